@@ -1,0 +1,220 @@
+"""The pixel pendulum: Gymnasium's own ``Pendulum-v1``, observed through its own render.
+
+The observation is built from Gymnasium's observation wrappers and involves no hand-made renderer:
+
+``Pendulum-v1 (rgb_array) -> AddRenderObservation -> ResizeObservation -> GrayscaleObservation
+-> FrameStackObservation``
+
+The frame is resized *before* it is converted to gray. That order is about 3x faster than the
+reverse, because the gray conversion then runs on 64x64 pixels instead of 500x500.
+
+## Spaces
+
+| space | shape | dtype | range |
+|---|---|---|---|
+| observation | (frame_stack, image_size, image_size) | uint8 | 0..255, oldest frame first |
+| action | (1,) | float32 | u in [-2, 2] |
+
+## Dynamics (Pendulum-v1, with piga's settings)
+
+| quantity | value |
+|---|---|
+| angle θ | 0 at upright, positive counter-clockwise as displayed |
+| θ̈ | (3 g / 2)·sin θ + 3·(gain·u) |
+| integration | semi-implicit Euler, dt = 0.05; θ̇ is clipped to ±8 |
+| g | ``gravity × gravity_mult`` |
+| applied torque | ``actuation_gain × u``, with u clipped to [-2, 2] before the gain is applied |
+| reward | -(θ² + 0.1·θ̇² + 0.001·(gain·u)²), Gymnasium's, using the applied torque |
+| reset | θ ~ U(-max_angle, max_angle), θ̇ ~ U(-max_speed, max_speed) |
+| truncation | after ``episode_length`` steps |
+
+The true state ``(θ, θ̇)`` is put in ``info["state"]`` as float64 ``[θ, θ̇]``, with θ unwrapped as
+Gymnasium keeps it. It is there for evaluation only. piga's training code never reads it.
+
+Gymnasium's renderer draws an arrow at the pivot for the last applied torque. piga draws it by
+default, to stay faithful to Gymnasium. ``draw_torque_arrow=False`` hides it, so that the frame
+shows only the pendulum.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import asdict, dataclass, replace
+from typing import Any, SupportsFloat
+
+import gymnasium as gym
+import numpy as np
+from gymnasium.wrappers import (
+    AddRenderObservation,
+    FrameStackObservation,
+    GrayscaleObservation,
+    ResizeObservation,
+)
+
+# pygame opens a display on its first render; on a headless machine it needs the dummy driver
+# and otherwise prints an XDG_RUNTIME_DIR complaint. A user's own choice is respected.
+os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
+
+#: Gymnasium's Pendulum-v1 torque limit: the action u lies in [-MAX_ACTION, MAX_ACTION].
+MAX_ACTION = 2.0
+#: Gymnasium's Pendulum-v1 integration step (s).
+PENDULUM_DT = 0.05
+
+
+@dataclass(frozen=True)
+class PixelPendulumConfig:
+    """Settings of the pixel pendulum. Every field has a Gymnasium-faithful default."""
+
+    image_size: int = 64
+    """Side of the square gray frame in pixels."""
+    frame_stack: int = 1
+    """Number of most recent frames in one observation (oldest first)."""
+    gravity: float = 10.0
+    """Gravity g of Pendulum-v1 before the multiplier (m/s²)."""
+    gravity_mult: float = 1.0
+    """Multiplier on gravity. The environment simulates ``gravity * gravity_mult``."""
+    actuation_gain: float = 1.0
+    """Applied torque = actuation_gain × u, for u in [-2, 2]."""
+    episode_length: int = 200
+    """Steps before truncation (Pendulum-v1's own TimeLimit)."""
+    max_angle: float = math.pi
+    """Reset draws θ ~ U(-max_angle, max_angle) (Pendulum-v1's ``x_init``)."""
+    max_speed: float = 1.0
+    """Reset draws θ̇ ~ U(-max_speed, max_speed) (Pendulum-v1's ``y_init``; the paper uses 6)."""
+    draw_torque_arrow: bool = True
+    """Draw Gymnasium's torque arrow at the pivot. True is Gymnasium's own picture."""
+
+    def __post_init__(self) -> None:
+        checks = {
+            "image_size": self.image_size >= 8,
+            "frame_stack": self.frame_stack >= 1,
+            "gravity": self.gravity > 0 and math.isfinite(self.gravity),
+            "gravity_mult": self.gravity_mult > 0 and math.isfinite(self.gravity_mult),
+            "actuation_gain": self.actuation_gain > 0 and math.isfinite(self.actuation_gain),
+            "episode_length": self.episode_length >= 1,
+            "max_angle": 0 <= self.max_angle <= math.pi,
+            "max_speed": 0 <= self.max_speed <= 8,
+        }
+        for name, ok in checks.items():
+            if not ok:
+                raise ValueError(
+                    f"PixelPendulumConfig.{name}={getattr(self, name)!r} is out of range "
+                    "(sizes and counts >= 1, gravity and gains > 0, max_angle in [0, pi], "
+                    "max_speed in [0, 8])"
+                )
+
+    @property
+    def effective_gravity(self) -> float:
+        """The gravity the simulator uses: ``gravity * gravity_mult``."""
+        return self.gravity * self.gravity_mult
+
+    def to_dict(self) -> dict[str, Any]:
+        """A JSON-able copy of the fields."""
+        return asdict(self)
+
+
+class ActuationGain(gym.ActionWrapper):
+    """Applies ``gain × u`` as Pendulum's torque, for an action u in Pendulum's own range.
+
+    Pendulum-v1 clips the torque it receives at ``max_torque`` (2). For a gain above 1 that clip
+    would cut the applied torque, so the wrapper raises the inner clip to ``2 × gain``. The outer
+    action space stays [-2, 2], and actions outside it are clipped before the gain is applied.
+    """
+
+    def __init__(self, env: gym.Env, gain: float):
+        if not (gain > 0 and math.isfinite(gain)):
+            raise ValueError(f"ActuationGain: gain must be finite and > 0, got {gain!r}")
+        if not isinstance(env.action_space, gym.spaces.Box) or env.action_space.shape != (1,):
+            raise TypeError(f"ActuationGain needs a Box action space of shape (1,), got {env.action_space}")
+        super().__init__(env)
+        self.gain = float(gain)
+        base = env.unwrapped
+        if not hasattr(base, "max_torque"):
+            raise TypeError("ActuationGain wraps Gymnasium's Pendulum (an env with `max_torque`)")
+        base.max_torque = MAX_ACTION * max(self.gain, 1.0)
+
+    def action(self, action: np.ndarray) -> np.ndarray:
+        u = np.clip(np.asarray(action, dtype=np.float32), -MAX_ACTION, MAX_ACTION)
+        return (self.gain * u).astype(np.float32)
+
+
+class HideTorqueArrow(gym.Wrapper):
+    """Renders Pendulum without its torque arrow. Gymnasium draws the arrow only when ``last_u`` is set."""
+
+    def render(self) -> Any:
+        base = self.env.unwrapped
+        saved = base.last_u
+        base.last_u = None
+        try:
+            return self.env.render()
+        finally:
+            base.last_u = saved
+
+
+class PendulumStateInfo(gym.Wrapper):
+    """Adds ``info["state"] = [θ, θ̇]`` (float64) after reset and every step. For evaluation only."""
+
+    def _state(self) -> np.ndarray:
+        return np.asarray(self.env.unwrapped.state, dtype=np.float64).copy()
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        obs, info = self.env.reset(seed=seed, options=options)
+        return obs, {**info, "state": self._state()}
+
+    def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        return obs, reward, terminated, truncated, {**info, "state": self._state()}
+
+
+class ResetRange(gym.Wrapper):
+    """Fills Pendulum-v1's reset options ``x_init`` (angle range) and ``y_init`` (speed range).
+
+    Options that the caller passes to ``reset`` take precedence.
+    """
+
+    def __init__(self, env: gym.Env, max_angle: float, max_speed: float):
+        if max_angle < 0 or max_speed < 0:
+            raise ValueError(f"ResetRange: ranges must be >= 0, got max_angle={max_angle}, max_speed={max_speed}")
+        super().__init__(env)
+        self.defaults = {"x_init": float(max_angle), "y_init": float(max_speed)}
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        return self.env.reset(seed=seed, options={**self.defaults, **(options or {})})
+
+
+def make_pixel_pendulum(
+    config: PixelPendulumConfig | None = None, render_mode: str | None = "rgb_array", **overrides: Any
+) -> gym.Env:
+    """Builds the pixel pendulum from Gymnasium's Pendulum-v1 and Gymnasium's wrappers.
+
+    Args:
+        config: the settings; None means the defaults.
+        render_mode: only "rgb_array" (or None, which means the same): the frames *are* the render,
+            so ``env.render()`` returns Gymnasium's full-size colour picture.
+        **overrides: fields of :class:`PixelPendulumConfig` that replace those of ``config``.
+            ``gym.make("piga/PixelPendulum-v0", gravity_mult=1.4)`` passes its keywords here.
+
+    Returns:
+        An env whose observation is uint8 (frame_stack, image_size, image_size).
+    """
+    if render_mode not in (None, "rgb_array"):
+        raise ValueError(f"the pixel pendulum renders only as 'rgb_array', got render_mode={render_mode!r}")
+    config = replace(config or PixelPendulumConfig(), **overrides)
+    env = gym.make(
+        "Pendulum-v1",
+        render_mode="rgb_array",
+        g=config.effective_gravity,
+        max_episode_steps=config.episode_length,
+    )
+    env = ResetRange(env, config.max_angle, config.max_speed)
+    env = ActuationGain(env, config.actuation_gain)
+    env = PendulumStateInfo(env)
+    if not config.draw_torque_arrow:
+        env = HideTorqueArrow(env)
+    env = AddRenderObservation(env, render_only=True)
+    env = ResizeObservation(env, (config.image_size, config.image_size))
+    env = GrayscaleObservation(env, keep_dim=False)
+    env = FrameStackObservation(env, config.frame_stack)
+    env.metadata = {**env.metadata, "render_modes": ["rgb_array"]}
+    return env

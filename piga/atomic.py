@@ -1,0 +1,64 @@
+"""Atomic file output: write to a temporary sibling, then rename over the target.
+
+A run that dies midway leaves the target untouched. That holds whether the target was absent or
+held an older file. ``os.replace`` is atomic within one filesystem, which is why the temporary file
+sits in the target's own folder.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+from collections.abc import Iterator
+from pathlib import Path
+
+
+class OutputExistsError(FileExistsError):
+    """The target exists and the caller did not allow overwriting it."""
+
+
+def check_writable_target(path: str | os.PathLike[str], overwrite: bool) -> Path:
+    """Fails early, before any work, if ``path`` cannot or may not be written.
+
+    Raises:
+        OutputExistsError: ``path`` exists and ``overwrite`` is False.
+        NotADirectoryError / PermissionError / FileNotFoundError: the folder is missing or not
+            writable, or ``path`` is a folder.
+    """
+    target = Path(path)
+    if target.is_dir():
+        raise IsADirectoryError(f"{target} is a folder, not a file path")
+    if target.exists() and not overwrite:
+        raise OutputExistsError(f"{target} exists; pass --overwrite to replace it")
+    folder = target.parent if str(target.parent) else Path(".")
+    if not folder.is_dir():
+        raise FileNotFoundError(f"folder {folder} does not exist")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise PermissionError(f"folder {folder} is not writable")
+    return target
+
+
+def partial_path(target: Path) -> Path:
+    """The temporary sibling used while ``target`` is being written (unique per process)."""
+    return target.with_name(f".{target.name}.partial-{os.getpid()}")
+
+
+@contextlib.contextmanager
+def atomic_output(path: str | os.PathLike[str], overwrite: bool = False) -> Iterator[Path]:
+    """Yields a temporary path to write; on success renames it to ``path``.
+
+    If the body raises, or the process is interrupted through SIGINT or SIGTERM (see
+    :func:`piga.cli.common.run_cli`), the temporary file is removed and ``path`` is left as it was.
+    A SIGKILL can leave a hidden ``.NAME.partial-PID`` file beside the target, but never a
+    half-written target.
+    """
+    target = check_writable_target(path, overwrite)
+    tmp = partial_path(target)
+    try:
+        yield tmp
+        if target.exists() and not overwrite:  # appeared while we worked
+            raise OutputExistsError(f"{target} appeared while writing; pass --overwrite to replace it")
+        os.replace(tmp, target)
+    finally:
+        with contextlib.suppress(FileNotFoundError):
+            tmp.unlink()

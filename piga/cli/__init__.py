@@ -1,0 +1,1 @@
+"""Command-line entry points. Each one only parses its arguments, calls one library function and saves."""

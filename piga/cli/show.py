@@ -1,0 +1,52 @@
+"""``piga-show``: a strip of frames from a data file, as a PNG."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import h5py
+import numpy as np
+
+from piga.cli.common import ArgumentParser, positive_int, run_cli
+from piga.data import SPLITS, inspect_dataset, split_indices
+from piga.plots import frame_strip, save_figure
+
+PROG = "piga-show"
+
+
+def build_parser() -> ArgumentParser:
+    p = ArgumentParser(prog=PROG, description="Save a grid of frames (rows: sequences, columns: time) from a piga data file.")
+    p.add_argument("data", help="HDF5 file of piga's schema")
+    p.add_argument("--out", required=True, help="output image (.png)")
+    p.add_argument("--split", choices=list(SPLITS), default="train", help="split to show (default %(default)s)")
+    p.add_argument("--sequences", type=positive_int, default=4, help="rows (default %(default)s)")
+    p.add_argument("--frames", type=positive_int, default=10, help="columns (default %(default)s)")
+    p.add_argument("--overwrite", action="store_true", help="replace --out if it exists")
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    info = inspect_dataset(args.data)
+    idx = split_indices(args.data, args.split)[: args.sequences]
+    if len(idx) == 0:
+        raise ValueError(f"split '{args.split}' of {args.data} is empty")
+    t = min(args.frames, info.steps)
+    with h5py.File(args.data, "r") as f:
+        frames = np.stack([f["frames"][int(i), :t] for i in idx])
+        actions = np.stack([f["actions"][int(i), :t] for i in idx])
+    labels = [f"seq {i}" for i in idx]
+    cols = [f"t={k}" for k in range(t)]
+    title = f"{info.path.name}: {info.system}, dt={info.dt:g}, params {info.params}"
+    fig = frame_strip(frames, labels, cols, title)
+    for r in range(len(idx)):  # the action after each frame, under it
+        for c in range(t):
+            if actions.shape[-1]:
+                fig.axes[r * t + c].set_xlabel(f"u={actions[r, c, 0]:+.2f}", fontsize=6)
+    path = save_figure(fig, args.out, overwrite=args.overwrite)
+    print(f"wrote {path}")
+    return 0
+
+
+def entry() -> None:
+    run_cli(PROG, main)

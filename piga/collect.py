@@ -1,0 +1,172 @@
+"""Collecting pixel-pendulum videos with random actions into piga's HDF5 schema.
+
+Determinism: sequence n draws its reset seed and its actions from ``SeedSequence(seed).spawn(N)[n]``.
+The arrays therefore depend only on ``seed`` and the settings, not on the number of workers or on
+which worker ran the sequence. Workers are Gymnasium vector envs: ``AsyncVectorEnv``, or
+``SyncVectorEnv`` for one worker.
+
+Sequence n holds frames x_0..x_{T-1}, where x_0 is the frame after reset. The actions are
+u_0..u_{T-1} ~ U(-2, 2), and u_t is applied after x_t. All T actions are applied, so each stored
+action really acted, even though the frame after the last one is not stored.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import shlex
+import sys
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+from tqdm.auto import tqdm
+
+from envs.pendulum import MAX_ACTION, PENDULUM_DT, PixelPendulumConfig, make_pixel_pendulum
+from piga.data import SPLITS, DatasetWriter
+
+#: Ranges of the paper's pendulum data: θ ~ U(-π, π), θ̇ ~ U(-6, 6).
+PAPER_MAX_SPEED = 6.0
+
+
+@dataclass(frozen=True)
+class CollectConfig:
+    """What ``piga-collect`` gathers. The defaults take about a minute on 2 cores."""
+
+    sequences: int = 500
+    """N, the number of sequences."""
+    steps: int = 40
+    """T, frames per sequence (the pendulum model needs at least L + T_pred = 14)."""
+    env: PixelPendulumConfig = field(default_factory=lambda: PixelPendulumConfig(max_speed=PAPER_MAX_SPEED))
+    """The environment. The reset ranges default to the paper's, θ ~ U(-π, π) and θ̇ ~ U(-6, 6)."""
+    seed: int = 0
+    """Root seed of every random draw."""
+    workers: int = 2
+    """Parallel environment processes (1 runs in this process)."""
+    split: tuple[float, float, float] = (0.8, 0.1, 0.1)
+    """Train/valid/test, as fractions summing to 1 or as counts summing to ``sequences``."""
+    batch: int = 64
+    """Sequences gathered between writes to disk (bounds memory)."""
+
+    def __post_init__(self) -> None:
+        if self.sequences < 1:
+            raise ValueError(f"sequences must be >= 1, got {self.sequences}")
+        if self.steps < 2:
+            raise ValueError(f"steps must be >= 2 (a video needs two frames), got {self.steps}")
+        if self.workers < 1:
+            raise ValueError(f"workers must be >= 1, got {self.workers}")
+        if self.seed < 0:
+            raise ValueError(f"seed must be >= 0, got {self.seed}")
+        if self.batch < 1:
+            raise ValueError(f"batch must be >= 1, got {self.batch}")
+        split_counts(self.sequences, self.split)  # validates
+
+
+#: The paper's pendulum data set: 5000 / 500 / 500 sequences of 14 frames.
+PRESETS: dict[str, dict[str, object]] = {
+    "default": {},
+    "paper": {"sequences": 6000, "steps": 14, "split": (5000, 500, 500)},
+}
+
+
+def split_counts(n: int, split: Sequence[float]) -> tuple[int, int, int]:
+    """Train/valid/test counts from fractions (sum 1) or counts (sum n)."""
+    if len(split) != 3 or any(not math.isfinite(x) or x < 0 for x in split):
+        raise ValueError(f"split needs three non-negative numbers (train, valid, test), got {tuple(split)}")
+    if all(float(x).is_integer() for x in split) and sum(split) == n and sum(split) != 1:
+        train, valid, test = (int(x) for x in split)
+    elif abs(sum(split) - 1.0) < 1e-6:
+        valid, test = round(split[1] * n), round(split[2] * n)
+        train = n - valid - test
+    else:
+        raise ValueError(f"split {tuple(split)} must be fractions summing to 1 or counts summing to {n}")
+    if train < 1:
+        raise ValueError(f"split {tuple(split)} leaves no training sequence out of {n}")
+    return train, valid, test
+
+
+def _episode_env(env_config: PixelPendulumConfig) -> gym.Env:
+    return make_pixel_pendulum(env_config)
+
+
+def sequence_rngs(seed: int, n: int) -> tuple[list[int], list[np.random.Generator]]:
+    """Per sequence: the env's reset seed and the action generator, both from ``SeedSequence(seed)``."""
+    children = np.random.SeedSequence(seed).spawn(n)
+    reset_seeds = [int(c.generate_state(1, dtype=np.uint32)[0]) for c in children]
+    action_rngs = [np.random.default_rng(c.spawn(1)[0]) for c in children]
+    return reset_seeds, action_rngs
+
+
+def collect(
+    config: CollectConfig,
+    out: str | Path,
+    overwrite: bool = False,
+    command: str | None = None,
+    progress: bool = True,
+) -> Path:
+    """Gathers ``config.sequences`` random-action sequences and writes them to ``out`` atomically.
+
+    Returns:
+        The path written.
+    """
+    n, t = config.sequences, config.steps
+    # Pendulum's own TimeLimit must not end an episode inside a sequence of T applied actions.
+    env_config = replace(config.env, episode_length=t + 1, frame_stack=1)
+    counts = split_counts(n, config.split)
+    reset_seeds, action_rngs = sequence_rngs(config.seed, n)
+    workers = min(config.workers, n)
+    factory: Callable[[], gym.Env] = functools.partial(_episode_env, env_config)
+    size = env_config.image_size
+    attrs = {
+        "system": "pendulum",
+        "dt": PENDULUM_DT,
+        "params": {
+            "g": env_config.effective_gravity,
+            "actuation_gain": env_config.actuation_gain,
+            "gravity": env_config.gravity,
+            "gravity_mult": env_config.gravity_mult,
+        },
+        "env_config": env_config.to_dict(),
+        "state_names": ["theta", "theta_dot"],
+        "seed": config.seed,
+        "command": command if command is not None else shlex.join(sys.argv),
+        "split_counts": dict(zip(SPLITS, counts)),
+    }
+    vec: gym.vector.VectorEnv
+    if workers == 1:
+        vec = gym.vector.SyncVectorEnv([factory])
+    else:
+        vec = gym.vector.AsyncVectorEnv([factory] * workers, shared_memory=True)
+    try:
+        with DatasetWriter(out, n, t, (size, size), 1, 2, attrs, overwrite=overwrite) as writer:
+            bar = tqdm(total=n, desc="collect", unit="seq", disable=not progress)
+            batch = max(config.batch, workers) // workers * workers
+            for start in range(0, n, batch):
+                stop = min(start + batch, n)
+                frames = np.zeros((stop - start, t, size, size), np.uint8)
+                actions = np.zeros((stop - start, t, 1), np.float32)
+                states = np.zeros((stop - start, t, 2), np.float32)
+                for group in range(start, stop, workers):
+                    ids = list(range(group, min(group + workers, stop)))
+                    # Spare envs of the last group replay sequence ids[0]; their output is dropped.
+                    seeds = [reset_seeds[i] for i in ids] + [reset_seeds[ids[0]]] * (workers - len(ids))
+                    obs, info = vec.reset(seed=seeds)
+                    u = np.stack([action_rngs[i].uniform(-MAX_ACTION, MAX_ACTION, size=(t, 1)) for i in ids]).astype(np.float32)
+                    rows = np.arange(len(ids))
+                    local = np.asarray(ids) - start
+                    for step in range(t):
+                        frames[local, step] = obs[rows, -1]
+                        states[local, step] = info["state"][rows]
+                        actions[local, step] = u[:, step]
+                        step_u = np.zeros((workers, 1), np.float32)
+                        step_u[rows] = u[:, step]
+                        obs, _, _, _, info = vec.step(step_u)
+                    bar.update(len(ids))
+                writer.write(start, frames, actions, states)
+            writer.set_split(np.repeat(np.arange(3, dtype=np.int8), counts))
+            bar.close()
+    finally:
+        vec.close()
+    return Path(out)

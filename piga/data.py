@@ -1,0 +1,308 @@
+"""piga's one HDF5 schema for videos with actions, and how to read and write it.
+
+| dataset | dtype and shape | meaning |
+|---|---|---|
+| ``/frames`` | uint8 [N, T, H, W] (gray) or [N, T, H, W, C] (colour) | the frames |
+| ``/actions`` | float32 [N, T, A] | ``actions[n, t]`` is applied after ``frames[n, t]``; A = 0 if unactuated |
+| ``/states`` | float32 [N, T, S] | optional ground truth, **for evaluation only** |
+| ``/split`` | int8 [N] | 0 train, 1 valid, 2 test |
+
+File attributes: ``system`` (str), ``dt`` (float, seconds between frames), ``params`` (JSON: the
+physical parameters used), ``seed`` (int, -1 if unknown), ``piga_version``, ``command`` (the
+command line that made the file), and optionally ``env_config`` and ``state_names`` (JSON).
+
+Training code reads only frames and actions: :class:`piga.windows.SequenceWindows` (a torch
+Dataset, also reachable as ``piga.data.SequenceWindows``) serves those and nothing else. Ground-truth states come out only through :func:`load_states`, which evaluation code calls
+explicitly.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import TracebackType
+from typing import Any
+
+import h5py
+import numpy as np
+from piga import __version__
+from piga.atomic import atomic_output
+
+SPLITS: dict[str, int] = {"train": 0, "valid": 1, "test": 2}
+"""Split name -> code stored in ``/split``."""
+
+REQUIRED_ATTRS = ("system", "dt")
+#: Files whose frames need less memory than this are loaded whole by default when training.
+IN_MEMORY_LIMIT_BYTES = 2 * 1024**3
+
+
+class DataFormatError(ValueError):
+    """A file does not follow piga's schema. The message names the dataset or attribute at fault."""
+
+
+@dataclass(frozen=True)
+class DatasetInfo:
+    """What a validated file holds (no arrays)."""
+
+    path: Path
+    """The file."""
+    n_sequences: int
+    """N."""
+    steps: int
+    """T, frames per sequence."""
+    image_shape: tuple[int, ...]
+    """(H, W) or (H, W, C)."""
+    action_dim: int
+    """A."""
+    has_states: bool
+    """Whether ``/states`` exists (evaluation only)."""
+    system: str
+    """Attribute ``system``."""
+    dt: float
+    """Attribute ``dt``."""
+    params: dict[str, Any]
+    """Attribute ``params`` parsed from JSON."""
+    split_counts: dict[str, int]
+    """Sequences per split name."""
+    attrs: dict[str, Any] = field(repr=False)
+    """All file attributes (JSON strings parsed)."""
+
+
+def _attr(value: Any) -> Any:
+    if isinstance(value, bytes):
+        value = value.decode()
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, str) and value[:1] in "{[":
+        try:
+            return json.loads(value)
+        except json.JSONDecodeError:
+            return value
+    return value
+
+
+def _validate(f: h5py.File, path: Path) -> DatasetInfo:
+    def need(name: str) -> h5py.Dataset:
+        if name not in f or not isinstance(f[name], h5py.Dataset):
+            raise DataFormatError(f"{path}: missing dataset /{name}")
+        return f[name]
+
+    frames = need("frames")
+    if frames.dtype != np.uint8 or frames.ndim not in (4, 5):
+        raise DataFormatError(
+            f"{path}: /frames must be uint8 [N, T, H, W] or [N, T, H, W, C], got {frames.dtype} {frames.shape}"
+        )
+    if frames.ndim == 5 and frames.shape[-1] not in (1, 3):
+        raise DataFormatError(f"{path}: /frames colour axis must have 1 or 3 channels, got {frames.shape}")
+    n, t = frames.shape[:2]
+    if n < 1 or t < 1:
+        raise DataFormatError(f"{path}: /frames is empty, shape {frames.shape}")
+    actions = need("actions")
+    if actions.ndim != 3 or actions.shape[:2] != (n, t) or not np.issubdtype(actions.dtype, np.floating):
+        raise DataFormatError(f"{path}: /actions must be float [N={n}, T={t}, A], got {actions.dtype} {actions.shape}")
+    has_states = "states" in f
+    if has_states:
+        states = f["states"]
+        if not isinstance(states, h5py.Dataset) or states.ndim != 3 or states.shape[:2] != (n, t):
+            raise DataFormatError(f"{path}: /states must be [N={n}, T={t}, S], got {getattr(states, 'shape', None)}")
+    split = need("split")
+    if split.shape != (n,) or not np.issubdtype(split.dtype, np.integer):
+        raise DataFormatError(f"{path}: /split must be int8 [N={n}], got {split.dtype} {split.shape}")
+    codes = split[()]
+    if not np.isin(codes, list(SPLITS.values())).all():
+        raise DataFormatError(f"{path}: /split holds codes other than 0 (train), 1 (valid), 2 (test)")
+    attrs = {key: _attr(value) for key, value in f.attrs.items()}
+    for key in REQUIRED_ATTRS:
+        if key not in attrs:
+            raise DataFormatError(f"{path}: missing file attribute '{key}'")
+    try:
+        dt = float(attrs["dt"])
+    except (TypeError, ValueError):
+        dt = float("nan")
+    if not dt > 0:
+        raise DataFormatError(f"{path}: attribute 'dt' must be a positive number, got {attrs['dt']!r}")
+    params = attrs.get("params", {})
+    if not isinstance(params, dict):
+        raise DataFormatError(f"{path}: attribute 'params' must be a JSON object, got {params!r}")
+    return DatasetInfo(
+        path=path,
+        n_sequences=n,
+        steps=t,
+        image_shape=tuple(frames.shape[2:]),
+        action_dim=actions.shape[2],
+        has_states=has_states,
+        system=str(attrs["system"]),
+        dt=dt,
+        params=params,
+        split_counts={name: int((codes == code).sum()) for name, code in SPLITS.items()},
+        attrs=attrs,
+    )
+
+
+def _open(path: str | os.PathLike[str]) -> h5py.File:
+    p = Path(path)
+    if not p.exists():
+        raise FileNotFoundError(f"{p}: no such file")
+    if p.is_dir():
+        raise DataFormatError(f"{p}: is a folder, not an HDF5 file")
+    try:
+        return h5py.File(p, "r")
+    except OSError as exc:
+        raise DataFormatError(f"{p}: not a readable HDF5 file ({exc.__class__.__name__})") from None
+
+
+def inspect_dataset(path: str | os.PathLike[str]) -> DatasetInfo:
+    """Opens and validates a file; raises :class:`DataFormatError` naming what is wrong."""
+    with _open(path) as f:
+        return _validate(f, Path(path))
+
+
+def split_indices(path: str | os.PathLike[str], split: str) -> np.ndarray:
+    """Sequence indices (sorted, int64) that belong to ``split`` ("train", "valid" or "test")."""
+    code = _split_code(split)
+    with _open(path) as f:
+        _validate(f, Path(path))
+        return np.flatnonzero(f["split"][()] == code)
+
+
+def _split_code(split: str) -> int:
+    if split not in SPLITS:
+        raise ValueError(f"unknown split {split!r}; expected one of {sorted(SPLITS)}")
+    return SPLITS[split]
+
+
+def read_sequences(path: str | os.PathLike[str], split: str) -> tuple[np.ndarray, np.ndarray]:
+    """All frames (uint8 [n, T, H, W(, C)]) and actions (float32 [n, T, A]) of one split, in memory."""
+    idx = split_indices(path, split)
+    with _open(path) as f:
+        return _take(f["frames"], idx), _take(f["actions"], idx).astype(np.float32)
+
+
+def load_states(path: str | os.PathLike[str], split: str) -> np.ndarray:
+    """Ground-truth states (float32 [n, T, S]) of one split. **For evaluation only.**
+
+    Training code must never call this; the test suite trains on a file without ``/states``.
+
+    Raises:
+        DataFormatError: the file has no ``/states``.
+    """
+    idx = split_indices(path, split)
+    with _open(path) as f:
+        if "states" not in f:
+            raise DataFormatError(f"{path}: has no /states (ground truth is optional in the schema)")
+        return _take(f["states"], idx).astype(np.float32)
+
+
+def _take(ds: h5py.Dataset, idx: np.ndarray) -> np.ndarray:
+    """Rows ``idx`` of ``ds``; one contiguous read when the rows are a range."""
+    if len(idx) and idx[-1] - idx[0] + 1 == len(idx):
+        return ds[int(idx[0]) : int(idx[-1]) + 1]
+    return ds[()][idx] if len(idx) > len(ds) // 4 else np.stack([ds[int(i)] for i in idx])
+
+
+class DatasetWriter:
+    """Writes a file of piga's schema atomically, in slices, so that N can exceed memory.
+
+    Use as a context manager. The file appears at ``path`` only when the block exits without
+    error. Before that it is a hidden ``.NAME.partial-PID`` sibling, removed on failure.
+
+    Args:
+        path: target file.
+        n_sequences, steps, image_shape, action_dim: N, T, (H, W[, C]), A.
+        state_dim: S, or None for a file without ``/states``.
+        attrs: file attributes; dicts and lists are stored as JSON. ``system`` and ``dt`` are required.
+        overwrite: allow replacing an existing file.
+        compression: h5py compression for ``/frames`` (gzip level 4 by default; None for none).
+    """
+
+    def __init__(
+        self,
+        path: str | os.PathLike[str],
+        n_sequences: int,
+        steps: int,
+        image_shape: tuple[int, ...],
+        action_dim: int,
+        state_dim: int | None,
+        attrs: dict[str, Any],
+        overwrite: bool = False,
+        compression: str | None = "gzip",
+    ):
+        missing = [key for key in REQUIRED_ATTRS if key not in attrs]
+        if missing:
+            raise ValueError(f"DatasetWriter: attrs lack required keys {missing}")
+        if n_sequences < 1 or steps < 1:
+            raise ValueError(f"DatasetWriter: need N >= 1 and T >= 1, got N={n_sequences}, T={steps}")
+        self.path = Path(path)
+        self.shape = (n_sequences, steps)
+        self.image_shape = tuple(image_shape)
+        self.action_dim, self.state_dim = action_dim, state_dim
+        self.attrs = {"seed": -1, "piga_version": __version__, "command": "", "params": {}, **attrs}
+        self.overwrite = overwrite
+        self.compression = compression
+        self._ctx: Any = None
+        self._file: h5py.File | None = None
+        self._written = np.zeros(n_sequences, dtype=bool)
+        self._split_set = False
+
+    def __enter__(self) -> DatasetWriter:
+        self._ctx = atomic_output(self.path, overwrite=self.overwrite)
+        tmp = self._ctx.__enter__()
+        n, t = self.shape
+        f = h5py.File(tmp, "w")
+        self._file = f
+        opts: dict[str, Any] = {"compression": self.compression, "compression_opts": 4} if self.compression == "gzip" else {}
+        f.create_dataset("frames", (n, t, *self.image_shape), dtype=np.uint8, chunks=(1, t, *self.image_shape), **opts)
+        f.create_dataset("actions", (n, t, self.action_dim), dtype=np.float32)
+        if self.state_dim is not None:
+            f.create_dataset("states", (n, t, self.state_dim), dtype=np.float32)
+        f.create_dataset("split", (n,), dtype=np.int8)
+        for key, value in self.attrs.items():
+            f.attrs[key] = json.dumps(value) if isinstance(value, (dict, list, tuple)) else value
+        return self
+
+    def write(self, start: int, frames: np.ndarray, actions: np.ndarray, states: np.ndarray | None = None) -> None:
+        """Writes sequences ``start .. start + len(frames)``; arrays as in the schema."""
+        assert self._file is not None, "DatasetWriter.write outside its `with` block"
+        stop = start + len(frames)
+        if frames.shape[1:] != (self.shape[1], *self.image_shape):
+            raise ValueError(f"frames slice has shape {frames.shape}, expected (n, {self.shape[1]}, {self.image_shape})")
+        self._file["frames"][start:stop] = frames
+        self._file["actions"][start:stop] = actions
+        if self.state_dim is not None:
+            if states is None:
+                raise ValueError("this file has /states; pass them to write()")
+            self._file["states"][start:stop] = states
+        self._written[start:stop] = True
+
+    def set_split(self, split: np.ndarray) -> None:
+        """Sets ``/split`` (int8 [N], codes of :data:`SPLITS`)."""
+        assert self._file is not None, "DatasetWriter.set_split outside its `with` block"
+        self._file["split"][:] = np.asarray(split, dtype=np.int8)
+        self._split_set = True
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None) -> None:
+        assert self._file is not None and self._ctx is not None
+        self._file.close()
+        if exc_type is not None:  # removes the partial file; the exception propagates
+            self._ctx.__exit__(exc_type, exc, tb)
+            return
+        if not (self._written.all() and self._split_set):
+            error = RuntimeError(
+                f"DatasetWriter closed with {int((~self._written).sum())} unwritten sequences"
+                + ("" if self._split_set else " and no split")
+            )
+            self._ctx.__exit__(RuntimeError, error, None)
+            raise error
+        self._ctx.__exit__(None, None, None)
+
+
+def __getattr__(name: str) -> Any:
+    # The torch Dataset lives in piga.windows so that reading and writing files (piga-collect)
+    # does not pay torch's 1.5 s import; ``piga.data.SequenceWindows`` still works.
+    if name in ("SequenceWindows", "Window"):
+        from piga import windows
+
+        return getattr(windows, name)
+    raise AttributeError(f"module 'piga.data' has no attribute {name!r}")
