@@ -1,0 +1,480 @@
+"""The differentiable physics engine: systems as force functions, plus an Euler integrator.
+
+A :class:`System` knows the equations of motion of one family of scenes and holds their unknown
+physical parameters; :class:`Euler` advances positions and velocities by one frame; :func:`rollout`
+unrolls it over a sequence. Everything is plain PyTorch, so gradients flow to the initial state
+(from the encoder and velocity estimator) and to the physical parameters.
+
+| system | N | D | A | acceleration of object i (d = p_i - p_j) | dt | learned (init -> truth) |
+|---|---|---|---|---|---|---|
+| :class:`Pendulum` | 1 | 1 (angle) | 1 | (3 / 2l)·g·sin θ + (3 / m l²)·a·u | 0.05 | g 1 -> 10, a 0.3 -> 1 |
+| :class:`Spring` | 2 | 2 | 0 | Σ_j -k·(abs(d) - 2l)·d / abs(d) | 0.3 | k 1 -> 4, l 1 -> 6 (balls) |
+| :class:`Gravity` | 3 | 2 | 0 | Σ_j -g·m_j·d / abs(d)³ | 0.5 | g 1 -> 60 |
+| :class:`Bouncing` | 2 | 2 | 0 | 0, elastic walls | 0.3 | (none) |
+
+Conventions:
+
+- Shapes: positions and velocities are (B, N, D), actions (B, A), sequences (B, T, N, D).
+- Positive parameters live in log space: ``log_g`` is the ``nn.Parameter``, ``g`` the property
+  ``exp(log_g)``. Defaults start far from the truth on purpose: learning must find the values.
+- The pendulum follows Gymnasium's ``Pendulum-v1``: θ = 0 upright, positive counter-clockwise as
+  displayed; its ±8 rad/s speed clip is deliberately *not* modelled.
+- Cartesian systems work in pixel units (x right, y down), as the decoder does.
+
+Example::
+
+    system = Pendulum()                      # learnable g = 1, a = 0.3
+    p, v = rollout(system, Euler(substeps=5), p0, v0, actions)   # (B, T, 1, 1) each
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Collection
+from typing import ClassVar
+
+import torch
+from torch import Tensor, nn
+
+__all__ = [
+    "System",
+    "Pendulum",
+    "Spring",
+    "Gravity",
+    "Bouncing",
+    "Euler",
+    "rollout",
+    "make_system",
+    "SYSTEMS",
+]
+
+
+def _pairwise_differences(p: Tensor) -> Tensor:
+    """d[b, i, j] = p[b, i] - p[b, j] for positions p of shape (B, N, D); returns (B, N, N, D)."""
+    return p.unsqueeze(2) - p.unsqueeze(1)  # (B, N, N, D)
+
+
+def _guarded_norm(d: Tensor, min_norm: float) -> Tensor:
+    """Euclidean norm over the last axis, clamped below at ``min_norm``; returns (..., 1).
+
+    The clamp is applied to the squared norm, before the square root, so coincident points give a
+    finite value and zero (not NaN) gradient.
+    """
+    return d.square().sum(dim=-1, keepdim=True).clamp_min(min_norm**2).sqrt()
+
+
+class System(nn.Module):
+    """Base class of a physical system: the force function of a known family of equations.
+
+    Subclasses set the four shape attributes, register their positive parameters with
+    :meth:`_add_positive_parameter`, and implement :meth:`acceleration`. Systems with hard
+    constraints (walls) also override :meth:`constrain`.
+
+    Attributes:
+        n_objects: N, the number of objects.
+        coord_dim: D, coordinates per object (1 for an angle, 2 for cartesian x, y).
+        action_dim: A, the size of the action vector (0 if unactuated).
+        dt: Seconds between two frames.
+        reference_values: The physical parameters of the paper's data sets (for oracles and
+            error reports); a learnable system never starts from them by default.
+    """
+
+    reference_values: ClassVar[dict[str, float]] = {}
+
+    def __init__(self, n_objects: int, coord_dim: int, action_dim: int, dt: float) -> None:
+        super().__init__()
+        if n_objects < 1:
+            raise ValueError(f"n_objects must be >= 1, got {n_objects}")
+        if coord_dim not in (1, 2):
+            raise ValueError(f"coord_dim must be 1 (angle) or 2 (x, y), got {coord_dim}")
+        if action_dim < 0:
+            raise ValueError(f"action_dim must be >= 0, got {action_dim}")
+        if not dt > 0:
+            raise ValueError(f"dt must be > 0, got {dt}")
+        self.n_objects = int(n_objects)
+        self.coord_dim = int(coord_dim)
+        self.action_dim = int(action_dim)
+        self.dt = float(dt)
+        self._physical_names: list[str] = []
+
+    # ----------------------------------------------------------------- parameters
+    def _add_positive_parameter(self, name: str, value: float, learnable: bool) -> None:
+        """Register ``log_<name>`` = log(value) as an ``nn.Parameter``; frozen if not learnable."""
+        try:
+            value = float(value)
+        except (TypeError, ValueError):
+            raise ValueError(f"{type(self).__name__}: {name} must be a number, got {value!r}") from None
+        if not (math.isfinite(value) and value > 0):
+            raise ValueError(f"{type(self).__name__}: {name} must be finite and > 0, got {value!r}")
+        log_value = torch.tensor(math.log(value), dtype=torch.get_default_dtype())
+        self.register_parameter(f"log_{name}", nn.Parameter(log_value, requires_grad=learnable))
+        self._physical_names.append(name)
+
+    @staticmethod
+    def _resolve_learnable(
+        cls_name: str, names: tuple[str, ...], learnable: bool | Collection[str]
+    ) -> dict[str, bool]:
+        """Map each parameter name to whether it is learned, validating a collection of names."""
+        if isinstance(learnable, bool):
+            return {name: learnable for name in names}
+        if isinstance(learnable, str):
+            learnable = (learnable,)
+        unknown = sorted(set(learnable) - set(names))
+        if unknown:
+            raise ValueError(
+                f"{cls_name}: unknown parameter name(s) {unknown} in learnable; "
+                f"known: {list(names)}"
+            )
+        return {name: name in learnable for name in names}
+
+    @torch.no_grad()
+    def set_parameters(self, **values: float) -> None:
+        """Overwrite physical parameters in place, e.g. ``set_parameters(g=14.0)``.
+
+        For oracles, counterfactuals (a changed gravity) and float64 checks: the log is computed in
+        float64 and then stored in the parameter's own dtype. ``requires_grad`` is unchanged.
+        """
+        for name, value in values.items():
+            if name not in self._physical_names:
+                raise ValueError(
+                    f"{type(self).__name__} has no parameter {name!r}; known: {self._physical_names}"
+                )
+            value = float(value)
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"{type(self).__name__}: {name} must be finite and > 0, got {value!r}")
+            getattr(self, f"log_{name}").fill_(math.log(value))
+
+    def parameters_dict(self) -> dict[str, float]:
+        """The current physical parameter values (positive values, not logs), for logging."""
+        return {
+            name: float(getattr(self, f"log_{name}").detach().exp()) for name in self._physical_names
+        }
+
+    # ------------------------------------------------------------------- dynamics
+    def acceleration(self, p: Tensor, v: Tensor, u: Tensor | None = None) -> Tensor:
+        """F(p, v, u): the acceleration of every object.
+
+        Args:
+            p: Positions, (B, N, D).
+            v: Velocities, (B, N, D).
+            u: Actions, (B, A), or None (no actuation).
+
+        Returns:
+            Accelerations, (B, N, D).
+        """
+        raise NotImplementedError
+
+    def constrain(self, p: Tensor, v: Tensor) -> tuple[Tensor, Tensor]:
+        """Apply hard constraints after each substep; the identity unless a subclass has walls."""
+        return p, v
+
+    def extra_repr(self) -> str:
+        values = ", ".join(f"{k}={v:.4g}" for k, v in self.parameters_dict().items())
+        return f"N={self.n_objects}, D={self.coord_dim}, A={self.action_dim}, dt={self.dt}" + (
+            f", {values}" if values else ""
+        )
+
+
+class Pendulum(System):
+    """Gymnasium's ``Pendulum-v1`` with a learnable gravity g and actuation gain a.
+
+    | quantity | value |
+    |---|---|
+    | state | θ (rad, 0 upright, positive counter-clockwise as displayed), θ̇ (rad/s) |
+    | action | torque u, (B, 1) |
+    | dynamics | θ̈ = (3 / 2l)·g·sin θ + (3 / m l²)·a·u, i.e. 1.5·g·sin θ + 3·a·u for m = l = 1 |
+    | step | dt = 0.05 |
+    | truth | g = 10, a = 1 |
+
+    Gymnasium clips θ̇ to ±8 after each step; that clip is intentionally not modelled.
+
+    Args:
+        g: Initial gravity (default 1, far from the true 10).
+        a: Initial actuation gain (default 0.3, far from the true 1).
+        length: Rod length l, fixed (not learned).
+        mass: Rod mass m, fixed (not learned).
+        dt: Seconds per frame.
+        learnable: True (all), False (none, e.g. an oracle), or the names to learn.
+    """
+
+    reference_values: ClassVar[dict[str, float]] = {"g": 10.0, "a": 1.0}
+
+    def __init__(
+        self,
+        g: float = 1.0,
+        a: float = 0.3,
+        length: float = 1.0,
+        mass: float = 1.0,
+        dt: float = 0.05,
+        learnable: bool | Collection[str] = True,
+    ) -> None:
+        super().__init__(n_objects=1, coord_dim=1, action_dim=1, dt=dt)
+        if not length > 0:
+            raise ValueError(f"Pendulum: length must be > 0, got {length}")
+        if not mass > 0:
+            raise ValueError(f"Pendulum: mass must be > 0, got {mass}")
+        self.length = float(length)
+        self.mass = float(mass)
+        flags = self._resolve_learnable("Pendulum", ("g", "a"), learnable)
+        self._add_positive_parameter("g", g, flags["g"])
+        self._add_positive_parameter("a", a, flags["a"])
+
+    @property
+    def g(self) -> Tensor:
+        """Gravity, exp(log_g)."""
+        return self.log_g.exp()
+
+    @property
+    def a(self) -> Tensor:
+        """Actuation gain, exp(log_a)."""
+        return self.log_a.exp()
+
+    def acceleration(self, p: Tensor, v: Tensor, u: Tensor | None = None) -> Tensor:
+        gravity_gain = 3.0 / (2.0 * self.length)
+        torque_gain = 3.0 / (self.mass * self.length**2)
+        acc = gravity_gain * self.g * torch.sin(p)  # (B, 1, 1)
+        if u is not None:
+            acc = acc + (torque_gain * self.a * u).unsqueeze(-1)  # (B, 1) -> (B, 1, 1)
+        return acc
+
+
+class Spring(System):
+    """N objects of unit mass joined pairwise by identical springs (the paper's 2-balls spring).
+
+    The force on object i from object j, with d = p_i - p_j, is -k·(abs(d) - 2l)·d / abs(d): l is half
+    the rest length (the published code's convention). True values: (k, l) = (4, 6) for the balls
+    data set, (2, 12) for the digits.
+
+    Args:
+        n_objects: N.
+        k: Initial spring constant (default 1, far from the truth).
+        l: Initial half rest length in pixels (default 1, far from the truth).
+        dt: Seconds per frame.
+        min_distance: abs(d) is clamped below at this many pixels so that coincident objects give
+            a finite force and gradient.
+        learnable: True (all), False (none), or the names to learn.
+    """
+
+    reference_values: ClassVar[dict[str, float]] = {"k": 4.0, "l": 6.0}
+
+    def __init__(
+        self,
+        n_objects: int = 2,
+        k: float = 1.0,
+        l: float = 1.0,  # noqa: E741 - the paper's name
+        dt: float = 0.3,
+        min_distance: float = 1e-4,
+        learnable: bool | Collection[str] = True,
+    ) -> None:
+        super().__init__(n_objects=n_objects, coord_dim=2, action_dim=0, dt=dt)
+        if not min_distance > 0:
+            raise ValueError(f"Spring: min_distance must be > 0, got {min_distance}")
+        self.min_distance = float(min_distance)
+        flags = self._resolve_learnable("Spring", ("k", "l"), learnable)
+        self._add_positive_parameter("k", k, flags["k"])
+        self._add_positive_parameter("l", l, flags["l"])
+
+    @property
+    def k(self) -> Tensor:
+        """Spring constant, exp(log_k)."""
+        return self.log_k.exp()
+
+    @property
+    def l(self) -> Tensor:  # noqa: E743 - the paper's name
+        """Half the rest length, exp(log_l)."""
+        return self.log_l.exp()
+
+    def acceleration(self, p: Tensor, v: Tensor, u: Tensor | None = None) -> Tensor:
+        d = _pairwise_differences(p)  # (B, N, N, 2)
+        dist = _guarded_norm(d, self.min_distance)  # (B, N, N, 1)
+        force = -self.k * (dist - 2.0 * self.l) * d / dist  # (B, N, N, 2); zero on the diagonal
+        return force.sum(dim=2)  # (B, N, 2)
+
+
+class Gravity(System):
+    """N bodies of unit mass under Newtonian gravity (the paper's 3-balls gravity).
+
+    The acceleration of body i is Σ_{j≠i} -g·m_j·d / abs(d)³ with d = p_i - p_j and m_j = 1. True
+    value g = 60.
+
+    Args:
+        n_objects: N.
+        g: Initial gravitational constant (default 1, far from the truth).
+        dt: Seconds per frame.
+        softening: abs(d) is clamped below at this many pixels (the published code clips at 1):
+            exact for bodies further apart, a bounded force and finite gradient for closer ones.
+        learnable: True (all), False (none), or the names to learn.
+    """
+
+    reference_values: ClassVar[dict[str, float]] = {"g": 60.0}
+
+    def __init__(
+        self,
+        n_objects: int = 3,
+        g: float = 1.0,
+        dt: float = 0.5,
+        softening: float = 1.0,
+        learnable: bool | Collection[str] = True,
+    ) -> None:
+        super().__init__(n_objects=n_objects, coord_dim=2, action_dim=0, dt=dt)
+        if not softening > 0:
+            raise ValueError(f"Gravity: softening must be > 0, got {softening}")
+        self.softening = float(softening)
+        self.mass = 1.0
+        flags = self._resolve_learnable("Gravity", ("g",), learnable)
+        self._add_positive_parameter("g", g, flags["g"])
+
+    @property
+    def g(self) -> Tensor:
+        """Gravitational constant, exp(log_g)."""
+        return self.log_g.exp()
+
+    def acceleration(self, p: Tensor, v: Tensor, u: Tensor | None = None) -> Tensor:
+        d = _pairwise_differences(p)  # (B, N, N, 2)
+        dist = _guarded_norm(d, self.softening)  # (B, N, N, 1)
+        acc = -self.g * self.mass * d / dist**3  # (B, N, N, 2); zero on the diagonal
+        return acc.sum(dim=2)  # (B, N, 2)
+
+
+class Bouncing(System):
+    """N balls moving freely in a square box with elastic walls; no force, no parameters.
+
+    A ball's centre stays in [radius, size - radius] in each coordinate. :meth:`constrain`
+    reflects a centre that left that interval back inside and flips that velocity component.
+
+    Args:
+        n_objects: N.
+        size: Side of the box in pixels (the image size).
+        radius: Ball radius in pixels.
+        dt: Seconds per frame.
+    """
+
+    def __init__(
+        self, n_objects: int = 2, size: float = 32.0, radius: float = 2.0, dt: float = 0.3
+    ) -> None:
+        super().__init__(n_objects=n_objects, coord_dim=2, action_dim=0, dt=dt)
+        if not radius >= 0:
+            raise ValueError(f"Bouncing: radius must be >= 0, got {radius}")
+        if not size > 2 * radius:
+            raise ValueError(f"Bouncing: size must be > 2 * radius = {2 * radius}, got {size}")
+        self.size = float(size)
+        self.radius = float(radius)
+
+    def acceleration(self, p: Tensor, v: Tensor, u: Tensor | None = None) -> Tensor:
+        return torch.zeros_like(p)
+
+    def constrain(self, p: Tensor, v: Tensor) -> tuple[Tensor, Tensor]:
+        """Reflect off the walls once: p -> 2·wall - p and v -> -v where p crossed a wall.
+
+        A single reflection per call, so a substep must move a ball less than the box width.
+        """
+        low, high = self.radius, self.size - self.radius
+        below, above = p < low, p > high  # (B, N, 2)
+        p = torch.where(below, 2 * low - p, torch.where(above, 2 * high - p, p))
+        v = torch.where(below | above, -v, v)
+        return p, v
+
+
+class Euler(nn.Module):
+    """Semi-implicit Euler with ``substeps`` substeps per frame, as in the paper.
+
+    Each substep of h = dt / substeps does ``v <- v + h·F(p, v, u)``, then ``p <- p + h·v`` with
+    the *new* v, then ``system.constrain(p, v)``. The action is held over the frame. With
+    ``substeps = 1`` this is exactly Gymnasium ``Pendulum-v1``'s step (without its speed clip).
+    """
+
+    def __init__(self, substeps: int = 5) -> None:
+        super().__init__()
+        if isinstance(substeps, bool) or not isinstance(substeps, int) or substeps < 1:
+            raise ValueError(f"substeps must be an int >= 1, got {substeps!r}")
+        self.substeps = substeps
+
+    def forward(
+        self, system: System, p: Tensor, v: Tensor, u: Tensor | None = None
+    ) -> tuple[Tensor, Tensor]:
+        """Advance (p, v), each (B, N, D), by one frame under action u (B, A) or None."""
+        h = system.dt / self.substeps
+        for _ in range(self.substeps):
+            v = v + h * system.acceleration(p, v, u)  # (B, N, D)
+            p = p + h * v  # (B, N, D)
+            p, v = system.constrain(p, v)
+        return p, v
+
+    def extra_repr(self) -> str:
+        return f"substeps={self.substeps}"
+
+
+def rollout(
+    system: System,
+    integrator: Callable[..., tuple[Tensor, Tensor]],
+    p0: Tensor,
+    v0: Tensor,
+    actions: Tensor | None = None,
+    steps: int | None = None,
+) -> tuple[Tensor, Tensor]:
+    """Unroll the dynamics from (p0, v0) for T frames.
+
+    Args:
+        system: The system (forces, parameters, constraints).
+        integrator: Called as ``integrator(system, p, v, u)`` for one frame, e.g. :class:`Euler`.
+        p0: Initial positions, (B, N, D).
+        v0: Initial velocities, (B, N, D).
+        actions: (B, T, A); frame t + 1 is reached under ``actions[:, t]``. None for no actions
+            (an actuated system then gets no torque).
+        steps: T; required when ``actions`` is None, and must equal ``actions.shape[1]`` otherwise.
+
+    Returns:
+        Positions and velocities of the T frames after the initial one, each (B, T, N, D).
+    """
+    n, d = system.n_objects, system.coord_dim
+    if p0.dim() != 3 or p0.shape[1:] != (n, d):
+        raise ValueError(
+            f"p0 must have shape (B, N={n}, D={d}) for {type(system).__name__}, got {tuple(p0.shape)}"
+        )
+    if v0.shape != p0.shape:
+        raise ValueError(f"v0 must have the shape of p0 {tuple(p0.shape)}, got {tuple(v0.shape)}")
+    if actions is not None:
+        a = system.action_dim
+        if actions.dim() != 3 or actions.shape[0] != p0.shape[0] or actions.shape[2] != a:
+            raise ValueError(
+                f"actions must have shape (B={p0.shape[0]}, T, A={a}) for "
+                f"{type(system).__name__}, got {tuple(actions.shape)}"
+            )
+        if steps is not None and steps != actions.shape[1]:
+            raise ValueError(f"steps={steps} disagrees with actions.shape[1]={actions.shape[1]}")
+        steps = actions.shape[1]
+    elif steps is None:
+        raise ValueError("rollout needs `steps` when `actions` is None")
+    if isinstance(steps, bool) or not isinstance(steps, int) or steps < 0:
+        raise ValueError(f"steps must be an int >= 0, got {steps!r}")
+
+    p, v = p0, v0
+    positions: list[Tensor] = []
+    velocities: list[Tensor] = []
+    for t in range(steps):
+        u = None if actions is None else actions[:, t]  # (B, A)
+        p, v = integrator(system, p, v, u)  # (B, N, D) each
+        positions.append(p)
+        velocities.append(v)
+    if not positions:
+        empty = p0.new_empty((p0.shape[0], 0, n, d))
+        return empty, empty.clone()
+    return torch.stack(positions, dim=1), torch.stack(velocities, dim=1)  # (B, T, N, D) each
+
+
+SYSTEMS: dict[str, type[System]] = {
+    "pendulum": Pendulum,
+    "spring": Spring,
+    "gravity": Gravity,
+    "bouncing": Bouncing,
+}
+"""Name -> system class, for :func:`make_system` and the command line."""
+
+
+def make_system(name: str, **kwargs: object) -> System:
+    """Build the system registered as ``name`` with constructor keyword arguments ``kwargs``."""
+    try:
+        cls = SYSTEMS[name]
+    except KeyError:
+        raise ValueError(f"unknown system {name!r}; known: {sorted(SYSTEMS)}") from None
+    return cls(**kwargs)  # type: ignore[arg-type]
