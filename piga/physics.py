@@ -182,11 +182,17 @@ class Pendulum(System):
     |---|---|
     | state | θ (rad, 0 upright, positive counter-clockwise as displayed), θ̇ (rad/s) |
     | action | torque u, (B, 1) |
-    | dynamics | θ̈ = (3 / 2l)·g·sin θ + (3 / m l²)·a·u, i.e. 1.5·g·sin θ + 3·a·u for m = l = 1 |
+    | dynamics | θ̈ = (3 / 2l)·g·sin(θ + φ) + (3 / m l²)·a·u, i.e. 1.5·g·sin(θ + φ) + 3·a·u for m = l = 1 |
     | step | dt = 0.05 |
     | truth | g = 10, a = 1 |
 
     Gymnasium clips θ̇ to ±8 after each step; that clip is intentionally not modelled.
+
+    φ (``offset``, radians, not positive so not in log space) is where upright lies in the
+    model's angle: Gymnasium's θ = model θ + φ. An encoder/decoder pair learned without labels
+    may settle on any template orientation; a learnable φ lets the physics absorb it smoothly
+    instead of forcing the templates to re-orient (a local minimum). φ = 0 (fixed) is the paper's
+    engine; ``learnable`` may name "offset" or leave it out.
 
     Args:
         g: Initial gravity (default 1, far from the true 10).
@@ -194,7 +200,9 @@ class Pendulum(System):
         length: Rod length l, fixed (not learned).
         mass: Rod mass m, fixed (not learned).
         dt: Seconds per frame.
-        learnable: True (all), False (none, e.g. an oracle), or the names to learn.
+        offset: Initial angle offset φ (default 0).
+        learnable: True (all), False (none, e.g. an oracle), or the names to learn among
+            "g", "a" and "offset".
     """
 
     reference_values: ClassVar[dict[str, float]] = {"g": 10.0, "a": 1.0}
@@ -206,6 +214,7 @@ class Pendulum(System):
         length: float = 1.0,
         mass: float = 1.0,
         dt: float = 0.05,
+        offset: float = 0.0,
         learnable: bool | Collection[str] = True,
     ) -> None:
         super().__init__(n_objects=1, coord_dim=1, action_dim=1, dt=dt)
@@ -215,9 +224,10 @@ class Pendulum(System):
             raise ValueError(f"Pendulum: mass must be > 0, got {mass}")
         self.length = float(length)
         self.mass = float(mass)
-        flags = self._resolve_learnable("Pendulum", ("g", "a"), learnable)
+        flags = self._resolve_learnable("Pendulum", ("g", "a", "offset"), learnable)
         self._add_positive_parameter("g", g, flags["g"])
         self._add_positive_parameter("a", a, flags["a"])
+        self.offset = nn.Parameter(torch.tensor(float(offset)), requires_grad=flags["offset"])
 
     @property
     def g(self) -> Tensor:
@@ -232,7 +242,7 @@ class Pendulum(System):
     def acceleration(self, p: Tensor, v: Tensor, u: Tensor | None = None) -> Tensor:
         gravity_gain = 3.0 / (2.0 * self.length)
         torque_gain = 3.0 / (self.mass * self.length**2)
-        acc = gravity_gain * self.g * torch.sin(p)  # (B, 1, 1)
+        acc = gravity_gain * self.g * torch.sin(p + self.offset)  # (B, 1, 1)
         if u is not None:
             acc = acc + (torque_gain * self.a * u).unsqueeze(-1)  # (B, 1) -> (B, 1, 1)
         return acc

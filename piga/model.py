@@ -1,0 +1,218 @@
+"""The physics-as-inverse-graphics world model: encoder, velocity estimator, physics and decoder.
+
+```
+frames x_1..x_L ─► Encoder ─► p_1..p_L ─► VelocityEstimator ─► (p_L, v_L)
+                                   │                                  │ actions u_L..
+                                   ▼                                  ▼
+                               Decoder ─► x̃ᵃᵉ (all frames)       Physics (Euler) ─► p_{L+1..L+T}
+                                                                      │
+                                                              Decoder ─► x̃ᵖʳᵉᵈ
+loss = Σ_{t>L} MSE(x̃ᵖʳᵉᵈ_t, x_t) + α Σ_t MSE(x̃ᵃᵉ_t, x_t)
+```
+
+Frames enter as uint8 [B, T, H, W] (gray) or [B, T, H, W, C], as a data file stores them. The
+actions are float [B, T, A], where ``actions[:, t]`` is applied after frame t.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from typing import Any, NamedTuple
+
+import torch
+import torch.nn.functional as F
+from torch import Tensor, nn
+
+from piga.decoder import Decoder, DecoderConfig
+from piga.encoder import Encoder, EncoderConfig
+from piga.physics import Euler, System, make_system, rollout
+from piga.velocity import VelocityConfig, VelocityEstimator
+
+#: System name -> (N, D, A) of its state and actions.
+SYSTEM_SHAPES: dict[str, tuple[int, int, int]] = {
+    "pendulum": (1, 1, 1),
+    "spring": (2, 2, 0),
+    "gravity": (3, 2, 0),
+    "bouncing": (2, 2, 0),
+}
+
+
+@dataclass(frozen=True)
+class ModelConfig:
+    """Everything needed to rebuild a model (stored in checkpoints)."""
+
+    system: str = "pendulum"
+    """Physics family: one of :data:`SYSTEM_SHAPES`."""
+    physics_init: dict[str, float] = field(default_factory=dict)
+    """Initial physical parameters (empty: the system's far-from-truth defaults)."""
+    learn_offset: bool = True
+    """Pendulum only: learn the angle offset φ between the model's angle and upright."""
+    dt: float = 0.05
+    """Seconds per frame (from the data file)."""
+    image_size: int = 64
+    """H = W."""
+    channels: int = 1
+    """C."""
+    n_objects: int = 1
+    """N (balls, digits)."""
+    input_frames: int = 4
+    """L, frames given to the encoder and velocity estimator."""
+    pred_frames: int = 10
+    """T_pred, frames predicted by the physics during training."""
+    alpha: float = 3.0
+    """Weight α of the reconstruction loss."""
+    rec_frames: str = "all"
+    """Frames in the reconstruction loss: "all" L + T_pred (the paper), or "input" (the L input
+    frames only: the encoder then runs on L frames per item instead of L + T_pred, 3.5x less
+    work for the pendulum, and with overlapping windows every frame is still reconstructed)."""
+    substeps: int = 1
+    """Euler substeps M per frame (the paper: 5; 1 matches Gymnasium's pendulum exactly)."""
+    readout: str = "centroid"
+    """Encoder readout: "centroid" (soft centroid of each mask) or "regress" (the paper's location network)."""
+    angle_reference: float = 0.0
+    """Centroid readout of an angle: the direction read as θ = 0 (the learned offset φ absorbs it)."""
+    mask_width: int = 16
+    """Encoder mask-network channels."""
+    loc_width: int = 32
+    """Encoder location-network channels."""
+    template_hidden: int = 200
+    """Hidden units of the template generators (the paper: 200)."""
+
+    def __post_init__(self) -> None:
+        if self.system not in SYSTEM_SHAPES:
+            raise ValueError(f"unknown system {self.system!r}; known: {sorted(SYSTEM_SHAPES)}")
+        if self.input_frames < 2 or self.pred_frames < 1:
+            raise ValueError(f"need input_frames >= 2 and pred_frames >= 1, got {self.input_frames}, {self.pred_frames}")
+        if self.rec_frames not in ("all", "input"):
+            raise ValueError(f"rec_frames must be 'all' or 'input', got {self.rec_frames!r}")
+        if self.alpha < 0:
+            raise ValueError(f"alpha must be >= 0, got {self.alpha}")
+
+    @property
+    def coord_dim(self) -> int:
+        """D."""
+        return SYSTEM_SHAPES[self.system][1]
+
+    @property
+    def action_dim(self) -> int:
+        """A."""
+        return SYSTEM_SHAPES[self.system][2]
+
+    @property
+    def window(self) -> int:
+        """Frames per training item: L + T_pred."""
+        return self.input_frames + self.pred_frames
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able fields."""
+        return asdict(self)
+
+
+class ModelOutput(NamedTuple):
+    """One forward pass on a training window."""
+
+    loss: Tensor
+    """Scalar, L_pred + α·L_rec."""
+    loss_pred: Tensor
+    """Scalar, Σ over predicted frames of the per-frame MSE (batch mean)."""
+    loss_rec: Tensor
+    """Scalar, Σ over all frames of the autoencoder's per-frame MSE (batch mean)."""
+    target: Tensor
+    """(B, L+T, C, H, W) the frames in [0, 1]."""
+    pred: Tensor
+    """(B, T_pred, C, H, W) frames rendered from the physics."""
+    rec: Tensor
+    """(B, L+T or L, C, H, W) frames rendered from the encoder's coordinates (see ``rec_frames``)."""
+    coords: Tensor
+    """(B, L+T or L, N, D) encoder coordinates."""
+    coords_pred: Tensor
+    """(B, T_pred, N, D) physics coordinates."""
+
+
+def frames_to_float(frames: Tensor, channels: int) -> Tensor:
+    """uint8 (B, T, H, W) or (B, T, H, W, C) -> float (B, T, C, H, W) in [0, 1]."""
+    x = frames.float() / 255.0 if frames.dtype == torch.uint8 else frames.float()
+    if x.dim() == 4:
+        x = x.unsqueeze(2)  # (B, T, 1, H, W)
+    elif x.dim() == 5 and x.shape[-1] == channels and x.shape[2] != channels:
+        x = x.permute(0, 1, 4, 2, 3)  # (B, T, C, H, W)
+    if x.dim() != 5 or x.shape[2] != channels:
+        raise ValueError(f"frames must be (B, T, H, W) or (B, T, H, W, C={channels}), got {tuple(frames.shape)}")
+    return x
+
+
+class PhysicsModel(nn.Module):
+    """Encoder + velocity estimator + differentiable physics + coordinate-consistent decoder."""
+
+    def __init__(self, config: ModelConfig):
+        super().__init__()
+        self.config = config
+        n, d, _ = SYSTEM_SHAPES[config.system]
+        n = config.n_objects if config.system != "pendulum" else 1
+        self.encoder = Encoder(EncoderConfig(config.image_size, config.channels, n, d, config.readout,
+                                             config.mask_width, config.loc_width, config.angle_reference))
+        self.velocity = VelocityEstimator(VelocityConfig(config.input_frames, n, d, config.dt, config.image_size))
+        kwargs: dict[str, Any] = {"dt": config.dt, **config.physics_init}
+        if config.system == "pendulum":
+            kwargs["learnable"] = ("g", "a", "offset") if config.learn_offset else ("g", "a")
+        elif config.system in ("spring", "gravity", "bouncing"):
+            kwargs["n_objects"] = n
+        if config.system == "bouncing":
+            kwargs.setdefault("size", float(config.image_size))
+        self.system: System = make_system(config.system, **kwargs)
+        self.integrator = Euler(config.substeps)
+        self.decoder = Decoder(DecoderConfig(config.image_size, config.channels, n, d, hidden=config.template_hidden))
+
+    def physical_parameters(self) -> dict[str, float]:
+        """Current physical parameter values, e.g. ``{"g": 9.98, "a": 1.002}`` (plus ``offset``)."""
+        values = self.system.parameters_dict()
+        if hasattr(self.system, "offset"):
+            values["offset"] = float(self.system.offset.detach())
+        return values
+
+    def encode(self, frames: Tensor) -> Tensor:
+        """Float frames (B, T, C, H, W) -> coordinates (B, T, N, D)."""
+        b, t = frames.shape[:2]
+        coords = self.encoder(frames.flatten(0, 1).contiguous(memory_format=torch.channels_last))
+        return coords.view(b, t, *coords.shape[1:])
+
+    def initial_state(self, coords: Tensor) -> tuple[Tensor, Tensor]:
+        """Coordinates of L frames (B, L, N, D) -> (p_L, v_L), each (B, N, D)."""
+        return coords[:, -1], self.velocity(coords)
+
+    def predict(self, coords: Tensor, actions: Tensor | None, steps: int) -> Tensor:
+        """Rolls the physics on from L encoded frames.
+
+        Args:
+            coords: (B, L, N, D), the encoder's coordinates of the input frames.
+            actions: (B, steps, A), the actions after input frame L, L+1, ...; None if unactuated.
+            steps: frames to predict.
+
+        Returns:
+            (B, steps, N, D) coordinates of frames L+1 .. L+steps.
+        """
+        p0, v0 = self.initial_state(coords)
+        positions, _ = rollout(self.system, self.integrator, p0, v0, actions, steps)
+        return positions
+
+    def forward(self, frames: Tensor, actions: Tensor, pred_frames: int | None = None) -> ModelOutput:
+        """Loss and renders on a window of L + T frames (uint8 or float; see module docstring).
+
+        ``pred_frames`` (default: the config's T_pred) may be smaller, for a rollout curriculum;
+        frames after L + pred_frames are then ignored.
+        """
+        cfg = self.config
+        ell = cfg.input_frames
+        t_pred = cfg.pred_frames if pred_frames is None else pred_frames
+        x = frames_to_float(frames, cfg.channels)[:, : ell + t_pred]  # (B, L+T, C, H, W)
+        if x.shape[1] < ell + t_pred:
+            raise ValueError(f"need {ell + t_pred} frames per item, got {x.shape[1]}")
+        coords = self.encode(x if cfg.rec_frames == "all" else x[:, :ell])  # (B, L+T or L, N, D)
+        acts = actions[:, ell - 1 : ell - 1 + t_pred].float() if cfg.action_dim else None  # (B, T, A)
+        coords_pred = self.predict(coords[:, :ell], acts, t_pred)  # (B, T, N, D)
+        rec = self.decoder(coords)  # (B, L+T or L, C, H, W)
+        pred = self.decoder(coords_pred)  # (B, T, C, H, W)
+        loss_rec = F.mse_loss(rec, x[:, : rec.shape[1]], reduction="none").mean(dim=(2, 3, 4)).sum(1).mean()
+        loss_pred = F.mse_loss(pred, x[:, ell:], reduction="none").mean(dim=(2, 3, 4)).sum(1).mean()
+        loss = loss_pred + cfg.alpha * loss_rec
+        return ModelOutput(loss, loss_pred, loss_rec, x, pred, rec, coords, coords_pred)

@@ -1,0 +1,56 @@
+"""Everything ``piga-train-model`` leaves in RUN_DIR after training: metrics.json and the figures."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from piga.data import inspect_dataset, read_sequences
+from piga.evaluate import PARAMETER_NAMES, EvalConfig, evaluate, rollout_frames
+from piga.model import PhysicsModel, frames_to_float
+from piga.plots import curves_figure, rollout_figure, save_figure, templates_figure
+from piga.train import TrainState, write_json
+
+
+def _image(x: np.ndarray) -> np.ndarray:
+    """(C, H, W) -> (H, W) or (H, W, C)."""
+    return x[0] if x.shape[0] == 1 else np.moveaxis(x, 0, -1)
+
+
+@torch.no_grad()
+def write_run_report(model: PhysicsModel, state: TrainState, data: str | Path, run_dir: str | Path,
+                     eval_config: EvalConfig = EvalConfig()) -> dict[str, Any]:
+    """Evaluates on held-out data and writes metrics.json, rollout.png, templates.png and curves.png."""
+    run_dir = Path(run_dir)
+    info = inspect_dataset(data)
+    split = eval_config.split if info.split_counts.get(eval_config.split) else "train"
+    if split != eval_config.split:
+        eval_config = EvalConfig(split=split, extrapolate_frames=eval_config.extrapolate_frames,
+                                 max_sequences=eval_config.max_sequences)
+    metrics = evaluate(model, data, eval_config)
+    metrics["training"] = {"epochs": state.epoch, "steps": state.step, "seconds": state.elapsed,
+                           "threads": torch.get_num_threads()}
+    write_json(run_dir / "metrics.json", metrics)
+
+    frames, actions = read_sequences(data, split)
+    frames, actions = frames[:3], actions[:3]
+    cfg = model.config
+    steps = min(cfg.pred_frames + eval_config.extrapolate_frames, info.steps - cfg.input_frames)
+    pred, _ = rollout_frames(model, frames, actions, steps)
+    truth = frames_to_float(torch.from_numpy(frames[:, cfg.input_frames : cfg.input_frames + steps]), cfg.channels).numpy()
+    to_img = lambda a: np.stack([[_image(f) for f in seq] for seq in a])  # noqa: E731
+    save_figure(rollout_figure(to_img(truth), to_img(pred), cfg.input_frames, cfg.pred_frames), run_dir / "rollout.png")
+
+    t = model.decoder.templates()
+    # Mask probabilities against the background, as the decoder's softmax would give at one pixel.
+    masks = torch.sigmoid(t.mask_logits[:, 0]).numpy()  # (N, h, w)
+    contents = np.stack([_image(c) for c in t.contents.numpy()])
+    save_figure(templates_figure(contents, masks, _image(t.background.numpy()), torch.sigmoid(t.background_mask_logit[0]).numpy()),
+                run_dir / "templates.png")
+    true = {PARAMETER_NAMES[k]: float(v) for k, v in info.params.items() if k in PARAMETER_NAMES}
+    if state.history:
+        save_figure(curves_figure(state.history, true), run_dir / "curves.png")
+    return metrics

@@ -1,0 +1,336 @@
+"""Training the world model on a data file: frames and actions only, never ``/states``.
+
+The loop is one readable flow, in the style of cleanrl:
+
+1. An autoencoder warm-up. For ``warmup_steps`` steps only α·L_rec trains the encoder and
+   decoder, so that the coordinates mean something before the physics leans on them.
+2. A rollout curriculum. The prediction horizon grows from 1 frame to T_pred over
+   ``curriculum_steps``. Short rollouts keep the predicted object overlapping the true one, so the
+   pixel loss has a gradient with respect to g and a even while they are far from the truth.
+3. Physical parameters get their own learning rate (``lr_physics``), in log space.
+
+Each epoch ends with an atomic checkpoint (``checkpoint.pt``). ``resume`` restores the model,
+the optimiser, the step count and every RNG, and continues exactly where the run stopped. A
+non-finite loss stops training with :class:`TrainingDiverged`, which names the last good
+checkpoint.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import random
+import time
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+import torch
+from torch.utils.data import DataLoader, RandomSampler
+from tqdm.auto import tqdm
+
+from piga.atomic import atomic_output
+from piga.data import DatasetInfo, inspect_dataset, read_sequences
+from piga.encoder import estimate_background
+from piga.model import SYSTEM_SHAPES, ModelConfig, PhysicsModel, frames_to_float
+from piga.windows import SequenceWindows
+
+CHECKPOINT = "checkpoint.pt"
+
+
+class TrainingDiverged(RuntimeError):
+    """The loss became NaN or infinite; the message names the last good checkpoint."""
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """How to train. Presets are in :data:`PRESETS`."""
+
+    epochs: int = 16
+    """Passes over the training windows (the cosine schedule is planned over all of them)."""
+    max_minutes: float = 0.0
+    """Safety wall-clock budget: stop after the first epoch that ends past it (0: no limit).
+    Training results do not depend on it unless it cuts the run short."""
+    batch_size: int = 32
+    """Windows per step."""
+    lr: float = 1e-3
+    """Learning rate of the networks (encoder, velocity, decoder)."""
+    lr_physics: float = 2e-2
+    """Learning rate of the physical parameters (log space)."""
+    optimizer: str = "adam"
+    """'adam' or 'rmsprop' (the paper's)."""
+    schedule: str = "cosine"
+    """"cosine": after the warm-up, both learning rates follow a cosine from their value down to
+    ``lr_final_fraction`` of it at the last planned step; "step": the paper's division by
+    ``lr_decay_factor`` from ``lr_decay_epoch`` on."""
+    lr_final_fraction: float = 0.02
+    """Cosine schedule: final learning rate as a fraction of the initial one."""
+    lr_decay_epoch: int = 0
+    """Step schedule: divide the learning rates by ``lr_decay_factor`` from this epoch on (0: never)."""
+    lr_decay_factor: float = 5.0
+    """The paper divides by 5."""
+    warmup_steps: int = 200
+    """Steps of autoencoder-only training before the physics is used."""
+    curriculum_steps: int = 600
+    """Steps over which the prediction horizon grows from 1 to T_pred (0: full horizon at once)."""
+    window_stride: int = 1
+    """Start frames of training windows are this far apart within a sequence."""
+    seed: int = 0
+    """Seed of initialisation and sampling."""
+    threads: int = 0
+    """torch CPU threads (0: leave torch's default)."""
+    grad_clip: float = 10.0
+    """Gradient-norm clip of the networks (0: none)."""
+
+
+#: Named recipes. 'fast' is the default; 'paper' follows the paper's appendix.
+PRESETS: dict[str, dict[str, Any]] = {
+    "fast": {"model": {"rec_frames": "input"}},
+    "paper": {
+        "train": {"epochs": 1000, "max_minutes": 0.0, "lr": 3e-4, "lr_physics": 3e-4, "optimizer": "rmsprop",
+                  "schedule": "step", "lr_decay_epoch": 500, "warmup_steps": 0, "curriculum_steps": 0, "grad_clip": 0.0},
+        "model": {"substeps": 5, "learn_offset": False, "readout": "regress", "rec_frames": "all"},
+    },
+}
+
+
+@dataclass
+class TrainState:
+    """What a checkpoint holds besides the weights."""
+
+    epoch: int = 0
+    """Epochs completed."""
+    step: int = 0
+    """Optimiser steps taken."""
+    elapsed: float = 0.0
+    """Training seconds so far (excluding evaluation)."""
+    history: list[dict[str, float]] = field(default_factory=list)
+    """Per-epoch means: loss, loss_pred, loss_rec, the physical parameters, seconds."""
+
+
+def model_config_for(info: DatasetInfo, overrides: dict[str, Any] | None = None) -> ModelConfig:
+    """The model that fits a data file: system, dt, image size and channels from its attributes."""
+    if info.system not in SYSTEM_SHAPES:
+        raise ValueError(f"{info.path}: system {info.system!r} has no physics model; known: {sorted(SYSTEM_SHAPES)}")
+    shape = info.image_shape
+    if shape[0] != shape[1]:
+        raise ValueError(f"{info.path}: frames must be square, got {shape}")
+    channels = shape[2] if len(shape) == 3 else 1
+    n_objects = int(info.attrs.get("n_objects", SYSTEM_SHAPES[info.system][0]))
+    cfg = ModelConfig(system=info.system, dt=info.dt, image_size=shape[0], channels=channels, n_objects=n_objects)
+    return replace(cfg, **(overrides or {}))
+
+
+def _optimizer(model: PhysicsModel, config: TrainConfig) -> torch.optim.Optimizer:
+    physics = list(model.system.parameters())
+    ids = {id(p) for p in physics}
+    nets = [p for p in model.parameters() if id(p) not in ids]
+    groups = [{"params": nets, "lr": config.lr, "name": "nets"},
+              {"params": [p for p in physics if p.requires_grad], "lr": config.lr_physics, "name": "physics"}]
+    if config.optimizer == "adam":
+        return torch.optim.Adam(groups)
+    if config.optimizer == "rmsprop":
+        return torch.optim.RMSprop(groups)
+    raise ValueError(f"unknown optimizer {config.optimizer!r}; expected 'adam' or 'rmsprop'")
+
+
+def _rng_state() -> dict[str, Any]:
+    return {"torch": torch.get_rng_state(), "numpy": np.random.get_state(), "python": random.getstate()}
+
+
+def _set_rng_state(state: dict[str, Any]) -> None:
+    torch.set_rng_state(state["torch"])
+    np.random.set_state(state["numpy"])
+    random.setstate(state["python"])
+
+
+def save_checkpoint(path: Path, model: PhysicsModel, optimizer: torch.optim.Optimizer, state: TrainState,
+                    train_config: TrainConfig, data_info: DatasetInfo) -> None:
+    """Writes everything needed to resume or to use the model, atomically."""
+    payload = {
+        "model_config": model.config.to_dict(),
+        "train_config": asdict(train_config),
+        "model": model.state_dict(),
+        "optimizer": optimizer.state_dict(),
+        "state": asdict(state),
+        "rng": _rng_state(),
+        "data": {"path": str(data_info.path), "system": data_info.system, "image_shape": list(data_info.image_shape),
+                 "dt": data_info.dt},
+    }
+    with atomic_output(path, overwrite=True) as tmp:
+        torch.save(payload, tmp)
+
+
+def load_model(run_dir: str | Path) -> tuple[PhysicsModel, dict[str, Any]]:
+    """Rebuilds a trained model from ``RUN_DIR/checkpoint.pt``; returns it (eval mode) and the checkpoint."""
+    path = Path(run_dir) / CHECKPOINT
+    if not path.exists():
+        raise FileNotFoundError(f"{path}: no checkpoint (is {run_dir} a piga-train-model run folder?)")
+    try:
+        ckpt = torch.load(path, map_location="cpu", weights_only=False)
+        model = PhysicsModel(ModelConfig(**ckpt["model_config"]))
+        model.load_state_dict(ckpt["model"])
+    except Exception as exc:  # a truncated or foreign file
+        raise ValueError(f"{path}: not a readable piga checkpoint ({exc.__class__.__name__}: {exc})") from None
+    model.eval()
+    return model, ckpt
+
+
+def _background(data: str | Path, channels: int, seed: int, max_frames: int = 2000) -> torch.Tensor:
+    """Label-free background of the training frames: a per-pixel median over up to ``max_frames``."""
+    frames, _ = read_sequences(data, "train")
+    flat = frames.reshape(-1, *frames.shape[2:])
+    pick = np.random.default_rng(seed).choice(len(flat), size=min(max_frames, len(flat)), replace=False)
+    sample = frames_to_float(torch.from_numpy(flat[np.sort(pick)])[:, None], channels)[:, 0]  # (F, C, H, W)
+    return estimate_background(sample)
+
+
+def _lr_factor(step: int, epoch: int, total_steps: int, config: TrainConfig) -> float:
+    """Multiplier of the learning rates at a step (see ``TrainConfig.schedule``)."""
+    if config.schedule == "step":
+        return 1.0 / config.lr_decay_factor if config.lr_decay_epoch and epoch >= config.lr_decay_epoch else 1.0
+    if config.schedule != "cosine":
+        raise ValueError(f"unknown schedule {config.schedule!r}; expected 'cosine' or 'step'")
+    span = max(total_steps - config.warmup_steps, 1)
+    progress = min(max(step - config.warmup_steps, 0) / span, 1.0)
+    low = config.lr_final_fraction
+    return low + (1 - low) * 0.5 * (1 + math.cos(math.pi * progress))
+
+
+def _horizon(step: int, config: TrainConfig, t_pred: int) -> int:
+    """Prediction frames at a given step: 0 during warm-up, then growing to T_pred."""
+    if step < config.warmup_steps:
+        return 0
+    if config.curriculum_steps <= 0:
+        return t_pred
+    frac = (step - config.warmup_steps) / config.curriculum_steps
+    return max(1, min(t_pred, 1 + int(frac * t_pred)))
+
+
+def train(
+    data: str | Path,
+    run_dir: str | Path,
+    train_config: TrainConfig,
+    model_overrides: dict[str, Any] | None = None,
+    resume: bool = False,
+    progress: bool = True,
+    on_epoch: Callable[[TrainState, PhysicsModel], None] | None = None,
+) -> tuple[PhysicsModel, TrainState]:
+    """Trains on the train split of ``data``; writes checkpoints and TensorBoard scalars to ``run_dir``.
+
+    With ``resume``, the model, optimiser, step and RNGs come from ``run_dir``'s checkpoint and
+    ``train_config`` should be the run's saved one (``TrainConfig(**ckpt["train_config"])``),
+    possibly with more ``epochs``; ``model_overrides`` is ignored.
+
+    Returns:
+        The trained model (eval mode) and the final :class:`TrainState`.
+    """
+    from torch.utils.tensorboard import SummaryWriter
+
+    run_dir = Path(run_dir)
+    info = inspect_dataset(data)
+    ckpt_path = run_dir / CHECKPOINT
+    if train_config.threads:
+        torch.set_num_threads(train_config.threads)
+    state = TrainState()
+    if resume:
+        model, ckpt = load_model(run_dir)
+        model.train()
+        optimizer = _optimizer(model, train_config)
+        optimizer.load_state_dict(ckpt["optimizer"])
+        state = TrainState(**ckpt["state"])
+        _set_rng_state(ckpt["rng"])
+    else:
+        torch.manual_seed(train_config.seed)
+        np.random.seed(train_config.seed)
+        random.seed(train_config.seed)
+        model = PhysicsModel(model_config_for(info, model_overrides))
+        with torch.no_grad():
+            model.encoder.background.copy_(_background(data, model.config.channels, train_config.seed))
+        optimizer = _optimizer(model, train_config)
+    cfg = model.config
+    windows = SequenceWindows(data, "train", window=cfg.window, stride=train_config.window_stride)
+    writer = SummaryWriter(str(run_dir / "tensorboard"))
+    physics_params = [p for p in model.system.parameters() if p.requires_grad]
+    physics_ids = {id(p) for p in physics_params}
+    net_params = [p for p in model.parameters() if id(p) not in physics_ids]
+    model.train()
+    started = time.monotonic() - state.elapsed
+    try:
+        while state.epoch < train_config.epochs:
+            if train_config.max_minutes and state.elapsed > train_config.max_minutes * 60:
+                break
+            # The sampler's generator depends on (seed, epoch) only, so a resumed run sees the same order.
+            gen = torch.Generator().manual_seed(train_config.seed * 100_003 + state.epoch)
+            loader = DataLoader(windows, batch_size=train_config.batch_size, sampler=RandomSampler(windows, generator=gen),
+                                drop_last=True)
+            total_steps = train_config.epochs * len(loader)
+            sums = {"loss": 0.0, "loss_pred": 0.0, "loss_rec": 0.0}
+            count = 0
+            bar = tqdm(loader, desc=f"epoch {state.epoch + 1}/{train_config.epochs}", leave=False, disable=not progress)
+            for batch in bar:
+                factor = _lr_factor(state.step, state.epoch, total_steps, train_config)
+                for group in optimizer.param_groups:
+                    group["lr"] = factor * (train_config.lr if group["name"] == "nets" else train_config.lr_physics)
+                horizon = _horizon(state.step, train_config, cfg.pred_frames)
+                out = model(batch.frames, batch.actions, pred_frames=max(horizon, 1))
+                loss = out.loss if horizon > 0 else cfg.alpha * out.loss_rec
+                if not torch.isfinite(loss):
+                    good = ckpt_path if ckpt_path.exists() else None
+                    raise TrainingDiverged(
+                        f"loss became {loss.item()} at step {state.step} (epoch {state.epoch + 1}); "
+                        + (f"last good checkpoint: {good}" if good else "no checkpoint was written yet")
+                    )
+                optimizer.zero_grad(set_to_none=True)
+                loss.backward()
+                if train_config.grad_clip:
+                    torch.nn.utils.clip_grad_norm_(net_params, train_config.grad_clip)
+                optimizer.step()
+                state.step += 1
+                count += 1
+                for key in sums:
+                    sums[key] += float(getattr(out, key).detach()) if key != "loss" else float(loss.detach())
+                if state.step % 10 == 0:
+                    params = model.physical_parameters()
+                    bar.set_postfix({k: f"{v:.4g}" for k, v in params.items() if k != "offset"} | {"loss": f"{loss.item():.4f}", "T": horizon})
+                    for name, value in params.items():
+                        writer.add_scalar(f"physics/{name}", value, state.step)
+                    writer.add_scalar("loss/total", loss.item(), state.step)
+                    writer.add_scalar("loss/pred", out.loss_pred.item(), state.step)
+                    writer.add_scalar("loss/rec", out.loss_rec.item(), state.step)
+                    writer.add_scalar("train/horizon", horizon, state.step)
+                    writer.add_scalar("train/lr_factor", factor, state.step)
+            bar.close()
+            state.epoch += 1
+            state.elapsed = time.monotonic() - started
+            record = {k: v / max(count, 1) for k, v in sums.items()}
+            record.update(model.physical_parameters())
+            record.update({"epoch": state.epoch, "step": state.step, "seconds": state.elapsed})
+            state.history.append(record)
+            save_checkpoint(ckpt_path, model, optimizer, state, train_config, info)
+            shown = ", ".join(f"{k}={v:.4g}" for k, v in model.physical_parameters().items())
+            (tqdm.write if progress else print)(f"epoch {state.epoch}: loss {record['loss']:.5f} (pred {record['loss_pred']:.5f}, "
+                           f"rec {record['loss_rec']:.5f}), {shown}, {state.elapsed / 60:.1f} min")
+            if on_epoch is not None:
+                on_epoch(state, model)
+    finally:
+        writer.close()
+        windows.close()
+    model.eval()
+    return model, state
+
+
+def write_json(path: Path, payload: dict[str, Any], overwrite: bool = True) -> None:
+    """Writes JSON atomically (NaN written as null)."""
+    def clean(x: Any) -> Any:
+        if isinstance(x, float) and not math.isfinite(x):
+            return None
+        if isinstance(x, dict):
+            return {k: clean(v) for k, v in x.items()}
+        if isinstance(x, (list, tuple)):
+            return [clean(v) for v in x]
+        return x
+
+    with atomic_output(path, overwrite=overwrite) as tmp:
+        tmp.write_text(json.dumps(clean(payload), indent=2) + "\n")
