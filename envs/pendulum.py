@@ -170,7 +170,9 @@ class PendulumStateInfo(gym.Wrapper):
 class ResetRange(gym.Wrapper):
     """Fills Pendulum-v1's reset options ``x_init`` (angle range) and ``y_init`` (speed range).
 
-    Options that the caller passes to ``reset`` take precedence.
+    Options that the caller passes to ``reset`` take precedence. ``options={"state": [θ, θ̇]}``
+    starts from exactly that state (for example hanging down, [π, 0]). The wrapper sits inside
+    ``AddRenderObservation``, so the first frame shows it.
     """
 
     def __init__(self, env: gym.Env, max_angle: float, max_speed: float):
@@ -180,7 +182,16 @@ class ResetRange(gym.Wrapper):
         self.defaults = {"x_init": float(max_angle), "y_init": float(max_speed)}
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
-        return self.env.reset(seed=seed, options={**self.defaults, **(options or {})})
+        options = dict(options or {})
+        state = options.pop("state", None)
+        obs, info = self.env.reset(seed=seed, options={**self.defaults, **options})
+        if state is not None:
+            state = np.asarray(state, dtype=np.float64)
+            if state.shape != (2,) or not np.isfinite(state).all():
+                raise ValueError(f"reset option 'state' must be a finite [theta, theta_dot], got {state!r}")
+            self.env.unwrapped.state = state.copy()
+            obs = self.env.unwrapped._get_obs()
+        return obs, info
 
 
 def make_pixel_pendulum(

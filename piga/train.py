@@ -56,7 +56,7 @@ class TrainConfig:
     """Windows per step."""
     lr: float = 1e-3
     """Learning rate of the networks (encoder, velocity, decoder)."""
-    lr_physics: float = 2e-2
+    lr_physics: float = 1e-2
     """Learning rate of the physical parameters (log space)."""
     optimizer: str = "adam"
     """'adam' or 'rmsprop' (the paper's)."""
@@ -64,7 +64,7 @@ class TrainConfig:
     """"cosine": after the warm-up, both learning rates follow a cosine from their value down to
     ``lr_final_fraction`` of it at the last planned step; "step": the paper's division by
     ``lr_decay_factor`` from ``lr_decay_epoch`` on."""
-    lr_final_fraction: float = 0.02
+    lr_final_fraction: float = 0.01
     """Cosine schedule: final learning rate as a fraction of the initial one."""
     lr_decay_epoch: int = 0
     """Step schedule: divide the learning rates by ``lr_decay_factor`` from this epoch on (0: never)."""
@@ -82,15 +82,23 @@ class TrainConfig:
     """torch CPU threads (0: leave torch's default)."""
     grad_clip: float = 10.0
     """Gradient-norm clip of the networks (0: none)."""
+    physics_grad_clip: float = 3.0
+    """Adam only: clip each physical parameter's gradient to this many times its running RMS (0: off).
+    One outlying batch otherwise inflates Adam's first moment long before the second catches up,
+    and the next ~10 steps throw g and a several percent off (seen mid-training without it)."""
+    average_final_epoch: bool = True
+    """End with the physical parameters averaged (in log space) over the last epoch's steps:
+    Polyak averaging, which removes most of the optimiser's step-to-step jitter."""
 
 
 #: Named recipes. 'fast' is the default; 'paper' follows the paper's appendix.
 PRESETS: dict[str, dict[str, Any]] = {
-    "fast": {"model": {"rec_frames": "input"}},
+    "fast": {"model": {"rec_frames": "input", "pred_trim": 0.1, "learn_offset": False}},
     "paper": {
         "train": {"epochs": 1000, "max_minutes": 0.0, "lr": 3e-4, "lr_physics": 3e-4, "optimizer": "rmsprop",
-                  "schedule": "step", "lr_decay_epoch": 500, "warmup_steps": 0, "curriculum_steps": 0, "grad_clip": 0.0},
-        "model": {"substeps": 5, "learn_offset": False, "readout": "regress", "rec_frames": "all"},
+                  "schedule": "step", "lr_decay_epoch": 500, "warmup_steps": 0, "curriculum_steps": 0, "grad_clip": 0.0,
+                  "average_final_epoch": False, "physics_grad_clip": 0.0},
+        "model": {"substeps": 5, "learn_offset": True, "readout": "regress", "rec_frames": "all"},
     },
 }
 
@@ -186,6 +194,25 @@ def _background(data: str | Path, channels: int, seed: int, max_frames: int = 20
     return estimate_background(sample)
 
 
+@torch.no_grad()
+def _clip_to_running_rms(optimizer: torch.optim.Optimizer, params: list[torch.Tensor], factor: float) -> None:
+    """Clips each gradient to ``factor`` x the bias-corrected RMS that Adam keeps for it.
+
+    Written by hand because torch's clip_grad_* clip to a fixed norm, not to a parameter's own
+    running gradient scale (the idea of Adafactor's update clipping).
+    """
+    for p in params:
+        state = optimizer.state.get(p)
+        if p.grad is None or not state or "exp_avg_sq" not in state:
+            continue
+        step = float(state["step"])
+        if step < 20:  # the running RMS is not yet meaningful
+            continue
+        beta2 = next(g["betas"][1] for g in optimizer.param_groups if any(q is p for q in g["params"]))
+        bound = factor * (state["exp_avg_sq"] / (1 - beta2**step)).sqrt()
+        p.grad.copy_(torch.maximum(torch.minimum(p.grad, bound), -bound))
+
+
 def _lr_factor(step: int, epoch: int, total_steps: int, config: TrainConfig) -> float:
     """Multiplier of the learning rates at a step (see ``TrainConfig.schedule``)."""
     if config.schedule == "step":
@@ -268,6 +295,8 @@ def train(
             total_steps = train_config.epochs * len(loader)
             sums = {"loss": 0.0, "loss_pred": 0.0, "loss_rec": 0.0}
             count = 0
+            final_epoch = state.epoch == train_config.epochs - 1
+            averages = [torch.zeros_like(p) for p in physics_params]
             bar = tqdm(loader, desc=f"epoch {state.epoch + 1}/{train_config.epochs}", leave=False, disable=not progress)
             for batch in bar:
                 factor = _lr_factor(state.step, state.epoch, total_steps, train_config)
@@ -284,11 +313,17 @@ def train(
                     )
                 optimizer.zero_grad(set_to_none=True)
                 loss.backward()
+                if train_config.physics_grad_clip and train_config.optimizer == "adam":
+                    _clip_to_running_rms(optimizer, physics_params, train_config.physics_grad_clip)
                 if train_config.grad_clip:
                     torch.nn.utils.clip_grad_norm_(net_params, train_config.grad_clip)
                 optimizer.step()
                 state.step += 1
                 count += 1
+                if final_epoch and train_config.average_final_epoch:
+                    with torch.no_grad():
+                        for avg, p in zip(averages, physics_params):
+                            avg += (p - avg) / count
                 for key in sums:
                     sums[key] += float(getattr(out, key).detach()) if key != "loss" else float(loss.detach())
                 if state.step % 10 == 0:
@@ -302,6 +337,10 @@ def train(
                     writer.add_scalar("train/horizon", horizon, state.step)
                     writer.add_scalar("train/lr_factor", factor, state.step)
             bar.close()
+            if final_epoch and train_config.average_final_epoch and count:
+                with torch.no_grad():
+                    for avg, p in zip(averages, physics_params):
+                        p.copy_(avg)
             state.epoch += 1
             state.elapsed = time.monotonic() - started
             record = {k: v / max(count, 1) for k, v in sums.items()}

@@ -136,11 +136,13 @@ def test_killed_overwrite_keeps_the_old_file(tmp_path: Path) -> None:
         assert f["frames"].shape[:2] == (2, 3)
 
 
-def test_demo_runs(tmp_path: Path) -> None:
-    result = run("piga-demo", "--out", str(tmp_path / "demo"), "--sequences", "4")
+def test_demo_runs_the_chain(tmp_path: Path) -> None:
+    result = run("piga-demo", "--out", str(tmp_path / "demo"), "--sequences", "10", "--epochs", "1")
     assert result.returncode == 0, result.stderr
-    assert "summary:" in result.stdout
-    assert (tmp_path / "demo" / "frames.png").exists() and (tmp_path / "demo" / "pendulum.h5").exists()
+    assert "summary: g: learned" in result.stdout and "a: learned" in result.stdout
+    for name in ("frames.png", "pendulum.h5", "model/metrics.json", "model/rollout.png"):
+        assert (tmp_path / "demo" / name).exists(), name
+    assert_one_line_error(run("piga-demo", "--out", str(tmp_path / "demo")), "--overwrite")
 
 
 def test_module_entry_points_importable_without_torch() -> None:

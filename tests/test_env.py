@@ -104,3 +104,15 @@ def test_registered_ids() -> None:
     assert "piga/PixelPendulum-v0" in gym.registry and "piga/PixelPendulumStack4-v0" in gym.registry
     assert gym.make("piga/PixelPendulumStack4-v0").observation_space.shape == (4, 64, 64)
     assert envs.MAX_ACTION == 2.0
+
+
+def test_reset_to_an_exact_state_shows_it_in_the_first_frame() -> None:
+    env = make_pixel_pendulum(draw_torque_arrow=False)
+    hanging, info = env.reset(seed=0, options={"state": [math.pi, 0.0]})
+    assert info["state"].tolist() == [math.pi, 0.0]
+    upright, _ = env.reset(seed=0, options={"state": [0.0, 0.0]})
+    rows = np.flatnonzero((255 - hanging[-1].astype(int)).sum(1) > 100)
+    rows_up = np.flatnonzero((255 - upright[-1].astype(int)).sum(1) > 100)
+    assert rows.mean() > 32 > rows_up.mean()  # the rod hangs below the pivot, or stands above it
+    with pytest.raises(ValueError, match="state"):
+        env.reset(options={"state": [1.0]})

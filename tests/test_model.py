@@ -54,3 +54,17 @@ def test_config_validation() -> None:
         ModelConfig(system="rocket")
     with pytest.raises(ValueError, match="rec_frames"):
         ModelConfig(rec_frames="some")
+
+
+def test_trimmed_prediction_loss_ignores_the_worst_windows() -> None:
+    torch.manual_seed(0)
+    model = PhysicsModel(ModelConfig(pred_trim=0.25))
+    frames = torch.randint(0, 256, (4, 14, 64, 64), dtype=torch.uint8)
+    actions = torch.zeros(4, 14, 1)
+    model.train()
+    trimmed = model(frames, actions).loss_pred
+    model.eval()  # evaluation reports the plain mean
+    plain = model(frames, actions).loss_pred
+    assert trimmed < plain
+    with pytest.raises(ValueError, match="pred_trim"):
+        ModelConfig(pred_trim=1.0)

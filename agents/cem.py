@@ -1,0 +1,114 @@
+"""The cross-entropy method: maximise a batched objective over action sequences within bounds.
+
+The optimiser knows nothing about models. The objective comes in as a closure that scores a
+population of action sequences (B, H, A) with a value (B,). This is mbrl-lib's design, without
+two of its mistakes:
+
+- A score that is NaN or infinite ranks *last*, never first: a blown-up rollout cannot win.
+- No state survives between calls. A warm start is passed in explicitly as ``init_mean``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import torch
+from torch import Tensor
+
+
+@dataclass(frozen=True)
+class CEMConfig:
+    """CEM settings. The defaults are PlaNet's (Hafner et al., 2019)."""
+
+    horizon: int = 12
+    """H, planning steps."""
+    iterations: int = 10
+    """Refinement iterations."""
+    candidates: int = 1000
+    """Action sequences sampled per iteration."""
+    elites: int = 100
+    """Best sequences that refit the sampling distribution."""
+    init_std: float = 1.0
+    """Initial standard deviation, as a fraction of the half-width of the action bounds."""
+    min_std: float = 0.0
+    """Floor on the standard deviation (same units as the actions)."""
+    momentum: float = 0.0
+    """Weight of the previous mean and std in each refit (0: plain CEM)."""
+
+    def __post_init__(self) -> None:
+        if self.horizon < 1 or self.iterations < 1 or self.candidates < 2:
+            raise ValueError(f"need horizon, iterations >= 1 and candidates >= 2, got {self}")
+        if not 1 <= self.elites <= self.candidates:
+            raise ValueError(f"elites must be in [1, candidates={self.candidates}], got {self.elites}")
+        if self.init_std <= 0 or self.min_std < 0 or not 0 <= self.momentum < 1:
+            raise ValueError(f"need init_std > 0, min_std >= 0, 0 <= momentum < 1, got {self}")
+
+
+class CEMResult(NamedTuple):
+    """What one optimisation returns."""
+
+    actions: Tensor
+    """(H, A) the best sequence found (the highest score among all samples, over all iterations)."""
+    value: float
+    """Its objective value (-inf if every score was non-finite)."""
+    mean: Tensor
+    """(H, A) the final sampling mean: shift it by one step to warm-start the next call."""
+
+
+def cem(
+    objective: Callable[[Tensor], Tensor],
+    low: Tensor,
+    high: Tensor,
+    config: CEMConfig = CEMConfig(),
+    init_mean: Tensor | None = None,
+    generator: torch.Generator | None = None,
+) -> CEMResult:
+    """Maximises ``objective`` over action sequences in [low, high].
+
+    Args:
+        objective: maps actions (B, H, A) to values (B,). Higher is better. NaN and ±inf rank last.
+        low, high: (A,) action bounds.
+        config: see :class:`CEMConfig`.
+        init_mean: (H, A) warm start of the sampling mean (default: the middle of the bounds).
+        generator: torch RNG for the samples (explicit, for reproducibility).
+
+    Returns:
+        A :class:`CEMResult`.
+    """
+    low, high = low.float(), high.float()
+    if low.dim() != 1 or low.shape != high.shape or not bool((high > low).all()):
+        raise ValueError(f"bounds must be 1-D with high > low, got low={low.tolist()}, high={high.tolist()}")
+    h, a = config.horizon, low.shape[0]
+    mid, half = (high + low) / 2, (high - low) / 2
+    mean = mid.expand(h, a).clone() if init_mean is None else init_mean.float().clamp(low, high).clone()
+    if mean.shape != (h, a):
+        raise ValueError(f"init_mean must be (H={h}, A={a}), got {tuple(mean.shape)}")
+    std = (config.init_std * half).expand(h, a).clone()
+    best_actions, best_value = mean.clone(), float("-inf")
+    for _ in range(config.iterations):
+        noise = torch.randn((config.candidates, h, a), generator=generator)
+        samples = (mean + std * noise).clamp(low, high)  # (B, H, A)
+        values = objective(samples)
+        if values.shape != (config.candidates,):
+            raise ValueError(f"objective must return ({config.candidates},) values, got {tuple(values.shape)}")
+        values = torch.where(torch.isfinite(values), values, torch.full_like(values, float("-inf")))
+        order = torch.argsort(values, descending=True)
+        top = float(values[order[0]])
+        if top > best_value:
+            best_value, best_actions = top, samples[order[0]].clone()
+        finite = order[torch.isfinite(values[order])][: config.elites]
+        if len(finite) == 0:  # everything blew up: widen nothing, keep the distribution
+            continue
+        elites = samples[finite]  # (E, H, A)
+        new_mean, new_std = elites.mean(0), elites.std(0, unbiased=False)
+        mean = config.momentum * mean + (1 - config.momentum) * new_mean
+        std = (config.momentum * std + (1 - config.momentum) * new_std).clamp_min(config.min_std)
+    return CEMResult(best_actions, best_value, mean)
+
+
+def shift_warm_start(mean: Tensor, low: Tensor, high: Tensor) -> Tensor:
+    """The next call's ``init_mean``: drop the executed first step, append the middle of the bounds."""
+    fill = ((high + low) / 2).expand(1, mean.shape[1])
+    return torch.cat([mean[1:], fill], dim=0)

@@ -1,0 +1,173 @@
+"""Model-predictive control of the pendulum with CEM over a physics model.
+
+One planner serves two agents:
+
+- :class:`PigaMPCAgent` sees only frames. Its last L frames go through the trained encoder and
+  velocity estimator to give (θ, θ̇). CEM then plans over the model's *learned* physics: its
+  learned g (times a gravity multiplier, if the agent is told gravity changed), its learned a,
+  and its offset φ.
+- :class:`OracleAgent` is the same planner with the true state from ``info["state"]`` and the
+  true parameters.
+
+Both plan in Gymnasium's convention (θ = 0 upright). The piga agent converts its model angle
+with θ = model θ + φ. The planning reward is Gymnasium's:
+-(wrap(θ - θ_goal)² + 0.1·θ̇² + 0.001·u²), summed over the horizon.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from agents.cem import CEMConfig, cem, shift_warm_start
+from envs.pendulum import MAX_ACTION, PENDULUM_DT
+from piga.model import PhysicsModel, frames_to_float
+from piga.physics import Euler, Pendulum, System, rollout
+from piga.velocity import wrap_angle
+
+
+@dataclass(frozen=True)
+class MPCConfig:
+    """Planner settings. The CEM defaults are tuned for the pendulum (README, ``piga-control``)."""
+
+    cem: CEMConfig = field(default_factory=lambda: CEMConfig(horizon=20, iterations=5, candidates=200, elites=20))
+    """CEM settings."""
+    goal_angle: float = 0.0
+    """θ_goal in Gymnasium's convention (0 = upright)."""
+    angle_weight: float = 1.0
+    """Weight of wrap(θ - θ_goal)²."""
+    velocity_weight: float = 0.1
+    """Weight of θ̇²."""
+    action_weight: float = 0.001
+    """Weight of u²."""
+    warm_start: bool = True
+    """Start each plan from the previous one, shifted by a step."""
+    seed: int = 0
+    """Seed of the planner's RNG."""
+
+
+class PendulumPlanner:
+    """CEM over a pendulum physics model; stateless except the warm start.
+
+    Args:
+        system: a :class:`piga.physics.Pendulum` (learned, or with the true values for the oracle).
+        integrator: its integrator (Euler with the model's substeps).
+        offset: φ, the system's angle offset: Gymnasium's θ = system θ + φ. The planner works in
+            the system's own angle and scores in Gymnasium's.
+        config: planner settings.
+    """
+
+    def __init__(self, system: System, integrator: Euler, config: MPCConfig = MPCConfig(), offset: float = 0.0):
+        self.system, self.integrator, self.offset = system, integrator, float(offset)
+        self.config = config
+        self.low = torch.tensor([-MAX_ACTION])
+        self.high = torch.tensor([MAX_ACTION])
+        self.generator = torch.Generator().manual_seed(config.seed)
+        self._mean: Tensor | None = None
+
+    def reset(self) -> None:
+        """Forgets the warm start and reseeds (a new episode)."""
+        self._mean = None
+        self.generator.manual_seed(self.config.seed)
+
+    def objective(self, theta: float, theta_dot: float) -> Callable[[Tensor], Tensor]:
+        """The closure CEM maximises: actions (B, H, 1) -> return (B,) from the system state (θ, θ̇)."""
+        cfg = self.config
+
+        @torch.no_grad()
+        def value(actions: Tensor) -> Tensor:
+            b = actions.shape[0]
+            p0 = torch.full((b, 1, 1), float(theta))
+            v0 = torch.full((b, 1, 1), float(theta_dot))
+            p, v = rollout(self.system, self.integrator, p0, v0, actions)  # (B, H, 1, 1) each
+            err = wrap_angle(p[..., 0, 0] + self.offset - cfg.goal_angle)  # (B, H), Gymnasium's convention
+            cost = cfg.angle_weight * err**2 + cfg.velocity_weight * v[..., 0, 0] ** 2 + cfg.action_weight * actions[..., 0] ** 2
+            return -cost.sum(1)
+
+        return value
+
+    def plan(self, theta: float, theta_dot: float) -> np.ndarray:
+        """The first action (1,) of the best plan from the system state (θ, θ̇)."""
+        return self.plan_sequence(theta, theta_dot)[0]
+
+    def plan_sequence(self, theta: float, theta_dot: float) -> np.ndarray:
+        """The whole best plan (H, 1) from the system state (θ, θ̇); advances the warm start."""
+        result = cem(self.objective(theta, theta_dot), self.low, self.high, self.config.cem,
+                     init_mean=self._mean, generator=self.generator)
+        if self.config.warm_start:
+            self._mean = shift_warm_start(result.mean, self.low, self.high)
+        return result.actions.numpy().astype(np.float32)
+
+
+class OracleAgent:
+    """The planner with the true state (``info["state"]``) and the true parameters (g, a)."""
+
+    def __init__(self, g: float, a: float, config: MPCConfig = MPCConfig(), dt: float = PENDULUM_DT):
+        system = Pendulum(g=g, a=a, dt=dt, learnable=False)
+        self.planner = PendulumPlanner(system, Euler(1), config)
+
+    def reset(self) -> None:
+        """Starts an episode."""
+        self.planner.reset()
+
+    def act(self, frames: np.ndarray, state: np.ndarray) -> np.ndarray:
+        """Action (1,) from the true state [θ, θ̇]; the frames are ignored."""
+        return self.planner.plan(float(state[0]), float(state[1]))
+
+
+class PigaMPCAgent:
+    """Control from pixels: frames -> encoder + velocity -> (θ, θ̇) -> CEM over learned physics.
+
+    Args:
+        model: a trained :class:`PhysicsModel` of the pendulum.
+        config: planner settings.
+        gravity_mult: the agent is told gravity changed by this factor; it multiplies its
+            learned g the same way (zero-shot, no retraining).
+    """
+
+    def __init__(self, model: PhysicsModel, config: MPCConfig = MPCConfig(), gravity_mult: float = 1.0,
+                 keep_trace: bool = False):
+        if model.config.system != "pendulum":
+            raise ValueError(f"PigaMPCAgent controls a pendulum model, got system {model.config.system!r}")
+        if not (gravity_mult > 0 and math.isfinite(gravity_mult)):
+            raise ValueError(f"gravity_mult must be finite and > 0, got {gravity_mult}")
+        self.model = model.eval()
+        system = copy.deepcopy(model.system)  # the learned physics, told about the new gravity
+        system.set_parameters(g=system.parameters_dict()["g"] * gravity_mult)
+        self.offset = float(getattr(system, "offset", torch.tensor(0.0)).detach())
+        self.planner = PendulumPlanner(system, model.integrator, config, offset=self.offset)
+        self.keep_trace = keep_trace
+        self.trace: list[tuple[float, float, np.ndarray]] = []
+        """With ``keep_trace``: per step, the believed (θ, θ̇) in the model's convention and the plan (H, 1)."""
+
+    @property
+    def input_frames(self) -> int:
+        """L, frames the agent needs per decision."""
+        return self.model.config.input_frames
+
+    def reset(self) -> None:
+        """Starts an episode."""
+        self.planner.reset()
+        self.trace = []
+
+    @torch.no_grad()
+    def estimate_state(self, frames: np.ndarray) -> tuple[float, float]:
+        """(θ, θ̇) in the model's convention (Gymnasium's θ = θ + ``offset``) from the last L frames, uint8 (L, H, W)."""
+        x = frames_to_float(torch.from_numpy(np.ascontiguousarray(frames))[None], self.model.config.channels)
+        coords = self.model.encode(x)  # (1, L, 1, 1)
+        p, v = self.model.initial_state(coords)
+        return float(p[0, 0, 0]), float(v[0, 0, 0])
+
+    def act(self, frames: np.ndarray, state: np.ndarray | None = None) -> np.ndarray:
+        """Action (1,) from the last L frames (uint8 (L, H, W)); ``state`` is never used."""
+        theta, theta_dot = self.estimate_state(frames)
+        plan = self.planner.plan_sequence(theta, theta_dot)
+        if self.keep_trace:
+            self.trace.append((theta, theta_dot, plan))
+        return plan[0]

@@ -1,0 +1,129 @@
+"""Benchmark: does the default recipe identify g and a to 1% on a 2-core CPU, for every seed and value?
+
+For each case it collects a data set with ``piga-collect``'s defaults, except for the case's
+physical values. It then trains with the default ``fast`` preset, which never reads /states and
+starts at g = 1, a = 0.3, and records the learned parameters and their errors, the training
+time, SSIM per step, and the encoder angle error.
+
+    python benchmarks/train_accuracy.py --out results/train_accuracy            # all cases
+    python benchmarks/train_accuracy.py --out results/train_accuracy --cases default --seeds 0 1
+
+Each finished run is appended to ``OUT.json`` (atomically), so an interrupted benchmark
+continues where it stopped. ``OUT.md`` is rewritten each time with the table. Runs are sequential,
+so training time is measured on the whole machine; the machine is recorded.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import statistics
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import torch
+
+from piga.atomic import atomic_output
+from piga.collect import CollectConfig, collect
+from piga.evaluate import EvalConfig, evaluate
+from piga.train import PRESETS, TrainConfig, train, write_json
+
+#: case name -> (gravity, actuation gain, data seed)
+CASES: dict[str, tuple[float, float, int]] = {
+    "default": (10.0, 1.0, 100),
+    "g6": (6.0, 1.0, 101),
+    "g14": (14.0, 1.0, 102),
+    "a0.5": (10.0, 0.5, 103),
+    "a1.5": (10.0, 1.5, 104),
+}
+
+
+def machine() -> dict[str, object]:
+    """Where the numbers were measured."""
+    cpu = "unknown"
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return {"cpu": cpu, "cores": os.cpu_count(), "torch_threads": torch.get_num_threads(), "torch": torch.__version__,
+            "python": platform.python_version(), "platform": platform.platform()}
+
+
+def table(runs: list[dict[str, object]]) -> str:
+    """Markdown: one row per run, then per-case medians and spreads."""
+    lines = ["| case | seed | true g | learned g | g error | true a | learned a | a error | train min | SSIM pred | SSIM ext | angle err (deg) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in runs:
+        pe = r["metrics"]["parameter_errors"]  # type: ignore[index]
+        m = r["metrics"]
+        ssim = m["frame_ssim_mean"]  # type: ignore[index]
+        angle = m.get("angle", {}).get("mean_abs_error_deg", float("nan"))  # type: ignore[union-attr]
+        lines.append(
+            f"| {r['case']} | {r['seed']} | {pe['g']['true']:g} | {pe['g']['learned']:.4f} | {100 * pe['g']['relative_error']:.2f}% | "
+            f"{pe['a']['true']:g} | {pe['a']['learned']:.4f} | {100 * pe['a']['relative_error']:.2f}% | "
+            f"{r['train_seconds'] / 60:.1f} | {ssim['prediction']:.3f} | {ssim['extrapolation']:.3f} | {angle:.2f} |"
+        )
+    lines += ["", "| case | runs | g error median (max) | a error median (max) | all ≤ 1% | train min median |", "|---|---|---|---|---|---|"]
+    for case in dict.fromkeys(r["case"] for r in runs):
+        rs = [r for r in runs if r["case"] == case]
+        ge = [100 * r["metrics"]["parameter_errors"]["g"]["relative_error"] for r in rs]  # type: ignore[index]
+        ae = [100 * r["metrics"]["parameter_errors"]["a"]["relative_error"] for r in rs]  # type: ignore[index]
+        ok = sum(g <= 1 and a <= 1 for g, a in zip(ge, ae))
+        lines.append(f"| {case} | {len(rs)} | {statistics.median(ge):.2f}% ({max(ge):.2f}%) | {statistics.median(ae):.2f}% ({max(ae):.2f}%) | "
+                     f"{ok}/{len(rs)} | {statistics.median([r['train_seconds'] / 60 for r in rs]):.1f} |")
+    return "\n".join(lines) + "\n"
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--out", default="results/train_accuracy", help="output stem (.json and .md)")
+    p.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES))
+    p.add_argument("--seeds", nargs="+", type=int, default=None, help="training seeds (default: 0-4 for 'default', 0 otherwise)")
+    p.add_argument("--work", default="/tmp/piga-bench", help="folder for data and run folders")
+    args = p.parse_args()
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    work = Path(args.work)
+    work.mkdir(parents=True, exist_ok=True)
+    record_path = out.with_suffix(".json")
+    record = json.loads(record_path.read_text()) if record_path.exists() else {"runs": []}
+    record["machine"] = machine()
+    record["command"] = " ".join(["python", *sys.argv])
+    record["recipe"] = {"train": TrainConfig().__dict__, "preset": "fast", "model": PRESETS["fast"].get("model", {})}
+    done = {(r["case"], r["seed"]) for r in record["runs"]}
+    for case in args.cases:
+        gravity, gain, data_seed = CASES[case]
+        seeds = args.seeds if args.seeds is not None else ([0, 1, 2, 3, 4] if case == "default" else [0])
+        data = work / f"{case}.h5"
+        if not data.exists():
+            base = CollectConfig()
+            collect(replace(base, env=replace(base.env, gravity=gravity, actuation_gain=gain), seed=data_seed), data,
+                    progress=False, command=f"benchmark case {case}")
+        for seed in seeds:
+            if (case, seed) in done:
+                continue
+            run_dir = work / f"{case}-seed{seed}"
+            started = time.monotonic()
+            model, state = train(data, run_dir, TrainConfig(seed=seed), PRESETS["fast"].get("model"), progress=False)
+            wall = time.monotonic() - started
+            metrics = evaluate(model, data, EvalConfig())
+            record["runs"].append({"case": case, "seed": seed, "train_seconds": state.elapsed, "wall_seconds": wall,
+                                   "history": state.history, "metrics": metrics})
+            write_json(record_path, record)
+            with atomic_output(out.with_suffix(".md"), overwrite=True) as tmp:
+                tmp.write_text(f"# Parameter identification benchmark\n\nCommand: `{record['command']}`\n\n"
+                               f"Machine: {record['machine']}\n\n" + table(record["runs"]))
+            pe = metrics["parameter_errors"]
+            print(f"{case} seed {seed}: g={pe['g']['learned']:.4f} ({100 * pe['g']['relative_error']:.2f}%), "
+                  f"a={pe['a']['learned']:.4f} ({100 * pe['a']['relative_error']:.2f}%), {state.elapsed / 60:.1f} min", flush=True)
+
+
+if __name__ == "__main__":
+    main()

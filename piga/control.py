@@ -1,0 +1,140 @@
+"""Running control episodes on the pixel pendulum and scoring them.
+
+Success is defined precisely. An episode of ``steps`` steps (200 by default) succeeds when, for
+each of its last ``hold_steps`` steps (20), |wrap(θ - θ_goal)| < ``angle_tolerance`` (0.2 rad)
+and |θ̇| < ``speed_tolerance`` (1 rad/s).
+
+Its time to swing up is the first step from which that condition holds until the end (None
+otherwise).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from collections.abc import Callable
+from typing import Any, Protocol
+
+import numpy as np
+
+from envs.pendulum import PixelPendulumConfig, make_pixel_pendulum
+
+
+class Agent(Protocol):
+    """What an episode needs from a controller."""
+
+    def reset(self) -> None: ...
+
+    def act(self, frames: np.ndarray, state: np.ndarray) -> np.ndarray: ...
+
+
+@dataclass(frozen=True)
+class EpisodeConfig:
+    """How episodes are run and scored."""
+
+    episodes: int = 5
+    """Number of episodes."""
+    steps: int = 200
+    """Steps per episode."""
+    seed: int = 0
+    """Seed of the start states."""
+    gravity_mult: float = 1.0
+    """The environment's gravity multiplier."""
+    goal_angle: float = 0.0
+    """θ_goal for scoring (Gymnasium's convention)."""
+    hang_first: bool = True
+    """Episode 0 starts hanging straight down at rest; the others start at θ ~ U(-π, π), θ̇ ~ U(-1, 1)."""
+    hold_steps: int = 20
+    """Success needs the goal held for this many final steps."""
+    angle_tolerance: float = 0.2
+    """Success: |wrap(θ - θ_goal)| below this (rad)."""
+    speed_tolerance: float = 1.0
+    """Success: |θ̇| below this (rad/s)."""
+    frame_stack: int = 4
+    """Frames the agent sees per step (the model's L)."""
+
+    def __post_init__(self) -> None:
+        if self.episodes < 1 or self.steps < self.hold_steps or self.hold_steps < 1:
+            raise ValueError(f"need episodes >= 1 and steps >= hold_steps >= 1, got {self}")
+        if not (self.gravity_mult > 0 and math.isfinite(self.gravity_mult)):
+            raise ValueError(f"gravity_mult must be finite and > 0, got {self.gravity_mult}")
+
+
+def _wrap(x: np.ndarray) -> np.ndarray:
+    return (x + np.pi) % (2 * np.pi) - np.pi
+
+
+def run_episodes(agent: Agent, config: EpisodeConfig, record: int = 0, progress: bool = False,
+                 on_episode_end: Callable[[int], None] | None = None) -> dict[str, Any]:
+    """Runs the episodes; returns per-episode results and a summary.
+
+    Args:
+        agent: controller; gets the last L frames (uint8 (L, H, W)) and the true state (which only
+            the oracle may use).
+        config: see :class:`EpisodeConfig`.
+        record: keep the frames, states and actions of the first ``record`` episodes (for videos).
+        on_episode_end: called with the episode index after each episode.
+    """
+    from tqdm.auto import tqdm
+
+    env = make_pixel_pendulum(PixelPendulumConfig(frame_stack=config.frame_stack, gravity_mult=config.gravity_mult,
+                                                  episode_length=config.steps))
+    rng = np.random.default_rng(config.seed)
+    episodes: list[dict[str, Any]] = []
+    recordings: list[dict[str, np.ndarray]] = []
+    for ep in tqdm(range(config.episodes), desc="episodes", disable=not progress):
+        if ep == 0 and config.hang_first:
+            start = np.array([math.pi, 0.0])
+        else:
+            start = np.array([rng.uniform(-math.pi, math.pi), rng.uniform(-1, 1)])
+        obs, info = env.reset(seed=config.seed * 1000 + ep, options={"state": start})
+        agent.reset()
+        states, actions, rewards, plan_times, frames = [info["state"]], [], [], [], [obs[-1]]
+        for _ in range(config.steps):
+            t0 = time.perf_counter()
+            u = np.asarray(agent.act(obs, info["state"]), dtype=np.float32).reshape(1)
+            plan_times.append(time.perf_counter() - t0)
+            obs, reward, _, _, info = env.step(u)
+            states.append(info["state"])
+            actions.append(float(u[0]))
+            rewards.append(float(reward))
+            if ep < record:
+                frames.append(obs[-1])
+        s = np.array(states)
+        err = np.abs(_wrap(s[1:, 0] - config.goal_angle))
+        inside = (err < config.angle_tolerance) & (np.abs(s[1:, 1]) < config.speed_tolerance)
+        held_from = None
+        if inside[-1]:
+            outside = np.flatnonzero(~inside)
+            held_from = int(outside[-1] + 1) if len(outside) else 0
+        success = bool(inside[-config.hold_steps :].all())
+        episodes.append({
+            "start": start.tolist(),
+            "return": float(np.sum(rewards)),
+            "success": success,
+            "final_angle_error": float(err[-1]),
+            "final_speed": float(abs(s[-1, 1])),
+            "time_to_goal_steps": held_from,
+            "plan_ms_median": float(1000 * np.median(plan_times)),
+            "plan_ms": [float(1000 * t) for t in plan_times],
+        })
+        if on_episode_end is not None:
+            on_episode_end(ep)
+        if ep < record:
+            recordings.append({"frames": np.array(frames), "states": s, "actions": np.array(actions)})
+    env.close()
+    all_plan = np.concatenate([e.pop("plan_ms") for e in episodes])
+    swing = [e["time_to_goal_steps"] for e in episodes if e["success"]]
+    summary = {
+        "episodes": config.episodes,
+        "success_rate": float(np.mean([e["success"] for e in episodes])),
+        "mean_return": float(np.mean([e["return"] for e in episodes])),
+        "final_angle_error_mean": float(np.mean([e["final_angle_error"] for e in episodes])),
+        "time_to_goal_steps_median": float(np.median(swing)) if swing else None,
+        "plan_ms_median": float(np.median(all_plan)),
+        "plan_ms_p95": float(np.percentile(all_plan, 95)),
+        "gravity_mult": config.gravity_mult,
+        "goal_angle": config.goal_angle,
+    }
+    return {"summary": summary, "episodes": episodes, "recordings": recordings}

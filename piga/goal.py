@@ -1,0 +1,114 @@
+"""Goals given as images: read the goal angle with the encoder, check it, and write goal images.
+
+An image is converted the way the environment converts its render: a centre crop to a square,
+``cv2.resize(..., INTER_AREA)`` to the model's size, then Gymnasium's gray weights
+(0.2125, 0.7154, 0.0721), truncated to uint8.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cv2
+import numpy as np
+import torch
+
+from piga.model import PhysicsModel, frames_to_float
+
+#: Gymnasium's GrayscaleObservation weights (R, G, B).
+GRAY_WEIGHTS = np.array([0.2125, 0.7154, 0.0721])
+
+
+def load_scene_image(path: str | os.PathLike[str], size: int) -> np.ndarray:
+    """Reads a PNG or JPEG of any size as the env would see it: uint8 (size, size).
+
+    Raises:
+        FileNotFoundError: no such file.
+        ValueError: the file is not a readable image.
+    """
+    import imageio.v3 as iio
+
+    p = Path(path)
+    if not p.is_file():
+        raise FileNotFoundError(f"{p}: no such image file")
+    try:
+        img = np.asarray(iio.imread(p))
+    except Exception as exc:  # imageio raises many types for foreign or corrupt files
+        raise ValueError(f"{p}: not a readable image ({exc.__class__.__name__})") from None
+    if img.ndim == 3 and img.shape[2] == 4:
+        img = img[..., :3]
+    if img.ndim not in (2, 3) or min(img.shape[:2]) < 2:
+        raise ValueError(f"{p}: expected a 2-D gray or RGB image, got shape {img.shape}")
+    if img.dtype != np.uint8:
+        img = np.clip(img.astype(np.float64) / (img.max() or 1) * 255, 0, 255).astype(np.uint8)
+    h, w = img.shape[:2]
+    side = min(h, w)
+    top, left = (h - side) // 2, (w - side) // 2
+    img = img[top : top + side, left : left + side]
+    img = cv2.resize(img, (size, size), interpolation=cv2.INTER_AREA)
+    if img.ndim == 3:
+        img = np.sum(img * GRAY_WEIGHTS, axis=-1).astype(np.uint8)
+    return img
+
+
+@dataclass(frozen=True)
+class GoalEstimate:
+    """What the model reads from a goal image."""
+
+    angle: float
+    """Goal angle θ in Gymnasium's convention (rad, 0 upright)."""
+    reconstruction_mse: float
+    """MSE of the model's re-rendering of the image (how well the image looks like the scene)."""
+    hold_torque: float
+    """Torque u needed to hold θ at rest under the agent's physics."""
+    feasible_max_angle: float
+    """Largest |θ| around upright that can be held with |u| <= 2 (rad)."""
+    warnings: list[str] = field(default_factory=list)
+    """Human-readable warnings (infeasible goal, image not of the scene)."""
+
+
+@torch.no_grad()
+def read_goal(model: PhysicsModel, image: np.ndarray, g: float, a: float, mse_limit: float) -> GoalEstimate:
+    """Encodes a goal image (uint8 (H, W)) and checks it.
+
+    Args:
+        model: the trained pendulum model.
+        image: uint8 (H, W) from :func:`load_scene_image`.
+        g, a: the agent's physics (learned g times any gravity multiplier, learned a).
+        mse_limit: reconstruction MSE above which the image is reported as not of the scene.
+    """
+    x = frames_to_float(torch.from_numpy(image)[None, None], model.config.channels)  # (1, 1, C, H, W)
+    coords = model.encode(x)  # (1, 1, 1, 1)
+    rec = model.decoder(coords)
+    mse = float(((rec - x) ** 2).mean())
+    offset = model.physical_parameters().get("offset", 0.0)
+    angle = math.remainder(float(coords[0, 0, 0, 0]) + offset, 2 * math.pi)
+    hold = -g * math.sin(angle) / (2 * a)  # 1.5 g sin θ + 3 a u = 0
+    ratio = min(1.0, 4 * a / g)
+    feasible = math.asin(ratio)
+    warnings = []
+    if abs(hold) > 2.0:
+        warnings.append(
+            f"goal {math.degrees(angle):.1f} deg needs torque {hold:+.2f} to hold, beyond the limit of 2; holdable goals are "
+            f"within ±{math.degrees(feasible):.1f} deg of upright (or of hanging down); the controller will do its best"
+        )
+    if mse > mse_limit:
+        warnings.append(
+            f"the goal image does not look like the scene: the model re-renders it with MSE {mse:.4f} "
+            f"(typical {mse_limit / 4:.4f}); the goal angle {math.degrees(angle):.1f} deg may be meaningless"
+        )
+    return GoalEstimate(angle, mse, hold, feasible, warnings)
+
+
+def render_goal_image(angle_deg: float) -> np.ndarray:
+    """Gymnasium's own full-size render (RGB uint8) of the pendulum at rest at ``angle_deg`` (0 = upright), no arrow."""
+    from envs.pendulum import make_pixel_pendulum
+
+    env = make_pixel_pendulum(draw_torque_arrow=False)
+    env.reset(seed=0, options={"state": [math.radians(angle_deg), 0.0]})
+    picture = env.render()
+    env.close()
+    return np.asarray(picture)

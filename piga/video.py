@@ -1,0 +1,59 @@
+"""Videos of control episodes: the real frame beside the model's rendering of its belief and plan."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import cv2
+import numpy as np
+import torch
+
+from piga.atomic import atomic_output
+from piga.model import PhysicsModel
+from piga.physics import rollout
+
+#: Display scale of the 64x64 frames.
+UPSCALE = 4
+
+
+def _panel(img: np.ndarray, label: str) -> np.ndarray:
+    """uint8 (H, W) -> labelled, upscaled RGB panel."""
+    big = cv2.resize(img, (img.shape[1] * UPSCALE, img.shape[0] * UPSCALE), interpolation=cv2.INTER_NEAREST)
+    rgb = np.repeat(big[..., None], 3, axis=-1).copy()
+    cv2.putText(rgb, label, (4, 14), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (200, 30, 30), 1, cv2.LINE_AA)
+    return rgb
+
+
+@torch.no_grad()
+def control_video(model: PhysicsModel, frames: np.ndarray, trace: list[tuple[float, float, np.ndarray]],
+                  path: str | os.PathLike[str], fps: int = 20, overwrite: bool = False) -> Path:
+    """Writes an MP4 or GIF: real frame | model's belief | model's plan (a trail of the planned states).
+
+    Args:
+        frames: uint8 (T+1, H, W), the episode's frames.
+        trace: per step, the believed (θ, θ̇) in the model's convention and the plan (H, 1).
+        path: ``.mp4`` or ``.gif``.
+    """
+    import imageio.v3 as iio
+
+    target = Path(path)
+    if target.suffix.lower() not in (".mp4", ".gif"):
+        raise ValueError(f"video path must end in .mp4 or .gif, got {target.name}")
+    model.eval()
+    out = []
+    for t, (theta, theta_dot, plan) in enumerate(trace):
+        p0 = torch.tensor([[[theta]]])
+        belief = model.decoder(p0)[0, 0].numpy()
+        positions, _ = rollout(model.system, model.integrator, p0, torch.tensor([[[theta_dot]]]),
+                               torch.from_numpy(plan)[None])
+        trail = model.decoder(positions[0]).numpy()[:, 0].min(axis=0)  # darkest over the plan: a trail
+        panels = [_panel(frames[t], "real"), _panel((belief * 255).astype(np.uint8), "belief"),
+                  _panel((trail * 255).astype(np.uint8), "plan")]
+        out.append(np.concatenate(panels, axis=1))
+    with atomic_output(target, overwrite=overwrite) as tmp:
+        if target.suffix.lower() == ".gif":
+            iio.imwrite(tmp, np.stack(out), extension=".gif", duration=1000 / fps, loop=0)
+        else:
+            iio.imwrite(tmp, np.stack(out), extension=".mp4", fps=fps, codec="libx264", macro_block_size=1)
+    return target

@@ -1,0 +1,115 @@
+"""Control: the oracle swings the pendulum up; goal images; piga-control's bad input."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from agents.mpc import MPCConfig, OracleAgent, PigaMPCAgent
+from piga.control import EpisodeConfig, run_episodes
+from piga.goal import load_scene_image, render_goal_image
+from piga.model import ModelConfig, PhysicsModel
+from tests.test_cli import assert_one_line_error, run
+
+
+def test_oracle_swings_up_from_hanging() -> None:
+    torch.set_num_threads(1)
+    result = run_episodes(OracleAgent(10.0, 1.0, MPCConfig()), EpisodeConfig(episodes=1, steps=150))
+    episode = result["episodes"][0]
+    assert episode["start"] == [math.pi, 0.0]
+    assert episode["success"], episode
+    assert result["summary"]["time_to_goal_steps_median"] < 130
+
+
+def test_oracle_told_of_stronger_gravity_swings_up() -> None:
+    """The counterfactual the piga agent relies on: planning with the changed gravity works."""
+    torch.set_num_threads(1)
+    config = EpisodeConfig(episodes=1, steps=150, gravity_mult=1.4)
+    told = run_episodes(OracleAgent(14.0, 1.0, MPCConfig()), config)["summary"]
+    assert told["success_rate"] == 1.0
+
+
+def test_success_definition() -> None:
+    class Still:
+        def reset(self) -> None: ...
+
+        def act(self, frames: np.ndarray, state: np.ndarray) -> np.ndarray:
+            return np.zeros(1, np.float32)
+
+    hanging = run_episodes(Still(), EpisodeConfig(episodes=1, steps=30, hold_steps=10))
+    assert not hanging["episodes"][0]["success"]  # hanging at rest is not upright
+    at_goal = run_episodes(Still(), EpisodeConfig(episodes=1, steps=30, hold_steps=10, goal_angle=math.pi))
+    assert at_goal["episodes"][0]["success"] and at_goal["episodes"][0]["time_to_goal_steps"] == 0
+
+
+def test_piga_agent_reads_state_in_models_convention() -> None:
+    model = PhysicsModel(ModelConfig())
+    with torch.no_grad():
+        model.encoder.background.fill_(1.0)
+    agent = PigaMPCAgent(model, MPCConfig(), gravity_mult=1.4)
+    assert agent.planner.system.parameters_dict()["g"] == pytest.approx(1.4 * model.physical_parameters()["g"])
+    assert model.physical_parameters()["g"] == pytest.approx(1.0)  # the model itself is not changed
+    frames = np.stack([render_goal_image(30.0) for _ in range(4)])
+    small = np.stack([load_scene_image_array(f) for f in frames])
+    theta, theta_dot = agent.estimate_state(small)
+    assert theta == pytest.approx(math.radians(30), abs=math.radians(3)) and abs(theta_dot) < 0.5
+    with pytest.raises(ValueError, match="gravity_mult"):
+        PigaMPCAgent(model, MPCConfig(), gravity_mult=0.0)
+
+
+def load_scene_image_array(picture: np.ndarray, tmp: Path | None = None) -> np.ndarray:
+    import tempfile
+
+    import imageio.v3 as iio
+
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "x.png"
+        iio.imwrite(path, picture)
+        return load_scene_image(path, 64)
+
+
+def test_goal_image_conversion_matches_the_env(tmp_path: Path) -> None:
+    from envs import make_pixel_pendulum
+
+    env = make_pixel_pendulum(draw_torque_arrow=False)
+    obs, _ = env.reset(seed=0, options={"state": [0.5, 0.0]})
+    picture = env.render()
+    converted = load_scene_image_array(picture)
+    assert np.abs(converted.astype(int) - obs[-1]).max() <= 1  # same pipeline, up to PNG round trip
+    # a JPEG at another size and aspect still converts to 64x64 gray
+    import imageio.v3 as iio
+
+    wide = np.concatenate([np.full((500, 100, 3), 255, np.uint8), picture, np.full((500, 100, 3), 255, np.uint8)], axis=1)
+    iio.imwrite(tmp_path / "wide.jpg", wide)
+    assert load_scene_image(tmp_path / "wide.jpg", 64).shape == (64, 64)
+    (tmp_path / "bad.png").write_text("not an image")
+    with pytest.raises(ValueError, match="not a readable image"):
+        load_scene_image(tmp_path / "bad.png", 64)
+
+
+def test_control_cli_bad_input(tmp_path: Path) -> None:
+    assert_one_line_error(run("piga-control"), "--model")
+    assert_one_line_error(run("piga-control", "--model", str(tmp_path / "nope")), "checkpoint")
+    broken = tmp_path / "broken"
+    broken.mkdir()
+    (broken / "checkpoint.pt").write_bytes(b"junk")
+    assert_one_line_error(run("piga-control", "--model", str(broken)), "checkpoint")
+    for bad in ("0", "-1", "nan", "abc"):
+        assert_one_line_error(run("piga-control", "--oracle", "--gravity-mult", bad), "--gravity-mult")
+    assert_one_line_error(run("piga-control", "--oracle", "--angle", "20"), "--write-goal-image")
+    assert_one_line_error(run("piga-control", "--oracle", "--goal-image", str(tmp_path / "x.png")), "--model")
+    assert_one_line_error(run("piga-control", "--write-goal-image", str(tmp_path / "g.png")), "--angle")
+    assert_one_line_error(run("piga-control", "--write-goal-image", str(tmp_path / "g.txt"), "--angle", "5"), ".png")
+    assert_one_line_error(run("piga-control", "--oracle", "--video", str(tmp_path / "v.avi")), ".mp4")
+
+
+def test_write_goal_image(tmp_path: Path) -> None:
+    out = tmp_path / "goal.png"
+    result = run("piga-control", "--write-goal-image", str(out), "--angle", "-15")
+    assert result.returncode == 0, result.stderr
+    assert out.read_bytes()[:4] == b"\x89PNG"
+    assert_one_line_error(run("piga-control", "--write-goal-image", str(out), "--angle", "5"), "--overwrite")
