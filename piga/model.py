@@ -74,6 +74,9 @@ class ModelConfig:
     """Frames in the reconstruction loss: "all" L + T_pred (the paper), or "input" (the L input
     frames only: the encoder then runs on L frames per item instead of L + T_pred, 3.5x less
     work for the pendulum, and with overlapping windows every frame is still reconstructed)."""
+    velocity_correction: bool = True
+    """Velocity estimator: backward difference plus the paper's MLP (True), or the difference alone
+    (exact for one Euler substep; see :class:`piga.velocity.VelocityConfig`)."""
     substeps: int = 1
     """Euler substeps M per frame (the paper: 5; 1 matches Gymnasium's pendulum exactly)."""
     readout: str = "centroid"
@@ -162,7 +165,8 @@ class PhysicsModel(nn.Module):
         n = config.n_objects if config.system != "pendulum" else 1
         self.encoder = Encoder(EncoderConfig(config.image_size, config.channels, n, d, config.readout,
                                              config.mask_width, config.loc_width, config.angle_reference))
-        self.velocity = VelocityEstimator(VelocityConfig(config.input_frames, n, d, config.dt, config.image_size))
+        self.velocity = VelocityEstimator(VelocityConfig(config.input_frames, n, d, config.dt, config.image_size,
+                                                         correction=config.velocity_correction))
         kwargs: dict[str, Any] = {"dt": config.dt, **config.physics_init}
         if config.system == "pendulum":
             kwargs["learnable"] = ("g", "a", "offset") if config.learn_offset else ("g", "a")

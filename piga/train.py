@@ -93,7 +93,7 @@ class TrainConfig:
 
 #: Named recipes. 'fast' is the default; 'paper' follows the paper's appendix.
 PRESETS: dict[str, dict[str, Any]] = {
-    "fast": {"model": {"rec_frames": "input", "pred_trim": 0.1, "learn_offset": False}},
+    "fast": {"model": {"rec_frames": "input", "pred_trim": 0.1, "learn_offset": False, "velocity_correction": False}},
     "paper": {
         "train": {"epochs": 1000, "max_minutes": 0.0, "lr": 3e-4, "lr_physics": 3e-4, "optimizer": "rmsprop",
                   "schedule": "step", "lr_decay_epoch": 500, "warmup_steps": 0, "curriculum_steps": 0, "grad_clip": 0.0,
