@@ -30,7 +30,8 @@ import torch
 from piga.atomic import atomic_output
 from piga.collect import CollectConfig, collect
 from piga.evaluate import EvalConfig, evaluate
-from piga.train import PRESETS, TrainConfig, train, write_json
+from piga.atomic import write_json
+from piga.train import PRESETS, TrainConfig, train
 
 #: case name -> (gravity, actuation gain, data seed)
 CASES: dict[str, tuple[float, float, int]] = {

@@ -70,11 +70,11 @@ def rollout_figure(truth: np.ndarray, pred: np.ndarray, input_frames: int, pred_
 
 
 def templates_figure(contents: np.ndarray, masks: np.ndarray, background: np.ndarray, background_mask: np.ndarray) -> Figure:
-    """Learned templates: per object content, mask σ(m) and σ(m)⊙c; then the background.
+    """Learned templates at the reference pose: per object content, mask and mask⊙content; then the background.
 
     Args:
-        contents: [N, H, W] or [N, H, W, 3] in [0, 1]; masks: [N, H, W] probabilities.
-        background: [H, W] or [H, W, 3]; background_mask: [H, W] probabilities.
+        contents: [N, H, W] or [N, H, W, 3] in [0, 1]; masks: [N, H, W], the decoder's softmaxed masks.
+        background: [H, W] or [H, W, 3]; background_mask: [H, W], its softmaxed mask.
     """
     n = contents.shape[0]
     fig, axes = plt.subplots(n + 1, 3, figsize=(6, 2 * (n + 1)), squeeze=False)
@@ -82,7 +82,7 @@ def templates_figure(contents: np.ndarray, masks: np.ndarray, background: np.nda
         c = contents[i] if i < n else background
         m = masks[i] if i < n else background_mask
         obj = c * (m[..., None] if c.ndim == 3 else m)
-        for j, (img, title) in enumerate([(c, "content c"), (m, "mask σ(m)"), (obj, "σ(m)⊙c")]):
+        for j, (img, title) in enumerate([(c, "content c"), (m, "mask m (softmax)"), (obj, "m⊙c")]):
             ax = axes[i, j]
             ax.imshow(img, cmap="gray" if img.ndim == 2 else None, vmin=0, vmax=1)
             ax.set_xticks([])
@@ -96,6 +96,7 @@ def curves_figure(history: list[dict[str, float]], true_params: dict[str, float]
     """Learning curves per epoch: losses (log scale) and each physical parameter with its true value."""
     epochs = [h["epoch"] for h in history]
     names = [k for k in history[0] if k in ("g", "a", "k", "l", "offset")] if history else []
+    names = [k for k in names if len({h[k] for h in history}) > 1]  # a frozen parameter has no curve
     fig, axes = plt.subplots(1, 1 + len(names), figsize=(3.2 * (1 + len(names)), 2.8), squeeze=False)
     ax = axes[0, 0]
     for key in ("loss", "loss_pred", "loss_rec"):

@@ -12,7 +12,8 @@ from piga.data import inspect_dataset, read_sequences
 from piga.evaluate import PARAMETER_NAMES, EvalConfig, evaluate, rollout_frames
 from piga.model import PhysicsModel, frames_to_float
 from piga.plots import curves_figure, rollout_figure, save_figure, templates_figure
-from piga.train import TrainState, write_json
+from piga.atomic import write_json
+from piga.train import TrainState
 
 
 def _image(x: np.ndarray) -> np.ndarray:
@@ -44,12 +45,14 @@ def write_run_report(model: PhysicsModel, state: TrainState, data: str | Path, r
     to_img = lambda a: np.stack([[_image(f) for f in seq] for seq in a])  # noqa: E731
     save_figure(rollout_figure(to_img(truth), to_img(pred), cfg.input_frames, cfg.pred_frames), run_dir / "rollout.png")
 
-    t = model.decoder.templates()
-    # Mask probabilities against the background, as the decoder's softmax would give at one pixel.
-    masks = torch.sigmoid(t.mask_logits[:, 0]).numpy()  # (N, h, w)
-    contents = np.stack([_image(c) for c in t.contents.numpy()])
-    save_figure(templates_figure(contents, masks, _image(t.background.numpy()), torch.sigmoid(t.background_mask_logit[0]).numpy()),
-                run_dir / "templates.png")
+    # What the decoder composes for an object at the reference pose (θ = 0, or the image centre):
+    # each transformed content and its mask after the softmax against the background.
+    n, d = cfg.n_objects if cfg.system != "pendulum" else 1, cfg.coord_dim
+    pose = torch.zeros(1, n, d) if d == 1 else torch.full((1, n, d), cfg.image_size / 2)
+    parts = model.decoder.render_parts(pose)
+    contents = np.stack([_image(c) for c in parts.contents[0].numpy()])  # (N, H, W[, C])
+    masks = parts.masks[0, :, 0].numpy()  # (N+1, H, W)
+    save_figure(templates_figure(contents, masks[:-1], _image(parts.background.numpy()), masks[-1]), run_dir / "templates.png")
     true = {PARAMETER_NAMES[k]: float(v) for k, v in info.params.items() if k in PARAMETER_NAMES}
     if state.history:
         save_figure(curves_figure(state.history, true), run_dir / "curves.png")

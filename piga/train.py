@@ -17,7 +17,6 @@ checkpoint.
 
 from __future__ import annotations
 
-import json
 import math
 import random
 import time
@@ -257,6 +256,7 @@ def train(
 
     run_dir = Path(run_dir)
     info = inspect_dataset(data)
+    run_dir.mkdir(parents=True, exist_ok=True)
     ckpt_path = run_dir / CHECKPOINT
     if train_config.threads:
         torch.set_num_threads(train_config.threads)
@@ -358,18 +358,3 @@ def train(
         windows.close()
     model.eval()
     return model, state
-
-
-def write_json(path: Path, payload: dict[str, Any], overwrite: bool = True) -> None:
-    """Writes JSON atomically (NaN written as null)."""
-    def clean(x: Any) -> Any:
-        if isinstance(x, float) and not math.isfinite(x):
-            return None
-        if isinstance(x, dict):
-            return {k: clean(v) for k, v in x.items()}
-        if isinstance(x, (list, tuple)):
-            return [clean(v) for v in x]
-        return x
-
-    with atomic_output(path, overwrite=overwrite) as tmp:
-        tmp.write_text(json.dumps(clean(payload), indent=2) + "\n")

@@ -53,7 +53,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     from agents.mpc import MPCConfig, OracleAgent, PigaMPCAgent
     from piga.atomic import check_writable_target
     from piga.control import EpisodeConfig, run_episodes
-    from piga.train import load_model, write_json
+    from piga.atomic import write_json
+    from piga.train import load_model
 
     if args.out:
         check_writable_target(Path(args.out).with_suffix(".json"), args.overwrite)

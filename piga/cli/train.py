@@ -40,7 +40,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     from piga.data import inspect_dataset
     from piga.report import write_run_report
-    from piga.train import PRESETS, TrainConfig, TrainingDiverged, load_model, model_config_for, train, write_json
+    from piga.atomic import write_json
+    from piga.train import PRESETS, TrainConfig, TrainingDiverged, load_model, model_config_for, train
 
     info = inspect_dataset(args.data)
     run_dir = Path(args.out)
@@ -50,7 +51,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.resume:
         if not (run_dir / "checkpoint.pt").exists():
             raise PigaError(f"--resume: {run_dir / 'checkpoint.pt'} does not exist")
-        _, ckpt = load_model(run_dir)
+        saved_model, ckpt = load_model(run_dir)
         if tuple(ckpt["data"]["image_shape"]) != info.image_shape or ckpt["data"]["system"] != info.system:
             raise PigaError(f"--resume: {args.data} ({info.system}, {info.image_shape}) does not match the run's data "
                             f"({ckpt['data']['system']}, {tuple(ckpt['data']['image_shape'])})")
@@ -65,7 +66,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise PigaError(f"--resume keeps the run's recipe; drop {', '.join('--' + c.replace('_', '-') for c in changed)}")
         train_config = replace(TrainConfig(**ckpt["train_config"]), **overrides)
         model_overrides = {}
-        model_config = load_model(run_dir)[0].config
+        model_config = saved_model.config
     else:
         train_config = replace(TrainConfig(seed=args.seed, threads=args.threads), **preset.get("train", {}), **overrides)
         model_overrides = dict(preset.get("model", {}))
