@@ -12,7 +12,6 @@ constant offset, to show how far the learned φ is from the best possible alignm
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -149,7 +148,3 @@ def summary_line(metrics: dict[str, Any]) -> str:
         parts = [f"{k}={v:.4f}" for k, v in metrics.get("parameters", {}).items()]
     return ", ".join(parts)
 
-
-def is_finite_metrics(metrics: dict[str, Any]) -> bool:
-    """Whether all learned parameters are finite."""
-    return all(math.isfinite(v) for v in metrics.get("parameters", {}).values())

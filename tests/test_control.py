@@ -61,7 +61,8 @@ def test_piga_agent_reads_state_in_models_convention() -> None:
         PigaMPCAgent(model, MPCConfig(), gravity_mult=0.0)
 
 
-def load_scene_image_array(picture: np.ndarray, tmp: Path | None = None) -> np.ndarray:
+def load_scene_image_array(picture: np.ndarray) -> np.ndarray:
+    """A picture through a PNG file and load_scene_image, as a user's goal image would go."""
     import tempfile
 
     import imageio.v3 as iio

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import shutil
-import subprocess
 from dataclasses import replace
 from pathlib import Path
 
@@ -122,4 +121,3 @@ def test_cli_nan_names_checkpoint(stateless_data: Path, tmp_path: Path) -> None:
         f["actions"][...] = np.nan
     result = run("piga-train-model", str(bad), "--out", str(out), "--resume", "--epochs", "2", "--quiet")
     assert_one_line_error(result, "diverged", str(out / "checkpoint.pt"))
-    assert isinstance(subprocess.CompletedProcess, type)
