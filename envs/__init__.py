@@ -7,11 +7,13 @@ Importing this package registers the env ids:
 | ``piga/PixelPendulum-v0`` | Pendulum-v1 seen as 64x64 gray frames, one frame per observation |
 | ``piga/PixelPendulumStack4-v0`` | the same with the last 4 frames stacked (for RL agents) |
 
-``gym.make(id, **fields)`` accepts any field of :class:`PixelPendulumConfig`.
+``gym.make(id, **fields)`` accepts any field of :class:`PixelPendulumConfig`, including
+``effects``, the unmodelled effects of :mod:`envs.effects`.
 """
 
 import gymnasium as gym
 
+from envs.effects import EFFECTS, FRICTION_SMOOTHING, normalize_effects, parse_effect
 from envs.pendulum import (
     MAX_ACTION,
     PENDULUM_DT,
@@ -24,6 +26,8 @@ from envs.pendulum import (
 )
 
 __all__ = [
+    "EFFECTS",
+    "FRICTION_SMOOTHING",
     "MAX_ACTION",
     "PENDULUM_DT",
     "ActuationGain",
@@ -32,6 +36,8 @@ __all__ = [
     "PixelPendulumConfig",
     "ResetRange",
     "make_pixel_pendulum",
+    "normalize_effects",
+    "parse_effect",
 ]
 
 _IDS = {

@@ -5,6 +5,10 @@ The observation is built from Gymnasium's observation wrappers and involves no h
 ``Pendulum-v1 (rgb_array) -> AddRenderObservation -> ResizeObservation -> GrayscaleObservation
 -> FrameStackObservation``
 
+Unmodelled effects (``effects``, see :mod:`envs.effects`) add their wrappers around
+``ActuationGain`` (actuator, passive torque and speed-clip effects) and after
+``GrayscaleObservation`` (vision effects). Without effects none is added.
+
 The frame is resized *before* it is converted to gray. That order is about 3x faster than the
 reverse, because the gray conversion then runs on 64x64 pixels instead of 500x500.
 
@@ -27,6 +31,7 @@ reverse, because the gray conversion then runs on 64x64 pixels instead of 500x50
 | reward | -(θ² + 0.1·θ̇² + 0.001·(gain·u)²), Gymnasium's, using the applied torque |
 | reset | θ ~ U(-max_angle, max_angle), θ̇ ~ U(-max_speed, max_speed) |
 | truncation | after ``episode_length`` steps |
+| effects | none by default; ``effects`` adds delay, deadzone, friction, blur, ... (:mod:`envs.effects`) |
 
 The true state ``(θ, θ̇)`` is put in ``info["state"]`` as float64 ``[θ, θ̇]``, with θ unwrapped as
 Gymnasium keeps it. It is there for evaluation only. piga's training code never reads it.
@@ -84,8 +89,17 @@ class PixelPendulumConfig:
     """Reset draws θ̇ ~ U(-max_speed, max_speed) (Pendulum-v1's ``y_init``; the paper uses 6)."""
     draw_torque_arrow: bool = True
     """Draw Gymnasium's torque arrow at the pivot. True is Gymnasium's own picture."""
+    effects: tuple[tuple[str, float], ...] = ()
+    """Unmodelled effects as (name, value) pairs, e.g. (("damping", 0.2),); see :mod:`envs.effects`."""
 
     def __post_init__(self) -> None:
+        from envs.effects import normalize_effects  # envs.effects imports this module
+
+        try:
+            effects = normalize_effects(self.effects)
+        except (TypeError, ValueError) as exc:
+            raise type(exc)(f"PixelPendulumConfig.effects: {exc}") from None
+        object.__setattr__(self, "effects", effects)  # canonical order, checked values
         checks = {
             "image_size": self.image_size >= 8,
             "frame_stack": self.frame_stack >= 1,
@@ -118,8 +132,10 @@ class ActuationGain(gym.ActionWrapper):
     """Applies ``gain × u`` as Pendulum's torque, for an action u in Pendulum's own range.
 
     Pendulum-v1 clips the torque it receives at ``max_torque`` (2). For a gain above 1 that clip
-    would cut the applied torque, so the wrapper raises the inner clip to ``2 × gain``. The outer
-    action space stays [-2, 2], and actions outside it are clipped before the gain is applied.
+    would cut the applied torque, so the wrapper raises the inner clip to ``2 × gain``. It never
+    lowers a clip that an inner wrapper has already raised (the effects of :mod:`envs.effects`
+    disable it). The outer action space stays [-2, 2], and actions outside it are clipped before
+    the gain is applied.
     """
 
     def __init__(self, env: gym.Env, gain: float):
@@ -132,7 +148,7 @@ class ActuationGain(gym.ActionWrapper):
         base = env.unwrapped
         if not hasattr(base, "max_torque"):
             raise TypeError("ActuationGain wraps Gymnasium's Pendulum (an env with `max_torque`)")
-        base.max_torque = MAX_ACTION * max(self.gain, 1.0)
+        base.max_torque = max(base.max_torque, MAX_ACTION * max(self.gain, 1.0))
 
     def action(self, action: np.ndarray) -> np.ndarray:
         u = np.clip(np.asarray(action, dtype=np.float32), -MAX_ACTION, MAX_ACTION)
@@ -211,6 +227,8 @@ def make_pixel_pendulum(
     """
     if render_mode not in (None, "rgb_array"):
         raise ValueError(f"the pixel pendulum renders only as 'rgb_array', got render_mode={render_mode!r}")
+    from envs.effects import wrap_effects  # envs.effects imports this module
+
     config = replace(config or PixelPendulumConfig(), **overrides)
     env = gym.make(
         "Pendulum-v1",
@@ -219,13 +237,16 @@ def make_pixel_pendulum(
         max_episode_steps=config.episode_length,
     )
     env = ResetRange(env, config.max_angle, config.max_speed)
+    env = wrap_effects(env, config.effects, "torque")  # speed clip, passive torques, gain error
     env = ActuationGain(env, config.actuation_gain)
+    env = wrap_effects(env, config.effects, "command")  # saturation, deadzone, delay (outermost)
     env = PendulumStateInfo(env)
     if not config.draw_torque_arrow:
         env = HideTorqueArrow(env)
     env = AddRenderObservation(env, render_only=True)
     env = ResizeObservation(env, (config.image_size, config.image_size))
     env = GrayscaleObservation(env, keep_dim=False)
+    env = wrap_effects(env, config.effects, "frame")  # blur, shift, noise, frame delay, frame drop
     env = FrameStackObservation(env, config.frame_stack)
     env.metadata = {**env.metadata, "render_modes": ["rgb_array"]}
     return env

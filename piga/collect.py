@@ -8,6 +8,10 @@ which worker ran the sequence. Workers are Gymnasium vector envs: ``AsyncVectorE
 Sequence n holds frames x_0..x_{T-1}, where x_0 is the frame after reset. The actions are
 u_0..u_{T-1} ~ U(-2, 2), and u_t is applied after x_t. All T actions are applied, so each stored
 action really acted, even though the frame after the last one is not stored.
+
+Unmodelled effects (``env.effects``, :mod:`envs.effects`) change the frames and states only. The
+stored actions are the commanded u, and the effects are recorded in the attrs ``effects`` (a JSON
+object, name -> value, empty without effects) and ``env_config``.
 """
 
 from __future__ import annotations
@@ -132,6 +136,7 @@ def collect(
             "gravity_mult": env_config.gravity_mult,
         },
         "env_config": env_config.to_dict(),
+        "effects": dict(env_config.effects),
         "state_names": ["theta", "theta_dot"],
         "seed": config.seed,
         "command": command if command is not None else shlex.join(sys.argv),

@@ -8,25 +8,22 @@ import sys
 from collections.abc import Sequence
 from dataclasses import replace
 
+from envs.effects import EFFECTS, format_effects, parse_effect
 from envs.pendulum import PixelPendulumConfig
-from piga.cli.common import ArgumentParser, nonnegative_int, positive_float, positive_int, run_cli
+from piga.cli.common import ArgumentParser, nonnegative_int, positive_float, positive_int, run_cli, split_type
 from piga.collect import PAPER_MAX_SPEED, PRESETS, CollectConfig, collect
 from piga.data import inspect_dataset
 
 PROG = "piga-collect"
 
 
-def _split(text: str) -> tuple[float, float, float]:
+def _effect(text: str) -> tuple[str, int | float]:
     import argparse
 
-    parts = text.replace(":", ",").split(",")
     try:
-        values = tuple(float(p) for p in parts)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected three numbers like 0.8,0.1,0.1 or 5000,500,500, got {text!r}") from None
-    if len(values) != 3:
-        raise argparse.ArgumentTypeError(f"expected three numbers (train,valid,test), got {text!r}")
-    return values  # type: ignore[return-value]
+        return parse_effect(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def build_parser() -> ArgumentParser:
@@ -58,7 +55,11 @@ def build_parser() -> ArgumentParser:
     p.add_argument("--seed", type=nonnegative_int, default=defaults.seed, help="root seed (default %(default)s)")
     p.add_argument("--workers", type=positive_int, default=defaults.workers,
                    help="parallel env processes (default %(default)s); the data do not depend on it")
-    p.add_argument("--split", type=_split, help="train,valid,test as fractions (0.8,0.1,0.1) or counts (default 0.8,0.1,0.1)")
+    p.add_argument("--split", type=split_type, help="train,valid,test as fractions (0.8,0.1,0.1) or counts (default 0.8,0.1,0.1)")
+    p.add_argument("--effect", action="append", type=_effect, default=[], metavar="NAME=VALUE",
+                   help="an unmodelled effect, repeatable (e.g. --effect damping=0.2 --effect delay=2). It changes the "
+                   "frames and states; the stored actions stay the commanded u, and the file's attr 'effects' records it. "
+                   f"Names: {', '.join(EFFECTS)} (equations: envs/effects.py)")
     p.add_argument("--overwrite", action="store_true", help="replace --out if it exists")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     return p
@@ -78,6 +79,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         max_angle=args.max_angle,
         max_speed=float(preset.pop("max_speed", PixelPendulumConfig.max_speed)),  # type: ignore[arg-type]
         draw_torque_arrow=not args.no_torque_arrow,
+        effects=tuple(args.effect),
     )
     config = replace(CollectConfig(env=env, seed=args.seed, workers=args.workers), **preset)
     argv_list = list(sys.argv[1:] if argv is None else argv)
@@ -85,7 +87,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                    progress=not args.quiet)
     info = inspect_dataset(path)
     print(f"wrote {path}: {info.n_sequences} sequences x {info.steps} frames of {info.image_shape}, "
-          f"split {info.split_counts}, g={info.params['g']:g}, actuation_gain={info.params['actuation_gain']:g}")
+          f"split {info.split_counts}, g={info.params['g']:g}, actuation_gain={info.params['actuation_gain']:g}"
+          + (f", effects {format_effects(env.effects)}" if env.effects else ""))
     return 0
 
 

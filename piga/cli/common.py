@@ -87,4 +87,16 @@ positive_float = _number_type(float, lambda v: 0 < v < float("inf"), "a finite n
 """argparse type: a finite number > 0 (NaN is rejected too)."""
 
 
-__all__ = ["ArgumentParser", "PigaError", "run_cli", "positive_int", "nonnegative_int", "positive_float"]
+def split_type(text: str) -> tuple[float, float, float]:
+    """argparse type: train,valid,test as three numbers, fractions (0.8,0.1,0.1) or counts (5000,500,500)."""
+    parts = text.replace(":", ",").split(",")
+    try:
+        values = tuple(float(p) for p in parts)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected three numbers like 0.8,0.1,0.1 or 5000,500,500, got {text!r}") from None
+    if len(values) != 3:
+        raise argparse.ArgumentTypeError(f"expected three numbers (train,valid,test), got {text!r}")
+    return values  # type: ignore[return-value]
+
+
+__all__ = ["ArgumentParser", "PigaError", "run_cli", "positive_int", "nonnegative_int", "positive_float", "split_type"]

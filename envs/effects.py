@@ -1,0 +1,547 @@
+"""Unmodelled effects: wrappers that turn the nominal pixel pendulum into a "real system".
+
+The nominal model is Gymnasium's Pendulum-v1 as piga's physics engine knows it. The effects below
+add what that model lacks: a lazy or weak actuator, friction, a bias, a tighter speed limit, and a
+poor camera. They are meant for sim-to-real studies, such as diagnosing a model identified on
+nominal data against a recording with effects. Each effect is one small wrapper, and
+``PixelPendulumConfig(effects=(("damping", 0.2), ...))`` puts the right ones in the right places
+(:func:`envs.pendulum.make_pixel_pendulum`). Write an effect on the command line as ``NAME=VALUE``
+(:func:`parse_effect`). :data:`EFFECTS` lists them all.
+
+## Dynamics
+
+The equations are exact. piga's fitting code uses the same ones in torch, so keep the two in step.
+
+Let u_t be the commanded action, the one that the agent sends and that a data file stores as
+``/actions``. Like Pendulum-v1, it is first clipped to [-2, 2]. The actuator effects turn u into
+ũ, applied in the order of the table (delay, then deadzone, then saturation, then gain):
+
+| effect | kind | parameter | equation | wrapper |
+|---|---|---|---|---|
+| ``delay=k`` | actuator | integer k >= 1 (steps) | ũ_t = u_{t-k}, and ũ_t = 0 for t < k (reset clears it) | :class:`ActionDelay` |
+| ``deadzone=d`` | actuator | 0 < d < 2 (action units) | ũ = sign(u)·max(abs(u) - d, 0) | :class:`ActionDeadzone` |
+| ``saturation=s`` | actuator | 0 < s < 2 (action units) | ũ = clip(u, -s, s) | :class:`ActionSaturation` |
+| ``gain=m`` | actuator | m > 0, m != 1 (factor) | ũ = m·u (an actuator gain error) | :class:`ActionGainError` |
+
+The applied torque τ_t is ``actuation_gain·ũ_t`` plus the passive torques. These are computed
+from the state (θ_t, θ̇_t) *before* the step:
+
+| effect | kind | parameter | passive torque | wrapper |
+|---|---|---|---|---|
+| ``damping=b`` | passive | b > 0 (N·m·s/rad) | -b·θ̇_t | :class:`ViscousDamping` |
+| ``friction=c`` | passive | c > 0 (N·m) | -c·tanh(θ̇_t / 0.1), a smoothed Coulomb friction (:data:`FRICTION_SMOOTHING`) | :class:`CoulombFriction` |
+| ``bias=τ0`` | passive | τ0 != 0 (N·m) | +τ0 | :class:`TorqueBias` |
+| ``speed_clip=v`` | clip | 0 < v < 8 (rad/s) | Pendulum-v1's speed clip ±8 becomes ±v | :class:`SpeedClip` |
+
+The step is Pendulum-v1's own step, given τ_t as its torque:
+
+| quantity | equation |
+|---|---|
+| torque | τ_t = actuation_gain·ũ_t - b·θ̇_t - c·tanh(θ̇_t / 0.1) + τ0 (absent effects contribute 0) |
+| speed | θ̇_{t+1} = clip(θ̇_t + dt·(1.5·g·sin θ_t + 3·τ_t), -v_max, v_max), with v_max = v, or 8 without ``speed_clip`` |
+| angle | θ_{t+1} = θ_t + dt·θ̇_{t+1} |
+
+To get there, the wrappers between :class:`~envs.pendulum.ActuationGain` and Pendulum-v1 pass τ_t
+as the action and disable Pendulum-v1's own torque clip (``max_torque = inf``). The command clip
+to [-2, 2] still applies. Pendulum-v1's reward and its torque arrow use τ_t, which includes the
+passive torques. ``info["state"]`` is the true state. As in the nominal env, ũ and
+``actuation_gain·ũ`` are float32; the gain error, the passive torques and the step are float64.
+
+## Vision
+
+The vision effects act on each gray uint8 (H, W) frame after ``GrayscaleObservation`` and before
+``FrameStackObservation``, in the order of the table. Random draws come from the env's
+``np_random``, so ``reset(seed=...)`` makes them reproducible. In each step the noise is drawn
+first (one normal per pixel), then the drop (one uniform); reset draws only the noise.
+
+| effect | kind | parameter | frame x -> observed frame | wrapper |
+|---|---|---|---|---|
+| ``blur=σ`` | vision | σ > 0 (px) | ``cv2.GaussianBlur(x, (0, 0), σ)``: the kernel size follows from σ | :class:`FrameBlur` |
+| ``shift=p`` | vision | p != 0 (px) | x'[r, c] = x[r - p, c - p]: p px right and p px down, border replicated (``cv2.warpAffine``) | :class:`FrameShift` |
+| ``noise=s`` | vision | s > 0 (gray levels) | clip(round(x + s·ε), 0, 255) as uint8, ε ~ N(0, 1) per pixel | :class:`FrameNoise` |
+| ``frame_delay=k`` | vision | integer k >= 1 (steps) | at step t, the frame of step t - k; the reset frame for t < k | :class:`FrameDelay` |
+| ``frame_drop=p`` | vision | 0 < p < 1 (probability) | at each step, with probability p, the previous observed frame again (a dropped frame); never on reset | :class:`FrameDrop` |
+
+``env.render()`` still returns Gymnasium's clean full-size picture. The vision effects act only
+on the observation.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass
+from typing import Any, SupportsFloat
+
+import cv2
+import gymnasium as gym
+import numpy as np
+
+from envs.pendulum import MAX_ACTION
+
+#: Speed scale (rad/s) of the smoothed Coulomb friction -c·tanh(θ̇ / FRICTION_SMOOTHING).
+FRICTION_SMOOTHING = 0.1
+
+#: Pendulum-v1's own speed clip (rad/s), which is always present.
+PENDULUM_MAX_SPEED = 8.0
+
+
+# ---------------------------------------------------------------------------------------------
+# Parameter checks, shared by the wrappers and the registry
+# ---------------------------------------------------------------------------------------------
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _validated(name: str, value: Any) -> Any:
+    """``value`` checked against :data:`EFFECTS` (defined below; wrappers call this at construction)."""
+    return EFFECTS[name].validate(name, value)
+
+
+def _base_pendulum(env: gym.Env, who: str) -> Any:
+    base = env.unwrapped
+    if not all(hasattr(base, key) for key in ("max_torque", "max_speed", "dt")):
+        raise TypeError(f"{who} wraps Gymnasium's Pendulum (an env with `max_torque` and `max_speed`), got {base}")
+    return base
+
+
+def _check_action_space(env: gym.Env, who: str) -> None:
+    if not isinstance(env.action_space, gym.spaces.Box) or env.action_space.shape != (1,):
+        raise TypeError(f"{who} needs a Box action space of shape (1,), got {env.action_space}")
+
+
+def _check_frame_space(env: gym.Env, who: str) -> None:
+    space = env.observation_space
+    if not isinstance(space, gym.spaces.Box) or space.dtype != np.uint8 or len(space.shape) != 2:
+        raise TypeError(f"{who} needs gray uint8 (H, W) frames (after GrayscaleObservation), got {space}")
+
+
+# ---------------------------------------------------------------------------------------------
+# Actuator effects: u -> ũ, outside ActuationGain (delay, deadzone, saturation) or inside it (gain)
+# ---------------------------------------------------------------------------------------------
+
+
+class ActionDelay(gym.ActionWrapper):
+    """Dead time: the actuator applies ũ_t = u_{t-k}, and 0 for t < k. ``reset`` clears the buffer.
+
+    The commanded u is clipped to [-2, 2] before it enters the buffer.
+    """
+
+    def __init__(self, env: gym.Env, steps: int):
+        steps = _validated("delay", steps)
+        _check_action_space(env, "ActionDelay")
+        super().__init__(env)
+        self.steps = steps
+        self._queue: deque[np.ndarray] = deque()
+        self._clear()
+
+    def _clear(self) -> None:
+        zero = np.zeros(self.action_space.shape, np.float32)
+        self._queue = deque([zero] * self.steps, maxlen=self.steps + 1)
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        self._clear()
+        return self.env.reset(seed=seed, options=options)
+
+    def action(self, action: np.ndarray) -> np.ndarray:
+        self._queue.append(np.clip(np.asarray(action, np.float32), -MAX_ACTION, MAX_ACTION))
+        return self._queue.popleft()
+
+
+class ActionDeadzone(gym.ActionWrapper):
+    """A deadzone: ũ = sign(u)·max(abs(u) - d, 0), for u clipped to [-2, 2]."""
+
+    def __init__(self, env: gym.Env, width: float):
+        width = _validated("deadzone", width)
+        _check_action_space(env, "ActionDeadzone")
+        super().__init__(env)
+        self.width = width
+
+    def action(self, action: np.ndarray) -> np.ndarray:
+        u = np.clip(np.asarray(action, np.float32), -MAX_ACTION, MAX_ACTION)
+        return (np.sign(u) * np.maximum(np.abs(u) - self.width, 0.0)).astype(np.float32)
+
+
+class ActionSaturation(gym.ActionWrapper):
+    """A weaker actuator: ũ = clip(u, -s, s), for s < 2."""
+
+    def __init__(self, env: gym.Env, limit: float):
+        limit = _validated("saturation", limit)
+        _check_action_space(env, "ActionSaturation")
+        super().__init__(env)
+        self.limit = limit
+
+    def action(self, action: np.ndarray) -> np.ndarray:
+        return np.clip(np.asarray(action, np.float32), -self.limit, self.limit).astype(np.float32)
+
+
+class ActionGainError(gym.ActionWrapper):
+    """An actuator gain error: the torque is m times what it should be.
+
+    It sits *inside* :class:`~envs.pendulum.ActuationGain`, so it scales ``actuation_gain·ũ``.
+    That is the same as ũ = m·u, because the gain is the last of the actuator effects and linear.
+    Pendulum-v1's own torque clip is disabled, so a gain above 1 is not cut. The command clip to
+    [-2, 2] happens in ``ActuationGain``.
+    """
+
+    def __init__(self, env: gym.Env, gain: float):
+        gain = _validated("gain", gain)
+        _check_action_space(env, "ActionGainError")
+        base = _base_pendulum(env, "ActionGainError")
+        super().__init__(env)
+        self.gain = gain
+        base.max_torque = math.inf
+
+    def action(self, action: np.ndarray) -> np.ndarray:
+        return self.gain * np.asarray(action, np.float64)
+
+
+# ---------------------------------------------------------------------------------------------
+# Passive torques and the speed clip, between ActuationGain and Pendulum-v1
+# ---------------------------------------------------------------------------------------------
+
+
+class _PassiveTorque(gym.ActionWrapper):
+    """Adds ``torque(θ_t, θ̇_t)``, computed from the state before the step, to the applied torque.
+
+    Pendulum-v1's own torque clip is disabled (``max_torque = inf``). Otherwise it would cut the
+    sum, which is a torque and no longer a command.
+    """
+
+    def __init__(self, env: gym.Env):
+        _check_action_space(env, type(self).__name__)
+        base = _base_pendulum(env, type(self).__name__)
+        super().__init__(env)
+        self._base = base
+        base.max_torque = math.inf
+
+    def torque(self, theta: float, theta_dot: float) -> float:
+        """The passive torque at state (θ, θ̇)."""
+        raise NotImplementedError
+
+    def action(self, action: np.ndarray) -> np.ndarray:
+        theta, theta_dot = (float(x) for x in self._base.state)
+        return np.asarray(action, np.float64) + self.torque(theta, theta_dot)
+
+
+class ViscousDamping(_PassiveTorque):
+    """Viscous damping: passive torque -b·θ̇."""
+
+    def __init__(self, env: gym.Env, coefficient: float):
+        coefficient = _validated("damping", coefficient)
+        super().__init__(env)
+        self.coefficient = coefficient
+
+    def torque(self, theta: float, theta_dot: float) -> float:
+        return -self.coefficient * theta_dot
+
+
+class CoulombFriction(_PassiveTorque):
+    """Smoothed Coulomb friction: passive torque -c·tanh(θ̇ / FRICTION_SMOOTHING)."""
+
+    def __init__(self, env: gym.Env, level: float):
+        level = _validated("friction", level)
+        super().__init__(env)
+        self.level = level
+
+    def torque(self, theta: float, theta_dot: float) -> float:
+        return -self.level * math.tanh(theta_dot / FRICTION_SMOOTHING)
+
+
+class TorqueBias(_PassiveTorque):
+    """A constant torque τ0, for example an unbalanced load or an actuator offset."""
+
+    def __init__(self, env: gym.Env, bias: float):
+        bias = _validated("bias", bias)
+        super().__init__(env)
+        self.bias = bias
+
+    def torque(self, theta: float, theta_dot: float) -> float:
+        return self.bias
+
+
+class SpeedClip(gym.Wrapper):
+    """Clips θ̇ to ±v after each step instead of Pendulum-v1's ±8 (it sets ``unwrapped.max_speed``).
+
+    The reset draw of θ̇ is not clipped. A reset range wider than v lasts until the first step.
+    """
+
+    def __init__(self, env: gym.Env, limit: float):
+        limit = _validated("speed_clip", limit)
+        base = _base_pendulum(env, "SpeedClip")
+        super().__init__(env)
+        self.limit = limit
+        base.max_speed = limit
+
+
+# ---------------------------------------------------------------------------------------------
+# Vision effects on gray uint8 (H, W) frames
+# ---------------------------------------------------------------------------------------------
+
+
+class FrameBlur(gym.ObservationWrapper):
+    """Defocus: ``cv2.GaussianBlur(frame, (0, 0), sigma)``. The kernel size follows from sigma."""
+
+    def __init__(self, env: gym.Env, sigma: float):
+        sigma = _validated("blur", sigma)
+        _check_frame_space(env, "FrameBlur")
+        super().__init__(env)
+        self.sigma = sigma
+
+    def observation(self, observation: np.ndarray) -> np.ndarray:
+        return cv2.GaussianBlur(observation, (0, 0), self.sigma)
+
+
+class FrameShift(gym.ObservationWrapper):
+    """A misplaced camera: the picture moves p px right and p px down, border replicated.
+
+    ``x'[r, c] = x[r - p, c - p]``, by ``cv2.warpAffine``. The result is exact for an integer p and
+    bilinear otherwise.
+    """
+
+    def __init__(self, env: gym.Env, pixels: float):
+        pixels = _validated("shift", pixels)
+        _check_frame_space(env, "FrameShift")
+        super().__init__(env)
+        self.pixels = pixels
+        self._matrix = np.array([[1.0, 0.0, self.pixels], [0.0, 1.0, self.pixels]])  # (2, 3)
+
+    def observation(self, observation: np.ndarray) -> np.ndarray:
+        h, w = observation.shape
+        return cv2.warpAffine(observation, self._matrix, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+
+
+class FrameNoise(gym.ObservationWrapper):
+    """Sensor noise: adds N(0, s²) per pixel from the env's ``np_random``, rounds, and clips to 0..255."""
+
+    def __init__(self, env: gym.Env, std: float):
+        std = _validated("noise", std)
+        _check_frame_space(env, "FrameNoise")
+        super().__init__(env)
+        self.std = std
+
+    def observation(self, observation: np.ndarray) -> np.ndarray:
+        noise = self.np_random.normal(0.0, self.std, size=observation.shape)  # (H, W)
+        return np.clip(np.rint(observation + noise), 0, 255).astype(np.uint8)
+
+
+class FrameDelay(gym.Wrapper):
+    """Camera latency: the frame observed at step t is the frame of step t - k (the reset frame for t < k)."""
+
+    def __init__(self, env: gym.Env, steps: int):
+        steps = _validated("frame_delay", steps)
+        _check_frame_space(env, "FrameDelay")
+        super().__init__(env)
+        self.steps = steps
+        self._frames: deque[np.ndarray] = deque(maxlen=self.steps + 1)
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        obs, info = self.env.reset(seed=seed, options=options)
+        self._frames = deque([obs] * (self.steps + 1), maxlen=self.steps + 1)
+        return obs.copy(), info
+
+    def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        self._frames.append(obs)
+        return self._frames[0].copy(), reward, terminated, truncated, info
+
+
+class FrameDrop(gym.Wrapper):
+    """Dropped frames: at each step, with probability p, the previous observed frame is observed again.
+
+    The draw comes from the env's ``np_random``. The reset frame is always observed.
+    """
+
+    def __init__(self, env: gym.Env, probability: float):
+        probability = _validated("frame_drop", probability)
+        _check_frame_space(env, "FrameDrop")
+        super().__init__(env)
+        self.probability = probability
+        self._last: np.ndarray | None = None
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        obs, info = self.env.reset(seed=seed, options=options)
+        self._last = obs
+        return obs.copy(), info
+
+    def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
+        assert self._last is not None, "FrameDrop.step before reset"
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        if not self.np_random.random() < self.probability:
+            self._last = obs
+        return self._last.copy(), reward, terminated, truncated, info
+
+
+# ---------------------------------------------------------------------------------------------
+# Registry, parsing and placement
+# ---------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class EffectSpec:
+    """One entry of :data:`EFFECTS`."""
+
+    kind: str
+    """One of "actuator" (acts on u), "passive" (adds a torque), "clip" (the speed clip), "vision" (acts on frames)."""
+    meaning: str
+    """What the value means, in a few words."""
+    unit: str
+    """The value's unit."""
+    requirement: str
+    """The allowed values, in words."""
+    validator: Callable[[float], bool]
+    """True for an allowed value."""
+    wrapper: type[gym.Wrapper]
+    """The wrapper class; ``wrapper(env, value)`` adds the effect."""
+    integer: bool = False
+    """Whether the value is a count (stored as int)."""
+
+    def validate(self, name: str, value: Any) -> int | float:
+        """The value as stored (int for counts, else float); raises ValueError naming the effect and the range."""
+        ok = _is_number(value) and (not self.integer or float(value).is_integer()) and self.validator(float(value))
+        if not ok:
+            raise ValueError(f"effect {name}={value!r} is out of range: {name} must be {self.requirement} ({self.meaning})")
+        return int(value) if self.integer else float(value)
+
+
+#: Every effect: name -> spec. The order is the canonical one, in which the effects are applied.
+EFFECTS: dict[str, EffectSpec] = {
+    "delay": EffectSpec("actuator", "actuator dead time", "steps", "an integer >= 1",
+                        lambda v: v >= 1, ActionDelay, integer=True),
+    "deadzone": EffectSpec("actuator", "actuator deadzone half-width", "action units", f"in (0, {MAX_ACTION:g})",
+                           lambda v: 0 < v < MAX_ACTION, ActionDeadzone),
+    "saturation": EffectSpec("actuator", "actuator limit below 2", "action units", f"in (0, {MAX_ACTION:g})",
+                             lambda v: 0 < v < MAX_ACTION, ActionSaturation),
+    "gain": EffectSpec("actuator", "actuator gain error factor", "factor", "> 0 and != 1",
+                       lambda v: v > 0 and v != 1, ActionGainError),
+    "damping": EffectSpec("passive", "viscous damping coefficient", "N·m·s/rad", "> 0",
+                          lambda v: v > 0, ViscousDamping),
+    "friction": EffectSpec("passive", "smoothed Coulomb friction torque", "N·m", "> 0",
+                           lambda v: v > 0, CoulombFriction),
+    "bias": EffectSpec("passive", "constant torque bias", "N·m", "a number != 0",
+                       lambda v: v != 0, TorqueBias),
+    "speed_clip": EffectSpec("clip", "speed limit below Pendulum-v1's 8", "rad/s", f"in (0, {PENDULUM_MAX_SPEED:g})",
+                             lambda v: 0 < v < PENDULUM_MAX_SPEED, SpeedClip),
+    "blur": EffectSpec("vision", "Gaussian blur sigma", "px", "> 0", lambda v: v > 0, FrameBlur),
+    "shift": EffectSpec("vision", "image shift right and down", "px", "a number != 0", lambda v: v != 0, FrameShift),
+    "noise": EffectSpec("vision", "pixel noise standard deviation", "gray levels", "> 0", lambda v: v > 0, FrameNoise),
+    "frame_delay": EffectSpec("vision", "camera latency", "steps", "an integer >= 1",
+                              lambda v: v >= 1, FrameDelay, integer=True),
+    "frame_drop": EffectSpec("vision", "probability of a dropped frame", "probability", "in (0, 1)",
+                             lambda v: 0 < v < 1, FrameDrop),
+}
+
+#: Where :func:`wrap_effects` puts each effect in the pixel pendulum, innermost wrapper first.
+#: "torque" lies between Pendulum-v1 and ActuationGain; "command" lies outside ActuationGain, so
+#: that an action meets delay, deadzone, then saturation; "frame" lies after GrayscaleObservation.
+STAGES: dict[str, tuple[str, ...]] = {
+    "torque": ("speed_clip", "bias", "friction", "damping", "gain"),
+    "command": ("saturation", "deadzone", "delay"),
+    "frame": ("blur", "shift", "noise", "frame_delay", "frame_drop"),
+}
+
+Effects = tuple[tuple[str, float], ...]
+
+
+def _canonical_name(name: Any) -> str:
+    if not isinstance(name, str):
+        raise TypeError(f"an effect name must be a string, got {name!r}")
+    key = name.strip().lower().replace("-", "_")
+    if key not in EFFECTS:
+        raise ValueError(f"unknown effect {name!r}; valid effects: {', '.join(EFFECTS)}")
+    return key
+
+
+def parse_effect(text: str) -> tuple[str, int | float]:
+    """Parses ``"NAME=VALUE"`` (for example ``"damping=0.2"``) into a checked ``(name, value)``.
+
+    Names are those of :data:`EFFECTS`; ``-`` may stand for ``_`` (``speed-clip=6``).
+
+    Raises:
+        ValueError: no ``=``, an unknown name (the message lists the valid ones), a value that is
+            not a number, or one out of range (the message gives the range).
+    """
+    name, sep, value_text = text.partition("=")
+    if not sep or not name.strip():
+        raise ValueError(f"expected an effect as NAME=VALUE, like damping=0.2, got {text!r}")
+    key = _canonical_name(name)
+    try:
+        value = float(value_text)
+    except ValueError:
+        raise ValueError(f"effect {key}: expected a number after '=', got {value_text.strip()!r}") from None
+    return key, EFFECTS[key].validate(key, value)
+
+
+def normalize_effects(effects: Mapping[str, float] | Iterable[tuple[str, float]] | None) -> Effects:
+    """Checked effects as ``((name, value), ...)`` in the canonical order of :data:`EFFECTS`.
+
+    Accepts a mapping, pairs, or ``"NAME=VALUE"`` strings; each name may appear once.
+
+    Raises:
+        ValueError / TypeError: an unknown name, a bad value, or a name given twice.
+    """
+    if effects is None:
+        return ()
+    items: Iterable[Any] = effects.items() if isinstance(effects, Mapping) else effects
+    if isinstance(items, (str, bytes)):
+        raise TypeError(f"effects must be (name, value) pairs, got the string {items!r}")
+    checked: dict[str, int | float] = {}
+    for item in items:
+        if isinstance(item, str):
+            key, value = parse_effect(item)
+        else:
+            try:
+                name, raw = item
+            except (TypeError, ValueError):
+                raise TypeError(f"an effect must be a (name, value) pair, got {item!r}") from None
+            key = _canonical_name(name)
+            value = EFFECTS[key].validate(key, raw)
+        if key in checked:
+            raise ValueError(f"effect {key!r} is given twice")
+        checked[key] = value
+    return tuple((name, checked[name]) for name in EFFECTS if name in checked)
+
+
+def wrap_effects(env: gym.Env, effects: Effects, stage: str) -> gym.Env:
+    """Wraps ``env`` in the wrappers of ``effects`` that belong to ``stage`` (see :data:`STAGES`)."""
+    if stage not in STAGES:
+        raise ValueError(f"unknown stage {stage!r}; expected one of {sorted(STAGES)}")
+    given = dict(effects)
+    for name in STAGES[stage]:
+        if name in given:
+            env = EFFECTS[name].wrapper(env, given[name])
+    return env
+
+
+def format_effects(effects: Effects) -> str:
+    """``"damping=0.2 delay=2"``, or ``"none"``."""
+    return " ".join(f"{name}={value:g}" for name, value in effects) or "none"
+
+
+__all__ = [
+    "EFFECTS",
+    "FRICTION_SMOOTHING",
+    "PENDULUM_MAX_SPEED",
+    "STAGES",
+    "ActionDeadzone",
+    "ActionDelay",
+    "ActionGainError",
+    "ActionSaturation",
+    "CoulombFriction",
+    "EffectSpec",
+    "FrameBlur",
+    "FrameDelay",
+    "FrameDrop",
+    "FrameNoise",
+    "FrameShift",
+    "SpeedClip",
+    "TorqueBias",
+    "ViscousDamping",
+    "format_effects",
+    "normalize_effects",
+    "parse_effect",
+    "wrap_effects",
+]
