@@ -9,7 +9,9 @@
 
 File attributes: ``system`` (str), ``dt`` (float, seconds between frames), ``params`` (JSON: the
 physical parameters used), ``seed`` (int, -1 if unknown), ``piga_version``, ``command`` (the
-command line that made the file), and optionally ``env_config`` and ``state_names`` (JSON).
+command line that made the file), and optionally ``env_config``, ``state_names`` and ``effects``
+(JSON, from ``piga-collect``; see :mod:`envs.effects`) or ``source``, ``source_actions``,
+``source_frames`` and ``dropped_frames`` (from ``piga-import``; see :mod:`piga.importer`).
 
 Training code reads only frames and actions: :class:`piga.windows.SequenceWindows` (a torch
 Dataset, also reachable as ``piga.data.SequenceWindows``) serves those and nothing else. Ground-truth states come out only through :func:`load_states`, which evaluation code calls

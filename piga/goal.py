@@ -1,57 +1,22 @@
 """Goals given as images: read the goal angle with the encoder, check it, and write goal images.
 
-An image is converted the way the environment converts its render: a centre crop to a square,
-``cv2.resize(..., INTER_AREA)`` to the model's size, then Gymnasium's gray weights
-(0.2125, 0.7154, 0.0721), truncated to uint8.
+An image is converted the way the environment converts its render (:mod:`piga.scene`): a centre
+crop to a square, ``cv2.resize(..., INTER_AREA)`` to the model's size, then Gymnasium's gray
+weights (0.2125, 0.7154, 0.0721), truncated to uint8.
 """
 
 from __future__ import annotations
 
 import math
-import os
 from dataclasses import dataclass, field
-from pathlib import Path
 
-import cv2
 import numpy as np
 import torch
 
 from piga.model import PhysicsModel, frames_to_float
+from piga.scene import GRAY_WEIGHTS, load_scene_image, scene_to_gray
 
-#: Gymnasium's GrayscaleObservation weights (R, G, B).
-GRAY_WEIGHTS = np.array([0.2125, 0.7154, 0.0721])
-
-
-def load_scene_image(path: str | os.PathLike[str], size: int) -> np.ndarray:
-    """Reads a PNG or JPEG of any size as the env would see it: uint8 (size, size).
-
-    Raises:
-        FileNotFoundError: no such file.
-        ValueError: the file is not a readable image.
-    """
-    import imageio.v3 as iio
-
-    p = Path(path)
-    if not p.is_file():
-        raise FileNotFoundError(f"{p}: no such image file")
-    try:
-        img = np.asarray(iio.imread(p))
-    except Exception as exc:  # imageio raises many types for foreign or corrupt files
-        raise ValueError(f"{p}: not a readable image ({exc.__class__.__name__})") from None
-    if img.ndim == 3 and img.shape[2] == 4:
-        img = img[..., :3]
-    if img.ndim not in (2, 3) or min(img.shape[:2]) < 2:
-        raise ValueError(f"{p}: expected a 2-D gray or RGB image, got shape {img.shape}")
-    if img.dtype != np.uint8:
-        img = np.clip(img.astype(np.float64) / (img.max() or 1) * 255, 0, 255).astype(np.uint8)
-    h, w = img.shape[:2]
-    side = min(h, w)
-    top, left = (h - side) // 2, (w - side) // 2
-    img = img[top : top + side, left : left + side]
-    img = cv2.resize(img, (size, size), interpolation=cv2.INTER_AREA)
-    if img.ndim == 3:
-        img = np.sum(img * GRAY_WEIGHTS, axis=-1).astype(np.uint8)
-    return img
+__all__ = ["GRAY_WEIGHTS", "GoalEstimate", "load_scene_image", "read_goal", "render_goal_image", "scene_to_gray"]
 
 
 @dataclass(frozen=True)

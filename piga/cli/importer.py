@@ -1,0 +1,54 @@
+"""``piga-import``: a user's own recording (video or frame folder, plus a CSV of actions) -> one HDF5 file."""
+
+from __future__ import annotations
+
+import shlex
+import sys
+from collections.abc import Sequence
+
+from piga.cli.common import ArgumentParser, positive_float, positive_int, run_cli, split_type
+from piga.importer import ImportConfig, import_recording
+
+PROG = "piga-import"
+
+
+def build_parser() -> ArgumentParser:
+    defaults = ImportConfig(dt=1.0)
+    p = ArgumentParser(
+        prog=PROG,
+        description="Import a recording of the pendulum and its actions into piga's HDF5 schema (README, "
+        "'Data files'), cut into sequences of --steps frames. Frames are converted as the env converts its "
+        "render: centre crop, INTER_AREA resize, Gymnasium's gray weights.",
+    )
+    p.add_argument("recording", help="a video file (.mp4, .gif, ... anything imageio reads) or a folder of "
+                   ".png/.jpg frames in natural name order")
+    p.add_argument("actions", help="CSV with one action per frame: one column, or a header naming the column "
+                   "'u' or 'action'")
+    p.add_argument("--dt", type=positive_float, required=True, help="seconds between frames (required)")
+    p.add_argument("--out", required=True, help="output .h5 file (written atomically)")
+    p.add_argument("--steps", type=positive_int, default=defaults.steps,
+                   help="frames per sequence T, >= 2; leftover frames at the end are dropped (default %(default)s)")
+    p.add_argument("--image-size", type=positive_int, default=defaults.image_size,
+                   help="frame side in pixels, >= 8 (default %(default)s)")
+    p.add_argument("--split", type=split_type, default=defaults.split,
+                   help="train,valid,test as fractions or counts of sequences, in recording order (default 0.8,0.1,0.1)")
+    p.add_argument("--overwrite", action="store_true", help="replace --out if it exists")
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    config = ImportConfig(dt=args.dt, steps=args.steps, image_size=args.image_size, split=args.split)
+    argv_list = list(sys.argv[1:] if argv is None else argv)
+    result = import_recording(args.recording, args.actions, args.out, config, overwrite=args.overwrite,
+                              command=shlex.join([PROG, *argv_list]))
+    print(f"wrote {result.path}: {result.sequences} sequences x {config.steps} frames of "
+          f"({config.image_size}, {config.image_size}), split {result.split_counts}, dt={config.dt:g}")
+    if result.dropped_frames:
+        print(f"note: the last {result.dropped_frames} of {result.source_frames} frames (less than one sequence "
+              f"of {config.steps}) were dropped")
+    return 0
+
+
+def entry() -> None:
+    run_cli(PROG, main)

@@ -1,0 +1,250 @@
+"""Importing a user's own recording (a video or a folder of frames, plus a CSV of actions).
+
+The output is a file of piga's one schema (:mod:`piga.data`), like the files that ``piga-collect``
+writes. It has no ``/states``, because a real recording has no ground truth.
+
+| input | what is accepted |
+|---|---|
+| recording | a video file that imageio reads (``.mp4``, ``.gif``, ...), or a folder of ``.png`` / ``.jpg`` / ``.jpeg`` frames in natural name order (``f2`` before ``f10``) |
+| actions | a CSV with one row per frame: the action u_t applied after frame t. Either one column, with or without a header row, or a header row with a column named ``u`` or ``action`` |
+| dt | the frame interval in seconds |
+
+Each frame is converted as the env converts its render (:func:`piga.scene.scene_to_gray`): a
+centre crop to a square, ``cv2.resize(..., INTER_AREA)`` to ``image_size``, then Gymnasium's gray
+weights. The recording is cut into consecutive sequences of ``steps`` frames. The frames left over
+at the end, fewer than one sequence, are dropped. The sequences are split train/valid/test in
+recording order, like ``piga-collect`` (:func:`piga.collect.split_counts`), so that the test
+sequences are the end of the recording. The converted frames are held in memory before writing
+(4 KiB per 64x64 frame), because their count must match the CSV's before anything is written.
+
+File attrs: ``system`` = "pendulum", ``dt``, ``params`` = {} (unknown), ``seed`` = -1,
+``command``, ``source`` (the recording's path), ``source_actions`` (the CSV's path),
+``source_frames`` (frames in the recording), ``dropped_frames``, and ``split_counts``.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import re
+import shlex
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from piga.atomic import check_writable_target
+from piga.collect import split_counts
+from piga.data import SPLITS, DatasetWriter
+from piga.scene import read_image, scene_to_gray
+
+#: File name endings read from a folder of frames (case-insensitive).
+FRAME_EXTENSIONS = (".png", ".jpg", ".jpeg")
+#: Header names that mark the action column of a CSV with several columns (case-insensitive).
+ACTION_COLUMNS = ("u", "action")
+
+
+@dataclass(frozen=True)
+class ImportConfig:
+    """How ``piga-import`` turns a recording into piga's schema."""
+
+    dt: float
+    """Seconds between consecutive frames of the recording."""
+    steps: int = 40
+    """T, frames per sequence; the recording is cut into sequences of T frames."""
+    image_size: int = 64
+    """Side of the square gray frame in pixels (the pixel pendulum's default)."""
+    split: tuple[float, float, float] = (0.8, 0.1, 0.1)
+    """Train/valid/test, as fractions summing to 1 or as counts summing to the number of sequences."""
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.dt, (int, float, np.floating)) and math.isfinite(self.dt) and self.dt > 0):
+            raise ValueError(f"dt must be a positive number of seconds, got {self.dt!r}")
+        if self.steps < 2:
+            raise ValueError(f"steps must be >= 2 (a video needs two frames), got {self.steps}")
+        if self.image_size < 8:
+            raise ValueError(f"image_size must be >= 8, got {self.image_size}")
+
+
+@dataclass(frozen=True)
+class ImportResult:
+    """What :func:`import_recording` wrote."""
+
+    path: Path
+    """The file written."""
+    sequences: int
+    """N, sequences written."""
+    source_frames: int
+    """Frames in the recording."""
+    dropped_frames: int
+    """Frames left over at the end (fewer than one sequence), not written."""
+    split_counts: dict[str, int]
+    """Sequences per split name."""
+
+
+def _natural_key(path: Path) -> list[int | str]:
+    return [int(part) if part.isdigit() else part.lower() for part in re.split(r"(\d+)", path.name)]
+
+
+def frame_files(folder: str | Path) -> list[Path]:
+    """The frame files of a folder, in natural name order (``f2.png`` before ``f10.png``).
+
+    Raises:
+        ValueError: the folder holds no PNG or JPEG file.
+    """
+    folder = Path(folder)
+    files = sorted((p for p in folder.iterdir() if p.is_file() and p.suffix.lower() in FRAME_EXTENSIONS), key=_natural_key)
+    if not files:
+        raise ValueError(f"{folder}: no frames in this folder (expected {', '.join(FRAME_EXTENSIONS)} files)")
+    return files
+
+
+def read_recording(path: str | Path, size: int) -> np.ndarray:
+    """All frames of a video file or a folder of frames, converted: uint8 (F, size, size).
+
+    Raises:
+        FileNotFoundError: no such file or folder.
+        ValueError: an unreadable video or frame (the message names it), or no frames at all.
+    """
+    p = Path(path)
+    if p.is_dir():
+        frames = []
+        for file in frame_files(p):
+            image = read_image(file)  # its errors name the file
+            try:
+                frames.append(scene_to_gray(image, size))
+            except ValueError as exc:
+                raise ValueError(f"{file}: {exc}") from None
+        return np.stack(frames)  # (F, size, size)
+    if not p.is_file():
+        raise FileNotFoundError(f"{p}: no such video file or frame folder")
+    import imageio.v3 as iio
+
+    frames = []
+    try:
+        for image in iio.imiter(p):
+            frames.append(scene_to_gray(np.asarray(image), size))
+    except Exception as exc:  # imageio and its plugins raise many types for foreign or corrupt files
+        first = (str(exc).strip().splitlines() or [""])[0][:120]
+        raise ValueError(f"{p}: not a readable video ({exc.__class__.__name__}{': ' + first if first else ''})") from None
+    if not frames:
+        raise ValueError(f"{p}: the video has no frames")
+    return np.stack(frames)  # (F, size, size)
+
+
+def _number(text: str) -> float | None:
+    try:
+        value = float(text)
+    except ValueError:
+        return None
+    return value
+
+
+def read_actions(path: str | Path) -> np.ndarray:
+    """The actions of a CSV, one row per frame: float32 (F,).
+
+    The CSV has one column, with an optional header row, or a header row that names the action
+    column ``u`` or ``action``. Commas, semicolons or tabs separate the columns, and blank lines are
+    skipped.
+
+    Raises:
+        FileNotFoundError: no such file.
+        ValueError: the file is empty, a value is not a finite number (the message gives the line),
+            or the action column cannot be told.
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise FileNotFoundError(f"{p}: no such actions file")
+    try:
+        text = p.read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError:
+        raise ValueError(f"{p}: not a text CSV file") from None
+    lines = [(number, line) for number, line in enumerate(text.splitlines(), start=1) if line.strip()]
+    if not lines:
+        raise ValueError(f"{p}: the actions file is empty")
+    delimiter = next((d for d in (",", ";", "\t") if d in lines[0][1]), ",")
+    rows = [(number, [cell.strip() for cell in next(csv.reader([line], delimiter=delimiter))]) for number, line in lines]
+    first_number, first = rows[0]
+    column = 0
+    if any(_number(cell) is None for cell in first):  # a header row
+        names = [cell.lower() for cell in first]
+        if len(first) > 1:
+            matches = [names.index(name) for name in ACTION_COLUMNS if name in names]
+            if not matches:
+                raise ValueError(f"{p}: line {first_number}: the header {first} names no column 'u' or 'action'")
+            column = matches[0]
+        rows = rows[1:]
+        if not rows:
+            raise ValueError(f"{p}: the actions file has a header and no values")
+    elif len(first) > 1:
+        raise ValueError(f"{p}: {len(first)} columns and no header row; add a header that names the action column "
+                         f"'u' or 'action'")
+    values = np.empty(len(rows), np.float64)
+    for i, (number, row) in enumerate(rows):
+        cell = row[column] if column < len(row) else ""
+        value = _number(cell)
+        if value is None or not math.isfinite(value):
+            raise ValueError(f"{p}: line {number}: expected a finite number, got {cell!r}")
+        values[i] = value
+    return values.astype(np.float32)
+
+
+def import_recording(
+    recording: str | Path,
+    actions: str | Path,
+    out: str | Path,
+    config: ImportConfig,
+    overwrite: bool = False,
+    command: str | None = None,
+) -> ImportResult:
+    """Reads a recording and its actions and writes them to ``out`` atomically, in piga's schema.
+
+    Args:
+        recording: a video file or a folder of frames.
+        actions: the CSV of actions, one row per frame.
+        out: the HDF5 file to write.
+        config: the frame interval, the sequence length, the frame size and the split.
+        overwrite: allow replacing an existing ``out``.
+        command: stored in the attrs; None means this process's command line.
+
+    Raises:
+        FileNotFoundError, ValueError: missing or unreadable input, a count of actions that differs
+            from the count of frames, or too few frames for one sequence. The message says which.
+        OutputExistsError: ``out`` exists and ``overwrite`` is False.
+    """
+    target = check_writable_target(out, overwrite)  # before any decoding
+    recording, actions = Path(recording), Path(actions)
+    if not recording.exists():
+        raise FileNotFoundError(f"{recording}: no such video file or frame folder")
+    u = read_actions(actions)  # (F,)
+    frames = read_recording(recording, config.image_size)  # (F, S, S)
+    if len(u) != len(frames):
+        raise ValueError(f"{actions} has {len(u)} actions but {recording} has {len(frames)} frames; "
+                         "give one action per frame")
+    t = config.steps
+    n = len(frames) // t
+    if n < 1:
+        raise ValueError(f"{recording} has {len(frames)} frames, too few for one sequence of {t} frames (lower steps)")
+    counts = split_counts(n, config.split)
+    dropped = len(frames) - n * t
+    size = config.image_size
+    attrs = {
+        "system": "pendulum",
+        "dt": float(config.dt),
+        "params": {},
+        "seed": -1,
+        "command": command if command is not None else shlex.join(sys.argv),
+        "source": str(recording),
+        "source_actions": str(actions),
+        "source_frames": len(frames),
+        "dropped_frames": dropped,
+        "split_counts": dict(zip(SPLITS, counts)),
+    }
+    with DatasetWriter(target, n, t, (size, size), 1, None, attrs, overwrite=overwrite) as writer:
+        writer.write(0, frames[: n * t].reshape(n, t, size, size), u[: n * t].reshape(n, t, 1))
+        writer.set_split(np.repeat(np.arange(3, dtype=np.int8), counts))
+    return ImportResult(target, n, len(frames), dropped, dict(zip(SPLITS, counts)))
+
+
+__all__ = ["ImportConfig", "ImportResult", "frame_files", "import_recording", "read_actions", "read_recording"]

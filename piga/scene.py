@@ -1,0 +1,77 @@
+"""Pictures of the scene converted as the environment converts its render (no torch).
+
+The conversion is a centre crop to a square, ``cv2.resize(..., INTER_AREA)`` to the model's size,
+then Gymnasium's gray weights (0.2125, 0.7154, 0.0721), truncated to uint8. That is
+``ResizeObservation`` then ``GrayscaleObservation``, as in :func:`envs.make_pixel_pendulum`.
+Goal images (:mod:`piga.goal`) and imported recordings (:mod:`piga.importer`) both use it.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+#: Gymnasium's GrayscaleObservation weights (R, G, B).
+GRAY_WEIGHTS = np.array([0.2125, 0.7154, 0.0721])
+
+
+def scene_to_gray(img: np.ndarray, size: int) -> np.ndarray:
+    """A gray or RGB(A) picture of any size, as the env would see it: uint8 (size, size).
+
+    Alpha is dropped. A picture that is not uint8 is scaled by its own maximum to 0..255.
+
+    Raises:
+        ValueError: ``img`` is not a 2-D gray or RGB(A) picture of at least 2x2 pixels.
+    """
+    img = np.asarray(img)
+    if img.ndim == 3 and img.shape[2] == 4:
+        img = img[..., :3]
+    if img.ndim == 3 and img.shape[2] == 1:
+        img = img[..., 0]
+    if img.ndim not in (2, 3) or (img.ndim == 3 and img.shape[2] != 3) or min(img.shape[:2]) < 2:
+        raise ValueError(f"expected a 2-D gray or RGB image, got shape {img.shape}")
+    if img.dtype != np.uint8:
+        img = np.clip(img.astype(np.float64) / (img.max() or 1) * 255, 0, 255).astype(np.uint8)
+    h, w = img.shape[:2]
+    side = min(h, w)
+    top, left = (h - side) // 2, (w - side) // 2
+    img = img[top : top + side, left : left + side]  # (side, side[, 3])
+    img = cv2.resize(img, (size, size), interpolation=cv2.INTER_AREA)
+    if img.ndim == 3:
+        img = np.sum(img * GRAY_WEIGHTS, axis=-1).astype(np.uint8)  # (size, size)
+    return img
+
+
+def read_image(path: str | os.PathLike[str]) -> np.ndarray:
+    """Reads a PNG, JPEG or other still image as an array, unconverted.
+
+    Raises:
+        FileNotFoundError: no such file.
+        ValueError: the file is not a readable image.
+    """
+    import imageio.v3 as iio
+
+    p = Path(path)
+    if not p.is_file():
+        raise FileNotFoundError(f"{p}: no such image file")
+    try:
+        return np.asarray(iio.imread(p))
+    except Exception as exc:  # imageio raises many types for foreign or corrupt files
+        raise ValueError(f"{p}: not a readable image ({exc.__class__.__name__})") from None
+
+
+def load_scene_image(path: str | os.PathLike[str], size: int) -> np.ndarray:
+    """Reads a PNG or JPEG of any size as the env would see it: uint8 (size, size).
+
+    Raises:
+        FileNotFoundError: no such file.
+        ValueError: the file is not a readable image.
+    """
+    img = read_image(path)
+    try:
+        return scene_to_gray(img, size)
+    except ValueError as exc:
+        raise ValueError(f"{path}: {exc}") from None

@@ -1,0 +1,217 @@
+"""piga-import: a user's recording (frames or video, plus a CSV of actions) into piga's schema."""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import h5py
+import imageio.v3 as iio
+import numpy as np
+import pytest
+
+from piga.cli import importer as cli
+from piga.cli.common import run_cli
+from piga.collect import CollectConfig, collect
+from piga.data import inspect_dataset, read_sequences
+from piga.importer import ImportConfig, import_recording, read_actions, read_recording
+from piga.scene import scene_to_gray
+from tests.test_cli import ENV, assert_one_line_error
+
+PROG = "piga-import"
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, np.ndarray, np.ndarray]:
+    """A collected file written out as a user's recording: a folder of 17 PNGs and a CSV.
+
+    Returns the folder, the CSV, and the frames (17, 64, 64) and actions (17,) they hold.
+    """
+    root = tmp_path_factory.mktemp("recording")
+    data = collect(CollectConfig(sequences=3, steps=6, seed=4, workers=1, split=(1, 1, 1)), root / "c.h5",
+                   progress=False, command="t")
+    with h5py.File(data, "r") as f:
+        frames = f["frames"][()].reshape(-1, 64, 64)[:17]  # 3 sequences of 5 frames, 2 left over
+        actions = f["actions"][()].reshape(-1)[:17]
+    folder = root / "frames"
+    folder.mkdir()
+    for i, frame in enumerate(frames):  # f2 before f10: natural order, not plain string order
+        iio.imwrite(folder / f"f{i}.png", frame)
+    csv = root / "actions.csv"
+    csv.write_text("time,u\n" + "".join(f"{i * 0.05:.2f},{float(u)!r}\n" for i, u in enumerate(actions)))
+    return folder, csv, frames, actions
+
+
+def _cli(*argv: str, capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
+    """Runs piga-import in this process as the script does: (exit code, stdout, stderr)."""
+    saved = signal.getsignal(signal.SIGTERM)
+    try:
+        with pytest.raises(SystemExit) as info:
+            run_cli(PROG, cli.main, list(argv))
+    finally:
+        signal.signal(signal.SIGTERM, saved)
+    out, err = capsys.readouterr()
+    return int(info.value.code or 0), out, err
+
+
+def _assert_one_line(code: int, err: str, *needles: str) -> None:
+    lines = err.strip().splitlines()
+    assert code != 0 and len(lines) == 1 and "Traceback" not in err, err
+    for needle in needles:
+        assert needle in lines[0], lines[0]
+
+
+def test_round_trip_through_the_script(tmp_path: Path, recording: tuple[Path, Path, np.ndarray, np.ndarray]) -> None:
+    folder, csv, frames, actions = recording
+    out = tmp_path / "imported.h5"
+    result = subprocess.run([PROG, str(folder), str(csv), "--dt", "0.05", "--out", str(out), "--steps", "5",
+                             "--split", "1,1,1"], capture_output=True, text=True, env=ENV, timeout=120)
+    assert result.returncode == 0, result.stderr
+    assert "3 sequences x 5 frames" in result.stdout and "the last 2 of 17 frames" in result.stdout
+    info = inspect_dataset(out)
+    assert (info.n_sequences, info.steps, info.image_shape, info.action_dim) == (3, 5, (64, 64), 1)
+    assert not info.has_states and info.system == "pendulum" and info.dt == 0.05 and info.params == {}
+    assert info.split_counts == {"train": 1, "valid": 1, "test": 1}
+    assert info.attrs["seed"] == -1 and info.attrs["source"] == str(folder) and info.attrs["source_actions"] == str(csv)
+    assert info.attrs["source_frames"] == 17 and info.attrs["dropped_frames"] == 2
+    assert info.attrs["command"].startswith("piga-import ")
+    got = np.concatenate([read_sequences(out, split)[0] for split in ("train", "valid", "test")])
+    got_u = np.concatenate([read_sequences(out, split)[1] for split in ("train", "valid", "test")])
+    assert got.reshape(-1, 64, 64).tobytes() == frames[:15].tobytes()  # exactly the frames, in recording order
+    assert got_u.reshape(-1).tobytes() == actions[:15].tobytes()
+
+
+def test_video_files(tmp_path: Path, recording: tuple[Path, Path, np.ndarray, np.ndarray]) -> None:
+    _, csv, frames, _ = recording
+    gif = tmp_path / "r.gif"
+    iio.imwrite(gif, frames)
+    # a GIF comes back as RGB; Gymnasium's gray weights then truncate a few gray levels by one
+    assert np.abs(read_recording(gif, 64).astype(int) - frames).max() <= 1
+    mp4 = tmp_path / "r.mp4"
+    iio.imwrite(mp4, np.repeat(frames[..., None], 3, axis=-1), fps=20)
+    result = import_recording(mp4, csv, tmp_path / "v.h5", ImportConfig(dt=0.05, steps=8), command="t")
+    assert (result.sequences, result.source_frames, result.dropped_frames) == (2, 17, 1)
+    got = read_sequences(tmp_path / "v.h5", "train")[0]
+    assert np.abs(got.reshape(-1, 64, 64).astype(int) - frames[:16]).mean() < 4  # lossy, but the same pictures
+
+
+def test_frames_are_converted_as_the_env_converts_its_render(tmp_path: Path) -> None:
+    rng = np.random.default_rng(0)
+    pictures = rng.integers(0, 256, size=(4, 90, 120, 3), dtype=np.uint8)  # wide RGB, any size
+    folder = tmp_path / "rgb"
+    folder.mkdir()
+    for i, picture in enumerate(pictures):
+        iio.imwrite(folder / f"frame_{i:03d}.png", picture)
+    got = read_recording(folder, 32)
+    assert got.shape == (4, 32, 32) and got.dtype == np.uint8
+    for frame, picture in zip(got, pictures):
+        assert frame.tobytes() == scene_to_gray(picture, 32).tobytes()
+
+
+@pytest.mark.parametrize(
+    "text, want",
+    [
+        ("0.5\n-1\n2\n", [0.5, -1, 2]),
+        ("torque\n0.5\n-1\n2\n", [0.5, -1, 2]),  # one column: any header name
+        ("t,action,other\n0,0.5,9\n1,-1,9\n\n2,2,9\n", [0.5, -1, 2]),
+        ("\ufeffu;t\n0.5;0\n-1;1\n2;2\n", [0.5, -1, 2]),  # a BOM, semicolons
+        ("U\t t\n0.5\t0\n-1\t1\n2\t2\n", [0.5, -1, 2]),
+    ],
+)
+def test_read_actions(tmp_path: Path, text: str, want: list[float]) -> None:
+    path = tmp_path / "a.csv"
+    path.write_text(text, encoding="utf-8")
+    got = read_actions(path)
+    assert got.dtype == np.float32 and got.tolist() == want
+
+
+@pytest.mark.parametrize(
+    "text, needle",
+    [
+        ("", "empty"),
+        ("u\n", "header and no values"),
+        ("0.5\nfast\n", "line 2: expected a finite number, got 'fast'"),
+        ("u\n0.5\nnan\n", "line 3"),
+        ("1,2\n3,4\n", "2 columns and no header row"),
+        ("a,b\n1,2\n", "names no column 'u' or 'action'"),
+        ("t,u\n0,1\n1\n", "line 3: expected a finite number, got ''"),
+    ],
+)
+def test_read_actions_errors(tmp_path: Path, text: str, needle: str) -> None:
+    path = tmp_path / "a.csv"
+    path.write_text(text)
+    with pytest.raises(ValueError) as info:
+        read_actions(path)
+    assert needle in str(info.value), str(info.value)
+
+
+def test_import_config_is_checked() -> None:
+    for bad in [{"dt": 0.0}, {"dt": -0.1}, {"dt": float("nan")}, {"dt": 0.05, "steps": 1}, {"dt": 0.05, "image_size": 4}]:
+        with pytest.raises(ValueError, match=next(iter(k for k in bad if k != "dt"), "dt")):
+            ImportConfig(**bad)  # type: ignore[arg-type]
+
+
+@pytest.mark.filterwarnings("ignore:The legacy `DICOM` plugin:DeprecationWarning")  # imageio probing junk.mp4
+def test_cli_bad_input(tmp_path: Path, recording: tuple[Path, Path, np.ndarray, np.ndarray],
+                       capsys: pytest.CaptureFixture[str]) -> None:
+    folder, csv, _, _ = recording
+    out = str(tmp_path / "o.h5")
+
+    def run(*argv: str) -> tuple[int, str]:
+        code, _, err = _cli(*argv, capsys=capsys)
+        return code, err
+
+    _assert_one_line(*run(str(tmp_path / "absent"), str(csv), "--dt", "0.05", "--out", out),
+                     "absent", "no such video file or frame folder")
+    _assert_one_line(*run(str(folder), str(tmp_path / "absent.csv"), "--dt", "0.05", "--out", out),
+                     "no such actions file")
+    junk_video = tmp_path / "junk.mp4"
+    junk_video.write_text("not a video")
+    _assert_one_line(*run(str(junk_video), str(csv), "--dt", "0.05", "--out", out), "junk.mp4", "not a readable video")
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    _assert_one_line(*run(str(empty), str(csv), "--dt", "0.05", "--out", out), "no frames")
+    broken = tmp_path / "broken"
+    broken.mkdir()
+    iio.imwrite(broken / "a0.png", np.zeros((8, 8), np.uint8))
+    (broken / "a1.png").write_text("not a picture")
+    _assert_one_line(*run(str(broken), str(csv), "--dt", "0.05", "--out", out), "a1.png", "not a readable image")
+    words = tmp_path / "words.csv"
+    words.write_text("u\n0.1\nleft\n")
+    _assert_one_line(*run(str(folder), str(words), "--dt", "0.05", "--out", out), "words.csv", "line 3", "'left'")
+    short = tmp_path / "short.csv"
+    short.write_text("0.1\n" * 12)
+    _assert_one_line(*run(str(folder), str(short), "--dt", "0.05", "--out", out), "12 actions", "17 frames")
+    _assert_one_line(*run(str(folder), str(csv), "--dt", "0.05", "--out", out, "--steps", "18"),
+                     "17 frames", "one sequence of 18 frames")
+    code, err = run(str(folder), str(csv), "--dt", "0", "--out", out)
+    _assert_one_line(code, err, "--dt")
+    assert code == 2
+    _assert_one_line(*run(str(folder), str(csv), "--dt", "-0.05", "--out", out), "--dt")
+    _assert_one_line(*run(str(folder), str(csv), "--out", out), "--dt")
+    _assert_one_line(*run(str(folder), str(csv), "--dt", "0.05", "--out", out, "--steps", "5", "--split", "0,0,1"),
+                     "no training sequence")
+    assert not Path(out).exists()
+    assert list(tmp_path.glob(".*partial*")) == []
+
+
+def test_cli_refuses_to_overwrite(tmp_path: Path, recording: tuple[Path, Path, np.ndarray, np.ndarray],
+                                  capsys: pytest.CaptureFixture[str]) -> None:
+    folder, csv, _, _ = recording
+    out = tmp_path / "mine.h5"
+    out.write_text("precious")
+    code, _, err = _cli(str(folder), str(csv), "--dt", "0.05", "--out", str(out), capsys=capsys)
+    _assert_one_line(code, err, "--overwrite")
+    assert out.read_text() == "precious"
+    code, stdout, err = _cli(str(folder), str(csv), "--dt", "0.05", "--out", str(out), "--steps", "17", "--overwrite",
+                             capsys=capsys)
+    assert code == 0, err
+    assert inspect_dataset(out).n_sequences == 1 and "note" not in stdout
+
+
+def test_script_needs_no_torch_and_reports_usage_errors(tmp_path: Path) -> None:
+    code = "import sys, piga.cli.importer; print('torch' in sys.modules)"
+    assert subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=ENV).stdout.strip() == "False"
+    assert_one_line_error(subprocess.run([PROG], capture_output=True, text=True, env=ENV, timeout=60), "required")
