@@ -108,7 +108,15 @@ def cem(
     return CEMResult(best_actions, best_value, mean)
 
 
-def shift_warm_start(mean: Tensor, low: Tensor, high: Tensor) -> Tensor:
-    """The next call's ``init_mean``: drop the executed first step, append the middle of the bounds."""
-    fill = ((high + low) / 2).expand(1, mean.shape[1])
-    return torch.cat([mean[1:], fill], dim=0)
+def shift_warm_start(mean: Tensor, low: Tensor, high: Tensor, fill: str = "middle") -> Tensor:
+    """The next call's ``init_mean``: drop the executed first step and append a last one.
+
+    ``fill`` is "middle" (the middle of the bounds, PlaNet's choice) or "repeat" (the last step
+    again: a plan that holds a state with a constant torque keeps holding it).
+    """
+    if fill == "repeat":
+        return torch.cat([mean[1:], mean[-1:]], dim=0)
+    if fill != "middle":
+        raise ValueError(f"fill must be 'middle' or 'repeat', got {fill!r}")
+    fill_row = ((high + low) / 2).expand(1, mean.shape[1])
+    return torch.cat([mean[1:], fill_row], dim=0)

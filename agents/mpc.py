@@ -19,7 +19,7 @@ from __future__ import annotations
 import copy
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import torch
@@ -46,10 +46,27 @@ class MPCConfig:
     """Weight of θ̇²."""
     action_weight: float = 0.001
     """Weight of u²."""
+    swing_up_angle: float = math.radians(60)
+    """For a goal in the upper half (|θ_goal| < 90°): while the pendulum is farther than this from
+    the goal, the planner scores against upright instead. Swinging up toward upright is
+    symmetric and reliable; aiming straight at a tilted goal gets CEM stuck pushing one way at
+    the torque limit (0 disables)."""
     warm_start: bool = True
     """Start each plan from the previous one, shifted by a step."""
+    warm_fill: str = "repeat"
+    """How the shifted warm start's new last step is filled: "middle" (0) or "repeat"."""
+    warm_init_std: float | None = 0.3
+    """CEM's initial std for warm-started plans near the goal, within ``swing_up_angle`` of it (None:
+    always the cold start's ``cem.init_std``). Holding needs precise torques; swinging up needs
+    exploration, or CEM gets stuck pushing at the torque limit."""
+    execute: str = "mean"
+    """Which plan acts: "best" (the highest-scoring sample) or "mean" (CEM's final mean, smoother)."""
     seed: int = 0
     """Seed of the planner's RNG."""
+
+
+def _wrap(x: float) -> float:
+    return (x + math.pi) % (2 * math.pi) - math.pi
 
 
 class PendulumPlanner:
@@ -76,9 +93,23 @@ class PendulumPlanner:
         self._mean = None
         self.generator.manual_seed(self.config.seed)
 
+    def near_goal(self, theta: float) -> bool:
+        """Whether the system angle θ is within ``swing_up_angle`` of the goal (holding, not swinging up)."""
+        limit = self.config.swing_up_angle or math.pi / 3
+        return abs(_wrap(theta + self.offset - self.config.goal_angle)) <= limit
+
+    def current_goal(self, theta: float) -> float:
+        """The angle scored against from the system angle θ: the goal, or upright while swinging up."""
+        goal = self.config.goal_angle
+        if not self.config.swing_up_angle or abs(_wrap(goal)) >= math.pi / 2:
+            return goal
+        far = abs(_wrap(theta + self.offset - goal)) > self.config.swing_up_angle
+        return 0.0 if far else goal
+
     def objective(self, theta: float, theta_dot: float) -> Callable[[Tensor], Tensor]:
         """The closure CEM maximises: actions (B, H, 1) -> return (B,) from the system state (θ, θ̇)."""
         cfg = self.config
+        goal = self.current_goal(theta)
 
         @torch.no_grad()
         def value(actions: Tensor) -> Tensor:
@@ -86,7 +117,7 @@ class PendulumPlanner:
             p0 = torch.full((b, 1, 1), float(theta))
             v0 = torch.full((b, 1, 1), float(theta_dot))
             p, v = rollout(self.system, self.integrator, p0, v0, actions)  # (B, H, 1, 1) each
-            err = wrap_angle(p[..., 0, 0] + self.offset - cfg.goal_angle)  # (B, H), Gymnasium's convention
+            err = wrap_angle(p[..., 0, 0] + self.offset - goal)  # (B, H), Gymnasium's convention
             cost = cfg.angle_weight * err**2 + cfg.velocity_weight * v[..., 0, 0] ** 2 + cfg.action_weight * actions[..., 0] ** 2
             return -cost.sum(1)
 
@@ -98,11 +129,15 @@ class PendulumPlanner:
 
     def plan_sequence(self, theta: float, theta_dot: float) -> np.ndarray:
         """The whole best plan (H, 1) from the system state (θ, θ̇); advances the warm start."""
-        result = cem(self.objective(theta, theta_dot), self.low, self.high, self.config.cem,
+        cem_config = self.config.cem
+        if self._mean is not None and self.config.warm_init_std is not None and self.near_goal(theta):
+            cem_config = replace(cem_config, init_std=self.config.warm_init_std)
+        result = cem(self.objective(theta, theta_dot), self.low, self.high, cem_config,
                      init_mean=self._mean, generator=self.generator)
+        plan = result.mean if self.config.execute == "mean" else result.actions
         if self.config.warm_start:
-            self._mean = shift_warm_start(result.mean, self.low, self.high)
-        return result.actions.numpy().astype(np.float32)
+            self._mean = shift_warm_start(result.mean, self.low, self.high, self.config.warm_fill)
+        return plan.numpy().astype(np.float32)
 
 
 class OracleAgent:

@@ -17,16 +17,14 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
 import statistics
 import sys
 import time
 from dataclasses import replace
 from pathlib import Path
 
-import torch
 
+from common import machine
 from piga.atomic import atomic_output
 from piga.collect import CollectConfig, collect
 from piga.evaluate import EvalConfig, evaluate
@@ -41,20 +39,6 @@ CASES: dict[str, tuple[float, float, int]] = {
     "a0.5": (10.0, 0.5, 103),
     "a1.5": (10.0, 1.5, 104),
 }
-
-
-def machine() -> dict[str, object]:
-    """Where the numbers were measured."""
-    cpu = "unknown"
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    return {"cpu": cpu, "cores": os.cpu_count(), "torch_threads": torch.get_num_threads(), "torch": torch.__version__,
-            "python": platform.python_version(), "platform": platform.platform()}
 
 
 def table(runs: list[dict[str, object]]) -> str:

@@ -227,7 +227,7 @@ def make_pixel_pendulum(
     """
     if render_mode not in (None, "rgb_array"):
         raise ValueError(f"the pixel pendulum renders only as 'rgb_array', got render_mode={render_mode!r}")
-    from envs.effects import wrap_effects  # envs.effects imports this module
+    from envs.effects import EFFECTS, ShowCommandedTorque, wrap_effects  # envs.effects imports this module
 
     config = replace(config or PixelPendulumConfig(), **overrides)
     env = gym.make(
@@ -240,6 +240,8 @@ def make_pixel_pendulum(
     env = wrap_effects(env, config.effects, "torque")  # speed clip, passive torques, gain error
     env = ActuationGain(env, config.actuation_gain)
     env = wrap_effects(env, config.effects, "command")  # saturation, deadzone, delay (outermost)
+    if any(EFFECTS[name].kind != "vision" for name, _ in config.effects):
+        env = ShowCommandedTorque(env, config.actuation_gain)  # the arrow shows the command, not the effects
     env = PendulumStateInfo(env)
     if not config.draw_torque_arrow:
         env = HideTorqueArrow(env)

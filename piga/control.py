@@ -12,13 +12,16 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
-from collections.abc import Callable
-from typing import Any, Protocol
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
 from envs.pendulum import PixelPendulumConfig, make_pixel_pendulum
+
+if TYPE_CHECKING:
+    from agents.mpc import MPCConfig
 
 
 class Agent(Protocol):
@@ -138,3 +141,138 @@ def run_episodes(agent: Agent, config: EpisodeConfig, record: int = 0, progress:
         "goal_angle": config.goal_angle,
     }
     return {"summary": summary, "episodes": episodes, "recordings": recordings}
+
+
+def _default_mpc() -> MPCConfig:
+    from agents.mpc import MPCConfig
+
+    return MPCConfig()
+
+
+@dataclass(frozen=True)
+class ControlJob:
+    """One batch of episodes for one agent: all a worker process needs to rebuild and run it.
+
+    The agent's goal (``mpc.goal_angle``, what it is told, for example read from a goal image) and
+    the scoring goal (``episodes.goal_angle``, the truth) are kept apart on purpose.
+    """
+
+    agent: str
+    """"piga" (frames -> learned model) or "oracle" (true state, true g = 10 x multiplier, a = 1)."""
+    episodes: EpisodeConfig
+    """The episodes; its ``gravity_mult`` is the environment's."""
+    mpc: MPCConfig = field(default_factory=_default_mpc)
+    """The planner; its ``goal_angle`` is the agent's goal."""
+    model_dir: str | None = None
+    """The run folder of ``piga-train-model`` (for "piga")."""
+    told_gravity_mult: float | None = None
+    """The multiplier the agent is told (None: the environment's)."""
+    tags: tuple[tuple[str, Any], ...] = ()
+    """Extra (key, value) pairs copied into the result's summary (labels for tables)."""
+
+    def __post_init__(self) -> None:
+        if self.agent not in ("piga", "oracle"):
+            raise ValueError(f"agent must be 'piga' or 'oracle', got {self.agent!r}")
+        if self.agent == "piga" and not self.model_dir:
+            raise ValueError("a 'piga' job needs model_dir")
+
+
+def build_agent(job: ControlJob) -> Any:
+    """The agent a job describes (loads the model for "piga")."""
+    from agents.mpc import OracleAgent, PigaMPCAgent
+
+    told = job.episodes.gravity_mult if job.told_gravity_mult is None else job.told_gravity_mult
+    if job.agent == "oracle":
+        return OracleAgent(g=10.0 * told, a=1.0, config=job.mpc)
+    from piga.train import load_model
+
+    model, _ = load_model(job.model_dir)
+    return PigaMPCAgent(model, job.mpc, gravity_mult=told)
+
+
+def run_job(job: ControlJob) -> dict[str, Any]:
+    """Runs one job in this process with one torch thread; returns :func:`run_episodes`' result
+    (without recordings), its summary extended with ``agent`` and the job's tags."""
+    import torch
+
+    torch.set_num_threads(1)  # small tensors: one thread plans fastest, and workers share the cores
+    agent = build_agent(job)
+    episodes = job.episodes
+    if job.agent == "piga":
+        from dataclasses import replace
+
+        episodes = replace(episodes, frame_stack=agent.input_frames)
+    result = run_episodes(agent, episodes)
+    result.pop("recordings")
+    result["summary"] = {"agent": job.agent, **dict(job.tags), **result["summary"]}
+    return result
+
+
+def run_jobs(jobs: Sequence[ControlJob], workers: int = 1, progress: bool = True) -> list[dict[str, Any]]:
+    """Runs jobs, in ``workers`` processes when > 1 (results in the order of ``jobs``)."""
+    from tqdm.auto import tqdm
+
+    if workers <= 1 or len(jobs) <= 1:
+        return [run_job(j) for j in tqdm(jobs, desc="control jobs", disable=not progress)]
+    import multiprocessing as mp
+
+    # spawn, not fork: torch and pygame state are not fork-safe
+    with mp.get_context("fork").Pool(min(workers, len(jobs))) as pool:
+        return list(tqdm(pool.imap(run_job, jobs), total=len(jobs), desc="control jobs", disable=not progress))
+
+
+SUMMARY_COLUMNS: tuple[tuple[str, str], ...] = (
+    ("agent", "agent"),
+    ("gravity_mult", "gravity x"),
+    ("goal_deg", "goal (deg)"),
+    ("episodes", "episodes"),
+    ("success_rate", "success"),
+    ("mean_return", "mean return"),
+    ("final_angle_error_deg", "final angle error (deg)"),
+    ("time_to_goal_steps_median", "steps to goal (median)"),
+    ("plan_ms_median", "plan ms (median)"),
+    ("plan_ms_p95", "plan ms (p95)"),
+)
+
+
+def summary_row(summary: dict[str, Any]) -> dict[str, Any]:
+    """A summary with the derived display fields (degrees) added."""
+    return {**summary, "goal_deg": math.degrees(summary["goal_angle"]),
+            "final_angle_error_deg": math.degrees(summary["final_angle_error_mean"])}
+
+
+def summary_markdown(summaries: Sequence[dict[str, Any]], extra: Sequence[tuple[str, str]] = ()) -> str:
+    """A Markdown table of episode summaries, one row each; ``extra`` adds (key, header) columns first."""
+    columns = [*extra, *SUMMARY_COLUMNS]
+    lines = ["| " + " | ".join(h for _, h in columns) + " |", "|" + "---|" * len(columns)]
+    for s in map(summary_row, summaries):
+        cells = []
+        for key, _ in columns:
+            v = s.get(key)
+            if key == "success_rate":
+                cells.append(f"{100 * v:.0f}%")
+            elif isinstance(v, float):
+                cells.append(f"{v:.2f}" if abs(v) < 100 else f"{v:.1f}")
+            else:
+                cells.append("–" if v is None else str(v))
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def parse_range(text: str) -> list[float]:
+    """``"0.5:1.8:0.1"`` -> [0.5, 0.6, ..., 1.8] (both ends included, rounded to 10 decimals).
+
+    Raises:
+        ValueError: not START:STOP:STEP with START <= STOP and STEP > 0, or more than 1000 values.
+    """
+    parts = text.split(":")
+    try:
+        start, stop, step = (float(p) for p in parts)
+    except ValueError:
+        raise ValueError(f"expected START:STOP:STEP such as 0.5:1.8:0.1, got {text!r}") from None
+    if not all(map(math.isfinite, (start, stop, step))) or step <= 0 or stop < start:
+        raise ValueError(f"need finite START <= STOP and STEP > 0, got {text!r}")
+    n = int(math.floor((stop - start) / step + 1e-9)) + 1
+    if n > 1000:
+        raise ValueError(f"{text!r} gives {n} values; at most 1000")
+    return [round(start + i * step, 10) for i in range(n)]

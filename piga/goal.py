@@ -8,6 +8,7 @@ weights (0.2125, 0.7154, 0.0721), truncated to uint8.
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -16,7 +17,7 @@ import torch
 from piga.model import PhysicsModel, frames_to_float
 from piga.scene import GRAY_WEIGHTS, load_scene_image, scene_to_gray
 
-__all__ = ["GRAY_WEIGHTS", "GoalEstimate", "load_scene_image", "read_goal", "render_goal_image", "scene_to_gray"]
+__all__ = ["GRAY_WEIGHTS", "GoalEstimate", "goal_from_image", "load_scene_image", "read_goal", "render_goal_image", "scene_to_gray"]
 
 
 @dataclass(frozen=True)
@@ -66,6 +67,19 @@ def read_goal(model: PhysicsModel, image: np.ndarray, g: float, a: float, mse_li
             f"(typical {mse_limit / 4:.4f}); the goal angle {math.degrees(angle):.1f} deg may be meaningless"
         )
     return GoalEstimate(angle, mse, hold, feasible, warnings)
+
+
+def goal_from_image(model: PhysicsModel, checkpoint: dict, path: str | os.PathLike[str],
+                    gravity_mult: float = 1.0) -> GoalEstimate:
+    """Reads the goal from an image file for a model loaded by :func:`piga.train.load_model`.
+
+    The "not the scene" limit is 4x the model's own final reconstruction MSE per frame.
+    """
+    learned = model.physical_parameters()
+    history = checkpoint["state"]["history"]
+    typical = history[-1]["loss_rec"] / model.config.input_frames if history else 0.001
+    return read_goal(model, load_scene_image(path, model.config.image_size),
+                     g=learned["g"] * gravity_mult, a=learned["a"], mse_limit=4 * typical)
 
 
 def render_goal_image(angle_deg: float) -> np.ndarray:

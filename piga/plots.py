@@ -1,4 +1,4 @@
-"""Figures a person looks at: frame strips (and, later, rollouts, templates, learning curves).
+"""Figures a person looks at: frame strips, rollouts, templates, learning curves, control sweeps.
 
 Every figure is written atomically through :func:`save_figure`.
 """
@@ -112,5 +112,23 @@ def curves_figure(history: list[dict[str, float]], true_params: dict[str, float]
         ax.set_xlabel("epoch")
         ax.legend(fontsize=7)
         ax.set_title(name, fontsize=9)
+    fig.tight_layout()
+    return fig
+
+
+def sweep_figure(summaries: list[dict], x_key: str = "gravity_mult", x_label: str = "gravity multiplier") -> Figure:
+    """Success rate and mean return against ``x_key``, one line per ``agent`` (control sweeps)."""
+    fig, axes = plt.subplots(1, 2, figsize=(8, 3))
+    for agent in sorted({s["agent"] for s in summaries}):
+        rows = sorted((s for s in summaries if s["agent"] == agent), key=lambda s: s[x_key])
+        xs = [s[x_key] for s in rows]
+        axes[0].plot(xs, [100 * s["success_rate"] for s in rows], marker="o", label=agent)
+        axes[1].plot(xs, [s["mean_return"] for s in rows], marker="o", label=agent)
+    for ax, title in zip(axes, ("success (%)", "mean return")):
+        ax.set_xlabel(x_label)
+        ax.set_title(title, fontsize=9)
+        ax.axvline(1.0, color="k", lw=0.5, ls=":")
+        ax.legend(fontsize=7)
+    axes[0].set_ylim(-5, 105)
     fig.tight_layout()
     return fig

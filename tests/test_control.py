@@ -114,3 +114,42 @@ def test_write_goal_image(tmp_path: Path) -> None:
     assert result.returncode == 0, result.stderr
     assert out.read_bytes()[:4] == b"\x89PNG"
     assert_one_line_error(run("piga-control", "--write-goal-image", str(out), "--angle", "5"), "--overwrite")
+
+
+def test_oracle_holds_a_tilted_goal_from_hanging() -> None:
+    """A goal near the torque limit (hold torque 1.71 of 2), reached from hanging down, in state space."""
+    torch.set_num_threads(1)
+    goal = math.radians(20)
+    agent = OracleAgent(10.0, 1.0, MPCConfig(goal_angle=goal))
+    agent.reset()
+    theta, speed = math.pi, 0.0
+    for _ in range(150):
+        u = float(np.clip(agent.act(None, np.array([theta, speed]))[0], -2, 2))
+        speed = float(np.clip(speed + 0.05 * (15 * math.sin(theta) + 3 * u), -8, 8))
+        theta += 0.05 * speed
+    error = math.degrees(abs(math.remainder(theta - goal, 2 * math.pi)))
+    assert error < 3 and abs(speed) < 0.3, (error, speed)
+
+
+def test_parse_range() -> None:
+    from piga.control import parse_range
+
+    assert parse_range("0.5:1.8:0.1") == [round(0.5 + 0.1 * i, 10) for i in range(14)]
+    assert parse_range("1:1:0.5") == [1.0]
+    for bad in ("1:2", "a:b:c", "2:1:0.1", "1:2:0", "0:1e9:1"):
+        with pytest.raises(ValueError):
+            parse_range(bad)
+
+
+def test_summary_markdown_has_a_row_per_summary() -> None:
+    from piga.control import summary_markdown
+
+    s = {"agent": "oracle", "gravity_mult": 1.0, "goal_angle": 0.0, "episodes": 2, "success_rate": 0.5, "mean_return": -200.0,
+         "final_angle_error_mean": 0.01, "time_to_goal_steps_median": None, "plan_ms_median": 9.0, "plan_ms_p95": 12.0}
+    table = summary_markdown([s, {**s, "agent": "piga"}]).splitlines()
+    assert len(table) == 4 and "| oracle | 1.00 | 0.00 | 2 | 50% | -200.0 | 0.57 | – | 9.00 | 12.00 |" == table[2]
+
+
+def test_sweep_cli_bad_input(tmp_path: Path) -> None:
+    assert_one_line_error(run("piga-control", "--oracle", "--sweep", "0.5:1.8:0.1"), "--model")
+    assert_one_line_error(run("piga-control", "--model", str(tmp_path / "none"), "--sweep", "1:2"), "START:STOP:STEP")

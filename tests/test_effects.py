@@ -436,3 +436,14 @@ def test_collect_cli_effect_given_twice(tmp_path: Path, capsys: pytest.CaptureFi
     code, _, err = _cli(cli, "piga-collect", "--out", str(tmp_path / "d.h5"), "--effect", "bias=0.1",
                         "--effect", "bias=0.2", capsys=capsys)
     assert code == 1 and err.strip() == "piga-collect: error: PixelPendulumConfig.effects: effect 'bias' is given twice"
+
+
+@pytest.mark.parametrize("effects", [{"gain": 1.3}, {"delay": 2, "damping": 0.3}, {"saturation": 0.5, "bias": 0.4}])
+def test_torque_arrow_shows_the_commanded_torque(effects: dict) -> None:
+    """The picture must not leak the effect (nor show an arrow larger than the nominal data's)."""
+    env = make_pixel_pendulum(PixelPendulumConfig(image_size=16, effects=tuple(effects.items())))
+    env.reset(seed=0, options={"state": [0.5, 2.0]})
+    for u in (1.7, -2.5, 0.3):
+        env.step(np.array([u], np.float32))
+        assert env.unwrapped.last_u == pytest.approx(float(np.clip(np.float32(u), -2, 2)))
+    env.close()

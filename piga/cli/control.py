@@ -29,8 +29,12 @@ def build_parser() -> ArgumentParser:
     p.add_argument("--candidates", type=positive_int, help="CEM candidates per iteration (default 200)")
     p.add_argument("--iterations", type=positive_int, help="CEM iterations (default 5)")
     p.add_argument("--seed", type=nonnegative_int, default=0, help="seed of start states and planner (default 0)")
+    p.add_argument("--sweep", metavar="START:STOP:STEP",
+                   help="run the piga agent and the oracle at each gravity multiplier of the range (e.g. 0.5:1.8:0.1); "
+                   "each agent is told the multiplier. Writes a table and, with --out, OUT.png")
+    p.add_argument("--workers", type=positive_int, default=2, help="processes for --sweep (default %(default)s)")
     p.add_argument("--video", help="write episode 0 as .mp4 or .gif: real frames | the model's belief | its plan")
-    p.add_argument("--out", help="write the results to OUT.json")
+    p.add_argument("--out", help="write the results to OUT.json and a Markdown table to OUT.md (and OUT.png with --sweep)")
     p.add_argument("--overwrite", action="store_true", help="replace existing --out files")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     return p
@@ -50,14 +54,18 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     import torch
 
-    from agents.mpc import MPCConfig, OracleAgent, PigaMPCAgent
-    from piga.atomic import check_writable_target
+    from agents.mpc import OracleAgent, PigaMPCAgent
+    from piga.atomic import check_writable_target, write_json
     from piga.control import EpisodeConfig, run_episodes
-    from piga.atomic import write_json
     from piga.train import load_model
 
+    outputs = []
     if args.out:
-        check_writable_target(Path(args.out).with_suffix(".json"), args.overwrite)
+        outputs = [Path(args.out).with_suffix(s) for s in (".json", ".md", *((".png",) if args.sweep else ()))]
+        for path in outputs:
+            check_writable_target(path, args.overwrite)
+    if args.sweep:
+        return _sweep(args, outputs)
     if args.video:
         if Path(args.video).suffix.lower() not in (".mp4", ".gif"):
             raise PigaError(f"--video must end in .mp4 or .gif, got {args.video}")
@@ -66,12 +74,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         check_writable_target(args.video, args.overwrite)
     torch.set_num_threads(1)  # small tensors: one thread plans fastest
     goal = math.radians(args.goal_angle)
-    mpc = MPCConfig(goal_angle=goal, seed=args.seed)
-    changes = {k: getattr(args, k) for k in ("horizon", "candidates", "iterations") if getattr(args, k) is not None}
-    if changes:
-        cem_config = replace(mpc.cem, **changes)
-        cem_config = replace(cem_config, elites=max(1, min(cem_config.elites, cem_config.candidates // 10 or 1)))
-        mpc = replace(mpc, cem=cem_config)
+    mpc = _mpc_config(args, goal)
     model = None
     if args.model:
         model, ckpt = load_model(args.model)
@@ -80,13 +83,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.goal_image:
         if model is None:
             raise PigaError("--goal-image needs --model: the goal is read from the image by the model's encoder")
-        from piga.goal import load_scene_image, read_goal
+        from piga.goal import goal_from_image
 
-        learned = model.physical_parameters()
-        history = ckpt["state"]["history"]
-        typical = history[-1]["loss_rec"] / model.config.input_frames if history else 0.001
-        estimate = read_goal(model, load_scene_image(args.goal_image, model.config.image_size),
-                             g=learned["g"] * args.gravity_mult, a=learned["a"], mse_limit=4 * typical)
+        estimate = goal_from_image(model, ckpt, args.goal_image, gravity_mult=args.gravity_mult)
         for warning in estimate.warnings:
             print(f"{PROG}: warning: {warning}", file=sys.stderr)
         goal = estimate.angle
@@ -115,9 +114,76 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         control_video(model, result["recordings"][0]["frames"], agent.first_trace, args.video, overwrite=args.overwrite)
         print(f"wrote {args.video}")
-    if args.out:
-        write_json(Path(args.out).with_suffix(".json"), {"agent": label, **result, "recordings": None}, overwrite=args.overwrite)
+    if outputs:
+        from piga.atomic import atomic_output
+        from piga.control import summary_markdown
+
+        s = {"agent": label, **s}
+        write_json(outputs[0], {"agent": label, **result, "summary": s, "recordings": None}, overwrite=args.overwrite)
+        with atomic_output(outputs[1], overwrite=args.overwrite) as tmp:
+            tmp.write_text(f"# {PROG}\n\nCommand: `{_command()}`\n\n{summary_markdown([s])}")
+        print(f"wrote {outputs[0]} and {outputs[1]}")
     return 0
+
+
+def _command() -> str:
+    import shlex
+
+    return shlex.join([PROG, *sys.argv[1:]])
+
+
+def _sweep(args, outputs: list[Path]) -> int:  # noqa: ANN001
+    """--sweep: the piga agent and the oracle at each multiplier, each told the multiplier."""
+    from piga.atomic import atomic_output, write_json
+    from piga.control import ControlJob, EpisodeConfig, parse_range, run_jobs, summary_markdown
+    from piga.train import load_model
+
+    if args.oracle or not args.model:
+        raise PigaError("--sweep compares the piga agent with the oracle: give --model RUN_DIR (without --oracle)")
+    if args.goal_image or args.video:
+        raise PigaError("--sweep runs upright swing-ups; it does not take --goal-image or --video")
+    try:
+        multipliers = parse_range(args.sweep)
+    except ValueError as exc:
+        raise PigaError(f"--sweep: {exc}") from None
+    if multipliers[0] <= 0:
+        raise PigaError(f"--sweep: gravity multipliers must be > 0, got {args.sweep}")
+    model, _ = load_model(args.model)  # fail early, in this process, on a bad folder
+    if model.config.system != "pendulum":
+        raise PigaError(f"{args.model}: a {model.config.system} model cannot control the pendulum")
+    mpc = _mpc_config(args, math.radians(args.goal_angle))
+    jobs = [ControlJob(agent, EpisodeConfig(episodes=args.episodes, steps=args.steps, seed=args.seed, gravity_mult=m,
+                                            goal_angle=mpc.goal_angle),
+                       mpc, model_dir=args.model if agent == "piga" else None)
+            for m in multipliers for agent in ("piga", "oracle")]
+    results = run_jobs(jobs, workers=args.workers, progress=not args.quiet)
+    summaries = [r["summary"] for r in results]
+    table = summary_markdown(summaries)
+    print(table, end="")
+    if outputs:
+        from piga.plots import save_figure, sweep_figure
+
+        write_json(outputs[0], {"model": args.model, "multipliers": multipliers, "results": results}, overwrite=args.overwrite)
+        with atomic_output(outputs[1], overwrite=args.overwrite) as tmp:
+            tmp.write_text(f"# {PROG} --sweep\n\nCommand: `{_command()}`\n\n![sweep]({outputs[2].name})\n\n{table}")
+        save_figure(sweep_figure(summaries), outputs[2], overwrite=args.overwrite)
+        print(f"wrote {', '.join(map(str, outputs))}")
+    return 0
+
+
+def _mpc_config(args, goal: float):  # noqa: ANN001, ANN202
+    """The planner settings from the command line."""
+    from dataclasses import replace
+
+    from agents.mpc import MPCConfig
+
+    mpc = MPCConfig(goal_angle=goal, seed=args.seed)
+    changes = {k: getattr(args, k) for k in ("horizon", "candidates", "iterations") if getattr(args, k) is not None}
+    if changes:
+        cem_config = replace(mpc.cem, **changes)
+        cem_config = replace(cem_config, elites=max(1, min(cem_config.elites, cem_config.candidates // 10 or 1)))
+        mpc = replace(mpc, cem=cem_config)
+    return mpc
 
 
 def _keep_first_trace(agent):  # noqa: ANN001, ANN202

@@ -1,8 +1,9 @@
 """``piga-demo``: the main job on small defaults, for a fresh machine.
 
-It collects a small data set and saves a strip of its frames. It then trains the world model with
-the fast preset and prints the learned g and a with their errors. Later stages (control) join this
-one command as they land.
+It collects a small data set and saves a strip of its frames, trains the world model with the fast
+preset, then controls the pixel pendulum from pixels with the learned model: upright at gravity
+x1.0, upright at x1.4 (the agent is told the multiplier, no retraining), and to a goal given as an
+image that it writes with Gymnasium's renderer. It ends with one summary.
 """
 
 from __future__ import annotations
@@ -26,6 +27,8 @@ def build_parser() -> ArgumentParser:
     p.add_argument("--out", default="demo", help="output folder (default %(default)s)")
     p.add_argument("--sequences", type=positive_int, default=CollectConfig.sequences, help="sequences to collect (default %(default)s)")
     p.add_argument("--epochs", type=positive_int, help="training epochs (default: the fast preset's)")
+    p.add_argument("--episodes", type=positive_int, default=3, help="control episodes per task (default %(default)s)")
+    p.add_argument("--goal-angle", type=float, default=15.0, help="angle of the goal image, degrees from upright (default %(default)s)")
     p.add_argument("--seed", type=nonnegative_int, default=0, help="seed of data and training (default %(default)s)")
     p.add_argument("--overwrite", action="store_true", help="replace files of an earlier demo in --out")
     return p
@@ -37,18 +40,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     if out.exists() and not out.is_dir():
         raise PigaError(f"--out {out} is a file, not a folder")
     data, strip, run_dir = out / "pendulum.h5", out / "frames.png", out / "model"
+    goal_png, control_md = out / "goal.png", out / "control.md"
     if not args.overwrite:
-        for path in (data, strip, run_dir / "checkpoint.pt"):
+        for path in (data, strip, run_dir / "checkpoint.pt", goal_png, control_md):
             if path.exists():
                 raise PigaError(f"{path} exists from an earlier demo; pass --overwrite to replace it")
     out.mkdir(parents=True, exist_ok=True)
     over = ["--overwrite"] if args.overwrite else []
-    print(f"[1/3] collecting {args.sequences} sequences into {data}", flush=True)
+    print(f"[1/4] collecting {args.sequences} sequences into {data}", flush=True)
     config = replace(CollectConfig(), sequences=args.sequences, seed=args.seed)
     collect(config, data, overwrite=args.overwrite, command=shlex.join([PROG, *(argv or [])]))
-    print(f"[2/3] saving a strip of frames to {strip}", flush=True)
+    print(f"[2/4] saving a strip of frames to {strip}", flush=True)
     show.main([str(data), "--out", str(strip), *over])
-    print(f"[3/3] training the world model into {run_dir} (fast preset)", flush=True)
+    print(f"[3/4] training the world model into {run_dir} (fast preset)", flush=True)
     train.main([str(data), "--out", str(run_dir), "--seed", str(args.seed), *over,
                 *(["--epochs", str(args.epochs)] if args.epochs else [])])
     import json
@@ -56,10 +60,51 @@ def main(argv: Sequence[str] | None = None) -> int:
     metrics = json.loads((run_dir / "metrics.json").read_text())
     info = inspect_dataset(data)
     errs = metrics["parameter_errors"]
+    print(f"[4/4] control from pixels with the learned model: upright, gravity x1.4, goal image at {args.goal_angle:g} deg",
+          flush=True)
+    rows = _control(run_dir, goal_png, control_md, args)
     print("summary: " + ", ".join(f"{n}: learned {e['learned']:.4f}, true {e['true']:g}, error {100 * e['relative_error']:.2f}%"
                                   for n, e in errs.items())
-          + f"; {info.n_sequences} sequences, {metrics['training']['seconds'] / 60:.1f} min of training; see {out}/")
+          + f"; {info.n_sequences} sequences, {metrics['training']['seconds'] / 60:.1f} min of training")
+    for label, s in rows:
+        print(f"summary: {label}: success {100 * s['success_rate']:.0f}% of {s['episodes']}, final angle error "
+              f"{s['final_angle_error_deg']:.2f} deg, plan {s['plan_ms_median']:.1f} ms/step")
+    print(f"summary: see {out}/ (frames.png, model/*.png, goal.png, control.md)")
     return 0
+
+
+def _control(run_dir: Path, goal_png: Path, control_md: Path, args) -> list[tuple[str, dict]]:  # noqa: ANN001
+    """Upright at x1.0 and x1.4, and to the goal image; writes goal.png and control.md."""
+    import math
+    from dataclasses import replace as dc_replace
+
+    import imageio.v3 as iio
+
+    from agents.mpc import MPCConfig
+    from piga.atomic import atomic_output
+    from piga.control import ControlJob, EpisodeConfig, run_jobs, summary_markdown, summary_row
+    from piga.goal import goal_from_image, render_goal_image
+    from piga.train import load_model
+
+    with atomic_output(goal_png, overwrite=args.overwrite) as tmp:
+        iio.imwrite(tmp, render_goal_image(args.goal_angle), extension=".png")
+    model, ckpt = load_model(run_dir)
+    estimate = goal_from_image(model, ckpt, goal_png)
+    for warning in estimate.warnings:
+        print(f"{PROG}: warning: {warning}")
+    mpc = MPCConfig(seed=args.seed)
+    episodes = EpisodeConfig(episodes=args.episodes, seed=args.seed)
+    jobs = [
+        ControlJob("piga", episodes, mpc, str(run_dir), tags=(("task", "upright, gravity x1.0"),)),
+        ControlJob("piga", dc_replace(episodes, gravity_mult=1.4), mpc, str(run_dir), tags=(("task", "upright, gravity x1.4"),)),
+        ControlJob("piga", dc_replace(episodes, goal_angle=math.radians(args.goal_angle)),
+                   dc_replace(mpc, goal_angle=estimate.angle), str(run_dir),
+                   tags=(("task", f"goal image at {args.goal_angle:g} deg (read {math.degrees(estimate.angle):.2f})"),)),
+    ]
+    summaries = [r["summary"] for r in run_jobs(jobs, workers=2, progress=False)]
+    with atomic_output(control_md, overwrite=args.overwrite) as tmp:
+        tmp.write_text("# piga-demo: control from pixels\n\n" + summary_markdown(summaries, extra=[("task", "task")]))
+    return [(s["task"], summary_row(s)) for s in summaries]
 
 
 def entry() -> None:

@@ -1,0 +1,165 @@
+"""Benchmark: control from pixels with the learned model, against the oracle (issue 4's floors).
+
+It runs, with a model trained by ``piga-train-model`` (default preset, default data):
+
+1. upright swing-up at gravity x1.0: the piga agent and the oracle, ``--episodes`` each (50);
+2. zero-shot gravity x1.4: both agents are told the multiplier, ``--episodes`` each;
+3. the sweep 0.5:1.8:0.1, ``--sweep-episodes`` each (10), with a plot;
+4. goals given as images, spread over the feasible range (within 0.9 x asin(4a/g) of upright and
+   of hanging down): a goal image is written with Gymnasium's renderer at each true angle, the
+   agent reads its goal from the image with its encoder, and its final error is measured against
+   the true angle; the oracle, told the true angle, is the reference;
+5. plan time of the tuned planner next to PlaNet's CEM defaults (H 12, 10 iterations, 1000
+   candidates, top 100, no warm start), ``--planet-episodes`` each (10).
+
+Episode 0 of each batch starts hanging straight down at rest; the others start at θ ~ U(-π, π),
+θ̇ ~ U(-1, 1). Success: |θ - θ_goal| < 0.2 rad and |θ̇| < 1 rad/s for each of the last 20 of 200
+steps. Jobs run in ``--workers`` processes, one torch thread each, so plan times are per core
+with the other core busy.
+
+    python benchmarks/control.py --model RUN_DIR --out results/control
+
+Writes OUT.json, OUT.md (tables and checks against the floors) and OUT-sweep.png.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import shlex
+import sys
+import tempfile
+import time
+from dataclasses import replace
+from pathlib import Path
+
+from common import machine
+from agents.cem import CEMConfig
+from agents.mpc import MPCConfig
+from piga.atomic import atomic_output, write_json
+from piga.control import ControlJob, EpisodeConfig, parse_range, run_jobs, summary_markdown
+from piga.plots import save_figure, sweep_figure
+
+#: PlaNet's CEM (Hafner et al., 2019), re-planned from scratch each step.
+PLANET = MPCConfig(cem=CEMConfig(), warm_start=False)
+
+
+def goal_angles(g: float, a: float, count: int = 7) -> list[float]:
+    """True goal angles (deg) spread over the feasible range: ``count`` around upright and around hanging."""
+    limit = math.degrees(math.asin(min(1.0, 4 * a / g)))
+    span = [0.9 * limit * (2 * i / (count - 1) - 1) for i in range(count)]  # -0.9 limit .. 0.9 limit
+    return [round(x, 2) for x in span] + [round(math.remainder(180 + x, 360), 2) for x in span]
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--model", required=True, help="run folder of piga-train-model")
+    p.add_argument("--out", default="results/control", help="output prefix (default %(default)s)")
+    p.add_argument("--episodes", type=int, default=50)
+    p.add_argument("--sweep", default="0.5:1.8:0.1")
+    p.add_argument("--sweep-episodes", type=int, default=10)
+    p.add_argument("--goal-episodes", type=int, default=3)
+    p.add_argument("--planet-episodes", type=int, default=10)
+    p.add_argument("--workers", type=int, default=2)
+    p.add_argument("--seed", type=int, default=0)
+    args = p.parse_args()
+    from piga.goal import goal_from_image, render_goal_image
+    from piga.train import load_model
+
+    model, ckpt = load_model(args.model)
+    learned = model.physical_parameters()
+    tuned = MPCConfig(seed=args.seed)
+    planet = replace(PLANET, seed=args.seed)
+
+    def job(agent: str, mult: float, episodes: int, mpc: MPCConfig = tuned, goal: float = 0.0, **tags: object) -> ControlJob:
+        return ControlJob(agent, EpisodeConfig(episodes=episodes, seed=args.seed, gravity_mult=mult, goal_angle=goal),
+                          mpc, model_dir=args.model if agent == "piga" else None, tags=tuple(tags.items()))
+
+    jobs: list[ControlJob] = []
+    for mult in (1.0, 1.4):
+        jobs += [job(agent, mult, args.episodes, part="main") for agent in ("piga", "oracle")]
+    jobs += [job("piga", 1.0, args.planet_episodes, planet, part="planet", planner="PlaNet defaults")]
+    jobs += [job(agent, m, args.sweep_episodes, part="sweep") for m in parse_range(args.sweep) for agent in ("piga", "oracle")]
+    goals = goal_angles(learned["g"], learned["a"])
+    read: dict[float, float] = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        import imageio.v3 as iio
+
+        for angle in goals:
+            path = Path(tmp) / f"goal_{angle:+.2f}.png"
+            iio.imwrite(path, render_goal_image(angle))
+            estimate = goal_from_image(model, ckpt, path)
+            read[angle] = math.degrees(estimate.angle)
+            jobs.append(job("piga", 1.0, args.goal_episodes, replace(tuned, goal_angle=estimate.angle), math.radians(angle),
+                            part="goal", read_goal_deg=round(read[angle], 3)))
+            jobs.append(job("oracle", 1.0, args.goal_episodes, replace(tuned, goal_angle=math.radians(angle)),
+                            math.radians(angle), part="goal"))
+    t0 = time.time()
+    results = run_jobs(jobs, workers=args.workers)
+    minutes = (time.time() - t0) / 60
+    s = [r["summary"] for r in results]
+
+    def pick(part: str, agent: str | None = None, mult: float | None = None) -> list[dict]:
+        return [x for x in s if x["part"] == part and (agent is None or x["agent"] == agent)
+                and (mult is None or abs(x["gravity_mult"] - mult) < 1e-9)]
+
+    main_rows = pick("main")
+    (p1,), (o1,) = pick("main", "piga", 1.0), pick("main", "oracle", 1.0)
+    (p14,), (o14,) = pick("main", "piga", 1.4), pick("main", "oracle", 1.4)
+    (pl,) = pick("planet")
+    goal_piga, goal_oracle = pick("goal", "piga"), pick("goal", "oracle")
+    goal_err = sum(math.degrees(x["final_angle_error_mean"]) for x in goal_piga) / len(goal_piga)
+    goal_err_oracle = sum(math.degrees(x["final_angle_error_mean"]) for x in goal_oracle) / len(goal_oracle)
+    return_gap = abs(p1["mean_return"] - o1["mean_return"]) / abs(o1["mean_return"])
+    checks = [
+        ("x1.0 success >= 95%", f"{100 * p1['success_rate']:.0f}%", p1["success_rate"] >= 0.95),
+        ("x1.0 mean return within 5% of the oracle's", f"{100 * return_gap:.1f}% ({p1['mean_return']:.1f} vs {o1['mean_return']:.1f})",
+         return_gap <= 0.05),
+        ("x1.4 success within 5 points of the oracle's", f"{100 * p14['success_rate']:.0f}% vs {100 * o14['success_rate']:.0f}%",
+         p14["success_rate"] >= o14["success_rate"] - 0.05),
+        ("goal images: mean final angle error <= 3 deg", f"{goal_err:.2f} deg (oracle told the true goal: {goal_err_oracle:.2f})",
+         goal_err <= 3.0),
+        ("plan time <= 20 ms per step (median; stretch 5 ms)", f"{p1['plan_ms_median']:.1f} ms (p95 {p1['plan_ms_p95']:.1f})",
+         p1["plan_ms_median"] <= 20.0),
+    ]
+    out = Path(args.out)
+    plot = out.with_name(out.name + "-sweep.png")
+    save_figure(sweep_figure(pick("sweep")), plot)
+    command = shlex.join(["python", *sys.argv])
+    lines = [
+        "# Control from pixels: piga MPC vs the oracle", "",
+        f"Command: `{command}`", "",
+        f"Model: `{args.model}`, learned g = {learned['g']:.4f}, a = {learned['a']:.4f}. "
+        f"Machine: {machine()['cpu']}, {machine()['cores']} cores; {args.workers} worker processes, 1 torch thread each; "
+        f"{minutes:.1f} min in all.", "",
+        "Success: |θ − θ_goal| < 0.2 rad and |θ̇| < 1 rad/s for each of the last 20 of 200 steps. Episode 0 of each row "
+        "starts hanging down; the others at θ ~ U(−π, π), θ̇ ~ U(−1, 1).", "",
+        "## Checks", "", "| floor | measured | met |", "|---|---|---|",
+        *[f"| {name} | {value} | {'yes' if ok else '**no**'} |" for name, value, ok in checks], "",
+        "## Upright, gravity x1.0 and x1.4 (told to the agent, no retraining)", "", summary_markdown(main_rows),
+        "## Planner settings: tuned defaults vs PlaNet's", "",
+        f"Tuned: CEM H {tuned.cem.horizon}, {tuned.cem.iterations} iterations, {tuned.cem.candidates} candidates, top "
+        f"{tuned.cem.elites}, warm start (std {tuned.warm_init_std}), executes the CEM mean. PlaNet: H 12, 10 iterations, "
+        "1000 candidates, top 100, no warm start.", "",
+        summary_markdown([{**p1, "planner": "tuned"}, pl], extra=[("planner", "planner")]),
+        f"## Gravity sweep {args.sweep} ({args.sweep_episodes} episodes per row)", "", f"![sweep]({plot.name})", "",
+        summary_markdown(pick("sweep")),
+        "## Goals given as images", "",
+        "True goal angles span 0.9 x the feasible range around upright and around hanging. The piga agent reads its goal "
+        "from a 500x500 render of the goal (no torque arrow) with its encoder; the oracle is told the true angle.", "",
+        summary_markdown(goal_piga + goal_oracle, extra=[("read_goal_deg", "goal read from image (deg)")]),
+    ]
+    md = "\n".join(lines)
+    with atomic_output(out.with_suffix(".md"), overwrite=True) as tmp_md:
+        tmp_md.write_text(md)
+    write_json(out.with_suffix(".json"), {"command": command, "machine": machine(), "model": args.model,
+                                          "learned": learned, "minutes": minutes,
+                                          "checks": [{"floor": n, "measured": v, "met": ok} for n, v, ok in checks],
+                                          "results": results}, overwrite=True)
+    print("\n".join(f"{'PASS' if ok else 'FAIL'}  {n}: {v}" for n, v, ok in checks))
+    print(f"wrote {out.with_suffix('.md')}, {out.with_suffix('.json')}, {plot}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,216 @@
+"""Blind check of ``piga-diagnose``: random effects and magnitudes, labels hidden, then scored.
+
+Cases are drawn with a seeded RNG: no effect, one candidate effect (delay, deadzone, saturation,
+gain, damping, friction, bias, speed_clip), two of them, or an effect outside the candidate set
+(``cogging``, a position-periodic torque -k·sin(4θ)). For each case the script collects
+``--sequences`` sequences of the "real" system with ``piga.collect.collect``, then strips every
+label from the file: the ``effects`` attribute, the effects in ``env_config``, the command line,
+and ``/states``. Only then does it run the diagnosis, in a fresh process, as a user would:
+``piga-diagnose --model RUN_DIR --data CASE.h5 --out REPORT_DIR``. The scorer alone reads the
+labels, which it keeps in its own JSON.
+
+    python benchmarks/diagnose_blind.py --model RUN_DIR --out results/diagnose_blind
+
+Each finished case is appended to OUT.json, so an interrupted run continues where it stopped.
+OUT.md holds the scores: confusion matrix, top-1 accuracy, false positives on no-effect data,
+coefficient and delay errors, and free-run closure.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shlex
+import subprocess
+import sys
+import time
+from collections import Counter
+from dataclasses import replace
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from common import machine
+from envs.pendulum import PixelPendulumConfig
+from piga.atomic import atomic_output, write_json
+from piga.collect import CollectConfig, collect
+
+#: Candidate effects and how their magnitudes are drawn (rng -> value).
+DRAWS = {
+    "damping": lambda r: round(float(r.uniform(0.05, 0.3)), 3),
+    "friction": lambda r: round(float(r.uniform(0.05, 0.3)), 3),
+    "bias": lambda r: round(float(r.choice([-1, 1]) * r.uniform(0.1, 0.4)), 3),
+    "delay": lambda r: int(r.integers(1, 4)),
+    "deadzone": lambda r: round(float(r.uniform(0.2, 0.6)), 3),
+    "saturation": lambda r: round(float(r.uniform(0.8, 1.5)), 3),
+    "gain": lambda r: round(float(r.choice([r.uniform(0.7, 0.9), r.uniform(1.1, 1.3)])), 3),
+    "speed_clip": lambda r: round(float(r.uniform(4.0, 6.0)), 3),
+}
+#: The effect outside the candidate set.
+OUTSIDE = {"cogging": lambda r: round(float(r.uniform(0.3, 0.6)), 3)}
+
+
+def draw_cases(n: int, seed: int) -> list[dict]:
+    """``n`` cases: about 1/6 no effect, 1/2 one effect, 1/5 two effects, the rest outside the set, shuffled."""
+    rng = np.random.default_rng(seed)
+    n_none, n_pair, n_out = max(1, n // 6), max(1, n // 5), max(1, n // 10)
+    n_single = n - n_none - n_pair - n_out
+    names = list(DRAWS)
+    cases: list[dict] = [{"effects": {}} for _ in range(n_none)]
+    singles = [names[i % len(names)] for i in range(n_single)]  # every candidate at least once when n_single >= 8
+    cases += [{"effects": {e: DRAWS[e](rng)}} for e in singles]
+    for _ in range(n_pair):
+        a, b = rng.choice(names, 2, replace=False)
+        cases.append({"effects": {str(a): DRAWS[str(a)](rng), str(b): DRAWS[str(b)](rng)}})
+    cases += [{"effects": {"cogging": OUTSIDE["cogging"](rng)}} for _ in range(n_out)]
+    order = rng.permutation(len(cases))
+    return [{"case": i, **cases[j], "data_seed": int(1000 + i)} for i, j in enumerate(order)]
+
+
+def truth_class(effects: dict) -> str:
+    if not effects:
+        return "none"
+    if set(effects) & set(OUTSIDE):
+        return "unexplained"
+    return "+".join(sorted(effects))
+
+
+def strip_labels(path: Path) -> None:
+    """Removes everything that names the effects from the file (in place)."""
+    with h5py.File(path, "r+") as f:
+        for key in ("effects", "command"):
+            if key in f.attrs:
+                del f.attrs[key]
+        if "env_config" in f.attrs:
+            cfg = json.loads(f.attrs["env_config"])
+            cfg.pop("effects", None)
+            f.attrs["env_config"] = json.dumps(cfg)
+        if "states" in f:
+            del f["states"]
+
+
+def score(case: dict, report: dict) -> dict:
+    """Compares a report with the hidden truth."""
+    truth = truth_class(case["effects"])
+    predicted = report["verdict_class"]
+    found = {e["effect"]: e for e in report["effects"]}
+    first = report["effects"][0]["effect"] if report["effects"] else predicted
+    if truth in ("none", "unexplained"):
+        top1 = predicted == truth
+    else:
+        top1 = first in case["effects"] and predicted != "unexplained"
+    coef = {}
+    for name, value in case["effects"].items():
+        if name in found and name != "delay":
+            coef[name] = abs(found[name]["value"] - value) / abs(value)
+    delay_ok = None
+    if "delay" in case["effects"]:
+        delay_ok = "delay" in found and found["delay"]["value"] == case["effects"]["delay"]
+    return {"truth": truth, "predicted": predicted, "first": first, "top1": bool(top1), "exact": predicted == truth,
+            "coefficient_error": coef, "delay_exact": delay_ok, "free_run_closure": report["gap"]["free_run_closure"],
+            "verdict": report["verdict"]}
+
+
+def summarize(runs: list[dict]) -> dict:
+    s = [r["score"] for r in runs]
+    none = [x for x in s if x["truth"] == "none"]
+    coefs = [v for x in s for v in x["coefficient_error"].values()]
+    delays = [x["delay_exact"] for x in s if x["delay_exact"] is not None]
+    with_gap = [x["free_run_closure"] for x in s if x["truth"] not in ("none", "unexplained")]
+    return {
+        "cases": len(s),
+        "top1_accuracy": float(np.mean([x["top1"] for x in s])) if s else None,
+        "exact_accuracy": float(np.mean([x["exact"] for x in s])) if s else None,
+        "false_positive_rate_no_effect": float(np.mean([x["predicted"] != "none" for x in none])) if none else None,
+        "no_effect_cases": len(none),
+        "coefficient_error_median": float(np.median(coefs)) if coefs else None,
+        "coefficient_error_max": float(np.max(coefs)) if coefs else None,
+        "coefficients_within_10pct": float(np.mean([c <= 0.1 for c in coefs])) if coefs else None,
+        "delay_exact_rate": float(np.mean(delays)) if delays else None,
+        "closure_median": float(np.median(with_gap)) if with_gap else None,
+        "closure_min": float(np.min(with_gap)) if with_gap else None,
+        "closure_at_least_90pct": float(np.mean([c >= 0.9 for c in with_gap])) if with_gap else None,
+        "outside_reported_unexplained": float(np.mean([x["predicted"] == "unexplained" for x in s if x["truth"] == "unexplained"]))
+        if any(x["truth"] == "unexplained" for x in s) else None,
+    }
+
+
+def markdown(runs: list[dict], summary: dict, command: str, info: dict) -> str:
+    s = [r["score"] for r in runs]
+    preds = sorted({x["first"] for x in s} | {"none"})
+    conf = Counter((x["truth"] if "+" not in x["truth"] else "pair", x["first"]) for x in s)
+    rows = sorted({x["truth"] if "+" not in x["truth"] else "pair" for x in s})
+    pct = lambda v: "–" if v is None else f"{100 * v:.0f}%"  # noqa: E731
+    lines = [
+        "# Blind check of piga-diagnose", "",
+        f"Command: `{command}`", "",
+        f"Model: `{info['model']}`. {info['sequences']} sequences x 40 frames per case. Machine: {info['machine']['cpu']}, "
+        f"{info['machine']['cores']} cores.", "",
+        "## Scores", "",
+        "| measure | value | floor |", "|---|---|---|",
+        f"| cases | {summary['cases']} | ≥ 30 |",
+        f"| top-1 accuracy (first named effect is a true one; none / unexplained exact) | {pct(summary['top1_accuracy'])} | ≥ 95% |",
+        f"| exact (the whole verdict right) | {pct(summary['exact_accuracy'])} | |",
+        f"| false positives on no-effect data ({summary['no_effect_cases']} cases) | {pct(summary['false_positive_rate_no_effect'])} | ≤ 5% |",
+        f"| coefficients within 10% | {pct(summary['coefficients_within_10pct'])} (median error {pct(summary['coefficient_error_median'])}, "
+        f"max {pct(summary['coefficient_error_max'])}) | all |",
+        f"| delay exact | {pct(summary['delay_exact_rate'])} | 100% |",
+        f"| free-run closure, cases with a candidate effect | median {pct(summary['closure_median'])}, min {pct(summary['closure_min'])}, "
+        f"≥ 90% in {pct(summary['closure_at_least_90pct'])} | ≥ 90% |",
+        f"| outside-the-set effect reported as unexplained | {pct(summary['outside_reported_unexplained'])} | 100% |", "",
+        "## Confusion (rows: truth, 'pair' for two effects; columns: first named effect or verdict)", "",
+        "| truth \\ predicted | " + " | ".join(preds) + " |", "|---|" + "---|" * len(preds),
+    ]
+    for t in rows:
+        lines.append(f"| {t} | " + " | ".join(str(conf.get((t, p), 0) or "") for p in preds) + " |")
+    lines += ["", "## Cases", "", "| case | truth (hidden from the diagnosis) | verdict | top-1 | closure |", "|---|---|---|---|---|"]
+    for r in runs:
+        eff = ", ".join(f"{k}={v}" for k, v in r["effects"].items()) or "none"
+        sc = r["score"]
+        lines.append(f"| {r['case']} | {eff} | {sc['verdict']} | {'yes' if sc['top1'] else '**no**'} | {pct(sc['free_run_closure'])} |")
+    return "\n".join(lines) + "\n"
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--model", required=True, help="run folder of piga-train-model (the nominal, identified model)")
+    p.add_argument("--out", default="results/diagnose_blind")
+    p.add_argument("--work", default="/tmp/piga-blind", help="folder for the case data and reports")
+    p.add_argument("--cases", type=int, default=30)
+    p.add_argument("--sequences", type=int, default=200)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--workers", type=int, default=2)
+    args = p.parse_args()
+    out, work = Path(args.out), Path(args.work)
+    work.mkdir(parents=True, exist_ok=True)
+    command = shlex.join(["python", *sys.argv])
+    done: list[dict] = json.loads(out.with_suffix(".json").read_text())["runs"] if out.with_suffix(".json").exists() else []
+    info = {"model": args.model, "sequences": args.sequences, "seed": args.seed, "machine": machine()}
+    for case in draw_cases(args.cases, args.seed):
+        if any(r["case"] == case["case"] and r["effects"] == case["effects"] for r in done):
+            continue
+        data = work / f"case{case['case']:02d}.h5"
+        t0 = time.time()
+        env = PixelPendulumConfig(effects=tuple(case["effects"].items()))
+        collect(replace(CollectConfig(), sequences=args.sequences, seed=case["data_seed"], env=env, workers=args.workers),
+                data, overwrite=True, command="", progress=False)
+        strip_labels(data)
+        report_dir = work / f"case{case['case']:02d}"
+        subprocess.run(["piga-diagnose", "--model", args.model, "--data", str(data), "--out", str(report_dir),
+                        "--overwrite", "--quiet"], check=True, stdout=subprocess.DEVNULL)
+        report = json.loads((report_dir / "report.json").read_text())
+        run = {**case, "seconds": time.time() - t0, "score": score(case, report)}
+        done.append(run)
+        print(f"case {case['case']}: truth {case['effects'] or 'none'} -> {run['score']['verdict']} "
+              f"({'ok' if run['score']['top1'] else 'WRONG'}, closure {100 * run['score']['free_run_closure']:.1f}%)", flush=True)
+        summary = summarize(done)
+        write_json(out.with_suffix(".json"), {"command": command, **info, "summary": summary, "runs": done}, overwrite=True)
+        with atomic_output(out.with_suffix(".md"), overwrite=True) as tmp:
+            tmp.write_text(markdown(sorted(done, key=lambda r: r["case"]), summary, command, info))
+    print(json.dumps(summarize(done), indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

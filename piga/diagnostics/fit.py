@@ -1,0 +1,280 @@
+"""Candidate physics for a sim-to-real gap, fitted to encoded trajectories.
+
+Each candidate is the nominal engine plus one or more unmodelled effects, with the same equations
+as the effect wrappers of :mod:`envs.effects` (model convention: Gymnasium's θ = θ + φ):
+
+| effect | parameter | where it acts |
+|---|---|---|
+| ``delay`` | integer k (steps) | ũ_t = u_{t-k} |
+| ``deadzone`` | d (action units) | ũ = sign(u)·max(abs(u) - d, 0) |
+| ``saturation`` | s (action units) | ũ = clip(u, -s, s) |
+| ``damping`` | b (N·m·s/rad) | torque -b·θ̇ |
+| ``friction`` | c (N·m) | torque -c·tanh(θ̇ / 0.1) |
+| ``bias`` | τ0 (N·m) | torque +τ0 |
+| ``speed_clip`` | v (rad/s) | θ̇ clipped to ±v after each step |
+
+θ̈ = 1.5·g·sin(θ + φ) + 3·a·ũ + 3·(passive torques); semi-implicit Euler with the nominal model's
+substeps. A gain error (ũ = m·u) is not a separate term: it is the refitted a over the nominal a.
+
+The fits run on the encoded angles alone (no images, no labels), so they take seconds: L-BFGS in
+float64 on the mean squared multi-step angle error over windows of the fit split.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from envs.effects import FRICTION_SMOOTHING
+
+#: Effects that the fit can add to the physics, in the order of the report.
+CANDIDATES: tuple[str, ...] = ("damping", "friction", "bias", "delay", "deadzone", "saturation", "speed_clip")
+#: Continuous parameter of each effect (delay is discrete).
+PARAMETER: dict[str, str] = {"damping": "b", "friction": "c", "bias": "tau0", "deadzone": "d", "saturation": "s",
+                             "speed_clip": "v"}
+#: Starting grids for the continuous parameters (the best grid point starts L-BFGS).
+GRIDS: dict[str, tuple[float, ...]] = {
+    "damping": (0.0, 0.05, 0.1, 0.2, 0.4),
+    "friction": (0.0, 0.05, 0.1, 0.2, 0.4),
+    "bias": (-0.3, -0.1, 0.0, 0.1, 0.3),
+    "deadzone": (0.05, 0.2, 0.4, 0.7, 1.0),
+    "saturation": (0.5, 0.8, 1.1, 1.4, 1.8),
+    "speed_clip": (2.0, 3.0, 4.0, 5.0, 6.0, 7.0),
+}
+MAX_DELAY = 4
+"""Largest delay tried (steps)."""
+
+
+@dataclass(frozen=True)
+class Nominal:
+    """The identified model's physics."""
+
+    g: float
+    a: float
+    offset: float
+    dt: float
+    substeps: int = 1
+
+
+@dataclass(frozen=True)
+class Windows:
+    """Multi-step prediction problems cut from encoded sequences. B windows of H steps."""
+
+    theta0: Tensor
+    """(B,) angle at the start frame s."""
+    v0: Tensor
+    """(B,) velocity (θ_s - θ_{s-1}) / dt."""
+    actions: Tensor
+    """(B, MAX_DELAY + H) commanded actions u_{s - MAX_DELAY} .. u_{s + H - 1}."""
+    target: Tensor
+    """(B, H) encoded angles θ_{s+1} .. θ_{s+H}."""
+    mask: Tensor
+    """(B, H) 1 where the target exists (inside the sequence)."""
+    sequence: Tensor
+    """(B,) index of the window's sequence."""
+
+
+def make_windows(theta: np.ndarray, actions: np.ndarray, rows: np.ndarray, horizon: int | None, stride: int,
+                 dt: float) -> Windows:
+    """Windows from sequences ``rows`` of (N, T) angles and actions.
+
+    Starts run from s = MAX_DELAY (so every delay up to MAX_DELAY has its actions) every ``stride``
+    frames. ``horizon`` None rolls every window to the end of its sequence (free run), masked.
+    """
+    t = theta.shape[1]
+    s_min = max(1, MAX_DELAY)
+    h = t - 1 - s_min if horizon is None else horizon
+    starts = np.arange(s_min, t - 1 if horizon is None else t - horizon, stride)
+    if len(starts) == 0 or h < 1:
+        raise ValueError(f"sequences of {t} frames are too short for windows of {h} steps after {s_min} frames")
+    th0, v0, acts, target, mask, seq = [], [], [], [], [], []
+    pad_t = np.pad(theta, ((0, 0), (0, h)), mode="edge")
+    pad_u = np.pad(np.clip(actions, -2.0, 2.0), ((0, 0), (0, h)))
+    for s in starts:
+        th0.append(theta[rows, s])
+        v0.append((theta[rows, s] - theta[rows, s - 1]) / dt)
+        acts.append(pad_u[rows, s - MAX_DELAY : s + h])
+        target.append(pad_t[rows, s + 1 : s + 1 + h])
+        mask.append(np.broadcast_to(np.arange(s + 1, s + 1 + h) < t, (len(rows), h)))
+        seq.append(rows)
+    f = lambda x: torch.as_tensor(np.concatenate(x), dtype=torch.float64)  # noqa: E731
+    return Windows(f(th0), f(v0), f(acts), f(target), f(mask), torch.as_tensor(np.concatenate(seq)))
+
+
+@dataclass
+class Model:
+    """A candidate: the nominal engine plus ``effects``, with its parameters."""
+
+    effects: tuple[str, ...] = ()
+    """Effects added (a subset of :data:`CANDIDATES`)."""
+    delay: int = 0
+    """k for the delay effect (0 without it)."""
+    values: dict[str, float] = field(default_factory=dict)
+    """Parameter values: g, a and each effect's parameter."""
+
+    @property
+    def name(self) -> str:
+        """"none", or the effects joined by "+"."""
+        return "+".join(self.effects) if self.effects else "none"
+
+    @property
+    def n_parameters(self) -> int:
+        """Free parameters: g, a and one per effect (the delay counts as one)."""
+        return 2 + len(self.effects)
+
+
+def simulate(model: Model, params: dict[str, Tensor], nominal: Nominal, w: Windows) -> Tensor:
+    """Predicted angles (B, H) of windows ``w`` under ``model`` with (differentiable) ``params``."""
+    u = w.actions  # (B, MAX_DELAY + H)
+    h_steps = w.target.shape[1]
+    k = model.delay if "delay" in model.effects else 0
+    cmd = u[:, MAX_DELAY - k : MAX_DELAY - k + h_steps]  # (B, H): ũ before the other actuator effects
+    if "deadzone" in model.effects:
+        cmd = torch.sign(cmd) * torch.relu(cmd.abs() - params["d"])
+    if "saturation" in model.effects:
+        s = params["s"].clamp_min(1e-3)
+        cmd = torch.minimum(torch.maximum(cmd, -s), s)
+    g, a = params["log_g"].exp(), params["log_a"].exp()
+    theta, v = w.theta0, w.v0
+    h = nominal.dt / nominal.substeps
+    out = []
+    for j in range(h_steps):
+        for _ in range(nominal.substeps):
+            tau = a * cmd[:, j]
+            if "damping" in model.effects:
+                tau = tau - params["b"] * v
+            if "friction" in model.effects:
+                tau = tau - params["c"] * torch.tanh(v / FRICTION_SMOOTHING)
+            if "bias" in model.effects:
+                tau = tau + params["tau0"]
+            v = v + h * (1.5 * g * torch.sin(theta + nominal.offset) + 3.0 * tau)
+            if "speed_clip" in model.effects:
+                vmax = params["v"].clamp_min(0.1)
+                v = torch.minimum(torch.maximum(v, -vmax), vmax)
+            theta = theta + h * v
+        out.append(theta)
+    return torch.stack(out, 1)  # (B, H)
+
+
+def _params(model: Model, nominal: Nominal) -> dict[str, Tensor]:
+    values = {"log_g": math.log(model.values.get("g", nominal.g)), "log_a": math.log(model.values.get("a", nominal.a))}
+    for e in model.effects:
+        if e in PARAMETER:
+            values[PARAMETER[e]] = model.values.get(PARAMETER[e], GRIDS[e][0])
+    return {k: torch.tensor(float(v), dtype=torch.float64, requires_grad=True) for k, v in values.items()}
+
+
+def squared_errors(model: Model, nominal: Nominal, w: Windows, params: dict[str, Tensor] | None = None) -> Tensor:
+    """(B, H) squared angle errors (masked to 0 outside the sequences)."""
+    p = _params(model, nominal) if params is None else params
+    return (simulate(model, p, nominal, w) - w.target) ** 2 * w.mask
+
+
+def loss(model: Model, nominal: Nominal, w: Windows, weights: Tensor | None = None,
+         params: dict[str, Tensor] | None = None) -> Tensor:
+    """Mean squared multi-step angle error (rad²), optionally weighted per window (B,)."""
+    se = squared_errors(model, nominal, w, params).sum(1) / w.mask.sum(1).clamp_min(1)  # (B,)
+    if weights is None:
+        return se.mean()
+    return (se * weights).sum() / weights.sum()
+
+
+def fit(model: Model, nominal: Nominal, w: Windows, weights: Tensor | None = None, max_iter: int = 60,
+        fit_ga: bool = True) -> Model:
+    """Fits g, a (unless ``fit_ga`` is False) and the effects' parameters; returns a new :class:`Model`.
+
+    A continuous effect parameter starts from the best point of its grid in :data:`GRIDS` (the
+    loss is not convex in a deadzone or a clip level); L-BFGS then refines all parameters.
+    """
+    start = Model(model.effects, model.delay, dict(model.values))
+    for e in model.effects:
+        name = PARAMETER.get(e)
+        if name is None or name in model.values:
+            continue
+        best = None
+        for value in GRIDS[e]:
+            trial = Model(model.effects, model.delay, {**start.values, name: value})
+            with torch.no_grad():
+                score = float(loss(trial, nominal, w, weights))
+            if best is None or score < best[0]:
+                best = (score, value)
+        start.values[name] = best[1]
+    params = _params(start, nominal)
+    free = [p for k, p in params.items() if fit_ga or not k.startswith("log_")]
+    if not free:
+        return start
+    opt = torch.optim.LBFGS(free, lr=1.0, max_iter=max_iter, line_search_fn="strong_wolfe", tolerance_grad=1e-12,
+                            tolerance_change=1e-14)
+
+    def closure() -> Tensor:
+        opt.zero_grad()
+        value = loss(start, nominal, w, weights, params)
+        value.backward()
+        return value
+
+    opt.step(closure)
+    values = {"g": float(params["log_g"].detach().exp()), "a": float(params["log_a"].detach().exp())}
+    values.update({k: float(v.detach()) for k, v in params.items() if not k.startswith("log_")})
+    return Model(model.effects, model.delay, values)
+
+
+def fit_best_delay(effects: tuple[str, ...], base: dict[str, float], nominal: Nominal, w: Windows) -> Model:
+    """Fits ``effects`` (which include "delay") for each k in 1..MAX_DELAY; returns the best."""
+    best = None
+    for k in range(1, MAX_DELAY + 1):
+        m = fit(Model(effects, k, dict(base)), nominal, w)
+        with torch.no_grad():
+            score = float(loss(m, nominal, w))
+        if best is None or score < best[0]:
+            best = (score, m)
+    return best[1]
+
+
+def fit_candidate(effects: tuple[str, ...], base: dict[str, float], nominal: Nominal, w: Windows) -> Model:
+    """Fits a candidate with ``effects`` (starting g and a from ``base``)."""
+    if "delay" in effects:
+        return fit_best_delay(effects, base, nominal, w)
+    return fit(Model(effects, 0, dict(base)), nominal, w)
+
+
+def one_step_bic(model: Model, nominal: Nominal, w1: Windows) -> tuple[float, float]:
+    """(BIC, RSS) of the one-step angle residuals on windows ``w1`` (horizon 1).
+
+    BIC = n·ln(RSS / n) + p·ln(n), p = free parameters. One-step residuals are close to
+    independent, unlike multi-step ones, so they are the ones counted.
+    """
+    with torch.no_grad():
+        se = squared_errors(model, nominal, w1)[:, 0]
+    n = se.numel()
+    rss = float(se.sum())
+    return n * math.log(max(rss, 1e-300) / n) + model.n_parameters * math.log(n), rss
+
+
+def horizon_errors(model: Model, nominal: Nominal, w: Windows) -> np.ndarray:
+    """(H,) mean squared angle error (rad²) at each horizon 1..H over windows ``w`` (masked)."""
+    with torch.no_grad():
+        se = squared_errors(model, nominal, w)
+    return (se.sum(0) / w.mask.sum(0).clamp_min(1)).numpy()
+
+
+def bootstrap(model: Model, nominal: Nominal, w: Windows, replicates: int, seed: int) -> dict[str, list[float]]:
+    """Refits ``model`` on ``replicates`` resamplings of the fit sequences; returns each parameter's values.
+
+    The delay k is held at its estimate; the other parameters start from the estimates.
+    """
+    rng = np.random.default_rng(seed)
+    seqs = torch.unique(w.sequence)
+    draws: dict[str, list[float]] = {k: [] for k in model.values}
+    for _ in range(replicates):
+        pick = rng.integers(0, len(seqs), len(seqs))
+        counts = torch.bincount(torch.as_tensor(pick), minlength=len(seqs)).double()
+        lookup = torch.zeros(int(seqs.max()) + 1, dtype=torch.float64)
+        lookup[seqs] = counts
+        m = fit(model, nominal, w, weights=lookup[w.sequence], max_iter=30)
+        for k, v in m.values.items():
+            draws[k].append(v)
+    return draws

@@ -1,0 +1,103 @@
+"""What the identified model sees in a recording: encoded angles, actions and reconstruction errors.
+
+The diagnosis never reads ``/states`` or the file's ``effects`` attribute. Everything it knows
+about the "real" system comes from here: the frames go through the model's encoder (angles in the
+model's convention; Gymnasium's θ = model θ + φ) and its decoder (how well the autoencoder alone
+explains each frame).
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from piga.data import SPLITS, inspect_dataset, split_indices
+from piga.model import PhysicsModel, frames_to_float
+
+
+class DiagnosisInputError(ValueError):
+    """The model and the data cannot be compared (different systems, sizes, too little data...)."""
+
+
+@dataclass(frozen=True)
+class Observations:
+    """A recording as the model sees it. N sequences of T frames."""
+
+    theta: np.ndarray
+    """(N, T) float64 encoded angle, model convention, unwrapped along time."""
+    actions: np.ndarray
+    """(N, T) float64 commanded action u_t, applied after frame t."""
+    rec_mse: np.ndarray
+    """(N, T) float64 MSE of the decoder's re-rendering of each frame (pixels in [0, 1])."""
+    fit: np.ndarray
+    """(N,) bool: the sequence is in the fit split (the file's train split); the rest is held out."""
+    dt: float
+    """Seconds between frames."""
+    frames: np.ndarray
+    """(n, T, H, W) uint8 a few held-out sequences' frames, for pixel errors and pictures."""
+    frames_index: np.ndarray
+    """(n,) indices into N of ``frames``."""
+
+
+def check_compatible(model: PhysicsModel, path: str | os.PathLike[str], min_sequences: int = 20, min_steps: int = 12) -> None:
+    """Raises :class:`DiagnosisInputError` with one clear line when ``model`` cannot diagnose ``path``."""
+    info = inspect_dataset(path)
+    cfg = model.config
+    if cfg.system != "pendulum":
+        raise DiagnosisInputError(f"the model is a {cfg.system} model; piga-diagnose handles the pendulum")
+    if info.system != cfg.system:
+        raise DiagnosisInputError(f"{path}: data of system {info.system!r}, but the model is a {cfg.system} model")
+    if info.image_shape[:2] != (cfg.image_size, cfg.image_size) or (len(info.image_shape) == 3) != (cfg.channels == 3):
+        raise DiagnosisInputError(f"{path}: frames are {info.image_shape}, the model takes {cfg.image_size}x{cfg.image_size} "
+                                  f"with {cfg.channels} channel(s)")
+    if info.action_dim != 1:
+        raise DiagnosisInputError(f"{path}: needs one action per step (the pendulum's torque), found {info.action_dim}")
+    if abs(info.dt - cfg.dt) > 1e-9 * max(1.0, cfg.dt):
+        raise DiagnosisInputError(f"{path}: frame interval {info.dt} s, the model was trained at {cfg.dt} s")
+    if info.steps < min_steps:
+        raise DiagnosisInputError(f"{path}: sequences of {info.steps} frames; the diagnosis needs at least {min_steps}")
+    if info.n_sequences < min_sequences:
+        raise DiagnosisInputError(f"{path}: {info.n_sequences} sequences; the diagnosis needs at least {min_sequences}")
+    n_fit = len(split_indices(path, "train"))
+    if n_fit < min_sequences // 2 or info.n_sequences - n_fit < min_sequences // 4:
+        raise DiagnosisInputError(f"{path}: {n_fit} train and {info.n_sequences - n_fit} held-out sequences; "
+                                  f"need at least {min_sequences // 2} and {min_sequences // 4}")
+
+
+@torch.no_grad()
+def observe(model: PhysicsModel, path: str | os.PathLike[str], batch: int = 16, keep_frames: int = 24,
+            progress: bool = False) -> Observations:
+    """Encodes and re-renders every frame of ``path`` with ``model``.
+
+    Args:
+        model: the identified pendulum model (eval mode).
+        path: a piga HDF5 file with frames and actions (``/states`` is never read).
+        batch: sequences per forward pass.
+        keep_frames: held-out sequences whose frames are kept for pixel errors.
+    """
+    import h5py
+    from tqdm.auto import tqdm
+
+    check_compatible(model, path)
+    info = inspect_dataset(path)
+    with h5py.File(path, "r") as f:
+        split = f["split"][:] if "split" in f else np.zeros(info.n_sequences, np.int8)
+        n = info.n_sequences
+        theta = np.empty((n, info.steps))
+        rec = np.empty((n, info.steps))
+        actions = f["actions"][:, :, 0].astype(np.float64)
+        held = np.flatnonzero(split != SPLITS["train"])
+        keep = held[:keep_frames]
+        for start in tqdm(range(0, n, batch), desc="encoding", disable=not progress):
+            raw = f["frames"][start : start + batch]
+            x = frames_to_float(torch.from_numpy(raw), model.config.channels)  # (B, T, C, H, W)
+            coords = model.encode(x)  # (B, T, 1, 1)
+            rec[start : start + batch] = ((model.decoder(coords) - x) ** 2).mean(dim=(2, 3, 4)).double().numpy()
+            theta[start : start + batch] = np.unwrap(coords[..., 0, 0].double().numpy(), axis=1)
+        frames = f["frames"][np.sort(keep)] if len(keep) else np.zeros((0, info.steps, *info.image_shape), np.uint8)
+    if not np.isfinite(actions).all():
+        raise DiagnosisInputError(f"{path}: /actions holds NaN or infinite values")
+    return Observations(theta, actions, rec, split == SPLITS["train"], float(info.dt), frames, np.sort(keep))

@@ -1,0 +1,159 @@
+"""The diagnosis report: ``report.md``, ``report.json`` and its plots, written atomically into one folder."""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from piga.atomic import atomic_output, write_json
+from piga.diagnostics.diagnose import Diagnosis
+from piga.plots import plt, save_figure
+
+#: Files the report writes into its folder.
+REPORT_FILES = ("report.md", "report.json", "gap.png", "residual_heatmap.png", "correlations.png")
+
+
+def gap_figure(d: Diagnosis):  # noqa: ANN201
+    """Held-out error against horizon, state and pixels, nominal vs corrected, and the closure."""
+    g = d.gap
+    fig, axes = plt.subplots(1, 3, figsize=(11, 3))
+    h = g["horizon"]
+    axes[0].semilogy(h, np.degrees(np.sqrt(g["state_mse_nominal"])), label="nominal")
+    axes[0].semilogy(h, np.degrees(np.sqrt(g["state_mse_corrected"])), label="corrected")
+    axes[0].set_title("encoded angle RMSE (deg)", fontsize=9)
+    if g["pixel_mse_nominal"]:
+        hp = range(1, len(g["pixel_mse_nominal"]) + 1)
+        axes[1].plot(hp, g["pixel_mse_nominal"], label="nominal")
+        axes[1].plot(hp, g["pixel_mse_corrected"], label="corrected")
+    axes[1].set_title("pixel MSE of the rendered prediction", fontsize=9)
+    axes[2].plot(h, 100 * np.array(g["closure"]))
+    axes[2].set_ylim(min(0, 100 * min(g["closure"] or [0])) - 5, 105)
+    axes[2].set_title("closure 1 - err_corr / err_nom (%)", fontsize=9)
+    for ax in axes:
+        ax.set_xlabel("horizon (steps)")
+    axes[0].legend(fontsize=7)
+    axes[1].legend(fontsize=7)
+    fig.tight_layout()
+    return fig
+
+
+def heatmap_figure(d: Diagnosis):  # noqa: ANN201
+    """Mean one-step acceleration residual of the nominal model over (θ, θ̇)."""
+    hm = d.residuals["heatmap"]
+    mean = np.array(hm["mean"], dtype=float)
+    lim = np.nanmax(np.abs(mean)) if np.isfinite(mean).any() else 1.0
+    fig, ax = plt.subplots(figsize=(5, 4))
+    te, ve = np.degrees(hm["theta_edges"]), hm["speed_edges"]
+    im = ax.pcolormesh(te, ve, mean.T, cmap="RdBu_r", vmin=-lim, vmax=lim)
+    fig.colorbar(im, ax=ax, label="mean residual θ̈ (rad/s²)")
+    ax.set_xlabel("θ (deg, 0 upright)")
+    ax.set_ylabel("θ̇ (rad/s)")
+    ax.set_title("nominal model: where the one-step residual lies", fontsize=9)
+    fig.tight_layout()
+    return fig
+
+
+def correlation_figure(d: Diagnosis):  # noqa: ANN201
+    """Residual autocorrelation and residual-action cross-correlation with the white-noise bands."""
+    ac, cc = d.residuals["autocorrelation"], d.residuals["action_correlation"]
+    fig, axes = plt.subplots(1, 2, figsize=(8, 3))
+    for ax, lags, vals, band, title in ((axes[0], ac["lags"], ac["acf"], ac["band"], "residual autocorrelation"),
+                                        (axes[1], cc["lags"], cc["ccf"], cc["band"], "corr(residual_t, u_{t-k})")):
+        ax.bar(lags, vals, width=0.5)
+        ax.axhspan(-band, band, color="gray", alpha=0.3, label="95% band (white)")
+        ax.set_xlabel("lag k (steps)")
+        ax.set_title(title, fontsize=9)
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    return fig
+
+
+def _fmt(x: Any) -> str:
+    if x is None:
+        return "–"
+    if isinstance(x, float):
+        return f"{x:.4g}"
+    return str(x)
+
+
+def markdown(d: Diagnosis, model: str, data: str, command: str) -> str:
+    """The report as Markdown."""
+    g = d.gap
+    lines = [
+        "# piga-diagnose report", "",
+        f"Command: `{command}`", "", f"Model: `{model}`. Data: `{data}` (frames and actions only).", "",
+        f"## Verdict: {d.verdict}", "",
+    ]
+    if d.effects:
+        lines += ["| effect | value | 95% interval | unit |", "|---|---|---|---|"]
+        for e in d.effects:
+            ci = "–" if not e.get("interval") else f"{e['interval'][0]:.4g} .. {e['interval'][1]:.4g}"
+            lines.append(f"| {e['effect']} | {_fmt(e['value'])} | {ci} | {e['unit']} |")
+        lines.append("")
+    lines += [f"- {n}" for n in d.notes] + ([""] if d.notes else [])
+    lines += [
+        "## Size of the gap, and how far it shrinks", "",
+        f"Held-out free run (mean over horizons 1..{g['horizon'][-1]}): angle MSE {g['free_run_mse_nominal']:.3g} rad² nominal, "
+        f"{g['free_run_mse_corrected']:.3g} rad² corrected: **closure {100 * g['free_run_closure']:.1f}%**. One step: RMSE "
+        f"{math.degrees(g['one_step_rms_nominal_rad']):.3f}° nominal, {math.degrees(g['one_step_rms_corrected_rad']):.3f}° corrected.", "",
+        f"Nominal g = {d.nominal['g']:.4f}, a = {d.nominal['a']:.4f}; corrected: "
+        + ", ".join(f"{k} = {_fmt(v)}" for k, v in d.corrected.items()), "",
+        "![gap](gap.png)", "",
+        "| horizon | angle RMSE nominal (deg) | corrected (deg) | closure | pixel MSE nominal | corrected |", "|---|---|---|---|---|---|",
+    ]
+    pn, pc = g["pixel_mse_nominal"], g["pixel_mse_corrected"]
+    for i in sorted({0, 1, 4, 9, 19, len(g["horizon"]) - 1} & set(range(len(g["horizon"])))):
+        pix = (f"{pn[i]:.2e} | {pc[i]:.2e}" if i < len(pn) else "– | –")
+        lines.append(f"| {g['horizon'][i]} | {math.degrees(math.sqrt(g['state_mse_nominal'][i])):.3f} | "
+                     f"{math.degrees(math.sqrt(g['state_mse_corrected'][i])):.3f} | {100 * g['closure'][i]:.1f}% | {pix} |")
+    v = d.vision
+    lines += [
+        "", "## Where it lies", "",
+        f"- **Vision**: the autoencoder re-renders the real frames with MSE {v['rec_mse_real']:.2e}, against "
+        f"{v['rec_mse_training']:.2e} on its training frames (x{v['ratio']:.2f}).",
+        f"- **Dynamics**: on the encoded angles, the nominal physics' held-out free-run angle RMSE is "
+        f"{math.degrees(math.sqrt(g['free_run_mse_nominal'])):.2f}°.", "",
+        "![residual heatmap](residual_heatmap.png) ![correlations](correlations.png)", "",
+        "| bin | n | mean residual (rad/s²) | RMS |", "|---|---|---|---|",
+    ]
+    for group in d.residuals["bins"].values():
+        for b in group:
+            lines.append(f"| {b['bin']} | {b['n']} | {_fmt(b['mean'])} | {_fmt(b['rms'])} |")
+    cc = d.residuals["action_correlation"]
+    lines += ["", f"Residual–action cross-correlation peak: lag {cc['peak_lag']} (band ±{cc['band']:.3f}; a peak at lag k "
+              "points to a delay of k steps).", "", "## Candidates", "",
+              "Each fitted with g and a on the fit split; BIC of one-step residuals on the fit split (lower is better); "
+              "error on the held-out split.", "",
+              "| candidate | BIC | ΔBIC vs none | held-out free-run MSE (rad²) | fitted values |", "|---|---|---|---|---|"]
+    for c in d.candidates:
+        if "candidate" not in c:
+            continue
+        vals = ", ".join(f"{k} = {val:.4g}" for k, val in c["values"].items()) + (f", k = {c['delay']}" if c.get("delay") else "")
+        lines.append(f"| {c['candidate']} | {c['bic']:.0f} | {_fmt(c.get('delta_bic'))} | {c['held_out_free_run_mse']:.3g} | {vals} |")
+    extra = d.candidates[-1]
+    lines += ["", "Forward selection:", ""]
+    for s in extra["selection"]:
+        lines.append(f"- tried {s['tried']}: BIC drop {s['bic_drop']:.1f}, held-out free-run drop {100 * s['free_run_drop']:.1f}% "
+                     f"-> {'accepted' if s['accepted'] else 'rejected'}")
+    gb = extra["generic_basis"]
+    lines.append(f"- flexible basis on what is left: BIC drop {gb['bic_drop']:.1f}, held-out residual drop "
+                 f"{100 * gb['held_out_drop']:.1f}% -> {'significant: not explained' if gb['significant'] else 'nothing left to explain'}")
+    return "\n".join(lines) + "\n"
+
+
+def write_report(d: Diagnosis, out: str | os.PathLike[str], model: str, data: str, command: str,
+                 overwrite: bool = False) -> Path:
+    """Writes :data:`REPORT_FILES` into ``out`` (created); each file atomically."""
+    folder = Path(out)
+    folder.mkdir(parents=True, exist_ok=True)
+    save_figure(gap_figure(d), folder / "gap.png", overwrite=overwrite)
+    save_figure(heatmap_figure(d), folder / "residual_heatmap.png", overwrite=overwrite)
+    save_figure(correlation_figure(d), folder / "correlations.png", overwrite=overwrite)
+    write_json(folder / "report.json", {"command": command, "model": model, "data": data, **d.to_dict()}, overwrite=overwrite)
+    with atomic_output(folder / "report.md", overwrite=overwrite) as tmp:
+        tmp.write_text(markdown(d, model, data, command))
+    return folder / "report.md"

@@ -1,0 +1,124 @@
+"""Residual analysis of a model on encoded trajectories, as in classical system identification.
+
+The one-step residual is an angular acceleration. With semi-implicit Euler (one substep per frame,
+the fast preset) the observed acceleration is exactly (θ_{t+1} - 2θ_t + θ_{t-1}) / dt², so
+
+    ρ_t = (θ_{t+1} - θ̂_{t+1}) / dt²,
+
+where θ̂_{t+1} is the model's one-step prediction from θ_t and θ̇_t = (θ_t - θ_{t-1}) / dt. The
+analysis bins ρ over the state and the action, and computes its autocorrelation and its
+cross-correlation with the actions, with the ±1.96/√n band of a white residual. A cross-correlation
+peak at lag k (ρ_t against u_{t-k}) points to an actuator delay of k steps.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from piga.diagnostics.fit import MAX_DELAY, Model, Nominal, Windows, _params, simulate
+
+
+@dataclass(frozen=True)
+class Residuals:
+    """One-step residuals of a model, flattened over sequences and steps (n samples)."""
+
+    rho: np.ndarray
+    """(n,) acceleration residual (rad/s²)."""
+    theta: np.ndarray
+    """(n,) θ_t in Gymnasium's convention, wrapped to [-π, π) (0 upright)."""
+    theta_dot: np.ndarray
+    """(n,) θ̇_t = (θ_t - θ_{t-1}) / dt."""
+    action: np.ndarray
+    """(n,) u_t."""
+    grid: np.ndarray
+    """(N, T - 1 - MAX_DELAY) ρ per sequence and step, for correlations."""
+    actions_grid: np.ndarray
+    """(N, T) the actions, aligned with ``grid`` from step MAX_DELAY."""
+
+
+def one_step_residuals(model: Model, nominal: Nominal, theta: np.ndarray, actions: np.ndarray, rows: np.ndarray) -> Residuals:
+    """One-step acceleration residuals of ``model`` on sequences ``rows`` of (N, T) encoded angles."""
+    t = theta.shape[1]
+    starts = np.arange(MAX_DELAY, t - 1)
+    th = torch.as_tensor(theta[rows], dtype=torch.float64)  # (n, T)
+    u = torch.as_tensor(np.clip(actions[rows], -2, 2), dtype=torch.float64)
+    # every start as one window of one step: (n * S,)
+    theta0 = th[:, starts].reshape(-1)
+    v0 = ((th[:, starts] - th[:, starts - 1]) / nominal.dt).reshape(-1)
+    hist = torch.stack([u[:, s - MAX_DELAY : s + 1] for s in starts], 1).reshape(-1, MAX_DELAY + 1)
+    target = th[:, starts + 1].reshape(-1, 1)
+    w = Windows(theta0, v0, hist, target, torch.ones_like(target), torch.zeros(len(theta0), dtype=torch.long))
+    with torch.no_grad():
+        pred = simulate(model, _params(model, nominal), nominal, w)[:, 0]
+    rho = ((target[:, 0] - pred) / nominal.dt**2).numpy()
+    gym_theta = np.remainder(theta0.numpy() + nominal.offset + math.pi, 2 * math.pi) - math.pi
+    return Residuals(rho, gym_theta, v0.numpy(), hist[:, -1].numpy(), rho.reshape(len(rows), len(starts)),
+                     actions[rows])
+
+
+def heatmap(res: Residuals, bins: int = 12, speed_limit: float | None = None) -> dict[str, list]:
+    """Mean residual and count over a (θ, θ̇) grid: ``{"theta_edges", "speed_edges", "mean", "count"}``."""
+    vmax = speed_limit or float(np.percentile(np.abs(res.theta_dot), 99)) or 1.0
+    te = np.linspace(-math.pi, math.pi, bins + 1)
+    ve = np.linspace(-vmax, vmax, bins + 1)
+    count, _, _ = np.histogram2d(res.theta, res.theta_dot, bins=(te, ve))
+    total, _, _ = np.histogram2d(res.theta, res.theta_dot, bins=(te, ve), weights=res.rho)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean = np.where(count >= 5, total / np.maximum(count, 1), np.nan)
+    return {"theta_edges": te.tolist(), "speed_edges": ve.tolist(), "mean": mean.tolist(), "count": count.tolist()}
+
+
+def binned(res: Residuals) -> dict[str, list[dict]]:
+    """Mean and RMS residual by sign of θ̇ and by |u| (where it lies)."""
+    def stats(mask: np.ndarray, label: str) -> dict:
+        r = res.rho[mask]
+        return {"bin": label, "n": int(mask.sum()), "mean": float(r.mean()) if len(r) else None,
+                "rms": float(np.sqrt((r**2).mean())) if len(r) else None}
+
+    au = np.abs(res.action)
+    return {
+        "sign_theta_dot": [stats(res.theta_dot < 0, "θ̇ < 0"), stats(res.theta_dot >= 0, "θ̇ ≥ 0")],
+        "abs_action": [stats((au >= lo) & (au < hi), f"{lo:g} ≤ |u| < {hi:g}") for lo, hi in
+                       ((0, 0.5), (0.5, 1.0), (1.0, 1.5), (1.5, 2.01))],
+    }
+
+
+def autocorrelation(res: Residuals, max_lag: int = 10) -> dict[str, list[float] | float]:
+    """Pooled within-sequence autocorrelation of ρ at lags 0..max_lag, with the white-noise band."""
+    r = res.grid - res.grid.mean()
+    var = float((r**2).mean())
+    acf = [float((r[:, : r.shape[1] - k] * r[:, k:]).mean() / var) if var > 0 else 0.0 for k in range(max_lag + 1)]
+    return {"lags": list(range(max_lag + 1)), "acf": acf, "band": 1.96 / math.sqrt(r.size)}
+
+
+def action_correlation(res: Residuals, max_lag: int = 8) -> dict[str, list[float] | float | int]:
+    """Correlation of ρ_t with u_{t-k} for k = 0..max_lag (k ≤ MAX_DELAY), with the white band.
+
+    ``peak_lag`` is the lag of the largest positive correlation outside the band (None if none):
+    a residual that follows the action k steps late means an actuator delay of k.
+    """
+    n_seq, n_steps = res.grid.shape
+    r = res.grid - res.grid.mean()
+    out = []
+    lags = list(range(0, min(max_lag, MAX_DELAY) + 1))
+    for k in lags:
+        u = res.actions_grid[:, MAX_DELAY - k : MAX_DELAY - k + n_steps]
+        u = u - u.mean()
+        den = math.sqrt(float((r**2).mean()) * float((u**2).mean()))
+        out.append(float((r * u).mean() / den) if den > 0 else 0.0)
+    band = 1.96 / math.sqrt(r.size)
+    positive = [(c, k) for k, c in zip(lags, out) if c > band]
+    return {"lags": lags, "ccf": out, "band": band, "peak_lag": max(positive)[1] if positive else None}
+
+
+def generic_features(res: Residuals, order: int = 6) -> np.ndarray:
+    """(n, F) a flexible basis of the state and action, for the "not explained" test:
+    sin and cos of kθ (k = 1..order), θ̇, tanh(θ̇/0.1), θ̇·|θ̇|, 1, u, u³."""
+    th, v, u = res.theta, res.theta_dot, res.action
+    cols = [np.sin(k * th) for k in range(1, order + 1)] + [np.cos(k * th) for k in range(1, order + 1)]
+    cols += [v, np.tanh(v / 0.1), v * np.abs(v), np.ones_like(v), u, u**3]
+    return np.stack(cols, 1)

@@ -1,0 +1,134 @@
+"""The gap diagnosis: its physics matches the effect wrappers, its fits recover planted effects, its CLI fails cleanly."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from envs.pendulum import PixelPendulumConfig, make_pixel_pendulum
+from piga.diagnostics import DiagnoseConfig, Observations, analyse
+from piga.diagnostics import fit as F
+from tests.test_cli import assert_one_line_error, run
+
+NOMINAL = F.Nominal(g=10.0, a=1.0, offset=0.0, dt=0.05)
+FAST = DiagnoseConfig(bootstrap=0)
+
+
+@pytest.mark.parametrize("effects", [
+    {"damping": 0.2}, {"friction": 0.15}, {"bias": -0.25}, {"deadzone": 0.5}, {"saturation": 1.2},
+    {"speed_clip": 3.0}, {"delay": 2}, {"damping": 0.1, "delay": 1},
+])
+def test_candidate_physics_matches_the_effect_wrappers(effects: dict) -> None:
+    env = make_pixel_pendulum(PixelPendulumConfig(image_size=16, effects=tuple(effects.items())))
+    theta0, v0 = 2.0, -1.5
+    _, info = env.reset(seed=0, options={"state": [theta0, v0]})
+    actions = np.random.default_rng(1).uniform(-2, 2, 12)
+    states = []
+    for u in actions:
+        _, _, _, _, info = env.step(np.array([u], np.float32))
+        states.append(info["state"][0])
+    env.close()
+    names = tuple(e for e in F.CANDIDATES if e in effects)
+    values = {"g": 10.0, "a": 1.0, **{F.PARAMETER[e]: v for e, v in effects.items() if e in F.PARAMETER}}
+    model = F.Model(names, effects.get("delay", 0), values)
+    w = F.Windows(torch.tensor([theta0], dtype=torch.float64), torch.tensor([v0], dtype=torch.float64),
+                  torch.tensor([[0.0] * F.MAX_DELAY + list(actions.astype(np.float32))], dtype=torch.float64),
+                  torch.tensor([states]), torch.ones(1, len(states)), torch.zeros(1, dtype=torch.long))
+    predicted = F.simulate(model, F._params(model, NOMINAL), NOMINAL, w)[0].detach().numpy()
+    np.testing.assert_allclose(predicted, states, atol=1e-5)
+
+
+def planted(effects: dict, n: int = 120, t: int = 30, noise: float = 0.002, seed: int = 0) -> Observations:
+    """Encoded-angle-like observations of a pendulum with ``effects``, written independently of piga's code."""
+    rng = np.random.default_rng(seed)
+    u = rng.uniform(-2, 2, (n, t))
+    th = np.zeros((n, t))
+    x, v = rng.uniform(-math.pi, math.pi, n), rng.uniform(-1, 1, n)
+    th[:, 0] = x
+    for i in range(t - 1):
+        k = effects.get("delay", 0)
+        a = u[:, i - k] if i >= k else np.zeros(n)
+        if "deadzone" in effects:
+            a = np.sign(a) * np.maximum(np.abs(a) - effects["deadzone"], 0)
+        a = a * effects.get("gain", 1.0)
+        tau = a - effects.get("damping", 0) * v + effects.get("bias", 0) - effects.get("cogging", 0) * np.sin(4 * x)
+        v = v + 0.05 * (15 * np.sin(x) + 3 * tau)
+        x = x + 0.05 * v
+        th[:, i + 1] = x
+    fit = np.arange(n) < int(0.75 * n)
+    return Observations(th + rng.normal(0, noise, th.shape), u, np.zeros((n, t)), fit, 0.05,
+                        np.zeros((0, t, 8, 8), np.uint8), np.zeros(0, int))
+
+
+def test_no_effect_is_no_gap() -> None:
+    d = analyse(planted({}), NOMINAL, FAST)
+    assert d.verdict_class == "none", d.verdict
+    assert d.verdict == "no significant gap"
+
+
+def test_planted_damping_is_found_with_its_coefficient_and_closes_the_gap() -> None:
+    d = analyse(planted({"damping": 0.2}), NOMINAL, replace(FAST, bootstrap=5))
+    assert d.verdict_class == "damping", d.verdict
+    (effect,) = d.effects
+    assert abs(effect["value"] - 0.2) < 0.01
+    lo, hi = effect["interval"]
+    assert lo <= effect["value"] <= hi
+    assert d.gap["free_run_closure"] > 0.95
+    assert abs(d.corrected["g"] - 10) < 0.1 and abs(d.corrected["a"] - 1) < 0.02
+
+
+def test_planted_delay_is_exact_and_shows_in_the_cross_correlation() -> None:
+    d = analyse(planted({"delay": 2}), NOMINAL, FAST)
+    assert d.verdict_class == "delay", d.verdict
+    assert d.effects[0]["value"] == 2
+    assert d.residuals["action_correlation"]["peak_lag"] == 2
+
+
+def test_two_effects_are_both_named() -> None:
+    d = analyse(planted({"bias": 0.3, "deadzone": 0.5}, n=160), NOMINAL, FAST)
+    assert d.verdict_class == "bias+deadzone", d.verdict
+
+
+def test_an_effect_outside_the_candidates_is_reported_unexplained() -> None:
+    d = analyse(planted({"cogging": 0.6}, n=160), NOMINAL, FAST)
+    assert d.verdict_class == "unexplained", d.verdict
+
+
+def test_a_gain_error_is_the_refitted_a() -> None:
+    d = analyse(planted({"gain": 0.8}), NOMINAL, FAST)
+    assert d.verdict_class == "gain", d.verdict
+    assert abs(d.effects[0]["value"] - 0.8) < 0.01
+
+
+# --- the command line ------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def tiny_model(tiny_data: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    from piga.train import TrainConfig, train
+
+    run_dir = tmp_path_factory.mktemp("diag") / "model"
+    train(tiny_data, run_dir, TrainConfig(epochs=1, batch_size=16, warmup_steps=2, curriculum_steps=2, threads=1),
+          {"rec_frames": "input", "pred_frames": 4}, progress=False)
+    return run_dir
+
+
+def test_cli_bad_inputs(tiny_model: Path, tiny_data: Path, tmp_path: Path) -> None:
+    from piga.collect import CollectConfig, collect
+
+    out = str(tmp_path / "report")
+    assert_one_line_error(run("piga-diagnose", "--model", str(tmp_path / "nope"), "--data", str(tiny_data), "--out", out),
+                          "no checkpoint")
+    assert_one_line_error(run("piga-diagnose", "--model", str(tiny_model), "--data", str(tmp_path / "x.h5"), "--out", out))
+    assert_one_line_error(run("piga-diagnose", "--model", str(tiny_model), "--data", str(tiny_data), "--out", out),
+                          "at least 20")  # 12 sequences: too little data
+    small = tmp_path / "small.h5"
+    collect(CollectConfig(sequences=4, steps=16, seed=1, workers=1, split=(2, 1, 1),
+                          env=PixelPendulumConfig(image_size=32)), small, progress=False, command="t")
+    assert_one_line_error(run("piga-diagnose", "--model", str(tiny_model), "--data", str(small), "--out", out), "32")
+    assert not (tmp_path / "report" / "report.md").exists()
