@@ -113,15 +113,23 @@ class PendulumPlanner:
 
         @torch.no_grad()
         def value(actions: Tensor) -> Tensor:
-            b = actions.shape[0]
-            p0 = torch.full((b, 1, 1), float(theta))
-            v0 = torch.full((b, 1, 1), float(theta_dot))
-            p, v = rollout(self.system, self.integrator, p0, v0, actions)  # (B, H, 1, 1) each
-            err = wrap_angle(p[..., 0, 0] + self.offset - goal)  # (B, H), Gymnasium's convention
-            cost = cfg.angle_weight * err**2 + cfg.velocity_weight * v[..., 0, 0] ** 2 + cfg.action_weight * actions[..., 0] ** 2
+            p, v = self.rollout(theta, theta_dot, actions)  # (B, H) each
+            err = wrap_angle(p + self.offset - goal)  # (B, H), Gymnasium's convention
+            cost = cfg.angle_weight * err**2 + cfg.velocity_weight * v**2 + cfg.action_weight * actions[..., 0] ** 2
             return -cost.sum(1)
 
         return value
+
+    def rollout(self, theta: float, theta_dot: float, actions: Tensor) -> tuple[Tensor, Tensor]:
+        """Angles and velocities (B, H) of the system from (θ, θ̇) under actions (B, H, 1)."""
+        b = actions.shape[0]
+        p0 = torch.full((b, 1, 1), float(theta))
+        v0 = torch.full((b, 1, 1), float(theta_dot))
+        p, v = rollout(self.system, self.integrator, p0, v0, actions)  # (B, H, 1, 1) each
+        return p[..., 0, 0], v[..., 0, 0]
+
+    def executed(self, action: np.ndarray) -> None:
+        """Told the action that was sent (a planner with an actuator delay keeps a history)."""
 
     def plan(self, theta: float, theta_dot: float) -> np.ndarray:
         """The first action (1,) of the best plan from the system state (θ, θ̇)."""
@@ -138,6 +146,54 @@ class PendulumPlanner:
         if self.config.warm_start:
             self._mean = shift_warm_start(result.mean, self.low, self.high, self.config.warm_fill)
         return plan.numpy().astype(np.float32)
+
+
+class CorrectedPlanner(PendulumPlanner):
+    """The planner over physics corrected by ``piga-diagnose``: the nominal engine plus fitted effects.
+
+    The effects are those of :mod:`piga.diagnostics.fit` (delay, deadzone, saturation, damping,
+    friction, bias, speed clip) with the fitted g, a and coefficients. For a delay of k steps the
+    first k steps of every rollout use the actions already sent, which the planner remembers.
+
+    Args:
+        corrected: the diagnosis' chosen model (``effects``, ``delay``, ``values``).
+        nominal: the identified model's φ, dt and substeps (its g and a are replaced by the fitted ones).
+        config: planner settings.
+        gravity_mult: multiplies the fitted g (as for the piga agent).
+    """
+
+    def __init__(self, corrected, nominal, config: MPCConfig = MPCConfig(), gravity_mult: float = 1.0):  # noqa: ANN001
+        from piga.diagnostics import fit as F
+
+        values = {**corrected.values, "g": corrected.values["g"] * gravity_mult}
+        self._fit = F
+        self.corrected = F.Model(corrected.effects, corrected.delay, values)
+        self.nominal = nominal
+        self._params = {k: v.detach() for k, v in F.parameters_of(self.corrected, nominal).items()}
+        self.history: list[float] = []
+        super().__init__(Pendulum(g=values["g"], a=values["a"], dt=nominal.dt, learnable=False), Euler(nominal.substeps),
+                         config, offset=nominal.offset)
+
+    def reset(self) -> None:
+        super().reset()
+        self.history = []
+
+    def executed(self, action: np.ndarray) -> None:
+        self.history = (self.history + [float(np.clip(np.asarray(action).reshape(-1)[0], -MAX_ACTION, MAX_ACTION))])[
+            -self._fit.MAX_DELAY :]
+
+    def rollout(self, theta: float, theta_dot: float, actions: Tensor) -> tuple[Tensor, Tensor]:
+        F = self._fit
+        b, h = actions.shape[:2]
+        past = torch.zeros(F.MAX_DELAY, dtype=torch.float64)
+        if self.history:
+            past[-len(self.history) :] = torch.tensor(self.history, dtype=torch.float64)
+        acts = torch.cat([past.expand(b, -1), actions[..., 0].double()], 1)  # (B, MAX_DELAY + H)
+        w = F.Windows(torch.full((b,), float(theta), dtype=torch.float64), torch.full((b,), float(theta_dot), dtype=torch.float64),
+                      acts, torch.zeros(b, h, dtype=torch.float64), torch.ones(b, h, dtype=torch.float64),
+                      torch.zeros(b, dtype=torch.long))
+        out = F.simulate(self.corrected, self._params, self.nominal, w, with_velocity=True).float()  # (B, H, 2)
+        return out[..., 0], out[..., 1]
 
 
 class OracleAgent:
@@ -164,10 +220,12 @@ class PigaMPCAgent:
         config: planner settings.
         gravity_mult: the agent is told gravity changed by this factor; it multiplies its
             learned g the same way (zero-shot, no retraining).
+        corrected: a model chosen by ``piga-diagnose`` (:class:`piga.diagnostics.fit.Model`); the
+            agent then plans with it (:class:`CorrectedPlanner`) instead of the learned physics.
     """
 
     def __init__(self, model: PhysicsModel, config: MPCConfig = MPCConfig(), gravity_mult: float = 1.0,
-                 keep_trace: bool = False):
+                 keep_trace: bool = False, corrected=None):  # noqa: ANN001
         if model.config.system != "pendulum":
             raise ValueError(f"PigaMPCAgent controls a pendulum model, got system {model.config.system!r}")
         if not (gravity_mult > 0 and math.isfinite(gravity_mult)):
@@ -176,7 +234,12 @@ class PigaMPCAgent:
         system = copy.deepcopy(model.system)  # the learned physics, told about the new gravity
         system.set_parameters(g=system.parameters_dict()["g"] * gravity_mult)
         self.offset = float(getattr(system, "offset", torch.tensor(0.0)).detach())
-        self.planner = PendulumPlanner(system, model.integrator, config, offset=self.offset)
+        if corrected is None:
+            self.planner = PendulumPlanner(system, model.integrator, config, offset=self.offset)
+        else:  # plan with the physics corrected by piga-diagnose
+            from piga.diagnostics.diagnose import nominal_of
+
+            self.planner = CorrectedPlanner(corrected, nominal_of(model), config, gravity_mult)
         self.keep_trace = keep_trace
         self.trace: list[tuple[float, float, np.ndarray]] = []
         """With ``keep_trace``: per step, the believed (θ, θ̇) in the model's convention and the plan (H, 1)."""
@@ -203,6 +266,7 @@ class PigaMPCAgent:
         """Action (1,) from the last L frames (uint8 (L, H, W)); ``state`` is never used."""
         theta, theta_dot = self.estimate_state(frames)
         plan = self.planner.plan_sequence(theta, theta_dot)
+        self.planner.executed(plan[0])
         if self.keep_trace:
             self.trace.append((theta, theta_dot, plan))
         return plan[0]

@@ -56,6 +56,8 @@ class EpisodeConfig:
     """Success: |θ̇| below this (rad/s)."""
     frame_stack: int = 4
     """Frames the agent sees per step (the model's L)."""
+    effects: tuple[tuple[str, float], ...] = ()
+    """Unmodelled effects of the environment (a simulated real system; :mod:`envs.effects`)."""
 
     def __post_init__(self) -> None:
         if self.episodes < 1 or self.steps < self.hold_steps or self.hold_steps < 1:
@@ -82,7 +84,7 @@ def run_episodes(agent: Agent, config: EpisodeConfig, record: int = 0, progress:
     from tqdm.auto import tqdm
 
     env = make_pixel_pendulum(PixelPendulumConfig(frame_stack=config.frame_stack, gravity_mult=config.gravity_mult,
-                                                  episode_length=config.steps))
+                                                  episode_length=config.steps, effects=config.effects))
     rng = np.random.default_rng(config.seed)
     episodes: list[dict[str, Any]] = []
     recordings: list[dict[str, np.ndarray]] = []
@@ -169,6 +171,8 @@ class ControlJob:
     """The multiplier the agent is told (None: the environment's)."""
     tags: tuple[tuple[str, Any], ...] = ()
     """Extra (key, value) pairs copied into the result's summary (labels for tables)."""
+    corrected: Any = None
+    """For "piga": plan with this physics from ``piga-diagnose`` (:class:`piga.diagnostics.fit.Model`)."""
 
     def __post_init__(self) -> None:
         if self.agent not in ("piga", "oracle"):
@@ -187,7 +191,7 @@ def build_agent(job: ControlJob) -> Any:
     from piga.train import load_model
 
     model, _ = load_model(job.model_dir)
-    return PigaMPCAgent(model, job.mpc, gravity_mult=told)
+    return PigaMPCAgent(model, job.mpc, gravity_mult=told, corrected=job.corrected)
 
 
 def run_job(job: ControlJob) -> dict[str, Any]:
@@ -206,6 +210,14 @@ def run_job(job: ControlJob) -> dict[str, Any]:
     result.pop("recordings")
     result["summary"] = {"agent": job.agent, **dict(job.tags), **result["summary"]}
     return result
+
+
+def _worker_init() -> None:
+    """A pool worker ends quietly when the pool terminates it (the CLI's SIGTERM handler is for the parent)."""
+    import signal
+
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is handled by the parent, which then terminates the pool
 
 
 def run_jobs(jobs: Sequence[ControlJob], workers: int = 1, progress: bool = True) -> list[dict[str, Any]]:

@@ -137,10 +137,12 @@ def test_killed_overwrite_keeps_the_old_file(tmp_path: Path) -> None:
 
 
 def test_demo_runs_the_chain(tmp_path: Path) -> None:
-    result = run("piga-demo", "--out", str(tmp_path / "demo"), "--sequences", "10", "--epochs", "1")
+    result = run("piga-demo", "--out", str(tmp_path / "demo"), "--sequences", "10", "--epochs", "1", "--episodes", "1",
+                 "--control-steps", "5")
     assert result.returncode == 0, result.stderr
     assert "summary: g: learned" in result.stdout and "a: learned" in result.stdout
-    for name in ("frames.png", "pendulum.h5", "model/metrics.json", "model/rollout.png"):
+    assert "summary: upright, gravity x1.4: success" in result.stdout
+    for name in ("frames.png", "pendulum.h5", "model/metrics.json", "model/rollout.png", "goal.png", "control.md"):
         assert (tmp_path / "demo" / name).exists(), name
     assert_one_line_error(run("piga-demo", "--out", str(tmp_path / "demo")), "--overwrite")
 

@@ -9,6 +9,7 @@ image that it writes with Gymnasium's renderer. It ends with one summary.
 from __future__ import annotations
 
 import shlex
+import sys
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
@@ -28,6 +29,7 @@ def build_parser() -> ArgumentParser:
     p.add_argument("--sequences", type=positive_int, default=CollectConfig.sequences, help="sequences to collect (default %(default)s)")
     p.add_argument("--epochs", type=positive_int, help="training epochs (default: the fast preset's)")
     p.add_argument("--episodes", type=positive_int, default=3, help="control episodes per task (default %(default)s)")
+    p.add_argument("--control-steps", type=positive_int, default=200, help="steps per control episode (default %(default)s)")
     p.add_argument("--goal-angle", type=float, default=15.0, help="angle of the goal image, degrees from upright (default %(default)s)")
     p.add_argument("--seed", type=nonnegative_int, default=0, help="seed of data and training (default %(default)s)")
     p.add_argument("--overwrite", action="store_true", help="replace files of an earlier demo in --out")
@@ -91,9 +93,10 @@ def _control(run_dir: Path, goal_png: Path, control_md: Path, args) -> list[tupl
     model, ckpt = load_model(run_dir)
     estimate = goal_from_image(model, ckpt, goal_png)
     for warning in estimate.warnings:
-        print(f"{PROG}: warning: {warning}")
+        print(f"{PROG}: warning: {warning}", file=sys.stderr)
     mpc = MPCConfig(seed=args.seed)
-    episodes = EpisodeConfig(episodes=args.episodes, seed=args.seed)
+    episodes = EpisodeConfig(episodes=args.episodes, seed=args.seed, steps=args.control_steps,
+                             hold_steps=min(20, args.control_steps))
     jobs = [
         ControlJob("piga", episodes, mpc, str(run_dir), tags=(("task", "upright, gravity x1.0"),)),
         ControlJob("piga", dc_replace(episodes, gravity_mult=1.4), mpc, str(run_dir), tags=(("task", "upright, gravity x1.4"),)),

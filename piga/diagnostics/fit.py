@@ -127,8 +127,12 @@ class Model:
         return 2 + len(self.effects)
 
 
-def simulate(model: Model, params: dict[str, Tensor], nominal: Nominal, w: Windows) -> Tensor:
-    """Predicted angles (B, H) of windows ``w`` under ``model`` with (differentiable) ``params``."""
+def simulate(model: Model, params: dict[str, Tensor], nominal: Nominal, w: Windows, with_velocity: bool = False) -> Tensor:
+    """Predicted angles (B, H) of windows ``w`` under ``model`` with (differentiable) ``params``.
+
+    With ``with_velocity``, returns angles and velocities stacked: (B, H, 2). Only ``theta0``,
+    ``v0``, ``actions`` and the horizon of ``w.target`` are used.
+    """
     u = w.actions  # (B, MAX_DELAY + H)
     h_steps = w.target.shape[1]
     k = model.delay if "delay" in model.effects else 0
@@ -141,7 +145,7 @@ def simulate(model: Model, params: dict[str, Tensor], nominal: Nominal, w: Windo
     g, a = params["log_g"].exp(), params["log_a"].exp()
     theta, v = w.theta0, w.v0
     h = nominal.dt / nominal.substeps
-    out = []
+    out, speeds = [], []
     for j in range(h_steps):
         for _ in range(nominal.substeps):
             tau = a * cmd[:, j]
@@ -157,7 +161,15 @@ def simulate(model: Model, params: dict[str, Tensor], nominal: Nominal, w: Windo
                 v = torch.minimum(torch.maximum(v, -vmax), vmax)
             theta = theta + h * v
         out.append(theta)
+        speeds.append(v)
+    if with_velocity:
+        return torch.stack([torch.stack(out, 1), torch.stack(speeds, 1)], -1)  # (B, H, 2)
     return torch.stack(out, 1)  # (B, H)
+
+
+def parameters_of(model: Model, nominal: Nominal) -> dict[str, Tensor]:
+    """The tensors :func:`simulate` takes, from a model's values (defaults: nominal g, a; grid starts)."""
+    return _params(model, nominal)
 
 
 def _params(model: Model, nominal: Nominal) -> dict[str, Tensor]:
@@ -278,3 +290,26 @@ def bootstrap(model: Model, nominal: Nominal, w: Windows, replicates: int, seed:
         for k, v in m.values.items():
             draws[k].append(v)
     return draws
+
+
+def noise_floor(model: Model, nominal: Nominal, w: Windows, sigma: float, draws: int = 3, seed: int = 0) -> np.ndarray:
+    """(H,) the error per horizon that ``model`` would still have if it were exactly right.
+
+    A parametric bootstrap: trajectories are simulated with ``model`` itself from the windows'
+    starts and actions, white noise of ``sigma`` (rad) is added to every observed angle, as the
+    encoder adds it, and the model predicts them from the noisy frames, as it does on real data.
+    Near upright, small errors in the estimated velocity grow fast, so even a perfect model has a
+    free-run error; closure is also reported against this floor.
+    """
+    gen = torch.Generator().manual_seed(seed)
+    p = _params(model, nominal)
+    with torch.no_grad():
+        clean = simulate(model, p, nominal, w)  # (B, H)
+        prev = w.theta0 - nominal.dt * w.v0  # θ_{s-1} consistent with the start
+        total = torch.zeros(w.target.shape[1], dtype=torch.float64)
+        for _ in range(draws):
+            noise = lambda shape: sigma * torch.randn(shape, generator=gen, dtype=torch.float64)  # noqa: E731
+            start, before = w.theta0 + noise(w.theta0.shape), prev + noise(prev.shape)
+            noisy = Windows(start, (start - before) / nominal.dt, w.actions, clean + noise(clean.shape), w.mask, w.sequence)
+            total += ((simulate(model, p, nominal, noisy) - noisy.target) ** 2 * w.mask).sum(0) / w.mask.sum(0).clamp_min(1)
+    return (total / draws).numpy()

@@ -24,6 +24,7 @@ def gap_figure(d: Diagnosis):  # noqa: ANN201
     h = g["horizon"]
     axes[0].semilogy(h, np.degrees(np.sqrt(g["state_mse_nominal"])), label="nominal")
     axes[0].semilogy(h, np.degrees(np.sqrt(g["state_mse_corrected"])), label="corrected")
+    axes[0].semilogy(h, np.degrees(np.sqrt(g["state_mse_noise_floor"])), ls=":", color="gray", label="noise floor")
     axes[0].set_title("encoded angle RMSE (deg)", fontsize=9)
     if g["pixel_mse_nominal"]:
         hp = range(1, len(g["pixel_mse_nominal"]) + 1)
@@ -72,6 +73,10 @@ def correlation_figure(d: Diagnosis):  # noqa: ANN201
     return fig
 
 
+def _pct(x: float | None) -> str:
+    return "–" if x is None else f"{100 * x:.1f}%"
+
+
 def _fmt(x: Any) -> str:
     if x is None:
         return "–"
@@ -98,7 +103,10 @@ def markdown(d: Diagnosis, model: str, data: str, command: str) -> str:
     lines += [
         "## Size of the gap, and how far it shrinks", "",
         f"Held-out free run (mean over horizons 1..{g['horizon'][-1]}): angle MSE {g['free_run_mse_nominal']:.3g} rad² nominal, "
-        f"{g['free_run_mse_corrected']:.3g} rad² corrected: **closure {100 * g['free_run_closure']:.1f}%**. One step: RMSE "
+        f"{g['free_run_mse_corrected']:.3g} rad² corrected: closure {100 * g['free_run_closure']:.1f}%. An exactly right model "
+        f"would still have {g['free_run_mse_noise_floor']:.3g} rad² with the encoder's noise ({math.degrees(g['encoder_noise_rad']):.3f}° "
+        f"per frame, estimated from the one-step residual): **{_pct(g['free_run_gap_closure'])} of the reducible gap is "
+        "closed**. One step: RMSE "
         f"{math.degrees(g['one_step_rms_nominal_rad']):.3f}° nominal, {math.degrees(g['one_step_rms_corrected_rad']):.3f}° corrected.", "",
         f"Nominal g = {d.nominal['g']:.4f}, a = {d.nominal['a']:.4f}; corrected: "
         + ", ".join(f"{k} = {_fmt(v)}" for k, v in d.corrected.items()), "",
@@ -110,6 +118,12 @@ def markdown(d: Diagnosis, model: str, data: str, command: str) -> str:
         pix = (f"{pn[i]:.2e} | {pc[i]:.2e}" if i < len(pn) else "– | –")
         lines.append(f"| {g['horizon'][i]} | {math.degrees(math.sqrt(g['state_mse_nominal'][i])):.3f} | "
                      f"{math.degrees(math.sqrt(g['state_mse_corrected'][i])):.3f} | {100 * g['closure'][i]:.1f}% | {pix} |")
+    if d.control:
+        from piga.control import summary_markdown
+
+        env = ", ".join(f"{k}={v}" for k, v in d.control["effects"].items()) or "none"
+        lines += ["", f"MPC on the simulated real system ({env}), same frames, encoder and planner; only the physics differs:", "",
+                  summary_markdown(d.control["rows"], extra=[("physics", "physics")]).rstrip()]
     v = d.vision
     lines += [
         "", "## Where it lies", "",
