@@ -41,6 +41,13 @@ CASES: dict[str, tuple[float, float, int]] = {
 }
 
 
+def markdown(record: dict, out: Path) -> str:
+    """The Markdown page: how to reproduce, the machine, the table."""
+    return (f"# Parameter identification benchmark\n\nReproduce all runs (resumable, skips finished ones): "
+            f"`python benchmarks/train_accuracy.py --out {out}`. Last invocation: `{record['command']}`.\n\n"
+            f"Machine: {record['machine']}\n\n" + table(record["runs"]))
+
+
 def table(runs: list[dict[str, object]]) -> str:
     """Markdown: one row per run, then per-case medians and spreads."""
     lines = ["| case | seed | true g | learned g | g error | true a | learned a | a error | train min | SSIM pred | SSIM ext | angle err (deg) |",
@@ -103,8 +110,7 @@ def main() -> None:
                                    "history": state.history, "metrics": metrics})
             write_json(record_path, record)
             with atomic_output(out.with_suffix(".md"), overwrite=True) as tmp:
-                tmp.write_text(f"# Parameter identification benchmark\n\nCommand: `{record['command']}`\n\n"
-                               f"Machine: {record['machine']}\n\n" + table(record["runs"]))
+                tmp.write_text(markdown(record, out))
             pe = metrics["parameter_errors"]
             print(f"{case} seed {seed}: g={pe['g']['learned']:.4f} ({100 * pe['g']['relative_error']:.2f}%), "
                   f"a={pe['a']['learned']:.4f} ({100 * pe['a']['relative_error']:.2f}%), {state.elapsed / 60:.1f} min", flush=True)
