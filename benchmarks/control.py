@@ -62,6 +62,9 @@ def main() -> int:
     p.add_argument("--planet-episodes", type=int, default=10)
     p.add_argument("--workers", type=int, default=2)
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--torque-arrow", action="store_true", help="frames show Gymnasium's torque arrow (off by default)")
+    p.add_argument("--extra-models", nargs="*", default=[],
+                   help="more run folders (other training seeds): upright at x1.0 and x1.4, --sweep-episodes each")
     args = p.parse_args()
     from piga.goal import goal_from_image, render_goal_image
     from piga.train import load_model
@@ -72,14 +75,18 @@ def main() -> int:
     planet = replace(PLANET, seed=args.seed)
 
     def job(agent: str, mult: float, episodes: int, mpc: MPCConfig = tuned, goal: float = 0.0, **tags: object) -> ControlJob:
-        return ControlJob(agent, EpisodeConfig(episodes=episodes, seed=args.seed, gravity_mult=mult, goal_angle=goal),
-                          mpc, model_dir=args.model if agent == "piga" else None, tags=tuple(tags.items()))
+        model_dir = str(tags.pop("model_dir", args.model))
+        return ControlJob(agent, EpisodeConfig(episodes=episodes, seed=args.seed, gravity_mult=mult, goal_angle=goal,
+                                               torque_arrow=args.torque_arrow),
+                          mpc, model_dir=model_dir if agent == "piga" else None, tags=tuple(tags.items()))
 
     jobs: list[ControlJob] = []
     for mult in (1.0, 1.4):
         jobs += [job(agent, mult, args.episodes, part="main") for agent in ("piga", "oracle")]
     jobs += [job("piga", 1.0, args.planet_episodes, planet, part="planet", planner="PlaNet defaults")]
     jobs += [job(agent, m, args.sweep_episodes, part="sweep") for m in parse_range(args.sweep) for agent in ("piga", "oracle")]
+    jobs += [job("piga", m, args.sweep_episodes, part="seeds", model_dir=extra, model=extra)
+             for extra in args.extra_models for m in (1.0, 1.4)]
     goals = goal_angles(learned["g"], learned["a"])
     read: dict[float, float] = {}
     with tempfile.TemporaryDirectory() as tmp:
@@ -131,7 +138,7 @@ def main() -> int:
         f"Command: `{command}`", "",
         f"Model: `{args.model}`, learned g = {learned['g']:.4f}, a = {learned['a']:.4f}. "
         f"Machine: {machine()['cpu']}, {machine()['cores']} cores; {args.workers} worker processes, 1 torch thread each; "
-        f"{minutes:.1f} min in all.", "",
+        f"{minutes:.1f} min in all. Frames {'with' if args.torque_arrow else 'without'} Gymnasium's torque arrow.", "",
         "Success: |θ − θ_goal| < 0.2 rad and |θ̇| < 1 rad/s for each of the last 20 of 200 steps. Episode 0 of each row "
         "starts hanging down; the others at θ ~ U(−π, π), θ̇ ~ U(−1, 1).", "",
         "## Checks", "", "| floor | measured | met |", "|---|---|---|",
@@ -144,6 +151,8 @@ def main() -> int:
         summary_markdown([{**p1, "planner": "tuned"}, pl], extra=[("planner", "planner")]),
         f"## Gravity sweep {args.sweep} ({args.sweep_episodes} episodes per row)", "", f"![sweep]({plot.name})", "",
         summary_markdown(pick("sweep")),
+        *(["## Other models (other training seeds), upright", "",
+            summary_markdown(pick("seeds"), extra=[("model", "model")])] if args.extra_models else []),
         "## Goals given as images", "",
         "True goal angles span 0.9 x the feasible range around upright and around hanging. The piga agent reads its goal "
         "from a 500x500 render of the goal (no torque arrow) with its encoder; the oracle is told the true angle.", "",

@@ -29,6 +29,8 @@ def build_parser() -> ArgumentParser:
     p.add_argument("--candidates", type=positive_int, help="CEM candidates per iteration (default 200)")
     p.add_argument("--iterations", type=positive_int, help="CEM iterations (default 5)")
     p.add_argument("--seed", type=nonnegative_int, default=0, help="seed of start states and planner (default 0)")
+    p.add_argument("--torque-arrow", action="store_true",
+                   help="show Gymnasium's torque arrow in the frames the agent sees (off by default; see README)")
     p.add_argument("--sweep", metavar="START:STOP:STEP",
                    help="run the piga agent and the oracle at each gravity multiplier of the range (e.g. 0.5:1.8:0.1); "
                    "each agent is told the multiplier. Writes a table and, with --out, OUT.png")
@@ -102,7 +104,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         frames = agent.input_frames
         label = f"piga ({args.model})"
     config = EpisodeConfig(episodes=args.episodes, steps=args.steps, seed=args.seed, gravity_mult=args.gravity_mult,
-                           goal_angle=goal, frame_stack=frames)
+                           goal_angle=goal, frame_stack=frames, torque_arrow=args.torque_arrow)
     result = run_episodes(agent, config, progress=not args.quiet, record=1 if args.video else 0,
                           on_episode_end=_keep_first_trace(agent) if args.video else None)
     s = result["summary"]
@@ -153,7 +155,7 @@ def _sweep(args, outputs: list[Path]) -> int:  # noqa: ANN001
         raise PigaError(f"{args.model}: a {model.config.system} model cannot control the pendulum")
     mpc = _mpc_config(args, math.radians(args.goal_angle))
     jobs = [ControlJob(agent, EpisodeConfig(episodes=args.episodes, steps=args.steps, seed=args.seed, gravity_mult=m,
-                                            goal_angle=mpc.goal_angle),
+                                            goal_angle=mpc.goal_angle, torque_arrow=args.torque_arrow),
                        mpc, model_dir=args.model if agent == "piga" else None)
             for m in multipliers for agent in ("piga", "oracle")]
     results = run_jobs(jobs, workers=args.workers, progress=not args.quiet)
