@@ -27,6 +27,8 @@ from torch import Tensor
 
 from agents.cem import CEMConfig, cem, shift_warm_start
 from envs.pendulum import MAX_ACTION, PENDULUM_DT
+from piga.diagnostics import fit as diag_fit
+from piga.diagnostics.diagnose import nominal_of
 from piga.model import PhysicsModel, frames_to_float
 from piga.physics import Euler, Pendulum, System, rollout
 from piga.velocity import wrap_angle
@@ -64,9 +66,10 @@ class MPCConfig:
     seed: int = 0
     """Seed of the planner's RNG."""
 
-
-def _wrap(x: float) -> float:
-    return (x + math.pi) % (2 * math.pi) - math.pi
+    def __post_init__(self) -> None:
+        if self.execute not in ("mean", "best") or self.warm_fill not in ("middle", "repeat"):
+            raise ValueError(f"execute must be 'mean' or 'best' and warm_fill 'middle' or 'repeat', got "
+                             f"{self.execute!r}, {self.warm_fill!r}")
 
 
 class PendulumPlanner:
@@ -96,15 +99,14 @@ class PendulumPlanner:
     def near_goal(self, theta: float) -> bool:
         """Whether the system angle θ is within ``swing_up_angle`` of the goal (holding, not swinging up)."""
         limit = self.config.swing_up_angle or math.pi / 3
-        return abs(_wrap(theta + self.offset - self.config.goal_angle)) <= limit
+        return abs(math.remainder(theta + self.offset - self.config.goal_angle, 2 * math.pi)) <= limit
 
     def current_goal(self, theta: float) -> float:
         """The angle scored against from the system angle θ: the goal, or upright while swinging up."""
         goal = self.config.goal_angle
-        if not self.config.swing_up_angle or abs(_wrap(goal)) >= math.pi / 2:
+        if not self.config.swing_up_angle or abs(math.remainder(goal, 2 * math.pi)) >= math.pi / 2 or self.near_goal(theta):
             return goal
-        far = abs(_wrap(theta + self.offset - goal)) > self.config.swing_up_angle
-        return 0.0 if far else goal
+        return 0.0
 
     def objective(self, theta: float, theta_dot: float) -> Callable[[Tensor], Tensor]:
         """The closure CEM maximises: actions (B, H, 1) -> return (B,) from the system state (θ, θ̇)."""
@@ -162,14 +164,12 @@ class CorrectedPlanner(PendulumPlanner):
         gravity_mult: multiplies the fitted g (as for the piga agent).
     """
 
-    def __init__(self, corrected, nominal, config: MPCConfig = MPCConfig(), gravity_mult: float = 1.0):  # noqa: ANN001
-        from piga.diagnostics import fit as F
-
+    def __init__(self, corrected: diag_fit.Model, nominal: diag_fit.Nominal, config: MPCConfig = MPCConfig(),
+                 gravity_mult: float = 1.0):
         values = {**corrected.values, "g": corrected.values["g"] * gravity_mult}
-        self._fit = F
-        self.corrected = F.Model(corrected.effects, corrected.delay, values)
+        self.corrected = diag_fit.Model(corrected.effects, corrected.delay, values)
         self.nominal = nominal
-        self._params = {k: v.detach() for k, v in F.parameters_of(self.corrected, nominal).items()}
+        self._params = {k: v.detach() for k, v in diag_fit.parameters_of(self.corrected, nominal).items()}
         self.history: list[float] = []
         super().__init__(Pendulum(g=values["g"], a=values["a"], dt=nominal.dt, learnable=False), Euler(nominal.substeps),
                          config, offset=nominal.offset)
@@ -180,10 +180,10 @@ class CorrectedPlanner(PendulumPlanner):
 
     def executed(self, action: np.ndarray) -> None:
         self.history = (self.history + [float(np.clip(np.asarray(action).reshape(-1)[0], -MAX_ACTION, MAX_ACTION))])[
-            -self._fit.MAX_DELAY :]
+            -diag_fit.MAX_DELAY :]
 
     def rollout(self, theta: float, theta_dot: float, actions: Tensor) -> tuple[Tensor, Tensor]:
-        F = self._fit
+        F = diag_fit
         b, h = actions.shape[:2]
         past = torch.zeros(F.MAX_DELAY, dtype=torch.float64)
         if self.history:
@@ -225,7 +225,7 @@ class PigaMPCAgent:
     """
 
     def __init__(self, model: PhysicsModel, config: MPCConfig = MPCConfig(), gravity_mult: float = 1.0,
-                 keep_trace: bool = False, corrected=None):  # noqa: ANN001
+                 keep_trace: bool = False, corrected: diag_fit.Model | None = None):
         if model.config.system != "pendulum":
             raise ValueError(f"PigaMPCAgent controls a pendulum model, got system {model.config.system!r}")
         if not (gravity_mult > 0 and math.isfinite(gravity_mult)):
@@ -237,8 +237,6 @@ class PigaMPCAgent:
         if corrected is None:
             self.planner = PendulumPlanner(system, model.integrator, config, offset=self.offset)
         else:  # plan with the physics corrected by piga-diagnose
-            from piga.diagnostics.diagnose import nominal_of
-
             self.planner = CorrectedPlanner(corrected, nominal_of(model), config, gravity_mult)
         self.keep_trace = keep_trace
         self.trace: list[tuple[float, float, np.ndarray]] = []

@@ -74,8 +74,8 @@ def main() -> int:
     tuned = MPCConfig(seed=args.seed)
     planet = replace(PLANET, seed=args.seed)
 
-    def job(agent: str, mult: float, episodes: int, mpc: MPCConfig = tuned, goal: float = 0.0, **tags: object) -> ControlJob:
-        model_dir = str(tags.pop("model_dir", args.model))
+    def job(agent: str, mult: float, episodes: int, mpc: MPCConfig = tuned, goal: float = 0.0, model_dir: str = args.model,
+            **tags: object) -> ControlJob:
         return ControlJob(agent, EpisodeConfig(episodes=episodes, seed=args.seed, gravity_mult=mult, goal_angle=goal,
                                                torque_arrow=args.torque_arrow),
                           mpc, model_dir=model_dir if agent == "piga" else None, tags=tuple(tags.items()))
@@ -133,11 +133,12 @@ def main() -> int:
     plot = out.with_name(out.name + "-sweep.png")
     save_figure(sweep_figure(pick("sweep")), plot)
     command = shlex.join(["python", *sys.argv])
+    where = machine()
     lines = [
         "# Control from pixels: piga MPC vs the oracle", "",
         f"Command: `{command}`", "",
         f"Model: `{args.model}`, learned g = {learned['g']:.4f}, a = {learned['a']:.4f}. "
-        f"Machine: {machine()['cpu']}, {machine()['cores']} cores; {args.workers} worker processes, 1 torch thread each; "
+        f"Machine: {where['cpu']}, {where['cores']} cores; {args.workers} worker processes, 1 torch thread each; "
         f"{minutes:.1f} min in all. Frames {'with' if args.torque_arrow else 'without'} Gymnasium's torque arrow.", "",
         "Success: |θ − θ_goal| < 0.2 rad and |θ̇| < 1 rad/s for each of the last 20 of 200 steps. Episode 0 of each row "
         "starts hanging down; the others at θ ~ U(−π, π), θ̇ ~ U(−1, 1).", "",
@@ -161,7 +162,7 @@ def main() -> int:
     md = "\n".join(lines)
     with atomic_output(out.with_suffix(".md"), overwrite=True) as tmp_md:
         tmp_md.write_text(md)
-    write_json(out.with_suffix(".json"), {"command": command, "machine": machine(), "model": args.model,
+    write_json(out.with_suffix(".json"), {"command": command, "machine": where, "model": args.model,
                                           "learned": learned, "minutes": minutes,
                                           "checks": [{"floor": n, "measured": v, "met": ok} for n, v, ok in checks],
                                           "results": results}, overwrite=True)

@@ -173,8 +173,6 @@ class ControlJob:
     """The planner; its ``goal_angle`` is the agent's goal."""
     model_dir: str | None = None
     """The run folder of ``piga-train-model`` (for "piga")."""
-    told_gravity_mult: float | None = None
-    """The multiplier the agent is told (None: the environment's)."""
     tags: tuple[tuple[str, Any], ...] = ()
     """Extra (key, value) pairs copied into the result's summary (labels for tables)."""
     corrected: Any = None
@@ -191,7 +189,7 @@ def build_agent(job: ControlJob) -> Any:
     """The agent a job describes (loads the model for "piga")."""
     from agents.mpc import OracleAgent, PigaMPCAgent
 
-    told = job.episodes.gravity_mult if job.told_gravity_mult is None else job.told_gravity_mult
+    told = job.episodes.gravity_mult  # the agent is told the environment's multiplier
     if job.agent == "oracle":
         return OracleAgent(g=10.0 * told, a=1.0, config=job.mpc)
     from piga.train import load_model
@@ -234,8 +232,10 @@ def run_jobs(jobs: Sequence[ControlJob], workers: int = 1, progress: bool = True
         return [run_job(j) for j in tqdm(jobs, desc="control jobs", disable=not progress)]
     import multiprocessing as mp
 
-    # spawn, not fork: torch and pygame state are not fork-safe
-    with mp.get_context("fork").Pool(min(workers, len(jobs))) as pool:
+    # fork, as torch's DataLoader does: with spawn, torch's import makes the resource tracker warn
+    # about leaked semaphores. The parent has rendered nothing; each child sets one torch thread.
+    method = "fork" if "fork" in mp.get_all_start_methods() else "spawn"
+    with mp.get_context(method).Pool(min(workers, len(jobs)), initializer=_worker_init) as pool:
         return list(tqdm(pool.imap(run_job, jobs), total=len(jobs), desc="control jobs", disable=not progress))
 
 

@@ -76,8 +76,9 @@ def goal_from_image(model: PhysicsModel, checkpoint: dict, path: str | os.PathLi
     The "not the scene" limit is 4x the model's own final reconstruction MSE per frame.
     """
     learned = model.physical_parameters()
-    history = checkpoint["state"]["history"]
-    typical = history[-1]["loss_rec"] / model.config.input_frames if history else 0.001
+    from piga.train import training_reconstruction_mse
+
+    typical = training_reconstruction_mse(model, checkpoint) or 0.001
     return read_goal(model, load_scene_image(path, model.config.image_size),
                      g=learned["g"] * gravity_mult, a=learned["a"], mse_limit=4 * typical)
 

@@ -184,6 +184,16 @@ def load_model(run_dir: str | Path) -> tuple[PhysicsModel, dict[str, Any]]:
     return model, ckpt
 
 
+def training_reconstruction_mse(model: PhysicsModel, checkpoint: dict[str, Any] | None) -> float:
+    """The model's own per-frame reconstruction MSE in its last training epoch (0 if unknown)."""
+    try:
+        history = checkpoint["state"]["history"]  # type: ignore[index]
+        frames = model.config.input_frames if model.config.rec_frames == "input" else model.config.window
+        return float(history[-1]["loss_rec"]) / frames
+    except (TypeError, KeyError, IndexError):
+        return 0.0
+
+
 def _background(data: str | Path, channels: int, seed: int, max_frames: int = 2000) -> torch.Tensor:
     """Label-free background of the training frames: a per-pixel median over up to ``max_frames``."""
     frames, _ = read_sequences(data, "train")

@@ -39,7 +39,7 @@ def test_candidate_physics_matches_the_effect_wrappers(effects: dict) -> None:
     w = F.Windows(torch.tensor([theta0], dtype=torch.float64), torch.tensor([v0], dtype=torch.float64),
                   torch.tensor([[0.0] * F.MAX_DELAY + list(actions.astype(np.float32))], dtype=torch.float64),
                   torch.tensor([states]), torch.ones(1, len(states)), torch.zeros(1, dtype=torch.long))
-    predicted = F.simulate(model, F._params(model, NOMINAL), NOMINAL, w)[0].detach().numpy()
+    predicted = F.simulate(model, F.parameters_of(model, NOMINAL), NOMINAL, w)[0].detach().numpy()
     np.testing.assert_allclose(predicted, states, atol=1e-5)
 
 

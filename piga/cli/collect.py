@@ -3,14 +3,12 @@
 from __future__ import annotations
 
 import math
-import shlex
-import sys
 from collections.abc import Sequence
 from dataclasses import replace
 
 from envs.effects import EFFECTS, format_effects, parse_effect
 from envs.pendulum import PixelPendulumConfig
-from piga.cli.common import ArgumentParser, nonnegative_int, positive_float, positive_int, run_cli, split_type
+from piga.cli.common import ArgumentParser, command_line, nonnegative_int, positive_float, positive_int, run_cli, split_type
 from piga.collect import PAPER_MAX_SPEED, PRESETS, CollectConfig, collect
 from piga.data import inspect_dataset
 
@@ -82,8 +80,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         effects=tuple(args.effect),
     )
     config = replace(CollectConfig(env=env, seed=args.seed, workers=args.workers), **preset)
-    argv_list = list(sys.argv[1:] if argv is None else argv)
-    path = collect(config, args.out, overwrite=args.overwrite, command=shlex.join([PROG, *argv_list]),
+    path = collect(config, args.out, overwrite=args.overwrite, command=command_line(PROG, argv),
                    progress=not args.quiet)
     info = inspect_dataset(path)
     print(f"wrote {path}: {info.n_sequences} sequences x {info.steps} frames of {info.image_shape}, "

@@ -37,6 +37,13 @@ USER_ERRORS: tuple[type[BaseException], ...] = (
 )
 
 
+def command_line(prog: str, argv: Sequence[str] | None) -> str:
+    """The command as typed, for records: ``prog`` and ``argv`` (default: this process's arguments)."""
+    import shlex
+
+    return shlex.join([prog, *(sys.argv[1:] if argv is None else argv)])
+
+
 def _raise_interrupt(signum: int, frame: object) -> None:
     raise KeyboardInterrupt
 

@@ -7,7 +7,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from piga.cli.common import ArgumentParser, PigaError, nonnegative_int, positive_float, positive_int, run_cli
+from piga.cli.common import ArgumentParser, PigaError, command_line, nonnegative_int, positive_float, positive_int, run_cli
 
 PROG = "piga-control"
 
@@ -67,7 +67,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         for path in outputs:
             check_writable_target(path, args.overwrite)
     if args.sweep:
-        return _sweep(args, outputs)
+        return _sweep(args, outputs, argv)
     if args.video:
         if Path(args.video).suffix.lower() not in (".mp4", ".gif"):
             raise PigaError(f"--video must end in .mp4 or .gif, got {args.video}")
@@ -123,18 +123,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         s = {"agent": label, **s}
         write_json(outputs[0], {"agent": label, **result, "summary": s, "recordings": None}, overwrite=args.overwrite)
         with atomic_output(outputs[1], overwrite=args.overwrite) as tmp:
-            tmp.write_text(f"# {PROG}\n\nCommand: `{_command()}`\n\n{summary_markdown([s])}")
+            tmp.write_text(f"# {PROG}\n\nCommand: `{command_line(PROG, argv)}`\n\n{summary_markdown([s])}")
         print(f"wrote {outputs[0]} and {outputs[1]}")
     return 0
 
 
-def _command() -> str:
-    import shlex
-
-    return shlex.join([PROG, *sys.argv[1:]])
-
-
-def _sweep(args, outputs: list[Path]) -> int:  # noqa: ANN001
+def _sweep(args, outputs: list[Path], argv: Sequence[str] | None) -> int:  # noqa: ANN001
     """--sweep: the piga agent and the oracle at each multiplier, each told the multiplier."""
     from piga.atomic import atomic_output, write_json
     from piga.control import ControlJob, EpisodeConfig, parse_range, run_jobs, summary_markdown
@@ -167,7 +161,7 @@ def _sweep(args, outputs: list[Path]) -> int:  # noqa: ANN001
 
         write_json(outputs[0], {"model": args.model, "multipliers": multipliers, "results": results}, overwrite=args.overwrite)
         with atomic_output(outputs[1], overwrite=args.overwrite) as tmp:
-            tmp.write_text(f"# {PROG} --sweep\n\nCommand: `{_command()}`\n\n![sweep]({outputs[2].name})\n\n{table}")
+            tmp.write_text(f"# {PROG} --sweep\n\nCommand: `{command_line(PROG, argv)}`\n\n![sweep]({outputs[2].name})\n\n{table}")
         save_figure(sweep_figure(summaries), outputs[2], overwrite=args.overwrite)
         print(f"wrote {', '.join(map(str, outputs))}")
     return 0

@@ -8,14 +8,13 @@ image that it writes with Gymnasium's renderer. It ends with one summary.
 
 from __future__ import annotations
 
-import shlex
 import sys
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
 
 from piga.cli import show, train
-from piga.cli.common import ArgumentParser, PigaError, nonnegative_int, positive_int, run_cli
+from piga.cli.common import ArgumentParser, PigaError, command_line, nonnegative_int, positive_int, run_cli
 from piga.collect import CollectConfig, collect
 from piga.data import inspect_dataset
 
@@ -51,7 +50,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     over = ["--overwrite"] if args.overwrite else []
     print(f"[1/4] collecting {args.sequences} sequences into {data}", flush=True)
     config = replace(CollectConfig(), sequences=args.sequences, seed=args.seed)
-    collect(config, data, overwrite=args.overwrite, command=shlex.join([PROG, *(argv or [])]))
+    collect(config, data, overwrite=args.overwrite, command=command_line(PROG, argv))
     print(f"[2/4] saving a strip of frames to {strip}", flush=True)
     show.main([str(data), "--out", str(strip), *over])
     print(f"[3/4] training the world model into {run_dir} (fast preset)", flush=True)
@@ -80,16 +79,15 @@ def _control(run_dir: Path, goal_png: Path, control_md: Path, args) -> list[tupl
     import math
     from dataclasses import replace as dc_replace
 
-    import imageio.v3 as iio
-
     from agents.mpc import MPCConfig
     from piga.atomic import atomic_output
+    from piga.cli import control as control_cli
     from piga.control import ControlJob, EpisodeConfig, run_jobs, summary_markdown, summary_row
-    from piga.goal import goal_from_image, render_goal_image
+    from piga.goal import goal_from_image
     from piga.train import load_model
 
-    with atomic_output(goal_png, overwrite=args.overwrite) as tmp:
-        iio.imwrite(tmp, render_goal_image(args.goal_angle), extension=".png")
+    control_cli.main(["--write-goal-image", str(goal_png), "--angle", str(args.goal_angle),
+                      *(["--overwrite"] if args.overwrite else [])])
     model, ckpt = load_model(run_dir)
     estimate = goal_from_image(model, ckpt, goal_png)
     for warning in estimate.warnings:

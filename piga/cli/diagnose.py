@@ -2,12 +2,10 @@
 
 from __future__ import annotations
 
-import shlex
-import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from piga.cli.common import ArgumentParser, PigaError, nonnegative_int, positive_int, run_cli
+from piga.cli.common import ArgumentParser, PigaError, command_line, nonnegative_int, positive_int, run_cli
 
 PROG = "piga-diagnose"
 
@@ -58,8 +56,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         diagnosis.control = compare_control(args.model, diagnosis, effects, episodes=args.episodes, seed=args.seed,
                                             progress=not args.quiet)
-    command = shlex.join([PROG, *(sys.argv[1:] if argv is None else argv)])
-    report = write_report(diagnosis, out, args.model, args.data, command, overwrite=args.overwrite)
+    report = write_report(diagnosis, out, args.model, args.data, command_line(PROG, argv), overwrite=args.overwrite)
     g = diagnosis.gap
     print(f"verdict: {diagnosis.verdict}")
     for note in diagnosis.notes:

@@ -2,11 +2,9 @@
 
 from __future__ import annotations
 
-import shlex
-import sys
 from collections.abc import Sequence
 
-from piga.cli.common import ArgumentParser, positive_float, positive_int, run_cli, split_type
+from piga.cli.common import ArgumentParser, command_line, positive_float, positive_int, run_cli, split_type
 from piga.importer import ImportConfig, import_recording
 
 PROG = "piga-import"
@@ -39,9 +37,8 @@ def build_parser() -> ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     config = ImportConfig(dt=args.dt, steps=args.steps, image_size=args.image_size, split=args.split)
-    argv_list = list(sys.argv[1:] if argv is None else argv)
     result = import_recording(args.recording, args.actions, args.out, config, overwrite=args.overwrite,
-                              command=shlex.join([PROG, *argv_list]))
+                              command=command_line(PROG, argv))
     print(f"wrote {result.path}: {result.sequences} sequences x {config.steps} frames of "
           f"({config.image_size}, {config.image_size}), split {result.split_counts}, dt={config.dt:g}")
     if result.dropped_frames:

@@ -2,13 +2,11 @@
 
 from __future__ import annotations
 
-import shlex
-import sys
 from collections.abc import Sequence
 from dataclasses import asdict, replace
 from pathlib import Path
 
-from piga.cli.common import ArgumentParser, PigaError, nonnegative_int, positive_float, positive_int, run_cli
+from piga.cli.common import ArgumentParser, PigaError, command_line, nonnegative_int, positive_float, positive_int, run_cli
 
 PROG = "piga-train-model"
 OUTPUTS = ("checkpoint.pt", "metrics.json", "config.json", "rollout.png", "templates.png", "curves.png")
@@ -77,7 +75,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not info.split_counts["train"]:
         raise PigaError(f"{args.data}: the train split is empty")
     run_dir.mkdir(parents=True, exist_ok=True)
-    write_json(run_dir / "config.json", {"command": shlex.join([PROG, *(sys.argv[1:] if argv is None else argv)]),
+    write_json(run_dir / "config.json", {"command": command_line(PROG, argv),
                                          "data": str(args.data), "train": asdict(train_config), "model": model_config.to_dict()})
     print(f"training on {args.data} ({info.split_counts['train']} train sequences x {info.steps} frames); "
           f"g and a start at {model_overrides.get('physics_init') or 'g=1, a=0.3'} -> {run_dir}")

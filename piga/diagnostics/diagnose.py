@@ -41,6 +41,7 @@ from piga.diagnostics.observe import Observations, observe
 from piga.diagnostics.residuals import (action_correlation, autocorrelation, binned, generic_features, heatmap,
                                         one_step_residuals)
 from piga.model import PhysicsModel
+from piga.train import training_reconstruction_mse
 
 #: Gymnasium Pendulum-v1's own speed clip (rad/s).
 GYM_SPEED_CLIP = 8.0
@@ -126,7 +127,7 @@ def nominal_of(model: PhysicsModel) -> F.Nominal:
 
 
 def _score(m: F.Model, nom: F.Nominal, w_fit1: F.Windows, w_free: F.Windows) -> dict[str, Any]:
-    bic, rss = F.one_step_bic(m, nom, w_fit1)
+    bic, _ = F.one_step_bic(m, nom, w_fit1)
     h = F.horizon_errors(m, nom, w_free)
     return {"model": m, "name": m.name, "bic": bic, "free_run": float(h.mean()), "horizon": h}
 
@@ -142,7 +143,7 @@ def diagnose(model: PhysicsModel, data: str | os.PathLike[str], config: Diagnose
         checkpoint: the model's checkpoint, for its training reconstruction error (vision check).
     """
     obs = observe(model, data, progress=progress)
-    return analyse(obs, nominal_of(model), config, model=model, rec_training=_training_rec(model, checkpoint),
+    return analyse(obs, nominal_of(model), config, model=model, rec_training=training_reconstruction_mse(model, checkpoint),
                    progress=progress)
 
 
@@ -198,16 +199,14 @@ def analyse(obs: Observations, nom: F.Nominal, config: DiagnoseConfig = Diagnose
         pool = []
         for name in tqdm(rest, desc=f"adding to {base.name}", disable=not progress):
             effects = tuple(e for e in F.CANDIDATES if e in (*base.effects, name))
-            start = {k: v for k, v in base.values.items()}
-            m = F.fit_candidate(effects, start, nom, w_fit) if name == "delay" or "delay" not in effects else \
-                F.fit(F.Model(effects, base.delay, start), nom, w_fit)
+            m = F.fit_candidate(effects, base.values, nom, w_fit, delay=base.delay or None)
             pool.append(_score(m, nom, w_fit1, w_free))
         pool.sort(key=lambda s: s["bic"])
 
     final: F.Model = chosen["model"]
     notes: list[str] = []
     # Gymnasium's own speed clip is no gap
-    named = [e for e in final.effects]
+    named = list(final.effects)
     if "speed_clip" in named and abs(final.values["v"] - GYM_SPEED_CLIP) <= config.gym_clip_tolerance:
         named.remove("speed_clip")
         notes.append(f"a speed clip at {final.values['v']:.2f} rad/s was found: Gymnasium's own ±8 rad/s clip, which the "
@@ -266,15 +265,14 @@ def analyse(obs: Observations, nom: F.Nominal, config: DiagnoseConfig = Diagnose
 
     # vision
     rec_real = float(np.mean(obs.rec_mse))
-    rec_train = rec_training
-    vision = {"rec_mse_real": rec_real, "rec_mse_training": rec_train,
-              "ratio": rec_real / rec_train if rec_train else float("nan")}
-    if rec_train and vision["ratio"] > config.vision_ratio:
+    vision = {"rec_mse_real": rec_real, "rec_mse_training": rec_training,
+              "ratio": rec_real / rec_training if rec_training else float("nan")}
+    if rec_training and vision["ratio"] > config.vision_ratio:
         notes.append(f"vision gap: the autoencoder re-renders the real frames {vision['ratio']:.1f}x worse than its "
                      "training frames (blur, noise, a shifted camera or a different scene?)")
 
     # gap per horizon, state and pixels
-    h_nom, h_fin = nominal_score["horizon"], F.horizon_errors(final, nom, w_free)
+    h_nom, h_fin = nominal_score["horizon"], chosen["horizon"]
     closure = [float(1 - b / a) if a > 0 else 0.0 for a, b in zip(h_nom, h_fin)]
     one_step = F.horizon_errors(final, nom, w_held1)[0]
     sigma = math.sqrt(one_step / 6)  # r = n_{t+1} - 2 n_t + n_{t-1} for white angle noise n
@@ -293,7 +291,7 @@ def analyse(obs: Observations, nom: F.Nominal, config: DiagnoseConfig = Diagnose
         "encoder_noise_rad": sigma,
         "free_run_gap_closure": gap_closure,
         "one_step_rms_nominal_rad": math.sqrt(float(F.horizon_errors(nominal_model, nom, w_held1)[0])),
-        "one_step_rms_corrected_rad": math.sqrt(float(F.horizon_errors(final, nom, w_held1)[0])),
+        "one_step_rms_corrected_rad": math.sqrt(float(one_step)),
         **pixels,
     }
     table = [{"candidate": "nominal (no refit)", "bic": nominal_score["bic"], "held_out_free_run_mse": nominal_score["free_run"],
@@ -323,16 +321,6 @@ def _describe(e: dict[str, Any]) -> str:
     return f"{e['effect']} {e['value']:.3g} {e['unit']}{ci}"
 
 
-def _training_rec(model: PhysicsModel, checkpoint: dict | None) -> float:
-    """The model's own per-frame reconstruction MSE at the end of training (0 if unknown)."""
-    try:
-        history = checkpoint["state"]["history"]  # type: ignore[index]
-        return float(history[-1]["loss_rec"]) / (model.config.input_frames if model.config.rec_frames == "input"
-                                                 else model.config.input_frames + model.config.pred_frames)
-    except (TypeError, KeyError, IndexError):
-        return 0.0
-
-
 @torch.no_grad()
 def _pixel_errors(model: PhysicsModel, obs: Observations, nom: F.Nominal, nominal_model: F.Model,
                   final: F.Model) -> dict[str, list[float]]:
@@ -346,7 +334,7 @@ def _pixel_errors(model: PhysicsModel, obs: Observations, nom: F.Nominal, nomina
     x = frames_to_float(torch.from_numpy(obs.frames[:, F.MAX_DELAY + 1 :]), model.config.channels)  # (n, H, C, H, W)
     out = {}
     for key, m in (("pixel_mse_nominal", nominal_model), ("pixel_mse_corrected", final)):
-        theta = F.simulate(m, F._params(m, nom), nom, w).float()  # (n, H)
+        theta = F.simulate(m, F.parameters_of(m, nom), nom, w).float()  # (n, H)
         frames = model.decoder(theta[..., None, None])  # (n, H, C, H, W)
         out[key] = ((frames - x) ** 2).mean(dim=(0, 2, 3, 4)).tolist()
     return out

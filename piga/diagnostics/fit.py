@@ -169,10 +169,6 @@ def simulate(model: Model, params: dict[str, Tensor], nominal: Nominal, w: Windo
 
 def parameters_of(model: Model, nominal: Nominal) -> dict[str, Tensor]:
     """The tensors :func:`simulate` takes, from a model's values (defaults: nominal g, a; grid starts)."""
-    return _params(model, nominal)
-
-
-def _params(model: Model, nominal: Nominal) -> dict[str, Tensor]:
     values = {"log_g": math.log(model.values.get("g", nominal.g)), "log_a": math.log(model.values.get("a", nominal.a))}
     for e in model.effects:
         if e in PARAMETER:
@@ -182,7 +178,7 @@ def _params(model: Model, nominal: Nominal) -> dict[str, Tensor]:
 
 def squared_errors(model: Model, nominal: Nominal, w: Windows, params: dict[str, Tensor] | None = None) -> Tensor:
     """(B, H) squared angle errors (masked to 0 outside the sequences)."""
-    p = _params(model, nominal) if params is None else params
+    p = parameters_of(model, nominal) if params is None else params
     return (simulate(model, p, nominal, w) - w.target) ** 2 * w.mask
 
 
@@ -215,7 +211,7 @@ def fit(model: Model, nominal: Nominal, w: Windows, weights: Tensor | None = Non
             if best is None or score < best[0]:
                 best = (score, value)
         start.values[name] = best[1]
-    params = _params(start, nominal)
+    params = parameters_of(start, nominal)
     free = [p for k, p in params.items() if fit_ga or not k.startswith("log_")]
     if not free:
         return start
@@ -246,11 +242,15 @@ def fit_best_delay(effects: tuple[str, ...], base: dict[str, float], nominal: No
     return best[1]
 
 
-def fit_candidate(effects: tuple[str, ...], base: dict[str, float], nominal: Nominal, w: Windows) -> Model:
-    """Fits a candidate with ``effects`` (starting g and a from ``base``)."""
-    if "delay" in effects:
+def fit_candidate(effects: tuple[str, ...], base: dict[str, float], nominal: Nominal, w: Windows,
+                  delay: int | None = None) -> Model:
+    """Fits a candidate with ``effects``, starting from the values in ``base`` (g, a, ...).
+
+    With a "delay" among the effects, ``delay`` holds k fixed; None searches k = 1..MAX_DELAY.
+    """
+    if "delay" in effects and delay is None:
         return fit_best_delay(effects, base, nominal, w)
-    return fit(Model(effects, 0, dict(base)), nominal, w)
+    return fit(Model(effects, delay if "delay" in effects else 0, dict(base)), nominal, w)
 
 
 def one_step_bic(model: Model, nominal: Nominal, w1: Windows) -> tuple[float, float]:
@@ -302,7 +302,7 @@ def noise_floor(model: Model, nominal: Nominal, w: Windows, sigma: float, draws:
     free-run error; closure is also reported against this floor.
     """
     gen = torch.Generator().manual_seed(seed)
-    p = _params(model, nominal)
+    p = parameters_of(model, nominal)
     with torch.no_grad():
         clean = simulate(model, p, nominal, w)  # (B, H)
         prev = w.theta0 - nominal.dt * w.v0  # θ_{s-1} consistent with the start

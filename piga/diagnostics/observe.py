@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from piga.data import SPLITS, inspect_dataset, split_indices
+from piga.data import SPLITS, DatasetInfo, inspect_dataset, split_indices
 from piga.model import PhysicsModel, frames_to_float
 
 
@@ -42,8 +42,9 @@ class Observations:
     """(n,) indices into N of ``frames``."""
 
 
-def check_compatible(model: PhysicsModel, path: str | os.PathLike[str], min_sequences: int = 20, min_steps: int = 12) -> None:
-    """Raises :class:`DiagnosisInputError` with one clear line when ``model`` cannot diagnose ``path``."""
+def check_compatible(model: PhysicsModel, path: str | os.PathLike[str], min_sequences: int = 20,
+                     min_steps: int = 12) -> DatasetInfo:
+    """The file's info; raises :class:`DiagnosisInputError` with one clear line when ``model`` cannot diagnose ``path``."""
     info = inspect_dataset(path)
     cfg = model.config
     if cfg.system != "pendulum":
@@ -65,6 +66,7 @@ def check_compatible(model: PhysicsModel, path: str | os.PathLike[str], min_sequ
     if n_fit < min_sequences // 2 or info.n_sequences - n_fit < min_sequences // 4:
         raise DiagnosisInputError(f"{path}: {n_fit} train and {info.n_sequences - n_fit} held-out sequences; "
                                   f"need at least {min_sequences // 2} and {min_sequences // 4}")
+    return info
 
 
 @torch.no_grad()
@@ -81,8 +83,7 @@ def observe(model: PhysicsModel, path: str | os.PathLike[str], batch: int = 16, 
     import h5py
     from tqdm.auto import tqdm
 
-    check_compatible(model, path)
-    info = inspect_dataset(path)
+    info = check_compatible(model, path)
     with h5py.File(path, "r") as f:
         split = f["split"][:] if "split" in f else np.zeros(info.n_sequences, np.int8)
         n = info.n_sequences

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from piga.diagnostics.fit import MAX_DELAY, Model, Nominal, Windows, _params, simulate
+from piga.diagnostics.fit import MAX_DELAY, Model, Nominal, make_windows, parameters_of, simulate
 
 
 @dataclass(frozen=True)
@@ -42,22 +42,13 @@ class Residuals:
 
 def one_step_residuals(model: Model, nominal: Nominal, theta: np.ndarray, actions: np.ndarray, rows: np.ndarray) -> Residuals:
     """One-step acceleration residuals of ``model`` on sequences ``rows`` of (N, T) encoded angles."""
-    t = theta.shape[1]
-    starts = np.arange(MAX_DELAY, t - 1)
-    th = torch.as_tensor(theta[rows], dtype=torch.float64)  # (n, T)
-    u = torch.as_tensor(np.clip(actions[rows], -2, 2), dtype=torch.float64)
-    # every start as one window of one step: (n * S,)
-    theta0 = th[:, starts].reshape(-1)
-    v0 = ((th[:, starts] - th[:, starts - 1]) / nominal.dt).reshape(-1)
-    hist = torch.stack([u[:, s - MAX_DELAY : s + 1] for s in starts], 1).reshape(-1, MAX_DELAY + 1)
-    target = th[:, starts + 1].reshape(-1, 1)
-    w = Windows(theta0, v0, hist, target, torch.ones_like(target), torch.zeros(len(theta0), dtype=torch.long))
+    w = make_windows(theta, actions, rows, 1, 1, nominal.dt)  # every start s = MAX_DELAY..T-2, start-major
     with torch.no_grad():
-        pred = simulate(model, _params(model, nominal), nominal, w)[:, 0]
-    rho = ((target[:, 0] - pred) / nominal.dt**2).numpy()
-    gym_theta = np.remainder(theta0.numpy() + nominal.offset + math.pi, 2 * math.pi) - math.pi
-    return Residuals(rho, gym_theta, v0.numpy(), hist[:, -1].numpy(), rho.reshape(len(rows), len(starts)),
-                     actions[rows])
+        pred = simulate(model, parameters_of(model, nominal), nominal, w)[:, 0]
+    rho = ((w.target[:, 0] - pred) / nominal.dt**2).numpy()  # (S * n,)
+    gym_theta = np.remainder(w.theta0.numpy() + nominal.offset + math.pi, 2 * math.pi) - math.pi
+    grid = rho.reshape(-1, len(rows)).T  # (n, S)
+    return Residuals(rho, gym_theta, w.v0.numpy(), w.actions[:, -1].numpy(), grid, actions[rows])
 
 
 def heatmap(res: Residuals, bins: int = 12, speed_limit: float | None = None) -> dict[str, list]:
