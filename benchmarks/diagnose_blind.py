@@ -1,8 +1,10 @@
 """Blind check of ``piga-diagnose``: random effects and magnitudes, labels hidden, then scored.
 
-Cases are drawn with a seeded RNG: no effect, one candidate effect (delay, deadzone, saturation,
-gain, damping, friction, bias, speed_clip), two of them, or an effect outside the candidate set
-(``cogging``, a position-periodic torque -k·sin(4θ)). For each case the script collects
+Cases are drawn with a seeded RNG: no effect, one candidate effect (dynamics: delay, deadzone,
+saturation, gain, damping, friction, bias, speed_clip; camera: blur, shift, noise, frame_drop,
+frame_delay), two of them, or an effect outside the candidate set (``cogging``, a
+position-periodic torque -k·sin(4θ)). An actuator delay and a camera delay are never drawn
+together: their sum could pass the largest delay the fit tries (4 steps). For each case the script collects
 ``--sequences`` sequences of the "real" system with ``piga.collect.collect``, then strips every
 label from the file: the ``effects`` attribute, the effects in ``env_config``, the command line,
 and ``/states``. Only then does it run the diagnosis, in a fresh process, as a user would:
@@ -46,7 +48,16 @@ DRAWS = {
     "saturation": lambda r: round(float(r.uniform(0.8, 1.5)), 3),
     "gain": lambda r: round(float(r.choice([r.uniform(0.7, 0.9), r.uniform(1.1, 1.3)])), 3),
     "speed_clip": lambda r: round(float(r.uniform(4.0, 6.0)), 3),
+    "blur": lambda r: round(float(r.uniform(0.8, 2.5)), 3),
+    "shift": lambda r: round(float(r.choice([-1, 1]) * r.uniform(0.8, 3.0)), 3),
+    "noise": lambda r: round(float(r.uniform(4.0, 25.0)), 2),
+    "frame_drop": lambda r: round(float(r.uniform(0.05, 0.3)), 3),
+    "frame_delay": lambda r: int(r.integers(1, 4)),
 }
+#: Pairs never drawn together.
+EXCLUDED_PAIRS = ({"delay", "frame_delay"},)
+#: Integer-valued effects, scored as exact or not.
+DISCRETE = ("delay", "frame_delay")
 #: The effect outside the candidate set.
 OUTSIDE = {"cogging": lambda r: round(float(r.uniform(0.3, 0.6)), 3)}
 
@@ -62,6 +73,8 @@ def draw_cases(n: int, seed: int) -> list[dict]:
     cases += [{"effects": {e: DRAWS[e](rng)}} for e in singles]
     for _ in range(n_pair):
         a, b = rng.choice(names, 2, replace=False)
+        while {str(a), str(b)} in EXCLUDED_PAIRS:
+            a, b = rng.choice(names, 2, replace=False)
         cases.append({"effects": {str(a): DRAWS[str(a)](rng), str(b): DRAWS[str(b)](rng)}})
     cases += [{"effects": {"cogging": OUTSIDE["cogging"](rng)}} for _ in range(n_out)]
     order = rng.permutation(len(cases))
@@ -102,14 +115,19 @@ def score(case: dict, report: dict) -> dict:
         top1 = first in case["effects"] and predicted != "unexplained"
     coef = {}
     for name, value in case["effects"].items():
-        if name in found and name != "delay":
+        if name in found and name == "shift":  # the env shifts right and down by the same p
+            coef[name] = max(abs(found[name]["dx"] - value), abs(found[name]["dy"] - value)) / abs(value)
+        elif name in found and name not in DISCRETE:
             coef[name] = abs(found[name]["value"] - value) / abs(value)
     delay_ok = None
-    if "delay" in case["effects"]:
-        delay_ok = "delay" in found and found["delay"]["value"] == case["effects"]["delay"]
+    for name in DISCRETE:
+        if name in case["effects"]:
+            ok = name in found and found[name]["value"] == case["effects"][name]
+            delay_ok = ok if delay_ok is None else (delay_ok and ok)
     return {"truth": truth, "predicted": predicted, "first": first, "top1": bool(top1), "exact": predicted == truth,
             "coefficient_error": coef, "delay_exact": delay_ok, "free_run_closure": report["gap"]["free_run_closure"],
-            "free_run_gap_closure": report["gap"]["free_run_gap_closure"],
+            "free_run_gap_closure": report["gap"]["free_run_gap_closure"], "closure_basis": report["gap"]["closure_basis"],
+            "mean_free_run_gap_closure": report["gap"]["mean_free_run_gap_closure"],
             "verdict": report["verdict"]}
 
 
@@ -121,6 +139,8 @@ def summarize(runs: list[dict]) -> dict:
     with_gap = [x["free_run_gap_closure"] for x in s if x["truth"] not in ("none", "unexplained")
                 and x["free_run_gap_closure"] is not None]
     raw = [x["free_run_closure"] for x in s if x["truth"] not in ("none", "unexplained")]
+    mean_gap = [x["mean_free_run_gap_closure"] for x in s if x["truth"] not in ("none", "unexplained")
+                and x.get("mean_free_run_gap_closure") is not None and x.get("closure_basis") == "state"]
     return {
         "cases": len(s),
         "top1_accuracy": float(np.mean([x["top1"] for x in s])) if s else None,
@@ -136,6 +156,8 @@ def summarize(runs: list[dict]) -> dict:
         "closure_at_least_90pct": float(np.mean([c >= 0.9 for c in with_gap])) if with_gap else None,
         "raw_closure_median": float(np.median(raw)) if raw else None,
         "raw_closure_min": float(np.min(raw)) if raw else None,
+        "mean_gap_closure_median": float(np.median(mean_gap)) if mean_gap else None,
+        "mean_gap_closure_at_least_90pct": float(np.mean([c >= 0.9 for c in mean_gap])) if mean_gap else None,
         "outside_reported_unexplained": float(np.mean([x["predicted"] == "unexplained" for x in s if x["truth"] == "unexplained"]))
         if any(x["truth"] == "unexplained" for x in s) else None,
     }
@@ -161,23 +183,30 @@ def markdown(runs: list[dict], summary: dict, command: str, info: dict) -> str:
         f"| coefficients within 10% | {pct(summary['coefficients_within_10pct'])} (median error {pct(summary['coefficient_error_median'])}, "
         f"max {pct(summary['coefficient_error_max'])}) | all |",
         f"| delay exact | {pct(summary['delay_exact_rate'])} | 100% |",
-        f"| free-run closure of the reducible gap (above the noise floor), cases with a candidate effect | median "
+        f"| free-run closure (report's headline), cases with a candidate effect | median "
         f"{pct(summary['closure_median'])}, min {pct(summary['closure_min'])}, ≥ 90% in {pct(summary['closure_at_least_90pct'])} | ≥ 90% |",
-        f"| raw free-run closure 1 − err_corrected / err_nominal, same cases | median {pct(summary['raw_closure_median'])}, "
-        f"min {pct(summary['raw_closure_min'])} | |",
+        f"| raw free-run closure 1 − err_corrected / err_nominal, mean over all held-out windows, same cases | median "
+        f"{pct(summary['raw_closure_median'])}, min {pct(summary['raw_closure_min'])} | |",
+        f"| mean free-run closure of the gap above a white-noise floor (the previous headline), angle-basis cases | median "
+        f"{pct(summary.get('mean_gap_closure_median'))}, ≥ 90% in {pct(summary.get('mean_gap_closure_at_least_90pct'))} | |",
         f"| outside-the-set effect reported as unexplained | {pct(summary['outside_reported_unexplained'])} | 100% |", "",
+        "The headline closure is 1 − err_corrected / err_nominal on the typical held-out window (the median over "
+        "windows of each window's mean squared free-run angle error), with no floor subtracted. When a camera effect "
+        "(blur, shift, noise) is found, the corrected model reads different angles from the frames, so the closure is "
+        "taken in pixels instead, on the typical window, of the gap above the matched re-rendering error (a true "
+        "floor: no angle renders closer).", "",
         "## Confusion (rows: truth, 'pair' for two effects; columns: first named effect or verdict)", "",
         "| truth \\ predicted | " + " | ".join(preds) + " |", "|---|" + "---|" * len(preds),
     ]
     for t in rows:
         lines.append(f"| {t} | " + " | ".join(str(conf.get((t, p), 0) or "") for p in preds) + " |")
-    lines += ["", "## Cases", "", "| case | truth (hidden from the diagnosis) | verdict | top-1 | closure of the reducible gap | raw closure |",
+    lines += ["", "## Cases", "", "| case | truth (hidden from the diagnosis) | verdict | top-1 | closure (basis) | raw mean closure |",
               "|---|---|---|---|---|---|"]
     for r in runs:
         eff = ", ".join(f"{k}={v}" for k, v in r["effects"].items()) or "none"
         sc = r["score"]
         lines.append(f"| {r['case']} | {eff} | {sc['verdict']} | {'yes' if sc['top1'] else '**no**'} | "
-                     f"{pct(sc['free_run_gap_closure'])} | {pct(sc['free_run_closure'])} |")
+                     f"{pct(sc['free_run_gap_closure'])} ({sc.get('closure_basis', 'state')}) | {pct(sc['free_run_closure'])} |")
     return "\n".join(lines) + "\n"
 
 

@@ -76,14 +76,23 @@ class Windows:
     """(B, H) 1 where the target exists (inside the sequence)."""
     sequence: Tensor
     """(B,) index of the window's sequence."""
+    source: Tensor | None = None
+    """(B, H) long or None. With repeated (stale) frames: which prediction each target repeats,
+    0 for the start θ_s and j for the j-th predicted step. A camera that dropped frame t shows
+    frame t - 1 again, so a model that knows it predicts the repeat (see :func:`squared_errors`)."""
 
 
 def make_windows(theta: np.ndarray, actions: np.ndarray, rows: np.ndarray, horizon: int | None, stride: int,
-                 dt: float) -> Windows:
+                 dt: float, stale: np.ndarray | None = None, repeat: bool = False) -> Windows:
     """Windows from sequences ``rows`` of (N, T) angles and actions.
 
     Starts run from s = MAX_DELAY (so every delay up to MAX_DELAY has its actions) every ``stride``
     frames. ``horizon`` None rolls every window to the end of its sequence (free run), masked.
+
+    ``stale`` (N, T) bool marks repeated frames (dropped or delayed by the camera). Then a window
+    starts only where frames s - 1 and s are fresh (its velocity is a real difference), and a stale
+    target is masked out, or with ``repeat`` kept and mapped to the prediction it repeats
+    (:attr:`Windows.source`).
     """
     t = theta.shape[1]
     s_min = max(1, MAX_DELAY)
@@ -91,18 +100,30 @@ def make_windows(theta: np.ndarray, actions: np.ndarray, rows: np.ndarray, horiz
     starts = np.arange(s_min, t - 1 if horizon is None else t - horizon, stride)
     if len(starts) == 0 or h < 1:
         raise ValueError(f"sequences of {t} frames are too short for windows of {h} steps after {s_min} frames")
-    th0, v0, acts, target, mask, seq = [], [], [], [], [], []
+    th0, v0, acts, target, mask, seq, src = [], [], [], [], [], [], []
     pad_t = np.pad(theta, ((0, 0), (0, h)), mode="edge")
     pad_u = np.pad(np.clip(actions, -2.0, 2.0), ((0, 0), (0, h)))
+    if stale is not None:
+        from piga.diagnostics.vision import repeat_sources
+
+        pad_stale = np.pad(stale, ((0, 0), (0, h)), mode="edge")
+        pad_src = np.pad(repeat_sources(stale), ((0, 0), (0, h)), mode="edge")
     for s in starts:
-        th0.append(theta[rows, s])
-        v0.append((theta[rows, s] - theta[rows, s - 1]) / dt)
-        acts.append(pad_u[rows, s - MAX_DELAY : s + h])
-        target.append(pad_t[rows, s + 1 : s + 1 + h])
-        mask.append(np.broadcast_to(np.arange(s + 1, s + 1 + h) < t, (len(rows), h)))
-        seq.append(rows)
+        r = rows if stale is None else rows[~stale[rows, s] & ~stale[rows, s - 1]]
+        inside = np.broadcast_to(np.arange(s + 1, s + 1 + h) < t, (len(r), h))
+        th0.append(theta[r, s])
+        v0.append((theta[r, s] - theta[r, s - 1]) / dt)
+        acts.append(pad_u[r, s - MAX_DELAY : s + h])
+        target.append(pad_t[r, s + 1 : s + 1 + h])
+        seq.append(r)
+        if stale is not None and repeat:
+            src.append(pad_src[r, s + 1 : s + 1 + h] - s)
+        elif stale is not None:
+            inside = inside & ~pad_stale[r, s + 1 : s + 1 + h]
+        mask.append(inside)
     f = lambda x: torch.as_tensor(np.concatenate(x), dtype=torch.float64)  # noqa: E731
-    return Windows(f(th0), f(v0), f(acts), f(target), f(mask), torch.as_tensor(np.concatenate(seq)))
+    source = torch.as_tensor(np.concatenate(src), dtype=torch.long) if src else None
+    return Windows(f(th0), f(v0), f(acts), f(target), f(mask), torch.as_tensor(np.concatenate(seq)), source)
 
 
 @dataclass
@@ -179,7 +200,10 @@ def parameters_of(model: Model, nominal: Nominal) -> dict[str, Tensor]:
 def squared_errors(model: Model, nominal: Nominal, w: Windows, params: dict[str, Tensor] | None = None) -> Tensor:
     """(B, H) squared angle errors (masked to 0 outside the sequences)."""
     p = parameters_of(model, nominal) if params is None else params
-    return (simulate(model, p, nominal, w) - w.target) ** 2 * w.mask
+    pred = simulate(model, p, nominal, w)  # (B, H)
+    if w.source is not None:  # repeated frames repeat a prediction (or the start)
+        pred = torch.cat([w.theta0[:, None], pred], 1).gather(1, w.source)
+    return (pred - w.target) ** 2 * w.mask
 
 
 def loss(model: Model, nominal: Nominal, w: Windows, weights: Tensor | None = None,
@@ -273,6 +297,13 @@ def horizon_errors(model: Model, nominal: Nominal, w: Windows) -> np.ndarray:
     return (se.sum(0) / w.mask.sum(0).clamp_min(1)).numpy()
 
 
+def window_errors(model: Model, nominal: Nominal, w: Windows) -> np.ndarray:
+    """(B,) each window's mean squared angle error (rad²) over its steps (masked)."""
+    with torch.no_grad():
+        se = squared_errors(model, nominal, w)
+    return (se.sum(1) / w.mask.sum(1).clamp_min(1)).numpy()
+
+
 def bootstrap(model: Model, nominal: Nominal, w: Windows, replicates: int, seed: int) -> dict[str, list[float]]:
     """Refits ``model`` on ``replicates`` resamplings of the fit sequences; returns each parameter's values.
 
@@ -292,8 +323,9 @@ def bootstrap(model: Model, nominal: Nominal, w: Windows, replicates: int, seed:
     return draws
 
 
-def noise_floor(model: Model, nominal: Nominal, w: Windows, sigma: float, draws: int = 3, seed: int = 0) -> np.ndarray:
-    """(H,) the error per horizon that ``model`` would still have if it were exactly right.
+def noise_floor(model: Model, nominal: Nominal, w: Windows, sigma: float, draws: int = 3,
+                seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """The error that ``model`` would still have if it were exactly right: (H,) per horizon and (B,) per window.
 
     A parametric bootstrap: trajectories are simulated with ``model`` itself from the windows'
     starts and actions, white noise of ``sigma`` (rad) is added to every observed angle, as the
@@ -305,11 +337,17 @@ def noise_floor(model: Model, nominal: Nominal, w: Windows, sigma: float, draws:
     p = parameters_of(model, nominal)
     with torch.no_grad():
         clean = simulate(model, p, nominal, w)  # (B, H)
+        if w.source is not None:  # a repeated frame shows the state of the frame it repeats
+            clean = torch.cat([w.theta0[:, None], clean], 1).gather(1, w.source)
         prev = w.theta0 - nominal.dt * w.v0  # θ_{s-1} consistent with the start
         total = torch.zeros(w.target.shape[1], dtype=torch.float64)
+        per_window = torch.zeros(w.target.shape[0], dtype=torch.float64)
         for _ in range(draws):
             noise = lambda shape: sigma * torch.randn(shape, generator=gen, dtype=torch.float64)  # noqa: E731
             start, before = w.theta0 + noise(w.theta0.shape), prev + noise(prev.shape)
-            noisy = Windows(start, (start - before) / nominal.dt, w.actions, clean + noise(clean.shape), w.mask, w.sequence)
-            total += ((simulate(model, p, nominal, noisy) - noisy.target) ** 2 * w.mask).sum(0) / w.mask.sum(0).clamp_min(1)
-    return (total / draws).numpy()
+            noisy = Windows(start, (start - before) / nominal.dt, w.actions, clean + noise(clean.shape), w.mask, w.sequence,
+                            w.source)
+            se = squared_errors(model, nominal, noisy, p)  # (B, H)
+            total += se.sum(0) / w.mask.sum(0).clamp_min(1)
+            per_window += se.sum(1) / w.mask.sum(1).clamp_min(1)
+    return (total / draws).numpy(), (per_window / draws).numpy()

@@ -15,6 +15,7 @@ import numpy as np
 import torch
 
 from piga.data import SPLITS, DatasetInfo, inspect_dataset, split_indices
+from piga.diagnostics.vision import stale_frames
 from piga.model import PhysicsModel, frames_to_float
 
 
@@ -40,6 +41,8 @@ class Observations:
     """(n, T, H, W) uint8 a few held-out sequences' frames, for pixel errors and pictures."""
     frames_index: np.ndarray
     """(n,) indices into N of ``frames``."""
+    stale: np.ndarray | None = None
+    """(N, T) bool: frame t is byte-identical to frame t - 1 (a repeated frame); None: not known."""
 
 
 def check_compatible(model: PhysicsModel, path: str | os.PathLike[str], min_sequences: int = 20,
@@ -70,7 +73,7 @@ def check_compatible(model: PhysicsModel, path: str | os.PathLike[str], min_sequ
 
 
 @torch.no_grad()
-def observe(model: PhysicsModel, path: str | os.PathLike[str], batch: int = 16, keep_frames: int = 24,
+def observe(model: PhysicsModel, path: str | os.PathLike[str], batch: int = 16, keep_frames: int = 40,
             progress: bool = False) -> Observations:
     """Encodes and re-renders every frame of ``path`` with ``model``.
 
@@ -89,11 +92,13 @@ def observe(model: PhysicsModel, path: str | os.PathLike[str], batch: int = 16, 
         n = info.n_sequences
         theta = np.empty((n, info.steps))
         rec = np.empty((n, info.steps))
+        stale = np.empty((n, info.steps), bool)
         actions = f["actions"][:, :, 0].astype(np.float64)
         held = np.flatnonzero(split != SPLITS["train"])
         keep = held[:keep_frames]
         for start in tqdm(range(0, n, batch), desc="encoding", disable=not progress):
             raw = f["frames"][start : start + batch]
+            stale[start : start + batch] = stale_frames(raw)
             x = frames_to_float(torch.from_numpy(raw), model.config.channels)  # (B, T, C, H, W)
             coords = model.encode(x)  # (B, T, 1, 1)
             rec[start : start + batch] = ((model.decoder(coords) - x) ** 2).mean(dim=(2, 3, 4)).double().numpy()
@@ -101,4 +106,4 @@ def observe(model: PhysicsModel, path: str | os.PathLike[str], batch: int = 16, 
         frames = f["frames"][np.sort(keep)] if len(keep) else np.zeros((0, info.steps, *info.image_shape), np.uint8)
     if not np.isfinite(actions).all():
         raise DiagnosisInputError(f"{path}: /actions holds NaN or infinite values")
-    return Observations(theta, actions, rec, split == SPLITS["train"], float(info.dt), frames, np.sort(keep))
+    return Observations(theta, actions, rec, split == SPLITS["train"], float(info.dt), frames, np.sort(keep), stale)

@@ -38,17 +38,28 @@ class Residuals:
     """(N, T - 1 - MAX_DELAY) ρ per sequence and step, for correlations."""
     actions_grid: np.ndarray
     """(N, T) the actions, aligned with ``grid`` from step MAX_DELAY."""
+    valid: np.ndarray | None = None
+    """(n,) bool or None: False where frame s - 1, s or s + 1 is a repeated (stale) frame."""
 
 
-def one_step_residuals(model: Model, nominal: Nominal, theta: np.ndarray, actions: np.ndarray, rows: np.ndarray) -> Residuals:
-    """One-step acceleration residuals of ``model`` on sequences ``rows`` of (N, T) encoded angles."""
+def one_step_residuals(model: Model, nominal: Nominal, theta: np.ndarray, actions: np.ndarray, rows: np.ndarray,
+                       stale: np.ndarray | None = None) -> Residuals:
+    """One-step acceleration residuals of ``model`` on sequences ``rows`` of (N, T) encoded angles.
+
+    ``stale`` (N, T) bool marks repeated frames; the residuals that touch one are flagged in ``valid``.
+    """
     w = make_windows(theta, actions, rows, 1, 1, nominal.dt)  # every start s = MAX_DELAY..T-2, start-major
     with torch.no_grad():
         pred = simulate(model, parameters_of(model, nominal), nominal, w)[:, 0]
     rho = ((w.target[:, 0] - pred) / nominal.dt**2).numpy()  # (S * n,)
     gym_theta = np.remainder(w.theta0.numpy() + nominal.offset + math.pi, 2 * math.pi) - math.pi
     grid = rho.reshape(-1, len(rows)).T  # (n, S)
-    return Residuals(rho, gym_theta, w.v0.numpy(), w.actions[:, -1].numpy(), grid, actions[rows])
+    valid = None
+    if stale is not None:
+        t = theta.shape[1]
+        touch = stale[rows][:, MAX_DELAY - 1 : t - 1] | stale[rows][:, MAX_DELAY : t] | np.pad(stale[rows], ((0, 0), (0, 1)))[:, MAX_DELAY + 1 : t + 1]
+        valid = ~touch[:, : grid.shape[1]].T.reshape(-1)  # start-major, like rho
+    return Residuals(rho, gym_theta, w.v0.numpy(), w.actions[:, -1].numpy(), grid, actions[rows], valid)
 
 
 def heatmap(res: Residuals, bins: int = 12, speed_limit: float | None = None) -> dict[str, list]:

@@ -1,0 +1,422 @@
+"""Camera-side candidates of the gap: blur, a shifted camera, sensor noise, dropped and delayed frames.
+
+The dynamics candidates (:mod:`piga.diagnostics.fit`) explain the encoded angles. A camera effect
+instead changes how a state looks, so it is fitted on the rendering side, by analysis by synthesis
+with the identified decoder D:
+
+- **Angle table.** For a camera ψ the decoder renders K angles once: R_j = V_ψ(D(θ_j)). Every
+  frame x is then matched to the table, θ*(x) = argmin_j ||x - R_j||², refined by a parabola
+  through the neighbouring distances (the grid is 0.5°). This is an exact search over the whole
+  circle, one matrix product for all frames; no gradient descent that could stop in a local
+  minimum when noise has made the encoder's angle useless.
+- **Blur σ and shift (dx, dy)** (:class:`Camera`) are fitted by minimising the mean matched
+  residual min_j ||x - V_ψ(D(θ_j))||² over a sample of the fit split (coordinate descent with
+  bounded scalar searches), and scored on a held-out sample. V_ψ blurs with a Gaussian kernel
+  (``cv2.GaussianBlur``'s, reflected border) and then translates with ``affine_grid`` /
+  ``grid_sample`` (border replicated), the equations of :mod:`envs.effects`.
+- **Noise s** (gray levels) is fitted on the pixels that the pendulum never reaches (the decoder's
+  renders over the whole circle leave them at the background): their temporal spread around the
+  per-pixel median, by maximum likelihood of a rounded Gaussian censored at 0 and 255 (a white
+  background clips half of the noise). A clean camera gives s = 0 there exactly.
+- **Repeated frames.** A frame identical, byte for byte, to the one before it while the pendulum
+  moves carries no new information: a dropped frame. When the first k frames of (nearly) every
+  sequence repeat the first one, the camera started k frames late: a camera delay of k steps,
+  which from then on looks exactly like an actuator delay of k (o_{t+1} = f(o_t, u_{t-k})).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from torch import Tensor
+
+from piga.model import PhysicsModel
+
+#: Angles in the matching table (0.5° apart).
+TABLE_SIZE = 720
+#: Bounds of the camera fit: blur σ in px, shift in px.
+MAX_BLUR, MAX_SHIFT = 4.0, 5.0
+
+
+@dataclass(frozen=True)
+class Camera:
+    """A camera model V_ψ applied to rendered frames: Gaussian blur, then a translation."""
+
+    blur: float = 0.0
+    """σ of the Gaussian blur (px); 0: none."""
+    dx: float = 0.0
+    """Shift to the right (px): x'[r, c] = x[r, c - dx]."""
+    dy: float = 0.0
+    """Shift down (px): x'[r, c] = x[r - dy, c]."""
+
+    def apply(self, frames: Tensor) -> Tensor:
+        """(K, C, H, W) frames in [0, 1] -> the same frames as this camera sees them."""
+        x = frames
+        if self.blur > 1e-3:
+            # cv2.GaussianBlur's kernel for float images: radius ceil(4σ), normalised; its default
+            # border (BORDER_REFLECT_101) is torch's "reflect" padding.
+            r = max(1, min(int(math.ceil(4 * self.blur)), x.shape[-1] - 1))
+            k = torch.exp(-0.5 * (torch.arange(-r, r + 1, dtype=x.dtype) / self.blur) ** 2)
+            k = (k / k.sum()).to(x)
+            c = x.shape[1]
+            x = F.conv2d(F.pad(x, (r, r, 0, 0), mode="reflect"), k.view(1, 1, 1, -1).expand(c, 1, 1, -1), groups=c)
+            x = F.conv2d(F.pad(x, (0, 0, r, r), mode="reflect"), k.view(1, 1, -1, 1).expand(c, 1, -1, 1), groups=c)
+        if abs(self.dx) > 1e-6 or abs(self.dy) > 1e-6:
+            n, _, h, w = x.shape
+            omega = torch.tensor([[1.0, 0.0, -2 * self.dx / w], [0.0, 1.0, -2 * self.dy / h]], dtype=x.dtype)
+            grid = F.affine_grid(omega.expand(n, 2, 3), list(x.shape), align_corners=False)  # (K, H, W, 2)
+            x = F.grid_sample(x, grid, mode="bilinear", padding_mode="border", align_corners=False)
+        return x
+
+
+@dataclass(frozen=True)
+class AngleTable:
+    """Renders of K angles through a camera, flattened for matching."""
+
+    angles: Tensor
+    """(K,) model-convention angles, uniformly spaced over [-π, π)."""
+    renders: Tensor
+    """(K, P) rendered frames, P = C·H·W, in [0, 1]."""
+
+
+@torch.no_grad()
+def angle_table(model: PhysicsModel, camera: Camera = Camera(), size: int = TABLE_SIZE) -> AngleTable:
+    """The decoder's renders of ``size`` angles, seen through ``camera``."""
+    angles = torch.arange(size, dtype=torch.float32) * (2 * math.pi / size) - math.pi
+    frames = model.decoder(angles[:, None, None])  # (K, C, H, W)
+    return AngleTable(angles, camera.apply(frames).flatten(1))
+
+
+@torch.no_grad()
+def match(table: AngleTable, x: Tensor, batch: int = 2048) -> tuple[Tensor, Tensor]:
+    """Analysis by synthesis: each frame's best angle in the table, refined by a parabola.
+
+    Args:
+        x: (M, P) frames in [0, 1], flattened like ``table.renders``.
+    Returns:
+        θ* (M,) in [-π, π) and the matched residual (M,) mean squared pixel error.
+    """
+    k = table.renders.shape[0]
+    r2 = (table.renders**2).sum(1)  # (K,)
+    thetas, errors = [], []
+    for start in range(0, x.shape[0], batch):
+        xb = x[start : start + batch]
+        d = (xb**2).sum(1, keepdim=True) - 2 * xb @ table.renders.T + r2  # (m, K) squared distances
+        j = d.argmin(1)  # (m,)
+        d0 = d.gather(1, j[:, None])[:, 0]
+        dm = d.gather(1, ((j - 1) % k)[:, None])[:, 0]
+        dp = d.gather(1, ((j + 1) % k)[:, None])[:, 0]
+        curv = dm - 2 * d0 + dp
+        delta = torch.where(curv > 0, 0.5 * (dm - dp) / curv.clamp_min(1e-12), torch.zeros_like(d0)).clamp(-0.5, 0.5)
+        step = 2 * math.pi / k
+        thetas.append(torch.remainder(table.angles[j] + delta * step + math.pi, 2 * math.pi) - math.pi)
+        errors.append((d0 - 0.25 * (dm - dp) * delta).clamp_min(0) / x.shape[1])
+    return torch.cat(thetas), torch.cat(errors)
+
+
+def matched_error(model: PhysicsModel, camera: Camera, x: Tensor, size: int = TABLE_SIZE // 2) -> float:
+    """Mean matched residual (pixel MSE) of frames ``x`` (M, P) under ``camera``."""
+    return float(match(angle_table(model, camera, size), x)[1].mean())
+
+
+def fit_camera(model: PhysicsModel, x: Tensor, blur: bool = True, shift: bool = True, rounds: int = 2) -> Camera:
+    """The camera (blur σ and/or shift dx, dy) that minimises the matched residual of frames ``x`` (M, P).
+
+    Coordinate descent: bounded scalar searches on each parameter in turn, ``rounds`` times.
+    """
+    from scipy.optimize import minimize_scalar
+
+    cam = {"blur": 0.0, "dx": 0.0, "dy": 0.0}
+    names = (["dx", "dy"] if shift else []) + (["blur"] if blur else [])
+    if not names:
+        return Camera()
+    for _ in range(rounds):
+        for name in names:
+            lo, hi = (0.0, MAX_BLUR) if name == "blur" else (-MAX_SHIFT, MAX_SHIFT)
+
+            def objective(v: float, name: str = name) -> float:
+                return matched_error(model, Camera(**{**cam, name: float(v)}), x)
+
+            # a coarse scan first: the residual of a shift has side minima a pixel apart
+            grid = np.linspace(lo, hi, 9 if name == "blur" else 11)
+            best = grid[int(np.argmin([objective(v) for v in grid]))]
+            step = grid[1] - grid[0]
+            res = minimize_scalar(objective, bounds=(max(lo, best - step), min(hi, best + step)), method="bounded",
+                                  options={"xatol": 0.01})
+            cam[name] = float(res.x) if res.fun <= objective(best) else float(best)
+    return Camera(**cam)
+
+
+@torch.no_grad()
+def static_pixels(model: PhysicsModel, margin: int = 4) -> np.ndarray:
+    """(H, W) bool: pixels that the decoder leaves at its background for every angle, ``margin`` px away."""
+    import cv2
+
+    table = angle_table(model, Camera(), 180)
+    cfg = model.config
+    frames = table.renders.view(-1, cfg.channels, cfg.image_size, cfg.image_size)
+    spread = (frames - frames.median(0).values).abs().amax(dim=(0, 1)).numpy()  # (H, W)
+    still = (spread < 0.5 / 255).astype(np.uint8)
+    if margin > 0:
+        still = cv2.erode(still, np.ones((2 * margin + 1, 2 * margin + 1), np.uint8), borderType=cv2.BORDER_REPLICATE)
+    return still.astype(bool)
+
+
+def wilson(k: int, n: int, z: float = 1.96) -> list[float]:
+    """Wilson score interval of a proportion k / n."""
+    p = k / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return [centre - half, centre + half]
+
+
+def noise_level(frames: np.ndarray, still: np.ndarray, interval: bool = False) -> float | tuple[float, list[float] | None]:
+    """Sensor noise s (gray levels) from uint8 frames (M, H, W) on the pixels ``still`` (H, W).
+
+    Maximum likelihood of y = clip(round(μ + s·ε), 0, 255), ε ~ N(0, 1), with μ each pixel's
+    temporal median. Returns 0 when the still pixels never change (a clean camera). With
+    ``interval``, also a 95% interval from the observed information in log s (None for s = 0).
+    """
+    from scipy.optimize import minimize_scalar
+    from scipy.stats import norm
+
+    y = frames[:, still].reshape(len(frames), -1).astype(np.int64)  # (M, S)
+    if y.size == 0:
+        return (float("nan"), None) if interval else float("nan")
+    mu = np.median(y, axis=0)  # (S,)
+    if (y == mu).all():
+        return (0.0, None) if interval else 0.0
+    # the likelihood depends only on (μ, y) pairs: count them
+    pairs, counts = np.unique(np.stack([np.broadcast_to(mu, y.shape).ravel() * 512 + y.ravel()]), return_counts=True)
+    mus, ys = pairs // 512, pairs % 512
+
+    def nll(log_s: float) -> float:
+        s = math.exp(log_s)
+        upper = np.where(ys >= 255, np.inf, (ys + 0.5 - mus) / s)
+        lower = np.where(ys <= 0, -np.inf, (ys - 0.5 - mus) / s)
+        p = np.clip(norm.cdf(upper) - norm.cdf(lower), 1e-300, 1.0)
+        return float(-(counts * np.log(p)).sum())
+
+    res = minimize_scalar(nll, bounds=(math.log(0.05), math.log(128.0)), method="bounded")
+    s = math.exp(res.x) if math.exp(res.x) > 0.06 else 0.0
+    if not interval:
+        return s
+    h = 0.01
+    info = (nll(res.x + h) - 2 * nll(res.x) + nll(res.x - h)) / h**2
+    ci = [s * math.exp(-1.96 / math.sqrt(info)), s * math.exp(1.96 / math.sqrt(info))] if s > 0 and info > 0 else None
+    return s, ci
+
+
+def stale_frames(frames: np.ndarray) -> np.ndarray:
+    """(N, T) bool: frame t is byte-identical to frame t - 1 (never true at t = 0). ``frames`` (N, T, ...)."""
+    same = (frames[:, 1:] == frames[:, :-1]).reshape(frames.shape[0], frames.shape[1] - 1, -1).all(-1)
+    return np.concatenate([np.zeros((frames.shape[0], 1), bool), same], axis=1)
+
+
+def leading_repeats(stale: np.ndarray, share: float = 0.9) -> int:
+    """k such that frames 1..k repeat frame 0 in at least ``share`` of the sequences (0: none)."""
+    run = np.argmin(np.concatenate([stale[:, 1:], np.zeros((len(stale), 1), bool)], axis=1), axis=1)  # (N,) leading run
+    k = 0
+    while np.mean(run >= k + 1) >= share:
+        k += 1
+    return k
+
+
+def repeat_sources(stale: np.ndarray) -> np.ndarray:
+    """(N, T) int: for each frame, the index of the last fresh frame at or before it."""
+    t = np.arange(stale.shape[1])
+    return np.maximum.accumulate(np.where(stale, 0, t[None]), axis=1)
+
+
+@dataclass(frozen=True)
+class CameraConfig:
+    """How the camera stage decides."""
+
+    fit_frames: int = 1000
+    """Frames of the fit split that the camera is fitted on."""
+    held_frames: int = 500
+    """Held-out frames it is scored on."""
+    min_drop: float = 0.1
+    """Relative drop of the held-out matched residual that a blur or a shift needs (measured on clean
+    data: 0%; 23-98% for blur 1-2 px and shifts of 1.5-2 px)."""
+    min_blur: float = 0.3
+    """Smallest blur σ (px) that is named."""
+    min_shift: float = 0.3
+    """Smallest shift (px, either axis) that is named."""
+    min_noise: float = 1.0
+    """Smallest sensor noise (gray levels) that is named (a clean camera gives 0)."""
+    min_drop_rate: float = 0.005
+    """Share of repeated frames while the pendulum moves, above which frames are named dropped."""
+    min_drops: int = 5
+    """... and at least this many of them."""
+    moving: float = 0.002
+    """rad per step across a repeated frame at or below which the pendulum counts as still (not a drop)."""
+
+
+@dataclass
+class CameraFindings:
+    """What the camera stage found; ``theta`` holds the re-matched angles when a camera or noise was accepted."""
+
+    camera: Camera
+    """The accepted camera (all zero: none)."""
+    noise: float
+    """Sensor noise s (gray levels) on the still pixels."""
+    drop_rate: float
+    """Share of frames after the leading run that repeat the previous one while the pendulum moves."""
+    drops: int
+    """How many such frames."""
+    leading: int
+    """Frames 1..k repeat frame 0 in nearly every sequence (a camera that starts late)."""
+    table: list[dict]
+    """Candidate rows: camera, held-out matched residual, its drop against no camera, accepted."""
+    matched_error_nominal: float
+    """Held-out matched residual with no camera effect."""
+    matched_error: float
+    """... with the accepted camera: the floor of any prediction's pixel error."""
+    effects: list[dict]
+    """Named camera effects (blur, shift, noise, frame_drop) with value and unit."""
+    theta: np.ndarray | None = None
+    """(N, T) angles matched under the accepted camera (None: the encoder's angles stand)."""
+
+    @property
+    def rematched(self) -> bool:
+        return self.theta is not None
+
+
+def _sample(path: str, rows: np.ndarray, count: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """(count, H, W[, C]) uint8 random frames of sequences ``rows`` of the file, and (count,) their sequences."""
+    import h5py
+
+    with h5py.File(path, "r") as f:
+        ds = f["frames"]
+        t = ds.shape[1]
+        seqs = np.sort(rng.choice(rows, min(len(rows), max(1, count // t + 1) * 2), replace=False))
+        frames = ds[seqs].reshape(-1, *ds.shape[2:])
+    pick = np.sort(rng.choice(len(frames), min(count, len(frames)), replace=False))
+    return frames[pick], np.repeat(seqs, t)[pick]
+
+
+def camera_interval(model: PhysicsModel, camera: Camera, name: str, x: Tensor, clusters: np.ndarray,
+                    step: float = 0.05) -> list[float]:
+    """95% interval of one camera parameter: the sandwich (M-estimator) variance, robust to frames of a
+    sequence being alike (clustered by ``clusters`` (M,)), from per-frame residual derivatives."""
+    errs = []
+    for sign in (-1, 0, 1):
+        value = getattr(camera, name) + sign * step
+        cam = Camera(**{**camera.__dict__, name: max(value, 0.0) if name == "blur" else value})
+        errs.append(match(angle_table(model, cam), x)[1].double().numpy())
+    d1 = (errs[2] - errs[0]) / (2 * step)  # (M,)
+    curvature = float(np.mean(errs[2] - 2 * errs[1] + errs[0])) / step**2
+    sums = np.bincount(np.unique(clusters, return_inverse=True)[1], weights=d1 - d1.mean())
+    value = getattr(camera, name)
+    if curvature <= 0:
+        return [float("nan"), float("nan")]
+    sd = math.sqrt(float((sums**2).sum())) / (len(d1) * curvature)
+    return [value - 1.96 * sd, value + 1.96 * sd]
+
+
+def _flat(frames: np.ndarray) -> Tensor:
+    x = torch.from_numpy(np.ascontiguousarray(frames)).float().div(255)
+    if x.dim() == 4:  # (M, H, W, C) -> (M, C, H, W)
+        x = x.permute(0, 3, 1, 2)
+    return x.reshape(len(x), -1)
+
+
+@torch.no_grad()
+def match_file(model: PhysicsModel, path: str, camera: Camera, batch: int = 64) -> np.ndarray:
+    """(N, T) angles of every frame of ``path`` matched under ``camera``, unwrapped along time."""
+    import h5py
+
+    table = angle_table(model, camera)
+    with h5py.File(path, "r") as f:
+        ds = f["frames"]
+        n, t = ds.shape[:2]
+        out = np.empty((n, t))
+        for start in range(0, n, batch):
+            raw = ds[start : start + batch]
+            th, _ = match(table, _flat(raw.reshape(-1, *raw.shape[2:])))
+            out[start : start + len(raw)] = th.double().numpy().reshape(len(raw), t)
+    return np.unwrap(out, axis=1)
+
+
+def camera_stage(model: PhysicsModel, path: str, theta: np.ndarray, fit: np.ndarray, stale: np.ndarray | None,
+                 config: CameraConfig = CameraConfig(), seed: int = 0) -> CameraFindings:
+    """Fits and tests the camera candidates on the recording ``path``.
+
+    Args:
+        theta: (N, T) the encoder's angles (to tell a moving pendulum from a still one).
+        fit: (N,) bool, the fit split.
+        stale: (N, T) repeated frames (:func:`stale_frames`), or None.
+    """
+    rng = np.random.default_rng(seed)
+    fit_rows, held_rows = np.flatnonzero(fit), np.flatnonzero(~fit)
+    raw_fit, fit_seqs = _sample(path, fit_rows, config.fit_frames, rng)
+    x_fit, x_held = _flat(raw_fit), _flat(_sample(path, held_rows, config.held_frames, rng)[0])
+
+    e0 = matched_error(model, Camera(), x_held)
+    table: list[dict] = [{"candidate": "none", "camera": Camera().__dict__, "held_out_matched_mse": e0, "drop": 0.0,
+                          "accepted": False}]
+
+    def row(name: str, cam: Camera, base: float) -> dict:
+        e = matched_error(model, cam, x_held)
+        material = (cam.blur > config.min_blur) if name == "blur" else \
+            (max(abs(cam.dx), abs(cam.dy)) > config.min_shift) if name == "shift" else True
+        drop = 1 - e / base if base > 0 else 0.0
+        return {"candidate": name, "camera": dict(cam.__dict__), "held_out_matched_mse": e, "drop": drop,
+                "accepted": bool(material and drop > config.min_drop)}
+
+    singles = [row("blur", fit_camera(model, x_fit, shift=False), e0), row("shift", fit_camera(model, x_fit, blur=False), e0)]
+    table += singles
+    best = max(singles, key=lambda r: r["drop"])
+    camera, e_cam = Camera(), e0
+    if best["accepted"]:
+        camera, e_cam = Camera(**best["camera"]), best["held_out_matched_mse"]
+        both = row("blur+shift", fit_camera(model, x_fit), e_cam)
+        other_material = (both["camera"]["blur"] > config.min_blur) if best["candidate"] == "shift" else \
+            (max(abs(both["camera"]["dx"]), abs(both["camera"]["dy"])) > config.min_shift)
+        both["accepted"] = bool(both["accepted"] and other_material)
+        table.append(both)
+        if both["accepted"]:
+            camera, e_cam = Camera(**both["camera"]), both["held_out_matched_mse"]
+    effects: list[dict] = []
+    if camera.blur > 0:
+        effects.append({"effect": "blur", "value": camera.blur, "unit": "px (Gaussian σ)",
+                        "interval": camera_interval(model, camera, "blur", x_fit, fit_seqs)})
+    if camera.dx or camera.dy:
+        ix, iy = (camera_interval(model, camera, k, x_fit, fit_seqs) for k in ("dx", "dy"))
+        effects.append({"effect": "shift", "value": 0.5 * (camera.dx + camera.dy), "dx": camera.dx, "dy": camera.dy,
+                        "dx_interval": ix, "dy_interval": iy, "unit": "px (mean of right and down)",
+                        "interval": [0.5 * (ix[0] + iy[0]), 0.5 * (ix[1] + iy[1])]})
+
+    frames_2d = raw_fit if raw_fit.ndim == 3 else raw_fit[..., 0]
+    noise, noise_ci = noise_level(frames_2d, static_pixels(model), interval=True)
+    if noise > config.min_noise:
+        effects.append({"effect": "noise", "value": noise, "unit": "gray levels (σ)", "interval": noise_ci})
+
+    leading, drops, drop_rate = 0, 0, 0.0
+    if stale is not None and stale.any():
+        leading = leading_repeats(stale)
+        src = repeat_sources(stale)
+        t = stale.shape[1]
+        still = 0  # repeats where the pendulum does not move across them: not drops
+        for n_, t_ in zip(*np.nonzero(stale[:, leading + 1 :])):
+            t_ += leading + 1
+            after = np.flatnonzero(~stale[n_, t_:])
+            if len(after):
+                q, p = t_ + after[0], src[n_, t_]
+                still += abs(theta[n_, q] - theta[n_, p]) <= config.moving * (q - p)
+        moving = int(stale[:, leading + 1 :].sum()) - still
+        drops = int(moving)
+        drop_rate = drops / max(1, stale.shape[0] * (t - leading - 1))
+        if drops >= config.min_drops and drop_rate > config.min_drop_rate:
+            effects.append({"effect": "frame_drop", "value": drop_rate, "unit": "probability per frame",
+                            "interval": wilson(drops, stale.shape[0] * (t - leading - 1))})
+
+    theta_c = None
+    if camera != Camera() or noise > config.min_noise:
+        theta_c = match_file(model, path, camera)
+    return CameraFindings(camera, noise, drop_rate, drops, leading, table, e0, e_cam, effects, theta_c)
