@@ -29,6 +29,7 @@ from agents.cem import CEMConfig, cem, shift_warm_start
 from envs.pendulum import MAX_ACTION, PENDULUM_DT
 from piga.diagnostics import fit as diag_fit
 from piga.diagnostics.diagnose import nominal_of
+from piga.diagnostics.vision import Camera, angle_table, match
 from piga.model import PhysicsModel, frames_to_float
 from piga.physics import Euler, Pendulum, System, rollout
 from piga.velocity import wrap_angle
@@ -222,10 +223,13 @@ class PigaMPCAgent:
             learned g the same way (zero-shot, no retraining).
         corrected: a model chosen by ``piga-diagnose`` (:class:`piga.diagnostics.fit.Model`); the
             agent then plans with it (:class:`CorrectedPlanner`) instead of the learned physics.
+        camera: a camera found by ``piga-diagnose`` (:class:`piga.diagnostics.vision.Camera`); the
+            agent then reads each frame's angle by matching it to the decoder's renders through
+            that camera, instead of with the encoder.
     """
 
     def __init__(self, model: PhysicsModel, config: MPCConfig = MPCConfig(), gravity_mult: float = 1.0,
-                 keep_trace: bool = False, corrected: diag_fit.Model | None = None):
+                 keep_trace: bool = False, corrected: diag_fit.Model | None = None, camera: Camera | None = None):
         if model.config.system != "pendulum":
             raise ValueError(f"PigaMPCAgent controls a pendulum model, got system {model.config.system!r}")
         if not (gravity_mult > 0 and math.isfinite(gravity_mult)):
@@ -238,6 +242,7 @@ class PigaMPCAgent:
             self.planner = PendulumPlanner(system, model.integrator, config, offset=self.offset)
         else:  # plan with the physics corrected by piga-diagnose
             self.planner = CorrectedPlanner(corrected, nominal_of(model), config, gravity_mult)
+        self.table = angle_table(model, camera) if camera is not None else None
         self.keep_trace = keep_trace
         self.trace: list[tuple[float, float, np.ndarray]] = []
         """With ``keep_trace``: per step, the believed (θ, θ̇) in the model's convention and the plan (H, 1)."""
@@ -256,7 +261,11 @@ class PigaMPCAgent:
     def estimate_state(self, frames: np.ndarray) -> tuple[float, float]:
         """(θ, θ̇) in the model's convention (Gymnasium's θ = θ + ``offset``) from the last L frames, uint8 (L, H, W)."""
         x = frames_to_float(torch.from_numpy(np.ascontiguousarray(frames))[None], self.model.config.channels)
-        coords = self.model.encode(x)  # (1, L, 1, 1)
+        if self.table is None:
+            coords = self.model.encode(x)  # (1, L, 1, 1)
+        else:
+            theta, _ = match(self.table, x[0].flatten(1))  # (L,)
+            coords = torch.from_numpy(np.unwrap(theta.double().numpy())).float().view(1, -1, 1, 1)
         p, v = self.model.initial_state(coords)
         return float(p[0, 0, 0]), float(v[0, 0, 0])
 

@@ -177,6 +177,9 @@ class ControlJob:
     """Extra (key, value) pairs copied into the result's summary (labels for tables)."""
     corrected: Any = None
     """For "piga": plan with this physics from ``piga-diagnose`` (:class:`piga.diagnostics.fit.Model`)."""
+    camera: Any = None
+    """For "piga": read angles by matching frames to the decoder's renders through this camera
+    (:class:`piga.diagnostics.vision.Camera`, from ``piga-diagnose``) instead of the encoder."""
 
     def __post_init__(self) -> None:
         if self.agent not in ("piga", "oracle"):
@@ -195,7 +198,7 @@ def build_agent(job: ControlJob) -> Any:
     from piga.train import load_model
 
     model, _ = load_model(job.model_dir)
-    return PigaMPCAgent(model, job.mpc, gravity_mult=told, corrected=job.corrected)
+    return PigaMPCAgent(model, job.mpc, gravity_mult=told, corrected=job.corrected, camera=job.camera)
 
 
 def run_job(job: ControlJob) -> dict[str, Any]:

@@ -154,3 +154,68 @@ def test_corrected_planner_rolls_the_corrected_physics() -> None:
 def test_cli_bad_env(tiny_model: Path, tiny_data: Path, tmp_path: Path) -> None:
     assert_one_line_error(run("piga-diagnose", "--model", str(tiny_model), "--data", str(tiny_data), "--out",
                               str(tmp_path / "r"), "--env", "dampng=0.2"), "--env", "unknown effect")
+
+
+# --- repeated frames: dropped and delayed by the camera -------------------------------------
+
+
+def _drop_frames(obs: Observations, p: float, seed: int = 0) -> Observations:
+    """The observations a camera that drops frames with probability ``p`` records: the last frame again."""
+    rng = np.random.default_rng(seed)
+    theta = obs.theta.copy()
+    stale = rng.random(theta.shape) < p
+    stale[:, 0] = False
+    for t in range(1, theta.shape[1]):
+        theta[stale[:, t], t] = theta[stale[:, t], t - 1]
+    return replace(obs, theta=theta, stale=stale)
+
+
+def test_dropped_frames_are_named_and_their_repeats_predicted() -> None:
+    from piga.diagnostics.vision import repeated_frames
+
+    obs = _drop_frames(planted({}, n=120), 0.15)
+    leading, drops, rate, effects = repeated_frames(obs.stale, obs.theta)
+    assert leading == 0 and [e["effect"] for e in effects] == ["frame_drop"]
+    assert abs(rate - 0.15) < 0.02 and effects[0]["interval"][0] < rate < effects[0]["interval"][1]
+    camera = _findings(effects, leading)
+    d = analyse(obs, NOMINAL, FAST, camera=camera)
+    assert d.verdict_class == "frame_drop", d.verdict
+    assert d.gap["free_run_gap_closure"] > 0.9, d.gap["free_run_gap_closure"]
+    # with damping on top, the dynamics are still fitted right: the repeats are left out of the fit
+    obs = _drop_frames(planted({"damping": 0.2}, n=120), 0.15)
+    d = analyse(obs, NOMINAL, FAST, camera=_findings(repeated_frames(obs.stale, obs.theta)[3], 0))
+    assert d.verdict_class == "damping+frame_drop", d.verdict
+    assert abs(next(e for e in d.effects if e["effect"] == "damping")["value"] - 0.2) < 0.02
+
+
+def test_a_still_pendulum_repeating_frames_is_no_drop() -> None:
+    from piga.diagnostics.vision import repeated_frames
+
+    theta = np.zeros((30, 20))
+    stale = np.zeros((30, 20), bool)
+    stale[:, 5:8] = True  # hanging still: the same picture, rightly
+    assert repeated_frames(stale, theta)[3] == []
+
+
+def test_a_late_camera_is_a_frame_delay_and_an_early_delay_an_actuator_delay() -> None:
+    from piga.diagnostics.vision import leading_repeats
+
+    obs = planted({"delay": 2}, n=120)
+    # a camera 2 frames late: frame t shows state t - 2, frames 0..2 show the first state
+    late = np.concatenate([obs.theta[:, :1].repeat(2, 1), obs.theta[:, :-2]], 1)
+    stale = np.zeros(late.shape, bool)
+    stale[:, 1:3] = True
+    assert leading_repeats(stale) == 2
+    cam = planted({}, n=120)
+    cam_late = replace(cam, theta=np.concatenate([cam.theta[:, :1].repeat(2, 1), cam.theta[:, :-2]], 1), stale=stale)
+    d = analyse(cam_late, NOMINAL, FAST, camera=_findings([], 2))
+    assert d.verdict_class == "frame_delay", d.verdict
+    assert d.effects[0]["value"] == 2
+    d = analyse(obs, NOMINAL, FAST, camera=_findings([], 0))  # no repeated start: the actuator's
+    assert d.verdict_class == "delay", d.verdict
+
+
+def _findings(effects: list, leading: int):  # noqa: ANN202
+    from piga.diagnostics.vision import Camera, CameraFindings
+
+    return CameraFindings(Camera(), 0.0, 0.0, 0, leading, [], 0.0, 0.0, list(effects))

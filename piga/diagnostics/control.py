@@ -10,7 +10,8 @@ from piga.diagnostics.diagnose import Diagnosis
 def compare_control(model_dir: str, diagnosis: Diagnosis, effects: tuple[tuple[str, float], ...], episodes: int = 5,
                     seed: int = 0, workers: int = 2, progress: bool = False) -> dict[str, Any]:
     """Swing-up episodes on the pixel pendulum with ``effects``, planned with the identified model's
-    physics and with the physics the diagnosis chose (same frames, same encoder, same planner).
+    physics and with the physics the diagnosis chose (same frames and planner; the corrected agent
+    reads angles through the fitted camera when the diagnosis found one).
 
     Returns ``{"effects": ..., "rows": [summary with "physics": "nominal" | "corrected", ...]}``.
     """
@@ -21,6 +22,6 @@ def compare_control(model_dir: str, diagnosis: Diagnosis, effects: tuple[tuple[s
     mpc = MPCConfig(seed=seed)
     jobs = [ControlJob("piga", config, mpc, model_dir, tags=(("physics", "nominal"),)),
             ControlJob("piga", config, mpc, model_dir, tags=(("physics", "corrected"),),
-                       corrected=diagnosis.corrected_model())]
+                       corrected=diagnosis.corrected_model(), camera=diagnosis.corrected_camera())]
     rows = [r["summary"] for r in run_jobs(jobs, workers=workers, progress=progress)]
     return {"effects": dict(effects), "rows": rows}

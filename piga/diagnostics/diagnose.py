@@ -120,6 +120,12 @@ class Diagnosis:
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
 
+    def corrected_camera(self) -> Camera | None:
+        """The camera to read angles through, when the diagnosis re-matched them (else None: the encoder)."""
+        if self.vision.get("angles") != "matched":
+            return None
+        return Camera(**self.vision["camera"])
+
     def corrected_model(self) -> F.Model:
         """The chosen physics as a :class:`piga.diagnostics.fit.Model` (for a planner)."""
         values = {k: float(v) for k, v in self.corrected.items() if k != "delay"}
@@ -312,7 +318,7 @@ def analyse(obs: Observations, nom: F.Nominal, config: DiagnoseConfig = Diagnose
                        "repeated_frames": int(stale.sum()) if stale is not None else 0, "dropped_frames": camera.drops,
                        "drop_rate": camera.drop_rate, "leading_repeats": camera.leading,
                        "matched_mse_nominal": camera.matched_error_nominal, "matched_mse_corrected": camera.matched_error,
-                       "angles": "re-matched under the fitted camera" if camera.rematched else "encoder"})
+                       "angles": "matched" if camera.rematched else "encoder"})
         if camera.rematched:
             notes.append("the dynamics are fitted on angles found by matching every frame to the decoder's renders "
                          "through the fitted camera (analysis by synthesis), not on the encoder's angles")
@@ -384,9 +390,14 @@ def analyse(obs: Observations, nom: F.Nominal, config: DiagnoseConfig = Diagnose
 
 
 def _describe(e: dict[str, Any]) -> str:
+    steps = lambda k: f"{k} step" + ("s" if k != 1 else "")  # noqa: E731
     if e["effect"] == "delay":
-        return f"actuator delay of {e['value']} steps"
+        return f"actuator delay of {steps(e['value'])}"
+    if e["effect"] == "frame_delay":
+        return f"camera delay (frame_delay) of {steps(e['value'])}"
     ci = f" (95% interval {e['interval'][0]:.3g}..{e['interval'][1]:.3g})" if e.get("interval") else ""
+    if e["effect"] == "shift":
+        return f"shift {e['dx']:.3g} px right, {e['dy']:.3g} px down (mean {e['value']:.3g}{ci})"
     return f"{e['effect']} {e['value']:.3g} {e['unit']}{ci}"
 
 
