@@ -62,8 +62,14 @@ DISCRETE = ("delay", "frame_delay")
 OUTSIDE = {"cogging": lambda r: round(float(r.uniform(0.3, 0.6)), 3)}
 
 
-def draw_cases(n: int, seed: int) -> list[dict]:
-    """``n`` cases: about 1/6 no effect, 1/2 one effect, 1/5 two effects, the rest outside the set, shuffled."""
+def draw_cases(n: int, seed: int, mix: str = "all") -> list[dict]:
+    """``n`` cases: about 1/6 no effect, 1/2 one effect, 1/5 two effects, the rest outside the set, shuffled.
+
+    ``mix`` "none" draws no-effect cases only (for the false-positive rate). Case i collects its
+    data with seed 1000·(seed + 1) + i.
+    """
+    if mix == "none":
+        return [{"case": i, "effects": {}, "data_seed": int(1000 * (seed + 1) + i)} for i in range(n)]
     rng = np.random.default_rng(seed)
     n_none, n_pair, n_out = max(1, n // 6), max(1, n // 5), max(1, n // 10)
     n_single = n - n_none - n_pair - n_out
@@ -78,7 +84,7 @@ def draw_cases(n: int, seed: int) -> list[dict]:
         cases.append({"effects": {str(a): DRAWS[str(a)](rng), str(b): DRAWS[str(b)](rng)}})
     cases += [{"effects": {"cogging": OUTSIDE["cogging"](rng)}} for _ in range(n_out)]
     order = rng.permutation(len(cases))
-    return [{"case": i, **cases[j], "data_seed": int(1000 + i)} for i, j in enumerate(order)]
+    return [{"case": i, **cases[j], "data_seed": int(1000 * (seed + 1) + i)} for i, j in enumerate(order)]
 
 
 def truth_class(effects: dict) -> str:
@@ -219,13 +225,15 @@ def main() -> int:
     p.add_argument("--sequences", type=int, default=200)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--workers", type=int, default=2)
+    p.add_argument("--mix", choices=("all", "none"), default="all",
+                   help="'all': the mix of effects; 'none': no-effect cases only (false-positive rate)")
     args = p.parse_args()
     out, work = Path(args.out), Path(args.work)
     work.mkdir(parents=True, exist_ok=True)
     command = shlex.join(["python", *sys.argv])
     done: list[dict] = json.loads(out.with_suffix(".json").read_text())["runs"] if out.with_suffix(".json").exists() else []
-    info = {"model": args.model, "sequences": args.sequences, "seed": args.seed, "machine": machine()}
-    for case in draw_cases(args.cases, args.seed):
+    info = {"model": args.model, "sequences": args.sequences, "seed": args.seed, "mix": args.mix, "machine": machine()}
+    for case in draw_cases(args.cases, args.seed, args.mix):
         if any(r["case"] == case["case"] and r["effects"] == case["effects"] for r in done):
             continue
         data = work / f"case{case['case']:02d}.h5"

@@ -158,3 +158,10 @@ def test_an_agent_with_a_camera_reads_angles_through_it(model: PhysicsModel) -> 
     angle, speed = agent.estimate_state(frames)
     assert angle == pytest.approx(0.42, abs=0.02)
     assert speed == pytest.approx(0.8, abs=0.4)
+
+
+def test_noise_level_on_a_gray_background() -> None:
+    rng = np.random.default_rng(7)
+    frames = np.clip(np.rint(120 + 6.0 * rng.normal(size=(400, 8, 8))), 0, 255).astype(np.uint8)
+    frames[:, :, :4] = np.clip(np.rint(3 + 6.0 * rng.normal(size=(400, 8, 4))), 0, 255)  # clipped at black
+    assert V.noise_level(frames, np.ones((8, 8), bool)) == pytest.approx(6.0, rel=0.05)

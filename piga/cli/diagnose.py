@@ -61,10 +61,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(f"verdict: {diagnosis.verdict}")
     for note in diagnosis.notes:
         print(f"note: {note}")
-    gap = "–" if g["free_run_gap_closure"] is None else f"{100 * g['free_run_gap_closure']:.1f}%"
-    print(f"free-run closure {100 * g['free_run_closure']:.1f}% (held-out angle MSE {g['free_run_mse_nominal']:.3g} -> "
-          f"{g['free_run_mse_corrected']:.3g} rad², noise floor {g['free_run_mse_noise_floor']:.3g}: {gap} of the reducible "
-          "gap closed); corrected "
+    headline = "–" if g["free_run_gap_closure"] is None else f"{100 * g['free_run_gap_closure']:.1f}%"
+    if g["closure_basis"] == "pixels":
+        detail = (f"typical held-out window, pixel MSE {g['typical_pixel_mse_nominal']:.3g} -> "
+                  f"{g['typical_pixel_mse_corrected']:.3g}, of the gap above the matched floor {g['pixel_mse_floor']:.3g}")
+    else:
+        detail = (f"typical held-out window, angle MSE {g['typical_free_run_mse_nominal']:.3g} -> "
+                  f"{g['typical_free_run_mse_corrected']:.3g} rad²")
+    print(f"free-run closure {headline} ({detail}; mean over all windows {100 * g['free_run_closure']:.1f}%); corrected "
           + ", ".join(f"{k} = {v:.4g}" for k, v in diagnosis.corrected.items()))
     if diagnosis.control:
         for row in diagnosis.control["rows"]:

@@ -3,27 +3,31 @@
 Steps (no state labels, no effect labels; only frames and actions of the "real" system):
 
 1. :func:`~piga.diagnostics.observe.observe`: encode and re-render every frame with the identified
-   model. The re-rendering error against the model's own training error says how much of the gap
-   is vision.
-2. Cut the encoded angles into windows: multi-step (8 steps) on the fit split (the file's train
-   split) for fitting, one-step for the information criterion, free-run on the held-out split.
-3. Fit "none" (g and a refitted) and each candidate effect with g and a
+   model, and mark the frames that repeat the previous one byte for byte. The re-rendering error
+   against the model's own training error says how much of the gap is vision.
+2. The camera stage (:func:`~piga.diagnostics.vision.camera_stage`): blur, shift and noise fitted
+   by matching frames to the decoder's renders; dropped frames and a late camera from the
+   repeats. With blur, shift or noise, the dynamics below use the matched angles.
+3. Cut the angles into windows: multi-step (8 steps) on the fit split (the file's train split)
+   for fitting, one-step for the information criterion, free-run on the held-out split. Repeated
+   frames are left out of the fits, and a free run predicts their repeat.
+4. Fit "none" (g and a refitted) and each dynamics candidate with g and a
    (:mod:`piga.diagnostics.fit`); rank by the one-step BIC on the fit split; report the held-out
    multi-step errors.
-4. Forward selection: candidates are tried in BIC order, and the first that lowers the BIC by
+5. Forward selection: candidates are tried in BIC order, and the first that lowers the BIC by
    more than ``bic_margin`` *and* the held-out free-run error by more than ``min_gain`` is
    accepted (a delay alone can win the one-step BIC while an unmodelled speed clip ruins its free
-   run); a second effect is then tried on top of the first in the same way.
-5. A gain error is the refitted a over the nominal a, beyond ``gain_tolerance``. A fitted speed
+   run); a second effect is then tried on top of the first in the same way. A fitted delay is the
+   camera's (``frame_delay``) as far as every sequence starts with that many repeated frames.
+6. A gain error is the refitted a over the nominal a, beyond ``gain_tolerance``. A fitted speed
    clip within ``gym_clip_tolerance`` of 8 rad/s is Gymnasium's own clip, present in the nominal
    environment too, so it is reported but is not a gap.
-6. "Not explained by the candidates": a flexible basis of the state and action
+7. "Not explained by the candidates": a flexible basis of the state and action
    (:func:`~piga.diagnostics.residuals.generic_features`) fitted to the remaining one-step
    residuals still lowers the held-out residual by more than ``unexplained_gain`` with a BIC gain.
-7. Bootstrap the chosen model over fit sequences for uncertainties; closure per horizon, raw
-   (1 - error_corrected / error_nominal) and against the noise floor, the free-run error that an
-   exactly right model still has with the encoder's noise (:func:`~piga.diagnostics.fit.noise_floor`):
-   (error_nominal - error_corrected) / (error_nominal - floor).
+8. Bootstrap the chosen model over fit sequences for uncertainties; closure per horizon and on
+   the typical held-out window (the median window's mean squared free-run error), in angles, or
+   in pixels above the matched re-rendering error when a camera effect changed the angles.
 """
 
 from __future__ import annotations
@@ -117,8 +121,15 @@ class Diagnosis:
     control: dict[str, Any] | None = None
     """With ``--env``: MPC on the simulated real system with the nominal vs the corrected physics."""
 
+    pictures: dict[str, np.ndarray] | None = field(default=None, repr=False)
+    """A held-out frame as recorded ("real", (H, W[, C]) in [0, 1]), re-rendered by the nominal model
+    ("nominal": decoder at the encoder's angle) and by the corrected one ("corrected": through the
+    fitted camera at the matched angle). For the report's picture; not in :meth:`to_dict`."""
+
     def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
+        out = asdict(self)
+        out.pop("pictures")
+        return out
 
     def corrected_camera(self) -> Camera | None:
         """The camera to read angles through, when the diagnosis re-matched them (else None: the encoder)."""
@@ -156,7 +167,8 @@ def diagnose(model: PhysicsModel, data: str | os.PathLike[str], config: Diagnose
         checkpoint: the model's checkpoint, for its training reconstruction error (vision check).
     """
     obs = observe(model, data, progress=progress)
-    camera = camera_stage(model, str(data), obs.theta, obs.fit, obs.stale, config.camera, seed=config.seed)
+    camera = camera_stage(model, str(data), obs.theta, obs.fit, obs.stale, config.camera, seed=config.seed,
+                          progress=progress)
     return analyse(obs, nominal_of(model), config, model=model, rec_training=training_reconstruction_mse(model, checkpoint),
                    progress=progress, camera=camera)
 
@@ -386,7 +398,22 @@ def analyse(obs: Observations, nom: F.Nominal, config: DiagnoseConfig = Diagnose
         residuals={"heatmap": heatmap(res_nom), "bins": binned(res_nom), "autocorrelation": autocorrelation(res_nom),
                    "action_correlation": action_correlation(res_nom)},
         notes=notes,
+        pictures=_pictures(model, obs, theta, camera.camera if camera is not None and camera.rematched else None)
+        if model is not None and len(obs.frames_index) else None,
     )
+
+
+@torch.no_grad()
+def _pictures(model: PhysicsModel, obs: Observations, theta: np.ndarray, camera: Camera | None) -> dict[str, np.ndarray]:
+    """The first kept held-out sequence's middle frame: as recorded, and re-rendered nominal and corrected."""
+    from piga.model import frames_to_float
+
+    n, t = int(obs.frames_index[0]), obs.theta.shape[1] // 2
+    real = frames_to_float(torch.from_numpy(obs.frames[:1, t : t + 1]), model.config.channels)[0, 0]  # (C, H, W)
+    nominal = model.decoder(torch.tensor([[[float(obs.theta[n, t])]]]))[0]  # (C, H, W)
+    corrected = (camera or Camera()).apply(model.decoder(torch.tensor([[[float(theta[n, t])]]])))[0]
+    as_image = lambda x: x.clamp(0, 1).permute(1, 2, 0).squeeze(-1).numpy()  # noqa: E731
+    return {"real": as_image(real), "nominal": as_image(nominal), "corrected": as_image(corrected)}
 
 
 def _describe(e: dict[str, Any]) -> str:

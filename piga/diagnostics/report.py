@@ -14,30 +14,56 @@ from piga.diagnostics.diagnose import Diagnosis
 from piga.plots import plt, save_figure
 
 #: Files the report writes into its folder.
-REPORT_FILES = ("report.md", "report.json", "gap.png", "residual_heatmap.png", "correlations.png")
+REPORT_FILES = ("report.md", "report.json", "gap.png", "residual_heatmap.png", "correlations.png", "frames.png")
 
 
 def gap_figure(d: Diagnosis):  # noqa: ANN201
-    """Held-out error against horizon, state and pixels, nominal vs corrected, and the closure."""
+    """Held-out error against horizon, angles and pixels, nominal vs corrected, and the closure."""
     g = d.gap
     fig, axes = plt.subplots(1, 3, figsize=(11, 3))
     h = g["horizon"]
     axes[0].semilogy(h, np.degrees(np.sqrt(g["state_mse_nominal"])), label="nominal")
     axes[0].semilogy(h, np.degrees(np.sqrt(g["state_mse_corrected"])), label="corrected")
-    axes[0].semilogy(h, np.degrees(np.sqrt(g["state_mse_noise_floor"])), ls=":", color="gray", label="noise floor")
-    axes[0].set_title("encoded angle RMSE (deg)", fontsize=9)
+    axes[0].semilogy(h, np.degrees(np.sqrt(g["state_mse_noise_floor"])), ls=":", color="gray", label="white-noise floor")
+    axes[0].set_title("angle RMSE (deg)" + (": nominal on the encoder's, corrected on matched angles"
+                                            if g["closure_basis"] == "pixels" else ""), fontsize=8)
+    closure = 100 * np.array(g["closure"])
+    title = "closure 1 - err_corr / err_nom (%), angles"
     if g["pixel_mse_nominal"]:
-        hp = range(1, len(g["pixel_mse_nominal"]) + 1)
-        axes[1].plot(hp, g["pixel_mse_nominal"], label="nominal")
-        axes[1].plot(hp, g["pixel_mse_corrected"], label="corrected")
+        pn, pc = np.array(g["pixel_mse_nominal"]), np.array(g["pixel_mse_corrected"])
+        hp = range(1, len(pn) + 1)
+        axes[1].plot(hp, pn, label="nominal")
+        axes[1].plot(hp, pc, label="corrected")
+        if g.get("pixel_mse_floor") is not None:
+            axes[1].axhline(g["pixel_mse_floor"], ls=":", color="gray", label="matched floor")
+        if g["closure_basis"] == "pixels":
+            closure = 100 * (pn - pc) / np.maximum(pn - g["pixel_mse_floor"], 1e-12)
+            title = "closure of the pixel gap above the floor (%)"
     axes[1].set_title("pixel MSE of the rendered prediction", fontsize=9)
-    axes[2].plot(h, 100 * np.array(g["closure"]))
-    axes[2].set_ylim(min(0, 100 * min(g["closure"] or [0])) - 5, 105)
-    axes[2].set_title("closure 1 - err_corr / err_nom (%)", fontsize=9)
+    axes[2].plot(range(1, len(closure) + 1), closure)
+    axes[2].set_ylim(min(0, float(np.min(closure)) if len(closure) else 0) - 5, 105)
+    axes[2].set_title(title, fontsize=9)
     for ax in axes:
         ax.set_xlabel("horizon (steps)")
     axes[0].legend(fontsize=7)
     axes[1].legend(fontsize=7)
+    fig.tight_layout()
+    return fig
+
+
+def frames_figure(d: Diagnosis):  # noqa: ANN201
+    """A held-out frame as recorded, re-rendered by the nominal and the corrected model, and the differences."""
+    p = d.pictures
+    fig, axes = plt.subplots(1, 5, figsize=(11, 2.6))
+    gray = {"cmap": "gray", "vmin": 0, "vmax": 1}
+    panels = [(p["real"], "recorded frame", gray), (p["nominal"], "nominal re-render", gray),
+              (p["corrected"], "corrected re-render", gray),
+              (np.abs(p["nominal"] - p["real"]), "|nominal - recorded|", {"cmap": "magma", "vmin": 0, "vmax": 0.5}),
+              (np.abs(p["corrected"] - p["real"]), "|corrected - recorded|", {"cmap": "magma", "vmin": 0, "vmax": 0.5})]
+    for ax, (img, title, kw) in zip(axes, panels):
+        ax.imshow(img if img.ndim == 2 else img.clip(0, 1), **kw)
+        ax.set_title(title, fontsize=8)
+        ax.axis("off")
     fig.tight_layout()
     return fig
 
@@ -159,7 +185,10 @@ def markdown(d: Diagnosis, model: str, data: str, command: str) -> str:
         from piga.control import summary_markdown
 
         env = ", ".join(f"{k}={v}" for k, v in d.control["effects"].items()) or "none"
-        lines += ["", f"MPC on the simulated real system ({env}), same frames, encoder and planner; only the physics differs:", "",
+        reader = ("reads angles through the fitted camera (matching) instead of the encoder"
+                  if d.vision.get("angles") == "matched" else "reads angles with the same encoder")
+        lines += ["", f"MPC on the simulated real system ({env}), same frames and planner; the corrected agent plans with the "
+                  f"corrected physics and {reader}:", "",
                   summary_markdown(d.control["rows"], extra=[("physics", "physics")]).rstrip()]
     v = d.vision
     lines += [
@@ -170,6 +199,8 @@ def markdown(d: Diagnosis, model: str, data: str, command: str) -> str:
         f"- **Dynamics**: on the encoded angles, the nominal physics' held-out free-run angle RMSE is "
         f"{math.degrees(math.sqrt(g['free_run_mse_nominal'])):.2f}°.", "",
         "![residual heatmap](residual_heatmap.png) ![correlations](correlations.png)", "",
+        *(["A held-out frame, as recorded and as each model re-renders it:", "", "![frames](frames.png)", ""]
+          if d.pictures is not None else []),
         "| bin | n | mean residual (rad/s²) | RMS |", "|---|---|---|---|",
     ]
     for group in d.residuals["bins"].values():
@@ -205,6 +236,8 @@ def write_report(d: Diagnosis, out: str | os.PathLike[str], model: str, data: st
     save_figure(gap_figure(d), folder / "gap.png", overwrite=overwrite)
     save_figure(heatmap_figure(d), folder / "residual_heatmap.png", overwrite=overwrite)
     save_figure(correlation_figure(d), folder / "correlations.png", overwrite=overwrite)
+    if d.pictures is not None:
+        save_figure(frames_figure(d), folder / "frames.png", overwrite=overwrite)
     write_json(folder / "report.json", {"command": command, "model": model, "data": data, **d.to_dict()}, overwrite=overwrite)
     with atomic_output(folder / "report.md", overwrite=overwrite) as tmp:
         tmp.write_text(markdown(d, model, data, command))

@@ -187,11 +187,11 @@ def noise_level(frames: np.ndarray, still: np.ndarray, interval: bool = False) -
     y = frames[:, still].reshape(len(frames), -1).astype(np.int64)  # (M, S)
     if y.size == 0:
         return (float("nan"), None) if interval else float("nan")
-    mu = np.median(y, axis=0)  # (S,)
+    mu = np.sort(y, axis=0)[len(y) // 2]  # (S,) the (upper) median, an integer level
     if (y == mu).all():
         return (0.0, None) if interval else 0.0
     # the likelihood depends only on (μ, y) pairs: count them
-    pairs, counts = np.unique(np.stack([np.broadcast_to(mu, y.shape).ravel() * 512 + y.ravel()]), return_counts=True)
+    pairs, counts = np.unique(np.broadcast_to(mu, y.shape).ravel() * 512 + y.ravel(), return_counts=True)
     mus, ys = pairs // 512, pairs % 512
 
     def nll(log_s: float) -> float:
@@ -385,14 +385,18 @@ def repeated_frames(stale: np.ndarray | None, theta: np.ndarray,
 
 
 def camera_stage(model: PhysicsModel, path: str, theta: np.ndarray, fit: np.ndarray, stale: np.ndarray | None,
-                 config: CameraConfig = CameraConfig(), seed: int = 0) -> CameraFindings:
+                 config: CameraConfig = CameraConfig(), seed: int = 0, progress: bool = False) -> CameraFindings:
     """Fits and tests the camera candidates on the recording ``path``.
 
     Args:
         theta: (N, T) the encoder's angles (to tell a moving pendulum from a still one).
         fit: (N,) bool, the fit split.
         stale: (N, T) repeated frames (:func:`stale_frames`), or None.
+        progress: show a progress bar over the fits.
     """
+    from tqdm.auto import tqdm
+
+    bar = tqdm(total=5, desc="camera candidates", disable=not progress)
     rng = np.random.default_rng(seed)
     fit_rows, held_rows = np.flatnonzero(fit), np.flatnonzero(~fit)
     raw_fit, fit_seqs = _sample(path, fit_rows, config.fit_frames, rng)
@@ -410,7 +414,10 @@ def camera_stage(model: PhysicsModel, path: str, theta: np.ndarray, fit: np.ndar
         return {"candidate": name, "camera": dict(cam.__dict__), "held_out_matched_mse": e, "drop": drop,
                 "accepted": bool(material and drop > config.min_drop)}
 
-    singles = [row("blur", fit_camera(model, x_fit, shift=False), e0), row("shift", fit_camera(model, x_fit, blur=False), e0)]
+    singles = [row("blur", fit_camera(model, x_fit, shift=False), e0)]
+    bar.update()
+    singles.append(row("shift", fit_camera(model, x_fit, blur=False), e0))
+    bar.update()
     table += singles
     best = max(singles, key=lambda r: r["drop"])
     camera, e_cam = Camera(), e0
@@ -423,6 +430,7 @@ def camera_stage(model: PhysicsModel, path: str, theta: np.ndarray, fit: np.ndar
         table.append(both)
         if both["accepted"]:
             camera, e_cam = Camera(**both["camera"]), both["held_out_matched_mse"]
+    bar.update()
     effects: list[dict] = []
     if camera.blur > 0:
         effects.append({"effect": "blur", "value": camera.blur, "unit": "px (Gaussian σ)",
@@ -440,8 +448,11 @@ def camera_stage(model: PhysicsModel, path: str, theta: np.ndarray, fit: np.ndar
 
     leading, drops, drop_rate, repeat_effects = repeated_frames(stale, theta, config)
     effects += repeat_effects
+    bar.update()
 
     theta_c = None
     if camera != Camera() or noise > config.min_noise:
         theta_c = match_file(model, path, camera)
+    bar.update()
+    bar.close()
     return CameraFindings(camera, noise, drop_rate, drops, leading, table, e0, e_cam, effects, theta_c)
