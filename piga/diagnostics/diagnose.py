@@ -15,7 +15,8 @@ Steps (no state labels, no effect labels; only frames and actions of the "real" 
    (:mod:`piga.diagnostics.fit`); rank by the one-step BIC on the fit split; report the held-out
    multi-step errors.
 5. Forward selection: candidates are tried in BIC order, and the first that lowers the BIC by
-   more than ``bic_margin`` *and* the held-out free-run error by more than ``min_gain`` is
+   more than ``bic_margin`` *and* the typical held-out free-run error (the median window's) by
+   more than ``min_gain`` is
    accepted (a delay alone can win the one-step BIC while an unmodelled speed clip ruins its free
    run); a second effect is then tried on top of the first in the same way. A fitted delay is the
    camera's (``frame_delay``) as far as every sequence starts with that many repeated frames.
@@ -65,7 +66,11 @@ class DiagnoseConfig:
     bic_margin: float = 10.0
     """BIC drop (one-step, fit split) an effect needs to be accepted ("very strong" on Kass & Raftery's scale)."""
     min_gain: float = 0.1
-    """Relative drop of the held-out free-run error an effect needs to be accepted."""
+    """Relative drop of the typical held-out free-run error (the median over windows of each window's
+    mean squared error) an effect needs to be accepted. The median window, not the mean: the mean is
+    dominated by the few windows near upright, where Gymnasium's unmodelled ±8 rad/s clip or any
+    small error explodes (measured: a deadzone of 0.37 lowered the mean by 7% and the median window
+    by 59%; candidates that are not in the data move the median window by at most 3%)."""
     unexplained_gain: float = 0.02
     """Relative drop of the held-out one-step residual that the flexible basis needs to call the gap
     "not explained" (measured: 0.0-0.2% when a candidate explains the data, 8% for a cogging torque
@@ -219,7 +224,7 @@ def analyse(obs: Observations, nom: F.Nominal, config: DiagnoseConfig = Diagnose
             bic_drop = chosen["bic"] - cand["bic"]
             if bic_drop <= config.bic_margin:
                 break  # the rest have even smaller BIC drops
-            free_drop = 1 - cand["free_run"] / chosen["free_run"] if chosen["free_run"] > 0 else 0.0
+            free_drop = 1 - cand["typical"] / chosen["typical"] if chosen["typical"] > 0 else 0.0
             accepted = free_drop > config.min_gain
             steps.append({"tried": cand["name"], "bic_drop": bic_drop, "free_run_drop": free_drop, "accepted": bool(accepted)})
             if accepted:
@@ -382,11 +387,13 @@ def analyse(obs: Observations, nom: F.Nominal, config: DiagnoseConfig = Diagnose
         **pixels,
     }
     table = [{"candidate": "nominal (no refit)", "bic": nominal_score["bic"], "held_out_free_run_mse": nominal_score["free_run"],
+              "typical_free_run_mse": nominal_score["typical"],
               "values": nominal_model.values}]
     for s in [refit, *singles]:
         m = s["model"]
         table.append({"candidate": "none (g, a refitted)" if not m.effects else m.name, "bic": s["bic"],
                       "delta_bic": s["bic"] - refit["bic"], "held_out_free_run_mse": s["free_run"],
+                      "typical_free_run_mse": s["typical"],
                       "values": m.values, "delay": m.delay or None})
     return Diagnosis(
         verdict=verdict, verdict_class=verdict_class, effects=effects,

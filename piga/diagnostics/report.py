@@ -211,16 +211,18 @@ def markdown(d: Diagnosis, model: str, data: str, command: str) -> str:
               "points to a delay of k steps).", "", "## Candidates", "",
               "Each fitted with g and a on the fit split; BIC of one-step residuals on the fit split (lower is better); "
               "error on the held-out split.", "",
-              "| candidate | BIC | ΔBIC vs none | held-out free-run MSE (rad²) | fitted values |", "|---|---|---|---|---|"]
+              "| candidate | BIC | ΔBIC vs none | held-out free-run MSE, typical window (rad²) | mean (rad²) | fitted values |",
+              "|---|---|---|---|---|---|"]
     for c in d.candidates:
         if "candidate" not in c:
             continue
         vals = ", ".join(f"{k} = {val:.4g}" for k, val in c["values"].items()) + (f", k = {c['delay']}" if c.get("delay") else "")
-        lines.append(f"| {c['candidate']} | {c['bic']:.0f} | {_fmt(c.get('delta_bic'))} | {c['held_out_free_run_mse']:.3g} | {vals} |")
+        lines.append(f"| {c['candidate']} | {c['bic']:.0f} | {_fmt(c.get('delta_bic'))} | {c['typical_free_run_mse']:.3g} | "
+                     f"{c['held_out_free_run_mse']:.3g} | {vals} |")
     extra = d.candidates[-1]
     lines += ["", "Forward selection:", ""]
     for s in extra["selection"]:
-        lines.append(f"- tried {s['tried']}: BIC drop {s['bic_drop']:.1f}, held-out free-run drop {100 * s['free_run_drop']:.1f}% "
+        lines.append(f"- tried {s['tried']}: BIC drop {s['bic_drop']:.1f}, typical held-out free-run drop {100 * s['free_run_drop']:.1f}% "
                      f"-> {'accepted' if s['accepted'] else 'rejected'}")
     gb = extra["generic_basis"]
     lines.append(f"- flexible basis on what is left: BIC drop {gb['bic_drop']:.1f}, held-out residual drop "
