@@ -165,3 +165,13 @@ def test_noise_level_on_a_gray_background() -> None:
     frames = np.clip(np.rint(120 + 6.0 * rng.normal(size=(400, 8, 8))), 0, 255).astype(np.uint8)
     frames[:, :, :4] = np.clip(np.rint(3 + 6.0 * rng.normal(size=(400, 8, 4))), 0, 255)  # clipped at black
     assert V.noise_level(frames, np.ones((8, 8), bool)) == pytest.approx(6.0, rel=0.05)
+
+
+def test_a_codec_copy_is_a_repeat_but_motion_is_not() -> None:
+    rng = np.random.default_rng(8)
+    first = rng.integers(10, 240, (1, 1, 16, 16)).astype(np.uint8)
+    copy = (first.astype(int) + rng.integers(-1, 2, first.shape)).astype(np.uint8)  # re-encoded: off by 1 level
+    moved = first.copy()
+    moved[..., 3, 4] += 12  # one pixel of a moving edge
+    stale = V.stale_frames(np.concatenate([first, copy, moved], axis=1))
+    np.testing.assert_array_equal(stale[0], [False, True, False])

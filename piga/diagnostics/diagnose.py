@@ -3,7 +3,7 @@
 Steps (no state labels, no effect labels; only frames and actions of the "real" system):
 
 1. :func:`~piga.diagnostics.observe.observe`: encode and re-render every frame with the identified
-   model, and mark the frames that repeat the previous one byte for byte. The re-rendering error
+   model, and mark the frames that repeat the previous one (within 2 gray levels). The re-rendering error
    against the model's own training error says how much of the gap is vision.
 2. The camera stage (:func:`~piga.diagnostics.vision.camera_stage`): blur, shift and noise fitted
    by matching frames to the decoder's renders; dropped frames and a late camera from the

@@ -42,7 +42,7 @@ class Observations:
     frames_index: np.ndarray
     """(n,) indices into N of ``frames``."""
     stale: np.ndarray | None = None
-    """(N, T) bool: frame t is byte-identical to frame t - 1 (a repeated frame); None: not known."""
+    """(N, T) bool: frame t repeats frame t - 1 (within 2 gray levels, :func:`~piga.diagnostics.vision.stale_frames`); None: not known."""
 
 
 def check_compatible(model: PhysicsModel, path: str | os.PathLike[str], min_sequences: int = 20,

@@ -18,8 +18,8 @@ with the identified decoder D:
   renders over the whole circle leave them at the background): their temporal spread around the
   per-pixel median, by maximum likelihood of a rounded Gaussian censored at 0 and 255 (a white
   background clips half of the noise). A clean camera gives s = 0 there exactly.
-- **Repeated frames.** A frame identical, byte for byte, to the one before it while the pendulum
-  moves carries no new information: a dropped frame. When the first k frames of (nearly) every
+- **Repeated frames.** A frame identical to the one before it (byte for byte, or within a video
+  codec's 2 gray levels) while the pendulum moves carries no new information: a dropped frame. When the first k frames of (nearly) every
   sequence repeat the first one, the camera started k frames late: a camera delay of k steps,
   which from then on looks exactly like an actuator delay of k (o_{t+1} = f(o_t, u_{t-k})).
 """
@@ -211,9 +211,18 @@ def noise_level(frames: np.ndarray, still: np.ndarray, interval: bool = False) -
     return s, ci
 
 
-def stale_frames(frames: np.ndarray) -> np.ndarray:
-    """(N, T) bool: frame t is byte-identical to frame t - 1 (never true at t = 0). ``frames`` (N, T, ...)."""
-    same = (frames[:, 1:] == frames[:, :-1]).reshape(frames.shape[0], frames.shape[1] - 1, -1).all(-1)
+#: Largest pixel change (gray levels) between a frame and the one before it that still counts as a
+#: repeat. A camera repeats a frame byte for byte, but a video codec re-encodes the copy: in an
+#: H.264 recording, repeated frames came back with changes of at most 1 gray level, while a
+#: pendulum that moves by more than 0.1° changes some pixel by 10 levels or more.
+REPEAT_TOLERANCE = 2
+
+
+def stale_frames(frames: np.ndarray, tolerance: int = REPEAT_TOLERANCE) -> np.ndarray:
+    """(N, T) bool: frame t repeats frame t - 1, no pixel changing by more than ``tolerance`` gray
+    levels (never true at t = 0). ``frames`` (N, T, ...) uint8."""
+    change = np.abs(frames[:, 1:].astype(np.int16) - frames[:, :-1].astype(np.int16))
+    same = change.reshape(frames.shape[0], frames.shape[1] - 1, -1).max(-1) <= tolerance
     return np.concatenate([np.zeros((frames.shape[0], 1), bool), same], axis=1)
 
 
@@ -354,7 +363,7 @@ def repeated_frames(stale: np.ndarray | None, theta: np.ndarray,
     where the pendulum moves that fast.
 
     Args:
-        stale: (N, T) bool, frame t repeats frame t - 1 byte for byte (:func:`stale_frames`), or None.
+        stale: (N, T) bool, frame t repeats frame t - 1 (:func:`stale_frames`), or None.
         theta: (N, T) angles, to tell a moving pendulum from a slow one.
     Returns:
         The leading repeats k (:func:`leading_repeats`), the drops, their rate per frame, and the
