@@ -198,10 +198,12 @@ def analyse(obs: Observations, nom: F.Nominal, config: DiagnoseConfig = Diagnose
     w_held1 = F.make_windows(theta, obs.actions, held_rows, 1, 1, obs.dt, stale)
     # the nominal model as the user has it: the encoder's angles, and no idea of repeated frames
     # (the same window starts, so that both are scored on the same predictions)
-    w_free_nominal = dataclass_replace(F.make_windows(obs.theta, obs.actions, held_rows, None, config.stride, obs.dt, stale,
-                                                      repeat=True), source=None)
-    w_held1_nominal = F.make_windows(obs.theta, obs.actions, held_rows, 1, 1, obs.dt, stale)
-    w_fit1_nominal = F.make_windows(obs.theta, obs.actions, fit_rows, 1, 1, obs.dt, stale)
+    w_free_nominal, w_held1_nominal, w_fit1_nominal = dataclass_replace(w_free, source=None), w_held1, w_fit1
+    if theta is not obs.theta:
+        w_free_nominal = dataclass_replace(F.make_windows(obs.theta, obs.actions, held_rows, None, config.stride, obs.dt,
+                                                          stale, repeat=True), source=None)
+        w_held1_nominal = F.make_windows(obs.theta, obs.actions, held_rows, 1, 1, obs.dt, stale)
+        w_fit1_nominal = F.make_windows(obs.theta, obs.actions, fit_rows, 1, 1, obs.dt, stale)
 
     nominal_model = F.Model((), 0, {"g": nom.g, "a": nom.a})
     nominal_score = _score(nominal_model, nom, w_fit1_nominal, w_free_nominal)
@@ -258,10 +260,8 @@ def analyse(obs: Observations, nom: F.Nominal, config: DiagnoseConfig = Diagnose
     # not explained by the candidates? a flexible basis on what is left
     res_fit = one_step_residuals(final, nom, theta, obs.actions, fit_rows, stale)
     res_held = one_step_residuals(final, nom, theta, obs.actions, held_rows, stale)
-    keep_fit = res_fit.valid if res_fit.valid is not None else np.ones(len(res_fit.rho), bool)
-    keep_held = res_held.valid if res_held.valid is not None else np.ones(len(res_held.rho), bool)
-    x_fit, x_held = generic_features(res_fit)[keep_fit], generic_features(res_held)[keep_held]
-    rho_fit, rho_held = res_fit.rho[keep_fit], res_held.rho[keep_held]
+    x_fit, x_held = generic_features(res_fit)[res_fit.valid], generic_features(res_held)[res_held.valid]
+    rho_fit, rho_held = res_fit.rho[res_fit.valid], res_held.rho[res_held.valid]
     coef, *_ = np.linalg.lstsq(x_fit, rho_fit, rcond=None)
     n = len(rho_fit)
     rss0, rss1 = float((rho_fit**2).sum()), float(((rho_fit - x_fit @ coef) ** 2).sum())
@@ -461,8 +461,8 @@ def _pixel_errors(model: PhysicsModel, obs: Observations, nom: F.Nominal, nomina
         if len(w.theta0) == 0:
             return empty
         pred = F.simulate(m, F.parameters_of(m, nom), nom, w).float()  # (B, H)
-        if repeat and w.source is not None:
-            pred = torch.cat([w.theta0[:, None].float(), pred], 1).gather(1, w.source)
+        if repeat:
+            pred = F.as_observed(w, pred)
         frames = camera_render(model, cam, pred)  # (B, H, C, H, W)
         x = x_all[[pos[int(s)] for s in w.sequence]][:, F.MAX_DELAY + 1 :]
         se = ((frames - x) ** 2).mean(dim=(2, 3, 4))  # (B, H)

@@ -30,6 +30,7 @@ import torch
 from torch import Tensor
 
 from envs.effects import FRICTION_SMOOTHING
+from piga.diagnostics.vision import repeat_sources
 
 #: Effects that the fit can add to the physics, in the order of the report.
 CANDIDATES: tuple[str, ...] = ("damping", "friction", "bias", "delay", "deadzone", "saturation", "speed_clip")
@@ -104,8 +105,6 @@ def make_windows(theta: np.ndarray, actions: np.ndarray, rows: np.ndarray, horiz
     pad_t = np.pad(theta, ((0, 0), (0, h)), mode="edge")
     pad_u = np.pad(np.clip(actions, -2.0, 2.0), ((0, 0), (0, h)))
     if stale is not None:
-        from piga.diagnostics.vision import repeat_sources
-
         pad_stale = np.pad(stale, ((0, 0), (0, h)), mode="edge")
         pad_src = np.pad(repeat_sources(stale), ((0, 0), (0, h)), mode="edge")
     for s in starts:
@@ -188,6 +187,14 @@ def simulate(model: Model, params: dict[str, Tensor], nominal: Nominal, w: Windo
     return torch.stack(out, 1)  # (B, H)
 
 
+def as_observed(w: Windows, pred: Tensor) -> Tensor:
+    """(B, H) predicted angles -> what the camera shows: at a repeated frame, the prediction (or the
+    start angle) it repeats (:attr:`Windows.source`); unchanged without repeats."""
+    if w.source is None:
+        return pred
+    return torch.cat([w.theta0[:, None].to(pred), pred], 1).gather(1, w.source)
+
+
 def parameters_of(model: Model, nominal: Nominal) -> dict[str, Tensor]:
     """The tensors :func:`simulate` takes, from a model's values (defaults: nominal g, a; grid starts)."""
     values = {"log_g": math.log(model.values.get("g", nominal.g)), "log_a": math.log(model.values.get("a", nominal.a))}
@@ -200,10 +207,7 @@ def parameters_of(model: Model, nominal: Nominal) -> dict[str, Tensor]:
 def squared_errors(model: Model, nominal: Nominal, w: Windows, params: dict[str, Tensor] | None = None) -> Tensor:
     """(B, H) squared angle errors (masked to 0 outside the sequences)."""
     p = parameters_of(model, nominal) if params is None else params
-    pred = simulate(model, p, nominal, w)  # (B, H)
-    if w.source is not None:  # repeated frames repeat a prediction (or the start)
-        pred = torch.cat([w.theta0[:, None], pred], 1).gather(1, w.source)
-    return (pred - w.target) ** 2 * w.mask
+    return (as_observed(w, simulate(model, p, nominal, w)) - w.target) ** 2 * w.mask
 
 
 def loss(model: Model, nominal: Nominal, w: Windows, weights: Tensor | None = None,
@@ -336,9 +340,7 @@ def noise_floor(model: Model, nominal: Nominal, w: Windows, sigma: float, draws:
     gen = torch.Generator().manual_seed(seed)
     p = parameters_of(model, nominal)
     with torch.no_grad():
-        clean = simulate(model, p, nominal, w)  # (B, H)
-        if w.source is not None:  # a repeated frame shows the state of the frame it repeats
-            clean = torch.cat([w.theta0[:, None], clean], 1).gather(1, w.source)
+        clean = as_observed(w, simulate(model, p, nominal, w))  # (B, H) what an exact camera shows
         prev = w.theta0 - nominal.dt * w.v0  # θ_{s-1} consistent with the start
         total = torch.zeros(w.target.shape[1], dtype=torch.float64)
         per_window = torch.zeros(w.target.shape[0], dtype=torch.float64)

@@ -38,8 +38,8 @@ class Residuals:
     """(N, T - 1 - MAX_DELAY) ρ per sequence and step, for correlations."""
     actions_grid: np.ndarray
     """(N, T) the actions, aligned with ``grid`` from step MAX_DELAY."""
-    valid: np.ndarray | None = None
-    """(n,) bool or None: False where frame s - 1, s or s + 1 is a repeated (stale) frame."""
+    valid: np.ndarray
+    """(n,) bool: False where frame s - 1, s or s + 1 is a repeated (stale) frame."""
 
 
 def one_step_residuals(model: Model, nominal: Nominal, theta: np.ndarray, actions: np.ndarray, rows: np.ndarray,
@@ -54,11 +54,11 @@ def one_step_residuals(model: Model, nominal: Nominal, theta: np.ndarray, action
     rho = ((w.target[:, 0] - pred) / nominal.dt**2).numpy()  # (S * n,)
     gym_theta = np.remainder(w.theta0.numpy() + nominal.offset + math.pi, 2 * math.pi) - math.pi
     grid = rho.reshape(-1, len(rows)).T  # (n, S)
-    valid = None
+    valid = np.ones(len(rho), bool)
     if stale is not None:
-        t = theta.shape[1]
-        touch = stale[rows][:, MAX_DELAY - 1 : t - 1] | stale[rows][:, MAX_DELAY : t] | np.pad(stale[rows], ((0, 0), (0, 1)))[:, MAX_DELAY + 1 : t + 1]
-        valid = ~touch[:, : grid.shape[1]].T.reshape(-1)  # start-major, like rho
+        s = np.arange(MAX_DELAY, theta.shape[1] - 1)  # the starts, as in make_windows
+        seen = stale[rows]
+        valid = ~(seen[:, s - 1] | seen[:, s] | seen[:, s + 1]).T.reshape(-1)  # start-major, like rho
     return Residuals(rho, gym_theta, w.v0.numpy(), w.actions[:, -1].numpy(), grid, actions[rows], valid)
 
 

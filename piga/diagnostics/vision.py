@@ -34,7 +34,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor
 
-from piga.model import PhysicsModel
+from piga.model import PhysicsModel, frames_to_float
 
 #: Angles in the matching table (0.5° apart).
 TABLE_SIZE = 720
@@ -52,6 +52,11 @@ class Camera:
     """Shift to the right (px): x'[r, c] = x[r, c - dx]."""
     dy: float = 0.0
     """Shift down (px): x'[r, c] = x[r - dy, c]."""
+
+    def material(self, config: CameraConfig) -> set[str]:
+        """The effects of this camera that are big enough to name: "blur" and/or "shift"."""
+        return ({"blur"} if self.blur > config.min_blur else set()) | \
+            ({"shift"} if max(abs(self.dx), abs(self.dy)) > config.min_shift else set())
 
     def apply(self, frames: Tensor) -> Tensor:
         """(K, C, H, W) frames in [0, 1] -> the same frames as this camera sees them."""
@@ -328,11 +333,9 @@ def camera_interval(model: PhysicsModel, camera: Camera, name: str, x: Tensor, c
     return [value - 1.96 * sd, value + 1.96 * sd]
 
 
-def _flat(frames: np.ndarray) -> Tensor:
-    x = torch.from_numpy(np.ascontiguousarray(frames)).float().div(255)
-    if x.dim() == 4:  # (M, H, W, C) -> (M, C, H, W)
-        x = x.permute(0, 3, 1, 2)
-    return x.reshape(len(x), -1)
+def _flat(frames: np.ndarray, channels: int = 1) -> Tensor:
+    """uint8 frames (M, H, W) or (M, H, W, C) -> (M, P) in [0, 1], flattened like :class:`AngleTable` renders."""
+    return frames_to_float(torch.from_numpy(np.ascontiguousarray(frames))[None], channels)[0].reshape(len(frames), -1)
 
 
 @torch.no_grad()
@@ -347,7 +350,7 @@ def match_file(model: PhysicsModel, path: str, camera: Camera, batch: int = 64) 
         out = np.empty((n, t))
         for start in range(0, n, batch):
             raw = ds[start : start + batch]
-            th, _ = match(table, _flat(raw.reshape(-1, *raw.shape[2:])))
+            th, _ = match(table, _flat(raw.reshape(-1, *raw.shape[2:]), model.config.channels))
             out[start : start + len(raw)] = th.double().numpy().reshape(len(raw), t)
     return np.unwrap(out, axis=1)
 
@@ -409,33 +412,30 @@ def camera_stage(model: PhysicsModel, path: str, theta: np.ndarray, fit: np.ndar
     rng = np.random.default_rng(seed)
     fit_rows, held_rows = np.flatnonzero(fit), np.flatnonzero(~fit)
     raw_fit, fit_seqs = _sample(path, fit_rows, config.fit_frames, rng)
-    x_fit, x_held = _flat(raw_fit), _flat(_sample(path, held_rows, config.held_frames, rng)[0])
+    channels = model.config.channels
+    x_fit, x_held = _flat(raw_fit, channels), _flat(_sample(path, held_rows, config.held_frames, rng)[0], channels)
 
     e0 = matched_error(model, Camera(), x_held)
     table: list[dict] = [{"candidate": "none", "camera": Camera().__dict__, "held_out_matched_mse": e0, "drop": 0.0,
                           "accepted": False}]
 
-    def row(name: str, cam: Camera, base: float) -> dict:
+    def row(name: str, cam: Camera, base: float, needs: set[str]) -> dict:
+        """A candidate's table row; accepted when it lowers the residual enough and ``needs`` are material."""
         e = matched_error(model, cam, x_held)
-        material = (cam.blur > config.min_blur) if name == "blur" else \
-            (max(abs(cam.dx), abs(cam.dy)) > config.min_shift) if name == "shift" else True
         drop = 1 - e / base if base > 0 else 0.0
         return {"candidate": name, "camera": dict(cam.__dict__), "held_out_matched_mse": e, "drop": drop,
-                "accepted": bool(material and drop > config.min_drop)}
+                "accepted": bool(needs <= cam.material(config) and drop > config.min_drop)}
 
-    singles = [row("blur", fit_camera(model, x_fit, shift=False), e0)]
+    singles = [row("blur", fit_camera(model, x_fit, shift=False), e0, {"blur"})]
     bar.update()
-    singles.append(row("shift", fit_camera(model, x_fit, blur=False), e0))
+    singles.append(row("shift", fit_camera(model, x_fit, blur=False), e0, {"shift"}))
     bar.update()
     table += singles
     best = max(singles, key=lambda r: r["drop"])
     camera, e_cam = Camera(), e0
     if best["accepted"]:
         camera, e_cam = Camera(**best["camera"]), best["held_out_matched_mse"]
-        both = row("blur+shift", fit_camera(model, x_fit), e_cam)
-        other_material = (both["camera"]["blur"] > config.min_blur) if best["candidate"] == "shift" else \
-            (max(abs(both["camera"]["dx"]), abs(both["camera"]["dy"])) > config.min_shift)
-        both["accepted"] = bool(both["accepted"] and other_material)
+        both = row("blur+shift", fit_camera(model, x_fit), e_cam, {"blur", "shift"} - {best["candidate"]})
         table.append(both)
         if both["accepted"]:
             camera, e_cam = Camera(**both["camera"]), both["held_out_matched_mse"]
