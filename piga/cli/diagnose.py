@@ -66,8 +66,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         detail = (f"typical held-out window, pixel MSE {g['typical_pixel_mse_nominal']:.3g} -> "
                   f"{g['typical_pixel_mse_corrected']:.3g}, of the gap above the matched floor {g['pixel_mse_floor']:.3g}")
     else:
+        floor = g.get("typical_free_run_mse_floor")
         detail = (f"typical held-out window, angle MSE {g['typical_free_run_mse_nominal']:.3g} -> "
-                  f"{g['typical_free_run_mse_corrected']:.3g} rad²")
+                  f"{g['typical_free_run_mse_corrected']:.3g} rad²"
+                  + (f", of the gap above the twin's floor {floor:.3g}" if floor is not None else ""))
     print(f"free-run closure {headline} ({detail}; mean over all windows {100 * g['free_run_closure']:.1f}%); corrected "
           + ", ".join(f"{k} = {v:.4g}" for k, v in diagnosis.corrected.items()))
     if diagnosis.control:

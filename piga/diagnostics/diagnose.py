@@ -27,8 +27,10 @@ Steps (no state labels, no effect labels; only frames and actions of the "real" 
    (:func:`~piga.diagnostics.residuals.generic_features`) fitted to the remaining one-step
    residuals still lowers the held-out residual by more than ``unexplained_gain`` with a BIC gain.
 8. Bootstrap the chosen model over fit sequences for uncertainties; closure per horizon and on
-   the typical held-out window (the median window's mean squared free-run error), in angles, or
-   in pixels above the matched re-rendering error when a camera effect changed the angles.
+   the typical held-out window (the median window's mean squared free-run error), in angles above
+   the floor that an exactly right model has on a simulated twin of the held-out data
+   (:mod:`piga.diagnostics.twin`), or in pixels above the matched re-rendering error when a camera
+   effect changed the angles.
 """
 
 from __future__ import annotations
@@ -47,7 +49,8 @@ from piga.diagnostics import fit as F
 from piga.diagnostics.observe import Observations, observe
 from piga.diagnostics.vision import Camera, CameraConfig, CameraFindings, angle_table, camera_stage, match
 from piga.diagnostics.residuals import (action_correlation, autocorrelation, binned, generic_features, heatmap,
-                                        one_step_residuals)
+                                        one_step_residuals, ridge)
+from piga.diagnostics.twin import gap_closure, twin_floor
 from piga.model import PhysicsModel
 from piga.train import training_reconstruction_mse
 
@@ -175,17 +178,38 @@ def diagnose(model: PhysicsModel, data: str | os.PathLike[str], config: Diagnose
     camera = camera_stage(model, str(data), obs.theta, obs.fit, obs.stale, config.camera, seed=config.seed,
                           progress=progress)
     return analyse(obs, nominal_of(model), config, model=model, rec_training=training_reconstruction_mse(model, checkpoint),
-                   progress=progress, camera=camera)
+                   progress=progress, camera=camera, arrow=training_arrow(checkpoint))
+
+
+def training_arrow(checkpoint: dict | None) -> bool:
+    """Whether the data the model was identified on showed Gymnasium's torque arrow: from the
+    ``env_config`` of the training file named in the checkpoint, if that file is still there, else
+    True (Gymnasium's own picture, the pixel pendulum's default)."""
+    import json
+
+    import h5py
+
+    path = ((checkpoint or {}).get("data") or {}).get("path")
+    if not path or not os.path.exists(path):
+        return True
+    try:
+        with h5py.File(path, "r") as f:
+            return bool(json.loads(f.attrs["env_config"]).get("draw_torque_arrow", True))
+    except (OSError, KeyError, ValueError):
+        return True
 
 
 def analyse(obs: Observations, nom: F.Nominal, config: DiagnoseConfig = DiagnoseConfig(), model: PhysicsModel | None = None,
-            rec_training: float = 0.0, progress: bool = False, camera: CameraFindings | None = None) -> Diagnosis:
+            rec_training: float = 0.0, progress: bool = False, camera: CameraFindings | None = None,
+            arrow: bool = True) -> Diagnosis:
     """The diagnosis of observations ``obs`` against the nominal physics ``nom``.
 
     ``model`` (its decoder) renders the pixel errors of ``obs.frames``; without it they are left
     out. ``rec_training`` is the model's own re-rendering MSE (0: unknown, no vision check).
     ``camera`` is the camera stage's result (:func:`~piga.diagnostics.vision.camera_stage`); when
-    it accepted a camera or noise, the dynamics are fitted on its re-matched angles.
+    it accepted a camera or noise, the dynamics are fitted on its re-matched angles. ``arrow``: the
+    simulator that the model was identified in draws Gymnasium's torque arrow (for the twin that
+    measures the floor of the gap, :mod:`piga.diagnostics.twin`).
     """
     from tqdm.auto import tqdm
 
@@ -262,7 +286,10 @@ def analyse(obs: Observations, nom: F.Nominal, config: DiagnoseConfig = Diagnose
     res_held = one_step_residuals(final, nom, theta, obs.actions, held_rows, stale)
     x_fit, x_held = generic_features(res_fit)[res_fit.valid], generic_features(res_held)[res_held.valid]
     rho_fit, rho_held = res_fit.rho[res_fit.valid], res_held.rho[res_held.valid]
-    coef, *_ = np.linalg.lstsq(x_fit, rho_fit, rcond=None)
+    # ridge, not least squares: where the fit split never visits part of the circle (a recording
+    # cut in time), the cos(kθ) columns are nearly collinear there and plain least squares gives
+    # huge cancelling coefficients that blow up on the held-out part (measured: -750%)
+    coef = ridge(x_fit, rho_fit)
     n = len(rho_fit)
     rss0, rss1 = float((rho_fit**2).sum()), float(((rho_fit - x_fit @ coef) ** 2).sum())
     bic_drop = n * math.log(rss0 / n) - (n * math.log(rss1 / n) + x_fit.shape[1] * math.log(n))
@@ -348,16 +375,21 @@ def analyse(obs: Observations, nom: F.Nominal, config: DiagnoseConfig = Diagnose
     h_nom, h_fin = nominal_score["horizon"], chosen["horizon"]
     closure = [float(1 - b / a) if a > 0 else 0.0 for a, b in zip(h_nom, h_fin)]
     one_step = F.horizon_errors(final, nom, w_held1)[0]
-    sigma = math.sqrt(one_step / 6)  # r = n_{t+1} - 2 n_t + n_{t-1} for white angle noise n
-    h_floor, win_floor = F.noise_floor(final, nom, w_free, sigma, seed=config.seed)
+    rematched = camera is not None and camera.rematched
+    # The floor: the corrected model's error on a simulated twin of the held-out data, which it
+    # describes exactly (piga.diagnostics.twin). Not with re-matched angles: their closure is in pixels.
+    floor = None
+    if model is not None and not rematched:
+        floor = twin_floor(model, final, nom, theta[held_rows], obs.actions[held_rows],
+                           None if stale is None else stale[held_rows], config.stride, arrow=arrow)
     # Closure on the typical window: the median over held-out windows of each window's mean squared
     # free-run error. The mean over windows is dominated by the few that pass near upright, where
-    # any velocity error grows fast, even in an exactly right model. No floor is subtracted: the
-    # white-noise floor is not a bound (the encoder's errors are correlated in time).
-    typ_nom, typ_fin, typ_floor = nominal_score["typical"], chosen["typical"], float(np.median(win_floor))
-    gap_closure = float(1 - typ_fin / typ_nom) if typ_nom > 0 else None
-    mean_reducible = float(h_nom.mean() - h_floor.mean())
-    mean_gap_closure = float((h_nom.mean() - h_fin.mean()) / mean_reducible) if mean_reducible > 0 else None
+    # any velocity error grows fast, even in an exactly right model (and in its twin).
+    typ_nom, typ_fin = nominal_score["typical"], chosen["typical"]
+    typ_floor = float(np.median(floor.windows)) if floor is not None else None
+    raw_typical = float(1 - typ_fin / typ_nom) if typ_nom > 0 else None
+    typical_gap = gap_closure(typ_nom, typ_fin, typ_floor) if floor is not None else raw_typical
+    mean_gap = gap_closure(float(h_nom.mean()), float(h_fin.mean()), float(floor.horizon.mean())) if floor is not None else None
     pixels = _pixel_errors(model, obs, nom, nominal_model, final, theta, camera.camera if camera else Camera(), stale) \
         if model is not None else {"pixel_mse_nominal": [], "pixel_mse_corrected": [], "pixel_mse_floor": None,
                                    "typical_pixel_mse_nominal": None, "typical_pixel_mse_corrected": None}
@@ -368,19 +400,19 @@ def analyse(obs: Observations, nom: F.Nominal, config: DiagnoseConfig = Diagnose
         pixel_closure = float((pn - pc) / (pn - pf)) if pn - pf > 0 else None
     # A camera effect changes the angles themselves (re-matched), so nominal and corrected angle errors
     # are measured against different angles: then the headline closure is the pixels'.
-    basis = "pixels" if camera is not None and camera.rematched and pixel_closure is not None else "state"
+    basis = "pixels" if rematched and pixel_closure is not None else "state"
     res_nom = one_step_residuals(nominal_model, nom, obs.theta, obs.actions, np.arange(len(obs.theta)))
     gap = {
         "horizon": list(range(1, len(h_nom) + 1)),
         "state_mse_nominal": h_nom.tolist(), "state_mse_corrected": h_fin.tolist(), "closure": closure,
         "free_run_mse_nominal": float(h_nom.mean()), "free_run_mse_corrected": float(h_fin.mean()),
         "free_run_closure": float(1 - h_fin.mean() / h_nom.mean()) if h_nom.mean() > 0 else 0.0,
-        "state_mse_noise_floor": h_floor.tolist(), "free_run_mse_noise_floor": float(h_floor.mean()),
-        "encoder_noise_rad": sigma,
-        "free_run_gap_closure": pixel_closure if basis == "pixels" else gap_closure,
+        "state_mse_floor": floor.horizon.tolist() if floor is not None else None,
+        "free_run_mse_floor": float(floor.horizon.mean()) if floor is not None else None,
+        "free_run_gap_closure": pixel_closure if basis == "pixels" else typical_gap,
         "typical_free_run_mse_nominal": typ_nom, "typical_free_run_mse_corrected": typ_fin,
-        "typical_free_run_mse_noise_floor": typ_floor, "typical_free_run_closure": gap_closure,
-        "mean_free_run_gap_closure": mean_gap_closure,
+        "typical_free_run_mse_floor": typ_floor, "typical_free_run_closure": raw_typical,
+        "typical_free_run_gap_closure": typical_gap, "mean_free_run_gap_closure": mean_gap,
         "closure_basis": basis, "pixel_free_run_gap_closure": pixel_closure,
         "one_step_rms_nominal_rad": math.sqrt(float(F.horizon_errors(nominal_model, nom, w_held1_nominal)[0])),
         "one_step_rms_corrected_rad": math.sqrt(float(one_step)),

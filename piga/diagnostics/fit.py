@@ -326,30 +326,3 @@ def bootstrap(model: Model, nominal: Nominal, w: Windows, replicates: int, seed:
             draws[k].append(v)
     return draws
 
-
-def noise_floor(model: Model, nominal: Nominal, w: Windows, sigma: float, draws: int = 3,
-                seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
-    """The error that ``model`` would still have if it were exactly right: (H,) per horizon and (B,) per window.
-
-    A parametric bootstrap: trajectories are simulated with ``model`` itself from the windows'
-    starts and actions, white noise of ``sigma`` (rad) is added to every observed angle, as the
-    encoder adds it, and the model predicts them from the noisy frames, as it does on real data.
-    Near upright, small errors in the estimated velocity grow fast, so even a perfect model has a
-    free-run error; closure is also reported against this floor.
-    """
-    gen = torch.Generator().manual_seed(seed)
-    p = parameters_of(model, nominal)
-    with torch.no_grad():
-        clean = as_observed(w, simulate(model, p, nominal, w))  # (B, H) what an exact camera shows
-        prev = w.theta0 - nominal.dt * w.v0  # θ_{s-1} consistent with the start
-        total = torch.zeros(w.target.shape[1], dtype=torch.float64)
-        per_window = torch.zeros(w.target.shape[0], dtype=torch.float64)
-        for _ in range(draws):
-            noise = lambda shape: sigma * torch.randn(shape, generator=gen, dtype=torch.float64)  # noqa: E731
-            start, before = w.theta0 + noise(w.theta0.shape), prev + noise(prev.shape)
-            noisy = Windows(start, (start - before) / nominal.dt, w.actions, clean + noise(clean.shape), w.mask, w.sequence,
-                            w.source)
-            se = squared_errors(model, nominal, noisy, p)  # (B, H)
-            total += se.sum(0) / w.mask.sum(0).clamp_min(1)
-            per_window += se.sum(1) / w.mask.sum(1).clamp_min(1)
-    return (total / draws).numpy(), (per_window / draws).numpy()

@@ -1,0 +1,132 @@
+"""The floor of the gap: how well an exactly right model predicts, measured on a simulated twin.
+
+Even a model whose physics is exactly right has a held-out error, since it reads its states from
+frames through the encoder. That error is the floor under which no correction can go, and the
+"gap" is what the nominal model has above it. Its size depends on the encoder's errors, which are
+correlated in time and depend on the angle, and on the windows (near upright, a small velocity
+error grows fast). No simple noise model captures both: white angle noise overestimates the typical
+window's floor 2x. So the floor is measured instead, on a twin of the held-out data:
+
+1. each held-out sequence is re-simulated with the corrected physics, from its first two encoded
+   angles and with its own actions (the twin's states are those of a system that the corrected
+   model describes exactly);
+2. the twin is rendered by the simulator the model was identified in (Gymnasium's Pendulum-v1
+   render, resized and grayed by Gymnasium's wrappers, as :func:`envs.pendulum.make_pixel_pendulum`
+   does), and the recording's repeated frames are repeated in the twin too;
+3. the model encodes the twin's frames, and the corrected model predicts the twin's windows just as
+   it predicts the real ones.
+
+The floor is the simulator's: a recording whose pictures differ from the simulator's (another
+camera, a codec) has its own vision error on top, which counts as part of the gap.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from piga.diagnostics import fit as F
+from piga.model import PhysicsModel, frames_to_float
+
+
+@dataclass(frozen=True)
+class TwinFloor:
+    """A corrected model's held-out errors on its twin (the floor of the gap)."""
+
+    horizon: np.ndarray
+    """(H,) mean squared angle error (rad²) at each horizon, as :func:`piga.diagnostics.fit.horizon_errors`."""
+    windows: np.ndarray
+    """(B,) each free-run window's mean squared angle error (rad²), as :func:`piga.diagnostics.fit.window_errors`."""
+
+
+def twin_angles(model: F.Model, nominal: F.Nominal, theta: np.ndarray, actions: np.ndarray) -> np.ndarray:
+    """(n, T) angles (model convention) of the twin of ``n`` sequences of (n, T) encoded ``theta``.
+
+    Frames 0 and 1 are the encoded ones; from frame 2 on, ``model`` simulates with the sequence's
+    actions (actions before frame 0, which a delay would need, are taken as 0).
+    """
+    n, t = theta.shape
+    pad = np.concatenate([np.zeros((n, F.MAX_DELAY - 1)), np.clip(actions[:, : t - 1], -2.0, 2.0)], 1)  # u_{-3}..u_{T-2}
+    as_t = lambda x: torch.as_tensor(x, dtype=torch.float64)  # noqa: E731
+    w = F.Windows(as_t(theta[:, 1]), as_t((theta[:, 1] - theta[:, 0]) / nominal.dt), as_t(pad),
+                  torch.zeros(n, t - 2, dtype=torch.float64), torch.ones(n, t - 2, dtype=torch.float64), torch.arange(n))
+    with torch.no_grad():
+        sim = F.simulate(model, F.parameters_of(model, nominal), nominal, w).numpy()  # (n, T - 2)
+    return np.concatenate([theta[:, :2], sim], 1)
+
+
+def render_angles(angles: np.ndarray, actions: np.ndarray, offset: float, image_size: int, arrow: bool) -> np.ndarray:
+    """(n, T, H, W) uint8 frames of the pendulum at (n, T) ``angles`` (model convention).
+
+    Rendered as the pixel pendulum renders (Gymnasium's picture, then Gymnasium's
+    ``ResizeObservation`` and ``GrayscaleObservation``); with ``arrow``, frame t shows the commanded
+    torque u_{t-1} (none at frame 0), as :class:`envs.effects.ShowCommandedTorque` does.
+    """
+    import gymnasium as gym
+    from gymnasium.wrappers import GrayscaleObservation, ResizeObservation
+
+    from envs.pendulum import PixelPendulumConfig, make_pixel_pendulum
+
+    env = make_pixel_pendulum(PixelPendulumConfig(image_size=image_size, draw_torque_arrow=True))
+    try:
+        env.reset(seed=0)
+        stages = []
+        wrapper = env
+        while isinstance(wrapper, gym.Wrapper):
+            if isinstance(wrapper, (ResizeObservation, GrayscaleObservation)):
+                stages.append(wrapper)
+            wrapper = wrapper.env
+        stages.reverse()  # innermost first: resize, then gray
+        base = env.unwrapped
+        out = np.empty((*angles.shape, image_size, image_size), np.uint8)
+        for i in range(angles.shape[0]):
+            for j in range(angles.shape[1]):
+                base.state = np.array([angles[i, j] + offset, 0.0])
+                base.last_u = float(np.clip(actions[i, j - 1], -2.0, 2.0)) if arrow and j > 0 else None
+                img = base.render()
+                for stage in stages:
+                    img = stage.observation(img)
+                out[i, j] = img
+    finally:
+        env.close()
+    return out
+
+
+def repeat_stale(frames: np.ndarray, stale: np.ndarray) -> np.ndarray:
+    """(n, T, ...) frames where each stale (n, T) frame repeats the frame before it (in place; returned)."""
+    for j in range(1, frames.shape[1]):
+        frames[stale[:, j], j] = frames[stale[:, j], j - 1]
+    return frames
+
+
+@torch.no_grad()
+def twin_floor(network: PhysicsModel, model: F.Model, nominal: F.Nominal, theta: np.ndarray, actions: np.ndarray,
+               stale: np.ndarray | None, stride: int, arrow: bool = True, batch: int = 16) -> TwinFloor:
+    """The errors of ``model`` on the twin of (n, T) encoded held-out sequences ``theta`` and ``actions``.
+
+    Args:
+        network: the identified model, whose encoder reads the twin's frames.
+        model: the corrected physics (the twin's physics and the predictor).
+        stale: (n, T) the recording's repeated frames, repeated in the twin too (None: none).
+        stride: frames between window starts, as for the real free-run windows.
+        arrow: render Gymnasium's torque arrow (as in the data the model was identified on).
+    """
+    angles = twin_angles(model, nominal, theta, actions)
+    frames = render_angles(angles, actions, nominal.offset, network.config.image_size, arrow)
+    if stale is not None:
+        repeat_stale(frames, stale)
+    encoded = np.empty(angles.shape)
+    for start in range(0, len(frames), batch):
+        x = frames_to_float(torch.from_numpy(frames[start : start + batch]), network.config.channels)  # (B, T, C, H, W)
+        encoded[start : start + batch] = np.unwrap(network.encode(x)[..., 0, 0].double().numpy(), axis=1)
+    rows = np.arange(len(encoded))
+    w = F.make_windows(encoded, actions, rows, None, stride, nominal.dt, stale, repeat=True)
+    return TwinFloor(F.horizon_errors(model, nominal, w), F.window_errors(model, nominal, w))
+
+
+def gap_closure(nominal: float, corrected: float, floor: float) -> float | None:
+    """Share of the gap above the floor that the correction closes: (nominal - corrected) / (nominal - floor)."""
+    return float((nominal - corrected) / (nominal - floor)) if nominal - floor > 0 and math.isfinite(floor) else None

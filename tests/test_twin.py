@@ -1,0 +1,64 @@
+"""The twin that measures the floor of the gap: its physics, its pictures, its repeats; and the ridge fit."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from envs.pendulum import PixelPendulumConfig, make_pixel_pendulum
+from piga.diagnostics import fit as F
+from piga.diagnostics.residuals import ridge
+from piga.diagnostics.twin import gap_closure, render_angles, repeat_stale, twin_angles
+from tests.test_diagnostics import NOMINAL, planted
+
+
+@pytest.mark.parametrize("effects", [{}, {"damping": 0.2, "delay": 2}])
+def test_the_twin_of_exact_data_is_the_data(effects: dict) -> None:
+    obs = planted(effects, n=6, t=20, noise=0.0)
+    values = {"g": 10.0, "a": 1.0, **({"b": 0.2} if "damping" in effects else {})}
+    model = F.Model(tuple(e for e in F.CANDIDATES if e in effects), effects.get("delay", 0), values)
+    np.testing.assert_allclose(twin_angles(model, NOMINAL, obs.theta, obs.actions), obs.theta, atol=1e-9)
+    # a wrong model's twin departs from the data
+    wrong = F.Model((), 0, {"g": 10.0, "a": 0.5})
+    assert np.abs(twin_angles(wrong, NOMINAL, obs.theta, obs.actions) - obs.theta).max() > 0.05
+
+
+def test_the_twin_is_rendered_as_the_env_renders() -> None:
+    env = make_pixel_pendulum(PixelPendulumConfig())
+    first, _ = env.reset(seed=0, options={"state": [2.5, 0.0]})
+    second, _, _, _, info = env.step(np.array([1.5], np.float32))
+    env.close()
+    angles = np.array([[2.5, info["state"][0]]]) - 0.1  # model convention with φ = 0.1
+    actions = np.array([[1.5, 0.0]])
+    frames = render_angles(angles, actions, 0.1, 64, arrow=True)  # (1, 2, 64, 64)
+    np.testing.assert_array_equal(frames[0, 0], first[0])
+    np.testing.assert_array_equal(frames[0, 1], second[0])  # the arrow shows u_0
+    no_arrow = render_angles(angles, actions, 0.1, 64, arrow=False)
+    np.testing.assert_array_equal(no_arrow[0, 0], first[0])
+    assert (no_arrow[0, 1] != second[0]).any()
+
+
+def test_stale_frames_repeat_in_the_twin() -> None:
+    frames = np.arange(8, dtype=np.uint8).reshape(2, 4, 1, 1).repeat(2, 2)
+    stale = np.array([[False, True, True, False], [False, False, False, True]])
+    out = repeat_stale(frames.copy(), stale)
+    assert out[0, :, 0, 0].tolist() == [0, 0, 0, 3] and out[1, :, 0, 0].tolist() == [4, 5, 6, 6]
+
+
+def test_gap_closure_is_the_share_above_the_floor() -> None:
+    assert gap_closure(1.0, 0.2, 0.1) == pytest.approx(0.8 / 0.9)
+    assert gap_closure(0.1, 0.1, 0.2) is None  # no gap above the floor
+
+
+def test_ridge_matches_least_squares_when_well_posed_and_stays_bounded_when_not() -> None:
+    rng = np.random.default_rng(0)
+    x = np.c_[rng.normal(size=(500, 3)), np.ones(500)]
+    y = x @ np.array([1.0, -2.0, 0.5, 0.3]) + 0.1 * rng.normal(size=500)
+    np.testing.assert_allclose(ridge(x, y), np.linalg.lstsq(x, y, rcond=None)[0], atol=0.02)
+    # cos(kθ) of angles that only visit the bottom of the circle: nearly collinear columns
+    th_fit, th_new = rng.uniform(2.6, 3.7, 400), rng.uniform(-np.pi, np.pi, 400)
+    feats = lambda th: np.stack([np.cos(k * th) for k in range(1, 7)] + [np.ones_like(th)], 1)  # noqa: E731
+    y_fit = 0.3 * np.sin(4 * th_fit) + rng.normal(size=400)
+    coef = ridge(feats(th_fit), y_fit)
+    y_new = 0.3 * np.sin(4 * th_new) + rng.normal(size=400)
+    assert ((y_new - feats(th_new) @ coef) ** 2).mean() < 2 * (y_new**2).mean()
