@@ -7,7 +7,9 @@ actions as a CSV. ``piga-import`` turns them into a data file, and ``piga-diagno
 a fresh process; the effect is known only to this script.
 
 A dropped frame is recorded here by writing the previous render again (a full-size frame, before
-the import's resize), with the same probability per step as ``envs.effects.FrameDrop``.
+the import's resize), with the same probability per step as ``envs.effects.FrameDrop``. A soft lens
+is a Gaussian blur of the full-size render (σ = 8 of its 500 pixels, about 1 pixel of the 64 the
+import keeps).
 
     python benchmarks/diagnose_recordings.py --model RUN_DIR --out results/diagnose_recordings
 """
@@ -21,7 +23,9 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import NamedTuple
 
+import cv2
 import imageio.v2 as imageio
 import numpy as np
 
@@ -29,20 +33,34 @@ from common import machine
 from envs.pendulum import PixelPendulumConfig, make_pixel_pendulum
 from piga.atomic import atomic_output, write_json
 
-#: (effects in the env, dropped-frame probability of the recording, the expected verdict class).
-CASES: list[tuple[dict, float, str]] = [
-    ({}, 0.0, "none"),
-    ({"damping": 0.2}, 0.0, "damping"),
-    ({"delay": 2}, 0.0, "delay"),
-    ({"friction": 0.15}, 0.0, "friction"),
-    ({"bias": -0.2}, 0.0, "bias"),
-    ({"cogging": 0.4}, 0.0, "unexplained"),
-    ({}, 0.1, "frame_drop"),
-    ({"damping": 0.15}, 0.1, "damping+frame_drop"),
+class Case(NamedTuple):
+    effects: dict
+    """Effects in the env (``envs.effects``)."""
+    drop: float
+    """Probability that the camera delivers the previous picture again."""
+    blur: float
+    """Gaussian σ of a soft lens, in pixels of the full-size render (0: sharp)."""
+    truth: str
+    """The expected verdict class."""
+
+
+CASES: list[Case] = [
+    Case({}, 0.0, 0.0, "none"),
+    Case({"damping": 0.2}, 0.0, 0.0, "damping"),
+    Case({"delay": 2}, 0.0, 0.0, "delay"),
+    Case({"friction": 0.15}, 0.0, 0.0, "friction"),
+    Case({"bias": -0.2}, 0.0, 0.0, "bias"),
+    Case({"cogging": 0.4}, 0.0, 0.0, "unexplained"),
+    Case({}, 0.1, 0.0, "frame_drop"),
+    Case({"damping": 0.15}, 0.1, 0.0, "damping+frame_drop"),
+    Case({"saturation": 1.0}, 0.0, 0.0, "saturation"),
+    Case({"deadzone": 0.5}, 0.0, 0.0, "deadzone"),
+    Case({"gain": 0.8}, 0.0, 0.0, "gain"),
+    Case({}, 0.0, 8.0, "blur"),
 ]
 
 
-def record(effects: dict, drop: float, frames: int, seed: int, out: Path) -> tuple[Path, Path]:
+def record(effects: dict, drop: float, blur: float, frames: int, seed: int, out: Path) -> tuple[Path, Path]:
     """Writes ``out``.mp4 and ``out``.csv: one episode of random actions u ~ U(-2, 2)."""
     env = make_pixel_pendulum(PixelPendulumConfig(effects=tuple(effects.items()), episode_length=10 * frames,
                                                   draw_torque_arrow=False))
@@ -51,6 +69,8 @@ def record(effects: dict, drop: float, frames: int, seed: int, out: Path) -> tup
     video, actions, last = [], [], None
     for _ in range(frames):
         shown = env.render()
+        if blur:
+            shown = cv2.GaussianBlur(shown, (0, 0), blur)
         if last is not None and rng.random() < drop:
             shown = last  # the camera delivers the previous picture again
         video.append(shown)
@@ -75,10 +95,10 @@ def main() -> int:
     work = Path(args.work)
     work.mkdir(parents=True, exist_ok=True)
     runs = []
-    for i, (effects, drop, truth) in enumerate(CASES):
+    for i, (effects, drop, blur, truth) in enumerate(CASES):
         t0 = time.time()
         stem = work / f"recording{i}"
-        video, csv = record(effects, drop, args.frames, args.seed + i, stem)
+        video, csv = record(effects, drop, blur, args.frames, args.seed + i, stem)
         data = stem.with_suffix(".h5")
         subprocess.run(["piga-import", str(video), str(csv), "--dt", "0.05", "--out", str(data), "--overwrite"], check=True,
                        stdout=subprocess.DEVNULL)
@@ -86,12 +106,13 @@ def main() -> int:
         subprocess.run(["piga-diagnose", "--model", args.model, "--data", str(data), "--out", str(report_dir), "--overwrite",
                         "--quiet"], check=True, stdout=subprocess.DEVNULL)
         report = json.loads((report_dir / "report.json").read_text())
-        runs.append({"case": i, "effects": effects, "frame_drop": drop, "truth": truth, "verdict": report["verdict"],
+        runs.append({"case": i, "effects": effects, "frame_drop": drop, "blur_full_size_px": blur, "truth": truth,
+                     "verdict": report["verdict"],
                      "verdict_class": report["verdict_class"], "correct": report["verdict_class"] == truth,
                      "effects_found": report["effects"], "closure": report["gap"]["free_run_gap_closure"],
                      "closure_basis": report["gap"]["closure_basis"], "notes": report["notes"],
                      "seconds": time.time() - t0})
-        print(f"recording {i}: {effects or 'none'}, drop {drop} -> {report['verdict']}", flush=True)
+        print(f"recording {i}: {effects or 'none'}, drop {drop}, blur {blur} -> {report['verdict']}", flush=True)
     info = {"command": shlex.join(["python", *sys.argv]), "model": args.model, "frames": args.frames, "machine": machine()}
     write_json(Path(args.out).with_suffix(".json"), {**info, "runs": runs}, overwrite=True)
     pct = lambda v: "–" if v is None else f"{100 * v:.0f}%"  # noqa: E731
@@ -104,6 +125,7 @@ def main() -> int:
     for r in runs:
         eff = ", ".join(f"{k}={v}" for k, v in r["effects"].items()) or "none"
         eff += f", frame_drop={r['frame_drop']}" if r["frame_drop"] else ""
+        eff += f", lens blur σ={r['blur_full_size_px']:g} px of the full-size render" if r.get("blur_full_size_px") else ""
         lines.append(f"| {r['case']} | {eff} | {r['verdict']} | {'yes' if r['correct'] else '**no**'} | "
                      f"{pct(r['closure'])} ({r['closure_basis']}) |")
     with atomic_output(Path(args.out).with_suffix(".md"), overwrite=True) as tmp:

@@ -175,6 +175,8 @@ def test_cli_writes_a_report_with_the_twin_floor(tiny_model: Path, tmp_path: Pat
     if g["closure_basis"] == "state":  # the floor comes from the twin: finite, one value per horizon
         assert len(g["state_mse_floor"]) == len(g["horizon"]) and np.isfinite(g["state_mse_floor"]).all()
         assert g["typical_free_run_mse_floor"] >= 0
+    md = (out / "report.md").read_text()
+    assert ("No gap above the floor" in md) == (not g["gap_above_floor"])
     for name in ("report.md", "gap.png", "residual_heatmap.png", "correlations.png"):
         assert (out / name).stat().st_size > 0
     # an existing report is not overwritten

@@ -62,6 +62,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     for note in diagnosis.notes:
         print(f"note: {note}")
     headline = "–" if g["free_run_gap_closure"] is None else f"{100 * g['free_run_gap_closure']:.1f}%"
+    if not g.get("gap_above_floor", True):
+        headline += " (no gap above the floor: a ratio of noise)"
     if g["closure_basis"] == "pixels":
         detail = (f"typical held-out window, pixel MSE {g['typical_pixel_mse_nominal']:.3g} -> "
                   f"{g['typical_pixel_mse_corrected']:.3g}, of the gap above the matched floor {g['pixel_mse_floor']:.3g}")

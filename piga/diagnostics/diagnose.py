@@ -50,7 +50,7 @@ from piga.diagnostics.observe import Observations, observe
 from piga.diagnostics.vision import Camera, CameraConfig, CameraFindings, angle_table, camera_stage, match
 from piga.diagnostics.residuals import (action_correlation, autocorrelation, binned, generic_features, heatmap,
                                         one_step_residuals, ridge)
-from piga.diagnostics.twin import gap_closure, twin_floor
+from piga.diagnostics.twin import MEASURABLE_GAP, gap_closure, twin_floor
 from piga.model import PhysicsModel
 from piga.train import training_reconstruction_mse
 
@@ -401,6 +401,10 @@ def analyse(obs: Observations, nom: F.Nominal, config: DiagnoseConfig = Diagnose
     # A camera effect changes the angles themselves (re-matched), so nominal and corrected angle errors
     # are measured against different angles: then the headline closure is the pixels'.
     basis = "pixels" if rematched and pixel_closure is not None else "state"
+    if basis == "pixels":
+        measurable = pixels["typical_pixel_mse_nominal"] > MEASURABLE_GAP * pixels["pixel_mse_floor"]
+    else:
+        measurable = typ_floor is None or typ_nom > MEASURABLE_GAP * typ_floor
     res_nom = one_step_residuals(nominal_model, nom, obs.theta, obs.actions, np.arange(len(obs.theta)))
     gap = {
         "horizon": list(range(1, len(h_nom) + 1)),
@@ -414,6 +418,7 @@ def analyse(obs: Observations, nom: F.Nominal, config: DiagnoseConfig = Diagnose
         "typical_free_run_mse_floor": typ_floor, "typical_free_run_closure": raw_typical,
         "typical_free_run_gap_closure": typical_gap, "mean_free_run_gap_closure": mean_gap,
         "closure_basis": basis, "pixel_free_run_gap_closure": pixel_closure,
+        "gap_above_floor": bool(measurable),
         "one_step_rms_nominal_rad": math.sqrt(float(F.horizon_errors(nominal_model, nom, w_held1_nominal)[0])),
         "one_step_rms_corrected_rad": math.sqrt(float(one_step)),
         **pixels,

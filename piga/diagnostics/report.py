@@ -11,6 +11,7 @@ import numpy as np
 
 from piga.atomic import atomic_output, write_json
 from piga.diagnostics.diagnose import Diagnosis
+from piga.diagnostics.twin import MEASURABLE_GAP
 from piga.plots import plt, save_figure
 
 #: Files the report writes into its folder.
@@ -175,6 +176,10 @@ def markdown(d: Diagnosis, model: str, data: str, command: str) -> str:
                         "typical held-out window (the median over windows of each window's mean squared free-run angle "
                         f"error: {g['typical_free_run_mse_nominal']:.3g} rad² nominal, "
                         f"{g['typical_free_run_mse_corrected']:.3g} rad² corrected). No floor is subtracted.")
+    if not g.get("gap_above_floor", True):
+        headline = ("**No gap above the floor to close** on the typical held-out window: the nominal model's error there "
+                    f"is within {MEASURABLE_GAP:g}x the floor, so the closure ({_pct(g['free_run_gap_closure'])}) is a ratio "
+                    "of noise. " + headline)
     floor = "" if g.get("free_run_mse_floor") is None else (
         f" On the twin, an exactly right model has {g['free_run_mse_floor']:.3g} rad²: "
         f"{_pct(g['mean_free_run_gap_closure'])} of the gap above that floor is closed.")

@@ -127,6 +127,11 @@ def twin_floor(network: PhysicsModel, model: F.Model, nominal: F.Nominal, theta:
     return TwinFloor(F.horizon_errors(model, nominal, w), F.window_errors(model, nominal, w))
 
 
+#: The nominal error must exceed the floor by this factor for a closure to mean something (below
+#: it, the three errors differ by noise and their ratio can take any value).
+MEASURABLE_GAP = 1.5
+
+
 def gap_closure(nominal: float, corrected: float, floor: float) -> float | None:
     """Share of the gap above the floor that the correction closes: (nominal - corrected) / (nominal - floor)."""
     return float((nominal - corrected) / (nominal - floor)) if nominal - floor > 0 and math.isfinite(floor) else None
