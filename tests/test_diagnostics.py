@@ -105,6 +105,14 @@ def test_a_gain_error_is_the_refitted_a() -> None:
     assert abs(d.effects[0]["value"] - 0.8) < 0.01
 
 
+def test_a_gain_whose_interval_holds_the_nominal_is_not_named() -> None:
+    obs = planted({"gain": 0.95}, n=40, t=20, noise=0.003, seed=2)  # little data: a refits to 0.945 ± 0.05
+    assert analyse(obs, NOMINAL, FAST).verdict_class == "gain"  # without intervals, the point estimate decides
+    d = analyse(obs, NOMINAL, DiagnoseConfig(bootstrap=8))
+    assert d.verdict_class == "none", d.verdict
+    assert any("not named a gain error" in n for n in d.notes)
+
+
 # --- the command line ------------------------------------------------------------------------
 
 
