@@ -73,6 +73,15 @@ def check_compatible(model: PhysicsModel, path: str | os.PathLike[str], min_sequ
 
 
 @torch.no_grad()
+def read_frames(model: PhysicsModel, raw: np.ndarray) -> tuple[torch.Tensor, torch.Tensor, np.ndarray]:
+    """What the encoder reads from (B, T, H, W[, C]) uint8 frames ``raw``: the frames as floats
+    (B, T, C, H, W), the coordinates (B, T, 1, 1) and the angles (B, T), unwrapped along time."""
+    x = frames_to_float(torch.from_numpy(raw), model.config.channels)
+    coords = model.encode(x)
+    return x, coords, np.unwrap(coords[..., 0, 0].double().numpy(), axis=1)
+
+
+@torch.no_grad()
 def observe(model: PhysicsModel, path: str | os.PathLike[str], batch: int = 16, keep_frames: int = 40,
             progress: bool = False) -> Observations:
     """Encodes and re-renders every frame of ``path`` with ``model``.
@@ -99,10 +108,8 @@ def observe(model: PhysicsModel, path: str | os.PathLike[str], batch: int = 16, 
         for start in tqdm(range(0, n, batch), desc="encoding", disable=not progress):
             raw = f["frames"][start : start + batch]
             stale[start : start + batch] = stale_frames(raw)
-            x = frames_to_float(torch.from_numpy(raw), model.config.channels)  # (B, T, C, H, W)
-            coords = model.encode(x)  # (B, T, 1, 1)
+            x, coords, theta[start : start + batch] = read_frames(model, raw)
             rec[start : start + batch] = ((model.decoder(coords) - x) ** 2).mean(dim=(2, 3, 4)).double().numpy()
-            theta[start : start + batch] = np.unwrap(coords[..., 0, 0].double().numpy(), axis=1)
         frames = f["frames"][np.sort(keep)] if len(keep) else np.zeros((0, info.steps, *info.image_shape), np.uint8)
     if not np.isfinite(actions).all():
         raise DiagnosisInputError(f"{path}: /actions holds NaN or infinite values")

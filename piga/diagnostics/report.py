@@ -162,20 +162,19 @@ def markdown(d: Diagnosis, model: str, data: str, command: str) -> str:
                     f"the corrected one at {g['typical_pixel_mse_corrected']:.3g}, and no prediction can beat "
                     f"{g['pixel_mse_floor']:.3g}, the error of the best-matching render of each frame; the closure is the "
                     "share of the gap above that floor that the correction removes.")
+    elif g.get("typical_free_run_mse_floor") is not None:
+        headline = (f"**Free-run closure {_pct(g['free_run_gap_closure'])}** of the gap above the floor, on the typical "
+                    "held-out window (the median over windows of each window's mean squared free-run angle error): "
+                    f"{g['typical_free_run_mse_nominal']:.3g} rad² nominal, {g['typical_free_run_mse_corrected']:.3g} rad² "
+                    f"corrected, and a floor of {g['typical_free_run_mse_floor']:.3g} rad², the corrected model's own error "
+                    "on a simulated twin of the held-out data that it describes exactly (re-simulated with the corrected "
+                    "physics, rendered by the simulator, read by the encoder). Raw, with no floor subtracted: "
+                    f"{_pct(g['typical_free_run_closure'])}.")
     else:
-        if g.get("typical_free_run_mse_floor") is not None:
-            headline = (f"**Free-run closure {_pct(g['free_run_gap_closure'])}** of the gap above the floor, on the typical "
-                        "held-out window (the median over windows of each window's mean squared free-run angle error): "
-                        f"{g['typical_free_run_mse_nominal']:.3g} rad² nominal, {g['typical_free_run_mse_corrected']:.3g} rad² "
-                        f"corrected, and a floor of {g['typical_free_run_mse_floor']:.3g} rad², the corrected model's own error "
-                        "on a simulated twin of the held-out data that it describes exactly (re-simulated with the corrected "
-                        "physics, rendered by the simulator, read by the encoder). Raw, with no floor subtracted: "
-                        f"{_pct(g['typical_free_run_closure'])}.")
-        else:
-            headline = (f"**Free-run closure {_pct(g['free_run_gap_closure'])}**: 1 − err_corrected / err_nominal on the "
-                        "typical held-out window (the median over windows of each window's mean squared free-run angle "
-                        f"error: {g['typical_free_run_mse_nominal']:.3g} rad² nominal, "
-                        f"{g['typical_free_run_mse_corrected']:.3g} rad² corrected). No floor is subtracted.")
+        headline = (f"**Free-run closure {_pct(g['free_run_gap_closure'])}**: 1 − err_corrected / err_nominal on the "
+                    "typical held-out window (the median over windows of each window's mean squared free-run angle "
+                    f"error: {g['typical_free_run_mse_nominal']:.3g} rad² nominal, "
+                    f"{g['typical_free_run_mse_corrected']:.3g} rad² corrected). No floor is subtracted.")
     if not g.get("gap_above_floor", True):
         headline = ("**No gap above the floor to close** on the typical held-out window: the nominal model's error there "
                     f"is within {MEASURABLE_GAP:g}x the floor, so the closure ({_pct(g['free_run_gap_closure'])}) is a ratio "

@@ -29,7 +29,8 @@ import numpy as np
 import torch
 
 from piga.diagnostics import fit as F
-from piga.model import PhysicsModel, frames_to_float
+from piga.diagnostics.observe import read_frames
+from piga.model import PhysicsModel
 
 
 @dataclass(frozen=True)
@@ -102,7 +103,6 @@ def repeat_stale(frames: np.ndarray, stale: np.ndarray) -> np.ndarray:
     return frames
 
 
-@torch.no_grad()
 def twin_floor(network: PhysicsModel, model: F.Model, nominal: F.Nominal, theta: np.ndarray, actions: np.ndarray,
                stale: np.ndarray | None, stride: int, arrow: bool = True, batch: int = 16) -> TwinFloor:
     """The errors of ``model`` on the twin of (n, T) encoded held-out sequences ``theta`` and ``actions``.
@@ -120,8 +120,7 @@ def twin_floor(network: PhysicsModel, model: F.Model, nominal: F.Nominal, theta:
         repeat_stale(frames, stale)
     encoded = np.empty(angles.shape)
     for start in range(0, len(frames), batch):
-        x = frames_to_float(torch.from_numpy(frames[start : start + batch]), network.config.channels)  # (B, T, C, H, W)
-        encoded[start : start + batch] = np.unwrap(network.encode(x)[..., 0, 0].double().numpy(), axis=1)
+        encoded[start : start + batch] = read_frames(network, frames[start : start + batch])[2]
     rows = np.arange(len(encoded))
     w = F.make_windows(encoded, actions, rows, None, stride, nominal.dt, stale, repeat=True)
     return TwinFloor(F.horizon_errors(model, nominal, w), F.window_errors(model, nominal, w))
