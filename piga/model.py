@@ -83,6 +83,10 @@ class ModelConfig:
     """Encoder readout: "centroid" (soft centroid of each mask) or "regress" (the paper's location network)."""
     angle_reference: float = 0.0
     """Centroid readout of an angle: the direction read as θ = 0 (the learned offset φ absorbs it)."""
+    pivot_gate: tuple[float, float] = (0.125, 0.16)
+    """Centroid readout of an angle: radii (fractions of the image side) within which pixels do not
+    vote, so Gymnasium's torque arrow at the pivot cannot move the reading
+    (:class:`piga.encoder.EncoderConfig`)."""
     mask_width: int = 16
     """Encoder mask-network channels."""
     loc_width: int = 32
@@ -101,6 +105,13 @@ class ModelConfig:
             raise ValueError(f"pred_trim must be in [0, 1), got {self.pred_trim}")
         if self.alpha < 0:
             raise ValueError(f"alpha must be >= 0, got {self.alpha}")
+        object.__setattr__(self, "pivot_gate", tuple(float(r) for r in self.pivot_gate))  # JSON gives a list
+
+    @classmethod
+    def from_dict(cls, values: dict[str, Any]) -> ModelConfig:
+        """The config of a checkpoint. A checkpoint saved before ``pivot_gate`` existed was
+        trained without the gate, so it gets (0, 0): the model reads angles as it was trained to."""
+        return cls(**{"pivot_gate": (0.0, 0.0), **values})
 
     @property
     def coord_dim(self) -> int:
@@ -164,7 +175,8 @@ class PhysicsModel(nn.Module):
         n, d, _ = SYSTEM_SHAPES[config.system]
         n = config.n_objects if config.system != "pendulum" else 1
         self.encoder = Encoder(EncoderConfig(config.image_size, config.channels, n, d, config.readout,
-                                             config.mask_width, config.loc_width, config.angle_reference))
+                                             config.mask_width, config.loc_width, config.angle_reference,
+                                             config.pivot_gate))
         self.velocity = VelocityEstimator(VelocityConfig(config.input_frames, n, d, config.dt, config.image_size,
                                                          correction=config.velocity_correction))
         kwargs: dict[str, Any] = {"dt": config.dt, **config.physics_init}

@@ -176,7 +176,7 @@ def load_model(run_dir: str | Path) -> tuple[PhysicsModel, dict[str, Any]]:
         raise FileNotFoundError(f"{path}: no checkpoint (is {run_dir} a piga-train-model run folder?)")
     try:
         ckpt = torch.load(path, map_location="cpu", weights_only=False)
-        model = PhysicsModel(ModelConfig(**ckpt["model_config"]))
+        model = PhysicsModel(ModelConfig.from_dict(ckpt["model_config"]))
         model.load_state_dict(ckpt["model"])
     except Exception as exc:  # a truncated or foreign file
         raise ValueError(f"{path}: not a readable piga checkpoint ({exc.__class__.__name__}: {exc})") from None

@@ -85,3 +85,46 @@ def test_velocity_starts_as_backward_difference_and_wraps() -> None:
     assert torch.allclose(cart(p), torch.full((1, 2, 2), 2.0))  # 1 px per frame / 0.5 s
     with pytest.raises(ValueError, match="expects"):
         est(torch.zeros(1, 3, 1, 1))
+
+
+def _gymnasium_frames(states_actions: list[tuple[float, float]], arrow: bool) -> torch.Tensor:
+    """Gymnasium's pendulum, rendered at θ after one step of u from (θ, 0): (B, 1, 64, 64) in [0, 1] and true θ (B,)."""
+    import numpy as np
+
+    from envs.pendulum import PixelPendulumConfig, make_pixel_pendulum
+
+    env = make_pixel_pendulum(PixelPendulumConfig(draw_torque_arrow=arrow))
+    env.reset(seed=0)
+    frames, thetas = [], []
+    for theta, u in states_actions:
+        env.unwrapped.state = np.array([theta, 0.0])
+        obs, *_ = env.step(np.array([u], dtype=np.float32))
+        frames.append(torch.from_numpy(obs[-1].astype(np.float32) / 255))
+        thetas.append(float(env.unwrapped.state[0]))
+    env.close()
+    return torch.stack(frames)[:, None], torch.tensor(thetas)
+
+
+def test_pivot_gate_makes_the_reading_blind_to_the_torque_arrow() -> None:
+    """Near upright, full torque: with the gate the arrow changes nothing; without it, degrees."""
+    cases = [(theta, u) for theta in (-0.2, -0.05, 0.0, 0.1, 0.25) for u in (-2.0, -1.0, 1.0, 2.0)]
+    with_arrow, thetas = _gymnasium_frames(cases, arrow=True)
+    without, _ = _gymnasium_frames(cases, arrow=False)
+    background = torch.ones(1, 64, 64)
+    background[:, 28:36, 28:36] = without[:, :, 28:36, 28:36].median(0).values  # the pivot's disc
+    shifts = {}
+    for gate in ((0.125, 0.16), (0.0, 0.0)):
+        enc = Encoder(EncoderConfig(pivot_gate=gate), background=background)
+        with torch.no_grad():
+            enc.masks.out.weight.zero_()  # uniform masks: the readout alone
+            enc.masks.out.bias.zero_()
+            a, b = enc(with_arrow)[:, 0, 0], enc(without)[:, 0, 0]
+        shifts[gate] = (a - b).abs().max().item()
+        assert (b - thetas).abs().max().item() < math.radians(1.0)  # both read the rod right without an arrow
+    assert shifts[(0.125, 0.16)] < 1e-5
+    assert shifts[(0.0, 0.0)] > math.radians(1.0)
+
+
+def test_pivot_gate_is_validated() -> None:
+    with pytest.raises(ValueError, match="pivot_gate"):
+        EncoderConfig(pivot_gate=(0.2, 0.1))

@@ -68,3 +68,10 @@ def test_trimmed_prediction_loss_ignores_the_worst_windows() -> None:
     assert trimmed < plain
     with pytest.raises(ValueError, match="pred_trim"):
         ModelConfig(pred_trim=1.0)
+
+
+def test_checkpoint_config_without_pivot_gate_reads_as_trained() -> None:
+    """A checkpoint from before the gate existed was trained without it: it loads with the gate off."""
+    legacy = {k: v for k, v in ModelConfig().to_dict().items() if k != "pivot_gate"}
+    assert ModelConfig.from_dict(legacy).pivot_gate == (0.0, 0.0)
+    assert ModelConfig.from_dict(ModelConfig().to_dict()) == ModelConfig()
