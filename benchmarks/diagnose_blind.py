@@ -197,7 +197,7 @@ def markdown(runs: list[dict], summary: dict, command: str, info: dict) -> str:
         f"{pct(summary['closure_median'])}, min {pct(summary['closure_min'])}, ≥ 90% in {pct(summary['closure_at_least_90pct'])} | ≥ 90% |",
         f"| raw free-run closure 1 − err_corrected / err_nominal, mean over all held-out windows, same cases | median "
         f"{pct(summary['raw_closure_median'])}, min {pct(summary['raw_closure_min'])} | |",
-        f"| angle-basis cases: typical-window closure with no floor subtracted (session 3's headline) | median "
+        f"| angle-basis cases: typical-window closure with no floor subtracted | median "
         f"{pct(summary.get('raw_typical_closure_median'))}, ≥ 90% in {pct(summary.get('raw_typical_closure_at_least_90pct'))} | |",
         f"| angle-basis cases: closure of the mean over all windows, above the twin's floor | median "
         f"{pct(summary.get('mean_gap_closure_median'))}, ≥ 90% in {pct(summary.get('mean_gap_closure_at_least_90pct'))} | |",
@@ -229,7 +229,7 @@ def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--model", required=True, help="run folder of piga-train-model (the nominal, identified model)")
     p.add_argument("--out", default="results/diagnose_blind")
-    p.add_argument("--work", default="/tmp/piga-blind", help="folder for the case data and reports")
+    p.add_argument("--work", default="runs/blind", help="folder for the case data and reports")
     p.add_argument("--cases", type=int, default=30)
     p.add_argument("--sequences", type=int, default=200)
     p.add_argument("--seed", type=int, default=0)

@@ -88,7 +88,7 @@ def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--model", required=True, help="run folder of piga-train-model (the identified model)")
     p.add_argument("--out", default="results/diagnose_recordings")
-    p.add_argument("--work", default="/tmp/piga-recordings", help="folder for the recordings, data files and reports")
+    p.add_argument("--work", default="runs/recordings", help="folder for the recordings, data files and reports")
     p.add_argument("--frames", type=int, default=4000, help="frames per recording (100 sequences of 40)")
     p.add_argument("--seed", type=int, default=5)
     args = p.parse_args()

@@ -78,7 +78,7 @@ def main() -> None:
     p.add_argument("--out", default="results/train_accuracy", help="output stem (.json and .md)")
     p.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES))
     p.add_argument("--seeds", nargs="+", type=int, default=None, help="training seeds (default: 0-4 for 'default', 0 otherwise)")
-    p.add_argument("--work", default="/tmp/piga-bench", help="folder for data and run folders")
+    p.add_argument("--work", default="runs/bench", help="folder for data and run folders")
     args = p.parse_args()
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
