@@ -13,21 +13,8 @@ import h5py
 import pytest
 
 from piga.data import inspect_dataset
+from tests.helpers import ENV, assert_one_line_error, run
 
-ENV = {**os.environ, "SDL_VIDEODRIVER": "dummy"}
-
-
-def run(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(list(args), capture_output=True, text=True, env=ENV, cwd=cwd, timeout=300)
-
-
-def assert_one_line_error(result: subprocess.CompletedProcess[str], *needles: str) -> None:
-    assert result.returncode != 0, result.stdout
-    lines = result.stderr.strip().splitlines()
-    assert len(lines) == 1, result.stderr
-    assert "Traceback" not in result.stderr
-    for needle in needles:
-        assert needle in lines[0], lines[0]
 
 
 def test_collect_then_show(tmp_path: Path) -> None:

@@ -13,7 +13,7 @@ import torch
 
 from piga.collect import CollectConfig, collect
 from piga.train import TrainConfig, TrainingDiverged, load_model, train
-from tests.test_cli import assert_one_line_error, run
+from tests.helpers import assert_one_line_error, run
 
 TINY = TrainConfig(epochs=8, batch_size=16, warmup_steps=40, curriculum_steps=60, lr_physics=5e-2, threads=2)
 
