@@ -180,6 +180,15 @@ def test_cli_bad_input(tmp_path: Path, recording: tuple[Path, Path, np.ndarray, 
     assert list(tmp_path.glob(".*partial*")) == []
 
 
+def test_cli_refuses_a_frame_size_that_cannot_fit(tmp_path: Path, recording: tuple[Path, Path, np.ndarray, np.ndarray],
+                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    folder, csv, _, _ = recording
+    out = tmp_path / "o.h5"
+    code, _, err = _cli(str(folder), str(csv), "--dt", "0.05", "--out", str(out), "--image-size", "2000000", capsys=capsys)
+    assert_one_line(code, err, "17 frames of 2000000x2000000 needs about", "of memory")
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_cli_refuses_to_overwrite(tmp_path: Path, recording: tuple[Path, Path, np.ndarray, np.ndarray],
                                   capsys: pytest.CaptureFixture[str]) -> None:
     folder, csv, _, _ = recording
