@@ -19,6 +19,7 @@ from __future__ import annotations
 import functools
 import math
 import multiprocessing
+import os
 import shlex
 import signal
 import sys
@@ -98,12 +99,19 @@ def split_counts(n: int, split: Sequence[float]) -> tuple[int, int, int]:
     return train, valid, test
 
 
+def _exit_quietly(signum: int, frame: object) -> None:
+    os._exit(128 + signum)
+
+
 def _episode_env(env_config: PixelPendulumConfig) -> gym.Env:
     if multiprocessing.parent_process() is not None:
         # A worker of AsyncVectorEnv. Ctrl-C reaches the whole process group; the parent alone
-        # handles it (one line, partial file removed) and closes the workers, which must not
-        # print KeyboardInterrupt tracebacks of their own.
+        # handles it (one line, partial file removed) and terminates the workers, which must not
+        # print KeyboardInterrupt tracebacks of their own: they ignore SIGINT and exit quietly on
+        # SIGTERM. (Not SIG_DFL: SDL, which pygame starts at the first render, takes over a
+        # default SIGTERM and ignores it.)
         signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, _exit_quietly)
     return make_pixel_pendulum(env_config)
 
 
@@ -174,11 +182,7 @@ def collect(
         "command": command if command is not None else shlex.join(sys.argv),
         "split_counts": dict(zip(SPLITS, counts)),
     }
-    vec: gym.vector.VectorEnv
-    if workers == 1:
-        vec = gym.vector.SyncVectorEnv([factory])
-    else:
-        vec = gym.vector.AsyncVectorEnv([factory] * workers, shared_memory=True)
+    vec = _vector_env(factory, workers)
     try:
         with DatasetWriter(out, n, t, (size, size), 1, 2, attrs, overwrite=overwrite) as writer:
             bar = tqdm(total=n, desc="collect", unit="seq", disable=not progress)
@@ -208,8 +212,27 @@ def collect(
                 writer.write(start, frames, actions, states)
             writer.set_split(np.repeat(np.arange(3, dtype=np.int8), counts))
             bar.close()
-    finally:
-        with warnings.catch_warnings():  # after an interruption: "close while waiting for step", not the user's concern
+    except BaseException:  # interrupted or failed: stop the workers now, without waiting for their step
+        with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            vec.close()
+            vec.close(terminate=True)
+        raise
+    vec.close()
     return Path(out)
+
+
+def _vector_env(factory: Callable[[], gym.Env], workers: int) -> gym.vector.VectorEnv:
+    """One env in this process, or ``workers`` env processes that leave Ctrl-C to this one.
+
+    The workers are started with SIGINT blocked, and then ignore it (:func:`_episode_env`), so that a
+    Ctrl-C, which reaches the whole process group, never interrupts them even during start-up.
+    """
+    if workers == 1:
+        return gym.vector.SyncVectorEnv([factory])
+    block = hasattr(signal, "pthread_sigmask")
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT}) if block else None
+    try:
+        return gym.vector.AsyncVectorEnv([factory] * workers, shared_memory=True)
+    finally:
+        if previous is not None:
+            signal.pthread_sigmask(signal.SIG_SETMASK, previous)

@@ -209,6 +209,7 @@ def test_killed_overwrite_keeps_the_old_file(tmp_path: Path) -> None:
         assert f["frames"].shape[:2] == (2, 3)
 
 
+@pytest.mark.slow  # the whole chain: collect, show, train, control
 def test_demo_runs_the_chain(tmp_path: Path) -> None:
     result = run("piga-demo", "--out", str(tmp_path / "demo"), "--sequences", "10", "--epochs", "1", "--episodes", "1",
                  "--control-steps", "5")
