@@ -19,9 +19,9 @@ from piga.train import PRESETS, TrainConfig, TrainingDiverged, load_model, train
 from tests.helpers import assert_one_line, assert_one_line_error, run, run_in_process
 
 PROG = "piga-train-model"
-TINY = TrainConfig(epochs=8, batch_size=16, warmup_steps=40, curriculum_steps=60, lr_physics=5e-2, threads=2)
+TINY = TrainConfig(epochs=8, batch_size=16, warmup_steps=40, curriculum_steps=60, lr_physics=5e-2, threads=1)
 #: CLI options for a run of seconds on ``small_data`` (2 steps per epoch).
-SMALL = ("--epochs", "1", "--batch-size", "8", "--warmup-steps", "1", "--quiet", "--threads", "2")
+SMALL = ("--epochs", "1", "--batch-size", "8", "--warmup-steps", "1", "--quiet", "--threads", "1")
 
 
 @pytest.fixture(scope="module")
