@@ -29,6 +29,7 @@ from piga.atomic import atomic_output
 from piga.collect import CollectConfig, collect
 from piga.evaluate import EvalConfig, evaluate
 from piga.atomic import write_json
+from piga.model import ModelConfig
 from piga.train import PRESETS, TrainConfig, train
 
 #: case name -> (gravity, actuation gain, data seed)
@@ -88,7 +89,7 @@ def main() -> None:
     record = json.loads(record_path.read_text()) if record_path.exists() else {"runs": []}
     record["machine"] = machine()
     record["command"] = " ".join(["python", *sys.argv])
-    record["recipe"] = {"train": TrainConfig().__dict__, "preset": "fast", "model": PRESETS["fast"].get("model", {})}
+    record["recipe"] = {"train": TrainConfig().__dict__, "preset": "fast", "model": ModelConfig().to_dict()}
     done = {(r["case"], r["seed"]) for r in record["runs"]}
     for case in args.cases:
         gravity, gain, data_seed = CASES[case]

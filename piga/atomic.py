@@ -46,6 +46,32 @@ def partial_path(target: Path) -> Path:
     return target.with_name(f".{target.name}.partial-{os.getpid()}")
 
 
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # alive, another user's
+        return True
+    return True
+
+
+def remove_stale_partials(target: Path) -> list[Path]:
+    """Removes ``.NAME.partial-PID`` siblings of ``target`` left by a process that no longer runs.
+
+    A SIGKILL (or a power cut) leaves them; the next write of the same target cleans them up. Files
+    of a live PID are left alone (another run may be writing). Returns the files removed.
+    """
+    removed = []
+    for path in target.parent.glob(f".{target.name}.partial-*"):
+        pid = path.name.rsplit("-", 1)[-1]
+        if pid.isdigit() and int(pid) != os.getpid() and not _alive(int(pid)):
+            with contextlib.suppress(FileNotFoundError):
+                path.unlink()
+                removed.append(path)
+    return removed
+
+
 @contextlib.contextmanager
 def atomic_output(path: str | os.PathLike[str], overwrite: bool = False) -> Iterator[Path]:
     """Yields a temporary path to write; on success renames it to ``path``.
@@ -53,9 +79,11 @@ def atomic_output(path: str | os.PathLike[str], overwrite: bool = False) -> Iter
     If the body raises, or the process is interrupted through SIGINT or SIGTERM (see
     :func:`piga.cli.common.run_cli`), the temporary file is removed and ``path`` is left as it was.
     A SIGKILL can leave a hidden ``.NAME.partial-PID`` file beside the target, but never a
-    half-written target.
+    half-written target; the next write of the same target removes such leftovers
+    (:func:`remove_stale_partials`).
     """
     target = check_writable_target(path, overwrite)
+    remove_stale_partials(target)
     tmp = partial_path(target)
     try:
         yield tmp

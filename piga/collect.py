@@ -18,8 +18,12 @@ from __future__ import annotations
 
 import functools
 import math
+import multiprocessing
+import os
 import shlex
+import signal
 import sys
+import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -29,6 +33,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from envs.pendulum import MAX_ACTION, PENDULUM_DT, PixelPendulumConfig, make_pixel_pendulum
+from piga.atomic import check_writable_target
 from piga.data import SPLITS, DatasetWriter
 
 #: Ranges of the paper's pendulum data: θ ~ U(-π, π), θ̇ ~ U(-6, 6).
@@ -94,16 +99,50 @@ def split_counts(n: int, split: Sequence[float]) -> tuple[int, int, int]:
     return train, valid, test
 
 
+def _exit_quietly(signum: int, frame: object) -> None:
+    os._exit(128 + signum)
+
+
 def _episode_env(env_config: PixelPendulumConfig) -> gym.Env:
+    if multiprocessing.parent_process() is not None:
+        # A worker of AsyncVectorEnv. Ctrl-C reaches the whole process group; the parent alone
+        # handles it (one line, partial file removed) and terminates the workers, which must not
+        # print KeyboardInterrupt tracebacks of their own: they ignore SIGINT and exit quietly on
+        # SIGTERM. (Not SIG_DFL: SDL, which pygame starts at the first render, takes over a
+        # default SIGTERM and ignores it.)
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, _exit_quietly)
     return make_pixel_pendulum(env_config)
 
 
-def sequence_rngs(seed: int, n: int) -> tuple[list[int], list[np.random.Generator]]:
-    """Per sequence: the env's reset seed and the action generator, both from ``SeedSequence(seed)``."""
-    children = np.random.SeedSequence(seed).spawn(n)
-    reset_seeds = [int(c.generate_state(1, dtype=np.uint32)[0]) for c in children]
-    action_rngs = [np.random.default_rng(c.spawn(1)[0]) for c in children]
-    return reset_seeds, action_rngs
+def sequence_rng(seed: int, n: int) -> tuple[int, np.random.Generator]:
+    """Sequence n's reset seed for the env and its action generator, from ``SeedSequence(seed)``'s n-th child.
+
+    The child is built directly (``spawn_key=(n,)``), which is what ``SeedSequence(seed).spawn(N)[n]``
+    gives, so that memory does not grow with the number of sequences.
+    """
+    child = np.random.SeedSequence(seed, spawn_key=(n,))
+    return int(child.generate_state(1, dtype=np.uint32)[0]), np.random.default_rng(child.spawn(1)[0])
+
+
+def check_resources(config: CollectConfig, out: str | Path) -> None:
+    """Refuses sizes that cannot fit in memory or on disk, before any env is made.
+
+    Memory: one batch of frames, the env workers' render buffers (the renderer's resize and gray
+    conversion take ~40 bytes per output pixel) and 2 bytes per sequence of bookkeeping. Disk:
+    frames gzip-compressed (:data:`piga.resources.RENDERED_FRAME_COMPRESSION`), actions and states raw.
+
+    Raises:
+        piga.resources.ResourceError: naming what is needed and what is available.
+    """
+    from piga.resources import RENDERED_FRAME_COMPRESSION, check_disk, check_memory
+
+    n, t, pixels = config.sequences, config.steps, config.env.image_size**2
+    workers = min(config.workers, n)
+    rows = min(max(config.batch, workers) // workers * workers, n)
+    what = f"{n} sequences x {t} frames of {config.env.image_size}x{config.env.image_size}"
+    check_memory(rows * t * (pixels + 12) + (workers + 1) * 48 * pixels + 2 * n, what)
+    check_disk(out, n * t * (pixels / RENDERED_FRAME_COMPRESSION + 12), what)
 
 
 def collect(
@@ -118,11 +157,12 @@ def collect(
     Returns:
         The path written.
     """
+    check_writable_target(out, overwrite)  # before any setup work
+    check_resources(config, out)
     n, t = config.sequences, config.steps
     # Pendulum's own TimeLimit must not end an episode inside a sequence of T applied actions.
     env_config = replace(config.env, episode_length=t + 1, frame_stack=1)
     counts = split_counts(n, config.split)
-    reset_seeds, action_rngs = sequence_rngs(config.seed, n)
     workers = min(config.workers, n)
     factory: Callable[[], gym.Env] = functools.partial(_episode_env, env_config)
     size = env_config.image_size
@@ -142,11 +182,7 @@ def collect(
         "command": command if command is not None else shlex.join(sys.argv),
         "split_counts": dict(zip(SPLITS, counts)),
     }
-    vec: gym.vector.VectorEnv
-    if workers == 1:
-        vec = gym.vector.SyncVectorEnv([factory])
-    else:
-        vec = gym.vector.AsyncVectorEnv([factory] * workers, shared_memory=True)
+    vec = _vector_env(factory, workers)
     try:
         with DatasetWriter(out, n, t, (size, size), 1, 2, attrs, overwrite=overwrite) as writer:
             bar = tqdm(total=n, desc="collect", unit="seq", disable=not progress)
@@ -158,10 +194,11 @@ def collect(
                 states = np.zeros((stop - start, t, 2), np.float32)
                 for group in range(start, stop, workers):
                     ids = list(range(group, min(group + workers, stop)))
+                    reset_seeds, action_rngs = zip(*(sequence_rng(config.seed, i) for i in ids))
                     # Spare envs of the last group replay sequence ids[0]; their output is dropped.
-                    seeds = [reset_seeds[i] for i in ids] + [reset_seeds[ids[0]]] * (workers - len(ids))
+                    seeds = list(reset_seeds) + [reset_seeds[0]] * (workers - len(ids))
                     obs, info = vec.reset(seed=seeds)
-                    u = np.stack([action_rngs[i].uniform(-MAX_ACTION, MAX_ACTION, size=(t, 1)) for i in ids]).astype(np.float32)
+                    u = np.stack([rng.uniform(-MAX_ACTION, MAX_ACTION, size=(t, 1)) for rng in action_rngs]).astype(np.float32)
                     rows = np.arange(len(ids))
                     local = np.asarray(ids) - start
                     for step in range(t):
@@ -175,6 +212,27 @@ def collect(
                 writer.write(start, frames, actions, states)
             writer.set_split(np.repeat(np.arange(3, dtype=np.int8), counts))
             bar.close()
-    finally:
-        vec.close()
+    except BaseException:  # interrupted or failed: stop the workers now, without waiting for their step
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            vec.close(terminate=True)
+        raise
+    vec.close()
     return Path(out)
+
+
+def _vector_env(factory: Callable[[], gym.Env], workers: int) -> gym.vector.VectorEnv:
+    """One env in this process, or ``workers`` env processes that leave Ctrl-C to this one.
+
+    The workers are started with SIGINT blocked, and then ignore it (:func:`_episode_env`), so that a
+    Ctrl-C, which reaches the whole process group, never interrupts them even during start-up.
+    """
+    if workers == 1:
+        return gym.vector.SyncVectorEnv([factory])
+    block = hasattr(signal, "pthread_sigmask")
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT}) if block else None
+    try:
+        return gym.vector.AsyncVectorEnv([factory] * workers, shared_memory=True)
+    finally:
+        if previous is not None:
+            signal.pthread_sigmask(signal.SIG_SETMASK, previous)

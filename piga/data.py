@@ -44,6 +44,32 @@ class DataFormatError(ValueError):
     """A file does not follow piga's schema. The message names the dataset or attribute at fault."""
 
 
+#: Largest |action| accepted in a file. Far beyond any torque of the systems here (the pendulum's
+#: is clipped to ±2); larger values are a unit or recording error, and they overflow the physics.
+MAX_ABS_ACTION = 1e6
+
+
+def check_actions(actions: np.ndarray, path: str | os.PathLike[str]) -> None:
+    """Refuses actions that no physics can use: NaN, infinite, or beyond ±:data:`MAX_ABS_ACTION`.
+
+    Raises:
+        DataFormatError: naming the file, the first bad entry (sequence, step) and its value.
+    """
+    bad = ~np.isfinite(actions) | (np.abs(np.nan_to_num(actions, nan=0.0)) > MAX_ABS_ACTION)
+    if bad.any():
+        n, t = (int(i) for i in np.argwhere(bad)[0][:2])
+        value = actions[(n, t, *np.argwhere(bad)[0][2:])]
+        what = "NaN or infinite values" if not np.isfinite(value) else f"values beyond ±{MAX_ABS_ACTION:g}"
+        raise DataFormatError(f"{path}: /actions holds {what} ({int(bad.sum())} entries; the first: sequence {n}, "
+                              f"step {t}: {value}); fix the recording's actions")
+
+
+def check_actions_file(path: str | os.PathLike[str]) -> None:
+    """:func:`check_actions` on a whole file's ``/actions`` (float32 [N, T, A], small next to the frames)."""
+    with _open(path) as f:
+        check_actions(np.asarray(f["actions"][()]), path)
+
+
 @dataclass(frozen=True)
 class DatasetInfo:
     """What a validated file holds (no arrays)."""

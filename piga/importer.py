@@ -190,6 +190,21 @@ def read_actions(path: str | Path) -> np.ndarray:
     return values.astype(np.float32)
 
 
+def _check_resources(n_frames: int, size: int, target: Path) -> None:
+    """Refuses, before decoding, a frame count and size (one frame per action) that cannot fit.
+
+    Memory: the converted frames twice (the list and the stacked array) and one frame's conversion
+    (~48 bytes per output pixel). Disk: the frames gzip-compressed
+    (:data:`piga.resources.RECORDED_FRAME_COMPRESSION`).
+    """
+    from piga.resources import RECORDED_FRAME_COMPRESSION, check_disk, check_memory
+
+    pixels = size * size
+    what = f"{n_frames} frames of {size}x{size}"
+    check_memory(2 * n_frames * pixels + 48 * pixels, what)
+    check_disk(target, n_frames * (pixels / RECORDED_FRAME_COMPRESSION + 4), what)
+
+
 def import_recording(
     recording: str | Path,
     actions: str | Path,
@@ -218,6 +233,7 @@ def import_recording(
     if not recording.exists():
         raise FileNotFoundError(f"{recording}: no such video file or frame folder")
     u = read_actions(actions)  # (F,)
+    _check_resources(len(u), config.image_size, target)
     frames = read_recording(recording, config.image_size)  # (F, S, S)
     if len(u) != len(frames):
         raise ValueError(f"{actions} has {len(u)} actions but {recording} has {len(frames)} frames; "

@@ -30,7 +30,7 @@ from torch.utils.data import DataLoader, RandomSampler
 from tqdm.auto import tqdm
 
 from piga.atomic import atomic_output
-from piga.data import DatasetInfo, inspect_dataset, read_sequences
+from piga.data import DatasetInfo, check_actions_file, inspect_dataset, read_sequences
 from piga.encoder import estimate_background
 from piga.model import SYSTEM_SHAPES, ModelConfig, PhysicsModel, frames_to_float
 from piga.windows import SequenceWindows
@@ -44,7 +44,7 @@ class TrainingDiverged(RuntimeError):
 
 @dataclass(frozen=True)
 class TrainConfig:
-    """How to train. Presets are in :data:`PRESETS`."""
+    """How to train. The defaults are the 'fast' recipe; other presets are in :data:`PRESETS`."""
 
     epochs: int = 16
     """Passes over the training windows (the cosine schedule is planned over all of them)."""
@@ -90,14 +90,16 @@ class TrainConfig:
     Polyak averaging, which removes most of the optimiser's step-to-step jitter."""
 
 
-#: Named recipes. 'fast' is the default; 'paper' follows the paper's appendix.
+#: Named recipes, as overrides of the dataclass defaults. 'fast' is the defaults themselves
+#: (:class:`TrainConfig`, :class:`ModelConfig`); 'paper' follows the paper's appendix.
 PRESETS: dict[str, dict[str, Any]] = {
-    "fast": {"model": {"rec_frames": "input", "pred_trim": 0.1, "learn_offset": False, "velocity_correction": False}},
+    "fast": {},
     "paper": {
-        "train": {"epochs": 1000, "max_minutes": 0.0, "lr": 3e-4, "lr_physics": 3e-4, "optimizer": "rmsprop",
+        "train": {"epochs": 1000, "lr": 3e-4, "lr_physics": 3e-4, "optimizer": "rmsprop",
                   "schedule": "step", "lr_decay_epoch": 500, "warmup_steps": 0, "curriculum_steps": 0, "grad_clip": 0.0,
                   "average_final_epoch": False, "physics_grad_clip": 0.0},
-        "model": {"substeps": 5, "learn_offset": True, "readout": "regress", "rec_frames": "all"},
+        "model": {"substeps": 5, "learn_offset": True, "readout": "regress", "rec_frames": "all", "pred_trim": 0.0,
+                  "velocity_correction": True},
     },
 }
 
@@ -244,6 +246,60 @@ def _horizon(step: int, config: TrainConfig, t_pred: int) -> int:
     return max(1, min(t_pred, 1 + int(frac * t_pred)))
 
 
+class _Scalars:
+    """TensorBoard scalars, held in memory until the run folder is first written (the first checkpoint).
+
+    So a run that fails or is interrupted before its first checkpoint leaves no ``tensorboard/``.
+    """
+
+    def __init__(self) -> None:
+        self.pending: list[tuple[str, float, int]] = []
+        self.writer: Any = None
+
+    def add(self, tag: str, value: float, step: int) -> None:
+        if self.writer is None:
+            self.pending.append((tag, value, step))
+        else:
+            self.writer.add_scalar(tag, value, step)
+
+    def open(self, folder: Path) -> None:
+        """Starts writing to ``folder`` (once), beginning with the scalars held so far."""
+        if self.writer is None:
+            from torch.utils.tensorboard import SummaryWriter
+
+            self.writer = SummaryWriter(str(folder))
+            for tag, value, step in self.pending:
+                self.writer.add_scalar(tag, value, step)
+            self.pending.clear()
+
+    def close(self) -> None:
+        if self.writer is not None:
+            self.writer.close()
+
+
+def check_trainable(info: DatasetInfo, model_config: ModelConfig, train_config: TrainConfig) -> int:
+    """Refuses, before anything is written, data that training cannot use; returns the number of train windows.
+
+    Raises:
+        ValueError (a :class:`piga.data.DataFormatError` for the file's contents): sequences shorter
+        than a window, an empty train split, non-finite or absurd actions, or fewer windows than
+        one batch (no step would run).
+    """
+    needed = model_config.window
+    if info.steps < needed:
+        raise ValueError(f"{info.path}: sequences have {info.steps} frames; training needs at least "
+                         f"L + T_pred = {needed}")
+    n_train = info.split_counts["train"]
+    if not n_train:
+        raise ValueError(f"{info.path}: the train split is empty")
+    check_actions_file(info.path)
+    windows = n_train * len(range(0, info.steps - needed + 1, train_config.window_stride))
+    if windows < train_config.batch_size:
+        raise ValueError(f"{info.path}: {windows} training windows ({n_train} train sequences) are fewer than one batch "
+                         f"of {train_config.batch_size}, so no step would run; lower the batch size or give more data")
+    return windows
+
+
 def train(
     data: str | Path,
     run_dir: str | Path,
@@ -255,18 +311,24 @@ def train(
 ) -> tuple[PhysicsModel, TrainState]:
     """Trains on the train split of ``data``; writes checkpoints and TensorBoard scalars to ``run_dir``.
 
+    Nothing is written (not even ``run_dir``) before the first checkpoint, at the end of the first
+    epoch; the data are checked first (:func:`check_trainable`).
+
     With ``resume``, the model, optimiser, step and RNGs come from ``run_dir``'s checkpoint and
     ``train_config`` should be the run's saved one (``TrainConfig(**ckpt["train_config"])``),
-    possibly with more ``epochs``; ``model_overrides`` is ignored.
+    possibly with more ``epochs``; ``model_overrides`` is ignored. Resuming with the same
+    ``epochs`` continues exactly. With more ``epochs``, the cosine schedule is replanned over the
+    new total: from the resumed step on, the learning rates are those a straight run of the new
+    length has at that step (they rise again if the old run had finished its cosine), while the
+    steps already taken keep the old schedule (and, if the old run finished, its final-epoch
+    average of the physical parameters); so the result is close to, not identical with, the
+    straight run.
 
     Returns:
         The trained model (eval mode) and the final :class:`TrainState`.
     """
-    from torch.utils.tensorboard import SummaryWriter
-
     run_dir = Path(run_dir)
     info = inspect_dataset(data)
-    run_dir.mkdir(parents=True, exist_ok=True)
     ckpt_path = run_dir / CHECKPOINT
     if train_config.threads:
         torch.set_num_threads(train_config.threads)
@@ -279,6 +341,7 @@ def train(
         state = TrainState(**ckpt["state"])
         _set_rng_state(ckpt["rng"])
     else:
+        check_trainable(info, model_config_for(info, model_overrides), train_config)
         torch.manual_seed(train_config.seed)
         np.random.seed(train_config.seed)
         random.seed(train_config.seed)
@@ -287,8 +350,10 @@ def train(
             model.encoder.background.copy_(_background(data, model.config.channels, train_config.seed))
         optimizer = _optimizer(model, train_config)
     cfg = model.config
+    if resume:
+        check_trainable(info, cfg, train_config)
     windows = SequenceWindows(data, "train", window=cfg.window, stride=train_config.window_stride)
-    writer = SummaryWriter(str(run_dir / "tensorboard"))
+    writer = _Scalars()
     physics_params = [p for p in model.system.parameters() if p.requires_grad]
     physics_ids = {id(p) for p in physics_params}
     net_params = [p for p in model.parameters() if id(p) not in physics_ids]
@@ -340,12 +405,12 @@ def train(
                     params = model.physical_parameters()
                     bar.set_postfix({k: f"{v:.4g}" for k, v in params.items() if k != "offset"} | {"loss": f"{loss.item():.4f}", "T": horizon})
                     for name, value in params.items():
-                        writer.add_scalar(f"physics/{name}", value, state.step)
-                    writer.add_scalar("loss/total", loss.item(), state.step)
-                    writer.add_scalar("loss/pred", out.loss_pred.item(), state.step)
-                    writer.add_scalar("loss/rec", out.loss_rec.item(), state.step)
-                    writer.add_scalar("train/horizon", horizon, state.step)
-                    writer.add_scalar("train/lr_factor", factor, state.step)
+                        writer.add(f"physics/{name}", value, state.step)
+                    writer.add("loss/total", loss.item(), state.step)
+                    writer.add("loss/pred", out.loss_pred.item(), state.step)
+                    writer.add("loss/rec", out.loss_rec.item(), state.step)
+                    writer.add("train/horizon", horizon, state.step)
+                    writer.add("train/lr_factor", factor, state.step)
             bar.close()
             if final_epoch and train_config.average_final_epoch and count:
                 with torch.no_grad():
@@ -357,7 +422,9 @@ def train(
             record.update(model.physical_parameters())
             record.update({"epoch": state.epoch, "step": state.step, "seconds": state.elapsed})
             state.history.append(record)
+            run_dir.mkdir(parents=True, exist_ok=True)
             save_checkpoint(ckpt_path, model, optimizer, state, train_config, info)
+            writer.open(run_dir / "tensorboard")
             shown = ", ".join(f"{k}={v:.4g}" for k, v in model.physical_parameters().items())
             (tqdm.write if progress else print)(f"epoch {state.epoch}: loss {record['loss']:.5f} (pred {record['loss_pred']:.5f}, "
                            f"rec {record['loss_rec']:.5f}), {shown}, {state.elapsed / 60:.1f} min")

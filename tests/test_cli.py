@@ -13,21 +13,8 @@ import h5py
 import pytest
 
 from piga.data import inspect_dataset
+from tests.helpers import ENV, assert_one_line, assert_one_line_error, run, run_in_process
 
-ENV = {**os.environ, "SDL_VIDEODRIVER": "dummy"}
-
-
-def run(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(list(args), capture_output=True, text=True, env=ENV, cwd=cwd, timeout=300)
-
-
-def assert_one_line_error(result: subprocess.CompletedProcess[str], *needles: str) -> None:
-    assert result.returncode != 0, result.stdout
-    lines = result.stderr.strip().splitlines()
-    assert len(lines) == 1, result.stderr
-    assert "Traceback" not in result.stderr
-    for needle in needles:
-        assert needle in lines[0], lines[0]
 
 
 def test_collect_then_show(tmp_path: Path) -> None:
@@ -123,6 +110,92 @@ def test_interrupted_collect_leaves_no_target(tmp_path: Path, sig: signal.Signal
         assert "interrupted" in err and "Traceback" not in err
 
 
+def test_ctrl_c_with_two_workers_prints_one_line(tmp_path: Path) -> None:
+    """Ctrl-C reaches the whole process group: the env workers must stay quiet."""
+    out = tmp_path / "d.h5"
+    proc = subprocess.Popen(["piga-collect", "--out", str(out), "--sequences", "3000", "--workers", "2", "--quiet"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV, start_new_session=True)
+    _wait_for_partial(tmp_path, proc)
+    os.killpg(proc.pid, signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130 and err.strip() == "piga-collect: interrupted; nothing was written", err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_stale_partial_files_are_removed_by_the_next_run(tmp_path: Path) -> None:
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    alive = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        stale, busy = tmp_path / f".d.h5.partial-{dead.pid}", tmp_path / f".d.h5.partial-{alive.pid}"
+        stale.write_text("left by a SIGKILL")
+        busy.write_text("being written by a live process")
+        result = run("piga-collect", "--out", str(tmp_path / "d.h5"), "--sequences", "2", "--steps", "3", "--workers", "1")
+        assert result.returncode == 0, result.stderr
+        assert not stale.exists() and busy.exists()
+    finally:
+        alive.kill()
+        alive.wait()
+
+
+@pytest.mark.parametrize("args", [["--steps", "1000000000"], ["--image-size", "100000"], ["--sequences", "1000000000"]])
+def test_sizes_that_cannot_fit_are_refused_before_allocating(tmp_path: Path, args: list[str],
+                                                             capsys: pytest.CaptureFixture[str]) -> None:
+    from piga.cli import collect as cli
+
+    out = tmp_path / "d.h5"
+    code, _, err = run_in_process("piga-collect", cli.main, "--out", str(out), "--workers", "1", *args, capsys=capsys)
+    line = assert_one_line(code, err, "needs about")
+    assert "of memory, but" in line and "available" in line or "of disk, but" in line and "free" in line
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_existing_output_is_refused_before_any_setup(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import gymnasium as gym
+
+    from piga.atomic import OutputExistsError
+    from piga.collect import CollectConfig, collect
+
+    def no_envs(*args: object, **kwargs: object) -> None:
+        raise AssertionError("envs were made before the output was checked")
+
+    monkeypatch.setattr(gym.vector, "AsyncVectorEnv", no_envs)
+    monkeypatch.setattr(gym.vector, "SyncVectorEnv", no_envs)
+    out = tmp_path / "d.h5"
+    out.write_text("precious")
+    with pytest.raises(OutputExistsError):
+        collect(CollectConfig(sequences=2, steps=3), out)
+    assert out.read_text() == "precious"
+
+
+def test_split_with_a_negative_number_is_named(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    from piga.cli import collect as cli
+
+    code, _, err = run_in_process("piga-collect", cli.main, "--out", str(tmp_path / "d.h5"), "--split", "-1,1,1", capsys=capsys)
+    assert code == 2 and "expected one argument" not in err
+    assert_one_line(code, err, "--split", ">= 0", "'-1,1,1'")
+
+
+def test_internal_error_is_one_line_naming_a_log(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    import tempfile
+
+    from piga.cli.common import INTERNAL_ERROR
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+
+    def buggy(argv: object) -> int:
+        return {}["missing"]  # a bug, not a user error
+
+    code, _, err = run_in_process("piga-x", buggy, "--flag", capsys=capsys)
+    line = assert_one_line(code, err, "piga-x: internal error (KeyError: 'missing')", "please report it")
+    assert code == INTERNAL_ERROR
+    logs = list((tmp_path / "piga-logs").iterdir())
+    assert len(logs) == 1 and str(logs[0]) in line
+    text = logs[0].read_text()
+    assert text.startswith("piga-x --flag") and "Traceback" in text and 'KeyError: \'missing\'' in text
+
+
 def test_killed_overwrite_keeps_the_old_file(tmp_path: Path) -> None:
     out = tmp_path / "d.h5"
     assert run("piga-collect", "--out", str(out), "--sequences", "2", "--steps", "3", "--workers", "1").returncode == 0
@@ -136,6 +209,7 @@ def test_killed_overwrite_keeps_the_old_file(tmp_path: Path) -> None:
         assert f["frames"].shape[:2] == (2, 3)
 
 
+@pytest.mark.slow  # the whole chain: collect, show, train, control
 def test_demo_runs_the_chain(tmp_path: Path) -> None:
     result = run("piga-demo", "--out", str(tmp_path / "demo"), "--sequences", "10", "--epochs", "1", "--episodes", "1",
                  "--control-steps", "5")

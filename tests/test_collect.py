@@ -8,8 +8,9 @@ import h5py
 import numpy as np
 import pytest
 
-from piga.collect import PRESETS, CollectConfig, collect, split_counts
+from piga.collect import PAPER_MAX_SPEED, PRESETS, CollectConfig, collect, split_counts
 from piga.data import inspect_dataset
+from tests.helpers import run_in_process
 
 
 def _arrays(path: Path) -> dict[str, np.ndarray]:
@@ -56,11 +57,13 @@ def test_split_counts() -> None:
             split_counts(10, bad)
 
 
-def test_paper_preset() -> None:
-    from dataclasses import replace
+def test_preset_applies_and_explicit_options_win(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from piga.cli import collect as cli
 
-    preset = dict(PRESETS["paper"])
-    assert preset.pop("max_speed") == 6.0
-    config = replace(CollectConfig(), **preset)
-    assert (config.sequences, config.steps) == (6000, 14)
-    assert split_counts(config.sequences, config.split) == (5000, 500, 500)
+    out = tmp_path / "p.h5"
+    code, _, err = run_in_process("piga-collect", cli.main, "--out", str(out), "--preset", "paper", "--sequences", "3",
+                                  "--split", "1,1,1", "--workers", "1", "--quiet", capsys=capsys)
+    assert code == 0, err
+    info = inspect_dataset(out)
+    assert (info.n_sequences, info.steps) == (3, PRESETS["paper"]["steps"])  # --sequences wins, steps from the preset
+    assert info.attrs["env_config"]["max_speed"] == PAPER_MAX_SPEED != CollectConfig().env.max_speed

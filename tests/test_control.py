@@ -13,7 +13,7 @@ from agents.mpc import MPCConfig, OracleAgent, PigaMPCAgent
 from piga.control import EpisodeConfig, run_episodes
 from piga.goal import load_scene_image, render_goal_image
 from piga.model import ModelConfig, PhysicsModel
-from tests.test_cli import assert_one_line_error, run
+from tests.helpers import assert_one_line_error, run
 
 
 def test_oracle_swings_up_from_hanging() -> None:

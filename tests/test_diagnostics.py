@@ -13,7 +13,7 @@ import torch
 from envs.pendulum import PixelPendulumConfig, make_pixel_pendulum
 from piga.diagnostics import DiagnoseConfig, Observations, analyse
 from piga.diagnostics import fit as F
-from tests.test_cli import assert_one_line_error, run
+from tests.helpers import assert_one_line_error, run
 
 NOMINAL = F.Nominal(g=10.0, a=1.0, offset=0.0, dt=0.05)
 FAST = DiagnoseConfig(bootstrap=0)

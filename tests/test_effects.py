@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import math
-import signal
 import warnings
 from dataclasses import replace
 from pathlib import Path
@@ -16,7 +15,7 @@ import h5py
 import numpy as np
 import pytest
 
-from envs import EFFECTS, FRICTION_SMOOTHING, PixelPendulumConfig, make_pixel_pendulum, parse_effect
+from envs import EFFECTS, PixelPendulumConfig, make_pixel_pendulum, parse_effect
 from envs.effects import (
     STAGES,
     ActionDelay,
@@ -24,8 +23,8 @@ from envs.effects import (
     ViscousDamping,
     normalize_effects,
 )
-from piga.cli.common import run_cli
 from piga.collect import CollectConfig, collect
+from tests.helpers import run_in_process
 
 DT, G = 0.05, 10.0
 START = [2.0, 3.0]  # θ, θ̇: fast enough for friction, damping and the speed clip to matter
@@ -270,17 +269,8 @@ def test_frame_stack_and_gym_make_carry_effects() -> None:
 # ---------------------------------------------------------------------------------------------
 
 
-def test_registry() -> None:
-    assert FRICTION_SMOOTHING == 0.1
-    kinds = {name: spec.kind for name, spec in EFFECTS.items()}
-    assert set(kinds.values()) <= {"actuator", "passive", "clip", "vision"}
-    assert {name: kinds.get(name) for name in (
-        "delay", "deadzone", "saturation", "gain", "damping", "friction", "bias", "speed_clip",
-        "blur", "shift", "noise", "frame_delay", "frame_drop")} == {
-        "delay": "actuator", "deadzone": "actuator", "saturation": "actuator", "gain": "actuator",
-        "damping": "passive", "friction": "passive", "bias": "passive", "speed_clip": "clip",
-        "blur": "vision", "shift": "vision", "noise": "vision", "frame_delay": "vision", "frame_drop": "vision",
-    }
+def test_every_effect_is_documented_and_has_one_place_in_the_env() -> None:
+    assert all(spec.kind in {"actuator", "passive", "clip", "vision"} for spec in EFFECTS.values())
     assert all(spec.meaning and spec.unit and spec.requirement for spec in EFFECTS.values())
     placed = [name for stage in STAGES.values() for name in stage]
     assert sorted(placed) == sorted(EFFECTS)  # each effect has exactly one place in the env
@@ -386,23 +376,11 @@ def test_collect_with_effects(tmp_path: Path) -> None:
         np.testing.assert_allclose(a["states"][n], want, atol=1e-4)
 
 
-def _cli(main_module: Any, prog: str, *argv: str, capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
-    """Runs a command in this process as ``run_cli`` does: (exit code, stdout, stderr)."""
-    saved = signal.getsignal(signal.SIGTERM)
-    try:
-        with pytest.raises(SystemExit) as info:
-            run_cli(prog, main_module.main, list(argv))
-    finally:
-        signal.signal(signal.SIGTERM, saved)
-    out, err = capsys.readouterr()
-    return int(info.value.code or 0), out, err
-
-
 def test_collect_cli_effect_writes_attrs(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     from piga.cli import collect as cli
 
     out = tmp_path / "d.h5"
-    code, stdout, err = _cli(cli, "piga-collect", "--out", str(out), "--sequences", "2", "--steps", "3", "--workers", "1",
+    code, stdout, err = run_in_process("piga-collect", cli.main, "--out", str(out), "--sequences", "2", "--steps", "3", "--workers", "1",
                              "--quiet", "--effect", "friction=0.2", "--effect", "frame-drop=0.3", capsys=capsys)
     assert code == 0, err
     assert "effects friction=0.2 frame_drop=0.3" in stdout
@@ -425,7 +403,7 @@ def test_collect_cli_bad_effect(tmp_path: Path, capsys: pytest.CaptureFixture[st
     from piga.cli import collect as cli
 
     out = tmp_path / "d.h5"
-    got, _, err = _cli(cli, "piga-collect", "--out", str(out), "--sequences", "2", "--effect", value, capsys=capsys)
+    got, _, err = run_in_process("piga-collect", cli.main, "--out", str(out), "--sequences", "2", "--effect", value, capsys=capsys)
     assert got == code and len(err.strip().splitlines()) == 1 and needle in err and "Traceback" not in err, err
     assert not out.exists()
 
@@ -433,7 +411,7 @@ def test_collect_cli_bad_effect(tmp_path: Path, capsys: pytest.CaptureFixture[st
 def test_collect_cli_effect_given_twice(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     from piga.cli import collect as cli
 
-    code, _, err = _cli(cli, "piga-collect", "--out", str(tmp_path / "d.h5"), "--effect", "bias=0.1",
+    code, _, err = run_in_process("piga-collect", cli.main, "--out", str(tmp_path / "d.h5"), "--effect", "bias=0.1",
                         "--effect", "bias=0.2", capsys=capsys)
     assert code == 1 and err.strip() == "piga-collect: error: PixelPendulumConfig.effects: effect 'bias' is given twice"
 

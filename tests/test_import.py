@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -13,12 +12,11 @@ import numpy as np
 import pytest
 
 from piga.cli import importer as cli
-from piga.cli.common import run_cli
 from piga.collect import CollectConfig, collect
 from piga.data import inspect_dataset, read_sequences
 from piga.importer import ImportConfig, import_recording, read_actions, read_recording
 from piga.scene import scene_to_gray
-from tests.test_cli import ENV, assert_one_line_error
+from tests.helpers import ENV, assert_one_line, assert_one_line_error, run_in_process
 
 PROG = "piga-import"
 
@@ -45,22 +43,7 @@ def recording(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, np.
 
 
 def _cli(*argv: str, capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
-    """Runs piga-import in this process as the script does: (exit code, stdout, stderr)."""
-    saved = signal.getsignal(signal.SIGTERM)
-    try:
-        with pytest.raises(SystemExit) as info:
-            run_cli(PROG, cli.main, list(argv))
-    finally:
-        signal.signal(signal.SIGTERM, saved)
-    out, err = capsys.readouterr()
-    return int(info.value.code or 0), out, err
-
-
-def _assert_one_line(code: int, err: str, *needles: str) -> None:
-    lines = err.strip().splitlines()
-    assert code != 0 and len(lines) == 1 and "Traceback" not in err, err
-    for needle in needles:
-        assert needle in lines[0], lines[0]
+    return run_in_process(PROG, cli.main, *argv, capsys=capsys)
 
 
 def test_round_trip_through_the_script(tmp_path: Path, recording: tuple[Path, Path, np.ndarray, np.ndarray]) -> None:
@@ -163,38 +146,47 @@ def test_cli_bad_input(tmp_path: Path, recording: tuple[Path, Path, np.ndarray, 
         code, _, err = _cli(*argv, capsys=capsys)
         return code, err
 
-    _assert_one_line(*run(str(tmp_path / "absent"), str(csv), "--dt", "0.05", "--out", out),
+    assert_one_line(*run(str(tmp_path / "absent"), str(csv), "--dt", "0.05", "--out", out),
                      "absent", "no such video file or frame folder")
-    _assert_one_line(*run(str(folder), str(tmp_path / "absent.csv"), "--dt", "0.05", "--out", out),
+    assert_one_line(*run(str(folder), str(tmp_path / "absent.csv"), "--dt", "0.05", "--out", out),
                      "no such actions file")
     junk_video = tmp_path / "junk.mp4"
     junk_video.write_text("not a video")
-    _assert_one_line(*run(str(junk_video), str(csv), "--dt", "0.05", "--out", out), "junk.mp4", "not a readable video")
+    assert_one_line(*run(str(junk_video), str(csv), "--dt", "0.05", "--out", out), "junk.mp4", "not a readable video")
     empty = tmp_path / "empty"
     empty.mkdir()
-    _assert_one_line(*run(str(empty), str(csv), "--dt", "0.05", "--out", out), "no frames")
+    assert_one_line(*run(str(empty), str(csv), "--dt", "0.05", "--out", out), "no frames")
     broken = tmp_path / "broken"
     broken.mkdir()
     iio.imwrite(broken / "a0.png", np.zeros((8, 8), np.uint8))
     (broken / "a1.png").write_text("not a picture")
-    _assert_one_line(*run(str(broken), str(csv), "--dt", "0.05", "--out", out), "a1.png", "not a readable image")
+    assert_one_line(*run(str(broken), str(csv), "--dt", "0.05", "--out", out), "a1.png", "not a readable image")
     words = tmp_path / "words.csv"
     words.write_text("u\n0.1\nleft\n")
-    _assert_one_line(*run(str(folder), str(words), "--dt", "0.05", "--out", out), "words.csv", "line 3", "'left'")
+    assert_one_line(*run(str(folder), str(words), "--dt", "0.05", "--out", out), "words.csv", "line 3", "'left'")
     short = tmp_path / "short.csv"
     short.write_text("0.1\n" * 12)
-    _assert_one_line(*run(str(folder), str(short), "--dt", "0.05", "--out", out), "12 actions", "17 frames")
-    _assert_one_line(*run(str(folder), str(csv), "--dt", "0.05", "--out", out, "--steps", "18"),
+    assert_one_line(*run(str(folder), str(short), "--dt", "0.05", "--out", out), "12 actions", "17 frames")
+    assert_one_line(*run(str(folder), str(csv), "--dt", "0.05", "--out", out, "--steps", "18"),
                      "17 frames", "one sequence of 18 frames")
     code, err = run(str(folder), str(csv), "--dt", "0", "--out", out)
-    _assert_one_line(code, err, "--dt")
+    assert_one_line(code, err, "--dt")
     assert code == 2
-    _assert_one_line(*run(str(folder), str(csv), "--dt", "-0.05", "--out", out), "--dt")
-    _assert_one_line(*run(str(folder), str(csv), "--out", out), "--dt")
-    _assert_one_line(*run(str(folder), str(csv), "--dt", "0.05", "--out", out, "--steps", "5", "--split", "0,0,1"),
+    assert_one_line(*run(str(folder), str(csv), "--dt", "-0.05", "--out", out), "--dt")
+    assert_one_line(*run(str(folder), str(csv), "--out", out), "--dt")
+    assert_one_line(*run(str(folder), str(csv), "--dt", "0.05", "--out", out, "--steps", "5", "--split", "0,0,1"),
                      "no training sequence")
     assert not Path(out).exists()
     assert list(tmp_path.glob(".*partial*")) == []
+
+
+def test_cli_refuses_a_frame_size_that_cannot_fit(tmp_path: Path, recording: tuple[Path, Path, np.ndarray, np.ndarray],
+                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    folder, csv, _, _ = recording
+    out = tmp_path / "o.h5"
+    code, _, err = _cli(str(folder), str(csv), "--dt", "0.05", "--out", str(out), "--image-size", "2000000", capsys=capsys)
+    assert_one_line(code, err, "17 frames of 2000000x2000000 needs about", "of memory")
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_cli_refuses_to_overwrite(tmp_path: Path, recording: tuple[Path, Path, np.ndarray, np.ndarray],
@@ -203,7 +195,7 @@ def test_cli_refuses_to_overwrite(tmp_path: Path, recording: tuple[Path, Path, n
     out = tmp_path / "mine.h5"
     out.write_text("precious")
     code, _, err = _cli(str(folder), str(csv), "--dt", "0.05", "--out", str(out), capsys=capsys)
-    _assert_one_line(code, err, "--overwrite")
+    assert_one_line(code, err, "--overwrite")
     assert out.read_text() == "precious"
     code, stdout, err = _cli(str(folder), str(csv), "--dt", "0.05", "--out", str(out), "--steps", "17", "--overwrite",
                              capsys=capsys)

@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+import json
 import shutil
-from dataclasses import replace
+from dataclasses import asdict, replace
 from pathlib import Path
 
 import h5py
@@ -11,11 +12,29 @@ import numpy as np
 import pytest
 import torch
 
+from piga.cli import train as cli
 from piga.collect import CollectConfig, collect
-from piga.train import TrainConfig, TrainingDiverged, load_model, train
-from tests.test_cli import assert_one_line_error, run
+from piga.model import ModelConfig, PhysicsModel
+from piga.train import PRESETS, TrainConfig, TrainingDiverged, load_model, train
+from tests.helpers import assert_one_line, assert_one_line_error, run, run_in_process
 
-TINY = TrainConfig(epochs=8, batch_size=16, warmup_steps=40, curriculum_steps=60, lr_physics=5e-2, threads=2)
+PROG = "piga-train-model"
+TINY = TrainConfig(epochs=8, batch_size=16, warmup_steps=40, curriculum_steps=60, lr_physics=5e-2, threads=1)
+#: CLI options for a run of seconds on ``small_data`` (2 steps per epoch).
+SMALL = ("--epochs", "1", "--batch-size", "8", "--warmup-steps", "1", "--quiet", "--threads", "1")
+
+
+@pytest.fixture(scope="module")
+def small_data(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """10 sequences x 15 frames, split 8/1/1: 16 training windows of L + T_pred = 14 frames.
+
+    Its /states were deleted: training cannot read them.
+    """
+    path = tmp_path_factory.mktemp("small") / "small.h5"
+    collect(CollectConfig(sequences=10, steps=15, seed=7, workers=1, split=(8, 1, 1)), path, progress=False, command="t")
+    with h5py.File(path, "a") as f:
+        del f["states"]
+    return path
 
 
 @pytest.fixture(scope="module")
@@ -28,8 +47,9 @@ def stateless_data(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return path
 
 
+@pytest.mark.slow  # the learning run: ~200 steps
 def test_tiny_training_moves_g_and_a_toward_truth(stateless_data: Path, tmp_path: Path) -> None:
-    model, state = train(stateless_data, tmp_path / "run", TINY, {"rec_frames": "input"}, progress=False)
+    model, state = train(stateless_data, tmp_path / "run", TINY, progress=False)
     p = model.physical_parameters()
     assert state.history[0]["g"] < 10  # it really started from g = 1
     assert abs(p["g"] - 10) < 0.5 * abs(1 - 10), p  # moved more than half-way from 1 to 10
@@ -38,40 +58,57 @@ def test_tiny_training_moves_g_and_a_toward_truth(stateless_data: Path, tmp_path
     assert any((tmp_path / "run" / "tensorboard").iterdir())
 
 
-def test_resume_continues_exactly(stateless_data: Path, tmp_path: Path) -> None:
-    cfg = replace(TINY, epochs=3)
-    straight, _ = train(stateless_data, tmp_path / "a", cfg, {"rec_frames": "input"}, progress=False)
+def test_resume_continues_exactly(small_data: Path, tmp_path: Path) -> None:
+    cfg = replace(TINY, epochs=3, batch_size=4, warmup_steps=2, curriculum_steps=4)  # 4 steps per epoch
+    straight, _ = train(small_data, tmp_path / "a", cfg, progress=False)
 
     def stop_after_first(state, model) -> None:  # noqa: ANN001
         if state.epoch == 1:
             raise KeyboardInterrupt
 
     with pytest.raises(KeyboardInterrupt):
-        train(stateless_data, tmp_path / "b", cfg, {"rec_frames": "input"}, progress=False, on_epoch=stop_after_first)
-    resumed, state = train(stateless_data, tmp_path / "b", cfg, resume=True, progress=False)
+        train(small_data, tmp_path / "b", cfg, progress=False, on_epoch=stop_after_first)
+    resumed, state = train(small_data, tmp_path / "b", cfg, resume=True, progress=False)
     assert state.epoch == 3
     for (name, a), (_, b) in zip(straight.state_dict().items(), resumed.state_dict().items()):
         assert torch.equal(a, b), name
 
 
-def test_nan_stops_and_names_last_checkpoint(stateless_data: Path, tmp_path: Path) -> None:
+def _poison(monkeypatch: pytest.MonkeyPatch, after_calls: int, error: type[BaseException] | None = None) -> None:
+    """From the ``after_calls``-th forward pass on, the loss is NaN (or ``error`` is raised)."""
+    forward = PhysicsModel.forward
+    calls = []
+
+    def patched(self, *args, **kwargs):  # noqa: ANN001, ANN002, ANN003, ANN202
+        calls.append(1)
+        out = forward(self, *args, **kwargs)
+        if len(calls) >= after_calls and self.training:
+            if error is not None:
+                raise error
+            return out._replace(loss=out.loss * float("nan"), loss_rec=out.loss_rec * float("nan"))
+        return out
+
+    monkeypatch.setattr(PhysicsModel, "forward", patched)
+
+
+def test_nan_stops_and_names_last_checkpoint(small_data: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     run_dir = tmp_path / "run"
-    train(stateless_data, run_dir, replace(TINY, epochs=1), {"rec_frames": "input"}, progress=False)
-    bad = tmp_path / "nan.h5"
-    shutil.copy(stateless_data, bad)
-    with h5py.File(bad, "a") as f:
-        f["actions"][...] = np.nan
+    cfg = replace(TINY, epochs=1, batch_size=8)
+    train(small_data, run_dir, cfg, progress=False)
     before = (run_dir / "checkpoint.pt").read_bytes()
+    _poison(monkeypatch, after_calls=2)
     with pytest.raises(TrainingDiverged, match=str(run_dir / "checkpoint.pt")):
-        train(bad, run_dir, replace(TINY, epochs=3), resume=True, progress=False)
+        train(small_data, run_dir, replace(cfg, epochs=3), resume=True, progress=False)
     assert (run_dir / "checkpoint.pt").read_bytes() == before  # the good checkpoint survives
     load_model(run_dir)
+    with pytest.raises(TrainingDiverged, match="no checkpoint was written yet"):
+        train(small_data, tmp_path / "fresh", cfg, progress=False)
+    assert not (tmp_path / "fresh").exists()
 
 
-def test_cli_trains_and_reports(stateless_data: Path, tmp_path: Path) -> None:
+def test_cli_trains_and_reports(small_data: Path, tmp_path: Path) -> None:
     out = tmp_path / "run"
-    result = run("piga-train-model", str(stateless_data), "--out", str(out), "--epochs", "1", "--warmup-steps", "5",
-                 "--quiet", "--threads", "2")
+    result = run("piga-train-model", str(small_data), "--out", str(out), *SMALL)
     assert result.returncode == 0, result.stderr
     assert "learned: g=" in result.stdout and "epoch 1:" in result.stdout
     for name in ("checkpoint.pt", "metrics.json", "config.json", "rollout.png", "templates.png", "curves.png"):
@@ -80,44 +117,152 @@ def test_cli_trains_and_reports(stateless_data: Path, tmp_path: Path) -> None:
 
     metrics = json.loads((out / "metrics.json").read_text())
     assert set(metrics["parameter_errors"]) == {"g", "a"} and "angle" not in metrics  # no /states, no angle error
-    assert len(metrics["frame_ssim_per_step"]) == 24 - 4
+    assert len(metrics["frame_ssim_per_step"]) == 15 - 4
     # an existing run is not replaced without --overwrite or --resume
-    assert_one_line_error(run("piga-train-model", str(stateless_data), "--out", str(out)), "--overwrite")
-    resumed = run("piga-train-model", str(stateless_data), "--out", str(out), "--resume", "--epochs", "2", "--quiet")
+    assert_one_line_error(run("piga-train-model", str(small_data), "--out", str(out)), "--overwrite")
+    resumed = run("piga-train-model", str(small_data), "--out", str(out), "--resume", "--epochs", "2", "--quiet")
     assert resumed.returncode == 0, resumed.stderr
     assert "epoch 2:" in resumed.stdout and "epoch 1:" not in resumed.stdout
 
 
-def test_cli_bad_input(stateless_data: Path, tmp_path: Path) -> None:
+def test_cli_bad_input(small_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = str(tmp_path / "run")
-    assert_one_line_error(run("piga-train-model", str(tmp_path / "absent.h5"), "--out", out), "no such file")
+    assert_one_line_error(run(PROG, str(tmp_path / "absent.h5"), "--out", out), "no such file")  # once as a script
+
+    def refused(*argv: str) -> str:
+        code, _, err = run_in_process(PROG, cli.main, *argv, capsys=capsys)
+        return assert_one_line(code, err)
+
     junk = tmp_path / "junk.h5"
     junk.write_text("junk")
-    assert_one_line_error(run("piga-train-model", str(junk), "--out", out), "HDF5")
+    assert "HDF5" in refused(str(junk), "--out", out)
     wrong = tmp_path / "wrong.h5"
     with h5py.File(wrong, "w") as f:
         f["frames"] = np.zeros((2, 20, 64, 64), np.uint8)
-    assert_one_line_error(run("piga-train-model", str(wrong), "--out", out), "/actions")
+    assert "/actions" in refused(str(wrong), "--out", out)
     short = tmp_path / "short.h5"
     collect(CollectConfig(sequences=3, steps=8, workers=1, split=(1, 1, 1)), short, progress=False, command="t")
-    assert_one_line_error(run("piga-train-model", str(short), "--out", out), "14")
-    assert_one_line_error(run("piga-train-model", str(stateless_data), "--out", out, "--preset", "slow"), "--preset")
-    assert_one_line_error(run("piga-train-model", str(stateless_data), "--out", out, "--resume"), "does not exist")
-    assert_one_line_error(run("piga-train-model", str(stateless_data), "--out", out, "--epochs", "0"), "--epochs")
-    assert not (tmp_path / "run" / "checkpoint.pt").exists()
+    assert "L + T_pred = 14" in refused(str(short), "--out", out)
+    assert "--preset" in refused(str(small_data), "--out", out, "--preset", "slow")
+    assert "does not exist" in refused(str(small_data), "--out", out, "--resume")
+    assert "--epochs" in refused(str(small_data), "--out", out, "--epochs", "0")
+    assert "is a file" in refused(str(small_data), "--out", str(junk))
+    assert not (tmp_path / "run").exists()
     broken = tmp_path / "broken"
     broken.mkdir()
     (broken / "checkpoint.pt").write_bytes(b"not a checkpoint")
-    assert_one_line_error(run("piga-train-model", str(stateless_data), "--out", str(broken), "--resume"), "checkpoint")
+    assert "checkpoint" in refused(str(small_data), "--out", str(broken), "--resume")
+    leftovers = tmp_path / "leftovers"  # an earlier run that wrote no checkpoint
+    (leftovers / "tensorboard").mkdir(parents=True)
+    (leftovers / "config.json").write_text("{}")
+    line = refused(str(small_data), "--out", str(leftovers))
+    assert "no checkpoint" in line and "--overwrite" in line and "--resume" not in line
 
 
-def test_cli_nan_names_checkpoint(stateless_data: Path, tmp_path: Path) -> None:
+def test_cli_nan_names_checkpoint(small_data: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                   capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "run"
-    assert run("piga-train-model", str(stateless_data), "--out", str(out), "--epochs", "1", "--warmup-steps", "0",
-               "--quiet").returncode == 0
-    bad = tmp_path / "nan.h5"
-    shutil.copy(stateless_data, bad)
+    code, _, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), *SMALL, capsys=capsys)
+    assert code == 0, err
+    _poison(monkeypatch, after_calls=1)
+    code, _, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), "--resume", "--epochs", "2",
+                                  "--quiet", capsys=capsys)
+    assert_one_line(code, err, "diverged", str(out / "checkpoint.pt"))
+
+
+@pytest.mark.parametrize("value, needle", [(np.nan, "NaN or infinite"), (np.inf, "NaN or infinite"), (1e30, "beyond")])
+def test_cli_refuses_unusable_actions_up_front(small_data: Path, tmp_path: Path, value: float, needle: str,
+                                              capsys: pytest.CaptureFixture[str]) -> None:
+    bad = tmp_path / "bad.h5"
+    shutil.copy(small_data, bad)
     with h5py.File(bad, "a") as f:
-        f["actions"][...] = np.nan
-    result = run("piga-train-model", str(bad), "--out", str(out), "--resume", "--epochs", "2", "--quiet")
-    assert_one_line_error(result, "diverged", str(out / "checkpoint.pt"))
+        f["actions"][1, 3, 0] = value
+    out = tmp_path / "r"
+    code, _, err = run_in_process(PROG, cli.main, str(bad), "--out", str(out), "--warmup-steps", "0", "--epochs", "1",
+                                  capsys=capsys)
+    assert_one_line(code, err, needle, "sequence 1, step 3")
+    assert not out.exists()
+
+
+def test_cli_refuses_a_run_without_a_single_batch(small_data: Path, tmp_path: Path,
+                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "r"
+    code, _, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), "--batch-size", "17", capsys=capsys)
+    assert_one_line(code, err, "16 training windows", "fewer than one batch of 17")
+    assert not out.exists()
+
+
+def test_cli_warns_when_there_is_no_test_split(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    data = tmp_path / "notest.h5"
+    collect(CollectConfig(sequences=3, steps=14, seed=1, workers=1, split=(3, 0, 0)), data, progress=False, command="t")
+    code, out, err = run_in_process(PROG, cli.main, str(data), "--out", str(tmp_path / "r"), "--batch-size", "3",
+                                    "--epochs", "1", "--warmup-steps", "0", "--quiet", capsys=capsys)
+    assert code == 0, err
+    assert "warning: " in err and "no test sequences" in err and "train split" in err
+    assert "SSIM (train split)" in out
+    assert json.loads((tmp_path / "r" / "metrics.json").read_text())["split"] == "train"
+
+
+def test_cli_paper_preset_runs(small_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    defaults = {"train": asdict(TrainConfig()), "model": asdict(ModelConfig())}
+    for part, values in PRESETS["paper"].items():  # the paper preset names only real differences
+        assert all(defaults[part][k] != v for k, v in values.items()), part
+    out = tmp_path / "paper"
+    code, _, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), "--preset", "paper", "--epochs", "1",
+                                  "--batch-size", "16", "--quiet", capsys=capsys)
+    assert code == 0, err
+    config = json.loads((out / "config.json").read_text())
+    assert config["train"]["optimizer"] == "rmsprop" and config["train"]["epochs"] == 1
+    assert config["model"]["substeps"] == 5 and config["model"]["readout"] == "regress"
+    _, ckpt = load_model(out)
+    assert ckpt["state"]["step"] == 1  # one step of 16 windows
+    assert load_model(out)[0].system.offset.requires_grad  # the paper preset learns the angle offset
+
+
+def test_cli_interrupted_first_epoch_writes_nothing_and_rerun_works(
+        small_data: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "r"
+    with monkeypatch.context() as m:
+        _poison(m, after_calls=2, error=KeyboardInterrupt)
+        code, _, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), *SMALL, capsys=capsys)
+    assert code == 130 and err.strip() == f"{PROG}: interrupted; nothing was written"
+    assert not out.exists()
+    with monkeypatch.context() as m:  # interrupted in epoch 2: epoch 1's checkpoint and the record stay
+        _poison(m, after_calls=3, error=KeyboardInterrupt)
+        code, _, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), *SMALL, "--epochs", "3",
+                                      capsys=capsys)
+    assert code == 130 and "holds epoch 1; continue with --resume" in err, err
+    first = json.loads((out / "config.json").read_text())
+    assert first["command"].startswith(PROG) and "--epochs 3" in first["command"] and "resumed" not in first
+    code, stdout, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), "--resume", "--epochs", "4",
+                                       "--quiet", capsys=capsys)
+    assert code == 0, err
+    assert "epoch 2:" in stdout and "epoch 4:" in stdout
+    record = json.loads((out / "config.json").read_text())
+    assert record["command"] == first["command"]  # the original command is kept
+    assert len(record["resumed"]) == 1 and "--resume --epochs 4" in record["resumed"][0]
+    assert record["train"]["epochs"] == 4
+
+
+def test_resume_with_more_epochs_replans_the_cosine(small_data: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """As documented: from the resumed step on, the learning rates are those of a straight run of the new length."""
+    import piga.train as training
+
+    seen: list[tuple[int, float]] = []
+    factor = training._lr_factor
+
+    def recording(step: int, epoch: int, total_steps: int, config: TrainConfig) -> float:
+        seen.append((step, factor(step, epoch, total_steps, config)))
+        return seen[-1][1]
+
+    monkeypatch.setattr(training, "_lr_factor", recording)
+    cfg = replace(TINY, batch_size=4, warmup_steps=2, curriculum_steps=2)  # 4 steps per epoch
+    straight, _ = train(small_data, tmp_path / "a", replace(cfg, epochs=3), progress=False)
+    straight_rates, seen[:] = dict(seen), []
+    train(small_data, tmp_path / "b", replace(cfg, epochs=2), progress=False)
+    short_rates, seen[:] = dict(seen), []
+    resumed, state = train(small_data, tmp_path / "b", replace(cfg, epochs=3), resume=True, progress=False)
+    assert state.epoch == 3 and sorted(seen) == [(s, straight_rates[s]) for s in range(8, 12)]
+    assert short_rates[7] < straight_rates[8] > straight_rates[11]  # the rate rose again, then decays to the end
+    assert any(short_rates[s] != straight_rates[s] for s in range(8))  # the first epochs had the 2-epoch schedule
+    assert straight.physical_parameters() != resumed.physical_parameters()  # close, not identical

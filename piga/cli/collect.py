@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import replace
 
 from envs.effects import EFFECTS, format_effects, parse_effect
 from envs.pendulum import PixelPendulumConfig
-from piga.cli.common import ArgumentParser, command_line, nonnegative_int, positive_float, positive_int, run_cli, split_type
+from piga.cli.common import (ArgumentParser, add_preset_option, command_line, format_default, nonnegative_int, positive_float,
+                             positive_int, run_cli, split_type)
 from piga.collect import PAPER_MAX_SPEED, PRESETS, CollectConfig, collect
 from piga.data import inspect_dataset
 
@@ -33,27 +33,30 @@ def build_parser() -> ArgumentParser:
         "(schema: README, 'Data files').",
     )
     p.add_argument("--out", required=True, help="output .h5 file (written atomically)")
+    paper = PRESETS["paper"]
     p.add_argument("--preset", choices=sorted(PRESETS), default="default",
-                   help="'default': small, about a minute on 2 cores; 'paper': 6000 sequences x 14 frames, "
-                   "split 5000/500/500. Explicit options override the preset.")
-    p.add_argument("--sequences", type=positive_int, help=f"number of sequences N (default {defaults.sequences})")
-    p.add_argument("--steps", type=positive_int, help=f"frames per sequence T, >= 2 (default {defaults.steps})")
+                   help=f"'default': small, about a minute on 2 cores; 'paper': {paper['sequences']} sequences x "
+                   f"{paper['steps']} frames, split {format_default(paper['split'])}, reset speeds up to "
+                   f"{format_default(paper['max_speed'])}. Explicit options override the preset.")
+    add_preset_option(p, "--sequences", type=positive_int, default=defaults.sequences, help="number of sequences N")
+    add_preset_option(p, "--steps", type=positive_int, default=defaults.steps, help="frames per sequence T, >= 2")
     p.add_argument("--gravity", type=positive_float, default=env.gravity, help="gravity g (default %(default)s)")
     p.add_argument("--gravity-mult", type=positive_float, default=env.gravity_mult,
                    help="multiplier on gravity; the env simulates gravity x mult (default %(default)s)")
     p.add_argument("--actuation-gain", type=positive_float, default=env.actuation_gain,
                    help="applied torque = gain x u (default %(default)s)")
-    p.add_argument("--max-speed", type=float,
-                   help=f"reset draws theta_dot ~ U(-s, s), s in [0, 8] (default {env.max_speed:g}, Gymnasium's; "
-                   f"the paper preset uses {PAPER_MAX_SPEED:g})")
-    p.add_argument("--max-angle", type=float, default=math.pi,
-                   help="reset draws theta ~ U(-a, a), a in [0, pi] (default pi)")
+    add_preset_option(p, "--max-speed", type=float, default=env.max_speed,
+                      shown=f"{env.max_speed:g}, Gymnasium's; the paper preset uses {PAPER_MAX_SPEED:g}",
+                      help="reset draws theta_dot ~ U(-s, s), s in [0, 8]")
+    p.add_argument("--max-angle", type=float, default=env.max_angle,
+                   help="reset draws theta ~ U(-a, a), a in [0, pi] (default %(default).4g, i.e. pi)")
     p.add_argument("--image-size", type=positive_int, default=env.image_size, help="frame side in pixels (default %(default)s)")
     p.add_argument("--no-torque-arrow", action="store_true", help="hide Gymnasium's torque arrow in the frames")
     p.add_argument("--seed", type=nonnegative_int, default=defaults.seed, help="root seed (default %(default)s)")
     p.add_argument("--workers", type=positive_int, default=defaults.workers,
                    help="parallel env processes (default %(default)s); the data do not depend on it")
-    p.add_argument("--split", type=split_type, help="train,valid,test as fractions (0.8,0.1,0.1) or counts (default 0.8,0.1,0.1)")
+    add_preset_option(p, "--split", type=split_type, default=defaults.split,
+                      help="train,valid,test as fractions (0.8,0.1,0.1) or counts (5000,500,500)")
     p.add_argument("--effect", action="append", type=_effect, default=[], metavar="NAME=VALUE",
                    help="an unmodelled effect, repeatable (e.g. --effect damping=0.2 --effect delay=2). It changes the "
                    "frames and states; the stored actions stay the commanded u, and the file's attr 'effects' records it. "

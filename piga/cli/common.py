@@ -3,9 +3,13 @@
 from __future__ import annotations
 
 import argparse
+import os
+import re
 import signal
+import tempfile
 import sys
 from collections.abc import Callable, Sequence
+from pathlib import Path
 from typing import Any, NoReturn
 
 
@@ -17,14 +21,27 @@ class PigaError(Exception):
     """An error a user can fix; the command prints its message as one line."""
 
 
+class Interrupted(KeyboardInterrupt):
+    """An interruption after which something was kept; its message says what (``run_cli`` prints it)."""
+
+
 class ArgumentParser(argparse.ArgumentParser):
-    """argparse that reports a usage error as a single line on stderr (exit 2)."""
+    """argparse that reports a usage error as a single line on stderr (exit 2).
+
+    A value that starts with a minus and a digit (``-1,1,1``, ``-1e3``) is read as a value, not
+    as an unknown option, so that its own type check names what is wrong with it.
+    """
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = re.compile(r"^-\.?\d")
 
     def error(self, message: str) -> NoReturn:
         self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
 
 
-#: Exceptions that are the user's to fix; any other exception is a bug and keeps its traceback.
+#: Exceptions that are the user's to fix; any other exception is a bug, and ``run_cli`` writes its
+#: traceback to a log file (:func:`log_folder`).
 USER_ERRORS: tuple[type[BaseException], ...] = (
     PigaError,
     DataFormatError,
@@ -49,7 +66,10 @@ def _raise_interrupt(signum: int, frame: object) -> None:
 
 
 def run_cli(prog: str, main: Callable[[Sequence[str] | None], int | None], argv: Sequence[str] | None = None) -> NoReturn:
-    """Runs ``main(argv)`` and exits; user errors become ``prog: error: ...`` on stderr.
+    """Runs ``main(argv)`` and exits; user errors become ``prog: error: ...`` on stderr (exit 1).
+
+    An unexpected exception (a bug) prints one line that names a log file in :func:`log_folder`
+    holding the traceback, and exits with :data:`INTERNAL_ERROR`.
 
     SIGTERM is turned into KeyboardInterrupt, so that ``finally`` blocks run. That is how a partly
     written output file gets removed.
@@ -57,8 +77,9 @@ def run_cli(prog: str, main: Callable[[Sequence[str] | None], int | None], argv:
     signal.signal(signal.SIGTERM, _raise_interrupt)
     try:
         code = main(argv)
-    except KeyboardInterrupt:
-        print(f"{prog}: interrupted; nothing was written", file=sys.stderr)
+    except KeyboardInterrupt as exc:
+        kept = str(exc) if isinstance(exc, Interrupted) else "nothing was written"
+        print(f"{prog}: interrupted; {kept}", file=sys.stderr)
         sys.exit(130)
     except USER_ERRORS as exc:
         message = " ".join(str(exc).split()) or exc.__class__.__name__
@@ -67,7 +88,43 @@ def run_cli(prog: str, main: Callable[[Sequence[str] | None], int | None], argv:
     except OSError as exc:  # h5py and friends: disk full, unreadable files
         print(f"{prog}: error: {exc.__class__.__name__}: {' '.join(str(exc).split())}", file=sys.stderr)
         sys.exit(1)
+    except MemoryError as exc:
+        print(f"{prog}: error: out of memory ({' '.join(str(exc).split()) or 'MemoryError'})", file=sys.stderr)
+        sys.exit(1)
+    except Exception as exc:  # a bug: one line, and the traceback in a log file
+        message = " ".join(str(exc).split())[:200]
+        log = _write_traceback(prog, argv)
+        where = f"the traceback is in {log}" if log else "the traceback could not be written to a log file"
+        print(f"{prog}: internal error ({exc.__class__.__name__}: {message}); {where}; please report it", file=sys.stderr)
+        sys.exit(INTERNAL_ERROR)
     sys.exit(code or 0)
+
+
+#: Exit status of an unexpected internal error (BSD's EX_SOFTWARE); user errors exit 1, usage errors 2.
+INTERNAL_ERROR = 70
+
+
+def log_folder() -> Path:
+    """Where internal errors leave their tracebacks: ``piga-logs`` in the system's temporary folder
+    (``$TMPDIR``, else /tmp on Linux)."""
+    return Path(tempfile.gettempdir()) / "piga-logs"
+
+
+def _write_traceback(prog: str, argv: Sequence[str] | None) -> Path | None:
+    """Writes the exception being handled, with the command line, to a new log file; returns its path."""
+    import time
+    import traceback
+
+    from piga.atomic import atomic_output
+
+    path = log_folder() / f"{prog}-{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}.log"
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with atomic_output(path, overwrite=True) as tmp:
+            tmp.write_text(f"{command_line(prog, argv)}\n\n{traceback.format_exc()}")
+    except OSError:
+        return None
+    return path
 
 
 def _number_type(convert: Callable[[str], float], ok: Callable[[float], bool], what: str) -> Callable[[str], Any]:
@@ -94,6 +151,37 @@ positive_float = _number_type(float, lambda v: 0 < v < float("inf"), "a finite n
 """argparse type: a finite number > 0 (NaN is rejected too)."""
 
 
+def format_default(value: Any) -> str:
+    """A default as help text shows it: 1e-3 as 0.001, (0.8, 0.1, 0.1) as 0.8,0.1,0.1, True as on."""
+    if isinstance(value, bool):
+        return "on" if value else "off"
+    if isinstance(value, float):
+        return f"{value:g}"
+    if isinstance(value, (tuple, list)):
+        return ",".join(format_default(v) for v in value)
+    return str(value)
+
+
+def add_preset_option(parser: argparse.ArgumentParser, *flags: str, default: Any, help: str,  # noqa: A002
+                      shown: str | None = None, **kwargs: Any) -> argparse.Action:
+    """An option whose value, when not given, comes from a preset or a dataclass default.
+
+    argparse's default stays None, so that the caller can tell a given value from a missing one
+    (an explicit option overrides a preset). The default that applies without a preset is named in
+    the help, from ``default``, and recorded on the action as ``documented_default`` (the README
+    test reads it through :func:`documented_default`). ``shown`` replaces the value in the help
+    (e.g. "no limit").
+    """
+    action = parser.add_argument(*flags, default=None, help=f"{help} (default {shown or format_default(default)})", **kwargs)
+    action.documented_default = default  # type: ignore[attr-defined]
+    return action
+
+
+def documented_default(action: argparse.Action) -> Any:
+    """The default an option documents: the preset's (see :func:`add_preset_option`) or argparse's."""
+    return getattr(action, "documented_default", action.default)
+
+
 def split_type(text: str) -> tuple[float, float, float]:
     """argparse type: train,valid,test as three numbers, fractions (0.8,0.1,0.1) or counts (5000,500,500)."""
     parts = text.replace(":", ",").split(",")
@@ -103,7 +191,10 @@ def split_type(text: str) -> tuple[float, float, float]:
         raise argparse.ArgumentTypeError(f"expected three numbers like 0.8,0.1,0.1 or 5000,500,500, got {text!r}") from None
     if len(values) != 3:
         raise argparse.ArgumentTypeError(f"expected three numbers (train,valid,test), got {text!r}")
+    if any(not v >= 0 or v == float("inf") for v in values):
+        raise argparse.ArgumentTypeError(f"expected three finite numbers >= 0 (train,valid,test), got {text!r}")
     return values  # type: ignore[return-value]
 
 
-__all__ = ["ArgumentParser", "PigaError", "run_cli", "positive_int", "nonnegative_int", "positive_float", "split_type"]
+__all__ = ["ArgumentParser", "PigaError", "run_cli", "positive_int", "nonnegative_int", "positive_float", "split_type",
+           "add_preset_option", "documented_default", "format_default", "Interrupted"]

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import sys
 from collections.abc import Sequence
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from piga.cli import show, train
@@ -21,16 +21,37 @@ from piga.data import inspect_dataset
 PROG = "piga-demo"
 
 
+@dataclass(frozen=True)
+class DemoConfig:
+    """The demo's own settings (data and training use :class:`CollectConfig` and the fast preset)."""
+
+    out: str = "demo"
+    """Output folder."""
+    sequences: int = CollectConfig.sequences
+    """Sequences to collect."""
+    episodes: int = 3
+    """Control episodes per task."""
+    control_steps: int = 200
+    """Steps per control episode."""
+    goal_angle: float = 15.0
+    """Angle of the goal image, degrees from upright."""
+    seed: int = 0
+    """Seed of data, training and control."""
+
+
 def build_parser() -> ArgumentParser:
+    d = DemoConfig()
     p = ArgumentParser(prog=PROG, description="Run piga's main job on small defaults: collect pixel-pendulum data, "
                        "train the world model (fast preset) and print the learned g and a with their errors.")
-    p.add_argument("--out", default="demo", help="output folder (default %(default)s)")
-    p.add_argument("--sequences", type=positive_int, default=CollectConfig.sequences, help="sequences to collect (default %(default)s)")
+    p.add_argument("--out", default=d.out, help="output folder (default %(default)s)")
+    p.add_argument("--sequences", type=positive_int, default=d.sequences, help="sequences to collect (default %(default)s)")
     p.add_argument("--epochs", type=positive_int, help="training epochs (default: the fast preset's)")
-    p.add_argument("--episodes", type=positive_int, default=3, help="control episodes per task (default %(default)s)")
-    p.add_argument("--control-steps", type=positive_int, default=200, help="steps per control episode (default %(default)s)")
-    p.add_argument("--goal-angle", type=float, default=15.0, help="angle of the goal image, degrees from upright (default %(default)s)")
-    p.add_argument("--seed", type=nonnegative_int, default=0, help="seed of data and training (default %(default)s)")
+    p.add_argument("--episodes", type=positive_int, default=d.episodes, help="control episodes per task (default %(default)s)")
+    p.add_argument("--control-steps", type=positive_int, default=d.control_steps,
+                   help="steps per control episode (default %(default)s)")
+    p.add_argument("--goal-angle", type=float, default=d.goal_angle,
+                   help="angle of the goal image, degrees from upright (default %(default)s)")
+    p.add_argument("--seed", type=nonnegative_int, default=d.seed, help="seed of data and training (default %(default)s)")
     p.add_argument("--overwrite", action="store_true", help="replace files of an earlier demo in --out")
     return p
 

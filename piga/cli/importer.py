@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from piga.cli.common import ArgumentParser, command_line, positive_float, positive_int, run_cli, split_type
+from piga.cli.common import ArgumentParser, command_line, format_default, positive_float, positive_int, run_cli, split_type
 from piga.importer import ImportConfig, import_recording
 
 PROG = "piga-import"
@@ -29,7 +29,8 @@ def build_parser() -> ArgumentParser:
     p.add_argument("--image-size", type=positive_int, default=defaults.image_size,
                    help="frame side in pixels, >= 8 (default %(default)s)")
     p.add_argument("--split", type=split_type, default=defaults.split,
-                   help="train,valid,test as fractions or counts of sequences, in recording order (default 0.8,0.1,0.1)")
+                   help="train,valid,test as fractions or counts of sequences, in recording order "
+                   f"(default {format_default(defaults.split)})")
     p.add_argument("--overwrite", action="store_true", help="replace --out if it exists")
     return p
 

@@ -2,33 +2,50 @@
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Sequence
 from dataclasses import asdict, replace
 from pathlib import Path
 
-from piga.cli.common import ArgumentParser, PigaError, command_line, nonnegative_int, positive_float, positive_int, run_cli
+from typing import Any
+
+from piga.cli.common import (ArgumentParser, Interrupted, PigaError, add_preset_option, command_line, format_default, nonnegative_int,
+                             positive_float, positive_int, run_cli)
 
 PROG = "piga-train-model"
-OUTPUTS = ("checkpoint.pt", "metrics.json", "config.json", "rollout.png", "templates.png", "curves.png")
+CHECKPOINT = "checkpoint.pt"
+OUTPUTS = (CHECKPOINT, "metrics.json", "config.json", "rollout.png", "templates.png", "curves.png")
 
 
 def build_parser() -> ArgumentParser:
+    from piga.train import PRESETS, TrainConfig  # noqa: PLC0415 (torch loads only when the command runs)
+
+    fast, paper = TrainConfig(), PRESETS["paper"]["train"]
+
+    def recipe(flag: str, field: str, type_: Any, text: str, shown: str | None = None) -> None:
+        value = getattr(fast, field)
+        also = f"; paper preset: {format_default(paper[field])}" if field in paper and paper[field] != value else ""
+        add_preset_option(p, flag, default=value, type=type_, shown=(shown or format_default(value)) + also, help=text)
+
     p = ArgumentParser(prog=PROG, description="Train the physics-as-inverse-graphics model on a piga data file. "
                        "Writes RUN_DIR/checkpoint.pt (every epoch), metrics.json, rollout.png, templates.png, "
                        "curves.png and TensorBoard scalars in RUN_DIR/tensorboard.")
     p.add_argument("data", help="HDF5 file of piga's schema (only /frames and /actions are used for training)")
     p.add_argument("--out", required=True, help="run folder")
-    p.add_argument("--preset", choices=["fast", "paper"], default="fast",
-                   help="'fast' (default): the CPU recipe; 'paper': the paper's (RMSProp 3e-4, 1000 epochs, M=5)")
-    p.add_argument("--epochs", type=positive_int, help="passes over the training windows (fast: 16)")
-    p.add_argument("--max-minutes", type=positive_float, help="stop after the epoch that ends past this budget")
-    p.add_argument("--batch-size", type=positive_int, help="windows per step (fast: 32)")
-    p.add_argument("--lr", type=positive_float, help="network learning rate (fast: 1e-3)")
-    p.add_argument("--lr-physics", type=positive_float, help="physical-parameter learning rate, log space (fast: 2e-2)")
-    p.add_argument("--warmup-steps", type=nonnegative_int, help="autoencoder-only steps first (fast: 200)")
-    p.add_argument("--seed", type=nonnegative_int, default=0, help="seed of initialisation and sampling (default 0)")
-    p.add_argument("--threads", type=nonnegative_int, default=0, help="torch CPU threads (default: torch's choice)")
-    p.add_argument("--resume", action="store_true", help="continue the run in --out exactly where it stopped")
+    p.add_argument("--preset", choices=sorted(PRESETS), default="fast",
+                   help="'fast' (default): the CPU recipe; 'paper': the paper's (RMSProp 3e-4, 1000 epochs, M=5). "
+                   "Explicit options override the preset.")
+    recipe("--epochs", "epochs", positive_int, "passes over the training windows; the cosine schedule is planned over them")
+    recipe("--max-minutes", "max_minutes", positive_float, "stop after the epoch that ends past this budget",
+           shown="no limit")
+    recipe("--batch-size", "batch_size", positive_int, "windows per step")
+    recipe("--lr", "lr", positive_float, "network learning rate")
+    recipe("--lr-physics", "lr_physics", positive_float, "physical-parameter learning rate, log space")
+    recipe("--warmup-steps", "warmup_steps", nonnegative_int, "autoencoder-only steps first")
+    p.add_argument("--seed", type=nonnegative_int, default=fast.seed, help="seed of initialisation and sampling (default %(default)s)")
+    p.add_argument("--threads", type=nonnegative_int, default=fast.threads, help="torch CPU threads (default %(default)s: torch's choice)")
+    p.add_argument("--resume", action="store_true", help="continue the run in --out; it may raise --epochs or --max-minutes "
+                   "(see README: resuming replans the cosine schedule)")
     p.add_argument("--overwrite", action="store_true", help="replace the outputs of an earlier run in --out")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     return p
@@ -36,62 +53,99 @@ def build_parser() -> ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    from piga.data import inspect_dataset
-    from piga.report import write_run_report
-    from piga.atomic import write_json
-    from piga.train import PRESETS, TrainConfig, TrainingDiverged, load_model, model_config_for, train
-
-    info = inspect_dataset(args.data)
     run_dir = Path(args.out)
     if run_dir.exists() and not run_dir.is_dir():
         raise PigaError(f"--out {run_dir} is a file, not a folder")
     existing = [name for name in OUTPUTS if (run_dir / name).exists()]
-    if args.resume:
-        if not (run_dir / "checkpoint.pt").exists():
-            raise PigaError(f"--resume: {run_dir / 'checkpoint.pt'} does not exist")
+    has_checkpoint = (run_dir / CHECKPOINT).exists()
+    if args.resume and not has_checkpoint:
+        raise PigaError(f"--resume: {run_dir / CHECKPOINT} does not exist")
+    if not args.resume and existing and not args.overwrite:
+        if has_checkpoint:
+            raise PigaError(f"{run_dir} already holds a run ({', '.join(existing)}); pass --resume to continue it "
+                            "or --overwrite to replace it")
+        raise PigaError(f"{run_dir} holds outputs of an earlier run but no checkpoint ({', '.join(existing)}); "
+                        "pass --overwrite to replace them")
+    from piga.atomic import write_json
+    from piga.data import inspect_dataset
+    from piga.report import write_run_report
+    from piga.train import PRESETS, TrainConfig, TrainingDiverged, check_trainable, load_model, model_config_for, train
+
+    info = inspect_dataset(args.data)
+    overrides = {k: getattr(args, k) for k in ("epochs", "max_minutes", "batch_size", "lr", "lr_physics", "warmup_steps")
+                 if getattr(args, k) is not None}
+    command = command_line(PROG, argv)
+    if args.resume:  # the run's own recipe; only the length and the budget may change
         saved_model, ckpt = load_model(run_dir)
         if tuple(ckpt["data"]["image_shape"]) != info.image_shape or ckpt["data"]["system"] != info.system:
             raise PigaError(f"--resume: {args.data} ({info.system}, {info.image_shape}) does not match the run's data "
                             f"({ckpt['data']['system']}, {tuple(ckpt['data']['image_shape'])})")
-    elif existing and not args.overwrite:
-        raise PigaError(f"{run_dir} already holds a run ({', '.join(existing)}); pass --resume to continue it or --overwrite to replace it")
-    preset = PRESETS[args.preset]
-    overrides = {k: getattr(args, k) for k in ("epochs", "max_minutes", "batch_size", "lr", "lr_physics", "warmup_steps")
-                 if getattr(args, k) is not None}
-    if args.resume:  # the run's own recipe; only the length and the budget may change
         changed = sorted(set(overrides) - {"epochs", "max_minutes"})
         if changed:
             raise PigaError(f"--resume keeps the run's recipe; drop {', '.join('--' + c.replace('_', '-') for c in changed)}")
         train_config = replace(TrainConfig(**ckpt["train_config"]), **overrides)
-        model_overrides = {}
+        model_overrides: dict[str, Any] = {}
         model_config = saved_model.config
+        record = _read_record(run_dir)
+        record.setdefault("resumed", []).append(command)
     else:
-        train_config = replace(TrainConfig(seed=args.seed, threads=args.threads), **preset.get("train", {}), **overrides)
+        preset = PRESETS[args.preset]
+        train_config = replace(TrainConfig(seed=args.seed, threads=args.threads), **{**preset.get("train", {}), **overrides})
         model_overrides = dict(preset.get("model", {}))
         model_config = model_config_for(info, model_overrides)
-    needed = model_config.window
-    if info.steps < needed:
-        raise PigaError(f"{args.data}: sequences have {info.steps} frames; training needs at least L + T_pred = {needed}")
-    if not info.split_counts["train"]:
-        raise PigaError(f"{args.data}: the train split is empty")
-    run_dir.mkdir(parents=True, exist_ok=True)
-    write_json(run_dir / "config.json", {"command": command_line(PROG, argv),
-                                         "data": str(args.data), "train": asdict(train_config), "model": model_config.to_dict()})
+        record = {"command": command}
+    check_trainable(info, model_config, train_config)
+    record.update({"data": str(args.data), "train": asdict(train_config), "model": model_config.to_dict()})
+    if not info.split_counts["test"]:
+        print(f"{PROG}: warning: {args.data} has no test sequences; metrics.json and the figures will be measured on "
+              "the train split, which is not held out", file=sys.stderr)
     print(f"training on {args.data} ({info.split_counts['train']} train sequences x {info.steps} frames); "
           f"g and a start at {model_overrides.get('physics_init') or 'g=1, a=0.3'} -> {run_dir}")
+    written: list[int] = []
+
+    def on_epoch(state: Any, model: Any) -> None:  # the first checkpoint of this command: the record goes with it
+        if not written:
+            write_json(run_dir / "config.json", record)
+        written.append(state.epoch)
+
     try:
-        model, state = train(args.data, run_dir, train_config, model_overrides, resume=args.resume, progress=not args.quiet)
+        model, state = train(args.data, run_dir, train_config, model_overrides, resume=args.resume,
+                             progress=not args.quiet, on_epoch=on_epoch)
     except TrainingDiverged as exc:
         raise PigaError(f"training diverged: {exc}") from None
+    except KeyboardInterrupt:
+        if written or args.resume:
+            epoch = written[-1] if written else _saved_epoch(run_dir)
+            raise Interrupted(f"{run_dir / CHECKPOINT} holds epoch {epoch}; continue with --resume") from None
+        raise
     metrics = write_run_report(model, state, args.data, run_dir)
     from piga.evaluate import summary_line
 
     print(f"learned: {summary_line(metrics)}")
     ssim = metrics["frame_ssim_mean"]
-    print(f"SSIM: prediction {ssim['prediction']:.3f}" + (f", extrapolation {ssim['extrapolation']:.3f}" if ssim["extrapolation"] is not None else "")
+    print(f"SSIM ({metrics['split']} split): prediction {ssim['prediction']:.3f}"
+          + (f", extrapolation {ssim['extrapolation']:.3f}" if ssim["extrapolation"] is not None else "")
           + (f"; encoder angle error {metrics['angle']['mean_abs_error_deg']:.2f} deg" if "angle" in metrics else ""))
     print(f"trained {state.epoch} epochs in {state.elapsed / 60:.1f} min; wrote {run_dir}/metrics.json and figures")
     return 0
+
+
+def _read_record(run_dir: Path) -> dict[str, Any]:
+    """The run's config.json, or an empty record if it is missing or unreadable."""
+    import json
+
+    try:
+        record = json.loads((run_dir / "config.json").read_text())
+    except (OSError, ValueError):
+        return {}
+    return record if isinstance(record, dict) else {}
+
+
+def _saved_epoch(run_dir: Path) -> int:
+    """Epochs completed in the run's checkpoint."""
+    from piga.train import load_model
+
+    return int(load_model(run_dir)[1]["state"]["epoch"])
 
 
 def entry() -> None:

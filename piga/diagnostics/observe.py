@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from piga.data import SPLITS, DatasetInfo, inspect_dataset, split_indices
+from piga.data import SPLITS, DatasetInfo, check_actions, inspect_dataset, split_indices
 from piga.diagnostics.vision import stale_frames
 from piga.model import PhysicsModel, frames_to_float
 
@@ -111,6 +111,5 @@ def observe(model: PhysicsModel, path: str | os.PathLike[str], batch: int = 16, 
             x, coords, theta[start : start + batch] = read_frames(model, raw)
             rec[start : start + batch] = ((model.decoder(coords) - x) ** 2).mean(dim=(2, 3, 4)).double().numpy()
         frames = f["frames"][np.sort(keep)] if len(keep) else np.zeros((0, info.steps, *info.image_shape), np.uint8)
-    if not np.isfinite(actions).all():
-        raise DiagnosisInputError(f"{path}: /actions holds NaN or infinite values")
+    check_actions(actions, path)
     return Observations(theta, actions, rec, split == SPLITS["train"], float(info.dt), frames, np.sort(keep), stale)

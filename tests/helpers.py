@@ -1,0 +1,52 @@
+"""Helpers that several test modules share: running a command as a user does, and checking its errors."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import pytest
+
+from piga.cli.common import run_cli
+
+#: The environment of a command run in a subprocess (no display needed for rendering).
+ENV = {**os.environ, "SDL_VIDEODRIVER": "dummy"}
+
+
+def run(*args: str, cwd: Path | None = None, env: dict[str, str] | None = None, timeout: float = 300) -> subprocess.CompletedProcess[str]:
+    """Runs a command in a subprocess, as a user would: (return code, stdout, stderr) as text."""
+    return subprocess.run(list(args), capture_output=True, text=True, env=env or ENV, cwd=cwd, timeout=timeout)
+
+
+def run_in_process(prog: str, main: Callable[[Sequence[str] | None], int | None], *argv: str,
+                   capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
+    """Runs a command's ``main`` in this process exactly as its script does (through ``run_cli``).
+
+    Faster than a subprocess when the test does not need signals. Returns (exit code, stdout, stderr).
+    """
+    saved = signal.getsignal(signal.SIGTERM)
+    try:
+        with pytest.raises(SystemExit) as info:
+            run_cli(prog, main, list(argv))
+    finally:
+        signal.signal(signal.SIGTERM, saved)
+    out, err = capsys.readouterr()
+    return int(info.value.code or 0), out, err
+
+
+def assert_one_line(code: int, err: str, *needles: str) -> str:
+    """A failed command: non-zero exit, exactly one line on stderr containing each needle, no traceback."""
+    lines = err.strip().splitlines()
+    assert code != 0, "expected a failure"
+    assert len(lines) == 1 and "Traceback" not in err, err
+    for needle in needles:
+        assert needle in lines[0], lines[0]
+    return lines[0]
+
+
+def assert_one_line_error(result: subprocess.CompletedProcess[str], *needles: str) -> str:
+    """:func:`assert_one_line` for a subprocess result; returns the line."""
+    return assert_one_line(result.returncode, result.stderr, *needles)

@@ -1,0 +1,165 @@
+"""The README's option tables against the parsers: every documented default must be the code's."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import math
+import re
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from piga.cli.common import documented_default
+
+README = Path(__file__).resolve().parents[1] / "README.md"
+
+#: Command -> its CLI module (each has ``build_parser()``).
+COMMANDS = {
+    "piga-collect": "piga.cli.collect",
+    "piga-show": "piga.cli.show",
+    "piga-train-model": "piga.cli.train",
+    "piga-control": "piga.cli.control",
+    "piga-demo": "piga.cli.demo",
+    "piga-diagnose": "piga.cli.diagnose",
+    "piga-import": "piga.cli.importer",
+}
+
+#: Words the README uses for a default, and the values they stand for.
+WORDS: dict[str, tuple[Any, ...]] = {
+    "off": (False, None),
+    "on": (True,),
+    "none": (None, 0, 0.0),
+    "torch's": (0,),
+    "π": (math.pi,),
+}
+
+
+def option_rows(text: str) -> dict[str, list[tuple[list[str], list[str], str]]]:
+    """Command -> rows (options, documented defaults, the row) of the option tables in its README section.
+
+    A table with a ``default`` column gives its cell, split at ", " into one default per option.
+    In a table without one, a row whose text holds "(default A, B, ...)" with one value per
+    option gives those; other rows document no default.
+    """
+    rows: dict[str, list[tuple[list[str], list[str], str]]] = {}
+    command = None
+    header: list[str] = []
+    for line in text.splitlines():
+        heading = re.match(r"#+ .*`(piga-[a-z-]+)", line)
+        if heading:
+            command = heading.group(1) if heading.group(1) in COMMANDS else None
+            header = []
+            continue
+        if command is None or not line.startswith("|"):
+            header = [] if not line.startswith("|") else header
+            continue
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if not header:
+            header = [c.lower() for c in cells]
+            continue
+        if set(line) <= set("|-: ") or "option" not in header[0]:
+            continue
+        options = re.findall(r"`(--[a-z][a-z0-9-]*)", cells[0])
+        if not options:
+            continue
+        if "default" in header:
+            cell = cells[header.index("default")]
+            defaults = [] if not cell else [cell] if len(options) == 1 else [d.strip() for d in cell.split(", ")]
+        else:
+            found = re.search(r"\(default ([^;)]*)", " ".join(cells[1:]))
+            defaults = [d.strip() for d in found.group(1).split(", ")] if found else []
+            if len(defaults) != len(options):
+                continue
+        if defaults:
+            rows.setdefault(command, []).append((options, defaults, line))
+    return rows
+
+
+def help_default(action: argparse.Action) -> str | None:
+    """The default that an option's help text names, "(default X)" or "(default X; ...)", if any."""
+    found = re.search(r"\(default:? ([^;)]*)", (action.help or "").replace("\n", " "))
+    if not found:
+        return None
+    return found.group(1).replace("%(default)s", str(action.default)).strip()
+
+
+def code_default(action: argparse.Action) -> Any:
+    """The parser's default; for an option whose default is decided later (None), the one its help names."""
+    value = documented_default(action)
+    return help_default(action) if value is None and help_default(action) is not None else value
+
+
+def matches(documented: str, action: argparse.Action) -> bool:
+    """Whether the README's text for a default is the parser's default."""
+    value = code_default(action)
+    text = documented.strip("`")
+    if isinstance(value, str) and action.choices is None:  # a default known only from the help text
+        try:
+            return math.isclose(float(text), float(value))
+        except ValueError:
+            return text == value
+    if text.lower() in WORDS:
+        return any(value == w and type(value) is not bool or value is w for w in WORDS[text.lower()])
+    if action.choices is not None and text in action.choices:
+        return text == value
+    try:
+        numbers = [float(x) for x in text.split(",")]
+    except ValueError:
+        return text == str(value)
+    if isinstance(value, (tuple, list)):
+        return len(numbers) == len(value) and all(math.isclose(a, float(b)) for a, b in zip(numbers, value))
+    return len(numbers) == 1 and value is not None and not isinstance(value, bool) and math.isclose(numbers[0], float(value))
+
+
+ROWS = option_rows(README.read_text())
+
+
+def test_the_readme_documents_defaults_of_the_main_commands() -> None:
+    # guards the parser of the tables: it must find the rows it is meant to check
+    assert {"piga-collect", "piga-train-model"} <= set(ROWS)
+    assert sum(len(r) for r in ROWS.values()) >= 15
+
+
+@pytest.mark.parametrize("command", sorted(COMMANDS))
+def test_readme_defaults_match_the_parser(command: str) -> None:
+    parser = importlib.import_module(COMMANDS[command]).build_parser()
+    actions = {flag: a for a in parser._actions for flag in a.option_strings}
+    wrong = []
+    for options, defaults, line in ROWS.get(command, []):
+        assert len(options) == len(defaults), f"README row lists {len(options)} options but {len(defaults)} defaults: {line}"
+        for option, documented in zip(options, defaults):
+            assert option in actions, f"README documents {option}, which {command} does not have: {line}"
+            if not matches(documented, actions[option]):
+                wrong.append(f"{option}: README says {documented!r}, the code {code_default(actions[option])!r}")
+    assert not wrong, f"{command}: " + "; ".join(wrong)
+
+
+@pytest.mark.parametrize("command", sorted(COMMANDS))
+def test_help_text_names_the_parsers_default(command: str) -> None:
+    """A help text that retypes a default ("(default 2e-2)") must say what argparse really uses."""
+    parser = importlib.import_module(COMMANDS[command]).build_parser()
+    wrong = []
+    for action in parser._actions:
+        shown, value = help_default(action), documented_default(action)
+        if shown is None or value is None or not action.option_strings or "%(default)" in (action.help or ""):
+            continue
+        first = shown.split(",")[0].split()[0] if isinstance(value, (int, float)) and not isinstance(value, bool) else None
+        if first is not None:
+            try:
+                ok = math.isclose(float(first), float(value))
+            except ValueError:
+                ok = True  # words, such as "no limit"
+            if not ok:
+                wrong.append(f"{action.option_strings[0]}: help says {shown!r}, the default is {value!r}")
+    assert not wrong, f"{command}: " + "; ".join(wrong)
+
+
+def test_the_table_reader_catches_a_wrong_default() -> None:
+    text = ("### `piga-train-model FILE.h5`\n\n| option | default | meaning |\n|---|---|---|\n"
+            "| `--batch-size`, `--lr` | 32, 2e-3 | knobs |\n")
+    (options, defaults, _), = option_rows(text)["piga-train-model"]
+    parser = importlib.import_module(COMMANDS["piga-train-model"]).build_parser()
+    actions = {flag: a for a in parser._actions for flag in a.option_strings}
+    assert matches(defaults[0], actions[options[0]]) and not matches(defaults[1], actions[options[1]])
