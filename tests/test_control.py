@@ -10,15 +10,36 @@ import pytest
 import torch
 
 from agents.mpc import MPCConfig, OracleAgent, PigaMPCAgent
-from piga.control import EpisodeConfig, run_episodes
+from piga.episodes import EpisodeConfig, run_episodes
 from piga.goal import load_scene_image, render_goal_image
 from piga.model import ModelConfig, PhysicsModel
 from tests.test_cli import assert_one_line_error, run
 
 
+@pytest.mark.parametrize("substeps", [1, 5])
+def test_planning_dynamics_roll_like_the_physics_module(substeps: int) -> None:
+    """The planner's plain-array engine follows piga.physics.rollout (model convention + φ = Gymnasium's)."""
+    from agents.dynamics import PendulumDynamics
+    from piga.physics import Euler, Pendulum, rollout
+
+    system = Pendulum(g=9.3, a=1.2, dt=0.05, offset=0.4, length=1.1, mass=0.9, learnable=False)
+    actions = torch.rand(50, 20, 1, generator=torch.Generator().manual_seed(0)) * 4 - 2
+    theta0 = torch.linspace(-3, 3, 50)[:, None, None]  # (B, 1, 1) model angles
+    speed0 = torch.linspace(-4, 4, 50)[:, None, None]
+    p, v = rollout(system, Euler(substeps), theta0, speed0, actions)  # (B, H, 1, 1)
+    dynamics = PendulumDynamics.of(system, Euler(substeps), gravity_mult=1.0)
+    for i in (0, 17, 49):
+        angles, speeds = dynamics.rollout(float(theta0[i]) + 0.4, float(speed0[i]), actions[i : i + 1])
+        torch.testing.assert_close(angles[0], p[i, :, 0, 0] + 0.4, atol=1e-4, rtol=0)
+        torch.testing.assert_close(speeds[0], v[i, :, 0, 0], atol=1e-4, rtol=0)
+    stronger = PendulumDynamics.of(system, Euler(substeps), gravity_mult=1.4)
+    assert stronger.g == pytest.approx(1.4 * 9.3) and stronger.substeps == substeps
+
+
 def test_oracle_swings_up_from_hanging() -> None:
     torch.set_num_threads(1)
-    result = run_episodes(OracleAgent(10.0, 1.0, MPCConfig()), EpisodeConfig(episodes=1, steps=150))
+    config = EpisodeConfig(episodes=1, steps=150)
+    result = run_episodes(OracleAgent.for_env(config.env_config(), MPCConfig()), config)
     episode = result["episodes"][0]
     assert episode["start"] == [math.pi, 0.0]
     assert episode["success"], episode
@@ -29,7 +50,9 @@ def test_oracle_told_of_stronger_gravity_swings_up() -> None:
     """The counterfactual the piga agent relies on: planning with the changed gravity works."""
     torch.set_num_threads(1)
     config = EpisodeConfig(episodes=1, steps=150, gravity_mult=1.4)
-    told = run_episodes(OracleAgent(14.0, 1.0, MPCConfig()), config)["summary"]
+    oracle = OracleAgent.for_env(config.env_config(), MPCConfig())
+    assert oracle.planner.dynamics.g == pytest.approx(14.0) and oracle.planner.dynamics.a == 1.0  # the env's truth
+    told = run_episodes(oracle, config)["summary"]
     assert told["success_rate"] == 1.0
 
 
@@ -51,7 +74,7 @@ def test_piga_agent_reads_state_in_models_convention() -> None:
     with torch.no_grad():
         model.encoder.background.fill_(1.0)
     agent = PigaMPCAgent(model, MPCConfig(), gravity_mult=1.4)
-    assert agent.planner.system.parameters_dict()["g"] == pytest.approx(1.4 * model.physical_parameters()["g"])
+    assert agent.planner.dynamics.g == pytest.approx(1.4 * model.physical_parameters()["g"])
     assert model.physical_parameters()["g"] == pytest.approx(1.0)  # the model itself is not changed
     frames = np.stack([render_goal_image(30.0) for _ in range(4)])
     small = np.stack([load_scene_image_array(f) for f in frames])
@@ -132,7 +155,7 @@ def test_oracle_holds_a_tilted_goal_from_hanging() -> None:
 
 
 def test_parse_range() -> None:
-    from piga.control import parse_range
+    from piga.episodes import parse_range
 
     assert parse_range("0.5:1.8:0.1") == [round(0.5 + 0.1 * i, 10) for i in range(14)]
     assert parse_range("1:1:0.5") == [1.0]
@@ -142,7 +165,7 @@ def test_parse_range() -> None:
 
 
 def test_summary_markdown_has_a_row_per_summary() -> None:
-    from piga.control import summary_markdown
+    from piga.episodes import summary_markdown
 
     s = {"agent": "oracle", "gravity_mult": 1.0, "goal_angle": 0.0, "episodes": 2, "success_rate": 0.5, "mean_return": -200.0,
          "final_angle_error_mean": 0.01, "time_to_goal_steps_median": None, "plan_ms_median": 9.0, "plan_ms_p95": 12.0}
@@ -153,3 +176,15 @@ def test_summary_markdown_has_a_row_per_summary() -> None:
 def test_sweep_cli_bad_input(tmp_path: Path) -> None:
     assert_one_line_error(run("piga-control", "--oracle", "--sweep", "0.5:1.8:0.1"), "--model")
     assert_one_line_error(run("piga-control", "--model", str(tmp_path / "none"), "--sweep", "1:2"), "START:STOP:STEP")
+
+
+def test_agents_import_nothing_from_diagnostics() -> None:
+    """The planner knows no diagnosis: importing every agents module in a fresh interpreter loads no piga.diagnostics."""
+    import subprocess
+    import sys
+
+    code = ("import pkgutil, importlib, sys, agents\n"
+            "for m in pkgutil.iter_modules(agents.__path__): importlib.import_module('agents.' + m.name)\n"
+            "print(sorted(m for m in sys.modules if m.startswith(('piga.diagnostics', 'piga.train', 'piga.episodes'))))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]"

@@ -1,4 +1,4 @@
-"""Running control episodes on the pixel pendulum and scoring them.
+"""Control episodes on the pixel pendulum: running and scoring them, jobs for worker processes, tables.
 
 Success is defined precisely. An episode of ``steps`` steps (200 by default) succeeds when, for
 each of its last ``hold_steps`` steps (20), |wrap(θ - θ_goal)| < ``angle_tolerance`` (0.2 rad)
@@ -10,18 +10,26 @@ otherwise).
 
 from __future__ import annotations
 
+import ctypes
 import math
+import multiprocessing as mp
+import os
+import signal
+import sys
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Protocol
+from dataclasses import dataclass, field, replace
+from typing import Any, Protocol
 
 import numpy as np
+import torch
+from tqdm.auto import tqdm
 
+from agents.dynamics import Dynamics
+from agents.mpc import MPCConfig, OracleAgent, PigaMPCAgent, StateReader
 from envs.pendulum import PixelPendulumConfig, make_pixel_pendulum
-
-if TYPE_CHECKING:
-    from agents.mpc import MPCConfig
+from piga.model import PhysicsModel
+from piga.train import load_model
 
 
 class Agent(Protocol):
@@ -65,10 +73,18 @@ class EpisodeConfig:
     x1.4 (README, results/control.md); without it, all succeeded. Training data keep the arrow."""
 
     def __post_init__(self) -> None:
-        if self.episodes < 1 or self.steps < self.hold_steps or self.hold_steps < 1:
-            raise ValueError(f"need episodes >= 1 and steps >= hold_steps >= 1, got {self}")
+        if self.episodes < 1:
+            raise ValueError(f"need at least 1 episode, got {self.episodes}")
+        if self.hold_steps < 1 or self.steps < self.hold_steps:
+            raise ValueError(f"an episode of {self.steps} steps is too short: success needs the goal held for its last "
+                             f"{self.hold_steps} steps (hold_steps >= 1, steps >= hold_steps)")
         if not (self.gravity_mult > 0 and math.isfinite(self.gravity_mult)):
             raise ValueError(f"gravity_mult must be finite and > 0, got {self.gravity_mult}")
+
+    def env_config(self) -> PixelPendulumConfig:
+        """The environment the episodes run in (the one place its true parameters come from)."""
+        return PixelPendulumConfig(frame_stack=self.frame_stack, gravity_mult=self.gravity_mult,
+                                   episode_length=self.steps, effects=self.effects, draw_torque_arrow=self.torque_arrow)
 
 
 def _wrap(x: np.ndarray) -> np.ndarray:
@@ -86,11 +102,7 @@ def run_episodes(agent: Agent, config: EpisodeConfig, record: int = 0, progress:
         record: keep the frames, states and actions of the first ``record`` episodes (for videos).
         on_episode_end: called with the episode index after each episode.
     """
-    from tqdm.auto import tqdm
-
-    env = make_pixel_pendulum(PixelPendulumConfig(frame_stack=config.frame_stack, gravity_mult=config.gravity_mult,
-                                                  episode_length=config.steps, effects=config.effects,
-                                                  draw_torque_arrow=config.torque_arrow))
+    env = make_pixel_pendulum(config.env_config())
     rng = np.random.default_rng(config.seed)
     episodes: list[dict[str, Any]] = []
     recordings: list[dict[str, np.ndarray]] = []
@@ -151,10 +163,18 @@ def run_episodes(agent: Agent, config: EpisodeConfig, record: int = 0, progress:
     return {"summary": summary, "episodes": episodes, "recordings": recordings}
 
 
-def _default_mpc() -> MPCConfig:
-    from agents.mpc import MPCConfig
+class AgentCorrection(Protocol):
+    """What changes a piga agent's physics and the way it reads frames (for example a diagnosis:
+    :class:`piga.diagnostics.corrected.Correction`). Built into the agent in the worker process
+    from the loaded model, so it must pickle."""
 
-    return MPCConfig()
+    def dynamics(self, model: PhysicsModel, gravity_mult: float) -> Dynamics:
+        """The dynamics to plan with, for ``model``'s agent told gravity changed by ``gravity_mult``."""
+        ...
+
+    def reader(self, model: PhysicsModel) -> StateReader | None:
+        """The state reader to use, or None to keep the model's encoder."""
+        ...
 
 
 @dataclass(frozen=True)
@@ -166,52 +186,48 @@ class ControlJob:
     """
 
     agent: str
-    """"piga" (frames -> learned model) or "oracle" (true state, true g = 10 x multiplier, a = 1)."""
+    """"piga" (frames -> learned model) or "oracle" (true state, the environment's true g and a)."""
     episodes: EpisodeConfig
     """The episodes; its ``gravity_mult`` is the environment's."""
-    mpc: MPCConfig = field(default_factory=_default_mpc)
+    mpc: MPCConfig = field(default_factory=MPCConfig)
     """The planner; its ``goal_angle`` is the agent's goal."""
     model_dir: str | None = None
     """The run folder of ``piga-train-model`` (for "piga")."""
     tags: tuple[tuple[str, Any], ...] = ()
     """Extra (key, value) pairs copied into the result's summary (labels for tables)."""
-    corrected: Any = None
-    """For "piga": plan with this physics from ``piga-diagnose`` (:class:`piga.diagnostics.fit.Model`)."""
-    camera: Any = None
-    """For "piga": read angles by matching frames to the decoder's renders through this camera
-    (:class:`piga.diagnostics.vision.Camera`, from ``piga-diagnose``) instead of the encoder."""
+    correction: AgentCorrection | None = None
+    """For "piga": plan with this correction's dynamics and read frames with its reader (from ``piga-diagnose``)."""
 
     def __post_init__(self) -> None:
         if self.agent not in ("piga", "oracle"):
             raise ValueError(f"agent must be 'piga' or 'oracle', got {self.agent!r}")
         if self.agent == "piga" and not self.model_dir:
             raise ValueError("a 'piga' job needs model_dir")
+        if self.agent == "oracle" and self.correction is not None:
+            raise ValueError("an 'oracle' job plans with the true physics; it takes no correction")
 
 
-def build_agent(job: ControlJob) -> Any:
-    """The agent a job describes (loads the model for "piga")."""
-    from agents.mpc import OracleAgent, PigaMPCAgent
-
-    told = job.episodes.gravity_mult  # the agent is told the environment's multiplier
+def build_agent(job: ControlJob) -> OracleAgent | PigaMPCAgent:
+    """The agent a job describes (loads the model for "piga"). The agent is told the environment's
+    gravity multiplier; the oracle takes the environment's true g and a."""
     if job.agent == "oracle":
-        return OracleAgent(g=10.0 * told, a=1.0, config=job.mpc)
-    from piga.train import load_model
-
+        return OracleAgent.for_env(job.episodes.env_config(), job.mpc)
+    assert job.model_dir is not None
     model, _ = load_model(job.model_dir)
-    return PigaMPCAgent(model, job.mpc, gravity_mult=told, corrected=job.corrected, camera=job.camera)
+    told = job.episodes.gravity_mult
+    if job.correction is None:
+        return PigaMPCAgent(model, job.mpc, gravity_mult=told)
+    return PigaMPCAgent(model, job.mpc, gravity_mult=told, dynamics=job.correction.dynamics(model, told),
+                        reader=job.correction.reader(model))
 
 
 def run_job(job: ControlJob) -> dict[str, Any]:
     """Runs one job in this process with one torch thread; returns :func:`run_episodes`' result
     (without recordings), its summary extended with ``agent`` and the job's tags."""
-    import torch
-
     torch.set_num_threads(1)  # small tensors: one thread plans fastest, and workers share the cores
     agent = build_agent(job)
     episodes = job.episodes
-    if job.agent == "piga":
-        from dataclasses import replace
-
+    if isinstance(agent, PigaMPCAgent):
         episodes = replace(episodes, frame_stack=agent.input_frames)
     result = run_episodes(agent, episodes)
     result.pop("recordings")
@@ -220,25 +236,44 @@ def run_job(job: ControlJob) -> dict[str, Any]:
 
 
 def _worker_init() -> None:
-    """A pool worker ends quietly when the pool terminates it (the CLI's SIGTERM handler is for the parent)."""
-    import signal
+    """Makes a pool worker end at once, quietly, on SIGTERM (the pool's terminate) and when its parent
+    dies; Ctrl-C is the parent's to handle (it then terminates the pool).
 
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is handled by the parent, which then terminates the pool
+    SIGTERM gets a handler rather than SIG_DFL on purpose: SDL (pygame, which renders the frames)
+    takes over SIGTERM when it finds SIG_DFL and turns it into a quit event that nobody reads, so
+    the worker would never end and the parent would wait for it forever.
+    """
+    signal.signal(signal.SIGTERM, _exit_now)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    _die_with_parent()
+
+
+def _exit_now(signum: int, frame: object) -> None:
+    os._exit(128 + signum)
+
+
+def _die_with_parent() -> None:
+    """Asks Linux to send this process SIGTERM when its parent ends (prctl PR_SET_PDEATHSIG); elsewhere nothing."""
+    if not sys.platform.startswith("linux"):
+        return
+    try:
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)  # 1 = PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass
 
 
 def run_jobs(jobs: Sequence[ControlJob], workers: int = 1, progress: bool = True) -> list[dict[str, Any]]:
-    """Runs jobs, in ``workers`` processes when > 1 (results in the order of ``jobs``)."""
-    from tqdm.auto import tqdm
+    """Runs jobs, in ``workers`` processes when > 1 (results in the order of ``jobs``).
 
+    On KeyboardInterrupt (Ctrl-C, or SIGTERM turned into it by :func:`piga.cli.common.run_cli`) the
+    pool terminates its workers before the exception propagates; a worker whose parent is killed ends too.
+    """
     if workers <= 1 or len(jobs) <= 1:
         return [run_job(j) for j in tqdm(jobs, desc="control jobs", disable=not progress)]
-    import multiprocessing as mp
-
     # fork, as torch's DataLoader does: with spawn, torch's import makes the resource tracker warn
     # about leaked semaphores. The parent has rendered nothing; each child sets one torch thread.
     method = "fork" if "fork" in mp.get_all_start_methods() else "spawn"
-    with mp.get_context(method).Pool(min(workers, len(jobs)), initializer=_worker_init) as pool:
+    with mp.get_context(method).Pool(min(workers, len(jobs)), initializer=_worker_init) as pool:  # exit: terminate
         return list(tqdm(pool.imap(run_job, jobs), total=len(jobs), desc="control jobs", disable=not progress))
 
 
