@@ -3,6 +3,10 @@
 from __future__ import annotations
 
 import math
+import signal
+import subprocess
+import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -13,7 +17,7 @@ from agents.mpc import MPCConfig, OracleAgent, PigaMPCAgent
 from piga.episodes import EpisodeConfig, run_episodes
 from piga.goal import load_scene_image, render_goal_image
 from piga.model import ModelConfig, PhysicsModel
-from tests.test_cli import assert_one_line_error, run
+from tests.test_cli import ENV, assert_one_line_error, run
 
 
 @pytest.mark.parametrize("substeps", [1, 5])
@@ -188,3 +192,154 @@ def test_agents_import_nothing_from_diagnostics() -> None:
             "print(sorted(m for m in sys.modules if m.startswith(('piga.diagnostics', 'piga.train', 'piga.episodes'))))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]"
+
+
+# --- piga-control end to end on a tiny model (its control quality means nothing) -----------------
+
+
+@pytest.fixture(scope="module")
+def control_model(tiny_data: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A pendulum model trained for one epoch on the tiny data: a real run folder, quickly."""
+    from piga.train import TrainConfig, train
+
+    run_dir = tmp_path_factory.mktemp("control") / "model"
+    train(tiny_data, run_dir, TrainConfig(epochs=1, batch_size=16, warmup_steps=2, curriculum_steps=2, threads=1),
+          {"rec_frames": "input", "pred_frames": 4}, progress=False)
+    return run_dir
+
+
+def test_sweep_writes_a_table_per_multiplier(control_model: Path, tmp_path: Path) -> None:
+    import json
+
+    out = tmp_path / "sweep"
+    result = run("piga-control", "--model", str(control_model), "--sweep", "1:1.5:0.5", "--episodes", "1", "--steps", "20",
+                 "--workers", "2", "--out", str(out), "--quiet")
+    assert result.returncode == 0, result.stderr
+    record = json.loads(out.with_suffix(".json").read_text())
+    assert record["multipliers"] == [1.0, 1.5]
+    rows = [(r["summary"]["agent"], r["summary"]["gravity_mult"]) for r in record["results"]]
+    assert rows == [("piga", 1.0), ("oracle", 1.0), ("piga", 1.5), ("oracle", 1.5)]
+    assert all(len(r["episodes"]) == 1 for r in record["results"])
+    assert out.with_suffix(".md").read_text().count("| piga |") == 2
+    assert out.with_suffix(".png").read_bytes()[:4] == b"\x89PNG"
+
+
+@pytest.mark.parametrize("suffix", [".mp4", ".gif"])
+def test_video_is_written_and_decodes(control_model: Path, tmp_path: Path, suffix: str) -> None:
+    import imageio.v3 as iio
+
+    video = tmp_path / f"episode{suffix}"
+    result = run("piga-control", "--model", str(control_model), "--episodes", "1", "--steps", "20", "--video", str(video),
+                 "--quiet")
+    assert result.returncode == 0, result.stderr
+    frames = iio.imread(video)  # (T, H, W, 3): real | belief | plan, one per step
+    assert frames.shape[0] == 20 and frames.shape[2] >= 3 * 64 and frames.std() > 1
+    assert_one_line_error(run("piga-control", "--model", str(control_model), "--episodes", "1", "--steps", "20", "--video",
+                              str(video)), "--overwrite")
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_interrupted_sweep_ends_with_its_workers(control_model: Path, sig: signal.Signals) -> None:
+    """Ctrl-C or SIGTERM to piga-control during a sweep: one line, a non-zero exit, and no worker left."""
+    if not Path("/proc/self/stat").exists():
+        pytest.skip("needs /proc")
+    proc = subprocess.Popen(["piga-control", "--model", str(control_model), "--sweep", "0.5:1.5:0.5", "--workers", "2",
+                             "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV)
+    try:
+        deadline = time.monotonic() + 60
+        while len(_children(proc.pid)) < 2 and time.monotonic() < deadline and proc.poll() is None:
+            time.sleep(0.05)
+        workers = _children(proc.pid)
+        assert len(workers) == 2, "the sweep did not start its two workers"
+        time.sleep(1.0)  # well into the episodes
+        proc.send_signal(sig)
+        _, err = proc.communicate(timeout=20)
+    finally:
+        proc.kill()
+    assert proc.returncode != 0
+    assert err.strip().splitlines() == ["piga-control: interrupted; nothing was written"], err
+    deadline = time.monotonic() + 10
+    while any(map(_alive, workers)) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not any(map(_alive, workers))
+
+
+def _children(pid: int) -> list[int]:
+    """Live child processes of ``pid`` (from /proc)."""
+    found = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
+            except OSError:
+                continue
+            if int(fields[1]) == pid and fields[0] != "Z":
+                found.append(int(entry.name))
+    return found
+
+
+def _alive(pid: int) -> bool:
+    """Whether ``pid`` runs (a zombie does not)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+def test_cem_settings_from_the_command_line() -> None:
+    """PlaNet's CEM can be given; elites follow the candidates unless given; the defaults are the dataclasses'."""
+    from agents.cem import CEMConfig
+    from piga.cli import control as cli
+
+    parser = cli.build_parser()
+    default = cli._mpc_config(parser.parse_args(["--oracle"]), 0.0)
+    assert default == MPCConfig()
+    planet = cli._mpc_config(parser.parse_args(["--oracle", "--horizon", "12", "--iterations", "10", "--candidates", "1000",
+                                                "--elites", "100", "--no-warm-start"]), 0.0)
+    assert planet.cem == replace(CEMConfig(), init_std=MPCConfig().cem.init_std) and not planet.warm_start
+    few = cli._mpc_config(parser.parse_args(["--oracle", "--candidates", "10"]), 0.0)
+    assert few.cem.candidates == 10 and few.cem.elites == 1
+    assert "(default 200)" in " ".join(parser.format_help().split())
+
+
+def test_control_cli_bad_cem_and_episode_settings() -> None:
+    assert_one_line_error(run("piga-control", "--oracle", "--candidates", "10", "--elites", "20"),
+                          "--elites (20) must be at most --candidates (10)")
+    assert_one_line_error(run("piga-control", "--oracle", "--candidates", "1"), "--candidates must be at least 2")
+    result = run("piga-control", "--oracle", "--steps", "3")
+    assert_one_line_error(result, "--steps must be at least 20")
+    assert "EpisodeConfig" not in result.stderr
+    ok = run("piga-control", "--oracle", "--candidates", "10", "--episodes", "1", "--steps", "20", "--quiet")
+    assert ok.returncode == 0 and "success" in ok.stdout, ok.stderr
+
+
+def test_goal_image_that_is_not_the_scene_is_refused(control_model: Path, tmp_path: Path) -> None:
+    """White, black or noise is refused whatever the model's training; a render of the scene is read."""
+    import imageio.v3 as iio
+
+    from piga.goal import NotTheSceneError, goal_from_image, scene_mismatch
+    from piga.train import load_model
+
+    model, ckpt = load_model(control_model)  # one epoch: its own re-rendering check means nothing
+    rng = np.random.default_rng(0)
+    for name, picture in (("white", np.full((300, 300, 3), 255, np.uint8)), ("black", np.zeros((80, 80), np.uint8)),
+                          ("noise", rng.integers(0, 256, (200, 200, 3)).astype(np.uint8))):
+        iio.imwrite(tmp_path / f"{name}.png", picture)
+        with pytest.raises(NotTheSceneError, match="not a picture of the pendulum scene"):
+            goal_from_image(model, ckpt, tmp_path / f"{name}.png")
+    for angle in (0.0, 13.7, -100.0, 180.0):
+        assert scene_mismatch(load_scene_image_array(render_goal_image(angle))) < 0.1
+    iio.imwrite(tmp_path / "goal.png", render_goal_image(13.7))
+    goal_from_image(model, ckpt, tmp_path / "goal.png")  # accepted
+    assert_one_line_error(run("piga-control", "--model", str(control_model), "--goal-image", str(tmp_path / "white.png")),
+                          "not a picture of the pendulum scene")
+
+
+def test_goal_image_messages(control_model: Path, tmp_path: Path) -> None:
+    import imageio.v3 as iio
+
+    iio.imwrite(tmp_path / "dot.png", np.zeros((1, 1), np.uint8))
+    assert_one_line_error(run("piga-control", "--model", str(control_model), "--goal-image", str(tmp_path / "dot.png")),
+                          "1x1 pixels, too small")
+    assert_one_line_error(run("piga-control", "--model", str(control_model), "--goal-image", str(tmp_path)),
+                          "is a folder, not an image file")
