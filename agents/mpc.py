@@ -85,6 +85,8 @@ class Planner:
         self.high = torch.tensor([MAX_ACTION])
         self.generator = torch.Generator().manual_seed(config.seed)
         self._mean: Tensor | None = None
+        self._holding_cem = config.cem if config.warm_init_std is None else replace(config.cem, init_std=config.warm_init_std)
+        """CEM settings of a warm-started plan near the goal."""
 
     def reset(self) -> None:
         """Forgets the warm start and the dynamics' history, and reseeds (a new episode)."""
@@ -132,8 +134,8 @@ class Planner:
     def plan_sequence(self, theta: float, theta_dot: float) -> np.ndarray:
         """The whole best plan (H, 1) from the state (θ, θ̇); advances the warm start."""
         cem_config = self.config.cem
-        if self._mean is not None and self.config.warm_init_std is not None and self.near_goal(theta):
-            cem_config = replace(cem_config, init_std=self.config.warm_init_std)
+        if self._mean is not None and self.near_goal(theta):
+            cem_config = self._holding_cem
         result = cem(self.objective(theta, theta_dot), self.low, self.high, cem_config,
                      init_mean=self._mean, generator=self.generator)
         plan = result.mean if self.config.execute == "mean" else result.actions

@@ -343,3 +343,25 @@ def test_goal_image_messages(control_model: Path, tmp_path: Path) -> None:
                           "1x1 pixels, too small")
     assert_one_line_error(run("piga-control", "--model", str(control_model), "--goal-image", str(tmp_path)),
                           "is a folder, not an image file")
+
+
+def test_a_job_with_a_correction_plans_and_reads_with_it(control_model: Path) -> None:
+    """A diagnosis' correction travels to a worker (pickled) and replaces the agent's physics and reader."""
+    import pickle
+
+    from piga.diagnostics import fit
+    from piga.diagnostics.corrected import CameraReader, CorrectedDynamics, Correction
+    from piga.diagnostics.vision import Camera
+    from piga.episodes import ControlJob, build_agent, run_job
+
+    correction = Correction(fit.Model(("damping",), 0, {"g": 9.0, "a": 1.1, "b": 0.2}), Camera(blur=1.0))
+    job = ControlJob("piga", EpisodeConfig(episodes=1, steps=20, gravity_mult=1.4), MPCConfig(), str(control_model),
+                     correction=correction)
+    job = pickle.loads(pickle.dumps(job))
+    agent = build_agent(job)
+    assert isinstance(agent, PigaMPCAgent) and isinstance(agent.read_state, CameraReader)
+    dynamics = agent.planner.dynamics
+    assert isinstance(dynamics, CorrectedDynamics) and dynamics.corrected.values["g"] == pytest.approx(9.0 * 1.4)
+    assert len(run_job(job)["episodes"]) == 1
+    with pytest.raises(ValueError, match="no correction"):
+        ControlJob("oracle", EpisodeConfig(), correction=correction)
