@@ -9,10 +9,14 @@ from collections.abc import Callable, Sequence
 from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
+import torch
+
 from agents.mpc import MPCConfig, OracleAgent, PigaMPCAgent
 from piga.atomic import atomic_output, check_writable_target, write_json
 from piga.cli.common import ArgumentParser, PigaError, command_line, nonnegative_int, positive_float, positive_int, run_cli
 from piga.episodes import ControlJob, EpisodeConfig, parse_range, run_episodes, run_jobs, summary_markdown
+from piga.train import load_model
 
 PROG = "piga-control"
 
@@ -87,10 +91,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.oracle:
             raise PigaError("--video shows the model's belief and plan; it needs --model, not --oracle")
         check_writable_target(args.video, args.overwrite)
-    import torch
-
-    from piga.train import load_model
-
     torch.set_num_threads(1)  # small tensors: one thread plans fastest
     model = None
     if args.model:
@@ -111,6 +111,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     config = EpisodeConfig(episodes=args.episodes, steps=args.steps, seed=args.seed, gravity_mult=args.gravity_mult,
                            goal_angle=mpc.goal_angle, torque_arrow=args.torque_arrow)
     agent: OracleAgent | PigaMPCAgent
+    first_trace: list[tuple[float, float, np.ndarray]] = []  # the piga agent's beliefs and plans in episode 0
+    on_episode_end = None
     if model is None:
         agent = OracleAgent.for_env(config.env_config(), mpc)
         label = "oracle"
@@ -118,9 +120,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         agent = PigaMPCAgent(model, mpc, gravity_mult=args.gravity_mult, keep_trace=bool(args.video))
         config = replace(config, frame_stack=agent.input_frames)
         label = f"piga ({args.model})"
-    first_trace: list[tuple[float, float, object]] = []
+        on_episode_end = _keep_first_trace(agent, first_trace) if args.video else None
     result = run_episodes(agent, config, progress=not args.quiet, record=1 if args.video else 0,
-                          on_episode_end=_keep_first_trace(agent, first_trace) if args.video else None)
+                          on_episode_end=on_episode_end)
     s = result["summary"]
     print(f"{label}, gravity x{args.gravity_mult:g}, goal {args.goal_angle:g} deg: success {100 * s['success_rate']:.0f}% of "
           f"{s['episodes']}, mean return {s['mean_return']:.1f}, final angle error {math.degrees(s['final_angle_error_mean']):.2f} deg, "
@@ -142,8 +144,6 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: Sequence[str] | None) -> int:
     """--sweep: the piga agent and the oracle at each multiplier, each told the multiplier."""
-    from piga.train import load_model
-
     if args.oracle or not args.model:
         raise PigaError("--sweep compares the piga agent with the oracle: give --model RUN_DIR (without --oracle)")
     if args.goal_image or args.video:
@@ -194,7 +194,7 @@ def _mpc_config(args: argparse.Namespace, goal: float) -> MPCConfig:
     return replace(defaults, cem=cem, goal_angle=goal, seed=args.seed, warm_start=args.warm_start)
 
 
-def _keep_first_trace(agent: PigaMPCAgent, into: list) -> Callable[[int], None]:
+def _keep_first_trace(agent: PigaMPCAgent, into: list[tuple[float, float, np.ndarray]]) -> Callable[[int], None]:
     """Copies the piga agent's trace of episode 0 (the one recorded for the video) into ``into``."""
 
     def keep(episode: int) -> None:
