@@ -178,8 +178,11 @@ class StateReader(Protocol):
 class EncoderReader:
     """A :class:`StateReader`: each frame's coordinate from the model's encoder, then its velocity estimator.
 
-    The encoder reads each frame alone, so the frames already read in the previous call (a frame
-    stack moves on by one frame per step) are not read again: only the new frame is. Subclasses
+    The encoder reads each frame alone (:meth:`PhysicsModel.encode` puts the (B, T) frames in one
+    batch of independent frames), so the frames already read in the previous call are not read
+    again: a frame stack moves on by one frame per step, and only the new frame is read. This is
+    a quarter of the encoder's work per step at L = 4, with the same result (tests/test_control.py
+    checks it against a fresh read). Subclasses
     change how a frame is read (:meth:`read_frames`) and how the L coordinates are prepared for
     the velocity estimator (:meth:`prepare`).
     """

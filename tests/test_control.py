@@ -365,3 +365,22 @@ def test_a_job_with_a_correction_plans_and_reads_with_it(control_model: Path) ->
     assert len(run_job(job)["episodes"]) == 1
     with pytest.raises(ValueError, match="no correction"):
         ControlJob("oracle", EpisodeConfig(), correction=correction)
+
+
+def test_encoder_reader_reads_only_the_new_frame_and_agrees_with_a_fresh_read() -> None:
+    """The reader keeps the coordinates of frames it has seen; this holds only while the encoder reads
+    each frame alone, which this test checks against reading all L frames anew."""
+    from agents.mpc import EncoderReader
+
+    model = PhysicsModel(ModelConfig())
+    with torch.no_grad():
+        model.encoder.background.fill_(1.0)
+    frames = np.stack([load_scene_image_array(render_goal_image(a)) for a in (20.0, 24.0, 29.0, 35.0, 42.0)])
+    reader = EncoderReader(model)
+    reader(frames[:4])
+    calls = []
+    model.encoder.register_forward_hook(lambda module, args, out: calls.append(args[0].shape[0]))
+    moved_on = reader(frames[1:])
+    assert calls == [1]  # only the new frame went through the encoder
+    assert moved_on == pytest.approx(EncoderReader(model)(frames[1:]), abs=1e-5)
+    assert calls == [1, 4]
