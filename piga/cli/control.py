@@ -37,7 +37,8 @@ def build_parser() -> ArgumentParser:
                    help="multiply the environment's gravity; the agent is told and scales its learned g (default %(default)s)")
     p.add_argument("--goal-angle", type=float, default=math.degrees(mpc.goal_angle),
                    help="goal angle in degrees, 0 = upright (default %(default)g)")
-    p.add_argument("--goal-image", help="PNG or JPEG of the scene at the goal; the encoder reads the goal angle from it")
+    p.add_argument("--goal-image", help="PNG or JPEG of the scene at the goal; the encoder reads the goal angle from it "
+                   "(refused when no render of the pendulum at any angle comes close to it)")
     p.add_argument("--write-goal-image", metavar="PATH", help="only write Gymnasium's picture of the pendulum at --angle to PATH, then exit")
     p.add_argument("--angle", type=float, help="with --write-goal-image: the angle in degrees (0 = upright, counter-clockwise)")
     p.add_argument("--horizon", type=positive_int, default=cem.horizon, help="CEM planning horizon H (default %(default)s)")
