@@ -11,39 +11,14 @@ two of its mistakes:
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import NamedTuple
 
 import torch
 from torch import Tensor
 
+from agents.config import CEMConfig
 
-@dataclass(frozen=True)
-class CEMConfig:
-    """CEM settings. The defaults are PlaNet's (Hafner et al., 2019)."""
-
-    horizon: int = 12
-    """H, planning steps."""
-    iterations: int = 10
-    """Refinement iterations."""
-    candidates: int = 1000
-    """Action sequences sampled per iteration."""
-    elites: int = 100
-    """Best sequences that refit the sampling distribution."""
-    init_std: float = 1.0
-    """Initial standard deviation, as a fraction of the half-width of the action bounds."""
-    min_std: float = 0.0
-    """Floor on the standard deviation (same units as the actions)."""
-    momentum: float = 0.0
-    """Weight of the previous mean and std in each refit (0: plain CEM)."""
-
-    def __post_init__(self) -> None:
-        if self.horizon < 1 or self.iterations < 1 or self.candidates < 2:
-            raise ValueError(f"need horizon, iterations >= 1 and candidates >= 2, got {self}")
-        if not 1 <= self.elites <= self.candidates:
-            raise ValueError(f"elites must be in [1, candidates={self.candidates}], got {self.elites}")
-        if self.init_std <= 0 or self.min_std < 0 or not 0 <= self.momentum < 1:
-            raise ValueError(f"need init_std > 0, min_std >= 0, 0 <= momentum < 1, got {self}")
+__all__ = ["CEMConfig", "CEMResult", "cem", "shift_warm_start"]
 
 
 class CEMResult(NamedTuple):

@@ -17,56 +17,20 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from typing import Protocol
 
 import numpy as np
 import torch
 from torch import Tensor
 
-from agents.cem import CEMConfig, cem, shift_warm_start
+from agents.cem import cem, shift_warm_start
+from agents.config import MPCConfig
 from agents.dynamics import Dynamics, PendulumDynamics
 from envs.pendulum import MAX_ACTION, PENDULUM_DT, PixelPendulumConfig
 from piga.model import PhysicsModel, frames_to_float
 
-
-@dataclass(frozen=True)
-class MPCConfig:
-    """Planner settings. The CEM defaults are tuned for the pendulum (README, ``piga-control``)."""
-
-    cem: CEMConfig = field(default_factory=lambda: CEMConfig(horizon=20, iterations=5, candidates=200, elites=20))
-    """CEM settings."""
-    goal_angle: float = 0.0
-    """θ_goal in Gymnasium's convention (0 = upright)."""
-    angle_weight: float = 1.0
-    """Weight of wrap(θ - θ_goal)²."""
-    velocity_weight: float = 0.1
-    """Weight of θ̇²."""
-    action_weight: float = 0.001
-    """Weight of u²."""
-    swing_up_angle: float = math.radians(60)
-    """For a goal in the upper half (|θ_goal| < 90°): while the pendulum is farther than this from
-    the goal, the planner scores against upright instead. Swinging up toward upright is
-    symmetric and reliable; aiming straight at a tilted goal gets CEM stuck pushing one way at
-    the torque limit (0 disables)."""
-    warm_start: bool = True
-    """Start each plan from the previous one, shifted by a step."""
-    warm_fill: str = "repeat"
-    """How the shifted warm start's new last step is filled: "middle" (0) or "repeat"."""
-    warm_init_std: float | None = 0.3
-    """CEM's initial std for warm-started plans near the goal, within ``swing_up_angle`` of it (None:
-    always the cold start's ``cem.init_std``). Holding needs precise torques; swinging up needs
-    exploration, or CEM gets stuck pushing at the torque limit."""
-    execute: str = "mean"
-    """Which plan acts: "best" (the highest-scoring sample) or "mean" (CEM's final mean, smoother)."""
-    seed: int = 0
-    """Seed of the planner's RNG."""
-
-    def __post_init__(self) -> None:
-        if self.execute not in ("mean", "best") or self.warm_fill not in ("middle", "repeat"):
-            raise ValueError(f"execute must be 'mean' or 'best' and warm_fill 'middle' or 'repeat', got "
-                             f"{self.execute!r}, {self.warm_fill!r}")
-
+__all__ = ["EncoderReader", "MPCConfig", "OracleAgent", "PigaMPCAgent", "Planner", "StateReader"]
 
 
 class Planner:

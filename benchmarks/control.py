@@ -37,7 +37,8 @@ from common import machine
 from agents.cem import CEMConfig
 from agents.mpc import MPCConfig
 from piga.atomic import atomic_output, write_json
-from piga.episodes import ControlJob, EpisodeConfig, parse_range, run_jobs, summary_markdown
+from piga.episodes import EpisodeConfig, parse_range, summary_markdown
+from piga.jobs import ControlJob, run_jobs
 from piga.plots import save_figure, sweep_figure
 
 #: PlaNet's CEM (Hafner et al., 2019), re-planned from scratch each step.

@@ -189,7 +189,7 @@ def test_agents_import_nothing_from_diagnostics() -> None:
 
     code = ("import pkgutil, importlib, sys, agents\n"
             "for m in pkgutil.iter_modules(agents.__path__): importlib.import_module('agents.' + m.name)\n"
-            "print(sorted(m for m in sys.modules if m.startswith(('piga.diagnostics', 'piga.train', 'piga.episodes'))))")
+            "print(sorted(m for m in sys.modules if m.startswith(('piga.diagnostics', 'piga.train', 'piga.episodes', 'piga.jobs'))))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]"
 
@@ -352,7 +352,7 @@ def test_a_job_with_a_correction_plans_and_reads_with_it(control_model: Path) ->
     from piga.diagnostics import fit
     from piga.diagnostics.corrected import CameraReader, CorrectedDynamics, Correction
     from piga.diagnostics.vision import Camera
-    from piga.episodes import ControlJob, build_agent, run_job
+    from piga.jobs import ControlJob, build_agent, run_job
 
     correction = Correction(fit.Model(("damping",), 0, {"g": 9.0, "a": 1.1, "b": 0.2}), Camera(blur=1.0))
     job = ControlJob("piga", EpisodeConfig(episodes=1, steps=20, gravity_mult=1.4), MPCConfig(), str(control_model),

@@ -8,15 +8,20 @@ import sys
 from collections.abc import Callable, Sequence
 from dataclasses import replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import torch
 
-from agents.mpc import MPCConfig, OracleAgent, PigaMPCAgent
+from agents.config import MPCConfig
 from piga.atomic import atomic_output, check_writable_target, write_json
 from piga.cli.common import ArgumentParser, PigaError, command_line, nonnegative_int, positive_float, positive_int, run_cli
-from piga.episodes import ControlJob, EpisodeConfig, parse_range, run_episodes, run_jobs, summary_markdown
-from piga.train import load_model
+from piga.episodes import EpisodeConfig, parse_range, run_episodes, summary_markdown
+
+if TYPE_CHECKING:
+    from agents.mpc import PigaMPCAgent
+
+# torch, the agents and the model are imported once the arguments are checked: a mistyped
+# command is answered at once, without the seconds that importing torch takes.
 
 PROG = "piga-control"
 
@@ -92,6 +97,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.oracle:
             raise PigaError("--video shows the model's belief and plan; it needs --model, not --oracle")
         check_writable_target(args.video, args.overwrite)
+    import torch
+
+    from agents.mpc import OracleAgent, PigaMPCAgent
+    from piga.train import load_model
+
     torch.set_num_threads(1)  # small tensors: one thread plans fastest
     model = None
     if args.model:
@@ -145,6 +155,9 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: Sequence[str] | None) -> int:
     """--sweep: the piga agent and the oracle at each multiplier, each told the multiplier."""
+    from piga.jobs import ControlJob, run_jobs
+    from piga.train import load_model
+
     if args.oracle or not args.model:
         raise PigaError("--sweep compares the piga agent with the oracle: give --model RUN_DIR (without --oracle)")
     if args.goal_image or args.video:

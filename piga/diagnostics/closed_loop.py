@@ -7,7 +7,8 @@ from typing import Any
 from agents.mpc import MPCConfig
 from piga.diagnostics.corrected import Correction
 from piga.diagnostics.diagnose import Diagnosis
-from piga.episodes import ControlJob, EpisodeConfig, run_jobs
+from piga.episodes import EpisodeConfig
+from piga.jobs import ControlJob, run_jobs
 
 
 def compare_control(model_dir: str, diagnosis: Diagnosis, effects: tuple[tuple[str, float], ...], episodes: int = 5,

@@ -3,7 +3,7 @@
 Both plug into :class:`agents.mpc.PigaMPCAgent` through its protocols
 (:class:`agents.dynamics.Dynamics`, :class:`agents.mpc.StateReader`), so the planner knows
 nothing of the diagnosis. :class:`Correction` bundles them for a control job
-(:class:`piga.episodes.ControlJob`), which rebuilds them in its worker process.
+(:class:`piga.jobs.ControlJob`), which rebuilds them in its worker process.
 """
 
 from __future__ import annotations
@@ -87,7 +87,7 @@ class CameraReader(EncoderReader):
 class Correction:
     """What a diagnosis changes in a piga agent: its physics and, if it found a camera, how it reads frames.
 
-    Implements :class:`piga.episodes.AgentCorrection`.
+    Implements :class:`piga.jobs.AgentCorrection`.
     """
 
     physics: fit.Model
