@@ -384,3 +384,13 @@ def test_encoder_reader_reads_only_the_new_frame_and_agrees_with_a_fresh_read() 
     assert calls == [1]  # only the new frame went through the encoder
     assert moved_on == pytest.approx(EncoderReader(model)(frames[1:]), abs=1e-5)
     assert calls == [1, 4]
+
+
+def test_piga_control_parses_its_arguments_without_torch() -> None:
+    """A mistyped command is answered at once: the parser and its defaults do not import torch."""
+    import subprocess
+    import sys
+
+    code = "import sys, piga.cli.control as c; c.build_parser().parse_args(['--oracle']); print('torch' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "False"
