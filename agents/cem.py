@@ -11,39 +11,14 @@ two of its mistakes:
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import NamedTuple
 
 import torch
 from torch import Tensor
 
+from agents.config import CEMConfig
 
-@dataclass(frozen=True)
-class CEMConfig:
-    """CEM settings. The defaults are PlaNet's (Hafner et al., 2019)."""
-
-    horizon: int = 12
-    """H, planning steps."""
-    iterations: int = 10
-    """Refinement iterations."""
-    candidates: int = 1000
-    """Action sequences sampled per iteration."""
-    elites: int = 100
-    """Best sequences that refit the sampling distribution."""
-    init_std: float = 1.0
-    """Initial standard deviation, as a fraction of the half-width of the action bounds."""
-    min_std: float = 0.0
-    """Floor on the standard deviation (same units as the actions)."""
-    momentum: float = 0.0
-    """Weight of the previous mean and std in each refit (0: plain CEM)."""
-
-    def __post_init__(self) -> None:
-        if self.horizon < 1 or self.iterations < 1 or self.candidates < 2:
-            raise ValueError(f"need horizon, iterations >= 1 and candidates >= 2, got {self}")
-        if not 1 <= self.elites <= self.candidates:
-            raise ValueError(f"elites must be in [1, candidates={self.candidates}], got {self.elites}")
-        if self.init_std <= 0 or self.min_std < 0 or not 0 <= self.momentum < 1:
-            raise ValueError(f"need init_std > 0, min_std >= 0, 0 <= momentum < 1, got {self}")
+__all__ = ["CEMConfig", "CEMResult", "cem", "shift_warm_start"]
 
 
 class CEMResult(NamedTuple):
@@ -87,24 +62,29 @@ def cem(
         raise ValueError(f"init_mean must be (H={h}, A={a}), got {tuple(mean.shape)}")
     std = (config.init_std * half).expand(h, a).clone()
     best_actions, best_value = mean.clone(), float("-inf")
+    k = config.elites
     for _ in range(config.iterations):
         noise = torch.randn((config.candidates, h, a), generator=generator)
-        samples = (mean + std * noise).clamp(low, high)  # (B, H, A)
+        samples = torch.addcmul(mean, std, noise).clamp_(low, high)  # (B, H, A): mean + std * noise, in bounds
         values = objective(samples)
         if values.shape != (config.candidates,):
             raise ValueError(f"objective must return ({config.candidates},) values, got {tuple(values.shape)}")
-        values = torch.where(torch.isfinite(values), values, torch.full_like(values, float("-inf")))
-        order = torch.argsort(values, descending=True)
-        top = float(values[order[0]])
-        if top > best_value:
-            best_value, best_actions = top, samples[order[0]].clone()
-        finite = order[torch.isfinite(values[order])][: config.elites]
-        if len(finite) == 0:  # everything blew up: widen nothing, keep the distribution
-            continue
-        elites = samples[finite]  # (E, H, A)
-        new_mean, new_std = elites.mean(0), elites.std(0, unbiased=False)
-        mean = config.momentum * mean + (1 - config.momentum) * new_mean
-        std = (config.momentum * std + (1 - config.momentum) * new_std).clamp_min(config.min_std)
+        ninf = float("-inf")
+        values = torch.nan_to_num(values, nan=ninf, posinf=ninf, neginf=ninf)  # non-finite ranks last
+        top, order = torch.topk(values, k)  # (E,) the best k, best first
+        first = float(top[0])
+        if first > best_value:
+            best_value, best_actions = first, samples[order[0]].clone()
+        if float(top[-1]) == ninf:  # some of the best k blew up: only the finite ones refit
+            order = order[torch.isfinite(top)]
+            if len(order) == 0:  # everything blew up: keep the distribution
+                continue
+        new_std, new_mean = torch.std_mean(samples[order], dim=0, unbiased=False)  # (H, A) each, over the elites
+        if config.momentum:
+            new_mean = config.momentum * mean + (1 - config.momentum) * new_mean
+            new_std = config.momentum * std + (1 - config.momentum) * new_std
+        mean = new_mean
+        std = new_std.clamp_min(config.min_std) if config.min_std else new_std
     return CEMResult(best_actions, best_value, mean)
 
 

@@ -3,10 +3,15 @@
 An image is converted the way the environment converts its render (:mod:`piga.scene`): a centre
 crop to a square, ``cv2.resize(..., INTER_AREA)`` to the model's size, then Gymnasium's gray
 weights (0.2125, 0.7154, 0.0721), truncated to uint8.
+
+Before the model reads it, an image is checked against the environment's own renders, which
+does not depend on how well the model was trained (:func:`scene_mismatch`): a picture that no
+render of the pendulum, at any angle, comes close to is refused.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 from dataclasses import dataclass, field
@@ -17,7 +22,49 @@ import torch
 from piga.model import PhysicsModel, frames_to_float
 from piga.scene import GRAY_WEIGHTS, load_scene_image, scene_to_gray
 
-__all__ = ["GRAY_WEIGHTS", "GoalEstimate", "goal_from_image", "load_scene_image", "read_goal", "render_goal_image", "scene_to_gray"]
+__all__ = ["GRAY_WEIGHTS", "GoalEstimate", "NotTheSceneError", "goal_from_image", "load_scene_image", "read_goal",
+           "render_goal_image", "scene_mismatch", "scene_to_gray"]
+
+SCENE_ANGLES = 120
+"""Angles (every 3°) at which the environment's renders are compared with a goal image."""
+MAX_SCENE_MISMATCH = 0.5
+"""Largest :func:`scene_mismatch` of a goal image. A render at an angle between two of the
+compared ones scores below 0.05; an empty background scores 1; random noise far above 1."""
+
+
+class NotTheSceneError(ValueError):
+    """A goal image that does not show the pendulum scene."""
+
+
+@functools.lru_cache(maxsize=4)
+def scene_renders(size: int, count: int = SCENE_ANGLES) -> np.ndarray:
+    """The environment's frames of the pendulum at rest at ``count`` angles over the circle, no arrow:
+    float (count, size, size) in [0, 1]; the last row is the empty background (no pendulum)."""
+    from envs.pendulum import make_pixel_pendulum
+
+    env = make_pixel_pendulum(draw_torque_arrow=False, frame_stack=1, image_size=size)
+    frames = []
+    for k in range(count):
+        obs, _ = env.reset(seed=0, options={"state": [2 * math.pi * k / count - math.pi, 0.0]})
+        frames.append(obs[-1])
+    env.close()
+    frames = np.asarray(frames, np.float64) / 255  # (K, size, size)
+    background = np.median(frames, axis=0)  # the pendulum covers each pixel in few of the angles
+    return np.concatenate([frames, background[None]])
+
+
+def scene_mismatch(image: np.ndarray) -> float:
+    """How unlike the environment's scene a gray uint8 (H, W) picture is, independent of any model.
+
+    The smallest mean squared difference to the environment's renders at :data:`SCENE_ANGLES`
+    angles, divided by that of the empty background (the pendulum's own share of a frame): 0 for
+    a render, 1 for a picture of the background without the pendulum.
+    """
+    renders = scene_renders(image.shape[0])
+    x = np.asarray(image, np.float64) / 255
+    mse = ((renders[:-1] - x) ** 2).mean(axis=(1, 2))  # (K,)
+    pendulum = ((renders[:-1] - renders[-1]) ** 2).mean(axis=(1, 2))  # (K,) the pendulum's share at each angle
+    return float(mse.min() / pendulum.mean())
 
 
 @dataclass(frozen=True)
@@ -73,14 +120,24 @@ def goal_from_image(model: PhysicsModel, checkpoint: dict, path: str | os.PathLi
                     gravity_mult: float = 1.0) -> GoalEstimate:
     """Reads the goal from an image file for a model loaded by :func:`piga.train.load_model`.
 
-    The "not the scene" limit is 4x the model's own final reconstruction MSE per frame.
+    The image is first compared with the environment's renders (:func:`scene_mismatch`). The
+    model's "not the scene" warning limit is 4x its own final reconstruction MSE per frame.
+
+    Raises:
+        NotTheSceneError: the image does not show the pendulum scene (mismatch above
+            :data:`MAX_SCENE_MISMATCH`).
     """
     learned = model.physical_parameters()
     from piga.train import training_reconstruction_mse
 
+    image = load_scene_image(path, model.config.image_size)
+    mismatch = scene_mismatch(image)
+    if mismatch > MAX_SCENE_MISMATCH:
+        raise NotTheSceneError(
+            f"{path}: not a picture of the pendulum scene: no render of the pendulum at any angle comes close to it "
+            f"(mismatch {mismatch:.2f}; a render scores 0, the empty background 1, the limit is {MAX_SCENE_MISMATCH})")
     typical = training_reconstruction_mse(model, checkpoint) or 0.001
-    return read_goal(model, load_scene_image(path, model.config.image_size),
-                     g=learned["g"] * gravity_mult, a=learned["a"], mse_limit=4 * typical)
+    return read_goal(model, image, g=learned["g"] * gravity_mult, a=learned["a"], mse_limit=4 * typical)
 
 
 def render_goal_image(angle_deg: float) -> np.ndarray:

@@ -31,8 +31,10 @@ def scene_to_gray(img: np.ndarray, size: int) -> np.ndarray:
         img = img[..., :3]
     if img.ndim == 3 and img.shape[2] == 1:
         img = img[..., 0]
-    if img.ndim not in (2, 3) or (img.ndim == 3 and img.shape[2] != 3) or min(img.shape[:2]) < 2:
+    if img.ndim not in (2, 3) or (img.ndim == 3 and img.shape[2] != 3):
         raise ValueError(f"expected a 2-D gray or RGB image, got shape {img.shape}")
+    if min(img.shape[:2]) < 2:
+        raise ValueError(f"the image is {img.shape[1]}x{img.shape[0]} pixels, too small (at least 2x2)")
     if img.dtype != np.uint8:
         img = np.clip(img.astype(np.float64) / (img.max() or 1) * 255, 0, 255).astype(np.uint8)
     h, w = img.shape[:2]
@@ -50,11 +52,14 @@ def read_image(path: str | os.PathLike[str]) -> np.ndarray:
 
     Raises:
         FileNotFoundError: no such file.
+        IsADirectoryError: ``path`` is a folder.
         ValueError: the file is not a readable image.
     """
     import imageio.v3 as iio
 
     p = Path(path)
+    if p.is_dir():
+        raise IsADirectoryError(f"{p}: is a folder, not an image file")
     if not p.is_file():
         raise FileNotFoundError(f"{p}: no such image file")
     try:
@@ -68,7 +73,8 @@ def load_scene_image(path: str | os.PathLike[str], size: int) -> np.ndarray:
 
     Raises:
         FileNotFoundError: no such file.
-        ValueError: the file is not a readable image.
+        IsADirectoryError: ``path`` is a folder.
+        ValueError: the file is not a readable image, or too small.
     """
     img = read_image(path)
     try:

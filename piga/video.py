@@ -55,5 +55,7 @@ def control_video(model: PhysicsModel, frames: np.ndarray, trace: list[tuple[flo
         if target.suffix.lower() == ".gif":
             iio.imwrite(tmp, np.stack(out), extension=".gif", duration=1000 / fps, loop=0)
         else:
-            iio.imwrite(tmp, np.stack(out), extension=".mp4", fps=fps, codec="libx264", macro_block_size=1)
+            # the temporary name has no .mp4 ending for ffmpeg to guess the container from: name it
+            iio.imwrite(tmp, np.stack(out), extension=".mp4", fps=fps, codec="libx264", macro_block_size=1,
+                        output_params=["-f", "mp4"])
     return target

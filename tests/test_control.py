@@ -3,6 +3,10 @@
 from __future__ import annotations
 
 import math
+import signal
+import subprocess
+import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -10,15 +14,36 @@ import pytest
 import torch
 
 from agents.mpc import MPCConfig, OracleAgent, PigaMPCAgent
-from piga.control import EpisodeConfig, run_episodes
+from piga.episodes import EpisodeConfig, run_episodes
 from piga.goal import load_scene_image, render_goal_image
 from piga.model import ModelConfig, PhysicsModel
-from tests.helpers import assert_one_line_error, run
+from tests.helpers import ENV, assert_one_line_error, run
+
+
+@pytest.mark.parametrize("substeps", [1, 5])
+def test_planning_dynamics_roll_like_the_physics_module(substeps: int) -> None:
+    """The planner's plain-array engine follows piga.physics.rollout (model convention + φ = Gymnasium's)."""
+    from agents.dynamics import PendulumDynamics
+    from piga.physics import Euler, Pendulum, rollout
+
+    system = Pendulum(g=9.3, a=1.2, dt=0.05, offset=0.4, length=1.1, mass=0.9, learnable=False)
+    actions = torch.rand(50, 20, 1, generator=torch.Generator().manual_seed(0)) * 4 - 2
+    theta0 = torch.linspace(-3, 3, 50)[:, None, None]  # (B, 1, 1) model angles
+    speed0 = torch.linspace(-4, 4, 50)[:, None, None]
+    p, v = rollout(system, Euler(substeps), theta0, speed0, actions)  # (B, H, 1, 1)
+    dynamics = PendulumDynamics.of(system, Euler(substeps), gravity_mult=1.0)
+    for i in (0, 17, 49):
+        angles, speeds = dynamics.rollout(float(theta0[i]) + 0.4, float(speed0[i]), actions[i : i + 1])
+        torch.testing.assert_close(angles[0], p[i, :, 0, 0] + 0.4, atol=1e-4, rtol=0)
+        torch.testing.assert_close(speeds[0], v[i, :, 0, 0], atol=1e-4, rtol=0)
+    stronger = PendulumDynamics.of(system, Euler(substeps), gravity_mult=1.4)
+    assert stronger.g == pytest.approx(1.4 * 9.3) and stronger.substeps == substeps
 
 
 def test_oracle_swings_up_from_hanging() -> None:
     torch.set_num_threads(1)
-    result = run_episodes(OracleAgent(10.0, 1.0, MPCConfig()), EpisodeConfig(episodes=1, steps=150))
+    config = EpisodeConfig(episodes=1, steps=150)
+    result = run_episodes(OracleAgent.for_env(config.env_config(), MPCConfig()), config)
     episode = result["episodes"][0]
     assert episode["start"] == [math.pi, 0.0]
     assert episode["success"], episode
@@ -29,7 +54,9 @@ def test_oracle_told_of_stronger_gravity_swings_up() -> None:
     """The counterfactual the piga agent relies on: planning with the changed gravity works."""
     torch.set_num_threads(1)
     config = EpisodeConfig(episodes=1, steps=150, gravity_mult=1.4)
-    told = run_episodes(OracleAgent(14.0, 1.0, MPCConfig()), config)["summary"]
+    oracle = OracleAgent.for_env(config.env_config(), MPCConfig())
+    assert oracle.planner.dynamics.g == pytest.approx(14.0) and oracle.planner.dynamics.a == 1.0  # the env's truth
+    told = run_episodes(oracle, config)["summary"]
     assert told["success_rate"] == 1.0
 
 
@@ -51,7 +78,7 @@ def test_piga_agent_reads_state_in_models_convention() -> None:
     with torch.no_grad():
         model.encoder.background.fill_(1.0)
     agent = PigaMPCAgent(model, MPCConfig(), gravity_mult=1.4)
-    assert agent.planner.system.parameters_dict()["g"] == pytest.approx(1.4 * model.physical_parameters()["g"])
+    assert agent.planner.dynamics.g == pytest.approx(1.4 * model.physical_parameters()["g"])
     assert model.physical_parameters()["g"] == pytest.approx(1.0)  # the model itself is not changed
     frames = np.stack([render_goal_image(30.0) for _ in range(4)])
     small = np.stack([load_scene_image_array(f) for f in frames])
@@ -132,7 +159,7 @@ def test_oracle_holds_a_tilted_goal_from_hanging() -> None:
 
 
 def test_parse_range() -> None:
-    from piga.control import parse_range
+    from piga.episodes import parse_range
 
     assert parse_range("0.5:1.8:0.1") == [round(0.5 + 0.1 * i, 10) for i in range(14)]
     assert parse_range("1:1:0.5") == [1.0]
@@ -142,7 +169,7 @@ def test_parse_range() -> None:
 
 
 def test_summary_markdown_has_a_row_per_summary() -> None:
-    from piga.control import summary_markdown
+    from piga.episodes import summary_markdown
 
     s = {"agent": "oracle", "gravity_mult": 1.0, "goal_angle": 0.0, "episodes": 2, "success_rate": 0.5, "mean_return": -200.0,
          "final_angle_error_mean": 0.01, "time_to_goal_steps_median": None, "plan_ms_median": 9.0, "plan_ms_p95": 12.0}
@@ -153,3 +180,217 @@ def test_summary_markdown_has_a_row_per_summary() -> None:
 def test_sweep_cli_bad_input(tmp_path: Path) -> None:
     assert_one_line_error(run("piga-control", "--oracle", "--sweep", "0.5:1.8:0.1"), "--model")
     assert_one_line_error(run("piga-control", "--model", str(tmp_path / "none"), "--sweep", "1:2"), "START:STOP:STEP")
+
+
+def test_agents_import_nothing_from_diagnostics() -> None:
+    """The planner knows no diagnosis: importing every agents module in a fresh interpreter loads no piga.diagnostics."""
+    import subprocess
+    import sys
+
+    code = ("import pkgutil, importlib, sys, agents\n"
+            "for m in pkgutil.iter_modules(agents.__path__): importlib.import_module('agents.' + m.name)\n"
+            "print(sorted(m for m in sys.modules if m.startswith(('piga.diagnostics', 'piga.train', 'piga.episodes', 'piga.jobs'))))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]"
+
+
+# --- piga-control end to end on a tiny model (its control quality means nothing) -----------------
+
+
+@pytest.fixture(scope="module")
+def control_model(tiny_data: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A pendulum model trained for one epoch on the tiny data: a real run folder, quickly."""
+    from piga.train import TrainConfig, train
+
+    run_dir = tmp_path_factory.mktemp("control") / "model"
+    train(tiny_data, run_dir, TrainConfig(epochs=1, batch_size=16, warmup_steps=2, curriculum_steps=2, threads=1),
+          {"rec_frames": "input", "pred_frames": 4}, progress=False)
+    return run_dir
+
+
+def test_sweep_writes_a_table_per_multiplier(control_model: Path, tmp_path: Path) -> None:
+    import json
+
+    out = tmp_path / "sweep"
+    result = run("piga-control", "--model", str(control_model), "--sweep", "1:1.5:0.5", "--episodes", "1", "--steps", "20",
+                 "--workers", "2", "--out", str(out), "--quiet")
+    assert result.returncode == 0, result.stderr
+    record = json.loads(out.with_suffix(".json").read_text())
+    assert record["multipliers"] == [1.0, 1.5]
+    rows = [(r["summary"]["agent"], r["summary"]["gravity_mult"]) for r in record["results"]]
+    assert rows == [("piga", 1.0), ("oracle", 1.0), ("piga", 1.5), ("oracle", 1.5)]
+    assert all(len(r["episodes"]) == 1 for r in record["results"])
+    assert out.with_suffix(".md").read_text().count("| piga |") == 2
+    assert out.with_suffix(".png").read_bytes()[:4] == b"\x89PNG"
+
+
+@pytest.mark.parametrize("suffix", [".mp4", ".gif"])
+def test_video_is_written_and_decodes(control_model: Path, tmp_path: Path, suffix: str) -> None:
+    import imageio.v3 as iio
+
+    video = tmp_path / f"episode{suffix}"
+    result = run("piga-control", "--model", str(control_model), "--episodes", "1", "--steps", "20", "--video", str(video),
+                 "--quiet")
+    assert result.returncode == 0, result.stderr
+    frames = iio.imread(video)  # (T, H, W, 3): real | belief | plan, one per step
+    assert frames.shape[0] == 20 and frames.shape[2] >= 3 * 64 and frames.std() > 1
+    assert_one_line_error(run("piga-control", "--model", str(control_model), "--episodes", "1", "--steps", "20", "--video",
+                              str(video)), "--overwrite")
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_interrupted_sweep_ends_with_its_workers(control_model: Path, sig: signal.Signals) -> None:
+    """Ctrl-C or SIGTERM to piga-control during a sweep: one line, a non-zero exit, and no worker left."""
+    if not Path("/proc/self/stat").exists():
+        pytest.skip("needs /proc")
+    proc = subprocess.Popen(["piga-control", "--model", str(control_model), "--sweep", "0.5:1.5:0.5", "--workers", "2",
+                             "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV)
+    try:
+        deadline = time.monotonic() + 60
+        while len(_children(proc.pid)) < 2 and time.monotonic() < deadline and proc.poll() is None:
+            time.sleep(0.05)
+        workers = _children(proc.pid)
+        assert len(workers) == 2, "the sweep did not start its two workers"
+        time.sleep(1.0)  # well into the episodes
+        proc.send_signal(sig)
+        _, err = proc.communicate(timeout=20)
+    finally:
+        proc.kill()
+    assert proc.returncode != 0
+    assert err.strip().splitlines() == ["piga-control: interrupted; nothing was written"], err
+    deadline = time.monotonic() + 10
+    while any(map(_alive, workers)) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not any(map(_alive, workers))
+
+
+def _children(pid: int) -> list[int]:
+    """Live child processes of ``pid`` (from /proc)."""
+    found = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
+            except OSError:
+                continue
+            if int(fields[1]) == pid and fields[0] != "Z":
+                found.append(int(entry.name))
+    return found
+
+
+def _alive(pid: int) -> bool:
+    """Whether ``pid`` runs (a zombie does not)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+def test_cem_settings_from_the_command_line() -> None:
+    """PlaNet's CEM can be given; elites follow the candidates unless given; the defaults are the dataclasses'."""
+    from agents.cem import CEMConfig
+    from piga.cli import control as cli
+
+    parser = cli.build_parser()
+    default = cli._mpc_config(parser.parse_args(["--oracle"]), 0.0)
+    assert default == MPCConfig()
+    planet = cli._mpc_config(parser.parse_args(["--oracle", "--horizon", "12", "--iterations", "10", "--candidates", "1000",
+                                                "--elites", "100", "--no-warm-start"]), 0.0)
+    assert planet.cem == replace(CEMConfig(), init_std=MPCConfig().cem.init_std) and not planet.warm_start
+    few = cli._mpc_config(parser.parse_args(["--oracle", "--candidates", "10"]), 0.0)
+    assert few.cem.candidates == 10 and few.cem.elites == 1
+    assert "(default 200)" in " ".join(parser.format_help().split())
+
+
+def test_control_cli_bad_cem_and_episode_settings() -> None:
+    assert_one_line_error(run("piga-control", "--oracle", "--candidates", "10", "--elites", "20"),
+                          "--elites (20) must be at most --candidates (10)")
+    assert_one_line_error(run("piga-control", "--oracle", "--candidates", "1"), "--candidates must be at least 2")
+    result = run("piga-control", "--oracle", "--steps", "3")
+    assert_one_line_error(result, "--steps must be at least 20")
+    assert "EpisodeConfig" not in result.stderr
+    ok = run("piga-control", "--oracle", "--candidates", "10", "--episodes", "1", "--steps", "20", "--quiet")
+    assert ok.returncode == 0 and "success" in ok.stdout, ok.stderr
+
+
+def test_goal_image_that_is_not_the_scene_is_refused(control_model: Path, tmp_path: Path) -> None:
+    """White, black or noise is refused whatever the model's training; a render of the scene is read."""
+    import imageio.v3 as iio
+
+    from piga.goal import NotTheSceneError, goal_from_image, scene_mismatch
+    from piga.train import load_model
+
+    model, ckpt = load_model(control_model)  # one epoch: its own re-rendering check means nothing
+    rng = np.random.default_rng(0)
+    for name, picture in (("white", np.full((300, 300, 3), 255, np.uint8)), ("black", np.zeros((80, 80), np.uint8)),
+                          ("noise", rng.integers(0, 256, (200, 200, 3)).astype(np.uint8))):
+        iio.imwrite(tmp_path / f"{name}.png", picture)
+        with pytest.raises(NotTheSceneError, match="not a picture of the pendulum scene"):
+            goal_from_image(model, ckpt, tmp_path / f"{name}.png")
+    for angle in (0.0, 13.7, -100.0, 180.0):
+        assert scene_mismatch(load_scene_image_array(render_goal_image(angle))) < 0.1
+    iio.imwrite(tmp_path / "goal.png", render_goal_image(13.7))
+    goal_from_image(model, ckpt, tmp_path / "goal.png")  # accepted
+    assert_one_line_error(run("piga-control", "--model", str(control_model), "--goal-image", str(tmp_path / "white.png")),
+                          "not a picture of the pendulum scene")
+
+
+def test_goal_image_messages(control_model: Path, tmp_path: Path) -> None:
+    import imageio.v3 as iio
+
+    iio.imwrite(tmp_path / "dot.png", np.zeros((1, 1), np.uint8))
+    assert_one_line_error(run("piga-control", "--model", str(control_model), "--goal-image", str(tmp_path / "dot.png")),
+                          "1x1 pixels, too small")
+    assert_one_line_error(run("piga-control", "--model", str(control_model), "--goal-image", str(tmp_path)),
+                          "is a folder, not an image file")
+
+
+def test_a_job_with_a_correction_plans_and_reads_with_it(control_model: Path) -> None:
+    """A diagnosis' correction travels to a worker (pickled) and replaces the agent's physics and reader."""
+    import pickle
+
+    from piga.diagnostics import fit
+    from piga.diagnostics.corrected import CameraReader, CorrectedDynamics, Correction
+    from piga.diagnostics.vision import Camera
+    from piga.jobs import ControlJob, build_agent, run_job
+
+    correction = Correction(fit.Model(("damping",), 0, {"g": 9.0, "a": 1.1, "b": 0.2}), Camera(blur=1.0))
+    job = ControlJob("piga", EpisodeConfig(episodes=1, steps=20, gravity_mult=1.4), MPCConfig(), str(control_model),
+                     correction=correction)
+    job = pickle.loads(pickle.dumps(job))
+    agent = build_agent(job)
+    assert isinstance(agent, PigaMPCAgent) and isinstance(agent.read_state, CameraReader)
+    dynamics = agent.planner.dynamics
+    assert isinstance(dynamics, CorrectedDynamics) and dynamics.corrected.values["g"] == pytest.approx(9.0 * 1.4)
+    assert len(run_job(job)["episodes"]) == 1
+    with pytest.raises(ValueError, match="no correction"):
+        ControlJob("oracle", EpisodeConfig(), correction=correction)
+
+
+def test_encoder_reader_reads_only_the_new_frame_and_agrees_with_a_fresh_read() -> None:
+    """The reader keeps the coordinates of frames it has seen; this holds only while the encoder reads
+    each frame alone, which this test checks against reading all L frames anew."""
+    from agents.mpc import EncoderReader
+
+    model = PhysicsModel(ModelConfig())
+    with torch.no_grad():
+        model.encoder.background.fill_(1.0)
+    frames = np.stack([load_scene_image_array(render_goal_image(a)) for a in (20.0, 24.0, 29.0, 35.0, 42.0)])
+    reader = EncoderReader(model)
+    reader(frames[:4])
+    calls = []
+    model.encoder.register_forward_hook(lambda module, args, out: calls.append(args[0].shape[0]))
+    moved_on = reader(frames[1:])
+    assert calls == [1]  # only the new frame went through the encoder
+    assert moved_on == pytest.approx(EncoderReader(model)(frames[1:]), abs=1e-5)
+    assert calls == [1, 4]
+
+
+def test_piga_control_parses_its_arguments_without_torch() -> None:
+    """A mistyped command is answered at once: the parser and its defaults do not import torch."""
+    import subprocess
+    import sys
+
+    code = "import sys, piga.cli.control as c; c.build_parser().parse_args(['--oracle']); print('torch' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "False"

@@ -151,13 +151,18 @@ def test_wilson_interval_covers_the_proportion() -> None:
 
 def test_an_agent_with_a_camera_reads_angles_through_it(model: PhysicsModel) -> None:
     from agents.mpc import PigaMPCAgent
+    from piga.diagnostics.corrected import CameraReader
 
-    theta = torch.tensor([0.30, 0.34, 0.38, 0.42])  # L = 4 frames, 0.04 rad per 0.05 s step
+    theta = torch.tensor([0.30, 0.34, 0.38, 0.42, 0.46])  # 0.04 rad per 0.05 s step
     frames = np.stack([cv2.GaussianBlur(f, (0, 0), 1.5) for f in _renders(model, theta)])
-    agent = PigaMPCAgent(model, camera=V.Camera(blur=1.5))
-    angle, speed = agent.estimate_state(frames)
+    agent = PigaMPCAgent(model, reader=CameraReader(model, V.Camera(blur=1.5)))
+    angle, speed = agent.estimate_state(frames[:4])  # L = 4 frames
     assert angle == pytest.approx(0.42, abs=0.02)
     assert speed == pytest.approx(0.8, abs=0.4)
+    moved_on = agent.estimate_state(frames[1:])  # the next step: only the new frame is read
+    assert moved_on[0] == pytest.approx(0.46, abs=0.02)
+    fresh = PigaMPCAgent(model, reader=CameraReader(model, V.Camera(blur=1.5))).estimate_state(frames[1:])
+    assert moved_on == pytest.approx(fresh, abs=1e-4)  # float32 matching, one frame vs a batch
 
 
 def test_noise_level_on_a_gray_background() -> None:

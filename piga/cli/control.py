@@ -2,33 +2,61 @@
 
 from __future__ import annotations
 
+import argparse
 import math
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from dataclasses import replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
+import numpy as np
+
+from agents.config import MPCConfig
+from piga.atomic import atomic_output, check_writable_target, write_json
 from piga.cli.common import ArgumentParser, PigaError, command_line, nonnegative_int, positive_float, positive_int, run_cli
+from piga.episodes import EpisodeConfig, parse_range, run_episodes, summary_markdown
+
+if TYPE_CHECKING:
+    from agents.mpc import PigaMPCAgent
+
+# torch, the agents and the model are imported once the arguments are checked: a mistyped
+# command is answered at once, without the seconds that importing torch takes.
 
 PROG = "piga-control"
 
 
 def build_parser() -> ArgumentParser:
+    episodes, mpc = EpisodeConfig(), MPCConfig()
+    cem = mpc.cem
     p = ArgumentParser(prog=PROG, description="Swing up and hold the pixel pendulum with model-predictive control "
                        "(CEM) over a trained piga model, from frames alone.")
     p.add_argument("--model", help="run folder of piga-train-model (not needed with --oracle)")
     p.add_argument("--oracle", action="store_true", help="plan with the true state and true parameters instead")
-    p.add_argument("--episodes", type=positive_int, default=5, help="episodes (default %(default)s); episode 0 starts hanging down")
-    p.add_argument("--steps", type=positive_int, default=200, help="steps per episode (default %(default)s)")
-    p.add_argument("--gravity-mult", type=positive_float, default=1.0,
-                   help="multiply the environment's gravity; the agent is told and scales its learned g (default 1)")
-    p.add_argument("--goal-angle", type=float, default=0.0, help="goal angle in degrees, 0 = upright (default 0)")
-    p.add_argument("--goal-image", help="PNG or JPEG of the scene at the goal; the encoder reads the goal angle from it")
+    p.add_argument("--episodes", type=positive_int, default=episodes.episodes,
+                   help="episodes (default %(default)s); episode 0 starts hanging down")
+    p.add_argument("--steps", type=positive_int, default=episodes.steps,
+                   help=f"steps per episode, at least {episodes.hold_steps}: success is the goal held for the last "
+                   f"{episodes.hold_steps} (default %(default)s)")
+    p.add_argument("--gravity-mult", type=positive_float, default=episodes.gravity_mult,
+                   help="multiply the environment's gravity; the agent is told and scales its learned g (default %(default)s)")
+    p.add_argument("--goal-angle", type=float, default=math.degrees(mpc.goal_angle),
+                   help="goal angle in degrees, 0 = upright (default %(default)g)")
+    p.add_argument("--goal-image", help="PNG or JPEG of the scene at the goal; the encoder reads the goal angle from it "
+                   "(refused when no render of the pendulum at any angle comes close to it)")
     p.add_argument("--write-goal-image", metavar="PATH", help="only write Gymnasium's picture of the pendulum at --angle to PATH, then exit")
     p.add_argument("--angle", type=float, help="with --write-goal-image: the angle in degrees (0 = upright, counter-clockwise)")
-    p.add_argument("--horizon", type=positive_int, help="CEM planning horizon (default 20)")
-    p.add_argument("--candidates", type=positive_int, help="CEM candidates per iteration (default 200)")
-    p.add_argument("--iterations", type=positive_int, help="CEM iterations (default 5)")
-    p.add_argument("--seed", type=nonnegative_int, default=0, help="seed of start states and planner (default 0)")
+    p.add_argument("--horizon", type=positive_int, default=cem.horizon, help="CEM planning horizon H (default %(default)s)")
+    p.add_argument("--candidates", type=positive_int, default=cem.candidates,
+                   help="CEM candidates per iteration, >= 2 (default %(default)s)")
+    p.add_argument("--elites", type=positive_int,
+                   help=f"CEM elites that refit the sampling distribution, <= --candidates (default: the same share of "
+                   f"the candidates as {cem.elites} of {cem.candidates})")
+    p.add_argument("--iterations", type=positive_int, default=cem.iterations, help="CEM iterations (default %(default)s)")
+    p.add_argument("--warm-start", action=argparse.BooleanOptionalAction, default=mpc.warm_start,
+                   help="start each plan from the previous one shifted by a step; PlaNet re-plans from scratch "
+                   "(--no-warm-start) (default %(default)s)")
+    p.add_argument("--seed", type=nonnegative_int, default=episodes.seed, help="seed of start states and planner (default %(default)s)")
     p.add_argument("--torque-arrow", action="store_true",
                    help="show Gymnasium's torque arrow in the frames the agent sees (off by default; see README)")
     p.add_argument("--sweep", metavar="START:STOP:STEP",
@@ -52,31 +80,29 @@ def main(argv: Sequence[str] | None = None) -> int:
         raise PigaError("give --model RUN_DIR (or --oracle)")
     if not math.isfinite(args.goal_angle):
         raise PigaError(f"--goal-angle must be a finite number of degrees, got {args.goal_angle}")
-    from dataclasses import replace
-
-    import torch
-
-    from agents.mpc import OracleAgent, PigaMPCAgent
-    from piga.atomic import check_writable_target, write_json
-    from piga.control import EpisodeConfig, run_episodes
-    from piga.train import load_model
-
+    hold = EpisodeConfig.hold_steps
+    if args.steps < hold:
+        raise PigaError(f"--steps must be at least {hold}: success is the goal held for the last {hold} steps, got {args.steps}")
+    mpc = _mpc_config(args, math.radians(args.goal_angle))
     outputs = []
     if args.out:
         outputs = [Path(args.out).with_suffix(s) for s in (".json", ".md", *((".png",) if args.sweep else ()))]
         for path in outputs:
             check_writable_target(path, args.overwrite)
     if args.sweep:
-        return _sweep(args, outputs, argv)
+        return _sweep(args, mpc, outputs, argv)
     if args.video:
         if Path(args.video).suffix.lower() not in (".mp4", ".gif"):
             raise PigaError(f"--video must end in .mp4 or .gif, got {args.video}")
         if args.oracle:
             raise PigaError("--video shows the model's belief and plan; it needs --model, not --oracle")
         check_writable_target(args.video, args.overwrite)
+    import torch
+
+    from agents.mpc import OracleAgent, PigaMPCAgent
+    from piga.train import load_model
+
     torch.set_num_threads(1)  # small tensors: one thread plans fastest
-    goal = math.radians(args.goal_angle)
-    mpc = _mpc_config(args, goal)
     model = None
     if args.model:
         model, ckpt = load_model(args.model)
@@ -90,23 +116,24 @@ def main(argv: Sequence[str] | None = None) -> int:
         estimate = goal_from_image(model, ckpt, args.goal_image, gravity_mult=args.gravity_mult)
         for warning in estimate.warnings:
             print(f"{PROG}: warning: {warning}", file=sys.stderr)
-        goal = estimate.angle
-        args.goal_angle = math.degrees(goal)
+        args.goal_angle = math.degrees(estimate.angle)
         print(f"goal read from {args.goal_image}: {args.goal_angle:.2f} deg (hold torque {estimate.hold_torque:+.2f})")
-        mpc = replace(mpc, goal_angle=goal)
-    if args.oracle:
-        agent = OracleAgent(g=10.0 * args.gravity_mult, a=1.0, config=mpc)
-        frames = 4
+        mpc = replace(mpc, goal_angle=estimate.angle)
+    config = EpisodeConfig(episodes=args.episodes, steps=args.steps, seed=args.seed, gravity_mult=args.gravity_mult,
+                           goal_angle=mpc.goal_angle, torque_arrow=args.torque_arrow)
+    agent: OracleAgent | PigaMPCAgent
+    first_trace: list[tuple[float, float, np.ndarray]] = []  # the piga agent's beliefs and plans in episode 0
+    on_episode_end = None
+    if model is None:
+        agent = OracleAgent.for_env(config.env_config(), mpc)
         label = "oracle"
     else:
-        assert model is not None
         agent = PigaMPCAgent(model, mpc, gravity_mult=args.gravity_mult, keep_trace=bool(args.video))
-        frames = agent.input_frames
+        config = replace(config, frame_stack=agent.input_frames)
         label = f"piga ({args.model})"
-    config = EpisodeConfig(episodes=args.episodes, steps=args.steps, seed=args.seed, gravity_mult=args.gravity_mult,
-                           goal_angle=goal, frame_stack=frames, torque_arrow=args.torque_arrow)
+        on_episode_end = _keep_first_trace(agent, first_trace) if args.video else None
     result = run_episodes(agent, config, progress=not args.quiet, record=1 if args.video else 0,
-                          on_episode_end=_keep_first_trace(agent) if args.video else None)
+                          on_episode_end=on_episode_end)
     s = result["summary"]
     print(f"{label}, gravity x{args.gravity_mult:g}, goal {args.goal_angle:g} deg: success {100 * s['success_rate']:.0f}% of "
           f"{s['episodes']}, mean return {s['mean_return']:.1f}, final angle error {math.degrees(s['final_angle_error_mean']):.2f} deg, "
@@ -114,12 +141,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.video:
         from piga.video import control_video
 
-        control_video(model, result["recordings"][0]["frames"], agent.first_trace, args.video, overwrite=args.overwrite)
+        assert model is not None
+        control_video(model, result["recordings"][0]["frames"], first_trace, args.video, overwrite=args.overwrite)
         print(f"wrote {args.video}")
     if outputs:
-        from piga.atomic import atomic_output
-        from piga.control import summary_markdown
-
         s = {"agent": label, **s}
         write_json(outputs[0], {"agent": label, **result, "summary": s, "recordings": None}, overwrite=args.overwrite)
         with atomic_output(outputs[1], overwrite=args.overwrite) as tmp:
@@ -128,10 +153,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     return 0
 
 
-def _sweep(args, outputs: list[Path], argv: Sequence[str] | None) -> int:  # noqa: ANN001
+def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: Sequence[str] | None) -> int:
     """--sweep: the piga agent and the oracle at each multiplier, each told the multiplier."""
-    from piga.atomic import atomic_output, write_json
-    from piga.control import ControlJob, EpisodeConfig, parse_range, run_jobs, summary_markdown
+    from piga.jobs import ControlJob, run_jobs
     from piga.train import load_model
 
     if args.oracle or not args.model:
@@ -147,7 +171,6 @@ def _sweep(args, outputs: list[Path], argv: Sequence[str] | None) -> int:  # noq
     model, _ = load_model(args.model)  # fail early, in this process, on a bad folder
     if model.config.system != "pendulum":
         raise PigaError(f"{args.model}: a {model.config.system} model cannot control the pendulum")
-    mpc = _mpc_config(args, math.radians(args.goal_angle))
     jobs = [ControlJob(agent, EpisodeConfig(episodes=args.episodes, steps=args.steps, seed=args.seed, gravity_mult=m,
                                             goal_angle=mpc.goal_angle, torque_arrow=args.torque_arrow),
                        mpc, model_dir=args.model if agent == "piga" else None)
@@ -167,36 +190,37 @@ def _sweep(args, outputs: list[Path], argv: Sequence[str] | None) -> int:  # noq
     return 0
 
 
-def _mpc_config(args, goal: float):  # noqa: ANN001, ANN202
+def default_elites(candidates: int) -> int:
+    """Elites for ``candidates`` when none are given: the default planner's share (at least 1)."""
+    cem = MPCConfig().cem
+    return max(1, round(candidates * cem.elites / cem.candidates))
+
+
+def _mpc_config(args: argparse.Namespace, goal: float) -> MPCConfig:
     """The planner settings from the command line."""
-    from dataclasses import replace
-
-    from agents.mpc import MPCConfig
-
-    mpc = MPCConfig(goal_angle=goal, seed=args.seed)
-    changes = {k: getattr(args, k) for k in ("horizon", "candidates", "iterations") if getattr(args, k) is not None}
-    if changes:
-        cem_config = replace(mpc.cem, **changes)
-        cem_config = replace(cem_config, elites=max(1, min(cem_config.elites, cem_config.candidates // 10 or 1)))
-        mpc = replace(mpc, cem=cem_config)
-    return mpc
+    if args.candidates < 2:
+        raise PigaError(f"--candidates must be at least 2, got {args.candidates}")
+    elites = default_elites(args.candidates) if args.elites is None else args.elites
+    if elites > args.candidates:
+        raise PigaError(f"--elites ({elites}) must be at most --candidates ({args.candidates})")
+    defaults = MPCConfig()
+    cem = replace(defaults.cem, horizon=args.horizon, candidates=args.candidates, elites=elites, iterations=args.iterations)
+    return replace(defaults, cem=cem, goal_angle=goal, seed=args.seed, warm_start=args.warm_start)
 
 
-def _keep_first_trace(agent):  # noqa: ANN001, ANN202
-    """Keeps the piga agent's trace of episode 0 (the one recorded for the video)."""
-    agent.first_trace = None
+def _keep_first_trace(agent: PigaMPCAgent, into: list[tuple[float, float, np.ndarray]]) -> Callable[[int], None]:
+    """Copies the piga agent's trace of episode 0 (the one recorded for the video) into ``into``."""
 
     def keep(episode: int) -> None:
         if episode == 0:
-            agent.first_trace = list(agent.trace)
+            into[:] = agent.trace
 
     return keep
 
 
-def _write_goal_image(args) -> int:  # noqa: ANN001
+def _write_goal_image(args: argparse.Namespace) -> int:
     import imageio.v3 as iio
 
-    from piga.atomic import atomic_output
     from piga.goal import render_goal_image
 
     if args.angle is None or not math.isfinite(args.angle):

@@ -103,7 +103,8 @@ def _control(run_dir: Path, goal_png: Path, control_md: Path, args) -> list[tupl
     from agents.mpc import MPCConfig
     from piga.atomic import atomic_output
     from piga.cli import control as control_cli
-    from piga.control import ControlJob, EpisodeConfig, run_jobs, summary_markdown, summary_row
+    from piga.episodes import EpisodeConfig, summary_markdown, summary_row
+    from piga.jobs import ControlJob, run_jobs
     from piga.goal import goal_from_image
     from piga.train import load_model
 

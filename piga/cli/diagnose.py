@@ -52,7 +52,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     diagnosis = diagnose(model, args.data, DiagnoseConfig(bootstrap=args.bootstrap, seed=args.seed), checkpoint=ckpt,
                          progress=not args.quiet)
     if effects is not None:
-        from piga.diagnostics.control import compare_control
+        from piga.diagnostics.closed_loop import compare_control
 
         diagnosis.control = compare_control(args.model, diagnosis, effects, episodes=args.episodes, seed=args.seed,
                                             progress=not args.quiet)

@@ -12,6 +12,7 @@ import numpy as np
 from piga.atomic import atomic_output, write_json
 from piga.diagnostics.diagnose import Diagnosis
 from piga.diagnostics.twin import MEASURABLE_GAP
+from piga.episodes import summary_markdown
 from piga.plots import plt, save_figure
 
 #: Files the report writes into its folder.
@@ -200,8 +201,6 @@ def markdown(d: Diagnosis, model: str, data: str, command: str) -> str:
         lines.append(f"| {g['horizon'][i]} | {math.degrees(math.sqrt(g['state_mse_nominal'][i])):.3f} | "
                      f"{math.degrees(math.sqrt(g['state_mse_corrected'][i])):.3f} | {100 * g['closure'][i]:.1f}% | {pix} |")
     if d.control:
-        from piga.control import summary_markdown
-
         env = ", ".join(f"{k}={v}" for k, v in d.control["effects"].items()) or "none"
         reader = ("reads angles through the fitted camera (matching) instead of the encoder"
                   if d.vision.get("angles") == "matched" else "reads angles with the same encoder")

@@ -4,7 +4,11 @@ from __future__ import annotations
 
 from typing import Any
 
+from agents.mpc import MPCConfig
+from piga.diagnostics.corrected import Correction
 from piga.diagnostics.diagnose import Diagnosis
+from piga.episodes import EpisodeConfig
+from piga.jobs import ControlJob, run_jobs
 
 
 def compare_control(model_dir: str, diagnosis: Diagnosis, effects: tuple[tuple[str, float], ...], episodes: int = 5,
@@ -15,13 +19,10 @@ def compare_control(model_dir: str, diagnosis: Diagnosis, effects: tuple[tuple[s
 
     Returns ``{"effects": ..., "rows": [summary with "physics": "nominal" | "corrected", ...]}``.
     """
-    from agents.mpc import MPCConfig
-    from piga.control import ControlJob, EpisodeConfig, run_jobs
-
     config = EpisodeConfig(episodes=episodes, seed=seed, effects=tuple(effects))
     mpc = MPCConfig(seed=seed)
+    correction = Correction(diagnosis.corrected_model(), diagnosis.corrected_camera())
     jobs = [ControlJob("piga", config, mpc, model_dir, tags=(("physics", "nominal"),)),
-            ControlJob("piga", config, mpc, model_dir, tags=(("physics", "corrected"),),
-                       corrected=diagnosis.corrected_model(), camera=diagnosis.corrected_camera())]
+            ControlJob("piga", config, mpc, model_dir, tags=(("physics", "corrected"),), correction=correction)]
     rows = [r["summary"] for r in run_jobs(jobs, workers=workers, progress=progress)]
     return {"effects": dict(effects), "rows": rows}

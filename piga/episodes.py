@@ -1,4 +1,7 @@
-"""Running control episodes on the pixel pendulum and scoring them.
+"""Control episodes on the pixel pendulum: running and scoring them with any agent, and their tables.
+
+Jobs, batches of episodes for the named agents run in worker processes, are in :mod:`piga.jobs`.
+This module does not import torch (command lines read :class:`EpisodeConfig`'s defaults quickly).
 
 Success is defined precisely. An episode of ``steps`` steps (200 by default) succeeds when, for
 each of its last ``hold_steps`` steps (20), |wrap(θ - θ_goal)| < ``angle_tolerance`` (0.2 rad)
@@ -13,15 +16,13 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Protocol
+from dataclasses import dataclass
+from typing import Any, Protocol
 
 import numpy as np
+from tqdm.auto import tqdm
 
 from envs.pendulum import PixelPendulumConfig, make_pixel_pendulum
-
-if TYPE_CHECKING:
-    from agents.mpc import MPCConfig
 
 
 class Agent(Protocol):
@@ -65,10 +66,18 @@ class EpisodeConfig:
     x1.4 (README, results/control.md); without it, all succeeded. Training data keep the arrow."""
 
     def __post_init__(self) -> None:
-        if self.episodes < 1 or self.steps < self.hold_steps or self.hold_steps < 1:
-            raise ValueError(f"need episodes >= 1 and steps >= hold_steps >= 1, got {self}")
+        if self.episodes < 1:
+            raise ValueError(f"need at least 1 episode, got {self.episodes}")
+        if self.hold_steps < 1 or self.steps < self.hold_steps:
+            raise ValueError(f"an episode of {self.steps} steps is too short: success needs the goal held for its last "
+                             f"{self.hold_steps} steps (hold_steps >= 1, steps >= hold_steps)")
         if not (self.gravity_mult > 0 and math.isfinite(self.gravity_mult)):
             raise ValueError(f"gravity_mult must be finite and > 0, got {self.gravity_mult}")
+
+    def env_config(self) -> PixelPendulumConfig:
+        """The environment the episodes run in (the one place its true parameters come from)."""
+        return PixelPendulumConfig(frame_stack=self.frame_stack, gravity_mult=self.gravity_mult,
+                                   episode_length=self.steps, effects=self.effects, draw_torque_arrow=self.torque_arrow)
 
 
 def _wrap(x: np.ndarray) -> np.ndarray:
@@ -86,11 +95,7 @@ def run_episodes(agent: Agent, config: EpisodeConfig, record: int = 0, progress:
         record: keep the frames, states and actions of the first ``record`` episodes (for videos).
         on_episode_end: called with the episode index after each episode.
     """
-    from tqdm.auto import tqdm
-
-    env = make_pixel_pendulum(PixelPendulumConfig(frame_stack=config.frame_stack, gravity_mult=config.gravity_mult,
-                                                  episode_length=config.steps, effects=config.effects,
-                                                  draw_torque_arrow=config.torque_arrow))
+    env = make_pixel_pendulum(config.env_config())
     rng = np.random.default_rng(config.seed)
     episodes: list[dict[str, Any]] = []
     recordings: list[dict[str, np.ndarray]] = []
@@ -149,97 +154,6 @@ def run_episodes(agent: Agent, config: EpisodeConfig, record: int = 0, progress:
         "goal_angle": config.goal_angle,
     }
     return {"summary": summary, "episodes": episodes, "recordings": recordings}
-
-
-def _default_mpc() -> MPCConfig:
-    from agents.mpc import MPCConfig
-
-    return MPCConfig()
-
-
-@dataclass(frozen=True)
-class ControlJob:
-    """One batch of episodes for one agent: all a worker process needs to rebuild and run it.
-
-    The agent's goal (``mpc.goal_angle``, what it is told, for example read from a goal image) and
-    the scoring goal (``episodes.goal_angle``, the truth) are kept apart on purpose.
-    """
-
-    agent: str
-    """"piga" (frames -> learned model) or "oracle" (true state, true g = 10 x multiplier, a = 1)."""
-    episodes: EpisodeConfig
-    """The episodes; its ``gravity_mult`` is the environment's."""
-    mpc: MPCConfig = field(default_factory=_default_mpc)
-    """The planner; its ``goal_angle`` is the agent's goal."""
-    model_dir: str | None = None
-    """The run folder of ``piga-train-model`` (for "piga")."""
-    tags: tuple[tuple[str, Any], ...] = ()
-    """Extra (key, value) pairs copied into the result's summary (labels for tables)."""
-    corrected: Any = None
-    """For "piga": plan with this physics from ``piga-diagnose`` (:class:`piga.diagnostics.fit.Model`)."""
-    camera: Any = None
-    """For "piga": read angles by matching frames to the decoder's renders through this camera
-    (:class:`piga.diagnostics.vision.Camera`, from ``piga-diagnose``) instead of the encoder."""
-
-    def __post_init__(self) -> None:
-        if self.agent not in ("piga", "oracle"):
-            raise ValueError(f"agent must be 'piga' or 'oracle', got {self.agent!r}")
-        if self.agent == "piga" and not self.model_dir:
-            raise ValueError("a 'piga' job needs model_dir")
-
-
-def build_agent(job: ControlJob) -> Any:
-    """The agent a job describes (loads the model for "piga")."""
-    from agents.mpc import OracleAgent, PigaMPCAgent
-
-    told = job.episodes.gravity_mult  # the agent is told the environment's multiplier
-    if job.agent == "oracle":
-        return OracleAgent(g=10.0 * told, a=1.0, config=job.mpc)
-    from piga.train import load_model
-
-    model, _ = load_model(job.model_dir)
-    return PigaMPCAgent(model, job.mpc, gravity_mult=told, corrected=job.corrected, camera=job.camera)
-
-
-def run_job(job: ControlJob) -> dict[str, Any]:
-    """Runs one job in this process with one torch thread; returns :func:`run_episodes`' result
-    (without recordings), its summary extended with ``agent`` and the job's tags."""
-    import torch
-
-    torch.set_num_threads(1)  # small tensors: one thread plans fastest, and workers share the cores
-    agent = build_agent(job)
-    episodes = job.episodes
-    if job.agent == "piga":
-        from dataclasses import replace
-
-        episodes = replace(episodes, frame_stack=agent.input_frames)
-    result = run_episodes(agent, episodes)
-    result.pop("recordings")
-    result["summary"] = {"agent": job.agent, **dict(job.tags), **result["summary"]}
-    return result
-
-
-def _worker_init() -> None:
-    """A pool worker ends quietly when the pool terminates it (the CLI's SIGTERM handler is for the parent)."""
-    import signal
-
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is handled by the parent, which then terminates the pool
-
-
-def run_jobs(jobs: Sequence[ControlJob], workers: int = 1, progress: bool = True) -> list[dict[str, Any]]:
-    """Runs jobs, in ``workers`` processes when > 1 (results in the order of ``jobs``)."""
-    from tqdm.auto import tqdm
-
-    if workers <= 1 or len(jobs) <= 1:
-        return [run_job(j) for j in tqdm(jobs, desc="control jobs", disable=not progress)]
-    import multiprocessing as mp
-
-    # fork, as torch's DataLoader does: with spawn, torch's import makes the resource tracker warn
-    # about leaked semaphores. The parent has rendered nothing; each child sets one torch thread.
-    method = "fork" if "fork" in mp.get_all_start_methods() else "spawn"
-    with mp.get_context(method).Pool(min(workers, len(jobs)), initializer=_worker_init) as pool:
-        return list(tqdm(pool.imap(run_job, jobs), total=len(jobs), desc="control jobs", disable=not progress))
 
 
 SUMMARY_COLUMNS: tuple[tuple[str, str], ...] = (

@@ -1,0 +1,140 @@
+"""Control jobs: batches of episodes for the piga agent or the oracle, run in worker processes.
+
+A :class:`ControlJob` holds all a worker needs to rebuild its agent (a run folder, not a model),
+so that jobs pickle; :func:`run_jobs` runs them in a process pool, one torch thread each, and
+makes sure that no worker outlives an interrupted command.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import multiprocessing as mp
+import os
+import signal
+import sys
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any, Protocol
+
+import torch
+from tqdm.auto import tqdm
+
+from agents.dynamics import Dynamics
+from agents.mpc import MPCConfig, OracleAgent, PigaMPCAgent, StateReader
+from piga.episodes import EpisodeConfig, run_episodes
+from piga.model import PhysicsModel
+from piga.train import load_model
+
+
+class AgentCorrection(Protocol):
+    """What changes a piga agent's physics and the way it reads frames (for example a diagnosis:
+    :class:`piga.diagnostics.corrected.Correction`). Built into the agent in the worker process
+    from the loaded model, so it must pickle."""
+
+    def dynamics(self, model: PhysicsModel, gravity_mult: float) -> Dynamics:
+        """The dynamics to plan with, for ``model``'s agent told gravity changed by ``gravity_mult``."""
+        ...
+
+    def reader(self, model: PhysicsModel) -> StateReader | None:
+        """The state reader to use, or None to keep the model's encoder."""
+        ...
+
+
+@dataclass(frozen=True)
+class ControlJob:
+    """One batch of episodes for one agent: all a worker process needs to rebuild and run it.
+
+    The agent's goal (``mpc.goal_angle``, what it is told, for example read from a goal image) and
+    the scoring goal (``episodes.goal_angle``, the truth) are kept apart on purpose.
+    """
+
+    agent: str
+    """"piga" (frames -> learned model) or "oracle" (true state, the environment's true g and a)."""
+    episodes: EpisodeConfig
+    """The episodes; its ``gravity_mult`` is the environment's."""
+    mpc: MPCConfig = field(default_factory=MPCConfig)
+    """The planner; its ``goal_angle`` is the agent's goal."""
+    model_dir: str | None = None
+    """The run folder of ``piga-train-model`` (for "piga")."""
+    tags: tuple[tuple[str, Any], ...] = ()
+    """Extra (key, value) pairs copied into the result's summary (labels for tables)."""
+    correction: AgentCorrection | None = None
+    """For "piga": plan with this correction's dynamics and read frames with its reader (from ``piga-diagnose``)."""
+
+    def __post_init__(self) -> None:
+        if self.agent not in ("piga", "oracle"):
+            raise ValueError(f"agent must be 'piga' or 'oracle', got {self.agent!r}")
+        if self.agent == "piga" and not self.model_dir:
+            raise ValueError("a 'piga' job needs model_dir")
+        if self.agent == "oracle" and self.correction is not None:
+            raise ValueError("an 'oracle' job plans with the true physics; it takes no correction")
+
+
+def build_agent(job: ControlJob) -> OracleAgent | PigaMPCAgent:
+    """The agent a job describes (loads the model for "piga"). The agent is told the environment's
+    gravity multiplier; the oracle takes the environment's true g and a."""
+    if job.agent == "oracle":
+        return OracleAgent.for_env(job.episodes.env_config(), job.mpc)
+    assert job.model_dir is not None
+    model, _ = load_model(job.model_dir)
+    told = job.episodes.gravity_mult
+    if job.correction is None:
+        return PigaMPCAgent(model, job.mpc, gravity_mult=told)
+    return PigaMPCAgent(model, job.mpc, gravity_mult=told, dynamics=job.correction.dynamics(model, told),
+                        reader=job.correction.reader(model))
+
+
+def run_job(job: ControlJob) -> dict[str, Any]:
+    """Runs one job in this process with one torch thread; returns :func:`run_episodes`' result
+    (without recordings), its summary extended with ``agent`` and the job's tags."""
+    torch.set_num_threads(1)  # small tensors: one thread plans fastest, and workers share the cores
+    agent = build_agent(job)
+    episodes = job.episodes
+    if isinstance(agent, PigaMPCAgent):
+        episodes = replace(episodes, frame_stack=agent.input_frames)
+    result = run_episodes(agent, episodes)
+    result.pop("recordings")
+    result["summary"] = {"agent": job.agent, **dict(job.tags), **result["summary"]}
+    return result
+
+
+def _worker_init() -> None:
+    """Makes a pool worker end at once, quietly, on SIGTERM (the pool's terminate) and when its parent
+    dies; Ctrl-C is the parent's to handle (it then terminates the pool).
+
+    SIGTERM gets a handler rather than SIG_DFL on purpose: SDL (pygame, which renders the frames)
+    takes over SIGTERM when it finds SIG_DFL and turns it into a quit event that nobody reads, so
+    the worker would never end and the parent would wait for it forever.
+    """
+    signal.signal(signal.SIGTERM, _exit_now)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    _die_with_parent()
+
+
+def _exit_now(signum: int, frame: object) -> None:
+    os._exit(128 + signum)
+
+
+def _die_with_parent() -> None:
+    """Asks Linux to send this process SIGTERM when its parent ends (prctl PR_SET_PDEATHSIG); elsewhere nothing."""
+    if not sys.platform.startswith("linux"):
+        return
+    try:
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)  # 1 = PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass
+
+
+def run_jobs(jobs: Sequence[ControlJob], workers: int = 1, progress: bool = True) -> list[dict[str, Any]]:
+    """Runs jobs, in ``workers`` processes when > 1 (results in the order of ``jobs``).
+
+    On KeyboardInterrupt (Ctrl-C, or SIGTERM turned into it by :func:`piga.cli.common.run_cli`) the
+    pool terminates its workers before the exception propagates; a worker whose parent is killed ends too.
+    """
+    if workers <= 1 or len(jobs) <= 1:
+        return [run_job(j) for j in tqdm(jobs, desc="control jobs", disable=not progress)]
+    # fork, as torch's DataLoader does: with spawn, torch's import makes the resource tracker warn
+    # about leaked semaphores. The parent has rendered nothing; each child sets one torch thread.
+    method = "fork" if "fork" in mp.get_all_start_methods() else "spawn"
+    with mp.get_context(method).Pool(min(workers, len(jobs)), initializer=_worker_init) as pool:  # exit: terminate
+        return list(tqdm(pool.imap(run_job, jobs), total=len(jobs), desc="control jobs", disable=not progress))
