@@ -211,17 +211,17 @@ def control_model(tiny_data: Path, tmp_path_factory: pytest.TempPathFactory) -> 
 def test_sweep_writes_a_table_per_multiplier(control_model: Path, tmp_path: Path) -> None:
     import json
 
-    out = tmp_path / "sweep"
+    out = tmp_path / "sweep-x1.0"  # a stem with a dot: OUT.json is appended, never replaces ".0"
     result = run("piga-control", "--model", str(control_model), "--sweep", "1:1.5:0.5", "--episodes", "1", "--steps", "20",
                  "--workers", "2", "--out", str(out), "--quiet")
     assert result.returncode == 0, result.stderr
-    record = json.loads(out.with_suffix(".json").read_text())
+    record = json.loads(Path(f"{out}.json").read_text())
     assert record["multipliers"] == [1.0, 1.5]
     rows = [(r["summary"]["agent"], r["summary"]["gravity_mult"]) for r in record["results"]]
     assert rows == [("piga", 1.0), ("oracle", 1.0), ("piga", 1.5), ("oracle", 1.5)]
     assert all(len(r["episodes"]) == 1 for r in record["results"])
-    assert out.with_suffix(".md").read_text().count("| piga |") == 2
-    assert out.with_suffix(".png").read_bytes()[:4] == b"\x89PNG"
+    assert Path(f"{out}.md").read_text().count("| piga |") == 2
+    assert Path(f"{out}.png").read_bytes()[:4] == b"\x89PNG"
 
 
 @pytest.mark.parametrize("suffix", [".mp4", ".gif"])

@@ -86,7 +86,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     mpc = _mpc_config(args, math.radians(args.goal_angle))
     outputs = []
     if args.out:
-        outputs = [Path(args.out).with_suffix(s) for s in (".json", ".md", *((".png",) if args.sweep else ()))]
+        stem = Path(args.out)  # OUT.json, OUT.md: appended, so a stem such as "x1.4" keeps its dot
+        stem = stem.with_suffix("") if stem.suffix in (".json", ".md", ".png") else stem
+        outputs = [stem.with_name(stem.name + s) for s in (".json", ".md", *((".png",) if args.sweep else ()))]
         for path in outputs:
             check_writable_target(path, args.overwrite)
     if args.sweep:
