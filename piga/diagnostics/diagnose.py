@@ -46,6 +46,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from envs.constants import PENDULUM_MAX_SPEED
 from piga.diagnostics import fit as F
 from piga.diagnostics.observe import Observations, observe
 from piga.diagnostics.vision import Camera, CameraConfig, CameraFindings, angle_table, camera_stage, match
@@ -56,7 +57,7 @@ from piga.model import PhysicsModel
 from piga.train import training_reconstruction_mse
 
 #: Gymnasium Pendulum-v1's own speed clip (rad/s).
-GYM_SPEED_CLIP = 8.0
+GYM_SPEED_CLIP = PENDULUM_MAX_SPEED
 
 
 @dataclass(frozen=True)
