@@ -195,7 +195,7 @@ def build_agent(job: ControlJob) -> Any:
     told = job.episodes.gravity_mult  # the agent is told the environment's multiplier
     if job.agent == "oracle":
         return OracleAgent(g=10.0 * told, a=1.0, config=job.mpc)
-    from piga.train import load_model
+    from piga.runs import load_model
 
     model, _ = load_model(job.model_dir)
     return PigaMPCAgent(model, job.mpc, gravity_mult=told, corrected=job.corrected, camera=job.camera)

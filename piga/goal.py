@@ -71,12 +71,12 @@ def read_goal(model: PhysicsModel, image: np.ndarray, g: float, a: float, mse_li
 
 def goal_from_image(model: PhysicsModel, checkpoint: dict, path: str | os.PathLike[str],
                     gravity_mult: float = 1.0) -> GoalEstimate:
-    """Reads the goal from an image file for a model loaded by :func:`piga.train.load_model`.
+    """Reads the goal from an image file for a model loaded by :func:`piga.runs.load_model`.
 
     The "not the scene" limit is 4x the model's own final reconstruction MSE per frame.
     """
     learned = model.physical_parameters()
-    from piga.train import training_reconstruction_mse
+    from piga.runs import training_reconstruction_mse
 
     typical = training_reconstruction_mse(model, checkpoint) or 0.001
     return read_goal(model, load_scene_image(path, model.config.image_size),

@@ -206,7 +206,7 @@ def _drop_frames(obs: Observations, p: float, seed: int = 0) -> Observations:
 
 
 def test_dropped_frames_are_named_and_their_repeats_predicted() -> None:
-    from piga.diagnostics.vision import repeated_frames
+    from piga.diagnostics.repeats import repeated_frames
 
     obs = _drop_frames(planted({}, n=120), 0.15)
     leading, drops, rate, effects = repeated_frames(obs.stale, obs.theta)
@@ -224,7 +224,7 @@ def test_dropped_frames_are_named_and_their_repeats_predicted() -> None:
 
 
 def test_a_still_pendulum_repeating_frames_is_no_drop() -> None:
-    from piga.diagnostics.vision import repeated_frames
+    from piga.diagnostics.repeats import repeated_frames
 
     theta = np.zeros((30, 20))
     stale = np.zeros((30, 20), bool)
@@ -233,7 +233,7 @@ def test_a_still_pendulum_repeating_frames_is_no_drop() -> None:
 
 
 def test_a_late_camera_is_a_frame_delay_and_an_early_delay_an_actuator_delay() -> None:
-    from piga.diagnostics.vision import leading_repeats
+    from piga.diagnostics.repeats import leading_repeats
 
     obs = planted({"delay": 2}, n=120)
     # a camera 2 frames late: frame t shows state t - 2, frames 0..2 show the first state

@@ -12,7 +12,8 @@ import pytest
 import torch
 
 from piga.collect import CollectConfig, collect
-from piga.train import TrainConfig, TrainingDiverged, load_model, train
+from piga.runs import load_model
+from piga.train import TrainConfig, TrainingDiverged, train
 from tests.test_cli import assert_one_line_error, run
 
 TINY = TrainConfig(epochs=8, batch_size=16, warmup_steps=40, curriculum_steps=60, lr_physics=5e-2, threads=2)

@@ -59,7 +59,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     from agents.mpc import OracleAgent, PigaMPCAgent
     from piga.atomic import check_writable_target, write_json
     from piga.control import EpisodeConfig, run_episodes
-    from piga.train import load_model
+    from piga.runs import load_model
 
     outputs = []
     if args.out:
@@ -132,7 +132,7 @@ def _sweep(args, outputs: list[Path], argv: Sequence[str] | None) -> int:  # noq
     """--sweep: the piga agent and the oracle at each multiplier, each told the multiplier."""
     from piga.atomic import atomic_output, write_json
     from piga.control import ControlJob, EpisodeConfig, parse_range, run_jobs, summary_markdown
-    from piga.train import load_model
+    from piga.runs import load_model
 
     if args.oracle or not args.model:
         raise PigaError("--sweep compares the piga agent with the oracle: give --model RUN_DIR (without --oracle)")

@@ -84,7 +84,7 @@ def _control(run_dir: Path, goal_png: Path, control_md: Path, args) -> list[tupl
     from piga.cli import control as control_cli
     from piga.control import ControlJob, EpisodeConfig, run_jobs, summary_markdown, summary_row
     from piga.goal import goal_from_image
-    from piga.train import load_model
+    from piga.runs import load_model
 
     control_cli.main(["--write-goal-image", str(goal_png), "--angle", str(args.goal_angle),
                       *(["--overwrite"] if args.overwrite else [])])

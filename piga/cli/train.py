@@ -39,7 +39,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     from piga.data import inspect_dataset
     from piga.report import write_run_report
     from piga.atomic import write_json
-    from piga.train import PRESETS, TrainConfig, TrainingDiverged, load_model, model_config_for, train
+    from piga.runs import load_model
+    from piga.train import PRESETS, TrainConfig, TrainingDiverged, model_config_for, train
 
     info = inspect_dataset(args.data)
     run_dir = Path(args.out)

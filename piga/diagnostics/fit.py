@@ -18,6 +18,20 @@ substeps. A gain error (ũ = m·u) is not a separate term: it is the refitted a 
 
 The fits run on the encoded angles alone (no images, no labels), so they take seconds: L-BFGS in
 float64 on the mean squared multi-step angle error over windows of the fit split.
+
+Why a second pendulum engine (:func:`simulate`) next to the model's
+(:class:`piga.physics.Pendulum` with :class:`piga.physics.Euler`)? Without effects the two are the
+same equations and the same semi-implicit Euler step, and they agree to rounding (a test checks
+it). They stay apart because they serve different needs:
+
+- The model's engine is one of several :class:`piga.physics.System` force functions, an
+  ``nn.Module`` whose learnable parameters train with the networks, on (B, N, D) tensors in
+  float32. Its equations are the *identified* physics; the effects are by design not in it
+  (the diagnosis must find them as a gap).
+- The diagnosis' engine adds the candidate effects, each with its own parameter, as optional
+  terms, and acts on delayed and transformed commands (a delay needs the actions before the
+  window). Its parameters are a plain dict of float64 scalars that L-BFGS and the bootstrap refit
+  thousands of times; a module with ten optional parameters would only hide which are free.
 """
 
 from __future__ import annotations
@@ -29,8 +43,10 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from envs.constants import MAX_ACTION
 from envs.effects import FRICTION_SMOOTHING
-from piga.diagnostics.vision import repeat_sources
+from piga.diagnostics.repeats import repeat_sources
+from piga.runs import Nominal
 
 #: Effects that the fit can add to the physics, in the order of the report.
 CANDIDATES: tuple[str, ...] = ("damping", "friction", "bias", "delay", "deadzone", "saturation", "speed_clip")
@@ -48,17 +64,6 @@ GRIDS: dict[str, tuple[float, ...]] = {
 }
 MAX_DELAY = 4
 """Largest delay tried (steps)."""
-
-
-@dataclass(frozen=True)
-class Nominal:
-    """The identified model's physics."""
-
-    g: float
-    a: float
-    offset: float
-    dt: float
-    substeps: int = 1
 
 
 @dataclass(frozen=True)
@@ -103,7 +108,7 @@ def make_windows(theta: np.ndarray, actions: np.ndarray, rows: np.ndarray, horiz
         raise ValueError(f"sequences of {t} frames are too short for windows of {h} steps after {s_min} frames")
     th0, v0, acts, target, mask, seq, src = [], [], [], [], [], [], []
     pad_t = np.pad(theta, ((0, 0), (0, h)), mode="edge")
-    pad_u = np.pad(np.clip(actions, -2.0, 2.0), ((0, 0), (0, h)))
+    pad_u = np.pad(np.clip(actions, -MAX_ACTION, MAX_ACTION), ((0, 0), (0, h)))
     if stale is not None:
         pad_stale = np.pad(stale, ((0, 0), (0, h)), mode="edge")
         pad_src = np.pad(repeat_sources(stale), ((0, 0), (0, h)), mode="edge")
