@@ -10,7 +10,7 @@ import pytest
 import torch
 
 from envs.pendulum import PixelPendulumConfig, make_pixel_pendulum
-from piga.diagnostics import fit as F
+from piga.diagnostics import fit
 from piga.diagnostics import repeats as R
 from piga.diagnostics import vision as V
 from piga.model import ModelConfig, PhysicsModel
@@ -136,10 +136,10 @@ def test_repeat_sources_and_windows_over_repeated_frames() -> None:
     np.testing.assert_array_equal(R.repeat_sources(stale)[0, 6:11], [6, 7, 7, 7, 10])
     theta = np.arange(20.0)[None].repeat(2, 0)
     actions = np.zeros((2, 20))
-    w = F.make_windows(theta, actions, np.arange(2), None, 20, 0.05, stale, repeat=True)
+    w = fit.make_windows(theta, actions, np.arange(2), None, 20, 0.05, stale, repeat=True)
     # frames 5..19 after the start at 4: frames 8 and 9 repeat frame 7 (the third prediction)
     np.testing.assert_array_equal(w.source[0, :6].numpy(), [1, 2, 3, 3, 3, 6])
-    one = F.make_windows(theta, actions, np.arange(2), 1, 1, 0.05, stale)
+    one = fit.make_windows(theta, actions, np.arange(2), 1, 1, 0.05, stale)
     starts = one.theta0[one.sequence == 0].numpy()
     assert not {8.0, 9.0, 10.0} & set(starts)  # a start needs frames s - 1 and s fresh
     assert float(one.mask[(one.sequence == 0) & (one.theta0 == 7.0)].sum()) == 0  # its target, frame 8, is stale

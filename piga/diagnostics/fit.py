@@ -64,6 +64,9 @@ GRIDS: dict[str, tuple[float, ...]] = {
 }
 MAX_DELAY = 4
 """Largest delay tried (steps)."""
+#: Smallest value that :func:`simulate` uses for a limit (a saturation level, a speed clip): the
+#: fit may move the free parameter below it, but the physics, and so the reported value, stop there.
+LOWER_BOUNDS: dict[str, float] = {"s": 1e-3, "v": 0.1}
 
 
 @dataclass(frozen=True)
@@ -165,7 +168,7 @@ def simulate(model: Model, params: dict[str, Tensor], nominal: Nominal, w: Windo
     if "deadzone" in model.effects:
         cmd = torch.sign(cmd) * torch.relu(cmd.abs() - params["d"])
     if "saturation" in model.effects:
-        s = params["s"].clamp_min(1e-3)
+        s = params["s"].clamp_min(LOWER_BOUNDS["s"])
         cmd = torch.minimum(torch.maximum(cmd, -s), s)
     g, a = params["log_g"].exp(), params["log_a"].exp()
     theta, v = w.theta0, w.v0
@@ -182,7 +185,7 @@ def simulate(model: Model, params: dict[str, Tensor], nominal: Nominal, w: Windo
                 tau = tau + params["tau0"]
             v = v + h * (1.5 * g * torch.sin(theta + nominal.offset) + 3.0 * tau)
             if "speed_clip" in model.effects:
-                vmax = params["v"].clamp_min(0.1)
+                vmax = params["v"].clamp_min(LOWER_BOUNDS["v"])
                 v = torch.minimum(torch.maximum(v, -vmax), vmax)
             theta = theta + h * v
         out.append(theta)
@@ -259,7 +262,8 @@ def fit(model: Model, nominal: Nominal, w: Windows, weights: Tensor | None = Non
 
     opt.step(closure)
     values = {"g": float(params["log_g"].detach().exp()), "a": float(params["log_a"].detach().exp())}
-    values.update({k: float(v.detach()) for k, v in params.items() if not k.startswith("log_")})
+    values.update({k: max(float(v.detach()), LOWER_BOUNDS.get(k, -math.inf)) for k, v in params.items()
+                   if not k.startswith("log_")})
     return Model(model.effects, model.delay, values)
 
 
