@@ -249,7 +249,8 @@ def test_video_that_is_not_the_pendulum_is_refused_not_diagnosed(tiny_model: Pat
     with h5py.File(noise, "r+") as f:
         f["frames"][...] = np.random.default_rng(0).integers(0, 256, f["frames"].shape, dtype=np.uint8)
     out = tmp_path / "report"
-    result = run("piga-diagnose", "--model", str(tiny_model), "--data", str(noise), "--out", str(out), "--bootstrap", "0")
+    result = run("piga-diagnose", "--model", str(tiny_model), "--data", str(noise), "--out", str(out), "--bootstrap", "0",
+                 "--quiet")
     assert_one_line_error(result, "not the scene the model knows")
     assert "verdict" not in result.stdout and not out.exists()
 

@@ -61,11 +61,18 @@ from piga.runs import Nominal, nominal_of, training_arrow, training_blank_mse, t
 GYM_SPEED_CLIP = PENDULUM_MAX_SPEED
 
 #: Re-rendering error of a recording over the model's training error above which the recording is
-#: not the scene the model knows. MEASURED_PLACEHOLDER
+#: not the scene the model knows. Measured with a model of the default recipe (piga-collect
+#: defaults, 2 epochs of piga-train-model, training MSE 4.6e-4) on 40 x 20 frames of each: the
+#: pendulum 0.9x (clean or damped), blur σ 2.5 px 3.7x, a 3 px shift 8.5x, camera noise of 30 gray
+#: levels 27x (the blind check's strongest is 22); uniform random frames 700x, black frames 2100x.
+#: 100x lies between, a factor of ~4 from the strongest real camera and ~7 from noise.
 SCENE_RATIO = 100.0
 
 #: The model's training reconstruction error over the error of drawing no pendulum on its training
-#: frames above which its training failed. MEASURED_PLACEHOLDER
+#: frames (their MSE against the model's own background) above which its training failed: a model
+#: that re-renders its own frames worse than an empty picture would has not learnt the pendulum.
+#: Measured: 0.13 for the default recipe after 2 of 16 epochs, 0.25 for the tests' 24-step tiny
+#: model, 59 after 2 steps (the untrained model that reported "speed_clip -0.374").
 TRAINING_FRACTION = 1.0
 
 
