@@ -2,9 +2,13 @@
 
 Steps (no state labels, no effect labels; only frames and actions of the "real" system):
 
+0. Refuse a run whose training clearly failed: its reconstruction error on its own training frames
+   is above that of drawing no pendulum at all (:data:`TRAINING_FRACTION`).
 1. :func:`~piga.diagnostics.observe.observe`: encode and re-render every frame with the identified
-   model, and mark the frames that repeat the previous one (within 2 gray levels). The re-rendering error
-   against the model's own training error says how much of the gap is vision.
+   model, and mark the frames that repeat the previous one (within 2 gray levels,
+   :mod:`piga.diagnostics.repeats`). The re-rendering error against the model's own training error
+   says how much of the gap is vision; far above it (:data:`SCENE_RATIO`), the recording is not the
+   scene the model knows, and the diagnosis refuses rather than name effects.
 2. The camera stage (:func:`~piga.diagnostics.vision.camera_stage`): blur, shift and noise fitted
    by matching frames to the decoder's renders; dropped frames and a late camera from the
    repeats. With blur, shift or noise, the dynamics below use the matched angles.
