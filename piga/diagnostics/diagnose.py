@@ -3,11 +3,11 @@
 Steps (no state labels, no effect labels; only frames and actions of the "real" system):
 
 0. Refuse a run whose training clearly failed: its reconstruction error on its own training frames
-   is above that of drawing no pendulum at all (:data:`TRAINING_FRACTION`).
+   is above that of drawing no pendulum at all (``DiagnoseConfig.max_training_fraction``).
 1. :func:`~piga.diagnostics.observe.observe`: encode and re-render every frame with the identified
    model, and mark the frames that repeat the previous one (within 2 gray levels,
    :mod:`piga.diagnostics.repeats`). The re-rendering error against the model's own training error
-   says how much of the gap is vision; far above it (:data:`SCENE_RATIO`), the recording is not the
+   says how much of the gap is vision; far above it (``DiagnoseConfig.max_scene_ratio``), the recording is not the
    scene the model knows, and the diagnosis refuses rather than name effects.
 2. The camera stage (:func:`~piga.diagnostics.vision.camera_stage`): blur, shift and noise fitted
    by matching frames to the decoder's renders; dropped frames and a late camera from the
@@ -64,21 +64,6 @@ from piga.runs import Nominal, nominal_of, training_arrow, training_blank_mse, t
 #: Gymnasium Pendulum-v1's own speed clip (rad/s).
 GYM_SPEED_CLIP = PENDULUM_MAX_SPEED
 
-#: Re-rendering error of a recording over the model's training error above which the recording is
-#: not the scene the model knows. Measured with a model of the default recipe (piga-collect
-#: defaults, 2 epochs of piga-train-model, training MSE 4.6e-4) on 40 x 20 frames of each: the
-#: pendulum 0.9x (clean or damped), blur σ 2.5 px 3.7x, a 3 px shift 8.5x, camera noise of 30 gray
-#: levels 27x (the blind check's strongest is 22); uniform random frames 700x, black frames 2100x.
-#: 100x lies between, a factor of ~4 from the strongest real camera and ~7 from noise.
-SCENE_RATIO = 100.0
-
-#: The model's training reconstruction error over the error of drawing no pendulum on its training
-#: frames (their MSE against the model's own background) above which its training failed: a model
-#: that re-renders its own frames worse than an empty picture would has not learnt the pendulum.
-#: Measured: 0.13 for the default recipe after 2 of 16 epochs, 0.25 for the tests' 24-step tiny
-#: model, 59 after 2 steps (the untrained model that reported "speed_clip -0.374").
-TRAINING_FRACTION = 1.0
-
 
 @dataclass(frozen=True)
 class DiagnoseConfig:
@@ -113,12 +98,20 @@ class DiagnoseConfig:
     """Seed of the bootstrap."""
     vision_ratio: float = 2.0
     """Re-rendering error above this multiple of the model's training error counts as a vision gap."""
-    max_scene_ratio: float = SCENE_RATIO
+    max_scene_ratio: float = 100.0
     """Re-rendering error above this multiple of the model's training error: not the scene the model
-    knows, and the diagnosis refuses (see :data:`SCENE_RATIO`)."""
-    max_training_fraction: float = TRAINING_FRACTION
+    knows, and the diagnosis refuses. Measured with a model of the default recipe (piga-collect
+    defaults, 2 epochs of piga-train-model, training MSE 4.6e-4) on 40 x 20 frames of each: the
+    pendulum 0.9x (clean or damped), blur σ 2.5 px 3.7x, a 3 px shift 8.5x, camera noise of 30 gray
+    levels 27x (the blind check's strongest is 22); uniform random frames 700x, black frames 2100x.
+    100x lies between: ~4x above the strongest real camera, ~7x below noise."""
+    max_training_fraction: float = 1.0
     """The model's training reconstruction error above this fraction of the error of drawing no
-    pendulum: its training failed, and the diagnosis refuses (see :data:`TRAINING_FRACTION`)."""
+    pendulum on its training frames (their MSE against the model's own background): its training
+    failed, and the diagnosis refuses. A model that re-renders its own frames worse than an empty
+    picture has not learnt the pendulum. Measured: 0.13 for the default recipe after 2 of 16
+    epochs, 0.25 for the tests' 24-step tiny model, 59 after 2 steps (an untrained model, whose
+    diagnosis named a "speed_clip -0.374")."""
     camera: CameraConfig = field(default_factory=CameraConfig)
     """How the camera candidates (blur, shift, noise, dropped and delayed frames) are decided."""
 
