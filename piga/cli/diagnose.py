@@ -32,7 +32,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     from piga.data import inspect_dataset
     from piga.diagnostics import DiagnoseConfig, diagnose
-    from piga.diagnostics.report import check_report_target, write_report
+    from piga.diagnostics.report import check_report_target, number, write_report
     from piga.runs import load_model
 
     # Everything is checked before any work, and the report folder is only created at the end
@@ -56,19 +56,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(f"verdict: {diagnosis.verdict}")
     for note in diagnosis.notes:
         print(f"note: {note}")
-    headline = "–" if g.free_run_gap_closure is None else f"{100 * g.free_run_gap_closure:.1f}%"
+    headline = "–" if g.free_run_gap_closure is None else f"{number(100 * g.free_run_gap_closure, '.1f')}%"
     if not g.gap_above_floor:
         headline += " (no gap above the floor: a ratio of noise)"
     if g.closure_basis == "pixels":
-        detail = (f"typical held-out window, pixel MSE {g.typical_pixel_mse_nominal:.3g} -> "
-                  f"{g.typical_pixel_mse_corrected:.3g}, of the gap above the matched floor {g.pixel_mse_floor:.3g}")
+        detail = (f"typical held-out window, pixel MSE {number(g.typical_pixel_mse_nominal)} -> "
+                  f"{number(g.typical_pixel_mse_corrected)}, of the gap above the matched floor {number(g.pixel_mse_floor)}")
     else:
         floor = g.typical_free_run_mse_floor
-        detail = (f"typical held-out window, angle MSE {g.typical_free_run_mse_nominal:.3g} -> "
-                  f"{g.typical_free_run_mse_corrected:.3g} rad²"
-                  + (f", of the gap above the twin's floor {floor:.3g}" if floor is not None else ""))
-    print(f"free-run closure {headline} ({detail}; mean over all windows {100 * g.free_run_closure:.1f}%); corrected "
-          + ", ".join(f"{k} = {v:.4g}" for k, v in diagnosis.corrected.items()))
+        detail = (f"typical held-out window, angle MSE {number(g.typical_free_run_mse_nominal)} -> "
+                  f"{number(g.typical_free_run_mse_corrected)} rad²"
+                  + (f", of the gap above the twin's floor {number(floor)}" if floor is not None else ""))
+    print(f"free-run closure {headline} ({detail}; mean over all windows {number(100 * g.free_run_closure, '.1f')}%); "
+          "corrected " + ", ".join(f"{k} = {number(v, '.4g')}" for k, v in diagnosis.corrected.items()))
     if diagnosis.control:
         for row in diagnosis.control["rows"]:
             print(f"MPC on the simulated real system, {row['physics']} physics: success {100 * row['success_rate']:.0f}% of "

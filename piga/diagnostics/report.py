@@ -118,6 +118,11 @@ def _fmt(x: Any) -> str:
     return str(x)
 
 
+def number(x: float | None, spec: str = ".3g") -> str:
+    """``x`` formatted with ``spec``, or "–" when it is missing or not finite (a report never shows "nan")."""
+    return "–" if x is None or not math.isfinite(x) else format(x, spec)
+
+
 def _interval(ci: list[float] | None) -> str:
     return "–" if not ci or not all(math.isfinite(x) for x in ci) else f"{ci[0]:.4g} .. {ci[1]:.4g}"
 
@@ -166,38 +171,38 @@ def markdown(d: Diagnosis, model: str, data: str, command: str) -> str:
         headline = (f"**Free-run closure {_pct(g.free_run_gap_closure)}, in pixels**: a camera effect was found, so the "
                     "corrected model reads other angles from the frames than the encoder, and angle errors of the two "
                     "would not be comparable. On the typical held-out window (the median over windows of each window's "
-                    f"mean pixel MSE of the rendered free run), the nominal model is at {g.typical_pixel_mse_nominal:.3g}, "
-                    f"the corrected one at {g.typical_pixel_mse_corrected:.3g}, and no prediction can beat "
-                    f"{g.pixel_mse_floor:.3g}, the error of the best-matching render of each frame; the closure is the "
+                    f"mean pixel MSE of the rendered free run), the nominal model is at {number(g.typical_pixel_mse_nominal, '.3g')}, "
+                    f"the corrected one at {number(g.typical_pixel_mse_corrected, '.3g')}, and no prediction can beat "
+                    f"{number(g.pixel_mse_floor, '.3g')}, the error of the best-matching render of each frame; the closure is the "
                     "share of the gap above that floor that the correction removes.")
     elif g.typical_free_run_mse_floor is not None:
         headline = (f"**Free-run closure {_pct(g.free_run_gap_closure)}** of the gap above the floor, on the typical "
                     "held-out window (the median over windows of each window's mean squared free-run angle error): "
-                    f"{g.typical_free_run_mse_nominal:.3g} rad² nominal, {g.typical_free_run_mse_corrected:.3g} rad² "
-                    f"corrected, and a floor of {g.typical_free_run_mse_floor:.3g} rad², the corrected model's own error "
+                    f"{number(g.typical_free_run_mse_nominal, '.3g')} rad² nominal, {number(g.typical_free_run_mse_corrected, '.3g')} rad² "
+                    f"corrected, and a floor of {number(g.typical_free_run_mse_floor, '.3g')} rad², the corrected model's own error "
                     "on a simulated twin of the held-out data that it describes exactly (re-simulated with the corrected "
                     "physics, rendered by the simulator, read by the encoder). Raw, with no floor subtracted: "
                     f"{_pct(g.typical_free_run_closure)}.")
     else:
         headline = (f"**Free-run closure {_pct(g.free_run_gap_closure)}**: 1 − err_corrected / err_nominal on the "
                     "typical held-out window (the median over windows of each window's mean squared free-run angle "
-                    f"error: {g.typical_free_run_mse_nominal:.3g} rad² nominal, "
-                    f"{g.typical_free_run_mse_corrected:.3g} rad² corrected). No floor is subtracted.")
+                    f"error: {number(g.typical_free_run_mse_nominal, '.3g')} rad² nominal, "
+                    f"{number(g.typical_free_run_mse_corrected, '.3g')} rad² corrected). No floor is subtracted.")
     if not g.gap_above_floor:
         headline = ("**No gap above the floor to close** on the typical held-out window: the nominal model's error there "
                     f"is within {MEASURABLE_GAP:g}x the floor, so the closure ({_pct(g.free_run_gap_closure)}) is a ratio "
                     "of noise. " + headline)
     floor = "" if g.free_run_mse_floor is None else (
-        f" On the twin, an exactly right model has {g.free_run_mse_floor:.3g} rad²: "
+        f" On the twin, an exactly right model has {number(g.free_run_mse_floor, '.3g')} rad²: "
         f"{_pct(g.mean_free_run_gap_closure)} of the gap above that floor is closed.")
     lines += [
         "## Size of the gap, and how far it shrinks", "", headline, "",
-        f"Mean over all held-out windows and horizons 1..{g.horizon[-1]}: angle MSE {g.free_run_mse_nominal:.3g} rad² "
-        f"nominal, {g.free_run_mse_corrected:.3g} rad² corrected: raw closure {100 * g.free_run_closure:.1f}%. That mean "
+        f"Mean over all held-out windows and horizons 1..{g.horizon[-1]}: angle MSE {number(g.free_run_mse_nominal, '.3g')} rad² "
+        f"nominal, {number(g.free_run_mse_corrected, '.3g')} rad² corrected: raw closure {100 * g.free_run_closure:.1f}%. That mean "
         "is dominated by the few windows that pass near upright, where any error grows fast, even in an exactly right "
         "model." + floor + " One step: RMSE "
         f"{math.degrees(g.one_step_rms_nominal_rad):.3f}° nominal, {math.degrees(g.one_step_rms_corrected_rad):.3f}° corrected.", "",
-        f"Nominal g = {d.nominal['g']:.4f}, a = {d.nominal['a']:.4f}; corrected: "
+        f"Nominal g = {number(d.nominal['g'], '.4f')}, a = {number(d.nominal['a'], '.4f')}; corrected: "
         + ", ".join(f"{k} = {_fmt(v)}" for k, v in d.corrected.items()), "",
         "![gap](gap.png)", "",
         "| horizon | angle RMSE nominal (deg) | corrected (deg) | closure | pixel MSE nominal | corrected |", "|---|---|---|---|---|---|",
@@ -217,11 +222,11 @@ def markdown(d: Diagnosis, model: str, data: str, command: str) -> str:
                   f"corrected physics and {reader}:", "",
                   summary_markdown(d.control["rows"], extra=[("physics", "physics")]).rstrip()]
     v = d.vision
-    ratio = "" if v.ratio is None else f" (x{v.ratio:.2f})"
-    training = "an unknown error" if not v.rec_mse_training else f"{v.rec_mse_training:.2e}"
+    ratio = "" if v.ratio is None else f" (x{number(v.ratio, '.2f')})"
+    training = "an unknown error" if not v.rec_mse_training else f"{number(v.rec_mse_training, '.2e')}"
     lines += [
         "", "## Where it lies", "",
-        f"- **Vision**: the autoencoder re-renders the real frames with MSE {v.rec_mse_real:.2e}, against "
+        f"- **Vision**: the autoencoder re-renders the real frames with MSE {number(v.rec_mse_real, '.2e')}, against "
         f"{training} on its training frames{ratio}.",
         *_camera_lines(v),
         f"- **Dynamics**: on the encoded angles, the nominal physics' held-out free-run angle RMSE is "
