@@ -164,7 +164,7 @@ def test_cli_bad_inputs(tiny_model: Path, tiny_data: Path, tmp_path: Path) -> No
     collect(CollectConfig(sequences=4, steps=16, seed=1, workers=1, split=(2, 1, 1),
                           env=PixelPendulumConfig(image_size=32)), small, progress=False, command="t")
     assert_one_line_error(run("piga-diagnose", "--model", str(tiny_model), "--data", str(small), "--out", out), "32")
-    assert not (tmp_path / "report" / "report.md").exists()
+    assert not (tmp_path / "report").exists()  # a refusal leaves no folder behind
 
 
 def test_corrected_planner_rolls_the_corrected_physics() -> None:
@@ -187,6 +187,7 @@ def test_corrected_planner_rolls_the_corrected_physics() -> None:
 def test_cli_bad_env(tiny_model: Path, tiny_data: Path, tmp_path: Path) -> None:
     assert_one_line_error(run("piga-diagnose", "--model", str(tiny_model), "--data", str(tiny_data), "--out",
                               str(tmp_path / "r"), "--env", "dampng=0.2"), "--env", "unknown effect")
+    assert not (tmp_path / "r").exists()
 
 
 def test_cli_with_env_writes_a_complete_report_and_the_control_comparison(tiny_model: Path, damped_data: Path,
@@ -222,20 +223,12 @@ def test_cli_with_env_writes_a_complete_report_and_the_control_comparison(tiny_m
     assert_one_line_error(again, "--overwrite")
 
 
-def test_refusals_leave_no_report_folder(tiny_model: Path, untrained_model: Path, tiny_data: Path, damped_data: Path,
-                                         tmp_path: Path) -> None:
+def test_a_model_whose_training_failed_is_refused(untrained_model: Path, damped_data: Path, tmp_path: Path) -> None:
+    """An untrained model once reported "speed_clip -0.374" and "noise nan"; now one line, and no folder."""
     out = tmp_path / "report"
-    refused = [
-        (("--model", str(tmp_path / "nope"), "--data", str(damped_data)), "no checkpoint"),
-        (("--model", str(tiny_model), "--data", str(tmp_path / "x.h5")), ""),
-        (("--model", str(tiny_model), "--data", str(tiny_data)), "at least 20"),
-        (("--model", str(tiny_model), "--data", str(damped_data), "--env", "dampng=0.2"), "unknown effect"),
-        (("--model", str(untrained_model), "--data", str(damped_data)), "training failed"),
-    ]
-    for args, needle in refused:
-        assert_one_line_error(run("piga-diagnose", *args, "--out", str(out), "--bootstrap", "0"), needle)
-        assert not out.exists(), args
-    assert sorted(p.name for p in tmp_path.iterdir()) == []
+    result = run("piga-diagnose", "--model", str(untrained_model), "--data", str(damped_data), "--out", str(out))
+    assert_one_line_error(result, "training failed", "drawing no pendulum")
+    assert not out.exists()
 
 
 def test_video_that_is_not_the_pendulum_is_refused_not_diagnosed(tiny_model: Path, damped_data: Path, tmp_path: Path) -> None:
@@ -255,7 +248,7 @@ def test_video_that_is_not_the_pendulum_is_refused_not_diagnosed(tiny_model: Pat
     assert "verdict" not in result.stdout and not out.exists()
 
 
-def test_a_run_whose_training_failed_is_refused() -> None:
+def test_the_training_check_of_a_run() -> None:
     from piga.diagnostics.observe import UntrainedModelError, check_training
 
     run = {"state": {"step": 500}, "train_config": {"warmup_steps": 200}}
