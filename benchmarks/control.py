@@ -68,7 +68,7 @@ def main() -> int:
                    help="more run folders (other training seeds): upright at x1.0 and x1.4, --sweep-episodes each")
     args = p.parse_args()
     from piga.goal import goal_from_image, render_goal_image
-    from piga.train import load_model
+    from piga.runs import load_model
 
     model, ckpt = load_model(args.model)
     learned = model.physical_parameters()

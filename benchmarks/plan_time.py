@@ -37,7 +37,7 @@ from piga.atomic import atomic_output, write_json
 from piga.episodes import EpisodeConfig, run_episodes, summary_markdown
 from piga.model import PhysicsModel
 from piga.physics import rollout
-from piga.train import load_model
+from piga.runs import load_model
 
 
 class ModuleDynamics:

@@ -13,10 +13,9 @@ Importing this package registers the env ids:
 
 import gymnasium as gym
 
+from envs.constants import MAX_ACTION, PENDULUM_DT, PENDULUM_MAX_SPEED
 from envs.effects import EFFECTS, FRICTION_SMOOTHING, normalize_effects, parse_effect
 from envs.pendulum import (
-    MAX_ACTION,
-    PENDULUM_DT,
     ActuationGain,
     HideTorqueArrow,
     PendulumStateInfo,
@@ -30,6 +29,7 @@ __all__ = [
     "FRICTION_SMOOTHING",
     "MAX_ACTION",
     "PENDULUM_DT",
+    "PENDULUM_MAX_SPEED",
     "ActuationGain",
     "HideTorqueArrow",
     "PendulumStateInfo",

@@ -81,16 +81,13 @@ import cv2
 import gymnasium as gym
 import numpy as np
 
-from envs.pendulum import MAX_ACTION
+from envs.constants import MAX_ACTION, PENDULUM_MAX_SPEED
 
 #: Speed scale (rad/s) of the smoothed Coulomb friction -c·tanh(θ̇ / FRICTION_SMOOTHING).
 FRICTION_SMOOTHING = 0.1
 
 #: Periods per turn of the cogging torque.
 COGGING_PERIODS = 4
-
-#: Pendulum-v1's own speed clip (rad/s), which is always present.
-PENDULUM_MAX_SPEED = 8.0
 
 
 # ---------------------------------------------------------------------------------------------

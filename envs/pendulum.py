@@ -57,14 +57,15 @@ from gymnasium.wrappers import (
     ResizeObservation,
 )
 
+from envs.constants import MAX_ACTION, PENDULUM_DT, PENDULUM_MAX_SPEED
+from envs.effects import EFFECTS, ShowCommandedTorque, normalize_effects, wrap_effects
+
 # pygame opens a display on its first render; on a headless machine it needs the dummy driver
 # and otherwise prints an XDG_RUNTIME_DIR complaint. A user's own choice is respected.
 os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
 
-#: Gymnasium's Pendulum-v1 torque limit: the action u lies in [-MAX_ACTION, MAX_ACTION].
-MAX_ACTION = 2.0
-#: Gymnasium's Pendulum-v1 integration step (s).
-PENDULUM_DT = 0.05
+__all__ = ["MAX_ACTION", "PENDULUM_DT", "PENDULUM_MAX_SPEED", "ActuationGain", "HideTorqueArrow", "PendulumStateInfo",
+           "PixelPendulumConfig", "ResetRange", "make_pixel_pendulum"]
 
 
 @dataclass(frozen=True)
@@ -93,8 +94,6 @@ class PixelPendulumConfig:
     """Unmodelled effects as (name, value) pairs, e.g. (("damping", 0.2),); see :mod:`envs.effects`."""
 
     def __post_init__(self) -> None:
-        from envs.effects import normalize_effects  # envs.effects imports this module
-
         try:
             effects = normalize_effects(self.effects)
         except (TypeError, ValueError) as exc:
@@ -108,14 +107,14 @@ class PixelPendulumConfig:
             "actuation_gain": self.actuation_gain > 0 and math.isfinite(self.actuation_gain),
             "episode_length": self.episode_length >= 1,
             "max_angle": 0 <= self.max_angle <= math.pi,
-            "max_speed": 0 <= self.max_speed <= 8,
+            "max_speed": 0 <= self.max_speed <= PENDULUM_MAX_SPEED,
         }
         for name, ok in checks.items():
             if not ok:
                 raise ValueError(
                     f"PixelPendulumConfig.{name}={getattr(self, name)!r} is out of range "
                     "(sizes and counts >= 1, gravity and gains > 0, max_angle in [0, pi], "
-                    "max_speed in [0, 8])"
+                    f"max_speed in [0, {PENDULUM_MAX_SPEED:g}])"
                 )
 
     @property
@@ -227,8 +226,6 @@ def make_pixel_pendulum(
     """
     if render_mode not in (None, "rgb_array"):
         raise ValueError(f"the pixel pendulum renders only as 'rgb_array', got render_mode={render_mode!r}")
-    from envs.effects import EFFECTS, ShowCommandedTorque, wrap_effects  # envs.effects imports this module
-
     config = replace(config or PixelPendulumConfig(), **overrides)
     env = gym.make(
         "Pendulum-v1",

@@ -14,8 +14,9 @@ command line that made the file), and optionally ``env_config``, ``state_names``
 ``source_frames`` and ``dropped_frames`` (from ``piga-import``; see :mod:`piga.importer`).
 
 Training code reads only frames and actions: :class:`piga.windows.SequenceWindows` (a torch
-Dataset, also reachable as ``piga.data.SequenceWindows``) serves those and nothing else. Ground-truth states come out only through :func:`load_states`, which evaluation code calls
-explicitly.
+Dataset, in its own module so that reading and writing files does not pay torch's import) serves
+those and nothing else. Ground-truth states come out only through :func:`load_states`, which
+evaluation code calls explicitly.
 """
 
 from __future__ import annotations
@@ -325,12 +326,3 @@ class DatasetWriter:
             raise error
         self._ctx.__exit__(None, None, None)
 
-
-def __getattr__(name: str) -> Any:
-    # The torch Dataset lives in piga.windows so that reading and writing files (piga-collect)
-    # does not pay torch's 1.5 s import; ``piga.data.SequenceWindows`` still works.
-    if name in ("SequenceWindows", "Window"):
-        from piga import windows
-
-        return getattr(windows, name)
-    raise AttributeError(f"module 'piga.data' has no attribute {name!r}")

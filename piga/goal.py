@@ -118,7 +118,7 @@ def read_goal(model: PhysicsModel, image: np.ndarray, g: float, a: float, mse_li
 
 def goal_from_image(model: PhysicsModel, checkpoint: dict, path: str | os.PathLike[str],
                     gravity_mult: float = 1.0) -> GoalEstimate:
-    """Reads the goal from an image file for a model loaded by :func:`piga.train.load_model`.
+    """Reads the goal from an image file for a model loaded by :func:`piga.runs.load_model`.
 
     The image is first compared with the environment's renders (:func:`scene_mismatch`). The
     model's "not the scene" warning limit is 4x its own final reconstruction MSE per frame.
@@ -128,7 +128,7 @@ def goal_from_image(model: PhysicsModel, checkpoint: dict, path: str | os.PathLi
             :data:`MAX_SCENE_MISMATCH`).
     """
     learned = model.physical_parameters()
-    from piga.train import training_reconstruction_mse
+    from piga.runs import training_reconstruction_mse
 
     image = load_scene_image(path, model.config.image_size)
     mismatch = scene_mismatch(image)

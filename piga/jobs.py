@@ -23,7 +23,7 @@ from agents.dynamics import Dynamics
 from agents.mpc import MPCConfig, OracleAgent, PigaMPCAgent, StateReader
 from piga.episodes import EpisodeConfig, run_episodes
 from piga.model import PhysicsModel
-from piga.train import load_model
+from piga.runs import load_model
 
 
 class AgentCorrection(Protocol):

@@ -33,9 +33,8 @@ from piga.atomic import atomic_output
 from piga.data import DatasetInfo, check_actions_file, inspect_dataset, read_sequences
 from piga.encoder import estimate_background
 from piga.model import SYSTEM_SHAPES, ModelConfig, PhysicsModel, frames_to_float
+from piga.runs import CHECKPOINT, load_model
 from piga.windows import SequenceWindows
-
-CHECKPOINT = "checkpoint.pt"
 
 
 class TrainingDiverged(RuntimeError):
@@ -169,31 +168,6 @@ def save_checkpoint(path: Path, model: PhysicsModel, optimizer: torch.optim.Opti
     }
     with atomic_output(path, overwrite=True) as tmp:
         torch.save(payload, tmp)
-
-
-def load_model(run_dir: str | Path) -> tuple[PhysicsModel, dict[str, Any]]:
-    """Rebuilds a trained model from ``RUN_DIR/checkpoint.pt``; returns it (eval mode) and the checkpoint."""
-    path = Path(run_dir) / CHECKPOINT
-    if not path.exists():
-        raise FileNotFoundError(f"{path}: no checkpoint (is {run_dir} a piga-train-model run folder?)")
-    try:
-        ckpt = torch.load(path, map_location="cpu", weights_only=False)
-        model = PhysicsModel(ModelConfig.from_dict(ckpt["model_config"]))
-        model.load_state_dict(ckpt["model"])
-    except Exception as exc:  # a truncated or foreign file
-        raise ValueError(f"{path}: not a readable piga checkpoint ({exc.__class__.__name__}: {exc})") from None
-    model.eval()
-    return model, ckpt
-
-
-def training_reconstruction_mse(model: PhysicsModel, checkpoint: dict[str, Any] | None) -> float:
-    """The model's own per-frame reconstruction MSE in its last training epoch (0 if unknown)."""
-    try:
-        history = checkpoint["state"]["history"]  # type: ignore[index]
-        frames = model.config.input_frames if model.config.rec_frames == "input" else model.config.window
-        return float(history[-1]["loss_rec"]) / frames
-    except (TypeError, KeyError, IndexError):
-        return 0.0
 
 
 def _background(data: str | Path, channels: int, seed: int, max_frames: int = 2000) -> torch.Tensor:

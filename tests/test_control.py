@@ -318,7 +318,7 @@ def test_goal_image_that_is_not_the_scene_is_refused(control_model: Path, tmp_pa
     import imageio.v3 as iio
 
     from piga.goal import NotTheSceneError, goal_from_image, scene_mismatch
-    from piga.train import load_model
+    from piga.runs import load_model
 
     model, ckpt = load_model(control_model)  # one epoch: its own re-rendering check means nothing
     rng = np.random.default_rng(0)

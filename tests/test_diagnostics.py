@@ -12,10 +12,11 @@ import torch
 
 from envs.pendulum import PixelPendulumConfig, make_pixel_pendulum
 from piga.diagnostics import DiagnoseConfig, Observations, analyse
-from piga.diagnostics import fit as F
+from piga.diagnostics import fit
+from piga.runs import Nominal
 from tests.helpers import assert_one_line_error, run
 
-NOMINAL = F.Nominal(g=10.0, a=1.0, offset=0.0, dt=0.05)
+NOMINAL = Nominal(g=10.0, a=1.0, offset=0.0, dt=0.05)
 FAST = DiagnoseConfig(bootstrap=0)
 
 
@@ -33,13 +34,13 @@ def test_candidate_physics_matches_the_effect_wrappers(effects: dict) -> None:
         _, _, _, _, info = env.step(np.array([u], np.float32))
         states.append(info["state"][0])
     env.close()
-    names = tuple(e for e in F.CANDIDATES if e in effects)
-    values = {"g": 10.0, "a": 1.0, **{F.PARAMETER[e]: v for e, v in effects.items() if e in F.PARAMETER}}
-    model = F.Model(names, effects.get("delay", 0), values)
-    w = F.Windows(torch.tensor([theta0], dtype=torch.float64), torch.tensor([v0], dtype=torch.float64),
-                  torch.tensor([[0.0] * F.MAX_DELAY + list(actions.astype(np.float32))], dtype=torch.float64),
+    names = tuple(e for e in fit.CANDIDATES if e in effects)
+    values = {"g": 10.0, "a": 1.0, **{fit.PARAMETER[e]: v for e, v in effects.items() if e in fit.PARAMETER}}
+    model = fit.Model(names, effects.get("delay", 0), values)
+    w = fit.Windows(torch.tensor([theta0], dtype=torch.float64), torch.tensor([v0], dtype=torch.float64),
+                  torch.tensor([[0.0] * fit.MAX_DELAY + list(actions.astype(np.float32))], dtype=torch.float64),
                   torch.tensor([states]), torch.ones(1, len(states)), torch.zeros(1, dtype=torch.long))
-    predicted = F.simulate(model, F.parameters_of(model, NOMINAL), NOMINAL, w)[0].detach().numpy()
+    predicted = fit.simulate(model, fit.parameters_of(model, NOMINAL), NOMINAL, w)[0].detach().numpy()
     np.testing.assert_allclose(predicted, states, atol=1e-5)
 
 
@@ -60,8 +61,8 @@ def planted(effects: dict, n: int = 120, t: int = 30, noise: float = 0.002, seed
         v = v + 0.05 * (15 * np.sin(x) + 3 * tau)
         x = x + 0.05 * v
         th[:, i + 1] = x
-    fit = np.arange(n) < int(0.75 * n)
-    return Observations(th + rng.normal(0, noise, th.shape), u, np.zeros((n, t)), fit, 0.05,
+    fit_split = np.arange(n) < int(0.75 * n)
+    return Observations(th + rng.normal(0, noise, th.shape), u, np.zeros((n, t)), fit_split, 0.05,
                         np.zeros((0, t, 8, 8), np.uint8), np.zeros(0, int))
 
 
@@ -118,12 +119,36 @@ def test_a_gain_whose_interval_holds_the_nominal_is_not_named() -> None:
 
 @pytest.fixture(scope="module")
 def tiny_model(tiny_data: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A tiny model whose autoencoder has learnt the scene (training MSE ~25% of drawing no pendulum;
+    24 steps, ~15 s), but whose physics has barely moved from g = 1, a = 0.3: its verdicts mean nothing."""
     from piga.train import TrainConfig, train
 
     run_dir = tmp_path_factory.mktemp("diag") / "model"
-    train(tiny_data, run_dir, TrainConfig(epochs=1, batch_size=16, warmup_steps=2, curriculum_steps=2, threads=1),
+    train(tiny_data, run_dir, TrainConfig(epochs=6, batch_size=16, warmup_steps=16, curriculum_steps=2, threads=1, lr=3e-3),
           {"rec_frames": "input", "pred_frames": 4}, progress=False)
     return run_dir
+
+
+@pytest.fixture(scope="module")
+def untrained_model(tiny_data: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A model after 2 steps: its autoencoder draws no pendulum yet (training MSE ~60x that of drawing none)."""
+    from piga.train import TrainConfig, train
+
+    run_dir = tmp_path_factory.mktemp("diag") / "untrained"
+    train(tiny_data, run_dir, TrainConfig(epochs=1, batch_size=16, warmup_steps=1, curriculum_steps=2, threads=1),
+          {"rec_frames": "input", "pred_frames": 4}, progress=False)
+    return run_dir
+
+
+@pytest.fixture(scope="module")
+def damped_data(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """24 sequences x 16 frames of a pendulum with damping 0.3 (split 16/4/4)."""
+    from piga.collect import CollectConfig, collect
+
+    path = tmp_path_factory.mktemp("real") / "real.h5"
+    collect(CollectConfig(sequences=24, steps=16, seed=5, workers=1, split=(16, 4, 4),
+                          env=PixelPendulumConfig(effects=(("damping", 0.3),))), path, progress=False, command="t")
+    return path
 
 
 def test_cli_bad_inputs(tiny_model: Path, tiny_data: Path, tmp_path: Path) -> None:
@@ -139,7 +164,7 @@ def test_cli_bad_inputs(tiny_model: Path, tiny_data: Path, tmp_path: Path) -> No
     collect(CollectConfig(sequences=4, steps=16, seed=1, workers=1, split=(2, 1, 1),
                           env=PixelPendulumConfig(image_size=32)), small, progress=False, command="t")
     assert_one_line_error(run("piga-diagnose", "--model", str(tiny_model), "--data", str(small), "--out", out), "32")
-    assert not (tmp_path / "report" / "report.md").exists()
+    assert not (tmp_path / "report").exists()  # a refusal leaves no folder behind
 
 
 def test_corrected_dynamics_roll_the_corrected_physics() -> None:
@@ -149,10 +174,10 @@ def test_corrected_dynamics_roll_the_corrected_physics() -> None:
     actions = torch.rand(6, 10, 1) * 4 - 2
     true = PendulumDynamics(10.0, 1.0, NOMINAL.dt)
     plain = true.rollout(0.3, -1.0, actions)
-    same = CorrectedDynamics(F.Model((), 0, {"g": 10.0, "a": 1.0}), NOMINAL).rollout(0.3, -1.0, actions)
+    same = CorrectedDynamics(fit.Model((), 0, {"g": 10.0, "a": 1.0}), NOMINAL).rollout(0.3, -1.0, actions)
     for a, b in zip(plain, same):
         torch.testing.assert_close(a, b, atol=1e-5, rtol=0)
-    delayed = CorrectedDynamics(F.Model(("delay",), 2, {"g": 10.0, "a": 1.0}), NOMINAL)
+    delayed = CorrectedDynamics(fit.Model(("delay",), 2, {"g": 10.0, "a": 1.0}), NOMINAL)
     delayed.executed(np.array([1.5]))
     delayed.executed(np.array([-2.0]))
     theta, _ = delayed.rollout(0.3, -1.0, actions)
@@ -168,22 +193,25 @@ def test_corrected_dynamics_roll_the_corrected_physics() -> None:
 def test_cli_bad_env(tiny_model: Path, tiny_data: Path, tmp_path: Path) -> None:
     assert_one_line_error(run("piga-diagnose", "--model", str(tiny_model), "--data", str(tiny_data), "--out",
                               str(tmp_path / "r"), "--env", "dampng=0.2"), "--env", "unknown effect")
+    assert not (tmp_path / "r").exists()
 
 
-def test_cli_writes_a_report_with_the_twin_floor(tiny_model: Path, tmp_path: Path) -> None:
-    """End to end on a tiny model (its verdict means nothing): the report is complete and the floor measured."""
+def test_cli_with_env_writes_a_complete_report_and_the_control_comparison(tiny_model: Path, damped_data: Path,
+                                                                         tmp_path: Path) -> None:
+    """The success path end to end, with --env: every file of the report, the twin's floor, MPC with the
+    nominal and the corrected physics on the simulated real system, and no overwriting."""
     import json
 
-    from piga.collect import CollectConfig, collect
-
-    data, out = tmp_path / "real.h5", tmp_path / "report"
-    collect(CollectConfig(sequences=24, steps=16, seed=5, workers=1, split=(16, 4, 4),
-                          env=PixelPendulumConfig(effects=(("damping", 0.3),))), data, progress=False, command="t")
-    result = run("piga-diagnose", "--model", str(tiny_model), "--data", str(data), "--out", str(out), "--bootstrap", "0",
-                 "--quiet")
+    out = tmp_path / "deep" / "report"  # missing parents are created, at the end
+    result = run("piga-diagnose", "--model", str(tiny_model), "--data", str(damped_data), "--out", str(out),
+                 "--bootstrap", "0", "--env", "damping=0.3", "--episodes", "1", "--quiet")
     assert result.returncode == 0, result.stderr
     assert "verdict:" in result.stdout and "free-run closure" in result.stdout
+    assert "nominal physics: success" in result.stdout and "corrected physics: success" in result.stdout
     report = json.loads((out / "report.json").read_text())
+    assert [r["physics"] for r in report["control"]["rows"]] == ["nominal", "corrected"]
+    assert all(r["episodes"] == 1 for r in report["control"]["rows"])
+    assert report["control"]["effects"] == {"damping": 0.3}
     g = report["gap"]
     assert g["closure_basis"] == "state" or g["pixel_free_run_gap_closure"] is not None
     if g["closure_basis"] == "state":  # the floor comes from the twin: finite, one value per horizon
@@ -191,11 +219,96 @@ def test_cli_writes_a_report_with_the_twin_floor(tiny_model: Path, tmp_path: Pat
         assert g["typical_free_run_mse_floor"] >= 0
     md = (out / "report.md").read_text()
     assert ("No gap above the floor" in md) == (not g["gap_above_floor"])
+    assert "MPC on the simulated real system (damping=0.3)" in md
+    assert "nan" not in md.lower().replace("nanmax", "")
     for name in ("report.md", "gap.png", "residual_heatmap.png", "correlations.png"):
         assert (out / name).stat().st_size > 0
+    assert not [p for p in out.parent.iterdir() if p.name.startswith(".")]  # no partial folder left
     # an existing report is not overwritten
-    again = run("piga-diagnose", "--model", str(tiny_model), "--data", str(data), "--out", str(out), "--bootstrap", "0")
+    again = run("piga-diagnose", "--model", str(tiny_model), "--data", str(damped_data), "--out", str(out), "--bootstrap", "0")
     assert_one_line_error(again, "--overwrite")
+
+
+def test_a_model_whose_training_failed_is_refused(untrained_model: Path, damped_data: Path, tmp_path: Path) -> None:
+    """An untrained model once reported "speed_clip -0.374" and "noise nan"; now one line, and no folder."""
+    out = tmp_path / "report"
+    result = run("piga-diagnose", "--model", str(untrained_model), "--data", str(damped_data), "--out", str(out))
+    assert_one_line_error(result, "training failed", "drawing no pendulum")
+    assert not out.exists()
+
+
+def test_video_that_is_not_the_pendulum_is_refused_not_diagnosed(tiny_model: Path, damped_data: Path, tmp_path: Path) -> None:
+    """Random-noise frames: one line, "not the scene the model knows", no list of effects, no folder."""
+    import shutil
+
+    import h5py
+
+    noise = tmp_path / "noise.h5"
+    shutil.copy(damped_data, noise)
+    with h5py.File(noise, "r+") as f:
+        f["frames"][...] = np.random.default_rng(0).integers(0, 256, f["frames"].shape, dtype=np.uint8)
+    out = tmp_path / "report"
+    result = run("piga-diagnose", "--model", str(tiny_model), "--data", str(noise), "--out", str(out), "--bootstrap", "0",
+                 "--quiet")
+    assert_one_line_error(result, "not the scene the model knows")
+    assert "verdict" not in result.stdout and not out.exists()
+
+
+def test_the_training_check_of_a_run() -> None:
+    from piga.diagnostics.observe import UntrainedModelError, check_training
+
+    run = {"state": {"step": 500}, "train_config": {"warmup_steps": 200}}
+    check_training(run, 0.001, 0.004, max_fraction=1.0)  # a trained model: 25% of drawing no pendulum
+    check_training(run, 0.001, None, max_fraction=1.0)  # no scale known: the recorded error alone is checked
+    with pytest.raises(UntrainedModelError, match="training failed"):
+        check_training(run, 0.2, 0.004, max_fraction=1.0)
+    with pytest.raises(UntrainedModelError, match="never trained"):
+        check_training({"state": {"step": 0}}, 0.001, 0.004, max_fraction=1.0)
+    with pytest.raises(UntrainedModelError, match="warm-up"):
+        check_training({"state": {"step": 150}, "train_config": {"warmup_steps": 200}}, 0.001, 0.004, max_fraction=1.0)
+    for unknown in (0.0, float("nan")):
+        with pytest.raises(UntrainedModelError, match="reconstruction error"):
+            check_training(run, unknown, 0.004, max_fraction=1.0)
+
+
+def test_the_report_never_prints_nan() -> None:
+    """A camera stage that could not measure the noise (nan) and an interval that could not be computed."""
+    from piga.diagnostics.report import markdown
+    from piga.diagnostics.vision import Camera, CameraFindings
+
+    effects = [{"effect": "blur", "value": 1.2, "unit": "px (Gaussian σ)", "interval": [float("nan"), float("nan")]}]
+    camera = CameraFindings(Camera(blur=1.2), float("nan"), 0.0, 0, 0, [], 0.01, 0.005, effects)
+    d = analyse(planted({}), NOMINAL, FAST, camera=camera)
+    assert "blur" in d.verdict and "nan" not in d.verdict
+    assert "nan" not in markdown(d, "m", "d", "c").lower()
+
+
+def test_a_limit_is_reported_where_the_physics_holds_it() -> None:
+    """A speed clip fitted below the engine's bound is reported at the bound, never negative."""
+    obs = planted({}, n=20, t=12)
+    w = fit.make_windows(obs.theta, obs.actions, np.arange(20), 4, 2, 0.05)
+    m = fit.fit(fit.Model(("speed_clip",), 0, {"g": 10.0, "a": 1.0, "v": -0.374}), NOMINAL, w, max_iter=5)
+    assert m.values["v"] == fit.LOWER_BOUNDS["v"]
+
+
+def test_the_diagnosis_engine_is_the_model_engine_without_effects() -> None:
+    """fit.simulate with no effect and piga.physics.Pendulum + Euler integrate the same equations."""
+    from piga.physics import Euler, Pendulum, rollout
+
+    nominal = Nominal(g=9.3, a=1.2, offset=0.25, dt=0.05, substeps=2)
+    rng = np.random.default_rng(0)
+    theta0, v0, u = rng.uniform(-3, 3, 5), rng.uniform(-4, 4, 5), rng.uniform(-2, 2, (5, 15))
+    model = fit.Model((), 0, {"g": nominal.g, "a": nominal.a})
+    as64 = lambda x: torch.as_tensor(x, dtype=torch.float64)  # noqa: E731
+    w = fit.Windows(as64(theta0), as64(v0), as64(np.concatenate([np.zeros((5, fit.MAX_DELAY)), u], 1)),
+                    torch.zeros(5, 15, dtype=torch.float64), torch.ones(5, 15, dtype=torch.float64), torch.arange(5))
+    ours = fit.simulate(model, fit.parameters_of(model, nominal), nominal, w, with_velocity=True).detach()  # (B, H, 2)
+    system = Pendulum(dt=nominal.dt, offset=nominal.offset, learnable=False).double()
+    system.set_parameters(g=nominal.g, a=nominal.a)  # in float64
+    p, v = rollout(system, Euler(nominal.substeps), as64(theta0)[:, None, None], as64(v0)[:, None, None], as64(u)[..., None])
+    torch.testing.assert_close(ours[..., 0], p[..., 0, 0], atol=1e-12, rtol=0)
+    torch.testing.assert_close(ours[..., 1], v[..., 0, 0], atol=1e-12, rtol=0)
+
 
 # --- repeated frames: dropped and delayed by the camera -------------------------------------
 
@@ -212,7 +325,7 @@ def _drop_frames(obs: Observations, p: float, seed: int = 0) -> Observations:
 
 
 def test_dropped_frames_are_named_and_their_repeats_predicted() -> None:
-    from piga.diagnostics.vision import repeated_frames
+    from piga.diagnostics.repeats import repeated_frames
 
     obs = _drop_frames(planted({}, n=120), 0.15)
     leading, drops, rate, effects = repeated_frames(obs.stale, obs.theta)
@@ -230,7 +343,7 @@ def test_dropped_frames_are_named_and_their_repeats_predicted() -> None:
 
 
 def test_a_still_pendulum_repeating_frames_is_no_drop() -> None:
-    from piga.diagnostics.vision import repeated_frames
+    from piga.diagnostics.repeats import repeated_frames
 
     theta = np.zeros((30, 20))
     stale = np.zeros((30, 20), bool)
@@ -239,12 +352,11 @@ def test_a_still_pendulum_repeating_frames_is_no_drop() -> None:
 
 
 def test_a_late_camera_is_a_frame_delay_and_an_early_delay_an_actuator_delay() -> None:
-    from piga.diagnostics.vision import leading_repeats
+    from piga.diagnostics.repeats import leading_repeats
 
     obs = planted({"delay": 2}, n=120)
     # a camera 2 frames late: frame t shows state t - 2, frames 0..2 show the first state
-    late = np.concatenate([obs.theta[:, :1].repeat(2, 1), obs.theta[:, :-2]], 1)
-    stale = np.zeros(late.shape, bool)
+    stale = np.zeros(obs.theta.shape, bool)
     stale[:, 1:3] = True
     assert leading_repeats(stale) == 2
     cam = planted({}, n=120)

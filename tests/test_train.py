@@ -15,7 +15,8 @@ import torch
 from piga.cli import train as cli
 from piga.collect import CollectConfig, collect
 from piga.model import ModelConfig, PhysicsModel
-from piga.train import PRESETS, TrainConfig, TrainingDiverged, load_model, train
+from piga.runs import load_model
+from piga.train import PRESETS, TrainConfig, TrainingDiverged, train
 from tests.helpers import assert_one_line, assert_one_line_error, run, run_in_process
 
 PROG = "piga-train-model"

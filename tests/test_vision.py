@@ -10,7 +10,8 @@ import pytest
 import torch
 
 from envs.pendulum import PixelPendulumConfig, make_pixel_pendulum
-from piga.diagnostics import fit as F
+from piga.diagnostics import fit
+from piga.diagnostics import repeats as R
 from piga.diagnostics import vision as V
 from piga.model import ModelConfig, PhysicsModel
 
@@ -121,31 +122,31 @@ def test_stale_frames_come_from_the_drop_and_delay_wrappers() -> None:
         env.close()
         return np.stack(out)  # (N, T, H, W)
 
-    clean = V.stale_frames(frames({}))
+    clean = R.stale_frames(frames({}))
     assert not clean.any()
-    dropped = V.stale_frames(frames({"frame_drop": 0.3}))
-    assert 0.2 < dropped[:, 1:].mean() < 0.4 and V.leading_repeats(dropped) == 0
-    delayed = V.stale_frames(frames({"frame_delay": 2}))
-    assert V.leading_repeats(delayed) == 2 and not delayed[:, 3:].any()
+    dropped = R.stale_frames(frames({"frame_drop": 0.3}))
+    assert 0.2 < dropped[:, 1:].mean() < 0.4 and R.leading_repeats(dropped) == 0
+    delayed = R.stale_frames(frames({"frame_delay": 2}))
+    assert R.leading_repeats(delayed) == 2 and not delayed[:, 3:].any()
 
 
 def test_repeat_sources_and_windows_over_repeated_frames() -> None:
     stale = np.zeros((2, 20), bool)
     stale[0, [8, 9]] = True
-    np.testing.assert_array_equal(V.repeat_sources(stale)[0, 6:11], [6, 7, 7, 7, 10])
+    np.testing.assert_array_equal(R.repeat_sources(stale)[0, 6:11], [6, 7, 7, 7, 10])
     theta = np.arange(20.0)[None].repeat(2, 0)
     actions = np.zeros((2, 20))
-    w = F.make_windows(theta, actions, np.arange(2), None, 20, 0.05, stale, repeat=True)
+    w = fit.make_windows(theta, actions, np.arange(2), None, 20, 0.05, stale, repeat=True)
     # frames 5..19 after the start at 4: frames 8 and 9 repeat frame 7 (the third prediction)
     np.testing.assert_array_equal(w.source[0, :6].numpy(), [1, 2, 3, 3, 3, 6])
-    one = F.make_windows(theta, actions, np.arange(2), 1, 1, 0.05, stale)
+    one = fit.make_windows(theta, actions, np.arange(2), 1, 1, 0.05, stale)
     starts = one.theta0[one.sequence == 0].numpy()
     assert not {8.0, 9.0, 10.0} & set(starts)  # a start needs frames s - 1 and s fresh
     assert float(one.mask[(one.sequence == 0) & (one.theta0 == 7.0)].sum()) == 0  # its target, frame 8, is stale
 
 
 def test_wilson_interval_covers_the_proportion() -> None:
-    lo, hi = V.wilson(30, 300)
+    lo, hi = R.wilson(30, 300)
     assert lo < 0.1 < hi and hi - lo < 0.08
 
 
@@ -178,5 +179,5 @@ def test_a_codec_copy_is_a_repeat_but_motion_is_not() -> None:
     copy = (first.astype(int) + rng.integers(-1, 2, first.shape)).astype(np.uint8)  # re-encoded: off by 1 level
     moved = first.copy()
     moved[..., 3, 4] += 12  # one pixel of a moving edge
-    stale = V.stale_frames(np.concatenate([first, copy, moved], axis=1))
+    stale = R.stale_frames(np.concatenate([first, copy, moved], axis=1))
     np.testing.assert_array_equal(stale[0], [False, True, False])

@@ -102,7 +102,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     import torch
 
     from agents.mpc import OracleAgent, PigaMPCAgent
-    from piga.train import load_model
+    from piga.runs import load_model
 
     torch.set_num_threads(1)  # small tensors: one thread plans fastest
     model = None
@@ -158,7 +158,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: Sequence[str] | None) -> int:
     """--sweep: the piga agent and the oracle at each multiplier, each told the multiplier."""
     from piga.jobs import ControlJob, run_jobs
-    from piga.train import load_model
+    from piga.runs import load_model
 
     if args.oracle or not args.model:
         raise PigaError("--sweep compares the piga agent with the oracle: give --model RUN_DIR (without --oracle)")

@@ -106,7 +106,7 @@ def _control(run_dir: Path, goal_png: Path, control_md: Path, args) -> list[tupl
     from piga.episodes import EpisodeConfig, summary_markdown, summary_row
     from piga.jobs import ControlJob, run_jobs
     from piga.goal import goal_from_image
-    from piga.train import load_model
+    from piga.runs import load_model
 
     control_cli.main(["--write-goal-image", str(goal_png), "--angle", str(args.goal_angle),
                       *(["--overwrite"] if args.overwrite else [])])

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
-from pathlib import Path
 
 from piga.cli.common import ArgumentParser, PigaError, command_line, nonnegative_int, positive_int, run_cli
 
@@ -31,21 +30,17 @@ def build_parser() -> ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    from piga.atomic import check_writable_target
     from piga.data import inspect_dataset
     from piga.diagnostics import DiagnoseConfig, diagnose
-    from piga.diagnostics.report import REPORT_FILES, write_report
-    from piga.train import load_model
+    from piga.diagnostics.report import check_report_target, number, write_report
+    from piga.runs import load_model
 
+    # Everything is checked before any work, and the report folder is only created at the end
+    # (atomically): a refusal leaves nothing behind.
     effects = _parse_env(args.env) if args.env is not None else None
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise PigaError(f"--out {out} is a file, not a folder")
+    out = check_report_target(args.out, args.overwrite)
     inspect_dataset(args.data)  # schema errors first, with the file's name
     model, ckpt = load_model(args.model)
-    out.mkdir(parents=True, exist_ok=True)
-    for name in REPORT_FILES:
-        check_writable_target(out / name, args.overwrite)
     import torch
 
     torch.set_num_threads(max(1, min(2, torch.get_num_threads())))
@@ -61,19 +56,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(f"verdict: {diagnosis.verdict}")
     for note in diagnosis.notes:
         print(f"note: {note}")
-    headline = "–" if g["free_run_gap_closure"] is None else f"{100 * g['free_run_gap_closure']:.1f}%"
-    if not g.get("gap_above_floor", True):
+    headline = "–" if g.free_run_gap_closure is None else f"{number(100 * g.free_run_gap_closure, '.1f')}%"
+    if not g.gap_above_floor:
         headline += " (no gap above the floor: a ratio of noise)"
-    if g["closure_basis"] == "pixels":
-        detail = (f"typical held-out window, pixel MSE {g['typical_pixel_mse_nominal']:.3g} -> "
-                  f"{g['typical_pixel_mse_corrected']:.3g}, of the gap above the matched floor {g['pixel_mse_floor']:.3g}")
+    if g.closure_basis == "pixels":
+        detail = (f"typical held-out window, pixel MSE {number(g.typical_pixel_mse_nominal)} -> "
+                  f"{number(g.typical_pixel_mse_corrected)}, of the gap above the matched floor {number(g.pixel_mse_floor)}")
     else:
-        floor = g.get("typical_free_run_mse_floor")
-        detail = (f"typical held-out window, angle MSE {g['typical_free_run_mse_nominal']:.3g} -> "
-                  f"{g['typical_free_run_mse_corrected']:.3g} rad²"
-                  + (f", of the gap above the twin's floor {floor:.3g}" if floor is not None else ""))
-    print(f"free-run closure {headline} ({detail}; mean over all windows {100 * g['free_run_closure']:.1f}%); corrected "
-          + ", ".join(f"{k} = {v:.4g}" for k, v in diagnosis.corrected.items()))
+        floor = g.typical_free_run_mse_floor
+        detail = (f"typical held-out window, angle MSE {number(g.typical_free_run_mse_nominal)} -> "
+                  f"{number(g.typical_free_run_mse_corrected)} rad²"
+                  + (f", of the gap above the twin's floor {number(floor)}" if floor is not None else ""))
+    print(f"free-run closure {headline} ({detail}; mean over all windows {number(100 * g.free_run_closure, '.1f')}%); "
+          "corrected " + ", ".join(f"{k} = {number(v, '.4g')}" for k, v in diagnosis.corrected.items()))
     if diagnosis.control:
         for row in diagnosis.control["rows"]:
             print(f"MPC on the simulated real system, {row['physics']} physics: success {100 * row['success_rate']:.0f}% of "

@@ -69,7 +69,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     from piga.atomic import write_json
     from piga.data import inspect_dataset
     from piga.report import write_run_report
-    from piga.train import PRESETS, TrainConfig, TrainingDiverged, check_trainable, load_model, model_config_for, train
+    from piga.runs import load_model
+    from piga.train import PRESETS, TrainConfig, TrainingDiverged, check_trainable, model_config_for, train
 
     info = inspect_dataset(args.data)
     overrides = {k: getattr(args, k) for k in ("epochs", "max_minutes", "batch_size", "lr", "lr_physics", "warmup_steps")
@@ -143,7 +144,7 @@ def _read_record(run_dir: Path) -> dict[str, Any]:
 
 def _saved_epoch(run_dir: Path) -> int:
     """Epochs completed in the run's checkpoint."""
-    from piga.train import load_model
+    from piga.runs import load_model
 
     return int(load_model(run_dir)[1]["state"]["epoch"])
 

@@ -17,7 +17,7 @@ from torch import Tensor
 from agents.mpc import EncoderReader
 from envs.pendulum import MAX_ACTION
 from piga.diagnostics import fit
-from piga.diagnostics.diagnose import nominal_of
+from piga.runs import nominal_of
 from piga.diagnostics.vision import Camera, angle_table, match
 from piga.model import PhysicsModel
 

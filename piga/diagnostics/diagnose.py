@@ -2,9 +2,13 @@
 
 Steps (no state labels, no effect labels; only frames and actions of the "real" system):
 
+0. Refuse a run whose training clearly failed: its reconstruction error on its own training frames
+   is above that of drawing no pendulum at all (``DiagnoseConfig.max_training_fraction``).
 1. :func:`~piga.diagnostics.observe.observe`: encode and re-render every frame with the identified
-   model, and mark the frames that repeat the previous one (within 2 gray levels). The re-rendering error
-   against the model's own training error says how much of the gap is vision.
+   model, and mark the frames that repeat the previous one (within 2 gray levels,
+   :mod:`piga.diagnostics.repeats`). The re-rendering error against the model's own training error
+   says how much of the gap is vision; far above it (``DiagnoseConfig.max_scene_ratio``), the recording is not the
+   scene the model knows, and the diagnosis refuses rather than name effects.
 2. The camera stage (:func:`~piga.diagnostics.vision.camera_stage`): blur, shift and noise fitted
    by matching frames to the decoder's renders; dropped frames and a late camera from the
    repeats. With blur, shift or noise, the dynamics below use the matched angles.
@@ -38,25 +42,27 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from dataclasses import replace as dataclass_replace
-from typing import Any
 
 import numpy as np
 import torch
 from torch import Tensor
 
-from piga.diagnostics import fit as F
-from piga.diagnostics.observe import Observations, observe
-from piga.diagnostics.vision import Camera, CameraConfig, CameraFindings, angle_table, camera_stage, match
+from envs.constants import PENDULUM_MAX_SPEED
+from piga.diagnostics import fit
+from piga.diagnostics.observe import Observations, check_scene, check_training, observe
 from piga.diagnostics.residuals import (action_correlation, autocorrelation, binned, generic_features, heatmap,
                                         one_step_residuals, ridge)
+from piga.diagnostics.results import (CameraSummary, CandidateRow, Diagnosis, Effect, Gap, GenericBasis, Naming,
+                                      PixelErrors, Score, SelectionStep, VisionSummary)
 from piga.diagnostics.twin import MEASURABLE_GAP, gap_closure, twin_floor
+from piga.diagnostics.vision import Camera, CameraConfig, CameraFindings, angle_table, camera_stage, match
 from piga.model import PhysicsModel
-from piga.train import training_reconstruction_mse
+from piga.runs import Nominal, nominal_of, training_arrow, training_blank_mse, training_reconstruction_mse
 
 #: Gymnasium Pendulum-v1's own speed clip (rad/s).
-GYM_SPEED_CLIP = 8.0
+GYM_SPEED_CLIP = PENDULUM_MAX_SPEED
 
 
 @dataclass(frozen=True)
@@ -92,6 +98,20 @@ class DiagnoseConfig:
     """Seed of the bootstrap."""
     vision_ratio: float = 2.0
     """Re-rendering error above this multiple of the model's training error counts as a vision gap."""
+    max_scene_ratio: float = 100.0
+    """Re-rendering error above this multiple of the model's training error: not the scene the model
+    knows, and the diagnosis refuses. Measured with a model of the default recipe (piga-collect
+    defaults, 2 epochs of piga-train-model, training MSE 4.6e-4) on 40 x 20 frames of each: the
+    pendulum 0.9x (clean or damped), blur σ 2.5 px 3.7x, a 3 px shift 8.5x, camera noise of 30 gray
+    levels 27x (the blind check's strongest is 22); uniform random frames 700x, black frames 2100x.
+    100x lies between: ~4x above the strongest real camera, ~7x below noise."""
+    max_training_fraction: float = 1.0
+    """The model's training reconstruction error above this fraction of the error of drawing no
+    pendulum on its training frames (their MSE against the model's own background): its training
+    failed, and the diagnosis refuses. A model that re-renders its own frames worse than an empty
+    picture has not learnt the pendulum. Measured: 0.13 for the default recipe after 2 of 16
+    epochs, 0.25 for the tests' 24-step tiny model, 59 after 2 steps (an untrained model, whose
+    diagnosis named a "speed_clip -0.374")."""
     camera: CameraConfig = field(default_factory=CameraConfig)
     """How the camera candidates (blur, shift, noise, dropped and delayed frames) are decided."""
 
@@ -100,70 +120,8 @@ class DiagnoseConfig:
             raise ValueError(f"need fit_horizon, stride >= 1 and max_effects, bootstrap >= 0, got {self}")
 
 
-@dataclass
-class Diagnosis:
-    """Everything the report shows (JSON-ready through :meth:`to_dict`)."""
-
-    verdict: str
-    """One line: the named effect(s), "no significant gap", or "not explained by the candidates"."""
-    verdict_class: str
-    """"none", "unexplained", or the names of the effects joined by "+" (for scoring)."""
-    effects: list[dict[str, Any]]
-    """Named effects with coefficient, 95% interval and unit."""
-    nominal: dict[str, float]
-    """The identified model's g, a, φ."""
-    corrected: dict[str, float]
-    """g, a and the effect parameters of the chosen model."""
-    corrected_effects: list[str]
-    """The effects in the chosen model's physics (including Gymnasium's own clip when found)."""
-    candidates: list[dict[str, Any]]
-    """Ranked table of the single-effect fits (and the selection steps)."""
-    gap: dict[str, Any]
-    """Errors per horizon: state (rad²) and pixels, nominal vs chosen, and the closure."""
-    vision: dict[str, Any]
-    """Re-rendering error on the real frames vs the model's training error, and the camera stage:
-    the fitted camera, its candidate table, noise, dropped and repeated frames."""
-    residuals: dict[str, Any]
-    """Heatmap, bins, autocorrelation, action cross-correlation of the nominal model."""
-    notes: list[str] = field(default_factory=list)
-    """Other findings (Gymnasium's own clip, vision gap, ...)."""
-
-    control: dict[str, Any] | None = None
-    """With ``--env``: MPC on the simulated real system with the nominal vs the corrected physics."""
-
-    pictures: dict[str, np.ndarray] | None = field(default=None, repr=False)
-    """A held-out frame as recorded ("real", (H, W[, C]) in [0, 1]), re-rendered by the nominal model
-    ("nominal": decoder at the encoder's angle) and by the corrected one ("corrected": through the
-    fitted camera at the matched angle). For the report's picture; not in :meth:`to_dict`."""
-
-    def to_dict(self) -> dict[str, Any]:
-        out = asdict(self)
-        out.pop("pictures")
-        return out
-
-    def corrected_camera(self) -> Camera | None:
-        """The camera to read angles through, when the diagnosis re-matched them (else None: the encoder)."""
-        if self.vision.get("angles") != "matched":
-            return None
-        return Camera(**self.vision["camera"])
-
-    def corrected_model(self) -> F.Model:
-        """The chosen physics as a :class:`piga.diagnostics.fit.Model` (for a planner)."""
-        values = {k: float(v) for k, v in self.corrected.items() if k != "delay"}
-        return F.Model(tuple(self.corrected_effects), int(self.corrected.get("delay", 0)), values)
-
-
-def nominal_of(model: PhysicsModel) -> F.Nominal:
-    """The identified model's physics: g, a, φ, dt and substeps."""
-    p = model.physical_parameters()
-    return F.Nominal(p["g"], p["a"], p.get("offset", 0.0), model.config.dt, model.config.substeps)
-
-
-def _score(m: F.Model, nom: F.Nominal, w_fit1: F.Windows, w_free: F.Windows) -> dict[str, Any]:
-    bic, _ = F.one_step_bic(m, nom, w_fit1)
-    h = F.horizon_errors(m, nom, w_free)
-    return {"model": m, "name": m.name, "bic": bic, "free_run": float(h.mean()), "horizon": h,
-            "typical": float(np.median(F.window_errors(m, nom, w_free)))}
+#: Units of the dynamics effects' parameters.
+UNITS = {"b": "N·m·s/rad", "c": "N·m", "tau0": "N·m", "d": "action units", "s": "action units", "v": "rad/s"}
 
 
 def diagnose(model: PhysicsModel, data: str | os.PathLike[str], config: DiagnoseConfig = DiagnoseConfig(),
@@ -171,90 +129,133 @@ def diagnose(model: PhysicsModel, data: str | os.PathLike[str], config: Diagnose
     """Diagnoses the gap between ``model`` and the recording ``data`` (frames and actions only).
 
     Args:
-        model: the identified pendulum model (from :func:`piga.train.load_model`).
+        model: the identified pendulum model (from :func:`piga.runs.load_model`).
         data: a piga HDF5 file of the "real" system.
         config: see :class:`DiagnoseConfig`.
         checkpoint: the model's checkpoint, for its training reconstruction error (vision check).
+
+    Raises:
+        UntrainedModelError: the run's training clearly failed (checked before the data are read,
+            when the run's training file is still there).
+        NotTheSceneError: the recording is not the scene the model knows.
+        DiagnosisInputError: the model and the data cannot be compared.
     """
+    rec_training = training_reconstruction_mse(model, checkpoint)
+    blank = training_blank_mse(model, checkpoint)
+    if blank is not None:
+        check_training(checkpoint, rec_training, blank, config.max_training_fraction)
     obs = observe(model, data, progress=progress)
+    if blank is None:  # the training file is gone: the recording's frames give the scale
+        check_training(checkpoint, rec_training, obs.blank_mse, config.max_training_fraction)
+    check_scene(obs, rec_training, config.max_scene_ratio)
     camera = camera_stage(model, str(data), obs.theta, obs.fit, obs.stale, config.camera, seed=config.seed,
                           progress=progress)
-    return analyse(obs, nominal_of(model), config, model=model, rec_training=training_reconstruction_mse(model, checkpoint),
+    return analyse(obs, nominal_of(model), config, model=model, rec_training=rec_training,
                    progress=progress, camera=camera, arrow=training_arrow(checkpoint))
 
 
-def training_arrow(checkpoint: dict | None) -> bool:
-    """Whether the data the model was identified on showed Gymnasium's torque arrow: from the
-    ``env_config`` of the training file named in the checkpoint, if that file is still there, else
-    True (Gymnasium's own picture, the pixel pendulum's default)."""
-    import json
+@dataclass(frozen=True)
+class WindowSet:
+    """The windows every step scores on (:func:`piga.diagnostics.fit.make_windows`)."""
 
-    import h5py
+    fit: fit.Windows
+    """Multi-step (``fit_horizon``) windows of the fit split: the fitting loss."""
+    fit1: fit.Windows
+    """One-step windows of the fit split: the BIC."""
+    free: fit.Windows
+    """Free runs on the held-out split, predicting repeated frames."""
+    held1: fit.Windows
+    """One-step windows of the held-out split."""
+    free_nominal: fit.Windows
+    """``free`` as the user's nominal model sees it: the encoder's angles, no idea of repeated frames."""
+    held1_nominal: fit.Windows
+    """``held1`` on the encoder's angles."""
+    fit1_nominal: fit.Windows
+    """``fit1`` on the encoder's angles."""
 
-    path = ((checkpoint or {}).get("data") or {}).get("path")
-    if not path or not os.path.exists(path):
-        return True
-    try:
-        with h5py.File(path, "r") as f:
-            return bool(json.loads(f.attrs["env_config"]).get("draw_torque_arrow", True))
-    except (OSError, KeyError, ValueError):
-        return True
 
-
-def analyse(obs: Observations, nom: F.Nominal, config: DiagnoseConfig = DiagnoseConfig(), model: PhysicsModel | None = None,
-            rec_training: float = 0.0, progress: bool = False, camera: CameraFindings | None = None,
-            arrow: bool = True) -> Diagnosis:
-    """The diagnosis of observations ``obs`` against the nominal physics ``nom``.
-
-    ``model`` (its decoder) renders the pixel errors of ``obs.frames``; without it they are left
-    out. ``rec_training`` is the model's own re-rendering MSE (0: unknown, no vision check).
-    ``camera`` is the camera stage's result (:func:`~piga.diagnostics.vision.camera_stage`); when
-    it accepted a camera or noise, the dynamics are fitted on its re-matched angles. ``arrow``: the
-    simulator that the model was identified in draws Gymnasium's torque arrow (for the twin that
-    measures the floor of the gap, :mod:`piga.diagnostics.twin`).
-    """
-    from tqdm.auto import tqdm
-
+def cut_windows(obs: Observations, theta: np.ndarray, stale: np.ndarray | None, config: DiagnoseConfig) -> WindowSet:
+    """Cuts the (N, T) angles ``theta`` (the corrected model's) and ``obs.theta`` (the encoder's) into windows."""
     fit_rows, held_rows = np.flatnonzero(obs.fit), np.flatnonzero(~obs.fit)
-    stale = obs.stale if obs.stale is not None and obs.stale.any() else None
-    theta = camera.theta if camera is not None and camera.rematched else obs.theta  # the corrected model's angles
-    w_fit = F.make_windows(theta, obs.actions, fit_rows, config.fit_horizon, config.stride, obs.dt, stale)
-    w_fit1 = F.make_windows(theta, obs.actions, fit_rows, 1, 1, obs.dt, stale)
-    w_free = F.make_windows(theta, obs.actions, held_rows, None, config.stride, obs.dt, stale, repeat=True)
-    w_held1 = F.make_windows(theta, obs.actions, held_rows, 1, 1, obs.dt, stale)
+    w_fit = fit.make_windows(theta, obs.actions, fit_rows, config.fit_horizon, config.stride, obs.dt, stale)
+    w_fit1 = fit.make_windows(theta, obs.actions, fit_rows, 1, 1, obs.dt, stale)
+    w_free = fit.make_windows(theta, obs.actions, held_rows, None, config.stride, obs.dt, stale, repeat=True)
+    w_held1 = fit.make_windows(theta, obs.actions, held_rows, 1, 1, obs.dt, stale)
     # the nominal model as the user has it: the encoder's angles, and no idea of repeated frames
     # (the same window starts, so that both are scored on the same predictions)
     w_free_nominal, w_held1_nominal, w_fit1_nominal = dataclass_replace(w_free, source=None), w_held1, w_fit1
     if theta is not obs.theta:
-        w_free_nominal = dataclass_replace(F.make_windows(obs.theta, obs.actions, held_rows, None, config.stride, obs.dt,
-                                                          stale, repeat=True), source=None)
-        w_held1_nominal = F.make_windows(obs.theta, obs.actions, held_rows, 1, 1, obs.dt, stale)
-        w_fit1_nominal = F.make_windows(obs.theta, obs.actions, fit_rows, 1, 1, obs.dt, stale)
+        w_free_nominal = dataclass_replace(fit.make_windows(obs.theta, obs.actions, held_rows, None, config.stride, obs.dt,
+                                                            stale, repeat=True), source=None)
+        w_held1_nominal = fit.make_windows(obs.theta, obs.actions, held_rows, 1, 1, obs.dt, stale)
+        w_fit1_nominal = fit.make_windows(obs.theta, obs.actions, fit_rows, 1, 1, obs.dt, stale)
+    return WindowSet(w_fit, w_fit1, w_free, w_held1, w_free_nominal, w_held1_nominal, w_fit1_nominal)
 
-    nominal_model = F.Model((), 0, {"g": nom.g, "a": nom.a})
-    nominal_score = _score(nominal_model, nom, w_fit1_nominal, w_free_nominal)
-    bar = tqdm(total=1 + len(F.CANDIDATES), desc="fitting candidates", disable=not progress)
-    refit = _score(F.fit_candidate((), {}, nom, w_fit), nom, w_fit1, w_free)
+
+def score(m: fit.Model, nom: Nominal, w_fit1: fit.Windows, w_free: fit.Windows) -> Score:
+    """One-step BIC on ``w_fit1`` and free-run errors on ``w_free`` of the candidate ``m``."""
+    bic, _ = fit.one_step_bic(m, nom, w_fit1)
+    h = fit.horizon_errors(m, nom, w_free)
+    return Score(m, bic, float(h.mean()), h, float(np.median(fit.window_errors(m, nom, w_free))))
+
+
+@dataclass(frozen=True)
+class Candidates:
+    """Step 1: every single-effect candidate fitted and scored."""
+
+    nominal: Score
+    """The nominal model as the user has it (no refit), on the encoder's angles."""
+    refit: Score
+    """"none": g and a refitted, no effect."""
+    singles: list[Score]
+    """Each candidate of :data:`piga.diagnostics.fit.CANDIDATES` with g and a, in BIC order."""
+
+
+def score_candidates(nom: Nominal, w: WindowSet, progress: bool = False) -> Candidates:
+    """Fits "none" (g and a refitted) and each single candidate on the fit split, and scores them."""
+    from tqdm.auto import tqdm
+
+    nominal_model = fit.Model((), 0, {"g": nom.g, "a": nom.a})
+    nominal = score(nominal_model, nom, w.fit1_nominal, w.free_nominal)
+    bar = tqdm(total=1 + len(fit.CANDIDATES), desc="fitting candidates", disable=not progress)
+    refit = score(fit.fit_candidate((), {}, nom, w.fit), nom, w.fit1, w.free)
     bar.update()
     singles = []
-    for name in F.CANDIDATES:
-        singles.append(_score(F.fit_candidate((name,), refit["model"].values, nom, w_fit), nom, w_fit1, w_free))
+    for name in fit.CANDIDATES:
+        singles.append(score(fit.fit_candidate((name,), refit.model.values, nom, w.fit), nom, w.fit1, w.free))
         bar.update()
     bar.close()
-    singles.sort(key=lambda s: s["bic"])
+    singles.sort(key=lambda s: s.bic)
+    return Candidates(nominal, refit, singles)
 
-    # forward selection
-    chosen, steps = refit, []
-    pool = singles
+
+@dataclass(frozen=True)
+class Selection:
+    """Step 2: the forward selection's choice."""
+
+    chosen: Score
+    """The chosen physics ("none" when no effect passed)."""
+    steps: list[SelectionStep]
+    """Every test, in order."""
+
+
+def select(candidates: Candidates, nom: Nominal, w: WindowSet, config: DiagnoseConfig, progress: bool = False) -> Selection:
+    """Forward selection: in BIC order, the first candidate that lowers the BIC by more than
+    ``bic_margin`` and the typical held-out free-run error by more than ``min_gain`` is accepted; then
+    up to ``max_effects`` effects on top of each other, the same way."""
+    from tqdm.auto import tqdm
+
+    chosen, steps = candidates.refit, []
+    pool = candidates.singles
     for _round in range(config.max_effects):
         best = None
         for cand in pool:  # in BIC order: the first that passes both tests is accepted
-            bic_drop = chosen["bic"] - cand["bic"]
+            bic_drop = chosen.bic - cand.bic
             if bic_drop <= config.bic_margin:
                 break  # the rest have even smaller BIC drops
-            free_drop = 1 - cand["typical"] / chosen["typical"] if chosen["typical"] > 0 else 0.0
+            free_drop = 1 - cand.typical / chosen.typical if chosen.typical > 0 else 0.0
             accepted = free_drop > config.min_gain
-            steps.append({"tried": cand["name"], "bic_drop": bic_drop, "free_run_drop": free_drop, "accepted": bool(accepted)})
+            steps.append(SelectionStep(cand.name, bic_drop, free_drop, bool(accepted)))
             if accepted:
                 best = cand
                 break
@@ -263,27 +264,21 @@ def analyse(obs: Observations, nom: F.Nominal, config: DiagnoseConfig = Diagnose
         chosen = best
         if _round + 1 == config.max_effects:
             break
-        base = chosen["model"]
-        rest = [c for c in F.CANDIDATES if c not in base.effects]
+        base = chosen.model
+        rest = [c for c in fit.CANDIDATES if c not in base.effects]
         pool = []
         for name in tqdm(rest, desc=f"adding to {base.name}", disable=not progress):
-            effects = tuple(e for e in F.CANDIDATES if e in (*base.effects, name))
-            m = F.fit_candidate(effects, base.values, nom, w_fit, delay=base.delay or None)
-            pool.append(_score(m, nom, w_fit1, w_free))
-        pool.sort(key=lambda s: s["bic"])
+            effects = tuple(e for e in fit.CANDIDATES if e in (*base.effects, name))
+            m = fit.fit_candidate(effects, base.values, nom, w.fit, delay=base.delay or None)
+            pool.append(score(m, nom, w.fit1, w.free))
+        pool.sort(key=lambda s: s.bic)
+    return Selection(chosen, steps)
 
-    final: F.Model = chosen["model"]
-    notes: list[str] = []
-    # Gymnasium's own speed clip is no gap
-    named = list(final.effects)
-    if "speed_clip" in named and abs(final.values["v"] - GYM_SPEED_CLIP) <= config.gym_clip_tolerance:
-        named.remove("speed_clip")
-        notes.append(f"a speed clip at {final.values['v']:.2f} rad/s was found: Gymnasium's own ±8 rad/s clip, which the "
-                     "nominal environment has too (the model's engine does not); it is not counted as a gap")
-    gain = final.values["a"] / nom.a
-    gain_error = abs(gain - 1) > config.gain_tolerance
 
-    # not explained by the candidates? a flexible basis on what is left
+def generic_basis(final: fit.Model, nom: Nominal, obs: Observations, theta: np.ndarray, stale: np.ndarray | None,
+                  config: DiagnoseConfig) -> GenericBasis:
+    """Step 3: "not explained by the candidates"? A flexible basis fitted to what ``final`` leaves."""
+    fit_rows, held_rows = np.flatnonzero(obs.fit), np.flatnonzero(~obs.fit)
     res_fit = one_step_residuals(final, nom, theta, obs.actions, fit_rows, stale)
     res_held = one_step_residuals(final, nom, theta, obs.actions, held_rows, stale)
     x_fit, x_held = generic_features(res_fit)[res_fit.valid], generic_features(res_held)[res_held.valid]
@@ -297,17 +292,33 @@ def analyse(obs: Observations, nom: F.Nominal, config: DiagnoseConfig = Diagnose
     bic_drop = n * math.log(rss0 / n) - (n * math.log(rss1 / n) + x_fit.shape[1] * math.log(n))
     held0, held1 = float((rho_held**2).mean()), float(((rho_held - x_held @ coef) ** 2).mean())
     unexplained = bic_drop > config.bic_margin and held1 < (1 - config.unexplained_gain) * held0
-    generic = {"bic_drop": bic_drop, "held_out_drop": 1 - held1 / held0 if held0 > 0 else 0.0, "significant": bool(unexplained)}
+    return GenericBasis(bic_drop, 1 - held1 / held0 if held0 > 0 else 0.0, bool(unexplained))
+
+
+def name_effects(final: fit.Model, nom: Nominal, w: WindowSet, camera: CameraFindings | None, generic: GenericBasis,
+                 config: DiagnoseConfig) -> Naming:
+    """Step 4: the effects that the chosen physics and the camera stage name, with intervals, and the verdict.
+
+    Gymnasium's own speed clip is no gap; a delay with a repeated start is the camera's; a gain
+    error is the refitted a, named only when its bootstrap interval excludes the nominal a.
+    """
+    notes: list[str] = []
+    named = list(final.effects)
+    if "speed_clip" in named and abs(final.values["v"] - GYM_SPEED_CLIP) <= config.gym_clip_tolerance:
+        named.remove("speed_clip")
+        notes.append(f"a speed clip at {final.values['v']:.2f} rad/s was found: Gymnasium's own ±8 rad/s clip, which the "
+                     "nominal environment has too (the model's engine does not); it is not counted as a gap")
+    gain = final.values["a"] / nom.a
+    gain_error = abs(gain - 1) > config.gain_tolerance
 
     # uncertainties
-    draws = F.bootstrap(final, nom, w_fit, config.bootstrap, config.seed) if config.bootstrap else {}
+    draws = fit.bootstrap(final, nom, w.fit, config.bootstrap, config.seed) if config.bootstrap else {}
 
     def interval(key: str) -> list[float] | None:
         d = draws.get(key)
         return [float(np.percentile(d, 2.5)), float(np.percentile(d, 97.5))] if d else None
 
-    effects: list[dict[str, Any]] = list(camera.effects) if camera is not None else []
-    units = {"b": "N·m·s/rad", "c": "N·m", "tau0": "N·m", "d": "action units", "s": "action units", "v": "rad/s"}
+    effects = [Effect(**e) for e in camera.effects] if camera is not None else []
     leading = camera.leading if camera is not None else 0
     for e in named:
         if e == "delay":
@@ -316,20 +327,20 @@ def analyse(obs: Observations, nom: F.Nominal, config: DiagnoseConfig = Diagnose
             # camera shows frame 0 again for k frames.
             cam_k = min(leading, final.delay)
             if cam_k:
-                effects.append({"effect": "frame_delay", "value": cam_k, "interval": None, "unit": "steps"})
+                effects.append(Effect("frame_delay", cam_k, "steps"))
                 notes.append(f"the first {leading} frames of nearly every sequence repeat the first one: the camera "
                              f"starts {cam_k} frame(s) late, so the fitted delay of {final.delay} step(s) is "
                              + ("the camera's" if cam_k == final.delay else f"{cam_k} of the camera and {final.delay - cam_k} "
                                 "of the actuator"))
             if final.delay > cam_k:
-                effects.append({"effect": "delay", "value": final.delay - cam_k, "interval": None, "unit": "steps"})
+                effects.append(Effect("delay", final.delay - cam_k, "steps"))
                 if not cam_k:
                     notes.append("an actuator delay and a camera latency of the same k are the same model from frame k on; "
                                  "the recording does not start with repeated frames, as a late camera would, so it is "
                                  "named an actuator delay")
         else:
-            key = F.PARAMETER[e]
-            effects.append({"effect": e, "value": final.values[key], "interval": interval(key), "unit": units[key]})
+            key = fit.PARAMETER[e]
+            effects.append(Effect(e, final.values[key], UNITS[key], interval(key)))
     a_int = interval("a")
     if gain_error and a_int and a_int[0] <= nom.a <= a_int[1]:
         # a deadzone or a saturation trades off against a: the refit may move a while its
@@ -338,8 +349,7 @@ def analyse(obs: Observations, nom: F.Nominal, config: DiagnoseConfig = Diagnose
         notes.append(f"a refits to {final.values['a']:.3f} (x{gain:.3f} the nominal), but its 95% interval "
                      f"{a_int[0]:.3f}..{a_int[1]:.3f} holds the nominal {nom.a:.3f}: not named a gain error")
     if gain_error:
-        effects.append({"effect": "gain", "value": gain, "unit": "factor on the nominal a",
-                        "interval": [x / nom.a for x in a_int] if a_int else None})
+        effects.append(Effect("gain", gain, "factor on the nominal a", [x / nom.a for x in a_int] if a_int else None))
     if leading and "delay" not in final.effects:
         notes.append(f"the first {leading} frames of nearly every sequence repeat the first one, but the dynamics show no "
                      "delay: the camera froze at the start (these frames are left out of the fits)")
@@ -348,41 +358,52 @@ def analyse(obs: Observations, nom: F.Nominal, config: DiagnoseConfig = Diagnose
         notes.append(f"g refits to {final.values['g']:.3f} (x{g_ratio:.3f} the nominal {nom.g:.3f}): gravity, or the "
                      "pendulum's length, differs from the identified model")
 
-    names = [x["effect"] for x in effects]
-    if unexplained:
+    names = [x.effect for x in effects]
+    if generic.significant:
         verdict_class = "unexplained"
         verdict = ("not explained by the candidates: a flexible state-action basis still explains "
-                   f"{100 * generic['held_out_drop']:.0f}% of the held-out residual"
+                   f"{100 * generic.held_out_drop:.0f}% of the held-out residual"
                    + (f" after adding {'+'.join(names)}" if names else ""))
     elif names:
         verdict_class = "+".join(sorted(names))
-        verdict = "; ".join(_describe(x) for x in effects)
+        verdict = "; ".join(x.describe() for x in effects)
     else:
         verdict_class = "none"
         verdict = "no significant gap"
+    return Naming(effects, notes, verdict, verdict_class)
 
-    # vision
+
+def summarise_vision(obs: Observations, rec_training: float, camera: CameraFindings | None, stale: np.ndarray | None,
+                     effects: list[Effect], config: DiagnoseConfig) -> tuple[VisionSummary, list[str]]:
+    """Step 5: the re-rendering error against the training error, and the camera stage; with its notes."""
+    notes: list[str] = []
     rec_real = float(np.mean(obs.rec_mse))
-    vision: dict[str, Any] = {"rec_mse_real": rec_real, "rec_mse_training": rec_training,
-                              "ratio": rec_real / rec_training if rec_training else float("nan")}
+    ratio = rec_real / rec_training if rec_training else None
+    summary = None
     if camera is not None:
-        vision.update({"camera": asdict(camera.camera), "camera_candidates": camera.table, "noise": camera.noise,
-                       "repeated_frames": int(stale.sum()) if stale is not None else 0, "dropped_frames": camera.drops,
-                       "drop_rate": camera.drop_rate, "leading_repeats": camera.leading,
-                       "matched_mse_nominal": camera.matched_error_nominal, "matched_mse_corrected": camera.matched_error,
-                       "angles": "matched" if camera.rematched else "encoder"})
+        summary = CameraSummary(camera.camera, camera.table, camera.noise, int(stale.sum()) if stale is not None else 0,
+                                camera.drops, camera.drop_rate, camera.leading, camera.matched_error_nominal,
+                                camera.matched_error, "matched" if camera.rematched else "encoder")
         if camera.rematched:
             notes.append("the dynamics are fitted on angles found by matching every frame to the decoder's renders "
                          "through the fitted camera (analysis by synthesis), not on the encoder's angles")
-    named_vision = {"blur", "shift", "noise"} & {e["effect"] for e in effects}
-    if rec_training and vision["ratio"] > config.vision_ratio and not named_vision:
-        notes.append(f"vision gap: the autoencoder re-renders the real frames {vision['ratio']:.1f}x worse than its "
+    named_vision = {"blur", "shift", "noise"} & {e.effect for e in effects}
+    if ratio is not None and ratio > config.vision_ratio and not named_vision:
+        notes.append(f"vision gap: the autoencoder re-renders the real frames {ratio:.1f}x worse than its "
                      "training frames (blur, noise, a shifted camera or a different scene?)")
+    return VisionSummary(rec_real, rec_training, ratio, summary), notes
 
-    # gap per horizon, state and pixels
-    h_nom, h_fin = nominal_score["horizon"], chosen["horizon"]
+
+def measure_gap(candidates: Candidates, chosen: Score, nom: Nominal, obs: Observations, theta: np.ndarray,
+                stale: np.ndarray | None, w: WindowSet, config: DiagnoseConfig, model: PhysicsModel | None,
+                camera: CameraFindings | None, arrow: bool) -> Gap:
+    """Step 6: the gap per horizon, nominal vs ``chosen``, in angles and pixels, and how far it closes above the floor."""
+    final = chosen.model
+    nominal_model = candidates.nominal.model
+    held_rows = np.flatnonzero(~obs.fit)
+    h_nom, h_fin = candidates.nominal.horizon, chosen.horizon
     closure = [float(1 - b / a) if a > 0 else 0.0 for a, b in zip(h_nom, h_fin)]
-    one_step = F.horizon_errors(final, nom, w_held1)[0]
+    one_step = fit.horizon_errors(final, nom, w.held1)[0]
     rematched = camera is not None and camera.rematched
     # The floor: the corrected model's error on a simulated twin of the held-out data, which it
     # describes exactly (piga.diagnostics.twin). Not with re-matched angles: their closure is in pixels.
@@ -393,63 +414,93 @@ def analyse(obs: Observations, nom: F.Nominal, config: DiagnoseConfig = Diagnose
     # Closure on the typical window: the median over held-out windows of each window's mean squared
     # free-run error. The mean over windows is dominated by the few that pass near upright, where
     # any velocity error grows fast, even in an exactly right model (and in its twin).
-    typ_nom, typ_fin = nominal_score["typical"], chosen["typical"]
+    typ_nom, typ_fin = candidates.nominal.typical, chosen.typical
     typ_floor = float(np.median(floor.windows)) if floor is not None else None
     raw_typical = float(1 - typ_fin / typ_nom) if typ_nom > 0 else None
     typical_gap = gap_closure(typ_nom, typ_fin, typ_floor) if floor is not None else raw_typical
     mean_gap = gap_closure(float(h_nom.mean()), float(h_fin.mean()), float(floor.horizon.mean())) if floor is not None else None
     pixels = _pixel_errors(model, obs, nom, nominal_model, final, theta, camera.camera if camera else Camera(), stale) \
-        if model is not None else {"pixel_mse_nominal": [], "pixel_mse_corrected": [], "pixel_mse_floor": None,
-                                   "typical_pixel_mse_nominal": None, "typical_pixel_mse_corrected": None}
+        if model is not None else PixelErrors()
     pixel_closure = None
-    if pixels["pixel_mse_nominal"]:
+    if pixels.pixel_mse_nominal:
         # typical window, against the matched residual: a true floor, as no angle renders closer
-        pn, pc, pf = pixels["typical_pixel_mse_nominal"], pixels["typical_pixel_mse_corrected"], pixels["pixel_mse_floor"]
+        pn, pc, pf = pixels.typical_pixel_mse_nominal, pixels.typical_pixel_mse_corrected, pixels.pixel_mse_floor
         pixel_closure = float((pn - pc) / (pn - pf)) if pn - pf > 0 else None
     # A camera effect changes the angles themselves (re-matched), so nominal and corrected angle errors
     # are measured against different angles: then the headline closure is the pixels'.
     basis = "pixels" if rematched and pixel_closure is not None else "state"
     if basis == "pixels":
-        measurable = pixels["typical_pixel_mse_nominal"] > MEASURABLE_GAP * pixels["pixel_mse_floor"]
+        measurable = pixels.typical_pixel_mse_nominal > MEASURABLE_GAP * pixels.pixel_mse_floor
     else:
         measurable = typ_floor is None or typ_nom > MEASURABLE_GAP * typ_floor
-    res_nom = one_step_residuals(nominal_model, nom, obs.theta, obs.actions, np.arange(len(obs.theta)))
-    gap = {
-        "horizon": list(range(1, len(h_nom) + 1)),
-        "state_mse_nominal": h_nom.tolist(), "state_mse_corrected": h_fin.tolist(), "closure": closure,
-        "free_run_mse_nominal": float(h_nom.mean()), "free_run_mse_corrected": float(h_fin.mean()),
-        "free_run_closure": float(1 - h_fin.mean() / h_nom.mean()) if h_nom.mean() > 0 else 0.0,
-        "state_mse_floor": floor.horizon.tolist() if floor is not None else None,
-        "free_run_mse_floor": float(floor.horizon.mean()) if floor is not None else None,
-        "free_run_gap_closure": pixel_closure if basis == "pixels" else typical_gap,
-        "typical_free_run_mse_nominal": typ_nom, "typical_free_run_mse_corrected": typ_fin,
-        "typical_free_run_mse_floor": typ_floor, "typical_free_run_closure": raw_typical,
-        "typical_free_run_gap_closure": typical_gap, "mean_free_run_gap_closure": mean_gap,
-        "closure_basis": basis, "pixel_free_run_gap_closure": pixel_closure,
-        "gap_above_floor": bool(measurable),
-        "one_step_rms_nominal_rad": math.sqrt(float(F.horizon_errors(nominal_model, nom, w_held1_nominal)[0])),
-        "one_step_rms_corrected_rad": math.sqrt(float(one_step)),
-        **pixels,
-    }
-    table = [{"candidate": "nominal (no refit)", "bic": nominal_score["bic"], "held_out_free_run_mse": nominal_score["free_run"],
-              "typical_free_run_mse": nominal_score["typical"],
-              "values": nominal_model.values}]
-    for s in [refit, *singles]:
-        m = s["model"]
-        table.append({"candidate": "none (g, a refitted)" if not m.effects else m.name, "bic": s["bic"],
-                      "delta_bic": s["bic"] - refit["bic"], "held_out_free_run_mse": s["free_run"],
-                      "typical_free_run_mse": s["typical"],
-                      "values": m.values, "delay": m.delay or None})
+    return Gap(
+        horizon=list(range(1, len(h_nom) + 1)),
+        state_mse_nominal=h_nom.tolist(), state_mse_corrected=h_fin.tolist(), closure=closure,
+        free_run_mse_nominal=float(h_nom.mean()), free_run_mse_corrected=float(h_fin.mean()),
+        free_run_closure=float(1 - h_fin.mean() / h_nom.mean()) if h_nom.mean() > 0 else 0.0,
+        state_mse_floor=floor.horizon.tolist() if floor is not None else None,
+        free_run_mse_floor=float(floor.horizon.mean()) if floor is not None else None,
+        free_run_gap_closure=pixel_closure if basis == "pixels" else typical_gap,
+        typical_free_run_mse_nominal=typ_nom, typical_free_run_mse_corrected=typ_fin,
+        typical_free_run_mse_floor=typ_floor, typical_free_run_closure=raw_typical,
+        typical_free_run_gap_closure=typical_gap, mean_free_run_gap_closure=mean_gap,
+        closure_basis=basis, pixel_free_run_gap_closure=pixel_closure,
+        gap_above_floor=bool(measurable),
+        one_step_rms_nominal_rad=math.sqrt(float(fit.horizon_errors(nominal_model, nom, w.held1_nominal)[0])),
+        one_step_rms_corrected_rad=math.sqrt(float(one_step)),
+        pixel_mse_nominal=pixels.pixel_mse_nominal, pixel_mse_corrected=pixels.pixel_mse_corrected,
+        pixel_mse_floor=pixels.pixel_mse_floor, typical_pixel_mse_nominal=pixels.typical_pixel_mse_nominal,
+        typical_pixel_mse_corrected=pixels.typical_pixel_mse_corrected,
+    )
+
+
+def candidate_table(candidates: Candidates) -> list[CandidateRow]:
+    """The report's candidate table: the nominal model, "none" refitted, then the single effects in BIC order."""
+    nominal = candidates.nominal
+    rows = [CandidateRow("nominal (no refit)", nominal.bic, nominal.free_run, nominal.typical, nominal.model.values)]
+    for s in [candidates.refit, *candidates.singles]:
+        m = s.model
+        rows.append(CandidateRow("none (g, a refitted)" if not m.effects else m.name, s.bic, s.free_run, s.typical,
+                                 m.values, s.bic - candidates.refit.bic, m.delay or None))
+    return rows
+
+
+def analyse(obs: Observations, nom: Nominal, config: DiagnoseConfig = DiagnoseConfig(), model: PhysicsModel | None = None,
+            rec_training: float = 0.0, progress: bool = False, camera: CameraFindings | None = None,
+            arrow: bool = True) -> Diagnosis:
+    """The diagnosis of observations ``obs`` against the nominal physics ``nom``.
+
+    ``model`` (its decoder) renders the pixel errors of ``obs.frames``; without it they are left
+    out. ``rec_training`` is the model's own re-rendering MSE (0: unknown, no vision check).
+    ``camera`` is the camera stage's result (:func:`~piga.diagnostics.vision.camera_stage`); when
+    it accepted a camera or noise, the dynamics are fitted on its re-matched angles. ``arrow``: the
+    simulator that the model was identified in draws Gymnasium's torque arrow (for the twin that
+    measures the floor of the gap, :mod:`piga.diagnostics.twin`).
+
+    The steps: cut the windows, score the candidates, select, test what is left, name the effects,
+    summarise the vision, measure the gap, assemble.
+    """
+    stale = obs.stale if obs.stale is not None and obs.stale.any() else None
+    theta = camera.theta if camera is not None and camera.rematched else obs.theta  # the corrected model's angles
+    windows = cut_windows(obs, theta, stale, config)
+    candidates = score_candidates(nom, windows, progress)
+    selection = select(candidates, nom, windows, config, progress)
+    final = selection.chosen.model
+    generic = generic_basis(final, nom, obs, theta, stale, config)
+    naming = name_effects(final, nom, windows, camera, generic, config)
+    vision, vision_notes = summarise_vision(obs, rec_training, camera, stale, naming.effects, config)
+    gap = measure_gap(candidates, selection.chosen, nom, obs, theta, stale, windows, config, model, camera, arrow)
+    res_nom = one_step_residuals(candidates.nominal.model, nom, obs.theta, obs.actions, np.arange(len(obs.theta)))
     return Diagnosis(
-        verdict=verdict, verdict_class=verdict_class, effects=effects,
+        verdict=naming.verdict, verdict_class=naming.verdict_class, effects=naming.effects,
         nominal={"g": nom.g, "a": nom.a, "offset": nom.offset},
         corrected={**final.values, **({"delay": final.delay} if "delay" in final.effects else {})},
         corrected_effects=list(final.effects),
-        candidates=table + [{"selection": steps, "generic_basis": generic}],
+        candidates=candidate_table(candidates), selection=selection.steps, generic_basis=generic,
         gap=gap, vision=vision,
         residuals={"heatmap": heatmap(res_nom), "bins": binned(res_nom), "autocorrelation": autocorrelation(res_nom),
                    "action_correlation": action_correlation(res_nom)},
-        notes=notes,
+        notes=naming.notes + vision_notes,
         pictures=_pictures(model, obs, theta, camera.camera if camera is not None and camera.rematched else None)
         if model is not None and len(obs.frames_index) else None,
     )
@@ -468,21 +519,9 @@ def _pictures(model: PhysicsModel, obs: Observations, theta: np.ndarray, camera:
     return {"real": as_image(real), "nominal": as_image(nominal), "corrected": as_image(corrected)}
 
 
-def _describe(e: dict[str, Any]) -> str:
-    steps = lambda k: f"{k} step" + ("s" if k != 1 else "")  # noqa: E731
-    if e["effect"] == "delay":
-        return f"actuator delay of {steps(e['value'])}"
-    if e["effect"] == "frame_delay":
-        return f"camera delay (frame_delay) of {steps(e['value'])}"
-    ci = f" (95% interval {e['interval'][0]:.3g}..{e['interval'][1]:.3g})" if e.get("interval") else ""
-    if e["effect"] == "shift":
-        return f"shift {e['dx']:.3g} px right, {e['dy']:.3g} px down (mean {e['value']:.3g}{ci})"
-    return f"{e['effect']} {e['value']:.3g} {e['unit']}{ci}"
-
-
 @torch.no_grad()
-def _pixel_errors(model: PhysicsModel, obs: Observations, nom: F.Nominal, nominal_model: F.Model, final: F.Model,
-                  theta: np.ndarray, camera: Camera, stale: np.ndarray | None) -> dict[str, Any]:
+def _pixel_errors(model: PhysicsModel, obs: Observations, nom: Nominal, nominal_model: fit.Model, final: fit.Model,
+                  theta: np.ndarray, camera: Camera, stale: np.ndarray | None) -> PixelErrors:
     """Per-horizon pixel MSE of free runs on the kept held-out sequences, and the floor.
 
     Nominal: the decoder's renders of the nominal physics from the encoder's angles. Corrected: the
@@ -492,30 +531,29 @@ def _pixel_errors(model: PhysicsModel, obs: Observations, nom: F.Nominal, nomina
     """
     from piga.model import frames_to_float
 
-    empty = {"pixel_mse_nominal": [], "pixel_mse_corrected": [], "pixel_mse_floor": None, "typical_pixel_mse_nominal": None,
-             "typical_pixel_mse_corrected": None}
     if len(obs.frames_index) == 0:
-        return empty
+        return PixelErrors()
     t = obs.theta.shape[1]
     pos = {int(s): i for i, s in enumerate(obs.frames_index)}
     x_all = frames_to_float(torch.from_numpy(obs.frames), model.config.channels)  # (n, T, C, H, W)
-    out: dict[str, Any] = {}
-    for key, m, th, cam, repeat in (("pixel_mse_nominal", nominal_model, obs.theta, Camera(), False),
-                                    ("pixel_mse_corrected", final, theta, camera, True)):
-        w = F.make_windows(th, obs.actions, obs.frames_index, None, t, obs.dt, stale, repeat=True)  # one per sequence
+    per_horizon: dict[str, list[float]] = {}
+    typical: dict[str, float] = {}
+    for key, m, th, cam, repeat in (("nominal", nominal_model, obs.theta, Camera(), False),
+                                    ("corrected", final, theta, camera, True)):
+        w = fit.make_windows(th, obs.actions, obs.frames_index, None, t, obs.dt, stale, repeat=True)  # one per sequence
         if len(w.theta0) == 0:
-            return empty
-        pred = F.simulate(m, F.parameters_of(m, nom), nom, w).float()  # (B, H)
+            return PixelErrors()
+        pred = fit.simulate(m, fit.parameters_of(m, nom), nom, w).float()  # (B, H)
         if repeat:
-            pred = F.as_observed(w, pred)
+            pred = fit.as_observed(w, pred)
         frames = camera_render(model, cam, pred)  # (B, H, C, H, W)
-        x = x_all[[pos[int(s)] for s in w.sequence]][:, F.MAX_DELAY + 1 :]
+        x = x_all[[pos[int(s)] for s in w.sequence]][:, fit.MAX_DELAY + 1 :]
         se = ((frames - x) ** 2).mean(dim=(2, 3, 4))  # (B, H)
-        out[key] = se.mean(0).tolist()
-        out["typical_" + key] = float(se.mean(1).median())
+        per_horizon[key] = se.mean(0).tolist()
+        typical[key] = float(se.mean(1).median())
     _, floor = match(angle_table(model, camera), x.flatten(2).flatten(0, 1))
-    out["pixel_mse_floor"] = float(floor.mean())
-    return out
+    return PixelErrors(per_horizon["nominal"], per_horizon["corrected"], float(floor.mean()), typical["nominal"],
+                       typical["corrected"])
 
 
 def camera_render(model: PhysicsModel, camera: Camera, theta: Tensor) -> Tensor:

@@ -18,6 +18,20 @@ substeps. A gain error (ũ = m·u) is not a separate term: it is the refitted a 
 
 The fits run on the encoded angles alone (no images, no labels), so they take seconds: L-BFGS in
 float64 on the mean squared multi-step angle error over windows of the fit split.
+
+Why a second pendulum engine (:func:`simulate`) next to the model's
+(:class:`piga.physics.Pendulum` with :class:`piga.physics.Euler`)? Without effects the two are the
+same equations and the same semi-implicit Euler step, and they agree to rounding (a test checks
+it). They stay apart because they serve different needs:
+
+- The model's engine is one of several :class:`piga.physics.System` force functions, an
+  ``nn.Module`` whose learnable parameters train with the networks, on (B, N, D) tensors in
+  float32. Its equations are the *identified* physics; the effects are by design not in it
+  (the diagnosis must find them as a gap).
+- The diagnosis' engine adds the candidate effects, each with its own parameter, as optional
+  terms, and acts on delayed and transformed commands (a delay needs the actions before the
+  window). Its parameters are a plain dict of float64 scalars that L-BFGS and the bootstrap refit
+  thousands of times; a module with ten optional parameters would only hide which are free.
 """
 
 from __future__ import annotations
@@ -29,8 +43,10 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from envs.constants import MAX_ACTION
 from envs.effects import FRICTION_SMOOTHING
-from piga.diagnostics.vision import repeat_sources
+from piga.diagnostics.repeats import repeat_sources
+from piga.runs import Nominal
 
 #: Effects that the fit can add to the physics, in the order of the report.
 CANDIDATES: tuple[str, ...] = ("damping", "friction", "bias", "delay", "deadzone", "saturation", "speed_clip")
@@ -48,17 +64,9 @@ GRIDS: dict[str, tuple[float, ...]] = {
 }
 MAX_DELAY = 4
 """Largest delay tried (steps)."""
-
-
-@dataclass(frozen=True)
-class Nominal:
-    """The identified model's physics."""
-
-    g: float
-    a: float
-    offset: float
-    dt: float
-    substeps: int = 1
+#: Smallest value that :func:`simulate` uses for a limit (a saturation level, a speed clip): the
+#: fit may move the free parameter below it, but the physics, and so the reported value, stop there.
+LOWER_BOUNDS: dict[str, float] = {"s": 1e-3, "v": 0.1}
 
 
 @dataclass(frozen=True)
@@ -103,7 +111,7 @@ def make_windows(theta: np.ndarray, actions: np.ndarray, rows: np.ndarray, horiz
         raise ValueError(f"sequences of {t} frames are too short for windows of {h} steps after {s_min} frames")
     th0, v0, acts, target, mask, seq, src = [], [], [], [], [], [], []
     pad_t = np.pad(theta, ((0, 0), (0, h)), mode="edge")
-    pad_u = np.pad(np.clip(actions, -2.0, 2.0), ((0, 0), (0, h)))
+    pad_u = np.pad(np.clip(actions, -MAX_ACTION, MAX_ACTION), ((0, 0), (0, h)))
     if stale is not None:
         pad_stale = np.pad(stale, ((0, 0), (0, h)), mode="edge")
         pad_src = np.pad(repeat_sources(stale), ((0, 0), (0, h)), mode="edge")
@@ -160,7 +168,7 @@ def simulate(model: Model, params: dict[str, Tensor], nominal: Nominal, w: Windo
     if "deadzone" in model.effects:
         cmd = torch.sign(cmd) * torch.relu(cmd.abs() - params["d"])
     if "saturation" in model.effects:
-        s = params["s"].clamp_min(1e-3)
+        s = params["s"].clamp_min(LOWER_BOUNDS["s"])
         cmd = torch.minimum(torch.maximum(cmd, -s), s)
     g, a = params["log_g"].exp(), params["log_a"].exp()
     theta, v = w.theta0, w.v0
@@ -177,7 +185,7 @@ def simulate(model: Model, params: dict[str, Tensor], nominal: Nominal, w: Windo
                 tau = tau + params["tau0"]
             v = v + h * (1.5 * g * torch.sin(theta + nominal.offset) + 3.0 * tau)
             if "speed_clip" in model.effects:
-                vmax = params["v"].clamp_min(0.1)
+                vmax = params["v"].clamp_min(LOWER_BOUNDS["v"])
                 v = torch.minimum(torch.maximum(v, -vmax), vmax)
             theta = theta + h * v
         out.append(theta)
@@ -254,7 +262,8 @@ def fit(model: Model, nominal: Nominal, w: Windows, weights: Tensor | None = Non
 
     opt.step(closure)
     values = {"g": float(params["log_g"].detach().exp()), "a": float(params["log_a"].detach().exp())}
-    values.update({k: float(v.detach()) for k, v in params.items() if not k.startswith("log_")})
+    values.update({k: max(float(v.detach()), LOWER_BOUNDS.get(k, -math.inf)) for k, v in params.items()
+                   if not k.startswith("log_")})
     return Model(model.effects, model.delay, values)
 
 

@@ -8,19 +8,68 @@ explains each frame).
 
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import torch
 
 from piga.data import SPLITS, DatasetInfo, check_actions, inspect_dataset, split_indices
-from piga.diagnostics.vision import stale_frames
+from piga.diagnostics.repeats import stale_frames
 from piga.model import PhysicsModel, frames_to_float
+from piga.runs import training_steps
 
 
 class DiagnosisInputError(ValueError):
     """The model and the data cannot be compared (different systems, sizes, too little data...)."""
+
+
+class UntrainedModelError(DiagnosisInputError):
+    """The run's training clearly failed: its autoencoder does not draw the scene it was trained on."""
+
+
+class NotTheSceneError(DiagnosisInputError):
+    """The recording is not the scene the model knows: it re-renders it far worse than its training frames."""
+
+
+def check_training(checkpoint: dict[str, Any] | None, rec_training: float, blank: float | None,
+                   max_fraction: float) -> None:
+    """Refuses a run whose training clearly failed (:class:`UntrainedModelError`).
+
+    Args:
+        checkpoint: the run's checkpoint (its step count).
+        rec_training: the model's per-frame reconstruction MSE in its last epoch
+            (:func:`piga.runs.training_reconstruction_mse`; 0: not recorded).
+        blank: the error scale: the MSE of the frames against the model's background, a render
+            that draws no pendulum (:func:`piga.runs.training_blank_mse`); None: unknown.
+        max_fraction: refuse when ``rec_training`` exceeds this fraction of ``blank``.
+    """
+    steps = training_steps(checkpoint)
+    if steps == 0:
+        raise UntrainedModelError("the model was never trained (its run took no optimiser step); train it first")
+    warmup = ((checkpoint or {}).get("train_config") or {}).get("warmup_steps", 0)
+    if steps is not None and steps <= warmup:
+        raise UntrainedModelError(f"the model's physics was never trained: all {steps} steps of its run were "
+                                  f"autoencoder warm-up ({warmup} steps); train it longer")
+    if not rec_training or not math.isfinite(rec_training):
+        raise UntrainedModelError("the checkpoint records no finite reconstruction error, so the model's training "
+                                  "cannot be checked; use a run of piga-train-model")
+    if blank is not None and rec_training > max_fraction * blank:
+        raise UntrainedModelError(
+            f"the model's training failed: it re-renders its training frames with MSE {rec_training:.3g}, "
+            f"{rec_training / blank:.2g}x the error of drawing no pendulum at all ({blank:.3g}); train it longer")
+
+
+def check_scene(obs: Observations, rec_training: float, max_ratio: float) -> None:
+    """Refuses a recording that is not the scene the model knows (:class:`NotTheSceneError`): its mean
+    re-rendering error is more than ``max_ratio`` times the model's training error."""
+    rec_real = float(np.mean(obs.rec_mse))
+    if rec_training > 0 and not rec_real <= max_ratio * rec_training:  # NaN is refused too
+        raise NotTheSceneError(
+            f"this is not the scene the model knows: it re-renders these frames with MSE {rec_real:.3g}, "
+            f"{rec_real / rec_training:.0f}x its training error {rec_training:.3g} (the limit is {max_ratio:g}x)")
 
 
 @dataclass(frozen=True)
@@ -42,7 +91,9 @@ class Observations:
     frames_index: np.ndarray
     """(n,) indices into N of ``frames``."""
     stale: np.ndarray | None = None
-    """(N, T) bool: frame t repeats frame t - 1 (within 2 gray levels, :func:`~piga.diagnostics.vision.stale_frames`); None: not known."""
+    """(N, T) bool: frame t repeats frame t - 1 (within 2 gray levels, :func:`~piga.diagnostics.repeats.stale_frames`); None: not known."""
+    blank_mse: float | None = None
+    """Mean per-frame MSE of the frames against the model's background (a render of no object); None: not known."""
 
 
 def check_compatible(model: PhysicsModel, path: str | os.PathLike[str], min_sequences: int = 20,
@@ -101,6 +152,7 @@ def observe(model: PhysicsModel, path: str | os.PathLike[str], batch: int = 16, 
         n = info.n_sequences
         theta = np.empty((n, info.steps))
         rec = np.empty((n, info.steps))
+        blank = np.empty((n, info.steps))
         stale = np.empty((n, info.steps), bool)
         actions = f["actions"][:, :, 0].astype(np.float64)
         held = np.flatnonzero(split != SPLITS["train"])
@@ -110,6 +162,8 @@ def observe(model: PhysicsModel, path: str | os.PathLike[str], batch: int = 16, 
             stale[start : start + batch] = stale_frames(raw)
             x, coords, theta[start : start + batch] = read_frames(model, raw)
             rec[start : start + batch] = ((model.decoder(coords) - x) ** 2).mean(dim=(2, 3, 4)).double().numpy()
+            blank[start : start + batch] = ((x - model.encoder.background) ** 2).mean(dim=(2, 3, 4)).double().numpy()
         frames = f["frames"][np.sort(keep)] if len(keep) else np.zeros((0, info.steps, *info.image_shape), np.uint8)
     check_actions(actions, path)
-    return Observations(theta, actions, rec, split == SPLITS["train"], float(info.dt), frames, np.sort(keep), stale)
+    return Observations(theta, actions, rec, split == SPLITS["train"], float(info.dt), frames, np.sort(keep), stale,
+                        float(blank.mean()))

@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import math
 import os
+import shutil
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from piga.atomic import atomic_output, write_json
-from piga.diagnostics.diagnose import Diagnosis
+from piga.atomic import atomic_output, check_writable_target, partial_path, write_json
+from piga.diagnostics.results import Diagnosis, VisionSummary
 from piga.diagnostics.twin import MEASURABLE_GAP
 from piga.episodes import summary_markdown
 from piga.plots import plt, save_figure
@@ -23,24 +24,24 @@ def gap_figure(d: Diagnosis):  # noqa: ANN201
     """Held-out error against horizon, angles and pixels, nominal vs corrected, and the closure."""
     g = d.gap
     fig, axes = plt.subplots(1, 3, figsize=(11, 3))
-    h = g["horizon"]
-    axes[0].semilogy(h, np.degrees(np.sqrt(g["state_mse_nominal"])), label="nominal")
-    axes[0].semilogy(h, np.degrees(np.sqrt(g["state_mse_corrected"])), label="corrected")
-    if g.get("state_mse_floor") is not None:
-        axes[0].semilogy(h, np.degrees(np.sqrt(g["state_mse_floor"])), ls=":", color="gray", label="floor (twin)")
+    h = g.horizon
+    axes[0].semilogy(h, np.degrees(np.sqrt(g.state_mse_nominal)), label="nominal")
+    axes[0].semilogy(h, np.degrees(np.sqrt(g.state_mse_corrected)), label="corrected")
+    if g.state_mse_floor is not None:
+        axes[0].semilogy(h, np.degrees(np.sqrt(g.state_mse_floor)), ls=":", color="gray", label="floor (twin)")
     axes[0].set_title("angle RMSE (deg)" + (": nominal on the encoder's, corrected on matched angles"
-                                            if g["closure_basis"] == "pixels" else ""), fontsize=8)
-    closure = 100 * np.array(g["closure"])
+                                            if g.closure_basis == "pixels" else ""), fontsize=8)
+    closure = 100 * np.array(g.closure)
     title = "closure 1 - err_corr / err_nom (%), angles"
-    if g["pixel_mse_nominal"]:
-        pn, pc = np.array(g["pixel_mse_nominal"]), np.array(g["pixel_mse_corrected"])
+    if g.pixel_mse_nominal:
+        pn, pc = np.array(g.pixel_mse_nominal), np.array(g.pixel_mse_corrected)
         hp = range(1, len(pn) + 1)
         axes[1].plot(hp, pn, label="nominal")
         axes[1].plot(hp, pc, label="corrected")
-        if g.get("pixel_mse_floor") is not None:
-            axes[1].axhline(g["pixel_mse_floor"], ls=":", color="gray", label="matched floor")
-        if g["closure_basis"] == "pixels":
-            closure = 100 * (pn - pc) / np.maximum(pn - g["pixel_mse_floor"], 1e-12)
+        if g.pixel_mse_floor is not None:
+            axes[1].axhline(g.pixel_mse_floor, ls=":", color="gray", label="matched floor")
+        if g.closure_basis == "pixels":
+            closure = 100 * (pn - pc) / np.maximum(pn - g.pixel_mse_floor, 1e-12)
             title = "closure of the pixel gap above the floor (%)"
     axes[1].set_title("pixel MSE of the rendered prediction", fontsize=9)
     axes[2].plot(range(1, len(closure) + 1), closure)
@@ -49,7 +50,7 @@ def gap_figure(d: Diagnosis):  # noqa: ANN201
     for ax in axes:
         ax.set_xlabel("horizon (steps)")
     axes[0].legend(fontsize=7)
-    if g["pixel_mse_nominal"]:
+    if g.pixel_mse_nominal:
         axes[1].legend(fontsize=7)
     else:  # no held-out sequence has two fresh frames where the free runs start (a camera 3+ frames late)
         axes[1].text(0.5, 0.5, "no free run to render", ha="center", va="center", transform=axes[1].transAxes)
@@ -106,36 +107,49 @@ def correlation_figure(d: Diagnosis):  # noqa: ANN201
 
 
 def _pct(x: float | None) -> str:
-    return "–" if x is None else f"{100 * x:.1f}%"
+    return "–" if x is None or not math.isfinite(x) else f"{100 * x:.1f}%"
 
 
 def _fmt(x: Any) -> str:
-    if x is None:
+    """A value for a table: "–" for a missing or non-finite number (never "nan")."""
+    if x is None or (isinstance(x, float) and not math.isfinite(x)):
         return "–"
     if isinstance(x, float):
         return f"{x:.4g}"
     return str(x)
 
 
-def _camera_lines(v: dict[str, Any]) -> list[str]:
+def number(x: float | None, spec: str = ".3g") -> str:
+    """``x`` formatted with ``spec``, or "–" when it is missing or not finite (a report never shows "nan")."""
+    return "–" if x is None or not math.isfinite(x) else format(x, spec)
+
+
+def _interval(ci: list[float] | None) -> str:
+    return "–" if not ci or not all(math.isfinite(x) for x in ci) else f"{ci[0]:.4g} .. {ci[1]:.4g}"
+
+
+def _camera_lines(v: VisionSummary) -> list[str]:
     """The camera stage: candidate table, noise, repeated frames."""
-    if "camera" not in v:
+    c = v.camera
+    if c is None:
         return []
+    noise = (f"sensor noise {c.noise:.2f} gray levels on the pixels the pendulum never reaches"
+             if math.isfinite(c.noise) else "sensor noise not measured (the pendulum reaches every pixel)")
     lines = [
-        f"- **Camera**: sensor noise {v['noise']:.2f} gray levels on the pixels the pendulum never reaches; "
-        f"{v['repeated_frames']} frames repeat the previous one (within 2 gray levels) ({v['dropped_frames']} while the pendulum moves: "
-        f"rate {100 * v['drop_rate']:.2f}%), and the first {v['leading_repeats']} frame(s) of nearly every sequence repeat "
+        f"- **Camera**: {noise}; "
+        f"{c.repeated_frames} frames repeat the previous one (within 2 gray levels) ({c.dropped_frames} while the pendulum moves: "
+        f"rate {100 * c.drop_rate:.2f}%), and the first {c.leading_repeats} frame(s) of nearly every sequence repeat "
         "the first. The dynamics are fitted on "
-        + ("angles matched to the decoder's renders through the fitted camera." if v["angles"] == "matched"
+        + ("angles matched to the decoder's renders through the fitted camera." if c.angles == "matched"
            else "the encoder's angles."), "",
         "  Camera candidates, fitted by matching frames to the decoder's renders over the whole circle "
         "(fit split), scored on held-out frames:", "",
         "  | candidate | blur σ (px) | dx (px) | dy (px) | held-out matched MSE | drop | accepted |", "  |---|---|---|---|---|---|---|",
     ]
-    for c in v["camera_candidates"]:
-        cam = c["camera"]
-        lines.append(f"  | {c['candidate']} | {cam['blur']:.3f} | {cam['dx']:.3f} | {cam['dy']:.3f} | "
-                     f"{c['held_out_matched_mse']:.3e} | {100 * c['drop']:.1f}% | {'yes' if c['accepted'] else 'no'} |")
+    for row in c.camera_candidates:
+        cam = row["camera"]
+        lines.append(f"  | {row['candidate']} | {cam['blur']:.3f} | {cam['dx']:.3f} | {cam['dy']:.3f} | "
+                     f"{row['held_out_matched_mse']:.3e} | {100 * row['drop']:.1f}% | {'yes' if row['accepted'] else 'no'} |")
     lines.append("")
     return lines
 
@@ -151,70 +165,71 @@ def markdown(d: Diagnosis, model: str, data: str, command: str) -> str:
     if d.effects:
         lines += ["| effect | value | 95% interval | unit |", "|---|---|---|---|"]
         for e in d.effects:
-            ci = "–" if not e.get("interval") else f"{e['interval'][0]:.4g} .. {e['interval'][1]:.4g}"
-            lines.append(f"| {e['effect']} | {_fmt(e['value'])} | {ci} | {e['unit']} |")
+            lines.append(f"| {e.effect} | {_fmt(e.value)} | {_interval(e.interval)} | {e.unit} |")
         lines.append("")
     lines += [f"- {n}" for n in d.notes] + ([""] if d.notes else [])
-    if g["closure_basis"] == "pixels":
-        headline = (f"**Free-run closure {_pct(g['free_run_gap_closure'])}, in pixels**: a camera effect was found, so the "
+    if g.closure_basis == "pixels":
+        headline = (f"**Free-run closure {_pct(g.free_run_gap_closure)}, in pixels**: a camera effect was found, so the "
                     "corrected model reads other angles from the frames than the encoder, and angle errors of the two "
                     "would not be comparable. On the typical held-out window (the median over windows of each window's "
-                    f"mean pixel MSE of the rendered free run), the nominal model is at {g['typical_pixel_mse_nominal']:.3g}, "
-                    f"the corrected one at {g['typical_pixel_mse_corrected']:.3g}, and no prediction can beat "
-                    f"{g['pixel_mse_floor']:.3g}, the error of the best-matching render of each frame; the closure is the "
+                    f"mean pixel MSE of the rendered free run), the nominal model is at {number(g.typical_pixel_mse_nominal, '.3g')}, "
+                    f"the corrected one at {number(g.typical_pixel_mse_corrected, '.3g')}, and no prediction can beat "
+                    f"{number(g.pixel_mse_floor, '.3g')}, the error of the best-matching render of each frame; the closure is the "
                     "share of the gap above that floor that the correction removes.")
-    elif g.get("typical_free_run_mse_floor") is not None:
-        headline = (f"**Free-run closure {_pct(g['free_run_gap_closure'])}** of the gap above the floor, on the typical "
+    elif g.typical_free_run_mse_floor is not None:
+        headline = (f"**Free-run closure {_pct(g.free_run_gap_closure)}** of the gap above the floor, on the typical "
                     "held-out window (the median over windows of each window's mean squared free-run angle error): "
-                    f"{g['typical_free_run_mse_nominal']:.3g} rad² nominal, {g['typical_free_run_mse_corrected']:.3g} rad² "
-                    f"corrected, and a floor of {g['typical_free_run_mse_floor']:.3g} rad², the corrected model's own error "
+                    f"{number(g.typical_free_run_mse_nominal, '.3g')} rad² nominal, {number(g.typical_free_run_mse_corrected, '.3g')} rad² "
+                    f"corrected, and a floor of {number(g.typical_free_run_mse_floor, '.3g')} rad², the corrected model's own error "
                     "on a simulated twin of the held-out data that it describes exactly (re-simulated with the corrected "
                     "physics, rendered by the simulator, read by the encoder). Raw, with no floor subtracted: "
-                    f"{_pct(g['typical_free_run_closure'])}.")
+                    f"{_pct(g.typical_free_run_closure)}.")
     else:
-        headline = (f"**Free-run closure {_pct(g['free_run_gap_closure'])}**: 1 − err_corrected / err_nominal on the "
+        headline = (f"**Free-run closure {_pct(g.free_run_gap_closure)}**: 1 − err_corrected / err_nominal on the "
                     "typical held-out window (the median over windows of each window's mean squared free-run angle "
-                    f"error: {g['typical_free_run_mse_nominal']:.3g} rad² nominal, "
-                    f"{g['typical_free_run_mse_corrected']:.3g} rad² corrected). No floor is subtracted.")
-    if not g.get("gap_above_floor", True):
+                    f"error: {number(g.typical_free_run_mse_nominal, '.3g')} rad² nominal, "
+                    f"{number(g.typical_free_run_mse_corrected, '.3g')} rad² corrected). No floor is subtracted.")
+    if not g.gap_above_floor:
         headline = ("**No gap above the floor to close** on the typical held-out window: the nominal model's error there "
-                    f"is within {MEASURABLE_GAP:g}x the floor, so the closure ({_pct(g['free_run_gap_closure'])}) is a ratio "
+                    f"is within {MEASURABLE_GAP:g}x the floor, so the closure ({_pct(g.free_run_gap_closure)}) is a ratio "
                     "of noise. " + headline)
-    floor = "" if g.get("free_run_mse_floor") is None else (
-        f" On the twin, an exactly right model has {g['free_run_mse_floor']:.3g} rad²: "
-        f"{_pct(g['mean_free_run_gap_closure'])} of the gap above that floor is closed.")
+    floor = "" if g.free_run_mse_floor is None else (
+        f" On the twin, an exactly right model has {number(g.free_run_mse_floor, '.3g')} rad²: "
+        f"{_pct(g.mean_free_run_gap_closure)} of the gap above that floor is closed.")
     lines += [
         "## Size of the gap, and how far it shrinks", "", headline, "",
-        f"Mean over all held-out windows and horizons 1..{g['horizon'][-1]}: angle MSE {g['free_run_mse_nominal']:.3g} rad² "
-        f"nominal, {g['free_run_mse_corrected']:.3g} rad² corrected: raw closure {100 * g['free_run_closure']:.1f}%. That mean "
+        f"Mean over all held-out windows and horizons 1..{g.horizon[-1]}: angle MSE {number(g.free_run_mse_nominal, '.3g')} rad² "
+        f"nominal, {number(g.free_run_mse_corrected, '.3g')} rad² corrected: raw closure {100 * g.free_run_closure:.1f}%. That mean "
         "is dominated by the few windows that pass near upright, where any error grows fast, even in an exactly right "
         "model." + floor + " One step: RMSE "
-        f"{math.degrees(g['one_step_rms_nominal_rad']):.3f}° nominal, {math.degrees(g['one_step_rms_corrected_rad']):.3f}° corrected.", "",
-        f"Nominal g = {d.nominal['g']:.4f}, a = {d.nominal['a']:.4f}; corrected: "
+        f"{math.degrees(g.one_step_rms_nominal_rad):.3f}° nominal, {math.degrees(g.one_step_rms_corrected_rad):.3f}° corrected.", "",
+        f"Nominal g = {number(d.nominal['g'], '.4f')}, a = {number(d.nominal['a'], '.4f')}; corrected: "
         + ", ".join(f"{k} = {_fmt(v)}" for k, v in d.corrected.items()), "",
         "![gap](gap.png)", "",
         "| horizon | angle RMSE nominal (deg) | corrected (deg) | closure | pixel MSE nominal | corrected |", "|---|---|---|---|---|---|",
     ]
-    pn, pc = g["pixel_mse_nominal"], g["pixel_mse_corrected"]
-    for i in sorted({0, 1, 4, 9, 19, len(g["horizon"]) - 1} & set(range(len(g["horizon"])))):
+    pn, pc = g.pixel_mse_nominal, g.pixel_mse_corrected
+    for i in sorted({0, 1, 4, 9, 19, len(g.horizon) - 1} & set(range(len(g.horizon)))):
         pix = (f"{pn[i]:.2e} | {pc[i]:.2e}" if i < len(pn) else "– | –")
-        lines.append(f"| {g['horizon'][i]} | {math.degrees(math.sqrt(g['state_mse_nominal'][i])):.3f} | "
-                     f"{math.degrees(math.sqrt(g['state_mse_corrected'][i])):.3f} | {100 * g['closure'][i]:.1f}% | {pix} |")
+        lines.append(f"| {g.horizon[i]} | {math.degrees(math.sqrt(g.state_mse_nominal[i])):.3f} | "
+                     f"{math.degrees(math.sqrt(g.state_mse_corrected[i])):.3f} | {100 * g.closure[i]:.1f}% | {pix} |")
     if d.control:
         env = ", ".join(f"{k}={v}" for k, v in d.control["effects"].items()) or "none"
         reader = ("reads angles through the fitted camera (matching) instead of the encoder"
-                  if d.vision.get("angles") == "matched" else "reads angles with the same encoder")
+                  if d.corrected_camera() is not None else "reads angles with the same encoder")
         lines += ["", f"MPC on the simulated real system ({env}), same frames and planner; the corrected agent plans with the "
                   f"corrected physics and {reader}:", "",
                   summary_markdown(d.control["rows"], extra=[("physics", "physics")]).rstrip()]
     v = d.vision
+    ratio = "" if v.ratio is None else f" (x{number(v.ratio, '.2f')})"
+    training = "an unknown error" if not v.rec_mse_training else f"{number(v.rec_mse_training, '.2e')}"
     lines += [
         "", "## Where it lies", "",
-        f"- **Vision**: the autoencoder re-renders the real frames with MSE {v['rec_mse_real']:.2e}, against "
-        f"{v['rec_mse_training']:.2e} on its training frames (x{v['ratio']:.2f}).",
+        f"- **Vision**: the autoencoder re-renders the real frames with MSE {number(v.rec_mse_real, '.2e')}, against "
+        f"{training} on its training frames{ratio}.",
         *_camera_lines(v),
         f"- **Dynamics**: on the encoded angles, the nominal physics' held-out free-run angle RMSE is "
-        f"{math.degrees(math.sqrt(g['free_run_mse_nominal'])):.2f}°.", "",
+        f"{math.degrees(math.sqrt(g.free_run_mse_nominal)):.2f}°.", "",
         "![residual heatmap](residual_heatmap.png) ![correlations](correlations.png)", "",
         *(["A held-out frame, as recorded and as each model re-renders it:", "", "![frames](frames.png)", ""]
           if d.pictures is not None else []),
@@ -231,27 +246,41 @@ def markdown(d: Diagnosis, model: str, data: str, command: str) -> str:
               "| candidate | BIC | ΔBIC vs none | held-out free-run MSE, typical window (rad²) | mean (rad²) | fitted values |",
               "|---|---|---|---|---|---|"]
     for c in d.candidates:
-        if "candidate" not in c:
-            continue
-        vals = ", ".join(f"{k} = {val:.4g}" for k, val in c["values"].items()) + (f", k = {c['delay']}" if c.get("delay") else "")
-        lines.append(f"| {c['candidate']} | {c['bic']:.0f} | {_fmt(c.get('delta_bic'))} | {c['typical_free_run_mse']:.3g} | "
-                     f"{c['held_out_free_run_mse']:.3g} | {vals} |")
-    extra = d.candidates[-1]
+        vals = ", ".join(f"{k} = {_fmt(float(val))}" for k, val in c.values.items()) + (f", k = {c.delay}" if c.delay else "")
+        lines.append(f"| {c.candidate} | {c.bic:.0f} | {_fmt(c.delta_bic)} | {c.typical_free_run_mse:.3g} | "
+                     f"{c.held_out_free_run_mse:.3g} | {vals} |")
     lines += ["", "Forward selection:", ""]
-    for s in extra["selection"]:
-        lines.append(f"- tried {s['tried']}: BIC drop {s['bic_drop']:.1f}, typical held-out free-run drop {100 * s['free_run_drop']:.1f}% "
-                     f"-> {'accepted' if s['accepted'] else 'rejected'}")
-    gb = extra["generic_basis"]
-    lines.append(f"- flexible basis on what is left: BIC drop {gb['bic_drop']:.1f}, held-out residual drop "
-                 f"{100 * gb['held_out_drop']:.1f}% -> {'significant: not explained' if gb['significant'] else 'nothing left to explain'}")
+    for s in d.selection:
+        lines.append(f"- tried {s.tried}: BIC drop {s.bic_drop:.1f}, typical held-out free-run drop {100 * s.free_run_drop:.1f}% "
+                     f"-> {'accepted' if s.accepted else 'rejected'}")
+    gb = d.generic_basis
+    lines.append(f"- flexible basis on what is left: BIC drop {gb.bic_drop:.1f}, held-out residual drop "
+                 f"{100 * gb.held_out_drop:.1f}% -> {'significant: not explained' if gb.significant else 'nothing left to explain'}")
     return "\n".join(lines) + "\n"
 
 
-def write_report(d: Diagnosis, out: str | os.PathLike[str], model: str, data: str, command: str,
-                 overwrite: bool = False) -> Path:
-    """Writes :data:`REPORT_FILES` into ``out`` (created); each file atomically."""
+def check_report_target(out: str | os.PathLike[str], overwrite: bool) -> Path:
+    """Fails early, before any work, if the report cannot or may not be written into the folder ``out``.
+
+    The folder need not exist (it is created at the end, with any missing parents); if it exists,
+    none of :data:`REPORT_FILES` may be in it without ``overwrite``.
+    """
     folder = Path(out)
-    folder.mkdir(parents=True, exist_ok=True)
+    if folder.exists() and not folder.is_dir():
+        raise NotADirectoryError(f"--out {folder} is a file, not a folder")
+    if folder.is_dir():
+        for name in REPORT_FILES:
+            check_writable_target(folder / name, overwrite)
+        return folder
+    parent = folder.parent
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    if not parent.is_dir() or not os.access(parent, os.W_OK | os.X_OK):
+        raise PermissionError(f"cannot create --out {folder}: {parent} is not a writable folder")
+    return folder
+
+
+def _write_files(d: Diagnosis, folder: Path, model: str, data: str, command: str, overwrite: bool) -> None:
     save_figure(gap_figure(d), folder / "gap.png", overwrite=overwrite)
     save_figure(heatmap_figure(d), folder / "residual_heatmap.png", overwrite=overwrite)
     save_figure(correlation_figure(d), folder / "correlations.png", overwrite=overwrite)
@@ -260,4 +289,25 @@ def write_report(d: Diagnosis, out: str | os.PathLike[str], model: str, data: st
     write_json(folder / "report.json", {"command": command, "model": model, "data": data, **d.to_dict()}, overwrite=overwrite)
     with atomic_output(folder / "report.md", overwrite=overwrite) as tmp:
         tmp.write_text(markdown(d, model, data, command))
+
+
+def write_report(d: Diagnosis, out: str | os.PathLike[str], model: str, data: str, command: str,
+                 overwrite: bool = False) -> Path:
+    """Writes :data:`REPORT_FILES` into the folder ``out``; returns the path of ``report.md``.
+
+    A new folder appears whole: the files are written into a hidden sibling, which is then renamed
+    to ``out``. Into an existing folder, each file is written atomically.
+    """
+    folder = check_report_target(out, overwrite)
+    if folder.is_dir():
+        _write_files(d, folder, model, data, command, overwrite)
+        return folder / "report.md"
+    folder.parent.mkdir(parents=True, exist_ok=True)
+    tmp = partial_path(folder)
+    try:
+        tmp.mkdir()
+        _write_files(d, tmp, model, data, command, overwrite=True)
+        os.rename(tmp, folder)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
     return folder / "report.md"

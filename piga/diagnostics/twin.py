@@ -28,9 +28,11 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from piga.diagnostics import fit as F
+from envs.constants import MAX_ACTION
+from piga.diagnostics import fit
 from piga.diagnostics.observe import read_frames
 from piga.model import PhysicsModel
+from piga.runs import Nominal
 
 
 @dataclass(frozen=True)
@@ -43,19 +45,20 @@ class TwinFloor:
     """(B,) each free-run window's mean squared angle error (rad²), as :func:`piga.diagnostics.fit.window_errors`."""
 
 
-def twin_angles(model: F.Model, nominal: F.Nominal, theta: np.ndarray, actions: np.ndarray) -> np.ndarray:
+def twin_angles(model: fit.Model, nominal: Nominal, theta: np.ndarray, actions: np.ndarray) -> np.ndarray:
     """(n, T) angles (model convention) of the twin of ``n`` sequences of (n, T) encoded ``theta``.
 
     Frames 0 and 1 are the encoded ones; from frame 2 on, ``model`` simulates with the sequence's
     actions (actions before frame 0, which a delay would need, are taken as 0).
     """
     n, t = theta.shape
-    pad = np.concatenate([np.zeros((n, F.MAX_DELAY - 1)), np.clip(actions[:, : t - 1], -2.0, 2.0)], 1)  # u_{-3}..u_{T-2}
+    clipped = np.clip(actions[:, : t - 1], -MAX_ACTION, MAX_ACTION)
+    pad = np.concatenate([np.zeros((n, fit.MAX_DELAY - 1)), clipped], 1)  # u_{-3}..u_{T-2}
     as_t = lambda x: torch.as_tensor(x, dtype=torch.float64)  # noqa: E731
-    w = F.Windows(as_t(theta[:, 1]), as_t((theta[:, 1] - theta[:, 0]) / nominal.dt), as_t(pad),
+    w = fit.Windows(as_t(theta[:, 1]), as_t((theta[:, 1] - theta[:, 0]) / nominal.dt), as_t(pad),
                   torch.zeros(n, t - 2, dtype=torch.float64), torch.ones(n, t - 2, dtype=torch.float64), torch.arange(n))
     with torch.no_grad():
-        sim = F.simulate(model, F.parameters_of(model, nominal), nominal, w).numpy()  # (n, T - 2)
+        sim = fit.simulate(model, fit.parameters_of(model, nominal), nominal, w).numpy()  # (n, T - 2)
     return np.concatenate([theta[:, :2], sim], 1)
 
 
@@ -86,7 +89,7 @@ def render_angles(angles: np.ndarray, actions: np.ndarray, offset: float, image_
         for i in range(angles.shape[0]):
             for j in range(angles.shape[1]):
                 base.state = np.array([angles[i, j] + offset, 0.0])
-                base.last_u = float(np.clip(actions[i, j - 1], -2.0, 2.0)) if arrow and j > 0 else None
+                base.last_u = float(np.clip(actions[i, j - 1], -MAX_ACTION, MAX_ACTION)) if arrow and j > 0 else None
                 img = base.render()
                 for stage in stages:
                     img = stage.observation(img)
@@ -103,7 +106,7 @@ def repeat_stale(frames: np.ndarray, stale: np.ndarray) -> np.ndarray:
     return frames
 
 
-def twin_floor(network: PhysicsModel, model: F.Model, nominal: F.Nominal, theta: np.ndarray, actions: np.ndarray,
+def twin_floor(network: PhysicsModel, model: fit.Model, nominal: Nominal, theta: np.ndarray, actions: np.ndarray,
                stale: np.ndarray | None, stride: int, arrow: bool = True, batch: int = 16) -> TwinFloor:
     """The errors of ``model`` on the twin of (n, T) encoded held-out sequences ``theta`` and ``actions``.
 
@@ -122,8 +125,8 @@ def twin_floor(network: PhysicsModel, model: F.Model, nominal: F.Nominal, theta:
     for start in range(0, len(frames), batch):
         encoded[start : start + batch] = read_frames(network, frames[start : start + batch])[2]
     rows = np.arange(len(encoded))
-    w = F.make_windows(encoded, actions, rows, None, stride, nominal.dt, stale, repeat=True)
-    return TwinFloor(F.horizon_errors(model, nominal, w), F.window_errors(model, nominal, w))
+    w = fit.make_windows(encoded, actions, rows, None, stride, nominal.dt, stale, repeat=True)
+    return TwinFloor(fit.horizon_errors(model, nominal, w), fit.window_errors(model, nominal, w))
 
 
 #: The nominal error must exceed the floor by this factor for a closure to mean something (below

@@ -1,0 +1,338 @@
+"""What a diagnosis finds, as typed records: the effects, the candidate table, the gap, the vision check.
+
+:func:`piga.diagnostics.diagnose.analyse` builds them step by step; :mod:`piga.diagnostics.report`
+reads them. :meth:`Diagnosis.to_dict` gives the JSON of ``report.json``. Each record can also be
+read by key, like that JSON (``diagnosis.gap["free_run_closure"]``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field, fields
+from typing import Any
+
+import numpy as np
+
+from piga.diagnostics import fit
+from piga.diagnostics.vision import Camera
+
+
+class _ByKey:
+    """Read a record's fields by name too, as in ``report.json``: ``record["name"]``, ``record.get("name")``."""
+
+    def __getitem__(self, key: str) -> Any:
+        if key not in {f.name for f in fields(self)}:  # type: ignore[arg-type]
+            raise KeyError(key)
+        return getattr(self, key)
+
+    def __contains__(self, key: str) -> bool:
+        return key in {f.name for f in fields(self)}  # type: ignore[arg-type]
+
+    def get(self, key: str, default: Any = None) -> Any:
+        return getattr(self, key) if key in self else default
+
+
+@dataclass(frozen=True)
+class Effect(_ByKey):
+    """A named effect with its coefficient."""
+
+    effect: str
+    """Its name: a dynamics candidate, "gain", "frame_delay", or a camera effect (blur, shift, noise, frame_drop)."""
+    value: float
+    """Its coefficient (steps for a delay)."""
+    unit: str
+    """The coefficient's unit."""
+    interval: list[float] | None = None
+    """95% interval (None: none, e.g. a discrete delay or no bootstrap)."""
+    dx: float | None = None
+    """Shift only: px to the right."""
+    dy: float | None = None
+    """Shift only: px down."""
+    dx_interval: list[float] | None = None
+    """Shift only: 95% interval of dx."""
+    dy_interval: list[float] | None = None
+    """Shift only: 95% interval of dy."""
+
+    def describe(self) -> str:
+        """One phrase for the verdict line."""
+        steps = lambda k: f"{k} step" + ("s" if k != 1 else "")  # noqa: E731
+        if self.effect == "delay":
+            return f"actuator delay of {steps(self.value)}"
+        if self.effect == "frame_delay":
+            return f"camera delay (frame_delay) of {steps(self.value)}"
+        known = self.interval is not None and all(math.isfinite(x) for x in self.interval)
+        ci = f" (95% interval {self.interval[0]:.3g}..{self.interval[1]:.3g})" if known else ""
+        if self.effect == "shift":
+            return f"shift {self.dx:.3g} px right, {self.dy:.3g} px down (mean {self.value:.3g}{ci})"
+        return f"{self.effect} {self.value:.3g} {self.unit}{ci}"
+
+    def to_dict(self) -> dict[str, Any]:
+        shift_only = ("dx", "dy", "dx_interval", "dy_interval")
+        return {k: v for k, v in asdict(self).items() if k not in shift_only or self.effect == "shift"}
+
+
+@dataclass(frozen=True)
+class Score:
+    """A candidate physics and how well it predicts."""
+
+    model: fit.Model
+    """The fitted candidate."""
+    bic: float
+    """BIC of its one-step residuals on the fit split."""
+    free_run: float
+    """Mean held-out free-run angle MSE (rad²) over windows and horizons."""
+    horizon: np.ndarray
+    """(H,) held-out free-run angle MSE (rad²) per horizon."""
+    typical: float
+    """Held-out free-run angle MSE (rad²) of the typical (median) window."""
+
+    @property
+    def name(self) -> str:
+        return self.model.name
+
+
+@dataclass(frozen=True)
+class CandidateRow(_ByKey):
+    """A row of the candidate table."""
+
+    candidate: str
+    """"nominal (no refit)", "none (g, a refitted)" or the effect's name."""
+    bic: float
+    """One-step BIC on the fit split."""
+    held_out_free_run_mse: float
+    """Mean held-out free-run angle MSE (rad²)."""
+    typical_free_run_mse: float
+    """The typical held-out window's free-run angle MSE (rad²)."""
+    values: dict[str, float]
+    """Fitted g, a and the effect's parameter."""
+    delta_bic: float | None = None
+    """BIC against "none (g, a refitted)" (None for the nominal row)."""
+    delay: int | None = None
+    """k of a delay (None: no delay)."""
+
+    def to_dict(self) -> dict[str, Any]:
+        out = asdict(self)
+        if self.delta_bic is None:  # the nominal row has neither
+            out.pop("delta_bic")
+            out.pop("delay")
+        return out
+
+
+@dataclass(frozen=True)
+class SelectionStep(_ByKey):
+    """One test of the forward selection."""
+
+    tried: str
+    """The candidate tried."""
+    bic_drop: float
+    """Its BIC drop against the model chosen so far."""
+    free_run_drop: float
+    """Relative drop of the typical held-out free-run error."""
+    accepted: bool
+    """Both drops large enough."""
+
+
+@dataclass(frozen=True)
+class GenericBasis(_ByKey):
+    """The "not explained by the candidates" test: a flexible basis fitted to what is left."""
+
+    bic_drop: float
+    """BIC drop of the basis on the fit split's one-step residuals."""
+    held_out_drop: float
+    """Relative drop of the held-out one-step residual."""
+    significant: bool
+    """Both large enough: the gap is not explained by the candidates."""
+
+
+@dataclass(frozen=True)
+class Naming(_ByKey):
+    """The effects named from the chosen physics and the camera stage, and the verdict."""
+
+    effects: list[Effect]
+    """Named effects, camera ones first."""
+    notes: list[str]
+    """Findings that are not effects (Gymnasium's own clip, a gain within its interval, ...)."""
+    verdict: str
+    """One line."""
+    verdict_class: str
+    """"none", "unexplained", or the effects' names joined by "+" in alphabetical order."""
+
+
+@dataclass(frozen=True)
+class CameraSummary(_ByKey):
+    """The camera stage's findings, for the report."""
+
+    camera: Camera
+    """The accepted camera (all zero: none)."""
+    camera_candidates: list[dict[str, Any]]
+    """The camera stage's candidate table."""
+    noise: float
+    """Sensor noise (gray levels)."""
+    repeated_frames: int
+    """Frames that repeat the previous one."""
+    dropped_frames: int
+    """... while the pendulum moves."""
+    drop_rate: float
+    """Their rate."""
+    leading_repeats: int
+    """Frames 1..k repeat frame 0 in nearly every sequence."""
+    matched_mse_nominal: float
+    """Held-out matched residual with no camera effect."""
+    matched_mse_corrected: float
+    """... with the accepted camera."""
+    angles: str
+    """"matched" (the dynamics use angles matched through the camera) or "encoder"."""
+
+
+@dataclass(frozen=True)
+class VisionSummary(_ByKey):
+    """How well the autoencoder explains the recording, and the camera stage."""
+
+    rec_mse_real: float
+    """Mean re-rendering MSE of the recording's frames."""
+    rec_mse_training: float
+    """The model's own per-frame reconstruction MSE in training (0: unknown)."""
+    ratio: float | None
+    """rec_mse_real / rec_mse_training (None: the training error is unknown)."""
+    camera: CameraSummary | None = None
+    """The camera stage (None: not run)."""
+
+    def to_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"rec_mse_real": self.rec_mse_real, "rec_mse_training": self.rec_mse_training,
+                               "ratio": self.ratio}
+        if self.camera is not None:
+            out.update(asdict(self.camera))
+        return out
+
+
+@dataclass(frozen=True)
+class PixelErrors(_ByKey):
+    """Free-run pixel errors of the rendered predictions on the kept held-out sequences."""
+
+    pixel_mse_nominal: list[float] = field(default_factory=list)
+    """Per horizon, the nominal model (empty: no frames kept)."""
+    pixel_mse_corrected: list[float] = field(default_factory=list)
+    """Per horizon, the corrected model."""
+    pixel_mse_floor: float | None = None
+    """The matched residual of the same frames: no prediction beats it."""
+    typical_pixel_mse_nominal: float | None = None
+    """The typical sequence's mean pixel MSE, nominal."""
+    typical_pixel_mse_corrected: float | None = None
+    """... corrected."""
+
+
+@dataclass(frozen=True)
+class Gap(_ByKey):
+    """The size of the gap per horizon, nominal vs corrected, and how far it closes."""
+
+    horizon: list[int]
+    """1..H."""
+    state_mse_nominal: list[float]
+    """(H,) held-out free-run angle MSE (rad²) of the nominal model."""
+    state_mse_corrected: list[float]
+    """(H,) ... of the corrected model."""
+    closure: list[float]
+    """(H,) 1 - corrected / nominal."""
+    free_run_mse_nominal: float
+    """Mean over windows and horizons, nominal."""
+    free_run_mse_corrected: float
+    """... corrected."""
+    free_run_closure: float
+    """1 - corrected / nominal of those means."""
+    state_mse_floor: list[float] | None
+    """(H,) the twin's floor (None: not measured)."""
+    free_run_mse_floor: float | None
+    """Its mean."""
+    free_run_gap_closure: float | None
+    """The headline: the typical window's closure above the floor, in angles or (``closure_basis``) pixels."""
+    typical_free_run_mse_nominal: float
+    """The typical held-out window's free-run angle MSE, nominal."""
+    typical_free_run_mse_corrected: float
+    """... corrected."""
+    typical_free_run_mse_floor: float | None
+    """... on the twin."""
+    typical_free_run_closure: float | None
+    """Raw closure on the typical window (no floor)."""
+    typical_free_run_gap_closure: float | None
+    """Closure above the floor on the typical window (raw when no floor)."""
+    mean_free_run_gap_closure: float | None
+    """Closure above the floor of the means over all windows."""
+    closure_basis: str
+    """"state" (angles) or "pixels" (a camera effect changed the angles)."""
+    pixel_free_run_gap_closure: float | None
+    """Closure of the typical pixel gap above the matched floor."""
+    gap_above_floor: bool
+    """The nominal error exceeds the floor enough for a closure to mean something."""
+    one_step_rms_nominal_rad: float
+    """Held-out one-step angle RMSE, nominal (on the encoder's angles)."""
+    one_step_rms_corrected_rad: float
+    """... corrected."""
+    pixel_mse_nominal: list[float]
+    """See :class:`PixelErrors`."""
+    pixel_mse_corrected: list[float]
+    pixel_mse_floor: float | None
+    typical_pixel_mse_nominal: float | None
+    typical_pixel_mse_corrected: float | None
+
+
+@dataclass
+class Diagnosis(_ByKey):
+    """Everything the report shows (JSON-ready through :meth:`to_dict`)."""
+
+    verdict: str
+    """One line: the named effect(s), "no significant gap", or "not explained by the candidates"."""
+    verdict_class: str
+    """"none", "unexplained", or the names of the effects joined by "+" (for scoring)."""
+    effects: list[Effect]
+    """Named effects with coefficient, 95% interval and unit."""
+    nominal: dict[str, float]
+    """The identified model's g, a, φ."""
+    corrected: dict[str, float]
+    """g, a and the effect parameters of the chosen model."""
+    corrected_effects: list[str]
+    """The effects in the chosen model's physics (including Gymnasium's own clip when found)."""
+    candidates: list[CandidateRow]
+    """Ranked table of the single-effect fits."""
+    selection: list[SelectionStep]
+    """The forward selection's tests."""
+    generic_basis: GenericBasis
+    """The "not explained" test."""
+    gap: Gap
+    """Errors per horizon: state (rad²) and pixels, nominal vs chosen, and the closure."""
+    vision: VisionSummary
+    """Re-rendering error on the real frames vs the model's training error, and the camera stage."""
+    residuals: dict[str, Any]
+    """Heatmap, bins, autocorrelation, action cross-correlation of the nominal model."""
+    notes: list[str] = field(default_factory=list)
+    """Other findings (Gymnasium's own clip, vision gap, ...)."""
+
+    control: dict[str, Any] | None = None
+    """With ``--env``: MPC on the simulated real system with the nominal vs the corrected physics."""
+
+    pictures: dict[str, np.ndarray] | None = field(default=None, repr=False)
+    """A held-out frame as recorded ("real", (H, W[, C]) in [0, 1]), re-rendered by the nominal model
+    ("nominal": decoder at the encoder's angle) and by the corrected one ("corrected": through the
+    fitted camera at the matched angle). For the report's picture; not in :meth:`to_dict`."""
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON of ``report.json`` (the candidate table ends with the selection and the generic basis)."""
+        return {
+            "verdict": self.verdict, "verdict_class": self.verdict_class,
+            "effects": [e.to_dict() for e in self.effects],
+            "nominal": dict(self.nominal), "corrected": dict(self.corrected),
+            "corrected_effects": list(self.corrected_effects),
+            "candidates": [r.to_dict() for r in self.candidates]
+            + [{"selection": [asdict(s) for s in self.selection], "generic_basis": asdict(self.generic_basis)}],
+            "gap": asdict(self.gap), "vision": self.vision.to_dict(), "residuals": self.residuals,
+            "notes": list(self.notes), "control": self.control,
+        }
+
+    def corrected_camera(self) -> Camera | None:
+        """The camera to read angles through, when the diagnosis re-matched them (else None: the encoder)."""
+        cam = self.vision.camera
+        return cam.camera if cam is not None and cam.angles == "matched" else None
+
+    def corrected_model(self) -> fit.Model:
+        """The chosen physics as a :class:`piga.diagnostics.fit.Model` (for a planner)."""
+        values = {k: float(v) for k, v in self.corrected.items() if k != "delay"}
+        return fit.Model(tuple(self.corrected_effects), int(self.corrected.get("delay", 0)), values)

@@ -1,0 +1,131 @@
+"""Reading a training run: the model in ``RUN_DIR/checkpoint.pt`` and what the run says about it.
+
+A run folder is written by :func:`piga.train.train`. Everything that *uses* a trained model (control,
+goal images, the gap diagnosis, benchmarks) reads it through this module, never through the
+training code:
+
+- :func:`load_model`: the model (eval mode) and its checkpoint;
+- :func:`training_reconstruction_mse`: the autoencoder's own per-frame error in its last epoch;
+- :func:`training_steps`: how many optimiser steps the run took;
+- :func:`training_blank_mse`: the error of drawing no object on the run's training frames (its error scale);
+- :func:`training_arrow`: whether the training frames showed Gymnasium's torque arrow;
+- :func:`nominal_of`: the identified physics (:class:`Nominal`) that a diagnosis starts from.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from piga.model import ModelConfig, PhysicsModel
+
+#: The checkpoint's file name in a run folder.
+CHECKPOINT = "checkpoint.pt"
+
+
+@dataclass(frozen=True)
+class Nominal:
+    """The identified model's pendulum physics: θ̈ = 1.5·g·sin(θ + φ) + 3·a·u, ``substeps`` Euler steps per frame."""
+
+    g: float
+    """Gravity."""
+    a: float
+    """Actuation gain."""
+    offset: float
+    """φ: Gymnasium's θ = model θ + φ."""
+    dt: float
+    """Seconds per frame."""
+    substeps: int = 1
+    """Semi-implicit Euler substeps per frame."""
+
+
+def load_model(run_dir: str | os.PathLike[str]) -> tuple[PhysicsModel, dict[str, Any]]:
+    """Rebuilds a trained model from ``RUN_DIR/checkpoint.pt``; returns it (eval mode) and the checkpoint."""
+    path = Path(run_dir) / CHECKPOINT
+    if not path.exists():
+        raise FileNotFoundError(f"{path}: no checkpoint (is {run_dir} a piga-train-model run folder?)")
+    try:
+        ckpt = torch.load(path, map_location="cpu", weights_only=False)
+        model = PhysicsModel(ModelConfig.from_dict(ckpt["model_config"]))
+        model.load_state_dict(ckpt["model"])
+    except Exception as exc:  # a truncated or foreign file
+        raise ValueError(f"{path}: not a readable piga checkpoint ({exc.__class__.__name__}: {exc})") from None
+    model.eval()
+    return model, ckpt
+
+
+def training_reconstruction_mse(model: PhysicsModel, checkpoint: dict[str, Any] | None) -> float:
+    """The model's own per-frame reconstruction MSE in its last training epoch (0 if unknown)."""
+    try:
+        history = checkpoint["state"]["history"]  # type: ignore[index]
+        frames = model.config.input_frames if model.config.rec_frames == "input" else model.config.window
+        return float(history[-1]["loss_rec"]) / frames
+    except (TypeError, KeyError, IndexError):
+        return 0.0
+
+
+def training_steps(checkpoint: dict[str, Any] | None) -> int | None:
+    """Optimiser steps the run took (None: the checkpoint does not say)."""
+    try:
+        return int(checkpoint["state"]["step"])  # type: ignore[index]
+    except (TypeError, KeyError, ValueError):
+        return None
+
+
+def training_blank_mse(model: PhysicsModel, checkpoint: dict[str, Any] | None, max_sequences: int = 64) -> float | None:
+    """The scale of the run's reconstruction error: the per-frame MSE of its training frames against
+    the model's own background (the per-pixel median it subtracts, :mod:`piga.encoder`), i.e. the
+    error of a render that draws no object at all. Read from the first ``max_sequences`` train
+    sequences of the training file named in the checkpoint; None if that file is gone or unreadable."""
+    import h5py
+    import numpy as np
+
+    from piga.data import split_indices
+    from piga.model import frames_to_float
+
+    path = ((checkpoint or {}).get("data") or {}).get("path")
+    if not path or not os.path.exists(path):
+        return None
+    try:
+        rows = split_indices(path, "train")[:max_sequences]
+        with h5py.File(path, "r") as f:
+            raw = f["frames"][np.sort(rows)]
+    except (OSError, KeyError, ValueError):
+        return None
+    if len(raw) == 0:
+        return None
+    x = frames_to_float(torch.from_numpy(raw), model.config.channels)  # (n, T, C, H, W)
+    if x.shape[2:] != model.encoder.background.shape:
+        return None
+    return float(((x - model.encoder.background) ** 2).mean())
+
+
+def training_arrow(checkpoint: dict[str, Any] | None) -> bool:
+    """Whether the data the model was identified on showed Gymnasium's torque arrow: from the
+    ``env_config`` of the training file named in the checkpoint, if that file is still there, else
+    True (Gymnasium's own picture, the pixel pendulum's default)."""
+    import h5py
+
+    path = ((checkpoint or {}).get("data") or {}).get("path")
+    if not path or not os.path.exists(path):
+        return True
+    try:
+        with h5py.File(path, "r") as f:
+            return bool(json.loads(f.attrs["env_config"]).get("draw_torque_arrow", True))
+    except (OSError, KeyError, ValueError):
+        return True
+
+
+def nominal_of(model: PhysicsModel) -> Nominal:
+    """The identified model's physics: g, a, φ, dt and substeps."""
+    p = model.physical_parameters()
+    return Nominal(p["g"], p["a"], p.get("offset", 0.0), model.config.dt, model.config.substeps)
+
+
+__all__ = ["CHECKPOINT", "Nominal", "load_model", "nominal_of", "training_arrow", "training_blank_mse",
+           "training_reconstruction_mse", "training_steps"]

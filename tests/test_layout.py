@@ -1,0 +1,40 @@
+"""Dependencies point one way: reading a run or diagnosing never loads training code, and no cycle remains."""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+
+def _loaded_after(module: str) -> set[str]:
+    """The piga/envs/agents modules that importing ``module`` in a fresh interpreter loads."""
+    code = f"import sys, {module}; print(' '.join(m for m in sys.modules if m.split('.')[0] in ('piga', 'envs', 'agents')))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=120)
+    return set(out.stdout.split())
+
+
+@pytest.mark.parametrize("module, never", [
+    ("piga.runs", {"piga.train", "piga.diagnostics"}),
+    ("piga.diagnostics.diagnose", {"piga.train", "agents"}),
+    ("piga.diagnostics.report", {"piga.train", "agents"}),
+    ("piga.data", {"piga.windows"}),
+])
+def test_a_module_does_not_load(module: str, never: set[str]) -> None:
+    loaded = _loaded_after(module)
+    assert not {m for m in loaded for n in never if m == n or m.startswith(n + ".")}, loaded
+
+
+@pytest.mark.parametrize("path, never", [
+    ("envs/constants.py", {"envs"}),
+    ("envs/effects.py", {"envs.pendulum"}),
+])
+def test_the_env_modules_import_one_way(path: str, never: set[str]) -> None:
+    """envs.pendulum imports envs.effects, which takes Pendulum-v1's constants from envs.constants (no cycle)."""
+    tree = ast.parse((Path(__file__).parents[1] / path).read_text())
+    imported = {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.module}
+    imported |= {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
+    assert not {m for m in imported for n in never if m == n or m.startswith(n + ".")}, imported
