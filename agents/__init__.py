@@ -1,1 +1,1 @@
-"""Controllers and baselines: CEM planning, the piga MPC agent, the oracle, PlaNet and DDPG."""
+"""Controllers: the CEM optimiser, the planner over a :class:`~agents.dynamics.Dynamics`, the piga MPC agent and the oracle."""
