@@ -1,4 +1,4 @@
-"""Benchmark: control from pixels with the learned model, against the oracle (issue 4's floors).
+"""Benchmark: control from pixels with the learned model, against the oracle (with the control floors).
 
 It runs, with a model trained by ``piga-train-model`` (default preset, default data):
 
