@@ -7,6 +7,7 @@ import signal
 import subprocess
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -50,3 +51,12 @@ def assert_one_line(code: int, err: str, *needles: str) -> str:
 def assert_one_line_error(result: subprocess.CompletedProcess[str], *needles: str) -> str:
     """:func:`assert_one_line` for a subprocess result; returns the line."""
     return assert_one_line(result.returncode, result.stderr, *needles)
+
+
+def train_tiny(data: Path, run_dir: Path, **overrides: Any) -> Path:
+    """A real run folder in seconds: the tiny-data recipe (batch 16, 4 predicted frames, one thread), with ``overrides`` of TrainConfig."""
+    from piga.train import TrainConfig, train
+
+    config = TrainConfig(**{"epochs": 1, "batch_size": 16, "warmup_steps": 2, "curriculum_steps": 2, "threads": 1, **overrides})
+    train(data, run_dir, config, {"rec_frames": "input", "pred_frames": 4}, progress=False)
+    return run_dir

@@ -17,7 +17,7 @@ from agents.mpc import MPCConfig, OracleAgent, PigaMPCAgent
 from piga.episodes import EpisodeConfig, run_episodes
 from piga.goal import load_scene_image, render_goal_image
 from piga.model import ModelConfig, PhysicsModel
-from tests.helpers import ENV, assert_one_line_error, run
+from tests.helpers import ENV, assert_one_line_error, run, train_tiny
 
 
 @pytest.mark.parametrize("substeps", [1, 5])
@@ -200,12 +200,7 @@ def test_agents_import_nothing_from_diagnostics() -> None:
 @pytest.fixture(scope="module")
 def control_model(tiny_data: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A pendulum model trained for one epoch on the tiny data: a real run folder, quickly."""
-    from piga.train import TrainConfig, train
-
-    run_dir = tmp_path_factory.mktemp("control") / "model"
-    train(tiny_data, run_dir, TrainConfig(epochs=1, batch_size=16, warmup_steps=2, curriculum_steps=2, threads=1),
-          {"rec_frames": "input", "pred_frames": 4}, progress=False)
-    return run_dir
+    return train_tiny(tiny_data, tmp_path_factory.mktemp("control") / "model")
 
 
 def test_sweep_writes_a_table_per_multiplier(control_model: Path, tmp_path: Path) -> None:

@@ -14,7 +14,7 @@ from envs.pendulum import PixelPendulumConfig, make_pixel_pendulum
 from piga.diagnostics import DiagnoseConfig, Observations, analyse
 from piga.diagnostics import fit
 from piga.runs import Nominal
-from tests.helpers import assert_one_line_error, run
+from tests.helpers import assert_one_line_error, run, train_tiny
 
 NOMINAL = Nominal(g=10.0, a=1.0, offset=0.0, dt=0.05)
 FAST = DiagnoseConfig(bootstrap=0)
@@ -121,23 +121,13 @@ def test_a_gain_whose_interval_holds_the_nominal_is_not_named() -> None:
 def tiny_model(tiny_data: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A tiny model whose autoencoder has learnt the scene (training MSE ~25% of drawing no pendulum;
     24 steps, ~15 s), but whose physics has barely moved from g = 1, a = 0.3: its verdicts mean nothing."""
-    from piga.train import TrainConfig, train
-
-    run_dir = tmp_path_factory.mktemp("diag") / "model"
-    train(tiny_data, run_dir, TrainConfig(epochs=6, batch_size=16, warmup_steps=16, curriculum_steps=2, threads=1, lr=3e-3),
-          {"rec_frames": "input", "pred_frames": 4}, progress=False)
-    return run_dir
+    return train_tiny(tiny_data, tmp_path_factory.mktemp("diag") / "model", epochs=6, warmup_steps=16, lr=3e-3)
 
 
 @pytest.fixture(scope="module")
 def untrained_model(tiny_data: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A model after 2 steps: its autoencoder draws no pendulum yet (training MSE ~60x that of drawing none)."""
-    from piga.train import TrainConfig, train
-
-    run_dir = tmp_path_factory.mktemp("diag") / "untrained"
-    train(tiny_data, run_dir, TrainConfig(epochs=1, batch_size=16, warmup_steps=1, curriculum_steps=2, threads=1),
-          {"rec_frames": "input", "pred_frames": 4}, progress=False)
-    return run_dir
+    return train_tiny(tiny_data, tmp_path_factory.mktemp("diag") / "untrained", warmup_steps=1)
 
 
 @pytest.fixture(scope="module")
