@@ -72,10 +72,10 @@ def cem(
         ninf = float("-inf")
         values = torch.nan_to_num(values, nan=ninf, posinf=ninf, neginf=ninf)  # non-finite ranks last
         top, order = torch.topk(values, k)  # (E,) the best k, best first
-        first = float(top[0])
+        first, last = top[0::k - 1].tolist() if k > 1 else (float(top[0]),) * 2  # the best and the k-th
         if first > best_value:
             best_value, best_actions = first, samples[order[0]].clone()
-        if float(top[-1]) == ninf:  # some of the best k blew up: only the finite ones refit
+        if last == ninf:  # some of the best k blew up: only the finite ones refit
             order = order[torch.isfinite(top)]
             if len(order) == 0:  # everything blew up: keep the distribution
                 continue

@@ -80,7 +80,9 @@ class Planner:
             u = actions[..., 0]  # (B, H)
             # in place, on tiny tensors, where each operator call costs more than its arithmetic:
             # cost = w_θ·wrap(θ - θ_goal)² + w_v·θ̇² + w_u·u², wrap(x) = ((x + π) mod 2π) - π
-            cost = torch.remainder(p - (goal - math.pi), 2 * math.pi).sub_(math.pi).square_().mul_(cfg.angle_weight)
+            cost = torch.remainder(p - (goal - math.pi), 2 * math.pi).sub_(math.pi).square_()
+            if cfg.angle_weight != 1.0:
+                cost.mul_(cfg.angle_weight)
             cost.addcmul_(v, v, value=cfg.velocity_weight).addcmul_(u, u, value=cfg.action_weight)
             return cost.sum(1).neg_()  # (B,)
 
