@@ -26,7 +26,7 @@ from torch import Tensor
 
 from agents.cem import cem, shift_warm_start
 from agents.config import MPCConfig
-from agents.dynamics import Dynamics, PendulumDynamics
+from agents.dynamics import Dynamics, PendulumDynamics, ScoringDynamics, StageCost
 from envs.pendulum import MAX_ACTION, PENDULUM_DT, PixelPendulumConfig
 from piga.model import PhysicsModel, frames_to_float
 
@@ -44,6 +44,8 @@ class Planner:
 
     def __init__(self, dynamics: Dynamics, config: MPCConfig = MPCConfig()):
         self.dynamics = dynamics
+        self._scoring = dynamics if isinstance(dynamics, ScoringDynamics) else None
+        """The dynamics, when it scores its own rollouts."""
         self.config = config
         self.low = torch.tensor([-MAX_ACTION])
         self.high = torch.tensor([MAX_ACTION])
@@ -73,18 +75,14 @@ class Planner:
     def objective(self, theta: float, theta_dot: float) -> Callable[[Tensor], Tensor]:
         """The closure CEM maximises: actions (B, H, 1) -> return (B,) from the state (θ, θ̇)."""
         cfg = self.config
-        goal = self.current_goal(theta)
+        cost = StageCost(self.current_goal(theta), cfg.angle_weight, cfg.velocity_weight, cfg.action_weight)
+        if self._scoring is not None:
+            scoring = self._scoring
+            return lambda actions: scoring.returns(theta, theta_dot, actions, cost)
 
         def value(actions: Tensor) -> Tensor:
             p, v = self.dynamics.rollout(theta, theta_dot, actions)  # (B, H) each
-            u = actions[..., 0]  # (B, H)
-            # in place, on tiny tensors, where each operator call costs more than its arithmetic:
-            # cost = w_θ·wrap(θ - θ_goal)² + w_v·θ̇² + w_u·u², wrap(x) = ((x + π) mod 2π) - π
-            cost = torch.remainder(p - (goal - math.pi), 2 * math.pi).sub_(math.pi).square_()
-            if cfg.angle_weight != 1.0:
-                cost.mul_(cfg.angle_weight)
-            cost.addcmul_(v, v, value=cfg.velocity_weight).addcmul_(u, u, value=cfg.action_weight)
-            return cost.sum(1).neg_()  # (B,)
+            return cost.returns(p, v, actions[..., 0])
 
         return value
 

@@ -6,10 +6,12 @@ the piga agent that is reading the state from the frames (encoder and velocity e
 planning; for the oracle, planning alone. The planner is the default one (CEM, 200 candidates x
 20 steps x 5 iterations, warm start).
 
-A third row, "piga, nn.Module engine", plans with the same agent but rolls the candidates through
-:func:`piga.physics.rollout` on the model's own ``Pendulum`` module, as the planner did before it
-had a dynamics of its own: the difference is the overhead removed, and its success and return
-show that the planner's decisions did not change.
+Two more rows plan with the same agent over slower engines of the same physics, kept here as
+references: "piga, numpy operators" rolls the candidates with five in-place numpy operators per
+step and scores them with torch operators (the planner's engine before its compiled loop), and
+"piga, nn.Module engine" rolls them through :func:`piga.physics.rollout` on the model's own
+``Pendulum`` module. The differences are the overhead removed; their success and return show
+that the planner's decisions did not change.
 
 It trains nothing. Give it a run folder of ``piga-train-model``, for example the control
 benchmark's model (``piga-collect --out data/pendulum.h5`` then ``piga-train-model
@@ -32,6 +34,7 @@ import torch
 from torch import Tensor
 
 from common import machine
+from agents.dynamics import PendulumDynamics
 from agents.mpc import MPCConfig, OracleAgent, PigaMPCAgent
 from piga.atomic import atomic_output, write_json
 from piga.episodes import EpisodeConfig, run_episodes, summary_markdown
@@ -60,6 +63,36 @@ class ModuleDynamics:
     def executed(self, action: np.ndarray) -> None: ...
 
 
+class UfuncDynamics:
+    """The reference: the same semi-implicit Euler as :class:`agents.dynamics.PendulumDynamics`, with
+    five in-place numpy operators on (B,) rows per step; the planner scores it with torch operators."""
+
+    def __init__(self, dynamics: PendulumDynamics):
+        self.d = dynamics
+
+    def rollout(self, theta: float, theta_dot: float, actions: Tensor) -> tuple[Tensor, Tensor]:
+        b, steps = actions.shape[:2]
+        h = self.d.dt / self.d.substeps
+        push = np.multiply(actions[..., 0].numpy().T, h * h * self.d.torque_gain, dtype=np.float32)  # (H, B): h²·k_u·u
+        kick = np.float32(h * h * self.d.gravity_gain)
+        angles, moves = np.empty((steps, b), np.float32), np.empty((steps, b), np.float32)
+        q, d = np.full(b, theta, np.float32), np.full(b, h * theta_dot, np.float32)  # θ and h·θ̇
+        s = np.empty(b, np.float32)
+        for j in range(steps):
+            for _ in range(self.d.substeps):
+                np.sin(q, out=s)
+                s *= kick
+                s += push[j]
+                d = np.add(d, s, out=moves[j])
+                q = np.add(q, d, out=angles[j])
+        moves *= np.float32(1.0 / h)
+        return torch.from_numpy(angles).T, torch.from_numpy(moves).T  # (B, H) each
+
+    def reset(self) -> None: ...
+
+    def executed(self, action: np.ndarray) -> None: ...
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--model", required=True, help="run folder of piga-train-model (a pendulum model)")
@@ -67,7 +100,7 @@ def main() -> int:
     p.add_argument("--episodes", type=int, default=5, help="episodes per agent (default %(default)s)")
     p.add_argument("--steps", type=int, default=EpisodeConfig.steps, help="steps per episode (default %(default)s)")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--no-reference", action="store_true", help="skip the nn.Module-engine row")
+    p.add_argument("--no-reference", action="store_true", help="skip the two reference-engine rows")
     args = p.parse_args()
     torch.set_num_threads(1)
     model, _ = load_model(args.model)
@@ -79,6 +112,8 @@ def main() -> int:
         ("piga", PigaMPCAgent(model, mpc)),
     ]
     if not args.no_reference:
+        learned_dynamics = PendulumDynamics.of(model.system, model.integrator)  # type: ignore[arg-type]
+        agents.append(("piga, numpy operators", PigaMPCAgent(model, mpc, dynamics=UfuncDynamics(learned_dynamics))))
         agents.append(("piga, nn.Module engine", PigaMPCAgent(model, mpc, dynamics=ModuleDynamics(model))))
     rows = []
     for label, agent in agents:
@@ -96,8 +131,10 @@ def main() -> int:
         f"Model: `{args.model}` (learned g = {learned['g']:.4f}, a = {learned['a']:.4f}). Machine: {where['cpu']}, "
         f"{where['cores']} cores; one torch thread. Planner: CEM, {cem.candidates} candidates x {cem.horizon} steps x "
         f"{cem.iterations} iterations, top {cem.elites}, warm start. Time per call of the agent's `act`: for the piga "
-        "agent, reading the state from the frames and planning; for the oracle, planning. The nn.Module-engine row plans "
-        "with the same agent over `piga.physics.rollout` on the model's `Pendulum` module (the planner's engine before).", "",
+        "agent, reading the state from the frames and planning; for the oracle, planning. The reference rows plan "
+        "with the same agent over slower engines of the same physics: five in-place numpy operators per step, scored "
+        "with torch operators (\"numpy operators\"), and `piga.physics.rollout` on the model's `Pendulum` module "
+        "(\"nn.Module engine\"). The planner's own engine is one numba-compiled loop that rolls and scores.", "",
         summary_markdown(rows),
     ])
     out = Path(args.out)

@@ -40,6 +40,37 @@ def test_planning_dynamics_roll_like_the_physics_module(substeps: int) -> None:
     assert stronger.g == pytest.approx(1.4 * 9.3) and stronger.substeps == substeps
 
 
+@pytest.mark.parametrize("substeps", [1, 3])
+def test_planning_dynamics_scores_like_the_stage_cost(substeps: int) -> None:
+    """The compiled roll-and-score loop gives Gymnasium's cost of its own rollouts, wrap included
+    (goals near ±π, angles far past a turn), and the planner takes that path for it."""
+    from agents.dynamics import PendulumDynamics, ScoringDynamics, StageCost
+    from agents.mpc import Planner
+
+    dynamics = PendulumDynamics(11.0, 1.3, 0.05, substeps)
+    actions = torch.rand(64, 20, 1, generator=torch.Generator().manual_seed(1)) * 4 - 2
+    for theta, speed, goal in [(3.0, 6.0, -3.1), (-2.0, -8.0, 3.1), (0.1, 0.0, 0.0), (7.0, 1.0, 1.0)]:
+        cost = StageCost(goal, 0.7, 0.1, 0.001)
+        p, v = dynamics.rollout(theta, speed, actions)
+        torch.testing.assert_close(dynamics.returns(theta, speed, actions, cost), cost.returns(p, v, actions[..., 0]),
+                                   rtol=1e-5, atol=1e-3)
+    assert isinstance(dynamics, ScoringDynamics)
+    planner = Planner(dynamics, MPCConfig(goal_angle=0.5))
+
+    class RollOnly:  # the same physics without its own scoring: the planner's generic path
+        def rollout(self, theta: float, theta_dot: float, actions: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+            return dynamics.rollout(theta, theta_dot, actions)
+
+        def reset(self) -> None: ...
+
+        def executed(self, action: np.ndarray) -> None: ...
+
+    generic = Planner(RollOnly(), MPCConfig(goal_angle=0.5))
+    assert planner._scoring is dynamics and generic._scoring is None
+    torch.testing.assert_close(planner.objective(2.5, -1.0)(actions), generic.objective(2.5, -1.0)(actions),
+                               rtol=1e-5, atol=1e-3)
+
+
 def test_oracle_swings_up_from_hanging() -> None:
     torch.set_num_threads(1)
     config = EpisodeConfig(episodes=1, steps=150)
