@@ -23,15 +23,13 @@ BASELINE_KINDS = ("planet", "ddpg")
 
 
 def run_kind(run_dir: str | os.PathLike[str]) -> str:
-    """The kind of a run folder: ``config.json``'s ``kind``, "piga" when it has none (``piga-train-model``'s).
+    """The kind of a run folder: ``config.json``'s ``kind``; "piga" when it has none (``piga-train-model``'s)
+    or has no readable ``config.json`` (then loading the piga model says what is missing).
 
     Raises:
-        FileNotFoundError: ``run_dir`` is not a folder.
         ValueError: an unknown kind.
     """
     folder = Path(run_dir)
-    if not folder.is_dir():
-        raise FileNotFoundError(f"{folder}: no such run folder")
     try:
         record = json.loads((folder / "config.json").read_text())
     except (OSError, ValueError):
