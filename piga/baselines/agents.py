@@ -20,7 +20,7 @@ def baseline_agent(kind: str, run_dir: str | os.PathLike[str], seed: int = 0) ->
     if kind == "planet":
         from agents.planet.config import LatentPlannerConfig
         from agents.planet.planner import PlanetAgent
-        from piga.baselines.planet import load_planet
+        from piga.baselines.planet_run import load_planet
 
         model, _ = load_planet(run_dir)
         return PlanetAgent(model, LatentPlannerConfig(seed=seed))

@@ -28,13 +28,11 @@ from tqdm.auto import tqdm
 from agents.planet.config import PlanetTrainConfig, RSSMConfig
 from agents.planet.rssm import WorldModel
 from piga.atomic import atomic_output, write_json
+from piga.baselines.planet_run import CHECKPOINT, load_planet
 from piga.data import DataFormatError, DatasetInfo, check_actions, inspect_dataset, load_rewards, read_sequences
 from piga.train import TrainingDiverged
 
-#: The checkpoint's file name in a run folder.
-CHECKPOINT = "checkpoint.pt"
-
-__all__ = ["CHECKPOINT", "PlanetState", "check_planet_data", "load_planet", "train_planet"]
+__all__ = ["CHECKPOINT", "PlanetState", "check_planet_data", "load_planet", "rssm_config_for", "train_planet"]
 
 
 @dataclass
@@ -115,20 +113,6 @@ def _save(path: Path, model: WorldModel, optimizer: torch.optim.Optimizer, state
     }
     with atomic_output(path, overwrite=True) as tmp:
         torch.save(payload, tmp)
-
-
-def load_planet(run_dir: str | Path) -> tuple[WorldModel, dict[str, Any]]:
-    """The world model (eval mode) of a ``piga-baseline planet`` run, and its checkpoint."""
-    path = Path(run_dir) / CHECKPOINT
-    if not path.exists():
-        raise FileNotFoundError(f"{path}: no checkpoint (is {run_dir} a piga-baseline planet run folder?)")
-    try:
-        ckpt = torch.load(path, map_location="cpu", weights_only=False)
-        model = WorldModel(RSSMConfig(**ckpt["rssm_config"]))
-        model.load_state_dict(ckpt["model"])
-    except Exception as exc:  # a truncated or foreign file
-        raise ValueError(f"{path}: not a readable PlaNet-style checkpoint ({exc.__class__.__name__}: {exc})") from None
-    return model.eval(), ckpt
 
 
 @torch.no_grad()
