@@ -31,9 +31,10 @@ class StateObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
     """
 
     def __init__(self, env: gym.Env):
-        if not (hasattr(env.unwrapped, "state") and hasattr(env.unwrapped, "max_torque")):
-            raise TypeError(f"StateObservation wraps Gymnasium's Pendulum (an env with `state` and `max_torque`), "
-                            f"got {env.unwrapped!r}")
+        from gymnasium.envs.classic_control.pendulum import PendulumEnv
+
+        if not isinstance(env.unwrapped, PendulumEnv):
+            raise TypeError(f"StateObservation wraps Gymnasium's Pendulum-v1, got {env.unwrapped!r}")
         gym.utils.RecordConstructorArgs.__init__(self)
         gym.ObservationWrapper.__init__(self, env)
         high = np.array([1.0, 1.0, PENDULUM_MAX_SPEED], np.float32)

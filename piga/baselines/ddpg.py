@@ -29,6 +29,7 @@ import torch
 from tqdm.auto import tqdm
 
 from envs.observations import EpisodeSeeds, LatentObservation, StateObservation
+from envs.pendulum import PixelPendulumConfig
 from piga.atomic import atomic_output, write_json
 
 __all__ = ["CHECKPOINT", "DDPGAgent", "DDPGConfig", "OBSERVATIONS", "PRESETS", "config_for", "load_ddpg", "make_env",
@@ -119,13 +120,19 @@ PRESETS: dict[str, dict[str, Any]] = {"state": {}, "latent": {}, "pixels": {"buf
 
 def make_observation_env(config: DDPGConfig, encoder: Callable[[np.ndarray], np.ndarray] | None = None,
                          latent_size: int = 0, gravity_mult: float = 1.0) -> gym.Env:
-    """The registered pixel pendulum (one frame per observation) with the observation wrapper of ``config.obs``."""
+    """The registered pixel pendulum (one frame per observation) with the observation wrapper of ``config.obs``.
+
+    For "state", Gymnasium's Pendulum-v1 itself (the same dynamics and starts, gravity times
+    ``gravity_mult``) without rendering: rendering a frame costs more than the rest of a step, and
+    the state policy never looks at it.
+    """
     import envs  # noqa: F401  (registers piga/PixelPendulum-v0)
 
+    if config.obs == "state":
+        g = PixelPendulumConfig().gravity * gravity_mult
+        return StateObservation(gym.make("Pendulum-v1", g=g, max_episode_steps=EPISODE_STEPS))
     env = gym.make("piga/PixelPendulum-v0", frame_stack=1, draw_torque_arrow=config.torque_arrow,
                    episode_length=EPISODE_STEPS, gravity_mult=gravity_mult)
-    if config.obs == "state":
-        return StateObservation(env)
     if config.obs == "latent":
         if encoder is None:
             raise ValueError("obs='latent' needs an encoder")
