@@ -28,7 +28,6 @@ import json
 import math
 import shlex
 import sys
-import time
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -121,17 +120,19 @@ def evaluate(kind: str, run: Path | None, cfg: BenchConfig, gravity_mult: float 
 
 
 def train_piga(data: Path, run: Path, seed: int, cfg: BenchConfig) -> float:
+    """Trains (unless done) and returns the run's training seconds."""
+    from piga.runs import load_model
     from piga.train import TrainConfig, train
 
-    started = time.monotonic()
     if not (run / "checkpoint.pt").exists():
         overrides = {"rec_frames": "input", "pred_frames": 4} if "piga" in cfg.overrides else {}
         train(data, run, TrainConfig(epochs=cfg.piga_epochs, seed=seed, threads=1, **cfg.overrides.get("piga", {})),
               overrides, progress=False)
-    return time.monotonic() - started
+    return float(load_model(run)[1]["state"]["elapsed"])
 
 
 def train_planet_run(data: Path, run: Path, seed: int, cfg: BenchConfig) -> float:
+    """Trains (unless done) and returns the run's training seconds."""
     from agents.planet.config import PlanetTrainConfig
     from piga.baselines.planet import rssm_config_for, train_planet
     from piga.data import inspect_dataset
@@ -144,6 +145,7 @@ def train_planet_run(data: Path, run: Path, seed: int, cfg: BenchConfig) -> floa
 
 
 def train_ddpg_run(obs: str, steps: int, seed: int, data: Path, run: Path, cfg: BenchConfig) -> dict[str, Any]:
+    """Trains (unless done) and returns the run's metrics (learning curve, seconds)."""
     from piga.baselines.autoencoder import AutoencoderConfig, train_autoencoder
     from piga.baselines.ddpg import AUTOENCODER, config_for, train_ddpg
 
