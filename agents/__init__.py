@@ -1,1 +1,1 @@
-"""Controllers: the CEM optimiser, the planner over a :class:`~agents.dynamics.Dynamics`, the piga MPC agent and the oracle."""
+"""Controllers: the CEM optimiser, the planner over a :class:`~agents.dynamics.Dynamics`, the piga MPC agent and the oracle, and the PlaNet-style baseline (:mod:`agents.planet`: an RSSM world model and CEM in its latent space)."""

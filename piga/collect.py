@@ -7,7 +7,9 @@ which worker ran the sequence. Workers are Gymnasium vector envs: ``AsyncVectorE
 
 Sequence n holds frames x_0..x_{T-1}, where x_0 is the frame after reset. The actions are
 u_0..u_{T-1} ~ U(-2, 2), and u_t is applied after x_t. All T actions are applied, so each stored
-action really acted, even though the frame after the last one is not stored.
+action really acted, even though the frame after the last one is not stored. ``/rewards[n, t]`` is
+Gymnasium's reward for u_t (computed from the state of x_t), for reward-based baselines; piga's own
+training never reads it.
 
 Unmodelled effects (``env.effects``, :mod:`envs.effects`) change the frames and states only. The
 stored actions are the commanded u, and the effects are recorded in the attrs ``effects`` (a JSON
@@ -130,7 +132,7 @@ def check_resources(config: CollectConfig, out: str | Path) -> None:
 
     Memory: one batch of frames, the env workers' render buffers (the renderer's resize and gray
     conversion take ~40 bytes per output pixel) and 2 bytes per sequence of bookkeeping. Disk:
-    frames gzip-compressed (:data:`piga.resources.RENDERED_FRAME_COMPRESSION`), actions and states raw.
+    frames gzip-compressed (:data:`piga.resources.RENDERED_FRAME_COMPRESSION`), actions, states and rewards raw.
 
     Raises:
         piga.resources.ResourceError: naming what is needed and what is available.
@@ -184,7 +186,7 @@ def collect(
     }
     vec = _vector_env(factory, workers)
     try:
-        with DatasetWriter(out, n, t, (size, size), 1, 2, attrs, overwrite=overwrite) as writer:
+        with DatasetWriter(out, n, t, (size, size), 1, 2, attrs, overwrite=overwrite, rewards=True) as writer:
             bar = tqdm(total=n, desc="collect", unit="seq", disable=not progress)
             batch = max(config.batch, workers) // workers * workers
             for start in range(0, n, batch):
@@ -192,6 +194,7 @@ def collect(
                 frames = np.zeros((stop - start, t, size, size), np.uint8)
                 actions = np.zeros((stop - start, t, 1), np.float32)
                 states = np.zeros((stop - start, t, 2), np.float32)
+                rewards = np.zeros((stop - start, t), np.float32)
                 for group in range(start, stop, workers):
                     ids = list(range(group, min(group + workers, stop)))
                     reset_seeds, action_rngs = zip(*(sequence_rng(config.seed, i) for i in ids))
@@ -207,9 +210,10 @@ def collect(
                         actions[local, step] = u[:, step]
                         step_u = np.zeros((workers, 1), np.float32)
                         step_u[rows] = u[:, step]
-                        obs, _, _, _, info = vec.step(step_u)
+                        obs, reward, _, _, info = vec.step(step_u)
+                        rewards[local, step] = reward[rows]  # Gymnasium's reward for u_t
                     bar.update(len(ids))
-                writer.write(start, frames, actions, states)
+                writer.write(start, frames, actions, states, rewards)
             writer.set_split(np.repeat(np.arange(3, dtype=np.int8), counts))
             bar.close()
     except BaseException:  # interrupted or failed: stop the workers now, without waiting for their step

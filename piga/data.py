@@ -5,6 +5,7 @@
 | ``/frames`` | uint8 [N, T, H, W] (gray) or [N, T, H, W, C] (colour) | the frames |
 | ``/actions`` | float32 [N, T, A] | ``actions[n, t]`` is applied after ``frames[n, t]``; A = 0 if unactuated |
 | ``/states`` | float32 [N, T, S] | optional ground truth, **for evaluation only** |
+| ``/rewards`` | float32 [N, T] | optional: the env's reward for the action after ``frames[n, t]`` (reward-based baselines) |
 | ``/split`` | int8 [N] | 0 train, 1 valid, 2 test |
 
 File attributes: ``system`` (str), ``dt`` (float, seconds between frames), ``params`` (JSON: the
@@ -16,7 +17,8 @@ command line that made the file), and optionally ``env_config``, ``state_names``
 Training code reads only frames and actions: :class:`piga.windows.SequenceWindows` (a torch
 Dataset, in its own module so that reading and writing files does not pay torch's import) serves
 those and nothing else. Ground-truth states come out only through :func:`load_states`, which
-evaluation code calls explicitly.
+evaluation code calls explicitly. Rewards come out only through :func:`load_rewards`, which only the
+reward-based baselines (:mod:`agents.planet`) call; piga's own training never reads them.
 """
 
 from __future__ import annotations
@@ -97,6 +99,8 @@ class DatasetInfo:
     """Sequences per split name."""
     attrs: dict[str, Any] = field(repr=False)
     """All file attributes (JSON strings parsed)."""
+    has_rewards: bool = False
+    """Whether ``/rewards`` exists (reward-based baselines only)."""
 
 
 def _attr(value: Any) -> Any:
@@ -136,6 +140,13 @@ def _validate(f: h5py.File, path: Path) -> DatasetInfo:
         states = f["states"]
         if not isinstance(states, h5py.Dataset) or states.ndim != 3 or states.shape[:2] != (n, t):
             raise DataFormatError(f"{path}: /states must be [N={n}, T={t}, S], got {getattr(states, 'shape', None)}")
+    has_rewards = "rewards" in f
+    if has_rewards:
+        rewards = f["rewards"]
+        if (not isinstance(rewards, h5py.Dataset) or rewards.shape != (n, t)
+                or not np.issubdtype(rewards.dtype, np.floating)):
+            raise DataFormatError(f"{path}: /rewards must be float32 [N={n}, T={t}], got "
+                                  f"{getattr(rewards, 'dtype', None)} {getattr(rewards, 'shape', None)}")
     split = need("split")
     if split.shape != (n,) or not np.issubdtype(split.dtype, np.integer):
         raise DataFormatError(f"{path}: /split must be int8 [N={n}], got {split.dtype} {split.shape}")
@@ -167,6 +178,7 @@ def _validate(f: h5py.File, path: Path) -> DatasetInfo:
         params=params,
         split_counts={name: int((codes == code).sum()) for name, code in SPLITS.items()},
         attrs=attrs,
+        has_rewards=has_rewards,
     )
 
 
@@ -224,6 +236,21 @@ def load_states(path: str | os.PathLike[str], split: str) -> np.ndarray:
         return _take(f["states"], idx).astype(np.float32)
 
 
+def load_rewards(path: str | os.PathLike[str], split: str) -> np.ndarray:
+    """Rewards (float32 [n, T]) of one split: ``rewards[n, t]`` is the env's reward for the action after
+    ``frames[n, t]``. For reward-based baselines only; piga's own training never calls this.
+
+    Raises:
+        DataFormatError: the file has no ``/rewards`` (optional in the schema; ``piga-collect`` writes it).
+    """
+    idx = split_indices(path, split)
+    with _open(path) as f:
+        if "rewards" not in f:
+            raise DataFormatError(f"{path}: has no /rewards (reward-based baselines need them; files from "
+                                  "piga-collect have them)")
+        return _take(f["rewards"], idx).astype(np.float32)
+
+
 def _take(ds: h5py.Dataset, idx: np.ndarray) -> np.ndarray:
     """Rows ``idx`` of ``ds``; one contiguous read when the rows are a range."""
     if len(idx) and idx[-1] - idx[0] + 1 == len(idx):
@@ -241,6 +268,7 @@ class DatasetWriter:
         path: target file.
         n_sequences, steps, image_shape, action_dim: N, T, (H, W[, C]), A.
         state_dim: S, or None for a file without ``/states``.
+        rewards: whether the file has ``/rewards`` (float32 [N, T]); then :meth:`write` needs them.
         attrs: file attributes; dicts and lists are stored as JSON. ``system`` and ``dt`` are required.
         overwrite: allow replacing an existing file.
         compression: h5py compression for ``/frames`` (gzip level 4 by default; None for none).
@@ -257,6 +285,7 @@ class DatasetWriter:
         attrs: dict[str, Any],
         overwrite: bool = False,
         compression: str | None = "gzip",
+        rewards: bool = False,
     ):
         missing = [key for key in REQUIRED_ATTRS if key not in attrs]
         if missing:
@@ -270,6 +299,7 @@ class DatasetWriter:
         self.attrs = {"seed": -1, "piga_version": __version__, "command": "", "params": {}, **attrs}
         self.overwrite = overwrite
         self.compression = compression
+        self.rewards = rewards
         self._ctx: Any = None
         self._file: h5py.File | None = None
         self._written = np.zeros(n_sequences, dtype=bool)
@@ -286,12 +316,15 @@ class DatasetWriter:
         f.create_dataset("actions", (n, t, self.action_dim), dtype=np.float32)
         if self.state_dim is not None:
             f.create_dataset("states", (n, t, self.state_dim), dtype=np.float32)
+        if self.rewards:
+            f.create_dataset("rewards", (n, t), dtype=np.float32)
         f.create_dataset("split", (n,), dtype=np.int8)
         for key, value in self.attrs.items():
             f.attrs[key] = json.dumps(value) if isinstance(value, (dict, list, tuple)) else value
         return self
 
-    def write(self, start: int, frames: np.ndarray, actions: np.ndarray, states: np.ndarray | None = None) -> None:
+    def write(self, start: int, frames: np.ndarray, actions: np.ndarray, states: np.ndarray | None = None,
+              rewards: np.ndarray | None = None) -> None:
         """Writes sequences ``start .. start + len(frames)``; arrays as in the schema."""
         assert self._file is not None, "DatasetWriter.write outside its `with` block"
         stop = start + len(frames)
@@ -303,6 +336,10 @@ class DatasetWriter:
             if states is None:
                 raise ValueError("this file has /states; pass them to write()")
             self._file["states"][start:stop] = states
+        if self.rewards:
+            if rewards is None:
+                raise ValueError("this file has /rewards; pass them to write()")
+            self._file["rewards"][start:stop] = rewards
         self._written[start:stop] = True
 
     def set_split(self, split: np.ndarray) -> None:

@@ -21,6 +21,7 @@ from tqdm.auto import tqdm
 
 from agents.dynamics import Dynamics
 from agents.mpc import MPCConfig, OracleAgent, PigaMPCAgent, StateReader
+from piga.baselines.kinds import BASELINE_KINDS
 from piga.episodes import EpisodeConfig, run_episodes
 from piga.model import PhysicsModel
 from piga.runs import load_model
@@ -49,32 +50,41 @@ class ControlJob:
     """
 
     agent: str
-    """"piga" (frames -> learned model) or "oracle" (true state, the environment's true g and a)."""
+    """"piga" (frames -> learned model), "oracle" (true state, the environment's true g and a), or a
+    baseline's kind, "planet" or "ddpg" (:mod:`piga.baselines`; not told of a gravity change)."""
     episodes: EpisodeConfig
     """The episodes; its ``gravity_mult`` is the environment's."""
     mpc: MPCConfig = field(default_factory=MPCConfig)
     """The planner; its ``goal_angle`` is the agent's goal."""
     model_dir: str | None = None
-    """The run folder of ``piga-train-model`` (for "piga")."""
+    """The run folder of ``piga-train-model`` (for "piga") or of ``piga-baseline`` (for a baseline)."""
     tags: tuple[tuple[str, Any], ...] = ()
     """Extra (key, value) pairs copied into the result's summary (labels for tables)."""
     correction: AgentCorrection | None = None
     """For "piga": plan with this correction's dynamics and read frames with its reader (from ``piga-diagnose``)."""
 
     def __post_init__(self) -> None:
-        if self.agent not in ("piga", "oracle"):
-            raise ValueError(f"agent must be 'piga' or 'oracle', got {self.agent!r}")
-        if self.agent == "piga" and not self.model_dir:
-            raise ValueError("a 'piga' job needs model_dir")
+        if self.agent not in ("piga", "oracle", *BASELINE_KINDS):
+            raise ValueError(f"agent must be 'piga', 'oracle' or one of {BASELINE_KINDS}, got {self.agent!r}")
+        if self.agent != "oracle" and not self.model_dir:
+            raise ValueError(f"a {self.agent!r} job needs model_dir")
+        if self.agent in BASELINE_KINDS and self.correction is not None:
+            raise ValueError(f"a {self.agent!r} job runs as trained; it takes no correction")
         if self.agent == "oracle" and self.correction is not None:
             raise ValueError("an 'oracle' job plans with the true physics; it takes no correction")
 
 
-def build_agent(job: ControlJob) -> OracleAgent | PigaMPCAgent:
-    """The agent a job describes (loads the model for "piga"). The agent is told the environment's
-    gravity multiplier; the oracle takes the environment's true g and a."""
+def build_agent(job: ControlJob) -> Any:
+    """The agent a job describes (loads the model for "piga" and the baselines). The piga agent is
+    told the environment's gravity multiplier; the oracle takes the environment's true g and a; a
+    baseline runs as trained."""
     if job.agent == "oracle":
         return OracleAgent.for_env(job.episodes.env_config(), job.mpc)
+    if job.agent in BASELINE_KINDS:
+        from piga.baselines.agents import baseline_agent
+
+        assert job.model_dir is not None
+        return baseline_agent(job.agent, job.model_dir, seed=job.mpc.seed)
     assert job.model_dir is not None
     model, _ = load_model(job.model_dir)
     told = job.episodes.gravity_mult
@@ -90,7 +100,7 @@ def run_job(job: ControlJob) -> dict[str, Any]:
     torch.set_num_threads(1)  # small tensors: one thread plans fastest, and workers share the cores
     agent = build_agent(job)
     episodes = job.episodes
-    if isinstance(agent, PigaMPCAgent):
+    if not isinstance(agent, OracleAgent):
         episodes = replace(episodes, frame_stack=agent.input_frames)
     result = run_episodes(agent, episodes)
     result.pop("recordings")

@@ -60,3 +60,15 @@ def train_tiny(data: Path, run_dir: Path, **overrides: Any) -> Path:
     config = TrainConfig(**{"epochs": 1, "batch_size": 16, "warmup_steps": 2, "curriculum_steps": 2, "threads": 1, **overrides})
     train(data, run_dir, config, {"rec_frames": "input", "pred_frames": 4}, progress=False)
     return run_dir
+
+
+def copy_without(src: Path, dst: Path, dataset: str) -> Path:
+    """A copy of the data file ``src`` at ``dst`` without ``/dataset`` (for example a file from before ``/rewards``)."""
+    import shutil
+
+    import h5py
+
+    shutil.copyfile(src, dst)
+    with h5py.File(dst, "a") as f:
+        del f[dataset]
+    return dst

@@ -15,7 +15,7 @@ from tests.helpers import run_in_process
 
 def _arrays(path: Path) -> dict[str, np.ndarray]:
     with h5py.File(path, "r") as f:
-        return {k: f[k][()] for k in ("frames", "actions", "states", "split")}
+        return {k: f[k][()] for k in ("frames", "actions", "states", "rewards", "split")}
 
 
 def test_same_seed_same_bytes_whatever_the_workers(tmp_path: Path) -> None:
@@ -46,6 +46,20 @@ def test_contents_match_the_schema(tiny_data: Path) -> None:
     pred = thd[:, :-1] + (15 * np.sin(th[:, :-1]) + 3 * u[:, :-1]) * 0.05
     free = np.abs(pred) < 8
     assert np.allclose(thd[:, 1:][free], pred[free], atol=1e-4)
+
+
+def test_rewards_are_gymnasiums_for_the_action_after_each_frame(tiny_data: Path) -> None:
+    from piga.data import load_rewards
+
+    assert inspect_dataset(tiny_data).has_rewards
+    a = _arrays(tiny_data)
+    assert a["rewards"].dtype == np.float32 and a["rewards"].shape == a["frames"].shape[:2]
+    th, thd, u = a["states"][..., 0], a["states"][..., 1], a["actions"][..., 0]
+    wrapped = (th + np.pi) % (2 * np.pi) - np.pi
+    expected = -(wrapped**2 + 0.1 * thd**2 + 0.001 * u**2)  # Pendulum-v1's reward from the state of frame t and u_t
+    assert np.allclose(a["rewards"], expected, atol=1e-4)
+    train = a["split"] == 0
+    assert np.array_equal(load_rewards(tiny_data, "train"), a["rewards"][train])
 
 
 def test_split_counts() -> None:

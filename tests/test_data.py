@@ -84,6 +84,20 @@ def test_load_states_needs_states(tmp_path: Path) -> None:
         load_states(path, "train")
 
 
+def test_rewards_are_optional_and_checked(tmp_path: Path) -> None:
+    from piga.data import load_rewards
+
+    path = tmp_path / "d.h5"
+    _write(path)
+    assert not inspect_dataset(path).has_rewards
+    with pytest.raises(DataFormatError, match="/rewards"):
+        load_rewards(path, "train")
+    with h5py.File(path, "a") as f:
+        f["rewards"] = np.zeros((1, 2), np.float32)  # wrong shape
+    with pytest.raises(DataFormatError, match="/rewards"):
+        inspect_dataset(path)
+
+
 def _corrupt(path: Path, how: str) -> None:
     with h5py.File(path, "a") as f:
         if how == "no-frames":

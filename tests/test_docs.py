@@ -24,7 +24,19 @@ COMMANDS = {
     "piga-demo": "piga.cli.demo",
     "piga-diagnose": "piga.cli.diagnose",
     "piga-import": "piga.cli.importer",
+    "piga-baseline planet": "piga.cli.baseline:planet",
+    "piga-baseline ddpg": "piga.cli.baseline:ddpg",
 }
+
+
+def build_parser(command: str) -> argparse.ArgumentParser:
+    """The parser of a command, or of its subcommand ("module:subcommand")."""
+    module, _, sub = COMMANDS[command].partition(":")
+    parser = importlib.import_module(module).build_parser()
+    if not sub:
+        return parser
+    subparsers = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    return subparsers.choices[sub]
 
 #: Words the README uses for a default, and the values they stand for.
 WORDS: dict[str, tuple[Any, ...]] = {
@@ -47,9 +59,10 @@ def option_rows(text: str) -> dict[str, list[tuple[list[str], list[str], str]]]:
     command = None
     header: list[str] = []
     for line in text.splitlines():
-        heading = re.match(r"#+ .*`(piga-[a-z-]+)", line)
+        heading = re.match(r"#+ .*`(piga-[a-z-]+)( [a-z]+)?", line)
         if heading:
-            command = heading.group(1) if heading.group(1) in COMMANDS else None
+            named = "".join(g or "" for g in heading.groups())
+            command = named if named in COMMANDS else heading.group(1) if heading.group(1) in COMMANDS else None
             header = []
             continue
         if command is None or not line.startswith("|"):
@@ -124,7 +137,7 @@ def test_the_readme_documents_defaults_of_the_main_commands() -> None:
 
 @pytest.mark.parametrize("command", sorted(COMMANDS))
 def test_readme_defaults_match_the_parser(command: str) -> None:
-    parser = importlib.import_module(COMMANDS[command]).build_parser()
+    parser = build_parser(command)
     actions = {flag: a for a in parser._actions for flag in a.option_strings}
     wrong = []
     for options, defaults, line in ROWS.get(command, []):
@@ -139,7 +152,7 @@ def test_readme_defaults_match_the_parser(command: str) -> None:
 @pytest.mark.parametrize("command", sorted(COMMANDS))
 def test_help_text_names_the_parsers_default(command: str) -> None:
     """A help text that retypes a default ("(default 2e-2)") must say what argparse really uses."""
-    parser = importlib.import_module(COMMANDS[command]).build_parser()
+    parser = build_parser(command)
     wrong = []
     for action in parser._actions:
         shown, value = help_default(action), documented_default(action)

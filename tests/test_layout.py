@@ -22,6 +22,9 @@ def _loaded_after(module: str) -> set[str]:
     ("piga.diagnostics.diagnose", {"piga.train", "agents"}),
     ("piga.diagnostics.report", {"piga.train", "agents"}),
     ("piga.data", {"piga.windows"}),
+    ("agents.planet.planner", {"piga.train", "piga.diagnostics", "piga.baselines"}),
+    ("piga.baselines.agents", {"piga.train", "piga.diagnostics"}),
+    ("piga.baselines.kinds", {"agents", "piga.model"}),
 ])
 def test_a_module_does_not_load(module: str, never: set[str]) -> None:
     loaded = _loaded_after(module)

@@ -31,7 +31,8 @@ def build_parser() -> ArgumentParser:
     cem = mpc.cem
     p = ArgumentParser(prog=PROG, description="Swing up and hold the pixel pendulum with model-predictive control "
                        "(CEM) over a trained piga model, from frames alone.")
-    p.add_argument("--model", help="run folder of piga-train-model (not needed with --oracle)")
+    p.add_argument("--model", help="run folder of piga-train-model, or of piga-baseline (planet, ddpg: run as trained, "
+                   "no goals); not needed with --oracle")
     p.add_argument("--oracle", action="store_true", help="plan with the true state and true parameters instead")
     p.add_argument("--episodes", type=positive_int, default=episodes.episodes,
                    help="episodes (default %(default)s); episode 0 starts hanging down")
@@ -91,6 +92,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         outputs = [stem.with_name(stem.name + s) for s in (".json", ".md", *((".png",) if args.sweep else ()))]
         for path in outputs:
             check_writable_target(path, args.overwrite)
+    kind = _run_kind(args)
+    if kind != "piga":
+        return _baseline(args, kind, mpc, outputs, argv)
     if args.sweep:
         return _sweep(args, mpc, outputs, argv)
     if args.video:
@@ -155,8 +159,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     return 0
 
 
-def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: Sequence[str] | None) -> int:
-    """--sweep: the piga agent and the oracle at each multiplier, each told the multiplier."""
+def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: Sequence[str] | None, kind: str = "piga") -> int:
+    """--sweep: the run's agent (``kind``) and the oracle at each multiplier; piga and the oracle are
+    told the multiplier, a baseline runs as trained."""
     from piga.jobs import ControlJob, run_jobs
     from piga.runs import load_model
 
@@ -170,13 +175,14 @@ def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: 
         raise PigaError(f"--sweep: {exc}") from None
     if multipliers[0] <= 0:
         raise PigaError(f"--sweep: gravity multipliers must be > 0, got {args.sweep}")
-    model, _ = load_model(args.model)  # fail early, in this process, on a bad folder
-    if model.config.system != "pendulum":
-        raise PigaError(f"{args.model}: a {model.config.system} model cannot control the pendulum")
+    if kind == "piga":
+        model, _ = load_model(args.model)  # fail early, in this process, on a bad folder
+        if model.config.system != "pendulum":
+            raise PigaError(f"{args.model}: a {model.config.system} model cannot control the pendulum")
     jobs = [ControlJob(agent, EpisodeConfig(episodes=args.episodes, steps=args.steps, seed=args.seed, gravity_mult=m,
                                             goal_angle=mpc.goal_angle, torque_arrow=args.torque_arrow),
-                       mpc, model_dir=args.model if agent == "piga" else None)
-            for m in multipliers for agent in ("piga", "oracle")]
+                       mpc, model_dir=args.model if agent != "oracle" else None)
+            for m in multipliers for agent in (kind, "oracle")]
     results = run_jobs(jobs, workers=args.workers, progress=not args.quiet)
     summaries = [r["summary"] for r in results]
     table = summary_markdown(summaries)
@@ -189,6 +195,60 @@ def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: 
             tmp.write_text(f"# {PROG} --sweep\n\nCommand: `{command_line(PROG, argv)}`\n\n![sweep]({outputs[2].name})\n\n{table}")
         save_figure(sweep_figure(summaries), outputs[2], overwrite=args.overwrite)
         print(f"wrote {', '.join(map(str, outputs))}")
+    return 0
+
+
+def _run_kind(args: argparse.Namespace) -> str:
+    """The kind of ``--model``'s run ("piga" for a piga-train-model run, or with --oracle alone)."""
+    if args.oracle or not args.model:
+        return "piga"
+    from piga.baselines.kinds import run_kind
+
+    return run_kind(args.model)
+
+
+def _baseline(args: argparse.Namespace, kind: str, mpc: MPCConfig, outputs: list[Path], argv: Sequence[str] | None) -> int:
+    """A baseline run ("planet" or "ddpg") on the same episodes, starts, seeds and success definition as piga.
+
+    It has no goal input and cannot be told a gravity change: goals are refused, and a gravity
+    multiplier runs it as trained, saying so. The PlaNet-style agent plans with PlaNet's CEM settings
+    (:class:`agents.planet.config.LatentPlannerConfig`), not with --horizon and the other CEM options.
+    """
+    why = f"a {kind} run has no goal input (it learned to swing up to upright from the env's reward)"
+    if args.goal_image:
+        raise PigaError(f"--goal-image: {why}, so it cannot be given a goal image; goal images need a piga run")
+    if args.goal_angle:
+        raise PigaError(f"--goal-angle: {why}; only upright (0) can be scored")
+    if args.video:
+        raise PigaError(f"--video shows a piga model's belief and plan; a {kind} run has neither")
+    if args.sweep or args.gravity_mult != 1:
+        print(f"note: the {kind} agent runs as trained: it cannot be told that gravity changed")
+    if args.sweep:
+        return _sweep(args, mpc, outputs, argv, kind=kind)
+    import torch
+
+    from piga.baselines.agents import baseline_agent
+
+    torch.set_num_threads(1)
+    agent = baseline_agent(kind, args.model, seed=args.seed)
+    trained_arrow = getattr(getattr(agent, "config", None), "torque_arrow", None)
+    if kind == "ddpg" and trained_arrow is not None and trained_arrow != args.torque_arrow:
+        print(f"{PROG}: warning: {args.model} was trained with the torque arrow {'shown' if trained_arrow else 'hidden'}; "
+              f"these episodes {'show' if args.torque_arrow else 'hide'} it", file=sys.stderr)
+    config = EpisodeConfig(episodes=args.episodes, steps=args.steps, seed=args.seed, gravity_mult=args.gravity_mult,
+                           torque_arrow=args.torque_arrow, frame_stack=agent.input_frames)
+    result = run_episodes(agent, config, progress=not args.quiet)
+    s = result["summary"]
+    label = f"{kind} ({args.model})"
+    print(f"{label}, gravity x{args.gravity_mult:g}, goal 0 deg: success {100 * s['success_rate']:.0f}% of {s['episodes']}, "
+          f"mean return {s['mean_return']:.1f}, final angle error {math.degrees(s['final_angle_error_mean']):.2f} deg, "
+          f"plan {s['plan_ms_median']:.1f} ms median / {s['plan_ms_p95']:.1f} ms p95")
+    if outputs:
+        s = {"agent": label, **s}
+        write_json(outputs[0], {"agent": label, "kind": kind, **result, "summary": s, "recordings": None}, overwrite=args.overwrite)
+        with atomic_output(outputs[1], overwrite=args.overwrite) as tmp:
+            tmp.write_text(f"# {PROG}\n\nCommand: `{command_line(PROG, argv)}`\n\n{summary_markdown([s])}")
+        print(f"wrote {outputs[0]} and {outputs[1]}")
     return 0
 
 

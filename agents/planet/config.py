@@ -1,0 +1,118 @@
+"""Settings of the PlaNet-style baseline: plain dataclasses, no torch, so that command lines read their defaults quickly.
+
+PlaNet (Hafner et al., 2019) is sized for a GPU. Each field below that departs from it says so, and
+why: the model must train in tens of minutes on a 2-core CPU. The README's baselines section lists
+the departures in one table.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+from agents.config import CEMConfig
+
+
+@dataclass(frozen=True)
+class RSSMConfig:
+    """The recurrent state-space model: sizes of its parts."""
+
+    image_size: int = 64
+    """Side of the square gray frames."""
+    channels: int = 1
+    """Colour channels of a frame (1: gray)."""
+    action_dim: int = 1
+    """A."""
+    deter_size: int = 100
+    """Size of the deterministic GRU state h (PlaNet: 200; halved for CPU time, the GRU and every head scale with it)."""
+    stoch_size: int = 16
+    """Size of the stochastic Gaussian state s (PlaNet: 30; the pendulum has two degrees of freedom)."""
+    hidden_size: int = 100
+    """Width of the MLPs around the GRU and of the reward head (PlaNet: 200, halved with ``deter_size``)."""
+    depth: int = 16
+    """Channels of the first conv layer, doubled at each of the four (PlaNet: 32; the convs are ~80% of
+    a training step's time on a CPU, and a gray 64x64 pendulum needs less capacity than RGB scenes)."""
+    min_std: float = 0.1
+    """Floor on the standard deviation of the stochastic state (PlaNet's 0.1)."""
+
+    def __post_init__(self) -> None:
+        if self.image_size != 64:
+            raise ValueError(f"the PlaNet encoder and decoder are built for 64x64 frames, got image_size={self.image_size}")
+        for name in ("channels", "action_dim", "deter_size", "stoch_size", "hidden_size", "depth"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"RSSMConfig.{name} must be >= 1, got {getattr(self, name)}")
+        if not self.min_std > 0:
+            raise ValueError(f"RSSMConfig.min_std must be > 0, got {self.min_std}")
+
+    @property
+    def embed_size(self) -> int:
+        """Size of the encoder's output: 8·depth channels on a 2x2 grid."""
+        return 8 * self.depth * 4
+
+    def to_dict(self) -> dict[str, Any]:
+        """A JSON-able copy."""
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class PlanetTrainConfig:
+    """How the RSSM is trained on a data file's random-action sequences."""
+
+    steps: int = 3000
+    """Optimiser steps (PlaNet: 100 per collected episode, ~5e5 in all; here the data are fixed, and
+    the loss flattens after ~3000 steps on 500 sequences, README)."""
+    batch_size: int = 16
+    """Sequences per batch (PlaNet: 50; CPU time per step is linear in it)."""
+    chunk_length: int = 32
+    """Frames per training sequence (PlaNet: 50; piga-collect's default sequences have 40 frames)."""
+    lr: float = 1e-3
+    """Adam's learning rate (PlaNet's)."""
+    adam_eps: float = 1e-4
+    """Adam's epsilon (PlaNet's)."""
+    grad_clip: float = 1000.0
+    """Global gradient-norm clip (PlaNet's)."""
+    free_nats: float = 3.0
+    """The KL term is max(KL, free_nats) (PlaNet's 3)."""
+    kl_scale: float = 1.0
+    """Weight of the KL term (PlaNet's 1; PlaNet's latent overshooting is not used, as in its later releases)."""
+    reward_scale: float = 1.0
+    """Weight of the reward term."""
+    checkpoint_every: int = 250
+    """Steps between atomic checkpoints (and one line of the learning curve)."""
+    seed: int = 0
+    """Seed of initialisation, batch sampling and the stochastic states."""
+    threads: int = 0
+    """torch CPU threads (0: leave torch's default)."""
+    max_minutes: float = 0.0
+    """Stop at the first checkpoint past this budget (0: no limit)."""
+    max_sequences: int = 0
+    """Use only the first N training sequences of the file (0: all), for sample-efficiency sweeps."""
+
+    def __post_init__(self) -> None:
+        if self.steps < 1 or self.batch_size < 1 or self.chunk_length < 2 or self.checkpoint_every < 1:
+            raise ValueError(f"need steps >= 1, batch_size >= 1, chunk_length >= 2 and checkpoint_every >= 1, got "
+                             f"{self.steps}, {self.batch_size}, {self.chunk_length}, {self.checkpoint_every}")
+        if not (self.lr > 0 and self.adam_eps > 0 and self.grad_clip > 0 and self.free_nats >= 0):
+            raise ValueError("need lr, adam_eps, grad_clip > 0 and free_nats >= 0")
+        if self.seed < 0 or self.max_sequences < 0 or self.max_minutes < 0:
+            raise ValueError("seed, max_sequences and max_minutes must be >= 0")
+
+    def to_dict(self) -> dict[str, Any]:
+        """A JSON-able copy."""
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class LatentPlannerConfig:
+    """CEM in the RSSM's latent space. The defaults are PlaNet's: horizon 12, 10 iterations, 1000
+    candidates, the best 100 refit, re-planned from scratch at every step, and the first action of
+    the final mean executed."""
+
+    cem: CEMConfig = field(default_factory=CEMConfig)
+    """CEM settings (:class:`agents.config.CEMConfig`'s defaults are PlaNet's)."""
+    seed: int = 0
+    """Seed of the planner's RNG (candidate actions and imagined stochastic states)."""
+
+    def to_dict(self) -> dict[str, Any]:
+        """A JSON-able copy."""
+        return asdict(self)

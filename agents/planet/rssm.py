@@ -1,0 +1,236 @@
+"""A PlaNet-style recurrent state-space model (RSSM; Hafner et al., 2019) for 64x64 frames.
+
+The latent state at frame t is (h_t, s_t): a deterministic GRU state h and a stochastic Gaussian
+state s. With a_t the action applied after frame t (piga's schema) and a_{-1} = 0, s_{-1} = 0, h_{-1} = 0:
+
+| part | map |
+|---|---|
+| encoder | frame x_t (C, 64, 64) -> embedding e_t (E,): four stride-2 convs, PlaNet's |
+| transition | h_t = GRU(h_{t-1}, MLP(s_{t-1}, a_{t-1})) |
+| prior | p(s_t | h_t) = N(μ, σ), σ = softplus(·) + min_std |
+| posterior | q(s_t | h_t, e_t) = N(μ, σ) |
+| decoder | (h_t, s_t) -> mean of x_t: four stride-2 transposed convs, PlaNet's |
+| reward head | (h_t, s_t) -> r_t, the env's reward for a_t |
+
+The loss per frame is PlaNet's: the negative log-likelihood of x_t under N(decoder, 1) (summed over
+pixels), of r_t under N(head, 1), and max(KL(q || p), free_nats), averaged over the batch and time.
+
+Pendulum's reward for a_t is -(θ_t² + 0.1·θ̇_t² + 0.001·a_t²): a function of the state of frame t
+plus an action cost of at most 0.004, which the head (reading the state only, as in PlaNet) cannot see.
+
+Frames enter as uint8 and are scaled to [-0.5, 0.5]. Randomness (the reparameterised samples) comes
+from an explicit ``torch.Generator``.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import torch
+import torch.nn.functional as F
+from torch import Tensor, nn
+
+from agents.planet.config import PlanetTrainConfig, RSSMConfig
+
+__all__ = ["RSSM", "Belief", "LossParts", "WorldModel", "frames_to_input"]
+
+
+def frames_to_input(frames: Tensor, channels: int) -> Tensor:
+    """uint8 frames (..., H, W) for gray or (..., H, W, C) -> float (..., C, H, W) in [-0.5, 0.5]."""
+    x = frames.float() / 255.0 - 0.5
+    if channels == 1 and (x.dim() < 3 or x.shape[-1] != 1):
+        return x.unsqueeze(-3)
+    return x.movedim(-1, -3)
+
+
+class Belief(NamedTuple):
+    """A batch of latent states."""
+
+    h: Tensor
+    """(B, D) deterministic GRU state."""
+    s: Tensor
+    """(B, S) stochastic state."""
+
+
+class Gaussian(NamedTuple):
+    """A diagonal Gaussian over the stochastic state."""
+
+    mean: Tensor
+    """(..., S)."""
+    std: Tensor
+    """(..., S)."""
+
+
+class LossParts(NamedTuple):
+    """The training loss and its terms (each a scalar tensor, per frame)."""
+
+    loss: Tensor
+    """reconstruction + reward_scale·reward + kl_scale·max(KL, free nats)."""
+    reconstruction: Tensor
+    """0.5·Σ_pixels (x - x̂)²: the image NLL without its constant."""
+    reward: Tensor
+    """0.5·(r - r̂)²."""
+    kl: Tensor
+    """KL(q || p), summed over the stochastic state (before the free nats)."""
+
+
+class Encoder(nn.Module):
+    """PlaNet's conv encoder: (B, C, 64, 64) -> (B, 32·depth)."""
+
+    def __init__(self, config: RSSMConfig):
+        super().__init__()
+        d = config.depth
+        self.net = nn.Sequential(
+            nn.Conv2d(config.channels, d, 4, 2), nn.ReLU(),  # (B, d, 31, 31)
+            nn.Conv2d(d, 2 * d, 4, 2), nn.ReLU(),  # (B, 2d, 14, 14)
+            nn.Conv2d(2 * d, 4 * d, 4, 2), nn.ReLU(),  # (B, 4d, 6, 6)
+            nn.Conv2d(4 * d, 8 * d, 4, 2), nn.ReLU(),  # (B, 8d, 2, 2)
+            nn.Flatten(),
+        )
+
+    def forward(self, x: Tensor) -> Tensor:
+        return self.net(x)
+
+
+class Decoder(nn.Module):
+    """PlaNet's transposed-conv decoder: (B, D + S) -> mean frame (B, C, 64, 64)."""
+
+    def __init__(self, config: RSSMConfig):
+        super().__init__()
+        d = config.depth
+        self.fc = nn.Linear(config.deter_size + config.stoch_size, 32 * d)
+        self.net = nn.Sequential(
+            nn.ConvTranspose2d(32 * d, 4 * d, 5, 2), nn.ReLU(),  # (B, 4d, 5, 5)
+            nn.ConvTranspose2d(4 * d, 2 * d, 5, 2), nn.ReLU(),  # (B, 2d, 13, 13)
+            nn.ConvTranspose2d(2 * d, d, 6, 2), nn.ReLU(),  # (B, d, 30, 30)
+            nn.ConvTranspose2d(d, config.channels, 6, 2),  # (B, C, 64, 64)
+        )
+
+    def forward(self, features: Tensor) -> Tensor:
+        return self.net(self.fc(features)[..., None, None])
+
+
+class RSSM(nn.Module):
+    """The transition, prior and posterior of the latent state."""
+
+    def __init__(self, config: RSSMConfig):
+        super().__init__()
+        self.config = config
+        d, s, k = config.deter_size, config.stoch_size, config.hidden_size
+        self.pre_gru = nn.Linear(s + config.action_dim, k)
+        self.gru = nn.GRUCell(k, d)
+        self.prior_net = nn.Sequential(nn.Linear(d, k), nn.ReLU(), nn.Linear(k, 2 * s))
+        self.posterior_net = nn.Sequential(nn.Linear(d + config.embed_size, k), nn.ReLU(), nn.Linear(k, 2 * s))
+
+    def initial(self, batch: int) -> Belief:
+        """The zero state before the first frame."""
+        return Belief(torch.zeros(batch, self.config.deter_size), torch.zeros(batch, self.config.stoch_size))
+
+    def _gaussian(self, raw: Tensor) -> Gaussian:
+        mean, std = raw.chunk(2, dim=-1)
+        return Gaussian(mean, F.softplus(std) + self.config.min_std)
+
+    def transition(self, belief: Belief, action: Tensor) -> tuple[Tensor, Gaussian]:
+        """h_t (B, D) and the prior of s_t from the previous state (B, ·) and action a_{t-1} (B, A)."""
+        x = F.relu(self.pre_gru(torch.cat([belief.s, action], -1)))
+        h = self.gru(x, belief.h)
+        return h, self._gaussian(self.prior_net(h))
+
+    def posterior(self, h: Tensor, embed: Tensor) -> Gaussian:
+        """q(s_t | h_t, e_t) from h (B, D) and the frame's embedding (B, E)."""
+        return self._gaussian(self.posterior_net(torch.cat([h, embed], -1)))
+
+
+def sample(dist: Gaussian, generator: torch.Generator | None) -> Tensor:
+    """A reparameterised sample mean + std·ε, ε from ``generator``."""
+    noise = torch.randn(dist.mean.shape, generator=generator, dtype=dist.mean.dtype)
+    return dist.mean + dist.std * noise
+
+
+def _kl(q: Gaussian, p: Gaussian) -> Tensor:
+    """KL(q || p) of diagonal Gaussians, summed over the last axis."""
+    ratio = (q.std / p.std) ** 2
+    return 0.5 * (ratio + ((q.mean - p.mean) / p.std) ** 2 - 1 - ratio.log()).sum(-1)
+
+
+class WorldModel(nn.Module):
+    """Encoder, RSSM, decoder and reward head, with PlaNet's loss.
+
+    Args:
+        config: sizes.
+    """
+
+    def __init__(self, config: RSSMConfig = RSSMConfig()):
+        super().__init__()
+        self.config = config
+        self.encoder = Encoder(config)
+        self.rssm = RSSM(config)
+        self.decoder = Decoder(config)
+        k = config.hidden_size
+        self.reward_head = nn.Sequential(nn.Linear(config.deter_size + config.stoch_size, k), nn.ReLU(),
+                                         nn.Linear(k, k), nn.ReLU(), nn.Linear(k, 1))
+
+    def embed(self, frames: Tensor) -> Tensor:
+        """uint8 frames (B, T, H, W[, C]) -> embeddings (B, T, E)."""
+        b, t = frames.shape[:2]
+        x = frames_to_input(frames.reshape(b * t, *frames.shape[2:]), self.config.channels)  # (B·T, C, H, W)
+        return self.encoder(x).reshape(b, t, -1)
+
+    def observe(self, frames: Tensor, actions: Tensor, generator: torch.Generator | None = None
+                ) -> tuple[Tensor, Tensor, Gaussian, Gaussian]:
+        """Filters a batch of sequences: frames uint8 (B, T, H, W), actions (B, T, A), actions[:, t] after frames[:, t].
+
+        Returns:
+            h (B, T, D), s (B, T, S) sampled from the posteriors, the priors and the posteriors ((B, T, S) each).
+        """
+        b, t = frames.shape[:2]
+        embeds = self.embed(frames)  # (B, T, E)
+        belief = self.rssm.initial(b)
+        previous = torch.zeros(b, self.config.action_dim)
+        hs, ss, priors, posts = [], [], [], []
+        for step in range(t):
+            h, prior = self.rssm.transition(belief, previous)
+            post = self.rssm.posterior(h, embeds[:, step])
+            belief = Belief(h, sample(post, generator))
+            previous = actions[:, step]
+            hs.append(h)
+            ss.append(belief.s)
+            priors.append(prior)
+            posts.append(post)
+        stack = lambda xs: torch.stack(xs, 1)  # noqa: E731
+        return (stack(hs), stack(ss), Gaussian(stack([p.mean for p in priors]), stack([p.std for p in priors])),
+                Gaussian(stack([q.mean for q in posts]), stack([q.std for q in posts])))
+
+    def reward(self, h: Tensor, s: Tensor) -> Tensor:
+        """Predicted rewards (...,) from states (..., D) and (..., S)."""
+        return self.reward_head(torch.cat([h, s], -1))[..., 0]
+
+    def decode(self, h: Tensor, s: Tensor) -> Tensor:
+        """Mean frames (..., C, H, W) in [-0.5, 0.5] units from states (..., D), (..., S)."""
+        lead = h.shape[:-1]
+        out = self.decoder(torch.cat([h, s], -1).reshape(-1, h.shape[-1] + s.shape[-1]))
+        return out.reshape(*lead, *out.shape[1:])
+
+    def loss(self, frames: Tensor, actions: Tensor, rewards: Tensor, config: PlanetTrainConfig,
+             generator: torch.Generator | None = None) -> LossParts:
+        """PlaNet's loss on a batch: frames uint8 (B, T, H, W), actions (B, T, A), rewards (B, T)."""
+        h, s, prior, post = self.observe(frames, actions, generator)
+        target = frames_to_input(frames, self.config.channels)  # (B, T, C, H, W)
+        reconstruction = 0.5 * (self.decode(h, s) - target).square().sum((-3, -2, -1)).mean()
+        reward = 0.5 * (self.reward(h, s) - rewards).square().mean()
+        kl = _kl(post, prior)  # (B, T)
+        kl_term = kl.clamp_min(config.free_nats).mean()
+        loss = reconstruction + config.reward_scale * reward + config.kl_scale * kl_term
+        return LossParts(loss, reconstruction, reward, kl.mean())
+
+    def imagine_return(self, belief: Belief, actions: Tensor, generator: torch.Generator | None = None) -> Tensor:
+        """Sum of predicted rewards over the H imagined steps after ``belief`` ((1, ·) or (B, ·)) under
+        actions (B, H, A), with states sampled from the prior: (B,)."""
+        b, horizon = actions.shape[:2]
+        state = Belief(belief.h.expand(b, -1), belief.s.expand(b, -1))
+        total = torch.zeros(b)
+        for step in range(horizon):
+            h, prior = self.rssm.transition(state, actions[:, step])
+            state = Belief(h, sample(prior, generator))
+            total = total + self.reward(state.h, state.s)
+        return total

@@ -1,0 +1,228 @@
+"""Training the PlaNet-style world model on a data file's random-action sequences (PlaNet's protocol
+in the paper: "we train PlaNet on random episodes"), and reading the run back.
+
+The loop, one readable flow: sample a batch of ``chunk_length``-frame windows from the train
+split (frames, actions and ``/rewards``), take one Adam step on PlaNet's loss
+(:meth:`agents.planet.rssm.WorldModel.loss`), clip the gradient norm, and every
+``checkpoint_every`` steps write an atomic ``checkpoint.pt``, one point of the learning curve and
+TensorBoard scalars. Randomness comes from two explicit generators (numpy for the batches, torch
+for the latent samples), saved in each checkpoint, so ``resume`` continues exactly. A non-finite
+loss stops training with :class:`piga.train.TrainingDiverged`, naming the last good checkpoint.
+
+A run folder holds ``config.json`` (``kind: "planet"``), ``checkpoint.pt``, ``tensorboard/`` and
+``metrics.json`` (the learning curve and the final losses on the valid split).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from tqdm.auto import tqdm
+
+from agents.planet.config import PlanetTrainConfig, RSSMConfig
+from agents.planet.rssm import WorldModel
+from piga.atomic import atomic_output, write_json
+from piga.baselines.planet_run import CHECKPOINT, load_planet
+from piga.data import DataFormatError, DatasetInfo, check_actions, inspect_dataset, load_rewards, read_sequences
+from piga.train import TrainingDiverged
+
+__all__ = ["CHECKPOINT", "PlanetState", "check_planet_data", "load_planet", "rssm_config_for", "train_planet"]
+
+
+@dataclass
+class PlanetState:
+    """What a checkpoint holds besides the weights."""
+
+    step: int = 0
+    """Optimiser steps taken."""
+    elapsed: float = 0.0
+    """Training seconds so far."""
+    history: list[dict[str, float]] = field(default_factory=list)
+    """The learning curve: per checkpoint, the mean losses since the previous one, the step and seconds."""
+
+
+class _Sequences:
+    """The train split in memory: frames uint8 (N, T, H, W), actions (N, T, A), rewards (N, T)."""
+
+    def __init__(self, data: str | Path, split: str, max_sequences: int = 0):
+        frames, actions = read_sequences(data, split)
+        rewards = load_rewards(data, split)
+        if max_sequences:
+            frames, actions, rewards = frames[:max_sequences], actions[:max_sequences], rewards[:max_sequences]
+        self.frames = torch.from_numpy(frames)
+        self.actions = torch.from_numpy(actions)
+        self.rewards = torch.from_numpy(rewards)
+
+    def __len__(self) -> int:
+        return len(self.frames)
+
+    def batch(self, rng: np.random.Generator, size: int, length: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """``size`` random windows of ``length`` frames: frames (B, L, H, W), actions (B, L, A), rewards (B, L)."""
+        seq = rng.integers(len(self.frames), size=size)
+        start = rng.integers(self.frames.shape[1] - length + 1, size=size)
+        rows = torch.from_numpy(seq)[:, None]
+        cols = torch.from_numpy(start)[:, None] + torch.arange(length)[None]  # (B, L)
+        return self.frames[rows, cols], self.actions[rows, cols], self.rewards[rows, cols]
+
+
+def rssm_config_for(info: DatasetInfo, overrides: dict[str, Any] | None = None) -> RSSMConfig:
+    """The model that fits a data file's frames and actions."""
+    shape = info.image_shape
+    channels = shape[2] if len(shape) == 3 else 1
+    return RSSMConfig(**{"image_size": shape[0], "channels": channels, "action_dim": info.action_dim, **(overrides or {})})
+
+
+def check_planet_data(info: DatasetInfo, config: PlanetTrainConfig) -> None:
+    """Refuses, before anything is written, a file the world model cannot train on.
+
+    Raises:
+        DataFormatError: no ``/rewards``, frames that are not 64x64, or sequences shorter than a chunk.
+        ValueError: no training sequence.
+    """
+    if not info.has_rewards:
+        raise DataFormatError(f"{info.path}: has no /rewards; the PlaNet-style model learns a reward head "
+                              "(collect the data with piga-collect, which writes them)")
+    if info.image_shape[:2] != (64, 64):
+        raise DataFormatError(f"{info.path}: the PlaNet-style model takes 64x64 frames, got {info.image_shape}")
+    if info.action_dim < 1:
+        raise DataFormatError(f"{info.path}: has no actions (A = 0); a world model for control needs them")
+    if info.steps < config.chunk_length:
+        raise DataFormatError(f"{info.path}: sequences of {info.steps} frames are shorter than chunk_length "
+                              f"{config.chunk_length}; lower it")
+    if info.split_counts["train"] < 1:
+        raise ValueError(f"{info.path}: the train split is empty")
+
+
+def _save(path: Path, model: WorldModel, optimizer: torch.optim.Optimizer, state: PlanetState, config: PlanetTrainConfig,
+          rng: np.random.Generator, generator: torch.Generator, info: DatasetInfo) -> None:
+    payload = {
+        "kind": "planet",
+        "rssm_config": model.config.to_dict(),
+        "train_config": config.to_dict(),
+        "model": model.state_dict(),
+        "optimizer": optimizer.state_dict(),
+        "state": asdict(state),
+        "rng": {"numpy": rng.bit_generator.state, "torch": generator.get_state()},
+        "data": {"path": str(info.path), "image_shape": list(info.image_shape), "dt": info.dt},
+    }
+    with atomic_output(path, overwrite=True) as tmp:
+        torch.save(payload, tmp)
+
+
+@torch.no_grad()
+def _valid_losses(model: WorldModel, data: str | Path, config: PlanetTrainConfig, info: DatasetInfo) -> dict[str, float] | None:
+    """Mean losses on (up to 64 sequences of) the valid split, one chunk from the start of each; None without one."""
+    if not info.split_counts["valid"]:
+        return None
+    seqs = _Sequences(data, "valid", 64)
+    length = config.chunk_length
+    parts = model.loss(seqs.frames[:, :length], seqs.actions[:, :length], seqs.rewards[:, :length], config,
+                       torch.Generator().manual_seed(config.seed))
+    return {name: float(value) for name, value in parts._asdict().items()}
+
+
+def train_planet(
+    data: str | Path,
+    run_dir: str | Path,
+    config: PlanetTrainConfig,
+    rssm: RSSMConfig | None = None,
+    resume: bool = False,
+    progress: bool = True,
+    on_checkpoint: Callable[[PlanetState], None] | None = None,
+) -> tuple[WorldModel, PlanetState]:
+    """Trains the world model on ``data``'s train split; writes checkpoints, TensorBoard and ``metrics.json`` to ``run_dir``.
+
+    Nothing is written before the first checkpoint. With ``resume``, the model, optimiser, RNGs and
+    step come from ``run_dir``'s checkpoint, and ``config`` should be its saved one (possibly with
+    more ``steps``); ``rssm`` is ignored.
+
+    Returns:
+        The trained model (eval mode) and the final state.
+    """
+    run_dir = Path(run_dir)
+    ckpt_path = run_dir / CHECKPOINT
+    info = inspect_dataset(data)
+    check_planet_data(info, config)
+    check_actions(read_sequences(data, "train")[1], data)
+    if config.threads:
+        torch.set_num_threads(config.threads)
+    rng = np.random.default_rng(config.seed)
+    generator = torch.Generator().manual_seed(config.seed)
+    if resume:
+        model, ckpt = load_planet(run_dir)
+        state = PlanetState(**ckpt["state"])
+        rng.bit_generator.state = ckpt["rng"]["numpy"]
+        generator.set_state(ckpt["rng"]["torch"])
+    else:
+        torch.manual_seed(config.seed)  # the layers' initialisation
+        model = WorldModel(rssm or rssm_config_for(info))
+        state = PlanetState()
+    optimizer = torch.optim.Adam(model.parameters(), lr=config.lr, eps=config.adam_eps)
+    if resume:
+        optimizer.load_state_dict(ckpt["optimizer"])
+    seqs = _Sequences(data, "train", config.max_sequences)
+    writer: Any = None
+    model.train()
+    started = time.monotonic() - state.elapsed
+    sums: dict[str, float] = {}
+    count = 0
+    bar = tqdm(total=config.steps, initial=state.step, desc="planet", unit="step", disable=not progress)
+    try:
+        while state.step < config.steps:
+            frames, actions, rewards = seqs.batch(rng, config.batch_size, config.chunk_length)
+            parts = model.loss(frames, actions, rewards, config, generator)
+            if not torch.isfinite(parts.loss):
+                good = ckpt_path if ckpt_path.exists() else None
+                raise TrainingDiverged(f"loss became {parts.loss.item()} at step {state.step}; "
+                                       + (f"last good checkpoint: {good}" if good else "no checkpoint was written yet"))
+            optimizer.zero_grad(set_to_none=True)
+            parts.loss.backward()
+            torch.nn.utils.clip_grad_norm_(model.parameters(), config.grad_clip)
+            optimizer.step()
+            state.step += 1
+            count += 1
+            for name, value in parts._asdict().items():
+                sums[name] = sums.get(name, 0.0) + float(value.detach())
+            bar.update(1)
+            if state.step % 10 == 0:
+                bar.set_postfix(loss=f"{parts.loss.item():.2f}", kl=f"{parts.kl.item():.2f}", reward=f"{parts.reward.item():.3f}")
+            if state.step % config.checkpoint_every == 0 or state.step == config.steps:
+                state.elapsed = time.monotonic() - started
+                record = {name: total / count for name, total in sums.items()}
+                record.update({"step": state.step, "seconds": state.elapsed})
+                state.history.append(record)
+                sums, count = {}, 0
+                run_dir.mkdir(parents=True, exist_ok=True)
+                _save(ckpt_path, model, optimizer, state, config, rng, generator, info)
+                if writer is None:
+                    from torch.utils.tensorboard import SummaryWriter
+
+                    writer = SummaryWriter(str(run_dir / "tensorboard"))
+                for name in ("loss", "reconstruction", "reward", "kl"):
+                    writer.add_scalar(f"loss/{name}", record[name], state.step)
+                if on_checkpoint is not None:
+                    on_checkpoint(state)
+                if config.max_minutes and state.elapsed > config.max_minutes * 60:
+                    break
+    finally:
+        bar.close()
+        if writer is not None:
+            writer.close()
+    model.eval()
+    metrics = {
+        "kind": "planet",
+        "data": str(data),
+        "train_sequences": len(seqs),
+        "steps": state.step,
+        "train_seconds": state.elapsed,
+        "learning_curve": state.history,
+        "valid": _valid_losses(model, data, config, info),
+    }
+    write_json(run_dir / "metrics.json", metrics)
+    return model, state

@@ -1,0 +1,250 @@
+"""``piga-baseline {planet,ddpg}``: train a baseline into a run folder that ``piga-control --model`` evaluates.
+
+- ``piga-baseline planet DATA.h5 --out RUN_DIR``: the PlaNet-style world model on a data file's
+  random-action sequences (it needs ``/rewards``).
+- ``piga-baseline ddpg --obs {pixels,latent,state} --steps N --out RUN_DIR``: SB3 DDPG with the SB3
+  zoo's Pendulum-v1 hyperparameters; ``latent`` first trains an autoencoder on ``--data``'s frames.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from collections.abc import Sequence
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+from piga.cli.common import (ArgumentParser, Interrupted, PigaError, add_preset_option, command_line, format_default,
+                             nonnegative_int, positive_float, positive_int, run_cli)
+
+PROG = "piga-baseline"
+CHECKPOINT = "checkpoint.pt"
+OUTPUTS = (CHECKPOINT, "config.json", "metrics.json", "model.zip", "autoencoder.pt", "tensorboard")
+
+
+def build_parser() -> ArgumentParser:
+    from agents.planet.config import PlanetTrainConfig, RSSMConfig
+    from piga.baselines.autoencoder import AutoencoderConfig
+    from piga.baselines.ddpg import OBSERVATIONS, PRESETS, DDPGConfig
+
+    p = ArgumentParser(prog=PROG, description="Train a baseline (the PlaNet-style world model, or SB3 DDPG) into a run "
+                       "folder that piga-control --model evaluates like a piga run.")
+    sub = p.add_subparsers(dest="baseline", required=True, metavar="{planet,ddpg}")
+
+    planet, rssm = PlanetTrainConfig(), RSSMConfig()
+    q = sub.add_parser("planet", help="the PlaNet-style RSSM with latent CEM, trained on a data file's random-action sequences",
+                       description="Train the PlaNet-style world model (RSSM) on DATA.h5's train split (frames, actions and "
+                       "/rewards). Writes RUN_DIR/checkpoint.pt, config.json, metrics.json and tensorboard/.")
+    q.error = p.error  # type: ignore[method-assign]  (one-line usage errors, as the main parser's)
+    q.add_argument("data", help="HDF5 file of piga's schema with /rewards (piga-collect writes them)")
+    q.add_argument("--out", required=True, help="run folder")
+    add_preset_option(q, "--steps", default=planet.steps, type=positive_int,
+                      help="optimiser steps; with --resume, the run's own unless given")
+    q.add_argument("--batch-size", type=positive_int, default=planet.batch_size, help="sequences per batch (default %(default)s)")
+    q.add_argument("--chunk-length", type=positive_int, default=planet.chunk_length,
+                   help="frames per training sequence, <= the file's (default %(default)s)")
+    q.add_argument("--max-sequences", type=nonnegative_int, default=planet.max_sequences,
+                   help="train on the first N train sequences only (default %(default)s: all)")
+    q.add_argument("--free-nats", type=float, default=planet.free_nats, help="KL free nats (default %(default)s)")
+    q.add_argument("--deter-size", type=positive_int, default=rssm.deter_size, help="GRU state size (default %(default)s)")
+    q.add_argument("--stoch-size", type=positive_int, default=rssm.stoch_size, help="stochastic state size (default %(default)s)")
+    add_preset_option(q, "--max-minutes", default=planet.max_minutes, type=positive_float, shown="no limit",
+                      help="stop at the first checkpoint past this budget")
+    q.add_argument("--seed", type=nonnegative_int, default=planet.seed, help="seed (default %(default)s)")
+    q.add_argument("--threads", type=nonnegative_int, default=planet.threads, help="torch CPU threads (default %(default)s: torch's choice)")
+    _common(q)
+
+    ddpg = DDPGConfig()
+    d = sub.add_parser("ddpg", help="SB3 DDPG from pixels, an autoencoder's latent, or the true state",
+                       description="Train SB3 DDPG with the SB3 zoo's Pendulum-v1 hyperparameters on the pixel pendulum. "
+                       "Writes RUN_DIR/checkpoint.pt, model.zip, config.json, metrics.json (EvalCallback's learning "
+                       "curve) and tensorboard/.")
+    d.error = p.error  # type: ignore[method-assign]
+    d.add_argument("--obs", required=True, choices=OBSERVATIONS,
+                   help="pixels: stacked frames (CnnPolicy); latent: stacked autoencoder codes (needs --data); "
+                   "state: (cos θ, sin θ, θ̇), the reference point")
+    add_preset_option(d, "--steps", default=ddpg.steps, type=positive_int,
+                      help="env steps; with --resume, the run's own unless given")
+    d.add_argument("--out", required=True, help="run folder")
+    d.add_argument("--data", help="with --obs latent: HDF5 file whose train frames the autoencoder learns")
+    d.add_argument("--eval-every", type=positive_int, default=ddpg.eval_every,
+                   help="env steps between evaluations and checkpoints, a multiple of 200 (default %(default)s)")
+    d.add_argument("--eval-episodes", type=positive_int, default=ddpg.eval_episodes, help="episodes per evaluation (default %(default)s)")
+    d.add_argument("--learning-starts", type=nonnegative_int, default=ddpg.learning_starts,
+                   help="random-action steps before learning (default %(default)s)")
+    add_preset_option(d, "--buffer-size", default=ddpg.buffer_size, type=positive_int,
+                      shown=f"{ddpg.buffer_size}; pixels: {format_default(PRESETS['pixels']['buffer_size'])}",
+                      help="replay buffer capacity")
+    d.add_argument("--autoencoder-steps", type=positive_int, default=AutoencoderConfig.steps,
+                   help="with --obs latent: the autoencoder's training steps (default %(default)s)")
+    d.add_argument("--torque-arrow", action="store_true", help="show Gymnasium's torque arrow in the frames (off by default, as in piga-control)")
+    d.add_argument("--seed", type=nonnegative_int, default=ddpg.seed, help="seed (default %(default)s)")
+    d.add_argument("--threads", type=positive_int, default=ddpg.threads, help="torch CPU threads (default %(default)s)")
+    _common(d)
+    return p
+
+
+def _common(p: ArgumentParser) -> None:
+    p.add_argument("--resume", action="store_true", help="continue the run in --out exactly; it may raise --steps")
+    p.add_argument("--overwrite", action="store_true", help="replace an earlier run in --out")
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
+
+
+def _check_run_dir(run_dir: Path, resume: bool, overwrite: bool, kind: str) -> None:
+    """Refuses to clobber a run, or to resume what is not one of this kind; clears it with ``overwrite``."""
+    if run_dir.exists() and not run_dir.is_dir():
+        raise PigaError(f"--out {run_dir} is a file, not a folder")
+    existing = [name for name in OUTPUTS if (run_dir / name).exists()]
+    if resume:
+        if not (run_dir / CHECKPOINT).exists():
+            raise PigaError(f"--resume: {run_dir / CHECKPOINT} does not exist")
+        recorded = _read_record(run_dir).get("kind")
+        if recorded != kind:
+            raise PigaError(f"--resume: {run_dir} is a {recorded or 'piga'} run, not a {kind} run")
+        return
+    if existing and not overwrite:
+        raise PigaError(f"{run_dir} already holds a run ({', '.join(existing)}); pass --resume to continue it or "
+                        "--overwrite to replace it")
+    for name in existing:
+        path = run_dir / name
+        shutil.rmtree(path) if path.is_dir() else path.unlink()
+
+
+def _read_record(run_dir: Path) -> dict[str, Any]:
+    try:
+        record = json.loads((run_dir / "config.json").read_text())
+    except (OSError, ValueError):
+        return {}
+    return record if isinstance(record, dict) else {}
+
+
+def _planet(args: Any, argv: Sequence[str] | None) -> int:
+    from agents.planet.config import PlanetTrainConfig
+    from piga.atomic import write_json
+    from piga.baselines.planet import check_planet_data, rssm_config_for, train_planet
+    from piga.data import inspect_dataset
+    from piga.train import TrainingDiverged
+
+    run_dir = Path(args.out)
+    info = inspect_dataset(args.data)  # a missing or malformed file: one line, before the run folder is touched
+    command = command_line(PROG, argv)
+    if args.resume:
+        _check_run_dir(run_dir, True, False, "planet")
+        record = _read_record(run_dir)
+        config = replace(PlanetTrainConfig(**record["train"]), steps=args.steps or record["train"]["steps"],
+                         max_minutes=args.max_minutes or record["train"]["max_minutes"])
+        rssm = None
+        record["train"] = config.to_dict()
+        record.setdefault("resumed", []).append(command)
+    else:
+        config = PlanetTrainConfig(steps=args.steps or PlanetTrainConfig.steps, batch_size=args.batch_size, chunk_length=args.chunk_length,
+                                   max_sequences=args.max_sequences, free_nats=args.free_nats, seed=args.seed,
+                                   threads=args.threads, max_minutes=args.max_minutes or 0.0)
+        rssm = rssm_config_for(info, {"deter_size": args.deter_size, "stoch_size": args.stoch_size})
+        check_planet_data(info, config)
+        _check_run_dir(run_dir, False, args.overwrite, "planet")
+        record = {"kind": "planet", "command": command, "data": str(args.data), "train": config.to_dict(),
+                  "rssm": rssm.to_dict()}
+    check_planet_data(info, config)
+    used = min(info.split_counts["train"], config.max_sequences or info.split_counts["train"])
+    print(f"training the PlaNet-style model on {args.data} ({used} train sequences x {info.steps} frames) -> {run_dir}")
+    written: list[int] = []
+
+    def on_checkpoint(state: Any) -> None:
+        if not written:
+            write_json(run_dir / "config.json", record)
+        written.append(state.step)
+
+    try:
+        _, state = train_planet(args.data, run_dir, config, rssm, resume=args.resume, progress=not args.quiet,
+                                on_checkpoint=on_checkpoint)
+    except TrainingDiverged as exc:
+        raise PigaError(f"training diverged: {exc}") from None
+    except KeyboardInterrupt:
+        if written:
+            raise Interrupted(f"{run_dir / CHECKPOINT} holds step {written[-1]}; continue with --resume") from None
+        raise
+    last = state.history[-1] if state.history else {}
+    print(f"trained {state.step} steps in {state.elapsed / 60:.1f} min; last loss {last.get('loss', float('nan')):.2f} "
+          f"(reconstruction {last.get('reconstruction', float('nan')):.2f}, reward {last.get('reward', float('nan')):.4f}, "
+          f"KL {last.get('kl', float('nan')):.2f}); wrote {run_dir}/metrics.json")
+    return 0
+
+
+def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
+    from piga.atomic import write_json
+    from piga.baselines.ddpg import AUTOENCODER, DDPGConfig, config_for, first_step_reaching, train_ddpg
+
+    run_dir = Path(args.out)
+    command = command_line(PROG, argv)
+    if args.eval_every % 200:
+        raise PigaError(f"--eval-every must be a multiple of the episode length 200, got {args.eval_every}")
+    if args.obs == "latent" and not args.data and not args.resume:
+        raise PigaError("--obs latent trains an autoencoder on collected frames: give --data DATA.h5")
+    if args.obs != "latent" and args.data:
+        raise PigaError(f"--data is for --obs latent (the autoencoder's frames); --obs {args.obs} does not use it")
+    if args.resume:
+        _check_run_dir(run_dir, True, False, "ddpg")
+        record = _read_record(run_dir)
+        saved = record["ddpg"]
+        if saved["obs"] != args.obs:
+            raise PigaError(f"--resume: {run_dir} was trained with --obs {saved['obs']}, not {args.obs}")
+        config = replace(DDPGConfig(**{**saved, "net_arch": tuple(saved["net_arch"])}), steps=args.steps or saved["steps"])
+        record["ddpg"] = config.to_dict()
+        record.setdefault("resumed", []).append(command)
+    else:
+        buffer = {"buffer_size": args.buffer_size} if args.buffer_size is not None else {}
+        config = config_for(args.obs, steps=args.steps or DDPGConfig.steps, eval_every=args.eval_every, eval_episodes=args.eval_episodes,
+                            learning_starts=args.learning_starts, torque_arrow=args.torque_arrow, seed=args.seed,
+                            threads=args.threads, **buffer)
+        if args.data:
+            from piga.data import inspect_dataset
+
+            inspect_dataset(args.data)
+        _check_run_dir(run_dir, False, args.overwrite, "ddpg")
+        record = {"kind": "ddpg", "command": command, "data": args.data, "ddpg": config.to_dict()}
+    autoencoder = run_dir / AUTOENCODER if config.obs == "latent" else None
+    if autoencoder is not None and not args.resume:
+        from piga.baselines.autoencoder import AutoencoderConfig, train_autoencoder
+
+        ae_config = AutoencoderConfig(steps=args.autoencoder_steps, seed=config.seed)
+        run_dir.mkdir(parents=True, exist_ok=True)
+        _, mse = train_autoencoder(args.data, ae_config, autoencoder, progress=not args.quiet)
+        record["autoencoder"] = {**ae_config.__dict__, "train_mse": mse}
+        print(f"autoencoder trained on {args.data}: per-pixel MSE {mse:.5f}")
+    print(f"training DDPG from {config.obs} for {config.steps} env steps -> {run_dir}")
+    written: list[int] = []
+
+    def on_checkpoint(step: int) -> None:
+        if not written:
+            write_json(run_dir / "config.json", record)
+        written.append(step)
+
+    try:
+        metrics = train_ddpg(config, run_dir, autoencoder, resume=args.resume, progress=not args.quiet,
+                             on_checkpoint=on_checkpoint)
+    except KeyboardInterrupt:
+        if written:
+            raise Interrupted(f"{run_dir / CHECKPOINT} holds step {written[-1]}; continue with --resume") from None
+        raise
+    reached = first_step_reaching(metrics["learning_curve"])
+    final = metrics["final_eval_mean_return"]
+    print(f"trained {metrics['steps']} steps in {metrics['train_seconds'] / 60:.1f} min; final evaluation mean return "
+          + (f"{final:.1f}" if final is not None else "n/a") + "; "
+          + (f"first reached -200 at step {reached}" if reached is not None else "never reached -200")
+          + f"; wrote {run_dir}/metrics.json")
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    return _planet(args, argv) if args.baseline == "planet" else _ddpg(args, argv)
+
+
+def entry() -> None:
+    run_cli(PROG, main)
+
+
+if __name__ == "__main__":
+    entry()

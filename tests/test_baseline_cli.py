@@ -1,0 +1,119 @@
+"""``piga-baseline`` as a user runs it (bad input: one line), and ``piga-control`` on baseline runs."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from piga.cli import baseline, control
+from tests.helpers import assert_one_line, copy_without, run_in_process
+
+TINY_PLANET = ("--steps", "2", "--batch-size", "2", "--chunk-length", "8", "--deter-size", "8", "--stoch-size", "4",
+               "--threads", "1", "--quiet")
+TINY_DDPG = ("--steps", "200", "--eval-every", "200", "--eval-episodes", "1", "--learning-starts", "100", "--quiet")
+
+
+@pytest.fixture(scope="module")
+def planet_run(tiny_data: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("planet") / "run"
+    code, _, err = run_in_process("piga-baseline", baseline.main, "planet", str(tiny_data), "--out", str(out), *TINY_PLANET,
+                                  capsys=_NoCapture())
+    assert code == 0, err
+    return out
+
+
+class _NoCapture:
+    """run_in_process for a module fixture, where capsys is not available."""
+
+    def readouterr(self) -> tuple[str, str]:
+        return "", ""
+
+
+@pytest.fixture(scope="module")
+def ddpg_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("ddpg") / "run"
+    code, _, _ = run_in_process("piga-baseline", baseline.main, "ddpg", "--obs", "state", "--out", str(out), *TINY_DDPG,
+                                capsys=_NoCapture())
+    assert code == 0
+    return out
+
+
+@pytest.mark.parametrize("args, needle", [
+    (("planet", "missing.h5", "--out", "r"), "no such file"),
+    (("ddpg", "--obs", "state", "--steps", "0", "--out", "r"), "--steps: expected a positive integer, got 0"),
+    (("ddpg", "--obs", "eyes", "--out", "r"), "--obs: invalid choice: 'eyes'"),
+    (("ddpg", "--obs", "latent", "--out", "r"), "give --data"),
+    (("ddpg", "--obs", "state", "--eval-every", "300", "--out", "r"), "multiple of the episode length 200"),
+    (("ddpg", "--obs", "state", "--out", "r", "--resume"), "does not exist"),
+])
+def test_bad_input_gets_one_line(args: tuple[str, ...], needle: str, capsys: pytest.CaptureFixture[str],
+                                 tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.chdir(tmp_path)
+    code, _, err = run_in_process("piga-baseline", baseline.main, *args, capsys=capsys)
+    assert_one_line(code, err, needle)
+    assert not (tmp_path / "r").exists()
+
+
+def test_a_file_without_rewards_gets_one_line(tiny_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = copy_without(tiny_data, tmp_path / "old.h5", "rewards")
+    code, _, err = run_in_process("piga-baseline", baseline.main, "planet", str(path), "--out", str(tmp_path / "r"),
+                                  *TINY_PLANET, capsys=capsys)
+    assert_one_line(code, err, "has no /rewards")
+    assert not (tmp_path / "r").exists()
+
+
+def test_planet_run_records_its_kind_and_refuses_to_be_overwritten(planet_run: Path, tiny_data: Path,
+                                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    record = json.loads((planet_run / "config.json").read_text())
+    assert record["kind"] == "planet" and record["rssm"]["deter_size"] == 8
+    metrics = json.loads((planet_run / "metrics.json").read_text())
+    assert metrics["steps"] == 2 and len(metrics["learning_curve"]) == 1
+    code, _, err = run_in_process("piga-baseline", baseline.main, "planet", str(tiny_data), "--out", str(planet_run),
+                                  *TINY_PLANET, capsys=capsys)
+    assert_one_line(code, err, "already holds a run", "--resume", "--overwrite")
+    code, _, err = run_in_process("piga-baseline", baseline.main, "ddpg", "--obs", "state", "--out", str(planet_run),
+                                  "--resume", capsys=capsys)
+    assert_one_line(code, err, "is a planet run, not a ddpg run")
+
+
+def test_piga_control_runs_a_ddpg_run_as_trained(ddpg_run: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "eval"
+    code, stdout, err = run_in_process("piga-control", control.main, "--model", str(ddpg_run), "--episodes", "2",
+                                       "--steps", "20", "--gravity-mult", "1.4", "--quiet", "--out", str(out), capsys=capsys)
+    assert code == 0, err
+    lines = stdout.splitlines()
+    assert lines[0] == "note: the ddpg agent runs as trained: it cannot be told that gravity changed"
+    assert lines[1].startswith(f"ddpg ({ddpg_run}), gravity x1.4")
+    result = json.loads(out.with_suffix(".json").read_text())
+    assert result["kind"] == "ddpg" and result["summary"]["episodes"] == 2 and result["summary"]["gravity_mult"] == 1.4
+
+
+@pytest.mark.parametrize("option, needle", [
+    (("--goal-image", "goal.png"), "cannot be given a goal image"),
+    (("--goal-angle", "30"), "has no goal input"),
+    (("--video", "v.mp4"), "belief and plan"),
+])
+def test_piga_control_refuses_goals_for_baselines(planet_run: Path, option: tuple[str, ...], needle: str,
+                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    code, _, err = run_in_process("piga-control", control.main, "--model", str(planet_run), *option, capsys=capsys)
+    assert_one_line(code, err, needle)
+
+
+def test_control_jobs_dispatch_on_the_run_kind(planet_run: Path, ddpg_run: Path) -> None:
+    from agents.planet.planner import PlanetAgent
+    from piga.baselines.ddpg import DDPGAgent
+    from piga.baselines.kinds import run_kind
+    from piga.episodes import EpisodeConfig
+    from piga.jobs import ControlJob, build_agent, run_job
+
+    assert (run_kind(planet_run), run_kind(ddpg_run)) == ("planet", "ddpg")
+    episodes = EpisodeConfig(episodes=1, steps=2, hold_steps=1)
+    assert isinstance(build_agent(ControlJob("planet", episodes, model_dir=str(planet_run))), PlanetAgent)
+    assert isinstance(build_agent(ControlJob("ddpg", episodes, model_dir=str(ddpg_run))), DDPGAgent)
+    result = run_job(ControlJob("planet", episodes, model_dir=str(planet_run)))
+    assert result["summary"]["agent"] == "planet" and np.isfinite(result["summary"]["mean_return"])
+    with pytest.raises(ValueError, match="needs model_dir"):
+        ControlJob("ddpg", episodes)

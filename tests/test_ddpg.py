@@ -1,0 +1,98 @@
+"""DDPG baselines: the observation wrappers pass Gymnasium's and SB3's checkers, training resumes
+exactly, and a trained policy runs in piga's episodes."""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from piga.baselines.ddpg import DDPGConfig, make_env, make_observation_env
+
+#: Tiny settings: a few seconds of training.
+TINY = DDPGConfig(steps=400, learning_starts=100, eval_every=200, eval_episodes=1, batch_size=16, net_arch=(16, 16),
+                  buffer_size=1000)
+
+
+def _code(frame: np.ndarray) -> np.ndarray:
+    """A stand-in encoder: the frame's mean brightness by quadrant, in [-1, 1] (4,)."""
+    quads = frame.reshape(2, 32, 2, 32).mean((1, 3)).ravel() / 255.0
+    return (2 * quads - 1).astype(np.float32)
+
+
+@pytest.mark.parametrize("obs", ["pixels", "latent", "state"])
+def test_observation_wrappers_pass_gymnasium_and_sb3_checks(obs: str) -> None:
+    from gymnasium.utils.env_checker import check_env as gym_check_env
+    from stable_baselines3.common.env_checker import check_env as sb3_check_env
+
+    config = replace(TINY, obs=obs)
+    env = make_observation_env(config, _code, 4)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # any complaint of either checker fails the test, except
+        warnings.filterwarnings("ignore", message=".*different from the unwrapped")  # "it is wrapped": the point
+        # Pendulum-v1's own torque range [-2, 2]; SB3's DDPG rescales actions to [-1, 1] itself
+        warnings.filterwarnings("ignore", message=".*symmetric and normalized")
+        gym_check_env(env, skip_render_check=True)
+        sb3_check_env(make_env(config, _code, 4, episode_seed=0), warn=True)  # as training sees it, with Monitor
+    first, _ = env.reset(seed=5)
+    assert env.observation_space.contains(first)
+    expected = {"pixels": ((1, 64, 64), np.uint8), "latent": ((4,), np.float32), "state": ((3,), np.float32)}[obs]
+    assert (first.shape, first.dtype) == expected
+    if obs == "state":
+        theta, theta_dot = env.unwrapped.state
+        assert np.allclose(first, [np.cos(theta), np.sin(theta), theta_dot], atol=1e-6)
+    env.close()
+
+
+def test_wrappers_refuse_wrong_spaces() -> None:
+    import gymnasium as gym
+
+    from envs.observations import LatentObservation, StateObservation
+
+    with pytest.raises(TypeError, match="uint8 frame"):
+        LatentObservation(gym.make("Pendulum-v1"), _code, 4)
+    with pytest.raises(TypeError, match="Pendulum"):
+        StateObservation(gym.make("CartPole-v1"))
+
+
+def test_training_resumes_exactly(tmp_path: Path) -> None:
+    from piga.baselines.ddpg import load_ddpg, train_ddpg
+
+    straight = train_ddpg(TINY, tmp_path / "a", progress=False)
+    train_ddpg(replace(TINY, steps=200), tmp_path / "b", progress=False)
+    resumed = train_ddpg(TINY, tmp_path / "b", resume=True, progress=False)
+    assert [r["step"] for r in straight["learning_curve"]] == [200, 400]
+    assert [r["eval_mean_return"] for r in resumed["learning_curve"]] == [r["eval_mean_return"] for r in straight["learning_curve"]]
+    a, b = load_ddpg(tmp_path / "a")[0], load_ddpg(tmp_path / "b")[0]
+    for (name, p), q in zip(a.policy.state_dict().items(), b.policy.state_dict().values()):
+        assert torch.equal(p, q), name
+    assert (tmp_path / "a" / "model.zip").exists() and (tmp_path / "a" / "tensorboard").is_dir()
+
+
+def test_a_pixel_policy_runs_in_piga_episodes_with_sb3s_stacking(tmp_path: Path) -> None:
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecFrameStack
+
+    from piga.baselines.ddpg import DDPGAgent, train_ddpg
+    from piga.episodes import EpisodeConfig, run_episodes
+
+    config = replace(TINY, obs="pixels", steps=200, learning_starts=150, batch_size=4)
+    train_ddpg(config, tmp_path / "run", progress=False)
+    agent = DDPGAgent.from_run(tmp_path / "run")
+    result = run_episodes(agent, EpisodeConfig(episodes=1, steps=20, hold_steps=5, frame_stack=agent.input_frames))
+    assert np.isfinite(result["summary"]["mean_return"])
+    # the agent's own stack is SB3's VecFrameStack: zeros at reset, newest frame last
+    venv = VecFrameStack(DummyVecEnv([lambda: make_env(config)]), config.frame_stack, channels_order="first")
+    venv.seed(3)
+    stacked = venv.reset()
+    agent.reset()
+    agent.act(stacked[0][-1:], np.zeros(2))
+    assert agent._stack is not None and np.array_equal(agent._stack, stacked[0])
+    for _ in range(5):
+        stacked, *_ = venv.step(np.zeros((1, 1), np.float32))
+        agent.act(stacked[0][-1:], np.zeros(2))
+        assert np.array_equal(agent._stack, stacked[0])
+    venv.close()

@@ -1,0 +1,118 @@
+"""The PlaNet-style baseline: the RSSM's shapes, its training step and run folder, and the latent planner."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from agents.config import CEMConfig
+from agents.planet.config import LatentPlannerConfig, PlanetTrainConfig, RSSMConfig
+from agents.planet.planner import PlanetAgent
+from agents.planet.rssm import Belief, WorldModel
+
+#: A model small enough for a test to train in a second.
+TINY = RSSMConfig(depth=4, deter_size=16, stoch_size=4, hidden_size=16)
+TINY_TRAIN = PlanetTrainConfig(steps=4, batch_size=4, chunk_length=8, checkpoint_every=2, threads=1)
+TINY_CEM = LatentPlannerConfig(cem=CEMConfig(horizon=4, iterations=2, candidates=20, elites=4))
+
+
+def test_rssm_shapes() -> None:
+    model = WorldModel(TINY)
+    frames = torch.randint(0, 256, (3, 5, 64, 64), dtype=torch.uint8)
+    actions = torch.rand(3, 5, 1) * 4 - 2
+    h, s, prior, post = model.observe(frames, actions, torch.Generator().manual_seed(0))
+    assert h.shape == (3, 5, 16) and s.shape == (3, 5, 4)
+    assert prior.mean.shape == post.std.shape == (3, 5, 4) and bool((post.std >= TINY.min_std).all())
+    assert model.embed(frames).shape == (3, 5, TINY.embed_size)
+    assert model.decode(h, s).shape == (3, 5, 1, 64, 64)
+    assert model.reward(h, s).shape == (3, 5)
+    parts = model.loss(frames, actions, torch.zeros(3, 5), TINY_TRAIN)
+    assert all(p.dim() == 0 and torch.isfinite(p) for p in parts)
+    assert parts.kl.item() >= 0
+    returns = model.imagine_return(Belief(h[:1, -1], s[:1, -1]), torch.zeros(7, 6, 1))
+    assert returns.shape == (7,)
+
+
+def test_one_training_step_lowers_the_loss(tiny_data: Path) -> None:
+    from piga.baselines.planet import _Sequences
+
+    torch.manual_seed(0)
+    model = WorldModel(TINY)
+    batch = _Sequences(tiny_data, "train").batch(np.random.default_rng(0), 4, 8)
+
+    def loss() -> torch.Tensor:
+        return model.loss(*batch, TINY_TRAIN, torch.Generator().manual_seed(1)).loss
+
+    before = loss()
+    optimizer = torch.optim.Adam(model.parameters(), lr=1e-3, eps=1e-4)
+    before.backward()
+    optimizer.step()
+    with torch.no_grad():
+        after = loss()
+    assert after.item() < before.item() - 1e-3 * abs(before.item()), (before.item(), after.item())
+
+
+def test_training_writes_a_run_and_resumes_exactly(tiny_data: Path, tmp_path: Path) -> None:
+    from piga.baselines.planet import load_planet, train_planet
+
+    straight, _ = train_planet(tiny_data, tmp_path / "a", TINY_TRAIN, TINY, progress=False)
+    train_planet(tiny_data, tmp_path / "b", replace(TINY_TRAIN, steps=2), TINY, progress=False)
+    resumed, state = train_planet(tiny_data, tmp_path / "b", TINY_TRAIN, resume=True, progress=False)
+    assert state.step == 4 and [r["step"] for r in state.history] == [2, 4]
+    for (name, p), q in zip(straight.state_dict().items(), resumed.state_dict().values()):
+        assert torch.equal(p, q), name
+    loaded, ckpt = load_planet(tmp_path / "b")
+    assert ckpt["kind"] == "planet" and loaded.config == TINY
+    import json
+
+    metrics = json.loads((tmp_path / "b" / "metrics.json").read_text())
+    assert len(metrics["learning_curve"]) == 2 and metrics["valid"]["loss"] > 0
+    assert (tmp_path / "b" / "tensorboard").is_dir()
+
+
+def test_nan_stops_and_names_the_last_good_checkpoint(tiny_data: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from piga.baselines.planet import train_planet
+    from piga.train import TrainingDiverged
+
+    original = WorldModel.loss
+    calls = []
+
+    def loss_that_blows_up(self, *args, **kwargs):  # type: ignore[no-untyped-def]
+        parts = original(self, *args, **kwargs)
+        calls.append(1)
+        return parts._replace(loss=parts.loss * float("nan")) if len(calls) == 3 else parts
+
+    monkeypatch.setattr(WorldModel, "loss", loss_that_blows_up)
+    with pytest.raises(TrainingDiverged, match=f"step 2; last good checkpoint: {tmp_path / 'run' / 'checkpoint.pt'}"):
+        train_planet(tiny_data, tmp_path / "run", TINY_TRAIN, TINY, progress=False)
+
+
+def test_a_file_without_rewards_is_refused(tiny_data: Path, tmp_path: Path) -> None:
+    from piga.baselines.planet import check_planet_data
+    from piga.data import DataFormatError, inspect_dataset
+    from tests.helpers import copy_without
+
+    path = copy_without(tiny_data, tmp_path / "no_rewards.h5", "rewards")
+    with pytest.raises(DataFormatError, match="no /rewards"):
+        check_planet_data(inspect_dataset(path), TINY_TRAIN)
+
+
+def test_latent_planner_actions_in_bounds_and_deterministic_for_a_seed() -> None:
+    torch.manual_seed(0)
+    model = WorldModel(TINY)
+    frames = np.random.default_rng(0).integers(0, 256, (6, 1, 64, 64), dtype=np.uint8)
+
+    def episode(seed: int) -> np.ndarray:
+        agent = PlanetAgent(model, replace(TINY_CEM, seed=seed))
+        agent.reset()
+        return np.concatenate([agent.act(f) for f in frames])
+
+    first, again, other = episode(0), episode(0), episode(1)
+    assert first.shape == (6,) and first.dtype == np.float32
+    assert np.all(np.abs(first) <= 2.0) and np.all(np.abs(other) <= 2.0)
+    assert np.array_equal(first, again)
+    assert not np.array_equal(first, other)
