@@ -98,6 +98,17 @@ class ModelConfig:
     """Encoder location-network channels."""
     template_hidden: int = 200
     """Hidden units of the template generators (the paper: 200)."""
+    template_size: int = 0
+    """Side of each object template in template pixels (0: the image side). The scenes use H/2, as the
+    published decoder does."""
+    init_scale: float = 1.0
+    """Initial spatial-transformer scale s, image pixels per template pixel; learned. With templates of
+    H/2, the paper's s = 2 (balls: a template covering half the image) is 1 here, and its s = 1
+    (digits: the whole image) is 2."""
+    mask_pixelwise: bool = False
+    """Encoder: add a full-resolution colour term to the mask logits (:class:`piga.encoder.EncoderConfig`)."""
+    wall_radius: float = 2.0
+    """Bouncing only: how far from the image edge a centre bounces, pixels (the published engine's 2)."""
 
     def __post_init__(self) -> None:
         if self.system not in SYSTEM_SHAPES:
@@ -181,7 +192,7 @@ class PhysicsModel(nn.Module):
         n = config.n_objects if config.system != "pendulum" else 1
         self.encoder = Encoder(EncoderConfig(config.image_size, config.channels, n, d, config.readout,
                                              config.mask_width, config.loc_width, config.angle_reference,
-                                             config.pivot_gate))
+                                             config.pivot_gate, config.mask_pixelwise))
         self.velocity = VelocityEstimator(VelocityConfig(config.input_frames, n, d, config.dt, config.image_size,
                                                          correction=config.velocity_correction))
         kwargs: dict[str, Any] = {"dt": config.dt, **config.physics_init}
@@ -191,9 +202,11 @@ class PhysicsModel(nn.Module):
             kwargs["n_objects"] = n
         if config.system == "bouncing":
             kwargs.setdefault("size", float(config.image_size))
+            kwargs.setdefault("radius", config.wall_radius)
         self.system: System = make_system(config.system, **kwargs)
         self.integrator = Euler(config.substeps)
-        self.decoder = Decoder(DecoderConfig(config.image_size, config.channels, n, d, hidden=config.template_hidden))
+        self.decoder = Decoder(DecoderConfig(config.image_size, config.channels, n, d, hidden=config.template_hidden,
+                                             template_size=config.template_size or None, init_scale=config.init_scale))
 
     def physical_parameters(self) -> dict[str, float]:
         """Current physical parameter values, e.g. ``{"g": 9.98, "a": 1.002}`` (plus ``offset``)."""
