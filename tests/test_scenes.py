@@ -101,6 +101,7 @@ def test_rendered_balls_sit_at_their_states(scene: str) -> None:
 
 def test_rendered_digits_move_with_their_states() -> None:
     """A digit's foreground centroid moves exactly as its state, to 0.3 px (digits are pasted on a 1/4 px grid)."""
+    pytest.importorskip("sklearn", reason="the digits need the 'scenes' extra (scikit-learn)")
     config = scene_config("digits-spring")
     ps, _ = draw_start(config, np.random.default_rng(6), 12)
     frames = render(config, ps).astype(float) / 255
