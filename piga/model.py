@@ -107,6 +107,11 @@ class ModelConfig:
     (digits: the whole image) is 2."""
     mask_pixelwise: bool = False
     """Encoder: add a full-resolution colour term to the mask logits (:class:`piga.encoder.EncoderConfig`)."""
+    init_background: bool = False
+    """Start the decoder's background content at the encoder's label-free median background
+    (:meth:`piga.decoder.Decoder.init_background`). On the balls' black background the sigmoid
+    content otherwise stalls a few levels above 0, and SSIM, whose luminance term compares means
+    near 0, punishes that hard (a uniform 0.003 alone caps it near 0.92)."""
     wall_radius: float = 2.0
     """Bouncing only: how far from the image edge a centre bounces, pixels (the published engine's 2)."""
 

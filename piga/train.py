@@ -105,11 +105,11 @@ PRESETS: dict[str, dict[str, Any]] = {
 
 #: The scenes' recipes (``fast`` and ``paper``), by the file's attr ``scene`` (else its ``system``).
 #: What all ball and digit scenes share: templates of H/2 (the published decoder's), a pixelwise
-#: mask term, no trimming (nothing unmodelled to trim), and the paper's velocity MLP on top of
+#: mask term, the decoder's background content starting at the label-free median background, no trimming (nothing unmodelled to trim), and the paper's velocity MLP on top of
 #: the backward difference (at dt = 0.3 the difference alone is far from v_L: ω·dt ≈ 0.85 for the
 #: spring), L = 4 input and T_pred = 6 predicted frames (the published code's).
 _SCENE_MODEL: dict[str, Any] = {"input_frames": 4, "pred_frames": 6, "pred_trim": 0.0, "velocity_correction": True,
-                                "substeps": 5, "mask_pixelwise": True, "alpha": 2.0}
+                                "substeps": 5, "mask_pixelwise": True, "alpha": 2.0, "init_background": True}
 _SCENE_FAST_TRAIN: dict[str, Any] = {"epochs": 6, "warmup_steps": 300, "curriculum_steps": 600, "window_stride": 2}
 _SCENE_PAPER: dict[str, Any] = {
     "train": {"epochs": 500, "lr": 3e-4, "lr_physics": 3e-4, "optimizer": "rmsprop", "schedule": "step",
@@ -366,6 +366,8 @@ def train(
         model = PhysicsModel(model_config_for(info, model_overrides))
         with torch.no_grad():
             model.encoder.background.copy_(_background(data, model.config.channels, train_config.seed))
+        if model.config.init_background:
+            model.decoder.init_background(model.encoder.background)
         optimizer = _optimizer(model, train_config)
     cfg = model.config
     if resume:

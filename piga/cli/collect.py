@@ -41,7 +41,7 @@ def build_parser() -> ArgumentParser:
                    "(README, 'Systems') (default %(default)s)")
     for flag, what in SCENE_PARAMETERS.items():
         p.add_argument(flag, type=positive_float, default=None,
-                       help=f"{what} (default: the scene's, {_scene_defaults(flag)})")
+                       help=f"{what} (default the scene's; {_scene_defaults(flag)})")
     paper = PRESETS["paper"]
     p.add_argument("--preset", choices=sorted(PRESETS), default="default",
                    help=f"'default': small, about a minute on 2 cores; 'paper': {paper['sequences']} sequences x "
