@@ -38,15 +38,16 @@ def test_the_model_is_read_from_the_file(spring_data: Path) -> None:
 
 
 def test_tiny_spring_training_moves_k_toward_the_truth(spring_data: Path, tmp_path: Path) -> None:
-    """~300 steps on 32 sequences: k leaves 1 and goes a real way toward 4 (in log space, over a third)."""
+    """~420 steps on 32 sequences: k and l leave 1 and land near the truth (4, 6). Measured: k 4.27, l 6.09."""
     info = inspect_dataset(spring_data)
     preset = preset_for("fast", info)
-    config = TrainConfig(**{**preset["train"], "epochs": 8, "warmup_steps": 150, "curriculum_steps": 100,
-                            "batch_size": 16, "window_stride": 1, "threads": 1, "seed": 0})
-    model, state = train(spring_data, tmp_path / "run", config, preset["model"], progress=False)
-    k = model.physical_parameters()["k"]
-    assert k > 4.0 ** (1 / 3), state.history[-1]  # from 1 toward 4: at least a third of the way, in log space
-    assert k < 8.0
+    config = TrainConfig(**{**preset["train"], "epochs": 10, "warmup_steps": 150, "curriculum_steps": 60,
+                            "batch_size": 16, "window_stride": 1, "threads": 1, "seed": 0, "lr_physics": 3e-2})
+    # a 3-frame horizon: cheaper steps, and a rollout that stays near the truth while k is still far off
+    model, state = train(spring_data, tmp_path / "run", config, {**preset["model"], "pred_frames": 3}, progress=False)
+    learned = model.physical_parameters()
+    assert 3.0 < learned["k"] < 5.0, state.history[-1]  # from 1: over 80% of the way to 4, in log space
+    assert 4.5 < learned["l"] < 7.5, state.history[-1]
 
 
 def test_unknown_system_in_a_file_is_one_line(spring_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
