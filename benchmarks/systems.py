@@ -19,6 +19,7 @@ Writes ``OUT.json``, ``OUT.md``, ``OUT-ssim.png`` (SSIM per step) and ``OUT-roll
 from __future__ import annotations
 
 import argparse
+import os
 import shutil
 import statistics
 import sys
@@ -71,8 +72,10 @@ def _run(system: str, seed: int, data: Path, folder: Path) -> dict[str, Any]:
             shutil.rmtree(run_dir)  # an interrupted run restarts from scratch
         model, state = train(data, run_dir, config, preset["model"], progress=False)
         write_run_report(model, state, data, run_dir)
+        (run_dir / "load.json").write_text(json.dumps({"load_average_at_end": os.getloadavg()}))
     metrics = json.loads(metrics_path.read_text())
-    return {"system": system, "seed": seed, "run": str(run_dir), "metrics": metrics}
+    load = json.loads((run_dir / "load.json").read_text())["load_average_at_end"] if (run_dir / "load.json").exists() else None
+    return {"system": system, "seed": seed, "run": str(run_dir), "metrics": metrics, "load_average_at_end": load}
 
 
 def _median(values: list[float]) -> float:
@@ -108,6 +111,7 @@ def summary(runs: list[dict[str, Any]]) -> dict[str, Any]:
             "ssim_extrapolation": statistics.fmean(ssim[m0["pred_frames"]:]) if steps > m0["pred_frames"] else None,
             "ssim_min_extrapolation": min(ssim[m0["pred_frames"]:]) if steps > m0["pred_frames"] else None,
             "train_minutes": [r["metrics"]["training"]["seconds"] / 60 for r in rows],
+            "load_average_at_end": [r.get("load_average_at_end") for r in rows],
         }
     return out
 
@@ -137,7 +141,10 @@ def markdown(record: dict[str, Any], out: Path) -> str:
                if row["ssim_extrapolation"] is not None else "-")
         lines.append(f"| {system} | {row['input_frames']}, {row['pred_frames']}, {row['extrapolate_frames']} | "
                      f"{row['ssim_prediction']:.3f} | {ext} | {', '.join(f'{m:.1f}' for m in row['train_minutes'])} |")
-    lines += ["", f"![SSIM per step]({out.name}-ssim.png)", ""]
+    lines += ["", "Training minutes are wall-clock with one torch thread. The machine (2 cores) may be shared: "
+              "the 1, 5, 15-minute load averages at the end of each run are in the JSON "
+              "(`load_average_at_end`; absent for runs made before it was recorded).", "",
+              f"![SSIM per step]({out.name}-ssim.png)", ""]
     lines += [f"![{system}]({out.name}-rollout-{system}.png)" for system in s]
     return "\n".join(lines) + "\n"
 
