@@ -108,10 +108,10 @@ class ModelConfig:
     mask_pixelwise: bool = False
     """Encoder: add a full-resolution colour term to the mask logits (:class:`piga.encoder.EncoderConfig`)."""
     velocity_physics: bool = False
-    """Add the engine's own half-step velocity change, (dt/2)·a(p_L), to the estimator's velocity. The
-    backward difference is the mean velocity over the last frame interval, i.e. the velocity half a
-    frame earlier; this moves it to frame L with the current physics (the MLP, if on, corrects the rest).
-    No gradient flows from this term into the physical parameters."""
+    """Add the engine's own velocity change dt·(2·a(p_L) + a(p_{L-1}))/6 to the estimator's velocity. The
+    backward difference is the mean velocity over the last frame interval; this makes it v_L, exactly
+    for a cubic path, with the current physics (the MLP, if on, corrects the rest). No gradient flows
+    from this term into the physical parameters."""
     init_background: bool = False
     """Start the decoder's background content at the encoder's label-free median background
     (:meth:`piga.decoder.Decoder.init_background`). On the balls' black background the sigmoid
@@ -235,10 +235,13 @@ class PhysicsModel(nn.Module):
         """Coordinates of L frames (B, L, N, D) -> (p_L, v_L), each (B, N, D)."""
         v = self.velocity(coords)  # (B, N, D)
         if self.config.velocity_physics:
-            # The physical parameters are detached here: they must be identified by the rollout, not by
-            # the shortcut of bending the initial velocity.
+            # The backward difference D is exact for a cubic path once corrected by dt·(2·a_L + a_{L-1})/6
+            # (Taylor: D = v_L - a_L·dt/2 + ȧ·dt²/6). The physical parameters are detached here: they must
+            # be identified by the rollout, not by the shortcut of bending the initial velocity.
             frozen = {name: p.detach() for name, p in self.system.named_parameters()}
-            v = v + 0.5 * self.config.dt * torch.func.functional_call(self.system, frozen, (coords[:, -1], v))
+            a_last = torch.func.functional_call(self.system, frozen, (coords[:, -1], v))  # (B, N, D)
+            a_prev = torch.func.functional_call(self.system, frozen, (coords[:, -2], v))
+            v = v + self.config.dt * (2 * a_last + a_prev) / 6
         return coords[:, -1], v
 
     def predict(self, coords: Tensor, actions: Tensor | None, steps: int) -> Tensor:
