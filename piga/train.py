@@ -109,7 +109,8 @@ PRESETS: dict[str, dict[str, Any]] = {
 #: the backward difference (at dt = 0.3 the difference alone is far from v_L: ω·dt ≈ 0.85 for the
 #: spring), L = 4 input and T_pred = 6 predicted frames (the published code's).
 _SCENE_MODEL: dict[str, Any] = {"input_frames": 4, "pred_frames": 6, "pred_trim": 0.0, "velocity_correction": True,
-                                "substeps": 5, "mask_pixelwise": True, "alpha": 2.0, "init_background": True}
+                                "velocity_physics": True, "substeps": 5, "mask_pixelwise": True, "alpha": 2.0,
+                                "init_background": True}
 _SCENE_FAST_TRAIN: dict[str, Any] = {"epochs": 6, "warmup_steps": 300, "curriculum_steps": 600, "window_stride": 2}
 _SCENE_PAPER: dict[str, Any] = {
     "train": {"epochs": 500, "lr": 3e-4, "lr_physics": 3e-4, "optimizer": "rmsprop", "schedule": "step",
