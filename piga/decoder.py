@@ -220,6 +220,21 @@ class Decoder(nn.Module):
         self.object_generator.set_output(obj)
         self.background_generator.set_output(bkg)
 
+    @torch.no_grad()
+    def init_background(self, background: Tensor) -> None:
+        """Start the background content at ``background`` (C, H, W) in [0, 1]; its mask logit is kept.
+
+        Only the background generator's output layer is set (weights zeroed, bias = the values), so
+        the object templates start as before.
+        """
+        current = self.templates()
+        if tuple(background.shape) != tuple(current.background.shape):
+            raise ValueError(f"init_background: background must have shape {tuple(current.background.shape)}, "
+                             f"got {tuple(background.shape)}")
+        dtype = self.background_generator.out.bias.dtype
+        bkg = torch.cat([_logit(background.to(dtype)), current.background_mask_logit.to(dtype)], dim=0)
+        self.background_generator.set_output(bkg)
+
     # ------------------------------------------------------------------ rendering
     def _inverse_affine(self, coords: Tensor) -> Tensor:
         """The spatial transformer parameters ω for ``F.affine_grid``, (B, N, 2, 3).

@@ -98,6 +98,27 @@ class ModelConfig:
     """Encoder location-network channels."""
     template_hidden: int = 200
     """Hidden units of the template generators (the paper: 200)."""
+    template_size: int = 0
+    """Side of each object template in template pixels (0: the image side). The scenes use H/2, as the
+    published decoder does."""
+    init_scale: float = 1.0
+    """Initial spatial-transformer scale s, image pixels per template pixel; learned. With templates of
+    H/2, the paper's s = 2 (balls: a template covering half the image) is 1 here, and its s = 1
+    (digits: the whole image) is 2."""
+    mask_pixelwise: bool = False
+    """Encoder: add a full-resolution colour term to the mask logits (:class:`piga.encoder.EncoderConfig`)."""
+    velocity_physics: bool = False
+    """Add the engine's own velocity change dt·(2·a(p_L) + a(p_{L-1}))/6 to the estimator's velocity. The
+    backward difference is the mean velocity over the last frame interval; this makes it v_L, exactly
+    for a cubic path, with the current physics (the MLP, if on, corrects the rest). No gradient flows
+    from this term into the physical parameters."""
+    init_background: bool = False
+    """Start the decoder's background content at the encoder's label-free median background
+    (:meth:`piga.decoder.Decoder.init_background`). On the balls' black background the sigmoid
+    content otherwise stalls a few levels above 0, and SSIM, whose luminance term compares means
+    near 0, punishes that hard (a uniform 0.003 alone caps it near 0.92)."""
+    wall_radius: float = 2.0
+    """Bouncing only: how far from the image edge a centre bounces, pixels (the published engine's 2)."""
 
     def __post_init__(self) -> None:
         if self.system not in SYSTEM_SHAPES:
@@ -181,7 +202,7 @@ class PhysicsModel(nn.Module):
         n = config.n_objects if config.system != "pendulum" else 1
         self.encoder = Encoder(EncoderConfig(config.image_size, config.channels, n, d, config.readout,
                                              config.mask_width, config.loc_width, config.angle_reference,
-                                             config.pivot_gate))
+                                             config.pivot_gate, config.mask_pixelwise))
         self.velocity = VelocityEstimator(VelocityConfig(config.input_frames, n, d, config.dt, config.image_size,
                                                          correction=config.velocity_correction))
         kwargs: dict[str, Any] = {"dt": config.dt, **config.physics_init}
@@ -191,9 +212,11 @@ class PhysicsModel(nn.Module):
             kwargs["n_objects"] = n
         if config.system == "bouncing":
             kwargs.setdefault("size", float(config.image_size))
+            kwargs.setdefault("radius", config.wall_radius)
         self.system: System = make_system(config.system, **kwargs)
         self.integrator = Euler(config.substeps)
-        self.decoder = Decoder(DecoderConfig(config.image_size, config.channels, n, d, hidden=config.template_hidden))
+        self.decoder = Decoder(DecoderConfig(config.image_size, config.channels, n, d, hidden=config.template_hidden,
+                                             template_size=config.template_size or None, init_scale=config.init_scale))
 
     def physical_parameters(self) -> dict[str, float]:
         """Current physical parameter values, e.g. ``{"g": 9.98, "a": 1.002}`` (plus ``offset``)."""
@@ -210,7 +233,16 @@ class PhysicsModel(nn.Module):
 
     def initial_state(self, coords: Tensor) -> tuple[Tensor, Tensor]:
         """Coordinates of L frames (B, L, N, D) -> (p_L, v_L), each (B, N, D)."""
-        return coords[:, -1], self.velocity(coords)
+        v = self.velocity(coords)  # (B, N, D)
+        if self.config.velocity_physics:
+            # The backward difference D is exact for a cubic path once corrected by dt·(2·a_L + a_{L-1})/6
+            # (Taylor: D = v_L - a_L·dt/2 + ȧ·dt²/6). The physical parameters are detached here: they must
+            # be identified by the rollout, not by the shortcut of bending the initial velocity.
+            frozen = {name: p.detach() for name, p in self.system.named_parameters()}
+            a_last = torch.func.functional_call(self.system, frozen, (coords[:, -1], v))  # (B, N, D)
+            a_prev = torch.func.functional_call(self.system, frozen, (coords[:, -2], v))
+            v = v + self.config.dt * (2 * a_last + a_prev) / 6
+        return coords[:, -1], v
 
     def predict(self, coords: Tensor, actions: Tensor | None, steps: int) -> Tensor:
         """Rolls the physics on from L encoded frames.

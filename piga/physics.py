@@ -164,6 +164,10 @@ class System(nn.Module):
         """
         raise NotImplementedError
 
+    def forward(self, p: Tensor, v: Tensor, u: Tensor | None = None) -> Tensor:
+        """:meth:`acceleration` (so that ``torch.func.functional_call`` can evaluate it with other parameters)."""
+        return self.acceleration(p, v, u)
+
     def constrain(self, p: Tensor, v: Tensor) -> tuple[Tensor, Tensor]:
         """Apply hard constraints after each substep; the identity unless a subclass has walls."""
         return p, v

@@ -45,14 +45,22 @@ def write_run_report(model: PhysicsModel, state: TrainState, data: str | Path, r
     to_img = lambda a: np.stack([[_image(f) for f in seq] for seq in a])  # noqa: E731
     save_figure(rollout_figure(to_img(truth), to_img(pred), cfg.input_frames, cfg.pred_frames), run_dir / "rollout.png")
 
-    # What the decoder composes for an object at the reference pose (θ = 0, or the image centre):
-    # each transformed content and its mask after the softmax against the background.
+    # What the decoder composes for each object at the reference pose (θ = 0, or the image centre),
+    # drawn alone (the other objects far off the picture): its transformed content and its mask after
+    # the softmax against the background.
     n, d = cfg.n_objects if cfg.system != "pendulum" else 1, cfg.coord_dim
-    pose = torch.zeros(1, n, d) if d == 1 else torch.full((1, n, d), cfg.image_size / 2)
-    parts = model.decoder.render_parts(pose)
-    contents = np.stack([_image(c) for c in parts.contents[0].numpy()])  # (N, H, W[, C])
-    masks = parts.masks[0, :, 0].numpy()  # (N+1, H, W)
-    save_figure(templates_figure(contents, masks[:-1], _image(parts.background.numpy()), masks[-1]), run_dir / "templates.png")
+    contents, masks = [], []
+    for i in range(n):
+        pose = torch.zeros(1, n, d) if d == 1 else torch.full((1, n, d), -10.0 * cfg.image_size)
+        if d == 2:
+            pose[0, i] = cfg.image_size / 2
+        parts = model.decoder.render_parts(pose)
+        contents.append(_image(parts.contents[0, i].numpy()))  # (H, W[, C])
+        masks.append(parts.masks[0, i, 0].numpy())  # (H, W)
+    background_mask = model.decoder.render_parts(torch.full((1, n, d), -10.0 * cfg.image_size) if d == 2
+                                                 else torch.zeros(1, n, d)).masks[0, -1, 0].numpy()
+    save_figure(templates_figure(np.stack(contents), np.stack(masks), _image(parts.background.numpy()), background_mask),
+                run_dir / "templates.png")
     true = {PARAMETER_NAMES[k]: float(v) for k, v in info.params.items() if k in PARAMETER_NAMES}
     if state.history:
         save_figure(curves_figure(state.history, true), run_dir / "curves.png")

@@ -1,15 +1,18 @@
-"""``piga-collect``: pixel-pendulum videos with random actions, written to one HDF5 file."""
+"""``piga-collect``: pixel-pendulum videos with random actions, or a scene of the paper, written to one HDF5 file."""
 
 from __future__ import annotations
 
+import argparse
 from collections.abc import Sequence
 from dataclasses import replace
 
 from envs.effects import EFFECTS, format_effects, parse_effect
 from envs.pendulum import PixelPendulumConfig
-from piga.cli.common import (ArgumentParser, add_preset_option, command_line, format_default, nonnegative_int, positive_float,
+from envs.scenes import SCENES, scene_config
+from piga.cli.common import (ArgumentParser, PigaError, add_preset_option, command_line, format_default, nonnegative_int, positive_float,
                              positive_int, run_cli, split_type)
 from piga.collect import PAPER_MAX_SPEED, PRESETS, CollectConfig, collect
+from piga.collect_scenes import SCENE_PRESETS, SCENE_STEPS, SceneCollectConfig, collect_scene
 from piga.data import inspect_dataset
 
 PROG = "piga-collect"
@@ -33,11 +36,19 @@ def build_parser() -> ArgumentParser:
         "(schema: README, 'Data files').",
     )
     p.add_argument("--out", required=True, help="output .h5 file (written atomically)")
+    p.add_argument("--system", choices=SYSTEM_CHOICES, default="pendulum",
+                   help="what to collect: the actuated pixel pendulum, or one of the paper's unactuated scenes "
+                   "(README, 'Systems') (default %(default)s)")
+    for flag, what in SCENE_PARAMETERS.items():
+        p.add_argument(flag, type=positive_float, default=None,
+                       help=f"{what} (default the scene's; {_scene_defaults(flag)})")
     paper = PRESETS["paper"]
     p.add_argument("--preset", choices=sorted(PRESETS), default="default",
                    help=f"'default': small, about a minute on 2 cores; 'paper': {paper['sequences']} sequences x "
                    f"{paper['steps']} frames, split {format_default(paper['split'])}, reset speeds up to "
-                   f"{format_default(paper['max_speed'])}. Explicit options override the preset.")
+                   f"{format_default(paper['max_speed'])}; for a scene, 'default' is {SCENE_PRESETS['default']['sequences']} "
+                   f"sequences and 'paper' {format_default(SCENE_PRESETS['paper']['split'])}, of "
+                   f"{', '.join(f'{k} {v}' for k, v in SCENE_STEPS.items())} frames. Explicit options override the preset.")
     add_preset_option(p, "--sequences", type=positive_int, default=defaults.sequences, help="number of sequences N")
     add_preset_option(p, "--steps", type=positive_int, default=defaults.steps, help="frames per sequence T, >= 2")
     p.add_argument("--gravity", type=positive_float, default=env.gravity, help="gravity g (default %(default)s)")
@@ -50,7 +61,9 @@ def build_parser() -> ArgumentParser:
                       help="reset draws theta_dot ~ U(-s, s), s in [0, 8]")
     p.add_argument("--max-angle", type=float, default=env.max_angle,
                    help="reset draws theta ~ U(-a, a), a in [0, pi] (default %(default).4g, i.e. pi)")
-    p.add_argument("--image-size", type=positive_int, default=env.image_size, help="frame side in pixels (default %(default)s)")
+    add_preset_option(p, "--image-size", type=positive_int, default=env.image_size,
+                      shown=f"{env.image_size}; a scene's own: {', '.join(f'{k} {v}' for k, v in _scene_sizes().items())}",
+                      help="frame side in pixels")
     p.add_argument("--no-torque-arrow", action="store_true", help="hide Gymnasium's torque arrow in the frames")
     p.add_argument("--seed", type=nonnegative_int, default=defaults.seed, help="root seed (default %(default)s)")
     p.add_argument("--workers", type=positive_int, default=defaults.workers,
@@ -68,12 +81,18 @@ def build_parser() -> ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    if args.system != "pendulum":
+        return _collect_scene(args, argv)
+    given = [flag for flag in SCENE_PARAMETERS if getattr(args, flag.lstrip("-")) is not None]
+    if given:
+        raise PigaError(f"{', '.join(given)} {'is' if len(given) == 1 else 'are'} for the scenes (--system "
+                        f"{'/'.join(SYSTEM_CHOICES[1:])}); the pendulum takes --gravity and --actuation-gain")
     preset = dict(PRESETS[args.preset])
     for key in ("sequences", "steps", "split", "max_speed"):
         if getattr(args, key) is not None:
             preset[key] = getattr(args, key)
     env = PixelPendulumConfig(
-        image_size=args.image_size,
+        image_size=args.image_size or PixelPendulumConfig.image_size,
         gravity=args.gravity,
         gravity_mult=args.gravity_mult,
         actuation_gain=args.actuation_gain,
@@ -89,6 +108,52 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(f"wrote {path}: {info.n_sequences} sequences x {info.steps} frames of {info.image_shape}, "
           f"split {info.split_counts}, g={info.params['g']:g}, actuation_gain={info.params['actuation_gain']:g}"
           + (f", effects {format_effects(env.effects)}" if env.effects else ""))
+    return 0
+
+
+#: Scene parameter options -> what they set.
+SCENE_PARAMETERS = {"--k": "spring constant k, 1/s^2 (spring, digits-spring)",
+                    "--l": "half the spring's rest length l, pixels (spring, digits-spring)",
+                    "--g": "gravitational constant g, pixels^3/s^2 (gravity)",
+                    "--m": "mass m of every ball (gravity)"}
+SYSTEM_CHOICES = ["pendulum", *SCENES]
+
+
+def _scene_defaults(flag: str) -> str:
+    name = flag.lstrip("-")
+    return ", ".join(f"{scene} {values['params'][name]:g}" for scene, values in SCENES.items() if name in values["params"])
+
+
+def _scene_sizes() -> dict[str, int]:
+    return {scene: int(values["image_size"]) for scene, values in SCENES.items()}
+
+
+def _collect_scene(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
+    """``--system SCENE``: refuses the pendulum's options, builds the scene and collects it."""
+    defaults = build_parser().parse_args(["--out", "x"])
+    pendulum_only = [f"--{name.replace('_', '-')}" for name in ("gravity", "gravity_mult", "actuation_gain", "max_angle",
+                                                                "no_torque_arrow", "effect", "max_speed")
+                     if getattr(args, name) != getattr(defaults, name)]
+    if pendulum_only:
+        raise PigaError(f"{', '.join(pendulum_only)}: pendulum option(s), not for --system {args.system}")
+    params = {flag.lstrip("-"): getattr(args, flag.lstrip("-")) for flag in SCENE_PARAMETERS
+              if getattr(args, flag.lstrip("-")) is not None}
+    overrides: dict[str, object] = {"params": params}
+    if args.image_size is not None:
+        overrides["image_size"] = args.image_size
+    scene = scene_config(args.system, **overrides)
+    preset = dict(SCENE_PRESETS[args.preset])
+    for key in ("sequences", "steps", "split"):
+        if getattr(args, key) is not None:
+            preset[key] = getattr(args, key)
+    config = SceneCollectConfig(scene=scene, seed=args.seed, workers=args.workers,
+                                **{"steps": SCENE_STEPS[args.system], **preset})
+    path = collect_scene(config, args.out, overwrite=args.overwrite, command=command_line(PROG, argv),
+                         progress=not args.quiet)
+    info = inspect_dataset(path)
+    shown = ", ".join(f"{k}={v:g}" for k, v in info.params.items())
+    print(f"wrote {path}: {args.system}, {info.n_sequences} sequences x {info.steps} frames of {info.image_shape}, "
+          f"split {info.split_counts}" + (f", {shown}" if shown else ""))
     return 0
 
 

@@ -41,6 +41,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     out = check_report_target(args.out, args.overwrite)
     inspect_dataset(args.data)  # schema errors first, with the file's name
     model, ckpt = load_model(args.model)
+    if model.config.system != "pendulum":
+        raise PigaError(f"{args.model}: piga-diagnose is for pendulum models; this one is a {model.config.system} model")
     import torch
 
     torch.set_num_threads(max(1, min(2, torch.get_num_threads())))

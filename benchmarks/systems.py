@@ -1,0 +1,204 @@
+"""Benchmark: the paper's Table 1 from pixels. Each scene is collected, trained on with its ``fast``
+preset for several seeds, and evaluated on held-out sequences.
+
+For each system it collects one data set with ``piga-collect --system SYSTEM`` (the scene's
+defaults: 1000 sequences, split 800/100/100, data seed 100), trains with ``piga-train-model``'s
+``fast`` preset (chosen by the file's scene; it never reads /states, and k, l, g start at 1), and
+records the learned parameters against the truth and against the paper's learned values, SSIM
+and MSE per predicted and extrapolated step, and the training minutes.
+
+    python benchmarks/systems.py --out results/systems                       # 4 systems x 3 seeds
+    python benchmarks/systems.py --out results/systems --systems spring --seeds 0
+
+Runs are resumable: a finished run (its RUN_DIR/metrics.json) is read, not retrained, and each
+finished run is saved to ``OUT.json`` at once. Training runs one at a time with one thread, so its
+minutes are measured on one core of the machine (recorded in OUT.json), under whatever else runs.
+Writes ``OUT.json``, ``OUT.md``, ``OUT-ssim.png`` (SSIM per step) and ``OUT-rollout-SYSTEM.png``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import statistics
+import sys
+from pathlib import Path
+from typing import Any
+
+from common import machine
+
+from envs.scenes import scene_config
+from piga.atomic import write_json
+from piga.collect_scenes import SCENE_PRESETS as DATA_PRESETS
+from piga.collect_scenes import SCENE_STEPS, SceneCollectConfig, collect_scene
+from piga.data import inspect_dataset
+from piga.report import write_run_report
+from piga.train import TrainConfig, preset_for, train
+
+#: System -> the paper's learned values (its Table 1; none for bouncing).
+PAPER_LEARNED: dict[str, dict[str, float]] = {
+    "spring": {"k": 4.26, "l": 6.17},
+    "digits-spring": {"k": 2.18, "l": 12.24},
+    "gravity": {"g": 65.7},
+    "bouncing": {},
+}
+SYSTEMS = list(PAPER_LEARNED)
+DATA_SEED = 100
+
+
+def _data(system: str, folder: Path) -> Path:
+    """The system's data set (collected once, with the scene's defaults)."""
+    path = folder / f"{system}.h5"
+    if not path.exists():
+        config = SceneCollectConfig(scene=scene_config(system), sequences=DATA_PRESETS["default"]["sequences"],
+                                    steps=SCENE_STEPS[system], seed=DATA_SEED, workers=2)
+        collect_scene(config, path, command=f"piga-collect --system {system} --seed {DATA_SEED} --out {path}",
+                      progress=False)
+    return path
+
+
+def _run(system: str, seed: int, data: Path, folder: Path) -> dict[str, Any]:
+    """One training run with the fast preset; reused if its metrics exist."""
+    import json
+
+    run_dir = folder / f"{system}-seed{seed}"
+    metrics_path = run_dir / "metrics.json"
+    if not metrics_path.exists():
+        info = inspect_dataset(data)
+        preset = preset_for("fast", info)
+        config = TrainConfig(seed=seed, threads=1, **preset["train"])
+        if run_dir.exists():
+            shutil.rmtree(run_dir)  # an interrupted run restarts from scratch
+        model, state = train(data, run_dir, config, preset["model"], progress=False)
+        write_run_report(model, state, data, run_dir)
+        (run_dir / "load.json").write_text(json.dumps({"load_average_at_end": os.getloadavg()}))
+    metrics = json.loads(metrics_path.read_text())
+    load = json.loads((run_dir / "load.json").read_text())["load_average_at_end"] if (run_dir / "load.json").exists() else None
+    return {"system": system, "seed": seed, "run": str(run_dir), "metrics": metrics, "load_average_at_end": load}
+
+
+def _median(values: list[float]) -> float:
+    return statistics.median(values) if values else float("nan")
+
+
+def summary(runs: list[dict[str, Any]]) -> dict[str, Any]:
+    """Per system: learned values per seed, median error, max error, SSIM per step (mean over seeds), minutes."""
+    out: dict[str, Any] = {}
+    for system in SYSTEMS:
+        rows = [r for r in runs if r["system"] == system]
+        if not rows:
+            continue
+        errors = rows[0]["metrics"]["parameter_errors"]
+        params: dict[str, Any] = {}
+        for name in errors:
+            learned = [r["metrics"]["parameter_errors"][name]["learned"] for r in rows]
+            rel = [r["metrics"]["parameter_errors"][name]["relative_error"] for r in rows]
+            params[name] = {"true": errors[name]["true"], "learned": learned, "median_learned": _median(learned),
+                            "relative_errors": rel, "max_relative_error": max(rel),
+                            "within_5pct": sum(e <= 0.05 for e in rel), "paper_learned": PAPER_LEARNED[system].get(name)}
+        steps = len(rows[0]["metrics"]["frame_ssim_per_step"])
+        ssim = [statistics.fmean(r["metrics"]["frame_ssim_per_step"][t] for r in rows) for t in range(steps)]
+        mse = [statistics.fmean(r["metrics"]["frame_mse_per_step"][t] for r in rows) for t in range(steps)]
+        m0 = rows[0]["metrics"]
+        out[system] = {
+            "seeds": [r["seed"] for r in rows],
+            "parameters": params,
+            "input_frames": m0["input_frames"], "pred_frames": m0["pred_frames"],
+            "extrapolate_frames": m0["extrapolate_frames"],
+            "ssim_per_step": ssim, "mse_per_step": mse,
+            "ssim_prediction": statistics.fmean(ssim[: m0["pred_frames"]]),
+            "ssim_extrapolation": statistics.fmean(ssim[m0["pred_frames"]:]) if steps > m0["pred_frames"] else None,
+            "ssim_min_extrapolation": min(ssim[m0["pred_frames"]:]) if steps > m0["pred_frames"] else None,
+            "train_minutes": [r["metrics"]["training"]["seconds"] / 60 for r in rows],
+            "load_average_at_end": [r.get("load_average_at_end") for r in rows],
+        }
+    return out
+
+
+def markdown(record: dict[str, Any], out: Path) -> str:
+    """Table 1 (learned vs true vs the paper), then prediction quality and minutes."""
+    s = record["summary"]
+    lines = ["# The paper's scenes from pixels (Table 1)", "",
+             f"Reproduce (resumable): `python benchmarks/systems.py --out {out}`. Last invocation: "
+             f"`{record['command']}`.", "", f"Machine: {record['machine']}", "",
+             "Each system: one data set (`piga-collect --system SYSTEM --seed 100`, 800/100/100 sequences), "
+             "trained with the `fast` preset for each seed; parameters start at 1, far from the truth.", "",
+             "| system | parameter | true | learned (per seed) | max error | within 5% | paper's learned (error) |",
+             "|---|---|---|---|---|---|---|"]
+    for system, row in s.items():
+        for name, p in row["parameters"].items():
+            paper = p["paper_learned"]
+            paper_text = f"{paper:g} ({100 * abs(paper - p['true']) / p['true']:.1f}%)" if paper else "-"
+            lines.append(f"| {system} | {name} | {p['true']:g} | {', '.join(f'{v:.3f}' for v in p['learned'])} | "
+                         f"{100 * p['max_relative_error']:.2f}% | {p['within_5pct']}/{len(p['learned'])} | {paper_text} |")
+        if not row["parameters"]:
+            lines.append(f"| {system} | (none) | | | | | |")
+    lines += ["", "| system | L, T_pred, T_ext | SSIM prediction | SSIM extrapolation (mean, min) | train minutes (per seed) |",
+              "|---|---|---|---|---|"]
+    for system, row in s.items():
+        ext = (f"{row['ssim_extrapolation']:.3f}, {row['ssim_min_extrapolation']:.3f}"
+               if row["ssim_extrapolation"] is not None else "-")
+        lines.append(f"| {system} | {row['input_frames']}, {row['pred_frames']}, {row['extrapolate_frames']} | "
+                     f"{row['ssim_prediction']:.3f} | {ext} | {', '.join(f'{m:.1f}' for m in row['train_minutes'])} |")
+    lines += ["", "Training minutes are wall-clock with one torch thread. The machine (2 cores) may be shared: "
+              "the 1, 5, 15-minute load averages at the end of each run are in the JSON "
+              "(`load_average_at_end`; absent for runs made before it was recorded).", "",
+              f"![SSIM per step]({out.name}-ssim.png)", ""]
+    lines += [f"![{system}]({out.name}-rollout-{system}.png)" for system in s]
+    return "\n".join(lines) + "\n"
+
+
+def ssim_figure(s: dict[str, Any]) -> Any:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 3.2))
+    for system, row in s.items():
+        steps = range(1, len(row["ssim_per_step"]) + 1)
+        (line,) = ax.plot(steps, row["ssim_per_step"], marker=".", label=system)
+        ax.axvline(row["pred_frames"] + 0.5, color=line.get_color(), ls=":", lw=1)
+    ax.set_xlabel("step after the input frames (dotted: end of T_pred)")
+    ax.set_ylabel("SSIM (test split, mean over seeds)")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    return fig
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--out", type=Path, required=True, help="output prefix: OUT.json, OUT.md, OUT-*.png")
+    p.add_argument("--systems", nargs="+", choices=SYSTEMS, default=SYSTEMS)
+    p.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
+    p.add_argument("--work", type=Path, default=Path("runs/systems"), help="data and run folders (default %(default)s)")
+    args = p.parse_args(argv)
+    from piga.plots import save_figure
+
+    args.work.mkdir(parents=True, exist_ok=True)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    record: dict[str, Any] = {"command": " ".join(["python", "benchmarks/systems.py", *(argv or sys.argv[1:])]),
+                              "machine": machine(), "runs": []}
+    for system in args.systems:
+        data = _data(system, args.work)
+        for seed in args.seeds:
+            run = _run(system, seed, data, args.work)
+            record["runs"].append(run)
+            print(f"{system} seed {seed}: " + ", ".join(
+                f"{n}={e['learned']:.4f} ({100 * e['relative_error']:.2f}%)"
+                for n, e in run["metrics"]["parameter_errors"].items()), flush=True)
+            record["summary"] = summary(record["runs"])
+            write_json(args.out.with_suffix(".json"), record)
+        shutil.copyfile(Path(record["runs"][-len(args.seeds)]["run"]) / "rollout.png",
+                        args.out.parent / f"{args.out.name}-rollout-{system}.png")
+    save_figure(ssim_figure(record["summary"]), args.out.parent / f"{args.out.name}-ssim.png")
+    from piga.atomic import atomic_output
+
+    with atomic_output(args.out.with_suffix(".md"), overwrite=True) as tmp:
+        Path(tmp).write_text(markdown(record, args.out))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,398 @@
+"""The paper's unactuated scenes: ground-truth simulation and anti-aliased rendering, in NumPy.
+
+| scene | image | objects | force on object i (d = p_i - p_j) | start | dt | truth |
+|---|---|---|---|---|---|---|
+| ``bouncing`` | 32x32 RGB | 2 balls, r = 3 | none; elastic reflection at the image edges | p ~ U[r, H - r], speed ``speed`` in a random direction | 0.3 | (none) |
+| ``spring`` | 32x32 RGB | 2 balls, r = 3 | -k·(abs(d) - 2l)·d/abs(d) | centre of mass uniform, separation 2l·U[0.5, 1.5] at a random angle, each ball ``speed`` in a random direction | 0.3 | k = 4, l = 6 |
+| ``gravity`` | 36x36 RGB | 3 balls, r = 3 | -g·m_i·m_j·d/abs(d)³ | a near-equilateral triangle around the centre, radius H/4·U[0.75, 1.25], tangential speed ``speed`` plus a shared U(-0.5, 0.5) drift | 0.5 | g = 60, m = 1 |
+| ``digits-spring`` | 64x64 RGB | 2 digits, 22 px | the spring above | as the spring | 0.3 | k = 2, l = 12 |
+
+The starts follow the published generators (github.com/seuqaj114/paig, ``nn/datasets/generators.py``):
+a start whose trajectory touches a wall (or, for gravity, brings two balls within r + 1 of each other)
+within the sequence is redrawn, so the force-only systems never meet a wall. Bouncing balls do not
+collide with each other (as in the published engine); they pass through each other.
+
+Conventions (those of :mod:`piga.physics` and the decoder): positions are in pixels, x to the right,
+y down, the origin at the top-left corner of the image, and pixel i covers [i, i + 1]. Every object
+has unit mass. The simulation takes ``substeps`` semi-implicit Euler steps per frame (10, as the
+generators), each ``v <- v + h·a(p)``, ``p <- p + h·v``.
+
+Rendering draws each frame ``supersample`` times larger, then averages each block of
+``supersample`` x ``supersample`` pixels (:func:`skimage.transform.downscale_local_mean`): the
+exact area average of the high-resolution picture, i.e. anti-aliased. Balls are colour channel
+2 - j (blue, green, red), digits channel j (red, green), as in the generators. The digits are
+scikit-learn's ``load_digits`` images (8x8, upscaled), over a darkened scikit-image texture
+(``skimage.data.brick``): the paper's MNIST digits and CIFAR background cannot be downloaded here.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field, replace
+from functools import lru_cache
+from typing import Any
+
+import numpy as np
+
+__all__ = ["SCENES", "SceneConfig", "scene_config", "accelerations", "simulate", "draw_start", "render",
+           "generate_sequence", "state_names", "SceneError"]
+
+
+class SceneError(ValueError):
+    """A scene's settings cannot work (for example images too small for its objects)."""
+
+
+@dataclass(frozen=True)
+class SceneConfig:
+    """One scene: physics, picture and how starts are drawn. Defaults per scene: :data:`SCENES`."""
+
+    scene: str
+    """One of :data:`SCENES`."""
+    physics: str
+    """The force family, a :mod:`piga.physics` system name: "bouncing", "spring" or "gravity"."""
+    image_size: int
+    """H = W, pixels."""
+    n_objects: int
+    """N."""
+    dt: float
+    """Seconds per frame."""
+    params: dict[str, float] = field(default_factory=dict)
+    """True physical parameters: k, l (spring) or g, m (gravity); empty for bouncing."""
+    radius: float = 3.0
+    """Ball radius in pixels; for digits, half the digit's side (11: 22 px digits)."""
+    speed: float = 8.0
+    """Initial speed of each object, pixels per second (the published data sets' "vx8", "vx2")."""
+    substeps: int = 10
+    """Semi-implicit Euler substeps per frame of the ground truth."""
+    supersample: int = 8
+    """Drawing resolution / image resolution."""
+    wall_margin: float | None = None
+    """A start is redrawn when a centre comes within this many pixels of an edge (None: ``radius``)."""
+    colors: tuple[tuple[float, float, float], ...] = ()
+    """RGB in [0, 1] per object; empty for the generators' colours."""
+    max_tries: int = 10_000
+    """Redraws allowed per sequence before giving up with :class:`SceneError`."""
+
+    def __post_init__(self) -> None:
+        if self.scene not in SCENES:
+            raise SceneError(f"unknown scene {self.scene!r}; known: {sorted(SCENES)}")
+        if self.n_objects < 1:
+            raise SceneError(f"n_objects must be >= 1, got {self.n_objects}")
+        if not (self.dt > 0 and self.radius > 0 and self.speed >= 0):
+            raise SceneError(f"need dt > 0, radius > 0 and speed >= 0, got {self.dt}, {self.radius}, {self.speed}")
+        if self.substeps < 1 or self.supersample < 1:
+            raise SceneError(f"substeps and supersample must be >= 1, got {self.substeps}, {self.supersample}")
+        if self.colors and len(self.colors) < self.n_objects:
+            raise SceneError(f"{len(self.colors)} colours for {self.n_objects} objects")
+        object.__setattr__(self, "colors", tuple(tuple(float(c) for c in rgb) for rgb in self.colors))
+        for name, value in self.params.items():
+            if not (math.isfinite(float(value)) and float(value) > 0):
+                raise SceneError(f"{self.scene}: parameter {name} must be finite and > 0, got {value}")
+        needed = _minimum_size(self)
+        if self.image_size < needed:
+            raise SceneError(f"{self.scene}: {self.image_size}x{self.image_size} images are too small for "
+                             f"{self.n_objects} objects of radius {self.radius:g}"
+                             + (f" and rest length 2l = {2 * self.params['l']:g}" if "l" in self.params else "")
+                             + f"; need at least {needed} px")
+
+    @property
+    def margin(self) -> float:
+        """Distance from an edge that a centre must keep (``wall_margin`` or ``radius``)."""
+        return self.radius if self.wall_margin is None else self.wall_margin
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able fields."""
+        return asdict(self)
+
+
+def _minimum_size(config: SceneConfig) -> int:
+    """The smallest image side on which starts can be drawn at all."""
+    r, n = config.radius, config.n_objects
+    if config.physics == "spring":
+        return int(math.ceil(2 * (r + config.params.get("l", 0.0)) + 1))  # the centre of mass needs room
+    if config.physics == "gravity":
+        # the triangle's radius is H/4·[0.75, 1.25]; its balls must fit inside and apart from each other
+        return int(math.ceil(max(2 * r * n + 2, 8 * r)))
+    return int(math.ceil(2 * r * n + 2))  # bouncing: the balls must fit side by side
+
+
+#: Each scene's defaults (the paper's).
+SCENES: dict[str, dict[str, Any]] = {
+    "bouncing": {"physics": "bouncing", "image_size": 32, "n_objects": 2, "dt": 0.3, "params": {}, "radius": 3.0,
+                 "speed": 8.0},
+    "spring": {"physics": "spring", "image_size": 32, "n_objects": 2, "dt": 0.3, "params": {"k": 4.0, "l": 6.0},
+               "radius": 3.0, "speed": 8.0},
+    "gravity": {"physics": "gravity", "image_size": 36, "n_objects": 3, "dt": 0.5, "params": {"g": 60.0, "m": 1.0},
+                "radius": 3.0, "speed": 2.0},
+    "digits-spring": {"physics": "spring", "image_size": 64, "n_objects": 2, "dt": 0.3,
+                      "params": {"k": 2.0, "l": 12.0}, "radius": 11.0, "speed": 8.0, "wall_margin": 2.0,
+                      "supersample": 4},
+}
+
+
+def scene_config(scene: str, **overrides: Any) -> SceneConfig:
+    """The scene's defaults with ``overrides``; ``params`` entries are merged, not replaced."""
+    if scene not in SCENES:
+        raise SceneError(f"unknown scene {scene!r}; known: {sorted(SCENES)}")
+    values = dict(SCENES[scene])
+    params = dict(values["params"])
+    unknown = set(overrides.get("params", {})) - set(params)
+    if unknown:
+        raise SceneError(f"{scene} has no parameter(s) {sorted(unknown)}; it has {sorted(params) or 'none'}")
+    params.update(overrides.pop("params", {}))
+    return SceneConfig(scene=scene, **{**values, **overrides, "params": params})
+
+
+def state_names(n_objects: int) -> list[str]:
+    """Names of the /states columns: x0, y0, x1, y1, ..., then vx0, vy0, ..."""
+    return [f"{a}{i}" for i in range(n_objects) for a in ("x", "y")] + [
+        f"v{a}{i}" for i in range(n_objects) for a in ("x", "y")]
+
+
+# ------------------------------------------------------------------------------------------ physics
+def accelerations(config: SceneConfig, p: np.ndarray) -> np.ndarray:
+    """Acceleration of every object, (..., N, 2), at positions p (..., N, 2), unit masses."""
+    if config.physics == "bouncing":
+        return np.zeros_like(p)
+    d = p[..., :, None, :] - p[..., None, :, :]  # (..., N, N, 2), d[i, j] = p_i - p_j
+    dist = np.sqrt((d**2).sum(-1, keepdims=True))  # (..., N, N, 1)
+    dist = np.where(dist > 0, dist, 1.0)  # the diagonal's d is 0: avoid 0/0 (its term is 0 anyway)
+    if config.physics == "spring":
+        k, ell = config.params["k"], config.params["l"]
+        return (-k * (dist - 2 * ell) * d / dist).sum(-2)
+    g, m = config.params["g"], config.params.get("m", 1.0)
+    return (-g * m * m * d / dist**3).sum(-2) / m  # force g·m_i·m_j/|d|², divided by m_i
+
+
+def _reflect(config: SceneConfig, p: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Elastic walls: a centre beyond [r, H - r] is mirrored back inside and that velocity flips."""
+    low, high = config.radius, config.image_size - config.radius
+    below, above = p < low, p > high
+    p = np.where(below, 2 * low - p, np.where(above, 2 * high - p, p))
+    return p, np.where(below | above, -v, v)
+
+
+def simulate(config: SceneConfig, p0: np.ndarray, v0: np.ndarray, steps: int,
+             substeps: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Positions and velocities of ``steps`` frames, each (T, ..., N, 2), from p0, v0 (..., N, 2); frame 0 is (p0, v0).
+
+    Each frame is ``substeps`` (default ``config.substeps``) semi-implicit Euler steps of dt/substeps.
+    """
+    m = config.substeps if substeps is None else substeps
+    h = config.dt / m
+    p, v = np.array(p0, dtype=np.float64), np.array(v0, dtype=np.float64)
+    ps, vs = np.empty((steps, *p.shape)), np.empty((steps, *p.shape))
+    for t in range(steps):
+        ps[t], vs[t] = p, v
+        for _ in range(m):
+            v = v + h * accelerations(config, p)
+            p = p + h * v
+            if config.physics == "bouncing":
+                p, v = _reflect(config, p, v)
+    return ps, vs
+
+
+def _random_direction(rng: np.random.Generator, n: int) -> np.ndarray:
+    angle = rng.uniform(0, 2 * np.pi, size=n)
+    return np.stack([np.cos(angle), np.sin(angle)], axis=-1)  # (n, 2)
+
+
+def _start(config: SceneConfig, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """One candidate start (p0, v0), each (N, 2), drawn as the published generators draw it."""
+    size, n, r = float(config.image_size), config.n_objects, config.radius
+    if config.physics == "bouncing":
+        p = rng.uniform(r, size - r, size=(n, 2))
+        return p, config.speed * _random_direction(rng, n)
+    if config.physics == "spring":
+        ell = config.params["l"]
+        reach = r + ell
+        centre = reach + (size - 2 * reach) * rng.uniform(size=2)
+        angles = rng.uniform(0, 2 * np.pi) + 2 * np.pi * np.arange(n) / n
+        spread = ell * rng.uniform(0.5, 1.5)
+        p = centre + spread * np.stack([np.cos(angles), np.sin(angles)], -1)
+        return p, config.speed * _random_direction(rng, n)
+    # gravity: a near-regular polygon around the centre, tangential speeds in one sense, a shared drift
+    base = rng.uniform(0, 2 * np.pi)
+    jitter = np.concatenate([[0.0], rng.uniform(-0.25, 0.25, size=n - 1)])
+    angles = base + 2 * np.pi * np.arange(n) / n + jitter
+    radius = rng.uniform(0.75, 1.25) * size / 4
+    p = size / 2 + radius * np.stack([np.cos(angles), np.sin(angles)], -1)
+    sense = rng.choice([-1.0, 1.0])
+    tangent = angles + sense * np.pi / 2
+    v = config.speed * np.stack([np.cos(tangent), np.sin(tangent)], -1) + rng.uniform(-0.5, 0.5, size=2)
+    return p, v
+
+
+def _acceptable(config: SceneConfig, ps: np.ndarray) -> np.ndarray:
+    """Which candidates (ps: (T, B, N, 2)) keep every centre off the walls (force-only scenes) and, for
+    gravity, no two balls within r + 1 of each other; (B,) bool."""
+    if config.physics == "bouncing":
+        return np.ones(ps.shape[1], bool)
+    low, high = config.margin, config.image_size - config.margin
+    ok = ((ps > low) & (ps < high)).all(axis=(0, 2, 3))
+    if config.physics == "gravity":
+        d = np.sqrt(((ps[..., :, None, :] - ps[..., None, :, :]) ** 2).sum(-1))  # (T, B, N, N)
+        eye = np.eye(config.n_objects, dtype=bool)
+        ok &= np.where(eye, np.inf, d).min(axis=(0, 2, 3)) > config.radius + 1
+    return ok
+
+
+#: Candidate starts simulated together while looking for an acceptable one.
+_CANDIDATES = 64
+
+
+def draw_start(config: SceneConfig, rng: np.random.Generator, steps: int) -> tuple[np.ndarray, np.ndarray]:
+    """A start whose ``steps`` frames are acceptable, and its trajectory: positions, velocities (T, N, 2).
+
+    Candidates are drawn in batches of 64 (bouncing: 1) and simulated together; the first acceptable one is kept,
+    which is what drawing them one at a time until one passes gives. The check runs on every
+    substep (as the generators do), so no wall is touched between frames either.
+
+    Raises:
+        SceneError: no acceptable start in ``config.max_tries`` draws.
+    """
+    fine = replace(config, dt=config.dt / config.substeps, substeps=1)
+    batch = 1 if config.physics == "bouncing" else _CANDIDATES  # every bouncing start is acceptable
+    for _ in range(0, config.max_tries, batch):
+        starts = [_start(config, rng) for _ in range(batch)]
+        p0 = np.stack([p for p, _ in starts])  # (B, N, 2)
+        v0 = np.stack([v for _, v in starts])
+        fine_p, _ = simulate(fine, p0, v0, (steps - 1) * config.substeps + 1)  # (T·M, B, N, 2)
+        good = np.flatnonzero(_acceptable(config, fine_p))
+        if len(good):
+            return simulate(config, p0[good[0]], v0[good[0]], steps)
+    raise SceneError(f"{config.scene}: no start in {config.max_tries} draws stays clear of the walls for {steps} "
+                     "frames; use shorter sequences, a lower speed or a larger image")
+
+
+# ---------------------------------------------------------------------------------------- rendering
+_BALL_COLORS = ((0.0, 0.0, 1.0), (0.0, 1.0, 0.0), (1.0, 0.0, 0.0))  # channel 2 - j, as the generators
+_DIGIT_COLORS = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))  # channel j
+
+
+def _colors(config: SceneConfig) -> np.ndarray:
+    if config.colors:
+        return np.asarray(config.colors[: config.n_objects])
+    table = _DIGIT_COLORS if config.scene == "digits-spring" else _BALL_COLORS
+    return np.asarray([table[j % 3] for j in range(config.n_objects)])
+
+
+@lru_cache(maxsize=8)
+def _digit_images(side: int, n: int) -> tuple[np.ndarray, ...]:
+    """The first ``n`` distinct-class digits of scikit-learn's ``load_digits``, (side, side) in [0, 1]."""
+    try:
+        from sklearn.datasets import load_digits
+    except ImportError:  # pragma: no cover - depends on the install
+        raise SceneError("the digits scene needs scikit-learn: pip install 'piga[scenes]'") from None
+    from skimage.transform import resize
+
+    data = load_digits()
+    picked: list[np.ndarray] = []
+    seen: set[int] = set()
+    for image, label in zip(data.images, data.target):
+        if int(label) not in seen:
+            seen.add(int(label))
+            picked.append(resize(image / 16.0, (side, side), order=3, anti_aliasing=False).clip(0, 1))
+        if len(picked) == n:
+            break
+    return tuple(picked)
+
+
+@lru_cache(maxsize=8)
+def _texture(side: int) -> np.ndarray:
+    """The background of the digits: a darkened crop of ``skimage.data.brick``, (side, side) in [0, 1]."""
+    from skimage import data
+    from skimage.transform import resize
+
+    crop = data.brick()[:160, :160] / 255.0
+    return np.clip(resize(crop, (side, side), anti_aliasing=True) - 0.2, 0.0, 1.0)
+
+
+def render(config: SceneConfig, positions: np.ndarray) -> np.ndarray:
+    """Frames of positions (T, N, 2) -> uint8 (T, H, W, 3), drawn ``supersample`` x larger and block-averaged.
+
+    Balls: each ball's coverage of every pixel is the share of its s x s sample points (at the
+    high-resolution pixel centres) inside the disk, and balls are layered in order (a later one on
+    top): the block average of the high-resolution drawing wherever balls do not overlap within a
+    pixel. Digits: pasted into the high-resolution picture, which is then block-averaged.
+    """
+    s, size = config.supersample, config.image_size
+    colors = _colors(config)
+    positions = np.asarray(positions, dtype=np.float64)
+    steps = len(positions)
+    if config.scene == "digits-spring":
+        return _render_digits(config, positions, colors)
+    box = int(math.ceil(2 * config.radius)) + 2  # pixels around a ball that it can cover
+    offsets = (np.arange(box * s) + 0.5) / s  # high-resolution pixel centres in the box, box pixels
+    canvas = np.zeros((steps, size + 2 * box, size + 2 * box, 3))  # padded: boxes may leave the image
+    rows = np.arange(steps)[:, None, None]
+    for j in range(config.n_objects):
+        corner = np.floor(positions[:, j] - config.radius).astype(int)  # (T, 2), the box's top-left pixel
+        dx = corner[:, 0, None] + offsets[None] - positions[:, j, 0, None]  # (T, box·s)
+        dy = corner[:, 1, None] + offsets[None] - positions[:, j, 1, None]
+        inside = dy[:, :, None] ** 2 + dx[:, None, :] ** 2 < config.radius**2  # (T, box·s, box·s)
+        cover = inside.reshape(steps, box, s, box, s).mean(axis=(2, 4))[..., None]  # (T, box, box, 1)
+        top = np.clip(corner[:, 1], -box, size) + box  # (T,) padded rows
+        left = np.clip(corner[:, 0], -box, size) + box
+        ys = top[:, None, None] + np.arange(box)[None, :, None]  # (T, box, 1)
+        xs = left[:, None, None] + np.arange(box)[None, None, :]  # (T, 1, box)
+        canvas[rows, ys, xs] = canvas[rows, ys, xs] * (1 - cover) + cover * colors[j]
+    canvas = canvas[:, box : box + size, box : box + size]
+    return np.round(canvas * 255).clip(0, 255).astype(np.uint8)
+
+
+def _render_digits(config: SceneConfig, positions: np.ndarray, colors: np.ndarray) -> np.ndarray:
+    """Digits pasted over the texture at high resolution and block-averaged.
+
+    Only the pixels a digit can touch are redrawn at high resolution (each digit's box, or the union
+    of the boxes where they meet); elsewhere the block average of the texture is the same in every frame.
+    """
+    s, size = config.supersample, config.image_size
+    side = int(round(2 * config.radius * s))
+    box = int(math.ceil(2 * config.radius)) + 2  # image pixels a digit can touch
+    glyphs = _digit_images(side, config.n_objects)
+    background = np.repeat(_texture(size * s)[..., None], 3, axis=-1)  # (H·s, W·s, 3)
+    low = background.reshape(size, s, size, s, 3).mean(axis=(1, 3))  # (H, W, 3)
+    frames = np.empty((len(positions), size, size, 3), np.uint8)
+    for t, pos in enumerate(positions):
+        frame = low.copy()
+        corners = [np.clip(np.floor(p - config.radius).astype(int) - 1, 0, size) for p in pos]
+        merged: list[list[int]] = []  # boxes x0, y0, x1, y1; the union of those that meet
+        for c in corners:
+            r = [int(c[0]), int(c[1]), min(int(c[0]) + box, size), min(int(c[1]) + box, size)]
+            for m in merged:
+                if r[0] < m[2] and m[0] < r[2] and r[1] < m[3] and m[1] < r[3]:
+                    m[:] = [min(m[0], r[0]), min(m[1], r[1]), max(m[2], r[2]), max(m[3], r[3])]
+                    break
+            else:
+                merged.append(r)
+        for x0, y0, x1, y1 in merged:
+            if x1 <= x0 or y1 <= y0:
+                continue
+            crop = background[y0 * s : y1 * s, x0 * s : x1 * s].copy()
+            for j, (x, y) in enumerate(pos):
+                _paste(crop, glyphs[j], colors[j], x * s - side / 2 - x0 * s, y * s - side / 2 - y0 * s)
+            frame[y0:y1, x0:x1] = crop.reshape(y1 - y0, s, x1 - x0, s, 3).mean(axis=(1, 3))
+        frames[t] = np.round(frame * 255).clip(0, 255).astype(np.uint8)
+    return frames
+
+
+def _paste(canvas: np.ndarray, glyph: np.ndarray, color: np.ndarray, left: float, top: float) -> None:
+    """Alpha-composites ``glyph`` (alpha = intensity) of ``color`` with its top-left corner at (left, top), clipped."""
+    side, height, width = glyph.shape[0], canvas.shape[0], canvas.shape[1]
+    x0, y0 = int(round(left)), int(round(top))
+    gx0, gy0 = max(0, -x0), max(0, -y0)
+    cx0, cy0 = max(0, x0), max(0, y0)
+    cx1, cy1 = min(width, x0 + side), min(height, y0 + side)
+    if cx1 <= cx0 or cy1 <= cy0:
+        return
+    alpha = glyph[gy0 : gy0 + cy1 - cy0, gx0 : gx0 + cx1 - cx0, None]
+    region = canvas[cy0:cy1, cx0:cx1]
+    canvas[cy0:cy1, cx0:cx1] = alpha * color + (1 - alpha) * region
+
+
+def generate_sequence(config: SceneConfig, rng: np.random.Generator, steps: int) -> tuple[np.ndarray, np.ndarray]:
+    """One sequence: frames uint8 (T, H, W, 3) and states float32 (T, 4N) (positions, then velocities)."""
+    ps, vs = draw_start(config, rng, steps)
+    states = np.concatenate([ps.reshape(steps, -1), vs.reshape(steps, -1)], axis=1).astype(np.float32)
+    return render(config, ps), states

@@ -1,0 +1,136 @@
+"""Collecting the paper's unactuated scenes (:mod:`envs.scenes`) into piga's HDF5 schema.
+
+Determinism is the pendulum's (:mod:`piga.collect`): sequence n draws everything from
+``SeedSequence(seed)``'s n-th child, so the arrays depend only on ``seed`` and the settings, not on
+``workers``. Workers are processes of a :class:`multiprocessing.pool.Pool` (no environment to step:
+a scene has no actions, so a Gymnasium vector env would add nothing).
+
+The file: ``/frames`` uint8 [N, T, H, W, 3], ``/actions`` float32 [N, T, 0], ``/states`` float32
+[N, T, 4·n_objects] (x0, y0, x1, y1, ..., vx0, vy0, ...: pixels and pixels per second; evaluation
+only), and the attrs ``system`` (the physics: "bouncing", "spring" or "gravity"), ``scene`` (the
+picture, e.g. "digits-spring"), ``n_objects``, ``dt``, ``params`` (the true values), ``state_names``
+and ``scene_config``.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import shlex
+import signal
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from tqdm.auto import tqdm
+
+from envs.scenes import SceneConfig, generate_sequence, scene_config, state_names
+from piga.atomic import check_writable_target
+from piga.collect import sequence_rng, split_counts
+from piga.data import SPLITS, DatasetWriter
+
+#: Frames per sequence by scene: L + T_pred + T_ext of the chosen windows (README, "Systems").
+SCENE_STEPS: dict[str, int] = {"bouncing": 30, "spring": 30, "gravity": 40, "digits-spring": 30}
+
+#: Sizes: 'default' is small enough for a CPU; 'paper' is the paper's 5000 / 500 / 500.
+SCENE_PRESETS: dict[str, dict[str, Any]] = {
+    "default": {"sequences": 1000},
+    "paper": {"sequences": 6000, "split": (5000, 500, 500)},
+}
+
+
+@dataclass(frozen=True)
+class SceneCollectConfig:
+    """What ``piga-collect --system SCENE`` gathers."""
+
+    scene: SceneConfig = field(default_factory=lambda: scene_config("spring"))
+    """The scene: physics, picture and starts (:class:`envs.scenes.SceneConfig`)."""
+    sequences: int = 1000
+    """N."""
+    steps: int = 30
+    """T, frames per sequence."""
+    seed: int = 0
+    """Root seed of every random draw."""
+    workers: int = 2
+    """Processes (1 runs in this process)."""
+    split: tuple[float, float, float] = (0.8, 0.1, 0.1)
+    """Train/valid/test, as fractions summing to 1 or as counts summing to ``sequences``."""
+    batch: int = 64
+    """Sequences gathered between writes to disk (bounds memory)."""
+
+    def __post_init__(self) -> None:
+        if self.sequences < 1:
+            raise ValueError(f"sequences must be >= 1, got {self.sequences}")
+        if self.steps < 2:
+            raise ValueError(f"steps must be >= 2 (a video needs two frames), got {self.steps}")
+        if self.workers < 1 or self.batch < 1 or self.seed < 0:
+            raise ValueError(f"need workers >= 1, batch >= 1 and seed >= 0, got {self.workers}, {self.batch}, {self.seed}")
+        split_counts(self.sequences, self.split)  # validates
+
+
+def _ignore_interrupts() -> None:
+    """Pool workers leave Ctrl-C to the parent, which terminates them and removes the partial file."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _one(args: tuple[SceneConfig, int, int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """Sequence n of a collection: frames (T, H, W, 3) and states (T, 4N)."""
+    scene, seed, n, steps = args
+    _, rng = sequence_rng(seed, n)
+    return generate_sequence(scene, rng, steps)
+
+
+def scene_attrs(config: SceneCollectConfig, command: str | None = None) -> dict[str, Any]:
+    """The file attributes of a scene collection."""
+    scene = config.scene
+    return {
+        "system": scene.physics,
+        "scene": scene.scene,
+        "n_objects": scene.n_objects,
+        "dt": scene.dt,
+        "params": dict(scene.params),
+        "state_names": state_names(scene.n_objects),
+        "scene_config": scene.to_dict(),
+        "seed": config.seed,
+        "command": command if command is not None else shlex.join(sys.argv),
+        "split_counts": dict(zip(SPLITS, split_counts(config.sequences, config.split))),
+    }
+
+
+def collect_scene(config: SceneCollectConfig, out: str | Path, overwrite: bool = False, command: str | None = None,
+                  progress: bool = True) -> Path:
+    """Simulates and renders ``config.sequences`` sequences and writes them to ``out`` atomically."""
+    check_writable_target(out, overwrite)
+    scene, n, t = config.scene, config.sequences, config.steps
+    size = scene.image_size
+    counts = split_counts(n, config.split)
+    workers = min(config.workers, n)
+    pool = multiprocessing.Pool(workers, initializer=_ignore_interrupts) if workers > 1 else None
+    try:
+        with DatasetWriter(out, n, t, (size, size, 3), 0, 4 * scene.n_objects, scene_attrs(config, command),
+                           overwrite=overwrite) as writer:
+            bar = tqdm(total=n, desc=f"collect {scene.scene}", unit="seq", disable=not progress)
+            for start in range(0, n, config.batch):
+                stop = min(start + config.batch, n)
+                jobs = [(scene, config.seed, i, t) for i in range(start, stop)]
+                results = pool.imap(_one, jobs) if pool is not None else map(_one, jobs)
+                frames = np.zeros((stop - start, t, size, size, 3), np.uint8)
+                states = np.zeros((stop - start, t, 4 * scene.n_objects), np.float32)
+                for row, (f, s) in enumerate(results):
+                    frames[row], states[row] = f, s
+                    bar.update(1)
+                writer.write(start, frames, np.zeros((stop - start, t, 0), np.float32), states)
+            writer.set_split(np.repeat(np.arange(3, dtype=np.int8), counts))
+            bar.close()
+    except BaseException:
+        if pool is not None:
+            pool.terminate()
+        raise
+    if pool is not None:
+        pool.close()
+        pool.join()
+    return Path(out)
+
+
+__all__ = ["SCENE_PRESETS", "SCENE_STEPS", "SceneCollectConfig", "collect_scene", "scene_attrs"]
