@@ -33,7 +33,9 @@ def build_parser() -> ArgumentParser:
     p.add_argument("data", help="HDF5 file of piga's schema (only /frames and /actions are used for training)")
     p.add_argument("--out", required=True, help="run folder")
     p.add_argument("--preset", choices=sorted(PRESETS), default="fast",
-                   help="'fast' (default): the CPU recipe; 'paper': the paper's (RMSProp 3e-4, 1000 epochs, M=5). "
+                   help="'fast' (default): the CPU recipe; 'paper': the paper's (RMSProp 3e-4, 1000 epochs, M=5); "
+                   "'continuous': the fast recipe for a system that moves within the frame (RK4 with the action held, "
+                   "velocities read through it, a learnable damping b). "
                    "Explicit options override the preset.")
     recipe("--epochs", "epochs", positive_int, "passes over the training windows; the cosine schedule is planned over them")
     recipe("--max-minutes", "max_minutes", positive_float, "stop after the epoch that ends past this budget",
