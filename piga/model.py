@@ -97,6 +97,9 @@ class ModelConfig:
     at ``damping_init``. A real hinge has friction; Gymnasium's pendulum has none."""
     damping_init: float = 0.01
     """Initial b when ``learn_damping`` (far from any real hinge's value)."""
+    signed_actuation: bool = False
+    """Pendulum only: learn a in linear space, sign included (:class:`piga.physics.Pendulum`), for a
+    camera on the other side or a motor wired the other way; a then starts at +0.3 and may cross 0."""
     readout: str = "centroid"
     """Encoder readout: "centroid" (soft centroid of each mask) or "regress" (the paper's location network, the paper preset)."""
     angle_reference: float = 0.0
@@ -205,6 +208,8 @@ class PhysicsModel(nn.Module):
             if config.learn_damping:
                 kwargs["damping"] = kwargs.get("damping", config.damping_init)
                 kwargs["learnable"] += ("b",)
+            if config.signed_actuation:
+                kwargs["signed_actuation"] = True
         elif config.system in ("spring", "gravity", "bouncing"):
             kwargs["n_objects"] = n
         if config.system == "bouncing":

@@ -214,6 +214,10 @@ class Pendulum(System):
         offset: Initial angle offset φ (default 0).
         damping: Initial viscous damping b, or None for the paper's engine without damping (the
             default). A real hinge has friction; Gymnasium's pendulum has none.
+        signed_actuation: Learn a as a plain number (``a_signed``) instead of in log space, so that
+            it can turn negative: a camera on the other side of the hinge, or a motor wired the
+            other way, flips the sign of the actuation that the frames show. In log space a can
+            only shrink toward 0 on such data.
         learnable: True (all), False (none, e.g. an oracle), or the names to learn among
             "g", "a", "offset" and (with ``damping``) "b".
     """
@@ -230,6 +234,7 @@ class Pendulum(System):
         offset: float = 0.0,
         learnable: bool | Collection[str] = True,
         damping: float | None = None,
+        signed_actuation: bool = False,
     ) -> None:
         super().__init__(n_objects=1, coord_dim=1, action_dim=1, dt=dt)
         if not length > 0:
@@ -241,7 +246,13 @@ class Pendulum(System):
         names = ("g", "a", "offset") + (("b",) if damping is not None else ())
         flags = self._resolve_learnable("Pendulum", names, learnable)
         self._add_positive_parameter("g", g, flags["g"])
-        self._add_positive_parameter("a", a, flags["a"])
+        self.signed_actuation = bool(signed_actuation)
+        if self.signed_actuation:
+            if not (math.isfinite(float(a)) and a != 0):
+                raise ValueError(f"Pendulum: a must be finite and nonzero, got {a!r}")
+            self.a_signed = nn.Parameter(torch.tensor(float(a)), requires_grad=flags["a"])
+        else:
+            self._add_positive_parameter("a", a, flags["a"])
         self.offset = nn.Parameter(torch.tensor(float(offset)), requires_grad=flags["offset"])
         self.has_damping = damping is not None
         if damping is not None:
@@ -254,8 +265,23 @@ class Pendulum(System):
 
     @property
     def a(self) -> Tensor:
-        """Actuation gain, exp(log_a)."""
-        return self.log_a.exp()
+        """Actuation gain, exp(log_a) (or ``a_signed`` with ``signed_actuation``)."""
+        return self.a_signed if self.signed_actuation else self.log_a.exp()
+
+    def parameters_dict(self) -> dict[str, float]:
+        values = super().parameters_dict()
+        if self.signed_actuation:
+            values = {"g": values.pop("g"), "a": float(self.a_signed.detach()), **values}
+        return values
+
+    @torch.no_grad()
+    def set_parameters(self, **values: float) -> None:
+        if self.signed_actuation and "a" in values:
+            a = float(values.pop("a"))
+            if not (math.isfinite(a) and a != 0):
+                raise ValueError(f"Pendulum: a must be finite and nonzero, got {a!r}")
+            self.a_signed.fill_(a)
+        super().set_parameters(**values)
 
     def acceleration(self, p: Tensor, v: Tensor, u: Tensor | None = None) -> Tensor:
         gravity_gain = 3.0 / (2.0 * self.length)

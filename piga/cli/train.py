@@ -44,6 +44,9 @@ def build_parser() -> ArgumentParser:
     recipe("--lr", "lr", positive_float, "network learning rate")
     recipe("--lr-physics", "lr_physics", positive_float, "physical-parameter learning rate, log space")
     recipe("--warmup-steps", "warmup_steps", nonnegative_int, "autoencoder-only steps first")
+    p.add_argument("--signed-actuation", action="store_true",
+                   help="learn the sign of a too (a in linear space, from +0.3): for a camera on the other side of the "
+                   "hinge or a motor wired the other way, which flip the actuation the frames show")
     p.add_argument("--seed", type=nonnegative_int, default=fast.seed, help="seed of initialisation and sampling (default %(default)s)")
     p.add_argument("--threads", type=nonnegative_int, default=fast.threads, help="torch CPU threads (default %(default)s: torch's choice)")
     p.add_argument("--resume", action="store_true", help="continue the run in --out; it may raise --epochs or --max-minutes "
@@ -83,7 +86,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if tuple(ckpt["data"]["image_shape"]) != info.image_shape or ckpt["data"]["system"] != info.system:
             raise PigaError(f"--resume: {args.data} ({info.system}, {info.image_shape}) does not match the run's data "
                             f"({ckpt['data']['system']}, {tuple(ckpt['data']['image_shape'])})")
-        changed = sorted(set(overrides) - {"epochs", "max_minutes"})
+        changed = sorted(set(overrides) - {"epochs", "max_minutes"}) + (["signed_actuation"] if args.signed_actuation else [])
         if changed:
             raise PigaError(f"--resume keeps the run's recipe; drop {', '.join('--' + c.replace('_', '-') for c in changed)}")
         train_config = replace(TrainConfig(**ckpt["train_config"]), **overrides)
@@ -95,6 +98,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         preset = PRESETS[args.preset]
         train_config = replace(TrainConfig(seed=args.seed, threads=args.threads), **{**preset.get("train", {}), **overrides})
         model_overrides = dict(preset.get("model", {}))
+        if args.signed_actuation:
+            model_overrides["signed_actuation"] = True
         model_config = model_config_for(info, model_overrides)
         record = {"command": command}
     check_trainable(info, model_config, train_config)
@@ -125,6 +130,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     from piga.evaluate import summary_line
 
     print(f"learned: {summary_line(metrics)}")
+    if metrics.get("parameters", {}).get("a", 1.0) < 0:
+        print("note: a < 0, the actuation is flipped: positive u turns the pendulum clockwise as the frames show it "
+              "(a camera on the other side of the hinge, or a motor wired the other way)")
     ssim = metrics["frame_ssim_mean"]
     print(f"SSIM ({metrics['split']} split): prediction {ssim['prediction']:.3f}"
           + (f", extrapolation {ssim['extrapolation']:.3f}" if ssim["extrapolation"] is not None else "")

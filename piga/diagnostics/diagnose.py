@@ -156,6 +156,13 @@ def diagnose(model: PhysicsModel, data: str | os.PathLike[str], config: Diagnose
         NotTheSceneError: the recording is not the scene the model knows.
         DiagnosisInputError: the model and the data cannot be compared.
     """
+    from piga.diagnostics.observe import DiagnosisInputError
+
+    a = model.physical_parameters()["a"]
+    if not a > 0:
+        raise DiagnosisInputError(f"the model learned a = {a:.4g} < 0: its frames show a flipped actuation (a camera on the "
+                                  "other side of the hinge, or a motor wired the other way); the diagnosis' candidates "
+                                  "assume a > 0")
     rec_training = training_reconstruction_mse(model, checkpoint)
     blank = training_blank_mse(model, checkpoint)
     if blank is not None:
