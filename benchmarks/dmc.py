@@ -32,21 +32,26 @@ from pathlib import Path
 from common import machine
 from piga.atomic import atomic_output, write_json
 
-#: Published pixel-based scores on DMC pendulum-swingup (mean ± std over seeds), as read from the
-#: authors' published score files; x is in environment frames (physics steps at action repeat 1).
+#: Published pixel-based scores on DMC pendulum-swingup, read from the score files that DreamerV3's
+#: authors publish for it and its baselines (github.com/danijar/dreamerv3, ``scores/dmc_vision-{dreamerv3,
+#: drqv2,curl,sac}.json.gz``, commit e3f0224): per seed, the curve ``ys`` linearly interpolated at
+#: ``xs`` = x (the last point where a curve ends short of 1M: 993,984 for DreamerV3, 980,000 for
+#: DrQ-v2), then mean ± std over seeds. ``xs`` counts environment steps of 0.02 s (DMC's control
+#: step); DreamerV3's series holds every episode (noisy: its nearest point to 100k gives 296 ± 350).
+SCORE_FILES = "github.com/danijar/dreamerv3 scores/dmc_vision-*.json.gz (commit e3f0224)"
 PUBLISHED: list[dict[str, object]] = [
-    {"method": "DreamerV3", "frames": 100_000, "score": 352, "std": 336,
-     "source": "Hafner et al., Mastering Diverse Domains through World Models (2023); scores in github.com/danijar/dreamerv3"},
-    {"method": "DrQ-v2", "frames": 100_000, "score": 235, "std": 212,
-     "source": "Yarats et al., Mastering Visual Continuous Control (2021); curves in github.com/facebookresearch/drqv2"},
-    {"method": "CURL", "frames": 100_000, "score": 38, "std": 64,
+    {"method": "DreamerV3", "steps": 100_000, "score": 336, "std": 324, "seeds": 10,
+     "source": "Hafner et al., Mastering Diverse Domains through World Models (2023)"},
+    {"method": "DrQ-v2", "steps": 100_000, "score": 235, "std": 212, "seeds": 9,
+     "source": "Yarats et al., Mastering Visual Continuous Control (2021)"},
+    {"method": "CURL", "steps": 100_000, "score": 38, "std": 64, "seeds": 10,
      "source": "Laskin et al., CURL (ICML 2020)"},
-    {"method": "pixel SAC", "frames": 100_000, "score": 99, "std": 148,
-     "source": "Laskin et al., CURL (ICML 2020), pixel SAC baseline"},
-    {"method": "DreamerV3", "frames": 1_000_000, "score": 738, "std": 180,
-     "source": "Hafner et al. (2023), as above"},
-    {"method": "DrQ-v2", "frames": 1_000_000, "score": 845, "std": 29,
-     "source": "Yarats et al. (2021), as above"},
+    {"method": "pixel SAC", "steps": 100_000, "score": 99, "std": 148, "seeds": 9,
+     "source": "SAC from pixels, as in Laskin et al. (2020)"},
+    {"method": "DreamerV3", "steps": 1_000_000, "score": 733, "std": 269, "seeds": 10,
+     "source": "Hafner et al. (2023)"},
+    {"method": "DrQ-v2", "steps": 1_000_000, "score": 838, "std": 36, "seeds": 9,
+     "source": "Yarats et al. (2021)"},
 ]
 
 
@@ -107,18 +112,19 @@ def markdown(cases: list[dict[str, object]], command: str, info: dict[str, objec
         fmt = lambda r: "–" if r is None else f"{r['mean']:.1f} ± {r['std']:.1f}"  # noqa: E731
         lines.append(f"| {c['case']} | {fmt(piga)} | {fmt(oracle)} | {ratio} |")
     lines += ["", "## Against published pixel-based scores (pendulum-swingup)", "",
-              "x: environment frames the method learned from. piga learns its model from random-action frames only "
-              "(no reward) at an action repeat of 2, so each of its frames spans 2 physics steps; the frames below count "
-              "those frames, and the physics steps are twice as many.", "",
-              "| method | frames | score (mean ± std) | source |", "|---|---|---|---|"]
-    rows = [(str(p["method"]), int(p["frames"]), f"{p['score']} ± {p['std']}", str(p["source"])) for p in PUBLISHED]
+              f"Published curves read from {SCORE_FILES}; x is in environment steps of 0.02 s, the files' unit. "
+              "piga learns its model from random-action frames only (no reward) at an action repeat of 2: its x "
+              "counts the physics steps those frames span (2 per frame).", "",
+              "| method | environment steps | score (mean ± std) | seeds | source |", "|---|---|---|---|---|"]
+    rows = [(str(p["method"]), int(p["steps"]), f"{p['score']} ± {p['std']}", str(p["seeds"]), str(p["source"]))
+            for p in PUBLISHED]
     for c in cases:
         piga = c["control"].get("piga")
         if piga and not c["variant"]:
-            rows.append((f"piga ({c['case']})", int(c["frames"]), f"{piga['mean']:.0f} ± {piga['std']:.0f}",
-                         "this table: benchmarks/dmc.py"))
-    for method, frames, score, source in sorted(rows, key=lambda r: (r[1], r[0])):
-        lines.append(f"| {method} | {frames:,} | {score} | {source} |")
+            rows.append((f"piga ({c['case']}, {c['frames']:,} frames)", 2 * int(c["frames"]),
+                         f"{piga['mean']:.0f} ± {piga['std']:.0f}", "1 model, 10 episodes", "this table"))
+    for method, steps, score, seeds, source in sorted(rows, key=lambda r: (r[1], r[0])):
+        lines.append(f"| {method} | {steps:,} | {score} | {seeds} | {source} |")
     return "\n".join(lines) + "\n"
 
 
