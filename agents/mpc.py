@@ -155,6 +155,9 @@ class EncoderReader:
         self.model = model.eval()
         self._frames: np.ndarray | None = None  # uint8 (L, H, W) of the last call
         self._coords: Tensor | None = None  # (L, N, D) their coordinates
+        self.last_action: np.ndarray | None = None
+        """(A,) the action over the last frame; a model that reads velocities through its integrator
+        (``velocity_hold``) needs it, and its agent sets it before each call."""
 
     def read_frames(self, x: Tensor) -> Tensor:
         """Float frames (K, C, H, W) in [0, 1] -> coordinates (K, N, D)."""
@@ -177,7 +180,8 @@ class EncoderReader:
         if kept is not None:
             coords = torch.cat([kept, coords])  # (L, N, D)
         self._frames, self._coords = frames.copy(), coords
-        p, v = self.model.initial_state(self.prepare(coords)[None])  # (1, N, D) each
+        last = None if self.last_action is None else torch.as_tensor(self.last_action, dtype=torch.float32).view(1, -1)
+        p, v = self.model.initial_state(self.prepare(coords)[None], last)  # (1, N, D) each
         return float(p[0, 0, 0]), float(v[0, 0, 0])
 
 
@@ -222,6 +226,8 @@ class PigaMPCAgent:
         """Starts an episode."""
         self.planner.reset()
         self.trace = []
+        if isinstance(self.read_state, EncoderReader):
+            self.read_state.last_action = np.zeros(1, np.float32)  # nothing acted before the first frame
 
     def estimate_state(self, frames: np.ndarray) -> tuple[float, float]:
         """(θ, θ̇) in the model's convention (Gymnasium's θ = θ + ``offset``) from the last L frames, uint8 (L, H, W)."""
@@ -232,6 +238,8 @@ class PigaMPCAgent:
         theta, theta_dot = self.read_state(frames)
         plan = self.planner.plan_sequence(theta + self.offset, theta_dot)
         self.planner.executed(plan[0])
+        if isinstance(self.read_state, EncoderReader):
+            self.read_state.last_action = plan[0]
         if self.keep_trace:
             self.trace.append((theta, theta_dot, plan))
         return plan[0]

@@ -6,14 +6,17 @@ Importing this package registers the env ids:
 |---|---|
 | ``piga/PixelPendulum-v0`` | Pendulum-v1 seen as 64x64 gray frames, one frame per observation |
 | ``piga/PixelPendulumStack4-v0`` | the same with the last 4 frames stacked (for RL agents) |
+| ``piga/DMCPendulum-v0`` | dm_control's MuJoCo pendulum-swingup through a face-on camera (:mod:`envs.dmc`; needs ``piga[dmc]``) |
 
 ``gym.make(id, **fields)`` accepts any field of :class:`PixelPendulumConfig`, including
-``effects``, the unmodelled effects of :mod:`envs.effects`.
+``effects``, the unmodelled effects of :mod:`envs.effects`; ``piga/DMCPendulum-v0`` any field of
+:class:`envs.dmc.DMCPendulumConfig`.
 """
 
 import gymnasium as gym
 
 from envs.constants import MAX_ACTION, PENDULUM_DT, PENDULUM_MAX_SPEED
+from envs.dmc import DMCPendulumConfig, MissingExtraError, make_dmc_pendulum
 from envs.effects import EFFECTS, FRICTION_SMOOTHING, normalize_effects, parse_effect
 from envs.pendulum import (
     ActuationGain,
@@ -25,6 +28,9 @@ from envs.pendulum import (
 )
 
 __all__ = [
+    "DMCPendulumConfig",
+    "MissingExtraError",
+    "make_dmc_pendulum",
     "EFFECTS",
     "FRICTION_SMOOTHING",
     "MAX_ACTION",
@@ -41,12 +47,12 @@ __all__ = [
 ]
 
 _IDS = {
-    "piga/PixelPendulum-v0": {},
-    "piga/PixelPendulumStack4-v0": {"frame_stack": 4},
+    "piga/PixelPendulum-v0": ("envs.pendulum:make_pixel_pendulum", {}),
+    "piga/PixelPendulumStack4-v0": ("envs.pendulum:make_pixel_pendulum", {"frame_stack": 4}),
+    "piga/DMCPendulum-v0": ("envs.dmc:make_dmc_pendulum", {}),
 }
-for _id, _kwargs in _IDS.items():
+for _id, (_entry, _kwargs) in _IDS.items():
     if _id not in gym.registry:
-        # The truncation comes from Pendulum-v1's own TimeLimit inside the factory, so no
-        # max_episode_steps here; disable_env_checker because check_env is run by the tests.
-        gym.register(id=_id, entry_point="envs.pendulum:make_pixel_pendulum", kwargs=_kwargs,
-                     disable_env_checker=True)
+        # The truncation comes from the factory (Pendulum-v1's own TimeLimit, the DMC env's
+        # episode), so no max_episode_steps here; disable_env_checker because check_env is run by the tests.
+        gym.register(id=_id, entry_point=_entry, kwargs=_kwargs, disable_env_checker=True)

@@ -6,10 +6,10 @@ which worker ran the sequence. Workers are Gymnasium vector envs: ``AsyncVectorE
 ``SyncVectorEnv`` for one worker.
 
 Sequence n holds frames x_0..x_{T-1}, where x_0 is the frame after reset. The actions are
-u_0..u_{T-1} ~ U(-2, 2), and u_t is applied after x_t. All T actions are applied, so each stored
-action really acted, even though the frame after the last one is not stored. ``/rewards[n, t]`` is
-Gymnasium's reward for u_t (computed from the state of x_t), for reward-based baselines; piga's own
-training never reads it.
+u_0..u_{T-1} ~ U(-2, 2) (U(-1, 1) for the DMC pendulum, :mod:`envs.dmc`), and u_t is applied after x_t.
+All T actions are applied, so each stored action really acted, even though the frame after the last
+one is not stored. ``/rewards[n, t]`` is Gymnasium's reward for u_t (computed from the state of x_t),
+for reward-based baselines; piga's own training never reads it.
 
 Unmodelled effects (``env.effects``, :mod:`envs.effects`) change the frames and states only. The
 stored actions are the commanded u, and the effects are recorded in the attrs ``effects`` (a JSON
@@ -34,6 +34,7 @@ import gymnasium as gym
 import numpy as np
 from tqdm.auto import tqdm
 
+from envs.dmc import DMCPendulumConfig, make_dmc_pendulum
 from envs.pendulum import MAX_ACTION, PENDULUM_DT, PixelPendulumConfig, make_pixel_pendulum
 from piga.atomic import check_writable_target
 from piga.data import SPLITS, DatasetWriter
@@ -50,8 +51,8 @@ class CollectConfig:
     """N, the number of sequences."""
     steps: int = 40
     """T, frames per sequence (the pendulum model needs at least L + T_pred = 14)."""
-    env: PixelPendulumConfig = field(default_factory=PixelPendulumConfig)
-    """The environment. Reset ranges are Gymnasium's, θ ~ U(-π, π) and θ̇ ~ U(-1, 1): the paper's
+    env: PixelPendulumConfig | DMCPendulumConfig = field(default_factory=PixelPendulumConfig)
+    """The environment: Gymnasium's pixel pendulum, or dm_control's (:class:`DMCPendulumConfig`). Reset ranges are Gymnasium's, θ ~ U(-π, π) and θ̇ ~ U(-1, 1): the paper's
     θ̇ ~ U(-6, 6) makes Gymnasium's ±8 speed clip act on ~2% of steps, which biases the learned
     actuation gain by ~5% (the clip is not in the model). The 'paper' preset restores ±6."""
     seed: int = 0
@@ -105,7 +106,7 @@ def _exit_quietly(signum: int, frame: object) -> None:
     os._exit(128 + signum)
 
 
-def _episode_env(env_config: PixelPendulumConfig) -> gym.Env:
+def _episode_env(env_config: PixelPendulumConfig | DMCPendulumConfig) -> gym.Env:
     if multiprocessing.parent_process() is not None:
         # A worker of AsyncVectorEnv. Ctrl-C reaches the whole process group; the parent alone
         # handles it (one line, partial file removed) and terminates the workers, which must not
@@ -114,7 +115,22 @@ def _episode_env(env_config: PixelPendulumConfig) -> gym.Env:
         # default SIGTERM and ignores it.)
         signal.signal(signal.SIGINT, signal.SIG_IGN)
         signal.signal(signal.SIGTERM, _exit_quietly)
+    if isinstance(env_config, DMCPendulumConfig):
+        return make_dmc_pendulum(env_config)
     return make_pixel_pendulum(env_config)
+
+
+def env_attrs(env_config: PixelPendulumConfig | DMCPendulumConfig) -> tuple[float, float, dict[str, float]]:
+    """The env's frame dt, its action bound and its true parameters in piga's form, for the file's attrs."""
+    if isinstance(env_config, DMCPendulumConfig):
+        return env_config.dt, 1.0, env_config.piga_params()
+    params = {
+        "g": env_config.effective_gravity,
+        "actuation_gain": env_config.actuation_gain,
+        "gravity": env_config.gravity,
+        "gravity_mult": env_config.gravity_mult,
+    }
+    return PENDULUM_DT, MAX_ACTION, params
 
 
 def sequence_rng(seed: int, n: int) -> tuple[int, np.random.Generator]:
@@ -168,17 +184,15 @@ def collect(
     workers = min(config.workers, n)
     factory: Callable[[], gym.Env] = functools.partial(_episode_env, env_config)
     size = env_config.image_size
+    dt, max_action, params = env_attrs(env_config)
+    dmc = isinstance(env_config, DMCPendulumConfig)
     attrs = {
         "system": "pendulum",
-        "dt": PENDULUM_DT,
-        "params": {
-            "g": env_config.effective_gravity,
-            "actuation_gain": env_config.actuation_gain,
-            "gravity": env_config.gravity,
-            "gravity_mult": env_config.gravity_mult,
-        },
+        "dt": dt,
+        "params": params,
         "env_config": env_config.to_dict(),
-        "effects": dict(env_config.effects),
+        "env_id": "piga/DMCPendulum-v0" if dmc else "piga/PixelPendulum-v0",
+        "effects": {} if dmc else dict(env_config.effects),
         "state_names": ["theta", "theta_dot"],
         "seed": config.seed,
         "command": command if command is not None else shlex.join(sys.argv),
@@ -201,7 +215,7 @@ def collect(
                     # Spare envs of the last group replay sequence ids[0]; their output is dropped.
                     seeds = list(reset_seeds) + [reset_seeds[0]] * (workers - len(ids))
                     obs, info = vec.reset(seed=seeds)
-                    u = np.stack([rng.uniform(-MAX_ACTION, MAX_ACTION, size=(t, 1)) for rng in action_rngs]).astype(np.float32)
+                    u = np.stack([rng.uniform(-max_action, max_action, size=(t, 1)) for rng in action_rngs]).astype(np.float32)
                     rows = np.arange(len(ids))
                     local = np.asarray(ids) - start
                     for step in range(t):

@@ -24,7 +24,7 @@ from piga.data import inspect_dataset, load_states, read_sequences
 from piga.model import PhysicsModel, frames_to_float
 
 #: Data-file parameter name -> model parameter name.
-PARAMETER_NAMES = {"g": "g", "actuation_gain": "a", "k": "k", "l": "l"}
+PARAMETER_NAMES = {"g": "g", "actuation_gain": "a", "damping": "b", "k": "k", "l": "l"}
 
 
 @dataclass(frozen=True)
@@ -67,7 +67,8 @@ def rollout_frames(model: PhysicsModel, frames: np.ndarray, actions: np.ndarray,
     x = frames_to_float(torch.from_numpy(frames[:, : cfg.input_frames]), cfg.channels)
     coords = model.encode(x)
     acts = torch.from_numpy(actions[:, cfg.input_frames - 1 : cfg.input_frames - 1 + steps]).float() if cfg.action_dim else None
-    pred_coords = model.predict(coords, acts, steps)
+    last = torch.from_numpy(actions[:, cfg.input_frames - 2]).float() if cfg.action_dim else None  # (B, A)
+    pred_coords = model.predict(coords, acts, steps, last)
     return model.decoder(pred_coords).numpy(), pred_coords.numpy()
 
 

@@ -25,7 +25,7 @@ from torch import Tensor, nn
 
 from piga.decoder import Decoder, DecoderConfig
 from piga.encoder import Encoder, EncoderConfig
-from piga.physics import Euler, System, make_system, rollout
+from piga.physics import System, hold_velocity, make_integrator, make_system, rollout
 from piga.velocity import VelocityConfig, VelocityEstimator
 
 #: System name -> (N, D, A) of its state and actions.
@@ -83,7 +83,23 @@ class ModelConfig:
     """Velocity estimator: backward difference plus the paper's MLP (True, the paper preset), or the difference alone
     (exact for one Euler substep; see :class:`piga.velocity.VelocityConfig`)."""
     substeps: int = 1
-    """Euler substeps M per frame (the paper preset: 5; 1 matches Gymnasium's pendulum exactly)."""
+    """Integrator substeps M per frame (the paper preset: 5 Euler; 1 Euler matches Gymnasium's pendulum exactly)."""
+    integrator: str = "euler"
+    """"euler" (semi-implicit, the paper's) or "rk4" (a continuous system under a held action; the
+    'continuous' preset), see :mod:`piga.physics`."""
+    velocity_hold: bool = False
+    """Read the velocity at frame L through the integrator (:func:`piga.physics.hold_velocity`,
+    using the action over the last input frame) instead of taking the backward difference as it.
+    Needed when the system moves within a frame (substeps, RK4): there the difference lags the
+    velocity at the frame by about dt·F/2. The 'continuous' preset sets it."""
+    learn_damping: bool = False
+    """Pendulum only: add a learnable viscous damping b to the engine (θ̈ = ... − 3·b·θ̇), starting
+    at ``damping_init``. A real hinge has friction; Gymnasium's pendulum has none."""
+    damping_init: float = 0.01
+    """Initial b when ``learn_damping`` (far from any real hinge's value)."""
+    signed_actuation: bool = False
+    """Pendulum only: learn a in linear space, sign included (:class:`piga.physics.Pendulum`), for a
+    camera on the other side or a motor wired the other way; a then starts at +0.3 and may cross 0."""
     readout: str = "centroid"
     """Encoder readout: "centroid" (soft centroid of each mask) or "regress" (the paper's location network, the paper preset)."""
     angle_reference: float = 0.0
@@ -131,6 +147,8 @@ class ModelConfig:
             raise ValueError(f"pred_trim must be in [0, 1), got {self.pred_trim}")
         if self.alpha < 0:
             raise ValueError(f"alpha must be >= 0, got {self.alpha}")
+        if self.learn_damping and self.system != "pendulum":
+            raise ValueError(f"learn_damping is for the pendulum, not {self.system!r}")
         object.__setattr__(self, "pivot_gate", tuple(float(r) for r in self.pivot_gate))  # JSON gives a list
 
     @classmethod
@@ -208,13 +226,18 @@ class PhysicsModel(nn.Module):
         kwargs: dict[str, Any] = {"dt": config.dt, **config.physics_init}
         if config.system == "pendulum":
             kwargs["learnable"] = ("g", "a", "offset") if config.learn_offset else ("g", "a")
+            if config.learn_damping:
+                kwargs["damping"] = kwargs.get("damping", config.damping_init)
+                kwargs["learnable"] += ("b",)
+            if config.signed_actuation:
+                kwargs["signed_actuation"] = True
         elif config.system in ("spring", "gravity", "bouncing"):
             kwargs["n_objects"] = n
         if config.system == "bouncing":
             kwargs.setdefault("size", float(config.image_size))
             kwargs.setdefault("radius", config.wall_radius)
         self.system: System = make_system(config.system, **kwargs)
-        self.integrator = Euler(config.substeps)
+        self.integrator = make_integrator(config.integrator, config.substeps)
         self.decoder = Decoder(DecoderConfig(config.image_size, config.channels, n, d, hidden=config.template_hidden,
                                              template_size=config.template_size or None, init_scale=config.init_scale))
 
@@ -231,10 +254,19 @@ class PhysicsModel(nn.Module):
         coords = self.encoder(frames.flatten(0, 1).contiguous(memory_format=torch.channels_last))
         return coords.view(b, t, *coords.shape[1:])
 
-    def initial_state(self, coords: Tensor) -> tuple[Tensor, Tensor]:
-        """Coordinates of L frames (B, L, N, D) -> (p_L, v_L), each (B, N, D)."""
+    def initial_state(self, coords: Tensor, last_action: Tensor | None = None) -> tuple[Tensor, Tensor]:
+        """Coordinates of L frames (B, L, N, D) -> (p_L, v_L), each (B, N, D).
+
+        ``last_action`` (B, A) is the action over the last input frame (after frame L-1); it is
+        needed, and used, only with ``velocity_hold``.
+        """
         v = self.velocity(coords)  # (B, N, D)
-        if self.config.velocity_physics:
+        if self.config.velocity_hold and self.config.action_dim:
+            if last_action is None:
+                raise ValueError("this model reads velocities through its integrator (velocity_hold): "
+                                 "initial_state needs the action over the last input frame")
+            v = hold_velocity(self.system, self.integrator, coords[:, -2], v, last_action)
+        elif self.config.velocity_physics:
             # The backward difference D is exact for a cubic path once corrected by dt·(2·a_L + a_{L-1})/6
             # (Taylor: D = v_L - a_L·dt/2 + ȧ·dt²/6). The physical parameters are detached here: they must
             # be identified by the rollout, not by the shortcut of bending the initial velocity.
@@ -244,18 +276,20 @@ class PhysicsModel(nn.Module):
             v = v + self.config.dt * (2 * a_last + a_prev) / 6
         return coords[:, -1], v
 
-    def predict(self, coords: Tensor, actions: Tensor | None, steps: int) -> Tensor:
+    def predict(self, coords: Tensor, actions: Tensor | None, steps: int,
+                last_action: Tensor | None = None) -> Tensor:
         """Rolls the physics on from L encoded frames.
 
         Args:
             coords: (B, L, N, D), the encoder's coordinates of the input frames.
             actions: (B, steps, A), the actions after input frame L, L+1, ...; None if unactuated.
             steps: frames to predict.
+            last_action: (B, A), the action after input frame L-1 (for ``velocity_hold``).
 
         Returns:
             (B, steps, N, D) coordinates of frames L+1 .. L+steps.
         """
-        p0, v0 = self.initial_state(coords)
+        p0, v0 = self.initial_state(coords, last_action)
         positions, _ = rollout(self.system, self.integrator, p0, v0, actions, steps)
         return positions
 
@@ -273,7 +307,8 @@ class PhysicsModel(nn.Module):
             raise ValueError(f"need {ell + t_pred} frames per item, got {x.shape[1]}")
         coords = self.encode(x if cfg.rec_frames == "all" else x[:, :ell])  # (B, L+T or L, N, D)
         acts = actions[:, ell - 1 : ell - 1 + t_pred].float() if cfg.action_dim else None  # (B, T, A)
-        coords_pred = self.predict(coords[:, :ell], acts, t_pred)  # (B, T, N, D)
+        last = actions[:, ell - 2].float() if cfg.action_dim else None  # (B, A), over the last input frame
+        coords_pred = self.predict(coords[:, :ell], acts, t_pred, last)  # (B, T, N, D)
         rec = self.decoder(coords)  # (B, L+T or L, C, H, W)
         pred = self.decoder(coords_pred)  # (B, T, C, H, W)
         loss_rec = F.mse_loss(rec, x[:, : rec.shape[1]], reduction="none").mean(dim=(2, 3, 4)).sum(1).mean()

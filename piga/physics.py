@@ -7,7 +7,7 @@ unrolls it over a sequence. Everything is plain PyTorch, so gradients flow to th
 
 | system | N | D | A | acceleration of object i (d = p_i - p_j) | dt | learned (init -> truth) |
 |---|---|---|---|---|---|---|
-| :class:`Pendulum` | 1 | 1 (angle) | 1 | (3 / 2l)·g·sin θ + (3 / m l²)·a·u | 0.05 | g 1 -> 10, a 0.3 -> 1 |
+| :class:`Pendulum` | 1 | 1 (angle) | 1 | (3 / 2l)·g·sin θ + (3 / m l²)·(a·u − b·θ̇), b optional | 0.05 | g 1 -> 10, a 0.3 -> 1 |
 | :class:`Spring` | 2 | 2 | 0 | Σ_j -k·(abs(d) - 2l)·d / abs(d) | 0.3 | k 1 -> 4, l 1 -> 6 (balls) |
 | :class:`Gravity` | 3 | 2 | 0 | Σ_j -g·m_j·d / abs(d)³ | 0.5 | g 1 -> 60 |
 | :class:`Bouncing` | 2 | 2 | 0 | 0, elastic walls | 0.3 | (none) |
@@ -20,6 +20,13 @@ Conventions:
 - The pendulum follows Gymnasium's ``Pendulum-v1``: θ = 0 upright, positive counter-clockwise as
   displayed; its ±8 rad/s speed clip is deliberately *not* modelled.
 - Cartesian systems work in pixel units (x right, y down), as the decoder does.
+
+Integrators (the action held over the frame, a zero-order hold): :class:`Euler` (semi-implicit,
+``substeps`` per frame; one substep is Gymnasium's pendulum exactly) and :class:`RK4` (classical
+Runge-Kutta, ``substeps`` per frame), which follows a *continuous* system under a held action, as
+a real motor or MuJoCo's fine physics steps act within a frame. :func:`hold_velocity` reads the
+velocity at a frame from the last two positions *through* the integrator, which a backward
+difference gets wrong as soon as the system moves within the frame.
 
 Example::
 
@@ -43,6 +50,10 @@ __all__ = [
     "Gravity",
     "Bouncing",
     "Euler",
+    "RK4",
+    "INTEGRATORS",
+    "make_integrator",
+    "hold_velocity",
     "rollout",
     "make_system",
     "SYSTEMS",
@@ -186,7 +197,7 @@ class Pendulum(System):
     |---|---|
     | state | θ (rad, 0 upright, positive counter-clockwise as displayed), θ̇ (rad/s) |
     | action | torque u, (B, 1) |
-    | dynamics | θ̈ = (3 / 2l)·g·sin(θ + φ) + (3 / m l²)·a·u, i.e. 1.5·g·sin(θ + φ) + 3·a·u for m = l = 1 |
+    | dynamics | θ̈ = (3 / 2l)·g·sin(θ + φ) + (3 / m l²)·(a·u − b·θ̇), i.e. 1.5·g·sin(θ + φ) + 3·a·u − 3·b·θ̇ for m = l = 1 |
     | step | dt = 0.05 |
     | truth | g = 10, a = 1 |
 
@@ -205,8 +216,14 @@ class Pendulum(System):
         mass: Rod mass m, fixed (not learned).
         dt: Seconds per frame.
         offset: Initial angle offset φ (default 0).
+        damping: Initial viscous damping b, or None for the paper's engine without damping (the
+            default). A real hinge has friction; Gymnasium's pendulum has none.
+        signed_actuation: Learn a as a plain number (``a_signed``) instead of in log space, so that
+            it can turn negative: a camera on the other side of the hinge, or a motor wired the
+            other way, flips the sign of the actuation that the frames show. In log space a can
+            only shrink toward 0 on such data.
         learnable: True (all), False (none, e.g. an oracle), or the names to learn among
-            "g", "a" and "offset".
+            "g", "a", "offset" and (with ``damping``) "b".
     """
 
     reference_values: ClassVar[dict[str, float]] = {"g": 10.0, "a": 1.0}
@@ -220,6 +237,8 @@ class Pendulum(System):
         dt: float = 0.05,
         offset: float = 0.0,
         learnable: bool | Collection[str] = True,
+        damping: float | None = None,
+        signed_actuation: bool = False,
     ) -> None:
         super().__init__(n_objects=1, coord_dim=1, action_dim=1, dt=dt)
         if not length > 0:
@@ -228,10 +247,20 @@ class Pendulum(System):
             raise ValueError(f"Pendulum: mass must be > 0, got {mass}")
         self.length = float(length)
         self.mass = float(mass)
-        flags = self._resolve_learnable("Pendulum", ("g", "a", "offset"), learnable)
+        names = ("g", "a", "offset") + (("b",) if damping is not None else ())
+        flags = self._resolve_learnable("Pendulum", names, learnable)
         self._add_positive_parameter("g", g, flags["g"])
-        self._add_positive_parameter("a", a, flags["a"])
+        self.signed_actuation = bool(signed_actuation)
+        if self.signed_actuation:
+            if not (math.isfinite(float(a)) and a != 0):
+                raise ValueError(f"Pendulum: a must be finite and nonzero, got {a!r}")
+            self.a_signed = nn.Parameter(torch.tensor(float(a)), requires_grad=flags["a"])
+        else:
+            self._add_positive_parameter("a", a, flags["a"])
         self.offset = nn.Parameter(torch.tensor(float(offset)), requires_grad=flags["offset"])
+        self.has_damping = damping is not None
+        if damping is not None:
+            self._add_positive_parameter("b", damping, flags["b"])
 
     @property
     def g(self) -> Tensor:
@@ -240,8 +269,23 @@ class Pendulum(System):
 
     @property
     def a(self) -> Tensor:
-        """Actuation gain, exp(log_a)."""
-        return self.log_a.exp()
+        """Actuation gain, exp(log_a) (or ``a_signed`` with ``signed_actuation``)."""
+        return self.a_signed if self.signed_actuation else self.log_a.exp()
+
+    def parameters_dict(self) -> dict[str, float]:
+        values = super().parameters_dict()
+        if self.signed_actuation:
+            values = {"g": values.pop("g"), "a": float(self.a_signed.detach()), **values}
+        return values
+
+    @torch.no_grad()
+    def set_parameters(self, **values: float) -> None:
+        if self.signed_actuation and "a" in values:
+            a = float(values.pop("a"))
+            if not (math.isfinite(a) and a != 0):
+                raise ValueError(f"Pendulum: a must be finite and nonzero, got {a!r}")
+            self.a_signed.fill_(a)
+        super().set_parameters(**values)
 
     def acceleration(self, p: Tensor, v: Tensor, u: Tensor | None = None) -> Tensor:
         gravity_gain = 3.0 / (2.0 * self.length)
@@ -249,6 +293,8 @@ class Pendulum(System):
         acc = gravity_gain * self.g * torch.sin(p + self.offset)  # (B, 1, 1)
         if u is not None:
             acc = acc + (torque_gain * self.a * u).unsqueeze(-1)  # (B, 1) -> (B, 1, 1)
+        if self.has_damping:
+            acc = acc - torque_gain * self.log_b.exp() * v  # (B, 1, 1)
         return acc
 
 
@@ -416,6 +462,94 @@ class Euler(nn.Module):
 
     def extra_repr(self) -> str:
         return f"substeps={self.substeps}"
+
+
+class RK4(nn.Module):
+    """Classical Runge-Kutta of order 4, ``substeps`` substeps per frame, the action held over the frame.
+
+    A zero-order hold of a continuous system: the state follows θ̈ = F(θ, θ̇, u) with u constant
+    over the frame, to O(h⁴) per frame. Use it for a real system (or a simulator with fine
+    physics steps), where the motion within a frame matters: there the second difference of the
+    frames sees part of the previous frame's action too, which one Euler step attributes to the
+    current one. ``system.constrain`` is applied after each substep.
+    """
+
+    def __init__(self, substeps: int = 4) -> None:
+        super().__init__()
+        if isinstance(substeps, bool) or not isinstance(substeps, int) or substeps < 1:
+            raise ValueError(f"substeps must be an int >= 1, got {substeps!r}")
+        self.substeps = substeps
+
+    def forward(
+        self, system: System, p: Tensor, v: Tensor, u: Tensor | None = None
+    ) -> tuple[Tensor, Tensor]:
+        """Advance (p, v), each (B, N, D), by one frame under action u (B, A) or None."""
+        h = system.dt / self.substeps
+        for _ in range(self.substeps):
+            a1 = system.acceleration(p, v, u)  # (B, N, D) each
+            v2 = v + 0.5 * h * a1
+            a2 = system.acceleration(p + 0.5 * h * v, v2, u)
+            v3 = v + 0.5 * h * a2
+            a3 = system.acceleration(p + 0.5 * h * v2, v3, u)
+            v4 = v + h * a3
+            a4 = system.acceleration(p + h * v3, v4, u)
+            p = p + h / 6.0 * (v + 2.0 * v2 + 2.0 * v3 + v4)
+            v = v + h / 6.0 * (a1 + 2.0 * a2 + 2.0 * a3 + a4)
+            p, v = system.constrain(p, v)
+        return p, v
+
+    def extra_repr(self) -> str:
+        return f"substeps={self.substeps}"
+
+
+INTEGRATORS: dict[str, type[nn.Module]] = {"euler": Euler, "rk4": RK4}
+"""Name -> integrator class (both take ``substeps``)."""
+
+
+def make_integrator(name: str, substeps: int) -> Euler | RK4:
+    """The integrator registered as ``name`` with ``substeps`` substeps per frame."""
+    try:
+        cls = INTEGRATORS[name]
+    except KeyError:
+        raise ValueError(f"unknown integrator {name!r}; known: {sorted(INTEGRATORS)}") from None
+    return cls(substeps)  # type: ignore[return-value]
+
+
+def hold_velocity(
+    system: System,
+    integrator: Callable[..., tuple[Tensor, Tensor]],
+    p_prev: Tensor,
+    v_chord: Tensor,
+    u_prev: Tensor | None,
+    iterations: int = 3,
+) -> Tensor:
+    """The velocity at a frame, read through the integrator from the frame before it (shooting).
+
+    Finds the velocity v₀ at the previous frame whose one-frame step under ``u_prev`` moves the
+    position by ``dt · v_chord`` (the observed displacement), by Newton steps with the slope
+    approximated by dt, and returns the velocity that step ends with. For one Euler substep this
+    is the backward difference itself; with substeps, or RK4, it adds what the held action and the
+    forces did within the frame (for a continuous system: dt·F/2 more than the chord).
+
+    Args:
+        system: the system (its forces and dt).
+        integrator: as in :func:`rollout`.
+        p_prev: positions at the previous frame, (B, N, D).
+        v_chord: the observed displacement per second over the last frame, (B, N, D) (angle
+            differences already wrapped).
+        u_prev: the action applied over the last frame, (B, A), or None.
+        iterations: Newton steps; each shrinks the error by a factor ~ dt·∂F/∂v·dt.
+
+    Returns:
+        Velocities at the frame, (B, N, D).
+    """
+    target = v_chord * system.dt  # (B, N, D)
+    v0 = v_chord
+    for _ in range(iterations):
+        p1, _ = integrator(system, p_prev, v0, u_prev)
+        v0 = v0 + (target - (p1 - p_prev)) / system.dt
+    _, v1 = integrator(system, p_prev, v0, u_prev)
+    return v1
 
 
 def rollout(

@@ -100,6 +100,11 @@ PRESETS: dict[str, dict[str, Any]] = {
         "model": {"substeps": 5, "learn_offset": True, "readout": "regress", "rec_frames": "all", "pred_trim": 0.0,
                   "velocity_correction": True},
     },
+    # A continuous system filmed with a held action (a real motor, MuJoCo's 0.02 s physics steps):
+    # RK4 within the frame, velocities read through it, and a learnable hinge damping.
+    "continuous": {
+        "model": {"integrator": "rk4", "substeps": 2, "velocity_hold": True, "learn_damping": True},
+    },
 }
 
 

@@ -1,4 +1,4 @@
-"""``piga-collect``: pixel-pendulum videos with random actions, or a scene of the paper, written to one HDF5 file."""
+"""``piga-collect``: pendulum videos with random actions (Gymnasium's or dm_control's), or a scene of the paper, written to one HDF5 file."""
 
 from __future__ import annotations
 
@@ -6,6 +6,7 @@ import argparse
 from collections.abc import Sequence
 from dataclasses import replace
 
+from envs.dmc import DMCPendulumConfig
 from envs.effects import EFFECTS, format_effects, parse_effect
 from envs.pendulum import PixelPendulumConfig
 from envs.scenes import SCENES, scene_config
@@ -16,6 +17,11 @@ from piga.collect_scenes import SCENE_PRESETS, SCENE_STEPS, SceneCollectConfig, 
 from piga.data import inspect_dataset
 
 PROG = "piga-collect"
+#: Env ids piga-collect collects the pendulum from (registered in :mod:`envs`).
+ENVS = ("piga/PixelPendulum-v0", "piga/DMCPendulum-v0")
+#: Options of Gymnasium's pendulum only, with their defaults; the DMC pendulum refuses them.
+GYMNASIUM_ONLY = {"gravity": "--gravity", "gravity_mult": "--gravity-mult", "actuation_gain": "--actuation-gain",
+                  "no_torque_arrow": "--no-torque-arrow", "effect": "--effect"}
 
 
 def _effect(text: str) -> tuple[str, int | float]:
@@ -25,6 +31,38 @@ def _effect(text: str) -> tuple[str, int | float]:
         return parse_effect(text)
     except ValueError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def _env_option(text: str) -> tuple[str, str]:
+    import argparse
+
+    key, sep, value = text.partition("=")
+    if not sep or not key or not value:
+        raise argparse.ArgumentTypeError(f"expected KEY=VALUE (e.g. mass=1.2), got {text!r}")
+    return key.strip().replace("-", "_"), value.strip()
+
+
+def dmc_config(options: Sequence[tuple[str, str]], **fields: object) -> DMCPendulumConfig:
+    """A :class:`DMCPendulumConfig` from ``--env-option KEY=VALUE`` pairs (converted to each field's type) and ``fields``."""
+    import dataclasses
+
+    known = {f.name: f for f in dataclasses.fields(DMCPendulumConfig)}
+    values: dict[str, object] = dict(fields)
+    for key, text in options:
+        if key not in known or key in ("image_size", "frame_stack", "max_angle", "max_speed", "episode_length"):
+            settable = sorted(set(known) - {"image_size", "frame_stack", "max_angle", "max_speed", "episode_length"})
+            raise ValueError(f"--env-option {key}: unknown for piga/DMCPendulum-v0; known: {', '.join(settable)}")
+        kind = type(getattr(DMCPendulumConfig(), key))
+        try:
+            if kind is bool:
+                if text.lower() not in ("0", "1", "true", "false", "on", "off"):
+                    raise ValueError(text)
+                values[key] = text.lower() in ("1", "true", "on")
+            else:
+                values[key] = kind(text)
+        except ValueError:
+            raise ValueError(f"--env-option {key}={text}: expected a {kind.__name__}") from None
+    return DMCPendulumConfig(**values)  # type: ignore[arg-type]
 
 
 def build_parser() -> ArgumentParser:
@@ -42,6 +80,12 @@ def build_parser() -> ArgumentParser:
     for flag, what in SCENE_PARAMETERS.items():
         p.add_argument(flag, type=positive_float, default=None,
                        help=f"{what} (default the scene's; {_scene_defaults(flag)})")
+    p.add_argument("--env", choices=ENVS, default=ENVS[0],
+                   help="the env: Gymnasium's pixel pendulum, or dm_control's MuJoCo pendulum through a face-on camera "
+                   "(needs piga[dmc]; actions u ~ U(-1, 1), frame dt = action_repeat x 0.02) (default %(default)s)")
+    p.add_argument("--env-option", action="append", type=_env_option, default=[], metavar="KEY=VALUE",
+                   help="a field of the DMC pendulum's config, repeatable: mass, length, damping, action_repeat, "
+                   "flip (none, camera, motor), shadows (envs/dmc.py)")
     paper = PRESETS["paper"]
     p.add_argument("--preset", choices=sorted(PRESETS), default="default",
                    help=f"'default': small, about a minute on 2 cores; 'paper': {paper['sequences']} sequences x "
@@ -91,7 +135,33 @@ def main(argv: Sequence[str] | None = None) -> int:
     for key in ("sequences", "steps", "split", "max_speed"):
         if getattr(args, key) is not None:
             preset[key] = getattr(args, key)
-    env = PixelPendulumConfig(
+    if args.env == "piga/DMCPendulum-v0":
+        parser_defaults = build_parser().parse_args(["--out", args.out])
+        for key, flag in GYMNASIUM_ONLY.items():
+            if getattr(args, key) != getattr(parser_defaults, key):
+                raise PigaError(f"{flag} is an option of piga/PixelPendulum-v0 only; the DMC pendulum takes --env-option")
+        speed = preset.pop("max_speed", None)
+        env: PixelPendulumConfig | DMCPendulumConfig = dmc_config(
+            args.env_option, image_size=args.image_size or DMCPendulumConfig.image_size, max_angle=args.max_angle,
+            **({} if speed is None else {"max_speed": float(speed)}))  # type: ignore[arg-type]
+    elif args.env_option:
+        raise PigaError("--env-option is for --env piga/DMCPendulum-v0")
+    else:
+        env = _pixel_config(args, preset)
+    config = replace(CollectConfig(env=env, seed=args.seed, workers=args.workers), **preset)
+    path = collect(config, args.out, overwrite=args.overwrite, command=command_line(PROG, argv),
+                   progress=not args.quiet)
+    info = inspect_dataset(path)
+    effects = getattr(env, "effects", ())
+    print(f"wrote {path}: {info.n_sequences} sequences x {info.steps} frames of {info.image_shape}, "
+          f"split {info.split_counts}, g={info.params['g']:g}, actuation_gain={info.params['actuation_gain']:g}"
+          + (f", damping={info.params['damping']:g}" if "damping" in info.params else "")
+          + (f", effects {format_effects(effects)}" if effects else ""))
+    return 0
+
+
+def _pixel_config(args: argparse.Namespace, preset: dict[str, object]) -> PixelPendulumConfig:
+    return PixelPendulumConfig(
         image_size=args.image_size or PixelPendulumConfig.image_size,
         gravity=args.gravity,
         gravity_mult=args.gravity_mult,
@@ -101,14 +171,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         draw_torque_arrow=not args.no_torque_arrow,
         effects=tuple(args.effect),
     )
-    config = replace(CollectConfig(env=env, seed=args.seed, workers=args.workers), **preset)
-    path = collect(config, args.out, overwrite=args.overwrite, command=command_line(PROG, argv),
-                   progress=not args.quiet)
-    info = inspect_dataset(path)
-    print(f"wrote {path}: {info.n_sequences} sequences x {info.steps} frames of {info.image_shape}, "
-          f"split {info.split_counts}, g={info.params['g']:g}, actuation_gain={info.params['actuation_gain']:g}"
-          + (f", effects {format_effects(env.effects)}" if env.effects else ""))
-    return 0
 
 
 #: Scene parameter options -> what they set.
@@ -132,7 +194,8 @@ def _collect_scene(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     """``--system SCENE``: refuses the pendulum's options, builds the scene and collects it."""
     defaults = build_parser().parse_args(["--out", "x"])
     pendulum_only = [f"--{name.replace('_', '-')}" for name in ("gravity", "gravity_mult", "actuation_gain", "max_angle",
-                                                                "no_torque_arrow", "effect", "max_speed")
+                                                                "no_torque_arrow", "effect", "max_speed", "env",
+                                                                "env_option")
                      if getattr(args, name) != getattr(defaults, name)]
     if pendulum_only:
         raise PigaError(f"{', '.join(pendulum_only)}: pendulum option(s), not for --system {args.system}")

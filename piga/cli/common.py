@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 
+from envs.dmc import MissingExtraError
 from piga.atomic import OutputExistsError
 from piga.data import DataFormatError
 
@@ -51,6 +52,7 @@ USER_ERRORS: tuple[type[BaseException], ...] = (
     IsADirectoryError,
     NotADirectoryError,
     ValueError,
+    MissingExtraError,
 )
 
 

@@ -33,6 +33,14 @@ def build_parser() -> ArgumentParser:
                        "(CEM) over a trained piga model, from frames alone.")
     p.add_argument("--model", help="run folder of piga-train-model, or of piga-baseline (planet, ddpg: run as trained, "
                    "no goals); not needed with --oracle")
+    p.add_argument("--env", choices=("piga/PixelPendulum-v0", "piga/DMCPendulum-v0"), default="piga/PixelPendulum-v0",
+                   help="the env: Gymnasium's pixel pendulum, or dm_control's (needs piga[dmc]): then both the piga "
+                   "agent (with --model) and the oracle run 10 episodes of 1000 physics steps with the energy-aware "
+                   "swing-up planner, scored in DMC's units (max 1000); it takes --model, --oracle, --episodes, "
+                   "--seed, --env-option, --out, --overwrite and --quiet (default %(default)s)")
+    p.add_argument("--env-option", action="append", default=[], metavar="KEY=VALUE",
+                   help="with --env piga/DMCPendulum-v0: a field of its config, repeatable (mass, length, damping, "
+                   "action_repeat, flip, shadows), as for piga-collect")
     p.add_argument("--oracle", action="store_true", help="plan with the true state and true parameters instead")
     p.add_argument("--episodes", type=positive_int, default=episodes.episodes,
                    help="episodes (default %(default)s); episode 0 starts hanging down")
@@ -73,6 +81,10 @@ def build_parser() -> ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    if args.env == "piga/DMCPendulum-v0":
+        return _dmc(args, argv)
+    if args.env_option:
+        raise PigaError("--env-option is for --env piga/DMCPendulum-v0")
     if args.write_goal_image:
         return _write_goal_image(args)
     if args.angle is not None:
@@ -294,6 +306,66 @@ def _write_goal_image(args: argparse.Namespace) -> int:
     with atomic_output(target, overwrite=args.overwrite) as tmp:
         iio.imwrite(tmp, picture, extension=target.suffix.lower())
     print(f"wrote {target}: the pendulum at {args.angle:g} deg, {picture.shape[1]}x{picture.shape[0]}")
+    return 0
+
+
+#: Options of piga-control that the DMC pendulum takes (the rest must keep their defaults there).
+DMC_OPTIONS = ("model", "oracle", "episodes", "seed", "env", "env_option", "out", "overwrite", "quiet")
+
+
+def _dmc(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
+    """``--env piga/DMCPendulum-v0``: the piga agent and/or the oracle, scored in DMC's units."""
+    from piga.cli.collect import _env_option, dmc_config
+
+    defaults = vars(build_parser().parse_args([]))
+    given = [k for k, v in vars(args).items() if k not in DMC_OPTIONS and v != defaults[k]]
+    if given:
+        raise PigaError(f"--{given[0].replace('_', '-')} is not an option of --env piga/DMCPendulum-v0; it takes "
+                        + ", ".join(f"--{k.replace('_', '-')}" for k in DMC_OPTIONS))
+    import argparse as _argparse
+
+    try:
+        pairs = [_env_option(text) for text in args.env_option]
+    except _argparse.ArgumentTypeError as exc:
+        raise PigaError(str(exc)) from None
+    from piga.dmc_control import DMCControlConfig, OracleSwingUp, PigaSwingUp, dmc_markdown, run_dmc_episodes
+
+    episodes = args.episodes if args.episodes != defaults["episodes"] else DMCControlConfig.episodes
+    config = DMCControlConfig(episodes=episodes, seed=args.seed, env=dmc_config(pairs))
+    outputs = []
+    if args.out:
+        stem = Path(args.out)
+        stem = stem.with_suffix("") if stem.suffix in (".json", ".md") else stem
+        outputs = [stem.with_name(stem.name + s) for s in (".json", ".md")]
+        for path in outputs:
+            check_writable_target(path, args.overwrite)
+    import torch
+
+    torch.set_num_threads(1)
+    results = []
+    if args.model:
+        from piga.baselines.kinds import run_kind
+        from piga.runs import load_model
+
+        if (kind := run_kind(args.model)) != "piga":
+            raise PigaError(f"{args.model} is a {kind} run; --env piga/DMCPendulum-v0 runs piga models (and the oracle)")
+        model, _ = load_model(args.model)
+        if abs(model.config.dt - config.env.dt) > 1e-9:
+            raise PigaError(f"{args.model}: the model was trained at dt {model.config.dt} s, the env steps {config.env.dt} s "
+                            "(set --env-option action_repeat)")
+        agent = PigaSwingUp(model, config.planner)
+        results.append(run_dmc_episodes(agent, "piga", config, model.config.input_frames, progress=not args.quiet))
+    if args.oracle or not args.model:
+        results.append(run_dmc_episodes(OracleSwingUp(config.env, config.planner), "oracle", config, progress=not args.quiet))
+    command = command_line(PROG, argv)
+    text = dmc_markdown(results, config, command)
+    print(text)
+    if outputs:
+        write_json(outputs[0], {"command": command, "config": {"episodes": config.episodes, "seed": config.seed,
+                                                               "env": config.env.to_dict()},
+                                "results": [r.to_dict() for r in results]}, overwrite=args.overwrite)
+        with atomic_output(outputs[1], overwrite=args.overwrite) as tmp:
+            tmp.write_text(text)
     return 0
 
 

@@ -33,8 +33,10 @@ def build_parser() -> ArgumentParser:
     p.add_argument("data", help="HDF5 file of piga's schema (only /frames and /actions are used for training)")
     p.add_argument("--out", required=True, help="run folder")
     p.add_argument("--preset", choices=sorted(PRESETS), default="fast",
-                   help="'fast' (default): the CPU recipe; 'paper': the paper's (RMSProp 3e-4, 1000 epochs, M=5). For a scene "
-                   "(spring, gravity, ...) both are the scene's own (README, 'Systems'); the defaults shown are the pendulum's. "
+                   help="'fast' (default): the CPU recipe; 'paper': the paper's (RMSProp 3e-4, 1000 epochs, M=5); "
+                   "'continuous': the fast recipe for a system that moves within the frame (RK4 with the action held, "
+                   "velocities read through it, a learnable damping b). For a scene (spring, gravity, ...) 'fast' and "
+                   "'paper' are the scene's own (README, 'Systems'); the defaults shown are the pendulum's. "
                    "Explicit options override the preset.")
     recipe("--epochs", "epochs", positive_int, "passes over the training windows; the cosine schedule is planned over them")
     recipe("--max-minutes", "max_minutes", positive_float, "stop after the epoch that ends past this budget",
@@ -43,6 +45,9 @@ def build_parser() -> ArgumentParser:
     recipe("--lr", "lr", positive_float, "network learning rate")
     recipe("--lr-physics", "lr_physics", positive_float, "physical-parameter learning rate, log space")
     recipe("--warmup-steps", "warmup_steps", nonnegative_int, "autoencoder-only steps first")
+    p.add_argument("--signed-actuation", action="store_true",
+                   help="learn the sign of a too (a in linear space, from +0.3): for a camera on the other side of the "
+                   "hinge or a motor wired the other way, which flip the actuation the frames show")
     p.add_argument("--seed", type=nonnegative_int, default=fast.seed, help="seed of initialisation and sampling (default %(default)s)")
     p.add_argument("--threads", type=nonnegative_int, default=fast.threads, help="torch CPU threads (default %(default)s: torch's choice)")
     p.add_argument("--resume", action="store_true", help="continue the run in --out; it may raise --epochs or --max-minutes "
@@ -82,7 +87,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if tuple(ckpt["data"]["image_shape"]) != info.image_shape or ckpt["data"]["system"] != info.system:
             raise PigaError(f"--resume: {args.data} ({info.system}, {info.image_shape}) does not match the run's data "
                             f"({ckpt['data']['system']}, {tuple(ckpt['data']['image_shape'])})")
-        changed = sorted(set(overrides) - {"epochs", "max_minutes"})
+        changed = sorted(set(overrides) - {"epochs", "max_minutes"}) + (["signed_actuation"] if args.signed_actuation else [])
         if changed:
             raise PigaError(f"--resume keeps the run's recipe; drop {', '.join('--' + c.replace('_', '-') for c in changed)}")
         train_config = replace(TrainConfig(**ckpt["train_config"]), **overrides)
@@ -94,6 +99,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         preset = preset_for(args.preset, info)
         train_config = replace(TrainConfig(seed=args.seed, threads=args.threads), **{**preset.get("train", {}), **overrides})
         model_overrides = dict(preset.get("model", {}))
+        if args.signed_actuation:
+            model_overrides["signed_actuation"] = True
         model_config = model_config_for(info, model_overrides)
         record = {"command": command}
     check_trainable(info, model_config, train_config)
@@ -124,6 +131,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     from piga.evaluate import summary_line
 
     print(f"learned: {summary_line(metrics)}")
+    if metrics.get("parameters", {}).get("a", 1.0) < 0:
+        print("note: a < 0, the actuation is flipped: positive u turns the pendulum clockwise as the frames show it "
+              "(a camera on the other side of the hinge, or a motor wired the other way)")
     ssim = metrics["frame_ssim_mean"]
     print(f"SSIM ({metrics['split']} split): prediction {ssim['prediction']:.3f}"
           + (f", extrapolation {ssim['extrapolation']:.3f}" if ssim["extrapolation"] is not None else "")

@@ -40,7 +40,7 @@ class CorrectedDynamics:
 
     def __init__(self, corrected: fit.Model, nominal: fit.Nominal, gravity_mult: float = 1.0):
         values = {**corrected.values, "g": corrected.values["g"] * gravity_mult}
-        self.corrected = fit.Model(corrected.effects, corrected.delay, values)
+        self.corrected = corrected.with_values(values)
         self.nominal = replace(nominal, offset=0.0)
         self._params = {k: v.detach() for k, v in fit.parameters_of(self.corrected, self.nominal).items()}
         self.history: list[float] = []

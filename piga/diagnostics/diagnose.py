@@ -22,12 +22,16 @@ Steps (no state labels, no effect labels; only frames and actions of the "real" 
    more than ``bic_margin`` *and* the typical held-out free-run error (the median window's) by
    more than ``min_gain`` is
    accepted (a delay alone can win the one-step BIC while an unmodelled speed clip ruins its free
-   run); a second effect is then tried on top of the first in the same way. A fitted delay is the
+   run); a second effect is then tried on top of the first in the same way. ``within_frame`` (the
+   system moves within the frame) needs only a BIC drop above ``within_frame_bic_margin`` and no
+   loss in free run: it mostly moves the parameters, not the predictions. A fitted delay is the
    camera's (``frame_delay``) as far as every sequence starts with that many repeated frames.
 6. A gain error is the refitted a over the nominal a, beyond ``gain_tolerance`` and (with the
-   bootstrap) with a 95% interval that excludes the nominal a. A fitted speed
-   clip within ``gym_clip_tolerance`` of 8 rad/s is Gymnasium's own clip, present in the nominal
-   environment too, so it is reported but is not a gap.
+   bootstrap) with a 95% interval that excludes the nominal a. A speed clip is a candidate only
+   where the data show one: the observed speeds pile up at its level and hardly pass it
+   (:func:`clip_supported`; a damping, which slows fast swings too, can otherwise win the BIC as a
+   clip). A clip within ``gym_clip_tolerance`` of 8 rad/s is Gymnasium's own, present in the
+   nominal environment too, and not a gap, but only when the file says it came from Gymnasium.
 7. "Not explained by the candidates": a flexible basis of the state and action
    (:func:`~piga.diagnostics.residuals.generic_features`) fitted to the remaining one-step
    residuals still lowers the held-out residual by more than ``unexplained_gain`` with a BIC gain.
@@ -89,7 +93,19 @@ class DiagnoseConfig:
     """|a / a_nominal - 1| above this is reported as an actuator gain error (if the bootstrap interval
     of a also excludes the nominal a)."""
     gym_clip_tolerance: float = 0.3
-    """A fitted speed clip within this of 8 rad/s is Gymnasium's own."""
+    """A fitted speed clip within this of 8 rad/s is Gymnasium's own (for a file from Gymnasium's pendulum)."""
+    within_frame_bic_margin: float = 50.0
+    """BIC drop with which ``within_frame`` is accepted even when it hardly lowers the free-run error.
+    Its main consequence is on the identified parameters (one Euler step per frame reads a and g
+    low), not on prediction: on a pendulum simulated with 2 substeps per frame and damping (dt 0.04,
+    angle noise 0.002 rad), adding it to damping lowered the BIC by 113 and the typical free-run
+    error by 0.9%, and moved a from -6.2% to -0.9% of the truth."""
+    clip_band: float = 0.3
+    """Speeds (rad/s, backward differences of the angles) within this of a fitted clip level count as at the clip."""
+    clip_min_at: int = 5
+    """A speed clip needs at least this many speeds at its level (a pile-up)."""
+    clip_max_beyond: float = 0.1
+    """A speed clip is refuted when more speeds than this fraction of those at its level lie beyond it."""
     max_effects: int = 2
     """Effects the forward selection may combine."""
     bootstrap: int = 20
@@ -140,6 +156,13 @@ def diagnose(model: PhysicsModel, data: str | os.PathLike[str], config: Diagnose
         NotTheSceneError: the recording is not the scene the model knows.
         DiagnosisInputError: the model and the data cannot be compared.
     """
+    from piga.diagnostics.observe import DiagnosisInputError
+
+    a = model.physical_parameters()["a"]
+    if not a > 0:
+        raise DiagnosisInputError(f"the model learned a = {a:.4g} < 0: its frames show a flipped actuation (a camera on the "
+                                  "other side of the hinge, or a motor wired the other way); the diagnosis' candidates "
+                                  "assume a > 0")
     rec_training = training_reconstruction_mse(model, checkpoint)
     blank = training_blank_mse(model, checkpoint)
     if blank is not None:
@@ -239,10 +262,34 @@ class Selection:
     """Every test, in order."""
 
 
-def select(candidates: Candidates, nom: Nominal, w: WindowSet, config: DiagnoseConfig, progress: bool = False) -> Selection:
+def observed_speeds(theta: np.ndarray, dt: float, stale: np.ndarray | None) -> np.ndarray:
+    """(n,) absolute speeds |θ_t − θ_{t−1}| / dt over every sequence, leaving out repeated frames."""
+    speed = np.abs(np.diff(theta, axis=1)) / dt  # (N, T-1)
+    if stale is not None:
+        speed = speed[~(stale[:, 1:] | stale[:, :-1])]
+    return speed.ravel()
+
+
+def clip_supported(level: float, speeds: np.ndarray, config: DiagnoseConfig) -> bool:
+    """Whether the data show a speed clip at ``level``: speeds pile up there and hardly pass it.
+
+    A clip holds the speed at its level while the forces would raise it, so the observed speeds
+    gather at the level (at least ``clip_min_at``) and almost none lie beyond it (at most
+    ``clip_max_beyond`` times as many as at it). A damping or a within-frame integration, which
+    also slow the fastest swings, lets them pass any level a clip fitted in their place.
+    """
+    at = int(np.count_nonzero(np.abs(speeds - level) <= config.clip_band))
+    beyond = int(np.count_nonzero(speeds > level + config.clip_band))
+    return at >= config.clip_min_at and beyond <= config.clip_max_beyond * at
+
+
+def select(candidates: Candidates, nom: Nominal, w: WindowSet, config: DiagnoseConfig, progress: bool = False,
+           speeds: np.ndarray | None = None) -> Selection:
     """Forward selection: in BIC order, the first candidate that lowers the BIC by more than
     ``bic_margin`` and the typical held-out free-run error by more than ``min_gain`` is accepted; then
-    up to ``max_effects`` effects on top of each other, the same way."""
+    up to ``max_effects`` effects on top of each other, the same way. With ``speeds`` (the observed
+    speeds, :func:`observed_speeds`), a candidate with a speed clip that they refute
+    (:func:`clip_supported`) is passed over."""
     from tqdm.auto import tqdm
 
     chosen, steps = candidates.refit, []
@@ -250,11 +297,16 @@ def select(candidates: Candidates, nom: Nominal, w: WindowSet, config: DiagnoseC
     for _round in range(config.max_effects):
         best = None
         for cand in pool:  # in BIC order: the first that passes both tests is accepted
+            if speeds is not None and "speed_clip" in cand.model.effects \
+                    and not clip_supported(cand.model.values["v"], speeds, config):
+                continue  # the speeds do not pile up at this level, or pass it: no clip
             bic_drop = chosen.bic - cand.bic
             if bic_drop <= config.bic_margin:
                 break  # the rest have even smaller BIC drops
             free_drop = 1 - cand.typical / chosen.typical if chosen.typical > 0 else 0.0
-            accepted = free_drop > config.min_gain
+            accepted = free_drop > config.min_gain or (
+                "within_frame" in cand.model.effects and "within_frame" not in chosen.model.effects
+                and bic_drop > config.within_frame_bic_margin and free_drop >= 0)
             steps.append(SelectionStep(cand.name, bic_drop, free_drop, bool(accepted)))
             if accepted:
                 best = cand
@@ -269,7 +321,8 @@ def select(candidates: Candidates, nom: Nominal, w: WindowSet, config: DiagnoseC
         pool = []
         for name in tqdm(rest, desc=f"adding to {base.name}", disable=not progress):
             effects = tuple(e for e in fit.CANDIDATES if e in (*base.effects, name))
-            m = fit.fit_candidate(effects, base.values, nom, w.fit, delay=base.delay or None)
+            m = fit.fit_candidate(effects, base.values, nom, w.fit, delay=base.delay or None,
+                                  substeps=base.substeps or None)
             pool.append(score(m, nom, w.fit1, w.free))
         pool.sort(key=lambda s: s.bic)
     return Selection(chosen, steps)
@@ -296,15 +349,16 @@ def generic_basis(final: fit.Model, nom: Nominal, obs: Observations, theta: np.n
 
 
 def name_effects(final: fit.Model, nom: Nominal, w: WindowSet, camera: CameraFindings | None, generic: GenericBasis,
-                 config: DiagnoseConfig) -> Naming:
+                 config: DiagnoseConfig, from_gymnasium: bool = True) -> Naming:
     """Step 4: the effects that the chosen physics and the camera stage name, with intervals, and the verdict.
 
-    Gymnasium's own speed clip is no gap; a delay with a repeated start is the camera's; a gain
-    error is the refitted a, named only when its bootstrap interval excludes the nominal a.
+    Gymnasium's own speed clip is no gap (for a recording that the file says came from Gymnasium's
+    pendulum, ``from_gymnasium``); a delay with a repeated start is the camera's; a gain error is
+    the refitted a, named only when its bootstrap interval excludes the nominal a.
     """
     notes: list[str] = []
     named = list(final.effects)
-    if "speed_clip" in named and abs(final.values["v"] - GYM_SPEED_CLIP) <= config.gym_clip_tolerance:
+    if from_gymnasium and "speed_clip" in named and abs(final.values["v"] - GYM_SPEED_CLIP) <= config.gym_clip_tolerance:
         named.remove("speed_clip")
         notes.append(f"a speed clip at {final.values['v']:.2f} rad/s was found: Gymnasium's own ±8 rad/s clip, which the "
                      "nominal environment has too (the model's engine does not); it is not counted as a gap")
@@ -338,6 +392,11 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet, camera: CameraFin
                     notes.append("an actuator delay and a camera latency of the same k are the same model from frame k on; "
                                  "the recording does not start with repeated frames, as a late camera would, so it is "
                                  "named an actuator delay")
+        elif e == "within_frame":
+            effects.append(Effect("within_frame", final.substeps, "substeps per frame"))
+            notes.append("the system keeps moving under the held action between two frames (a continuous system, or "
+                         "a simulator with several physics steps per frame): with one Euler step per frame the "
+                         "identified a and g come out low; train with `--preset continuous` to model it")
         else:
             key = fit.PARAMETER[e]
             effects.append(Effect(e, final.values[key], UNITS[key], interval(key)))
@@ -407,8 +466,13 @@ def measure_gap(candidates: Candidates, chosen: Score, nom: Nominal, obs: Observ
     rematched = camera is not None and camera.rematched
     # The floor: the corrected model's error on a simulated twin of the held-out data, which it
     # describes exactly (piga.diagnostics.twin). Not with re-matched angles: their closure is in pixels.
-    floor = None
-    if model is not None and not rematched:
+    # The twin is rendered by the simulator the model was identified in, Gymnasium's pendulum: its floor
+    # is this recording's only when the file says the recording came from there too.
+    floor, floor_note = None, None
+    if not obs.from_gymnasium:
+        floor_note = ("no valid floor: the twin that measures it is rendered with Gymnasium's picture, and this "
+                      "recording was not filmed by that camera, so the closure is raw (no floor subtracted)")
+    if model is not None and not rematched and obs.from_gymnasium:
         floor = twin_floor(model, final, nom, theta[held_rows], obs.actions[held_rows],
                            None if stale is None else stale[held_rows], config.stride, arrow=arrow)
     # Closure on the typical window: the median over held-out windows of each window's mean squared
@@ -426,13 +490,23 @@ def measure_gap(candidates: Candidates, chosen: Score, nom: Nominal, obs: Observ
         # typical window, against the matched residual: a true floor, as no angle renders closer
         pn, pc, pf = pixels.typical_pixel_mse_nominal, pixels.typical_pixel_mse_corrected, pixels.pixel_mse_floor
         pixel_closure = float((pn - pc) / (pn - pf)) if pn - pf > 0 else None
+    # A floor above the corrected model's own error is no floor (a closure against it exceeds 100%):
+    # the headline then falls back to the raw closure, and says why.
+    if typ_floor is not None and typ_floor >= typ_fin:
+        floor_note = (f"the twin's floor ({typ_floor:.3g} rad²) lies above the corrected model's own error "
+                      f"({typ_fin:.3g} rad²), so it is no floor for this recording; the closure is raw (no floor subtracted)")
+        typical_gap, mean_gap = raw_typical, None
+    if pixel_closure is not None and pixel_closure > 1:
+        pixel_closure = float((pn - pc) / pn) if pn > 0 else None
+        floor_note = (f"the matched floor ({pf:.3g}) lies above the corrected model's pixel error ({pc:.3g}), so it is no "
+                      "floor; the pixel closure is raw (no floor subtracted)")
     # A camera effect changes the angles themselves (re-matched), so nominal and corrected angle errors
     # are measured against different angles: then the headline closure is the pixels'.
     basis = "pixels" if rematched and pixel_closure is not None else "state"
     if basis == "pixels":
         measurable = pixels.typical_pixel_mse_nominal > MEASURABLE_GAP * pixels.pixel_mse_floor
     else:
-        measurable = typ_floor is None or typ_nom > MEASURABLE_GAP * typ_floor
+        measurable = typ_floor is None or typ_floor >= typ_fin or typ_nom > MEASURABLE_GAP * typ_floor
     return Gap(
         horizon=list(range(1, len(h_nom) + 1)),
         state_mse_nominal=h_nom.tolist(), state_mse_corrected=h_fin.tolist(), closure=closure,
@@ -451,6 +525,7 @@ def measure_gap(candidates: Candidates, chosen: Score, nom: Nominal, obs: Observ
         pixel_mse_nominal=pixels.pixel_mse_nominal, pixel_mse_corrected=pixels.pixel_mse_corrected,
         pixel_mse_floor=pixels.pixel_mse_floor, typical_pixel_mse_nominal=pixels.typical_pixel_mse_nominal,
         typical_pixel_mse_corrected=pixels.typical_pixel_mse_corrected,
+        floor_note=floor_note,
     )
 
 
@@ -460,8 +535,9 @@ def candidate_table(candidates: Candidates) -> list[CandidateRow]:
     rows = [CandidateRow("nominal (no refit)", nominal.bic, nominal.free_run, nominal.typical, nominal.model.values)]
     for s in [candidates.refit, *candidates.singles]:
         m = s.model
+        values = {**m.values, **({"M": float(m.substeps)} if "within_frame" in m.effects else {})}
         rows.append(CandidateRow("none (g, a refitted)" if not m.effects else m.name, s.bic, s.free_run, s.typical,
-                                 m.values, s.bic - candidates.refit.bic, m.delay or None))
+                                 values, s.bic - candidates.refit.bic, m.delay or None))
     return rows
 
 
@@ -484,17 +560,18 @@ def analyse(obs: Observations, nom: Nominal, config: DiagnoseConfig = DiagnoseCo
     theta = camera.theta if camera is not None and camera.rematched else obs.theta  # the corrected model's angles
     windows = cut_windows(obs, theta, stale, config)
     candidates = score_candidates(nom, windows, progress)
-    selection = select(candidates, nom, windows, config, progress)
+    selection = select(candidates, nom, windows, config, progress, speeds=observed_speeds(theta, obs.dt, stale))
     final = selection.chosen.model
     generic = generic_basis(final, nom, obs, theta, stale, config)
-    naming = name_effects(final, nom, windows, camera, generic, config)
+    naming = name_effects(final, nom, windows, camera, generic, config, from_gymnasium=obs.from_gymnasium)
     vision, vision_notes = summarise_vision(obs, rec_training, camera, stale, naming.effects, config)
     gap = measure_gap(candidates, selection.chosen, nom, obs, theta, stale, windows, config, model, camera, arrow)
     res_nom = one_step_residuals(candidates.nominal.model, nom, obs.theta, obs.actions, np.arange(len(obs.theta)))
     return Diagnosis(
         verdict=naming.verdict, verdict_class=naming.verdict_class, effects=naming.effects,
         nominal={"g": nom.g, "a": nom.a, "offset": nom.offset},
-        corrected={**final.values, **({"delay": final.delay} if "delay" in final.effects else {})},
+        corrected={**final.values, **({"delay": final.delay} if "delay" in final.effects else {}),
+                   **({"substeps": final.substeps} if "within_frame" in final.effects else {})},
         corrected_effects=list(final.effects),
         candidates=candidate_table(candidates), selection=selection.steps, generic_basis=generic,
         gap=gap, vision=vision,

@@ -12,9 +12,19 @@ as the effect wrappers of :mod:`envs.effects` (model convention: Gymnasium's θ 
 | ``friction`` | c (N·m) | torque -c·tanh(θ̇ / 0.1) |
 | ``bias`` | τ0 (N·m) | torque +τ0 |
 | ``speed_clip`` | v (rad/s) | θ̇ clipped to ±v after each step |
+| ``within_frame`` | integer M (substeps) | the system moves within the frame: M semi-implicit Euler steps of dt / M per frame, the action held |
 
 θ̈ = 1.5·g·sin(θ + φ) + 3·a·ũ + 3·(passive torques); semi-implicit Euler with the nominal model's
 substeps. A gain error (ũ = m·u) is not a separate term: it is the refitted a over the nominal a.
+
+``within_frame``: a real system (or a simulator with fine physics steps, such as MuJoCo's) keeps
+moving under the held action between two frames. Then the second difference of the frames sees
+about (M + 1) / 2M of u_t and (M − 1) / 2M of u_{t−1}, and the backward difference lags the velocity
+at the frame by about dt·F·(M − 1) / 2M, which one Euler step per frame reads as a lower a and g (and
+a residual correlated with the action at lag 1 that no integer delay fits). The candidate simulates
+M substeps per frame and reads the start velocity through them (the velocity whose frame step
+reproduces the observed difference, as :func:`piga.physics.hold_velocity` does); M = 16 stands for
+a continuous system. M is searched over :data:`WITHIN_FRAME_SUBSTEPS`, as k is for a delay.
 
 The fits run on the encoded angles alone (no images, no labels), so they take seconds: L-BFGS in
 float64 on the mean squared multi-step angle error over windows of the fit split.
@@ -49,7 +59,8 @@ from piga.diagnostics.repeats import repeat_sources
 from piga.runs import Nominal
 
 #: Effects that the fit can add to the physics, in the order of the report.
-CANDIDATES: tuple[str, ...] = ("damping", "friction", "bias", "delay", "deadzone", "saturation", "speed_clip")
+CANDIDATES: tuple[str, ...] = ("damping", "friction", "bias", "delay", "deadzone", "saturation", "speed_clip",
+                               "within_frame")
 #: Continuous parameter of each effect (delay is discrete).
 PARAMETER: dict[str, str] = {"damping": "b", "friction": "c", "bias": "tau0", "deadzone": "d", "saturation": "s",
                              "speed_clip": "v"}
@@ -64,6 +75,10 @@ GRIDS: dict[str, tuple[float, ...]] = {
 }
 MAX_DELAY = 4
 """Largest delay tried (steps)."""
+WITHIN_FRAME_SUBSTEPS: tuple[int, ...] = (2, 3, 4, 8, 16)
+"""Substeps M tried for ``within_frame`` (16: close to a continuous system)."""
+HOLD_ITERATIONS = 3
+"""Newton steps that read the start velocity through the frame step (``within_frame``)."""
 #: Smallest value that :func:`simulate` uses for a limit (a saturation level, a speed clip): the
 #: fit may move the free parameter below it, but the physics, and so the reported value, stop there.
 LOWER_BOUNDS: dict[str, float] = {"s": 1e-3, "v": 0.1}
@@ -143,6 +158,8 @@ class Model:
     """k for the delay effect (0 without it)."""
     values: dict[str, float] = field(default_factory=dict)
     """Parameter values: g, a and each effect's parameter."""
+    substeps: int = 0
+    """M for the within_frame effect (0 without it: the nominal model's substeps)."""
 
     @property
     def name(self) -> str:
@@ -151,8 +168,12 @@ class Model:
 
     @property
     def n_parameters(self) -> int:
-        """Free parameters: g, a and one per effect (the delay counts as one)."""
+        """Free parameters: g, a and one per effect (the delay and M count as one each)."""
         return 2 + len(self.effects)
+
+    def with_values(self, values: dict[str, float]) -> Model:
+        """The same effects, delay and M with other ``values``."""
+        return Model(self.effects, self.delay, values, self.substeps)
 
 
 def simulate(model: Model, params: dict[str, Tensor], nominal: Nominal, w: Windows, with_velocity: bool = False) -> Tensor:
@@ -164,19 +185,22 @@ def simulate(model: Model, params: dict[str, Tensor], nominal: Nominal, w: Windo
     u = w.actions  # (B, MAX_DELAY + H)
     h_steps = w.target.shape[1]
     k = model.delay if "delay" in model.effects else 0
-    cmd = u[:, MAX_DELAY - k : MAX_DELAY - k + h_steps]  # (B, H): ũ before the other actuator effects
+    within = "within_frame" in model.effects
+    # ũ over the frame before the start (for within_frame's start velocity) and the H frames after it
+    padded = torch.cat([u.new_zeros(u.shape[0], 1), u], 1)  # (B, 1 + MAX_DELAY + H); u_{-MAX_DELAY-1} = 0
+    cmd = padded[:, MAX_DELAY - k : MAX_DELAY - k + h_steps + 1]  # (B, H + 1)
     if "deadzone" in model.effects:
         cmd = torch.sign(cmd) * torch.relu(cmd.abs() - params["d"])
     if "saturation" in model.effects:
         s = params["s"].clamp_min(LOWER_BOUNDS["s"])
         cmd = torch.minimum(torch.maximum(cmd, -s), s)
     g, a = params["log_g"].exp(), params["log_a"].exp()
-    theta, v = w.theta0, w.v0
-    h = nominal.dt / nominal.substeps
-    out, speeds = [], []
-    for j in range(h_steps):
-        for _ in range(nominal.substeps):
-            tau = a * cmd[:, j]
+    substeps = model.substeps if within else nominal.substeps
+    h = nominal.dt / substeps
+
+    def frame(theta: Tensor, v: Tensor, c: Tensor) -> tuple[Tensor, Tensor]:
+        for _ in range(substeps):
+            tau = a * c
             if "damping" in model.effects:
                 tau = tau - params["b"] * v
             if "friction" in model.effects:
@@ -188,6 +212,19 @@ def simulate(model: Model, params: dict[str, Tensor], nominal: Nominal, w: Windo
                 vmax = params["v"].clamp_min(LOWER_BOUNDS["v"])
                 v = torch.minimum(torch.maximum(v, -vmax), vmax)
             theta = theta + h * v
+        return theta, v
+
+    theta, v = w.theta0, w.v0
+    if within:  # v0 is the difference over the last frame: read the velocity at the start through the frame step
+        previous = theta - nominal.dt * v
+        start = v
+        for _ in range(HOLD_ITERATIONS):
+            reached, _ = frame(previous, start, cmd[:, 0])
+            start = start + (theta - reached) / nominal.dt
+        _, v = frame(previous, start, cmd[:, 0])
+    out, speeds = [], []
+    for j in range(h_steps):
+        theta, v = frame(theta, v, cmd[:, j + 1])
         out.append(theta)
         speeds.append(v)
     if with_velocity:
@@ -234,14 +271,14 @@ def fit(model: Model, nominal: Nominal, w: Windows, weights: Tensor | None = Non
     A continuous effect parameter starts from the best point of its grid in :data:`GRIDS` (the
     loss is not convex in a deadzone or a clip level); L-BFGS then refines all parameters.
     """
-    start = Model(model.effects, model.delay, dict(model.values))
+    start = model.with_values(dict(model.values))
     for e in model.effects:
         name = PARAMETER.get(e)
         if name is None or name in model.values:
             continue
         best = None
         for value in GRIDS[e]:
-            trial = Model(model.effects, model.delay, {**start.values, name: value})
+            trial = start.with_values({**start.values, name: value})
             with torch.no_grad():
                 score = float(loss(trial, nominal, w, weights))
             if best is None or score < best[0]:
@@ -264,14 +301,15 @@ def fit(model: Model, nominal: Nominal, w: Windows, weights: Tensor | None = Non
     values = {"g": float(params["log_g"].detach().exp()), "a": float(params["log_a"].detach().exp())}
     values.update({k: max(float(v.detach()), LOWER_BOUNDS.get(k, -math.inf)) for k, v in params.items()
                    if not k.startswith("log_")})
-    return Model(model.effects, model.delay, values)
+    return model.with_values(values)
 
 
-def fit_best_delay(effects: tuple[str, ...], base: dict[str, float], nominal: Nominal, w: Windows) -> Model:
+def fit_best_delay(effects: tuple[str, ...], base: dict[str, float], nominal: Nominal, w: Windows,
+                   substeps: int = 0) -> Model:
     """Fits ``effects`` (which include "delay") for each k in 1..MAX_DELAY; returns the best."""
     best = None
     for k in range(1, MAX_DELAY + 1):
-        m = fit(Model(effects, k, dict(base)), nominal, w)
+        m = fit(Model(effects, k, dict(base), substeps), nominal, w)
         with torch.no_grad():
             score = float(loss(m, nominal, w))
         if best is None or score < best[0]:
@@ -280,14 +318,25 @@ def fit_best_delay(effects: tuple[str, ...], base: dict[str, float], nominal: No
 
 
 def fit_candidate(effects: tuple[str, ...], base: dict[str, float], nominal: Nominal, w: Windows,
-                  delay: int | None = None) -> Model:
+                  delay: int | None = None, substeps: int | None = None) -> Model:
     """Fits a candidate with ``effects``, starting from the values in ``base`` (g, a, ...).
 
     With a "delay" among the effects, ``delay`` holds k fixed; None searches k = 1..MAX_DELAY.
+    With "within_frame", ``substeps`` holds M fixed; None searches :data:`WITHIN_FRAME_SUBSTEPS`.
     """
+    if "within_frame" in effects and substeps is None:
+        best = None
+        for m_sub in WITHIN_FRAME_SUBSTEPS:
+            m = fit_candidate(effects, base, nominal, w, delay, m_sub)
+            with torch.no_grad():
+                score = float(loss(m, nominal, w))
+            if best is None or score < best[0]:
+                best = (score, m)
+        return best[1]
+    m_sub = substeps if "within_frame" in effects else 0
     if "delay" in effects and delay is None:
-        return fit_best_delay(effects, base, nominal, w)
-    return fit(Model(effects, delay if "delay" in effects else 0, dict(base)), nominal, w)
+        return fit_best_delay(effects, base, nominal, w, m_sub)
+    return fit(Model(effects, delay if "delay" in effects else 0, dict(base), m_sub or 0), nominal, w)
 
 
 def one_step_bic(model: Model, nominal: Nominal, w1: Windows) -> tuple[float, float]:

@@ -94,6 +94,9 @@ class Observations:
     """(N, T) bool: frame t repeats frame t - 1 (within 2 gray levels, :func:`~piga.diagnostics.repeats.stale_frames`); None: not known."""
     blank_mse: float | None = None
     """Mean per-frame MSE of the frames against the model's background (a render of no object); None: not known."""
+    from_gymnasium: bool = True
+    """The file says it was collected from Gymnasium's pendulum (``env_id``, or an ``env_config`` of
+    :class:`envs.pendulum.PixelPendulumConfig`): only then is a clip at 8 rad/s Gymnasium's own."""
 
 
 def check_compatible(model: PhysicsModel, path: str | os.PathLike[str], min_sequences: int = 20,
@@ -164,6 +167,22 @@ def observe(model: PhysicsModel, path: str | os.PathLike[str], batch: int = 16, 
             rec[start : start + batch] = ((model.decoder(coords) - x) ** 2).mean(dim=(2, 3, 4)).double().numpy()
             blank[start : start + batch] = ((x - model.encoder.background) ** 2).mean(dim=(2, 3, 4)).double().numpy()
         frames = f["frames"][np.sort(keep)] if len(keep) else np.zeros((0, info.steps, *info.image_shape), np.uint8)
+        gymnasium = from_gymnasium(dict(f.attrs))
     check_actions(actions, path)
     return Observations(theta, actions, rec, split == SPLITS["train"], float(info.dt), frames, np.sort(keep), stale,
-                        float(blank.mean()))
+                        float(blank.mean()), gymnasium)
+
+
+def from_gymnasium(attrs: dict) -> bool:
+    """Whether a file's attributes say it was collected from Gymnasium's pendulum (piga-collect's
+    ``env_id``, or, in files from before it, an ``env_config`` with the pixel pendulum's torque arrow)."""
+    import json
+
+    env_id = attrs.get("env_id")
+    if env_id is not None:
+        return str(env_id) == "piga/PixelPendulum-v0"
+    try:
+        config = json.loads(attrs.get("env_config", "{}"))
+    except (TypeError, ValueError):
+        return False
+    return isinstance(config, dict) and "draw_torque_arrow" in config

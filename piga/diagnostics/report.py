@@ -189,6 +189,13 @@ def markdown(d: Diagnosis, model: str, data: str, command: str) -> str:
                     "typical held-out window (the median over windows of each window's mean squared free-run angle "
                     f"error: {number(g.typical_free_run_mse_nominal, '.3g')} rad² nominal, "
                     f"{number(g.typical_free_run_mse_corrected, '.3g')} rad² corrected). No floor is subtracted.")
+    if g.floor_note:
+        headline = (f"**Free-run closure {_pct(g.free_run_gap_closure)}, raw**: 1 − err_corrected / err_nominal on the "
+                    "typical held-out window (the median over windows of each window's mean squared free-run "
+                    + ("pixel error" if g.closure_basis == "pixels" else
+                       f"angle error: {number(g.typical_free_run_mse_nominal, '.3g')} rad² nominal, "
+                       f"{number(g.typical_free_run_mse_corrected, '.3g')} rad² corrected")
+                    + f"). {g.floor_note[0].upper()}{g.floor_note[1:]}.")
     if not g.gap_above_floor:
         headline = ("**No gap above the floor to close** on the typical held-out window: the nominal model's error there "
                     f"is within {MEASURABLE_GAP:g}x the floor, so the closure ({_pct(g.free_run_gap_closure)}) is a ratio "

@@ -60,11 +60,15 @@ class Effect(_ByKey):
             return f"actuator delay of {steps(self.value)}"
         if self.effect == "frame_delay":
             return f"camera delay (frame_delay) of {steps(self.value)}"
+        if self.effect == "within_frame":
+            return (f"the system integrates within the frame (moves under the held action between frames; "
+                    f"fits best as {self.value:g} substeps per frame)")
         known = self.interval is not None and all(math.isfinite(x) for x in self.interval)
         ci = f" (95% interval {self.interval[0]:.3g}..{self.interval[1]:.3g})" if known else ""
         if self.effect == "shift":
             return f"shift {self.dx:.3g} px right, {self.dy:.3g} px down (mean {self.value:.3g}{ci})"
-        return f"{self.effect} {self.value:.3g} {self.unit}{ci}"
+        value = f"{self.value:.3g}" if self.value is not None and math.isfinite(self.value) else "–"
+        return f"{self.effect} {value} {self.unit}{ci}"
 
     def to_dict(self) -> dict[str, Any]:
         shift_only = ("dx", "dy", "dx_interval", "dy_interval")
@@ -273,6 +277,10 @@ class Gap(_ByKey):
     pixel_mse_floor: float | None
     typical_pixel_mse_nominal: float | None
     typical_pixel_mse_corrected: float | None
+    floor_note: str | None = None
+    """Why the headline closure has no floor subtracted (None: it has one, or none was tried): the
+    recording was not filmed by the simulator's camera, or the floor lay above the corrected model's
+    own error (then it is no floor, and a closure against it would exceed 100%)."""
 
 
 @dataclass
@@ -334,5 +342,6 @@ class Diagnosis(_ByKey):
 
     def corrected_model(self) -> fit.Model:
         """The chosen physics as a :class:`piga.diagnostics.fit.Model` (for a planner)."""
-        values = {k: float(v) for k, v in self.corrected.items() if k != "delay"}
-        return fit.Model(tuple(self.corrected_effects), int(self.corrected.get("delay", 0)), values)
+        values = {k: float(v) for k, v in self.corrected.items() if k not in ("delay", "substeps")}
+        return fit.Model(tuple(self.corrected_effects), int(self.corrected.get("delay", 0)), values,
+                         int(self.corrected.get("substeps", 0)))

@@ -1,0 +1,300 @@
+"""dm_control's MuJoCo pendulum (``suite.load("pendulum", "swingup")``) seen through a face-on camera.
+
+A pendulum that piga did not simulate: MuJoCo integrates it in physics steps of 0.02 s while an
+action is held over the frame (``action_repeat`` steps per frame), its hinge has damping, and the
+picture is MuJoCo's shaded 3D pole over a textured floor and sky. The task, its reward and its
+physics step are dm_control's own; piga only adds a camera on the hinge axis (an edit of the
+model XML) and the Gymnasium interface.
+
+Needs the optional extra ``dmc`` (``pip install -e '.[dmc]'``): without it, making the env raises
+:class:`MissingExtraError` ("install piga[dmc]"). Rendering is headless. ``MUJOCO_GL`` defaults to
+``egl`` here, which works on a CPU-only machine through Mesa's software rasteriser (llvmpipe); a
+user's own ``MUJOCO_GL`` (``osmesa``, ``glfw``) is respected.
+
+## Spaces
+
+| space | shape | dtype | range |
+|---|---|---|---|
+| observation | (frame_stack, image_size, image_size) | uint8 | 0..255 gray, oldest frame first |
+| action | (1,) | float32 | u in [-1, 1] (DMC's control range; clipped) |
+
+## Dynamics (MuJoCo, dm_control's pendulum.xml with the config's edits)
+
+| quantity | value |
+|---|---|
+| angle θ | the hinge angle: 0 upright, positive counter-clockwise as displayed (camera on the +y side) |
+| equation | I·θ̈ = m·g·l·sin θ + gear·u − d·θ̇, with I = m·(l² + 0.4·r²) (a sphere of radius r = 0.05 at the tip; the pole is massless) |
+| piga's form | θ̈ = 1.5·g'·sin θ + 3·a·u − 3·b·θ̇ with g' = m·g·l / (1.5·I), a = gear / (3·I), b = d / (3·I) |
+| integration | MuJoCo's semi-implicit Euler (damping implicit), 0.02 s per physics step, ``action_repeat`` steps per frame |
+| frame dt | ``action_repeat × 0.02`` (0.04 by default) |
+| reward | dm_control's: 1 while the pole is within 8° of upright (a tolerance on cos θ), summed over the frame's physics steps |
+| reset | θ ~ U(-max_angle, max_angle), θ̇ ~ U(-max_speed, max_speed) (DMC's: U(-π, π) at rest); ``options={"state": [θ, θ̇]}`` sets it |
+| truncation | after ``episode_length`` frames (DMC's episode: 1000 physics steps) |
+
+``info["state"]`` is the true ``[θ, θ̇]`` (float64, θ unwrapped as MuJoCo keeps it), for evaluation
+only, and ``info["dmc_reward"]`` the reward. DMC's score of an episode is the sum of its rewards
+over 1000 physics steps (at most 1000).
+
+``flip="camera"`` films from the other side (the picture is mirrored), ``flip="motor"`` wires the
+motor the other way (gear -1): either flips the sign of the actuation as the frames show it.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import xml.etree.ElementTree as ET
+from dataclasses import asdict, dataclass, replace
+from typing import Any, SupportsFloat
+
+import gymnasium as gym
+import numpy as np
+from gymnasium.wrappers import FrameStackObservation, GrayscaleObservation
+
+__all__ = ["DMC_PHYSICS_DT", "DMC_EPISODE_STEPS", "DMCPendulumConfig", "MissingExtraError", "make_dmc_pendulum",
+           "DMCPendulumEnv"]
+
+#: dm_control's pendulum physics step (pendulum.xml's ``timestep``), seconds.
+DMC_PHYSICS_DT = 0.02
+#: Physics steps of one DMC episode (20 s).
+DMC_EPISODE_STEPS = 1000
+#: Radius of the sphere at the pole's tip in pendulum.xml (its only mass).
+TIP_RADIUS = 0.05
+#: Earth's gravity as MuJoCo's default ``option/gravity``.
+EARTH_GRAVITY = 9.81
+#: The camera sees a square of this half-side (metres) around the pivot: a pole up to 0.6 m fits.
+VIEW_HALF_SIDE = 0.7
+#: Vertical field of view of the face-on camera, degrees.
+CAMERA_FOVY = 45.0
+FLIPS = ("none", "camera", "motor")
+
+
+class MissingExtraError(ImportError):
+    """dm_control or MuJoCo is not installed (or the pair does not match)."""
+
+
+@dataclass(frozen=True)
+class DMCPendulumConfig:
+    """Settings of the DMC pendulum env. The defaults are dm_control's pendulum-swingup."""
+
+    image_size: int = 64
+    """Side of the square gray frame in pixels."""
+    frame_stack: int = 1
+    """Number of most recent frames in one observation (oldest first)."""
+    action_repeat: int = 2
+    """Physics steps of 0.02 s per frame, the action held over them (the frame dt is their total)."""
+    episode_length: int = 0
+    """Frames before truncation; 0 means DMC's episode, 1000 physics steps (1000 // action_repeat frames)."""
+    mass: float = 1.0
+    """Mass of the tip sphere (kg; pendulum.xml: 1)."""
+    length: float = 0.5
+    """Distance from the hinge to the tip sphere's centre (m; pendulum.xml: 0.5)."""
+    damping: float = 0.1
+    """Hinge damping d (N·m·s/rad; pendulum.xml: 0.1)."""
+    flip: str = "none"
+    """"none", "camera" (filmed from the other side: mirrored) or "motor" (gear -1)."""
+    max_angle: float = math.pi
+    """Reset draws θ ~ U(-max_angle, max_angle) (DMC: π)."""
+    max_speed: float = 0.0
+    """Reset draws θ̇ ~ U(-max_speed, max_speed) (DMC: 0, at rest)."""
+    shadows: bool = False
+    """Render shadows (dm_control's 2048-pixel shadow map). Off by default: on a software
+    rasteriser (llvmpipe) they make a frame ~4x slower, and seen face-on the shadow only darkens
+    a sliver of the floor."""
+
+    def __post_init__(self) -> None:
+        checks = {
+            "image_size": self.image_size >= 8,
+            "frame_stack": self.frame_stack >= 1,
+            "action_repeat": self.action_repeat >= 1,
+            "episode_length": self.episode_length >= 0,
+            "mass": self.mass > 0 and math.isfinite(self.mass),
+            "length": 0 < self.length <= VIEW_HALF_SIDE - 2 * TIP_RADIUS,
+            "damping": self.damping >= 0 and math.isfinite(self.damping),
+            "flip": self.flip in FLIPS,
+            "max_angle": 0 <= self.max_angle <= math.pi,
+            "max_speed": 0 <= self.max_speed < math.inf,
+        }
+        for name, ok in checks.items():
+            if not ok:
+                raise ValueError(
+                    f"DMCPendulumConfig.{name}={getattr(self, name)!r} is out of range (sizes and counts >= 1, "
+                    f"mass > 0, length in (0, {VIEW_HALF_SIDE - 2 * TIP_RADIUS:g}], damping >= 0, flip in {FLIPS}, "
+                    "max_angle in [0, pi], max_speed >= 0)")
+
+    @property
+    def dt(self) -> float:
+        """Seconds per frame: ``action_repeat × 0.02``."""
+        return self.action_repeat * DMC_PHYSICS_DT
+
+    @property
+    def frames_per_episode(self) -> int:
+        """Frames before truncation."""
+        return self.episode_length or DMC_EPISODE_STEPS // self.action_repeat
+
+    @property
+    def inertia(self) -> float:
+        """Moment of inertia about the hinge, I = m·(l² + 0.4·r²)."""
+        return self.mass * (self.length**2 + 0.4 * TIP_RADIUS**2)
+
+    @property
+    def gear(self) -> float:
+        """The motor's gear: -1 when wired the other way."""
+        return -1.0 if self.flip == "motor" else 1.0
+
+    def piga_params(self) -> dict[str, float]:
+        """The true parameters in piga's form (θ̈ = 1.5·g·sin θ + 3·a·u − 3·b·θ̇), as the frames show them.
+
+        ``actuation_sign`` is -1 when a flipped camera or motor makes positive u turn the pole
+        clockwise as displayed; ``actuation_gain`` is the magnitude.
+        """
+        inertia = self.inertia
+        return {
+            "g": self.mass * EARTH_GRAVITY * self.length / (1.5 * inertia),
+            "actuation_gain": 1.0 / (3.0 * inertia),
+            "damping": self.damping / (3.0 * inertia),
+            "actuation_sign": -1.0 if self.flip != "none" else 1.0,
+        }
+
+    def to_dict(self) -> dict[str, Any]:
+        """A JSON-able copy of the fields."""
+        return asdict(self)
+
+
+def _import_dm_control() -> tuple[Any, Any]:
+    """dm_control's pendulum module and its ``control`` module, or one clear error."""
+    os.environ.setdefault("MUJOCO_GL", "egl")
+    try:
+        from dm_control.rl import control
+        from dm_control.suite import pendulum
+    except ImportError as exc:
+        raise MissingExtraError(f"the DMC pendulum needs dm_control and MuJoCo: install piga[dmc] "
+                                f"(pip install -e '.[dmc]'); import failed: {exc}") from None
+    return pendulum, control
+
+
+def model_xml(config: DMCPendulumConfig, base_xml: str) -> str:
+    """pendulum.xml with the config's mass, length, damping, motor and shadows, and the face-on camera ``face``.
+
+    The camera sits on the hinge axis (y), level with the pivot, at the distance where the view
+    spans ±``VIEW_HALF_SIDE`` around it, looking along −y (image right = −x, image up = +z), so that
+    θ > 0 turns counter-clockwise as displayed; ``flip="camera"`` puts it on the −y side.
+    """
+    root = ET.fromstring(base_xml)
+    body = root.find("./worldbody/body[@name='pole']")
+    if body is None:
+        raise ValueError("pendulum.xml has no body 'pole': an unknown dm_control version")
+    pivot = [float(x) for x in body.get("pos", "0 0 0").split()]
+    body.find("./joint[@name='hinge']").set("damping", repr(config.damping))
+    body.find("./geom[@name='pole']").set("fromto", f"0 0 0 0 0 {config.length!r}")
+    mass = body.find("./geom[@name='mass']")
+    mass.set("pos", f"0 0 {config.length!r}")
+    mass.set("mass", repr(config.mass))
+    root.find("./actuator/motor[@name='torque']").set("gear", repr(config.gear))
+    visual = ET.SubElement(root, "visual")  # merged with common/visual.xml's
+    ET.SubElement(visual, "quality", {"shadowsize": "2048" if config.shadows else "0"})
+    size = str(max(config.image_size, 64))
+    ET.SubElement(visual, "global", {"offwidth": size, "offheight": size})  # the off-screen buffer: one frame
+    distance = VIEW_HALF_SIDE / math.tan(math.radians(CAMERA_FOVY / 2))
+    side = -1.0 if config.flip == "camera" else 1.0
+    ET.SubElement(root.find("./worldbody"), "camera", {
+        "name": "face", "fovy": repr(CAMERA_FOVY),
+        "pos": f"{pivot[0]!r} {side * distance!r} {pivot[2]!r}",
+        "xyaxes": f"{-side!r} 0 0 0 0 1",
+    })
+    return ET.tostring(root, encoding="unicode")
+
+
+class DMCPendulumEnv(gym.Env):
+    """dm_control's pendulum-swingup as a Gymnasium env with RGB frames from the face-on camera.
+
+    The observation is the (image_size, image_size, 3) uint8 frame; :func:`make_dmc_pendulum` adds
+    the gray conversion and the frame stack. See the module docstring for the spaces and dynamics.
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 25}
+
+    def __init__(self, config: DMCPendulumConfig | None = None, render_mode: str | None = "rgb_array"):
+        if render_mode not in (None, "rgb_array"):
+            raise ValueError(f"the DMC pendulum renders only as 'rgb_array', got render_mode={render_mode!r}")
+        self.config = config or DMCPendulumConfig()
+        self.render_mode = "rgb_array"
+        pendulum, control = _import_dm_control()
+        xml, assets = pendulum.get_model_and_assets()
+        xml = model_xml(self.config, xml.decode() if isinstance(xml, bytes) else xml)
+        try:
+            physics = pendulum.Physics.from_xml_string(xml, assets)
+        except AttributeError as exc:  # e.g. 'MjModel' object has no attribute 'flex_vertedge'
+            raise MissingExtraError(f"dm_control and MuJoCo do not match ({exc}): install piga[dmc], "
+                                    "which pins a matching pair") from None
+        self._task = pendulum.SwingUp(random=np.random.RandomState(0))
+        # The time limit is this env's (truncation in frames), not dm_control's.
+        self._env = control.Environment(physics, self._task, time_limit=float("inf"), n_sub_steps=1)
+        self.physics = physics
+        size = self.config.image_size
+        self.observation_space = gym.spaces.Box(0, 255, (size, size, 3), np.uint8)
+        self.action_space = gym.spaces.Box(-1.0, 1.0, (1,), np.float32)
+        self._frames = 0
+
+    def _state(self) -> np.ndarray:
+        return np.array([self.physics.data.qpos[0], self.physics.data.qvel[0]], dtype=np.float64)
+
+    def render(self) -> np.ndarray:
+        size = self.config.image_size
+        return self.physics.render(size, size, camera_id="face")  # (H, W, 3) uint8
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        super().reset(seed=seed)
+        options = dict(options or {})
+        cfg = self.config
+        self._env.reset()  # the task's own draw of θ is replaced below, from this env's np_random
+        state = options.pop("state", None)
+        if options:
+            raise ValueError(f"unknown reset options {sorted(options)}; known: ['state']")
+        if state is None:
+            state = [self.np_random.uniform(-cfg.max_angle, cfg.max_angle),
+                     self.np_random.uniform(-cfg.max_speed, cfg.max_speed)]
+        state = np.asarray(state, dtype=np.float64)
+        if state.shape != (2,) or not np.isfinite(state).all():
+            raise ValueError(f"reset option 'state' must be a finite [theta, theta_dot], got {state!r}")
+        with self.physics.reset_context():
+            self.physics.data.qpos[0] = state[0]
+            self.physics.data.qvel[0] = state[1]
+        self._frames = 0
+        return self.render(), {"state": self._state(), "dmc_reward": 0.0}
+
+    def step(self, action: Any) -> tuple[np.ndarray, SupportsFloat, bool, bool, dict[str, Any]]:
+        u = np.clip(np.asarray(action, dtype=np.float64).reshape(1), -1.0, 1.0)
+        reward = 0.0
+        for _ in range(self.config.action_repeat):
+            reward += float(self._env.step(u).reward)
+        self._frames += 1
+        truncated = self._frames >= self.config.frames_per_episode
+        return self.render(), reward, False, truncated, {"state": self._state(), "dmc_reward": reward}
+
+    def close(self) -> None:
+        self.physics.free()
+        super().close()
+
+
+def make_dmc_pendulum(config: DMCPendulumConfig | None = None, render_mode: str | None = "rgb_array",
+                      **overrides: Any) -> gym.Env:
+    """The DMC pendulum with gray frames: ``DMCPendulumEnv -> GrayscaleObservation -> FrameStackObservation``.
+
+    Args:
+        config: the settings; None means the defaults.
+        render_mode: only "rgb_array" (or None, which means the same).
+        **overrides: fields of :class:`DMCPendulumConfig` that replace those of ``config``
+            (``gym.make("piga/DMCPendulum-v0", mass=1.2)`` passes its keywords here).
+
+    Returns:
+        An env whose observation is uint8 (frame_stack, image_size, image_size).
+
+    Raises:
+        MissingExtraError: dm_control or MuJoCo is missing ("install piga[dmc]").
+    """
+    config = replace(config or DMCPendulumConfig(), **overrides)
+    env: gym.Env = DMCPendulumEnv(config, render_mode)
+    env = GrayscaleObservation(env, keep_dim=False)
+    env = FrameStackObservation(env, config.frame_stack)
+    return env

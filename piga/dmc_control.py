@@ -1,0 +1,145 @@
+"""Control of dm_control's pendulum (:mod:`envs.dmc`) from pixels, scored in DMC's own units.
+
+Two agents share one planner (:class:`agents.swingup.SwingUpPlanner`, energy-aware CEM):
+
+- the oracle: the true state (``info["state"]``) and the true physics (the env's g, a, b in piga's
+  form, MuJoCo's integrator and physics steps);
+- the piga agent: frames only. The model's encoder reads the last L frames, its velocity estimator
+  (through its integrator, with the action over the last frame, for a ``velocity_hold`` model)
+  gives θ̇, and the planner rolls the model's *learned* g, a and b (0 without a learned damping)
+  with the model's own integrator and substeps.
+
+DMC's score of an episode is the sum of its rewards over 1000 physics steps of 0.02 s (at most
+1000): the reward is 1 while the pole is within 8° of upright.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass, field, replace
+from typing import Any, Protocol
+
+import numpy as np
+
+from agents.swingup import DampedPendulumDynamics, SwingUpConfig, SwingUpPlanner
+from envs.dmc import DMCPendulumConfig, make_dmc_pendulum
+
+__all__ = ["DMCControlConfig", "DMCResult", "OracleSwingUp", "PigaSwingUp", "run_dmc_episodes", "dmc_markdown"]
+
+
+@dataclass(frozen=True)
+class DMCControlConfig:
+    """What ``piga-control --env piga/DMCPendulum-v0`` runs."""
+
+    episodes: int = 10
+    """Episodes of DMC's length (1000 physics steps)."""
+    seed: int = 0
+    """Episode e starts from ``reset(seed=seed + e)`` (DMC's reset: θ ~ U(-π, π) at rest)."""
+    env: DMCPendulumConfig = field(default_factory=DMCPendulumConfig)
+    """The environment (variants: mass, length, damping, flip)."""
+    planner: SwingUpConfig = field(default_factory=SwingUpConfig)
+    """The planner, the same for both agents."""
+
+
+class Agent(Protocol):
+    def reset(self) -> None: ...
+    def act(self, frames: np.ndarray, state: np.ndarray) -> np.ndarray: ...
+
+
+class OracleSwingUp:
+    """The planner with the true state and the env's true physics (MuJoCo's semi-implicit Euler)."""
+
+    def __init__(self, env: DMCPendulumConfig, config: SwingUpConfig = SwingUpConfig()):
+        p = env.piga_params()
+        a = p["actuation_gain"] * (-1.0 if env.flip == "motor" else 1.0)  # in the hinge's own angle
+        self.planner = SwingUpPlanner(DampedPendulumDynamics(p["g"], a, p["damping"], env.dt, env.action_repeat), config)
+
+    def reset(self) -> None:
+        self.planner.reset()
+
+    def act(self, frames: np.ndarray, state: np.ndarray) -> np.ndarray:
+        return self.planner.plan(float(state[0]), float(state[1]))
+
+
+class PigaSwingUp:
+    """Frames -> the model's (θ, θ̇) -> the planner over the model's learned physics. ``state`` is never read."""
+
+    def __init__(self, model: Any, config: SwingUpConfig = SwingUpConfig()):
+        from agents.mpc import EncoderReader
+
+        if model.config.system != "pendulum":
+            raise ValueError(f"a {model.config.system} model cannot control the pendulum")
+        p = model.physical_parameters()
+        self.offset = p.get("offset", 0.0)
+        dynamics = DampedPendulumDynamics(p["g"], p["a"], p.get("b", 0.0), model.config.dt, model.config.substeps,
+                                          model.config.integrator)
+        self.planner = SwingUpPlanner(dynamics, config)
+        self.reader = EncoderReader(model)
+        self.input_frames = model.config.input_frames
+
+    def reset(self) -> None:
+        self.planner.reset()
+        self.reader.last_action = np.zeros(1, np.float32)
+
+    def act(self, frames: np.ndarray, state: np.ndarray | None = None) -> np.ndarray:
+        theta, theta_dot = self.reader(frames)
+        action = self.planner.plan(theta + self.offset, theta_dot)
+        self.reader.last_action = action
+        return action
+
+
+@dataclass(frozen=True)
+class DMCResult:
+    """Scores of one agent."""
+
+    agent: str
+    """"piga" or "oracle"."""
+    scores: list[float]
+    """DMC's score of each episode (sum of rewards over 1000 physics steps)."""
+
+    @property
+    def mean(self) -> float:
+        return float(np.mean(self.scores))
+
+    @property
+    def std(self) -> float:
+        return float(np.std(self.scores))
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"agent": self.agent, "scores": self.scores, "mean": self.mean, "std": self.std}
+
+
+def run_dmc_episodes(agent: Agent, name: str, config: DMCControlConfig, frame_stack: int = 1,
+                     progress: bool = False) -> DMCResult:
+    """Runs ``config.episodes`` DMC episodes of ``agent`` and returns their DMC scores."""
+    from tqdm.auto import tqdm
+
+    env = make_dmc_pendulum(replace(config.env, frame_stack=frame_stack, episode_length=0))
+    scores = []
+    try:
+        for e in tqdm(range(config.episodes), desc=name, disable=not progress):
+            obs, info = env.reset(seed=config.seed + e)
+            agent.reset()
+            total, truncated = 0.0, False
+            while not truncated:
+                obs, reward, _, truncated, info = env.step(agent.act(obs, info["state"]))
+                total += float(reward)
+            scores.append(total)
+    finally:
+        env.close()
+    return DMCResult(name, scores)
+
+
+def dmc_markdown(results: list[DMCResult], config: DMCControlConfig, command: str) -> str:
+    """A Markdown table of the results, with the command and the env."""
+    lines = [f"Command: `{command}`", "",
+             f"DMC pendulum-swingup through the face-on camera: {json.dumps(config.env.to_dict())}; "
+             f"{config.episodes} episodes of 1000 physics steps of 0.02 s (score: sum of DMC's reward, max 1000), "
+             f"seeds {config.seed}..{config.seed + config.episodes - 1}.", "",
+             "| agent | mean score | std | min | max |", "|---|---|---|---|---|"]
+    for r in results:
+        lines.append(f"| {r.agent} | {r.mean:.1f} | {r.std:.1f} | {min(r.scores):.0f} | {max(r.scores):.0f} |")
+    planner = asdict(config.planner)
+    lines += ["", f"Planner: {json.dumps(planner)}", ""]
+    return "\n".join(lines)
+

@@ -1,0 +1,102 @@
+"""The diagnosis on a system that is not Gymnasium's: it moves within the frame (MuJoCo-like substeps
+with implicit damping), its speeds pass any clip level, and its file does not say Gymnasium."""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from piga.diagnostics import DiagnoseConfig, Observations, analyse
+from piga.diagnostics.diagnose import clip_supported
+from piga.diagnostics.observe import from_gymnasium
+from piga.diagnostics.report import markdown
+from piga.runs import Nominal
+
+TRUTH = {"g": 13.03, "a": 1.328, "b": 0.1328}  # dm_control's pendulum in piga's form
+DT = 0.04
+
+
+def planted_within_frame(n: int = 100, t: int = 30, noise: float = 0.002, seed: int = 0, substeps: int = 2) -> Observations:
+    """Angles of a pendulum that MuJoCo would simulate: ``substeps`` semi-implicit steps per frame with
+    implicit damping, the action held; speeds up to ~10 rad/s. Written independently of piga's code."""
+    rng = np.random.default_rng(seed)
+    u = rng.uniform(-1, 1, (n, t))
+    th = np.zeros((n, t))
+    x, v = rng.uniform(-math.pi, math.pi, n), rng.uniform(-8, 8, n)
+    th[:, 0] = x
+    h = DT / substeps
+    for i in range(t - 1):
+        for _ in range(substeps):
+            v = (v + h * (1.5 * TRUTH["g"] * np.sin(x) + 3 * TRUTH["a"] * u[:, i])) / (1 + h * 3 * TRUTH["b"])
+            x = x + h * v
+        th[:, i + 1] = x
+    fit_split = np.arange(n) < int(0.75 * n)
+    return Observations(th + rng.normal(0, noise, th.shape), u, np.zeros((n, t)), fit_split, DT,
+                        np.zeros((0, t, 8, 8), np.uint8), np.zeros(0, int), from_gymnasium=False)
+
+
+@pytest.fixture(scope="module")
+def diagnosis():
+    # the nominal model as one Euler step per frame identifies it: a and g low
+    return analyse(planted_within_frame(), Nominal(g=12.4, a=1.2, offset=0.0, dt=DT), DiagnoseConfig(bootstrap=0))
+
+
+def test_names_damping_and_the_integration_within_the_frame_not_a_clip(diagnosis):
+    named = {e["effect"]: e for e in diagnosis.effects}
+    assert {"damping", "within_frame"} <= set(named), diagnosis.verdict
+    assert "speed_clip" not in named and "speed_clip" not in diagnosis.corrected_effects
+    assert abs(named["damping"]["value"] / TRUTH["b"] - 1) < 0.05
+    assert named["within_frame"]["value"] == 2
+    assert "the system integrates within the frame" in diagnosis.verdict
+    for key in ("g", "a", "b"):
+        assert abs(diagnosis.corrected[key] / TRUTH[key] - 1) < 0.03, (key, diagnosis.corrected)
+    assert not any("Gymnasium" in note for note in diagnosis.notes)
+
+
+def test_closure_has_no_invalid_floor_and_never_exceeds_100_percent(diagnosis):
+    gap = diagnosis.gap
+    assert gap.floor_note and "no valid floor" in gap.floor_note
+    assert gap.free_run_gap_closure <= 1.0
+    text = markdown(diagnosis, "RUN", "DATA", "piga-diagnose")
+    headline = next(line for line in text.splitlines() if line.startswith("**Free-run closure"))
+    assert "raw" in headline and "no valid floor" in headline.lower()
+    assert all(float(p) <= 100.0 for p in re.findall(r"(\d+(?:\.\d+)?)%", headline))
+    assert "nan" not in text.lower().replace("nominal", "")
+
+
+def test_a_clip_needs_a_pile_up_of_speeds():
+    rng = np.random.default_rng(0)
+    smooth = np.abs(rng.normal(0, 3.5, 5000))  # damped swings: speeds pass any level
+    clipped = np.minimum(np.abs(rng.normal(0, 5, 5000)), 5.0) + rng.normal(0, 0.02, 5000)  # a clip at 5
+    config = DiagnoseConfig()
+    assert not clip_supported(7.53, smooth, config)
+    assert clip_supported(5.0, clipped, config)
+    assert not clip_supported(3.0, clipped, config)  # passed by most
+    assert not clip_supported(20.0, clipped, config)  # nothing gets there
+
+
+def test_only_a_file_from_gymnasium_has_gymnasiums_clip():
+    assert from_gymnasium({"env_id": "piga/PixelPendulum-v0"})
+    assert not from_gymnasium({"env_id": "piga/DMCPendulum-v0", "env_config": '{"draw_torque_arrow": true}'})
+    assert from_gymnasium({"env_config": '{"image_size": 64, "draw_torque_arrow": true}'})  # files before env_id
+    assert not from_gymnasium({"system": "pendulum", "source": "video.mp4"})  # piga-import
+
+
+def test_a_clip_at_8_in_a_file_not_from_gymnasium_is_named():
+    """Gymnasium's own ±8 clip is no gap only in Gymnasium's files; elsewhere a clip that was selected is named."""
+    from piga.diagnostics import fit
+    from piga.diagnostics.diagnose import name_effects
+    from piga.diagnostics.results import GenericBasis
+
+    final = fit.Model(("speed_clip",), 0, {"g": 10.0, "a": 1.0, "v": 7.9})
+    nominal = Nominal(g=10.0, a=1.0, offset=0.0, dt=0.05)
+    quiet = GenericBasis(0.0, 0.0, False)
+    config = DiagnoseConfig(bootstrap=0)
+    gym = name_effects(final, nominal, None, None, quiet, config, from_gymnasium=True)
+    other = name_effects(final, nominal, None, None, quiet, config, from_gymnasium=False)
+    assert gym.verdict_class == "none" and any("Gymnasium's own" in note for note in gym.notes)
+    assert other.verdict_class == "speed_clip" and not any("Gymnasium" in note for note in other.notes)

@@ -1,0 +1,174 @@
+"""dm_control's pendulum as a Gymnasium env (envs/dmc.py): the env checker, the picture against the
+state, the physics against piga's form, the XML variants, collection, and the missing extra."""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from envs.dmc import VIEW_HALF_SIDE, DMCPendulumConfig, MissingExtraError, make_dmc_pendulum
+
+try:
+    import dm_control  # noqa: F401
+    HAVE_DMC = True
+except ImportError:
+    HAVE_DMC = False
+
+needs_dmc = pytest.mark.skipif(not HAVE_DMC, reason="needs the optional extra piga[dmc]")
+
+
+def pole_angle(env, frame: np.ndarray, background: np.ndarray) -> float:
+    """The pole's angle as the frame shows it: the direction, from the pivot (the image centre), of
+    the centroid of the pixels that differ from the background; 0 up, positive counter-clockwise."""
+    diff = np.abs(frame.astype(np.float64) - background.astype(np.float64))  # (H, W)
+    size = frame.shape[0]
+    ys, xs = np.mgrid[0:size, 0:size] + 0.5
+    weight = np.where(diff > 10, diff, 0.0)
+    cx, cy = (weight * xs).sum() / weight.sum(), (weight * ys).sum() / weight.sum()
+    return math.atan2(-(cx - size / 2), -(cy - size / 2))
+
+
+def background_frame(env) -> np.ndarray:
+    """The frame without the pendulum (its geoms made transparent), in gray as the env converts it."""
+    import cv2
+
+    physics = env.unwrapped.physics
+    saved = physics.model.geom_rgba.copy()
+    physics.model.geom_rgba[1:, 3] = 0.0  # every geom but the floor
+    rgb = env.unwrapped.render()
+    physics.model.geom_rgba[:] = saved
+    return cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)
+
+
+def angle_error(a: float, b: float) -> float:
+    return abs((a - b + math.pi) % (2 * math.pi) - math.pi)
+
+
+@needs_dmc
+def test_env_checker_passes():
+    import gymnasium as gym
+    from gymnasium.utils.env_checker import check_env
+
+    import envs  # noqa: F401 - registers the ids
+
+    env = gym.make("piga/DMCPendulum-v0", episode_length=5)
+    check_env(env.unwrapped)
+    obs, info = env.reset(seed=0)
+    assert obs.shape == (1, 64, 64) and obs.dtype == np.uint8
+    assert env.action_space.low[0] == -1 and env.action_space.high[0] == 1
+
+
+@needs_dmc
+@pytest.mark.parametrize("flip", ["none", "camera"])
+def test_episode_renders_the_pendulum_where_the_state_says(flip):
+    env = make_dmc_pendulum(flip=flip, episode_length=40)
+    obs, info = env.reset(seed=3)
+    background = background_frame(env)
+    rng = np.random.default_rng(0)
+    sign = -1.0 if flip == "camera" else 1.0
+    errors, truncated, rewards = [], False, []
+    while not truncated:
+        seen = pole_angle(env, obs[-1], background)
+        errors.append(angle_error(seen, sign * info["state"][0]))
+        obs, reward, terminated, truncated, info = env.step(rng.uniform(-1, 1, size=1).astype(np.float32))
+        assert not terminated and reward == info["dmc_reward"]
+        rewards.append(reward)
+    assert len(errors) == 40
+    assert np.degrees(max(errors)) < 4.0, np.degrees(errors)
+
+
+@needs_dmc
+def test_reward_is_dmc_and_upright_scores_one_per_physics_step():
+    env = make_dmc_pendulum(action_repeat=2)
+    env.reset(seed=0, options={"state": [0.0, 0.0]})
+    _, reward, _, _, _ = env.step(np.zeros(1, np.float32))
+    assert reward == pytest.approx(2.0)  # two physics steps within 8 degrees of upright
+    env.reset(seed=0, options={"state": [math.pi, 0.0]})
+    _, reward, _, _, _ = env.step(np.zeros(1, np.float32))
+    assert reward == 0.0
+    assert DMCPendulumConfig().frames_per_episode * DMCPendulumConfig().action_repeat == 1000
+
+
+@needs_dmc
+@pytest.mark.parametrize("overrides", [{}, {"mass": 1.5, "length": 0.4, "damping": 0.3}, {"flip": "motor"}])
+def test_physics_matches_pigas_form(overrides):
+    """Free swing and torque response of MuJoCo against θ̈ = 1.5·g·sin θ + 3·a·s·u − 3·b·θ̇ in piga's units."""
+    config = DMCPendulumConfig(action_repeat=1, **overrides)
+    env = make_dmc_pendulum(config)
+    params = config.piga_params()
+    physics = env.unwrapped.physics
+    for theta, speed, u in [(0.7, 0.0, 0.0), (-2.0, 3.0, 0.0), (1.0, -1.0, 1.0), (2.5, 0.5, -0.6)]:
+        env.reset(seed=0, options={"state": [theta, speed]})
+        env.step(np.array([u], np.float32))
+        acc = (physics.data.qvel[0] - speed) / 0.02
+        # MuJoCo's Euler treats damping implicitly: v' = v + h·(f - d·v') / I.
+        sign = -1.0 if config.flip == "motor" else 1.0
+        expected = (1.5 * params["g"] * math.sin(theta) + 3 * params["actuation_gain"] * sign * u
+                    - 3 * params["damping"] * speed) / (1 + 0.02 * 3 * params["damping"])
+        assert acc == pytest.approx(expected, rel=1e-6, abs=1e-6)
+
+
+@needs_dmc
+def test_length_variant_moves_the_tip_in_the_picture():
+    tips = []
+    for length in (0.3, 0.55):
+        env = make_dmc_pendulum(length=length)
+        obs, _ = env.reset(seed=0, options={"state": [math.pi / 2, 0.0]})  # horizontal, tip to the left
+        background = background_frame(env)
+        columns = np.nonzero((np.abs(obs[-1].astype(int) - background.astype(int)) > 10).any(axis=0))[0]
+        tips.append(32 - columns.min())
+    expected = [length * 32 / VIEW_HALF_SIDE for length in (0.3, 0.55)]
+    assert tips[1] - tips[0] == pytest.approx(expected[1] - expected[0], abs=1.5)
+
+
+@needs_dmc
+def test_collect_from_the_dmc_env(tmp_path):
+    from piga.cli.collect import main
+    from piga.data import inspect_dataset, load_states
+
+    out = tmp_path / "dmc.h5"
+    assert main(["--env", "piga/DMCPendulum-v0", "--out", str(out), "--sequences", "2", "--steps", "5",
+                 "--workers", "1", "--quiet", "--env-option", "damping=0.2"]) == 0
+    info = inspect_dataset(out)
+    assert info.dt == pytest.approx(0.04)
+    assert info.params["damping"] == pytest.approx(DMCPendulumConfig(damping=0.2).piga_params()["damping"])
+    import h5py
+
+    with h5py.File(out) as f:
+        actions = f["actions"][:]
+        assert f.attrs["env_id"] == "piga/DMCPendulum-v0"
+    assert np.abs(actions).max() <= 1.0 and np.abs(actions).max() > 0.5
+    assert np.isfinite(load_states(out, "train")).all()
+
+
+def test_missing_extra_gives_one_clear_line(tmp_path):
+    """With dm_control unimportable, the env raises MissingExtraError and piga-collect prints one line."""
+    code = (
+        "import sys; sys.modules['dm_control'] = None\n"
+        "from piga.cli.collect import entry\n"
+        f"sys.argv = ['piga-collect', '--env', 'piga/DMCPendulum-v0', '--out', {str(tmp_path / 'x.h5')!r}, '--workers', '1']\n"
+        "entry()\n"
+    )
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert result.returncode == 1
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and "install piga[dmc]" in lines[0], result.stderr
+    assert not (tmp_path / "x.h5").exists()
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setitem(sys.modules, "dm_control", None)
+        mp.setitem(sys.modules, "dm_control.suite", None)
+        mp.setitem(sys.modules, "dm_control.rl", None)
+        with pytest.raises(MissingExtraError, match=r"install piga\[dmc\]"):
+            make_dmc_pendulum()
+
+
+def test_config_refuses_bad_values():
+    with pytest.raises(ValueError, match="flip"):
+        DMCPendulumConfig(flip="sideways")
+    with pytest.raises(ValueError, match="length"):
+        DMCPendulumConfig(length=2.0)
+    assert DMCPendulumConfig(action_repeat=4).dt == pytest.approx(0.08)

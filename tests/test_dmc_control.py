@@ -1,0 +1,78 @@
+"""Control of dm_control's pendulum: the planner's engines against MuJoCo and piga's own, the oracle's
+swing-up with a torque limit of 1, and piga-control's DMC options."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from agents.swingup import DampedPendulumDynamics, SwingUpPlanner
+from envs.dmc import DMCPendulumConfig
+from piga.physics import RK4, Pendulum, rollout
+from tests.helpers import assert_one_line_error, run
+from tests.test_dmc import needs_dmc
+
+
+@needs_dmc
+def test_oracle_engine_is_mujocos():
+    from envs.dmc import make_dmc_pendulum
+
+    config = DMCPendulumConfig(damping=0.3, mass=1.2)
+    p = config.piga_params()
+    env = make_dmc_pendulum(config)
+    _, info = env.reset(seed=0, options={"state": [2.0, -1.0]})
+    actions = np.random.default_rng(0).uniform(-1, 1, 25).astype(np.float32)
+    states = []
+    for u in actions:
+        _, _, _, _, info = env.step(np.array([u]))
+        states.append(info["state"])
+    engine = DampedPendulumDynamics(p["g"], p["actuation_gain"], p["damping"], config.dt, config.action_repeat)
+    q, v = engine.rollout(2.0, -1.0, torch.from_numpy(actions).view(1, -1, 1))
+    np.testing.assert_allclose(q[0].numpy(), np.array(states)[:, 0], atol=1e-4)
+    np.testing.assert_allclose(v[0].numpy(), np.array(states)[:, 1], atol=1e-4)
+
+
+def test_rk4_engine_is_the_models():
+    system = Pendulum(g=13.0, a=1.3, dt=0.04, learnable=False, damping=0.13).double()
+    actions = torch.rand(1, 20, 1, dtype=torch.float64) * 2 - 1
+    p, v = rollout(system, RK4(substeps=2), torch.full((1, 1, 1), 2.5, dtype=torch.float64),
+                   torch.full((1, 1, 1), 0.5, dtype=torch.float64), actions)
+    q, w = DampedPendulumDynamics(13.0, 1.3, 0.13, 0.04, 2, "rk4").rollout(2.5, 0.5, actions.float())
+    np.testing.assert_allclose(q[0].numpy(), p[0, :, 0, 0].numpy(), atol=1e-5)
+    np.testing.assert_allclose(w[0].numpy(), v[0, :, 0, 0].numpy(), atol=1e-4)
+
+
+def test_energy_cost_pumps_from_hanging_down():
+    """From rest at the bottom, where pushing straight up cannot lift the pole, the planner swings it up
+    on the true physics within 9 s (four swings) and holds it within 8 degrees."""
+    p = DMCPendulumConfig().piga_params()
+    engine = DampedPendulumDynamics(p["g"], p["actuation_gain"], p["damping"], 0.04, 2)
+    planner = SwingUpPlanner(engine)
+    theta, speed, upright = math.pi, 0.0, []
+    for _ in range(220):
+        u = planner.plan(theta, speed)
+        assert abs(float(u[0])) <= 1.0
+        q, v = engine.rollout(theta, speed, torch.from_numpy(u).view(1, 1, 1))
+        theta, speed = float(q[0, 0]), float(v[0, 0])
+        upright.append(math.cos(theta) >= math.cos(math.radians(8)))
+    assert not any(upright[:10])  # it had to swing
+    assert all(upright[-25:]), "not held upright at the end"
+
+
+@needs_dmc
+def test_piga_control_dmc_oracle_scores_and_refuses_gymnasium_options(tmp_path):
+    out = tmp_path / "oracle"
+    result = run("piga-control", "--env", "piga/DMCPendulum-v0", "--episodes", "1", "--seed", "1", "--quiet",
+                 "--out", str(out))
+    assert result.returncode == 0, result.stderr
+    import json
+
+    payload = json.loads((tmp_path / "oracle.json").read_text())
+    (oracle,) = payload["results"]
+    assert oracle["agent"] == "oracle" and len(oracle["scores"]) == 1 and oracle["scores"][0] > 500
+    assert "| oracle |" in (tmp_path / "oracle.md").read_text()
+    assert_one_line_error(run("piga-control", "--env", "piga/DMCPendulum-v0", "--horizon", "5"), "--horizon")
+    assert_one_line_error(run("piga-control", "--oracle", "--env-option", "mass=2"), "--env-option")
