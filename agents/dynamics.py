@@ -135,7 +135,15 @@ class PendulumDynamics:
 
     @classmethod
     def of(cls, system: Pendulum, integrator: Euler, gravity_mult: float = 1.0) -> PendulumDynamics:
-        """The dynamics of a (learned) :class:`Pendulum` and its integrator, its g times ``gravity_mult``."""
+        """The dynamics of a (learned) :class:`Pendulum` and its integrator, its g times ``gravity_mult``.
+
+        Raises ValueError for a model this engine would plan wrongly: one that integrates with RK4
+        or learned a damping b (``--preset continuous``; see ``agents.swingup`` for such systems).
+        """
+        if not isinstance(integrator, Euler) or getattr(system, "has_damping", False):
+            raise ValueError("this model integrates within the frame or learned a damping (--preset continuous); the "
+                             "pendulum planner's engine is semi-implicit Euler without damping (for dm_control's "
+                             "pendulum use piga-control --env piga/DMCPendulum-v0)")
         p = system.parameters_dict()
         return cls(p["g"] * gravity_mult, p["a"], system.dt, integrator.substeps, system.length, system.mass)
 

@@ -180,7 +180,9 @@ class EncoderReader:
         if kept is not None:
             coords = torch.cat([kept, coords])  # (L, N, D)
         self._frames, self._coords = frames.copy(), coords
-        last = None if self.last_action is None else torch.as_tensor(self.last_action, dtype=torch.float32).view(1, -1)
+        last = None
+        if self.model.config.velocity_hold and self.last_action is not None:
+            last = torch.as_tensor(self.last_action, dtype=torch.float32).view(1, -1)  # (1, A)
         p, v = self.model.initial_state(self.prepare(coords)[None], last)  # (1, N, D) each
         return float(p[0, 0, 0]), float(v[0, 0, 0])
 

@@ -14,7 +14,7 @@ same machine, one process at a time:
 6. **Compute**: training wall time of each agent, and the machine.
 
     python benchmarks/baselines.py --out results/baselines                  # the full comparison (hours)
-    python benchmarks/baselines.py --out /tmp/check --preset tiny          # the pipeline end to end, in minutes
+    python benchmarks/baselines.py --out runs/check --preset tiny          # the pipeline end to end, in minutes
 
 Finished runs are kept in ``OUT_runs/`` and skipped when the benchmark is run again, so an
 interrupted benchmark continues where it stopped. ``OUT.json`` and ``OUT.md`` are rewritten

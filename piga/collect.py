@@ -53,8 +53,9 @@ class CollectConfig:
     """T, frames per sequence (the pendulum model needs at least L + T_pred = 14)."""
     env: PixelPendulumConfig | DMCPendulumConfig = field(default_factory=PixelPendulumConfig)
     """The environment: Gymnasium's pixel pendulum, or dm_control's (:class:`DMCPendulumConfig`). Reset ranges are Gymnasium's, θ ~ U(-π, π) and θ̇ ~ U(-1, 1): the paper's
-    θ̇ ~ U(-6, 6) makes Gymnasium's ±8 speed clip act on ~2% of steps, which biases the learned
-    actuation gain by ~5% (the clip is not in the model). The 'paper' preset restores ±6."""
+    θ̇ ~ U(-6, 6) makes Gymnasium's ±8 speed clip act on ~2% of steps, which biases a least-squares
+    actuation gain by about −2% (the clip is not in the model; results/speed_clip_bias.md). The
+    'paper' preset restores ±6."""
     seed: int = 0
     """Root seed of every random draw."""
     workers: int = 2

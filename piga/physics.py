@@ -435,6 +435,13 @@ class Bouncing(System):
         return p, v
 
 
+def _checked_substeps(substeps: int) -> int:
+    """``substeps`` if it is an int >= 1 (an integrator's substeps per frame); else ValueError."""
+    if isinstance(substeps, bool) or not isinstance(substeps, int) or substeps < 1:
+        raise ValueError(f"substeps must be an int >= 1, got {substeps!r}")
+    return substeps
+
+
 class Euler(nn.Module):
     """Semi-implicit Euler with ``substeps`` substeps per frame, as in the paper.
 
@@ -445,9 +452,7 @@ class Euler(nn.Module):
 
     def __init__(self, substeps: int = 5) -> None:
         super().__init__()
-        if isinstance(substeps, bool) or not isinstance(substeps, int) or substeps < 1:
-            raise ValueError(f"substeps must be an int >= 1, got {substeps!r}")
-        self.substeps = substeps
+        self.substeps = _checked_substeps(substeps)
 
     def forward(
         self, system: System, p: Tensor, v: Tensor, u: Tensor | None = None
@@ -476,9 +481,7 @@ class RK4(nn.Module):
 
     def __init__(self, substeps: int = 4) -> None:
         super().__init__()
-        if isinstance(substeps, bool) or not isinstance(substeps, int) or substeps < 1:
-            raise ValueError(f"substeps must be an int >= 1, got {substeps!r}")
-        self.substeps = substeps
+        self.substeps = _checked_substeps(substeps)
 
     def forward(
         self, system: System, p: Tensor, v: Tensor, u: Tensor | None = None

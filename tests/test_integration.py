@@ -146,3 +146,21 @@ def test_signed_actuation_parameters():
     assert system.parameters_dict() == pytest.approx({"g": 5.0, "a": -2.0})
     with pytest.raises(ValueError, match="nonzero"):
         system.set_parameters(a=0.0)
+
+
+@pytest.mark.parametrize("fields", [{"integrator": "rk4", "substeps": 2}, {"learn_damping": True}])
+def test_continuous_models_are_refused_where_euler_without_damping_is_assumed(tmp_path, fields):
+    """The pendulum planner's engine and the diagnosis' nominal physics are Euler without damping:
+    a --preset continuous model gets a clear refusal there, not a silently wrong plan or verdict."""
+    from agents.dynamics import PendulumDynamics
+    from piga.diagnostics.diagnose import diagnose
+    from piga.diagnostics.observe import DiagnosisInputError
+    from piga.model import ModelConfig, PhysicsModel
+
+    model = PhysicsModel(ModelConfig(**fields))
+    with pytest.raises(ValueError, match="preset continuous"):
+        PendulumDynamics.of(model.system, model.integrator)
+    with pytest.raises(DiagnosisInputError, match="preset continuous"):
+        diagnose(model, tmp_path / "never-read.h5")
+    plain = PhysicsModel(ModelConfig())
+    assert PendulumDynamics.of(plain.system, plain.integrator).substeps == 1

@@ -163,6 +163,10 @@ def diagnose(model: PhysicsModel, data: str | os.PathLike[str], config: Diagnose
         raise DiagnosisInputError(f"the model learned a = {a:.4g} < 0: its frames show a flipped actuation (a camera on the "
                                   "other side of the hinge, or a motor wired the other way); the diagnosis' candidates "
                                   "assume a > 0")
+    if model.config.integrator != "euler" or getattr(model.system, "has_damping", False):
+        raise DiagnosisInputError("the model integrates within the frame or learned a damping (--preset continuous); the "
+                                  "diagnosis starts from a model trained with Euler and no damping (--preset fast or "
+                                  "paper) and tests those effects as candidates")
     rec_training = training_reconstruction_mse(model, checkpoint)
     blank = training_blank_mse(model, checkpoint)
     if blank is not None:
