@@ -66,17 +66,23 @@ class CollectConfig:
     """Sequences gathered between writes to disk (bounds memory)."""
 
     def __post_init__(self) -> None:
-        if self.sequences < 1:
-            raise ValueError(f"sequences must be >= 1, got {self.sequences}")
-        if self.steps < 2:
-            raise ValueError(f"steps must be >= 2 (a video needs two frames), got {self.steps}")
-        if self.workers < 1:
-            raise ValueError(f"workers must be >= 1, got {self.workers}")
-        if self.seed < 0:
-            raise ValueError(f"seed must be >= 0, got {self.seed}")
-        if self.batch < 1:
-            raise ValueError(f"batch must be >= 1, got {self.batch}")
-        split_counts(self.sequences, self.split)  # validates
+        check_collect_sizes(self.sequences, self.steps, self.workers, self.seed, self.batch, self.split)
+
+
+def check_collect_sizes(sequences: int, steps: int, workers: int, seed: int, batch: int,
+                        split: tuple[float, float, float]) -> None:
+    """ValueError unless the sizes of a collection make sense (shared by the pendulum's and the scenes' configs)."""
+    if sequences < 1:
+        raise ValueError(f"sequences must be >= 1, got {sequences}")
+    if steps < 2:
+        raise ValueError(f"steps must be >= 2 (a video needs two frames), got {steps}")
+    if workers < 1:
+        raise ValueError(f"workers must be >= 1, got {workers}")
+    if seed < 0:
+        raise ValueError(f"seed must be >= 0, got {seed}")
+    if batch < 1:
+        raise ValueError(f"batch must be >= 1, got {batch}")
+    split_counts(sequences, split)  # validates
 
 
 #: The paper's pendulum data set: 5000 / 500 / 500 sequences of 14 frames.

@@ -27,7 +27,7 @@ from tqdm.auto import tqdm
 
 from envs.scenes import SceneConfig, generate_sequence, scene_config, state_names
 from piga.atomic import check_writable_target
-from piga.collect import sequence_rng, split_counts
+from piga.collect import check_collect_sizes, sequence_rng, split_counts
 from piga.data import SPLITS, DatasetWriter
 
 #: Frames per sequence by scene: L + T_pred + T_ext of the chosen windows (README, "Systems").
@@ -60,13 +60,7 @@ class SceneCollectConfig:
     """Sequences gathered between writes to disk (bounds memory)."""
 
     def __post_init__(self) -> None:
-        if self.sequences < 1:
-            raise ValueError(f"sequences must be >= 1, got {self.sequences}")
-        if self.steps < 2:
-            raise ValueError(f"steps must be >= 2 (a video needs two frames), got {self.steps}")
-        if self.workers < 1 or self.batch < 1 or self.seed < 0:
-            raise ValueError(f"need workers >= 1, batch >= 1 and seed >= 0, got {self.workers}, {self.batch}, {self.seed}")
-        split_counts(self.sequences, self.split)  # validates
+        check_collect_sizes(self.sequences, self.steps, self.workers, self.seed, self.batch, self.split)
 
 
 def _ignore_interrupts() -> None:
