@@ -435,14 +435,20 @@ class Bouncing(System):
         return p, v
 
 
-def _checked_substeps(substeps: int) -> int:
-    """``substeps`` if it is an int >= 1 (an integrator's substeps per frame); else ValueError."""
-    if isinstance(substeps, bool) or not isinstance(substeps, int) or substeps < 1:
-        raise ValueError(f"substeps must be an int >= 1, got {substeps!r}")
-    return substeps
+class _Integrator(nn.Module):
+    """An integrator with ``substeps`` substeps per frame (an int >= 1, else ValueError)."""
+
+    def __init__(self, substeps: int) -> None:
+        super().__init__()
+        if isinstance(substeps, bool) or not isinstance(substeps, int) or substeps < 1:
+            raise ValueError(f"substeps must be an int >= 1, got {substeps!r}")
+        self.substeps = substeps
+
+    def extra_repr(self) -> str:
+        return f"substeps={self.substeps}"
 
 
-class Euler(nn.Module):
+class Euler(_Integrator):
     """Semi-implicit Euler with ``substeps`` substeps per frame, as in the paper.
 
     Each substep of h = dt / substeps does ``v <- v + h·F(p, v, u)``, then ``p <- p + h·v`` with
@@ -451,8 +457,7 @@ class Euler(nn.Module):
     """
 
     def __init__(self, substeps: int = 5) -> None:
-        super().__init__()
-        self.substeps = _checked_substeps(substeps)
+        super().__init__(substeps)
 
     def forward(
         self, system: System, p: Tensor, v: Tensor, u: Tensor | None = None
@@ -465,11 +470,8 @@ class Euler(nn.Module):
             p, v = system.constrain(p, v)
         return p, v
 
-    def extra_repr(self) -> str:
-        return f"substeps={self.substeps}"
 
-
-class RK4(nn.Module):
+class RK4(_Integrator):
     """Classical Runge-Kutta of order 4, ``substeps`` substeps per frame, the action held over the frame.
 
     A zero-order hold of a continuous system: the state follows θ̈ = F(θ, θ̇, u) with u constant
@@ -480,8 +482,7 @@ class RK4(nn.Module):
     """
 
     def __init__(self, substeps: int = 4) -> None:
-        super().__init__()
-        self.substeps = _checked_substeps(substeps)
+        super().__init__(substeps)
 
     def forward(
         self, system: System, p: Tensor, v: Tensor, u: Tensor | None = None
@@ -500,9 +501,6 @@ class RK4(nn.Module):
             v = v + h / 6.0 * (a1 + 2.0 * a2 + 2.0 * a3 + a4)
             p, v = system.constrain(p, v)
         return p, v
-
-    def extra_repr(self) -> str:
-        return f"substeps={self.substeps}"
 
 
 INTEGRATORS: dict[str, type[nn.Module]] = {"euler": Euler, "rk4": RK4}
