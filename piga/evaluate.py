@@ -24,7 +24,7 @@ from piga.data import inspect_dataset, load_states, read_sequences
 from piga.model import PhysicsModel, frames_to_float
 
 #: Data-file parameter name -> model parameter name.
-PARAMETER_NAMES = {"g": "g", "actuation_gain": "a", "damping": "b", "k": "k", "l": "l"}
+PARAMETER_NAMES = {"g": "g", "actuation_gain": "a", "damping": "b", "k": "k", "l": "l", "m": "m"}
 
 
 @dataclass(frozen=True)
@@ -33,18 +33,29 @@ class EvalConfig:
 
     split: str = "test"
     """Split of held-out sequences."""
-    extrapolate_frames: int = 20
-    """T_ext, frames predicted beyond T_pred (capped by the sequence length)."""
+    extrapolate_frames: int | None = None
+    """T_ext, frames predicted beyond T_pred (capped by the sequence length); None: the model's own
+    (:attr:`piga.model.ModelConfig.extrapolate_frames`: 20, or 24 for gravity)."""
+
+    def frames_after_input(self, model: PhysicsModel, sequence_steps: int) -> int:
+        """T_pred + T_ext frames to predict after the L input frames, capped by the sequence length."""
+        cfg = model.config
+        ext = cfg.extrapolate_frames if self.extrapolate_frames is None else self.extrapolate_frames
+        return min(cfg.pred_frames + ext, sequence_steps - cfg.input_frames)
     max_sequences: int = 200
     """At most this many sequences (the first of the split)."""
 
 
 def parameter_errors(model: PhysicsModel, true_params: dict[str, Any]) -> dict[str, dict[str, float]]:
-    """Learned vs true physical parameters, with relative errors, for every parameter both know."""
+    """Learned vs true physical parameters, with relative errors, for every learned parameter the file knows.
+
+    A parameter held fixed (gravity's g in the m run) is not reported here: it was given, not learned.
+    """
     learned = model.physical_parameters()
+    names = set(model.learned_parameter_names())
     out: dict[str, dict[str, float]] = {}
     for file_name, model_name in PARAMETER_NAMES.items():
-        if file_name in true_params and model_name in learned:
+        if file_name in true_params and model_name in names:
             true = float(true_params[file_name])
             out[model_name] = {"learned": learned[model_name], "true": true,
                                "relative_error": abs(learned[model_name] - true) / abs(true)}
@@ -89,7 +100,7 @@ def evaluate(model: PhysicsModel, data: str | Path, config: EvalConfig = EvalCon
     frames, actions = frames[: config.max_sequences], actions[: config.max_sequences]
     if len(frames) == 0:
         raise ValueError(f"{data}: split '{config.split}' is empty; nothing to evaluate")
-    steps = min(cfg.pred_frames + config.extrapolate_frames, info.steps - cfg.input_frames)
+    steps = config.frames_after_input(model, info.steps)
     pred, _ = rollout_frames(model, frames, actions, steps)  # (B, S, C, H, W)
     truth = frames_to_float(torch.from_numpy(frames[:, cfg.input_frames : cfg.input_frames + steps]), cfg.channels).numpy()
     mse = ((pred - truth) ** 2).mean(axis=(0, 2, 3, 4))  # (S,)
@@ -104,6 +115,8 @@ def evaluate(model: PhysicsModel, data: str | Path, config: EvalConfig = EvalCon
         "extrapolate_frames": steps - n_pred,
         "parameters": model.physical_parameters(),
         "parameter_errors": parameter_errors(model, info.params),
+        "fixed_parameters": {name: value for name, value in model.physical_parameters().items()
+                             if name not in model.learned_parameter_names() and name != "offset"},
         "frame_mse_per_step": mse.tolist(),
         "frame_ssim_per_step": ssim.tolist(),
         "frame_ssim_mean": {"prediction": float(ssim[:n_pred].mean()),

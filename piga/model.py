@@ -16,6 +16,7 @@ actions are float [B, T, A], where ``actions[:, t]`` is applied after frame t.
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass, field
 from typing import Any, NamedTuple
 
@@ -68,6 +69,9 @@ class ModelConfig:
     """L, frames given to the encoder and velocity estimator."""
     pred_frames: int = 10
     """T_pred, frames predicted by the physics during training."""
+    extrapolate_frames: int = 20
+    """T_ext, frames predicted beyond T_pred when evaluating (capped by the sequence length); training
+    never uses it. The paper's (L, T_pred, T_ext) give 20, and 24 for gravity."""
     alpha: float = 3.0
     """Weight α of the reconstruction loss."""
     pred_trim: float = 0.1
@@ -135,10 +139,17 @@ class ModelConfig:
     near 0, punishes that hard (a uniform 0.003 alone caps it near 0.92)."""
     wall_radius: float = 2.0
     """Bouncing only: how far from the image edge a centre bounces, pixels (the published engine's 2)."""
+    fixed_g: float = 0.0
+    """Gravity only: the paper's m run. Hold g at this value (the user's; training never reads the
+    file's parameters) and learn the bodies' shared mass m instead; 0 (the default): learn g with
+    unit masses. The motion depends on g·m only, so m starts at 1/``fixed_g``: the force starts as
+    weak as in the g run (g = 1, m = 1), far from any true g·m."""
 
     def __post_init__(self) -> None:
         if self.system not in SYSTEM_SHAPES:
             raise ValueError(f"unknown system {self.system!r}; known: {sorted(SYSTEM_SHAPES)}")
+        if self.extrapolate_frames < 0:
+            raise ValueError(f"extrapolate_frames must be >= 0, got {self.extrapolate_frames}")
         if self.input_frames < 2 or self.pred_frames < 1:
             raise ValueError(f"need input_frames >= 2 and pred_frames >= 1, got {self.input_frames}, {self.pred_frames}")
         if self.rec_frames not in ("all", "input"):
@@ -149,6 +160,12 @@ class ModelConfig:
             raise ValueError(f"alpha must be >= 0, got {self.alpha}")
         if self.learn_damping and self.system != "pendulum":
             raise ValueError(f"learn_damping is for the pendulum, not {self.system!r}")
+        if self.fixed_g and self.system != "gravity":
+            raise ValueError(f"fixed_g (learning the mass m) is for gravity, not {self.system!r}")
+        if not (self.fixed_g >= 0 and math.isfinite(self.fixed_g)):
+            raise ValueError(f"fixed_g must be finite and > 0 (or 0: learn g), got {self.fixed_g}")
+        if self.fixed_g and "g" in self.physics_init:
+            raise ValueError("fixed_g holds g at its value; physics_init must not set g as well")
         object.__setattr__(self, "pivot_gate", tuple(float(r) for r in self.pivot_gate))  # JSON gives a list
 
     @classmethod
@@ -233,6 +250,9 @@ class PhysicsModel(nn.Module):
                 kwargs["signed_actuation"] = True
         elif config.system in ("spring", "gravity", "bouncing"):
             kwargs["n_objects"] = n
+        if config.fixed_g:  # the m run: g given, m learned from 1/g (see ModelConfig.fixed_g)
+            kwargs.update(g=config.fixed_g, learnable=("m",))
+            kwargs.setdefault("mass", 1.0 / config.fixed_g)
         if config.system == "bouncing":
             kwargs.setdefault("size", float(config.image_size))
             kwargs.setdefault("radius", config.wall_radius)
@@ -240,6 +260,20 @@ class PhysicsModel(nn.Module):
         self.integrator = make_integrator(config.integrator, config.substeps)
         self.decoder = Decoder(DecoderConfig(config.image_size, config.channels, n, d, hidden=config.template_hidden,
                                              template_size=config.template_size or None, init_scale=config.init_scale))
+
+    def learned_parameter_names(self) -> list[str]:
+        """The physical parameters that training changes, e.g. ``["k", "l"]``; a fixed one (gravity's g
+        in the m run) is left out."""
+        names = []
+        for name in self.physical_parameters():
+            param = getattr(self.system, f"log_{name}", None)
+            if name == "a" and param is None:
+                param = getattr(self.system, "a_signed", None)
+            if name == "offset":
+                param = self.system.offset
+            if param is not None and param.requires_grad:
+                names.append(name)
+        return names
 
     def physical_parameters(self) -> dict[str, float]:
         """Current physical parameter values, e.g. ``{"g": 9.98, "a": 1.002}`` (plus ``offset``)."""

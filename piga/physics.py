@@ -9,7 +9,7 @@ unrolls it over a sequence. Everything is plain PyTorch, so gradients flow to th
 |---|---|---|---|---|---|---|
 | :class:`Pendulum` | 1 | 1 (angle) | 1 | (3 / 2l)·g·sin θ + (3 / m l²)·(a·u − b·θ̇), b optional | 0.05 | g 1 -> 10, a 0.3 -> 1 |
 | :class:`Spring` | 2 | 2 | 0 | Σ_j -k·(abs(d) - 2l)·d / abs(d) | 0.3 | k 1 -> 4, l 1 -> 6 (balls) |
-| :class:`Gravity` | 3 | 2 | 0 | Σ_j -g·m_j·d / abs(d)³ | 0.5 | g 1 -> 60 |
+| :class:`Gravity` | 3 | 2 | 0 | Σ_j -g·m_j·d / abs(d)³ | 0.5 | g 1 -> 60 (m = 1); or m 1/g -> 1 (g fixed) |
 | :class:`Bouncing` | 2 | 2 | 0 | 0, elastic walls | 0.3 | (none) |
 
 Conventions:
@@ -352,18 +352,25 @@ class Spring(System):
 
 
 class Gravity(System):
-    """N bodies of unit mass under Newtonian gravity (the paper's 3-balls gravity).
+    """N bodies of one shared mass m under Newtonian gravity (the paper's 3-balls gravity).
 
-    The acceleration of body i is Σ_{j≠i} -g·m_j·d / abs(d)³ with d = p_i - p_j and m_j = 1. True
-    value g = 60.
+    The force between bodies i and j is g·m_i·m_j / abs(d)², so the acceleration of body i is
+    Σ_{j≠i} -g·m_j·d / abs(d)³ with d = p_i - p_j. True values g = 60, m = 1.
+
+    The paper learns either g with the masses fixed (m = 1, the default here: m is then a constant,
+    not a parameter) or m with g fixed (``mass`` given, ``learnable=("m",)``). With one shared mass
+    the motion depends on g·m only, so learning both is a flat direction and is refused.
 
     Args:
         n_objects: N.
-        g: Initial gravitational constant (default 1, far from the truth).
+        g: Initial gravitational constant (default 1, far from the truth), or its fixed value.
         dt: Seconds per frame.
         softening: abs(d) is clamped below at this many pixels (the published code clips at 1):
             exact for bodies further apart, a bounded force and finite gradient for closer ones.
-        learnable: True (all), False (none), or the names to learn.
+        mass: None for unit masses (a constant, the paper's g run), or the initial shared mass m,
+            registered as the parameter ``log_m``.
+        learnable: True (all), False (none), or the names to learn among "g" and (with ``mass``)
+            "m"; not both.
     """
 
     reference_values: ClassVar[dict[str, float]] = {"g": 60.0}
@@ -375,24 +382,37 @@ class Gravity(System):
         dt: float = 0.5,
         softening: float = 1.0,
         learnable: bool | Collection[str] = True,
+        mass: float | None = None,
     ) -> None:
         super().__init__(n_objects=n_objects, coord_dim=2, action_dim=0, dt=dt)
         if not softening > 0:
             raise ValueError(f"Gravity: softening must be > 0, got {softening}")
         self.softening = float(softening)
-        self.mass = 1.0
-        flags = self._resolve_learnable("Gravity", ("g",), learnable)
+        names = ("g", "m") if mass is not None else ("g",)
+        flags = self._resolve_learnable("Gravity", names, learnable)
+        if flags["g"] and flags.get("m", False):
+            raise ValueError("Gravity: g and m enter the motion only as g·m, so they cannot both be learned; "
+                             "learn one and fix the other")
         self._add_positive_parameter("g", g, flags["g"])
+        self.has_mass = mass is not None
+        if mass is not None:
+            self._add_positive_parameter("m", mass, flags["m"])
 
     @property
     def g(self) -> Tensor:
         """Gravitational constant, exp(log_g)."""
         return self.log_g.exp()
 
+    @property
+    def m(self) -> Tensor:
+        """The shared mass, exp(log_m), or 1 (a constant) without ``mass``."""
+        return self.log_m.exp() if self.has_mass else self.log_g.new_ones(())
+
     def acceleration(self, p: Tensor, v: Tensor, u: Tensor | None = None) -> Tensor:
         d = _pairwise_differences(p)  # (B, N, N, 2)
         dist = _guarded_norm(d, self.softening)  # (B, N, N, 1)
-        acc = -self.g * self.mass * d / dist**3  # (B, N, N, 2); zero on the diagonal
+        strength = self.g * self.m if self.has_mass else self.g  # g·m_j, the acceleration's scale
+        acc = -strength * d / dist**3  # (B, N, N, 2); zero on the diagonal
         return acc.sum(dim=2)  # (B, N, 2)
 
 

@@ -39,7 +39,7 @@ def write_run_report(model: PhysicsModel, state: TrainState, data: str | Path, r
     frames, actions = read_sequences(data, split)
     frames, actions = frames[:3], actions[:3]
     cfg = model.config
-    steps = min(cfg.pred_frames + eval_config.extrapolate_frames, info.steps - cfg.input_frames)
+    steps = eval_config.frames_after_input(model, info.steps)
     pred, _ = rollout_frames(model, frames, actions, steps)
     truth = frames_to_float(torch.from_numpy(frames[:, cfg.input_frames : cfg.input_frames + steps]), cfg.channels).numpy()
     to_img = lambda a: np.stack([[_image(f) for f in seq] for seq in a])  # noqa: E731

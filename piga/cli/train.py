@@ -18,7 +18,8 @@ OUTPUTS = (CHECKPOINT, "metrics.json", "config.json", "rollout.png", "templates.
 
 
 def build_parser() -> ArgumentParser:
-    from piga.train import PRESETS, TrainConfig  # noqa: PLC0415 (torch loads only when the command runs)
+    from piga.model import ModelConfig  # noqa: PLC0415 (torch loads only when the command runs)
+    from piga.train import PRESETS, TrainConfig  # noqa: PLC0415
 
     fast, paper = TrainConfig(), PRESETS["paper"]["train"]
 
@@ -48,6 +49,11 @@ def build_parser() -> ArgumentParser:
     p.add_argument("--signed-actuation", action="store_true",
                    help="learn the sign of a too (a in linear space, from +0.3): for a camera on the other side of the "
                    "hinge or a motor wired the other way, which flip the actuation the frames show")
+    add_preset_option(p, "--fixed-g", type=positive_float, default=ModelConfig().fixed_g, metavar="G",
+                      shown="none: learn g with unit masses",
+                      help="gravity data only, the paper's m run: hold g at G (your value; the file's parameters are "
+                      "never read) and learn the bodies' shared mass m instead, starting from 1/G so that the force "
+                      "g·m starts at 1 as in the g run")
     p.add_argument("--seed", type=nonnegative_int, default=fast.seed, help="seed of initialisation and sampling (default %(default)s)")
     p.add_argument("--threads", type=nonnegative_int, default=fast.threads, help="torch CPU threads (default %(default)s: torch's choice)")
     p.add_argument("--resume", action="store_true", help="continue the run in --out; it may raise --epochs or --max-minutes "
@@ -87,7 +93,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         if tuple(ckpt["data"]["image_shape"]) != info.image_shape or ckpt["data"]["system"] != info.system:
             raise PigaError(f"--resume: {args.data} ({info.system}, {info.image_shape}) does not match the run's data "
                             f"({ckpt['data']['system']}, {tuple(ckpt['data']['image_shape'])})")
-        changed = sorted(set(overrides) - {"epochs", "max_minutes"}) + (["signed_actuation"] if args.signed_actuation else [])
+        changed = (sorted(set(overrides) - {"epochs", "max_minutes"}) + (["signed_actuation"] if args.signed_actuation else [])
+                   + (["fixed_g"] if args.fixed_g is not None else []))
         if changed:
             raise PigaError(f"--resume keeps the run's recipe; drop {', '.join('--' + c.replace('_', '-') for c in changed)}")
         train_config = replace(TrainConfig(**ckpt["train_config"]), **overrides)
@@ -101,6 +108,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         model_overrides = dict(preset.get("model", {}))
         if args.signed_actuation:
             model_overrides["signed_actuation"] = True
+        if args.fixed_g is not None:
+            if info.system != "gravity":
+                raise PigaError(f"--fixed-g is for gravity data (it learns the mass m with g held); {args.data} is "
+                                f"{info.system}")
+            model_overrides["fixed_g"] = args.fixed_g
         model_config = model_config_for(info, model_overrides)
         record = {"command": command}
     check_trainable(info, model_config, train_config)
@@ -146,8 +158,11 @@ def _start_values(model_config: Any) -> str:
     """The physical parameters a new model starts from, e.g. "g=1, a=0.3"."""
     from piga.model import PhysicsModel
 
-    values = PhysicsModel(model_config).physical_parameters()
-    return ", ".join(f"{k}={v:g}" for k, v in values.items() if k != "offset") or "(none to learn)"
+    model = PhysicsModel(model_config)
+    learned = model.learned_parameter_names()
+    values = model.physical_parameters()
+    return ", ".join(f"{k}={v:g}" + ("" if k in learned else " (fixed)") for k, v in values.items()
+                     if k != "offset") or "(none to learn)"
 
 
 def _read_record(run_dir: Path) -> dict[str, Any]:
