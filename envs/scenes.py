@@ -20,7 +20,8 @@ generators), each ``v <- v + h·a(p)``, ``p <- p + h·v``.
 Rendering draws each frame ``supersample`` times larger, then averages each block of
 ``supersample`` x ``supersample`` pixels (:func:`skimage.transform.downscale_local_mean`): the
 exact area average of the high-resolution picture, i.e. anti-aliased. Balls are colour channel
-2 - j (blue, green, red), digits channel j (red, green), as in the generators. The digits are
+2 - j (blue, green, red), digits channel j (red, green), as in the generators; ``colors``,
+``radius`` and (balls) ``background`` change the look, for data rendered unlike the training data. The digits are
 scikit-learn's ``load_digits`` images (8x8, upscaled), over a darkened scikit-image texture
 (``skimage.data.brick``): the paper's MNIST digits and CIFAR background cannot be downloaded here.
 """
@@ -70,6 +71,8 @@ class SceneConfig:
     """A start is redrawn when a centre comes within this many pixels of an edge (None: ``radius``)."""
     colors: tuple[tuple[float, float, float], ...] = ()
     """RGB in [0, 1] per object; empty for the generators' colours."""
+    background: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """RGB in [0, 1] of the balls' uniform background (the generators' black); the digits have their texture."""
     max_tries: int = 10_000
     """Redraws allowed per sequence before giving up with :class:`SceneError`."""
 
@@ -85,6 +88,12 @@ class SceneConfig:
         if self.colors and len(self.colors) < self.n_objects:
             raise SceneError(f"{len(self.colors)} colours for {self.n_objects} objects")
         object.__setattr__(self, "colors", tuple(tuple(float(c) for c in rgb) for rgb in self.colors))
+        object.__setattr__(self, "background", tuple(float(c) for c in self.background))
+        for rgb in (*self.colors, self.background):
+            if len(rgb) != 3 or not all(0.0 <= c <= 1.0 for c in rgb):
+                raise SceneError(f"a colour must be 3 values (R, G, B) in [0, 1], got {rgb}")
+        if self.scene == "digits-spring" and any(self.background):
+            raise SceneError("digits-spring draws its digits over a texture; a background colour is for the balls")
         for name, value in self.params.items():
             if not (math.isfinite(float(value)) and float(value) > 0):
                 raise SceneError(f"{self.scene}: parameter {name} must be finite and > 0, got {value}")
@@ -324,7 +333,8 @@ def render(config: SceneConfig, positions: np.ndarray) -> np.ndarray:
         return _render_digits(config, positions, colors)
     box = int(math.ceil(2 * config.radius)) + 2  # pixels around a ball that it can cover
     offsets = (np.arange(box * s) + 0.5) / s  # high-resolution pixel centres in the box, box pixels
-    canvas = np.zeros((steps, size + 2 * box, size + 2 * box, 3))  # padded: boxes may leave the image
+    canvas = np.empty((steps, size + 2 * box, size + 2 * box, 3))  # padded: boxes may leave the image
+    canvas[:] = config.background
     rows = np.arange(steps)[:, None, None]
     for j in range(config.n_objects):
         corner = np.floor(positions[:, j] - config.radius).astype(int)  # (T, 2), the box's top-left pixel

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from collections.abc import Sequence
 from dataclasses import replace
+from typing import Any
 
 from envs.dmc import DMCPendulumConfig
 from envs.effects import EFFECTS, format_effects, parse_effect
@@ -31,6 +32,18 @@ def _effect(text: str) -> tuple[str, int | float]:
         return parse_effect(text)
     except ValueError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def _color(text: str) -> tuple[float, float, float]:
+    """A colour as matplotlib reads it (a name, '#rrggbb', 'tab:blue', ...) -> RGB in [0, 1]."""
+    import argparse
+
+    from matplotlib.colors import to_rgb
+
+    try:
+        return tuple(float(c) for c in to_rgb(text))  # type: ignore[return-value]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a colour: {text!r} (use a name such as 'gold', or '#ffd91a')") from None
 
 
 def _env_option(text: str) -> tuple[str, str]:
@@ -80,6 +93,14 @@ def build_parser() -> ArgumentParser:
     for flag, what in SCENE_PARAMETERS.items():
         p.add_argument(flag, type=positive_float, default=None,
                        help=f"{what} (default the scene's; {_scene_defaults(flag)})")
+    p.add_argument("--radius", type=positive_float, default=None,
+                   help="a scene's ball radius in pixels, or half a digit's side (default the scene's; "
+                   f"{', '.join(f'{k} {v}' for k, v in _scene_values('radius').items())})")
+    p.add_argument("--colors", type=_color, nargs="+", default=None, metavar="COLOR",
+                   help="a scene's object colours, one per object, as matplotlib names them (red, tab:orange, "
+                   "'#ffd91a', ...) (default the scene's; blue, green, red for balls, red, green for digits)")
+    p.add_argument("--background", type=_color, default=None, metavar="COLOR",
+                   help="a ball scene's background colour, as --colors (default the scene's; black)")
     p.add_argument("--env", choices=ENVS, default=ENVS[0],
                    help="the env: Gymnasium's pixel pendulum, or dm_control's MuJoCo pendulum through a face-on camera "
                    "(needs piga[dmc]; actions u ~ U(-1, 1), frame dt = action_repeat x 0.02) (default %(default)s)")
@@ -127,7 +148,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if args.system != "pendulum":
         return _collect_scene(args, argv)
-    given = [flag for flag in SCENE_PARAMETERS if getattr(args, flag.lstrip("-")) is not None]
+    given = [flag for flag in (*SCENE_PARAMETERS, *SCENE_LOOK) if getattr(args, flag.lstrip("-")) is not None]
     if given:
         raise PigaError(f"{', '.join(given)} {'is' if len(given) == 1 else 'are'} for the scenes (--system "
                         f"{'/'.join(SYSTEM_CHOICES[1:])}); the pendulum takes --gravity and --actuation-gain")
@@ -179,11 +200,18 @@ SCENE_PARAMETERS = {"--k": "spring constant k, 1/s^2 (spring, digits-spring)",
                     "--g": "gravitational constant g, pixels^3/s^2 (gravity)",
                     "--m": "mass m of every ball (gravity)"}
 SYSTEM_CHOICES = ["pendulum", *SCENES]
+#: Scene appearance options (a look unlike the default scene's, for held-out checks).
+SCENE_LOOK = ("--radius", "--colors", "--background")
 
 
 def _scene_defaults(flag: str) -> str:
     name = flag.lstrip("-")
     return ", ".join(f"{scene} {values['params'][name]:g}" for scene, values in SCENES.items() if name in values["params"])
+
+
+def _scene_values(name: str) -> dict[str, Any]:
+    """Scene -> its default of a :class:`envs.scenes.SceneConfig` field, e.g. ``radius``."""
+    return {scene: format_default(values[name]) for scene, values in SCENES.items()}
 
 
 def _scene_sizes() -> dict[str, int]:
@@ -204,6 +232,15 @@ def _collect_scene(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     overrides: dict[str, object] = {"params": params}
     if args.image_size is not None:
         overrides["image_size"] = args.image_size
+    if args.radius is not None:
+        overrides["radius"] = args.radius
+    if args.colors is not None:
+        if len(args.colors) != SCENES[args.system]["n_objects"]:
+            raise PigaError(f"--colors: {args.system} has {SCENES[args.system]['n_objects']} objects; "
+                            f"got {len(args.colors)} colour(s)")
+        overrides["colors"] = tuple(args.colors)
+    if args.background is not None:
+        overrides["background"] = args.background
     scene = scene_config(args.system, **overrides)
     preset = dict(SCENE_PRESETS[args.preset])
     for key in ("sequences", "steps", "split"):
