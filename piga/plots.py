@@ -95,7 +95,7 @@ def templates_figure(contents: np.ndarray, masks: np.ndarray, background: np.nda
 def curves_figure(history: list[dict[str, float]], true_params: dict[str, float]) -> Figure:
     """Learning curves per epoch: losses (log scale) and each physical parameter with its true value."""
     epochs = [h["epoch"] for h in history]
-    names = [k for k in history[0] if k in ("g", "a", "k", "l", "offset")] if history else []
+    names = [k for k in history[0] if k in ("g", "a", "k", "l", "m", "offset")] if history else []
     names = [k for k in names if len({h[k] for h in history}) > 1]  # a frozen parameter has no curve
     fig, axes = plt.subplots(1, 1 + len(names), figsize=(3.2 * (1 + len(names)), 2.8), squeeze=False)
     ax = axes[0, 0]
