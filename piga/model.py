@@ -136,9 +136,9 @@ class ModelConfig:
     """Unactuated systems: the velocity at frame L is the one the engine ends the last input interval
     with when it starts at p_{L-1} and reaches p_L (shooting, :func:`piga.physics.hold_velocity`, from
     the estimator's velocity), with the current physical parameters detached as in ``velocity_physics``,
-    which it replaces. Exact for noiseless positions when the engine is the data's; the cubic term of
-    ``velocity_physics`` is not at dt = 0.3 (fitting the spring's true positions with it gives k 1.5% low,
-    with shooting 0.2%, the rest being the engine's 5 substeps against the data's 10)."""
+    which it replaces. Exact for noiseless positions when the engine is the data's. The cubic term of
+    ``velocity_physics`` is not the engine's own (staggered, semi-implicit) velocity at dt = 0.3, and
+    biases k and g low (``benchmarks/velocity_bias.py``)."""
     init_background: bool = False
     """Start the decoder's background content at the encoder's label-free median background
     (:meth:`piga.decoder.Decoder.init_background`). On the balls' black background the sigmoid
