@@ -18,7 +18,9 @@ collected at other values (:data:`HELDOUT`): the spring at other k, l and with a
 radius, colours, background), gravity at another g, the digits at other k, l.
 
 Runs are resumable: a finished run (its RUN_DIR/metrics.json) is read, not retrained, and each
-finished run is saved to ``OUT.json`` at once. Training runs one at a time with one thread, so its
+finished run is saved to ``OUT.json`` at once. A finished run whose model was built with another recipe
+than today's fast preset stops the benchmark with one line (remove it, or use another ``--work``); one
+evaluated with fewer extrapolated frames than its recipe's T_ext is re-evaluated from its checkpoint. Training runs one at a time with one thread, so its
 minutes are measured on one core of the machine (recorded in OUT.json), under whatever else runs.
 Writes ``OUT.json``, ``OUT.md``, ``OUT-ssim.png`` (SSIM per step) and ``OUT-rollout-SYSTEM.png``.
 """
@@ -26,6 +28,7 @@ Writes ``OUT.json``, ``OUT.md``, ``OUT-ssim.png`` (SSIM per step) and ``OUT-roll
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import shutil
 import statistics
@@ -122,6 +125,7 @@ def _run(case: str, seed: int, data: Path, folder: Path, overrides: dict[str, An
         model, state = train(data, run_dir, config, model_overrides, progress=False)
         write_run_report(model, state, data, run_dir)
         (run_dir / "load.json").write_text(json.dumps({"load_average_at_end": os.getloadavg()}))
+    _check_recipe(run_dir, info, model_overrides)
     metrics = json.loads(metrics_path.read_text())
     t_ext = model_overrides.get("extrapolate_frames", 20)
     expected = min(t_ext, info.steps - metrics["input_frames"] - metrics["pred_frames"])
@@ -134,6 +138,24 @@ def _run(case: str, seed: int, data: Path, folder: Path, overrides: dict[str, An
         write_json(metrics_path, metrics)
     load = json.loads((run_dir / "load.json").read_text())["load_average_at_end"] if (run_dir / "load.json").exists() else None
     return {"system": case, "seed": seed, "run": str(run_dir), "metrics": metrics, "load_average_at_end": load}
+
+
+def _check_recipe(run_dir: Path, info: Any, model_overrides: dict[str, Any]) -> None:
+    """Refuses to reuse a finished run whose model was built with another recipe than today's fast preset
+    (T_ext aside: only evaluation uses it, and :func:`_run` re-evaluates)."""
+    import torch
+
+    from piga.train import model_config_for
+
+    from piga.model import ModelConfig
+
+    saved = {**ModelConfig().to_dict(),  # a field newer than the run: the run had its default
+             **torch.load(run_dir / "checkpoint.pt", map_location="cpu", weights_only=False)["model_config"]}
+    wanted = model_config_for(info, model_overrides).to_dict()
+    changed = [k for k in wanted if k != "extrapolate_frames" and json.dumps(saved[k]) != json.dumps(wanted[k])]
+    if changed:
+        raise SystemExit(f"{run_dir} was trained with another recipe ({', '.join(f'{k}: {saved.get(k)} -> {wanted[k]}' for k in changed)}); "
+                         "remove it (or use another --work) to retrain it")
 
 
 def _median(values: list[float]) -> float:
