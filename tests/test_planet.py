@@ -101,6 +101,23 @@ def test_a_file_without_rewards_is_refused(tiny_data: Path, tmp_path: Path) -> N
         check_planet_data(inspect_dataset(path), TINY_TRAIN)
 
 
+@pytest.mark.parametrize("horizon", [1, 5])
+def test_fast_imagination_equals_the_reference(horizon: int) -> None:
+    from agents.planet.imagine import Imagination
+
+    torch.manual_seed(0)
+    model = WorldModel(TINY).eval()
+    imagination = Imagination(model)
+    belief = Belief(torch.randn(1, TINY.deter_size), torch.randn(1, TINY.stoch_size))
+    for batch in (9, 3):  # a new shape reallocates the buffers
+        actions = torch.rand(batch, horizon, 1) * 4 - 2
+        with torch.inference_mode():
+            reference = model.imagine_return(belief, actions, torch.Generator().manual_seed(5))
+        fast = imagination(belief, actions, torch.Generator().manual_seed(5))
+        assert fast.shape == (batch,)
+        torch.testing.assert_close(fast, reference, rtol=1e-4, atol=1e-5)
+
+
 def test_latent_planner_actions_in_bounds_and_deterministic_for_a_seed() -> None:
     torch.manual_seed(0)
     model = WorldModel(TINY)
@@ -116,3 +133,6 @@ def test_latent_planner_actions_in_bounds_and_deterministic_for_a_seed() -> None
     assert np.all(np.abs(first) <= 2.0) and np.all(np.abs(other) <= 2.0)
     assert np.array_equal(first, again)
     assert not np.array_equal(first, other)
+    reference = PlanetAgent(model, TINY_CEM, fast=False)
+    reference.reset()
+    np.testing.assert_allclose(np.concatenate([reference.act(f) for f in frames]), first, atol=1e-4)
