@@ -117,3 +117,17 @@ def test_control_jobs_dispatch_on_the_run_kind(planet_run: Path, ddpg_run: Path)
     assert result["summary"]["agent"] == "planet" and np.isfinite(result["summary"]["mean_return"])
     with pytest.raises(ValueError, match="needs model_dir"):
         ControlJob("ddpg", episodes)
+
+
+def test_episodes_split_over_workers_are_the_episodes_of_one_process(planet_run: Path) -> None:
+    from piga.episodes import EpisodeConfig
+    from piga.jobs import ControlJob, run_job, run_split, split_job
+
+    job = ControlJob("planet", EpisodeConfig(episodes=3, steps=4, hold_steps=1, seed=2, frame_stack=1), model_dir=str(planet_run))
+    assert [(j.episodes.first_episode, j.episodes.episodes) for j in split_job(job, 2)] == [(0, 2), (2, 1)]
+    one, split = run_job(job), run_split(job, workers=2, progress=False)
+    timing = ("plan_ms_median", "plan_ms_p95")
+    assert [{k: v for k, v in e.items() if k not in timing} for e in split["episodes"]] == \
+           [{k: v for k, v in e.items() if k not in timing} for e in one["episodes"]]
+    assert {k: v for k, v in split["summary"].items() if k not in timing} == {k: v for k, v in one["summary"].items() if k not in timing}
+    assert len({e["return"] for e in one["episodes"]}) == 3  # three different episodes, not one thrice
