@@ -131,3 +131,33 @@ def test_episodes_split_over_workers_are_the_episodes_of_one_process(planet_run:
            [{k: v for k, v in e.items() if k not in timing} for e in one["episodes"]]
     assert {k: v for k, v in split["summary"].items() if k not in timing} == {k: v for k, v in one["summary"].items() if k not in timing}
     assert len({e["return"] for e in one["episodes"]}) == 3  # three different episodes, not one thrice
+
+
+def test_planet_iterative_from_the_command_line(tiny_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "run"
+    code, stdout, err = run_in_process("piga-baseline", baseline.main, "planet", str(tiny_data), "--out", str(out), *TINY_PLANET,
+                                       "--iterative", "1", "--rounds", "1", "--round-steps", "2", "--episode-steps", "16",
+                                       capsys=capsys)
+    assert code == 0, err
+    assert "then 1 rounds of 1 planner episodes + 2 steps" in stdout
+    record = json.loads((out / "config.json").read_text())
+    assert record["iterative"]["episodes"] == 1 and record["iterative"]["noise"] == 0.3
+    assert json.loads((out / "metrics.json").read_text())["iterative"]["collected_sequences"] == 1
+    code, stdout, err = run_in_process("piga-baseline", baseline.main, "planet", str(tiny_data), "--out", str(out), "--resume",
+                                       "--rounds", "2", "--quiet", capsys=capsys)
+    assert code == 0, err
+    assert json.loads((out / "metrics.json").read_text())["iterative"]["rounds"] == 2
+
+
+@pytest.mark.parametrize("option, needle", [
+    (("--rounds", "2"), "--rounds goes with --iterative"),
+    (("--iterative", "1", "--exploration-noise", "-1"), "noise must be >= 0"),
+    (("--iterative", "1", "--episode-steps", "8"), "shorter than the file's sequences of 16 frames"),
+    (("--iterative", "1", "--max-minutes", "5"), "bound the run with --rounds"),
+])
+def test_planet_iterative_bad_input_gets_one_line(tiny_data: Path, tmp_path: Path, option: tuple[str, ...], needle: str,
+                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    code, _, err = run_in_process("piga-baseline", baseline.main, "planet", str(tiny_data), "--out", str(tmp_path / "r"),
+                                  *TINY_PLANET, *option, capsys=capsys)
+    assert_one_line(code, err, needle)
+    assert not (tmp_path / "r").exists()

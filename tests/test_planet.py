@@ -10,7 +10,7 @@ import pytest
 import torch
 
 from agents.config import CEMConfig
-from agents.planet.config import LatentPlannerConfig, PlanetTrainConfig, RSSMConfig
+from agents.planet.config import IterativeConfig, LatentPlannerConfig, PlanetTrainConfig, RSSMConfig
 from agents.planet.planner import PlanetAgent
 from agents.planet.rssm import Belief, WorldModel
 
@@ -136,3 +136,54 @@ def test_latent_planner_actions_in_bounds_and_deterministic_for_a_seed() -> None
     reference = PlanetAgent(model, TINY_CEM, fast=False)
     reference.reset()
     np.testing.assert_allclose(np.concatenate([reference.act(f) for f in frames]), first, atol=1e-4)
+
+
+TINY_ITERATIVE = IterativeConfig(rounds=2, episodes=1, steps_per_round=2, episode_steps=36)
+
+
+def _iterative(data: Path, run: Path, rounds: int, resume: bool = False) -> tuple[WorldModel, object]:
+    from piga.baselines.planet_iterative import train_planet_iterative
+
+    return train_planet_iterative(data, run, TINY_TRAIN, replace(TINY_ITERATIVE, rounds=rounds), TINY, resume=resume,
+                                  progress=False, planner=TINY_CEM)
+
+
+def test_iterative_rounds_append_collected_episodes_and_leave_the_data_file_alone(tiny_data: Path, tmp_path: Path) -> None:
+    import hashlib
+    import json
+
+    from piga.data import inspect_dataset, load_rewards, read_sequences
+
+    digest = hashlib.sha256(tiny_data.read_bytes()).hexdigest()
+    _, state = _iterative(tiny_data, tmp_path / "run", rounds=1)
+    after_one = inspect_dataset(tmp_path / "run" / "collected.h5")
+    model, state = _iterative(tiny_data, tmp_path / "run", rounds=2, resume=True)
+    assert hashlib.sha256(tiny_data.read_bytes()).hexdigest() == digest
+    collected = inspect_dataset(tmp_path / "run" / "collected.h5")
+    # 36 steps per episode cut into sequences of the file's 16 frames: 2 per episode, 4 left over
+    assert (after_one.n_sequences, collected.n_sequences, collected.steps) == (2, 4, 16)
+    assert collected.attrs["rounds"] == 2 and len(collected.attrs["episode_returns"]) == 2 and not collected.has_states
+    frames, actions = read_sequences(tmp_path / "run" / "collected.h5", "train")
+    assert frames.shape == (4, 16, 64, 64) and frames.dtype == np.uint8 and np.abs(actions).max() <= 2.0
+    assert np.all(load_rewards(tmp_path / "run" / "collected.h5", "train") <= 0)
+    assert state.step == TINY_TRAIN.steps + 2 * TINY_ITERATIVE.steps_per_round
+    metrics = json.loads((tmp_path / "run" / "metrics.json").read_text())
+    assert metrics["collected_sequences"] == 4 and metrics["iterative"]["rounds"] == 2
+    assert metrics["train_sequences"] == 8 + 4
+
+
+def test_iterative_resume_is_exact(tiny_data: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from piga.baselines import planet_iterative
+    from piga.data import read_sequences
+
+    straight, _ = _iterative(tiny_data, tmp_path / "a", rounds=2)
+    _iterative(tiny_data, tmp_path / "b", rounds=1)  # stopped after round 1, then asked for one more
+    with monkeypatch.context() as patch:  # and stopped again while collecting round 2: it is collected again, the same
+        patch.setattr(planet_iterative, "collect_round", lambda *args, **kwargs: (_ for _ in ()).throw(KeyboardInterrupt))
+        with pytest.raises(KeyboardInterrupt):
+            _iterative(tiny_data, tmp_path / "b", rounds=2, resume=True)
+    resumed, _ = _iterative(tiny_data, tmp_path / "b", rounds=2, resume=True)
+    for (name, p), q in zip(straight.state_dict().items(), resumed.state_dict().values()):
+        assert torch.equal(p, q), name
+    for x, y in zip(read_sequences(tmp_path / "a" / "collected.h5", "train"), read_sequences(tmp_path / "b" / "collected.h5", "train")):
+        assert np.array_equal(x, y)

@@ -75,6 +75,14 @@ class PlanetAgent:
                      self.low, self.high, self.config.cem, generator=self.generator)
         return result.mean[0].clamp(self.low, self.high).numpy().astype(np.float32)
 
+    def explore(self, frames: np.ndarray, rng: np.random.Generator, noise: float) -> np.ndarray:
+        """As :meth:`act`, plus PlaNet's exploration: the action (1,) plus N(0, (noise·bound)²), clipped
+        to the bounds; the belief then follows the action executed, noise included."""
+        planned = self.plan(self.observe(frames[-1]))
+        action = np.clip(planned + noise * MAX_ACTION * rng.standard_normal(1), -MAX_ACTION, MAX_ACTION).astype(np.float32)
+        self.previous = torch.from_numpy(action)[None]
+        return action
+
     def act(self, frames: np.ndarray, state: np.ndarray | None = None) -> np.ndarray:
         """Action (1,) from the newest frame of ``frames`` (uint8 (L, H, W)); ``state`` is never used."""
         action = self.plan(self.observe(frames[-1]))

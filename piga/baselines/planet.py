@@ -48,13 +48,18 @@ class PlanetState:
 
 
 class _Sequences:
-    """The train split in memory: frames uint8 (N, T, H, W), actions (N, T, A), rewards (N, T)."""
+    """The train split in memory: frames uint8 (N, T, H, W), actions (N, T, A), rewards (N, T);
+    ``extra``'s train split (the iterative mode's collected episodes, all in it) appended."""
 
-    def __init__(self, data: str | Path, split: str, max_sequences: int = 0):
+    def __init__(self, data: str | Path, split: str, max_sequences: int = 0, extra: str | Path | None = None):
         frames, actions = read_sequences(data, split)
         rewards = load_rewards(data, split)
         if max_sequences:
             frames, actions, rewards = frames[:max_sequences], actions[:max_sequences], rewards[:max_sequences]
+        if extra is not None:
+            more_frames, more_actions = read_sequences(extra, "train")
+            frames, actions = np.concatenate([frames, more_frames]), np.concatenate([actions, more_actions])
+            rewards = np.concatenate([rewards, load_rewards(extra, "train")])
         self.frames = torch.from_numpy(frames)
         self.actions = torch.from_numpy(actions)
         self.rewards = torch.from_numpy(rewards)
@@ -135,12 +140,14 @@ def train_planet(
     resume: bool = False,
     progress: bool = True,
     on_checkpoint: Callable[[PlanetState], None] | None = None,
+    extra_data: str | Path | None = None,
 ) -> tuple[WorldModel, PlanetState]:
     """Trains the world model on ``data``'s train split; writes checkpoints, TensorBoard and ``metrics.json`` to ``run_dir``.
 
     Nothing is written before the first checkpoint. With ``resume``, the model, optimiser, RNGs and
     step come from ``run_dir``'s checkpoint, and ``config`` should be its saved one (possibly with
-    more ``steps``); ``rssm`` is ignored.
+    more ``steps``); ``rssm`` is ignored. ``extra_data``: a file of the same frames whose sequences
+    are trained on too (:mod:`piga.baselines.planet_iterative`'s collected episodes).
 
     Returns:
         The trained model (eval mode) and the final state.
@@ -166,7 +173,7 @@ def train_planet(
     optimizer = torch.optim.Adam(model.parameters(), lr=config.lr, eps=config.adam_eps)
     if resume:
         optimizer.load_state_dict(ckpt["optimizer"])
-    seqs = _Sequences(data, "train", config.max_sequences)
+    seqs = _Sequences(data, "train", config.max_sequences, extra_data)
     writer: Any = None
     model.train()
     started = time.monotonic() - state.elapsed
@@ -219,6 +226,7 @@ def train_planet(
         "kind": "planet",
         "data": str(data),
         "train_sequences": len(seqs),
+        "collected_sequences": 0 if extra_data is None else inspect_dataset(extra_data).n_sequences,
         "steps": state.step,
         "train_seconds": state.elapsed,
         "learning_curve": state.history,
