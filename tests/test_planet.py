@@ -35,6 +35,11 @@ def test_rssm_shapes() -> None:
     assert parts.kl.item() >= 0
     returns = model.imagine_return(Belief(h[:1, -1], s[:1, -1]), torch.zeros(7, 6, 1))
     assert returns.shape == (7,)
+    decoded, rewards = model.open_loop(frames, actions, 2, torch.Generator().manual_seed(0))
+    assert decoded.shape == (3, 5, 1, 64, 64) and rewards.shape == (3, 5)
+    changed = frames.clone()
+    changed[:, 2:] = 0  # frames after the context are never read
+    torch.testing.assert_close(model.open_loop(changed, actions, 2, torch.Generator().manual_seed(0))[0], decoded)
 
 
 def test_one_training_step_lowers_the_loss(tiny_data: Path) -> None:
@@ -72,6 +77,9 @@ def test_training_writes_a_run_and_resumes_exactly(tiny_data: Path, tmp_path: Pa
     metrics = json.loads((tmp_path / "b" / "metrics.json").read_text())
     assert len(metrics["learning_curve"]) == 2 and metrics["valid"]["loss"] > 0
     assert (tmp_path / "b" / "tensorboard").is_dir()
+    open_loop = metrics["open_loop"]
+    assert open_loop["split"] == "valid" and open_loop["context"] == 5 and len(open_loop["frame_mse"]) == 16
+    assert (tmp_path / "b" / "openloop.png").stat().st_size > 0
 
 
 def test_nan_stops_and_names_the_last_good_checkpoint(tiny_data: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

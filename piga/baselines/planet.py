@@ -120,6 +120,37 @@ def _save(path: Path, model: WorldModel, optimizer: torch.optim.Optimizer, state
         torch.save(payload, tmp)
 
 
+#: Frames filtered before the open-loop prediction of ``openloop.png`` (PlaNet's open-loop videos use 5).
+OPEN_LOOP_CONTEXT = 5
+
+
+@torch.no_grad()
+def open_loop_check(model: WorldModel, data: str | Path, run_dir: Path, seed: int, sequences: int = 4) -> dict[str, Any]:
+    """PlaNet's open-loop diagnostic on the valid split (the train split without one): filter
+    :data:`OPEN_LOOP_CONTEXT` frames, imagine the rest of each sequence under its own actions;
+    writes ``run_dir/openloop.png`` (real frames above imagined ones, and real against predicted
+    rewards) and returns per-step errors: frame MSE (in [0, 1] units) and reward absolute error,
+    averaged over ``sequences`` sequences, plus the same for an all-mean-frame and zero-reward guess."""
+    from piga.plots import openloop_figure, save_figure
+
+    info = inspect_dataset(data)
+    split = "valid" if info.split_counts["valid"] else "train"
+    seqs = _Sequences(data, split, sequences)
+    frames, actions, rewards = seqs.frames, seqs.actions, seqs.rewards
+    context = min(OPEN_LOOP_CONTEXT, frames.shape[1] - 1)
+    decoded, predicted = model.open_loop(frames, actions, context, torch.Generator().manual_seed(seed))
+    imagined = (decoded[:, :, 0] + 0.5).clamp(0, 1)  # (B, T, H, W) in [0, 1]
+    real = frames.float() / 255  # (B, T, H, W)
+    frame_mse = (imagined - real).square().mean((0, 2, 3))  # (T,)
+    mean_frame_mse = (real.mean((0, 1), keepdim=True) - real).square().mean((0, 2, 3))  # (T,) the average frame as a guess
+    reward_error = (predicted - rewards).abs().mean(0)  # (T,)
+    save_figure(openloop_figure(real.numpy(), imagined.numpy(), rewards.numpy(), predicted.numpy(), context),
+                run_dir / "openloop.png")
+    return {"split": split, "sequences": len(frames), "context": context, "frame_mse": frame_mse.tolist(),
+            "mean_frame_mse": mean_frame_mse.tolist(), "reward_abs_error": reward_error.tolist(),
+            "zero_reward_abs_error": rewards.abs().mean(0).tolist()}
+
+
 @torch.no_grad()
 def _valid_losses(model: WorldModel, data: str | Path, config: PlanetTrainConfig, info: DatasetInfo) -> dict[str, float] | None:
     """Mean losses on (up to 64 sequences of) the valid split, one chunk from the start of each; None without one."""
@@ -231,6 +262,7 @@ def train_planet(
         "train_seconds": state.elapsed,
         "learning_curve": state.history,
         "valid": _valid_losses(model, data, config, info),
+        "open_loop": open_loop_check(model, data, run_dir, config.seed),
     }
     write_json(run_dir / "metrics.json", metrics)
     return model, state
