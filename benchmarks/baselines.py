@@ -22,17 +22,21 @@ Trainings run ``--workers`` at a time (default 2, one torch thread each), longes
 evaluation splits its episodes over the workers (:func:`piga.jobs.run_split`: the same episodes and
 scores as one process). Plan times are measured with one process.
 
-**Cost.** :data:`COST_S` holds the cost of one unit of each kind of work on one core of the 2-core
-AMD EPYC, measured with the two cores shared with other jobs (load average 6-8), so upper bounds
-(an idle core is roughly twice as fast): PlaNet-style training step 1.9 s (``piga-baseline planet``'s
-defaults, 12 steps timed), piga training step 0.29 s (33 steps), latent CEM 0.79 s per control step
-(``benchmarks/planet_plan_time.py``), DDPG from the state 0.0106 s per env step (5.3 min per 30k),
-from pixels and from the latent per env step as in :data:`COST_S`. ``--estimate`` turns them into:
+**Cost.** :data:`COST_S` holds the CPU seconds of one unit of each kind of work (one process, one
+torch thread) on the 2-core AMD EPYC, measured as process CPU time while other jobs shared the
+machine, so roughly what an idle core takes: a PlaNet-style training step 1.15 s, a piga training
+step 0.145 s, latent CEM 0.43 s per control step (0.66 s with the model's reference
+``imagine_return``), a DDPG step from pixels 0.37 s once learning starts, from the latent 0.020 s,
+from the state 0.011 s. One run each: PlaNet-style 58 min (3000 steps, whatever the data size);
+piga 7-8 min (at least 3000 steps) on up to 250 sequences, 16 min on 500 (16 epochs); DDPG from
+the state 5 min (30k), from the latent 12 min (30k, autoencoder included), from pixels 64 min (20k);
+an evaluation of 10 PlaNet-style episodes 14 min of CPU. ``--estimate`` adds them up (trainings
+packed longest first on ``--workers`` cores, episodes split evenly):
 
-| preset | what | collect | training (core-h) | PlaNet-style episodes (core-h) | other episodes (core-h) | wall on 2 cores |
+| preset | what | collect | training (core-h) | PlaNet-style episodes (core-h) | other episodes (core-h) | wall on 2 idle cores |
 |---|---|---|---|---|---|---|
-| ``budget`` | piga at 25/50/100/250 sequences x 3 seeds (at least 3000 steps each); PlaNet-style at 100/500/2000 x 1 seed (3000 steps); DDPG state 30k x 3 seeds, latent 30k x 1, pixels 20k x 1; 20 episodes per evaluation (PlaNet-style: 10); sweep x0.6, 1.0, 1.4, 1.8 with 5 episodes each | 0.3 h | 10.2 | 2.2 | 0.1 | 6.6 h (upper bound; ~3.5 h on an idle machine) |
-| ``full`` | the issue's: 7 sizes x 3 seeds each, DDPG 30k/80k/80k x 3 seeds, 20 episodes, 14 multipliers x 10 episodes | 0.3 h | 71.6 | 24.6 | 0.4 | 49 h |
+| ``budget`` | piga at 25/50/100/250 sequences x 3 seeds (at least 3000 steps each); PlaNet-style at 100/500/2000 x 1 seed (3000 steps); DDPG state 30k x 3 seeds, latent 30k x 1, pixels 20k x 1; 20 episodes per evaluation (PlaNet-style: 10); sweep x0.6, 1.0, 1.4, 1.8 with 5 episodes each | 0.1 h | 5.9 | 1.2 | 0.2 | 3.8 h |
+| ``full`` | the issue's: 7 sizes x 3 seeds each, DDPG 30k/80k/80k x 3 seeds, 20 episodes, 14 multipliers x 10 episodes | 0.2 h | 50 | 13.4 | 0.5 | 32 h |
 
 The budget preset answers every question of the comparison with what it can afford, and says what
 it cut: PlaNet-style has one seed per point (three where a GPU is lent), its points are where it
@@ -118,17 +122,22 @@ class BenchConfig:
         return self.episodes if self.planet_episodes is None else self.planet_episodes
 
 
-#: Cost of one unit of work on one core of the 2-core AMD EPYC, measured with other jobs on the
-#: machine (load average 6-8), so upper bounds; on an idle core expect roughly half.
+#: CPU seconds of one unit of work in one process with one torch thread, on the 2-core AMD EPYC:
+#: process CPU time, measured while other jobs shared the machine (so roughly an idle core's wall
+#: time; cache sharing makes them, if anything, high), except ``ddpg_state_step``, the wall time of
+#: 30k-step runs with one other job on the machine.
 COST_S = {
-    "piga_train_step": 0.29,  # piga-train-model, batch 32 windows of 14 frames
-    "planet_train_step": 1.9,  # piga-baseline planet at its defaults (16 x 32 frames, depth 16, state 100/16)
-    "planet_plan_step": 0.79,  # latent CEM, PlaNet's settings (benchmarks/planet_plan_time.py)
-    "piga_episode_step": 0.006,  # piga's CEM (1.4 ms idle) + rendering a frame
-    "ddpg_state_step": 0.0106,  # Pendulum-v1, MLP, one gradient step per env step (5.3 min per 30k)
-    "ddpg_latent_step": 0.03,  # rendering + autoencoder code + MLP gradient step
-    "ddpg_pixels_step": 0.35,  # rendering + CnnPolicy gradient step on 256 stacks of 4 frames
-    "collect_sequence": 0.15,  # piga-collect, 40 frames, one process
+    "piga_train_step": 0.145,  # piga-train-model at its defaults, batch 32 (33 steps, startup included)
+    "planet_train_step": 1.15,  # piga-baseline planet at its defaults, 16 x 32 frames (12 steps, startup included)
+    "planet_plan_step": 0.43,  # latent CEM with PlaNet's settings, the Imagination engine (reference engine: 0.66)
+    "piga_episode_step": 0.008,  # a control step with rendering (the oracle's 200-step episode: 1.65 s)
+    "ddpg_state_step": 0.0106,  # Pendulum-v1 without rendering, warm-up included (5.3 min per 30k)
+    "ddpg_latent_warmup_step": 0.0068,  # rendering + autoencoder code, random actions
+    "ddpg_latent_step": 0.020,  # the same + one MLP gradient step
+    "ddpg_pixels_warmup_step": 0.012,  # rendering, random actions
+    "ddpg_pixels_step": 0.372,  # rendering + one CnnPolicy gradient step on 256 stacks of 4 frames
+    "autoencoder_step": 0.135,  # piga.baselines.autoencoder, 2000 steps before DDPG from the latent
+    "collect_sequence": 0.25,  # piga-collect, 40 frames
 }
 
 
@@ -168,7 +177,17 @@ def train_cost(cfg: BenchConfig, agent: str, n: int = 0, steps: int = 0) -> floa
         return piga_epochs(cfg, n) * _piga_steps_per_epoch(cfg, n) * COST_S["piga_train_step"]
     if agent == "planet":
         return cfg.planet_steps * COST_S["planet_train_step"]
-    return steps * COST_S[f"{agent}_step"]
+    if agent == "ddpg_state":
+        return steps * COST_S["ddpg_state_step"]
+    from piga.baselines.autoencoder import AutoencoderConfig
+    from piga.baselines.ddpg import DDPGConfig
+
+    obs = agent.removeprefix("ddpg_")
+    warmup = min(steps, cfg.overrides.get("ddpg", {}).get("learning_starts", DDPGConfig.learning_starts))
+    seconds = warmup * COST_S[f"{agent}_warmup_step"] + (steps - warmup) * COST_S[f"{agent}_step"]
+    if obs == "latent":
+        seconds += cfg.overrides.get("autoencoder", {}).get("steps", AutoencoderConfig.steps) * COST_S["autoencoder_step"]
+    return seconds
 
 
 def estimate(cfg: BenchConfig) -> dict[str, float]:
@@ -184,7 +203,7 @@ def estimate(cfg: BenchConfig) -> dict[str, float]:
     runs = len(cfg.sizes) * len(cfg.seeds) + 1 + sum(len(seeds) for _, _, seeds in cfg.ddpg_runs)
     other_eval = (runs * cfg.episodes + 3 * len(parse_range(cfg.sweep)) * cfg.sweep_episodes
                   + len(cfg.goal_angles) * max(1, cfg.episodes // 5)) * step * COST_S["piga_episode_step"]
-    collect = (max(cfg.sizes + cfg.planet_size_list) * 1.2) * COST_S["collect_sequence"] * len(set(cfg.sizes + cfg.planet_size_list)) / 2
+    collect = sum(n * 1.2 for n in set(cfg.sizes + cfg.planet_size_list)) * COST_S["collect_sequence"] / cfg.workers
     cores = [0.0] * cfg.workers
     for seconds in sorted(train, reverse=True):  # longest first, each to the least loaded core
         cores[cores.index(min(cores))] += seconds
@@ -365,7 +384,7 @@ def main() -> int:
     args = p.parse_args()
     cfg = PRESETS[args.preset] if args.workers is None else replace(PRESETS[args.preset], workers=args.workers)
     cost = estimate(cfg)
-    print(f"estimate (from COST_S, upper bounds): {', '.join(f'{k} {v / 3600:.1f} h' for k, v in cost.items())}", flush=True)
+    print(f"estimate (COST_S): {', '.join(f'{k} {v / 3600:.1f} h' for k, v in cost.items())}", flush=True)
     if args.estimate:
         return 0
     import time

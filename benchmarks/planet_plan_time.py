@@ -78,8 +78,8 @@ def main() -> int:
     out = Path(args.out)
     write_json(out.with_suffix(".json"), record, overwrite=True)
     lines = [f"# PlaNet-style plan time per control step\n\nCommand: `{record['command']}`\n",
-             f"Machine: {record['machine']['cpu']}, {record['machine']['cores']} cores; load average "
-             f"{load_before[0]:.2f} before, {record['load_average_after'][0]:.2f} after.\n",
+             (f"Machine: {record['machine']['cpu']}, {record['machine']['cores']} cores; load average "
+             f"{load_before[0]:.2f} before, {record['load_average_after'][0]:.2f} after.\n"),
              "| threads | reference ms | fast ms | speedup | same actions |", "|---|---|---|---|---|"]
     lines += [f"| {r['threads']} | {r['reference_ms']:.0f} | {r['fast_ms']:.0f} | {r['speedup']:.2f}x | {r['same_actions']} |" for r in rows]
     with atomic_output(out.with_suffix(".md"), overwrite=True) as tmp:

@@ -165,7 +165,7 @@ def test_iterative_rounds_append_collected_episodes_and_leave_the_data_file_alon
     digest = hashlib.sha256(tiny_data.read_bytes()).hexdigest()
     _, state = _iterative(tiny_data, tmp_path / "run", rounds=1)
     after_one = inspect_dataset(tmp_path / "run" / "collected.h5")
-    model, state = _iterative(tiny_data, tmp_path / "run", rounds=2, resume=True)
+    _, state = _iterative(tiny_data, tmp_path / "run", rounds=2, resume=True)
     assert hashlib.sha256(tiny_data.read_bytes()).hexdigest() == digest
     collected = inspect_dataset(tmp_path / "run" / "collected.h5")
     # 36 steps per episode cut into sequences of the file's 16 frames: 2 per episode, 4 left over

@@ -141,13 +141,14 @@ def train_planet_iterative(
     resume: bool = False,
     progress: bool = True,
     on_checkpoint: Callable[[PlanetState], None] | None = None,
-    planner: LatentPlannerConfig = LatentPlannerConfig(),
+    planner: LatentPlannerConfig | None = None,
     command: str = "",
 ) -> tuple[WorldModel, PlanetState]:
     """Trains on ``data``, then runs ``iterative.rounds`` collect-then-train rounds (module docstring).
 
-    With ``resume``, continues ``run_dir`` exactly where it stopped (``config`` and ``iterative``
-    should be its saved ones, possibly with more rounds). ``metrics.json`` gains an ``iterative``
+    ``planner``: the latent planner's settings while collecting (None: PlaNet's). With ``resume``,
+    continues ``run_dir`` exactly where it stopped (``config`` and ``iterative`` should be its saved
+    ones, possibly with more rounds). ``metrics.json`` gains an ``iterative``
     record: rounds done, collected sequences and each collected episode's return.
 
     Returns:
@@ -170,7 +171,8 @@ def train_planet_iterative(
             if _step_of(run_dir) > target - iterative.steps_per_round:
                 raise ValueError(f"{collected} holds {done} rounds, but {run_dir / CHECKPOINT} was trained past round {r - 1}; "
                                  "the run cannot continue exactly (was collected.h5 removed?)")
-            new = collect_round(load_planet(run_dir)[0], env_config, iterative, planner, config.seed, r, info.steps, progress)
+            new = collect_round(load_planet(run_dir)[0], env_config, iterative, planner or LatentPlannerConfig(), config.seed, r,
+                                info.steps, progress)
             _append(collected, info, new, r, command)
             done = r
         if _step_of(run_dir) < target:
