@@ -343,17 +343,77 @@ def goal_images(piga_run: Path, cfg: BenchConfig, folder: Path) -> list[dict[str
     return rows
 
 
+def figures(record: dict[str, Any], out: Path) -> dict[str, str]:
+    """The comparison's figures next to OUT.md: sample efficiency, DDPG learning curves, gravity sweep.
+    Returns their file names by part."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from piga.plots import save_figure
+
+    names = {part: f"{out.name}-{part}.png" for part in ("sample_efficiency", "ddpg", "sweep")}
+    fig, axes = plt.subplots(1, 2, figsize=(9, 3.4), layout="constrained")
+    for agent, color in (("piga", "C0"), ("planet", "C1")):
+        rows = [r for r in record["sample_efficiency"] if r["agent"] == agent]
+        label = "piga" if agent == "piga" else "PlaNet-style"
+        for ax, key, mean_key in ((axes[0], "success_rate", "success_mean"), (axes[1], "mean_return", "return_mean")):
+            scale = 100 if key == "success_rate" else 1
+            for r in rows:
+                ax.scatter([r["sequences"]] * len(r["runs"]), [scale * run["control"][key] for run in r["runs"]], color=color, s=12, alpha=0.5)
+            ax.plot([r["sequences"] for r in rows], [scale * r[mean_key] for r in rows], "-o", color=color, label=label)
+    oracle = record["oracle"]
+    axes[0].axhline(100 * oracle["success_rate"], color="gray", ls="--", label="oracle")
+    axes[1].axhline(oracle["mean_return"], color="gray", ls="--", label="oracle")
+    sizes = sorted({r["sequences"] for r in record["sample_efficiency"]})
+    axes[0].set_ylim(-5, 105)
+    for ax, ylabel in ((axes[0], "success (%)"), (axes[1], "mean return")):
+        ax.set_xscale("log")
+        ax.set_xticks(sizes, [str(n) for n in sizes])
+        ax.minorticks_off()
+        ax.set_xlabel("training sequences")
+        ax.set_ylabel(ylabel)
+    axes[0].legend(fontsize=7)
+    fig.suptitle("sample efficiency at gravity x1.0 (dots: seeds; line: mean)", fontsize=9)
+    save_figure(fig, out.with_name(names["sample_efficiency"]))
+    fig, ax = plt.subplots(figsize=(5, 3.4))
+    for i, obs in enumerate(dict.fromkeys(r["obs"] for r in record["ddpg"])):
+        for r in (r for r in record["ddpg"] if r["obs"] == obs):
+            curve = r["metrics"]["learning_curve"]
+            ax.plot([c["step"] for c in curve], [c["eval_mean_return"] for c in curve], color=f"C{i}", alpha=0.8,
+                    label=obs if r["seed"] == min(q["seed"] for q in record["ddpg"] if q["obs"] == obs) else None)
+    ax.axhline(-200, color="gray", ls="--", lw=0.8)
+    ax.set_xlabel("env steps")
+    ax.set_ylabel("evaluation mean return")
+    ax.legend(fontsize=7, title="DDPG from", title_fontsize=7)
+    save_figure(fig, out.with_name(names["ddpg"]))
+    fig, ax = plt.subplots(figsize=(5, 3.4))
+    ax.set_ylim(-5, 105)
+    sweep = record["sweep"]
+    for j, agent in enumerate(sweep["agents"]):
+        told = agent in ("piga", "oracle")
+        ax.plot(sweep["multipliers"], [100 * row[j] for row in sweep["success"]], "-o" if told else "--s",
+                label=f"{agent} ({'told' if told else 'not told'})")
+    ax.set_xlabel("gravity multiplier")
+    ax.set_ylabel("success (%)")
+    ax.legend(fontsize=7)
+    save_figure(fig, out.with_name(names["sweep"]))
+    return names
+
+
 def markdown(record: dict[str, Any]) -> str:
     """The results page."""
     lines = [f"# Baselines: piga, PlaNet-style and DDPG\n\nCommand: `{record['command']}` (preset `{record['preset']}`)\n",
              f"Machine: {record['machine']}\n", "## Sample efficiency (gravity x1.0)\n",
+             f"![sample efficiency]({record['figures']['sample_efficiency']})\n",
              "| sequences | agent | seeds | success (mean) | mean return | train s (mean) |", "|---|---|---|---|---|---|"]
     for row in record["sample_efficiency"]:
         lines.append(f"| {row['sequences']} | {row['agent']} | {len(row['runs'])} | {100 * row['success_mean']:.0f}% | "
                      f"{row['return_mean']:.1f} | {row['train_seconds_mean']:.0f} |")
     o = record["oracle"]
     lines += [f"\nOracle: {100 * o['success_rate']:.0f}% success, mean return {o['mean_return']:.1f}.\n",
-              "## DDPG\n", "| observation | seed | steps | first step at >= -200 | final eval return | success | train s |",
+              "## DDPG\n", f"![DDPG learning curves]({record['figures']['ddpg']})\n", "| observation | seed | steps | first step at >= -200 | final eval return | success | train s |",
               "|---|---|---|---|---|---|---|"]
     for r in record["ddpg"]:
         final = r["metrics"]["final_eval_mean_return"]
@@ -361,6 +421,7 @@ def markdown(record: dict[str, Any]) -> str:
                      f"{'n/a' if final is None else f'{final:.1f}'} | {100 * r['control']['success_rate']:.0f}% | "
                      f"{r['metrics']['train_seconds']:.0f} |")
     lines += ["\n## Zero-shot gravity sweep (piga and the oracle told the multiplier; baselines not told)\n",
+              f"![gravity sweep]({record['figures']['sweep']})\n",
               "| gravity x | " + " | ".join(record["sweep"]["agents"]) + " |", "|---|" + "---|" * len(record["sweep"]["agents"])]
     for m, cells in zip(record["sweep"]["multipliers"], record["sweep"]["success"]):
         lines.append(f"| {m:g} | " + " | ".join(f"{100 * c:.0f}%" for c in cells) + " |")
@@ -448,10 +509,11 @@ def main() -> int:
     planet_ms = evaluate("planet", best["planet"], cfg, episodes=1, workers=1)["plan_ms_median"]
     record["plan_time"] = {"piga_ms": piga_ms, "planet_ms": planet_ms, "ratio": planet_ms / piga_ms}
     record["wall_seconds"] = time.monotonic() - started
+    record["figures"] = figures(record, out)
     write_json(out.with_suffix(".json"), record)
     with atomic_output(out.with_suffix(".md"), overwrite=True) as tmp:
         tmp.write_text(markdown(record))
-    print(f"wrote {out.with_suffix('.json')} and {out.with_suffix('.md')}")
+    print(f"wrote {out.with_suffix('.json')}, {out.with_suffix('.md')} and the figures {', '.join(record['figures'].values())}")
     return 0
 
 
