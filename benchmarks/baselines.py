@@ -44,6 +44,11 @@ might reach 80% rather than where piga does, DDPG from pixels gets 20k steps (10
 random warm-up, so 10k of learning; the paper's DDPG from pixels failed) and DDPG from the latent
 30k, not the paper's 80k. The results page states the budget spent (training seconds per run and
 the wall time).
+
+Finished runs are kept in ``OUT_runs/`` and skipped when the benchmark is run again, so an
+interrupted benchmark continues where it stopped. ``OUT.json``, ``OUT.md`` and the figures
+``OUT-sample_efficiency.png``, ``OUT-ddpg.png`` and ``OUT-sweep.png`` are rewritten (atomically) at
+the end. Numbers of the ``tiny`` preset check the pipeline only; they are no result.
 """
 
 from __future__ import annotations
@@ -438,7 +443,7 @@ def markdown(record: dict[str, Any]) -> str:
 
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--out", required=True, help="writes OUT.json, OUT.md; runs in OUT_runs/")
+    p.add_argument("--out", required=True, help="writes OUT.json, OUT.md, OUT-*.png; runs in OUT_runs/")
     p.add_argument("--preset", choices=sorted(PRESETS), default="full")
     p.add_argument("--workers", type=int, help="processes (default: the preset's, 2)")
     p.add_argument("--estimate", action="store_true", help="print the estimated cost of the preset and exit")
