@@ -39,7 +39,7 @@ packed longest first on ``--workers`` cores, episodes split evenly):
 | ``full`` | the issue's: 7 sizes x 3 seeds each, DDPG 30k/80k/80k x 3 seeds, 20 episodes, 14 multipliers x 10 episodes | 0.2 h | 50 | 13.4 | 0.5 | 32 h |
 
 The budget preset answers every question of the comparison with what it can afford, and says what
-it cut: PlaNet-style has one seed per point (three where a GPU is lent), its points are where it
+it cut: PlaNet-style has one seed per point (its 3000 steps are an hour each), its points are where it
 might reach 80% rather than where piga does, DDPG from pixels gets 20k steps (10k of them the zoo's
 random warm-up, so 10k of learning; the paper's DDPG from pixels failed) and DDPG from the latent
 30k, not the paper's 80k. The results page states the budget spent (training seconds per run and
