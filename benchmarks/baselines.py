@@ -1,7 +1,7 @@
 """Benchmark: piga against the PlaNet-style world model and SB3 DDPG, side by side (the paper's Figure 5).
 
 Every agent is scored by the same episodes (:mod:`piga.episodes`: starts, seeds, success), on the
-same machine, one process at a time:
+same machine:
 
 1. **Sample efficiency**: success rate and mean return against the number of training sequences,
    for piga (``piga-train-model``'s recipe) and the PlaNet-style model trained on the same files
@@ -13,12 +13,42 @@ same machine, one process at a time:
 5. **Plan time per step**: piga's CEM against PlaNet-style latent CEM, measured in this run.
 6. **Compute**: training wall time of each agent, and the machine.
 
-    python benchmarks/baselines.py --out results/baselines                  # the full comparison (hours)
+    python benchmarks/baselines.py --out results/baselines --preset budget  # what 2 CPU cores allow (hours)
+    python benchmarks/baselines.py --out results/baselines                  # the full comparison (days on 2 cores)
     python benchmarks/baselines.py --out runs/check --preset tiny          # the pipeline end to end, in minutes
+    python benchmarks/baselines.py --out X --preset budget --estimate      # the cost estimate only
+
+Trainings run ``--workers`` at a time (default 2, one torch thread each), longest first; then each
+evaluation splits its episodes over the workers (:func:`piga.jobs.run_split`: the same episodes and
+scores as one process). Plan times are measured with one process.
+
+**Cost.** :data:`COST_S` holds the CPU seconds of one unit of each kind of work (one process, one
+torch thread) on the 2-core AMD EPYC, measured as process CPU time while other jobs shared the
+machine, so roughly what an idle core takes: a PlaNet-style training step 1.15 s, a piga training
+step 0.145 s, latent CEM 0.43 s per control step (0.66 s with the model's reference
+``imagine_return``), a DDPG step from pixels 0.37 s once learning starts, from the latent 0.020 s,
+from the state 0.011 s. One run each: PlaNet-style 58 min (3000 steps, whatever the data size);
+piga 7-8 min (at least 3000 steps) on up to 250 sequences, 16 min on 500 (16 epochs); DDPG from
+the state 5 min (30k), from the latent 12 min (30k, autoencoder included), from pixels 64 min (20k);
+an evaluation of 10 PlaNet-style episodes 14 min of CPU. ``--estimate`` adds them up (trainings
+packed longest first on ``--workers`` cores, episodes split evenly):
+
+| preset | what | collect | training (core-h) | PlaNet-style episodes (core-h) | other episodes (core-h) | wall on 2 idle cores |
+|---|---|---|---|---|---|---|
+| ``budget`` | piga at 25/50/100/250 sequences x 3 seeds (at least 3000 steps each); PlaNet-style at 100/500/2000 x 1 seed (3000 steps); DDPG state 30k x 3 seeds, latent 30k x 1, pixels 20k x 1; 20 episodes per evaluation (PlaNet-style: 10); sweep x0.6, 1.0, 1.4, 1.8 with 5 episodes each | 0.1 h | 5.9 | 1.2 | 0.2 | 3.8 h |
+| ``full`` | the issue's: 7 sizes x 3 seeds each, DDPG 30k/80k/80k x 3 seeds, 20 episodes, 14 multipliers x 10 episodes | 0.2 h | 50 | 13.4 | 0.5 | 32 h |
+
+The budget preset answers every question of the comparison with what it can afford, and says what
+it cut: PlaNet-style has one seed per point (its 3000 steps are an hour each), its points are where it
+might reach 80% rather than where piga does, DDPG from pixels gets 20k steps (10k of them the zoo's
+random warm-up, so 10k of learning; the paper's DDPG from pixels failed) and DDPG from the latent
+30k, not the paper's 80k. The results page states the budget spent (training seconds per run and
+the wall time).
 
 Finished runs are kept in ``OUT_runs/`` and skipped when the benchmark is run again, so an
-interrupted benchmark continues where it stopped. ``OUT.json`` and ``OUT.md`` are rewritten
-(atomically) at the end. Numbers of the ``tiny`` preset check the pipeline only; they are no result.
+interrupted benchmark continues where it stopped. ``OUT.json``, ``OUT.md`` and the figures
+``OUT-sample_efficiency.png``, ``OUT-ddpg.png`` and ``OUT-sweep.png`` are rewritten (atomically) at
+the end. Numbers of the ``tiny`` preset check the pipeline only; they are no result.
 """
 
 from __future__ import annotations
@@ -30,9 +60,11 @@ import shlex
 import sys
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
+from collections.abc import Callable
 from typing import Any
 
 from common import machine
+from piga.episodes import parse_range
 from piga.atomic import atomic_output, write_json
 
 
@@ -41,39 +73,87 @@ class BenchConfig:
     """What the comparison runs."""
 
     sizes: tuple[int, ...] = (25, 50, 100, 250, 500, 1000, 2000)
-    """Training sequences per point of the sample-efficiency sweep."""
+    """Training sequences per point of the sample-efficiency sweep (piga's)."""
+    planet_sizes: tuple[int, ...] | None = None
+    """The PlaNet-style model's points (None: ``sizes``); its training cost does not grow with them."""
     seeds: tuple[int, ...] = (0, 1, 2)
-    """Training seeds per point."""
+    """piga's training seeds per point."""
+    planet_seeds: tuple[int, ...] | None = None
+    """The PlaNet-style model's training seeds per point (None: ``seeds``)."""
     steps: int = 40
     """Frames per collected sequence (piga-collect's default)."""
     data_seed: int = 100
     """Seed of the one random-action collection that every subset is cut from."""
     piga_epochs: int = 16
     """piga-train-model's epochs (its default)."""
+    piga_min_steps: int = 0
+    """At least this many optimiser steps for piga (more epochs on small subsets; 0: ``piga_epochs`` only).
+    With 16 epochs of 50 sequences piga takes ~670 steps, fewer than its 800-step warm-up and
+    curriculum, so a small subset would measure an unfinished recipe rather than too little data."""
     planet_steps: int = 3000
-    """PlaNet-style optimiser steps (piga-baseline planet's default)."""
-    ddpg_steps: tuple[tuple[str, int], ...] = (("state", 30000), ("latent", 80000), ("pixels", 80000))
-    """DDPG budgets per observation (the paper's: proprioception 30k, latent 80k)."""
-    ddpg_seeds: tuple[int, ...] = (0, 1, 2)
-    """DDPG seeds."""
+    """PlaNet-style optimiser steps (piga-baseline planet's default), whatever the subset's size."""
+    ddpg_runs: tuple[tuple[str, int, tuple[int, ...]], ...] = (("state", 30000, (0, 1, 2)), ("latent", 80000, (0, 1, 2)),
+                                                                ("pixels", 80000, (0, 1, 2)))
+    """DDPG (observation, env steps, seeds) (the paper's budgets: proprioception 30k, latent 80k)."""
     episodes: int = 20
-    """Control episodes per evaluation."""
+    """Control episodes per evaluation of piga, the oracle and DDPG."""
+    planet_episodes: int | None = None
+    """Control episodes per evaluation of the PlaNet-style agent (None: ``episodes``); its latent CEM
+    takes ~0.5 s a step, ~100 s an episode."""
     sweep: str = "0.5:1.8:0.1"
     """Gravity multipliers of the zero-shot sweep."""
     sweep_episodes: int = 10
-    """Episodes per multiplier."""
+    """Episodes per multiplier (the PlaNet-style agent: at most ``planet_episodes``)."""
     goal_angles: tuple[float, ...] = (-30.0, 15.0, 45.0)
     """Goal images (degrees) for piga."""
     episode_steps: int = 200
     """Steps per control episode."""
+    workers: int = 2
+    """Processes: trainings run side by side, and each evaluation's episodes are split over them
+    (the same episodes and scores as one process; plan times are measured with one process)."""
     overrides: dict[str, dict[str, Any]] = field(default_factory=dict)
     """Extra settings per stage (the tiny preset shrinks the models)."""
+
+    @property
+    def planet_size_list(self) -> tuple[int, ...]:
+        return self.sizes if self.planet_sizes is None else self.planet_sizes
+
+    @property
+    def planet_seed_list(self) -> tuple[int, ...]:
+        return self.seeds if self.planet_seeds is None else self.planet_seeds
+
+    @property
+    def planet_episode_count(self) -> int:
+        return self.episodes if self.planet_episodes is None else self.planet_episodes
+
+
+#: CPU seconds of one unit of work in one process with one torch thread, on the 2-core AMD EPYC:
+#: process CPU time, measured while other jobs shared the machine (so roughly an idle core's wall
+#: time; cache sharing makes them, if anything, high), except ``ddpg_state_step``, the wall time of
+#: 30k-step runs with one other job on the machine.
+COST_S = {
+    "piga_train_step": 0.145,  # piga-train-model at its defaults, batch 32 (33 steps, startup included)
+    "planet_train_step": 1.15,  # piga-baseline planet at its defaults, 16 x 32 frames (12 steps, startup included)
+    "planet_plan_step": 0.43,  # latent CEM with PlaNet's settings, the Imagination engine (reference engine: 0.66)
+    "piga_episode_step": 0.008,  # a control step with rendering (the oracle's 200-step episode: 1.65 s)
+    "ddpg_state_step": 0.0106,  # Pendulum-v1 without rendering, warm-up included (5.3 min per 30k)
+    "ddpg_latent_warmup_step": 0.0068,  # rendering + autoencoder code, random actions
+    "ddpg_latent_step": 0.020,  # the same + one MLP gradient step
+    "ddpg_pixels_warmup_step": 0.012,  # rendering, random actions
+    "ddpg_pixels_step": 0.372,  # rendering + one CnnPolicy gradient step on 256 stacks of 4 frames
+    "autoencoder_step": 0.135,  # piga.baselines.autoencoder, 2000 steps before DDPG from the latent
+    "collect_sequence": 0.25,  # piga-collect, 40 frames
+}
 
 
 PRESETS: dict[str, BenchConfig] = {
     "full": BenchConfig(),
-    "tiny": BenchConfig(sizes=(8, 16), seeds=(0,), steps=16, piga_epochs=1, planet_steps=4,
-                        ddpg_steps=(("state", 400), ("latent", 400), ("pixels", 400)), ddpg_seeds=(0,), episodes=1,
+    "budget": BenchConfig(sizes=(25, 50, 100, 250), seeds=(0, 1, 2), planet_sizes=(100, 500, 2000), planet_seeds=(0,),
+                          piga_min_steps=3000,
+                          ddpg_runs=(("state", 30000, (0, 1, 2)), ("latent", 30000, (0,)), ("pixels", 20000, (0,))),
+                          planet_episodes=10, sweep="0.6:1.8:0.4", sweep_episodes=5),
+    "tiny": BenchConfig(sizes=(8, 16), seeds=(0,), planet_sizes=(16,), steps=16, piga_epochs=1, planet_steps=4,
+                        ddpg_runs=(("state", 400, (0,)), ("latent", 400, (0,)), ("pixels", 400, (0,))), episodes=2,
                         sweep="1.0:1.4:0.4", sweep_episodes=1, goal_angles=(15.0,), episode_steps=20,
                         overrides={"planet": {"batch_size": 2, "chunk_length": 8}, "rssm": {"deter_size": 8, "stoch_size": 4},
                                    "piga": {"batch_size": 16, "warmup_steps": 2, "curriculum_steps": 2},
@@ -83,30 +163,89 @@ PRESETS: dict[str, BenchConfig] = {
 }
 
 
+def _piga_steps_per_epoch(cfg: BenchConfig, n: int) -> int:
+    from piga.model import ModelConfig
+
+    window = ModelConfig().window  # the pendulum's L + T_pred
+    return max(1, n * (cfg.steps - window + 1) // cfg.overrides.get("piga", {}).get("batch_size", 32))
+
+
+def piga_epochs(cfg: BenchConfig, n: int) -> int:
+    """piga's epochs on ``n`` sequences: ``piga_epochs``, or more to reach ``piga_min_steps``."""
+    return max(cfg.piga_epochs, math.ceil(cfg.piga_min_steps / _piga_steps_per_epoch(cfg, n)))
+
+
+def train_cost(cfg: BenchConfig, agent: str, n: int = 0, steps: int = 0) -> float:
+    """Estimated core-seconds of one training (:data:`COST_S`): "piga" or "planet" on ``n`` sequences,
+    or "ddpg_OBS" for ``steps`` env steps."""
+    if agent == "piga":
+        return piga_epochs(cfg, n) * _piga_steps_per_epoch(cfg, n) * COST_S["piga_train_step"]
+    if agent == "planet":
+        return cfg.planet_steps * COST_S["planet_train_step"]
+    if agent == "ddpg_state":
+        return steps * COST_S["ddpg_state_step"]
+    from piga.baselines.autoencoder import AutoencoderConfig
+    from piga.baselines.ddpg import DDPGConfig
+
+    obs = agent.removeprefix("ddpg_")
+    warmup = min(steps, cfg.overrides.get("ddpg", {}).get("learning_starts", DDPGConfig.learning_starts))
+    seconds = warmup * COST_S[f"{agent}_warmup_step"] + (steps - warmup) * COST_S[f"{agent}_step"]
+    if obs == "latent":
+        seconds += cfg.overrides.get("autoencoder", {}).get("steps", AutoencoderConfig.steps) * COST_S["autoencoder_step"]
+    return seconds
+
+
+def estimate(cfg: BenchConfig) -> dict[str, float]:
+    """Core-seconds per part from :data:`COST_S` (upper bounds: measured under load), and the wall
+    time on ``workers`` cores (trainings packed longest first; episodes split evenly)."""
+    train = [train_cost(cfg, "piga", n) for n in cfg.sizes for _ in cfg.seeds]
+    train += [train_cost(cfg, "planet", n) for n in cfg.planet_size_list for _ in cfg.planet_seed_list]
+    train += [train_cost(cfg, f"ddpg_{obs}", steps=steps) for obs, steps, seeds in cfg.ddpg_runs for _ in seeds]
+    step = cfg.episode_steps
+    planet_eval = len(cfg.planet_size_list) * len(cfg.planet_seed_list) * cfg.planet_episode_count * step * COST_S["planet_plan_step"]
+    planet_eval += len(parse_range(cfg.sweep)) * min(cfg.sweep_episodes, cfg.planet_episode_count) * step * COST_S["planet_plan_step"]
+    planet_eval += step * COST_S["planet_plan_step"]  # the plan-time episode
+    runs = len(cfg.sizes) * len(cfg.seeds) + 1 + sum(len(seeds) for _, _, seeds in cfg.ddpg_runs)
+    other_eval = (runs * cfg.episodes + 3 * len(parse_range(cfg.sweep)) * cfg.sweep_episodes
+                  + len(cfg.goal_angles) * max(1, cfg.episodes // 5)) * step * COST_S["piga_episode_step"]
+    collect = sum(n * 1.2 for n in set(cfg.sizes + cfg.planet_size_list)) * COST_S["collect_sequence"] / cfg.workers
+    cores = [0.0] * cfg.workers
+    for seconds in sorted(train, reverse=True):  # longest first, each to the least loaded core
+        cores[cores.index(min(cores))] += seconds
+    parts = {"collect": collect, "train (core-s)": sum(train), "planet episodes (core-s)": planet_eval,
+             "other episodes (core-s)": other_eval}
+    parts["wall"] = collect + max(cores) + (planet_eval + other_eval) / cfg.workers
+    return parts
+
+
 def collect_subsets(cfg: BenchConfig, folder: Path) -> dict[int, Path]:
     """One data file per size: the first n sequences of one collection are its train split (nested
     subsets: sequence k depends only on (data_seed, k)), plus 10% more for valid and test."""
     from piga.collect import CollectConfig, collect
 
     files = {}
-    for n in cfg.sizes:
+    for n in sorted(set(cfg.sizes + cfg.planet_size_list)):
         path = folder / f"data-n{n}.h5"
         extra = max(1, n // 10)
         if not path.exists():
-            collect(CollectConfig(sequences=n + 2 * extra, steps=cfg.steps, seed=cfg.data_seed, workers=1, split=(n, extra, extra)),
-                    path, progress=False, command=f"benchmarks/baselines.py (n={n})")
+            collect(CollectConfig(sequences=n + 2 * extra, steps=cfg.steps, seed=cfg.data_seed, workers=cfg.workers,
+                                  split=(n, extra, extra)), path, progress=False, command=f"benchmarks/baselines.py (n={n})")
         files[n] = path
     return files
 
 
-def evaluate(kind: str, run: Path | None, cfg: BenchConfig, gravity_mult: float = 1.0, episodes: int | None = None) -> dict[str, Any]:
-    """piga.episodes' summary for one agent (kind "piga", "planet", "ddpg" or "oracle")."""
+def evaluate(kind: str, run: Path | None, cfg: BenchConfig, gravity_mult: float = 1.0, episodes: int | None = None,
+             workers: int | None = None) -> dict[str, Any]:
+    """piga.episodes' summary for one agent (kind "piga", "planet", "ddpg" or "oracle"), its episodes
+    split over ``workers`` processes (default ``cfg.workers``)."""
     from agents.config import CEMConfig
     from piga.episodes import EpisodeConfig
-    from piga.jobs import ControlJob, run_job
+    from piga.jobs import ControlJob, run_split
 
-    episode_config = EpisodeConfig(episodes=episodes or cfg.episodes, steps=cfg.episode_steps,
-                                   hold_steps=min(20, cfg.episode_steps), gravity_mult=gravity_mult)
+    if episodes is None:
+        episodes = cfg.planet_episode_count if kind == "planet" else cfg.episodes
+    episode_config = EpisodeConfig(episodes=episodes, steps=cfg.episode_steps, hold_steps=min(20, cfg.episode_steps),
+                                   gravity_mult=gravity_mult)
     job = ControlJob(kind, episode_config, model_dir=str(run) if run else None)
     if kind == "planet" and "cem" in cfg.overrides:  # tiny preset only: PlaNet's planner, shrunk
         from agents.planet.config import LatentPlannerConfig
@@ -116,22 +255,22 @@ def evaluate(kind: str, run: Path | None, cfg: BenchConfig, gravity_mult: float 
 
         agent = PlanetAgent(load_planet(run)[0], LatentPlannerConfig(cem=CEMConfig(**cfg.overrides["cem"])))
         return run_episodes(agent, replace(episode_config, frame_stack=1))["summary"]
-    return run_job(job)["summary"]
+    return run_split(job, cfg.workers if workers is None else workers, progress=False)["summary"]
 
 
-def train_piga(data: Path, run: Path, seed: int, cfg: BenchConfig) -> float:
+def train_piga(data: Path, run: Path, seed: int, cfg: BenchConfig, n: int) -> float:
     """Trains (unless done) and returns the run's training seconds."""
     from piga.runs import load_model
     from piga.train import TrainConfig, train
 
     if not (run / "checkpoint.pt").exists():
         overrides = {"rec_frames": "input", "pred_frames": 4} if "piga" in cfg.overrides else {}
-        train(data, run, TrainConfig(epochs=cfg.piga_epochs, seed=seed, threads=1, **cfg.overrides.get("piga", {})),
+        train(data, run, TrainConfig(epochs=piga_epochs(cfg, n), seed=seed, threads=1, **cfg.overrides.get("piga", {})),
               overrides, progress=False)
     return float(load_model(run)[1]["state"]["elapsed"])
 
 
-def train_planet_run(data: Path, run: Path, seed: int, cfg: BenchConfig) -> float:
+def train_planet_run(data: Path, run: Path, seed: int, cfg: BenchConfig, n: int) -> float:
     """Trains (unless done) and returns the run's training seconds."""
     from agents.planet.config import PlanetTrainConfig
     from piga.baselines.planet import rssm_config_for, train_planet
@@ -161,6 +300,30 @@ def train_ddpg_run(obs: str, steps: int, seed: int, data: Path, run: Path, cfg: 
     return json.loads((run / "metrics.json").read_text())
 
 
+def _task(item: tuple[str, Callable[..., Any], tuple[Any, ...]]) -> tuple[str, Any]:
+    name, fn, args = item
+    import torch
+
+    torch.set_num_threads(1)
+    result = fn(*args)
+    print(f"trained {name}", flush=True)
+    return name, result
+
+
+def train_all(tasks: list[tuple[str, Callable[..., Any], tuple[Any, ...], float]], workers: int) -> dict[str, Any]:
+    """Runs the trainings (name, function, arguments, estimated seconds), ``workers`` at a time,
+    longest first; finished runs return at once (each trainer skips a run that is done)."""
+    ordered = [(name, fn, args) for name, fn, args, _ in sorted(tasks, key=lambda t: -t[3])]
+    if workers <= 1:
+        return dict(map(_task, ordered))
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor
+
+    method = "fork" if "fork" in mp.get_all_start_methods() else "spawn"
+    with ProcessPoolExecutor(workers, mp_context=mp.get_context(method)) as pool:
+        return dict(pool.map(_task, ordered))
+
+
 def goal_images(piga_run: Path, cfg: BenchConfig, folder: Path) -> list[dict[str, Any]]:
     """piga reaching goal images; the baselines have no goal input (refused by piga-control)."""
     import imageio.v3 as iio
@@ -185,23 +348,85 @@ def goal_images(piga_run: Path, cfg: BenchConfig, folder: Path) -> list[dict[str
     return rows
 
 
+def figures(record: dict[str, Any], out: Path) -> dict[str, str]:
+    """The comparison's figures next to OUT.md: sample efficiency, DDPG learning curves, gravity sweep.
+    Returns their file names by part."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from piga.plots import save_figure
+
+    names = {part: f"{out.name}-{part}.png" for part in ("sample_efficiency", "ddpg", "sweep")}
+    fig, axes = plt.subplots(1, 2, figsize=(9, 3.4), layout="constrained")
+    for agent, color in (("piga", "C0"), ("planet", "C1")):
+        rows = [r for r in record["sample_efficiency"] if r["agent"] == agent]
+        label = "piga" if agent == "piga" else "PlaNet-style"
+        for ax, key, mean_key in ((axes[0], "success_rate", "success_mean"), (axes[1], "mean_return", "return_mean")):
+            scale = 100 if key == "success_rate" else 1
+            for r in rows:
+                ax.scatter([r["sequences"]] * len(r["runs"]), [scale * run["control"][key] for run in r["runs"]], color=color, s=12, alpha=0.5)
+            ax.plot([r["sequences"] for r in rows], [scale * r[mean_key] for r in rows], "-o", color=color, label=label)
+    oracle = record["oracle"]
+    axes[0].axhline(100 * oracle["success_rate"], color="gray", ls="--", label="oracle")
+    axes[1].axhline(oracle["mean_return"], color="gray", ls="--", label="oracle")
+    sizes = sorted({r["sequences"] for r in record["sample_efficiency"]})
+    axes[0].set_ylim(-5, 105)
+    for ax, ylabel in ((axes[0], "success (%)"), (axes[1], "mean return")):
+        ax.set_xscale("log")
+        ax.set_xticks(sizes, [str(n) for n in sizes])
+        ax.minorticks_off()
+        ax.set_xlabel("training sequences")
+        ax.set_ylabel(ylabel)
+    axes[0].legend(fontsize=7)
+    fig.suptitle("sample efficiency at gravity x1.0 (dots: seeds; line: mean)", fontsize=9)
+    save_figure(fig, out.with_name(names["sample_efficiency"]))
+    fig, ax = plt.subplots(figsize=(5, 3.4))
+    for i, obs in enumerate(dict.fromkeys(r["obs"] for r in record["ddpg"])):
+        for r in (r for r in record["ddpg"] if r["obs"] == obs):
+            curve = r["metrics"]["learning_curve"]
+            ax.plot([c["step"] for c in curve], [c["eval_mean_return"] for c in curve], color=f"C{i}", alpha=0.8,
+                    label=obs if r["seed"] == min(q["seed"] for q in record["ddpg"] if q["obs"] == obs) else None)
+    ax.axhline(-200, color="gray", ls="--", lw=0.8)
+    ax.set_xlabel("env steps")
+    ax.set_ylabel("evaluation mean return")
+    ax.legend(fontsize=7, title="DDPG from", title_fontsize=7)
+    save_figure(fig, out.with_name(names["ddpg"]))
+    fig, ax = plt.subplots(figsize=(5, 3.4))
+    ax.set_ylim(-5, 105)
+    sweep = record["sweep"]
+    for j, agent in enumerate(sweep["agents"]):
+        told = agent in ("piga", "oracle")
+        ax.plot(sweep["multipliers"], [100 * row[j] for row in sweep["success"]], "-o" if told else "--s",
+                label=f"{agent} ({'told' if told else 'not told'})")
+    ax.set_xlabel("gravity multiplier")
+    ax.set_ylabel("success (%)")
+    ax.legend(fontsize=7)
+    save_figure(fig, out.with_name(names["sweep"]))
+    return names
+
+
 def markdown(record: dict[str, Any]) -> str:
     """The results page."""
     lines = [f"# Baselines: piga, PlaNet-style and DDPG\n\nCommand: `{record['command']}` (preset `{record['preset']}`)\n",
              f"Machine: {record['machine']}\n", "## Sample efficiency (gravity x1.0)\n",
+             f"![sample efficiency]({record['figures']['sample_efficiency']})\n",
              "| sequences | agent | seeds | success (mean) | mean return | train s (mean) |", "|---|---|---|---|---|---|"]
     for row in record["sample_efficiency"]:
         lines.append(f"| {row['sequences']} | {row['agent']} | {len(row['runs'])} | {100 * row['success_mean']:.0f}% | "
                      f"{row['return_mean']:.1f} | {row['train_seconds_mean']:.0f} |")
     o = record["oracle"]
     lines += [f"\nOracle: {100 * o['success_rate']:.0f}% success, mean return {o['mean_return']:.1f}.\n",
-              "## DDPG\n", "| observation | seed | steps | first step at >= -200 | final eval return | success | train s |",
+              "## DDPG\n", f"![DDPG learning curves]({record['figures']['ddpg']})\n", "| observation | seed | steps | first step at >= -200 | final eval return | success | train s |",
               "|---|---|---|---|---|---|---|"]
     for r in record["ddpg"]:
+        final = r["metrics"]["final_eval_mean_return"]
         lines.append(f"| {r['obs']} | {r['seed']} | {r['metrics']['steps']} | {r['metrics']['first_step_reaching_minus_200'] or 'never'} | "
-                     f"{r['metrics']['final_eval_mean_return']:.1f} | {100 * r['control']['success_rate']:.0f}% | "
+                     f"{'n/a' if final is None else f'{final:.1f}'} | {100 * r['control']['success_rate']:.0f}% | "
                      f"{r['metrics']['train_seconds']:.0f} |")
     lines += ["\n## Zero-shot gravity sweep (piga and the oracle told the multiplier; baselines not told)\n",
+              f"![gravity sweep]({record['figures']['sweep']})\n",
               "| gravity x | " + " | ".join(record["sweep"]["agents"]) + " |", "|---|" + "---|" * len(record["sweep"]["agents"])]
     for m, cells in zip(record["sweep"]["multipliers"], record["sweep"]["success"]):
         lines.append(f"| {m:g} | " + " | ".join(f"{100 * c:.0f}%" for c in cells) + " |")
@@ -209,67 +434,91 @@ def markdown(record: dict[str, Any]) -> str:
     for g in record["goals"]:
         lines.append(f"| {g['goal_deg']:g} | {g['read_deg']:.2f} | {100 * g['piga']['success_rate']:.0f}% | {g['planet']} | {g['ddpg']} |")
     p = record["plan_time"]
-    lines += [f"\n## Plan time per step (median, this run)\n\npiga {p['piga_ms']:.2f} ms, PlaNet-style {p['planet_ms']:.1f} ms: "
-              f"ratio {p['ratio']:.1f}x.\n"]
+    lines += [f"\n## Plan time per step (median, this run, one process)\n\npiga {p['piga_ms']:.2f} ms, PlaNet-style "
+              f"{p['planet_ms']:.1f} ms: ratio {p['ratio']:.1f}x.\n",
+              f"## Compute\n\nWall time of this invocation: {record['wall_seconds'] / 60:.1f} min on {record['config']['workers']} "
+              f"processes (finished runs of earlier invocations are reused; their training seconds are in the tables).\n"]
     return "\n".join(lines) + "\n"
 
 
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--out", required=True, help="writes OUT.json, OUT.md; runs in OUT_runs/")
+    p.add_argument("--out", required=True, help="writes OUT.json, OUT.md, OUT-*.png; runs in OUT_runs/")
     p.add_argument("--preset", choices=sorted(PRESETS), default="full")
+    p.add_argument("--workers", type=int, help="processes (default: the preset's, 2)")
+    p.add_argument("--estimate", action="store_true", help="print the estimated cost of the preset and exit")
     args = p.parse_args()
+    cfg = PRESETS[args.preset] if args.workers is None else replace(PRESETS[args.preset], workers=args.workers)
+    cost = estimate(cfg)
+    print(f"estimate (COST_S): {', '.join(f'{k} {v / 3600:.1f} h' for k, v in cost.items())}", flush=True)
+    if args.estimate:
+        return 0
+    import time
+
     import torch
 
     torch.set_num_threads(1)
-    cfg = PRESETS[args.preset]
+    started = time.monotonic()
     out = Path(args.out)
     folder = out.with_name(out.name + "_runs")
     folder.mkdir(parents=True, exist_ok=True)
     record: dict[str, Any] = {"command": shlex.join(["python", *sys.argv]), "preset": args.preset, "config": asdict(cfg),
-                              "machine": machine()}
+                              "machine": machine(), "estimate_seconds": cost}
     files = collect_subsets(cfg, folder)
+    largest = files[max(files)]
+    agents = (("piga", train_piga, cfg.sizes, cfg.seeds), ("planet", train_planet_run, cfg.planet_size_list, cfg.planet_seed_list))
+    tasks: list[tuple[str, Callable[..., Any], tuple[Any, ...], float]] = []
+    for agent, trainer, sizes, seeds in agents:
+        for n in sizes:
+            for seed in seeds:
+                tasks.append((f"{agent}-n{n}-s{seed}", trainer, (files[n], folder / f"{agent}-n{n}-s{seed}", seed, cfg, n),
+                              train_cost(cfg, agent, n)))
+    for obs, steps, seeds in cfg.ddpg_runs:
+        for seed in seeds:
+            tasks.append((f"ddpg-{obs}-s{seed}", train_ddpg_run, (obs, steps, seed, largest, folder / f"ddpg-{obs}-s{seed}", cfg),
+                          train_cost(cfg, f"ddpg_{obs}", steps=steps)))
+    trained = train_all(tasks, cfg.workers)
     rows = []
-    for n, data in files.items():
-        for agent, trainer in (("piga", train_piga), ("planet", train_planet_run)):
+    for agent, _, sizes, seeds in agents:
+        for n in sizes:
             runs = []
-            for seed in cfg.seeds:
-                run = folder / f"{agent}-n{n}-s{seed}"
-                seconds = trainer(data, run, seed, cfg)
-                runs.append({"seed": seed, "train_seconds": seconds, "control": evaluate(agent, run, cfg)})
-                print(f"{agent} n={n} seed={seed}: success {runs[-1]['control']['success_rate']:.2f}", flush=True)
+            for seed in seeds:
+                name = f"{agent}-n{n}-s{seed}"
+                runs.append({"seed": seed, "train_seconds": trained[name], "control": evaluate(agent, folder / name, cfg)})
+                print(f"{name}: success {runs[-1]['control']['success_rate']:.2f}", flush=True)
             rows.append({"sequences": n, "agent": agent, "runs": runs,
                          "success_mean": sum(r["control"]["success_rate"] for r in runs) / len(runs),
                          "return_mean": sum(r["control"]["mean_return"] for r in runs) / len(runs),
                          "train_seconds_mean": sum(r["train_seconds"] for r in runs) / len(runs)})
     record["sample_efficiency"] = rows
     record["oracle"] = evaluate("oracle", None, cfg)
-    largest = files[max(cfg.sizes)]
     ddpg = []
-    for obs, steps in cfg.ddpg_steps:
-        for seed in cfg.ddpg_seeds:
-            run = folder / f"ddpg-{obs}-s{seed}"
-            metrics = train_ddpg_run(obs, steps, seed, largest, run, cfg)
-            ddpg.append({"obs": obs, "seed": seed, "metrics": metrics, "control": evaluate("ddpg", run, cfg)})
-            print(f"ddpg {obs} seed={seed}: first -200 at {metrics['first_step_reaching_minus_200']}", flush=True)
+    for obs, steps, seeds in cfg.ddpg_runs:
+        for seed in seeds:
+            name = f"ddpg-{obs}-s{seed}"
+            metrics = trained[name]
+            ddpg.append({"obs": obs, "seed": seed, "metrics": metrics, "control": evaluate("ddpg", folder / name, cfg)})
+            print(f"{name}: first -200 at {metrics['first_step_reaching_minus_200']}", flush=True)
     record["ddpg"] = ddpg
-    from piga.episodes import parse_range
-
     multipliers = parse_range(cfg.sweep)
-    best = {agent: folder / f"{agent}-n{max(cfg.sizes)}-s{cfg.seeds[0]}" for agent in ("piga", "planet")}
-    best["ddpg"] = folder / f"ddpg-{cfg.ddpg_steps[0][0]}-s{cfg.ddpg_seeds[0]}"
-    agents = ["piga", "oracle", "planet", "ddpg"]
-    record["sweep"] = {"agents": agents, "multipliers": multipliers,
-                       "success": [[evaluate(a, best.get(a), cfg, m, cfg.sweep_episodes)["success_rate"] for a in agents]
+    best = {"piga": folder / f"piga-n{max(cfg.sizes)}-s{cfg.seeds[0]}",
+            "planet": folder / f"planet-n{max(cfg.planet_size_list)}-s{cfg.planet_seed_list[0]}",
+            "ddpg": folder / f"ddpg-{cfg.ddpg_runs[0][0]}-s{cfg.ddpg_runs[0][2][0]}"}
+    sweep_agents = ["piga", "oracle", "planet", "ddpg"]
+    record["sweep"] = {"agents": sweep_agents, "multipliers": multipliers, "runs": {k: str(v) for k, v in best.items()},
+                       "success": [[evaluate(a, best.get(a), cfg, m, min(cfg.sweep_episodes, cfg.planet_episode_count)
+                                             if a == "planet" else cfg.sweep_episodes)["success_rate"] for a in sweep_agents]
                                    for m in multipliers]}
     record["goals"] = goal_images(best["piga"], cfg, folder)
-    piga_ms = evaluate("piga", best["piga"], cfg, episodes=1)["plan_ms_median"]
-    planet_ms = evaluate("planet", best["planet"], cfg, episodes=1)["plan_ms_median"]
+    piga_ms = evaluate("piga", best["piga"], cfg, episodes=1, workers=1)["plan_ms_median"]
+    planet_ms = evaluate("planet", best["planet"], cfg, episodes=1, workers=1)["plan_ms_median"]
     record["plan_time"] = {"piga_ms": piga_ms, "planet_ms": planet_ms, "ratio": planet_ms / piga_ms}
+    record["wall_seconds"] = time.monotonic() - started
+    record["figures"] = figures(record, out)
     write_json(out.with_suffix(".json"), record)
     with atomic_output(out.with_suffix(".md"), overwrite=True) as tmp:
         tmp.write_text(markdown(record))
-    print(f"wrote {out.with_suffix('.json')} and {out.with_suffix('.md')}")
+    print(f"wrote {out.with_suffix('.json')}, {out.with_suffix('.md')} and the figures {', '.join(record['figures'].values())}")
     return 0
 
 

@@ -64,10 +64,16 @@ class EpisodeConfig:
     the controller's own output drawn into its input, right where the pendulum is read near
     upright. With it, 2 of 6 trained models misread the angle there by ~1.5° and failed at gravity
     x1.4 (README, results/control.md); without it, all succeeded. Training data keep the arrow."""
+    first_episode: int = 0
+    """Index of the first episode run: episodes ``first_episode`` to ``first_episode + episodes - 1``
+    of the sequence this seed gives, each with its own start and env seed, so a batch split across
+    workers (:func:`piga.jobs.run_split`) runs the very episodes one process would."""
 
     def __post_init__(self) -> None:
         if self.episodes < 1:
             raise ValueError(f"need at least 1 episode, got {self.episodes}")
+        if self.first_episode < 0:
+            raise ValueError(f"first_episode must be >= 0, got {self.first_episode}")
         if self.hold_steps < 1 or self.steps < self.hold_steps:
             raise ValueError(f"an episode of {self.steps} steps is too short: success needs the goal held for its last "
                              f"{self.hold_steps} steps (hold_steps >= 1, steps >= hold_steps)")
@@ -84,8 +90,15 @@ def _wrap(x: np.ndarray) -> np.ndarray:
     return (x + np.pi) % (2 * np.pi) - np.pi
 
 
+def _start(config: EpisodeConfig, episode: int, rng: np.random.Generator) -> np.ndarray:
+    """Episode ``episode``'s start (θ, θ̇), drawn from ``rng`` (which must have drawn those of the earlier ones)."""
+    if episode == 0 and config.hang_first:
+        return np.array([math.pi, 0.0])
+    return np.array([rng.uniform(-math.pi, math.pi), rng.uniform(-1, 1)])
+
+
 def run_episodes(agent: Agent, config: EpisodeConfig, record: int = 0, progress: bool = False,
-                 on_episode_end: Callable[[int], None] | None = None) -> dict[str, Any]:
+                 on_episode_end: Callable[[int], None] | None = None, keep_plan_ms: bool = False) -> dict[str, Any]:
     """Runs the episodes; returns per-episode results and a summary.
 
     Args:
@@ -93,17 +106,18 @@ def run_episodes(agent: Agent, config: EpisodeConfig, record: int = 0, progress:
             the oracle may use).
         config: see :class:`EpisodeConfig`.
         record: keep the frames, states and actions of the first ``record`` episodes (for videos).
-        on_episode_end: called with the episode index after each episode.
+        on_episode_end: called with the episode's position in this run (0, 1, ...) after each episode.
+        keep_plan_ms: keep each episode's per-step plan times (``plan_ms``, for :func:`merge_results`).
     """
     env = make_pixel_pendulum(config.env_config())
     rng = np.random.default_rng(config.seed)
+    for skipped in range(config.first_episode):  # the earlier episodes' starts, drawn and dropped
+        _start(config, skipped, rng)
     episodes: list[dict[str, Any]] = []
     recordings: list[dict[str, np.ndarray]] = []
-    for ep in tqdm(range(config.episodes), desc="episodes", disable=not progress):
-        if ep == 0 and config.hang_first:
-            start = np.array([math.pi, 0.0])
-        else:
-            start = np.array([rng.uniform(-math.pi, math.pi), rng.uniform(-1, 1)])
+    for index in tqdm(range(config.episodes), desc="episodes", disable=not progress):
+        ep = config.first_episode + index
+        start = _start(config, ep, rng)
         obs, info = env.reset(seed=config.seed * 1000 + ep, options={"state": start})
         agent.reset()
         states, actions, rewards, plan_times, frames = [info["state"]], [], [], [], [obs[-1]]
@@ -115,7 +129,7 @@ def run_episodes(agent: Agent, config: EpisodeConfig, record: int = 0, progress:
             states.append(info["state"])
             actions.append(float(u[0]))
             rewards.append(float(reward))
-            if ep < record:
+            if index < record:
                 frames.append(obs[-1])
         s = np.array(states)
         err = np.abs(_wrap(s[1:, 0] - config.goal_angle))
@@ -136,14 +150,20 @@ def run_episodes(agent: Agent, config: EpisodeConfig, record: int = 0, progress:
             "plan_ms": [float(1000 * t) for t in plan_times],
         })
         if on_episode_end is not None:
-            on_episode_end(ep)
-        if ep < record:
+            on_episode_end(index)
+        if index < record:
             recordings.append({"frames": np.array(frames), "states": s, "actions": np.array(actions)})
     env.close()
-    all_plan = np.concatenate([e.pop("plan_ms") for e in episodes])
+    return {"summary": summarize(episodes, config, keep_plan_ms), "episodes": episodes, "recordings": recordings}
+
+
+def summarize(episodes: Sequence[dict[str, Any]], config: EpisodeConfig, keep_plan_ms: bool = False) -> dict[str, Any]:
+    """The summary of episodes (dicts of :func:`run_episodes`, with their ``plan_ms``, which it
+    removes unless ``keep_plan_ms``); ``config`` gives the gravity and the goal."""
+    all_plan = np.concatenate([e["plan_ms"] if keep_plan_ms else e.pop("plan_ms") for e in episodes])
     swing = [e["time_to_goal_steps"] for e in episodes if e["success"]]
-    summary = {
-        "episodes": config.episodes,
+    return {
+        "episodes": len(episodes),
         "success_rate": float(np.mean([e["success"] for e in episodes])),
         "mean_return": float(np.mean([e["return"] for e in episodes])),
         "final_angle_error_mean": float(np.mean([e["final_angle_error"] for e in episodes])),
@@ -153,7 +173,15 @@ def run_episodes(agent: Agent, config: EpisodeConfig, record: int = 0, progress:
         "gravity_mult": config.gravity_mult,
         "goal_angle": config.goal_angle,
     }
-    return {"summary": summary, "episodes": episodes, "recordings": recordings}
+
+
+def merge_results(config: EpisodeConfig, parts: Sequence[dict[str, Any]]) -> dict[str, Any]:
+    """One result from :func:`run_episodes` results (``keep_plan_ms``) of consecutive batches of
+    ``config``'s episodes, as one run of them all would give (recordings dropped)."""
+    episodes = [e for part in parts for e in part["episodes"]]
+    if len(episodes) != config.episodes:
+        raise ValueError(f"the parts hold {len(episodes)} episodes, the config {config.episodes}")
+    return {"summary": summarize(episodes, config), "episodes": episodes, "recordings": []}
 
 
 SUMMARY_COLUMNS: tuple[tuple[str, str], ...] = (

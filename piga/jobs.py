@@ -8,6 +8,7 @@ makes sure that no worker outlives an interrupted command.
 from __future__ import annotations
 
 import ctypes
+import functools
 import multiprocessing as mp
 import os
 import signal
@@ -22,7 +23,7 @@ from tqdm.auto import tqdm
 from agents.dynamics import Dynamics
 from agents.mpc import MPCConfig, OracleAgent, PigaMPCAgent, StateReader
 from piga.baselines.kinds import BASELINE_KINDS
-from piga.episodes import EpisodeConfig, run_episodes
+from piga.episodes import EpisodeConfig, merge_results, run_episodes
 from piga.model import PhysicsModel
 from piga.runs import load_model
 
@@ -94,18 +95,41 @@ def build_agent(job: ControlJob) -> Any:
                         reader=job.correction.reader(model))
 
 
-def run_job(job: ControlJob) -> dict[str, Any]:
+def run_job(job: ControlJob, keep_plan_ms: bool = False) -> dict[str, Any]:
     """Runs one job in this process with one torch thread; returns :func:`run_episodes`' result
-    (without recordings), its summary extended with ``agent`` and the job's tags."""
+    (without recordings), its summary extended with ``agent`` and the job's tags (``keep_plan_ms``:
+    each episode keeps its per-step plan times, for :func:`run_split`'s merge)."""
     torch.set_num_threads(1)  # small tensors: one thread plans fastest, and workers share the cores
     agent = build_agent(job)
     episodes = job.episodes
     if not isinstance(agent, OracleAgent):
         episodes = replace(episodes, frame_stack=agent.input_frames)
-    result = run_episodes(agent, episodes)
+    result = run_episodes(agent, episodes, keep_plan_ms=keep_plan_ms)
     result.pop("recordings")
     result["summary"] = {"agent": job.agent, **dict(job.tags), **result["summary"]}
     return result
+
+
+def split_job(job: ControlJob, parts: int) -> list[ControlJob]:
+    """``job``'s episodes as up to ``parts`` jobs of consecutive episodes (sizes differing by at most one)."""
+    n, first = job.episodes.episodes, job.episodes.first_episode
+    parts = max(1, min(parts, n))
+    sizes = [n // parts + (i < n % parts) for i in range(parts)]
+    starts = [first + sum(sizes[:i]) for i in range(parts)]
+    return [replace(job, episodes=replace(job.episodes, first_episode=s, episodes=k)) for s, k in zip(starts, sizes)]
+
+
+def run_split(job: ControlJob, workers: int = 1, progress: bool = True) -> dict[str, Any]:
+    """Runs ``job``'s episodes split over ``workers`` processes; the result is the one :func:`run_job`
+    gives in one process (the same episodes, starts, seeds and scores; each agent is reset per
+    episode), except the plan times, which are measured with the workers sharing the machine."""
+    if workers <= 1 or job.episodes.episodes <= 1:
+        return run_job(job)
+    results = run_jobs(split_job(job, workers), workers, progress, keep_plan_ms=True)
+    merged = merge_results(job.episodes, results)
+    merged.pop("recordings")
+    merged["summary"] = {"agent": job.agent, **dict(job.tags), **merged["summary"]}
+    return merged
 
 
 def _worker_init() -> None:
@@ -135,16 +159,17 @@ def _die_with_parent() -> None:
         pass
 
 
-def run_jobs(jobs: Sequence[ControlJob], workers: int = 1, progress: bool = True) -> list[dict[str, Any]]:
-    """Runs jobs, in ``workers`` processes when > 1 (results in the order of ``jobs``).
+def run_jobs(jobs: Sequence[ControlJob], workers: int = 1, progress: bool = True, keep_plan_ms: bool = False) -> list[dict[str, Any]]:
+    """Runs jobs, in ``workers`` processes when > 1 (results in the order of ``jobs``; ``keep_plan_ms`` as for :func:`run_job`).
 
     On KeyboardInterrupt (Ctrl-C, or SIGTERM turned into it by :func:`piga.cli.common.run_cli`) the
     pool terminates its workers before the exception propagates; a worker whose parent is killed ends too.
     """
     if workers <= 1 or len(jobs) <= 1:
-        return [run_job(j) for j in tqdm(jobs, desc="control jobs", disable=not progress)]
+        return [run_job(j, keep_plan_ms) for j in tqdm(jobs, desc="control jobs", disable=not progress)]
     # fork, as torch's DataLoader does: with spawn, torch's import makes the resource tracker warn
     # about leaked semaphores. The parent has rendered nothing; each child sets one torch thread.
     method = "fork" if "fork" in mp.get_all_start_methods() else "spawn"
     with mp.get_context(method).Pool(min(workers, len(jobs)), initializer=_worker_init) as pool:  # exit: terminate
-        return list(tqdm(pool.imap(run_job, jobs), total=len(jobs), desc="control jobs", disable=not progress))
+        run = functools.partial(run_job, keep_plan_ms=keep_plan_ms)
+        return list(tqdm(pool.imap(run, jobs), total=len(jobs), desc="control jobs", disable=not progress))

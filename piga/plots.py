@@ -69,6 +69,42 @@ def rollout_figure(truth: np.ndarray, pred: np.ndarray, input_frames: int, pred_
     return frame_strip(np.stack(rows), labels, cols, title="rollout from 4 input frames (* = extrapolation beyond T_pred)")
 
 
+def openloop_figure(real: np.ndarray, imagined: np.ndarray, rewards: np.ndarray, predicted: np.ndarray, context: int,
+                    shown: int = 2, every: int = 3) -> Figure:
+    """A world model's open-loop prediction: real frames above imagined ones, and real against predicted rewards.
+
+    Args:
+        real, imagined: float [B, T, H, W] in [0, 1]; the first ``context`` imagined frames are filtered (reconstructions).
+        rewards, predicted: [B, T].
+        shown: sequences drawn; every: show every ``every``-th frame.
+    """
+    steps = list(range(0, real.shape[1], every))
+    shown = min(shown, len(real))
+    fig = plt.figure(figsize=(len(steps) * 0.8, shown * 1.7 + 1.8))
+    grid = fig.add_gridspec(2 * shown + 1, len(steps), height_ratios=[1] * (2 * shown) + [2.2], hspace=0.15, wspace=0.05)
+    for b in range(shown):
+        for row, (images, label) in enumerate(((real, f"real #{b}"), (imagined, f"model #{b}"))):
+            for col, t in enumerate(steps):
+                ax = fig.add_subplot(grid[2 * b + row, col])
+                ax.imshow(images[b, t], cmap="gray", vmin=0, vmax=1)
+                ax.set_xticks([])
+                ax.set_yticks([])
+                if b == 0 and row == 0:
+                    ax.set_title(f"t={t}" + ("" if t < context else "*"), fontsize=7)
+                if col == 0:
+                    ax.set_ylabel(label, fontsize=7)
+    ax = fig.add_subplot(grid[-1, :])
+    for b in range(shown):
+        line, = ax.plot(rewards[b], label=f"real #{b}")
+        ax.plot(predicted[b], "--", color=line.get_color(), label=f"model #{b}")
+    ax.axvline(context - 0.5, color="gray", lw=0.8)
+    ax.set_xlabel("frame t")
+    ax.set_ylabel("reward")
+    ax.legend(fontsize=6, ncol=2 * shown)
+    fig.suptitle(f"open loop: {context} frames filtered, then imagined under the real actions (* = imagined)", fontsize=9)
+    return fig
+
+
 def templates_figure(contents: np.ndarray, masks: np.ndarray, background: np.ndarray, background_mask: np.ndarray) -> Figure:
     """Learned templates at the reference pose: per object content, mask and mask⊙content; then the background.
 

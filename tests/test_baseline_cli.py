@@ -117,3 +117,47 @@ def test_control_jobs_dispatch_on_the_run_kind(planet_run: Path, ddpg_run: Path)
     assert result["summary"]["agent"] == "planet" and np.isfinite(result["summary"]["mean_return"])
     with pytest.raises(ValueError, match="needs model_dir"):
         ControlJob("ddpg", episodes)
+
+
+def test_episodes_split_over_workers_are_the_episodes_of_one_process(planet_run: Path) -> None:
+    from piga.episodes import EpisodeConfig
+    from piga.jobs import ControlJob, run_job, run_split, split_job
+
+    job = ControlJob("planet", EpisodeConfig(episodes=3, steps=4, hold_steps=1, seed=2, frame_stack=1), model_dir=str(planet_run))
+    assert [(j.episodes.first_episode, j.episodes.episodes) for j in split_job(job, 2)] == [(0, 2), (2, 1)]
+    one, split = run_job(job), run_split(job, workers=2, progress=False)
+    timing = ("plan_ms_median", "plan_ms_p95")
+    assert [{k: v for k, v in e.items() if k not in timing} for e in split["episodes"]] == \
+           [{k: v for k, v in e.items() if k not in timing} for e in one["episodes"]]
+    assert {k: v for k, v in split["summary"].items() if k not in timing} == {k: v for k, v in one["summary"].items() if k not in timing}
+    assert len({e["return"] for e in one["episodes"]}) == 3  # three different episodes, not one thrice
+
+
+def test_planet_iterative_from_the_command_line(tiny_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "run"
+    code, stdout, err = run_in_process("piga-baseline", baseline.main, "planet", str(tiny_data), "--out", str(out), *TINY_PLANET,
+                                       "--iterative", "1", "--rounds", "1", "--round-steps", "2", "--episode-steps", "16",
+                                       capsys=capsys)
+    assert code == 0, err
+    assert "then 1 rounds of 1 planner episodes + 2 steps" in stdout
+    record = json.loads((out / "config.json").read_text())
+    assert record["iterative"]["episodes"] == 1 and record["iterative"]["noise"] == 0.3
+    assert json.loads((out / "metrics.json").read_text())["iterative"]["collected_sequences"] == 1
+    code, stdout, err = run_in_process("piga-baseline", baseline.main, "planet", str(tiny_data), "--out", str(out), "--resume",
+                                       "--rounds", "2", "--quiet", capsys=capsys)
+    assert code == 0, err
+    assert json.loads((out / "metrics.json").read_text())["iterative"]["rounds"] == 2
+
+
+@pytest.mark.parametrize("option, needle", [
+    (("--rounds", "2"), "--rounds goes with --iterative"),
+    (("--iterative", "1", "--exploration-noise", "-1"), "noise must be >= 0"),
+    (("--iterative", "1", "--episode-steps", "8"), "shorter than the file's sequences of 16 frames"),
+    (("--iterative", "1", "--max-minutes", "5"), "bound the run with --rounds"),
+])
+def test_planet_iterative_bad_input_gets_one_line(tiny_data: Path, tmp_path: Path, option: tuple[str, ...], needle: str,
+                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    code, _, err = run_in_process("piga-baseline", baseline.main, "planet", str(tiny_data), "--out", str(tmp_path / "r"),
+                                  *TINY_PLANET, *option, capsys=capsys)
+    assert_one_line(code, err, needle)
+    assert not (tmp_path / "r").exists()

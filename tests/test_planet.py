@@ -10,7 +10,7 @@ import pytest
 import torch
 
 from agents.config import CEMConfig
-from agents.planet.config import LatentPlannerConfig, PlanetTrainConfig, RSSMConfig
+from agents.planet.config import IterativeConfig, LatentPlannerConfig, PlanetTrainConfig, RSSMConfig
 from agents.planet.planner import PlanetAgent
 from agents.planet.rssm import Belief, WorldModel
 
@@ -35,6 +35,11 @@ def test_rssm_shapes() -> None:
     assert parts.kl.item() >= 0
     returns = model.imagine_return(Belief(h[:1, -1], s[:1, -1]), torch.zeros(7, 6, 1))
     assert returns.shape == (7,)
+    decoded, rewards = model.open_loop(frames, actions, 2, torch.Generator().manual_seed(0))
+    assert decoded.shape == (3, 5, 1, 64, 64) and rewards.shape == (3, 5)
+    changed = frames.clone()
+    changed[:, 2:] = 0  # frames after the context are never read
+    torch.testing.assert_close(model.open_loop(changed, actions, 2, torch.Generator().manual_seed(0))[0], decoded)
 
 
 def test_one_training_step_lowers_the_loss(tiny_data: Path) -> None:
@@ -72,6 +77,9 @@ def test_training_writes_a_run_and_resumes_exactly(tiny_data: Path, tmp_path: Pa
     metrics = json.loads((tmp_path / "b" / "metrics.json").read_text())
     assert len(metrics["learning_curve"]) == 2 and metrics["valid"]["loss"] > 0
     assert (tmp_path / "b" / "tensorboard").is_dir()
+    open_loop = metrics["open_loop"]
+    assert open_loop["split"] == "valid" and open_loop["context"] == 5 and len(open_loop["frame_mse"]) == 16
+    assert (tmp_path / "b" / "openloop.png").stat().st_size > 0
 
 
 def test_nan_stops_and_names_the_last_good_checkpoint(tiny_data: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -101,6 +109,23 @@ def test_a_file_without_rewards_is_refused(tiny_data: Path, tmp_path: Path) -> N
         check_planet_data(inspect_dataset(path), TINY_TRAIN)
 
 
+@pytest.mark.parametrize("horizon", [1, 5])
+def test_fast_imagination_equals_the_reference(horizon: int) -> None:
+    from agents.planet.imagine import Imagination
+
+    torch.manual_seed(0)
+    model = WorldModel(TINY).eval()
+    imagination = Imagination(model)
+    belief = Belief(torch.randn(1, TINY.deter_size), torch.randn(1, TINY.stoch_size))
+    for batch in (9, 3):  # a new shape reallocates the buffers
+        actions = torch.rand(batch, horizon, 1) * 4 - 2
+        with torch.inference_mode():
+            reference = model.imagine_return(belief, actions, torch.Generator().manual_seed(5))
+        fast = imagination(belief, actions, torch.Generator().manual_seed(5))
+        assert fast.shape == (batch,)
+        torch.testing.assert_close(fast, reference, rtol=1e-4, atol=1e-5)
+
+
 def test_latent_planner_actions_in_bounds_and_deterministic_for_a_seed() -> None:
     torch.manual_seed(0)
     model = WorldModel(TINY)
@@ -116,3 +141,57 @@ def test_latent_planner_actions_in_bounds_and_deterministic_for_a_seed() -> None
     assert np.all(np.abs(first) <= 2.0) and np.all(np.abs(other) <= 2.0)
     assert np.array_equal(first, again)
     assert not np.array_equal(first, other)
+    reference = PlanetAgent(model, TINY_CEM, fast=False)
+    reference.reset()
+    np.testing.assert_allclose(np.concatenate([reference.act(f) for f in frames]), first, atol=1e-4)
+
+
+TINY_ITERATIVE = IterativeConfig(rounds=2, episodes=1, steps_per_round=2, episode_steps=36)
+
+
+def _iterative(data: Path, run: Path, rounds: int, resume: bool = False) -> tuple[WorldModel, object]:
+    from piga.baselines.planet_iterative import train_planet_iterative
+
+    return train_planet_iterative(data, run, TINY_TRAIN, replace(TINY_ITERATIVE, rounds=rounds), TINY, resume=resume,
+                                  progress=False, planner=TINY_CEM)
+
+
+def test_iterative_rounds_append_collected_episodes_and_leave_the_data_file_alone(tiny_data: Path, tmp_path: Path) -> None:
+    import hashlib
+    import json
+
+    from piga.data import inspect_dataset, load_rewards, read_sequences
+
+    digest = hashlib.sha256(tiny_data.read_bytes()).hexdigest()
+    _, state = _iterative(tiny_data, tmp_path / "run", rounds=1)
+    after_one = inspect_dataset(tmp_path / "run" / "collected.h5")
+    _, state = _iterative(tiny_data, tmp_path / "run", rounds=2, resume=True)
+    assert hashlib.sha256(tiny_data.read_bytes()).hexdigest() == digest
+    collected = inspect_dataset(tmp_path / "run" / "collected.h5")
+    # 36 steps per episode cut into sequences of the file's 16 frames: 2 per episode, 4 left over
+    assert (after_one.n_sequences, collected.n_sequences, collected.steps) == (2, 4, 16)
+    assert collected.attrs["rounds"] == 2 and len(collected.attrs["episode_returns"]) == 2 and not collected.has_states
+    frames, actions = read_sequences(tmp_path / "run" / "collected.h5", "train")
+    assert frames.shape == (4, 16, 64, 64) and frames.dtype == np.uint8 and np.abs(actions).max() <= 2.0
+    assert np.all(load_rewards(tmp_path / "run" / "collected.h5", "train") <= 0)
+    assert state.step == TINY_TRAIN.steps + 2 * TINY_ITERATIVE.steps_per_round
+    metrics = json.loads((tmp_path / "run" / "metrics.json").read_text())
+    assert metrics["collected_sequences"] == 4 and metrics["iterative"]["rounds"] == 2
+    assert metrics["train_sequences"] == 8 + 4
+
+
+def test_iterative_resume_is_exact(tiny_data: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from piga.baselines import planet_iterative
+    from piga.data import read_sequences
+
+    straight, _ = _iterative(tiny_data, tmp_path / "a", rounds=2)
+    _iterative(tiny_data, tmp_path / "b", rounds=1)  # stopped after round 1, then asked for one more
+    with monkeypatch.context() as patch:  # and stopped again while collecting round 2: it is collected again, the same
+        patch.setattr(planet_iterative, "collect_round", lambda *args, **kwargs: (_ for _ in ()).throw(KeyboardInterrupt))
+        with pytest.raises(KeyboardInterrupt):
+            _iterative(tiny_data, tmp_path / "b", rounds=2, resume=True)
+    resumed, _ = _iterative(tiny_data, tmp_path / "b", rounds=2, resume=True)
+    for (name, p), q in zip(straight.state_dict().items(), resumed.state_dict().values()):
+        assert torch.equal(p, q), name
+    for x, y in zip(read_sequences(tmp_path / "a" / "collected.h5", "train"), read_sequences(tmp_path / "b" / "collected.h5", "train")):
+        assert np.array_equal(x, y)

@@ -103,6 +103,36 @@ class PlanetTrainConfig:
 
 
 @dataclass(frozen=True)
+class IterativeConfig:
+    """PlaNet's own data loop, after training on the data file: each round collects ``episodes``
+    episodes with the latent planner plus Gaussian exploration noise, adds them to the training
+    data, and trains ``steps_per_round`` more optimiser steps on the file and everything collected."""
+
+    rounds: int = 10
+    """Collect-then-train rounds after the first training."""
+    episodes: int = 1
+    """Episodes collected per round (PlaNet: 1 per collection interval)."""
+    steps_per_round: int = 100
+    """Optimiser steps after each round's collection (PlaNet: 100 per collected episode)."""
+    episode_steps: int = 200
+    """Env steps per collected episode (Pendulum-v1's episode length); cut into sequences of the data file's length."""
+    noise: float = 0.3
+    """Std of the Gaussian exploration noise added to the planner's action, as a fraction of the action
+    bound (PlaNet's 0.3 for actions in [-1, 1]; here 0.6 for the pendulum's [-2, 2]); then clipped."""
+
+    def __post_init__(self) -> None:
+        if self.rounds < 1 or self.episodes < 1 or self.steps_per_round < 1 or self.episode_steps < 1:
+            raise ValueError(f"need rounds, episodes, steps_per_round and episode_steps >= 1, got {self.rounds}, "
+                             f"{self.episodes}, {self.steps_per_round}, {self.episode_steps}")
+        if not self.noise >= 0:
+            raise ValueError(f"IterativeConfig.noise must be >= 0, got {self.noise}")
+
+    def to_dict(self) -> dict[str, Any]:
+        """A JSON-able copy."""
+        return asdict(self)
+
+
+@dataclass(frozen=True)
 class LatentPlannerConfig:
     """CEM in the RSSM's latent space. The defaults are PlaNet's: horizon 12, 10 iterations, 1000
     candidates, the best 100 refit, re-planned from scratch at every step, and the first action of

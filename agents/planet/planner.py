@@ -5,6 +5,10 @@ action it executed, then s_t from the posterior given the frame), and plans with
 :func:`agents.cem.cem`: each candidate sequence (B, H, A) is scored by the sum of the rewards the
 model predicts over H imagined steps (states sampled from the prior). As in PlaNet, every step
 re-plans from scratch (no warm start) and executes the first action of CEM's final mean.
+
+The scores come from :class:`agents.planet.imagine.Imagination`, which computes
+:meth:`WorldModel.imagine_return`'s numbers (same random draws, float rounding apart) without its
+per-step allocations; ``fast=False`` scores with the reference method instead.
 """
 
 from __future__ import annotations
@@ -14,6 +18,7 @@ import torch
 
 from agents.cem import cem
 from agents.planet.config import LatentPlannerConfig
+from agents.planet.imagine import Imagination
 from agents.planet.rssm import Belief, WorldModel, sample
 from envs.constants import MAX_ACTION
 
@@ -31,12 +36,13 @@ class PlanetAgent:
     Args:
         model: a trained world model.
         config: planner settings (PlaNet's by default).
+        fast: score candidates with :class:`Imagination` (True) or :meth:`WorldModel.imagine_return`.
     """
 
     input_frames = 1
     """Frames the agent needs per decision (its belief carries the history)."""
 
-    def __init__(self, model: WorldModel, config: LatentPlannerConfig = LatentPlannerConfig()):
+    def __init__(self, model: WorldModel, config: LatentPlannerConfig = LatentPlannerConfig(), fast: bool = True):
         if model.config.action_dim != 1:
             raise ValueError(f"PlanetAgent controls the pendulum (one action), got a model with action_dim={model.config.action_dim}")
         self.model = model.eval()
@@ -46,6 +52,7 @@ class PlanetAgent:
         self.generator = torch.Generator().manual_seed(config.seed)
         self.belief = model.rssm.initial(1)
         self.previous = torch.zeros(1, 1)
+        self.score = Imagination(model) if fast else model.imagine_return
 
     def reset(self) -> None:
         """Starts an episode: the zero state, no previous action, the generator reseeded."""
@@ -64,9 +71,17 @@ class PlanetAgent:
     @torch.inference_mode()
     def plan(self, belief: Belief) -> np.ndarray:
         """The first action (1,) of CEM's final mean from ``belief`` ((1, ·) states)."""
-        result = cem(lambda actions: self.model.imagine_return(belief, actions, self.generator),
+        result = cem(lambda actions: self.score(belief, actions, self.generator),
                      self.low, self.high, self.config.cem, generator=self.generator)
         return result.mean[0].clamp(self.low, self.high).numpy().astype(np.float32)
+
+    def explore(self, frames: np.ndarray, rng: np.random.Generator, noise: float) -> np.ndarray:
+        """As :meth:`act`, plus PlaNet's exploration: the action (1,) plus N(0, (noise·bound)²), clipped
+        to the bounds; the belief then follows the action executed, noise included."""
+        planned = self.plan(self.observe(frames[-1]))
+        action = np.clip(planned + noise * MAX_ACTION * rng.standard_normal(1), -MAX_ACTION, MAX_ACTION).astype(np.float32)
+        self.previous = torch.from_numpy(action)[None]
+        return action
 
     def act(self, frames: np.ndarray, state: np.ndarray | None = None) -> np.ndarray:
         """Action (1,) from the newest frame of ``frames`` (uint8 (L, H, W)); ``state`` is never used."""

@@ -223,6 +223,34 @@ class WorldModel(nn.Module):
         loss = reconstruction + config.reward_scale * reward + config.kl_scale * kl_term
         return LossParts(loss, reconstruction, reward, kl.mean())
 
+    @torch.no_grad()
+    def open_loop(self, frames: Tensor, actions: Tensor, context: int, generator: torch.Generator | None = None
+                  ) -> tuple[Tensor, Tensor]:
+        """PlaNet's open-loop prediction: filter the first ``context`` frames, then imagine the rest
+        from the prior (sampled) under the sequence's own actions.
+
+        Args:
+            frames: uint8 (B, T, H, W[, C]); only the first ``context`` are read.
+            actions: (B, T, A), actions[:, t] after frames[:, t].
+
+        Returns:
+            Decoded frames (B, T, C, H, W) in [-0.5, 0.5] units (the first ``context`` are
+            reconstructions, the rest predictions) and predicted rewards (B, T).
+        """
+        b, t = frames.shape[:2]
+        embeds = self.embed(frames[:, :context])  # (B, context, E)
+        belief = self.rssm.initial(b)
+        previous = torch.zeros(b, self.config.action_dim)
+        hs, ss = [], []
+        for step in range(t):
+            h, prior = self.rssm.transition(belief, previous)
+            belief = Belief(h, sample(self.rssm.posterior(h, embeds[:, step]) if step < context else prior, generator))
+            previous = actions[:, step]
+            hs.append(h)
+            ss.append(belief.s)
+        h, s = torch.stack(hs, 1), torch.stack(ss, 1)
+        return self.decode(h, s), self.reward(h, s)
+
     def imagine_return(self, belief: Belief, actions: Tensor, generator: torch.Generator | None = None) -> Tensor:
         """Sum of predicted rewards over the H imagined steps after ``belief`` ((1, ·) or (B, ·)) under
         actions (B, H, A), with states sampled from the prior: (B,)."""

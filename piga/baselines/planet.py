@@ -48,13 +48,18 @@ class PlanetState:
 
 
 class _Sequences:
-    """The train split in memory: frames uint8 (N, T, H, W), actions (N, T, A), rewards (N, T)."""
+    """The train split in memory: frames uint8 (N, T, H, W), actions (N, T, A), rewards (N, T);
+    ``extra``'s train split (the iterative mode's collected episodes, all in it) appended."""
 
-    def __init__(self, data: str | Path, split: str, max_sequences: int = 0):
+    def __init__(self, data: str | Path, split: str, max_sequences: int = 0, extra: str | Path | None = None):
         frames, actions = read_sequences(data, split)
         rewards = load_rewards(data, split)
         if max_sequences:
             frames, actions, rewards = frames[:max_sequences], actions[:max_sequences], rewards[:max_sequences]
+        if extra is not None:
+            more_frames, more_actions = read_sequences(extra, "train")
+            frames, actions = np.concatenate([frames, more_frames]), np.concatenate([actions, more_actions])
+            rewards = np.concatenate([rewards, load_rewards(extra, "train")])
         self.frames = torch.from_numpy(frames)
         self.actions = torch.from_numpy(actions)
         self.rewards = torch.from_numpy(rewards)
@@ -115,6 +120,37 @@ def _save(path: Path, model: WorldModel, optimizer: torch.optim.Optimizer, state
         torch.save(payload, tmp)
 
 
+#: Frames filtered before the open-loop prediction of ``openloop.png`` (PlaNet's open-loop videos use 5).
+OPEN_LOOP_CONTEXT = 5
+
+
+@torch.no_grad()
+def open_loop_check(model: WorldModel, data: str | Path, run_dir: Path, seed: int, sequences: int = 4) -> dict[str, Any]:
+    """PlaNet's open-loop diagnostic on the valid split (the train split without one): filter
+    :data:`OPEN_LOOP_CONTEXT` frames, imagine the rest of each sequence under its own actions;
+    writes ``run_dir/openloop.png`` (real frames above imagined ones, and real against predicted
+    rewards) and returns per-step errors: frame MSE (in [0, 1] units) and reward absolute error,
+    averaged over ``sequences`` sequences, plus the same for an all-mean-frame and zero-reward guess."""
+    from piga.plots import openloop_figure, save_figure
+
+    info = inspect_dataset(data)
+    split = "valid" if info.split_counts["valid"] else "train"
+    seqs = _Sequences(data, split, sequences)
+    frames, actions, rewards = seqs.frames, seqs.actions, seqs.rewards
+    context = min(OPEN_LOOP_CONTEXT, frames.shape[1] - 1)
+    decoded, predicted = model.open_loop(frames, actions, context, torch.Generator().manual_seed(seed))
+    imagined = (decoded[:, :, 0] + 0.5).clamp(0, 1)  # (B, T, H, W) in [0, 1]
+    real = frames.float() / 255  # (B, T, H, W)
+    frame_mse = (imagined - real).square().mean((0, 2, 3))  # (T,)
+    mean_frame_mse = (real.mean((0, 1), keepdim=True) - real).square().mean((0, 2, 3))  # (T,) the average frame as a guess
+    reward_error = (predicted - rewards).abs().mean(0)  # (T,)
+    save_figure(openloop_figure(real.numpy(), imagined.numpy(), rewards.numpy(), predicted.numpy(), context),
+                run_dir / "openloop.png")
+    return {"split": split, "sequences": len(frames), "context": context, "frame_mse": frame_mse.tolist(),
+            "mean_frame_mse": mean_frame_mse.tolist(), "reward_abs_error": reward_error.tolist(),
+            "zero_reward_abs_error": rewards.abs().mean(0).tolist()}
+
+
 @torch.no_grad()
 def _valid_losses(model: WorldModel, data: str | Path, config: PlanetTrainConfig, info: DatasetInfo) -> dict[str, float] | None:
     """Mean losses on (up to 64 sequences of) the valid split, one chunk from the start of each; None without one."""
@@ -135,12 +171,14 @@ def train_planet(
     resume: bool = False,
     progress: bool = True,
     on_checkpoint: Callable[[PlanetState], None] | None = None,
+    extra_data: str | Path | None = None,
 ) -> tuple[WorldModel, PlanetState]:
     """Trains the world model on ``data``'s train split; writes checkpoints, TensorBoard and ``metrics.json`` to ``run_dir``.
 
     Nothing is written before the first checkpoint. With ``resume``, the model, optimiser, RNGs and
     step come from ``run_dir``'s checkpoint, and ``config`` should be its saved one (possibly with
-    more ``steps``); ``rssm`` is ignored.
+    more ``steps``); ``rssm`` is ignored. ``extra_data``: a file of the same frames whose sequences
+    are trained on too (:mod:`piga.baselines.planet_iterative`'s collected episodes).
 
     Returns:
         The trained model (eval mode) and the final state.
@@ -166,7 +204,7 @@ def train_planet(
     optimizer = torch.optim.Adam(model.parameters(), lr=config.lr, eps=config.adam_eps)
     if resume:
         optimizer.load_state_dict(ckpt["optimizer"])
-    seqs = _Sequences(data, "train", config.max_sequences)
+    seqs = _Sequences(data, "train", config.max_sequences, extra_data)
     writer: Any = None
     model.train()
     started = time.monotonic() - state.elapsed
@@ -219,10 +257,12 @@ def train_planet(
         "kind": "planet",
         "data": str(data),
         "train_sequences": len(seqs),
+        "collected_sequences": 0 if extra_data is None else inspect_dataset(extra_data).n_sequences,
         "steps": state.step,
         "train_seconds": state.elapsed,
         "learning_curve": state.history,
         "valid": _valid_losses(model, data, config, info),
+        "open_loop": open_loop_check(model, data, run_dir, config.seed),
     }
     write_json(run_dir / "metrics.json", metrics)
     return model, state

@@ -20,11 +20,11 @@ from piga.cli.common import (ArgumentParser, Interrupted, PigaError, add_preset_
 
 PROG = "piga-baseline"
 CHECKPOINT = "checkpoint.pt"
-OUTPUTS = (CHECKPOINT, "config.json", "metrics.json", "model.zip", "autoencoder.pt", "tensorboard")
+OUTPUTS = (CHECKPOINT, "config.json", "metrics.json", "model.zip", "autoencoder.pt", "tensorboard", "collected.h5")
 
 
 def build_parser() -> ArgumentParser:
-    from agents.planet.config import PlanetTrainConfig, RSSMConfig
+    from agents.planet.config import IterativeConfig, PlanetTrainConfig, RSSMConfig
     from piga.baselines.autoencoder import AutoencoderConfig
     from piga.baselines.ddpg import OBSERVATIONS, PRESETS, DDPGConfig
 
@@ -53,6 +53,19 @@ def build_parser() -> ArgumentParser:
                       help="stop at the first checkpoint past this budget")
     q.add_argument("--seed", type=nonnegative_int, default=planet.seed, help="seed (default %(default)s)")
     q.add_argument("--threads", type=nonnegative_int, default=planet.threads, help="torch CPU threads (default %(default)s: torch's choice)")
+    iterative = IterativeConfig()
+    q.add_argument("--iterative", type=nonnegative_int, default=0, metavar="EPISODES",
+                   help="after training, PlaNet's own loop: each round collects EPISODES episodes with the planner plus "
+                   "exploration noise into RUN_DIR/collected.h5 (DATA.h5 is only read), then trains --round-steps more "
+                   "steps on both (default %(default)s: off)")
+    add_preset_option(q, "--rounds", default=iterative.rounds, type=positive_int,
+                      help="with --iterative: collect-then-train rounds; with --resume, the run's own unless given")
+    q.add_argument("--round-steps", type=positive_int, default=iterative.steps_per_round,
+                   help="with --iterative: optimiser steps per round (default %(default)s)")
+    q.add_argument("--episode-steps", type=positive_int, default=iterative.episode_steps,
+                   help="with --iterative: env steps per collected episode (default %(default)s)")
+    q.add_argument("--exploration-noise", type=float, default=iterative.noise,
+                   help="with --iterative: std of the Gaussian action noise, a fraction of the action bound (default %(default)s)")
     _common(q)
 
     ddpg = DDPGConfig()
@@ -120,7 +133,7 @@ def _read_record(run_dir: Path) -> dict[str, Any]:
 
 
 def _planet(args: Any, argv: Sequence[str] | None) -> int:
-    from agents.planet.config import PlanetTrainConfig
+    from agents.planet.config import IterativeConfig, PlanetTrainConfig
     from piga.atomic import write_json
     from piga.baselines.planet import check_planet_data, rssm_config_for, train_planet
     from piga.data import inspect_dataset
@@ -129,6 +142,7 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
     run_dir = Path(args.out)
     info = inspect_dataset(args.data)  # a missing or malformed file: one line, before the run folder is touched
     command = command_line(PROG, argv)
+    iterative: IterativeConfig | None = None
     if args.resume:
         _check_run_dir(run_dir, True, False, "planet")
         record = _read_record(run_dir)
@@ -136,19 +150,42 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
                          max_minutes=args.max_minutes or record["train"]["max_minutes"])
         rssm = None
         record["train"] = config.to_dict()
+        if args.iterative and not record.get("iterative"):
+            raise PigaError(f"--iterative: {run_dir} was trained without it; --resume continues a run as it was started")
+        if record.get("iterative"):
+            iterative = replace(IterativeConfig(**record["iterative"]), rounds=args.rounds or record["iterative"]["rounds"])
+            record["iterative"] = iterative.to_dict()
         record.setdefault("resumed", []).append(command)
     else:
         config = PlanetTrainConfig(steps=args.steps or PlanetTrainConfig.steps, batch_size=args.batch_size, chunk_length=args.chunk_length,
                                    max_sequences=args.max_sequences, free_nats=args.free_nats, seed=args.seed,
                                    threads=args.threads, max_minutes=args.max_minutes or 0.0)
         rssm = rssm_config_for(info, {"deter_size": args.deter_size, "stoch_size": args.stoch_size})
+        if not args.iterative:
+            given = [flag for flag, value, default in (("--rounds", args.rounds, None), ("--round-steps", args.round_steps, IterativeConfig.steps_per_round),
+                                                       ("--episode-steps", args.episode_steps, IterativeConfig.episode_steps),
+                                                       ("--exploration-noise", args.exploration_noise, IterativeConfig.noise)) if value != default]
+            if given:
+                raise PigaError(f"{given[0]} goes with --iterative EPISODES (PlaNet's collect-then-train loop)")
+        else:
+            iterative = IterativeConfig(rounds=args.rounds or IterativeConfig.rounds, episodes=args.iterative,
+                                        steps_per_round=args.round_steps, episode_steps=args.episode_steps,
+                                        noise=args.exploration_noise)
         check_planet_data(info, config)
         _check_run_dir(run_dir, False, args.overwrite, "planet")
         record = {"kind": "planet", "command": command, "data": str(args.data), "train": config.to_dict(),
-                  "rssm": rssm.to_dict()}
+                  "rssm": rssm.to_dict(), **({"iterative": iterative.to_dict()} if iterative else {})}
     check_planet_data(info, config)
+    if iterative is not None:
+        from piga.baselines.planet_iterative import check_iterative_data, train_planet_iterative
+
+        if config.max_minutes:
+            raise PigaError("--max-minutes stops one training; with --iterative, bound the run with --rounds instead")
+        check_iterative_data(info, iterative)
     used = min(info.split_counts["train"], config.max_sequences or info.split_counts["train"])
-    print(f"training the PlaNet-style model on {args.data} ({used} train sequences x {info.steps} frames) -> {run_dir}")
+    print(f"training the PlaNet-style model on {args.data} ({used} train sequences x {info.steps} frames) -> {run_dir}"
+          + (f", then {iterative.rounds} rounds of {iterative.episodes} planner episodes + {iterative.steps_per_round} steps"
+             if iterative else ""))
     written: list[int] = []
 
     def on_checkpoint(state: Any) -> None:
@@ -157,14 +194,20 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
         written.append(state.step)
 
     try:
-        _, state = train_planet(args.data, run_dir, config, rssm, resume=args.resume, progress=not args.quiet,
-                                on_checkpoint=on_checkpoint)
+        if iterative is not None:
+            _, state = train_planet_iterative(args.data, run_dir, config, iterative, rssm, resume=args.resume,
+                                              progress=not args.quiet, on_checkpoint=on_checkpoint, command=command)
+        else:
+            _, state = train_planet(args.data, run_dir, config, rssm, resume=args.resume, progress=not args.quiet,
+                                    on_checkpoint=on_checkpoint)
     except TrainingDiverged as exc:
         raise PigaError(f"training diverged: {exc}") from None
     except KeyboardInterrupt:
         if written:
             raise Interrupted(f"{run_dir / CHECKPOINT} holds step {written[-1]}; continue with --resume") from None
         raise
+    if not written:  # a resume with nothing left to do still records its command
+        write_json(run_dir / "config.json", record)
     last = state.history[-1] if state.history else {}
     print(f"trained {state.step} steps in {state.elapsed / 60:.1f} min; last loss {last.get('loss', float('nan')):.2f} "
           f"(reconstruction {last.get('reconstruction', float('nan')):.2f}, reward {last.get('reward', float('nan')):.4f}, "

@@ -1,0 +1,92 @@
+"""Benchmark: time per control step of the PlaNet-style agent (latent CEM with PlaNet's settings:
+horizon 12, 10 iterations, 1000 candidates, top 100), by scoring engine and torch thread count.
+
+The rows alternate within one run, so that a load that changes while it runs affects them alike:
+"reference" scores candidates with :meth:`agents.planet.rssm.WorldModel.imagine_return` (the
+model's readable loop), "fast" with :class:`agents.planet.imagine.Imagination` (the agent's
+default; the same numbers without the overheads). Each timed call is one full ``act``: filtering
+the newest frame into the belief, then planning. Both agents must pick the same actions (checked).
+
+The model is the default size (``RSSMConfig()``); its weights do not change the cost, so it needs
+no training unless ``--model RUN_DIR`` (a ``piga-baseline planet`` run) is given:
+
+    python benchmarks/planet_plan_time.py --out results/planet_plan_time --threads 1 2
+
+Writes OUT.json and OUT.md (with the machine and the load average). Nothing else should run on the
+machine meanwhile; otherwise, read only the ratio.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shlex
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from common import machine
+from agents.planet.config import LatentPlannerConfig, RSSMConfig
+from agents.planet.planner import PlanetAgent
+from agents.planet.rssm import WorldModel
+from piga.atomic import atomic_output, write_json
+
+
+def measure(model: WorldModel, threads: int, steps: int, seed: int = 0) -> dict[str, object]:
+    """Median ms per ``act`` for both engines, alternating, on ``threads`` torch threads."""
+    torch.set_num_threads(threads)
+    frames = np.random.default_rng(seed).integers(0, 256, (steps, 1, 64, 64), dtype=np.uint8)
+    agents = {"reference": PlanetAgent(model, LatentPlannerConfig(seed=seed), fast=False),
+              "fast": PlanetAgent(model, LatentPlannerConfig(seed=seed))}
+    times: dict[str, list[float]] = {name: [] for name in agents}
+    actions: dict[str, list[float]] = {name: [] for name in agents}
+    for agent in agents.values():
+        agent.reset()
+        agent.act(frames[0])  # warm-up (allocations, thread pool)
+        agent.reset()
+    for frame in frames:
+        for name, agent in agents.items():
+            start = time.perf_counter()
+            actions[name].append(float(agent.act(frame)[0]))
+            times[name].append(time.perf_counter() - start)
+    reference, fast = (float(1000 * np.median(times[n])) for n in ("reference", "fast"))
+    return {"threads": threads, "steps": steps, "reference_ms": reference, "fast_ms": fast, "speedup": reference / fast,
+            "same_actions": bool(np.allclose(actions["reference"], actions["fast"], atol=1e-4))}
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--out", required=True, help="writes OUT.json and OUT.md")
+    p.add_argument("--model", help="a piga-baseline planet run folder (default: an untrained default-size model)")
+    p.add_argument("--threads", type=int, nargs="+", default=[1], help="torch thread counts to measure (default 1)")
+    p.add_argument("--steps", type=int, default=20, help="control steps timed per engine and thread count (default 20)")
+    args = p.parse_args()
+    if args.model:
+        from piga.baselines.planet_run import load_planet
+
+        model = load_planet(args.model)[0]
+    else:
+        torch.manual_seed(0)
+        model = WorldModel(RSSMConfig()).eval()
+    load_before = os.getloadavg()
+    rows = [measure(model, t, args.steps) for t in args.threads]
+    record = {"command": shlex.join(["python", *sys.argv]), "machine": machine(), "model": args.model or "untrained RSSMConfig()",
+              "load_average_before": load_before, "load_average_after": os.getloadavg(), "rows": rows}
+    out = Path(args.out)
+    write_json(out.with_suffix(".json"), record, overwrite=True)
+    lines = [f"# PlaNet-style plan time per control step\n\nCommand: `{record['command']}`\n",
+             (f"Machine: {record['machine']['cpu']}, {record['machine']['cores']} cores; load average "
+             f"{load_before[0]:.2f} before, {record['load_average_after'][0]:.2f} after.\n"),
+             "| threads | reference ms | fast ms | speedup | same actions |", "|---|---|---|---|---|"]
+    lines += [f"| {r['threads']} | {r['reference_ms']:.0f} | {r['fast_ms']:.0f} | {r['speedup']:.2f}x | {r['same_actions']} |" for r in rows]
+    with atomic_output(out.with_suffix(".md"), overwrite=True) as tmp:
+        tmp.write_text("\n".join(lines) + "\n")
+    print("\n".join(lines[2:]))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
