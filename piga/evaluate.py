@@ -40,12 +40,18 @@ class EvalConfig:
 
 
 def parameter_errors(model: PhysicsModel, true_params: dict[str, Any]) -> dict[str, dict[str, float]]:
-    """Learned vs true physical parameters, with relative errors, for every parameter both know."""
+    """Learned vs true physical parameters, with relative errors, for every parameter both know.
+
+    The true a carries the file's ``actuation_sign`` (-1 for a flipped camera or motor: the frames
+    show the actuation reversed), so a model that learned a > 0 from flipped frames is ~200% off.
+    """
     learned = model.physical_parameters()
     out: dict[str, dict[str, float]] = {}
     for file_name, model_name in PARAMETER_NAMES.items():
         if file_name in true_params and model_name in learned:
             true = float(true_params[file_name])
+            if file_name == "actuation_gain":
+                true *= float(true_params.get("actuation_sign", 1.0))
             out[model_name] = {"learned": learned[model_name], "true": true,
                                "relative_error": abs(learned[model_name] - true) / abs(true)}
     return out
