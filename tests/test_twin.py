@@ -96,3 +96,14 @@ def test_the_decoder_twin_is_the_decoders_picture_in_8_bits() -> None:
     with pytest.raises(ValueError, match="renderer"):
         twin_floor(network, fit.Model((), 0, {"g": 10.0, "a": 1.0}), Nominal(10.0, 1.0, 0.0, 0.05), angles,
                    np.zeros((2, 5)), None, 1, renderer="camera")
+
+
+def test_the_decoder_twin_is_scaled_down_to_the_recordings_own_one_step_error() -> None:
+    from piga.diagnostics.twin import TwinFloor, calibrate_floor
+
+    floor = TwinFloor(np.array([2e-5, 8e-5, 1e-4]), np.array([5e-5, 1e-4]))
+    half = calibrate_floor(floor, 1e-5)  # the recording's one-step error is half the twin's
+    np.testing.assert_allclose(half.horizon, floor.horizon / 2)
+    np.testing.assert_allclose(half.windows, floor.windows / 2)
+    same = calibrate_floor(floor, 4e-5)  # never scaled up
+    np.testing.assert_array_equal(same.windows, floor.windows)

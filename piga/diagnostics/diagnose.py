@@ -510,6 +510,8 @@ def measure_gap(candidates: Candidates, chosen: Score, nom: Nominal, obs: Observ
     if floor_source is not None:
         floor = twin_floor(model, final, nom, theta[held_rows], obs.actions[held_rows],
                            None if stale is None else stale[held_rows], config.stride, arrow=arrow, renderer=floor_source)
+        if floor_source == "decoder":
+            floor = calibrate_floor(floor, float(h_fin[0]))
     # Closure on the typical window: the median over held-out windows of each window's mean squared
     # free-run error. The mean over windows is dominated by the few that pass near upright, where
     # any velocity error grows fast, even in an exactly right model (and in its twin).

@@ -21,9 +21,12 @@ camera, a codec) has its own vision error on top, which counts as part of the ga
 did not come from the simulator (another camera: a MuJoCo scene, a real pendulum) has its twin
 rendered instead by the model's own decoder (``renderer="decoder"``), the picture the model learned
 of that camera; that is the recording's own camera only when the autoencoder re-renders the
-recording about as well as its training frames, which the caller checks. The decoder's picture is
-cleaner than the recording (no texture, no shading the templates missed), so the encoder reads it at
-least as well: that floor is a lower bound, and a closure above it errs towards less closure.
+recording about as well as its training frames, which the caller checks. The encoder need not read
+the decoder's picture as it reads the recording (on dm_control's shaded pole it reads the decoder's
+flat templates worse), so the decoder's twin is calibrated to the recording's own vision noise
+(:func:`calibrate_floor`): an exactly right model's errors are linear in the encoder's errors, so
+its squared errors scale with their variance, which the one-step error gives on both sides (assuming
+the two have alike correlations in time: an approximation, which the report names).
 """
 
 from __future__ import annotations
@@ -153,6 +156,22 @@ def twin_floor(network: PhysicsModel, model: fit.Model, nominal: Nominal, theta:
     rows = np.arange(len(encoded))
     w = fit.make_windows(encoded, actions, rows, None, stride, nominal.dt, stale, repeat=True)
     return TwinFloor(fit.horizon_errors(model, nominal, w), fit.window_errors(model, nominal, w))
+
+
+def calibrate_floor(floor: TwinFloor, one_step_mse: float) -> TwinFloor:
+    """``floor`` scaled down to the recording's own vision noise: by ``one_step_mse`` (the corrected
+    model's held-out one-step angle MSE on the recording) over the twin's one-step MSE, where that is
+    below 1.
+
+    The twin's model is exact, so its one-step error is vision noise alone, while the recording's also
+    holds whatever the corrected model still gets wrong: the ratio overstates the recording's noise
+    relative to the twin's, and the scaled floor errs high (towards less closure). Never scaled up.
+    """
+    twin_one_step = float(floor.horizon[0])
+    if not (twin_one_step > 0 and math.isfinite(one_step_mse)):
+        return floor
+    scale = min(1.0, one_step_mse / twin_one_step)
+    return TwinFloor(floor.horizon * scale, floor.windows * scale)
 
 
 #: The nominal error must exceed the floor by this factor for a closure to mean something (below
