@@ -184,8 +184,8 @@ def markdown(d: Diagnosis, model: str, data: str, command: str) -> str:
                     "on a simulated twin of the held-out data that it describes exactly (re-simulated with the corrected "
                     + ("physics, rendered by the simulator, read by the encoder)" if g.floor_source != "decoder" else
                        "physics, drawn by the model's own decoder, whose picture is this recording's camera as it re-renders "
-                       "the recording about as well as its training frames, read by the encoder; a lower bound, since "
-                       "the decoder's picture is cleaner than the recording)")
+                       "the recording about as well as its training frames, read by the encoder, and scaled down to this "
+                       "recording's own vision noise by the ratio of the one-step errors, recording over twin)")
                     + ". Raw, with no floor subtracted: "
                     f"{_pct(g.typical_free_run_closure)}.")
     else:
