@@ -60,7 +60,7 @@ from piga.diagnostics.residuals import (action_correlation, autocorrelation, bin
                                         one_step_residuals, ridge)
 from piga.diagnostics.results import (CameraSummary, CandidateRow, Diagnosis, Effect, Gap, GenericBasis, Naming,
                                       PixelErrors, Score, SelectionStep, VisionSummary)
-from piga.diagnostics.twin import MEASURABLE_GAP, gap_closure, twin_floor
+from piga.diagnostics.twin import MEASURABLE_GAP, calibrate_floor, gap_closure, twin_floor
 from piga.diagnostics.vision import Camera, CameraConfig, CameraFindings, angle_table, camera_stage, match
 from piga.model import PhysicsModel
 from piga.runs import Nominal, nominal_of, training_arrow, training_blank_mse, training_reconstruction_mse
