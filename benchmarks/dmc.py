@@ -21,7 +21,10 @@ the commands themselves:
    A flipped case is not diagnosed: the diagnosis needs a > 0, and refuses such a model in one line.
 
     python benchmarks/dmc.py --work runs/dmc --out results/dmc
-    python benchmarks/dmc.py --work runs/dmc --out results/dmc --seeds 0 1 2 --variant mass=1.5 --variant damping=0.3
+    python benchmarks/dmc.py --work runs/dmc --out results/dmc --epochs 6 --seeds 0 1 2 --variant flip=motor \
+        --variant mass=1.5 --variant length=0.4 --variant damping=0.3
+
+Variants run for the first seed only unless ``--variant-seeds all``.
 
 Finished steps are kept in ``--work`` and skipped when the benchmark is run again, so an
 interrupted run continues. ``OUT.json`` holds every number, ``OUT.md`` the tables, with the
@@ -277,6 +280,8 @@ def main() -> None:
     p.add_argument("--control-seed", type=int, default=0)
     p.add_argument("--diagnose", choices=("first", "all", "none"), default="first",
                    help="diagnose the cases of the first seed (default), of every seed, or none")
+    p.add_argument("--variant-seeds", choices=("first", "all"), default="first",
+                   help="run the variants for the first seed only (default) or for every seed")
     p.add_argument("--skip-control", action="store_true",
                    help="no control episodes (identification and diagnosis only; the control table is left out)")
     args = p.parse_args()
@@ -285,7 +290,8 @@ def main() -> None:
     cases = []
     for seed in args.seeds:
         diagnose = args.diagnose == "all" or (args.diagnose == "first" and seed == args.seeds[0])
-        for variant in [[], *([v] for v in args.variant)]:
+        variants = args.variant if args.variant_seeds == "all" or seed == args.seeds[0] else []
+        for variant in [[], *([v] for v in variants)]:
             cases.append(run_case(work, seed, variant, args, diagnose))
     command = "python benchmarks/dmc.py " + " ".join(sys.argv[1:])
     info = machine()
