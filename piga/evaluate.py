@@ -50,6 +50,8 @@ def parameter_errors(model: PhysicsModel, true_params: dict[str, Any]) -> dict[s
     """Learned vs true physical parameters, with relative errors, for every learned parameter the file knows.
 
     A parameter held fixed (gravity's g in the m run) is not reported here: it was given, not learned.
+    The true a carries the file's ``actuation_sign`` (-1 for a flipped camera or motor: the frames
+    show the actuation reversed), so a model that learned a > 0 from flipped frames is ~200% off.
     """
     learned = model.physical_parameters()
     names = set(model.learned_parameter_names())
@@ -57,6 +59,8 @@ def parameter_errors(model: PhysicsModel, true_params: dict[str, Any]) -> dict[s
     for file_name, model_name in PARAMETER_NAMES.items():
         if file_name in true_params and model_name in names:
             true = float(true_params[file_name])
+            if file_name == "actuation_gain":
+                true *= float(true_params.get("actuation_sign", 1.0))
             out[model_name] = {"learned": learned[model_name], "true": true,
                                "relative_error": abs(learned[model_name] - true) / abs(true)}
     return out

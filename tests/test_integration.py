@@ -164,3 +164,15 @@ def test_continuous_models_are_refused_where_euler_without_damping_is_assumed(tm
         diagnose(model, tmp_path / "never-read.h5")
     plain = PhysicsModel(ModelConfig())
     assert PendulumDynamics.of(plain.system, plain.integrator).substeps == 1
+
+
+def test_parameter_errors_compare_a_with_the_signed_truth_of_a_flipped_file() -> None:
+    from piga.evaluate import parameter_errors
+    from piga.model import ModelConfig, PhysicsModel
+
+    model = PhysicsModel(ModelConfig(image_size=32, signed_actuation=True))
+    model.system.set_parameters(a=-1.3)
+    flipped = {"g": 13.0, "actuation_gain": 1.328, "actuation_sign": -1.0}
+    assert parameter_errors(model, flipped)["a"]["true"] == pytest.approx(-1.328)
+    assert parameter_errors(model, flipped)["a"]["relative_error"] == pytest.approx(0.028 / 1.328, rel=1e-5)
+    assert parameter_errors(model, {**flipped, "actuation_sign": 1.0})["a"]["relative_error"] > 1.9

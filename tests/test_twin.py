@@ -62,3 +62,48 @@ def test_ridge_matches_least_squares_when_well_posed_and_stays_bounded_when_not(
     coef = ridge(feats(th_fit), y_fit)
     y_new = 0.3 * np.sin(4 * th_new) + rng.normal(size=400)
     assert ((y_new - feats(th_new) @ coef) ** 2).mean() < 2 * (y_new**2).mean()
+
+
+def test_the_floor_of_another_camera_is_drawn_by_the_decoder_only_when_it_re_renders_that_camera() -> None:
+    from piga.diagnostics import DiagnoseConfig
+    from piga.diagnostics.diagnose import twin_renderer
+
+    config = DiagnoseConfig()
+    assert twin_renderer(True, True, False, 5.0, config) == ("simulator", None)
+    assert twin_renderer(False, True, False, 1.2, config) == ("decoder", None)
+    for args in ((False, True, False, 3.0), (False, True, False, None), (False, False, False, 1.0), (False, True, True, 1.0)):
+        source, note = twin_renderer(*args, config)
+        assert source is None and note.startswith("no valid floor") and "raw" in note
+    assert "3.0x worse" in twin_renderer(False, True, False, 3.0, config)[1]
+    assert twin_renderer(True, False, False, None, config) == (None, None)
+
+
+def test_the_decoder_twin_is_the_decoders_picture_in_8_bits() -> None:
+    import torch
+
+    from piga.diagnostics.twin import decoder_render, twin_floor
+    from piga.model import ModelConfig, PhysicsModel
+    from piga.runs import Nominal
+
+    torch.manual_seed(0)
+    network = PhysicsModel(ModelConfig(image_size=32)).eval()
+    angles = np.linspace(-3, 3, 10).reshape(2, 5)
+    frames = decoder_render(network, angles)
+    assert frames.shape == (2, 5, 32, 32) and frames.dtype == np.uint8
+    with torch.no_grad():
+        expected = network.decoder(torch.tensor(angles, dtype=torch.float32)[..., None, None]).clamp(0, 1)[:, :, 0]
+    np.testing.assert_allclose(frames / 255.0, expected.numpy(), atol=0.5 / 255 + 1e-6)
+    with pytest.raises(ValueError, match="renderer"):
+        twin_floor(network, fit.Model((), 0, {"g": 10.0, "a": 1.0}), Nominal(10.0, 1.0, 0.0, 0.05), angles,
+                   np.zeros((2, 5)), None, 1, renderer="camera")
+
+
+def test_the_decoder_twin_is_scaled_down_to_the_recordings_own_one_step_error() -> None:
+    from piga.diagnostics.twin import TwinFloor, calibrate_floor
+
+    floor = TwinFloor(np.array([2e-5, 8e-5, 1e-4]), np.array([5e-5, 1e-4]))
+    half = calibrate_floor(floor, 1e-5)  # the recording's one-step error is half the twin's
+    np.testing.assert_allclose(half.horizon, floor.horizon / 2)
+    np.testing.assert_allclose(half.windows, floor.windows / 2)
+    same = calibrate_floor(floor, 4e-5)  # never scaled up
+    np.testing.assert_array_equal(same.windows, floor.windows)

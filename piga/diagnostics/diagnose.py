@@ -60,7 +60,7 @@ from piga.diagnostics.residuals import (action_correlation, autocorrelation, bin
                                         one_step_residuals, ridge)
 from piga.diagnostics.results import (CameraSummary, CandidateRow, Diagnosis, Effect, Gap, GenericBasis, Naming,
                                       PixelErrors, Score, SelectionStep, VisionSummary)
-from piga.diagnostics.twin import MEASURABLE_GAP, gap_closure, twin_floor
+from piga.diagnostics.twin import MEASURABLE_GAP, calibrate_floor, gap_closure, twin_floor
 from piga.diagnostics.vision import Camera, CameraConfig, CameraFindings, angle_table, camera_stage, match
 from piga.model import PhysicsModel
 from piga.runs import Nominal, nominal_of, training_arrow, training_blank_mse, training_reconstruction_mse
@@ -457,10 +457,41 @@ def summarise_vision(obs: Observations, rec_training: float, camera: CameraFindi
     return VisionSummary(rec_real, rec_training, ratio, summary), notes
 
 
+def twin_renderer(from_gymnasium: bool, has_model: bool, rematched: bool, vision_ratio: float | None,
+                  config: DiagnoseConfig) -> tuple[str | None, str | None]:
+    """What draws the twin that measures the floor, and else why there is no valid floor.
+
+    Returns ("simulator", None) for a recording from Gymnasium; ("decoder", None) for another camera
+    that the autoencoder re-renders within ``config.vision_ratio`` of its training error (its decoder's
+    picture is that camera's); (None, note) otherwise. No twin either with re-matched angles (their
+    closure is in pixels) or without a model (then no note for a recording from Gymnasium).
+    """
+    if has_model and not rematched and from_gymnasium:
+        return "simulator", None
+    own_camera = vision_ratio is not None and vision_ratio <= config.vision_ratio
+    if has_model and not rematched and own_camera:
+        return "decoder", None
+    if from_gymnasium:
+        return None, None
+    why = ("the corrected angles were re-matched through a fitted camera" if rematched else
+           "there is no model whose decoder could draw the twin" if not has_model else
+           "the model's decoder re-renders this recording with an unknown error, so its picture may not be this camera's"
+           if vision_ratio is None else
+           f"the model's decoder re-renders this recording {vision_ratio:.1f}x worse than its training frames (above "
+           f"{config.vision_ratio:g}x), so its picture is not this camera's")
+    return None, ("no valid floor: this recording was not filmed by Gymnasium's camera, and " + why
+                  + "; the closure is raw (no floor subtracted)")
+
+
 def measure_gap(candidates: Candidates, chosen: Score, nom: Nominal, obs: Observations, theta: np.ndarray,
                 stale: np.ndarray | None, w: WindowSet, config: DiagnoseConfig, model: PhysicsModel | None,
-                camera: CameraFindings | None, arrow: bool) -> Gap:
-    """Step 6: the gap per horizon, nominal vs ``chosen``, in angles and pixels, and how far it closes above the floor."""
+                camera: CameraFindings | None, arrow: bool, vision_ratio: float | None = None) -> Gap:
+    """Step 6: the gap per horizon, nominal vs ``chosen``, in angles and pixels, and how far it closes above the floor.
+
+    ``vision_ratio`` is the autoencoder's re-rendering error on the recording over that on its
+    training frames (None: unknown); at most ``config.vision_ratio``, the decoder's picture is the
+    recording's camera, and a recording not from Gymnasium gets a twin drawn by the decoder.
+    """
     final = chosen.model
     nominal_model = candidates.nominal.model
     held_rows = np.flatnonzero(~obs.fit)
@@ -470,15 +501,17 @@ def measure_gap(candidates: Candidates, chosen: Score, nom: Nominal, obs: Observ
     rematched = camera is not None and camera.rematched
     # The floor: the corrected model's error on a simulated twin of the held-out data, which it
     # describes exactly (piga.diagnostics.twin). Not with re-matched angles: their closure is in pixels.
-    # The twin is rendered by the simulator the model was identified in, Gymnasium's pendulum: its floor
-    # is this recording's only when the file says the recording came from there too.
-    floor, floor_note = None, None
-    if not obs.from_gymnasium:
-        floor_note = ("no valid floor: the twin that measures it is rendered with Gymnasium's picture, and this "
-                      "recording was not filmed by that camera, so the closure is raw (no floor subtracted)")
-    if model is not None and not rematched and obs.from_gymnasium:
+    # The twin is rendered by the simulator the model was identified in, Gymnasium's pendulum, when the
+    # file says the recording came from there too; otherwise by the model's own decoder, whose picture
+    # is the recording's camera only if the autoencoder re-renders the recording about as well as its
+    # training frames. Else there is no valid floor, and the closure is raw.
+    floor = None
+    floor_source, floor_note = twin_renderer(obs.from_gymnasium, model is not None, rematched, vision_ratio, config)
+    if floor_source is not None:
         floor = twin_floor(model, final, nom, theta[held_rows], obs.actions[held_rows],
-                           None if stale is None else stale[held_rows], config.stride, arrow=arrow)
+                           None if stale is None else stale[held_rows], config.stride, arrow=arrow, renderer=floor_source)
+        if floor_source == "decoder":
+            floor = calibrate_floor(floor, float(h_fin[0]))
     # Closure on the typical window: the median over held-out windows of each window's mean squared
     # free-run error. The mean over windows is dominated by the few that pass near upright, where
     # any velocity error grows fast, even in an exactly right model (and in its twin).
@@ -520,7 +553,7 @@ def measure_gap(candidates: Candidates, chosen: Score, nom: Nominal, obs: Observ
         free_run_mse_floor=float(floor.horizon.mean()) if floor is not None else None,
         free_run_gap_closure=pixel_closure if basis == "pixels" else typical_gap,
         typical_free_run_mse_nominal=typ_nom, typical_free_run_mse_corrected=typ_fin,
-        typical_free_run_mse_floor=typ_floor, typical_free_run_closure=raw_typical,
+        typical_free_run_mse_floor=typ_floor, typical_free_run_closure=raw_typical, floor_source=floor_source,
         typical_free_run_gap_closure=typical_gap, mean_free_run_gap_closure=mean_gap,
         closure_basis=basis, pixel_free_run_gap_closure=pixel_closure,
         gap_above_floor=bool(measurable),
@@ -569,7 +602,8 @@ def analyse(obs: Observations, nom: Nominal, config: DiagnoseConfig = DiagnoseCo
     generic = generic_basis(final, nom, obs, theta, stale, config)
     naming = name_effects(final, nom, windows, camera, generic, config, from_gymnasium=obs.from_gymnasium)
     vision, vision_notes = summarise_vision(obs, rec_training, camera, stale, naming.effects, config)
-    gap = measure_gap(candidates, selection.chosen, nom, obs, theta, stale, windows, config, model, camera, arrow)
+    gap = measure_gap(candidates, selection.chosen, nom, obs, theta, stale, windows, config, model, camera, arrow,
+                      vision.ratio)
     res_nom = one_step_residuals(candidates.nominal.model, nom, obs.theta, obs.actions, np.arange(len(obs.theta)))
     return Diagnosis(
         verdict=naming.verdict, verdict_class=naming.verdict_class, effects=naming.effects,

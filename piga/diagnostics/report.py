@@ -182,7 +182,11 @@ def markdown(d: Diagnosis, model: str, data: str, command: str) -> str:
                     f"{number(g.typical_free_run_mse_nominal, '.3g')} rad² nominal, {number(g.typical_free_run_mse_corrected, '.3g')} rad² "
                     f"corrected, and a floor of {number(g.typical_free_run_mse_floor, '.3g')} rad², the corrected model's own error "
                     "on a simulated twin of the held-out data that it describes exactly (re-simulated with the corrected "
-                    "physics, rendered by the simulator, read by the encoder). Raw, with no floor subtracted: "
+                    + ("physics, rendered by the simulator, read by the encoder)" if g.floor_source != "decoder" else
+                       "physics, drawn by the model's own decoder, whose picture is this recording's camera as it re-renders "
+                       "the recording about as well as its training frames, read by the encoder, and scaled down to this "
+                       "recording's own vision noise by the ratio of the one-step errors, recording over twin)")
+                    + ". Raw, with no floor subtracted: "
                     f"{_pct(g.typical_free_run_closure)}.")
     else:
         headline = (f"**Free-run closure {_pct(g.free_run_gap_closure)}**: 1 − err_corrected / err_nominal on the "

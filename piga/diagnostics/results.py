@@ -257,6 +257,9 @@ class Gap(_ByKey):
     """... on the twin."""
     typical_free_run_closure: float | None
     """Raw closure on the typical window (no floor)."""
+    floor_source: str | None
+    """What drew the twin that measured the floor: "simulator" (Gymnasium's picture, for a recording
+    from Gymnasium), "decoder" (the model's own picture of the recording's camera) or None (no twin)."""
     typical_free_run_gap_closure: float | None
     """Closure above the floor on the typical window (raw when no floor)."""
     mean_free_run_gap_closure: float | None

@@ -17,7 +17,16 @@ window's floor 2x. So the floor is measured instead, on a twin of the held-out d
    it predicts the real ones.
 
 The floor is the simulator's: a recording whose pictures differ from the simulator's (another
-camera, a codec) has its own vision error on top, which counts as part of the gap.
+camera, a codec) has its own vision error on top, which counts as part of the gap. A recording that
+did not come from the simulator (another camera: a MuJoCo scene, a real pendulum) has its twin
+rendered instead by the model's own decoder (``renderer="decoder"``), the picture the model learned
+of that camera; that is the recording's own camera only when the autoencoder re-renders the
+recording about as well as its training frames, which the caller checks. The encoder need not read
+the decoder's picture as it reads the recording (on dm_control's shaded pole it reads the decoder's
+flat templates worse), so the decoder's twin is calibrated to the recording's own vision noise
+(:func:`calibrate_floor`): an exactly right model's errors are linear in the encoder's errors, so
+its squared errors scale with their variance, which the one-step error gives on both sides (assuming
+the two have alike correlations in time: an approximation, which the report names).
 """
 
 from __future__ import annotations
@@ -99,6 +108,19 @@ def render_angles(angles: np.ndarray, actions: np.ndarray, offset: float, image_
     return out
 
 
+@torch.no_grad()
+def decoder_render(network: PhysicsModel, angles: np.ndarray, batch: int = 16) -> np.ndarray:
+    """(n, T, H, W[, C]) uint8 frames of (n, T) ``angles`` (model convention) drawn by the model's own decoder,
+    quantised to 8 bits as a camera's would be."""
+    out = []
+    for start in range(0, len(angles), batch):
+        coords = torch.as_tensor(angles[start : start + batch], dtype=torch.float32)[..., None, None]  # (B, T, 1, 1)
+        frames = network.decoder(coords).clamp(0, 1)  # (B, T, C, H, W)
+        frames = frames[:, :, 0] if frames.shape[2] == 1 else frames.permute(0, 1, 3, 4, 2)
+        out.append((frames * 255).round().to(torch.uint8).numpy())
+    return np.concatenate(out, 0)
+
+
 def repeat_stale(frames: np.ndarray, stale: np.ndarray) -> np.ndarray:
     """(n, T, ...) frames where each stale (n, T) frame repeats the frame before it (in place; returned)."""
     for j in range(1, frames.shape[1]):
@@ -107,7 +129,8 @@ def repeat_stale(frames: np.ndarray, stale: np.ndarray) -> np.ndarray:
 
 
 def twin_floor(network: PhysicsModel, model: fit.Model, nominal: Nominal, theta: np.ndarray, actions: np.ndarray,
-               stale: np.ndarray | None, stride: int, arrow: bool = True, batch: int = 16) -> TwinFloor:
+               stale: np.ndarray | None, stride: int, arrow: bool = True, batch: int = 16,
+               renderer: str = "simulator") -> TwinFloor:
     """The errors of ``model`` on the twin of (n, T) encoded held-out sequences ``theta`` and ``actions``.
 
     Args:
@@ -116,9 +139,15 @@ def twin_floor(network: PhysicsModel, model: fit.Model, nominal: Nominal, theta:
         stale: (n, T) the recording's repeated frames, repeated in the twin too (None: none).
         stride: frames between window starts, as for the real free-run windows.
         arrow: render Gymnasium's torque arrow (as in the data the model was identified on).
+        renderer: "simulator" (Gymnasium's picture) or "decoder" (the model's own, :func:`decoder_render`).
     """
+    if renderer not in ("simulator", "decoder"):
+        raise ValueError(f"renderer must be 'simulator' or 'decoder', got {renderer!r}")
     angles = twin_angles(model, nominal, theta, actions)
-    frames = render_angles(angles, actions, nominal.offset, network.config.image_size, arrow)
+    if renderer == "decoder":
+        frames = decoder_render(network, angles, batch)
+    else:
+        frames = render_angles(angles, actions, nominal.offset, network.config.image_size, arrow)
     if stale is not None:
         repeat_stale(frames, stale)
     encoded = np.empty(angles.shape)
@@ -127,6 +156,22 @@ def twin_floor(network: PhysicsModel, model: fit.Model, nominal: Nominal, theta:
     rows = np.arange(len(encoded))
     w = fit.make_windows(encoded, actions, rows, None, stride, nominal.dt, stale, repeat=True)
     return TwinFloor(fit.horizon_errors(model, nominal, w), fit.window_errors(model, nominal, w))
+
+
+def calibrate_floor(floor: TwinFloor, one_step_mse: float) -> TwinFloor:
+    """``floor`` scaled down to the recording's own vision noise: by ``one_step_mse`` (the corrected
+    model's held-out one-step angle MSE on the recording) over the twin's one-step MSE, where that is
+    below 1.
+
+    The twin's model is exact, so its one-step error is vision noise alone, while the recording's also
+    holds whatever the corrected model still gets wrong: the ratio overstates the recording's noise
+    relative to the twin's, and the scaled floor errs high (towards less closure). Never scaled up.
+    """
+    twin_one_step = float(floor.horizon[0])
+    if not (twin_one_step > 0 and math.isfinite(one_step_mse)):
+        return floor
+    scale = min(1.0, one_step_mse / twin_one_step)
+    return TwinFloor(floor.horizon * scale, floor.windows * scale)
 
 
 #: The nominal error must exceed the floor by this factor for a closure to mean something (below
