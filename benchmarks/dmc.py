@@ -127,9 +127,10 @@ def train(data: Path, run: Path, preset: str, seed: int, args: argparse.Namespac
     """``piga-train-model`` with ``preset`` into ``run``, resumed if a checkpoint is there, skipped if finished."""
     if (run / "metrics.json").exists():
         return
-    resume = ["--resume"] if (run / "checkpoint.pt").exists() else []
-    sh("piga-train-model", str(data), "--out", str(run), "--preset", preset, "--epochs", str(args.epochs),
-       "--seed", str(seed), "--threads", "1", "--quiet", *extra, *resume, log=log)
+    # A resumed run keeps its recipe (piga-train-model refuses recipe options with --resume).
+    recipe = ["--resume"] if (run / "checkpoint.pt").exists() else ["--preset", preset, *extra]
+    sh("piga-train-model", str(data), "--out", str(run), *recipe, "--epochs", str(args.epochs),
+       "--seed", str(seed), "--threads", "1", "--quiet", log=log)
 
 
 def run_diagnosis(folder: Path, data: Path, seed: int, args: argparse.Namespace, log: Path) -> dict[str, object]:
