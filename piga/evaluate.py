@@ -36,14 +36,20 @@ class EvalConfig:
     extrapolate_frames: int | None = None
     """T_ext, frames predicted beyond T_pred (capped by the sequence length); None: the model's own
     (:attr:`piga.model.ModelConfig.extrapolate_frames`: 20, or 24 for gravity)."""
+    max_sequences: int = 200
+    """At most this many sequences (the first of the split)."""
 
     def frames_after_input(self, model: PhysicsModel, sequence_steps: int) -> int:
         """T_pred + T_ext frames to predict after the L input frames, capped by the sequence length."""
         cfg = model.config
         ext = cfg.extrapolate_frames if self.extrapolate_frames is None else self.extrapolate_frames
         return min(cfg.pred_frames + ext, sequence_steps - cfg.input_frames)
-    max_sequences: int = 200
-    """At most this many sequences (the first of the split)."""
+
+
+def fixed_parameters(model: PhysicsModel) -> dict[str, float]:
+    """The physical parameters held at a given value (gravity's g in the m run), the offset apart."""
+    learned = set(model.learned_parameter_names())
+    return {name: value for name, value in model.physical_parameters().items() if name not in learned and name != "offset"}
 
 
 def parameter_errors(model: PhysicsModel, true_params: dict[str, Any]) -> dict[str, dict[str, float]]:
@@ -119,8 +125,7 @@ def evaluate(model: PhysicsModel, data: str | Path, config: EvalConfig = EvalCon
         "extrapolate_frames": steps - n_pred,
         "parameters": model.physical_parameters(),
         "parameter_errors": parameter_errors(model, info.params),
-        "fixed_parameters": {name: value for name, value in model.physical_parameters().items()
-                             if name not in model.learned_parameter_names() and name != "offset"},
+        "fixed_parameters": fixed_parameters(model),
         "frame_mse_per_step": mse.tolist(),
         "frame_ssim_per_step": ssim.tolist(),
         "frame_ssim_mean": {"prediction": float(ssim[:n_pred].mean()),

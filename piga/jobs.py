@@ -104,7 +104,11 @@ def run_job(job: ControlJob, keep_plan_ms: bool = False) -> dict[str, Any]:
     episodes = job.episodes
     if not isinstance(agent, OracleAgent):
         episodes = replace(episodes, frame_stack=agent.input_frames)
-    result = run_episodes(agent, episodes, keep_plan_ms=keep_plan_ms)
+    return _tagged(job, run_episodes(agent, episodes, keep_plan_ms=keep_plan_ms))
+
+
+def _tagged(job: ControlJob, result: dict[str, Any]) -> dict[str, Any]:
+    """``result`` without recordings, its summary extended with ``agent`` and the job's tags."""
     result.pop("recordings")
     result["summary"] = {"agent": job.agent, **dict(job.tags), **result["summary"]}
     return result
@@ -126,10 +130,7 @@ def run_split(job: ControlJob, workers: int = 1, progress: bool = True) -> dict[
     if workers <= 1 or job.episodes.episodes <= 1:
         return run_job(job)
     results = run_jobs(split_job(job, workers), workers, progress, keep_plan_ms=True)
-    merged = merge_results(job.episodes, results)
-    merged.pop("recordings")
-    merged["summary"] = {"agent": job.agent, **dict(job.tags), **merged["summary"]}
-    return merged
+    return _tagged(job, merge_results(job.episodes, results))
 
 
 def _worker_init() -> None:

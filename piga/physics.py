@@ -411,8 +411,7 @@ class Gravity(System):
     def acceleration(self, p: Tensor, v: Tensor, u: Tensor | None = None) -> Tensor:
         d = _pairwise_differences(p)  # (B, N, N, 2)
         dist = _guarded_norm(d, self.softening)  # (B, N, N, 1)
-        strength = self.g * self.m if self.has_mass else self.g  # g·m_j, the acceleration's scale
-        acc = -strength * d / dist**3  # (B, N, N, 2); zero on the diagonal
+        acc = -self.g * self.m * d / dist**3  # (B, N, N, 2); zero on the diagonal
         return acc.sum(dim=2)  # (B, N, 2)
 
 
