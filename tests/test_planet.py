@@ -12,7 +12,7 @@ import torch
 from agents.config import CEMConfig
 from agents.planet.config import IterativeConfig, LatentPlannerConfig, PlanetTrainConfig, RSSMConfig
 from agents.planet.planner import PlanetAgent
-from agents.planet.rssm import Belief, WorldModel
+from agents.planet.rssm import Belief, WorldModel, model_steps
 
 #: A model small enough for a test to train in a second.
 TINY = RSSMConfig(depth=4, deter_size=16, stoch_size=4, hidden_size=16)
@@ -109,12 +109,42 @@ def test_a_file_without_rewards_is_refused(tiny_data: Path, tmp_path: Path) -> N
         check_planet_data(inspect_dataset(path), TINY_TRAIN)
 
 
-@pytest.mark.parametrize("horizon", [1, 5])
-def test_fast_imagination_equals_the_reference(horizon: int) -> None:
+def test_model_steps_group_env_steps() -> None:
+    frames = torch.arange(7)[None, :, None, None].expand(2, 7, 3, 3)  # (B, T, H, W), frame t filled with t
+    actions = torch.arange(14, dtype=torch.float32).reshape(2, 7, 1)
+    rewards = torch.ones(2, 7)
+    f, a, r = model_steps(frames, actions, rewards, 3)
+    assert f.shape == (2, 2, 3, 3) and a.shape == (2, 2, 3) and r.shape == (2, 2)
+    assert f[0, :, 0, 0].tolist() == [0, 3]  # every R-th frame; the 7th is dropped
+    assert a[1, 1].tolist() == [10.0, 11.0, 12.0]  # the R actions after frame 3, in order
+    assert r.tolist() == [[3.0, 3.0], [3.0, 3.0]]
+    assert all(x is y for x, y in zip(model_steps(frames, actions, rewards, 1), (frames, actions, rewards)))
+
+
+def test_action_repeat_holds_each_planned_action_for_r_steps(tiny_data: Path) -> None:
+    from piga.baselines.planet import _Sequences
+
+    torch.manual_seed(0)
+    model = WorldModel(replace(TINY, action_repeat=3))
+    assert model.rssm.pre_gru.in_features == TINY.stoch_size + 3
+    frames, actions, rewards = _Sequences(tiny_data, "train").batch(np.random.default_rng(0), 2, 4, repeat=3)
+    assert frames.shape == (2, 4, 64, 64) and actions.shape == (2, 4, 3) and rewards.shape == (2, 4)
+    assert torch.isfinite(model.loss(frames, actions, rewards, TINY_TRAIN).loss)
+    agent = PlanetAgent(model, TINY_CEM)
+    stream = np.random.default_rng(1).integers(0, 256, (7, 1, 64, 64), dtype=np.uint8)
+    acted = np.concatenate([agent.act(f) for f in stream])
+    assert acted[0] == acted[1] == acted[2] and acted[3] == acted[4] == acted[5] and acted[2] != acted[3]
+    assert agent.previous.tolist() == [[acted[6]] * 3]  # the next frame read follows the action held since the last
+    agent.reset()
+    assert np.array_equal(np.concatenate([agent.act(f) for f in stream]), acted)
+
+
+@pytest.mark.parametrize("horizon,repeat", [(1, 1), (5, 1), (5, 2)])
+def test_fast_imagination_equals_the_reference(horizon: int, repeat: int) -> None:
     from agents.planet.imagine import Imagination
 
     torch.manual_seed(0)
-    model = WorldModel(TINY).eval()
+    model = WorldModel(replace(TINY, action_repeat=repeat)).eval()
     imagination = Imagination(model)
     belief = Belief(torch.randn(1, TINY.deter_size), torch.randn(1, TINY.stoch_size))
     for batch in (9, 3):  # a new shape reallocates the buffers

@@ -34,15 +34,24 @@ class RSSMConfig:
     a training step's time on a CPU, and a gray 64x64 pendulum needs less capacity than RGB scenes)."""
     min_std: float = 0.1
     """Floor on the standard deviation of the stochastic state (PlaNet's 0.1)."""
+    action_repeat: int = 1
+    """R, env steps per model step (PlaNet: 2 to 8 on its DMC tasks). The model sees every R-th frame,
+    takes the R actions in between as one input of R·A numbers (random-action data change the action
+    at every env step), and predicts their summed reward; the planner holds each action for R steps."""
 
     def __post_init__(self) -> None:
         if self.image_size != 64:
             raise ValueError(f"the PlaNet encoder and decoder are built for 64x64 frames, got image_size={self.image_size}")
-        for name in ("channels", "action_dim", "deter_size", "stoch_size", "hidden_size", "depth"):
+        for name in ("channels", "action_dim", "deter_size", "stoch_size", "hidden_size", "depth", "action_repeat"):
             if getattr(self, name) < 1:
                 raise ValueError(f"RSSMConfig.{name} must be >= 1, got {getattr(self, name)}")
         if not self.min_std > 0:
             raise ValueError(f"RSSMConfig.min_std must be > 0, got {self.min_std}")
+
+    @property
+    def input_action_size(self) -> int:
+        """Size of the transition's action input: the R actions of a model step, R·A."""
+        return self.action_repeat * self.action_dim
 
     @property
     def embed_size(self) -> int:
@@ -64,7 +73,8 @@ class PlanetTrainConfig:
     batch_size: int = 16
     """Sequences per batch (PlaNet: 50; CPU time per step is linear in it)."""
     chunk_length: int = 32
-    """Frames per training sequence (PlaNet: 50; piga-collect's default sequences have 40 frames)."""
+    """Model steps per training sequence (PlaNet: 50; piga-collect's default sequences have 40 frames,
+    so with an action repeat R a chunk spans chunk_length·R of them)."""
     lr: float = 1e-3
     """Adam's learning rate (PlaNet's)."""
     adam_eps: float = 1e-4

@@ -8,7 +8,7 @@ so this module only removes what is not that work:
 | change | why it is exact |
 |---|---|
 | ``s @ W_s^T`` and ``h @ W_hh^T`` of the first step computed once, not 1000 times | every candidate starts from the same belief |
-| ``cat(s, a) @ W^T`` split into ``s @ W_s^T + a ⊗ w_a`` | the same linear map (A = 1: an outer product, not a matmul) |
+| ``cat(s, a) @ W^T`` split into ``s @ W_s^T + a ⊗ w_a`` | the same linear map (A = 1: an outer product, not a matmul); with an action repeat R, w_a sums the R copies' weights |
 | the reward head run once on all H·B states at the end | the same head on the same states; one large matmul is faster than H small ones |
 | preallocated buffers, in-place activations, ``out=`` matmuls | no per-step allocations |
 | the GRU's gates by hand on those buffers | ``torch.nn.GRUCell``'s equations, PyTorch's gate order (r, z, n) |
@@ -45,7 +45,9 @@ class Imagination:
         with torch.no_grad():
             pre = rssm.pre_gru.weight.detach()  # (K, S + A)
             self.w_pre_s = pre[:, :s_dim].t().contiguous()  # (S, K)
-            self.w_pre_a = pre[:, s_dim:].t().contiguous()  # (A, K)
+            # an action held for R env steps enters R times: its weight is the sum of the R blocks
+            w_a = pre[:, s_dim:].t()  # (R·A, K)
+            self.w_pre_a = w_a.reshape(config.action_repeat, config.action_dim, -1).sum(0).contiguous()  # (A, K)
             self.b_pre = rssm.pre_gru.bias.detach().clone()  # (K,)
             self.w_ih = rssm.gru.weight_ih.detach().t().contiguous()  # (K, 3D), gates r, z, n
             self.w_hh = rssm.gru.weight_hh.detach().t().contiguous()  # (D, 3D)
@@ -79,8 +81,9 @@ class Imagination:
 
     @torch.inference_mode()
     def __call__(self, belief: Belief, actions: Tensor, generator: torch.Generator | None = None) -> Tensor:
-        """Sum of predicted rewards over the H imagined steps after ``belief`` ((1, ·) states) under
-        actions (B, H, A), states sampled from the prior: (B,). Equals :meth:`WorldModel.imagine_return`."""
+        """Sum of predicted rewards over the H imagined model steps after ``belief`` ((1, ·) states) under
+        actions (B, H, A) (each held for R env steps), states sampled from the prior: (B,). Equals
+        :meth:`WorldModel.imagine_return`."""
         b, horizon = actions.shape[:2]
         if belief.h.shape[0] != 1:
             raise ValueError(f"Imagination starts every candidate from one belief, got a batch of {belief.h.shape[0]}")

@@ -18,6 +18,11 @@ pixels), of r_t under N(head, 1), and max(KL(q || p), free_nats), averaged over 
 Pendulum's reward for a_t is -(θ_t² + 0.1·θ̇_t² + 0.001·a_t²): a function of the state of frame t
 plus an action cost of at most 0.004, which the head (reading the state only, as in PlaNet) cannot see.
 
+With an action repeat R (``RSSMConfig.action_repeat``), one model step is R env steps:
+:func:`model_steps` turns env-step sequences into model steps (every R-th frame, the R actions in
+between as one input of R·A numbers, their rewards summed), and the methods below take model steps.
+An imagined action is held for R env steps, its R copies side by side.
+
 Frames enter as uint8 and are scaled to [-0.5, 0.5]. Randomness (the reparameterised samples) comes
 from an explicit ``torch.Generator``.
 """
@@ -32,7 +37,7 @@ from torch import Tensor, nn
 
 from agents.planet.config import PlanetTrainConfig, RSSMConfig
 
-__all__ = ["RSSM", "Belief", "LossParts", "WorldModel", "frames_to_input"]
+__all__ = ["RSSM", "Belief", "LossParts", "WorldModel", "frames_to_input", "held", "model_steps"]
 
 
 def frames_to_input(frames: Tensor, channels: int) -> Tensor:
@@ -41,6 +46,29 @@ def frames_to_input(frames: Tensor, channels: int) -> Tensor:
     if channels == 1 and (x.dim() < 3 or x.shape[-1] != 1):
         return x.unsqueeze(-3)
     return x.movedim(-1, -3)
+
+
+def model_steps(frames: Tensor, actions: Tensor, rewards: Tensor, repeat: int) -> tuple[Tensor, Tensor, Tensor]:
+    """Env-step sequences as model steps of ``repeat`` env steps each (trailing steps dropped).
+
+    Args:
+        frames: (B, T, ...) frames; actions (B, T, A), actions[:, t] after frames[:, t]; rewards (B, T).
+
+    Returns:
+        frames (B, L, ...) = frames[:, ::R], actions (B, L, R·A) (the R actions after each kept frame,
+        side by side), rewards (B, L) (their summed rewards), with L = T // R.
+    """
+    if repeat == 1:
+        return frames, actions, rewards
+    b, t = actions.shape[:2]
+    steps = t // repeat
+    return (frames[:, :steps * repeat:repeat], actions[:, :steps * repeat].reshape(b, steps, -1),
+            rewards[:, :steps * repeat].reshape(b, steps, repeat).sum(-1))
+
+
+def held(actions: Tensor, repeat: int) -> Tensor:
+    """Actions (..., A) held for ``repeat`` env steps: the model's inputs (..., R·A)."""
+    return actions if repeat == 1 else actions.repeat(*([1] * (actions.dim() - 1)), repeat)
 
 
 class Belief(NamedTuple):
@@ -117,7 +145,7 @@ class RSSM(nn.Module):
         super().__init__()
         self.config = config
         d, s, k = config.deter_size, config.stoch_size, config.hidden_size
-        self.pre_gru = nn.Linear(s + config.action_dim, k)
+        self.pre_gru = nn.Linear(s + config.input_action_size, k)
         self.gru = nn.GRUCell(k, d)
         self.prior_net = nn.Sequential(nn.Linear(d, k), nn.ReLU(), nn.Linear(k, 2 * s))
         self.posterior_net = nn.Sequential(nn.Linear(d + config.embed_size, k), nn.ReLU(), nn.Linear(k, 2 * s))
@@ -131,7 +159,7 @@ class RSSM(nn.Module):
         return Gaussian(mean, F.softplus(std) + self.config.min_std)
 
     def transition(self, belief: Belief, action: Tensor) -> tuple[Tensor, Gaussian]:
-        """h_t (B, D) and the prior of s_t from the previous state (B, ·) and action a_{t-1} (B, A)."""
+        """h_t (B, D) and the prior of s_t from the previous state (B, ·) and action a_{t-1} (B, R·A)."""
         x = F.relu(self.pre_gru(torch.cat([belief.s, action], -1)))
         h = self.gru(x, belief.h)
         return h, self._gaussian(self.prior_net(h))
@@ -178,7 +206,8 @@ class WorldModel(nn.Module):
 
     def observe(self, frames: Tensor, actions: Tensor, generator: torch.Generator | None = None
                 ) -> tuple[Tensor, Tensor, Gaussian, Gaussian]:
-        """Filters a batch of sequences: frames uint8 (B, T, H, W), actions (B, T, A), actions[:, t] after frames[:, t].
+        """Filters a batch of sequences of model steps: frames uint8 (B, T, H, W), actions (B, T, R·A),
+        actions[:, t] after frames[:, t].
 
         Returns:
             h (B, T, D), s (B, T, S) sampled from the posteriors, the priors and the posteriors ((B, T, S) each).
@@ -186,7 +215,7 @@ class WorldModel(nn.Module):
         b, t = frames.shape[:2]
         embeds = self.embed(frames)  # (B, T, E)
         belief = self.rssm.initial(b)
-        previous = torch.zeros(b, self.config.action_dim)
+        previous = torch.zeros(b, self.config.input_action_size)
         hs, ss, priors, posts = [], [], [], []
         for step in range(t):
             h, prior = self.rssm.transition(belief, previous)
@@ -213,7 +242,7 @@ class WorldModel(nn.Module):
 
     def loss(self, frames: Tensor, actions: Tensor, rewards: Tensor, config: PlanetTrainConfig,
              generator: torch.Generator | None = None) -> LossParts:
-        """PlaNet's loss on a batch: frames uint8 (B, T, H, W), actions (B, T, A), rewards (B, T)."""
+        """PlaNet's loss on a batch of model steps: frames uint8 (B, T, H, W), actions (B, T, R·A), rewards (B, T)."""
         h, s, prior, post = self.observe(frames, actions, generator)
         target = frames_to_input(frames, self.config.channels)  # (B, T, C, H, W)
         reconstruction = 0.5 * (self.decode(h, s) - target).square().sum((-3, -2, -1)).mean()
@@ -230,8 +259,8 @@ class WorldModel(nn.Module):
         from the prior (sampled) under the sequence's own actions.
 
         Args:
-            frames: uint8 (B, T, H, W[, C]); only the first ``context`` are read.
-            actions: (B, T, A), actions[:, t] after frames[:, t].
+            frames: uint8 (B, T, H, W[, C]) of model steps; only the first ``context`` are read.
+            actions: (B, T, R·A), actions[:, t] after frames[:, t].
 
         Returns:
             Decoded frames (B, T, C, H, W) in [-0.5, 0.5] units (the first ``context`` are
@@ -240,7 +269,7 @@ class WorldModel(nn.Module):
         b, t = frames.shape[:2]
         embeds = self.embed(frames[:, :context])  # (B, context, E)
         belief = self.rssm.initial(b)
-        previous = torch.zeros(b, self.config.action_dim)
+        previous = torch.zeros(b, self.config.input_action_size)
         hs, ss = [], []
         for step in range(t):
             h, prior = self.rssm.transition(belief, previous)
@@ -252,9 +281,10 @@ class WorldModel(nn.Module):
         return self.decode(h, s), self.reward(h, s)
 
     def imagine_return(self, belief: Belief, actions: Tensor, generator: torch.Generator | None = None) -> Tensor:
-        """Sum of predicted rewards over the H imagined steps after ``belief`` ((1, ·) or (B, ·)) under
-        actions (B, H, A), with states sampled from the prior: (B,)."""
+        """Sum of predicted rewards over the H imagined model steps after ``belief`` ((1, ·) or (B, ·))
+        under actions (B, H, A), each held for R env steps, with states sampled from the prior: (B,)."""
         b, horizon = actions.shape[:2]
+        actions = held(actions, self.config.action_repeat)  # (B, H, R·A)
         state = Belief(belief.h.expand(b, -1), belief.s.expand(b, -1))
         total = torch.zeros(b)
         for step in range(horizon):

@@ -26,7 +26,7 @@ import torch
 from tqdm.auto import tqdm
 
 from agents.planet.config import PlanetTrainConfig, RSSMConfig
-from agents.planet.rssm import WorldModel
+from agents.planet.rssm import WorldModel, model_steps
 from piga.atomic import atomic_output, write_json
 from piga.baselines.planet_run import CHECKPOINT, load_planet
 from piga.data import DataFormatError, DatasetInfo, check_actions, inspect_dataset, load_rewards, read_sequences
@@ -67,13 +67,15 @@ class _Sequences:
     def __len__(self) -> int:
         return len(self.frames)
 
-    def batch(self, rng: np.random.Generator, size: int, length: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """``size`` random windows of ``length`` frames: frames (B, L, H, W), actions (B, L, A), rewards (B, L)."""
+    def batch(self, rng: np.random.Generator, size: int, length: int, repeat: int = 1) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """``size`` random windows of ``length`` model steps of ``repeat`` env steps each
+        (:func:`agents.planet.rssm.model_steps`): frames (B, L, H, W), actions (B, L, R·A), rewards (B, L)."""
+        length *= repeat  # env steps
         seq = rng.integers(len(self.frames), size=size)
         start = rng.integers(self.frames.shape[1] - length + 1, size=size)
         rows = torch.from_numpy(seq)[:, None]
         cols = torch.from_numpy(start)[:, None] + torch.arange(length)[None]  # (B, L)
-        return self.frames[rows, cols], self.actions[rows, cols], self.rewards[rows, cols]
+        return model_steps(self.frames[rows, cols], self.actions[rows, cols], self.rewards[rows, cols], repeat)
 
 
 def rssm_config_for(info: DatasetInfo, overrides: dict[str, Any] | None = None) -> RSSMConfig:
@@ -83,8 +85,9 @@ def rssm_config_for(info: DatasetInfo, overrides: dict[str, Any] | None = None) 
     return RSSMConfig(**{"image_size": shape[0], "channels": channels, "action_dim": info.action_dim, **(overrides or {})})
 
 
-def check_planet_data(info: DatasetInfo, config: PlanetTrainConfig) -> None:
-    """Refuses, before anything is written, a file the world model cannot train on.
+def check_planet_data(info: DatasetInfo, config: PlanetTrainConfig, repeat: int = 1) -> None:
+    """Refuses, before anything is written, a file the world model cannot train on (with the
+    model's action repeat ``repeat``).
 
     Raises:
         DataFormatError: no ``/rewards``, frames that are not 64x64, or sequences shorter than a chunk.
@@ -97,9 +100,9 @@ def check_planet_data(info: DatasetInfo, config: PlanetTrainConfig) -> None:
         raise DataFormatError(f"{info.path}: the PlaNet-style model takes 64x64 frames, got {info.image_shape}")
     if info.action_dim < 1:
         raise DataFormatError(f"{info.path}: has no actions (A = 0); a world model for control needs them")
-    if info.steps < config.chunk_length:
+    if info.steps < config.chunk_length * repeat:
         raise DataFormatError(f"{info.path}: sequences of {info.steps} frames are shorter than chunk_length "
-                              f"{config.chunk_length}; lower it")
+                              f"{config.chunk_length}" + (f" x action repeat {repeat}" if repeat > 1 else "") + "; lower it")
     if info.split_counts["train"] < 1:
         raise ValueError(f"{info.path}: the train split is empty")
 
@@ -136,7 +139,7 @@ def open_loop_check(model: WorldModel, data: str | Path, run_dir: Path, seed: in
     info = inspect_dataset(data)
     split = "valid" if info.split_counts["valid"] else "train"
     seqs = _Sequences(data, split, sequences)
-    frames, actions, rewards = seqs.frames, seqs.actions, seqs.rewards
+    frames, actions, rewards = model_steps(seqs.frames, seqs.actions, seqs.rewards, model.config.action_repeat)
     context = min(OPEN_LOOP_CONTEXT, frames.shape[1] - 1)
     decoded, predicted = model.open_loop(frames, actions, context, torch.Generator().manual_seed(seed))
     imagined = (decoded[:, :, 0] + 0.5).clamp(0, 1)  # (B, T, H, W) in [0, 1]
@@ -158,8 +161,9 @@ def _valid_losses(model: WorldModel, data: str | Path, config: PlanetTrainConfig
         return None
     seqs = _Sequences(data, "valid", 64)
     length = config.chunk_length
-    parts = model.loss(seqs.frames[:, :length], seqs.actions[:, :length], seqs.rewards[:, :length], config,
-                       torch.Generator().manual_seed(config.seed))
+    repeat = model.config.action_repeat
+    window = model_steps(seqs.frames[:, :length * repeat], seqs.actions[:, :length * repeat], seqs.rewards[:, :length * repeat], repeat)
+    parts = model.loss(*window, config, torch.Generator().manual_seed(config.seed))
     return {name: float(value) for name, value in parts._asdict().items()}
 
 
@@ -186,7 +190,6 @@ def train_planet(
     run_dir = Path(run_dir)
     ckpt_path = run_dir / CHECKPOINT
     info = inspect_dataset(data)
-    check_planet_data(info, config)
     check_actions(read_sequences(data, "train")[1], data)
     if config.threads:
         torch.set_num_threads(config.threads)
@@ -201,6 +204,7 @@ def train_planet(
         torch.manual_seed(config.seed)  # the layers' initialisation
         model = WorldModel(rssm or rssm_config_for(info))
         state = PlanetState()
+    check_planet_data(info, config, model.config.action_repeat)
     optimizer = torch.optim.Adam(model.parameters(), lr=config.lr, eps=config.adam_eps)
     if resume:
         optimizer.load_state_dict(ckpt["optimizer"])
@@ -213,7 +217,7 @@ def train_planet(
     bar = tqdm(total=config.steps, initial=state.step, desc="planet", unit="step", disable=not progress)
     try:
         while state.step < config.steps:
-            frames, actions, rewards = seqs.batch(rng, config.batch_size, config.chunk_length)
+            frames, actions, rewards = seqs.batch(rng, config.batch_size, config.chunk_length, model.config.action_repeat)
             parts = model.loss(frames, actions, rewards, config, generator)
             if not torch.isfinite(parts.loss):
                 good = ckpt_path if ckpt_path.exists() else None

@@ -156,7 +156,7 @@ def train_planet_iterative(
     """
     run_dir = Path(run_dir)
     info = inspect_dataset(data)
-    check_planet_data(info, config)
+    check_planet_data(info, config)  # train_planet checks again with the model's action repeat
     env_config = check_iterative_data(info, iterative)
     collected = run_dir / COLLECTED
     has_checkpoint = (run_dir / CHECKPOINT).exists()

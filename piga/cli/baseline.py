@@ -43,7 +43,10 @@ def build_parser() -> ArgumentParser:
                       help="optimiser steps; with --resume, the run's own unless given")
     q.add_argument("--batch-size", type=positive_int, default=planet.batch_size, help="sequences per batch (default %(default)s)")
     q.add_argument("--chunk-length", type=positive_int, default=planet.chunk_length,
-                   help="frames per training sequence, <= the file's (default %(default)s)")
+                   help="model steps per training sequence; times --action-repeat, <= the file's frames (default %(default)s)")
+    q.add_argument("--action-repeat", type=positive_int, default=rssm.action_repeat,
+                   help="env steps per model step: the model reads every R-th frame and the planner holds each "
+                   "action R steps (PlaNet: 2 to 8) (default %(default)s)")
     q.add_argument("--max-sequences", type=nonnegative_int, default=planet.max_sequences,
                    help="train on the first N train sequences only (default %(default)s: all)")
     q.add_argument("--free-nats", type=float, default=planet.free_nats, help="KL free nats (default %(default)s)")
@@ -160,7 +163,7 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
         config = PlanetTrainConfig(steps=args.steps or PlanetTrainConfig.steps, batch_size=args.batch_size, chunk_length=args.chunk_length,
                                    max_sequences=args.max_sequences, free_nats=args.free_nats, seed=args.seed,
                                    threads=args.threads, max_minutes=args.max_minutes or 0.0)
-        rssm = rssm_config_for(info, {"deter_size": args.deter_size, "stoch_size": args.stoch_size})
+        rssm = rssm_config_for(info, {"deter_size": args.deter_size, "stoch_size": args.stoch_size, "action_repeat": args.action_repeat})
         if not args.iterative:
             given = [flag for flag, value, default in (("--rounds", args.rounds, None), ("--round-steps", args.round_steps, IterativeConfig.steps_per_round),
                                                        ("--episode-steps", args.episode_steps, IterativeConfig.episode_steps),
@@ -171,11 +174,10 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
             iterative = IterativeConfig(rounds=args.rounds or IterativeConfig.rounds, episodes=args.iterative,
                                         steps_per_round=args.round_steps, episode_steps=args.episode_steps,
                                         noise=args.exploration_noise)
-        check_planet_data(info, config)
         _check_run_dir(run_dir, False, args.overwrite, "planet")
         record = {"kind": "planet", "command": command, "data": str(args.data), "train": config.to_dict(),
                   "rssm": rssm.to_dict(), **({"iterative": iterative.to_dict()} if iterative else {})}
-    check_planet_data(info, config)
+    check_planet_data(info, config, record["rssm"].get("action_repeat", 1))
     if iterative is not None:
         from piga.baselines.planet_iterative import check_iterative_data, train_planet_iterative
 
