@@ -108,6 +108,8 @@ def run_episodes(agent: Agent, config: EpisodeConfig, record: int = 0, progress:
         record: keep the frames, states and actions of the first ``record`` episodes (for videos).
         on_episode_end: called with the episode's position in this run (0, 1, ...) after each episode.
         keep_plan_ms: keep each episode's per-step plan times (``plan_ms``, for :func:`merge_results`).
+            An agent with a ``planned`` attribute (one that holds an action for several steps) is
+            timed only at the steps where it planned: plan times are per plan.
     """
     env = make_pixel_pendulum(config.env_config())
     rng = np.random.default_rng(config.seed)
@@ -124,7 +126,8 @@ def run_episodes(agent: Agent, config: EpisodeConfig, record: int = 0, progress:
         for _ in range(config.steps):
             t0 = time.perf_counter()
             u = np.asarray(agent.act(obs, info["state"]), dtype=np.float32).reshape(1)
-            plan_times.append(time.perf_counter() - t0)
+            if getattr(agent, "planned", True):  # an agent that holds an action for some steps says when it planned
+                plan_times.append(time.perf_counter() - t0)
             obs, reward, _, _, info = env.step(u)
             states.append(info["state"])
             actions.append(float(u[0]))

@@ -137,6 +137,10 @@ def test_action_repeat_holds_each_planned_action_for_r_steps(tiny_data: Path) ->
     assert agent.previous.tolist() == [[acted[6]] * 3]  # the next frame read follows the action held since the last
     agent.reset()
     assert np.array_equal(np.concatenate([agent.act(f) for f in stream]), acted)
+    from piga.episodes import EpisodeConfig, run_episodes
+
+    result = run_episodes(agent, EpisodeConfig(episodes=1, steps=7, hold_steps=1, frame_stack=1), keep_plan_ms=True)
+    assert len(result["episodes"][0]["plan_ms"]) == 3  # timed where it planned: steps 0, 3 and 6
 
 
 @pytest.mark.parametrize("horizon,repeat", [(1, 1), (5, 1), (5, 2)])

@@ -65,6 +65,7 @@ class PlanetAgent:
         self.previous = torch.zeros(1, self.model.config.input_action_size)  # (1, R·A) the actions since the last read frame
         self.action = np.zeros(1, np.float32)  # (1,) the action held
         self.left = 0  # env steps the held action has left
+        self.planned = False  # whether the last act planned (episodes time only those steps)
 
     @torch.inference_mode()
     def observe(self, frame: np.ndarray) -> Belief:
@@ -84,7 +85,8 @@ class PlanetAgent:
     def _step(self, frames: np.ndarray, choose: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
         """The action (1,) for this env step: at the start of a model step, read the newest frame of
         ``frames`` (uint8 (L, H, W)), plan, and hold ``choose(planned)`` for R env steps."""
-        if self.left == 0:
+        self.planned = self.left == 0
+        if self.planned:
             self.action = choose(self.plan(self.observe(frames[-1])))
             self.previous = held(torch.from_numpy(self.action)[None], self.repeat)  # (1, R·A): what the next read follows
             self.left = self.repeat
