@@ -65,6 +65,14 @@ def test_a_file_without_rewards_gets_one_line(tiny_data: Path, tmp_path: Path, c
     assert not (tmp_path / "r").exists()
 
 
+def test_an_action_repeat_longer_than_the_sequences_gets_one_line(tiny_data: Path, tmp_path: Path,
+                                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    code, _, err = run_in_process("piga-baseline", baseline.main, "planet", str(tiny_data), "--out", str(tmp_path / "r"),
+                                  *TINY_PLANET, "--action-repeat", "3", capsys=capsys)  # 8 model steps x 3 > 16 frames
+    assert_one_line(code, err, "x action repeat 3")
+    assert not (tmp_path / "r").exists()
+
+
 def test_planet_run_records_its_kind_and_refuses_to_be_overwritten(planet_run: Path, tiny_data: Path,
                                                                    capsys: pytest.CaptureFixture[str]) -> None:
     record = json.loads((planet_run / "config.json").read_text())
