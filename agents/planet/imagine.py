@@ -43,7 +43,7 @@ class Imagination:
         rssm, config = model.rssm, model.config
         s_dim = config.stoch_size
         with torch.no_grad():
-            pre = rssm.pre_gru.weight.detach()  # (K, S + A)
+            pre = rssm.pre_gru.weight.detach()  # (K, S + R·A)
             self.w_pre_s = pre[:, :s_dim].t().contiguous()  # (S, K)
             # an action held for R env steps enters R times: its weight is the sum of the R blocks
             w_a = pre[:, s_dim:].t()  # (R·A, K)

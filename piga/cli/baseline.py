@@ -174,6 +174,7 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
             iterative = IterativeConfig(rounds=args.rounds or IterativeConfig.rounds, episodes=args.iterative,
                                         steps_per_round=args.round_steps, episode_steps=args.episode_steps,
                                         noise=args.exploration_noise)
+        check_planet_data(info, config, rssm.action_repeat)  # a bad file: one line, before the run folder is looked at
         _check_run_dir(run_dir, False, args.overwrite, "planet")
         record = {"kind": "planet", "command": command, "data": str(args.data), "train": config.to_dict(),
                   "rssm": rssm.to_dict(), **({"iterative": iterative.to_dict()} if iterative else {})}
