@@ -24,22 +24,22 @@ scores as one process). Plan times are measured with one process.
 
 **Cost.** :data:`COST_S` holds the CPU seconds of one unit of each kind of work (one process, one
 torch thread) on the 2-core AMD EPYC, measured as process CPU time while other jobs shared the
-machine, so roughly what an idle core takes: a PlaNet-style training step 1.15 s, a piga training
-step 0.145 s, latent CEM 0.43 s per control step (0.66 s with the model's reference
-``imagine_return``), a DDPG step from pixels 0.37 s once learning starts, from the latent 0.020 s,
-from the state 0.011 s. One run each: PlaNet-style 58 min (3000 steps, whatever the data size);
+machine, so roughly what an idle core takes: a PlaNet-style training step 0.54 s (16 x 20 model steps
+of 2 frames), a piga training step 0.145 s, latent CEM 0.17 s per control step (one plan of ~0.34 s
+per 2 steps), a DDPG step from pixels 0.37 s once learning starts, from the latent 0.020 s,
+from the state 0.011 s. One run each: PlaNet-style 54 min (6000 steps, whatever the data size);
 piga 7-8 min (at least 3000 steps) on up to 250 sequences, 16 min on 500 (16 epochs); DDPG from
 the state 5 min (30k), from the latent 12 min (30k, autoencoder included), from pixels 64 min (20k);
-an evaluation of 10 PlaNet-style episodes 14 min of CPU. ``--estimate`` adds them up (trainings
+an evaluation of 20 PlaNet-style episodes 11 min of CPU. ``--estimate`` adds them up (trainings
 packed longest first on ``--workers`` cores, episodes split evenly):
 
 | preset | what | collect | training (core-h) | PlaNet-style episodes (core-h) | other episodes (core-h) | wall on 2 idle cores |
 |---|---|---|---|---|---|---|
-| ``budget`` | piga at 25/50/100/250 sequences x 3 seeds (at least 3000 steps each); PlaNet-style at 100/500/2000 x 1 seed (3000 steps); DDPG state 30k x 3 seeds, latent 30k x 1, pixels 20k x 1; 20 episodes per evaluation (PlaNet-style: 10); sweep x0.6, 1.0, 1.4, 1.8 with 5 episodes each | 0.1 h | 5.9 | 1.2 | 0.2 | 3.8 h |
-| ``full`` | the issue's: 7 sizes x 3 seeds each, DDPG 30k/80k/80k x 3 seeds, 20 episodes, 14 multipliers x 10 episodes | 0.2 h | 50 | 13.4 | 0.5 | 32 h |
+| ``budget`` | piga at 25/50/100/250 sequences x 3 seeds (at least 3000 steps each); PlaNet-style at 100/500/2000 x 1 seed (6000 steps); DDPG state 30k x 3 seeds, latent 30k x 1, pixels 20k x 1; 20 episodes per evaluation; sweep x0.6, 1.0, 1.4, 1.8 with 5 episodes each | 0.1 h | 5.7 | 0.8 | 0.2 | 3.5 h |
+| ``full`` | the issue's: 7 sizes x 3 seeds each, DDPG 30k/80k/80k x 3 seeds, 20 episodes, 14 multipliers x 10 episodes | 0.2 h | 49 | 5.3 | 0.5 | 27.5 h |
 
 The budget preset answers every question of the comparison with what it can afford, and says what
-it cut: PlaNet-style has one seed per point (its 3000 steps are an hour each), its points are where it
+it cut: PlaNet-style has one seed per point (its 6000 steps are an hour each), its points are where it
 might reach 80% rather than where piga does, DDPG from pixels gets 20k steps (10k of them the zoo's
 random warm-up, so 10k of learning; the paper's DDPG from pixels failed) and DDPG from the latent
 30k, not the paper's 80k. The results page states the budget spent (training seconds per run and
@@ -63,6 +63,7 @@ from pathlib import Path
 from collections.abc import Callable
 from typing import Any
 
+from agents.planet.config import PlanetTrainConfig
 from common import machine
 from piga.episodes import parse_range
 from piga.atomic import atomic_output, write_json
@@ -90,7 +91,7 @@ class BenchConfig:
     """At least this many optimiser steps for piga (more epochs on small subsets; 0: ``piga_epochs`` only).
     With 16 epochs of 50 sequences piga takes ~670 steps, fewer than its 800-step warm-up and
     curriculum, so a small subset would measure an unfinished recipe rather than too little data."""
-    planet_steps: int = 3000
+    planet_steps: int = PlanetTrainConfig().steps
     """PlaNet-style optimiser steps (piga-baseline planet's default), whatever the subset's size."""
     ddpg_runs: tuple[tuple[str, int, tuple[int, ...]], ...] = (("state", 30000, (0, 1, 2)), ("latent", 80000, (0, 1, 2)),
                                                                 ("pixels", 80000, (0, 1, 2)))
@@ -133,8 +134,8 @@ class BenchConfig:
 #: 30k-step runs with one other job on the machine.
 COST_S = {
     "piga_train_step": 0.145,  # piga-train-model at its defaults, batch 32 (33 steps, startup included)
-    "planet_train_step": 1.15,  # piga-baseline planet at its defaults, 16 x 32 frames (12 steps, startup included)
-    "planet_plan_step": 0.43,  # latent CEM with PlaNet's settings, the Imagination engine (reference engine: 0.66)
+    "planet_train_step": 0.54,  # piga-baseline planet at its defaults, 16 x 20 model steps of 2 frames (6000 steps in 53.9 min)
+    "planet_plan_step": 0.17,  # per env step: latent CEM with PlaNet's settings, the Imagination engine, one plan per 2 steps
     "piga_episode_step": 0.008,  # a control step with rendering (the oracle's 200-step episode: 1.65 s)
     "ddpg_state_step": 0.0106,  # Pendulum-v1 without rendering, warm-up included (5.3 min per 30k)
     "ddpg_latent_warmup_step": 0.0068,  # rendering + autoencoder code, random actions
@@ -151,7 +152,7 @@ PRESETS: dict[str, BenchConfig] = {
     "budget": BenchConfig(sizes=(25, 50, 100, 250), seeds=(0, 1, 2), planet_sizes=(100, 500, 2000), planet_seeds=(0,),
                           piga_min_steps=3000,
                           ddpg_runs=(("state", 30000, (0, 1, 2)), ("latent", 30000, (0,)), ("pixels", 20000, (0,))),
-                          planet_episodes=10, sweep="0.6:1.8:0.4", sweep_episodes=5),
+                          sweep="0.6:1.8:0.4", sweep_episodes=5),
     "tiny": BenchConfig(sizes=(8, 16), seeds=(0,), planet_sizes=(16,), steps=16, piga_epochs=1, planet_steps=4,
                         ddpg_runs=(("state", 400, (0,)), ("latent", 400, (0,)), ("pixels", 400, (0,))), episodes=2,
                         sweep="1.0:1.4:0.4", sweep_episodes=1, goal_angles=(15.0,), episode_steps=20,
@@ -272,7 +273,6 @@ def train_piga(data: Path, run: Path, seed: int, cfg: BenchConfig, n: int) -> fl
 
 def train_planet_run(data: Path, run: Path, seed: int, cfg: BenchConfig, n: int) -> float:
     """Trains (unless done) and returns the run's training seconds."""
-    from agents.planet.config import PlanetTrainConfig
     from piga.baselines.planet import rssm_config_for, train_planet
     from piga.data import inspect_dataset
 
