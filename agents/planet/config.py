@@ -72,7 +72,7 @@ class PlanetTrainConfig:
     steps: int = 6000
     """Optimiser steps (PlaNet: 100 per collected episode, ~5e5 in all; here the data are fixed). On
     2000 sequences the loss still fell at 3000 steps, and the agent held upright in none of 10
-    episodes there and in 9 of 10 at 6000 (results/planet_tuning.md)."""
+    episodes there and in 17 of 20 at 6000 (results/planet_tuning.md)."""
     batch_size: int = 16
     """Sequences per batch (PlaNet: 50; CPU time per step is linear in it)."""
     chunk_length: int = 20
