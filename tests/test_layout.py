@@ -41,3 +41,18 @@ def test_the_env_modules_import_one_way(path: str, never: set[str]) -> None:
     imported = {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.module}
     imported |= {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
     assert not {m for m in imported for n in never if m == n or m.startswith(n + ".")}, imported
+
+
+def _console_scripts() -> dict[str, str]:
+    """pyproject.toml's console scripts: name -> module."""
+    import tomllib
+
+    scripts = tomllib.loads((Path(__file__).parents[1] / "pyproject.toml").read_text())["project"]["scripts"]
+    return {name: target.split(":")[0] for name, target in scripts.items()}
+
+
+@pytest.mark.parametrize("name", sorted(_console_scripts()))
+def test_every_command_runs_as_a_module(name: str) -> None:
+    """``python -m piga.cli.X`` is the same command as its console script (for a checkout without the scripts)."""
+    out = subprocess.run([sys.executable, "-m", _console_scripts()[name], "--help"], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0 and out.stdout.startswith(f"usage: {name}"), out.stderr[-500:]

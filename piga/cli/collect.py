@@ -259,3 +259,7 @@ def _collect_scene(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
 
 def entry() -> None:
     run_cli(PROG, main)
+
+
+if __name__ == "__main__":
+    entry()

@@ -379,3 +379,7 @@ def _dmc(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
 
 def entry() -> None:
     run_cli(PROG, main)
+
+
+if __name__ == "__main__":
+    entry()

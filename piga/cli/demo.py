@@ -132,3 +132,7 @@ def _control(run_dir: Path, goal_png: Path, control_md: Path, args) -> list[tupl
 
 def entry() -> None:
     run_cli(PROG, main)
+
+
+if __name__ == "__main__":
+    entry()

@@ -93,3 +93,7 @@ def _parse_env(text: str) -> tuple[tuple[str, float], ...]:
 
 def entry() -> None:
     run_cli(PROG, main)
+
+
+if __name__ == "__main__":
+    entry()

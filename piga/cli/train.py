@@ -185,3 +185,7 @@ def _saved_epoch(run_dir: Path) -> int:
 
 def entry() -> None:
     run_cli(PROG, main)
+
+
+if __name__ == "__main__":
+    entry()
