@@ -259,6 +259,21 @@ def evaluate(kind: str, run: Path | None, cfg: BenchConfig, gravity_mult: float 
     return run_split(job, cfg.workers if workers is None else workers, progress=False)["summary"]
 
 
+def evaluate_kept(folder: Path, kind: str, run: Path | None, cfg: BenchConfig, gravity_mult: float = 1.0,
+                  episodes: int | None = None) -> dict[str, Any]:
+    """:func:`evaluate`, its summary kept in ``folder/evals/`` so that a benchmark stopped during the
+    evaluations continues there (plan times are measured afresh, by :func:`evaluate`, in each invocation)."""
+    if episodes is None:
+        episodes = cfg.planet_episode_count if kind == "planet" else cfg.episodes
+    path = folder / "evals" / f"{run.name if run else kind}-x{gravity_mult:g}-e{episodes}-s{cfg.episode_steps}.json"
+    if path.exists():
+        return json.loads(path.read_text())
+    summary = evaluate(kind, run, cfg, gravity_mult, episodes)
+    path.parent.mkdir(exist_ok=True)
+    write_json(path, summary)
+    return summary
+
+
 def train_piga(data: Path, run: Path, seed: int, cfg: BenchConfig, n: int) -> float:
     """Trains (unless done) and returns the run's training seconds."""
     from piga.runs import load_model
@@ -407,6 +422,35 @@ def figures(record: dict[str, Any], out: Path) -> dict[str, str]:
     return names
 
 
+def floors(record: dict[str, Any], cfg: BenchConfig) -> list[dict[str, Any]]:
+    """The issue's floors, each with what this run measured."""
+    def smallest(agent: str, rate: float) -> int | None:
+        sizes = [row["sequences"] for row in record["sample_efficiency"] if row["agent"] == agent and row["success_mean"] >= rate]
+        return min(sizes) if sizes else None
+
+    planet_n, piga_n = smallest("planet", 0.8), smallest("piga", 0.95)
+    out = [{"floor": f"PlaNet-style >= 80% success at x1.0 ({cfg.planet_episode_count} episodes)",
+            "measured": f"first at {planet_n} sequences" if planet_n else "at no size", "met": planet_n is not None},
+           {"floor": "piga >= 95% with at most half the sequences PlaNet-style needs for 80%",
+            "measured": f"piga {piga_n or 'never'}, PlaNet-style {planet_n or 'never'}",
+            "met": bool(piga_n and planet_n and piga_n <= planet_n / 2)}]
+    state = [r for r in record["ddpg"] if r["obs"] == "state"]
+    reached = [r for r in state if (r["metrics"]["first_step_reaching_minus_200"] or math.inf) <= 30000]
+    out.append({"floor": "DDPG from state reaches -200 within 30k steps in >= 2 of 3 seeds",
+                "measured": f"{len(reached)} of {len(state)}", "met": len(reached) >= 2})
+    sweep = record["sweep"]
+    at = [i for i, m in enumerate(sweep["multipliers"]) if abs(m - 1.4) < 1e-9]
+    if at:
+        cells = dict(zip(sweep["agents"], sweep["success"][at[0]]))
+        out.append({"floor": "at x1.4 piga within 5 points of the oracle (PlaNet-style: measured, not told)",
+                    "measured": f"piga {100 * cells['piga']:.0f}%, oracle {100 * cells['oracle']:.0f}%, "
+                                f"PlaNet-style {100 * cells['planet']:.0f}%",
+                    "met": cells["piga"] >= cells["oracle"] - 0.05})
+    ratio = record["plan_time"]["ratio_per_step"]
+    out.append({"floor": "piga plans >= 20x faster per env step", "measured": f"{ratio:.1f}x", "met": ratio >= 20})
+    return out
+
+
 def markdown(record: dict[str, Any]) -> str:
     """The results page."""
     lines = [f"# Baselines: piga, PlaNet-style and DDPG\n\nCommand: `{record['command']}` (preset `{record['preset']}`)\n",
@@ -434,8 +478,12 @@ def markdown(record: dict[str, Any]) -> str:
     for g in record["goals"]:
         lines.append(f"| {g['goal_deg']:g} | {g['read_deg']:.2f} | {100 * g['piga']['success_rate']:.0f}% | {g['planet']} | {g['ddpg']} |")
     p = record["plan_time"]
-    lines += [f"\n## Plan time per step (median, this run, one process)\n\npiga {p['piga_ms']:.2f} ms, PlaNet-style "
-              f"{p['planet_ms']:.1f} ms: ratio {p['ratio']:.1f}x.\n",
+    lines += [f"\n## Plan time (median, this run, one process)\n\npiga plans at every env step: {p['piga_ms']:.2f} ms. "
+              f"PlaNet-style plans once every {p['planet_action_repeat']} env steps (its action repeat): {p['planet_ms']:.1f} ms a plan, "
+              f"{p['planet_ms_per_step']:.1f} ms per env step. Ratio per env step {p['ratio_per_step']:.1f}x "
+              f"(per plan {p['ratio']:.1f}x).\n",
+              "## Floors\n", "| floor | measured | met |", "|---|---|---|",
+              *[f"| {f['floor']} | {f['measured']} | {'yes' if f['met'] else 'no'} |" for f in record["floors"]], "",
               f"## Compute\n\nWall time of this invocation: {record['wall_seconds'] / 60:.1f} min on {record['config']['workers']} "
               f"processes (finished runs of earlier invocations are reused; their training seconds are in the tables).\n"]
     return "\n".join(lines) + "\n"
@@ -484,20 +532,20 @@ def main() -> int:
             runs = []
             for seed in seeds:
                 name = f"{agent}-n{n}-s{seed}"
-                runs.append({"seed": seed, "train_seconds": trained[name], "control": evaluate(agent, folder / name, cfg)})
+                runs.append({"seed": seed, "train_seconds": trained[name], "control": evaluate_kept(folder, agent, folder / name, cfg)})
                 print(f"{name}: success {runs[-1]['control']['success_rate']:.2f}", flush=True)
             rows.append({"sequences": n, "agent": agent, "runs": runs,
                          "success_mean": sum(r["control"]["success_rate"] for r in runs) / len(runs),
                          "return_mean": sum(r["control"]["mean_return"] for r in runs) / len(runs),
                          "train_seconds_mean": sum(r["train_seconds"] for r in runs) / len(runs)})
     record["sample_efficiency"] = rows
-    record["oracle"] = evaluate("oracle", None, cfg)
+    record["oracle"] = evaluate_kept(folder, "oracle", None, cfg)
     ddpg = []
     for obs, steps, seeds in cfg.ddpg_runs:
         for seed in seeds:
             name = f"ddpg-{obs}-s{seed}"
             metrics = trained[name]
-            ddpg.append({"obs": obs, "seed": seed, "metrics": metrics, "control": evaluate("ddpg", folder / name, cfg)})
+            ddpg.append({"obs": obs, "seed": seed, "metrics": metrics, "control": evaluate_kept(folder, "ddpg", folder / name, cfg)})
             print(f"{name}: first -200 at {metrics['first_step_reaching_minus_200']}", flush=True)
     record["ddpg"] = ddpg
     multipliers = parse_range(cfg.sweep)
@@ -506,13 +554,19 @@ def main() -> int:
             "ddpg": folder / f"ddpg-{cfg.ddpg_runs[0][0]}-s{cfg.ddpg_runs[0][2][0]}"}
     sweep_agents = ["piga", "oracle", "planet", "ddpg"]
     record["sweep"] = {"agents": sweep_agents, "multipliers": multipliers, "runs": {k: str(v) for k, v in best.items()},
-                       "success": [[evaluate(a, best.get(a), cfg, m, min(cfg.sweep_episodes, cfg.planet_episode_count)
-                                             if a == "planet" else cfg.sweep_episodes)["success_rate"] for a in sweep_agents]
+                       "success": [[evaluate_kept(folder, a, best.get(a), cfg, m, min(cfg.sweep_episodes, cfg.planet_episode_count)
+                                                  if a == "planet" else cfg.sweep_episodes)["success_rate"] for a in sweep_agents]
                                    for m in multipliers]}
     record["goals"] = goal_images(best["piga"], cfg, folder)
+    from piga.baselines.planet_run import load_planet
+
     piga_ms = evaluate("piga", best["piga"], cfg, episodes=1, workers=1)["plan_ms_median"]
-    planet_ms = evaluate("planet", best["planet"], cfg, episodes=1, workers=1)["plan_ms_median"]
-    record["plan_time"] = {"piga_ms": piga_ms, "planet_ms": planet_ms, "ratio": planet_ms / piga_ms}
+    planet_ms = evaluate("planet", best["planet"], cfg, episodes=1, workers=1)["plan_ms_median"]  # per plan
+    repeat = load_planet(best["planet"])[0].config.action_repeat  # PlaNet-style plans every R-th env step
+    record["plan_time"] = {"piga_ms": piga_ms, "planet_ms": planet_ms, "planet_action_repeat": repeat,
+                           "planet_ms_per_step": planet_ms / repeat, "ratio": planet_ms / piga_ms,
+                           "ratio_per_step": planet_ms / repeat / piga_ms}
+    record["floors"] = floors(record, cfg)
     record["wall_seconds"] = time.monotonic() - started
     record["figures"] = figures(record, out)
     write_json(out.with_suffix(".json"), record)
