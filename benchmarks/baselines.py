@@ -58,15 +58,16 @@ import json
 import math
 import shlex
 import sys
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from collections.abc import Callable
 from typing import Any
 
-from agents.planet.config import PlanetTrainConfig
 from common import machine
-from piga.episodes import parse_range
+
+from agents.planet.config import PlanetTrainConfig
 from piga.atomic import atomic_output, write_json
+from piga.episodes import parse_range
 
 
 @dataclass(frozen=True)
