@@ -36,7 +36,7 @@ packed longest first on ``--workers`` cores, episodes split evenly):
 | preset | what | collect | training (core-h) | PlaNet-style episodes (core-h) | other episodes (core-h) | wall on 2 idle cores |
 |---|---|---|---|---|---|---|
 | ``budget`` | piga at 25/50/100/250 sequences x 3 seeds (at least 3000 steps each); PlaNet-style at 100/500/2000 x 1 seed (6000 steps); DDPG state 30k x 3 seeds, latent 30k x 1, pixels 20k x 1; 20 episodes per evaluation; sweep x0.6, 1.0, 1.4, 1.8 with 5 episodes each | 0.1 h | 5.7 | 0.8 | 0.2 | 3.5 h |
-| ``full`` | the issue's: 7 sizes x 3 seeds each, DDPG 30k/80k/80k x 3 seeds, 20 episodes, 14 multipliers x 10 episodes | 0.2 h | 49 | 5.3 | 0.5 | 27.5 h |
+| ``full`` | the full design: 7 sizes x 3 seeds each, DDPG 30k/80k/80k x 3 seeds, 20 episodes, 14 multipliers x 10 episodes | 0.2 h | 49 | 5.3 | 0.5 | 27.5 h |
 
 The budget preset answers every question of the comparison with what it can afford, and says what
 it cut: PlaNet-style has one seed per point (its 6000 steps are an hour each), its points are where it
@@ -424,7 +424,7 @@ def figures(record: dict[str, Any], out: Path) -> dict[str, str]:
 
 
 def floors(record: dict[str, Any], cfg: BenchConfig) -> list[dict[str, Any]]:
-    """The issue's floors, each with what this run measured."""
+    """The comparison's floors (the bars a fair result must clear), each with what this run measured."""
     def smallest(agent: str, rate: float) -> int | None:
         sizes = [row["sequences"] for row in record["sample_efficiency"] if row["agent"] == agent and row["success_mean"] >= rate]
         return min(sizes) if sizes else None
