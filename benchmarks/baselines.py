@@ -280,10 +280,11 @@ def train_piga(data: Path, run: Path, seed: int, cfg: BenchConfig, n: int) -> fl
     from piga.runs import load_model
     from piga.train import TrainConfig, train
 
-    if not (run / "checkpoint.pt").exists():
+    config = TrainConfig(epochs=piga_epochs(cfg, n), seed=seed, threads=1, **cfg.overrides.get("piga", {}))
+    started = (run / "checkpoint.pt").exists()
+    if not started or load_model(run)[1]["state"]["epoch"] < config.epochs:  # not begun, or stopped part-way: resume
         overrides = {"rec_frames": "input", "pred_frames": 4} if "piga" in cfg.overrides else {}
-        train(data, run, TrainConfig(epochs=piga_epochs(cfg, n), seed=seed, threads=1, **cfg.overrides.get("piga", {})),
-              overrides, progress=False)
+        train(data, run, config, overrides, resume=started, progress=False)
     return float(load_model(run)[1]["state"]["elapsed"])
 
 
@@ -294,7 +295,8 @@ def train_planet_run(data: Path, run: Path, seed: int, cfg: BenchConfig, n: int)
 
     if not (run / "metrics.json").exists():
         config = PlanetTrainConfig(steps=cfg.planet_steps, seed=seed, threads=1, **cfg.overrides.get("planet", {}))
-        train_planet(data, run, config, rssm_config_for(inspect_dataset(data), cfg.overrides.get("rssm")), progress=False)
+        train_planet(data, run, config, rssm_config_for(inspect_dataset(data), cfg.overrides.get("rssm")),
+                     resume=(run / "checkpoint.pt").exists(), progress=False)  # metrics.json comes last: resume a stopped run
         write_json(run / "config.json", {"kind": "planet", "data": str(data), "train": config.to_dict()})
     return float(json.loads((run / "metrics.json").read_text())["train_seconds"])
 
@@ -310,8 +312,10 @@ def train_ddpg_run(obs: str, steps: int, seed: int, data: Path, run: Path, cfg: 
         autoencoder = None
         if obs == "latent":
             autoencoder = run / AUTOENCODER
-            train_autoencoder(data, AutoencoderConfig(seed=seed, **cfg.overrides.get("autoencoder", {})), autoencoder, progress=False)
-        train_ddpg(config, run, autoencoder, progress=False)
+            if not autoencoder.exists():
+                train_autoencoder(data, AutoencoderConfig(seed=seed, **cfg.overrides.get("autoencoder", {})), autoencoder,
+                                  progress=False)
+        train_ddpg(config, run, autoencoder, resume=(run / "checkpoint.pt").exists(), progress=False)
         write_json(run / "config.json", {"kind": "ddpg", "data": str(data), "ddpg": config.to_dict()})
     return json.loads((run / "metrics.json").read_text())
 
