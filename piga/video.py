@@ -1,4 +1,5 @@
-"""Videos of control episodes: the real frame beside the model's rendering of its belief and plan."""
+"""Videos of control episodes: the real frame beside the model's rendering of its belief and plan (piga),
+or beside what a baseline sees (:func:`panels_video`)."""
 
 from __future__ import annotations
 
@@ -35,8 +36,6 @@ def control_video(model: PhysicsModel, frames: np.ndarray, trace: list[tuple[flo
         trace: per step, the believed (θ, θ̇) in the model's convention and the plan (H, 1).
         path: ``.mp4`` or ``.gif``.
     """
-    import imageio.v3 as iio
-
     target = Path(path)
     if target.suffix.lower() not in (".mp4", ".gif"):
         raise ValueError(f"video path must end in .mp4 or .gif, got {target.name}")
@@ -51,11 +50,36 @@ def control_video(model: PhysicsModel, frames: np.ndarray, trace: list[tuple[flo
         panels = [_panel(frames[t], "real"), _panel((belief * 255).astype(np.uint8), "belief"),
                   _panel((trail * 255).astype(np.uint8), "plan")]
         out.append(np.concatenate(panels, axis=1))
+    return _write(np.stack(out), target, fps, overwrite)
+
+
+def panels_video(panels: list[tuple[str, np.ndarray]], path: str | os.PathLike[str], fps: int = 20,
+                 overwrite: bool = False) -> Path:
+    """Writes an MP4 or GIF of labelled gray panels side by side, one video frame per row.
+
+    Args:
+        panels: (label, uint8 (T, H, W)) pairs, all of the same T.
+        path: ``.mp4`` or ``.gif``.
+    """
+    target = Path(path)
+    if target.suffix.lower() not in (".mp4", ".gif"):
+        raise ValueError(f"video path must end in .mp4 or .gif, got {target.name}")
+    lengths = {len(frames) for _, frames in panels}
+    if len(lengths) != 1:
+        raise ValueError(f"panels of different lengths: {sorted(lengths)}")
+    out = [np.concatenate([_panel(frames[t], label) for label, frames in panels], axis=1) for t in range(lengths.pop())]
+    return _write(np.stack(out), target, fps, overwrite)
+
+
+def _write(video: np.ndarray, target: Path, fps: int, overwrite: bool) -> Path:
+    """Writes uint8 RGB frames (T, H, W, 3) to ``target`` (.mp4 or .gif) atomically."""
+    import imageio.v3 as iio
+
     with atomic_output(target, overwrite=overwrite) as tmp:
         if target.suffix.lower() == ".gif":
-            iio.imwrite(tmp, np.stack(out), extension=".gif", duration=1000 / fps, loop=0)
+            iio.imwrite(tmp, video, extension=".gif", duration=1000 / fps, loop=0)
         else:
             # the temporary name has no .mp4 ending for ffmpeg to guess the container from: name it
-            iio.imwrite(tmp, np.stack(out), extension=".mp4", fps=fps, codec="libx264", macro_block_size=1,
+            iio.imwrite(tmp, video, extension=".mp4", fps=fps, codec="libx264", macro_block_size=1,
                         output_params=["-f", "mp4"])
     return target

@@ -102,12 +102,30 @@ def test_piga_control_runs_a_ddpg_run_as_trained(ddpg_run: Path, tmp_path: Path,
 @pytest.mark.parametrize("option, needle", [
     (("--goal-image", "goal.png"), "cannot be given a goal image"),
     (("--goal-angle", "30"), "has no goal input"),
-    (("--video", "v.mp4"), "belief and plan"),
+    (("--video", "v.avi"), ".mp4 or .gif"),
 ])
 def test_piga_control_refuses_goals_for_baselines(planet_run: Path, option: tuple[str, ...], needle: str,
                                                   capsys: pytest.CaptureFixture[str]) -> None:
     code, _, err = run_in_process("piga-control", control.main, "--model", str(planet_run), *option, capsys=capsys)
     assert_one_line(code, err, needle)
+
+
+@pytest.mark.parametrize("kind, workers, panels", [("planet", "2", 2), ("ddpg", "1", 1)])
+def test_piga_control_writes_a_baseline_video(planet_run: Path, ddpg_run: Path, tmp_path: Path, kind: str, workers: str,
+                                              panels: int, capsys: pytest.CaptureFixture[str]) -> None:
+    """Episode 0 as real frames (| the PlaNet-style model's reconstruction), also when workers ran the episodes."""
+    import imageio.v3 as iio
+
+    video = tmp_path / "episode.mp4"  # (a GIF writer may merge identical frames)
+    run = planet_run if kind == "planet" else ddpg_run
+    args = ("--model", str(run), "--episodes", "2", "--steps", "20", "--workers", workers, "--quiet", "--video", str(video))
+    code, stdout, err = run_in_process("piga-control", control.main, *args, capsys=capsys)
+    assert code == 0, err
+    assert f"wrote {video}" in stdout
+    frames = iio.imread(video)  # (T, H, W, 3): the panels side by side, 4x upscaled
+    assert frames.shape[0] == 20 and frames.shape[1:3] == (256, 256 * panels)
+    code, _, err = run_in_process("piga-control", control.main, *args, capsys=capsys)
+    assert_one_line(code, err, "--overwrite")
 
 
 def test_control_jobs_dispatch_on_the_run_kind(planet_run: Path, ddpg_run: Path) -> None:

@@ -74,7 +74,8 @@ def build_parser() -> ArgumentParser:
     p.add_argument("--workers", type=positive_int, default=2,
                    help="processes for --sweep, and for a baseline run's episodes (split over them; the same "
                    "episodes and scores as one process) (default %(default)s)")
-    p.add_argument("--video", help="write episode 0 as .mp4 or .gif: real frames | the model's belief | its plan")
+    p.add_argument("--video", help="write episode 0 as .mp4 or .gif: real frames | the model's belief | its plan "
+                   "(a PlaNet-style run: real frames | its world model's reconstruction; DDPG: the real frames)")
     p.add_argument("--out", help="write the results to OUT.json and a Markdown table to OUT.md (and OUT.png with --sweep)")
     p.add_argument("--overwrite", action="store_true", help="replace existing --out files")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -234,7 +235,11 @@ def _baseline(args: argparse.Namespace, kind: str, mpc: MPCConfig, outputs: list
     if args.goal_angle:
         raise PigaError(f"--goal-angle: {why}; only upright (0) can be scored")
     if args.video:
-        raise PigaError(f"--video shows a piga model's belief and plan; a {kind} run has neither")
+        if args.sweep:
+            raise PigaError("--sweep runs upright swing-ups; it does not take --goal-image or --video")
+        if Path(args.video).suffix.lower() not in (".mp4", ".gif"):
+            raise PigaError(f"--video must end in .mp4 or .gif, got {args.video}")
+        check_writable_target(args.video, args.overwrite)
     if args.sweep or args.gravity_mult != 1:
         print(f"note: the {kind} agent runs as trained: it cannot be told that gravity changed")
     if args.sweep:
@@ -257,9 +262,18 @@ def _baseline(args: argparse.Namespace, kind: str, mpc: MPCConfig, outputs: list
         result = run_split(ControlJob(kind, config, mpc, model_dir=args.model), args.workers, progress=not args.quiet)
         result["summary"].pop("agent")
     else:
-        result = run_episodes(agent, config, progress=not args.quiet)
+        result = run_episodes(agent, config, progress=not args.quiet, record=1 if args.video else 0)
     s = result["summary"]
     label = f"{kind} ({args.model})"
+    if args.video:
+        from piga.baselines.agents import episode_panels
+        from piga.video import panels_video
+
+        # episode 0 again in this process when the workers ran it (the same start and seeds: the same episode)
+        recording = (result.get("recordings") or run_episodes(agent, replace(config, episodes=1), record=1)["recordings"])[0]
+        panels_video(episode_panels(agent, recording), args.video, overwrite=args.overwrite)
+        print(f"wrote {args.video}")
+        result["recordings"] = []
     print(f"{label}, gravity x{args.gravity_mult:g}, goal 0 deg: success {100 * s['success_rate']:.0f}% of {s['episodes']}, "
           f"mean return {s['mean_return']:.1f}, final angle error {math.degrees(s['final_angle_error_mean']):.2f} deg, "
           f"plan {s['plan_ms_median']:.1f} ms median / {s['plan_ms_p95']:.1f} ms p95")
