@@ -265,6 +265,9 @@ def _baseline(args: argparse.Namespace, kind: str, mpc: MPCConfig, outputs: list
         result = run_episodes(agent, config, progress=not args.quiet, record=1 if args.video else 0)
     s = result["summary"]
     label = f"{kind} ({args.model})"
+    print(f"{label}, gravity x{args.gravity_mult:g}, goal 0 deg: success {100 * s['success_rate']:.0f}% of {s['episodes']}, "
+          f"mean return {s['mean_return']:.1f}, final angle error {math.degrees(s['final_angle_error_mean']):.2f} deg, "
+          f"plan {s['plan_ms_median']:.1f} ms median / {s['plan_ms_p95']:.1f} ms p95")
     if args.video:
         from piga.baselines.agents import episode_panels
         from piga.video import panels_video
@@ -273,10 +276,6 @@ def _baseline(args: argparse.Namespace, kind: str, mpc: MPCConfig, outputs: list
         recording = (result.get("recordings") or run_episodes(agent, replace(config, episodes=1), record=1)["recordings"])[0]
         panels_video(episode_panels(agent, recording), args.video, overwrite=args.overwrite)
         print(f"wrote {args.video}")
-        result["recordings"] = []
-    print(f"{label}, gravity x{args.gravity_mult:g}, goal 0 deg: success {100 * s['success_rate']:.0f}% of {s['episodes']}, "
-          f"mean return {s['mean_return']:.1f}, final angle error {math.degrees(s['final_angle_error_mean']):.2f} deg, "
-          f"plan {s['plan_ms_median']:.1f} ms median / {s['plan_ms_p95']:.1f} ms p95")
     if outputs:
         s = {"agent": label, **s}
         write_json(outputs[0], {"agent": label, "kind": kind, **result, "summary": s, "recordings": None}, overwrite=args.overwrite)
