@@ -282,10 +282,11 @@ def train_piga(data: Path, run: Path, seed: int, cfg: BenchConfig, n: int) -> fl
 
     config = TrainConfig(epochs=piga_epochs(cfg, n), seed=seed, threads=1, **cfg.overrides.get("piga", {}))
     started = (run / "checkpoint.pt").exists()
-    if not started or load_model(run)[1]["state"]["epoch"] < config.epochs:  # not begun, or stopped part-way: resume
+    state = load_model(run)[1]["state"] if started else None
+    if state is None or state["epoch"] < config.epochs:  # not begun, or stopped part-way: resume
         overrides = {"rec_frames": "input", "pred_frames": 4} if "piga" in cfg.overrides else {}
-        train(data, run, config, overrides, resume=started, progress=False)
-    return float(load_model(run)[1]["state"]["elapsed"])
+        state = asdict(train(data, run, config, overrides, resume=started, progress=False)[1])
+    return float(state["elapsed"])
 
 
 def train_planet_run(data: Path, run: Path, seed: int, cfg: BenchConfig, n: int) -> float:
