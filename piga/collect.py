@@ -21,7 +21,6 @@ from __future__ import annotations
 import functools
 import math
 import multiprocessing
-import os
 import shlex
 import signal
 import sys
@@ -35,9 +34,15 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from envs.dmc import DMCPendulumConfig, make_dmc_pendulum
-from envs.pendulum import MAX_ACTION, PENDULUM_DT, PixelPendulumConfig, make_pixel_pendulum
+from envs.pendulum import (
+    MAX_ACTION,
+    PENDULUM_DT,
+    PixelPendulumConfig,
+    make_pixel_pendulum,
+)
 from piga.atomic import check_writable_target
 from piga.data import SPLITS, DatasetWriter
+from piga.worker_signals import quiet_worker_signals
 
 #: Ranges of the paper's pendulum data: θ ~ U(-π, π), θ̇ ~ U(-6, 6).
 PAPER_MAX_SPEED = 6.0
@@ -109,19 +114,12 @@ def split_counts(n: int, split: Sequence[float]) -> tuple[int, int, int]:
     return train, valid, test
 
 
-def _exit_quietly(signum: int, frame: object) -> None:
-    os._exit(128 + signum)
-
-
 def _episode_env(env_config: PixelPendulumConfig | DMCPendulumConfig) -> gym.Env:
     if multiprocessing.parent_process() is not None:
         # A worker of AsyncVectorEnv. Ctrl-C reaches the whole process group; the parent alone
         # handles it (one line, partial file removed) and terminates the workers, which must not
-        # print KeyboardInterrupt tracebacks of their own: they ignore SIGINT and exit quietly on
-        # SIGTERM. (Not SIG_DFL: SDL, which pygame starts at the first render, takes over a
-        # default SIGTERM and ignores it.)
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
-        signal.signal(signal.SIGTERM, _exit_quietly)
+        # print KeyboardInterrupt tracebacks of their own.
+        quiet_worker_signals()
     if isinstance(env_config, DMCPendulumConfig):
         return make_dmc_pendulum(env_config)
     return make_pixel_pendulum(env_config)

@@ -7,12 +7,8 @@ makes sure that no worker outlives an interrupted command.
 
 from __future__ import annotations
 
-import ctypes
 import functools
 import multiprocessing as mp
-import os
-import signal
-import sys
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any, Protocol
@@ -26,6 +22,7 @@ from piga.baselines.kinds import BASELINE_KINDS
 from piga.episodes import EpisodeConfig, merge_results, run_episodes
 from piga.model import PhysicsModel
 from piga.runs import load_model
+from piga.worker_signals import die_with_parent, quiet_worker_signals
 
 
 class AgentCorrection(Protocol):
@@ -135,29 +132,9 @@ def run_split(job: ControlJob, workers: int = 1, progress: bool = True) -> dict[
 
 def _worker_init() -> None:
     """Makes a pool worker end at once, quietly, on SIGTERM (the pool's terminate) and when its parent
-    dies; Ctrl-C is the parent's to handle (it then terminates the pool).
-
-    SIGTERM gets a handler rather than SIG_DFL on purpose: SDL (pygame, which renders the frames)
-    takes over SIGTERM when it finds SIG_DFL and turns it into a quit event that nobody reads, so
-    the worker would never end and the parent would wait for it forever.
-    """
-    signal.signal(signal.SIGTERM, _exit_now)
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    _die_with_parent()
-
-
-def _exit_now(signum: int, frame: object) -> None:
-    os._exit(128 + signum)
-
-
-def _die_with_parent() -> None:
-    """Asks Linux to send this process SIGTERM when its parent ends (prctl PR_SET_PDEATHSIG); elsewhere nothing."""
-    if not sys.platform.startswith("linux"):
-        return
-    try:
-        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)  # 1 = PR_SET_PDEATHSIG
-    except (OSError, AttributeError):
-        pass
+    dies; Ctrl-C is the parent's to handle (it then terminates the pool). See :mod:`piga.worker_signals`."""
+    quiet_worker_signals()
+    die_with_parent()
 
 
 def run_jobs(jobs: Sequence[ControlJob], workers: int = 1, progress: bool = True, keep_plan_ms: bool = False) -> list[dict[str, Any]]:

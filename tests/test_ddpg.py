@@ -63,8 +63,10 @@ def test_training_resumes_exactly(tmp_path: Path) -> None:
     from piga.baselines.ddpg import load_ddpg, train_ddpg
 
     straight = train_ddpg(TINY, tmp_path / "a", progress=False)
-    train_ddpg(replace(TINY, steps=200), tmp_path / "b", progress=False)
+    train_ddpg(replace(TINY, steps=200), tmp_path / "moved", progress=False)
+    (tmp_path / "moved").rename(tmp_path / "b")  # a run folder moved between the two invocations
     resumed = train_ddpg(TINY, tmp_path / "b", resume=True, progress=False)
+    assert not (tmp_path / "moved").exists(), "the resumed run logged to the folder it was moved from"
     assert [r["step"] for r in straight["learning_curve"]] == [200, 400]
     assert [r["eval_mean_return"] for r in resumed["learning_curve"]] == [r["eval_mean_return"] for r in straight["learning_curve"]]
     a, b = load_ddpg(tmp_path / "a")[0], load_ddpg(tmp_path / "b")[0]

@@ -244,7 +244,8 @@ def train_ddpg(config: DDPGConfig, run_dir: str | Path, autoencoder: str | Path 
     elapsed = 0.0
     if resume:
         ckpt = torch.load(run_dir / CHECKPOINT, map_location="cpu", weights_only=False)
-        model = DDPG.load(io.BytesIO(ckpt["model_zip"]), env=venv, device="cpu")
+        # the zip holds the TensorBoard folder of the run's first invocation: log where the run is now
+        model = DDPG.load(io.BytesIO(ckpt["model_zip"]), env=venv, device="cpu", tensorboard_log=str(run_dir / "tensorboard"))
         model.load_replay_buffer(io.BytesIO(ckpt["replay_buffer"]))
         # DDPG.load reseeded everything with the run's seed (SB3's _setup_model): put back the states
         # of the moment of the checkpoint
