@@ -3,11 +3,18 @@
 from __future__ import annotations
 
 import os
+import signal
 from pathlib import Path
 
 import pytest
 
 os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
+
+# A shell starts background jobs (`pytest &`) with SIGINT ignored, and the commands that the tests
+# start would inherit that and never see the Ctrl-C the interrupt tests send. A handler, unlike
+# SIG_IGN, is reset to the default in a started command.
+if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 @pytest.fixture(scope="session")
