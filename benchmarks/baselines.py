@@ -35,14 +35,14 @@ packed longest first on ``--workers`` cores, episodes split evenly):
 
 | preset | what | collect | training (core-h) | PlaNet-style episodes (core-h) | other episodes (core-h) | wall on 2 idle cores |
 |---|---|---|---|---|---|---|
-| ``budget`` | piga at 25/50/100/250 sequences x 3 seeds (at least 3000 steps each); PlaNet-style at 100/500/2000 x 1 seed (6000 steps); DDPG state 30k x 3 seeds, latent 30k x 1, pixels 20k x 1; 20 episodes per evaluation; sweep x0.6, 1.0, 1.4, 1.8 with 5 episodes each | 0.1 h | 5.7 | 0.8 | 0.2 | 3.5 h |
+| ``budget`` | piga at 25/50/100/250 sequences x 3 seeds (at least 3000 steps each); PlaNet-style at 100/500/2000 x 1 seed, and a second seed at 500 and 2000 (6000 steps each); DDPG state 30k x 3 seeds, latent 30k x 1, pixels 20k x 1; 20 episodes per evaluation; sweep x0.6, 1.0, 1.4, 1.8 with 5 episodes each | 0.1 h | 7.5 | 1.1 | 0.2 | 4.6 h |
 | ``full`` | the full design: 7 sizes x 3 seeds each, DDPG 30k/80k/80k x 3 seeds, 20 episodes, 14 multipliers x 10 episodes | 0.2 h | 49 | 5.3 | 0.5 | 27.5 h |
 
 The budget preset answers every question of the comparison with what it can afford, and says what
-it cut: PlaNet-style has one seed per point (its 6000 steps are an hour each), its points are where it
-might reach 80% rather than where piga does, DDPG from pixels gets 20k steps (10k of them the zoo's
-random warm-up, so 10k of learning; the paper's DDPG from pixels failed) and DDPG from the latent
-30k, not the paper's 80k. The results page states the budget spent (training seconds per run and
+it cut: PlaNet-style has one seed per point and a second at 500 and 2000 sequences (its 6000 steps
+are an hour each), its points are where it might reach 80% rather than where piga does, DDPG from
+pixels gets 20k steps (10k of them the zoo's random warm-up, so 10k of learning; the paper's DDPG
+from pixels failed) and DDPG from the latent 30k, not the paper's 80k. The results page states the budget spent (training seconds per run and
 the wall time).
 
 Finished runs are kept in ``OUT_runs/`` and skipped when the benchmark is run again, so an
@@ -82,6 +82,9 @@ class BenchConfig:
     """piga's training seeds per point."""
     planet_seeds: tuple[int, ...] | None = None
     """The PlaNet-style model's training seeds per point (None: ``seeds``)."""
+    planet_more_seeds: tuple[tuple[int, tuple[int, ...]], ...] = ()
+    """Extra PlaNet-style seeds at some points, (sequences, seeds) pairs: an hour of training each, so
+    the budget preset spends them where one seed left the result in doubt."""
     steps: int = 40
     """Frames per collected sequence (piga-collect's default)."""
     data_seed: int = 100
@@ -126,6 +129,15 @@ class BenchConfig:
     def planet_seed_list(self) -> tuple[int, ...]:
         return self.seeds if self.planet_seeds is None else self.planet_seeds
 
+    def planet_seeds_at(self, n: int) -> tuple[int, ...]:
+        """The PlaNet-style model's seeds at ``n`` sequences: ``planet_seed_list`` and any extra ones."""
+        extra = tuple(seed for size, seeds in self.planet_more_seeds if size == n for seed in seeds)
+        return self.planet_seed_list + tuple(seed for seed in extra if seed not in self.planet_seed_list)
+
+    def piga_seeds_at(self, n: int) -> tuple[int, ...]:
+        """piga's seeds at ``n`` sequences."""
+        return self.seeds
+
     @property
     def planet_episode_count(self) -> int:
         return self.episodes if self.planet_episodes is None else self.planet_episodes
@@ -153,6 +165,7 @@ COST_S = {
 PRESETS: dict[str, BenchConfig] = {
     "full": BenchConfig(),
     "budget": BenchConfig(sizes=(25, 50, 100, 250), seeds=(0, 1, 2), planet_sizes=(100, 500, 2000), planet_seeds=(0,),
+                          planet_more_seeds=((500, (1,)), (2000, (1,))),
                           piga_min_steps=3000,
                           ddpg_runs=(("state", 30000, (0, 1, 2)), ("latent", 30000, (0,)), ("pixels", 20000, (0,))),
                           sweep="0.6:1.8:0.4", sweep_episodes=5),
@@ -203,10 +216,11 @@ def estimate(cfg: BenchConfig) -> dict[str, float]:
     """Core-seconds per part from :data:`COST_S` (upper bounds: measured under load), and the wall
     time on ``workers`` cores (trainings packed longest first; episodes split evenly)."""
     train = [train_cost(cfg, "piga", n) for n in cfg.sizes for _ in cfg.seeds]
-    train += [train_cost(cfg, "planet", n) for n in cfg.planet_size_list for _ in cfg.planet_seed_list]
+    planet_runs = sum(len(cfg.planet_seeds_at(n)) for n in cfg.planet_size_list)
+    train += [train_cost(cfg, "planet", n) for n in cfg.planet_size_list for _ in cfg.planet_seeds_at(n)]
     train += [train_cost(cfg, f"ddpg_{obs}", steps=steps) for obs, steps, seeds in cfg.ddpg_runs for _ in seeds]
     step = cfg.episode_steps
-    planet_eval = len(cfg.planet_size_list) * len(cfg.planet_seed_list) * cfg.planet_episode_count * step * COST_S["planet_plan_step"]
+    planet_eval = planet_runs * cfg.planet_episode_count * step * COST_S["planet_plan_step"]
     planet_eval += len(parse_range(cfg.sweep)) * min(cfg.sweep_episodes, cfg.planet_episode_count) * step * COST_S["planet_plan_step"]
     planet_eval += step * COST_S["planet_plan_step"]  # the plan-time episode
     runs = len(cfg.sizes) * len(cfg.seeds) + 1 + sum(len(seeds) for _, _, seeds in cfg.ddpg_runs)
@@ -501,14 +515,14 @@ def markdown(record: dict[str, Any]) -> str:
     for g in record["goals"]:
         lines.append(f"| {g['goal_deg']:g} | {g['read_deg']:.2f} | {100 * g['piga']['success_rate']:.0f}% | {g['planet']} | {g['ddpg']} |")
     p = record["plan_time"]
-    lines += [f"\n## Plan time (median, this run, one process)\n\npiga plans at every env step: {p['piga_ms']:.2f} ms. "
-              f"PlaNet-style plans once every {p['planet_action_repeat']} env steps (its action repeat): {p['planet_ms']:.1f} ms a plan, "
-              f"{p['planet_ms_per_step']:.1f} ms per env step. Ratio per env step {p['ratio_per_step']:.1f}x "
-              f"(per plan {p['ratio']:.1f}x).\n",
+    lines += [(f"\n## Plan time (median, this run, one process)\n\npiga plans at every env step: {p['piga_ms']:.2f} ms. "
+               f"PlaNet-style plans once every {p['planet_action_repeat']} env steps (its action repeat): {p['planet_ms']:.1f} ms a plan, "
+               f"{p['planet_ms_per_step']:.1f} ms per env step. Ratio per env step {p['ratio_per_step']:.1f}x "
+               f"(per plan {p['ratio']:.1f}x).\n"),
               "## Floors\n", "| floor | measured | met |", "|---|---|---|",
               *[f"| {f['floor']} | {f['measured']} | {'yes' if f['met'] else 'no'} |" for f in record["floors"]], "",
-              f"## Compute\n\nWall time of this invocation: {record['wall_seconds'] / 60:.1f} min on {record['config']['workers']} "
-              f"processes (finished runs of earlier invocations are reused; their training seconds are in the tables).\n"]
+              (f"## Compute\n\nWall time of this invocation: {record['wall_seconds'] / 60:.1f} min on {record['config']['workers']} "
+               f"processes (finished runs of earlier invocations are reused; their training seconds are in the tables).\n")]
     return "\n".join(lines) + "\n"
 
 
@@ -537,11 +551,11 @@ def main() -> int:
                               "machine": machine(), "estimate_seconds": cost}
     files = collect_subsets(cfg, folder)
     largest = files[max(files)]
-    agents = (("piga", train_piga, cfg.sizes, cfg.seeds), ("planet", train_planet_run, cfg.planet_size_list, cfg.planet_seed_list))
+    agents = (("piga", train_piga, cfg.sizes, cfg.piga_seeds_at), ("planet", train_planet_run, cfg.planet_size_list, cfg.planet_seeds_at))
     tasks: list[tuple[str, Callable[..., Any], tuple[Any, ...], float]] = []
-    for agent, trainer, sizes, seeds in agents:
+    for agent, trainer, sizes, seeds_at in agents:
         for n in sizes:
-            for seed in seeds:
+            for seed in seeds_at(n):
                 tasks.append((f"{agent}-n{n}-s{seed}", trainer, (files[n], folder / f"{agent}-n{n}-s{seed}", seed, cfg, n),
                               train_cost(cfg, agent, n)))
     for obs, steps, seeds in cfg.ddpg_runs:
@@ -550,10 +564,10 @@ def main() -> int:
                           train_cost(cfg, f"ddpg_{obs}", steps=steps)))
     trained = train_all(tasks, cfg.workers)
     rows = []
-    for agent, _, sizes, seeds in agents:
+    for agent, _, sizes, seeds_at in agents:
         for n in sizes:
             runs = []
-            for seed in seeds:
+            for seed in seeds_at(n):
                 name = f"{agent}-n{n}-s{seed}"
                 runs.append({"seed": seed, "train_seconds": trained[name], "control": evaluate_kept(folder, agent, folder / name, cfg)})
                 print(f"{name}: success {runs[-1]['control']['success_rate']:.2f}", flush=True)

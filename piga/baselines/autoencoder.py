@@ -1,8 +1,22 @@
 """A frame autoencoder for "DDPG from a latent": trained on a data file's frames, it turns a 64x64
-gray frame into a small code in [-1, 1] (a tanh bottleneck).
+gray frame into a small code in [-1, 1].
 
-Plain deterministic autoencoder, MSE loss: the paper's variant used a VAE; the code's bounds are
-what DDPG needs (a bounded observation space), and a tanh bottleneck gives them without a prior.
+Plain deterministic autoencoder, MSE loss: the paper's variant used a VAE. Two choices keep its
+training from collapsing, which it did with the textbook layout (a tanh bottleneck, a sigmoid
+output), leaving DDPG's "latent" a constant:
+
+- **The decoder draws on top of the training frames' mean** (a logit offset, ``mean_logit``). The
+  pendulum covers a few percent of the frame, so drawing the mean frame is a strong minimum (MSE
+  equal to the pixel variance, 0.0045) that the plain decoder never left: measured on the
+  benchmark's 500-sequence file, 2000 steps at learning rates 1e-3 and 3e-4.
+- **The bottleneck is linear while training.** With the offset, a tanh bottleneck still saturated
+  at +-1 for every frame within 100 steps on the 2000-sequence file (its gradient then vanishes).
+  After training, the codes are standardised with the training frames' per-dimension mean and std
+  and squashed, ``tanh(standardised / 2)``: a bounded observation space, as DDPG needs, in which
+  +-2 standard deviations span +-0.76.
+
+With both, 500 steps on the 2000-sequence file give a held-out MSE of 0.00046 (a tenth of drawing
+the mean) and a 5-nearest-neighbour probe reads (cos θ, sin θ) off the code with RMSE 0.005.
 """
 
 from __future__ import annotations
@@ -45,7 +59,8 @@ class AutoencoderConfig:
 
 
 class FrameAutoencoder(nn.Module):
-    """(B, 1, 64, 64) in [0, 1] <-> codes (B, Z) in [-1, 1]."""
+    """(B, 1, 64, 64) in [0, 1] <-> raw codes (B, Z) (:meth:`forward`); :meth:`encode` gives the
+    bounded codes (B, Z) in [-1, 1] that DDPG sees."""
 
     def __init__(self, config: AutoencoderConfig = AutoencoderConfig()):
         super().__init__()
@@ -56,24 +71,38 @@ class FrameAutoencoder(nn.Module):
             nn.Conv2d(d, 2 * d, 4, 2, 1), nn.ReLU(),  # (B, 2d, 16, 16)
             nn.Conv2d(2 * d, 4 * d, 4, 2, 1), nn.ReLU(),  # (B, 4d, 8, 8)
             nn.Conv2d(4 * d, 8 * d, 4, 2, 1), nn.ReLU(),  # (B, 8d, 4, 4)
-            nn.Flatten(), nn.Linear(8 * d * 16, z), nn.Tanh(),  # (B, Z)
+            nn.Flatten(), nn.Linear(8 * d * 16, z),  # (B, Z) raw code, linear (see the module's docstring)
         )
         self.decoder = nn.Sequential(
             nn.Linear(z, 8 * d * 16), nn.ReLU(), nn.Unflatten(1, (8 * d, 4, 4)),
             nn.ConvTranspose2d(8 * d, 4 * d, 4, 2, 1), nn.ReLU(),  # (B, 4d, 8, 8)
             nn.ConvTranspose2d(4 * d, 2 * d, 4, 2, 1), nn.ReLU(),  # (B, 2d, 16, 16)
             nn.ConvTranspose2d(2 * d, d, 4, 2, 1), nn.ReLU(),  # (B, d, 32, 32)
-            nn.ConvTranspose2d(d, 1, 4, 2, 1), nn.Sigmoid(),  # (B, 1, 64, 64)
+            nn.ConvTranspose2d(d, 1, 4, 2, 1),  # (B, 1, 64, 64) logits, added to mean_logit
         )
+        #: logit of the training frames' mean (1, 1, 64, 64), set by :func:`train_autoencoder`
+        self.register_buffer("mean_logit", torch.zeros(1, 1, 64, 64))
+        #: per-dimension mean and std (Z,) of the training frames' raw codes, set by :func:`train_autoencoder`
+        self.register_buffer("code_mean", torch.zeros(z))
+        self.register_buffer("code_std", torch.ones(z))
+
+    def decode(self, z: Tensor) -> Tensor:
+        """Raw codes (B, Z) -> frames (B, 1, 64, 64) in [0, 1]."""
+        return torch.sigmoid(self.decoder(z) + self.mean_logit)
 
     def forward(self, x: Tensor) -> Tensor:
-        return self.decoder(self.encoder(x))
+        return self.decode(self.encoder(x))
+
+    def encode(self, x: Tensor) -> Tensor:
+        """Frames (B, 1, 64, 64) in [0, 1] -> bounded codes (B, Z) in [-1, 1]: standardised raw
+        codes, squashed by tanh(. / 2)."""
+        return torch.tanh((self.encoder(x) - self.code_mean) / (2 * self.code_std))
 
     @torch.inference_mode()
     def encode_frame(self, frame: np.ndarray) -> np.ndarray:
-        """A uint8 frame (64, 64) -> its code float32 (Z,)."""
+        """A uint8 frame (64, 64) -> its bounded code float32 (Z,)."""
         x = torch.from_numpy(np.ascontiguousarray(frame)).float().div(255.0)[None, None]
-        return self.encoder(x)[0].numpy().astype(np.float32)
+        return self.encode(x)[0].numpy().astype(np.float32)
 
 
 def train_autoencoder(data: str | Path, config: AutoencoderConfig, out: str | Path, progress: bool = True) -> tuple[FrameAutoencoder, float]:
@@ -88,6 +117,8 @@ def train_autoencoder(data: str | Path, config: AutoencoderConfig, out: str | Pa
     flat = torch.from_numpy(frames.reshape(-1, 1, 64, 64))  # (N·T, 1, 64, 64) uint8
     torch.manual_seed(config.seed)
     model = FrameAutoencoder(config)
+    mean = torch.from_numpy(frames.mean(axis=(0, 1), dtype=np.float64) / 255.0).float()[None, None]  # (1, 1, 64, 64)
+    model.mean_logit.copy_(torch.logit(mean.clamp(1e-3, 1 - 1e-3)))
     optimizer = torch.optim.Adam(model.parameters(), lr=config.lr)
     rng = np.random.default_rng(config.seed)
     recent: list[float] = []
@@ -101,6 +132,11 @@ def train_autoencoder(data: str | Path, config: AutoencoderConfig, out: str | Pa
         optimizer.step()
         recent = (recent + [loss.item()])[-100:]
     model.eval()
+    with torch.inference_mode():  # the raw codes' statistics, over (at most) 4096 training frames
+        sample = flat[torch.from_numpy(np.sort(rng.permutation(len(flat))[:4096]))].float() / 255.0
+        codes = torch.cat([model.encoder(batch) for batch in sample.split(512)])  # (S, Z)
+    model.code_mean.copy_(codes.mean(0))
+    model.code_std.copy_(codes.std(0).clamp_min(1e-6))
     with atomic_output(out, overwrite=True) as tmp:
         torch.save({"config": asdict(config), "model": model.state_dict(), "mse": float(np.mean(recent))}, tmp)
     return model, float(np.mean(recent))
@@ -109,6 +145,8 @@ def train_autoencoder(data: str | Path, config: AutoencoderConfig, out: str | Pa
 def load_autoencoder(path: str | Path) -> FrameAutoencoder:
     """The autoencoder written by :func:`train_autoencoder` (eval mode)."""
     payload: dict[str, Any] = torch.load(path, map_location="cpu", weights_only=False)
+    if "code_std" not in payload["model"]:
+        raise ValueError(f"{path}: an autoencoder of the old, collapsing layout (tanh bottleneck); train it again")
     model = FrameAutoencoder(AutoencoderConfig(**payload["config"]))
     model.load_state_dict(payload["model"])
     return model.eval()
