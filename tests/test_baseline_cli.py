@@ -13,7 +13,8 @@ from tests.helpers import assert_one_line, copy_without, run_in_process
 
 TINY_PLANET = ("--steps", "2", "--batch-size", "2", "--chunk-length", "8", "--deter-size", "8", "--stoch-size", "4",
                "--threads", "1", "--quiet")
-TINY_DDPG = ("--steps", "200", "--eval-every", "200", "--eval-episodes", "1", "--learning-starts", "100", "--quiet")
+TINY_DDPG = ("--steps", "200", "--eval-every", "200", "--eval-episodes", "1", "--learning-starts", "100", "--quiet",
+             "--learning-rate", "0.0005", "--batch-size", "32", "--noise-std", "0.3")
 
 
 @pytest.fixture(scope="module")
@@ -39,6 +40,16 @@ def ddpg_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
                                 capsys=_NoCapture())
     assert code == 0
     return out
+
+
+def test_ddpg_tuning_options_reach_the_run(ddpg_run: Path) -> None:
+    from piga.baselines.ddpg import load_ddpg
+
+    saved = json.loads((ddpg_run / "config.json").read_text())["ddpg"]
+    assert (saved["learning_rate"], saved["batch_size"], saved["noise_std"]) == (0.0005, 32, 0.3)
+    model, config, _ = load_ddpg(ddpg_run)
+    assert (model.batch_size, model.learning_rate, config.noise_std) == (32, 0.0005, 0.3)
+    assert np.allclose(model.action_noise._sigma, 0.3)
 
 
 @pytest.mark.parametrize("args, needle", [

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from piga.cli.common import (ArgumentParser, Interrupted, PigaError, add_preset_option, command_line, format_default,
-                             nonnegative_int, positive_float, positive_int, run_cli)
+                             nonnegative_float, nonnegative_int, positive_float, positive_int, run_cli)
 
 PROG = "piga-baseline"
 CHECKPOINT = "checkpoint.pt"
@@ -89,6 +89,11 @@ def build_parser() -> ArgumentParser:
     d.add_argument("--eval-episodes", type=positive_int, default=ddpg.eval_episodes, help="episodes per evaluation (default %(default)s)")
     d.add_argument("--learning-starts", type=nonnegative_int, default=ddpg.learning_starts,
                    help="random-action steps before learning (default %(default)s)")
+    d.add_argument("--learning-rate", type=positive_float, default=ddpg.learning_rate,
+                   help="Adam's learning rate for actor and critic (default %(default)s)")
+    d.add_argument("--batch-size", type=positive_int, default=ddpg.batch_size, help="minibatch (default %(default)s)")
+    d.add_argument("--noise-std", type=nonnegative_float, default=ddpg.noise_std,
+                   help="std of the Gaussian action noise, in SB3's [-1, 1] action scale (default %(default)s)")
     add_preset_option(d, "--buffer-size", default=ddpg.buffer_size, type=positive_int,
                       shown=f"{ddpg.buffer_size}; pixels: {format_default(PRESETS['pixels']['buffer_size'])}",
                       help="replay buffer capacity")
@@ -242,7 +247,8 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
     else:
         buffer = {"buffer_size": args.buffer_size} if args.buffer_size is not None else {}
         config = config_for(args.obs, steps=args.steps or DDPGConfig.steps, eval_every=args.eval_every, eval_episodes=args.eval_episodes,
-                            learning_starts=args.learning_starts, torque_arrow=args.torque_arrow, seed=args.seed,
+                            learning_starts=args.learning_starts, learning_rate=args.learning_rate, batch_size=args.batch_size,
+                            noise_std=args.noise_std, torque_arrow=args.torque_arrow, seed=args.seed,
                             threads=args.threads, **buffer)
         if args.data:
             from piga.data import inspect_dataset

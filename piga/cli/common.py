@@ -151,6 +151,8 @@ nonnegative_int = _number_type(int, lambda v: v >= 0, "an integer >= 0")
 """argparse type: an integer >= 0."""
 positive_float = _number_type(float, lambda v: 0 < v < float("inf"), "a finite number > 0")
 """argparse type: a finite number > 0 (NaN is rejected too)."""
+nonnegative_float = _number_type(float, lambda v: 0 <= v < float("inf"), "a finite number >= 0")
+"""argparse type: a finite number >= 0 (NaN is rejected too)."""
 
 
 def format_default(value: Any) -> str:
@@ -198,5 +200,5 @@ def split_type(text: str) -> tuple[float, float, float]:
     return values  # type: ignore[return-value]
 
 
-__all__ = ["ArgumentParser", "PigaError", "run_cli", "positive_int", "nonnegative_int", "positive_float", "split_type",
-           "add_preset_option", "documented_default", "format_default", "Interrupted"]
+__all__ = ["ArgumentParser", "PigaError", "run_cli", "positive_int", "nonnegative_int", "positive_float", "nonnegative_float",
+           "split_type", "add_preset_option", "documented_default", "format_default", "Interrupted"]
