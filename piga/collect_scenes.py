@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import multiprocessing
 import shlex
-import signal
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -29,6 +28,7 @@ from envs.scenes import SceneConfig, generate_sequence, scene_config, state_name
 from piga.atomic import check_writable_target
 from piga.collect import check_collect_sizes, sequence_rng, split_counts
 from piga.data import SPLITS, DatasetWriter
+from piga.worker_signals import quiet_worker_signals
 
 #: Frames per sequence by scene: L + T_pred + T_ext of the chosen windows (README, "Systems").
 SCENE_STEPS: dict[str, int] = {"bouncing": 30, "spring": 30, "gravity": 40, "digits-spring": 30}
@@ -63,11 +63,6 @@ class SceneCollectConfig:
         check_collect_sizes(self.sequences, self.steps, self.workers, self.seed, self.batch, self.split)
 
 
-def _ignore_interrupts() -> None:
-    """Pool workers leave Ctrl-C to the parent, which terminates them and removes the partial file."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-
-
 def _one(args: tuple[SceneConfig, int, int, int]) -> tuple[np.ndarray, np.ndarray]:
     """Sequence n of a collection: frames (T, H, W, 3) and states (T, 4N)."""
     scene, seed, n, steps = args
@@ -100,7 +95,7 @@ def collect_scene(config: SceneCollectConfig, out: str | Path, overwrite: bool =
     size = scene.image_size
     counts = split_counts(n, config.split)
     workers = min(config.workers, n)
-    pool = multiprocessing.Pool(workers, initializer=_ignore_interrupts) if workers > 1 else None
+    pool = multiprocessing.Pool(workers, initializer=quiet_worker_signals) if workers > 1 else None
     try:
         with DatasetWriter(out, n, t, (size, size, 3), 0, 4 * scene.n_objects, scene_attrs(config, command),
                            overwrite=overwrite) as writer:
