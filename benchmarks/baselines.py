@@ -42,8 +42,8 @@ The budget preset answers every question of the comparison with what it can affo
 it cut: PlaNet-style has one seed per point and a second at 500 and 2000 sequences (its 6000 steps
 are an hour each), its points are where it might reach 80% rather than where piga does, DDPG from
 pixels gets 20k steps (10k of them the zoo's random warm-up, so 10k of learning; the paper's DDPG
-from pixels failed) and DDPG from the latent 30k, not the paper's 80k. The results page states the budget spent (training seconds per run and
-the wall time).
+from pixels failed) and DDPG from the latent 30k, not the paper's 80k. The results page states the
+budget spent (training seconds per run and the wall time).
 
 Finished runs are kept in ``OUT_runs/`` and skipped when the benchmark is run again, so an
 interrupted benchmark continues where it stopped. ``OUT.json``, ``OUT.md`` and the figures
