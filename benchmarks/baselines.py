@@ -216,11 +216,11 @@ def estimate(cfg: BenchConfig) -> dict[str, float]:
     """Core-seconds per part from :data:`COST_S` (upper bounds: measured under load), and the wall
     time on ``workers`` cores (trainings packed longest first; episodes split evenly)."""
     train = [train_cost(cfg, "piga", n) for n in cfg.sizes for _ in cfg.seeds]
-    planet_runs = sum(len(cfg.planet_seeds_at(n)) for n in cfg.planet_size_list)
-    train += [train_cost(cfg, "planet", n) for n in cfg.planet_size_list for _ in cfg.planet_seeds_at(n)]
+    planet_runs = [n for n in cfg.planet_size_list for _ in cfg.planet_seeds_at(n)]  # a size per run
+    train += [train_cost(cfg, "planet", n) for n in planet_runs]
     train += [train_cost(cfg, f"ddpg_{obs}", steps=steps) for obs, steps, seeds in cfg.ddpg_runs for _ in seeds]
     step = cfg.episode_steps
-    planet_eval = planet_runs * cfg.planet_episode_count * step * COST_S["planet_plan_step"]
+    planet_eval = len(planet_runs) * cfg.planet_episode_count * step * COST_S["planet_plan_step"]
     planet_eval += len(parse_range(cfg.sweep)) * min(cfg.sweep_episodes, cfg.planet_episode_count) * step * COST_S["planet_plan_step"]
     planet_eval += step * COST_S["planet_plan_step"]  # the plan-time episode
     runs = len(cfg.sizes) * len(cfg.seeds) + 1 + sum(len(seeds) for _, _, seeds in cfg.ddpg_runs)

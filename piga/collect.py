@@ -34,12 +34,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from envs.dmc import DMCPendulumConfig, make_dmc_pendulum
-from envs.pendulum import (
-    MAX_ACTION,
-    PENDULUM_DT,
-    PixelPendulumConfig,
-    make_pixel_pendulum,
-)
+from envs.pendulum import MAX_ACTION, PENDULUM_DT, PixelPendulumConfig, make_pixel_pendulum
 from piga.atomic import check_writable_target
 from piga.data import SPLITS, DatasetWriter
 from piga.worker_signals import quiet_worker_signals
