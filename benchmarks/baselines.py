@@ -312,10 +312,19 @@ def train_planet_run(data: Path, run: Path, seed: int, cfg: BenchConfig, n: int)
 
     if not (run / "metrics.json").exists():
         config = PlanetTrainConfig(steps=cfg.planet_steps, seed=seed, threads=1, **cfg.overrides.get("planet", {}))
-        train_planet(data, run, config, rssm_config_for(inspect_dataset(data), cfg.overrides.get("rssm")),
-                     resume=(run / "checkpoint.pt").exists(), progress=False)  # metrics.json comes last: resume a stopped run
-        write_json(run / "config.json", {"kind": "planet", "data": str(data), "train": config.to_dict()})
+        rssm = rssm_config_for(inspect_dataset(data), cfg.overrides.get("rssm"))
+        resume = (run / "checkpoint.pt").exists()  # metrics.json comes last: resume a stopped run
+        if not resume:  # the record piga-baseline planet writes, so that it can --resume this run too
+            run.mkdir(parents=True, exist_ok=True)
+            write_json(run / "config.json", {"kind": "planet", "data": str(data), "train": config.to_dict(), "rssm": rssm.to_dict()})
+        train_planet(data, run, config, rssm, resume=resume, progress=False)
     return float(json.loads((run / "metrics.json").read_text())["train_seconds"])
+
+
+def _autoencoder_seconds(metrics: dict[str, Any]) -> str:
+    """" + N s autoencoder" for a latent run whose autoencoder recorded its training time, else ""."""
+    seconds = metrics.get("autoencoder_train_seconds")
+    return "" if seconds is None else f" + {seconds:.0f} autoencoder"
 
 
 def train_ddpg_run(obs: str, steps: int, seed: int, data: Path, run: Path, cfg: BenchConfig) -> dict[str, Any]:
@@ -503,7 +512,7 @@ def markdown(record: dict[str, Any]) -> str:
         final = r["metrics"]["final_eval_mean_return"]
         lines.append(f"| {r['obs']} | {r['seed']} | {r['metrics']['steps']} | {r['metrics']['first_step_reaching_minus_200'] or 'never'} | "
                      f"{'n/a' if final is None else f'{final:.1f}'} | {100 * r['control']['success_rate']:.0f}% | "
-                     f"{r['metrics']['train_seconds']:.0f} |")
+                     f"{r['metrics']['train_seconds']:.0f}" + _autoencoder_seconds(r['metrics']) + " |")
     lines += ["\n## Zero-shot gravity sweep (piga and the oracle told the multiplier; baselines not told)\n",
               f"![gravity sweep]({record['figures']['sweep']})\n",
               "Runs (each agent's best at x1.0; they also give the goal images and plan times): "

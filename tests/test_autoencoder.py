@@ -10,6 +10,7 @@ import torch
 
 from piga.baselines.autoencoder import (
     AutoencoderConfig,
+    autoencoder_seconds,
     load_autoencoder,
     train_autoencoder,
 )
@@ -33,6 +34,7 @@ def test_codes_carry_the_pendulum_instead_of_collapsing_to_the_mean_frame(tiny_d
     assert codes.std(0).min() > 0.2, codes.std(0)  # standardised, then tanh(. / 2): about 0.4 per dimension
     assert np.abs(codes).max() < 1 and np.abs(codes.mean(0)).max() < 0.2, codes.mean(0)
     assert np.allclose(model.encode_frame(frames[0, 0]), codes[0], atol=1e-5)
+    assert 0 < autoencoder_seconds(path) < 600  # recorded for the DDPG run's compute
 
 
 def test_an_autoencoder_of_the_collapsing_layout_is_refused(tiny_data: Path, tmp_path: Path) -> None:

@@ -52,8 +52,47 @@ def test_ddpg_tuning_options_reach_the_run(ddpg_run: Path) -> None:
     assert np.allclose(model.action_noise._sigma, 0.3)
 
 
+def test_sac_takes_its_own_presets_and_resumes_only_as_sac(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from stable_baselines3 import SAC
+
+    from piga.baselines.ddpg import ALGORITHM_PRESETS, load_ddpg
+
+    out = tmp_path / "sac"
+    code, stdout, err = run_in_process("piga-baseline", baseline.main, "ddpg", "--algo", "sac", "--obs", "state", "--out", str(out),
+                                       "--steps", "200", "--eval-every", "200", "--eval-episodes", "1", "--batch-size", "16",
+                                       "--learning-starts", "150", "--quiet", capsys=capsys)
+    assert code == 0, err
+    assert "training SAC from state" in stdout
+    model, config, _ = load_ddpg(out)
+    assert isinstance(model, SAC) and model.action_noise is None  # SAC explores with its own policy
+    sac = ALGORITHM_PRESETS["sac"]
+    assert (config.algo, config.gamma, config.buffer_size, config.net_arch) == ("sac", sac["gamma"], sac["buffer_size"], sac["net_arch"])
+    assert (config.learning_starts, model.learning_starts) == (150, 150)  # a given option overrides the preset
+    code, _, err = run_in_process("piga-baseline", baseline.main, "ddpg", "--obs", "state", "--out", str(out), "--resume",
+                                  "--steps", "400", capsys=capsys)
+    assert_one_line(code, err, "was trained with --algo sac, not ddpg")
+
+
+def test_planet_resume_reads_the_model_config_from_the_checkpoint(planet_run: Path, tiny_data: Path, tmp_path: Path,
+                                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    """A run whose config.json has no "rssm" (older benchmark runs) resumes from its checkpoint's."""
+    import shutil
+
+    run = tmp_path / "run"
+    shutil.copytree(planet_run, run)
+    record = json.loads((run / "config.json").read_text())
+    del record["rssm"]
+    (run / "config.json").write_text(json.dumps(record))
+    code, _, err = run_in_process("piga-baseline", baseline.main, "planet", str(tiny_data), "--out", str(run), "--resume",
+                                  "--steps", "3", "--quiet", capsys=capsys)
+    assert code == 0, err
+    assert json.loads((run / "config.json").read_text())["rssm"]["deter_size"] == 8
+    assert json.loads((run / "metrics.json").read_text())["steps"] == 3
+
+
 @pytest.mark.parametrize("args, needle", [
     (("planet", "missing.h5", "--out", "r"), "no such file"),
+    (("ddpg", "--obs", "state", "--algo", "td3", "--out", "r"), "--algo: invalid choice: 'td3'"),
     (("ddpg", "--obs", "state", "--steps", "0", "--out", "r"), "--steps: expected a positive integer, got 0"),
     (("ddpg", "--obs", "eyes", "--out", "r"), "--obs: invalid choice: 'eyes'"),
     (("ddpg", "--obs", "latent", "--out", "r"), "give --data"),

@@ -98,3 +98,19 @@ def test_a_pixel_policy_runs_in_piga_episodes_with_sb3s_stacking(tmp_path: Path)
         agent.act(stacked[0][-1:], np.zeros(2))
         assert np.array_equal(agent._stack, stacked[0])
     venv.close()
+
+
+def test_a_latent_run_trains_on_its_autoencoders_codes_and_records_its_cost(tiny_data: Path, tmp_path: Path) -> None:
+    from piga.baselines.autoencoder import AutoencoderConfig, train_autoencoder
+    from piga.baselines.ddpg import DDPGAgent, train_ddpg
+    from piga.episodes import EpisodeConfig, run_episodes
+
+    run = tmp_path / "run"
+    run.mkdir()
+    train_autoencoder(tiny_data, AutoencoderConfig(steps=2, depth=4, batch_size=2), run / "autoencoder.pt", progress=False)
+    metrics = train_ddpg(replace(TINY, obs="latent", steps=200, learning_starts=150, batch_size=4), run, run / "autoencoder.pt",
+                         progress=False)
+    assert metrics["autoencoder_train_seconds"] > 0  # the compute table adds it to DDPG's own seconds
+    agent = DDPGAgent.from_run(run)
+    assert agent.model.observation_space.shape == (TINY.frame_stack * 8,)  # K stacked 8-number codes
+    assert np.isfinite(run_episodes(agent, EpisodeConfig(episodes=1, steps=10, hold_steps=5))["summary"]["mean_return"])

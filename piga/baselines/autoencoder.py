@@ -22,6 +22,7 @@ code with RMSE 0.006 (``benchmarks/baseline_probes.py autoencoder``; results/ddp
 
 from __future__ import annotations
 
+import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -34,7 +35,7 @@ from tqdm.auto import tqdm
 from piga.atomic import atomic_output
 from piga.data import read_sequences
 
-__all__ = ["AutoencoderConfig", "FrameAutoencoder", "load_autoencoder", "train_autoencoder"]
+__all__ = ["AutoencoderConfig", "FrameAutoencoder", "autoencoder_seconds", "load_autoencoder", "train_autoencoder"]
 
 
 @dataclass(frozen=True)
@@ -109,9 +110,12 @@ class FrameAutoencoder(nn.Module):
 def train_autoencoder(data: str | Path, config: AutoencoderConfig, out: str | Path, progress: bool = True) -> tuple[FrameAutoencoder, float]:
     """Trains on the train split's frames of ``data`` and writes the model to ``out`` atomically.
 
+    The file also records the training's wall seconds (``train_seconds``, read by :func:`autoencoder_seconds`).
+
     Returns:
         The model (eval mode) and its final training MSE (mean over the last 100 steps).
     """
+    started = time.monotonic()
     frames, _ = read_sequences(data, "train")
     if frames.ndim != 4 or frames.shape[2:] != (64, 64):
         raise ValueError(f"{data}: the autoencoder takes gray 64x64 frames, got frames of shape {frames.shape[2:]}")
@@ -139,8 +143,15 @@ def train_autoencoder(data: str | Path, config: AutoencoderConfig, out: str | Pa
     model.code_mean.copy_(codes.mean(0))
     model.code_std.copy_(codes.std(0).clamp_min(1e-6))
     with atomic_output(out, overwrite=True) as tmp:
-        torch.save({"config": asdict(config), "model": model.state_dict(), "mse": float(np.mean(recent))}, tmp)
+        torch.save({"config": asdict(config), "model": model.state_dict(), "mse": float(np.mean(recent)),
+                    "train_seconds": time.monotonic() - started}, tmp)
     return model, float(np.mean(recent))
+
+
+def autoencoder_seconds(path: str | Path) -> float | None:
+    """The wall seconds that training the autoencoder at ``path`` took (None: a file from before they were recorded)."""
+    seconds = torch.load(path, map_location="cpu", weights_only=False).get("train_seconds")
+    return None if seconds is None else float(seconds)
 
 
 def load_autoencoder(path: str | Path) -> FrameAutoencoder:

@@ -5,6 +5,11 @@ Everything is SB3's own: ``DDPG`` with ``CnnPolicy`` (pixels) or ``MlpPolicy``, 
 learning curve, TensorBoard logging and ``seed=``. The hyperparameters are the SB3 zoo's tuned ones
 for Pendulum-v1 (rl-baselines3-zoo, ``hyperparams/ddpg.yml``), listed in :class:`DDPGConfig`.
 
+``algo="sac"`` trains SB3's SAC instead, with the zoo's Pendulum-v1 settings (``hyperparams/sac.yml``:
+learning rate 1e-3, SB3's SAC defaults for the rest; :data:`ALGORITHM_PRESETS`). It is the stronger
+sibling for pixels, where DDPG's deterministic actor saturates (``results/ddpg_tuning.md``); the run
+folder, the agent and the evaluation are the same.
+
 Training runs in chunks of ``eval_every`` steps (whole episodes). After each chunk, ``EvalCallback``
 has scored the policy, and one atomic ``checkpoint.pt`` holds the SB3 model, its replay buffer, the
 global numpy and torch RNG states (SB3 samples batches and noise from them) and the number of
@@ -32,11 +37,13 @@ from envs.observations import EpisodeSeeds, LatentObservation, StateObservation
 from envs.pendulum import PixelPendulumConfig
 from piga.atomic import atomic_output, write_json
 
-__all__ = ["CHECKPOINT", "DDPGAgent", "DDPGConfig", "OBSERVATIONS", "PRESETS", "config_for", "load_ddpg", "make_env",
-           "make_observation_env", "train_ddpg"]
+__all__ = ["ALGORITHMS", "ALGORITHM_PRESETS", "CHECKPOINT", "DDPGAgent", "DDPGConfig", "OBSERVATIONS", "PRESETS", "config_for",
+           "load_ddpg", "make_env", "make_observation_env", "train_ddpg"]
 
 #: What DDPG can observe.
 OBSERVATIONS = ("pixels", "latent", "state")
+#: The SB3 algorithms: DDPG (the paper's), SAC (its stronger sibling).
+ALGORITHMS = ("ddpg", "sac")
 #: The checkpoint's file name in a run folder; ``model.zip`` is the latest policy in SB3's format.
 CHECKPOINT = "checkpoint.pt"
 MODEL = "model.zip"
@@ -55,6 +62,8 @@ class DDPGConfig:
     obs: str = "state"
     """What the policy sees: "pixels" (K stacked frames, CnnPolicy), "latent" (K stacked autoencoder
     codes) or "state" ((cos θ, sin θ, θ̇), the reference point)."""
+    algo: str = "ddpg"
+    """The SB3 algorithm: "ddpg", or "sac" (start from :func:`config_for`, which applies its zoo settings)."""
     steps: int = 30000
     """Env steps to train (the paper reports its proprioception result after 30k steps)."""
     gamma: float = 0.98
@@ -93,6 +102,8 @@ class DDPGConfig:
     def __post_init__(self) -> None:
         if self.obs not in OBSERVATIONS:
             raise ValueError(f"unknown observation {self.obs!r}; expected one of {', '.join(OBSERVATIONS)}")
+        if self.algo not in ALGORITHMS:
+            raise ValueError(f"unknown algorithm {self.algo!r}; expected one of {', '.join(ALGORITHMS)}")
         if self.steps < 1:
             raise ValueError(f"steps must be >= 1, got {self.steps}")
         if self.eval_every < EPISODE_STEPS or self.eval_every % EPISODE_STEPS:
@@ -116,6 +127,21 @@ class DDPGConfig:
 #: Per-observation overrides of :class:`DDPGConfig`. Pixels: a replay buffer of 200000 stacks of
 #: four 64x64 frames takes 6.6 GB (observations and next observations); 50000 take 1.6 GB.
 PRESETS: dict[str, dict[str, Any]] = {"state": {}, "latent": {}, "pixels": {"buffer_size": 50_000}}
+#: Per-algorithm overrides of :class:`DDPGConfig`, applied before :data:`PRESETS`. SAC: the zoo's
+#: Pendulum-v1 entry sets only the learning rate (1e-3, as DDPG's); the rest are SB3's SAC defaults
+#: (gamma 0.99, buffer 1e6, learning starts 100, net_arch [256, 256], entropy coefficient "auto", no
+#: added action noise: SAC explores with its own stochastic policy).
+ALGORITHM_PRESETS: dict[str, dict[str, Any]] = {
+    "ddpg": {},
+    "sac": {"gamma": 0.99, "buffer_size": 1_000_000, "learning_starts": 100, "noise_std": 0.0, "net_arch": (256, 256)},
+}
+
+
+def _algorithm(name: str) -> Any:
+    """The SB3 class of ``name`` (one of :data:`ALGORITHMS`)."""
+    from stable_baselines3 import DDPG, SAC
+
+    return {"ddpg": DDPG, "sac": SAC}[name]
 
 
 def make_observation_env(config: DDPGConfig, encoder: Callable[[np.ndarray], np.ndarray] | None = None,
@@ -225,9 +251,9 @@ def train_ddpg(config: DDPGConfig, run_dir: str | Path, autoencoder: str | Path 
     Returns:
         The metrics written to ``metrics.json``.
     """
-    from stable_baselines3 import DDPG
     from stable_baselines3.common.noise import NormalActionNoise
 
+    algorithm = _algorithm(config.algo)
     run_dir = Path(run_dir)
     torch.set_num_threads(config.threads)
     encoder, latent_size = None, 0
@@ -245,9 +271,9 @@ def train_ddpg(config: DDPGConfig, run_dir: str | Path, autoencoder: str | Path 
     if resume:
         ckpt = torch.load(run_dir / CHECKPOINT, map_location="cpu", weights_only=False)
         # the zip holds the TensorBoard folder of the run's first invocation: log where the run is now
-        model = DDPG.load(io.BytesIO(ckpt["model_zip"]), env=venv, device="cpu", tensorboard_log=str(run_dir / "tensorboard"))
+        model = algorithm.load(io.BytesIO(ckpt["model_zip"]), env=venv, device="cpu", tensorboard_log=str(run_dir / "tensorboard"))
         model.load_replay_buffer(io.BytesIO(ckpt["replay_buffer"]))
-        # DDPG.load reseeded everything with the run's seed (SB3's _setup_model): put back the states
+        # load() reseeded everything with the run's seed (SB3's _setup_model): put back the states
         # of the moment of the checkpoint
         np.random.set_state(ckpt["rng"]["numpy"])
         torch.set_rng_state(ckpt["rng"]["torch"])
@@ -260,20 +286,20 @@ def train_ddpg(config: DDPGConfig, run_dir: str | Path, autoencoder: str | Path 
         history, elapsed = list(ckpt["history"]), float(ckpt["elapsed"])
     else:
         n_actions = venv.action_space.shape[0]
-        model = DDPG("CnnPolicy" if config.obs == "pixels" else "MlpPolicy", venv, learning_rate=config.learning_rate,
-                     buffer_size=config.buffer_size, learning_starts=config.learning_starts, batch_size=config.batch_size,
-                     tau=config.tau, gamma=config.gamma, train_freq=config.train_freq, gradient_steps=config.gradient_steps,
-                     action_noise=NormalActionNoise(np.zeros(n_actions), config.noise_std * np.ones(n_actions)),
-                     policy_kwargs={"net_arch": list(config.net_arch)}, tensorboard_log=str(run_dir / "tensorboard"),
-                     seed=config.seed, device="cpu", verbose=0)
+        noise = NormalActionNoise(np.zeros(n_actions), config.noise_std * np.ones(n_actions)) if config.noise_std else None
+        model = algorithm("CnnPolicy" if config.obs == "pixels" else "MlpPolicy", venv, learning_rate=config.learning_rate,
+                          buffer_size=config.buffer_size, learning_starts=config.learning_starts, batch_size=config.batch_size,
+                          tau=config.tau, gamma=config.gamma, train_freq=config.train_freq, gradient_steps=config.gradient_steps,
+                          action_noise=noise, policy_kwargs={"net_arch": list(config.net_arch)},
+                          tensorboard_log=str(run_dir / "tensorboard"), seed=config.seed, device="cpu", verbose=0)
     callback = _eval_callback(config, eval_env)
     started = time.monotonic() - elapsed
-    bar = tqdm(total=config.steps, initial=model.num_timesteps, desc=f"ddpg ({config.obs})", unit="step", disable=not progress)
+    bar = tqdm(total=config.steps, initial=model.num_timesteps, desc=f"{config.algo} ({config.obs})", unit="step", disable=not progress)
     try:
         while model.num_timesteps < config.steps:
             chunk = min(config.eval_every, config.steps - model.num_timesteps)
             before = model.num_timesteps
-            model.learn(chunk, callback=callback, reset_num_timesteps=False, tb_log_name="ddpg")
+            model.learn(chunk, callback=callback, reset_num_timesteps=False, tb_log_name=config.algo)
             bar.update(model.num_timesteps - before)
             elapsed = time.monotonic() - started
             if chunk == config.eval_every:  # the callback evaluated at the chunk's last step
@@ -290,6 +316,7 @@ def train_ddpg(config: DDPGConfig, run_dir: str | Path, autoencoder: str | Path 
         eval_env.close()
     metrics = {
         "kind": "ddpg",
+        "algo": config.algo,
         "obs": config.obs,
         "steps": int(model.num_timesteps),
         "train_seconds": elapsed,
@@ -297,14 +324,16 @@ def train_ddpg(config: DDPGConfig, run_dir: str | Path, autoencoder: str | Path 
         "first_step_reaching_minus_200": first_step_reaching(history),
         "final_eval_mean_return": history[-1]["eval_mean_return"] if history else None,
     }
+    if autoencoder is not None:  # its training came before DDPG's and is not in train_seconds
+        from piga.baselines.autoencoder import autoencoder_seconds
+
+        metrics["autoencoder_train_seconds"] = autoencoder_seconds(autoencoder)
     write_json(run_dir / "metrics.json", metrics)
     return metrics
 
 
 def load_ddpg(run_dir: str | Path) -> tuple[Any, DDPGConfig, Any]:
-    """The policy (SB3 ``DDPG``), its config and, for "latent", its autoencoder (else None)."""
-    from stable_baselines3 import DDPG
-
+    """The policy (SB3 ``DDPG`` or ``SAC``), its config and, for "latent", its autoencoder (else None)."""
     run_dir = Path(run_dir)
     path = run_dir / CHECKPOINT
     if not path.exists():
@@ -312,7 +341,7 @@ def load_ddpg(run_dir: str | Path) -> tuple[Any, DDPGConfig, Any]:
     try:
         ckpt = torch.load(path, map_location="cpu", weights_only=False)
         config = DDPGConfig(**{**ckpt["config"], "net_arch": tuple(ckpt["config"]["net_arch"])})
-        model = DDPG.load(io.BytesIO(ckpt["model_zip"]), device="cpu")
+        model = _algorithm(config.algo).load(io.BytesIO(ckpt["model_zip"]), device="cpu")
     except Exception as exc:  # a truncated or foreign file
         raise ValueError(f"{path}: not a readable DDPG checkpoint ({exc.__class__.__name__}: {exc})") from None
     encoder = None
@@ -333,7 +362,7 @@ class DDPGAgent:
     """
 
     model: Any
-    """SB3 ``DDPG``."""
+    """SB3 ``DDPG`` or ``SAC``."""
     config: DDPGConfig
     """The run's settings."""
     encoder: Any = None
@@ -368,6 +397,9 @@ class DDPGAgent:
         return np.asarray(action, np.float32).reshape(1)
 
 
-def config_for(obs: str, **overrides: Any) -> DDPGConfig:
-    """The config of an observation kind: the zoo defaults, the kind's preset, then ``overrides``."""
-    return replace(DDPGConfig(obs=obs), **{**PRESETS[obs], **overrides})
+def config_for(obs: str, algo: str = "ddpg", **overrides: Any) -> DDPGConfig:
+    """The config of an observation kind and algorithm: DDPG's zoo defaults, the algorithm's preset
+    (:data:`ALGORITHM_PRESETS`), the observation's (:data:`PRESETS`), then ``overrides``."""
+    if algo not in ALGORITHMS:
+        raise ValueError(f"unknown algorithm {algo!r}; expected one of {', '.join(ALGORITHMS)}")
+    return replace(DDPGConfig(obs=obs, algo=algo), **{**ALGORITHM_PRESETS[algo], **PRESETS[obs], **overrides})

@@ -26,7 +26,7 @@ OUTPUTS = (CHECKPOINT, "config.json", "metrics.json", "model.zip", "autoencoder.
 def build_parser() -> ArgumentParser:
     from agents.planet.config import IterativeConfig, PlanetTrainConfig, RSSMConfig
     from piga.baselines.autoencoder import AutoencoderConfig
-    from piga.baselines.ddpg import OBSERVATIONS, PRESETS, DDPGConfig
+    from piga.baselines.ddpg import ALGORITHM_PRESETS, ALGORITHMS, OBSERVATIONS, PRESETS, DDPGConfig
 
     p = ArgumentParser(prog=PROG, description="Train a baseline (the PlaNet-style world model, or SB3 DDPG) into a run "
                        "folder that piga-control --model evaluates like a piga run.")
@@ -72,10 +72,11 @@ def build_parser() -> ArgumentParser:
     _common(q)
 
     ddpg = DDPGConfig()
-    d = sub.add_parser("ddpg", help="SB3 DDPG from pixels, an autoencoder's latent, or the true state",
-                       description="Train SB3 DDPG with the SB3 zoo's Pendulum-v1 hyperparameters on the pixel pendulum. "
-                       "Writes RUN_DIR/checkpoint.pt, model.zip, config.json, metrics.json (EvalCallback's learning "
-                       "curve) and tensorboard/.")
+    sac = ALGORITHM_PRESETS["sac"]
+    d = sub.add_parser("ddpg", help="SB3 DDPG (or SAC) from pixels, an autoencoder's latent, or the true state",
+                       description="Train SB3 DDPG (or, with --algo sac, SAC) with the SB3 zoo's Pendulum-v1 hyperparameters "
+                       "on the pixel pendulum. Writes RUN_DIR/checkpoint.pt, model.zip, config.json, metrics.json "
+                       "(EvalCallback's learning curve) and tensorboard/.")
     d.error = p.error  # type: ignore[method-assign]
     d.add_argument("--obs", required=True, choices=OBSERVATIONS,
                    help="pixels: stacked frames (CnnPolicy); latent: stacked autoencoder codes (needs --data); "
@@ -84,18 +85,22 @@ def build_parser() -> ArgumentParser:
                       help="env steps; with --resume, the run's own unless given")
     d.add_argument("--out", required=True, help="run folder")
     d.add_argument("--data", help="with --obs latent: HDF5 file whose train frames the autoencoder learns")
+    d.add_argument("--algo", choices=ALGORITHMS, default=ddpg.algo,
+                   help="the SB3 algorithm: ddpg (the paper's), or sac, its stronger sibling with the zoo's "
+                   "Pendulum-v1 settings (default %(default)s)")
     d.add_argument("--eval-every", type=positive_int, default=ddpg.eval_every,
                    help="env steps between evaluations and checkpoints, a multiple of 200 (default %(default)s)")
     d.add_argument("--eval-episodes", type=positive_int, default=ddpg.eval_episodes, help="episodes per evaluation (default %(default)s)")
-    d.add_argument("--learning-starts", type=nonnegative_int, default=ddpg.learning_starts,
-                   help="random-action steps before learning (default %(default)s)")
+    add_preset_option(d, "--learning-starts", default=ddpg.learning_starts, type=nonnegative_int,
+                      shown=f"{ddpg.learning_starts}; sac: {sac['learning_starts']}", help="random-action steps before learning")
     d.add_argument("--learning-rate", type=positive_float, default=ddpg.learning_rate,
                    help="Adam's learning rate for actor and critic (default %(default)s)")
     d.add_argument("--batch-size", type=positive_int, default=ddpg.batch_size, help="minibatch (default %(default)s)")
-    d.add_argument("--noise-std", type=nonnegative_float, default=ddpg.noise_std,
-                   help="std of the Gaussian action noise, in SB3's [-1, 1] action scale (default %(default)s)")
+    add_preset_option(d, "--noise-std", default=ddpg.noise_std, type=nonnegative_float,
+                      shown=f"{ddpg.noise_std}; sac: {format_default(sac['noise_std'])}",
+                      help="std of the Gaussian action noise added to the policy's, in SB3's [-1, 1] action scale")
     add_preset_option(d, "--buffer-size", default=ddpg.buffer_size, type=positive_int,
-                      shown=f"{ddpg.buffer_size}; pixels: {format_default(PRESETS['pixels']['buffer_size'])}",
+                      shown=f"{ddpg.buffer_size}; sac: {sac['buffer_size']}; pixels: {format_default(PRESETS['pixels']['buffer_size'])}",
                       help="replay buffer capacity")
     d.add_argument("--autoencoder-steps", type=positive_int, default=AutoencoderConfig.steps,
                    help="with --obs latent: the autoencoder's training steps (default %(default)s)")
@@ -163,6 +168,13 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
         if record.get("iterative"):
             iterative = replace(IterativeConfig(**record["iterative"]), rounds=args.rounds or record["iterative"]["rounds"])
             record["iterative"] = iterative.to_dict()
+        if "rssm" not in record:  # a record without it (benchmarks/baselines.py wrote none before): the checkpoint's
+            from piga.baselines.planet_run import load_planet
+
+            try:
+                record["rssm"] = load_planet(run_dir)[0].config.to_dict()
+            except (FileNotFoundError, ValueError) as exc:
+                raise PigaError(str(exc)) from None
         record.setdefault("resumed", []).append(command)
     else:
         config = PlanetTrainConfig(steps=args.steps or PlanetTrainConfig.steps, batch_size=args.batch_size, chunk_length=args.chunk_length,
@@ -241,15 +253,17 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
         saved = record["ddpg"]
         if saved["obs"] != args.obs:
             raise PigaError(f"--resume: {run_dir} was trained with --obs {saved['obs']}, not {args.obs}")
+        if saved.get("algo", "ddpg") != args.algo:
+            raise PigaError(f"--resume: {run_dir} was trained with --algo {saved.get('algo', 'ddpg')}, not {args.algo}")
         config = replace(DDPGConfig(**{**saved, "net_arch": tuple(saved["net_arch"])}), steps=args.steps or saved["steps"])
         record["ddpg"] = config.to_dict()
         record.setdefault("resumed", []).append(command)
     else:
-        buffer = {"buffer_size": args.buffer_size} if args.buffer_size is not None else {}
-        config = config_for(args.obs, steps=args.steps or DDPGConfig.steps, eval_every=args.eval_every, eval_episodes=args.eval_episodes,
-                            learning_starts=args.learning_starts, learning_rate=args.learning_rate, batch_size=args.batch_size,
-                            noise_std=args.noise_std, torque_arrow=args.torque_arrow, seed=args.seed,
-                            threads=args.threads, **buffer)
+        given = {name: value for name, value in (("buffer_size", args.buffer_size), ("learning_starts", args.learning_starts),
+                                                 ("noise_std", args.noise_std)) if value is not None}  # else the presets'
+        config = config_for(args.obs, args.algo, steps=args.steps or DDPGConfig.steps, eval_every=args.eval_every,
+                            eval_episodes=args.eval_episodes, learning_rate=args.learning_rate, batch_size=args.batch_size,
+                            torque_arrow=args.torque_arrow, seed=args.seed, threads=args.threads, **given)
         if args.data:
             from piga.data import inspect_dataset
 
@@ -265,7 +279,7 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
         _, mse = train_autoencoder(args.data, ae_config, autoencoder, progress=not args.quiet)
         record["autoencoder"] = {**ae_config.__dict__, "train_mse": mse}
         print(f"autoencoder trained on {args.data}: per-pixel MSE {mse:.5f}")
-    print(f"training DDPG from {config.obs} for {config.steps} env steps -> {run_dir}")
+    print(f"training {config.algo.upper()} from {config.obs} for {config.steps} env steps -> {run_dir}")
     written: list[int] = []
 
     def on_checkpoint(step: int) -> None:
