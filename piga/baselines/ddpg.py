@@ -37,8 +37,20 @@ from envs.observations import EpisodeSeeds, LatentObservation, StateObservation
 from envs.pendulum import PixelPendulumConfig
 from piga.atomic import atomic_output, write_json
 
-__all__ = ["ALGORITHMS", "ALGORITHM_PRESETS", "CHECKPOINT", "DDPGAgent", "DDPGConfig", "OBSERVATIONS", "PRESETS", "config_for",
-           "load_ddpg", "make_env", "make_observation_env", "train_ddpg"]
+__all__ = [
+    "ALGORITHMS",
+    "ALGORITHM_PRESETS",
+    "CHECKPOINT",
+    "OBSERVATIONS",
+    "PRESETS",
+    "DDPGAgent",
+    "DDPGConfig",
+    "config_for",
+    "load_ddpg",
+    "make_env",
+    "make_observation_env",
+    "train_ddpg",
+]
 
 #: What DDPG can observe.
 OBSERVATIONS = ("pixels", "latent", "state")
