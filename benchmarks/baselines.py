@@ -279,11 +279,13 @@ def evaluate(kind: str, run: Path | None, cfg: BenchConfig, gravity_mult: float 
 def evaluate_kept(folder: Path, kind: str, run: Path | None, cfg: BenchConfig, gravity_mult: float = 1.0,
                   episodes: int | None = None) -> dict[str, Any]:
     """:func:`evaluate`, its summary kept in ``folder/evals/`` so that a benchmark stopped during the
-    evaluations continues there (plan times are measured afresh, by :func:`evaluate`, in each invocation)."""
+    evaluations continues there (plan times are measured afresh, by :func:`evaluate`, in each invocation).
+    A kept summary older than the run's checkpoint (a run trained further since) is evaluated again."""
     if episodes is None:
         episodes = cfg.planet_episode_count if kind == "planet" else cfg.episodes
     path = folder / "evals" / f"{run.name if run else kind}-x{gravity_mult:g}-e{episodes}-s{cfg.episode_steps}.json"
-    if path.exists():
+    checkpoint = run / "checkpoint.pt" if run else None
+    if path.exists() and not (checkpoint and checkpoint.exists() and checkpoint.stat().st_mtime > path.stat().st_mtime):
         return json.loads(path.read_text())
     summary = evaluate(kind, run, cfg, gravity_mult, episodes)
     path.parent.mkdir(exist_ok=True)
@@ -306,19 +308,21 @@ def train_piga(data: Path, run: Path, seed: int, cfg: BenchConfig, n: int) -> fl
 
 
 def train_planet_run(data: Path, run: Path, seed: int, cfg: BenchConfig, n: int) -> float:
-    """Trains (unless done) and returns the run's training seconds."""
+    """Trains (unless done: a run of fewer steps is continued to ``cfg.planet_steps``) and returns the run's training seconds."""
     from piga.baselines.planet import rssm_config_for, train_planet
     from piga.data import inspect_dataset
 
-    if not (run / "metrics.json").exists():
+    metrics = run / "metrics.json"
+    if not metrics.exists() or json.loads(metrics.read_text())["steps"] < cfg.planet_steps:
         config = PlanetTrainConfig(steps=cfg.planet_steps, seed=seed, threads=1, **cfg.overrides.get("planet", {}))
         rssm = rssm_config_for(inspect_dataset(data), cfg.overrides.get("rssm"))
-        resume = (run / "checkpoint.pt").exists()  # metrics.json comes last: resume a stopped run
-        if not resume:  # the record piga-baseline planet writes, so that it can --resume this run too
-            run.mkdir(parents=True, exist_ok=True)
-            write_json(run / "config.json", {"kind": "planet", "data": str(data), "train": config.to_dict(), "rssm": rssm.to_dict()})
+        resume = (run / "checkpoint.pt").exists()  # metrics.json comes last: resume a stopped or shorter run
+        # the record piga-baseline planet writes (so that it can --resume this run too), with the steps now asked for
+        record = json.loads((run / "config.json").read_text()) if resume else {"kind": "planet", "data": str(data), "rssm": rssm.to_dict()}
+        run.mkdir(parents=True, exist_ok=True)
+        write_json(run / "config.json", {**record, "train": config.to_dict()})
         train_planet(data, run, config, rssm, resume=resume, progress=False)
-    return float(json.loads((run / "metrics.json").read_text())["train_seconds"])
+    return float(json.loads(metrics.read_text())["train_seconds"])
 
 
 def _autoencoder_seconds(metrics: dict[str, Any]) -> str:
