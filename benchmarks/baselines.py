@@ -502,7 +502,8 @@ def floors(record: dict[str, Any], cfg: BenchConfig) -> list[dict[str, Any]]:
 def markdown(record: dict[str, Any]) -> str:
     """The results page."""
     lines = [f"# Baselines: piga, PlaNet-style and DDPG\n\nCommand: `{record['command']}` (preset `{record['preset']}`)\n",
-             f"Machine: {record['machine']}\n", "## Sample efficiency (gravity x1.0)\n",
+             f"Machine: {record['machine']['cpu']}, {record['machine']['cores']} cores, torch {record['machine']['torch']}, "
+             f"each training on one torch thread.\n", "## Sample efficiency (gravity x1.0)\n",
              f"![sample efficiency]({record['figures']['sample_efficiency']})\n",
              "| sequences | agent | seeds | success (mean) | mean return | train s (mean) |", "|---|---|---|---|---|---|"]
     for row in record["sample_efficiency"]:
