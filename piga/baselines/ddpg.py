@@ -412,6 +412,4 @@ class DDPGAgent:
 def config_for(obs: str, algo: str = "ddpg", **overrides: Any) -> DDPGConfig:
     """The config of an observation kind and algorithm: DDPG's zoo defaults, the algorithm's preset
     (:data:`ALGORITHM_PRESETS`), the observation's (:data:`PRESETS`), then ``overrides``."""
-    if algo not in ALGORITHMS:
-        raise ValueError(f"unknown algorithm {algo!r}; expected one of {', '.join(ALGORITHMS)}")
     return replace(DDPGConfig(obs=obs, algo=algo), **{**ALGORITHM_PRESETS[algo], **PRESETS[obs], **overrides})
