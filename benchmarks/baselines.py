@@ -318,9 +318,9 @@ def train_planet_run(data: Path, run: Path, seed: int, cfg: BenchConfig, n: int)
         rssm = rssm_config_for(inspect_dataset(data), cfg.overrides.get("rssm"))
         resume = (run / "checkpoint.pt").exists()  # metrics.json comes last: resume a stopped or shorter run
         # the record piga-baseline planet writes (so that it can --resume this run too), with the steps now asked for
-        record = json.loads((run / "config.json").read_text()) if resume else {"kind": "planet", "data": str(data), "rssm": rssm.to_dict()}
+        record = json.loads((run / "config.json").read_text()) if resume else {"kind": "planet", "data": str(data)}
         run.mkdir(parents=True, exist_ok=True)
-        write_json(run / "config.json", {**record, "train": config.to_dict()})
+        write_json(run / "config.json", {"rssm": rssm.to_dict(), **record, "train": config.to_dict()})  # a recorded rssm wins
         train_planet(data, run, config, rssm, resume=resume, progress=False)
     return float(json.loads(metrics.read_text())["train_seconds"])
 

@@ -253,8 +253,9 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
         saved = record["ddpg"]
         if saved["obs"] != args.obs:
             raise PigaError(f"--resume: {run_dir} was trained with --obs {saved['obs']}, not {args.obs}")
-        if saved.get("algo", "ddpg") != args.algo:
-            raise PigaError(f"--resume: {run_dir} was trained with --algo {saved.get('algo', 'ddpg')}, not {args.algo}")
+        trained_with = saved.get("algo", "ddpg")  # runs from before --algo are DDPG
+        if trained_with != args.algo:
+            raise PigaError(f"--resume: {run_dir} was trained with --algo {trained_with}, not {args.algo}")
         config = replace(DDPGConfig(**{**saved, "net_arch": tuple(saved["net_arch"])}), steps=args.steps or saved["steps"])
         record["ddpg"] = config.to_dict()
         record.setdefault("resumed", []).append(command)
