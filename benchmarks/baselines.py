@@ -18,37 +18,43 @@ same machine:
     python benchmarks/baselines.py --out runs/check --preset tiny          # the pipeline end to end, in minutes
     python benchmarks/baselines.py --out X --preset budget --estimate      # the cost estimate only
 
-Trainings run ``--workers`` at a time (default 2, one torch thread each), longest first; then each
-evaluation splits its episodes over the workers (:func:`piga.jobs.run_split`: the same episodes and
-scores as one process). Plan times are measured with one process.
+Each run is a job: train (continuing a stopped run), then measure everything the comparison reads
+from it, in the same process: control at x1.0, the gravity sweep, the plan time (piga, PlaNet-style:
+one episode, beside whatever else runs) and the goal images (piga). Jobs run ``--workers`` at a time
+(default 2, one torch thread each), longest first. A job ends by writing its record,
+``OUT_runs/records/NAME.json`` (its settings, measurements, training seconds and machine; a few kB).
+A job whose record has the same settings is not run again, so an interrupted benchmark continues
+where it stopped, on this machine or another; the checkpoints are needed only until the record
+exists (for ``results/baselines`` the records are committed, the checkpoints and data are not).
+``--only piga,oracle`` runs those kinds of job only. ``OUT.json``, ``OUT.md`` and the figures
+``OUT-sample_efficiency.png``, ``OUT-ddpg.png`` and ``OUT-sweep.png`` are written (atomically) once
+every job has a record; they read the records only. Each agent's sweep, goal images and plan time
+are those of its best run at x1.0.
 
 **Cost.** :data:`COST_S` holds the CPU seconds of one unit of each kind of work (one process, one
-torch thread) on the 2-core AMD EPYC, measured as process CPU time while other jobs shared the
+torch thread) on a 2-core AMD EPYC, measured as process CPU time while other jobs shared the
 machine, so roughly what an idle core takes: a PlaNet-style training step 0.54 s (16 x 20 model steps
 of 2 frames), a piga training step 0.145 s, latent CEM 0.17 s per control step (one plan of ~0.34 s
 per 2 steps), a DDPG step from pixels 0.37 s once learning starts, from the latent 0.020 s,
-from the state 0.011 s. One run each: PlaNet-style 54 min (6000 steps, whatever the data size);
-piga 7-8 min (at least 3000 steps) on up to 250 sequences, 16 min on 500 (16 epochs); DDPG from
-the state 5 min (30k), from the latent 12 min (30k, autoencoder included), from pixels 64 min (20k);
-an evaluation of 20 PlaNet-style episodes 11 min of CPU. ``--estimate`` adds them up (trainings
-packed longest first on ``--workers`` cores, episodes split evenly):
+from the state 0.011 s. One run each: PlaNet-style 108 min (12000 steps, whatever the data size) and
+its episodes 23 min (x1.0 and the sweep); piga 7-8 min (at least 3000 steps) on up to 250 sequences,
+16 min on 500 (16 epochs); DDPG from the state 5 min (30k), from the latent 12 min (30k, autoencoder
+included), from pixels 64 min (20k). An older CPU takes longer (the records name each job's machine).
+``--estimate`` adds them up (jobs packed longest first on ``--workers`` cores):
 
 | preset | what | collect | training (core-h) | PlaNet-style episodes (core-h) | other episodes (core-h) | wall on 2 idle cores |
 |---|---|---|---|---|---|---|
-| ``budget`` | piga at 25/50/100/250 sequences x 3 seeds (at least 3000 steps each); PlaNet-style at 100/500/2000 x 1 seed, and a second seed at 500 and 2000 (6000 steps each); DDPG state 30k x 3 seeds, latent 30k x 1, pixels 20k x 1; 20 episodes per evaluation; sweep x0.6, 1.0, 1.4, 1.8 with 5 episodes each | 0.1 h | 7.5 | 1.1 | 0.2 | 4.6 h |
-| ``full`` | the full design: 7 sizes x 3 seeds each, DDPG 30k/80k/80k x 3 seeds, 20 episodes, 14 multipliers x 10 episodes | 0.2 h | 49 | 5.3 | 0.5 | 27.5 h |
+| ``budget`` | piga at 25/50/100/250 sequences x 3 seeds (at least 3000 steps each); PlaNet-style at 100/500/2000 x 1 seed, and a second seed at 500 and 2000 (12000 steps each); DDPG state 30k x 3 seeds, latent 30k x 1, pixels 20k x 1; 20 episodes per evaluation; sweep x0.6, 1.0, 1.4, 1.8 with 5 episodes each | 0.1 h | 12.0 | 1.7 | 0.3 | 7.2 h |
+| ``full`` | the full design: 7 sizes x 3 seeds each, DDPG 30k/80k/80k x 3 seeds, 20 episodes, 14 multipliers x 10 episodes | 0.2 h | 67.7 | 29.9 | 2.2 | 50.1 h |
 
 The budget preset answers every question of the comparison with what it can afford, and says what
-it cut: PlaNet-style has one seed per point and a second at 500 and 2000 sequences (its 6000 steps
-are an hour each), its points are where it might reach 80% rather than where piga does, DDPG from
-pixels gets 20k steps (10k of them the zoo's random warm-up, so 10k of learning; the paper's DDPG
+it cut: PlaNet-style has one seed per point and a second at 500 and 2000 sequences (its 12000 steps
+are almost two hours each), its points are where it might reach 80% rather than where piga does, DDPG
+from pixels gets 20k steps (10k of them the zoo's random warm-up, so 10k of learning; the paper's DDPG
 from pixels failed) and DDPG from the latent 30k, not the paper's 80k. The results page states the
-budget spent (training seconds per run and the wall time).
+budget spent (training seconds per run).
 
-Finished runs are kept in ``OUT_runs/`` and skipped when the benchmark is run again, so an
-interrupted benchmark continues where it stopped. ``OUT.json``, ``OUT.md`` and the figures
-``OUT-sample_efficiency.png``, ``OUT-ddpg.png`` and ``OUT-sweep.png`` are rewritten (atomically) at
-the end. Numbers of the ``tiny`` preset check the pipeline only; they are no result.
+Numbers of the ``tiny`` preset check the pipeline only; they are no result.
 """
 
 from __future__ import annotations
@@ -58,7 +64,6 @@ import json
 import math
 import shlex
 import sys
-from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -149,7 +154,7 @@ class BenchConfig:
 #: 30k-step runs with one other job on the machine.
 COST_S = {
     "piga_train_step": 0.145,  # piga-train-model at its defaults, batch 32 (33 steps, startup included)
-    "planet_train_step": 0.54,  # piga-baseline planet at its defaults, 16 x 20 model steps of 2 frames (6000 steps in 53.9 min)
+    "planet_train_step": 0.54,  # piga-baseline planet, 16 x 20 model steps of 2 frames (6000 steps in 53.9 min)
     "planet_plan_step": 0.17,  # per env step: latent CEM with PlaNet's settings, the Imagination engine, one plan per 2 steps
     "piga_episode_step": 0.008,  # a control step with rendering (the oracle's 200-step episode: 1.65 s)
     "ddpg_state_step": 0.0106,  # Pendulum-v1 without rendering, warm-up included (5.3 min per 30k)
@@ -214,48 +219,123 @@ def train_cost(cfg: BenchConfig, agent: str, n: int = 0, steps: int = 0) -> floa
 
 def estimate(cfg: BenchConfig) -> dict[str, float]:
     """Core-seconds per part from :data:`COST_S` (upper bounds: measured under load), and the wall
-    time on ``workers`` cores (trainings packed longest first; episodes split evenly)."""
-    train = [train_cost(cfg, "piga", n) for n in cfg.sizes for _ in cfg.seeds]
+    time on ``workers`` cores (jobs packed longest first, a PlaNet-style run's episodes with its
+    training; the other episodes, a few minutes, spread evenly)."""
+    piga = [train_cost(cfg, "piga", n) for n in cfg.sizes for _ in cfg.seeds]
     planet_runs = [n for n in cfg.planet_size_list for _ in cfg.planet_seeds_at(n)]  # a size per run
-    train += [train_cost(cfg, "planet", n) for n in planet_runs]
-    train += [train_cost(cfg, f"ddpg_{obs}", steps=steps) for obs, steps, seeds in cfg.ddpg_runs for _ in seeds]
+    planet = [train_cost(cfg, "planet", n) for n in planet_runs]
+    ddpg = [train_cost(cfg, f"ddpg_{obs}", steps=steps) for obs, steps, seeds in cfg.ddpg_runs for _ in seeds]
     step = cfg.episode_steps
-    planet_eval = len(planet_runs) * cfg.planet_episode_count * step * COST_S["planet_plan_step"]
-    planet_eval += len(parse_range(cfg.sweep)) * min(cfg.sweep_episodes, cfg.planet_episode_count) * step * COST_S["planet_plan_step"]
-    planet_eval += step * COST_S["planet_plan_step"]  # the plan-time episode
-    runs = len(cfg.sizes) * len(cfg.seeds) + 1 + sum(len(seeds) for _, _, seeds in cfg.ddpg_runs)
-    other_eval = (runs * cfg.episodes + 3 * len(parse_range(cfg.sweep)) * cfg.sweep_episodes
-                  + len(cfg.goal_angles) * max(1, cfg.episodes // 5)) * step * COST_S["piga_episode_step"]
+    sweep = [m for m in parse_range(cfg.sweep) if m != 1.0]  # x1.0 is the run's own evaluation
+
+    def episodes(agent: str) -> int:  # per run: x1.0, the sweep, the plan-time episode, the goal images
+        own = cfg.planet_episode_count if agent == "planet" else cfg.episodes
+        return (own + len(sweep) * sweep_episodes(cfg, agent) + (agent in ("piga", "planet"))
+                + (agent == "piga") * len(cfg.goal_angles) * max(1, cfg.episodes // 5))
+
+    planet_eval = len(planet_runs) * episodes("planet") * step * COST_S["planet_plan_step"]
+    others = [("piga", len(cfg.sizes) * len(cfg.seeds)), ("oracle", 1),
+              ("ddpg", sum(len(seeds) for _, _, seeds in cfg.ddpg_runs))]
+    other_eval = sum(count * episodes(agent) for agent, count in others) * step * COST_S["piga_episode_step"]
     collect = sum(n * 1.2 for n in set(cfg.sizes + cfg.planet_size_list)) * COST_S["collect_sequence"] / cfg.workers
+    per_planet = episodes("planet") * step * COST_S["planet_plan_step"]
+    jobs = piga + [t + per_planet for t in planet] + ddpg  # a PlaNet-style run's episodes follow its training
     cores = [0.0] * cfg.workers
-    for seconds in sorted(train, reverse=True):  # longest first, each to the least loaded core
+    for seconds in sorted(jobs, reverse=True):  # longest first, each to the least loaded core
         cores[cores.index(min(cores))] += seconds
-    parts = {"collect": collect, "train (core-s)": sum(train), "planet episodes (core-s)": planet_eval,
+    parts = {"collect": collect, "train (core-s)": sum(piga + planet + ddpg), "planet episodes (core-s)": planet_eval,
              "other episodes (core-s)": other_eval}
-    parts["wall"] = collect + max(cores) + (planet_eval + other_eval) / cfg.workers
+    parts["wall"] = collect + max(cores) + other_eval / cfg.workers
     return parts
 
 
-def collect_subsets(cfg: BenchConfig, folder: Path) -> dict[int, Path]:
-    """One data file per size: the first n sequences of one collection are its train split (nested
-    subsets: sequence k depends only on (data_seed, k)), plus 10% more for valid and test."""
+AGENTS = ("piga", "planet", "ddpg", "oracle")
+"""The kinds of job, as ``--only`` takes them."""
+
+
+@dataclass(frozen=True)
+class Job:
+    """One run of the comparison: trained (unless ``agent`` is "oracle"), then measured."""
+
+    name: str
+    """Its folder in ``OUT_runs/`` and its record ``OUT_runs/records/NAME.json``."""
+    agent: str
+    """"piga", "planet", "ddpg" or "oracle"."""
+    sequences: int = 0
+    """Training sequences (piga, planet)."""
+    seed: int = 0
+    obs: str = ""
+    """DDPG's observation."""
+    steps: int = 0
+    """DDPG's env steps."""
+
+
+def jobs_for(cfg: BenchConfig) -> list[Job]:
+    """Every run of the comparison, the oracle included."""
+    jobs = [Job(f"{agent}-n{n}-s{seed}", agent, n, seed)
+            for agent, sizes, seeds_at in (("piga", cfg.sizes, cfg.piga_seeds_at), ("planet", cfg.planet_size_list, cfg.planet_seeds_at))
+            for n in sizes for seed in seeds_at(n)]
+    jobs += [Job(f"ddpg-{obs}-s{seed}", "ddpg", seed=seed, obs=obs, steps=steps) for obs, steps, seeds in cfg.ddpg_runs for seed in seeds]
+    return jobs + [Job("oracle", "oracle")]
+
+
+def job_spec(job: Job, cfg: BenchConfig) -> dict[str, Any]:
+    """What a job's record was measured with: a kept record counts only if this is unchanged (JSON types)."""
+    spec: dict[str, Any] = {**asdict(job), "episodes": cfg.planet_episode_count if job.agent == "planet" else cfg.episodes,
+                            "episode_steps": cfg.episode_steps, "sweep": parse_range(cfg.sweep),
+                            "sweep_episodes": sweep_episodes(cfg, job.agent)}
+    if job.agent in ("piga", "planet"):
+        spec.update(data_seed=cfg.data_seed, frames=cfg.steps)
+    if job.agent == "piga":
+        spec.update(epochs=piga_epochs(cfg, job.sequences), goal_angles=list(cfg.goal_angles))
+    if job.agent == "planet":
+        spec["planet_steps"] = cfg.planet_steps
+    if cfg.overrides:
+        spec["overrides"] = cfg.overrides
+    return json.loads(json.dumps(spec))
+
+
+def sweep_episodes(cfg: BenchConfig, agent: str) -> int:
+    """Episodes per multiplier of the sweep (the PlaNet-style agent: at most ``planet_episodes``)."""
+    return min(cfg.sweep_episodes, cfg.planet_episode_count) if agent == "planet" else cfg.sweep_episodes
+
+
+def record_path(folder: Path, job: Job) -> Path:
+    return folder / "records" / f"{job.name}.json"
+
+
+def kept_record(folder: Path, job: Job, cfg: BenchConfig) -> dict[str, Any] | None:
+    """The job's record if one was kept for the same settings (:func:`job_spec`), else None."""
+    path = record_path(folder, job)
+    if path.exists():
+        record = json.loads(path.read_text())
+        if record.get("spec") == job_spec(job, cfg):
+            return record
+    return None
+
+
+def data_path(folder: Path, n: int) -> Path:
+    return folder / f"data-n{n}.h5"
+
+
+def data_file(cfg: BenchConfig, folder: Path, n: int) -> Path:
+    """The data file of ``n`` training sequences, collected if missing: the first n sequences of one
+    collection are its train split (nested subsets: sequence k depends only on (data_seed, k)), plus
+    10% more for valid and test."""
     from piga.collect import CollectConfig, collect
 
-    files = {}
-    for n in sorted(set(cfg.sizes + cfg.planet_size_list)):
-        path = folder / f"data-n{n}.h5"
-        extra = max(1, n // 10)
-        if not path.exists():
-            collect(CollectConfig(sequences=n + 2 * extra, steps=cfg.steps, seed=cfg.data_seed, workers=cfg.workers,
-                                  split=(n, extra, extra)), path, progress=False, command=f"benchmarks/baselines.py (n={n})")
-        files[n] = path
-    return files
+    path = data_path(folder, n)
+    extra = max(1, n // 10)
+    if not path.exists():
+        collect(CollectConfig(sequences=n + 2 * extra, steps=cfg.steps, seed=cfg.data_seed, workers=cfg.workers,
+                              split=(n, extra, extra)), path, progress=False, command=f"benchmarks/baselines.py (n={n})")
+    return path
 
 
 def evaluate(kind: str, run: Path | None, cfg: BenchConfig, gravity_mult: float = 1.0, episodes: int | None = None,
-             workers: int | None = None) -> dict[str, Any]:
+             workers: int = 1) -> dict[str, Any]:
     """piga.episodes' summary for one agent (kind "piga", "planet", "ddpg" or "oracle"), its episodes
-    split over ``workers`` processes (default ``cfg.workers``)."""
+    split over ``workers`` processes (the same episodes and scores as one)."""
     from agents.config import CEMConfig
     from piga.episodes import EpisodeConfig
     from piga.jobs import ControlJob, run_split
@@ -273,14 +353,14 @@ def evaluate(kind: str, run: Path | None, cfg: BenchConfig, gravity_mult: float 
 
         agent = PlanetAgent(load_planet(run)[0], LatentPlannerConfig(cem=CEMConfig(**cfg.overrides["cem"])))
         return run_episodes(agent, replace(episode_config, frame_stack=1))["summary"]
-    return run_split(job, cfg.workers if workers is None else workers, progress=False)["summary"]
+    return run_split(job, workers, progress=False)["summary"]
 
 
 def evaluate_kept(folder: Path, kind: str, run: Path | None, cfg: BenchConfig, gravity_mult: float = 1.0,
                   episodes: int | None = None) -> dict[str, Any]:
-    """:func:`evaluate`, its summary kept in ``folder/evals/`` so that a benchmark stopped during the
-    evaluations continues there (plan times are measured afresh, by :func:`evaluate`, in each invocation).
-    A kept summary older than the run's checkpoint (a run trained further since) is evaluated again."""
+    """:func:`evaluate` in one process, its summary kept in ``folder/evals/`` so that a job stopped during
+    its evaluations continues there. A kept summary older than the run's checkpoint (a run trained
+    further since) is evaluated again."""
     if episodes is None:
         episodes = cfg.planet_episode_count if kind == "planet" else cfg.episodes
     path = folder / "evals" / f"{run.name if run else kind}-x{gravity_mult:g}-e{episodes}-s{cfg.episode_steps}.json"
@@ -350,28 +430,77 @@ def train_ddpg_run(obs: str, steps: int, seed: int, data: Path, run: Path, cfg: 
     return json.loads((run / "metrics.json").read_text())
 
 
-def _task(item: tuple[str, Callable[..., Any], tuple[Any, ...]]) -> tuple[str, Any]:
-    name, fn, args = item
+def run_job(job: Job, cfg: BenchConfig, folder: Path, data: Path | None) -> dict[str, Any]:
+    """Trains the job's run (continuing a stopped one) and measures everything the comparison reads from
+    it, in this process: control at x1.0, the gravity sweep, the plan time (piga, planet) and the goal
+    images (piga). Writes and returns its record (JSON); a record kept for the same settings is returned
+    at once. The aggregate reads records only, so a run's checkpoint is needed only until its record exists."""
+    kept = kept_record(folder, job, cfg)
+    if kept is not None:
+        return kept
+    run = None if job.agent == "oracle" else folder / job.name
+    record: dict[str, Any] = {"spec": job_spec(job, cfg), "machine": machine()}  # jobs may run on different machines
+    if job.agent == "piga":
+        record["train_seconds"] = train_piga(data, run, job.seed, cfg, job.sequences)
+    elif job.agent == "planet":
+        record["train_seconds"] = train_planet_run(data, run, job.seed, cfg, job.sequences)
+    elif job.agent == "ddpg":
+        record["metrics"] = train_ddpg_run(job.obs, job.steps, job.seed, data, run, cfg)
+        record["train_seconds"] = record["metrics"]["train_seconds"]
+    record["control"] = evaluate_kept(folder, job.agent, run, cfg)
+    # the x1.0 cell of the sweep is the x1.0 evaluation (its first sweep_episodes episodes are the sweep's own)
+    record["sweep"] = {f"{m:g}": record["control"] if m == 1.0 else
+                       evaluate_kept(folder, job.agent, run, cfg, m, sweep_episodes(cfg, job.agent))
+                       for m in parse_range(cfg.sweep)}
+    if job.agent in ("piga", "planet"):  # one episode, one process, beside whatever else the machine runs
+        record["plan_ms"] = evaluate(job.agent, run, cfg, episodes=1)["plan_ms_median"]
+    if job.agent == "planet":
+        from piga.baselines.planet_run import load_planet
+
+        record["action_repeat"] = load_planet(run)[0].config.action_repeat  # PlaNet-style plans every R-th env step
+    if job.agent == "piga":
+        record["goals"] = goal_images(run, cfg, folder)
+    record_path(folder, job).parent.mkdir(exist_ok=True)
+    write_json(record_path(folder, job), record)
+    return record
+
+
+def _run_task(args: tuple[Job, BenchConfig, Path, Path | None]) -> tuple[str, dict[str, Any]]:
     import torch
 
     torch.set_num_threads(1)
-    result = fn(*args)
-    print(f"trained {name}", flush=True)
-    return name, result
+    record = run_job(*args)
+    print(f"done {args[0].name}", flush=True)
+    return args[0].name, record
 
 
-def train_all(tasks: list[tuple[str, Callable[..., Any], tuple[Any, ...], float]], workers: int) -> dict[str, Any]:
-    """Runs the trainings (name, function, arguments, estimated seconds), ``workers`` at a time,
-    longest first; finished runs return at once (each trainer skips a run that is done)."""
-    ordered = [(name, fn, args) for name, fn, args, _ in sorted(tasks, key=lambda t: -t[3])]
-    if workers <= 1:
-        return dict(map(_task, ordered))
-    import multiprocessing as mp
-    from concurrent.futures import ProcessPoolExecutor
+def run_all(cfg: BenchConfig, folder: Path, only: tuple[str, ...] = AGENTS) -> dict[str, dict[str, Any] | None]:
+    """Every job's record: kept ones as they are, the others of the ``only`` agents run ``cfg.workers``
+    at a time, longest first (None for a job not run). Only the data files of jobs still to run are
+    collected (first, in this process)."""
+    jobs = jobs_for(cfg)
+    todo = [job for job in jobs if job.agent in only and kept_record(folder, job, cfg) is None]
+    largest = max(cfg.sizes + cfg.planet_size_list)
+    needs = {job.sequences or largest for job in todo if job.agent in ("piga", "planet") or job.obs == "latent"}
+    files = {n: data_file(cfg, folder, n) for n in sorted(needs)}
 
-    method = "fork" if "fork" in mp.get_all_start_methods() else "spawn"
-    with ProcessPoolExecutor(workers, mp_context=mp.get_context(method)) as pool:
-        return dict(pool.map(_task, ordered))
+    def cost(job: Job) -> float:
+        if job.agent in ("piga", "planet"):
+            return train_cost(cfg, job.agent, job.sequences)
+        return train_cost(cfg, f"ddpg_{job.obs}", steps=job.steps) if job.agent == "ddpg" else 0.0
+
+    args = [(job, cfg, folder, None if job.agent == "oracle" else files.get(job.sequences or largest, data_path(folder, largest)))
+            for job in sorted(todo, key=lambda j: -cost(j))]
+    if cfg.workers <= 1 or len(args) <= 1:
+        done = dict(map(_run_task, args))
+    else:
+        import multiprocessing as mp
+        from concurrent.futures import ProcessPoolExecutor
+
+        method = "fork" if "fork" in mp.get_all_start_methods() else "spawn"
+        with ProcessPoolExecutor(cfg.workers, mp_context=mp.get_context(method)) as pool:
+            done = dict(pool.map(_run_task, args))
+    return {job.name: done.get(job.name) or kept_record(folder, job, cfg) for job in jobs}
 
 
 def best_run(record: dict[str, Any], agent: str) -> str:
@@ -399,8 +528,10 @@ def goal_images(piga_run: Path, cfg: BenchConfig, folder: Path) -> list[dict[str
     model, ckpt = load_model(piga_run)
     rows = []
     for angle in cfg.goal_angles:
-        path = folder / f"goal{angle:g}.png"
-        iio.imwrite(path, render_goal_image(angle))
+        path = folder / "goals" / f"goal{angle:g}.png"
+        path.parent.mkdir(exist_ok=True)
+        with atomic_output(path, overwrite=True) as tmp:  # jobs run side by side
+            iio.imwrite(tmp, render_goal_image(angle), extension=".png")
         estimate = goal_from_image(model, ckpt, path)
         agent = PigaMPCAgent(model, replace(MPCConfig(), goal_angle=estimate.angle))
         summary = run_episodes(agent, EpisodeConfig(episodes=max(1, cfg.episodes // 5), steps=cfg.episode_steps,
@@ -502,8 +633,8 @@ def floors(record: dict[str, Any], cfg: BenchConfig) -> list[dict[str, Any]]:
 def markdown(record: dict[str, Any]) -> str:
     """The results page."""
     lines = [f"# Baselines: piga, PlaNet-style and DDPG\n\nCommand: `{record['command']}` (preset `{record['preset']}`)\n",
-             f"Machine: {record['machine']['cpu']}, {record['machine']['cores']} cores, torch {record['machine']['torch']}, "
-             f"each training on one torch thread.\n", "## Sample efficiency (gravity x1.0)\n",
+             (f"Machine: {record['machine']['cpu']}, {record['machine']['cores']} cores, torch {record['machine']['torch']}, "
+             f"each training on one torch thread.\n"), "## Sample efficiency (gravity x1.0)\n",
              f"![sample efficiency]({record['figures']['sample_efficiency']})\n",
              "| sequences | agent | seeds | success (mean) | mean return | train s (mean) |", "|---|---|---|---|---|---|"]
     for row in record["sample_efficiency"]:
@@ -529,14 +660,17 @@ def markdown(record: dict[str, Any]) -> str:
     for g in record["goals"]:
         lines.append(f"| {g['goal_deg']:g} | {g['read_deg']:.2f} | {100 * g['piga']['success_rate']:.0f}% | {g['planet']} | {g['ddpg']} |")
     p = record["plan_time"]
-    lines += [(f"\n## Plan time (median, this run, one process)\n\npiga plans at every env step: {p['piga_ms']:.2f} ms. "
+    lines += [(f"\n## Plan time (median over one {record['config']['episode_steps']}-step episode in one process, measured after each run's training)\n\npiga plans at every env step: {p['piga_ms']:.2f} ms. "
                f"PlaNet-style plans once every {p['planet_action_repeat']} env steps (its action repeat): {p['planet_ms']:.1f} ms a plan, "
                f"{p['planet_ms_per_step']:.1f} ms per env step. Ratio per env step {p['ratio_per_step']:.1f}x "
                f"(per plan {p['ratio']:.1f}x).\n"),
               "## Floors\n", "| floor | measured | met |", "|---|---|---|",
               *[f"| {f['floor']} | {f['measured']} | {'yes' if f['met'] else 'no'} |" for f in record["floors"]], "",
-              (f"## Compute\n\nWall time of this invocation: {record['wall_seconds'] / 60:.1f} min on {record['config']['workers']} "
-               f"processes (finished runs of earlier invocations are reused; their training seconds are in the tables).\n")]
+              (f"## Compute\n\nTraining seconds are in the tables, one torch thread per run, {record['config']['workers']} runs side by side. "
+               "Each run's record names the machine it ran on:\n"),
+              *[f"- {m}: {', '.join(names)}" for m, names in record["job_machines"].items()],
+              (f"\nWall time of the invocation that wrote this page: {record['wall_seconds'] / 60:.1f} min (records kept "
+               "from earlier invocations are not run again).\n")]
     return "\n".join(lines) + "\n"
 
 
@@ -546,7 +680,13 @@ def main() -> int:
     p.add_argument("--preset", choices=sorted(PRESETS), default="full")
     p.add_argument("--workers", type=int, help="processes (default: the preset's, 2)")
     p.add_argument("--estimate", action="store_true", help="print the estimated cost of the preset and exit")
+    p.add_argument("--only", default=",".join(AGENTS), metavar="AGENTS",
+                   help=f"run only these jobs (comma-separated from {', '.join(AGENTS)}); the results are written once "
+                        "every job has a record")
     args = p.parse_args()
+    only = tuple(args.only.split(","))
+    if not set(only) <= set(AGENTS):
+        p.error(f"--only takes {', '.join(AGENTS)}, got {args.only!r}")
     cfg = PRESETS[args.preset] if args.workers is None else replace(PRESETS[args.preset], workers=args.workers)
     cost = estimate(cfg)
     print(f"estimate (COST_S): {', '.join(f'{k} {v / 3600:.1f} h' for k, v in cost.items())}", flush=True)
@@ -563,58 +703,50 @@ def main() -> int:
     folder.mkdir(parents=True, exist_ok=True)
     record: dict[str, Any] = {"command": shlex.join(["python", *sys.argv]), "preset": args.preset, "config": asdict(cfg),
                               "machine": machine(), "estimate_seconds": cost}
-    files = collect_subsets(cfg, folder)
-    largest = files[max(files)]
-    agents = (("piga", train_piga, cfg.sizes, cfg.piga_seeds_at), ("planet", train_planet_run, cfg.planet_size_list, cfg.planet_seeds_at))
-    tasks: list[tuple[str, Callable[..., Any], tuple[Any, ...], float]] = []
-    for agent, trainer, sizes, seeds_at in agents:
-        for n in sizes:
-            for seed in seeds_at(n):
-                tasks.append((f"{agent}-n{n}-s{seed}", trainer, (files[n], folder / f"{agent}-n{n}-s{seed}", seed, cfg, n),
-                              train_cost(cfg, agent, n)))
-    for obs, steps, seeds in cfg.ddpg_runs:
-        for seed in seeds:
-            tasks.append((f"ddpg-{obs}-s{seed}", train_ddpg_run, (obs, steps, seed, largest, folder / f"ddpg-{obs}-s{seed}", cfg),
-                          train_cost(cfg, f"ddpg_{obs}", steps=steps)))
-    trained = train_all(tasks, cfg.workers)
+    records = run_all(cfg, folder, only)
+    missing = [name for name, kept in records.items() if kept is None]
+    if missing:
+        print(f"{len(records) - len(missing)} of {len(records)} jobs have a record; still to run: {', '.join(missing)}. "
+              f"{out.with_suffix('.md')} is written once all have one.", flush=True)
+        return 0
     rows = []
-    for agent, _, sizes, seeds_at in agents:
+    for agent, sizes, seeds_at in (("piga", cfg.sizes, cfg.piga_seeds_at), ("planet", cfg.planet_size_list, cfg.planet_seeds_at)):
         for n in sizes:
             runs = []
             for seed in seeds_at(n):
-                name = f"{agent}-n{n}-s{seed}"
-                runs.append({"seed": seed, "train_seconds": trained[name], "control": evaluate_kept(folder, agent, folder / name, cfg)})
-                print(f"{name}: success {runs[-1]['control']['success_rate']:.2f}", flush=True)
+                kept = records[f"{agent}-n{n}-s{seed}"]
+                runs.append({"seed": seed, "train_seconds": kept["train_seconds"], "control": kept["control"]})
+                print(f"{agent}-n{n}-s{seed}: success {runs[-1]['control']['success_rate']:.2f}", flush=True)
             rows.append({"sequences": n, "agent": agent, "runs": runs,
                          "success_mean": sum(r["control"]["success_rate"] for r in runs) / len(runs),
                          "return_mean": sum(r["control"]["mean_return"] for r in runs) / len(runs),
                          "train_seconds_mean": sum(r["train_seconds"] for r in runs) / len(runs)})
     record["sample_efficiency"] = rows
-    record["oracle"] = evaluate_kept(folder, "oracle", None, cfg)
+    record["oracle"] = records["oracle"]["control"]
     ddpg = []
-    for obs, steps, seeds in cfg.ddpg_runs:
+    for obs, _, seeds in cfg.ddpg_runs:
         for seed in seeds:
-            name = f"ddpg-{obs}-s{seed}"
-            metrics = trained[name]
-            ddpg.append({"obs": obs, "seed": seed, "metrics": metrics, "control": evaluate_kept(folder, "ddpg", folder / name, cfg)})
-            print(f"{name}: first -200 at {metrics['first_step_reaching_minus_200']}", flush=True)
+            kept = records[f"ddpg-{obs}-s{seed}"]
+            ddpg.append({"obs": obs, "seed": seed, "metrics": kept["metrics"], "control": kept["control"]})
+            print(f"ddpg-{obs}-s{seed}: first -200 at {kept['metrics']['first_step_reaching_minus_200']}", flush=True)
     record["ddpg"] = ddpg
     multipliers = parse_range(cfg.sweep)
-    best = {agent: folder / best_run(record, agent) for agent in ("piga", "planet", "ddpg")}
+    best = {agent: best_run(record, agent) for agent in ("piga", "planet", "ddpg")}
     sweep_agents = ["piga", "oracle", "planet", "ddpg"]
-    record["sweep"] = {"agents": sweep_agents, "multipliers": multipliers, "runs": {k: str(v) for k, v in best.items()},
-                       "success": [[evaluate_kept(folder, a, best.get(a), cfg, m, min(cfg.sweep_episodes, cfg.planet_episode_count)
-                                                  if a == "planet" else cfg.sweep_episodes)["success_rate"] for a in sweep_agents]
+    record["sweep"] = {"agents": sweep_agents, "multipliers": multipliers, "runs": best,
+                       "success": [[records[best.get(a, a)]["sweep"][f"{m:g}"]["success_rate"] for a in sweep_agents]
                                    for m in multipliers]}
-    record["goals"] = goal_images(best["piga"], cfg, folder)
-    from piga.baselines.planet_run import load_planet
-
-    piga_ms = evaluate("piga", best["piga"], cfg, episodes=1, workers=1)["plan_ms_median"]
-    planet_ms = evaluate("planet", best["planet"], cfg, episodes=1, workers=1)["plan_ms_median"]  # per plan
-    repeat = load_planet(best["planet"])[0].config.action_repeat  # PlaNet-style plans every R-th env step
+    record["goals"] = records[best["piga"]]["goals"]
+    piga_ms, planet_ms = records[best["piga"]]["plan_ms"], records[best["planet"]]["plan_ms"]  # planet: per plan
+    repeat = records[best["planet"]]["action_repeat"]
     record["plan_time"] = {"piga_ms": piga_ms, "planet_ms": planet_ms, "planet_action_repeat": repeat,
                            "planet_ms_per_step": planet_ms / repeat, "ratio": planet_ms / piga_ms,
                            "ratio_per_step": planet_ms / repeat / piga_ms}
+    machines: dict[str, list[str]] = {}
+    for name, kept in records.items():
+        m = kept["machine"]
+        machines.setdefault(f"{m['cpu']} (family/model {m.get('cpu_family_model', '?')}), {m['cores']} cores", []).append(name)
+    record["job_machines"] = machines
     record["floors"] = floors(record, cfg)
     record["wall_seconds"] = time.monotonic() - started
     record["figures"] = figures(record, out)

@@ -11,13 +11,19 @@ import torch
 
 def machine() -> dict[str, object]:
     """Where the numbers were measured."""
-    cpu = "unknown"
+    cpu, family, model = "unknown", "?", "?"
     try:
         for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
+            key, _, value = line.partition(":")
+            key, value = key.strip(), value.strip()
+            if key == "model name" and cpu == "unknown":
+                cpu = value
+            elif key == "cpu family" and family == "?":
+                family = value
+            elif key == "model" and model == "?":
+                model = value
     except OSError:
         pass
-    return {"cpu": cpu, "cores": os.cpu_count(), "torch_threads": torch.get_num_threads(), "torch": torch.__version__,
+    # "AMD EPYC" names several generations, of different speeds (family 23 model 1 is Zen 1); family/model tells them apart
+    return {"cpu": cpu, "cpu_family_model": f"{family}/{model}", "cores": os.cpu_count(), "torch_threads": torch.get_num_threads(), "torch": torch.__version__,
             "python": platform.python_version(), "platform": platform.platform()}

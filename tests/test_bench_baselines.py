@@ -1,0 +1,62 @@
+"""benchmarks/baselines.py's job records: what lets the comparison continue across invocations and machines."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+
+from piga.atomic import write_json
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def bench():
+    sys.path.insert(0, str(ROOT / "benchmarks"))  # the script imports its sibling module common
+    try:
+        spec = importlib.util.spec_from_file_location("bench_baselines", ROOT / "benchmarks" / "baselines.py")
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[spec.name] = module  # dataclasses look their module up there
+        spec.loader.exec_module(module)
+        yield module
+    finally:
+        sys.modules.pop("bench_baselines", None)
+        sys.path.remove(str(ROOT / "benchmarks"))
+
+
+def test_the_budget_preset_has_one_job_per_run(bench) -> None:
+    names = [job.name for job in bench.jobs_for(bench.PRESETS["budget"])]
+    assert len(names) == len(set(names)) == 12 + 5 + 5 + 1  # piga 4 x 3, planet 3 + 2, DDPG 3 + 1 + 1, oracle
+    assert "planet-n2000-s1" in names and "ddpg-pixels-s0" in names and names[-1] == "oracle"
+
+
+def test_a_record_is_reused_only_for_the_same_settings(bench, tmp_path: Path) -> None:
+    cfg = bench.PRESETS["budget"]
+    planet, piga = (next(j for j in bench.jobs_for(cfg) if j.name == name) for name in ("planet-n500-s1", "piga-n25-s0"))
+    for job in (planet, piga):
+        path = bench.record_path(tmp_path, job)
+        path.parent.mkdir(exist_ok=True)
+        write_json(path, {"spec": bench.job_spec(job, cfg), "control": {"success_rate": 1.0}})
+        assert bench.kept_record(tmp_path, job, cfg)["control"] == {"success_rate": 1.0}
+    longer = replace(cfg, planet_steps=cfg.planet_steps + 1)
+    assert bench.kept_record(tmp_path, planet, longer) is None  # trained further: run (continue) it again
+    assert bench.kept_record(tmp_path, piga, longer) is not None  # piga's runs do not depend on it
+    assert bench.kept_record(tmp_path, piga, replace(cfg, episodes=cfg.episodes + 1)) is None
+
+
+def test_run_all_returns_kept_records_without_collecting_data(bench, tmp_path: Path) -> None:
+    cfg = bench.PRESETS["budget"]
+    for job in bench.jobs_for(cfg):
+        bench.record_path(tmp_path, job).parent.mkdir(exist_ok=True)
+        write_json(bench.record_path(tmp_path, job), {"spec": bench.job_spec(job, cfg), "name": job.name})
+    records = bench.run_all(cfg, tmp_path)
+    assert all(kept["name"] == name for name, kept in records.items())
+    assert not list(tmp_path.glob("*.h5"))
+    (tmp_path / "records" / "oracle.json").unlink()
+    assert bench.run_all(cfg, tmp_path, only=("piga",))["oracle"] is None  # not asked for: left to another invocation
+    assert json.loads(bench.record_path(tmp_path, bench.jobs_for(cfg)[0]).read_text())["name"] == "piga-n25-s0"
