@@ -26,7 +26,7 @@ one episode, beside whatever else runs) and the goal images (piga). Jobs run ``-
 A job whose record has the same settings is not run again, so an interrupted benchmark continues
 where it stopped, on this machine or another; the checkpoints are needed only until the record
 exists (for ``results/baselines`` the records are committed, the checkpoints and data are not).
-``--only piga,oracle`` runs those kinds of job only. ``OUT.json``, ``OUT.md`` and the figures
+``--only piga,oracle`` runs those kinds of job only, ``--only planet-n2000-s1`` that job. ``OUT.json``, ``OUT.md`` and the figures
 ``OUT-sample_efficiency.png``, ``OUT-ddpg.png`` and ``OUT-sweep.png`` are written (atomically) once
 every job has a record; they read the records only. Each agent's sweep, goal images and plan time
 are those of its best run at x1.0.
@@ -250,7 +250,7 @@ def estimate(cfg: BenchConfig) -> dict[str, float]:
 
 
 AGENTS = ("piga", "planet", "ddpg", "oracle")
-"""The kinds of job, as ``--only`` takes them."""
+"""The kinds of job, as ``--only`` takes them (besides job names)."""
 
 
 @dataclass(frozen=True)
@@ -475,11 +475,11 @@ def _run_task(args: tuple[Job, BenchConfig, Path, Path | None]) -> tuple[str, di
 
 
 def run_all(cfg: BenchConfig, folder: Path, only: tuple[str, ...] = AGENTS) -> dict[str, dict[str, Any] | None]:
-    """Every job's record: kept ones as they are, the others of the ``only`` agents run ``cfg.workers``
+    """Every job's record: kept ones as they are, the others of the ``only`` agents (or job names) run ``cfg.workers``
     at a time, longest first (None for a job not run). Only the data files of jobs still to run are
     collected (first, in this process)."""
     jobs = jobs_for(cfg)
-    todo = [job for job in jobs if job.agent in only and kept_record(folder, job, cfg) is None]
+    todo = [job for job in jobs if (job.agent in only or job.name in only) and kept_record(folder, job, cfg) is None]
     largest = max(cfg.sizes + cfg.planet_size_list)
     needs = {job.sequences or largest for job in todo if job.agent in ("piga", "planet") or job.obs == "latent"}
     files = {n: data_file(cfg, folder, n) for n in sorted(needs)}
@@ -680,14 +680,15 @@ def main() -> int:
     p.add_argument("--preset", choices=sorted(PRESETS), default="full")
     p.add_argument("--workers", type=int, help="processes (default: the preset's, 2)")
     p.add_argument("--estimate", action="store_true", help="print the estimated cost of the preset and exit")
-    p.add_argument("--only", default=",".join(AGENTS), metavar="AGENTS",
-                   help=f"run only these jobs (comma-separated from {', '.join(AGENTS)}); the results are written once "
-                        "every job has a record")
+    p.add_argument("--only", default=",".join(AGENTS), metavar="JOBS",
+                   help=f"run only these jobs, comma-separated: kinds ({', '.join(AGENTS)}) or names (planet-n500-s1); "
+                        "the results are written once every job has a record")
     args = p.parse_args()
-    only = tuple(args.only.split(","))
-    if not set(only) <= set(AGENTS):
-        p.error(f"--only takes {', '.join(AGENTS)}, got {args.only!r}")
     cfg = PRESETS[args.preset] if args.workers is None else replace(PRESETS[args.preset], workers=args.workers)
+    only = tuple(args.only.split(","))
+    unknown = set(only) - set(AGENTS) - {job.name for job in jobs_for(cfg)}
+    if unknown:
+        p.error(f"--only takes {', '.join(AGENTS)} or the preset's job names, not {', '.join(sorted(unknown))}")
     cost = estimate(cfg)
     print(f"estimate (COST_S): {', '.join(f'{k} {v / 3600:.1f} h' for k, v in cost.items())}", flush=True)
     if args.estimate:

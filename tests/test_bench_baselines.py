@@ -58,5 +58,5 @@ def test_run_all_returns_kept_records_without_collecting_data(bench, tmp_path: P
     assert all(kept["name"] == name for name, kept in records.items())
     assert not list(tmp_path.glob("*.h5"))
     (tmp_path / "records" / "oracle.json").unlink()
-    assert bench.run_all(cfg, tmp_path, only=("piga",))["oracle"] is None  # not asked for: left to another invocation
+    assert bench.run_all(cfg, tmp_path, only=("piga", "ddpg-state-s0"))["oracle"] is None  # not asked for: left to another invocation
     assert json.loads(bench.record_path(tmp_path, bench.jobs_for(cfg)[0]).read_text())["name"] == "piga-n25-s0"
