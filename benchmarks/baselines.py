@@ -663,7 +663,10 @@ def markdown(record: dict[str, Any]) -> str:
     lines += [(f"\n## Plan time (median over one {record['config']['episode_steps']}-step episode in one process, measured after each run's training)\n\npiga plans at every env step: {p['piga_ms']:.2f} ms. "
                f"PlaNet-style plans once every {p['planet_action_repeat']} env steps (its action repeat): {p['planet_ms']:.1f} ms a plan, "
                f"{p['planet_ms_per_step']:.1f} ms per env step. Ratio per env step {p['ratio_per_step']:.1f}x "
-               f"(per plan {p['ratio']:.1f}x).\n"),
+               f"(per plan {p['ratio']:.1f}x)."
+               + ("" if len(set(p["machines"])) == 1 else
+                  f" The two were measured on different machines (CPU family/model {p['machines'][0]} and {p['machines'][1]}), "
+                  "so the ratio mixes their speeds.") + "\n"),
               "## Floors\n", "| floor | measured | met |", "|---|---|---|",
               *[f"| {f['floor']} | {f['measured']} | {'yes' if f['met'] else 'no'} |" for f in record["floors"]], "",
               (f"## Compute\n\nTraining seconds are in the tables, one torch thread per run, {record['config']['workers']} runs side by side. "
@@ -742,7 +745,8 @@ def main() -> int:
     repeat = records[best["planet"]]["action_repeat"]
     record["plan_time"] = {"piga_ms": piga_ms, "planet_ms": planet_ms, "planet_action_repeat": repeat,
                            "planet_ms_per_step": planet_ms / repeat, "ratio": planet_ms / piga_ms,
-                           "ratio_per_step": planet_ms / repeat / piga_ms}
+                           "ratio_per_step": planet_ms / repeat / piga_ms,
+                           "machines": [records[best[a]]["machine"].get("cpu_family_model", "?") for a in ("piga", "planet")]}
     machines: dict[str, list[str]] = {}
     for name, kept in records.items():
         m = kept["machine"]
