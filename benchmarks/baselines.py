@@ -233,12 +233,12 @@ def estimate(cfg: BenchConfig) -> dict[str, float]:
         return (own + len(sweep) * sweep_episodes(cfg, agent) + (agent in ("piga", "planet"))
                 + (agent == "piga") * len(cfg.goal_angles) * max(1, cfg.episodes // 5))
 
-    planet_eval = len(planet_runs) * episodes("planet") * step * COST_S["planet_plan_step"]
+    per_planet = episodes("planet") * step * COST_S["planet_plan_step"]  # one PlaNet-style run's episodes
+    planet_eval = len(planet_runs) * per_planet
     others = [("piga", len(cfg.sizes) * len(cfg.seeds)), ("oracle", 1),
               ("ddpg", sum(len(seeds) for _, _, seeds in cfg.ddpg_runs))]
     other_eval = sum(count * episodes(agent) for agent, count in others) * step * COST_S["piga_episode_step"]
     collect = sum(n * 1.2 for n in set(cfg.sizes + cfg.planet_size_list)) * COST_S["collect_sequence"] / cfg.workers
-    per_planet = episodes("planet") * step * COST_S["planet_plan_step"]
     jobs = piga + [t + per_planet for t in planet] + ddpg  # a PlaNet-style run's episodes follow its training
     cores = [0.0] * cfg.workers
     for seconds in sorted(jobs, reverse=True):  # longest first, each to the least loaded core
@@ -479,7 +479,8 @@ def run_all(cfg: BenchConfig, folder: Path, only: tuple[str, ...] = AGENTS) -> d
     at a time, longest first (None for a job not run). Only the data files of jobs still to run are
     collected (first, in this process)."""
     jobs = jobs_for(cfg)
-    todo = [job for job in jobs if (job.agent in only or job.name in only) and kept_record(folder, job, cfg) is None]
+    kept = {job.name: kept_record(folder, job, cfg) for job in jobs}
+    todo = [job for job in jobs if (job.agent in only or job.name in only) and kept[job.name] is None]
     largest = max(cfg.sizes + cfg.planet_size_list)
     needs = {job.sequences or largest for job in todo if job.agent in ("piga", "planet") or job.obs == "latent"}
     files = {n: data_file(cfg, folder, n) for n in sorted(needs)}
@@ -500,7 +501,7 @@ def run_all(cfg: BenchConfig, folder: Path, only: tuple[str, ...] = AGENTS) -> d
         method = "fork" if "fork" in mp.get_all_start_methods() else "spawn"
         with ProcessPoolExecutor(cfg.workers, mp_context=mp.get_context(method)) as pool:
             done = dict(pool.map(_run_task, args))
-    return {job.name: done.get(job.name) or kept_record(folder, job, cfg) for job in jobs}
+    return {**kept, **done}
 
 
 def best_run(record: dict[str, Any], agent: str) -> str:
