@@ -63,6 +63,7 @@ import argparse
 import json
 import math
 import shlex
+import statistics
 import sys
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
@@ -631,11 +632,82 @@ def floors(record: dict[str, Any], cfg: BenchConfig) -> list[dict[str, Any]]:
     return out
 
 
+AGENT_LABELS = {"piga": "piga", "planet": "PlaNet-style", "ddpg-state": "DDPG from the true state",
+                "ddpg-latent": "DDPG from an autoencoder's latent", "ddpg-pixels": "DDPG from pixels",
+                "oracle": "oracle (true state and physics)"}
+"""The agents' names in the summary table."""
+
+
+def _num(x: float, digits: int = 1) -> str:
+    """A number with a typographic minus, as the README writes them."""
+    return f"{x:.{digits}f}".replace("-", "\u2212")
+
+
+def _per_seed(values: list[float]) -> str:
+    """Success rates, one per seed: "100%, 40%"."""
+    return ", ".join(f"{100 * v:.0f}%" for v in values)
+
+
+def _minutes(seconds: list[float]) -> str:
+    """Training minutes over seeds: "54 min" or "16-22 min"."""
+    lo, hi = round(min(seconds) / 60), round(max(seconds) / 60)
+    return f"{lo} min" if lo == hi else f"{lo}\u2013{hi} min"
+
+
+def summary_table(records: dict[str, dict[str, Any]], cfg: BenchConfig) -> str:
+    """The README's Baselines table, from the job records alone: a row per agent and data size (piga,
+    PlaNet-style), per DDPG observation and for the oracle, each cell over the row's seeds. x1.4 is each
+    run's own sweep cell; the plan time is the median over the row's runs, per env step (PlaNet-style
+    plans once every action-repeat steps), with its ratio to piga's median over all of piga's runs."""
+    jobs = jobs_for(cfg)
+    groups: dict[tuple[str, Any], list[dict[str, Any]]] = {}
+    for job in jobs:
+        key = (job.agent, job.sequences) if job.agent in ("piga", "planet") else (f"ddpg-{job.obs}" if job.agent == "ddpg" else "oracle", job.steps)
+        groups.setdefault(key, []).append(records[job.name])
+    piga_ms = statistics.median(r["plan_ms"] for (agent, _), runs in groups.items() if agent == "piga" for r in runs)
+    sweep_at = "1.4" if 1.4 in [round(m, 9) for m in parse_range(cfg.sweep)] else None
+    lines = [f"| agent | training data | training time (one thread) | success x1.0 ({cfg.episodes} episodes; per seed) | mean return "
+             f"| success x1.4 ({cfg.sweep_episodes} episodes) | goal images | plan time per env step |", "|---|---|---|---|---|---|---|---|"]
+    for (agent, size), runs in groups.items():
+        seeds = f" ({len(runs)} seeds)" if len(runs) > 1 else ""
+        told = " (told)" if agent in ("piga", "oracle") else " (not told)"
+        if agent in ("piga", "planet"):
+            data = f"{size} random-action sequences{seeds}"
+        elif agent == "oracle":
+            data = ""
+        else:
+            data = f"{size // 1000 if size % 1000 == 0 else size / 1000:g}k env steps{seeds}"
+        seconds = [r["train_seconds"] + r.get("metrics", {}).get("autoencoder_train_seconds", 0.0) for r in runs if "train_seconds" in r]
+        time = _minutes(seconds) if seconds else ""
+        if agent == "ddpg-latent" and seconds:
+            time += " (autoencoder included)"
+        x14 = _per_seed([r["sweep"][sweep_at]["success_rate"] for r in runs]) + told if sweep_at else ""
+        if agent == "piga":
+            goals = [g["piga"]["success_rate"] for r in runs for g in r["goals"]]
+            goal = f"{len(runs[0]['goals'])} goal{'s' * (len(runs[0]['goals']) != 1)}, {100 * sum(goals) / len(goals):.0f}%"
+            plan = f"{statistics.median(r['plan_ms'] for r in runs):.1f} ms"
+        elif agent == "oracle":
+            goal = plan = ""
+        else:
+            goal, plan = "refused (no goal input)", ""
+        if agent == "planet":
+            per_step = statistics.median(r["plan_ms"] / r["action_repeat"] for r in runs)
+            plan = f"{per_step:.0f} ms ({per_step / piga_ms:.0f}x piga)"
+        cells = [AGENT_LABELS[agent], data, time, _per_seed([r["control"]["success_rate"] for r in runs]),
+                 _num(statistics.mean(r["control"]["mean_return"] for r in runs)), x14, goal, plan]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
 def markdown(record: dict[str, Any]) -> str:
     """The results page."""
     lines = [f"# Baselines: piga, PlaNet-style and DDPG\n\nCommand: `{record['command']}` (preset `{record['preset']}`)\n",
              (f"Machine: {record['machine']['cpu']}, {record['machine']['cores']} cores, torch {record['machine']['torch']}, "
-             f"each training on one torch thread.\n"), "## Sample efficiency (gravity x1.0)\n",
+             f"each training on one torch thread.\n"),
+             "## Summary\n\nThe README's table. A row per agent and data size, each cell over the row's seeds; x1.4 is "
+             "each run's own sweep cell; the plan time is the median of the row's runs, per env step, and its ratio "
+             "to piga's median over all of piga's runs.\n", record["summary_table"],
+             "## Sample efficiency (gravity x1.0)\n",
              f"![sample efficiency]({record['figures']['sample_efficiency']})\n",
              "| sequences | agent | seeds | success (mean) | mean return | train s (mean) |", "|---|---|---|---|---|---|"]
     for row in record["sample_efficiency"]:
@@ -754,6 +826,7 @@ def main() -> int:
         machines.setdefault(f"{m['cpu']} (family/model {m.get('cpu_family_model', '?')}), {m['cores']} cores", []).append(name)
     record["job_machines"] = machines
     record["floors"] = floors(record, cfg)
+    record["summary_table"] = summary_table(records, cfg)
     record["wall_seconds"] = time.monotonic() - started
     record["figures"] = figures(record, out)
     write_json(out.with_suffix(".json"), record)

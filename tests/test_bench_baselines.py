@@ -60,3 +60,31 @@ def test_run_all_returns_kept_records_without_collecting_data(bench, tmp_path: P
     (tmp_path / "records" / "oracle.json").unlink()
     assert bench.run_all(cfg, tmp_path, only=("piga", "ddpg-state-s0"))["oracle"] is None  # not asked for: left to another invocation
     assert json.loads(bench.record_path(tmp_path, bench.jobs_for(cfg)[0]).read_text())["name"] == "piga-n25-s0"
+
+
+def test_the_summary_table_has_a_row_per_agent_and_size_over_its_seeds(bench) -> None:
+    cfg = bench.PRESETS["budget"]
+    records = {}
+    for job in bench.jobs_for(cfg):
+        success = 0.5 if job.name == "planet-n500-s1" else 1.0
+        control = {"success_rate": success, "mean_return": -200.0 if job.name == "planet-n500-s1" else -160.0}
+        record = {"control": control, "sweep": {"1.4": {"success_rate": 0.0 if job.agent in ("planet", "ddpg") else 1.0}}}
+        if job.agent != "oracle":
+            record["train_seconds"] = 600.0 * (1 + job.seed)
+        if job.agent == "piga":
+            record.update(plan_ms=2.0, goals=[{"piga": {"success_rate": 1.0}}, {"piga": {"success_rate": 0.5}}])
+        if job.agent == "planet":
+            record.update(plan_ms=300.0, action_repeat=3)
+        if job.agent == "ddpg":
+            record["metrics"] = {"autoencoder_train_seconds": 300.0} if job.obs == "latent" else {}
+        records[job.name] = record
+    rows = [line.split(" | ") for line in bench.summary_table(records, cfg).splitlines()[2:]]
+    assert len(rows) == 4 + 3 + 3 + 1  # piga's 4 sizes, PlaNet-style's 3, DDPG's 3 observations, the oracle
+    planet_500 = next(r for r in rows if r[0] == "| PlaNet-style" and r[1].startswith("500 "))
+    assert planet_500[1:6] == ["500 random-action sequences (2 seeds)", "10\u201320 min", "100%, 50%", "\u2212180.0",
+                               "0%, 0% (not told)"]
+    assert planet_500[7] == "100 ms (50x piga) |"  # 300 ms a plan, one plan per 3 env steps, piga 2 ms a step
+    piga_25 = rows[0]
+    assert piga_25[5:8] == ["100%, 100%, 100% (told)", "2 goals, 75%", "2.0 ms |"]
+    latent = next(r for r in rows if "latent" in r[0])
+    assert latent[2] == "15 min (autoencoder included)" and latent[6] == "refused (no goal input)"
