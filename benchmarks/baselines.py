@@ -659,15 +659,19 @@ def summary_table(records: dict[str, dict[str, Any]], cfg: BenchConfig) -> str:
     PlaNet-style), per DDPG observation and for the oracle, each cell over the row's seeds. x1.4 is each
     run's own sweep cell; the plan time is the median over the row's runs, per env step (PlaNet-style
     plans once every action-repeat steps), with its ratio to piga's median over all of piga's runs."""
-    jobs = jobs_for(cfg)
-    groups: dict[tuple[str, Any], list[dict[str, Any]]] = {}
-    for job in jobs:
-        key = (job.agent, job.sequences) if job.agent in ("piga", "planet") else (f"ddpg-{job.obs}" if job.agent == "ddpg" else "oracle", job.steps)
-        groups.setdefault(key, []).append(records[job.name])
+    groups: dict[tuple[str, int], list[dict[str, Any]]] = {}  # (agent label key, sequences or env steps): the seeds' records
+    for job in jobs_for(cfg):
+        key = f"ddpg-{job.obs}" if job.agent == "ddpg" else job.agent
+        groups.setdefault((key, job.sequences or job.steps), []).append(records[job.name])
     piga_ms = statistics.median(r["plan_ms"] for (agent, _), runs in groups.items() if agent == "piga" for r in runs)
-    sweep_at = "1.4" if 1.4 in [round(m, 9) for m in parse_range(cfg.sweep)] else None
-    lines = [f"| agent | training data | training time (one thread) | success x1.0 ({cfg.episodes} episodes; per seed) | mean return "
-             f"| success x1.4 ({cfg.sweep_episodes} episodes) | goal images | plan time per env step |", "|---|---|---|---|---|---|---|---|"]
+    sweep_at = "1.4" if "1.4" in (f"{m:g}" for m in parse_range(cfg.sweep)) else None  # the records' sweep keys
+
+    def counts(others: int, planet: int) -> str:
+        return f"{others} episodes" + ("" if planet == others else f", PlaNet-style {planet}")
+
+    lines = [f"| agent | training data | training time (one thread) | success x1.0 ({counts(cfg.episodes, cfg.planet_episode_count)}; "
+             f"per seed) | mean return | success x1.4 ({counts(cfg.sweep_episodes, sweep_episodes(cfg, 'planet'))}) | goal images "
+             "| plan time per env step |", "|---|---|---|---|---|---|---|---|"]
     for (agent, size), runs in groups.items():
         seeds = f" ({len(runs)} seeds)" if len(runs) > 1 else ""
         told = " (told)" if agent in ("piga", "oracle") else " (not told)"
@@ -678,9 +682,9 @@ def summary_table(records: dict[str, dict[str, Any]], cfg: BenchConfig) -> str:
         else:
             data = f"{size // 1000 if size % 1000 == 0 else size / 1000:g}k env steps{seeds}"
         seconds = [r["train_seconds"] + r.get("metrics", {}).get("autoencoder_train_seconds", 0.0) for r in runs if "train_seconds" in r]
-        time = _minutes(seconds) if seconds else ""
+        train = _minutes(seconds) if seconds else ""
         if agent == "ddpg-latent" and seconds:
-            time += " (autoencoder included)"
+            train += " (autoencoder included)"
         x14 = _per_seed([r["sweep"][sweep_at]["success_rate"] for r in runs]) + told if sweep_at else ""
         if agent == "piga":
             goals = [g["piga"]["success_rate"] for r in runs for g in r["goals"]]
@@ -693,7 +697,7 @@ def summary_table(records: dict[str, dict[str, Any]], cfg: BenchConfig) -> str:
         if agent == "planet":
             per_step = statistics.median(r["plan_ms"] / r["action_repeat"] for r in runs)
             plan = f"{per_step:.0f} ms ({per_step / piga_ms:.0f}x piga)"
-        cells = [AGENT_LABELS[agent], data, time, _per_seed([r["control"]["success_rate"] for r in runs]),
+        cells = [AGENT_LABELS[agent], data, train, _per_seed([r["control"]["success_rate"] for r in runs]),
                  _num(statistics.mean(r["control"]["mean_return"] for r in runs)), x14, goal, plan]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
