@@ -7,7 +7,8 @@ same machine:
    for piga (``piga-train-model``'s recipe) and the PlaNet-style model trained on the same files
    (nested subsets of one random-action collection), over seeds; the oracle as a line.
 2. **DDPG learning curves**: EvalCallback's mean return against env steps, from pixels, from an
-   autoencoder's latent and from the true state, with the first step at which each reached -200.
+   autoencoder's latent and from the true state, with the first step at which each reached -200;
+   and SAC, DDPG's stronger sibling, from pixels, where DDPG's actor saturates.
 3. **Zero-shot gravity sweep**: piga told the multiplier, the oracle, PlaNet-style and DDPG not told.
 4. **Goal images**: piga reaches them; the baselines refuse (no goal input), as recorded.
 5. **Plan time per step**: piga's CEM against PlaNet-style latent CEM, measured in this run.
@@ -36,22 +37,23 @@ torch thread) on a 2-core AMD EPYC, measured as process CPU time while other job
 machine, so roughly what an idle core takes: a PlaNet-style training step 0.54 s (16 x 20 model steps
 of 2 frames), a piga training step 0.145 s, latent CEM 0.17 s per control step (one plan of ~0.34 s
 per 2 steps), a DDPG step from pixels 0.37 s once learning starts, from the latent 0.020 s,
-from the state 0.011 s. One run each: PlaNet-style 108 min (12000 steps, whatever the data size) and
+from the state 0.011 s; SAC from pixels about 0.6 s. One run each: PlaNet-style 108 min (12000 steps, whatever the data size) and
 its episodes 23 min (x1.0 and the sweep); piga 7-8 min (at least 3000 steps) on up to 250 sequences,
 16 min on 500 (16 epochs); DDPG from the state 5 min (30k), from the latent 12 min (30k, autoencoder
-included), from pixels 64 min (20k). An older CPU takes longer (the records name each job's machine).
+included), from pixels 64 min (20k); SAC from pixels about 3 h (20k). An older CPU takes longer (the records name each job's machine).
 ``--estimate`` adds them up (jobs packed longest first on ``--workers`` cores):
 
 | preset | what | collect | training (core-h) | PlaNet-style episodes (core-h) | other episodes (core-h) | wall on 2 idle cores |
 |---|---|---|---|---|---|---|
-| ``budget`` | piga at 25/50/100/250 sequences x 3 seeds (at least 3000 steps each); PlaNet-style at 100/500/2000 x 1 seed, and a second seed at 500 and 2000 (12000 steps each); DDPG state 30k x 3 seeds, latent 30k x 1, pixels 20k x 1; 20 episodes per evaluation; sweep x0.6, 1.0, 1.4, 1.8 with 5 episodes each | 0.1 h | 12.0 | 1.7 | 0.3 | 7.2 h |
-| ``full`` | the full design: 7 sizes x 3 seeds each, DDPG 30k/80k/80k x 3 seeds, 20 episodes, 14 multipliers x 10 episodes | 0.2 h | 67.7 | 29.9 | 2.2 | 50.1 h |
+| ``budget`` | piga at 25/50/100/250 sequences x 3 seeds (at least 3000 steps each); PlaNet-style at 100/500/2000 x 1 seed, and a second seed at 500 and 2000 (12000 steps each); DDPG state 30k x 3 seeds, latent 30k x 1, pixels 20k x 1; SAC pixels 20k x 1; 20 episodes per evaluation; sweep x0.6, 1.0, 1.4, 1.8 with 5 episodes each | 0.1 h | 15.4 | 1.7 | 0.4 | 8.8 h |
+| ``full`` | the full design: 7 sizes x 3 seeds each, DDPG 30k/80k/80k x 3 seeds, SAC pixels 80k x 3 seeds, 20 episodes, 14 multipliers x 10 episodes | 0.2 h | 107.7 | 29.9 | 2.4 | 70.2 h |
 
 The budget preset answers every question of the comparison with what it can afford, and says what
 it cut: PlaNet-style has one seed per point and a second at 500 and 2000 sequences (its 12000 steps
 are almost two hours each), its points are where it might reach 80% rather than where piga does, DDPG
 from pixels gets 20k steps (10k of them the zoo's random warm-up, so 10k of learning; the paper's DDPG
-from pixels failed) and DDPG from the latent 30k, not the paper's 80k. The results page states the
+from pixels failed), SAC from pixels 20k (learning from step 100) and DDPG from the latent 30k, not
+the paper's 80k. The results page states the
 budget spent (training seconds per run).
 
 Numbers of the ``tiny`` preset check the pipeline only; they are no result.
@@ -106,6 +108,9 @@ class BenchConfig:
     ddpg_runs: tuple[tuple[str, int, tuple[int, ...]], ...] = (("state", 30000, (0, 1, 2)), ("latent", 80000, (0, 1, 2)),
                                                                 ("pixels", 80000, (0, 1, 2)))
     """DDPG (observation, env steps, seeds) (the paper's budgets: proprioception 30k, latent 80k)."""
+    sac_runs: tuple[tuple[str, int, tuple[int, ...]], ...] = (("pixels", 80000, (0, 1, 2)),)
+    """SB3's SAC (observation, env steps, seeds): DDPG's stronger sibling, where DDPG's actor saturates
+    (from pixels; results/ddpg_tuning.md). Scored as DDPG's runs are, in their tables and curves."""
     episodes: int = 20
     """Control episodes per evaluation of piga, the oracle and DDPG."""
     planet_episodes: int | None = None
@@ -163,6 +168,8 @@ COST_S = {
     "ddpg_latent_step": 0.020,  # the same + one MLP gradient step
     "ddpg_pixels_warmup_step": 0.012,  # rendering, random actions
     "ddpg_pixels_step": 0.372,  # rendering + one CnnPolicy gradient step on 256 stacks of 4 frames
+    "sac_state_step": 0.023,  # SAC from the state: 20k steps in 7.8 min beside two other jobs (results/ddpg_tuning.md)
+    "sac_pixels_step": 0.6,  # SAC from pixels (two critics, separate CNNs): ~10 min per 1000 steps beside other jobs, a partial run
     "autoencoder_step": 0.135,  # piga.baselines.autoencoder, 2000 steps before DDPG from the latent
     "collect_sequence": 0.25,  # piga-collect, 40 frames
 }
@@ -174,9 +181,11 @@ PRESETS: dict[str, BenchConfig] = {
                           planet_more_seeds=((500, (1,)), (2000, (1,))),
                           piga_min_steps=3000,
                           ddpg_runs=(("state", 30000, (0, 1, 2)), ("latent", 30000, (0,)), ("pixels", 20000, (0,))),
+                          sac_runs=(("pixels", 20000, (0,)),),
                           sweep="0.6:1.8:0.4", sweep_episodes=5),
     "tiny": BenchConfig(sizes=(8, 16), seeds=(0,), planet_sizes=(16,), steps=16, piga_epochs=1, planet_steps=4,
-                        ddpg_runs=(("state", 400, (0,)), ("latent", 400, (0,)), ("pixels", 400, (0,))), episodes=2,
+                        ddpg_runs=(("state", 400, (0,)), ("latent", 400, (0,)), ("pixels", 400, (0,))),
+                        sac_runs=(("pixels", 400, (0,)),), episodes=2,
                         sweep="1.0:1.4:0.4", sweep_episodes=1, goal_angles=(15.0,), episode_steps=20,
                         overrides={"planet": {"batch_size": 2, "chunk_length": 8}, "rssm": {"deter_size": 8, "stoch_size": 4},
                                    "piga": {"batch_size": 16, "warmup_steps": 2, "curriculum_steps": 2},
@@ -200,19 +209,19 @@ def piga_epochs(cfg: BenchConfig, n: int) -> int:
 
 def train_cost(cfg: BenchConfig, agent: str, n: int = 0, steps: int = 0) -> float:
     """Estimated core-seconds of one training (:data:`COST_S`): "piga" or "planet" on ``n`` sequences,
-    or "ddpg_OBS" for ``steps`` env steps."""
+    or "ALGO_OBS" (an SB3 run: "ddpg_pixels", "sac_pixels") for ``steps`` env steps."""
     if agent == "piga":
         return piga_epochs(cfg, n) * _piga_steps_per_epoch(cfg, n) * COST_S["piga_train_step"]
     if agent == "planet":
         return cfg.planet_steps * COST_S["planet_train_step"]
-    if agent == "ddpg_state":
-        return steps * COST_S["ddpg_state_step"]
+    if agent.endswith("_state"):
+        return steps * COST_S[f"{agent}_step"]
     from piga.baselines.autoencoder import AutoencoderConfig
-    from piga.baselines.ddpg import DDPGConfig
+    from piga.baselines.ddpg import config_for
 
-    obs = agent.removeprefix("ddpg_")
-    warmup = min(steps, cfg.overrides.get("ddpg", {}).get("learning_starts", DDPGConfig.learning_starts))
-    seconds = warmup * COST_S[f"{agent}_warmup_step"] + (steps - warmup) * COST_S[f"{agent}_step"]
+    algo, obs = agent.split("_")
+    warmup = min(steps, config_for(obs, algo, **cfg.overrides.get("ddpg", {})).learning_starts)
+    seconds = warmup * COST_S[f"ddpg_{obs}_warmup_step"] + (steps - warmup) * COST_S[f"{agent}_step"]  # warm-up: the env's work only
     if obs == "latent":
         seconds += cfg.overrides.get("autoencoder", {}).get("steps", AutoencoderConfig.steps) * COST_S["autoencoder_step"]
     return seconds
@@ -225,7 +234,7 @@ def estimate(cfg: BenchConfig) -> dict[str, float]:
     piga = [train_cost(cfg, "piga", n) for n in cfg.sizes for _ in cfg.seeds]
     planet_runs = [n for n in cfg.planet_size_list for _ in cfg.planet_seeds_at(n)]  # a size per run
     planet = [train_cost(cfg, "planet", n) for n in planet_runs]
-    ddpg = [train_cost(cfg, f"ddpg_{obs}", steps=steps) for obs, steps, seeds in cfg.ddpg_runs for _ in seeds]
+    ddpg = [train_cost(cfg, f"{algo}_{obs}", steps=steps) for algo, obs, steps, seeds in sb3_runs(cfg) for _ in seeds]
     step = cfg.episode_steps
     sweep = [m for m in parse_range(cfg.sweep) if m != 1.0]  # x1.0 is the run's own evaluation
 
@@ -237,7 +246,7 @@ def estimate(cfg: BenchConfig) -> dict[str, float]:
     per_planet = episodes("planet") * step * COST_S["planet_plan_step"]  # one PlaNet-style run's episodes
     planet_eval = len(planet_runs) * per_planet
     others = [("piga", len(cfg.sizes) * len(cfg.seeds)), ("oracle", 1),
-              ("ddpg", sum(len(seeds) for _, _, seeds in cfg.ddpg_runs))]
+              ("ddpg", sum(len(seeds) for _, _, _, seeds in sb3_runs(cfg)))]
     other_eval = sum(count * episodes(agent) for agent, count in others) * step * COST_S["piga_episode_step"]
     collect = sum(n * 1.2 for n in set(cfg.sizes + cfg.planet_size_list)) * COST_S["collect_sequence"] / cfg.workers
     jobs = piga + [t + per_planet for t in planet] + ddpg  # a PlaNet-style run's episodes follow its training
@@ -251,7 +260,12 @@ def estimate(cfg: BenchConfig) -> dict[str, float]:
 
 
 AGENTS = ("piga", "planet", "ddpg", "oracle")
-"""The kinds of job, as ``--only`` takes them (besides job names)."""
+"""The kinds of job, as ``--only`` takes them (besides job names); "ddpg" are the SB3 runs, SAC's included."""
+
+
+def sb3_runs(cfg: BenchConfig) -> list[tuple[str, str, int, tuple[int, ...]]]:
+    """The SB3 runs as (algorithm, observation, env steps, seeds): DDPG's, then SAC's."""
+    return [("ddpg", *run) for run in cfg.ddpg_runs] + [("sac", *run) for run in cfg.sac_runs]
 
 
 @dataclass(frozen=True)
@@ -269,6 +283,8 @@ class Job:
     """DDPG's observation."""
     steps: int = 0
     """DDPG's env steps."""
+    algo: str = "ddpg"
+    """The SB3 algorithm of a "ddpg" job: "ddpg" or "sac"."""
 
 
 def jobs_for(cfg: BenchConfig) -> list[Job]:
@@ -276,7 +292,8 @@ def jobs_for(cfg: BenchConfig) -> list[Job]:
     jobs = [Job(f"{agent}-n{n}-s{seed}", agent, n, seed)
             for agent, sizes, seeds_at in (("piga", cfg.sizes, cfg.piga_seeds_at), ("planet", cfg.planet_size_list, cfg.planet_seeds_at))
             for n in sizes for seed in seeds_at(n)]
-    jobs += [Job(f"ddpg-{obs}-s{seed}", "ddpg", seed=seed, obs=obs, steps=steps) for obs, steps, seeds in cfg.ddpg_runs for seed in seeds]
+    jobs += [Job(f"{algo}-{obs}-s{seed}", "ddpg", seed=seed, obs=obs, steps=steps, algo=algo)
+             for algo, obs, steps, seeds in sb3_runs(cfg) for seed in seeds]
     return jobs + [Job("oracle", "oracle")]
 
 
@@ -285,6 +302,8 @@ def job_spec(job: Job, cfg: BenchConfig) -> dict[str, Any]:
     spec: dict[str, Any] = {**asdict(job), "episodes": cfg.planet_episode_count if job.agent == "planet" else cfg.episodes,
                             "episode_steps": cfg.episode_steps, "sweep": parse_range(cfg.sweep),
                             "sweep_episodes": sweep_episodes(cfg, job.agent)}
+    if job.algo == "ddpg":  # named only where it is not the kind's own algorithm, as the DDPG records were written
+        del spec["algo"]
     if job.agent in ("piga", "planet"):
         spec.update(data_seed=cfg.data_seed, frames=cfg.steps)
     if job.agent == "piga":
@@ -412,13 +431,13 @@ def _autoencoder_seconds(metrics: dict[str, Any]) -> str:
     return "" if seconds is None else f" + {seconds:.0f} autoencoder"
 
 
-def train_ddpg_run(obs: str, steps: int, seed: int, data: Path, run: Path, cfg: BenchConfig) -> dict[str, Any]:
-    """Trains (unless done) and returns the run's metrics (learning curve, seconds)."""
+def train_ddpg_run(obs: str, steps: int, seed: int, data: Path, run: Path, cfg: BenchConfig, algo: str = "ddpg") -> dict[str, Any]:
+    """Trains an SB3 run (``algo``: "ddpg" or "sac"; unless done) and returns its metrics (learning curve, seconds)."""
     from piga.baselines.autoencoder import AutoencoderConfig, train_autoencoder
     from piga.baselines.ddpg import AUTOENCODER, config_for, train_ddpg
 
     if not (run / "metrics.json").exists():
-        config = config_for(obs, steps=steps, seed=seed, **cfg.overrides.get("ddpg", {}))
+        config = config_for(obs, algo, steps=steps, seed=seed, **cfg.overrides.get("ddpg", {}))
         run.mkdir(parents=True, exist_ok=True)
         autoencoder = None
         if obs == "latent":
@@ -446,7 +465,7 @@ def run_job(job: Job, cfg: BenchConfig, folder: Path, data: Path | None) -> dict
     elif job.agent == "planet":
         record["train_seconds"] = train_planet_run(data, run, job.seed, cfg, job.sequences)
     elif job.agent == "ddpg":
-        record["metrics"] = train_ddpg_run(job.obs, job.steps, job.seed, data, run, cfg)
+        record["metrics"] = train_ddpg_run(job.obs, job.steps, job.seed, data, run, cfg, job.algo)
         record["train_seconds"] = record["metrics"]["train_seconds"]
     record["control"] = evaluate_kept(folder, job.agent, run, cfg)
     # the x1.0 cell of the sweep is the x1.0 evaluation (its first sweep_episodes episodes are the sweep's own)
@@ -489,7 +508,7 @@ def run_all(cfg: BenchConfig, folder: Path, only: tuple[str, ...] = AGENTS) -> d
     def cost(job: Job) -> float:
         if job.agent in ("piga", "planet"):
             return train_cost(cfg, job.agent, job.sequences)
-        return train_cost(cfg, f"ddpg_{job.obs}", steps=job.steps) if job.agent == "ddpg" else 0.0
+        return train_cost(cfg, f"{job.algo}_{job.obs}", steps=job.steps) if job.agent == "ddpg" else 0.0
 
     args = [(job, cfg, folder, None if job.agent == "oracle" else files.get(job.sequences or largest, data_path(folder, largest)))
             for job in sorted(todo, key=lambda j: -cost(j))]
@@ -510,8 +529,8 @@ def best_run(record: dict[str, Any], agent: str) -> str:
     highest mean return, then the most data): the one the gravity sweep, the goal images and the plan
     times use, so that each agent is shown at its best. The PlaNet-style runs differ by more than data
     size (a run on 500 sequences beat one on 2000 in the budget preset), so "the largest" would not do."""
-    if agent == "ddpg":
-        runs = [(f"ddpg-{r['obs']}-s{r['seed']}", r["control"], 0) for r in record["ddpg"]]
+    if agent == "ddpg":  # DDPG's own runs (the paper's baseline), not SAC's
+        runs = [(f"ddpg-{r['obs']}-s{r['seed']}", r["control"], 0) for r in record["ddpg"] if r["algo"] == "ddpg"]
     else:
         runs = [(f"{agent}-n{row['sequences']}-s{run['seed']}", run["control"], row["sequences"])
                 for row in record["sample_efficiency"] if row["agent"] == agent for run in row["runs"]]
@@ -579,15 +598,16 @@ def figures(record: dict[str, Any], out: Path) -> dict[str, str]:
     fig.suptitle("sample efficiency at gravity x1.0 (dots: seeds; line: mean)", fontsize=9)
     save_figure(fig, out.with_name(names["sample_efficiency"]))
     fig, ax = plt.subplots(figsize=(5, 3.4))
-    for i, obs in enumerate(dict.fromkeys(r["obs"] for r in record["ddpg"])):
-        for r in (r for r in record["ddpg"] if r["obs"] == obs):
+    for i, (algo, obs) in enumerate(dict.fromkeys((r["algo"], r["obs"]) for r in record["ddpg"])):
+        runs = [r for r in record["ddpg"] if (r["algo"], r["obs"]) == (algo, obs)]
+        for r in runs:
             curve = r["metrics"]["learning_curve"]
             ax.plot([c["step"] for c in curve], [c["eval_mean_return"] for c in curve], color=f"C{i}", alpha=0.8,
-                    label=obs if r["seed"] == min(q["seed"] for q in record["ddpg"] if q["obs"] == obs) else None)
+                    ls="-" if algo == "ddpg" else ":", label=f"{algo.upper()}, {obs}" if r is runs[0] else None)
     ax.axhline(-200, color="gray", ls="--", lw=0.8)
     ax.set_xlabel("env steps")
     ax.set_ylabel("evaluation mean return")
-    ax.legend(fontsize=7, title="DDPG from", title_fontsize=7)
+    ax.legend(fontsize=7, title="SB3 agent, from", title_fontsize=7)
     save_figure(fig, out.with_name(names["ddpg"]))
     fig, ax = plt.subplots(figsize=(5, 3.4))
     ax.set_ylim(-5, 105)
@@ -615,7 +635,7 @@ def floors(record: dict[str, Any], cfg: BenchConfig) -> list[dict[str, Any]]:
            {"floor": "piga >= 95% with at most half the sequences PlaNet-style needs for 80%",
             "measured": f"piga {piga_n or 'never'}, PlaNet-style {planet_n or 'never'}",
             "met": bool(piga_n and planet_n and piga_n <= planet_n / 2)}]
-    state = [r for r in record["ddpg"] if r["obs"] == "state"]
+    state = [r for r in record["ddpg"] if (r["algo"], r["obs"]) == ("ddpg", "state")]
     reached = [r for r in state if (r["metrics"]["first_step_reaching_minus_200"] or math.inf) <= 30000]
     out.append({"floor": "DDPG from state reaches -200 within 30k steps in >= 2 of 3 seeds",
                 "measured": f"{len(reached)} of {len(state)}", "met": len(reached) >= 2})
@@ -634,6 +654,7 @@ def floors(record: dict[str, Any], cfg: BenchConfig) -> list[dict[str, Any]]:
 
 AGENT_LABELS = {"piga": "piga", "planet": "PlaNet-style", "ddpg-state": "DDPG from the true state",
                 "ddpg-latent": "DDPG from an autoencoder's latent", "ddpg-pixels": "DDPG from pixels",
+                "sac-state": "SAC from the true state", "sac-latent": "SAC from an autoencoder's latent", "sac-pixels": "SAC from pixels",
                 "oracle": "oracle (true state and physics)"}
 """The agents' names in the summary table."""
 
@@ -661,13 +682,13 @@ def summary_table(records: dict[str, dict[str, Any]], cfg: BenchConfig) -> str:
     plans once every action-repeat steps), with its ratio to piga's median over all of piga's runs."""
     groups: dict[tuple[str, int], list[dict[str, Any]]] = {}  # (agent label key, sequences or env steps): the seeds' records
     for job in jobs_for(cfg):
-        key = f"ddpg-{job.obs}" if job.agent == "ddpg" else job.agent
+        key = f"{job.algo}-{job.obs}" if job.agent == "ddpg" else job.agent
         groups.setdefault((key, job.sequences or job.steps), []).append(records[job.name])
     piga_ms = statistics.median(r["plan_ms"] for (agent, _), runs in groups.items() if agent == "piga" for r in runs)
     sweep_at = "1.4" if "1.4" in (f"{m:g}" for m in parse_range(cfg.sweep)) else None  # the records' sweep keys
 
     def counts(others: int, planet: int) -> str:
-        return f"{others} episodes" + ("" if planet == others else f", PlaNet-style {planet}")
+        return f"{others} episode{'s' * (others != 1)}" + ("" if planet == others else f", PlaNet-style {planet}")
 
     lines = [f"| agent | training data | training time (one thread) | success x1.0 ({counts(cfg.episodes, cfg.planet_episode_count)}; "
              f"per seed) | mean return | success x1.4 ({counts(cfg.sweep_episodes, sweep_episodes(cfg, 'planet'))}) | goal images "
@@ -683,7 +704,7 @@ def summary_table(records: dict[str, dict[str, Any]], cfg: BenchConfig) -> str:
             data = f"{size // 1000 if size % 1000 == 0 else size / 1000:g}k env steps{seeds}"
         seconds = [r["train_seconds"] + r.get("metrics", {}).get("autoencoder_train_seconds", 0.0) for r in runs if "train_seconds" in r]
         train = _minutes(seconds) if seconds else ""
-        if agent == "ddpg-latent" and seconds:
+        if agent.endswith("-latent") and seconds:
             train += " (autoencoder included)"
         x14 = _per_seed([r["sweep"][sweep_at]["success_rate"] for r in runs]) + told if sweep_at else ""
         if agent == "piga":
@@ -719,11 +740,13 @@ def markdown(record: dict[str, Any]) -> str:
                      f"{row['return_mean']:.1f} | {row['train_seconds_mean']:.0f} |")
     o = record["oracle"]
     lines += [f"\nOracle: {100 * o['success_rate']:.0f}% success, mean return {o['mean_return']:.1f}.\n",
-              "## DDPG\n", f"![DDPG learning curves]({record['figures']['ddpg']})\n", "| observation | seed | steps | first step at >= -200 | final eval return | success | train s |",
-              "|---|---|---|---|---|---|---|"]
+              "## DDPG (and SAC, its stronger sibling)\n", f"![DDPG learning curves]({record['figures']['ddpg']})\n",
+              "| algorithm | observation | seed | steps | first step at >= -200 | final eval return | success | train s |",
+              "|---|---|---|---|---|---|---|---|"]
     for r in record["ddpg"]:
         final = r["metrics"]["final_eval_mean_return"]
-        lines.append(f"| {r['obs']} | {r['seed']} | {r['metrics']['steps']} | {r['metrics']['first_step_reaching_minus_200'] or 'never'} | "
+        lines.append(f"| {r['algo'].upper()} | {r['obs']} | {r['seed']} | {r['metrics']['steps']} | "
+                     f"{r['metrics']['first_step_reaching_minus_200'] or 'never'} | "
                      f"{'n/a' if final is None else f'{final:.1f}'} | {100 * r['control']['success_rate']:.0f}% | "
                      f"{r['metrics']['train_seconds']:.0f}" + _autoencoder_seconds(r['metrics']) + " |")
     lines += ["\n## Zero-shot gravity sweep (piga and the oracle told the multiplier; baselines not told)\n",
@@ -805,11 +828,11 @@ def main() -> int:
     record["sample_efficiency"] = rows
     record["oracle"] = records["oracle"]["control"]
     ddpg = []
-    for obs, _, seeds in cfg.ddpg_runs:
+    for algo, obs, _, seeds in sb3_runs(cfg):
         for seed in seeds:
-            kept = records[f"ddpg-{obs}-s{seed}"]
-            ddpg.append({"obs": obs, "seed": seed, "metrics": kept["metrics"], "control": kept["control"]})
-            print(f"ddpg-{obs}-s{seed}: first -200 at {kept['metrics']['first_step_reaching_minus_200']}", flush=True)
+            kept = records[f"{algo}-{obs}-s{seed}"]
+            ddpg.append({"algo": algo, "obs": obs, "seed": seed, "metrics": kept["metrics"], "control": kept["control"]})
+            print(f"{algo}-{obs}-s{seed}: first -200 at {kept['metrics']['first_step_reaching_minus_200']}", flush=True)
     record["ddpg"] = ddpg
     multipliers = parse_range(cfg.sweep)
     best = {agent: best_run(record, agent) for agent in ("piga", "planet", "ddpg")}

@@ -31,8 +31,18 @@ def bench():
 
 def test_the_budget_preset_has_one_job_per_run(bench) -> None:
     names = [job.name for job in bench.jobs_for(bench.PRESETS["budget"])]
-    assert len(names) == len(set(names)) == 12 + 5 + 5 + 1  # piga 4 x 3, planet 3 + 2, DDPG 3 + 1 + 1, oracle
-    assert "planet-n2000-s1" in names and "ddpg-pixels-s0" in names and names[-1] == "oracle"
+    assert len(names) == len(set(names)) == 12 + 5 + 5 + 1 + 1  # piga 4 x 3, planet 3 + 2, DDPG 3 + 1 + 1, SAC 1, oracle
+    assert "planet-n2000-s1" in names and "ddpg-pixels-s0" in names and "sac-pixels-s0" in names and names[-1] == "oracle"
+
+
+def test_the_committed_records_are_kept_by_the_budget_preset(bench) -> None:
+    """A change to the preset or to a job's spec must not silently discard hours of committed runs."""
+    cfg = bench.PRESETS["budget"]
+    folder = ROOT / "results" / "baselines_runs"
+    committed = {path.stem for path in (folder / "records").glob("*.json")}
+    jobs = [job for job in bench.jobs_for(cfg) if job.name in committed]
+    assert len(jobs) == len(committed) >= 17  # every committed record is a job of the preset
+    assert [job.name for job in jobs if bench.kept_record(folder, job, cfg) is None] == []
 
 
 def test_a_record_is_reused_only_for_the_same_settings(bench, tmp_path: Path) -> None:
@@ -79,7 +89,8 @@ def test_the_summary_table_has_a_row_per_agent_and_size_over_its_seeds(bench) ->
             record["metrics"] = {"autoencoder_train_seconds": 300.0} if job.obs == "latent" else {}
         records[job.name] = record
     rows = [line.split(" | ") for line in bench.summary_table(records, cfg).splitlines()[2:]]
-    assert len(rows) == 4 + 3 + 3 + 1  # piga's 4 sizes, PlaNet-style's 3, DDPG's 3 observations, the oracle
+    assert len(rows) == 4 + 3 + 3 + 1 + 1  # piga's 4 sizes, PlaNet-style's 3, DDPG's 3 observations, SAC's 1, the oracle
+    assert [r[0] for r in rows[-3:]] == ["| DDPG from pixels", "| SAC from pixels", "| oracle (true state and physics)"]
     planet_500 = next(r for r in rows if r[0] == "| PlaNet-style" and r[1].startswith("500 "))
     assert planet_500[1:6] == ["500 random-action sequences (2 seeds)", "10\u201320 min", "100%, 50%", "\u2212180.0",
                                "0%, 0% (not told)"]
