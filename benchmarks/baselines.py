@@ -37,10 +37,11 @@ torch thread) on a 2-core AMD EPYC, measured as process CPU time while other job
 machine, so roughly what an idle core takes: a PlaNet-style training step 0.54 s (16 x 20 model steps
 of 2 frames), a piga training step 0.145 s, latent CEM 0.17 s per control step (one plan of ~0.34 s
 per 2 steps), a DDPG step from pixels 0.37 s once learning starts, from the latent 0.020 s,
-from the state 0.011 s; SAC from pixels about 0.6 s. One run each: PlaNet-style 108 min (12000 steps, whatever the data size) and
-its episodes 23 min (x1.0 and the sweep); piga 7-8 min (at least 3000 steps) on up to 250 sequences,
+from the state 0.011 s; SAC from pixels about 0.6 s. One run each: PlaNet-style 108 min (12000 steps,
+whatever the data size) and its episodes 23 min (x1.0 and the sweep); piga 7-8 min (at least 3000 steps) on up to 250 sequences,
 16 min on 500 (16 epochs); DDPG from the state 5 min (30k), from the latent 12 min (30k, autoencoder
-included), from pixels 64 min (20k); SAC from pixels about 3 h (20k). An older CPU takes longer (the records name each job's machine).
+included), from pixels 64 min (20k); SAC from pixels about 3 h (20k). An older CPU takes longer (the
+records name each job's machine).
 ``--estimate`` adds them up (jobs packed longest first on ``--workers`` cores):
 
 | preset | what | collect | training (core-h) | PlaNet-style episodes (core-h) | other episodes (core-h) | wall on 2 idle cores |
@@ -53,8 +54,7 @@ it cut: PlaNet-style has one seed per point and a second at 500 and 2000 sequenc
 are almost two hours each), its points are where it might reach 80% rather than where piga does, DDPG
 from pixels gets 20k steps (10k of them the zoo's random warm-up, so 10k of learning; the paper's DDPG
 from pixels failed), SAC from pixels 20k (learning from step 100) and DDPG from the latent 30k, not
-the paper's 80k. The results page states the
-budget spent (training seconds per run).
+the paper's 80k. The results page states the budget spent (training seconds per run).
 
 Numbers of the ``tiny`` preset check the pipeline only; they are no result.
 """
@@ -231,10 +231,8 @@ def estimate(cfg: BenchConfig) -> dict[str, float]:
     """Core-seconds per part from :data:`COST_S` (upper bounds: measured under load), and the wall
     time on ``workers`` cores (jobs packed longest first, a PlaNet-style run's episodes with its
     training; the other episodes, a few minutes, spread evenly)."""
-    piga = [train_cost(cfg, "piga", n) for n in cfg.sizes for _ in cfg.seeds]
-    planet_runs = [n for n in cfg.planet_size_list for _ in cfg.planet_seeds_at(n)]  # a size per run
-    planet = [train_cost(cfg, "planet", n) for n in planet_runs]
-    ddpg = [train_cost(cfg, f"{algo}_{obs}", steps=steps) for algo, obs, steps, seeds in sb3_runs(cfg) for _ in seeds]
+    runs = {agent: [job for job in jobs_for(cfg) if job.agent == agent] for agent in AGENTS}
+    piga, planet, ddpg = ([job_train_cost(cfg, job) for job in runs[agent]] for agent in ("piga", "planet", "ddpg"))
     step = cfg.episode_steps
     sweep = [m for m in parse_range(cfg.sweep) if m != 1.0]  # x1.0 is the run's own evaluation
 
@@ -244,9 +242,8 @@ def estimate(cfg: BenchConfig) -> dict[str, float]:
                 + (agent == "piga") * len(cfg.goal_angles) * max(1, cfg.episodes // 5))
 
     per_planet = episodes("planet") * step * COST_S["planet_plan_step"]  # one PlaNet-style run's episodes
-    planet_eval = len(planet_runs) * per_planet
-    others = [("piga", len(cfg.sizes) * len(cfg.seeds)), ("oracle", 1),
-              ("ddpg", sum(len(seeds) for _, _, _, seeds in sb3_runs(cfg)))]
+    planet_eval = len(runs["planet"]) * per_planet
+    others = [(agent, len(runs[agent])) for agent in ("piga", "oracle", "ddpg")]
     other_eval = sum(count * episodes(agent) for agent, count in others) * step * COST_S["piga_episode_step"]
     collect = sum(n * 1.2 for n in set(cfg.sizes + cfg.planet_size_list)) * COST_S["collect_sequence"] / cfg.workers
     jobs = piga + [t + per_planet for t in planet] + ddpg  # a PlaNet-style run's episodes follow its training
@@ -261,11 +258,6 @@ def estimate(cfg: BenchConfig) -> dict[str, float]:
 
 AGENTS = ("piga", "planet", "ddpg", "oracle")
 """The kinds of job, as ``--only`` takes them (besides job names); "ddpg" are the SB3 runs, SAC's included."""
-
-
-def sb3_runs(cfg: BenchConfig) -> list[tuple[str, str, int, tuple[int, ...]]]:
-    """The SB3 runs as (algorithm, observation, env steps, seeds): DDPG's, then SAC's."""
-    return [("ddpg", *run) for run in cfg.ddpg_runs] + [("sac", *run) for run in cfg.sac_runs]
 
 
 @dataclass(frozen=True)
@@ -293,8 +285,15 @@ def jobs_for(cfg: BenchConfig) -> list[Job]:
             for agent, sizes, seeds_at in (("piga", cfg.sizes, cfg.piga_seeds_at), ("planet", cfg.planet_size_list, cfg.planet_seeds_at))
             for n in sizes for seed in seeds_at(n)]
     jobs += [Job(f"{algo}-{obs}-s{seed}", "ddpg", seed=seed, obs=obs, steps=steps, algo=algo)
-             for algo, obs, steps, seeds in sb3_runs(cfg) for seed in seeds]
+             for algo, runs in (("ddpg", cfg.ddpg_runs), ("sac", cfg.sac_runs)) for obs, steps, seeds in runs for seed in seeds]
     return jobs + [Job("oracle", "oracle")]
+
+
+def job_train_cost(cfg: BenchConfig, job: Job) -> float:
+    """:func:`train_cost` of one job (0 for the oracle, which is not trained)."""
+    if job.agent in ("piga", "planet"):
+        return train_cost(cfg, job.agent, job.sequences)
+    return train_cost(cfg, f"{job.algo}_{job.obs}", steps=job.steps) if job.agent == "ddpg" else 0.0
 
 
 def job_spec(job: Job, cfg: BenchConfig) -> dict[str, Any]:
@@ -504,14 +503,8 @@ def run_all(cfg: BenchConfig, folder: Path, only: tuple[str, ...] = AGENTS) -> d
     largest = max(cfg.sizes + cfg.planet_size_list)
     needs = {job.sequences or largest for job in todo if job.agent in ("piga", "planet") or job.obs == "latent"}
     files = {n: data_file(cfg, folder, n) for n in sorted(needs)}
-
-    def cost(job: Job) -> float:
-        if job.agent in ("piga", "planet"):
-            return train_cost(cfg, job.agent, job.sequences)
-        return train_cost(cfg, f"{job.algo}_{job.obs}", steps=job.steps) if job.agent == "ddpg" else 0.0
-
     args = [(job, cfg, folder, None if job.agent == "oracle" else files.get(job.sequences or largest, data_path(folder, largest)))
-            for job in sorted(todo, key=lambda j: -cost(j))]
+            for job in sorted(todo, key=lambda j: -job_train_cost(cfg, j))]
     if cfg.workers <= 1 or len(args) <= 1:
         done = dict(map(_run_task, args))
     else:
@@ -652,11 +645,17 @@ def floors(record: dict[str, Any], cfg: BenchConfig) -> list[dict[str, Any]]:
     return out
 
 
-AGENT_LABELS = {"piga": "piga", "planet": "PlaNet-style", "ddpg-state": "DDPG from the true state",
-                "ddpg-latent": "DDPG from an autoencoder's latent", "ddpg-pixels": "DDPG from pixels",
-                "sac-state": "SAC from the true state", "sac-latent": "SAC from an autoencoder's latent", "sac-pixels": "SAC from pixels",
-                "oracle": "oracle (true state and physics)"}
-"""The agents' names in the summary table."""
+AGENT_LABELS = {"piga": "piga", "planet": "PlaNet-style", "oracle": "oracle (true state and physics)"}
+"""The agents' names in the summary table; an SB3 run's is "ALGO from" its observation's (:data:`OBS_LABELS`)."""
+OBS_LABELS = {"state": "the true state", "latent": "an autoencoder's latent", "pixels": "pixels"}
+
+
+def agent_label(key: str) -> str:
+    """The summary table's name of an agent key: "piga", "planet", "oracle" or "ALGO-OBS" ("sac-pixels")."""
+    if key in AGENT_LABELS:
+        return AGENT_LABELS[key]
+    algo, obs = key.split("-")
+    return f"{algo.upper()} from {OBS_LABELS[obs]}"
 
 
 def _num(x: float, digits: int = 1) -> str:
@@ -718,7 +717,7 @@ def summary_table(records: dict[str, dict[str, Any]], cfg: BenchConfig) -> str:
         if agent == "planet":
             per_step = statistics.median(r["plan_ms"] / r["action_repeat"] for r in runs)
             plan = f"{per_step:.0f} ms ({per_step / piga_ms:.0f}x piga)"
-        cells = [AGENT_LABELS[agent], data, train, _per_seed([r["control"]["success_rate"] for r in runs]),
+        cells = [agent_label(agent), data, train, _per_seed([r["control"]["success_rate"] for r in runs]),
                  _num(statistics.mean(r["control"]["mean_return"] for r in runs)), x14, goal, plan]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
@@ -828,11 +827,10 @@ def main() -> int:
     record["sample_efficiency"] = rows
     record["oracle"] = records["oracle"]["control"]
     ddpg = []
-    for algo, obs, _, seeds in sb3_runs(cfg):
-        for seed in seeds:
-            kept = records[f"{algo}-{obs}-s{seed}"]
-            ddpg.append({"algo": algo, "obs": obs, "seed": seed, "metrics": kept["metrics"], "control": kept["control"]})
-            print(f"{algo}-{obs}-s{seed}: first -200 at {kept['metrics']['first_step_reaching_minus_200']}", flush=True)
+    for job in (job for job in jobs_for(cfg) if job.agent == "ddpg"):
+        kept = records[job.name]
+        ddpg.append({"algo": job.algo, "obs": job.obs, "seed": job.seed, "metrics": kept["metrics"], "control": kept["control"]})
+        print(f"{job.name}: first -200 at {kept['metrics']['first_step_reaching_minus_200']}", flush=True)
     record["ddpg"] = ddpg
     multipliers = parse_range(cfg.sweep)
     best = {agent: best_run(record, agent) for agent in ("piga", "planet", "ddpg")}
