@@ -28,8 +28,9 @@ A job whose record has the same settings is not run again, so an interrupted ben
 where it stopped, on this machine or another; the checkpoints are needed only until the record
 exists (for ``results/baselines`` the records are committed, the checkpoints and data are not).
 ``--only piga,oracle`` runs those kinds of job only, ``--only planet-n2000-s1`` that job. ``OUT.json``, ``OUT.md`` and the figures
-``OUT-sample_efficiency.png``, ``OUT-ddpg.png`` and ``OUT-sweep.png`` are written (atomically) once
-every job has a record; they read the records only. Each agent's sweep, goal images and plan time
+``OUT-sample_efficiency.png``, ``OUT-ddpg.png`` and ``OUT-sweep.png`` are written (atomically) at the
+end of every invocation; they read the records only, those there are: while some jobs have none, the
+page names them, their cells read "pending", and each floor names the pending runs that could change it. Each agent's sweep, goal images and plan time
 are those of its best run at x1.0.
 
 **Cost.** :data:`COST_S` holds the CPU seconds of one unit of each kind of work (one process, one
@@ -517,17 +518,18 @@ def run_all(cfg: BenchConfig, folder: Path, only: tuple[str, ...] = AGENTS) -> d
     return {**kept, **done}
 
 
-def best_run(record: dict[str, Any], agent: str) -> str:
+def best_run(record: dict[str, Any], agent: str) -> str | None:
     """The name of ``agent``'s run ("piga", "planet" or "ddpg") with the highest success at x1.0 (then the
     highest mean return, then the most data): the one the gravity sweep, the goal images and the plan
     times use, so that each agent is shown at its best. The PlaNet-style runs differ by more than data
-    size (a run on 500 sequences beat one on 2000 in the budget preset), so "the largest" would not do."""
+    size (a run on 500 sequences beat one on 2000 in the budget preset), so "the largest" would not do.
+    None while none of the agent's runs has a record."""
     if agent == "ddpg":  # DDPG's own runs (the paper's baseline), not SAC's
         runs = [(f"ddpg-{r['obs']}-s{r['seed']}", r["control"], 0) for r in record["ddpg"] if r["algo"] == "ddpg"]
     else:
         runs = [(f"{agent}-n{row['sequences']}-s{run['seed']}", run["control"], row["sequences"])
                 for row in record["sample_efficiency"] if row["agent"] == agent for run in row["runs"]]
-    return max(runs, key=lambda r: (r[1]["success_rate"], r[1]["mean_return"], r[2]))[0]
+    return max(runs, key=lambda r: (r[1]["success_rate"], r[1]["mean_return"], r[2]))[0] if runs else None
 
 
 def goal_images(piga_run: Path, cfg: BenchConfig, folder: Path) -> list[dict[str, Any]]:
@@ -569,7 +571,7 @@ def figures(record: dict[str, Any], out: Path) -> dict[str, str]:
     names = {part: f"{out.name}-{part}.png" for part in ("sample_efficiency", "ddpg", "sweep")}
     fig, axes = plt.subplots(1, 2, figsize=(9, 3.4), layout="constrained")
     for agent, color in (("piga", "C0"), ("planet", "C1")):
-        rows = [r for r in record["sample_efficiency"] if r["agent"] == agent]
+        rows = [r for r in record["sample_efficiency"] if r["agent"] == agent and r["runs"]]  # sizes with a record
         label = "piga" if agent == "piga" else "PlaNet-style"
         for ax, key, mean_key in ((axes[0], "success_rate", "success_mean"), (axes[1], "mean_return", "return_mean")):
             scale = 100 if key == "success_rate" else 1
@@ -577,9 +579,10 @@ def figures(record: dict[str, Any], out: Path) -> dict[str, str]:
                 ax.scatter([r["sequences"]] * len(r["runs"]), [scale * run["control"][key] for run in r["runs"]], color=color, s=12, alpha=0.5)
             ax.plot([r["sequences"] for r in rows], [scale * r[mean_key] for r in rows], "-o", color=color, label=label)
     oracle = record["oracle"]
-    axes[0].axhline(100 * oracle["success_rate"], color="gray", ls="--", label="oracle")
-    axes[1].axhline(oracle["mean_return"], color="gray", ls="--", label="oracle")
-    sizes = sorted({r["sequences"] for r in record["sample_efficiency"]})
+    if oracle is not None:
+        axes[0].axhline(100 * oracle["success_rate"], color="gray", ls="--", label="oracle")
+        axes[1].axhline(oracle["mean_return"], color="gray", ls="--", label="oracle")
+    sizes = sorted({r["sequences"] for r in record["sample_efficiency"] if r["runs"]})
     axes[0].set_ylim(-5, 105)
     for ax, ylabel in ((axes[0], "success (%)"), (axes[1], "mean return")):
         ax.set_xscale("log")
@@ -588,7 +591,8 @@ def figures(record: dict[str, Any], out: Path) -> dict[str, str]:
         ax.set_xlabel("training sequences")
         ax.set_ylabel(ylabel)
     axes[0].legend(fontsize=7)
-    fig.suptitle("sample efficiency at gravity x1.0 (dots: seeds; line: mean)", fontsize=9)
+    waiting = f"; part-way, {len(record['pending'])} runs pending" if record["pending"] else ""
+    fig.suptitle(f"sample efficiency at gravity x1.0 (dots: seeds; line: mean{waiting})", fontsize=9)
     save_figure(fig, out.with_name(names["sample_efficiency"]))
     fig, ax = plt.subplots(figsize=(5, 3.4))
     for i, (algo, obs) in enumerate(dict.fromkeys((r["algo"], r["obs"]) for r in record["ddpg"])):
@@ -616,32 +620,40 @@ def figures(record: dict[str, Any], out: Path) -> dict[str, str]:
     return names
 
 
-def floors(record: dict[str, Any], cfg: BenchConfig) -> list[dict[str, Any]]:
-    """The comparison's floors (the bars a fair result must clear), each with what this run measured."""
+def floors(record: dict[str, Any], cfg: BenchConfig, pending: tuple[Job, ...] = ()) -> list[dict[str, Any]]:
+    """The comparison's floors (the bars a fair result must clear), each with what the runs with a record
+    measured, and the ``pending`` jobs (still without a record) that could change it."""
     def smallest(agent: str, rate: float) -> int | None:
-        sizes = [row["sequences"] for row in record["sample_efficiency"] if row["agent"] == agent and row["success_mean"] >= rate]
+        sizes = [row["sequences"] for row in record["sample_efficiency"]
+                 if row["agent"] == agent and row["runs"] and row["success_mean"] >= rate]
         return min(sizes) if sizes else None
 
+    def floor(text: str, measured: str, met: bool, agents: tuple[str, ...], **match: str) -> dict[str, Any]:
+        waiting = [job.name for job in pending if job.agent in agents and all(getattr(job, k) == v for k, v in match.items())]
+        return {"floor": text, "measured": measured, "met": met, "pending": waiting}
+
     planet_n, piga_n = smallest("planet", 0.8), smallest("piga", 0.95)
-    out = [{"floor": f"PlaNet-style >= 80% success at x1.0 ({cfg.planet_episode_count} episodes)",
-            "measured": f"first at {planet_n} sequences" if planet_n else "at no size", "met": planet_n is not None},
-           {"floor": "piga >= 95% with at most half the sequences PlaNet-style needs for 80%",
-            "measured": f"piga {piga_n or 'never'}, PlaNet-style {planet_n or 'never'}",
-            "met": bool(piga_n and planet_n and piga_n <= planet_n / 2)}]
+    out = [floor(f"PlaNet-style >= 80% success at x1.0 ({cfg.planet_episode_count} episodes)",
+                 f"first at {planet_n} sequences" if planet_n else "at no size", planet_n is not None, ("planet",)),
+           floor("piga >= 95% with at most half the sequences PlaNet-style needs for 80%",
+                 f"piga {piga_n or 'never'}, PlaNet-style {planet_n or 'never'}",
+                 bool(piga_n and planet_n and piga_n <= planet_n / 2), ("piga", "planet"))]
     state = [r for r in record["ddpg"] if (r["algo"], r["obs"]) == ("ddpg", "state")]
     reached = [r for r in state if (r["metrics"]["first_step_reaching_minus_200"] or math.inf) <= 30000]
-    out.append({"floor": "DDPG from state reaches -200 within 30k steps in >= 2 of 3 seeds",
-                "measured": f"{len(reached)} of {len(state)}", "met": len(reached) >= 2})
+    out.append(floor("DDPG from state reaches -200 within 30k steps in >= 2 of 3 seeds", f"{len(reached)} of {len(state)}",
+                     len(reached) >= 2, ("ddpg",), algo="ddpg", obs="state"))
     sweep = record["sweep"]
     at = [i for i, m in enumerate(sweep["multipliers"]) if abs(m - 1.4) < 1e-9]
     if at:
         cells = dict(zip(sweep["agents"], sweep["success"][at[0]]))
-        out.append({"floor": "at x1.4 piga within 5 points of the oracle (PlaNet-style: measured, not told)",
-                    "measured": f"piga {100 * cells['piga']:.0f}%, oracle {100 * cells['oracle']:.0f}%, "
-                                f"PlaNet-style {100 * cells['planet']:.0f}%",
-                    "met": cells["piga"] >= cells["oracle"] - 0.05})
-    ratio = record["plan_time"]["ratio_per_step"]
-    out.append({"floor": "piga plans >= 20x faster per env step", "measured": f"{ratio:.1f}x", "met": ratio >= 20})
+        shown = {agent: f"{100 * cells[agent]:.0f}%" if agent in cells else "no record yet" for agent in ("piga", "oracle", "planet")}
+        out.append(floor("at x1.4 piga within 5 points of the oracle (PlaNet-style: measured, not told)",
+                         f"piga {shown['piga']}, oracle {shown['oracle']}, PlaNet-style {shown['planet']}",
+                         "piga" in cells and "oracle" in cells and cells["piga"] >= cells["oracle"] - 0.05,
+                         ("piga", "oracle", "planet")))
+    ratio = record["plan_time"]["ratio_per_step"] if record["plan_time"] else None
+    out.append(floor("piga plans >= 20x faster per env step", "no record yet" if ratio is None else f"{ratio:.1f}x",
+                     ratio is not None and ratio >= 20, ("piga", "planet")))
     return out
 
 
@@ -663,9 +675,9 @@ def _num(x: float, digits: int = 1) -> str:
     return f"{x:.{digits}f}".replace("-", "\u2212")
 
 
-def _per_seed(values: list[float]) -> str:
-    """Success rates, one per seed: "100%, 40%"."""
-    return ", ".join(f"{100 * v:.0f}%" for v in values)
+def _per_seed(values: list[float | None]) -> str:
+    """Success rates, one per seed, None for a run still without a record: "100%, 40%", "100%, pending"."""
+    return ", ".join("pending" if v is None else f"{100 * v:.0f}%" for v in values)
 
 
 def _minutes(seconds: list[float]) -> str:
@@ -674,16 +686,18 @@ def _minutes(seconds: list[float]) -> str:
     return f"{lo} min" if lo == hi else f"{lo}\u2013{hi} min"
 
 
-def summary_table(records: dict[str, dict[str, Any]], cfg: BenchConfig) -> str:
+def summary_table(records: dict[str, dict[str, Any] | None], cfg: BenchConfig) -> str:
     """The README's Baselines table, from the job records alone: a row per agent and data size (piga,
     PlaNet-style), per DDPG observation and for the oracle, each cell over the row's seeds. x1.4 is each
     run's own sweep cell; the plan time is the median over the row's runs, per env step (PlaNet-style
-    plans once every action-repeat steps), with its ratio to piga's median over all of piga's runs."""
-    groups: dict[tuple[str, int], list[dict[str, Any]]] = {}  # (agent label key, sequences or env steps): the seeds' records
+    plans once every action-repeat steps), with its ratio to piga's median over all of piga's runs.
+    A job still without a record (None) is "pending" in its seed's cells, and left out of the others."""
+    groups: dict[tuple[str, int], list[dict[str, Any] | None]] = {}  # (agent label key, sequences or env steps): the seeds' records
     for job in jobs_for(cfg):
         key = f"{job.algo}-{job.obs}" if job.agent == "ddpg" else job.agent
         groups.setdefault((key, job.sequences or job.steps), []).append(records[job.name])
-    piga_ms = statistics.median(r["plan_ms"] for (agent, _), runs in groups.items() if agent == "piga" for r in runs)
+    piga_plans = [r["plan_ms"] for (agent, _), runs in groups.items() if agent == "piga" for r in runs if r]
+    piga_ms = statistics.median(piga_plans) if piga_plans else None
     sweep_at = "1.4" if "1.4" in (f"{m:g}" for m in parse_range(cfg.sweep)) else None  # the records' sweep keys
 
     def counts(others: int, planet: int) -> str:
@@ -692,8 +706,9 @@ def summary_table(records: dict[str, dict[str, Any]], cfg: BenchConfig) -> str:
     lines = [f"| agent | training data | training time (one thread) | success x1.0 ({counts(cfg.episodes, cfg.planet_episode_count)}; "
              f"per seed) | mean return | success x1.4 ({counts(cfg.sweep_episodes, sweep_episodes(cfg, 'planet'))}) | goal images "
              "| plan time per env step |", "|---|---|---|---|---|---|---|---|"]
-    for (agent, size), runs in groups.items():
-        seeds = f" ({len(runs)} seeds)" if len(runs) > 1 else ""
+    for (agent, size), all_runs in groups.items():
+        runs = [r for r in all_runs if r is not None]
+        seeds = f" ({len(all_runs)} seeds)" if len(all_runs) > 1 else ""
         told = " (told)" if agent in ("piga", "oracle") else " (not told)"
         if agent in ("piga", "planet"):
             data = f"{size} random-action sequences{seeds}"
@@ -705,27 +720,40 @@ def summary_table(records: dict[str, dict[str, Any]], cfg: BenchConfig) -> str:
         train = _minutes(seconds) if seconds else ""
         if agent.endswith("-latent") and seconds:
             train += " (autoencoder included)"
-        x14 = _per_seed([r["sweep"][sweep_at]["success_rate"] for r in runs]) + told if sweep_at else ""
-        if agent == "piga":
+        x14 = _per_seed([r and r["sweep"][sweep_at]["success_rate"] for r in all_runs]) + told if sweep_at else ""
+        if agent == "piga" and runs:
             goals = [g["piga"]["success_rate"] for r in runs for g in r["goals"]]
             goal = f"{len(runs[0]['goals'])} goal{'s' * (len(runs[0]['goals']) != 1)}, {100 * sum(goals) / len(goals):.0f}%"
             plan = f"{statistics.median(r['plan_ms'] for r in runs):.1f} ms"
-        elif agent == "oracle":
+        elif agent in ("piga", "oracle"):
             goal = plan = ""
         else:
             goal, plan = "refused (no goal input)", ""
-        if agent == "planet":
+        if agent == "planet" and runs:
             per_step = statistics.median(r["plan_ms"] / r["action_repeat"] for r in runs)
-            plan = f"{per_step:.0f} ms ({per_step / piga_ms:.0f}x piga)"
-        cells = [agent_label(agent), data, train, _per_seed([r["control"]["success_rate"] for r in runs]),
-                 _num(statistics.mean(r["control"]["mean_return"] for r in runs)), x14, goal, plan]
+            plan = f"{per_step:.0f} ms" + (f" ({per_step / piga_ms:.0f}x piga)" if piga_ms else "")
+        mean_return = _num(statistics.mean(r["control"]["mean_return"] for r in runs)) if runs else "pending"
+        cells = [agent_label(agent), data, train, _per_seed([r and r["control"]["success_rate"] for r in all_runs]),
+                 mean_return, x14, goal, plan]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
+
+
+def _pending_note(record: dict[str, Any]) -> list[str]:
+    """The page's warning while some jobs have no record: which, and that the tables cover the others only."""
+    if not record["pending"]:
+        return []
+    total = record["job_count"]
+    return [f"**Part-way: {total - len(record['pending'])} of {total} runs have a record.** Still to run: "
+            + ", ".join(f"`{name}`" for name in record["pending"])
+            + ". Every table and figure below reads the runs with a record only, and a floor that a pending run "
+              "could change says so. The same command continues the rest.\n"]
 
 
 def markdown(record: dict[str, Any]) -> str:
     """The results page."""
     lines = [f"# Baselines: piga, PlaNet-style and DDPG\n\nCommand: `{record['command']}` (preset `{record['preset']}`)\n",
+             *_pending_note(record),
              (f"Machine: {record['machine']['cpu']}, {record['machine']['cores']} cores, torch {record['machine']['torch']}, "
              f"each training on one torch thread.\n"),
              "## Summary\n\nThe README's table. A row per agent and data size, each cell over the row's seeds; x1.4 is "
@@ -735,10 +763,14 @@ def markdown(record: dict[str, Any]) -> str:
              f"![sample efficiency]({record['figures']['sample_efficiency']})\n",
              "| sequences | agent | seeds | success (mean) | mean return | train s (mean) |", "|---|---|---|---|---|---|"]
     for row in record["sample_efficiency"]:
-        lines.append(f"| {row['sequences']} | {row['agent']} | {len(row['runs'])} | {100 * row['success_mean']:.0f}% | "
-                     f"{row['return_mean']:.1f} | {row['train_seconds_mean']:.0f} |")
+        seeds = str(len(row["runs"])) + (f" ({len(row['pending_seeds'])} pending)" if row["pending_seeds"] else "")
+        if row["runs"]:
+            lines.append(f"| {row['sequences']} | {row['agent']} | {seeds} | {100 * row['success_mean']:.0f}% | "
+                         f"{row['return_mean']:.1f} | {row['train_seconds_mean']:.0f} |")
+        else:
+            lines.append(f"| {row['sequences']} | {row['agent']} | {seeds} | pending | pending | pending |")
     o = record["oracle"]
-    lines += [f"\nOracle: {100 * o['success_rate']:.0f}% success, mean return {o['mean_return']:.1f}.\n",
+    lines += ["\nOracle: " + ("pending" if o is None else f"{100 * o['success_rate']:.0f}% success, mean return {o['mean_return']:.1f}") + ".\n",
               "## DDPG (and SAC, its stronger sibling)\n", f"![DDPG learning curves]({record['figures']['ddpg']})\n",
               "| algorithm | observation | seed | steps | first step at >= -200 | final eval return | success | train s |",
               "|---|---|---|---|---|---|---|---|"]
@@ -748,9 +780,12 @@ def markdown(record: dict[str, Any]) -> str:
                      f"{r['metrics']['first_step_reaching_minus_200'] or 'never'} | "
                      f"{'n/a' if final is None else f'{final:.1f}'} | {100 * r['control']['success_rate']:.0f}% | "
                      f"{r['metrics']['train_seconds']:.0f}" + _autoencoder_seconds(r['metrics']) + " |")
+    sb3_pending = [name for name in record["pending"] if name.startswith(("ddpg-", "sac-"))]
+    if sb3_pending:
+        lines.append(f"\nPending: {', '.join(sb3_pending)}.")
     lines += ["\n## Zero-shot gravity sweep (piga and the oracle told the multiplier; baselines not told)\n",
               f"![gravity sweep]({record['figures']['sweep']})\n",
-              "Runs (each agent's best at x1.0; they also give the goal images and plan times): "
+              "Runs (each agent's best at x1.0 among the runs with a record; they also give the goal images and plan times): "
               + ", ".join(f"{agent} `{Path(run).name}`" for agent, run in record["sweep"]["runs"].items()) + ".\n",
               "| gravity x | " + " | ".join(record["sweep"]["agents"]) + " |", "|---|" + "---|" * len(record["sweep"]["agents"])]
     for m, cells in zip(record["sweep"]["multipliers"], record["sweep"]["success"]):
@@ -759,21 +794,78 @@ def markdown(record: dict[str, Any]) -> str:
     for g in record["goals"]:
         lines.append(f"| {g['goal_deg']:g} | {g['read_deg']:.2f} | {100 * g['piga']['success_rate']:.0f}% | {g['planet']} | {g['ddpg']} |")
     p = record["plan_time"]
-    lines += [(f"\n## Plan time (median over one {record['config']['episode_steps']}-step episode in one process, measured after each run's training)\n\npiga plans at every env step: {p['piga_ms']:.2f} ms. "
-               f"PlaNet-style plans once every {p['planet_action_repeat']} env steps (its action repeat): {p['planet_ms']:.1f} ms a plan, "
-               f"{p['planet_ms_per_step']:.1f} ms per env step. Ratio per env step {p['ratio_per_step']:.1f}x "
-               f"(per plan {p['ratio']:.1f}x)."
-               + ("" if len(set(p["machines"])) == 1 else
-                  f" The two were measured on different machines (CPU family/model {p['machines'][0]} and {p['machines'][1]}), "
-                  "so the ratio mixes their speeds.") + "\n"),
-              "## Floors\n", "| floor | measured | met |", "|---|---|---|",
-              *[f"| {f['floor']} | {f['measured']} | {'yes' if f['met'] else 'no'} |" for f in record["floors"]], "",
+    heading = (f"\n## Plan time (median over one {record['config']['episode_steps']}-step episode in one process, "
+               "measured after each run's training)\n")
+    if p is None:
+        lines += [heading, "Pending: it needs a record of piga and of the PlaNet-style model.\n"]
+    else:
+        lines += [heading + (f"\npiga plans at every env step: {p['piga_ms']:.2f} ms. "
+                  f"PlaNet-style plans once every {p['planet_action_repeat']} env steps (its action repeat): {p['planet_ms']:.1f} ms a plan, "
+                  f"{p['planet_ms_per_step']:.1f} ms per env step. Ratio per env step {p['ratio_per_step']:.1f}x "
+                  f"(per plan {p['ratio']:.1f}x).")
+                  + ("" if len(set(p["machines"])) == 1 else
+                     f" The two were measured on different machines (CPU family/model {p['machines'][0]} and {p['machines'][1]}), "
+                     "so the ratio mixes their speeds.") + "\n"]
+    lines += ["## Floors\n", "| floor | measured | met |", "|---|---|---|",
+              *[f"| {f['floor']} | {f['measured']} | {'yes' if f['met'] else 'no'}"
+                + (f" (so far: {len(f['pending'])} run{'s' * (len(f['pending']) != 1)} pending)" if f["pending"] else "") + " |"
+                for f in record["floors"]], "",
               (f"## Compute\n\nTraining seconds are in the tables, one torch thread per run, {record['config']['workers']} runs side by side. "
                "Each run's record names the machine it ran on:\n"),
               *[f"- {m}: {', '.join(names)}" for m, names in record["job_machines"].items()],
               (f"\nWall time of the invocation that wrote this page: {record['wall_seconds'] / 60:.1f} min (records kept "
                "from earlier invocations are not run again).\n")]
     return "\n".join(lines) + "\n"
+
+
+def aggregate(records: dict[str, dict[str, Any] | None], cfg: BenchConfig) -> dict[str, Any]:
+    """The comparison from the job records (:func:`run_all`; None for a job still to run): sample
+    efficiency, the oracle, the SB3 runs, the sweep of each agent's best run, its goal images, the plan
+    times, the machines, the floors and the README's table. Every part reads only the records there are,
+    and ``pending`` names the jobs still to run, so that a page written part-way says what it lacks."""
+    pending = tuple(job for job in jobs_for(cfg) if records[job.name] is None)
+    out: dict[str, Any] = {"pending": [job.name for job in pending], "job_count": len(records)}
+    rows = []
+    for agent, sizes, seeds_at in (("piga", cfg.sizes, cfg.piga_seeds_at), ("planet", cfg.planet_size_list, cfg.planet_seeds_at)):
+        for n in sizes:
+            kept = {seed: records[f"{agent}-n{n}-s{seed}"] for seed in seeds_at(n)}
+            runs = [{"seed": seed, "train_seconds": r["train_seconds"], "control": r["control"]} for seed, r in kept.items() if r]
+            row: dict[str, Any] = {"sequences": n, "agent": agent, "runs": runs,
+                                   "pending_seeds": [seed for seed, r in kept.items() if r is None]}
+            if runs:
+                row.update(success_mean=statistics.mean(r["control"]["success_rate"] for r in runs),
+                           return_mean=statistics.mean(r["control"]["mean_return"] for r in runs),
+                           train_seconds_mean=statistics.mean(r["train_seconds"] for r in runs))
+            rows.append(row)
+    out["sample_efficiency"] = rows
+    out["oracle"] = records["oracle"]["control"] if records["oracle"] else None
+    out["ddpg"] = [{"algo": job.algo, "obs": job.obs, "seed": job.seed, "metrics": kept["metrics"], "control": kept["control"]}
+                   for job in jobs_for(cfg) if job.agent == "ddpg" and (kept := records[job.name])]
+    best = {agent: run for agent in ("piga", "planet", "ddpg") if (run := best_run(out, agent))}
+    runs = {"piga": best.get("piga"), "oracle": "oracle" if records["oracle"] else None,
+            "planet": best.get("planet"), "ddpg": best.get("ddpg")}
+    sweep_agents = [agent for agent, run in runs.items() if run]
+    multipliers = parse_range(cfg.sweep)
+    out["sweep"] = {"agents": sweep_agents, "multipliers": multipliers, "runs": best,
+                    "success": [[records[runs[a]]["sweep"][f"{m:g}"]["success_rate"] for a in sweep_agents] for m in multipliers]}
+    out["goals"] = records[best["piga"]]["goals"] if "piga" in best else []
+    out["plan_time"] = None
+    if "piga" in best and "planet" in best:
+        piga_ms, planet_ms = records[best["piga"]]["plan_ms"], records[best["planet"]]["plan_ms"]  # planet: per plan
+        repeat = records[best["planet"]]["action_repeat"]
+        out["plan_time"] = {"piga_ms": piga_ms, "planet_ms": planet_ms, "planet_action_repeat": repeat,
+                            "planet_ms_per_step": planet_ms / repeat, "ratio": planet_ms / piga_ms,
+                            "ratio_per_step": planet_ms / repeat / piga_ms,
+                            "machines": [records[best[a]]["machine"].get("cpu_family_model", "?") for a in ("piga", "planet")]}
+    machines: dict[str, list[str]] = {}
+    for name, kept in records.items():
+        if kept:
+            m = kept["machine"]
+            machines.setdefault(f"{m['cpu']} (family/model {m.get('cpu_family_model', '?')}), {m['cores']} cores", []).append(name)
+    out["job_machines"] = machines
+    out["floors"] = floors(out, cfg, pending)
+    out["summary_table"] = summary_table(records, cfg)
+    return out
 
 
 def main() -> int:
@@ -784,7 +876,7 @@ def main() -> int:
     p.add_argument("--estimate", action="store_true", help="print the estimated cost of the preset and exit")
     p.add_argument("--only", default=",".join(AGENTS), metavar="JOBS",
                    help=f"run only these jobs, comma-separated: kinds ({', '.join(AGENTS)}) or names (planet-n500-s1); "
-                        "the results are written once every job has a record")
+                        "the results are written from every record there is, the jobs still to run named")
     args = p.parse_args()
     cfg = PRESETS[args.preset] if args.workers is None else replace(PRESETS[args.preset], workers=args.workers)
     only = tuple(args.only.split(","))
@@ -804,54 +896,15 @@ def main() -> int:
     out = Path(args.out)
     folder = out.with_name(out.name + "_runs")
     folder.mkdir(parents=True, exist_ok=True)
-    record: dict[str, Any] = {"command": shlex.join(["python", *sys.argv]), "preset": args.preset, "config": asdict(cfg),
-                              "machine": machine(), "estimate_seconds": cost}
+    # the command that writes the whole page (any --only runs some jobs only), and this invocation's own
+    command = ["python", "benchmarks/baselines.py", "--out", args.out, "--preset", args.preset]
+    record: dict[str, Any] = {"command": shlex.join(command), "invocation": shlex.join(["python", *sys.argv]),
+                              "preset": args.preset, "config": asdict(cfg), "machine": machine(), "estimate_seconds": cost}
     records = run_all(cfg, folder, only)
-    missing = [name for name, kept in records.items() if kept is None]
-    if missing:
-        print(f"{len(records) - len(missing)} of {len(records)} jobs have a record; still to run: {', '.join(missing)}. "
-              f"{out.with_suffix('.md')} is written once all have one.", flush=True)
-        return 0
-    rows = []
-    for agent, sizes, seeds_at in (("piga", cfg.sizes, cfg.piga_seeds_at), ("planet", cfg.planet_size_list, cfg.planet_seeds_at)):
-        for n in sizes:
-            runs = []
-            for seed in seeds_at(n):
-                kept = records[f"{agent}-n{n}-s{seed}"]
-                runs.append({"seed": seed, "train_seconds": kept["train_seconds"], "control": kept["control"]})
-                print(f"{agent}-n{n}-s{seed}: success {runs[-1]['control']['success_rate']:.2f}", flush=True)
-            rows.append({"sequences": n, "agent": agent, "runs": runs,
-                         "success_mean": sum(r["control"]["success_rate"] for r in runs) / len(runs),
-                         "return_mean": sum(r["control"]["mean_return"] for r in runs) / len(runs),
-                         "train_seconds_mean": sum(r["train_seconds"] for r in runs) / len(runs)})
-    record["sample_efficiency"] = rows
-    record["oracle"] = records["oracle"]["control"]
-    ddpg = []
-    for job in (job for job in jobs_for(cfg) if job.agent == "ddpg"):
-        kept = records[job.name]
-        ddpg.append({"algo": job.algo, "obs": job.obs, "seed": job.seed, "metrics": kept["metrics"], "control": kept["control"]})
-        print(f"{job.name}: first -200 at {kept['metrics']['first_step_reaching_minus_200']}", flush=True)
-    record["ddpg"] = ddpg
-    multipliers = parse_range(cfg.sweep)
-    best = {agent: best_run(record, agent) for agent in ("piga", "planet", "ddpg")}
-    sweep_agents = ["piga", "oracle", "planet", "ddpg"]
-    record["sweep"] = {"agents": sweep_agents, "multipliers": multipliers, "runs": best,
-                       "success": [[records[best.get(a, a)]["sweep"][f"{m:g}"]["success_rate"] for a in sweep_agents]
-                                   for m in multipliers]}
-    record["goals"] = records[best["piga"]]["goals"]
-    piga_ms, planet_ms = records[best["piga"]]["plan_ms"], records[best["planet"]]["plan_ms"]  # planet: per plan
-    repeat = records[best["planet"]]["action_repeat"]
-    record["plan_time"] = {"piga_ms": piga_ms, "planet_ms": planet_ms, "planet_action_repeat": repeat,
-                           "planet_ms_per_step": planet_ms / repeat, "ratio": planet_ms / piga_ms,
-                           "ratio_per_step": planet_ms / repeat / piga_ms,
-                           "machines": [records[best[a]]["machine"].get("cpu_family_model", "?") for a in ("piga", "planet")]}
-    machines: dict[str, list[str]] = {}
-    for name, kept in records.items():
-        m = kept["machine"]
-        machines.setdefault(f"{m['cpu']} (family/model {m.get('cpu_family_model', '?')}), {m['cores']} cores", []).append(name)
-    record["job_machines"] = machines
-    record["floors"] = floors(record, cfg)
-    record["summary_table"] = summary_table(records, cfg)
+    record.update(aggregate(records, cfg))
+    if record["pending"]:
+        print(f"{len(records) - len(record['pending'])} of {len(records)} jobs have a record; still to run: "
+              f"{', '.join(record['pending'])}. {out.with_suffix('.md')} is written from the records there are.", flush=True)
     record["wall_seconds"] = time.monotonic() - started
     record["figures"] = figures(record, out)
     write_json(out.with_suffix(".json"), record)

@@ -99,3 +99,72 @@ def test_the_summary_table_has_a_row_per_agent_and_size_over_its_seeds(bench) ->
     assert piga_25[5:8] == ["100%, 100%, 100% (told)", "2 goals, 75%", "2.0 ms |"]
     latent = next(r for r in rows if "latent" in r[0])
     assert latent[2] == "15 min (autoencoder included)" and latent[6] == "refused (no goal input)"
+
+
+def _records(bench, cfg) -> dict:
+    """A full set of synthetic job records, with every field the results page reads."""
+    machine = {"cpu": "test CPU", "cpu_family_model": "1/2", "cores": 2}
+    sweep_keys = [f"{m:g}" for m in bench.parse_range(cfg.sweep)]
+    records = {}
+    for job in bench.jobs_for(cfg):
+        success = 0.5 if job.agent == "planet" and job.sequences < 2000 else 1.0
+        record = {"machine": machine, "control": {"success_rate": success, "mean_return": -170.0},
+                  "sweep": {k: {"success_rate": 1.0 if job.agent in ("piga", "oracle") else 0.0} for k in sweep_keys}}
+        if job.agent != "oracle":
+            record["train_seconds"] = 600.0
+        if job.agent == "piga":
+            record.update(plan_ms=2.0, goals=[{"goal_deg": 10.0, "read_deg": 10.1, "piga": {"success_rate": 1.0},
+                                               "planet": "refused: no goal input", "ddpg": "refused: no goal input"}])
+        if job.agent == "planet":
+            record.update(plan_ms=300.0, action_repeat=2)
+        if job.agent == "ddpg":
+            record["metrics"] = {"learning_curve": [{"step": 1000, "eval_mean_return": -1200.0}, {"step": 2000, "eval_mean_return": -190.0}],
+                                 "first_step_reaching_minus_200": 2000, "final_eval_mean_return": -190.0, "steps": job.steps,
+                                 "train_seconds": 600.0}
+        records[job.name] = record
+    return records
+
+
+def _page(bench, cfg, records, tmp_path: Path) -> tuple[dict, str]:
+    record = {"command": "python benchmarks/baselines.py --out X --preset budget", "preset": "budget",
+              "config": bench.asdict(cfg), "machine": {"cpu": "test CPU", "cores": 2, "torch": "2"}, "wall_seconds": 1.0,
+              **bench.aggregate(records, cfg)}
+    record["figures"] = bench.figures(record, tmp_path / "b")
+    return record, bench.markdown(record)
+
+
+def test_a_page_written_part_way_names_the_runs_still_to_run(bench, tmp_path: Path) -> None:
+    """The page is written from the records there are (a PlaNet-style run takes hours), and says what it lacks."""
+    cfg = bench.PRESETS["budget"]
+    records = _records(bench, cfg)
+    record, page = _page(bench, cfg, records, tmp_path)
+    assert record["pending"] == [] and "Part-way" not in page and "pending" not in page
+    assert [f["met"] for f in record["floors"]] == [True, True, True, True, True]  # PlaNet-style: 80% first at 2000
+
+    for name in ("planet-n2000-s0", "planet-n2000-s1", "ddpg-state-s1", "sac-pixels-s0"):
+        records[name] = None
+    record, page = _page(bench, cfg, records, tmp_path)
+    assert record["pending"] == ["planet-n2000-s0", "planet-n2000-s1", "ddpg-state-s1", "sac-pixels-s0"]
+    assert "**Part-way: 20 of 24 runs have a record.**" in page
+    floors = {f["floor"][:20]: f for f in record["floors"]}
+    planet = floors["PlaNet-style >= 80% "]
+    assert (planet["measured"], planet["met"]) == ("at no size", False)  # on the records there are, and says it may change
+    assert planet["pending"] == ["planet-n2000-s0", "planet-n2000-s1"] and "no (so far: 2 runs pending)" in page
+    assert floors["DDPG from state reac"]["measured"] == "2 of 2" and floors["DDPG from state reac"]["pending"] == ["ddpg-state-s1"]
+    row = next(r for r in record["summary_table"].splitlines() if r.startswith("| PlaNet-style | 2000 "))
+    assert row.split(" | ")[3:5] == ["pending, pending", "pending"]
+    assert "| DDPG from the true state | 30k env steps (3 seeds) | 10 min | 100%, pending, 100% |" in record["summary_table"]
+    assert record["sweep"]["runs"]["planet"] == "planet-n500-s0"  # the best among those with a record (a tie: the most data)
+
+    for job in bench.jobs_for(cfg):  # nothing but the oracle: a page still, of what there is
+        if job.agent != "oracle":
+            records[job.name] = None
+    record, page = _page(bench, cfg, records, tmp_path)
+    assert record["sweep"]["agents"] == ["oracle"] and record["plan_time"] is None and record["goals"] == []
+    assert "Pending: it needs a record of piga and of the PlaNet-style model." in page
+
+
+def test_the_readme_baselines_table_is_the_committed_summary() -> None:
+    """The README's Baselines table is results/baselines.json's summary_table, verbatim (regenerate, then paste)."""
+    summary = json.loads((ROOT / "results" / "baselines.json").read_text())["summary_table"]
+    assert summary in (ROOT / "README.md").read_text()
