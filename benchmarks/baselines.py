@@ -604,7 +604,8 @@ def figures(record: dict[str, Any], out: Path) -> dict[str, str]:
     ax.axhline(-200, color="gray", ls="--", lw=0.8)
     ax.set_xlabel("env steps")
     ax.set_ylabel("evaluation mean return")
-    ax.legend(fontsize=7, title="SB3 agent, from", title_fontsize=7)
+    if record["ddpg"]:
+        ax.legend(fontsize=7, title="SB3 agent, from", title_fontsize=7)
     save_figure(fig, out.with_name(names["ddpg"]))
     fig, ax = plt.subplots(figsize=(5, 3.4))
     ax.set_ylim(-5, 105)
@@ -651,9 +652,10 @@ def floors(record: dict[str, Any], cfg: BenchConfig, pending: tuple[Job, ...] = 
                          f"piga {shown['piga']}, oracle {shown['oracle']}, PlaNet-style {shown['planet']}",
                          "piga" in cells and "oracle" in cells and cells["piga"] >= cells["oracle"] - 0.05,
                          ("piga", "oracle", "planet")))
-    ratio = record["plan_time"]["ratio_per_step"] if record["plan_time"] else None
-    out.append(floor("piga plans >= 20x faster per env step", "no record yet" if ratio is None else f"{ratio:.1f}x",
-                     ratio is not None and ratio >= 20, ("piga", "planet")))
+    ratios = [(row["ratio_per_step"], row["cpu"]) for row in record["plan_time"] if row["ratio_per_step"]]
+    out.append(floor("piga plans >= 20x faster per env step (timed on the same CPU)",
+                     ", ".join(f"{ratio:.1f}x on CPU {cpu}" for ratio, cpu in ratios) or "no CPU with both timed yet",
+                     bool(ratios) and min(ratio for ratio, _ in ratios) >= 20, ("piga", "planet")))
     return out
 
 
@@ -686,18 +688,43 @@ def _minutes(seconds: list[float]) -> str:
     return f"{lo} min" if lo == hi else f"{lo}\u2013{hi} min"
 
 
+def cpu_of(record: dict[str, Any]) -> str:
+    """The CPU a record was measured on, as its family/model ("AMD EPYC" names generations of different speeds)."""
+    return record["machine"].get("cpu_family_model", "?")
+
+
+def plan_times(records: dict[str, dict[str, Any] | None], cfg: BenchConfig) -> list[dict[str, Any]]:
+    """piga's and PlaNet-style's plan times per env step (median over their runs; PlaNet-style plans once
+    every action-repeat steps), a row per CPU their records were measured on, with the ratio where both
+    were timed on the same CPU: runs on different machines are not compared."""
+    per_cpu: dict[str, dict[str, list[tuple[str, dict[str, Any]]]]] = {}
+    for job in jobs_for(cfg):
+        record = records[job.name]
+        if record and job.agent in ("piga", "planet"):
+            per_cpu.setdefault(cpu_of(record), {"piga": [], "planet": []})[job.agent].append((job.name, record))
+    rows = []
+    for cpu, runs in per_cpu.items():
+        piga = statistics.median(r["plan_ms"] for _, r in runs["piga"]) if runs["piga"] else None
+        planet = statistics.median(r["plan_ms"] / r["action_repeat"] for _, r in runs["planet"]) if runs["planet"] else None
+        rows.append({"cpu": cpu, "piga_runs": [name for name, _ in runs["piga"]], "planet_runs": [name for name, _ in runs["planet"]],
+                     "piga_ms": piga, "planet_ms_per_step": planet,
+                     "planet_ms_per_plan": statistics.median(r["plan_ms"] for _, r in runs["planet"]) if runs["planet"] else None,
+                     "ratio_per_step": planet / piga if piga and planet else None})
+    return rows
+
+
 def summary_table(records: dict[str, dict[str, Any] | None], cfg: BenchConfig) -> str:
     """The README's Baselines table, from the job records alone: a row per agent and data size (piga,
     PlaNet-style), per DDPG observation and for the oracle, each cell over the row's seeds. x1.4 is each
     run's own sweep cell; the plan time is the median over the row's runs, per env step (PlaNet-style
-    plans once every action-repeat steps), with its ratio to piga's median over all of piga's runs.
+    plans once every action-repeat steps), with its ratio to piga's median on the same CPU
+    (:func:`plan_times`; the median of the runs' ratios), none where piga was not timed on it.
     A job still without a record (None) is "pending" in its seed's cells, and left out of the others."""
     groups: dict[tuple[str, int], list[dict[str, Any] | None]] = {}  # (agent label key, sequences or env steps): the seeds' records
     for job in jobs_for(cfg):
         key = f"{job.algo}-{job.obs}" if job.agent == "ddpg" else job.agent
         groups.setdefault((key, job.sequences or job.steps), []).append(records[job.name])
-    piga_plans = [r["plan_ms"] for (agent, _), runs in groups.items() if agent == "piga" for r in runs if r]
-    piga_ms = statistics.median(piga_plans) if piga_plans else None
+    piga_ms = {row["cpu"]: row["piga_ms"] for row in plan_times(records, cfg) if row["piga_ms"]}
     sweep_at = "1.4" if "1.4" in (f"{m:g}" for m in parse_range(cfg.sweep)) else None  # the records' sweep keys
 
     def counts(others: int, planet: int) -> str:
@@ -731,7 +758,8 @@ def summary_table(records: dict[str, dict[str, Any] | None], cfg: BenchConfig) -
             goal, plan = "refused (no goal input)", ""
         if agent == "planet" and runs:
             per_step = statistics.median(r["plan_ms"] / r["action_repeat"] for r in runs)
-            plan = f"{per_step:.0f} ms" + (f" ({per_step / piga_ms:.0f}x piga)" if piga_ms else "")
+            ratios = [r["plan_ms"] / r["action_repeat"] / piga_ms[cpu_of(r)] for r in runs if cpu_of(r) in piga_ms]
+            plan = f"{per_step:.0f} ms" + (f" ({statistics.median(ratios):.0f}x piga)" if ratios else " (piga not timed on its CPU)")
         mean_return = _num(statistics.mean(r["control"]["mean_return"] for r in runs)) if runs else "pending"
         cells = [agent_label(agent), data, train, _per_seed([r and r["control"]["success_rate"] for r in all_runs]),
                  mean_return, x14, goal, plan]
@@ -793,19 +821,19 @@ def markdown(record: dict[str, Any]) -> str:
     lines += ["\n## Goal images\n", "| goal (deg) | read (deg) | piga success | PlaNet-style | DDPG |", "|---|---|---|---|---|"]
     for g in record["goals"]:
         lines.append(f"| {g['goal_deg']:g} | {g['read_deg']:.2f} | {100 * g['piga']['success_rate']:.0f}% | {g['planet']} | {g['ddpg']} |")
-    p = record["plan_time"]
-    heading = (f"\n## Plan time (median over one {record['config']['episode_steps']}-step episode in one process, "
-               "measured after each run's training)\n")
-    if p is None:
-        lines += [heading, "Pending: it needs a record of piga and of the PlaNet-style model.\n"]
-    else:
-        lines += [heading + (f"\npiga plans at every env step: {p['piga_ms']:.2f} ms. "
-                  f"PlaNet-style plans once every {p['planet_action_repeat']} env steps (its action repeat): {p['planet_ms']:.1f} ms a plan, "
-                  f"{p['planet_ms_per_step']:.1f} ms per env step. Ratio per env step {p['ratio_per_step']:.1f}x "
-                  f"(per plan {p['ratio']:.1f}x).")
-                  + ("" if len(set(p["machines"])) == 1 else
-                     f" The two were measured on different machines (CPU family/model {p['machines'][0]} and {p['machines'][1]}), "
-                     "so the ratio mixes their speeds.") + "\n"]
+    lines += [f"\n## Plan time (median per env step; each run timed over one {record['config']['episode_steps']}-step episode "
+              "in one process after its training, beside whatever else ran)\n",
+              "piga plans at every env step, PlaNet-style once every action-repeat steps. Plan times are compared only "
+              "on the same CPU (family/model).\n",
+              "| CPU | piga runs | piga ms per step | PlaNet-style runs | PlaNet-style ms per plan | per env step | ratio per env step |",
+              "|---|---|---|---|---|---|---|"]
+    for row in record["plan_time"]:
+        def ms(x: float | None, digits: int) -> str:
+            return "" if x is None else f"{x:.{digits}f}"
+        lines.append(f"| {row['cpu']} | {len(row['piga_runs'])} | {ms(row['piga_ms'], 2)} | {len(row['planet_runs'])} | "
+                     f"{ms(row['planet_ms_per_plan'], 1)} | {ms(row['planet_ms_per_step'], 1)} | "
+                     + ("" if row["ratio_per_step"] is None else f"{row['ratio_per_step']:.1f}x") + " |")
+    lines.append("")
     lines += ["## Floors\n", "| floor | measured | met |", "|---|---|---|",
               *[f"| {f['floor']} | {f['measured']} | {'yes' if f['met'] else 'no'}"
                 + (f" (so far: {len(f['pending'])} run{'s' * (len(f['pending']) != 1)} pending)" if f["pending"] else "") + " |"
@@ -849,14 +877,7 @@ def aggregate(records: dict[str, dict[str, Any] | None], cfg: BenchConfig) -> di
     out["sweep"] = {"agents": sweep_agents, "multipliers": multipliers, "runs": best,
                     "success": [[records[runs[a]]["sweep"][f"{m:g}"]["success_rate"] for a in sweep_agents] for m in multipliers]}
     out["goals"] = records[best["piga"]]["goals"] if "piga" in best else []
-    out["plan_time"] = None
-    if "piga" in best and "planet" in best:
-        piga_ms, planet_ms = records[best["piga"]]["plan_ms"], records[best["planet"]]["plan_ms"]  # planet: per plan
-        repeat = records[best["planet"]]["action_repeat"]
-        out["plan_time"] = {"piga_ms": piga_ms, "planet_ms": planet_ms, "planet_action_repeat": repeat,
-                            "planet_ms_per_step": planet_ms / repeat, "ratio": planet_ms / piga_ms,
-                            "ratio_per_step": planet_ms / repeat / piga_ms,
-                            "machines": [records[best[a]]["machine"].get("cpu_family_model", "?") for a in ("piga", "planet")]}
+    out["plan_time"] = plan_times(records, cfg)
     machines: dict[str, list[str]] = {}
     for name, kept in records.items():
         if kept:

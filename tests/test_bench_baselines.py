@@ -78,7 +78,8 @@ def test_the_summary_table_has_a_row_per_agent_and_size_over_its_seeds(bench) ->
     for job in bench.jobs_for(cfg):
         success = 0.5 if job.name == "planet-n500-s1" else 1.0
         control = {"success_rate": success, "mean_return": -200.0 if job.name == "planet-n500-s1" else -160.0}
-        record = {"control": control, "sweep": {"1.4": {"success_rate": 0.0 if job.agent in ("planet", "ddpg") else 1.0}}}
+        record = {"control": control, "sweep": {"1.4": {"success_rate": 0.0 if job.agent in ("planet", "ddpg") else 1.0}},
+                  "machine": {"cpu_family_model": "25/17"}}
         if job.agent != "oracle":
             record["train_seconds"] = 600.0 * (1 + job.seed)
         if job.agent == "piga":
@@ -143,6 +144,7 @@ def test_a_page_written_part_way_names_the_runs_still_to_run(bench, tmp_path: Pa
 
     for name in ("planet-n2000-s0", "planet-n2000-s1", "ddpg-state-s1", "sac-pixels-s0"):
         records[name] = None
+    records["planet-n100-s0"] = {**records["planet-n100-s0"], "machine": {"cpu": "other CPU", "cpu_family_model": "9/9", "cores": 2}}
     record, page = _page(bench, cfg, records, tmp_path)
     assert record["pending"] == ["planet-n2000-s0", "planet-n2000-s1", "ddpg-state-s1", "sac-pixels-s0"]
     assert "**Part-way: 20 of 24 runs have a record.**" in page
@@ -155,13 +157,17 @@ def test_a_page_written_part_way_names_the_runs_still_to_run(bench, tmp_path: Pa
     assert row.split(" | ")[3:5] == ["pending, pending", "pending"]
     assert "| DDPG from the true state | 30k env steps (3 seeds) | 10 min | 100%, pending, 100% |" in record["summary_table"]
     assert record["sweep"]["runs"]["planet"] == "planet-n500-s0"  # the best among those with a record (a tie: the most data)
+    # plan times are compared on the same CPU only: piga was not timed on planet-n100-s0's
+    assert [(row["cpu"], row["ratio_per_step"]) for row in record["plan_time"]] == [("1/2", 75.0), ("9/9", None)]
+    assert "| 150 ms (piga not timed on its CPU) |" in record["summary_table"] and "| 150 ms (75x piga) |" in record["summary_table"]
+    assert floors["piga plans >= 20x fa"]["measured"] == "75.0x on CPU 1/2"
 
     for job in bench.jobs_for(cfg):  # nothing but the oracle: a page still, of what there is
         if job.agent != "oracle":
             records[job.name] = None
     record, page = _page(bench, cfg, records, tmp_path)
-    assert record["sweep"]["agents"] == ["oracle"] and record["plan_time"] is None and record["goals"] == []
-    assert "Pending: it needs a record of piga and of the PlaNet-style model." in page
+    assert record["sweep"]["agents"] == ["oracle"] and record["goals"] == []
+    assert record["plan_time"] == [] and record["floors"][-1]["measured"] == "no CPU with both timed yet"
 
 
 def test_the_readme_baselines_table_is_the_committed_summary() -> None:
