@@ -612,7 +612,9 @@ def figures(record: dict[str, Any], out: Path) -> dict[str, str]:
     sweep = record["sweep"]
     for j, agent in enumerate(sweep["agents"]):
         told = agent in ("piga", "oracle")
+        wide = agent in ("piga", "planet")  # drawn wide under the thin oracle and DDPG, so that equal lines both show
         ax.plot(sweep["multipliers"], [100 * row[j] for row in sweep["success"]], "-o" if told else "--s",
+                lw=4 if wide else 1.5, ms=9 if wide else 5, alpha=0.55 if wide else 1.0, zorder=1 if wide else 2,
                 label=f"{agent} ({'told' if told else 'not told'})")
     ax.set_xlabel("gravity multiplier")
     ax.set_ylabel("success (%)")
