@@ -788,7 +788,7 @@ def markdown(record: dict[str, Any]) -> str:
              f"each training on one torch thread.\n"),
              "## Summary\n\nThe README's table. A row per agent and data size, each cell over the row's seeds; x1.4 is "
              "each run's own sweep cell; the plan time is the median of the row's runs, per env step, and its ratio "
-             "to piga's median over all of piga's runs.\n", record["summary_table"],
+             "to piga's median on the same CPU (none where piga was not timed on it).\n", record["summary_table"],
              "## Sample efficiency (gravity x1.0)\n",
              f"![sample efficiency]({record['figures']['sample_efficiency']})\n",
              "| sequences | agent | seeds | success (mean) | mean return | train s (mean) |", "|---|---|---|---|---|---|"]
@@ -840,7 +840,8 @@ def markdown(record: dict[str, Any]) -> str:
               *[f"| {f['floor']} | {f['measured']} | {'yes' if f['met'] else 'no'}"
                 + (f" (so far: {len(f['pending'])} run{'s' * (len(f['pending']) != 1)} pending)" if f["pending"] else "") + " |"
                 for f in record["floors"]], "",
-              (f"## Compute\n\nTraining seconds are in the tables, one torch thread per run, {record['config']['workers']} runs side by side. "
+              ("## Compute\n\nTraining seconds are in the tables, one torch thread per run, most runs beside a second job on "
+               "the machine's other core (jobs of one invocation, or invocations with `--workers 1` side by side). "
                "Each run's record names the machine it ran on:\n"),
               *[f"- {m}: {', '.join(names)}" for m, names in record["job_machines"].items()],
               (f"\nWall time of the invocation that wrote this page: {record['wall_seconds'] / 60:.1f} min (records kept "
