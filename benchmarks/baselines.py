@@ -715,12 +715,29 @@ def plan_times(records: dict[str, dict[str, Any] | None], cfg: BenchConfig) -> l
     return rows
 
 
+def _plan_cell(runs: list[dict[str, Any]], per_step: Any, piga_ms: dict[str, float], digits: int, ratio: bool = False) -> str:
+    """A summary cell of plan time per env step: the median of ``per_step(record)`` over the runs of each CPU
+    (their family/model named where the runs span several), with the ratio to piga's median on that CPU
+    (``ratio``): a median over runs on different machines would mean nothing."""
+    by_cpu: dict[str, list[float]] = {}
+    for r in runs:
+        by_cpu.setdefault(cpu_of(r), []).append(per_step(r))
+    cells = []
+    for cpu, values in by_cpu.items():
+        ms = statistics.median(values)
+        cell = f"{ms:.{digits}f} ms"
+        if ratio:
+            cell += f" ({ms / piga_ms[cpu]:.0f}x piga)" if cpu in piga_ms else " (piga not timed on its CPU)"
+        cells.append(cell + (f" on CPU {cpu}" if len(by_cpu) > 1 else ""))
+    return "; ".join(cells)
+
+
 def summary_table(records: dict[str, dict[str, Any] | None], cfg: BenchConfig) -> str:
     """The README's Baselines table, from the job records alone: a row per agent and data size (piga,
     PlaNet-style), per DDPG observation and for the oracle, each cell over the row's seeds. x1.4 is each
     run's own sweep cell; the plan time is the median over the row's runs, per env step (PlaNet-style
-    plans once every action-repeat steps), with its ratio to piga's median on the same CPU
-    (:func:`plan_times`; the median of the runs' ratios), none where piga was not timed on it.
+    plans once every action-repeat steps), per CPU, with its ratio to piga's median on the same CPU
+    (:func:`plan_times`), none where piga was not timed on it.
     A job still without a record (None) is "pending" in its seed's cells, and left out of the others."""
     groups: dict[tuple[str, int], list[dict[str, Any] | None]] = {}  # (agent label key, sequences or env steps): the seeds' records
     for job in jobs_for(cfg):
@@ -753,15 +770,13 @@ def summary_table(records: dict[str, dict[str, Any] | None], cfg: BenchConfig) -
         if agent == "piga" and runs:
             goals = [g["piga"]["success_rate"] for r in runs for g in r["goals"]]
             goal = f"{len(runs[0]['goals'])} goal{'s' * (len(runs[0]['goals']) != 1)}, {100 * sum(goals) / len(goals):.0f}%"
-            plan = f"{statistics.median(r['plan_ms'] for r in runs):.1f} ms"
+            plan = _plan_cell(runs, lambda r: r["plan_ms"], piga_ms, digits=1)
         elif agent in ("piga", "oracle"):
             goal = plan = ""
         else:
             goal, plan = "refused (no goal input)", ""
         if agent == "planet" and runs:
-            per_step = statistics.median(r["plan_ms"] / r["action_repeat"] for r in runs)
-            ratios = [r["plan_ms"] / r["action_repeat"] / piga_ms[cpu_of(r)] for r in runs if cpu_of(r) in piga_ms]
-            plan = f"{per_step:.0f} ms" + (f" ({statistics.median(ratios):.0f}x piga)" if ratios else " (piga not timed on its CPU)")
+            plan = _plan_cell(runs, lambda r: r["plan_ms"] / r["action_repeat"], piga_ms, digits=0, ratio=True)
         mean_return = _num(statistics.mean(r["control"]["mean_return"] for r in runs)) if runs else "pending"
         cells = [agent_label(agent), data, train, _per_seed([r and r["control"]["success_rate"] for r in all_runs]),
                  mean_return, x14, goal, plan]

@@ -13,11 +13,18 @@ step and scores them with torch operators (the planner's engine before its compi
 ``Pendulum`` module. The differences are the overhead removed; their success and return show
 that the planner's decisions did not change.
 
+With ``--planet RUN_DIR`` (a ``piga-baseline planet`` run), the PlaNet-style agent (latent CEM with
+PlaNet's settings: horizon 12, 10 iterations, 1000 candidates, top 100) is timed too, in the same
+process on the same episodes, and the page gives the ratio per env step: PlaNet-style plans once
+every action-repeat env steps and holds the action between, piga at every step. This is the
+benchmark's plan-time ratio measured in one run, on one machine, rather than across records.
+
 It trains nothing. Give it a run folder of ``piga-train-model``, for example the control
 benchmark's model (``piga-collect --out data/pendulum.h5`` then ``piga-train-model
 data/pendulum.h5 --out runs/pendulum``):
 
     python benchmarks/plan_time.py --model runs/pendulum --out results/plan_time
+    python benchmarks/plan_time.py --model runs/pendulum --planet runs/planet --no-reference --out results/plan_time_planet
 
 Writes OUT.json and OUT.md (with the machine). Nothing else should run on the machine meanwhile.
 """
@@ -27,6 +34,7 @@ from __future__ import annotations
 import argparse
 import shlex
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -36,8 +44,10 @@ from torch import Tensor
 from common import machine
 from agents.dynamics import PendulumDynamics
 from agents.mpc import MPCConfig, OracleAgent, PigaMPCAgent
+from agents.planet.planner import PlanetAgent
 from piga.atomic import atomic_output, write_json
 from piga.episodes import EpisodeConfig, run_episodes, summary_markdown
+from piga.baselines.planet_run import load_planet
 from piga.model import PhysicsModel
 from piga.physics import rollout
 from piga.runs import load_model
@@ -93,6 +103,25 @@ class UfuncDynamics:
     def executed(self, action: np.ndarray) -> None: ...
 
 
+PLANET = "PlaNet-style (latent CEM, PlaNet's settings)"
+"""The row label of the PlaNet-style agent."""
+
+
+def planet_ratio(rows: list[dict]) -> dict | None:
+    """PlaNet-style's median time per env step (per plan / env steps per plan) over piga's, from the
+    rows of one run; None without a PlaNet-style row."""
+    by = {row["agent"]: row for row in rows}
+    if PLANET not in by:
+        return None
+    piga_ms = by["piga"]["plan_ms_median"]
+    planet_plan = by[PLANET]["plan_ms_median"]
+    per_step = planet_plan / by[PLANET]["env_steps_per_plan"]
+    text = (f"Per env step, in this run: PlaNet-style {per_step:.1f} ms (a plan of {planet_plan:.1f} ms every "
+            f"{by[PLANET]['env_steps_per_plan']} env steps), piga {piga_ms:.2f} ms: piga plans {per_step / piga_ms:.0f}x faster.")
+    return {"piga_ms_per_step": piga_ms, "planet_ms_per_plan": planet_plan, "planet_ms_per_step": per_step,
+            "ratio_per_step": per_step / piga_ms, "text": text}
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--model", required=True, help="run folder of piga-train-model (a pendulum model)")
@@ -101,6 +130,7 @@ def main() -> int:
     p.add_argument("--steps", type=int, default=EpisodeConfig.steps, help="steps per episode (default %(default)s)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--no-reference", action="store_true", help="skip the two reference-engine rows")
+    p.add_argument("--planet", help="also time the PlaNet-style agent of this piga-baseline planet run (PlaNet's planner)")
     args = p.parse_args()
     torch.set_num_threads(1)
     model, _ = load_model(args.model)
@@ -115,16 +145,24 @@ def main() -> int:
         learned_dynamics = PendulumDynamics.of(model.system, model.integrator)  # type: ignore[arg-type]
         agents.append(("piga, numpy operators", PigaMPCAgent(model, mpc, dynamics=UfuncDynamics(learned_dynamics))))
         agents.append(("piga, nn.Module engine", PigaMPCAgent(model, mpc, dynamics=ModuleDynamics(model))))
+    repeat = {}  # label -> env steps per plan, for agents that hold an action
+    if args.planet:
+        planet_model, _ = load_planet(args.planet)
+        agents.append((PLANET, PlanetAgent(planet_model)))
+        repeat[PLANET] = planet_model.config.action_repeat
     rows = []
     for label, agent in agents:
-        result = run_episodes(agent, config)  # type: ignore[arg-type]
-        rows.append({"agent": label, **result["summary"]})
+        result = run_episodes(agent, replace(config, frame_stack=1) if label == PLANET else config)  # type: ignore[arg-type]
+        rows.append({"agent": label, **result["summary"], "env_steps_per_plan": repeat.get(label, 1)})
         s = rows[-1]
         print(f"{label}: plan {s['plan_ms_median']:.2f} ms median, {s['plan_ms_p95']:.2f} ms p95; "
               f"success {100 * s['success_rate']:.0f}%, mean return {s['mean_return']:.1f}")
     command = shlex.join(["python", *sys.argv])
     where = machine()
     cem = mpc.cem
+    ratio = planet_ratio(rows)
+    if ratio:
+        print(ratio["text"])
     md = "\n".join([
         "# Plan time per control step", "",
         f"Command: `{command}`", "",
@@ -136,12 +174,16 @@ def main() -> int:
         "with torch operators (\"numpy operators\"), and `piga.physics.rollout` on the model's `Pendulum` module "
         "(\"nn.Module engine\"). The planner's own engine is one numba-compiled loop that rolls and scores.", "",
         summary_markdown(rows),
+        *([] if ratio is None else [
+            "", f"PlaNet-style: `{args.planet}` (a `piga-baseline planet` run). Its row times its plans only: `act` at the "
+            "env steps where it plans (filtering the newest frame into its belief, then latent CEM with PlaNet's "
+            "settings); it holds the action in between.", "", ratio["text"]]),
     ])
     out = Path(args.out)
     with atomic_output(out.with_suffix(".md"), overwrite=True) as tmp:
         tmp.write_text(md)
     write_json(out.with_suffix(".json"), {"command": command, "machine": where, "model": args.model, "learned": learned,
-                                          "rows": rows}, overwrite=True)
+                                          "rows": rows, "planet": args.planet, "planet_ratio": ratio}, overwrite=True)
     print(f"wrote {out.with_suffix('.md')} and {out.with_suffix('.json')}")
     return 0
 

@@ -160,6 +160,10 @@ def test_a_page_written_part_way_names_the_runs_still_to_run(bench, tmp_path: Pa
     # plan times are compared on the same CPU only: piga was not timed on planet-n100-s0's
     assert [(row["cpu"], row["ratio_per_step"]) for row in record["plan_time"]] == [("1/2", 75.0), ("9/9", None)]
     assert "| 150 ms (piga not timed on its CPU) |" in record["summary_table"] and "| 150 ms (75x piga) |" in record["summary_table"]
+    # a row whose seeds ran on two CPUs gives each CPU's plan time: no median across machines
+    records["planet-n500-s1"] = {**records["planet-n500-s1"], "plan_ms": 100.0, "machine": records["planet-n100-s0"]["machine"]}
+    row = next(r for r in _page(bench, cfg, records, tmp_path)[0]["summary_table"].splitlines() if r.startswith("| PlaNet-style | 500 "))
+    assert row.endswith("| 150 ms (75x piga) on CPU 1/2; 50 ms (piga not timed on its CPU) on CPU 9/9 |")
     assert floors["piga plans >= 20x fa"]["measured"] == "75.0x on CPU 1/2"
 
     for job in bench.jobs_for(cfg):  # nothing but the oracle: a page still, of what there is
