@@ -32,6 +32,7 @@ Writes OUT.json and OUT.md (with the machine). Nothing else should run on the ma
 from __future__ import annotations
 
 import argparse
+import os
 import shlex
 import sys
 from dataclasses import replace
@@ -150,6 +151,7 @@ def main() -> int:
         planet_model, _ = load_planet(args.planet)
         agents.append((PLANET, PlanetAgent(planet_model)))
         repeat[PLANET] = planet_model.config.action_repeat
+    load_before = os.getloadavg()
     rows = []
     for label, agent in agents:
         result = run_episodes(agent, replace(config, frame_stack=1) if label == PLANET else config)  # type: ignore[arg-type]
@@ -159,6 +161,7 @@ def main() -> int:
               f"success {100 * s['success_rate']:.0f}%, mean return {s['mean_return']:.1f}")
     command = shlex.join(["python", *sys.argv])
     where = machine()
+    load = {"before": load_before, "after": os.getloadavg()}
     cem = mpc.cem
     ratio = planet_ratio(rows)
     if ratio:
@@ -167,13 +170,15 @@ def main() -> int:
         "# Plan time per control step", "",
         f"Command: `{command}`", "",
         f"Model: `{args.model}` (learned g = {learned['g']:.4f}, a = {learned['a']:.4f}). Machine: {where['cpu']}, "
-        f"{where['cores']} cores; one torch thread. Planner: CEM, {cem.candidates} candidates x {cem.horizon} steps x "
+        f"{where['cores']} cores; load average {load['before'][0]:.2f} before, {load['after'][0]:.2f} after (1 min); one torch "
+        f"thread. Planner: CEM, {cem.candidates} candidates x {cem.horizon} steps x "
         f"{cem.iterations} iterations, top {cem.elites}, warm start. Time per call of the agent's `act`: for the piga "
-        "agent, reading the state from the frames and planning; for the oracle, planning. The reference rows plan "
-        "with the same agent over slower engines of the same physics: five in-place numpy operators per step, scored "
-        "with torch operators (\"numpy operators\"), and `piga.physics.rollout` on the model's `Pendulum` module "
-        "(\"nn.Module engine\"). The planner's own engine is one numba-compiled loop that rolls and scores.", "",
-        summary_markdown(rows),
+        "agent, reading the state from the frames and planning; for the oracle, planning."
+        + ("" if args.no_reference else " The reference rows plan with the same agent over slower engines of the same "
+           "physics: five in-place numpy operators per step, scored with torch operators (\"numpy operators\"), and "
+           "`piga.physics.rollout` on the model's `Pendulum` module (\"nn.Module engine\").")
+        + " The planner's own engine is one numba-compiled loop that rolls and scores.", "",
+        summary_markdown(rows).rstrip(),
         *([] if ratio is None else [
             "", f"PlaNet-style: `{args.planet}` (a `piga-baseline planet` run). Its row times its plans only: `act` at the "
             "env steps where it plans (filtering the newest frame into its belief, then latent CEM with PlaNet's "
@@ -183,7 +188,8 @@ def main() -> int:
     with atomic_output(out.with_suffix(".md"), overwrite=True) as tmp:
         tmp.write_text(md)
     write_json(out.with_suffix(".json"), {"command": command, "machine": where, "model": args.model, "learned": learned,
-                                          "rows": rows, "planet": args.planet, "planet_ratio": ratio}, overwrite=True)
+                                          "load_average": load, "rows": rows, "planet": args.planet, "planet_ratio": ratio},
+               overwrite=True)
     print(f"wrote {out.with_suffix('.md')} and {out.with_suffix('.json')}")
     return 0
 

@@ -30,4 +30,5 @@ def test_plan_time_times_the_planet_agent_in_the_same_run(tiny_data: Path, tmp_p
     assert ratio["planet_ms_per_step"] == planet["plan_ms_median"] / 2
     assert ratio["ratio_per_step"] == ratio["planet_ms_per_step"] / rows["piga"]["plan_ms_median"] > 0
     page = out.with_suffix(".md").read_text()
-    assert "PlaNet-style" in page and f"{ratio['ratio_per_step']:.0f}x faster" in page
+    assert "PlaNet-style" in page and f"{ratio['ratio_per_step']:.0f}x faster" in page and "reference rows" not in page
+    assert len(record["load_average"]["before"]) == 3
