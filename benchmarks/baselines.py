@@ -802,8 +802,8 @@ def markdown(record: dict[str, Any]) -> str:
              (f"Machine: {record['machine']['cpu']}, {record['machine']['cores']} cores, torch {record['machine']['torch']}, "
              f"each training on one torch thread.\n"),
              "## Summary\n\nThe README's table. A row per agent and data size, each cell over the row's seeds; x1.4 is "
-             "each run's own sweep cell; the plan time is the median of the row's runs, per env step, and its ratio "
-             "to piga's median on the same CPU (none where piga was not timed on it).\n", record["summary_table"],
+             "each run's own sweep cell; the plan time is the median of the row's runs on each CPU, per env step, and "
+             "its ratio to piga's median on the same CPU (none where piga was not timed on it).\n", record["summary_table"],
              "## Sample efficiency (gravity x1.0)\n",
              f"![sample efficiency]({record['figures']['sample_efficiency']})\n",
              "| sequences | agent | seeds | success (mean) | mean return | train s (mean) |", "|---|---|---|---|---|---|"]
@@ -841,7 +841,8 @@ def markdown(record: dict[str, Any]) -> str:
     lines += [f"\n## Plan time (median per env step; each run timed over one {record['config']['episode_steps']}-step episode "
               "in one process after its training, beside whatever else ran)\n",
               "piga plans at every env step, PlaNet-style once every action-repeat steps. Plan times are compared only "
-              "on the same CPU (family/model).\n",
+              "on the same CPU (family/model). Where the records leave a CPU without piga, `benchmarks/plan_time.py "
+              "--model PIGA_RUN --planet PLANET_RUN` times both agents in one process (results/plan_time_planet.md).\n",
               "| CPU | piga runs | piga ms per step | PlaNet-style runs | PlaNet-style ms per plan | per env step | ratio per env step |",
               "|---|---|---|---|---|---|---|"]
     for row in record["plan_time"]:
