@@ -68,6 +68,7 @@ import math
 import shlex
 import statistics
 import sys
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -715,7 +716,7 @@ def plan_times(records: dict[str, dict[str, Any] | None], cfg: BenchConfig) -> l
     return rows
 
 
-def _plan_cell(runs: list[dict[str, Any]], per_step: Any, piga_ms: dict[str, float], digits: int, ratio: bool = False) -> str:
+def _plan_cell(runs: list[dict[str, Any]], per_step: Callable[[dict[str, Any]], float], piga_ms: dict[str, float], digits: int, ratio: bool = False) -> str:
     """A summary cell of plan time per env step: the median of ``per_step(record)`` over the runs of each CPU
     (their family/model named where the runs span several), with the ratio to piga's median on that CPU
     (``ratio``): a median over runs on different machines would mean nothing."""

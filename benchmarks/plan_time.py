@@ -45,10 +45,9 @@ from torch import Tensor
 from common import machine
 from agents.dynamics import PendulumDynamics
 from agents.mpc import MPCConfig, OracleAgent, PigaMPCAgent
-from agents.planet.planner import PlanetAgent
 from piga.atomic import atomic_output, write_json
+from piga.baselines.agents import baseline_agent
 from piga.episodes import EpisodeConfig, run_episodes, summary_markdown
-from piga.baselines.planet_run import load_planet
 from piga.model import PhysicsModel
 from piga.physics import rollout
 from piga.runs import load_model
@@ -146,16 +145,14 @@ def main() -> int:
         learned_dynamics = PendulumDynamics.of(model.system, model.integrator)  # type: ignore[arg-type]
         agents.append(("piga, numpy operators", PigaMPCAgent(model, mpc, dynamics=UfuncDynamics(learned_dynamics))))
         agents.append(("piga, nn.Module engine", PigaMPCAgent(model, mpc, dynamics=ModuleDynamics(model))))
-    repeat = {}  # label -> env steps per plan, for agents that hold an action
-    if args.planet:
-        planet_model, _ = load_planet(args.planet)
-        agents.append((PLANET, PlanetAgent(planet_model)))
-        repeat[PLANET] = planet_model.config.action_repeat
+    if args.planet:  # piga-control's PlaNet-style agent: PlaNet's planner settings
+        agents.append((PLANET, baseline_agent("planet", args.planet, seed=args.seed)))
     load_before = os.getloadavg()
     rows = []
     for label, agent in agents:
-        result = run_episodes(agent, replace(config, frame_stack=1) if label == PLANET else config)  # type: ignore[arg-type]
-        rows.append({"agent": label, **result["summary"], "env_steps_per_plan": repeat.get(label, 1)})
+        # each agent reads the frames it needs (PlaNet-style: the newest), and plans every `repeat` env steps
+        result = run_episodes(agent, replace(config, frame_stack=getattr(agent, "input_frames", config.frame_stack)))  # type: ignore[arg-type]
+        rows.append({"agent": label, **result["summary"], "env_steps_per_plan": getattr(agent, "repeat", 1)})
         s = rows[-1]
         print(f"{label}: plan {s['plan_ms_median']:.2f} ms median, {s['plan_ms_p95']:.2f} ms p95; "
               f"success {100 * s['success_rate']:.0f}%, mean return {s['mean_return']:.1f}")
