@@ -1,4 +1,4 @@
-"""Probes of what a DDPG baseline was given and what it learned (the numbers in results/ddpg_tuning.md).
+"""Probes of what a DDPG or SAC baseline was given and what it learned (the numbers in results/ddpg_tuning.md).
 
 - ``autoencoder RUN DATA.h5``: the autoencoder of a ``piga-baseline ddpg --obs latent`` run, on DATA's
   test split: reconstruction MSE against the pixel variance (drawing the mean frame scores about the
@@ -6,8 +6,8 @@
   its 5 nearest neighbours (fitted on half the test frames, scored on the other half). States are
   read for this evaluation only.
 - ``actor RUN DATA.h5``: the policy of a ``--obs pixels`` run on stacks of 4 consecutive frames of
-  DATA's first 50 sequences: its actions, the actor's pre-tanh output (saturated when far beyond
-  ±3), the spread of the actor's CNN features over frames, and the critic's Q.
+  DATA's first 50 sequences: its actions, the actor's pre-tanh output (DDPG's; SAC's Gaussian mean
+  before the squash; saturated when far beyond ±3), the spread of the actor's CNN features over frames, and the critic's Q.
 
     python benchmarks/baseline_probes.py autoencoder results/baselines_runs/ddpg-latent-s0 results/baselines_runs/data-n2000.h5
     python benchmarks/baseline_probes.py actor results/baselines_runs/ddpg-pixels-s0 results/baselines_runs/data-n500.h5
@@ -65,7 +65,10 @@ def probe_actor(run: Path, data: Path) -> dict[str, object]:
     with torch.no_grad():
         o = torch.as_tensor(obs).float()
         features = model.actor.extract_features(o, model.actor.features_extractor)  # (50, F), SB3 scales the pixels
-        pre_tanh = model.actor.mu[:-1](features)[:, 0]
+        if isinstance(model.actor.mu, torch.nn.Sequential):  # DDPG (TD3's actor): its layers, then a tanh
+            pre_tanh = model.actor.mu[:-1](features)[:, 0]
+        else:  # SAC: the squashed Gaussian's mean, before its tanh
+            pre_tanh = model.actor.mu(model.actor.latent_pi(features))[:, 0]
         q = model.critic(o, torch.as_tensor(actions).float())[0][:, 0]
     return {"actions": np.asarray(actions)[:, 0].tolist(), "pre_tanh_min": float(pre_tanh.min()),
             "pre_tanh_max": float(pre_tanh.max()), "feature_std_over_frames": float(features.std(0).mean()),

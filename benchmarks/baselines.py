@@ -800,8 +800,9 @@ def markdown(record: dict[str, Any]) -> str:
     """The results page."""
     lines = [f"# Baselines: piga, PlaNet-style and DDPG\n\nCommand: `{record['command']}` (preset `{record['preset']}`)\n",
              *_pending_note(record),
-             (f"Machine: {record['machine']['cpu']}, {record['machine']['cores']} cores, torch {record['machine']['torch']}, "
-             f"each training on one torch thread.\n"),
+             # the records' machines, not the invocation's: a page is written from runs made on several
+             (f"Machines: {len(record['job_machines'])} (each run's under Compute), torch "
+              f"{', '.join(record['torch_versions'])}, each training on one torch thread.\n"),
              "## Summary\n\nThe README's table. A row per agent and data size, each cell over the row's seeds; x1.4 is "
              "each run's own sweep cell; the plan time is the median of the row's runs on each CPU, per env step, and "
              "its ratio to piga's median on the same CPU (none where piga was not timed on it).\n", record["summary_table"],
@@ -904,6 +905,7 @@ def aggregate(records: dict[str, dict[str, Any] | None], cfg: BenchConfig) -> di
             m = kept["machine"]
             machines.setdefault(f"{m['cpu']} (family/model {m.get('cpu_family_model', '?')}), {m['cores']} cores", []).append(name)
     out["job_machines"] = machines
+    out["torch_versions"] = sorted({kept["machine"]["torch"] for kept in records.values() if kept})
     out["floors"] = floors(out, cfg, pending)
     out["summary_table"] = summary_table(records, cfg)
     return out

@@ -104,7 +104,7 @@ def test_the_summary_table_has_a_row_per_agent_and_size_over_its_seeds(bench) ->
 
 def _records(bench, cfg) -> dict:
     """A full set of synthetic job records, with every field the results page reads."""
-    machine = {"cpu": "test CPU", "cpu_family_model": "1/2", "cores": 2}
+    machine = {"cpu": "record CPU", "cpu_family_model": "1/2", "cores": 2, "torch": "2.13.0+cpu"}
     sweep_keys = [f"{m:g}" for m in bench.parse_range(cfg.sweep)]
     records = {}
     for job in bench.jobs_for(cfg):
@@ -144,10 +144,12 @@ def test_a_page_written_part_way_names_the_runs_still_to_run(bench, tmp_path: Pa
 
     for name in ("planet-n2000-s0", "planet-n2000-s1", "ddpg-state-s1", "sac-pixels-s0"):
         records[name] = None
-    records["planet-n100-s0"] = {**records["planet-n100-s0"], "machine": {"cpu": "other CPU", "cpu_family_model": "9/9", "cores": 2}}
+    records["planet-n100-s0"] = {**records["planet-n100-s0"], "machine": {"cpu": "other CPU", "cpu_family_model": "9/9", "cores": 2, "torch": "2.13.0+cpu"}}
     record, page = _page(bench, cfg, records, tmp_path)
     assert record["pending"] == ["planet-n2000-s0", "planet-n2000-s1", "ddpg-state-s1", "sac-pixels-s0"]
     assert "**Part-way: 20 of 24 runs have a record.**" in page
+    assert "Machines: 2 (each run's under Compute), torch 2.13.0+cpu," in page  # the records', not the invocation's ("test CPU")
+    assert "test CPU" not in page and "- other CPU (family/model 9/9), 2 cores: planet-n100-s0" in page
     floors = {f["floor"][:20]: f for f in record["floors"]}
     planet = floors["PlaNet-style >= 80% "]
     assert (planet["measured"], planet["met"]) == ("at no size", False)  # on the records there are, and says it may change
