@@ -67,8 +67,8 @@ def probe_actor(run: Path, data: Path) -> dict[str, object]:
         features = model.actor.extract_features(o, model.actor.features_extractor)  # (50, F), SB3 scales the pixels
         if isinstance(model.actor.mu, torch.nn.Sequential):  # DDPG (TD3's actor): its layers, then a tanh
             pre_tanh = model.actor.mu[:-1](features)[:, 0]
-        else:  # SAC: the squashed Gaussian's mean, before its tanh
-            pre_tanh = model.actor.mu(model.actor.latent_pi(features))[:, 0]
+        else:  # SAC: the squashed Gaussian's mean, before its tanh, as SB3's actor computes it
+            pre_tanh = model.actor.get_action_dist_params(o)[0][:, 0]
         q = model.critic(o, torch.as_tensor(actions).float())[0][:, 0]
     return {"actions": np.asarray(actions)[:, 0].tolist(), "pre_tanh_min": float(pre_tanh.min()),
             "pre_tanh_max": float(pre_tanh.max()), "feature_std_over_frames": float(features.std(0).mean()),

@@ -900,12 +900,14 @@ def aggregate(records: dict[str, dict[str, Any] | None], cfg: BenchConfig) -> di
     out["goals"] = records[best["piga"]]["goals"] if "piga" in best else []
     out["plan_time"] = plan_times(records, cfg)
     machines: dict[str, list[str]] = {}
+    torch_versions: set[str] = set()
     for name, kept in records.items():
         if kept:
             m = kept["machine"]
             machines.setdefault(f"{m['cpu']} (family/model {m.get('cpu_family_model', '?')}), {m['cores']} cores", []).append(name)
+            torch_versions.add(m["torch"])
     out["job_machines"] = machines
-    out["torch_versions"] = sorted({kept["machine"]["torch"] for kept in records.values() if kept})
+    out["torch_versions"] = sorted(torch_versions)
     out["floors"] = floors(out, cfg, pending)
     out["summary_table"] = summary_table(records, cfg)
     return out
