@@ -190,7 +190,7 @@ PRESETS: dict[str, BenchConfig] = {
                         sac_runs=(("pixels", 400, (0,)),), episodes=2,
                         sweep="1.0:1.4:0.4", sweep_episodes=1, goal_angles=(15.0,), episode_steps=20,
                         overrides={"planet": {"batch_size": 2, "chunk_length": 8}, "rssm": {"deter_size": 8, "stoch_size": 4},
-                                   "piga": {"batch_size": 16, "warmup_steps": 2, "curriculum_steps": 2},
+                                   "piga": {"batch_size": 16, "warmup_fraction": 0.1, "curriculum_fraction": 0.1},
                                    "ddpg": {"learning_starts": 100, "eval_every": 200, "eval_episodes": 1, "batch_size": 16,
                                             "buffer_size": 1000},
                                    "autoencoder": {"steps": 20}, "cem": {"horizon": 3, "iterations": 2, "candidates": 20, "elites": 4}}),

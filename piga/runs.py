@@ -59,6 +59,25 @@ def load_model(run_dir: str | os.PathLike[str]) -> tuple[PhysicsModel, dict[str,
     return model, ckpt
 
 
+def convergence_warning(run_dir: str | os.PathLike[str]) -> str | None:
+    """One line when the run's metrics.json says it did not converge (``converged: false``), else None.
+
+    Every command and benchmark that reads a run prints it, so a run that did not identify its
+    parameters cannot pass unnoticed. A run without the record (an older run, or one still training)
+    gives None.
+    """
+    import json
+
+    try:
+        metrics = json.loads((Path(run_dir) / "metrics.json").read_text())
+    except (OSError, ValueError):
+        return None
+    if not isinstance(metrics, dict) or metrics.get("converged", True) is not False:
+        return None
+    reason = (metrics.get("convergence") or {}).get("reason", "no reason recorded")
+    return f"warning: the run {run_dir} did not converge: {reason}"
+
+
 def training_reconstruction_mse(model: PhysicsModel, checkpoint: dict[str, Any] | None) -> float:
     """The model's own per-frame reconstruction MSE in its last training epoch (0 if unknown)."""
     try:
@@ -127,5 +146,5 @@ def nominal_of(model: PhysicsModel) -> Nominal:
     return Nominal(p["g"], p["a"], p.get("offset", 0.0), model.config.dt, model.config.substeps)
 
 
-__all__ = ["CHECKPOINT", "Nominal", "load_model", "nominal_of", "training_arrow", "training_blank_mse",
+__all__ = ["CHECKPOINT", "Nominal", "convergence_warning", "load_model", "nominal_of", "training_arrow", "training_blank_mse",
            "training_reconstruction_mse", "training_steps"]

@@ -2,12 +2,15 @@
 
 The loop is one readable flow, in the style of cleanrl:
 
-1. An autoencoder warm-up. For ``warmup_steps`` steps only α·L_rec trains the encoder and
+0. A plan sized from the file (:func:`plan_training`): the run's steps, and the warm-up, curriculum
+   and final average as fractions of them.
+1. An autoencoder warm-up. For the plan's warm-up steps only α·L_rec trains the encoder and
    decoder, so that the coordinates mean something before the physics leans on them.
-2. A rollout curriculum. The prediction horizon grows from 1 frame to T_pred over
-   ``curriculum_steps``. Short rollouts keep the predicted object overlapping the true one, so the
+2. A rollout curriculum. The prediction horizon grows from 1 frame to T_pred over the plan's
+   curriculum steps. Short rollouts keep the predicted object overlapping the true one, so the
    pixel loss has a gradient with respect to g and a even while they are far from the truth.
 3. Physical parameters get their own learning rate (``lr_physics``), in log space.
+4. A convergence check of the physical parameters at the end (:mod:`piga.convergence`).
 
 Each epoch ends with an atomic checkpoint (``checkpoint.pt``). ``resume`` restores the model,
 the optimiser, the step count and every RNG, and continues exactly where the run stopped. A
@@ -22,7 +25,7 @@ import random
 import time
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Literal
 
 import numpy as np
 import torch
@@ -43,10 +46,18 @@ class TrainingDiverged(RuntimeError):
 
 @dataclass(frozen=True)
 class TrainConfig:
-    """How to train. The defaults are the 'fast' recipe; other presets are in :data:`PRESETS`."""
+    """How to train. The defaults are the 'fast' recipe; other presets are in :data:`PRESETS`.
 
-    epochs: int = 16
-    """Passes over the training windows (the cosine schedule is planned over all of them)."""
+    Every schedule is sized from the data file (:func:`plan_training`): the run's length comes from
+    ``budget_steps`` unless ``epochs`` is given, and the warm-up, the curriculum and the final
+    average are fractions of the run, so a small or short file trains its physics as long as a large one.
+    """
+
+    epochs: int = 0
+    """Passes over the training windows (0: sized from the data, the fewest whole epochs that reach
+    ``budget_steps``). The cosine schedule is planned over all of them."""
+    budget_steps: int = 5400
+    """Optimiser steps a run is sized to when ``epochs`` is 0 (rounded up to whole epochs)."""
     max_minutes: float = 0.0
     """Safety wall-clock budget: stop after the first epoch that ends past it (0: no limit).
     Training results do not depend on it unless it cuts the run short."""
@@ -56,9 +67,9 @@ class TrainConfig:
     """Learning rate of the networks (encoder, velocity, decoder)."""
     lr_physics: float = 1e-2
     """Learning rate of the physical parameters (log space)."""
-    optimizer: str = "adam"
+    optimizer: Literal["adam", "rmsprop"] = "adam"
     """'adam' or 'rmsprop' (the paper's)."""
-    schedule: str = "cosine"
+    schedule: Literal["cosine", "step"] = "cosine"
     """"cosine": after the warm-up, both learning rates follow a cosine from their value down to
     ``lr_final_fraction`` of it at the last planned step; "step": the paper's division by
     ``lr_decay_factor`` from ``lr_decay_epoch`` on."""
@@ -68,10 +79,10 @@ class TrainConfig:
     """Step schedule: divide the learning rates by ``lr_decay_factor`` from this epoch on (0: never)."""
     lr_decay_factor: float = 5.0
     """The paper divides by 5."""
-    warmup_steps: int = 200
-    """Steps of autoencoder-only training before the physics is used."""
-    curriculum_steps: int = 600
-    """Steps over which the prediction horizon grows from 1 to T_pred (0: full horizon at once)."""
+    warmup_fraction: float = 0.04
+    """Fraction of the planned steps of autoencoder-only training before the physics is used."""
+    curriculum_fraction: float = 0.11
+    """Fraction of the planned steps over which the prediction horizon grows from 1 to T_pred (0: full horizon at once)."""
     window_stride: int = 1
     """Start frames of training windows are this far apart within a sequence."""
     seed: int = 0
@@ -84,9 +95,114 @@ class TrainConfig:
     """Adam only: clip each physical parameter's gradient to this many times its running RMS (0: off).
     One outlying batch otherwise inflates Adam's first moment long before the second catches up,
     and the next ~10 steps throw g and a several percent off (seen mid-training without it)."""
-    average_final_epoch: bool = True
-    """End with the physical parameters averaged (in log space) over the last epoch's steps:
-    Polyak averaging, which removes most of the optimiser's step-to-step jitter."""
+    average_fraction: float = 0.0625
+    """End with the physical parameters averaged (in log space) over this last fraction of the planned
+    steps: Polyak averaging, which removes most of the optimiser's step-to-step jitter (0: off)."""
+
+    def __post_init__(self) -> None:
+        for name in ("epochs", "budget_steps", "lr_decay_epoch", "seed", "threads"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"TrainConfig.{name} must be >= 0, got {getattr(self, name)}")
+        if self.batch_size < 1 or self.window_stride < 1:
+            raise ValueError(f"TrainConfig.batch_size and window_stride must be >= 1, got {self.batch_size}, "
+                             f"{self.window_stride}")
+        if not self.epochs and not self.budget_steps:
+            raise ValueError("TrainConfig: give epochs or budget_steps (both are 0)")
+        for name in ("lr", "lr_physics"):
+            if not (math.isfinite(getattr(self, name)) and 0 < getattr(self, name) <= MAX_LR):
+                raise ValueError(f"TrainConfig.{name} must be in (0, {MAX_LR:g}], got {getattr(self, name)}")
+        if not (math.isfinite(self.lr_decay_factor) and self.lr_decay_factor > 0):
+            raise ValueError(f"TrainConfig.lr_decay_factor must be finite and > 0, got {self.lr_decay_factor}")
+        for name in ("warmup_fraction", "curriculum_fraction", "average_fraction", "lr_final_fraction"):
+            if not 0 <= getattr(self, name) <= 1:
+                raise ValueError(f"TrainConfig.{name} must be in [0, 1], got {getattr(self, name)}")
+        if self.warmup_fraction + self.curriculum_fraction >= 1:
+            raise ValueError("TrainConfig: warmup_fraction + curriculum_fraction must leave some steps at the full "
+                             f"horizon, got {self.warmup_fraction} + {self.curriculum_fraction}")
+        for name in ("max_minutes", "grad_clip", "physics_grad_clip"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"TrainConfig.{name} must be finite and >= 0, got {value}")
+        if self.optimizer not in ("adam", "rmsprop"):
+            raise ValueError(f"TrainConfig.optimizer must be 'adam' or 'rmsprop', got {self.optimizer!r}")
+        if self.schedule not in ("cosine", "step"):
+            raise ValueError(f"TrainConfig.schedule must be 'cosine' or 'step', got {self.schedule!r}")
+
+    @classmethod
+    def from_dict(cls, values: dict[str, Any]) -> TrainConfig:
+        """The config a checkpoint saved. A run saved before the schedules were sized from the data
+        (absolute ``warmup_steps``) cannot be resumed: its schedule has no fraction to replan from."""
+        legacy = {"warmup_steps", "curriculum_steps", "average_final_epoch"} & set(values)
+        if legacy:
+            raise ValueError("the run was saved by an older piga, whose schedules were absolute steps "
+                             f"({', '.join(sorted(legacy))}); train it again instead of resuming")
+        return cls(**values)
+
+
+#: Learning rates above this are refused: no recipe of piga's comes within a factor 100 of it, and a
+#: physics learning rate that large throws the log-space parameters to the float limits in one step.
+MAX_LR = 10.0
+
+
+@dataclass(frozen=True)
+class TrainPlan:
+    """A recipe made concrete for one data file: its steps, and where the warm-up, the curriculum and
+    the final average fall (:func:`plan_training`)."""
+
+    windows: int
+    """Training windows in the file (its train split)."""
+    steps_per_epoch: int
+    """Batches per epoch (``windows // batch_size``)."""
+    epochs: int
+    """Epochs planned."""
+    warmup_steps: int
+    """Autoencoder-only steps first."""
+    curriculum_steps: int
+    """Steps over which the horizon grows to T_pred."""
+    average_steps: int
+    """The last steps whose physical parameters are averaged (0: none)."""
+    checkpoint_every: int = 1
+    """Epochs between checkpoints (and printed lines): one epoch, or enough of a small file's short epochs
+    to make 2% of the run, so that a file of a few windows does not spend its time saving."""
+
+    @property
+    def total_steps(self) -> int:
+        """Optimiser steps planned."""
+        return self.epochs * self.steps_per_epoch
+
+    def describe(self, pred_frames: int) -> str:
+        """One line, e.g. "5400 steps = 16 epochs x 337 steps (10800 windows); warm-up 216, curriculum 594 (T 1->10), average of the last 337"."""
+        return (f"{self.total_steps} steps = {self.epochs} epoch{'s' if self.epochs != 1 else ''} x {self.steps_per_epoch} "
+                f"steps ({self.windows} windows); autoencoder warm-up {self.warmup_steps} steps, curriculum "
+                f"{self.curriculum_steps} steps (T_pred 1 -> {pred_frames})"
+                + (f", parameters averaged over the last {self.average_steps}" if self.average_steps else "")
+                + (f"; a checkpoint every {self.checkpoint_every} epochs" if self.checkpoint_every > 1 else ""))
+
+
+def plan_training(config: TrainConfig, windows: int) -> TrainPlan:
+    """Sizes a recipe to a file of ``windows`` training windows.
+
+    With ``config.epochs`` 0 the run is the fewest whole epochs that reach ``budget_steps``; the
+    warm-up, the curriculum and the final average are fractions of the planned steps (at least one
+    step each when their fraction is not 0), so that the physics trains for most of the run whatever
+    the file's size.
+    """
+    per_epoch = windows // config.batch_size
+    if per_epoch < 1:
+        raise ValueError(f"{windows} training windows are fewer than one batch of {config.batch_size}, so no step "
+                         "would run; lower the batch size or give more data")
+    epochs = config.epochs or max(1, math.ceil(config.budget_steps / per_epoch))
+    total = epochs * per_epoch
+
+    def part(fraction: float) -> int:
+        return 0 if fraction <= 0 else max(1, int(round(fraction * total)))
+
+    warmup, curriculum = part(config.warmup_fraction), part(config.curriculum_fraction)
+    if warmup + curriculum >= total:  # a run of a few steps: keep one step at the full horizon
+        warmup, curriculum = min(warmup, max(total - 1, 0) // 2), min(curriculum, max(total - 1, 0) // 2)
+    return TrainPlan(windows=windows, steps_per_epoch=per_epoch, epochs=epochs, warmup_steps=warmup,
+                     curriculum_steps=curriculum, average_steps=min(part(config.average_fraction), total),
+                     checkpoint_every=max(1, math.ceil(0.02 * total / per_epoch)))
 
 
 #: Named recipes, as overrides of the dataclass defaults. 'fast' is the defaults themselves
@@ -95,8 +211,8 @@ PRESETS: dict[str, dict[str, Any]] = {
     "fast": {},
     "paper": {
         "train": {"epochs": 1000, "lr": 3e-4, "lr_physics": 3e-4, "optimizer": "rmsprop",
-                  "schedule": "step", "lr_decay_epoch": 500, "warmup_steps": 0, "curriculum_steps": 0, "grad_clip": 0.0,
-                  "average_final_epoch": False, "physics_grad_clip": 0.0},
+                  "schedule": "step", "lr_decay_epoch": 500, "warmup_fraction": 0.0, "curriculum_fraction": 0.0,
+                  "grad_clip": 0.0, "average_fraction": 0.0, "physics_grad_clip": 0.0},
         "model": {"substeps": 5, "learn_offset": True, "readout": "regress", "rec_frames": "all", "pred_trim": 0.0,
                   "velocity_correction": True},
     },
@@ -120,11 +236,14 @@ PRESETS: dict[str, dict[str, Any]] = {
 _SCENE_MODEL: dict[str, Any] = {"input_frames": 4, "pred_frames": 6, "pred_trim": 0.0, "velocity_correction": True,
                                 "velocity_physics": True, "substeps": 5, "mask_pixelwise": True, "alpha": 2.0,
                                 "init_background": True}
-_SCENE_FAST_TRAIN: dict[str, Any] = {"epochs": 6, "warmup_steps": 300, "curriculum_steps": 600, "window_stride": 2}
+#: The scenes' fast schedule: 1650 steps (6 epochs of the default 1000 x 30-frame file), of which the
+#: first 18% train the autoencoder alone and the next 36% grow the horizon, whatever the file's size.
+_SCENE_FAST_TRAIN: dict[str, Any] = {"budget_steps": 1650, "warmup_fraction": 0.18, "curriculum_fraction": 0.36,
+                                     "average_fraction": 1 / 6, "window_stride": 2}
 _SCENE_PAPER: dict[str, Any] = {
     "train": {"epochs": 500, "lr": 3e-4, "lr_physics": 3e-4, "optimizer": "rmsprop", "schedule": "step",
-              "lr_decay_epoch": 375, "warmup_steps": 0, "curriculum_steps": 0, "grad_clip": 0.0,
-              "average_final_epoch": False, "physics_grad_clip": 0.0, "batch_size": 100},
+              "lr_decay_epoch": 375, "warmup_fraction": 0.0, "curriculum_fraction": 0.0, "grad_clip": 0.0,
+              "average_fraction": 0.0, "physics_grad_clip": 0.0, "batch_size": 100},
     "model": {**_SCENE_MODEL, "readout": "regress", "rec_frames": "all"},
 }
 SCENE_PRESETS: dict[str, dict[str, dict[str, Any]]] = {
@@ -172,6 +291,15 @@ class TrainState:
     """Training seconds so far (excluding evaluation)."""
     history: list[dict[str, float]] = field(default_factory=list)
     """Per-epoch means: loss, loss_pred, loss_rec, the physical parameters, seconds."""
+    start: dict[str, float] = field(default_factory=dict)
+    """The learned physical parameters before the first step."""
+    trace: list[list[float]] = field(default_factory=list)
+    """[step, value of each learned parameter (``start``'s order)] every few steps: the trajectory the
+    convergence check reads."""
+    average: list[list[float]] = field(default_factory=list)
+    """Running Polyak average of the physical-parameter tensors (flattened), over the final steps so far."""
+    average_count: int = 0
+    """Steps in ``average``."""
 
 
 def model_config_for(info: DatasetInfo, overrides: dict[str, Any] | None = None) -> ModelConfig:
@@ -211,11 +339,12 @@ def _set_rng_state(state: dict[str, Any]) -> None:
 
 
 def save_checkpoint(path: Path, model: PhysicsModel, optimizer: torch.optim.Optimizer, state: TrainState,
-                    train_config: TrainConfig, data_info: DatasetInfo) -> None:
+                    train_config: TrainConfig, data_info: DatasetInfo, plan: TrainPlan) -> None:
     """Writes everything needed to resume or to use the model, atomically."""
     payload = {
         "model_config": model.config.to_dict(),
         "train_config": asdict(train_config),
+        "plan": asdict(plan),
         "model": model.state_dict(),
         "optimizer": optimizer.state_dict(),
         "state": asdict(state),
@@ -255,25 +384,23 @@ def _clip_to_running_rms(optimizer: torch.optim.Optimizer, params: list[torch.Te
         p.grad.copy_(torch.maximum(torch.minimum(p.grad, bound), -bound))
 
 
-def _lr_factor(step: int, epoch: int, total_steps: int, config: TrainConfig) -> float:
+def _lr_factor(step: int, epoch: int, plan: TrainPlan, config: TrainConfig) -> float:
     """Multiplier of the learning rates at a step (see ``TrainConfig.schedule``)."""
     if config.schedule == "step":
         return 1.0 / config.lr_decay_factor if config.lr_decay_epoch and epoch >= config.lr_decay_epoch else 1.0
-    if config.schedule != "cosine":
-        raise ValueError(f"unknown schedule {config.schedule!r}; expected 'cosine' or 'step'")
-    span = max(total_steps - config.warmup_steps, 1)
-    progress = min(max(step - config.warmup_steps, 0) / span, 1.0)
+    span = max(plan.total_steps - plan.warmup_steps, 1)
+    progress = min(max(step - plan.warmup_steps, 0) / span, 1.0)
     low = config.lr_final_fraction
     return low + (1 - low) * 0.5 * (1 + math.cos(math.pi * progress))
 
 
-def _horizon(step: int, config: TrainConfig, t_pred: int) -> int:
+def _horizon(step: int, plan: TrainPlan, t_pred: int) -> int:
     """Prediction frames at a given step: 0 during warm-up, then growing to T_pred."""
-    if step < config.warmup_steps:
+    if step < plan.warmup_steps:
         return 0
-    if config.curriculum_steps <= 0:
+    if plan.curriculum_steps <= 0:
         return t_pred
-    frac = (step - config.warmup_steps) / config.curriculum_steps
+    frac = (step - plan.warmup_steps) / plan.curriculum_steps
     return max(1, min(t_pred, 1 + int(frac * t_pred)))
 
 
@@ -308,8 +435,30 @@ class _Scalars:
             self.writer.close()
 
 
-def check_trainable(info: DatasetInfo, model_config: ModelConfig, train_config: TrainConfig) -> int:
-    """Refuses, before anything is written, data that training cannot use; returns the number of train windows.
+def _last_good(ckpt_path: Path) -> str:
+    return f"last good checkpoint: {ckpt_path}" if ckpt_path.exists() else "no checkpoint was written yet"
+
+
+def _shown(params: dict[str, float]) -> str:
+    return ", ".join(f"{k}={v:.4g}" for k, v in params.items())
+
+
+@torch.no_grad()
+def _accumulate_average(state: TrainState, params: list[torch.Tensor], restart: bool) -> None:
+    """Adds the current physical parameters to the running Polyak average kept in ``state`` (so a
+    resumed run continues it exactly); ``restart`` begins a new one."""
+    if restart or not state.average:
+        state.average = [[0.0] * p.numel() for p in params]
+        state.average_count = 0
+    state.average_count += 1
+    for i, p in enumerate(params):
+        avg = torch.tensor(state.average[i], dtype=p.dtype)
+        avg += (p.detach().flatten() - avg) / state.average_count
+        state.average[i] = avg.tolist()
+
+
+def check_trainable(info: DatasetInfo, model_config: ModelConfig, train_config: TrainConfig) -> TrainPlan:
+    """Refuses, before anything is written, data that training cannot use; returns the run's plan.
 
     Raises:
         ValueError (a :class:`piga.data.DataFormatError` for the file's contents): sequences shorter
@@ -325,10 +474,10 @@ def check_trainable(info: DatasetInfo, model_config: ModelConfig, train_config: 
         raise ValueError(f"{info.path}: the train split is empty")
     check_actions_file(info.path)
     windows = n_train * len(range(0, info.steps - needed + 1, train_config.window_stride))
-    if windows < train_config.batch_size:
-        raise ValueError(f"{info.path}: {windows} training windows ({n_train} train sequences) are fewer than one batch "
-                         f"of {train_config.batch_size}, so no step would run; lower the batch size or give more data")
-    return windows
+    try:
+        return plan_training(train_config, windows)
+    except ValueError as exc:
+        raise ValueError(f"{info.path}: {exc} ({n_train} train sequences)") from None
 
 
 def train(
@@ -343,15 +492,16 @@ def train(
     """Trains on the train split of ``data``; writes checkpoints and TensorBoard scalars to ``run_dir``.
 
     Nothing is written (not even ``run_dir``) before the first checkpoint, at the end of the first
-    epoch; the data are checked first (:func:`check_trainable`).
+    epoch (or of the first ``plan.checkpoint_every`` epochs of a small file); the data are checked
+    first (:func:`check_trainable`). ``on_epoch`` is called after each checkpoint.
 
     With ``resume``, the model, optimiser, step and RNGs come from ``run_dir``'s checkpoint and
-    ``train_config`` should be the run's saved one (``TrainConfig(**ckpt["train_config"])``),
+    ``train_config`` should be the run's saved one (``TrainConfig.from_dict(ckpt["train_config"])``),
     possibly with more ``epochs``; ``model_overrides`` is ignored. Resuming with the same
     ``epochs`` continues exactly. With more ``epochs``, the cosine schedule is replanned over the
     new total: from the resumed step on, the learning rates are those a straight run of the new
     length has at that step (they rise again if the old run had finished its cosine), while the
-    steps already taken keep the old schedule (and, if the old run finished, its final-epoch
+    steps already taken keep the old schedule (and, if the old run finished, its final
     average of the physical parameters); so the result is close to, not identical with, the
     straight run.
 
@@ -382,43 +532,40 @@ def train(
         if model.config.init_background:
             model.decoder.init_background(model.encoder.background)
         optimizer = _optimizer(model, train_config)
+        learned = model.learned_parameter_names()
+        state.start = {k: v for k, v in model.physical_parameters().items() if k in learned}
     cfg = model.config
-    if resume:
-        check_trainable(info, cfg, train_config)
+    plan = check_trainable(info, cfg, train_config)
     windows = SequenceWindows(data, "train", window=cfg.window, stride=train_config.window_stride)
     writer = _Scalars()
     physics_params = [p for p in model.system.parameters() if p.requires_grad]
     physics_ids = {id(p) for p in physics_params}
     net_params = [p for p in model.parameters() if id(p) not in physics_ids]
+    average_from = plan.total_steps - plan.average_steps  # the first step of the final average
+    trace_every = max(1, plan.total_steps // 1000)
     model.train()
     started = time.monotonic() - state.elapsed
     try:
-        while state.epoch < train_config.epochs:
+        while state.epoch < plan.epochs:
             if train_config.max_minutes and state.elapsed > train_config.max_minutes * 60:
                 break
             # The sampler's generator depends on (seed, epoch) only, so a resumed run sees the same order.
             gen = torch.Generator().manual_seed(train_config.seed * 100_003 + state.epoch)
             loader = DataLoader(windows, batch_size=train_config.batch_size, sampler=RandomSampler(windows, generator=gen),
                                 drop_last=True)
-            total_steps = train_config.epochs * len(loader)
             sums = {"loss": 0.0, "loss_pred": 0.0, "loss_rec": 0.0}
             count = 0
-            final_epoch = state.epoch == train_config.epochs - 1
-            averages = [torch.zeros_like(p) for p in physics_params]
-            bar = tqdm(loader, desc=f"epoch {state.epoch + 1}/{train_config.epochs}", leave=False, disable=not progress)
+            bar = tqdm(loader, desc=f"epoch {state.epoch + 1}/{plan.epochs}", leave=False, disable=not progress)
             for batch in bar:
-                factor = _lr_factor(state.step, state.epoch, total_steps, train_config)
+                factor = _lr_factor(state.step, state.epoch, plan, train_config)
                 for group in optimizer.param_groups:
                     group["lr"] = factor * (train_config.lr if group["name"] == "nets" else train_config.lr_physics)
-                horizon = _horizon(state.step, train_config, cfg.pred_frames)
+                horizon = _horizon(state.step, plan, cfg.pred_frames)
                 out = model(batch.frames, batch.actions, pred_frames=max(horizon, 1))
                 loss = out.loss if horizon > 0 else cfg.alpha * out.loss_rec
                 if not torch.isfinite(loss):
-                    good = ckpt_path if ckpt_path.exists() else None
-                    raise TrainingDiverged(
-                        f"loss became {loss.item()} at step {state.step} (epoch {state.epoch + 1}); "
-                        + (f"last good checkpoint: {good}" if good else "no checkpoint was written yet")
-                    )
+                    raise TrainingDiverged(f"loss became {loss.item()} at step {state.step} (epoch {state.epoch + 1}); "
+                                           + _last_good(ckpt_path))
                 optimizer.zero_grad(set_to_none=True)
                 loss.backward()
                 if train_config.physics_grad_clip and train_config.optimizer == "adam":
@@ -426,16 +573,19 @@ def train(
                 if train_config.grad_clip:
                     torch.nn.utils.clip_grad_norm_(net_params, train_config.grad_clip)
                 optimizer.step()
+                if plan.average_steps and state.step >= average_from:
+                    _accumulate_average(state, physics_params, restart=state.step == average_from)
                 state.step += 1
                 count += 1
-                if final_epoch and train_config.average_final_epoch:
-                    with torch.no_grad():
-                        for avg, p in zip(averages, physics_params):
-                            avg += (p - avg) / count
+                params = model.physical_parameters()
+                if not all(math.isfinite(v) for v in params.values()):
+                    raise TrainingDiverged(f"the physical parameters became non-finite at step {state.step} "
+                                           f"({_shown(params)}); lower --lr-physics; " + _last_good(ckpt_path))
+                if state.step % trace_every == 0 and state.start:
+                    state.trace.append([float(state.step), *(params[k] for k in state.start)])
                 for key in sums:
                     sums[key] += float(getattr(out, key).detach()) if key != "loss" else float(loss.detach())
                 if state.step % 10 == 0:
-                    params = model.physical_parameters()
                     bar.set_postfix({k: f"{v:.4g}" for k, v in params.items() if k != "offset"} | {"loss": f"{loss.item():.4f}", "T": horizon})
                     for name, value in params.items():
                         writer.add(f"physics/{name}", value, state.step)
@@ -445,24 +595,26 @@ def train(
                     writer.add("train/horizon", horizon, state.step)
                     writer.add("train/lr_factor", factor, state.step)
             bar.close()
-            if final_epoch and train_config.average_final_epoch and count:
+            if plan.average_steps and state.step == plan.total_steps and state.average_count:
                 with torch.no_grad():
-                    for avg, p in zip(averages, physics_params):
-                        p.copy_(avg)
+                    for avg, p in zip(state.average, physics_params):
+                        p.copy_(torch.tensor(avg, dtype=p.dtype).view_as(p))
             state.epoch += 1
             state.elapsed = time.monotonic() - started
             record = {k: v / max(count, 1) for k, v in sums.items()}
             record.update(model.physical_parameters())
             record.update({"epoch": state.epoch, "step": state.step, "seconds": state.elapsed})
             state.history.append(record)
-            run_dir.mkdir(parents=True, exist_ok=True)
-            save_checkpoint(ckpt_path, model, optimizer, state, train_config, info)
-            writer.open(run_dir / "tensorboard")
-            shown = ", ".join(f"{k}={v:.4g}" for k, v in model.physical_parameters().items())
-            (tqdm.write if progress else print)(f"epoch {state.epoch}: loss {record['loss']:.5f} (pred {record['loss_pred']:.5f}, "
-                           f"rec {record['loss_rec']:.5f}), {shown}, {state.elapsed / 60:.1f} min")
-            if on_epoch is not None:
-                on_epoch(state, model)
+            last = state.epoch == plan.epochs or bool(train_config.max_minutes and state.elapsed > train_config.max_minutes * 60)
+            if state.epoch % plan.checkpoint_every == 0 or last:
+                run_dir.mkdir(parents=True, exist_ok=True)
+                save_checkpoint(ckpt_path, model, optimizer, state, train_config, info, plan)
+                writer.open(run_dir / "tensorboard")
+                (tqdm.write if progress else print)(
+                    f"epoch {state.epoch}: loss {record['loss']:.5f} (pred {record['loss_pred']:.5f}, rec "
+                    f"{record['loss_rec']:.5f}), {_shown(model.physical_parameters())}, {state.elapsed / 60:.1f} min")
+                if on_epoch is not None:
+                    on_epoch(state, model)
     finally:
         writer.close()
         windows.close()

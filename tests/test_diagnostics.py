@@ -121,13 +121,13 @@ def test_a_gain_whose_interval_holds_the_nominal_is_not_named() -> None:
 def tiny_model(tiny_data: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A tiny model whose autoencoder has learnt the scene (training MSE ~25% of drawing no pendulum;
     24 steps, ~15 s), but whose physics has barely moved from g = 1, a = 0.3: its verdicts mean nothing."""
-    return train_tiny(tiny_data, tmp_path_factory.mktemp("diag") / "model", epochs=6, warmup_steps=16, lr=3e-3)
+    return train_tiny(tiny_data, tmp_path_factory.mktemp("diag") / "model", epochs=6, warmup_fraction=16 / 24, lr=3e-3)
 
 
 @pytest.fixture(scope="module")
 def untrained_model(tiny_data: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A model after 2 steps: its autoencoder draws no pendulum yet (training MSE ~60x that of drawing none)."""
-    return train_tiny(tiny_data, tmp_path_factory.mktemp("diag") / "untrained", warmup_steps=1)
+    return train_tiny(tiny_data, tmp_path_factory.mktemp("diag") / "untrained", warmup_fraction=0.5)
 
 
 @pytest.fixture(scope="module")
@@ -247,7 +247,7 @@ def test_video_that_is_not_the_pendulum_is_refused_not_diagnosed(tiny_model: Pat
 def test_the_training_check_of_a_run() -> None:
     from piga.diagnostics.observe import UntrainedModelError, check_training
 
-    run = {"state": {"step": 500}, "train_config": {"warmup_steps": 200}}
+    run = {"state": {"step": 500}, "plan": {"warmup_steps": 200}}
     check_training(run, 0.001, 0.004, max_fraction=1.0)  # a trained model: 25% of drawing no pendulum
     check_training(run, 0.001, None, max_fraction=1.0)  # no scale known: the recorded error alone is checked
     with pytest.raises(UntrainedModelError, match="training failed"):
@@ -255,7 +255,7 @@ def test_the_training_check_of_a_run() -> None:
     with pytest.raises(UntrainedModelError, match="never trained"):
         check_training({"state": {"step": 0}}, 0.001, 0.004, max_fraction=1.0)
     with pytest.raises(UntrainedModelError, match="warm-up"):
-        check_training({"state": {"step": 150}, "train_config": {"warmup_steps": 200}}, 0.001, 0.004, max_fraction=1.0)
+        check_training({"state": {"step": 150}, "plan": {"warmup_steps": 200}}, 0.001, 0.004, max_fraction=1.0)
     for unknown in (0.0, float("nan")):
         with pytest.raises(UntrainedModelError, match="reconstruction error"):
             check_training(run, unknown, 0.004, max_fraction=1.0)

@@ -41,7 +41,7 @@ def test_tiny_spring_training_moves_k_toward_the_truth(spring_data: Path, tmp_pa
     """~420 steps on 32 sequences: k and l leave 1 and land near the truth (4, 6). Measured: k 3.89, l 5.98."""
     info = inspect_dataset(spring_data)
     preset = preset_for("fast", info)
-    config = TrainConfig(**{**preset["train"], "epochs": 10, "warmup_steps": 150, "curriculum_steps": 60,
+    config = TrainConfig(**{**preset["train"], "epochs": 10, "warmup_fraction": 150 / 420, "curriculum_fraction": 60 / 420,
                             "batch_size": 16, "window_stride": 1, "threads": 1, "seed": 0, "lr_physics": 3e-2})
     # a 3-frame horizon: cheaper steps, and a rollout that stays near the truth while k is still far off
     model, state = train(spring_data, tmp_path / "run", config, {**preset["model"], "pred_frames": 3}, progress=False)

@@ -20,9 +20,9 @@ from piga.train import PRESETS, TrainConfig, TrainingDiverged, train
 from tests.helpers import assert_one_line, assert_one_line_error, run, run_in_process
 
 PROG = "piga-train-model"
-TINY = TrainConfig(epochs=8, batch_size=16, warmup_steps=40, curriculum_steps=60, lr_physics=5e-2, threads=1)
+TINY = TrainConfig(epochs=8, batch_size=16, warmup_fraction=0.2, curriculum_fraction=0.3, lr_physics=5e-2, threads=1)
 #: CLI options for a run of seconds on ``small_data`` (2 steps per epoch).
-SMALL = ("--epochs", "1", "--batch-size", "8", "--warmup-steps", "1", "--quiet", "--threads", "1")
+SMALL = ("--epochs", "1", "--batch-size", "8", "--warmup-fraction", "0.5", "--quiet", "--threads", "1")
 
 
 @pytest.fixture(scope="module")
@@ -60,7 +60,7 @@ def test_tiny_training_moves_g_and_a_toward_truth(stateless_data: Path, tmp_path
 
 
 def test_resume_continues_exactly(small_data: Path, tmp_path: Path) -> None:
-    cfg = replace(TINY, epochs=3, batch_size=4, warmup_steps=2, curriculum_steps=4)  # 4 steps per epoch
+    cfg = replace(TINY, epochs=3, batch_size=4, warmup_fraction=1 / 6, curriculum_fraction=1 / 3)  # 4 steps per epoch
     straight, _ = train(small_data, tmp_path / "a", cfg, progress=False)
 
     def stop_after_first(state, model) -> None:  # noqa: ANN001
@@ -179,7 +179,7 @@ def test_cli_refuses_unusable_actions_up_front(small_data: Path, tmp_path: Path,
     with h5py.File(bad, "a") as f:
         f["actions"][1, 3, 0] = value
     out = tmp_path / "r"
-    code, _, err = run_in_process(PROG, cli.main, str(bad), "--out", str(out), "--warmup-steps", "0", "--epochs", "1",
+    code, _, err = run_in_process(PROG, cli.main, str(bad), "--out", str(out), "--warmup-fraction", "0", "--epochs", "1",
                                   capsys=capsys)
     assert_one_line(code, err, needle, "sequence 1, step 3")
     assert not out.exists()
@@ -197,7 +197,7 @@ def test_cli_warns_when_there_is_no_test_split(tmp_path: Path, capsys: pytest.Ca
     data = tmp_path / "notest.h5"
     collect(CollectConfig(sequences=3, steps=14, seed=1, workers=1, split=(3, 0, 0)), data, progress=False, command="t")
     code, out, err = run_in_process(PROG, cli.main, str(data), "--out", str(tmp_path / "r"), "--batch-size", "3",
-                                    "--epochs", "1", "--warmup-steps", "0", "--quiet", capsys=capsys)
+                                    "--epochs", "1", "--warmup-fraction", "0", "--quiet", capsys=capsys)
     assert code == 0, err
     assert "warning: " in err and "no test sequences" in err and "train split" in err
     assert "SSIM (train split)" in out
@@ -252,12 +252,12 @@ def test_resume_with_more_epochs_replans_the_cosine(small_data: Path, tmp_path: 
     seen: list[tuple[int, float]] = []
     factor = training._lr_factor
 
-    def recording(step: int, epoch: int, total_steps: int, config: TrainConfig) -> float:
-        seen.append((step, factor(step, epoch, total_steps, config)))
+    def recording(step: int, epoch: int, plan: training.TrainPlan, config: TrainConfig) -> float:
+        seen.append((step, factor(step, epoch, plan, config)))
         return seen[-1][1]
 
     monkeypatch.setattr(training, "_lr_factor", recording)
-    cfg = replace(TINY, batch_size=4, warmup_steps=2, curriculum_steps=2)  # 4 steps per epoch
+    cfg = replace(TINY, batch_size=4, warmup_fraction=0.1, curriculum_fraction=0.1)  # 4 steps per epoch
     straight, _ = train(small_data, tmp_path / "a", replace(cfg, epochs=3), progress=False)
     straight_rates, seen[:] = dict(seen), []
     train(small_data, tmp_path / "b", replace(cfg, epochs=2), progress=False)
@@ -267,3 +267,101 @@ def test_resume_with_more_epochs_replans_the_cosine(small_data: Path, tmp_path: 
     assert short_rates[7] < straight_rates[8] > straight_rates[11]  # the rate rose again, then decays to the end
     assert any(short_rates[s] != straight_rates[s] for s in range(8))  # the first epochs had the 2-epoch schedule
     assert straight.physical_parameters() != resumed.physical_parameters()  # close, not identical
+
+
+# --- recipes sized from the data, and the convergence check -----------------------------------
+
+
+def test_the_plan_is_sized_from_the_file() -> None:
+    from piga.train import plan_training
+
+    fast = TrainConfig()
+    big, small = plan_training(fast, 10_800), plan_training(fast, 336)  # the default file; 48 sequences x 7 windows
+    assert big.epochs == -(-fast.budget_steps // 337) and small.epochs == -(-fast.budget_steps // 10)  # whole epochs
+    for plan in (big, small):
+        assert plan.total_steps >= fast.budget_steps
+        assert plan.warmup_steps == round(fast.warmup_fraction * plan.total_steps)  # fractions, not absolute steps
+        assert plan.warmup_steps + plan.curriculum_steps < plan.total_steps / 2  # the physics trains most of the run
+    assert small.checkpoint_every > 1 and big.checkpoint_every == 1
+    short = plan_training(replace(fast, epochs=1), 64)  # 2 steps: still one step of physics at the full horizon
+    assert short.total_steps == 2 and short.warmup_steps + short.curriculum_steps < 2
+    with pytest.raises(ValueError, match="fewer than one batch"):
+        plan_training(fast, 31)
+
+
+@pytest.mark.parametrize("field, value", [("lr_physics", 1e30), ("lr", float("nan")), ("warmup_fraction", 1.5),
+                                          ("budget_steps", -1), ("optimizer", "sgd")])
+def test_train_config_names_a_bad_field(field: str, value: object) -> None:
+    with pytest.raises(ValueError, match=f"TrainConfig.{field}"):
+        TrainConfig(**{field: value})
+
+
+def test_a_file_that_ended_inside_the_old_warm_up_now_trains_its_physics(small_data: Path, tmp_path: Path,
+                                                                          capsys: pytest.CaptureFixture[str]) -> None:
+    """16 windows of batch 8: 2 steps an epoch. Under the old absolute 200-step warm-up, 16 epochs (32 steps)
+    never ran the physics; sized from the data, the same command plans a run whose physics trains."""
+    out = tmp_path / "r"
+    code, stdout, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), "--batch-size", "8",
+                                       "--budget-steps", "60", "--quiet", "--threads", "1", capsys=capsys)
+    assert code == 0, err
+    assert "plan: 60 steps = 30 epochs x 2 steps" in stdout  # printed in one line at the start
+    metrics = json.loads((out / "metrics.json").read_text())
+    conv = metrics["convergence"]
+    assert conv["physics_steps"] > 40 and conv["steps"] == 60
+    assert all(abs(c["change_from_start"]) > 0.01 for c in conv["parameters"].values())  # g and a left 1 and 0.3
+    assert metrics["converged"] == (conv["outcome"] == "converged")
+    assert json.loads((out / "config.json").read_text())["plan"]["warmup_steps"] == 2
+
+
+def test_a_run_stopped_before_its_physics_trained_exits_non_zero(small_data: Path, tmp_path: Path,
+                                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "r"  # 20 planned steps, the first 10 the warm-up; the budget stops it after the first epoch (2 steps)
+    code, _, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), "--batch-size", "8", "--epochs", "10",
+                                  "--warmup-fraction", "0.5", "--max-minutes", "1e-9", "--quiet", "--threads", "1",
+                                  capsys=capsys)
+    line = assert_one_line(code, err, "physics never trained", "warm-up", "--epochs", "--resume")
+    assert code == 1, line
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["converged"] is False and metrics["convergence"]["outcome"] == "untrained"
+
+
+def test_converged_is_false_when_the_parameters_never_moved(small_data: Path, tmp_path: Path,
+                                                           capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "r"
+    code, _, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), "--batch-size", "8", "--epochs", "5",
+                                  "--lr-physics", "1e-9", "--quiet", "--threads", "1", capsys=capsys)
+    assert_one_line(code, err, "never left", "--lr-physics")
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["converged"] is False
+    from piga.runs import convergence_warning
+
+    assert "did not converge" in (convergence_warning(out) or "")  # what piga-control and piga-diagnose print
+
+
+def test_the_convergence_check_on_made_up_trajectories() -> None:
+    from types import SimpleNamespace
+
+    from piga.convergence import check_convergence
+    from piga.train import TrainPlan
+
+    plan = TrainPlan(windows=3200, steps_per_epoch=100, epochs=10, warmup_steps=40, curriculum_steps=100, average_steps=60)
+    steps = np.arange(10, 1001, 10.0)
+
+    def state(g: np.ndarray, a: np.ndarray, step: int = 1000) -> SimpleNamespace:
+        trace = [[s, gv, av] for s, gv, av in zip(steps, g, a) if s <= step]
+        return SimpleNamespace(step=step, start={"g": 1.0, "a": 0.3}, trace=trace,
+                               history=[{"g": trace[-1][1], "a": trace[-1][2]}])
+
+    settle = 1 - np.exp(-steps / 150)
+    good = check_convergence(state(1 + 9 * settle, 0.3 + 0.7 * settle), plan)
+    assert good.outcome == "converged", good.reason
+    drifting = check_convergence(state(1 + 9 * steps / 1000, 0.3 + 0.7 * settle), plan)  # g still climbs at the end
+    assert drifting.outcome == "unsettled" and "g moved" in drifting.reason and "a moved" not in drifting.reason
+    stopped = check_convergence(state(1 + 9 * settle, 0.3 + 0.7 * settle, step=500), plan)
+    assert stopped.outcome == "unsettled" and "500 of 1000" in stopped.reason
+    stuck = check_convergence(state(np.ones_like(steps), 0.3 + 0.7 * settle), plan)
+    assert stuck.outcome == "untrained" and "g never left" in stuck.reason
+    collapsed = check_convergence(state(1 + 9 * settle, np.full_like(steps, 1e-9)), plan)
+    assert collapsed.outcome == "untrained" and "a collapsed" in collapsed.reason
+    warm = check_convergence(state(np.ones_like(steps), np.full_like(steps, 0.3), step=30), plan)
+    assert warm.outcome == "untrained" and "never trained" in warm.reason and warm.physics_steps == 0

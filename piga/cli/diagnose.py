@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Sequence
 
 from piga.cli.common import ArgumentParser, PigaError, command_line, nonnegative_int, positive_int, run_cli
@@ -33,7 +34,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     from piga.data import inspect_dataset
     from piga.diagnostics import DiagnoseConfig, diagnose
     from piga.diagnostics.report import check_report_target, number, write_report
-    from piga.runs import load_model
+    from piga.runs import convergence_warning, load_model
 
     # Everything is checked before any work, and the report folder is only created at the end
     # (atomically): a refusal leaves nothing behind.
@@ -43,6 +44,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     model, ckpt = load_model(args.model)
     if model.config.system != "pendulum":
         raise PigaError(f"{args.model}: piga-diagnose is for pendulum models; this one is a {model.config.system} model")
+    warning = convergence_warning(args.model)
+    if warning:
+        print(f"{PROG}: {warning}", file=sys.stderr)
     import torch
 
     torch.set_num_threads(max(1, min(2, torch.get_num_threads())))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import sys
+from argparse import ArgumentTypeError
 from collections.abc import Sequence
 from dataclasses import asdict, replace
 from pathlib import Path
@@ -11,6 +12,22 @@ from typing import Any
 
 from piga.cli.common import (ArgumentParser, Interrupted, PigaError, add_preset_option, command_line, format_default, nonnegative_int,
                              positive_float, positive_int, run_cli)
+
+#: The recipe options a user may give; each is a TrainConfig field of the same name.
+RECIPE_OPTIONS = ("epochs", "budget_steps", "max_minutes", "batch_size", "lr", "lr_physics", "warmup_fraction")
+
+
+def fraction(text: str) -> float:
+    """argparse type: a number in [0, 1)."""
+    import math
+
+    try:
+        value = float(text)
+    except ValueError:
+        raise ArgumentTypeError(f"expected a number in [0, 1), got {text!r}") from None
+    if not (math.isfinite(value) and 0 <= value < 1):
+        raise ArgumentTypeError(f"expected a number in [0, 1), got {text!r}")
+    return value
 
 PROG = "piga-train-model"
 CHECKPOINT = "checkpoint.pt"
@@ -39,13 +56,17 @@ def build_parser() -> ArgumentParser:
                    "velocities read through it, a learnable damping b). For a scene (spring, gravity, ...) 'fast' and "
                    "'paper' are the scene's own (README, 'Systems'); the defaults shown are the pendulum's. "
                    "Explicit options override the preset.")
-    recipe("--epochs", "epochs", positive_int, "passes over the training windows; the cosine schedule is planned over them")
+    recipe("--epochs", "epochs", positive_int, "passes over the training windows; the cosine schedule is planned over them",
+           shown="sized from the data: the fewest that reach --budget-steps")
+    recipe("--budget-steps", "budget_steps", positive_int, "optimiser steps the run is sized to when --epochs is not given "
+           "(a scene's fast preset: 1650)")
     recipe("--max-minutes", "max_minutes", positive_float, "stop after the epoch that ends past this budget",
            shown="no limit")
     recipe("--batch-size", "batch_size", positive_int, "windows per step")
     recipe("--lr", "lr", positive_float, "network learning rate")
     recipe("--lr-physics", "lr_physics", positive_float, "physical-parameter learning rate, log space")
-    recipe("--warmup-steps", "warmup_steps", nonnegative_int, "autoencoder-only steps first")
+    recipe("--warmup-fraction", "warmup_fraction", fraction, "fraction of the run's steps that train the autoencoder "
+           "alone, first")
     p.add_argument("--signed-actuation", action="store_true",
                    help="learn the sign of a too (a in linear space, from +0.3): for a camera on the other side of the "
                    "hinge or a motor wired the other way, which flip the actuation the frames show")
@@ -56,7 +77,7 @@ def build_parser() -> ArgumentParser:
                       "g·m starts at 1 as in the g run")
     p.add_argument("--seed", type=nonnegative_int, default=fast.seed, help="seed of initialisation and sampling (default %(default)s)")
     p.add_argument("--threads", type=nonnegative_int, default=fast.threads, help="torch CPU threads (default %(default)s: torch's choice)")
-    p.add_argument("--resume", action="store_true", help="continue the run in --out; it may raise --epochs or --max-minutes "
+    p.add_argument("--resume", action="store_true", help="continue the run in --out; it may raise --epochs, --budget-steps or --max-minutes "
                    "(see README: resuming replans the cosine schedule)")
     p.add_argument("--overwrite", action="store_true", help="replace the outputs of an earlier run in --out")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
@@ -85,19 +106,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     from piga.train import TrainConfig, TrainingDiverged, check_trainable, model_config_for, preset_for, train
 
     info = inspect_dataset(args.data)
-    overrides = {k: getattr(args, k) for k in ("epochs", "max_minutes", "batch_size", "lr", "lr_physics", "warmup_steps")
-                 if getattr(args, k) is not None}
+    overrides = {k: getattr(args, k) for k in RECIPE_OPTIONS if getattr(args, k) is not None}
     command = command_line(PROG, argv)
     if args.resume:  # the run's own recipe; only the length and the budget may change
         saved_model, ckpt = load_model(run_dir)
         if tuple(ckpt["data"]["image_shape"]) != info.image_shape or ckpt["data"]["system"] != info.system:
             raise PigaError(f"--resume: {args.data} ({info.system}, {info.image_shape}) does not match the run's data "
                             f"({ckpt['data']['system']}, {tuple(ckpt['data']['image_shape'])})")
-        changed = (sorted(set(overrides) - {"epochs", "max_minutes"}) + (["signed_actuation"] if args.signed_actuation else [])
+        changed = (sorted(set(overrides) - {"epochs", "budget_steps", "max_minutes"}) + (["signed_actuation"] if args.signed_actuation else [])
                    + (["fixed_g"] if args.fixed_g is not None else []))
         if changed:
             raise PigaError(f"--resume keeps the run's recipe; drop {', '.join('--' + c.replace('_', '-') for c in changed)}")
-        train_config = replace(TrainConfig(**ckpt["train_config"]), **overrides)
+        train_config = replace(TrainConfig.from_dict(ckpt["train_config"]), **overrides)
         model_overrides: dict[str, Any] = {}
         model_config = saved_model.config
         record = _read_record(run_dir)
@@ -115,13 +135,15 @@ def main(argv: Sequence[str] | None = None) -> int:
             model_overrides["fixed_g"] = args.fixed_g
         model_config = model_config_for(info, model_overrides)
         record = {"command": command}
-    check_trainable(info, model_config, train_config)
-    record.update({"data": str(args.data), "train": asdict(train_config), "model": model_config.to_dict()})
+    plan = check_trainable(info, model_config, train_config)
+    record.update({"data": str(args.data), "train": asdict(train_config), "plan": asdict(plan),
+                   "model": model_config.to_dict()})
     if not info.split_counts["test"]:
         print(f"{PROG}: warning: {args.data} has no test sequences; metrics.json and the figures will be measured on "
               "the train split, which is not held out", file=sys.stderr)
     print(f"training on {args.data} ({info.split_counts['train']} train sequences x {info.steps} frames); "
           f"{info.system} parameters start at {_start_values(model_config)} -> {run_dir}")
+    print(f"plan: {plan.describe(model_config.pred_frames)}")
     written: list[int] = []
 
     def on_epoch(state: Any, model: Any) -> None:  # the first checkpoint of this command: the record goes with it
@@ -139,7 +161,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             epoch = written[-1] if written else _saved_epoch(run_dir)
             raise Interrupted(f"{run_dir / CHECKPOINT} holds epoch {epoch}; continue with --resume") from None
         raise
-    metrics = write_run_report(model, state, args.data, run_dir)
+    from piga.convergence import check_convergence
+
+    convergence = check_convergence(state, plan)
+    metrics = write_run_report(model, state, args.data, run_dir, convergence=convergence)
     from piga.evaluate import summary_line
 
     print(f"learned: {summary_line(metrics)}")
@@ -150,7 +175,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(f"SSIM ({metrics['split']} split): prediction {ssim['prediction']:.3f}"
           + (f", extrapolation {ssim['extrapolation']:.3f}" if ssim["extrapolation"] is not None else "")
           + (f"; encoder angle error {metrics['angle']['mean_abs_error_deg']:.2f} deg" if "angle" in metrics else ""))
-    print(f"trained {state.epoch} epochs in {state.elapsed / 60:.1f} min; wrote {run_dir}/metrics.json and figures")
+    print(f"trained {state.epoch} epoch{'s' if state.epoch != 1 else ''} ({state.step} steps) in {state.elapsed / 60:.1f} min; "
+          f"wrote {run_dir}/metrics.json and figures")
+    if convergence.outcome == "untrained":
+        raise PigaError(f"the run did not identify its parameters: {convergence.reason}")
+    if convergence.outcome == "unsettled":
+        print(f"{PROG}: warning: not converged: {convergence.reason}", file=sys.stderr)
     return 0
 
 

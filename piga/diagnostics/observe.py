@@ -49,7 +49,7 @@ def check_training(checkpoint: dict[str, Any] | None, rec_training: float, blank
     steps = training_steps(checkpoint)
     if steps == 0:
         raise UntrainedModelError("the model was never trained (its run took no optimiser step); train it first")
-    warmup = ((checkpoint or {}).get("train_config") or {}).get("warmup_steps", 0)
+    warmup = ((checkpoint or {}).get("plan") or {}).get("warmup_steps", 0)
     if steps is not None and steps <= warmup:
         raise UntrainedModelError(f"the model's physics was never trained: all {steps} steps of its run were "
                                   f"autoencoder warm-up ({warmup} steps); train it longer")

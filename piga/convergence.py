@@ -1,0 +1,153 @@
+"""Did a training run identify its physical parameters? The check that every run ends with.
+
+A run can end without having learned anything and still look like one that did: a small file
+whose epochs end inside the autoencoder warm-up never runs the physics, a physics learning rate
+that is too small leaves g where it started, and a run cut short by ``--max-minutes`` stops while
+its parameters still move. The check reads the run's own record (its plan and the parameters'
+trajectory, :class:`piga.train.TrainState`), never the truth, and gives one of three outcomes:
+
+| outcome | meaning | ``piga-train-model`` |
+|---|---|---|
+| ``untrained`` | the physics never trained, a learned parameter never left its start, or one collapsed to a float limit | exits 1 with a line that names the fix |
+| ``unsettled`` | it trained, but stopped before its plan ended, or a parameter still drifts at the end | exits 0 with a warning line |
+| ``converged`` | none of the above | exits 0 |
+
+A parameter *drifts* when its change over the last ``tail`` of the planned steps (a straight-line
+fit of its log through the recorded trajectory) exceeds ``drift_tolerance``, or twice its spread
+about that line, whichever is larger: at the end of the cosine schedule the learning rate is a few
+percent of its peak, so a parameter that still moves by more than half a percent there has not
+found its value.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+from typing import Any, Literal
+
+import numpy as np
+
+Outcome = Literal["converged", "unsettled", "untrained"]
+
+
+@dataclass(frozen=True)
+class ConvergenceConfig:
+    """Thresholds of the check."""
+
+    tail: float = 0.1
+    """Fraction of the planned steps, at the end, over which drift is measured."""
+    drift_tolerance: float = 0.005
+    """Largest relative change over the tail of a settled parameter."""
+    moved_tolerance: float = 1e-3
+    """Smallest relative change from its start of a parameter that was learned."""
+    collapse_factor: float = 1e4
+    """A parameter that ends this factor or more away from its start has collapsed (log-space runaway)."""
+
+
+@dataclass(frozen=True)
+class ParameterCheck:
+    """One learned parameter's trajectory, summarised."""
+
+    start: float
+    end: float
+    change_from_start: float
+    """Relative change (end - start) / |start| (absolute for a parameter that starts at 0)."""
+    tail_change: float | None
+    """Relative change over the tail by the straight-line fit (None: too few recorded points)."""
+    tail_spread: float | None
+    """Standard deviation (relative) about that line."""
+
+
+@dataclass(frozen=True)
+class Convergence:
+    """The verdict on one run."""
+
+    outcome: Outcome
+    reason: str
+    """One sentence; for ``untrained`` and ``unsettled`` it names the fix."""
+    physics_steps: int
+    """Steps in which the physics was part of the loss (after the warm-up)."""
+    planned_steps: int
+    steps: int
+    parameters: dict[str, ParameterCheck] = field(default_factory=dict)
+
+    @property
+    def converged(self) -> bool:
+        return self.outcome == "converged"
+
+    def to_dict(self) -> dict[str, Any]:
+        """What metrics.json keeps under ``convergence``."""
+        return asdict(self)
+
+
+def _fix(planned: int, steps: int) -> str:
+    return ("train longer (--epochs or a larger --max-minutes, or more data), or continue this run with --resume "
+            f"and a larger --epochs (it took {steps} of {planned} planned steps)")
+
+
+def check_convergence(state: Any, plan: Any, config: ConvergenceConfig = ConvergenceConfig()) -> Convergence:
+    """Judges a finished (or stopped) run from its :class:`~piga.train.TrainState` and :class:`~piga.train.TrainPlan`.
+
+    ``state.start`` holds the learned parameters before the first step, ``state.trace`` their values
+    every few steps, and ``state.history[-1]`` the values the run ended with.
+    """
+    steps, planned = int(state.step), int(plan.total_steps)
+    physics_steps = max(0, steps - int(plan.warmup_steps))
+    end_values = {k: float(state.history[-1][k]) for k in state.start} if state.history else dict(state.start)
+    checks = {name: _parameter(name, float(start), end_values[name], state.trace, list(state.start), planned, config)
+              for name, start in state.start.items()}
+
+    def verdict(outcome: Outcome, reason: str) -> Convergence:
+        return Convergence(outcome, reason, physics_steps, planned, steps, checks)
+
+    if physics_steps == 0:
+        return verdict("untrained", f"the physics never trained: all {steps} steps were the autoencoder warm-up "
+                                    f"({plan.warmup_steps} steps); " + _fix(planned, steps))
+    # A parameter that starts at 0 (the pendulum's angle offset) has no scale of its own: it is judged
+    # in absolute terms, and only for drift, since its truth may well be 0.
+    scaled = {name: c for name, c in checks.items() if c.start != 0}
+    for name, c in checks.items():
+        if not math.isfinite(c.end):
+            return verdict("untrained", f"{name} became {c.end}: lower --lr-physics")
+    for name, c in scaled.items():
+        if abs(c.end) >= config.collapse_factor * abs(c.start) or abs(c.end) <= abs(c.start) / config.collapse_factor:
+            return verdict("untrained", f"{name} collapsed from {c.start:.4g} to {c.end:.4g}: the physics learning "
+                                        "rate is too large for this file; lower --lr-physics")
+    stuck = [name for name, c in scaled.items() if abs(c.change_from_start) < config.moved_tolerance]
+    if stuck:
+        return verdict("untrained", f"{', '.join(stuck)} never left {'its' if len(stuck) == 1 else 'their'} initial "
+                                    f"value in {physics_steps} physics steps; raise --lr-physics or " + _fix(planned, steps))
+    if steps < planned:
+        return verdict("unsettled", f"the run stopped at step {steps} of {planned} planned, before its learning rate "
+                                    "decayed; " + _fix(planned, steps))
+    short = [name for name, c in checks.items() if c.tail_change is None]
+    if short:
+        return verdict("unsettled", f"the run is too short to judge whether {', '.join(short)} settled ({steps} steps, "
+                                    "fewer than 5 recorded over its last tenth); " + _fix(planned, steps))
+    drifting = []
+    for name, c in checks.items():
+        if c.tail_change is not None and abs(c.tail_change) > max(config.drift_tolerance, 2 * (c.tail_spread or 0.0)):
+            drifting.append(f"{name} moved {100 * c.tail_change:+.2f}% over the last {100 * config.tail:.0f}% of steps")
+    if drifting:
+        return verdict("unsettled", "still drifting at the end: " + "; ".join(drifting) + "; " + _fix(planned, steps))
+    if not checks:
+        return verdict("converged", f"the physics trained for {physics_steps} steps (no parameter to learn)")
+    return verdict("converged", f"every learned parameter left its start and settled over the last "
+                                f"{100 * config.tail:.0f}% of {planned} steps")
+
+
+def _parameter(name: str, start: float, end: float, trace: list[list[float]], names: list[str], planned: int,
+               config: ConvergenceConfig) -> ParameterCheck:
+    scale = abs(start) or 1.0
+    tail_change = tail_spread = None
+    if trace and math.isfinite(end):
+        rows = np.asarray(trace, dtype=np.float64)  # (K, 1 + P): step, then the parameters
+        rows = rows[rows[:, 0] > planned * (1 - config.tail)]
+        values = rows[:, 1 + names.index(name)] if len(rows) else rows
+        if len(values) >= 5 and np.all(np.isfinite(values)) and np.all(values != 0):
+            # Relative change: the log for a positive parameter; a signed one (a learned with its sign) linearly.
+            y = np.log(np.abs(values)) if np.all(values > 0) or np.all(values < 0) else values / scale
+            slope, intercept = np.polyfit(rows[:, 0], y, 1)
+            tail_change = float(slope * (rows[-1, 0] - rows[0, 0]))
+            tail_spread = float(np.std(y - (slope * rows[:, 0] + intercept)))
+    return ParameterCheck(start, end, (end - start) / scale, tail_change, tail_spread)
