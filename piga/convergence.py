@@ -85,14 +85,17 @@ def _fix(planned: int, steps: int) -> str:
             f"and a larger --epochs (it took {steps} of {planned} planned steps)")
 
 
-def check_convergence(state: Any, plan: Any, config: ConvergenceConfig = ConvergenceConfig()) -> Convergence:
-    """Judges a finished (or stopped) run from its :class:`~piga.train.TrainState` and :class:`~piga.train.TrainPlan`.
+def check_convergence(state: Any, config: ConvergenceConfig = ConvergenceConfig()) -> Convergence:
+    """Judges a finished (or stopped) run from its :class:`~piga.train.TrainState`.
 
-    ``state.start`` holds the learned parameters before the first step, ``state.trace`` their values
-    every few steps, and ``state.history[-1]`` the values the run ended with.
+    ``state.plan`` is the run's :class:`~piga.train.TrainPlan` (as a dict), ``state.start`` the
+    learned parameters before the first step, ``state.trace`` their values every few steps, and
+    ``state.history[-1]`` the values the run ended with.
     """
-    steps, planned = int(state.step), int(plan.total_steps)
-    physics_steps = max(0, steps - int(plan.warmup_steps))
+    plan = state.plan
+    steps = int(state.step)
+    planned = int(plan["epochs"]) * int(plan["steps_per_epoch"])
+    physics_steps = max(0, steps - int(plan["warmup_steps"]))
     end_values = {k: float(state.history[-1][k]) for k in state.start} if state.history else dict(state.start)
     checks = {name: _parameter(name, float(start), end_values[name], state.trace, list(state.start), planned, config)
               for name, start in state.start.items()}
@@ -102,7 +105,7 @@ def check_convergence(state: Any, plan: Any, config: ConvergenceConfig = Converg
 
     if physics_steps == 0:
         return verdict("untrained", f"the physics never trained: all {steps} steps were the autoencoder warm-up "
-                                    f"({plan.warmup_steps} steps); " + _fix(planned, steps))
+                                    f"({plan['warmup_steps']} steps); " + _fix(planned, steps))
     # A parameter that starts at 0 (the pendulum's angle offset) has no scale of its own: it is judged
     # in absolute terms, and only for drift, since its truth may well be 0.
     scaled = {name: c for name, c in checks.items() if c.start != 0}

@@ -13,7 +13,7 @@ from piga.evaluate import PARAMETER_NAMES, EvalConfig, evaluate, rollout_frames
 from piga.model import PhysicsModel, frames_to_float
 from piga.plots import curves_figure, rollout_figure, save_figure, templates_figure
 from piga.atomic import write_json
-from piga.convergence import Convergence
+from piga.convergence import check_convergence
 from piga.train import TrainState
 
 
@@ -24,11 +24,12 @@ def _image(x: np.ndarray) -> np.ndarray:
 
 @torch.no_grad()
 def write_run_report(model: PhysicsModel, state: TrainState, data: str | Path, run_dir: str | Path,
-                     eval_config: EvalConfig = EvalConfig(), convergence: Convergence | None = None) -> dict[str, Any]:
+                     eval_config: EvalConfig = EvalConfig()) -> dict[str, Any]:
     """Evaluates on held-out data and writes metrics.json, rollout.png, templates.png and curves.png.
 
-    With ``convergence`` (:func:`piga.convergence.check_convergence`), metrics.json also holds
-    ``converged`` (true or false) and ``convergence`` (the outcome, its reason and each parameter's check).
+    For a run that recorded its plan, metrics.json also holds the convergence check
+    (:func:`piga.convergence.check_convergence`): ``converged`` (true or false) and ``convergence``
+    (the outcome, its reason and each parameter's trajectory summary).
     """
     run_dir = Path(run_dir)
     info = inspect_dataset(data)
@@ -39,7 +40,8 @@ def write_run_report(model: PhysicsModel, state: TrainState, data: str | Path, r
     metrics = evaluate(model, data, eval_config)
     metrics["training"] = {"epochs": state.epoch, "steps": state.step, "seconds": state.elapsed,
                            "threads": torch.get_num_threads()}
-    if convergence is not None:
+    if state.plan:
+        convergence = check_convergence(state)
         metrics["converged"] = convergence.converged
         metrics["convergence"] = convergence.to_dict()
     write_json(run_dir / "metrics.json", metrics)

@@ -228,13 +228,13 @@ PRESETS: dict[str, dict[str, Any]] = {
 #: What all ball and digit scenes share: templates of H/2 (the published decoder's), a pixelwise
 #: mask term, the decoder's background content starting at the label-free median background, no
 #: trimming (nothing unmodelled to trim), and the paper's velocity MLP on top of the backward
-#: difference (at dt = 0.3 the difference alone is far from v_L: ω·dt ≈ 0.85 for the spring) with a
-#: cubic Taylor term (``velocity_physics``), L = 4 input and T_pred = 6 predicted frames (the
-#: published code's). Reading v_L through the engine instead (``velocity_shoot``) removes the ~1.5%
-#: low bias that the cubic term leaves on k and g when fitted to true positions
-#: (``benchmarks/velocity_bias.py``); it becomes the recipe once Table 1 is re-measured with it.
+#: difference (at dt = 0.3 the difference alone is far from v_L: ω·dt ≈ 0.85 for the spring), with
+#: v_L read through the engine (``velocity_shoot``: the velocity the engine ends the last input
+#: interval with), L = 4 input and T_pred = 6 predicted frames (the published code's). The cubic
+#: Taylor term that it replaced (``velocity_physics``) left k and g about 1.5% low
+#: (``benchmarks/velocity_bias.py``).
 _SCENE_MODEL: dict[str, Any] = {"input_frames": 4, "pred_frames": 6, "pred_trim": 0.0, "velocity_correction": True,
-                                "velocity_physics": True, "substeps": 5, "mask_pixelwise": True, "alpha": 2.0,
+                                "velocity_shoot": True, "substeps": 5, "mask_pixelwise": True, "alpha": 2.0,
                                 "init_background": True}
 #: The scenes' fast schedule: 1650 steps (6 epochs of the default 1000 x 30-frame file), of which the
 #: first 18% train the autoencoder alone and the next 36% grow the horizon, whatever the file's size.
@@ -300,6 +300,8 @@ class TrainState:
     """Running Polyak average of the physical-parameter tensors (flattened), over the final steps so far."""
     average_count: int = 0
     """Steps in ``average``."""
+    plan: dict[str, int] = field(default_factory=dict)
+    """The run's :class:`TrainPlan` (as a dict), for the convergence check."""
 
 
 def model_config_for(info: DatasetInfo, overrides: dict[str, Any] | None = None) -> ModelConfig:
@@ -536,6 +538,7 @@ def train(
         state.start = {k: v for k, v in model.physical_parameters().items() if k in learned}
     cfg = model.config
     plan = check_trainable(info, cfg, train_config)
+    state.plan = asdict(plan)
     windows = SequenceWindows(data, "train", window=cfg.window, stride=train_config.window_stride)
     writer = _Scalars()
     physics_params = [p for p in model.system.parameters() if p.requires_grad]

@@ -344,24 +344,25 @@ def test_the_convergence_check_on_made_up_trajectories() -> None:
     from piga.convergence import check_convergence
     from piga.train import TrainPlan
 
-    plan = TrainPlan(windows=3200, steps_per_epoch=100, epochs=10, warmup_steps=40, curriculum_steps=100, average_steps=60)
+    plan = asdict(TrainPlan(windows=3200, steps_per_epoch=100, epochs=10, warmup_steps=40, curriculum_steps=100,
+                            average_steps=60))
     steps = np.arange(10, 1001, 10.0)
 
     def state(g: np.ndarray, a: np.ndarray, step: int = 1000) -> SimpleNamespace:
         trace = [[s, gv, av] for s, gv, av in zip(steps, g, a) if s <= step]
-        return SimpleNamespace(step=step, start={"g": 1.0, "a": 0.3}, trace=trace,
+        return SimpleNamespace(step=step, start={"g": 1.0, "a": 0.3}, trace=trace, plan=plan,
                                history=[{"g": trace[-1][1], "a": trace[-1][2]}])
 
     settle = 1 - np.exp(-steps / 150)
-    good = check_convergence(state(1 + 9 * settle, 0.3 + 0.7 * settle), plan)
+    good = check_convergence(state(1 + 9 * settle, 0.3 + 0.7 * settle))
     assert good.outcome == "converged", good.reason
-    drifting = check_convergence(state(1 + 9 * steps / 1000, 0.3 + 0.7 * settle), plan)  # g still climbs at the end
+    drifting = check_convergence(state(1 + 9 * steps / 1000, 0.3 + 0.7 * settle))  # g still climbs at the end
     assert drifting.outcome == "unsettled" and "g moved" in drifting.reason and "a moved" not in drifting.reason
-    stopped = check_convergence(state(1 + 9 * settle, 0.3 + 0.7 * settle, step=500), plan)
+    stopped = check_convergence(state(1 + 9 * settle, 0.3 + 0.7 * settle, step=500))
     assert stopped.outcome == "unsettled" and "500 of 1000" in stopped.reason
-    stuck = check_convergence(state(np.ones_like(steps), 0.3 + 0.7 * settle), plan)
+    stuck = check_convergence(state(np.ones_like(steps), 0.3 + 0.7 * settle))
     assert stuck.outcome == "untrained" and "g never left" in stuck.reason
-    collapsed = check_convergence(state(1 + 9 * settle, np.full_like(steps, 1e-9)), plan)
+    collapsed = check_convergence(state(1 + 9 * settle, np.full_like(steps, 1e-9)))
     assert collapsed.outcome == "untrained" and "a collapsed" in collapsed.reason
-    warm = check_convergence(state(np.ones_like(steps), np.full_like(steps, 0.3), step=30), plan)
+    warm = check_convergence(state(np.ones_like(steps), np.full_like(steps, 0.3), step=30))
     assert warm.outcome == "untrained" and "never trained" in warm.reason and warm.physics_steps == 0

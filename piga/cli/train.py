@@ -161,10 +161,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             epoch = written[-1] if written else _saved_epoch(run_dir)
             raise Interrupted(f"{run_dir / CHECKPOINT} holds epoch {epoch}; continue with --resume") from None
         raise
-    from piga.convergence import check_convergence
-
-    convergence = check_convergence(state, plan)
-    metrics = write_run_report(model, state, args.data, run_dir, convergence=convergence)
+    metrics = write_run_report(model, state, args.data, run_dir)
+    convergence = metrics.get("convergence") or {"outcome": "converged"}
     from piga.evaluate import summary_line
 
     print(f"learned: {summary_line(metrics)}")
@@ -177,10 +175,10 @@ def main(argv: Sequence[str] | None = None) -> int:
           + (f"; encoder angle error {metrics['angle']['mean_abs_error_deg']:.2f} deg" if "angle" in metrics else ""))
     print(f"trained {state.epoch} epoch{'s' if state.epoch != 1 else ''} ({state.step} steps) in {state.elapsed / 60:.1f} min; "
           f"wrote {run_dir}/metrics.json and figures")
-    if convergence.outcome == "untrained":
-        raise PigaError(f"the run did not identify its parameters: {convergence.reason}")
-    if convergence.outcome == "unsettled":
-        print(f"{PROG}: warning: not converged: {convergence.reason}", file=sys.stderr)
+    if convergence["outcome"] == "untrained":
+        raise PigaError(f"the run did not identify its parameters: {convergence['reason']}")
+    if convergence["outcome"] == "unsettled":
+        print(f"{PROG}: warning: not converged: {convergence['reason']}", file=sys.stderr)
     return 0
 
 
