@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import functools
 import multiprocessing as mp
+import sys
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any, Protocol
@@ -21,7 +22,7 @@ from agents.mpc import MPCConfig, OracleAgent, PigaMPCAgent, StateReader
 from piga.baselines.kinds import BASELINE_KINDS
 from piga.episodes import EpisodeConfig, merge_results, run_episodes
 from piga.model import PhysicsModel
-from piga.runs import load_model
+from piga.runs import convergence_warning, load_model
 from piga.worker_signals import die_with_parent, quiet_worker_signals
 
 
@@ -143,6 +144,9 @@ def run_jobs(jobs: Sequence[ControlJob], workers: int = 1, progress: bool = True
     On KeyboardInterrupt (Ctrl-C, or SIGTERM turned into it by :func:`piga.cli.common.run_cli`) the
     pool terminates its workers before the exception propagates; a worker whose parent is killed ends too.
     """
+    for run_dir in dict.fromkeys(j.model_dir for j in jobs if j.model_dir is not None):  # once per run, in order
+        if (warning := convergence_warning(run_dir)) is not None:
+            print(warning, file=sys.stderr)
     if workers <= 1 or len(jobs) <= 1:
         return [run_job(j, keep_plan_ms) for j in tqdm(jobs, desc="control jobs", disable=not progress)]
     # fork, as torch's DataLoader does: with spawn, torch's import makes the resource tracker warn
