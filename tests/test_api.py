@@ -55,3 +55,10 @@ def test_the_example_and_the_readme_snippet_run(tmp_path: Path) -> None:
     out = subprocess.run([sys.executable, "-c", snippet], capture_output=True, text=True, timeout=300, env=ENV)
     assert out.returncode == 0, out.stderr[-2000:]
     assert "'g':" in out.stdout
+
+
+def test_the_data_pages_example_writes_a_valid_file(tmp_path: Path) -> None:
+    """docs/data.md's h5py example: a file written by hand is a valid piga file."""
+    block = re.search(r"```python\n(.*?)```", (ROOT / "docs" / "data.md").read_text(), re.DOTALL).group(1)
+    out = subprocess.run([sys.executable, "-c", block], capture_output=True, text=True, timeout=120, env=ENV, cwd=tmp_path)
+    assert out.returncode == 0 and "n_sequences=3" in out.stdout, out.stderr[-2000:]
