@@ -3,6 +3,8 @@
 A small public API, loaded on first use so that ``import piga`` stays cheap (torch, Gymnasium
 and h5py are imported only when a name that needs them is used)::
 
+    import torch
+
     import piga
 
     model, checkpoint = piga.load_model("runs/pendulum")  # a piga-train-model run folder

@@ -47,7 +47,7 @@ def test_the_version_is_the_package_version() -> None:
 def test_the_example_and_the_readme_snippet_run(tmp_path: Path) -> None:
     """examples/identify_pendulum.py on tiny settings, then the README's snippet on its outputs."""
     out = subprocess.run([sys.executable, str(ROOT / "examples" / "identify_pendulum.py"), "--out", str(tmp_path),
-                          "--sequences", "20", "--epochs", "1"], capture_output=True, text=True, timeout=300, env=ENV)
+                          "--sequences", "12", "--epochs", "1"], capture_output=True, text=True, timeout=300, env=ENV)
     assert out.returncode == 0, out.stderr[-2000:]
     assert "learned:" in out.stdout and "true:" in out.stdout
     snippet = re.search(r"```python\n(.*?)```", (ROOT / "README.md").read_text(), re.DOTALL).group(1)
