@@ -38,7 +38,7 @@ class CEMConfig:
 
 @dataclass(frozen=True)
 class MPCConfig:
-    """Planner settings. The CEM defaults are tuned for the pendulum (README, ``piga-control``)."""
+    """Planner settings. The CEM defaults are tuned for the pendulum (docs/commands/control.md)."""
 
     cem: CEMConfig = field(default_factory=lambda: CEMConfig(horizon=20, iterations=5, candidates=200, elites=20))
     """CEM settings."""

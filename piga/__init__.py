@@ -1,6 +1,80 @@
 """piga: physics-as-inverse-graphics. Learn a system's parameters and states from video.
 
-Small public API; the modules hold the details.
+A small public API, loaded on first use so that ``import piga`` stays cheap (torch, Gymnasium
+and h5py are imported only when a name that needs them is used)::
+
+    import torch
+
+    import piga
+
+    model, checkpoint = piga.load_model("runs/pendulum")  # a piga-train-model run folder
+    frames, actions = piga.read_sequences("data/pendulum.h5", "test")  # uint8 (N, T, H, W), (N, T, A)
+    x = piga.frames_to_float(torch.from_numpy(frames[:, :4]), channels=1)  # (N, 4, 1, H, W)
+    theta = model.encode(x)  # (N, 4, 1, 1): the angle read from each frame
+    future = model.predict(theta, torch.from_numpy(actions[:, 3:13]), steps=10)  # (N, 10, 1, 1)
+
+The modules (``piga.collect``, ``piga.train``, ``piga.data``, ...) are importable as attributes
+too, and hold the details.
 """
 
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
 __version__ = "0.1.0"
+
+#: Public name -> the module that defines it.
+_API: dict[str, str] = {
+    # runs and the model
+    "load_model": "piga.runs",
+    "PhysicsModel": "piga.model",
+    "ModelConfig": "piga.model",
+    "frames_to_float": "piga.model",
+    "rollout": "piga.physics",
+    # data
+    "CollectConfig": "piga.collect",
+    "TrainConfig": "piga.train",
+    "inspect_dataset": "piga.data",
+    "read_sequences": "piga.data",
+    "load_states": "piga.data",
+    "DatasetInfo": "piga.data",
+    "DataFormatError": "piga.data",
+    "SequenceWindows": "piga.windows",
+    # environments
+    "make_pixel_pendulum": "envs.pendulum",
+    "PixelPendulumConfig": "envs.pendulum",
+    "make_dmc_pendulum": "envs.dmc",
+    "DMCPendulumConfig": "envs.dmc",
+}
+
+__all__ = ["__version__", *_API]
+
+if TYPE_CHECKING:  # for type checkers and IDEs; at run time the names load lazily (__getattr__)
+    from envs.dmc import DMCPendulumConfig, make_dmc_pendulum
+    from envs.pendulum import PixelPendulumConfig, make_pixel_pendulum
+    from piga.collect import CollectConfig
+    from piga.data import DataFormatError, DatasetInfo, inspect_dataset, load_states, read_sequences
+    from piga.model import ModelConfig, PhysicsModel, frames_to_float
+    from piga.physics import rollout
+    from piga.runs import load_model
+    from piga.train import TrainConfig
+    from piga.windows import SequenceWindows
+
+
+def __getattr__(name: str) -> Any:
+    """Loads a public name, or a submodule (``piga.collect``, ``piga.train``, ...), on first use."""
+    if name in _API:
+        value = getattr(importlib.import_module(_API[name]), name)
+        globals()[name] = value
+        return value
+    try:
+        return importlib.import_module(f"{__name__}.{name}")
+    except ModuleNotFoundError as exc:
+        if exc.name != f"{__name__}.{name}":
+            raise
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *_API})

@@ -30,7 +30,7 @@ from piga.collect import check_collect_sizes, sequence_rng, split_counts
 from piga.data import SPLITS, DatasetWriter
 from piga.worker_signals import quiet_worker_signals
 
-#: Frames per sequence by scene: L + T_pred + T_ext of the chosen windows (README, "Systems").
+#: Frames per sequence by scene: L + T_pred + T_ext of the chosen windows (docs/systems.md).
 SCENE_STEPS: dict[str, int] = {"bouncing": 30, "spring": 30, "gravity": 40, "digits-spring": 30}
 
 #: Sizes: 'default' is small enough for a CPU; 'paper' is the paper's 5000 / 500 / 500.

@@ -63,7 +63,7 @@ class EpisodeConfig:
     """Whether the frames show Gymnasium's torque arrow. Off by default: in closed loop the arrow is
     the controller's own output drawn into its input, right where the pendulum is read near
     upright. With it, 2 of 6 trained models misread the angle there by ~1.5° and failed at gravity
-    x1.4 (README, results/control.md); without it, all succeeded. Training data keep the arrow."""
+    x1.4 (docs/commands/control.md, results/control.md); without it, all succeeded. Training data keep the arrow."""
     first_episode: int = 0
     """Index of the first episode run: episodes ``first_episode`` to ``first_episode + episodes - 1``
     of the sequence this seed gives, each with its own start and env seed, so a batch split across

@@ -1,4 +1,4 @@
-"""The README's option tables against the parsers: every documented default must be the code's."""
+"""The command reference (docs/commands/) against the parsers: every option documented, every documented default the code's."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ import pytest
 
 from piga.cli.common import documented_default
 
-README = Path(__file__).resolve().parents[1] / "README.md"
+DOCS = Path(__file__).resolve().parents[1] / "docs"
 
 #: Command -> its CLI module (each has ``build_parser()``).
 COMMANDS = {
@@ -28,6 +28,19 @@ COMMANDS = {
     "piga-baseline ddpg": "piga.cli.baseline:ddpg",
 }
 
+#: Command -> its page in docs/commands/.
+PAGES = {
+    "piga-collect": "collect.md",
+    "piga-show": "show.md",
+    "piga-train-model": "train-model.md",
+    "piga-control": "control.md",
+    "piga-demo": "demo.md",
+    "piga-diagnose": "diagnose.md",
+    "piga-import": "import.md",
+    "piga-baseline planet": "baseline.md",
+    "piga-baseline ddpg": "baseline.md",
+}
+
 
 def build_parser(command: str) -> argparse.ArgumentParser:
     """The parser of a command, or of its subcommand ("module:subcommand")."""
@@ -38,7 +51,7 @@ def build_parser(command: str) -> argparse.ArgumentParser:
     subparsers = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
     return subparsers.choices[sub]
 
-#: Words the README uses for a default, and the values they stand for.
+#: Words the reference uses for a default, and the values they stand for.
 WORDS: dict[str, tuple[Any, ...]] = {
     "off": (False, None),
     "on": (True,),
@@ -49,7 +62,9 @@ WORDS: dict[str, tuple[Any, ...]] = {
 
 
 def option_rows(text: str) -> dict[str, list[tuple[list[str], list[str], str]]]:
-    """Command -> rows (options, documented defaults, the row) of the option tables in its README section.
+    """Command -> rows (options, documented defaults, the row) of the option tables in its section of ``text``.
+
+    A section starts at a heading that names the command in backticks (``# `piga-collect ...` ``).
 
     A table with a ``default`` column gives its cell, split at ", " into one default per option.
     In a table without one, a row whose text holds "(default A, B, ...)" with one value per
@@ -105,7 +120,7 @@ def code_default(action: argparse.Action) -> Any:
 
 
 def matches(documented: str, action: argparse.Action) -> bool:
-    """Whether the README's text for a default is the parser's default."""
+    """Whether the reference's text for a default is the parser's default."""
     value = code_default(action)
     text = documented.strip("`")
     if isinstance(value, str) and action.choices is None:  # a default known only from the help text
@@ -126,27 +141,55 @@ def matches(documented: str, action: argparse.Action) -> bool:
     return len(numbers) == 1 and value is not None and not isinstance(value, bool) and math.isclose(numbers[0], float(value))
 
 
-ROWS = option_rows(README.read_text())
+def reference_text() -> str:
+    """The command pages, each starting with its command's heading."""
+    return "\n\n".join((DOCS / "commands" / page).read_text() for page in sorted(set(PAGES.values())))
 
 
-def test_the_readme_documents_defaults_of_the_main_commands() -> None:
+ROWS = option_rows(reference_text())
+
+
+def test_the_reference_documents_defaults_of_the_main_commands() -> None:
     # guards the parser of the tables: it must find the rows it is meant to check
     assert {"piga-collect", "piga-train-model"} <= set(ROWS)
     assert sum(len(r) for r in ROWS.values()) >= 15
 
 
 @pytest.mark.parametrize("command", sorted(COMMANDS))
-def test_readme_defaults_match_the_parser(command: str) -> None:
+def test_reference_defaults_match_the_parser(command: str) -> None:
     parser = build_parser(command)
     actions = {flag: a for a in parser._actions for flag in a.option_strings}
     wrong = []
     for options, defaults, line in ROWS.get(command, []):
-        assert len(options) == len(defaults), f"README row lists {len(options)} options but {len(defaults)} defaults: {line}"
+        assert len(options) == len(defaults), f"docs/commands/{PAGES[command]}: a row lists {len(options)} options but {len(defaults)} defaults: {line}"
         for option, documented in zip(options, defaults):
-            assert option in actions, f"README documents {option}, which {command} does not have: {line}"
+            assert option in actions, f"docs/commands/{PAGES[command]} documents {option}, which {command} does not have: {line}"
             if not matches(documented, actions[option]):
-                wrong.append(f"{option}: README says {documented!r}, the code {code_default(actions[option])!r}")
+                wrong.append(f"{option}: docs/commands/{PAGES[command]} says {documented!r}, the code {code_default(actions[option])!r}")
     assert not wrong, f"{command}: " + "; ".join(wrong)
+
+
+@pytest.mark.parametrize("command", sorted(COMMANDS))
+def test_every_option_is_on_its_commands_page(command: str) -> None:
+    """Each option of the parser is named on the command's page (in a table or in the text)."""
+    page = (DOCS / "commands" / PAGES[command]).read_text()
+    missing = [a.option_strings[-1] for a in build_parser(command)._actions
+               if a.option_strings and "--help" not in a.option_strings
+               and not any(re.search(rf"(?<![\w-]){re.escape(o)}(?![\w-])", page) for o in a.option_strings)]
+    assert not missing, f"docs/commands/{PAGES[command]} does not mention {command}'s {', '.join(missing)}"
+
+
+def test_every_command_has_a_page_in_the_site() -> None:
+    """pyproject's console scripts all have a page, and mkdocs.yml's navigation lists every command page."""
+    import tomllib
+
+    root = DOCS.parent
+    scripts = tomllib.loads((root / "pyproject.toml").read_text())["project"]["scripts"]
+    documented = {c.split()[0] for c in COMMANDS}
+    assert set(scripts) == documented, f"commands without a reference page: {set(scripts) - documented}"
+    nav = (root / "mkdocs.yml").read_text()
+    pages = {p.name for p in (DOCS / "commands").glob("*.md")}
+    assert all(f"commands/{p}" in nav for p in pages), f"mkdocs.yml's nav misses some of {sorted(pages)}"
 
 
 @pytest.mark.parametrize("command", sorted(COMMANDS))

@@ -1,7 +1,7 @@
 """Settings of the PlaNet-style baseline: plain dataclasses, no torch, so that command lines read their defaults quickly.
 
 PlaNet (Hafner et al., 2019) is sized for a GPU. Each field below that departs from it says so, and
-why: the model must train in tens of minutes on a 2-core CPU. The README's baselines section lists
+why: the model must train in tens of minutes on a 2-core CPU. docs/commands/baseline.md lists
 the departures in one table.
 """
 
