@@ -57,6 +57,7 @@ WORDS: dict[str, tuple[Any, ...]] = {
     "on": (True,),
     "none": (None, 0, 0.0),
     "torch's": (0,),
+    "from the data": (0,),
     "π": (math.pi,),
 }
 

@@ -54,7 +54,7 @@ def build_parser() -> ArgumentParser:
                    help="'fast' (default): the CPU recipe; 'paper': the paper's (RMSProp 3e-4, 1000 epochs, M=5); "
                    "'continuous': the fast recipe for a system that moves within the frame (RK4 with the action held, "
                    "velocities read through it, a learnable damping b). For a scene (spring, gravity, ...) 'fast' and "
-                   "'paper' are the scene's own (README, 'Systems'); the defaults shown are the pendulum's. "
+                   "'paper' are the scene's own (docs: Systems); the defaults shown are the pendulum's. "
                    "Explicit options override the preset.")
     recipe("--epochs", "epochs", positive_int, "passes over the training windows; the cosine schedule is planned over them",
            shown="sized from the data: the fewest that reach --budget-steps")
@@ -78,7 +78,7 @@ def build_parser() -> ArgumentParser:
     p.add_argument("--seed", type=nonnegative_int, default=fast.seed, help="seed of initialisation and sampling (default %(default)s)")
     p.add_argument("--threads", type=nonnegative_int, default=fast.threads, help="torch CPU threads (default %(default)s: torch's choice)")
     p.add_argument("--resume", action="store_true", help="continue the run in --out; it may raise --epochs, --budget-steps or --max-minutes "
-                   "(see README: resuming replans the cosine schedule)")
+                   "(docs: piga-train-model; resuming replans the cosine schedule)")
     p.add_argument("--overwrite", action="store_true", help="replace the outputs of an earlier run in --out")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     return p
