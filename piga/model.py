@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field
-from typing import Any, NamedTuple
+from typing import Any, Literal, NamedTuple
 
 import torch
 import torch.nn.functional as F
@@ -46,7 +46,7 @@ class ModelConfig:
     (:data:`piga.train.PRESETS`) overrides what the paper's appendix does differently.
     """
 
-    system: str = "pendulum"
+    system: Literal["pendulum", "spring", "gravity", "bouncing"] = "pendulum"
     """Physics family: one of :data:`SYSTEM_SHAPES`."""
     physics_init: dict[str, float] = field(default_factory=dict)
     """Initial physical parameters (empty: the system's far-from-truth defaults)."""
@@ -79,7 +79,7 @@ class ModelConfig:
     least-trimmed-squares loss). Rare events the physics does not model, such as Gymnasium's ±8
     speed clip, then cannot bias g and a. Fitting true pendulum states shows that 5-10% removes
     the clip's -1% bias on a. 0 is the paper's plain mean (the paper preset)."""
-    rec_frames: str = "input"
+    rec_frames: Literal["all", "input"] = "input"
     """Frames in the reconstruction loss: "all" L + T_pred (the paper preset), or "input" (the L input
     frames only: the encoder then runs on L frames per item instead of L + T_pred, 3.5x less
     work for the pendulum, and with overlapping windows every frame is still reconstructed)."""
@@ -88,7 +88,7 @@ class ModelConfig:
     (exact for one Euler substep; see :class:`piga.velocity.VelocityConfig`)."""
     substeps: int = 1
     """Integrator substeps M per frame (the paper preset: 5 Euler; 1 Euler matches Gymnasium's pendulum exactly)."""
-    integrator: str = "euler"
+    integrator: Literal["euler", "rk4"] = "euler"
     """"euler" (semi-implicit, the paper's) or "rk4" (a continuous system under a held action; the
     'continuous' preset), see :mod:`piga.physics`."""
     velocity_hold: bool = False
@@ -104,7 +104,7 @@ class ModelConfig:
     signed_actuation: bool = False
     """Pendulum only: learn a in linear space, sign included (:class:`piga.physics.Pendulum`), for a
     camera on the other side or a motor wired the other way; a then starts at +0.3 and may cross 0."""
-    readout: str = "centroid"
+    readout: Literal["centroid", "regress"] = "centroid"
     """Encoder readout: "centroid" (soft centroid of each mask) or "regress" (the paper's location network, the paper preset)."""
     angle_reference: float = 0.0
     """Centroid readout of an angle: the direction read as θ = 0 (the learned offset φ absorbs it)."""
@@ -161,6 +161,10 @@ class ModelConfig:
             raise ValueError(f"need input_frames >= 2 and pred_frames >= 1, got {self.input_frames}, {self.pred_frames}")
         if self.rec_frames not in ("all", "input"):
             raise ValueError(f"rec_frames must be 'all' or 'input', got {self.rec_frames!r}")
+        if self.integrator not in ("euler", "rk4"):
+            raise ValueError(f"ModelConfig.integrator must be 'euler' or 'rk4', got {self.integrator!r}")
+        if self.readout not in ("centroid", "regress"):
+            raise ValueError(f"ModelConfig.readout must be 'centroid' or 'regress', got {self.readout!r}")
         if not 0 <= self.pred_trim < 1:
             raise ValueError(f"pred_trim must be in [0, 1), got {self.pred_trim}")
         if self.alpha < 0:
