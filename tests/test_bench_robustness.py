@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-import importlib.util
+import importlib
 import json
 import os
 import stat
@@ -22,15 +22,12 @@ ROOT = Path(__file__).resolve().parents[1]
 
 @pytest.fixture(scope="module")
 def bench():
-    sys.path.insert(0, str(ROOT / "benchmarks"))  # the script imports its sibling module common
+    """The script as a module (it imports its sibling module common, so benchmarks/ goes on the path)."""
+    sys.path.insert(0, str(ROOT / "benchmarks"))
     try:
-        spec = importlib.util.spec_from_file_location("bench_robustness", ROOT / "benchmarks" / "robustness.py")
-        module = importlib.util.module_from_spec(spec)
-        sys.modules[spec.name] = module  # dataclasses look their module up there
-        spec.loader.exec_module(module)
-        yield module
+        yield importlib.import_module("robustness")
     finally:
-        sys.modules.pop("bench_robustness", None)
+        sys.modules.pop("robustness", None)
         sys.path.remove(str(ROOT / "benchmarks"))
 
 
@@ -67,6 +64,7 @@ def test_the_rows_cover_the_issue(bench) -> None:
     for system in ("spring", "gravity"):
         seeds = [r for r in rows if r.group == "seeds" and r.system == system]
         assert sorted(r.seed for r in seeds) == list(range(10)) and {r.data_name for r in seeds} == {f"{system}-default"}
+    assert [r.name for r in rows if r.renderer] == ["own/spring-opencv"]
     # the default command, unchanged: only --seed is added, on the seed rows
     row = next(r for r in rows if r.name == "spring/noise-10")
     assert row.train_command(Path("f.h5"), Path("run")) == ["piga-train-model", "f.h5", "--out", "run", "--threads", "1", "--quiet"]
@@ -117,6 +115,28 @@ def test_h264_of_gray_frames_and_odd_sizes(bench, tiny_data: Path, tmp_path: Pat
         bench._parse_post("h264:qp=3")
 
 
+def test_the_own_renderer_simulates_as_piga_and_writes_a_valid_file(bench, tmp_path: Path) -> None:
+    from envs.scenes import scene_config, simulate
+
+    rng = np.random.default_rng(0)
+    p0, v0 = rng.uniform(10, 20, (3, 2, 2)), rng.normal(0, 8, (3, 2, 2))  # (B, N, 2)
+    positions, velocities, fine = bench.simulate_spring(p0, v0, 12)
+    expected = simulate(scene_config("spring"), p0, v0, 12)  # piga's generator, written apart
+    np.testing.assert_allclose(positions, expected[0], atol=1e-9)
+    np.testing.assert_allclose(velocities, expected[1], atol=1e-9)
+    assert fine.shape == (11 * 10 + 1, 3, 2, 2)
+    path = tmp_path / "own.h5"
+    bench.render_spring_opencv(path, sequences=10, steps=6)
+    info = inspect_dataset(path)
+    assert info.image_shape == (32, 32, 3) and info.split_counts == {"train": 8, "valid": 1, "test": 1}
+    assert info.params == {"k": 4.0, "l": 6.0} and info.attrs["scene"] == "spring"
+    with h5py.File(path) as f:
+        frames, states = f["frames"][()], f["states"][()]
+    x, y = np.rint(states[0, 0, :2] - 0.5).astype(int)  # the blue ball's centre pixel
+    assert frames[0, 0, y, x, 2] > 200 and frames[0, 0, y, x, :2].max() == 0
+    assert ((states[..., :4] > 3) & (states[..., :4] < 29)).all()  # clear of the walls
+
+
 def _record(exit_code: int = 0, errors: tuple[float, ...] = (0.01,), converged: bool | None = None,
             found: bool = True) -> dict:
     return {"exit_code": exit_code, "stderr_last": "ValueError: too short", "converged": converged,
@@ -163,6 +183,11 @@ def test_summary_floors_and_seed_counts(bench) -> None:
     assert floors["every row within 2% or flagged"] == {"met": False, "rows": ["pendulum/x"]}
     assert floors["no row exits 0 with an error > 5% without reporting converged false"]["met"]
     assert s["counts"] == {"pass": 20, "flagged": 0, "miss": 1, "FAIL": 0}
+    assert floors["seeds: gravity 9/10"] == {"met": True, "rows": ["seeds/gravity-seed0"]}
+    partial = bench.summary(records[:8], len(records))["seeds"]  # 4 runs of each finished: too early to tell
+    assert partial["spring"]["met"] is None and partial["gravity"]["met"] is None
+    lost = [r for r in records if r["system"] == "gravity"][:2]
+    assert bench.summary([{**r, "objects": {"found": False}} for r in lost], 2)["seeds"]["gravity"]["met"] is False
 
 
 def _command(path: Path, body: str) -> None:
@@ -192,7 +217,7 @@ def test_a_refused_row_is_recorded_and_not_rerun(bench, spring_file: Path, tmp_p
     assert record["train_command"].startswith("piga-train-model ") and "--threads 1 --quiet" in record["train_command"]
     page = out.with_suffix(".md").read_text()
     assert "spring/steps10" in page and "1 flagged" in page and "--rows spring/steps10" in page
-    result = run(*args, "--list", env=env)
-    assert "done" in result.stdout.splitlines()[1] and "1 rows" in result.stdout
+    listing = bench.list_rows(bench.Bench(work, out, "", bench.rows()), bench.select(bench.rows(), ["spring/steps1*"]))
+    assert "spring/steps10" in listing and " done " in listing and " to do " in listing and "2 rows" in listing
     assert run(*args, env=env).returncode == 0
     assert len(calls.read_text().splitlines()) == 1  # the second invocation skipped the finished row
