@@ -774,6 +774,12 @@ def markdown(result: dict[str, Any], out: Path) -> str:
               "block after decoding, which is exact without the codec: compression at a phone-like size.",
               "- A post-processed file keeps /actions, /states, /split and every attribute of the collected one, "
               "and adds the attribute `postprocess` (JSON: what, with which parameters, from which file).",
+              "- `own/spring-opencv`: this script's numpy simulation of the published spring (checked against piga's "
+              "generator in the tests), starts drawn as the published generator draws them, balls drawn by "
+              "`cv2.circle` (filled, anti-aliased, 1/16-pixel centres); they look about half a pixel larger than "
+              "piga's supersampled disks.",
+              "- The seed rows train on the default file of their system; seed 0 is the same run as the system's "
+              "`default` row (whichever ran first made it, and its record shows that command).",
               "- Rows whose sequences are shorter than the recipe's window (L + T_pred) are expected to be refused "
               "(exit non-zero: flagged).", ""]
     return "\n".join(lines)

@@ -195,7 +195,8 @@ def _command(path: Path, body: str) -> None:
     path.chmod(path.stat().st_mode | stat.S_IXUSR)
 
 
-def test_a_refused_row_is_recorded_and_not_rerun(bench, spring_file: Path, tmp_path: Path) -> None:
+def test_a_refused_row_is_recorded_and_not_rerun(bench, spring_file: Path, tmp_path: Path,
+                                                 monkeypatch: pytest.MonkeyPatch) -> None:
     """The whole flow, as a user would see it, with stand-ins for the commands: piga-collect copies a tiny file,
     piga-train-model refuses it (exit 2)."""
     folder = tmp_path / "bin"
@@ -219,5 +220,18 @@ def test_a_refused_row_is_recorded_and_not_rerun(bench, spring_file: Path, tmp_p
     assert "spring/steps10" in page and "1 flagged" in page and "--rows spring/steps10" in page
     listing = bench.list_rows(bench.Bench(work, out, "", bench.rows()), bench.select(bench.rows(), ["spring/steps1*"]))
     assert "spring/steps10" in listing and " done " in listing and " to do " in listing and "2 rows" in listing
-    assert run(*args, env=env).returncode == 0
+    monkeypatch.setenv("PATH", env["PATH"])
+    assert bench.main(list(args[2:])) == 0  # again, in this process
     assert len(calls.read_text().splitlines()) == 1  # the second invocation skipped the finished row
+
+
+@pytest.mark.slow
+def test_a_tiny_row_end_to_end(tmp_path: Path) -> None:
+    """The real commands on the smallest row (pendulum, 50 sequences: a few minutes on one core)."""
+    out = tmp_path / "robustness"
+    result = run("python", str(ROOT / "benchmarks" / "robustness.py"), "--rows", "pendulum/sequences50", "--out", str(out),
+                 "--work", str(tmp_path / "work"), timeout=1200)
+    assert result.returncode == 0, result.stderr
+    record = json.loads(out.with_suffix(".json").read_text())["rows"][0]
+    assert record["exit_code"] == 0 and set(record["parameters"]) == {"g", "a"} and record["objects"]["found"]
+    assert record["verdict"] in ("pass", "miss", "flagged")
