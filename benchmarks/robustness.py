@@ -529,7 +529,7 @@ def summary(records: list[dict[str, Any]], planned: int) -> dict[str, Any]:
             "floors": floors}
 
 
-# -------------------------------------------------------------------------------------------- rows
+# ------------------------------------------------------------------------------------ running rows
 class Bench:
     """Data files, runs and records of one ``--work`` folder; safe to call from several threads."""
 
