@@ -459,14 +459,11 @@ def render_spring_opencv(out: Path, sequences: int = 1000, steps: int = 30, size
 
 # ------------------------------------------------------------------------------------------ scoring
 def converged_field(metrics: dict[str, Any] | None) -> tuple[bool | None, str | None]:
-    """metrics.json's ``converged``: ``{"ok": bool, "reason": str}``, or a bool with ``converged_reason``;
-    (None, None) when the run does not report it."""
+    """metrics.json's ``converged`` (a bool) and the reason under ``convergence``; (None, None) when
+    the run does not report it."""
     value = (metrics or {}).get("converged")
-    if isinstance(value, dict):
-        ok = value.get("ok")
-        return (bool(ok) if ok is not None else None), value.get("reason")
     if isinstance(value, bool):
-        return value, (metrics or {}).get("converged_reason")
+        return value, ((metrics or {}).get("convergence") or {}).get("reason")
     return None, None
 
 

@@ -161,9 +161,9 @@ def test_score(bench, record: dict, verdict: str) -> None:
     assert bench.score(record)[0] == verdict
 
 
-def test_converged_field_is_read_in_either_form(bench) -> None:
-    assert bench.converged_field({"converged": {"ok": False, "reason": "flat"}}) == (False, "flat")
-    assert bench.converged_field({"converged": True, "converged_reason": "ok"}) == (True, "ok")
+def test_converged_field_is_read_from_metrics(bench) -> None:
+    assert bench.converged_field({"converged": False, "convergence": {"reason": "flat"}}) == (False, "flat")
+    assert bench.converged_field({"converged": True, "convergence": {"reason": "ok"}}) == (True, "ok")
     assert bench.converged_field({}) == (None, None) and bench.converged_field(None) == (None, None)
 
 
