@@ -15,8 +15,8 @@ trajectory, :class:`piga.train.TrainState`), never the truth, and gives one of t
 A parameter *drifts* when its change over the last ``tail`` of the planned steps (a straight-line
 fit of its log through the recorded trajectory) exceeds ``drift_tolerance``, or twice its spread
 about that line, whichever is larger: at the end of the cosine schedule the learning rate is a few
-percent of its peak, so a parameter that still moves by more than half a percent there has not
-found its value.
+percent of its peak, so a parameter that still moves by more than 1% there has not found its value
+(a settled run of the default file moves g and a by under 0.5%).
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ class ConvergenceConfig:
 
     tail: float = 0.1
     """Fraction of the planned steps, at the end, over which drift is measured."""
-    drift_tolerance: float = 0.005
+    drift_tolerance: float = 0.01
     """Largest relative change over the tail of a settled parameter."""
     moved_tolerance: float = 1e-3
     """Smallest relative change from its start of a parameter that was learned."""

@@ -56,8 +56,9 @@ class TrainConfig:
     epochs: int = 0
     """Passes over the training windows (0: sized from the data, the fewest whole epochs that reach
     ``budget_steps``). The cosine schedule is planned over all of them."""
-    budget_steps: int = 5400
-    """Optimiser steps a run is sized to when ``epochs`` is 0 (rounded up to whole epochs)."""
+    budget_steps: int = 2000
+    """Optimiser steps a run is sized to when ``epochs`` is 0 (rounded up to whole epochs). 2000 identify
+    g and a to 0.1% on the default file (``benchmarks/identify_time.py``), as 5400 did."""
     max_minutes: float = 0.0
     """Safety wall-clock budget: stop after the first epoch that ends past it (0: no limit).
     Training results do not depend on it unless it cuts the run short."""

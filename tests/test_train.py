@@ -277,6 +277,7 @@ def test_the_plan_is_sized_from_the_file() -> None:
 
     fast = TrainConfig()
     big, small = plan_training(fast, 10_800), plan_training(fast, 336)  # the default file; 48 sequences x 7 windows
+    assert (big.epochs, big.warmup_steps, big.curriculum_steps) == (6, 81, 222)  # 2022 steps
     assert big.epochs == -(-fast.budget_steps // 337) and small.epochs == -(-fast.budget_steps // 10)  # whole epochs
     for plan in (big, small):
         assert plan.total_steps >= fast.budget_steps
