@@ -27,6 +27,7 @@ from pathlib import Path
 from common import machine
 from piga.atomic import atomic_output
 from piga.collect import CollectConfig, collect
+from piga.convergence import check_convergence
 from piga.evaluate import EvalConfig, evaluate
 from piga.atomic import write_json
 from piga.model import ModelConfig
@@ -51,8 +52,8 @@ def markdown(record: dict, out: Path) -> str:
 
 def table(runs: list[dict[str, object]]) -> str:
     """Markdown: one row per run, then per-case medians and spreads."""
-    lines = ["| case | seed | true g | learned g | g error | true a | learned a | a error | train min | SSIM pred | SSIM ext | angle err (deg) |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    lines = ["| case | seed | true g | learned g | g error | true a | learned a | a error | converged | train min | SSIM pred | SSIM ext | angle err (deg) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in runs:
         pe = r["metrics"]["parameter_errors"]  # type: ignore[index]
         m = r["metrics"]
@@ -61,7 +62,7 @@ def table(runs: list[dict[str, object]]) -> str:
         lines.append(
             f"| {r['case']} | {r['seed']} | {pe['g']['true']:g} | {pe['g']['learned']:.4f} | {100 * pe['g']['relative_error']:.2f}% | "
             f"{pe['a']['true']:g} | {pe['a']['learned']:.4f} | {100 * pe['a']['relative_error']:.2f}% | "
-            f"{r['train_seconds'] / 60:.1f} | {ssim['prediction']:.3f} | {ssim['extrapolation']:.3f} | {angle:.2f} |"
+            f"{ {True: 'yes', False: 'no'}.get(r.get('converged'), '-') } | {r['train_seconds'] / 60:.1f} | {ssim['prediction']:.3f} | {ssim['extrapolation']:.3f} | {angle:.2f} |"
         )
     lines += ["", "| case | runs | g error median (max) | a error median (max) | all ≤ 1% | train min median |", "|---|---|---|---|---|---|"]
     for case in dict.fromkeys(r["case"] for r in runs):
@@ -107,8 +108,12 @@ def main() -> None:
             model, state = train(data, run_dir, TrainConfig(seed=seed), PRESETS["fast"].get("model"), progress=False)
             wall = time.monotonic() - started
             metrics = evaluate(model, data, EvalConfig())
+            convergence = check_convergence(state)
+            if not convergence.converged:
+                print(f"{case} seed {seed}: warning: not converged: {convergence.reason}", file=sys.stderr)
             record["runs"].append({"case": case, "seed": seed, "train_seconds": state.elapsed, "wall_seconds": wall,
-                                   "history": state.history, "metrics": metrics})
+                                   "history": state.history, "metrics": metrics, "converged": convergence.converged,
+                                   "convergence": convergence.to_dict()})
             write_json(record_path, record)
             with atomic_output(out.with_suffix(".md"), overwrite=True) as tmp:
                 tmp.write_text(markdown(record, out))
