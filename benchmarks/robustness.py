@@ -233,8 +233,8 @@ def file_shape(row: Row) -> tuple[int, int, int]:
     return (int(_option(row, "--sequences") or n), int(_option(row, "--steps") or t), int(_option(row, "--image-size") or size))
 
 
-def recipe_windows(row: Row) -> tuple[int, int, int]:
-    """(L + T_pred, epochs, window stride) of the default recipe for the row's system."""
+def recipe_windows(row: Row) -> tuple[int, Any, int]:
+    """(L + T_pred, the recipe's TrainConfig, window stride) of the default recipe for the row's system."""
     from piga.model import ModelConfig
     from piga.train import PRESETS, SCENE_PRESETS, TrainConfig
 
@@ -242,7 +242,7 @@ def recipe_windows(row: Row) -> tuple[int, int, int]:
     train = TrainConfig(**recipe.get("train", {}))
     model = recipe.get("model", {})
     window = model.get("input_frames", ModelConfig.input_frames) + model.get("pred_frames", ModelConfig.pred_frames)
-    return window, train.epochs, train.window_stride
+    return window, train, train.window_stride
 
 
 def estimate_minutes(row: Row) -> dict[str, float]:
@@ -253,9 +253,14 @@ def estimate_minutes(row: Row) -> dict[str, float]:
     if row.post.startswith("h264"):
         scale = int(_parse_post(row.post)[1]["scale"])
         data += n * (H264_S_PER_SEQUENCE + t * (scale * size) ** 2 * H264_S_PER_PIXEL) / 60
-    window, epochs, stride = recipe_windows(row)
+    from piga.train import plan_training
+
+    window, config, stride = recipe_windows(row)
     windows = int(0.8 * n) * len(range(0, t - window + 1, stride))
-    train = windows * epochs * MS_PER_WINDOW[row.system] * (size / native) ** 2 / 60000 + (0.5 if windows else 0.1)
+    if windows < config.batch_size:
+        return {"data": data, "train": 0.1}  # refused at once
+    seen = plan_training(config, windows).total_steps * config.batch_size  # windows the planned run trains on
+    train = seen * MS_PER_WINDOW[row.system] * (size / native) ** 2 / 60000 + 0.5
     return {"data": data, "train": train}
 
 
