@@ -1,4 +1,4 @@
-"""Benchmark: piga's default recipe, unchanged, on data files it was not tuned on (issue 30, part 4).
+"""Benchmark: piga's default recipe, unchanged, on data files it was not tuned on.
 
 Each row is one data file and one training run with the default command, run as a user runs it::
 
