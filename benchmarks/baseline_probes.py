@@ -76,7 +76,7 @@ def probe_actor(run: Path, data: Path) -> dict[str, object]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.split("\n\n")[0])
     p.add_argument("what", choices=("autoencoder", "actor"))
     p.add_argument("run", type=Path, help="a piga-baseline ddpg run folder")
     p.add_argument("data", type=Path, help="a piga-collect file")

@@ -914,7 +914,7 @@ def aggregate(records: dict[str, dict[str, Any] | None], cfg: BenchConfig) -> di
 
 
 def main() -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.split("\n\n")[0])
     p.add_argument("--out", required=True, help="writes OUT.json, OUT.md, OUT-*.png; runs in OUT_runs/")
     p.add_argument("--preset", choices=sorted(PRESETS), default="full")
     p.add_argument("--workers", type=int, help="processes (default: the preset's, 2)")

@@ -53,7 +53,7 @@ def goal_angles(g: float, a: float, count: int = 7) -> list[float]:
 
 
 def main() -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     p.add_argument("--model", required=True, help="run folder of piga-train-model")
     p.add_argument("--out", default="results/control", help="output prefix (default %(default)s)")
     p.add_argument("--episodes", type=int, default=50)

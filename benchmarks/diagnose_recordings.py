@@ -85,7 +85,7 @@ def record(effects: dict, drop: float, blur: float, frames: int, seed: int, out:
 
 
 def main() -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     p.add_argument("--model", required=True, help="run folder of piga-train-model (the identified model)")
     p.add_argument("--out", default="results/diagnose_recordings")
     p.add_argument("--work", default="runs/recordings", help="folder for the recordings, data files and reports")

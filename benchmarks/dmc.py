@@ -268,7 +268,7 @@ def markdown(cases: list[dict[str, object]], command: str, info: dict[str, objec
 
 
 def main() -> None:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     p.add_argument("--work", required=True, help="folder for data and runs (kept, reused on a rerun)")
     p.add_argument("--out", required=True, help="OUT.json and OUT.md are written")
     p.add_argument("--seeds", type=int, nargs="+", default=[0])

@@ -123,7 +123,7 @@ def planet_ratio(rows: list[dict]) -> dict | None:
 
 
 def main() -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     p.add_argument("--model", required=True, help="run folder of piga-train-model (a pendulum model)")
     p.add_argument("--out", default="results/plan_time", help="output prefix (default %(default)s)")
     p.add_argument("--episodes", type=int, default=5, help="episodes per agent (default %(default)s)")

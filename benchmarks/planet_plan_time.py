@@ -65,7 +65,7 @@ def measure(model: WorldModel, threads: int, steps: int, seed: int = 0) -> dict[
 
 
 def main() -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.split("\n\n")[0])
     p.add_argument("--out", required=True, help="writes OUT.json and OUT.md")
     p.add_argument("--model", help="a piga-baseline planet run folder (default: an untrained default-size model)")
     p.add_argument("--threads", type=int, nargs="+", default=[1], help="torch thread counts to measure (default 1)")

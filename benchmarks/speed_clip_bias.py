@@ -44,7 +44,7 @@ def fit(max_speed: float, sequences: int, steps: int, seed: int) -> dict[str, fl
 
 
 def main() -> None:
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.split("\n")[0])
     p.add_argument("--out", default="results/speed_clip_bias", help="output stem (.json and .md)")
     p.add_argument("--sequences", type=int, default=500)
     p.add_argument("--steps", type=int, default=40)

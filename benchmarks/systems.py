@@ -282,7 +282,7 @@ def _look(overrides: dict[str, Any]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     p.add_argument("--out", type=Path, required=True, help="output prefix: OUT.json, OUT.md, OUT-*.png")
     p.add_argument("--systems", nargs="+", choices=SYSTEMS, default=SYSTEMS,
                    help="cases: the systems, and gravity-m (the gravity data, g held at 60, m learned)")

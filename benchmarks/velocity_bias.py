@@ -65,7 +65,7 @@ def fit(scene: str, positions: torch.Tensor, mode: str, steps: int, seed: int) -
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     p.add_argument("--out", type=Path, required=True, help="output prefix: OUT.json and OUT.md")
     p.add_argument("--sequences", type=int, default=200, help="sequences per scene (default %(default)s)")
     p.add_argument("--steps", type=int, default=1000, help="Adam steps per fit (default %(default)s)")

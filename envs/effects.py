@@ -18,20 +18,20 @@ Let u_t be the commanded action, the one that the agent sends and that a data fi
 
 | effect | kind | parameter | equation | wrapper |
 |---|---|---|---|---|
-| ``delay=k`` | actuator | integer k >= 1 (steps) | ũ_t = u_{t-k}, and ũ_t = 0 for t < k (reset clears it) | :class:`ActionDelay` |
+| ``delay=k`` | actuator | integer 1 <= k <= 1000 (steps) | ũ_t = u_{t-k}, and ũ_t = 0 for t < k (reset clears it) | :class:`ActionDelay` |
 | ``deadzone=d`` | actuator | 0 < d < 2 (action units) | ũ = sign(u)·max(abs(u) - d, 0) | :class:`ActionDeadzone` |
 | ``saturation=s`` | actuator | 0 < s < 2 (action units) | ũ = clip(u, -s, s) | :class:`ActionSaturation` |
-| ``gain=m`` | actuator | m > 0, m != 1 (factor) | ũ = m·u (an actuator gain error) | :class:`ActionGainError` |
+| ``gain=m`` | actuator | 0 < m <= 100, m != 1 (factor) | ũ = m·u (an actuator gain error) | :class:`ActionGainError` |
 
 The applied torque τ_t is ``actuation_gain·ũ_t`` plus the passive torques. These are computed
 from the state (θ_t, θ̇_t) *before* the step:
 
 | effect | kind | parameter | passive torque | wrapper |
 |---|---|---|---|---|
-| ``damping=b`` | passive | b > 0 (N·m·s/rad) | -b·θ̇_t | :class:`ViscousDamping` |
-| ``friction=c`` | passive | c > 0 (N·m) | -c·tanh(θ̇_t / 0.1), a smoothed Coulomb friction (:data:`FRICTION_SMOOTHING`) | :class:`CoulombFriction` |
-| ``bias=τ0`` | passive | τ0 != 0 (N·m) | +τ0 | :class:`TorqueBias` |
-| ``cogging=k`` | passive | k > 0 (N·m) | -k·sin(4θ_t), a detent torque; not a candidate of the diagnosis | :class:`CoggingTorque` |
+| ``damping=b`` | passive | 0 < b <= 100 (N·m·s/rad) | -b·θ̇_t | :class:`ViscousDamping` |
+| ``friction=c`` | passive | 0 < c <= 100 (N·m) | -c·tanh(θ̇_t / 0.1), a smoothed Coulomb friction (:data:`FRICTION_SMOOTHING`) | :class:`CoulombFriction` |
+| ``bias=τ0`` | passive | 0 < abs(τ0) <= 100 (N·m) | +τ0 | :class:`TorqueBias` |
+| ``cogging=k`` | passive | 0 < k <= 100 (N·m) | -k·sin(4θ_t), a detent torque; not a candidate of the diagnosis | :class:`CoggingTorque` |
 | ``speed_clip=v`` | clip | 0 < v < 8 (rad/s) | Pendulum-v1's speed clip ±8 becomes ±v | :class:`SpeedClip` |
 
 The step is Pendulum-v1's own step, given τ_t as its torque:
@@ -59,10 +59,10 @@ first (one normal per pixel), then the drop (one uniform); reset draws only the 
 
 | effect | kind | parameter | frame x -> observed frame | wrapper |
 |---|---|---|---|---|
-| ``blur=σ`` | vision | σ > 0 (px) | ``cv2.GaussianBlur(x, (0, 0), σ)``: the kernel size follows from σ | :class:`FrameBlur` |
-| ``shift=p`` | vision | p != 0 (px) | x'[r, c] = x[r - p, c - p]: p px right and p px down, border replicated (``cv2.warpAffine``) | :class:`FrameShift` |
-| ``noise=s`` | vision | s > 0 (gray levels) | clip(round(x + s·ε), 0, 255) as uint8, ε ~ N(0, 1) per pixel | :class:`FrameNoise` |
-| ``frame_delay=k`` | vision | integer k >= 1 (steps) | at step t, the frame of step t - k; the reset frame for t < k | :class:`FrameDelay` |
+| ``blur=σ`` | vision | 0 < σ <= 1000 (px) | ``cv2.GaussianBlur(x, (0, 0), σ)``: the kernel size follows from σ | :class:`FrameBlur` |
+| ``shift=p`` | vision | 0 < abs(p) <= 1000 (px) | x'[r, c] = x[r - p, c - p]: p px right and p px down, border replicated (``cv2.warpAffine``) | :class:`FrameShift` |
+| ``noise=s`` | vision | 0 < s <= 1000 (gray levels) | clip(round(x + s·ε), 0, 255) as uint8, ε ~ N(0, 1) per pixel | :class:`FrameNoise` |
+| ``frame_delay=k`` | vision | integer 1 <= k <= 1000 (steps) | at step t, the frame of step t - k; the reset frame for t < k | :class:`FrameDelay` |
 | ``frame_drop=p`` | vision | 0 < p < 1 (probability) | at each step, with probability p, the previous observed frame again (a dropped frame); never on reset | :class:`FrameDrop` |
 
 ``env.render()`` still returns Gymnasium's clean full-size picture. The vision effects act only
@@ -88,6 +88,21 @@ FRICTION_SMOOTHING = 0.1
 
 #: Periods per turn of the cogging torque.
 COGGING_PERIODS = 4
+
+# Upper bounds of the effects' parameters: far beyond any real system's (the pendulum's torque is
+# at most 2 N·m, its frames 64 px and 255 gray levels), and small enough that a typo such as
+# ``delay=1000000000`` is refused instead of allocating a buffer of that many actions.
+
+#: Largest ``delay`` and ``frame_delay``, in steps (five Pendulum-v1 episodes).
+MAX_DELAY_STEPS = 1000
+#: Largest ``gain`` factor.
+MAX_GAIN_ERROR = 100.0
+#: Largest ``damping``, ``friction``, ``cogging`` and ``|bias|`` (N·m, or N·m·s/rad for damping).
+MAX_PASSIVE = 100.0
+#: Largest ``blur`` sigma and ``|shift|``, in pixels.
+MAX_PIXELS = 1000.0
+#: Largest ``noise`` standard deviation, in gray levels.
+MAX_NOISE = 1000.0
 
 
 # ---------------------------------------------------------------------------------------------
@@ -451,29 +466,32 @@ class EffectSpec:
 
 #: Every effect: name -> spec. The order is the canonical one, in which the effects are applied.
 EFFECTS: dict[str, EffectSpec] = {
-    "delay": EffectSpec("actuator", "actuator dead time", "steps", "an integer >= 1",
-                        lambda v: v >= 1, ActionDelay, integer=True),
+    "delay": EffectSpec("actuator", "actuator dead time", "steps", f"an integer >= 1 and <= {MAX_DELAY_STEPS}",
+                        lambda v: 1 <= v <= MAX_DELAY_STEPS, ActionDelay, integer=True),
     "deadzone": EffectSpec("actuator", "actuator deadzone half-width", "action units", f"in (0, {MAX_ACTION:g})",
                            lambda v: 0 < v < MAX_ACTION, ActionDeadzone),
     "saturation": EffectSpec("actuator", "actuator limit below 2", "action units", f"in (0, {MAX_ACTION:g})",
                              lambda v: 0 < v < MAX_ACTION, ActionSaturation),
-    "gain": EffectSpec("actuator", "actuator gain error factor", "factor", "> 0 and != 1",
-                       lambda v: v > 0 and v != 1, ActionGainError),
-    "damping": EffectSpec("passive", "viscous damping coefficient", "N·m·s/rad", "> 0",
-                          lambda v: v > 0, ViscousDamping),
-    "friction": EffectSpec("passive", "smoothed Coulomb friction torque", "N·m", "> 0",
-                           lambda v: v > 0, CoulombFriction),
-    "bias": EffectSpec("passive", "constant torque bias", "N·m", "a number != 0",
-                       lambda v: v != 0, TorqueBias),
-    "cogging": EffectSpec("passive", "cogging (detent) torque amplitude", "N·m", "> 0",
-                          lambda v: v > 0, CoggingTorque),
+    "gain": EffectSpec("actuator", "actuator gain error factor", "factor", f"> 0 and != 1, at most {MAX_GAIN_ERROR:g}",
+                       lambda v: 0 < v <= MAX_GAIN_ERROR and v != 1, ActionGainError),
+    "damping": EffectSpec("passive", "viscous damping coefficient", "N·m·s/rad", f"> 0 and <= {MAX_PASSIVE:g}",
+                          lambda v: 0 < v <= MAX_PASSIVE, ViscousDamping),
+    "friction": EffectSpec("passive", "smoothed Coulomb friction torque", "N·m", f"> 0 and <= {MAX_PASSIVE:g}",
+                           lambda v: 0 < v <= MAX_PASSIVE, CoulombFriction),
+    "bias": EffectSpec("passive", "constant torque bias", "N·m", f"a number != 0 within ±{MAX_PASSIVE:g}",
+                       lambda v: v != 0 and abs(v) <= MAX_PASSIVE, TorqueBias),
+    "cogging": EffectSpec("passive", "cogging (detent) torque amplitude", "N·m", f"> 0 and <= {MAX_PASSIVE:g}",
+                          lambda v: 0 < v <= MAX_PASSIVE, CoggingTorque),
     "speed_clip": EffectSpec("clip", "speed limit below Pendulum-v1's 8", "rad/s", f"in (0, {PENDULUM_MAX_SPEED:g})",
                              lambda v: 0 < v < PENDULUM_MAX_SPEED, SpeedClip),
-    "blur": EffectSpec("vision", "Gaussian blur sigma", "px", "> 0", lambda v: v > 0, FrameBlur),
-    "shift": EffectSpec("vision", "image shift right and down", "px", "a number != 0", lambda v: v != 0, FrameShift),
-    "noise": EffectSpec("vision", "pixel noise standard deviation", "gray levels", "> 0", lambda v: v > 0, FrameNoise),
-    "frame_delay": EffectSpec("vision", "camera latency", "steps", "an integer >= 1",
-                              lambda v: v >= 1, FrameDelay, integer=True),
+    "blur": EffectSpec("vision", "Gaussian blur sigma", "px", f"> 0 and <= {MAX_PIXELS:g}", lambda v: 0 < v <= MAX_PIXELS,
+                       FrameBlur),
+    "shift": EffectSpec("vision", "image shift right and down", "px", f"a number != 0 within ±{MAX_PIXELS:g}",
+                        lambda v: v != 0 and abs(v) <= MAX_PIXELS, FrameShift),
+    "noise": EffectSpec("vision", "pixel noise standard deviation", "gray levels", f"> 0 and <= {MAX_NOISE:g}",
+                        lambda v: 0 < v <= MAX_NOISE, FrameNoise),
+    "frame_delay": EffectSpec("vision", "camera latency", "steps", f"an integer >= 1 and <= {MAX_DELAY_STEPS}",
+                              lambda v: 1 <= v <= MAX_DELAY_STEPS, FrameDelay, integer=True),
     "frame_drop": EffectSpec("vision", "probability of a dropped frame", "probability", "in (0, 1)",
                              lambda v: 0 < v < 1, FrameDrop),
 }

@@ -20,7 +20,7 @@ import numpy as np
 
 from envs.constants import PENDULUM_MAX_SPEED
 
-__all__ = ["EpisodeSeeds", "LatentObservation", "StateObservation"]
+__all__ = ["EpisodeSeeds", "FiniteActions", "LatentObservation", "NonFiniteAction", "StateObservation"]
 
 
 class StateObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
@@ -72,6 +72,23 @@ class LatentObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs)
         if code.shape != self.observation_space.shape:
             raise ValueError(f"the encoder returned shape {code.shape}, expected {self.observation_space.shape}")
         return np.clip(code, self.observation_space.low, self.observation_space.high)
+
+
+class NonFiniteAction(ValueError):
+    """An agent sent a NaN or infinite action (:class:`FiniteActions`); its training has diverged."""
+
+
+class FiniteActions(gym.ActionWrapper):
+    """Refuses NaN or infinite actions with :class:`NonFiniteAction`, before the env steps on them.
+
+    A learner whose weights became NaN sends NaN actions; Gymnasium would step on them and return
+    NaN observations and rewards (with a warning each), and the run would go on, scoring NaN.
+    """
+
+    def action(self, action: Any) -> Any:
+        if not np.all(np.isfinite(action)):
+            raise NonFiniteAction(f"the agent's action became {np.asarray(action).ravel().tolist()}")
+        return action
 
 
 class EpisodeSeeds(gym.Wrapper):

@@ -39,6 +39,10 @@ __all__ = ["SCENES", "SceneConfig", "scene_config", "accelerations", "simulate",
            "generate_sequence", "state_names", "SceneError"]
 
 
+#: Smallest ball radius (or half digit side) accepted, in pixels: smaller objects leave no trace in the frames.
+MIN_RADIUS = 0.5
+
+
 class SceneError(ValueError):
     """A scene's settings cannot work (for example images too small for its objects)."""
 
@@ -94,9 +98,22 @@ class SceneConfig:
                 raise SceneError(f"a colour must be 3 values (R, G, B) in [0, 1], got {rgb}")
         if self.scene == "digits-spring" and any(self.background):
             raise SceneError("digits-spring draws its digits over a texture; a background colour is for the balls")
+        if self.radius < MIN_RADIUS:
+            raise SceneError(f"radius must be at least {MIN_RADIUS:g} px (a smaller object leaves no trace in the frames), "
+                             f"got {self.radius:g}")
+        if self.scene != "digits-spring":
+            hidden = [j for j, rgb in enumerate(self.colors[: self.n_objects]) if rgb == self.background]
+            if hidden:
+                raise SceneError(f"object {hidden[0]}'s colour {self.colors[hidden[0]]} is the background's: it would be "
+                                 "invisible; choose colours that differ from the background")
         for name, value in self.params.items():
             if not (math.isfinite(float(value)) and float(value) > 0):
                 raise SceneError(f"{self.scene}: parameter {name} must be finite and > 0, got {value}")
+        if self.physics == "spring":
+            stiffest = max_stable_k(self.dt, self.substeps, self.n_objects)
+            if self.params.get("k", 0.0) >= stiffest:
+                raise SceneError(f"{self.scene}: k = {self.params['k']:g} is too stiff for {self.substeps} substeps of "
+                                 f"{self.dt:g} s: the simulation would blow up; k must be below {stiffest:.4g}")
         needed = _minimum_size(self)
         if self.image_size < needed:
             raise SceneError(f"{self.scene}: {self.image_size}x{self.image_size} images are too small for "
@@ -112,6 +129,14 @@ class SceneConfig:
     def to_dict(self) -> dict[str, Any]:
         """JSON-able fields."""
         return asdict(self)
+
+
+def max_stable_k(dt: float, substeps: int, n_objects: int) -> float:
+    """The stiffest spring constant that semi-implicit Euler with ``substeps`` steps per frame of
+    ``dt`` integrates stably: the fastest mode of ``n_objects`` balls joined pairwise by springs has
+    ω² = n·k, and the method is stable for ω·h < 2 (h = dt / substeps)."""
+    h = dt / substeps
+    return (2 / h) ** 2 / n_objects
 
 
 def _minimum_size(config: SceneConfig) -> int:
@@ -191,13 +216,16 @@ def simulate(config: SceneConfig, p0: np.ndarray, v0: np.ndarray, steps: int,
     h = config.dt / m
     p, v = np.array(p0, dtype=np.float64), np.array(v0, dtype=np.float64)
     ps, vs = np.empty((steps, *p.shape)), np.empty((steps, *p.shape))
-    for t in range(steps):
-        ps[t], vs[t] = p, v
-        for _ in range(m):
-            v = v + h * accelerations(config, p)
-            p = p + h * v
-            if config.physics == "bouncing":
-                p, v = _reflect(config, p, v)
+    # a candidate start that blows up (balls of the gravity scene passing through each other)
+    # turns inf or NaN quietly: _acceptable rejects it, and numpy's warnings would only be noise
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        for t in range(steps):
+            ps[t], vs[t] = p, v
+            for _ in range(m):
+                v = v + h * accelerations(config, p)
+                p = p + h * v
+                if config.physics == "bouncing":
+                    p, v = _reflect(config, p, v)
     return ps, vs
 
 

@@ -14,7 +14,7 @@ import torch
 
 import piga
 
-parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+parser = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
 parser.add_argument("--out", default="runs/example", help="folder for the data file and the run")
 parser.add_argument("--sequences", type=int, default=40, help="sequences to collect")
 parser.add_argument("--epochs", type=int, default=2, help="training epochs")

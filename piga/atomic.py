@@ -35,6 +35,9 @@ def check_writable_target(path: str | os.PathLike[str], overwrite: bool) -> Path
         raise OutputExistsError(f"{target} exists; pass --overwrite to replace it")
     folder = target.parent if str(target.parent) else Path(".")
     if not folder.is_dir():
+        blocking = next((p for p in (folder, *folder.parents) if p.exists()), None)
+        if blocking is not None and not blocking.is_dir():
+            raise NotADirectoryError(f"{blocking} is a file, not a folder, so {target} cannot be written there")
         raise FileNotFoundError(f"folder {folder} does not exist")
     if not os.access(folder, os.W_OK | os.X_OK):
         raise PermissionError(f"folder {folder} is not writable")

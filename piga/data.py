@@ -195,9 +195,96 @@ def _open(path: str | os.PathLike[str]) -> h5py.File:
 
 
 def inspect_dataset(path: str | os.PathLike[str]) -> DatasetInfo:
-    """Opens and validates a file; raises :class:`DataFormatError` naming what is wrong."""
+    """Opens and validates a file; raises :class:`DataFormatError` naming what is wrong.
+
+    Beyond the schema (shapes, types, the split, the required attributes), it checks attributes
+    against the arrays and that ``/states`` is finite (:func:`_check_attrs_agree`; the states are
+    small). Whether the frames carry a signal is a separate check, :func:`check_frames_have_signal`,
+    which the commands that learn from or diagnose the frames run.
+    """
     with _open(path) as f:
-        return _validate(f, Path(path))
+        info = _validate(f, Path(path))
+        _check_attrs_agree(info, f)
+        return info
+
+
+def _check_attrs_agree(info: DatasetInfo, f: h5py.File) -> None:
+    """Refuses attributes that contradict the arrays (``n_objects``, ``state_names``) or are not the
+    JSON objects they should be (``env_config``, ``scene_config``), and non-finite ``/states``."""
+    path, attrs = info.path, info.attrs
+    for key in ("env_config", "scene_config"):
+        if key in attrs and not isinstance(attrs[key], dict):
+            raise DataFormatError(f"{path}: attribute '{key}' must be a JSON object, got {str(attrs[key])[:80]!r}")
+    states_dim = f["states"].shape[2] if info.has_states else None
+    if "n_objects" in attrs:
+        n = attrs["n_objects"]
+        if isinstance(n, bool) or not isinstance(n, (int, float)) or not float(n).is_integer() or n < 1:
+            raise DataFormatError(f"{path}: attribute 'n_objects' must be an integer >= 1, got {n!r}")
+        n = int(n)
+        recorded = attrs.get("scene_config", {}).get("n_objects") if isinstance(attrs.get("scene_config"), dict) else None
+        if recorded is not None and recorded != n:
+            raise DataFormatError(f"{path}: attribute 'n_objects' is {n} but 'scene_config' says {recorded}; fix the attribute")
+        if info.system == "pendulum" and n != 1:
+            raise DataFormatError(f"{path}: attribute 'n_objects' is {n}, but a pendulum file holds one object")
+        if states_dim is not None and info.system != "pendulum" and states_dim != STATE_DIM_PER_OBJECT * n:
+            raise DataFormatError(f"{path}: attribute 'n_objects' is {n}, but /states holds {states_dim} values per frame "
+                                  f"({STATE_DIM_PER_OBJECT} per object: {states_dim / STATE_DIM_PER_OBJECT:g} objects); "
+                                  "fix the attribute")
+    names = attrs.get("state_names")
+    if names is not None:
+        if not isinstance(names, list):
+            raise DataFormatError(f"{path}: attribute 'state_names' must be a JSON list, got {names!r}")
+        if states_dim is not None and len(names) != states_dim:
+            raise DataFormatError(f"{path}: attribute 'state_names' names {len(names)} values, but /states holds "
+                                  f"{states_dim} per frame")
+        if "n_objects" in attrs and info.system != "pendulum" and len(names) != STATE_DIM_PER_OBJECT * int(attrs["n_objects"]):
+            raise DataFormatError(f"{path}: attribute 'n_objects' is {attrs['n_objects']}, but 'state_names' names "
+                                  f"{len(names)} values ({STATE_DIM_PER_OBJECT} per object); fix the attribute")
+    if info.has_states:
+        states = f["states"][()]
+        bad = ~np.isfinite(states)
+        if bad.any():
+            n, t, k = (int(i) for i in np.argwhere(bad)[0])
+            raise DataFormatError(f"{path}: /states holds NaN or infinite values ({int(bad.sum())} entries; the first: "
+                                  f"sequence {n}, step {t}, value {k}: {states[n, t, k]}); fix or drop /states "
+                                  "(ground truth is optional)")
+
+
+#: Values per object in a scene file's ``/states``: x, y, vx, vy (:func:`envs.scenes.state_names`).
+STATE_DIM_PER_OBJECT = 4
+
+
+def frames_have_signal(frames: np.ndarray) -> bool:
+    """Whether any frame of ``frames`` (uint8 [N, T, H, W] or [N, T, H, W, C], the schema's) is not
+    blank, blank meaning one flat level (or colour) over the whole frame."""
+    flat = frames.reshape(frames.shape[0] * frames.shape[1], -1)  # (N·T, H·W[·C])
+    return bool((flat.max(-1) != flat.min(-1)).any())
+
+
+def _blank_error(path: str | os.PathLike[str], level: int) -> DataFormatError:
+    return DataFormatError(f"{path}: every frame is blank (one flat level, {level}): the video carries no signal to "
+                           "learn from; check that the objects are drawn (their size, and colours against the background)")
+
+
+def _check_frames_signal(frames: h5py.Dataset, path: str | os.PathLike[str]) -> None:
+    for start in range(len(frames)):  # one sequence (one chunk) at a time: a good file stops at the first
+        if frames_have_signal(frames[start : start + 1]):
+            return
+    raise _blank_error(path, int(frames[0, 0].flat[0]))
+
+
+def check_frames_have_signal(path: str | os.PathLike[str]) -> None:
+    """Refuses a file whose frames are all blank (each one flat level), which no model can learn
+    from and no diagnosis can read. Training (:class:`piga.windows.SequenceWindows`), the baselines
+    and ``piga-diagnose`` run it when they open a file; :class:`DatasetWriter` runs the same test
+    before it keeps a file. It reads one sequence of a good file: it stops at the first frame that
+    is not blank.
+
+    Raises:
+        DataFormatError: naming the file and the level.
+    """
+    with _open(path) as f:
+        _check_frames_signal(f["frames"], path)
 
 
 def split_indices(path: str | os.PathLike[str], split: str) -> np.ndarray:
@@ -252,7 +339,9 @@ def load_rewards(path: str | os.PathLike[str], split: str) -> np.ndarray:
 
 
 def _take(ds: h5py.Dataset, idx: np.ndarray) -> np.ndarray:
-    """Rows ``idx`` of ``ds``; one contiguous read when the rows are a range."""
+    """Rows ``idx`` of ``ds``; one contiguous read when the rows are a range (none: an empty array)."""
+    if not len(idx):
+        return np.empty((0, *ds.shape[1:]), ds.dtype)
     if len(idx) and idx[-1] - idx[0] + 1 == len(idx):
         return ds[int(idx[0]) : int(idx[-1]) + 1]
     return ds[()][idx] if len(idx) > len(ds) // 4 else np.stack([ds[int(i)] for i in idx])
@@ -262,7 +351,9 @@ class DatasetWriter:
     """Writes a file of piga's schema atomically, in slices, so that N can exceed memory.
 
     Use as a context manager. The file appears at ``path`` only when the block exits without
-    error. Before that it is a hidden ``.NAME.partial-PID`` sibling, removed on failure.
+    error. Before that it is a hidden ``.NAME.partial-PID`` sibling, removed on failure. A file
+    whose frames are all blank is not kept either (:class:`DataFormatError`, as
+    :func:`check_frames_have_signal`).
 
     Args:
         path: target file.
@@ -304,6 +395,8 @@ class DatasetWriter:
         self._file: h5py.File | None = None
         self._written = np.zeros(n_sequences, dtype=bool)
         self._split_set = False
+        self._signal = False
+        self._level = 0
 
     def __enter__(self) -> DatasetWriter:
         self._ctx = atomic_output(self.path, overwrite=self.overwrite)
@@ -341,6 +434,9 @@ class DatasetWriter:
                 raise ValueError("this file has /rewards; pass them to write()")
             self._file["rewards"][start:stop] = rewards
         self._written[start:stop] = True
+        if not self._signal and len(frames):
+            self._signal = frames_have_signal(frames)
+            self._level = int(frames.flat[0])
 
     def set_split(self, split: np.ndarray) -> None:
         """Sets ``/split`` (int8 [N], codes of :data:`SPLITS`)."""
@@ -361,5 +457,9 @@ class DatasetWriter:
             )
             self._ctx.__exit__(RuntimeError, error, None)
             raise error
+        if not self._signal:  # nothing to learn from: the file is not kept (check_frames_have_signal)
+            blank = _blank_error(self.path, self._level)
+            self._ctx.__exit__(DataFormatError, blank, None)
+            raise blank
         self._ctx.__exit__(None, None, None)
 

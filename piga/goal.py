@@ -19,10 +19,13 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
+from envs.constants import MAX_ACTION
+from envs.pendulum import PixelPendulumConfig
 from piga.model import PhysicsModel, frames_to_float
 from piga.scene import GRAY_WEIGHTS, load_scene_image, scene_to_gray
 
-__all__ = ["GRAY_WEIGHTS", "GoalEstimate", "NotTheSceneError", "goal_from_image", "load_scene_image", "read_goal",
+__all__ = ["GRAY_WEIGHTS", "HOLDABLE_ANGLE", "GoalEstimate", "NotTheSceneError", "goal_from_image", "holdable_angle",
+           "load_scene_image", "read_goal",
            "render_goal_image", "scene_mismatch", "scene_to_gray"]
 
 SCENE_ANGLES = 120
@@ -30,6 +33,19 @@ SCENE_ANGLES = 120
 MAX_SCENE_MISMATCH = 0.5
 """Largest :func:`scene_mismatch` of a goal image. A render at an angle between two of the
 compared ones scores below 0.05; an empty background scores 1; random noise far above 1."""
+
+
+def holdable_angle(g: float, a: float = 1.0, max_action: float = MAX_ACTION) -> float:
+    """Largest |θ| from upright (rad) at which the pendulum can be held at rest with |u| <= ``max_action``.
+
+    At rest, 1.5·g·sin θ + 3·a·u = 0, so holding θ needs u = -g·sin θ / (2a): |sin θ| <= 2·a·max_action / g.
+    """
+    return math.asin(min(1.0, 2 * a * max_action / g))
+
+
+HOLDABLE_ANGLE = holdable_angle(PixelPendulumConfig.gravity, PixelPendulumConfig.actuation_gain)
+"""The pixel pendulum's holdable range around upright (rad), at its own gravity: asin(0.4), ±23.6°.
+The README quotes it; the goal-image warning prints the same value (for gravity x1)."""
 
 
 class NotTheSceneError(ValueError):
@@ -78,20 +94,24 @@ class GoalEstimate:
     hold_torque: float
     """Torque u needed to hold θ at rest under the agent's physics."""
     feasible_max_angle: float
-    """Largest |θ| around upright that can be held with |u| <= 2 (rad)."""
+    """Largest |θ| around upright that the env's pendulum can be held at with |u| <= 2 (rad; :func:`holdable_angle`)."""
     warnings: list[str] = field(default_factory=list)
     """Human-readable warnings (infeasible goal, image not of the scene)."""
 
 
 @torch.no_grad()
-def read_goal(model: PhysicsModel, image: np.ndarray, g: float, a: float, mse_limit: float) -> GoalEstimate:
+def read_goal(model: PhysicsModel, image: np.ndarray, g: float, a: float, mse_limit: float,
+              gravity_mult: float = 1.0) -> GoalEstimate:
     """Encodes a goal image (uint8 (H, W)) and checks it.
 
     Args:
         model: the trained pendulum model.
         image: uint8 (H, W) from :func:`load_scene_image`.
-        g, a: the agent's physics (learned g times any gravity multiplier, learned a).
+        g, a: the agent's physics (learned g times any gravity multiplier, learned a): the hold torque.
         mse_limit: reconstruction MSE above which the image is reported as not of the scene.
+        gravity_mult: the env's gravity multiplier. Whether the goal can be held is the env's
+            property: it is judged, and its range named, with the env's own physics
+            (:func:`holdable_angle`; :data:`HOLDABLE_ANGLE` at x1), not with the learned one.
     """
     x = frames_to_float(torch.from_numpy(image)[None, None], model.config.channels)  # (1, 1, C, H, W)
     coords = model.encode(x)  # (1, 1, 1, 1)
@@ -100,13 +120,15 @@ def read_goal(model: PhysicsModel, image: np.ndarray, g: float, a: float, mse_li
     offset = model.physical_parameters().get("offset", 0.0)
     angle = math.remainder(float(coords[0, 0, 0, 0]) + offset, 2 * math.pi)
     hold = -g * math.sin(angle) / (2 * a)  # 1.5 g sin θ + 3 a u = 0
-    ratio = min(1.0, 4 * a / g)
-    feasible = math.asin(ratio)
+    env_g, env_a = PixelPendulumConfig.gravity * gravity_mult, PixelPendulumConfig.actuation_gain
+    feasible = holdable_angle(env_g, env_a)
     warnings = []
-    if abs(hold) > 2.0:
+    if abs(math.sin(angle)) > math.sin(feasible):
+        needed = -env_g * math.sin(angle) / (2 * env_a)
         warnings.append(
-            f"goal {math.degrees(angle):.1f} deg needs torque {hold:+.2f} to hold, beyond the limit of 2; holdable goals are "
-            f"within ±{math.degrees(feasible):.1f} deg of upright (or of hanging down); the controller will do its best"
+            f"goal {math.degrees(angle):.1f} deg needs torque {needed:+.2f} to hold, beyond the limit of {MAX_ACTION:g}; "
+            f"holdable goals are within ±{math.degrees(feasible):.1f} deg of upright (or of hanging down); the controller "
+            "will do its best"
         )
     if mse > mse_limit:
         warnings.append(
@@ -137,7 +159,8 @@ def goal_from_image(model: PhysicsModel, checkpoint: dict, path: str | os.PathLi
             f"{path}: not a picture of the pendulum scene: no render of the pendulum at any angle comes close to it "
             f"(mismatch {mismatch:.2f}; a render scores 0, the empty background 1, the limit is {MAX_SCENE_MISMATCH})")
     typical = training_reconstruction_mse(model, checkpoint) or 0.001
-    return read_goal(model, image, g=learned["g"] * gravity_mult, a=learned["a"], mse_limit=4 * typical)
+    return read_goal(model, image, g=learned["g"] * gravity_mult, a=learned["a"], mse_limit=4 * typical,
+                     gravity_mult=gravity_mult)
 
 
 def render_goal_image(angle_deg: float) -> np.ndarray:

@@ -36,7 +36,7 @@ import numpy as np
 
 from piga.atomic import check_writable_target
 from piga.collect import split_counts
-from piga.data import SPLITS, DatasetWriter
+from piga.data import MAX_ABS_ACTION, SPLITS, DatasetWriter
 from piga.scene import read_image, scene_to_gray
 
 #: File name endings read from a folder of frames (case-insensitive).
@@ -150,8 +150,8 @@ def read_actions(path: str | Path) -> np.ndarray:
 
     Raises:
         FileNotFoundError: no such file.
-        ValueError: the file is empty, a value is not a finite number (the message gives the line),
-            or the action column cannot be told.
+        ValueError: the file is empty, a value is not a finite number or beyond
+            ±:data:`piga.data.MAX_ABS_ACTION` (the message gives the line), or the action column cannot be told.
     """
     p = Path(path)
     if not p.is_file():
@@ -186,6 +186,9 @@ def read_actions(path: str | Path) -> np.ndarray:
         value = _number(cell)
         if value is None or not math.isfinite(value):
             raise ValueError(f"{p}: line {number}: expected a finite number, got {cell!r}")
+        if abs(value) > MAX_ABS_ACTION:  # beyond float32 it would be stored as inf
+            raise ValueError(f"{p}: line {number}: the action {cell} is beyond ±{MAX_ABS_ACTION:g} (the pendulum's torque "
+                             "is at most ±2); check the column's unit")
         values[i] = value
     return values.astype(np.float32)
 

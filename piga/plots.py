@@ -74,7 +74,7 @@ def openloop_figure(real: np.ndarray, imagined: np.ndarray, rewards: np.ndarray,
     """A world model's open-loop prediction: real frames above imagined ones, and real against predicted rewards.
 
     Args:
-        real, imagined: float [B, T, H, W] in [0, 1]; the first ``context`` imagined frames are filtered (reconstructions).
+        real, imagined: float [B, T, H, W] (gray) or [B, T, H, W, 3] in [0, 1]; the first ``context`` imagined frames are filtered (reconstructions).
         rewards, predicted: [B, T].
         shown: sequences drawn; every: show every ``every``-th frame.
     """

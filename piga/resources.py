@@ -10,6 +10,7 @@ from __future__ import annotations
 import os
 import shutil
 from pathlib import Path
+from typing import Any
 
 #: gzip (level 4) shrinks piga-collect's pendulum frames about 25x (measured on its default data);
 #: the disk check of generated data assumes 20x.
@@ -54,14 +55,43 @@ def check_memory(needed: float, what: str) -> None:
                             "available; ask for less")
 
 
-def check_disk(target: str | os.PathLike[str], needed: float, what: str) -> None:
-    """Raises :class:`ResourceError` if ``needed`` bytes exceed the free space where ``target`` goes."""
+def check_disk(target: str | os.PathLike[str], needed: float, what: str, advice: str = "ask for less") -> None:
+    """Raises :class:`ResourceError` if ``needed`` bytes exceed the free space where ``target`` goes.
+
+    ``target``'s folder need not exist yet (a run folder made at its first checkpoint): the space
+    is measured at its nearest existing ancestor, the filesystem it will be made on. ``advice``
+    ends the message: what the user can do.
+    """
     folder = Path(target).parent if str(Path(target).parent) else Path(".")
+    while not folder.is_dir() and folder != folder.parent:
+        folder = folder.parent
     free = shutil.disk_usage(folder).free
     if needed > free:
         raise ResourceError(f"{what} needs about {format_bytes(needed)} of disk, but {folder} has "
-                            f"{format_bytes(free)} free; ask for less")
+                            f"{format_bytes(free)} free; {advice}")
 
 
-__all__ = ["RECORDED_FRAME_COMPRESSION", "RENDERED_FRAME_COMPRESSION", "ResourceError", "available_memory",
-           "check_disk", "check_memory", "format_bytes"]
+#: Room left on top of a training run's checkpoints, for its metrics, plots and TensorBoard.
+RUN_DISK_MARGIN = 64 * 1024**2
+
+
+def adam_checkpoint_bytes(module: Any) -> int:
+    """The size of a float32 torch module's checkpoint with Adam's state: the weights and two moments."""
+    return 3 * 4 * sum(p.numel() for p in module.parameters())
+
+
+def check_run_disk(run_dir: str | os.PathLike[str], checkpoint_bytes: float, what: str, extra: float = 0.0,
+                   checkpoint: str = "checkpoint.pt") -> None:
+    """Refuses, before a training run starts, a run folder whose disk cannot hold its checkpoints:
+    each is written beside the previous one (atomically), so twice ``checkpoint_bytes``, plus
+    ``extra`` and :data:`RUN_DISK_MARGIN`. ``run_dir`` need not exist yet.
+
+    Raises:
+        ResourceError: as :func:`check_disk`.
+    """
+    check_disk(Path(run_dir) / checkpoint, 2 * checkpoint_bytes + extra + RUN_DISK_MARGIN, what,
+               advice="free some space, or give another --out")
+
+
+__all__ = ["RECORDED_FRAME_COMPRESSION", "RENDERED_FRAME_COMPRESSION", "RUN_DISK_MARGIN", "ResourceError",
+           "adam_checkpoint_bytes", "available_memory", "check_disk", "check_memory", "check_run_disk", "format_bytes"]

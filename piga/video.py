@@ -4,6 +4,7 @@ or beside what a baseline sees (:func:`panels_video`)."""
 from __future__ import annotations
 
 import os
+import shutil
 from pathlib import Path
 
 import cv2
@@ -75,11 +76,22 @@ def _write(video: np.ndarray, target: Path, fps: int, overwrite: bool) -> Path:
     """Writes uint8 RGB frames (T, H, W, 3) to ``target`` (.mp4 or .gif) atomically."""
     import imageio.v3 as iio
 
+    from piga.resources import check_disk, format_bytes
+
+    # an MP4 or GIF of these panels takes well under 1% of the raw frames (a 200-step episode: ~20 KB)
+    check_disk(target, video.nbytes / 100 + 64 * 1024, f"the video {target.name}",
+               advice="free some space, or write it elsewhere")
     with atomic_output(target, overwrite=overwrite) as tmp:
-        if target.suffix.lower() == ".gif":
-            iio.imwrite(tmp, video, extension=".gif", duration=1000 / fps, loop=0)
-        else:
-            # the temporary name has no .mp4 ending for ffmpeg to guess the container from: name it
-            iio.imwrite(tmp, video, extension=".mp4", fps=fps, codec="libx264", macro_block_size=1,
-                        output_params=["-f", "mp4"])
+        try:
+            if target.suffix.lower() == ".gif":
+                iio.imwrite(tmp, video, extension=".gif", duration=1000 / fps, loop=0)
+            else:
+                # the temporary name has no .mp4 ending for ffmpeg to guess the container from: name it;
+                # ffmpeg's own messages would go to our stderr, line by line: the error below says it once
+                iio.imwrite(tmp, video, extension=".mp4", fps=fps, codec="libx264", macro_block_size=1,
+                            output_params=["-f", "mp4"], ffmpeg_log_level="quiet")
+        except OSError as exc:  # ffmpeg's broken pipe, a full disk
+            free = shutil.disk_usage(tmp.parent).free
+            cause = exc.strerror or "ffmpeg stopped"
+            raise OSError(f"{target}: the video could not be written ({cause}); its disk has {format_bytes(free)} free") from None
     return target

@@ -11,7 +11,8 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset
 
-from piga.data import IN_MEMORY_LIMIT_BYTES, DataFormatError, inspect_dataset, read_sequences, split_indices
+from piga.data import (IN_MEMORY_LIMIT_BYTES, DataFormatError, check_frames_have_signal, inspect_dataset, read_sequences,
+                       split_indices)
 
 
 class Window(NamedTuple):
@@ -49,6 +50,7 @@ class SequenceWindows(Dataset[Window]):
     ):
         self.path = Path(path)
         self.info = inspect_dataset(self.path)
+        check_frames_have_signal(self.path)  # a blank video has nothing to train on
         if window < 1 or window > self.info.steps:
             raise DataFormatError(
                 f"{self.path}: sequences have {self.info.steps} frames, fewer than the {window} needed per item"

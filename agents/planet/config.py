@@ -7,10 +7,17 @@ the departures in one table.
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
 from agents.config import CEMConfig
+
+#: Largest KL free nats per frame accepted (PlaNet uses 3; far larger values switch the KL term off
+#: entirely and, near float32's range, overflow the loss).
+MAX_FREE_NATS = 1000.0
+#: Largest exploration noise accepted, as a fraction of the action bound (the noisy action is then clipped).
+MAX_EXPLORATION_NOISE = 10.0
 
 
 @dataclass(frozen=True)
@@ -109,8 +116,14 @@ class PlanetTrainConfig:
         if self.steps < 1 or self.batch_size < 1 or self.chunk_length < 2 or self.checkpoint_every < 1:
             raise ValueError(f"need steps >= 1, batch_size >= 1, chunk_length >= 2 and checkpoint_every >= 1, got "
                              f"{self.steps}, {self.batch_size}, {self.chunk_length}, {self.checkpoint_every}")
+        if not all(math.isfinite(v) for v in (self.lr, self.adam_eps, self.grad_clip, self.free_nats, self.kl_scale,
+                                              self.reward_scale, self.max_minutes)):
+            raise ValueError(f"PlanetTrainConfig: lr, adam_eps, grad_clip, free_nats, kl_scale, reward_scale and "
+                             f"max_minutes must be finite numbers: {self}")
         if not (self.lr > 0 and self.adam_eps > 0 and self.grad_clip > 0 and self.free_nats >= 0):
             raise ValueError("need lr, adam_eps, grad_clip > 0 and free_nats >= 0")
+        if self.free_nats > MAX_FREE_NATS:
+            raise ValueError(f"PlanetTrainConfig.free_nats (--free-nats) must be at most {MAX_FREE_NATS:g} nats per frame (PlaNet uses 3), got {self.free_nats:g}")
         if self.seed < 0 or self.max_sequences < 0 or self.max_minutes < 0:
             raise ValueError("seed, max_sequences and max_minutes must be >= 0")
 
@@ -141,8 +154,9 @@ class IterativeConfig:
         if self.rounds < 1 or self.episodes < 1 or self.steps_per_round < 1 or self.episode_steps < 1:
             raise ValueError(f"need rounds, episodes, steps_per_round and episode_steps >= 1, got {self.rounds}, "
                              f"{self.episodes}, {self.steps_per_round}, {self.episode_steps}")
-        if not self.noise >= 0:
-            raise ValueError(f"IterativeConfig.noise must be >= 0, got {self.noise}")
+        if not 0 <= self.noise <= MAX_EXPLORATION_NOISE:
+            raise ValueError(f"IterativeConfig.noise: the exploration noise must be >= 0 and at most "
+                             f"{MAX_EXPLORATION_NOISE:g} (a fraction of the action bound), got {self.noise}")
 
     def to_dict(self) -> dict[str, Any]:
         """A JSON-able copy."""

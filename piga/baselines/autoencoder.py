@@ -33,9 +33,9 @@ from torch import Tensor, nn
 from tqdm.auto import tqdm
 
 from piga.atomic import atomic_output
-from piga.data import read_sequences
+from piga.data import DataFormatError, DatasetInfo, check_frames_have_signal, inspect_dataset, read_sequences
 
-__all__ = ["AutoencoderConfig", "FrameAutoencoder", "autoencoder_seconds", "load_autoencoder", "train_autoencoder"]
+__all__ = ["AutoencoderConfig", "FrameAutoencoder", "autoencoder_seconds", "check_autoencoder_data", "load_autoencoder", "train_autoencoder"]
 
 
 @dataclass(frozen=True)
@@ -107,6 +107,20 @@ class FrameAutoencoder(nn.Module):
         return self.encode(x)[0].numpy().astype(np.float32)
 
 
+def check_autoencoder_data(info: DatasetInfo) -> None:
+    """Refuses, before anything is written, a file the autoencoder cannot learn from: frames other
+    than gray 64x64, an empty train split, or blank frames (:func:`piga.data.check_frames_have_signal`).
+
+    Raises:
+        DataFormatError: naming the file and what is wrong.
+    """
+    if info.image_shape not in ((64, 64), (64, 64, 1)):
+        raise DataFormatError(f"{info.path}: the autoencoder takes gray 64x64 frames, got frames of shape {info.image_shape}")
+    if not info.split_counts["train"]:
+        raise DataFormatError(f"{info.path}: the train split is empty; the autoencoder learns from it")
+    check_frames_have_signal(info.path)
+
+
 def train_autoencoder(data: str | Path, config: AutoencoderConfig, out: str | Path, progress: bool = True) -> tuple[FrameAutoencoder, float]:
     """Trains on the train split's frames of ``data`` and writes the model to ``out`` atomically.
 
@@ -116,9 +130,8 @@ def train_autoencoder(data: str | Path, config: AutoencoderConfig, out: str | Pa
         The model (eval mode) and its final training MSE (mean over the last 100 steps).
     """
     started = time.monotonic()
+    check_autoencoder_data(inspect_dataset(data))
     frames, _ = read_sequences(data, "train")
-    if frames.ndim != 4 or frames.shape[2:] != (64, 64):
-        raise ValueError(f"{data}: the autoencoder takes gray 64x64 frames, got frames of shape {frames.shape[2:]}")
     flat = torch.from_numpy(frames.reshape(-1, 1, 64, 64))  # (N·T, 1, 64, 64) uint8
     torch.manual_seed(config.seed)
     model = FrameAutoencoder(config)

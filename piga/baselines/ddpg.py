@@ -26,14 +26,14 @@ import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 import gymnasium as gym
 import numpy as np
 import torch
 from tqdm.auto import tqdm
 
-from envs.observations import EpisodeSeeds, LatentObservation, StateObservation
+from envs.observations import EpisodeSeeds, FiniteActions, LatentObservation, NonFiniteAction, StateObservation
 from envs.pendulum import PixelPendulumConfig
 from piga.atomic import atomic_output, write_json
 
@@ -180,11 +180,12 @@ def make_observation_env(config: DDPGConfig, encoder: Callable[[np.ndarray], np.
 
 def make_env(config: DDPGConfig, encoder: Callable[[np.ndarray], np.ndarray] | None = None, latent_size: int = 0,
              episode_seed: int | None = None, gravity_mult: float = 1.0) -> gym.Env:
-    """One env as DDPG sees it, before stacking: :func:`make_observation_env`, then (with
-    ``episode_seed``) :class:`EpisodeSeeds`, then SB3's ``Monitor``."""
+    """One env as DDPG sees it, before stacking: :func:`make_observation_env`, then
+    :class:`~envs.observations.FiniteActions` (a diverged policy's NaN action stops the run), then
+    (with ``episode_seed``) :class:`EpisodeSeeds`, then SB3's ``Monitor``."""
     from stable_baselines3.common.monitor import Monitor
 
-    env = make_observation_env(config, encoder, latent_size, gravity_mult)
+    env = FiniteActions(make_observation_env(config, encoder, latent_size, gravity_mult))
     if episode_seed is not None:
         env = EpisodeSeeds(env, episode_seed)
     return Monitor(env)
@@ -243,6 +244,29 @@ def _save(run_dir: Path, model: Any, config: DDPGConfig, episodes: int, history:
         tmp.write_bytes(policy.getvalue())
 
 
+def _check_finite(model: Any, callback: Any, evaluated: bool, checkpoint: Path) -> None:
+    """Stops a run whose weights or evaluation return became NaN or infinite, before it is checkpointed.
+
+    Raises:
+        piga.train.TrainingDiverged: naming the step, the cause and the last good checkpoint.
+    """
+    bad = [name for name, p in model.policy.named_parameters() if not torch.isfinite(p).all()]
+    ret = float(callback.last_mean_reward) if evaluated else 0.0
+    if not bad and np.isfinite(ret):
+        return
+    _diverged(f"the weights of {bad[0]} became non-finite" if bad else f"the evaluation's mean return became {ret}",
+              model.num_timesteps, checkpoint)
+
+
+def _diverged(cause: str, step: int, checkpoint: Path) -> NoReturn:
+    """Raises :class:`piga.train.TrainingDiverged` naming ``cause``, the step and the last good checkpoint."""
+    from piga.train import TrainingDiverged
+
+    good = checkpoint if checkpoint.exists() else None
+    raise TrainingDiverged(f"{cause} by step {step} (lower the learning rate); "
+                           + (f"last good checkpoint: {good}" if good else "no checkpoint was written yet"))
+
+
 def first_step_reaching(history: list[dict[str, float]], threshold: float = -200.0) -> int | None:
     """The first evaluated step at which the mean return is at least ``threshold`` (None if never)."""
     return next((int(r["step"]) for r in history if r["eval_mean_return"] >= threshold), None)
@@ -281,10 +305,14 @@ def train_ddpg(config: DDPGConfig, run_dir: str | Path, autoencoder: str | Path 
     history: list[dict[str, float]] = []
     elapsed = 0.0
     if resume:
-        ckpt = torch.load(run_dir / CHECKPOINT, map_location="cpu", weights_only=False)
-        # the zip holds the TensorBoard folder of the run's first invocation: log where the run is now
-        model = algorithm.load(io.BytesIO(ckpt["model_zip"]), env=venv, device="cpu", tensorboard_log=str(run_dir / "tensorboard"))
-        model.load_replay_buffer(io.BytesIO(ckpt["replay_buffer"]))
+        path = run_dir / CHECKPOINT
+        try:
+            ckpt = torch.load(path, map_location="cpu", weights_only=False)
+            # the zip holds the TensorBoard folder of the run's first invocation: log where the run is now
+            model = algorithm.load(io.BytesIO(ckpt["model_zip"]), env=venv, device="cpu", tensorboard_log=str(run_dir / "tensorboard"))
+            model.load_replay_buffer(io.BytesIO(ckpt["replay_buffer"]))
+        except Exception as exc:  # a truncated or foreign file
+            raise _unreadable(path, exc) from None
         # load() reseeded everything with the run's seed (SB3's _setup_model): put back the states
         # of the moment of the checkpoint
         np.random.set_state(ckpt["rng"]["numpy"])
@@ -311,8 +339,12 @@ def train_ddpg(config: DDPGConfig, run_dir: str | Path, autoencoder: str | Path 
         while model.num_timesteps < config.steps:
             chunk = min(config.eval_every, config.steps - model.num_timesteps)
             before = model.num_timesteps
-            model.learn(chunk, callback=callback, reset_num_timesteps=False, tb_log_name=config.algo)
+            try:
+                model.learn(chunk, callback=callback, reset_num_timesteps=False, tb_log_name=config.algo)
+            except NonFiniteAction as exc:
+                _diverged(str(exc), model.num_timesteps, run_dir / CHECKPOINT)
             bar.update(model.num_timesteps - before)
+            _check_finite(model, callback, chunk == config.eval_every, run_dir / CHECKPOINT)
             elapsed = time.monotonic() - started
             if chunk == config.eval_every:  # the callback evaluated at the chunk's last step
                 history.append({"step": model.num_timesteps, "eval_mean_return": float(callback.last_mean_reward),
@@ -344,6 +376,13 @@ def train_ddpg(config: DDPGConfig, run_dir: str | Path, autoencoder: str | Path 
     return metrics
 
 
+def _unreadable(path: Path, exc: Exception) -> ValueError:
+    """The one-line error for a checkpoint that cannot be read: the file, and the first sentence of the cause."""
+    cause = " ".join(str(exc).split()).split(". ")[0][:160]
+    return ValueError(f"{path}: not a readable DDPG checkpoint ({exc.__class__.__name__}: {cause}); it may be truncated "
+                      "(a full disk, an interrupted copy): restore it, or train the run again with --overwrite")
+
+
 def load_ddpg(run_dir: str | Path) -> tuple[Any, DDPGConfig, Any]:
     """The policy (SB3 ``DDPG`` or ``SAC``), its config and, for "latent", its autoencoder (else None)."""
     run_dir = Path(run_dir)
@@ -355,7 +394,7 @@ def load_ddpg(run_dir: str | Path) -> tuple[Any, DDPGConfig, Any]:
         config = DDPGConfig(**{**ckpt["config"], "net_arch": tuple(ckpt["config"]["net_arch"])})
         model = _algorithm(config.algo).load(io.BytesIO(ckpt["model_zip"]), device="cpu")
     except Exception as exc:  # a truncated or foreign file
-        raise ValueError(f"{path}: not a readable DDPG checkpoint ({exc.__class__.__name__}: {exc})") from None
+        raise _unreadable(path, exc) from None
     encoder = None
     if config.obs == "latent":
         from piga.baselines.autoencoder import load_autoencoder

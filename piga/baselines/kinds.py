@@ -40,4 +40,19 @@ def run_kind(run_dir: str | os.PathLike[str]) -> str:
     return str(kind)
 
 
-__all__ = ["BASELINE_KINDS", "KINDS", "run_kind"]
+def require_piga_run(run_dir: str | os.PathLike[str], purpose: str) -> None:
+    """Refuses a baseline's run folder where a ``piga-train-model`` run is needed, saying which it is.
+
+    Args:
+        purpose: what needs the piga run, e.g. "piga-diagnose diagnoses the identified physics".
+
+    Raises:
+        ValueError: ``run_dir`` is a planet or ddpg run (or of an unknown kind).
+    """
+    kind = run_kind(run_dir)
+    if kind != "piga":
+        raise ValueError(f"{run_dir} is a piga-baseline {kind} run; {purpose}, so it needs a run folder of "
+                         "piga-train-model")
+
+
+__all__ = ["BASELINE_KINDS", "KINDS", "require_piga_run", "run_kind"]

@@ -29,7 +29,8 @@ from agents.planet.config import PlanetTrainConfig, RSSMConfig
 from agents.planet.rssm import WorldModel, model_steps
 from piga.atomic import atomic_output, write_json
 from piga.baselines.planet_run import CHECKPOINT, load_planet
-from piga.data import DataFormatError, DatasetInfo, check_actions, inspect_dataset, load_rewards, read_sequences
+from piga.data import (DataFormatError, DatasetInfo, check_actions, check_frames_have_signal, inspect_dataset, load_rewards,
+                       read_sequences)
 from piga.train import TrainingDiverged
 
 __all__ = ["CHECKPOINT", "PlanetState", "check_planet_data", "load_planet", "rssm_config_for", "train_planet"]
@@ -90,7 +91,9 @@ def check_planet_data(info: DatasetInfo, config: PlanetTrainConfig, repeat: int 
     model's action repeat ``repeat``).
 
     Raises:
-        DataFormatError: no ``/rewards``, frames that are not 64x64, or sequences shorter than a chunk.
+        DataFormatError: no ``/rewards``, frames that are not 64x64 gray, actions that are not the
+            pendulum's one torque (piga-control could not run the model), blank frames, or
+            sequences shorter than a chunk.
         ValueError: no training sequence.
     """
     if not info.has_rewards:
@@ -98,8 +101,13 @@ def check_planet_data(info: DatasetInfo, config: PlanetTrainConfig, repeat: int 
                               "(collect the data with piga-collect, which writes them)")
     if info.image_shape[:2] != (64, 64):
         raise DataFormatError(f"{info.path}: the PlaNet-style model takes 64x64 frames, got {info.image_shape}")
-    if info.action_dim < 1:
-        raise DataFormatError(f"{info.path}: has no actions (A = 0); a world model for control needs them")
+    if info.action_dim != 1:
+        raise DataFormatError(f"{info.path}: has {info.action_dim} action dimensions; the PlaNet-style agent controls the "
+                              "pixel pendulum, which takes one (collect the data with piga-collect)")
+    if len(info.image_shape) == 3 and info.image_shape[2] != 1:
+        raise DataFormatError(f"{info.path}: has colour frames {info.image_shape}; the PlaNet-style agent controls the "
+                              "pixel pendulum from gray frames (collect the data with piga-collect)")
+    check_frames_have_signal(info.path)
     if info.steps < config.chunk_length * repeat:
         raise DataFormatError(f"{info.path}: sequences of {info.steps} frames are shorter than chunk_length "
                               f"{config.chunk_length}" + (f" x action repeat {repeat}" if repeat > 1 else "") + "; lower it")
@@ -142,12 +150,16 @@ def open_loop_check(model: WorldModel, data: str | Path, run_dir: Path, seed: in
     frames, actions, rewards = model_steps(seqs.frames, seqs.actions, seqs.rewards, model.config.action_repeat)
     context = min(OPEN_LOOP_CONTEXT, frames.shape[1] - 1)
     decoded, predicted = model.open_loop(frames, actions, context, torch.Generator().manual_seed(seed))
-    imagined = (decoded[:, :, 0] + 0.5).clamp(0, 1)  # (B, T, H, W) in [0, 1]
-    real = frames.float() / 255  # (B, T, H, W)
-    frame_mse = (imagined - real).square().mean((0, 2, 3))  # (T,)
-    mean_frame_mse = (real.mean((0, 1), keepdim=True) - real).square().mean((0, 2, 3))  # (T,) the average frame as a guess
+    imagined = (decoded.movedim(2, -1) + 0.5).clamp(0, 1)  # (B, T, H, W, C) in [0, 1]
+    real = frames.float() / 255  # (B, T, H, W) gray, or (B, T, H, W, C)
+    if real.dim() == 4:
+        real = real.unsqueeze(-1)  # (B, T, H, W, 1)
+    pixel_axes = (0, 2, 3, 4)
+    frame_mse = (imagined - real).square().mean(pixel_axes)  # (T,)
+    mean_frame_mse = (real.mean((0, 1), keepdim=True) - real).square().mean(pixel_axes)  # (T,) the average frame as a guess
     reward_error = (predicted - rewards).abs().mean(0)  # (T,)
-    save_figure(openloop_figure(real.numpy(), imagined.numpy(), rewards.numpy(), predicted.numpy(), context),
+    shown = (lambda x: x.squeeze(-1)) if real.shape[-1] == 1 else (lambda x: x)  # gray as (H, W) for imshow
+    save_figure(openloop_figure(shown(real).numpy(), shown(imagined).numpy(), rewards.numpy(), predicted.numpy(), context),
                 run_dir / "openloop.png")
     return {"split": split, "sequences": len(frames), "context": context, "frame_mse": frame_mse.tolist(),
             "mean_frame_mse": mean_frame_mse.tolist(), "reward_abs_error": reward_error.tolist(),

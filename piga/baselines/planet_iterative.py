@@ -22,6 +22,7 @@ Frames are rendered as the data file's were (its ``env_config``: the torque arro
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from collections.abc import Callable
 from dataclasses import replace
@@ -58,9 +59,18 @@ def check_iterative_data(info: DatasetInfo, config: IterativeConfig) -> PixelPen
     if config.episode_steps < info.steps:
         raise DataFormatError(f"{info.path}: collected episodes of {config.episode_steps} steps are shorter than the "
                               f"file's sequences of {info.steps} frames")
-    fields = dict(info.attrs["env_config"])
-    fields["effects"] = tuple(tuple(effect) for effect in fields.get("effects", ()))
-    return replace(PixelPendulumConfig(**fields), frame_stack=1, episode_length=config.episode_steps)
+    fields = info.attrs["env_config"]  # a JSON object (inspect_dataset checked it)
+    known = {f.name for f in dataclasses.fields(PixelPendulumConfig)}
+    unknown = sorted(set(fields) - known)
+    if unknown:
+        raise DataFormatError(f"{info.path}: attribute 'env_config' has unknown field(s) {', '.join(unknown)}; "
+                              f"PixelPendulumConfig knows {', '.join(sorted(known))}")
+    try:
+        effects = tuple(tuple(effect) for effect in fields.get("effects", ()))
+        env = PixelPendulumConfig(**{**fields, "effects": effects})
+    except (TypeError, ValueError) as exc:
+        raise DataFormatError(f"{info.path}: attribute 'env_config' is not a valid PixelPendulumConfig ({exc})") from None
+    return replace(env, frame_stack=1, episode_length=config.episode_steps)
 
 
 def rounds_collected(run_dir: str | Path) -> int:

@@ -8,15 +8,19 @@
 
 from __future__ import annotations
 
+import contextlib
+import dataclasses
 import json
+import math
+import os
 import shutil
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 from piga.cli.common import (ArgumentParser, Interrupted, PigaError, add_preset_option, command_line, format_default,
-                             nonnegative_float, nonnegative_int, positive_float, positive_int, run_cli)
+                             made_folder, nonnegative_float, nonnegative_int, positive_float, positive_int, run_cli)
 
 PROG = "piga-baseline"
 CHECKPOINT = "checkpoint.pt"
@@ -49,7 +53,7 @@ def build_parser() -> ArgumentParser:
                    "action R steps (PlaNet: 2 to 8) (default %(default)s)")
     q.add_argument("--max-sequences", type=nonnegative_int, default=planet.max_sequences,
                    help="train on the first N train sequences only (default %(default)s: all)")
-    q.add_argument("--free-nats", type=float, default=planet.free_nats, help="KL free nats (default %(default)s)")
+    q.add_argument("--free-nats", type=nonnegative_float, default=planet.free_nats, help="KL free nats (default %(default)s)")
     q.add_argument("--deter-size", type=positive_int, default=rssm.deter_size, help="GRU state size (default %(default)s)")
     q.add_argument("--stoch-size", type=positive_int, default=rssm.stoch_size, help="stochastic state size (default %(default)s)")
     add_preset_option(q, "--max-minutes", default=planet.max_minutes, type=positive_float, shown="no limit",
@@ -125,11 +129,22 @@ def _check_run_dir(run_dir: Path, resume: bool, overwrite: bool, kind: str) -> N
     if resume:
         if not (run_dir / CHECKPOINT).exists():
             raise PigaError(f"--resume: {run_dir / CHECKPOINT} does not exist")
-        recorded = _read_record(run_dir).get("kind")
+        if not (run_dir / "config.json").exists():
+            raise PigaError(f"--resume: {run_dir / 'config.json'} is missing; it records the run's settings, so the "
+                            f"run cannot be continued (start it again with --overwrite)")
+        record = _read_record(run_dir)
+        if not record:
+            raise PigaError(f"--resume: {run_dir / 'config.json'} is not a readable JSON record; start the run again "
+                            "with --overwrite")
+        recorded = record.get("kind")
         if recorded != kind:
-            raise PigaError(f"--resume: {run_dir} is a {recorded or 'piga'} run, not a {kind} run")
+            what = f"a {recorded} run" if recorded else "a piga-train-model run (its config.json has no 'kind')"
+            raise PigaError(f"--resume: {run_dir} is {what}, not a {kind} run (piga-baseline {kind})")
         return
     if existing and not overwrite:
+        if CHECKPOINT not in existing:  # a run killed before its first checkpoint: nothing to continue
+            raise PigaError(f"{run_dir} holds outputs of an earlier run but no checkpoint ({', '.join(existing)}); "
+                            "pass --overwrite to replace them")
         raise PigaError(f"{run_dir} already holds a run ({', '.join(existing)}); pass --resume to continue it or "
                         "--overwrite to replace it")
     for name in existing:
@@ -145,8 +160,78 @@ def _read_record(run_dir: Path) -> dict[str, Any]:
     return record if isinstance(record, dict) else {}
 
 
+def _saved_config(run_dir: Path, record: dict[str, Any], key: str, cls: Any, optional: tuple[str, ...] = ()) -> Any:
+    """The dataclass ``cls`` that a run's ``config.json`` records under ``key``, for ``--resume``.
+
+    Raises:
+        PigaError: the entry is missing, lacks fields (other than ``optional``, which newer
+            versions added), has unknown ones, or holds values ``cls`` refuses.
+    """
+    where = run_dir / "config.json"
+    saved = record.get(key)
+    if not isinstance(saved, dict):
+        raise PigaError(f"--resume: {where} has no '{key}' settings (not written by piga-baseline, or edited); "
+                        "start the run again with --overwrite")
+    names = {f.name for f in dataclasses.fields(cls)}
+    missing, unknown = sorted(names - set(saved) - set(optional)), sorted(set(saved) - names)
+    if missing or unknown:
+        raise PigaError(f"--resume: {where}'s '{key}' settings " + (f"lack {', '.join(missing)}" if missing else "")
+                        + (" and " if missing and unknown else "") + (f"have unknown {', '.join(unknown)}" if unknown else "")
+                        + " (edited, or from another version); start the run again with --overwrite")
+    try:
+        return cls(**{name: tuple(value) if isinstance(value, list) else value for name, value in saved.items()})
+    except (TypeError, ValueError) as exc:
+        raise PigaError(f"--resume: {where}'s '{key}' settings are not usable ({exc}); start the run again with "
+                        "--overwrite") from None
+
+
+#: Options that ``--resume`` takes besides those naming the run: the run's length and budget, and
+#: how this process runs. Any other option would change the run's recipe, so it is refused.
+RESUME_OPTIONS = {"planet": ("steps", "max_minutes", "rounds", "threads", "quiet"), "ddpg": ("steps", "threads", "quiet")}
+
+
+def _refuse_recipe_changes(args: Any, record: dict[str, Any], run_dir: Path) -> None:
+    """``--resume`` continues a run as it was started, as piga-train-model's does: refuses options
+    that would change its recipe (other than :data:`RESUME_OPTIONS`), and another data file."""
+    kind = args.baseline
+    named = [kind, args.data, "--out", args.out] if kind == "planet" else [kind, "--obs", args.obs, "--out", args.out]
+    defaults = vars(build_parser().parse_args(named))
+    skip = {"baseline", "data", "out", "obs", "algo", "resume", "overwrite", "iterative", *RESUME_OPTIONS[kind]}
+    changed = [name for name, value in vars(args).items() if name not in skip and value != defaults[name]]
+    if changed:
+        raise PigaError(f"--resume keeps the run's recipe; drop {', '.join('--' + c.replace('_', '-') for c in changed)}")
+    recorded = record.get("data")
+    if args.data and recorded != args.data:
+        same = recorded is not None and Path(recorded).exists() and Path(args.data).exists() and os.path.samefile(recorded, args.data)
+        if not same:
+            drop = "give that file" if kind == "planet" else "drop --data (the run keeps its autoencoder)"
+            raise PigaError(f"--resume: {run_dir} was trained on {recorded or 'no data file'}, not {args.data}; {drop}")
+
+
+@contextlib.contextmanager
+def _nothing_left_unless_checkpointed(run_dir: Path, written: list[int], fresh: bool) -> Iterator[None]:
+    """Makes ``run_dir`` and undoes a fresh run that fails or is interrupted before its first
+    checkpoint (``written`` empty): removes the outputs it made (TensorBoard's folder, the
+    autoencoder) and the folders it made (:func:`~piga.cli.common.made_folder`), so that the same
+    command can simply be run again. ``_check_run_dir`` made sure that none of :data:`OUTPUTS` was
+    there before."""
+    with made_folder(run_dir):
+        try:
+            yield
+        except BaseException:
+            if fresh and not written:
+                for name in OUTPUTS:
+                    path = run_dir / name
+                    if path.is_dir():
+                        shutil.rmtree(path, ignore_errors=True)
+                    elif path.exists():
+                        path.unlink()
+            raise
+
+
 def _planet(args: Any, argv: Sequence[str] | None) -> int:
     from agents.planet.config import IterativeConfig, PlanetTrainConfig
+    from piga.resources import check_run_disk
     from piga.atomic import write_json
     from piga.baselines.planet import check_planet_data, rssm_config_for, train_planet
     from piga.data import inspect_dataset
@@ -159,14 +244,20 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
     if args.resume:
         _check_run_dir(run_dir, True, False, "planet")
         record = _read_record(run_dir)
-        config = replace(PlanetTrainConfig(**record["train"]), steps=args.steps or record["train"]["steps"],
-                         max_minutes=args.max_minutes or record["train"]["max_minutes"])
+        _refuse_recipe_changes(args, record, run_dir)
+        saved = _saved_config(run_dir, record, "train", PlanetTrainConfig)
+        config = replace(saved, steps=args.steps or saved.steps, max_minutes=args.max_minutes or saved.max_minutes,
+                         threads=args.threads or saved.threads)
         rssm = None
         record["train"] = config.to_dict()
         if args.iterative and not record.get("iterative"):
             raise PigaError(f"--iterative: {run_dir} was trained without it; --resume continues a run as it was started")
         if record.get("iterative"):
-            iterative = replace(IterativeConfig(**record["iterative"]), rounds=args.rounds or record["iterative"]["rounds"])
+            saved_iterative = _saved_config(run_dir, record, "iterative", IterativeConfig)
+            if args.iterative and args.iterative != saved_iterative.episodes:
+                raise PigaError(f"--iterative: {run_dir} collects {saved_iterative.episodes} episodes a round; --resume "
+                                "keeps the run's recipe")
+            iterative = replace(saved_iterative, rounds=args.rounds or saved_iterative.rounds)
             record["iterative"] = iterative.to_dict()
         if "rssm" not in record:  # a record without it (benchmarks/baselines.py wrote none before): the checkpoint's
             from piga.baselines.planet_run import load_planet
@@ -192,6 +283,10 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
                                         steps_per_round=args.round_steps, episode_steps=args.episode_steps,
                                         noise=args.exploration_noise)
         check_planet_data(info, config, rssm.action_repeat)  # a bad file: one line, before the run folder is looked at
+        if iterative is not None:
+            from piga.baselines.planet_iterative import check_iterative_data
+
+            check_iterative_data(info, iterative)
         _check_run_dir(run_dir, False, args.overwrite, "planet")
         record = {"kind": "planet", "command": command, "data": str(args.data), "train": config.to_dict(),
                   "rssm": rssm.to_dict(), **({"iterative": iterative.to_dict()} if iterative else {})}
@@ -202,6 +297,8 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
         if config.max_minutes:
             raise PigaError("--max-minutes stops one training; with --iterative, bound the run with --rounds instead")
         check_iterative_data(info, iterative)
+    check_run_disk(run_dir, _planet_checkpoint_bytes(run_dir, record["rssm"], args.resume), "the PlaNet-style run",
+                   extra=0 if iterative is None else 2 * _collected_bytes(info, iterative))
     used = min(info.split_counts["train"], config.max_sequences or info.split_counts["train"])
     print(f"training the PlaNet-style model on {args.data} ({used} train sequences x {info.steps} frames) -> {run_dir}"
           + (f", then {iterative.rounds} rounds of {iterative.episodes} planner episodes + {iterative.steps_per_round} steps"
@@ -214,12 +311,13 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
         written.append(state.step)
 
     try:
-        if iterative is not None:
-            _, state = train_planet_iterative(args.data, run_dir, config, iterative, rssm, resume=args.resume,
-                                              progress=not args.quiet, on_checkpoint=on_checkpoint, command=command)
-        else:
-            _, state = train_planet(args.data, run_dir, config, rssm, resume=args.resume, progress=not args.quiet,
-                                    on_checkpoint=on_checkpoint)
+        with _nothing_left_unless_checkpointed(run_dir, written, fresh=not args.resume):
+            if iterative is not None:
+                _, state = train_planet_iterative(args.data, run_dir, config, iterative, rssm, resume=args.resume,
+                                                  progress=not args.quiet, on_checkpoint=on_checkpoint, command=command)
+            else:
+                _, state = train_planet(args.data, run_dir, config, rssm, resume=args.resume, progress=not args.quiet,
+                                        on_checkpoint=on_checkpoint)
     except TrainingDiverged as exc:
         raise PigaError(f"training diverged: {exc}") from None
     except KeyboardInterrupt:
@@ -235,9 +333,36 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
     return 0
 
 
+def _planet_checkpoint_bytes(run_dir: Path, rssm: dict[str, Any], resume: bool) -> float:
+    """A PlaNet-style checkpoint's size: the one there (resuming), or the weights and Adam's two moments."""
+    from piga.resources import adam_checkpoint_bytes
+
+    if resume:
+        return (run_dir / CHECKPOINT).stat().st_size
+    from agents.planet.config import RSSMConfig
+    from agents.planet.rssm import WorldModel
+
+    return adam_checkpoint_bytes(WorldModel(RSSMConfig(**rssm)))
+
+
+def _collected_bytes(info: Any, iterative: Any) -> float:
+    """``collected.h5`` at the end of an iterative run (frames uncompressed, actions and rewards)."""
+    pixels = math.prod(info.image_shape)
+    return iterative.rounds * iterative.episodes * iterative.episode_steps * (pixels + 4 * (info.action_dim + 1))
+
+
+def _ddpg_checkpoint_bytes(config: Any, latent_size: int) -> float:
+    """A DDPG checkpoint's size: its replay buffer, pickled at full capacity with observations and
+    next observations, and the networks (:data:`piga.resources.RUN_DISK_MARGIN` covers them)."""
+    per_obs = {"pixels": config.frame_stack * 64 * 64, "latent": 4 * config.frame_stack * latent_size, "state": 4 * 3}[config.obs]
+    return config.buffer_size * (2 * per_obs + 16)
+
+
 def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
     from piga.atomic import write_json
     from piga.baselines.ddpg import AUTOENCODER, DDPGConfig, config_for, first_step_reaching, train_ddpg
+    from piga.resources import check_run_disk
+    from piga.train import TrainingDiverged
 
     run_dir = Path(args.out)
     command = command_line(PROG, argv)
@@ -250,37 +375,37 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
     if args.resume:
         _check_run_dir(run_dir, True, False, "ddpg")
         record = _read_record(run_dir)
-        saved = record["ddpg"]
-        if saved["obs"] != args.obs:
-            raise PigaError(f"--resume: {run_dir} was trained with --obs {saved['obs']}, not {args.obs}")
-        trained_with = saved.get("algo", "ddpg")  # runs from before --algo are DDPG
-        if trained_with != args.algo:
-            raise PigaError(f"--resume: {run_dir} was trained with --algo {trained_with}, not {args.algo}")
-        config = replace(DDPGConfig(**{**saved, "net_arch": tuple(saved["net_arch"])}), steps=args.steps or saved["steps"])
+        saved = _saved_config(run_dir, record, "ddpg", DDPGConfig, optional=("algo",))  # runs from before --algo are DDPG
+        if saved.obs != args.obs:
+            raise PigaError(f"--resume: {run_dir} was trained with --obs {saved.obs}, not {args.obs}")
+        if saved.algo != args.algo:
+            raise PigaError(f"--resume: {run_dir} was trained with --algo {saved.algo}, not {args.algo}")
+        _refuse_recipe_changes(args, record, run_dir)
+        if saved.obs == "latent" and not (run_dir / AUTOENCODER).exists():
+            raise PigaError(f"--resume: {run_dir / AUTOENCODER} is missing; the latent run cannot be continued without it")
+        config = replace(saved, steps=args.steps or saved.steps, threads=args.threads)
         record["ddpg"] = config.to_dict()
         record.setdefault("resumed", []).append(command)
+        checkpoint_bytes: float = (run_dir / CHECKPOINT).stat().st_size
     else:
+        from piga.baselines.autoencoder import AutoencoderConfig
+
         given = {name: value for name, value in (("buffer_size", args.buffer_size), ("learning_starts", args.learning_starts),
                                                  ("noise_std", args.noise_std)) if value is not None}  # else the presets'
         config = config_for(args.obs, args.algo, steps=args.steps or DDPGConfig.steps, eval_every=args.eval_every,
                             eval_episodes=args.eval_episodes, learning_rate=args.learning_rate, batch_size=args.batch_size,
                             torque_arrow=args.torque_arrow, seed=args.seed, threads=args.threads, **given)
+        ae_config = AutoencoderConfig(steps=args.autoencoder_steps, seed=config.seed)
         if args.data:
+            from piga.baselines.autoencoder import check_autoencoder_data
             from piga.data import inspect_dataset
 
-            inspect_dataset(args.data)
+            check_autoencoder_data(inspect_dataset(args.data))  # blank or ill-sized frames: one line, before --out is touched
         _check_run_dir(run_dir, False, args.overwrite, "ddpg")
         record = {"kind": "ddpg", "command": command, "data": args.data, "ddpg": config.to_dict()}
+        checkpoint_bytes = _ddpg_checkpoint_bytes(config, ae_config.latent_size)
+    check_run_disk(run_dir, checkpoint_bytes, f"{config.algo.upper()}'s run (a replay buffer of {config.buffer_size})")
     autoencoder = run_dir / AUTOENCODER if config.obs == "latent" else None
-    if autoencoder is not None and not args.resume:
-        from piga.baselines.autoencoder import AutoencoderConfig, train_autoencoder
-
-        ae_config = AutoencoderConfig(steps=args.autoencoder_steps, seed=config.seed)
-        run_dir.mkdir(parents=True, exist_ok=True)
-        _, mse = train_autoencoder(args.data, ae_config, autoencoder, progress=not args.quiet)
-        record["autoencoder"] = {**ae_config.__dict__, "train_mse": mse}
-        print(f"autoencoder trained on {args.data}: per-pixel MSE {mse:.5f}")
-    print(f"training {config.algo.upper()} from {config.obs} for {config.steps} env steps -> {run_dir}")
     written: list[int] = []
 
     def on_checkpoint(step: int) -> None:
@@ -289,8 +414,18 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
         written.append(step)
 
     try:
-        metrics = train_ddpg(config, run_dir, autoencoder, resume=args.resume, progress=not args.quiet,
-                             on_checkpoint=on_checkpoint)
+        with _nothing_left_unless_checkpointed(run_dir, written, fresh=not args.resume):
+            if autoencoder is not None and not args.resume:
+                from piga.baselines.autoencoder import train_autoencoder
+
+                _, mse = train_autoencoder(args.data, ae_config, autoencoder, progress=not args.quiet)
+                record["autoencoder"] = {**ae_config.__dict__, "train_mse": mse}
+                print(f"autoencoder trained on {args.data}: per-pixel MSE {mse:.5f}")
+            print(f"training {config.algo.upper()} from {config.obs} for {config.steps} env steps -> {run_dir}")
+            metrics = train_ddpg(config, run_dir, autoencoder, resume=args.resume, progress=not args.quiet,
+                                 on_checkpoint=on_checkpoint)
+    except TrainingDiverged as exc:
+        raise PigaError(f"training diverged: {exc}") from None
     except KeyboardInterrupt:
         if written:
             raise Interrupted(f"{run_dir / CHECKPOINT} holds step {written[-1]}; continue with --resume") from None

@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import re
 import signal
 import tempfile
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
@@ -29,11 +30,15 @@ class Interrupted(KeyboardInterrupt):
 class ArgumentParser(argparse.ArgumentParser):
     """argparse that reports a usage error as a single line on stderr (exit 2).
 
+    Abbreviations are off (``allow_abbrev=False``): ``--gravity 14`` must not silently mean
+    ``--gravity-mult 14``; an option is taken only as spelt in full. Subparsers inherit this class.
+
     A value that starts with a minus and a digit (``-1,1,1``, ``-1e3``) is read as a value, not
     as an unknown option, so that its own type check names what is wrong with it.
     """
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("allow_abbrev", False)
         super().__init__(*args, **kwargs)
         self._negative_number_matcher = re.compile(r"^-\.?\d")
 
@@ -100,6 +105,25 @@ def run_cli(prog: str, main: Callable[[Sequence[str] | None], int | None], argv:
         print(f"{prog}: internal error ({exc.__class__.__name__}: {message}); {where}; please report it", file=sys.stderr)
         sys.exit(INTERNAL_ERROR)
     sys.exit(code or 0)
+
+
+@contextlib.contextmanager
+def made_folder(folder: str | os.PathLike[str]) -> Iterator[Path]:
+    """Makes ``folder`` (and missing parents) for a command's outputs, and removes the folders it
+    made again if the command fails or is interrupted while they are still empty: a refused or
+    interrupted run leaves no empty folder behind. Folders that existed are never removed."""
+    path = Path(folder)
+    missing = [p for p in (path, *path.parents) if not p.exists()]
+    path.mkdir(parents=True, exist_ok=True)
+    try:
+        yield path
+    except BaseException:
+        for p in missing:  # innermost first; stops at the first that is not empty
+            try:
+                p.rmdir()
+            except OSError:
+                break
+        raise
 
 
 #: Exit status of an unexpected internal error (BSD's EX_SOFTWARE); user errors exit 1, usage errors 2.
@@ -201,4 +225,4 @@ def split_type(text: str) -> tuple[float, float, float]:
 
 
 __all__ = ["ArgumentParser", "PigaError", "run_cli", "positive_int", "nonnegative_int", "positive_float", "nonnegative_float",
-           "split_type", "add_preset_option", "documented_default", "format_default", "Interrupted"]
+           "split_type", "add_preset_option", "documented_default", "format_default", "Interrupted", "made_folder"]

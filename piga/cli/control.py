@@ -102,8 +102,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         raise PigaError("--angle goes with --write-goal-image; to set the control goal use --goal-angle or --goal-image")
     if not args.oracle and not args.model:
         raise PigaError("give --model RUN_DIR (or --oracle)")
-    if not math.isfinite(args.goal_angle):
-        raise PigaError(f"--goal-angle must be a finite number of degrees, got {args.goal_angle}")
+    check_angle("--goal-angle", args.goal_angle)
     hold = EpisodeConfig.hold_steps
     if args.steps < hold:
         raise PigaError(f"--steps must be at least {hold}: success is the goal held for the last {hold} steps, got {args.steps}")
@@ -225,11 +224,17 @@ def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: 
 
 def _run_kind(args: argparse.Namespace) -> str:
     """The kind of ``--model``'s run ("piga" for a piga-train-model run, or with --oracle alone)."""
-    if args.oracle or not args.model:
+    if not args.model:
         return "piga"
     from piga.baselines.kinds import run_kind
 
-    return run_kind(args.model)
+    kind = run_kind(args.model)
+    if args.oracle:
+        if kind != "piga":
+            raise PigaError(f"--oracle: {args.model} is a piga-baseline {kind} run, which runs as trained and knows no "
+                            "physics to hand the oracle; drop --oracle to score the run, or drop --model to run the oracle")
+        return "piga"
+    return kind
 
 
 def _baseline(args: argparse.Namespace, kind: str, mpc: MPCConfig, outputs: list[Path], argv: Sequence[str] | None) -> int:
@@ -295,6 +300,13 @@ def _baseline(args: argparse.Namespace, kind: str, mpc: MPCConfig, outputs: list
     return 0
 
 
+def check_angle(flag: str, degrees: float) -> None:
+    """Refuses an angle outside [-180, 180] degrees (NaN and infinities included): a goal such as
+    1e300 degrees means nothing, and reduced modulo a turn it would be an arbitrary angle."""
+    if not -180 <= degrees <= 180:
+        raise PigaError(f"{flag} must be an angle in degrees from upright within [-180, 180], got {degrees:g}")
+
+
 def default_elites(candidates: int) -> int:
     """Elites for ``candidates`` when none are given: the default planner's share (at least 1)."""
     cem = MPCConfig().cem
@@ -328,8 +340,9 @@ def _write_goal_image(args: argparse.Namespace) -> int:
 
     from piga.goal import render_goal_image
 
-    if args.angle is None or not math.isfinite(args.angle):
-        raise PigaError("--write-goal-image needs a finite --angle in degrees")
+    if args.angle is None:
+        raise PigaError("--write-goal-image needs --angle in degrees")
+    check_angle("--angle", args.angle)
     target = Path(args.write_goal_image)
     if target.suffix.lower() not in (".png", ".jpg", ".jpeg"):
         raise PigaError(f"--write-goal-image: use a .png or .jpg path, got {target.name}")

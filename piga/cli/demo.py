@@ -20,7 +20,8 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from piga.cli import show, train
-from piga.cli.common import ArgumentParser, PigaError, command_line, nonnegative_int, positive_int, run_cli
+from piga.cli.common import (ArgumentParser, Interrupted, PigaError, command_line, made_folder, nonnegative_int,
+                             positive_int, run_cli)
 from piga.collect import CollectConfig, collect
 from piga.data import inspect_dataset
 
@@ -92,7 +93,26 @@ def main(argv: Sequence[str] | None = None) -> int:
         for path in (data, strip, run_dir / "checkpoint.pt", goal_png, control_md):
             if path.exists():
                 raise PigaError(f"{path} exists from an earlier demo; pass --overwrite to replace it")
-    out.mkdir(parents=True, exist_ok=True)
+    from piga.cli.control import check_angle
+
+    check_angle("--goal-angle", args.goal_angle)
+    outputs = (data, strip, run_dir / "checkpoint.pt", goal_png, control_md)
+    before = {path: path.exists() and path.stat().st_mtime_ns for path in outputs}
+    try:
+        with made_folder(out):
+            return _run(args, argv, out, data, strip, run_dir, goal_png, control_md)
+    except KeyboardInterrupt:  # say what this demo kept (a step's own message would name its own command)
+        kept = [str(path.relative_to(out)) for path in outputs
+                if path.exists() and path.stat().st_mtime_ns != before[path]]
+        if kept:
+            raise Interrupted(f"{out} keeps {', '.join(kept)} from this demo; run it again with --overwrite to start "
+                              "over") from None
+        raise KeyboardInterrupt from None
+
+
+def _run(args: argparse.Namespace, argv: Sequence[str] | None, out: Path, data: Path, strip: Path, run_dir: Path,
+         goal_png: Path, control_md: Path) -> int:
+    """The demo's four steps, into the folder ``out`` (made by the caller)."""
     over = ["--overwrite"] if args.overwrite else []
     print(f"[1/4] collecting {args.sequences} sequences into {data}", flush=True)
     config = replace(CollectConfig(), sequences=args.sequences, seed=args.seed)

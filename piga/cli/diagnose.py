@@ -31,7 +31,8 @@ def build_parser() -> ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    from piga.data import inspect_dataset
+    from piga.baselines.kinds import require_piga_run
+    from piga.data import check_frames_have_signal, inspect_dataset
     from piga.diagnostics import DiagnoseConfig, diagnose
     from piga.diagnostics.report import check_report_target, number, write_report
     from piga.runs import convergence_warning, load_model
@@ -41,6 +42,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     effects = _parse_env(args.env) if args.env is not None else None
     out = check_report_target(args.out, args.overwrite)
     inspect_dataset(args.data)  # schema errors first, with the file's name
+    check_frames_have_signal(args.data)  # blank video: the diagnosis would divide by its zero variance
+    require_piga_run(args.model, "piga-diagnose compares the physics a piga model identified with the data")
     model, ckpt = load_model(args.model)
     if model.config.system != "pendulum":
         raise PigaError(f"{args.model}: piga-diagnose is for pendulum models; this one is a {model.config.system} model")
