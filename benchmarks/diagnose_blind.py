@@ -226,7 +226,7 @@ def markdown(runs: list[dict], summary: dict, command: str, info: dict) -> str:
 
 
 def main() -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
     p.add_argument("--model", required=True, help="run folder of piga-train-model (the nominal, identified model)")
     p.add_argument("--out", default="results/diagnose_blind")
     p.add_argument("--work", default="runs/blind", help="folder for the case data and reports")

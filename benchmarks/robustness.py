@@ -811,7 +811,7 @@ def list_rows(bench: Bench, chosen: list[Row]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
     p.add_argument("--out", type=Path, default=Path("results/robustness"), help="output stem: OUT.md and OUT.json "
                    "(default %(default)s)")
     p.add_argument("--work", type=Path, default=Path("runs/robustness"),

@@ -76,7 +76,7 @@ def table(runs: list[dict[str, object]]) -> str:
 
 
 def main() -> None:
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0], allow_abbrev=False)
     p.add_argument("--out", default="results/train_accuracy", help="output stem (.json and .md)")
     p.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES))
     p.add_argument("--seeds", nargs="+", type=int, default=None, help="training seeds (default: 0-4 for 'default', 0 otherwise)")

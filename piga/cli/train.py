@@ -136,6 +136,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         model_config = model_config_for(info, model_overrides)
         record = {"command": command}
     plan = check_trainable(info, model_config, train_config)
+    from piga.model import PhysicsModel
+    from piga.resources import adam_checkpoint_bytes, check_run_disk
+
+    check_run_disk(run_dir, (run_dir / CHECKPOINT).stat().st_size if args.resume
+                   else adam_checkpoint_bytes(PhysicsModel(model_config)), "the training run")
     record.update({"data": str(args.data), "train": asdict(train_config), "plan": asdict(plan),
                    "model": model_config.to_dict()})
     if not info.split_counts["test"]:
