@@ -51,6 +51,11 @@ def load_model(run_dir: str | os.PathLike[str]) -> tuple[PhysicsModel, dict[str,
         raise FileNotFoundError(f"{path}: no checkpoint (is {run_dir} a piga-train-model run folder?)")
     try:
         ckpt = torch.load(path, map_location="cpu", weights_only=False)
+    except Exception as exc:  # a truncated or foreign file
+        raise ValueError(f"{path}: not a readable piga checkpoint ({exc.__class__.__name__}: {exc})") from None
+    if isinstance(ckpt, dict) and "model_config" not in ckpt and "kind" in ckpt:
+        raise ValueError(f"{path} is a piga-baseline {ckpt['kind']} checkpoint, not a piga-train-model run")
+    try:
         model = PhysicsModel(ModelConfig.from_dict(ckpt["model_config"]))
         model.load_state_dict(ckpt["model"])
     except Exception as exc:  # a truncated or foreign file
