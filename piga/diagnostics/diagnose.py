@@ -521,14 +521,18 @@ def ambiguity_of(chosen: Score, rival: Score, nom: Nominal, w: WindowSet | None,
 def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: CameraFindings | None,
                  generic: GenericBasis, config: DiagnoseConfig, from_gymnasium: bool = True,
                  ambiguity: Ambiguity | None = None, flip_bic_drop: float | None = None,
-                 draws: dict[str, list[float]] | None = None) -> Naming:
+                 draws: dict[str, list[float]] | None = None, refit: fit.Model | None = None) -> Naming:
     """Step 4: the effects that the chosen physics and the camera stage name, with intervals, and the verdict.
 
     Gymnasium's own speed clip is no gap (for a recording that the file says came from Gymnasium's
     pendulum, ``from_gymnasium``); a delay with a repeated start is the camera's; a gain error is
     the refitted a, named only when its bootstrap interval excludes the nominal a, and measured
     without ``within_frame`` (which reads a and g anew from the motion within the frame: the fast
-    model's low a is that reading, not a gain error). A refitted a of the other sign than the
+    model's low a is that reading, not a gain error). With ``refit`` ("none": g and a refitted, no
+    effect, the nominal model's own form), a gain is named only when that refit's a too differs
+    from the nominal a, in the same direction: when the nominal form reads the nominal a from this
+    recording, a different a with the effects only compensates them (an effect that the system the
+    nominal model was trained on had too, such as dm_control's hinge damping). A refitted a of the other sign than the
     nominal's is a flipped actuation (``flip_bic_drop``: how much better that sign fits). With an
     ``ambiguity``, the effects it cannot decide between are not named; the verdict says so.
     """
@@ -547,6 +551,12 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
         reference = fit.fit_candidate(euler, final.values, nom, w.fit, delay=final.delay or None)
     gain = abs(reference.values["a"] / nom.a)
     gain_error = abs(gain - 1) > config.gain_tolerance
+    plain = None if refit is None else abs(refit.values["a"] / nom.a)  # the nominal form's reading
+    if gain_error and plain is not None and not (abs(plain - 1) > config.gain_tolerance and (plain - 1) * (gain - 1) > 0):
+        gain_error = False
+        notes.append(f"a refits to {reference.values['a']:.3f} (x{gain:.3f} the nominal) with the effects, but to "
+                     f"{refit.values['a']:.3f} (x{plain:.3f}) in the nominal model's own form (no effect): the difference "
+                     "compensates the effects, not a gain error")
 
     # uncertainties
     if draws is None:
@@ -614,7 +624,8 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
         notes.append(f"the first {leading} frames of nearly every sequence repeat the first one, but the dynamics show no "
                      "delay: the camera froze at the start (these frames are left out of the fits)")
     g_ratio = reference.values["g"] / nom.g
-    if abs(g_ratio - 1) > config.gain_tolerance:
+    g_plain = 1.0 if refit is None else refit.values["g"] / nom.g
+    if abs(g_ratio - 1) > config.gain_tolerance and (refit is None or abs(g_plain - 1) > config.gain_tolerance):
         notes.append(f"g refits to {reference.values['g']:.3f} (x{g_ratio:.3f} the nominal {nom.g:.3f}): gravity, or the "
                      "pendulum's length, differs from the identified model")
     if any(e.effect in ("damping", "friction", "bias") for e in effects):
@@ -816,7 +827,8 @@ def analyse(obs: Observations, nom: Nominal, config: DiagnoseConfig = DiagnoseCo
                                                                   config, draws)
     generic = generic_basis(final, nom, obs, theta, stale, config)
     naming = name_effects(final, nom, windows, camera, generic, config, from_gymnasium=obs.from_gymnasium,
-                          ambiguity=ambiguity, flip_bic_drop=candidates.flip_bic_drop, draws=draws)
+                          ambiguity=ambiguity, flip_bic_drop=candidates.flip_bic_drop, draws=draws,
+                          refit=candidates.refit.model)
     vision, vision_notes = summarise_vision(obs, rec_training, camera, stale, naming.effects, config)
     gap = measure_gap(candidates, selection.chosen, nom, obs, theta, stale, windows, config, model, camera, arrow,
                       vision.ratio, corrects=bool(naming.effects) or ambiguity is not None)
