@@ -26,11 +26,22 @@ Steps (no state labels, no effect labels; only frames and actions of the "real" 
    system moves within the frame) needs only a BIC drop above ``within_frame_bic_margin`` and no
    loss in free run: it mostly moves the parameters, not the predictions. A fitted delay is the
    camera's (``frame_delay``) as far as every sequence starts with that many repeated frames.
+   When another candidate that would be accepted too explains the data about as well (BIC within
+   ``ambiguous_bic``, typical free-run error within ``ambiguous_free_run``, and with the bootstrap
+   overlapping intervals of the values both fit), the selection stops: the verdict is "ambiguous
+   between" the two, names both, and says what data would separate them (:data:`SEPARATING_DATA`).
+   Before any of this, "none" is refitted with a of the other sign too, where the frames' response
+   to the actions has the other sign (:func:`actuation_sign`): a flipped actuation is named.
+   Candidates that the file's attrs say its system cannot have (a dm_control file has no speed
+   clip, :func:`piga.diagnostics.observe.impossible_effects`) are not fitted, and the report says
+   so; the blind benchmarks delete those attrs, so nothing there rests on them.
 6. A gain error is the refitted a over the nominal a, beyond ``gain_tolerance`` and (with the
-   bootstrap) with a 95% interval that excludes the nominal a. A speed clip is a candidate only
-   where the data show one: the observed speeds pile up at its level and hardly pass it
-   (:func:`clip_supported`; a damping, which slows fast swings too, can otherwise win the BIC as a
-   clip). A clip within ``gym_clip_tolerance`` of 8 rad/s is Gymnasium's own, present in the
+   bootstrap) with a 95% interval that excludes the nominal a, read one step per frame (not with
+   ``within_frame``'s reading), and only when "none" refitted moves a the same way (else the
+   refit only compensates the other effects). A speed clip is a candidate only
+   where the data show one: the observed speeds pile up at its level and hardly pass it, and it
+   binds in at least ``clip_min_binding`` of the samples (:func:`clip_refuted`; a damping or the
+   tail of smooth swings can otherwise win the BIC as a clip). A clip within ``gym_clip_tolerance`` of 8 rad/s is Gymnasium's own, present in the
    nominal environment too, and not a gap, but only when the file says it came from Gymnasium.
 7. "Not explained by the candidates": a flexible basis of the state and action
    (:func:`~piga.diagnostics.residuals.generic_features`) fitted to the remaining one-step
