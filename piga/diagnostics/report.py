@@ -159,7 +159,7 @@ def ambiguity_lines(d: Diagnosis) -> list[str]:
     a = d.ambiguity
     if a is None:
         return []
-    overlap = ("not checked (no bootstrap)" if a.intervals_overlap is None else
+    overlap = ("were not compared (no bootstrap)" if a.intervals_overlap is None else
                "overlap" if a.intervals_overlap else "do not overlap")
     return [f"**Ambiguous between {a.between[0]} and {a.between[1]}**: the candidates {a.candidates[0]} and "
             f"{a.candidates[1]} have one-step BICs {a.bic[0]:.1f} and {a.bic[1]:.1f} and typical held-out free-run "
