@@ -155,6 +155,9 @@ def test_a_gain_on_top_of_within_frame_is_not_counted_twice() -> None:
 def test_a_real_gain_error_is_still_named() -> None:
     d = analyse(planted({"gain": 0.8}), NOMINAL, FAST)
     assert d.verdict_class == "gain" and abs(d.effects[0].value - 0.8) < 0.01, d.verdict
+    # a deadzone reads a low in the nominal form (no effect), the gain above 1 with it: still a gain
+    d = analyse(planted({"gain": 1.2, "deadzone": 0.5}, n=160), NOMINAL, FAST)
+    assert d.verdict_class == "deadzone+gain", d.verdict
 
 
 @pytest.mark.parametrize("nominal_a", [1.0, 0.05])

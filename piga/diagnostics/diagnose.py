@@ -37,8 +37,8 @@ Steps (no state labels, no effect labels; only frames and actions of the "real" 
    so; the blind benchmarks delete those attrs, so nothing there rests on them.
 6. A gain error is the refitted a over the nominal a, beyond ``gain_tolerance`` and (with the
    bootstrap) with a 95% interval that excludes the nominal a, read one step per frame (not with
-   ``within_frame``'s reading), and only when "none" refitted moves a the same way (else the
-   refit only compensates the other effects). A speed clip is a candidate only
+   ``within_frame``'s reading), and only when "none" refitted moves a away from the nominal too
+   (else the refit only compensates the other effects). A speed clip is a candidate only
    where the data show one: the observed speeds pile up at its level and hardly pass it, and it
    binds in at least ``clip_min_binding`` of the samples (:func:`clip_refuted`; a damping or the
    tail of smooth swings can otherwise win the BIC as a clip). A clip within ``gym_clip_tolerance`` of 8 rad/s is Gymnasium's own, present in the
@@ -541,9 +541,10 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
     without ``within_frame`` (which reads a and g anew from the motion within the frame: the fast
     model's low a is that reading, not a gain error). With ``refit`` ("none": g and a refitted, no
     effect, the nominal model's own form), a gain is named only when that refit's a too differs
-    from the nominal a, in the same direction: when the nominal form reads the nominal a from this
-    recording, a different a with the effects only compensates them (an effect that the system the
-    nominal model was trained on had too, such as dm_control's hinge damping). A refitted a of the other sign than the
+    from the nominal a: when the nominal form reads the nominal a from this recording, a different
+    a with the effects only compensates them (an effect that the system the nominal model was
+    trained on had too, such as dm_control's hinge damping). (Its direction is not asked: a
+    deadzone on top of a gain of 1.2 reads a low in the nominal form.) A refitted a of the other sign than the
     nominal's is a flipped actuation (``flip_bic_drop``: how much better that sign fits). With an
     ``ambiguity``, the effects it cannot decide between are not named; the verdict says so.
     """
@@ -563,7 +564,7 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
     gain = abs(reference.values["a"] / nom.a)
     gain_error = abs(gain - 1) > config.gain_tolerance
     plain = None if refit is None else abs(refit.values["a"] / nom.a)  # the nominal form's reading
-    if gain_error and plain is not None and not (abs(plain - 1) > config.gain_tolerance and (plain - 1) * (gain - 1) > 0):
+    if gain_error and plain is not None and abs(plain - 1) <= config.gain_tolerance:
         gain_error = False
         notes.append(f"a refits to {reference.values['a']:.3f} (x{gain:.3f} the nominal) with the effects, but to "
                      f"{refit.values['a']:.3f} (x{plain:.3f}) in the nominal model's own form (no effect): the difference "
