@@ -176,31 +176,38 @@ def score(case: dict[str, Any], report: dict[str, Any]) -> dict[str, Any]:
     else:
         top1 = named[0] in true["effects"]
     corrected = report["corrected"]
-    errors = {"g": abs(corrected["g"] / true["g"] - 1), "a": abs(corrected["a"] / true["a"] - 1)}
+    relative = lambda key: None if corrected.get(key) is None else abs(corrected[key] / true[key] - 1)  # noqa: E731
+    errors = {"g": relative("g"), "a": relative("a")}
     if "b" in corrected and true["b"] > 0:
-        errors["b"] = abs(corrected["b"] / true["b"] - 1)
+        errors["b"] = relative("b")
     return {**base, "truth_effects": true["effects"], "named": named, "top1": bool(top1),
             "ambiguous": bool(ambiguity), "false_effects": sorted(set(named) - set(true["effects"])),
             "parameter_error": errors}
 
 
+def worst_error(score: dict[str, Any]) -> float | None:
+    """The largest relative error of the corrected g, a, b (None: none, or one was not finite)."""
+    errors = list(score["parameter_error"].values())
+    return None if not errors or None in errors else float(max(errors))
+
+
 def summarize(runs: list[dict[str, Any]]) -> dict[str, Any]:
     s = [r["score"] for r in runs]
     clear = [x for x in s if not x["ambiguous"]]
-    worst = [max(x["parameter_error"].values()) for x in clear if x["predicted"] != "refused"]
+    worst = [worst_error(x) for x in clear if x["predicted"] != "refused"]
     return {
         "cases": len(s),
         "refused": int(sum(x["predicted"] == "refused" for x in s)),
         "top1_accuracy": float(np.mean([x["top1"] for x in s])) if s else None,
         "ambiguous_rate": float(np.mean([x["ambiguous"] for x in s])) if s else None,
         "false_effects": int(sum(len(x["false_effects"]) for x in s)),
-        "parameters_within_3pct": float(np.mean([w <= 0.03 for w in worst])) if worst else None,
-        "parameter_error_max": float(max(worst)) if worst else None,
+        "parameters_within_3pct": float(np.mean([w is not None and w <= 0.03 for w in worst])) if worst else None,
+        "parameter_error_max": None if not worst or None in worst else float(max(worst)),
     }
 
 
 def markdown(runs: list[dict[str, Any]], summary: dict[str, Any], command: str, info: dict[str, Any]) -> str:
-    pct = lambda v: "–" if v is None else f"{100 * v:.0f}%"  # noqa: E731
+    pct = lambda v: "–" if v is None or not np.isfinite(v) else f"{100 * v:.0f}%"  # noqa: E731
     lines = [
         "# Blind check of piga-diagnose on dm_control's pendulum", "", f"Command: `{command}`", "",
         f"{info['sequences']} sequences x {info['steps']} frames per file; nominal model: `piga-train-model --preset fast` "
@@ -220,7 +227,7 @@ def markdown(runs: list[dict[str, Any]], summary: dict[str, Any], command: str, 
         v, sc = r["variant"], r["score"]
         variant = ", ".join(f"{k}={val}" for k, val in v.items())
         added = ", ".join(f"{k}={val}" for k, val in r["effects"].items()) or "none"
-        worst = max(sc["parameter_error"].values(), default=None)
+        worst = worst_error(sc)
         lines.append(f"| {r['case']} | {variant} | {added} | {'+'.join(sc['truth_effects']) or 'none'} | {sc['verdict']} | "
                      f"{'yes' if sc['top1'] else '**no**'} | {pct(worst)} |")
     return "\n".join(lines) + "\n"
