@@ -43,7 +43,8 @@ class CorrectedDynamics:
         self.corrected = corrected.with_values(values)
         # the planner's θ̇ is the reader's velocity at the frame (a velocity_hold model's reader already
         # reads it through the integrator), not a difference to read again
-        self.nominal = replace(nominal, offset=0.0, **({"velocity_hold": False} if hasattr(nominal, "velocity_hold") else {}))
+        hold = {"velocity_hold": False} if hasattr(nominal, "velocity_hold") else {}
+        self.nominal = replace(nominal, offset=0.0, **hold)
         self._params = {k: v.detach() for k, v in fit.parameters_of(self.corrected, self.nominal).items()}
         self.history: list[float] = []
         """The last actions sent (at most ``fit.MAX_DELAY``), oldest first."""

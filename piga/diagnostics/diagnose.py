@@ -41,8 +41,9 @@ Steps (no state labels, no effect labels; only frames and actions of the "real" 
    (else the refit only compensates the other effects). A speed clip is a candidate only
    where the data show one: the observed speeds pile up at its level and hardly pass it, and it
    binds in at least ``clip_min_binding`` of the samples (:func:`clip_refuted`; a damping or the
-   tail of smooth swings can otherwise win the BIC as a clip). A clip within ``gym_clip_tolerance`` of 8 rad/s is Gymnasium's own, present in the
-   nominal environment too, and not a gap, but only when the file says it came from Gymnasium.
+   tail of smooth swings can otherwise win the BIC as a clip). A clip within ``gym_clip_tolerance``
+   of 8 rad/s is Gymnasium's own, present in the nominal environment too, and not a gap, but only
+   when the file says it came from Gymnasium.
 7. "Not explained by the candidates": a flexible basis of the state and action
    (:func:`~piga.diagnostics.residuals.generic_features`) fitted to the remaining one-step
    residuals still lowers the held-out residual by more than ``unexplained_gain`` with a BIC gain.
@@ -121,8 +122,8 @@ class DiagnoseConfig:
     clip_min_binding: float = 0.01
     """A speed clip must bind in at least this fraction of the samples: of the observed speeds (those at
     its level) and of the fitted clip model's one-step predictions (those it holds at the level). A
-    "clip" that binds less is the tail of a smooth speed distribution, not a limit (measured on a
-    dm_control pendulum: a clip fitted at 8.79 rad/s where the speeds reach 9.2, ΔBIC −242)."""
+    "clip" that binds less is the tail of a smooth speed distribution, not a limit (issue 31: on a
+    dm_control pendulum whose speeds reach 9.2 rad/s, a clip fitted at 8.79 rad/s won ΔBIC −242)."""
     ambiguous_bic: float = 10.0
     """Two candidates whose BICs differ by at most this (less than "very strong" evidence, Kass & Raftery)
     and whose typical held-out free-run errors differ by at most ``ambiguous_free_run`` (relative), with
@@ -380,7 +381,8 @@ def clip_binding(model: fit.Model, nom: Nominal, w1: fit.Windows) -> float:
     those whose speed, unclipped, would pass its level."""
     if "speed_clip" not in model.effects or len(w1.theta0) == 0:
         return 0.0
-    free = fit.Model(tuple(e for e in model.effects if e != "speed_clip"), model.delay, dict(model.values), model.substeps)
+    free = fit.Model(tuple(e for e in model.effects if e != "speed_clip"), model.delay, dict(model.values),
+                     model.substeps)
     with torch.no_grad():
         v = fit.simulate(free, fit.parameters_of(free, nom), nom, w1, with_velocity=True)[:, 0, 1]  # (B,)
     return float((v.abs() > model.values["v"]).double().mean())
