@@ -73,8 +73,11 @@ def test_scoring_counts_ambiguity_right_only_with_the_truth_in_it(bench) -> None
     assert not clipped["top1"] and clipped["false_effects"] == ["speed_clip"]
     right = bench.score(case, _report(["damping", "within_frame"]))
     assert right["top1"] and right["false_effects"] == [] and max(right["parameter_error"].values()) < 0.01
-    summary = bench.summarize([{"score": s} for s in (ok, wrong, clipped, right)])
-    assert summary["top1_accuracy"] == 0.5 and summary["ambiguous_rate"] == 0.5 and summary["false_effects"] == 1
+    refused = bench.refused(case, "piga-diagnose: error: refitting g and a diverged")
+    assert not refused["top1"] and refused["verdict"].startswith("refused: ")
+    summary = bench.summarize([{"score": s} for s in (ok, wrong, clipped, right, refused)])
+    assert summary["top1_accuracy"] == 0.4 and summary["ambiguous_rate"] == 0.4 and summary["false_effects"] == 1
+    assert summary["refused"] == 1 and summary["parameters_within_3pct"] == 1.0  # of the clear, answered cases
 
 
 def test_every_label_and_hint_is_deleted(bench, tmp_path: Path) -> None:
