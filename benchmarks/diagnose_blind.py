@@ -225,6 +225,14 @@ def markdown(runs: list[dict], summary: dict, command: str, info: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def save(out: Path, command: str, info: dict, runs: list[dict], summary: dict, text: str) -> None:
+    """Writes OUT.json (the command, ``info``, the summary and every run) and OUT.md (``text``), each atomically."""
+    out.parent.mkdir(parents=True, exist_ok=True)
+    write_json(out.with_suffix(".json"), {"command": command, **info, "summary": summary, "runs": runs}, overwrite=True)
+    with atomic_output(out.with_suffix(".md"), overwrite=True) as tmp:
+        tmp.write_text(text)
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--model", required=True, help="run folder of piga-train-model (the nominal, identified model)")
@@ -261,9 +269,7 @@ def main() -> int:
               f"({'ok' if run['score']['top1'] else 'WRONG'}, raw closure {100 * run['score']['free_run_closure']:.1f}%, "
               f"gap closure {run['score']['free_run_gap_closure']})", flush=True)
         summary = summarize(done)
-        write_json(out.with_suffix(".json"), {"command": command, **info, "summary": summary, "runs": done}, overwrite=True)
-        with atomic_output(out.with_suffix(".md"), overwrite=True) as tmp:
-            tmp.write_text(markdown(sorted(done, key=lambda r: r["case"]), summary, command, info))
+        save(out, command, info, done, summary, markdown(sorted(done, key=lambda r: r["case"]), summary, command, info))
     print(json.dumps(summarize(done), indent=2))
     return 0
 

@@ -46,10 +46,9 @@ import h5py
 import numpy as np
 
 from common import machine
+from diagnose_blind import save, strip_labels
 from diagnose_blind import score as score_gym
-from diagnose_blind import strip_labels
 from envs.dmc import DMCPendulumConfig, DMCPendulumEnv
-from piga.atomic import atomic_output, write_json
 from piga.collect import CollectConfig, collect
 
 #: Effects added outside dm_control, and how their magnitudes are drawn (rng -> value). friction
@@ -294,10 +293,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"case {case['case']}: {case['variant']} + {case['effects'] or 'none'} -> {run['score']['verdict']} "
               f"({'ok' if run['score']['top1'] else 'WRONG'})", flush=True)
         summary = summarize(done)
-        out.parent.mkdir(parents=True, exist_ok=True)
-        write_json(json_path, {"command": command, **info, "summary": summary, "runs": done}, overwrite=True)
-        with atomic_output(out.with_suffix(".md"), overwrite=True) as tmp:
-            tmp.write_text(markdown(sorted(done, key=lambda r: r["case"]), summary, command, info))
+        save(out, command, info, done, summary, markdown(sorted(done, key=lambda r: r["case"]), summary, command, info))
     print(json.dumps(summarize(done), indent=2))
     return 0
 
