@@ -292,8 +292,7 @@ def main(argv: list[str] | None = None) -> int:
         done.append(run)
         print(f"case {case['case']}: {case['variant']} + {case['effects'] or 'none'} -> {run['score']['verdict']} "
               f"({'ok' if run['score']['top1'] else 'WRONG'})", flush=True)
-        summary = summarize(done)
-        save(out, command, info, done, summary, markdown(sorted(done, key=lambda r: r["case"]), summary, command, info))
+        save(out, command, info, done, summarize, markdown)
     print(json.dumps(summarize(done), indent=2))
     return 0
 
