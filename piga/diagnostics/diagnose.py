@@ -202,6 +202,9 @@ def diagnose(model: PhysicsModel, data: str | os.PathLike[str], config: Diagnose
     if blank is None:  # the training file is gone: the recording's frames give the scale
         check_training(checkpoint, rec_training, obs.blank_mse, config.max_training_fraction)
     check_scene(obs, rec_training, config.max_scene_ratio)
+    if obs.stale is not None and obs.stale[:, 1:].all():  # before the camera stage, which would match them all
+        raise DiagnosisInputError("every frame of the recording repeats the previous one (a constant or frozen video): "
+                                  "there is no motion to diagnose")
     camera = camera_stage(model, str(data), obs.theta, obs.fit, obs.stale, config.camera, seed=config.seed,
                           progress=progress)
     return analyse(obs, nominal_of(model), config, model=model, rec_training=rec_training,
