@@ -129,6 +129,8 @@ def test_an_excluded_effect_is_not_fitted_and_the_report_says_why() -> None:
     assert d.excluded == {"speed_clip": "dm_control has no speed clip"}
     assert not any(r.candidate == "speed_clip" for r in d.candidates)
     assert "excluded by the file's provenance: speed_clip (dm_control has no speed clip)" in markdown(d, "m", "d", "c")
+    assert d.to_dict()["exclusions"] == ["excluded by the file's provenance: speed_clip (dm_control has no speed clip)"]
+    assert not any("clip" in n for n in d.notes)  # benchmarks/dmc.py checks that no note speaks of a clip
     off = analyse(obs, NOMINAL, replace(FAST, use_provenance=False))
     assert off.excluded == {} and any(r.candidate == "speed_clip" for r in off.candidates)
     assert off.verdict_class == d.verdict_class == "damping"

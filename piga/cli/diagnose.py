@@ -56,6 +56,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     report = write_report(diagnosis, out, args.model, args.data, command_line(PROG, argv), overwrite=args.overwrite)
     g = diagnosis.gap
     print(f"verdict: {diagnosis.verdict}")
+    for line in diagnosis.exclusions:
+        print(line)
     for note in diagnosis.notes:
         print(f"note: {note}")
     headline = "–" if g.free_run_gap_closure is None else f"{number(100 * g.free_run_gap_closure, '.1f')}%"

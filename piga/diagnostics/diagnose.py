@@ -860,9 +860,8 @@ def analyse(obs: Observations, nom: Nominal, config: DiagnoseConfig = DiagnoseCo
     gap = measure_gap(candidates, selection.chosen, nom, obs, theta, stale, windows, config, model, camera, arrow,
                       vision.ratio, corrects=bool(naming.effects) or ambiguity is not None)
     res_nom = one_step_residuals(candidates.nominal.model, nom, obs.theta, obs.actions, np.arange(len(obs.theta)))
-    excluded_notes = [f"excluded by the file's provenance: {e} ({why})" for e, why in excluded.items()
-                      if e in obs.impossible]
-    excluded_notes += [f"not tried: {e} ({why})" for e, why in excluded.items() if e not in obs.impossible]
+    exclusions = [f"excluded by the file's provenance: {e} ({why})" for e, why in excluded.items() if e in obs.impossible]
+    exclusions += [f"not tried: {e} ({why})" for e, why in excluded.items() if e not in obs.impossible]
     return Diagnosis(
         verdict=naming.verdict, verdict_class=naming.verdict_class, effects=naming.effects,
         nominal={"g": nom.g, "a": nom.a, "offset": nom.offset,
@@ -874,10 +873,10 @@ def analyse(obs: Observations, nom: Nominal, config: DiagnoseConfig = DiagnoseCo
         gap=gap, vision=vision,
         residuals={"heatmap": heatmap(res_nom), "bins": binned(res_nom), "autocorrelation": autocorrelation(res_nom),
                    "action_correlation": action_correlation(res_nom)},
-        notes=excluded_notes + naming.notes + vision_notes,
+        notes=naming.notes + vision_notes,
         pictures=_pictures(model, obs, theta, camera.camera if camera is not None and camera.rematched else None)
         if model is not None and len(obs.frames_index) else None,
-        ambiguity=ambiguity, excluded=excluded,
+        ambiguity=ambiguity, excluded=excluded, exclusions=exclusions,
     )
 
 

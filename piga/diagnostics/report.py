@@ -224,7 +224,7 @@ def markdown(d: Diagnosis, model: str, data: str, command: str) -> str:
         for e in d.effects:
             lines.append(f"| {e.effect} | {_fmt(e.value)} | {_interval(e.interval)} | {e.unit} |")
         lines.append("")
-    lines += [f"- {n}" for n in d.notes] + ([""] if d.notes else [])
+    lines += [f"- {n}" for n in d.exclusions + d.notes] + ([""] if d.notes or d.exclusions else [])
     lines += ambiguity_lines(d)
     headline = headline_text(d)
     floor = "" if g.free_run_mse_floor is None else (

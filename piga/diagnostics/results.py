@@ -364,6 +364,9 @@ class Diagnosis(_ByKey):
     excluded: dict[str, str] = field(default_factory=dict)
     """Candidates left out before fitting, and why: the file's provenance (a dm_control file has no
     speed clip), or the nominal model already has them (an RK4 model moves within the frame)."""
+    exclusions: list[str] = field(default_factory=list)
+    """The report's sentences on ``excluded``: "excluded by the file's provenance: speed_clip (dm_control
+    has no speed clip)", or "not tried: ..." (kept apart from ``notes``, which speak of the data)."""
 
     pictures: dict[str, np.ndarray] | None = field(default=None, repr=False)
     """A held-out frame as recorded ("real", (H, W[, C]) in [0, 1]), re-rendered by the nominal model
@@ -382,7 +385,7 @@ class Diagnosis(_ByKey):
             "gap": asdict(self.gap), "vision": self.vision.to_dict(), "residuals": self.residuals,
             "notes": list(self.notes), "control": self.control,
             "ambiguity": None if self.ambiguity is None else asdict(self.ambiguity),
-            "excluded": dict(self.excluded),
+            "excluded": dict(self.excluded), "exclusions": list(self.exclusions),
         }
 
     def corrected_camera(self) -> Camera | None:
