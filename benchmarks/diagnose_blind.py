@@ -27,6 +27,7 @@ import subprocess
 import sys
 import time
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 
@@ -225,6 +226,18 @@ def markdown(runs: list[dict], summary: dict, command: str, info: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def save(out: Path, command: str, info: dict, runs: list[dict], summarize: Callable[[list[dict]], dict],
+         markdown: Callable[[list[dict], dict, str, dict], str]) -> dict:
+    """Summarises ``runs`` and writes OUT.json (the command, ``info``, the summary and every run) and
+    OUT.md (``markdown`` of the runs in case order), each atomically; returns the summary."""
+    summary = summarize(runs)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    write_json(out.with_suffix(".json"), {"command": command, **info, "summary": summary, "runs": runs}, overwrite=True)
+    with atomic_output(out.with_suffix(".md"), overwrite=True) as tmp:
+        tmp.write_text(markdown(sorted(runs, key=lambda r: r["case"]), summary, command, info))
+    return summary
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
     p.add_argument("--model", required=True, help="run folder of piga-train-model (the nominal, identified model)")
@@ -260,10 +273,7 @@ def main() -> int:
         print(f"case {case['case']}: truth {case['effects'] or 'none'} -> {run['score']['verdict']} "
               f"({'ok' if run['score']['top1'] else 'WRONG'}, raw closure {100 * run['score']['free_run_closure']:.1f}%, "
               f"gap closure {run['score']['free_run_gap_closure']})", flush=True)
-        summary = summarize(done)
-        write_json(out.with_suffix(".json"), {"command": command, **info, "summary": summary, "runs": done}, overwrite=True)
-        with atomic_output(out.with_suffix(".md"), overwrite=True) as tmp:
-            tmp.write_text(markdown(sorted(done, key=lambda r: r["case"]), summary, command, info))
+        save(out, command, info, done, summarize, markdown)
     print(json.dumps(summarize(done), indent=2))
     return 0
 

@@ -97,6 +97,9 @@ class DMCPendulumConfig:
     """Reset draws θ ~ U(-max_angle, max_angle) (DMC: π)."""
     max_speed: float = 0.0
     """Reset draws θ̇ ~ U(-max_speed, max_speed) (DMC: 0, at rest)."""
+    camera_distance: float = 1.0
+    """The face-on camera's distance from the hinge, as a multiple of the default (which frames
+    ±0.7 m around the pivot): above 1 the pendulum looks smaller; below, it must still fit in view."""
     shadows: bool = False
     """Render shadows (dm_control's 2048-pixel shadow map). Off by default: on a software
     rasteriser (llvmpipe) they make a frame ~4x slower, and seen face-on the shadow only darkens
@@ -114,13 +117,14 @@ class DMCPendulumConfig:
             "flip": self.flip in FLIPS,
             "max_angle": 0 <= self.max_angle <= math.pi,
             "max_speed": 0 <= self.max_speed < math.inf,
+            "camera_distance": (self.length + 2 * TIP_RADIUS) / VIEW_HALF_SIDE <= self.camera_distance <= 3.0,
         }
         for name, ok in checks.items():
             if not ok:
                 raise ValueError(
                     f"DMCPendulumConfig.{name}={getattr(self, name)!r} is out of range (sizes and counts >= 1, "
                     f"mass > 0, length in (0, {VIEW_HALF_SIDE - 2 * TIP_RADIUS:g}], damping >= 0, flip in {FLIPS}, "
-                    "max_angle in [0, pi], max_speed >= 0)")
+                    "max_angle in [0, pi], max_speed >= 0, camera_distance in [(length + 0.1) / 0.7, 3])")
 
     @property
     def dt(self) -> float:
@@ -195,7 +199,7 @@ def model_xml(config: DMCPendulumConfig, base_xml: str) -> str:
     ET.SubElement(visual, "quality", {"shadowsize": "2048" if config.shadows else "0"})
     size = str(max(config.image_size, 64))
     ET.SubElement(visual, "global", {"offwidth": size, "offheight": size})  # the off-screen buffer: one frame
-    distance = VIEW_HALF_SIDE / math.tan(math.radians(CAMERA_FOVY / 2))
+    distance = config.camera_distance * VIEW_HALF_SIDE / math.tan(math.radians(CAMERA_FOVY / 2))
     side = -1.0 if config.flip == "camera" else 1.0
     ET.SubElement(root.find("./worldbody"), "camera", {
         "name": "face", "fovy": repr(CAMERA_FOVY),

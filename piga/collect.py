@@ -169,8 +169,13 @@ def collect(
     overwrite: bool = False,
     command: str | None = None,
     progress: bool = True,
+    make_env: Callable[[PixelPendulumConfig | DMCPendulumConfig], gym.Env] | None = None,
 ) -> Path:
     """Gathers ``config.sequences`` random-action sequences and writes them to ``out`` atomically.
+
+    ``make_env`` builds each worker's env from the config (with ``episode_length`` and
+    ``frame_stack`` set for collection) instead of piga's own, e.g. to wrap dm_control's pendulum
+    in effects from outside it; it must return what that env returns (gray frames, ``info["state"]``).
 
     Returns:
         The path written.
@@ -182,7 +187,7 @@ def collect(
     env_config = replace(config.env, episode_length=t + 1, frame_stack=1)
     counts = split_counts(n, config.split)
     workers = min(config.workers, n)
-    factory: Callable[[], gym.Env] = functools.partial(_episode_env, env_config)
+    factory: Callable[[], gym.Env] = functools.partial(make_env or _episode_env, env_config)
     size = env_config.image_size
     dt, max_action, params = env_attrs(env_config)
     dmc = isinstance(env_config, DMCPendulumConfig)

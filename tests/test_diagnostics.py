@@ -362,3 +362,20 @@ def _findings(effects: list, leading: int):  # noqa: ANN202
     from piga.diagnostics.vision import Camera, CameraFindings
 
     return CameraFindings(Camera(), 0.0, 0.0, 0, leading, [], 0.0, 0.0, list(effects))
+
+
+def test_a_video_of_constant_frames_is_refused_with_a_reason(tiny_model: Path, damped_data: Path, tmp_path: Path) -> None:
+    """Every frame the same picture of the pendulum (once a ZeroDivisionError in fit.py): one line, and no folder."""
+    import shutil
+
+    import h5py
+
+    still = tmp_path / "still.h5"
+    shutil.copy(damped_data, still)
+    with h5py.File(still, "r+") as f:
+        f["frames"][...] = f["frames"][0, 0]
+    out = tmp_path / "report"
+    result = run("piga-diagnose", "--model", str(tiny_model), "--data", str(still), "--out", str(out), "--bootstrap", "0",
+                 "--quiet")
+    assert_one_line_error(result, "repeats the previous one")
+    assert "ZeroDivisionError" not in result.stderr and not out.exists()

@@ -149,19 +149,20 @@ def test_signed_actuation_parameters():
 
 
 @pytest.mark.parametrize("fields", [{"integrator": "rk4", "substeps": 2}, {"learn_damping": True}])
-def test_continuous_models_are_refused_where_euler_without_damping_is_assumed(tmp_path, fields):
-    """The pendulum planner's engine and the diagnosis' nominal physics are Euler without damping:
-    a --preset continuous model gets a clear refusal there, not a silently wrong plan or verdict."""
+def test_continuous_models_are_refused_by_the_planner_and_carried_by_the_diagnosis(fields):
+    """The pendulum planner's engine is Euler without damping: a --preset continuous model gets a clear
+    refusal there, not a silently wrong plan. The diagnosis carries the model's integrator and damping
+    (its candidates are effects on top of them)."""
     from agents.dynamics import PendulumDynamics
-    from piga.diagnostics.diagnose import diagnose
-    from piga.diagnostics.observe import DiagnosisInputError
+    from piga.diagnostics import nominal_of
     from piga.model import ModelConfig, PhysicsModel
 
     model = PhysicsModel(ModelConfig(**fields))
     with pytest.raises(ValueError, match="preset continuous"):
         PendulumDynamics.of(model.system, model.integrator)
-    with pytest.raises(DiagnosisInputError, match="preset continuous"):
-        diagnose(model, tmp_path / "never-read.h5")
+    nominal = nominal_of(model)
+    assert nominal.integrator == fields.get("integrator", "euler") and nominal.substeps == fields.get("substeps", 1)
+    assert (nominal.b > 0) == bool(fields.get("learn_damping"))
     plain = PhysicsModel(ModelConfig())
     assert PendulumDynamics.of(plain.system, plain.integrator).substeps == 1
 

@@ -63,21 +63,31 @@ def main(argv: Sequence[str] | None = None) -> int:
     report = write_report(diagnosis, out, args.model, args.data, command_line(PROG, argv), overwrite=args.overwrite)
     g = diagnosis.gap
     print(f"verdict: {diagnosis.verdict}")
+    for line in diagnosis.exclusions:
+        print(line)
     for note in diagnosis.notes:
         print(f"note: {note}")
     headline = "–" if g.free_run_gap_closure is None else f"{number(100 * g.free_run_gap_closure, '.1f')}%"
+    if not g.floor_subtracted and g.free_run_gap_closure is not None:
+        headline += " raw"
     if not g.gap_above_floor:
         headline += " (no gap above the floor: a ratio of noise)"
     if g.closure_basis == "pixels":
         detail = (f"typical held-out window, pixel MSE {number(g.typical_pixel_mse_nominal)} -> "
-                  f"{number(g.typical_pixel_mse_corrected)}, of the gap above the matched floor {number(g.pixel_mse_floor)}")
+                  f"{number(g.typical_pixel_mse_corrected)}"
+                  + (f", of the gap above the matched floor {number(g.pixel_mse_floor)}" if g.floor_subtracted else ""))
     else:
         floor = g.typical_free_run_mse_floor
         detail = (f"typical held-out window, angle MSE {number(g.typical_free_run_mse_nominal)} -> "
                   f"{number(g.typical_free_run_mse_corrected)} rad²"
-                  + (f", of the gap above the twin's floor {number(floor)}" if floor is not None else ""))
-    print(f"free-run closure {headline} ({detail}; mean over all windows {number(100 * g.free_run_closure, '.1f')}%); "
-          "corrected " + ", ".join(f"{k} = {number(v, '.4g')}" for k, v in diagnosis.corrected.items()))
+                  + (f", of the gap above the twin's floor {number(floor)}" if floor is not None and g.floor_subtracted
+                     else ""))
+    corrected = "corrected " + ", ".join(f"{k} = {number(v, '.4g')}" for k, v in diagnosis.corrected.items())
+    if g.no_gap:
+        print(f"free-run closure: no gap to close (nothing named to correct; {detail}); {corrected}")
+    else:
+        print(f"free-run closure {headline} ({detail}; mean over all windows {number(100 * g.free_run_closure, '.1f')}%); "
+              + corrected)
     if diagnosis.control:
         for row in diagnosis.control["rows"]:
             print(f"MPC on the simulated real system, {row['physics']} physics: success {100 * row['success_rate']:.0f}% of "

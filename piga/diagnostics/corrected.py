@@ -17,7 +17,7 @@ from torch import Tensor
 from agents.mpc import EncoderReader
 from envs.pendulum import MAX_ACTION
 from piga.diagnostics import fit
-from piga.runs import nominal_of
+from piga.diagnostics.fit import nominal_of
 from piga.diagnostics.vision import Camera, angle_table, match
 from piga.model import PhysicsModel
 
@@ -41,7 +41,10 @@ class CorrectedDynamics:
     def __init__(self, corrected: fit.Model, nominal: fit.Nominal, gravity_mult: float = 1.0):
         values = {**corrected.values, "g": corrected.values["g"] * gravity_mult}
         self.corrected = corrected.with_values(values)
-        self.nominal = replace(nominal, offset=0.0)
+        # the planner's θ̇ is the reader's velocity at the frame (a velocity_hold model's reader already
+        # reads it through the integrator), not a difference to read again
+        hold = {"velocity_hold": False} if hasattr(nominal, "velocity_hold") else {}
+        self.nominal = replace(nominal, offset=0.0, **hold)
         self._params = {k: v.detach() for k, v in fit.parameters_of(self.corrected, self.nominal).items()}
         self.history: list[float] = []
         """The last actions sent (at most ``fit.MAX_DELAY``), oldest first."""

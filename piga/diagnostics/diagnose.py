@@ -26,12 +26,24 @@ Steps (no state labels, no effect labels; only frames and actions of the "real" 
    system moves within the frame) needs only a BIC drop above ``within_frame_bic_margin`` and no
    loss in free run: it mostly moves the parameters, not the predictions. A fitted delay is the
    camera's (``frame_delay``) as far as every sequence starts with that many repeated frames.
+   When another candidate that would be accepted too explains the data about as well (BIC within
+   ``ambiguous_bic``, typical free-run error within ``ambiguous_free_run``, and with the bootstrap
+   overlapping intervals of the values both fit), the selection stops: the verdict is "ambiguous
+   between" the two, names both, and says what data would separate them (:data:`SEPARATING_DATA`).
+   Before any of this, "none" is refitted with a of the other sign too, where the frames' response
+   to the actions has the other sign (:func:`actuation_sign`): a flipped actuation is named.
+   Candidates that the file's attrs say its system cannot have (a dm_control file has no speed
+   clip, :func:`piga.diagnostics.observe.impossible_effects`) are not fitted, and the report says
+   so; the blind benchmarks delete those attrs, so nothing there rests on them.
 6. A gain error is the refitted a over the nominal a, beyond ``gain_tolerance`` and (with the
-   bootstrap) with a 95% interval that excludes the nominal a. A speed clip is a candidate only
-   where the data show one: the observed speeds pile up at its level and hardly pass it
-   (:func:`clip_supported`; a damping, which slows fast swings too, can otherwise win the BIC as a
-   clip). A clip within ``gym_clip_tolerance`` of 8 rad/s is Gymnasium's own, present in the
-   nominal environment too, and not a gap, but only when the file says it came from Gymnasium.
+   bootstrap) with a 95% interval that excludes the nominal a, read one step per frame (not with
+   ``within_frame``'s reading), and only when "none" refitted moves a away from the nominal too
+   (else the refit only compensates the other effects). A speed clip is a candidate only
+   where the data show one: the observed speeds pile up at its level and hardly pass it, and it
+   binds in at least ``clip_min_binding`` of the samples (:func:`clip_refuted`; a damping or the
+   tail of smooth swings can otherwise win the BIC as a clip). A clip within ``gym_clip_tolerance``
+   of 8 rad/s is Gymnasium's own, present in the nominal environment too, and not a gap, but only
+   when the file says it came from Gymnasium.
 7. "Not explained by the candidates": a flexible basis of the state and action
    (:func:`~piga.diagnostics.residuals.generic_features`) fitted to the remaining one-step
    residuals still lowers the held-out residual by more than ``unexplained_gain`` with a BIC gain.
@@ -55,15 +67,16 @@ from torch import Tensor
 
 from envs.constants import PENDULUM_MAX_SPEED
 from piga.diagnostics import fit
-from piga.diagnostics.observe import Observations, check_scene, check_training, observe
+from piga.diagnostics.observe import DiagnosisInputError, Observations, check_scene, check_training, observe
 from piga.diagnostics.residuals import (action_correlation, autocorrelation, binned, generic_features, heatmap,
                                         one_step_residuals, ridge)
-from piga.diagnostics.results import (CameraSummary, CandidateRow, Diagnosis, Effect, Gap, GenericBasis, Naming,
-                                      PixelErrors, Score, SelectionStep, VisionSummary)
+from piga.diagnostics.results import (Ambiguity, CameraSummary, CandidateRow, Diagnosis, Effect, Gap, GenericBasis,
+                                      Naming, PixelErrors, Score, SelectionStep, VisionSummary)
 from piga.diagnostics.twin import MEASURABLE_GAP, calibrate_floor, gap_closure, twin_floor
 from piga.diagnostics.vision import Camera, CameraConfig, CameraFindings, angle_table, camera_stage, match
 from piga.model import PhysicsModel
-from piga.runs import Nominal, nominal_of, training_arrow, training_blank_mse, training_reconstruction_mse
+from piga.diagnostics.fit import Nominal, nominal_of
+from piga.runs import training_arrow, training_blank_mse, training_reconstruction_mse
 
 #: Gymnasium Pendulum-v1's own speed clip (rad/s).
 GYM_SPEED_CLIP = PENDULUM_MAX_SPEED
@@ -106,6 +119,21 @@ class DiagnoseConfig:
     """A speed clip needs at least this many speeds at its level (a pile-up)."""
     clip_max_beyond: float = 0.1
     """A speed clip is refuted when more speeds than this fraction of those at its level lie beyond it."""
+    clip_min_binding: float = 0.01
+    """A speed clip must bind in at least this fraction of the samples: of the observed speeds (those at
+    its level) and of the fitted clip model's one-step predictions (those it holds at the level). A
+    "clip" that binds less is the tail of a smooth speed distribution, not a limit (issue 31: on a
+    dm_control pendulum whose speeds reach 9.2 rad/s, a clip fitted at 8.79 rad/s won ΔBIC −242)."""
+    ambiguous_bic: float = 10.0
+    """Two candidates whose BICs differ by at most this (less than "very strong" evidence, Kass & Raftery)
+    and whose typical held-out free-run errors differ by at most ``ambiguous_free_run`` (relative), with
+    overlapping 95% intervals of the values they both fit (g, a, ...; not checked without the
+    bootstrap), explain the residual about equally: the verdict says "ambiguous between" them."""
+    ambiguous_free_run: float = 0.05
+    """See ``ambiguous_bic``."""
+    use_provenance: bool = True
+    """Leave out effects that the file's attrs say the system that made it cannot have (a dm_control
+    file has no speed clip), and say so in the report. Only excludes; never adds or names an effect."""
     max_effects: int = 2
     """Effects the forward selection may combine."""
     bootstrap: int = 20
@@ -136,8 +164,14 @@ class DiagnoseConfig:
             raise ValueError(f"need fit_horizon, stride >= 1 and max_effects, bootstrap >= 0, got {self}")
 
 
-#: Units of the dynamics effects' parameters.
-UNITS = {"b": "N·m·s/rad", "c": "N·m", "tau0": "N·m", "d": "action units", "s": "action units", "v": "rad/s"}
+#: Units of the dynamics effects' parameters. piga's engine is θ̈ = 1.5·g·sin(θ + φ) + 3·(a·u − b·θ̇ − ...),
+#: a rod with m = l = 1: its torques are per m·l², so b (3·b·θ̇ in rad/s², θ̇ in rad/s) is a rate in 1/s and
+#: c, τ0 are in rad/s². A real rod's hinge damping is b·m·l² N·m·s/rad (:data:`UNITS_NOTE`).
+UNITS = {"b": "1/s", "c": "rad/s²", "tau0": "rad/s²", "d": "action units", "s": "action units", "v": "rad/s"}
+#: The report's line on those units.
+UNITS_NOTE = ("units: piga's engine is θ̈ = 1.5·g·sin(θ + φ) + 3·(a·u − b·θ̇ − c·tanh(θ̇/0.1) + τ0), a rod with "
+              "m = l = 1, so its torques are per m·l²: b is in 1/s, c and τ0 in rad/s²; for a rod of mass m and "
+              "length l, b·m·l² is the hinge damping in N·m·s/rad and c·m·l², τ0·m·l² are torques in N·m")
 
 
 def diagnose(model: PhysicsModel, data: str | os.PathLike[str], config: DiagnoseConfig = DiagnoseConfig(),
@@ -155,18 +189,11 @@ def diagnose(model: PhysicsModel, data: str | os.PathLike[str], config: Diagnose
             when the run's training file is still there).
         NotTheSceneError: the recording is not the scene the model knows.
         DiagnosisInputError: the model and the data cannot be compared.
-    """
-    from piga.diagnostics.observe import DiagnosisInputError
 
-    a = model.physical_parameters()["a"]
-    if not a > 0:
-        raise DiagnosisInputError(f"the model learned a = {a:.4g} < 0: its frames show a flipped actuation (a camera on the "
-                                  "other side of the hinge, or a motor wired the other way); the diagnosis' candidates "
-                                  "assume a > 0")
-    if model.config.integrator != "euler" or getattr(model.system, "has_damping", False):
-        raise DiagnosisInputError("the model integrates within the frame or learned a damping (--preset continuous); the "
-                                  "diagnosis starts from a model trained with Euler and no damping (--preset fast or "
-                                  "paper) and tests those effects as candidates")
+    The nominal model's own damping and integrator (``--preset continuous``) are kept
+    (:func:`piga.diagnostics.fit.nominal_of`): the candidates are effects on top of them. A model
+    whose a is negative (``--signed-actuation``) is diagnosed with that sign.
+    """
     rec_training = training_reconstruction_mse(model, checkpoint)
     blank = training_blank_mse(model, checkpoint)
     if blank is not None:
@@ -175,6 +202,9 @@ def diagnose(model: PhysicsModel, data: str | os.PathLike[str], config: Diagnose
     if blank is None:  # the training file is gone: the recording's frames give the scale
         check_training(checkpoint, rec_training, obs.blank_mse, config.max_training_fraction)
     check_scene(obs, rec_training, config.max_scene_ratio)
+    if obs.stale is not None and obs.stale[:, 1:].all():  # before the camera stage, which would match them all
+        raise DiagnosisInputError("every frame of the recording repeats the previous one (a constant or frozen video): "
+                                  "there is no motion to diagnose")
     camera = camera_stage(model, str(data), obs.theta, obs.fit, obs.stale, config.camera, seed=config.seed,
                           progress=progress)
     return analyse(obs, nominal_of(model), config, model=model, rec_training=rec_training,
@@ -233,27 +263,84 @@ class Candidates:
     nominal: Score
     """The nominal model as the user has it (no refit), on the encoder's angles."""
     refit: Score
-    """"none": g and a refitted, no effect."""
+    """"none": g and a refitted, no effect (a of the sign that fits: see ``flip_bic_drop``)."""
     singles: list[Score]
     """Each candidate of :data:`piga.diagnostics.fit.CANDIDATES` with g and a, in BIC order."""
+    flip_bic_drop: float = 0.0
+    """BIC of "none" refitted with the nominal a's sign minus that with the opposite sign (> 0: the
+    frames show the actuation reversed)."""
+    excluded: dict[str, str] = field(default_factory=dict)
+    """Candidates left out, and why (the file's provenance, the nominal model's integrator)."""
+
+    @property
+    def flipped(self) -> bool:
+        """The refitted a has the opposite sign of the nominal a."""
+        return self.refit.model.values["a"] * self.nominal.model.values["a"] < 0
+
+    @property
+    def allowed(self) -> tuple[str, ...]:
+        """The candidates that may be tried."""
+        return tuple(c for c in fit.CANDIDATES if c not in self.excluded)
 
 
-def score_candidates(nom: Nominal, w: WindowSet, progress: bool = False) -> Candidates:
-    """Fits "none" (g and a refitted) and each single candidate on the fit split, and scores them."""
+def actuation_sign(nom: Nominal, w1: fit.Windows, min_t: float = 5.0) -> float:
+    """The sign of the frames' response to the actions: +1, -1, or 0 when it is not clear.
+
+    The observed one-step acceleration (θ_{s+1} − θ_s − dt·v_s) / dt² is regressed on sin and cos of
+    the angle, a constant, the speed, and the actions u_{s−k} for k = 0..MAX_DELAY; the sign is that
+    of the largest action coefficient (a delay moves it to lag k, a flip turns it negative), when
+    its t-statistic is above ``min_t``.
+    """
+    th = (w1.theta0 + nom.offset).numpy()
+    acc = ((w1.target[:, 0] - w1.theta0 - nom.dt * w1.v0) / nom.dt**2).numpy()
+    lags = w1.actions[:, : fit.MAX_DELAY + 1].numpy()[:, ::-1]  # (B, K): u_s, u_{s-1}, ...
+    x = np.column_stack([np.sin(th), np.cos(th), np.ones_like(th), w1.v0.numpy(), lags])
+    if len(acc) <= x.shape[1]:
+        return 0.0
+    coef, *_ = np.linalg.lstsq(x, acc, rcond=None)
+    resid = acc - x @ coef
+    cov = np.linalg.pinv(x.T @ x) * float(resid @ resid) / (len(acc) - x.shape[1])
+    c, se = coef[4:], np.sqrt(np.maximum(np.diag(cov)[4:], 1e-300))
+    k = int(np.argmax(np.abs(c)))
+    return float(np.sign(c[k])) if abs(c[k]) / se[k] > min_t else 0.0
+
+
+def score_candidates(nom: Nominal, w: WindowSet, progress: bool = False, excluded: dict[str, str] | None = None,
+                     bic_margin: float = 10.0) -> Candidates:
+    """Fits "none" (g and a refitted) and each single candidate on the fit split, and scores them.
+
+    "none" is refitted with a of the nominal sign and of the opposite sign (a flipped actuation: a
+    camera on the other side of the hinge, a motor wired the other way); the opposite sign is kept
+    when its BIC is lower by more than ``bic_margin``, and every candidate then starts from it.
+    Candidates in ``excluded`` are not fitted.
+    """
     from tqdm.auto import tqdm
 
+    excluded = dict(excluded or {})
     nominal_model = fit.Model((), 0, {"g": nom.g, "a": nom.a})
     nominal = score(nominal_model, nom, w.fit1_nominal, w.free_nominal)
-    bar = tqdm(total=1 + len(fit.CANDIDATES), desc="fitting candidates", disable=not progress)
+    allowed = [c for c in fit.CANDIDATES if c not in excluded]
+    bar = tqdm(total=2 + len(allowed), desc="fitting candidates", disable=not progress)
     refit = score(fit.fit_candidate((), {}, nom, w.fit), nom, w.fit1, w.free)
+    if not all(math.isfinite(v) for v in refit.model.values.values()) or not math.isfinite(refit.bic):
+        raise DiagnosisInputError(f"refitting g and a to this recording's angles diverged (from g = {nom.g:.3g}, "
+                                  f"a = {nom.a:.3g}): the angles read from it are no pendulum motion that the nominal "
+                                  "physics can follow; is the model trained well enough on this camera?")
+    bar.update()
+    flip_bic_drop = 0.0
+    if actuation_sign(nom, w.fit1) * nom.a < 0:  # the observed response to the actions has the other sign
+        flipped = score(fit.fit_candidate((), {"a": -nom.a}, nom, w.fit), nom, w.fit1, w.free)
+        flip_bic_drop = refit.bic - flipped.bic
+        if flip_bic_drop > bic_margin:
+            refit = flipped
     bar.update()
     singles = []
-    for name in fit.CANDIDATES:
+    for name in allowed:
         singles.append(score(fit.fit_candidate((name,), refit.model.values, nom, w.fit), nom, w.fit1, w.free))
         bar.update()
     bar.close()
     singles.sort(key=lambda s: s.bic)
-    return Candidates(nominal, refit, singles)
+    return Candidates(nominal, refit, singles, flip_bic_drop, excluded)
 
 
 @dataclass(frozen=True)
@@ -264,6 +351,10 @@ class Selection:
     """The chosen physics ("none" when no effect passed)."""
     steps: list[SelectionStep]
     """Every test, in order."""
+    rival: Score | None = None
+    """A candidate that explains the data about as well as ``chosen`` (BIC within ``ambiguous_bic``,
+    typical free-run error within ``ambiguous_free_run``) in the round that added the last effect;
+    the selection stops there. None: the choice is clear."""
 
 
 def observed_speeds(theta: np.ndarray, dt: float, stale: np.ndarray | None) -> np.ndarray:
@@ -278,50 +369,98 @@ def clip_supported(level: float, speeds: np.ndarray, config: DiagnoseConfig) -> 
     """Whether the data show a speed clip at ``level``: speeds pile up there and hardly pass it.
 
     A clip holds the speed at its level while the forces would raise it, so the observed speeds
-    gather at the level (at least ``clip_min_at``) and almost none lie beyond it (at most
-    ``clip_max_beyond`` times as many as at it). A damping or a within-frame integration, which
-    also slow the fastest swings, lets them pass any level a clip fitted in their place.
+    gather at the level: at least ``clip_min_at`` of them and ``clip_min_binding`` of all (where
+    it binds), and more than in a band as wide just below it (a pile-up, not a tail that thins out);
+    and almost none lie beyond it (at most ``clip_max_beyond`` times as many as at it). A damping
+    or a within-frame integration, which also slow the fastest swings, lets them pass any level a
+    clip fitted in their place, or leaves only a thin tail there.
     """
-    at = int(np.count_nonzero(np.abs(speeds - level) <= config.clip_band))
-    beyond = int(np.count_nonzero(speeds > level + config.clip_band))
-    return at >= config.clip_min_at and beyond <= config.clip_max_beyond * at
+    band = config.clip_band
+    at = int(np.count_nonzero(np.abs(speeds - level) <= band))
+    below = int(np.count_nonzero((speeds >= level - 3 * band) & (speeds < level - band)))
+    beyond = int(np.count_nonzero(speeds > level + band))
+    return (at >= max(config.clip_min_at, config.clip_min_binding * len(speeds)) and at >= below
+            and beyond <= config.clip_max_beyond * at)
+
+
+def clip_binding(model: fit.Model, nom: Nominal, w1: fit.Windows) -> float:
+    """The fraction of one-step predictions in which ``model``'s speed clip binds (0 without a clip):
+    those whose speed, unclipped, would pass its level."""
+    if "speed_clip" not in model.effects or len(w1.theta0) == 0:
+        return 0.0
+    free = fit.Model(tuple(e for e in model.effects if e != "speed_clip"), model.delay, dict(model.values),
+                     model.substeps)
+    with torch.no_grad():
+        v = fit.simulate(free, fit.parameters_of(free, nom), nom, w1, with_velocity=True)[:, 0, 1]  # (B,)
+    return float((v.abs() > model.values["v"]).double().mean())
+
+
+def clip_refuted(model: fit.Model, nom: Nominal, w1: fit.Windows, speeds: np.ndarray | None,
+                 config: DiagnoseConfig) -> bool:
+    """A candidate with a speed clip that the data refute: the observed speeds show no pile-up at its
+    level (:func:`clip_supported`), or the fitted clip binds in under ``clip_min_binding`` of the samples."""
+    if "speed_clip" not in model.effects:
+        return False
+    level = model.values["v"]
+    return (speeds is not None and not clip_supported(level, speeds, config)) \
+        or clip_binding(model, nom, w1) < config.clip_min_binding
+
+
+def close_rival(best: Score, cand: Score, config: DiagnoseConfig) -> bool:
+    """``cand`` explains the data about as well as ``best``: BIC within ``ambiguous_bic`` and typical
+    held-out free-run error within ``ambiguous_free_run`` (relative)."""
+    if cand.model.effects == best.model.effects:
+        return False
+    free_gap = abs(cand.typical - best.typical) / best.typical if best.typical > 0 else 0.0
+    return abs(cand.bic - best.bic) <= config.ambiguous_bic and free_gap <= config.ambiguous_free_run
 
 
 def select(candidates: Candidates, nom: Nominal, w: WindowSet, config: DiagnoseConfig, progress: bool = False,
            speeds: np.ndarray | None = None) -> Selection:
     """Forward selection: in BIC order, the first candidate that lowers the BIC by more than
     ``bic_margin`` and the typical held-out free-run error by more than ``min_gain`` is accepted; then
-    up to ``max_effects`` effects on top of each other, the same way. With ``speeds`` (the observed
-    speeds, :func:`observed_speeds`), a candidate with a speed clip that they refute
-    (:func:`clip_supported`) is passed over."""
+    up to ``max_effects`` effects on top of each other, the same way. A candidate with a speed clip
+    that the data refute (:func:`clip_refuted`, with ``speeds`` the observed speeds,
+    :func:`observed_speeds`) is passed over. When another candidate that would also be accepted
+    explains the data about as well as the accepted one (:func:`close_rival`), the selection stops
+    with both: it cannot tell them apart."""
     from tqdm.auto import tqdm
 
     chosen, steps = candidates.refit, []
     pool = candidates.singles
+
+    def passes(cand: Score, base: Score) -> tuple[bool, float, float]:
+        bic_drop = base.bic - cand.bic
+        free_drop = 1 - cand.typical / base.typical if base.typical > 0 else 0.0
+        accepted = bic_drop > config.bic_margin and (free_drop > config.min_gain or (
+            "within_frame" in cand.model.effects and "within_frame" not in base.model.effects
+            and bic_drop > config.within_frame_bic_margin and free_drop >= 0))
+        return bool(accepted), bic_drop, free_drop
+
     for _round in range(config.max_effects):
         best = None
+        pool = [c for c in pool if not clip_refuted(c.model, nom, w.fit1, speeds, config)]
         for cand in pool:  # in BIC order: the first that passes both tests is accepted
-            if speeds is not None and "speed_clip" in cand.model.effects \
-                    and not clip_supported(cand.model.values["v"], speeds, config):
-                continue  # the speeds do not pile up at this level, or pass it: no clip
-            bic_drop = chosen.bic - cand.bic
+            accepted, bic_drop, free_drop = passes(cand, chosen)
             if bic_drop <= config.bic_margin:
                 break  # the rest have even smaller BIC drops
-            free_drop = 1 - cand.typical / chosen.typical if chosen.typical > 0 else 0.0
-            accepted = free_drop > config.min_gain or (
-                "within_frame" in cand.model.effects and "within_frame" not in chosen.model.effects
-                and bic_drop > config.within_frame_bic_margin and free_drop >= 0)
-            steps.append(SelectionStep(cand.name, bic_drop, free_drop, bool(accepted)))
+            steps.append(SelectionStep(cand.name, bic_drop, free_drop, accepted))
             if accepted:
                 best = cand
                 break
         if best is None:
             break
-        chosen = best
+        rivals = [c for c in pool if c is not best and passes(c, chosen)[0] and close_rival(best, c, config)]
+        previous, chosen = chosen, best
+        if rivals:
+            rival = min(rivals, key=lambda c: c.bic)
+            _, bic_drop, free_drop = passes(rival, previous)
+            steps.append(SelectionStep(rival.name, bic_drop, free_drop, False, ambiguous=True))
+            return Selection(chosen, steps, rival)
         if _round + 1 == config.max_effects:
             break
         base = chosen.model
-        rest = [c for c in fit.CANDIDATES if c not in base.effects]
+        rest = [c for c in candidates.allowed if c not in base.effects]
         pool = []
         for name in tqdm(rest, desc=f"adding to {base.name}", disable=not progress):
             effects = tuple(e for e in fit.CANDIDATES if e in (*base.effects, name))
@@ -352,31 +491,116 @@ def generic_basis(final: fit.Model, nom: Nominal, obs: Observations, theta: np.n
     return GenericBasis(bic_drop, 1 - held1 / held0 if held0 > 0 else 0.0, bool(unexplained))
 
 
-def name_effects(final: fit.Model, nom: Nominal, w: WindowSet, camera: CameraFindings | None, generic: GenericBasis,
-                 config: DiagnoseConfig, from_gymnasium: bool = True) -> Naming:
+#: What data would tell each effect from another that explains a recording as well (for "ambiguous between").
+SEPARATING_DATA: dict[str, str] = {
+    "speed_clip": "speeds above {v:.2f} rad/s (a clip there holds them, any other effect lets them pass)",
+    "within_frame": "a different action hold (another frame rate or action repeat: motion within the frame grows "
+                    "with the frame's length, an effect of the system does not)",
+    "damping": "free swings with no action at several speeds (a viscous torque grows with the speed)",
+    "friction": "slow motion near rest, below 0.1 rad/s (Coulomb friction is as strong there as at speed)",
+    "bias": "the pendulum left at rest with no action (a bias moves its resting angle)",
+    "delay": "actions that switch abruptly, with frames after each switch",
+    "deadzone": "small actions, |u| below {d:.2f}",
+    "saturation": "large actions, |u| above {s:.2f}",
+}
+
+
+def separating_data(effects: tuple[str, ...], values: dict[str, float]) -> list[str]:
+    """What data would show ``effects`` apart from a rival (:data:`SEPARATING_DATA`), with their fitted values."""
+    return [SEPARATING_DATA[e].format(**values) for e in effects if e in SEPARATING_DATA]
+
+
+def _intervals(draws: dict[str, list[float]]) -> dict[str, tuple[float, float]]:
+    return {k: (float(np.percentile(v, 2.5)), float(np.percentile(v, 97.5))) for k, v in draws.items() if v}
+
+
+def ambiguity_of(chosen: Score, rival: Score, nom: Nominal, w: WindowSet | None, config: DiagnoseConfig,
+                 draws: dict[str, list[float]] | None = None) -> Ambiguity | None:
+    """The "ambiguous between" record of two candidates that the BIC and the free run cannot tell apart,
+    or None when the 95% intervals of the values they both fit (g, a, ...) do not overlap (then their
+    fitted values tell them apart). Without the bootstrap (``config.bootstrap`` 0) the intervals are
+    not checked."""
+    overlap = None
+    if config.bootstrap and w is not None:
+        ours = _intervals(draws if draws is not None else fit.bootstrap(chosen.model, nom, w.fit, config.bootstrap,
+                                                                        config.seed))
+        theirs = _intervals(fit.bootstrap(rival.model, nom, w.fit, config.bootstrap, config.seed))
+        shared = sorted(set(ours) & set(theirs))
+        overlap = all(ours[k][0] <= theirs[k][1] and theirs[k][0] <= ours[k][1] for k in shared)
+        if not overlap:
+            return None
+    only_a = tuple(e for e in chosen.model.effects if e not in rival.model.effects)
+    only_b = tuple(e for e in rival.model.effects if e not in chosen.model.effects)
+    hints = separating_data(only_a, chosen.model.values) + separating_data(only_b, rival.model.values)
+    return Ambiguity(between=["+".join(only_a) or "none", "+".join(only_b) or "none"],
+                     candidates=[chosen.name, rival.name], bic=[chosen.bic, rival.bic],
+                     typical_free_run_mse=[chosen.typical, rival.typical], intervals_overlap=overlap,
+                     separate_by=" or ".join(hints) if hints else "more data")
+
+
+def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: CameraFindings | None,
+                 generic: GenericBasis, config: DiagnoseConfig, from_gymnasium: bool = True,
+                 ambiguity: Ambiguity | None = None, flip_bic_drop: float | None = None,
+                 draws: dict[str, list[float]] | None = None, refit: fit.Model | None = None) -> Naming:
     """Step 4: the effects that the chosen physics and the camera stage name, with intervals, and the verdict.
 
     Gymnasium's own speed clip is no gap (for a recording that the file says came from Gymnasium's
     pendulum, ``from_gymnasium``); a delay with a repeated start is the camera's; a gain error is
-    the refitted a, named only when its bootstrap interval excludes the nominal a.
+    the refitted a, named only when its bootstrap interval excludes the nominal a, and measured
+    without ``within_frame`` (which reads a and g anew from the motion within the frame: the fast
+    model's low a is that reading, not a gain error). With ``refit`` ("none": g and a refitted, no
+    effect, the nominal model's own form), a gain is named only when that refit's a too differs
+    from the nominal a: when the nominal form reads the nominal a from this recording, a different
+    a with the effects only compensates them (an effect that the system the nominal model was
+    trained on had too, such as dm_control's hinge damping). (Its direction is not asked: a
+    deadzone on top of a gain of 1.2 reads a low in the nominal form.) A refitted a of the other sign than the
+    nominal's is a flipped actuation (``flip_bic_drop``: how much better that sign fits). With an
+    ``ambiguity``, the effects it cannot decide between are not named; the verdict says so.
     """
     notes: list[str] = []
-    named = list(final.effects)
+    named = [e for e in final.effects if ambiguity is None or e not in ambiguity.between[0].split("+")]
     if from_gymnasium and "speed_clip" in named and abs(final.values["v"] - GYM_SPEED_CLIP) <= config.gym_clip_tolerance:
         named.remove("speed_clip")
         notes.append(f"a speed clip at {final.values['v']:.2f} rad/s was found: Gymnasium's own ±8 rad/s clip, which the "
                      "nominal environment has too (the model's engine does not); it is not counted as a gap")
-    gain = final.values["a"] / nom.a
+    flipped = final.values["a"] * nom.a < 0
+    # the a and g that a gain or gravity error is read from: with within_frame, those of the same
+    # physics read one step per frame, as the nominal model reads them
+    reference = final
+    if "within_frame" in final.effects and w is not None:
+        euler = tuple(e for e in final.effects if e != "within_frame")
+        reference = fit.fit_candidate(euler, final.values, nom, w.fit, delay=final.delay or None)
+    gain = abs(reference.values["a"] / nom.a)
     gain_error = abs(gain - 1) > config.gain_tolerance
+    plain = None if refit is None else abs(refit.values["a"] / nom.a)  # the nominal form's reading
+    if flipped and gain_error:
+        # a model trained on flipped frames without --signed-actuation shrank its a toward 0: its size
+        # is no reference (measured: "gain 4.22" on dm_control filmed from the other side)
+        gain_error = False
+        notes.append(f"|a| refits to x{gain:.3f} the nominal a; with the sign flipped, the nominal a is no reference "
+                     "for its size (a model trained on such frames shrinks a toward 0), so no gain error is named")
+    if gain_error and plain is not None and abs(plain - 1) <= config.gain_tolerance:
+        gain_error = False
+        notes.append(f"a refits to {reference.values['a']:.3f} (x{gain:.3f} the nominal) with the effects, but to "
+                     f"{refit.values['a']:.3f} (x{plain:.3f}) in the nominal model's own form (no effect): the difference "
+                     "compensates the effects, not a gain error")
 
     # uncertainties
-    draws = fit.bootstrap(final, nom, w.fit, config.bootstrap, config.seed) if config.bootstrap else {}
+    if draws is None:
+        draws = fit.bootstrap(final, nom, w.fit, config.bootstrap, config.seed) if config.bootstrap else {}
 
     def interval(key: str) -> list[float] | None:
         d = draws.get(key)
         return [float(np.percentile(d, 2.5)), float(np.percentile(d, 97.5))] if d else None
 
     effects = [Effect(**e) for e in camera.effects] if camera is not None else []
+    if flipped:
+        effects.insert(0, Effect("flip", -1.0, "sign of the actuation"))
+        notes.append(f"the frames show the actuation reversed: a refits to {final.values['a']:.3f} against the nominal "
+                     f"{nom.a:.3f}" + (f" (ΔBIC {-flip_bic_drop:.0f} for the reversed sign)" if flip_bic_drop else "")
+                     + ": a camera filming from the other side of the hinge, or a motor wired the other way. A model "
+                     "trained on such frames without --signed-actuation can only shrink its a toward 0 (its a is "
+                     "learnt in log space): retrain it with --signed-actuation")
     leading = camera.leading if camera is not None else 0
     for e in named:
         if e == "delay":
@@ -401,25 +625,38 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet, camera: CameraFin
             notes.append("the system keeps moving under the held action between two frames (a continuous system, or "
                          "a simulator with several physics steps per frame): with one Euler step per frame the "
                          "identified a and g come out low; train with `--preset continuous` to model it")
+            if reference is not final:
+                notes.append(f"read with the motion within the frame, a = {final.values['a']:.3f} and g = "
+                             f"{final.values['g']:.3f}; read one step per frame, as the nominal model does, a = "
+                             f"{reference.values['a']:.3f} and g = {reference.values['g']:.3f}: a gain or gravity error "
+                             "is judged on the latter (the former's difference from the nominal is the within-frame "
+                             "reading itself)")
         else:
             key = fit.PARAMETER[e]
             effects.append(Effect(e, final.values[key], UNITS[key], interval(key)))
     a_int = interval("a")
-    if gain_error and a_int and a_int[0] <= nom.a <= a_int[1]:
+    if a_int and reference is not final:  # the interval of the reference's a: final's, shifted with it
+        a_int = [x * reference.values["a"] / final.values["a"] for x in a_int]
+    if a_int:
+        a_int = sorted(abs(x) for x in a_int) if a_int[0] * a_int[1] > 0 else [0.0, max(abs(x) for x in a_int)]
+    if gain_error and a_int and a_int[0] <= abs(nom.a) <= a_int[1]:
         # a deadzone or a saturation trades off against a: the refit may move a while its
         # interval still holds the nominal (measured: deadzone 0.44 with a at 0.96, 0.83..1.04)
         gain_error = False
-        notes.append(f"a refits to {final.values['a']:.3f} (x{gain:.3f} the nominal), but its 95% interval "
-                     f"{a_int[0]:.3f}..{a_int[1]:.3f} holds the nominal {nom.a:.3f}: not named a gain error")
+        notes.append(f"a refits to {reference.values['a']:.3f} (x{gain:.3f} the nominal), but its 95% interval "
+                     f"{a_int[0]:.3f}..{a_int[1]:.3f} holds the nominal {abs(nom.a):.3f}: not named a gain error")
     if gain_error:
-        effects.append(Effect("gain", gain, "factor on the nominal a", [x / nom.a for x in a_int] if a_int else None))
+        effects.append(Effect("gain", gain, "factor on the nominal a", [x / abs(nom.a) for x in a_int] if a_int else None))
     if leading and "delay" not in final.effects:
         notes.append(f"the first {leading} frames of nearly every sequence repeat the first one, but the dynamics show no "
                      "delay: the camera froze at the start (these frames are left out of the fits)")
-    g_ratio = final.values["g"] / nom.g
-    if abs(g_ratio - 1) > config.gain_tolerance:
-        notes.append(f"g refits to {final.values['g']:.3f} (x{g_ratio:.3f} the nominal {nom.g:.3f}): gravity, or the "
+    g_ratio = reference.values["g"] / nom.g
+    g_plain = 1.0 if refit is None else refit.values["g"] / nom.g
+    if abs(g_ratio - 1) > config.gain_tolerance and (refit is None or abs(g_plain - 1) > config.gain_tolerance):
+        notes.append(f"g refits to {reference.values['g']:.3f} (x{g_ratio:.3f} the nominal {nom.g:.3f}): gravity, or the "
                      "pendulum's length, differs from the identified model")
+    if any(e.effect in ("damping", "friction", "bias") for e in effects):
+        notes.append(UNITS_NOTE)
 
     names = [x.effect for x in effects]
     if generic.significant:
@@ -427,6 +664,9 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet, camera: CameraFin
         verdict = ("not explained by the candidates: a flexible state-action basis still explains "
                    f"{100 * generic.held_out_drop:.0f}% of the held-out residual"
                    + (f" after adding {'+'.join(names)}" if names else ""))
+    elif ambiguity is not None:
+        verdict_class = "ambiguous"
+        verdict = "; ".join([x.describe() for x in effects] + [ambiguity.describe()])
     elif names:
         verdict_class = "+".join(sorted(names))
         verdict = "; ".join(x.describe() for x in effects)
@@ -485,7 +725,8 @@ def twin_renderer(from_gymnasium: bool, has_model: bool, rematched: bool, vision
 
 def measure_gap(candidates: Candidates, chosen: Score, nom: Nominal, obs: Observations, theta: np.ndarray,
                 stale: np.ndarray | None, w: WindowSet, config: DiagnoseConfig, model: PhysicsModel | None,
-                camera: CameraFindings | None, arrow: bool, vision_ratio: float | None = None) -> Gap:
+                camera: CameraFindings | None, arrow: bool, vision_ratio: float | None = None,
+                corrects: bool = True) -> Gap:
     """Step 6: the gap per horizon, nominal vs ``chosen``, in angles and pixels, and how far it closes above the floor.
 
     ``vision_ratio`` is the autoencoder's re-rendering error on the recording over that on its
@@ -519,6 +760,7 @@ def measure_gap(candidates: Candidates, chosen: Score, nom: Nominal, obs: Observ
     typ_floor = float(np.median(floor.windows)) if floor is not None else None
     raw_typical = float(1 - typ_fin / typ_nom) if typ_nom > 0 else None
     typical_gap = gap_closure(typ_nom, typ_fin, typ_floor) if floor is not None else raw_typical
+    floored = floor is not None  # typical_gap is above the twin's floor
     mean_gap = gap_closure(float(h_nom.mean()), float(h_fin.mean()), float(floor.horizon.mean())) if floor is not None else None
     pixels = _pixel_errors(model, obs, nom, nominal_model, final, theta, camera.camera if camera else Camera(), stale) \
         if model is not None else PixelErrors()
@@ -532,14 +774,20 @@ def measure_gap(candidates: Candidates, chosen: Score, nom: Nominal, obs: Observ
     if typ_floor is not None and typ_floor >= typ_fin:
         floor_note = (f"the twin's floor ({typ_floor:.3g} rad²) lies above the corrected model's own error "
                       f"({typ_fin:.3g} rad²), so it is no floor for this recording; the closure is raw (no floor subtracted)")
-        typical_gap, mean_gap = raw_typical, None
-    if pixel_closure is not None and pixel_closure > 1:
+        typical_gap, mean_gap, floored = raw_typical, None, False
+    pixel_raw = pixel_closure is not None and pixel_closure > 1
+    if pixel_raw:
         pixel_closure = float((pn - pc) / pn) if pn > 0 else None
-        floor_note = (f"the matched floor ({pf:.3g}) lies above the corrected model's pixel error ({pc:.3g}), so it is no "
-                      "floor; the pixel closure is raw (no floor subtracted)")
     # A camera effect changes the angles themselves (re-matched), so nominal and corrected angle errors
     # are measured against different angles: then the headline closure is the pixels'.
     basis = "pixels" if rematched and pixel_closure is not None else "state"
+    if basis == "pixels":  # the headline's floor is the matched one; the twin's note is not about it
+        floor_note = None
+        if pixel_raw:
+            floor_note = (f"the matched floor ({pf:.3g}) lies above the corrected model's pixel error ({pc:.3g}), so it "
+                          "is no floor; the pixel closure is raw (no floor subtracted)")
+    headline = pixel_closure if basis == "pixels" else typical_gap
+    floor_subtracted = (not pixel_raw) if basis == "pixels" else floored
     if basis == "pixels":
         measurable = pixels.typical_pixel_mse_nominal > MEASURABLE_GAP * pixels.pixel_mse_floor
     else:
@@ -551,7 +799,7 @@ def measure_gap(candidates: Candidates, chosen: Score, nom: Nominal, obs: Observ
         free_run_closure=float(1 - h_fin.mean() / h_nom.mean()) if h_nom.mean() > 0 else 0.0,
         state_mse_floor=floor.horizon.tolist() if floor is not None else None,
         free_run_mse_floor=float(floor.horizon.mean()) if floor is not None else None,
-        free_run_gap_closure=pixel_closure if basis == "pixels" else typical_gap,
+        free_run_gap_closure=headline if corrects else None,
         typical_free_run_mse_nominal=typ_nom, typical_free_run_mse_corrected=typ_fin,
         typical_free_run_mse_floor=typ_floor, typical_free_run_closure=raw_typical, floor_source=floor_source,
         typical_free_run_gap_closure=typical_gap, mean_free_run_gap_closure=mean_gap,
@@ -562,7 +810,8 @@ def measure_gap(candidates: Candidates, chosen: Score, nom: Nominal, obs: Observ
         pixel_mse_nominal=pixels.pixel_mse_nominal, pixel_mse_corrected=pixels.pixel_mse_corrected,
         pixel_mse_floor=pixels.pixel_mse_floor, typical_pixel_mse_nominal=pixels.typical_pixel_mse_nominal,
         typical_pixel_mse_corrected=pixels.typical_pixel_mse_corrected,
-        floor_note=floor_note,
+        floor_note=floor_note, floor_subtracted=bool(floor_subtracted and headline is not None),
+        no_gap=not corrects,
     )
 
 
@@ -596,18 +845,27 @@ def analyse(obs: Observations, nom: Nominal, config: DiagnoseConfig = DiagnoseCo
     stale = obs.stale if obs.stale is not None and obs.stale.any() else None
     theta = camera.theta if camera is not None and camera.rematched else obs.theta  # the corrected model's angles
     windows = cut_windows(obs, theta, stale, config)
-    candidates = score_candidates(nom, windows, progress)
+    excluded = excluded_candidates(obs, nom, config)
+    candidates = score_candidates(nom, windows, progress, excluded, config.bic_margin)
     selection = select(candidates, nom, windows, config, progress, speeds=observed_speeds(theta, obs.dt, stale))
     final = selection.chosen.model
+    draws = fit.bootstrap(final, nom, windows.fit, config.bootstrap, config.seed) if config.bootstrap else {}
+    ambiguity = None if selection.rival is None else ambiguity_of(selection.chosen, selection.rival, nom, windows,
+                                                                  config, draws)
     generic = generic_basis(final, nom, obs, theta, stale, config)
-    naming = name_effects(final, nom, windows, camera, generic, config, from_gymnasium=obs.from_gymnasium)
+    naming = name_effects(final, nom, windows, camera, generic, config, from_gymnasium=obs.from_gymnasium,
+                          ambiguity=ambiguity, flip_bic_drop=candidates.flip_bic_drop, draws=draws,
+                          refit=candidates.refit.model)
     vision, vision_notes = summarise_vision(obs, rec_training, camera, stale, naming.effects, config)
     gap = measure_gap(candidates, selection.chosen, nom, obs, theta, stale, windows, config, model, camera, arrow,
-                      vision.ratio)
+                      vision.ratio, corrects=bool(naming.effects) or ambiguity is not None)
     res_nom = one_step_residuals(candidates.nominal.model, nom, obs.theta, obs.actions, np.arange(len(obs.theta)))
+    exclusions = [f"excluded by the file's provenance: {e} ({why})" for e, why in excluded.items() if e in obs.impossible]
+    exclusions += [f"not tried: {e} ({why})" for e, why in excluded.items() if e not in obs.impossible]
     return Diagnosis(
         verdict=naming.verdict, verdict_class=naming.verdict_class, effects=naming.effects,
-        nominal={"g": nom.g, "a": nom.a, "offset": nom.offset},
+        nominal={"g": nom.g, "a": nom.a, "offset": nom.offset,
+                 **({"b": fit.nominal_damping(nom)} if fit.nominal_damping(nom) else {})},
         corrected={**final.values, **({"delay": final.delay} if "delay" in final.effects else {}),
                    **({"substeps": final.substeps} if "within_frame" in final.effects else {})},
         corrected_effects=list(final.effects),
@@ -618,7 +876,18 @@ def analyse(obs: Observations, nom: Nominal, config: DiagnoseConfig = DiagnoseCo
         notes=naming.notes + vision_notes,
         pictures=_pictures(model, obs, theta, camera.camera if camera is not None and camera.rematched else None)
         if model is not None and len(obs.frames_index) else None,
+        ambiguity=ambiguity, excluded=excluded, exclusions=exclusions,
     )
+
+
+def excluded_candidates(obs: Observations, nom: Nominal, config: DiagnoseConfig) -> dict[str, str]:
+    """Candidates not to try, and why: those the file's provenance rules out (``config.use_provenance``,
+    :func:`piga.diagnostics.observe.impossible_effects`), and ``within_frame`` for a nominal model
+    that already moves within the frame (RK4)."""
+    excluded = dict(obs.impossible) if config.use_provenance else {}
+    if fit.nominal_integrator(nom) == "rk4":
+        excluded["within_frame"] = "the nominal model integrates within the frame already (RK4)"
+    return excluded
 
 
 @torch.no_grad()

@@ -8,14 +8,23 @@ as the effect wrappers of :mod:`envs.effects` (model convention: Gymnasium's θ 
 | ``delay`` | integer k (steps) | ũ_t = u_{t-k} |
 | ``deadzone`` | d (action units) | ũ = sign(u)·max(abs(u) - d, 0) |
 | ``saturation`` | s (action units) | ũ = clip(u, -s, s) |
-| ``damping`` | b (N·m·s/rad) | torque -b·θ̇ |
-| ``friction`` | c (N·m) | torque -c·tanh(θ̇ / 0.1) |
-| ``bias`` | τ0 (N·m) | torque +τ0 |
+| ``damping`` | b (1/s) | torque -b·θ̇ |
+| ``friction`` | c (rad/s²) | torque -c·tanh(θ̇ / 0.1) |
+| ``bias`` | τ0 (rad/s²) | torque +τ0 |
 | ``speed_clip`` | v (rad/s) | θ̇ clipped to ±v after each step |
 | ``within_frame`` | integer M (substeps) | the system moves within the frame: M semi-implicit Euler steps of dt / M per frame, the action held |
 
 θ̈ = 1.5·g·sin(θ + φ) + 3·a·ũ + 3·(passive torques); semi-implicit Euler with the nominal model's
-substeps. A gain error (ũ = m·u) is not a separate term: it is the refitted a over the nominal a.
+substeps (or its RK4, and its own learned damping, when the nominal model has them: :class:`Nominal`).
+A gain error (ũ = m·u) is not a separate term: it is the refitted a over the nominal a. A negative a
+is a flipped actuation (a camera on the other side of the hinge, or a motor wired the other way):
+its size is fitted in log space, its sign is held.
+
+Units. The engine is a rod's θ̈ = (3 / m·l²)·τ + (3 / 2l)·g·sin θ with m = l = 1, so its "torques"
+are torques per m·l² (per kg·m²): a term 3·b·θ̇ in rad/s² with θ̇ in rad/s makes b a rate, in 1/s;
+c and τ0 are in rad/s². For a rod of mass m and length l, b·m·l² is the hinge's damping in
+N·m·s/rad and c·m·l², τ0·m·l² are torques in N·m (equal numbers on Gymnasium's pendulum, where
+m·l² = 1 kg·m²; on dm_control's, piga's b is its hinge damping d over 3·I, :mod:`envs.dmc`).
 
 ``within_frame``: a real system (or a simulator with fine physics steps, such as MuJoCo's) keeps
 moving under the held action between two frames. Then the second difference of the frames sees
@@ -48,6 +57,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
@@ -56,7 +66,10 @@ from torch import Tensor
 from envs.constants import MAX_ACTION
 from envs.effects import FRICTION_SMOOTHING
 from piga.diagnostics.repeats import repeat_sources
-from piga.runs import Nominal
+from piga.runs import Nominal as _RunNominal
+
+if TYPE_CHECKING:
+    from piga.model import PhysicsModel
 
 #: Effects that the fit can add to the physics, in the order of the report.
 CANDIDATES: tuple[str, ...] = ("damping", "friction", "bias", "delay", "deadzone", "saturation", "speed_clip",
@@ -82,6 +95,37 @@ HOLD_ITERATIONS = 3
 #: Smallest value that :func:`simulate` uses for a limit (a saturation level, a speed clip): the
 #: fit may move the free parameter below it, but the physics, and so the reported value, stop there.
 LOWER_BOUNDS: dict[str, float] = {"s": 1e-3, "v": 0.1}
+
+
+@dataclass(frozen=True)
+class Nominal(_RunNominal):
+    """The identified model's physics, with what :class:`piga.runs.Nominal` leaves out: its learned
+    damping and its integrator (θ̈ = 1.5·g·sin(θ + φ) + 3·a·u − 3·b·θ̇, ``substeps`` steps of
+    ``integrator`` per frame). A plain :class:`piga.runs.Nominal` reads as b = 0 and Euler."""
+
+    b: float = 0.0
+    """The nominal model's own viscous damping (1/s; 0: none learned)."""
+    integrator: str = "euler"
+    """"euler" (semi-implicit) or "rk4", as :mod:`piga.physics`."""
+    velocity_hold: bool = False
+    """The model reads the velocity at a frame through its integrator (``ModelConfig.velocity_hold``)."""
+
+
+def nominal_of(model: PhysicsModel) -> Nominal:
+    """The identified model's physics: g, a, φ, dt, substeps, and its damping b and integrator."""
+    p = model.physical_parameters()
+    return Nominal(p["g"], p["a"], p.get("offset", 0.0), model.config.dt, model.config.substeps,
+                   float(p.get("b", 0.0)), model.config.integrator, bool(model.config.velocity_hold))
+
+
+def nominal_damping(nominal: _RunNominal) -> float:
+    """The nominal model's own damping b (0 for a :class:`piga.runs.Nominal`)."""
+    return float(getattr(nominal, "b", 0.0))
+
+
+def nominal_integrator(nominal: _RunNominal) -> str:
+    """The nominal model's integrator ("euler" for a :class:`piga.runs.Nominal`)."""
+    return str(getattr(nominal, "integrator", "euler"))
 
 
 @dataclass(frozen=True)
@@ -194,28 +238,50 @@ def simulate(model: Model, params: dict[str, Tensor], nominal: Nominal, w: Windo
     if "saturation" in model.effects:
         s = params["s"].clamp_min(LOWER_BOUNDS["s"])
         cmd = torch.minimum(torch.maximum(cmd, -s), s)
-    g, a = params["log_g"].exp(), params["log_a"].exp()
+    g, a = params["log_g"].exp(), params["log_a"].exp() * params.get("a_sign", 1.0)
     substeps = model.substeps if within else nominal.substeps
     h = nominal.dt / substeps
+    b_nominal = nominal_damping(nominal)
+    rk4 = nominal_integrator(nominal) == "rk4" and not within
+
+    def acceleration(theta: Tensor, v: Tensor, c: Tensor) -> Tensor:
+        tau = a * c
+        if b_nominal:
+            tau = tau - b_nominal * v
+        if "damping" in model.effects:
+            tau = tau - params["b"] * v
+        if "friction" in model.effects:
+            tau = tau - params["c"] * torch.tanh(v / FRICTION_SMOOTHING)
+        if "bias" in model.effects:
+            tau = tau + params["tau0"]
+        return 1.5 * g * torch.sin(theta + nominal.offset) + 3.0 * tau
+
+    def clip(v: Tensor) -> Tensor:
+        if "speed_clip" in model.effects:
+            vmax = params["v"].clamp_min(LOWER_BOUNDS["v"])
+            v = torch.minimum(torch.maximum(v, -vmax), vmax)
+        return v
 
     def frame(theta: Tensor, v: Tensor, c: Tensor) -> tuple[Tensor, Tensor]:
         for _ in range(substeps):
-            tau = a * c
-            if "damping" in model.effects:
-                tau = tau - params["b"] * v
-            if "friction" in model.effects:
-                tau = tau - params["c"] * torch.tanh(v / FRICTION_SMOOTHING)
-            if "bias" in model.effects:
-                tau = tau + params["tau0"]
-            v = v + h * (1.5 * g * torch.sin(theta + nominal.offset) + 3.0 * tau)
-            if "speed_clip" in model.effects:
-                vmax = params["v"].clamp_min(LOWER_BOUNDS["v"])
-                v = torch.minimum(torch.maximum(v, -vmax), vmax)
-            theta = theta + h * v
+            if rk4:  # the nominal model's classical Runge-Kutta (piga.physics.RK4), the action held
+                a1 = acceleration(theta, v, c)
+                v2 = v + 0.5 * h * a1
+                a2 = acceleration(theta + 0.5 * h * v, v2, c)
+                v3 = v + 0.5 * h * a2
+                a3 = acceleration(theta + 0.5 * h * v2, v3, c)
+                v4 = v + h * a3
+                a4 = acceleration(theta + h * v3, v4, c)
+                theta = theta + h / 6.0 * (v + 2.0 * v2 + 2.0 * v3 + v4)
+                v = clip(v + h / 6.0 * (a1 + 2.0 * a2 + 2.0 * a3 + a4))
+            else:
+                v = clip(v + h * acceleration(theta, v, c))
+                theta = theta + h * v
         return theta, v
 
     theta, v = w.theta0, w.v0
-    if within:  # v0 is the difference over the last frame: read the velocity at the start through the frame step
+    if within or getattr(nominal, "velocity_hold", False):
+        # v0 is the difference over the last frame: read the velocity at the start through the frame step
         previous = theta - nominal.dt * v
         start = v
         for _ in range(HOLD_ITERATIONS):
@@ -240,13 +306,20 @@ def as_observed(w: Windows, pred: Tensor) -> Tensor:
     return torch.cat([w.theta0[:, None].to(pred), pred], 1).gather(1, w.source)
 
 
-def parameters_of(model: Model, nominal: Nominal) -> dict[str, Tensor]:
-    """The tensors :func:`simulate` takes, from a model's values (defaults: nominal g, a; grid starts)."""
-    values = {"log_g": math.log(model.values.get("g", nominal.g)), "log_a": math.log(model.values.get("a", nominal.a))}
+def parameters_of(model: Model, nominal: _RunNominal) -> dict[str, Tensor]:
+    """The tensors :func:`simulate` takes, from a model's values (defaults: nominal g, a; grid starts).
+
+    a is fitted in log space; a negative a (a flipped actuation) keeps its sign in ``a_sign``, which
+    is held, not fitted."""
+    a = model.values.get("a", nominal.a)
+    values = {"log_g": math.log(model.values.get("g", nominal.g)), "log_a": math.log(abs(a))}
     for e in model.effects:
         if e in PARAMETER:
             values[PARAMETER[e]] = model.values.get(PARAMETER[e], GRIDS[e][0])
-    return {k: torch.tensor(float(v), dtype=torch.float64, requires_grad=True) for k, v in values.items()}
+    params = {k: torch.tensor(float(v), dtype=torch.float64, requires_grad=True) for k, v in values.items()}
+    if a < 0:
+        params["a_sign"] = torch.tensor(-1.0, dtype=torch.float64)
+    return params
 
 
 def squared_errors(model: Model, nominal: Nominal, w: Windows, params: dict[str, Tensor] | None = None) -> Tensor:
@@ -285,7 +358,7 @@ def fit(model: Model, nominal: Nominal, w: Windows, weights: Tensor | None = Non
                 best = (score, value)
         start.values[name] = best[1]
     params = parameters_of(start, nominal)
-    free = [p for k, p in params.items() if fit_ga or not k.startswith("log_")]
+    free = [p for k, p in params.items() if p.requires_grad and (fit_ga or not k.startswith("log_"))]
     if not free:
         return start
     opt = torch.optim.LBFGS(free, lr=1.0, max_iter=max_iter, line_search_fn="strong_wolfe", tolerance_grad=1e-12,
@@ -298,9 +371,10 @@ def fit(model: Model, nominal: Nominal, w: Windows, weights: Tensor | None = Non
         return value
 
     opt.step(closure)
-    values = {"g": float(params["log_g"].detach().exp()), "a": float(params["log_a"].detach().exp())}
+    sign = float(params["a_sign"]) if "a_sign" in params else 1.0
+    values = {"g": float(params["log_g"].detach().exp()), "a": sign * float(params["log_a"].detach().exp())}
     values.update({k: max(float(v.detach()), LOWER_BOUNDS.get(k, -math.inf)) for k, v in params.items()
-                   if not k.startswith("log_")})
+                   if not k.startswith("log_") and k != "a_sign"})
     return model.with_values(values)
 
 
@@ -348,6 +422,9 @@ def one_step_bic(model: Model, nominal: Nominal, w1: Windows) -> tuple[float, fl
     with torch.no_grad():
         se = squared_errors(model, nominal, w1)[:, 0]
     n = se.numel()
+    if n == 0:
+        raise ValueError("no one-step window to score: every frame of the recording repeats the previous one or "
+                         "the sequences are too short (a still or frozen video?)")
     rss = float(se.sum())
     return n * math.log(max(rss, 1e-300) / n) + model.n_parameters * math.log(n), rss
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -97,6 +97,8 @@ class Observations:
     from_gymnasium: bool = True
     """The file says it was collected from Gymnasium's pendulum (``env_id``, or an ``env_config`` of
     :class:`envs.pendulum.PixelPendulumConfig`): only then is a clip at 8 rad/s Gymnasium's own."""
+    impossible: dict[str, str] = field(default_factory=dict)
+    """Effects that the system which made the file cannot have, by its attrs (:func:`impossible_effects`), and why."""
 
 
 def check_compatible(model: PhysicsModel, path: str | os.PathLike[str], min_sequences: int = 20,
@@ -167,10 +169,10 @@ def observe(model: PhysicsModel, path: str | os.PathLike[str], batch: int = 16, 
             rec[start : start + batch] = ((model.decoder(coords) - x) ** 2).mean(dim=(2, 3, 4)).double().numpy()
             blank[start : start + batch] = ((x - model.encoder.background) ** 2).mean(dim=(2, 3, 4)).double().numpy()
         frames = f["frames"][np.sort(keep)] if len(keep) else np.zeros((0, info.steps, *info.image_shape), np.uint8)
-        gymnasium = from_gymnasium(dict(f.attrs))
+        attrs = dict(f.attrs)
     check_actions(actions, path)
     return Observations(theta, actions, rec, split == SPLITS["train"], float(info.dt), frames, np.sort(keep), stale,
-                        float(blank.mean()), gymnasium)
+                        float(blank.mean()), from_gymnasium(attrs), impossible_effects(attrs))
 
 
 def from_gymnasium(attrs: dict) -> bool:
@@ -186,3 +188,30 @@ def from_gymnasium(attrs: dict) -> bool:
     except (TypeError, ValueError):
         return False
     return isinstance(config, dict) and "draw_torque_arrow" in config
+
+
+#: Effects that a simulator cannot produce, by the env id that piga-collect writes into a file's attrs.
+IMPOSSIBLE: dict[str, dict[str, str]] = {
+    "piga/DMCPendulum-v0": {"speed_clip": "dm_control has no speed clip"},
+}
+
+
+def impossible_effects(attrs: dict) -> dict[str, str]:
+    """Effects that the system which made a file cannot have, by its attrs (``env_id``, or an
+    ``env_config`` with dm_control's ``action_repeat``), and why: a dm_control file has no speed clip.
+
+    Only simulators' own physics is excluded: an effect wrapper around the env could add any
+    effect, so nothing else is. Empty for a file whose attrs say nothing (an imported video, a
+    blind benchmark's file with its hints deleted).
+    """
+    import json
+
+    env_id = attrs.get("env_id")
+    if env_id is None:
+        try:
+            config = json.loads(attrs.get("env_config", "{}"))
+        except (TypeError, ValueError):
+            config = None
+        if isinstance(config, dict) and "action_repeat" in config:
+            env_id = "piga/DMCPendulum-v0"
+    return dict(IMPOSSIBLE.get(str(env_id), {}))

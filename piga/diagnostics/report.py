@@ -154,6 +154,63 @@ def _camera_lines(v: VisionSummary) -> list[str]:
     return lines
 
 
+def ambiguity_lines(d: Diagnosis) -> list[str]:
+    """The report's paragraph on two candidates the data cannot tell apart (none when the choice is clear)."""
+    a = d.ambiguity
+    if a is None:
+        return []
+    overlap = ("were not compared (no bootstrap)" if a.intervals_overlap is None else
+               "overlap" if a.intervals_overlap else "do not overlap")
+    return [f"**Ambiguous between {a.between[0]} and {a.between[1]}**: the candidates {a.candidates[0]} and "
+            f"{a.candidates[1]} have one-step BICs {a.bic[0]:.1f} and {a.bic[1]:.1f} and typical held-out free-run "
+            f"errors {a.typical_free_run_mse[0]:.3g} and {a.typical_free_run_mse[1]:.3g} rad²; the 95% intervals of the "
+            f"values they both fit {overlap}. Neither is named. {a.separate_by[0].upper()}{a.separate_by[1:]} would "
+            f"separate them. The gap below is measured with {a.candidates[0]} (the lower BIC).", ""]
+
+
+def headline_text(d: Diagnosis) -> str:
+    """The headline closure, labelled as what it is: above a floor, raw, or no gap to close."""
+    g = d.gap
+    if g.no_gap:
+        return ("**No gap to close**: nothing was named to correct, so a closure would be a ratio of noise. For "
+                "reference, the typical held-out window's free-run angle MSE (the median over windows of each window's "
+                f"mean squared error) is {number(g.typical_free_run_mse_nominal, '.3g')} rad² for the nominal model and "
+                f"{number(g.typical_free_run_mse_corrected, '.3g')} rad² with g and a refitted.")
+    note = f" {g.floor_note[0].upper()}{g.floor_note[1:]}." if g.floor_note else ""
+    if g.closure_basis == "pixels":
+        kind = "of the gap above the matched floor, in pixels" if g.floor_subtracted else "raw, in pixels"
+        headline = (f"**Free-run closure {_pct(g.free_run_gap_closure)}, {kind}**: a camera effect was found, so the "
+                    "corrected model reads other angles from the frames than the encoder, and angle errors of the two "
+                    "would not be comparable. On the typical held-out window (the median over windows of each window's "
+                    f"mean pixel MSE of the rendered free run), the nominal model is at {number(g.typical_pixel_mse_nominal, '.3g')}, "
+                    f"the corrected one at {number(g.typical_pixel_mse_corrected, '.3g')}, and no prediction can beat "
+                    f"{number(g.pixel_mse_floor, '.3g')}, the error of the best-matching render of each frame"
+                    + ("; the closure is the share of the gap above that floor that the correction removes."
+                       if g.floor_subtracted else "; the closure is 1 − corrected / nominal." + note))
+    elif g.floor_subtracted:
+        headline = (f"**Free-run closure {_pct(g.free_run_gap_closure)}** of the gap above the floor, on the typical "
+                    "held-out window (the median over windows of each window's mean squared free-run angle error): "
+                    f"{number(g.typical_free_run_mse_nominal, '.3g')} rad² nominal, {number(g.typical_free_run_mse_corrected, '.3g')} rad² "
+                    f"corrected, and a floor of {number(g.typical_free_run_mse_floor, '.3g')} rad², the corrected model's own error "
+                    "on a simulated twin of the held-out data that it describes exactly (re-simulated with the corrected "
+                    + ("physics, rendered by the simulator, read by the encoder)" if g.floor_source != "decoder" else
+                       "physics, drawn by the model's own decoder, whose picture is this recording's camera as it re-renders "
+                       "the recording about as well as its training frames, read by the encoder, and scaled down to this "
+                       "recording's own vision noise by the ratio of the one-step errors, recording over twin)")
+                    + ". Raw, with no floor subtracted (1 − corrected / nominal of the same two numbers): "
+                    f"{_pct(g.typical_free_run_closure)}.")
+    else:
+        headline = (f"**Free-run closure {_pct(g.free_run_gap_closure)}, raw**: 1 − err_corrected / err_nominal on the "
+                    "typical held-out window (the median over windows of each window's mean squared free-run angle "
+                    f"error: {number(g.typical_free_run_mse_nominal, '.3g')} rad² nominal, "
+                    f"{number(g.typical_free_run_mse_corrected, '.3g')} rad² corrected). No floor is subtracted." + note)
+    if not g.gap_above_floor:
+        headline = ("**No gap above the floor to close** on the typical held-out window: the nominal model's error there "
+                    f"is within {MEASURABLE_GAP:g}x the floor, so the closure ({_pct(g.free_run_gap_closure)}) is a ratio "
+                    "of noise. " + headline)
+    return headline
+
+
 def markdown(d: Diagnosis, model: str, data: str, command: str) -> str:
     """The report as Markdown."""
     g = d.gap
@@ -167,50 +224,17 @@ def markdown(d: Diagnosis, model: str, data: str, command: str) -> str:
         for e in d.effects:
             lines.append(f"| {e.effect} | {_fmt(e.value)} | {_interval(e.interval)} | {e.unit} |")
         lines.append("")
-    lines += [f"- {n}" for n in d.notes] + ([""] if d.notes else [])
-    if g.closure_basis == "pixels":
-        headline = (f"**Free-run closure {_pct(g.free_run_gap_closure)}, in pixels**: a camera effect was found, so the "
-                    "corrected model reads other angles from the frames than the encoder, and angle errors of the two "
-                    "would not be comparable. On the typical held-out window (the median over windows of each window's "
-                    f"mean pixel MSE of the rendered free run), the nominal model is at {number(g.typical_pixel_mse_nominal, '.3g')}, "
-                    f"the corrected one at {number(g.typical_pixel_mse_corrected, '.3g')}, and no prediction can beat "
-                    f"{number(g.pixel_mse_floor, '.3g')}, the error of the best-matching render of each frame; the closure is the "
-                    "share of the gap above that floor that the correction removes.")
-    elif g.typical_free_run_mse_floor is not None:
-        headline = (f"**Free-run closure {_pct(g.free_run_gap_closure)}** of the gap above the floor, on the typical "
-                    "held-out window (the median over windows of each window's mean squared free-run angle error): "
-                    f"{number(g.typical_free_run_mse_nominal, '.3g')} rad² nominal, {number(g.typical_free_run_mse_corrected, '.3g')} rad² "
-                    f"corrected, and a floor of {number(g.typical_free_run_mse_floor, '.3g')} rad², the corrected model's own error "
-                    "on a simulated twin of the held-out data that it describes exactly (re-simulated with the corrected "
-                    + ("physics, rendered by the simulator, read by the encoder)" if g.floor_source != "decoder" else
-                       "physics, drawn by the model's own decoder, whose picture is this recording's camera as it re-renders "
-                       "the recording about as well as its training frames, read by the encoder, and scaled down to this "
-                       "recording's own vision noise by the ratio of the one-step errors, recording over twin)")
-                    + ". Raw, with no floor subtracted: "
-                    f"{_pct(g.typical_free_run_closure)}.")
-    else:
-        headline = (f"**Free-run closure {_pct(g.free_run_gap_closure)}**: 1 − err_corrected / err_nominal on the "
-                    "typical held-out window (the median over windows of each window's mean squared free-run angle "
-                    f"error: {number(g.typical_free_run_mse_nominal, '.3g')} rad² nominal, "
-                    f"{number(g.typical_free_run_mse_corrected, '.3g')} rad² corrected). No floor is subtracted.")
-    if g.floor_note:
-        headline = (f"**Free-run closure {_pct(g.free_run_gap_closure)}, raw**: 1 − err_corrected / err_nominal on the "
-                    "typical held-out window (the median over windows of each window's mean squared free-run "
-                    + ("pixel error" if g.closure_basis == "pixels" else
-                       f"angle error: {number(g.typical_free_run_mse_nominal, '.3g')} rad² nominal, "
-                       f"{number(g.typical_free_run_mse_corrected, '.3g')} rad² corrected")
-                    + f"). {g.floor_note[0].upper()}{g.floor_note[1:]}.")
-    if not g.gap_above_floor:
-        headline = ("**No gap above the floor to close** on the typical held-out window: the nominal model's error there "
-                    f"is within {MEASURABLE_GAP:g}x the floor, so the closure ({_pct(g.free_run_gap_closure)}) is a ratio "
-                    "of noise. " + headline)
+    lines += [f"- {n}" for n in d.exclusions + d.notes] + ([""] if d.notes or d.exclusions else [])
+    lines += ambiguity_lines(d)
+    headline = headline_text(d)
     floor = "" if g.free_run_mse_floor is None else (
         f" On the twin, an exactly right model has {number(g.free_run_mse_floor, '.3g')} rad²: "
         f"{_pct(g.mean_free_run_gap_closure)} of the gap above that floor is closed.")
     lines += [
         "## Size of the gap, and how far it shrinks", "", headline, "",
         f"Mean over all held-out windows and horizons 1..{g.horizon[-1]}: angle MSE {number(g.free_run_mse_nominal, '.3g')} rad² "
-        f"nominal, {number(g.free_run_mse_corrected, '.3g')} rad² corrected: raw closure {100 * g.free_run_closure:.1f}%. That mean "
+        f"nominal, {number(g.free_run_mse_corrected, '.3g')} rad² corrected"
+        + (" (nothing to close)" if g.no_gap else f": raw closure {100 * g.free_run_closure:.1f}%") + ". That mean "
         "is dominated by the few windows that pass near upright, where any error grows fast, even in an exactly right "
         "model." + floor + " One step: RMSE "
         f"{math.degrees(g.one_step_rms_nominal_rad):.3f}° nominal, {math.degrees(g.one_step_rms_corrected_rad):.3f}° corrected.", "",

@@ -60,6 +60,9 @@ class Effect(_ByKey):
             return f"actuator delay of {steps(self.value)}"
         if self.effect == "frame_delay":
             return f"camera delay (frame_delay) of {steps(self.value)}"
+        if self.effect == "flip":
+            return ("flipped actuation (the frames show the torque reversed: a camera on the other side of the hinge, "
+                    "or a motor wired the other way)")
         if self.effect == "within_frame":
             return (f"the system integrates within the frame (moves under the held action between frames; "
                     f"fits best as {self.value:g} substeps per frame)")
@@ -134,6 +137,35 @@ class SelectionStep(_ByKey):
     """Relative drop of the typical held-out free-run error."""
     accepted: bool
     """Both drops large enough."""
+    ambiguous: bool = False
+    """It would have been accepted too, and explains the data about as well as the accepted one."""
+
+
+@dataclass(frozen=True)
+class Ambiguity(_ByKey):
+    """Two candidates that explain the residual about equally: by BIC, by the typical held-out free-run
+    error, and (with the bootstrap) by overlapping 95% intervals of the values they both fit."""
+
+    between: list[str]
+    """The effects that differ, one entry per candidate ("within_frame", "speed_clip", ...)."""
+    candidates: list[str]
+    """The two whole candidates (e.g. "damping+within_frame", "damping+speed_clip"); the first is the
+    physics the gap is measured with (the lower BIC)."""
+    bic: list[float]
+    """Their one-step BICs on the fit split."""
+    typical_free_run_mse: list[float]
+    """Their typical held-out free-run angle MSE (rad²)."""
+    intervals_overlap: bool | None
+    """The 95% intervals of their shared values overlap (None: not checked, no bootstrap)."""
+    separate_by: str
+    """What data would tell them apart."""
+
+    def describe(self) -> str:
+        """The verdict's phrase."""
+        a, b = self.between
+        return (f"ambiguous between {a} and {b} (ΔBIC {abs(self.bic[1] - self.bic[0]):.1f}, typical held-out free-run "
+                f"errors {self.typical_free_run_mse[0]:.3g} and {self.typical_free_run_mse[1]:.3g} rad²): the data "
+                f"cannot tell them apart; {self.separate_by} would separate them")
 
 
 @dataclass(frozen=True)
@@ -159,7 +191,7 @@ class Naming(_ByKey):
     verdict: str
     """One line."""
     verdict_class: str
-    """"none", "unexplained", or the effects' names joined by "+" in alphabetical order."""
+    """"none", "unexplained", "ambiguous", or the effects' names joined by "+" in alphabetical order."""
 
 
 @dataclass(frozen=True)
@@ -284,6 +316,12 @@ class Gap(_ByKey):
     """Why the headline closure has no floor subtracted (None: it has one, or none was tried): the
     recording was not filmed by the simulator's camera, or the floor lay above the corrected model's
     own error (then it is no floor, and a closure against it would exceed 100%)."""
+    floor_subtracted: bool = False
+    """The headline ``free_run_gap_closure`` is above a floor (the twin's, or the matched pixels');
+    False: it is raw, 1 − err_corrected / err_nominal of the numbers next to it."""
+    no_gap: bool = False
+    """Nothing was named to correct (no effect): there is no gap to close, and no headline closure
+    (``free_run_gap_closure`` None; the raw numbers stay for reference)."""
 
 
 @dataclass
@@ -293,7 +331,7 @@ class Diagnosis(_ByKey):
     verdict: str
     """One line: the named effect(s), "no significant gap", or "not explained by the candidates"."""
     verdict_class: str
-    """"none", "unexplained", or the names of the effects joined by "+" (for scoring)."""
+    """"none", "unexplained", "ambiguous" (see ``ambiguity``), or the names of the effects joined by "+" (for scoring)."""
     effects: list[Effect]
     """Named effects with coefficient, 95% interval and unit."""
     nominal: dict[str, float]
@@ -320,6 +358,16 @@ class Diagnosis(_ByKey):
     control: dict[str, Any] | None = None
     """With ``--env``: MPC on the simulated real system with the nominal vs the corrected physics."""
 
+    ambiguity: Ambiguity | None = None
+    """Two candidates the data cannot tell apart (None: the choice is clear); then ``verdict_class``
+    is "ambiguous" and neither's own effects are in ``effects``."""
+    excluded: dict[str, str] = field(default_factory=dict)
+    """Candidates left out before fitting, and why: the file's provenance (a dm_control file has no
+    speed clip), or the nominal model already has them (an RK4 model moves within the frame)."""
+    exclusions: list[str] = field(default_factory=list)
+    """The report's sentences on ``excluded``: "excluded by the file's provenance: speed_clip (dm_control
+    has no speed clip)", or "not tried: ..." (kept apart from ``notes``, which speak of the data)."""
+
     pictures: dict[str, np.ndarray] | None = field(default=None, repr=False)
     """A held-out frame as recorded ("real", (H, W[, C]) in [0, 1]), re-rendered by the nominal model
     ("nominal": decoder at the encoder's angle) and by the corrected one ("corrected": through the
@@ -336,6 +384,8 @@ class Diagnosis(_ByKey):
             + [{"selection": [asdict(s) for s in self.selection], "generic_basis": asdict(self.generic_basis)}],
             "gap": asdict(self.gap), "vision": self.vision.to_dict(), "residuals": self.residuals,
             "notes": list(self.notes), "control": self.control,
+            "ambiguity": None if self.ambiguity is None else asdict(self.ambiguity),
+            "excluded": dict(self.excluded), "exclusions": list(self.exclusions),
         }
 
     def corrected_camera(self) -> Camera | None:

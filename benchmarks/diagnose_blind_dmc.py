@@ -1,0 +1,301 @@
+"""Blind check of ``piga-diagnose`` on dm_control's MuJoCo pendulum: variants it was not tuned for.
+
+Cases are drawn with a seeded RNG over the variant (mass, length, hinge damping, action repeat 1-4,
+camera distance, a flipped camera or motor) and over an effect added by a wrapper outside
+dm_control (Coulomb ``friction``, actuator ``delay``, ``deadzone``, torque ``bias``, ``frame_drop``,
+motion ``blur``), or none. For each case the script
+
+1. collects a nominal file of the variant (its camera, no added effect) and trains the nominal
+   model on it with the default fast preset, as a user would (``piga-train-model --preset fast``);
+2. collects the case's "real" file of the same variant with the added effect;
+3. deletes every label from that file: the ``effects`` attribute, the command line, ``/states``
+   (as :func:`diagnose_blind.strip_labels`), and the provenance hints ``env_id``, ``env_config``
+   and ``params`` (so that nothing here rests on the diagnosis excluding effects by provenance);
+4. runs ``piga-diagnose --model RUN --data CASE.h5 --out REPORT`` in a fresh process;
+5. scores the report against the hidden truth, with :mod:`diagnose_blind`'s scorer.
+
+The truth of a case is the added effect plus what the variant itself has and the fast model
+lacks: its hinge ``damping`` (if any), ``within_frame`` (an action held over 2+ physics steps),
+and ``flip`` (a mirrored camera or reversed motor). Naming any of them is right; naming anything
+else is a false effect.
+
+    python benchmarks/diagnose_blind_dmc.py --out results/diagnose_blind_dmc            # 24 cases (hours)
+    python benchmarks/diagnose_blind_dmc.py --quick --out /tmp/dmc_quick --work /tmp/w  # 2 tiny cases
+
+Floors (reported in OUT.md): top-1 ≥ 90% (an "ambiguous" verdict counts as right only when the
+truth holds one of its two; at most 10% ambiguous), no named effect that the case does not have,
+and the corrected g, a, b within 3% of the variant's when the verdict is not ambiguous. Each
+finished case is appended to OUT.json, so an interrupted run continues where it stopped.
+"""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import json
+import shlex
+import subprocess
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+from typing import Any, SupportsFloat
+
+import gymnasium as gym
+import h5py
+import numpy as np
+
+from common import machine
+from diagnose_blind import save, strip_labels
+from diagnose_blind import score as score_gym
+from envs.dmc import DMCPendulumConfig, DMCPendulumEnv
+from piga.collect import CollectConfig, collect
+
+#: Effects added outside dm_control, and how their magnitudes are drawn (rng -> value). friction
+#: and bias are in piga's units (rad/s², torque per m·l²), applied to the hinge as 3·I times that.
+ADDED = {
+    "friction": lambda r: round(float(r.uniform(0.3, 0.8)), 3),
+    "bias": lambda r: round(float(r.choice([-1, 1]) * r.uniform(0.3, 0.8)), 3),
+    "delay": lambda r: int(r.integers(1, 4)),
+    "deadzone": lambda r: round(float(r.uniform(0.2, 0.4)), 3),
+    "frame_drop": lambda r: round(float(r.uniform(0.05, 0.2)), 3),
+    "blur": lambda r: round(float(r.uniform(0.8, 2.0)), 3),
+}
+#: Provenance attrs deleted on top of :func:`diagnose_blind.strip_labels`.
+PROVENANCE = ("env_id", "env_config", "params")
+
+
+def draw_variant(rng: np.random.Generator) -> dict[str, Any]:
+    """A dm_control pendulum variant (fields of :class:`envs.dmc.DMCPendulumConfig`)."""
+    length = round(float(rng.uniform(0.35, 0.55)), 3)
+    return {"mass": round(float(rng.uniform(0.7, 1.5)), 3), "length": length,
+            "damping": round(float(rng.uniform(0.05, 0.3)), 3), "action_repeat": int(rng.integers(1, 5)),
+            "camera_distance": round(float(rng.uniform(max(1.0, (length + 0.1) / 0.7), 1.3)), 3),
+            "flip": str(rng.choice(["none", "none", "none", "camera", "motor"]))}
+
+
+def draw_cases(n: int, seed: int) -> list[dict[str, Any]]:
+    """``n`` cases: about 1/4 with no added effect, the rest one added effect (every one when n >= 8), shuffled.
+
+    Case i collects its nominal file with seed 1000·(seed + 1) + 2i and its real file with 2i + 1.
+    """
+    rng = np.random.default_rng(seed)
+    n_none = max(1, n // 4)
+    names = list(ADDED)
+    added: list[dict[str, Any]] = [{} for _ in range(n_none)]
+    added += [{names[i % len(names)]: ADDED[names[i % len(names)]](rng)} for i in range(n - n_none)]
+    order = rng.permutation(n)
+    base = 1000 * (seed + 1)
+    return [{"case": i, "variant": draw_variant(rng), "effects": added[j], "nominal_seed": base + 2 * i,
+             "data_seed": base + 2 * i + 1} for i, j in enumerate(order)]
+
+
+def inherent(variant: dict[str, Any]) -> set[str]:
+    """What the variant has and the fast nominal model lacks, in the diagnosis' names."""
+    return ({"damping"} if variant["damping"] > 0 else set()) | ({"within_frame"} if variant["action_repeat"] > 1 else set()) \
+        | ({"flip"} if variant["flip"] != "none" else set())
+
+
+def truth(case: dict[str, Any]) -> dict[str, Any]:
+    """The true values in piga's form (g, a, b) and every effect the case has."""
+    config = DMCPendulumConfig(**case["variant"])
+    p = config.piga_params()
+    return {"g": p["g"], "a": p["actuation_gain"] * p["actuation_sign"], "b": p["damping"],
+            "effects": sorted(inherent(case["variant"]) | set(case["effects"]))}
+
+
+class HingeTorque(gym.Wrapper):
+    """Friction −c·tanh(θ̇ / 0.1) or a bias τ0 (piga's units) on dm_control's hinge, from outside it.
+
+    Computed from the state before each frame and held over the frame's physics steps, as MuJoCo's
+    applied generalized force (``qfrc_applied``, 3·I times piga's value): no clip on the action,
+    unlike a torque added to u.
+    """
+
+    def __init__(self, env: gym.Env, kind: str, value: float):
+        super().__init__(env)
+        if kind not in ("friction", "bias"):
+            raise ValueError(f"HingeTorque: kind must be 'friction' or 'bias', got {kind!r}")
+        if not isinstance(env.unwrapped, DMCPendulumEnv):
+            raise TypeError(f"HingeTorque wraps the DMC pendulum, got {env.unwrapped}")
+        self.kind, self.value = kind, float(value)
+        self.scale = 3.0 * env.unwrapped.config.inertia  # piga's torque per m·l² -> N·m
+
+    def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
+        physics = self.env.unwrapped.physics
+        speed = float(physics.data.qvel[0])
+        torque = -self.value * np.tanh(speed / 0.1) if self.kind == "friction" else self.value
+        physics.data.qfrc_applied[0] = self.scale * torque
+        return self.env.step(action)
+
+
+def make_case_env(effects: dict[str, Any], config: DMCPendulumConfig) -> gym.Env:
+    """dm_control's pendulum with ``effects`` added from outside it, gray frames, ``frame_stack`` 1."""
+    from gymnasium.wrappers import FrameStackObservation, GrayscaleObservation
+
+    from envs.effects import ActionDeadzone, ActionDelay, FrameBlur, FrameDrop
+
+    env: gym.Env = DMCPendulumEnv(config)
+    for kind in ("friction", "bias"):
+        if kind in effects:
+            env = HingeTorque(env, kind, float(effects[kind]))
+    if "deadzone" in effects:
+        env = ActionDeadzone(env, float(effects["deadzone"]))
+    if "delay" in effects:
+        env = ActionDelay(env, int(effects["delay"]))
+    env = GrayscaleObservation(env, keep_dim=False)
+    if "blur" in effects:
+        env = FrameBlur(env, float(effects["blur"]))
+    if "frame_drop" in effects:
+        env = FrameDrop(env, float(effects["frame_drop"]))
+    return FrameStackObservation(env, config.frame_stack)
+
+
+def strip_provenance(path: Path) -> None:
+    """Every label and hint (:func:`diagnose_blind.strip_labels`, then :data:`PROVENANCE`), in place."""
+    strip_labels(path)
+    with h5py.File(path, "r+") as f:
+        for key in PROVENANCE:
+            if key in f.attrs:
+                del f.attrs[key]
+
+
+def score(case: dict[str, Any], report: dict[str, Any]) -> dict[str, Any]:
+    """:func:`diagnose_blind.score` against the added effect, plus what this benchmark's floors need."""
+    true = truth(case)
+    base = score_gym({**case, "effects": case["effects"]}, report)
+    named = [e["effect"] for e in report["effects"]]
+    ambiguity = report.get("ambiguity")
+    if ambiguity:  # right only when the truth holds one of the two
+        top1 = any(set(side.split("+")) <= set(true["effects"]) for side in ambiguity["between"])
+    elif report["verdict_class"] == "unexplained":
+        top1 = False
+    elif not named:
+        top1 = not true["effects"]
+    else:
+        top1 = named[0] in true["effects"]
+    corrected = report["corrected"]
+    relative = lambda key: None if corrected.get(key) is None else abs(corrected[key] / true[key] - 1)  # noqa: E731
+    errors = {"g": relative("g"), "a": relative("a")}
+    if "b" in corrected and true["b"] > 0:
+        errors["b"] = relative("b")
+    return {**base, "truth_effects": true["effects"], "named": named, "top1": bool(top1),
+            "ambiguous": bool(ambiguity), "false_effects": sorted(set(named) - set(true["effects"])),
+            "parameter_error": errors}
+
+
+def worst_error(score: dict[str, Any]) -> float | None:
+    """The largest relative error of the corrected g, a, b (None: none, or one was not finite)."""
+    errors = list(score["parameter_error"].values())
+    return None if not errors or None in errors else float(max(errors))
+
+
+def summarize(runs: list[dict[str, Any]]) -> dict[str, Any]:
+    s = [r["score"] for r in runs]
+    clear = [x for x in s if not x["ambiguous"]]
+    worst = [worst_error(x) for x in clear if x["predicted"] != "refused"]
+    return {
+        "cases": len(s),
+        "refused": int(sum(x["predicted"] == "refused" for x in s)),
+        "top1_accuracy": float(np.mean([x["top1"] for x in s])) if s else None,
+        "ambiguous_rate": float(np.mean([x["ambiguous"] for x in s])) if s else None,
+        "false_effects": int(sum(len(x["false_effects"]) for x in s)),
+        "parameters_within_3pct": float(np.mean([w is not None and w <= 0.03 for w in worst])) if worst else None,
+        "parameter_error_max": None if not worst or None in worst else float(max(worst)),
+    }
+
+
+def markdown(runs: list[dict[str, Any]], summary: dict[str, Any], command: str, info: dict[str, Any]) -> str:
+    pct = lambda v: "–" if v is None or not np.isfinite(v) else f"{100 * v:.0f}%"  # noqa: E731
+    lines = [
+        "# Blind check of piga-diagnose on dm_control's pendulum", "", f"Command: `{command}`", "",
+        f"{info['sequences']} sequences x {info['steps']} frames per file; nominal model: `piga-train-model --preset fast` "
+        f"on a nominal file of each variant{info['train_note']}. Machine: {info['machine']['cpu']}, "
+        f"{info['machine']['cores']} cores.", "",
+        "| measure | value | floor |", "|---|---|---|",
+        f"| cases | {summary['cases']} ({summary['refused']} refused by piga-diagnose, counted wrong) | ≥ 24 |",
+        f"| top-1 (first named effect is one the case has; ambiguous right only if the truth is one of the two) | "
+        f"{pct(summary['top1_accuracy'])} | ≥ 90% |",
+        f"| ambiguous verdicts | {pct(summary['ambiguous_rate'])} | ≤ 10% |",
+        f"| named effects the case does not have | {summary['false_effects']} | 0 |",
+        f"| corrected g, a, b within 3% (verdicts not ambiguous) | {pct(summary['parameters_within_3pct'])} "
+        f"(worst {pct(summary['parameter_error_max'])}) | all |", "",
+        "| case | variant | added (hidden) | truth | verdict | top-1 | worst of g, a, b |", "|---|---|---|---|---|---|---|",
+    ]
+    for r in runs:
+        v, sc = r["variant"], r["score"]
+        variant = ", ".join(f"{k}={val}" for k, val in v.items())
+        added = ", ".join(f"{k}={val}" for k, val in r["effects"].items()) or "none"
+        worst = worst_error(sc)
+        lines.append(f"| {r['case']} | {variant} | {added} | {'+'.join(sc['truth_effects']) or 'none'} | {sc['verdict']} | "
+                     f"{'yes' if sc['top1'] else '**no**'} | {pct(worst)} |")
+    return "\n".join(lines) + "\n"
+
+
+def run_case(case: dict[str, Any], work: Path, sequences: int, steps: int, train_args: list[str]) -> dict[str, Any]:
+    """Collects, trains, strips, diagnoses and scores one case; returns its record."""
+    t0 = time.time()
+    config = DMCPendulumConfig(**case["variant"])
+    nominal, real = work / f"case{case['case']:02d}_nominal.h5", work / f"case{case['case']:02d}.h5"
+    run_dir, report_dir = work / f"case{case['case']:02d}_model", work / f"case{case['case']:02d}"
+    collect_config = replace(CollectConfig(), sequences=sequences, steps=steps, env=config, workers=1)
+    collect(replace(collect_config, seed=case["nominal_seed"]), nominal, overwrite=True, command="", progress=False)
+    subprocess.run(["piga-train-model", str(nominal), "--out", str(run_dir), "--preset", "fast", "--threads", "1",
+                    "--overwrite", "--quiet", *train_args], check=True, stdout=subprocess.DEVNULL)
+    collect(replace(collect_config, seed=case["data_seed"]), real, overwrite=True, command="", progress=False,
+            make_env=functools.partial(make_case_env, case["effects"]))
+    strip_provenance(real)
+    done = subprocess.run(["piga-diagnose", "--model", str(run_dir), "--data", str(real), "--out", str(report_dir),
+                           "--overwrite", "--quiet"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    if done.returncode != 0:  # a refusal (one line) is an outcome, scored as wrong; a crash is not
+        if "internal error" in done.stderr or not done.stderr.strip():
+            raise RuntimeError(f"piga-diagnose failed on case {case['case']}: {done.stderr.strip()}")
+        return {**case, "seconds": time.time() - t0, "score": refused(case, done.stderr.strip().splitlines()[-1])}
+    report = json.loads((report_dir / "report.json").read_text())
+    return {**case, "seconds": time.time() - t0, "score": score(case, report)}
+
+
+def refused(case: dict[str, Any], message: str) -> dict[str, Any]:
+    """The score of a case that piga-diagnose refused: wrong, with its one line as the verdict."""
+    return {"truth": "+".join(truth(case)["effects"]) or "none", "predicted": "refused", "verdict": f"refused: {message}",
+            "truth_effects": truth(case)["effects"], "named": [], "top1": False, "ambiguous": False,
+            "false_effects": [], "parameter_error": {}}
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--out", default="results/diagnose_blind_dmc")
+    p.add_argument("--work", default="runs/blind_dmc", help="folder for the case data, models and reports")
+    p.add_argument("--cases", type=int, default=24)
+    p.add_argument("--sequences", type=int, default=300)
+    p.add_argument("--steps", type=int, default=40)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--quick", action="store_true",
+                   help="2 cases of 40 sequences x 16 frames, a 6-epoch tiny model: checks the pipeline, not the diagnosis")
+    args = p.parse_args(argv)
+    if args.quick:
+        args.cases, args.sequences, args.steps = min(args.cases, 2), 40, 16
+    # --quick: a tiny model (the tests' recipe), which may well be refused: it checks the pipeline
+    train_args = ["--epochs", "6", "--batch-size", "8", "--warmup-steps", "8", "--lr", "3e-3"] if args.quick else []
+    out, work = Path(args.out), Path(args.work)
+    work.mkdir(parents=True, exist_ok=True)
+    command = shlex.join(["python", *(sys.argv if argv is None else ["benchmarks/diagnose_blind_dmc.py", *argv])])
+    json_path = out.with_suffix(".json")
+    done: list[dict[str, Any]] = json.loads(json_path.read_text())["runs"] if json_path.exists() else []
+    info = {"sequences": args.sequences, "steps": args.steps, "seed": args.seed, "machine": machine(),
+            "train_note": " (a tiny model: --quick)" if args.quick else ""}
+    for case in draw_cases(args.cases, args.seed):
+        if any(r["case"] == case["case"] and r["variant"] == case["variant"] and r["effects"] == case["effects"]
+               for r in done):
+            continue
+        run = run_case(case, work, args.sequences, args.steps, train_args)
+        done.append(run)
+        print(f"case {case['case']}: {case['variant']} + {case['effects'] or 'none'} -> {run['score']['verdict']} "
+              f"({'ok' if run['score']['top1'] else 'WRONG'})", flush=True)
+        save(out, command, info, done, summarize, markdown)
+    print(json.dumps(summarize(done), indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

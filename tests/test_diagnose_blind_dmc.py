@@ -1,0 +1,104 @@
+"""benchmarks/diagnose_blind_dmc.py: its cases, its truth, its label stripping and its scoring (fast);
+its whole pipeline on two tiny cases (slow, needs dm_control)."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import sys
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def bench():
+    sys.path.insert(0, str(ROOT / "benchmarks"))  # the script imports its sibling modules common, diagnose_blind
+    try:
+        spec = importlib.util.spec_from_file_location("bench_blind_dmc", ROOT / "benchmarks" / "diagnose_blind_dmc.py")
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[spec.name] = module
+        spec.loader.exec_module(module)
+        yield module
+    finally:
+        sys.modules.pop("bench_blind_dmc", None)
+        sys.path.remove(str(ROOT / "benchmarks"))
+
+
+def test_cases_are_seeded_and_cover_the_variants_and_effects(bench) -> None:
+    cases = bench.draw_cases(24, 0)
+    assert cases == bench.draw_cases(24, 0) and cases != bench.draw_cases(24, 1)
+    assert len(cases) == 24 and [c["case"] for c in cases] == list(range(24))
+    added = {name for c in cases for name in c["effects"]}
+    assert added == set(bench.ADDED) and sum(not c["effects"] for c in cases) == 6
+    variants = [c["variant"] for c in cases]
+    assert {v["action_repeat"] for v in variants} == {1, 2, 3, 4}
+    assert {v["flip"] for v in variants} >= {"none", "camera", "motor"}
+    assert len({v["mass"] for v in variants}) > 20 and len({v["camera_distance"] for v in variants}) > 20
+    seeds = [c[k] for c in cases for k in ("nominal_seed", "data_seed")]
+    assert len(set(seeds)) == len(seeds)
+
+
+def test_the_truth_holds_what_the_variant_has_and_the_fast_model_lacks(bench) -> None:
+    case = {"variant": {"mass": 1.0, "length": 0.5, "damping": 0.1, "action_repeat": 2, "camera_distance": 1.0,
+                        "flip": "motor"}, "effects": {"friction": 0.5}}
+    true = bench.truth(case)
+    assert true["effects"] == ["damping", "flip", "friction", "within_frame"]
+    assert true["a"] < 0 and abs(true["b"] - 0.1 / (3 * 1.0 * (0.25 + 0.4 * 0.05**2))) < 1e-9
+    single = {**case, "variant": {**case["variant"], "action_repeat": 1, "flip": "none", "damping": 0.0}, "effects": {}}
+    assert bench.truth(single)["effects"] == []
+
+
+def _report(effects: list[str], ambiguity: list[str] | None = None, corrected: dict | None = None) -> dict:
+    gap = {"free_run_closure": 0.5, "free_run_gap_closure": 0.9, "closure_basis": "state",
+           "mean_free_run_gap_closure": None, "typical_free_run_closure": 0.9}
+    return {"verdict_class": "ambiguous" if ambiguity else "+".join(sorted(effects)) or "none",
+            "verdict": "v", "effects": [{"effect": e, "value": 1.0} for e in effects], "gap": gap,
+            "ambiguity": {"between": ambiguity} if ambiguity else None,
+            "corrected": corrected or {"g": 13.08, "a": 1.3289, "b": 0.1329}}
+
+
+def test_scoring_counts_ambiguity_right_only_with_the_truth_in_it(bench) -> None:
+    case = {"variant": {"mass": 1.0, "length": 0.5, "damping": 0.1, "action_repeat": 2, "camera_distance": 1.0,
+                        "flip": "none"}, "effects": {}}
+    ok = bench.score(case, _report(["damping"], ["within_frame", "speed_clip"]))
+    assert ok["top1"] and ok["ambiguous"]
+    wrong = bench.score(case, _report([], ["speed_clip", "friction"]))
+    assert not wrong["top1"]
+    clipped = bench.score(case, _report(["speed_clip", "damping"]))
+    assert not clipped["top1"] and clipped["false_effects"] == ["speed_clip"]
+    right = bench.score(case, _report(["damping", "within_frame"]))
+    assert right["top1"] and right["false_effects"] == [] and max(right["parameter_error"].values()) < 0.01
+    refused = bench.refused(case, "piga-diagnose: error: refitting g and a diverged")
+    assert not refused["top1"] and refused["verdict"].startswith("refused: ")
+    summary = bench.summarize([{"score": s} for s in (ok, wrong, clipped, right, refused)])
+    assert summary["top1_accuracy"] == 0.4 and summary["ambiguous_rate"] == 0.4 and summary["false_effects"] == 1
+    assert summary["refused"] == 1 and summary["parameters_within_3pct"] == 1.0  # of the clear, answered cases
+
+
+def test_every_label_and_hint_is_deleted(bench, tmp_path: Path) -> None:
+    path = tmp_path / "case.h5"
+    with h5py.File(path, "w") as f:
+        f.create_dataset("states", data=np.zeros((2, 3, 2)))
+        for key, value in {"effects": "{}", "command": "piga-collect", "env_id": "piga/DMCPendulum-v0",
+                           "env_config": json.dumps({"action_repeat": 2}), "params": "{}", "dt": 0.04}.items():
+            f.attrs[key] = value
+    bench.strip_provenance(path)
+    with h5py.File(path, "r") as f:
+        assert set(f.attrs) == {"dt"} and "states" not in f
+
+
+@pytest.mark.slow
+def test_the_quick_run_goes_through_the_whole_pipeline(bench, tmp_path: Path) -> None:
+    pytest.importorskip("dm_control")
+    out = tmp_path / "results" / "blind_dmc"
+    assert bench.main(["--quick", "--out", str(out), "--work", str(tmp_path / "work")]) == 0
+    record = json.loads(out.with_suffix(".json").read_text())
+    assert record["summary"]["cases"] == 2 and len(record["runs"]) == 2
+    assert "| top-1" in out.with_suffix(".md").read_text()
+    with h5py.File(tmp_path / "work" / "case00.h5", "r") as f:
+        assert not {"effects", "env_id", "env_config", "params", "command"} & set(f.attrs) and "states" not in f

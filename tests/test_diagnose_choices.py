@@ -1,0 +1,260 @@
+"""How the diagnosis chooses: it says when it cannot tell two candidates apart, refuses a clip that does
+not bind, leaves out what the file's provenance rules out, and four fixed defects (a gain that only
+compensates within-frame integration, a flipped actuation, the unit of b, the nominal model's own
+damping and integrator)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import torch
+
+from piga.diagnostics import DiagnoseConfig, Observations, analyse, fit
+from piga.diagnostics.diagnose import UNITS, clip_binding, clip_supported, select
+from piga.diagnostics.report import markdown
+from piga.runs import Nominal
+from tests.test_diagnose_continuous import DT, planted_within_frame
+from tests.test_diagnostics import NOMINAL, planted
+
+FAST = DiagnoseConfig(bootstrap=0)
+
+
+def planted_spin(bias: float = -0.3, n: int = 100, t: int = 30, noise: float = 0.002, seed: int = 0) -> Observations:
+    """A pendulum that only ever spins one way, fast (θ̇ > 5 rad/s), against a constant torque ``bias``.
+
+    There Coulomb friction −c·tanh(θ̇ / 0.1) is −c at every sample, exactly a bias τ0 = −c: the two
+    candidates are indistinguishable by construction."""
+    rng = np.random.default_rng(seed)
+    u = rng.uniform(-1, 1, (n, t))
+    th = np.zeros((n, t))
+    x, v = rng.uniform(-math.pi, math.pi, n), rng.uniform(12, 14, n)
+    th[:, 0] = x
+    for i in range(t - 1):
+        v = v + 0.05 * (15 * np.sin(x) + 3 * (u[:, i] + bias))
+        x = x + 0.05 * v
+        th[:, i + 1] = x
+    assert (np.diff(th, axis=1) / 0.05).min() > 5
+    fit_split = np.arange(n) < int(0.75 * n)
+    return Observations(th + rng.normal(0, noise, th.shape), u, np.zeros((n, t)), fit_split, 0.05,
+                        np.zeros((0, t, 8, 8), np.uint8), np.zeros(0, int))
+
+
+# --- 1. ambiguity -----------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def spin():
+    return analyse(planted_spin(), NOMINAL, FAST)
+
+
+def test_two_candidates_the_data_cannot_separate_give_an_ambiguous_verdict(spin) -> None:
+    d = spin
+    assert d.verdict_class == "ambiguous", d.verdict
+    assert d.verdict.startswith("ambiguous between"), d.verdict
+    assert sorted(d.ambiguity.between) == ["bias", "friction"]
+    assert "bias" in d.verdict and "friction" in d.verdict
+    assert "slow motion near rest" in d.verdict  # what would separate them
+    assert not any(e.effect in ("bias", "friction") for e in d.effects)  # neither is named alone
+    assert any(s.ambiguous for s in d.selection)
+    out = d.to_dict()
+    assert out["verdict_class"] == "ambiguous" and sorted(out["ambiguity"]["between"]) == ["bias", "friction"]
+    text = markdown(d, "m", "d", "c")
+    assert "**Ambiguous between" in text and "would separate them" in text
+
+
+def test_a_clear_choice_is_not_ambiguous() -> None:
+    d = analyse(planted({"damping": 0.2}), NOMINAL, FAST)
+    assert d.ambiguity is None and d.verdict_class == "damping", d.verdict
+
+
+def test_ambiguity_needs_overlapping_intervals_with_the_bootstrap() -> None:
+    """With the bootstrap, the intervals of the values both fit (g, a) are compared: here they overlap."""
+    d = analyse(planted_spin(n=60), NOMINAL, DiagnoseConfig(bootstrap=4))
+    assert d.verdict_class == "ambiguous", d.verdict
+    assert d.ambiguity.intervals_overlap is True
+
+
+# --- 2. a clip must bind ----------------------------------------------------------------------
+
+
+def test_a_tail_of_speeds_is_no_clip() -> None:
+    """The dm_control report: speeds thin out up to 9.2 rad/s and a clip fitted at 8.79 "explained" them."""
+    rng = np.random.default_rng(0)
+    tail = 9.2 * (1 - np.sqrt(rng.uniform(0, 1, 12000)))  # density falling to 0 at 9.2 rad/s
+    config = DiagnoseConfig()
+    at = np.count_nonzero(np.abs(tail - 8.79) <= config.clip_band)
+    assert config.clip_min_at <= at < 0.01 * len(tail)  # enough for the old count, under 1% of the samples
+    assert not clip_supported(8.79, tail, config)
+    clipped = np.minimum(np.abs(rng.normal(0, 5, 12000)), 5.0) + rng.normal(0, 0.02, 12000)
+    assert clip_supported(5.0, clipped, config)
+
+
+def test_a_clip_that_never_binds_is_not_selected() -> None:
+    """A speed clip that best lowers the BIC but binds in no sample is passed over; the next candidate wins."""
+    from piga.diagnostics.diagnose import Candidates, cut_windows, score
+
+    obs = planted({"damping": 0.2})
+    w = cut_windows(obs, obs.theta, None, FAST)
+    refit = score(fit.fit_candidate((), {}, NOMINAL, w.fit), NOMINAL, w.fit1, w.free)
+    damping = score(fit.fit_candidate(("damping",), refit.model.values, NOMINAL, w.fit), NOMINAL, w.fit1, w.free)
+    never = fit.Model(("speed_clip",), 0, {**damping.model.values, "v": 50.0})  # far above every speed
+    assert clip_binding(never, NOMINAL, w.fit1) == 0.0
+    fake = replace(damping, model=never, bic=damping.bic - 100)  # the best BIC, by construction
+    candidates = Candidates(refit, refit, [fake, damping])
+    chosen = select(candidates, NOMINAL, w, FAST).chosen
+    assert chosen.model.effects == ("damping",)
+    binding = fit.Model(("speed_clip",), 0, {**damping.model.values, "v": 1.0})
+    assert clip_binding(binding, NOMINAL, w.fit1) > 0.5
+
+
+# --- 3. provenance ----------------------------------------------------------------------------
+
+
+def test_provenance_excludes_only_what_the_system_cannot_have() -> None:
+    from piga.diagnostics.observe import impossible_effects
+
+    assert impossible_effects({"env_id": "piga/DMCPendulum-v0"}) == {"speed_clip": "dm_control has no speed clip"}
+    assert impossible_effects({"env_config": '{"action_repeat": 2, "mass": 1.0}'}) == {
+        "speed_clip": "dm_control has no speed clip"}
+    assert impossible_effects({"env_id": "piga/PixelPendulum-v0"}) == {}  # a wrapper can add a clip
+    assert impossible_effects({}) == {}  # a blind benchmark's file, its hints deleted
+
+
+def test_an_excluded_effect_is_not_fitted_and_the_report_says_why() -> None:
+    obs = replace(planted({"damping": 0.2}, n=60), impossible={"speed_clip": "dm_control has no speed clip"})
+    d = analyse(obs, NOMINAL, FAST)
+    assert d.excluded == {"speed_clip": "dm_control has no speed clip"}
+    assert not any(r.candidate == "speed_clip" for r in d.candidates)
+    assert "excluded by the file's provenance: speed_clip (dm_control has no speed clip)" in markdown(d, "m", "d", "c")
+    assert d.to_dict()["exclusions"] == ["excluded by the file's provenance: speed_clip (dm_control has no speed clip)"]
+    assert not any("clip" in n for n in d.notes)  # benchmarks/dmc.py checks that no note speaks of a clip
+    off = analyse(obs, NOMINAL, replace(FAST, use_provenance=False))
+    assert off.excluded == {} and any(r.candidate == "speed_clip" for r in off.candidates)
+    assert off.verdict_class == d.verdict_class == "damping"
+
+
+# --- 4. the four defects ----------------------------------------------------------------------
+
+
+def test_a_gain_on_top_of_within_frame_is_not_counted_twice() -> None:
+    """(a) The fast model reads a low on a system that moves within the frame; refitted with within_frame,
+    a comes out at the truth, which is no gain error of the real system."""
+    obs = planted_within_frame()
+    rows = np.flatnonzero(obs.fit)
+    euler = fit.fit_candidate((), {}, Nominal(g=12.0, a=1.0, offset=0.0, dt=DT),
+                              fit.make_windows(obs.theta, obs.actions, rows, 8, 2, DT))
+    nominal = Nominal(g=euler.values["g"], a=euler.values["a"], offset=0.0, dt=DT)  # what a fast model identifies
+    d = analyse(obs, nominal, FAST)
+    names = [e.effect for e in d.effects]
+    assert "within_frame" in names and "gain" not in names, d.verdict
+    assert abs(d.corrected["a"] / nominal.a - 1) > 0.1  # the correction still moves a: it is the reading, not a gain
+    assert any("compensates the effects, not a gain error" in n for n in d.notes)
+
+
+def test_a_real_gain_error_is_still_named() -> None:
+    d = analyse(planted({"gain": 0.8}), NOMINAL, FAST)
+    assert d.verdict_class == "gain" and abs(d.effects[0].value - 0.8) < 0.01, d.verdict
+    # a deadzone reads a low in the nominal form (no effect), the gain above 1 with it: still a gain
+    d = analyse(planted({"gain": 1.2, "deadzone": 0.5}, n=160), NOMINAL, FAST)
+    assert d.verdict_class == "deadzone+gain", d.verdict
+
+
+@pytest.mark.parametrize("nominal_a", [1.0, 0.05])
+def test_a_flipped_actuation_is_detected(nominal_a: float) -> None:
+    """(b) Frames that show the torque reversed: against a nominal model of the right a (a real system
+    whose motor is wired the other way), and against one trained on such frames without
+    --signed-actuation (its log-space a shrank toward 0)."""
+    obs = planted({})
+    flipped = replace(obs, actions=-obs.actions)
+    d = analyse(flipped, replace(NOMINAL, a=nominal_a), FAST)
+    assert d.effects[0].effect == "flip", d.verdict
+    assert "flip" in d.verdict_class.split("+")
+    assert "flipped actuation" in d.verdict
+    assert abs(d.corrected["a"] + 1.0) < 0.02, d.corrected
+    assert any("--signed-actuation" in n for n in d.notes)
+    assert "gain" not in [e.effect for e in d.effects]  # against a shrunk nominal a, its size means nothing
+    assert d.gap.free_run_gap_closure > 0.9
+    # the corrected physics rolls with the reversed sign
+    m = d.corrected_model()
+    w = fit.make_windows(flipped.theta, flipped.actions, np.arange(5), 5, 5, 0.05)
+    with torch.no_grad():
+        assert float(fit.loss(m, NOMINAL, w)) < 1e-4
+
+
+def test_no_flip_on_a_delay() -> None:
+    d = analyse(planted({"delay": 2}), NOMINAL, FAST)
+    assert d.verdict_class == "delay", d.verdict
+
+
+def test_damping_is_reported_in_one_over_seconds() -> None:
+    """(c) θ̈ = ... − 3·b·θ̇ with θ̈ in rad/s² and θ̇ in rad/s: b is a rate, 1/s, not N·m·s/rad."""
+    assert UNITS["b"] == "1/s"
+    d = analyse(planted({"damping": 0.2}), NOMINAL, FAST)
+    (effect,) = d.effects
+    assert effect.unit == "1/s"
+    text = markdown(d, "m", "d", "c")
+    row = next(line for line in text.splitlines() if line.startswith("| damping |"))
+    assert row.endswith("| 1/s |"), row
+    assert any("b·m·l² is the hinge damping in N·m·s/rad" in n for n in d.notes)
+
+
+def test_the_nominal_model_carries_its_damping_and_integrator() -> None:
+    """(d) nominal_of keeps a learned b and RK4, and the diagnosis' engine integrates them as the model does."""
+    from piga.model import ModelConfig, PhysicsModel
+    from piga.physics import RK4, Pendulum, rollout
+
+    model = PhysicsModel(ModelConfig(dt=0.04, integrator="rk4", substeps=2, learn_damping=True, damping_init=0.07,
+                                     image_size=16))
+    nom = fit.nominal_of(model)
+    assert nom.integrator == "rk4" and nom.substeps == 2 and abs(nom.b - 0.07) < 1e-6
+    nominal = fit.Nominal(g=9.3, a=1.2, offset=0.25, dt=0.04, substeps=2, b=0.15, integrator="rk4")
+    rng = np.random.default_rng(0)
+    theta0, v0, u = rng.uniform(-3, 3, 5), rng.uniform(-4, 4, 5), rng.uniform(-2, 2, (5, 15))
+    as64 = lambda x: torch.as_tensor(x, dtype=torch.float64)  # noqa: E731
+    w = fit.Windows(as64(theta0), as64(v0), as64(np.concatenate([np.zeros((5, fit.MAX_DELAY)), u], 1)),
+                    torch.zeros(5, 15, dtype=torch.float64), torch.ones(5, 15, dtype=torch.float64), torch.arange(5))
+    m = fit.Model((), 0, {"g": nominal.g, "a": nominal.a})
+    ours = fit.simulate(m, fit.parameters_of(m, nominal), nominal, w, with_velocity=True).detach()
+    system = Pendulum(dt=0.04, offset=0.25, damping=0.15, learnable=False).double()
+    system.set_parameters(g=9.3, a=1.2, b=0.15)
+    p, v = rollout(system, RK4(2), as64(theta0)[:, None, None], as64(v0)[:, None, None], as64(u)[..., None])
+    torch.testing.assert_close(ours[..., 0], p[..., 0, 0], atol=1e-10, rtol=0)
+    torch.testing.assert_close(ours[..., 1], v[..., 0, 0], atol=1e-10, rtol=0)
+
+
+def test_a_nominal_model_with_damping_is_diagnosed_relative_to_it() -> None:
+    """A nominal b of 0.1 on data damped by 0.1: no gap; by 0.3: damping of +0.2 on top."""
+    damped = fit.Nominal(g=10.0, a=1.0, offset=0.0, dt=0.05, b=0.1)
+    assert analyse(planted({"damping": 0.1}), damped, FAST).verdict_class == "none"
+    d = analyse(planted({"damping": 0.3}), damped, FAST)
+    assert d.verdict_class == "damping" and abs(d.effects[0].value - 0.2) < 0.01, d.verdict
+    assert d.nominal["b"] == 0.1
+
+
+# --- 5. the headline ----------------------------------------------------------------------------
+
+
+def test_clean_data_have_no_gap_to_close() -> None:
+    d = analyse(planted({}), NOMINAL, FAST)
+    assert d.verdict_class == "none" and d.gap.no_gap and d.gap.free_run_gap_closure is None
+    text = markdown(d, "m", "d", "c")
+    headline = next(line for line in text.splitlines() if line.startswith("**No gap to close"))
+    assert "%" not in headline
+    assert "raw closure -" not in text
+
+
+def test_the_headline_is_labelled_raw_only_when_it_is() -> None:
+    from piga.diagnostics.report import headline_text
+
+    d = analyse(planted({"damping": 0.2}), NOMINAL, FAST)
+    g = d.gap
+    assert not g.floor_subtracted and "raw" in headline_text(d)  # no model: no twin, no floor
+    shown = f"{100 * g.free_run_gap_closure:.1f}%"
+    assert shown == f"{100 * (1 - g.typical_free_run_mse_corrected / g.typical_free_run_mse_nominal):.1f}%"
+    floored = replace(g, typical_free_run_mse_floor=g.typical_free_run_mse_corrected / 10, floor_subtracted=True,
+                      free_run_gap_closure=0.999, floor_note=None)
+    text = headline_text(replace(d, gap=floored))
+    assert text.startswith("**Free-run closure 99.9%** of the gap above the floor") and ", raw**" not in text
