@@ -30,7 +30,8 @@ CHECKPOINT = "checkpoint.pt"
 
 @dataclass(frozen=True)
 class Nominal:
-    """The identified model's pendulum physics: θ̈ = 1.5·g·sin(θ + φ) + 3·a·u, ``substeps`` Euler steps per frame."""
+    """The identified model's pendulum physics: θ̈ = 1.5·g·sin(θ + φ) + 3·a·u − 3·b·θ̇, ``substeps`` steps of
+    ``integrator`` per frame."""
 
     g: float
     """Gravity."""
@@ -41,7 +42,13 @@ class Nominal:
     dt: float
     """Seconds per frame."""
     substeps: int = 1
-    """Semi-implicit Euler substeps per frame."""
+    """Integrator substeps per frame."""
+    b: float = 0.0
+    """The model's own viscous damping (1/s; 0: none learned): θ̈ = ... − 3·b·θ̇."""
+    integrator: str = "euler"
+    """"euler" (semi-implicit) or "rk4", as :mod:`piga.physics`."""
+    velocity_hold: bool = False
+    """The model reads the velocity at a frame through its integrator (``ModelConfig.velocity_hold``)."""
 
 
 def load_model(run_dir: str | os.PathLike[str]) -> tuple[PhysicsModel, dict[str, Any]]:
@@ -146,9 +153,10 @@ def training_arrow(checkpoint: dict[str, Any] | None) -> bool:
 
 
 def nominal_of(model: PhysicsModel) -> Nominal:
-    """The identified model's physics: g, a, φ, dt and substeps."""
+    """The identified model's physics: g, a, φ, dt, substeps, and its damping b and integrator."""
     p = model.physical_parameters()
-    return Nominal(p["g"], p["a"], p.get("offset", 0.0), model.config.dt, model.config.substeps)
+    return Nominal(p["g"], p["a"], p.get("offset", 0.0), model.config.dt, model.config.substeps,
+                   float(p.get("b", 0.0)), model.config.integrator, bool(model.config.velocity_hold))
 
 
 __all__ = ["CHECKPOINT", "Nominal", "convergence_warning", "load_model", "nominal_of", "training_arrow", "training_blank_mse",

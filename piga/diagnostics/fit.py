@@ -66,7 +66,7 @@ from torch import Tensor
 from envs.constants import MAX_ACTION
 from envs.effects import FRICTION_SMOOTHING
 from piga.diagnostics.repeats import repeat_sources
-from piga.runs import Nominal as _RunNominal
+from piga.runs import Nominal, nominal_of  # noqa: F401 (nominal_of: re-exported for the diagnosis)
 
 if TYPE_CHECKING:
     from piga.model import PhysicsModel
@@ -97,35 +97,14 @@ HOLD_ITERATIONS = 3
 LOWER_BOUNDS: dict[str, float] = {"s": 1e-3, "v": 0.1}
 
 
-@dataclass(frozen=True)
-class Nominal(_RunNominal):
-    """The identified model's physics, with what :class:`piga.runs.Nominal` leaves out: its learned
-    damping and its integrator (θ̈ = 1.5·g·sin(θ + φ) + 3·a·u − 3·b·θ̇, ``substeps`` steps of
-    ``integrator`` per frame). A plain :class:`piga.runs.Nominal` reads as b = 0 and Euler."""
-
-    b: float = 0.0
-    """The nominal model's own viscous damping (1/s; 0: none learned)."""
-    integrator: str = "euler"
-    """"euler" (semi-implicit) or "rk4", as :mod:`piga.physics`."""
-    velocity_hold: bool = False
-    """The model reads the velocity at a frame through its integrator (``ModelConfig.velocity_hold``)."""
+def nominal_damping(nominal: Nominal) -> float:
+    """The nominal model's own damping b."""
+    return float(nominal.b)
 
 
-def nominal_of(model: PhysicsModel) -> Nominal:
-    """The identified model's physics: g, a, φ, dt, substeps, and its damping b and integrator."""
-    p = model.physical_parameters()
-    return Nominal(p["g"], p["a"], p.get("offset", 0.0), model.config.dt, model.config.substeps,
-                   float(p.get("b", 0.0)), model.config.integrator, bool(model.config.velocity_hold))
-
-
-def nominal_damping(nominal: _RunNominal) -> float:
-    """The nominal model's own damping b (0 for a :class:`piga.runs.Nominal`)."""
-    return float(getattr(nominal, "b", 0.0))
-
-
-def nominal_integrator(nominal: _RunNominal) -> str:
-    """The nominal model's integrator ("euler" for a :class:`piga.runs.Nominal`)."""
-    return str(getattr(nominal, "integrator", "euler"))
+def nominal_integrator(nominal: Nominal) -> str:
+    """The nominal model's integrator."""
+    return str(nominal.integrator)
 
 
 @dataclass(frozen=True)
@@ -306,7 +285,7 @@ def as_observed(w: Windows, pred: Tensor) -> Tensor:
     return torch.cat([w.theta0[:, None].to(pred), pred], 1).gather(1, w.source)
 
 
-def parameters_of(model: Model, nominal: _RunNominal) -> dict[str, Tensor]:
+def parameters_of(model: Model, nominal: Nominal) -> dict[str, Tensor]:
     """The tensors :func:`simulate` takes, from a model's values (defaults: nominal g, a; grid starts).
 
     a is fitted in log space; a negative a (a flipped actuation) keeps its sign in ``a_sign``, which
