@@ -263,7 +263,7 @@ def refused(case: dict[str, Any], message: str) -> dict[str, Any]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
     p.add_argument("--out", default="results/diagnose_blind_dmc")
     p.add_argument("--work", default="runs/blind_dmc", help="folder for the case data, models and reports")
     p.add_argument("--cases", type=int, default=24)

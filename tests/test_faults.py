@@ -1,5 +1,5 @@
 """A fault corpus, by command: bad input exits 1 (a usage error 2) with one line on stderr that says
-what to change, never a traceback, and leaves nothing that blocks a rerun (issue 33).
+what to change, never a traceback, and leaves nothing that blocks a rerun.
 
 Each case runs the command's ``main`` in this process (through ``run_cli``, as its script does) on
 tiny files derived from the session's ``tiny_data``, and checks the exit code, the one line and
@@ -190,8 +190,7 @@ def test_abbreviations_are_refused(prog: str, argv: list[str], needle: str, tmp_
 
 
 def test_script_parsers_take_no_abbreviations() -> None:
-    """The benchmarks' and examples' own argparse parsers (diagnose_blind.py and train_accuracy.py
-    are another developer's: issue 33's report asks for the same change there)."""
+    """The benchmarks' and examples' own argparse parsers."""
     root = Path(__file__).parents[1]
     scripts = [*root.glob("benchmarks/*.py"), *root.glob("examples/*.py")]
     lacking = [p.name for p in sorted(scripts) if "ArgumentParser(" in p.read_text()

@@ -122,7 +122,7 @@ class DiagnoseConfig:
     clip_min_binding: float = 0.01
     """A speed clip must bind in at least this fraction of the samples: of the observed speeds (those at
     its level) and of the fitted clip model's one-step predictions (those it holds at the level). A
-    "clip" that binds less is the tail of a smooth speed distribution, not a limit (issue 31: on a
+    "clip" that binds less is the tail of a smooth speed distribution, not a limit (on a
     dm_control pendulum whose speeds reach 9.2 rad/s, a clip fitted at 8.79 rad/s won ΔBIC −242)."""
     ambiguous_bic: float = 10.0
     """Two candidates whose BICs differ by at most this (less than "very strong" evidence, Kass & Raftery)
