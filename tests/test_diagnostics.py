@@ -379,3 +379,17 @@ def test_a_video_of_constant_frames_is_refused_with_a_reason(tiny_model: Path, d
                  "--quiet")
     assert_one_line_error(result, "repeats the previous one")
     assert "ZeroDivisionError" not in result.stderr and not out.exists()
+
+
+def test_the_smallest_default_file_is_accepted(tmp_path: Path) -> None:
+    """20 sequences at piga-collect's default split (16, 2, 2) are what the docs name as the minimum."""
+    from piga.collect import CollectConfig, collect
+    from piga.diagnostics.observe import DiagnosisInputError, check_compatible
+    from piga.model import ModelConfig, PhysicsModel
+
+    data = tmp_path / "twenty.h5"
+    collect(CollectConfig(sequences=20, steps=12, seed=3, workers=1), data, progress=False, command="t")
+    model = PhysicsModel(ModelConfig())
+    assert check_compatible(model, data).n_sequences == 20
+    with pytest.raises(DiagnosisInputError, match="need at least 12 and 5"):
+        check_compatible(model, data, min_sequences=25)

@@ -122,9 +122,12 @@ def check_compatible(model: PhysicsModel, path: str | os.PathLike[str], min_sequ
     if info.n_sequences < min_sequences:
         raise DiagnosisInputError(f"{path}: {info.n_sequences} sequences; the diagnosis needs at least {min_sequences}")
     n_fit = len(split_indices(path, "train"))
-    if n_fit < min_sequences // 2 or info.n_sequences - n_fit < min_sequences // 4:
+    # Half of the minimum to fit, a fifth held out: the minimum of 20 sequences at piga-collect's default
+    # split (0.8, 0.1, 0.1) gives 16 and 4, so the smallest file that collect makes by default is accepted.
+    min_fit, min_held_out = min_sequences // 2, max(1, min_sequences // 5)
+    if n_fit < min_fit or info.n_sequences - n_fit < min_held_out:
         raise DiagnosisInputError(f"{path}: {n_fit} train and {info.n_sequences - n_fit} held-out sequences; "
-                                  f"need at least {min_sequences // 2} and {min_sequences // 4}")
+                                  f"need at least {min_fit} and {min_held_out}")
     return info
 
 
