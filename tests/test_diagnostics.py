@@ -391,5 +391,7 @@ def test_the_smallest_default_file_is_accepted(tmp_path: Path) -> None:
     collect(CollectConfig(sequences=20, steps=12, seed=3, workers=1), data, progress=False, command="t")
     model = PhysicsModel(ModelConfig())
     assert check_compatible(model, data).n_sequences == 20
-    with pytest.raises(DiagnosisInputError, match="need at least 12 and 5"):
-        check_compatible(model, data, min_sequences=25)
+    fewer = tmp_path / "three-held-out.h5"
+    collect(CollectConfig(sequences=20, steps=12, seed=3, workers=1, split=(17, 2, 1)), fewer, progress=False, command="t")
+    with pytest.raises(DiagnosisInputError, match="17 train and 3 held-out sequences; need at least 10 and 4"):
+        check_compatible(model, fewer)
