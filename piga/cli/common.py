@@ -68,6 +68,14 @@ def command_line(prog: str, argv: Sequence[str] | None) -> str:
     return shlex.join([prog, *(sys.argv[1:] if argv is None else argv)])
 
 
+def warn_if_unconverged(prog: str, run_dir: str | os.PathLike[str]) -> None:
+    """Prints one warning line when the run's metrics.json says it did not converge (:func:`piga.runs.convergence_warning`)."""
+    from piga.runs import convergence_warning
+
+    if (warning := convergence_warning(run_dir)) is not None:
+        print(f"{prog}: {warning}", file=sys.stderr)
+
+
 def _raise_interrupt(signum: int, frame: object) -> None:
     raise KeyboardInterrupt
 
@@ -177,6 +185,8 @@ positive_float = _number_type(float, lambda v: 0 < v < float("inf"), "a finite n
 """argparse type: a finite number > 0 (NaN is rejected too)."""
 nonnegative_float = _number_type(float, lambda v: 0 <= v < float("inf"), "a finite number >= 0")
 """argparse type: a finite number >= 0 (NaN is rejected too)."""
+unit_fraction = _number_type(float, lambda v: 0 <= v < 1, "a number in [0, 1)")
+"""argparse type: a fraction in [0, 1) (NaN is rejected too)."""
 
 
 def format_default(value: Any) -> str:

@@ -14,7 +14,7 @@ import numpy as np
 
 from agents.config import MPCConfig
 from piga.atomic import atomic_output, check_writable_target, write_json
-from piga.cli.common import ArgumentParser, PigaError, command_line, nonnegative_int, positive_float, positive_int, run_cli
+from piga.cli.common import ArgumentParser, PigaError, command_line, nonnegative_int, positive_float, positive_int, run_cli, warn_if_unconverged
 from piga.episodes import EpisodeConfig, parse_range, run_episodes, summary_markdown
 
 if TYPE_CHECKING:
@@ -82,14 +82,6 @@ def build_parser() -> ArgumentParser:
     return p
 
 
-def _warn_unconverged(run_dir: str) -> None:
-    from piga.runs import convergence_warning
-
-    warning = convergence_warning(run_dir)
-    if warning:
-        print(f"{PROG}: {warning}", file=sys.stderr)
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if args.env == "piga/DMCPendulum-v0":
@@ -136,7 +128,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         model, ckpt = load_model(args.model)
         if model.config.system != "pendulum":
             raise PigaError(f"{args.model}: a {model.config.system} model cannot control the pendulum")
-        _warn_unconverged(args.model)
+        warn_if_unconverged(PROG, args.model)
     if args.goal_image:
         if model is None:
             raise PigaError("--goal-image needs --model: the goal is read from the image by the model's encoder")
@@ -200,7 +192,7 @@ def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: 
         raise PigaError(f"--sweep: gravity multipliers must be > 0, got {args.sweep}")
     if kind == "piga":
         model, _ = load_model(args.model)  # fail early, in this process, on a bad folder
-        _warn_unconverged(args.model)
+        warn_if_unconverged(PROG, args.model)
         if model.config.system != "pendulum":
             raise PigaError(f"{args.model}: a {model.config.system} model cannot control the pendulum")
     jobs = [ControlJob(agent, EpisodeConfig(episodes=args.episodes, steps=args.steps, seed=args.seed, gravity_mult=m,
@@ -394,7 +386,7 @@ def _dmc(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
         if (kind := run_kind(args.model)) != "piga":
             raise PigaError(f"{args.model} is a {kind} run; --env piga/DMCPendulum-v0 runs piga models (and the oracle)")
         model, _ = load_model(args.model)
-        _warn_unconverged(args.model)
+        warn_if_unconverged(PROG, args.model)
         if abs(model.config.dt - config.env.dt) > 1e-9:
             raise PigaError(f"{args.model}: the model was trained at dt {model.config.dt} s, the env steps {config.env.dt} s "
                             "(set --env-option action_repeat)")

@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
-import sys
 from collections.abc import Sequence
 
-from piga.cli.common import ArgumentParser, PigaError, command_line, nonnegative_int, positive_int, run_cli
+from piga.cli.common import ArgumentParser, PigaError, command_line, nonnegative_int, positive_int, run_cli, warn_if_unconverged
 
 PROG = "piga-diagnose"
 
@@ -35,7 +34,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     from piga.data import check_frames_have_signal, inspect_dataset
     from piga.diagnostics import DiagnoseConfig, diagnose
     from piga.diagnostics.report import check_report_target, number, write_report
-    from piga.runs import convergence_warning, load_model
+    from piga.runs import load_model
 
     # Everything is checked before any work, and the report folder is only created at the end
     # (atomically): a refusal leaves nothing behind.
@@ -47,9 +46,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     model, ckpt = load_model(args.model)
     if model.config.system != "pendulum":
         raise PigaError(f"{args.model}: piga-diagnose is for pendulum models; this one is a {model.config.system} model")
-    warning = convergence_warning(args.model)
-    if warning:
-        print(f"{PROG}: {warning}", file=sys.stderr)
+    warn_if_unconverged(PROG, args.model)
     import torch
 
     torch.set_num_threads(max(1, min(2, torch.get_num_threads())))

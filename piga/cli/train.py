@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import sys
-from argparse import ArgumentTypeError
 from collections.abc import Sequence
 from dataclasses import asdict, replace
 from pathlib import Path
@@ -11,23 +10,10 @@ from pathlib import Path
 from typing import Any
 
 from piga.cli.common import (ArgumentParser, Interrupted, PigaError, add_preset_option, command_line, format_default, nonnegative_int,
-                             positive_float, positive_int, run_cli)
+                             positive_float, positive_int, run_cli, unit_fraction)
 
 #: The recipe options a user may give; each is a TrainConfig field of the same name.
 RECIPE_OPTIONS = ("epochs", "budget_steps", "max_minutes", "batch_size", "lr", "lr_physics", "warmup_fraction")
-
-
-def fraction(text: str) -> float:
-    """argparse type: a number in [0, 1)."""
-    import math
-
-    try:
-        value = float(text)
-    except ValueError:
-        raise ArgumentTypeError(f"expected a number in [0, 1), got {text!r}") from None
-    if not (math.isfinite(value) and 0 <= value < 1):
-        raise ArgumentTypeError(f"expected a number in [0, 1), got {text!r}")
-    return value
 
 PROG = "piga-train-model"
 CHECKPOINT = "checkpoint.pt"
@@ -65,7 +51,7 @@ def build_parser() -> ArgumentParser:
     recipe("--batch-size", "batch_size", positive_int, "windows per step")
     recipe("--lr", "lr", positive_float, "network learning rate")
     recipe("--lr-physics", "lr_physics", positive_float, "physical-parameter learning rate, log space")
-    recipe("--warmup-fraction", "warmup_fraction", fraction, "fraction of the run's steps that train the autoencoder "
+    recipe("--warmup-fraction", "warmup_fraction", unit_fraction, "fraction of the run's steps that train the autoencoder "
            "alone, first")
     p.add_argument("--signed-actuation", action="store_true",
                    help="learn the sign of a too (a in linear space, from +0.3): for a camera on the other side of the "
@@ -139,15 +125,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     from piga.model import PhysicsModel
     from piga.resources import adam_checkpoint_bytes, check_run_disk
 
-    check_run_disk(run_dir, (run_dir / CHECKPOINT).stat().st_size if args.resume
-                   else adam_checkpoint_bytes(PhysicsModel(model_config)), "the training run")
+    fresh = PhysicsModel(model_config)  # its size and start values, before training builds its own
+    check_run_disk(run_dir, (run_dir / CHECKPOINT).stat().st_size if args.resume else adam_checkpoint_bytes(fresh),
+                   "the training run")
     record.update({"data": str(args.data), "train": asdict(train_config), "plan": asdict(plan),
                    "model": model_config.to_dict()})
     if not info.split_counts["test"]:
         print(f"{PROG}: warning: {args.data} has no test sequences; metrics.json and the figures will be measured on "
               "the train split, which is not held out", file=sys.stderr)
     print(f"training on {args.data} ({info.split_counts['train']} train sequences x {info.steps} frames); "
-          f"{info.system} parameters start at {_start_values(model_config)} -> {run_dir}")
+          f"{info.system} parameters start at {_start_values(fresh)} -> {run_dir}")
     print(f"plan: {plan.describe(model_config.pred_frames)}")
     written: list[int] = []
 
@@ -187,11 +174,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     return 0
 
 
-def _start_values(model_config: Any) -> str:
-    """The physical parameters a new model starts from, e.g. "g=1, a=0.3"."""
-    from piga.model import PhysicsModel
-
-    model = PhysicsModel(model_config)
+def _start_values(model: Any) -> str:
+    """The physical parameters a new (untrained) model starts from, e.g. "g=1, a=0.3"."""
     learned = model.learned_parameter_names()
     values = model.physical_parameters()
     return ", ".join(f"{k}={v:g}" + ("" if k in learned else " (fixed)") for k, v in values.items()
