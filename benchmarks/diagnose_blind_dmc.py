@@ -276,7 +276,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.quick:
         args.cases, args.sequences, args.steps = min(args.cases, 2), 40, 16
     # --quick: a tiny model (the tests' recipe), which may well be refused: it checks the pipeline
-    train_args = ["--epochs", "6", "--batch-size", "8", "--warmup-steps", "8", "--lr", "3e-3"] if args.quick else []
+    train_args = ["--epochs", "6", "--batch-size", "8", "--warmup-fraction", "0.1", "--lr", "3e-3"] if args.quick else []
     out, work = Path(args.out), Path(args.work)
     work.mkdir(parents=True, exist_ok=True)
     command = shlex.join(["python", *(sys.argv if argv is None else ["benchmarks/diagnose_blind_dmc.py", *argv])])
