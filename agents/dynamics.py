@@ -3,7 +3,7 @@
 The planner (:mod:`agents.mpc`) knows no model. Whatever predicts (θ, θ̇) plugs in through the
 :class:`Dynamics` protocol: the learned physics of a piga model and the oracle's true physics
 (both :class:`PendulumDynamics`), the physics corrected by a diagnosis
-(:mod:`piga.diagnostics.corrected`), and later a latent model. States are in Gymnasium's
+(:mod:`piga.control.corrected`), and later a latent model. States are in Gymnasium's
 convention (θ = 0 upright), the one the planner scores in.
 
 A dynamics that can also score its rollouts itself (:class:`ScoringDynamics`) saves the planner
@@ -21,7 +21,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from piga.physics import Euler, Pendulum
+from piga.world.physics import Euler, Pendulum
 
 
 class Dynamics(Protocol):
@@ -101,15 +101,15 @@ _NO_COST = np.zeros(0, np.float32)
 
 
 class PendulumDynamics:
-    """The pendulum engine of :class:`piga.physics.Pendulum` on plain arrays, for planning.
+    """The pendulum engine of :class:`piga.world.physics.Pendulum` on plain arrays, for planning.
 
     θ̈ = k_g·sin θ + k_u·u with k_g = 3g / 2l and k_u = 3a / m l², integrated by semi-implicit Euler
     with ``substeps`` substeps of dt / substeps per step, the action held over the step: what
-    :class:`piga.physics.Euler` does with a :class:`~piga.physics.Pendulum`, up to float32
+    :class:`piga.world.physics.Euler` does with a :class:`~piga.world.physics.Pendulum`, up to float32
     rounding (tests/test_control.py compares them). Here θ is Gymnasium's angle: a model's angle
     offset φ is added to the state before planning, not inside the engine.
 
-    Why not :func:`piga.physics.rollout` itself: a planning step rolls 200 candidates x 20 steps x
+    Why not :func:`piga.world.physics.rollout` itself: a planning step rolls 200 candidates x 20 steps x
     5 CEM iterations, and on 200 numbers the fixed cost of each operator call dominates the
     arithmetic (an ``nn.Module`` call, parameter lookups and ``exp`` of the log-parameters every
     step). One numba-compiled loop over steps and candidates, which also scores the rollouts

@@ -10,7 +10,7 @@ upright), with Gymnasium's reward -(wrap(θ - θ_goal)² + 0.1·θ̇² + 0.001·
   velocity estimator); the agent adds the model's angle offset φ (Gymnasium's θ = model θ + φ) and
   plans over the model's *learned* physics (its g times a gravity multiplier, if told gravity
   changed, and its a), or over any other dynamics it is given, such as the physics corrected by
-  a diagnosis (:mod:`piga.diagnostics.corrected`).
+  a diagnosis (:mod:`piga.control.corrected`).
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ from agents.cem import cem, shift_warm_start
 from agents.config import MPCConfig
 from agents.dynamics import Dynamics, PendulumDynamics, ScoringDynamics, StageCost
 from envs.pendulum import MAX_ACTION, PENDULUM_DT, PixelPendulumConfig
-from piga.model import PhysicsModel, frames_to_float
+from piga.world.model import PhysicsModel, frames_to_float
 
 __all__ = ["EncoderReader", "MPCConfig", "OracleAgent", "PigaMPCAgent", "Planner", "StateReader"]
 

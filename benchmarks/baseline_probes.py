@@ -34,7 +34,7 @@ def knn_rmse(train_x: torch.Tensor, train_y: torch.Tensor, test_x: torch.Tensor,
 
 def probe_autoencoder(run: Path, data: Path) -> dict[str, object]:
     from piga.baselines.autoencoder import load_autoencoder
-    from piga.data import load_states, read_sequences
+    from piga.data.schema import load_states, read_sequences
 
     model = load_autoencoder(run / "autoencoder.pt")
     frames, _ = read_sequences(data, "test")  # (N, T, 64, 64) uint8

@@ -1,6 +1,6 @@
 """Benchmark: piga against the PlaNet-style world model and SB3 DDPG, side by side (the paper's Figure 5).
 
-Every agent is scored by the same episodes (:mod:`piga.episodes`: starts, seeds, success), on the
+Every agent is scored by the same episodes (:mod:`piga.control.episodes`: starts, seeds, success), on the
 same machine:
 
 1. **Sample efficiency**: success rate and mean return against the number of training sequences,
@@ -76,8 +76,8 @@ from typing import Any
 from common import machine
 
 from agents.planet.config import PlanetTrainConfig
-from piga.atomic import atomic_output, write_json
-from piga.episodes import parse_range
+from piga.io.atomic import atomic_output, write_json
+from piga.control.episodes import parse_range
 
 
 @dataclass(frozen=True)
@@ -198,7 +198,7 @@ PRESETS: dict[str, BenchConfig] = {
 
 
 def _piga_steps_per_epoch(cfg: BenchConfig, n: int) -> int:
-    from piga.model import ModelConfig
+    from piga.world.model import ModelConfig
 
     window = ModelConfig().window  # the pendulum's L + T_pred
     return max(1, n * (cfg.steps - window + 1) // cfg.overrides.get("piga", {}).get("batch_size", 32))
@@ -343,7 +343,7 @@ def data_file(cfg: BenchConfig, folder: Path, n: int) -> Path:
     """The data file of ``n`` training sequences, collected if missing: the first n sequences of one
     collection are its train split (nested subsets: sequence k depends only on (data_seed, k)), plus
     10% more for valid and test."""
-    from piga.collect import CollectConfig, collect
+    from piga.data.collect import CollectConfig, collect
 
     path = data_path(folder, n)
     extra = max(1, n // 10)
@@ -355,11 +355,11 @@ def data_file(cfg: BenchConfig, folder: Path, n: int) -> Path:
 
 def evaluate(kind: str, run: Path | None, cfg: BenchConfig, gravity_mult: float = 1.0, episodes: int | None = None,
              workers: int = 1) -> dict[str, Any]:
-    """piga.episodes' summary for one agent (kind "piga", "planet", "ddpg" or "oracle"), its episodes
+    """piga.control.episodes' summary for one agent (kind "piga", "planet", "ddpg" or "oracle"), its episodes
     split over ``workers`` processes (the same episodes and scores as one)."""
     from agents.config import CEMConfig
-    from piga.episodes import EpisodeConfig
-    from piga.jobs import ControlJob, run_split
+    from piga.control.episodes import EpisodeConfig
+    from piga.control.jobs import ControlJob, run_split
 
     if episodes is None:
         episodes = cfg.planet_episode_count if kind == "planet" else cfg.episodes
@@ -370,7 +370,7 @@ def evaluate(kind: str, run: Path | None, cfg: BenchConfig, gravity_mult: float 
         from agents.planet.config import LatentPlannerConfig
         from agents.planet.planner import PlanetAgent
         from piga.baselines.planet_run import load_planet
-        from piga.episodes import run_episodes
+        from piga.control.episodes import run_episodes
 
         agent = PlanetAgent(load_planet(run)[0], LatentPlannerConfig(cem=CEMConfig(**cfg.overrides["cem"])))
         return run_episodes(agent, replace(episode_config, frame_stack=1))["summary"]
@@ -396,8 +396,8 @@ def evaluate_kept(folder: Path, kind: str, run: Path | None, cfg: BenchConfig, g
 
 def train_piga(data: Path, run: Path, seed: int, cfg: BenchConfig, n: int) -> float:
     """Trains (unless done) and returns the run's training seconds."""
-    from piga.runs import load_model
-    from piga.train import TrainConfig, train
+    from piga.io.runs import load_model
+    from piga.training.train import TrainConfig, train
 
     config = TrainConfig(epochs=piga_epochs(cfg, n), seed=seed, threads=1, **cfg.overrides.get("piga", {}))
     started = (run / "checkpoint.pt").exists()
@@ -411,7 +411,7 @@ def train_piga(data: Path, run: Path, seed: int, cfg: BenchConfig, n: int) -> fl
 def train_planet_run(data: Path, run: Path, seed: int, cfg: BenchConfig, n: int) -> float:
     """Trains (unless done: a run of fewer steps is continued to ``cfg.planet_steps``) and returns the run's training seconds."""
     from piga.baselines.planet import rssm_config_for, train_planet
-    from piga.data import inspect_dataset
+    from piga.data.schema import inspect_dataset
 
     metrics = run / "metrics.json"
     if not metrics.exists() or json.loads(metrics.read_text())["steps"] < cfg.planet_steps:
@@ -538,9 +538,9 @@ def goal_images(piga_run: Path, cfg: BenchConfig, folder: Path) -> list[dict[str
     import imageio.v3 as iio
 
     from agents.mpc import MPCConfig, PigaMPCAgent
-    from piga.episodes import EpisodeConfig, run_episodes
-    from piga.goal import goal_from_image, render_goal_image
-    from piga.runs import load_model
+    from piga.control.episodes import EpisodeConfig, run_episodes
+    from piga.control.goal import goal_from_image, render_goal_image
+    from piga.io.runs import load_model
 
     model, ckpt = load_model(piga_run)
     rows = []
@@ -567,7 +567,7 @@ def figures(record: dict[str, Any], out: Path) -> dict[str, str]:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from piga.plots import save_figure
+    from piga.evaluation.plots import save_figure
 
     names = {part: f"{out.name}-{part}.png" for part in ("sample_efficiency", "ddpg", "sweep")}
     fig, axes = plt.subplots(1, 2, figsize=(9, 3.4), layout="constrained")

@@ -36,10 +36,10 @@ from pathlib import Path
 from common import machine
 from agents.cem import CEMConfig
 from agents.mpc import MPCConfig
-from piga.atomic import atomic_output, write_json
-from piga.episodes import EpisodeConfig, parse_range, summary_markdown
-from piga.jobs import ControlJob, run_jobs
-from piga.plots import save_figure, sweep_figure
+from piga.io.atomic import atomic_output, write_json
+from piga.control.episodes import EpisodeConfig, parse_range, summary_markdown
+from piga.control.jobs import ControlJob, run_jobs
+from piga.evaluation.plots import save_figure, sweep_figure
 
 #: PlaNet's CEM (Hafner et al., 2019), re-planned from scratch each step.
 PLANET = MPCConfig(cem=CEMConfig(), warm_start=False)
@@ -67,8 +67,8 @@ def main() -> int:
     p.add_argument("--extra-models", nargs="*", default=[],
                    help="more run folders (other training seeds): upright at x1.0 and x1.4, --sweep-episodes each")
     args = p.parse_args()
-    from piga.goal import goal_from_image, render_goal_image
-    from piga.runs import load_model
+    from piga.control.goal import goal_from_image, render_goal_image
+    from piga.io.runs import load_model
 
     model, ckpt = load_model(args.model)
     learned = model.physical_parameters()

@@ -5,7 +5,7 @@ saturation, gain, damping, friction, bias, speed_clip; camera: blur, shift, nois
 frame_delay), two of them, or an effect outside the candidate set (``cogging``, a
 position-periodic torque -k·sin(4θ)). An actuator delay and a camera delay are never drawn
 together: their sum could pass the largest delay the fit tries (4 steps). For each case the script collects
-``--sequences`` sequences of the "real" system with ``piga.collect.collect``, then strips every
+``--sequences`` sequences of the "real" system with ``piga.data.collect.collect``, then strips every
 label from the file: the ``effects`` attribute, the effects in ``env_config``, the command line,
 and ``/states``. Only then does it run the diagnosis, in a fresh process, as a user would:
 ``piga-diagnose --model RUN_DIR --data CASE.h5 --out REPORT_DIR``. The scorer alone reads the
@@ -36,8 +36,8 @@ import numpy as np
 
 from common import machine
 from envs.pendulum import PixelPendulumConfig
-from piga.atomic import atomic_output, write_json
-from piga.collect import CollectConfig, collect
+from piga.io.atomic import atomic_output, write_json
+from piga.data.collect import CollectConfig, collect
 
 #: Candidate effects and how their magnitudes are drawn (rng -> value).
 DRAWS = {

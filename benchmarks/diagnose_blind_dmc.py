@@ -49,7 +49,7 @@ from common import machine
 from diagnose_blind import save, strip_labels
 from diagnose_blind import score as score_gym
 from envs.dmc import DMCPendulumConfig, DMCPendulumEnv
-from piga.collect import CollectConfig, collect
+from piga.data.collect import CollectConfig, collect
 
 #: Effects added outside dm_control, and how their magnitudes are drawn (rng -> value). friction
 #: and bias are in piga's units (rad/s², torque per m·l²), applied to the hinge as 3·I times that.

@@ -31,7 +31,7 @@ import numpy as np
 
 from common import machine
 from envs.pendulum import PixelPendulumConfig, make_pixel_pendulum
-from piga.atomic import atomic_output, write_json
+from piga.io.atomic import atomic_output, write_json
 
 class Case(NamedTuple):
     effects: dict

@@ -41,7 +41,7 @@ import sys
 from pathlib import Path
 
 from common import machine
-from piga.atomic import atomic_output, write_json
+from piga.io.atomic import atomic_output, write_json
 
 #: Published pixel-based scores on DMC pendulum-swingup, read from the score files that DreamerV3's
 #: authors publish for it and its baselines (github.com/danijar/dreamerv3, ``scores/dmc_vision-{dreamerv3,
@@ -135,7 +135,7 @@ def train(data: Path, run: Path, preset: str, seed: int, args: argparse.Namespac
 
 def run_diagnosis(folder: Path, data: Path, seed: int, args: argparse.Namespace, log: Path) -> dict[str, object]:
     """The default preset on the same file, then ``piga-diagnose`` as a user runs it; its report checked against the truth."""
-    from piga.data import inspect_dataset
+    from piga.data.schema import inspect_dataset
 
     fast, report = folder / "fast", folder / "diagnosis"
     train(data, fast, "fast", seed, args, log, [])

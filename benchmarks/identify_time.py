@@ -34,12 +34,12 @@ from typing import Any
 import numpy as np
 
 from common import machine
-from piga.atomic import atomic_output, write_json
-from piga.collect import CollectConfig, collect
-from piga.data import inspect_dataset
-from piga.evaluate import PARAMETER_NAMES
-from piga.report import write_run_report
-from piga.train import TrainConfig, train
+from piga.io.atomic import atomic_output, write_json
+from piga.data.collect import CollectConfig, collect
+from piga.data.schema import inspect_dataset
+from piga.evaluation.evaluate import PARAMETER_NAMES
+from piga.training.report import write_run_report
+from piga.training.train import TrainConfig, train
 
 #: The fast preset before its budget was sized from the data: 16 epochs, 200 warm-up and 600 curriculum
 #: steps of the default file's 16 x 337, and the last epoch averaged.

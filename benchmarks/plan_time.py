@@ -9,7 +9,7 @@ planning; for the oracle, planning alone. The planner is the default one (CEM, 2
 Two more rows plan with the same agent over slower engines of the same physics, kept here as
 references: "piga, numpy operators" rolls the candidates with five in-place numpy operators per
 step and scores them with torch operators (the planner's engine before its compiled loop), and
-"piga, nn.Module engine" rolls them through :func:`piga.physics.rollout` on the model's own
+"piga, nn.Module engine" rolls them through :func:`piga.world.physics.rollout` on the model's own
 ``Pendulum`` module. The differences are the overhead removed; their success and return show
 that the planner's decisions did not change.
 
@@ -45,16 +45,16 @@ from torch import Tensor
 from common import machine
 from agents.dynamics import PendulumDynamics
 from agents.mpc import MPCConfig, OracleAgent, PigaMPCAgent
-from piga.atomic import atomic_output, write_json
+from piga.io.atomic import atomic_output, write_json
 from piga.baselines.agents import baseline_agent
-from piga.episodes import EpisodeConfig, run_episodes, summary_markdown
-from piga.model import PhysicsModel
-from piga.physics import rollout
-from piga.runs import load_model
+from piga.control.episodes import EpisodeConfig, run_episodes, summary_markdown
+from piga.world.model import PhysicsModel
+from piga.world.physics import rollout
+from piga.io.runs import load_model
 
 
 class ModuleDynamics:
-    """The reference: rollouts through :func:`piga.physics.rollout` and the model's ``Pendulum`` module
+    """The reference: rollouts through :func:`piga.world.physics.rollout` and the model's ``Pendulum`` module
     (model convention inside, Gymnasium's outside)."""
 
     def __init__(self, model: PhysicsModel):
@@ -173,7 +173,7 @@ def main() -> int:
         "agent, reading the state from the frames and planning; for the oracle, planning."
         + ("" if args.no_reference else " The reference rows plan with the same agent over slower engines of the same "
            "physics: five in-place numpy operators per step, scored with torch operators (\"numpy operators\"), and "
-           "`piga.physics.rollout` on the model's `Pendulum` module (\"nn.Module engine\").")
+           "`piga.world.physics.rollout` on the model's `Pendulum` module (\"nn.Module engine\").")
         + " The planner's own engine is one numba-compiled loop that rolls and scores.", "",
         summary_markdown(rows).rstrip(),
         *([] if ratio is None else [

@@ -34,7 +34,7 @@ from common import machine
 from agents.planet.config import LatentPlannerConfig, RSSMConfig
 from agents.planet.planner import PlanetAgent
 from agents.planet.rssm import WorldModel
-from piga.atomic import atomic_output, write_json
+from piga.io.atomic import atomic_output, write_json
 
 
 def measure(model: WorldModel, threads: int, steps: int, seed: int = 0) -> dict[str, object]:

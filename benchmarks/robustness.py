@@ -66,8 +66,8 @@ import h5py
 import numpy as np
 
 from common import machine
-from piga.atomic import atomic_output, write_json
-from piga.data import DatasetWriter
+from piga.io.atomic import atomic_output, write_json
+from piga.data.schema import DatasetWriter
 
 #: ``piga-collect --seed`` of every file: not the 100 that systems.py and train_accuracy.py check the recipe on.
 DATA_SEED = 200
@@ -222,8 +222,8 @@ def _option(row: Row, name: str) -> str | None:
 def file_shape(row: Row) -> tuple[int, int, int]:
     """(sequences, frames per sequence, image side) of the row's file: its options, else ``piga-collect``'s defaults."""
     from envs.scenes import scene_config
-    from piga.collect import CollectConfig
-    from piga.collect_scenes import SCENE_PRESETS, SCENE_STEPS
+    from piga.data.collect import CollectConfig
+    from piga.data.collect_scenes import SCENE_PRESETS, SCENE_STEPS
 
     if row.system == "pendulum":
         base = CollectConfig()
@@ -235,8 +235,8 @@ def file_shape(row: Row) -> tuple[int, int, int]:
 
 def recipe_windows(row: Row) -> tuple[int, Any, int]:
     """(L + T_pred, the recipe's TrainConfig, window stride) of the default recipe for the row's system."""
-    from piga.model import ModelConfig
-    from piga.train import PRESETS, SCENE_PRESETS, TrainConfig
+    from piga.world.model import ModelConfig
+    from piga.training.train import PRESETS, SCENE_PRESETS, TrainConfig
 
     recipe = PRESETS["fast"] if row.system == "pendulum" else SCENE_PRESETS[row.system]["fast"]
     train = TrainConfig(**recipe.get("train", {}))
@@ -253,7 +253,7 @@ def estimate_minutes(row: Row) -> dict[str, float]:
     if row.post.startswith("h264"):
         scale = int(_parse_post(row.post)[1]["scale"])
         data += n * (H264_S_PER_SEQUENCE + t * (scale * size) ** 2 * H264_S_PER_PIXEL) / 60
-    from piga.train import plan_training
+    from piga.training.train import plan_training
 
     window, config, stride = recipe_windows(row)
     windows = int(0.8 * n) * len(range(0, t - window + 1, stride))
@@ -350,7 +350,7 @@ def postprocess(source: Path, target: Path, spec: str, seed: int = DATA_SEED, ch
 
     Everything else is kept: ``/actions``, ``/states``, ``/rewards``, ``/split`` and every file
     attribute. The attr ``postprocess`` (JSON) says what was done, to which file, and with what.
-    The file is written atomically by :class:`piga.data.DatasetWriter`, in chunks of sequences.
+    The file is written atomically by :class:`piga.data.schema.DatasetWriter`, in chunks of sequences.
     """
     kind, params = _parse_post(spec)
     rng = np.random.default_rng(seed)
@@ -675,9 +675,9 @@ def object_errors(run_dir: Path, data: Path, metrics: dict[str, Any], system: st
         return {"angle_error_deg": error, "found": error < FOUND_DEG}
     import torch
 
-    from piga.data import load_states, read_sequences
-    from piga.model import frames_to_float
-    from piga.runs import load_model
+    from piga.data.schema import load_states, read_sequences
+    from piga.world.model import frames_to_float
+    from piga.io.runs import load_model
 
     torch.set_num_threads(1)
     model, _ = load_model(run_dir)

@@ -20,7 +20,7 @@ import gymnasium as gym
 import numpy as np
 
 from envs.pendulum import MAX_ACTION, PENDULUM_DT
-from piga.atomic import atomic_output, write_json
+from piga.io.atomic import atomic_output, write_json
 
 
 def fit(max_speed: float, sequences: int, steps: int, seed: int) -> dict[str, float]:

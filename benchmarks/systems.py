@@ -39,12 +39,12 @@ from typing import Any
 from common import machine
 
 from envs.scenes import scene_config
-from piga.atomic import write_json
-from piga.collect_scenes import SCENE_PRESETS as DATA_PRESETS
-from piga.collect_scenes import SCENE_STEPS, SceneCollectConfig, collect_scene
-from piga.data import inspect_dataset
-from piga.report import write_run_report
-from piga.train import TrainConfig, preset_for, train
+from piga.io.atomic import write_json
+from piga.data.collect_scenes import SCENE_PRESETS as DATA_PRESETS
+from piga.data.collect_scenes import SCENE_STEPS, SceneCollectConfig, collect_scene
+from piga.data.schema import inspect_dataset
+from piga.training.report import write_run_report
+from piga.training.train import TrainConfig, preset_for, train
 
 #: Case -> the paper's learned values (its Table 1; none for bouncing). A case is a system, or
 #: "gravity-m": the gravity data with g held at the collection's value and the mass m learned
@@ -109,9 +109,9 @@ def _run(case: str, seed: int, data: Path, folder: Path, overrides: dict[str, An
     """
     import json
 
-    from piga.evaluate import EvalConfig
-    from piga.runs import load_model
-    from piga.train import TrainState
+    from piga.evaluation.evaluate import EvalConfig
+    from piga.io.runs import load_model
+    from piga.training.train import TrainState
 
     run_dir = folder / f"{name or case}-seed{seed}"
     metrics_path = run_dir / "metrics.json"
@@ -145,9 +145,9 @@ def _check_recipe(run_dir: Path, info: Any, model_overrides: dict[str, Any]) -> 
     (T_ext aside: only evaluation uses it, and :func:`_run` re-evaluates)."""
     import torch
 
-    from piga.train import model_config_for
+    from piga.training.train import model_config_for
 
-    from piga.model import ModelConfig
+    from piga.world.model import ModelConfig
 
     saved = {**ModelConfig().to_dict(),  # a field newer than the run: the run had its default
              **torch.load(run_dir / "checkpoint.pt", map_location="cpu", weights_only=False)["model_config"]}
@@ -291,7 +291,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--heldout", action="store_true",
                    help="also train once (seed 0) on each held-out data set of HELDOUT and add its table")
     args = p.parse_args(argv)
-    from piga.plots import save_figure
+    from piga.evaluation.plots import save_figure
 
     args.work.mkdir(parents=True, exist_ok=True)
     args.out.parent.mkdir(parents=True, exist_ok=True)
@@ -322,7 +322,7 @@ def main(argv: list[str] | None = None) -> int:
                 for n, e in run["metrics"]["parameter_errors"].items()), flush=True)
             write_json(args.out.with_suffix(".json"), record)
     save_figure(ssim_figure(record["summary"]), args.out.parent / f"{args.out.name}-ssim.png")
-    from piga.atomic import atomic_output
+    from piga.io.atomic import atomic_output
 
     text = markdown(record, args.out) + ("\n" + heldout_markdown(record) if args.heldout else "")
     with atomic_output(args.out.with_suffix(".md"), overwrite=True) as tmp:

@@ -25,13 +25,13 @@ from pathlib import Path
 
 
 from common import machine
-from piga.atomic import atomic_output
-from piga.collect import CollectConfig, collect
-from piga.convergence import check_convergence
-from piga.evaluate import EvalConfig, evaluate
-from piga.atomic import write_json
-from piga.model import ModelConfig
-from piga.train import PRESETS, TrainConfig, train
+from piga.io.atomic import atomic_output
+from piga.data.collect import CollectConfig, collect
+from piga.training.convergence import check_convergence
+from piga.evaluation.evaluate import EvalConfig, evaluate
+from piga.io.atomic import write_json
+from piga.world.model import ModelConfig
+from piga.training.train import PRESETS, TrainConfig, train
 
 #: case name -> (gravity, actuation gain, data seed)
 CASES: dict[str, tuple[float, float, int]] = {

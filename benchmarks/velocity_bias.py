@@ -26,10 +26,10 @@ import torch
 from common import machine
 
 from envs.scenes import draw_start, scene_config
-from piga.atomic import atomic_output, write_json
-from piga.collect import sequence_rng
-from piga.collect_scenes import SCENE_STEPS
-from piga.model import ModelConfig, PhysicsModel
+from piga.io.atomic import atomic_output, write_json
+from piga.data.collect import sequence_rng
+from piga.data.collect_scenes import SCENE_STEPS
+from piga.world.model import ModelConfig, PhysicsModel
 
 SCENES = ("spring", "gravity", "digits-spring")
 MODES = {"cubic": {"velocity_physics": True}, "shoot": {"velocity_shoot": True}}

@@ -12,7 +12,7 @@ a start whose trajectory touches a wall (or, for gravity, brings two balls withi
 within the sequence is redrawn, so the force-only systems never meet a wall. Bouncing balls do not
 collide with each other (as in the published engine); they pass through each other.
 
-Conventions (those of :mod:`piga.physics` and the decoder): positions are in pixels, x to the right,
+Conventions (those of :mod:`piga.world.physics` and the decoder): positions are in pixels, x to the right,
 y down, the origin at the top-left corner of the image, and pixel i covers [i, i + 1]. Every object
 has unit mass. The simulation takes ``substeps`` semi-implicit Euler steps per frame (10, as the
 generators), each ``v <- v + h·a(p)``, ``p <- p + h·v``.
@@ -54,7 +54,7 @@ class SceneConfig:
     scene: str
     """One of :data:`SCENES`."""
     physics: str
-    """The force family, a :mod:`piga.physics` system name: "bouncing", "spring" or "gravity"."""
+    """The force family, a :mod:`piga.world.physics` system name: "bouncing", "spring" or "gravity"."""
     image_size: int
     """H = W, pixels."""
     n_objects: int

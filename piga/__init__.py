@@ -13,7 +13,7 @@ and h5py are imported only when a name that needs them is used)::
     theta = model.encode(x)  # (N, 4, 1, 1): the angle read from each frame
     future = model.predict(theta, torch.from_numpy(actions[:, 3:13]), steps=10)  # (N, 10, 1, 1)
 
-The modules (``piga.collect``, ``piga.train``, ``piga.data``, ...) are importable as attributes
+The modules (``piga.data.collect``, ``piga.training.train``, ``piga.data.schema``, ...) are importable as attributes
 too, and hold the details.
 """
 
@@ -27,20 +27,20 @@ __version__ = "0.1.0"
 #: Public name -> the module that defines it.
 _API: dict[str, str] = {
     # runs and the model
-    "load_model": "piga.runs",
-    "PhysicsModel": "piga.model",
-    "ModelConfig": "piga.model",
-    "frames_to_float": "piga.model",
-    "rollout": "piga.physics",
+    "load_model": "piga.io.runs",
+    "PhysicsModel": "piga.world.model",
+    "ModelConfig": "piga.world.model",
+    "frames_to_float": "piga.world.model",
+    "rollout": "piga.world.physics",
     # data
-    "CollectConfig": "piga.collect",
-    "TrainConfig": "piga.train",
-    "inspect_dataset": "piga.data",
-    "read_sequences": "piga.data",
-    "load_states": "piga.data",
-    "DatasetInfo": "piga.data",
-    "DataFormatError": "piga.data",
-    "SequenceWindows": "piga.windows",
+    "CollectConfig": "piga.data.collect",
+    "TrainConfig": "piga.training.train",
+    "inspect_dataset": "piga.data.schema",
+    "read_sequences": "piga.data.schema",
+    "load_states": "piga.data.schema",
+    "DatasetInfo": "piga.data.schema",
+    "DataFormatError": "piga.data.schema",
+    "SequenceWindows": "piga.data.windows",
     # environments
     "make_pixel_pendulum": "envs.pendulum",
     "PixelPendulumConfig": "envs.pendulum",
@@ -53,17 +53,17 @@ __all__ = ["__version__", *_API]
 if TYPE_CHECKING:  # for type checkers and IDEs; at run time the names load lazily (__getattr__)
     from envs.dmc import DMCPendulumConfig, make_dmc_pendulum
     from envs.pendulum import PixelPendulumConfig, make_pixel_pendulum
-    from piga.collect import CollectConfig
-    from piga.data import DataFormatError, DatasetInfo, inspect_dataset, load_states, read_sequences
-    from piga.model import ModelConfig, PhysicsModel, frames_to_float
-    from piga.physics import rollout
-    from piga.runs import load_model
-    from piga.train import TrainConfig
-    from piga.windows import SequenceWindows
+    from piga.data.collect import CollectConfig
+    from piga.data.schema import DataFormatError, DatasetInfo, inspect_dataset, load_states, read_sequences
+    from piga.world.model import ModelConfig, PhysicsModel, frames_to_float
+    from piga.world.physics import rollout
+    from piga.io.runs import load_model
+    from piga.training.train import TrainConfig
+    from piga.data.windows import SequenceWindows
 
 
 def __getattr__(name: str) -> Any:
-    """Loads a public name, or a submodule (``piga.collect``, ``piga.train``, ...), on first use."""
+    """Loads a public name, or a submodule (``piga.data.collect``, ``piga.training.train``, ...), on first use."""
     if name in _API:
         value = getattr(importlib.import_module(_API[name]), name)
         globals()[name] = value

@@ -20,7 +20,7 @@ if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
 @pytest.fixture(scope="session")
 def tiny_data(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """12 pendulum sequences x 16 frames, seed 3 (split 8/2/2)."""
-    from piga.collect import CollectConfig, collect
+    from piga.data.collect import CollectConfig, collect
 
     path = tmp_path_factory.mktemp("data") / "tiny.h5"
     collect(CollectConfig(sequences=12, steps=16, seed=3, workers=1, split=(8, 2, 2)), path, progress=False, command="test")

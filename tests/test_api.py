@@ -30,10 +30,10 @@ def test_every_public_name_resolves(name: str) -> None:
 
 
 def test_submodules_are_attributes_and_a_wrong_name_is_an_attribute_error() -> None:
-    import piga.data
+    import piga.data.schema
 
-    assert piga.data.inspect_dataset is piga.inspect_dataset
-    assert piga.collect.collect is not None  # a submodule, imported on first use
+    assert piga.data.schema.inspect_dataset is piga.inspect_dataset
+    assert piga.data.collect.collect is not None  # a submodule, imported on first use
     with pytest.raises(AttributeError, match="no attribute 'no_such_name'"):
         piga.no_such_name  # noqa: B018
 

@@ -14,7 +14,7 @@ from piga.baselines.autoencoder import (
     load_autoencoder,
     train_autoencoder,
 )
-from piga.data import read_sequences
+from piga.data.schema import read_sequences
 
 
 def test_codes_carry_the_pendulum_instead_of_collapsing_to_the_mean_frame(tiny_data: Path, tmp_path: Path) -> None:

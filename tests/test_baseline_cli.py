@@ -182,8 +182,8 @@ def test_control_jobs_dispatch_on_the_run_kind(planet_run: Path, ddpg_run: Path)
     from agents.planet.planner import PlanetAgent
     from piga.baselines.ddpg import DDPGAgent
     from piga.baselines.kinds import run_kind
-    from piga.episodes import EpisodeConfig
-    from piga.jobs import ControlJob, build_agent, run_job
+    from piga.control.episodes import EpisodeConfig
+    from piga.control.jobs import ControlJob, build_agent, run_job
 
     assert (run_kind(planet_run), run_kind(ddpg_run)) == ("planet", "ddpg")
     episodes = EpisodeConfig(episodes=1, steps=2, hold_steps=1)
@@ -196,8 +196,8 @@ def test_control_jobs_dispatch_on_the_run_kind(planet_run: Path, ddpg_run: Path)
 
 
 def test_episodes_split_over_workers_are_the_episodes_of_one_process(planet_run: Path) -> None:
-    from piga.episodes import EpisodeConfig
-    from piga.jobs import ControlJob, run_job, run_split, split_job
+    from piga.control.episodes import EpisodeConfig
+    from piga.control.jobs import ControlJob, run_job, run_split, split_job
 
     job = ControlJob("planet", EpisodeConfig(episodes=3, steps=4, hold_steps=1, seed=2, frame_stack=1), model_dir=str(planet_run))
     assert [(j.episodes.first_episode, j.episodes.episodes) for j in split_job(job, 2)] == [(0, 2), (2, 1)]

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from piga.atomic import write_json
+from piga.io.atomic import write_json
 
 ROOT = Path(__file__).resolve().parents[1]
 

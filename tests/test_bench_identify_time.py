@@ -10,7 +10,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 
 import identify_time  # noqa: E402
-from piga.train import TrainConfig, plan_training  # noqa: E402
+from piga.training.train import TrainConfig, plan_training  # noqa: E402
 
 
 def test_before_is_the_old_fast_recipe_on_the_default_file() -> None:

@@ -13,7 +13,7 @@ import h5py
 import numpy as np
 import pytest
 
-from piga.data import inspect_dataset
+from piga.data.schema import inspect_dataset
 
 from .helpers import ENV, run
 
@@ -35,7 +35,7 @@ def bench():
 def spring_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """6 spring sequences x 8 frames (colour, 32 px, with /states)."""
     from envs.scenes import scene_config
-    from piga.collect_scenes import SceneCollectConfig, collect_scene
+    from piga.data.collect_scenes import SceneCollectConfig, collect_scene
 
     path = tmp_path_factory.mktemp("spring") / "spring.h5"
     collect_scene(SceneCollectConfig(scene=scene_config("spring"), sequences=6, steps=8, seed=1, workers=1, split=(4, 1, 1)),

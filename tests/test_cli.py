@@ -12,7 +12,7 @@ from pathlib import Path
 import h5py
 import pytest
 
-from piga.data import inspect_dataset
+from piga.data.schema import inspect_dataset
 from tests.helpers import ENV, assert_one_line, assert_one_line_error, run, run_in_process
 
 
@@ -153,8 +153,8 @@ def test_sizes_that_cannot_fit_are_refused_before_allocating(tmp_path: Path, arg
 def test_existing_output_is_refused_before_any_setup(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     import gymnasium as gym
 
-    from piga.atomic import OutputExistsError
-    from piga.collect import CollectConfig, collect
+    from piga.io.atomic import OutputExistsError
+    from piga.data.collect import CollectConfig, collect
 
     def no_envs(*args: object, **kwargs: object) -> None:
         raise AssertionError("envs were made before the output was checked")

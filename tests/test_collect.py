@@ -8,8 +8,8 @@ import h5py
 import numpy as np
 import pytest
 
-from piga.collect import PAPER_MAX_SPEED, PRESETS, CollectConfig, collect, split_counts
-from piga.data import inspect_dataset
+from piga.data.collect import PAPER_MAX_SPEED, PRESETS, CollectConfig, collect, split_counts
+from piga.data.schema import inspect_dataset
 from tests.helpers import run_in_process
 
 
@@ -49,7 +49,7 @@ def test_contents_match_the_schema(tiny_data: Path) -> None:
 
 
 def test_rewards_are_gymnasiums_for_the_action_after_each_frame(tiny_data: Path) -> None:
-    from piga.data import load_rewards
+    from piga.data.schema import load_rewards
 
     assert inspect_dataset(tiny_data).has_rewards
     a = _arrays(tiny_data)

@@ -14,17 +14,17 @@ import pytest
 import torch
 
 from agents.mpc import MPCConfig, OracleAgent, PigaMPCAgent
-from piga.episodes import EpisodeConfig, run_episodes
-from piga.goal import load_scene_image, render_goal_image
-from piga.model import ModelConfig, PhysicsModel
+from piga.control.episodes import EpisodeConfig, run_episodes
+from piga.control.goal import load_scene_image, render_goal_image
+from piga.world.model import ModelConfig, PhysicsModel
 from tests.helpers import ENV, assert_one_line_error, run, train_tiny
 
 
 @pytest.mark.parametrize("substeps", [1, 5])
 def test_planning_dynamics_roll_like_the_physics_module(substeps: int) -> None:
-    """The planner's plain-array engine follows piga.physics.rollout (model convention + φ = Gymnasium's)."""
+    """The planner's plain-array engine follows piga.world.physics.rollout (model convention + φ = Gymnasium's)."""
     from agents.dynamics import PendulumDynamics
-    from piga.physics import Euler, Pendulum, rollout
+    from piga.world.physics import Euler, Pendulum, rollout
 
     system = Pendulum(g=9.3, a=1.2, dt=0.05, offset=0.4, length=1.1, mass=0.9, learnable=False)
     actions = torch.rand(50, 20, 1, generator=torch.Generator().manual_seed(0)) * 4 - 2
@@ -190,7 +190,7 @@ def test_oracle_holds_a_tilted_goal_from_hanging() -> None:
 
 
 def test_parse_range() -> None:
-    from piga.episodes import parse_range
+    from piga.control.episodes import parse_range
 
     assert parse_range("0.5:1.8:0.1") == [round(0.5 + 0.1 * i, 10) for i in range(14)]
     assert parse_range("1:1:0.5") == [1.0]
@@ -200,7 +200,7 @@ def test_parse_range() -> None:
 
 
 def test_summary_markdown_has_a_row_per_summary() -> None:
-    from piga.episodes import summary_markdown
+    from piga.control.episodes import summary_markdown
 
     s = {"agent": "oracle", "gravity_mult": 1.0, "goal_angle": 0.0, "episodes": 2, "success_rate": 0.5, "mean_return": -200.0,
          "final_angle_error_mean": 0.01, "time_to_goal_steps_median": None, "plan_ms_median": 9.0, "plan_ms_p95": 12.0}
@@ -220,7 +220,7 @@ def test_agents_import_nothing_from_diagnostics() -> None:
 
     code = ("import pkgutil, importlib, sys, agents\n"
             "for m in pkgutil.iter_modules(agents.__path__): importlib.import_module('agents.' + m.name)\n"
-            "print(sorted(m for m in sys.modules if m.startswith(('piga.diagnostics', 'piga.train', 'piga.episodes', 'piga.jobs'))))")
+            "print(sorted(m for m in sys.modules if m.startswith(('piga.diagnostics', 'piga.training.train', 'piga.control.episodes', 'piga.control.jobs'))))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]"
 
@@ -343,8 +343,8 @@ def test_goal_image_that_is_not_the_scene_is_refused(control_model: Path, tmp_pa
     """White, black or noise is refused whatever the model's training; a render of the scene is read."""
     import imageio.v3 as iio
 
-    from piga.goal import NotTheSceneError, goal_from_image, scene_mismatch
-    from piga.runs import load_model
+    from piga.control.goal import NotTheSceneError, goal_from_image, scene_mismatch
+    from piga.io.runs import load_model
 
     model, ckpt = load_model(control_model)  # one epoch: its own re-rendering check means nothing
     rng = np.random.default_rng(0)
@@ -376,9 +376,9 @@ def test_a_job_with_a_correction_plans_and_reads_with_it(control_model: Path) ->
     import pickle
 
     from piga.diagnostics import fit
-    from piga.diagnostics.corrected import CameraReader, CorrectedDynamics, Correction
+    from piga.control.corrected import CameraReader, CorrectedDynamics, Correction
     from piga.diagnostics.vision import Camera
-    from piga.jobs import ControlJob, build_agent, run_job
+    from piga.control.jobs import ControlJob, build_agent, run_job
 
     correction = Correction(fit.Model(("damping",), 0, {"g": 9.0, "a": 1.1, "b": 0.2}), Camera(blur=1.0))
     job = ControlJob("piga", EpisodeConfig(episodes=1, steps=20, gravity_mult=1.4), MPCConfig(), str(control_model),

@@ -13,8 +13,8 @@ import pytest
 import torch
 from torch.utils.data import DataLoader
 
-from piga.data import DataFormatError, DatasetWriter, inspect_dataset, load_states, read_sequences, split_indices
-from piga.windows import SequenceWindows, Window
+from piga.data.schema import DataFormatError, DatasetWriter, inspect_dataset, load_states, read_sequences, split_indices
+from piga.data.windows import SequenceWindows, Window
 
 
 def _write(path: Path, n: int = 6, t: int = 5, colour: bool = False, states: bool = True) -> dict[str, np.ndarray]:
@@ -85,7 +85,7 @@ def test_load_states_needs_states(tmp_path: Path) -> None:
 
 
 def test_rewards_are_optional_and_checked(tmp_path: Path) -> None:
-    from piga.data import load_rewards
+    from piga.data.schema import load_rewards
 
     path = tmp_path / "d.h5"
     _write(path)

@@ -79,7 +79,7 @@ def test_a_pixel_policy_runs_in_piga_episodes_with_sb3s_stacking(tmp_path: Path)
     from stable_baselines3.common.vec_env import DummyVecEnv, VecFrameStack
 
     from piga.baselines.ddpg import DDPGAgent, train_ddpg
-    from piga.episodes import EpisodeConfig, run_episodes
+    from piga.control.episodes import EpisodeConfig, run_episodes
 
     config = replace(TINY, obs="pixels", steps=200, learning_starts=150, batch_size=4)
     train_ddpg(config, tmp_path / "run", progress=False)
@@ -103,7 +103,7 @@ def test_a_pixel_policy_runs_in_piga_episodes_with_sb3s_stacking(tmp_path: Path)
 def test_a_latent_run_trains_on_its_autoencoders_codes_and_records_its_cost(tiny_data: Path, tmp_path: Path) -> None:
     from piga.baselines.autoencoder import AutoencoderConfig, train_autoencoder
     from piga.baselines.ddpg import DDPGAgent, train_ddpg
-    from piga.episodes import EpisodeConfig, run_episodes
+    from piga.control.episodes import EpisodeConfig, run_episodes
 
     run = tmp_path / "run"
     run.mkdir()

@@ -1,4 +1,4 @@
-"""Tests of piga.decoder: shapes, coordinate consistency (the property that matters), gradients."""
+"""Tests of piga.world.decoder: shapes, coordinate consistency (the property that matters), gradients."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import math
 import pytest
 import torch
 
-from piga.decoder import Decoder, DecoderConfig
+from piga.world.decoder import Decoder, DecoderConfig
 
 
 def _pixel_centres(size: int) -> tuple[torch.Tensor, torch.Tensor]:

@@ -15,7 +15,7 @@ import torch
 from piga.diagnostics import DiagnoseConfig, Observations, analyse, fit
 from piga.diagnostics.diagnose import UNITS, clip_binding, clip_supported, select
 from piga.diagnostics.report import markdown
-from piga.runs import Nominal
+from piga.io.runs import Nominal
 from tests.test_diagnose_continuous import DT, planted_within_frame
 from tests.test_diagnostics import NOMINAL, planted
 
@@ -203,8 +203,8 @@ def test_damping_is_reported_in_one_over_seconds() -> None:
 
 def test_the_nominal_model_carries_its_damping_and_integrator() -> None:
     """(d) nominal_of keeps a learned b and RK4, and the diagnosis' engine integrates them as the model does."""
-    from piga.model import ModelConfig, PhysicsModel
-    from piga.physics import RK4, Pendulum, rollout
+    from piga.world.model import ModelConfig, PhysicsModel
+    from piga.world.physics import RK4, Pendulum, rollout
 
     model = PhysicsModel(ModelConfig(dt=0.04, integrator="rk4", substeps=2, learn_damping=True, damping_init=0.07,
                                      image_size=16))

@@ -14,7 +14,7 @@ from piga.diagnostics import DiagnoseConfig, Observations, analyse
 from piga.diagnostics.diagnose import clip_supported
 from piga.diagnostics.observe import from_gymnasium
 from piga.diagnostics.report import markdown
-from piga.runs import Nominal
+from piga.io.runs import Nominal
 
 TRUTH = {"g": 13.03, "a": 1.328, "b": 0.1328}  # dm_control's pendulum in piga's form
 DT = 0.04

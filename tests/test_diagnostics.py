@@ -13,7 +13,7 @@ import torch
 from envs.pendulum import PixelPendulumConfig, make_pixel_pendulum
 from piga.diagnostics import DiagnoseConfig, Observations, analyse
 from piga.diagnostics import fit
-from piga.runs import Nominal
+from piga.io.runs import Nominal
 from tests.helpers import assert_one_line_error, run, train_tiny
 
 NOMINAL = Nominal(g=10.0, a=1.0, offset=0.0, dt=0.05)
@@ -133,7 +133,7 @@ def untrained_model(tiny_data: Path, tmp_path_factory: pytest.TempPathFactory) -
 @pytest.fixture(scope="module")
 def damped_data(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """24 sequences x 16 frames of a pendulum with damping 0.3 (split 16/4/4)."""
-    from piga.collect import CollectConfig, collect
+    from piga.data.collect import CollectConfig, collect
 
     path = tmp_path_factory.mktemp("real") / "real.h5"
     collect(CollectConfig(sequences=24, steps=16, seed=5, workers=1, split=(16, 4, 4),
@@ -142,7 +142,7 @@ def damped_data(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def test_cli_bad_inputs(tiny_model: Path, tiny_data: Path, tmp_path: Path) -> None:
-    from piga.collect import CollectConfig, collect
+    from piga.data.collect import CollectConfig, collect
 
     out = str(tmp_path / "report")
     assert_one_line_error(run("piga-diagnose", "--model", str(tmp_path / "nope"), "--data", str(tiny_data), "--out", out),
@@ -159,7 +159,7 @@ def test_cli_bad_inputs(tiny_model: Path, tiny_data: Path, tmp_path: Path) -> No
 
 def test_corrected_dynamics_roll_the_corrected_physics() -> None:
     from agents.dynamics import PendulumDynamics
-    from piga.diagnostics.corrected import CorrectedDynamics
+    from piga.control.corrected import CorrectedDynamics
 
     actions = torch.rand(6, 10, 1) * 4 - 2
     true = PendulumDynamics(10.0, 1.0, NOMINAL.dt)
@@ -282,8 +282,8 @@ def test_a_limit_is_reported_where_the_physics_holds_it() -> None:
 
 
 def test_the_diagnosis_engine_is_the_model_engine_without_effects() -> None:
-    """fit.simulate with no effect and piga.physics.Pendulum + Euler integrate the same equations."""
-    from piga.physics import Euler, Pendulum, rollout
+    """fit.simulate with no effect and piga.world.physics.Pendulum + Euler integrate the same equations."""
+    from piga.world.physics import Euler, Pendulum, rollout
 
     nominal = Nominal(g=9.3, a=1.2, offset=0.25, dt=0.05, substeps=2)
     rng = np.random.default_rng(0)
@@ -383,9 +383,9 @@ def test_a_video_of_constant_frames_is_refused_with_a_reason(tiny_model: Path, d
 
 def test_the_smallest_default_file_is_accepted(tmp_path: Path) -> None:
     """20 sequences at piga-collect's default split (16, 2, 2) are what the docs name as the minimum."""
-    from piga.collect import CollectConfig, collect
+    from piga.data.collect import CollectConfig, collect
     from piga.diagnostics.observe import DiagnosisInputError, check_compatible
-    from piga.model import ModelConfig, PhysicsModel
+    from piga.world.model import ModelConfig, PhysicsModel
 
     data = tmp_path / "twenty.h5"
     collect(CollectConfig(sequences=20, steps=12, seed=3, workers=1), data, progress=False, command="t")

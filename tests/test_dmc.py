@@ -128,7 +128,7 @@ def test_length_variant_moves_the_tip_in_the_picture():
 @needs_dmc
 def test_collect_from_the_dmc_env(tmp_path):
     from piga.cli.collect import main
-    from piga.data import inspect_dataset, load_states
+    from piga.data.schema import inspect_dataset, load_states
 
     out = tmp_path / "dmc.h5"
     assert main(["--env", "piga/DMCPendulum-v0", "--out", str(out), "--sequences", "2", "--steps", "5",

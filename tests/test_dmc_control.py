@@ -11,7 +11,7 @@ import torch
 
 from agents.swingup import DampedPendulumDynamics, SwingUpPlanner
 from envs.dmc import DMCPendulumConfig
-from piga.physics import RK4, Pendulum, rollout
+from piga.world.physics import RK4, Pendulum, rollout
 from tests.helpers import assert_one_line_error, run
 from tests.test_dmc import needs_dmc
 

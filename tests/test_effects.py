@@ -23,7 +23,7 @@ from envs.effects import (
     ViscousDamping,
     normalize_effects,
 )
-from piga.collect import CollectConfig, collect
+from piga.data.collect import CollectConfig, collect
 from tests.helpers import run_in_process
 
 DT, G = 0.05, 10.0

@@ -7,8 +7,8 @@ import math
 import pytest
 import torch
 
-from piga.encoder import Encoder, EncoderConfig, estimate_background
-from piga.velocity import VelocityConfig, VelocityEstimator, wrap_angle
+from piga.world.encoder import Encoder, EncoderConfig, estimate_background
+from piga.world.velocity import VelocityConfig, VelocityEstimator, wrap_angle
 
 
 def _rod_image(theta: float, size: int = 64, length: float = 14.0) -> torch.Tensor:

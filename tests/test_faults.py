@@ -96,7 +96,7 @@ def files(tiny_data: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[str
     """``tiny_data`` (12 pendulum sequences x 16 frames) and its faulty variants, by name; "balls5":
     a spring scene whose ``n_objects`` says 5 for its 2 balls."""
     from envs.scenes import scene_config
-    from piga.collect_scenes import SceneCollectConfig, collect_scene
+    from piga.data.collect_scenes import SceneCollectConfig, collect_scene
 
     root = tmp_path_factory.mktemp("faults")
     made = {"tiny": tiny_data, **{name: _variant(tiny_data, root / f"{name}.h5", edit) for name, edit in VARIANTS.items()}}
@@ -225,7 +225,7 @@ def test_collect_into_a_path_through_a_file_names_the_file(tmp_path: Path, capsy
 
 
 def test_blank_frames_are_never_kept(tmp_path: Path) -> None:
-    from piga.data import DataFormatError, DatasetWriter
+    from piga.data.schema import DataFormatError, DatasetWriter
 
     with pytest.raises(DataFormatError, match="every frame is blank"):
         with DatasetWriter(tmp_path / "d.h5", 2, 3, (8, 8), 1, None, {"system": "x", "dt": 1.0}) as writer:
@@ -469,7 +469,7 @@ def test_holdable_range_is_one_value() -> None:
     """The README's holdable range and the goal-image warning's come from the same computed angle."""
     import re
 
-    from piga.goal import HOLDABLE_ANGLE, holdable_angle
+    from piga.control.goal import HOLDABLE_ANGLE, holdable_angle
 
     assert HOLDABLE_ANGLE == holdable_angle(10.0, 1.0) == math.asin(0.4)
     root = Path(__file__).parents[1]
@@ -481,7 +481,7 @@ def test_holdable_range_is_one_value() -> None:
 
 def test_video_on_a_full_disk_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str],
                                           monkeypatch: pytest.MonkeyPatch) -> None:
-    from piga.video import panels_video
+    from piga.evaluation.video import panels_video
 
     _full_disk(monkeypatch)
 
@@ -532,7 +532,7 @@ def test_train_model_refuses_data_on_open(data: str, needles: list[str], files: 
 
 
 def test_n_objects_must_agree_with_the_states(files: dict[str, Path], tmp_path: Path) -> None:
-    from piga.data import DataFormatError, inspect_dataset
+    from piga.data.schema import DataFormatError, inspect_dataset
 
     def edit(f: h5py.File) -> None:
         f.attrs["n_objects"] = 5
@@ -545,7 +545,7 @@ def test_n_objects_must_agree_with_the_states(files: dict[str, Path], tmp_path: 
 
 
 def test_an_empty_split_reads_as_no_sequences(tiny_data: Path, tmp_path: Path) -> None:
-    from piga.data import load_states, read_sequences
+    from piga.data.schema import load_states, read_sequences
 
     path = _variant(tiny_data, tmp_path / "all_train.h5", lambda f: f["split"].__setitem__(slice(None), 0))
     frames, actions = read_sequences(path, "test")

@@ -10,12 +10,12 @@ import torch
 
 from envs.scenes import draw_start, scene_config
 from piga.cli.train import main as train_main
-from piga.collect_scenes import SceneCollectConfig, collect_scene
-from piga.data import inspect_dataset
-from piga.evaluate import parameter_errors
-from piga.model import ModelConfig, PhysicsModel
-from piga.physics import Euler, Gravity, rollout
-from piga.train import model_config_for, preset_for
+from piga.data.collect_scenes import SceneCollectConfig, collect_scene
+from piga.data.schema import inspect_dataset
+from piga.evaluation.evaluate import parameter_errors
+from piga.world.model import ModelConfig, PhysicsModel
+from piga.world.physics import Euler, Gravity, rollout
+from piga.training.train import model_config_for, preset_for
 from tests.helpers import assert_one_line, run_in_process
 
 

@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 
 from piga.cli import importer as cli
-from piga.collect import CollectConfig, collect
-from piga.data import inspect_dataset, read_sequences
-from piga.importer import ImportConfig, import_recording, read_actions, read_recording
-from piga.scene import scene_to_gray
+from piga.data.collect import CollectConfig, collect
+from piga.data.schema import inspect_dataset, read_sequences
+from piga.data.importer import ImportConfig, import_recording, read_actions, read_recording
+from piga.data.scene import scene_to_gray
 from tests.helpers import ENV, assert_one_line, assert_one_line_error, run_in_process
 
 PROG = "piga-import"

@@ -1,4 +1,4 @@
-"""Integration within the frame (piga/physics.py): RK4 and the velocity read through the
+"""Integration within the frame (piga/world/physics.py): RK4 and the velocity read through the
 integrator, against a fine-step reference of the continuous pendulum with a held action."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ import math
 import pytest
 import torch
 
-from piga.physics import RK4, Euler, Pendulum, hold_velocity, make_integrator, rollout
+from piga.world.physics import RK4, Euler, Pendulum, hold_velocity, make_integrator, rollout
 
 DT = 0.04
 
@@ -95,8 +95,8 @@ def test_make_integrator_names():
 
 
 def test_continuous_preset_model_reads_velocity_through_its_integrator():
-    from piga.model import ModelConfig, PhysicsModel
-    from piga.train import PRESETS
+    from piga.world.model import ModelConfig, PhysicsModel
+    from piga.training.train import PRESETS
 
     config = ModelConfig(dt=DT, **PRESETS["continuous"]["model"])
     model = PhysicsModel(config)
@@ -155,7 +155,7 @@ def test_continuous_models_are_refused_by_the_planner_and_carried_by_the_diagnos
     (its candidates are effects on top of them)."""
     from agents.dynamics import PendulumDynamics
     from piga.diagnostics import nominal_of
-    from piga.model import ModelConfig, PhysicsModel
+    from piga.world.model import ModelConfig, PhysicsModel
 
     model = PhysicsModel(ModelConfig(**fields))
     with pytest.raises(ValueError, match="preset continuous"):
@@ -168,8 +168,8 @@ def test_continuous_models_are_refused_by_the_planner_and_carried_by_the_diagnos
 
 
 def test_parameter_errors_compare_a_with_the_signed_truth_of_a_flipped_file() -> None:
-    from piga.evaluate import parameter_errors
-    from piga.model import ModelConfig, PhysicsModel
+    from piga.evaluation.evaluate import parameter_errors
+    from piga.world.model import ModelConfig, PhysicsModel
 
     model = PhysicsModel(ModelConfig(image_size=32, signed_actuation=True))
     model.system.set_parameters(a=-1.3)

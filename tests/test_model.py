@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 import torch
 
-from piga.model import ModelConfig, PhysicsModel, frames_to_float
+from piga.world.model import ModelConfig, PhysicsModel, frames_to_float
 
 
 @pytest.mark.parametrize("rec_frames", ["all", "input"])

@@ -1,4 +1,4 @@
-"""Tests of piga.physics: against Gymnasium's own step, closed forms, gradcheck, and validation."""
+"""Tests of piga.world.physics: against Gymnasium's own step, closed forms, gradcheck, and validation."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import pytest
 import torch
 from torch import Tensor, nn
 
-from piga.physics import (
+from piga.world.physics import (
     SYSTEMS,
     Bouncing,
     Euler,

@@ -84,7 +84,7 @@ def test_training_writes_a_run_and_resumes_exactly(tiny_data: Path, tmp_path: Pa
 
 def test_nan_stops_and_names_the_last_good_checkpoint(tiny_data: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     from piga.baselines.planet import train_planet
-    from piga.train import TrainingDiverged
+    from piga.training.train import TrainingDiverged
 
     original = WorldModel.loss
     calls = []
@@ -101,7 +101,7 @@ def test_nan_stops_and_names_the_last_good_checkpoint(tiny_data: Path, tmp_path:
 
 def test_a_file_without_rewards_is_refused(tiny_data: Path, tmp_path: Path) -> None:
     from piga.baselines.planet import check_planet_data
-    from piga.data import DataFormatError, inspect_dataset
+    from piga.data.schema import DataFormatError, inspect_dataset
     from tests.helpers import copy_without
 
     path = copy_without(tiny_data, tmp_path / "no_rewards.h5", "rewards")
@@ -137,7 +137,7 @@ def test_action_repeat_holds_each_planned_action_for_r_steps(tiny_data: Path) ->
     assert agent.previous.tolist() == [[acted[6]] * 3]  # the next frame read follows the action held since the last
     agent.reset()
     assert np.array_equal(np.concatenate([agent.act(f) for f in stream]), acted)
-    from piga.episodes import EpisodeConfig, run_episodes
+    from piga.control.episodes import EpisodeConfig, run_episodes
 
     result = run_episodes(agent, EpisodeConfig(episodes=1, steps=7, hold_steps=1, frame_stack=1), keep_plan_ms=True)
     assert len(result["episodes"][0]["plan_ms"]) == 3  # timed where it planned: steps 0, 3 and 6
@@ -194,7 +194,7 @@ def test_iterative_rounds_append_collected_episodes_and_leave_the_data_file_alon
     import hashlib
     import json
 
-    from piga.data import inspect_dataset, load_rewards, read_sequences
+    from piga.data.schema import inspect_dataset, load_rewards, read_sequences
 
     digest = hashlib.sha256(tiny_data.read_bytes()).hexdigest()
     _, state = _iterative(tiny_data, tmp_path / "run", rounds=1)
@@ -216,7 +216,7 @@ def test_iterative_rounds_append_collected_episodes_and_leave_the_data_file_alon
 
 def test_iterative_resume_is_exact(tiny_data: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     from piga.baselines import planet_iterative
-    from piga.data import read_sequences
+    from piga.data.schema import read_sequences
 
     straight, _ = _iterative(tiny_data, tmp_path / "a", rounds=2)
     _iterative(tiny_data, tmp_path / "b", rounds=1)  # stopped after round 1, then asked for one more

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from piga.cli.collect import main as collect_main
-from piga.data import load_states
+from piga.data.schema import load_states
 from tests.helpers import assert_one_line, run_in_process
 
 

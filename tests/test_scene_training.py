@@ -11,10 +11,10 @@ import torch
 
 from envs.scenes import scene_config
 from piga.cli.train import main as train_main
-from piga.collect_scenes import SceneCollectConfig, collect_scene
-from piga.data import inspect_dataset
-from piga.model import PhysicsModel
-from piga.train import PRESETS, TrainConfig, model_config_for, preset_for, train
+from piga.data.collect_scenes import SceneCollectConfig, collect_scene
+from piga.data.schema import inspect_dataset
+from piga.world.model import PhysicsModel
+from piga.training.train import PRESETS, TrainConfig, model_config_for, preset_for, train
 from tests.helpers import assert_one_line, run_in_process
 
 
@@ -84,7 +84,7 @@ def test_the_physics_velocity_term_recovers_v_at_frame_l() -> None:
 
 def inspect_dataset_like():
     """A stand-in DatasetInfo of a spring file, without writing one."""
-    from piga.data import DatasetInfo
+    from piga.data.schema import DatasetInfo
 
     return DatasetInfo(path=Path("spring.h5"), n_sequences=1, steps=4, image_shape=(32, 32, 3), action_dim=0,
                        has_states=False, system="spring", dt=0.3, params={}, split_counts={}, attrs={"n_objects": 2})

@@ -13,9 +13,9 @@ from scipy.integrate import solve_ivp
 
 from envs.scenes import SceneError, accelerations, draw_start, render, scene_config, simulate
 from piga.cli.collect import main as collect_main
-from piga.collect_scenes import SceneCollectConfig, collect_scene
-from piga.data import inspect_dataset, load_states
-from piga.physics import Bouncing, Euler, Gravity, Spring, rollout
+from piga.data.collect_scenes import SceneCollectConfig, collect_scene
+from piga.data.schema import inspect_dataset, load_states
+from piga.world.physics import Bouncing, Euler, Gravity, Spring, rollout
 from tests.helpers import assert_one_line, run_in_process
 
 F64 = torch.float64

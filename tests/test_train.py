@@ -13,10 +13,10 @@ import pytest
 import torch
 
 from piga.cli import train as cli
-from piga.collect import CollectConfig, collect
-from piga.model import ModelConfig, PhysicsModel
-from piga.runs import load_model
-from piga.train import PRESETS, TrainConfig, TrainingDiverged, train
+from piga.data.collect import CollectConfig, collect
+from piga.world.model import ModelConfig, PhysicsModel
+from piga.io.runs import load_model
+from piga.training.train import PRESETS, TrainConfig, TrainingDiverged, train
 from tests.helpers import assert_one_line, assert_one_line_error, run, run_in_process
 
 PROG = "piga-train-model"
@@ -247,7 +247,7 @@ def test_cli_interrupted_first_epoch_writes_nothing_and_rerun_works(
 
 def test_resume_with_more_epochs_replans_the_cosine(small_data: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """As documented: from the resumed step on, the learning rates are those of a straight run of the new length."""
-    import piga.train as training
+    import piga.training.train as training
 
     seen: list[tuple[int, float]] = []
     factor = training._lr_factor
@@ -273,7 +273,7 @@ def test_resume_with_more_epochs_replans_the_cosine(small_data: Path, tmp_path: 
 
 
 def test_the_plan_is_sized_from_the_file() -> None:
-    from piga.train import plan_training
+    from piga.training.train import plan_training
 
     fast = TrainConfig()
     big, small = plan_training(fast, 10_800), plan_training(fast, 336)  # the default file; 48 sequences x 7 windows
@@ -334,7 +334,7 @@ def test_converged_is_false_when_the_parameters_never_moved(small_data: Path, tm
     assert_one_line(code, err, "never left", "--lr-physics")
     metrics = json.loads((out / "metrics.json").read_text())
     assert metrics["converged"] is False
-    from piga.runs import convergence_warning
+    from piga.io.runs import convergence_warning
 
     assert "did not converge" in (convergence_warning(out) or "")  # what piga-control and piga-diagnose print
 
@@ -342,8 +342,8 @@ def test_converged_is_false_when_the_parameters_never_moved(small_data: Path, tm
 def test_the_convergence_check_on_made_up_trajectories() -> None:
     from types import SimpleNamespace
 
-    from piga.convergence import check_convergence
-    from piga.train import TrainPlan
+    from piga.training.convergence import check_convergence
+    from piga.training.train import TrainPlan
 
     plan = asdict(TrainPlan(windows=3200, steps_per_epoch=100, epochs=10, warmup_steps=40, curriculum_steps=100,
                             average_steps=60))

@@ -82,8 +82,8 @@ def test_the_decoder_twin_is_the_decoders_picture_in_8_bits() -> None:
     import torch
 
     from piga.diagnostics.twin import decoder_render, twin_floor
-    from piga.model import ModelConfig, PhysicsModel
-    from piga.runs import Nominal
+    from piga.world.model import ModelConfig, PhysicsModel
+    from piga.io.runs import Nominal
 
     torch.manual_seed(0)
     network = PhysicsModel(ModelConfig(image_size=32)).eval()

@@ -8,7 +8,7 @@ import numpy as np
 import torch
 
 from envs.scenes import draw_start, scene_config
-from piga.model import ModelConfig, PhysicsModel
+from piga.world.model import ModelConfig, PhysicsModel
 
 L, T = 4, 6
 

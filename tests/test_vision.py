@@ -13,7 +13,7 @@ from envs.pendulum import PixelPendulumConfig, make_pixel_pendulum
 from piga.diagnostics import fit
 from piga.diagnostics import repeats as R
 from piga.diagnostics import vision as V
-from piga.model import ModelConfig, PhysicsModel
+from piga.world.model import ModelConfig, PhysicsModel
 
 SIZE = 32
 
@@ -152,7 +152,7 @@ def test_wilson_interval_covers_the_proportion() -> None:
 
 def test_an_agent_with_a_camera_reads_angles_through_it(model: PhysicsModel) -> None:
     from agents.mpc import PigaMPCAgent
-    from piga.diagnostics.corrected import CameraReader
+    from piga.control.corrected import CameraReader
 
     theta = torch.tensor([0.30, 0.34, 0.38, 0.42, 0.46])  # 0.04 rad per 0.05 s step
     frames = np.stack([cv2.GaussianBlur(f, (0, 0), 1.5) for f in _renders(model, theta)])

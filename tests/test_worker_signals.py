@@ -22,7 +22,7 @@ def _caught_and_ignored() -> tuple[int, int]:
 def _render_then_wait(init_name: str, report: mp.Queue, tasks: mp.Queue) -> None:
     """A pool worker's life: its initializer, frames rendered (SDL starts), then blocked on the task queue."""
     from envs.pendulum import make_pixel_pendulum
-    from piga import jobs
+    from piga.control import jobs
 
     getattr(jobs, init_name)()
     env = make_pixel_pendulum()

@@ -1,4 +1,4 @@
-"""A baseline's run folder as an episode agent (:mod:`piga.episodes`), whatever its kind."""
+"""A baseline's run folder as an episode agent (:mod:`piga.control.episodes`), whatever its kind."""
 
 from __future__ import annotations
 
@@ -34,12 +34,12 @@ def baseline_agent(kind: str, run_dir: str | os.PathLike[str], seed: int = 0) ->
 
 
 def episode_panels(agent: Any, recording: dict[str, np.ndarray]) -> list[tuple[str, np.ndarray]]:
-    """The panels of a baseline's control video (:func:`piga.video.panels_video`): the real frames,
+    """The panels of a baseline's control video (:func:`piga.evaluation.video.panels_video`): the real frames,
     and for a PlaNet-style agent its world model's reconstruction of each frame it read.
 
     Args:
         agent: the episode's agent (:func:`baseline_agent`).
-        recording: one of :func:`piga.episodes.run_episodes`' recordings: frames uint8 (T+1, H, W),
+        recording: one of :func:`piga.control.episodes.run_episodes`' recordings: frames uint8 (T+1, H, W),
             actions (T, 1).
 
     Returns:

@@ -32,8 +32,8 @@ import torch
 from torch import Tensor, nn
 from tqdm.auto import tqdm
 
-from piga.atomic import atomic_output
-from piga.data import DataFormatError, DatasetInfo, check_frames_have_signal, inspect_dataset, read_sequences
+from piga.io.atomic import atomic_output
+from piga.data.schema import DataFormatError, DatasetInfo, check_frames_have_signal, inspect_dataset, read_sequences
 
 __all__ = ["AutoencoderConfig", "FrameAutoencoder", "autoencoder_seconds", "check_autoencoder_data", "load_autoencoder", "train_autoencoder"]
 
@@ -109,7 +109,7 @@ class FrameAutoencoder(nn.Module):
 
 def check_autoencoder_data(info: DatasetInfo) -> None:
     """Refuses, before anything is written, a file the autoencoder cannot learn from: frames other
-    than gray 64x64, an empty train split, or blank frames (:func:`piga.data.check_frames_have_signal`).
+    than gray 64x64, an empty train split, or blank frames (:func:`piga.data.schema.check_frames_have_signal`).
 
     Raises:
         DataFormatError: naming the file and what is wrong.

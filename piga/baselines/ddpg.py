@@ -35,7 +35,7 @@ from tqdm.auto import tqdm
 
 from envs.observations import EpisodeSeeds, FiniteActions, LatentObservation, NonFiniteAction, StateObservation
 from envs.pendulum import PixelPendulumConfig
-from piga.atomic import atomic_output, write_json
+from piga.io.atomic import atomic_output, write_json
 
 __all__ = [
     "ALGORITHMS",
@@ -248,7 +248,7 @@ def _check_finite(model: Any, callback: Any, evaluated: bool, checkpoint: Path) 
     """Stops a run whose weights or evaluation return became NaN or infinite, before it is checkpointed.
 
     Raises:
-        piga.train.TrainingDiverged: naming the step, the cause and the last good checkpoint.
+        piga.training.train.TrainingDiverged: naming the step, the cause and the last good checkpoint.
     """
     bad = [name for name, p in model.policy.named_parameters() if not torch.isfinite(p).all()]
     ret = float(callback.last_mean_reward) if evaluated else 0.0
@@ -259,8 +259,8 @@ def _check_finite(model: Any, callback: Any, evaluated: bool, checkpoint: Path) 
 
 
 def _diverged(cause: str, step: int, checkpoint: Path) -> NoReturn:
-    """Raises :class:`piga.train.TrainingDiverged` naming ``cause``, the step and the last good checkpoint."""
-    from piga.train import TrainingDiverged
+    """Raises :class:`piga.training.train.TrainingDiverged` naming ``cause``, the step and the last good checkpoint."""
+    from piga.training.train import TrainingDiverged
 
     good = checkpoint if checkpoint.exists() else None
     raise TrainingDiverged(f"{cause} by step {step} (lower the learning rate); "
@@ -405,7 +405,7 @@ def load_ddpg(run_dir: str | Path) -> tuple[Any, DDPGConfig, Any]:
 
 @dataclass
 class DDPGAgent:
-    """A trained DDPG policy as an episode agent (:mod:`piga.episodes`).
+    """A trained DDPG policy as an episode agent (:mod:`piga.control.episodes`).
 
     It keeps its own stack of the last K frames or codes, zeros at reset, exactly as SB3's
     ``VecFrameStack`` did in training, so it needs only the newest frame (``input_frames`` = 1).

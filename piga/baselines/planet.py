@@ -7,7 +7,7 @@ split (frames, actions and ``/rewards``), take one Adam step on PlaNet's loss
 ``checkpoint_every`` steps write an atomic ``checkpoint.pt``, one point of the learning curve and
 TensorBoard scalars. Randomness comes from two explicit generators (numpy for the batches, torch
 for the latent samples), saved in each checkpoint, so ``resume`` continues exactly. A non-finite
-loss stops training with :class:`piga.train.TrainingDiverged`, naming the last good checkpoint.
+loss stops training with :class:`piga.training.train.TrainingDiverged`, naming the last good checkpoint.
 
 A run folder holds ``config.json`` (``kind: "planet"``), ``checkpoint.pt``, ``tensorboard/`` and
 ``metrics.json`` (the learning curve and the final losses on the valid split).
@@ -27,11 +27,11 @@ from tqdm.auto import tqdm
 
 from agents.planet.config import PlanetTrainConfig, RSSMConfig
 from agents.planet.rssm import WorldModel, model_steps
-from piga.atomic import atomic_output, write_json
+from piga.io.atomic import atomic_output, write_json
 from piga.baselines.planet_run import CHECKPOINT, load_planet
-from piga.data import (DataFormatError, DatasetInfo, check_actions, check_frames_have_signal, inspect_dataset, load_rewards,
+from piga.data.schema import (DataFormatError, DatasetInfo, check_actions, check_frames_have_signal, inspect_dataset, load_rewards,
                        read_sequences)
-from piga.train import TrainingDiverged
+from piga.training.train import TrainingDiverged
 
 __all__ = ["CHECKPOINT", "PlanetState", "check_planet_data", "load_planet", "rssm_config_for", "train_planet"]
 
@@ -142,7 +142,7 @@ def open_loop_check(model: WorldModel, data: str | Path, run_dir: Path, seed: in
     writes ``run_dir/openloop.png`` (real frames above imagined ones, and real against predicted
     rewards) and returns per-step errors: frame MSE (in [0, 1] units) and reward absolute error,
     averaged over ``sequences`` sequences, plus the same for an all-mean-frame and zero-reward guess."""
-    from piga.plots import openloop_figure, save_figure
+    from piga.evaluation.plots import openloop_figure, save_figure
 
     info = inspect_dataset(data)
     split = "valid" if info.split_counts["valid"] else "train"

@@ -36,9 +36,9 @@ from agents.planet.config import IterativeConfig, LatentPlannerConfig, PlanetTra
 from agents.planet.planner import PlanetAgent
 from agents.planet.rssm import WorldModel
 from envs.pendulum import PixelPendulumConfig, make_pixel_pendulum
-from piga.atomic import write_json
+from piga.io.atomic import write_json
 from piga.baselines.planet import CHECKPOINT, PlanetState, check_planet_data, load_planet, train_planet
-from piga.data import DataFormatError, DatasetInfo, DatasetWriter, inspect_dataset, load_rewards, read_sequences
+from piga.data.schema import DataFormatError, DatasetInfo, DatasetWriter, inspect_dataset, load_rewards, read_sequences
 
 #: The collected episodes' file in a run folder.
 COLLECTED = "collected.h5"

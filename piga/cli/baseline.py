@@ -231,11 +231,11 @@ def _nothing_left_unless_checkpointed(run_dir: Path, written: list[int], fresh: 
 
 def _planet(args: Any, argv: Sequence[str] | None) -> int:
     from agents.planet.config import IterativeConfig, PlanetTrainConfig
-    from piga.resources import check_run_disk
-    from piga.atomic import write_json
+    from piga.io.resources import check_run_disk
+    from piga.io.atomic import write_json
     from piga.baselines.planet import check_planet_data, rssm_config_for, train_planet
-    from piga.data import inspect_dataset
-    from piga.train import TrainingDiverged
+    from piga.data.schema import inspect_dataset
+    from piga.training.train import TrainingDiverged
 
     run_dir = Path(args.out)
     info = inspect_dataset(args.data)  # a missing or malformed file: one line, before the run folder is touched
@@ -335,7 +335,7 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
 
 def _planet_checkpoint_bytes(run_dir: Path, rssm: dict[str, Any], resume: bool) -> float:
     """A PlaNet-style checkpoint's size: the one there (resuming), or the weights and Adam's two moments."""
-    from piga.resources import adam_checkpoint_bytes
+    from piga.io.resources import adam_checkpoint_bytes
 
     if resume:
         return (run_dir / CHECKPOINT).stat().st_size
@@ -353,16 +353,16 @@ def _collected_bytes(info: Any, iterative: Any) -> float:
 
 def _ddpg_checkpoint_bytes(config: Any, latent_size: int) -> float:
     """A DDPG checkpoint's size: its replay buffer, pickled at full capacity with observations and
-    next observations, and the networks (:data:`piga.resources.RUN_DISK_MARGIN` covers them)."""
+    next observations, and the networks (:data:`piga.io.resources.RUN_DISK_MARGIN` covers them)."""
     per_obs = {"pixels": config.frame_stack * 64 * 64, "latent": 4 * config.frame_stack * latent_size, "state": 4 * 3}[config.obs]
     return config.buffer_size * (2 * per_obs + 16)
 
 
 def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
-    from piga.atomic import write_json
+    from piga.io.atomic import write_json
     from piga.baselines.ddpg import AUTOENCODER, DDPGConfig, config_for, first_step_reaching, train_ddpg
-    from piga.resources import check_run_disk
-    from piga.train import TrainingDiverged
+    from piga.io.resources import check_run_disk
+    from piga.training.train import TrainingDiverged
 
     run_dir = Path(args.out)
     command = command_line(PROG, argv)
@@ -398,7 +398,7 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
         ae_config = AutoencoderConfig(steps=args.autoencoder_steps, seed=config.seed)
         if args.data:
             from piga.baselines.autoencoder import check_autoencoder_data
-            from piga.data import inspect_dataset
+            from piga.data.schema import inspect_dataset
 
             check_autoencoder_data(inspect_dataset(args.data))  # blank or ill-sized frames: one line, before --out is touched
         _check_run_dir(run_dir, False, args.overwrite, "ddpg")

@@ -13,9 +13,9 @@ from envs.pendulum import PixelPendulumConfig
 from envs.scenes import SCENES, scene_config
 from piga.cli.common import (ArgumentParser, PigaError, add_preset_option, command_line, format_default, nonnegative_int, positive_float,
                              positive_int, run_cli, split_type)
-from piga.collect import PAPER_MAX_SPEED, PRESETS, CollectConfig, collect
-from piga.collect_scenes import SCENE_PRESETS, SCENE_STEPS, SceneCollectConfig, collect_scene
-from piga.data import inspect_dataset
+from piga.data.collect import PAPER_MAX_SPEED, PRESETS, CollectConfig, collect
+from piga.data.collect_scenes import SCENE_PRESETS, SCENE_STEPS, SceneCollectConfig, collect_scene
+from piga.data.schema import inspect_dataset
 
 PROG = "piga-collect"
 #: Env ids piga-collect collects the pendulum from (registered in :mod:`envs`).

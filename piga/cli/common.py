@@ -15,8 +15,8 @@ from typing import Any, NoReturn
 
 
 from envs.dmc import MissingExtraError
-from piga.atomic import OutputExistsError
-from piga.data import DataFormatError
+from piga.io.atomic import OutputExistsError
+from piga.data.schema import DataFormatError
 
 
 class PigaError(Exception):
@@ -69,8 +69,8 @@ def command_line(prog: str, argv: Sequence[str] | None) -> str:
 
 
 def warn_if_unconverged(prog: str, run_dir: str | os.PathLike[str]) -> None:
-    """Prints one warning line when the run's metrics.json says it did not converge (:func:`piga.runs.convergence_warning`)."""
-    from piga.runs import convergence_warning
+    """Prints one warning line when the run's metrics.json says it did not converge (:func:`piga.io.runs.convergence_warning`)."""
+    from piga.io.runs import convergence_warning
 
     if (warning := convergence_warning(run_dir)) is not None:
         print(f"{prog}: {warning}", file=sys.stderr)
@@ -149,7 +149,7 @@ def _write_traceback(prog: str, argv: Sequence[str] | None) -> Path | None:
     import time
     import traceback
 
-    from piga.atomic import atomic_output
+    from piga.io.atomic import atomic_output
 
     path = log_folder() / f"{prog}-{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}.log"
     try:

@@ -13,9 +13,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from agents.config import MPCConfig
-from piga.atomic import atomic_output, check_writable_target, write_json
+from piga.io.atomic import atomic_output, check_writable_target, write_json
 from piga.cli.common import ArgumentParser, PigaError, command_line, nonnegative_int, positive_float, positive_int, run_cli, warn_if_unconverged
-from piga.episodes import EpisodeConfig, parse_range, run_episodes, summary_markdown
+from piga.control.episodes import EpisodeConfig, parse_range, run_episodes, summary_markdown
 
 if TYPE_CHECKING:
     from agents.mpc import PigaMPCAgent
@@ -120,7 +120,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     import torch
 
     from agents.mpc import OracleAgent, PigaMPCAgent
-    from piga.runs import load_model
+    from piga.io.runs import load_model
 
     torch.set_num_threads(1)  # small tensors: one thread plans fastest
     model = None
@@ -132,7 +132,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.goal_image:
         if model is None:
             raise PigaError("--goal-image needs --model: the goal is read from the image by the model's encoder")
-        from piga.goal import goal_from_image
+        from piga.control.goal import goal_from_image
 
         estimate = goal_from_image(model, ckpt, args.goal_image, gravity_mult=args.gravity_mult)
         for warning in estimate.warnings:
@@ -160,7 +160,7 @@ def main(argv: Sequence[str] | None = None) -> int:
           f"{s['episodes']}, mean return {s['mean_return']:.1f}, final angle error {math.degrees(s['final_angle_error_mean']):.2f} deg, "
           f"plan {s['plan_ms_median']:.1f} ms median / {s['plan_ms_p95']:.1f} ms p95")
     if args.video:
-        from piga.video import control_video
+        from piga.evaluation.video import control_video
 
         assert model is not None
         control_video(model, result["recordings"][0]["frames"], first_trace, args.video, overwrite=args.overwrite)
@@ -177,8 +177,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: Sequence[str] | None, kind: str = "piga") -> int:
     """--sweep: the run's agent (``kind``) and the oracle at each multiplier; piga and the oracle are
     told the multiplier, a baseline runs as trained."""
-    from piga.jobs import ControlJob, run_jobs
-    from piga.runs import load_model
+    from piga.control.jobs import ControlJob, run_jobs
+    from piga.io.runs import load_model
 
     if args.oracle or not args.model:
         raise PigaError("--sweep compares the piga agent with the oracle: give --model RUN_DIR (without --oracle)")
@@ -204,7 +204,7 @@ def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: 
     table = summary_markdown(summaries)
     print(table, end="")
     if outputs:
-        from piga.plots import save_figure, sweep_figure
+        from piga.evaluation.plots import save_figure, sweep_figure
 
         write_json(outputs[0], {"model": args.model, "multipliers": multipliers, "results": results}, overwrite=args.overwrite)
         with atomic_output(outputs[1], overwrite=args.overwrite) as tmp:
@@ -264,7 +264,7 @@ def _baseline(args: argparse.Namespace, kind: str, mpc: MPCConfig, outputs: list
     config = EpisodeConfig(episodes=args.episodes, steps=args.steps, seed=args.seed, gravity_mult=args.gravity_mult,
                            torque_arrow=args.torque_arrow, frame_stack=agent.input_frames)
     if args.workers > 1 and args.episodes > 1:  # latent CEM takes ~0.5 s a step: use the cores over episodes
-        from piga.jobs import ControlJob, run_split
+        from piga.control.jobs import ControlJob, run_split
 
         result = run_split(ControlJob(kind, config, mpc, model_dir=args.model), args.workers, progress=not args.quiet)
         result["summary"].pop("agent")
@@ -277,7 +277,7 @@ def _baseline(args: argparse.Namespace, kind: str, mpc: MPCConfig, outputs: list
           f"plan {s['plan_ms_median']:.1f} ms median / {s['plan_ms_p95']:.1f} ms p95")
     if args.video:
         from piga.baselines.agents import episode_panels
-        from piga.video import panels_video
+        from piga.evaluation.video import panels_video
 
         # episode 0 again in this process when the workers ran it (the same start and seeds: the same episode)
         recording = (result.get("recordings") or run_episodes(agent, replace(config, episodes=1), record=1)["recordings"])[0]
@@ -330,7 +330,7 @@ def _keep_first_trace(agent: PigaMPCAgent, into: list[tuple[float, float, np.nda
 def _write_goal_image(args: argparse.Namespace) -> int:
     import imageio.v3 as iio
 
-    from piga.goal import render_goal_image
+    from piga.control.goal import render_goal_image
 
     if args.angle is None:
         raise PigaError("--write-goal-image needs --angle in degrees")
@@ -364,7 +364,7 @@ def _dmc(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
         pairs = [_env_option(text) for text in args.env_option]
     except _argparse.ArgumentTypeError as exc:
         raise PigaError(str(exc)) from None
-    from piga.dmc_control import DMCControlConfig, OracleSwingUp, PigaSwingUp, dmc_markdown, run_dmc_episodes
+    from piga.control.dmc import DMCControlConfig, OracleSwingUp, PigaSwingUp, dmc_markdown, run_dmc_episodes
 
     episodes = args.episodes if args.episodes != defaults["episodes"] else DMCControlConfig.episodes
     config = DMCControlConfig(episodes=episodes, seed=args.seed, env=dmc_config(pairs))
@@ -381,7 +381,7 @@ def _dmc(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     results = []
     if args.model:
         from piga.baselines.kinds import run_kind
-        from piga.runs import load_model
+        from piga.io.runs import load_model
 
         if (kind := run_kind(args.model)) != "piga":
             raise PigaError(f"{args.model} is a {kind} run; --env piga/DMCPendulum-v0 runs piga models (and the oracle)")

@@ -22,8 +22,8 @@ from pathlib import Path
 from piga.cli import show, train
 from piga.cli.common import (ArgumentParser, Interrupted, PigaError, command_line, made_folder, nonnegative_int,
                              positive_int, run_cli)
-from piga.collect import CollectConfig, collect
-from piga.data import inspect_dataset
+from piga.data.collect import CollectConfig, collect
+from piga.data.schema import inspect_dataset
 
 PROG = "piga-demo"
 
@@ -147,12 +147,12 @@ def _control(run_dir: Path, goal_png: Path, control_md: Path, args) -> list[tupl
     from dataclasses import replace as dc_replace
 
     from agents.mpc import MPCConfig
-    from piga.atomic import atomic_output
+    from piga.io.atomic import atomic_output
     from piga.cli import control as control_cli
-    from piga.episodes import EpisodeConfig, summary_markdown, summary_row
-    from piga.jobs import ControlJob, run_jobs
-    from piga.goal import goal_from_image
-    from piga.runs import load_model
+    from piga.control.episodes import EpisodeConfig, summary_markdown, summary_row
+    from piga.control.jobs import ControlJob, run_jobs
+    from piga.control.goal import goal_from_image
+    from piga.io.runs import load_model
 
     control_cli.main(["--write-goal-image", str(goal_png), "--angle", str(args.goal_angle),
                       *(["--overwrite"] if args.overwrite else [])])

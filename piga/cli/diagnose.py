@@ -31,10 +31,10 @@ def build_parser() -> ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     from piga.baselines.kinds import require_piga_run
-    from piga.data import check_frames_have_signal, inspect_dataset
+    from piga.data.schema import check_frames_have_signal, inspect_dataset
     from piga.diagnostics import DiagnoseConfig, diagnose
     from piga.diagnostics.report import check_report_target, number, write_report
-    from piga.runs import load_model
+    from piga.io.runs import load_model
 
     # Everything is checked before any work, and the report folder is only created at the end
     # (atomically): a refusal leaves nothing behind.
@@ -53,7 +53,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     diagnosis = diagnose(model, args.data, DiagnoseConfig(bootstrap=args.bootstrap, seed=args.seed), checkpoint=ckpt,
                          progress=not args.quiet)
     if effects is not None:
-        from piga.diagnostics.closed_loop import compare_control
+        from piga.control.closed_loop import compare_control
 
         diagnosis.control = compare_control(args.model, diagnosis, effects, episodes=args.episodes, seed=args.seed,
                                             progress=not args.quiet)

@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from piga.cli.common import ArgumentParser, command_line, format_default, positive_float, positive_int, run_cli, split_type
-from piga.importer import ImportConfig, import_recording
+from piga.data.importer import ImportConfig, import_recording
 
 PROG = "piga-import"
 

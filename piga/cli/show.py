@@ -8,8 +8,8 @@ import h5py
 import numpy as np
 
 from piga.cli.common import ArgumentParser, positive_int, run_cli
-from piga.data import SPLITS, inspect_dataset, split_indices
-from piga.plots import frame_strip, save_figure
+from piga.data.schema import SPLITS, inspect_dataset, split_indices
+from piga.evaluation.plots import frame_strip, save_figure
 
 PROG = "piga-show"
 

@@ -21,8 +21,8 @@ OUTPUTS = (CHECKPOINT, "metrics.json", "config.json", "rollout.png", "templates.
 
 
 def build_parser() -> ArgumentParser:
-    from piga.model import ModelConfig  # noqa: PLC0415 (torch loads only when the command runs)
-    from piga.train import PRESETS, TrainConfig  # noqa: PLC0415
+    from piga.world.model import ModelConfig  # noqa: PLC0415 (torch loads only when the command runs)
+    from piga.training.train import PRESETS, TrainConfig  # noqa: PLC0415
 
     fast, paper = TrainConfig(), PRESETS["paper"]["train"]
 
@@ -85,11 +85,11 @@ def main(argv: Sequence[str] | None = None) -> int:
                             "or --overwrite to replace it")
         raise PigaError(f"{run_dir} holds outputs of an earlier run but no checkpoint ({', '.join(existing)}); "
                         "pass --overwrite to replace them")
-    from piga.atomic import write_json
-    from piga.data import inspect_dataset
-    from piga.report import write_run_report
-    from piga.runs import load_model
-    from piga.train import TrainConfig, TrainingDiverged, check_trainable, model_config_for, preset_for, train
+    from piga.io.atomic import write_json
+    from piga.data.schema import inspect_dataset
+    from piga.training.report import write_run_report
+    from piga.io.runs import load_model
+    from piga.training.train import TrainConfig, TrainingDiverged, check_trainable, model_config_for, preset_for, train
 
     info = inspect_dataset(args.data)
     overrides = {k: getattr(args, k) for k in RECIPE_OPTIONS if getattr(args, k) is not None}
@@ -122,8 +122,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         model_config = model_config_for(info, model_overrides)
         record = {"command": command}
     plan = check_trainable(info, model_config, train_config)
-    from piga.model import PhysicsModel
-    from piga.resources import adam_checkpoint_bytes, check_run_disk
+    from piga.world.model import PhysicsModel
+    from piga.io.resources import adam_checkpoint_bytes, check_run_disk
 
     fresh = PhysicsModel(model_config)  # its size and start values, before training builds its own
     check_run_disk(run_dir, (run_dir / CHECKPOINT).stat().st_size if args.resume else adam_checkpoint_bytes(fresh),
@@ -155,7 +155,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         raise
     metrics = write_run_report(model, state, args.data, run_dir)
     convergence = metrics.get("convergence") or {"outcome": "converged"}
-    from piga.evaluate import summary_line
+    from piga.evaluation.evaluate import summary_line
 
     print(f"learned: {summary_line(metrics)}")
     if metrics.get("parameters", {}).get("a", 1.0) < 0:
@@ -195,7 +195,7 @@ def _read_record(run_dir: Path) -> dict[str, Any]:
 
 def _saved_epoch(run_dir: Path) -> int:
     """Epochs completed in the run's checkpoint."""
-    from piga.runs import load_model
+    from piga.io.runs import load_model
 
     return int(load_model(run_dir)[1]["state"]["epoch"])
 

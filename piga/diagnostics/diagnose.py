@@ -74,9 +74,9 @@ from piga.diagnostics.results import (Ambiguity, CameraSummary, CandidateRow, Di
                                       Naming, PixelErrors, Score, SelectionStep, VisionSummary)
 from piga.diagnostics.twin import MEASURABLE_GAP, calibrate_floor, gap_closure, twin_floor
 from piga.diagnostics.vision import Camera, CameraConfig, CameraFindings, angle_table, camera_stage, match
-from piga.model import PhysicsModel
+from piga.world.model import PhysicsModel
 from piga.diagnostics.fit import Nominal, nominal_of
-from piga.runs import training_arrow, training_blank_mse, training_reconstruction_mse
+from piga.io.runs import training_arrow, training_blank_mse, training_reconstruction_mse
 
 #: Gymnasium Pendulum-v1's own speed clip (rad/s).
 GYM_SPEED_CLIP = PENDULUM_MAX_SPEED
@@ -179,7 +179,7 @@ def diagnose(model: PhysicsModel, data: str | os.PathLike[str], config: Diagnose
     """Diagnoses the gap between ``model`` and the recording ``data`` (frames and actions only).
 
     Args:
-        model: the identified pendulum model (from :func:`piga.runs.load_model`).
+        model: the identified pendulum model (from :func:`piga.io.runs.load_model`).
         data: a piga HDF5 file of the "real" system.
         config: see :class:`DiagnoseConfig`.
         checkpoint: the model's checkpoint, for its training reconstruction error (vision check).
@@ -893,7 +893,7 @@ def excluded_candidates(obs: Observations, nom: Nominal, config: DiagnoseConfig)
 @torch.no_grad()
 def _pictures(model: PhysicsModel, obs: Observations, theta: np.ndarray, camera: Camera | None) -> dict[str, np.ndarray]:
     """The first kept held-out sequence's middle frame: as recorded, and re-rendered nominal and corrected."""
-    from piga.model import frames_to_float
+    from piga.world.model import frames_to_float
 
     n, t = int(obs.frames_index[0]), obs.theta.shape[1] // 2
     real = frames_to_float(torch.from_numpy(obs.frames[:1, t : t + 1]), model.config.channels)[0, 0]  # (C, H, W)
@@ -913,7 +913,7 @@ def _pixel_errors(model: PhysicsModel, obs: Observations, nom: Nominal, nominal_
     repeated frame. The floor is the matched residual of the same frames under ``camera``: the
     pixel error of the best angle, which no prediction can beat.
     """
-    from piga.model import frames_to_float
+    from piga.world.model import frames_to_float
 
     if len(obs.frames_index) == 0:
         return PixelErrors()

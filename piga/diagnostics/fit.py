@@ -32,18 +32,18 @@ about (M + 1) / 2M of u_t and (M − 1) / 2M of u_{t−1}, and the backward diff
 at the frame by about dt·F·(M − 1) / 2M, which one Euler step per frame reads as a lower a and g (and
 a residual correlated with the action at lag 1 that no integer delay fits). The candidate simulates
 M substeps per frame and reads the start velocity through them (the velocity whose frame step
-reproduces the observed difference, as :func:`piga.physics.hold_velocity` does); M = 16 stands for
+reproduces the observed difference, as :func:`piga.world.physics.hold_velocity` does); M = 16 stands for
 a continuous system. M is searched over :data:`WITHIN_FRAME_SUBSTEPS`, as k is for a delay.
 
 The fits run on the encoded angles alone (no images, no labels), so they take seconds: L-BFGS in
 float64 on the mean squared multi-step angle error over windows of the fit split.
 
 Why a second pendulum engine (:func:`simulate`) next to the model's
-(:class:`piga.physics.Pendulum` with :class:`piga.physics.Euler`)? Without effects the two are the
+(:class:`piga.world.physics.Pendulum` with :class:`piga.world.physics.Euler`)? Without effects the two are the
 same equations and the same semi-implicit Euler step, and they agree to rounding (a test checks
 it). They stay apart because they serve different needs:
 
-- The model's engine is one of several :class:`piga.physics.System` force functions, an
+- The model's engine is one of several :class:`piga.world.physics.System` force functions, an
   ``nn.Module`` whose learnable parameters train with the networks, on (B, N, D) tensors in
   float32. Its equations are the *identified* physics; the effects are by design not in it
   (the diagnosis must find them as a gap).
@@ -66,10 +66,10 @@ from torch import Tensor
 from envs.constants import MAX_ACTION
 from envs.effects import FRICTION_SMOOTHING
 from piga.diagnostics.repeats import repeat_sources
-from piga.runs import Nominal, nominal_of  # noqa: F401 (nominal_of: re-exported for the diagnosis)
+from piga.io.runs import Nominal, nominal_of  # noqa: F401 (nominal_of: re-exported for the diagnosis)
 
 if TYPE_CHECKING:
-    from piga.model import PhysicsModel
+    from piga.world.model import PhysicsModel
 
 #: Effects that the fit can add to the physics, in the order of the report.
 CANDIDATES: tuple[str, ...] = ("damping", "friction", "bias", "delay", "deadzone", "saturation", "speed_clip",
@@ -243,7 +243,7 @@ def simulate(model: Model, params: dict[str, Tensor], nominal: Nominal, w: Windo
 
     def frame(theta: Tensor, v: Tensor, c: Tensor) -> tuple[Tensor, Tensor]:
         for _ in range(substeps):
-            if rk4:  # the nominal model's classical Runge-Kutta (piga.physics.RK4), the action held
+            if rk4:  # the nominal model's classical Runge-Kutta (piga.world.physics.RK4), the action held
                 a1 = acceleration(theta, v, c)
                 v2 = v + 0.5 * h * a1
                 a2 = acceleration(theta + 0.5 * h * v, v2, c)

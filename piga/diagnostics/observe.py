@@ -16,10 +16,10 @@ from typing import Any
 import numpy as np
 import torch
 
-from piga.data import SPLITS, DatasetInfo, check_actions, inspect_dataset, split_indices
+from piga.data.schema import SPLITS, DatasetInfo, check_actions, inspect_dataset, split_indices
 from piga.diagnostics.repeats import stale_frames
-from piga.model import PhysicsModel, frames_to_float
-from piga.runs import training_steps
+from piga.world.model import PhysicsModel, frames_to_float
+from piga.io.runs import training_steps
 
 
 class DiagnosisInputError(ValueError):
@@ -41,9 +41,9 @@ def check_training(checkpoint: dict[str, Any] | None, rec_training: float, blank
     Args:
         checkpoint: the run's checkpoint (its step count).
         rec_training: the model's per-frame reconstruction MSE in its last epoch
-            (:func:`piga.runs.training_reconstruction_mse`; 0: not recorded).
+            (:func:`piga.io.runs.training_reconstruction_mse`; 0: not recorded).
         blank: the error scale: the MSE of the frames against the model's background, a render
-            that draws no pendulum (:func:`piga.runs.training_blank_mse`); None: unknown.
+            that draws no pendulum (:func:`piga.io.runs.training_blank_mse`); None: unknown.
         max_fraction: refuse when ``rec_training`` exceeds this fraction of ``blank``.
     """
     steps = training_steps(checkpoint)

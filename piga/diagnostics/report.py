@@ -10,11 +10,11 @@ from typing import Any
 
 import numpy as np
 
-from piga.atomic import atomic_output, check_writable_target, partial_path, write_json
+from piga.io.atomic import atomic_output, check_writable_target, partial_path, write_json
 from piga.diagnostics.results import Diagnosis, VisionSummary
 from piga.diagnostics.twin import MEASURABLE_GAP
-from piga.episodes import summary_markdown
-from piga.plots import plt, save_figure
+from piga.control.episodes import summary_markdown
+from piga.evaluation.plots import plt, save_figure
 
 #: Files the report writes into its folder.
 REPORT_FILES = ("report.md", "report.json", "gap.png", "residual_heatmap.png", "correlations.png", "frames.png")

@@ -40,8 +40,8 @@ import torch
 from envs.constants import MAX_ACTION
 from piga.diagnostics import fit
 from piga.diagnostics.observe import read_frames
-from piga.model import PhysicsModel
-from piga.runs import Nominal
+from piga.world.model import PhysicsModel
+from piga.io.runs import Nominal
 
 
 @dataclass(frozen=True)

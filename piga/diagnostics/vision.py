@@ -33,7 +33,7 @@ import torch.nn.functional as F
 from torch import Tensor
 
 from piga.diagnostics.repeats import RepeatConfig, repeated_frames
-from piga.model import PhysicsModel, frames_to_float
+from piga.world.model import PhysicsModel, frames_to_float
 
 #: Angles in the matching table (0.5° apart).
 TABLE_SIZE = 720

@@ -24,10 +24,10 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-from piga.decoder import Decoder, DecoderConfig
-from piga.encoder import Encoder, EncoderConfig
-from piga.physics import System, hold_velocity, make_integrator, make_system, rollout
-from piga.velocity import VelocityConfig, VelocityEstimator
+from piga.world.decoder import Decoder, DecoderConfig
+from piga.world.encoder import Encoder, EncoderConfig
+from piga.world.physics import System, hold_velocity, make_integrator, make_system, rollout
+from piga.world.velocity import VelocityConfig, VelocityEstimator
 
 #: System name -> (N, D, A) of its state and actions.
 SYSTEM_SHAPES: dict[str, tuple[int, int, int]] = {
@@ -43,7 +43,7 @@ class ModelConfig:
     """Everything needed to rebuild a model (stored in checkpoints).
 
     The defaults are the 'fast' recipe that every benchmark uses; the 'paper' preset
-    (:data:`piga.train.PRESETS`) overrides what the paper's appendix does differently.
+    (:data:`piga.training.train.PRESETS`) overrides what the paper's appendix does differently.
     """
 
     system: Literal["pendulum", "spring", "gravity", "bouncing"] = "pendulum"
@@ -85,14 +85,14 @@ class ModelConfig:
     work for the pendulum, and with overlapping windows every frame is still reconstructed)."""
     velocity_correction: bool = False
     """Velocity estimator: backward difference plus the paper's MLP (True, the paper preset), or the difference alone
-    (exact for one Euler substep; see :class:`piga.velocity.VelocityConfig`)."""
+    (exact for one Euler substep; see :class:`piga.world.velocity.VelocityConfig`)."""
     substeps: int = 1
     """Integrator substeps M per frame (the paper preset: 5 Euler; 1 Euler matches Gymnasium's pendulum exactly)."""
     integrator: Literal["euler", "rk4"] = "euler"
     """"euler" (semi-implicit, the paper's) or "rk4" (a continuous system under a held action; the
-    'continuous' preset), see :mod:`piga.physics`."""
+    'continuous' preset), see :mod:`piga.world.physics`."""
     velocity_hold: bool = False
-    """Read the velocity at frame L through the integrator (:func:`piga.physics.hold_velocity`,
+    """Read the velocity at frame L through the integrator (:func:`piga.world.physics.hold_velocity`,
     using the action over the last input frame) instead of taking the backward difference as it.
     Needed when the system moves within a frame (substeps, RK4): there the difference lags the
     velocity at the frame by about dt·F/2. The 'continuous' preset sets it."""
@@ -102,7 +102,7 @@ class ModelConfig:
     damping_init: float = 0.01
     """Initial b when ``learn_damping`` (far from any real hinge's value)."""
     signed_actuation: bool = False
-    """Pendulum only: learn a in linear space, sign included (:class:`piga.physics.Pendulum`), for a
+    """Pendulum only: learn a in linear space, sign included (:class:`piga.world.physics.Pendulum`), for a
     camera on the other side or a motor wired the other way; a then starts at +0.3 and may cross 0."""
     readout: Literal["centroid", "regress"] = "centroid"
     """Encoder readout: "centroid" (soft centroid of each mask) or "regress" (the paper's location network, the paper preset)."""
@@ -111,7 +111,7 @@ class ModelConfig:
     pivot_gate: tuple[float, float] = (0.125, 0.16)
     """Centroid readout of an angle: radii (fractions of the image side) within which pixels do not
     vote, so Gymnasium's torque arrow at the pivot cannot move the reading
-    (:class:`piga.encoder.EncoderConfig`)."""
+    (:class:`piga.world.encoder.EncoderConfig`)."""
     mask_width: int = 16
     """Encoder mask-network channels."""
     loc_width: int = 32
@@ -126,7 +126,7 @@ class ModelConfig:
     H/2, the paper's s = 2 (balls: a template covering half the image) is 1 here, and its s = 1
     (digits: the whole image) is 2."""
     mask_pixelwise: bool = False
-    """Encoder: add a full-resolution colour term to the mask logits (:class:`piga.encoder.EncoderConfig`)."""
+    """Encoder: add a full-resolution colour term to the mask logits (:class:`piga.world.encoder.EncoderConfig`)."""
     velocity_physics: bool = False
     """Add the engine's own velocity change dt·(2·a(p_L) + a(p_{L-1}))/6 to the estimator's velocity. The
     backward difference is the mean velocity over the last frame interval; this makes it v_L, exactly
@@ -134,14 +134,14 @@ class ModelConfig:
     from this term into the physical parameters."""
     velocity_shoot: bool = False
     """Unactuated systems: the velocity at frame L is the one the engine ends the last input interval
-    with when it starts at p_{L-1} and reaches p_L (shooting, :func:`piga.physics.hold_velocity`, from
+    with when it starts at p_{L-1} and reaches p_L (shooting, :func:`piga.world.physics.hold_velocity`, from
     the estimator's velocity), with the current physical parameters detached as in ``velocity_physics``,
     which it replaces. Exact for noiseless positions when the engine is the data's. The cubic term of
     ``velocity_physics`` is not the engine's own (staggered, semi-implicit) velocity at dt = 0.3, and
     biases k and g low (``benchmarks/velocity_bias.py``)."""
     init_background: bool = False
     """Start the decoder's background content at the encoder's label-free median background
-    (:meth:`piga.decoder.Decoder.init_background`). On the balls' black background the sigmoid
+    (:meth:`piga.world.decoder.Decoder.init_background`). On the balls' black background the sigmoid
     content otherwise stalls a few levels above 0, and SSIM, whose luminance term compares means
     near 0, punishes that hard (a uniform 0.003 alone caps it near 0.92)."""
     wall_radius: float = 2.0

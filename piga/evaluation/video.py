@@ -11,9 +11,9 @@ import cv2
 import numpy as np
 import torch
 
-from piga.atomic import atomic_output
-from piga.model import PhysicsModel
-from piga.physics import rollout
+from piga.io.atomic import atomic_output
+from piga.world.model import PhysicsModel
+from piga.world.physics import rollout
 
 #: Display scale of the 64x64 frames.
 UPSCALE = 4
@@ -76,7 +76,7 @@ def _write(video: np.ndarray, target: Path, fps: int, overwrite: bool) -> Path:
     """Writes uint8 RGB frames (T, H, W, 3) to ``target`` (.mp4 or .gif) atomically."""
     import imageio.v3 as iio
 
-    from piga.resources import check_disk, format_bytes
+    from piga.io.resources import check_disk, format_bytes
 
     # an MP4 or GIF of these panels takes well under 1% of the raw frames (a 200-step episode: ~20 KB)
     check_disk(target, video.nbytes / 100 + 64 * 1024, f"the video {target.name}",

@@ -8,13 +8,13 @@ from typing import Any
 import numpy as np
 import torch
 
-from piga.data import inspect_dataset, read_sequences
-from piga.evaluate import PARAMETER_NAMES, EvalConfig, evaluate, rollout_frames
-from piga.model import PhysicsModel, frames_to_float
-from piga.plots import curves_figure, rollout_figure, save_figure, templates_figure
-from piga.atomic import write_json
-from piga.convergence import check_convergence
-from piga.train import TrainState
+from piga.data.schema import inspect_dataset, read_sequences
+from piga.evaluation.evaluate import PARAMETER_NAMES, EvalConfig, evaluate, rollout_frames
+from piga.world.model import PhysicsModel, frames_to_float
+from piga.evaluation.plots import curves_figure, rollout_figure, save_figure, templates_figure
+from piga.io.atomic import write_json
+from piga.training.convergence import check_convergence
+from piga.training.train import TrainState
 
 
 def _image(x: np.ndarray) -> np.ndarray:
@@ -28,7 +28,7 @@ def write_run_report(model: PhysicsModel, state: TrainState, data: str | Path, r
     """Evaluates on held-out data and writes metrics.json, rollout.png, templates.png and curves.png.
 
     For a run that recorded its plan, metrics.json also holds the convergence check
-    (:func:`piga.convergence.check_convergence`): ``converged`` (true or false) and ``convergence``
+    (:func:`piga.training.convergence.check_convergence`): ``converged`` (true or false) and ``convergence``
     (the outcome, its reason and each parameter's trajectory summary).
     """
     run_dir = Path(run_dir)

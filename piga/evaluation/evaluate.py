@@ -1,7 +1,7 @@
 """Evaluating a trained model on held-out sequences: parameters, frames, states, and plots.
 
 This is the only training-side module that reads ``/states``, through
-:func:`piga.data.load_states`, and it does so only to *report* the encoder's angle error.
+:func:`piga.data.schema.load_states`, and it does so only to *report* the encoder's angle error.
 
 The model's angle convention relative to Gymnasium's: the encoder's centroid readout measures
 the rod's direction counter-clockwise from straight up, as Gymnasium does. The physics learns an
@@ -20,8 +20,8 @@ import numpy as np
 import torch
 from skimage.metrics import structural_similarity
 
-from piga.data import inspect_dataset, load_states, read_sequences
-from piga.model import PhysicsModel, frames_to_float
+from piga.data.schema import inspect_dataset, load_states, read_sequences
+from piga.world.model import PhysicsModel, frames_to_float
 
 #: Data-file parameter name -> model parameter name.
 PARAMETER_NAMES = {"g": "g", "actuation_gain": "a", "damping": "b", "k": "k", "l": "l", "m": "m"}
@@ -35,7 +35,7 @@ class EvalConfig:
     """Split of held-out sequences."""
     extrapolate_frames: int | None = None
     """T_ext, frames predicted beyond T_pred (capped by the sequence length); None: the model's own
-    (:attr:`piga.model.ModelConfig.extrapolate_frames`: 20, or 24 for gravity)."""
+    (:attr:`piga.world.model.ModelConfig.extrapolate_frames`: 20, or 24 for gravity)."""
     max_sequences: int = 200
     """At most this many sequences (the first of the split)."""
 

@@ -3,7 +3,7 @@
 Both plug into :class:`agents.mpc.PigaMPCAgent` through its protocols
 (:class:`agents.dynamics.Dynamics`, :class:`agents.mpc.StateReader`), so the planner knows
 nothing of the diagnosis. :class:`Correction` bundles them for a control job
-(:class:`piga.jobs.ControlJob`), which rebuilds them in its worker process.
+(:class:`piga.control.jobs.ControlJob`), which rebuilds them in its worker process.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from envs.pendulum import MAX_ACTION
 from piga.diagnostics import fit
 from piga.diagnostics.fit import nominal_of
 from piga.diagnostics.vision import Camera, angle_table, match
-from piga.model import PhysicsModel
+from piga.world.model import PhysicsModel
 
 
 class CorrectedDynamics:
@@ -90,7 +90,7 @@ class CameraReader(EncoderReader):
 class Correction:
     """What a diagnosis changes in a piga agent: its physics and, if it found a camera, how it reads frames.
 
-    Implements :class:`piga.jobs.AgentCorrection`.
+    Implements :class:`piga.control.jobs.AgentCorrection`.
     """
 
     physics: fit.Model

@@ -20,15 +20,15 @@ from tqdm.auto import tqdm
 from agents.dynamics import Dynamics
 from agents.mpc import MPCConfig, OracleAgent, PigaMPCAgent, StateReader
 from piga.baselines.kinds import BASELINE_KINDS
-from piga.episodes import EpisodeConfig, merge_results, run_episodes
-from piga.model import PhysicsModel
-from piga.runs import convergence_warning, load_model
-from piga.worker_signals import die_with_parent, quiet_worker_signals
+from piga.control.episodes import EpisodeConfig, merge_results, run_episodes
+from piga.world.model import PhysicsModel
+from piga.io.runs import convergence_warning, load_model
+from piga.io.worker_signals import die_with_parent, quiet_worker_signals
 
 
 class AgentCorrection(Protocol):
     """What changes a piga agent's physics and the way it reads frames (for example a diagnosis:
-    :class:`piga.diagnostics.corrected.Correction`). Built into the agent in the worker process
+    :class:`piga.control.corrected.Correction`). Built into the agent in the worker process
     from the loaded model, so it must pickle."""
 
     def dynamics(self, model: PhysicsModel, gravity_mult: float) -> Dynamics:
@@ -133,7 +133,7 @@ def run_split(job: ControlJob, workers: int = 1, progress: bool = True) -> dict[
 
 def _worker_init() -> None:
     """Makes a pool worker end at once, quietly, on SIGTERM (the pool's terminate) and when its parent
-    dies; Ctrl-C is the parent's to handle (it then terminates the pool). See :mod:`piga.worker_signals`."""
+    dies; Ctrl-C is the parent's to handle (it then terminates the pool). See :mod:`piga.io.worker_signals`."""
     quiet_worker_signals()
     die_with_parent()
 

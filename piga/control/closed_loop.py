@@ -5,10 +5,10 @@ from __future__ import annotations
 from typing import Any
 
 from agents.mpc import MPCConfig
-from piga.diagnostics.corrected import Correction
+from piga.control.corrected import Correction
 from piga.diagnostics.diagnose import Diagnosis
-from piga.episodes import EpisodeConfig
-from piga.jobs import ControlJob, run_jobs
+from piga.control.episodes import EpisodeConfig
+from piga.control.jobs import ControlJob, run_jobs
 
 
 def compare_control(model_dir: str, diagnosis: Diagnosis, effects: tuple[tuple[str, float], ...], episodes: int = 5,

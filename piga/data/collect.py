@@ -35,9 +35,9 @@ from tqdm.auto import tqdm
 
 from envs.dmc import DMCPendulumConfig, make_dmc_pendulum
 from envs.pendulum import MAX_ACTION, PENDULUM_DT, PixelPendulumConfig, make_pixel_pendulum
-from piga.atomic import check_writable_target
-from piga.data import SPLITS, DatasetWriter
-from piga.worker_signals import quiet_worker_signals
+from piga.io.atomic import check_writable_target
+from piga.data.schema import SPLITS, DatasetWriter
+from piga.io.worker_signals import quiet_worker_signals
 
 #: Ranges of the paper's pendulum data: θ ~ U(-π, π), θ̇ ~ U(-6, 6).
 PAPER_MAX_SPEED = 6.0
@@ -148,12 +148,12 @@ def check_resources(config: CollectConfig, out: str | Path) -> None:
 
     Memory: one batch of frames, the env workers' render buffers (the renderer's resize and gray
     conversion take ~40 bytes per output pixel) and 2 bytes per sequence of bookkeeping. Disk:
-    frames gzip-compressed (:data:`piga.resources.RENDERED_FRAME_COMPRESSION`), actions, states and rewards raw.
+    frames gzip-compressed (:data:`piga.io.resources.RENDERED_FRAME_COMPRESSION`), actions, states and rewards raw.
 
     Raises:
-        piga.resources.ResourceError: naming what is needed and what is available.
+        piga.io.resources.ResourceError: naming what is needed and what is available.
     """
-    from piga.resources import RENDERED_FRAME_COMPRESSION, check_disk, check_memory
+    from piga.io.resources import RENDERED_FRAME_COMPRESSION, check_disk, check_memory
 
     n, t, pixels = config.sequences, config.steps, config.env.image_size**2
     workers = min(config.workers, n)

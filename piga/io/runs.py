@@ -1,6 +1,6 @@
 """Reading a training run: the model in ``RUN_DIR/checkpoint.pt`` and what the run says about it.
 
-A run folder is written by :func:`piga.train.train`. Everything that *uses* a trained model (control,
+A run folder is written by :func:`piga.training.train.train`. Everything that *uses* a trained model (control,
 goal images, the gap diagnosis, benchmarks) reads it through this module, never through the
 training code:
 
@@ -22,7 +22,7 @@ from typing import Any
 
 import torch
 
-from piga.model import ModelConfig, PhysicsModel
+from piga.world.model import ModelConfig, PhysicsModel
 
 #: The checkpoint's file name in a run folder.
 CHECKPOINT = "checkpoint.pt"
@@ -46,7 +46,7 @@ class Nominal:
     b: float = 0.0
     """The model's own viscous damping (1/s; 0: none learned): θ̈ = ... − 3·b·θ̇."""
     integrator: str = "euler"
-    """"euler" (semi-implicit) or "rk4", as :mod:`piga.physics`."""
+    """"euler" (semi-implicit) or "rk4", as :mod:`piga.world.physics`."""
     velocity_hold: bool = False
     """The model reads the velocity at a frame through its integrator (``ModelConfig.velocity_hold``)."""
 
@@ -110,14 +110,14 @@ def training_steps(checkpoint: dict[str, Any] | None) -> int | None:
 
 def training_blank_mse(model: PhysicsModel, checkpoint: dict[str, Any] | None, max_sequences: int = 64) -> float | None:
     """The scale of the run's reconstruction error: the per-frame MSE of its training frames against
-    the model's own background (the per-pixel median it subtracts, :mod:`piga.encoder`), i.e. the
+    the model's own background (the per-pixel median it subtracts, :mod:`piga.world.encoder`), i.e. the
     error of a render that draws no object at all. Read from the first ``max_sequences`` train
     sequences of the training file named in the checkpoint; None if that file is gone or unreadable."""
     import h5py
     import numpy as np
 
-    from piga.data import split_indices
-    from piga.model import frames_to_float
+    from piga.data.schema import split_indices
+    from piga.world.model import frames_to_float
 
     path = ((checkpoint or {}).get("data") or {}).get("path")
     if not path or not os.path.exists(path):

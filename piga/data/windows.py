@@ -11,7 +11,7 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset
 
-from piga.data import (IN_MEMORY_LIMIT_BYTES, DataFormatError, check_frames_have_signal, inspect_dataset, read_sequences,
+from piga.data.schema import (IN_MEMORY_LIMIT_BYTES, DataFormatError, check_frames_have_signal, inspect_dataset, read_sequences,
                        split_indices)
 
 

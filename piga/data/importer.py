@@ -1,6 +1,6 @@
 """Importing a user's own recording (a video or a folder of frames, plus a CSV of actions).
 
-The output is a file of piga's one schema (:mod:`piga.data`), like the files that ``piga-collect``
+The output is a file of piga's one schema (:mod:`piga.data.schema`), like the files that ``piga-collect``
 writes. It has no ``/states``, because a real recording has no ground truth.
 
 | input | what is accepted |
@@ -9,11 +9,11 @@ writes. It has no ``/states``, because a real recording has no ground truth.
 | actions | a CSV with one row per frame: the action u_t applied after frame t. Either one column, with or without a header row, or a header row with a column named ``u`` or ``action`` |
 | dt | the frame interval in seconds |
 
-Each frame is converted as the env converts its render (:func:`piga.scene.scene_to_gray`): a
+Each frame is converted as the env converts its render (:func:`piga.data.scene.scene_to_gray`): a
 centre crop to a square, ``cv2.resize(..., INTER_AREA)`` to ``image_size``, then Gymnasium's gray
 weights. The recording is cut into consecutive sequences of ``steps`` frames. The frames left over
 at the end, fewer than one sequence, are dropped. The sequences are split train/valid/test in
-recording order, like ``piga-collect`` (:func:`piga.collect.split_counts`), so that the test
+recording order, like ``piga-collect`` (:func:`piga.data.collect.split_counts`), so that the test
 sequences are the end of the recording. The converted frames are held in memory before writing
 (4 KiB per 64x64 frame), because their count must match the CSV's before anything is written.
 
@@ -34,10 +34,10 @@ from pathlib import Path
 
 import numpy as np
 
-from piga.atomic import check_writable_target
-from piga.collect import split_counts
-from piga.data import MAX_ABS_ACTION, SPLITS, DatasetWriter
-from piga.scene import read_image, scene_to_gray
+from piga.io.atomic import check_writable_target
+from piga.data.collect import split_counts
+from piga.data.schema import MAX_ABS_ACTION, SPLITS, DatasetWriter
+from piga.data.scene import read_image, scene_to_gray
 
 #: File name endings read from a folder of frames (case-insensitive).
 FRAME_EXTENSIONS = (".png", ".jpg", ".jpeg")
@@ -151,7 +151,7 @@ def read_actions(path: str | Path) -> np.ndarray:
     Raises:
         FileNotFoundError: no such file.
         ValueError: the file is empty, a value is not a finite number or beyond
-            ±:data:`piga.data.MAX_ABS_ACTION` (the message gives the line), or the action column cannot be told.
+            ±:data:`piga.data.schema.MAX_ABS_ACTION` (the message gives the line), or the action column cannot be told.
     """
     p = Path(path)
     if not p.is_file():
@@ -198,9 +198,9 @@ def _check_resources(n_frames: int, size: int, target: Path) -> None:
 
     Memory: the converted frames twice (the list and the stacked array) and one frame's conversion
     (~48 bytes per output pixel). Disk: the frames gzip-compressed
-    (:data:`piga.resources.RECORDED_FRAME_COMPRESSION`).
+    (:data:`piga.io.resources.RECORDED_FRAME_COMPRESSION`).
     """
-    from piga.resources import RECORDED_FRAME_COMPRESSION, check_disk, check_memory
+    from piga.io.resources import RECORDED_FRAME_COMPRESSION, check_disk, check_memory
 
     pixels = size * size
     what = f"{n_frames} frames of {size}x{size}"

@@ -4,7 +4,7 @@ A run can end without having learned anything and still look like one that did: 
 whose epochs end inside the autoencoder warm-up never runs the physics, a physics learning rate
 that is too small leaves g where it started, and a run cut short by ``--max-minutes`` stops while
 its parameters still move. The check reads the run's own record (its plan and the parameters'
-trajectory, :class:`piga.train.TrainState`), never the truth, and gives one of three outcomes:
+trajectory, :class:`piga.training.train.TrainState`), never the truth, and gives one of three outcomes:
 
 | outcome | meaning | ``piga-train-model`` |
 |---|---|---|
@@ -86,9 +86,9 @@ def _fix(planned: int, steps: int) -> str:
 
 
 def check_convergence(state: Any, config: ConvergenceConfig = ConvergenceConfig()) -> Convergence:
-    """Judges a finished (or stopped) run from its :class:`~piga.train.TrainState`.
+    """Judges a finished (or stopped) run from its :class:`~piga.training.train.TrainState`.
 
-    ``state.plan`` is the run's :class:`~piga.train.TrainPlan` (as a dict), ``state.start`` the
+    ``state.plan`` is the run's :class:`~piga.training.train.TrainPlan` (as a dict), ``state.start`` the
     learned parameters before the first step, ``state.trace`` their values every few steps, and
     ``state.history[-1]`` the values the run ended with.
     """

@@ -15,7 +15,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 
-from piga.atomic import atomic_output  # noqa: E402
+from piga.io.atomic import atomic_output  # noqa: E402
 
 
 def save_figure(fig: Figure, path: str | os.PathLike[str], overwrite: bool = True, dpi: int = 100) -> Path:

@@ -10,7 +10,7 @@ The loop is one readable flow, in the style of cleanrl:
    curriculum steps. Short rollouts keep the predicted object overlapping the true one, so the
    pixel loss has a gradient with respect to g and a even while they are far from the truth.
 3. Physical parameters get their own learning rate (``lr_physics``), in log space.
-4. A convergence check of the physical parameters at the end (:mod:`piga.convergence`).
+4. A convergence check of the physical parameters at the end (:mod:`piga.training.convergence`).
 
 Each epoch ends with an atomic checkpoint (``checkpoint.pt``). ``resume`` restores the model,
 the optimiser, the step count and every RNG, and continues exactly where the run stopped. A
@@ -32,12 +32,12 @@ import torch
 from torch.utils.data import DataLoader, RandomSampler
 from tqdm.auto import tqdm
 
-from piga.atomic import atomic_output
-from piga.data import DatasetInfo, check_actions_file, inspect_dataset, read_sequences
-from piga.encoder import estimate_background
-from piga.model import SYSTEM_SHAPES, ModelConfig, PhysicsModel, frames_to_float
-from piga.runs import CHECKPOINT, load_model
-from piga.windows import SequenceWindows
+from piga.io.atomic import atomic_output
+from piga.data.schema import DatasetInfo, check_actions_file, inspect_dataset, read_sequences
+from piga.world.encoder import estimate_background
+from piga.world.model import SYSTEM_SHAPES, ModelConfig, PhysicsModel, frames_to_float
+from piga.io.runs import CHECKPOINT, load_model
+from piga.data.windows import SequenceWindows
 
 
 class TrainingDiverged(RuntimeError):
@@ -464,7 +464,7 @@ def check_trainable(info: DatasetInfo, model_config: ModelConfig, train_config: 
     """Refuses, before anything is written, data that training cannot use; returns the run's plan.
 
     Raises:
-        ValueError (a :class:`piga.data.DataFormatError` for the file's contents): sequences shorter
+        ValueError (a :class:`piga.data.schema.DataFormatError` for the file's contents): sequences shorter
         than a window, an empty train split, non-finite or absurd actions, or fewer windows than
         one batch (no step would run).
     """

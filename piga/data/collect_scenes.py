@@ -1,6 +1,6 @@
 """Collecting the paper's unactuated scenes (:mod:`envs.scenes`) into piga's HDF5 schema.
 
-Determinism is the pendulum's (:mod:`piga.collect`): sequence n draws everything from
+Determinism is the pendulum's (:mod:`piga.data.collect`): sequence n draws everything from
 ``SeedSequence(seed)``'s n-th child, so the arrays depend only on ``seed`` and the settings, not on
 ``workers``. Workers are processes of a :class:`multiprocessing.pool.Pool` (no environment to step:
 a scene has no actions, so a Gymnasium vector env would add nothing).
@@ -25,10 +25,10 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from envs.scenes import SceneConfig, generate_sequence, scene_config, state_names
-from piga.atomic import check_writable_target
-from piga.collect import check_collect_sizes, sequence_rng, split_counts
-from piga.data import SPLITS, DatasetWriter
-from piga.worker_signals import quiet_worker_signals
+from piga.io.atomic import check_writable_target
+from piga.data.collect import check_collect_sizes, sequence_rng, split_counts
+from piga.data.schema import SPLITS, DatasetWriter
+from piga.io.worker_signals import quiet_worker_signals
 
 #: Frames per sequence by scene: L + T_pred + T_ext of the chosen windows (docs/systems.md).
 SCENE_STEPS: dict[str, int] = {"bouncing": 30, "spring": 30, "gravity": 40, "digits-spring": 30}

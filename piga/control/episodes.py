@@ -1,6 +1,6 @@
 """Control episodes on the pixel pendulum: running and scoring them with any agent, and their tables.
 
-Jobs, batches of episodes for the named agents run in worker processes, are in :mod:`piga.jobs`.
+Jobs, batches of episodes for the named agents run in worker processes, are in :mod:`piga.control.jobs`.
 This module does not import torch (command lines read :class:`EpisodeConfig`'s defaults quickly).
 
 Success is defined precisely. An episode of ``steps`` steps (200 by default) succeeds when, for
@@ -67,7 +67,7 @@ class EpisodeConfig:
     first_episode: int = 0
     """Index of the first episode run: episodes ``first_episode`` to ``first_episode + episodes - 1``
     of the sequence this seed gives, each with its own start and env seed, so a batch split across
-    workers (:func:`piga.jobs.run_split`) runs the very episodes one process would."""
+    workers (:func:`piga.control.jobs.run_split`) runs the very episodes one process would."""
 
     def __post_init__(self) -> None:
         if self.episodes < 1:

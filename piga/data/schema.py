@@ -12,9 +12,9 @@ File attributes: ``system`` (str), ``dt`` (float, seconds between frames), ``par
 physical parameters used), ``seed`` (int, -1 if unknown), ``piga_version``, ``command`` (the
 command line that made the file), and optionally ``env_config``, ``state_names`` and ``effects``
 (JSON, from ``piga-collect``; see :mod:`envs.effects`) or ``source``, ``source_actions``,
-``source_frames`` and ``dropped_frames`` (from ``piga-import``; see :mod:`piga.importer`).
+``source_frames`` and ``dropped_frames`` (from ``piga-import``; see :mod:`piga.data.importer`).
 
-Training code reads only frames and actions: :class:`piga.windows.SequenceWindows` (a torch
+Training code reads only frames and actions: :class:`piga.data.windows.SequenceWindows` (a torch
 Dataset, in its own module so that reading and writing files does not pay torch's import) serves
 those and nothing else. Ground-truth states come out only through :func:`load_states`, which
 evaluation code calls explicitly. Rewards come out only through :func:`load_rewards`, which only the
@@ -33,7 +33,7 @@ from typing import Any
 import h5py
 import numpy as np
 from piga import __version__
-from piga.atomic import atomic_output
+from piga.io.atomic import atomic_output
 
 SPLITS: dict[str, int] = {"train": 0, "valid": 1, "test": 2}
 """Split name -> code stored in ``/split``."""
@@ -275,7 +275,7 @@ def _check_frames_signal(frames: h5py.Dataset, path: str | os.PathLike[str]) -> 
 
 def check_frames_have_signal(path: str | os.PathLike[str]) -> None:
     """Refuses a file whose frames are all blank (each one flat level), which no model can learn
-    from and no diagnosis can read. Training (:class:`piga.windows.SequenceWindows`), the baselines
+    from and no diagnosis can read. Training (:class:`piga.data.windows.SequenceWindows`), the baselines
     and ``piga-diagnose`` run it when they open a file; :class:`DatasetWriter` runs the same test
     before it keeps a file. It reads one sequence of a good file: it stops at the first frame that
     is not blank.

@@ -3,7 +3,7 @@
 The conversion is a centre crop to a square, ``cv2.resize(..., INTER_AREA)`` to the model's size,
 then Gymnasium's gray weights (0.2125, 0.7154, 0.0721), truncated to uint8. That is
 ``ResizeObservation`` then ``GrayscaleObservation``, as in :func:`envs.make_pixel_pendulum`.
-Goal images (:mod:`piga.goal`) and imported recordings (:mod:`piga.importer`) both use it.
+Goal images (:mod:`piga.control.goal`) and imported recordings (:mod:`piga.data.importer`) both use it.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Goals given as images: read the goal angle with the encoder, check it, and write goal images.
 
-An image is converted the way the environment converts its render (:mod:`piga.scene`): a centre
+An image is converted the way the environment converts its render (:mod:`piga.data.scene`): a centre
 crop to a square, ``cv2.resize(..., INTER_AREA)`` to the model's size, then Gymnasium's gray
 weights (0.2125, 0.7154, 0.0721), truncated to uint8.
 
@@ -21,8 +21,8 @@ import torch
 
 from envs.constants import MAX_ACTION
 from envs.pendulum import PixelPendulumConfig
-from piga.model import PhysicsModel, frames_to_float
-from piga.scene import GRAY_WEIGHTS, load_scene_image, scene_to_gray
+from piga.world.model import PhysicsModel, frames_to_float
+from piga.data.scene import GRAY_WEIGHTS, load_scene_image, scene_to_gray
 
 __all__ = ["GRAY_WEIGHTS", "HOLDABLE_ANGLE", "GoalEstimate", "NotTheSceneError", "goal_from_image", "holdable_angle",
            "load_scene_image", "read_goal",
@@ -140,7 +140,7 @@ def read_goal(model: PhysicsModel, image: np.ndarray, g: float, a: float, mse_li
 
 def goal_from_image(model: PhysicsModel, checkpoint: dict, path: str | os.PathLike[str],
                     gravity_mult: float = 1.0) -> GoalEstimate:
-    """Reads the goal from an image file for a model loaded by :func:`piga.runs.load_model`.
+    """Reads the goal from an image file for a model loaded by :func:`piga.io.runs.load_model`.
 
     The image is first compared with the environment's renders (:func:`scene_mismatch`). The
     model's "not the scene" warning limit is 4x its own final reconstruction MSE per frame.
@@ -150,7 +150,7 @@ def goal_from_image(model: PhysicsModel, checkpoint: dict, path: str | os.PathLi
             :data:`MAX_SCENE_MISMATCH`).
     """
     learned = model.physical_parameters()
-    from piga.runs import training_reconstruction_mse
+    from piga.io.runs import training_reconstruction_mse
 
     image = load_scene_image(path, model.config.image_size)
     mismatch = scene_mismatch(image)

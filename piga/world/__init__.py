@@ -1,0 +1,9 @@
+"""The world model: what piga learns from video.
+
+An object-centric encoder reads each object's coordinates from a frame (:mod:`.encoder`), a
+velocity estimator turns the first frames' coordinates into a velocity (:mod:`.velocity`), a
+differentiable physics engine with a few interpretable parameters steps the state forward
+(:mod:`.physics`), and a coordinate-consistent decoder draws the state back into pixels
+(:mod:`.decoder`). :mod:`.model` assembles the four into one ``PhysicsModel``. Nothing here reads
+files, trains, or knows about agents.
+"""
