@@ -22,9 +22,9 @@ args = parser.parse_args()
 out = Path(args.out)
 out.mkdir(parents=True, exist_ok=True)
 
-data = piga.data.collect.collect(piga.CollectConfig(sequences=args.sequences, workers=1), out / "pendulum.h5",
+data = piga.collect(piga.CollectConfig(sequences=args.sequences, workers=1), out / "pendulum.h5",
                             overwrite=True, progress=False)
-piga.training.train.train(data, out / "run", piga.TrainConfig(epochs=args.epochs), progress=False)  # writes run/checkpoint.pt
+piga.train(data, out / "run", piga.TrainConfig(epochs=args.epochs), progress=False)  # writes run/checkpoint.pt
 
 model, _ = piga.load_model(out / "run")  # the trained model, in eval mode
 frames, actions = piga.read_sequences(data, "test")  # uint8 (N, T, 64, 64), float32 (N, T, 1)

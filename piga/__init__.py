@@ -13,7 +13,7 @@ and h5py are imported only when a name that needs them is used)::
     theta = model.encode(x)  # (N, 4, 1, 1): the angle read from each frame
     future = model.predict(theta, torch.from_numpy(actions[:, 3:13]), steps=10)  # (N, 10, 1, 1)
 
-The modules (``piga.data.collect``, ``piga.training.train``, ``piga.data.schema``, ...) are importable as attributes
+The subpackages (``piga.world``, ``piga.data``, ``piga.training``, ...) are importable as attributes
 too, and hold the details.
 """
 
@@ -33,7 +33,9 @@ _API: dict[str, str] = {
     "frames_to_float": "piga.world.model",
     "rollout": "piga.world.physics",
     # data
+    "collect": "piga.data.collect",
     "CollectConfig": "piga.data.collect",
+    "train": "piga.training.train",
     "TrainConfig": "piga.training.train",
     "inspect_dataset": "piga.data.schema",
     "read_sequences": "piga.data.schema",
@@ -53,17 +55,17 @@ __all__ = ["__version__", *_API]
 if TYPE_CHECKING:  # for type checkers and IDEs; at run time the names load lazily (__getattr__)
     from envs.dmc import DMCPendulumConfig, make_dmc_pendulum
     from envs.pendulum import PixelPendulumConfig, make_pixel_pendulum
-    from piga.data.collect import CollectConfig
+    from piga.data.collect import CollectConfig, collect
     from piga.data.schema import DataFormatError, DatasetInfo, inspect_dataset, load_states, read_sequences
     from piga.world.model import ModelConfig, PhysicsModel, frames_to_float
     from piga.world.physics import rollout
     from piga.io.runs import load_model
-    from piga.training.train import TrainConfig
+    from piga.training.train import TrainConfig, train
     from piga.data.windows import SequenceWindows
 
 
 def __getattr__(name: str) -> Any:
-    """Loads a public name, or a submodule (``piga.data.collect``, ``piga.training.train``, ...), on first use."""
+    """Loads a public name, or a subpackage (``piga.data``, ``piga.training``, ...), on first use."""
     if name in _API:
         value = getattr(importlib.import_module(_API[name]), name)
         globals()[name] = value
