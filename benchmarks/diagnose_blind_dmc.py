@@ -7,6 +7,8 @@ motion ``blur``), or none. For each case the script
 
 1. collects a nominal file of the variant (its camera, no added effect) and trains the nominal
    model on it with the default fast preset, as a user would (``piga-train-model --preset fast``);
+   when that run exits 1 saying the actuation faded (a flipped camera or motor), it retrains with
+   the ``--signed-actuation`` that the line names, as a user would;
 2. collects the case's "real" file of the same variant with the added effect;
 3. deletes every label from that file: the ``effects`` attribute, the command line, ``/states``
    (as :func:`diagnose_blind.strip_labels`), and the provenance hints ``env_id``, ``env_config``
@@ -210,7 +212,8 @@ def markdown(runs: list[dict[str, Any]], summary: dict[str, Any], command: str, 
     lines = [
         "# Blind check of piga-diagnose on dm_control's pendulum", "", f"Command: `{command}`", "",
         f"{info['sequences']} sequences x {info['steps']} frames per file; nominal model: `piga-train-model --preset fast` "
-        f"on a nominal file of each variant{info['train_note']}. Machine: {info['machine']['cpu']}, "
+        f"on a nominal file of each variant{info['train_note']} (with `--signed-actuation` where the first run exits 1 "
+        f"asking for it: cases {', '.join(str(r['case']) for r in runs if r.get('signed_actuation')) or 'none'}). Machine: {info['machine']['cpu']}, "
         f"{info['machine']['cores']} cores.", "",
         "| measure | value | floor |", "|---|---|---|",
         f"| cases | {summary['cases']} ({summary['refused']} refused by piga-diagnose, counted wrong) | ≥ 24 |",
@@ -240,8 +243,14 @@ def run_case(case: dict[str, Any], work: Path, sequences: int, steps: int, train
     run_dir, report_dir = work / f"case{case['case']:02d}_model", work / f"case{case['case']:02d}"
     collect_config = replace(CollectConfig(), sequences=sequences, steps=steps, env=config, workers=1)
     collect(replace(collect_config, seed=case["nominal_seed"]), nominal, overwrite=True, command="", progress=False)
-    subprocess.run(["piga-train-model", str(nominal), "--out", str(run_dir), "--preset", "fast", "--threads", "1",
-                    "--overwrite", "--quiet", *train_args], check=True, stdout=subprocess.DEVNULL)
+    command = ["piga-train-model", str(nominal), "--out", str(run_dir), "--preset", "fast", "--threads", "1",
+               "--overwrite", "--quiet", *train_args]
+    trained = subprocess.run(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    signed = trained.returncode == 1 and "--signed-actuation" in trained.stderr
+    if signed:  # as a user would: the line says the frames show the actuation reversed, and names the flag
+        trained = subprocess.run([*command, "--signed-actuation"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    if trained.returncode != 0:
+        raise RuntimeError(f"piga-train-model failed on case {case['case']}: {trained.stderr.strip()}")
     collect(replace(collect_config, seed=case["data_seed"]), real, overwrite=True, command="", progress=False,
             make_env=functools.partial(make_case_env, case["effects"]))
     strip_provenance(real)
@@ -250,9 +259,10 @@ def run_case(case: dict[str, Any], work: Path, sequences: int, steps: int, train
     if done.returncode != 0:  # a refusal (one line) is an outcome, scored as wrong; a crash is not
         if "internal error" in done.stderr or not done.stderr.strip():
             raise RuntimeError(f"piga-diagnose failed on case {case['case']}: {done.stderr.strip()}")
-        return {**case, "seconds": time.time() - t0, "score": refused(case, done.stderr.strip().splitlines()[-1])}
+        return {**case, "seconds": time.time() - t0, "signed_actuation": signed,
+                "score": refused(case, done.stderr.strip().splitlines()[-1])}
     report = json.loads((report_dir / "report.json").read_text())
-    return {**case, "seconds": time.time() - t0, "score": score(case, report)}
+    return {**case, "seconds": time.time() - t0, "signed_actuation": signed, "score": score(case, report)}
 
 
 def refused(case: dict[str, Any], message: str) -> dict[str, Any]:

@@ -365,5 +365,9 @@ def test_the_convergence_check_on_made_up_trajectories() -> None:
     assert stuck.outcome == "untrained" and "g never left" in stuck.reason
     collapsed = check_convergence(state(1 + 9 * settle, np.full_like(steps, 1e-9)))
     assert collapsed.outcome == "untrained" and "a collapsed" in collapsed.reason
+    faded = check_convergence(state(1 + 9 * settle, 0.3 - 0.298 * settle))  # a settles at 0.002: reversed frames
+    assert faded.outcome == "untrained" and "a shrank" in faded.reason and "--signed-actuation" in faded.reason
+    weak = check_convergence(state(1 + 9 * settle, 0.3 - 0.29 * (1 - np.exp(-steps / 50))))  # a settles at 0.01, 30x below
+    assert weak.outcome == "converged", weak.reason
     warm = check_convergence(state(np.ones_like(steps), np.full_like(steps, 0.3), step=30))
     assert warm.outcome == "untrained" and "never trained" in warm.reason and warm.physics_steps == 0

@@ -8,7 +8,7 @@ trajectory, :class:`piga.training.train.TrainState`), never the truth, and gives
 
 | outcome | meaning | ``piga-train-model`` |
 |---|---|---|
-| ``untrained`` | the physics never trained, a learned parameter never left its start, or one collapsed to a float limit | exits 1 with a line that names the fix |
+| ``untrained`` | the physics never trained, a learned parameter never left its start, one collapsed to a float limit, or the actuation gain faded toward 0 | exits 1 with a line that names the fix |
 | ``unsettled`` | it trained, but stopped before its plan ended, or a parameter still drifts at the end | exits 0 with a warning line |
 | ``converged`` | none of the above | exits 0 |
 
@@ -42,6 +42,9 @@ class ConvergenceConfig:
     """Smallest relative change from its start of a parameter that was learned."""
     collapse_factor: float = 1e4
     """A parameter that ends this factor or more away from its start has collapsed (log-space runaway)."""
+    actuation_fade: float = 100.0
+    """An actuation gain ``a`` that ends this factor or more below its start has faded: in the frames the actions
+    barely move the system, or move it the other way (a model learning a > 0 in log space can only shrink a)."""
 
 
 @dataclass(frozen=True)
@@ -116,6 +119,12 @@ def check_convergence(state: Any, config: ConvergenceConfig = ConvergenceConfig(
         if abs(c.end) >= config.collapse_factor * abs(c.start) or abs(c.end) <= abs(c.start) / config.collapse_factor:
             return verdict("untrained", f"{name} collapsed from {c.start:.4g} to {c.end:.4g}: the physics learning "
                                         "rate is too large for this file; lower --lr-physics")
+    fade = scaled.get("a")
+    if fade is not None and abs(fade.end) <= abs(fade.start) / config.actuation_fade:
+        return verdict("untrained", f"a shrank from {fade.start:.4g} to {fade.end:.4g} (x{abs(fade.start / fade.end):.0f}): in "
+                                    "these frames the actions barely move the system, or move it the other way (a camera "
+                                    "filming from the other side, a motor wired in reverse); retrain with "
+                                    "--signed-actuation, or check the file's actions")
     stuck = [name for name, c in scaled.items() if abs(c.change_from_start) < config.moved_tolerance]
     if stuck:
         return verdict("untrained", f"{', '.join(stuck)} never left {'its' if len(stuck) == 1 else 'their'} initial "
