@@ -21,6 +21,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from piga.world.effects import pendulum_gains, scaled_gravity
 from piga.world.physics import Euler, Pendulum
 
 
@@ -103,10 +104,11 @@ _NO_COST = np.zeros(0, np.float32)
 class PendulumDynamics:
     """The pendulum engine of :class:`piga.world.physics.Pendulum` on plain arrays, for planning.
 
-    θ̈ = k_g·sin θ + k_u·u with k_g = 3g / 2l and k_u = 3a / m l², integrated by semi-implicit Euler
-    with ``substeps`` substeps of dt / substeps per step, the action held over the step: what
+    θ̈ = k_g·sin θ + k_u·u with k_g = 3g / 2l and k_u = 3a / m l² (the gains of
+    :func:`piga.world.effects.pendulum_gains`), integrated by semi-implicit Euler with ``substeps``
+    substeps of dt / substeps per step, the action held over the step: what
     :class:`piga.world.physics.Euler` does with a :class:`~piga.world.physics.Pendulum`, up to float32
-    rounding (tests/test_control.py compares them). Here θ is Gymnasium's angle: a model's angle
+    rounding (``tests/test_planning_engine.py`` ties the two on random states and actions). Here θ is Gymnasium's angle: a model's angle
     offset φ is added to the state before planning, not inside the engine.
 
     Why not :func:`piga.world.physics.rollout` itself: a planning step rolls 200 candidates x 20 steps x
@@ -128,9 +130,10 @@ class PendulumDynamics:
             raise ValueError(f"need g, a, dt, length, mass > 0 and substeps >= 1, got g={g}, a={a}, dt={dt}, "
                              f"length={length}, mass={mass}, substeps={substeps}")
         self.g, self.a, self.dt, self.substeps = float(g), float(a), float(dt), int(substeps)
-        self.gravity_gain = 3.0 * self.g / (2.0 * length)
+        gravity_gain, torque_gain = pendulum_gains(length, mass)
+        self.gravity_gain = gravity_gain * self.g
         """k_g = 3g / 2l."""
-        self.torque_gain = 3.0 * self.a / (mass * length**2)
+        self.torque_gain = torque_gain * self.a
         """k_u = 3a / m l²."""
 
     @classmethod
@@ -145,7 +148,7 @@ class PendulumDynamics:
                              "pendulum planner's engine is semi-implicit Euler without damping (for dm_control's "
                              "pendulum use piga-control --env piga/DMCPendulum-v0)")
         p = system.parameters_dict()
-        return cls(p["g"] * gravity_mult, p["a"], system.dt, integrator.substeps, system.length, system.mass)
+        return cls(scaled_gravity(p["g"], gravity_mult), p["a"], system.dt, integrator.substeps, system.length, system.mass)
 
     def _roll(self, theta: float, theta_dot: float, actions: Tensor, cost: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Angles, speeds (H, B) and returns (B,) (zeros unless ``cost`` holds (goal, w_θ, w_v, w_u))."""

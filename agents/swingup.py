@@ -8,8 +8,8 @@ pumps energy toward the upright's is rewarded, and the angle term takes over nea
     cost_t = w_θ·(1 − cos θ_t) + w_E·((E_t − E*) / 2E*)² + w_u·u_t²,
     E = θ̇² / 2 + k_g·cos θ,  E* = k_g (upright at rest),  k_g = 1.5·g (θ̈ = k_g·sin θ + ...).
 
-The dynamics (:class:`DampedPendulumDynamics`) are piga's engine with a damping term,
-θ̈ = 1.5·g·sin θ + 3·a·u − 3·b·θ̇, integrated by MuJoCo's semi-implicit Euler (damping implicit) or
+The dynamics (:class:`DampedPendulumDynamics`) are piga's pendulum equation with its damping term
+(:mod:`piga.world.effects`), θ̈ = 1.5·g·sin θ + 3·(a·u − b·θ̇), integrated by MuJoCo's semi-implicit Euler (damping implicit) or
 by RK4, ``substeps`` per frame with the action held. With the environment's true g, a, b and
 MuJoCo's integrator it is the oracle's model; with a piga model's learned values and integrator
 it is the piga agent's. Angles are Gymnasium's convention (θ = 0 upright).
@@ -25,12 +25,18 @@ from torch import Tensor
 
 from agents.cem import cem, shift_warm_start
 from agents.config import CEMConfig
+from piga.world.effects import DAMPING, pendulum_acceleration, pendulum_gains
+from piga.world.physics import euler_step, rk4_step
 
 __all__ = ["DampedPendulumDynamics", "SwingUpConfig", "SwingUpPlanner"]
 
 
 class DampedPendulumDynamics:
-    """θ̈ = k_g·sin θ + k_u·u − k_b·θ̇ on plain arrays (k_g = 1.5·g, k_u = 3·a, k_b = 3·b), for planning.
+    """θ̈ = k_g·sin θ + 3·(a·u − b·θ̇) on plain arrays (k_g = 1.5·g), for planning.
+
+    The equation and the damping term are piga's (:func:`piga.world.effects.pendulum_acceleration`,
+    :data:`piga.world.effects.DAMPING`), stepped by :func:`piga.world.physics.euler_step` (the
+    damping taken implicitly, as MuJoCo's Euler does) or :func:`piga.world.physics.rk4_step`.
 
     Args:
         g, a, b: gravity, actuation gain (its sign included: a flipped actuation has a < 0) and damping,
@@ -44,35 +50,33 @@ class DampedPendulumDynamics:
         if not (g > 0 and a != 0 and b >= 0 and dt > 0 and substeps >= 1) or integrator not in ("euler", "rk4"):
             raise ValueError(f"need g > 0, a != 0, b >= 0, dt > 0, substeps >= 1 and integrator euler or rk4, got "
                              f"g={g}, a={a}, b={b}, dt={dt}, substeps={substeps}, integrator={integrator!r}")
-        self.k_g, self.k_u, self.k_b = 1.5 * float(g), 3.0 * float(a), 3.0 * float(b)
+        self.g, self.a, self.b = float(g), float(a), float(b)
+        gravity_gain, torque_gain = pendulum_gains()
+        self.k_g = gravity_gain * self.g
+        """k_g = 1.5·g: the upright's energy per unit inertia (the planner's cost)."""
+        self.damping_rate = torque_gain * self.b
+        """3·b: the θ̇ coefficient of θ̈, taken implicitly by the Euler step."""
         self.dt, self.substeps, self.integrator = float(dt), int(substeps), integrator
-
-    def _acc(self, q: np.ndarray, v: np.ndarray, push: np.ndarray) -> np.ndarray:
-        return self.k_g * np.sin(q) + push - self.k_b * v
 
     def rollout(self, theta: float, theta_dot: float, actions: Tensor) -> tuple[Tensor, Tensor]:
         """Angles and velocities (B, H) of the H frames after (θ, θ̇) under actions (B, H, 1)."""
         b, steps = actions.shape[:2]
         h = self.dt / self.substeps
-        push = actions[..., 0].numpy().T.astype(np.float64) * self.k_u  # (H, B)
+        drive = actions[..., 0].numpy().T.astype(np.float64) * self.a  # (H, B): a·u
         q = np.full(b, theta, np.float64)
         v = np.full(b, theta_dot, np.float64)
         angles = np.empty((steps, b), np.float32)
         speeds = np.empty((steps, b), np.float32)
         for j in range(steps):
-            for _ in range(self.substeps):
-                if self.integrator == "euler":
-                    v = (v + h * (self.k_g * np.sin(q) + push[j])) / (1.0 + h * self.k_b)
-                    q = q + h * v
-                else:
-                    a1 = self._acc(q, v, push[j])
-                    v2 = v + 0.5 * h * a1
-                    a2 = self._acc(q + 0.5 * h * v, v2, push[j])
-                    v3 = v + 0.5 * h * a2
-                    a3 = self._acc(q + 0.5 * h * v2, v3, push[j])
-                    v4 = v + h * a3
-                    a4 = self._acc(q + h * v3, v4, push[j])
-                    q, v = q + h / 6 * (v + 2 * v2 + 2 * v3 + v4), v + h / 6 * (a1 + 2 * a2 + 2 * a3 + a4)
+            if self.integrator == "euler":  # the damping implicit: MuJoCo's Euler
+                undamped = lambda q, v, u=drive[j]: pendulum_acceleration(q, v, self.g, actuation=(1.0, u))  # noqa: E731
+                for _ in range(self.substeps):
+                    q, v = euler_step(undamped, q, v, h, implicit_damping=self.damping_rate)
+            else:
+                damped = lambda q, v, u=drive[j]: pendulum_acceleration(q, v, self.g, actuation=(1.0, u),  # noqa: E731
+                                                                     passive=[(DAMPING, self.b)])
+                for _ in range(self.substeps):
+                    q, v = rk4_step(damped, q, v, h)
             angles[j], speeds[j] = q, v
         return torch.from_numpy(angles).T, torch.from_numpy(speeds).T  # (B, H) each
 

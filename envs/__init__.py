@@ -17,7 +17,7 @@ import gymnasium as gym
 
 from envs.constants import MAX_ACTION, PENDULUM_DT, PENDULUM_MAX_SPEED
 from envs.dmc import DMCPendulumConfig, MissingExtraError, make_dmc_pendulum
-from envs.effects import EFFECTS, FRICTION_SMOOTHING, normalize_effects, parse_effect
+from envs.effects import EFFECTS, normalize_effects, parse_effect
 from envs.pendulum import (
     ActuationGain,
     HideTorqueArrow,
@@ -32,7 +32,6 @@ __all__ = [
     "MissingExtraError",
     "make_dmc_pendulum",
     "EFFECTS",
-    "FRICTION_SMOOTHING",
     "MAX_ACTION",
     "PENDULUM_DT",
     "PENDULUM_MAX_SPEED",

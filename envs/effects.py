@@ -10,7 +10,9 @@ nominal data against a recording with effects. Each effect is one small wrapper,
 
 ## Dynamics
 
-The equations are exact. piga's fitting code uses the same ones in torch, so keep the two in step.
+The equations are exact. The actuator and passive-torque terms are those of
+:mod:`piga.world.effects`, the one definition that piga's diagnosis and planners use too (that
+module is torch-free: it is the only part of piga that ``envs`` imports).
 
 Let u_t be the commanded action, the one that the agent sends and that a data file stores as
 ``/actions``. Like Pendulum-v1, it is first clipped to [-2, 2]. The actuator effects turn u into
@@ -29,7 +31,7 @@ from the state (θ_t, θ̇_t) *before* the step:
 | effect | kind | parameter | passive torque | wrapper |
 |---|---|---|---|---|
 | ``damping=b`` | passive | 0 < b <= 100 (N·m·s/rad) | -b·θ̇_t | :class:`ViscousDamping` |
-| ``friction=c`` | passive | 0 < c <= 100 (N·m) | -c·tanh(θ̇_t / 0.1), a smoothed Coulomb friction (:data:`FRICTION_SMOOTHING`) | :class:`CoulombFriction` |
+| ``friction=c`` | passive | 0 < c <= 100 (N·m) | -c·tanh(θ̇_t / 0.1), a smoothed Coulomb friction (:data:`piga.world.effects.FRICTION_SMOOTHING`) | :class:`CoulombFriction` |
 | ``bias=τ0`` | passive | 0 < abs(τ0) <= 100 (N·m) | +τ0 | :class:`TorqueBias` |
 | ``cogging=k`` | passive | 0 < k <= 100 (N·m) | -k·sin(4θ_t), a detent torque; not a candidate of the diagnosis | :class:`CoggingTorque` |
 | ``speed_clip=v`` | clip | 0 < v < 8 (rad/s) | Pendulum-v1's speed clip ±8 becomes ±v | :class:`SpeedClip` |
@@ -82,12 +84,7 @@ import gymnasium as gym
 import numpy as np
 
 from envs.constants import MAX_ACTION, PENDULUM_MAX_SPEED
-
-#: Speed scale (rad/s) of the smoothed Coulomb friction -c·tanh(θ̇ / FRICTION_SMOOTHING).
-FRICTION_SMOOTHING = 0.1
-
-#: Periods per turn of the cogging torque.
-COGGING_PERIODS = 4
+from piga.world.effects import BIAS, COGGING, DAMPING, DEADZONE, FRICTION, GAIN, SATURATION
 
 # Upper bounds of the effects' parameters: far beyond any real system's (the pendulum's torque is
 # at most 2 N·m, its frames 64 px and 255 gray levels), and small enough that a typo such as
@@ -180,7 +177,7 @@ class ActionDeadzone(gym.ActionWrapper):
 
     def action(self, action: np.ndarray) -> np.ndarray:
         u = np.clip(np.asarray(action, np.float32), -MAX_ACTION, MAX_ACTION)
-        return (np.sign(u) * np.maximum(np.abs(u) - self.width, 0.0)).astype(np.float32)
+        return DEADZONE.transform(u, self.width).astype(np.float32)
 
 
 class ActionSaturation(gym.ActionWrapper):
@@ -193,7 +190,7 @@ class ActionSaturation(gym.ActionWrapper):
         self.limit = limit
 
     def action(self, action: np.ndarray) -> np.ndarray:
-        return np.clip(np.asarray(action, np.float32), -self.limit, self.limit).astype(np.float32)
+        return SATURATION.transform(np.asarray(action, np.float32), self.limit).astype(np.float32)
 
 
 class ActionGainError(gym.ActionWrapper):
@@ -214,7 +211,7 @@ class ActionGainError(gym.ActionWrapper):
         base.max_torque = math.inf
 
     def action(self, action: np.ndarray) -> np.ndarray:
-        return self.gain * np.asarray(action, np.float64)
+        return GAIN.transform(np.asarray(action, np.float64), self.gain)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -254,11 +251,11 @@ class ViscousDamping(_PassiveTorque):
         self.coefficient = coefficient
 
     def torque(self, theta: float, theta_dot: float) -> float:
-        return -self.coefficient * theta_dot
+        return DAMPING.torque(theta, theta_dot, self.coefficient)
 
 
 class CoulombFriction(_PassiveTorque):
-    """Smoothed Coulomb friction: passive torque -c·tanh(θ̇ / FRICTION_SMOOTHING)."""
+    """Smoothed Coulomb friction: passive torque -c·tanh(θ̇ / 0.1) (:data:`piga.world.effects.FRICTION_SMOOTHING`)."""
 
     def __init__(self, env: gym.Env, level: float):
         level = _validated("friction", level)
@@ -266,7 +263,7 @@ class CoulombFriction(_PassiveTorque):
         self.level = level
 
     def torque(self, theta: float, theta_dot: float) -> float:
-        return -self.level * math.tanh(theta_dot / FRICTION_SMOOTHING)
+        return FRICTION.torque(theta, theta_dot, self.level)
 
 
 class TorqueBias(_PassiveTorque):
@@ -278,11 +275,11 @@ class TorqueBias(_PassiveTorque):
         self.bias = bias
 
     def torque(self, theta: float, theta_dot: float) -> float:
-        return self.bias
+        return BIAS.torque(theta, theta_dot, self.bias)
 
 
 class CoggingTorque(_PassiveTorque):
-    """A position-periodic detent torque -k·sin(COGGING_PERIODS·θ), as a motor with 4 pole pairs has.
+    """A position-periodic detent torque -k·sin(4θ), as a motor with 4 pole pairs has.
 
     It is *not* among the candidates of ``piga-diagnose``: the blind check uses it as the effect
     outside the candidate set, which the diagnosis must report as unexplained.
@@ -294,7 +291,7 @@ class CoggingTorque(_PassiveTorque):
         self.level = level
 
     def torque(self, theta: float, theta_dot: float) -> float:
-        return -self.level * math.sin(COGGING_PERIODS * theta)
+        return COGGING.torque(theta, theta_dot, self.level)
 
 
 class ShowCommandedTorque(gym.Wrapper):
@@ -585,7 +582,6 @@ def format_effects(effects: Effects) -> str:
 
 __all__ = [
     "EFFECTS",
-    "FRICTION_SMOOTHING",
     "PENDULUM_MAX_SPEED",
     "STAGES",
     "ActionDeadzone",

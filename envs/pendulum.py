@@ -59,6 +59,7 @@ from gymnasium.wrappers import (
 
 from envs.constants import MAX_ACTION, PENDULUM_DT, PENDULUM_MAX_SPEED
 from envs.effects import EFFECTS, ShowCommandedTorque, normalize_effects, wrap_effects
+from piga.world.effects import scaled_gravity
 
 # pygame opens a display on its first render; on a headless machine it needs the dummy driver
 # and otherwise prints an XDG_RUNTIME_DIR complaint. A user's own choice is respected.
@@ -119,8 +120,8 @@ class PixelPendulumConfig:
 
     @property
     def effective_gravity(self) -> float:
-        """The gravity the simulator uses: ``gravity * gravity_mult``."""
-        return self.gravity * self.gravity_mult
+        """The gravity the simulator uses: ``gravity * gravity_mult`` (:func:`piga.world.effects.scaled_gravity`)."""
+        return scaled_gravity(self.gravity, self.gravity_mult)
 
     def to_dict(self) -> dict[str, Any]:
         """A JSON-able copy of the fields."""

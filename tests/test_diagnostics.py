@@ -14,6 +14,7 @@ from envs.pendulum import PixelPendulumConfig, make_pixel_pendulum
 from piga.diagnostics import DiagnoseConfig, Observations, analyse
 from piga.diagnostics import fit
 from piga.io.runs import Nominal
+from piga.world.effects import CANDIDATES, EFFECTS, SPEED_CLIP
 from tests.helpers import assert_one_line_error, run, train_tiny
 
 NOMINAL = Nominal(g=10.0, a=1.0, offset=0.0, dt=0.05)
@@ -34,8 +35,8 @@ def test_candidate_physics_matches_the_effect_wrappers(effects: dict) -> None:
         _, _, _, _, info = env.step(np.array([u], np.float32))
         states.append(info["state"][0])
     env.close()
-    names = tuple(e for e in fit.CANDIDATES if e in effects)
-    values = {"g": 10.0, "a": 1.0, **{fit.PARAMETER[e]: v for e, v in effects.items() if e in fit.PARAMETER}}
+    names = tuple(e for e in CANDIDATES if e in effects)
+    values = {"g": 10.0, "a": 1.0, **{EFFECTS[e].parameter: v for e, v in effects.items() if EFFECTS[e].parameter}}
     model = fit.Model(names, effects.get("delay", 0), values)
     w = fit.Windows(torch.tensor([theta0], dtype=torch.float64), torch.tensor([v0], dtype=torch.float64),
                   torch.tensor([[0.0] * fit.MAX_DELAY + list(actions.astype(np.float32))], dtype=torch.float64),
@@ -278,7 +279,7 @@ def test_a_limit_is_reported_where_the_physics_holds_it() -> None:
     obs = planted({}, n=20, t=12)
     w = fit.make_windows(obs.theta, obs.actions, np.arange(20), 4, 2, 0.05)
     m = fit.fit(fit.Model(("speed_clip",), 0, {"g": 10.0, "a": 1.0, "v": -0.374}), NOMINAL, w, max_iter=5)
-    assert m.values["v"] == fit.LOWER_BOUNDS["v"]
+    assert m.values["v"] == SPEED_CLIP.lower_bound
 
 
 def test_the_diagnosis_engine_is_the_model_engine_without_effects() -> None:

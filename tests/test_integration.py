@@ -1,4 +1,4 @@
-"""Integration within the frame (piga/world/physics.py): RK4 and the velocity read through the
+"""Integration within the frame (piga/world/physics): RK4 and the velocity read through the
 integrator, against a fine-step reference of the continuous pendulum with a held action."""
 
 from __future__ import annotations

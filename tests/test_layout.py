@@ -43,6 +43,22 @@ def test_the_env_modules_import_one_way(path: str, never: set[str]) -> None:
     assert not {m for m in imported for n in never if m == n or m.startswith(n + ".")}, imported
 
 
+def test_envs_import_only_the_torch_free_effect_terms_of_piga() -> None:
+    """envs builds its effect wrappers from piga.world.effects, the one module of piga it may import: it is
+    torch-free, so making an environment never loads the model."""
+    root = Path(__file__).parents[1]
+    for path in sorted((root / "envs").glob("*.py")):
+        tree = ast.parse(path.read_text())
+        imported = {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.module}
+        imported |= {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
+        piga = {m for m in imported if m == "piga" or m.startswith("piga.")}
+        assert piga <= {"piga.world.effects"}, (path.name, piga)
+    code = "import sys, envs.effects, envs.pendulum; print(' '.join(sorted(sys.modules)))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=120)
+    loaded = set(out.stdout.split())
+    assert "torch" not in loaded and {m for m in loaded if m.startswith("piga.")} == {"piga.world", "piga.world.effects"}
+
+
 def _console_scripts() -> dict[str, str]:
     """pyproject.toml's console scripts: name -> module."""
     import tomllib

@@ -9,6 +9,7 @@ from envs.pendulum import PixelPendulumConfig, make_pixel_pendulum
 from piga.diagnostics import fit
 from piga.diagnostics.residuals import ridge
 from piga.diagnostics.twin import gap_closure, render_angles, repeat_stale, twin_angles
+from piga.world.effects import CANDIDATES
 from tests.test_diagnostics import NOMINAL, planted
 
 
@@ -16,7 +17,7 @@ from tests.test_diagnostics import NOMINAL, planted
 def test_the_twin_of_exact_data_is_the_data(effects: dict) -> None:
     obs = planted(effects, n=6, t=20, noise=0.0)
     values = {"g": 10.0, "a": 1.0, **({"b": 0.2} if "damping" in effects else {})}
-    model = fit.Model(tuple(e for e in fit.CANDIDATES if e in effects), effects.get("delay", 0), values)
+    model = fit.Model(tuple(e for e in CANDIDATES if e in effects), effects.get("delay", 0), values)
     np.testing.assert_allclose(twin_angles(model, NOMINAL, obs.theta, obs.actions), obs.theta, atol=1e-9)
     # a wrong model's twin departs from the data
     wrong = fit.Model((), 0, {"g": 10.0, "a": 0.5})

@@ -167,7 +167,7 @@ def make_observation_env(config: DDPGConfig, encoder: Callable[[np.ndarray], np.
     import envs  # noqa: F401  (registers piga/PixelPendulum-v0)
 
     if config.obs == "state":
-        g = PixelPendulumConfig().gravity * gravity_mult
+        g = PixelPendulumConfig(gravity_mult=gravity_mult).effective_gravity
         return StateObservation(gym.make("Pendulum-v1", g=g, max_episode_steps=EPISODE_STEPS))
     env = gym.make("piga/PixelPendulum-v0", frame_stack=1, draw_torque_arrow=config.torque_arrow,
                    episode_length=EPISODE_STEPS, gravity_mult=gravity_mult)

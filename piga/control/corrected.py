@@ -19,15 +19,16 @@ from envs.pendulum import MAX_ACTION
 from piga.diagnostics import fit
 from piga.diagnostics.fit import nominal_of
 from piga.diagnostics.vision import Camera, angle_table, match
+from piga.world.effects import scaled_gravity
 from piga.world.model import PhysicsModel
 
 
 class CorrectedDynamics:
     """The nominal engine plus the effects a diagnosis fitted, as a :class:`agents.dynamics.Dynamics`.
 
-    The effects are those of :mod:`piga.diagnostics.fit` (delay, deadzone, saturation, damping,
-    friction, bias, speed clip) with the fitted g, a and coefficients, rolled by
-    :func:`piga.diagnostics.fit.simulate`. For a delay of k steps the first k steps of every
+    The effects are the typed terms of :mod:`piga.world.effects` that the diagnosis fitted (delay,
+    deadzone, saturation, damping, friction, bias, speed clip, within_frame) with the fitted g, a and
+    coefficients, rolled by :func:`piga.diagnostics.fit.simulate`. For a delay of k steps the first k steps of every
     rollout use the actions already sent, which this object remembers (:meth:`executed`).
     Angles are Gymnasium's (θ = 0 upright), as for every planner's dynamics.
 
@@ -39,7 +40,7 @@ class CorrectedDynamics:
     """
 
     def __init__(self, corrected: fit.Model, nominal: fit.Nominal, gravity_mult: float = 1.0):
-        values = {**corrected.values, "g": corrected.values["g"] * gravity_mult}
+        values = {**corrected.values, "g": scaled_gravity(corrected.values["g"], gravity_mult)}
         self.corrected = corrected.with_values(values)
         # the planner's θ̇ is the reader's velocity at the frame (a velocity_hold model's reader already
         # reads it through the integrator), not a difference to read again

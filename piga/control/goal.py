@@ -21,6 +21,7 @@ import torch
 
 from envs.constants import MAX_ACTION
 from envs.pendulum import PixelPendulumConfig
+from piga.world.effects import scaled_gravity
 from piga.world.model import PhysicsModel, frames_to_float
 from piga.data.scene import GRAY_WEIGHTS, load_scene_image, scene_to_gray
 
@@ -120,7 +121,7 @@ def read_goal(model: PhysicsModel, image: np.ndarray, g: float, a: float, mse_li
     offset = model.physical_parameters().get("offset", 0.0)
     angle = math.remainder(float(coords[0, 0, 0, 0]) + offset, 2 * math.pi)
     hold = -g * math.sin(angle) / (2 * a)  # 1.5 g sin θ + 3 a u = 0
-    env_g, env_a = PixelPendulumConfig.gravity * gravity_mult, PixelPendulumConfig.actuation_gain
+    env_g, env_a = PixelPendulumConfig(gravity_mult=gravity_mult).effective_gravity, PixelPendulumConfig.actuation_gain
     feasible = holdable_angle(env_g, env_a)
     warnings = []
     if abs(math.sin(angle)) > math.sin(feasible):
@@ -159,7 +160,7 @@ def goal_from_image(model: PhysicsModel, checkpoint: dict, path: str | os.PathLi
             f"{path}: not a picture of the pendulum scene: no render of the pendulum at any angle comes close to it "
             f"(mismatch {mismatch:.2f}; a render scores 0, the empty background 1, the limit is {MAX_SCENE_MISMATCH})")
     typical = training_reconstruction_mse(model, checkpoint) or 0.001
-    return read_goal(model, image, g=learned["g"] * gravity_mult, a=learned["a"], mse_limit=4 * typical,
+    return read_goal(model, image, g=scaled_gravity(learned["g"], gravity_mult), a=learned["a"], mse_limit=4 * typical,
                      gravity_mult=gravity_mult)
 
 

@@ -76,6 +76,7 @@ from piga.diagnostics.twin import MEASURABLE_GAP, calibrate_floor, gap_closure, 
 from piga.diagnostics.vision import Camera, CameraConfig, CameraFindings, angle_table, camera_stage, match
 from piga.world.model import PhysicsModel
 from piga.diagnostics.fit import Nominal, nominal_of
+from piga.world.effects import CANDIDATES, DELAY, EFFECTS, SPEED_CLIP, WITHIN_FRAME, TorqueTerm
 from piga.io.runs import training_arrow, training_blank_mse, training_reconstruction_mse
 
 #: Gymnasium Pendulum-v1's own speed clip (rad/s).
@@ -164,10 +165,11 @@ class DiagnoseConfig:
             raise ValueError(f"need fit_horizon, stride >= 1 and max_effects, bootstrap >= 0, got {self}")
 
 
-#: Units of the dynamics effects' parameters. piga's engine is θ̈ = 1.5·g·sin(θ + φ) + 3·(a·u − b·θ̇ − ...),
-#: a rod with m = l = 1: its torques are per m·l², so b (3·b·θ̇ in rad/s², θ̇ in rad/s) is a rate in 1/s and
-#: c, τ0 are in rad/s². A real rod's hinge damping is b·m·l² N·m·s/rad (:data:`UNITS_NOTE`).
-UNITS = {"b": "1/s", "c": "rad/s²", "tau0": "rad/s²", "d": "action units", "s": "action units", "v": "rad/s"}
+#: Units of the candidates' parameters, from their terms (:mod:`piga.world.effects`). piga's engine is
+#: θ̈ = 1.5·g·sin(θ + φ) + 3·(a·u − b·θ̇ − ...), a rod with m = l = 1: its torques are per m·l², so b (3·b·θ̇ in
+#: rad/s², θ̇ in rad/s) is a rate in 1/s and c, τ0 are in rad/s². A real rod's hinge damping is b·m·l² N·m·s/rad
+#: (:data:`UNITS_NOTE`).
+UNITS = {e.parameter: e.unit for name, e in EFFECTS.items() if name in CANDIDATES and e.parameter is not None}
 #: The report's line on those units.
 UNITS_NOTE = ("units: piga's engine is θ̈ = 1.5·g·sin(θ + φ) + 3·(a·u − b·θ̇ − c·tanh(θ̇/0.1) + τ0), a rod with "
               "m = l = 1, so its torques are per m·l²: b is in 1/s, c and τ0 in rad/s²; for a rod of mass m and "
@@ -280,7 +282,7 @@ class Candidates:
     @property
     def allowed(self) -> tuple[str, ...]:
         """The candidates that may be tried."""
-        return tuple(c for c in fit.CANDIDATES if c not in self.excluded)
+        return tuple(c for c in CANDIDATES if c not in self.excluded)
 
 
 def actuation_sign(nom: Nominal, w1: fit.Windows, min_t: float = 5.0) -> float:
@@ -319,7 +321,7 @@ def score_candidates(nom: Nominal, w: WindowSet, progress: bool = False, exclude
     excluded = dict(excluded or {})
     nominal_model = fit.Model((), 0, {"g": nom.g, "a": nom.a})
     nominal = score(nominal_model, nom, w.fit1_nominal, w.free_nominal)
-    allowed = [c for c in fit.CANDIDATES if c not in excluded]
+    allowed = [c for c in CANDIDATES if c not in excluded]
     bar = tqdm(total=2 + len(allowed), desc="fitting candidates", disable=not progress)
     refit = score(fit.fit_candidate((), {}, nom, w.fit), nom, w.fit1, w.free)
     if not all(math.isfinite(v) for v in refit.model.values.values()) or not math.isfinite(refit.bic):
@@ -386,9 +388,9 @@ def clip_supported(level: float, speeds: np.ndarray, config: DiagnoseConfig) -> 
 def clip_binding(model: fit.Model, nom: Nominal, w1: fit.Windows) -> float:
     """The fraction of one-step predictions in which ``model``'s speed clip binds (0 without a clip):
     those whose speed, unclipped, would pass its level."""
-    if "speed_clip" not in model.effects or len(w1.theta0) == 0:
+    if not model.has(SPEED_CLIP) or len(w1.theta0) == 0:
         return 0.0
-    free = fit.Model(tuple(e for e in model.effects if e != "speed_clip"), model.delay, dict(model.values),
+    free = fit.Model(tuple(e for e in model.effects if e != SPEED_CLIP.name), model.delay, dict(model.values),
                      model.substeps)
     with torch.no_grad():
         v = fit.simulate(free, fit.parameters_of(free, nom), nom, w1, with_velocity=True)[:, 0, 1]  # (B,)
@@ -399,7 +401,7 @@ def clip_refuted(model: fit.Model, nom: Nominal, w1: fit.Windows, speeds: np.nda
                  config: DiagnoseConfig) -> bool:
     """A candidate with a speed clip that the data refute: the observed speeds show no pile-up at its
     level (:func:`clip_supported`), or the fitted clip binds in under ``clip_min_binding`` of the samples."""
-    if "speed_clip" not in model.effects:
+    if not model.has(SPEED_CLIP):
         return False
     level = model.values["v"]
     return (speeds is not None and not clip_supported(level, speeds, config)) \
@@ -433,7 +435,7 @@ def select(candidates: Candidates, nom: Nominal, w: WindowSet, config: DiagnoseC
         bic_drop = base.bic - cand.bic
         free_drop = 1 - cand.typical / base.typical if base.typical > 0 else 0.0
         accepted = bic_drop > config.bic_margin and (free_drop > config.min_gain or (
-            "within_frame" in cand.model.effects and "within_frame" not in base.model.effects
+            cand.model.has(WITHIN_FRAME) and not base.model.has(WITHIN_FRAME)
             and bic_drop > config.within_frame_bic_margin and free_drop >= 0))
         return bool(accepted), bic_drop, free_drop
 
@@ -463,7 +465,7 @@ def select(candidates: Candidates, nom: Nominal, w: WindowSet, config: DiagnoseC
         rest = [c for c in candidates.allowed if c not in base.effects]
         pool = []
         for name in tqdm(rest, desc=f"adding to {base.name}", disable=not progress):
-            effects = tuple(e for e in fit.CANDIDATES if e in (*base.effects, name))
+            effects = tuple(e for e in CANDIDATES if e in (*base.effects, name))
             m = fit.fit_candidate(effects, base.values, nom, w.fit, delay=base.delay or None,
                                   substeps=base.substeps or None)
             pool.append(score(m, nom, w.fit1, w.free))
@@ -491,23 +493,9 @@ def generic_basis(final: fit.Model, nom: Nominal, obs: Observations, theta: np.n
     return GenericBasis(bic_drop, 1 - held1 / held0 if held0 > 0 else 0.0, bool(unexplained))
 
 
-#: What data would tell each effect from another that explains a recording as well (for "ambiguous between").
-SEPARATING_DATA: dict[str, str] = {
-    "speed_clip": "speeds above {v:.2f} rad/s (a clip there holds them, any other effect lets them pass)",
-    "within_frame": "a different action hold (another frame rate or action repeat: motion within the frame grows "
-                    "with the frame's length, an effect of the system does not)",
-    "damping": "free swings with no action at several speeds (a viscous torque grows with the speed)",
-    "friction": "slow motion near rest, below 0.1 rad/s (Coulomb friction is as strong there as at speed)",
-    "bias": "the pendulum left at rest with no action (a bias moves its resting angle)",
-    "delay": "actions that switch abruptly, with frames after each switch",
-    "deadzone": "small actions, |u| below {d:.2f}",
-    "saturation": "large actions, |u| above {s:.2f}",
-}
-
-
 def separating_data(effects: tuple[str, ...], values: dict[str, float]) -> list[str]:
-    """What data would show ``effects`` apart from a rival (:data:`SEPARATING_DATA`), with their fitted values."""
-    return [SEPARATING_DATA[e].format(**values) for e in effects if e in SEPARATING_DATA]
+    """What data would show ``effects`` apart from a rival (each term's ``evidence``), with their fitted values."""
+    return [EFFECTS[e].evidence.format(**values) for e in effects if EFFECTS[e].evidence]
 
 
 def _intervals(draws: dict[str, list[float]]) -> dict[str, tuple[float, float]]:
@@ -559,16 +547,16 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
     """
     notes: list[str] = []
     named = [e for e in final.effects if ambiguity is None or e not in ambiguity.between[0].split("+")]
-    if from_gymnasium and "speed_clip" in named and abs(final.values["v"] - GYM_SPEED_CLIP) <= config.gym_clip_tolerance:
-        named.remove("speed_clip")
+    if from_gymnasium and SPEED_CLIP.name in named and abs(final.values["v"] - GYM_SPEED_CLIP) <= config.gym_clip_tolerance:
+        named.remove(SPEED_CLIP.name)
         notes.append(f"a speed clip at {final.values['v']:.2f} rad/s was found: Gymnasium's own ±8 rad/s clip, which the "
                      "nominal environment has too (the model's engine does not); it is not counted as a gap")
     flipped = final.values["a"] * nom.a < 0
     # the a and g that a gain or gravity error is read from: with within_frame, those of the same
     # physics read one step per frame, as the nominal model reads them
     reference = final
-    if "within_frame" in final.effects and w is not None:
-        euler = tuple(e for e in final.effects if e != "within_frame")
+    if final.has(WITHIN_FRAME) and w is not None:
+        euler = tuple(e for e in final.effects if e != WITHIN_FRAME.name)
         reference = fit.fit_candidate(euler, final.values, nom, w.fit, delay=final.delay or None)
     gain = abs(reference.values["a"] / nom.a)
     gain_error = abs(gain - 1) > config.gain_tolerance
@@ -603,7 +591,8 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
                      "learnt in log space): retrain it with --signed-actuation")
     leading = camera.leading if camera is not None else 0
     for e in named:
-        if e == "delay":
+        term = EFFECTS[e]
+        if term is DELAY:
             # From frame k on, a camera k frames late looks exactly like an actuator delay of k
             # (o_{t+1} = f(o_t, u_{t-k}) either way); only the start tells them apart, where such a
             # camera shows frame 0 again for k frames.
@@ -615,13 +604,13 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
                              + ("the camera's" if cam_k == final.delay else f"{cam_k} of the camera and {final.delay - cam_k} "
                                 "of the actuator"))
             if final.delay > cam_k:
-                effects.append(Effect("delay", final.delay - cam_k, "steps"))
+                effects.append(Effect(e, final.delay - cam_k, term.unit))
                 if not cam_k:
                     notes.append("an actuator delay and a camera latency of the same k are the same model from frame k on; "
                                  "the recording does not start with repeated frames, as a late camera would, so it is "
                                  "named an actuator delay")
-        elif e == "within_frame":
-            effects.append(Effect("within_frame", final.substeps, "substeps per frame"))
+        elif term is WITHIN_FRAME:
+            effects.append(Effect(e, final.substeps, term.unit))
             notes.append("the system keeps moving under the held action between two frames (a continuous system, or "
                          "a simulator with several physics steps per frame): with one Euler step per frame the "
                          "identified a and g come out low; train with `--preset continuous` to model it")
@@ -632,8 +621,8 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
                              "is judged on the latter (the former's difference from the nominal is the within-frame "
                              "reading itself)")
         else:
-            key = fit.PARAMETER[e]
-            effects.append(Effect(e, final.values[key], UNITS[key], interval(key)))
+            key = term.parameter
+            effects.append(Effect(e, final.values[key], term.unit, interval(key)))
     a_int = interval("a")
     if a_int and reference is not final:  # the interval of the reference's a: final's, shifted with it
         a_int = [x * reference.values["a"] / final.values["a"] for x in a_int]
@@ -647,7 +636,7 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
                      f"{a_int[0]:.3f}..{a_int[1]:.3f} holds the nominal {abs(nom.a):.3f}: not named a gain error")
     if gain_error:
         effects.append(Effect("gain", gain, "factor on the nominal a", [x / abs(nom.a) for x in a_int] if a_int else None))
-    if leading and "delay" not in final.effects:
+    if leading and not final.has(DELAY):
         notes.append(f"the first {leading} frames of nearly every sequence repeat the first one, but the dynamics show no "
                      "delay: the camera froze at the start (these frames are left out of the fits)")
     g_ratio = reference.values["g"] / nom.g
@@ -655,7 +644,7 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
     if abs(g_ratio - 1) > config.gain_tolerance and (refit is None or abs(g_plain - 1) > config.gain_tolerance):
         notes.append(f"g refits to {reference.values['g']:.3f} (x{g_ratio:.3f} the nominal {nom.g:.3f}): gravity, or the "
                      "pendulum's length, differs from the identified model")
-    if any(e.effect in ("damping", "friction", "bias") for e in effects):
+    if any(isinstance(EFFECTS.get(e.effect), TorqueTerm) for e in effects):
         notes.append(UNITS_NOTE)
 
     names = [x.effect for x in effects]
@@ -821,7 +810,7 @@ def candidate_table(candidates: Candidates) -> list[CandidateRow]:
     rows = [CandidateRow("nominal (no refit)", nominal.bic, nominal.free_run, nominal.typical, nominal.model.values)]
     for s in [candidates.refit, *candidates.singles]:
         m = s.model
-        values = {**m.values, **({"M": float(m.substeps)} if "within_frame" in m.effects else {})}
+        values = {**m.values, **({"M": float(m.substeps)} if m.has(WITHIN_FRAME) else {})}
         rows.append(CandidateRow("none (g, a refitted)" if not m.effects else m.name, s.bic, s.free_run, s.typical,
                                  values, s.bic - candidates.refit.bic, m.delay or None))
     return rows
@@ -866,8 +855,8 @@ def analyse(obs: Observations, nom: Nominal, config: DiagnoseConfig = DiagnoseCo
         verdict=naming.verdict, verdict_class=naming.verdict_class, effects=naming.effects,
         nominal={"g": nom.g, "a": nom.a, "offset": nom.offset,
                  **({"b": fit.nominal_damping(nom)} if fit.nominal_damping(nom) else {})},
-        corrected={**final.values, **({"delay": final.delay} if "delay" in final.effects else {}),
-                   **({"substeps": final.substeps} if "within_frame" in final.effects else {})},
+        corrected={**final.values, **({"delay": final.delay} if final.has(DELAY) else {}),
+                   **({"substeps": final.substeps} if final.has(WITHIN_FRAME) else {})},
         corrected_effects=list(final.effects),
         candidates=candidate_table(candidates), selection=selection.steps, generic_basis=generic,
         gap=gap, vision=vision,
@@ -886,7 +875,7 @@ def excluded_candidates(obs: Observations, nom: Nominal, config: DiagnoseConfig)
     that already moves within the frame (RK4)."""
     excluded = dict(obs.impossible) if config.use_provenance else {}
     if fit.nominal_integrator(nom) == "rk4":
-        excluded["within_frame"] = "the nominal model integrates within the frame already (RK4)"
+        excluded[WITHIN_FRAME.name] = "the nominal model integrates within the frame already (RK4)"
     return excluded
 
 

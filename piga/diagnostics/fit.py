@@ -1,7 +1,11 @@
 """Candidate physics for a sim-to-real gap, fitted to encoded trajectories.
 
-Each candidate is the nominal engine plus one or more unmodelled effects, with the same equations
-as the effect wrappers of :mod:`envs.effects` (model convention: Gymnasium's θ = θ + φ):
+Each candidate is the nominal engine plus one or more unmodelled effects. Both are written once, in
+:mod:`piga.world.effects` (the pendulum's equation and each effect's typed term: its parameter, unit,
+starting grid, lower bound and stage), and shared with the model's engine
+(:class:`piga.world.physics.Pendulum`), its integrators' step functions
+(:func:`piga.world.physics.euler_step`, :func:`~piga.world.physics.rk4_step`) and the effect wrappers of
+:mod:`envs.effects` (model convention: Gymnasium's θ = θ + φ):
 
 | effect | parameter | where it acts |
 |---|---|---|
@@ -32,25 +36,19 @@ about (M + 1) / 2M of u_t and (M − 1) / 2M of u_{t−1}, and the backward diff
 at the frame by about dt·F·(M − 1) / 2M, which one Euler step per frame reads as a lower a and g (and
 a residual correlated with the action at lag 1 that no integer delay fits). The candidate simulates
 M substeps per frame and reads the start velocity through them (the velocity whose frame step
-reproduces the observed difference, as :func:`piga.world.physics.hold_velocity` does); M = 16 stands for
-a continuous system. M is searched over :data:`WITHIN_FRAME_SUBSTEPS`, as k is for a delay.
+reproduces the observed difference, :func:`piga.world.physics.shoot_velocity`, as the model's
+:func:`~piga.world.physics.hold_velocity` does); M = 16 stands for a continuous system. M is searched over
+the term's grid (:data:`piga.world.effects.WITHIN_FRAME`), as k is for a delay.
 
 The fits run on the encoded angles alone (no images, no labels), so they take seconds: L-BFGS in
 float64 on the mean squared multi-step angle error over windows of the fit split.
 
-Why a second pendulum engine (:func:`simulate`) next to the model's
-(:class:`piga.world.physics.Pendulum` with :class:`piga.world.physics.Euler`)? Without effects the two are the
-same equations and the same semi-implicit Euler step, and they agree to rounding (a test checks
-it). They stay apart because they serve different needs:
-
-- The model's engine is one of several :class:`piga.world.physics.System` force functions, an
-  ``nn.Module`` whose learnable parameters train with the networks, on (B, N, D) tensors in
-  float32. Its equations are the *identified* physics; the effects are by design not in it
-  (the diagnosis must find them as a gap).
-- The diagnosis' engine adds the candidate effects, each with its own parameter, as optional
-  terms, and acts on delayed and transformed commands (a delay needs the actions before the
-  window). Its parameters are a plain dict of float64 scalars that L-BFGS and the bootstrap refit
-  thousands of times; a module with ten optional parameters would only hide which are free.
+Why :func:`simulate` is not the model's :func:`piga.world.physics.rollout`: the model's engine is an
+``nn.Module`` whose learnable parameters train with the networks, on (B, N, D) float32 tensors, and its
+equations are the *identified* physics (the effects are by design not in it: the diagnosis must find
+them as a gap). The candidates' parameters are a plain dict of float64 scalars that L-BFGS and the
+bootstrap refit thousands of times, and a delay needs the actions before the window. So
+:func:`simulate` composes the same equation, terms and step functions over (B,) tensors itself.
 """
 
 from __future__ import annotations
@@ -64,37 +62,29 @@ import torch
 from torch import Tensor
 
 from envs.constants import MAX_ACTION
-from envs.effects import FRICTION_SMOOTHING
 from piga.diagnostics.repeats import repeat_sources
 from piga.io.runs import Nominal, nominal_of  # noqa: F401 (nominal_of: re-exported for the diagnosis)
+from piga.world.effects import (
+    CANDIDATES,
+    DAMPING,
+    DELAY,
+    EFFECTS,
+    WITHIN_FRAME,
+    CommandTerm,
+    Effect,
+    TorqueTerm,
+    VelocityTerm,
+    pendulum_acceleration,
+)
+from piga.world.physics import euler_step, rk4_step, shoot_velocity
 
 if TYPE_CHECKING:
     from piga.world.model import PhysicsModel
 
-#: Effects that the fit can add to the physics, in the order of the report.
-CANDIDATES: tuple[str, ...] = ("damping", "friction", "bias", "delay", "deadzone", "saturation", "speed_clip",
-                               "within_frame")
-#: Continuous parameter of each effect (delay is discrete).
-PARAMETER: dict[str, str] = {"damping": "b", "friction": "c", "bias": "tau0", "deadzone": "d", "saturation": "s",
-                             "speed_clip": "v"}
-#: Starting grids for the continuous parameters (the best grid point starts L-BFGS).
-GRIDS: dict[str, tuple[float, ...]] = {
-    "damping": (0.0, 0.05, 0.1, 0.2, 0.4),
-    "friction": (0.0, 0.05, 0.1, 0.2, 0.4),
-    "bias": (-0.3, -0.1, 0.0, 0.1, 0.3),
-    "deadzone": (0.05, 0.2, 0.4, 0.7, 1.0),
-    "saturation": (0.5, 0.8, 1.1, 1.4, 1.8),
-    "speed_clip": (2.0, 3.0, 4.0, 5.0, 6.0, 7.0),
-}
-MAX_DELAY = 4
+MAX_DELAY = int(max(DELAY.grid))
 """Largest delay tried (steps)."""
-WITHIN_FRAME_SUBSTEPS: tuple[int, ...] = (2, 3, 4, 8, 16)
-"""Substeps M tried for ``within_frame`` (16: close to a continuous system)."""
 HOLD_ITERATIONS = 3
 """Newton steps that read the start velocity through the frame step (``within_frame``)."""
-#: Smallest value that :func:`simulate` uses for a limit (a saturation level, a speed clip): the
-#: fit may move the free parameter below it, but the physics, and so the reported value, stop there.
-LOWER_BOUNDS: dict[str, float] = {"s": 1e-3, "v": 0.1}
 
 
 def nominal_damping(nominal: Nominal) -> float:
@@ -176,7 +166,7 @@ class Model:
     """A candidate: the nominal engine plus ``effects``, with its parameters."""
 
     effects: tuple[str, ...] = ()
-    """Effects added (a subset of :data:`CANDIDATES`)."""
+    """Effects added (names of :data:`piga.world.effects.CANDIDATES`)."""
     delay: int = 0
     """k for the delay effect (0 without it)."""
     values: dict[str, float] = field(default_factory=dict)
@@ -184,10 +174,24 @@ class Model:
     substeps: int = 0
     """M for the within_frame effect (0 without it: the nominal model's substeps)."""
 
+    def __post_init__(self) -> None:
+        unknown = [e for e in self.effects if e not in CANDIDATES]
+        if unknown:
+            raise ValueError(f"unknown effect(s) {unknown} in a candidate physics; known: {', '.join(CANDIDATES)}")
+
     @property
     def name(self) -> str:
         """"none", or the effects joined by "+"."""
         return "+".join(self.effects) if self.effects else "none"
+
+    @property
+    def terms(self) -> tuple[Effect, ...]:
+        """The effects' typed terms, in the order of :data:`piga.world.effects.EFFECTS` (the order they apply in)."""
+        return tuple(e for name, e in EFFECTS.items() if name in self.effects)
+
+    def has(self, effect: Effect) -> bool:
+        """Whether ``effect`` is among the effects."""
+        return effect.name in self.effects
 
     @property
     def n_parameters(self) -> int:
@@ -199,6 +203,12 @@ class Model:
         return Model(self.effects, self.delay, values, self.substeps)
 
 
+def _value(term: Effect, params: dict[str, Tensor]) -> Tensor:
+    """A term's parameter as the physics uses it: stopped at its lower bound."""
+    value = params[term.parameter]
+    return value if term.lower_bound is None else value.clamp_min(term.lower_bound)
+
+
 def simulate(model: Model, params: dict[str, Tensor], nominal: Nominal, w: Windows, with_velocity: bool = False) -> Tensor:
     """Predicted angles (B, H) of windows ``w`` under ``model`` with (differentiable) ``params``.
 
@@ -207,66 +217,42 @@ def simulate(model: Model, params: dict[str, Tensor], nominal: Nominal, w: Windo
     """
     u = w.actions  # (B, MAX_DELAY + H)
     h_steps = w.target.shape[1]
-    k = model.delay if "delay" in model.effects else 0
-    within = "within_frame" in model.effects
+    k = model.delay if model.has(DELAY) else 0
+    within = model.has(WITHIN_FRAME)
+    terms = model.terms
     # ũ over the frame before the start (for within_frame's start velocity) and the H frames after it
     padded = torch.cat([u.new_zeros(u.shape[0], 1), u], 1)  # (B, 1 + MAX_DELAY + H); u_{-MAX_DELAY-1} = 0
     cmd = padded[:, MAX_DELAY - k : MAX_DELAY - k + h_steps + 1]  # (B, H + 1)
-    if "deadzone" in model.effects:
-        cmd = torch.sign(cmd) * torch.relu(cmd.abs() - params["d"])
-    if "saturation" in model.effects:
-        s = params["s"].clamp_min(LOWER_BOUNDS["s"])
-        cmd = torch.minimum(torch.maximum(cmd, -s), s)
+    for term in terms:
+        if isinstance(term, CommandTerm):
+            cmd = term.transform(cmd, _value(term, params))
     g, a = params["log_g"].exp(), params["log_a"].exp() * params.get("a_sign", 1.0)
     substeps = model.substeps if within else nominal.substeps
     h = nominal.dt / substeps
     b_nominal = nominal_damping(nominal)
-    rk4 = nominal_integrator(nominal) == "rk4" and not within
+    step = rk4_step if nominal_integrator(nominal) == "rk4" and not within else euler_step
+    torques = [(term, _value(term, params)) for term in terms if isinstance(term, TorqueTerm)]
+    limits = [term for term in terms if isinstance(term, VelocityTerm)]
 
-    def acceleration(theta: Tensor, v: Tensor, c: Tensor) -> Tensor:
-        tau = a * c
-        if b_nominal:
-            tau = tau - b_nominal * v
-        if "damping" in model.effects:
-            tau = tau - params["b"] * v
-        if "friction" in model.effects:
-            tau = tau - params["c"] * torch.tanh(v / FRICTION_SMOOTHING)
-        if "bias" in model.effects:
-            tau = tau + params["tau0"]
-        return 1.5 * g * torch.sin(theta + nominal.offset) + 3.0 * tau
-
-    def clip(v: Tensor) -> Tensor:
-        if "speed_clip" in model.effects:
-            vmax = params["v"].clamp_min(LOWER_BOUNDS["v"])
-            v = torch.minimum(torch.maximum(v, -vmax), vmax)
+    def limit(v: Tensor) -> Tensor:
+        for term in limits:
+            v = term.limit(v, _value(term, params))
         return v
 
     def frame(theta: Tensor, v: Tensor, c: Tensor) -> tuple[Tensor, Tensor]:
+        def acceleration(q: Tensor, dq: Tensor) -> Tensor:
+            passive = [(DAMPING, b_nominal)] if b_nominal else []
+            return pendulum_acceleration(q, dq, g, nominal.offset, actuation=(a, c), passive=passive + torques)
+
         for _ in range(substeps):
-            if rk4:  # the nominal model's classical Runge-Kutta (piga.world.physics.RK4), the action held
-                a1 = acceleration(theta, v, c)
-                v2 = v + 0.5 * h * a1
-                a2 = acceleration(theta + 0.5 * h * v, v2, c)
-                v3 = v + 0.5 * h * a2
-                a3 = acceleration(theta + 0.5 * h * v2, v3, c)
-                v4 = v + h * a3
-                a4 = acceleration(theta + h * v3, v4, c)
-                theta = theta + h / 6.0 * (v + 2.0 * v2 + 2.0 * v3 + v4)
-                v = clip(v + h / 6.0 * (a1 + 2.0 * a2 + 2.0 * a3 + a4))
-            else:
-                v = clip(v + h * acceleration(theta, v, c))
-                theta = theta + h * v
+            theta, v = step(acceleration, theta, v, h, limit if limits else None)
         return theta, v
 
     theta, v = w.theta0, w.v0
     if within or getattr(nominal, "velocity_hold", False):
         # v0 is the difference over the last frame: read the velocity at the start through the frame step
-        previous = theta - nominal.dt * v
-        start = v
-        for _ in range(HOLD_ITERATIONS):
-            reached, _ = frame(previous, start, cmd[:, 0])
-            start = start + (theta - reached) / nominal.dt
-        _, v = frame(previous, start, cmd[:, 0])
+        v = shoot_velocity(lambda q, dq: frame(q, dq, cmd[:, 0]), theta - nominal.dt * v, v, nominal.dt,
+                           HOLD_ITERATIONS)
     out, speeds = [], []
     for j in range(h_steps):
         theta, v = frame(theta, v, cmd[:, j + 1])
@@ -292,9 +278,9 @@ def parameters_of(model: Model, nominal: Nominal) -> dict[str, Tensor]:
     is held, not fitted."""
     a = model.values.get("a", nominal.a)
     values = {"log_g": math.log(model.values.get("g", nominal.g)), "log_a": math.log(abs(a))}
-    for e in model.effects:
-        if e in PARAMETER:
-            values[PARAMETER[e]] = model.values.get(PARAMETER[e], GRIDS[e][0])
+    for term in model.terms:
+        if term.parameter is not None:
+            values[term.parameter] = model.values.get(term.parameter, term.grid[0])
     params = {k: torch.tensor(float(v), dtype=torch.float64, requires_grad=True) for k, v in values.items()}
     if a < 0:
         params["a_sign"] = torch.tensor(-1.0, dtype=torch.float64)
@@ -320,16 +306,16 @@ def fit(model: Model, nominal: Nominal, w: Windows, weights: Tensor | None = Non
         fit_ga: bool = True) -> Model:
     """Fits g, a (unless ``fit_ga`` is False) and the effects' parameters; returns a new :class:`Model`.
 
-    A continuous effect parameter starts from the best point of its grid in :data:`GRIDS` (the
-    loss is not convex in a deadzone or a clip level); L-BFGS then refines all parameters.
+    A continuous effect parameter starts from the best point of its term's grid (the loss is not
+    convex in a deadzone or a clip level); L-BFGS then refines all parameters.
     """
     start = model.with_values(dict(model.values))
-    for e in model.effects:
-        name = PARAMETER.get(e)
+    for term in model.terms:
+        name = term.parameter
         if name is None or name in model.values:
             continue
         best = None
-        for value in GRIDS[e]:
+        for value in term.grid:
             trial = start.with_values({**start.values, name: value})
             with torch.no_grad():
                 score = float(loss(trial, nominal, w, weights))
@@ -352,7 +338,8 @@ def fit(model: Model, nominal: Nominal, w: Windows, weights: Tensor | None = Non
     opt.step(closure)
     sign = float(params["a_sign"]) if "a_sign" in params else 1.0
     values = {"g": float(params["log_g"].detach().exp()), "a": sign * float(params["log_a"].detach().exp())}
-    values.update({k: max(float(v.detach()), LOWER_BOUNDS.get(k, -math.inf)) for k, v in params.items()
+    bounds = {t.parameter: t.lower_bound for t in model.terms if t.lower_bound is not None}
+    values.update({k: max(float(v.detach()), bounds.get(k, -math.inf)) for k, v in params.items()
                    if not k.startswith("log_") and k != "a_sign"})
     return model.with_values(values)
 
@@ -361,7 +348,7 @@ def fit_best_delay(effects: tuple[str, ...], base: dict[str, float], nominal: No
                    substeps: int = 0) -> Model:
     """Fits ``effects`` (which include "delay") for each k in 1..MAX_DELAY; returns the best."""
     best = None
-    for k in range(1, MAX_DELAY + 1):
+    for k in DELAY.grid:
         m = fit(Model(effects, k, dict(base), substeps), nominal, w)
         with torch.no_grad():
             score = float(loss(m, nominal, w))
@@ -377,19 +364,19 @@ def fit_candidate(effects: tuple[str, ...], base: dict[str, float], nominal: Nom
     With a "delay" among the effects, ``delay`` holds k fixed; None searches k = 1..MAX_DELAY.
     With "within_frame", ``substeps`` holds M fixed; None searches :data:`WITHIN_FRAME_SUBSTEPS`.
     """
-    if "within_frame" in effects and substeps is None:
+    if WITHIN_FRAME.name in effects and substeps is None:
         best = None
-        for m_sub in WITHIN_FRAME_SUBSTEPS:
+        for m_sub in WITHIN_FRAME.grid:
             m = fit_candidate(effects, base, nominal, w, delay, m_sub)
             with torch.no_grad():
                 score = float(loss(m, nominal, w))
             if best is None or score < best[0]:
                 best = (score, m)
         return best[1]
-    m_sub = substeps if "within_frame" in effects else 0
-    if "delay" in effects and delay is None:
+    m_sub = substeps if WITHIN_FRAME.name in effects else 0
+    if DELAY.name in effects and delay is None:
         return fit_best_delay(effects, base, nominal, w, m_sub)
-    return fit(Model(effects, delay if "delay" in effects else 0, dict(base), m_sub or 0), nominal, w)
+    return fit(Model(effects, delay if DELAY.name in effects else 0, dict(base), m_sub or 0), nominal, w)
 
 
 def one_step_bic(model: Model, nominal: Nominal, w1: Windows) -> tuple[float, float]:

@@ -1,63 +1,23 @@
-"""The differentiable physics engine: systems as force functions, plus an Euler integrator.
+"""The systems: each physical system defined once, as the acceleration of its generalised coordinates.
 
-A :class:`System` knows the equations of motion of one family of scenes and holds their unknown
-physical parameters; :class:`Euler` advances positions and velocities by one frame; :func:`rollout`
-unrolls it over a sequence. Everything is plain PyTorch, so gradients flow to the initial state
-(from the encoder and velocity estimator) and to the physical parameters.
-
-| system | N | D | A | acceleration of object i (d = p_i - p_j) | dt | learned (init -> truth) |
-|---|---|---|---|---|---|---|
-| :class:`Pendulum` | 1 | 1 (angle) | 1 | (3 / 2l)·g·sin θ + (3 / m l²)·(a·u − b·θ̇), b optional | 0.05 | g 1 -> 10, a 0.3 -> 1 |
-| :class:`Spring` | 2 | 2 | 0 | Σ_j -k·(abs(d) - 2l)·d / abs(d) | 0.3 | k 1 -> 4, l 1 -> 6 (balls) |
-| :class:`Gravity` | 3 | 2 | 0 | Σ_j -g·m_j·d / abs(d)³ | 0.5 | g 1 -> 60 (m = 1); or m 1/g -> 1 (g fixed) |
-| :class:`Bouncing` | 2 | 2 | 0 | 0, elastic walls | 0.3 | (none) |
-
-Conventions:
-
-- Shapes: positions and velocities are (B, N, D), actions (B, A), sequences (B, T, N, D).
-- Positive parameters live in log space: ``log_g`` is the ``nn.Parameter``, ``g`` the property
-  ``exp(log_g)``. Defaults start far from the truth on purpose: learning must find the values.
-- The pendulum follows Gymnasium's ``Pendulum-v1``: θ = 0 upright, positive counter-clockwise as
-  displayed; its ±8 rad/s speed clip is deliberately *not* modelled.
-- Cartesian systems work in pixel units (x right, y down), as the decoder does.
-
-Integrators (the action held over the frame, a zero-order hold): :class:`Euler` (semi-implicit,
-``substeps`` per frame; one substep is Gymnasium's pendulum exactly) and :class:`RK4` (classical
-Runge-Kutta, ``substeps`` per frame), which follows a *continuous* system under a held action, as
-a real motor or MuJoCo's fine physics steps act within a frame. :func:`hold_velocity` reads the
-velocity at a frame from the last two positions *through* the integrator, which a backward
-difference gets wrong as soon as the system moves within the frame.
-
-Example::
-
-    system = Pendulum()                      # learnable g = 1, a = 0.3
-    p, v = rollout(system, Euler(substeps=5), p0, v0, actions)   # (B, T, 1, 1) each
+A :class:`System` holds one family's equations of motion q̈ = F(q, q̇, u) and its unknown physical
+parameters (positive ones learned in log space, each with its unit). The integrators
+(:mod:`piga.world.physics.integrators`) step any system; the pendulum's equation and its effect
+terms are :mod:`piga.world.effects`, shared with the diagnosis, the planners and the effect wrappers.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Collection
+from collections.abc import Collection
 from typing import ClassVar
 
 import torch
 from torch import Tensor, nn
 
-__all__ = [
-    "System",
-    "Pendulum",
-    "Spring",
-    "Gravity",
-    "Bouncing",
-    "Euler",
-    "RK4",
-    "INTEGRATORS",
-    "make_integrator",
-    "hold_velocity",
-    "rollout",
-    "make_system",
-    "SYSTEMS",
-]
+from piga.world.effects import DAMPING, pendulum_acceleration
+
+__all__ = ["System", "Pendulum", "Spring", "Gravity", "Bouncing", "SYSTEMS", "make_system"]
 
 
 def _pairwise_differences(p: Tensor) -> Tensor:
@@ -75,29 +35,33 @@ def _guarded_norm(d: Tensor, min_norm: float) -> Tensor:
 
 
 class System(nn.Module):
-    """Base class of a physical system: the force function of a known family of equations.
+    """Base class of a physical system: q̈ = F(q, q̇, u) over generalised coordinates q, and its parameters.
 
     Subclasses set the four shape attributes, register their positive parameters with
-    :meth:`_add_positive_parameter`, and implement :meth:`acceleration`. Systems with hard
-    constraints (walls) also override :meth:`constrain`.
+    :meth:`_add_positive_parameter`, give their units in :attr:`units`, and implement
+    :meth:`acceleration`. Systems with hard constraints (walls) also override :meth:`constrain`.
+    An articulated system (a cart-pole, a double pendulum) fits the same interface: its
+    :meth:`acceleration` solves its configuration-dependent mass matrix, M(q)·q̈ = f(q, q̇, u).
 
     Attributes:
         n_objects: N, the number of objects.
-        coord_dim: D, coordinates per object (1 for an angle, 2 for cartesian x, y).
+        coord_dim: D, generalised coordinates per object (1 for an angle, 2 for cartesian x, y).
         action_dim: A, the size of the action vector (0 if unactuated).
         dt: Seconds between two frames.
         reference_values: The physical parameters of the paper's data sets (for oracles and
             error reports); a learnable system never starts from them by default.
+        units: Each physical parameter's unit.
     """
 
     reference_values: ClassVar[dict[str, float]] = {}
+    units: ClassVar[dict[str, str]] = {}
 
     def __init__(self, n_objects: int, coord_dim: int, action_dim: int, dt: float) -> None:
         super().__init__()
         if n_objects < 1:
             raise ValueError(f"n_objects must be >= 1, got {n_objects}")
-        if coord_dim not in (1, 2):
-            raise ValueError(f"coord_dim must be 1 (angle) or 2 (x, y), got {coord_dim}")
+        if coord_dim < 1:
+            raise ValueError(f"coord_dim must be >= 1 (an angle: 1, a position x, y: 2), got {coord_dim}")
         if action_dim < 0:
             raise ValueError(f"action_dim must be >= 0, got {action_dim}")
         if not dt > 0:
@@ -227,6 +191,7 @@ class Pendulum(System):
     """
 
     reference_values: ClassVar[dict[str, float]] = {"g": 10.0, "a": 1.0}
+    units: ClassVar[dict[str, str]] = {"g": "m/s²", "a": "factor on the torque", "offset": "rad", "b": DAMPING.unit}
 
     def __init__(
         self,
@@ -288,14 +253,10 @@ class Pendulum(System):
         super().set_parameters(**values)
 
     def acceleration(self, p: Tensor, v: Tensor, u: Tensor | None = None) -> Tensor:
-        gravity_gain = 3.0 / (2.0 * self.length)
-        torque_gain = 3.0 / (self.mass * self.length**2)
-        acc = gravity_gain * self.g * torch.sin(p + self.offset)  # (B, 1, 1)
-        if u is not None:
-            acc = acc + (torque_gain * self.a * u).unsqueeze(-1)  # (B, 1) -> (B, 1, 1)
-        if self.has_damping:
-            acc = acc - torque_gain * self.log_b.exp() * v  # (B, 1, 1)
-        return acc
+        actuation = None if u is None else (self.a, u.unsqueeze(-1))  # u: (B, 1) -> (B, 1, 1)
+        passive = [(DAMPING, self.log_b.exp())] if self.has_damping else []
+        return pendulum_acceleration(p, v, self.g, self.offset, self.length, self.mass, actuation=actuation,
+                                     passive=passive)  # (B, 1, 1)
 
 
 class Spring(System):
@@ -316,6 +277,7 @@ class Spring(System):
     """
 
     reference_values: ClassVar[dict[str, float]] = {"k": 4.0, "l": 6.0}
+    units: ClassVar[dict[str, str]] = {"k": "1/s² (per unit mass)", "l": "px"}
 
     def __init__(
         self,
@@ -374,6 +336,7 @@ class Gravity(System):
     """
 
     reference_values: ClassVar[dict[str, float]] = {"g": 60.0}
+    units: ClassVar[dict[str, str]] = {"g": "px³/s² per unit mass", "m": "mass units"}
 
     def __init__(
         self,
@@ -452,182 +415,6 @@ class Bouncing(System):
         p = torch.where(below, 2 * low - p, torch.where(above, 2 * high - p, p))
         v = torch.where(below | above, -v, v)
         return p, v
-
-
-class _Integrator(nn.Module):
-    """An integrator with ``substeps`` substeps per frame (an int >= 1, else ValueError)."""
-
-    def __init__(self, substeps: int) -> None:
-        super().__init__()
-        if isinstance(substeps, bool) or not isinstance(substeps, int) or substeps < 1:
-            raise ValueError(f"substeps must be an int >= 1, got {substeps!r}")
-        self.substeps = substeps
-
-    def extra_repr(self) -> str:
-        return f"substeps={self.substeps}"
-
-
-class Euler(_Integrator):
-    """Semi-implicit Euler with ``substeps`` substeps per frame, as in the paper.
-
-    Each substep of h = dt / substeps does ``v <- v + h·F(p, v, u)``, then ``p <- p + h·v`` with
-    the *new* v, then ``system.constrain(p, v)``. The action is held over the frame. With
-    ``substeps = 1`` this is exactly Gymnasium ``Pendulum-v1``'s step (without its speed clip).
-    """
-
-    def __init__(self, substeps: int = 5) -> None:
-        super().__init__(substeps)
-
-    def forward(
-        self, system: System, p: Tensor, v: Tensor, u: Tensor | None = None
-    ) -> tuple[Tensor, Tensor]:
-        """Advance (p, v), each (B, N, D), by one frame under action u (B, A) or None."""
-        h = system.dt / self.substeps
-        for _ in range(self.substeps):
-            v = v + h * system.acceleration(p, v, u)  # (B, N, D)
-            p = p + h * v  # (B, N, D)
-            p, v = system.constrain(p, v)
-        return p, v
-
-
-class RK4(_Integrator):
-    """Classical Runge-Kutta of order 4, ``substeps`` substeps per frame, the action held over the frame.
-
-    A zero-order hold of a continuous system: the state follows θ̈ = F(θ, θ̇, u) with u constant
-    over the frame, to O(h⁴) per frame. Use it for a real system (or a simulator with fine
-    physics steps), where the motion within a frame matters: there the second difference of the
-    frames sees part of the previous frame's action too, which one Euler step attributes to the
-    current one. ``system.constrain`` is applied after each substep.
-    """
-
-    def __init__(self, substeps: int = 4) -> None:
-        super().__init__(substeps)
-
-    def forward(
-        self, system: System, p: Tensor, v: Tensor, u: Tensor | None = None
-    ) -> tuple[Tensor, Tensor]:
-        """Advance (p, v), each (B, N, D), by one frame under action u (B, A) or None."""
-        h = system.dt / self.substeps
-        for _ in range(self.substeps):
-            a1 = system.acceleration(p, v, u)  # (B, N, D) each
-            v2 = v + 0.5 * h * a1
-            a2 = system.acceleration(p + 0.5 * h * v, v2, u)
-            v3 = v + 0.5 * h * a2
-            a3 = system.acceleration(p + 0.5 * h * v2, v3, u)
-            v4 = v + h * a3
-            a4 = system.acceleration(p + h * v3, v4, u)
-            p = p + h / 6.0 * (v + 2.0 * v2 + 2.0 * v3 + v4)
-            v = v + h / 6.0 * (a1 + 2.0 * a2 + 2.0 * a3 + a4)
-            p, v = system.constrain(p, v)
-        return p, v
-
-
-INTEGRATORS: dict[str, type[nn.Module]] = {"euler": Euler, "rk4": RK4}
-"""Name -> integrator class (both take ``substeps``)."""
-
-
-def make_integrator(name: str, substeps: int) -> Euler | RK4:
-    """The integrator registered as ``name`` with ``substeps`` substeps per frame."""
-    try:
-        cls = INTEGRATORS[name]
-    except KeyError:
-        raise ValueError(f"unknown integrator {name!r}; known: {sorted(INTEGRATORS)}") from None
-    return cls(substeps)  # type: ignore[return-value]
-
-
-def hold_velocity(
-    system: System,
-    integrator: Callable[..., tuple[Tensor, Tensor]],
-    p_prev: Tensor,
-    v_chord: Tensor,
-    u_prev: Tensor | None,
-    iterations: int = 3,
-) -> Tensor:
-    """The velocity at a frame, read through the integrator from the frame before it (shooting).
-
-    Finds the velocity v₀ at the previous frame whose one-frame step under ``u_prev`` moves the
-    position by ``dt · v_chord`` (the observed displacement), by Newton steps with the slope
-    approximated by dt, and returns the velocity that step ends with. For one Euler substep this
-    is the backward difference itself; with substeps, or RK4, it adds what the held action and the
-    forces did within the frame (for a continuous system: dt·F/2 more than the chord).
-
-    Args:
-        system: the system (its forces and dt).
-        integrator: as in :func:`rollout`.
-        p_prev: positions at the previous frame, (B, N, D).
-        v_chord: the observed displacement per second over the last frame, (B, N, D) (angle
-            differences already wrapped).
-        u_prev: the action applied over the last frame, (B, A), or None.
-        iterations: Newton steps; each shrinks the error by a factor ~ dt·∂F/∂v·dt.
-
-    Returns:
-        Velocities at the frame, (B, N, D).
-    """
-    target = v_chord * system.dt  # (B, N, D)
-    v0 = v_chord
-    for _ in range(iterations):
-        p1, _ = integrator(system, p_prev, v0, u_prev)
-        v0 = v0 + (target - (p1 - p_prev)) / system.dt
-    _, v1 = integrator(system, p_prev, v0, u_prev)
-    return v1
-
-
-def rollout(
-    system: System,
-    integrator: Callable[..., tuple[Tensor, Tensor]],
-    p0: Tensor,
-    v0: Tensor,
-    actions: Tensor | None = None,
-    steps: int | None = None,
-) -> tuple[Tensor, Tensor]:
-    """Unroll the dynamics from (p0, v0) for T frames.
-
-    Args:
-        system: The system (forces, parameters, constraints).
-        integrator: Called as ``integrator(system, p, v, u)`` for one frame, e.g. :class:`Euler`.
-        p0: Initial positions, (B, N, D).
-        v0: Initial velocities, (B, N, D).
-        actions: (B, T, A); frame t + 1 is reached under ``actions[:, t]``. None for no actions
-            (an actuated system then gets no torque).
-        steps: T; required when ``actions`` is None, and must equal ``actions.shape[1]`` otherwise.
-
-    Returns:
-        Positions and velocities of the T frames after the initial one, each (B, T, N, D).
-    """
-    n, d = system.n_objects, system.coord_dim
-    if p0.dim() != 3 or p0.shape[1:] != (n, d):
-        raise ValueError(
-            f"p0 must have shape (B, N={n}, D={d}) for {type(system).__name__}, got {tuple(p0.shape)}"
-        )
-    if v0.shape != p0.shape:
-        raise ValueError(f"v0 must have the shape of p0 {tuple(p0.shape)}, got {tuple(v0.shape)}")
-    if actions is not None:
-        a = system.action_dim
-        if actions.dim() != 3 or actions.shape[0] != p0.shape[0] or actions.shape[2] != a:
-            raise ValueError(
-                f"actions must have shape (B={p0.shape[0]}, T, A={a}) for "
-                f"{type(system).__name__}, got {tuple(actions.shape)}"
-            )
-        if steps is not None and steps != actions.shape[1]:
-            raise ValueError(f"steps={steps} disagrees with actions.shape[1]={actions.shape[1]}")
-        steps = actions.shape[1]
-    elif steps is None:
-        raise ValueError("rollout needs `steps` when `actions` is None")
-    if isinstance(steps, bool) or not isinstance(steps, int) or steps < 0:
-        raise ValueError(f"steps must be an int >= 0, got {steps!r}")
-
-    p, v = p0, v0
-    positions: list[Tensor] = []
-    velocities: list[Tensor] = []
-    for t in range(steps):
-        u = None if actions is None else actions[:, t]  # (B, A)
-        p, v = integrator(system, p, v, u)  # (B, N, D) each
-        positions.append(p)
-        velocities.append(v)
-    if not positions:
-        empty = p0.new_empty((p0.shape[0], 0, n, d))
-        return empty, empty.clone()
-    return torch.stack(positions, dim=1), torch.stack(velocities, dim=1)  # (B, T, N, D) each
 
 
 SYSTEMS: dict[str, type[System]] = {
