@@ -22,8 +22,9 @@ same machine:
 Each run is a job: train (continuing a stopped run), then measure everything the comparison reads
 from it, in the same process: control at x1.0, the gravity sweep, the plan time (piga, PlaNet-style:
 one episode, beside whatever else runs) and the goal images (piga). Jobs run ``--workers`` at a time
-(default 2, one torch thread each), longest first. A job ends by writing its record,
-``OUT_runs/records/NAME.json`` (its settings, measurements, training seconds and machine; a few kB).
+(default 2, one torch thread each; :func:`piga.io.pool.run_recorded`), longest first. A job ends by writing
+its record, ``OUT_runs/records/NAME.json`` (its settings, measurements, training seconds, machine, the code's
+git commit and every hyperparameter of its training and evaluation; a few kB).
 A job whose record has the same settings is not run again, so an interrupted benchmark continues
 where it stopped, on this machine or another; the checkpoints are needed only until the record
 exists (for ``results/baselines`` the records are committed, the checkpoints and data are not).
@@ -77,6 +78,7 @@ from common import machine
 
 from agents.planet.config import PlanetTrainConfig
 from piga.io.atomic import atomic_output, write_json
+from piga.io.pool import JobRecords, RecordedJob, run_recorded
 from piga.control.episodes import parse_range
 
 
@@ -321,18 +323,18 @@ def sweep_episodes(cfg: BenchConfig, agent: str) -> int:
     return min(cfg.sweep_episodes, cfg.planet_episode_count) if agent == "planet" else cfg.sweep_episodes
 
 
+def job_records(folder: Path) -> JobRecords:
+    """The jobs' records, ``folder/records/NAME.json``."""
+    return JobRecords(folder / "records")
+
+
 def record_path(folder: Path, job: Job) -> Path:
-    return folder / "records" / f"{job.name}.json"
+    return job_records(folder).path(job.name)
 
 
 def kept_record(folder: Path, job: Job, cfg: BenchConfig) -> dict[str, Any] | None:
     """The job's record if one was kept for the same settings (:func:`job_spec`), else None."""
-    path = record_path(folder, job)
-    if path.exists():
-        record = json.loads(path.read_text())
-        if record.get("spec") == job_spec(job, cfg):
-            return record
-    return None
+    return job_records(folder).kept(job.name, job_spec(job, cfg))
 
 
 def data_path(folder: Path, n: int) -> Path:
@@ -357,24 +359,62 @@ def evaluate(kind: str, run: Path | None, cfg: BenchConfig, gravity_mult: float 
              workers: int = 1) -> dict[str, Any]:
     """piga.control.episodes' summary for one agent (kind "piga", "planet", "ddpg" or "oracle"), its episodes
     split over ``workers`` processes (the same episodes and scores as one)."""
-    from agents.config import CEMConfig
-    from piga.control.episodes import EpisodeConfig
     from piga.control.jobs import ControlJob, run_split
 
-    if episodes is None:
-        episodes = cfg.planet_episode_count if kind == "planet" else cfg.episodes
-    episode_config = EpisodeConfig(episodes=episodes, steps=cfg.episode_steps, hold_steps=min(20, cfg.episode_steps),
-                                   gravity_mult=gravity_mult)
+    episode_config = episode_config_for(kind, cfg, gravity_mult, episodes)
     job = ControlJob(kind, episode_config, model_dir=str(run) if run else None)
     if kind == "planet" and "cem" in cfg.overrides:  # tiny preset only: PlaNet's planner, shrunk
-        from agents.planet.config import LatentPlannerConfig
         from agents.planet.planner import PlanetAgent
         from piga.baselines.planet_run import load_planet
         from piga.control.episodes import run_episodes
 
-        agent = PlanetAgent(load_planet(run)[0], LatentPlannerConfig(cem=CEMConfig(**cfg.overrides["cem"])))
+        agent = PlanetAgent(load_planet(run)[0], planet_planner(cfg))
         return run_episodes(agent, replace(episode_config, frame_stack=1))["summary"]
     return run_split(job, workers, progress=False)["summary"]
+
+
+def episode_config_for(kind: str, cfg: BenchConfig, gravity_mult: float = 1.0, episodes: int | None = None) -> Any:
+    """The :class:`piga.control.episodes.EpisodeConfig` of one evaluation of ``kind``'s agent."""
+    from piga.control.episodes import EpisodeConfig
+
+    if episodes is None:
+        episodes = cfg.planet_episode_count if kind == "planet" else cfg.episodes
+    return EpisodeConfig(episodes=episodes, steps=cfg.episode_steps, hold_steps=min(20, cfg.episode_steps),
+                         gravity_mult=gravity_mult)
+
+
+def planet_planner(cfg: BenchConfig) -> Any:
+    """The PlaNet-style agent's planner settings: PlaNet's (:func:`piga.baselines.agents.baseline_agent`), or the
+    tiny preset's shrunk CEM."""
+    from agents.config import CEMConfig
+    from agents.planet.config import LatentPlannerConfig
+
+    return LatentPlannerConfig(cem=CEMConfig(**cfg.overrides["cem"])) if "cem" in cfg.overrides else LatentPlannerConfig()
+
+
+def hyperparameters(job: Job, cfg: BenchConfig, run: Path | None) -> dict[str, Any]:
+    """Every setting of the job's run, as the run used it: its training configs (read back from the run folder,
+    so a continued run reports what it trained with) and its evaluation's episodes and planner."""
+    from agents.mpc import MPCConfig
+
+    configs: dict[str, Any] = {"episodes": asdict(episode_config_for(job.agent, cfg))}
+    if job.agent == "piga":
+        from piga.io.runs import load_model
+
+        ckpt = load_model(run)[1]
+        configs.update(train=ckpt["train_config"], model=ckpt["model_config"], planner=asdict(MPCConfig()))
+    elif job.agent == "planet":
+        saved = json.loads((run / "config.json").read_text())
+        configs.update(train=saved["train"], rssm=saved["rssm"], planner=asdict(planet_planner(cfg)))
+    elif job.agent == "ddpg":
+        from piga.baselines.autoencoder import AutoencoderConfig
+
+        configs["train"] = json.loads((run / "config.json").read_text())["ddpg"]
+        if job.obs == "latent":
+            configs["autoencoder"] = asdict(AutoencoderConfig(seed=job.seed, **cfg.overrides.get("autoencoder", {})))
+    else:
+        configs["planner"] = asdict(MPCConfig())
+    return json.loads(json.dumps(configs))
 
 
 def evaluate_kept(folder: Path, kind: str, run: Path | None, cfg: BenchConfig, gravity_mult: float = 1.0,
@@ -403,8 +443,10 @@ def train_piga(data: Path, run: Path, seed: int, cfg: BenchConfig, n: int) -> fl
     started = (run / "checkpoint.pt").exists()
     state = load_model(run)[1]["state"] if started else None
     if state is None or state["epoch"] < config.epochs:  # not begun, or stopped part-way: resume
-        overrides = {"rec_frames": "input", "pred_frames": 4} if "piga" in cfg.overrides else {}
-        state = asdict(train(data, run, config, overrides, resume=started, progress=False)[1])
+        from piga.world.model import ModelConfig
+
+        model = ModelConfig(rec_frames="input", pred_frames=4) if "piga" in cfg.overrides else None  # tiny preset: shrunk
+        state = asdict(train(data, run, config, model, resume=started, progress=False)[1])
     return float(state["elapsed"])
 
 
@@ -454,13 +496,10 @@ def train_ddpg_run(obs: str, steps: int, seed: int, data: Path, run: Path, cfg: 
 def run_job(job: Job, cfg: BenchConfig, folder: Path, data: Path | None) -> dict[str, Any]:
     """Trains the job's run (continuing a stopped one) and measures everything the comparison reads from
     it, in this process: control at x1.0, the gravity sweep, the plan time (piga, planet) and the goal
-    images (piga). Writes and returns its record (JSON); a record kept for the same settings is returned
-    at once. The aggregate reads records only, so a run's checkpoint is needed only until its record exists."""
-    kept = kept_record(folder, job, cfg)
-    if kept is not None:
-        return kept
+    images (piga). Returns its record's fields (JSON types; :func:`run_all` adds the spec and the commit and
+    writes it). The aggregate reads records only, so a run's checkpoint is needed only until its record exists."""
     run = None if job.agent == "oracle" else folder / job.name
-    record: dict[str, Any] = {"spec": job_spec(job, cfg), "machine": machine()}  # jobs may run on different machines
+    record: dict[str, Any] = {"machine": machine()}  # jobs may run on different machines
     if job.agent == "piga":
         record["train_seconds"] = train_piga(data, run, job.seed, cfg, job.sequences)
     elif job.agent == "planet":
@@ -481,18 +520,18 @@ def run_job(job: Job, cfg: BenchConfig, folder: Path, data: Path | None) -> dict
         record["action_repeat"] = load_planet(run)[0].config.action_repeat  # PlaNet-style plans every R-th env step
     if job.agent == "piga":
         record["goals"] = goal_images(run, cfg, folder)
-    record_path(folder, job).parent.mkdir(exist_ok=True)
-    write_json(record_path(folder, job), record)
+    record["config"] = hyperparameters(job, cfg, run)
     return record
 
 
-def _run_task(args: tuple[Job, BenchConfig, Path, Path | None]) -> tuple[str, dict[str, Any]]:
+def _run_task(args: tuple[Job, BenchConfig, Path, Path | None]) -> dict[str, Any]:
+    """:func:`run_job` with one torch thread (the worker pool's setting, here for one process too)."""
     import torch
 
     torch.set_num_threads(1)
     record = run_job(*args)
     print(f"done {args[0].name}", flush=True)
-    return args[0].name, record
+    return record
 
 
 def run_all(cfg: BenchConfig, folder: Path, only: tuple[str, ...] = AGENTS) -> dict[str, dict[str, Any] | None]:
@@ -505,17 +544,10 @@ def run_all(cfg: BenchConfig, folder: Path, only: tuple[str, ...] = AGENTS) -> d
     largest = max(cfg.sizes + cfg.planet_size_list)
     needs = {job.sequences or largest for job in todo if job.agent in ("piga", "planet") or job.obs == "latent"}
     files = {n: data_file(cfg, folder, n) for n in sorted(needs)}
-    args = [(job, cfg, folder, None if job.agent == "oracle" else files.get(job.sequences or largest, data_path(folder, largest)))
-            for job in sorted(todo, key=lambda j: -job_train_cost(cfg, j))]
-    if cfg.workers <= 1 or len(args) <= 1:
-        done = dict(map(_run_task, args))
-    else:
-        import multiprocessing as mp
-        from concurrent.futures import ProcessPoolExecutor
-
-        method = "fork" if "fork" in mp.get_all_start_methods() else "spawn"
-        with ProcessPoolExecutor(cfg.workers, mp_context=mp.get_context(method)) as pool:
-            done = dict(pool.map(_run_task, args))
+    recorded = [RecordedJob(job.name, job_spec(job, cfg), (job, cfg, folder, None if job.agent == "oracle" else
+                                                           files.get(job.sequences or largest, data_path(folder, largest))))
+                for job in sorted(todo, key=lambda j: -job_train_cost(cfg, j))]
+    done = run_recorded(_run_task, recorded, job_records(folder), cfg.workers, progress=False)
     return {**kept, **done}
 
 

@@ -229,20 +229,16 @@ def file_shape(row: Row) -> tuple[int, int, int]:
         base = CollectConfig()
         n, t, size = base.sequences, base.steps, base.env.image_size
     else:
-        n, t, size = SCENE_PRESETS["default"]["sequences"], SCENE_STEPS[row.system], scene_config(row.system).image_size
+        n, t, size = SCENE_PRESETS["default"].sequences, SCENE_STEPS[row.system], scene_config(row.system).image_size
     return (int(_option(row, "--sequences") or n), int(_option(row, "--steps") or t), int(_option(row, "--image-size") or size))
 
 
 def recipe_windows(row: Row) -> tuple[int, Any, int]:
     """(L + T_pred, the recipe's TrainConfig, window stride) of the default recipe for the row's system."""
-    from piga.world.model import ModelConfig
-    from piga.training.train import PRESETS, SCENE_PRESETS, TrainConfig
+    from piga.training.train import PRESETS, SCENE_PRESETS
 
     recipe = PRESETS["fast"] if row.system == "pendulum" else SCENE_PRESETS[row.system]["fast"]
-    train = TrainConfig(**recipe.get("train", {}))
-    model = recipe.get("model", {})
-    window = model.get("input_frames", ModelConfig.input_frames) + model.get("pred_frames", ModelConfig.pred_frames)
-    return window, train, train.window_stride
+    return recipe.model.window, recipe.train, recipe.train.window_stride
 
 
 def estimate_minutes(row: Row) -> dict[str, float]:

@@ -33,6 +33,7 @@ import os
 import shutil
 import statistics
 import sys
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -44,7 +45,7 @@ from piga.data.collect_scenes import SCENE_PRESETS as DATA_PRESETS
 from piga.data.collect_scenes import SCENE_STEPS, SceneCollectConfig, collect_scene
 from piga.data.schema import inspect_dataset
 from piga.training.report import write_run_report
-from piga.training.train import TrainConfig, preset_for, train
+from piga.training.train import preset_for, train
 
 #: Case -> the paper's learned values (its Table 1; none for bouncing). A case is a system, or
 #: "gravity-m": the gravity data with g held at the collection's value and the mass m learned
@@ -87,7 +88,7 @@ def _collect(name: str, scene: str, overrides: dict[str, Any], folder: Path) -> 
         if "background" in overrides:
             look["background"] = to_rgb(overrides["background"])
         config = SceneCollectConfig(scene=scene_config(scene, **{**overrides, **look}),
-                                    sequences=DATA_PRESETS["default"]["sequences"],
+                                    sequences=DATA_PRESETS["default"].sequences,
                                     steps=SCENE_STEPS[scene], seed=DATA_SEED, workers=2)
         collect_scene(config, path, command=f"piga-collect --system {scene} --seed {DATA_SEED} {_look(overrides)} "
                       f"--out {path}", progress=False)
@@ -117,17 +118,17 @@ def _run(case: str, seed: int, data: Path, folder: Path, overrides: dict[str, An
     metrics_path = run_dir / "metrics.json"
     info = inspect_dataset(data)
     preset = preset_for("fast", info)
-    model_overrides = {**preset["model"], **(overrides or {})}
+    model_config = replace(preset.model, **(overrides or {}))
     if not metrics_path.exists():
-        config = TrainConfig(seed=seed, threads=1, **preset["train"])
+        config = replace(preset.train, seed=seed, threads=1)
         if run_dir.exists():
             shutil.rmtree(run_dir)  # an interrupted run restarts from scratch
-        model, state = train(data, run_dir, config, model_overrides, progress=False)
+        model, state = train(data, run_dir, config, model_config, progress=False)
         write_run_report(model, state, data, run_dir)
         (run_dir / "load.json").write_text(json.dumps({"load_average_at_end": os.getloadavg()}))
-    _check_recipe(run_dir, info, model_overrides)
+    _check_recipe(run_dir, info, model_config)
     metrics = json.loads(metrics_path.read_text())
-    t_ext = model_overrides.get("extrapolate_frames", 20)
+    t_ext = model_config.extrapolate_frames
     expected = min(t_ext, info.steps - metrics["input_frames"] - metrics["pred_frames"])
     if metrics["extrapolate_frames"] < expected:
         model, ckpt = load_model(run_dir)
@@ -140,7 +141,7 @@ def _run(case: str, seed: int, data: Path, folder: Path, overrides: dict[str, An
     return {"system": case, "seed": seed, "run": str(run_dir), "metrics": metrics, "load_average_at_end": load}
 
 
-def _check_recipe(run_dir: Path, info: Any, model_overrides: dict[str, Any]) -> None:
+def _check_recipe(run_dir: Path, info: Any, model_config: Any) -> None:
     """Refuses to reuse a finished run whose model was built with another recipe than today's fast preset
     (T_ext aside: only evaluation uses it, and :func:`_run` re-evaluates)."""
     import torch
@@ -151,7 +152,7 @@ def _check_recipe(run_dir: Path, info: Any, model_overrides: dict[str, Any]) -> 
 
     saved = {**ModelConfig().to_dict(),  # a field newer than the run: the run had its default
              **torch.load(run_dir / "checkpoint.pt", map_location="cpu", weights_only=False)["model_config"]}
-    wanted = model_config_for(info, model_overrides).to_dict()
+    wanted = model_config_for(info, model_config).to_dict()
     changed = [k for k in wanted if k != "extrapolate_frames" and json.dumps(saved[k]) != json.dumps(wanted[k])]
     if changed:
         raise SystemExit(f"{run_dir} was trained with another recipe ({', '.join(f'{k}: {saved.get(k)} -> {wanted[k]}' for k in changed)}); "

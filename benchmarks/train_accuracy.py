@@ -105,7 +105,7 @@ def main() -> None:
                 continue
             run_dir = work / f"{case}-seed{seed}"
             started = time.monotonic()
-            model, state = train(data, run_dir, TrainConfig(seed=seed), PRESETS["fast"].get("model"), progress=False)
+            model, state = train(data, run_dir, TrainConfig(seed=seed), PRESETS["fast"].model, progress=False)
             wall = time.monotonic() - started
             metrics = evaluate(model, data, EvalConfig())
             convergence = check_convergence(state)

@@ -45,7 +45,7 @@ import math
 import os
 import xml.etree.ElementTree as ET
 from dataclasses import asdict, dataclass, replace
-from typing import Any, SupportsFloat
+from typing import Any, Literal, SupportsFloat, get_args
 
 import gymnasium as gym
 import numpy as np
@@ -66,7 +66,9 @@ EARTH_GRAVITY = 9.81
 VIEW_HALF_SIDE = 0.7
 #: Vertical field of view of the face-on camera, degrees.
 CAMERA_FOVY = 45.0
-FLIPS = ("none", "camera", "motor")
+Flip = Literal["none", "camera", "motor"]
+#: What a flip turns over: nothing, the camera (filmed from the other side) or the motor (gear -1).
+FLIPS: tuple[Flip, ...] = get_args(Flip)
 
 
 class MissingExtraError(ImportError):
@@ -91,7 +93,7 @@ class DMCPendulumConfig:
     """Distance from the hinge to the tip sphere's centre (m; pendulum.xml: 0.5)."""
     damping: float = 0.1
     """Hinge damping d (N·m·s/rad; pendulum.xml: 0.1)."""
-    flip: str = "none"
+    flip: Flip = "none"
     """"none", "camera" (filmed from the other side: mirrored) or "motor" (gear -1)."""
     max_angle: float = math.pi
     """Reset draws θ ~ U(-max_angle, max_angle) (DMC: π)."""

@@ -77,7 +77,7 @@ import math
 from collections import deque
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
-from typing import Any, SupportsFloat
+from typing import Any, Literal, SupportsFloat, get_args
 
 import cv2
 import gymnasium as gym
@@ -434,11 +434,15 @@ class FrameDrop(gym.Wrapper):
 # ---------------------------------------------------------------------------------------------
 
 
+#: Where an effect acts: on u ("actuator"), as an added torque ("passive"), as the speed clip ("clip"), on frames ("vision").
+EffectKind = Literal["actuator", "passive", "clip", "vision"]
+
+
 @dataclass(frozen=True)
 class EffectSpec:
     """One entry of :data:`EFFECTS`."""
 
-    kind: str
+    kind: EffectKind
     """One of "actuator" (acts on u), "passive" (adds a torque), "clip" (the speed clip), "vision" (acts on frames)."""
     meaning: str
     """What the value means, in a few words."""
@@ -452,6 +456,10 @@ class EffectSpec:
     """The wrapper class; ``wrapper(env, value)`` adds the effect."""
     integer: bool = False
     """Whether the value is a count (stored as int)."""
+
+    def __post_init__(self) -> None:
+        if self.kind not in get_args(EffectKind):
+            raise ValueError(f"EffectSpec.kind must be one of {', '.join(map(repr, get_args(EffectKind)))}; got {self.kind!r}")
 
     def validate(self, name: str, value: Any) -> int | float:
         """The value as stored (int for counts, else float); raises ValueError naming the effect and the range."""

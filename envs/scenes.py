@@ -31,7 +31,7 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass, field, replace
 from functools import lru_cache
-from typing import Any
+from typing import Any, Literal, get_args
 
 import numpy as np
 
@@ -43,6 +43,12 @@ __all__ = ["SCENES", "SceneConfig", "scene_config", "accelerations", "simulate",
 MIN_RADIUS = 0.5
 
 
+#: The scenes (the keys of :data:`SCENES`).
+Scene = Literal["bouncing", "spring", "gravity", "digits-spring"]
+#: The force families, :mod:`piga.world.physics` system names.
+Physics = Literal["bouncing", "spring", "gravity"]
+
+
 class SceneError(ValueError):
     """A scene's settings cannot work (for example images too small for its objects)."""
 
@@ -51,9 +57,9 @@ class SceneError(ValueError):
 class SceneConfig:
     """One scene: physics, picture and how starts are drawn. Defaults per scene: :data:`SCENES`."""
 
-    scene: str
+    scene: Scene
     """One of :data:`SCENES`."""
-    physics: str
+    physics: Physics
     """The force family, a :mod:`piga.world.physics` system name: "bouncing", "spring" or "gravity"."""
     image_size: int
     """H = W, pixels."""
@@ -83,6 +89,8 @@ class SceneConfig:
     def __post_init__(self) -> None:
         if self.scene not in SCENES:
             raise SceneError(f"unknown scene {self.scene!r}; known: {sorted(SCENES)}")
+        if self.physics not in get_args(Physics):
+            raise SceneError(f"SceneConfig.physics must be one of {', '.join(map(repr, get_args(Physics)))}; got {self.physics!r}")
         if self.n_objects < 1:
             raise SceneError(f"n_objects must be >= 1, got {self.n_objects}")
         if not (self.dt > 0 and self.radius > 0 and self.speed >= 0):

@@ -56,9 +56,10 @@ def assert_one_line_error(result: subprocess.CompletedProcess[str], *needles: st
 def train_tiny(data: Path, run_dir: Path, **overrides: Any) -> Path:
     """A real run folder in seconds: the tiny-data recipe (batch 16, 4 predicted frames, one thread), with ``overrides`` of TrainConfig."""
     from piga.training.train import TrainConfig, train
+    from piga.world.model import ModelConfig
 
     config = TrainConfig(**{"epochs": 1, "batch_size": 16, "warmup_fraction": 0.1, "curriculum_fraction": 0.1, "threads": 1, **overrides})
-    train(data, run_dir, config, {"rec_frames": "input", "pred_frames": 4}, progress=False)
+    train(data, run_dir, config, ModelConfig(rec_frames="input", pred_frames=4), progress=False)
     return run_dir
 
 

@@ -180,3 +180,41 @@ def test_the_readme_baselines_table_is_the_committed_summary() -> None:
     """The README's Baselines table is results/baselines.json's summary_table, verbatim (regenerate, then paste)."""
     summary = json.loads((ROOT / "results" / "baselines.json").read_text())["summary_table"]
     assert summary in (ROOT / "README.md").read_text()
+
+
+def test_a_record_holds_the_commit_and_every_setting_and_is_not_run_again(bench, tmp_path: Path) -> None:
+    """The tiny preset's oracle job, end to end through the shared runner: its record names the code's commit
+    and the episodes' and planner's settings in full; a second invocation keeps it."""
+    from dataclasses import asdict
+
+    from agents.mpc import MPCConfig
+    from piga.io.pool import git_commit
+
+    cfg = replace(bench.PRESETS["tiny"], workers=1)
+    records = bench.run_all(cfg, tmp_path, only=("oracle",))
+    record = records["oracle"]
+    assert [name for name, r in records.items() if r is not None] == ["oracle"]
+    saved = json.loads(bench.record_path(tmp_path, bench.Job("oracle", "oracle")).read_text())
+    assert saved == record and record["spec"] == bench.job_spec(bench.Job("oracle", "oracle"), cfg)
+    assert record["commit"] == git_commit() and {"machine", "control", "sweep", "config"} <= set(record)
+    assert record["config"]["planner"] == json.loads(json.dumps(asdict(MPCConfig())))
+    assert record["config"]["episodes"] == json.loads(json.dumps(asdict(bench.episode_config_for("oracle", cfg))))
+    assert record["config"]["episodes"]["steps"] == cfg.episode_steps
+    mtime = bench.record_path(tmp_path, bench.Job("oracle", "oracle")).stat().st_mtime_ns
+    assert bench.run_all(cfg, tmp_path, only=("oracle",))["oracle"] == record  # kept, not run again
+    assert bench.record_path(tmp_path, bench.Job("oracle", "oracle")).stat().st_mtime_ns == mtime
+
+
+def test_a_piga_record_holds_its_runs_training_configs(bench, tiny_data: Path, tmp_path: Path) -> None:
+    from dataclasses import fields
+
+    from piga.world.model import ModelConfig
+
+    cfg = bench.PRESETS["tiny"]
+    run = tmp_path / "piga-n8-s0"
+    seconds = bench.train_piga(tiny_data, run, 0, cfg, 8)
+    assert seconds > 0
+    configs = bench.hyperparameters(bench.Job("piga-n8-s0", "piga", 8, 0), cfg, run)
+    assert configs["train"]["epochs"] == bench.piga_epochs(cfg, 8) and configs["train"]["batch_size"] == 16
+    assert set(configs["model"]) == {f.name for f in fields(ModelConfig)} and configs["model"]["pred_frames"] == 4
+    assert {"episodes", "planner"} <= set(configs)

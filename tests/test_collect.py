@@ -79,5 +79,5 @@ def test_preset_applies_and_explicit_options_win(tmp_path: Path, capsys: pytest.
                                   "--split", "1,1,1", "--workers", "1", "--quiet", capsys=capsys)
     assert code == 0, err
     info = inspect_dataset(out)
-    assert (info.n_sequences, info.steps) == (3, PRESETS["paper"]["steps"])  # --sequences wins, steps from the preset
+    assert (info.n_sequences, info.steps) == (3, PRESETS["paper"].steps)  # --sequences wins, steps from the preset
     assert info.attrs["env_config"]["max_speed"] == PAPER_MAX_SPEED != CollectConfig().env.max_speed

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -78,7 +79,7 @@ def gravity_data(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def test_fixed_g_reaches_the_model_and_is_refused_elsewhere(gravity_data: Path, tmp_path: Path,
                                                              capsys: pytest.CaptureFixture[str]) -> None:
     info = inspect_dataset(gravity_data)
-    config = model_config_for(info, {**preset_for("fast", info)["model"], "fixed_g": 60.0})
+    config = replace(model_config_for(info, preset_for("fast", info).model), fixed_g=60.0)
     assert config.extrapolate_frames == 24 and config.pred_frames == 12  # the paper's (4, 12, 24) for gravity
     spring = tmp_path / "spring.h5"
     collect_scene(SceneCollectConfig(scene=scene_config("spring"), sequences=2, steps=12, seed=0, workers=1,

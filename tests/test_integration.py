@@ -95,10 +95,12 @@ def test_make_integrator_names():
 
 
 def test_continuous_preset_model_reads_velocity_through_its_integrator():
-    from piga.world.model import ModelConfig, PhysicsModel
+    from dataclasses import replace
+
+    from piga.world.model import PhysicsModel
     from piga.training.train import PRESETS
 
-    config = ModelConfig(dt=DT, **PRESETS["continuous"]["model"])
+    config = replace(PRESETS["continuous"].model, dt=DT)
     model = PhysicsModel(config)
     assert isinstance(model.integrator, RK4) and set(model.physical_parameters()) >= {"g", "a", "b"}
     assert model.physical_parameters()["b"] == pytest.approx(config.damping_init)

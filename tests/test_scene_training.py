@@ -14,7 +14,7 @@ from piga.cli.train import main as train_main
 from piga.data.collect_scenes import SceneCollectConfig, collect_scene
 from piga.data.schema import inspect_dataset
 from piga.world.model import PhysicsModel
-from piga.training.train import PRESETS, TrainConfig, model_config_for, preset_for, train
+from piga.training.train import PRESETS, model_config_for, preset_for, train
 from tests.helpers import assert_one_line, run_in_process
 
 
@@ -28,7 +28,7 @@ def spring_data(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def test_the_model_is_read_from_the_file(spring_data: Path) -> None:
     info = inspect_dataset(spring_data)
     preset = preset_for("fast", info)
-    config = model_config_for(info, preset["model"])
+    config = model_config_for(info, preset.model)
     assert (config.system, config.n_objects, config.image_size, config.channels, config.dt) == ("spring", 2, 32, 3, 0.3)
     model = PhysicsModel(config)
     assert model.decoder.config.template_size == 16 and torch.allclose(model.decoder.scale, torch.ones(2))
@@ -41,10 +41,10 @@ def test_tiny_spring_training_moves_k_toward_the_truth(spring_data: Path, tmp_pa
     """~420 steps on 32 sequences: k and l leave 1 and land near the truth (4, 6). Measured: k 3.89, l 5.98."""
     info = inspect_dataset(spring_data)
     preset = preset_for("fast", info)
-    config = TrainConfig(**{**preset["train"], "epochs": 10, "warmup_fraction": 150 / 420, "curriculum_fraction": 60 / 420,
-                            "batch_size": 16, "window_stride": 1, "threads": 1, "seed": 0, "lr_physics": 3e-2})
+    config = replace(preset.train, epochs=10, warmup_fraction=150 / 420, curriculum_fraction=60 / 420, batch_size=16,
+                     window_stride=1, threads=1, seed=0, lr_physics=3e-2)
     # a 3-frame horizon: cheaper steps, and a rollout that stays near the truth while k is still far off
-    model, state = train(spring_data, tmp_path / "run", config, {**preset["model"], "pred_frames": 3}, progress=False)
+    model, state = train(spring_data, tmp_path / "run", config, replace(preset.model, pred_frames=3), progress=False)
     learned = model.physical_parameters()
     assert 3.0 < learned["k"] < 5.0, state.history[-1]  # from 1: over 80% of the way to 4, in log space
     assert 4.5 < learned["l"] < 7.5, state.history[-1]
@@ -75,7 +75,7 @@ def test_the_physics_velocity_term_recovers_v_at_frame_l() -> None:
     v_true = torch.tensor(np.stack([vs[-1] for _, vs in paths]), dtype=torch.float32)  # (B, N, 2)
     errors = {}
     for physics in (False, True):
-        config = replace(model_config_for(inspect_dataset_like(), {}), velocity_correction=False,
+        config = replace(model_config_for(inspect_dataset_like()), velocity_correction=False,
                          velocity_physics=physics, physics_init={"k": 4.0, "l": 6.0})
         _, v = PhysicsModel(config).initial_state(p)
         errors[physics] = float((v - v_true).norm(dim=-1).mean())

@@ -22,9 +22,9 @@ def _caught_and_ignored() -> tuple[int, int]:
 def _render_then_wait(init_name: str, report: mp.Queue, tasks: mp.Queue) -> None:
     """A pool worker's life: its initializer, frames rendered (SDL starts), then blocked on the task queue."""
     from envs.pendulum import make_pixel_pendulum
-    from piga.control import jobs
+    from piga.io import pool
 
-    getattr(jobs, init_name)()
+    getattr(pool, init_name)()
     env = make_pixel_pendulum()
     env.reset(seed=0)
     env.step(env.action_space.sample())
@@ -38,7 +38,7 @@ def test_pool_worker_keeps_sigterm_default_and_dies_on_it() -> None:
     even when it delivers the signal to SDL's thread; and the blocked worker does end on it."""
     ctx = mp.get_context("spawn")  # a fresh process: SDL starts after the initializer, as in a pool worker
     report, tasks = ctx.Queue(), ctx.Queue()
-    worker = ctx.Process(target=_render_then_wait, args=("_worker_init", report, tasks), daemon=True)
+    worker = ctx.Process(target=_render_then_wait, args=("init_worker", report, tasks), daemon=True)
     worker.start()
     try:
         caught, ignored = report.get(timeout=120)

@@ -14,7 +14,7 @@ from envs.scenes import SCENES, scene_config
 from piga.cli.common import (ArgumentParser, PigaError, add_preset_option, command_line, format_default, nonnegative_int, positive_float,
                              positive_int, run_cli, split_type)
 from piga.data.collect import PAPER_MAX_SPEED, PRESETS, CollectConfig, collect
-from piga.data.collect_scenes import SCENE_PRESETS, SCENE_STEPS, SceneCollectConfig, collect_scene
+from piga.data.collect_scenes import SCENE_PRESETS, SCENE_STEPS, collect_scene
 from piga.data.schema import inspect_dataset
 
 PROG = "piga-collect"
@@ -109,10 +109,10 @@ def build_parser() -> ArgumentParser:
                    "flip (none, camera, motor), shadows (envs/dmc.py)")
     paper = PRESETS["paper"]
     p.add_argument("--preset", choices=sorted(PRESETS), default="default",
-                   help=f"'default': small, about a minute on 2 cores; 'paper': {paper['sequences']} sequences x "
-                   f"{paper['steps']} frames, split {format_default(paper['split'])}, reset speeds up to "
-                   f"{format_default(paper['max_speed'])}; for a scene, 'default' is {SCENE_PRESETS['default']['sequences']} "
-                   f"sequences and 'paper' {format_default(SCENE_PRESETS['paper']['split'])}, of "
+                   help=f"'default': small, about a minute on 2 cores; 'paper': {paper.sequences} sequences x "
+                   f"{paper.steps} frames, split {format_default(paper.split)}, reset speeds up to "
+                   f"{format_default(paper.env.max_speed)}; for a scene, 'default' is {SCENE_PRESETS['default'].sequences} "
+                   f"sequences and 'paper' {format_default(SCENE_PRESETS['paper'].split)}, of "
                    f"{', '.join(f'{k} {v}' for k, v in SCENE_STEPS.items())} frames. Explicit options override the preset.")
     add_preset_option(p, "--sequences", type=positive_int, default=defaults.sequences, help="number of sequences N")
     add_preset_option(p, "--steps", type=positive_int, default=defaults.steps, help="frames per sequence T, >= 2")
@@ -152,24 +152,24 @@ def main(argv: Sequence[str] | None = None) -> int:
     if given:
         raise PigaError(f"{', '.join(given)} {'is' if len(given) == 1 else 'are'} for the scenes (--system "
                         f"{'/'.join(SYSTEM_CHOICES[1:])}); the pendulum takes --gravity and --actuation-gain")
-    preset = dict(PRESETS[args.preset])
-    for key in ("sequences", "steps", "split", "max_speed"):
-        if getattr(args, key) is not None:
-            preset[key] = getattr(args, key)
+    preset = PRESETS[args.preset]
+    given = {key: getattr(args, key) for key in ("sequences", "steps", "split") if getattr(args, key) is not None}
+    # explicit options override the preset; the preset's reset speed, where it sets one, applies to either env
+    preset_speed = preset.env.max_speed if preset.env.max_speed != PixelPendulumConfig.max_speed else None
+    speed = args.max_speed if args.max_speed is not None else preset_speed
     if args.env == "piga/DMCPendulum-v0":
         parser_defaults = build_parser().parse_args(["--out", args.out])
         for key, flag in GYMNASIUM_ONLY.items():
             if getattr(args, key) != getattr(parser_defaults, key):
                 raise PigaError(f"{flag} is an option of piga/PixelPendulum-v0 only; the DMC pendulum takes --env-option")
-        speed = preset.pop("max_speed", None)
         env: PixelPendulumConfig | DMCPendulumConfig = dmc_config(
             args.env_option, image_size=args.image_size or DMCPendulumConfig.image_size, max_angle=args.max_angle,
             **({} if speed is None else {"max_speed": float(speed)}))  # type: ignore[arg-type]
     elif args.env_option:
         raise PigaError("--env-option is for --env piga/DMCPendulum-v0")
     else:
-        env = _pixel_config(args, preset)
-    config = replace(CollectConfig(env=env, seed=args.seed, workers=args.workers), **preset)
+        env = _pixel_config(args, PixelPendulumConfig.max_speed if speed is None else speed)
+    config = replace(preset, env=env, seed=args.seed, workers=args.workers, **given)
     path = collect(config, args.out, overwrite=args.overwrite, command=command_line(PROG, argv),
                    progress=not args.quiet)
     info = inspect_dataset(path)
@@ -181,14 +181,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     return 0
 
 
-def _pixel_config(args: argparse.Namespace, preset: dict[str, object]) -> PixelPendulumConfig:
+def _pixel_config(args: argparse.Namespace, max_speed: float) -> PixelPendulumConfig:
     return PixelPendulumConfig(
         image_size=args.image_size or PixelPendulumConfig.image_size,
         gravity=args.gravity,
         gravity_mult=args.gravity_mult,
         actuation_gain=args.actuation_gain,
         max_angle=args.max_angle,
-        max_speed=float(preset.pop("max_speed", PixelPendulumConfig.max_speed)),  # type: ignore[arg-type]
+        max_speed=float(max_speed),
         draw_torque_arrow=not args.no_torque_arrow,
         effects=tuple(args.effect),
     )
@@ -242,12 +242,9 @@ def _collect_scene(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     if args.background is not None:
         overrides["background"] = args.background
     scene = scene_config(args.system, **overrides)
-    preset = dict(SCENE_PRESETS[args.preset])
-    for key in ("sequences", "steps", "split"):
-        if getattr(args, key) is not None:
-            preset[key] = getattr(args, key)
-    config = SceneCollectConfig(scene=scene, seed=args.seed, workers=args.workers,
-                                **{"steps": SCENE_STEPS[args.system], **preset})
+    given = {key: getattr(args, key) for key in ("sequences", "split") if getattr(args, key) is not None}
+    config = replace(SCENE_PRESETS[args.preset], scene=scene, seed=args.seed, workers=args.workers,  # explicit options win
+                     steps=SCENE_STEPS[args.system] if args.steps is None else args.steps, **given)
     path = collect_scene(config, args.out, overwrite=args.overwrite, command=command_line(PROG, argv),
                          progress=not args.quiet)
     info = inspect_dataset(path)

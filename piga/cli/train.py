@@ -24,11 +24,11 @@ def build_parser() -> ArgumentParser:
     from piga.world.model import ModelConfig  # noqa: PLC0415 (torch loads only when the command runs)
     from piga.training.train import PRESETS, TrainConfig  # noqa: PLC0415
 
-    fast, paper = TrainConfig(), PRESETS["paper"]["train"]
+    fast, paper = TrainConfig(), PRESETS["paper"].train
 
     def recipe(flag: str, field: str, type_: Any, text: str, shown: str | None = None) -> None:
         value = getattr(fast, field)
-        also = f"; paper preset: {format_default(paper[field])}" if field in paper and paper[field] != value else ""
+        also = f"; paper preset: {format_default(getattr(paper, field))}" if getattr(paper, field) != value else ""
         add_preset_option(p, flag, default=value, type=type_, shown=(shown or format_default(value)) + also, help=text)
 
     p = ArgumentParser(prog=PROG, description="Train the physics-as-inverse-graphics model on a piga data file. "
@@ -104,22 +104,20 @@ def main(argv: Sequence[str] | None = None) -> int:
         if changed:
             raise PigaError(f"--resume keeps the run's recipe; drop {', '.join('--' + c.replace('_', '-') for c in changed)}")
         train_config = replace(TrainConfig.from_dict(ckpt["train_config"]), **overrides)
-        model_overrides: dict[str, Any] = {}
         model_config = saved_model.config
         record = _read_record(run_dir)
         record.setdefault("resumed", []).append(command)
     else:
-        preset = preset_for(args.preset, info)
-        train_config = replace(TrainConfig(seed=args.seed, threads=args.threads), **{**preset.get("train", {}), **overrides})
-        model_overrides = dict(preset.get("model", {}))
+        recipe = preset_for(args.preset, info)
+        train_config = replace(recipe.train, seed=args.seed, threads=args.threads, **overrides)  # explicit options win
+        model_config = model_config_for(info, recipe.model)
         if args.signed_actuation:
-            model_overrides["signed_actuation"] = True
+            model_config = replace(model_config, signed_actuation=True)
         if args.fixed_g is not None:
             if info.system != "gravity":
                 raise PigaError(f"--fixed-g is for gravity data (it learns the mass m with g held); {args.data} is "
                                 f"{info.system}")
-            model_overrides["fixed_g"] = args.fixed_g
-        model_config = model_config_for(info, model_overrides)
+            model_config = replace(model_config, fixed_g=args.fixed_g)
         record = {"command": command}
     plan = check_trainable(info, model_config, train_config)
     from piga.world.model import PhysicsModel
@@ -144,7 +142,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         written.append(state.epoch)
 
     try:
-        model, state = train(args.data, run_dir, train_config, model_overrides, resume=args.resume,
+        model, state = train(args.data, run_dir, train_config, model_config, resume=args.resume,
                              progress=not args.quiet, on_epoch=on_epoch)
     except TrainingDiverged as exc:
         raise PigaError(f"training diverged: {exc}") from None

@@ -1,29 +1,27 @@
 """Control jobs: batches of episodes for the piga agent or the oracle, run in worker processes.
 
 A :class:`ControlJob` holds all a worker needs to rebuild its agent (a run folder, not a model),
-so that jobs pickle; :func:`run_jobs` runs them in a process pool, one torch thread each, and
-makes sure that no worker outlives an interrupted command.
+so that jobs pickle; :func:`run_jobs` runs them in the shared worker pool (:func:`piga.io.pool.run_pool`),
+one torch thread each, and no worker outlives an interrupted command.
 """
 
 from __future__ import annotations
 
 import functools
-import multiprocessing as mp
 import sys
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any, Protocol
+from typing import Any, Literal, Protocol
 
 import torch
-from tqdm.auto import tqdm
-
 from agents.dynamics import Dynamics
 from agents.mpc import MPCConfig, OracleAgent, PigaMPCAgent, StateReader
 from piga.baselines.kinds import BASELINE_KINDS
 from piga.control.episodes import EpisodeConfig, merge_results, run_episodes
 from piga.world.model import PhysicsModel
+from piga.io.choices import check_choices
 from piga.io.runs import convergence_warning, load_model
-from piga.io.worker_signals import die_with_parent, quiet_worker_signals
+from piga.io.pool import run_pool
 
 
 class AgentCorrection(Protocol):
@@ -48,7 +46,7 @@ class ControlJob:
     the scoring goal (``episodes.goal_angle``, the truth) are kept apart on purpose.
     """
 
-    agent: str
+    agent: Literal["piga", "oracle", "planet", "ddpg"]
     """"piga" (frames -> learned model), "oracle" (true state, the environment's true g and a), or a
     baseline's kind, "planet" or "ddpg" (:mod:`piga.baselines`; not told of a gravity change)."""
     episodes: EpisodeConfig
@@ -63,8 +61,7 @@ class ControlJob:
     """For "piga": plan with this correction's dynamics and read frames with its reader (from ``piga-diagnose``)."""
 
     def __post_init__(self) -> None:
-        if self.agent not in ("piga", "oracle", *BASELINE_KINDS):
-            raise ValueError(f"agent must be 'piga', 'oracle' or one of {BASELINE_KINDS}, got {self.agent!r}")
+        check_choices(self)
         if self.agent != "oracle" and not self.model_dir:
             raise ValueError(f"a {self.agent!r} job needs model_dir")
         if self.agent in BASELINE_KINDS and self.correction is not None:
@@ -131,13 +128,6 @@ def run_split(job: ControlJob, workers: int = 1, progress: bool = True) -> dict[
     return _tagged(job, merge_results(job.episodes, results))
 
 
-def _worker_init() -> None:
-    """Makes a pool worker end at once, quietly, on SIGTERM (the pool's terminate) and when its parent
-    dies; Ctrl-C is the parent's to handle (it then terminates the pool). See :mod:`piga.io.worker_signals`."""
-    quiet_worker_signals()
-    die_with_parent()
-
-
 def run_jobs(jobs: Sequence[ControlJob], workers: int = 1, progress: bool = True, keep_plan_ms: bool = False) -> list[dict[str, Any]]:
     """Runs jobs, in ``workers`` processes when > 1 (results in the order of ``jobs``; ``keep_plan_ms`` as for :func:`run_job`).
 
@@ -147,11 +137,4 @@ def run_jobs(jobs: Sequence[ControlJob], workers: int = 1, progress: bool = True
     for run_dir in dict.fromkeys(j.model_dir for j in jobs if j.model_dir is not None):  # once per run, in order
         if (warning := convergence_warning(run_dir)) is not None:
             print(warning, file=sys.stderr)
-    if workers <= 1 or len(jobs) <= 1:
-        return [run_job(j, keep_plan_ms) for j in tqdm(jobs, desc="control jobs", disable=not progress)]
-    # fork, as torch's DataLoader does: with spawn, torch's import makes the resource tracker warn
-    # about leaked semaphores. The parent has rendered nothing; each child sets one torch thread.
-    method = "fork" if "fork" in mp.get_all_start_methods() else "spawn"
-    with mp.get_context(method).Pool(min(workers, len(jobs)), initializer=_worker_init) as pool:  # exit: terminate
-        run = functools.partial(run_job, keep_plan_ms=keep_plan_ms)
-        return list(tqdm(pool.imap(run, jobs), total=len(jobs), desc="control jobs", disable=not progress))
+    return run_pool(functools.partial(run_job, keep_plan_ms=keep_plan_ms), jobs, workers, progress, desc="control jobs")

@@ -85,14 +85,6 @@ def check_collect_sizes(sequences: int, steps: int, workers: int, seed: int, bat
     split_counts(sequences, split)  # validates
 
 
-#: The paper's pendulum data set: 5000 / 500 / 500 sequences of 14 frames.
-#: ``max_speed`` is the env's reset range of θ̇.
-PRESETS: dict[str, dict[str, object]] = {
-    "default": {},
-    "paper": {"sequences": 6000, "steps": 14, "split": (5000, 500, 500), "max_speed": PAPER_MAX_SPEED},
-}
-
-
 def split_counts(n: int, split: Sequence[float]) -> tuple[int, int, int]:
     """Train/valid/test counts from fractions (sum 1) or counts (sum n)."""
     if len(split) != 3 or any(not math.isfinite(x) or x < 0 for x in split):
@@ -107,6 +99,15 @@ def split_counts(n: int, split: Sequence[float]) -> tuple[int, int, int]:
     if train < 1:
         raise ValueError(f"split {tuple(split)} leaves no training sequence out of {n}")
     return train, valid, test
+
+
+#: ``piga-collect``'s presets: 'default' is :class:`CollectConfig`'s defaults; 'paper' the paper's pendulum
+#: data set, 5000 / 500 / 500 sequences of 14 frames with θ̇ drawn from U(-6, 6) at reset. The command's
+#: seed, workers and env settings other than the reset speed are its own options.
+PRESETS: dict[str, CollectConfig] = {
+    "default": CollectConfig(),
+    "paper": CollectConfig(sequences=6000, steps=14, split=(5000, 500, 500), env=PixelPendulumConfig(max_speed=PAPER_MAX_SPEED)),
+}
 
 
 def _episode_env(env_config: PixelPendulumConfig | DMCPendulumConfig) -> gym.Env:

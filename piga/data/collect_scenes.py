@@ -33,11 +33,6 @@ from piga.io.worker_signals import quiet_worker_signals
 #: Frames per sequence by scene: L + T_pred + T_ext of the chosen windows (docs/systems.md).
 SCENE_STEPS: dict[str, int] = {"bouncing": 30, "spring": 30, "gravity": 40, "digits-spring": 30}
 
-#: Sizes: 'default' is small enough for a CPU; 'paper' is the paper's 5000 / 500 / 500.
-SCENE_PRESETS: dict[str, dict[str, Any]] = {
-    "default": {"sequences": 1000},
-    "paper": {"sequences": 6000, "split": (5000, 500, 500)},
-}
 
 
 @dataclass(frozen=True)
@@ -120,6 +115,15 @@ def collect_scene(config: SceneCollectConfig, out: str | Path, overwrite: bool =
         pool.close()
         pool.join()
     return Path(out)
+
+
+#: Sizes: 'default' (:class:`SceneCollectConfig`'s defaults, 1000 sequences) is small enough for a CPU;
+#: 'paper' is the paper's 5000 / 500 / 500. A preset sets the sizes only: the scene and its frames per
+#: sequence (:data:`SCENE_STEPS`) are the ``--system``'s.
+SCENE_PRESETS: dict[str, SceneCollectConfig] = {
+    "default": SceneCollectConfig(),
+    "paper": SceneCollectConfig(sequences=6000, split=(5000, 500, 500)),
+}
 
 
 __all__ = ["SCENE_PRESETS", "SCENE_STEPS", "SceneCollectConfig", "collect_scene", "scene_attrs"]

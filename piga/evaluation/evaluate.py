@@ -14,13 +14,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 import torch
 from skimage.metrics import structural_similarity
 
 from piga.data.schema import inspect_dataset, load_states, read_sequences
+from piga.io.choices import check_choices
 from piga.world.model import PhysicsModel, frames_to_float
 
 #: Data-file parameter name -> model parameter name.
@@ -31,13 +32,16 @@ PARAMETER_NAMES = {"g": "g", "actuation_gain": "a", "damping": "b", "k": "k", "l
 class EvalConfig:
     """What to evaluate."""
 
-    split: str = "test"
+    split: Literal["train", "valid", "test"] = "test"
     """Split of held-out sequences."""
     extrapolate_frames: int | None = None
     """T_ext, frames predicted beyond T_pred (capped by the sequence length); None: the model's own
     (:attr:`piga.world.model.ModelConfig.extrapolate_frames`: 20, or 24 for gravity)."""
     max_sequences: int = 200
     """At most this many sequences (the first of the split)."""
+
+    def __post_init__(self) -> None:
+        check_choices(self)
 
     def frames_after_input(self, model: PhysicsModel, sequence_steps: int) -> int:
         """T_pred + T_ext frames to predict after the L input frames, capped by the sequence length."""

@@ -1,7 +1,8 @@
-"""Plumbing shared by every command: atomic writes, resource checks, worker signals, and run folders.
+"""Plumbing shared by every command: atomic writes, resource checks, worker processes, and run folders.
 
 :mod:`.atomic` writes files so that a crash never leaves a half-written one, :mod:`.resources`
 checks memory and disk before a command allocates or writes, :mod:`.worker_signals` makes worker
-processes stop cleanly, and :mod:`.runs` reads a training run's folder (its model and what it says
-about itself).
+processes stop cleanly, :mod:`.pool` runs jobs in worker processes and resumes them from their records,
+:mod:`.choices` checks a config's ``Literal`` fields, and :mod:`.runs` reads a training run's folder
+(its model and what it says about itself).
 """

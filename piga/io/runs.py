@@ -18,10 +18,11 @@ import json
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import torch
 
+from piga.io.choices import check_choices
 from piga.world.model import ModelConfig, PhysicsModel
 
 #: The checkpoint's file name in a run folder.
@@ -45,10 +46,13 @@ class Nominal:
     """Integrator substeps per frame."""
     b: float = 0.0
     """The model's own viscous damping (1/s; 0: none learned): θ̈ = ... − 3·b·θ̇."""
-    integrator: str = "euler"
+    integrator: Literal["euler", "rk4"] = "euler"
     """"euler" (semi-implicit) or "rk4", as :mod:`piga.world.physics`."""
     velocity_hold: bool = False
     """The model reads the velocity at a frame through its integrator (``ModelConfig.velocity_hold``)."""
+
+    def __post_init__(self) -> None:
+        check_choices(self)
 
 
 def load_model(run_dir: str | os.PathLike[str]) -> tuple[PhysicsModel, dict[str, Any]]:

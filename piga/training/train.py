@@ -33,6 +33,7 @@ from torch.utils.data import DataLoader, RandomSampler
 from tqdm.auto import tqdm
 
 from piga.io.atomic import atomic_output
+from piga.io.choices import check_choices
 from piga.data.schema import DatasetInfo, check_actions_file, inspect_dataset, read_sequences
 from piga.world.encoder import estimate_background
 from piga.world.model import SYSTEM_SHAPES, ModelConfig, PhysicsModel, frames_to_float
@@ -46,7 +47,7 @@ class TrainingDiverged(RuntimeError):
 
 @dataclass(frozen=True)
 class TrainConfig:
-    """How to train. The defaults are the 'fast' recipe; other presets are in :data:`PRESETS`.
+    """How to train. The defaults are the 'fast' recipe; other recipes are in :data:`PRESETS`.
 
     Every schedule is sized from the data file (:func:`plan_training`): the run's length comes from
     ``budget_steps`` unless ``epochs`` is given, and the warm-up, the curriculum and the final
@@ -124,10 +125,7 @@ class TrainConfig:
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise ValueError(f"TrainConfig.{name} must be finite and >= 0, got {value}")
-        if self.optimizer not in ("adam", "rmsprop"):
-            raise ValueError(f"TrainConfig.optimizer must be 'adam' or 'rmsprop', got {self.optimizer!r}")
-        if self.schedule not in ("cosine", "step"):
-            raise ValueError(f"TrainConfig.schedule must be 'cosine' or 'step', got {self.schedule!r}")
+        check_choices(self)
 
     @classmethod
     def from_dict(cls, values: dict[str, Any]) -> TrainConfig:
@@ -206,67 +204,80 @@ def plan_training(config: TrainConfig, windows: int) -> TrainPlan:
                      checkpoint_every=max(1, math.ceil(0.02 * total / per_epoch)))
 
 
-#: Named recipes, as overrides of the dataclass defaults. 'fast' is the defaults themselves
-#: (:class:`TrainConfig`, :class:`ModelConfig`); 'paper' follows the paper's appendix.
-PRESETS: dict[str, dict[str, Any]] = {
-    "fast": {},
-    "paper": {
-        "train": {"epochs": 1000, "lr": 3e-4, "lr_physics": 3e-4, "optimizer": "rmsprop",
-                  "schedule": "step", "lr_decay_epoch": 500, "warmup_fraction": 0.0, "curriculum_fraction": 0.0,
-                  "grad_clip": 0.0, "average_fraction": 0.0, "physics_grad_clip": 0.0},
-        "model": {"substeps": 5, "learn_offset": True, "readout": "regress", "rec_frames": "all", "pred_trim": 0.0,
-                  "velocity_correction": True},
-    },
+@dataclass(frozen=True)
+class Recipe:
+    """A named way to train (a preset): how (:class:`TrainConfig`) and which model (:class:`ModelConfig`).
+
+    The model's data-file fields (``system``, ``dt``, ``image_size``, ``channels``, ``n_objects``)
+    are the file's whatever the recipe says: :func:`model_config_for` sets them.
+    """
+
+    train: TrainConfig = field(default_factory=TrainConfig)
+    """The training schedule and optimiser."""
+    model: ModelConfig = field(default_factory=ModelConfig)
+    """The model; its data-file fields are replaced by the file's."""
+
+
+#: Named recipes. 'fast' is the defaults themselves (:class:`TrainConfig`, :class:`ModelConfig`);
+#: 'paper' follows the paper's appendix.
+PRESETS: dict[str, Recipe] = {
+    "fast": Recipe(),
+    "paper": Recipe(
+        TrainConfig(epochs=1000, lr=3e-4, lr_physics=3e-4, optimizer="rmsprop", schedule="step", lr_decay_epoch=500,
+                    warmup_fraction=0.0, curriculum_fraction=0.0, grad_clip=0.0, average_fraction=0.0, physics_grad_clip=0.0),
+        ModelConfig(substeps=5, learn_offset=True, readout="regress", rec_frames="all", pred_trim=0.0, velocity_correction=True),
+    ),
     # A continuous system filmed with a held action (a real motor, MuJoCo's 0.02 s physics steps):
     # RK4 within the frame, velocities read through it, and a learnable hinge damping.
-    "continuous": {
-        "model": {"integrator": "rk4", "substeps": 2, "velocity_hold": True, "learn_damping": True},
-    },
+    "continuous": Recipe(model=ModelConfig(integrator="rk4", substeps=2, velocity_hold=True, learn_damping=True)),
 }
 
 
-#: The scenes' recipes (``fast`` and ``paper``), by the file's attr ``scene`` (else its ``system``).
-#: What all ball and digit scenes share: templates of H/2 (the published decoder's), a pixelwise
-#: mask term, the decoder's background content starting at the label-free median background, no
-#: trimming (nothing unmodelled to trim), and the paper's velocity MLP on top of the backward
-#: difference (at dt = 0.3 the difference alone is far from v_L: ω·dt ≈ 0.85 for the spring), with
-#: v_L read through the engine (``velocity_shoot``: the velocity the engine ends the last input
-#: interval with), L = 4 input and T_pred = 6 predicted frames (the published code's). The cubic
-#: Taylor term that it replaced (``velocity_physics``) left k and g about 1.5% low
-#: (``benchmarks/velocity_bias.py``).
-_SCENE_MODEL: dict[str, Any] = {"input_frames": 4, "pred_frames": 6, "pred_trim": 0.0, "velocity_correction": True,
-                                "velocity_shoot": True, "substeps": 5, "mask_pixelwise": True, "alpha": 2.0,
-                                "init_background": True}
+def _scene_model(system: Literal["spring", "gravity", "bouncing"], paper: bool = False, **changes: Any) -> ModelConfig:
+    """A scene's model. What all ball and digit scenes share: a pixelwise mask term, the decoder's
+    background content starting at the label-free median background, no trimming (nothing unmodelled
+    to trim), and the paper's velocity MLP on top of the backward difference (at dt = 0.3 the difference
+    alone is far from v_L: ω·dt ≈ 0.85 for the spring), with v_L read through the engine
+    (``velocity_shoot``: the velocity the engine ends the last input interval with), L = 4 input and
+    T_pred = 6 predicted frames (the published code's). The cubic Taylor term that it replaced
+    (``velocity_physics``) left k and g about 1.5% low (``benchmarks/velocity_bias.py``). ``paper``:
+    the paper's regressing location network and reconstruction of all frames. Templates are H/2
+    (the published decoder's), set from the file by :func:`preset_for`."""
+    shared = ModelConfig(system=system, input_frames=4, pred_frames=6, pred_trim=0.0, velocity_correction=True,
+                         velocity_shoot=True, substeps=5, mask_pixelwise=True, alpha=2.0, init_background=True)
+    if paper:
+        shared = replace(shared, readout="regress", rec_frames="all")
+    return replace(shared, **changes)
+
+
 #: The scenes' fast schedule: 1650 steps (6 epochs of the default 1000 x 30-frame file), of which the
 #: first 18% train the autoencoder alone and the next 36% grow the horizon, whatever the file's size.
-_SCENE_FAST_TRAIN: dict[str, Any] = {"budget_steps": 1650, "warmup_fraction": 0.18, "curriculum_fraction": 0.36,
-                                     "average_fraction": 1 / 6, "window_stride": 2}
-_SCENE_PAPER: dict[str, Any] = {
-    "train": {"epochs": 500, "lr": 3e-4, "lr_physics": 3e-4, "optimizer": "rmsprop", "schedule": "step",
-              "lr_decay_epoch": 375, "warmup_fraction": 0.0, "curriculum_fraction": 0.0, "grad_clip": 0.0,
-              "average_fraction": 0.0, "physics_grad_clip": 0.0, "batch_size": 100},
-    "model": {**_SCENE_MODEL, "readout": "regress", "rec_frames": "all"},
-}
-SCENE_PRESETS: dict[str, dict[str, dict[str, Any]]] = {
+_SCENE_FAST_TRAIN = TrainConfig(budget_steps=1650, warmup_fraction=0.18, curriculum_fraction=0.36, average_fraction=1 / 6,
+                                window_stride=2)
+#: The scenes' paper schedule (the paper's appendix).
+_SCENE_PAPER_TRAIN = TrainConfig(epochs=500, lr=3e-4, lr_physics=3e-4, optimizer="rmsprop", schedule="step", lr_decay_epoch=375,
+                                 warmup_fraction=0.0, curriculum_fraction=0.0, grad_clip=0.0, average_fraction=0.0,
+                                 physics_grad_clip=0.0, batch_size=100)
+
+#: The scenes' recipes (``fast`` and ``paper``), by the file's attr ``scene`` (else its ``system``);
+#: what they share: :func:`_scene_model`.
+SCENE_PRESETS: dict[str, dict[str, Recipe]] = {
     # Bouncing: nothing to learn; the wall distance is given, as the published engine hard-codes it.
-    "bouncing": {"fast": {"train": _SCENE_FAST_TRAIN, "model": {**_SCENE_MODEL, "init_scale": 1.0, "wall_radius": 3.0}},
-                 "paper": {"train": _SCENE_PAPER["train"], "model": {**_SCENE_PAPER["model"], "wall_radius": 3.0}}},
-    "spring": {"fast": {"train": _SCENE_FAST_TRAIN, "model": {**_SCENE_MODEL, "init_scale": 1.0}}, "paper": _SCENE_PAPER},
+    "bouncing": {"fast": Recipe(_SCENE_FAST_TRAIN, _scene_model("bouncing", init_scale=1.0, wall_radius=3.0)),
+                 "paper": Recipe(_SCENE_PAPER_TRAIN, _scene_model("bouncing", paper=True, wall_radius=3.0))},
+    "spring": {"fast": Recipe(_SCENE_FAST_TRAIN, _scene_model("spring", init_scale=1.0)),
+               "paper": Recipe(_SCENE_PAPER_TRAIN, _scene_model("spring", paper=True))},
     # Gravity: the paper's (L, T_pred, T_ext) = (4, 12, 24), as its published code's 3-body task (40-frame test sequences).
-    "gravity": {"fast": {"train": _SCENE_FAST_TRAIN, "model": {**_SCENE_MODEL, "init_scale": 1.0, "pred_frames": 12,
-                                                               "extrapolate_frames": 24}},
-                "paper": {"train": _SCENE_PAPER["train"], "model": {**_SCENE_PAPER["model"], "pred_frames": 12,
-                                                                    "extrapolate_frames": 24}}},
-    "digits-spring": {"fast": {"train": _SCENE_FAST_TRAIN, "model": {**_SCENE_MODEL, "init_scale": 2.0}},
-                      "paper": {"train": _SCENE_PAPER["train"], "model": {**_SCENE_PAPER["model"], "init_scale": 2.0}}},
+    "gravity": {"fast": Recipe(_SCENE_FAST_TRAIN, _scene_model("gravity", init_scale=1.0, pred_frames=12, extrapolate_frames=24)),
+                "paper": Recipe(_SCENE_PAPER_TRAIN, _scene_model("gravity", paper=True, pred_frames=12, extrapolate_frames=24))},
+    "digits-spring": {"fast": Recipe(_SCENE_FAST_TRAIN, _scene_model("spring", init_scale=2.0)),
+                      "paper": Recipe(_SCENE_PAPER_TRAIN, _scene_model("spring", paper=True, init_scale=2.0))},
 }
 
 
-def preset_for(name: str, info: DatasetInfo) -> dict[str, dict[str, Any]]:
-    """The recipe ``name`` ("fast" or "paper") for a data file: the pendulum's :data:`PRESETS`, or the scene's.
-
-    The scenes' templates are H/2 whatever the preset (:data:`SCENE_PRESETS`).
-    """
+def preset_for(name: str, info: DatasetInfo) -> Recipe:
+    """The recipe ``name`` (a key of :data:`PRESETS`) for a data file: the pendulum's, or the scene's
+    (:data:`SCENE_PRESETS`), whose templates are H/2 whatever the preset."""
     if name not in PRESETS:
         raise ValueError(f"unknown preset {name!r}; known: {sorted(PRESETS)}")
     if info.system == "pendulum":
@@ -275,9 +286,10 @@ def preset_for(name: str, info: DatasetInfo) -> dict[str, dict[str, Any]]:
     recipes = SCENE_PRESETS.get(scene) or SCENE_PRESETS.get(info.system)
     if recipes is None:
         raise ValueError(f"{info.path}: system {info.system!r} has no physics model; known: {sorted(SYSTEM_SHAPES)}")
+    if name not in recipes:
+        raise ValueError(f"preset {name!r} is the pendulum's; a {scene} file has {', '.join(sorted(recipes))}")
     recipe = recipes[name]
-    size = info.image_shape[0]
-    return {"train": dict(recipe["train"]), "model": {**recipe["model"], "template_size": max(size // 2, 1)}}
+    return replace(recipe, model=replace(recipe.model, template_size=max(info.image_shape[0] // 2, 1)))
 
 
 @dataclass
@@ -305,8 +317,9 @@ class TrainState:
     """The run's :class:`TrainPlan` (as a dict), for the convergence check."""
 
 
-def model_config_for(info: DatasetInfo, overrides: dict[str, Any] | None = None) -> ModelConfig:
-    """The model that fits a data file: system, dt, image size and channels from its attributes."""
+def model_config_for(info: DatasetInfo, model: ModelConfig | None = None) -> ModelConfig:
+    """``model`` (None: the fast recipe's) fitted to a data file: system, dt, image size, channels and
+    objects from its attributes."""
     if info.system not in SYSTEM_SHAPES:
         raise ValueError(f"{info.path}: system {info.system!r} has no physics model; known: {sorted(SYSTEM_SHAPES)}")
     shape = info.image_shape
@@ -314,8 +327,8 @@ def model_config_for(info: DatasetInfo, overrides: dict[str, Any] | None = None)
         raise ValueError(f"{info.path}: frames must be square, got {shape}")
     channels = shape[2] if len(shape) == 3 else 1
     n_objects = int(info.attrs.get("n_objects", SYSTEM_SHAPES[info.system][0]))
-    cfg = ModelConfig(system=info.system, dt=info.dt, image_size=shape[0], channels=channels, n_objects=n_objects)
-    return replace(cfg, **(overrides or {}))
+    return replace(model or ModelConfig(), system=info.system, dt=info.dt, image_size=shape[0], channels=channels,
+                   n_objects=n_objects)
 
 
 def _optimizer(model: PhysicsModel, config: TrainConfig) -> torch.optim.Optimizer:
@@ -487,7 +500,7 @@ def train(
     data: str | Path,
     run_dir: str | Path,
     train_config: TrainConfig,
-    model_overrides: dict[str, Any] | None = None,
+    model_config: ModelConfig | None = None,
     resume: bool = False,
     progress: bool = True,
     on_epoch: Callable[[TrainState, PhysicsModel], None] | None = None,
@@ -500,7 +513,8 @@ def train(
 
     With ``resume``, the model, optimiser, step and RNGs come from ``run_dir``'s checkpoint and
     ``train_config`` should be the run's saved one (``TrainConfig.from_dict(ckpt["train_config"])``),
-    possibly with more ``epochs``; ``model_overrides`` is ignored. Resuming with the same
+    possibly with more ``epochs``; ``model_config`` is ignored. Otherwise the model is ``model_config``
+    (None: the fast recipe's) fitted to the file (:func:`model_config_for`). Resuming with the same
     ``epochs`` continues exactly. With more ``epochs``, the cosine schedule is replanned over the
     new total: from the resumed step on, the learning rates are those a straight run of the new
     length has at that step (they rise again if the old run had finished its cosine), while the
@@ -525,11 +539,12 @@ def train(
         state = TrainState(**ckpt["state"])
         _set_rng_state(ckpt["rng"])
     else:
-        check_trainable(info, model_config_for(info, model_overrides), train_config)
+        fitted = model_config_for(info, model_config)
+        check_trainable(info, fitted, train_config)
         torch.manual_seed(train_config.seed)
         np.random.seed(train_config.seed)
         random.seed(train_config.seed)
-        model = PhysicsModel(model_config_for(info, model_overrides))
+        model = PhysicsModel(fitted)
         with torch.no_grad():
             model.encoder.background.copy_(_background(data, model.config.channels, train_config.seed))
         if model.config.init_background:

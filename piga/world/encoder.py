@@ -37,10 +37,13 @@ Angles are returned in radians, positive counter-clockwise as displayed.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal
 
 import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
+
+from piga.io.choices import check_choices
 
 
 @dataclass(frozen=True)
@@ -55,7 +58,7 @@ class EncoderConfig:
     """N, objects to localise."""
     coord_dim: int = 1
     """D: 1 for an angle about the image centre, 2 for cartesian (x, y) in pixels."""
-    readout: str = "centroid"
+    readout: Literal["centroid", "regress"] = "centroid"
     """"centroid": soft centroid of each masked foreground (no parameters); "regress": the paper's
     location network (strided convs + linear)."""
     mask_width: int = 16
@@ -75,8 +78,7 @@ class EncoderConfig:
     scenes); off for the pendulum, whose one object needs no such detail."""
 
     def __post_init__(self) -> None:
-        if self.readout not in ("centroid", "regress"):
-            raise ValueError(f"readout must be 'centroid' or 'regress', got {self.readout!r}")
+        check_choices(self)
         if self.coord_dim not in (1, 2):
             raise ValueError(f"coord_dim must be 1 (angle) or 2 (cartesian), got {self.coord_dim}")
         inner, outer = self.pivot_gate

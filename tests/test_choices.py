@@ -1,0 +1,57 @@
+"""Fixed-choice config fields are typed ``Literal`` and refuse any other value with one line naming the field and the choices."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import get_args
+
+import pytest
+
+from envs.dmc import FLIPS, DMCPendulumConfig
+from envs.effects import EFFECTS, EffectKind
+from envs.scenes import SCENES, Physics, Scene, SceneError, scene_config
+from piga.control.episodes import EpisodeConfig
+from piga.control.jobs import ControlJob
+from piga.evaluation.evaluate import EvalConfig
+from piga.io.choices import check_choices, literal_fields
+from piga.io.runs import Nominal
+from piga.training.train import TrainConfig
+from piga.world.encoder import EncoderConfig
+
+CASES = [
+    (TrainConfig(), "optimizer", ("adam", "rmsprop")),
+    (TrainConfig(), "schedule", ("cosine", "step")),
+    (EvalConfig(), "split", ("train", "valid", "test")),
+    (Nominal(g=10.0, a=1.0, offset=0.0, dt=0.05), "integrator", ("euler", "rk4")),
+    (EncoderConfig(), "readout", ("centroid", "regress")),
+    (ControlJob("oracle", EpisodeConfig()), "agent", ("piga", "oracle", "planet", "ddpg")),
+]
+
+
+@pytest.mark.parametrize("config,name,choices", CASES, ids=[f"{type(c).__name__}.{n}" for c, n, _ in CASES])
+def test_a_value_outside_the_literal_is_one_line_naming_the_field_and_choices(config: object, name: str,
+                                                                              choices: tuple[str, ...]) -> None:
+    assert dict(literal_fields(type(config)))[name] == choices
+    with pytest.raises(ValueError) as info:
+        replace(config, **{name: "bogus"})  # type: ignore[type-var]
+    message = str(info.value)
+    assert "\n" not in message and f"{type(config).__name__}.{name}" in message and "'bogus'" in message
+    assert all(repr(choice) in message for choice in choices), message
+
+
+def test_check_choices_accepts_each_choice() -> None:
+    for config, name, choices in CASES:
+        for choice in choices:
+            check_choices(replace(config, **{name: choice}) if name != "agent" else config)  # type: ignore[type-var]
+
+
+def test_the_env_configs_take_their_literals() -> None:
+    assert set(SCENES) == set(get_args(Scene)) and {s["physics"] for s in SCENES.values()} == set(get_args(Physics))
+    with pytest.raises(SceneError, match="SceneConfig.physics must be one of 'bouncing', 'spring', 'gravity'; got 'magnet'"):
+        replace(scene_config("spring"), physics="magnet")  # type: ignore[arg-type]
+    assert FLIPS == ("none", "camera", "motor")
+    with pytest.raises(ValueError, match="flip"):
+        DMCPendulumConfig(flip="upside")  # type: ignore[arg-type]
+    assert {spec.kind for spec in EFFECTS.values()} <= set(get_args(EffectKind))
+    with pytest.raises(ValueError, match="EffectSpec.kind must be one of 'actuator', 'passive', 'clip', 'vision'; got 'x'"):
+        replace(next(iter(EFFECTS.values())), kind="x")  # type: ignore[arg-type]
