@@ -1,1 +1,1 @@
-"""Controllers: the CEM optimiser, the planner over a :class:`~agents.dynamics.Dynamics`, the piga MPC agent and the oracle, and the PlaNet-style baseline (:mod:`agents.planet`: an RSSM world model and CEM in its latent space)."""
+"""Controllers: the planner (:class:`agents.planner.Planner`, CEM over a :class:`~agents.dynamics.Dynamics` and a :class:`~agents.cost.Cost`), the piga MPC agent and the oracle, the dm_control swing-up, and the PlaNet-style baseline (:mod:`agents.planet`: an RSSM world model and CEM in its latent space)."""

@@ -1,35 +1,48 @@
-"""What a planner needs from a model: a batched rollout of the pendulum's state under action sequences.
+"""What a planner needs from a model: a batched rollout of its state under action sequences.
 
-The planner (:mod:`agents.mpc`) knows no model. Whatever predicts (θ, θ̇) plugs in through the
-:class:`Dynamics` protocol: the learned physics of a piga model and the oracle's true physics
-(both :class:`PendulumDynamics`), the physics corrected by a diagnosis
-(:mod:`piga.control.corrected`), and later a latent model. States are in Gymnasium's
-convention (θ = 0 upright), the one the planner scores in.
+The planner (:class:`agents.planner.Planner`) knows no model. Whatever predicts states plugs in
+through the :class:`Dynamics` protocol: the learned physics of a piga model and the oracle's true
+physics (both :class:`PendulumDynamics`), the physics corrected by a diagnosis
+(:mod:`piga.control.corrected`), the damped pendulum of dm_control (:mod:`agents.swingup`) and a
+latent model (:mod:`agents.planet.planner`). A pendulum's state is (θ, θ̇) in Gymnasium's
+convention (θ = 0 upright), the one its costs (:mod:`agents.cost`) score in.
 
-A dynamics that can also score its rollouts itself (:class:`ScoringDynamics`) saves the planner
-building the trajectories as tensors: :class:`PendulumDynamics` rolls and scores the candidates in
-one compiled loop.
+A dynamics that can roll out and score in one pass for some costs (:class:`FusedDynamics`) saves
+the planner building the trajectories as tensors: :class:`PendulumDynamics` rolls and scores the
+candidates for a :class:`~agents.cost.PendulumCost` in one compiled loop.
 """
 
 from __future__ import annotations
 
 import math
-from typing import NamedTuple, Protocol, runtime_checkable
+from collections.abc import Callable
+from typing import Protocol, runtime_checkable
 
 import numba
 import numpy as np
 import torch
 from torch import Tensor
 
+from agents.cost import Cost, PendulumCost
 from piga.world.effects import pendulum_gains, scaled_gravity
 from piga.world.physics import Euler, Pendulum
 
+__all__ = ["Dynamics", "FusedDynamics", "PendulumDynamics", "PendulumModel", "Scorer", "pendulum_state", "start_of"]
+
+Scorer = Callable[[Tensor], Tensor]
+"""actions (B, H, A) -> returns (B,) of the rollouts from one start state, rolled out and scored in one pass."""
+
 
 class Dynamics(Protocol):
-    """A batched model of the pendulum, in Gymnasium's convention (θ = 0 upright)."""
+    """A batched model of a system's state under action sequences."""
 
-    def rollout(self, theta: float, theta_dot: float, actions: Tensor) -> tuple[Tensor, Tensor]:
-        """Angles and velocities (B, H) of the H steps after (θ, θ̇) under float32 actions (B, H, 1)."""
+    def rollout(self, state: Tensor, actions: Tensor, generator: torch.Generator | None = None) -> Tensor:
+        """States (B, H, S) of the H steps after ``state`` under float32 actions (B, H, A).
+
+        ``state`` is (1, S), one start shared by the B candidates (what a planner passes), or (B, S)
+        where the dynamics says it takes one start per candidate. A stochastic model draws its
+        samples from ``generator``.
+        """
         ...
 
     def reset(self) -> None:
@@ -37,36 +50,44 @@ class Dynamics(Protocol):
         ...
 
     def executed(self, action: np.ndarray) -> None:
-        """Told the action (1,) that was sent to the system (a model with an actuator delay keeps a history)."""
+        """Told the action (A,) that was sent to the system (a model with an actuator delay keeps a history)."""
         ...
-
-
-class StageCost(NamedTuple):
-    """Gymnasium's pendulum cost of a step, w_θ·wrap(θ − θ_goal)² + w_v·θ̇² + w_u·u², with
-    wrap(x) = ((x + π) mod 2π) − π; a rollout's return is minus its sum over the horizon."""
-
-    goal: float
-    angle_weight: float
-    velocity_weight: float
-    action_weight: float
-
-    def returns(self, angles: Tensor, speeds: Tensor, actions: Tensor) -> Tensor:
-        """Returns (B,) of angles and speeds (B, H) under actions (B, H)."""
-        # in place, on tiny tensors, where each operator call costs more than its arithmetic
-        cost = torch.remainder(angles - (self.goal - math.pi), 2 * math.pi).sub_(math.pi).square_()
-        if self.angle_weight != 1.0:
-            cost.mul_(self.angle_weight)
-        cost.addcmul_(speeds, speeds, value=self.velocity_weight).addcmul_(actions, actions, value=self.action_weight)
-        return cost.sum(1).neg_()  # (B,)
 
 
 @runtime_checkable
-class ScoringDynamics(Dynamics, Protocol):
-    """A :class:`Dynamics` that also scores its rollouts itself (faster than rolling out, then scoring)."""
+class FusedDynamics(Dynamics, Protocol):
+    """A :class:`Dynamics` that rolls out and scores in one pass for the costs it knows (faster than
+    rolling out, then scoring)."""
 
-    def returns(self, theta: float, theta_dot: float, actions: Tensor, cost: StageCost) -> Tensor:
-        """``cost.returns`` (B,) of the rollouts from (θ, θ̇) under float32 actions (B, H, 1)."""
+    def fused(self, state: Tensor, cost: Cost, generator: torch.Generator | None = None) -> Scorer | None:
+        """A :data:`Scorer` of ``cost``'s returns (:func:`agents.cost.returns`) of this dynamics' rollouts
+        from ``state`` (1, S), drawing any samples from ``generator``; None for a cost it cannot score itself."""
         ...
+
+
+@runtime_checkable
+class PendulumModel(Dynamics, Protocol):
+    """A pendulum's :class:`Dynamics` over (θ, θ̇), θ̈ = k_g·sin θ + ..., that says its gravity gain k_g
+    (what an energy-aware cost needs: the upright's energy at rest is k_g)."""
+
+    @property
+    def gravity_gain(self) -> float:
+        """k_g = 3g / 2l."""
+        ...
+
+
+def pendulum_state(theta: float, theta_dot: float) -> Tensor:
+    """A pendulum's start state (1, 2) = [[θ, θ̇]] for a planner, in float64 (each engine rounds it as it computes)."""
+    return torch.from_numpy(np.array([[theta, theta_dot]], np.float64))
+
+
+def start_of(state: Tensor) -> tuple[float, float]:
+    """(θ, θ̇) of a pendulum state (1, 2) shared by all candidates; ValueError for anything else."""
+    if state.shape != (1, 2):
+        raise ValueError(f"this pendulum engine rolls every candidate from one start state (1, 2) = [[θ, θ̇]], "
+                         f"got shape {tuple(state.shape)}")
+    (theta, theta_dot), = state.tolist()
+    return theta, theta_dot
 
 
 @numba.njit(cache=True, nogil=True)
@@ -115,7 +136,7 @@ class PendulumDynamics:
     5 CEM iterations, and on 200 numbers the fixed cost of each operator call dominates the
     arithmetic (an ``nn.Module`` call, parameter lookups and ``exp`` of the log-parameters every
     step). One numba-compiled loop over steps and candidates, which also scores the rollouts
-    (:meth:`returns`), takes a fraction of the time of even in-place numpy operators per step
+    (:meth:`fused`), takes a fraction of the time of even in-place numpy operators per step
     (``benchmarks/plan_time.py`` times both).
 
     Args:
@@ -160,14 +181,19 @@ class PendulumDynamics:
                           self.substeps, angles, speeds, cost, returns)
         return angles, speeds, returns
 
-    def rollout(self, theta: float, theta_dot: float, actions: Tensor) -> tuple[Tensor, Tensor]:
-        angles, speeds, _ = self._roll(theta, theta_dot, actions, _NO_COST)
-        return torch.from_numpy(angles).T, torch.from_numpy(speeds).T  # (B, H) each
+    def rollout(self, state: Tensor, actions: Tensor, generator: torch.Generator | None = None) -> Tensor:
+        """States (B, H, 2) = (θ, θ̇) of the H steps after ``state`` (1, 2) under float32 actions (B, H, 1)."""
+        angles, speeds, _ = self._roll(*start_of(state), actions, _NO_COST)
+        return torch.from_numpy(np.stack([angles, speeds], -1)).transpose(0, 1)  # (B, H, 2)
 
-    def returns(self, theta: float, theta_dot: float, actions: Tensor, cost: StageCost) -> Tensor:
-        """``cost.returns`` (B,) of the rollouts from (θ, θ̇) under float32 actions (B, H, 1), in one compiled loop."""
-        _, _, returns = self._roll(theta, theta_dot, actions, np.array(cost, np.float32))
-        return torch.from_numpy(returns)
+    def fused(self, state: Tensor, cost: Cost, generator: torch.Generator | None = None) -> Scorer | None:
+        """For a :class:`~agents.cost.PendulumCost`: its returns (B,) of the rollouts from ``state`` (1, 2)
+        under float32 actions (B, H, 1), rolled and scored in one compiled loop; None for other costs."""
+        if not isinstance(cost, PendulumCost):
+            return None
+        theta, theta_dot = start_of(state)
+        weights = np.array(cost, np.float32)  # (goal, w_θ, w_v, w_u)
+        return lambda actions: torch.from_numpy(self._roll(theta, theta_dot, actions, weights)[2])
 
     def reset(self) -> None:
         """Nothing to forget."""

@@ -1,8 +1,8 @@
-"""Model-predictive control of the pendulum: CEM over a :class:`~agents.dynamics.Dynamics`.
+"""Model-predictive control of the pendulum: the shared :class:`~agents.planner.Planner` with Gymnasium's cost.
 
-One planner, :class:`Planner`, serves every agent. It knows no model: it scores rollouts of
-whatever :class:`~agents.dynamics.Dynamics` it is given, in Gymnasium's convention (θ = 0
-upright), with Gymnasium's reward -(wrap(θ - θ_goal)² + 0.1·θ̇² + 0.001·u²) summed over the horizon.
+:class:`PendulumPlanner` plans over whatever :class:`~agents.dynamics.Dynamics` it is given, in
+Gymnasium's convention (θ = 0 upright), with Gymnasium's reward -(wrap(θ - θ_goal)² + 0.1·θ̇² +
+0.001·u²) summed over the horizon (:class:`~agents.cost.PendulumCost`).
 
 - :class:`OracleAgent` plans from the true state (``info["state"]``) with the true physics.
 - :class:`PigaMPCAgent` sees only frames. A :class:`StateReader` turns its last L frames into
@@ -16,7 +16,6 @@ upright), with Gymnasium's reward -(wrap(θ - θ_goal)² + 0.1·θ̇² + 0.001·
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from dataclasses import replace
 from typing import Protocol
 
@@ -24,18 +23,20 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from agents.cem import cem, shift_warm_start
 from agents.config import MPCConfig
-from agents.dynamics import Dynamics, PendulumDynamics, ScoringDynamics, StageCost
+from agents.cost import PendulumCost
+from agents.dynamics import Dynamics, PendulumDynamics, pendulum_state
+from agents.planner import Planner
 from envs.pendulum import MAX_ACTION, PENDULUM_DT, PixelPendulumConfig
 from piga.world.model import PhysicsModel, frames_to_float
 
-__all__ = ["EncoderReader", "MPCConfig", "OracleAgent", "PigaMPCAgent", "Planner", "StateReader"]
+__all__ = ["EncoderReader", "MPCConfig", "OracleAgent", "PendulumPlanner", "PigaMPCAgent", "StateReader"]
 
 
-class Planner:
-    """CEM over a :class:`~agents.dynamics.Dynamics`; stateless except the warm start (and the
-    dynamics' own history). Angles are Gymnasium's (θ = 0 upright).
+class PendulumPlanner:
+    """The pendulum's goals over a :class:`~agents.planner.Planner`: each plan scores against the goal,
+    or against upright while swinging up toward a goal in the upper half, and a warm-started plan near
+    the goal searches with a narrower initial spread. Angles are Gymnasium's (θ = 0 upright).
 
     Args:
         dynamics: what predicts the rollouts (learned, true or corrected physics, ...).
@@ -43,22 +44,26 @@ class Planner:
     """
 
     def __init__(self, dynamics: Dynamics, config: MPCConfig = MPCConfig()):
-        self.dynamics = dynamics
-        self._scoring = dynamics if isinstance(dynamics, ScoringDynamics) else None
-        """The dynamics, when it scores its own rollouts."""
         self.config = config
-        self.low = torch.tensor([-MAX_ACTION])
-        self.high = torch.tensor([MAX_ACTION])
-        self.generator = torch.Generator().manual_seed(config.seed)
-        self._mean: Tensor | None = None
+        self.optimizer = Planner(dynamics, self.cost(config.goal_angle), [-MAX_ACTION], [MAX_ACTION], config.cem,
+                                 warm_start=config.warm_fill if config.warm_start else "off",  # type: ignore[arg-type]
+                                 execute=config.execute, seed=config.seed)  # type: ignore[arg-type]
         self._holding_cem = config.cem if config.warm_init_std is None else replace(config.cem, init_std=config.warm_init_std)
         """CEM settings of a warm-started plan near the goal."""
 
+    @property
+    def dynamics(self) -> Dynamics:
+        """What the plans roll out."""
+        return self.optimizer.dynamics
+
+    def cost(self, goal: float) -> PendulumCost:
+        """Gymnasium's cost with the configured weights, scored against ``goal``."""
+        cfg = self.config
+        return PendulumCost(goal, cfg.angle_weight, cfg.velocity_weight, cfg.action_weight)
+
     def reset(self) -> None:
         """Forgets the warm start and the dynamics' history, and reseeds (a new episode)."""
-        self._mean = None
-        self.generator.manual_seed(self.config.seed)
-        self.dynamics.reset()
+        self.optimizer.reset()
 
     def near_goal(self, theta: float) -> bool:
         """Whether θ is within ``swing_up_angle`` of the goal (holding, not swinging up)."""
@@ -72,40 +77,21 @@ class Planner:
             return goal
         return 0.0
 
-    def objective(self, theta: float, theta_dot: float) -> Callable[[Tensor], Tensor]:
-        """The closure CEM maximises: actions (B, H, 1) -> return (B,) from the state (θ, θ̇)."""
-        cfg = self.config
-        cost = StageCost(self.current_goal(theta), cfg.angle_weight, cfg.velocity_weight, cfg.action_weight)
-        if self._scoring is not None:
-            scoring = self._scoring
-            return lambda actions: scoring.returns(theta, theta_dot, actions, cost)
-
-        def value(actions: Tensor) -> Tensor:
-            p, v = self.dynamics.rollout(theta, theta_dot, actions)  # (B, H) each
-            return cost.returns(p, v, actions[..., 0])
-
-        return value
-
     def executed(self, action: np.ndarray) -> None:
         """Told the action that was sent (passed on to the dynamics, which may keep a history)."""
-        self.dynamics.executed(action)
+        self.optimizer.executed(action)
 
     def plan(self, theta: float, theta_dot: float) -> np.ndarray:
-        """The first action (1,) of the best plan from the state (θ, θ̇)."""
-        return self.plan_sequence(theta, theta_dot)[0]
+        """The first action (1,) of the plan from the state (θ, θ̇), told to the dynamics as executed."""
+        action = self.plan_sequence(theta, theta_dot)[0]
+        self.executed(action)
+        return action
 
-    @torch.inference_mode()
     def plan_sequence(self, theta: float, theta_dot: float) -> np.ndarray:
-        """The whole best plan (H, 1) from the state (θ, θ̇); advances the warm start."""
-        cem_config = self.config.cem
-        if self._mean is not None and self.near_goal(theta):
-            cem_config = self._holding_cem
-        result = cem(self.objective(theta, theta_dot), self.low, self.high, cem_config,
-                     init_mean=self._mean, generator=self.generator)
-        plan = result.mean if self.config.execute == "mean" else result.actions
-        if self.config.warm_start:
-            self._mean = shift_warm_start(result.mean, self.low, self.high, self.config.warm_fill)
-        return plan.numpy().astype(np.float32)
+        """The whole plan (H, 1) from the state (θ, θ̇); advances the warm start."""
+        holding = self.optimizer.warm and self.near_goal(theta)
+        return self.optimizer.plan(pendulum_state(theta, theta_dot), self.cost(self.current_goal(theta)),
+                                   self._holding_cem if holding else None)
 
 
 class OracleAgent:
@@ -115,7 +101,7 @@ class OracleAgent:
     """
 
     def __init__(self, g: float, a: float, config: MPCConfig = MPCConfig(), dt: float = PENDULUM_DT):
-        self.planner = Planner(PendulumDynamics(g, a, dt), config)
+        self.planner = PendulumPlanner(PendulumDynamics(g, a, dt), config)
 
     @classmethod
     def for_env(cls, env: PixelPendulumConfig, config: MPCConfig = MPCConfig()) -> OracleAgent:
@@ -138,6 +124,11 @@ class StateReader(Protocol):
         """(θ, θ̇) in the model's convention (Gymnasium's θ = θ + φ) from uint8 frames (L, H, W)."""
         ...
 
+    def executed(self, action: np.ndarray) -> None:
+        """Told the action (A,) applied over the frame the next call ends with (zeros at the start of an
+        episode: nothing acted before the first frame)."""
+        ...
+
 
 class EncoderReader:
     """A :class:`StateReader`: each frame's coordinate from the model's encoder, then its velocity estimator.
@@ -157,7 +148,11 @@ class EncoderReader:
         self._coords: Tensor | None = None  # (L, N, D) their coordinates
         self.last_action: np.ndarray | None = None
         """(A,) the action over the last frame; a model that reads velocities through its integrator
-        (``velocity_hold``) needs it, and its agent sets it before each call."""
+        (``velocity_hold``) needs it; :meth:`executed` sets it."""
+
+    def executed(self, action: np.ndarray) -> None:
+        """Keeps the action (A,) as :attr:`last_action`."""
+        self.last_action = action
 
     def read_frames(self, x: Tensor) -> Tensor:
         """Float frames (K, C, H, W) in [0, 1] -> coordinates (K, N, D)."""
@@ -213,7 +208,7 @@ class PigaMPCAgent:
         """φ: Gymnasium's θ = model θ + φ."""
         if dynamics is None:
             dynamics = PendulumDynamics.of(model.system, model.integrator, gravity_mult)  # type: ignore[arg-type]
-        self.planner = Planner(dynamics, config)
+        self.planner = PendulumPlanner(dynamics, config)
         self.read_state: StateReader = reader if reader is not None else EncoderReader(model)
         self.keep_trace = keep_trace
         self.trace: list[tuple[float, float, np.ndarray]] = []
@@ -228,8 +223,7 @@ class PigaMPCAgent:
         """Starts an episode."""
         self.planner.reset()
         self.trace = []
-        if isinstance(self.read_state, EncoderReader):
-            self.read_state.last_action = np.zeros(1, np.float32)  # nothing acted before the first frame
+        self.read_state.executed(np.zeros(1, np.float32))  # nothing acted before the first frame
 
     def estimate_state(self, frames: np.ndarray) -> tuple[float, float]:
         """(θ, θ̇) in the model's convention (Gymnasium's θ = θ + ``offset``) from the last L frames, uint8 (L, H, W)."""
@@ -240,8 +234,7 @@ class PigaMPCAgent:
         theta, theta_dot = self.read_state(frames)
         plan = self.planner.plan_sequence(theta + self.offset, theta_dot)
         self.planner.executed(plan[0])
-        if isinstance(self.read_state, EncoderReader):
-            self.read_state.last_action = plan[0]
+        self.read_state.executed(plan[0])
         if self.keep_trace:
             self.trace.append((theta, theta_dot, plan))
         return plan[0]

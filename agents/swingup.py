@@ -2,11 +2,15 @@
 
 dm_control's pendulum has a torque limit of 1, while holding the pole horizontal takes m·g·l ≈ 4.9
 N·m: no plan that pushes straight up works, and a short horizon never sees the payoff of pumping.
-The cost therefore scores the pendulum's energy as well as its angle, so that every step that
-pumps energy toward the upright's is rewarded, and the angle term takes over near the top:
+The cost (:class:`agents.cost.EnergyCost`) therefore scores the pendulum's energy as well as its
+angle, so that every step that pumps energy toward the upright's is rewarded, and the angle term
+takes over near the top:
 
     cost_t = w_θ·(1 − cos θ_t) + w_E·((E_t − E*) / 2E*)² + w_u·u_t²,
     E = θ̇² / 2 + k_g·cos θ,  E* = k_g (upright at rest),  k_g = 1.5·g (θ̈ = k_g·sin θ + ...).
+
+The planner reads k_g from its dynamics' :class:`agents.dynamics.PendulumModel` interface
+(``gravity_gain``), so any pendulum dynamics that says its gravity gain plugs in.
 
 The dynamics (:class:`DampedPendulumDynamics`) are piga's pendulum equation with its damping term
 (:mod:`piga.world.effects`), θ̈ = 1.5·g·sin θ + 3·(a·u − b·θ̇), integrated by MuJoCo's semi-implicit Euler (damping implicit) or
@@ -23,10 +27,12 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from agents.cem import cem, shift_warm_start
 from agents.config import CEMConfig
 from piga.world.effects import DAMPING, pendulum_acceleration, pendulum_gains
 from piga.world.physics import euler_step, rk4_step
+from agents.cost import EnergyCost
+from agents.dynamics import PendulumModel, pendulum_state, start_of
+from agents.planner import Planner
 
 __all__ = ["DampedPendulumDynamics", "SwingUpConfig", "SwingUpPlanner"]
 
@@ -58,15 +64,20 @@ class DampedPendulumDynamics:
         """3·b: the θ̇ coefficient of θ̈, taken implicitly by the Euler step."""
         self.dt, self.substeps, self.integrator = float(dt), int(substeps), integrator
 
-    def rollout(self, theta: float, theta_dot: float, actions: Tensor) -> tuple[Tensor, Tensor]:
-        """Angles and velocities (B, H) of the H frames after (θ, θ̇) under actions (B, H, 1)."""
+    @property
+    def gravity_gain(self) -> float:
+        """k_g = 1.5·g (the :class:`agents.dynamics.PendulumModel` interface)."""
+        return self.k_g
+
+    def rollout(self, state: Tensor, actions: Tensor, generator: torch.Generator | None = None) -> Tensor:
+        """States (B, H, 2) = (θ, θ̇) of the H frames after ``state`` (1, 2) under actions (B, H, 1)."""
+        theta, theta_dot = start_of(state)
         b, steps = actions.shape[:2]
         h = self.dt / self.substeps
         drive = actions[..., 0].numpy().T.astype(np.float64) * self.a  # (H, B): a·u
         q = np.full(b, theta, np.float64)
         v = np.full(b, theta_dot, np.float64)
-        angles = np.empty((steps, b), np.float32)
-        speeds = np.empty((steps, b), np.float32)
+        states = np.empty((steps, b, 2), np.float32)  # (H, B, 2)
         for j in range(steps):
             if self.integrator == "euler":  # the damping implicit: MuJoCo's Euler
                 undamped = lambda q, v, u=drive[j]: pendulum_acceleration(q, v, self.g, actuation=(1.0, u))  # noqa: E731
@@ -77,8 +88,8 @@ class DampedPendulumDynamics:
                                                                      passive=[(DAMPING, self.b)])
                 for _ in range(self.substeps):
                     q, v = rk4_step(damped, q, v, h)
-            angles[j], speeds[j] = q, v
-        return torch.from_numpy(angles).T, torch.from_numpy(speeds).T  # (B, H) each
+            states[j, :, 0], states[j, :, 1] = q, v
+        return torch.from_numpy(states).transpose(0, 1)  # (B, H, 2)
 
     def reset(self) -> None:
         """Nothing to forget."""
@@ -108,45 +119,27 @@ class SwingUpConfig:
 
 
 class SwingUpPlanner:
-    """CEM over a dynamics (:class:`DampedPendulumDynamics` or any :class:`agents.dynamics.Dynamics`)
-    with the energy-aware cost of the module docstring. ``k_g`` (1.5·g) sets the upright's energy."""
+    """The shared :class:`~agents.planner.Planner` over a pendulum's dynamics (:class:`DampedPendulumDynamics`
+    or any :class:`agents.dynamics.PendulumModel`) with the energy-aware cost of the module docstring,
+    whose upright energy is the dynamics' ``gravity_gain``."""
 
-    def __init__(self, dynamics: DampedPendulumDynamics, config: SwingUpConfig = SwingUpConfig()):
-        self.dynamics = dynamics
+    def __init__(self, dynamics: PendulumModel, config: SwingUpConfig = SwingUpConfig()):
+        if not isinstance(dynamics, PendulumModel):
+            raise TypeError(f"the swing-up planner needs a pendulum dynamics with a gravity_gain, got {type(dynamics).__name__}")
         self.config = config
-        self.low = torch.tensor([-config.max_action])
-        self.high = torch.tensor([config.max_action])
-        self.generator = torch.Generator().manual_seed(config.seed)
-        self._mean: Tensor | None = None
+        cost = EnergyCost(dynamics.gravity_gain, config.angle_weight, config.energy_weight, config.action_weight)
+        self.optimizer = Planner(dynamics, cost, [-config.max_action], [config.max_action], config.cem,
+                                 warm_start="repeat" if config.warm_start else "off", seed=config.seed)
+
+    @property
+    def dynamics(self) -> PendulumModel:
+        """What the plans roll out."""
+        return self.optimizer.dynamics  # type: ignore[return-value]
 
     def reset(self) -> None:
         """Forgets the warm start and reseeds (a new episode)."""
-        self._mean = None
-        self.generator.manual_seed(self.config.seed)
-        self.dynamics.reset()
+        self.optimizer.reset()
 
-    def objective(self, theta: float, theta_dot: float):  # noqa: ANN201 - a closure (B, H, 1) -> (B,)
-        cfg = self.config
-        k_g = self.dynamics.k_g
-
-        def value(actions: Tensor) -> Tensor:
-            q, v = self.dynamics.rollout(theta, theta_dot, actions)  # (B, H) each
-            energy = 0.5 * v * v + k_g * torch.cos(q)  # (B, H)
-            e = (energy - k_g) / (2 * k_g)
-            u = actions[..., 0]
-            cost = cfg.angle_weight * (1 - torch.cos(q)) + cfg.energy_weight * e * e + cfg.action_weight * u * u
-            return -cost.sum(1)  # (B,)
-
-        return value
-
-    @torch.inference_mode()
     def plan(self, theta: float, theta_dot: float) -> np.ndarray:
-        """The first action (1,) of the best plan from (θ, θ̇) (Gymnasium's convention)."""
-        result = cem(self.objective(theta, theta_dot), self.low, self.high, self.config.cem, init_mean=self._mean,
-                     generator=self.generator)
-        if self.config.warm_start:
-            self._mean = shift_warm_start(result.mean, self.low, self.high, "repeat")
-        action = result.mean[0].numpy().astype(np.float32)
-        self.dynamics.executed(action)
-        return action
-
+        """The first action (1,) of the plan from (θ, θ̇) (Gymnasium's convention), told to the dynamics as executed."""
+        return self.optimizer.act(pendulum_state(theta, theta_dot))

@@ -43,7 +43,7 @@ import torch
 from torch import Tensor
 
 from common import machine
-from agents.dynamics import PendulumDynamics
+from agents.dynamics import PendulumDynamics, start_of
 from agents.mpc import MPCConfig, OracleAgent, PigaMPCAgent
 from piga.io.atomic import atomic_output, write_json
 from piga.baselines.agents import baseline_agent
@@ -61,12 +61,13 @@ class ModuleDynamics:
         self.system, self.integrator = model.system, model.integrator
         self.offset = model.physical_parameters().get("offset", 0.0)
 
-    def rollout(self, theta: float, theta_dot: float, actions: Tensor) -> tuple[Tensor, Tensor]:
+    def rollout(self, state: Tensor, actions: Tensor, generator: torch.Generator | None = None) -> Tensor:
+        theta, theta_dot = start_of(state)
         b = actions.shape[0]
         p0 = torch.full((b, 1, 1), theta - self.offset)
         v0 = torch.full((b, 1, 1), float(theta_dot))
         p, v = rollout(self.system, self.integrator, p0, v0, actions)  # (B, H, 1, 1) each
-        return p[..., 0, 0] + self.offset, v[..., 0, 0]
+        return torch.stack([p[..., 0, 0] + self.offset, v[..., 0, 0]], -1)  # (B, H, 2)
 
     def reset(self) -> None: ...
 
@@ -80,7 +81,8 @@ class UfuncDynamics:
     def __init__(self, dynamics: PendulumDynamics):
         self.d = dynamics
 
-    def rollout(self, theta: float, theta_dot: float, actions: Tensor) -> tuple[Tensor, Tensor]:
+    def rollout(self, state: Tensor, actions: Tensor, generator: torch.Generator | None = None) -> Tensor:
+        theta, theta_dot = start_of(state)
         b, steps = actions.shape[:2]
         h = self.d.dt / self.d.substeps
         push = np.multiply(actions[..., 0].numpy().T, h * h * self.d.torque_gain, dtype=np.float32)  # (H, B): h²·k_u·u
@@ -96,7 +98,7 @@ class UfuncDynamics:
                 d = np.add(d, s, out=moves[j])
                 q = np.add(q, d, out=angles[j])
         moves *= np.float32(1.0 / h)
-        return torch.from_numpy(angles).T, torch.from_numpy(moves).T  # (B, H) each
+        return torch.from_numpy(np.stack([angles, moves], -1)).transpose(0, 1)  # (B, H, 2)
 
     def reset(self) -> None: ...
 

@@ -2,8 +2,9 @@
 horizon 12, 10 iterations, 1000 candidates, top 100), by scoring engine and torch thread count.
 
 The rows alternate within one run, so that a load that changes while it runs affects them alike:
-"reference" scores candidates with :meth:`agents.planet.rssm.WorldModel.imagine_return` (the
-model's readable loop), "fast" with :class:`agents.planet.imagine.Imagination` (the agent's
+"reference" scores candidates by rolling out the model's prior step by step
+(:class:`agents.planet.planner.LatentDynamics`) and scoring the states with its reward head (the
+readable loop), "fast" with :class:`agents.planet.imagine.Imagination` (the agent's
 default; the same numbers without the overheads). Each timed call is one full ``act``: filtering
 the newest frame into the belief, then planning, at the env steps where the agent plans (every
 ``action_repeat``-th); the mean per env step counts the held steps too. Both agents must pick the

@@ -23,7 +23,7 @@ from tests.helpers import ENV, assert_one_line_error, run, train_tiny
 @pytest.mark.parametrize("substeps", [1, 5])
 def test_planning_dynamics_roll_like_the_physics_module(substeps: int) -> None:
     """The planner's plain-array engine follows piga.world.physics.rollout (model convention + φ = Gymnasium's)."""
-    from agents.dynamics import PendulumDynamics
+    from agents.dynamics import PendulumDynamics, pendulum_state
     from piga.world.physics import Euler, Pendulum, rollout
 
     system = Pendulum(g=9.3, a=1.2, dt=0.05, offset=0.4, length=1.1, mass=0.9, learnable=False)
@@ -33,42 +33,12 @@ def test_planning_dynamics_roll_like_the_physics_module(substeps: int) -> None:
     p, v = rollout(system, Euler(substeps), theta0, speed0, actions)  # (B, H, 1, 1)
     dynamics = PendulumDynamics.of(system, Euler(substeps), gravity_mult=1.0)
     for i in (0, 17, 49):
-        angles, speeds = dynamics.rollout(float(theta0[i]) + 0.4, float(speed0[i]), actions[i : i + 1])
-        torch.testing.assert_close(angles[0], p[i, :, 0, 0] + 0.4, atol=1e-4, rtol=0)
-        torch.testing.assert_close(speeds[0], v[i, :, 0, 0], atol=1e-4, rtol=0)
+        states = dynamics.rollout(pendulum_state(float(theta0[i]) + 0.4, float(speed0[i])), actions[i : i + 1])
+        assert states.shape == (1, 20, 2)
+        torch.testing.assert_close(states[0, :, 0], p[i, :, 0, 0] + 0.4, atol=1e-4, rtol=0)
+        torch.testing.assert_close(states[0, :, 1], v[i, :, 0, 0], atol=1e-4, rtol=0)
     stronger = PendulumDynamics.of(system, Euler(substeps), gravity_mult=1.4)
     assert stronger.g == pytest.approx(1.4 * 9.3) and stronger.substeps == substeps
-
-
-@pytest.mark.parametrize("substeps", [1, 3])
-def test_planning_dynamics_scores_like_the_stage_cost(substeps: int) -> None:
-    """The compiled roll-and-score loop gives Gymnasium's cost of its own rollouts, wrap included
-    (goals near ±π, angles far past a turn), and the planner takes that path for it."""
-    from agents.dynamics import PendulumDynamics, ScoringDynamics, StageCost
-    from agents.mpc import Planner
-
-    dynamics = PendulumDynamics(11.0, 1.3, 0.05, substeps)
-    actions = torch.rand(64, 20, 1, generator=torch.Generator().manual_seed(1)) * 4 - 2
-    for theta, speed, goal in [(3.0, 6.0, -3.1), (-2.0, -8.0, 3.1), (0.1, 0.0, 0.0), (7.0, 1.0, 1.0)]:
-        cost = StageCost(goal, 0.7, 0.1, 0.001)
-        p, v = dynamics.rollout(theta, speed, actions)
-        torch.testing.assert_close(dynamics.returns(theta, speed, actions, cost), cost.returns(p, v, actions[..., 0]),
-                                   rtol=1e-5, atol=1e-3)
-    assert isinstance(dynamics, ScoringDynamics)
-    planner = Planner(dynamics, MPCConfig(goal_angle=0.5))
-
-    class RollOnly:  # the same physics without its own scoring: the planner's generic path
-        def rollout(self, theta: float, theta_dot: float, actions: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-            return dynamics.rollout(theta, theta_dot, actions)
-
-        def reset(self) -> None: ...
-
-        def executed(self, action: np.ndarray) -> None: ...
-
-    generic = Planner(RollOnly(), MPCConfig(goal_angle=0.5))
-    assert planner._scoring is dynamics and generic._scoring is None
-    torch.testing.assert_close(planner.objective(2.5, -1.0)(actions), generic.objective(2.5, -1.0)(actions),
-                               rtol=1e-5, atol=1e-3)
 
 
 def test_oracle_swings_up_from_hanging() -> None:

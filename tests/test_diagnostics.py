@@ -159,25 +159,26 @@ def test_cli_bad_inputs(tiny_model: Path, tiny_data: Path, tmp_path: Path) -> No
 
 
 def test_corrected_dynamics_roll_the_corrected_physics() -> None:
-    from agents.dynamics import PendulumDynamics
+    from agents.dynamics import PendulumDynamics, pendulum_state
     from piga.control.corrected import CorrectedDynamics
 
     actions = torch.rand(6, 10, 1) * 4 - 2
+    start = pendulum_state(0.3, -1.0)
     true = PendulumDynamics(10.0, 1.0, NOMINAL.dt)
-    plain = true.rollout(0.3, -1.0, actions)
-    same = CorrectedDynamics(fit.Model((), 0, {"g": 10.0, "a": 1.0}), NOMINAL).rollout(0.3, -1.0, actions)
-    for a, b in zip(plain, same):
-        torch.testing.assert_close(a, b, atol=1e-5, rtol=0)
+    plain = true.rollout(start, actions)
+    same = CorrectedDynamics(fit.Model((), 0, {"g": 10.0, "a": 1.0}), NOMINAL).rollout(start, actions)
+    assert same.shape == plain.shape == (6, 10, 2)
+    torch.testing.assert_close(plain, same, atol=1e-5, rtol=0)
     delayed = CorrectedDynamics(fit.Model(("delay",), 2, {"g": 10.0, "a": 1.0}), NOMINAL)
     delayed.executed(np.array([1.5]))
     delayed.executed(np.array([-2.0]))
-    theta, _ = delayed.rollout(0.3, -1.0, actions)
+    theta = delayed.rollout(start, actions)[..., 0]
     history = torch.cat([torch.tensor([1.5, -2.0]).expand(6, 2), actions[:, :8, 0]], 1)[..., None]  # what really acts
-    expected, _ = true.rollout(0.3, -1.0, history)
+    expected = true.rollout(start, history)[..., 0]
     torch.testing.assert_close(theta, expected, atol=1e-5, rtol=0)
     delayed.reset()
-    torch.testing.assert_close(delayed.rollout(0.3, -1.0, actions)[0],
-                               true.rollout(0.3, -1.0, torch.cat([torch.zeros(6, 2, 1), actions[:, :8]], 1))[0],
+    torch.testing.assert_close(delayed.rollout(start, actions)[..., 0],
+                               true.rollout(start, torch.cat([torch.zeros(6, 2, 1), actions[:, :8]], 1))[..., 0],
                                atol=1e-5, rtol=0)
 
 

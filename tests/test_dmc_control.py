@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 import torch
 
+from agents.dynamics import pendulum_state
 from agents.swingup import DampedPendulumDynamics, SwingUpPlanner
 from envs.dmc import DMCPendulumConfig
 from piga.world.physics import RK4, Pendulum, rollout
@@ -30,9 +31,8 @@ def test_oracle_engine_is_mujocos():
         _, _, _, _, info = env.step(np.array([u]))
         states.append(info["state"])
     engine = DampedPendulumDynamics(p["g"], p["actuation_gain"], p["damping"], config.dt, config.action_repeat)
-    q, v = engine.rollout(2.0, -1.0, torch.from_numpy(actions).view(1, -1, 1))
-    np.testing.assert_allclose(q[0].numpy(), np.array(states)[:, 0], atol=1e-4)
-    np.testing.assert_allclose(v[0].numpy(), np.array(states)[:, 1], atol=1e-4)
+    rolled = engine.rollout(pendulum_state(2.0, -1.0), torch.from_numpy(actions).view(1, -1, 1))  # (1, H, 2)
+    np.testing.assert_allclose(rolled[0].numpy(), np.array(states)[:, :2], atol=1e-4)
 
 
 def test_rk4_engine_is_the_models():
@@ -40,9 +40,9 @@ def test_rk4_engine_is_the_models():
     actions = torch.rand(1, 20, 1, dtype=torch.float64) * 2 - 1
     p, v = rollout(system, RK4(substeps=2), torch.full((1, 1, 1), 2.5, dtype=torch.float64),
                    torch.full((1, 1, 1), 0.5, dtype=torch.float64), actions)
-    q, w = DampedPendulumDynamics(13.0, 1.3, 0.13, 0.04, 2, "rk4").rollout(2.5, 0.5, actions.float())
-    np.testing.assert_allclose(q[0].numpy(), p[0, :, 0, 0].numpy(), atol=1e-5)
-    np.testing.assert_allclose(w[0].numpy(), v[0, :, 0, 0].numpy(), atol=1e-4)
+    rolled = DampedPendulumDynamics(13.0, 1.3, 0.13, 0.04, 2, "rk4").rollout(pendulum_state(2.5, 0.5), actions.float())
+    np.testing.assert_allclose(rolled[0, :, 0].numpy(), p[0, :, 0, 0].numpy(), atol=1e-5)
+    np.testing.assert_allclose(rolled[0, :, 1].numpy(), v[0, :, 0, 0].numpy(), atol=1e-4)
 
 
 @pytest.mark.parametrize("sign", [1.0, -1.0])
@@ -57,8 +57,7 @@ def test_energy_cost_pumps_from_hanging_down(sign):
     for _ in range(220):
         u = planner.plan(theta, speed)
         assert abs(float(u[0])) <= 1.0
-        q, v = engine.rollout(theta, speed, torch.from_numpy(u).view(1, 1, 1))
-        theta, speed = float(q[0, 0]), float(v[0, 0])
+        theta, speed = engine.rollout(pendulum_state(theta, speed), torch.from_numpy(u).view(1, 1, 1))[0, 0].tolist()
         upright.append(math.cos(theta) >= math.cos(math.radians(8)))
     assert not any(upright[:10])  # it had to swing
     assert all(upright[-25:]), "not held upright at the end"

@@ -130,7 +130,8 @@ def _wrappers() -> dict[str, np.ndarray]:
 
 def _planners() -> dict[str, np.ndarray]:
     """(d) the compiled planner engine, the swing-up planner's engine and the corrected physics, on seeded actions."""
-    from agents.dynamics import PendulumDynamics, StageCost
+    from agents.cost import PendulumCost
+    from agents.dynamics import PendulumDynamics, pendulum_state
     from agents.swingup import DampedPendulumDynamics
     from piga.control.corrected import CorrectedDynamics
     from piga.diagnostics import fit
@@ -138,22 +139,24 @@ def _planners() -> dict[str, np.ndarray]:
 
     out: dict[str, np.ndarray] = {}
     actions = torch.rand(16, 10, 1, generator=torch.Generator().manual_seed(5)) * 4 - 2
+    start = pendulum_state(2.5, -1.0)  # (1, 2): θ, θ̇ in float64
+
+    def angles_speeds(states: torch.Tensor) -> list[torch.Tensor]:
+        return [states[..., 0], states[..., 1]]  # (B, H) each
     for substeps in (1, 4):
         dyn = PendulumDynamics(9.3, 1.2, 0.05, substeps, length=1.1, mass=0.9)
-        p, v = dyn.rollout(2.5, -1.0, actions)
-        ret = dyn.returns(2.5, -1.0, actions, StageCost(0.2, 1.0, 0.1, 0.001))
-        out[f"planner_{substeps}"] = torch.cat([p, v, ret[:, None]], 1).numpy()
+        ret = dyn.fused(start, PendulumCost(0.2, 1.0, 0.1, 0.001))(actions)  # (B,)
+        out[f"planner_{substeps}"] = torch.cat([*angles_speeds(dyn.rollout(start, actions)), ret[:, None]], 1).numpy()
     for integrator in ("euler", "rk4"):
         for substeps in (1, 3):
             dyn = DampedPendulumDynamics(9.81, -0.9, 0.12, 0.04, substeps, integrator)
-            p, v = dyn.rollout(2.9, 0.5, actions)
-            out[f"swingup_{integrator}{substeps}"] = torch.cat([p, v], 1).numpy()
+            states = dyn.rollout(pendulum_state(2.9, 0.5), actions)
+            out[f"swingup_{integrator}{substeps}"] = torch.cat(angles_speeds(states), 1).numpy()
     nominal = Nominal(g=9.3, a=1.2, offset=0.25, dt=0.05, substeps=1, velocity_hold=True)
     corrected = fit.Model(("damping", "delay", "saturation"), 2, {"g": 9.6, "a": 1.1, "b": 0.2, "s": 1.3})
     dyn = CorrectedDynamics(corrected, nominal, gravity_mult=1.3)
     dyn.executed(np.array([0.7], np.float32))
-    p, v = dyn.rollout(2.5, -1.0, actions)
-    out["corrected"] = torch.cat([p, v], 1).numpy()
+    out["corrected"] = torch.cat(angles_speeds(dyn.rollout(start, actions)), 1).numpy()
     return out
 
 

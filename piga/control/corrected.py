@@ -14,6 +14,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from agents.dynamics import start_of
 from agents.mpc import EncoderReader
 from envs.pendulum import MAX_ACTION
 from piga.diagnostics import fit
@@ -57,7 +58,9 @@ class CorrectedDynamics:
         u = float(np.clip(np.asarray(action).reshape(-1)[0], -MAX_ACTION, MAX_ACTION))
         self.history = [*self.history, u][-fit.MAX_DELAY :]
 
-    def rollout(self, theta: float, theta_dot: float, actions: Tensor) -> tuple[Tensor, Tensor]:
+    def rollout(self, state: Tensor, actions: Tensor, generator: torch.Generator | None = None) -> Tensor:
+        """States (B, H, 2) = (θ, θ̇) of the H steps after ``state`` (1, 2) under actions (B, H, 1)."""
+        theta, theta_dot = start_of(state)
         b, h = actions.shape[:2]
         past = torch.zeros(fit.MAX_DELAY, dtype=torch.float64)
         if self.history:
@@ -66,8 +69,7 @@ class CorrectedDynamics:
         f64 = {"dtype": torch.float64}
         w = fit.Windows(torch.full((b,), float(theta), **f64), torch.full((b,), float(theta_dot), **f64), acts,
                         torch.zeros(b, h, **f64), torch.ones(b, h, **f64), torch.zeros(b, dtype=torch.long))
-        out = fit.simulate(self.corrected, self._params, self.nominal, w, with_velocity=True).float()  # (B, H, 2)
-        return out[..., 0], out[..., 1]
+        return fit.simulate(self.corrected, self._params, self.nominal, w, with_velocity=True).float()  # (B, H, 2)
 
 
 class CameraReader(EncoderReader):

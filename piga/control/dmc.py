@@ -79,12 +79,12 @@ class PigaSwingUp:
 
     def reset(self) -> None:
         self.planner.reset()
-        self.reader.last_action = np.zeros(1, np.float32)
+        self.reader.executed(np.zeros(1, np.float32))
 
     def act(self, frames: np.ndarray, state: np.ndarray | None = None) -> np.ndarray:
         theta, theta_dot = self.reader(frames)
         action = self.planner.plan(theta + self.offset, theta_dot)
-        self.reader.last_action = action
+        self.reader.executed(action)
         return action
 
 
