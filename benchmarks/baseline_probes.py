@@ -33,7 +33,7 @@ def knn_rmse(train_x: torch.Tensor, train_y: torch.Tensor, test_x: torch.Tensor,
 
 
 def probe_autoencoder(run: Path, data: Path) -> dict[str, object]:
-    from piga.baselines.autoencoder import load_autoencoder
+    from agents.sb3.autoencoder import load_autoencoder
     from piga.data.schema import load_states, read_sequences
 
     model = load_autoencoder(run / "autoencoder.pt")
@@ -54,9 +54,9 @@ def probe_autoencoder(run: Path, data: Path) -> dict[str, object]:
 def probe_actor(run: Path, data: Path) -> dict[str, object]:
     import h5py
 
-    from piga.baselines.ddpg import load_ddpg
+    from agents.sb3.run import load_sb3
 
-    model, config, _ = load_ddpg(run)
+    model, config, _ = load_sb3(run)
     if config.obs != "pixels":
         raise SystemExit(f"{run}: a --obs {config.obs} run; the actor probe is for pixel runs")
     with h5py.File(data, "r") as f:

@@ -78,6 +78,7 @@ from common import machine
 
 from agents.planet.config import PlanetTrainConfig
 from piga.io.atomic import atomic_output, write_json
+from piga.io.checkpoint import CHECKPOINT
 from piga.io.pool import JobRecords, RecordedJob, run_recorded
 from piga.control.episodes import parse_range
 
@@ -174,7 +175,7 @@ COST_S = {
     "ddpg_pixels_step": 0.372,  # rendering + one CnnPolicy gradient step on 256 stacks of 4 frames
     "sac_state_step": 0.023,  # SAC from the state: 20k steps in 7.8 min beside two other jobs (results/ddpg_tuning.md)
     "sac_pixels_step": 0.6,  # SAC from pixels (two critics, separate CNNs): ~10 min per 1000 steps beside other jobs, a partial run
-    "autoencoder_step": 0.135,  # piga.baselines.autoencoder, 2000 steps before DDPG from the latent
+    "autoencoder_step": 0.135,  # agents.sb3.autoencoder, 2000 steps before DDPG from the latent
     "collect_sequence": 0.25,  # piga-collect, 40 frames
 }
 
@@ -220,11 +221,11 @@ def train_cost(cfg: BenchConfig, agent: str, n: int = 0, steps: int = 0) -> floa
         return cfg.planet_steps * COST_S["planet_train_step"]
     if agent.endswith("_state"):
         return steps * COST_S[f"{agent}_step"]
-    from piga.baselines.autoencoder import AutoencoderConfig
-    from piga.baselines.ddpg import config_for
+    from agents.sb3.autoencoder import AutoencoderConfig
+    from agents.sb3.config import SB3Config
 
     algo, obs = agent.split("_")
-    warmup = min(steps, config_for(obs, algo, **cfg.overrides.get("ddpg", {})).learning_starts)
+    warmup = min(steps, SB3Config(obs=obs, algo=algo, **cfg.overrides.get("ddpg", {})).learning_starts)
     seconds = warmup * COST_S[f"ddpg_{obs}_warmup_step"] + (steps - warmup) * COST_S[f"{agent}_step"]  # warm-up: the env's work only
     if obs == "latent":
         seconds += cfg.overrides.get("autoencoder", {}).get("steps", AutoencoderConfig.steps) * COST_S["autoencoder_step"]
@@ -365,12 +366,12 @@ def evaluate(kind: str, run: Path | None, cfg: BenchConfig, gravity_mult: float 
     job = ControlJob(kind, episode_config, model_dir=str(run) if run else None)
     if kind == "planet" and "cem" in cfg.overrides:  # tiny preset only: PlaNet's planner, shrunk
         from agents.planet.planner import PlanetAgent
-        from piga.baselines.planet_run import load_planet
+        from agents.planet.run import load_planet
         from piga.control.episodes import run_episodes
 
         agent = PlanetAgent(load_planet(run)[0], planet_planner(cfg))
-        return run_episodes(agent, replace(episode_config, frame_stack=1))["summary"]
-    return run_split(job, workers, progress=False)["summary"]
+        return run_episodes(agent, replace(episode_config, frame_stack=1)).summary.to_dict()
+    return run_split(job, workers, progress=False).summary.to_dict()
 
 
 def episode_config_for(kind: str, cfg: BenchConfig, gravity_mult: float = 1.0, episodes: int | None = None) -> Any:
@@ -384,7 +385,7 @@ def episode_config_for(kind: str, cfg: BenchConfig, gravity_mult: float = 1.0, e
 
 
 def planet_planner(cfg: BenchConfig) -> Any:
-    """The PlaNet-style agent's planner settings: PlaNet's (:func:`piga.baselines.agents.baseline_agent`), or the
+    """The PlaNet-style agent's planner settings: PlaNet's (:func:`piga.control.registry.baseline_agent`), or the
     tiny preset's shrunk CEM."""
     from agents.config import CEMConfig
     from agents.planet.config import LatentPlannerConfig
@@ -407,7 +408,7 @@ def hyperparameters(job: Job, cfg: BenchConfig, run: Path | None) -> dict[str, A
         saved = json.loads((run / "config.json").read_text())
         configs.update(train=saved["train"], rssm=saved["rssm"], planner=asdict(planet_planner(cfg)))
     elif job.agent == "ddpg":
-        from piga.baselines.autoencoder import AutoencoderConfig
+        from agents.sb3.autoencoder import AutoencoderConfig
 
         configs["train"] = json.loads((run / "config.json").read_text())["ddpg"]
         if job.obs == "latent":
@@ -425,7 +426,7 @@ def evaluate_kept(folder: Path, kind: str, run: Path | None, cfg: BenchConfig, g
     if episodes is None:
         episodes = cfg.planet_episode_count if kind == "planet" else cfg.episodes
     path = folder / "evals" / f"{run.name if run else kind}-x{gravity_mult:g}-e{episodes}-s{cfg.episode_steps}.json"
-    checkpoint = run / "checkpoint.pt" if run else None
+    checkpoint = run / CHECKPOINT if run else None
     if path.exists() and not (checkpoint and checkpoint.exists() and checkpoint.stat().st_mtime > path.stat().st_mtime):
         return json.loads(path.read_text())
     summary = evaluate(kind, run, cfg, gravity_mult, episodes)
@@ -452,7 +453,7 @@ def train_piga(data: Path, run: Path, seed: int, cfg: BenchConfig, n: int) -> fl
 
 def train_planet_run(data: Path, run: Path, seed: int, cfg: BenchConfig, n: int) -> float:
     """Trains (unless done: a run of fewer steps is continued to ``cfg.planet_steps``) and returns the run's training seconds."""
-    from piga.baselines.planet import rssm_config_for, train_planet
+    from agents.planet.train import rssm_config_for, train_planet
     from piga.data.schema import inspect_dataset
 
     metrics = run / "metrics.json"
@@ -476,11 +477,13 @@ def _autoencoder_seconds(metrics: dict[str, Any]) -> str:
 
 def train_ddpg_run(obs: str, steps: int, seed: int, data: Path, run: Path, cfg: BenchConfig, algo: str = "ddpg") -> dict[str, Any]:
     """Trains an SB3 run (``algo``: "ddpg" or "sac"; unless done) and returns its metrics (learning curve, seconds)."""
-    from piga.baselines.autoencoder import AutoencoderConfig, train_autoencoder
-    from piga.baselines.ddpg import AUTOENCODER, config_for, train_ddpg
+    from agents.sb3.autoencoder import AutoencoderConfig, train_autoencoder
+    from agents.sb3.config import SB3Config
+    from agents.sb3.run import AUTOENCODER
+    from agents.sb3.train import train_sb3
 
     if not (run / "metrics.json").exists():
-        config = config_for(obs, algo, steps=steps, seed=seed, **cfg.overrides.get("ddpg", {}))
+        config = SB3Config(obs=obs, algo=algo, steps=steps, seed=seed, **cfg.overrides.get("ddpg", {}))
         run.mkdir(parents=True, exist_ok=True)
         autoencoder = None
         if obs == "latent":
@@ -488,7 +491,7 @@ def train_ddpg_run(obs: str, steps: int, seed: int, data: Path, run: Path, cfg: 
             if not autoencoder.exists():
                 train_autoencoder(data, AutoencoderConfig(seed=seed, **cfg.overrides.get("autoencoder", {})), autoencoder,
                                   progress=False)
-        train_ddpg(config, run, autoencoder, resume=(run / "checkpoint.pt").exists(), progress=False)
+        train_sb3(config, run, autoencoder, resume=(run / "checkpoint.pt").exists(), progress=False)
         write_json(run / "config.json", {"kind": "ddpg", "data": str(data), "ddpg": config.to_dict()})
     return json.loads((run / "metrics.json").read_text())
 
@@ -515,7 +518,7 @@ def run_job(job: Job, cfg: BenchConfig, folder: Path, data: Path | None) -> dict
     if job.agent in ("piga", "planet"):  # one episode, one process, beside whatever else the machine runs
         record["plan_ms"] = evaluate(job.agent, run, cfg, episodes=1)["plan_ms_median"]
     if job.agent == "planet":
-        from piga.baselines.planet_run import load_planet
+        from agents.planet.run import load_planet
 
         record["action_repeat"] = load_planet(run)[0].config.action_repeat  # PlaNet-style plans every R-th env step
     if job.agent == "piga":
@@ -585,7 +588,7 @@ def goal_images(piga_run: Path, cfg: BenchConfig, folder: Path) -> list[dict[str
         agent = PigaMPCAgent(model, replace(MPCConfig(), goal_angle=estimate.angle))
         summary = run_episodes(agent, EpisodeConfig(episodes=max(1, cfg.episodes // 5), steps=cfg.episode_steps,
                                                     hold_steps=min(20, cfg.episode_steps), goal_angle=math.radians(angle),
-                                                    frame_stack=agent.input_frames))["summary"]
+                                                    frame_stack=agent.input_frames)).summary.to_dict()
         rows.append({"goal_deg": angle, "read_deg": math.degrees(estimate.angle), "piga": summary,
                      "planet": "refused: no goal input", "ddpg": "refused: no goal input"})
     return rows

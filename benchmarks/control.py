@@ -37,8 +37,9 @@ from common import machine
 from agents.cem import CEMConfig
 from agents.mpc import MPCConfig
 from piga.io.atomic import atomic_output, write_json
-from piga.control.episodes import EpisodeConfig, parse_range, summary_markdown
+from piga.control.episodes import EpisodeConfig, parse_range
 from piga.control.jobs import ControlJob, run_jobs
+from piga.evaluation.episodes import EpisodeSummary, summary_markdown
 from piga.evaluation.plots import save_figure, sweep_figure
 
 #: PlaNet's CEM (Hafner et al., 2019), re-planned from scratch each step.
@@ -105,34 +106,34 @@ def main() -> int:
     t0 = time.time()
     results = run_jobs(jobs, workers=args.workers)
     minutes = (time.time() - t0) / 60
-    s = [r["summary"] for r in results]
+    s = [r.summary for r in results]
 
-    def pick(part: str, agent: str | None = None, mult: float | None = None) -> list[dict]:
-        return [x for x in s if x["part"] == part and (agent is None or x["agent"] == agent)
-                and (mult is None or abs(x["gravity_mult"] - mult) < 1e-9)]
+    def pick(part: str, agent: str | None = None, mult: float | None = None) -> list[EpisodeSummary]:
+        return [x for x in s if x.labels["part"] == part and (agent is None or x.labels["agent"] == agent)
+                and (mult is None or abs(x.gravity_mult - mult) < 1e-9)]
 
     main_rows = pick("main")
     (p1,), (o1,) = pick("main", "piga", 1.0), pick("main", "oracle", 1.0)
     (p14,), (o14,) = pick("main", "piga", 1.4), pick("main", "oracle", 1.4)
     (pl,) = pick("planet")
     goal_piga, goal_oracle = pick("goal", "piga"), pick("goal", "oracle")
-    goal_err = sum(math.degrees(x["final_angle_error_mean"]) for x in goal_piga) / len(goal_piga)
-    goal_err_oracle = sum(math.degrees(x["final_angle_error_mean"]) for x in goal_oracle) / len(goal_oracle)
-    return_gap = abs(p1["mean_return"] - o1["mean_return"]) / abs(o1["mean_return"])
+    goal_err = sum(math.degrees(x.final_angle_error_mean) for x in goal_piga) / len(goal_piga)
+    goal_err_oracle = sum(math.degrees(x.final_angle_error_mean) for x in goal_oracle) / len(goal_oracle)
+    return_gap = abs(p1.mean_return - o1.mean_return) / abs(o1.mean_return)
     checks = [
-        ("x1.0 success >= 95%", f"{100 * p1['success_rate']:.0f}%", p1["success_rate"] >= 0.95),
-        ("x1.0 mean return within 5% of the oracle's", f"{100 * return_gap:.1f}% ({p1['mean_return']:.1f} vs {o1['mean_return']:.1f})",
+        ("x1.0 success >= 95%", f"{100 * p1.success_rate:.0f}%", p1.success_rate >= 0.95),
+        ("x1.0 mean return within 5% of the oracle's", f"{100 * return_gap:.1f}% ({p1.mean_return:.1f} vs {o1.mean_return:.1f})",
          return_gap <= 0.05),
-        ("x1.4 success within 5 points of the oracle's", f"{100 * p14['success_rate']:.0f}% vs {100 * o14['success_rate']:.0f}%",
-         p14["success_rate"] >= o14["success_rate"] - 0.05),
+        ("x1.4 success within 5 points of the oracle's", f"{100 * p14.success_rate:.0f}% vs {100 * o14.success_rate:.0f}%",
+         p14.success_rate >= o14.success_rate - 0.05),
         ("goal images: mean final angle error <= 3 deg", f"{goal_err:.2f} deg (oracle told the true goal: {goal_err_oracle:.2f})",
          goal_err <= 3.0),
         ("plan time <= 2 ms per step (median) and <= 4 ms (p95), encoding included",
-         f"{p1['plan_ms_median']:.2f} ms (p95 {p1['plan_ms_p95']:.2f})", p1["plan_ms_median"] <= 2.0 and p1["plan_ms_p95"] <= 4.0),
+         f"{p1.plan_ms_median:.2f} ms (p95 {p1.plan_ms_p95:.2f})", p1.plan_ms_median <= 2.0 and p1.plan_ms_p95 <= 4.0),
     ]
     out = Path(args.out)
     plot = out.with_name(out.name + "-sweep.png")
-    save_figure(sweep_figure(pick("sweep")), plot)
+    save_figure(sweep_figure([x.to_dict() for x in pick("sweep")]), plot)
     command = shlex.join(["python", *sys.argv])
     where = machine()
     lines = [
@@ -150,7 +151,7 @@ def main() -> int:
         f"Tuned: CEM H {tuned.cem.horizon}, {tuned.cem.iterations} iterations, {tuned.cem.candidates} candidates, top "
         f"{tuned.cem.elites}, warm start (std {tuned.warm_init_std}), executes the CEM mean. PlaNet: H 12, 10 iterations, "
         "1000 candidates, top 100, no warm start.", "",
-        summary_markdown([{**p1, "planner": "tuned"}, pl], extra=[("planner", "planner")]),
+        summary_markdown([p1.labelled(planner="tuned"), pl], extra=[("planner", "planner")]),
         f"## Gravity sweep {args.sweep} ({args.sweep_episodes} episodes per row)", "", f"![sweep]({plot.name})", "",
         summary_markdown(pick("sweep")),
         *(["## Other models (other training seeds), upright", "",
@@ -166,7 +167,7 @@ def main() -> int:
     write_json(out.with_suffix(".json"), {"command": command, "machine": where, "model": args.model,
                                           "learned": learned, "minutes": minutes,
                                           "checks": [{"floor": n, "measured": v, "met": ok} for n, v, ok in checks],
-                                          "results": results}, overwrite=True)
+                                          "results": [r.to_dict() for r in results]}, overwrite=True)
     print("\n".join(f"{'PASS' if ok else 'FAIL'}  {n}: {v}" for n, v, ok in checks))
     print(f"wrote {out.with_suffix('.md')}, {out.with_suffix('.json')}, {plot}")
     return 0

@@ -46,8 +46,10 @@ from common import machine
 from agents.dynamics import PendulumDynamics, start_of
 from agents.mpc import MPCConfig, OracleAgent, PigaMPCAgent
 from piga.io.atomic import atomic_output, write_json
-from piga.baselines.agents import baseline_agent
-from piga.control.episodes import EpisodeConfig, run_episodes, summary_markdown
+from piga.control.registry import baseline_agent
+from piga.control.episodes import EpisodeConfig, run_episodes
+from piga.evaluation.episodes import EpisodeSummary, summary_markdown
+from piga.io.checkpoint import RunKind
 from piga.world.model import PhysicsModel
 from piga.world.physics import rollout
 from piga.io.runs import load_model
@@ -148,13 +150,13 @@ def main() -> int:
         agents.append(("piga, numpy operators", PigaMPCAgent(model, mpc, dynamics=UfuncDynamics(learned_dynamics))))
         agents.append(("piga, nn.Module engine", PigaMPCAgent(model, mpc, dynamics=ModuleDynamics(model))))
     if args.planet:  # piga-control's PlaNet-style agent: PlaNet's planner settings
-        agents.append((PLANET, baseline_agent("planet", args.planet, seed=args.seed)))
+        agents.append((PLANET, baseline_agent(RunKind.PLANET, args.planet, seed=args.seed)))
     load_before = os.getloadavg()
     rows = []
     for label, agent in agents:
         # each agent reads the frames it needs (PlaNet-style: the newest), and plans every `repeat` env steps
         result = run_episodes(agent, replace(config, frame_stack=getattr(agent, "input_frames", config.frame_stack)))  # type: ignore[arg-type]
-        rows.append({"agent": label, **result["summary"], "env_steps_per_plan": getattr(agent, "repeat", 1)})
+        rows.append({"agent": label, **result.summary.to_dict(), "env_steps_per_plan": getattr(agent, "repeat", 1)})
         s = rows[-1]
         print(f"{label}: plan {s['plan_ms_median']:.2f} ms median, {s['plan_ms_p95']:.2f} ms p95; "
               f"success {100 * s['success_rate']:.0f}%, mean return {s['mean_return']:.1f}")
@@ -177,7 +179,7 @@ def main() -> int:
            "physics: five in-place numpy operators per step, scored with torch operators (\"numpy operators\"), and "
            "`piga.world.physics.rollout` on the model's `Pendulum` module (\"nn.Module engine\").")
         + " The planner's own engine is one numba-compiled loop that rolls and scores.", "",
-        summary_markdown(rows).rstrip(),
+        summary_markdown([EpisodeSummary.from_dict(r) for r in rows]).rstrip(),
         *([] if ratio is None else [
             "", f"PlaNet-style: `{args.planet}` (a `piga-baseline planet` run). Its row times its plans only: `act` at the "
             "env steps where it plans (filtering the newest frame into its belief, then latent CEM with PlaNet's "

@@ -73,7 +73,7 @@ def main() -> int:
     p.add_argument("--steps", type=int, default=20, help="env steps timed per engine and thread count (default 20)")
     args = p.parse_args()
     if args.model:
-        from piga.baselines.planet_run import load_planet
+        from agents.planet.run import load_planet
 
         model = load_planet(args.model)[0]
     else:

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-from piga.baselines.autoencoder import (
+from agents.sb3.autoencoder import (
     AutoencoderConfig,
     autoencoder_seconds,
     load_autoencoder,

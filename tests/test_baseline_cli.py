@@ -43,11 +43,11 @@ def ddpg_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def test_ddpg_tuning_options_reach_the_run(ddpg_run: Path) -> None:
-    from piga.baselines.ddpg import load_ddpg
+    from agents.sb3.run import load_sb3
 
     saved = json.loads((ddpg_run / "config.json").read_text())["ddpg"]
     assert (saved["learning_rate"], saved["batch_size"], saved["noise_std"]) == (0.0005, 32, 0.3)
-    model, config, _ = load_ddpg(ddpg_run)
+    model, config, _ = load_sb3(ddpg_run)
     assert (model.batch_size, model.learning_rate, config.noise_std) == (32, 0.0005, 0.3)
     assert np.allclose(model.action_noise._sigma, 0.3)
 
@@ -55,7 +55,8 @@ def test_ddpg_tuning_options_reach_the_run(ddpg_run: Path) -> None:
 def test_sac_takes_its_own_presets_and_resumes_only_as_sac(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     from stable_baselines3 import SAC
 
-    from piga.baselines.ddpg import ALGORITHM_PRESETS, load_ddpg
+    from agents.sb3.config import ALGORITHM_PRESETS
+    from agents.sb3.run import load_sb3
 
     out = tmp_path / "sac"
     code, stdout, err = run_in_process("piga-baseline", baseline.main, "ddpg", "--algo", "sac", "--obs", "state", "--out", str(out),
@@ -63,7 +64,7 @@ def test_sac_takes_its_own_presets_and_resumes_only_as_sac(tmp_path: Path, capsy
                                        "--learning-starts", "150", "--quiet", capsys=capsys)
     assert code == 0, err
     assert "training SAC from state" in stdout
-    model, config, _ = load_ddpg(out)
+    model, config, _ = load_sb3(out)
     assert isinstance(model, SAC) and model.action_noise is None  # SAC explores with its own policy
     sac = ALGORITHM_PRESETS["sac"]
     assert (config.algo, config.gamma, config.buffer_size, config.net_arch) == ("sac", sac["gamma"], sac["buffer_size"], sac["net_arch"])
@@ -180,17 +181,17 @@ def test_piga_control_writes_a_baseline_video(planet_run: Path, ddpg_run: Path, 
 
 def test_control_jobs_dispatch_on_the_run_kind(planet_run: Path, ddpg_run: Path) -> None:
     from agents.planet.planner import PlanetAgent
-    from piga.baselines.ddpg import DDPGAgent
-    from piga.baselines.kinds import run_kind
+    from agents.sb3.run import SB3Agent
     from piga.control.episodes import EpisodeConfig
     from piga.control.jobs import ControlJob, build_agent, run_job
+    from piga.io.checkpoint import RunKind, run_kind
 
-    assert (run_kind(planet_run), run_kind(ddpg_run)) == ("planet", "ddpg")
+    assert (run_kind(planet_run), run_kind(ddpg_run)) == (RunKind.PLANET, RunKind.DDPG)
     episodes = EpisodeConfig(episodes=1, steps=2, hold_steps=1)
     assert isinstance(build_agent(ControlJob("planet", episodes, model_dir=str(planet_run))), PlanetAgent)
-    assert isinstance(build_agent(ControlJob("ddpg", episodes, model_dir=str(ddpg_run))), DDPGAgent)
+    assert isinstance(build_agent(ControlJob("ddpg", episodes, model_dir=str(ddpg_run))), SB3Agent)
     result = run_job(ControlJob("planet", episodes, model_dir=str(planet_run)))
-    assert result["summary"]["agent"] == "planet" and np.isfinite(result["summary"]["mean_return"])
+    assert result.summary.labels["agent"] == "planet" and np.isfinite(result.summary.mean_return)
     with pytest.raises(ValueError, match="needs model_dir"):
         ControlJob("ddpg", episodes)
 
@@ -203,10 +204,11 @@ def test_episodes_split_over_workers_are_the_episodes_of_one_process(planet_run:
     assert [(j.episodes.first_episode, j.episodes.episodes) for j in split_job(job, 2)] == [(0, 2), (2, 1)]
     one, split = run_job(job), run_split(job, workers=2, progress=False)
     timing = ("plan_ms_median", "plan_ms_p95")
-    assert [{k: v for k, v in e.items() if k not in timing} for e in split["episodes"]] == \
-           [{k: v for k, v in e.items() if k not in timing} for e in one["episodes"]]
-    assert {k: v for k, v in split["summary"].items() if k not in timing} == {k: v for k, v in one["summary"].items() if k not in timing}
-    assert len({e["return"] for e in one["episodes"]}) == 3  # three different episodes, not one thrice
+    assert [{k: v for k, v in e.to_dict().items() if k not in timing} for e in split.episodes] == \
+           [{k: v for k, v in e.to_dict().items() if k not in timing} for e in one.episodes]
+    assert {k: v for k, v in split.summary.to_dict().items() if k not in timing} == \
+           {k: v for k, v in one.summary.to_dict().items() if k not in timing}
+    assert len({e.return_ for e in one.episodes}) == 3  # three different episodes, not one thrice
 
 
 def test_planet_iterative_from_the_command_line(tiny_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

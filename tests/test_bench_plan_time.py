@@ -6,7 +6,7 @@ import json
 from pathlib import Path
 
 from agents.planet.config import PlanetTrainConfig, RSSMConfig
-from piga.baselines.planet import train_planet
+from agents.planet.train import train_planet
 
 from .helpers import run, train_tiny
 

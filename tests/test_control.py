@@ -45,10 +45,10 @@ def test_oracle_swings_up_from_hanging() -> None:
     torch.set_num_threads(1)
     config = EpisodeConfig(episodes=1, steps=150)
     result = run_episodes(OracleAgent.for_env(config.env_config(), MPCConfig()), config)
-    episode = result["episodes"][0]
-    assert episode["start"] == [math.pi, 0.0]
-    assert episode["success"], episode
-    assert result["summary"]["time_to_goal_steps_median"] < 130
+    episode = result.episodes[0]
+    assert episode.start == (math.pi, 0.0)
+    assert episode.success, episode
+    assert result.summary.time_to_goal_steps_median < 130
 
 
 def test_oracle_told_of_stronger_gravity_swings_up() -> None:
@@ -57,8 +57,8 @@ def test_oracle_told_of_stronger_gravity_swings_up() -> None:
     config = EpisodeConfig(episodes=1, steps=150, gravity_mult=1.4)
     oracle = OracleAgent.for_env(config.env_config(), MPCConfig())
     assert oracle.planner.dynamics.g == pytest.approx(14.0) and oracle.planner.dynamics.a == 1.0  # the env's truth
-    told = run_episodes(oracle, config)["summary"]
-    assert told["success_rate"] == 1.0
+    told = run_episodes(oracle, config).summary
+    assert told.success_rate == 1.0
 
 
 def test_success_definition() -> None:
@@ -69,9 +69,9 @@ def test_success_definition() -> None:
             return np.zeros(1, np.float32)
 
     hanging = run_episodes(Still(), EpisodeConfig(episodes=1, steps=30, hold_steps=10))
-    assert not hanging["episodes"][0]["success"]  # hanging at rest is not upright
+    assert not hanging.episodes[0].success  # hanging at rest is not upright
     at_goal = run_episodes(Still(), EpisodeConfig(episodes=1, steps=30, hold_steps=10, goal_angle=math.pi))
-    assert at_goal["episodes"][0]["success"] and at_goal["episodes"][0]["time_to_goal_steps"] == 0
+    assert at_goal.episodes[0].success and at_goal.episodes[0].time_to_goal_steps == 0
 
 
 def test_piga_agent_reads_state_in_models_convention() -> None:
@@ -170,11 +170,11 @@ def test_parse_range() -> None:
 
 
 def test_summary_markdown_has_a_row_per_summary() -> None:
-    from piga.control.episodes import summary_markdown
+    from piga.evaluation.episodes import EpisodeSummary, summary_markdown
 
     s = {"agent": "oracle", "gravity_mult": 1.0, "goal_angle": 0.0, "episodes": 2, "success_rate": 0.5, "mean_return": -200.0,
          "final_angle_error_mean": 0.01, "time_to_goal_steps_median": None, "plan_ms_median": 9.0, "plan_ms_p95": 12.0}
-    table = summary_markdown([s, {**s, "agent": "piga"}]).splitlines()
+    table = summary_markdown([EpisodeSummary.from_dict(s), EpisodeSummary.from_dict({**s, "agent": "piga"})]).splitlines()
     assert len(table) == 4 and "| oracle | 1.00 | 0.00 | 2 | 50% | -200.0 | 0.57 | – | 9.00 | 12.00 |" == table[2]
 
 
@@ -358,7 +358,7 @@ def test_a_job_with_a_correction_plans_and_reads_with_it(control_model: Path) ->
     assert isinstance(agent, PigaMPCAgent) and isinstance(agent.read_state, CameraReader)
     dynamics = agent.planner.dynamics
     assert isinstance(dynamics, CorrectedDynamics) and dynamics.corrected.values["g"] == pytest.approx(9.0 * 1.4)
-    assert len(run_job(job)["episodes"]) == 1
+    assert len(run_job(job).episodes) == 1
     with pytest.raises(ValueError, match="no correction"):
         ControlJob("oracle", EpisodeConfig(), correction=correction)
 

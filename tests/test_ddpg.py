@@ -11,10 +11,11 @@ import numpy as np
 import pytest
 import torch
 
-from piga.baselines.ddpg import DDPGConfig, make_env, make_observation_env
+from agents.sb3.config import SB3Config
+from agents.sb3.train import make_env, make_observation_env
 
 #: Tiny settings: a few seconds of training.
-TINY = DDPGConfig(steps=400, learning_starts=100, eval_every=200, eval_episodes=1, batch_size=16, net_arch=(16, 16),
+TINY = SB3Config(steps=400, learning_starts=100, eval_every=200, eval_episodes=1, batch_size=16, net_arch=(16, 16),
                   buffer_size=1000)
 
 
@@ -60,16 +61,17 @@ def test_wrappers_refuse_wrong_spaces() -> None:
 
 
 def test_training_resumes_exactly(tmp_path: Path) -> None:
-    from piga.baselines.ddpg import load_ddpg, train_ddpg
+    from agents.sb3.run import load_sb3
+    from agents.sb3.train import train_sb3
 
-    straight = train_ddpg(TINY, tmp_path / "a", progress=False)
-    train_ddpg(replace(TINY, steps=200), tmp_path / "moved", progress=False)
+    straight = train_sb3(TINY, tmp_path / "a", progress=False)
+    train_sb3(replace(TINY, steps=200), tmp_path / "moved", progress=False)
     (tmp_path / "moved").rename(tmp_path / "b")  # a run folder moved between the two invocations
-    resumed = train_ddpg(TINY, tmp_path / "b", resume=True, progress=False)
+    resumed = train_sb3(TINY, tmp_path / "b", resume=True, progress=False)
     assert not (tmp_path / "moved").exists(), "the resumed run logged to the folder it was moved from"
     assert [r["step"] for r in straight["learning_curve"]] == [200, 400]
     assert [r["eval_mean_return"] for r in resumed["learning_curve"]] == [r["eval_mean_return"] for r in straight["learning_curve"]]
-    a, b = load_ddpg(tmp_path / "a")[0], load_ddpg(tmp_path / "b")[0]
+    a, b = load_sb3(tmp_path / "a")[0], load_sb3(tmp_path / "b")[0]
     for (name, p), q in zip(a.policy.state_dict().items(), b.policy.state_dict().values()):
         assert torch.equal(p, q), name
     assert (tmp_path / "a" / "model.zip").exists() and (tmp_path / "a" / "tensorboard").is_dir()
@@ -78,14 +80,15 @@ def test_training_resumes_exactly(tmp_path: Path) -> None:
 def test_a_pixel_policy_runs_in_piga_episodes_with_sb3s_stacking(tmp_path: Path) -> None:
     from stable_baselines3.common.vec_env import DummyVecEnv, VecFrameStack
 
-    from piga.baselines.ddpg import DDPGAgent, train_ddpg
+    from agents.sb3.run import SB3Agent
+    from agents.sb3.train import train_sb3
     from piga.control.episodes import EpisodeConfig, run_episodes
 
     config = replace(TINY, obs="pixels", steps=200, learning_starts=150, batch_size=4)
-    train_ddpg(config, tmp_path / "run", progress=False)
-    agent = DDPGAgent.from_run(tmp_path / "run")
+    train_sb3(config, tmp_path / "run", progress=False)
+    agent = SB3Agent.from_run(tmp_path / "run")
     result = run_episodes(agent, EpisodeConfig(episodes=1, steps=20, hold_steps=5, frame_stack=agent.input_frames))
-    assert np.isfinite(result["summary"]["mean_return"])
+    assert np.isfinite(result.summary.mean_return)
     # the agent's own stack is SB3's VecFrameStack: zeros at reset, newest frame last
     venv = VecFrameStack(DummyVecEnv([lambda: make_env(config)]), config.frame_stack, channels_order="first")
     venv.seed(3)
@@ -101,16 +104,32 @@ def test_a_pixel_policy_runs_in_piga_episodes_with_sb3s_stacking(tmp_path: Path)
 
 
 def test_a_latent_run_trains_on_its_autoencoders_codes_and_records_its_cost(tiny_data: Path, tmp_path: Path) -> None:
-    from piga.baselines.autoencoder import AutoencoderConfig, train_autoencoder
-    from piga.baselines.ddpg import DDPGAgent, train_ddpg
+    from agents.sb3.autoencoder import AutoencoderConfig, train_autoencoder
+    from agents.sb3.run import SB3Agent
+    from agents.sb3.train import train_sb3
     from piga.control.episodes import EpisodeConfig, run_episodes
 
     run = tmp_path / "run"
     run.mkdir()
     train_autoencoder(tiny_data, AutoencoderConfig(steps=2, depth=4, batch_size=2), run / "autoencoder.pt", progress=False)
-    metrics = train_ddpg(replace(TINY, obs="latent", steps=200, learning_starts=150, batch_size=4), run, run / "autoencoder.pt",
+    metrics = train_sb3(replace(TINY, obs="latent", steps=200, learning_starts=150, batch_size=4), run, run / "autoencoder.pt",
                          progress=False)
     assert metrics["autoencoder_train_seconds"] > 0  # the compute table adds it to DDPG's own seconds
-    agent = DDPGAgent.from_run(run)
+    agent = SB3Agent.from_run(run)
     assert agent.model.observation_space.shape == (TINY.frame_stack * 8,)  # K stacked 8-number codes
-    assert np.isfinite(run_episodes(agent, EpisodeConfig(episodes=1, steps=10, hold_steps=5))["summary"]["mean_return"])
+    assert np.isfinite(run_episodes(agent, EpisodeConfig(episodes=1, steps=10, hold_steps=5)).summary.mean_return)
+
+
+def test_each_algorithm_has_its_own_zoo_values() -> None:
+    """The values config_for gave each (observation, algorithm) before SB3Config resolved them itself."""
+    ddpg = {"gamma": 0.98, "buffer_size": 200_000, "learning_starts": 10_000, "noise_std": 0.1, "net_arch": (400, 300)}
+    sac = {"gamma": 0.99, "buffer_size": 1_000_000, "learning_starts": 100, "noise_std": 0.0, "net_arch": (256, 256)}
+    for algo, values in (("ddpg", ddpg), ("sac", sac)):
+        for obs in ("state", "latent", "pixels"):
+            config = SB3Config(obs=obs, algo=algo)  # type: ignore[arg-type]
+            expected = {**values, "buffer_size": 50_000} if obs == "pixels" else values
+            assert {name: getattr(config, name) for name in values} == expected, (algo, obs)
+    assert SB3Config(algo="sac", gamma=0.95, buffer_size=10).gamma == 0.95  # a value given wins
+    assert SB3Config(**SB3Config(algo="sac").to_dict()) == SB3Config(algo="sac")  # a run's record reads back
+    with pytest.raises(ValueError, match="unknown algorithm 'td3'"):
+        SB3Config(algo="td3")  # type: ignore[arg-type]

@@ -387,8 +387,8 @@ def test_ddpg_interrupted_before_its_first_checkpoint_leaves_nothing(obs: str, t
                                                                       capsys: pytest.CaptureFixture[str],
                                                                       monkeypatch: pytest.MonkeyPatch) -> None:
     """Ctrl-C in the autoencoder, or in DDPG after TensorBoard's folder appeared: the rerun is not refused."""
-    import piga.baselines.autoencoder as autoencoder
-    import piga.baselines.ddpg as ddpg
+    import agents.sb3.autoencoder as autoencoder
+    import agents.sb3.train as ddpg
 
     def interrupted_autoencoder(data: Any, config: Any, out: Path, progress: bool = True) -> None:
         Path(out).write_bytes(b"half an autoencoder")
@@ -399,7 +399,7 @@ def test_ddpg_interrupted_before_its_first_checkpoint_leaves_nothing(obs: str, t
         raise KeyboardInterrupt
 
     monkeypatch.setattr(autoencoder, "train_autoencoder", interrupted_autoencoder)
-    monkeypatch.setattr(ddpg, "train_ddpg", interrupted_ddpg)
+    monkeypatch.setattr(ddpg, "train_sb3", interrupted_ddpg)
     out = tmp_path / "runs" / "run"
     data = ["--data", str(tiny_data)] if obs == "latent" else []
     code, _, err = run_in_process("piga-baseline", baseline.main, "ddpg", "--obs", obs, *data, "--out", str(out), *TINY_DDPG,

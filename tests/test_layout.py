@@ -1,4 +1,14 @@
-"""Dependencies point one way: reading a run or diagnosing never loads training code, and no cycle remains."""
+"""Dependencies point one way: envs <- piga's core <- agents <- piga.control and piga.cli; reading a run or
+diagnosing never loads training code, and no cycle remains.
+
+The rules, checked on every file by its imports (its syntax tree, function-level imports included):
+
+- piga's core (piga.world, piga.data, piga.training, piga.evaluation, piga.diagnostics, piga.io) imports
+  neither ``agents`` nor ``piga.control`` nor ``piga.cli``;
+- ``agents`` imports neither ``piga.control`` nor ``piga.cli``, and ``piga.training`` only from an agent's
+  own trainer (``agents/<agent>/train.py``), which needs the core's training interfaces (``TrainingDiverged``);
+  an agent's model, planner and run loader never load training code.
+"""
 
 from __future__ import annotations
 
@@ -11,8 +21,8 @@ import pytest
 
 
 def _loaded_after(module: str) -> set[str]:
-    """The piga/envs/agents modules that importing ``module`` in a fresh interpreter loads."""
-    code = f"import sys, {module}; print(' '.join(m for m in sys.modules if m.split('.')[0] in ('piga', 'envs', 'agents')))"
+    """The piga/envs/agents (and torch) modules that importing ``module`` in a fresh interpreter loads."""
+    code = f"import sys, {module}; print(' '.join(m for m in sys.modules if m.split('.')[0] in ('piga', 'envs', 'agents', 'torch')))"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=120)
     return set(out.stdout.split())
 
@@ -20,11 +30,14 @@ def _loaded_after(module: str) -> set[str]:
 @pytest.mark.parametrize("module, never", [
     ("piga.io.runs", {"piga.training.train", "piga.diagnostics"}),
     ("piga.diagnostics.diagnose", {"piga.training.train", "agents"}),
-    ("piga.diagnostics.report", {"piga.training.train", "agents"}),
+    ("piga.diagnostics.report", {"piga.training.train", "agents", "piga.control", "piga.cli"}),
     ("piga.data.schema", {"piga.data.windows"}),
-    ("agents.planet.planner", {"piga.training.train", "piga.diagnostics", "piga.baselines"}),
-    ("piga.baselines.agents", {"piga.training.train", "piga.diagnostics"}),
-    ("piga.baselines.kinds", {"agents", "piga.world.model"}),
+    ("piga.evaluation.episodes", {"agents", "piga.control", "torch"}),
+    ("agents.planet.planner", {"piga.training.train", "piga.diagnostics", "piga.control"}),
+    ("agents.planet.run", {"piga.training.train", "piga.control"}),
+    ("agents.sb3.run", {"piga.training.train", "piga.control"}),
+    ("piga.control.registry", {"piga.training.train", "piga.diagnostics"}),
+    ("piga.io.checkpoint", {"agents", "piga.world.model", "torch"}),
 ])
 def test_a_module_does_not_load(module: str, never: set[str]) -> None:
     loaded = _loaded_after(module)
@@ -57,6 +70,57 @@ def test_envs_import_only_the_torch_free_effect_terms_of_piga() -> None:
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=120)
     loaded = set(out.stdout.split())
     assert "torch" not in loaded and {m for m in loaded if m.startswith("piga.")} == {"piga.world", "piga.world.effects"}
+
+
+ROOT = Path(__file__).parents[1]
+CORE = ("piga/world", "piga/data", "piga/training", "piga/evaluation", "piga/diagnostics", "piga/io")
+
+
+def _imports(path: Path, root: Path = ROOT) -> set[str]:
+    """The modules a file imports, at its top or inside functions (relative imports resolved against its package)."""
+    tree = ast.parse(path.read_text())
+    package = ".".join(path.relative_to(root).with_suffix("").parts[:-1])
+    found = {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
+    for n in ast.walk(tree):
+        if isinstance(n, ast.ImportFrom):
+            base = ".".join(package.split(".")[: len(package.split(".")) - n.level + 1]) if n.level else ""
+            module = ".".join(p for p in (base, n.module or "") if p)
+            found.add(module)
+            found |= {f"{module}.{a.name}" for a in n.names}  # ``from piga import control`` imports piga.control
+    return found
+
+
+def _offending(folders: tuple[str, ...], never: tuple[str, ...], allowed: tuple[str, ...] = (),
+               root: Path = ROOT) -> dict[str, list[str]]:
+    """File -> the imports of ``never`` (or their submodules) in each .py file under ``folders``, but for ``allowed`` files."""
+    bad = {}
+    for folder in folders:
+        for path in sorted((root / folder).rglob("*.py")):
+            if path.relative_to(root).as_posix() in allowed:
+                continue
+            hits = sorted(m for m in _imports(path, root) for n in never if m == n or m.startswith(n + "."))
+            if hits:
+                bad[path.relative_to(root).as_posix()] = hits
+    return bad
+
+
+def test_the_core_imports_neither_agents_nor_the_composition_layer() -> None:
+    assert not _offending(CORE, ("agents", "piga.control", "piga.cli"))
+
+
+def test_agents_import_only_the_core() -> None:
+    """agents never reaches up into piga.control or piga.cli; only an agent's own trainer uses piga.training."""
+    assert not _offending(("agents",), ("piga.control", "piga.cli"))
+    trainers = tuple(p.relative_to(ROOT).as_posix() for p in (ROOT / "agents").glob("*/train.py"))
+    assert not _offending(("agents",), ("piga.training",), allowed=trainers)
+
+
+def test_the_import_rules_catch_a_violation(tmp_path: Path) -> None:
+    """The checker sees function-level and ``from package import module`` imports."""
+    (tmp_path / "piga" / "io").mkdir(parents=True)
+    (tmp_path / "piga" / "io" / "probe.py").write_text("def f():\n    from piga import control\n    import agents.mpc\n")
+    (tmp_path / "piga" / "io" / "fine.py").write_text("from piga.io.atomic import write_json\nfrom . import runs\n")
+    assert _offending(("piga/io",), ("agents", "piga.control"), root=tmp_path) == {"piga/io/probe.py": ["agents.mpc", "piga.control"]}
 
 
 def _console_scripts() -> dict[str, str]:

@@ -43,7 +43,7 @@ def test_rssm_shapes() -> None:
 
 
 def test_one_training_step_lowers_the_loss(tiny_data: Path) -> None:
-    from piga.baselines.planet import _Sequences
+    from agents.planet.train import _Sequences
 
     torch.manual_seed(0)
     model = WorldModel(TINY)
@@ -62,7 +62,7 @@ def test_one_training_step_lowers_the_loss(tiny_data: Path) -> None:
 
 
 def test_training_writes_a_run_and_resumes_exactly(tiny_data: Path, tmp_path: Path) -> None:
-    from piga.baselines.planet import load_planet, train_planet
+    from agents.planet.train import load_planet, train_planet
 
     straight, _ = train_planet(tiny_data, tmp_path / "a", TINY_TRAIN, TINY, progress=False)
     train_planet(tiny_data, tmp_path / "b", replace(TINY_TRAIN, steps=2), TINY, progress=False)
@@ -83,7 +83,7 @@ def test_training_writes_a_run_and_resumes_exactly(tiny_data: Path, tmp_path: Pa
 
 
 def test_nan_stops_and_names_the_last_good_checkpoint(tiny_data: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    from piga.baselines.planet import train_planet
+    from agents.planet.train import train_planet
     from piga.training.train import TrainingDiverged
 
     original = WorldModel.loss
@@ -100,7 +100,7 @@ def test_nan_stops_and_names_the_last_good_checkpoint(tiny_data: Path, tmp_path:
 
 
 def test_a_file_without_rewards_is_refused(tiny_data: Path, tmp_path: Path) -> None:
-    from piga.baselines.planet import check_planet_data
+    from agents.planet.train import check_planet_data
     from piga.data.schema import DataFormatError, inspect_dataset
     from tests.helpers import copy_without
 
@@ -122,7 +122,7 @@ def test_model_steps_group_env_steps() -> None:
 
 
 def test_action_repeat_holds_each_planned_action_for_r_steps(tiny_data: Path) -> None:
-    from piga.baselines.planet import _Sequences
+    from agents.planet.train import _Sequences
 
     torch.manual_seed(0)
     model = WorldModel(replace(TINY, action_repeat=3))
@@ -140,7 +140,7 @@ def test_action_repeat_holds_each_planned_action_for_r_steps(tiny_data: Path) ->
     from piga.control.episodes import EpisodeConfig, run_episodes
 
     result = run_episodes(agent, EpisodeConfig(episodes=1, steps=7, hold_steps=1, frame_stack=1), keep_plan_ms=True)
-    assert len(result["episodes"][0]["plan_ms"]) == 3  # timed where it planned: steps 0, 3 and 6
+    assert len(result.episodes[0].plan_ms) == 3  # timed where it planned: steps 0, 3 and 6
 
 
 @pytest.mark.parametrize("horizon,repeat", [(1, 1), (5, 1), (5, 2)])
@@ -184,7 +184,7 @@ TINY_ITERATIVE = IterativeConfig(rounds=2, episodes=1, steps_per_round=2, episod
 
 
 def _iterative(data: Path, run: Path, rounds: int, resume: bool = False) -> tuple[WorldModel, object]:
-    from piga.baselines.planet_iterative import train_planet_iterative
+    from agents.planet.iterative import train_planet_iterative
 
     return train_planet_iterative(data, run, TINY_TRAIN, replace(TINY_ITERATIVE, rounds=rounds), TINY, resume=resume,
                                   progress=False, planner=TINY_CEM)
@@ -215,7 +215,7 @@ def test_iterative_rounds_append_collected_episodes_and_leave_the_data_file_alon
 
 
 def test_iterative_resume_is_exact(tiny_data: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    from piga.baselines import planet_iterative
+    from agents.planet import iterative as planet_iterative
     from piga.data.schema import read_sequences
 
     straight, _ = _iterative(tiny_data, tmp_path / "a", rounds=2)

@@ -21,16 +21,16 @@ from typing import Any
 
 from piga.cli.common import (ArgumentParser, Interrupted, PigaError, add_preset_option, command_line, format_default,
                              made_folder, nonnegative_float, nonnegative_int, positive_float, positive_int, run_cli)
+from piga.io.checkpoint import CHECKPOINT, RunKind
 
 PROG = "piga-baseline"
-CHECKPOINT = "checkpoint.pt"
 OUTPUTS = (CHECKPOINT, "config.json", "metrics.json", "model.zip", "autoencoder.pt", "tensorboard", "collected.h5")
 
 
 def build_parser() -> ArgumentParser:
     from agents.planet.config import IterativeConfig, PlanetTrainConfig, RSSMConfig
-    from piga.baselines.autoencoder import AutoencoderConfig
-    from piga.baselines.ddpg import ALGORITHM_PRESETS, ALGORITHMS, OBSERVATIONS, PRESETS, DDPGConfig
+    from agents.sb3.autoencoder import AutoencoderConfig
+    from agents.sb3.config import ALGORITHM_PRESETS, ALGORITHMS, OBSERVATIONS, PRESETS, SB3Config
 
     p = ArgumentParser(prog=PROG, description="Train a baseline (the PlaNet-style world model, or SB3 DDPG) into a run "
                        "folder that piga-control --model evaluates like a piga run.")
@@ -75,7 +75,7 @@ def build_parser() -> ArgumentParser:
                    help="with --iterative: std of the Gaussian action noise, a fraction of the action bound (default %(default)s)")
     _common(q)
 
-    ddpg = DDPGConfig()
+    ddpg = SB3Config()
     sac = ALGORITHM_PRESETS["sac"]
     d = sub.add_parser("ddpg", help="SB3 DDPG (or SAC) from pixels, an autoencoder's latent, or the true state",
                        description="Train SB3 DDPG (or, with --algo sac, SAC) with the SB3 zoo's Pendulum-v1 hyperparameters "
@@ -121,7 +121,7 @@ def _common(p: ArgumentParser) -> None:
     p.add_argument("--quiet", action="store_true", help="no progress bars")
 
 
-def _check_run_dir(run_dir: Path, resume: bool, overwrite: bool, kind: str) -> None:
+def _check_run_dir(run_dir: Path, resume: bool, overwrite: bool, kind: RunKind) -> None:
     """Refuses to clobber a run, or to resume what is not one of this kind; clears it with ``overwrite``."""
     if run_dir.exists() and not run_dir.is_dir():
         raise PigaError(f"--out {run_dir} is a file, not a folder")
@@ -137,9 +137,9 @@ def _check_run_dir(run_dir: Path, resume: bool, overwrite: bool, kind: str) -> N
             raise PigaError(f"--resume: {run_dir / 'config.json'} is not a readable JSON record; start the run again "
                             "with --overwrite")
         recorded = record.get("kind")
-        if recorded != kind:
+        if recorded != kind.value:
             what = f"a {recorded} run" if recorded else "a piga-train-model run (its config.json has no 'kind')"
-            raise PigaError(f"--resume: {run_dir} is {what}, not a {kind} run (piga-baseline {kind})")
+            raise PigaError(f"--resume: {run_dir} is {what}, not a {kind.value} run ({kind.writer})")
         return
     if existing and not overwrite:
         if CHECKPOINT not in existing:  # a run killed before its first checkpoint: nothing to continue
@@ -233,7 +233,7 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
     from agents.planet.config import IterativeConfig, PlanetTrainConfig
     from piga.io.resources import check_run_disk
     from piga.io.atomic import write_json
-    from piga.baselines.planet import check_planet_data, rssm_config_for, train_planet
+    from agents.planet.train import check_planet_data, rssm_config_for, train_planet
     from piga.data.schema import inspect_dataset
     from piga.training.train import TrainingDiverged
 
@@ -242,7 +242,7 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
     command = command_line(PROG, argv)
     iterative: IterativeConfig | None = None
     if args.resume:
-        _check_run_dir(run_dir, True, False, "planet")
+        _check_run_dir(run_dir, True, False, RunKind.PLANET)
         record = _read_record(run_dir)
         _refuse_recipe_changes(args, record, run_dir)
         saved = _saved_config(run_dir, record, "train", PlanetTrainConfig)
@@ -260,7 +260,7 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
             iterative = replace(saved_iterative, rounds=args.rounds or saved_iterative.rounds)
             record["iterative"] = iterative.to_dict()
         if "rssm" not in record:  # a record without it (benchmarks/baselines.py wrote none before): the checkpoint's
-            from piga.baselines.planet_run import load_planet
+            from agents.planet.run import load_planet
 
             try:
                 record["rssm"] = load_planet(run_dir)[0].config.to_dict()
@@ -284,15 +284,15 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
                                         noise=args.exploration_noise)
         check_planet_data(info, config, rssm.action_repeat)  # a bad file: one line, before the run folder is looked at
         if iterative is not None:
-            from piga.baselines.planet_iterative import check_iterative_data
+            from agents.planet.iterative import check_iterative_data
 
             check_iterative_data(info, iterative)
-        _check_run_dir(run_dir, False, args.overwrite, "planet")
-        record = {"kind": "planet", "command": command, "data": str(args.data), "train": config.to_dict(),
+        _check_run_dir(run_dir, False, args.overwrite, RunKind.PLANET)
+        record = {"kind": RunKind.PLANET.value, "command": command, "data": str(args.data), "train": config.to_dict(),
                   "rssm": rssm.to_dict(), **({"iterative": iterative.to_dict()} if iterative else {})}
     check_planet_data(info, config, record["rssm"].get("action_repeat", 1))
     if iterative is not None:
-        from piga.baselines.planet_iterative import check_iterative_data, train_planet_iterative
+        from agents.planet.iterative import check_iterative_data, train_planet_iterative
 
         if config.max_minutes:
             raise PigaError("--max-minutes stops one training; with --iterative, bound the run with --rounds instead")
@@ -360,7 +360,9 @@ def _ddpg_checkpoint_bytes(config: Any, latent_size: int) -> float:
 
 def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
     from piga.io.atomic import write_json
-    from piga.baselines.ddpg import AUTOENCODER, DDPGConfig, config_for, first_step_reaching, train_ddpg
+    from agents.sb3.config import SB3Config
+    from agents.sb3.run import AUTOENCODER
+    from agents.sb3.train import first_step_reaching, train_sb3
     from piga.io.resources import check_run_disk
     from piga.training.train import TrainingDiverged
 
@@ -373,9 +375,9 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
     if args.obs != "latent" and args.data:
         raise PigaError(f"--data is for --obs latent (the autoencoder's frames); --obs {args.obs} does not use it")
     if args.resume:
-        _check_run_dir(run_dir, True, False, "ddpg")
+        _check_run_dir(run_dir, True, False, RunKind.DDPG)
         record = _read_record(run_dir)
-        saved = _saved_config(run_dir, record, "ddpg", DDPGConfig, optional=("algo",))  # runs from before --algo are DDPG
+        saved = _saved_config(run_dir, record, "ddpg", SB3Config, optional=("algo",))  # runs from before --algo are DDPG
         if saved.obs != args.obs:
             raise PigaError(f"--resume: {run_dir} was trained with --obs {saved.obs}, not {args.obs}")
         if saved.algo != args.algo:
@@ -388,21 +390,21 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
         record.setdefault("resumed", []).append(command)
         checkpoint_bytes: float = (run_dir / CHECKPOINT).stat().st_size
     else:
-        from piga.baselines.autoencoder import AutoencoderConfig
+        from agents.sb3.autoencoder import AutoencoderConfig
 
         given = {name: value for name, value in (("buffer_size", args.buffer_size), ("learning_starts", args.learning_starts),
                                                  ("noise_std", args.noise_std)) if value is not None}  # else the presets'
-        config = config_for(args.obs, args.algo, steps=args.steps or DDPGConfig.steps, eval_every=args.eval_every,
+        config = SB3Config(obs=args.obs, algo=args.algo, steps=args.steps or SB3Config.steps, eval_every=args.eval_every,
                             eval_episodes=args.eval_episodes, learning_rate=args.learning_rate, batch_size=args.batch_size,
                             torque_arrow=args.torque_arrow, seed=args.seed, threads=args.threads, **given)
         ae_config = AutoencoderConfig(steps=args.autoencoder_steps, seed=config.seed)
         if args.data:
-            from piga.baselines.autoencoder import check_autoencoder_data
+            from agents.sb3.autoencoder import check_autoencoder_data
             from piga.data.schema import inspect_dataset
 
             check_autoencoder_data(inspect_dataset(args.data))  # blank or ill-sized frames: one line, before --out is touched
-        _check_run_dir(run_dir, False, args.overwrite, "ddpg")
-        record = {"kind": "ddpg", "command": command, "data": args.data, "ddpg": config.to_dict()}
+        _check_run_dir(run_dir, False, args.overwrite, RunKind.DDPG)
+        record = {"kind": RunKind.DDPG.value, "command": command, "data": args.data, "ddpg": config.to_dict()}
         checkpoint_bytes = _ddpg_checkpoint_bytes(config, ae_config.latent_size)
     check_run_disk(run_dir, checkpoint_bytes, f"{config.algo.upper()}'s run (a replay buffer of {config.buffer_size})")
     autoencoder = run_dir / AUTOENCODER if config.obs == "latent" else None
@@ -416,13 +418,13 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
     try:
         with _nothing_left_unless_checkpointed(run_dir, written, fresh=not args.resume):
             if autoencoder is not None and not args.resume:
-                from piga.baselines.autoencoder import train_autoencoder
+                from agents.sb3.autoencoder import train_autoencoder
 
                 _, mse = train_autoencoder(args.data, ae_config, autoencoder, progress=not args.quiet)
                 record["autoencoder"] = {**ae_config.__dict__, "train_mse": mse}
                 print(f"autoencoder trained on {args.data}: per-pixel MSE {mse:.5f}")
             print(f"training {config.algo.upper()} from {config.obs} for {config.steps} env steps -> {run_dir}")
-            metrics = train_ddpg(config, run_dir, autoencoder, resume=args.resume, progress=not args.quiet,
+            metrics = train_sb3(config, run_dir, autoencoder, resume=args.resume, progress=not args.quiet,
                                  on_checkpoint=on_checkpoint)
     except TrainingDiverged as exc:
         raise PigaError(f"training diverged: {exc}") from None

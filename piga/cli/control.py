@@ -15,7 +15,9 @@ import numpy as np
 from agents.config import MPCConfig
 from piga.io.atomic import atomic_output, check_writable_target, write_json
 from piga.cli.common import ArgumentParser, PigaError, command_line, nonnegative_int, positive_float, positive_int, run_cli, warn_if_unconverged
-from piga.control.episodes import EpisodeConfig, parse_range, run_episodes, summary_markdown
+from piga.control.episodes import EpisodeConfig, parse_range, run_episodes
+from piga.evaluation.episodes import summary_markdown
+from piga.io.checkpoint import RunKind
 
 if TYPE_CHECKING:
     from agents.mpc import PigaMPCAgent
@@ -107,7 +109,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         for path in outputs:
             check_writable_target(path, args.overwrite)
     kind = _run_kind(args)
-    if kind != "piga":
+    if kind.is_baseline:
         return _baseline(args, kind, mpc, outputs, argv)
     if args.sweep:
         return _sweep(args, mpc, outputs, argv)
@@ -155,26 +157,27 @@ def main(argv: Sequence[str] | None = None) -> int:
         on_episode_end = _keep_first_trace(agent, first_trace) if args.video else None
     result = run_episodes(agent, config, progress=not args.quiet, record=1 if args.video else 0,
                           on_episode_end=on_episode_end)
-    s = result["summary"]
-    print(f"{label}, gravity x{args.gravity_mult:g}, goal {args.goal_angle:g} deg: success {100 * s['success_rate']:.0f}% of "
-          f"{s['episodes']}, mean return {s['mean_return']:.1f}, final angle error {math.degrees(s['final_angle_error_mean']):.2f} deg, "
-          f"plan {s['plan_ms_median']:.1f} ms median / {s['plan_ms_p95']:.1f} ms p95")
+    s = result.summary
+    print(f"{label}, gravity x{args.gravity_mult:g}, goal {args.goal_angle:g} deg: success {100 * s.success_rate:.0f}% of "
+          f"{s.episodes}, mean return {s.mean_return:.1f}, final angle error {math.degrees(s.final_angle_error_mean):.2f} deg, "
+          f"plan {s.plan_ms_median:.1f} ms median / {s.plan_ms_p95:.1f} ms p95")
     if args.video:
         from piga.evaluation.video import control_video
 
         assert model is not None
-        control_video(model, result["recordings"][0]["frames"], first_trace, args.video, overwrite=args.overwrite)
+        control_video(model, result.recordings[0].frames, first_trace, args.video, overwrite=args.overwrite)
         print(f"wrote {args.video}")
     if outputs:
-        s = {"agent": label, **s}
-        write_json(outputs[0], {"agent": label, **result, "summary": s, "recordings": None}, overwrite=args.overwrite)
+        result = result.labelled(agent=label)
+        write_json(outputs[0], {"agent": label, **result.to_dict(), "recordings": None}, overwrite=args.overwrite)
         with atomic_output(outputs[1], overwrite=args.overwrite) as tmp:
-            tmp.write_text(f"# {PROG}\n\nCommand: `{command_line(PROG, argv)}`\n\n{summary_markdown([s])}")
+            tmp.write_text(f"# {PROG}\n\nCommand: `{command_line(PROG, argv)}`\n\n{summary_markdown([result.summary])}")
         print(f"wrote {outputs[0]} and {outputs[1]}")
     return 0
 
 
-def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: Sequence[str] | None, kind: str = "piga") -> int:
+def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: Sequence[str] | None,
+           kind: RunKind = RunKind.PIGA) -> int:
     """--sweep: the run's agent (``kind``) and the oracle at each multiplier; piga and the oracle are
     told the multiplier, a baseline runs as trained."""
     from piga.control.jobs import ControlJob, run_jobs
@@ -190,7 +193,7 @@ def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: 
         raise PigaError(f"--sweep: {exc}") from None
     if multipliers[0] <= 0:
         raise PigaError(f"--sweep: gravity multipliers must be > 0, got {args.sweep}")
-    if kind == "piga":
+    if kind is RunKind.PIGA:
         model, _ = load_model(args.model)  # fail early, in this process, on a bad folder
         warn_if_unconverged(PROG, args.model)
         if model.config.system != "pendulum":
@@ -198,45 +201,44 @@ def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: 
     jobs = [ControlJob(agent, EpisodeConfig(episodes=args.episodes, steps=args.steps, seed=args.seed, gravity_mult=m,
                                             goal_angle=mpc.goal_angle, torque_arrow=args.torque_arrow),
                        mpc, model_dir=args.model if agent != "oracle" else None)
-            for m in multipliers for agent in (kind, "oracle")]
+            for m in multipliers for agent in (kind.value, "oracle")]
     results = run_jobs(jobs, workers=args.workers, progress=not args.quiet)
-    summaries = [r["summary"] for r in results]
+    summaries = [r.summary for r in results]
     table = summary_markdown(summaries)
     print(table, end="")
     if outputs:
         from piga.evaluation.plots import save_figure, sweep_figure
 
-        write_json(outputs[0], {"model": args.model, "multipliers": multipliers, "results": results}, overwrite=args.overwrite)
+        write_json(outputs[0], {"model": args.model, "multipliers": multipliers, "results": [r.to_dict() for r in results]},
+                   overwrite=args.overwrite)
         with atomic_output(outputs[1], overwrite=args.overwrite) as tmp:
             tmp.write_text(f"# {PROG} --sweep\n\nCommand: `{command_line(PROG, argv)}`\n\n![sweep]({outputs[2].name})\n\n{table}")
-        save_figure(sweep_figure(summaries), outputs[2], overwrite=args.overwrite)
+        save_figure(sweep_figure([s.to_dict() for s in summaries]), outputs[2], overwrite=args.overwrite)
         print(f"wrote {', '.join(map(str, outputs))}")
     return 0
 
 
-def _run_kind(args: argparse.Namespace) -> str:
-    """The kind of ``--model``'s run ("piga" for a piga-train-model run, or with --oracle alone)."""
+def _run_kind(args: argparse.Namespace) -> RunKind:
+    """The kind of ``--model``'s run (piga for a piga-train-model run, or with --oracle alone)."""
     if not args.model:
-        return "piga"
-    from piga.baselines.kinds import run_kind
+        return RunKind.PIGA
+    from piga.io.checkpoint import run_kind
 
     kind = run_kind(args.model)
-    if args.oracle:
-        if kind != "piga":
-            raise PigaError(f"--oracle: {args.model} is a piga-baseline {kind} run, which runs as trained and knows no "
-                            "physics to hand the oracle; drop --oracle to score the run, or drop --model to run the oracle")
-        return "piga"
+    if args.oracle and kind.is_baseline:
+        raise PigaError(f"--oracle: {args.model} is a {kind.writer} run, which runs as trained and knows no "
+                        "physics to hand the oracle; drop --oracle to score the run, or drop --model to run the oracle")
     return kind
 
 
-def _baseline(args: argparse.Namespace, kind: str, mpc: MPCConfig, outputs: list[Path], argv: Sequence[str] | None) -> int:
+def _baseline(args: argparse.Namespace, kind: RunKind, mpc: MPCConfig, outputs: list[Path], argv: Sequence[str] | None) -> int:
     """A baseline run ("planet" or "ddpg") on the same episodes, starts, seeds and success definition as piga.
 
     It has no goal input and cannot be told a gravity change: goals are refused, and a gravity
     multiplier runs it as trained, saying so. The PlaNet-style agent plans with PlaNet's CEM settings
     (:class:`agents.planet.config.LatentPlannerConfig`), not with --horizon and the other CEM options.
     """
-    why = f"a {kind} run has no goal input (it learned to swing up to upright from the env's reward)"
+    why = f"a {kind.value} run has no goal input (it learned to swing up to upright from the env's reward)"
     if args.goal_image:
         raise PigaError(f"--goal-image: {why}, so it cannot be given a goal image; goal images need a piga run")
     if args.goal_angle:
@@ -248,17 +250,17 @@ def _baseline(args: argparse.Namespace, kind: str, mpc: MPCConfig, outputs: list
             raise PigaError(f"--video must end in .mp4 or .gif, got {args.video}")
         check_writable_target(args.video, args.overwrite)
     if args.sweep or args.gravity_mult != 1:
-        print(f"note: the {kind} agent runs as trained: it cannot be told that gravity changed")
+        print(f"note: the {kind.value} agent runs as trained: it cannot be told that gravity changed")
     if args.sweep:
         return _sweep(args, mpc, outputs, argv, kind=kind)
     import torch
 
-    from piga.baselines.agents import baseline_agent
+    from piga.control.registry import baseline_agent
 
     torch.set_num_threads(1)
     agent = baseline_agent(kind, args.model, seed=args.seed)
     trained_arrow = getattr(getattr(agent, "config", None), "torque_arrow", None)
-    if kind == "ddpg" and trained_arrow is not None and trained_arrow != args.torque_arrow:
+    if kind is RunKind.DDPG and trained_arrow is not None and trained_arrow != args.torque_arrow:
         print(f"{PROG}: warning: {args.model} was trained with the torque arrow {'shown' if trained_arrow else 'hidden'}; "
               f"these episodes {'show' if args.torque_arrow else 'hide'} it", file=sys.stderr)
     config = EpisodeConfig(episodes=args.episodes, steps=args.steps, seed=args.seed, gravity_mult=args.gravity_mult,
@@ -266,28 +268,27 @@ def _baseline(args: argparse.Namespace, kind: str, mpc: MPCConfig, outputs: list
     if args.workers > 1 and args.episodes > 1:  # latent CEM takes ~0.5 s a step: use the cores over episodes
         from piga.control.jobs import ControlJob, run_split
 
-        result = run_split(ControlJob(kind, config, mpc, model_dir=args.model), args.workers, progress=not args.quiet)
-        result["summary"].pop("agent")
+        result = run_split(ControlJob(kind.value, config, mpc, model_dir=args.model), args.workers, progress=not args.quiet)
     else:
         result = run_episodes(agent, config, progress=not args.quiet, record=1 if args.video else 0)
-    s = result["summary"]
-    label = f"{kind} ({args.model})"
-    print(f"{label}, gravity x{args.gravity_mult:g}, goal 0 deg: success {100 * s['success_rate']:.0f}% of {s['episodes']}, "
-          f"mean return {s['mean_return']:.1f}, final angle error {math.degrees(s['final_angle_error_mean']):.2f} deg, "
-          f"plan {s['plan_ms_median']:.1f} ms median / {s['plan_ms_p95']:.1f} ms p95")
+    s = result.summary
+    label = f"{kind.value} ({args.model})"
+    print(f"{label}, gravity x{args.gravity_mult:g}, goal 0 deg: success {100 * s.success_rate:.0f}% of {s.episodes}, "
+          f"mean return {s.mean_return:.1f}, final angle error {math.degrees(s.final_angle_error_mean):.2f} deg, "
+          f"plan {s.plan_ms_median:.1f} ms median / {s.plan_ms_p95:.1f} ms p95")
     if args.video:
-        from piga.baselines.agents import episode_panels
+        from piga.control.registry import episode_panels
         from piga.evaluation.video import panels_video
 
         # episode 0 again in this process when the workers ran it (the same start and seeds: the same episode)
-        recording = (result.get("recordings") or run_episodes(agent, replace(config, episodes=1), record=1)["recordings"])[0]
+        recording = (result.recordings or run_episodes(agent, replace(config, episodes=1), record=1).recordings)[0]
         panels_video(episode_panels(agent, recording), args.video, overwrite=args.overwrite)
         print(f"wrote {args.video}")
     if outputs:
-        s = {"agent": label, **s}
-        write_json(outputs[0], {"agent": label, "kind": kind, **result, "summary": s, "recordings": None}, overwrite=args.overwrite)
+        result = result.labelled(agent=label)
+        write_json(outputs[0], {"agent": label, "kind": kind.value, **result.to_dict(), "recordings": None}, overwrite=args.overwrite)
         with atomic_output(outputs[1], overwrite=args.overwrite) as tmp:
-            tmp.write_text(f"# {PROG}\n\nCommand: `{command_line(PROG, argv)}`\n\n{summary_markdown([s])}")
+            tmp.write_text(f"# {PROG}\n\nCommand: `{command_line(PROG, argv)}`\n\n{summary_markdown([result.summary])}")
         print(f"wrote {outputs[0]} and {outputs[1]}")
     return 0
 
@@ -364,7 +365,7 @@ def _dmc(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
         pairs = [_env_option(text) for text in args.env_option]
     except _argparse.ArgumentTypeError as exc:
         raise PigaError(str(exc)) from None
-    from piga.control.dmc import DMCControlConfig, OracleSwingUp, PigaSwingUp, dmc_markdown, run_dmc_episodes
+    from piga.control.dmc import DMCControlConfig, OracleSwingUp, PigaSwingUp, dmc_markdown, dmc_record, run_dmc_episodes
 
     episodes = args.episodes if args.episodes != defaults["episodes"] else DMCControlConfig.episodes
     config = DMCControlConfig(episodes=episodes, seed=args.seed, env=dmc_config(pairs))
@@ -380,11 +381,11 @@ def _dmc(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     torch.set_num_threads(1)
     results = []
     if args.model:
-        from piga.baselines.kinds import run_kind
+        from piga.io.checkpoint import run_kind
         from piga.io.runs import load_model
 
-        if (kind := run_kind(args.model)) != "piga":
-            raise PigaError(f"{args.model} is a {kind} run; --env piga/DMCPendulum-v0 runs piga models (and the oracle)")
+        if (kind := run_kind(args.model)).is_baseline:
+            raise PigaError(f"{args.model} is a {kind.value} run; --env piga/DMCPendulum-v0 runs piga models (and the oracle)")
         model, _ = load_model(args.model)
         warn_if_unconverged(PROG, args.model)
         if abs(model.config.dt - config.env.dt) > 1e-9:
@@ -400,7 +401,7 @@ def _dmc(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     if outputs:
         write_json(outputs[0], {"command": command, "config": {"episodes": config.episodes, "seed": config.seed,
                                                                "env": config.env.to_dict()},
-                                "results": [r.to_dict() for r in results]}, overwrite=args.overwrite)
+                                "results": [dmc_record(r) for r in results]}, overwrite=args.overwrite)
         with atomic_output(outputs[1], overwrite=args.overwrite) as tmp:
             tmp.write_text(text)
     return 0

@@ -24,6 +24,7 @@ from piga.cli.common import (ArgumentParser, Interrupted, PigaError, command_lin
                              positive_int, run_cli)
 from piga.data.collect import CollectConfig, collect
 from piga.data.schema import inspect_dataset
+from piga.io.checkpoint import CHECKPOINT
 
 PROG = "piga-demo"
 
@@ -90,13 +91,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     data, strip, run_dir = out / "pendulum.h5", out / "frames.png", out / "model"
     goal_png, control_md = out / "goal.png", out / "control.md"
     if not args.overwrite:
-        for path in (data, strip, run_dir / "checkpoint.pt", goal_png, control_md):
+        for path in (data, strip, run_dir / CHECKPOINT, goal_png, control_md):
             if path.exists():
                 raise PigaError(f"{path} exists from an earlier demo; pass --overwrite to replace it")
     from piga.cli.control import check_angle
 
     check_angle("--goal-angle", args.goal_angle)
-    outputs = (data, strip, run_dir / "checkpoint.pt", goal_png, control_md)
+    outputs = (data, strip, run_dir / CHECKPOINT, goal_png, control_md)
     before = {path: path.exists() and path.stat().st_mtime_ns for path in outputs}
     try:
         with made_folder(out):
@@ -149,7 +150,8 @@ def _control(run_dir: Path, goal_png: Path, control_md: Path, args) -> list[tupl
     from agents.mpc import MPCConfig
     from piga.io.atomic import atomic_output
     from piga.cli import control as control_cli
-    from piga.control.episodes import EpisodeConfig, summary_markdown, summary_row
+    from piga.control.episodes import EpisodeConfig
+    from piga.evaluation.episodes import summary_markdown, summary_row
     from piga.control.jobs import ControlJob, run_jobs
     from piga.control.goal import goal_from_image
     from piga.io.runs import load_model
@@ -170,10 +172,10 @@ def _control(run_dir: Path, goal_png: Path, control_md: Path, args) -> list[tupl
                    dc_replace(mpc, goal_angle=estimate.angle), str(run_dir),
                    tags=(("task", f"goal image at {args.goal_angle:g} deg (read {math.degrees(estimate.angle):.2f})"),)),
     ]
-    summaries = [r["summary"] for r in run_jobs(jobs, workers=2, progress=False)]
+    summaries = [r.summary for r in run_jobs(jobs, workers=2, progress=False)]
     with atomic_output(control_md, overwrite=args.overwrite) as tmp:
         tmp.write_text("# piga-demo: control from pixels\n\n" + summary_markdown(summaries, extra=[("task", "task")]))
-    return [(s["task"], summary_row(s)) for s in summaries]
+    return [(s.labels["task"], summary_row(s)) for s in summaries]
 
 
 def entry() -> None:

@@ -11,12 +11,12 @@ from typing import Any
 
 from piga.cli.common import (ArgumentParser, Interrupted, PigaError, add_preset_option, command_line, format_default, nonnegative_int,
                              positive_float, positive_int, run_cli, unit_fraction)
+from piga.io.checkpoint import CHECKPOINT
 
 #: The recipe options a user may give; each is a TrainConfig field of the same name.
 RECIPE_OPTIONS = ("epochs", "budget_steps", "max_minutes", "batch_size", "lr", "lr_physics", "warmup_fraction")
 
 PROG = "piga-train-model"
-CHECKPOINT = "checkpoint.pt"
 OUTPUTS = (CHECKPOINT, "metrics.json", "config.json", "rollout.png", "templates.png", "curves.png")
 
 

@@ -24,5 +24,5 @@ def compare_control(model_dir: str, diagnosis: Diagnosis, effects: tuple[tuple[s
     correction = Correction(diagnosis.corrected_model(), diagnosis.corrected_camera())
     jobs = [ControlJob("piga", config, mpc, model_dir, tags=(("physics", "nominal"),)),
             ControlJob("piga", config, mpc, model_dir, tags=(("physics", "corrected"),), correction=correction)]
-    rows = [r["summary"] for r in run_jobs(jobs, workers=workers, progress=progress)]
+    rows = [r.summary.to_dict() for r in run_jobs(jobs, workers=workers, progress=progress)]
     return {"effects": dict(effects), "rows": rows}

@@ -9,22 +9,26 @@ Two agents share one planner (:class:`agents.swingup.SwingUpPlanner`, energy-awa
   gives θ̇, and the planner rolls the model's *learned* g, a and b (0 without a learned damping)
   with the model's own integrator and substeps.
 
-DMC's score of an episode is the sum of its rewards over 1000 physics steps of 0.02 s (at most
-1000): the reward is 1 while the pole is within 8° of upright.
+Episodes run in the one episode runner (:func:`piga.control.episodes.run_agent`). DMC's score of an
+episode is its return (:attr:`piga.evaluation.episodes.EpisodeResult.return_`), the sum of its rewards
+over 1000 physics steps of 0.02 s (at most 1000): the reward is 1 while the pole is within 8° of upright.
 """
 
 from __future__ import annotations
 
 import json
 from dataclasses import asdict, dataclass, field, replace
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 
+from agents.protocol import Agent
 from agents.swingup import DampedPendulumDynamics, SwingUpConfig, SwingUpPlanner
 from envs.dmc import DMCPendulumConfig, make_dmc_pendulum
+from piga.control.episodes import EpisodeStart, Scoring, run_agent
+from piga.evaluation.episodes import EpisodeBatch
 
-__all__ = ["DMCControlConfig", "DMCResult", "OracleSwingUp", "PigaSwingUp", "run_dmc_episodes", "dmc_markdown"]
+__all__ = ["DMCControlConfig", "OracleSwingUp", "PigaSwingUp", "dmc_markdown", "dmc_record", "run_dmc_episodes"]
 
 
 @dataclass(frozen=True)
@@ -39,11 +43,6 @@ class DMCControlConfig:
     """The environment (variants: mass, length, damping, flip)."""
     planner: SwingUpConfig = field(default_factory=SwingUpConfig)
     """The planner, the same for both agents."""
-
-
-class Agent(Protocol):
-    def reset(self) -> None: ...
-    def act(self, frames: np.ndarray, state: np.ndarray) -> np.ndarray: ...
 
 
 class OracleSwingUp:
@@ -88,57 +87,34 @@ class PigaSwingUp:
         return action
 
 
-@dataclass(frozen=True)
-class DMCResult:
-    """Scores of one agent."""
-
-    agent: str
-    """"piga" or "oracle"."""
-    scores: list[float]
-    """DMC's score of each episode (sum of rewards over 1000 physics steps)."""
-
-    @property
-    def mean(self) -> float:
-        return float(np.mean(self.scores))
-
-    @property
-    def std(self) -> float:
-        return float(np.std(self.scores))
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"agent": self.agent, "scores": self.scores, "mean": self.mean, "std": self.std}
-
-
 def run_dmc_episodes(agent: Agent, name: str, config: DMCControlConfig, frame_stack: int = 1,
-                     progress: bool = False) -> DMCResult:
-    """Runs ``config.episodes`` DMC episodes of ``agent`` and returns their DMC scores."""
-    from tqdm.auto import tqdm
-
+                     progress: bool = False) -> EpisodeBatch:
+    """Runs ``config.episodes`` DMC episodes of ``agent`` (episode e from ``reset(seed=seed + e)``, until DMC's
+    time limit); the batch's summary is labelled ``agent=name``, and its returns are the DMC scores."""
     env = make_dmc_pendulum(replace(config.env, frame_stack=frame_stack, episode_length=0))
-    scores = []
+    starts = [EpisodeStart(config.seed + e) for e in range(config.episodes)]
     try:
-        for e in tqdm(range(config.episodes), desc=name, disable=not progress):
-            obs, info = env.reset(seed=config.seed + e)
-            agent.reset()
-            total, truncated = 0.0, False
-            while not truncated:
-                obs, reward, _, truncated, info = env.step(agent.act(obs, info["state"]))
-                total += float(reward)
-            scores.append(total)
+        batch = run_agent(agent, env, starts, Scoring(), progress=progress, desc=name)
     finally:
         env.close()
-    return DMCResult(name, scores)
+    return batch.labelled(agent=name)
 
 
-def dmc_markdown(results: list[DMCResult], config: DMCControlConfig, command: str) -> str:
-    """A Markdown table of the results, with the command and the env."""
+def dmc_record(batch: EpisodeBatch) -> dict[str, Any]:
+    """The JSON record of a DMC batch: the agent, each episode's DMC score, their mean and std."""
+    scores = batch.returns
+    return {"agent": batch.summary.labels["agent"], "scores": scores, "mean": float(np.mean(scores)), "std": float(np.std(scores))}
+
+
+def dmc_markdown(results: list[EpisodeBatch], config: DMCControlConfig, command: str) -> str:
+    """A Markdown table of the batches' DMC scores, with the command and the env."""
     lines = [f"Command: `{command}`", "",
              f"DMC pendulum-swingup through the face-on camera: {json.dumps(config.env.to_dict())}; "
              f"{config.episodes} episodes of 1000 physics steps of 0.02 s (score: sum of DMC's reward, max 1000), "
              f"seeds {config.seed}..{config.seed + config.episodes - 1}.", "",
              "| agent | mean score | std | min | max |", "|---|---|---|---|---|"]
-    for r in results:
-        lines.append(f"| {r.agent} | {r.mean:.1f} | {r.std:.1f} | {min(r.scores):.0f} | {max(r.scores):.0f} |")
+    for r in map(dmc_record, results):
+        lines.append(f"| {r['agent']} | {r['mean']:.1f} | {r['std']:.1f} | {min(r['scores']):.0f} | {max(r['scores']):.0f} |")
     planner = asdict(config.planner)
     lines += ["", f"Planner: {json.dumps(planner)}", ""]
     return "\n".join(lines)

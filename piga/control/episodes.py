@@ -1,7 +1,9 @@
-"""Control episodes on the pixel pendulum: running and scoring them with any agent, and their tables.
+"""Control episodes: the one episode runner (:func:`run_agent`) for any agent (:class:`agents.protocol.Agent`)
+in any environment whose ``info["state"]`` is the true (θ, θ̇), and the pixel pendulum's episodes (:func:`run_episodes`).
 
-Jobs, batches of episodes for the named agents run in worker processes, are in :mod:`piga.control.jobs`.
-This module does not import torch (command lines read :class:`EpisodeConfig`'s defaults quickly).
+Jobs, batches of episodes for the named agents run in worker processes, are in :mod:`piga.control.jobs`;
+the typed results and their tables in :mod:`piga.evaluation.episodes`. This module does not import
+torch (command lines read :class:`EpisodeConfig`'s defaults quickly).
 
 Success is defined precisely. An episode of ``steps`` steps (200 by default) succeeds when, for
 each of its last ``hold_steps`` steps (20), |wrap(θ - θ_goal)| < ``angle_tolerance`` (0.2 rad)
@@ -16,26 +18,48 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
-from typing import Any, Protocol
+from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 from tqdm.auto import tqdm
 
+from agents.protocol import Agent
 from envs.pendulum import PixelPendulumConfig, make_pixel_pendulum
+from piga.evaluation.episodes import EpisodeBatch, EpisodeResult, Recording, summarize
 
-
-class Agent(Protocol):
-    """What an episode needs from a controller."""
-
-    def reset(self) -> None: ...
-
-    def act(self, frames: np.ndarray, state: np.ndarray) -> np.ndarray: ...
+__all__ = ["EpisodeConfig", "EpisodeStart", "Scoring", "merge_results", "parse_range", "run_agent", "run_episodes"]
 
 
 @dataclass(frozen=True)
-class EpisodeConfig:
-    """How episodes are run and scored."""
+class Scoring:
+    """How an episode is scored (module docstring), and the environment's gravity multiplier that labels its summary."""
+
+    gravity_mult: float = 1.0
+    """The environment's gravity multiplier."""
+    goal_angle: float = 0.0
+    """θ_goal for scoring (Gymnasium's convention: 0 upright)."""
+    hold_steps: int = 20
+    """Success needs the goal held for this many final steps."""
+    angle_tolerance: float = 0.2
+    """Success: |wrap(θ - θ_goal)| below this (rad)."""
+    speed_tolerance: float = 1.0
+    """Success: |θ̇| below this (rad/s)."""
+
+
+@dataclass(frozen=True)
+class EpisodeStart:
+    """How an episode starts: ``env.reset(seed=seed, options={"state": state})`` (no options without a state)."""
+
+    seed: int
+    """The env's reset seed."""
+    state: tuple[float, ...] | None = None
+    """The start (θ, θ̇); None: the env draws it."""
+
+
+@dataclass(frozen=True)
+class EpisodeConfig(Scoring):
+    """How episodes are run on the pixel pendulum, and scored (the fields of :class:`Scoring`)."""
 
     episodes: int = 5
     """Number of episodes."""
@@ -43,18 +67,8 @@ class EpisodeConfig:
     """Steps per episode."""
     seed: int = 0
     """Seed of the start states."""
-    gravity_mult: float = 1.0
-    """The environment's gravity multiplier."""
-    goal_angle: float = 0.0
-    """θ_goal for scoring (Gymnasium's convention)."""
     hang_first: bool = True
     """Episode 0 starts hanging straight down at rest; the others start at θ ~ U(-π, π), θ̇ ~ U(-1, 1)."""
-    hold_steps: int = 20
-    """Success needs the goal held for this many final steps."""
-    angle_tolerance: float = 0.2
-    """Success: |wrap(θ - θ_goal)| below this (rad)."""
-    speed_tolerance: float = 1.0
-    """Success: |θ̇| below this (rad/s)."""
     frame_stack: int = 4
     """Frames the agent sees per step (the model's L)."""
     effects: tuple[tuple[str, float], ...] = ()
@@ -80,6 +94,14 @@ class EpisodeConfig:
         if not (self.gravity_mult > 0 and math.isfinite(self.gravity_mult)):
             raise ValueError(f"gravity_mult must be finite and > 0, got {self.gravity_mult}")
 
+    def starts(self) -> list[EpisodeStart]:
+        """Its episodes' starts: episode e (``first_episode`` onwards) from (θ, θ̇) drawn in order from
+        ``seed`` and reset with seed ``seed · 1000 + e``."""
+        rng = np.random.default_rng(self.seed)
+        drawn = [_start(self, e, rng) for e in range(self.first_episode + self.episodes)]  # the earlier ones drawn and dropped
+        return [EpisodeStart(self.seed * 1000 + e, tuple(drawn[e].tolist()))
+                for e in range(self.first_episode, self.first_episode + self.episodes)]
+
     def env_config(self) -> PixelPendulumConfig:
         """The environment the episodes run in (the one place its true parameters come from)."""
         return PixelPendulumConfig(frame_stack=self.frame_stack, gravity_mult=self.gravity_mult,
@@ -97,132 +119,89 @@ def _start(config: EpisodeConfig, episode: int, rng: np.random.Generator) -> np.
     return np.array([rng.uniform(-math.pi, math.pi), rng.uniform(-1, 1)])
 
 
-def run_episodes(agent: Agent, config: EpisodeConfig, record: int = 0, progress: bool = False,
-                 on_episode_end: Callable[[int], None] | None = None, keep_plan_ms: bool = False) -> dict[str, Any]:
-    """Runs the episodes; returns per-episode results and a summary.
+def run_agent(agent: Agent, env: Any, starts: Sequence[EpisodeStart], scoring: Scoring, steps: int | None = None,
+              record: int = 0, progress: bool = False, on_episode_end: Callable[[int], None] | None = None,
+              keep_plan_ms: bool = False, desc: str = "episodes") -> EpisodeBatch:
+    """Runs ``agent`` for one episode from each start in ``env`` (a Gymnasium env whose ``info["state"]``
+    is the true (θ, θ̇)) and scores them.
 
     Args:
-        agent: controller; gets the last L frames (uint8 (L, H, W)) and the true state (which only
-            the oracle may use).
-        config: see :class:`EpisodeConfig`.
+        agent: gets the env's observation (the last L frames, uint8 (L, H, W)) and the true state (which
+            only an oracle may use); reset after the env at each start.
+        steps: steps per episode; None: until the env truncates it.
         record: keep the frames, states and actions of the first ``record`` episodes (for videos).
         on_episode_end: called with the episode's position in this run (0, 1, ...) after each episode.
-        keep_plan_ms: keep each episode's per-step plan times (``plan_ms``, for :func:`merge_results`).
-            An agent with a ``planned`` attribute (one that holds an action for several steps) is
-            timed only at the steps where it planned: plan times are per plan.
+        keep_plan_ms: keep each episode's per-plan times (for :meth:`EpisodeBatch.merge`). An agent with a
+            ``planned`` attribute (one that holds an action for several steps) is timed only at the steps
+            where it planned: plan times are per plan.
     """
-    env = make_pixel_pendulum(config.env_config())
-    rng = np.random.default_rng(config.seed)
-    for skipped in range(config.first_episode):  # the earlier episodes' starts, drawn and dropped
-        _start(config, skipped, rng)
-    episodes: list[dict[str, Any]] = []
-    recordings: list[dict[str, np.ndarray]] = []
-    for index in tqdm(range(config.episodes), desc="episodes", disable=not progress):
-        ep = config.first_episode + index
-        start = _start(config, ep, rng)
-        obs, info = env.reset(seed=config.seed * 1000 + ep, options={"state": start})
+    episodes: list[EpisodeResult] = []
+    recordings: list[Recording] = []
+    for index, start in enumerate(tqdm(starts, desc=desc, disable=not progress)):
+        obs, info = env.reset(seed=start.seed, options=None if start.state is None else {"state": np.array(start.state)})
         agent.reset()
         states, actions, rewards, plan_times, frames = [info["state"]], [], [], [], [obs[-1]]
-        for _ in range(config.steps):
+        truncated = False
+        while (steps is None and not truncated) or (steps is not None and len(actions) < steps):
             t0 = time.perf_counter()
             u = np.asarray(agent.act(obs, info["state"]), dtype=np.float32).reshape(1)
             if getattr(agent, "planned", True):  # an agent that holds an action for some steps says when it planned
                 plan_times.append(time.perf_counter() - t0)
-            obs, reward, _, _, info = env.step(u)
+            obs, reward, _, truncated, info = env.step(u)
             states.append(info["state"])
             actions.append(float(u[0]))
             rewards.append(float(reward))
             if index < record:
                 frames.append(obs[-1])
-        s = np.array(states)
-        err = np.abs(_wrap(s[1:, 0] - config.goal_angle))
-        inside = (err < config.angle_tolerance) & (np.abs(s[1:, 1]) < config.speed_tolerance)
-        held_from = None
-        if inside[-1]:
-            outside = np.flatnonzero(~inside)
-            held_from = int(outside[-1] + 1) if len(outside) else 0
-        success = bool(inside[-config.hold_steps :].all())
-        episodes.append({
-            "start": start.tolist(),
-            "return": float(np.sum(rewards)),
-            "success": success,
-            "final_angle_error": float(err[-1]),
-            "final_speed": float(abs(s[-1, 1])),
-            "time_to_goal_steps": held_from,
-            "plan_ms_median": float(1000 * np.median(plan_times)),
-            "plan_ms": [float(1000 * t) for t in plan_times],
-        })
+        episodes.append(_score(np.array(states), rewards, plan_times, start, scoring))
         if on_episode_end is not None:
             on_episode_end(index)
         if index < record:
-            recordings.append({"frames": np.array(frames), "states": s, "actions": np.array(actions)})
-    env.close()
-    return {"summary": summarize(episodes, config, keep_plan_ms), "episodes": episodes, "recordings": recordings}
+            recordings.append(Recording(np.array(frames), np.array(states), np.array(actions)))
+    summary = summarize(episodes, scoring.gravity_mult, scoring.goal_angle)
+    if not keep_plan_ms:
+        episodes = [replace(e, plan_ms=()) for e in episodes]
+    return EpisodeBatch(summary, tuple(episodes), tuple(recordings))
 
 
-def summarize(episodes: Sequence[dict[str, Any]], config: EpisodeConfig, keep_plan_ms: bool = False) -> dict[str, Any]:
-    """The summary of episodes (dicts of :func:`run_episodes`, with their ``plan_ms``, which it
-    removes unless ``keep_plan_ms``); ``config`` gives the gravity and the goal."""
-    all_plan = np.concatenate([e["plan_ms"] if keep_plan_ms else e.pop("plan_ms") for e in episodes])
-    swing = [e["time_to_goal_steps"] for e in episodes if e["success"]]
-    return {
-        "episodes": len(episodes),
-        "success_rate": float(np.mean([e["success"] for e in episodes])),
-        "mean_return": float(np.mean([e["return"] for e in episodes])),
-        "final_angle_error_mean": float(np.mean([e["final_angle_error"] for e in episodes])),
-        "time_to_goal_steps_median": float(np.median(swing)) if swing else None,
-        "plan_ms_median": float(np.median(all_plan)),
-        "plan_ms_p95": float(np.percentile(all_plan, 95)),
-        "gravity_mult": config.gravity_mult,
-        "goal_angle": config.goal_angle,
-    }
+def _score(s: np.ndarray, rewards: list[float], plan_times: list[float], start: EpisodeStart, scoring: Scoring) -> EpisodeResult:
+    """One episode's result from its states (T+1, S), rewards (T,) and plan seconds."""
+    err = np.abs(_wrap(s[1:, 0] - scoring.goal_angle))
+    inside = (err < scoring.angle_tolerance) & (np.abs(s[1:, 1]) < scoring.speed_tolerance)
+    held_from = None
+    if inside[-1]:
+        outside = np.flatnonzero(~inside)
+        held_from = int(outside[-1] + 1) if len(outside) else 0
+    return EpisodeResult(
+        start=() if start.state is None else start.state,
+        return_=float(np.sum(rewards)),
+        success=bool(inside[-scoring.hold_steps:].all()),
+        final_angle_error=float(err[-1]),
+        final_speed=float(abs(s[-1, 1])),
+        time_to_goal_steps=held_from,
+        plan_ms_median=float(1000 * np.median(plan_times)),
+        plan_ms=tuple(float(1000 * t) for t in plan_times),
+    )
 
 
-def merge_results(config: EpisodeConfig, parts: Sequence[dict[str, Any]]) -> dict[str, Any]:
+def run_episodes(agent: Agent, config: EpisodeConfig, record: int = 0, progress: bool = False,
+                 on_episode_end: Callable[[int], None] | None = None, keep_plan_ms: bool = False) -> EpisodeBatch:
+    """Runs ``config``'s episodes on the pixel pendulum (:func:`run_agent`, with :meth:`EpisodeConfig.starts`)."""
+    env = make_pixel_pendulum(config.env_config())
+    try:
+        return run_agent(agent, env, config.starts(), config, config.steps, record, progress, on_episode_end,
+                         keep_plan_ms)
+    finally:
+        env.close()
+
+
+def merge_results(config: EpisodeConfig, parts: Sequence[EpisodeBatch]) -> EpisodeBatch:
     """One result from :func:`run_episodes` results (``keep_plan_ms``) of consecutive batches of
     ``config``'s episodes, as one run of them all would give (recordings dropped)."""
-    episodes = [e for part in parts for e in part["episodes"]]
-    if len(episodes) != config.episodes:
-        raise ValueError(f"the parts hold {len(episodes)} episodes, the config {config.episodes}")
-    return {"summary": summarize(episodes, config), "episodes": episodes, "recordings": []}
-
-
-SUMMARY_COLUMNS: tuple[tuple[str, str], ...] = (
-    ("agent", "agent"),
-    ("gravity_mult", "gravity x"),
-    ("goal_deg", "goal (deg)"),
-    ("episodes", "episodes"),
-    ("success_rate", "success"),
-    ("mean_return", "mean return"),
-    ("final_angle_error_deg", "final angle error (deg)"),
-    ("time_to_goal_steps_median", "steps to goal (median)"),
-    ("plan_ms_median", "plan ms (median)"),
-    ("plan_ms_p95", "plan ms (p95)"),
-)
-
-
-def summary_row(summary: dict[str, Any]) -> dict[str, Any]:
-    """A summary with the derived display fields (degrees) added."""
-    return {**summary, "goal_deg": math.degrees(summary["goal_angle"]),
-            "final_angle_error_deg": math.degrees(summary["final_angle_error_mean"])}
-
-
-def summary_markdown(summaries: Sequence[dict[str, Any]], extra: Sequence[tuple[str, str]] = ()) -> str:
-    """A Markdown table of episode summaries, one row each; ``extra`` adds (key, header) columns first."""
-    columns = [*extra, *SUMMARY_COLUMNS]
-    lines = ["| " + " | ".join(h for _, h in columns) + " |", "|" + "---|" * len(columns)]
-    for s in map(summary_row, summaries):
-        cells = []
-        for key, _ in columns:
-            v = s.get(key)
-            if key == "success_rate":
-                cells.append(f"{100 * v:.0f}%")
-            elif isinstance(v, float):
-                cells.append(f"{v:.2f}" if abs(v) < 100 else f"{v:.1f}")
-            else:
-                cells.append("–" if v is None else str(v))
-        lines.append("| " + " | ".join(cells) + " |")
-    return "\n".join(lines) + "\n"
+    n = sum(len(part.episodes) for part in parts)
+    if n != config.episodes:
+        raise ValueError(f"the parts hold {n} episodes, the config {config.episodes}")
+    return EpisodeBatch.merge(parts, config.gravity_mult, config.goal_angle)
 
 
 def parse_range(text: str) -> list[float]:

@@ -15,9 +15,11 @@ from typing import Any, Literal, Protocol
 
 import torch
 from agents.dynamics import Dynamics
+from agents.protocol import Agent
 from agents.mpc import MPCConfig, OracleAgent, PigaMPCAgent, StateReader
-from piga.baselines.kinds import BASELINE_KINDS
 from piga.control.episodes import EpisodeConfig, merge_results, run_episodes
+from piga.evaluation.episodes import EpisodeBatch
+from piga.io.checkpoint import RunKind
 from piga.world.model import PhysicsModel
 from piga.io.choices import check_choices
 from piga.io.runs import convergence_warning, load_model
@@ -48,7 +50,7 @@ class ControlJob:
 
     agent: Literal["piga", "oracle", "planet", "ddpg"]
     """"piga" (frames -> learned model), "oracle" (true state, the environment's true g and a), or a
-    baseline's kind, "planet" or "ddpg" (:mod:`piga.baselines`; not told of a gravity change)."""
+    baseline's kind, "planet" or "ddpg" (:class:`~piga.io.checkpoint.RunKind`; not told of a gravity change)."""
     episodes: EpisodeConfig
     """The episodes; its ``gravity_mult`` is the environment's."""
     mpc: MPCConfig = field(default_factory=MPCConfig)
@@ -61,26 +63,26 @@ class ControlJob:
     """For "piga": plan with this correction's dynamics and read frames with its reader (from ``piga-diagnose``)."""
 
     def __post_init__(self) -> None:
-        check_choices(self)
+        check_choices(self)  # "oracle" or a RunKind's value
         if self.agent != "oracle" and not self.model_dir:
             raise ValueError(f"a {self.agent!r} job needs model_dir")
-        if self.agent in BASELINE_KINDS and self.correction is not None:
+        if self.agent != "oracle" and RunKind(self.agent).is_baseline and self.correction is not None:
             raise ValueError(f"a {self.agent!r} job runs as trained; it takes no correction")
         if self.agent == "oracle" and self.correction is not None:
             raise ValueError("an 'oracle' job plans with the true physics; it takes no correction")
 
 
-def build_agent(job: ControlJob) -> Any:
+def build_agent(job: ControlJob) -> Agent:
     """The agent a job describes (loads the model for "piga" and the baselines). The piga agent is
     told the environment's gravity multiplier; the oracle takes the environment's true g and a; a
     baseline runs as trained."""
     if job.agent == "oracle":
         return OracleAgent.for_env(job.episodes.env_config(), job.mpc)
-    if job.agent in BASELINE_KINDS:
-        from piga.baselines.agents import baseline_agent
+    if RunKind(job.agent).is_baseline:
+        from piga.control.registry import baseline_agent
 
         assert job.model_dir is not None
-        return baseline_agent(job.agent, job.model_dir, seed=job.mpc.seed)
+        return baseline_agent(RunKind(job.agent), job.model_dir, seed=job.mpc.seed)
     assert job.model_dir is not None
     model, _ = load_model(job.model_dir)
     told = job.episodes.gravity_mult
@@ -90,7 +92,7 @@ def build_agent(job: ControlJob) -> Any:
                         reader=job.correction.reader(model))
 
 
-def run_job(job: ControlJob, keep_plan_ms: bool = False) -> dict[str, Any]:
+def run_job(job: ControlJob, keep_plan_ms: bool = False) -> EpisodeBatch:
     """Runs one job in this process with one torch thread; returns :func:`run_episodes`' result
     (without recordings), its summary extended with ``agent`` and the job's tags (``keep_plan_ms``:
     each episode keeps its per-step plan times, for :func:`run_split`'s merge)."""
@@ -98,15 +100,13 @@ def run_job(job: ControlJob, keep_plan_ms: bool = False) -> dict[str, Any]:
     agent = build_agent(job)
     episodes = job.episodes
     if not isinstance(agent, OracleAgent):
-        episodes = replace(episodes, frame_stack=agent.input_frames)
+        episodes = replace(episodes, frame_stack=agent.input_frames)  # type: ignore[attr-defined]
     return _tagged(job, run_episodes(agent, episodes, keep_plan_ms=keep_plan_ms))
 
 
-def _tagged(job: ControlJob, result: dict[str, Any]) -> dict[str, Any]:
-    """``result`` without recordings, its summary extended with ``agent`` and the job's tags."""
-    result.pop("recordings")
-    result["summary"] = {"agent": job.agent, **dict(job.tags), **result["summary"]}
-    return result
+def _tagged(job: ControlJob, result: EpisodeBatch) -> EpisodeBatch:
+    """``result`` without recordings, its summary labelled with ``agent`` and the job's tags."""
+    return result.labelled(**{"agent": job.agent, **dict(job.tags)})
 
 
 def split_job(job: ControlJob, parts: int) -> list[ControlJob]:
@@ -118,7 +118,7 @@ def split_job(job: ControlJob, parts: int) -> list[ControlJob]:
     return [replace(job, episodes=replace(job.episodes, first_episode=s, episodes=k)) for s, k in zip(starts, sizes)]
 
 
-def run_split(job: ControlJob, workers: int = 1, progress: bool = True) -> dict[str, Any]:
+def run_split(job: ControlJob, workers: int = 1, progress: bool = True) -> EpisodeBatch:
     """Runs ``job``'s episodes split over ``workers`` processes; the result is the one :func:`run_job`
     gives in one process (the same episodes, starts, seeds and scores; each agent is reset per
     episode), except the plan times, which are measured with the workers sharing the machine."""
@@ -128,7 +128,7 @@ def run_split(job: ControlJob, workers: int = 1, progress: bool = True) -> dict[
     return _tagged(job, merge_results(job.episodes, results))
 
 
-def run_jobs(jobs: Sequence[ControlJob], workers: int = 1, progress: bool = True, keep_plan_ms: bool = False) -> list[dict[str, Any]]:
+def run_jobs(jobs: Sequence[ControlJob], workers: int = 1, progress: bool = True, keep_plan_ms: bool = False) -> list[EpisodeBatch]:
     """Runs jobs, in ``workers`` processes when > 1 (results in the order of ``jobs``; ``keep_plan_ms`` as for :func:`run_job`).
 
     On KeyboardInterrupt (Ctrl-C, or SIGTERM turned into it by :func:`piga.cli.common.run_cli`) the

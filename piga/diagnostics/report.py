@@ -13,7 +13,7 @@ import numpy as np
 from piga.io.atomic import atomic_output, check_writable_target, partial_path, write_json
 from piga.diagnostics.results import Diagnosis, VisionSummary
 from piga.diagnostics.twin import MEASURABLE_GAP
-from piga.control.episodes import summary_markdown
+from piga.evaluation.episodes import EpisodeSummary, summary_markdown
 from piga.evaluation.plots import plt, save_figure
 
 #: Files the report writes into its folder.
@@ -254,7 +254,7 @@ def markdown(d: Diagnosis, model: str, data: str, command: str) -> str:
                   if d.corrected_camera() is not None else "reads angles with the same encoder")
         lines += ["", f"MPC on the simulated real system ({env}), same frames and planner; the corrected agent plans with the "
                   f"corrected physics and {reader}:", "",
-                  summary_markdown(d.control["rows"], extra=[("physics", "physics")]).rstrip()]
+                  summary_markdown([EpisodeSummary.from_dict(r) for r in d.control["rows"]], extra=[("physics", "physics")]).rstrip()]
     v = d.vision
     ratio = "" if v.ratio is None else f" (x{number(v.ratio, '.2f')})"
     training = "an unknown error" if not v.rec_mse_training else f"{number(v.rec_mse_training, '.2e')}"

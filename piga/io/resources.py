@@ -12,6 +12,8 @@ import shutil
 from pathlib import Path
 from typing import Any
 
+from piga.io.checkpoint import CHECKPOINT
+
 #: gzip (level 4) shrinks piga-collect's pendulum frames about 25x (measured on its default data);
 #: the disk check of generated data assumes 20x.
 RENDERED_FRAME_COMPRESSION = 20.0
@@ -81,7 +83,7 @@ def adam_checkpoint_bytes(module: Any) -> int:
 
 
 def check_run_disk(run_dir: str | os.PathLike[str], checkpoint_bytes: float, what: str, extra: float = 0.0,
-                   checkpoint: str = "checkpoint.pt") -> None:
+                   checkpoint: str = CHECKPOINT) -> None:
     """Refuses, before a training run starts, a run folder whose disk cannot hold its checkpoints:
     each is written beside the previous one (atomically), so twice ``checkpoint_bytes``, plus
     ``extra`` and :data:`RUN_DISK_MARGIN`. ``run_dir`` need not exist yet.

@@ -22,11 +22,9 @@ from typing import Any, Literal
 
 import torch
 
+from piga.io.checkpoint import CHECKPOINT, RunKind, read_checkpoint, unreadable
 from piga.io.choices import check_choices
 from piga.world.model import ModelConfig, PhysicsModel
-
-#: The checkpoint's file name in a run folder.
-CHECKPOINT = "checkpoint.pt"
 
 
 @dataclass(frozen=True)
@@ -57,20 +55,12 @@ class Nominal:
 
 def load_model(run_dir: str | os.PathLike[str]) -> tuple[PhysicsModel, dict[str, Any]]:
     """Rebuilds a trained model from ``RUN_DIR/checkpoint.pt``; returns it (eval mode) and the checkpoint."""
-    path = Path(run_dir) / CHECKPOINT
-    if not path.exists():
-        raise FileNotFoundError(f"{path}: no checkpoint (is {run_dir} a piga-train-model run folder?)")
-    try:
-        ckpt = torch.load(path, map_location="cpu", weights_only=False)
-    except Exception as exc:  # a truncated or foreign file
-        raise ValueError(f"{path}: not a readable piga checkpoint ({exc.__class__.__name__}: {exc})") from None
-    if isinstance(ckpt, dict) and "model_config" not in ckpt and "kind" in ckpt:
-        raise ValueError(f"{path} is a piga-baseline {ckpt['kind']} checkpoint, not a piga-train-model run")
+    ckpt = read_checkpoint(run_dir, RunKind.PIGA)
     try:
         model = PhysicsModel(ModelConfig.from_dict(ckpt["model_config"]))
         model.load_state_dict(ckpt["model"])
-    except Exception as exc:  # a truncated or foreign file
-        raise ValueError(f"{path}: not a readable piga checkpoint ({exc.__class__.__name__}: {exc})") from None
+    except Exception as exc:  # a foreign or damaged payload
+        raise unreadable(Path(run_dir) / CHECKPOINT, RunKind.PIGA, exc) from None
     model.eval()
     return model, ckpt
 
@@ -163,5 +153,5 @@ def nominal_of(model: PhysicsModel) -> Nominal:
                    float(p.get("b", 0.0)), model.config.integrator, bool(model.config.velocity_hold))
 
 
-__all__ = ["CHECKPOINT", "Nominal", "convergence_warning", "load_model", "nominal_of", "training_arrow", "training_blank_mse",
+__all__ = ["Nominal", "convergence_warning", "load_model", "nominal_of", "training_arrow", "training_blank_mse",
            "training_reconstruction_mse", "training_steps"]

@@ -32,12 +32,12 @@ import torch
 from torch.utils.data import DataLoader, RandomSampler
 from tqdm.auto import tqdm
 
-from piga.io.atomic import atomic_output
 from piga.io.choices import check_choices
 from piga.data.schema import DatasetInfo, check_actions_file, inspect_dataset, read_sequences
 from piga.world.encoder import estimate_background
 from piga.world.model import SYSTEM_SHAPES, ModelConfig, PhysicsModel, frames_to_float
-from piga.io.runs import CHECKPOINT, load_model
+from piga.io.checkpoint import CHECKPOINT, write_checkpoint
+from piga.io.runs import load_model
 from piga.data.windows import SequenceWindows
 
 
@@ -368,8 +368,7 @@ def save_checkpoint(path: Path, model: PhysicsModel, optimizer: torch.optim.Opti
         "data": {"path": str(data_info.path), "system": data_info.system, "image_shape": list(data_info.image_shape),
                  "dt": data_info.dt},
     }
-    with atomic_output(path, overwrite=True) as tmp:
-        torch.save(payload, tmp)
+    write_checkpoint(path.parent, payload)
 
 
 def _background(data: str | Path, channels: int, seed: int, max_frames: int = 2000) -> torch.Tensor:

@@ -27,13 +27,14 @@ from tqdm.auto import tqdm
 
 from agents.planet.config import PlanetTrainConfig, RSSMConfig
 from agents.planet.rssm import WorldModel, model_steps
-from piga.io.atomic import atomic_output, write_json
-from piga.baselines.planet_run import CHECKPOINT, load_planet
+from agents.planet.run import load_planet
 from piga.data.schema import (DataFormatError, DatasetInfo, check_actions, check_frames_have_signal, inspect_dataset, load_rewards,
-                       read_sequences)
+                              read_sequences)
+from piga.io.atomic import write_json
+from piga.io.checkpoint import CHECKPOINT, RunKind, write_checkpoint
 from piga.training.train import TrainingDiverged
 
-__all__ = ["CHECKPOINT", "PlanetState", "check_planet_data", "load_planet", "rssm_config_for", "train_planet"]
+__all__ = ["PlanetState", "check_planet_data", "rssm_config_for", "train_planet"]
 
 
 @dataclass
@@ -118,7 +119,7 @@ def check_planet_data(info: DatasetInfo, config: PlanetTrainConfig, repeat: int 
 def _save(path: Path, model: WorldModel, optimizer: torch.optim.Optimizer, state: PlanetState, config: PlanetTrainConfig,
           rng: np.random.Generator, generator: torch.Generator, info: DatasetInfo) -> None:
     payload = {
-        "kind": "planet",
+        "kind": RunKind.PLANET.value,
         "rssm_config": model.config.to_dict(),
         "train_config": config.to_dict(),
         "model": model.state_dict(),
@@ -127,8 +128,7 @@ def _save(path: Path, model: WorldModel, optimizer: torch.optim.Optimizer, state
         "rng": {"numpy": rng.bit_generator.state, "torch": generator.get_state()},
         "data": {"path": str(info.path), "image_shape": list(info.image_shape), "dt": info.dt},
     }
-    with atomic_output(path, overwrite=True) as tmp:
-        torch.save(payload, tmp)
+    write_checkpoint(path.parent, payload)
 
 
 #: Frames filtered before the open-loop prediction of ``openloop.png`` (PlaNet's open-loop videos use 5).
@@ -194,7 +194,7 @@ def train_planet(
     Nothing is written before the first checkpoint. With ``resume``, the model, optimiser, RNGs and
     step come from ``run_dir``'s checkpoint, and ``config`` should be its saved one (possibly with
     more ``steps``); ``rssm`` is ignored. ``extra_data``: a file of the same frames whose sequences
-    are trained on too (:mod:`piga.baselines.planet_iterative`'s collected episodes).
+    are trained on too (:mod:`agents.planet.iterative`'s collected episodes).
 
     Returns:
         The trained model (eval mode) and the final state.

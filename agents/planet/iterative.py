@@ -35,10 +35,12 @@ from tqdm.auto import tqdm
 from agents.planet.config import IterativeConfig, LatentPlannerConfig, PlanetTrainConfig, RSSMConfig
 from agents.planet.planner import PlanetAgent
 from agents.planet.rssm import WorldModel
+from agents.planet.run import load_planet
+from agents.planet.train import PlanetState, check_planet_data, train_planet
 from envs.pendulum import PixelPendulumConfig, make_pixel_pendulum
-from piga.io.atomic import write_json
-from piga.baselines.planet import CHECKPOINT, PlanetState, check_planet_data, load_planet, train_planet
 from piga.data.schema import DataFormatError, DatasetInfo, DatasetWriter, inspect_dataset, load_rewards, read_sequences
+from piga.io.atomic import write_json
+from piga.io.checkpoint import CHECKPOINT
 
 #: The collected episodes' file in a run folder.
 COLLECTED = "collected.h5"

@@ -1,0 +1,114 @@
+"""The settings of an SB3 baseline run: DDPG or SAC, as variants of one config.
+
+Each algorithm's defaults are the SB3 zoo's tuned ones for Pendulum-v1 (rl-baselines3-zoo,
+``hyperparams/ddpg.yml`` and ``hyperparams/sac.yml``; :data:`ALGORITHM_PRESETS`); each observation
+may change some of them (:data:`PRESETS`). A field left unset takes, in order, the observation's
+preset, then the algorithm's value: so ``SB3Config(algo="sac")`` has SAC's values, never DDPG's.
+Build a new config to change ``algo`` or ``obs`` (``dataclasses.replace`` keeps the values already set).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Any, Literal, get_args
+
+__all__ = ["ALGORITHMS", "ALGORITHM_PRESETS", "EPISODE_STEPS", "OBSERVATIONS", "PRESETS", "Algorithm", "Observation", "SB3Config"]
+
+Observation = Literal["pixels", "latent", "state"]
+"""What the policy sees."""
+Algorithm = Literal["ddpg", "sac"]
+"""The SB3 algorithm: DDPG (the paper's), SAC (its stronger sibling)."""
+#: What the policy can observe.
+OBSERVATIONS: tuple[Observation, ...] = get_args(Observation)
+#: The SB3 algorithms.
+ALGORITHMS: tuple[Algorithm, ...] = get_args(Algorithm)
+#: Pendulum-v1's episode length (its TimeLimit).
+EPISODE_STEPS = 200
+
+#: Each algorithm's zoo values for Pendulum-v1. DDPG (``ddpg.yml``): gamma 0.98, buffer 200000, learning
+#: starts 10000, Gaussian action noise of std 0.1 (in SB3's [-1, 1] action scale), net_arch [400, 300].
+#: SAC: the zoo's Pendulum-v1 entry sets only the learning rate (1e-3, as DDPG's); the rest are SB3's SAC
+#: defaults (gamma 0.99, buffer 1e6, learning starts 100, net_arch [256, 256], entropy coefficient "auto",
+#: no added action noise: SAC explores with its own stochastic policy).
+ALGORITHM_PRESETS: dict[Algorithm, dict[str, Any]] = {
+    "ddpg": {"gamma": 0.98, "buffer_size": 200_000, "learning_starts": 10_000, "noise_std": 0.1, "net_arch": (400, 300)},
+    "sac": {"gamma": 0.99, "buffer_size": 1_000_000, "learning_starts": 100, "noise_std": 0.0, "net_arch": (256, 256)},
+}
+#: Per-observation values, over the algorithm's. Pixels: a replay buffer of 200000 stacks of four 64x64
+#: frames takes 6.6 GB (observations and next observations); 50000 take 1.6 GB.
+PRESETS: dict[Observation, dict[str, Any]] = {"state": {}, "latent": {}, "pixels": {"buffer_size": 50_000}}
+
+
+@dataclass(frozen=True)
+class SB3Config:
+    """An SB3 run's settings. Unset (None) fields take the observation's preset, then the algorithm's zoo
+    value (module docstring); the rest are the zoo's for both (one gradient step per env step, learning
+    rate 1e-3) or SB3's defaults (batch 256, tau 0.005). The zoo trains 20000 steps."""
+
+    obs: Observation = "state"
+    """What the policy sees: "pixels" (K stacked frames, CnnPolicy), "latent" (K stacked autoencoder
+    codes) or "state" ((cos θ, sin θ, θ̇), the reference point)."""
+    algo: Algorithm = "ddpg"
+    """The SB3 algorithm: "ddpg" or "sac"."""
+    steps: int = 30000
+    """Env steps to train (the paper reports its proprioception result after 30k steps)."""
+    gamma: float = None  # type: ignore[assignment]  (None: the algorithm's)
+    """Discount (zoo: DDPG 0.98, SAC 0.99)."""
+    buffer_size: int = None  # type: ignore[assignment]
+    """Replay buffer capacity (zoo: DDPG 200000, SAC 1e6; pixels 50000)."""
+    learning_starts: int = None  # type: ignore[assignment]
+    """Random-action steps before learning (zoo: DDPG 10000, SAC 100)."""
+    noise_std: float = None  # type: ignore[assignment]
+    """Std of the Gaussian action noise, in SB3's [-1, 1] action scale (zoo: DDPG 0.1, SAC none)."""
+    train_freq: int = 1
+    """Env steps between updates (zoo)."""
+    gradient_steps: int = 1
+    """Gradient steps per update (zoo)."""
+    learning_rate: float = 1e-3
+    """Adam's learning rate for actor and critic (zoo)."""
+    batch_size: int = 256
+    """Minibatch (SB3's default)."""
+    tau: float = 0.005
+    """Target networks' soft-update rate (SB3's default)."""
+    net_arch: tuple[int, ...] = None  # type: ignore[assignment]
+    """Hidden layers of actor and critic (zoo: DDPG (400, 300), SAC (256, 256))."""
+    frame_stack: int = 4
+    """K, frames (or codes) per observation for "pixels" and "latent"."""
+    torque_arrow: bool = False
+    """Whether the frames show Gymnasium's torque arrow (``piga-control``'s default is off)."""
+    eval_every: int = 1000
+    """Env steps between evaluations and checkpoints (whole episodes: a multiple of 200)."""
+    eval_episodes: int = 5
+    """Episodes per evaluation (EvalCallback), from the same seeded starts each time."""
+    seed: int = 0
+    """SB3's ``seed=``, the episode starts and the evaluation starts."""
+    threads: int = 1
+    """torch CPU threads."""
+
+    def __post_init__(self) -> None:
+        if self.obs not in OBSERVATIONS:
+            raise ValueError(f"unknown observation {self.obs!r}; expected one of {', '.join(OBSERVATIONS)}")
+        if self.algo not in ALGORITHMS:
+            raise ValueError(f"unknown algorithm {self.algo!r}; expected one of {', '.join(ALGORITHMS)}")
+        for name, value in {**ALGORITHM_PRESETS[self.algo], **PRESETS[self.obs]}.items():
+            if getattr(self, name) is None:
+                object.__setattr__(self, name, value)
+        object.__setattr__(self, "net_arch", tuple(self.net_arch))  # a JSON record's list
+        if self.steps < 1:
+            raise ValueError(f"steps must be >= 1, got {self.steps}")
+        if self.eval_every < EPISODE_STEPS or self.eval_every % EPISODE_STEPS:
+            raise ValueError(f"eval_every must be a multiple of the episode length {EPISODE_STEPS}, got {self.eval_every}")
+        if min(self.buffer_size, self.batch_size, self.train_freq, self.gradient_steps, self.frame_stack,
+               self.eval_episodes, self.threads) < 1 or self.learning_starts < 0 or self.seed < 0:
+            raise ValueError(f"SB3Config: sizes, counts and threads must be >= 1, learning_starts and seed >= 0: {self}")
+        if not (0 < self.gamma <= 1 and self.learning_rate > 0 and 0 < self.tau <= 1 and self.noise_std >= 0):
+            raise ValueError(f"SB3Config: need 0 < gamma <= 1, learning_rate > 0, 0 < tau <= 1, noise_std >= 0: {self}")
+
+    @property
+    def stacked(self) -> int:
+        """Frames or codes per observation: ``frame_stack``, or 1 for "state"."""
+        return 1 if self.obs == "state" else self.frame_stack
+
+    def to_dict(self) -> dict[str, Any]:
+        """A JSON-able copy, every value set."""
+        return asdict(self)

@@ -1,0 +1,142 @@
+"""A run folder and its checkpoint: what kind of run it is, and its one ``checkpoint.pt``.
+
+| kind | written by | its checkpoint's ``kind`` |
+|---|---|---|
+| :attr:`RunKind.PIGA` | ``piga-train-model`` (its ``config.json`` has no ``kind``) | none |
+| :attr:`RunKind.PLANET` | ``piga-baseline planet`` | ``"planet"`` |
+| :attr:`RunKind.DDPG` | ``piga-baseline ddpg`` (DDPG or SAC) | ``"ddpg"`` |
+
+Every run writes its checkpoint with :func:`write_checkpoint` (atomic) and reads it with
+:func:`read_checkpoint`, which says which file and what it found when the file is missing, unreadable
+or of another kind. The agent each kind runs as is registered in :mod:`piga.control.registry`.
+
+This module imports torch only when a checkpoint is read or written.
+"""
+
+from __future__ import annotations
+
+import enum
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+#: The checkpoint's file name in every run folder.
+CHECKPOINT = "checkpoint.pt"
+
+__all__ = ["CHECKPOINT", "RunKind", "read_checkpoint", "require_piga_run", "run_kind", "write_checkpoint", "unreadable"]
+
+
+class RunKind(enum.Enum):
+    """What a run folder holds: its ``config.json``'s ``kind`` (``piga`` when it has none)."""
+
+    PIGA = "piga"
+    PLANET = "planet"
+    DDPG = "ddpg"
+
+    @property
+    def is_baseline(self) -> bool:
+        """A baseline runs as trained: it cannot be told a gravity change or given a goal."""
+        return self is not RunKind.PIGA
+
+    @property
+    def writer(self) -> str:
+        """The command that writes such a run."""
+        return "piga-train-model" if self is RunKind.PIGA else f"piga-baseline {self.value}"
+
+    @property
+    def label(self) -> str:
+        """Its name in messages: "piga", "PlaNet-style", "DDPG" (an SB3 run, DDPG or SAC)."""
+        return {RunKind.PIGA: "piga", RunKind.PLANET: "PlaNet-style", RunKind.DDPG: "DDPG"}[self]
+
+    @classmethod
+    def parse(cls, name: str, where: str = "run kind") -> RunKind:
+        """The kind named ``name``.
+
+        Raises:
+            ValueError: an unknown name, naming ``where`` it was read and the known kinds.
+        """
+        try:
+            return cls(name)
+        except ValueError:
+            raise ValueError(f"{where}: unknown run kind {name!r}; known: {', '.join(k.value for k in cls)}") from None
+
+
+def run_kind(run_dir: str | os.PathLike[str]) -> RunKind:
+    """The kind of a run folder: ``config.json``'s ``kind``; :attr:`RunKind.PIGA` when it has none
+    (``piga-train-model``'s) or has no readable ``config.json`` (then loading the piga model says what is missing).
+
+    Raises:
+        ValueError: an unknown kind.
+    """
+    folder = Path(run_dir)
+    try:
+        record = json.loads((folder / "config.json").read_text())
+    except (OSError, ValueError):
+        record = {}
+    kind = record.get("kind", "piga") if isinstance(record, dict) else "piga"
+    return RunKind.parse(str(kind), f"{folder}/config.json")
+
+
+def require_piga_run(run_dir: str | os.PathLike[str], purpose: str) -> None:
+    """Refuses a baseline's run folder where a ``piga-train-model`` run is needed, saying which it is.
+
+    Args:
+        purpose: what needs the piga run, e.g. "piga-diagnose diagnoses the identified physics".
+
+    Raises:
+        ValueError: ``run_dir`` is a planet or ddpg run (or of an unknown kind).
+    """
+    kind = run_kind(run_dir)
+    if kind is not RunKind.PIGA:
+        raise ValueError(f"{run_dir} is a {kind.writer} run; {purpose}, so it needs a run folder of piga-train-model")
+
+
+def write_checkpoint(run_dir: str | os.PathLike[str], payload: dict[str, Any]) -> Path:
+    """Writes ``payload`` to ``run_dir/checkpoint.pt`` atomically (a reader never sees half a file); returns the path.
+
+    A baseline's payload names its kind (``payload["kind"]``, a :class:`RunKind` value); a piga run's has none.
+    """
+    import torch
+
+    from piga.io.atomic import atomic_output
+
+    path = Path(run_dir) / CHECKPOINT
+    with atomic_output(path, overwrite=True) as tmp:
+        torch.save(payload, tmp)
+    return path
+
+
+def _first_sentence(exc: Exception) -> str:
+    return " ".join(str(exc).split()).split(". ")[0][:160]
+
+
+def read_checkpoint(run_dir: str | os.PathLike[str], kind: RunKind) -> dict[str, Any]:
+    """The checkpoint of ``run_dir``, which must be a ``kind`` run's.
+
+    Raises:
+        FileNotFoundError: no checkpoint, asking whether ``run_dir`` is a ``kind`` run folder.
+        ValueError: a truncated or foreign file (naming the file and the cause), or another kind's
+            checkpoint (naming the kind found).
+    """
+    import torch
+
+    path = Path(run_dir) / CHECKPOINT
+    if not path.exists():
+        raise FileNotFoundError(f"{path}: no checkpoint (is {run_dir} a {kind.writer} run folder?)")
+    try:
+        payload = torch.load(path, map_location="cpu", weights_only=False)
+    except Exception as exc:  # a truncated or foreign file
+        raise unreadable(path, kind, exc) from None
+    if not isinstance(payload, dict):
+        raise ValueError(f"{path}: not a readable {kind.label} checkpoint (it holds a {type(payload).__name__})")
+    found = payload.get("kind", RunKind.PIGA.value)
+    if found != kind.value:
+        raise ValueError(f"{path} is a {RunKind.parse(str(found), str(path)).writer} checkpoint, not a {kind.writer} run")
+    return payload
+
+
+def unreadable(path: Path, kind: RunKind, exc: Exception) -> ValueError:
+    """The one-line error for a ``kind`` checkpoint that cannot be read: the file, and the first sentence of the cause."""
+    return ValueError(f"{path}: not a readable {kind.label} checkpoint ({exc.__class__.__name__}: {_first_sentence(exc)}); "
+                      "it may be truncated (a full disk, an interrupted copy): restore it, or train the run again with --overwrite")
