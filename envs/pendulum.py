@@ -69,6 +69,11 @@ __all__ = ["MAX_ACTION", "PENDULUM_DT", "PENDULUM_MAX_SPEED", "ActuationGain", "
            "PixelPendulumConfig", "ResetRange", "make_pixel_pendulum"]
 
 
+#: Largest actuation gain, and largest simulated gravity ``gravity * gravity_mult``: torques stay
+#: far inside float32.
+MAX_ACTUATION_GAIN = MAX_GRAVITY = 1e6
+
+
 @dataclass(frozen=True)
 class PixelPendulumConfig:
     """Settings of the pixel pendulum. Every field has a Gymnasium-faithful default."""
@@ -100,6 +105,19 @@ class PixelPendulumConfig:
         except (TypeError, ValueError) as exc:
             raise type(exc)(f"PixelPendulumConfig.effects: {exc}") from None
         object.__setattr__(self, "effects", effects)  # canonical order, checked values
+        if self.actuation_gain > MAX_ACTUATION_GAIN:
+            raise ValueError(f"PixelPendulumConfig.actuation_gain={self.actuation_gain!r} is out of range: at most "
+                             f"{MAX_ACTUATION_GAIN:g} (a larger torque overflows float32)")
+        if self.effective_gravity > MAX_GRAVITY:
+            raise ValueError(f"PixelPendulumConfig: gravity x gravity_mult = {self.effective_gravity:g} is out of range: at "
+                             f"most {MAX_GRAVITY:g} (a larger gravity overflows float32)")
+        for name, value in effects:
+            if name == "blur" and value > self.image_size / 2:
+                raise ValueError(f"effect blur={value:g} px would blur the pendulum away in a {self.image_size} px frame; "
+                                 f"use a sigma of at most {self.image_size / 2:g} px")
+            if name == "shift" and abs(value) >= self.image_size:
+                raise ValueError(f"effect shift={value:g} px would move the pendulum out of a {self.image_size} px frame; "
+                                 f"use |shift| < {self.image_size}")
         checks = {
             "image_size": self.image_size >= 8,
             "frame_stack": self.frame_stack >= 1,

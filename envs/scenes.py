@@ -41,6 +41,8 @@ __all__ = ["SCENES", "SceneConfig", "scene_config", "accelerations", "simulate",
 
 #: Smallest ball radius (or half digit side) accepted, in pixels: smaller objects leave no trace in the frames.
 MIN_RADIUS = 0.5
+#: Smallest difference, in some RGB channel (0 to 1), between an object's colour and the background's.
+MIN_CONTRAST = 0.1
 
 
 #: The scenes (the keys of :data:`SCENES`).
@@ -110,9 +112,11 @@ class SceneConfig:
             raise SceneError(f"radius must be at least {MIN_RADIUS:g} px (a smaller object leaves no trace in the frames), "
                              f"got {self.radius:g}")
         if self.scene != "digits-spring":
-            hidden = [j for j, rgb in enumerate(self.colors[: self.n_objects]) if rgb == self.background]
+            hidden = [j for j, rgb in enumerate(self.colors[: self.n_objects])
+                      if max(abs(a - b) for a, b in zip(rgb, self.background)) < MIN_CONTRAST]
             if hidden:
-                raise SceneError(f"object {hidden[0]}'s colour {self.colors[hidden[0]]} is the background's: it would be "
+                same = "is" if self.colors[hidden[0]] == self.background else f"is within {MIN_CONTRAST:g} of"
+                raise SceneError(f"object {hidden[0]}'s colour {self.colors[hidden[0]]} {same} the background's: it would be "
                                  "invisible; choose colours that differ from the background")
         for name, value in self.params.items():
             if not (math.isfinite(float(value)) and float(value) > 0):

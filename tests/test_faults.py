@@ -23,7 +23,7 @@ import h5py
 import numpy as np
 import pytest
 
-from piga.cli import baseline, collect, control, demo, diagnose, importer, train
+from piga.cli import baseline, collect, control, demo, diagnose, importer, show, train
 from tests.helpers import ENV, assert_one_line, run_in_process
 
 TINY_PLANET = ("--steps", "2", "--batch-size", "2", "--chunk-length", "8", "--deter-size", "8", "--stoch-size", "4",
@@ -32,7 +32,7 @@ TINY_DDPG = ("--steps", "200", "--eval-every", "200", "--eval-episodes", "1", "-
              "--threads", "1", "--quiet")
 MAINS: dict[str, Callable[[Sequence[str] | None], int]] = {
     "piga-collect": collect.main, "piga-import": importer.main, "piga-baseline": baseline.main, "piga-control": control.main,
-    "piga-diagnose": diagnose.main, "piga-train-model": train.main, "piga-demo": demo.main,
+    "piga-diagnose": diagnose.main, "piga-train-model": train.main, "piga-demo": demo.main, "piga-show": show.main,
 }
 
 
@@ -64,6 +64,12 @@ def _nan_state(f: h5py.File) -> None:
     f["states"][...] = states
 
 
+def _nan_reward(f: h5py.File) -> None:
+    rewards = f["rewards"][()]
+    rewards[1, 2] = np.nan
+    f["rewards"][...] = rewards
+
+
 def _colour(f: h5py.File) -> None:
     _replace(f, "frames", np.repeat(f["frames"][()][..., None], 3, axis=-1))
 
@@ -86,7 +92,7 @@ def _five_objects(f: h5py.File) -> None:
 
 
 VARIANTS: dict[str, Callable[[h5py.File], None]] = {
-    "blank": _blank, "nan_state": _nan_state, "colour": _colour, "channel_axis": _channel_axis,
+    "blank": _blank, "nan_state": _nan_state, "nan_reward": _nan_reward, "colour": _colour, "channel_axis": _channel_axis,
     "two_actions": _two_actions, "unknown_env_field": _unknown_env_field,
 }
 
@@ -198,6 +204,18 @@ def test_script_parsers_take_no_abbreviations() -> None:
     assert lacking == []
 
 
+def test_a_failed_allocation_is_out_of_memory(capsys: pytest.CaptureFixture[str]) -> None:
+    """torch's CPU allocator raises a RuntimeError (here its words for piga-baseline planet --deter-size
+    100000000): one line that says so, exit 1, not an internal error."""
+    def allocate(argv: object) -> int:
+        raise RuntimeError("[enforce fail at alloc_cpu.cpp:127] err == 0. DefaultCPUAllocator: can't allocate memory: "
+                           "you tried to allocate 120000000000 bytes. Error code 12 (Cannot allocate memory)")
+
+    code, _, err = run_in_process("piga-baseline", allocate, capsys=capsys)
+    assert code == 1 and err == "piga-baseline: error: out of memory (an array of 111.8 GiB did not fit); choose smaller " \
+                                "sizes\n", err
+
+
 # ---------------------------------------------------------------------------------------------
 # piga-collect
 # ---------------------------------------------------------------------------------------------
@@ -210,6 +228,14 @@ def test_script_parsers_take_no_abbreviations() -> None:
     (["--system", "bouncing", "--colors", "black", "black"], ["is the background's", "invisible"], 1),
     (["--system", "bouncing", "--colors", "red", "white", "--background", "white"], ["object 1's colour"], 1),
     (["--system", "spring", "--k", "1e6"], ["k = 1e+06 is too stiff", "below 2222"], 1),
+    (["--seed", "9" * 25], ["seed must be >= 0 and <= 9223372036854775807"], 1),
+    (["--actuation-gain", "1e39"], ["actuation_gain=1e+39 is out of range", "at most 1e+06"], 1),
+    (["--gravity", "1e39"], ["gravity x gravity_mult = 1e+39 is out of range", "at most 1e+06"], 1),
+    (["--effect", "delay=5"], ["delay=5 steps is not shorter than a sequence's 5 actions", "raise --steps"], 1),
+    (["--effect", "frame_delay=7"], ["frame_delay=7 steps is not shorter", "all show the reset"], 1),
+    (["--effect", "blur=900"], ["blur=900 px would blur the pendulum away in a 64 px frame", "at most 32 px"], 1),
+    (["--effect", "shift=-64"], ["shift=-64 px would move the pendulum out of a 64 px frame"], 1),
+    (["--system", "bouncing", "--colors", "#000001", "white"], ["object 0's colour", "is within 0.1 of the background's"], 1),
 ])
 def test_collect_refuses(argv: list[str], needles: list[str], code: int, tmp_path: Path,
                          capsys: pytest.CaptureFixture[str]) -> None:
@@ -241,33 +267,63 @@ def test_blank_frames_are_never_kept(tmp_path: Path) -> None:
 
 @pytest.fixture(scope="module")
 def frame_folders(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    """Folders of 12 PNGs: "moving" (a square that moves), "blank" (all black)."""
+    """Folders of 12 PNGs: "moving" (a square that moves), "blank" (all black), "sizes" (as "moving",
+    but its 6th frame is 30x50)."""
     import imageio.v3 as iio
 
     root = tmp_path_factory.mktemp("recordings")
-    folders = {"moving": root / "moving", "blank": root / "blank"}
+    folders = {"moving": root / "moving", "blank": root / "blank", "sizes": root / "sizes"}
     for name, folder in folders.items():
         folder.mkdir()
         for i in range(12):
-            frame = np.zeros((32, 32), np.uint8)
-            if name == "moving":
+            frame = np.zeros((30, 50) if name == "sizes" and i == 5 else (32, 32), np.uint8)
+            if name != "blank":
                 frame[i : i + 6, 8:14] = 220
             iio.imwrite(folder / f"f{i}.png", frame)
     return folders
 
 
-@pytest.mark.parametrize("folder, values, needles", [
-    ("moving", ["1e300"] * 12, ["line 1: the action 1e300 is beyond ±1e+06"]),
-    ("moving", ["0.5"] * 11 + ["-3e7"], ["line 12: the action -3e7"]),
-    ("blank", ["0.5"] * 12, ["every frame is blank"]),
+@pytest.mark.parametrize("folder, values, argv, needles", [
+    ("moving", ["1e300"] * 12, (), ["line 1: the action 1e300 is beyond ±1e+06"]),
+    ("moving", ["0.5"] * 11 + ["-3e7"], (), ["line 12: the action -3e7"]),
+    ("blank", ["0.5"] * 12, (), ["every frame is blank"]),
+    ("moving", ["0.5"] * 12, ("--dt", "1e9"), ["dt must be the seconds between frames, 1e-05 to 10, got 1e+09"]),
+    ("moving", ["0.5"] * 12, ("--dt", "1e-12"), ["dt must be the seconds between frames"]),
+    ("sizes", ["0.5"] * 12, (), ["f5.png: 30x50 px, but f0.png is 32x32", "share one size"]),
 ])
-def test_import_refuses(folder: str, values: list[str], needles: list[str], frame_folders: dict[str, Path], tmp_path: Path,
-                        capsys: pytest.CaptureFixture[str]) -> None:
+def test_import_refuses(folder: str, values: list[str], argv: tuple[str, ...], needles: list[str],
+                        frame_folders: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     csv = tmp_path / "u.csv"
     csv.write_text("\n".join(values) + "\n")
     refused("piga-import", [str(frame_folders[folder]), str(csv), "--dt", "0.05", "--steps", "4", "--image-size", "32",
-                            "--split", "1,1,1", "--out", str(tmp_path / "out.h5")], capsys, *needles)
+                            "--split", "1,1,1", "--out", str(tmp_path / "out.h5"), *argv], capsys, *needles)
     assert _listing(tmp_path) == ["u.csv"]
+
+
+# ---------------------------------------------------------------------------------------------
+# piga-show
+# ---------------------------------------------------------------------------------------------
+
+
+def _grey(f: h5py.File) -> None:
+    f["frames"][...] = 128
+
+
+def _nan_action(f: h5py.File) -> None:
+    actions = f["actions"][()]
+    actions[2, 3, 0] = np.nan
+    f["actions"][...] = actions
+
+
+@pytest.mark.parametrize("edit, needles", [
+    (_grey, ["every frame is blank (one flat level, 128)"]),
+    (_nan_action, ["/actions holds NaN", "sequence 2, step 3"]),
+])
+def test_show_refuses_a_file_with_nothing_to_show(edit: Callable[[h5py.File], None], needles: list[str], tiny_data: Path,
+                                                  tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    data = _variant(tiny_data, tmp_path / "d.h5", edit)
+    refused("piga-show", [str(data), "--out", str(tmp_path / "s.png")], capsys, *needles)
+    assert _listing(tmp_path) == ["d.h5"]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -280,6 +336,7 @@ def test_import_refuses(folder: str, values: list[str], needles: list[str], fram
     ("two_actions", (), ["has 2 action dimensions", "takes one"]),
     ("blank", (), ["every frame is blank"]),
     ("nan_state", (), ["/states holds NaN", "sequence 1, step 2"]),
+    ("nan_reward", (), ["/rewards holds NaN", "sequence 1, step 2"]),
     ("tiny", ("--free-nats", "1e308"), ["free_nats", "at most 1000"]),
     ("tiny", ("--iterative", "1", "--exploration-noise", "1e300"), ["exploration noise must be >= 0 and at most 10"]),
     ("unknown_env_field", ("--iterative", "1", "--episode-steps", "16"), ["'env_config' has unknown field(s) bogus"]),
@@ -511,6 +568,33 @@ def test_diagnose_refuses_data_before_the_diagnosis(data: str, needles: list[str
     assert _listing(tmp_path) == []
 
 
+def test_diagnose_refusing_an_unconverged_model_says_one_line(tiny_data: Path, tmp_path: Path,
+                                                               capsys: pytest.CaptureFixture[str],
+                                                               monkeypatch: pytest.MonkeyPatch) -> None:
+    """A run that did not converge, refused by the diagnosis (as one whose autoencoder draws no
+    pendulum is): the refusal alone, not the convergence warning first and then the refusal."""
+    import types
+
+    import piga.baselines.kinds
+    import piga.diagnostics
+    import piga.io.runs
+    from piga.cli.common import PigaError
+
+    def training_failed(*args: object, **kwargs: object) -> None:
+        raise PigaError("the model's training failed: train it longer")
+
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "metrics.json").write_text(json.dumps({"converged": False, "convergence": {"reason": "too short"}}))
+    pendulum = types.SimpleNamespace(config=types.SimpleNamespace(system="pendulum"))
+    monkeypatch.setattr(piga.baselines.kinds, "require_piga_run", lambda *args: None)
+    monkeypatch.setattr(piga.io.runs, "load_model", lambda path: (pendulum, {}))
+    monkeypatch.setattr(piga.diagnostics, "diagnose", training_failed)
+    refused("piga-diagnose", ["--model", str(run), "--data", str(tiny_data), "--out", str(tmp_path / "report"), "--quiet"],
+            capsys, "training failed")
+    assert _listing(tmp_path) == ["run", "run/metrics.json"]
+
+
 def test_diagnose_on_a_baseline_run_says_what_it_is(files: dict[str, Path], fake_planet_run: Path, tmp_path: Path,
                                                     capsys: pytest.CaptureFixture[str]) -> None:
     line = refused("piga-diagnose", ["--model", str(fake_planet_run), "--data", str(files["tiny"]), "--out",
@@ -560,6 +644,7 @@ def test_an_empty_split_reads_as_no_sequences(tiny_data: Path, tmp_path: Path) -
 @pytest.mark.parametrize("argv, needles", [
     (["--goal-angle", "1e300"], ["--goal-angle must be an angle"]),
     (["--sequences", "1000000000"], ["needs about"]),
+    (["--seed", "9" * 25], ["seed must be >= 0 and <= 9223372036854775807"]),
 ])
 def test_demo_refusals_leave_no_folder(argv: list[str], needles: list[str], tmp_path: Path,
                                        capsys: pytest.CaptureFixture[str]) -> None:
@@ -583,6 +668,30 @@ def test_demo_keeps_a_folder_that_existed(tmp_path: Path, capsys: pytest.Capture
     refused("piga-demo", ["--out", str(tmp_path / "demo"), "--sequences", "1000000000"], capsys, "needs about")
     assert _listing(tmp_path) == ["demo"]
     assert os.listdir(tmp_path / "demo") == []
+
+
+def test_demo_refused_in_training_leaves_nothing(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                 monkeypatch: pytest.MonkeyPatch) -> None:
+    """Training refuses the collected data (too few sequences): the data and the strip go too, so that the
+    rerun is refused for the same reason, not for files "from an earlier demo"."""
+    from piga.cli.common import PigaError
+
+    def fake_collect(config: Any, out: Path, **kwargs: Any) -> None:
+        Path(out).write_bytes(b"data")
+
+    def fake_show(argv: Sequence[str]) -> int:
+        Path(argv[argv.index("--out") + 1]).write_bytes(b"png")
+        return 0
+
+    def refused_training(argv: Sequence[str]) -> int:
+        raise PigaError("27 training windows are fewer than one batch of 32")
+
+    monkeypatch.setattr(demo, "collect", fake_collect)
+    monkeypatch.setattr(demo.show, "main", fake_show)
+    monkeypatch.setattr(demo.train, "main", refused_training)
+    for _ in range(2):
+        refused("piga-demo", ["--out", str(tmp_path / "demo"), "--sequences", "1"], capsys, "fewer than one batch")
+        assert _listing(tmp_path) == []
 
 
 def test_demo_interrupted_in_training_says_what_it_kept(tmp_path: Path, capsys: pytest.CaptureFixture[str],

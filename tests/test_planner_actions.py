@@ -27,7 +27,7 @@ def _episode_actions(agent: object, **overrides: object) -> np.ndarray:
 
     config = EpisodeConfig(**{"episodes": 2, "steps": 20, "hold_steps": 1, **overrides})  # type: ignore[arg-type]
     result = run_episodes(agent, config, record=config.episodes)  # type: ignore[arg-type]
-    return np.stack([r["actions"] for r in result["recordings"]]).astype(np.float32)
+    return np.stack([r.actions for r in result.recordings]).astype(np.float32)
 
 
 def _pendulum_model() -> object:

@@ -106,13 +106,32 @@ def run_cli(prog: str, main: Callable[[Sequence[str] | None], int | None], argv:
     except MemoryError as exc:
         print(f"{prog}: error: out of memory ({' '.join(str(exc).split()) or 'MemoryError'})", file=sys.stderr)
         sys.exit(1)
+    except RuntimeError as exc:
+        if (wanted := _failed_allocation(exc)) is None:
+            _internal_error(prog, argv, exc)
+        print(f"{prog}: error: out of memory (an array of {wanted} did not fit); choose smaller sizes", file=sys.stderr)
+        sys.exit(1)
     except Exception as exc:  # a bug: one line, and the traceback in a log file
-        message = " ".join(str(exc).split())[:200]
-        log = _write_traceback(prog, argv)
-        where = f"the traceback is in {log}" if log else "the traceback could not be written to a log file"
-        print(f"{prog}: internal error ({exc.__class__.__name__}: {message}); {where}; please report it", file=sys.stderr)
-        sys.exit(INTERNAL_ERROR)
+        _internal_error(prog, argv, exc)
     sys.exit(code or 0)
+
+
+def _internal_error(prog: str, argv: Sequence[str] | None, exc: BaseException) -> NoReturn:
+    """Prints the one line of a bug, writes the traceback of the exception being handled to a log file, and exits."""
+    message = " ".join(str(exc).split())[:200]
+    log = _write_traceback(prog, argv)
+    where = f"the traceback is in {log}" if log else "the traceback could not be written to a log file"
+    print(f"{prog}: internal error ({exc.__class__.__name__}: {message}); {where}; please report it", file=sys.stderr)
+    sys.exit(INTERNAL_ERROR)
+
+
+def _failed_allocation(exc: RuntimeError) -> str | None:
+    """The size torch's CPU allocator could not get ("... you tried to allocate 120000000000 bytes"), as
+    text such as "112 GiB"; None for any other RuntimeError."""
+    from piga.io.resources import format_bytes
+
+    found = re.search(r"can't allocate memory: you tried to allocate (\d+) bytes", str(exc))
+    return None if found is None else format_bytes(float(found.group(1)))
 
 
 @contextlib.contextmanager

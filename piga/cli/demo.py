@@ -97,11 +97,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     from piga.cli.control import check_angle
 
     check_angle("--goal-angle", args.goal_angle)
+    collect_config = replace(CollectConfig(), sequences=args.sequences, seed=args.seed)  # checked before any folder
     outputs = (data, strip, run_dir / CHECKPOINT, goal_png, control_md)
     before = {path: path.exists() and path.stat().st_mtime_ns for path in outputs}
     try:
         with made_folder(out):
-            return _run(args, argv, out, data, strip, run_dir, goal_png, control_md)
+            try:
+                return _run(args, argv, out, collect_config, data, strip, run_dir, goal_png, control_md)
+            except Exception:  # a later stage refused: the files this demo made would make the rerun refuse
+                for path in (data, strip, goal_png, control_md):
+                    if before[path] is False and path.exists():
+                        path.unlink()
+                raise
     except KeyboardInterrupt:  # say what this demo kept (a step's own message would name its own command)
         kept = [str(path.relative_to(out)) for path in outputs
                 if path.exists() and path.stat().st_mtime_ns != before[path]]
@@ -111,12 +118,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         raise KeyboardInterrupt from None
 
 
-def _run(args: argparse.Namespace, argv: Sequence[str] | None, out: Path, data: Path, strip: Path, run_dir: Path,
-         goal_png: Path, control_md: Path) -> int:
-    """The demo's four steps, into the folder ``out`` (made by the caller)."""
+def _run(args: argparse.Namespace, argv: Sequence[str] | None, out: Path, config: CollectConfig, data: Path, strip: Path,
+         run_dir: Path, goal_png: Path, control_md: Path) -> int:
+    """The demo's four steps, into the folder ``out`` (made by the caller); ``config`` collects the data."""
     over = ["--overwrite"] if args.overwrite else []
     print(f"[1/4] collecting {args.sequences} sequences into {data}", flush=True)
-    config = replace(CollectConfig(), sequences=args.sequences, seed=args.seed)
     collect(config, data, overwrite=args.overwrite, command=command_line(PROG, argv), progress=not args.quiet)
     print(f"[2/4] saving a strip of frames to {strip}", flush=True)
     show.main([str(data), "--out", str(strip), *over])

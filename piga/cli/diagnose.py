@@ -46,7 +46,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     model, ckpt = load_model(args.model)
     if model.config.system != "pendulum":
         raise PigaError(f"{args.model}: piga-diagnose is for pendulum models; this one is a {model.config.system} model")
-    warn_if_unconverged(PROG, args.model)
     import torch
 
     torch.set_num_threads(max(1, min(2, torch.get_num_threads())))
@@ -58,6 +57,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         diagnosis.control = compare_control(args.model, diagnosis, effects, episodes=args.episodes, seed=args.seed,
                                             progress=not args.quiet)
     report = write_report(diagnosis, out, args.model, args.data, command_line(PROG, argv), overwrite=args.overwrite)
+    warn_if_unconverged(PROG, args.model)  # after the work: a refusal of the model stays the one line on stderr
     g = diagnosis.gap
     print(f"verdict: {diagnosis.verdict}")
     for line in diagnosis.exclusions:

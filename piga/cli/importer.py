@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from piga.cli.common import ArgumentParser, command_line, format_default, positive_float, positive_int, run_cli, split_type
-from piga.data.importer import ImportConfig, import_recording
+from piga.data.importer import MAX_DT, MIN_DT, ImportConfig, import_recording
 
 PROG = "piga-import"
 
@@ -22,7 +22,7 @@ def build_parser() -> ArgumentParser:
                    ".png/.jpg frames in natural name order")
     p.add_argument("actions", help="CSV with one action per frame: one column, or a header naming the column "
                    "'u' or 'action'")
-    p.add_argument("--dt", type=positive_float, required=True, help="seconds between frames (required)")
+    p.add_argument("--dt", type=positive_float, required=True, help=f"seconds between frames, {MIN_DT:g} to {MAX_DT:g} (required)")
     p.add_argument("--out", required=True, help="output .h5 file (written atomically)")
     p.add_argument("--steps", type=positive_int, default=defaults.steps,
                    help="frames per sequence T, >= 2; leftover frames at the end are dropped (default %(default)s)")

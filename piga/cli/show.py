@@ -8,7 +8,7 @@ import h5py
 import numpy as np
 
 from piga.cli.common import ArgumentParser, positive_int, run_cli
-from piga.data.schema import SPLITS, inspect_dataset, split_indices
+from piga.data.schema import SPLITS, check_actions_file, check_frames_have_signal, inspect_dataset, split_indices
 from piga.evaluation.plots import frame_strip, save_figure
 
 PROG = "piga-show"
@@ -28,6 +28,8 @@ def build_parser() -> ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     info = inspect_dataset(args.data)
+    check_frames_have_signal(args.data)  # a blank file, or a non-finite action, is named rather than drawn
+    check_actions_file(args.data)
     idx = split_indices(args.data, args.split)[: args.sequences]
     if len(idx) == 0:
         raise ValueError(f"split '{args.split}' of {args.data} is empty")

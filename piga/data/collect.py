@@ -39,6 +39,9 @@ from piga.io.atomic import check_writable_target
 from piga.data.schema import SPLITS, DatasetWriter
 from piga.io.worker_signals import quiet_worker_signals
 
+#: Largest root seed: a data file stores it as a 64-bit integer.
+MAX_SEED = 2**63 - 1
+
 #: Ranges of the paper's pendulum data: θ ~ U(-π, π), θ̇ ~ U(-6, 6).
 PAPER_MAX_SPEED = 6.0
 
@@ -67,6 +70,13 @@ class CollectConfig:
 
     def __post_init__(self) -> None:
         check_collect_sizes(self.sequences, self.steps, self.workers, self.seed, self.batch, self.split)
+        effects = dict(getattr(self.env, "effects", ()))
+        if effects.get("delay", 0) >= self.steps - 1:
+            raise ValueError(f"effect delay={effects['delay']:g} steps is not shorter than a sequence's {self.steps - 1} "
+                             "actions: no action would reach a frame; lower it or raise --steps")
+        if effects.get("frame_delay", 0) >= self.steps - 1:
+            raise ValueError(f"effect frame_delay={effects['frame_delay']:g} steps is not shorter than a sequence's "
+                             f"{self.steps} frames: they would all show the reset; lower it or raise --steps")
 
 
 def check_collect_sizes(sequences: int, steps: int, workers: int, seed: int, batch: int,
@@ -78,8 +88,8 @@ def check_collect_sizes(sequences: int, steps: int, workers: int, seed: int, bat
         raise ValueError(f"steps must be >= 2 (a video needs two frames), got {steps}")
     if workers < 1:
         raise ValueError(f"workers must be >= 1, got {workers}")
-    if seed < 0:
-        raise ValueError(f"seed must be >= 0, got {seed}")
+    if not 0 <= seed <= MAX_SEED:
+        raise ValueError(f"seed must be >= 0 and <= {MAX_SEED} (2^63 - 1, the largest a data file stores), got {seed}")
     if batch < 1:
         raise ValueError(f"batch must be >= 1, got {batch}")
     split_counts(sequences, split)  # validates

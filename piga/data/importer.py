@@ -43,6 +43,9 @@ from piga.data.scene import read_image, scene_to_gray
 FRAME_EXTENSIONS = (".png", ".jpg", ".jpeg")
 #: Header names that mark the action column of a CSV with several columns (case-insensitive).
 ACTION_COLUMNS = ("u", "action")
+#: Accepted frame intervals, in seconds: a 100 kHz camera to one frame per 10 s (beyond, a swinging
+#: pendulum's frames no longer follow each other).
+MIN_DT, MAX_DT = 1e-5, 10.0
 
 
 @dataclass(frozen=True)
@@ -59,8 +62,10 @@ class ImportConfig:
     """Train/valid/test, as fractions summing to 1 or as counts summing to the number of sequences."""
 
     def __post_init__(self) -> None:
-        if not (isinstance(self.dt, (int, float, np.floating)) and math.isfinite(self.dt) and self.dt > 0):
-            raise ValueError(f"dt must be a positive number of seconds, got {self.dt!r}")
+        number = isinstance(self.dt, (int, float, np.floating))
+        if not (number and MIN_DT <= self.dt <= MAX_DT):
+            raise ValueError(f"dt must be the seconds between frames, {MIN_DT:g} to {MAX_DT:g}, got "
+                             f"{format(self.dt, 'g') if number else repr(self.dt)}")
         if self.steps < 2:
             raise ValueError(f"steps must be >= 2 (a video needs two frames), got {self.steps}")
         if self.image_size < 8:
@@ -110,8 +115,13 @@ def read_recording(path: str | Path, size: int) -> np.ndarray:
     p = Path(path)
     if p.is_dir():
         frames = []
+        first: tuple[Path, tuple[int, ...]] | None = None
         for file in frame_files(p):
             image = read_image(file)  # its errors name the file
+            first = first or (file, image.shape[:2])
+            if image.shape[:2] != first[1]:
+                raise ValueError(f"{file}: {image.shape[0]}x{image.shape[1]} px, but {first[0].name} is "
+                                 f"{first[1][0]}x{first[1][1]}: the frames of one recording share one size")
             try:
                 frames.append(scene_to_gray(image, size))
             except ValueError as exc:

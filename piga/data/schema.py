@@ -328,14 +328,21 @@ def load_rewards(path: str | os.PathLike[str], split: str) -> np.ndarray:
     ``frames[n, t]``. For reward-based baselines only; piga's own training never calls this.
 
     Raises:
-        DataFormatError: the file has no ``/rewards`` (optional in the schema; ``piga-collect`` writes it).
+        DataFormatError: the file has no ``/rewards`` (optional in the schema; ``piga-collect`` writes it),
+            or they hold NaN or infinite values (naming the first: sequence, step).
     """
     idx = split_indices(path, split)
     with _open(path) as f:
         if "rewards" not in f:
             raise DataFormatError(f"{path}: has no /rewards (reward-based baselines need them; files from "
                                   "piga-collect have them)")
-        return _take(f["rewards"], idx).astype(np.float32)
+        rewards = _take(f["rewards"], idx).astype(np.float32)  # (n, T)
+    bad = ~np.isfinite(rewards)
+    if bad.any():
+        i, t = (int(k) for k in np.argwhere(bad)[0])
+        raise DataFormatError(f"{path}: /rewards holds NaN or infinite values ({int(bad.sum())} entries; the first: "
+                              f"sequence {int(idx[i])}, step {t}: {rewards[i, t]}); fix or recompute the rewards")
+    return rewards
 
 
 def _take(ds: h5py.Dataset, idx: np.ndarray) -> np.ndarray:
