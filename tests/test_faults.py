@@ -575,7 +575,7 @@ def test_diagnose_refusing_an_unconverged_model_says_one_line(tiny_data: Path, t
     pendulum is): the refusal alone, not the convergence warning first and then the refusal."""
     import types
 
-    import piga.baselines.kinds
+    import piga.io.checkpoint
     import piga.diagnostics
     import piga.io.runs
     from piga.cli.common import PigaError
@@ -587,7 +587,7 @@ def test_diagnose_refusing_an_unconverged_model_says_one_line(tiny_data: Path, t
     run.mkdir()
     (run / "metrics.json").write_text(json.dumps({"converged": False, "convergence": {"reason": "too short"}}))
     pendulum = types.SimpleNamespace(config=types.SimpleNamespace(system="pendulum"))
-    monkeypatch.setattr(piga.baselines.kinds, "require_piga_run", lambda *args: None)
+    monkeypatch.setattr(piga.io.checkpoint, "require_piga_run", lambda *args: None)
     monkeypatch.setattr(piga.io.runs, "load_model", lambda path: (pendulum, {}))
     monkeypatch.setattr(piga.diagnostics, "diagnose", training_failed)
     refused("piga-diagnose", ["--model", str(run), "--data", str(tiny_data), "--out", str(tmp_path / "report"), "--quiet"],
@@ -712,3 +712,18 @@ def test_demo_interrupted_in_training_says_what_it_kept(tmp_path: Path, capsys: 
     assert err.strip() == f"piga-demo: interrupted; {tmp_path / 'demo'} keeps pendulum.h5 from this demo; run it again with " \
                           "--overwrite to start over", err
     assert _listing(tmp_path) == ["demo", "demo/pendulum.h5"]
+
+
+@pytest.mark.parametrize("prog, argv, needle", [
+    ("piga-train-model", ["FILE", "--threads", "100000"], "--threads: expected an integer in [0, "),
+    ("piga-baseline", ["planet", "FILE", "--out", "OUT", "--threads", "100000"], "--threads: expected an integer in [0, "),
+    ("piga-baseline", ["ddpg", "--out", "OUT", "--threads", "100000"], "--threads: expected an integer in [0, "),
+    ("piga-train-model", ["FILE", "--seed", "9" * 25], "--seed: expected an integer in [0, 2^63 - 1]"),
+    ("piga-control", ["--oracle", "--seed", "9" * 25], "--seed: expected an integer in [0, 2^63 - 1]"),
+])
+def test_threads_and_seeds_are_refused_beyond_what_the_machine_and_the_generators_take(
+        prog: str, argv: list[str], needle: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A thread count above the CPUs crashes torch's pool; a seed above 2^63 - 1 overflows numpy's generator."""
+    argv = [str(tmp_path / "x.h5") if a == "FILE" else str(tmp_path / "out") if a == "OUT" else a for a in argv]
+    refused(prog, argv, capsys, needle, code=2)
+    assert not (tmp_path / "out").exists()

@@ -20,7 +20,8 @@ from pathlib import Path
 from typing import Any
 
 from piga.cli.common import (ArgumentParser, Interrupted, PigaError, add_preset_option, command_line, format_default,
-                             made_folder, nonnegative_float, nonnegative_int, positive_float, positive_int, run_cli)
+                             made_folder, nonnegative_float, nonnegative_int, positive_float, positive_int, run_cli,
+                             seed_int, thread_count)
 from piga.io.checkpoint import CHECKPOINT, RunKind
 
 PROG = "piga-baseline"
@@ -58,8 +59,8 @@ def build_parser() -> ArgumentParser:
     q.add_argument("--stoch-size", type=positive_int, default=rssm.stoch_size, help="stochastic state size (default %(default)s)")
     add_preset_option(q, "--max-minutes", default=planet.max_minutes, type=positive_float, shown="no limit",
                       help="stop at the first checkpoint past this budget")
-    q.add_argument("--seed", type=nonnegative_int, default=planet.seed, help="seed (default %(default)s)")
-    q.add_argument("--threads", type=nonnegative_int, default=planet.threads, help="torch CPU threads (default %(default)s: torch's choice)")
+    q.add_argument("--seed", type=seed_int, default=planet.seed, help="seed (default %(default)s)")
+    q.add_argument("--threads", type=thread_count, default=planet.threads, help="torch CPU threads (default %(default)s: torch's choice)")
     iterative = IterativeConfig()
     q.add_argument("--iterative", type=nonnegative_int, default=0, metavar="EPISODES",
                    help="after training, PlaNet's own loop: each round collects EPISODES episodes with the planner plus "
@@ -109,8 +110,8 @@ def build_parser() -> ArgumentParser:
     d.add_argument("--autoencoder-steps", type=positive_int, default=AutoencoderConfig.steps,
                    help="with --obs latent: the autoencoder's training steps (default %(default)s)")
     d.add_argument("--torque-arrow", action="store_true", help="show Gymnasium's torque arrow in the frames (off by default, as in piga-control)")
-    d.add_argument("--seed", type=nonnegative_int, default=ddpg.seed, help="seed (default %(default)s)")
-    d.add_argument("--threads", type=positive_int, default=ddpg.threads, help="torch CPU threads (default %(default)s)")
+    d.add_argument("--seed", type=seed_int, default=ddpg.seed, help="seed (default %(default)s)")
+    d.add_argument("--threads", type=thread_count, default=ddpg.threads, help="torch CPU threads (default %(default)s)")
     _common(d)
     return p
 

@@ -11,8 +11,8 @@ from envs.dmc import DMCPendulumConfig
 from envs.effects import EFFECTS, format_effects, parse_effect
 from envs.pendulum import PixelPendulumConfig
 from envs.scenes import SCENES, scene_config
-from piga.cli.common import (ArgumentParser, PigaError, add_preset_option, command_line, format_default, nonnegative_int, positive_float,
-                             positive_int, run_cli, split_type)
+from piga.cli.common import (ArgumentParser, PigaError, add_preset_option, command_line, format_default, positive_float,
+                             positive_int, run_cli, seed_int, split_type)
 from piga.data.collect import PAPER_MAX_SPEED, PRESETS, CollectConfig, collect
 from piga.data.collect_scenes import SCENE_PRESETS, SCENE_STEPS, collect_scene
 from piga.data.schema import inspect_dataset
@@ -130,7 +130,7 @@ def build_parser() -> ArgumentParser:
                       shown=f"{env.image_size}; a scene's own: {', '.join(f'{k} {v}' for k, v in _scene_sizes().items())}",
                       help="frame side in pixels")
     p.add_argument("--no-torque-arrow", action="store_true", help="hide Gymnasium's torque arrow in the frames")
-    p.add_argument("--seed", type=nonnegative_int, default=defaults.seed, help="root seed (default %(default)s)")
+    p.add_argument("--seed", type=seed_int, default=defaults.seed, help="root seed (default %(default)s)")
     p.add_argument("--workers", type=positive_int, default=defaults.workers,
                    help="parallel env processes (default %(default)s); the data do not depend on it")
     add_preset_option(p, "--split", type=split_type, default=defaults.split,

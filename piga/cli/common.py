@@ -206,6 +206,15 @@ nonnegative_float = _number_type(float, lambda v: 0 <= v < float("inf"), "a fini
 """argparse type: a finite number >= 0 (NaN is rejected too)."""
 unit_fraction = _number_type(float, lambda v: 0 <= v < 1, "a number in [0, 1)")
 """argparse type: a fraction in [0, 1) (NaN is rejected too)."""
+MAX_SEED = 2**63 - 1
+"""The largest seed: numpy and torch take seeds up to 2^63 - 1, and a data file stores them as int64."""
+seed_int = _number_type(int, lambda v: 0 <= v <= MAX_SEED, "an integer in [0, 2^63 - 1]")
+"""argparse type: a seed, an integer in [0, 2^63 - 1]."""
+MAX_THREADS = max(1, os.cpu_count() or 1)
+thread_count = _number_type(int, lambda v: 0 <= v <= MAX_THREADS, f"an integer in [0, {MAX_THREADS}] (0: torch's choice; "
+                                                                  f"at most this machine's {MAX_THREADS} CPUs)")
+"""argparse type: torch CPU threads, 0 (torch's choice) up to this machine's CPU count (more only slows it down,
+and a huge count makes torch's thread pool crash)."""
 
 
 def format_default(value: Any) -> str:
@@ -253,5 +262,5 @@ def split_type(text: str) -> tuple[float, float, float]:
     return values  # type: ignore[return-value]
 
 
-__all__ = ["ArgumentParser", "PigaError", "run_cli", "positive_int", "nonnegative_int", "positive_float", "nonnegative_float",
+__all__ = ["ArgumentParser", "PigaError", "run_cli", "positive_int", "nonnegative_int", "seed_int", "thread_count", "positive_float", "nonnegative_float",
            "split_type", "add_preset_option", "documented_default", "format_default", "Interrupted", "made_folder"]

@@ -14,7 +14,8 @@ import numpy as np
 
 from agents.config import MPCConfig
 from piga.io.atomic import atomic_output, check_writable_target, write_json
-from piga.cli.common import ArgumentParser, PigaError, command_line, nonnegative_int, positive_float, positive_int, run_cli, warn_if_unconverged
+from piga.cli.common import (ArgumentParser, PigaError, command_line, positive_float, positive_int, run_cli, seed_int,
+                             warn_if_unconverged)
 from piga.control.episodes import EpisodeConfig, parse_range, run_episodes
 from piga.evaluation.episodes import summary_markdown
 from piga.io.checkpoint import RunKind
@@ -67,7 +68,7 @@ def build_parser() -> ArgumentParser:
     p.add_argument("--warm-start", action=argparse.BooleanOptionalAction, default=mpc.warm_start,
                    help="start each plan from the previous one shifted by a step; PlaNet re-plans from scratch "
                    "(--no-warm-start) (default %(default)s)")
-    p.add_argument("--seed", type=nonnegative_int, default=episodes.seed, help="seed of start states and planner (default %(default)s)")
+    p.add_argument("--seed", type=seed_int, default=episodes.seed, help="seed of start states and planner (default %(default)s)")
     p.add_argument("--torque-arrow", action="store_true",
                    help="show Gymnasium's torque arrow in the frames the agent sees (off by default; see README)")
     p.add_argument("--sweep", metavar="START:STOP:STEP",

@@ -20,8 +20,8 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from piga.cli import show, train
-from piga.cli.common import (ArgumentParser, Interrupted, PigaError, command_line, made_folder, nonnegative_int,
-                             positive_int, run_cli)
+from piga.cli.common import (ArgumentParser, Interrupted, PigaError, command_line, made_folder, positive_int, run_cli,
+                             seed_int, thread_count)
 from piga.data.collect import CollectConfig, collect
 from piga.data.schema import inspect_dataset
 from piga.io.checkpoint import CHECKPOINT
@@ -74,8 +74,8 @@ def build_parser() -> ArgumentParser:
                    help="steps per control episode (default %(default)s)")
     p.add_argument("--goal-angle", type=float, default=d.goal_angle,
                    help="angle of the goal image, degrees from upright (default %(default)s)")
-    p.add_argument("--seed", type=nonnegative_int, default=d.seed, help="seed of data, training and control (default %(default)s)")
-    p.add_argument("--threads", type=nonnegative_int, default=d.threads,
+    p.add_argument("--seed", type=seed_int, default=d.seed, help="seed of data, training and control (default %(default)s)")
+    p.add_argument("--threads", type=thread_count, default=d.threads,
                    help="torch CPU threads for training (default %(default)s: torch's choice); control plans on one "
                    "thread per worker")
     p.add_argument("--overwrite", action="store_true", help="replace files of an earlier demo in --out")

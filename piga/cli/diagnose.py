@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from piga.cli.common import ArgumentParser, PigaError, command_line, nonnegative_int, positive_int, run_cli, warn_if_unconverged
+from piga.cli.common import (ArgumentParser, PigaError, command_line, nonnegative_int, positive_int, run_cli, seed_int,
+                             warn_if_unconverged)
 
 PROG = "piga-diagnose"
 
@@ -22,7 +23,7 @@ def build_parser() -> ArgumentParser:
                    "'none'): also run MPC on it with the nominal and with the corrected physics, and compare")
     p.add_argument("--episodes", type=positive_int, default=5, help="MPC episodes per model with --env (default %(default)s)")
     p.add_argument("--bootstrap", type=nonnegative_int, default=20, help="bootstrap replicates for intervals (default %(default)s)")
-    p.add_argument("--seed", type=nonnegative_int, default=0, help="seed of the bootstrap (default %(default)s)")
+    p.add_argument("--seed", type=seed_int, default=0, help="seed of the bootstrap (default %(default)s)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing report in --out")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     return p

@@ -9,8 +9,8 @@ from pathlib import Path
 
 from typing import Any
 
-from piga.cli.common import (ArgumentParser, Interrupted, PigaError, add_preset_option, command_line, format_default, nonnegative_int,
-                             positive_float, positive_int, run_cli, unit_fraction)
+from piga.cli.common import (ArgumentParser, Interrupted, PigaError, add_preset_option, command_line, format_default,
+                             positive_float, positive_int, run_cli, seed_int, thread_count, unit_fraction)
 from piga.io.checkpoint import CHECKPOINT
 
 #: The recipe options a user may give; each is a TrainConfig field of the same name.
@@ -61,8 +61,8 @@ def build_parser() -> ArgumentParser:
                       help="gravity data only, the paper's m run: hold g at G (your value; the file's parameters are "
                       "never read) and learn the bodies' shared mass m instead, starting from 1/G so that the force "
                       "g·m starts at 1 as in the g run")
-    p.add_argument("--seed", type=nonnegative_int, default=fast.seed, help="seed of initialisation and sampling (default %(default)s)")
-    p.add_argument("--threads", type=nonnegative_int, default=fast.threads, help="torch CPU threads (default %(default)s: torch's choice)")
+    p.add_argument("--seed", type=seed_int, default=fast.seed, help="seed of initialisation and sampling (default %(default)s)")
+    p.add_argument("--threads", type=thread_count, default=fast.threads, help="torch CPU threads (default %(default)s: torch's choice)")
     p.add_argument("--resume", action="store_true", help="continue the run in --out; it may raise --epochs, --budget-steps or --max-minutes "
                    "(docs: piga-train-model; resuming replans the cosine schedule)")
     p.add_argument("--overwrite", action="store_true", help="replace the outputs of an earlier run in --out")
