@@ -727,3 +727,24 @@ def test_threads_and_seeds_are_refused_beyond_what_the_machine_and_the_generator
     argv = [str(tmp_path / "x.h5") if a == "FILE" else str(tmp_path / "out") if a == "OUT" else a for a in argv]
     refused(prog, argv, capsys, needle, code=2)
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["--model", "RUN", "--oracle"], "not both"),
+    (["--write-goal-image", "OUT.png", "--angle", "30", "--oracle"], "takes no --model or --oracle"),
+])
+def test_control_refuses_options_it_would_ignore(argv: list[str], needle: str, tmp_path: Path,
+                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    """--oracle beside a piga run, and --write-goal-image beside an agent, used to be silently ignored."""
+    run = tmp_path / "run"  # a piga run folder, as far as its kind goes (refused before its checkpoint is read)
+    run.mkdir()
+    (run / "checkpoint.pt").write_bytes(b"not read")
+    argv = [str(run) if a == "RUN" else str(tmp_path / a) if a == "OUT.png" else a for a in argv]
+    refused("piga-control", argv, capsys, needle)
+    assert not (tmp_path / "OUT.png").exists()
+
+
+def test_control_refuses_planner_options_for_a_baseline_run(baseline_runs: dict[str, Path],
+                                                            capsys: pytest.CaptureFixture[str]) -> None:
+    """A DDPG run has no planner and a PlaNet-style run plans with PlaNet's CEM: --horizon would be ignored."""
+    refused("piga-control", ["--model", str(baseline_runs["ddpg"]), "--horizon", "7"], capsys, "--horizon", "ddpg")

@@ -92,11 +92,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.env_option:
         raise PigaError("--env-option is for --env piga/DMCPendulum-v0")
     if args.write_goal_image:
+        if args.model or args.oracle:
+            raise PigaError("--write-goal-image only writes a picture and exits; it takes no --model or --oracle")
         return _write_goal_image(args)
     if args.angle is not None:
         raise PigaError("--angle goes with --write-goal-image; to set the control goal use --goal-angle or --goal-image")
     if not args.oracle and not args.model:
         raise PigaError("give --model RUN_DIR (or --oracle)")
+    if args.oracle and args.model and not args.sweep and run_kind_is_piga(args.model):
+        raise PigaError("give --model RUN_DIR to run the piga agent or --oracle to run the oracle, not both "
+                        "(--sweep runs the two side by side)")
     check_angle("--goal-angle", args.goal_angle)
     hold = EpisodeConfig.hold_steps
     if args.steps < hold:
@@ -131,7 +136,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         model, ckpt = load_model(args.model)
         if model.config.system != "pendulum":
             raise PigaError(f"{args.model}: a {model.config.system} model cannot control the pendulum")
-        warn_if_unconverged(PROG, args.model)
     if args.goal_image:
         if model is None:
             raise PigaError("--goal-image needs --model: the goal is read from the image by the model's encoder")
@@ -143,6 +147,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         args.goal_angle = math.degrees(estimate.angle)
         print(f"goal read from {args.goal_image}: {args.goal_angle:.2f} deg (hold torque {estimate.hold_torque:+.2f})")
         mpc = replace(mpc, goal_angle=estimate.angle)
+    if args.model:  # after every refusal, so that a refused command prints one line
+        warn_if_unconverged(PROG, args.model)
     config = EpisodeConfig(episodes=args.episodes, steps=args.steps, seed=args.seed, gravity_mult=args.gravity_mult,
                            goal_angle=mpc.goal_angle, torque_arrow=args.torque_arrow)
     agent: OracleAgent | PigaMPCAgent
@@ -219,6 +225,18 @@ def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: 
     return 0
 
 
+#: The CEM options' defaults: a baseline run refuses any other value (it does not use them).
+PLANNER_DEFAULTS = {"horizon": MPCConfig().cem.horizon, "candidates": MPCConfig().cem.candidates, "elites": None,
+                    "iterations": MPCConfig().cem.iterations, "warm_start": MPCConfig().warm_start}
+
+
+def run_kind_is_piga(model: str) -> bool:
+    """Whether ``model`` is a piga-train-model run (a baseline's run refuses --oracle with its own line)."""
+    from piga.io.checkpoint import run_kind
+
+    return run_kind(model) is RunKind.PIGA
+
+
 def _run_kind(args: argparse.Namespace) -> RunKind:
     """The kind of ``--model``'s run (piga for a piga-train-model run, or with --oracle alone)."""
     if not args.model:
@@ -250,6 +268,12 @@ def _baseline(args: argparse.Namespace, kind: RunKind, mpc: MPCConfig, outputs: 
         if Path(args.video).suffix.lower() not in (".mp4", ".gif"):
             raise PigaError(f"--video must end in .mp4 or .gif, got {args.video}")
         check_writable_target(args.video, args.overwrite)
+    planner = [f"--{name.replace('_', '-')}" for name in ("horizon", "candidates", "elites", "iterations", "warm_start")
+               if getattr(args, name) != PLANNER_DEFAULTS[name]]
+    if planner:
+        raise PigaError(f"{', '.join(planner)}: a {kind.value} run plans with its own settings "
+                        f"({'PlaNet' + chr(39) + 's CEM' if kind is RunKind.PLANET else 'a policy, no planner'}); "
+                        "the CEM options set the piga agent's and the oracle's planner")
     if args.sweep or args.gravity_mult != 1:
         print(f"note: the {kind.value} agent runs as trained: it cannot be told that gravity changed")
     if args.sweep:
