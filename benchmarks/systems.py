@@ -59,8 +59,8 @@ PAPER_LEARNED: dict[str, dict[str, float]] = {
 }
 SYSTEMS = list(PAPER_LEARNED)
 DATA_SEED = 100
-#: Case -> (the scene whose data it trains on, ModelConfig overrides on top of the fast preset). The m
-#: run's g is the value the data were collected with: what the user knows, given on the command line.
+#: Case -> (the scene whose data it trains on, system options (``ModelConfig.with_options``) on top of the fast
+#: preset). The m run's g is the value the data were collected with: what the user knows, given on the command line.
 CASES: dict[str, tuple[str, dict[str, Any]]] = {
     **{system: (system, {}) for system in SYSTEMS if system != "gravity-m"},
     "gravity-m": ("gravity", {"fixed_g": scene_config("gravity").params["g"]}),
@@ -103,7 +103,7 @@ def _data(system: str, folder: Path) -> Path:
 
 def _run(case: str, seed: int, data: Path, folder: Path, overrides: dict[str, Any] | None = None,
          name: str | None = None) -> dict[str, Any]:
-    """One training run with the fast preset (plus ``overrides``); reused if its metrics exist.
+    """One training run with the fast preset (plus ``overrides`` of its system options); reused if its metrics exist.
 
     A finished run whose metrics extrapolate fewer frames than its recipe's T_ext (a run made before
     gravity's T_ext was 24) is re-evaluated from its checkpoint, not retrained.
@@ -118,7 +118,7 @@ def _run(case: str, seed: int, data: Path, folder: Path, overrides: dict[str, An
     metrics_path = run_dir / "metrics.json"
     info = inspect_dataset(data)
     preset = preset_for("fast", info)
-    model_config = replace(preset.model, **(overrides or {}))
+    model_config = preset.model.with_options(**(overrides or {}))
     if not metrics_path.exists():
         config = replace(preset.train, seed=seed, threads=1)
         if run_dir.exists():
@@ -150,8 +150,8 @@ def _check_recipe(run_dir: Path, info: Any, model_config: Any) -> None:
 
     from piga.world.model import ModelConfig
 
-    saved = {**ModelConfig().to_dict(),  # a field newer than the run: the run had its default
-             **torch.load(run_dir / "checkpoint.pt", map_location="cpu", weights_only=False)["model_config"]}
+    saved = ModelConfig.from_dict(torch.load(run_dir / "checkpoint.pt", map_location="cpu",  # a field newer than the
+                                             weights_only=False)["model_config"]).to_dict()  # run: its default
     wanted = model_config_for(info, model_config).to_dict()
     changed = [k for k in wanted if k != "extrapolate_frames" and json.dumps(saved[k]) != json.dumps(wanted[k])]
     if changed:

@@ -204,9 +204,9 @@ def test_damping_is_reported_in_one_over_seconds() -> None:
 def test_the_nominal_model_carries_its_damping_and_integrator() -> None:
     """(d) nominal_of keeps a learned b and RK4, and the diagnosis' engine integrates them as the model does."""
     from piga.world.model import ModelConfig, PhysicsModel
-    from piga.world.physics import RK4, Pendulum, rollout
+    from piga.world.physics import RK4, Pendulum, PendulumOptions, rollout
 
-    model = PhysicsModel(ModelConfig(dt=0.04, integrator="rk4", substeps=2, learn_damping=True, damping_init=0.07,
+    model = PhysicsModel(ModelConfig(dt=0.04, integrator="rk4", substeps=2, system_options=PendulumOptions(learn_damping=True, damping_init=0.07),
                                      image_size=16))
     nom = fit.nominal_of(model)
     assert nom.integrator == "rk4" and nom.substeps == 2 and abs(nom.b - 0.07) < 1e-6

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -15,7 +14,7 @@ from piga.data.collect_scenes import SceneCollectConfig, collect_scene
 from piga.data.schema import inspect_dataset
 from piga.evaluation.evaluate import parameter_errors
 from piga.world.model import ModelConfig, PhysicsModel
-from piga.world.physics import Euler, Gravity, rollout
+from piga.world.physics import Euler, Gravity, GravityOptions, rollout
 from piga.training.train import model_config_for, preset_for
 from tests.helpers import assert_one_line, run_in_process
 
@@ -55,7 +54,7 @@ def test_m_learned_from_true_trajectories_with_g_fixed() -> None:
 
 def test_fixed_g_model_starts_far_and_only_m_gets_gradients() -> None:
     config = ModelConfig(system="gravity", dt=0.5, image_size=36, channels=3, n_objects=3, input_frames=4,
-                         pred_frames=2, template_size=18, fixed_g=60.0)
+                         pred_frames=2, template_size=18, system_options=GravityOptions(fixed_g=60.0))
     model = PhysicsModel(config)
     assert model.physical_parameters() == pytest.approx({"g": 60.0, "m": 1 / 60})
     assert model.learned_parameter_names() == ["m"]
@@ -66,7 +65,7 @@ def test_fixed_g_model_starts_far_and_only_m_gets_gradients() -> None:
     errors = parameter_errors(model, {"g": 60.0, "m": 1.0})
     assert list(errors) == ["m"] and errors["m"]["relative_error"] == pytest.approx(59 / 60)  # g was given, not learned
     with pytest.raises(ValueError, match="for gravity"):
-        ModelConfig(system="spring", fixed_g=60.0)
+        ModelConfig.from_dict({"system": "spring", "fixed_g": 60.0})
 
 
 @pytest.fixture(scope="module")
@@ -79,7 +78,7 @@ def gravity_data(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def test_fixed_g_reaches_the_model_and_is_refused_elsewhere(gravity_data: Path, tmp_path: Path,
                                                              capsys: pytest.CaptureFixture[str]) -> None:
     info = inspect_dataset(gravity_data)
-    config = replace(model_config_for(info, preset_for("fast", info).model), fixed_g=60.0)
+    config = model_config_for(info, preset_for("fast", info).model).with_options(fixed_g=60.0)
     assert config.extrapolate_frames == 24 and config.pred_frames == 12  # the paper's (4, 12, 24) for gravity
     spring = tmp_path / "spring.h5"
     collect_scene(SceneCollectConfig(scene=scene_config("spring"), sequences=2, steps=12, seed=0, workers=1,
@@ -87,4 +86,8 @@ def test_fixed_g_reaches_the_model_and_is_refused_elsewhere(gravity_data: Path, 
     code, _, err = run_in_process("piga-train-model", train_main, str(spring), "--out", str(tmp_path / "run"),
                                   "--fixed-g", "60", capsys=capsys)
     assert_one_line(code, err, "--fixed-g", "gravity")
+    assert not (tmp_path / "run").exists()
+    code, _, err = run_in_process("piga-train-model", train_main, str(spring), "--out", str(tmp_path / "run"),
+                                  "--signed-actuation", capsys=capsys)  # the pendulum's option, likewise
+    assert_one_line(code, err, "--signed-actuation", "pendulum")
     assert not (tmp_path / "run").exists()

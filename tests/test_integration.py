@@ -8,7 +8,7 @@ import math
 import pytest
 import torch
 
-from piga.world.physics import RK4, Euler, Pendulum, hold_velocity, make_integrator, rollout
+from piga.world.physics import RK4, Euler, Pendulum, PendulumOptions, hold_velocity, make_integrator, rollout
 
 DT = 0.04
 
@@ -103,7 +103,7 @@ def test_continuous_preset_model_reads_velocity_through_its_integrator():
     config = replace(PRESETS["continuous"].model, dt=DT)
     model = PhysicsModel(config)
     assert isinstance(model.integrator, RK4) and set(model.physical_parameters()) >= {"g", "a", "b"}
-    assert model.physical_parameters()["b"] == pytest.approx(config.damping_init)
+    assert model.physical_parameters()["b"] == pytest.approx(config.system_options.damping_init)
     coords = torch.tensor([0.1, 0.12, 0.15, 0.19]).view(1, 4, 1, 1)
     with pytest.raises(ValueError, match="action over the last input frame"):
         model.initial_state(coords)
@@ -150,7 +150,7 @@ def test_signed_actuation_parameters():
         system.set_parameters(a=0.0)
 
 
-@pytest.mark.parametrize("fields", [{"integrator": "rk4", "substeps": 2}, {"learn_damping": True}])
+@pytest.mark.parametrize("fields", [{"integrator": "rk4", "substeps": 2}, {"system_options": PendulumOptions(learn_damping=True)}])
 def test_continuous_models_are_refused_by_the_planner_and_carried_by_the_diagnosis(fields):
     """The pendulum planner's engine is Euler without damping: a --preset continuous model gets a clear
     refusal there, not a silently wrong plan. The diagnosis carries the model's integrator and damping
@@ -164,7 +164,7 @@ def test_continuous_models_are_refused_by_the_planner_and_carried_by_the_diagnos
         PendulumDynamics.of(model.system, model.integrator)
     nominal = nominal_of(model)
     assert nominal.integrator == fields.get("integrator", "euler") and nominal.substeps == fields.get("substeps", 1)
-    assert (nominal.b > 0) == bool(fields.get("learn_damping"))
+    assert (nominal.b > 0) == ("system_options" in fields)
     plain = PhysicsModel(ModelConfig())
     assert PendulumDynamics.of(plain.system, plain.integrator).substeps == 1
 
@@ -173,7 +173,7 @@ def test_parameter_errors_compare_a_with_the_signed_truth_of_a_flipped_file() ->
     from piga.evaluation.evaluate import parameter_errors
     from piga.world.model import ModelConfig, PhysicsModel
 
-    model = PhysicsModel(ModelConfig(image_size=32, signed_actuation=True))
+    model = PhysicsModel(ModelConfig(image_size=32, system_options=PendulumOptions(signed_actuation=True)))
     model.system.set_parameters(a=-1.3)
     flipped = {"g": 13.0, "actuation_gain": 1.328, "actuation_sign": -1.0}
     assert parameter_errors(model, flipped)["a"]["true"] == pytest.approx(-1.328)

@@ -2,10 +2,15 @@
 
 from __future__ import annotations
 
+import json
+from dataclasses import fields
+from typing import Any
+
 import pytest
 import torch
 
 from piga.world.model import ModelConfig, PhysicsModel, frames_to_float
+from piga.world.physics import BouncingOptions, GravityOptions, PendulumOptions
 
 
 @pytest.mark.parametrize("rec_frames", ["all", "input"])
@@ -72,6 +77,44 @@ def test_trimmed_prediction_loss_ignores_the_worst_windows() -> None:
 
 def test_checkpoint_config_without_pivot_gate_reads_as_trained() -> None:
     """A checkpoint from before the gate existed was trained without it: it loads with the gate off."""
-    legacy = {k: v for k, v in ModelConfig().to_dict().items() if k != "pivot_gate"}
-    assert ModelConfig.from_dict(legacy).pivot_gate == (0.0, 0.0)
+    legacy = {k: v for k, v in _flat(ModelConfig()).items() if k != "pivot_gate"}
+    assert ModelConfig.from_dict(legacy).system_options.pivot_gate == (0.0, 0.0)
     assert ModelConfig.from_dict(ModelConfig().to_dict()) == ModelConfig()
+
+
+#: The flat form every checkpoint stored before the systems' options moved to their systems: each system's
+#: options as fields of the config, at these defaults.
+FLAT_OPTIONS = {"learn_offset": False, "learn_damping": False, "damping_init": 0.01, "signed_actuation": False,
+                "angle_reference": 0.0, "pivot_gate": [0.125, 0.16], "wall_radius": 2.0, "fixed_g": 0.0}
+
+
+def _flat(config: ModelConfig) -> dict[str, Any]:
+    """``config`` as a checkpoint of the flat form stored it (JSON values: a tuple is a list)."""
+    values = json.loads(json.dumps(config.to_dict()))
+    return {**FLAT_OPTIONS, **values.pop("system_options"), **values}
+
+
+@pytest.mark.parametrize("config", [
+    ModelConfig(system_options=PendulumOptions(learn_offset=True, learn_damping=True, damping_init=0.07, signed_actuation=True,
+                                               angle_reference=0.3, pivot_gate=(0.1, 0.2)), substeps=5),
+    ModelConfig(system="spring", n_objects=2, dt=0.3),
+    ModelConfig(system="gravity", n_objects=3, system_options=GravityOptions(fixed_g=60.0)),
+    ModelConfig(system="bouncing", system_options=BouncingOptions(wall_radius=3.0), image_size=32)])
+def test_a_flat_checkpoint_config_loads_and_a_new_one_round_trips(config: ModelConfig) -> None:
+    assert ModelConfig.from_dict(_flat(config)) == config
+    stored = json.loads(json.dumps(config.to_dict()))  # as config.json holds it
+    assert set(stored["system_options"]) == {f.name for f in fields(type(config.system_options))}
+    assert ModelConfig.from_dict(stored) == config and ModelConfig.from_dict(config.to_dict()) == config
+
+
+def test_an_option_of_another_system_is_one_line_naming_both() -> None:
+    with pytest.raises(ValueError, match=r"^learn_damping is an option for pendulum models, not for a spring model "
+                                         r"\(its options: none\)$"):
+        ModelConfig.from_dict({**_flat(ModelConfig(system="spring")), "learn_damping": True})
+    with pytest.raises(ValueError, match="^wall_radius is an option for bouncing models, not for a gravity model "
+                                         r"\(its options: fixed_g\)$"):
+        ModelConfig(system="gravity").with_options(wall_radius=3.0)
+    with pytest.raises(ValueError, match="^a spring model takes SpringOptions, not PendulumOptions$"):
+        ModelConfig(system="spring", system_options=PendulumOptions())
+    with pytest.raises(ValueError, match="has no field or system option 'wall'"):
+        ModelConfig.from_dict({"system": "bouncing", "wall": 3.0})

@@ -68,7 +68,7 @@ def _old(scene: str, name: str) -> tuple[TrainConfig, ModelConfig]:
     if scene != "pendulum":
         model["template_size"] = max(info.image_shape[0] // 2, 1)
     file_model = model_config_for(info)
-    return TrainConfig(**recipe.get("train", {})), replace(file_model, **model)
+    return TrainConfig(**recipe.get("train", {})), ModelConfig.from_dict({**file_model.to_dict(), **model})  # flat overrides
 
 
 @pytest.mark.parametrize("scene,name", [("pendulum", name) for name in OLD_PRESETS]

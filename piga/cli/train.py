@@ -21,7 +21,7 @@ OUTPUTS = (CHECKPOINT, "metrics.json", "config.json", "rollout.png", "templates.
 
 
 def build_parser() -> ArgumentParser:
-    from piga.world.model import ModelConfig  # noqa: PLC0415 (torch loads only when the command runs)
+    from piga.world.physics import GravityOptions  # noqa: PLC0415 (torch loads only when the command runs)
     from piga.training.train import PRESETS, TrainConfig  # noqa: PLC0415
 
     fast, paper = TrainConfig(), PRESETS["paper"].train
@@ -56,7 +56,7 @@ def build_parser() -> ArgumentParser:
     p.add_argument("--signed-actuation", action="store_true",
                    help="learn the sign of a too (a in linear space, from +0.3): for a camera on the other side of the "
                    "hinge or a motor wired the other way, which flip the actuation the frames show")
-    add_preset_option(p, "--fixed-g", type=positive_float, default=ModelConfig().fixed_g, metavar="G",
+    add_preset_option(p, "--fixed-g", type=positive_float, default=GravityOptions().fixed_g, metavar="G",
                       shown="none: learn g with unit masses",
                       help="gravity data only, the paper's m run: hold g at G (your value; the file's parameters are "
                       "never read) and learn the bodies' shared mass m instead, starting from 1/G so that the force "
@@ -111,13 +111,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         recipe = preset_for(args.preset, info)
         train_config = replace(recipe.train, seed=args.seed, threads=args.threads, **overrides)  # explicit options win
         model_config = model_config_for(info, recipe.model)
-        if args.signed_actuation:
-            model_config = replace(model_config, signed_actuation=True)
-        if args.fixed_g is not None:
-            if info.system != "gravity":
-                raise PigaError(f"--fixed-g is for gravity data (it learns the mass m with g held); {args.data} is "
-                                f"{info.system}")
-            model_config = replace(model_config, fixed_g=args.fixed_g)
+        for flag, option, value in (("--signed-actuation", "signed_actuation", args.signed_actuation or None),
+                                    ("--fixed-g", "fixed_g", args.fixed_g)):
+            if value is not None:
+                try:
+                    model_config = model_config.with_options(**{option: value})
+                except ValueError as exc:
+                    raise PigaError(f"{flag}: {args.data} holds {info.system} data: {exc}") from None
         record = {"command": command}
     plan = check_trainable(info, model_config, train_config)
     from piga.world.model import PhysicsModel

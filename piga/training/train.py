@@ -36,6 +36,7 @@ from piga.io.choices import check_choices
 from piga.data.schema import DatasetInfo, check_actions_file, inspect_dataset, read_sequences
 from piga.world.encoder import estimate_background
 from piga.world.model import SYSTEM_SHAPES, ModelConfig, PhysicsModel, frames_to_float
+from piga.world.physics import BouncingOptions, PendulumOptions
 from piga.io.checkpoint import CHECKPOINT, write_checkpoint
 from piga.io.runs import load_model
 from piga.data.windows import SequenceWindows
@@ -225,11 +226,13 @@ PRESETS: dict[str, Recipe] = {
     "paper": Recipe(
         TrainConfig(epochs=1000, lr=3e-4, lr_physics=3e-4, optimizer="rmsprop", schedule="step", lr_decay_epoch=500,
                     warmup_fraction=0.0, curriculum_fraction=0.0, grad_clip=0.0, average_fraction=0.0, physics_grad_clip=0.0),
-        ModelConfig(substeps=5, learn_offset=True, readout="regress", rec_frames="all", pred_trim=0.0, velocity_correction=True),
+        ModelConfig(substeps=5, system_options=PendulumOptions(learn_offset=True), readout="regress", rec_frames="all",
+                    pred_trim=0.0, velocity_correction=True),
     ),
     # A continuous system filmed with a held action (a real motor, MuJoCo's 0.02 s physics steps):
     # RK4 within the frame, velocities read through it, and a learnable hinge damping.
-    "continuous": Recipe(model=ModelConfig(integrator="rk4", substeps=2, velocity_hold=True, learn_damping=True)),
+    "continuous": Recipe(model=ModelConfig(integrator="rk4", substeps=2, velocity_hold=True,
+                                           system_options=PendulumOptions(learn_damping=True))),
 }
 
 
@@ -259,12 +262,14 @@ _SCENE_PAPER_TRAIN = TrainConfig(epochs=500, lr=3e-4, lr_physics=3e-4, optimizer
                                  warmup_fraction=0.0, curriculum_fraction=0.0, grad_clip=0.0, average_fraction=0.0,
                                  physics_grad_clip=0.0, batch_size=100)
 
+#: Bouncing: nothing to learn; the wall distance is given, as the published engine hard-codes it.
+_WALL_3 = BouncingOptions(wall_radius=3.0)
+
 #: The scenes' recipes (``fast`` and ``paper``), by the file's attr ``scene`` (else its ``system``);
 #: what they share: :func:`_scene_model`.
 SCENE_PRESETS: dict[str, dict[str, Recipe]] = {
-    # Bouncing: nothing to learn; the wall distance is given, as the published engine hard-codes it.
-    "bouncing": {"fast": Recipe(_SCENE_FAST_TRAIN, _scene_model("bouncing", init_scale=1.0, wall_radius=3.0)),
-                 "paper": Recipe(_SCENE_PAPER_TRAIN, _scene_model("bouncing", paper=True, wall_radius=3.0))},
+    "bouncing": {"fast": Recipe(_SCENE_FAST_TRAIN, _scene_model("bouncing", init_scale=1.0, system_options=_WALL_3)),
+                 "paper": Recipe(_SCENE_PAPER_TRAIN, _scene_model("bouncing", paper=True, system_options=_WALL_3))},
     "spring": {"fast": Recipe(_SCENE_FAST_TRAIN, _scene_model("spring", init_scale=1.0)),
                "paper": Recipe(_SCENE_PAPER_TRAIN, _scene_model("spring", paper=True))},
     # Gravity: the paper's (L, T_pred, T_ext) = (4, 12, 24), as its published code's 3-body task (40-frame test sequences).
@@ -327,7 +332,13 @@ def model_config_for(info: DatasetInfo, model: ModelConfig | None = None) -> Mod
         raise ValueError(f"{info.path}: frames must be square, got {shape}")
     channels = shape[2] if len(shape) == 3 else 1
     n_objects = int(info.attrs.get("n_objects", SYSTEM_SHAPES[info.system][0]))
-    return replace(model or ModelConfig(), system=info.system, dt=info.dt, image_size=shape[0], channels=channels,
+    model = model or ModelConfig()
+    options = model.system_options
+    if model.system != info.system:  # another system's model: only its default options make way for the file's
+        if options != type(options)():
+            raise ValueError(f"{info.path}: {options} are a {model.system} model's, not a {info.system} model's")
+        options = None
+    return replace(model, system=info.system, system_options=options, dt=info.dt, image_size=shape[0], channels=channels,
                    n_objects=n_objects)
 
 

@@ -16,8 +16,8 @@ actions are float [B, T, A], where ``actions[:, t]`` is applied after frame t.
 
 from __future__ import annotations
 
-import math
-from dataclasses import asdict, dataclass, field
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, field, fields, replace
 from typing import Any, Literal, NamedTuple
 
 import torch
@@ -26,7 +26,7 @@ from torch import Tensor, nn
 
 from piga.world.decoder import Decoder, DecoderConfig
 from piga.world.encoder import Encoder, EncoderConfig
-from piga.world.physics import System, hold_velocity, make_integrator, make_system, rollout
+from piga.world.physics import SYSTEMS, System, SystemOptions, hold_velocity, make_integrator, rollout
 from piga.world.velocity import VelocityConfig, VelocityEstimator
 
 #: System name -> (N, D, A) of its state and actions.
@@ -50,13 +50,9 @@ class ModelConfig:
     """Physics family: one of :data:`SYSTEM_SHAPES`."""
     physics_init: dict[str, float] = field(default_factory=dict)
     """Initial physical parameters (empty: the system's far-from-truth defaults)."""
-    learn_offset: bool = False
-    """Pendulum only: learn the angle offset φ between the model's angle and upright. Needed
-    when the encoder's angle convention is arbitrary (the "regress" readout; the paper preset
-    learns it). The centroid readout is anchored by geometry (θ = 0: the object straight above the
-    pivot, i.e. the camera is upright), and a learnable φ there only adds a flat direction (encoder
-    convention, template orientation and φ drifting together) that drags g and a around; so it is
-    frozen by default."""
+    system_options: SystemOptions | None = None
+    """The options of ``system`` only, an instance of its ``Options`` (e.g.
+    :class:`piga.world.physics.PendulumOptions` of :class:`piga.world.physics.Pendulum`); None: their defaults."""
     dt: float = 0.05
     """Seconds per frame (from the data file)."""
     image_size: int = 64
@@ -96,22 +92,8 @@ class ModelConfig:
     using the action over the last input frame) instead of taking the backward difference as it.
     Needed when the system moves within a frame (substeps, RK4): there the difference lags the
     velocity at the frame by about dt·F/2. The 'continuous' preset sets it."""
-    learn_damping: bool = False
-    """Pendulum only: add a learnable viscous damping b to the engine (θ̈ = ... − 3·b·θ̇), starting
-    at ``damping_init``. A real hinge has friction; Gymnasium's pendulum has none."""
-    damping_init: float = 0.01
-    """Initial b when ``learn_damping`` (far from any real hinge's value)."""
-    signed_actuation: bool = False
-    """Pendulum only: learn a in linear space, sign included (:class:`piga.world.physics.Pendulum`), for a
-    camera on the other side or a motor wired the other way; a then starts at +0.3 and may cross 0."""
     readout: Literal["centroid", "regress"] = "centroid"
     """Encoder readout: "centroid" (soft centroid of each mask) or "regress" (the paper's location network, the paper preset)."""
-    angle_reference: float = 0.0
-    """Centroid readout of an angle: the direction read as θ = 0 (the learned offset φ absorbs it)."""
-    pivot_gate: tuple[float, float] = (0.125, 0.16)
-    """Centroid readout of an angle: radii (fractions of the image side) within which pixels do not
-    vote, so Gymnasium's torque arrow at the pivot cannot move the reading
-    (:class:`piga.world.encoder.EncoderConfig`)."""
     mask_width: int = 16
     """Encoder mask-network channels."""
     loc_width: int = 32
@@ -144,13 +126,6 @@ class ModelConfig:
     (:meth:`piga.world.decoder.Decoder.init_background`). On the balls' black background the sigmoid
     content otherwise stalls a few levels above 0, and SSIM, whose luminance term compares means
     near 0, punishes that hard (a uniform 0.003 alone caps it near 0.92)."""
-    wall_radius: float = 2.0
-    """Bouncing only: how far from the image edge a centre bounces, pixels (the published engine's 2)."""
-    fixed_g: float = 0.0
-    """Gravity only: the paper's m run. Hold g at this value (the user's; training never reads the
-    file's parameters) and learn the bodies' shared mass m instead; 0 (the default): learn g with
-    unit masses. The motion depends on g·m only, so m starts at 1/``fixed_g``: the force starts as
-    weak as in the g run (g = 1, m = 1), far from any true g·m."""
 
     def __post_init__(self) -> None:
         if self.system not in SYSTEM_SHAPES:
@@ -163,27 +138,37 @@ class ModelConfig:
             raise ValueError(f"rec_frames must be 'all' or 'input', got {self.rec_frames!r}")
         if self.integrator not in ("euler", "rk4"):
             raise ValueError(f"ModelConfig.integrator must be 'euler' or 'rk4', got {self.integrator!r}")
+        options = SYSTEMS[self.system].Options
+        if self.system_options is None:
+            object.__setattr__(self, "system_options", options())
+        elif type(self.system_options) is not options:
+            raise ValueError(f"a {self.system} model takes {options.__name__}, not {type(self.system_options).__name__}")
         if self.readout not in ("centroid", "regress"):
             raise ValueError(f"ModelConfig.readout must be 'centroid' or 'regress', got {self.readout!r}")
         if not 0 <= self.pred_trim < 1:
             raise ValueError(f"pred_trim must be in [0, 1), got {self.pred_trim}")
         if self.alpha < 0:
             raise ValueError(f"alpha must be >= 0, got {self.alpha}")
-        if self.learn_damping and self.system != "pendulum":
-            raise ValueError(f"learn_damping is for the pendulum, not {self.system!r}")
-        if self.fixed_g and self.system != "gravity":
-            raise ValueError(f"fixed_g (learning the mass m) is for gravity, not {self.system!r}")
-        if not (self.fixed_g >= 0 and math.isfinite(self.fixed_g)):
-            raise ValueError(f"fixed_g must be finite and > 0 (or 0: learn g), got {self.fixed_g}")
-        if self.fixed_g and "g" in self.physics_init:
-            raise ValueError("fixed_g holds g at its value; physics_init must not set g as well")
-        object.__setattr__(self, "pivot_gate", tuple(float(r) for r in self.pivot_gate))  # JSON gives a list
+        self.system_options.check_physics_init(self.physics_init)
 
     @classmethod
-    def from_dict(cls, values: dict[str, Any]) -> ModelConfig:
-        """The config of a checkpoint. A checkpoint saved before ``pivot_gate`` existed was
-        trained without the gate, so it gets (0, 0): the model reads angles as it was trained to."""
-        return cls(**{"pivot_gate": (0.0, 0.0), **values})
+    def from_dict(cls, values: Mapping[str, Any]) -> ModelConfig:
+        """The config of a checkpoint (:meth:`to_dict`), or of one saved when every system's options were
+        fields of their own (the flat form: the other systems' ones at their defaults, which are dropped).
+        Option fields given flat override ``system_options``. A flat config lacking an option that came
+        later (``SystemOptions.LEGACY``, e.g. the pendulum's ``pivot_gate``) was trained without it."""
+        values = dict(values)
+        system = values.get("system", cls.system)
+        if system not in SYSTEMS:
+            raise ValueError(f"unknown system {system!r}; known: {sorted(SYSTEMS)}")
+        options = SYSTEMS[system].Options
+        nested = values.pop("system_options", None)
+        shared = {f.name for f in fields(cls)}
+        flat = {k: values.pop(k) for k in list(values) if k not in shared}
+        given = nested if nested is not None else {**options.LEGACY}
+        if isinstance(given, SystemOptions):
+            given = asdict(given)
+        return cls(**values, system_options=_options(system, {**given, **flat}))
 
     @property
     def coord_dim(self) -> int:
@@ -201,8 +186,36 @@ class ModelConfig:
         return self.input_frames + self.pred_frames
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-able fields."""
+        """JSON-able fields (``system_options`` as a dict of its own)."""
         return asdict(self)
+
+    def with_options(self, **changes: Any) -> ModelConfig:
+        """This config with some of its system's options changed, e.g. ``with_options(learn_damping=True)``."""
+        return replace(self, system_options=_options(self.system, {**asdict(self.system_options), **changes}))
+
+
+def _options(system: str, values: Mapping[str, Any]) -> SystemOptions:
+    """The options of a ``system`` model from field values; another system's option at its default (a
+    flat config holds every system's) is dropped, one set otherwise is refused in one line."""
+    options = SYSTEMS[system].Options
+    own = {f.name for f in fields(options)}
+    others = {f.name: (name, f.default) for name, cls in SYSTEMS.items() if cls.Options is not options
+              for f in fields(cls.Options)}  # option -> (its system, its default)
+    for key, value in values.items():
+        if key in own:
+            continue
+        if key not in others:
+            raise ValueError(f"ModelConfig has no field or system option {key!r}")
+        owner, default = others[key]
+        if _plain(value) != _plain(default):
+            raise ValueError(f"{key} is an option for {owner} models, not for a {system} model "
+                             f"(its options: {', '.join(sorted(own)) or 'none'})")
+    return options(**{k: v for k, v in values.items() if k in own})
+
+
+def _plain(value: Any) -> Any:
+    """A value as JSON stores it (a tuple as a list), for comparing a stored field with its default."""
+    return list(value) if isinstance(value, tuple) else value
 
 
 class ModelOutput(NamedTuple):
@@ -255,30 +268,16 @@ class PhysicsModel(nn.Module):
     def __init__(self, config: ModelConfig):
         super().__init__()
         self.config = config
-        n, d, _ = SYSTEM_SHAPES[config.system]
-        n = config.n_objects if config.system != "pendulum" else 1
+        # the system first: it knows its N and D (a pendulum is one angle whatever n_objects says)
+        system = SYSTEMS[config.system].for_model(config.system_options, config.dt, config.n_objects, config.image_size,
+                                                   config.physics_init)
+        n, d = system.n_objects, system.coord_dim
         self.encoder = Encoder(EncoderConfig(config.image_size, config.channels, n, d, config.readout,
-                                             config.mask_width, config.loc_width, config.angle_reference,
-                                             config.pivot_gate, config.mask_pixelwise))
+                                             config.mask_width, config.loc_width, pixelwise=config.mask_pixelwise,
+                                             **config.system_options.encoder_fields()))
         self.velocity = VelocityEstimator(VelocityConfig(config.input_frames, n, d, config.dt, config.image_size,
                                                          correction=config.velocity_correction))
-        kwargs: dict[str, Any] = {"dt": config.dt, **config.physics_init}
-        if config.system == "pendulum":
-            kwargs["learnable"] = ("g", "a", "offset") if config.learn_offset else ("g", "a")
-            if config.learn_damping:
-                kwargs["damping"] = kwargs.get("damping", config.damping_init)
-                kwargs["learnable"] += ("b",)
-            if config.signed_actuation:
-                kwargs["signed_actuation"] = True
-        elif config.system in ("spring", "gravity", "bouncing"):
-            kwargs["n_objects"] = n
-        if config.fixed_g:  # the m run: g given, m learned from 1/g (see ModelConfig.fixed_g)
-            kwargs.update(g=config.fixed_g, learnable=("m",))
-            kwargs.setdefault("mass", 1.0 / config.fixed_g)
-        if config.system == "bouncing":
-            kwargs.setdefault("size", float(config.image_size))
-            kwargs.setdefault("radius", config.wall_radius)
-        self.system: System = make_system(config.system, **kwargs)
+        self.system: System = system
         self.integrator = make_integrator(config.integrator, config.substeps)
         self.decoder = Decoder(DecoderConfig(config.image_size, config.channels, n, d, hidden=config.template_hidden,
                                              template_size=config.template_size or None, init_scale=config.init_scale))

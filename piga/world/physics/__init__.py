@@ -53,7 +53,8 @@ from piga.world.physics.integrators import (
     rollout,
     shoot_velocity,
 )
-from piga.world.physics.systems import SYSTEMS, Bouncing, Gravity, Pendulum, Spring, System, make_system
+from piga.world.physics.systems import (SYSTEMS, Bouncing, BouncingOptions, Gravity, GravityOptions, Pendulum, PendulumOptions,
+                                       Spring, SpringOptions, System, SystemOptions, make_system)
 
 __all__ = [
     "System",
@@ -72,4 +73,9 @@ __all__ = [
     "rollout",
     "make_system",
     "SYSTEMS",
+    "SystemOptions",
+    "PendulumOptions",
+    "SpringOptions",
+    "GravityOptions",
+    "BouncingOptions",
 ]

@@ -9,15 +9,17 @@ terms are :mod:`piga.world.effects`, shared with the diagnosis, the planners and
 from __future__ import annotations
 
 import math
-from collections.abc import Collection
-from typing import ClassVar
+from collections.abc import Collection, Mapping
+from dataclasses import dataclass
+from typing import Any, ClassVar
 
 import torch
 from torch import Tensor, nn
 
 from piga.world.effects import DAMPING, pendulum_acceleration
 
-__all__ = ["System", "Pendulum", "Spring", "Gravity", "Bouncing", "SYSTEMS", "make_system"]
+__all__ = ["System", "Pendulum", "Spring", "Gravity", "Bouncing", "SYSTEMS", "make_system", "SystemOptions",
+           "PendulumOptions", "SpringOptions", "GravityOptions", "BouncingOptions"]
 
 
 def _pairwise_differences(p: Tensor) -> Tensor:
@@ -32,6 +34,23 @@ def _guarded_norm(d: Tensor, min_norm: float) -> Tensor:
     finite value and zero (not NaN) gradient.
     """
     return d.square().sum(dim=-1, keepdim=True).clamp_min(min_norm**2).sqrt()
+
+
+@dataclass(frozen=True)
+class SystemOptions:
+    """A world model's options for one system (:attr:`piga.world.model.ModelConfig.system_options`): what
+    only a model of that system may set. Each :class:`System` names its own in :attr:`System.Options`."""
+
+    LEGACY: ClassVar[dict[str, Any]] = {}
+    """Values of options that a checkpoint saved before they existed lacks: the model it holds was trained
+    without them (:meth:`piga.world.model.ModelConfig.from_dict`)."""
+
+    def encoder_fields(self) -> dict[str, Any]:
+        """The :class:`piga.world.encoder.EncoderConfig` fields these options set (none by default)."""
+        return {}
+
+    def check_physics_init(self, physics_init: Mapping[str, float]) -> None:
+        """Refuses initial values (:attr:`piga.world.model.ModelConfig.physics_init`) that contradict the options."""
 
 
 class System(nn.Module):
@@ -55,6 +74,16 @@ class System(nn.Module):
 
     reference_values: ClassVar[dict[str, float]] = {}
     units: ClassVar[dict[str, str]] = {}
+    Options: ClassVar[type[SystemOptions]] = SystemOptions
+    """The world model's options for this system."""
+
+    @classmethod
+    def for_model(cls, options: SystemOptions, dt: float, n_objects: int, image_size: int,
+                  physics_init: Mapping[str, float]) -> System:
+        """The system a world model learns: constructor arguments ``physics_init`` (the initial values)
+        with what ``options`` (an instance of :attr:`Options`) make of them, N objects in frames of
+        ``image_size`` pixels, ``dt`` seconds apart."""
+        return cls(**{"dt": dt, **physics_init, "n_objects": n_objects})
 
     def __init__(self, n_objects: int, coord_dim: int, action_dim: int, dt: float) -> None:
         super().__init__()
@@ -154,6 +183,41 @@ class System(nn.Module):
         )
 
 
+@dataclass(frozen=True)
+class PendulumOptions(SystemOptions):
+    """A pendulum model's options."""
+
+    LEGACY: ClassVar[dict[str, Any]] = {"pivot_gate": (0.0, 0.0)}
+
+    learn_offset: bool = False
+    """Learn the angle offset φ between the model's angle and upright. Needed
+    when the encoder's angle convention is arbitrary (the "regress" readout; the paper preset
+    learns it). The centroid readout is anchored by geometry (θ = 0: the object straight above the
+    pivot, i.e. the camera is upright), and a learnable φ there only adds a flat direction (encoder
+    convention, template orientation and φ drifting together) that drags g and a around; so it is
+    frozen by default."""
+    learn_damping: bool = False
+    """Add a learnable viscous damping b to the engine (θ̈ = ... − 3·b·θ̇), starting
+    at ``damping_init``. A real hinge has friction; Gymnasium's pendulum has none."""
+    damping_init: float = 0.01
+    """Initial b when ``learn_damping`` (far from any real hinge's value)."""
+    signed_actuation: bool = False
+    """Learn a in linear space, sign included (:class:`Pendulum`), for a camera on the other side or a
+    motor wired the other way; a then starts at +0.3 and may cross 0."""
+    angle_reference: float = 0.0
+    """Centroid readout of the angle: the direction read as θ = 0 (the learned offset φ absorbs it)."""
+    pivot_gate: tuple[float, float] = (0.125, 0.16)
+    """Centroid readout of the angle: radii (fractions of the image side) within which pixels do not
+    vote, so Gymnasium's torque arrow at the pivot cannot move the reading
+    (:class:`piga.world.encoder.EncoderConfig`)."""
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "pivot_gate", tuple(float(r) for r in self.pivot_gate))  # JSON gives a list
+
+    def encoder_fields(self) -> dict[str, Any]:
+        return {"angle_reference": self.angle_reference, "pivot_gate": self.pivot_gate}
+
+
 class Pendulum(System):
     """Gymnasium's ``Pendulum-v1`` with a learnable gravity g and actuation gain a.
 
@@ -192,6 +256,21 @@ class Pendulum(System):
 
     reference_values: ClassVar[dict[str, float]] = {"g": 10.0, "a": 1.0}
     units: ClassVar[dict[str, str]] = {"g": "m/s²", "a": "factor on the torque", "offset": "rad", "b": DAMPING.unit}
+    Options: ClassVar[type[SystemOptions]] = PendulumOptions
+
+    @classmethod
+    def for_model(cls, options: SystemOptions, dt: float, n_objects: int, image_size: int,
+                  physics_init: Mapping[str, float]) -> System:
+        """g, a (and the options' φ, b) learned; one object whatever ``n_objects`` says."""
+        assert isinstance(options, PendulumOptions)
+        kwargs: dict[str, Any] = {"dt": dt, **physics_init}
+        kwargs["learnable"] = ("g", "a", "offset") if options.learn_offset else ("g", "a")
+        if options.learn_damping:
+            kwargs["damping"] = kwargs.get("damping", options.damping_init)
+            kwargs["learnable"] += ("b",)
+        if options.signed_actuation:
+            kwargs["signed_actuation"] = True
+        return cls(**kwargs)
 
     def __init__(
         self,
@@ -259,6 +338,11 @@ class Pendulum(System):
                                      passive=passive)  # (B, 1, 1)
 
 
+@dataclass(frozen=True)
+class SpringOptions(SystemOptions):
+    """A spring model's options: none."""
+
+
 class Spring(System):
     """N objects of unit mass joined pairwise by identical springs (the paper's 2-balls spring).
 
@@ -278,6 +362,7 @@ class Spring(System):
 
     reference_values: ClassVar[dict[str, float]] = {"k": 4.0, "l": 6.0}
     units: ClassVar[dict[str, str]] = {"k": "1/s² (per unit mass)", "l": "px"}
+    Options: ClassVar[type[SystemOptions]] = SpringOptions
 
     def __init__(
         self,
@@ -313,6 +398,25 @@ class Spring(System):
         return force.sum(dim=2)  # (B, N, 2)
 
 
+@dataclass(frozen=True)
+class GravityOptions(SystemOptions):
+    """A gravity model's options."""
+
+    fixed_g: float = 0.0
+    """The paper's m run. Hold g at this value (the user's; training never reads the
+    file's parameters) and learn the bodies' shared mass m instead; 0 (the default): learn g with
+    unit masses. The motion depends on g·m only, so m starts at 1/``fixed_g``: the force starts as
+    weak as in the g run (g = 1, m = 1), far from any true g·m."""
+
+    def __post_init__(self) -> None:
+        if not (self.fixed_g >= 0 and math.isfinite(self.fixed_g)):
+            raise ValueError(f"fixed_g must be finite and > 0 (or 0: learn g), got {self.fixed_g}")
+
+    def check_physics_init(self, physics_init: Mapping[str, float]) -> None:
+        if self.fixed_g and "g" in physics_init:
+            raise ValueError("fixed_g holds g at its value; physics_init must not set g as well")
+
+
 class Gravity(System):
     """N bodies of one shared mass m under Newtonian gravity (the paper's 3-balls gravity).
 
@@ -337,6 +441,18 @@ class Gravity(System):
 
     reference_values: ClassVar[dict[str, float]] = {"g": 60.0}
     units: ClassVar[dict[str, str]] = {"g": "px³/s² per unit mass", "m": "mass units"}
+    Options: ClassVar[type[SystemOptions]] = GravityOptions
+
+    @classmethod
+    def for_model(cls, options: SystemOptions, dt: float, n_objects: int, image_size: int,
+                  physics_init: Mapping[str, float]) -> System:
+        """g learned with unit masses, or (``fixed_g``) g held and the shared mass m learned from 1/g."""
+        assert isinstance(options, GravityOptions)
+        kwargs: dict[str, Any] = {"dt": dt, **physics_init, "n_objects": n_objects}
+        if options.fixed_g:
+            kwargs.update(g=options.fixed_g, learnable=("m",))
+            kwargs.setdefault("mass", 1.0 / options.fixed_g)
+        return cls(**kwargs)
 
     def __init__(
         self,
@@ -378,6 +494,14 @@ class Gravity(System):
         return acc.sum(dim=2)  # (B, N, 2)
 
 
+@dataclass(frozen=True)
+class BouncingOptions(SystemOptions):
+    """A bouncing-balls model's options."""
+
+    wall_radius: float = 2.0
+    """How far from the image edge a centre bounces, pixels (the published engine's 2)."""
+
+
 class Bouncing(System):
     """N balls moving freely in a square box with elastic walls; no force, no parameters.
 
@@ -390,6 +514,18 @@ class Bouncing(System):
         radius: Ball radius in pixels.
         dt: Seconds per frame.
     """
+
+    Options: ClassVar[type[SystemOptions]] = BouncingOptions
+
+    @classmethod
+    def for_model(cls, options: SystemOptions, dt: float, n_objects: int, image_size: int,
+                  physics_init: Mapping[str, float]) -> System:
+        """The box is the image; the walls ``wall_radius`` from its edges (unless ``physics_init`` says otherwise)."""
+        assert isinstance(options, BouncingOptions)
+        kwargs: dict[str, Any] = {"dt": dt, **physics_init, "n_objects": n_objects}
+        kwargs.setdefault("size", float(image_size))
+        kwargs.setdefault("radius", options.wall_radius)
+        return cls(**kwargs)
 
     def __init__(
         self, n_objects: int = 2, size: float = 32.0, radius: float = 2.0, dt: float = 0.3
@@ -423,7 +559,8 @@ SYSTEMS: dict[str, type[System]] = {
     "gravity": Gravity,
     "bouncing": Bouncing,
 }
-"""Name -> system class, for :func:`make_system` and the command line."""
+"""Name -> system class, for :func:`make_system`, the world model (:meth:`System.for_model`, with the
+class's :attr:`System.Options`) and the command line: a new system is its class and one line here."""
 
 
 def make_system(name: str, **kwargs: object) -> System:
