@@ -748,3 +748,39 @@ def test_control_refuses_planner_options_for_a_baseline_run(baseline_runs: dict[
                                                             capsys: pytest.CaptureFixture[str]) -> None:
     """A DDPG run has no planner and a PlaNet-style run plans with PlaNet's CEM: --horizon would be ignored."""
     refused("piga-control", ["--model", str(baseline_runs["ddpg"]), "--horizon", "7"], capsys, "--horizon", "ddpg")
+
+
+@pytest.fixture(scope="module")
+def tiny_piga_run(tiny_data: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A one-epoch piga-train-model run on ``tiny_data`` (seconds)."""
+    from tests.helpers import train_tiny
+
+    return train_tiny(tiny_data, tmp_path_factory.mktemp("piga") / "run")
+
+
+@pytest.mark.parametrize("extra, needles", [
+    (["--seed", "7"], ["drop --seed"]),
+    (["--preset", "paper"], ["drop --preset"]),
+    (["--data-file", "balls"], ["continues on the file the run trained on", "without --resume"]),
+])
+def test_train_resume_refuses_what_it_would_ignore(extra: list[str], needles: list[str], tiny_piga_run: Path,
+                                                   tiny_data: Path, tmp_path: Path,
+                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    """--resume continues the run's recipe on its own file: another seed, preset or file used to be ignored."""
+    run = _run_copy(tiny_piga_run, tmp_path / "run")
+    data = tiny_data
+    if extra[0] == "--data-file":  # another pendulum file of the same look, with other sequences
+        from dataclasses import replace
+
+        from piga.data.collect import CollectConfig, collect
+
+        data, extra = tmp_path / "other.h5", []
+        collect(replace(CollectConfig(), sequences=8, steps=16, workers=1, seed=3), data, command="t", progress=False)
+    refused("piga-train-model", [str(data), "--out", str(run), "--resume", "--epochs", "2", "--quiet", *extra], capsys,
+            *needles)
+
+
+def test_train_resume_refuses_a_baseline_run(baseline_runs: dict[str, Path], tiny_data: Path, tmp_path: Path,
+                                             capsys: pytest.CaptureFixture[str]) -> None:
+    run = _run_copy(baseline_runs["ddpg"], tmp_path / "run")
+    refused("piga-train-model", [str(tiny_data), "--out", str(run), "--resume", "--quiet"], capsys, "piga-baseline ddpg run")

@@ -11,7 +11,7 @@ from typing import Any
 
 from piga.cli.common import (ArgumentParser, Interrupted, PigaError, add_preset_option, command_line, format_default,
                              positive_float, positive_int, run_cli, seed_int, thread_count, unit_fraction)
-from piga.io.checkpoint import CHECKPOINT
+from piga.io.checkpoint import CHECKPOINT, require_piga_run
 
 #: The recipe options a user may give; each is a TrainConfig field of the same name.
 RECIPE_OPTIONS = ("epochs", "budget_steps", "max_minutes", "batch_size", "lr", "lr_physics", "warmup_fraction")
@@ -94,16 +94,25 @@ def main(argv: Sequence[str] | None = None) -> int:
     info = inspect_dataset(args.data)
     overrides = {k: getattr(args, k) for k in RECIPE_OPTIONS if getattr(args, k) is not None}
     command = command_line(PROG, argv)
-    if args.resume:  # the run's own recipe; only the length and the budget may change
+    if args.resume:  # the run's own recipe and data; only the length and the budget may change
+        require_piga_run(run_dir, "--resume continues a training run of the world model")
         saved_model, ckpt = load_model(run_dir)
-        if tuple(ckpt["data"]["image_shape"]) != info.image_shape or ckpt["data"]["system"] != info.system:
+        data = ckpt["data"]
+        if tuple(data["image_shape"]) != info.image_shape or data["system"] != info.system:
             raise PigaError(f"--resume: {args.data} ({info.system}, {info.image_shape}) does not match the run's data "
-                            f"({ckpt['data']['system']}, {tuple(ckpt['data']['image_shape'])})")
+                            f"({data['system']}, {tuple(data['image_shape'])})")
+        same_file = Path(data["path"]).resolve() == Path(args.data).resolve()
+        same_shape = data.get("sequences") == info.n_sequences and data.get("steps") == info.steps and data["dt"] == info.dt
+        if not same_file and not same_shape:  # a moved file keeps its shape; another file is another run
+            raise PigaError(f"--resume continues on the file the run trained on ({data['path']}), not {args.data}; "
+                            "train a new run (without --resume) to learn from another file")
+        saved = TrainConfig.from_dict(ckpt["train_config"])
         changed = (sorted(set(overrides) - {"epochs", "budget_steps", "max_minutes"}) + (["signed_actuation"] if args.signed_actuation else [])
-                   + (["fixed_g"] if args.fixed_g is not None else []))
+                   + (["fixed_g"] if args.fixed_g is not None else []) + (["preset"] if args.preset != "fast" else [])
+                   + (["seed"] if args.seed not in (saved.seed, TrainConfig().seed) else []))
         if changed:
             raise PigaError(f"--resume keeps the run's recipe; drop {', '.join('--' + c.replace('_', '-') for c in changed)}")
-        train_config = replace(TrainConfig.from_dict(ckpt["train_config"]), **overrides)
+        train_config = replace(saved, **overrides)
         model_config = saved_model.config
         record = _read_record(run_dir)
         record.setdefault("resumed", []).append(command)

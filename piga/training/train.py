@@ -377,7 +377,7 @@ def save_checkpoint(path: Path, model: PhysicsModel, optimizer: torch.optim.Opti
         "state": asdict(state),
         "rng": _rng_state(),
         "data": {"path": str(data_info.path), "system": data_info.system, "image_shape": list(data_info.image_shape),
-                 "dt": data_info.dt},
+                 "dt": data_info.dt, "sequences": data_info.n_sequences, "steps": data_info.steps},
     }
     write_checkpoint(path.parent, payload)
 
