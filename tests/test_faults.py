@@ -784,3 +784,24 @@ def test_train_resume_refuses_a_baseline_run(baseline_runs: dict[str, Path], tin
                                              capsys: pytest.CaptureFixture[str]) -> None:
     run = _run_copy(baseline_runs["ddpg"], tmp_path / "run")
     refused("piga-train-model", [str(tiny_data), "--out", str(run), "--resume", "--quiet"], capsys, "piga-baseline ddpg run")
+
+
+@pytest.mark.parametrize("extra, needle", [
+    (["--autoencoder-steps", "5"], "--autoencoder-steps is for --obs latent"),
+    (["--steps", "200", "--eval-every", "400"], "never be evaluated"),
+    (["--steps", "400", "--eval-every", "200", "--learning-starts", "5000"], "never learn"),
+    (["--steps", "400", "--eval-every", "200", "--learning-starts", "100", "--batch-size", "500", "--buffer-size", "100"],
+     "cannot be drawn from the replay buffer"),
+])
+def test_ddpg_refuses_settings_that_would_do_nothing(extra: list[str], needle: str, tmp_path: Path,
+                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    """Settings a run would ignore, or that leave it never evaluated or never learning, used to exit 0."""
+    refused("piga-baseline", ["ddpg", "--obs", "state", "--out", str(tmp_path / "run"), "--quiet", *extra], capsys, needle)
+    assert not (tmp_path / "run").exists()
+
+
+def test_ddpg_resume_refuses_fewer_steps(baseline_runs: dict[str, Path], tmp_path: Path,
+                                         capsys: pytest.CaptureFixture[str]) -> None:
+    run = _run_copy(baseline_runs["ddpg"], tmp_path / "run")
+    refused("piga-baseline", ["ddpg", "--obs", "state", "--out", str(run), "--resume", "--steps", "100", "--quiet"], capsys,
+            "never lower it")

@@ -103,6 +103,15 @@ class SB3Config:
             raise ValueError(f"SB3Config: sizes, counts and threads must be >= 1, learning_starts and seed >= 0: {self}")
         if not (0 < self.gamma <= 1 and self.learning_rate > 0 and 0 < self.tau <= 1 and self.noise_std >= 0):
             raise ValueError(f"SB3Config: need 0 < gamma <= 1, learning_rate > 0, 0 < tau <= 1, noise_std >= 0: {self}")
+        if self.eval_every > self.steps:
+            raise ValueError(f"eval_every ({self.eval_every}) is more than steps ({self.steps}): the run would never be "
+                             "evaluated; lower eval_every or raise steps")
+        if self.learning_starts >= self.steps:
+            raise ValueError(f"learning_starts ({self.learning_starts}) is not below steps ({self.steps}): the run would "
+                             "only collect random actions and never learn; lower learning_starts or raise steps")
+        if self.batch_size > self.buffer_size:
+            raise ValueError(f"batch_size ({self.batch_size}) is more than buffer_size ({self.buffer_size}): a batch "
+                             "cannot be drawn from the replay buffer; lower batch_size or raise buffer_size")
 
     @property
     def stacked(self) -> int:

@@ -375,6 +375,10 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
         raise PigaError("--obs latent trains an autoencoder on collected frames: give --data DATA.h5")
     if args.obs != "latent" and args.data:
         raise PigaError(f"--data is for --obs latent (the autoencoder's frames); --obs {args.obs} does not use it")
+    from agents.sb3.autoencoder import AutoencoderConfig
+
+    if args.obs != "latent" and args.autoencoder_steps != AutoencoderConfig.steps:
+        raise PigaError(f"--autoencoder-steps is for --obs latent; --obs {args.obs} trains no autoencoder")
     if args.resume:
         _check_run_dir(run_dir, True, False, RunKind.DDPG)
         record = _read_record(run_dir)
@@ -386,13 +390,14 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
         _refuse_recipe_changes(args, record, run_dir)
         if saved.obs == "latent" and not (run_dir / AUTOENCODER).exists():
             raise PigaError(f"--resume: {run_dir / AUTOENCODER} is missing; the latent run cannot be continued without it")
+        if args.steps and args.steps < saved.steps:
+            raise PigaError(f"--resume --steps {args.steps}: the run already planned {saved.steps} steps; --resume may "
+                            "raise --steps, never lower it")
         config = replace(saved, steps=args.steps or saved.steps, threads=args.threads)
         record["ddpg"] = config.to_dict()
         record.setdefault("resumed", []).append(command)
         checkpoint_bytes: float = (run_dir / CHECKPOINT).stat().st_size
     else:
-        from agents.sb3.autoencoder import AutoencoderConfig
-
         given = {name: value for name, value in (("buffer_size", args.buffer_size), ("learning_starts", args.learning_starts),
                                                  ("noise_std", args.noise_std)) if value is not None}  # else the presets'
         config = SB3Config(obs=args.obs, algo=args.algo, steps=args.steps or SB3Config.steps, eval_every=args.eval_every,
