@@ -806,3 +806,14 @@ def test_ddpg_resume_refuses_fewer_steps(baseline_runs: dict[str, Path], tmp_pat
     run = _run_copy(baseline_runs["ddpg"], tmp_path / "run")
     refused("piga-baseline", ["ddpg", "--obs", "state", "--out", str(run), "--resume", "--steps", "100", "--quiet"], capsys,
             "never lower it")
+
+
+def test_train_refuses_a_folder_with_another_runs_curves(tiny_data: Path, tmp_path: Path,
+                                                         capsys: pytest.CaptureFixture[str]) -> None:
+    """A folder that holds only a tensorboard/ (another run's curves) is not silently trained into: the new run's
+    curves would join the old ones. --overwrite replaces them."""
+    out = tmp_path / "run"
+    (out / "tensorboard").mkdir(parents=True)
+    (out / "tensorboard" / "events.old").write_text("old curves")
+    refused("piga-train-model", [str(tiny_data), "--out", str(out), "--quiet"], capsys, "tensorboard", "--overwrite")
+    assert (out / "tensorboard" / "events.old").exists()

@@ -17,7 +17,7 @@ from piga.io.checkpoint import CHECKPOINT, require_piga_run
 RECIPE_OPTIONS = ("epochs", "budget_steps", "max_minutes", "batch_size", "lr", "lr_physics", "warmup_fraction")
 
 PROG = "piga-train-model"
-OUTPUTS = (CHECKPOINT, "metrics.json", "config.json", "rollout.png", "templates.png", "curves.png")
+OUTPUTS = (CHECKPOINT, "metrics.json", "config.json", "rollout.png", "templates.png", "curves.png", "tensorboard")
 
 
 def build_parser() -> ArgumentParser:
@@ -144,6 +144,10 @@ def main(argv: Sequence[str] | None = None) -> int:
           f"{info.system} parameters start at {_start_values(fresh)} -> {run_dir}")
     print(f"plan: {plan.describe(model_config.pred_frames)}")
     written: list[int] = []
+    if args.overwrite and not args.resume and (run_dir / "tensorboard").is_dir():
+        import shutil
+
+        shutil.rmtree(run_dir / "tensorboard")  # the replaced run's curves, which the new run's would join
 
     def on_epoch(state: Any, model: Any) -> None:  # the first checkpoint of this command: the record goes with it
         if not written:
