@@ -15,7 +15,7 @@ import torch
 from piga.diagnostics import DiagnoseConfig, Observations, analyse, fit
 from piga.diagnostics.diagnose import UNITS, clip_binding, clip_supported, select
 from piga.diagnostics.report import markdown
-from piga.io.runs import Nominal
+from piga.io.runs import Nominal, nominal_of
 from tests.test_diagnose_continuous import DT, planted_within_frame
 from tests.test_diagnostics import NOMINAL, planted
 
@@ -208,7 +208,7 @@ def test_the_nominal_model_carries_its_damping_and_integrator() -> None:
 
     model = PhysicsModel(ModelConfig(dt=0.04, integrator="rk4", substeps=2, system_options=PendulumOptions(learn_damping=True, damping_init=0.07),
                                      image_size=16))
-    nom = fit.nominal_of(model)
+    nom = nominal_of(model)
     assert nom.integrator == "rk4" and nom.substeps == 2 and abs(nom.b - 0.07) < 1e-6
     nominal = fit.Nominal(g=9.3, a=1.2, offset=0.25, dt=0.04, substeps=2, b=0.15, integrator="rk4")
     rng = np.random.default_rng(0)

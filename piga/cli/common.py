@@ -16,7 +16,7 @@ from typing import Any, NoReturn
 
 from envs.dmc import MissingExtraError
 from piga.io.atomic import OutputExistsError
-from piga.data.schema import DataFormatError
+from piga.data.schema import MAX_SEED, DataFormatError
 
 
 class PigaError(Exception):
@@ -206,8 +206,6 @@ nonnegative_float = _number_type(float, lambda v: 0 <= v < float("inf"), "a fini
 """argparse type: a finite number >= 0 (NaN is rejected too)."""
 unit_fraction = _number_type(float, lambda v: 0 <= v < 1, "a number in [0, 1)")
 """argparse type: a fraction in [0, 1) (NaN is rejected too)."""
-MAX_SEED = 2**63 - 1
-"""The largest seed: numpy and torch take seeds up to 2^63 - 1, and a data file stores them as int64."""
 seed_int = _number_type(int, lambda v: 0 <= v <= MAX_SEED, "an integer in [0, 2^63 - 1]")
 """argparse type: a seed, an integer in [0, 2^63 - 1]."""
 MAX_THREADS = max(1, os.cpu_count() or 1)

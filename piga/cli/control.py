@@ -99,9 +99,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         raise PigaError("--angle goes with --write-goal-image; to set the control goal use --goal-angle or --goal-image")
     if not args.oracle and not args.model:
         raise PigaError("give --model RUN_DIR (or --oracle)")
-    if args.oracle and args.model and not args.sweep and run_kind_is_piga(args.model):
-        raise PigaError("give --model RUN_DIR to run the piga agent or --oracle to run the oracle, not both "
-                        "(--sweep runs the two side by side)")
     check_angle("--goal-angle", args.goal_angle)
     hold = EpisodeConfig.hold_steps
     if args.steps < hold:
@@ -225,18 +222,6 @@ def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: 
     return 0
 
 
-#: The CEM options' defaults: a baseline run refuses any other value (it does not use them).
-PLANNER_DEFAULTS = {"horizon": MPCConfig().cem.horizon, "candidates": MPCConfig().cem.candidates, "elites": None,
-                    "iterations": MPCConfig().cem.iterations, "warm_start": MPCConfig().warm_start}
-
-
-def run_kind_is_piga(model: str) -> bool:
-    """Whether ``model`` is a piga-train-model run (a baseline's run refuses --oracle with its own line)."""
-    from piga.io.checkpoint import run_kind
-
-    return run_kind(model) is RunKind.PIGA
-
-
 def _run_kind(args: argparse.Namespace) -> RunKind:
     """The kind of ``--model``'s run (piga for a piga-train-model run, or with --oracle alone)."""
     if not args.model:
@@ -247,6 +232,9 @@ def _run_kind(args: argparse.Namespace) -> RunKind:
     if args.oracle and kind.is_baseline:
         raise PigaError(f"--oracle: {args.model} is a {kind.writer} run, which runs as trained and knows no "
                         "physics to hand the oracle; drop --oracle to score the run, or drop --model to run the oracle")
+    if args.oracle and not args.sweep:
+        raise PigaError("give --model RUN_DIR to run the piga agent or --oracle to run the oracle, not both "
+                        "(--sweep runs the two side by side)")
     return kind
 
 
@@ -268,8 +256,9 @@ def _baseline(args: argparse.Namespace, kind: RunKind, mpc: MPCConfig, outputs: 
         if Path(args.video).suffix.lower() not in (".mp4", ".gif"):
             raise PigaError(f"--video must end in .mp4 or .gif, got {args.video}")
         check_writable_target(args.video, args.overwrite)
+    parser = build_parser()  # the CEM options' defaults, as --help shows them
     planner = [f"--{name.replace('_', '-')}" for name in ("horizon", "candidates", "elites", "iterations", "warm_start")
-               if getattr(args, name) != PLANNER_DEFAULTS[name]]
+               if getattr(args, name) != parser.get_default(name)]
     if planner:
         raise PigaError(f"{', '.join(planner)}: a {kind.value} run plans with its own settings "
                         f"({'PlaNet' + chr(39) + 's CEM' if kind is RunKind.PLANET else 'a policy, no planner'}); "

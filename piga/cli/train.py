@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import shutil
 import sys
 from collections.abc import Sequence
 from dataclasses import asdict, replace
@@ -145,8 +146,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(f"plan: {plan.describe(model_config.pred_frames)}")
     written: list[int] = []
     if args.overwrite and not args.resume and (run_dir / "tensorboard").is_dir():
-        import shutil
-
         shutil.rmtree(run_dir / "tensorboard")  # the replaced run's curves, which the new run's would join
 
     def on_epoch(state: Any, model: Any) -> None:  # the first checkpoint of this command: the record goes with it

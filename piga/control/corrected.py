@@ -18,8 +18,8 @@ from agents.dynamics import start_of
 from agents.mpc import EncoderReader
 from envs.pendulum import MAX_ACTION
 from piga.diagnostics import fit
-from piga.diagnostics.fit import nominal_of
 from piga.diagnostics.vision import Camera, angle_table, match
+from piga.io.runs import nominal_of
 from piga.world.effects import scaled_gravity
 from piga.world.model import PhysicsModel
 

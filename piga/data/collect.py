@@ -36,11 +36,8 @@ from tqdm.auto import tqdm
 from envs.dmc import DMCPendulumConfig, make_dmc_pendulum
 from envs.pendulum import MAX_ACTION, PENDULUM_DT, PixelPendulumConfig, make_pixel_pendulum
 from piga.io.atomic import check_writable_target
-from piga.data.schema import SPLITS, DatasetWriter
+from piga.data.schema import MAX_SEED, SPLITS, DatasetWriter
 from piga.io.worker_signals import quiet_worker_signals
-
-#: Largest root seed: a data file stores it as a 64-bit integer.
-MAX_SEED = 2**63 - 1
 
 #: Ranges of the paper's pendulum data: θ ~ U(-π, π), θ̇ ~ U(-6, 6).
 PAPER_MAX_SPEED = 6.0

@@ -38,6 +38,10 @@ from piga.io.atomic import atomic_output
 SPLITS: dict[str, int] = {"train": 0, "valid": 1, "test": 2}
 """Split name -> code stored in ``/split``."""
 
+#: Largest root seed: a data file stores it as a 64-bit integer (and numpy's and torch's generators take
+#: seeds up to it).
+MAX_SEED = 2**63 - 1
+
 REQUIRED_ATTRS = ("system", "dt")
 #: Files whose frames need less memory than this are loaded whole by default when training.
 IN_MEMORY_LIMIT_BYTES = 2 * 1024**3

@@ -75,9 +75,9 @@ from piga.diagnostics.results import (Ambiguity, CameraSummary, CandidateRow, Di
 from piga.diagnostics.twin import MEASURABLE_GAP, calibrate_floor, gap_closure, twin_floor
 from piga.diagnostics.vision import Camera, CameraConfig, CameraFindings, angle_table, camera_stage, match
 from piga.world.model import PhysicsModel
-from piga.diagnostics.fit import Nominal, nominal_of
+from piga.diagnostics.fit import Nominal
 from piga.world.effects import CANDIDATES, DELAY, EFFECTS, SPEED_CLIP, WITHIN_FRAME, TorqueTerm
-from piga.io.runs import training_arrow, training_blank_mse, training_reconstruction_mse
+from piga.io.runs import nominal_of, training_arrow, training_blank_mse, training_reconstruction_mse
 
 #: Gymnasium Pendulum-v1's own speed clip (rad/s).
 GYM_SPEED_CLIP = PENDULUM_MAX_SPEED
@@ -193,7 +193,7 @@ def diagnose(model: PhysicsModel, data: str | os.PathLike[str], config: Diagnose
         DiagnosisInputError: the model and the data cannot be compared.
 
     The nominal model's own damping and integrator (``--preset continuous``) are kept
-    (:func:`piga.diagnostics.fit.nominal_of`): the candidates are effects on top of them. A model
+    (:func:`piga.io.runs.nominal_of`): the candidates are effects on top of them. A model
     whose a is negative (``--signed-actuation``) is diagnosed with that sign.
     """
     rec_training = training_reconstruction_mse(model, checkpoint)

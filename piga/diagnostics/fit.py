@@ -55,7 +55,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
@@ -63,7 +62,7 @@ from torch import Tensor
 
 from envs.constants import MAX_ACTION
 from piga.diagnostics.repeats import repeat_sources
-from piga.io.runs import Nominal, nominal_of  # noqa: F401 (nominal_of: re-exported for the diagnosis)
+from piga.io.runs import Nominal
 from piga.world.effects import (
     CANDIDATES,
     DAMPING,
@@ -77,9 +76,6 @@ from piga.world.effects import (
     pendulum_acceleration,
 )
 from piga.world.physics import euler_step, rk4_step, shoot_velocity
-
-if TYPE_CHECKING:
-    from piga.world.model import PhysicsModel
 
 MAX_DELAY = int(max(DELAY.grid))
 """Largest delay tried (steps)."""

@@ -24,6 +24,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
+from piga.io.choices import check_choices
 from piga.world.decoder import Decoder, DecoderConfig
 from piga.world.encoder import Encoder, EncoderConfig
 from piga.world.physics import SYSTEMS, System, SystemOptions, hold_velocity, make_integrator, rollout
@@ -130,21 +131,16 @@ class ModelConfig:
     def __post_init__(self) -> None:
         if self.system not in SYSTEM_SHAPES:
             raise ValueError(f"unknown system {self.system!r}; known: {sorted(SYSTEM_SHAPES)}")
+        check_choices(self)  # rec_frames, integrator, readout
         if self.extrapolate_frames < 0:
             raise ValueError(f"extrapolate_frames must be >= 0, got {self.extrapolate_frames}")
         if self.input_frames < 2 or self.pred_frames < 1:
             raise ValueError(f"need input_frames >= 2 and pred_frames >= 1, got {self.input_frames}, {self.pred_frames}")
-        if self.rec_frames not in ("all", "input"):
-            raise ValueError(f"rec_frames must be 'all' or 'input', got {self.rec_frames!r}")
-        if self.integrator not in ("euler", "rk4"):
-            raise ValueError(f"ModelConfig.integrator must be 'euler' or 'rk4', got {self.integrator!r}")
         options = SYSTEMS[self.system].Options
         if self.system_options is None:
             object.__setattr__(self, "system_options", options())
         elif type(self.system_options) is not options:
             raise ValueError(f"a {self.system} model takes {options.__name__}, not {type(self.system_options).__name__}")
-        if self.readout not in ("centroid", "regress"):
-            raise ValueError(f"ModelConfig.readout must be 'centroid' or 'regress', got {self.readout!r}")
         if not 0 <= self.pred_trim < 1:
             raise ValueError(f"pred_trim must be in [0, 1), got {self.pred_trim}")
         if self.alpha < 0:
