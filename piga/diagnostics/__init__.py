@@ -3,6 +3,6 @@
 from piga.diagnostics.diagnose import DiagnoseConfig, analyse, diagnose
 from piga.diagnostics.observe import DiagnosisInputError, Observations, observe
 from piga.diagnostics.results import Diagnosis
-from piga.diagnostics.fit import nominal_of
+from piga.io.runs import nominal_of
 
 __all__ = ["DiagnoseConfig", "Diagnosis", "DiagnosisInputError", "Observations", "analyse", "diagnose", "nominal_of", "observe"]
