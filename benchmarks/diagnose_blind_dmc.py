@@ -23,6 +23,7 @@ else is a false effect.
 
     python benchmarks/diagnose_blind_dmc.py --out results/diagnose_blind_dmc            # 24 cases (hours)
     python benchmarks/diagnose_blind_dmc.py --quick --out /tmp/dmc_quick --work /tmp/w  # 2 tiny cases
+    python benchmarks/diagnose_blind_dmc.py --models-only --only 2 3  # step 1 ahead, for cases 2 and 3
 
 Floors (reported in OUT.md): top-1 ≥ 90% (an "ambiguous" verdict counts as right only when the
 truth holds one of its two; at most 10% ambiguous), no named effect that the case does not have,
@@ -235,12 +236,24 @@ def markdown(runs: list[dict[str, Any]], summary: dict[str, Any], command: str, 
     return "\n".join(lines) + "\n"
 
 
-def run_case(case: dict[str, Any], work: Path, sequences: int, steps: int, train_args: list[str]) -> dict[str, Any]:
-    """Collects, trains, strips, diagnoses and scores one case; returns its record."""
-    t0 = time.time()
+def nominal_model(case: dict[str, Any], work: Path, sequences: int, steps: int, train_args: list[str]) -> tuple[Path, bool]:
+    """Collects the case's nominal file and trains its nominal model (step 1); returns the run's folder
+    and whether it needed ``--signed-actuation``.
+
+    A model that this step already trained for the same case, file shape and training arguments
+    (its ``nominal.json`` stamp) is kept: the training is most of a case's time, and it does not
+    depend on the diagnosis being checked.
+    """
     config = DMCPendulumConfig(**case["variant"])
-    nominal, real = work / f"case{case['case']:02d}_nominal.h5", work / f"case{case['case']:02d}.h5"
-    run_dir, report_dir = work / f"case{case['case']:02d}_model", work / f"case{case['case']:02d}"
+    nominal = work / f"case{case['case']:02d}_nominal.h5"
+    run_dir = work / f"case{case['case']:02d}_model"
+    stamp = {"variant": case["variant"], "nominal_seed": case["nominal_seed"], "sequences": sequences, "steps": steps,
+             "train_args": train_args}
+    stamp_path = run_dir / "nominal.json"
+    if stamp_path.exists() and (run_dir / "checkpoint.pt").exists():
+        kept = json.loads(stamp_path.read_text())
+        if {k: kept.get(k) for k in stamp} == stamp:
+            return run_dir, bool(kept["signed_actuation"])
     collect_config = replace(CollectConfig(), sequences=sequences, steps=steps, env=config, workers=1)
     collect(replace(collect_config, seed=case["nominal_seed"]), nominal, overwrite=True, command="", progress=False)
     command = ["piga-train-model", str(nominal), "--out", str(run_dir), "--preset", "fast", "--threads", "1",
@@ -251,11 +264,22 @@ def run_case(case: dict[str, Any], work: Path, sequences: int, steps: int, train
         trained = subprocess.run([*command, "--signed-actuation"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     if trained.returncode != 0:
         raise RuntimeError(f"piga-train-model failed on case {case['case']}: {trained.stderr.strip()}")
+    stamp_path.write_text(json.dumps({**stamp, "signed_actuation": signed}))
+    return run_dir, signed
+
+
+def run_case(case: dict[str, Any], work: Path, sequences: int, steps: int, train_args: list[str]) -> dict[str, Any]:
+    """Collects, trains, strips, diagnoses and scores one case; returns its record."""
+    t0 = time.time()
+    run_dir, signed = nominal_model(case, work, sequences, steps, train_args)
+    config = DMCPendulumConfig(**case["variant"])
+    real, report_dir = work / f"case{case['case']:02d}.h5", work / f"case{case['case']:02d}"
+    collect_config = replace(CollectConfig(), sequences=sequences, steps=steps, env=config, workers=1)
     collect(replace(collect_config, seed=case["data_seed"]), real, overwrite=True, command="", progress=False,
             make_env=functools.partial(make_case_env, case["effects"]))
     strip_provenance(real)
     done = subprocess.run(["piga-diagnose", "--model", str(run_dir), "--data", str(real), "--out", str(report_dir),
-                           "--overwrite", "--quiet"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+                           "--overwrite", "--quiet", "--threads", "1"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     if done.returncode != 0:  # a refusal (one line) is an outcome, scored as wrong; a crash is not
         if "internal error" in done.stderr or not done.stderr.strip():
             raise RuntimeError(f"piga-diagnose failed on case {case['case']}: {done.stderr.strip()}")
@@ -282,6 +306,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--quick", action="store_true",
                    help="2 cases of 40 sequences x 16 frames, a 6-epoch tiny model: checks the pipeline, not the diagnosis")
+    p.add_argument("--models-only", action="store_true",
+                   help="only collect the nominal files and train the nominal models (step 1), for a later run to keep")
+    p.add_argument("--only", type=int, nargs="*", default=None, help="run only these case numbers")
     args = p.parse_args(argv)
     if args.quick:
         args.cases, args.sequences, args.steps = min(args.cases, 2), 40, 16
@@ -295,6 +322,12 @@ def main(argv: list[str] | None = None) -> int:
     info = {"sequences": args.sequences, "steps": args.steps, "seed": args.seed, "machine": machine(),
             "train_note": " (a tiny model: --quick)" if args.quick else ""}
     for case in draw_cases(args.cases, args.seed):
+        if args.only is not None and case["case"] not in args.only:
+            continue
+        if args.models_only:
+            nominal_model(case, work, args.sequences, args.steps, train_args)
+            print(f"case {case['case']}: nominal model trained", flush=True)
+            continue
         if any(r["case"] == case["case"] and r["variant"] == case["variant"] and r["effects"] == case["effects"]
                for r in done):
             continue

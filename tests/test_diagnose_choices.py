@@ -258,3 +258,66 @@ def test_the_headline_is_labelled_raw_only_when_it_is() -> None:
                       free_run_gap_closure=0.999, floor_note=None)
     text = headline_text(replace(d, gap=floored))
     assert text.startswith("**Free-run closure 99.9%** of the gap above the floor") and ", raw**" not in text
+
+
+# --- 6. sets of effects, the encoder's reading error, the model's own file -----------------------
+
+
+def test_a_pair_whose_effects_fail_alone_beats_a_single_that_passes(monkeypatch) -> None:
+    """A damping hidden by a torque bias: each alone lowers the BIC but worsens the free run; together
+    they explain the data best. The selection fits every pair, not only pairs on top of the first single."""
+    import importlib
+    from types import SimpleNamespace
+
+    from piga.diagnostics.diagnose import Candidates
+    from piga.diagnostics.results import Score
+
+    # effects -> (BIC against none, typical free-run error against none's 1.0): a dm_control case's numbers
+    table = {frozenset(): (0.0, 1.0), frozenset({"damping"}): (-220.0, 1.33), frozenset({"bias"}): (-148.0, 1.19),
+             frozenset({"friction"}): (-125.0, 0.84), frozenset({"damping", "bias"}): (-450.0, 0.07),
+             frozenset({"friction", "bias"}): (-305.0, 0.34), frozenset({"damping", "friction"}): (-210.0, 1.31)}
+
+    def fake_score(m: fit.Model, *_: object) -> Score:
+        bic, typical = table[frozenset(m.effects)]
+        return Score(m, bic, typical, np.zeros(1), typical)
+
+    def fake_fit(effects: tuple[str, ...], *_: object, **__: object) -> fit.Model:
+        return fit.Model(effects, 0, {"g": 10.0, "a": 1.0})
+
+    diagnose = importlib.import_module("piga.diagnostics.diagnose")  # the module, not the function of that name
+    monkeypatch.setattr(diagnose, "score", fake_score)
+    monkeypatch.setattr(diagnose.fit, "fit_candidate", fake_fit)
+    singles = sorted((fake_score(fit.Model((e,)), None) for e in ("damping", "bias", "friction")), key=lambda s: s.bic)
+    refit = fake_score(fit.Model(()), None)
+    windows = SimpleNamespace(fit=None, fit1=None, free=None)
+    chosen = select(Candidates(refit, refit, singles), NOMINAL, windows, FAST)
+    assert chosen.chosen.model.effects == ("damping", "bias"), chosen.steps
+    assert chosen.rival is None
+    accepted = {s.tried for s in chosen.steps if s.accepted}
+    assert accepted == {"friction", "damping+bias", "friction+bias"}  # damping and bias alone fail the free run
+
+
+def test_an_encoder_reading_error_is_not_a_gap_in_the_physics() -> None:
+    """Angles read with a periodic error (a camera the encoder renders a little off): the effect is still
+    named, and what it leaves is not called "not explained by the candidates"."""
+    obs = planted({"damping": 0.2}, n=160)
+    misread = obs.theta + 0.012 * np.sin(3 * obs.theta) + 0.008 * np.cos(5 * obs.theta)
+    d = analyse(replace(obs, theta=misread), NOMINAL, FAST)
+    assert d.verdict_class == "damping", d.verdict
+    assert d.generic_basis.reading_decides and not d.generic_basis.significant  # the basis alone would have said it
+    assert 0.007 < d.generic_basis.reading_rms < 0.014  # planted: 10.2 mrad rms
+    assert any("encoder's angles" in n for n in d.notes)
+
+
+def test_a_gain_is_judged_against_the_models_own_file() -> None:
+    """A nominal model identified without the damping its system had reads a low (here 0.9 for 1.0).
+    On a recording of the same system with a bias, the effects read a = 1.0: against the nominal a
+    that is a gain of 1.11, against the same effects read from the model's own training file none."""
+    low = Nominal(g=10.0, a=0.9, offset=0.0, dt=0.05)
+    real = planted({"damping": 0.2, "bias": 0.3}, n=160)
+    own = planted({"damping": 0.2}, n=80, seed=3)
+    blind = analyse(real, low, FAST)
+    assert "gain" in blind.verdict_class.split("+"), blind.verdict
+    d = analyse(real, low, FAST, own=own)
+    assert d.verdict_class == "bias+damping", d.verdict
+    assert any("own training file" in n for n in d.notes)

@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from piga.cli.common import (ArgumentParser, PigaError, command_line, nonnegative_int, positive_int, run_cli, seed_int,
-                             warn_if_unconverged)
+                             thread_count, warn_if_unconverged)
 
 PROG = "piga-diagnose"
 
@@ -22,8 +22,14 @@ def build_parser() -> ArgumentParser:
                    help="the data come from a simulated real system with these effects (e.g. 'damping=0.2,delay=2', or "
                    "'none'): also run MPC on it with the nominal and with the corrected physics, and compare")
     p.add_argument("--episodes", type=positive_int, default=5, help="MPC episodes per model with --env (default %(default)s)")
-    p.add_argument("--bootstrap", type=nonnegative_int, default=20, help="bootstrap replicates for intervals (default %(default)s)")
-    p.add_argument("--seed", type=seed_int, default=0, help="seed of the bootstrap (default %(default)s)")
+    from piga.diagnostics.diagnose import DiagnoseConfig
+
+    d = DiagnoseConfig()
+    p.add_argument("--bootstrap", type=nonnegative_int, default=d.bootstrap,
+                   help="bootstrap replicates for intervals (default %(default)s)")
+    p.add_argument("--seed", type=seed_int, default=d.seed, help="seed of the bootstrap (default %(default)s)")
+    p.add_argument("--threads", type=thread_count, default=0,
+                   help="torch CPU threads (default %(default)s: torch's choice, at most 2; small fits gain little from more)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing report in --out")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     return p
@@ -49,7 +55,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         raise PigaError(f"{args.model}: piga-diagnose is for pendulum models; this one is a {model.config.system} model")
     import torch
 
-    torch.set_num_threads(max(1, min(2, torch.get_num_threads())))
+    torch.set_num_threads(args.threads or max(1, min(2, torch.get_num_threads())))
     diagnosis = diagnose(model, args.data, DiagnoseConfig(bootstrap=args.bootstrap, seed=args.seed), checkpoint=ckpt,
                          progress=not args.quiet)
     if effects is not None:

@@ -284,10 +284,11 @@ def markdown(d: Diagnosis, model: str, data: str, command: str) -> str:
         vals = ", ".join(f"{k} = {_fmt(float(val))}" for k, val in c.values.items()) + (f", k = {c.delay}" if c.delay else "")
         lines.append(f"| {c.candidate} | {c.bic:.0f} | {_fmt(c.delta_bic)} | {c.typical_free_run_mse:.3g} | "
                      f"{c.held_out_free_run_mse:.3g} | {vals} |")
-    lines += ["", "Forward selection:", ""]
+    lines += ["", "Selection (every set of effects, against none; a set is accepted when each of its effects earns its place "
+              "against the same set without it, and the accepted set of lowest BIC is chosen):", ""]
     for s in d.selection:
-        lines.append(f"- tried {s.tried}: BIC drop {s.bic_drop:.1f}, typical held-out free-run drop {100 * s.free_run_drop:.1f}% "
-                     f"-> {'accepted' if s.accepted else 'rejected'}")
+        lines.append(f"- {s.tried}: BIC drop {s.bic_drop:.1f}, typical held-out free-run drop {100 * s.free_run_drop:.1f}% "
+                     f"-> {'accepted' if s.accepted else 'rejected'}{' (ambiguous with the chosen set)' if s.ambiguous else ''}")
     gb = d.generic_basis
     lines.append(f"- flexible basis on what is left: BIC drop {gb.bic_drop:.1f}, held-out residual drop "
                  f"{100 * gb.held_out_drop:.1f}% -> {'significant: not explained' if gb.significant else 'nothing left to explain'}")

@@ -127,18 +127,18 @@ class CandidateRow(_ByKey):
 
 @dataclass(frozen=True)
 class SelectionStep(_ByKey):
-    """One test of the forward selection."""
+    """One set of effects that the selection fitted (:func:`piga.diagnostics.diagnose.select`)."""
 
     tried: str
-    """The candidate tried."""
+    """The effects, joined by "+"."""
     bic_drop: float
-    """Its BIC drop against the model chosen so far."""
+    """Its BIC drop against "none" (g and a refitted)."""
     free_run_drop: float
-    """Relative drop of the typical held-out free-run error."""
+    """Relative drop of the typical held-out free-run error against "none"."""
     accepted: bool
-    """Both drops large enough."""
+    """Each of its effects earns its place against the same set without it (BIC and free-run drops)."""
     ambiguous: bool = False
-    """It would have been accepted too, and explains the data about as well as the accepted one."""
+    """Accepted too, and explains the data about as well as the chosen set."""
 
 
 @dataclass(frozen=True)
@@ -178,6 +178,18 @@ class GenericBasis(_ByKey):
     """Relative drop of the held-out one-step residual."""
     significant: bool
     """Both large enough: the gap is not explained by the candidates."""
+    reading_drop: float = 0.0
+    """Relative drop of the held-out one-step residual by a periodic error in the encoder's angles alone
+    (:func:`piga.diagnostics.residuals.reading_features`); where both explain it, ``bic_drop`` and
+    ``held_out_drop`` are the state-action basis's on top of it."""
+    reading_rms: float = 0.0
+    """The rms over the recording's angles (rad) of the angle-reading error that the fit of
+    ``reading_drop`` implies."""
+    reading_significant: bool = False
+    """A periodic reading error in the encoder's angles explains the residual (BIC and held-out drop)."""
+    reading_decides: bool = False
+    """The state-action basis explains the residual alone but not on top of the reading error: the gap
+    left is the encoder's, not the physics'."""
 
 
 @dataclass(frozen=True)
@@ -343,7 +355,7 @@ class Diagnosis(_ByKey):
     candidates: list[CandidateRow]
     """Ranked table of the single-effect fits."""
     selection: list[SelectionStep]
-    """The forward selection's tests."""
+    """Every set of effects that the selection fitted, in BIC order."""
     generic_basis: GenericBasis
     """The "not explained" test."""
     gap: Gap

@@ -102,6 +102,12 @@ def training_steps(checkpoint: dict[str, Any] | None) -> int | None:
         return None
 
 
+def training_data_path(checkpoint: dict[str, Any] | None) -> str | None:
+    """The training file that the checkpoint names, if it is still there (else None)."""
+    path = ((checkpoint or {}).get("data") or {}).get("path")
+    return path if path and os.path.exists(path) else None
+
+
 def training_blank_mse(model: PhysicsModel, checkpoint: dict[str, Any] | None, max_sequences: int = 64) -> float | None:
     """The scale of the run's reconstruction error: the per-frame MSE of its training frames against
     the model's own background (the per-pixel median it subtracts, :mod:`piga.world.encoder`), i.e. the
@@ -113,8 +119,8 @@ def training_blank_mse(model: PhysicsModel, checkpoint: dict[str, Any] | None, m
     from piga.data.schema import split_indices
     from piga.world.model import frames_to_float
 
-    path = ((checkpoint or {}).get("data") or {}).get("path")
-    if not path or not os.path.exists(path):
+    path = training_data_path(checkpoint)
+    if path is None:
         return None
     try:
         rows = split_indices(path, "train")[:max_sequences]
@@ -136,8 +142,8 @@ def training_arrow(checkpoint: dict[str, Any] | None) -> bool:
     True (Gymnasium's own picture, the pixel pendulum's default)."""
     import h5py
 
-    path = ((checkpoint or {}).get("data") or {}).get("path")
-    if not path or not os.path.exists(path):
+    path = training_data_path(checkpoint)
+    if path is None:
         return True
     try:
         with h5py.File(path, "r") as f:
