@@ -102,3 +102,29 @@ def test_the_quick_run_goes_through_the_whole_pipeline(bench, tmp_path: Path) ->
     assert "| top-1" in out.with_suffix(".md").read_text()
     with h5py.File(tmp_path / "work" / "case00.h5", "r") as f:
         assert not {"effects", "env_id", "env_config", "params", "command"} & set(f.attrs) and "states" not in f
+
+
+def test_a_nominal_model_is_kept_only_for_the_same_case_and_recipe(bench, tmp_path: Path, monkeypatch) -> None:
+    """Step 1 (collect and train) is skipped for a model that it trained for the same case, file shape and
+    training arguments, and redone otherwise."""
+    trained: list[list[str]] = []
+
+    class Done:
+        returncode, stderr = 0, ""
+
+    def fake_run(command: list[str], **_: object) -> Done:
+        trained.append(command)
+        run_dir = Path(command[command.index("--out") + 1])
+        run_dir.mkdir(parents=True, exist_ok=True)
+        (run_dir / "checkpoint.pt").write_bytes(b"")
+        return Done()
+
+    monkeypatch.setattr(bench, "collect", lambda *a, **k: None)
+    monkeypatch.setattr(bench.subprocess, "run", fake_run)
+    case = bench.draw_cases(4, 0)[0]
+    bench.nominal_model(case, tmp_path, 40, 16, [])
+    bench.nominal_model(case, tmp_path, 40, 16, [])
+    assert len(trained) == 1
+    bench.nominal_model(case, tmp_path, 40, 20, [])  # another file shape
+    bench.nominal_model({**case, "nominal_seed": case["nominal_seed"] + 1}, tmp_path, 40, 20, [])  # another file
+    assert len(trained) == 3
