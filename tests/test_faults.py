@@ -340,6 +340,7 @@ def test_show_refuses_a_file_with_nothing_to_show(edit: Callable[[h5py.File], No
     ("tiny", ("--free-nats", "1e308"), ["free_nats", "at most 1000"]),
     ("tiny", ("--iterative", "1", "--exploration-noise", "1e300"), ["exploration noise must be >= 0 and at most 10"]),
     ("unknown_env_field", ("--iterative", "1", "--episode-steps", "16"), ["'env_config' has unknown field(s) bogus"]),
+    ("tiny", ("--stoch-size", "50000000"), ["world model of these sizes needs about", "ask for less"]),
 ])
 def test_planet_refuses_before_touching_out(data: str, argv: tuple[str, ...], needles: list[str], files: dict[str, Path],
                                             tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -645,10 +646,13 @@ def test_an_empty_split_reads_as_no_sequences(tiny_data: Path, tmp_path: Path) -
     (["--goal-angle", "1e300"], ["--goal-angle must be an angle"]),
     (["--sequences", "1000000000"], ["needs about"]),
     (["--seed", "9" * 25], ["--seed: expected an integer in [0, 2^63 - 1]"]),
+    (["--epochs", "1000000000"], ["--epochs: expected an integer in [1, 200]", "small default job"]),
+    (["--episodes", "1000000000"], ["--episodes: expected an integer in [1, 100]"]),
+    (["--control-steps", "1000000000"], ["--control-steps: expected an integer in [1, 5000]"]),
 ])
 def test_demo_refusals_leave_no_folder(argv: list[str], needles: list[str], tmp_path: Path,
                                        capsys: pytest.CaptureFixture[str]) -> None:
-    code = 2 if argv[0] == "--seed" else 1  # a seed out of range is the parser's refusal
+    code = 2 if argv[0] in ("--seed", "--epochs", "--episodes", "--control-steps") else 1  # the parser's refusals
     refused("piga-demo", ["--out", str(tmp_path / "demo" / "out"), *argv], capsys, *needles, code=code)
     assert _listing(tmp_path) == []
 

@@ -292,3 +292,9 @@ class WorldModel(nn.Module):
             state = Belief(h, sample(prior, generator))
             total = total + self.reward(state.h, state.s)
         return total
+
+
+def parameter_count(config: RSSMConfig) -> int:
+    """The number of parameters of ``WorldModel(config)``, counted on torch's meta device (no memory)."""
+    with torch.device("meta"):
+        return sum(p.numel() for p in WorldModel(config).parameters())

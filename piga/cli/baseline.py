@@ -230,6 +230,18 @@ def _nothing_left_unless_checkpointed(run_dir: Path, written: list[int], fresh: 
             raise
 
 
+def check_planet_memory(rssm: Any) -> None:
+    """Refuses model sizes whose weights, gradients and Adam's two moments (4 float32 copies) do not fit
+    in memory, before anything is allocated (a --stoch-size of 5e7 otherwise swaps for ever)."""
+    from agents.planet.rssm import parameter_count
+    from piga.io.resources import ResourceError, check_memory
+
+    try:
+        check_memory(16.0 * parameter_count(rssm), "the PlaNet-style world model of these sizes")
+    except ResourceError as exc:
+        raise PigaError(str(exc)) from None
+
+
 def _planet(args: Any, argv: Sequence[str] | None) -> int:
     from agents.planet.config import IterativeConfig, PlanetTrainConfig
     from piga.io.resources import check_run_disk
@@ -273,6 +285,7 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
                                    max_sequences=args.max_sequences, free_nats=args.free_nats, seed=args.seed,
                                    threads=args.threads, max_minutes=args.max_minutes or 0.0)
         rssm = rssm_config_for(info, {"deter_size": args.deter_size, "stoch_size": args.stoch_size, "action_repeat": args.action_repeat})
+        check_planet_memory(rssm)
         if not args.iterative:
             given = [flag for flag, value, default in (("--rounds", args.rounds, None), ("--round-steps", args.round_steps, IterativeConfig.steps_per_round),
                                                        ("--episode-steps", args.episode_steps, IterativeConfig.episode_steps),

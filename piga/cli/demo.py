@@ -20,8 +20,8 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from piga.cli import show, train
-from piga.cli.common import (ArgumentParser, Interrupted, PigaError, command_line, made_folder, positive_int, run_cli,
-                             seed_int, thread_count)
+from piga.cli.common import (ArgumentParser, Interrupted, PigaError, command_line, int_up_to, made_folder, positive_int,
+                             run_cli, seed_int, thread_count)
 from piga.data.collect import CollectConfig, collect
 from piga.data.schema import inspect_dataset
 from piga.io.checkpoint import CHECKPOINT
@@ -49,6 +49,12 @@ class DemoConfig:
     """torch CPU threads for training (0: torch's choice)."""
 
 
+#: The demo's largest --epochs, --episodes and --control-steps: it is the small default job, and larger
+#: values (the probe tried 1e9) only make it run for days; piga-train-model and piga-control take any.
+DEMO_LIMITS = {"epochs": 200, "episodes": 100, "control_steps": 5000}
+_DEMO_WHY = "piga-demo is the small default job; piga-train-model and piga-control run larger ones"
+
+
 def build_parser() -> ArgumentParser:
     d = DemoConfig()
     p = ArgumentParser(
@@ -68,9 +74,11 @@ def build_parser() -> ArgumentParser:
         "and each control task's success rate, final angle error and plan time.")
     p.add_argument("--out", default=d.out, help="output folder (default %(default)s)")
     p.add_argument("--sequences", type=positive_int, default=d.sequences, help="sequences to collect (default %(default)s)")
-    p.add_argument("--epochs", type=positive_int, help="training epochs (default: the fast preset's)")
-    p.add_argument("--episodes", type=positive_int, default=d.episodes, help="control episodes per task (default %(default)s)")
-    p.add_argument("--control-steps", type=positive_int, default=d.control_steps,
+    p.add_argument("--epochs", type=int_up_to(DEMO_LIMITS["epochs"], _DEMO_WHY),
+                   help="training epochs (default: the fast preset's)")
+    p.add_argument("--episodes", type=int_up_to(DEMO_LIMITS["episodes"], _DEMO_WHY), default=d.episodes,
+                   help="control episodes per task (default %(default)s)")
+    p.add_argument("--control-steps", type=int_up_to(DEMO_LIMITS["control_steps"], _DEMO_WHY), default=d.control_steps,
                    help="steps per control episode (default %(default)s)")
     p.add_argument("--goal-angle", type=float, default=d.goal_angle,
                    help="angle of the goal image, degrees from upright (default %(default)s)")
