@@ -182,9 +182,19 @@ def score(case: dict[str, Any], report: dict[str, Any]) -> dict[str, Any]:
     errors = {"g": relative("g"), "a": relative("a")}
     if "b" in corrected and true["b"] > 0:
         errors["b"] = relative("b")
+    found = {e["effect"]: e.get("value") for e in report["effects"]}
+    added_error = {}  # the added effect's fitted size against the truth (a mirrored camera or motor flips a bias)
+    for name, value in case["effects"].items():
+        if name in found and name not in ("delay",) and isinstance(found[name], (int, float)):
+            fitted = abs(found[name]) if case["variant"]["flip"] != "none" else found[name]
+            added_error[name] = abs(fitted - (abs(value) if case["variant"]["flip"] != "none" else value)) / abs(value)
+    gap = report["gap"]
+    closure = gap.get("free_run_gap_closure")
+    # a closure is reported above a valid floor (the twin's), within [0, 105%], or marked as having none
+    closure_valid = closure is None or (bool(gap.get("gap_above_floor")) and -0.05 <= closure <= 1.05)
     return {**base, "truth_effects": true["effects"], "named": named, "top1": bool(top1),
             "ambiguous": bool(ambiguity), "false_effects": sorted(set(named) - set(true["effects"])),
-            "parameter_error": errors}
+            "parameter_error": errors, "added_error": added_error, "closure": closure, "closure_valid": closure_valid}
 
 
 def worst_error(score: dict[str, Any]) -> float | None:
@@ -205,6 +215,9 @@ def summarize(runs: list[dict[str, Any]]) -> dict[str, Any]:
         "false_effects": int(sum(len(x["false_effects"]) for x in s)),
         "parameters_within_3pct": float(np.mean([w is not None and w <= 0.03 for w in worst])) if worst else None,
         "parameter_error_max": None if not worst or None in worst else float(max(worst)),
+        "added_error_max": max((e for x in s for e in x.get("added_error", {}).values()), default=None),
+        "closures_valid": int(sum(x.get("closure_valid", False) for x in s if x["predicted"] != "refused")),
+        "closure_median": float(np.median(c)) if (c := [x["closure"] for x in s if x.get("closure") is not None]) else None,
     }
 
 
@@ -223,16 +236,22 @@ def markdown(runs: list[dict[str, Any]], summary: dict[str, Any], command: str, 
         f"| ambiguous verdicts | {pct(summary['ambiguous_rate'])} | ≤ 10% |",
         f"| named effects the case does not have | {summary['false_effects']} | 0 |",
         f"| corrected g, a, b within 3% (verdicts not ambiguous) | {pct(summary['parameters_within_3pct'])} "
-        f"(worst {pct(summary['parameter_error_max'])}) | all |", "",
-        "| case | variant | added (hidden) | truth | verdict | top-1 | worst of g, a, b |", "|---|---|---|---|---|---|---|",
+        f"(worst {pct(summary['parameter_error_max'])}) | all |",
+        f"| closures above a valid floor or marked as having none | {summary.get('closures_valid', '–')} of "
+        f"{summary['cases'] - summary['refused']} (median closure {pct(summary.get('closure_median'))}) | all |",
+        f"| the added effect's size, worst error (a flip mirrors a bias: its size is compared) | "
+        f"{pct(summary.get('added_error_max'))} | |", "",
+        "| case | variant | added (hidden) | truth | verdict | top-1 | worst of g, a, b | gap closure |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for r in runs:
         v, sc = r["variant"], r["score"]
         variant = ", ".join(f"{k}={val}" for k, val in v.items())
         added = ", ".join(f"{k}={val}" for k, val in r["effects"].items()) or "none"
         worst = worst_error(sc)
+        closure = "none" if sc.get("closure") is None else pct(sc["closure"])
         lines.append(f"| {r['case']} | {variant} | {added} | {'+'.join(sc['truth_effects']) or 'none'} | {sc['verdict']} | "
-                     f"{'yes' if sc['top1'] else '**no**'} | {pct(worst)} |")
+                     f"{'yes' if sc['top1'] else '**no**'} | {pct(worst)} | {closure} |")
     return "\n".join(lines) + "\n"
 
 
@@ -309,6 +328,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--models-only", action="store_true",
                    help="only collect the nominal files and train the nominal models (step 1), for a later run to keep")
     p.add_argument("--only", type=int, nargs="*", default=None, help="run only these case numbers")
+    p.add_argument("--rescore", action="store_true",
+                   help="score the finished cases' reports (in --work) again with this script's scorer, and rewrite OUT")
     args = p.parse_args(argv)
     if args.quick:
         args.cases, args.sequences, args.steps = min(args.cases, 2), 40, 16
@@ -321,6 +342,16 @@ def main(argv: list[str] | None = None) -> int:
     done: list[dict[str, Any]] = json.loads(json_path.read_text())["runs"] if json_path.exists() else []
     info = {"sequences": args.sequences, "steps": args.steps, "seed": args.seed, "machine": machine(),
             "train_note": " (a tiny model: --quick)" if args.quick else ""}
+    if args.rescore:  # the command that ran the cases stays the one recorded
+        command = json.loads(json_path.read_text())["command"] if json_path.exists() else command
+        cases = {c["case"]: c for c in draw_cases(args.cases, args.seed)}
+        for r in done:
+            report_path = work / f"case{r['case']:02d}" / "report.json"
+            if r["score"]["predicted"] != "refused" and report_path.exists():
+                r["score"] = score(cases[r["case"]], json.loads(report_path.read_text()))
+        save(out, command, info, done, summarize, markdown)
+        print(json.dumps(summarize(done), indent=2))
+        return 0
     for case in draw_cases(args.cases, args.seed):
         if args.only is not None and case["case"] not in args.only:
             continue
@@ -335,6 +366,8 @@ def main(argv: list[str] | None = None) -> int:
         done.append(run)
         print(f"case {case['case']}: {case['variant']} + {case['effects'] or 'none'} -> {run['score']['verdict']} "
               f"({'ok' if run['score']['top1'] else 'WRONG'})", flush=True)
+        save(out, command, info, done, summarize, markdown)
+    if done and not args.models_only and args.only is None:  # a run over every case records its command
         save(out, command, info, done, summarize, markdown)
     print(json.dumps(summarize(done), indent=2))
     return 0
