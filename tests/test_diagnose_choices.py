@@ -275,7 +275,8 @@ def test_a_pair_whose_effects_fail_alone_beats_a_single_that_passes(monkeypatch)
     # effects -> (BIC against none, typical free-run error against none's 1.0): a dm_control case's numbers
     table = {frozenset(): (0.0, 1.0), frozenset({"damping"}): (-220.0, 1.33), frozenset({"bias"}): (-148.0, 1.19),
              frozenset({"friction"}): (-125.0, 0.84), frozenset({"damping", "bias"}): (-450.0, 0.07),
-             frozenset({"friction", "bias"}): (-305.0, 0.34), frozenset({"damping", "friction"}): (-210.0, 1.31)}
+             frozenset({"friction", "bias"}): (-305.0, 0.34), frozenset({"damping", "friction"}): (-210.0, 1.31),
+             frozenset({"damping", "bias", "friction"}): (-452.0, 0.069)}  # friction adds nothing to the pair
 
     def fake_score(m: fit.Model, *_: object) -> Score:
         bic, typical = table[frozenset(m.effects)]

@@ -144,8 +144,15 @@ class DiagnoseConfig:
     use_provenance: bool = True
     """Leave out effects that the file's attrs say the system that made it cannot have (a dm_control
     file has no speed clip), and say so in the report. Only excludes; never adds or names an effect."""
-    max_effects: int = 2
-    """Effects the selection may combine."""
+    max_effects: int = 3
+    """Effects the selection may combine (a dm_control variant with hinge damping, an action held over
+    3 physics steps and an added deadzone needs all three: with two, the deadzone's part was left
+    "not explained")."""
+    exhaustive_effects: int = 2
+    """Sets up to this size are all fitted; larger ones only extend the ``beam`` accepted sets of
+    lowest BIC of the size below (each effect of a set must earn its place anyway)."""
+    beam: int = 2
+    """See ``exhaustive_effects``."""
     bootstrap: int = 20
     """Bootstrap replicates for the uncertainties (0: none)."""
     seed: int = 0
@@ -171,8 +178,8 @@ class DiagnoseConfig:
 
     def __post_init__(self) -> None:
         if self.fit_horizon < 1 or self.stride < 1 or self.max_effects < 0 or self.bootstrap < 0 \
-                or self.reading_harmonics < 2:
-            raise ValueError(f"need fit_horizon, stride >= 1, reading_harmonics >= 2 and max_effects, bootstrap >= 0, got {self}")
+                or self.reading_harmonics < 2 or self.exhaustive_effects < 1 or self.beam < 1:
+            raise ValueError(f"need fit_horizon, stride, exhaustive_effects, beam >= 1, reading_harmonics >= 2 and max_effects, bootstrap >= 0, got {self}")
 
 
 #: Units of the candidates' parameters, from their terms (:mod:`piga.world.effects`). piga's engine is
@@ -460,7 +467,8 @@ def close_rival(best: Score, cand: Score, config: DiagnoseConfig) -> bool:
 
 def select(candidates: Candidates, nom: Nominal, w: WindowSet, config: DiagnoseConfig, progress: bool = False,
            speeds: np.ndarray | None = None) -> Selection:
-    """Best subset: every set of up to ``max_effects`` candidates is fitted and scored; a set is accepted
+    """Best subset: every set of up to ``exhaustive_effects`` candidates is fitted and scored, and larger
+    sets up to ``max_effects`` that extend the best accepted ones; a set is accepted
     when each of its effects earns its place against the same set without it (a BIC drop above
     ``bic_margin`` and a drop of the typical held-out free-run error above ``min_gain``, or
     ``within_frame``'s larger BIC drop), and the accepted set of lowest BIC is chosen.
@@ -489,11 +497,14 @@ def select(candidates: Candidates, nom: Nominal, w: WindowSet, config: DiagnoseC
     scored: dict[frozenset[str], Score] = {frozenset(): candidates.refit}
     scored.update({frozenset(c.model.effects): c for c in pool})
     names = [c.model.effects[0] for c in pool]
-    sets = [frozenset(x) for size in range(2, config.max_effects + 1) for x in combinations(names, size)]
-    for members in tqdm(sets, desc="fitting sets of effects", disable=not progress):
+
+    def admissible(members: frozenset[str]) -> bool:
+        return all(members - {e} in scored and passes(scored[members], scored[members - {e}])[0] for e in members)
+
+    def fit_set(members: frozenset[str]) -> None:
         subs = [scored[members - {e}] for e in members if members - {e} in scored]
-        if len(subs) < len(members):  # a subset was refuted (a clip that does not bind)
-            continue
+        if not subs:
+            return
         start = min(subs, key=lambda x: x.bic).model
         effects = tuple(e for e in CANDIDATES if e in members)
         # k and M searched anew: a single's M can be wrong without the other effect (measured: M = 2
@@ -502,8 +513,15 @@ def select(candidates: Candidates, nom: Nominal, w: WindowSet, config: DiagnoseC
         if not clip_refuted(m, nom, w.fit1, speeds, config):
             scored[members] = score(m, nom, w.fit1, w.free)
 
-    def admissible(members: frozenset[str]) -> bool:
-        return all(passes(scored[members], scored[members - {e}])[0] for e in members)
+    for size in range(2, config.max_effects + 1):
+        if size <= config.exhaustive_effects:
+            sets = [frozenset(x) for x in combinations(names, size)]
+        else:  # extend the best accepted sets of the size below
+            below = sorted((m for m in scored if len(m) == size - 1 and admissible(m)), key=lambda m: scored[m].bic)
+            sets = list(dict.fromkeys(m | {e} for m in below[: config.beam] for e in names if e not in m))
+        for members in tqdm(sets, desc=f"fitting sets of {size} effects", disable=not progress):
+            if all(members - {e} in scored for e in members):  # else a subset was refuted (a clip that does not bind)
+                fit_set(members)
 
     steps, accepted = [], []
     for members, cand in sorted(scored.items(), key=lambda kv: kv[1].bic):
