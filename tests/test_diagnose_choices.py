@@ -322,3 +322,21 @@ def test_a_gain_is_judged_against_the_models_own_file() -> None:
     d = analyse(real, low, FAST, own=own)
     assert d.verdict_class == "bias+damping", d.verdict
     assert any("own training file" in n for n in d.notes)
+
+
+def test_angles_that_no_pendulum_follows_are_refused_in_one_line() -> None:
+    """Angles read from frames whose camera noise the model did not take out: g refits toward 0. The
+    diagnosis refuses with its one line instead of failing inside a fit (a log of 0)."""
+    from piga.diagnostics.observe import DiagnosisInputError
+
+    obs = planted({}, n=60)
+    rng = np.random.default_rng(0)
+    scrambled = np.unwrap(rng.uniform(-math.pi, math.pi, obs.theta.shape), axis=1)
+    with pytest.raises(DiagnosisInputError, match="no pendulum motion"):
+        analyse(replace(obs, theta=scrambled), NOMINAL, FAST)
+
+
+def test_a_fit_that_runs_off_is_collapsed() -> None:
+    assert fit.collapsed(fit.Model((), 0, {"g": 0.0, "a": 1.0}), NOMINAL)
+    assert fit.collapsed(fit.Model((), 0, {"g": 10.0, "a": float("inf")}), NOMINAL)
+    assert not fit.collapsed(fit.Model((), 0, {"g": 12.0, "a": -0.5}), NOMINAL)

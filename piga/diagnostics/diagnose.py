@@ -372,22 +372,29 @@ def score_candidates(nom: Nominal, w: WindowSet, progress: bool = False, exclude
     nominal = score(nominal_model, nom, w.fit1_nominal, w.free_nominal)
     allowed = [c for c in CANDIDATES if c not in excluded]
     bar = tqdm(total=2 + len(allowed), desc="fitting candidates", disable=not progress)
-    refit = score(fit.fit_candidate((), {}, nom, w.fit), nom, w.fit1, w.free)
-    if not all(math.isfinite(v) for v in refit.model.values.values()) or not math.isfinite(refit.bic):
+    refit_model = fit.fit_candidate((), {}, nom, w.fit)
+    refit = None if fit.collapsed(refit_model, nom) else score(refit_model, nom, w.fit1, w.free)
+    if refit is None or not math.isfinite(refit.bic):
         raise DiagnosisInputError(f"refitting g and a to this recording's angles diverged (from g = {nom.g:.3g}, "
                                   f"a = {nom.a:.3g}): the angles read from it are no pendulum motion that the nominal "
                                   "physics can follow; is the model trained well enough on this camera?")
     bar.update()
     flip_bic_drop = 0.0
     if actuation_sign(nom, w.fit1) * nom.a < 0:  # the observed response to the actions has the other sign
-        flipped = score(fit.fit_candidate((), {"a": -nom.a}, nom, w.fit), nom, w.fit1, w.free)
-        flip_bic_drop = refit.bic - flipped.bic
-        if flip_bic_drop > bic_margin:
-            refit = flipped
+        flipped_model = fit.fit_candidate((), {"a": -nom.a}, nom, w.fit)
+        if not fit.collapsed(flipped_model, nom):
+            flipped = score(flipped_model, nom, w.fit1, w.free)
+            flip_bic_drop = refit.bic - flipped.bic
+            if flip_bic_drop > bic_margin:
+                refit = flipped
     bar.update()
     singles = []
     for name in allowed:
-        singles.append(score(fit.fit_candidate((name,), refit.model.values, nom, w.fit), nom, w.fit1, w.free))
+        m = fit.fit_candidate((name,), refit.model.values, nom, w.fit)
+        if fit.collapsed(m, nom):  # left out, and the report says why
+            excluded[name] = f"its fit ran off (g = {m.values['g']:.3g}, a = {m.values['a']:.3g})"
+        else:
+            singles.append(score(m, nom, w.fit1, w.free))
         bar.update()
     bar.close()
     singles.sort(key=lambda s: s.bic)
@@ -509,7 +516,7 @@ def select(candidates: Candidates, nom: Nominal, w: WindowSet, config: DiagnoseC
         # k and M searched anew: a single's M can be wrong without the other effect (measured: M = 2
         # alone, 4 beside damping, on a dm_control pendulum with its action held over 4 physics steps)
         m = fit.fit_candidate(effects, start.values, nom, w.fit)
-        if not clip_refuted(m, nom, w.fit1, speeds, config):
+        if not fit.collapsed(m, nom) and not clip_refuted(m, nom, w.fit1, speeds, config):
             scored[members] = score(m, nom, w.fit1, w.free)
 
     for size in range(2, config.max_effects + 1):
