@@ -505,7 +505,15 @@ def select(candidates: Candidates, nom: Nominal, w: WindowSet, config: DiagnoseC
     names = [c.model.effects[0] for c in pool]
 
     def admissible(members: frozenset[str]) -> bool:
-        return all(members - {e} in scored and passes(scored[members], scored[members - {e}])[0] for e in members)
+        """Each effect earns its place against the set without it; a subset not fitted yet (the beam
+        left it out) is fitted once the fitted ones are passed."""
+        subs = [members - {e} for e in members]
+        if not all(passes(scored[members], scored[x])[0] for x in subs if x in scored):
+            return False
+        for x in subs:
+            if x not in scored:
+                fit_set(x)
+        return all(passes(scored[members], scored[x])[0] for x in subs if x in scored)
 
     def fit_set(members: frozenset[str]) -> None:
         subs = [scored[members - {e}] for e in members if members - {e} in scored]
@@ -522,7 +530,7 @@ def select(candidates: Candidates, nom: Nominal, w: WindowSet, config: DiagnoseC
     for size in range(2, config.max_effects + 1):
         # pairs extend the singles that lower the BIC, accepted or not (damping alone may fail the free
         # run while a bias hides it); larger sets extend accepted ones
-        below = sorted((m for m in scored if len(m) == size - 1 and (
+        below = sorted((m for m in list(scored) if len(m) == size - 1 and (
             admissible(m) if size > 2 else candidates.refit.bic - scored[m].bic > config.bic_margin)),
             key=lambda m: scored[m].bic)
         sets = list(dict.fromkeys(m | {e} for m in below[: config.beam] for e in names if e not in m))
@@ -530,7 +538,7 @@ def select(candidates: Candidates, nom: Nominal, w: WindowSet, config: DiagnoseC
             fit_set(members)
 
     steps, accepted = [], []
-    for members, cand in sorted(scored.items(), key=lambda kv: kv[1].bic):
+    for members, cand in sorted(list(scored.items()), key=lambda kv: kv[1].bic):
         if not members:
             continue
         ok = admissible(members)
