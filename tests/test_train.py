@@ -364,6 +364,8 @@ def test_the_convergence_check_on_made_up_trajectories() -> None:
     assert collapsed.outcome == "untrained" and "a collapsed" in collapsed.reason
     faded = check_convergence(state(1 + 9 * settle, 0.3 - 0.298 * settle))  # a settles at 0.002: reversed frames
     assert faded.outcome == "untrained" and "a shrank" in faded.reason and "--signed-actuation" in faded.reason
+    reversed_dmc = check_convergence(state(1 + 9 * settle, 0.3 - 0.2968 * settle))  # a = 0.0032, 93x below: measured
+    assert reversed_dmc.outcome == "untrained" and "a shrank" in reversed_dmc.reason
     weak = check_convergence(state(1 + 9 * settle, 0.3 - 0.29 * (1 - np.exp(-steps / 50))))  # a settles at 0.01, 30x below
     assert weak.outcome == "converged", weak.reason
     warm = check_convergence(state(np.ones_like(steps), np.full_like(steps, 0.3), step=30))
