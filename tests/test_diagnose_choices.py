@@ -340,3 +340,5 @@ def test_a_fit_that_runs_off_is_collapsed() -> None:
     assert fit.collapsed(fit.Model((), 0, {"g": 0.0, "a": 1.0}), NOMINAL)
     assert fit.collapsed(fit.Model((), 0, {"g": 10.0, "a": float("inf")}), NOMINAL)
     assert not fit.collapsed(fit.Model((), 0, {"g": 12.0, "a": -0.5}), NOMINAL)
+    assert not fit.collapsed(fit.Model((), 0, {"g": 10.0, "a": 1e-6}), NOMINAL)  # a of the wrong sign shrinks
+    assert fit.collapsed(fit.Model((), 0, {"g": 10.0, "a": 0.0}), NOMINAL)

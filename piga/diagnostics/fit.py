@@ -268,13 +268,15 @@ def as_observed(w: Windows, pred: Tensor) -> Tensor:
 
 
 def collapsed(model: Model, nominal: Nominal, factor: float = 1e3) -> bool:
-    """A fit that ran off: a value that is not finite, or g or |a| more than ``factor`` times away from
-    the nominal's (their logs are fitted, and ran toward 0 or infinity: measured, g = 1e-10 on angles
-    that a model read from frames under camera noise it did not take out)."""
+    """A fit that ran off: a value that is not finite, g more than ``factor`` times away from the
+    nominal's, |a| more than ``factor`` times above it or exactly 0 (their logs are fitted, and ran
+    toward 0 or infinity: measured, g = 1e-10 on angles that a model read from frames under camera
+    noise it did not take out). A small |a| is no run-off: a of the wrong sign shrinks toward 0,
+    which is how a flipped actuation shows."""
     if not all(math.isfinite(v) for v in model.values.values()):
         return True
     g, a = model.values.get("g", nominal.g), abs(model.values.get("a", nominal.a))
-    return not (nominal.g / factor < g < nominal.g * factor and abs(nominal.a) / factor < a < abs(nominal.a) * factor)
+    return not (nominal.g / factor < g < nominal.g * factor and 0 < a < abs(nominal.a) * factor)
 
 
 def parameters_of(model: Model, nominal: Nominal) -> dict[str, Tensor]:
