@@ -185,7 +185,7 @@ def score(case: dict[str, Any], report: dict[str, Any]) -> dict[str, Any]:
     found = {e["effect"]: e.get("value") for e in report["effects"]}
     added_error = {}  # the added effect's fitted size against the truth (a mirrored camera or motor flips a bias)
     for name, value in case["effects"].items():
-        if name in found and name not in ("delay",) and isinstance(found[name], (int, float)):
+        if name in found and name != "delay" and isinstance(found[name], (int, float)):
             fitted = abs(found[name]) if case["variant"]["flip"] != "none" else found[name]
             added_error[name] = abs(fitted - (abs(value) if case["variant"]["flip"] != "none" else value)) / abs(value)
     gap = report["gap"]
@@ -255,6 +255,11 @@ def markdown(runs: list[dict[str, Any]], summary: dict[str, Any], command: str, 
     return "\n".join(lines) + "\n"
 
 
+def collect_config(case: dict[str, Any], sequences: int, steps: int) -> CollectConfig:
+    """The collection of a case's files: its variant, ``sequences`` x ``steps``, one worker (the seed is the file's)."""
+    return replace(CollectConfig(), sequences=sequences, steps=steps, env=DMCPendulumConfig(**case["variant"]), workers=1)
+
+
 def nominal_model(case: dict[str, Any], work: Path, sequences: int, steps: int, train_args: list[str]) -> tuple[Path, bool]:
     """Collects the case's nominal file and trains its nominal model (step 1); returns the run's folder
     and whether it needed ``--signed-actuation``.
@@ -263,7 +268,6 @@ def nominal_model(case: dict[str, Any], work: Path, sequences: int, steps: int, 
     (its ``nominal.json`` stamp) is kept: the training is most of a case's time, and it does not
     depend on the diagnosis being checked.
     """
-    config = DMCPendulumConfig(**case["variant"])
     nominal = work / f"case{case['case']:02d}_nominal.h5"
     run_dir = work / f"case{case['case']:02d}_model"
     stamp = {"variant": case["variant"], "nominal_seed": case["nominal_seed"], "sequences": sequences, "steps": steps,
@@ -273,8 +277,8 @@ def nominal_model(case: dict[str, Any], work: Path, sequences: int, steps: int, 
         kept = json.loads(stamp_path.read_text())
         if {k: kept.get(k) for k in stamp} == stamp:
             return run_dir, bool(kept["signed_actuation"])
-    collect_config = replace(CollectConfig(), sequences=sequences, steps=steps, env=config, workers=1)
-    collect(replace(collect_config, seed=case["nominal_seed"]), nominal, overwrite=True, command="", progress=False)
+    collect(replace(collect_config(case, sequences, steps), seed=case["nominal_seed"]), nominal, overwrite=True,
+            command="", progress=False)
     command = ["piga-train-model", str(nominal), "--out", str(run_dir), "--preset", "fast", "--threads", "1",
                "--overwrite", "--quiet", *train_args]
     trained = subprocess.run(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
@@ -291,11 +295,9 @@ def run_case(case: dict[str, Any], work: Path, sequences: int, steps: int, train
     """Collects, trains, strips, diagnoses and scores one case; returns its record."""
     t0 = time.time()
     run_dir, signed = nominal_model(case, work, sequences, steps, train_args)
-    config = DMCPendulumConfig(**case["variant"])
     real, report_dir = work / f"case{case['case']:02d}.h5", work / f"case{case['case']:02d}"
-    collect_config = replace(CollectConfig(), sequences=sequences, steps=steps, env=config, workers=1)
-    collect(replace(collect_config, seed=case["data_seed"]), real, overwrite=True, command="", progress=False,
-            make_env=functools.partial(make_case_env, case["effects"]))
+    collect(replace(collect_config(case, sequences, steps), seed=case["data_seed"]), real, overwrite=True, command="",
+            progress=False, make_env=functools.partial(make_case_env, case["effects"]))
     strip_provenance(real)
     done = subprocess.run(["piga-diagnose", "--model", str(run_dir), "--data", str(real), "--out", str(report_dir),
                            "--overwrite", "--quiet", "--threads", "1"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)

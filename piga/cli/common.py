@@ -199,12 +199,14 @@ def _number_type(convert: Callable[[str], float], ok: Callable[[float], bool], w
 positive_int = _number_type(int, lambda v: v >= 1, "a positive integer")
 """argparse type: an integer >= 1."""
 nonnegative_int = _number_type(int, lambda v: v >= 0, "an integer >= 0")
+"""argparse type: an integer >= 0."""
 
 
 def int_up_to(limit: int, why: str) -> Callable[[str], Any]:
     """argparse type: an integer in [1, ``limit``]; ``why`` says what the limit is for."""
     return _number_type(int, lambda v: 1 <= v <= limit, f"an integer in [1, {limit}] ({why})")
-"""argparse type: an integer >= 0."""
+
+
 positive_float = _number_type(float, lambda v: 0 < v < float("inf"), "a finite number > 0")
 """argparse type: a finite number > 0 (NaN is rejected too)."""
 nonnegative_float = _number_type(float, lambda v: 0 <= v < float("inf"), "a finite number >= 0")

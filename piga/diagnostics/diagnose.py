@@ -62,6 +62,7 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from dataclasses import replace as dataclass_replace
 
@@ -229,7 +230,7 @@ def diagnose(model: PhysicsModel, data: str | os.PathLike[str], config: Diagnose
                           progress=progress)
     return analyse(obs, nominal_of(model), config, model=model, rec_training=rec_training,
                    progress=progress, camera=camera, arrow=training_arrow(checkpoint),
-                   own=observe_own(model, checkpoint, progress))
+                   own=lambda: observe_own(model, checkpoint, progress))  # read only when effects were chosen
 
 
 def observe_own(model: PhysicsModel, checkpoint: dict | None, progress: bool = False) -> Observations | None:
@@ -529,10 +530,14 @@ def select(candidates: Candidates, nom: Nominal, w: WindowSet, config: DiagnoseC
                 fit_set(x)
         return all(passes(scored[members], scored[x])[0] for x in subs if x in scored)
 
+    tried: set[frozenset[str]] = set(scored)
+
     def fit_set(members: frozenset[str]) -> None:
+        """Fits and scores ``members`` once (a set whose fit ran off or whose clip the data refute stays out)."""
         subs = [scored[members - {e}] for e in members if members - {e} in scored]
-        if not subs:
+        if members in tried or not subs:
             return
+        tried.add(members)
         start = min(subs, key=lambda x: x.bic).model
         effects = tuple(e for e in CANDIDATES if e in members)
         # k and M searched anew: a single's M can be wrong without the other effect (measured: M = 2
@@ -665,7 +670,7 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
                  generic: GenericBasis, config: DiagnoseConfig, from_gymnasium: bool = True,
                  ambiguity: Ambiguity | None = None, flip_bic_drop: float | None = None,
                  draws: dict[str, list[float]] | None = None, refit: fit.Model | None = None,
-                 own: Observations | None = None) -> Naming:
+                 own: Observations | Callable[[], Observations | None] | None = None) -> Naming:
     """Step 4: the effects that the chosen physics and the camera stage name, with intervals, and the verdict.
 
     Gymnasium's own speed clip is no gap (for a recording that the file says came from Gymnasium's
@@ -680,7 +685,8 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
     deadzone on top of a gain of 1.2 reads a low in the nominal form.) A refitted a of the other sign than the
     nominal's is a flipped actuation (``flip_bic_drop``: how much better that sign fits). With an
     ``ambiguity``, the effects it cannot decide between are not named; the verdict says so. With
-    ``own`` (the model's training file as it sees it), the a and g of a gain or gravity error are
+    ``own`` (the model's training file as it sees it, or a function that reads it, called only when
+    effects were chosen), the a and g of a gain or gravity error are
     compared with those that the same effects read from that file (:func:`own_reading`), not with
     the nominal model's, which were identified without the effects.
     """
@@ -693,16 +699,19 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
     flipped = final.values["a"] * nom.a < 0
     # the a and g that a gain or gravity error is read from: with within_frame, those of the same
     # physics read one step per frame, as the nominal model reads them
+    own_obs = None
+    if own is not None and w is not None and final.effects:
+        own_obs = own() if callable(own) else own
+    use_own = own_obs is not None
     reference = final
-    if final.has(WITHIN_FRAME) and w is not None:
+    if final.has(WITHIN_FRAME) and w is not None and not use_own:
         euler = tuple(e for e in final.effects if e != WITHIN_FRAME.name)
         reference = fit.fit_candidate(euler, final.values, nom, w.fit, delay=final.delay or None)
     ref_g, ref_a = nom.g, abs(nom.a)  # what the recording's g and a are compared with
-    if own is not None and w is not None and final.effects:
+    if use_own:
         # both files read the same way, within the frame too: the recording's own reading is compared
-        reference = final
         start = {**final.values, "a": math.copysign(abs(final.values["a"]), nom.a)}
-        read = own_reading(final.with_values(start), nom, own, config)
+        read = own_reading(final.with_values(start), nom, own_obs, config)
         ref_g, ref_a = read.values["g"], abs(read.values["a"])
         if max(abs(ref_g / nom.g - 1), abs(ref_a / abs(nom.a) - 1)) > config.gain_tolerance:
             notes.append(f"read from the model's own training file with the effects it shows too ({read.name}), g = "
@@ -973,7 +982,7 @@ def candidate_table(candidates: Candidates) -> list[CandidateRow]:
 
 def analyse(obs: Observations, nom: Nominal, config: DiagnoseConfig = DiagnoseConfig(), model: PhysicsModel | None = None,
             rec_training: float = 0.0, progress: bool = False, camera: CameraFindings | None = None,
-            arrow: bool = True, own: Observations | None = None) -> Diagnosis:
+            arrow: bool = True, own: Observations | Callable[[], Observations | None] | None = None) -> Diagnosis:
     """The diagnosis of observations ``obs`` against the nominal physics ``nom``.
 
     ``model`` (its decoder) renders the pixel errors of ``obs.frames``; without it they are left
@@ -982,8 +991,8 @@ def analyse(obs: Observations, nom: Nominal, config: DiagnoseConfig = DiagnoseCo
     it accepted a camera or noise, the dynamics are fitted on its re-matched angles. ``arrow``: the
     simulator that the model was identified in draws Gymnasium's torque arrow (for the twin that
     measures the floor of the gap, :mod:`piga.diagnostics.twin`). ``own``: the model's own training
-    file as it sees it (:func:`observe_own`), the reference of a gain or gravity error
-    (:func:`own_reading`); without it, the nominal g and a are.
+    file as it sees it (:func:`observe_own`), or a function that reads it only when needed: the
+    reference of a gain or gravity error (:func:`own_reading`); without it, the nominal g and a are.
 
     The steps: cut the windows, score the candidates, select, test what is left, name the effects,
     summarise the vision, measure the gap, assemble.
