@@ -21,6 +21,7 @@ coefficient and delay errors, and free-run closure.
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import shlex
 import subprocess
@@ -38,6 +39,7 @@ from common import machine
 from envs.pendulum import PixelPendulumConfig
 from piga.io.atomic import atomic_output, write_json
 from piga.data.collect import CollectConfig, collect
+from piga.io.pool import run_pool
 
 #: Candidate effects and how their magnitudes are drawn (rng -> value).
 DRAWS = {
@@ -246,7 +248,9 @@ def main() -> int:
     p.add_argument("--cases", type=int, default=30)
     p.add_argument("--sequences", type=int, default=200)
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--workers", type=int, default=2)
+    p.add_argument("--workers", type=int, default=2, help="collection workers of one case (with --jobs 1)")
+    p.add_argument("--jobs", type=int, default=1,
+                   help="cases run at once, each in its own process with one torch thread (a machine's cores)")
     p.add_argument("--mix", choices=("all", "none"), default="all",
                    help="'all': the mix of effects; 'none': no-effect cases only (false-positive rate)")
     args = p.parse_args()
@@ -254,28 +258,40 @@ def main() -> int:
     work.mkdir(parents=True, exist_ok=True)
     command = shlex.join(["python", *sys.argv])
     done: list[dict] = json.loads(out.with_suffix(".json").read_text())["runs"] if out.with_suffix(".json").exists() else []
-    info = {"model": args.model, "sequences": args.sequences, "seed": args.seed, "mix": args.mix, "machine": machine()}
-    for case in draw_cases(args.cases, args.seed, args.mix):
-        if any(r["case"] == case["case"] and r["effects"] == case["effects"] for r in done):
-            continue
-        data = work / f"case{case['case']:02d}.h5"
-        t0 = time.time()
-        env = PixelPendulumConfig(effects=tuple(case["effects"].items()))
-        collect(replace(CollectConfig(), sequences=args.sequences, seed=case["data_seed"], env=env, workers=args.workers),
-                data, overwrite=True, command="", progress=False)
-        strip_labels(data)
-        report_dir = work / f"case{case['case']:02d}"
-        subprocess.run(["piga-diagnose", "--model", args.model, "--data", str(data), "--out", str(report_dir),
-                        "--overwrite", "--quiet"], check=True, stdout=subprocess.DEVNULL)
-        report = json.loads((report_dir / "report.json").read_text())
-        run = {**case, "seconds": time.time() - t0, "score": score(case, report)}
-        done.append(run)
-        print(f"case {case['case']}: truth {case['effects'] or 'none'} -> {run['score']['verdict']} "
-              f"({'ok' if run['score']['top1'] else 'WRONG'}, raw closure {100 * run['score']['free_run_closure']:.1f}%, "
-              f"gap closure {run['score']['free_run_gap_closure']})", flush=True)
+    info = {"model": args.model, "sequences": args.sequences, "seed": args.seed, "mix": args.mix, "machine": machine(),
+            "jobs": args.jobs}
+    todo = [c for c in draw_cases(args.cases, args.seed, args.mix)
+            if not any(r["case"] == c["case"] and r["effects"] == c["effects"] for r in done)]
+    run = functools.partial(run_case, model=args.model, work=work, sequences=args.sequences,
+                            workers=args.workers if args.jobs <= 1 else 1, threads=1 if args.jobs > 1 else None)
+
+    def finished(_: int, record: dict) -> None:  # saved as each case ends, so that a stopped run continues
+        done.append(record)
+        done.sort(key=lambda r: r["case"])
+        print(f"case {record['case']}: truth {record['effects'] or 'none'} -> {record['score']['verdict']} "
+              f"({'ok' if record['score']['top1'] else 'WRONG'}, raw closure "
+              f"{100 * record['score']['free_run_closure']:.1f}%, gap closure {record['score']['free_run_gap_closure']})",
+              flush=True)
         save(out, command, info, done, summarize, markdown)
+
+    run_pool(run, todo, workers=args.jobs, progress=False, on_result=finished)
     print(json.dumps(summarize(done), indent=2))
     return 0
+
+
+def run_case(case: dict, model: str, work: Path, sequences: int, workers: int, threads: int | None) -> dict:
+    """Collects, strips, diagnoses (in a fresh process) and scores one case; returns its record."""
+    data = work / f"case{case['case']:02d}.h5"
+    t0 = time.time()
+    env = PixelPendulumConfig(effects=tuple(case["effects"].items()))
+    collect(replace(CollectConfig(), sequences=sequences, seed=case["data_seed"], env=env, workers=workers),
+            data, overwrite=True, command="", progress=False)
+    strip_labels(data)
+    report_dir = work / f"case{case['case']:02d}"
+    subprocess.run(["piga-diagnose", "--model", model, "--data", str(data), "--out", str(report_dir), "--overwrite",
+                    "--quiet", *(["--threads", str(threads)] if threads else [])], check=True, stdout=subprocess.DEVNULL)
+    report = json.loads((report_dir / "report.json").read_text())
+    return {**case, "seconds": time.time() - t0, "score": score(case, report)}
 
 
 if __name__ == "__main__":

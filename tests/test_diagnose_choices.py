@@ -13,7 +13,7 @@ import pytest
 import torch
 
 from piga.diagnostics import DiagnoseConfig, Observations, analyse, fit
-from piga.diagnostics.diagnose import UNITS, clip_binding, clip_supported, select
+from piga.diagnostics.diagnose import UNITS, clip_binding, clip_supported, own_reading, select
 from piga.diagnostics.report import markdown
 from piga.io.runs import Nominal, nominal_of
 from tests.test_diagnose_continuous import DT, planted_within_frame
@@ -322,6 +322,16 @@ def test_a_gain_is_judged_against_the_models_own_file() -> None:
     d = analyse(real, low, FAST, own=own)
     assert d.verdict_class == "bias+damping", d.verdict
     assert any("own training file" in n for n in d.notes)
+
+
+def test_the_own_file_is_read_in_the_recordings_form_where_an_effect_can_vanish() -> None:
+    """On the training file, a torque or a deadzone of the recording is fitted whether the file shows it
+    or not (there it lands near 0 and leaves a where it is); a delay only when the file shows it."""
+    own = planted({"damping": 0.2}, n=80, seed=3)
+    physics = fit.Model(("damping", "delay", "deadzone"), 1, {"g": 10.0, "a": 1.0, "b": 0.2, "d": 0.3}, 0)
+    read = own_reading(physics, NOMINAL, own, FAST)
+    assert set(read.effects) == {"damping", "deadzone"}, read.effects
+    assert read.values["d"] < 0.05 and abs(read.values["a"] - 1.0) < 0.03, read.values
 
 
 def test_angles_that_no_pendulum_follows_are_refused_in_one_line() -> None:

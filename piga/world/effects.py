@@ -168,6 +168,9 @@ class Effect:
     """Values a fit tries: starting points of L-BFGS, or every count searched."""
     lower_bound: float | None = None
     """Smallest value the physics uses (a fit may move the parameter below it; the physics stops there)."""
+    vanishes_at: float | None = None
+    """The parameter's value at which the effect is absent (0 for a torque or a deadzone), when there is one: a fit
+    of the effect to data without it then lands near that value, instead of bending the other parameters."""
     candidate: bool = True
     """Among the diagnosis' candidates."""
     evidence: str = ""
@@ -191,6 +194,7 @@ class TorqueTerm(Effect):
 
     input: Callable[[Array, Array], Array]
     """(θ, θ̇) -> the torque per unit of the parameter (``-θ̇`` for damping)."""
+    vanishes_at: float | None = 0.0
     stage: ClassVar[Stage] = "torque"
 
     def torque(self, theta: Array, v: Array, value: Array) -> Array:
@@ -227,7 +231,7 @@ def _deadzone(u: Array, d: Array) -> Array:
 DELAY = DiscreteTerm(name="delay", meaning="actuator dead time", unit="steps", grid=(1, 2, 3, 4),
                      evidence="actions that switch abruptly, with frames after each switch")
 DEADZONE = CommandTerm(name="deadzone", meaning="actuator deadzone half-width", parameter="d", unit="action units",
-                       grid=(0.05, 0.2, 0.4, 0.7, 1.0), transform=_deadzone,
+                       grid=(0.05, 0.2, 0.4, 0.7, 1.0), vanishes_at=0.0, transform=_deadzone,
                        evidence="small actions, |u| below {d:.2f}")
 SATURATION = CommandTerm(name="saturation", meaning="actuator limit", parameter="s", unit="action units",
                          grid=(0.5, 0.8, 1.1, 1.4, 1.8), lower_bound=1e-3, transform=clip,
