@@ -107,6 +107,23 @@ def test_noise_level_recovers_planted_noise_clipped_at_white(model: PhysicsModel
         assert ci[0] < s < ci[1]
 
 
+def test_still_pixels_survive_a_decoder_that_leaks_a_few_gray_levels(model: PhysicsModel, monkeypatch) -> None:
+    """A decoder that leaks up to 2 gray levels of its template across the image (as trained models do)
+    still leaves pixels "at its background" for the noise estimate, and the noise is still measured."""
+    clean = V.angle_table(model, V.Camera(), 180)
+    rng = np.random.default_rng(0)
+    on = (np.arange(180) % 3 == 0)[:, None]  # a third of the angles leak 1-2 gray levels on every pixel
+    leak = torch.as_tensor(on * rng.uniform(1 / 255, 2 / 255, (1, clean.renders.shape[1])), dtype=clean.renders.dtype)
+    monkeypatch.setattr(V, "angle_table", lambda *args, **kwargs: V.AngleTable(clean.angles, clean.renders + leak))
+    still = V.static_pixels(model, margin=1)
+    assert still.sum() > 50 and not still[SIZE // 2, SIZE // 2]
+    assert not V.static_pixels(model, margin=1, tolerance=0.5 / 255).any()  # the old rule found none
+    theta = torch.rand(200, generator=torch.Generator().manual_seed(5)) * 2 * math.pi - math.pi
+    frames = _renders(model, theta).astype(np.float64)
+    noisy = np.clip(np.rint(frames + 12 * np.random.default_rng(6).normal(size=frames.shape)), 0, 255).astype(np.uint8)
+    assert V.noise_level(noisy, still) == pytest.approx(12, rel=0.05)
+
+
 def test_stale_frames_come_from_the_drop_and_delay_wrappers() -> None:
     def frames(effects: dict) -> np.ndarray:
         env = make_pixel_pendulum(PixelPendulumConfig(image_size=32, effects=tuple(effects.items())))
