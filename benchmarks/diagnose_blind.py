@@ -148,7 +148,7 @@ def summarize(runs: list[dict]) -> dict:
     delays = [x["delay_exact"] for x in s if x["delay_exact"] is not None]
     with_gap = [x["free_run_gap_closure"] for x in s if x["truth"] not in ("none", "unexplained")
                 and x["free_run_gap_closure"] is not None]
-    raw = [x["free_run_closure"] for x in s if x["truth"] not in ("none", "unexplained")]
+    raw = [x["free_run_closure"] for x in s if x["truth"] not in ("none", "unexplained") and x["free_run_closure"] is not None]
     state = [x for x in s if x["truth"] not in ("none", "unexplained") and x.get("closure_basis") == "state"]
     mean_gap = [x["mean_free_run_gap_closure"] for x in state if x.get("mean_free_run_gap_closure") is not None]
     raw_typical = [x["typical_free_run_closure"] for x in state if x.get("typical_free_run_closure") is not None]
@@ -288,10 +288,24 @@ def run_case(case: dict, model: str, work: Path, sequences: int, workers: int, t
             data, overwrite=True, command="", progress=False)
     strip_labels(data)
     report_dir = work / f"case{case['case']:02d}"
-    subprocess.run(["piga-diagnose", "--model", model, "--data", str(data), "--out", str(report_dir), "--overwrite",
-                    "--quiet", *(["--threads", str(threads)] if threads else [])], check=True, stdout=subprocess.DEVNULL)
+    done = subprocess.run(["piga-diagnose", "--model", model, "--data", str(data), "--out", str(report_dir), "--overwrite",
+                           "--quiet", *(["--threads", str(threads)] if threads else [])],
+                          stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    if done.returncode != 0:  # a refusal (one line) is an outcome, scored as wrong; a crash is not
+        if "internal error" in done.stderr or not done.stderr.strip():
+            raise RuntimeError(f"piga-diagnose failed on case {case['case']}: {done.stderr.strip()}")
+        return {**case, "seconds": time.time() - t0, "score": refused(case, done.stderr.strip().splitlines()[-1])}
     report = json.loads((report_dir / "report.json").read_text())
     return {**case, "seconds": time.time() - t0, "score": score(case, report)}
+
+
+def refused(case: dict, message: str) -> dict:
+    """The score of a case that piga-diagnose refused: wrong, with its one line as the verdict."""
+    truth = truth_class(case["effects"])
+    return {"truth": truth, "predicted": "refused", "first": "refused", "top1": False, "exact": False,
+            "coefficient_error": {}, "delay_exact": None, "free_run_closure": None, "free_run_gap_closure": None,
+            "closure_basis": None, "mean_free_run_gap_closure": None, "typical_free_run_closure": None,
+            "verdict": f"refused: {message}"}
 
 
 if __name__ == "__main__":
