@@ -21,7 +21,7 @@ lacks: its hinge ``damping`` (if any), ``within_frame`` (an action held over 2+ 
 and ``flip`` (a mirrored camera or reversed motor). Naming any of them is right; naming anything
 else is a false effect.
 
-    python benchmarks/diagnose_blind_dmc.py --out results/diagnose_blind_dmc            # 24 cases (hours)
+    python benchmarks/diagnose_blind_dmc.py --out results/diagnose_blind_dmc --jobs 2   # 24 cases (hours)
     python benchmarks/diagnose_blind_dmc.py --quick --out /tmp/dmc_quick --work /tmp/w  # 2 tiny cases
     python benchmarks/diagnose_blind_dmc.py --models-only --only 2 3  # step 1 ahead, for cases 2 and 3
 
@@ -53,6 +53,7 @@ from diagnose_blind import save, strip_labels
 from diagnose_blind import score as score_gym
 from envs.dmc import DMCPendulumConfig, DMCPendulumEnv
 from piga.data.collect import CollectConfig, collect
+from piga.io.pool import run_pool
 
 #: Effects added outside dm_control, and how their magnitudes are drawn (rng -> value). friction
 #: and bias are in piga's units (rad/s², torque per m·l²), applied to the hinge as 3·I times that.
@@ -330,6 +331,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--models-only", action="store_true",
                    help="only collect the nominal files and train the nominal models (step 1), for a later run to keep")
     p.add_argument("--only", type=int, nargs="*", default=None, help="run only these case numbers")
+    p.add_argument("--jobs", type=int, default=1,
+                   help="cases run at once, each in its own process with one torch thread (a machine's cores)")
     p.add_argument("--rescore", action="store_true",
                    help="score the finished cases' reports (in --work) again with this script's scorer, and rewrite OUT")
     args = p.parse_args(argv)
@@ -342,7 +345,7 @@ def main(argv: list[str] | None = None) -> int:
     command = shlex.join(["python", *(sys.argv if argv is None else ["benchmarks/diagnose_blind_dmc.py", *argv])])
     json_path = out.with_suffix(".json")
     done: list[dict[str, Any]] = json.loads(json_path.read_text())["runs"] if json_path.exists() else []
-    info = {"sequences": args.sequences, "steps": args.steps, "seed": args.seed, "machine": machine(),
+    info = {"sequences": args.sequences, "steps": args.steps, "seed": args.seed, "machine": machine(), "jobs": args.jobs,
             "train_note": " (a tiny model: --quick)" if args.quick else ""}
     if args.rescore:  # the command that ran the cases stays the one recorded
         command = json.loads(json_path.read_text())["command"] if json_path.exists() else command
@@ -354,21 +357,24 @@ def main(argv: list[str] | None = None) -> int:
         save(out, command, info, done, summarize, markdown)
         print(json.dumps(summarize(done), indent=2))
         return 0
-    for case in draw_cases(args.cases, args.seed):
-        if args.only is not None and case["case"] not in args.only:
-            continue
-        if args.models_only:
-            nominal_model(case, work, args.sequences, args.steps, train_args)
-            print(f"case {case['case']}: nominal model trained", flush=True)
-            continue
-        if any(r["case"] == case["case"] and r["variant"] == case["variant"] and r["effects"] == case["effects"]
-               for r in done):
-            continue
-        run = run_case(case, work, args.sequences, args.steps, train_args)
+    cases = [c for c in draw_cases(args.cases, args.seed) if args.only is None or c["case"] in args.only]
+    if args.models_only:
+        run_pool(functools.partial(nominal_model, work=work, sequences=args.sequences, steps=args.steps,
+                                   train_args=train_args), cases, workers=args.jobs, progress=False,
+                 on_result=lambda i, _: print(f"case {cases[i]['case']}: nominal model trained", flush=True))
+        return 0
+    todo = [c for c in cases if not any(r["case"] == c["case"] and r["variant"] == c["variant"]
+                                        and r["effects"] == c["effects"] for r in done)]
+
+    def finished(_: int, run: dict[str, Any]) -> None:  # saved as each case ends, so that a stopped run continues
         done.append(run)
-        print(f"case {case['case']}: {case['variant']} + {case['effects'] or 'none'} -> {run['score']['verdict']} "
+        done.sort(key=lambda r: r["case"])
+        print(f"case {run['case']}: {run['variant']} + {run['effects'] or 'none'} -> {run['score']['verdict']} "
               f"({'ok' if run['score']['top1'] else 'WRONG'})", flush=True)
         save(out, command, info, done, summarize, markdown)
+
+    run_pool(functools.partial(run_case, work=work, sequences=args.sequences, steps=args.steps, train_args=train_args),
+             todo, workers=args.jobs, progress=False, on_result=finished)
     if done and not args.models_only and args.only is None:  # a run over every case records its command
         save(out, command, info, done, summarize, markdown)
     print(json.dumps(summarize(done), indent=2))
