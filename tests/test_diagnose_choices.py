@@ -260,6 +260,31 @@ def test_the_headline_is_labelled_raw_only_when_it_is() -> None:
     assert text.startswith("**Free-run closure 99.9%** of the gap above the floor") and ", raw**" not in text
 
 
+@pytest.mark.parametrize("above, at_floor", [(1.05, True), (3.0, False)])
+def test_a_floor_just_above_the_corrected_error_is_reached_and_one_far_above_is_none(monkeypatch, above: float,
+                                                                                     at_floor: bool) -> None:
+    """The twin's floor is a median over held-out windows: a corrected error just under it, within its
+    interval, has closed the gap (100%); far under it, the floor is no floor and the closure is raw."""
+    import importlib
+
+    from piga.diagnostics.twin import TwinFloor
+
+    D = importlib.import_module("piga.diagnostics.diagnose")  # the module (the package re-exports its function)
+
+    obs = planted({"damping": 0.2})
+    corrected = analyse(obs, NOMINAL, FAST).gap.typical_free_run_mse_corrected
+    # windows' errors spread over orders of magnitude, as real ones do; their median: about `above` x
+    windows = corrected * above * np.exp(np.random.default_rng(0).normal(0, 1, 200))
+    monkeypatch.setattr(D, "twin_renderer", lambda *args, **kwargs: ("simulator", None))
+    monkeypatch.setattr(D, "twin_floor", lambda *args, **kwargs: TwinFloor(np.full(35, corrected * above), windows))
+    g = analyse(obs, NOMINAL, FAST).gap
+    if at_floor:
+        assert g.floor_subtracted and g.free_run_gap_closure == 1.0 and "at the twin's floor" in g.floor_note
+    else:
+        assert not g.floor_subtracted and "no floor" in g.floor_note
+        assert g.free_run_gap_closure == pytest.approx(g.typical_free_run_closure)
+
+
 # --- 6. sets of effects, the encoder's reading error, the model's own file -----------------------
 
 

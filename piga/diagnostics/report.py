@@ -198,7 +198,7 @@ def headline_text(d: Diagnosis) -> str:
                        "the recording about as well as its training frames, read by the encoder, and scaled down to this "
                        "recording's own vision noise by the ratio of the one-step errors, recording over twin)")
                     + ". Raw, with no floor subtracted (1 − corrected / nominal of the same two numbers): "
-                    f"{_pct(g.typical_free_run_closure)}.")
+                    f"{_pct(g.typical_free_run_closure)}." + note)
     else:
         headline = (f"**Free-run closure {_pct(g.free_run_gap_closure)}, raw**: 1 − err_corrected / err_nominal on the "
                     "typical held-out window (the median over windows of each window's mean squared free-run angle "

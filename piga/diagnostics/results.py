@@ -327,7 +327,8 @@ class Gap(_ByKey):
     floor_note: str | None = None
     """Why the headline closure has no floor subtracted (None: it has one, or none was tried): the
     recording was not filmed by the simulator's camera, or the floor lay above the corrected model's
-    own error (then it is no floor, and a closure against it would exceed 100%)."""
+    own error beyond its 95% interval (then it is no floor, and a closure against it would exceed
+    100%); or why it is 100%: the corrected model's error lay at the floor, within that interval."""
     floor_subtracted: bool = False
     """The headline ``free_run_gap_closure`` is above a floor (the twin's, or the matched pixels');
     False: it is raw, 1 − err_corrected / err_nominal of the numbers next to it."""
