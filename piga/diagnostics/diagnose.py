@@ -37,9 +37,9 @@ Steps (no state labels, no effect labels; only frames and actions of the "real" 
    clip, :func:`piga.diagnostics.observe.impossible_effects`) are not fitted, and the report says
    so; the blind benchmarks delete those attrs, so nothing there rests on them.
 6. A gain error is the refitted a over the reference a (the nominal's, or the same effects read from
-   the model's own training file, :func:`own_reading`), beyond ``gain_tolerance`` with (with the
-   bootstrap) all of its 95% interval (without the training file, read one step per frame, not with
-   ``within_frame``'s reading), and only when "none" refitted moves a away from the nominal too
+   the model's own training file, :func:`own_reading`), beyond ``gain_tolerance``, and with the
+   bootstrap all of its 95% interval beyond it too (without the training file, a is read one step
+   per frame, not with ``within_frame``'s reading), and only when "none" refitted moves a away from the nominal too
    (else the refit only compensates the other effects). A speed clip is a candidate only
    where the data show one: the observed speeds pile up at its level and hardly pass it, and it
    binds in at least ``clip_min_binding`` of the samples (:func:`clip_refuted`; a damping or the
