@@ -10,6 +10,14 @@ import pytest
 
 os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
 
+# Under pytest-xdist the tests share the cores: one torch thread per worker, and for the commands the
+# tests start (two processes with torch's default threads on 2 cores ran 15-20x slower than one each).
+if os.environ.get("PYTEST_XDIST_WORKER"):
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    import torch
+
+    torch.set_num_threads(1)
+
 # A shell starts background jobs (`pytest &`) with SIGINT ignored, and the commands that the tests
 # start would inherit that and never see the Ctrl-C the interrupt tests send. A handler, unlike
 # SIG_IGN, is reset to the default in a started command.

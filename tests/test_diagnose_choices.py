@@ -359,6 +359,22 @@ def test_the_own_file_is_read_in_the_recordings_form_where_an_effect_can_vanish(
     assert read.values["d"] < 0.05 and abs(read.values["a"] - 1.0) < 0.03, read.values
 
 
+def test_the_own_file_is_read_by_the_recordings_reader(monkeypatch, tmp_path) -> None:
+    """When the recording's angles were matched to the decoder's renders (a camera effect), the training
+    file's angles are matched too, with no camera; otherwise they are the encoder's."""
+    import importlib
+
+    D = importlib.import_module("piga.diagnostics.diagnose")  # the module (the package re-exports its function)
+    encoded = planted({}, n=4)
+    matched = encoded.theta + 0.01
+    (tmp_path / "train.h5").write_bytes(b"")
+    monkeypatch.setattr(D, "observe", lambda *args, **kwargs: encoded)
+    monkeypatch.setattr(D, "match_file", lambda model, path, camera: matched if camera == D.Camera() else None)
+    checkpoint = {"data": {"path": str(tmp_path / "train.h5")}}
+    assert D.observe_own(None, checkpoint).theta is encoded.theta
+    assert D.observe_own(None, checkpoint, rematch=True).theta is matched
+
+
 def test_angles_that_no_pendulum_follows_are_refused_in_one_line() -> None:
     """Angles read from frames whose camera noise the model did not take out: g refits toward 0. The
     diagnosis refuses with its one line instead of failing inside a fit (a log of 0)."""
