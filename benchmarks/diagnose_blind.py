@@ -287,16 +287,22 @@ def run_case(case: dict, model: str, work: Path, sequences: int, workers: int, t
     collect(replace(CollectConfig(), sequences=sequences, seed=case["data_seed"], env=env, workers=workers),
             data, overwrite=True, command="", progress=False)
     strip_labels(data)
-    report_dir = work / f"case{case['case']:02d}"
-    done = subprocess.run(["piga-diagnose", "--model", model, "--data", str(data), "--out", str(report_dir), "--overwrite",
-                           "--quiet", *(["--threads", str(threads)] if threads else [])],
+    report = run_diagnose(model, data, work / f"case{case['case']:02d}", case["case"], threads)
+    return {**case, "seconds": time.time() - t0,
+            "score": refused(case, report) if isinstance(report, str) else score(case, report)}
+
+
+def run_diagnose(model: str | Path, data: Path, report_dir: Path, case: int, threads: int | None) -> dict | str:
+    """``piga-diagnose`` on ``data`` in a fresh process: its report, or the one line of its refusal (an
+    outcome, scored as wrong). A crash (an internal error, or no line at all) raises."""
+    done = subprocess.run(["piga-diagnose", "--model", str(model), "--data", str(data), "--out", str(report_dir),
+                           "--overwrite", "--quiet", *(["--threads", str(threads)] if threads else [])],
                           stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
-    if done.returncode != 0:  # a refusal (one line) is an outcome, scored as wrong; a crash is not
+    if done.returncode != 0:
         if "internal error" in done.stderr or not done.stderr.strip():
-            raise RuntimeError(f"piga-diagnose failed on case {case['case']}: {done.stderr.strip()}")
-        return {**case, "seconds": time.time() - t0, "score": refused(case, done.stderr.strip().splitlines()[-1])}
-    report = json.loads((report_dir / "report.json").read_text())
-    return {**case, "seconds": time.time() - t0, "score": score(case, report)}
+            raise RuntimeError(f"piga-diagnose failed on case {case}: {done.stderr.strip()}")
+        return done.stderr.strip().splitlines()[-1]
+    return json.loads((report_dir / "report.json").read_text())
 
 
 def refused(case: dict, message: str) -> dict:

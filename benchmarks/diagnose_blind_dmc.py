@@ -49,7 +49,7 @@ import h5py
 import numpy as np
 
 from common import machine
-from diagnose_blind import save, strip_labels
+from diagnose_blind import run_diagnose, save, strip_labels
 from diagnose_blind import score as score_gym
 from envs.dmc import DMCPendulumConfig, DMCPendulumEnv
 from piga.data.collect import CollectConfig, collect
@@ -300,15 +300,9 @@ def run_case(case: dict[str, Any], work: Path, sequences: int, steps: int, train
     collect(replace(collect_config(case, sequences, steps), seed=case["data_seed"]), real, overwrite=True, command="",
             progress=False, make_env=functools.partial(make_case_env, case["effects"]))
     strip_provenance(real)
-    done = subprocess.run(["piga-diagnose", "--model", str(run_dir), "--data", str(real), "--out", str(report_dir),
-                           "--overwrite", "--quiet", "--threads", "1"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
-    if done.returncode != 0:  # a refusal (one line) is an outcome, scored as wrong; a crash is not
-        if "internal error" in done.stderr or not done.stderr.strip():
-            raise RuntimeError(f"piga-diagnose failed on case {case['case']}: {done.stderr.strip()}")
-        return {**case, "seconds": time.time() - t0, "signed_actuation": signed,
-                "score": refused(case, done.stderr.strip().splitlines()[-1])}
-    report = json.loads((report_dir / "report.json").read_text())
-    return {**case, "seconds": time.time() - t0, "signed_actuation": signed, "score": score(case, report)}
+    report = run_diagnose(run_dir, real, report_dir, case["case"], threads=1)
+    return {**case, "seconds": time.time() - t0, "signed_actuation": signed,
+            "score": refused(case, report) if isinstance(report, str) else score(case, report)}
 
 
 def refused(case: dict[str, Any], message: str) -> dict[str, Any]:
@@ -375,7 +369,7 @@ def main(argv: list[str] | None = None) -> int:
 
     run_pool(functools.partial(run_case, work=work, sequences=args.sequences, steps=args.steps, train_args=train_args),
              todo, workers=args.jobs, progress=False, on_result=finished)
-    if done and not args.models_only and args.only is None:  # a run over every case records its command
+    if done and args.only is None:  # a run over every case records its command
         save(out, command, info, done, summarize, markdown)
     print(json.dumps(summarize(done), indent=2))
     return 0
