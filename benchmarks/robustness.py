@@ -67,6 +67,7 @@ import numpy as np
 
 from common import machine
 from piga.io.atomic import atomic_output, write_json
+from piga.io.pool import git_commit
 from piga.data.schema import DatasetWriter
 
 #: ``piga-collect --seed`` of every file: not the 100 that systems.py and train_accuracy.py check the recipe on.
@@ -580,7 +581,8 @@ class Bench:
             wall = time.monotonic() - started
             _check_interrupt(result.returncode)
             run_dir.with_name(f"{row.run_name}.stderr.txt").write_text(result.stderr)
-            info = {"command": shlex.join(command), "exit_code": result.returncode, "stderr_last": _last_line(result.stderr),
+            info = {"command": shlex.join(command), "commit": git_commit(), "exit_code": result.returncode,
+                    "stderr_last": _last_line(result.stderr),
                     "stdout_last": _last_line(result.stdout), "wall_seconds": wall, "load_average_at_end": os.getloadavg()}
             write_json(info_path, info)
             return run_dir, info
@@ -640,7 +642,7 @@ def make_record(row: Row, data: Path, run_dir: Path, info: dict[str, Any]) -> di
     record: dict[str, Any] = {
         "row": row.name, "group": row.group, "system": row.system, "changed": row.describe(),
         "data": str(data), "data_command": shlex.join(row.collect_command(data.with_name(f"{row.source_name}.h5"))),
-        "post": row.post, "train_command": info["command"], "seed": row.seed or 0,
+        "post": row.post, "train_command": info["command"], "commit": info.get("commit"), "seed": row.seed or 0,
         "exit_code": info["exit_code"], "stderr_last": info["stderr_last"], "stdout_last": info.get("stdout_last", ""),
         "wall_seconds": info["wall_seconds"], "load_average_at_end": info.get("load_average_at_end"),
         "converged": converged, "converged_reason": reason, "converged_raw": (metrics or {}).get("converged"),
@@ -741,6 +743,10 @@ def markdown(result: dict[str, Any], out: Path) -> str:
     lines += [""] + [f"Seeds, {system}: {c['success']} of {c['finished']} finished runs ({c['planned']} planned) found "
                      f"every object and every parameter within {100 * PASS_ERROR:g}% (floor {c['floor']}/{c['planned']})."
                      for system, c in s["seeds"].items()]
+    commits: defaultdict[str, list[str]] = defaultdict(list)
+    for r in result["rows"]:
+        commits[r.get("commit") or "not recorded"].append(r["row"])
+    lines += ["", "Code that trained each row (piga's commit):"] + [f"- {c}: {', '.join(rows)}" for c, rows in commits.items()]
     lines += ["", f"Objects found: for the balls, the encoder's position of each ball on the test split (100 "
               f"sequences, every frame) against the true centre, under the best assignment of slots to balls; a "
               f"ball is found when its mean distance is below {FOUND_PX:g} px (the balls' radius is 3 px). For the "
