@@ -393,3 +393,18 @@ def test_a_fit_that_runs_off_is_collapsed() -> None:
     assert not fit.collapsed(fit.Model((), 0, {"g": 12.0, "a": -0.5}), NOMINAL)
     assert not fit.collapsed(fit.Model((), 0, {"g": 10.0, "a": 1e-6}), NOMINAL)  # a of the wrong sign shrinks
     assert fit.collapsed(fit.Model((), 0, {"g": 10.0, "a": 0.0}), NOMINAL)
+
+
+def test_a_static_torque_below_the_reading_error_is_not_named() -> None:
+    """A bias (or friction) that moves the rest angle less than the encoder's own periodic angle error cannot be
+    told from a camera offset: below_reading picks it out, and only where the reading error is what is left."""
+    from piga.diagnostics.diagnose import below_reading, rest_shift
+    from piga.diagnostics.results import GenericBasis
+
+    tiny = fit.Model(("damping", "bias"), 0, {"g": 10.0, "a": 1.0, "b": 0.2, "tau0": -0.02})
+    real = fit.Model(("damping", "friction"), 0, {"g": 10.0, "a": 1.0, "b": 0.2, "c": 0.1})
+    reading = GenericBasis(0.0, 0.0, False, reading_rms=0.01, reading_significant=True, reading_decides=True)
+    assert rest_shift(tiny, NOMINAL, "bias") == pytest.approx(2 * 0.02 / 10.0)  # 3·τ0 / (1.5·g)
+    assert below_reading(tiny, NOMINAL, reading) == {"bias": pytest.approx(0.004)}
+    assert below_reading(real, NOMINAL, reading) == {}  # 20 mrad: a friction the vision resolves
+    assert below_reading(tiny, NOMINAL, replace(reading, reading_decides=False)) == {}  # no reading error measured
