@@ -11,7 +11,7 @@ nominal data against a recording with effects. Each effect is one small wrapper,
 ## Dynamics
 
 The equations are exact. The actuator and passive-torque terms are those of
-:mod:`piga.world.effects`, the one definition that piga's diagnosis and planners use too (that
+:mod:`piga.world.effects` (each :class:`EffectSpec` names its ``term``), the one definition that piga's diagnosis and planners use too (that
 module is torch-free: it is the only part of piga that ``envs`` imports).
 
 Let u_t be the commanded action, the one that the agent sends and that a data file stores as
@@ -84,7 +84,7 @@ import gymnasium as gym
 import numpy as np
 
 from envs.constants import MAX_ACTION, PENDULUM_MAX_SPEED
-from piga.world.effects import BIAS, COGGING, DAMPING, DEADZONE, FRICTION, GAIN, SATURATION
+from piga.world.effects import BIAS, COGGING, DAMPING, DEADZONE, DELAY, FRICTION, GAIN, SATURATION, SPEED_CLIP, Effect
 
 # Upper bounds of the effects' parameters: far beyond any real system's (the pendulum's torque is
 # at most 2 N·m, its frames 64 px and 255 gray levels), and small enough that a typo such as
@@ -438,6 +438,10 @@ class FrameDrop(gym.Wrapper):
 EffectKind = Literal["actuator", "passive", "clip", "vision"]
 
 
+#: The stage of :mod:`piga.world.effects` that each kind of dynamics effect is a term of.
+TERM_STAGE: dict[str, str] = {"actuator": "command", "passive": "torque", "clip": "velocity"}
+
+
 @dataclass(frozen=True)
 class EffectSpec:
     """One entry of :data:`EFFECTS`."""
@@ -456,10 +460,18 @@ class EffectSpec:
     """The wrapper class; ``wrapper(env, value)`` adds the effect."""
     integer: bool = False
     """Whether the value is a count (stored as int)."""
+    term: Effect | None = None
+    """The typed term of :mod:`piga.world.effects` whose equation the wrapper applies (None for a vision
+    effect): the one definition that the diagnosis fits and the corrected planner simulates. Its unit is
+    the engine's (per m·l²); :attr:`unit` is the environment's."""
 
     def __post_init__(self) -> None:
         if self.kind not in get_args(EffectKind):
             raise ValueError(f"EffectSpec.kind must be one of {', '.join(map(repr, get_args(EffectKind)))}; got {self.kind!r}")
+        if (self.term is None) != (self.kind == "vision") or (
+                self.term is not None and self.term.stage != TERM_STAGE[self.kind]):
+            raise ValueError(f"EffectSpec: a {self.kind} effect needs a term of stage {TERM_STAGE.get(self.kind)!r}, "
+                             f"got {self.term!r}")
 
     def validate(self, name: str, value: Any) -> int | float:
         """The value as stored (int for counts, else float); raises ValueError naming the effect and the range."""
@@ -472,23 +484,23 @@ class EffectSpec:
 #: Every effect: name -> spec. The order is the canonical one, in which the effects are applied.
 EFFECTS: dict[str, EffectSpec] = {
     "delay": EffectSpec("actuator", "actuator dead time", "steps", f"an integer >= 1 and <= {MAX_DELAY_STEPS}",
-                        lambda v: 1 <= v <= MAX_DELAY_STEPS, ActionDelay, integer=True),
+                        lambda v: 1 <= v <= MAX_DELAY_STEPS, ActionDelay, integer=True, term=DELAY),
     "deadzone": EffectSpec("actuator", "actuator deadzone half-width", "action units", f"in (0, {MAX_ACTION:g})",
-                           lambda v: 0 < v < MAX_ACTION, ActionDeadzone),
+                           lambda v: 0 < v < MAX_ACTION, ActionDeadzone, term=DEADZONE),
     "saturation": EffectSpec("actuator", "actuator limit below 2", "action units", f"in (0, {MAX_ACTION:g})",
-                             lambda v: 0 < v < MAX_ACTION, ActionSaturation),
+                             lambda v: 0 < v < MAX_ACTION, ActionSaturation, term=SATURATION),
     "gain": EffectSpec("actuator", "actuator gain error factor", "factor", f"> 0 and != 1, at most {MAX_GAIN_ERROR:g}",
-                       lambda v: 0 < v <= MAX_GAIN_ERROR and v != 1, ActionGainError),
+                       lambda v: 0 < v <= MAX_GAIN_ERROR and v != 1, ActionGainError, term=GAIN),
     "damping": EffectSpec("passive", "viscous damping coefficient", "N·m·s/rad", f"> 0 and <= {MAX_PASSIVE:g}",
-                          lambda v: 0 < v <= MAX_PASSIVE, ViscousDamping),
+                          lambda v: 0 < v <= MAX_PASSIVE, ViscousDamping, term=DAMPING),
     "friction": EffectSpec("passive", "smoothed Coulomb friction torque", "N·m", f"> 0 and <= {MAX_PASSIVE:g}",
-                           lambda v: 0 < v <= MAX_PASSIVE, CoulombFriction),
+                           lambda v: 0 < v <= MAX_PASSIVE, CoulombFriction, term=FRICTION),
     "bias": EffectSpec("passive", "constant torque bias", "N·m", f"a number != 0 within ±{MAX_PASSIVE:g}",
-                       lambda v: v != 0 and abs(v) <= MAX_PASSIVE, TorqueBias),
+                       lambda v: v != 0 and abs(v) <= MAX_PASSIVE, TorqueBias, term=BIAS),
     "cogging": EffectSpec("passive", "cogging (detent) torque amplitude", "N·m", f"> 0 and <= {MAX_PASSIVE:g}",
-                          lambda v: 0 < v <= MAX_PASSIVE, CoggingTorque),
+                          lambda v: 0 < v <= MAX_PASSIVE, CoggingTorque, term=COGGING),
     "speed_clip": EffectSpec("clip", "speed limit below Pendulum-v1's 8", "rad/s", f"in (0, {PENDULUM_MAX_SPEED:g})",
-                             lambda v: 0 < v < PENDULUM_MAX_SPEED, SpeedClip),
+                             lambda v: 0 < v < PENDULUM_MAX_SPEED, SpeedClip, term=SPEED_CLIP),
     "blur": EffectSpec("vision", "Gaussian blur sigma", "px", f"> 0 and <= {MAX_PIXELS:g}", lambda v: 0 < v <= MAX_PIXELS,
                        FrameBlur),
     "shift": EffectSpec("vision", "image shift right and down", "px", f"a number != 0 within ±{MAX_PIXELS:g}",

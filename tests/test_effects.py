@@ -19,6 +19,8 @@ from envs import EFFECTS, PixelPendulumConfig, make_pixel_pendulum, parse_effect
 from envs.effects import (
     STAGES,
     ActionDelay,
+    CoulombFriction,
+    EffectSpec,
     FrameBlur,
     ViscousDamping,
     normalize_effects,
@@ -425,3 +427,19 @@ def test_torque_arrow_shows_the_commanded_torque(effects: dict) -> None:
         env.step(np.array([u], np.float32))
         assert env.unwrapped.last_u == pytest.approx(float(np.clip(np.float32(u), -2, 2)))
     env.close()
+
+
+def test_every_dynamics_effect_of_the_envs_is_a_term_of_piga_world_effects() -> None:
+    """One definition: each actuator, passive or clip wrapper names the typed term whose equation it applies,
+    under the same name, and every candidate of the diagnosis can be made by a wrapper (within_frame aside:
+    it is how a simulator integrates, not a wrapper)."""
+    from piga.world.effects import CANDIDATES
+    from piga.world.effects import EFFECTS as TERMS
+
+    for name, spec in EFFECTS.items():
+        assert (spec.term is None) == (spec.kind == "vision"), name
+        if spec.term is not None:
+            assert spec.term is TERMS[name] and spec.term.name == name
+    assert set(CANDIDATES) - {"within_frame"} <= {n for n, s in EFFECTS.items() if s.term is not None}
+    with pytest.raises(ValueError, match="term of stage 'torque'"):
+        EffectSpec("passive", "x", "N·m", "any", lambda v: True, CoulombFriction, term=TERMS["delay"])
