@@ -370,3 +370,26 @@ def test_the_convergence_check_on_made_up_trajectories() -> None:
     assert weak.outcome == "converged", weak.reason
     warm = check_convergence(state(np.ones_like(steps), np.full_like(steps, 0.3), step=30))
     assert warm.outcome == "untrained" and "never trained" in warm.reason and warm.physics_steps == 0
+
+
+def test_cli_interrupted_right_after_its_first_checkpoint_keeps_it_with_its_record(
+        small_data: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    """Ctrl-C between the first checkpoint's write and the record that goes with it: the run is kept, said so, and
+    --resume continues it (it used to say "nothing was written" beside a checkpoint that blocked the rerun)."""
+    import piga.training.train as training
+
+    save = training.save_checkpoint
+
+    def save_then_interrupt(*args: object, **kwargs: object) -> None:
+        save(*args, **kwargs)
+        raise KeyboardInterrupt
+
+    out = tmp_path / "r"
+    monkeypatch.setattr(training, "save_checkpoint", save_then_interrupt)
+    code, _, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), *SMALL, capsys=capsys)
+    assert code == 130 and "holds epoch 1; continue with --resume" in err, err
+    assert json.loads((out / "config.json").read_text())["command"].startswith(PROG)
+    monkeypatch.setattr(training, "save_checkpoint", save)
+    code, _, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), "--resume", "--epochs", "2",
+                                  "--quiet", capsys=capsys)
+    assert code == 0, err

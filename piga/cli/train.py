@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import shutil
+import time
 import sys
 from collections.abc import Sequence
 from dataclasses import asdict, replace
@@ -153,12 +154,18 @@ def main(argv: Sequence[str] | None = None) -> int:
             write_json(run_dir / "config.json", record)
         written.append(state.epoch)
 
+    started = time.time()
     try:
         model, state = train(args.data, run_dir, train_config, model_config, resume=args.resume,
                              progress=not args.quiet, on_epoch=on_epoch)
     except TrainingDiverged as exc:
         raise PigaError(f"training diverged: {exc}") from None
     except KeyboardInterrupt:
+        checkpoint = run_dir / CHECKPOINT
+        if not written and checkpoint.exists() and checkpoint.stat().st_mtime >= started:
+            # interrupted between this command's first checkpoint and its on_epoch: the record goes with it
+            write_json(run_dir / "config.json", record)
+            written.append(_saved_epoch(run_dir))
         if written or args.resume:
             epoch = written[-1] if written else _saved_epoch(run_dir)
             raise Interrupted(f"{run_dir / CHECKPOINT} holds epoch {epoch}; continue with --resume") from None
