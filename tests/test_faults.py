@@ -821,3 +821,25 @@ def test_train_refuses_a_folder_with_another_runs_curves(tiny_data: Path, tmp_pa
     (out / "tensorboard" / "events.old").write_text("old curves")
     refused("piga-train-model", [str(tiny_data), "--out", str(out), "--quiet"], capsys, "tensorboard", "--overwrite")
     assert (out / "tensorboard" / "events.old").exists()
+
+
+def test_train_resume_tells_a_moved_file_from_another_of_the_same_shape(tiny_piga_run: Path, tiny_data: Path,
+                                                                        tmp_path: Path,
+                                                                        capsys: pytest.CaptureFixture[str]) -> None:
+    """The checkpoint keeps a fingerprint of the file's contents: a copy elsewhere resumes, another recording of
+    the same shape (another seed) is refused (it used to pass as "a moved file")."""
+    import shutil
+
+    from piga.data.collect import CollectConfig, collect
+    from tests.helpers import run_in_process
+    from piga.cli import train as cli
+
+    other = tmp_path / "other.h5"
+    collect(CollectConfig(sequences=12, steps=16, seed=4, workers=1, split=(8, 2, 2)), other, progress=False, command="t")
+    refused("piga-train-model", [str(other), "--out", str(_run_copy(tiny_piga_run, tmp_path / "a")), "--resume",
+                                 "--epochs", "2", "--quiet"], capsys, "continues on the file the run trained on")
+    moved = tmp_path / "moved.h5"
+    shutil.copy(tiny_data, moved)
+    code, _, err = run_in_process("piga-train-model", cli.main, str(moved), "--out", str(_run_copy(tiny_piga_run, tmp_path / "b")),
+                                  "--resume", "--epochs", "2", "--quiet", capsys=capsys)
+    assert code == 0, err

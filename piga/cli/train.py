@@ -88,7 +88,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         raise PigaError(f"{run_dir} holds outputs of an earlier run but no checkpoint ({', '.join(existing)}); "
                         "pass --overwrite to replace them")
     from piga.io.atomic import write_json
-    from piga.data.schema import inspect_dataset
+    from piga.data.schema import fingerprint, inspect_dataset
     from piga.training.report import write_run_report
     from piga.io.runs import load_model
     from piga.training.train import TrainConfig, TrainingDiverged, check_trainable, model_config_for, preset_for, train
@@ -103,9 +103,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         if tuple(data["image_shape"]) != info.image_shape or data["system"] != info.system:
             raise PigaError(f"--resume: {args.data} ({info.system}, {info.image_shape}) does not match the run's data "
                             f"({data['system']}, {tuple(data['image_shape'])})")
-        same_file = Path(data["path"]).resolve() == Path(args.data).resolve()
-        same_shape = data.get("sequences") == info.n_sequences and data.get("steps") == info.steps and data["dt"] == info.dt
-        if not same_file and not same_shape:  # a moved file keeps its shape; another file is another run
+        if "fingerprint" in data:  # a moved or copied file keeps its contents; another file is another run
+            same_data = data["fingerprint"] == fingerprint(args.data)
+        else:  # a checkpoint from before fingerprints: the same path, or a file of the same shape
+            same_data = Path(data["path"]).resolve() == Path(args.data).resolve() or (
+                data.get("sequences") == info.n_sequences and data.get("steps") == info.steps and data["dt"] == info.dt)
+        if not same_data:
             raise PigaError(f"--resume continues on the file the run trained on ({data['path']}), not {args.data}; "
                             "train a new run (without --resume) to learn from another file")
         saved = TrainConfig.from_dict(ckpt["train_config"])

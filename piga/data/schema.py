@@ -291,6 +291,20 @@ def check_frames_have_signal(path: str | os.PathLike[str]) -> None:
         _check_frames_signal(f["frames"], path)
 
 
+def fingerprint(path: str | os.PathLike[str]) -> str:
+    """A short hash of what a file holds, not of where it lies: its /actions, /split and first sequence of
+    frames (sha256, hex). A moved or copied file keeps it; another file of the same shape (another seed, another
+    recording) does not. It reads a few hundred kB of a default file."""
+    import hashlib
+
+    digest = hashlib.sha256()
+    with _open(path) as f:
+        for array in (f["actions"][()], f["split"][()], f["frames"][0]):
+            digest.update(str((array.dtype.str, array.shape)).encode())
+            digest.update(np.ascontiguousarray(array).tobytes())
+    return digest.hexdigest()[:16]
+
+
 def split_indices(path: str | os.PathLike[str], split: str) -> np.ndarray:
     """Sequence indices (sorted, int64) that belong to ``split`` ("train", "valid" or "test")."""
     code = _split_code(split)

@@ -33,7 +33,7 @@ from torch.utils.data import DataLoader, RandomSampler
 from tqdm.auto import tqdm
 
 from piga.io.choices import check_choices
-from piga.data.schema import DatasetInfo, check_actions_file, inspect_dataset, read_sequences
+from piga.data.schema import DatasetInfo, check_actions_file, fingerprint, inspect_dataset, read_sequences
 from piga.world.encoder import estimate_background
 from piga.world.model import SYSTEM_SHAPES, ModelConfig, PhysicsModel, frames_to_float
 from piga.world.physics import BouncingOptions, PendulumOptions
@@ -377,7 +377,8 @@ def save_checkpoint(path: Path, model: PhysicsModel, optimizer: torch.optim.Opti
         "state": asdict(state),
         "rng": _rng_state(),
         "data": {"path": str(data_info.path), "system": data_info.system, "image_shape": list(data_info.image_shape),
-                 "dt": data_info.dt, "sequences": data_info.n_sequences, "steps": data_info.steps},
+                 "dt": data_info.dt, "sequences": data_info.n_sequences, "steps": data_info.steps,
+                 "fingerprint": fingerprint(data_info.path)},
     }
     write_checkpoint(path.parent, payload)
 
