@@ -408,3 +408,12 @@ def test_a_static_torque_below_the_reading_error_is_not_named() -> None:
     assert below_reading(tiny, NOMINAL, reading) == {"bias": pytest.approx(0.004)}
     assert below_reading(real, NOMINAL, reading) == {}  # 20 mrad: a friction the vision resolves
     assert below_reading(tiny, NOMINAL, replace(reading, reading_decides=False)) == {}  # no reading error measured
+
+
+def test_the_report_says_which_damping_convention_its_numbers_use() -> None:
+    """One Euler step per frame takes the damping explicitly (Gymnasium's way, as planted here); the note gives the
+    factor by which MuJoCo's implicit convention would read g, a and b from the same frames."""
+    d = analyse(planted({"damping": 0.2}), NOMINAL, FAST)
+    note = next(n for n in d.notes if "takes the damping explicitly" in n)
+    assert "x1.030" in note  # 1 + h·3b = 1 + 0.05·3·0.2
+    assert abs(d.corrected["b"] / 0.2 - 1) < 0.03
