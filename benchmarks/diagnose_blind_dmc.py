@@ -312,6 +312,35 @@ def refused(case: dict[str, Any], message: str) -> dict[str, Any]:
             "false_effects": [], "parameter_error": {}}
 
 
+def true_angle_fit(case: dict[str, Any], work: Path, sequences: int, steps: int) -> dict[str, Any]:
+    """Outside the blind protocol: the diagnosis' candidate physics fitted to the case's *true* angles.
+
+    The case's file is collected again with its labels kept (``WORK/caseNN_true.h5``), and
+    :func:`piga.diagnostics.analyse` runs on ``/states`` instead of the encoder's angles, against the
+    nominal model's g and a. What it gets wrong is the candidates' physics, not the vision.
+    """
+    from piga.diagnostics import DiagnoseConfig, Observations, analyse
+    from piga.io.runs import load_model, nominal_of
+
+    path = work / f"case{case['case']:02d}_true.h5"
+    if not path.exists():
+        collect(replace(collect_config(case, sequences, steps), seed=case["data_seed"]), path, overwrite=True, command="",
+                progress=False, make_env=functools.partial(make_case_env, case["effects"]))
+    nominal = nominal_of(load_model(work / f"case{case['case']:02d}_model")[0])
+    with h5py.File(path, "r") as f:
+        theta = np.unwrap(f["states"][:, :, 0].astype(np.float64), axis=1)  # (N, T)
+        actions = f["actions"][:, :, 0].astype(np.float64)
+    if case["variant"]["flip"] == "camera":  # the frames show the angle mirrored; /states does not
+        theta = -theta
+    n, t = theta.shape
+    obs = Observations(theta, actions, np.zeros((n, t)), np.arange(n) < int(0.75 * n), nominal.dt,
+                       np.zeros((0, t, 8, 8), np.uint8), np.zeros(0, int), from_gymnasium=False)
+    d = analyse(obs, nominal, DiagnoseConfig(bootstrap=0))
+    true = truth(case)
+    return {"case": case["case"], "verdict": d.verdict, "corrected": d.corrected,
+            "signed_error": {k: d.corrected[k] / true[k] - 1 for k in ("g", "a", "b") if k in d.corrected and true[k]}}
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
     p.add_argument("--out", default="results/diagnose_blind_dmc")
@@ -327,6 +356,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--only", type=int, nargs="*", default=None, help="run only these case numbers")
     p.add_argument("--jobs", type=int, default=1,
                    help="cases run at once, each in its own process with one torch thread (a machine's cores)")
+    p.add_argument("--true-angles", type=int, default=None, metavar="CASE",
+                   help="outside the blind protocol: fit the candidates to case CASE's true angles and print the verdict "
+                        "and the signed errors of g, a, b (what the physics gets wrong without the vision)")
     p.add_argument("--rescore", action="store_true",
                    help="score the finished cases' reports (in --work) again with this script's scorer, and rewrite OUT")
     args = p.parse_args(argv)
@@ -352,6 +384,12 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(summarize(done), indent=2))
         return 0
     cases = [c for c in draw_cases(args.cases, args.seed) if args.only is None or c["case"] in args.only]
+    if args.true_angles is not None:
+        case = next((c for c in cases if c["case"] == args.true_angles), None)
+        if case is None:
+            raise SystemExit(f"--true-angles: no case {args.true_angles} among the {args.cases} drawn")
+        print(json.dumps(true_angle_fit(case, work, args.sequences, args.steps), indent=2))
+        return 0
     if args.models_only:
         run_pool(functools.partial(nominal_model, work=work, sequences=args.sequences, steps=args.steps,
                                    train_args=train_args), cases, workers=args.jobs, progress=False,
