@@ -20,7 +20,9 @@ Each row's record (exit code, last stderr line, wall time, learned parameters an
 run's ``converged`` report, SSIM, object tracking errors, verdict) is saved atomically to
 ``WORK/records/ROW.json`` as soon as the row ends, and ``OUT.md`` and ``OUT.json`` are rewritten from
 all records after each row, so an interrupted benchmark loses one row at most and continues where it
-stopped. A row with a record is skipped; delete the record (and ``WORK/runs/RUN.run.json``) to rerun it.
+stopped. A row with a record is skipped; delete the record (and ``WORK/runs/RUN.run.json``) to rerun it. In a
+fresh ``--work`` (another machine), the rows that ``OUT.json`` already holds are taken from it, so a
+benchmark spread over several sessions continues where the published page stops.
 
 A last row, ``own/spring-opencv``, trains on a spring file that piga did not draw: this script's own
 numpy simulation of the published convention, its balls drawn by OpenCV (:func:`render_spring_opencv`).
@@ -546,6 +548,21 @@ class Bench:
     def record_path(self, row: Row) -> Path:
         return self.work / "records" / f"{row.name.replace('/', '--')}.json"
 
+    def adopt_published(self) -> list[str]:
+        """Rows that ``OUT.json`` holds but ``WORK/records`` does not (a fresh ``--work``, another machine): their
+        published records become this folder's, so that the benchmark continues instead of starting over.
+        Returns their names."""
+        path = self.out.with_suffix(".json")
+        if not path.exists():
+            return []
+        adopted = []
+        for record in json.loads(path.read_text()).get("rows", []):
+            row = next((r for r in self.all_rows if r.name == record.get("row")), None)
+            if row is not None and not self.record_path(row).exists():
+                write_json(self.record_path(row), record)
+                adopted.append(row.name)
+        return adopted
+
     def data(self, row: Row) -> Path:
         """The row's file: collected (``piga-collect``, as a subprocess) and post-processed, once."""
         source = self.work / "data" / f"{row.source_name}.h5"
@@ -835,6 +852,9 @@ def main(argv: list[str] | None = None) -> int:
     if shutil.which("piga-train-model") is None or shutil.which("piga-collect") is None:
         raise SystemExit("piga-train-model or piga-collect is not on PATH; install piga (pip install -e .)")
     args.out.parent.mkdir(parents=True, exist_ok=True)
+    if adopted := bench.adopt_published():
+        print(f"{len(adopted)} rows taken from {args.out.with_suffix('.json')} (their records were not in {args.work})",
+              flush=True)
     todo = [row for row in chosen if not bench.record_path(row).exists()]
     from tqdm import tqdm
 

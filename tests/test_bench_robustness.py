@@ -223,6 +223,11 @@ def test_a_refused_row_is_recorded_and_not_rerun(bench, spring_file: Path, tmp_p
     monkeypatch.setenv("PATH", env["PATH"])
     assert bench.main(list(args[2:])) == 0  # again, in this process
     assert len(calls.read_text().splitlines()) == 1  # the second invocation skipped the finished row
+    assert record["commit"]  # the code that trained the row (this checkout's commit)
+    fresh = [*args[2:-1], str(tmp_path / "elsewhere")]  # another machine: the published page's rows are kept
+    assert bench.main(fresh) == 0
+    assert len(calls.read_text().splitlines()) == 1
+    assert (tmp_path / "elsewhere" / "records" / "spring--steps10.json").exists()
 
 
 @pytest.mark.slow
