@@ -6,7 +6,9 @@ compare: exactly where the arithmetic is the same operations in the same order (
 float32 engine, which training depends on to the last bit; the effect wrappers; the compiled
 planner), and to float tolerance where only the order of a sum or product changed (the diagnosis'
 and the swing-up planner's float64 engines, which now add each torque with its gain instead of
-summing the torques first).
+summing the torques first). The diagnosis' within-frame substeps take the damping implicitly, as
+MuJoCo's Euler does: the values of its within-frame sets with a damping (of the set or of the
+nominal model) were recorded again when that changed, and only those.
 """
 
 from __future__ import annotations
