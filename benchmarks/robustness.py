@@ -763,7 +763,8 @@ def markdown(result: dict[str, Any], out: Path) -> str:
     commits: defaultdict[str, list[str]] = defaultdict(list)
     for r in result["rows"]:
         commits[r.get("commit") or "not recorded"].append(r["row"])
-    lines += ["", "Code that trained each row (piga's commit):"] + [f"- {c}: {', '.join(rows)}" for c, rows in commits.items()]
+    lines += ["", "Code that trained each row (piga's commit):"]
+    lines += [f"- {c}: {', '.join(rows)}" for c, rows in commits.items()]
     lines += ["", f"Objects found: for the balls, the encoder's position of each ball on the test split (100 "
               f"sequences, every frame) against the true centre, under the best assignment of slots to balls; a "
               f"ball is found when its mean distance is below {FOUND_PX:g} px (the balls' radius is 3 px). For the "

@@ -11,8 +11,9 @@ nominal data against a recording with effects. Each effect is one small wrapper,
 ## Dynamics
 
 The equations are exact. The actuator and passive-torque terms are those of
-:mod:`piga.world.effects` (each :class:`EffectSpec` names its ``term``), the one definition that piga's diagnosis and planners use too (that
-module is torch-free: it is the only part of piga that ``envs`` imports).
+:mod:`piga.world.effects` (each :class:`EffectSpec` names its ``term``), the one definition that
+piga's diagnosis and planners use too (that module is torch-free: it is the only part of piga
+that ``envs`` imports).
 
 Let u_t be the commanded action, the one that the agent sends and that a data file stores as
 ``/actions``. Like Pendulum-v1, it is first clipped to [-2, 2]. The actuator effects turn u into

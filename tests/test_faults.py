@@ -840,6 +840,7 @@ def test_train_resume_tells_a_moved_file_from_another_of_the_same_shape(tiny_pig
                                  "--epochs", "2", "--quiet"], capsys, "continues on the file the run trained on")
     moved = tmp_path / "moved.h5"
     shutil.copy(tiny_data, moved)
-    code, _, err = run_in_process("piga-train-model", cli.main, str(moved), "--out", str(_run_copy(tiny_piga_run, tmp_path / "b")),
-                                  "--resume", "--epochs", "2", "--quiet", capsys=capsys)
+    run = _run_copy(tiny_piga_run, tmp_path / "b")
+    code, _, err = run_in_process("piga-train-model", cli.main, str(moved), "--out", str(run), "--resume", "--epochs", "2",
+                                  "--quiet", capsys=capsys)
     assert code == 0, err
