@@ -22,7 +22,7 @@ run's ``converged`` report, SSIM, object tracking errors, verdict) is saved atom
 all records after each row, so an interrupted benchmark loses one row at most and continues where it
 stopped. A row with a record is skipped; delete the record (and ``WORK/runs/RUN.run.json``) to rerun it. In a
 fresh ``--work`` (another machine), the rows that ``OUT.json`` already holds are taken from it, so a
-benchmark spread over several sessions continues where the published page stops.
+benchmark spread over several machines or days continues where the published page stops.
 
 A last row, ``own/spring-opencv``, trains on a spring file that piga did not draw: this script's own
 numpy simulation of the published convention, its balls drawn by OpenCV (:func:`render_spring_opencv`).
