@@ -21,7 +21,7 @@ run's ``converged`` report, SSIM, object tracking errors, verdict) is saved atom
 ``WORK/records/ROW.json`` as soon as the row ends, and ``OUT.md`` and ``OUT.json`` are rewritten from
 all records after each row, so an interrupted benchmark loses one row at most and continues where it
 stopped. A row with a record is skipped; delete the record (and ``WORK/runs/RUN.run.json``) to rerun it. In a
-fresh ``--work`` (another machine), the rows that ``OUT.json`` already holds are taken from it, so a
+new ``--work`` (another machine), the rows that ``OUT.json`` already holds are taken from it, so a
 benchmark spread over several machines or days continues where the published page stops.
 
 A last row, ``own/spring-opencv``, trains on a spring file that piga did not draw: this script's own
@@ -536,8 +536,6 @@ class Bench:
 
     def __init__(self, work: Path, out: Path, command: str, all_rows: list[Row]):
         self.work, self.out, self.command, self.all_rows = work, out, command, all_rows
-        for sub in ("data", "runs", "records"):
-            (work / sub).mkdir(parents=True, exist_ok=True)
         self._locks: defaultdict[str, threading.Lock] = defaultdict(threading.Lock)
         self._guard = threading.Lock()
 
@@ -548,17 +546,20 @@ class Bench:
     def record_path(self, row: Row) -> Path:
         return self.work / "records" / f"{row.name.replace('/', '--')}.json"
 
-    def adopt_published(self) -> list[str]:
-        """Rows that ``OUT.json`` holds but ``WORK/records`` does not (a fresh ``--work``, another machine): their
-        published records become this folder's, so that the benchmark continues instead of starting over.
-        Returns their names."""
+    def prepare(self) -> list[str]:
+        """Makes the folders. A new ``--work`` (no records folder yet: another machine) first takes the rows
+        that ``OUT.json`` holds as its records, so that the benchmark continues instead of starting over;
+        returns their names. A folder that had records keeps them as they are: deleting one reruns its row."""
+        new = not (self.work / "records").exists()
+        for sub in ("data", "runs", "records"):
+            (self.work / sub).mkdir(parents=True, exist_ok=True)
         path = self.out.with_suffix(".json")
-        if not path.exists():
+        if not new or not path.exists():
             return []
         adopted = []
         for record in json.loads(path.read_text()).get("rows", []):
             row = next((r for r in self.all_rows if r.name == record.get("row")), None)
-            if row is not None and not self.record_path(row).exists():
+            if row is not None:
                 write_json(self.record_path(row), record)
                 adopted.append(row.name)
         return adopted
@@ -853,7 +854,7 @@ def main(argv: list[str] | None = None) -> int:
     if shutil.which("piga-train-model") is None or shutil.which("piga-collect") is None:
         raise SystemExit("piga-train-model or piga-collect is not on PATH; install piga (pip install -e .)")
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    if adopted := bench.adopt_published():
+    if adopted := bench.prepare():
         print(f"{len(adopted)} rows taken from {args.out.with_suffix('.json')} (their records were not in {args.work})",
               flush=True)
     todo = [row for row in chosen if not bench.record_path(row).exists()]

@@ -228,6 +228,10 @@ def test_a_refused_row_is_recorded_and_not_rerun(bench, spring_file: Path, tmp_p
     assert bench.main(fresh) == 0
     assert len(calls.read_text().splitlines()) == 1
     assert (tmp_path / "elsewhere" / "records" / "spring--steps10.json").exists()
+    (work / "records" / "spring--steps10.json").unlink()  # a deleted record reruns its row, as documented
+    (work / "runs" / "spring-steps-10-seed0.run.json").unlink(missing_ok=True)
+    assert bench.main(list(args[2:])) == 0
+    assert len(calls.read_text().splitlines()) == 2
 
 
 @pytest.mark.slow

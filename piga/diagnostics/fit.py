@@ -242,7 +242,6 @@ def simulate(model: Model, params: dict[str, Tensor], nominal: Nominal, w: Windo
     substeps = model.substeps if within else nominal.substeps
     h = nominal.dt / substeps
     b_nominal = nominal_damping(nominal)
-    step = rk4_step if nominal_integrator(nominal) == "rk4" and not within else euler_step
     torques = [(term, _value(term, params)) for term in terms if isinstance(term, TorqueTerm)]
     limits = [term for term in terms if isinstance(term, VelocityTerm)]
 
@@ -255,6 +254,8 @@ def simulate(model: Model, params: dict[str, Tensor], nominal: Nominal, w: Windo
     if within:  # the substeps take the damping implicitly, as MuJoCo's Euler does (see the module's text)
         step = functools.partial(euler_step, implicit_damping=implicit_rate(passive))
         passive = [(term, value) for term, value in passive if term is not DAMPING]
+    else:
+        step = rk4_step if nominal_integrator(nominal) == "rk4" else euler_step
 
     def frame(theta: Tensor, v: Tensor, c: Tensor) -> tuple[Tensor, Tensor]:
         def acceleration(q: Tensor, dq: Tensor) -> Tensor:

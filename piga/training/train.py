@@ -366,8 +366,9 @@ def _set_rng_state(state: dict[str, Any]) -> None:
 
 
 def save_checkpoint(path: Path, model: PhysicsModel, optimizer: torch.optim.Optimizer, state: TrainState,
-                    train_config: TrainConfig, data_info: DatasetInfo, plan: TrainPlan) -> None:
-    """Writes everything needed to resume or to use the model, atomically."""
+                    train_config: TrainConfig, data_info: DatasetInfo, plan: TrainPlan, data_fingerprint: str) -> None:
+    """Writes everything needed to resume or to use the model, atomically. ``data_fingerprint``:
+    :func:`piga.data.schema.fingerprint` of the training file (read once per run, not per checkpoint)."""
     payload = {
         "model_config": model.config.to_dict(),
         "train_config": asdict(train_config),
@@ -378,7 +379,7 @@ def save_checkpoint(path: Path, model: PhysicsModel, optimizer: torch.optim.Opti
         "rng": _rng_state(),
         "data": {"path": str(data_info.path), "system": data_info.system, "image_shape": list(data_info.image_shape),
                  "dt": data_info.dt, "sequences": data_info.n_sequences, "steps": data_info.steps,
-                 "fingerprint": fingerprint(data_info.path)},
+                 "fingerprint": data_fingerprint},
     }
     write_checkpoint(path.parent, payload)
 
@@ -538,6 +539,7 @@ def train(
     """
     run_dir = Path(run_dir)
     info = inspect_dataset(data)
+    data_fingerprint = fingerprint(data)
     ckpt_path = run_dir / CHECKPOINT
     if train_config.threads:
         torch.set_num_threads(train_config.threads)
@@ -638,7 +640,7 @@ def train(
             last = state.epoch == plan.epochs or bool(train_config.max_minutes and state.elapsed > train_config.max_minutes * 60)
             if state.epoch % plan.checkpoint_every == 0 or last:
                 run_dir.mkdir(parents=True, exist_ok=True)
-                save_checkpoint(ckpt_path, model, optimizer, state, train_config, info, plan)
+                save_checkpoint(ckpt_path, model, optimizer, state, train_config, info, plan, data_fingerprint)
                 writer.open(run_dir / "tensorboard")
                 (tqdm.write if progress else print)(
                     f"epoch {state.epoch}: loss {record['loss']:.5f} (pred {record['loss_pred']:.5f}, rec "
