@@ -237,15 +237,18 @@ def file_shape(row: Row) -> tuple[int, int, int]:
 
 
 def recipe_windows(row: Row) -> tuple[int, Any, int]:
-    """(L + T_pred, the recipe's TrainConfig, window stride) of the default recipe for the row's system."""
-    from piga.training.train import PRESETS, SCENE_PRESETS
+    """(L + T_pred, the recipe's TrainConfig, window stride) of the default recipe for the row's system,
+    with T_pred as training shortens it for the row's sequence length."""
+    from piga.training.train import MIN_PRED_FRAMES, PRESETS, SCENE_PRESETS
 
     recipe = PRESETS["fast"] if row.system == "pendulum" else SCENE_PRESETS[row.system]["fast"]
-    return recipe.model.window, recipe.train, recipe.train.window_stride
+    model, steps = recipe.model, file_shape(row)[1]
+    floor = model.input_frames + min(MIN_PRED_FRAMES, model.pred_frames)
+    return min(model.window, max(steps, floor)), recipe.train, recipe.train.window_stride
 
 
 def estimate_minutes(row: Row) -> dict[str, float]:
-    """Rough minutes on one core: ``data`` (collect and post-process the file) and ``train`` (0: refused)."""
+    """Rough minutes on one core: ``data`` (collect and post-process the file) and ``train`` (0.1: refused)."""
     n, t, size = file_shape(row)
     native = file_shape(Row("x", row.system))[2]
     data = n * t * COLLECT_S_PER_FRAME[row.system] / 60
@@ -803,8 +806,9 @@ def markdown(result: dict[str, Any], out: Path) -> str:
               "piga's supersampled disks.",
               "- The seed rows train on the default file of their system; seed 0 is the same run as the system's "
               "`default` row (whichever ran first made it, and its record shows that command).",
-              "- Rows whose sequences are shorter than the recipe's window (L + T_pred) are expected to be refused "
-              "(exit non-zero: flagged).", ""]
+              "- Sequences shorter than the recipe's window L + T_pred train with T_pred shortened to what they "
+              "hold (at least 4 frames; the plan line and a note say so); shorter still are refused (exit non-zero: "
+              "flagged).", ""]
     return "\n".join(lines)
 
 

@@ -70,8 +70,9 @@ def test_the_rows_cover_the_issue(bench) -> None:
     assert row.train_command(Path("f.h5"), Path("run")) == ["piga-train-model", "f.h5", "--out", "run", "--threads", "1", "--quiet"]
     assert next(r for r in rows if r.name == "seeds/spring-seed3").train_command(Path("f"), Path("r"))[-2:] == ["--seed", "3"]
     assert bench.select(rows, ["pendulum/size*"]) == [r for r in rows if r.name in ("pendulum/size32", "pendulum/size96")]
-    cost = bench.estimate_minutes(next(r for r in rows if r.name == "pendulum/steps10"))
-    assert cost["train"] < 0.5  # 10 frames < L + T_pred: the recipe refuses it at once
+    short = next(r for r in rows if r.name == "pendulum/steps10")  # 10 frames < L + T_pred: training shortens T_pred
+    assert bench.recipe_windows(short)[0] == 10 and bench.estimate_minutes(short)["train"] > 1
+    assert bench.recipe_windows(next(r for r in rows if r.name == "pendulum/default"))[0] == 14
 
 
 def _assert_same_but_frames(source: Path, target: Path, spec: str) -> np.ndarray:

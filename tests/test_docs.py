@@ -220,3 +220,13 @@ def test_the_table_reader_catches_a_wrong_default() -> None:
     parser = importlib.import_module(COMMANDS["piga-train-model"]).build_parser()
     actions = {flag: a for a in parser._actions for flag in a.option_strings}
     assert matches(defaults[0], actions[options[0]]) and not matches(defaults[1], actions[options[1]])
+
+
+def test_the_short_file_rule_quotes_the_code() -> None:
+    """The train-model page's rule for sequences shorter than the window names the code's floor and window."""
+    from piga.training.train import MIN_PRED_FRAMES, PRESETS
+
+    model = PRESETS["fast"].model
+    text = (DOCS / "commands" / "train-model.md").read_text()
+    assert f"L + T_pred ({model.input_frames} + {model.pred_frames} for the pendulum)" in text
+    assert f"down to {MIN_PRED_FRAMES} (`MIN_PRED_FRAMES`)" in text

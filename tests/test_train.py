@@ -142,8 +142,8 @@ def test_cli_bad_input(small_data: Path, tmp_path: Path, capsys: pytest.CaptureF
         f["frames"] = np.zeros((2, 20, 64, 64), np.uint8)
     assert "/actions" in refused(str(wrong), "--out", out)
     short = tmp_path / "short.h5"
-    collect(CollectConfig(sequences=3, steps=8, workers=1, split=(1, 1, 1)), short, progress=False, command="t")
-    assert "L + T_pred = 14" in refused(str(short), "--out", out)
+    collect(CollectConfig(sequences=3, steps=7, workers=1, split=(1, 1, 1)), short, progress=False, command="t")
+    assert "L + T_pred = 4 + 4 = 8" in refused(str(short), "--out", out)  # T_pred shortened to its floor, still too long
     assert "--preset" in refused(str(small_data), "--out", out, "--preset", "slow")
     assert "does not exist" in refused(str(small_data), "--out", out, "--resume")
     assert "--epochs" in refused(str(small_data), "--out", out, "--epochs", "0")
@@ -202,6 +202,24 @@ def test_cli_warns_when_there_is_no_test_split(tmp_path: Path, capsys: pytest.Ca
     assert "warning: " in err and "no test sequences" in err and "train split" in err
     assert "SSIM (train split)" in out
     assert json.loads((tmp_path / "r" / "metrics.json").read_text())["split"] == "train"
+
+
+def test_short_sequences_shorten_the_rollout_to_what_they_hold(tmp_path: Path,
+                                                                capsys: pytest.CaptureFixture[str]) -> None:
+    """A file of 10-frame sequences is shorter than the recipe's window L + T_pred = 4 + 10: the physics
+    predicts 6 frames per window instead, the plan says so, and the saved model keeps it."""
+    from piga.data.schema import inspect_dataset
+    from piga.training.train import MIN_PRED_FRAMES, model_config_for
+
+    data = tmp_path / "short.h5"
+    collect(CollectConfig(sequences=6, steps=10, seed=1, workers=1, split=(4, 1, 1)), data, progress=False, command="t")
+    fitted = model_config_for(inspect_dataset(data))
+    assert (fitted.input_frames, fitted.pred_frames) == (4, 6) and MIN_PRED_FRAMES <= 6
+    code, out, err = run_in_process(PROG, cli.main, str(data), "--out", str(tmp_path / "r"), "--batch-size", "4",
+                                    "--epochs", "1", "--warmup-fraction", "0", "--quiet", capsys=capsys)
+    assert code == 0, err
+    assert "T_pred 1 -> 6" in out and "predicts 6 frames per window, not the recipe's 10" in err
+    assert load_model(tmp_path / "r")[0].config.pred_frames == 6
 
 
 def test_cli_paper_preset_runs(small_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -148,6 +148,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(f"training on {args.data} ({info.split_counts['train']} train sequences x {info.steps} frames); "
           f"{info.system} parameters start at {_start_values(fresh)} -> {run_dir}")
     print(f"plan: {plan.describe(model_config.pred_frames)}")
+    if not args.resume and model_config.pred_frames < recipe.model.pred_frames:
+        print(f"{PROG}: note: sequences of {info.steps} frames: the physics predicts {model_config.pred_frames} frames "
+              f"per window, not the recipe's {recipe.model.pred_frames}", file=sys.stderr)
     written: list[int] = []
     if args.overwrite and not args.resume and (run_dir / "tensorboard").is_dir():
         shutil.rmtree(run_dir / "tensorboard")  # the replaced run's curves, which the new run's would join

@@ -322,9 +322,15 @@ class TrainState:
     """The run's :class:`TrainPlan` (as a dict), for the convergence check."""
 
 
+#: The fewest frames the physics predicts in a training window (T_pred) when a file's sequences are
+#: too short for the recipe's: below this a window says too little about the dynamics.
+MIN_PRED_FRAMES = 4
+
+
 def model_config_for(info: DatasetInfo, model: ModelConfig | None = None) -> ModelConfig:
     """``model`` (None: the fast recipe's) fitted to a data file: system, dt, image size, channels and
-    objects from its attributes."""
+    objects from its attributes. Sequences shorter than the recipe's window L + T_pred shorten T_pred
+    to what they hold, down to :data:`MIN_PRED_FRAMES` (:func:`check_trainable` refuses shorter ones)."""
     if info.system not in SYSTEM_SHAPES:
         raise ValueError(f"{info.path}: system {info.system!r} has no physics model; known: {sorted(SYSTEM_SHAPES)}")
     shape = info.image_shape
@@ -338,8 +344,11 @@ def model_config_for(info: DatasetInfo, model: ModelConfig | None = None) -> Mod
         if options != type(options)():
             raise ValueError(f"{info.path}: {options} are a {model.system} model's, not a {info.system} model's")
         options = None
+    pred_frames = model.pred_frames
+    if info.steps < model.window:  # a short file: a shorter rollout, never below the floor
+        pred_frames = max(info.steps - model.input_frames, min(MIN_PRED_FRAMES, model.pred_frames))
     return replace(model, system=info.system, system_options=options, dt=info.dt, image_size=shape[0], channels=channels,
-                   n_objects=n_objects)
+                   n_objects=n_objects, pred_frames=pred_frames)
 
 
 def _optimizer(model: PhysicsModel, config: TrainConfig) -> torch.optim.Optimizer:
@@ -496,7 +505,7 @@ def check_trainable(info: DatasetInfo, model_config: ModelConfig, train_config: 
     needed = model_config.window
     if info.steps < needed:
         raise ValueError(f"{info.path}: sequences have {info.steps} frames; training needs at least "
-                         f"L + T_pred = {needed}")
+                         f"L + T_pred = {model_config.input_frames} + {model_config.pred_frames} = {needed}")
     n_train = info.split_counts["train"]
     if not n_train:
         raise ValueError(f"{info.path}: the train split is empty")
