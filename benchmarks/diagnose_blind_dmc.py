@@ -36,6 +36,7 @@ from __future__ import annotations
 import argparse
 import functools
 import json
+import math
 import shlex
 import subprocess
 import sys
@@ -111,9 +112,10 @@ def truth(case: dict[str, Any]) -> dict[str, Any]:
 class HingeTorque(gym.Wrapper):
     """Friction −c·tanh(θ̇ / 0.1) or a bias τ0 (piga's units) on dm_control's hinge, from outside it.
 
-    Computed from the state before each frame and held over the frame's physics steps, as MuJoCo's
-    applied generalized force (``qfrc_applied``, 3·I times piga's value): no clip on the action,
-    unlike a torque added to u.
+    Computed from the state before each *physics step* (:attr:`envs.dmc.DMCPendulumEnv.hinge_torque`) and
+    applied as MuJoCo's generalized force (``qfrc_applied``, 3·I times piga's value): a friction that acts
+    within the frame as a real one does, not one held over the frame's physics steps at the frame's first
+    speed; no clip on the action, unlike a torque added to u.
     """
 
     def __init__(self, env: gym.Env, kind: str, value: float):
@@ -124,13 +126,13 @@ class HingeTorque(gym.Wrapper):
             raise TypeError(f"HingeTorque wraps the DMC pendulum, got {env.unwrapped}")
         self.kind, self.value = kind, float(value)
         self.scale = 3.0 * env.unwrapped.config.inertia  # piga's torque per m·l² -> N·m
+        self.inner = env.unwrapped.hinge_torque  # another HingeTorque's, which this one adds to
+        env.unwrapped.hinge_torque = self.torque
 
-    def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
-        physics = self.env.unwrapped.physics
-        speed = float(physics.data.qvel[0])
-        torque = -self.value * np.tanh(speed / 0.1) if self.kind == "friction" else self.value
-        physics.data.qfrc_applied[0] = self.scale * torque
-        return self.env.step(action)
+    def torque(self, theta: float, speed: float) -> float:
+        """The hinge torque (N·m) at angular speed ``speed`` (rad/s), with the inner wrapper's."""
+        own = self.scale * (-self.value * math.tanh(speed / 0.1) if self.kind == "friction" else self.value)
+        return own + (self.inner(theta, speed) if self.inner is not None else 0.0)
 
 
 def make_case_env(effects: dict[str, Any], config: DMCPendulumConfig) -> gym.Env:

@@ -45,7 +45,7 @@ import math
 import os
 import xml.etree.ElementTree as ET
 from dataclasses import asdict, dataclass, replace
-from typing import Any, Literal, SupportsFloat, get_args
+from typing import Any, Callable, Literal, SupportsFloat, get_args
 
 import gymnasium as gym
 import numpy as np
@@ -237,6 +237,10 @@ class DMCPendulumEnv(gym.Env):
         # The time limit is this env's (truncation in frames), not dm_control's.
         self._env = control.Environment(physics, self._task, time_limit=float("inf"), n_sub_steps=1)
         self.physics = physics
+        self.hinge_torque: Callable[[float, float], float] | None = None
+        """A torque on the hinge (N·m) from the state (θ, θ̇) before each *physics step*, applied as MuJoCo's
+        ``qfrc_applied``: how an effect added from outside dm_control (friction) acts within the frame,
+        as a real one would, rather than held over the frame's physics steps. None: no torque."""
         size = self.config.image_size
         self.observation_space = gym.spaces.Box(0, 255, (size, size, 3), np.uint8)
         self.action_space = gym.spaces.Box(-1.0, 1.0, (1,), np.float32)
@@ -273,6 +277,9 @@ class DMCPendulumEnv(gym.Env):
         u = np.clip(np.asarray(action, dtype=np.float64).reshape(1), -1.0, 1.0)
         reward = 0.0
         for _ in range(self.config.action_repeat):
+            if self.hinge_torque is not None:
+                data = self.physics.data
+                data.qfrc_applied[0] = self.hinge_torque(float(data.qpos[0]), float(data.qvel[0]))
             reward += float(self._env.step(u).reward)
         self._frames += 1
         truncated = self._frames >= self.config.frames_per_episode

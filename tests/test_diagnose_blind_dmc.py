@@ -128,3 +128,32 @@ def test_a_nominal_model_is_kept_only_for_the_same_case_and_recipe(bench, tmp_pa
     bench.nominal_model(case, tmp_path, 40, 20, [])  # another file shape
     bench.nominal_model({**case, "nominal_seed": case["nominal_seed"] + 1}, tmp_path, 40, 20, [])  # another file
     assert len(trained) == 3
+
+
+def test_an_added_friction_acts_at_every_physics_step(bench) -> None:
+    """The case's friction is computed from the speed before each physics step (4 per frame here), as a
+    real friction acts: the same as driving MuJoCo's steps by hand with the torque set before each."""
+    pytest.importorskip("dm_control")
+    from envs.dmc import DMCPendulumConfig, DMCPendulumEnv
+
+    config = DMCPendulumConfig(action_repeat=4, damping=0.1)
+    env = bench.HingeTorque(DMCPendulumEnv(config), "friction", 2.0)
+    seen: list[float] = []
+    torque = env.unwrapped.hinge_torque
+    env.unwrapped.hinge_torque = lambda q, v: (seen.append(v), torque(q, v))[1]
+    env.reset(seed=0, options={"state": [0.3, 0.05]})
+    env.step(np.array([0.5], np.float32))
+    state = env.unwrapped._state()
+    assert len(seen) == 4 and len(set(seen)) == 4 and seen[0] == 0.05
+    by_hand = DMCPendulumEnv(config)
+    by_hand.reset(seed=0, options={"state": [0.3, 0.05]})
+    for _ in range(4):
+        data = by_hand.physics.data
+        data.qfrc_applied[0] = 3.0 * config.inertia * -2.0 * np.tanh(float(data.qvel[0]) / 0.1)
+        by_hand._env.step(np.array([0.5]))
+    assert np.allclose(by_hand._state(), state, rtol=0, atol=1e-12)
+    held = DMCPendulumEnv(config)  # held over the frame at its first speed, as before: another state
+    held.reset(seed=0, options={"state": [0.3, 0.05]})
+    held.physics.data.qfrc_applied[0] = 3.0 * config.inertia * -2.0 * np.tanh(0.05 / 0.1)
+    held.step(np.array([0.5]))
+    assert abs(held._state()[1] - state[1]) > 1e-3
