@@ -314,12 +314,13 @@ def refused(case: dict[str, Any], message: str) -> dict[str, Any]:
             "false_effects": [], "parameter_error": {}}
 
 
-def true_angle_fit(case: dict[str, Any], work: Path, sequences: int, steps: int) -> dict[str, Any]:
+def true_angle_fit(case: dict[str, Any], work: Path, sequences: int, steps: int, noise: float = 0.0) -> dict[str, Any]:
     """Outside the blind protocol: the diagnosis' candidate physics fitted to the case's *true* angles.
 
     The case's file is collected again with its labels kept (``WORK/caseNN_true.h5``), and
     :func:`piga.diagnostics.analyse` runs on ``/states`` instead of the encoder's angles, against the
-    nominal model's g and a. What it gets wrong is the candidates' physics, not the vision.
+    nominal model's g and a. What it gets wrong is the candidates' physics, not the vision. ``noise``
+    (rad) adds independent Gaussian errors to every angle (seed 0): what a reading error alone does.
     """
     from piga.diagnostics import DiagnoseConfig, Observations, analyse
     from piga.io.runs import load_model, nominal_of
@@ -334,12 +335,13 @@ def true_angle_fit(case: dict[str, Any], work: Path, sequences: int, steps: int)
         actions = f["actions"][:, :, 0].astype(np.float64)
     if case["variant"]["flip"] == "camera":  # the frames show the angle mirrored; /states does not
         theta = -theta
+    theta = theta + np.random.default_rng(0).normal(0.0, noise, theta.shape)
     n, t = theta.shape
     obs = Observations(theta, actions, np.zeros((n, t)), np.arange(n) < int(0.75 * n), nominal.dt,
                        np.zeros((0, t, 8, 8), np.uint8), np.zeros(0, int), from_gymnasium=False)
     d = analyse(obs, nominal, DiagnoseConfig(bootstrap=0))
     true = truth(case)
-    return {"case": case["case"], "verdict": d.verdict, "corrected": d.corrected,
+    return {"case": case["case"], "angle_noise_rad": noise, "verdict": d.verdict, "corrected": d.corrected,
             "signed_error": {k: d.corrected[k] / true[k] - 1 for k in ("g", "a", "b") if k in d.corrected and true[k]}}
 
 
@@ -361,6 +363,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--true-angles", type=int, default=None, metavar="CASE",
                    help="outside the blind protocol: fit the candidates to case CASE's true angles and print the verdict "
                         "and the signed errors of g, a, b (what the physics gets wrong without the vision)")
+    p.add_argument("--angle-noise", type=float, default=0.0, metavar="RAD",
+                   help="with --true-angles: add independent Gaussian errors of this rms (rad) to the true angles")
     p.add_argument("--rescore", action="store_true",
                    help="score the finished cases' reports (in --work) again with this script's scorer, and rewrite OUT")
     args = p.parse_args(argv)
@@ -390,7 +394,7 @@ def main(argv: list[str] | None = None) -> int:
         case = next((c for c in cases if c["case"] == args.true_angles), None)
         if case is None:
             raise SystemExit(f"--true-angles: no case {args.true_angles} among the {args.cases} drawn")
-        print(json.dumps(true_angle_fit(case, work, args.sequences, args.steps), indent=2))
+        print(json.dumps(true_angle_fit(case, work, args.sequences, args.steps, args.angle_noise), indent=2))
         return 0
     if args.models_only:
         run_pool(functools.partial(nominal_model, work=work, sequences=args.sequences, steps=args.steps,

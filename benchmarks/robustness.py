@@ -552,7 +552,8 @@ class Bench:
     def prepare(self) -> list[str]:
         """Makes the folders. A new ``--work`` (no records folder yet: another machine) first takes the rows
         that ``OUT.json`` holds as its records, so that the benchmark continues instead of starting over;
-        returns their names. A folder that had records keeps them as they are: deleting one reruns its row."""
+        returns their names. A folder that had records keeps them as they are: deleting one re-scores its row
+        from the finished run; deleting the run's ``.run.json`` too trains it again."""
         new = not (self.work / "records").exists()
         for sub in ("data", "runs", "records"):
             (self.work / sub).mkdir(parents=True, exist_ok=True)

@@ -13,7 +13,7 @@ import pytest
 import torch
 
 from piga.diagnostics import DiagnoseConfig, Observations, analyse, fit
-from piga.diagnostics.diagnose import UNITS, clip_binding, clip_supported, own_reading, select
+from piga.diagnostics.diagnose import UNITS, clip_binding, clip_supported, deadzone_refuted, own_reading, select
 from piga.diagnostics.report import markdown
 from piga.io.runs import Nominal, nominal_of
 from tests.test_diagnose_continuous import DT, planted_within_frame
@@ -108,6 +108,25 @@ def test_a_clip_that_never_binds_is_not_selected() -> None:
     assert chosen.model.effects == ("damping",)
     binding = fit.Model(("speed_clip",), 0, {**damping.model.values, "v": 1.0})
     assert clip_binding(binding, NOMINAL, w.fit1) > 0.5
+
+
+def test_a_deadzone_that_holds_no_action_is_not_chosen() -> None:
+    """A deadzone fitted at a width of 0 or less (what noise-free angles gave beside damping and a bias) changes
+    the commands by rounding only: with the best BIC by construction it is still passed over."""
+    from piga.diagnostics.diagnose import Candidates, cut_windows, score
+
+    obs = planted({"damping": 0.2})
+    w = cut_windows(obs, obs.theta, None, FAST)
+    refit = score(fit.fit_candidate((), {}, NOMINAL, w.fit), NOMINAL, w.fit1, w.free)
+    damping = score(fit.fit_candidate(("damping",), refit.model.values, NOMINAL, w.fit), NOMINAL, w.fit1, w.free)
+    for width in (-3.3e-7, 0.0, 0.002):
+        inert = fit.Model(("deadzone", "damping"), 0, {**damping.model.values, "d": width})
+        assert deadzone_refuted(inert, w.fit1, FAST)
+        fake = replace(damping, model=inert, bic=damping.bic - 100)
+        selection = select(Candidates(refit, refit, [fake, damping]), NOMINAL, w, FAST)
+        assert selection.chosen.model.effects == ("damping",) and selection.rival is None
+    held = fit.Model(("deadzone",), 0, {**damping.model.values, "d": 0.2})
+    assert not deadzone_refuted(held, w.fit1, FAST)
 
 
 # --- 3. provenance ----------------------------------------------------------------------------

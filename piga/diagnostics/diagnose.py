@@ -43,7 +43,8 @@ Steps (no state labels, no effect labels; only frames and actions of the "real" 
    (else the refit only compensates the other effects). A speed clip is a candidate only
    where the data show one: the observed speeds pile up at its level and hardly pass it, and it
    binds in at least ``clip_min_binding`` of the samples (:func:`clip_refuted`; a damping or the
-   tail of smooth swings can otherwise win the BIC as a clip). A clip within ``gym_clip_tolerance``
+   tail of smooth swings can otherwise win the BIC as a clip). Likewise a deadzone must hold at least
+   ``deadzone_min_binding`` of the actions (:func:`deadzone_refuted`). A clip within ``gym_clip_tolerance``
    of 8 rad/s is Gymnasium's own, present in the nominal environment too, and not a gap, but only
    when the file says it came from Gymnasium.
 7. "Not explained by the candidates": a flexible basis of the state and action
@@ -82,8 +83,8 @@ from piga.diagnostics.twin import MEASURABLE_GAP, calibrate_floor, gap_closure, 
 from piga.diagnostics.vision import Camera, CameraConfig, CameraFindings, angle_table, camera_stage, match, match_file
 from piga.world.model import PhysicsModel
 from piga.diagnostics.fit import Nominal
-from piga.world.effects import (BIAS, CANDIDATES, DAMPING, DELAY, EFFECTS, FRICTION, SPEED_CLIP, WITHIN_FRAME, TorqueTerm,
-                                pendulum_gains)
+from piga.world.effects import (BIAS, CANDIDATES, DAMPING, DEADZONE, DELAY, EFFECTS, FRICTION, SPEED_CLIP, WITHIN_FRAME,
+                                TorqueTerm, pendulum_gains)
 from piga.io.runs import (nominal_of, training_arrow, training_blank_mse, training_data_path,
                           training_reconstruction_mse)
 
@@ -138,6 +139,11 @@ class DiagnoseConfig:
     its level) and of the fitted clip model's one-step predictions (those it holds at the level). A
     "clip" that binds less is the tail of a smooth speed distribution, not a limit (on a
     dm_control pendulum whose speeds reach 9.2 rad/s, a clip fitted at 8.79 rad/s won ΔBIC −242)."""
+    deadzone_min_binding: float = 0.01
+    """A deadzone must hold at least this fraction of the actions (|u| below its half-width). A narrower one,
+    or one of width 0 or less, changes the commands by rounding only (measured: on the true, noise-free
+    angles of a dm_control pendulum with damping and a bias, a deadzone fitted at d = −3.3e-7 lowered the
+    one-step BIC by 1950: with no reading error, the optimiser's rounding dominates the residual)."""
     ambiguous_bic: float = 10.0
     """Two candidates whose BICs differ by at most this (less than "very strong" evidence, Kass & Raftery)
     and whose typical held-out free-run errors differ by at most ``ambiguous_free_run`` (relative), with
@@ -501,6 +507,15 @@ def clip_refuted(model: fit.Model, nom: Nominal, w1: fit.Windows, speeds: np.nda
         or clip_binding(model, nom, w1) < config.clip_min_binding
 
 
+def deadzone_refuted(model: fit.Model, w1: fit.Windows, config: DiagnoseConfig) -> bool:
+    """A candidate with a deadzone that holds under ``deadzone_min_binding`` of the windows' actions
+    (|u| < d; none at all when d <= 0)."""
+    if not model.has(DEADZONE) or len(w1.actions) == 0:
+        return False
+    held = float((w1.actions[:, -1].abs() < model.values[DEADZONE.parameter]).double().mean())  # (B,) u_s
+    return held < config.deadzone_min_binding
+
+
 def close_rival(best: Score, cand: Score, config: DiagnoseConfig) -> bool:
     """``cand`` explains the data about as well as ``best``: BIC within ``ambiguous_bic`` and typical
     held-out free-run error within ``ambiguous_free_run`` (relative)."""
@@ -523,8 +538,10 @@ def select(candidates: Candidates, nom: Nominal, w: WindowSet, config: DiagnoseC
     220 but raised the typical free-run error by 33%, so a forward selection took friction, then
     friction + bias; damping + bias lowered the BIC by 450 and the free-run error by 93%, and read
     g, a and b within 1.6%). A candidate with a speed clip that the data refute
-    (:func:`clip_refuted`, with ``speeds`` the observed speeds, :func:`observed_speeds`) is passed
-    over. When another accepted set explains the data about as well as the chosen one
+    (:func:`clip_refuted`, with ``speeds`` the observed speeds, :func:`observed_speeds`) or a deadzone that
+    holds almost no action (:func:`deadzone_refuted`) is passed over: the clip's sets are not fitted; the
+    deadzone's are, and may steer which pairs the beam extends (a deadzone fitted at a negative width,
+    common as a stand-in for a larger gain at small actions), but are never accepted. When another accepted set explains the data about as well as the chosen one
     (:func:`close_rival`), the selection returns both: it cannot tell them apart."""
     from tqdm.auto import tqdm
 
@@ -582,7 +599,7 @@ def select(candidates: Candidates, nom: Nominal, w: WindowSet, config: DiagnoseC
     for members, cand in sorted(list(scored.items()), key=lambda kv: kv[1].bic):
         if not members:
             continue
-        ok = admissible(members)
+        ok = admissible(members) and not deadzone_refuted(cand.model, w.fit1, config)
         _, bic_drop, free_drop = passes(cand, candidates.refit)
         steps.append(SelectionStep(cand.name, bic_drop, free_drop, ok))
         if ok:
