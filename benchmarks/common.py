@@ -27,3 +27,10 @@ def machine() -> dict[str, object]:
     # "AMD EPYC" names several generations, of different speeds (family 23 model 1 is Zen 1); family/model tells them apart
     return {"cpu": cpu, "cpu_family_model": f"{family}/{model}", "cores": os.cpu_count(), "torch_threads": torch.get_num_threads(), "torch": torch.__version__,
             "python": platform.python_version(), "platform": platform.platform()}
+
+
+def machine_words(m: dict[str, object]) -> str:
+    """A :func:`machine` record in words, for a results page: "AMD EPYC (family/model 25/17), 2 cores; ..."."""
+    threads = m.get("torch_threads")
+    return (f"{m.get('cpu', 'unknown')} (family/model {m.get('cpu_family_model', '?')}), {m.get('cores', '?')} cores; "
+            f"torch {m.get('torch', '?')} on {threads} thread{'' if threads == 1 else 's'}, Python {m.get('python', '?')}")

@@ -67,7 +67,7 @@ from typing import Any
 import h5py
 import numpy as np
 
-from common import machine
+from common import machine, machine_words
 from piga.io.atomic import atomic_output, write_json
 from piga.io.pool import git_commit
 from piga.data.schema import DatasetWriter
@@ -743,7 +743,7 @@ def markdown(result: dict[str, Any], out: Path) -> str:
     s = result["summary"]
     lines = ["# Robustness: the default recipe on files it was not tuned on", "",
              f"Reproduce (resumable, skips finished rows): `python benchmarks/robustness.py --out {out}`. "
-             f"Last invocation: `{result['command']}`.", "", f"Machine: {result['machine']}", "",
+             f"Last invocation: `{result['command']}`.", "", f"Machine: {machine_words(result['machine'])}.", "",
              "Each row collects a file with `piga-collect --system SYSTEM --seed 200` and the row's options (or changes "
              "a copy of the default file: noise, H.264), then trains with the unchanged default command "
              "`piga-train-model FILE --out RUN --threads 1 --quiet` in a subprocess, as a user would.", "",
@@ -846,6 +846,8 @@ def main(argv: list[str] | None = None) -> int:
                    "e.g. 'pendulum/*' 'seeds/spring-*' (default: all; see --list)")
     p.add_argument("--list", action="store_true", help="print the rows with their estimated cost and status, and stop")
     p.add_argument("--workers", type=int, default=1, help="rows run at once, each training with one thread (default 1)")
+    p.add_argument("--render", action="store_true", help="rewrite OUT.md and OUT.json from the records in WORK with "
+                   "this script's scoring and page, run nothing, and keep the last invocation that ran rows")
     args = p.parse_args(argv)
     if args.workers < 1:
         p.error(f"--workers must be >= 1, got {args.workers}")
@@ -855,6 +857,15 @@ def main(argv: list[str] | None = None) -> int:
     bench = Bench(args.work, args.out, command, all_rows)
     if args.list:
         print(list_rows(bench, chosen))
+        return 0
+    if args.render:
+        if not (args.work / "records").is_dir():
+            raise SystemExit(f"--render: {args.work / 'records'} does not exist; nothing to render")
+        published = args.out.with_suffix(".json")
+        if published.exists():
+            bench.command = json.loads(published.read_text()).get("command", command)
+        bench.write_results()
+        print(f"wrote {args.out.with_suffix('.md')} and {published} from {args.work / 'records'}")
         return 0
     if shutil.which("piga-train-model") is None or shutil.which("piga-collect") is None:
         raise SystemExit("piga-train-model or piga-collect is not on PATH; install piga (pip install -e .)")

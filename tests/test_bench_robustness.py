@@ -233,6 +233,12 @@ def test_a_refused_row_is_recorded_and_not_rerun(bench, spring_file: Path, tmp_p
     (work / "runs" / "spring-steps-10-seed0.run.json").unlink(missing_ok=True)
     assert bench.main(list(args[2:])) == 0
     assert len(calls.read_text().splitlines()) == 2
+    out.with_suffix(".md").write_text("stale")  # --render rewrites the page from the records, running nothing
+    assert bench.main(["--out", str(out), "--work", str(work), "--render"]) == 0
+    assert len(calls.read_text().splitlines()) == 2
+    page = out.with_suffix(".md").read_text()
+    assert "spring/steps10" in page and "--rows spring/steps10" in page and "--render" not in page
+    assert "Machine: " in page and "{" not in page.split("Machine: ")[1].splitlines()[0]  # in words, not a dict
 
 
 @pytest.mark.slow
