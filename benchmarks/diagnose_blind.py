@@ -292,11 +292,13 @@ def run_case(case: dict, model: str, work: Path, sequences: int, workers: int, t
             "score": refused(case, report) if isinstance(report, str) else score(case, report)}
 
 
-def run_diagnose(model: str | Path, data: Path, report_dir: Path, case: int, threads: int | None) -> dict | str:
-    """``piga-diagnose`` on ``data`` in a fresh process: its report, or the one line of its refusal (an
-    outcome, scored as wrong). A crash (an internal error, or no line at all) raises."""
+def run_diagnose(model: str | Path, data: Path, report_dir: Path, case: int, threads: int | None,
+                 options: tuple[str, ...] = ()) -> dict | str:
+    """``piga-diagnose`` on ``data`` in a fresh process, with ``options`` (e.g. ``("--fit-starts",)``): its
+    report, or the one line of its refusal (an outcome, scored as wrong). A crash (an internal error, or no
+    line at all) raises."""
     done = subprocess.run(["piga-diagnose", "--model", str(model), "--data", str(data), "--out", str(report_dir),
-                           "--overwrite", "--quiet", *(["--threads", str(threads)] if threads else [])],
+                           "--overwrite", "--quiet", *(["--threads", str(threads)] if threads else []), *options],
                           stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     if done.returncode != 0:
         if "internal error" in done.stderr or not done.stderr.strip():

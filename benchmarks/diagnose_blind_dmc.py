@@ -43,7 +43,7 @@ import sys
 import time
 from dataclasses import replace
 from pathlib import Path
-from typing import Any, SupportsFloat
+from typing import Any
 
 import gymnasium as gym
 import h5py
@@ -294,15 +294,17 @@ def nominal_model(case: dict[str, Any], work: Path, sequences: int, steps: int, 
     return run_dir, signed
 
 
-def run_case(case: dict[str, Any], work: Path, sequences: int, steps: int, train_args: list[str]) -> dict[str, Any]:
-    """Collects, trains, strips, diagnoses and scores one case; returns its record."""
+def run_case(case: dict[str, Any], work: Path, sequences: int, steps: int, train_args: list[str],
+             diagnose_options: tuple[str, ...] = ()) -> dict[str, Any]:
+    """Collects, trains, strips, diagnoses (``piga-diagnose`` with ``diagnose_options``) and scores one case;
+    returns its record."""
     t0 = time.time()
     run_dir, signed = nominal_model(case, work, sequences, steps, train_args)
     real, report_dir = work / f"case{case['case']:02d}.h5", work / f"case{case['case']:02d}"
     collect(replace(collect_config(case, sequences, steps), seed=case["data_seed"]), real, overwrite=True, command="",
             progress=False, make_env=functools.partial(make_case_env, case["effects"]))
     strip_provenance(real)
-    report = run_diagnose(run_dir, real, report_dir, case["case"], threads=1)
+    report = run_diagnose(run_dir, real, report_dir, case["case"], threads=1, options=diagnose_options)
     return {**case, "seconds": time.time() - t0, "signed_actuation": signed,
             "score": refused(case, report) if isinstance(report, str) else score(case, report)}
 
@@ -314,13 +316,15 @@ def refused(case: dict[str, Any], message: str) -> dict[str, Any]:
             "false_effects": [], "parameter_error": {}}
 
 
-def true_angle_fit(case: dict[str, Any], work: Path, sequences: int, steps: int, noise: float = 0.0) -> dict[str, Any]:
+def true_angle_fit(case: dict[str, Any], work: Path, sequences: int, steps: int, noise: float = 0.0,
+                   fit_starts: bool = False) -> dict[str, Any]:
     """Outside the blind protocol: the diagnosis' candidate physics fitted to the case's *true* angles.
 
     The case's file is collected again with its labels kept (``WORK/caseNN_true.h5``), and
     :func:`piga.diagnostics.analyse` runs on ``/states`` instead of the encoder's angles, against the
     nominal model's g and a. What it gets wrong is the candidates' physics, not the vision. ``noise``
-    (rad) adds independent Gaussian errors to every angle (seed 0): what a reading error alone does.
+    (rad) adds independent Gaussian errors to every angle (seed 0): what a reading error alone does;
+    ``fit_starts``: the fits take the windows' start angles as data (``DiagnoseConfig.fit_starts``).
     """
     from piga.diagnostics import DiagnoseConfig, Observations, analyse
     from piga.io.runs import load_model, nominal_of
@@ -339,9 +343,10 @@ def true_angle_fit(case: dict[str, Any], work: Path, sequences: int, steps: int,
     n, t = theta.shape
     obs = Observations(theta, actions, np.zeros((n, t)), np.arange(n) < int(0.75 * n), nominal.dt,
                        np.zeros((0, t, 8, 8), np.uint8), np.zeros(0, int), from_gymnasium=False)
-    d = analyse(obs, nominal, DiagnoseConfig(bootstrap=0))
+    d = analyse(obs, nominal, DiagnoseConfig(bootstrap=0, fit_starts=fit_starts))
     true = truth(case)
-    return {"case": case["case"], "angle_noise_rad": noise, "verdict": d.verdict, "corrected": d.corrected,
+    return {"case": case["case"], "angle_noise_rad": noise, "fit_starts": fit_starts, "verdict": d.verdict,
+            "corrected": d.corrected,
             "signed_error": {k: d.corrected[k] / true[k] - 1 for k in ("g", "a", "b") if k in d.corrected and true[k]}}
 
 
@@ -365,6 +370,8 @@ def main(argv: list[str] | None = None) -> int:
                         "and the signed errors of g, a, b (what the physics gets wrong without the vision)")
     p.add_argument("--angle-noise", type=float, default=0.0, metavar="RAD",
                    help="with --true-angles: add independent Gaussian errors of this rms (rad) to the true angles")
+    p.add_argument("--fit-starts", action="store_true",
+                   help="diagnose with piga-diagnose --fit-starts (with --true-angles: DiagnoseConfig.fit_starts)")
     p.add_argument("--rescore", action="store_true",
                    help="score the finished cases' reports (in --work) again with this script's scorer, and rewrite OUT")
     args = p.parse_args(argv)
@@ -394,7 +401,8 @@ def main(argv: list[str] | None = None) -> int:
         case = next((c for c in cases if c["case"] == args.true_angles), None)
         if case is None:
             raise SystemExit(f"--true-angles: no case {args.true_angles} among the {args.cases} drawn")
-        print(json.dumps(true_angle_fit(case, work, args.sequences, args.steps, args.angle_noise), indent=2))
+        print(json.dumps(true_angle_fit(case, work, args.sequences, args.steps, args.angle_noise, args.fit_starts),
+                         indent=2))
         return 0
     if args.models_only:
         run_pool(functools.partial(nominal_model, work=work, sequences=args.sequences, steps=args.steps,
@@ -411,7 +419,8 @@ def main(argv: list[str] | None = None) -> int:
               f"({'ok' if run['score']['top1'] else 'WRONG'})", flush=True)
         save(out, command, info, done, summarize, markdown)
 
-    run_pool(functools.partial(run_case, work=work, sequences=args.sequences, steps=args.steps, train_args=train_args),
+    run_pool(functools.partial(run_case, work=work, sequences=args.sequences, steps=args.steps, train_args=train_args,
+                               diagnose_options=("--fit-starts",) if args.fit_starts else ()),
              todo, workers=args.jobs, progress=False, on_result=finished)
     if done and args.only is None:  # a run over every case records its command
         save(out, command, info, done, summarize, markdown)

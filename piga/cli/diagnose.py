@@ -28,6 +28,9 @@ def build_parser() -> ArgumentParser:
     p.add_argument("--bootstrap", type=nonnegative_int, default=d.bootstrap,
                    help="bootstrap replicates for intervals (default %(default)s)")
     p.add_argument("--seed", type=seed_int, default=d.seed, help="seed of the bootstrap (default %(default)s)")
+    p.add_argument("--fit-starts", action="store_true", default=d.fit_starts,
+                   help="refit the chosen effects' values with each fitting window's two start angles fitted too "
+                        "(errors in the read angles then bias no damping); the selection is unchanged")
     p.add_argument("--threads", type=thread_count, default=0,
                    help="torch CPU threads (default %(default)s: torch's choice, at most 2; small fits gain little from more)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing report in --out")
@@ -56,7 +59,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     import torch
 
     torch.set_num_threads(args.threads or max(1, min(2, torch.get_num_threads())))
-    diagnosis = diagnose(model, args.data, DiagnoseConfig(bootstrap=args.bootstrap, seed=args.seed), checkpoint=ckpt,
+    diagnosis = diagnose(model, args.data, DiagnoseConfig(bootstrap=args.bootstrap, seed=args.seed, fit_starts=args.fit_starts), checkpoint=ckpt,
                          progress=not args.quiet)
     if effects is not None:
         from piga.control.closed_loop import compare_control

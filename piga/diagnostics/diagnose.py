@@ -100,6 +100,12 @@ class DiagnoseConfig:
     """Steps of the multi-step fitting loss."""
     stride: int = 2
     """Frames between window starts."""
+    fit_starts: bool = False
+    """Refit the chosen effects' values with the two read angles that start each fitting window fitted
+    too (errors in variables, :attr:`piga.diagnostics.fit.Windows.fit_starts`), and so their intervals
+    and the references they are judged against; the selection is unchanged. A window's start velocity
+    is the difference of two read angles, and a fit that takes it as read takes its error for damping.
+    Off until the blind benchmarks have been run with it."""
     bic_margin: float = 10.0
     """BIC drop (one-step, fit split) an effect needs to be accepted ("very strong" on Kass & Raftery's scale)."""
     min_gain: float = 0.1
@@ -284,7 +290,8 @@ def own_reading(physics: fit.Model, nom: Nominal, own: Observations, config: Dia
     """
     stale = own.stale if own.stale is not None and own.stale.any() else None
     rows = np.arange(len(own.theta))
-    w = fit.make_windows(own.theta, own.actions, rows, config.fit_horizon, config.stride, own.dt, stale)
+    w = dataclass_replace(fit.make_windows(own.theta, own.actions, rows, config.fit_horizon, config.stride, own.dt, stale),
+                          fit_starts=config.fit_starts)
     w1 = fit.make_windows(own.theta, own.actions, rows, 1, 1, own.dt, stale)
     start = {k: v for k, v in physics.values.items() if k in ("g", "a")}
     kept = fit.fit_candidate((), start, nom, w)
@@ -1144,6 +1151,10 @@ def analyse(obs: Observations, nom: Nominal, config: DiagnoseConfig = DiagnoseCo
         chosen = without(chosen, tuple(small), nom, windows, candidates)
         generic = generic_basis(chosen.model, nom, obs, theta, stale, config)
     final = chosen.model
+    if config.fit_starts:  # the chosen effects' values (and what they are judged against) with fitted starts
+        windows = dataclass_replace(windows, fit=dataclass_replace(windows.fit, fit_starts=True))
+        final = fit.fit(final, nom, windows.fit)
+        chosen = score(final, nom, windows.fit1, windows.free)
     draws = fit.bootstrap(final, nom, windows.fit, config.bootstrap, config.seed) if config.bootstrap else {}
     ambiguity = None if selection.rival is None else ambiguity_of(selection.chosen, selection.rival, nom, windows,
                                                                   config, draws)

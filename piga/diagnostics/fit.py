@@ -64,6 +64,7 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass, field
+from dataclasses import replace as dataclass_replace
 
 import numpy as np
 import torch
@@ -91,6 +92,9 @@ MAX_DELAY = int(max(DELAY.grid))
 """Largest delay tried (steps)."""
 HOLD_ITERATIONS = 3
 """Newton steps that read the start velocity through the frame step (``within_frame``)."""
+START_ITERATIONS = 2
+"""Gauss-Newton steps that fit a window's two start angles (:attr:`Windows.fit_starts`): the
+errors are nearly linear in them (moves of a few mrad), and 2 from the read angles settle them."""
 
 
 def nominal_damping(nominal: Nominal) -> float:
@@ -129,6 +133,10 @@ class Windows:
     """(B, H) long or None. With repeated (stale) frames: which prediction each target repeats,
     0 for the start θ_s and j for the j-th predicted step. A camera that dropped frame t shows
     frame t - 1 again, so a model that knows it predicts the repeat (see :func:`squared_errors`)."""
+    fit_starts: bool = False
+    """Fit the two read angles that start each window (θ_s and θ_{s-1}, so its velocity) with the
+    physics, as data like the targets, instead of taking them as read (:func:`loss`); only for
+    windows of 2 or more steps."""
 
 
 def make_windows(theta: np.ndarray, actions: np.ndarray, rows: np.ndarray, horizon: int | None, stride: int,
@@ -322,10 +330,51 @@ def squared_errors(model: Model, nominal: Nominal, w: Windows, params: dict[str,
     return (as_observed(w, simulate(model, p, nominal, w)) - w.target) ** 2 * w.mask
 
 
+def with_starts(w: Windows, d: Tensor, dt: float) -> Windows:
+    """``w`` with its read start angles θ_s and θ_{s-1} moved by ``d`` (B, 2) rad."""
+    theta0 = w.theta0 + d[:, 0]
+    before = w.theta0 - dt * w.v0 + d[:, 1]
+    return dataclass_replace(w, theta0=theta0, v0=(theta0 - before) / dt, fit_starts=False)
+
+
+def fitted_starts(model: Model, nominal: Nominal, w: Windows, params: dict[str, Tensor],
+                  iterations: int = START_ITERATIONS, eps: float = 1e-6) -> Tensor:
+    """(B, 2) the moves of each window's two start angles that minimise its squared errors, the
+    targets' and the start angles' own (each read with the same error): Gauss-Newton from the read
+    angles, each window a 2x2 problem, the Jacobian by forward differences (float64)."""
+    d = torch.zeros(len(w.theta0), 2, dtype=torch.float64)
+    eye = torch.eye(2, dtype=torch.float64)
+    with torch.no_grad():
+        for _ in range(iterations):
+            r = (as_observed(with_starts(w, d, nominal.dt), simulate(model, params, nominal, with_starts(w, d, nominal.dt)))
+                 - w.target) * w.mask  # (B, H)
+            columns = []
+            for k in range(2):
+                step = torch.zeros_like(d)
+                step[:, k] = eps
+                moved = with_starts(w, d + step, nominal.dt)
+                columns.append(((as_observed(moved, simulate(model, params, nominal, moved)) - w.target) * w.mask - r) / eps)
+            jac = torch.stack(columns, -1)  # (B, H, 2)
+            grad = (jac.transpose(1, 2) @ r[..., None])[..., 0] + d  # (B, 2)
+            d = d - torch.linalg.solve(jac.transpose(1, 2) @ jac + eye, grad[..., None])[..., 0]
+    return d
+
+
 def loss(model: Model, nominal: Nominal, w: Windows, weights: Tensor | None = None,
          params: dict[str, Tensor] | None = None) -> Tensor:
-    """Mean squared multi-step angle error (rad²), optionally weighted per window (B,)."""
-    se = squared_errors(model, nominal, w, params).sum(1) / w.mask.sum(1).clamp_min(1)  # (B,)
+    """Mean squared multi-step angle error (rad²), optionally weighted per window (B,).
+
+    With ``w.fit_starts`` (and 2 or more steps) the start angles are fitted too (:func:`fitted_starts`),
+    and count with the targets: the loss is profiled over them (variable projection). Its gradient
+    in the parameters is the partial one at the fitted starts, which are therefore held fixed in the
+    backward pass (the envelope theorem)."""
+    if w.fit_starts and w.target.shape[1] > 1:
+        p = parameters_of(model, nominal) if params is None else params
+        d = fitted_starts(model, nominal, w, p)
+        se = (squared_errors(model, nominal, with_starts(w, d, nominal.dt), p).sum(1) + (d**2).sum(1)) \
+            / (w.mask.sum(1) + 2)  # (B,)
+    else:
+        se = squared_errors(model, nominal, w, params).sum(1) / w.mask.sum(1).clamp_min(1)  # (B,)
     if weights is None:
         return se.mean()
     return (se * weights).sum() / weights.sum()
