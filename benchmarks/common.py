@@ -32,5 +32,6 @@ def machine() -> dict[str, object]:
 def machine_words(m: dict[str, object]) -> str:
     """A :func:`machine` record in words, for a results page: "AMD EPYC (family/model 25/17), 2 cores; ..."."""
     threads = m.get("torch_threads")
+    plural = "" if threads == 1 else "s"
     return (f"{m.get('cpu', 'unknown')} (family/model {m.get('cpu_family_model', '?')}), {m.get('cores', '?')} cores; "
-            f"torch {m.get('torch', '?')} on {threads} thread{'' if threads == 1 else 's'}, Python {m.get('python', '?')}")
+            f"torch {m.get('torch', '?')} on {threads} thread{plural}, Python {m.get('python', '?')}")

@@ -59,8 +59,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     import torch
 
     torch.set_num_threads(args.threads or max(1, min(2, torch.get_num_threads())))
-    diagnosis = diagnose(model, args.data, DiagnoseConfig(bootstrap=args.bootstrap, seed=args.seed, fit_starts=args.fit_starts), checkpoint=ckpt,
-                         progress=not args.quiet)
+    config = DiagnoseConfig(bootstrap=args.bootstrap, seed=args.seed, fit_starts=args.fit_starts)
+    diagnosis = diagnose(model, args.data, config, checkpoint=ckpt, progress=not args.quiet)
     if effects is not None:
         from piga.control.closed_loop import compare_control
 

@@ -290,8 +290,8 @@ def own_reading(physics: fit.Model, nom: Nominal, own: Observations, config: Dia
     """
     stale = own.stale if own.stale is not None and own.stale.any() else None
     rows = np.arange(len(own.theta))
-    w = dataclass_replace(fit.make_windows(own.theta, own.actions, rows, config.fit_horizon, config.stride, own.dt, stale),
-                          fit_starts=config.fit_starts)
+    w = fit.make_windows(own.theta, own.actions, rows, config.fit_horizon, config.stride, own.dt, stale)
+    w = dataclass_replace(w, fit_starts=config.fit_starts)
     w1 = fit.make_windows(own.theta, own.actions, rows, 1, 1, own.dt, stale)
     start = {k: v for k, v in physics.values.items() if k in ("g", "a")}
     kept = fit.fit_candidate((), start, nom, w)
@@ -548,8 +548,9 @@ def select(candidates: Candidates, nom: Nominal, w: WindowSet, config: DiagnoseC
     (:func:`clip_refuted`, with ``speeds`` the observed speeds, :func:`observed_speeds`) or a deadzone that
     holds almost no action (:func:`deadzone_refuted`) is passed over: the clip's sets are not fitted; the
     deadzone's are, and may steer which pairs the beam extends (a deadzone fitted at a negative width,
-    common as a stand-in for a larger gain at small actions), but are never accepted. When another accepted set explains the data about as well as the chosen one
-    (:func:`close_rival`), the selection returns both: it cannot tell them apart."""
+    common as a stand-in for a larger gain at small actions), but are never accepted. When another
+    accepted set explains the data about as well as the chosen one (:func:`close_rival`), the
+    selection returns both: it cannot tell them apart."""
     from tqdm.auto import tqdm
 
     def passes(cand: Score, base: Score) -> tuple[bool, float, float]:

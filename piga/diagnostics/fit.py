@@ -346,14 +346,16 @@ def fitted_starts(model: Model, nominal: Nominal, w: Windows, params: dict[str, 
     eye = torch.eye(2, dtype=torch.float64)
     with torch.no_grad():
         for _ in range(iterations):
-            r = (as_observed(with_starts(w, d, nominal.dt), simulate(model, params, nominal, with_starts(w, d, nominal.dt)))
-                 - w.target) * w.mask  # (B, H)
+            def residuals(moves: Tensor) -> Tensor:  # (B, H)
+                moved = with_starts(w, moves, nominal.dt)
+                return (as_observed(moved, simulate(model, params, nominal, moved)) - w.target) * w.mask
+
+            r = residuals(d)
             columns = []
             for k in range(2):
                 step = torch.zeros_like(d)
                 step[:, k] = eps
-                moved = with_starts(w, d + step, nominal.dt)
-                columns.append(((as_observed(moved, simulate(model, params, nominal, moved)) - w.target) * w.mask - r) / eps)
+                columns.append((residuals(d + step) - r) / eps)
             jac = torch.stack(columns, -1)  # (B, H, 2)
             grad = (jac.transpose(1, 2) @ r[..., None])[..., 0] + d  # (B, 2)
             d = d - torch.linalg.solve(jac.transpose(1, 2) @ jac + eye, grad[..., None])[..., 0]
