@@ -16,16 +16,17 @@ from tests.test_diagnostics import NOMINAL, planted
 @pytest.fixture(scope="module")
 def noisy():
     """Damping 0.2 read through 10 mrad of independent angle error (its velocities 0.28 rad/s off)."""
-    return planted({"damping": 0.2}, n=300, t=30, noise=0.01)
+    return planted({"damping": 0.2}, n=150, t=30, noise=0.01)
 
 
 def test_fitted_starts_remove_the_damping_bias_of_read_starts(noisy) -> None:
     w = fit.make_windows(noisy.theta, noisy.actions, np.flatnonzero(noisy.fit), 8, 2, noisy.dt)
     read = fit.fit_candidate(("damping",), {}, NOMINAL, w)
     fitted = fit.fit(read, NOMINAL, replace(w, fit_starts=True))
-    assert read.values["b"] > 0.21  # measured 0.215: b biased up by the noisy start velocities
+    assert read.values["b"] > 0.203  # measured 0.207 (0.215 on 300 sequences): biased up by the start velocities
     assert abs(fitted.values["b"] / 0.2 - 1) < 0.01 and abs(fitted.values["g"] / 10 - 1) < 0.003
-    assert abs(read.values["g"] / 10 - 1) > 0.005  # g biased too (measured +1.0%)
+    assert read.values["b"] - 0.2 > 3 * abs(fitted.values["b"] - 0.2)
+    assert abs(read.values["g"] / 10 - 1) > 2 * abs(fitted.values["g"] / 10 - 1)  # g biased too
 
 
 def test_fitted_starts_solve_each_window_and_leave_exact_data_alone() -> None:
