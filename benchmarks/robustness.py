@@ -239,12 +239,11 @@ def file_shape(row: Row) -> tuple[int, int, int]:
 def recipe_windows(row: Row) -> tuple[int, Any, int]:
     """(L + T_pred, the recipe's TrainConfig, window stride) of the default recipe for the row's system,
     with T_pred as training shortens it for the row's sequence length."""
-    from piga.training.train import MIN_PRED_FRAMES, PRESETS, SCENE_PRESETS
+    from piga.training.train import PRESETS, SCENE_PRESETS, pred_frames_for
 
     recipe = PRESETS["fast"] if row.system == "pendulum" else SCENE_PRESETS[row.system]["fast"]
-    model, steps = recipe.model, file_shape(row)[1]
-    floor = model.input_frames + min(MIN_PRED_FRAMES, model.pred_frames)
-    return min(model.window, max(steps, floor)), recipe.train, recipe.train.window_stride
+    window = recipe.model.input_frames + pred_frames_for(recipe.model, file_shape(row)[1])
+    return window, recipe.train, recipe.train.window_stride
 
 
 def estimate_minutes(row: Row) -> dict[str, float]:

@@ -327,6 +327,15 @@ class TrainState:
 MIN_PRED_FRAMES = 4
 
 
+def pred_frames_for(model: ModelConfig, steps: int) -> int:
+    """T_pred for sequences of ``steps`` frames: the recipe's, or, when they are shorter than its window
+    L + T_pred, the frames they hold after the L input frames, down to :data:`MIN_PRED_FRAMES` (a window
+    still longer than the sequences is refused by :func:`check_trainable`)."""
+    if steps >= model.window:
+        return model.pred_frames
+    return max(steps - model.input_frames, min(MIN_PRED_FRAMES, model.pred_frames))
+
+
 def model_config_for(info: DatasetInfo, model: ModelConfig | None = None) -> ModelConfig:
     """``model`` (None: the fast recipe's) fitted to a data file: system, dt, image size, channels and
     objects from its attributes. Sequences shorter than the recipe's window L + T_pred shorten T_pred
@@ -344,11 +353,8 @@ def model_config_for(info: DatasetInfo, model: ModelConfig | None = None) -> Mod
         if options != type(options)():
             raise ValueError(f"{info.path}: {options} are a {model.system} model's, not a {info.system} model's")
         options = None
-    pred_frames = model.pred_frames
-    if info.steps < model.window:  # a short file: a shorter rollout, never below the floor
-        pred_frames = max(info.steps - model.input_frames, min(MIN_PRED_FRAMES, model.pred_frames))
     return replace(model, system=info.system, system_options=options, dt=info.dt, image_size=shape[0], channels=channels,
-                   n_objects=n_objects, pred_frames=pred_frames)
+                   n_objects=n_objects, pred_frames=pred_frames_for(model, info.steps))
 
 
 def _optimizer(model: PhysicsModel, config: TrainConfig) -> torch.optim.Optimizer:
