@@ -253,6 +253,8 @@ def main() -> int:
                    help="cases run at once, each in its own process with one torch thread (a machine's cores)")
     p.add_argument("--mix", choices=("all", "none"), default="all",
                    help="'all': the mix of effects; 'none': no-effect cases only (false-positive rate)")
+    p.add_argument("--fit-starts", action="store_true", help="diagnose with piga-diagnose --fit-starts")
+    p.add_argument("--matched-angles", action="store_true", help="diagnose with piga-diagnose --matched-angles")
     args = p.parse_args()
     out, work = Path(args.out), Path(args.work)
     work.mkdir(parents=True, exist_ok=True)
@@ -263,7 +265,9 @@ def main() -> int:
     todo = [c for c in draw_cases(args.cases, args.seed, args.mix)
             if not any(r["case"] == c["case"] and r["effects"] == c["effects"] for r in done)]
     run = functools.partial(run_case, model=args.model, work=work, sequences=args.sequences,
-                            workers=args.workers if args.jobs <= 1 else 1, threads=1 if args.jobs > 1 else None)
+                            workers=args.workers if args.jobs <= 1 else 1, threads=1 if args.jobs > 1 else None,
+                            options=(("--fit-starts",) if args.fit_starts else ())
+                            + (("--matched-angles",) if args.matched_angles else ()))
 
     def finished(_: int, record: dict) -> None:  # saved as each case ends, so that a stopped run continues
         done.append(record)
@@ -279,15 +283,17 @@ def main() -> int:
     return 0
 
 
-def run_case(case: dict, model: str, work: Path, sequences: int, workers: int, threads: int | None) -> dict:
-    """Collects, strips, diagnoses (in a fresh process) and scores one case; returns its record."""
+def run_case(case: dict, model: str, work: Path, sequences: int, workers: int, threads: int | None,
+             options: tuple[str, ...] = ()) -> dict:
+    """Collects, strips, diagnoses (in a fresh process, ``piga-diagnose`` with ``options``) and scores one case;
+    returns its record."""
     data = work / f"case{case['case']:02d}.h5"
     t0 = time.time()
     env = PixelPendulumConfig(effects=tuple(case["effects"].items()))
     collect(replace(CollectConfig(), sequences=sequences, seed=case["data_seed"], env=env, workers=workers),
             data, overwrite=True, command="", progress=False)
     strip_labels(data)
-    report = run_diagnose(model, data, work / f"case{case['case']:02d}", case["case"], threads)
+    report = run_diagnose(model, data, work / f"case{case['case']:02d}", case["case"], threads, options)
     return {**case, "seconds": time.time() - t0,
             "score": refused(case, report) if isinstance(report, str) else score(case, report)}
 

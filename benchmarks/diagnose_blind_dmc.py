@@ -27,8 +27,11 @@ else is a false effect.
 
 Floors (reported in OUT.md): top-1 ≥ 90% (an "ambiguous" verdict counts as right only when the
 truth holds one of its two; at most 10% ambiguous), no named effect that the case does not have,
-and the corrected g, a, b within 3% of the variant's when the verdict is not ambiguous. Each
-finished case is appended to OUT.json, so an interrupted run continues where it stopped.
+and the corrected g, a, b within 3% of the variant's when the verdict is not ambiguous. MuJoCo
+takes the hinge damping implicitly; a report that reads the damping explicitly (one Euler step per
+frame, Gymnasium's convention) gives the same frames' values under MuJoCo's (its
+``damping_convention``), and those are scored. Each finished case is appended to OUT.json, so an
+interrupted run continues where it stopped.
 """
 
 from __future__ import annotations
@@ -181,6 +184,9 @@ def score(case: dict[str, Any], report: dict[str, Any]) -> dict[str, Any]:
     else:
         top1 = named[0] in true["effects"]
     corrected = report["corrected"]
+    convention = report.get("damping_convention")
+    if convention is not None and convention["taken"] == "explicit":  # MuJoCo's values of the same frames
+        corrected = {**corrected, **convention["values"]}
     relative = lambda key: None if corrected.get(key) is None else abs(corrected[key] / true[key] - 1)  # noqa: E731
     errors = {"g": relative("g"), "a": relative("a")}
     if "b" in corrected and true["b"] > 0:
@@ -372,6 +378,7 @@ def main(argv: list[str] | None = None) -> int:
                    help="with --true-angles: add independent Gaussian errors of this rms (rad) to the true angles")
     p.add_argument("--fit-starts", action="store_true",
                    help="diagnose with piga-diagnose --fit-starts (with --true-angles: DiagnoseConfig.fit_starts)")
+    p.add_argument("--matched-angles", action="store_true", help="diagnose with piga-diagnose --matched-angles")
     p.add_argument("--rescore", action="store_true",
                    help="score the finished cases' reports (in --work) again with this script's scorer, and rewrite OUT")
     args = p.parse_args(argv)
@@ -420,7 +427,8 @@ def main(argv: list[str] | None = None) -> int:
         save(out, command, info, done, summarize, markdown)
 
     run_pool(functools.partial(run_case, work=work, sequences=args.sequences, steps=args.steps, train_args=train_args,
-                               diagnose_options=("--fit-starts",) if args.fit_starts else ()),
+                               diagnose_options=(("--fit-starts",) if args.fit_starts else ())
+                               + (("--matched-angles",) if args.matched_angles else ())),
              todo, workers=args.jobs, progress=False, on_result=finished)
     if done and args.only is None:  # a run over every case records its command
         save(out, command, info, done, summarize, markdown)

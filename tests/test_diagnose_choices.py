@@ -434,5 +434,27 @@ def test_the_report_says_which_damping_convention_its_numbers_use() -> None:
     factor by which MuJoCo's implicit convention would read g, a and b from the same frames."""
     d = analyse(planted({"damping": 0.2}), NOMINAL, FAST)
     note = next(n for n in d.notes if "takes the damping explicitly" in n)
-    assert "x1.030" in note  # 1 + h·3b = 1 + 0.05·3·0.2
     assert abs(d.corrected["b"] / 0.2 - 1) < 0.03
+    convention = d.damping_convention
+    assert convention["taken"] == "explicit" and convention["other"] == "implicit"
+    assert convention["factor"] == pytest.approx(1 / (1 - 0.05 * 3 * d.corrected["b"]))  # 1 / (1 - h·3b), about 1.03
+    for key in ("g", "a", "b"):
+        assert convention["values"][key] == pytest.approx(d.corrected[key] * convention["factor"])
+    assert f"x{convention['factor']:.3f}" in note and f"b = {convention['values']['b']:.4g}" in note
+    assert d.to_dict()["damping_convention"] == convention
+
+
+def test_the_two_damping_conventions_make_the_same_frames() -> None:
+    """The conversion the report gives is exact: MuJoCo's implicit step with the converted values makes the frames
+    of the explicit step (the identity behind :func:`damping_convention`, to float precision)."""
+    h, g, a, b = 0.05, 9.0, 1.4, 0.3  # explicit
+    f = 1 / (1 - h * 3 * b)
+    rng = np.random.default_rng(0)
+    x1 = x2 = 0.3
+    v1 = v2 = 0.0
+    for u in rng.uniform(-1, 1, 50):
+        v1 = v1 + h * (1.5 * g * np.sin(x1) + 3 * a * u - 3 * b * v1)
+        x1 = x1 + h * v1
+        v2 = (v2 + h * (1.5 * g * f * np.sin(x2) + 3 * a * f * u)) / (1 + h * 3 * b * f)
+        x2 = x2 + h * v2
+        assert x2 == pytest.approx(x1, abs=1e-12)

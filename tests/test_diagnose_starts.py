@@ -46,3 +46,16 @@ def test_the_option_refits_the_chosen_values(noisy) -> None:
     fitted = analyse(noisy, NOMINAL, DiagnoseConfig(bootstrap=0, fit_starts=True))
     assert fitted.verdict_class == "damping", fitted.verdict
     assert abs(fitted.corrected["b"] / 0.2 - 1) < 0.01
+
+
+def test_matched_angles_read_the_chosen_values_on_the_matched_angles(noisy) -> None:
+    """``DiagnoseConfig.matched_angles``: the selection on the encoder's angles (here 10 mrad of error), the
+    chosen effects' values on the matched ones (here 2 mrad); without the option ``matched`` is not used."""
+    matched = planted({"damping": 0.2}, n=150, t=30, noise=0.002).theta  # the same motion, read better
+    config = DiagnoseConfig(bootstrap=0, matched_angles=True)
+    on_matched = analyse(noisy, NOMINAL, config, matched=lambda: matched)
+    assert on_matched.verdict_class == "damping", on_matched.verdict
+    assert abs(on_matched.corrected["b"] / 0.2 - 1) < 0.01  # read on the encoder's angles: 0.207
+    assert any("matching every frame to the decoder's renders" in n for n in on_matched.notes)
+    plain = analyse(noisy, NOMINAL, DiagnoseConfig(bootstrap=0), matched=lambda: matched)
+    assert plain.corrected["b"] > 0.203 and not any("decoder's renders" in n for n in plain.notes)

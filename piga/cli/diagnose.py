@@ -31,6 +31,10 @@ def build_parser() -> ArgumentParser:
     p.add_argument("--fit-starts", action="store_true", default=d.fit_starts,
                    help="refit the chosen effects' values with each fitting window's two start angles fitted too "
                         "(errors in the read angles then bias no damping); the selection is unchanged")
+    p.add_argument("--matched-angles", action="store_true", default=d.matched_angles,
+                   help="read the chosen effects' values, and the model's own training file that a gain is judged "
+                        "against, on angles matched to the decoder's renders instead of the encoder's; the selection "
+                        "is unchanged")
     p.add_argument("--threads", type=thread_count, default=0,
                    help="torch CPU threads (default %(default)s: torch's choice, at most 2; small fits gain little from more)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing report in --out")
@@ -59,7 +63,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     import torch
 
     torch.set_num_threads(args.threads or max(1, min(2, torch.get_num_threads())))
-    config = DiagnoseConfig(bootstrap=args.bootstrap, seed=args.seed, fit_starts=args.fit_starts)
+    config = DiagnoseConfig(bootstrap=args.bootstrap, seed=args.seed, fit_starts=args.fit_starts,
+                            matched_angles=args.matched_angles)
     diagnosis = diagnose(model, args.data, config, checkpoint=ckpt, progress=not args.quiet)
     if effects is not None:
         from piga.control.closed_loop import compare_control

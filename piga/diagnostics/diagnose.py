@@ -66,6 +66,7 @@ import math
 import os
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 from dataclasses import replace as dataclass_replace
 
 import numpy as np
@@ -106,6 +107,14 @@ class DiagnoseConfig:
     and the references they are judged against; the selection is unchanged. A window's start velocity
     is the difference of two read angles, and a fit that takes it as read takes its error for damping.
     Off until the blind benchmarks have been run with it."""
+    matched_angles: bool = False
+    """Read the chosen effects' values (with their intervals, and the model's own training file that a
+    gain or gravity error is judged against) on angles found by matching every frame of both files to
+    the decoder's renders (:func:`piga.diagnostics.vision.match_file`), not on the encoder's; the
+    selection and the gap are unchanged. The encoder's errors differ from file to file (on the one it
+    was trained on, the physics shaped them); the matching's follow the angle alone, and are the same
+    in both (measured on dm_control at 50 frames a second: "gains" of 1.05 between the two files read
+    by the encoder, 1.00-1.02 matched). With a fitted camera the dynamics are on matched angles already."""
     bic_margin: float = 10.0
     """BIC drop (one-step, fit split) an effect needs to be accepted ("very strong" on Kass & Raftery's scale)."""
     min_gain: float = 0.1
@@ -245,7 +254,8 @@ def diagnose(model: PhysicsModel, data: str | os.PathLike[str], config: Diagnose
                           progress=progress)
     return analyse(obs, nominal_of(model), config, model=model, rec_training=rec_training,
                    progress=progress, camera=camera, arrow=training_arrow(checkpoint),
-                   own=lambda: observe_own(model, checkpoint, progress, rematch=camera.rematched))  # only when effects were chosen
+                   own=lambda: observe_own(model, checkpoint, progress, rematch=camera.rematched or config.matched_angles),
+                   matched=lambda: match_file(model, str(data), Camera()))  # both read only when needed
 
 
 def observe_own(model: PhysicsModel, checkpoint: dict | None, progress: bool = False,
@@ -680,28 +690,46 @@ def generic_basis(final: fit.Model, nom: Nominal, obs: Observations, theta: np.n
                         reading_rms=reading_rms, reading_significant=bool(reading), reading_decides=reading_decides)
 
 
-def damping_convention(final: fit.Model, nom: Nominal, implicit: bool) -> str | None:
-    """The note on how the Euler steps took the damping, and the factor the other convention gives (None: no damping).
+def damping_convention(final: fit.Model, nom: Nominal) -> dict[str, Any] | None:
+    """How the corrected values take the damping, and the same frames' values under the other convention.
 
-    Frames cannot tell damping taken implicitly, q̇ <- (q̇ + h·f) / (1 + h·r), from damping taken explicitly with
-    g, a and b all divided by 1 + h·r (r = 3·b; they differ by (h·r)²): the convention fixes the numbers. The
-    within-frame substeps take MuJoCo's (implicit), one step per frame Gymnasium's (explicit: a torque added
-    before the step, as piga's effect wrappers add it too). Measured on dm_control's pendulum from its true
-    angles, one physics step per frame: the explicit fit reads g, a and b all low by 1 + h·r (1.40% at h·r = 1.42%).
+    Frames cannot tell damping taken implicitly, q̇ <- (q̇ + h·f) / (1 + h·r), from damping taken explicitly,
+    q̇ <- q̇ + h·(f' - r'·q̇), with g, a and b all divided by 1 + h·r (r = 3·b, r' = r / (1 + h·r)): the
+    convention fixes the numbers. The within-frame substeps take MuJoCo's (implicit), one step per frame
+    Gymnasium's (explicit: a torque added before the step, as piga's effect wrappers add it too). Measured
+    on dm_control's pendulum from its true angles, one physics step per frame: the explicit fit reads g, a
+    and b all low by 1 + h·r (2.99% at h·r = 2.99%). None: no damping, or an RK4 model (which has no
+    such step).
+
+    Returns ``{"taken": "explicit" | "implicit", "step_s": h, "other": the other one, "factor": F,
+    "values": {"g", "a", "b"} x F}``: F = 1 / (1 - h·r') from explicit to implicit, 1 / (1 + h·r) back.
     """
+    implicit = final.has(WITHIN_FRAME)
+    if not implicit and fit.nominal_integrator(nom) != "euler":
+        return None
     b = final.values.get(DAMPING.parameter, 0.0) + fit.nominal_damping(nom)
     if b <= 0:
         return None
     steps = final.substeps if implicit else nom.substeps
     h = nom.dt / steps
-    factor = 1 + h * pendulum_gains()[1] * b
-    if implicit:
-        return (f"the {steps} substeps take the damping implicitly, as MuJoCo's Euler does; a simulator that adds it as "
-                f"an explicit torque before each step makes the same frames with g, a and b x{1 / factor:.3f} "
-                f"(1 / (1 + h·3b), h = {h:.4g} s): frames cannot tell the two apart")
-    return (f"the Euler step takes the damping explicitly, as a torque added before the step (as Gymnasium's pendulum "
-            f"with a damping wrapper does); a simulator that takes it implicitly, as MuJoCo's Euler does, makes the "
-            f"same frames with g, a and b x{factor:.3f} (1 + h·3b, h = {h:.4g} s): frames cannot tell the two apart")
+    hr = h * pendulum_gains()[1] * b
+    factor = 1 / (1 + hr) if implicit else 1 / (1 - hr)
+    values = {k: v * factor for k, v in final.values.items() if k in ("g", "a", DAMPING.parameter)}
+    return {"taken": "implicit" if implicit else "explicit", "step_s": h,
+            "other": "explicit" if implicit else "implicit", "factor": factor, "values": values}
+
+
+def convention_note(convention: dict[str, Any]) -> str:
+    """The report's sentence on :func:`damping_convention`'s result."""
+    v, h, f = convention["values"], convention["step_s"], convention["factor"]
+    other = f"g = {v['g']:.3f}, a = {v['a']:.3f}" + (f", b = {v['b']:.4g}" if "b" in v else "")
+    if convention["taken"] == "implicit":
+        return (f"the substeps (h = {h:.4g} s) take the damping implicitly, as MuJoCo's Euler does; a simulator that "
+                f"adds it as an explicit torque before each step makes the same frames with {other} (x{f:.3f} these, "
+                "1 / (1 + h·3b)): frames cannot tell the two apart")
+    return (f"the Euler step (h = {h:.4g} s) takes the damping explicitly, as a torque added before the step (as "
+            f"Gymnasium's pendulum with a damping wrapper does); a simulator that takes it implicitly, as MuJoCo's Euler "
+            f"does, makes the same frames with {other} (x{f:.3f} these, 1 / (1 − h·3b)): frames cannot tell the two apart")
 
 
 STATIC_TORQUES = (BIAS.name, FRICTION.name)
@@ -887,8 +915,8 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
             notes.append("the system keeps moving under the held action between two frames (a continuous system, or "
                          "a simulator with several physics steps per frame): with one Euler step per frame the "
                          "identified a and g come out low; train with `--preset continuous` to model it")
-            if (note := damping_convention(final, nom, implicit=True)) is not None:
-                notes.append(note)
+            if (convention := damping_convention(final, nom)) is not None:
+                notes.append(convention_note(convention))
             if reference is not final:
                 notes.append(f"read with the motion within the frame, a = {final.values['a']:.3f} and g = "
                              f"{final.values['g']:.3f}; read one step per frame, as the nominal model does, a = "
@@ -899,8 +927,8 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
             key = term.parameter
             effects.append(Effect(e, final.values[key], term.unit, interval(key)))
     if DAMPING.name in named and not final.has(WITHIN_FRAME) and fit.nominal_integrator(nom) == "euler":
-        if (note := damping_convention(final, nom, implicit=False)) is not None:
-            notes.append(note)
+        if (convention := damping_convention(final, nom)) is not None:
+            notes.append(convention_note(convention))
     a_int = interval("a")
     if a_int and reference is not final:  # the interval of the reference's a: final's, shifted with it
         a_int = [x * reference.values["a"] / final.values["a"] for x in a_int]
@@ -1122,7 +1150,8 @@ def candidate_table(candidates: Candidates) -> list[CandidateRow]:
 
 def analyse(obs: Observations, nom: Nominal, config: DiagnoseConfig = DiagnoseConfig(), model: PhysicsModel | None = None,
             rec_training: float = 0.0, progress: bool = False, camera: CameraFindings | None = None,
-            arrow: bool = True, own: Observations | Callable[[], Observations | None] | None = None) -> Diagnosis:
+            arrow: bool = True, own: Observations | Callable[[], Observations | None] | None = None,
+            matched: np.ndarray | Callable[[], np.ndarray] | None = None) -> Diagnosis:
     """The diagnosis of observations ``obs`` against the nominal physics ``nom``.
 
     ``model`` (its decoder) renders the pixel errors of ``obs.frames``; without it they are left
@@ -1133,6 +1162,9 @@ def analyse(obs: Observations, nom: Nominal, config: DiagnoseConfig = DiagnoseCo
     measures the floor of the gap, :mod:`piga.diagnostics.twin`). ``own``: the model's own training
     file as it sees it (:func:`observe_own`), or a function that reads it only when needed: the
     reference of a gain or gravity error (:func:`own_reading`); without it, the nominal g and a are.
+    ``matched``: (N, T) the recording's angles matched to the decoder's renders with no camera, or a
+    function that reads them: with ``config.matched_angles``, the chosen effects' values are read on
+    them (without, on the encoder's).
 
     The steps: cut the windows, score the candidates, select, test what is left (and leave out a
     static torque below the angle reading's error, :func:`below_reading`), name the effects,
@@ -1152,14 +1184,22 @@ def analyse(obs: Observations, nom: Nominal, config: DiagnoseConfig = DiagnoseCo
         chosen = without(chosen, tuple(small), nom, windows, candidates)
         generic = generic_basis(chosen.model, nom, obs, theta, stale, config)
     final = chosen.model
-    if config.fit_starts:  # the chosen effects' values (and what they are judged against) with fitted starts
-        windows = dataclass_replace(windows, fit=dataclass_replace(windows.fit, fit_starts=True))
-        final = fit.fit(final, nom, windows.fit)
+    reading = windows  # the windows the chosen effects' values are read on
+    reading_notes = []
+    if config.matched_angles and matched is not None and not (camera is not None and camera.rematched):
+        reading = cut_windows(obs, matched() if callable(matched) else matched, stale, config)
+        reading_notes.append("the chosen effects' values are read on angles found by matching every frame to the "
+                             "decoder's renders, in this recording and in the model's own training file alike; the "
+                             "selection and the gap are on the encoder's angles")
+    if config.fit_starts:
+        reading = dataclass_replace(reading, fit=dataclass_replace(reading.fit, fit_starts=True))
+    if reading is not windows:  # the chosen effects' values (and what they are judged against) read anew
+        final = fit.fit(final, nom, reading.fit)
         chosen = score(final, nom, windows.fit1, windows.free)
-    draws = fit.bootstrap(final, nom, windows.fit, config.bootstrap, config.seed) if config.bootstrap else {}
-    ambiguity = None if selection.rival is None else ambiguity_of(selection.chosen, selection.rival, nom, windows,
+    draws = fit.bootstrap(final, nom, reading.fit, config.bootstrap, config.seed) if config.bootstrap else {}
+    ambiguity = None if selection.rival is None else ambiguity_of(selection.chosen, selection.rival, nom, reading,
                                                                   config, draws)
-    naming = name_effects(final, nom, windows, camera, generic, config, from_gymnasium=obs.from_gymnasium,
+    naming = name_effects(final, nom, reading, camera, generic, config, from_gymnasium=obs.from_gymnasium,
                           ambiguity=ambiguity, flip_bic_drop=candidates.flip_bic_drop, draws=draws,
                           refit=candidates.refit.model, own=own)
     vision, vision_notes = summarise_vision(obs, rec_training, camera, stale, naming.effects, config)
@@ -1179,10 +1219,11 @@ def analyse(obs: Observations, nom: Nominal, config: DiagnoseConfig = DiagnoseCo
         gap=gap, vision=vision,
         residuals={"heatmap": heatmap(res_nom), "bins": binned(res_nom), "autocorrelation": autocorrelation(res_nom),
                    "action_correlation": action_correlation(res_nom)},
-        notes=naming.notes + small_notes + vision_notes,
+        notes=naming.notes + small_notes + vision_notes + reading_notes,
         pictures=_pictures(model, obs, theta, camera.camera if camera is not None and camera.rematched else None)
         if model is not None and len(obs.frames_index) else None,
         ambiguity=ambiguity, excluded=excluded, exclusions=exclusions,
+        damping_convention=damping_convention(final, nom),
     )
 
 

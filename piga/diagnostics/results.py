@@ -381,6 +381,11 @@ class Diagnosis(_ByKey):
     """The report's sentences on ``excluded``: "excluded by the file's provenance: speed_clip (dm_control
     has no speed clip)", or "not tried: ..." (kept apart from ``notes``, which speak of the data)."""
 
+    damping_convention: dict[str, Any] | None = None
+    """How ``corrected`` takes the damping ("explicit": a torque added before each Euler step, Gymnasium's
+    way; "implicit": MuJoCo's), and the same frames' g, a and b under the other convention ("values",
+    ``factor`` x the corrected ones): frames cannot tell the two apart. None: no damping (or RK4)."""
+
     pictures: dict[str, np.ndarray] | None = field(default=None, repr=False)
     """A held-out frame as recorded ("real", (H, W[, C]) in [0, 1]), re-rendered by the nominal model
     ("nominal": decoder at the encoder's angle) and by the corrected one ("corrected": through the
@@ -399,6 +404,7 @@ class Diagnosis(_ByKey):
             "notes": list(self.notes), "control": self.control,
             "ambiguity": None if self.ambiguity is None else asdict(self.ambiguity),
             "excluded": dict(self.excluded), "exclusions": list(self.exclusions),
+            "damping_convention": None if self.damping_convention is None else dict(self.damping_convention),
         }
 
     def corrected_camera(self) -> Camera | None:
