@@ -56,6 +56,7 @@ from common import machine
 from diagnose_blind import run_diagnose, save, strip_labels
 from diagnose_blind import score as score_gym
 from envs.dmc import DMCPendulumConfig, DMCPendulumEnv
+from piga.cli.common import NOT_CONVERGED
 from piga.data.collect import CollectConfig, collect
 from piga.io.pool import run_pool
 
@@ -294,7 +295,7 @@ def nominal_model(case: dict[str, Any], work: Path, sequences: int, steps: int, 
     signed = trained.returncode == 1 and "--signed-actuation" in trained.stderr
     if signed:  # as a user would: the line says the frames show the actuation reversed, and names the flag
         trained = subprocess.run([*command, "--signed-actuation"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
-    if trained.returncode != 0:
+    if trained.returncode not in (0, NOT_CONVERGED):  # not converged: a warning, which the report shows
         raise RuntimeError(f"piga-train-model failed on case {case['case']}: {trained.stderr.strip()}")
     stamp_path.write_text(json.dumps({**stamp, "signed_actuation": signed}))
     return run_dir, signed

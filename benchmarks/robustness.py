@@ -68,6 +68,7 @@ import h5py
 import numpy as np
 
 from common import machine, machine_words
+from piga.cli.common import NOT_CONVERGED
 from piga.io.atomic import atomic_output, write_json
 from piga.io.pool import git_commit
 from piga.data.schema import DatasetWriter
@@ -655,10 +656,11 @@ def _last_line(text: str) -> str:
 
 
 def make_record(row: Row, data: Path, run_dir: Path, info: dict[str, Any]) -> dict[str, Any]:
-    """What the row measured: the command's exit and wall time, and from metrics.json (when it exited 0)
+    """What the row measured: the command's exit and wall time, and from metrics.json (when it exited 0 or 3)
     the learned parameters, their errors, ``converged``, SSIM, and how well the encoder finds the objects."""
     metrics_path = run_dir / "metrics.json"
-    metrics = json.loads(metrics_path.read_text()) if info["exit_code"] == 0 and metrics_path.exists() else None
+    finished = info["exit_code"] in (0, NOT_CONVERGED)  # trained and saved (not converged: exit 3, with a warning)
+    metrics = json.loads(metrics_path.read_text()) if finished and metrics_path.exists() else None
     converged, reason = converged_field(metrics)
     record: dict[str, Any] = {
         "row": row.name, "group": row.group, "system": row.system, "changed": row.describe(),

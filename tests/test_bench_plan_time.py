@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import subprocess
 from pathlib import Path
 
 from agents.planet.config import PlanetTrainConfig, RSSMConfig
@@ -32,3 +33,23 @@ def test_plan_time_times_the_planet_agent_in_the_same_run(tiny_data: Path, tmp_p
     page = out.with_suffix(".md").read_text()
     assert "PlaNet-style" in page and f"{ratio['ratio_per_step']:.0f}x faster" in page and "reference rows" not in page
     assert len(record["load_average"]["before"]) == 3
+
+
+def test_plan_time_at_two_revisions_alternates_and_gives_ratios(tiny_data: Path, tmp_path: Path) -> None:
+    """benchmarks/plan_time_revisions.py: the baseline in a temporary worktree (removed after), both revisions
+    timed in turn, each agent's ratio of medians."""
+    piga_run = train_tiny(tiny_data, tmp_path / "piga")
+    out = tmp_path / "revisions"
+    result = run("python", str(ROOT / "benchmarks" / "plan_time_revisions.py"), "--baseline", "HEAD", "--model",
+                 str(piga_run), "--pairs", "1", "--episodes", "1", "--steps", "20", "--out", str(out))
+    assert result.returncode == 0, result.stderr
+    record = json.loads(out.with_suffix(".json").read_text())
+    for agent in ("oracle", "piga"):
+        s = record["summary"][agent]
+        assert len(s["baseline_ms"]) == len(s["current_ms"]) == 1
+        assert s["ratio"] == s["current_median_ms"] / s["baseline_median_ms"] > 0
+    assert "piga-revisions-" not in subprocess.run(["git", "-C", str(ROOT), "worktree", "list"], capture_output=True,
+                                                    text=True).stdout
+    bad = run("python", str(ROOT / "benchmarks" / "plan_time_revisions.py"), "--baseline", "no-such-rev", "--model",
+              str(piga_run), "--out", str(out))
+    assert bad.returncode != 0 and "not a revision" in bad.stderr

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 import torch
 
+from piga.cli.common import NOT_CONVERGED
 from piga.cli import train as cli
 from piga.data.collect import CollectConfig, collect
 from piga.world.model import PhysicsModel
@@ -319,7 +320,8 @@ def test_a_file_that_ended_inside_the_old_warm_up_now_trains_its_physics(small_d
     out = tmp_path / "r"
     code, stdout, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), "--batch-size", "8",
                                        "--budget-steps", "60", "--quiet", "--threads", "1", capsys=capsys)
-    assert code == 0, err
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert code == (0 if metrics["converged"] else NOT_CONVERGED), err
     assert "plan: 60 steps = 30 epochs x 2 steps" in stdout  # printed in one line at the start
     metrics = json.loads((out / "metrics.json").read_text())
     conv = metrics["convergence"]
@@ -339,6 +341,21 @@ def test_a_run_stopped_before_its_physics_trained_exits_non_zero(small_data: Pat
     assert code == 1, line
     metrics = json.loads((out / "metrics.json").read_text())
     assert metrics["converged"] is False and metrics["convergence"]["outcome"] == "untrained"
+
+
+def test_a_run_stopped_after_its_physics_trained_exits_3_with_a_warning(small_data: Path, tmp_path: Path,
+                                                                        capsys: pytest.CaptureFixture[str]) -> None:
+    """Trained and saved, but stopped before its plan ended: not converged, so not exit 0 (a script would take
+    it for an identification), and not 1 (its model is there to --resume)."""
+    out = tmp_path / "r"  # 40 planned steps, 2 of warm-up; the budget stops it after the first epoch (4 steps)
+    code, _, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), "--batch-size", "4", "--epochs", "10",
+                                  "--warmup-fraction", "0.05", "--max-minutes", "1e-9", "--quiet", "--threads", "1",
+                                  capsys=capsys)
+    assert code == NOT_CONVERGED == 3, err
+    assert err.count("\n") == 1 and "warning: not converged" in err and "--resume" in err
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["converged"] is False and metrics["convergence"]["outcome"] == "unsettled"
+    assert (out / "checkpoint.pt").exists()
 
 
 def test_converged_is_false_when_the_parameters_never_moved(small_data: Path, tmp_path: Path,

@@ -155,6 +155,10 @@ def made_folder(folder: str | os.PathLike[str]) -> Iterator[Path]:
 
 #: Exit status of an unexpected internal error (BSD's EX_SOFTWARE); user errors exit 1, usage errors 2.
 INTERNAL_ERROR = 70
+#: Exit status of a training run that finished and saved its model but did not converge (its parameters still
+#: moved at the end, or it stopped before its plan ended): the warning line says why, ``--resume`` continues it.
+#: Not 0, so that a script cannot take it for an identification; not 1, so that it can tell it from a refusal.
+NOT_CONVERGED = 3
 
 
 def log_folder() -> Path:

@@ -135,7 +135,7 @@ def _run(args: argparse.Namespace, argv: Sequence[str] | None, out: Path, config
     print(f"[2/4] saving a strip of frames to {strip}", flush=True)
     show.main([str(data), "--out", str(strip), *over])
     print(f"[3/4] training the world model into {run_dir} (fast preset)", flush=True)
-    train.main([str(data), "--out", str(run_dir), "--seed", str(args.seed), *over,
+    trained = train.main([str(data), "--out", str(run_dir), "--seed", str(args.seed), *over,
                 *(["--epochs", str(args.epochs)] if args.epochs else []),
                 *(["--threads", str(args.threads)] if args.threads else []), *(["--quiet"] if args.quiet else [])])
     import json
@@ -153,7 +153,7 @@ def _run(args: argparse.Namespace, argv: Sequence[str] | None, out: Path, config
         print(f"summary: {label}: success {100 * s['success_rate']:.0f}% of {s['episodes']}, final angle error "
               f"{s['final_angle_error_deg']:.2f} deg, plan {s['plan_ms_median']:.1f} ms/step")
     print(f"summary: see {out}/ (frames.png, model/*.png, goal.png, control.md)")
-    return 0
+    return trained  # a model that did not converge: its warning above, and its exit status
 
 
 def _control(run_dir: Path, goal_png: Path, control_md: Path, args) -> list[tuple[str, dict]]:  # noqa: ANN001

@@ -11,7 +11,7 @@ from pathlib import Path
 
 from typing import Any
 
-from piga.cli.common import (ArgumentParser, Interrupted, PigaError, add_preset_option, command_line, format_default,
+from piga.cli.common import (NOT_CONVERGED, ArgumentParser, Interrupted, PigaError, add_preset_option, command_line, format_default,
                              positive_float, positive_int, run_cli, seed_int, thread_count, unit_fraction)
 from piga.io.checkpoint import CHECKPOINT, require_piga_run
 
@@ -194,6 +194,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         raise PigaError(f"the run did not identify its parameters: {convergence['reason']}")
     if convergence["outcome"] == "unsettled":
         print(f"{PROG}: warning: not converged: {convergence['reason']}", file=sys.stderr)
+        return NOT_CONVERGED
     return 0
 
 
