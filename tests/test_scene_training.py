@@ -14,6 +14,8 @@ from piga.cli.train import main as train_main
 from piga.data.collect_scenes import SceneCollectConfig, collect_scene
 from piga.data.schema import inspect_dataset
 from piga.world.model import PhysicsModel
+from piga.evaluation.objects import LOST_RATIO
+from piga.training.report import write_run_report
 from piga.training.train import PRESETS, model_config_for, preset_for, train
 from tests.helpers import assert_one_line, run_in_process
 
@@ -48,6 +50,9 @@ def test_tiny_spring_training_moves_k_toward_the_truth(spring_data: Path, tmp_pa
     learned = model.physical_parameters()
     assert 3.0 < learned["k"] < 5.0, state.history[-1]  # from 1: over 80% of the way to 4, in log space
     assert 4.5 < learned["l"] < 7.5, state.history[-1]
+    metrics = write_run_report(model, state, spring_data, tmp_path / "run")
+    assert not metrics["objects"]["lost"] and metrics["objects"]["ratio"] < LOST_RATIO / 2  # both balls found
+    assert metrics["convergence"]["outcome"] != "untrained"
 
 
 def test_unknown_system_in_a_file_is_one_line(spring_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

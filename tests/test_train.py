@@ -25,6 +25,9 @@ TINY = TrainConfig(epochs=8, batch_size=16, warmup_fraction=0.2, curriculum_frac
 #: CLI options for a run of seconds on ``small_data`` (2 steps per epoch).
 SMALL = ("--epochs", "1", "--batch-size", "8", "--warmup-fraction", "0.5", "--quiet", "--threads", "1")
 
+#: Exit statuses of a run that trained and saved its model: a tiny run is too short to be judged converged (3).
+FINISHED = (0, NOT_CONVERGED)
+
 
 @pytest.fixture(scope="module")
 def small_data(tmp_path_factory: pytest.TempPathFactory) -> Path:
@@ -111,7 +114,7 @@ def test_nan_stops_and_names_last_checkpoint(small_data: Path, tmp_path: Path, m
 def test_cli_trains_and_reports(small_data: Path, tmp_path: Path) -> None:
     out = tmp_path / "run"
     result = run("piga-train-model", str(small_data), "--out", str(out), *SMALL)
-    assert result.returncode == 0, result.stderr
+    assert result.returncode in FINISHED, result.stderr
     assert "learned: g=" in result.stdout and "epoch 1:" in result.stdout
     for name in ("checkpoint.pt", "metrics.json", "config.json", "rollout.png", "templates.png", "curves.png"):
         assert (out / name).exists(), name
@@ -123,7 +126,7 @@ def test_cli_trains_and_reports(small_data: Path, tmp_path: Path) -> None:
     # an existing run is not replaced without --overwrite or --resume
     assert_one_line_error(run("piga-train-model", str(small_data), "--out", str(out)), "--overwrite")
     resumed = run("piga-train-model", str(small_data), "--out", str(out), "--resume", "--epochs", "2", "--quiet")
-    assert resumed.returncode == 0, resumed.stderr
+    assert resumed.returncode in FINISHED, resumed.stderr
     assert "epoch 2:" in resumed.stdout and "epoch 1:" not in resumed.stdout
 
 
@@ -165,7 +168,7 @@ def test_cli_nan_names_checkpoint(small_data: Path, tmp_path: Path, monkeypatch:
                                    capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "run"
     code, _, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), *SMALL, capsys=capsys)
-    assert code == 0, err
+    assert code in FINISHED, err
     _poison(monkeypatch, after_calls=1)
     code, _, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), "--resume", "--epochs", "2",
                                   "--quiet", capsys=capsys)
@@ -199,7 +202,7 @@ def test_cli_warns_when_there_is_no_test_split(tmp_path: Path, capsys: pytest.Ca
     collect(CollectConfig(sequences=3, steps=14, seed=1, workers=1, split=(3, 0, 0)), data, progress=False, command="t")
     code, out, err = run_in_process(PROG, cli.main, str(data), "--out", str(tmp_path / "r"), "--batch-size", "3",
                                     "--epochs", "1", "--warmup-fraction", "0", "--quiet", capsys=capsys)
-    assert code == 0, err
+    assert code in FINISHED, err
     assert "warning: " in err and "no test sequences" in err and "train split" in err
     assert "SSIM (train split)" in out
     assert json.loads((tmp_path / "r" / "metrics.json").read_text())["split"] == "train"
@@ -218,7 +221,7 @@ def test_short_sequences_shorten_the_rollout_to_what_they_hold(tmp_path: Path,
     assert (fitted.input_frames, fitted.pred_frames) == (4, 6) and MIN_PRED_FRAMES <= 6
     code, out, err = run_in_process(PROG, cli.main, str(data), "--out", str(tmp_path / "r"), "--batch-size", "4",
                                     "--epochs", "1", "--warmup-fraction", "0", "--quiet", capsys=capsys)
-    assert code == 0, err
+    assert code in FINISHED, err
     assert "T_pred 1 -> 6" in out and "predicts 6 frames per window, not the recipe's 10" in err
     assert load_model(tmp_path / "r")[0].config.pred_frames == 6
 
@@ -227,7 +230,7 @@ def test_cli_paper_preset_runs(small_data: Path, tmp_path: Path, capsys: pytest.
     out = tmp_path / "paper"
     code, _, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), "--preset", "paper", "--epochs", "1",
                                   "--batch-size", "16", "--quiet", capsys=capsys)
-    assert code == 0, err
+    assert code in FINISHED, err
     config = json.loads((out / "config.json").read_text())
     assert config["train"]["optimizer"] == "rmsprop" and config["train"]["epochs"] == 1
     assert config["model"]["substeps"] == 5 and config["model"]["readout"] == "regress"
@@ -253,7 +256,7 @@ def test_cli_interrupted_first_epoch_writes_nothing_and_rerun_works(
     assert first["command"].startswith(PROG) and "--epochs 3" in first["command"] and "resumed" not in first
     code, stdout, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), "--resume", "--epochs", "4",
                                        "--quiet", capsys=capsys)
-    assert code == 0, err
+    assert code in FINISHED, err
     assert "epoch 2:" in stdout and "epoch 4:" in stdout
     record = json.loads((out / "config.json").read_text())
     assert record["command"] == first["command"]  # the original command is kept
@@ -427,4 +430,4 @@ def test_cli_interrupted_right_after_its_first_checkpoint_keeps_it_with_its_reco
     monkeypatch.setattr(training, "save_checkpoint", save)
     code, _, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), "--resume", "--epochs", "2",
                                   "--quiet", capsys=capsys)
-    assert code == 0, err
+    assert code in FINISHED, err

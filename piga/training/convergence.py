@@ -8,7 +8,7 @@ trajectory, :class:`piga.training.train.TrainState`), never the truth, and gives
 
 | outcome | meaning | ``piga-train-model`` |
 |---|---|---|
-| ``untrained`` | the physics never trained, a learned parameter never left its start, one collapsed to a float limit, or the actuation gain faded toward 0 | exits 1 with a line that names the fix |
+| ``untrained`` | the physics never trained, a learned parameter never left its start, one collapsed to a float limit, the actuation gain faded toward 0, or (for a scene) an object was not found (:mod:`piga.evaluation.objects`) | exits 1 with a line that names the fix |
 | ``unsettled`` | it trained, but stopped before its plan ended, or a parameter still drifts at the end | exits 3 with a warning line |
 | ``converged`` | none of the above | exits 0 |
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -13,6 +14,7 @@ from piga.evaluation.evaluate import PARAMETER_NAMES, EvalConfig, evaluate, roll
 from piga.world.model import PhysicsModel, frames_to_float
 from piga.evaluation.plots import curves_figure, rollout_figure, save_figure, templates_figure
 from piga.io.atomic import write_json
+from piga.evaluation.objects import check_objects
 from piga.training.convergence import check_convergence
 from piga.training.train import TrainState
 
@@ -29,7 +31,9 @@ def write_run_report(model: PhysicsModel, state: TrainState, data: str | Path, r
 
     For a run that recorded its plan, metrics.json also holds the convergence check
     (:func:`piga.training.convergence.check_convergence`): ``converged`` (true or false) and ``convergence``
-    (the outcome, its reason and each parameter's trajectory summary).
+    (the outcome, its reason and each parameter's trajectory summary). For a scene of objects it holds
+    ``objects`` (:func:`piga.evaluation.objects.check_objects`), and a lost object makes the outcome
+    ``untrained``: the physics fitted the objects that were found, and its parameters mean nothing.
     """
     run_dir = Path(run_dir)
     info = inspect_dataset(data)
@@ -38,10 +42,16 @@ def write_run_report(model: PhysicsModel, state: TrainState, data: str | Path, r
         eval_config = EvalConfig(split=split, extrapolate_frames=eval_config.extrapolate_frames,
                                  max_sequences=eval_config.max_sequences)
     metrics = evaluate(model, data, eval_config)
+    objects = None
+    if model.config.coord_dim == 2:  # a scene of objects: did the autoencoder find each of them?
+        objects = check_objects(model, read_sequences(data, split)[0][: eval_config.max_sequences])
+        metrics["objects"] = objects.to_dict()
     metrics["training"] = {"epochs": state.epoch, "steps": state.step, "seconds": state.elapsed,
                            "threads": torch.get_num_threads()}
     if state.plan:
         convergence = check_convergence(state)
+        if objects is not None and objects.lost and convergence.outcome != "untrained":
+            convergence = replace(convergence, outcome="untrained", reason=objects.reason())
         metrics["converged"] = convergence.converged
         metrics["convergence"] = convergence.to_dict()
     write_json(run_dir / "metrics.json", metrics)
