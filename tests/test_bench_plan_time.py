@@ -6,6 +6,8 @@ import json
 import subprocess
 from pathlib import Path
 
+import pytest
+
 from agents.planet.config import PlanetTrainConfig, RSSMConfig
 from agents.planet.train import train_planet
 
@@ -35,6 +37,7 @@ def test_plan_time_times_the_planet_agent_in_the_same_run(tiny_data: Path, tmp_p
     assert len(record["load_average"]["before"]) == 3
 
 
+@pytest.mark.slow  # a git worktree and four benchmark processes: about 25 s
 def test_plan_time_at_two_revisions_alternates_and_gives_ratios(tiny_data: Path, tmp_path: Path) -> None:
     """benchmarks/plan_time_revisions.py: the baseline in a temporary worktree (removed after), both revisions
     timed in turn, each agent's ratio of medians."""
