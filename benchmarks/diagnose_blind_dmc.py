@@ -170,6 +170,22 @@ def strip_provenance(path: Path) -> None:
                 del f.attrs[key]
 
 
+def mujoco_values(case: dict[str, Any], report: dict[str, Any]) -> dict[str, Any]:
+    """The report's corrected values under MuJoCo's implicit damping: as they are when the report took the
+    damping implicitly (within-frame substeps), else the same frames' implicit values that the report gives
+    (``damping_convention``). A report from before that field is converted the same way
+    (:func:`piga.diagnostics.diagnose.damping_convention`: x 1 / (1 - h·3b), h the frame's step)."""
+    corrected = dict(report["corrected"])
+    convention = report.get("damping_convention", "absent")
+    if convention == "absent" and corrected.get("b", 0) > 0 and not corrected.get("substeps"):
+        h = DMCPendulumConfig(**case["variant"]).dt  # the nominal fast model's one Euler step per frame
+        factor = 1 / (1 - h * 3 * corrected["b"])
+        convention = {"taken": "explicit", "values": {k: corrected[k] * factor for k in ("g", "a", "b")}}
+    if isinstance(convention, dict) and convention["taken"] == "explicit":
+        corrected.update(convention["values"])
+    return corrected
+
+
 def score(case: dict[str, Any], report: dict[str, Any]) -> dict[str, Any]:
     """:func:`diagnose_blind.score` against the added effect, plus what this benchmark's floors need."""
     true = truth(case)
@@ -184,10 +200,7 @@ def score(case: dict[str, Any], report: dict[str, Any]) -> dict[str, Any]:
         top1 = not true["effects"]
     else:
         top1 = named[0] in true["effects"]
-    corrected = report["corrected"]
-    convention = report.get("damping_convention")
-    if convention is not None and convention["taken"] == "explicit":  # MuJoCo's values of the same frames
-        corrected = {**corrected, **convention["values"]}
+    corrected = mujoco_values(case, report)
     relative = lambda key: None if corrected.get(key) is None else abs(corrected[key] / true[key] - 1)  # noqa: E731
     errors = {"g": relative("g"), "a": relative("a")}
     if "b" in corrected and true["b"] > 0:
@@ -233,12 +246,16 @@ def summarize(runs: list[dict[str, Any]]) -> dict[str, Any]:
 
 def markdown(runs: list[dict[str, Any]], summary: dict[str, Any], command: str, info: dict[str, Any]) -> str:
     pct = lambda v: "–" if v is None or not np.isfinite(v) else f"{100 * v:.0f}%"  # noqa: E731
+    pct1 = lambda v: "–" if v is None or not np.isfinite(v) else f"{100 * v:.1f}%"  # noqa: E731
     lines = [
         "# Blind check of piga-diagnose on dm_control's pendulum", "", f"Command: `{command}`", "",
         f"{info['sequences']} sequences x {info['steps']} frames per file; nominal model: `piga-train-model --preset fast` "
         f"on a nominal file of each variant{info['train_note']} (with `--signed-actuation` where the first run exits 1 "
         f"asking for it: cases {', '.join(str(r['case']) for r in runs if r.get('signed_actuation')) or 'none'}). Machine: {info['machine']['cpu']}, "
         f"{info['machine']['cores']} cores.", "",
+        "g, a and b are compared under MuJoCo's convention, which takes the hinge damping implicitly: where the "
+        "report reads the damping explicitly (one Euler step per frame, Gymnasium's way), the same frames' values "
+        "under the implicit convention, which the report gives (`damping_convention`), are scored.", "",
         "| measure | value | floor |", "|---|---|---|",
         f"| cases | {summary['cases']} ({summary['refused']} refused by piga-diagnose, counted wrong) | ≥ 24 |",
         f"| top-1 (first named effect is one the case has; ambiguous right only if the truth is one of the two) | "
@@ -246,7 +263,7 @@ def markdown(runs: list[dict[str, Any]], summary: dict[str, Any], command: str, 
         f"| ambiguous verdicts | {pct(summary['ambiguous_rate'])} | ≤ 10% |",
         f"| named effects the case does not have | {summary['false_effects']} | 0 |",
         f"| corrected g, a, b within 3% (verdicts not ambiguous) | {pct(summary['parameters_within_3pct'])} "
-        f"(worst {pct(summary['parameter_error_max'])}) | all |",
+        f"(worst {pct1(summary['parameter_error_max'])}) | all |",
         f"| closures above a valid floor or marked as having none | {summary.get('closures_valid', '–')} of "
         f"{summary['cases'] - summary['refused']} (median closure {pct(summary.get('closure_median'))}) | all |",
         f"| the added effect's size, worst error (a flip mirrors a bias: its size is compared) | "
@@ -261,7 +278,7 @@ def markdown(runs: list[dict[str, Any]], summary: dict[str, Any], command: str, 
         worst = worst_error(sc)
         closure = "none" if sc.get("closure") is None else pct(sc["closure"])
         lines.append(f"| {r['case']} | {variant} | {added} | {'+'.join(sc['truth_effects']) or 'none'} | {sc['verdict']} | "
-                     f"{'yes' if sc['top1'] else '**no**'} | {pct(worst)} | {closure} |")
+                     f"{'yes' if sc['top1'] else '**no**'} | {pct1(worst)} | {closure} |")
     return "\n".join(lines) + "\n"
 
 

@@ -71,13 +71,31 @@ def test_scoring_counts_ambiguity_right_only_with_the_truth_in_it(bench) -> None
     assert not wrong["top1"]
     clipped = bench.score(case, _report(["speed_clip", "damping"]))
     assert not clipped["top1"] and clipped["false_effects"] == ["speed_clip"]
-    right = bench.score(case, _report(["damping", "within_frame"]))
+    right = bench.score(case, _report(["damping", "within_frame"], corrected={"g": 13.08, "a": 1.3289, "b": 0.1329,
+                                                                               "substeps": 2}))
     assert right["top1"] and right["false_effects"] == [] and max(right["parameter_error"].values()) < 0.01
     refused = bench.refused(case, "piga-diagnose: error: refitting g and a diverged")
     assert not refused["top1"] and refused["verdict"].startswith("refused: ")
     summary = bench.summarize([{"score": s} for s in (ok, wrong, clipped, right, refused)])
     assert summary["top1_accuracy"] == 0.4 and summary["ambiguous_rate"] == 0.4 and summary["false_effects"] == 1
     assert summary["refused"] == 1 and summary["parameters_within_3pct"] == 1.0  # of the clear, answered cases
+
+
+def test_an_explicit_reading_is_scored_under_mujocos_implicit_damping(bench) -> None:
+    """One Euler step per frame reads g, a and b low by 1 - h·3b (the explicit convention); the scorer compares
+    the same frames' implicit values, from the report's ``damping_convention`` or, in an older report, the
+    same conversion."""
+    case = {"variant": {"mass": 1.0, "length": 0.5, "damping": 0.1, "action_repeat": 1, "camera_distance": 1.0,
+                        "flip": "none"}, "effects": {}}
+    true = bench.truth(case)
+    h, factor = 0.02, 1 / (1 + 0.02 * 3 * true["b"])  # what an exact explicit reading gives
+    explicit = {k: true[k] * factor for k in ("g", "a", "b")}
+    older = bench.score(case, _report(["damping"], corrected=explicit))
+    assert max(older["parameter_error"].values()) < 1e-9
+    report = _report(["damping"], corrected=explicit)
+    report["damping_convention"] = {"taken": "explicit", "values": {k: v * 1.01 for k, v in explicit.items()}}
+    assert bench.score(case, report)["parameter_error"]["g"] == pytest.approx(abs(1.01 * explicit["g"] / true["g"] - 1))
+    assert bench.mujoco_values(case, {**report, "damping_convention": None})["g"] == explicit["g"]  # no damping, no change
 
 
 def test_every_label_and_hint_is_deleted(bench, tmp_path: Path) -> None:
