@@ -66,8 +66,8 @@ import math
 import os
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
 from dataclasses import replace as dataclass_replace
+from typing import Any
 
 import numpy as np
 import torch
@@ -113,8 +113,9 @@ class DiagnoseConfig:
     the decoder's renders (:func:`piga.diagnostics.vision.match_file`), not on the encoder's; the
     selection and the gap are unchanged. The encoder's errors differ from file to file (on the one it
     was trained on, the physics shaped them); the matching's follow the angle alone, and are the same
-    in both (measured on dm_control at 50 frames a second: "gains" of 1.05 between the two files read
-    by the encoder, 1.00-1.02 matched). With a fitted camera the dynamics are on matched angles already."""
+    in both (measured on dm_control at 50 frames a second, case 19 of the blind benchmark, with fitted
+    starts: a "gain" of 1.05 between the two files read by the encoder, 1.005 matched). With a fitted
+    camera the dynamics are on matched angles already."""
     bic_margin: float = 10.0
     """BIC drop (one-step, fit split) an effect needs to be accepted ("very strong" on Kass & Raftery's scale)."""
     min_gain: float = 0.1
@@ -698,8 +699,8 @@ def damping_convention(final: fit.Model, nom: Nominal) -> dict[str, Any] | None:
     convention fixes the numbers. The within-frame substeps take MuJoCo's (implicit), one step per frame
     Gymnasium's (explicit: a torque added before the step, as piga's effect wrappers add it too). Measured
     on dm_control's pendulum from its true angles, one physics step per frame: the explicit fit reads g, a
-    and b all low by 1 + h·r (2.99% at h·r = 2.99%). None: no damping, or an RK4 model (which has no
-    such step).
+    and b all low by the factor 1 / (1 + h·r) (−2.90% at h·r = 2.99%, case 19 of the blind benchmark).
+    None: no damping, or an RK4 model (which has no such step).
 
     Returns ``{"taken": "explicit" | "implicit", "step_s": h, "other": the other one, "factor": F,
     "values": {"g", "a", "b"} x F}``: F = 1 / (1 - h·r') from explicit to implicit, 1 / (1 + h·r) back.
