@@ -97,6 +97,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--episodes", type=int, default=5, help="episodes per agent and run (default %(default)s)")
     p.add_argument("--steps", type=int, default=None, help="steps per episode (default: plan_time.py's)")
     args = p.parse_args(argv)
+    import torch
+
+    torch.set_num_threads(1)  # what each run uses (OMP_NUM_THREADS=1), and so what the machine record says
     if args.pairs < 1 or args.episodes < 1:
         raise SystemExit("--pairs and --episodes must be at least 1")
     model = str(Path(args.model).resolve())
