@@ -833,6 +833,7 @@ def test_train_resume_tells_a_moved_file_from_another_of_the_same_shape(tiny_pig
     from piga.data.collect import CollectConfig, collect
     from tests.helpers import run_in_process
     from piga.cli import train as cli
+    from piga.cli.common import NOT_CONVERGED
 
     other = tmp_path / "other.h5"
     collect(CollectConfig(sequences=12, steps=16, seed=4, workers=1, split=(8, 2, 2)), other, progress=False, command="t")
@@ -843,4 +844,4 @@ def test_train_resume_tells_a_moved_file_from_another_of_the_same_shape(tiny_pig
     run = _run_copy(tiny_piga_run, tmp_path / "b")
     code, _, err = run_in_process("piga-train-model", cli.main, str(moved), "--out", str(run), "--resume", "--epochs", "2",
                                   "--quiet", capsys=capsys)
-    assert code == 0, err
+    assert code in (0, NOT_CONVERGED), err  # resumed and trained: a tiny run is too short to be judged converged
