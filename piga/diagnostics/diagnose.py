@@ -106,7 +106,8 @@ class DiagnoseConfig:
     too (errors in variables, :attr:`piga.diagnostics.fit.Windows.fit_starts`), and so their intervals
     and the references they are judged against; the selection is unchanged. A window's start velocity
     is the difference of two read angles, and a fit that takes it as read takes its error for damping.
-    Off until the blind benchmarks have been run with it."""
+    Off by default until every benchmark that runs the diagnosis has been run with it (the blind ones
+    have, with ``matched_angles``: ``results/diagnose.md``)."""
     matched_angles: bool = False
     """Read the chosen effects' values (with their intervals, and the model's own training file that a
     gain or gravity error is judged against) on angles found by matching every frame of both files to
