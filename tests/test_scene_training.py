@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from dataclasses import replace
 from pathlib import Path
 
@@ -64,6 +65,20 @@ def test_unknown_system_in_a_file_is_one_line(spring_data: Path, tmp_path: Path,
     code, _, err = run_in_process("piga-train-model", train_main, str(bad), "--out", str(tmp_path / "run"), capsys=capsys)
     assert_one_line(code, err, "rocket")
     assert not (tmp_path / "run").exists()
+
+
+def test_a_run_whose_autoencoder_found_no_ball_exits_1_naming_the_seed(spring_data: Path, tmp_path: Path,
+                                                                       capsys: pytest.CaptureFixture[str]) -> None:
+    """Two optimiser steps: the decoder renders no ball yet, so the balls stay in the residual; the run
+    says so instead of reporting k and l."""
+    out = tmp_path / "run"
+    code, _, err = run_in_process("piga-train-model", train_main, str(spring_data), "--out", str(out), "--epochs", "1",
+                                  "--batch-size", "16", "--warmup-fraction", "0.5", "--threads", "1", "--quiet",
+                                  capsys=capsys)
+    assert_one_line(code, err, "an object was not found", "--seed", "--overwrite")
+    assert code == 1
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["objects"]["lost"] and metrics["converged"] is False
 
 
 def test_the_physics_velocity_term_recovers_v_at_frame_l() -> None:

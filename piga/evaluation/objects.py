@@ -52,7 +52,7 @@ class ObjectCheck:
         """The one-line cause of a lost object, with the fix."""
         return (f"an object was not found: the reconstruction of single frames leaves a moving blob "
                 f"{self.ratio:.2f}x as strong as the scene's objects (at most {LOST_RATIO:g} when every object is "
-                "found); train again with another --seed")
+                "found); train again with another --seed (and --overwrite, or another --out)")
 
 
 def _peaks(diff: np.ndarray, sigma: float) -> np.ndarray:
