@@ -91,7 +91,10 @@ def main() -> int:
     p.add_argument("--work", default="runs/recordings", help="folder for the recordings, data files and reports")
     p.add_argument("--frames", type=int, default=4000, help="frames per recording (100 sequences of 40)")
     p.add_argument("--seed", type=int, default=5)
+    p.add_argument("--fit-starts", action="store_true", help="diagnose with piga-diagnose --fit-starts")
+    p.add_argument("--matched-angles", action="store_true", help="diagnose with piga-diagnose --matched-angles")
     args = p.parse_args()
+    options = [*(["--fit-starts"] if args.fit_starts else []), *(["--matched-angles"] if args.matched_angles else [])]
     work = Path(args.work)
     work.mkdir(parents=True, exist_ok=True)
     runs = []
@@ -104,7 +107,7 @@ def main() -> int:
                        stdout=subprocess.DEVNULL)
         report_dir = work / f"report{i}"
         subprocess.run(["piga-diagnose", "--model", args.model, "--data", str(data), "--out", str(report_dir), "--overwrite",
-                        "--quiet"], check=True, stdout=subprocess.DEVNULL)
+                        "--quiet", *options], check=True, stdout=subprocess.DEVNULL)
         report = json.loads((report_dir / "report.json").read_text())
         runs.append({"case": i, "effects": effects, "frame_drop": drop, "blur_full_size_px": blur, "truth": truth,
                      "verdict": report["verdict"],
