@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import os
 import platform
 from pathlib import Path
@@ -35,3 +36,19 @@ def machine_words(m: dict[str, object]) -> str:
     plural = "" if threads == 1 else "s"
     return (f"{m.get('cpu', 'unknown')} (family/model {m.get('cpu_family_model', '?')}), {m.get('cores', '?')} cores; "
             f"torch {m.get('torch', '?')} on {threads} thread{plural}, Python {m.get('python', '?')}")
+
+
+#: The diagnosis' opt-in readings that the benchmarks running ``piga-diagnose`` pass through: (flag, help).
+DIAGNOSE_OPTIONS = (("--fit-starts", "diagnose with piga-diagnose --fit-starts"),
+                    ("--matched-angles", "diagnose with piga-diagnose --matched-angles"))
+
+
+def add_diagnose_options(parser: argparse.ArgumentParser) -> None:
+    """Adds :data:`DIAGNOSE_OPTIONS` to a benchmark's parser."""
+    for flag, text in DIAGNOSE_OPTIONS:
+        parser.add_argument(flag, action="store_true", help=text)
+
+
+def diagnose_options(args: object) -> tuple[str, ...]:
+    """The ``piga-diagnose`` flags of :data:`DIAGNOSE_OPTIONS` that ``args`` turned on."""
+    return tuple(flag for flag, _ in DIAGNOSE_OPTIONS if getattr(args, flag[2:].replace("-", "_")))

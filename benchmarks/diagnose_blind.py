@@ -35,7 +35,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from common import machine
+from common import add_diagnose_options, diagnose_options, machine
 from envs.pendulum import PixelPendulumConfig
 from piga.io.atomic import atomic_output, write_json
 from piga.data.collect import CollectConfig, collect
@@ -253,8 +253,7 @@ def main() -> int:
                    help="cases run at once, each in its own process with one torch thread (a machine's cores)")
     p.add_argument("--mix", choices=("all", "none"), default="all",
                    help="'all': the mix of effects; 'none': no-effect cases only (false-positive rate)")
-    p.add_argument("--fit-starts", action="store_true", help="diagnose with piga-diagnose --fit-starts")
-    p.add_argument("--matched-angles", action="store_true", help="diagnose with piga-diagnose --matched-angles")
+    add_diagnose_options(p)
     args = p.parse_args()
     out, work = Path(args.out), Path(args.work)
     work.mkdir(parents=True, exist_ok=True)
@@ -266,8 +265,7 @@ def main() -> int:
             if not any(r["case"] == c["case"] and r["effects"] == c["effects"] for r in done)]
     run = functools.partial(run_case, model=args.model, work=work, sequences=args.sequences,
                             workers=args.workers if args.jobs <= 1 else 1, threads=1 if args.jobs > 1 else None,
-                            options=(("--fit-starts",) if args.fit_starts else ())
-                            + (("--matched-angles",) if args.matched_angles else ()))
+                            options=diagnose_options(args))
 
     def finished(_: int, record: dict) -> None:  # saved as each case ends, so that a stopped run continues
         done.append(record)

@@ -52,7 +52,7 @@ import gymnasium as gym
 import h5py
 import numpy as np
 
-from common import machine
+from common import diagnose_options, machine
 from diagnose_blind import run_diagnose, save, strip_labels
 from diagnose_blind import score as score_gym
 from envs.dmc import DMCPendulumConfig, DMCPendulumEnv
@@ -445,8 +445,7 @@ def main(argv: list[str] | None = None) -> int:
         save(out, command, info, done, summarize, markdown)
 
     run_pool(functools.partial(run_case, work=work, sequences=args.sequences, steps=args.steps, train_args=train_args,
-                               diagnose_options=(("--fit-starts",) if args.fit_starts else ())
-                               + (("--matched-angles",) if args.matched_angles else ())),
+                               diagnose_options=diagnose_options(args)),
              todo, workers=args.jobs, progress=False, on_result=finished)
     if done and args.only is None:  # a run over every case records its command
         save(out, command, info, done, summarize, markdown)

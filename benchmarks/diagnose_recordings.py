@@ -29,7 +29,7 @@ import cv2
 import imageio.v2 as imageio
 import numpy as np
 
-from common import machine
+from common import add_diagnose_options, diagnose_options, machine
 from envs.pendulum import PixelPendulumConfig, make_pixel_pendulum
 from piga.io.atomic import atomic_output, write_json
 
@@ -91,10 +91,9 @@ def main() -> int:
     p.add_argument("--work", default="runs/recordings", help="folder for the recordings, data files and reports")
     p.add_argument("--frames", type=int, default=4000, help="frames per recording (100 sequences of 40)")
     p.add_argument("--seed", type=int, default=5)
-    p.add_argument("--fit-starts", action="store_true", help="diagnose with piga-diagnose --fit-starts")
-    p.add_argument("--matched-angles", action="store_true", help="diagnose with piga-diagnose --matched-angles")
+    add_diagnose_options(p)
     args = p.parse_args()
-    options = [*(["--fit-starts"] if args.fit_starts else []), *(["--matched-angles"] if args.matched_angles else [])]
+    options = diagnose_options(args)
     work = Path(args.work)
     work.mkdir(parents=True, exist_ok=True)
     runs = []

@@ -136,8 +136,9 @@ def _run(args: argparse.Namespace, argv: Sequence[str] | None, out: Path, config
     show.main([str(data), "--out", str(strip), *over])
     print(f"[3/4] training the world model into {run_dir} (fast preset)", flush=True)
     trained = train.main([str(data), "--out", str(run_dir), "--seed", str(args.seed), *over,
-                *(["--epochs", str(args.epochs)] if args.epochs else []),
-                *(["--threads", str(args.threads)] if args.threads else []), *(["--quiet"] if args.quiet else [])])
+                          *(["--epochs", str(args.epochs)] if args.epochs else []),
+                          *(["--threads", str(args.threads)] if args.threads else []),
+                          *(["--quiet"] if args.quiet else [])])
     import json
 
     metrics = json.loads((run_dir / "metrics.json").read_text())

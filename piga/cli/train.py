@@ -11,8 +11,9 @@ from pathlib import Path
 
 from typing import Any
 
-from piga.cli.common import (NOT_CONVERGED, ArgumentParser, Interrupted, PigaError, add_preset_option, command_line, format_default,
-                             positive_float, positive_int, run_cli, seed_int, thread_count, unit_fraction)
+from piga.cli.common import (NOT_CONVERGED, ArgumentParser, Interrupted, PigaError, add_preset_option, command_line,
+                             format_default, positive_float, positive_int, run_cli, seed_int, thread_count,
+                             unit_fraction)
 from piga.io.checkpoint import CHECKPOINT, require_piga_run
 
 #: The recipe options a user may give; each is a TrainConfig field of the same name.

@@ -928,7 +928,7 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
         else:
             key = term.parameter
             effects.append(Effect(e, final.values[key], term.unit, interval(key)))
-    if DAMPING.name in named and not final.has(WITHIN_FRAME) and fit.nominal_integrator(nom) == "euler":
+    if DAMPING.name in named and not final.has(WITHIN_FRAME):
         if (convention := damping_convention(final, nom)) is not None:
             notes.append(convention_note(convention))
     a_int = interval("a")

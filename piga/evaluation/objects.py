@@ -3,8 +3,9 @@
 An object the encoder and decoder never took up (measured: one of the three balls of a gravity file on
 a dark background, which the learned background smeared into a faint ring) leaves the physics to fit
 the others, and g came out 89% off with little other sign: g moved 1.5% over the run's last tenth, and
-its frames' SSIM was within the range of a noisy file's. What gives it away is the reconstruction of single frames: a ball that no
-object renders stays in the residual, frame after frame, as a blob as strong as the balls themselves.
+its frames' SSIM was within the range of a noisy file's. What gives it away is the reconstruction of
+single frames: a ball that no object renders stays in the residual, frame after frame, as a blob as
+strong as the balls themselves.
 Pixel noise and lossy compression leave residuals too, but spread over the frame, which a blur of about
 a ball's size averages out.
 

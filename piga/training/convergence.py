@@ -23,9 +23,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
+
+if TYPE_CHECKING:  # the check itself needs torch and OpenCV; this module only reads its verdict
+    from piga.evaluation.objects import ObjectCheck
 
 Outcome = Literal["converged", "unsettled", "untrained"]
 
@@ -91,8 +94,11 @@ def _fix(planned: int, steps: int) -> str:
             f"and a larger --epochs (it took {steps} of {planned} planned steps)")
 
 
-def check_convergence(state: Any, config: ConvergenceConfig = ConvergenceConfig()) -> Convergence:
-    """Judges a finished (or stopped) run from its :class:`~piga.training.train.TrainState`.
+def check_convergence(state: Any, config: ConvergenceConfig = ConvergenceConfig(),
+                      objects: ObjectCheck | None = None) -> Convergence:
+    """Judges a finished (or stopped) run from its :class:`~piga.training.train.TrainState`, and for a scene
+    from ``objects`` (:func:`piga.evaluation.objects.check_objects`): a lost object leaves the physics to fit
+    the others, so its parameters mean nothing.
 
     ``state.plan`` is the run's :class:`~piga.training.train.TrainPlan` (as a dict), ``state.start`` the
     learned parameters before the first step, ``state.trace`` their values every few steps, and
@@ -132,6 +138,8 @@ def check_convergence(state: Any, config: ConvergenceConfig = ConvergenceConfig(
     if stuck:
         return verdict("untrained", f"{', '.join(stuck)} never left {'its' if len(stuck) == 1 else 'their'} initial "
                                     f"value in {physics_steps} physics steps; raise --lr-physics or " + _fix(planned, steps))
+    if objects is not None and objects.lost:
+        return verdict("untrained", objects.reason())
     if steps < planned:
         return verdict("unsettled", f"the run stopped at step {steps} of {planned} planned, before its learning rate "
                                     "decayed; " + _fix(planned, steps))

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -42,21 +41,19 @@ def write_run_report(model: PhysicsModel, state: TrainState, data: str | Path, r
         eval_config = EvalConfig(split=split, extrapolate_frames=eval_config.extrapolate_frames,
                                  max_sequences=eval_config.max_sequences)
     metrics = evaluate(model, data, eval_config)
+    frames, actions = read_sequences(data, split)
     objects = None
     if model.config.coord_dim == 2:  # a scene of objects: did the autoencoder find each of them?
-        objects = check_objects(model, read_sequences(data, split)[0][: eval_config.max_sequences])
+        objects = check_objects(model, frames[: eval_config.max_sequences])
         metrics["objects"] = objects.to_dict()
     metrics["training"] = {"epochs": state.epoch, "steps": state.step, "seconds": state.elapsed,
                            "threads": torch.get_num_threads()}
     if state.plan:
-        convergence = check_convergence(state)
-        if objects is not None and objects.lost and convergence.outcome != "untrained":
-            convergence = replace(convergence, outcome="untrained", reason=objects.reason())
+        convergence = check_convergence(state, objects=objects)
         metrics["converged"] = convergence.converged
         metrics["convergence"] = convergence.to_dict()
     write_json(run_dir / "metrics.json", metrics)
 
-    frames, actions = read_sequences(data, split)
     frames, actions = frames[:3], actions[:3]
     cfg = model.config
     steps = eval_config.frames_after_input(model, info.steps)
