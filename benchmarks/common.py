@@ -38,17 +38,25 @@ def machine_words(m: dict[str, object]) -> str:
             f"torch {m.get('torch', '?')} on {threads} thread{plural}, Python {m.get('python', '?')}")
 
 
-#: The diagnosis' opt-in readings that the benchmarks running ``piga-diagnose`` pass through: (flag, help).
-DIAGNOSE_OPTIONS = (("--fit-starts", "diagnose with piga-diagnose --fit-starts"),
-                    ("--matched-angles", "diagnose with piga-diagnose --matched-angles"))
+#: The diagnosis' readings that the benchmarks running ``piga-diagnose`` pass through: (flag, help).
+#: Both are on by default in ``piga-diagnose``; ``--no-FLAG`` reproduces the pages run without them.
+DIAGNOSE_OPTIONS = (("--fit-starts", "pass --fit-starts or --no-fit-starts to piga-diagnose (default: its own)"),
+                    ("--matched-angles", "pass --matched-angles or --no-matched-angles to piga-diagnose "
+                                         "(default: its own)"))
 
 
-def add_diagnose_options(parser: argparse.ArgumentParser) -> None:
-    """Adds :data:`DIAGNOSE_OPTIONS` to a benchmark's parser."""
+def add_diagnose_options(parser: argparse.ArgumentParser, help_suffix: dict[str, str] | None = None) -> None:
+    """Adds :data:`DIAGNOSE_OPTIONS` to a benchmark's parser (each ``None`` unless given), ``help_suffix`` by flag."""
     for flag, text in DIAGNOSE_OPTIONS:
-        parser.add_argument(flag, action="store_true", help=text)
+        parser.add_argument(flag, action=argparse.BooleanOptionalAction, default=None,
+                            help=text + (help_suffix or {}).get(flag, ""))
 
 
 def diagnose_options(args: object) -> tuple[str, ...]:
-    """The ``piga-diagnose`` flags of :data:`DIAGNOSE_OPTIONS` that ``args`` turned on."""
-    return tuple(flag for flag, _ in DIAGNOSE_OPTIONS if getattr(args, flag[2:].replace("-", "_")))
+    """The ``piga-diagnose`` flags of :data:`DIAGNOSE_OPTIONS` that ``args`` gave, either way."""
+    flags = []
+    for flag, _ in DIAGNOSE_OPTIONS:
+        value = getattr(args, flag[2:].replace("-", "_"))
+        if value is not None:
+            flags.append(flag if value else "--no-" + flag[2:])
+    return tuple(flags)

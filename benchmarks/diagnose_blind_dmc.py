@@ -52,7 +52,7 @@ import gymnasium as gym
 import h5py
 import numpy as np
 
-from common import diagnose_options, machine
+from common import add_diagnose_options, diagnose_options, machine
 from diagnose_blind import run_diagnose, save, strip_labels
 from diagnose_blind import score as score_gym
 from envs.dmc import DMCPendulumConfig, DMCPendulumEnv
@@ -394,9 +394,7 @@ def main(argv: list[str] | None = None) -> int:
                         "and the signed errors of g, a, b (what the physics gets wrong without the vision)")
     p.add_argument("--angle-noise", type=float, default=0.0, metavar="RAD",
                    help="with --true-angles: add independent Gaussian errors of this rms (rad) to the true angles")
-    p.add_argument("--fit-starts", action="store_true",
-                   help="diagnose with piga-diagnose --fit-starts (with --true-angles: DiagnoseConfig.fit_starts)")
-    p.add_argument("--matched-angles", action="store_true", help="diagnose with piga-diagnose --matched-angles")
+    add_diagnose_options(p, {"--fit-starts": "; with --true-angles: DiagnoseConfig.fit_starts, off unless given"})
     p.add_argument("--rescore", action="store_true",
                    help="score the finished cases' reports (in --work) again with this script's scorer, and rewrite OUT")
     args = p.parse_args(argv)
@@ -426,7 +424,7 @@ def main(argv: list[str] | None = None) -> int:
         case = next((c for c in cases if c["case"] == args.true_angles), None)
         if case is None:
             raise SystemExit(f"--true-angles: no case {args.true_angles} among the {args.cases} drawn")
-        print(json.dumps(true_angle_fit(case, work, args.sequences, args.steps, args.angle_noise, args.fit_starts),
+        print(json.dumps(true_angle_fit(case, work, args.sequences, args.steps, args.angle_noise, bool(args.fit_starts)),
                          indent=2))
         return 0
     if args.models_only:

@@ -40,7 +40,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from common import machine
+from common import add_diagnose_options, diagnose_options, machine
 from piga.io.atomic import atomic_output, write_json
 
 #: Published pixel-based scores on DMC pendulum-swingup, read from the score files that DreamerV3's
@@ -141,7 +141,7 @@ def run_diagnosis(folder: Path, data: Path, seed: int, args: argparse.Namespace,
     train(data, fast, "fast", seed, args, log, [])
     if not (report / "report.json").exists():
         sh("piga-diagnose", "--model", str(fast), "--data", str(data), "--out", str(report), "--seed", str(seed),
-           "--quiet", log=log)
+           *diagnose_options(args), "--quiet", log=log)
     d = json.loads((report / "report.json").read_text())
     truth = inspect_dataset(data).params
     true = {"g": float(truth["g"]), "a": float(truth["actuation_gain"]), "b": float(truth["damping"])}
@@ -283,6 +283,7 @@ def main() -> None:
                    help="diagnose the cases of the first seed (default), of every seed, or none")
     p.add_argument("--variant-seeds", choices=("first", "all"), default="first",
                    help="run the variants for the first seed only (default) or for every seed")
+    add_diagnose_options(p)
     p.add_argument("--skip-control", action="store_true",
                    help="no control episodes (identification and diagnosis only; the control table is left out)")
     args = p.parse_args()

@@ -43,19 +43,21 @@ def test_fitted_starts_solve_each_window_and_leave_exact_data_alone() -> None:
 
 def test_the_option_refits_the_chosen_values(noisy) -> None:
     """``DiagnoseConfig.fit_starts``: the same choice (damping), its value refitted (read starts: b 7% high)."""
-    fitted = analyse(noisy, NOMINAL, DiagnoseConfig(bootstrap=0, fit_starts=True))
+    fitted = analyse(noisy, NOMINAL, DiagnoseConfig(bootstrap=0))  # on by default
+    assert DiagnoseConfig().fit_starts and DiagnoseConfig().matched_angles
     assert fitted.verdict_class == "damping", fitted.verdict
     assert abs(fitted.corrected["b"] / 0.2 - 1) < 0.01
 
 
 def test_matched_angles_read_the_chosen_values_on_the_matched_angles(noisy) -> None:
     """``DiagnoseConfig.matched_angles``: the selection on the encoder's angles (here 10 mrad of error), the
-    chosen effects' values on the matched ones (here 2 mrad); without the option ``matched`` is not used."""
+    chosen effects' values on the matched ones (here 2 mrad); without the option ``matched`` is not used.
+    ``fit_starts`` is off here, so that only the angles differ."""
     matched = planted({"damping": 0.2}, n=150, t=30, noise=0.002).theta  # the same motion, read better
-    config = DiagnoseConfig(bootstrap=0, matched_angles=True)
+    config = DiagnoseConfig(bootstrap=0, fit_starts=False, matched_angles=True)
     on_matched = analyse(noisy, NOMINAL, config, matched=lambda: matched)
     assert on_matched.verdict_class == "damping", on_matched.verdict
     assert abs(on_matched.corrected["b"] / 0.2 - 1) < 0.01  # read on the encoder's angles: 0.207
     assert any("matching every frame to the decoder's renders" in n for n in on_matched.notes)
-    plain = analyse(noisy, NOMINAL, DiagnoseConfig(bootstrap=0), matched=lambda: matched)
+    plain = analyse(noisy, NOMINAL, replace(config, matched_angles=False), matched=lambda: matched)
     assert plain.corrected["b"] > 0.203 and not any("decoder's renders" in n for n in plain.notes)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 from collections.abc import Sequence
 
 from piga.cli.common import (ArgumentParser, PigaError, command_line, nonnegative_int, positive_int, run_cli, seed_int,
@@ -28,13 +29,13 @@ def build_parser() -> ArgumentParser:
     p.add_argument("--bootstrap", type=nonnegative_int, default=d.bootstrap,
                    help="bootstrap replicates for intervals (default %(default)s)")
     p.add_argument("--seed", type=seed_int, default=d.seed, help="seed of the bootstrap (default %(default)s)")
-    p.add_argument("--fit-starts", action="store_true", default=d.fit_starts,
+    p.add_argument("--fit-starts", action=argparse.BooleanOptionalAction, default=d.fit_starts,
                    help="refit the chosen effects' values with each fitting window's two start angles fitted too "
-                        "(errors in the read angles then bias no damping); the selection is unchanged")
-    p.add_argument("--matched-angles", action="store_true", default=d.matched_angles,
+                        "(errors in the read angles then bias no damping); the selection is unchanged (default %(default)s)")
+    p.add_argument("--matched-angles", action=argparse.BooleanOptionalAction, default=d.matched_angles,
                    help="read the chosen effects' values, and the model's own training file that a gain is judged "
                         "against, on angles matched to the decoder's renders instead of the encoder's; the selection "
-                        "is unchanged")
+                        "is unchanged (default %(default)s)")
     p.add_argument("--threads", type=thread_count, default=0,
                    help="torch CPU threads (default %(default)s: torch's choice, at most 2; small fits gain little from more)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing report in --out")

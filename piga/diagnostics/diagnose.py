@@ -101,14 +101,13 @@ class DiagnoseConfig:
     """Steps of the multi-step fitting loss."""
     stride: int = 2
     """Frames between window starts."""
-    fit_starts: bool = False
+    fit_starts: bool = True
     """Refit the chosen effects' values with the two read angles that start each fitting window fitted
     too (errors in variables, :attr:`piga.diagnostics.fit.Windows.fit_starts`), and so their intervals
     and the references they are judged against; the selection is unchanged. A window's start velocity
     is the difference of two read angles, and a fit that takes it as read takes its error for damping.
-    Off by default until every benchmark that runs the diagnosis has been run with it (the blind ones
-    have, with ``matched_angles``: ``results/diagnose.md``)."""
-    matched_angles: bool = False
+    ``results/diagnose.md`` compares the benchmarks with and without it."""
+    matched_angles: bool = True
     """Read the chosen effects' values (with their intervals, and the model's own training file that a
     gain or gravity error is judged against) on angles found by matching every frame of both files to
     the decoder's renders (:func:`piga.diagnostics.vision.match_file`), not on the encoder's; the
