@@ -502,9 +502,10 @@ def score(record: dict[str, Any]) -> tuple[str, str]:
 
 
 def seed_success(record: dict[str, Any]) -> bool:
-    """A seed row succeeds when its run exited 0, found every object, and has every parameter within 2%."""
+    """A seed row succeeds when its run exited 0 at its own seed (no ``--seed-retries`` retry), found every
+    object, and has every parameter within 2%."""
     errors = _errors(record)
-    return (record["exit_code"] == 0 and bool((record.get("objects") or {}).get("found")) and bool(errors)
+    return (record["exit_code"] == 0 and not record.get("retried_seeds") and bool((record.get("objects") or {}).get("found")) and bool(errors)
             and all(e is not None and e <= PASS_ERROR for e in errors))
 
 
@@ -673,12 +674,18 @@ def make_record(row: Row, data: Path, run_dir: Path, info: dict[str, Any]) -> di
                        for name, e in (metrics or {}).get("parameter_errors", {}).items()},
         "ssim": (metrics or {}).get("frame_ssim_mean"),
         "train_seconds": ((metrics or {}).get("training") or {}).get("seconds"),
-        "objects": None,
+        "objects": None, "retried_seeds": _retried_seeds(run_dir),
     }
     if metrics is not None:
         record["objects"] = object_errors(run_dir, data, metrics, row.system)
     record["verdict"], record["verdict_reason"] = score(record)
     return record
+
+
+def _retried_seeds(run_dir: Path) -> list[int]:
+    """The seeds whose run lost an object and was trained again (``piga-train-model --seed-retries``)."""
+    record = run_dir / "config.json"
+    return json.loads(record.read_text()).get("retried_seeds", []) if record.exists() else []
 
 
 def object_errors(run_dir: Path, data: Path, metrics: dict[str, Any], system: str) -> dict[str, Any] | None:
@@ -784,7 +791,10 @@ def markdown(result: dict[str, Any], out: Path) -> str:
             ssim_text = (f"{ssim['prediction']:.3f}, " + (f"{ssim['extrapolation']:.3f}" if ssim.get("extrapolation") is not None
                                                            else "-")) if ssim else "-"
             verdict = r["verdict"] if r["verdict"] == "pass" else f"**{r['verdict']}**"
-            lines.append(f"| {r['row']} | {r['changed']} | {r['exit_code']} | {_fmt_converged(r)} | {_fmt_params(r)} | "
+            retried = r.get("retried_seeds")
+            changed = r["changed"] + (f" (seed {', '.join(map(str, retried))} lost an object: trained again with the "
+                                      "next seed, `--seed-retries`)" if retried else "")
+            lines.append(f"| {r['row']} | {changed} | {r['exit_code']} | {_fmt_converged(r)} | {_fmt_params(r)} | "
                          f"{ssim_text} | {_fmt_objects(r)} | {r['wall_seconds'] / 60:.1f} | {verdict} |")
         lines.append("")
     others = [r for r in result["rows"] if r["verdict"] != "pass"]

@@ -67,18 +67,23 @@ def test_unknown_system_in_a_file_is_one_line(spring_data: Path, tmp_path: Path,
     assert not (tmp_path / "run").exists()
 
 
-def test_a_run_whose_autoencoder_found_no_ball_exits_1_naming_the_seed(spring_data: Path, tmp_path: Path,
-                                                                       capsys: pytest.CaptureFixture[str]) -> None:
-    """Two optimiser steps: the decoder renders no ball yet, so the balls stay in the residual; the run
+def test_a_run_whose_autoencoder_found_no_ball_trains_again_then_exits_1_naming_the_seed(
+        spring_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Two optimiser steps: the decoder renders no ball yet, so the balls stay in the residual. The run
+    trains again from the start with the next seed (``--seed-retries``, default 1), loses them again, and
     says so instead of reporting k and l."""
     out = tmp_path / "run"
-    code, _, err = run_in_process("piga-train-model", train_main, str(spring_data), "--out", str(out), "--epochs", "1",
-                                  "--batch-size", "16", "--warmup-fraction", "0.5", "--threads", "1", "--quiet",
-                                  capsys=capsys)
-    assert_one_line(code, err, "an object was not found", "--seed", "--overwrite")
+    code, stdout, err = run_in_process("piga-train-model", train_main, str(spring_data), "--out", str(out), "--epochs",
+                                       "1", "--batch-size", "16", "--warmup-fraction", "0.5", "--threads", "1",
+                                       "--quiet", "--seed", "5", capsys=capsys)
+    assert_one_line(code, err, "an object was not found", "seeds 5 and 6 tried", "--seed", "--overwrite")
     assert code == 1
+    assert "training again from the start with seed 6 (retry 1 of --seed-retries 1)" in stdout
     metrics = json.loads((out / "metrics.json").read_text())
     assert metrics["objects"]["lost"] and metrics["converged"] is False
+    record = json.loads((out / "config.json").read_text())
+    assert record["train"]["seed"] == 6 and record["retried_seeds"] == [5]
+    assert len(list((out / "tensorboard").iterdir())) == 1  # the first attempt's curves are gone
 
 
 def test_the_physics_velocity_term_recovers_v_at_frame_l() -> None:

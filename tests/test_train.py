@@ -169,6 +169,9 @@ def test_cli_nan_names_checkpoint(small_data: Path, tmp_path: Path, monkeypatch:
     out = tmp_path / "run"
     code, _, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), *SMALL, capsys=capsys)
     assert code in FINISHED, err
+    code, _, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), "--resume", "--seed-retries", "3",
+                                  capsys=capsys)
+    assert_one_line(code, err, "drop --seed-retries")  # retries start new runs; a resumed run is the user's
     _poison(monkeypatch, after_calls=1)
     code, _, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), "--resume", "--epochs", "2",
                                   "--quiet", capsys=capsys)

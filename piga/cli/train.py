@@ -12,8 +12,8 @@ from pathlib import Path
 from typing import Any
 
 from piga.cli.common import (NOT_CONVERGED, ArgumentParser, Interrupted, PigaError, add_preset_option, command_line,
-                             format_default, positive_float, positive_int, run_cli, seed_int, thread_count,
-                             unit_fraction)
+                             format_default, nonnegative_int, positive_float, positive_int, run_cli, seed_int,
+                             thread_count, unit_fraction)
 from piga.io.checkpoint import CHECKPOINT, require_piga_run
 
 #: The recipe options a user may give; each is a TrainConfig field of the same name.
@@ -66,6 +66,9 @@ def build_parser() -> ArgumentParser:
                       "g·m starts at 1 as in the g run")
     p.add_argument("--seed", type=seed_int, default=fast.seed, help="seed of initialisation and sampling (default %(default)s)")
     p.add_argument("--threads", type=thread_count, default=fast.threads, help="torch CPU threads (default %(default)s: torch's choice)")
+    p.add_argument("--seed-retries", type=nonnegative_int, default=fast.seed_retries, metavar="N",
+                   help="a scene whose object check finds an object missing is trained again from the start with the "
+                   "next seed, up to N times (default %(default)s; 0: never; not with --resume)")
     p.add_argument("--resume", action="store_true", help="continue the run in --out; it may raise --epochs, --budget-steps or --max-minutes "
                    "(docs: piga-train-model; resuming replans the cosine schedule)")
     p.add_argument("--overwrite", action="store_true", help="replace the outputs of an earlier run in --out")
@@ -89,7 +92,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         raise PigaError(f"{run_dir} holds outputs of an earlier run but no checkpoint ({', '.join(existing)}); "
                         "pass --overwrite to replace them")
     from piga.io.atomic import write_json
-    from piga.data.schema import fingerprint, inspect_dataset
+    from piga.data.schema import MAX_SEED, fingerprint, inspect_dataset
     from piga.training.report import write_run_report
     from piga.io.runs import load_model
     from piga.training.train import TrainConfig, TrainingDiverged, check_trainable, model_config_for, preset_for, train
@@ -115,7 +118,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         saved = TrainConfig.from_dict(ckpt["train_config"])
         changed = (sorted(set(overrides) - {"epochs", "budget_steps", "max_minutes"}) + (["signed_actuation"] if args.signed_actuation else [])
                    + (["fixed_g"] if args.fixed_g is not None else []) + (["preset"] if args.preset != "fast" else [])
-                   + (["seed"] if args.seed not in (saved.seed, TrainConfig().seed) else []))
+                   + (["seed"] if args.seed not in (saved.seed, TrainConfig().seed) else [])
+                   + (["seed_retries"] if args.seed_retries != TrainConfig().seed_retries else []))
         if changed:
             raise PigaError(f"--resume keeps the run's recipe; drop {', '.join('--' + c.replace('_', '-') for c in changed)}")
         train_config = replace(saved, **overrides)
@@ -124,7 +128,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         record.setdefault("resumed", []).append(command)
     else:
         recipe = preset_for(args.preset, info)
-        train_config = replace(recipe.train, seed=args.seed, threads=args.threads, **overrides)  # explicit options win
+        train_config = replace(recipe.train, seed=args.seed, threads=args.threads, seed_retries=args.seed_retries,
+                               **overrides)  # explicit options win
         model_config = model_config_for(info, recipe.model)
         for flag, option, value in (("--signed-actuation", "signed_actuation", args.signed_actuation or None),
                                     ("--fixed-g", "fixed_g", args.fixed_g)):
@@ -161,23 +166,36 @@ def main(argv: Sequence[str] | None = None) -> int:
             write_json(run_dir / "config.json", record)
         written.append(state.epoch)
 
-    started = time.time()
-    try:
-        model, state = train(args.data, run_dir, train_config, model_config, resume=args.resume,
-                             progress=not args.quiet, on_epoch=on_epoch)
-    except TrainingDiverged as exc:
-        raise PigaError(f"training diverged: {exc}") from None
-    except KeyboardInterrupt:
-        checkpoint = run_dir / CHECKPOINT
-        if not written and checkpoint.exists() and checkpoint.stat().st_mtime >= started:
-            # interrupted between this command's first checkpoint and its on_epoch: the record goes with it
-            write_json(run_dir / "config.json", record)
-            written.append(_saved_epoch(run_dir))
-        if written or args.resume:
-            epoch = written[-1] if written else _saved_epoch(run_dir)
-            raise Interrupted(f"{run_dir / CHECKPOINT} holds epoch {epoch}; continue with --resume") from None
-        raise
-    metrics = write_run_report(model, state, args.data, run_dir)
+    tried: list[int] = []  # seeds whose run lost an object and was trained again
+    while True:
+        started = time.time()
+        try:
+            model, state = train(args.data, run_dir, train_config, model_config, resume=args.resume,
+                                 progress=not args.quiet, on_epoch=on_epoch)
+        except TrainingDiverged as exc:
+            raise PigaError(f"training diverged: {exc}") from None
+        except KeyboardInterrupt:
+            checkpoint = run_dir / CHECKPOINT
+            if not written and checkpoint.exists() and checkpoint.stat().st_mtime >= started:
+                # interrupted between this command's first checkpoint and its on_epoch: the record goes with it
+                write_json(run_dir / "config.json", record)
+                written.append(_saved_epoch(run_dir))
+            if written or args.resume:
+                epoch = written[-1] if written else _saved_epoch(run_dir)
+                raise Interrupted(f"{run_dir / CHECKPOINT} holds epoch {epoch}; continue with --resume") from None
+            raise
+        metrics = write_run_report(model, state, args.data, run_dir)
+        if (args.resume or not metrics.get("objects", {}).get("lost") or len(tried) >= train_config.seed_retries
+                or train_config.seed >= MAX_SEED):
+            break
+        tried.append(train_config.seed)
+        train_config = replace(train_config, seed=train_config.seed + 1)
+        print(f"object check: an object was not found with seed {tried[-1]} (a blob {metrics['objects']['ratio']:.2f}x "
+              f"as strong as the objects); training again from the start with seed {train_config.seed} "
+              f"(retry {len(tried)} of --seed-retries {train_config.seed_retries})")
+        _remove_outputs(run_dir)
+        record.update({"train": asdict(train_config), "retried_seeds": list(tried)})
+        written.clear()
     convergence = metrics.get("convergence") or {"outcome": "converged"}
     from piga.evaluation.evaluate import summary_line
 
@@ -192,11 +210,22 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(f"trained {state.epoch} epoch{'s' if state.epoch != 1 else ''} ({state.step} steps) in {state.elapsed / 60:.1f} min; "
           f"wrote {run_dir}/metrics.json and figures")
     if convergence["outcome"] == "untrained":
-        raise PigaError(f"the run did not identify its parameters: {convergence['reason']}")
+        seeds = f" (seeds {', '.join(map(str, tried))} and {train_config.seed} tried)" if tried else ""
+        raise PigaError(f"the run did not identify its parameters{seeds}: {convergence['reason']}")
     if convergence["outcome"] == "unsettled":
         print(f"{PROG}: warning: not converged: {convergence['reason']}", file=sys.stderr)
         return NOT_CONVERGED
     return 0
+
+
+def _remove_outputs(run_dir: Path) -> None:
+    """Deletes what a run of this command wrote into ``run_dir`` (:data:`OUTPUTS`), before it trains again."""
+    for name in OUTPUTS:
+        path = run_dir / name
+        if path.is_dir():
+            shutil.rmtree(path)
+        elif path.exists():
+            path.unlink()
 
 
 def _start_values(model: Any) -> str:

@@ -92,6 +92,11 @@ class TrainConfig:
     """Seed of initialisation and sampling."""
     threads: int = 0
     """torch CPU threads (0: leave torch's default)."""
+    seed_retries: int = 1
+    """A scene run whose object check finds an object missing (:mod:`piga.evaluation.objects`, which
+    reads frames only) is trained again from its start with the next seed, up to this many times (0:
+    never). Which objects an autoencoder discovers depends on its initialisation, as the published
+    implementation's README says; the check makes a second draw possible without labels."""
     grad_clip: float = 10.0
     """Gradient-norm clip of the networks (0: none)."""
     physics_grad_clip: float = 3.0
@@ -103,7 +108,7 @@ class TrainConfig:
     steps: Polyak averaging, which removes most of the optimiser's step-to-step jitter (0: off)."""
 
     def __post_init__(self) -> None:
-        for name in ("epochs", "budget_steps", "lr_decay_epoch", "seed", "threads"):
+        for name in ("epochs", "budget_steps", "lr_decay_epoch", "seed", "threads", "seed_retries"):
             if getattr(self, name) < 0:
                 raise ValueError(f"TrainConfig.{name} must be >= 0, got {getattr(self, name)}")
         if self.batch_size < 1 or self.window_stride < 1:
