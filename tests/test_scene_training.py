@@ -86,6 +86,36 @@ def test_a_run_whose_autoencoder_found_no_ball_trains_again_then_exits_1_naming_
     assert len(list((out / "tensorboard").iterdir())) == 1  # the first attempt's curves are gone
 
 
+def test_a_retry_stopped_before_its_first_checkpoint_leaves_no_folder(spring_data: Path, tmp_path: Path,
+                                                                      monkeypatch: pytest.MonkeyPatch,
+                                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    """Ctrl-C in the retry, before its first checkpoint: the lost try's files are gone, and so is the
+    folder this command made, so nothing blocks the rerun (training and the report are stand-ins)."""
+    from types import SimpleNamespace
+
+    import piga.training.report as report
+    import piga.training.train as training
+
+    calls = []
+
+    def fake_train(data, run_dir, *args, on_epoch, **kwargs):
+        calls.append(kwargs)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        run_dir.mkdir(parents=True)
+        (run_dir / "checkpoint.pt").write_bytes(b"the first try")
+        on_epoch(SimpleNamespace(epoch=1), None)
+        return None, SimpleNamespace(epoch=1)
+
+    monkeypatch.setattr(training, "train", fake_train)
+    monkeypatch.setattr(report, "write_run_report", lambda *args: {"objects": {"lost": True, "ratio": 0.6}})
+    out = tmp_path / "run"
+    code, stdout, err = run_in_process("piga-train-model", train_main, str(spring_data), "--out", str(out), "--quiet",
+                                       capsys=capsys)
+    assert code == 130 and "nothing was written" in err and "with seed 1" in stdout
+    assert len(calls) == 2 and not out.exists()
+
+
 def test_the_physics_velocity_term_recovers_v_at_frame_l() -> None:
     """On the spring's ground truth, the backward difference misses v_L by far at dt = 0.3; the engine's
     correction dt·(2·a_L + a_{L-1})/6 with the true k, l brings it several times closer."""

@@ -167,6 +167,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         written.append(state.epoch)
 
     tried: list[int] = []  # seeds whose run lost an object and was trained again
+    existed = run_dir.exists()
     while True:
         started = time.time()
         try:
@@ -183,6 +184,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             if written or args.resume:
                 epoch = written[-1] if written else _saved_epoch(run_dir)
                 raise Interrupted(f"{run_dir / CHECKPOINT} holds epoch {epoch}; continue with --resume") from None
+            if tried and not existed and run_dir.is_dir() and not any(run_dir.iterdir()):
+                run_dir.rmdir()  # a retry stopped before its first checkpoint: the folder held only the lost try
             raise
         metrics = write_run_report(model, state, args.data, run_dir)
         if (args.resume or not metrics.get("objects", {}).get("lost") or len(tried) >= train_config.seed_retries
