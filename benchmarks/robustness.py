@@ -505,7 +505,8 @@ def seed_success(record: dict[str, Any]) -> bool:
     """A seed row succeeds when its run exited 0 at its own seed (no ``--seed-retries`` retry), found every
     object, and has every parameter within 2%."""
     errors = _errors(record)
-    return (record["exit_code"] == 0 and not record.get("retried_seeds") and bool((record.get("objects") or {}).get("found")) and bool(errors)
+    return (record["exit_code"] == 0 and not record.get("retried_seeds")
+            and bool((record.get("objects") or {}).get("found")) and bool(errors)
             and all(e is not None and e <= PASS_ERROR for e in errors))
 
 
