@@ -14,10 +14,18 @@ import pytest
 import torch
 
 from agents.mpc import MPCConfig, OracleAgent, PigaMPCAgent
+from piga.cli.control import main as control_main
 from piga.control.episodes import EpisodeConfig, run_episodes
 from piga.control.goal import load_scene_image, render_goal_image
 from piga.world.model import ModelConfig, PhysicsModel
-from tests.helpers import ENV, assert_one_line_error, run, train_tiny
+from tests.helpers import ENV, assert_one_line_error, run, run_in_process, train_tiny
+
+
+def ctl(capsys: pytest.CaptureFixture[str], *argv: str) -> subprocess.CompletedProcess[str]:
+    """``piga-control`` run in this process (:func:`run_in_process`): the script's exit, stdout and stderr,
+    without starting an interpreter for each refusal."""
+    code, out, err = run_in_process("piga-control", control_main, *argv, capsys=capsys)
+    return subprocess.CompletedProcess(["piga-control", *argv], code, out, err)
 
 
 @pytest.mark.parametrize("substeps", [1, 5])
@@ -120,28 +128,28 @@ def test_goal_image_conversion_matches_the_env(tmp_path: Path) -> None:
         load_scene_image(tmp_path / "bad.png", 64)
 
 
-def test_control_cli_bad_input(tmp_path: Path) -> None:
-    assert_one_line_error(run("piga-control"), "--model")
-    assert_one_line_error(run("piga-control", "--model", str(tmp_path / "nope")), "checkpoint")
+def test_control_cli_bad_input(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert_one_line_error(run("piga-control"), "--model")  # once as a script
+    assert_one_line_error(ctl(capsys, "--model", str(tmp_path / "nope")), "checkpoint")
     broken = tmp_path / "broken"
     broken.mkdir()
     (broken / "checkpoint.pt").write_bytes(b"junk")
-    assert_one_line_error(run("piga-control", "--model", str(broken)), "checkpoint")
+    assert_one_line_error(ctl(capsys, "--model", str(broken)), "checkpoint")
     for bad in ("0", "-1", "nan", "abc"):
-        assert_one_line_error(run("piga-control", "--oracle", "--gravity-mult", bad), "--gravity-mult")
-    assert_one_line_error(run("piga-control", "--oracle", "--angle", "20"), "--write-goal-image")
-    assert_one_line_error(run("piga-control", "--oracle", "--goal-image", str(tmp_path / "x.png")), "--model")
-    assert_one_line_error(run("piga-control", "--write-goal-image", str(tmp_path / "g.png")), "--angle")
-    assert_one_line_error(run("piga-control", "--write-goal-image", str(tmp_path / "g.txt"), "--angle", "5"), ".png")
-    assert_one_line_error(run("piga-control", "--oracle", "--video", str(tmp_path / "v.avi")), ".mp4")
+        assert_one_line_error(ctl(capsys, "--oracle", "--gravity-mult", bad), "--gravity-mult")
+    assert_one_line_error(ctl(capsys, "--oracle", "--angle", "20"), "--write-goal-image")
+    assert_one_line_error(ctl(capsys, "--oracle", "--goal-image", str(tmp_path / "x.png")), "--model")
+    assert_one_line_error(ctl(capsys, "--write-goal-image", str(tmp_path / "g.png")), "--angle")
+    assert_one_line_error(ctl(capsys, "--write-goal-image", str(tmp_path / "g.txt"), "--angle", "5"), ".png")
+    assert_one_line_error(ctl(capsys, "--oracle", "--video", str(tmp_path / "v.avi")), ".mp4")
 
 
-def test_write_goal_image(tmp_path: Path) -> None:
+def test_write_goal_image(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "goal.png"
-    result = run("piga-control", "--write-goal-image", str(out), "--angle", "-15")
+    result = ctl(capsys, "--write-goal-image", str(out), "--angle", "-15")
     assert result.returncode == 0, result.stderr
     assert out.read_bytes()[:4] == b"\x89PNG"
-    assert_one_line_error(run("piga-control", "--write-goal-image", str(out), "--angle", "5"), "--overwrite")
+    assert_one_line_error(ctl(capsys, "--write-goal-image", str(out), "--angle", "5"), "--overwrite")
 
 
 def test_oracle_holds_a_tilted_goal_from_hanging() -> None:
@@ -178,9 +186,9 @@ def test_summary_markdown_has_a_row_per_summary() -> None:
     assert len(table) == 4 and "| oracle | 1.00 | 0.00 | 2 | 50% | -200.0 | 0.57 | – | 9.00 | 12.00 |" == table[2]
 
 
-def test_sweep_cli_bad_input(tmp_path: Path) -> None:
-    assert_one_line_error(run("piga-control", "--oracle", "--sweep", "0.5:1.8:0.1"), "--model")
-    assert_one_line_error(run("piga-control", "--model", str(tmp_path / "none"), "--sweep", "1:2"), "START:STOP:STEP")
+def test_sweep_cli_bad_input(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert_one_line_error(ctl(capsys, "--oracle", "--sweep", "0.5:1.8:0.1"), "--model")
+    assert_one_line_error(ctl(capsys, "--model", str(tmp_path / "none"), "--sweep", "1:2"), "START:STOP:STEP")
 
 
 def test_agents_import_nothing_from_diagnostics() -> None:
@@ -298,18 +306,18 @@ def test_cem_settings_from_the_command_line() -> None:
     assert "(default 200)" in " ".join(parser.format_help().split())
 
 
-def test_control_cli_bad_cem_and_episode_settings() -> None:
-    assert_one_line_error(run("piga-control", "--oracle", "--candidates", "10", "--elites", "20"),
+def test_control_cli_bad_cem_and_episode_settings(capsys: pytest.CaptureFixture[str]) -> None:
+    assert_one_line_error(ctl(capsys, "--oracle", "--candidates", "10", "--elites", "20"),
                           "--elites (20) must be at most --candidates (10)")
-    assert_one_line_error(run("piga-control", "--oracle", "--candidates", "1"), "--candidates must be at least 2")
-    result = run("piga-control", "--oracle", "--steps", "3")
+    assert_one_line_error(ctl(capsys, "--oracle", "--candidates", "1"), "--candidates must be at least 2")
+    result = ctl(capsys, "--oracle", "--steps", "3")
     assert_one_line_error(result, "--steps must be at least 20")
     assert "EpisodeConfig" not in result.stderr
-    ok = run("piga-control", "--oracle", "--candidates", "10", "--episodes", "1", "--steps", "20", "--quiet")
+    ok = ctl(capsys, "--oracle", "--candidates", "10", "--episodes", "1", "--steps", "20", "--quiet")
     assert ok.returncode == 0 and "success" in ok.stdout, ok.stderr
 
 
-def test_goal_image_that_is_not_the_scene_is_refused(control_model: Path, tmp_path: Path) -> None:
+def test_goal_image_that_is_not_the_scene_is_refused(control_model: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """White, black or noise is refused whatever the model's training; a render of the scene is read."""
     import imageio.v3 as iio
 
@@ -327,17 +335,17 @@ def test_goal_image_that_is_not_the_scene_is_refused(control_model: Path, tmp_pa
         assert scene_mismatch(load_scene_image_array(render_goal_image(angle))) < 0.1
     iio.imwrite(tmp_path / "goal.png", render_goal_image(13.7))
     goal_from_image(model, ckpt, tmp_path / "goal.png")  # accepted
-    assert_one_line_error(run("piga-control", "--model", str(control_model), "--goal-image", str(tmp_path / "white.png")),
+    assert_one_line_error(ctl(capsys, "--model", str(control_model), "--goal-image", str(tmp_path / "white.png")),
                           "not a picture of the pendulum scene")
 
 
-def test_goal_image_messages(control_model: Path, tmp_path: Path) -> None:
+def test_goal_image_messages(control_model: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     import imageio.v3 as iio
 
     iio.imwrite(tmp_path / "dot.png", np.zeros((1, 1), np.uint8))
-    assert_one_line_error(run("piga-control", "--model", str(control_model), "--goal-image", str(tmp_path / "dot.png")),
+    assert_one_line_error(ctl(capsys, "--model", str(control_model), "--goal-image", str(tmp_path / "dot.png")),
                           "1x1 pixels, too small")
-    assert_one_line_error(run("piga-control", "--model", str(control_model), "--goal-image", str(tmp_path)),
+    assert_one_line_error(ctl(capsys, "--model", str(control_model), "--goal-image", str(tmp_path)),
                           "is a folder, not an image file")
 
 
