@@ -17,6 +17,16 @@ from tests.helpers import ENV, assert_one_line, assert_one_line_error, run, run_
 
 
 
+def in_process(capsys: pytest.CaptureFixture[str], prog: str, *argv: str) -> subprocess.CompletedProcess[str]:
+    """``piga-collect`` or ``piga-show`` run in this process (:func:`run_in_process`): the script's exit and
+    output, without starting an interpreter for each refusal."""
+    from piga.cli import collect, show
+
+    code, out, err = run_in_process(prog, {"piga-collect": collect.main, "piga-show": show.main}[prog], *argv,
+                                    capsys=capsys)
+    return subprocess.CompletedProcess([prog, *argv], code, out, err)
+
+
 def test_collect_then_show(tmp_path: Path) -> None:
     out = tmp_path / "d.h5"
     result = run("piga-collect", "--out", str(out), "--sequences", "4", "--steps", "5", "--workers", "1",
@@ -53,31 +63,32 @@ def test_collect_then_show(tmp_path: Path) -> None:
         (["--bogus"], "--bogus"),
     ],
 )
-def test_collect_bad_input(tmp_path: Path, args: list[str], needle: str) -> None:
+def test_collect_bad_input(tmp_path: Path, args: list[str], needle: str, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "d.h5"
-    assert_one_line_error(run("piga-collect", "--out", str(out), "--sequences", "2", "--steps", "3", *args), needle)
+    assert_one_line_error(in_process(capsys, "piga-collect", "--out", str(out), "--sequences", "2", "--steps", "3", *args),
+                          needle)
     assert not out.exists()
 
 
-def test_collect_bad_paths(tmp_path: Path) -> None:
-    assert_one_line_error(run("piga-collect", "--sequences", "2"), "--out")
-    assert_one_line_error(run("piga-collect", "--out", str(tmp_path / "nope" / "d.h5")), "does not exist")
-    assert_one_line_error(run("piga-collect", "--out", str(tmp_path)), "folder")
+def test_collect_bad_paths(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert_one_line_error(run("piga-collect", "--sequences", "2"), "--out")  # once as a script
+    assert_one_line_error(in_process(capsys, "piga-collect", "--out", str(tmp_path / "nope" / "d.h5")), "does not exist")
+    assert_one_line_error(in_process(capsys, "piga-collect", "--out", str(tmp_path)), "folder")
     if os.geteuid() != 0:  # root writes anywhere; a read-only folder only stops other users
         ro = tmp_path / "ro"
         ro.mkdir(mode=0o500)
-        assert_one_line_error(run("piga-collect", "--out", str(ro / "d.h5")), "not writable")
+        assert_one_line_error(in_process(capsys, "piga-collect", "--out", str(ro / "d.h5")), "not writable")
     existing = tmp_path / "mine.h5"
     existing.write_text("precious")
-    assert_one_line_error(run("piga-collect", "--out", str(existing), "--sequences", "2"), "--overwrite")
+    assert_one_line_error(in_process(capsys, "piga-collect", "--out", str(existing), "--sequences", "2"), "--overwrite")
     assert existing.read_text() == "precious"
 
 
-def test_show_bad_input(tmp_path: Path) -> None:
+def test_show_bad_input(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert_one_line_error(run("piga-show", str(tmp_path / "absent.h5"), "--out", str(tmp_path / "x.png")), "no such file")
     junk = tmp_path / "junk.h5"
     junk.write_text("junk")
-    assert_one_line_error(run("piga-show", str(junk), "--out", str(tmp_path / "x.png")), "HDF5")
+    assert_one_line_error(in_process(capsys, "piga-show", str(junk), "--out", str(tmp_path / "x.png")), "HDF5")
 
 
 def _start_long_collect(out: Path, *extra: str) -> subprocess.Popen[str]:
