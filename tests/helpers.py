@@ -38,6 +38,14 @@ def run_in_process(prog: str, main: Callable[[Sequence[str] | None], int | None]
     return int(info.value.code or 0), out, err
 
 
+def completed_in_process(prog: str, main: Callable[[Sequence[str] | None], int | None], *argv: str,
+                         capsys: pytest.CaptureFixture[str]) -> subprocess.CompletedProcess[str]:
+    """:func:`run_in_process` as :func:`run` returns it, for :func:`assert_one_line_error`: a refusal checked
+    without starting an interpreter (keep one run per command as a script)."""
+    code, out, err = run_in_process(prog, main, *argv, capsys=capsys)
+    return subprocess.CompletedProcess([prog, *argv], code, out, err)
+
+
 def assert_one_line(code: int, err: str, *needles: str) -> str:
     """A failed command: non-zero exit, exactly one line on stderr containing each needle, no traceback."""
     lines = err.strip().splitlines()

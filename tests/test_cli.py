@@ -13,18 +13,15 @@ import h5py
 import pytest
 
 from piga.data.schema import inspect_dataset
-from tests.helpers import ENV, assert_one_line, assert_one_line_error, run, run_in_process
+from tests.helpers import ENV, assert_one_line, assert_one_line_error, completed_in_process, run, run_in_process
 
 
 
 def in_process(capsys: pytest.CaptureFixture[str], prog: str, *argv: str) -> subprocess.CompletedProcess[str]:
-    """``piga-collect`` or ``piga-show`` run in this process (:func:`run_in_process`): the script's exit and
-    output, without starting an interpreter for each refusal."""
+    """``piga-collect`` or ``piga-show`` run in this process."""
     from piga.cli import collect, show
 
-    code, out, err = run_in_process(prog, {"piga-collect": collect.main, "piga-show": show.main}[prog], *argv,
-                                    capsys=capsys)
-    return subprocess.CompletedProcess([prog, *argv], code, out, err)
+    return completed_in_process(prog, {"piga-collect": collect.main, "piga-show": show.main}[prog], *argv, capsys=capsys)
 
 
 def test_collect_then_show(tmp_path: Path) -> None:

@@ -18,14 +18,12 @@ from piga.cli.control import main as control_main
 from piga.control.episodes import EpisodeConfig, run_episodes
 from piga.control.goal import load_scene_image, render_goal_image
 from piga.world.model import ModelConfig, PhysicsModel
-from tests.helpers import ENV, assert_one_line_error, run, run_in_process, train_tiny
+from tests.helpers import ENV, assert_one_line_error, completed_in_process, run, train_tiny
 
 
 def ctl(capsys: pytest.CaptureFixture[str], *argv: str) -> subprocess.CompletedProcess[str]:
-    """``piga-control`` run in this process (:func:`run_in_process`): the script's exit, stdout and stderr,
-    without starting an interpreter for each refusal."""
-    code, out, err = run_in_process("piga-control", control_main, *argv, capsys=capsys)
-    return subprocess.CompletedProcess(["piga-control", *argv], code, out, err)
+    """``piga-control`` run in this process."""
+    return completed_in_process("piga-control", control_main, *argv, capsys=capsys)
 
 
 @pytest.mark.parametrize("substeps", [1, 5])

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import subprocess
 from dataclasses import replace
 from pathlib import Path
 
@@ -15,7 +16,7 @@ from piga.diagnostics import DiagnoseConfig, Observations, analyse
 from piga.diagnostics import fit
 from piga.io.runs import Nominal
 from piga.world.effects import CANDIDATES, EFFECTS, SPEED_CLIP
-from tests.helpers import assert_one_line_error, run, train_tiny
+from tests.helpers import assert_one_line_error, completed_in_process, run, train_tiny
 
 NOMINAL = Nominal(g=10.0, a=1.0, offset=0.0, dt=0.05)
 FAST = DiagnoseConfig(bootstrap=0)
@@ -142,19 +143,28 @@ def damped_data(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return path
 
 
-def test_cli_bad_inputs(tiny_model: Path, tiny_data: Path, tmp_path: Path) -> None:
+def diagnose_in_process(capsys: pytest.CaptureFixture[str], *argv: str) -> subprocess.CompletedProcess[str]:
+    """``piga-diagnose`` run in this process."""
+    from piga.cli.diagnose import main
+
+    return completed_in_process("piga-diagnose", main, *argv, capsys=capsys)
+
+
+def test_cli_bad_inputs(tiny_model: Path, tiny_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     from piga.data.collect import CollectConfig, collect
 
     out = str(tmp_path / "report")
     assert_one_line_error(run("piga-diagnose", "--model", str(tmp_path / "nope"), "--data", str(tiny_data), "--out", out),
-                          "no checkpoint")
-    assert_one_line_error(run("piga-diagnose", "--model", str(tiny_model), "--data", str(tmp_path / "x.h5"), "--out", out))
-    assert_one_line_error(run("piga-diagnose", "--model", str(tiny_model), "--data", str(tiny_data), "--out", out),
+                          "no checkpoint")  # once as a script
+    assert_one_line_error(diagnose_in_process(capsys, "--model", str(tiny_model), "--data", str(tmp_path / "x.h5"),
+                                              "--out", out))
+    assert_one_line_error(diagnose_in_process(capsys, "--model", str(tiny_model), "--data", str(tiny_data), "--out", out),
                           "at least 20")  # 12 sequences: too little data
     small = tmp_path / "small.h5"
     collect(CollectConfig(sequences=4, steps=16, seed=1, workers=1, split=(2, 1, 1),
                           env=PixelPendulumConfig(image_size=32)), small, progress=False, command="t")
-    assert_one_line_error(run("piga-diagnose", "--model", str(tiny_model), "--data", str(small), "--out", out), "32")
+    assert_one_line_error(diagnose_in_process(capsys, "--model", str(tiny_model), "--data", str(small), "--out", out),
+                          "32")
     assert not (tmp_path / "report").exists()  # a refusal leaves no folder behind
 
 
@@ -182,9 +192,9 @@ def test_corrected_dynamics_roll_the_corrected_physics() -> None:
                                atol=1e-5, rtol=0)
 
 
-def test_cli_bad_env(tiny_model: Path, tiny_data: Path, tmp_path: Path) -> None:
-    assert_one_line_error(run("piga-diagnose", "--model", str(tiny_model), "--data", str(tiny_data), "--out",
-                              str(tmp_path / "r"), "--env", "dampng=0.2"), "--env", "unknown effect")
+def test_cli_bad_env(tiny_model: Path, tiny_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert_one_line_error(diagnose_in_process(capsys, "--model", str(tiny_model), "--data", str(tiny_data), "--out",
+                                              str(tmp_path / "r"), "--env", "dampng=0.2"), "--env", "unknown effect")
     assert not (tmp_path / "r").exists()
 
 

@@ -13,7 +13,7 @@ from agents.dynamics import pendulum_state
 from agents.swingup import DampedPendulumDynamics, SwingUpPlanner
 from envs.dmc import DMCPendulumConfig
 from piga.world.physics import RK4, Pendulum, rollout
-from tests.helpers import assert_one_line_error, run
+from tests.helpers import assert_one_line_error, completed_in_process, run
 from tests.test_dmc import needs_dmc
 
 
@@ -64,7 +64,7 @@ def test_energy_cost_pumps_from_hanging_down(sign):
 
 
 @needs_dmc
-def test_piga_control_dmc_oracle_scores_and_refuses_gymnasium_options(tmp_path):
+def test_piga_control_dmc_oracle_scores_and_refuses_gymnasium_options(tmp_path, capsys):
     out = tmp_path / "oracle"
     result = run("piga-control", "--env", "piga/DMCPendulum-v0", "--episodes", "1", "--seed", "1", "--quiet",
                  "--out", str(out))
@@ -75,5 +75,8 @@ def test_piga_control_dmc_oracle_scores_and_refuses_gymnasium_options(tmp_path):
     (oracle,) = payload["results"]
     assert oracle["agent"] == "oracle" and len(oracle["scores"]) == 1 and oracle["scores"][0] > 500
     assert "| oracle |" in (tmp_path / "oracle.md").read_text()
-    assert_one_line_error(run("piga-control", "--env", "piga/DMCPendulum-v0", "--horizon", "5"), "--horizon")
-    assert_one_line_error(run("piga-control", "--oracle", "--env-option", "mass=2"), "--env-option")
+    from piga.cli.control import main
+
+    for argv, needle in ((("--env", "piga/DMCPendulum-v0", "--horizon", "5"), "--horizon"),
+                         (("--oracle", "--env-option", "mass=2"), "--env-option")):
+        assert_one_line_error(completed_in_process("piga-control", main, *argv, capsys=capsys), needle)
