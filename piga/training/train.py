@@ -93,10 +93,11 @@ class TrainConfig:
     threads: int = 0
     """torch CPU threads (0: leave torch's default)."""
     seed_retries: int = 1
-    """A scene run whose object check finds an object missing (:mod:`piga.evaluation.objects`, which
-    reads frames only) is trained again from its start with the next seed, up to this many times (0:
-    never). Which objects an autoencoder discovers depends on its initialisation, as the published
-    implementation's README says; the check makes a second draw possible without labels."""
+    """``piga-train-model``: a scene run whose object check finds an object missing
+    (:mod:`piga.evaluation.objects`, which reads frames only) is trained again from its start with the
+    next seed, up to this many times (0: never); :func:`train` itself trains once. Which objects an
+    autoencoder discovers depends on its initialisation, as the published implementation's README
+    says; the check makes a second draw possible without labels."""
     grad_clip: float = 10.0
     """Gradient-norm clip of the networks (0: none)."""
     physics_grad_clip: float = 3.0
