@@ -4,9 +4,13 @@ For every run folder given (a ``piga-train-model`` run of a scene, whose ``confi
 file, or ``RUN=DATA`` to name it), it reconstructs the test split's single frames and prints the ratio of
 the residual's peak to the moving content's peak, against the threshold. It trains nothing: it shows where
 the threshold sits between runs that found every object and runs that lost one, for example the
-robustness benchmark's runs::
+robustness benchmark's runs, and the dark-background gravity run at seed 0 without the retry that
+finds its lost ball (``piga-train-model`` trains again with the next seed when the check fails)::
 
-    python benchmarks/object_check.py runs/robustness/runs/*-seed0 --out results/object_check
+    piga-train-model runs/robustness/data/gravity-background-401a4d.h5 --seed-retries 0 --threads 1 \
+        --out runs/object_check/gravity-background-401a4d-seed0-no-retry     # exits 1: a ball lost
+    python benchmarks/object_check.py runs/robustness/runs/*-seed0 \
+        runs/object_check/gravity-background-401a4d-seed0-no-retry --out results/object_check
 
 Writes OUT.json and OUT.md.
 """
