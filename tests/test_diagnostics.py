@@ -199,7 +199,8 @@ def test_cli_bad_env(tiny_model: Path, tiny_data: Path, tmp_path: Path, capsys: 
 
 
 def test_cli_with_env_writes_a_complete_report_and_the_control_comparison(tiny_model: Path, damped_data: Path,
-                                                                         tmp_path: Path) -> None:
+                                                                         tmp_path: Path,
+                                                                         capsys: pytest.CaptureFixture[str]) -> None:
     """The success path end to end, with --env: every file of the report, the twin's floor, MPC with the
     nominal and the corrected physics on the simulated real system, and no overwriting."""
     import json
@@ -227,7 +228,8 @@ def test_cli_with_env_writes_a_complete_report_and_the_control_comparison(tiny_m
         assert (out / name).stat().st_size > 0
     assert not [p for p in out.parent.iterdir() if p.name.startswith(".")]  # no partial folder left
     # an existing report is not overwritten
-    again = run("piga-diagnose", "--model", str(tiny_model), "--data", str(damped_data), "--out", str(out), "--bootstrap", "0")
+    again = diagnose_in_process(capsys, "--model", str(tiny_model), "--data", str(damped_data), "--out", str(out),
+                                "--bootstrap", "0")
     assert_one_line_error(again, "--overwrite")
 
 
