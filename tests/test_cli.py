@@ -21,7 +21,8 @@ def in_process(capsys: pytest.CaptureFixture[str], prog: str, *argv: str) -> sub
     """``piga-collect`` or ``piga-show`` run in this process."""
     from piga.cli import collect, show
 
-    return completed_in_process(prog, {"piga-collect": collect.main, "piga-show": show.main}[prog], *argv, capsys=capsys)
+    main = {"piga-collect": collect.main, "piga-show": show.main}[prog]
+    return completed_in_process(prog, main, *argv, capsys=capsys)
 
 
 def test_collect_then_show(tmp_path: Path) -> None:
@@ -62,14 +63,15 @@ def test_collect_then_show(tmp_path: Path) -> None:
 )
 def test_collect_bad_input(tmp_path: Path, args: list[str], needle: str, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "d.h5"
-    assert_one_line_error(in_process(capsys, "piga-collect", "--out", str(out), "--sequences", "2", "--steps", "3", *args),
-                          needle)
+    argv = ("--out", str(out), "--sequences", "2", "--steps", "3", *args)
+    assert_one_line_error(in_process(capsys, "piga-collect", *argv), needle)
     assert not out.exists()
 
 
 def test_collect_bad_paths(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert_one_line_error(run("piga-collect", "--sequences", "2"), "--out")  # once as a script
-    assert_one_line_error(in_process(capsys, "piga-collect", "--out", str(tmp_path / "nope" / "d.h5")), "does not exist")
+    assert_one_line_error(in_process(capsys, "piga-collect", "--out", str(tmp_path / "nope" / "d.h5")),
+                          "does not exist")
     assert_one_line_error(in_process(capsys, "piga-collect", "--out", str(tmp_path)), "folder")
     if os.geteuid() != 0:  # root writes anywhere; a read-only folder only stops other users
         ro = tmp_path / "ro"

@@ -315,7 +315,8 @@ def test_control_cli_bad_cem_and_episode_settings(capsys: pytest.CaptureFixture[
     assert ok.returncode == 0 and "success" in ok.stdout, ok.stderr
 
 
-def test_goal_image_that_is_not_the_scene_is_refused(control_model: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_goal_image_that_is_not_the_scene_is_refused(control_model: Path, tmp_path: Path,
+                                                     capsys: pytest.CaptureFixture[str]) -> None:
     """White, black or noise is refused whatever the model's training; a render of the scene is read."""
     import imageio.v3 as iio
 

@@ -109,7 +109,7 @@ def test_a_gain_error_is_the_refitted_a() -> None:
 
 
 def test_a_gain_whose_interval_holds_the_nominal_is_not_named() -> None:
-    obs = planted({"gain": 0.97}, n=40, t=20, noise=0.003, seed=2)  # little data: a refits to 0.966, its interval holds 1
+    obs = planted({"gain": 0.97}, n=40, t=20, noise=0.003, seed=2)  # little data: a refits to 0.966; interval holds 1
     assert analyse(obs, NOMINAL, FAST).verdict_class == "gain"  # without intervals, the point estimate decides
     d = analyse(obs, NOMINAL, DiagnoseConfig(bootstrap=8))
     assert d.verdict_class == "none", d.verdict
@@ -158,8 +158,8 @@ def test_cli_bad_inputs(tiny_model: Path, tiny_data: Path, tmp_path: Path, capsy
                           "no checkpoint")  # once as a script
     assert_one_line_error(diagnose_in_process(capsys, "--model", str(tiny_model), "--data", str(tmp_path / "x.h5"),
                                               "--out", out))
-    assert_one_line_error(diagnose_in_process(capsys, "--model", str(tiny_model), "--data", str(tiny_data), "--out", out),
-                          "at least 20")  # 12 sequences: too little data
+    assert_one_line_error(diagnose_in_process(capsys, "--model", str(tiny_model), "--data", str(tiny_data),
+                                              "--out", out), "at least 20")  # 12 sequences: too little data
     small = tmp_path / "small.h5"
     collect(CollectConfig(sequences=4, steps=16, seed=1, workers=1, split=(2, 1, 1),
                           env=PixelPendulumConfig(image_size=32)), small, progress=False, command="t")

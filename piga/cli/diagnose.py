@@ -31,7 +31,8 @@ def build_parser() -> ArgumentParser:
     p.add_argument("--seed", type=seed_int, default=d.seed, help="seed of the bootstrap (default %(default)s)")
     p.add_argument("--fit-starts", action=argparse.BooleanOptionalAction, default=d.fit_starts,
                    help="refit the chosen effects' values with each fitting window's two start angles fitted too "
-                        "(errors in the read angles then bias no damping); the selection is unchanged (default %(default)s)")
+                        "(errors in the read angles then bias no damping); the selection is unchanged "
+                        "(default %(default)s)")
     p.add_argument("--matched-angles", action=argparse.BooleanOptionalAction, default=d.matched_angles,
                    help="read the chosen effects' values, and the model's own training file that a gain is judged "
                         "against, on angles matched to the decoder's renders instead of the encoder's; the selection "
