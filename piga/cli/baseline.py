@@ -13,15 +13,14 @@ import dataclasses
 import json
 import math
 import os
-import shutil
 from collections.abc import Iterator, Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 from piga.cli.common import (ArgumentParser, Interrupted, PigaError, add_preset_option, command_line, format_default,
-                             made_folder, nonnegative_float, nonnegative_int, positive_float, positive_int, run_cli,
-                             seed_int, thread_count)
+                             made_folder, nonnegative_float, nonnegative_int, positive_float, positive_int,
+                             remove_outputs, run_cli, seed_int, thread_count)
 from piga.io.checkpoint import CHECKPOINT, RunKind
 
 PROG = "piga-baseline"
@@ -148,9 +147,7 @@ def _check_run_dir(run_dir: Path, resume: bool, overwrite: bool, kind: RunKind) 
                             "pass --overwrite to replace them")
         raise PigaError(f"{run_dir} already holds a run ({', '.join(existing)}); pass --resume to continue it or "
                         "--overwrite to replace it")
-    for name in existing:
-        path = run_dir / name
-        shutil.rmtree(path) if path.is_dir() else path.unlink()
+    remove_outputs(run_dir, existing)
 
 
 def _read_record(run_dir: Path) -> dict[str, Any]:
@@ -221,12 +218,7 @@ def _nothing_left_unless_checkpointed(run_dir: Path, written: list[int], fresh: 
             yield
         except BaseException:
             if fresh and not written:
-                for name in OUTPUTS:
-                    path = run_dir / name
-                    if path.is_dir():
-                        shutil.rmtree(path, ignore_errors=True)
-                    elif path.exists():
-                        path.unlink()
+                remove_outputs(run_dir, OUTPUTS, ignore_errors=True)
             raise
 
 

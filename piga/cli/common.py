@@ -6,6 +6,7 @@ import argparse
 import contextlib
 import os
 import re
+import shutil
 import signal
 import tempfile
 import sys
@@ -140,17 +141,39 @@ def made_folder(folder: str | os.PathLike[str]) -> Iterator[Path]:
     made again if the command fails or is interrupted while they are still empty: a refused or
     interrupted run leaves no empty folder behind. Folders that existed are never removed."""
     path = Path(folder)
-    missing = [p for p in (path, *path.parents) if not p.exists()]
+    missing = missing_folders(path)
     path.mkdir(parents=True, exist_ok=True)
     try:
         yield path
     except BaseException:
-        for p in missing:  # innermost first; stops at the first that is not empty
-            try:
-                p.rmdir()
-            except OSError:
-                break
+        remove_empty_folders(missing)
         raise
+
+
+def missing_folders(folder: Path) -> list[Path]:
+    """``folder`` and those of its parents that do not exist yet, innermost first."""
+    return [p for p in (folder, *folder.parents) if not p.exists()]
+
+
+def remove_empty_folders(folders: list[Path]) -> None:
+    """Removes ``folders`` (innermost first, as :func:`missing_folders` lists them) while they are empty."""
+    for p in folders:
+        try:
+            p.rmdir()
+        except OSError:  # not empty, or already gone: the outer ones stay
+            break
+
+
+def remove_outputs(run_dir: Path, names: Sequence[str], ignore_errors: bool = False) -> None:
+    """Deletes the files and folders ``names`` of a run in ``run_dir`` that exist (a run's own outputs,
+    before it is run again or after it was abandoned); nothing else in the folder is touched.
+    ``ignore_errors``: a folder that cannot be removed stays (while another error is being raised)."""
+    for name in names:
+        path = run_dir / name
+        if path.is_dir():
+            shutil.rmtree(path, ignore_errors=ignore_errors)
+        elif path.exists():
+            path.unlink()
 
 
 #: Exit status of an unexpected internal error (BSD's EX_SOFTWARE); user errors exit 1, usage errors 2.
@@ -272,4 +295,5 @@ def split_type(text: str) -> tuple[float, float, float]:
 
 
 __all__ = ["ArgumentParser", "PigaError", "run_cli", "positive_int", "nonnegative_int", "seed_int", "thread_count", "positive_float", "nonnegative_float",
-           "split_type", "add_preset_option", "documented_default", "format_default", "Interrupted", "made_folder"]
+           "split_type", "add_preset_option", "documented_default", "format_default", "Interrupted", "made_folder",
+           "missing_folders", "remove_empty_folders", "remove_outputs"]

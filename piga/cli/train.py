@@ -12,8 +12,8 @@ from pathlib import Path
 from typing import Any
 
 from piga.cli.common import (NOT_CONVERGED, ArgumentParser, Interrupted, PigaError, add_preset_option, command_line,
-                             format_default, nonnegative_int, positive_float, positive_int, run_cli, seed_int,
-                             thread_count, unit_fraction)
+                             format_default, missing_folders, nonnegative_int, positive_float, positive_int,
+                             remove_empty_folders, remove_outputs, run_cli, seed_int, thread_count, unit_fraction)
 from piga.io.checkpoint import CHECKPOINT, require_piga_run
 
 #: The recipe options a user may give; each is a TrainConfig field of the same name.
@@ -167,7 +167,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         written.append(state.epoch)
 
     tried: list[int] = []  # seeds whose run lost an object and was trained again
-    existed = run_dir.exists()
+    missing = missing_folders(run_dir)  # what train() makes at its first checkpoint
     while True:
         started = time.time()
         try:
@@ -184,8 +184,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             if written or args.resume:
                 epoch = written[-1] if written else _saved_epoch(run_dir)
                 raise Interrupted(f"{run_dir / CHECKPOINT} holds epoch {epoch}; continue with --resume") from None
-            if tried and not existed and run_dir.is_dir() and not any(run_dir.iterdir()):
-                run_dir.rmdir()  # a retry stopped before its first checkpoint: the folder held only the lost try
+            if tried:  # a retry stopped before its first checkpoint: the folders held only the lost try
+                remove_empty_folders(missing)
             raise
         metrics = write_run_report(model, state, args.data, run_dir)
         if (args.resume or not metrics.get("objects", {}).get("lost") or len(tried) >= train_config.seed_retries
@@ -196,7 +196,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"object check: an object was not found with seed {tried[-1]} (a blob {metrics['objects']['ratio']:.2f}x "
               f"as strong as the objects); training again from the start with seed {train_config.seed} "
               f"(retry {len(tried)} of --seed-retries {train_config.seed_retries})")
-        _remove_outputs(run_dir)
+        remove_outputs(run_dir, OUTPUTS)
         record.update({"train": asdict(train_config), "retried_seeds": list(tried)})
         written.clear()
     convergence = metrics.get("convergence") or {"outcome": "converged"}
@@ -219,16 +219,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"{PROG}: warning: not converged: {convergence['reason']}", file=sys.stderr)
         return NOT_CONVERGED
     return 0
-
-
-def _remove_outputs(run_dir: Path) -> None:
-    """Deletes what a run of this command wrote into ``run_dir`` (:data:`OUTPUTS`), before it trains again."""
-    for name in OUTPUTS:
-        path = run_dir / name
-        if path.is_dir():
-            shutil.rmtree(path)
-        elif path.exists():
-            path.unlink()
 
 
 def _start_values(model: Any) -> str:
