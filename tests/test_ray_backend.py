@@ -102,3 +102,12 @@ def test_a_head_that_asks_for_a_token_this_machine_lacks_is_refused(monkeypatch:
         monkeypatch.delenv(name, raising=False)
     with pytest.raises(BackendError, match="asks for an authentication token"):
         check_ray_head(host, int(port))
+
+
+def _where() -> str:
+    return os.getcwd()
+
+
+def test_a_job_runs_in_the_folder_the_run_was_started_in(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.chdir(tmp_path)  # relative paths in a job mean what they mean here, on any node
+    assert run_pool(lambda _: _where(), [0, 1], progress=False, backend=RAY) == [str(tmp_path)] * 2

@@ -4,8 +4,9 @@ Ray is an optional extra (``pip install -e '.[ray]'``), imported here only, when
 :func:`connect` joins a cluster once per process (or starts a local Ray instance, for "auto"), after
 checking that something at the address answers as a Ray head does, so that a wrong address is refused
 in seconds rather than after Ray's own minutes of retries. :func:`run_ray` submits every job at once
-(Ray runs as many as the cluster has free CPUs), gives each result to ``on_result`` in this process as
-it ends, and returns the results in the order of the jobs.
+(Ray runs as many as the cluster has free CPUs), each in this process's working directory (so every machine
+needs the same checkout at the same path), gives each result to ``on_result`` in this process as it ends,
+and returns the results in the order of the jobs.
 
 A job that raises (or whose worker process dies) stops the run: :class:`~piga.io.pool.JobFailed` names
 it, the other tasks are cancelled, and the results that ended before it were already handed to
@@ -157,10 +158,17 @@ def disconnect() -> None:
         _ray().shutdown()
 
 
-def _run_job(function: Callable[[Spec], Result], spec: Spec) -> Result:
-    """One job in a Ray worker: one torch thread (the task has one CPU), then ``function(spec)``."""
+def _run_job(function: Callable[[Spec], Result], spec: Spec, folder: str) -> Result:
+    """One job in a Ray worker: in ``folder`` (the driver's working directory, so that relative paths mean what
+    they mean there), with one torch thread (the task has one CPU), ``function(spec)``."""
     import torch
 
+    if os.getcwd() != folder:
+        try:
+            os.chdir(folder)
+        except OSError:
+            raise FileNotFoundError(f"{socket.gethostname()} has no folder {folder}, where the run was started: every "
+                                    "machine of the cluster needs the same checkout at the same path") from None
     torch.set_num_threads(1)
     return function(spec)
 
@@ -177,7 +185,7 @@ def run_ray(function: Callable[[Spec], Result], specs: Sequence[Spec], names: Se
         return []
     task = ray.remote(num_cpus=1, max_retries=0)(_run_job)
     shared = ray.put(function)
-    refs = [task.remote(shared, spec) for spec in specs]
+    refs = [task.remote(shared, spec, os.getcwd()) for spec in specs]
     index = {ref: i for i, ref in enumerate(refs)}
     pending = list(refs)
     results: list[Any] = [None] * len(specs)
