@@ -39,9 +39,14 @@ from common import machine, machine_words
 from piga.cli.common import ray_address
 from piga.io.atomic import atomic_output, write_json
 
+#: The blind benchmark's own sequences per case (``diagnose_blind.py --sequences``), for the page.
+BLIND_SEQUENCES = 200
 #: Fields left out of the comparison, as (farm, field name, why).
 EXCLUDED = (("sweep", "plan_ms_median, plan_ms_p95 (per episode and per summary)", "plan times per step: timings"),
-            ("blind", "seconds (per case)", "wall time of the case"))
+            ("blind", "seconds (per case)", "wall time of the case"),
+            ("blind, each case's report.json", "command, data, model", "the paths it names: the model as given, the case's own files"))
+#: Top-level fields of a piga-diagnose report.json that name paths (left out of the comparison).
+REPORT_PATHS = ("command", "data", "model")
 
 
 def without(value: Any, drop: tuple[str, ...]) -> Any:
@@ -98,6 +103,23 @@ def compare_sweeps(a: Path, b: Path) -> dict[str, Any]:
             "episodes": sum(len(r["episodes"]) for r in x["results"])}
 
 
+def report_bytes(path: Path) -> bytes:
+    """A diagnosis report as compared: canonical JSON without the paths it names (:data:`REPORT_PATHS`)."""
+    return canonical({k: v for k, v in json.loads(path.read_text()).items() if k not in REPORT_PATHS})
+
+
+def compare_files(a: Path, b: Path) -> dict[str, Any]:
+    """The cases' own files in two blind-benchmark work folders: each data file byte for byte, each diagnosis
+    report as canonical JSON without the paths it names."""
+    data = sorted(p.name for p in a.glob("case*.h5"))
+    reports = sorted(p.parent.name for p in a.glob("case*/report.json"))
+    same_data = [n for n in data if (b / n).exists() and (a / n).read_bytes() == (b / n).read_bytes()]
+    same_reports = [n for n in reports if (b / n / "report.json").exists()
+                    and report_bytes(a / n / "report.json") == report_bytes(b / n / "report.json")]
+    return {"data_files": len(data), "data_files_identical": len(same_data), "reports": len(reports),
+            "reports_identical": len(same_reports)}
+
+
 def compare_blind(a: Path, b: Path) -> dict[str, Any]:
     """Two blind-benchmark outputs compared case by case without their wall times; the median seconds per case."""
     x, y = (json.loads(p.read_text()) for p in (a, b))
@@ -138,17 +160,22 @@ def where_farm(address: str, tasks: int) -> dict[str, Any]:
             "tasks_per_node": dict(Counter(r["node"] for r in ran)), "tasks": ran}
 
 
+def code(text: str) -> str:
+    """``text`` as inline code in Markdown, also when it holds backticks."""
+    return f"`` {text} ``" if "`" in text else f"`{text}`"
+
+
 def node_words(node: dict[str, Any]) -> str:
     return f"{node['node']} with {node['cpus']:g} CPU"
 
 
 def markdown(record: dict[str, Any]) -> str:
     yes = {True: "**identical**", False: "**differ**"}
-    sweep, blind, cmd = record["sweep"], record["blind"], record["commands"]
+    sweep, blind, files, cmd = record["sweep"], record["blind"], record["blind_files"], record["commands"]
     t = record["seconds"]
     lines = [
         "# The job runner's backends: local processes and Ray", "",
-        f"Command: `{record['command']}`", "",
+        f"Command: {code(record['command'])}", "",
         f"Machine: {machine_words(record['machine'])}; no GPU. The machine was shared with other work while this ran, "
         "so the times are indicative only.", "",
         "Each farm ran twice with the same seeds, once on local processes (two at a time) and once on Ray "
@@ -159,10 +186,14 @@ def markdown(record: dict[str, Any]) -> str:
         "| farm | jobs | local processes | Ray | records |", "|---|---|---|---|---|",
         f"| control sweep: piga and the oracle at {record['multipliers']} multipliers, {record['episodes']} episodes each "
         f"| {sweep['jobs']} | {t['sweep_local']:.0f} s | {t['sweep_ray']:.0f} s | {yes[sweep['identical']]} |",
-        f"| blind diagnosis, {blind['cases']} cases of {record['sequences']} sequences (top-1: {blind['top1'][0]:.0%}, "
+        f"| blind diagnosis, {blind['cases']} cases of {record['sequences']} sequences{record['sequences_note']} (top-1: {blind['top1'][0]:.0%}, "
         f"{blind['top1'][1]:.0%}) | {blind['cases']} | median {blind['median_case_seconds'][0]:.0f} s per case | median "
-        f"{blind['median_case_seconds'][1]:.0f} s per case | {yes[blind['identical']]} |", "",
-        "The commands (`MODEL` is the trained run folder named in the command above):", "",
+        f"{blind['median_case_seconds'][1]:.0f} s per case | {yes[blind['identical']]} |",
+        f"| the blind cases' own files: data files (byte for byte), diagnosis reports | {files['data_files']}, "
+        f"{files['reports']} | | | {files['data_files_identical']} and {files['reports_identical']} "
+        f"{yes[files['data_files_identical'] == files['data_files'] and files['reports_identical'] == files['reports']]} |",
+        "",
+        "The commands it ran:", "",
         *[f"- {name}: `{c}`" for name, c in cmd.items()], "",
     ]
     if (cluster := record.get("cluster")) is not None:
@@ -190,7 +221,7 @@ def main() -> int:
     p.add_argument("--cases", type=int, default=20, help="blind-benchmark cases (default %(default)s)")
     p.add_argument("--sequences", type=int, default=100, help="sequences per blind case (default %(default)s)")
     p.add_argument("--cluster", type=ray_address, metavar="HOST:PORT",
-                   help="also run the sweep, and a farm that reports where each task ran, on this Ray cluster")
+                   help="also run the sweep, and a farm that reports where each of its tasks ran, on this Ray cluster")
     p.add_argument("--cluster-note", default="", help="what the cluster is, for the page")
     args = p.parse_args()
     work = Path(args.work)
@@ -211,15 +242,20 @@ def main() -> int:
     record: dict[str, Any] = {
         "command": shlex.join(["python", "benchmarks/backends.py", *sys.argv[1:]]), "machine": machine(), "ray": args.ray,
         "multipliers": len(parse_range(args.sweep)), "episodes": args.episodes, "sequences": args.sequences,
+        "sequences_note": "" if args.sequences == BLIND_SEQUENCES else f" (the benchmark's default: {BLIND_SEQUENCES})",
         "excluded": [{"farm": f, "fields": x, "why": w} for f, x, w in EXCLUDED],
         "commands": {k: shown(c) for k, c in commands.items()}, "seconds": seconds,
         "sweep": compare_sweeps(work / "sweep-local.json", work / "sweep-ray.json"),
         "blind": compare_blind(work / "blind-local.json", work / "blind-ray.json"),
+        "blind_files": compare_files(work / "blind-local-cases", work / "blind-ray-cases"),
     }
     if args.cluster:
         command = sweep_command(args, work / "sweep-cluster", args.cluster)
         seconds["sweep_cluster"] = run_step(command, work / "sweep-cluster.log", work / "sweep-cluster.time.json")
-        record["cluster"] = {"where": where_farm(args.cluster, 8), "command": shown(command), "note": args.cluster_note,
+        where = work / "cluster-where.json"
+        if not where.exists():
+            write_json(where, where_farm(args.cluster, 8))
+        record["cluster"] = {"where": json.loads(where.read_text()), "command": shown(command), "note": args.cluster_note,
                              "sweep": compare_sweeps(work / "sweep-local.json", work / "sweep-cluster.json")}
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -227,7 +263,9 @@ def main() -> int:
     with atomic_output(out.with_suffix(".md"), overwrite=True) as tmp:
         tmp.write_text(markdown(record))
     print(markdown(record))
+    files = record["blind_files"]
     identical = record["sweep"]["identical"] and record["blind"]["identical"] and \
+        files["data_files_identical"] == files["data_files"] and files["reports_identical"] == files["reports"] and \
         record.get("cluster", {}).get("sweep", {}).get("identical", True)
     return 0 if identical else 1
 
