@@ -15,7 +15,7 @@ ray = pytest.importorskip("ray", reason="Ray is not installed (the ray extra: pi
 
 from piga.control.jobs import ControlJob, run_split  # noqa: E402
 from piga.io.pool import Backend, BackendError, JobFailed, run_pool  # noqa: E402
-from piga.io.ray_backend import check_ray_head  # noqa: E402
+from piga.io.ray_backend import _local_instance, check_ray_head  # noqa: E402
 from tests.test_episodes import EPISODES, MPC, RECORDED, _without_timing  # noqa: E402
 
 RAY = Backend("ray")
@@ -111,3 +111,20 @@ def _where() -> str:
 def test_a_job_runs_in_the_folder_the_run_was_started_in(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.chdir(tmp_path)  # relative paths in a job mean what they mean here, on any node
     assert run_pool(lambda _: _where(), [0, 1], progress=False, backend=RAY) == [str(tmp_path)] * 2
+
+
+def test_auto_starts_an_instance_when_the_one_ray_start_recorded_is_gone(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Ray's own "auto" would retry an instance stopped without `ray stop` for minutes; piga starts its own."""
+    import ray._private.services as services
+
+    with socket.socket() as free:
+        free.bind(("127.0.0.1", 0))
+        gone = f"127.0.0.1:{free.getsockname()[1]}"
+    monkeypatch.delenv("RAY_ADDRESS", raising=False)
+    monkeypatch.setattr(services, "find_bootstrap_address", lambda temp_dir: gone)
+    assert _local_instance() == "local"
+    live = ray.get_runtime_context().gcs_address
+    monkeypatch.setattr(services, "find_bootstrap_address", lambda temp_dir: live)
+    assert _local_instance() == live
+    monkeypatch.setenv("RAY_ADDRESS", "10.0.0.5:6379")  # the user's own choice is kept, and checked when joining
+    assert _local_instance() == "10.0.0.5:6379"

@@ -1,9 +1,9 @@
 """The Ray backend of :func:`piga.io.pool.run_pool`: each job a Ray task of one CPU and one torch thread.
 
 Ray is an optional extra (``pip install -e '.[ray]'``), imported here only, when a run asks for it.
-:func:`connect` joins a cluster once per process (or starts a local Ray instance, for "auto"), after
-checking that something at the address answers as a Ray head does, so that a wrong address is refused
-in seconds rather than after Ray's own minutes of retries. :func:`run_ray` submits every job at once
+:func:`connect` joins a cluster once per process (or, for "auto", the instance running on this machine, or
+starts one), after checking that a Ray head answers at the address, so that a wrong address is refused in
+seconds rather than after Ray's own minutes of retries. :func:`run_ray` submits every job at once
 (Ray runs as many as the cluster has free CPUs), each in this process's working directory (so every machine
 needs the same checkout at the same path), gives each result to ``on_result`` in this process as it ends,
 and returns the results in the order of the jobs.
@@ -119,6 +119,27 @@ def _use_token_if_any(starts_local: bool) -> None:
         pass
 
 
+def _local_instance() -> str:
+    """Where "auto" goes: ``$RAY_ADDRESS`` if set; else the Ray instance that ``ray start`` last started on this
+    machine, if it still answers; else "local" (start one). Ray's own "auto" trusts the address ``ray start``
+    recorded even when that instance is gone (stopped without ``ray stop``), and then retries it for minutes."""
+    if (given := os.environ.get("RAY_ADDRESS")) and given != "auto":
+        return given
+    try:
+        from ray._private.services import find_bootstrap_address
+
+        recorded = find_bootstrap_address(None)
+    except Exception:  # Ray's internals moved: start an instance of this command's own
+        return "local"
+    if not recorded:
+        return "local"
+    try:
+        check_ray_head(*host_port(recorded))
+    except (BackendError, ValueError):
+        return "local"
+    return recorded
+
+
 def connect(address: str = "auto") -> None:
     """Joins the Ray cluster at ``address`` (HOST:PORT), or for "auto" the instance that runs on this machine
     (or ``$RAY_ADDRESS``), starting one when there is none; once per process (a connection already made, by
@@ -128,25 +149,32 @@ def connect(address: str = "auto") -> None:
     ray = _ray()
     if ray.is_initialized():
         return
-    target = None if address == "auto" else address
-    given = target or os.environ.get("RAY_ADDRESS")
-    if given and given not in ("auto", "local"):
+    target = address if address != "auto" else _local_instance()
+    if target != "local":
         try:
-            check_ray_head(*host_port(given))
+            check_ray_head(*host_port(target))
         except ValueError as exc:
             raise BackendError(str(exc)) from None
-    _use_token_if_any(starts_local=given is None)
+    _use_token_if_any(starts_local=target == "local")
     main_thread = threading.current_thread() is threading.main_thread()
     sigterm = signal.getsignal(signal.SIGTERM) if main_thread else None
     try:
-        ray.init(address=target, logging_level=logging.WARNING, **({} if target else {"include_dashboard": False}))
+        ray.init(address=target, logging_level=logging.WARNING,
+                 **({"include_dashboard": False} if target == "local" else {}))
     except (ConnectionError, RuntimeError, ValueError) as exc:
         message = " ".join(str(exc).split())[:300]
         raise BackendError(f"Ray could not connect to {address}: {message}") from None
     finally:
-        if main_thread:  # ray.init makes SIGTERM exit at once; run_cli's handler turns it into KeyboardInterrupt
-            signal.signal(signal.SIGTERM, sigterm)
+        # Ray takes SIGTERM over (to die with a stack dump); the caller's handler is put back (run_cli's raises
+        # KeyboardInterrupt), and where there was none, SIGTERM exits through SystemExit, so that run_ray cancels
+        # its tasks and stops the instance it started rather than leaving Ray's agents behind.
+        if main_thread:
+            signal.signal(signal.SIGTERM, sigterm if sigterm not in (signal.SIG_DFL, None) else _exit_on_sigterm)
     _started_here = True
+
+
+def _exit_on_sigterm(signum: int, frame: object) -> None:
+    raise SystemExit(128 + signum)
 
 
 def disconnect() -> None:
