@@ -21,6 +21,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+import h5py
 import numpy as np
 import torch
 from tqdm.auto import tqdm
@@ -28,8 +29,10 @@ from tqdm.auto import tqdm
 from agents.planet.config import PlanetTrainConfig, RSSMConfig
 from agents.planet.rssm import WorldModel, model_steps
 from agents.planet.run import load_planet
-from piga.data.schema import (DataFormatError, DatasetInfo, check_actions, check_frames_have_signal, inspect_dataset, load_rewards,
-                              read_sequences)
+from piga.data.schema import (DataFormatError, DatasetInfo, check_actions_file, check_frames_have_signal, inspect_dataset, load_rewards,
+                              read_sequences, split_indices)
+from piga.data.windows import SequenceReader, loads_whole
+from piga.io.resources import available_memory
 from piga.io.atomic import write_json
 from piga.io.checkpoint import CHECKPOINT, RunKind, write_checkpoint
 from piga.training.train import TrainingDiverged
@@ -50,33 +53,47 @@ class PlanetState:
 
 
 class _Sequences:
-    """The train split in memory: frames uint8 (N, T, H, W), actions (N, T, A), rewards (N, T);
-    ``extra``'s train split (the iterative mode's collected episodes, all in it) appended."""
+    """A split's sequences (its first ``max_sequences`` with it): frames uint8 (N, T, H, W), actions (N, T, A),
+    rewards (N, T); ``extra``'s train split (the iterative mode's collected episodes, all in it) appended.
+    The frames are in memory, or with ``stream`` read from the file through a bounded cache
+    (:class:`piga.data.windows.SequenceReader`), for a file larger than memory: the same batches either way."""
 
-    def __init__(self, data: str | Path, split: str, max_sequences: int = 0, extra: str | Path | None = None):
-        frames, actions = read_sequences(data, split)
-        rewards = load_rewards(data, split)
-        if max_sequences:
-            frames, actions, rewards = frames[:max_sequences], actions[:max_sequences], rewards[:max_sequences]
-        if extra is not None:
-            more_frames, more_actions = read_sequences(extra, "train")
-            frames, actions = np.concatenate([frames, more_frames]), np.concatenate([actions, more_actions])
-            rewards = np.concatenate([rewards, load_rewards(extra, "train")])
-        self.frames = torch.from_numpy(frames)
+    def __init__(self, data: str | Path, split: str, max_sequences: int = 0, extra: str | Path | None = None,
+                 stream: bool = False):
+        limit = max_sequences or None
+        rewards = load_rewards(data, split, limit=limit)
+        self.reader: SequenceReader | None = None
+        if stream:
+            if extra is not None:
+                raise ValueError("streamed sequences take no extra file")
+            self.reader = SequenceReader(data, split_indices(data, split)[:limit])
+            with h5py.File(data, "r") as f:
+                actions = f["actions"][()][self.reader.sequences].astype(np.float32)  # (N, T, A)
+            self.frames = None
+        else:
+            frames, actions = read_sequences(data, split, limit=limit)
+            if extra is not None:
+                more_frames, more_actions = read_sequences(extra, "train")
+                frames, actions = np.concatenate([frames, more_frames]), np.concatenate([actions, more_actions])
+                rewards = np.concatenate([rewards, load_rewards(extra, "train")])
+            self.frames = torch.from_numpy(frames)
         self.actions = torch.from_numpy(actions)
         self.rewards = torch.from_numpy(rewards)
 
     def __len__(self) -> int:
-        return len(self.frames)
+        return len(self.actions)
 
     def batch(self, rng: np.random.Generator, size: int, length: int, repeat: int = 1) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """``size`` random windows of ``length`` model steps of ``repeat`` env steps each
         (:func:`agents.planet.rssm.model_steps`): frames (B, L, H, W), actions (B, L, R·A), rewards (B, L)."""
         length *= repeat  # env steps
-        seq = rng.integers(len(self.frames), size=size)
-        start = rng.integers(self.frames.shape[1] - length + 1, size=size)
+        seq = rng.integers(len(self), size=size)
+        start = rng.integers(self.actions.shape[1] - length + 1, size=size)
         rows = torch.from_numpy(seq)[:, None]
         cols = torch.from_numpy(start)[:, None] + torch.arange(length)[None]  # (B, L)
+        if self.reader is not None:
+            frames = torch.from_numpy(np.stack([self.reader(i)[j : j + length] for i, j in zip(seq, start)]))
+            return model_steps(frames, self.actions[rows, cols], self.rewards[rows, cols], repeat)
         return model_steps(self.frames[rows, cols], self.actions[rows, cols], self.rewards[rows, cols], repeat)
 
 
@@ -202,7 +219,7 @@ def train_planet(
     run_dir = Path(run_dir)
     ckpt_path = run_dir / CHECKPOINT
     info = inspect_dataset(data)
-    check_actions(read_sequences(data, "train")[1], data)
+    check_actions_file(data)  # the actions only: the frames may not fit in memory
     if config.threads:
         torch.set_num_threads(config.threads)
     rng = np.random.default_rng(config.seed)
@@ -220,7 +237,10 @@ def train_planet(
     optimizer = torch.optim.Adam(model.parameters(), lr=config.lr, eps=config.adam_eps)
     if resume:
         optimizer.load_state_dict(ckpt["optimizer"])
-    seqs = _Sequences(data, "train", config.max_sequences, extra_data)
+    n_frames = (min(config.max_sequences or info.split_counts["train"], info.split_counts["train"]) * info.steps
+                * int(np.prod(info.image_shape)))
+    seqs = _Sequences(data, "train", config.max_sequences, extra_data,
+                      stream=extra_data is None and not loads_whole(n_frames, available_memory()))
     writer: Any = None
     model.train()
     started = time.monotonic() - state.elapsed

@@ -17,7 +17,7 @@ from piga.cli.common import (NOT_CONVERGED, ArgumentParser, Interrupted, PigaErr
 from piga.io.checkpoint import CHECKPOINT, require_piga_run
 
 #: The recipe options a user may give; each is a TrainConfig field of the same name.
-RECIPE_OPTIONS = ("epochs", "budget_steps", "max_minutes", "batch_size", "lr", "lr_physics", "warmup_fraction")
+RECIPE_OPTIONS = ("epochs", "budget_steps", "max_minutes", "batch_size", "lr", "lr_physics", "warmup_fraction", "window_stride")
 
 PROG = "piga-train-model"
 OUTPUTS = (CHECKPOINT, "metrics.json", "config.json", "rollout.png", "templates.png", "curves.png", "tensorboard")
@@ -26,6 +26,7 @@ OUTPUTS = (CHECKPOINT, "metrics.json", "config.json", "rollout.png", "templates.
 def build_parser() -> ArgumentParser:
     from piga.world.physics import GravityOptions  # noqa: PLC0415 (torch loads only when the command runs)
     from piga.training.train import PRESETS, TrainConfig  # noqa: PLC0415
+    from piga.io.choices import literal_fields  # noqa: PLC0415
 
     fast, paper = TrainConfig(), PRESETS["paper"].train
 
@@ -56,6 +57,8 @@ def build_parser() -> ArgumentParser:
     recipe("--lr-physics", "lr_physics", positive_float, "physical-parameter learning rate, log space")
     recipe("--warmup-fraction", "warmup_fraction", unit_fraction, "fraction of the run's steps that train the autoencoder "
            "alone, first")
+    recipe("--window-stride", "window_stride", positive_int, "frames between the start frames of a sequence's training "
+           "windows: a stride of T - L - T_pred + 1 takes one window per sequence, for a file of many sequences")
     p.add_argument("--signed-actuation", action="store_true",
                    help="learn the sign of a too (a in linear space, from +0.3): for a camera on the other side of the "
                    "hinge or a motor wired the other way, which flip the actuation the frames show")
@@ -64,6 +67,13 @@ def build_parser() -> ArgumentParser:
                       help="gravity data only, the paper's m run: hold g at G (your value; the file's parameters are "
                       "never read) and learn the bodies' shared mass m instead, starting from 1/G so that the force "
                       "g·m starts at 1 as in the g run")
+    p.add_argument("--data-loading", choices=dict(literal_fields(TrainConfig))["data_loading"], default=None,
+                   help="'memory': load the train split's frames whole; 'stream': read them from the file through a "
+                   "bounded cache, for a file larger than memory; 'auto': load when they need under 2 GiB and under a "
+                   f"quarter of the available memory (default {fast.data_loading})")
+    p.add_argument("--stream-cache-mb", type=positive_int, default=None, metavar="MB",
+                   help="the streaming reader's cache of decompressed sequences, capped at a quarter of the available "
+                   f"memory (default {fast.stream_cache_mb})")
     p.add_argument("--seed", type=seed_int, default=fast.seed, help="seed of initialisation and sampling (default %(default)s)")
     p.add_argument("--threads", type=thread_count, default=fast.threads, help="torch CPU threads (default %(default)s: torch's choice)")
     p.add_argument("--seed-retries", type=nonnegative_int, default=fast.seed_retries, metavar="N",
@@ -95,7 +105,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     from piga.data.schema import MAX_SEED, fingerprint, inspect_dataset
     from piga.training.report import write_run_report
     from piga.io.runs import load_model
-    from piga.training.train import TrainConfig, TrainingDiverged, check_trainable, model_config_for, preset_for, train
+    from piga.training.train import (TrainConfig, TrainingDiverged, check_trainable, model_config_for, preset_for,
+                                     resolve_loading, train)
 
     info = inspect_dataset(args.data)
     overrides = {k: getattr(args, k) for k in RECIPE_OPTIONS if getattr(args, k) is not None}
@@ -119,7 +130,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         changed = (sorted(set(overrides) - {"epochs", "budget_steps", "max_minutes"}) + (["signed_actuation"] if args.signed_actuation else [])
                    + (["fixed_g"] if args.fixed_g is not None else []) + (["preset"] if args.preset != "fast" else [])
                    + (["seed"] if args.seed not in (saved.seed, TrainConfig().seed) else [])
-                   + (["seed_retries"] if args.seed_retries != TrainConfig().seed_retries else []))
+                   + (["seed_retries"] if args.seed_retries != TrainConfig().seed_retries else [])
+                   + [name for name in ("data_loading", "stream_cache_mb")
+                      if getattr(args, name) is not None and getattr(args, name) != getattr(saved, name)])
         if changed:
             raise PigaError(f"--resume keeps the run's recipe; drop {', '.join('--' + c.replace('_', '-') for c in changed)}")
         train_config = replace(saved, **overrides)
@@ -128,8 +141,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         record.setdefault("resumed", []).append(command)
     else:
         recipe = preset_for(args.preset, info)
+        reading = {name: getattr(args, name) for name in ("data_loading", "stream_cache_mb") if getattr(args, name) is not None}
         train_config = replace(recipe.train, seed=args.seed, threads=args.threads, seed_retries=args.seed_retries,
-                               **overrides)  # explicit options win
+                               **overrides, **reading)  # explicit options win
+        train_config = resolve_loading(train_config, info)  # as the run records it
         model_config = model_config_for(info, recipe.model)
         for flag, option, value in (("--signed-actuation", "signed_actuation", args.signed_actuation or None),
                                     ("--fixed-g", "fixed_g", args.fixed_g)):
@@ -154,6 +169,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(f"training on {args.data} ({info.split_counts['train']} train sequences x {info.steps} frames); "
           f"{info.system} parameters start at {_start_values(fresh)} -> {run_dir}")
     print(f"plan: {plan.describe(model_config.pred_frames)}")
+    if train_config.data_loading == "stream":
+        print(f"reading: the frames are streamed from {args.data} through a {train_config.stream_cache_mb} MiB cache, in "
+              "blocks of the sequences it holds")
     if not args.resume and model_config.pred_frames < recipe.model.pred_frames:
         print(f"{PROG}: note: sequences of {info.steps} frames: the physics predicts {model_config.pred_frames} frames "
               f"per window, not the recipe's {recipe.model.pred_frames}", file=sys.stderr)

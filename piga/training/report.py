@@ -41,10 +41,10 @@ def write_run_report(model: PhysicsModel, state: TrainState, data: str | Path, r
         eval_config = EvalConfig(split=split, extrapolate_frames=eval_config.extrapolate_frames,
                                  max_sequences=eval_config.max_sequences)
     metrics = evaluate(model, data, eval_config)
-    frames, actions = read_sequences(data, split)
+    frames, actions = read_sequences(data, split, limit=eval_config.max_sequences)
     objects = None
     if model.config.coord_dim == 2:  # a scene of objects: did the autoencoder find each of them?
-        objects = check_objects(model, frames[: eval_config.max_sequences])
+        objects = check_objects(model, frames)
         metrics["objects"] = objects.to_dict()
     metrics["training"] = {"epochs": state.epoch, "steps": state.step, "seconds": state.elapsed,
                            "threads": torch.get_num_threads()}
