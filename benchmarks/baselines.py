@@ -441,7 +441,8 @@ def train_piga(data: Path, run: Path, seed: int, cfg: BenchConfig, n: int) -> fl
     from piga.training.train import TrainConfig, train
 
     # device="cpu": the comparison's training times are the CPU's, on every machine
-    config = TrainConfig(epochs=piga_epochs(cfg, n), seed=seed, threads=1, device="cpu", **cfg.overrides.get("piga", {}))
+    config = TrainConfig(epochs=piga_epochs(cfg, n), seed=seed, threads=1, device="cpu",
+                         **cfg.overrides.get("piga", {}))
     started = (run / "checkpoint.pt").exists()
     state = load_model(run)[1]["state"] if started else None
     if state is None or state["epoch"] < config.epochs:  # not begun, or stopped part-way: resume

@@ -236,8 +236,8 @@ def main(argv: list[str] | None = None) -> int:
     if min(args.steps, args.repeats, args.threads) < 1 or args.warmup < 0:
         p.error("--steps, --repeats and --threads must be >= 1 and --warmup >= 0")
     if args.device == "cuda" and not cuda_available():
-        print("device_speed.py: error: --device cuda: no CUDA device is available (torch.cuda.is_available() is False); "
-              "run it on a machine with a GPU, or with --device cpu to time the CPU alone", file=sys.stderr)
+        print("device_speed.py: error: --device cuda: no CUDA device is available "
+              "(torch.cuda.is_available() is False); run it on a machine with a GPU, or with --device cpu to time the CPU alone", file=sys.stderr)
         return 1
     devices = [torch.device("cpu")] + ([resolve_device("cuda")] if args.device == "cuda" else [])
     try:

@@ -49,7 +49,8 @@ BEFORE = TrainConfig(epochs=16, warmup_fraction=200 / BEFORE_STEPS, curriculum_f
 
 
 def recipe(name: str, threads: int) -> TrainConfig:
-    """The TrainConfig of a recipe name (see the module docstring), on the CPU: the times are the CPU's on every machine."""
+    """The TrainConfig of a recipe name (see the module docstring), on the CPU: the times are the CPU's on
+    every machine."""
     if name == "today":
         return TrainConfig(threads=threads, device="cpu")
     if name == "before":

@@ -152,8 +152,8 @@ def open_loop_check(model: WorldModel, data: str | Path, run_dir: Path, seed: in
     frames, actions, rewards = model_steps(seqs.frames, seqs.actions, seqs.rewards, model.config.action_repeat)
     context = min(OPEN_LOOP_CONTEXT, frames.shape[1] - 1)
     device = module_device(model)
-    decoded, predicted = model.open_loop(frames.to(device), actions.to(device), context, torch.Generator().manual_seed(seed))
-    decoded, predicted = decoded.cpu(), predicted.cpu()
+    generator = torch.Generator().manual_seed(seed)
+    decoded, predicted = (x.cpu() for x in model.open_loop(frames.to(device), actions.to(device), context, generator))
     imagined = (decoded.movedim(2, -1) + 0.5).clamp(0, 1)  # (B, T, H, W, C) in [0, 1]
     real = frames.float() / 255  # (B, T, H, W) gray, or (B, T, H, W, C)
     if real.dim() == 4:

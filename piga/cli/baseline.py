@@ -436,7 +436,8 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
             if autoencoder is not None and not args.resume:
                 from agents.sb3.autoencoder import train_autoencoder
 
-                _, mse = train_autoencoder(args.data, ae_config, autoencoder, progress=not args.quiet, device=config.device)
+                _, mse = train_autoencoder(args.data, ae_config, autoencoder, progress=not args.quiet,
+                                           device=config.device)
                 record["autoencoder"] = {**ae_config.__dict__, "train_mse": mse}
                 print(f"autoencoder trained on {args.data}: per-pixel MSE {mse:.5f}")
             print(f"training {config.algo.upper()} from {config.obs} for {config.steps} env steps -> {run_dir}")

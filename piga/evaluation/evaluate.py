@@ -96,8 +96,8 @@ def rollout_frames(model: PhysicsModel, frames: np.ndarray, actions: np.ndarray,
     coords = model.encode(x)
     acts = last = None
     if cfg.action_dim:
-        acts = torch.from_numpy(actions[:, cfg.input_frames - 1 : cfg.input_frames - 1 + steps]).float().to(device)  # (B, S, A)
-        last = torch.from_numpy(actions[:, cfg.input_frames - 2]).float().to(device)  # (B, A)
+        acts = torch.from_numpy(actions[:, cfg.input_frames - 1 : cfg.input_frames - 1 + steps]).float().to(device)
+        last = torch.from_numpy(actions[:, cfg.input_frames - 2]).float().to(device)  # (B, A); acts (B, S, A)
     pred_coords = model.predict(coords, acts, steps, last)
     return model.decoder(pred_coords).cpu().numpy(), pred_coords.cpu().numpy()
 
