@@ -12,10 +12,10 @@ folder, the agent (:class:`agents.sb3.run.SB3Agent`) and the evaluation are the 
 Training runs in chunks of ``eval_every`` steps (whole episodes). After each chunk, ``EvalCallback``
 has scored the policy, and one atomic ``checkpoint.pt`` holds the SB3 model, its replay buffer, the
 global numpy and torch RNG states (SB3 samples batches and noise from them; the GPU's too when it
-trains on one) and the number of episodes started; every training episode's start depends on (seed, episode index) only
-(:class:`envs.observations.EpisodeSeeds`) and every evaluation uses the same seeded starts. So
-``resume`` continues exactly as the uninterrupted run would. ``model.zip`` (SB3's format) is the
-latest policy, for ``DDPG.load``.
+trains on one) and the number of episodes started; every training episode's start depends on
+(seed, episode index) only (:class:`envs.observations.EpisodeSeeds`) and every evaluation uses the
+same seeded starts. So ``resume`` continues exactly as the uninterrupted run would (on the same
+device). ``model.zip`` (SB3's format) is the latest policy, for ``DDPG.load``.
 """
 
 from __future__ import annotations

@@ -96,8 +96,9 @@ class TrainConfig:
     device: Device = "auto"
     """Where to train (:mod:`piga.io.device`): "auto" (a CUDA GPU when torch sees one, else the CPU), "cpu" or
     "cuda". Not part of the recipe: a run resumes on any device. Sampling draws from the CPU's generator
-    everywhere; a GPU's float32 kernels round differently, so its numbers differ from the CPU's in the last
-    digits. No mixed precision: its effect on the identified parameters has not been measured."""
+    everywhere, but a GPU's kernels round differently (cuDNN may convolve in TF32, PyTorch's default), so a
+    GPU run is not the CPU's bit for bit. No mixed precision: its effect on the identified parameters has
+    not been measured."""
     seed_retries: int = 1
     """``piga-train-model``: a scene run whose object check finds an object missing
     (:mod:`piga.evaluation.objects`, which reads frames only) is trained again from its start with the
