@@ -6,7 +6,8 @@ split (frames, actions and ``/rewards``), take one Adam step on PlaNet's loss
 (:meth:`agents.planet.rssm.WorldModel.loss`), clip the gradient norm, and every
 ``checkpoint_every`` steps write an atomic ``checkpoint.pt``, one point of the learning curve and
 TensorBoard scalars. Randomness comes from two explicit generators (numpy for the batches, torch
-for the latent samples), saved in each checkpoint, so ``resume`` continues exactly. A non-finite
+for the latent samples), saved in each checkpoint, so ``resume`` continues exactly. Both draw on the
+CPU whatever ``PlanetTrainConfig.device``; the batches are then copied to the device. A non-finite
 loss stops training with :class:`piga.training.train.TrainingDiverged`, naming the last good checkpoint.
 
 A run folder holds ``config.json`` (``kind: "planet"``), ``checkpoint.pt``, ``tensorboard/`` and
@@ -35,6 +36,7 @@ from piga.data.windows import SequenceReader, loads_whole
 from piga.io.resources import available_memory
 from piga.io.atomic import write_json
 from piga.io.checkpoint import CHECKPOINT, RunKind, write_checkpoint
+from piga.io.device import module_device, resolve_device
 from piga.training.train import TrainingDiverged
 
 __all__ = ["PlanetState", "check_planet_data", "rssm_config_for", "train_planet"]
@@ -166,7 +168,9 @@ def open_loop_check(model: WorldModel, data: str | Path, run_dir: Path, seed: in
     seqs = _Sequences(data, split, sequences)
     frames, actions, rewards = model_steps(seqs.frames, seqs.actions, seqs.rewards, model.config.action_repeat)
     context = min(OPEN_LOOP_CONTEXT, frames.shape[1] - 1)
-    decoded, predicted = model.open_loop(frames, actions, context, torch.Generator().manual_seed(seed))
+    device = module_device(model)
+    generator = torch.Generator().manual_seed(seed)
+    decoded, predicted = (x.cpu() for x in model.open_loop(frames.to(device), actions.to(device), context, generator))
     imagined = (decoded.movedim(2, -1) + 0.5).clamp(0, 1)  # (B, T, H, W, C) in [0, 1]
     real = frames.float() / 255  # (B, T, H, W) gray, or (B, T, H, W, C)
     if real.dim() == 4:
@@ -192,7 +196,8 @@ def _valid_losses(model: WorldModel, data: str | Path, config: PlanetTrainConfig
     length = config.chunk_length
     repeat = model.config.action_repeat
     window = model_steps(seqs.frames[:, :length * repeat], seqs.actions[:, :length * repeat], seqs.rewards[:, :length * repeat], repeat)
-    parts = model.loss(*window, config, torch.Generator().manual_seed(config.seed))
+    device = module_device(model)
+    parts = model.loss(*(x.to(device) for x in window), config, torch.Generator().manual_seed(config.seed))
     return {name: float(value) for name, value in parts._asdict().items()}
 
 
@@ -213,9 +218,16 @@ def train_planet(
     more ``steps``); ``rssm`` is ignored. ``extra_data``: a file of the same frames whose sequences
     are trained on too (:mod:`agents.planet.iterative`'s collected episodes).
 
+    The model trains on ``config.device`` (:func:`piga.io.device.resolve_device`), where ``metrics.json``'s
+    losses are measured too, and is returned on the CPU, where the latent planner runs.
+
     Returns:
-        The trained model (eval mode) and the final state.
+        The trained model (eval mode, on the CPU) and the final state.
+
+    Raises:
+        ValueError: ``config.device`` is "cuda" and torch sees no CUDA device (before anything is read).
     """
+    device = resolve_device(config.device)
     run_dir = Path(run_dir)
     ckpt_path = run_dir / CHECKPOINT
     info = inspect_dataset(data)
@@ -234,6 +246,7 @@ def train_planet(
         model = WorldModel(rssm or rssm_config_for(info))
         state = PlanetState()
     check_planet_data(info, config, model.config.action_repeat)
+    model.to(device)
     optimizer = torch.optim.Adam(model.parameters(), lr=config.lr, eps=config.adam_eps)
     if resume:
         optimizer.load_state_dict(ckpt["optimizer"])
@@ -249,7 +262,8 @@ def train_planet(
     bar = tqdm(total=config.steps, initial=state.step, desc="planet", unit="step", disable=not progress)
     try:
         while state.step < config.steps:
-            frames, actions, rewards = seqs.batch(rng, config.batch_size, config.chunk_length, model.config.action_repeat)
+            batch = seqs.batch(rng, config.batch_size, config.chunk_length, model.config.action_repeat)
+            frames, actions, rewards = (x.to(device) for x in batch)  # uint8 (B, L, H, W), (B, L, R·A), (B, L)
             parts = model.loss(frames, actions, rewards, config, generator)
             if not torch.isfinite(parts.loss):
                 good = ckpt_path if ckpt_path.exists() else None
@@ -296,9 +310,10 @@ def train_planet(
         "collected_sequences": 0 if extra_data is None else inspect_dataset(extra_data).n_sequences,
         "steps": state.step,
         "train_seconds": state.elapsed,
+        "device": str(device),
         "learning_curve": state.history,
         "valid": _valid_losses(model, data, config, info),
         "open_loop": open_loop_check(model, data, run_dir, config.seed),
     }
     write_json(run_dir / "metrics.json", metrics)
-    return model, state
+    return model.cpu(), state

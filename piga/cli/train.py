@@ -11,9 +11,10 @@ from pathlib import Path
 
 from typing import Any
 
-from piga.cli.common import (NOT_CONVERGED, ArgumentParser, Interrupted, PigaError, add_preset_option, command_line,
-                             format_default, missing_folders, nonnegative_int, positive_float, positive_int,
-                             remove_empty_folders, remove_outputs, run_cli, seed_int, thread_count, unit_fraction)
+from piga.cli.common import (NOT_CONVERGED, ArgumentParser, Interrupted, PigaError, add_device_option,
+                             add_preset_option, command_line, format_default, missing_folders, nonnegative_int,
+                             positive_float, positive_int, remove_empty_folders, remove_outputs, run_cli, seed_int,
+                             thread_count, unit_fraction)
 from piga.io.checkpoint import CHECKPOINT, require_piga_run
 
 #: The recipe options a user may give; each is a TrainConfig field of the same name.
@@ -76,6 +77,7 @@ def build_parser() -> ArgumentParser:
                    f"memory (default {fast.stream_cache_mb})")
     p.add_argument("--seed", type=seed_int, default=fast.seed, help="seed of initialisation and sampling (default %(default)s)")
     p.add_argument("--threads", type=thread_count, default=fast.threads, help="torch CPU threads (default %(default)s: torch's choice)")
+    add_device_option(p, fast.device)
     p.add_argument("--seed-retries", type=nonnegative_int, default=fast.seed_retries, metavar="N",
                    help="a scene whose object check finds an object missing is trained again from the start with the "
                    "next seed, up to N times (default %(default)s; 0: never; not with --resume)")
@@ -88,6 +90,9 @@ def build_parser() -> ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    from piga.io.device import resolve_device
+
+    device = resolve_device(args.device)  # --device cuda without a GPU: one line, before anything is read
     run_dir = Path(args.out)
     if run_dir.exists() and not run_dir.is_dir():
         raise PigaError(f"--out {run_dir} is a file, not a folder")
@@ -135,15 +140,15 @@ def main(argv: Sequence[str] | None = None) -> int:
                       if getattr(args, name) is not None and getattr(args, name) != getattr(saved, name)])
         if changed:
             raise PigaError(f"--resume keeps the run's recipe; drop {', '.join('--' + c.replace('_', '-') for c in changed)}")
-        train_config = replace(saved, **overrides)
+        train_config = replace(saved, device=args.device, **overrides)  # the device is not the recipe's
         model_config = saved_model.config
         record = _read_record(run_dir)
         record.setdefault("resumed", []).append(command)
     else:
         recipe = preset_for(args.preset, info)
         reading = {name: getattr(args, name) for name in ("data_loading", "stream_cache_mb") if getattr(args, name) is not None}
-        train_config = replace(recipe.train, seed=args.seed, threads=args.threads, seed_retries=args.seed_retries,
-                               **overrides, **reading)  # explicit options win
+        train_config = replace(recipe.train, seed=args.seed, threads=args.threads, device=args.device,
+                               seed_retries=args.seed_retries, **overrides, **reading)  # explicit options win
         train_config = resolve_loading(train_config, info)  # as the run records it
         model_config = model_config_for(info, recipe.model)
         for flag, option, value in (("--signed-actuation", "signed_actuation", args.signed_actuation or None),
@@ -167,7 +172,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"{PROG}: warning: {args.data} has no test sequences; metrics.json and the figures will be measured on "
               "the train split, which is not held out", file=sys.stderr)
     print(f"training on {args.data} ({info.split_counts['train']} train sequences x {info.steps} frames); "
-          f"{info.system} parameters start at {_start_values(fresh)} -> {run_dir}")
+          f"{info.system} parameters start at {_start_values(fresh)} -> {run_dir} (device {device})")
     print(f"plan: {plan.describe(model_config.pred_frames)}")
     if train_config.data_loading == "stream":
         print(f"reading: the frames are streamed from {args.data} through a {train_config.stream_cache_mb} MiB cache, in "

@@ -22,6 +22,7 @@ from skimage.metrics import structural_similarity
 
 from piga.data.schema import inspect_dataset, load_states, read_sequences
 from piga.io.choices import check_choices
+from piga.io.device import module_device
 from piga.world.model import PhysicsModel, frames_to_float
 
 #: Data-file parameter name -> model parameter name.
@@ -90,15 +91,19 @@ def rollout_frames(model: PhysicsModel, frames: np.ndarray, actions: np.ndarray,
         steps: frames to predict.
 
     Returns:
-        Predicted frames, float [B, steps, C, H, W] in [0, 1], and their coordinates [B, steps, N, D].
+        Predicted frames, float [B, steps, C, H, W] in [0, 1], and their coordinates [B, steps, N, D],
+        computed on the model's device.
     """
     cfg = model.config
-    x = frames_to_float(torch.from_numpy(frames[:, : cfg.input_frames]), cfg.channels)
+    device = module_device(model)
+    x = frames_to_float(torch.from_numpy(frames[:, : cfg.input_frames]).to(device), cfg.channels)
     coords = model.encode(x)
-    acts = torch.from_numpy(actions[:, cfg.input_frames - 1 : cfg.input_frames - 1 + steps]).float() if cfg.action_dim else None
-    last = torch.from_numpy(actions[:, cfg.input_frames - 2]).float() if cfg.action_dim else None  # (B, A)
+    acts = last = None
+    if cfg.action_dim:
+        acts = torch.from_numpy(actions[:, cfg.input_frames - 1 : cfg.input_frames - 1 + steps]).float().to(device)
+        last = torch.from_numpy(actions[:, cfg.input_frames - 2]).float().to(device)  # (B, A); acts (B, S, A)
     pred_coords = model.predict(coords, acts, steps, last)
-    return model.decoder(pred_coords).numpy(), pred_coords.numpy()
+    return model.decoder(pred_coords).cpu().numpy(), pred_coords.cpu().numpy()
 
 
 def _ssim(a: np.ndarray, b: np.ndarray) -> float:
@@ -159,8 +164,9 @@ def angle_errors(model: PhysicsModel, frames: np.ndarray, states: np.ndarray) ->
     best constant offset, and that best offset.
     """
     cfg = model.config
-    theta = np.concatenate([model.encode(frames_to_float(torch.from_numpy(frames[i : i + EVAL_BATCH]), cfg.channels))[..., 0, 0].numpy()
-                            for i in range(0, len(frames), EVAL_BATCH)])  # (B, T)
+    device = module_device(model)
+    theta = np.concatenate([model.encode(frames_to_float(torch.from_numpy(frames[i : i + EVAL_BATCH]), cfg.channels).to(device))
+                            [..., 0, 0].cpu().numpy() for i in range(0, len(frames), EVAL_BATCH)])  # (B, T)
     phi = model.physical_parameters().get("offset", 0.0)
     diff = np.angle(np.exp(1j * (states[..., 0] - theta - phi)))  # true - (model + φ), wrapped
     best = float(np.angle(np.mean(np.exp(1j * diff))))

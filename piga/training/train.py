@@ -34,6 +34,7 @@ from torch.utils.data import DataLoader, RandomSampler
 from tqdm.auto import tqdm
 
 from piga.io.choices import check_choices
+from piga.io.device import Device, resolve_device
 from piga.data.schema import DatasetInfo, check_actions_file, fingerprint, inspect_dataset, split_indices
 from piga.world.encoder import estimate_background
 from piga.world.model import SYSTEM_SHAPES, ModelConfig, PhysicsModel, frames_to_float
@@ -103,6 +104,12 @@ class TrainConfig:
     """Seed of initialisation and sampling."""
     threads: int = 0
     """torch CPU threads (0: leave torch's default)."""
+    device: Device = "auto"
+    """Where to train (:mod:`piga.io.device`): "auto" (a CUDA GPU when torch sees one, else the CPU), "cpu" or
+    "cuda". Not part of the recipe: a run resumes on any device. Sampling draws from the CPU's generator
+    everywhere, but a GPU's kernels round differently (cuDNN may convolve in TF32, PyTorch's default), so a
+    GPU run is not the CPU's bit for bit. No mixed precision: its effect on the identified parameters has
+    not been measured."""
     seed_retries: int = 1
     """``piga-train-model``: a scene run whose object check finds an object missing
     (:mod:`piga.evaluation.objects`, which reads frames only) is trained again from its start with the
@@ -337,6 +344,8 @@ class TrainState:
     """Steps in ``average``."""
     plan: dict[str, int] = field(default_factory=dict)
     """The run's :class:`TrainPlan` (as a dict), for the convergence check."""
+    device: str = ""
+    """The torch device the latest training ran on ("cpu", "cuda:0"; empty in runs saved before it was recorded)."""
 
 
 #: The fewest frames the physics predicts in a training window (T_pred) when a file's sequences are
@@ -531,7 +540,7 @@ def _accumulate_average(state: TrainState, params: list[torch.Tensor], restart: 
         state.average_count = 0
     state.average_count += 1
     for i, p in enumerate(params):
-        avg = torch.tensor(state.average[i], dtype=p.dtype)
+        avg = torch.tensor(state.average[i], dtype=p.dtype, device=p.device)
         avg += (p.detach().flatten() - avg) / state.average_count
         state.average[i] = avg.tolist()
 
@@ -585,9 +594,17 @@ def train(
     average of the physical parameters); so the result is close to, not identical with, the
     straight run.
 
+    The model trains on ``train_config.device`` (:func:`piga.io.device.resolve_device`; ``on_epoch`` sees it
+    there) and is returned on the CPU, where evaluation, control and diagnosis run. Its initialisation,
+    the background estimate and every random draw happen on the CPU whatever the device.
+
     Returns:
-        The trained model (eval mode) and the final :class:`TrainState`.
+        The trained model (eval mode, on the CPU) and the final :class:`TrainState`.
+
+    Raises:
+        ValueError: ``train_config.device`` is "cuda" and torch sees no CUDA device (before anything is read).
     """
+    device = resolve_device(train_config.device)
     run_dir = Path(run_dir)
     info = inspect_dataset(data)
     data_fingerprint = fingerprint(data)
@@ -596,10 +613,10 @@ def train(
         torch.set_num_threads(train_config.threads)
     state = TrainState()
     if resume:
-        model, ckpt = load_model(run_dir)
-        model.train()
+        model, ckpt = load_model(run_dir)  # on the CPU, wherever it was saved
+        model.to(device).train()
         optimizer = _optimizer(model, train_config)
-        optimizer.load_state_dict(ckpt["optimizer"])
+        optimizer.load_state_dict(ckpt["optimizer"])  # its moments follow the parameters to the device
         state = TrainState(**ckpt["state"])
         _set_rng_state(ckpt["rng"])
     else:
@@ -613,12 +630,15 @@ def train(
             model.encoder.background.copy_(_background(data, model.config.channels, train_config.seed))
         if model.config.init_background:
             model.decoder.init_background(model.encoder.background)
+        model.to(device)
         optimizer = _optimizer(model, train_config)
         learned = model.learned_parameter_names()
         state.start = {k: v for k, v in model.physical_parameters().items() if k in learned}
     cfg = model.config
     plan = check_trainable(info, cfg, train_config)
     state.plan = asdict(plan)
+    state.device = str(device)
+    cuda = device.type == "cuda"  # batches go through pinned memory, copied while the GPU works
     if not resume or train_config.data_loading == "auto":  # a resumed run reads as it did (a run saved before the choice: auto)
         train_config = resolve_loading(train_config, info)
     windows = SequenceWindows(data, "train", window=cfg.window, stride=train_config.window_stride,
@@ -639,7 +659,7 @@ def train(
             gen = torch.Generator().manual_seed(train_config.seed * 100_003 + state.epoch)
             sampler = (RandomSampler(windows, generator=gen) if windows.in_memory
                        else BlockShuffleSampler(windows, windows.sequences_cached, generator=gen))
-            loader = DataLoader(windows, batch_size=train_config.batch_size, sampler=sampler, drop_last=True)
+            loader = DataLoader(windows, batch_size=train_config.batch_size, sampler=sampler, drop_last=True, pin_memory=cuda)
             sums = {"loss": 0.0, "loss_pred": 0.0, "loss_rec": 0.0}
             count = 0
             bar = tqdm(loader, desc=f"epoch {state.epoch + 1}/{plan.epochs}", leave=False, disable=not progress)
@@ -648,7 +668,9 @@ def train(
                 for group in optimizer.param_groups:
                     group["lr"] = factor * (train_config.lr if group["name"] == "nets" else train_config.lr_physics)
                 horizon = _horizon(state.step, plan, cfg.pred_frames)
-                out = model(batch.frames, batch.actions, pred_frames=max(horizon, 1))
+                frames = batch.frames.to(device, non_blocking=cuda)  # uint8 (B, L+T, H, W[, C]); the model scales it
+                actions = batch.actions.to(device, non_blocking=cuda)  # (B, L+T, A)
+                out = model(frames, actions, pred_frames=max(horizon, 1))
                 loss = out.loss if horizon > 0 else cfg.alpha * out.loss_rec
                 if not torch.isfinite(loss):
                     raise TrainingDiverged(f"loss became {loss.item()} at step {state.step} (epoch {state.epoch + 1}); "
@@ -685,7 +707,7 @@ def train(
             if plan.average_steps and state.step == plan.total_steps and state.average_count:
                 with torch.no_grad():
                     for avg, p in zip(state.average, physics_params):
-                        p.copy_(torch.tensor(avg, dtype=p.dtype).view_as(p))
+                        p.copy_(torch.tensor(avg, dtype=p.dtype, device=p.device).view_as(p))
             state.epoch += 1
             state.elapsed = time.monotonic() - started
             record = {k: v / max(count, 1) for k, v in sums.items()}
@@ -706,4 +728,4 @@ def train(
         writer.close()
         windows.close()
     model.eval()
-    return model, state
+    return model.cpu(), state
