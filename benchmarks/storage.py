@@ -5,16 +5,17 @@ Three parts, each on files that the script makes in ``--work`` with piga's own c
 - **codecs.** Each data file's frames are written again in every :data:`piga.data.schema.FrameCodec`
   (one sequence per chunk, as piga writes them) and measured: the file's size against the raw frames,
   the write speed, the speed of reading a split whole, and the cost of a window streamed from the file
-  with a cold cache (every window reads its sequence) and in :class:`piga.data.windows.BlockShuffleSampler`'s
-  order (each sequence read once per pass). Speeds are in MB of raw frames per second, medians over ``--repeats``.
+  with a cold cache (every window reads its sequence) and over a pass in
+  :class:`piga.data.windows.BlockShuffleSampler`'s order (each sequence read once per pass). Speeds are in MB of raw frames per second, medians over ``--repeats``.
 - **throughput.** The fast preset trains one epoch of the pendulum file (``piga-train-model --epochs 1
   --threads 1``) with its frames loaded whole and streamed, from files of each codec. Steps per second of
   the training loop (metrics.json's seconds, without the start-up and the evaluation), medians over
   ``--repeats``, the runs interleaved so that a drift in the machine's load falls on all alike.
-- **memory.** A file of ``--big-sequences`` uncompressed sequences (the pendulum file's, repeated, its
-  ``/states`` dropped), more than 4x ``--cap-mb``, is trained on for one epoch (``--window-stride 33``: one
-  window per sequence, every sequence read once) in a memory cgroup capped at ``--cap-mb``. The run's peak resident
-  memory (``wait4``'s maxrss) and the cgroup's count of hits on the limit are recorded. It needs root
+- **memory.** Files of ``--big-sequences`` uncompressed sequences (the pendulum file's, repeated, their
+  ``/states`` dropped), the largest more than 4x ``--cap-mb``, are each trained on for one epoch
+  (``--window-stride 33``: one window per sequence, every sequence read once) in a memory cgroup capped at
+  ``--cap-mb``. Each run's peak resident memory (``wait4``'s maxrss), the cgroup's peak charge and its count of
+  hits on the limit are recorded, against the file's size. It needs root
   (to make the cgroup), or skip it with ``--skip-memory``.
 
     python benchmarks/storage.py --work runs/storage --out results/storage
@@ -25,6 +26,7 @@ Writes ``OUT.json`` and ``OUT.md``.
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import json
 import os
 import shlex
@@ -70,12 +72,9 @@ def collect_sources(work: Path) -> dict[str, Path]:
     for name, args in SOURCES.items():
         path = work / f"{name}.h5"
         if not path.exists():
-            if name == "dmc-pendulum":
-                try:
-                    import dm_control  # noqa: F401
-                except ImportError:
-                    print("dm_control is not installed: the dmc-pendulum file is skipped", file=sys.stderr)
-                    continue
+            if name == "dmc-pendulum" and importlib.util.find_spec("dm_control") is None:
+                print("dm_control is not installed: the dmc-pendulum file is skipped", file=sys.stderr)
+                continue
             run(["piga-collect", "--out", str(path), "--quiet", *args])
         files[name] = path
     return files
@@ -105,13 +104,14 @@ def rewrite(source: Path, target: Path, codec: FrameCodec, with_states: bool = T
 
 
 def window_cost(path: Path, block: bool, cache_bytes: int, count: int = 2000) -> float:
-    """Microseconds per 12-frame window streamed from ``path``'s train split in random order (``block``:
-    :class:`BlockShuffleSampler`'s), through a cache of ``cache_bytes``."""
+    """Microseconds per 12-frame window streamed from ``path``'s train split through a cache of ``cache_bytes``:
+    ``count`` windows in random order, or with ``block`` a whole pass in :class:`BlockShuffleSampler`'s order
+    (each sequence read once)."""
     windows = SequenceWindows(path, "train", window=12, in_memory=False, cache_bytes=cache_bytes)
     generator = torch.Generator().manual_seed(0)
     order = (BlockShuffleSampler(windows, windows.sequences_cached, generator) if block
              else RandomSampler(windows, generator=generator))
-    items = list(order)[:count]
+    items = list(order) if block else list(order)[:count]
     started = time.perf_counter()
     for item in items:
         windows[item]
@@ -188,15 +188,16 @@ def memory_cgroup(cap_bytes: int) -> Path:
 
 
 def measure_memory(pendulum: Path, work: Path, cap_mb: int, sequences: int) -> dict[str, Any]:
+    """One epoch of training on a file of (about) ``sequences`` uncompressed sequences in a cgroup capped at ``cap_mb``."""
     cap = cap_mb * 2**20
     info = inspect_dataset(pendulum)
-    big = work / "big-none.h5"
     repeat = -(-sequences // info.n_sequences)
-    if not big.exists() or inspect_dataset(big).n_sequences != repeat * info.n_sequences:
+    big = work / f"big-{repeat * info.n_sequences}.h5"
+    if not big.exists():
         rewrite(pendulum, big, "none", with_states=False, repeat=repeat)
     size = big.stat().st_size
     group = memory_cgroup(cap)
-    out = work / "memory-run"
+    out = work / f"memory-run-{repeat * info.n_sequences}"
     command = ["piga-train-model", str(big), "--out", str(out), "--window-stride", "33", "--epochs", "1", "--threads", "1",
                "--quiet", "--overwrite"]
     print("$", shlex.join(command), f"(in a cgroup capped at {cap_mb} MiB)", flush=True)
@@ -210,15 +211,18 @@ def measure_memory(pendulum: Path, work: Path, cap_mb: int, sequences: int) -> d
     proc.returncode = os.waitstatus_to_exitcode(status)
     wall = time.monotonic() - started
     hits = (group / ("memory.failcnt" if v1 else "memory.events")).read_text().strip()
+    peak_charged = (group / ("memory.max_usage_in_bytes" if v1 else "memory.peak"))
+    charged = int(peak_charged.read_text()) if peak_charged.exists() else None
     group.rmdir()
+    big.unlink()  # gigabytes of repeated frames
     metrics = json.loads((out / "metrics.json").read_text()) if (out / "metrics.json").exists() else {}
     reading = json.loads((out / "config.json").read_text())["train"] if (out / "config.json").exists() else {}
     print(output)
     return {"file_bytes": size, "file_sequences": repeat * info.n_sequences, "cap_bytes": cap, "file_over_cap": size / cap,
             "exit_code": proc.returncode, "peak_rss_bytes": usage.ru_maxrss * 1024, "limit_hits": hits,
-            "wall_s": wall, "data_loading": reading.get("data_loading"), "stream_cache_mb": reading.get("stream_cache_mb"),
-            "steps": metrics.get("training", {}).get("steps"), "parameters": metrics.get("parameters"),
-            "command": shlex.join(command), "output": output.strip().splitlines()}
+            "peak_cgroup_bytes": charged, "wall_s": wall, "data_loading": reading.get("data_loading"),
+            "stream_cache_mb": reading.get("stream_cache_mb"), "steps": metrics.get("training", {}).get("steps"),
+            "parameters": metrics.get("parameters"), "command": shlex.join(command), "output": output.strip().splitlines()}
 
 
 def markdown(result: dict[str, Any]) -> str:
@@ -241,16 +245,24 @@ def markdown(result: dict[str, Any]) -> str:
         for row in result["throughput"]:
             lines.append(f"| {row['run']} | {row['steps']} | {row['steps_per_s']:.2f} | {row['relative']:.3f} |")
     if result.get("memory"):
-        m = result["memory"]
-        lines += ["", "## A file larger than memory", "",
-                  f"`{m['command']}` in a memory cgroup capped at {m['cap_bytes'] / 2**20:.0f} MiB: the file holds "
-                  f"{m['file_sequences']} uncompressed sequences (the pendulum file's, repeated), "
-                  f"{m['file_bytes'] / 2**30:.2f} GiB, {m['file_over_cap']:.1f}x the cap.", "",
-                  "| exit code | reading | steps | peak resident memory | of the cap | hits on the limit | wall |",
-                  "|---|---|---|---|---|---|---|",
-                  f"| {m['exit_code']} | {m['data_loading']} ({m['stream_cache_mb']} MiB cache) | {m['steps']} | "
-                  f"{m['peak_rss_bytes'] / 2**20:.0f} MiB | {m['peak_rss_bytes'] / m['cap_bytes']:.0%} | {m['limit_hits']} | "
-                  f"{m['wall_s'] / 60:.1f} min |"]
+        runs = result["memory"]
+        cap = runs[0]["cap_bytes"]
+        lines += ["", "## Files larger than memory", "",
+                  f"Each file holds uncompressed sequences (the pendulum file's, repeated). Each run trains one epoch "
+                  f"with one window per sequence, every sequence read once, in a memory cgroup capped at "
+                  f"{cap / 2**20:.0f} MiB, for example `{runs[-1]['command']}`.", "",
+                  "| file | of the cap | exit code | reading | steps | g, a learned | peak resident memory | of the cap | "
+                  "peak charged to the cgroup | hits on the limit | wall |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+        for m in runs:
+            learned = ", ".join(f"{v:.4g}" for k, v in (m.get("parameters") or {}).items() if k in ("g", "a"))
+            lines.append(f"| {m['file_sequences']} sequences, {m['file_bytes'] / 2**30:.2f} GiB | {m['file_over_cap']:.1f}x | "
+                         f"{m['exit_code']} | {m['data_loading']} ({m['stream_cache_mb']} MiB cache) | {m['steps']} | {learned} | "
+                         f"{m['peak_rss_bytes'] / 2**20:.0f} MiB | {m['peak_rss_bytes'] / cap:.0%} | "
+                         + (f"{m['peak_cgroup_bytes'] / 2**20:.0f} MiB" if m.get("peak_cgroup_bytes") else "n/a")
+                         + f" | {m['limit_hits']} | {m['wall_s'] / 60:.1f} min |")
+        lines += ["", "The peak resident memory (the kernel's maxrss of the run) counts the shared libraries' pages "
+                  "(torch's, about 250 MiB), which the cgroup does not charge when another process loaded them first; "
+                  "the cgroup's charge counts the page cache of the file read, which the kernel reclaims at the limit."]
     return "\n".join(lines) + "\n"
 
 
@@ -259,9 +271,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--work", type=Path, required=True, help="folder for the data files and runs")
     p.add_argument("--out", type=Path, required=True, help="writes OUT.json and OUT.md")
     p.add_argument("--repeats", type=int, default=3, help="repeats of each timing (default %(default)s)")
-    p.add_argument("--cap-mb", type=int, default=1024, help="the memory cap of the memory part, MiB (default %(default)s)")
-    p.add_argument("--big-sequences", type=int, default=27000,
-                   help="sequences of the memory part's file, rounded up to whole copies (default %(default)s)")
+    p.add_argument("--cap-mb", type=int, default=1536, help="the memory cap of the memory part, MiB (default %(default)s)")
+    p.add_argument("--big-sequences", type=int, nargs="+", default=[10000, 20000, 40000],
+                   help="sequences of the memory part's files, rounded up to whole copies (default %(default)s)")
     p.add_argument("--skip-throughput", action="store_true", help="no training-throughput part")
     p.add_argument("--skip-memory", action="store_true", help="no memory part (it needs root for its cgroup)")
     args = p.parse_args(argv)
@@ -275,7 +287,7 @@ def main(argv: list[str] | None = None) -> int:
     if not args.skip_throughput:
         result["throughput"] = measure_throughput(files["pendulum"], args.work, args.repeats)
     if not args.skip_memory:
-        result["memory"] = measure_memory(files["pendulum"], args.work, args.cap_mb, args.big_sequences)
+        result["memory"] = [measure_memory(files["pendulum"], args.work, args.cap_mb, n) for n in args.big_sequences]
     write_json(args.out.with_suffix(".json"), result)
     with atomic_output(args.out.with_suffix(".md"), overwrite=True) as tmp:
         tmp.write_text(markdown(result))
