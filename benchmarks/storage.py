@@ -12,8 +12,9 @@ Three parts, each on files that the script makes in ``--work`` with piga's own c
   the training loop (metrics.json's seconds, without the start-up and the evaluation), medians over
   ``--repeats``, the runs interleaved so that a drift in the machine's load falls on all alike.
 - **memory.** Files of ``--big-sequences`` uncompressed sequences (the pendulum file's, repeated, their
-  ``/states`` dropped), the largest more than 4x ``--cap-mb``, are each trained on for one epoch
-  (``--window-stride 33``: one window per sequence, every sequence read once) in a memory cgroup capped at
+  ``/states`` dropped), the largest more than 4x ``--cap-mb``, are each trained on for 1000 steps
+  (``--window-stride 33``: one window per sequence, so every sequence is read once per epoch; the largest
+  file's 1000 steps are one epoch) in a memory cgroup capped at
   ``--cap-mb``. Each run's peak resident memory (``wait4``'s maxrss), the cgroup's peak charge and its count of
   hits on the limit are recorded, against the file's size. It needs root
   (to make the cgroup), or skip it with ``--skip-memory``.
@@ -198,22 +199,27 @@ def measure_memory(pendulum: Path, work: Path, cap_mb: int, sequences: int) -> d
     size = big.stat().st_size
     group = memory_cgroup(cap)
     out = work / f"memory-run-{repeat * info.n_sequences}"
-    command = ["piga-train-model", str(big), "--out", str(out), "--window-stride", "33", "--epochs", "1", "--threads", "1",
-               "--quiet", "--overwrite"]
+    command = ["piga-train-model", str(big), "--out", str(out), "--window-stride", "33", "--budget-steps", "1000",
+               "--threads", "1", "--quiet", "--overwrite"]
     print("$", shlex.join(command), f"(in a cgroup capped at {cap_mb} MiB)", flush=True)
     v1 = (group / "memory.limit_in_bytes").exists()
     started = time.monotonic()
     proc = subprocess.Popen(command, stdout=subprocess.PIPE, text=True,
                             preexec_fn=lambda: (group / "cgroup.procs").write_text(str(os.getpid())))
-    assert proc.stdout is not None
-    output = proc.stdout.read()
-    _, status, usage = os.wait4(proc.pid, 0)
+    try:
+        assert proc.stdout is not None
+        output = proc.stdout.read()
+        _, status, usage = os.wait4(proc.pid, 0)
+        wall = time.monotonic() - started
+        hits = (group / ("memory.failcnt" if v1 else "memory.events")).read_text().strip()
+        peak_charged = (group / ("memory.max_usage_in_bytes" if v1 else "memory.peak"))
+        charged = int(peak_charged.read_text()) if peak_charged.exists() else None
+    finally:  # an interrupted benchmark leaves no run and no cgroup behind
+        if proc.poll() is None:
+            proc.terminate()
+            proc.wait()
+        group.rmdir()
     proc.returncode = os.waitstatus_to_exitcode(status)
-    wall = time.monotonic() - started
-    hits = (group / ("memory.failcnt" if v1 else "memory.events")).read_text().strip()
-    peak_charged = (group / ("memory.max_usage_in_bytes" if v1 else "memory.peak"))
-    charged = int(peak_charged.read_text()) if peak_charged.exists() else None
-    group.rmdir()
     big.unlink()  # gigabytes of repeated frames
     metrics = json.loads((out / "metrics.json").read_text()) if (out / "metrics.json").exists() else {}
     reading = json.loads((out / "config.json").read_text())["train"] if (out / "config.json").exists() else {}
@@ -248,8 +254,8 @@ def markdown(result: dict[str, Any]) -> str:
         runs = result["memory"]
         cap = runs[0]["cap_bytes"]
         lines += ["", "## Files larger than memory", "",
-                  f"Each file holds uncompressed sequences (the pendulum file's, repeated). Each run trains one epoch "
-                  f"with one window per sequence, every sequence read once, in a memory cgroup capped at "
+                  f"Each file holds uncompressed sequences (the pendulum file's, repeated). Each run trains 1000 steps "
+                  f"with one window per sequence (every sequence read once per epoch), in a memory cgroup capped at "
                   f"{cap / 2**20:.0f} MiB, for example `{runs[-1]['command']}`.", "",
                   "| file | of the cap | exit code | reading | steps | g, a learned | peak resident memory | of the cap | "
                   "peak charged to the cgroup | hits on the limit | wall |", "|---|---|---|---|---|---|---|---|---|---|---|"]
