@@ -21,7 +21,8 @@ Three parts, each on files that the script makes in ``--work`` with piga's own c
 
     python benchmarks/storage.py --work runs/storage --out results/storage
 
-Writes ``OUT.json`` and ``OUT.md``.
+Writes ``OUT.json`` and ``OUT.md``. A part skipped (``--skip-throughput``, ``--skip-memory``) keeps its
+rows from OUT.json's previous run, and the page names the command that measured each part.
 """
 
 from __future__ import annotations
@@ -232,8 +233,9 @@ def measure_memory(pendulum: Path, work: Path, cap_mb: int, sequences: int) -> d
 
 
 def markdown(result: dict[str, Any]) -> str:
+    commands = result.get("commands", {})
     lines = ["# Storage: compressed frames, and training on files larger than memory", "",
-             f"Command: `{result['command']}`", "", f"Machine: {machine_words(result['machine'])}.", ""]
+             f"Machine: {machine_words(result['machine'])}.", "", f"Command: `{commands.get('codecs', result['command'])}`", ""]
     lines += [f"piga writes `/frames` as **{result['default_codec']}**, one sequence per chunk. Sizes are of the "
               "whole file (actions, states and rewards included) against the raw frames; speeds are MB of raw frames "
               f"per second, medians over {result['repeats']} repeats.", "",
@@ -245,6 +247,7 @@ def markdown(result: dict[str, Any]) -> str:
                      f"{row['write_mb_s']:.0f} | {row['read_mb_s']:.0f} | {row['window_us_cold']:.0f} | {row['window_us_block']:.0f} |")
     if result.get("throughput"):
         lines += ["", "## Training throughput", "",
+                  f"Command: `{commands.get('throughput', result['command'])}`", "",
                   "The fast preset, one epoch of the pendulum file, one torch thread. `memory`: the train split loaded "
                   "whole; `stream`: read through the 256 MiB cache in blocks. Relative: against the first row.", "",
                   "| frames | steps | steps/s (median) | relative |", "|---|---|---|---|"]
@@ -253,7 +256,7 @@ def markdown(result: dict[str, Any]) -> str:
     if result.get("memory"):
         runs = result["memory"]
         cap = runs[0]["cap_bytes"]
-        lines += ["", "## Files larger than memory", "",
+        lines += ["", "## Files larger than memory", "", f"Command: `{commands.get('memory', result['command'])}`", "",
                   f"Each file holds uncompressed sequences (the pendulum file's, repeated). Each run trains 1000 steps "
                   f"with one window per sequence (every sequence read once per epoch), in a memory cgroup capped at "
                   f"{cap / 2**20:.0f} MiB, for example `{runs[-1]['command']}`.", "",
@@ -280,20 +283,29 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--cap-mb", type=int, default=1536, help="the memory cap of the memory part, MiB (default %(default)s)")
     p.add_argument("--big-sequences", type=int, nargs="+", default=[10000, 20000, 40000],
                    help="sequences of the memory part's files, rounded up to whole copies (default %(default)s)")
-    p.add_argument("--skip-throughput", action="store_true", help="no training-throughput part")
-    p.add_argument("--skip-memory", action="store_true", help="no memory part (it needs root for its cgroup)")
+    p.add_argument("--skip-throughput", action="store_true",
+                   help="no training-throughput part (the page keeps the one of OUT.json's previous run, if any)")
+    p.add_argument("--skip-memory", action="store_true",
+                   help="no memory part, which needs root for its cgroup (the page keeps the previous run's, if any)")
     args = p.parse_args(argv)
     torch.set_num_threads(1)
     args.work.mkdir(parents=True, exist_ok=True)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     files = collect_sources(args.work)
-    result: dict[str, Any] = {"command": shlex.join(["python", "benchmarks/storage.py", *(argv or sys.argv[1:])]),
-                              "machine": machine(), "default_codec": FRAME_CODEC, "repeats": args.repeats,
+    command = shlex.join(["python", "benchmarks/storage.py", *(argv or sys.argv[1:])])
+    result: dict[str, Any] = {"command": command, "machine": machine(), "default_codec": FRAME_CODEC, "repeats": args.repeats,
                               "codecs": measure_codecs(files, args.work, args.repeats)}
-    if not args.skip_throughput:
-        result["throughput"] = measure_throughput(files["pendulum"], args.work, args.repeats)
-    if not args.skip_memory:
-        result["memory"] = [measure_memory(files["pendulum"], args.work, args.cap_mb, n) for n in args.big_sequences]
+    # a part skipped keeps its rows from the page's previous run, with the command that measured them
+    previous = json.loads(args.out.with_suffix(".json").read_text()) if args.out.with_suffix(".json").exists() else {}
+    result["commands"] = {"codecs": command}
+    for part, skip in (("throughput", args.skip_throughput), ("memory", args.skip_memory)):
+        if skip and part in previous:
+            result[part] = previous[part]
+            result["commands"][part] = previous.get("commands", {}).get(part, previous.get("command"))
+        elif not skip:
+            result["commands"][part] = command
+            result[part] = (measure_throughput(files["pendulum"], args.work, args.repeats) if part == "throughput" else
+                            [measure_memory(files["pendulum"], args.work, args.cap_mb, n) for n in args.big_sequences])
     write_json(args.out.with_suffix(".json"), result)
     with atomic_output(args.out.with_suffix(".md"), overwrite=True) as tmp:
         tmp.write_text(markdown(result))
