@@ -22,7 +22,9 @@ same machine:
 Each run is a job: train (continuing a stopped run), then measure everything the comparison reads
 from it, in the same process: control at x1.0, the gravity sweep, the plan time (piga, PlaNet-style:
 one episode, beside whatever else runs) and the goal images (piga). Jobs run ``--workers`` at a time
-(default 2, one torch thread each; :func:`piga.io.pool.run_recorded`), longest first. A job ends by writing
+(default 2, one torch thread each; :func:`piga.io.pool.run_recorded`), longest first, or with ``--ray
+auto|HOST:PORT`` as tasks of a Ray cluster (on several machines, ``OUT_runs`` must be one shared folder:
+the data files are collected there first, by this process). A job ends by writing
 its record, ``OUT_runs/records/NAME.json`` (its settings, measurements, training seconds, machine, the code's
 git commit and every hyperparameter of its training and evaluation; a few kB).
 A job whose record has the same settings is not run again, so an interrupted benchmark continues
@@ -74,12 +76,12 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from common import machine
+from common import add_ray_option, machine, ray_backend
 
 from agents.planet.config import PlanetTrainConfig
 from piga.io.atomic import atomic_output, write_json
 from piga.io.checkpoint import CHECKPOINT
-from piga.io.pool import JobRecords, RecordedJob, run_recorded
+from piga.io.pool import Backend, JobRecords, RecordedJob, run_recorded
 from piga.control.episodes import parse_range
 
 
@@ -540,10 +542,11 @@ def _run_task(args: tuple[Job, BenchConfig, Path, Path | None]) -> dict[str, Any
     return record
 
 
-def run_all(cfg: BenchConfig, folder: Path, only: tuple[str, ...] = AGENTS) -> dict[str, dict[str, Any] | None]:
+def run_all(cfg: BenchConfig, folder: Path, only: tuple[str, ...] = AGENTS,
+            backend: Backend | None = None) -> dict[str, dict[str, Any] | None]:
     """Every job's record: kept ones as they are, the others of the ``only`` agents (or job names) run ``cfg.workers``
-    at a time, longest first (None for a job not run). Only the data files of jobs still to run are
-    collected (first, in this process)."""
+    at a time (or on ``backend``), longest first (None for a job not run). Only the data files of jobs still to
+    run are collected (first, in this process)."""
     jobs = jobs_for(cfg)
     kept = {job.name: kept_record(folder, job, cfg) for job in jobs}
     todo = [job for job in jobs if (job.agent in only or job.name in only) and kept[job.name] is None]
@@ -553,7 +556,7 @@ def run_all(cfg: BenchConfig, folder: Path, only: tuple[str, ...] = AGENTS) -> d
     recorded = [RecordedJob(job.name, job_spec(job, cfg), (job, cfg, folder, None if job.agent == "oracle" else
                                                            files.get(job.sequences or largest, data_path(folder, largest))))
                 for job in sorted(todo, key=lambda j: -job_train_cost(cfg, j))]
-    done = run_recorded(_run_task, recorded, job_records(folder), cfg.workers, progress=False)
+    done = run_recorded(_run_task, recorded, job_records(folder), cfg.workers, progress=False, backend=backend)
     return {**kept, **done}
 
 
@@ -956,6 +959,7 @@ def main() -> int:
     p.add_argument("--out", required=True, help="writes OUT.json, OUT.md, OUT-*.png; runs in OUT_runs/")
     p.add_argument("--preset", choices=sorted(PRESETS), default="full")
     p.add_argument("--workers", type=int, help="processes (default: the preset's, 2)")
+    add_ray_option(p, "the jobs (OUT_runs shared by every machine)")
     p.add_argument("--estimate", action="store_true", help="print the estimated cost of the preset and exit")
     p.add_argument("--only", default=",".join(AGENTS), metavar="JOBS",
                    help=f"run only these jobs, comma-separated: kinds ({', '.join(AGENTS)}) or names (planet-n500-s1); "
@@ -974,6 +978,7 @@ def main() -> int:
 
     import torch
 
+    backend = ray_backend(p, args)
     torch.set_num_threads(1)
     started = time.monotonic()
     out = Path(args.out)
@@ -983,7 +988,7 @@ def main() -> int:
     command = ["python", "benchmarks/baselines.py", "--out", args.out, "--preset", args.preset]
     record: dict[str, Any] = {"command": shlex.join(command), "invocation": shlex.join(["python", *sys.argv]),
                               "preset": args.preset, "config": asdict(cfg), "machine": machine(), "estimate_seconds": cost}
-    records = run_all(cfg, folder, only)
+    records = run_all(cfg, folder, only, backend)
     record.update(aggregate(records, cfg))
     if record["pending"]:
         print(f"{len(records) - len(record['pending'])} of {len(records)} jobs have a record; still to run: "

@@ -1,4 +1,5 @@
-"""What the benchmark scripts share: a record of the machine the numbers were measured on."""
+"""What the benchmark scripts share: a record of the machine the numbers were measured on, the options passed
+through to ``piga-diagnose``, and ``--ray`` for the scripts that farm jobs."""
 
 from __future__ import annotations
 
@@ -8,6 +9,11 @@ import platform
 from pathlib import Path
 
 import torch
+
+from piga.cli.common import PigaError, add_ray_option, connect_backend
+from piga.io.pool import Backend
+
+__all__ = ["add_diagnose_options", "add_ray_option", "diagnose_options", "machine", "machine_words", "ray_backend"]
 
 
 def machine() -> dict[str, object]:
@@ -60,3 +66,12 @@ def diagnose_options(args: object) -> tuple[str, ...]:
         if value is not None:
             flags.append(flag if value else "--no-" + flag[2:])
     return tuple(flags)
+
+
+def ray_backend(parser: argparse.ArgumentParser, args: argparse.Namespace) -> Backend:
+    """The backend that ``args.ray`` asks for (the option of :func:`add_ray_option`, the commands' own), connected
+    before any work; Ray missing or no Ray cluster at the address ends the script with one line (exit 1)."""
+    try:
+        return connect_backend(args.ray)
+    except PigaError as exc:
+        parser.exit(1, f"{parser.prog}: error: {exc}\n")

@@ -15,7 +15,8 @@ It runs, with a model trained by ``piga-train-model`` (default preset, default d
 Episode 0 of each batch starts hanging straight down at rest; the others start at θ ~ U(-π, π),
 θ̇ ~ U(-1, 1). Success: |θ - θ_goal| < 0.2 rad and |θ̇| < 1 rad/s for each of the last 20 of 200
 steps. Jobs run in ``--workers`` processes, one torch thread each, so plan times are per core
-with the other core busy.
+with the other core busy; or with ``--ray auto|HOST:PORT`` as tasks of a Ray cluster (the same episodes
+and scores; the plan times are those of the cluster's CPUs).
 
     python benchmarks/control.py --model RUN_DIR --out results/control
 
@@ -33,7 +34,7 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
-from common import machine
+from common import add_ray_option, machine, ray_backend
 from agents.cem import CEMConfig
 from agents.mpc import MPCConfig
 from piga.io.atomic import atomic_output, write_json
@@ -63,11 +64,13 @@ def main() -> int:
     p.add_argument("--goal-episodes", type=int, default=3)
     p.add_argument("--planet-episodes", type=int, default=10)
     p.add_argument("--workers", type=int, default=2)
+    add_ray_option(p, "the control jobs")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--torque-arrow", action="store_true", help="frames show Gymnasium's torque arrow (off by default)")
     p.add_argument("--extra-models", nargs="*", default=[],
                    help="more run folders (other training seeds): upright at x1.0 and x1.4, --sweep-episodes each")
     args = p.parse_args()
+    backend = ray_backend(p, args)
     from piga.control.goal import goal_from_image, render_goal_image
     from piga.io.runs import load_model
 
@@ -104,7 +107,7 @@ def main() -> int:
             jobs.append(job("oracle", 1.0, args.goal_episodes, replace(tuned, goal_angle=math.radians(angle)),
                             math.radians(angle), part="goal"))
     t0 = time.time()
-    results = run_jobs(jobs, workers=args.workers)
+    results = run_jobs(jobs, workers=args.workers, backend=backend)
     minutes = (time.time() - t0) / 60
     s = [r.summary for r in results]
 
@@ -136,11 +139,12 @@ def main() -> int:
     save_figure(sweep_figure([x.to_dict() for x in pick("sweep")]), plot)
     command = shlex.join(["python", *sys.argv])
     where = machine()
+    runner = f"{args.workers} worker processes" if backend.kind == "local" else f"the tasks of {backend}"
     lines = [
         "# Control from pixels: piga MPC vs the oracle", "",
         f"Command: `{command}`", "",
         f"Model: `{args.model}`, learned g = {learned['g']:.4f}, a = {learned['a']:.4f}. "
-        f"Machine: {where['cpu']}, {where['cores']} cores; {args.workers} worker processes, 1 torch thread each; "
+        f"Machine: {where['cpu']}, {where['cores']} cores; {runner}, 1 torch thread each; "
         f"{minutes:.1f} min in all. Frames {'with' if args.torque_arrow else 'without'} Gymnasium's torque arrow.", "",
         "Success: |θ − θ_goal| < 0.2 rad and |θ̇| < 1 rad/s for each of the last 20 of 200 steps. Episode 0 of each row "
         "starts hanging down; the others at θ ~ U(−π, π), θ̇ ~ U(−1, 1).", "",
@@ -164,7 +168,7 @@ def main() -> int:
     md = "\n".join(lines)
     with atomic_output(out.with_suffix(".md"), overwrite=True) as tmp_md:
         tmp_md.write_text(md)
-    write_json(out.with_suffix(".json"), {"command": command, "machine": where, "model": args.model,
+    write_json(out.with_suffix(".json"), {"command": command, "machine": where, "backend": str(backend), "model": args.model,
                                           "learned": learned, "minutes": minutes,
                                           "checks": [{"floor": n, "measured": v, "met": ok} for n, v, ok in checks],
                                           "results": [r.to_dict() for r in results]}, overwrite=True)

@@ -13,7 +13,9 @@ labels, which it keeps in its own JSON.
 
     python benchmarks/diagnose_blind.py --model RUN_DIR --out results/diagnose_blind
 
-Each finished case is appended to OUT.json, so an interrupted run continues where it stopped.
+Cases run ``--jobs`` at a time in local processes, or with ``--ray auto|HOST:PORT`` as tasks of a Ray
+cluster (one CPU and one torch thread each, as with ``--jobs`` > 1: the same records either way, bar the
+wall times). Each finished case is appended to OUT.json, so an interrupted run continues where it stopped.
 OUT.md holds the scores: confusion matrix, top-1 accuracy, false positives on no-effect data,
 coefficient and delay errors, and free-run closure.
 """
@@ -35,7 +37,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from common import add_diagnose_options, diagnose_options, machine
+from common import add_diagnose_options, add_ray_option, diagnose_options, machine, ray_backend
 from envs.pendulum import PixelPendulumConfig
 from piga.io.atomic import atomic_output, write_json
 from piga.data.collect import CollectConfig, collect
@@ -251,20 +253,23 @@ def main() -> int:
     p.add_argument("--workers", type=int, default=2, help="collection workers of one case (with --jobs 1)")
     p.add_argument("--jobs", type=int, default=1,
                    help="cases run at once, each in its own process with one torch thread (a machine's cores)")
+    add_ray_option(p, "the cases (each with one torch thread, as with --jobs > 1)")
     p.add_argument("--mix", choices=("all", "none"), default="all",
                    help="'all': the mix of effects; 'none': no-effect cases only (false-positive rate)")
     add_diagnose_options(p)
     args = p.parse_args()
+    backend = ray_backend(p, args)
     out, work = Path(args.out), Path(args.work)
     work.mkdir(parents=True, exist_ok=True)
     command = shlex.join(["python", *sys.argv])
     done: list[dict] = json.loads(out.with_suffix(".json").read_text())["runs"] if out.with_suffix(".json").exists() else []
     info = {"model": args.model, "sequences": args.sequences, "seed": args.seed, "mix": args.mix, "machine": machine(),
-            "jobs": args.jobs}
+            "jobs": args.jobs, "backend": str(backend)}
     todo = [c for c in draw_cases(args.cases, args.seed, args.mix)
             if not any(r["case"] == c["case"] and r["effects"] == c["effects"] for r in done)]
+    alone = args.jobs <= 1 and backend.kind == "local"  # one case at a time on this machine: all its cores
     run = functools.partial(run_case, model=args.model, work=work, sequences=args.sequences,
-                            workers=args.workers if args.jobs <= 1 else 1, threads=1 if args.jobs > 1 else None,
+                            workers=args.workers if alone else 1, threads=None if alone else 1,
                             options=diagnose_options(args))
 
     def finished(_: int, record: dict) -> None:  # saved as each case ends, so that a stopped run continues
@@ -276,7 +281,8 @@ def main() -> int:
               flush=True)
         save(out, command, info, done, summarize, markdown)
 
-    run_pool(run, todo, workers=args.jobs, progress=False, on_result=finished)
+    run_pool(run, todo, workers=args.jobs, progress=False, on_result=finished, backend=backend,
+             names=[f"case {c['case']}" for c in todo])
     print(json.dumps(summarize(done), indent=2))
     return 0
 
@@ -286,6 +292,7 @@ def run_case(case: dict, model: str, work: Path, sequences: int, workers: int, t
     """Collects, strips, diagnoses (in a fresh process, ``piga-diagnose`` with ``options``) and scores one case;
     returns its record."""
     data = work / f"case{case['case']:02d}.h5"
+    work.mkdir(parents=True, exist_ok=True)  # on a machine of a cluster, the first case there makes it
     t0 = time.time()
     env = PixelPendulumConfig(effects=tuple(case["effects"].items()))
     collect(replace(CollectConfig(), sequences=sequences, seed=case["data_seed"], env=env, workers=workers),

@@ -30,8 +30,9 @@ truth holds one of its two; at most 10% ambiguous), no named effect that the cas
 and the corrected g, a, b within 3% of the variant's when the verdict is not ambiguous. MuJoCo
 takes the hinge damping implicitly; a report that reads the damping explicitly (one Euler step per
 frame, Gymnasium's convention) gives the same frames' values under MuJoCo's (its
-``damping_convention``), and those are scored. Each finished case is appended to OUT.json, so an
-interrupted run continues where it stopped.
+``damping_convention``), and those are scored. Cases run ``--jobs`` at a time in local processes, or with
+``--ray auto|HOST:PORT`` as tasks of a Ray cluster (the same records, bar the wall times). Each finished case
+is appended to OUT.json, so an interrupted run continues where it stopped.
 """
 
 from __future__ import annotations
@@ -52,7 +53,7 @@ import gymnasium as gym
 import h5py
 import numpy as np
 
-from common import add_diagnose_options, diagnose_options, machine
+from common import add_diagnose_options, add_ray_option, diagnose_options, machine, ray_backend
 from diagnose_blind import run_diagnose, save, strip_labels
 from diagnose_blind import score as score_gym
 from envs.dmc import DMCPendulumConfig, DMCPendulumEnv
@@ -297,6 +298,7 @@ def nominal_model(case: dict[str, Any], work: Path, sequences: int, steps: int, 
     """
     nominal = work / f"case{case['case']:02d}_nominal.h5"
     run_dir = work / f"case{case['case']:02d}_model"
+    work.mkdir(parents=True, exist_ok=True)  # on a machine of a cluster, the first case there makes it
     stamp = {"variant": case["variant"], "nominal_seed": case["nominal_seed"], "sequences": sequences, "steps": steps,
              "train_args": train_args}
     stamp_path = run_dir / "nominal.json"
@@ -389,6 +391,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--only", type=int, nargs="*", default=None, help="run only these case numbers")
     p.add_argument("--jobs", type=int, default=1,
                    help="cases run at once, each in its own process with one torch thread (a machine's cores)")
+    add_ray_option(p, "the cases")
     p.add_argument("--true-angles", type=int, default=None, metavar="CASE",
                    help="outside the blind protocol: fit the candidates to case CASE's true angles and print the verdict "
                         "and the signed errors of g, a, b (what the physics gets wrong without the vision)")
@@ -427,10 +430,12 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(true_angle_fit(case, work, args.sequences, args.steps, args.angle_noise, bool(args.fit_starts)),
                          indent=2))
         return 0
+    backend = ray_backend(p, args)
     if args.models_only:
         run_pool(functools.partial(nominal_model, work=work, sequences=args.sequences, steps=args.steps,
                                    train_args=train_args), cases, workers=args.jobs, progress=False,
-                 on_result=lambda i, _: print(f"case {cases[i]['case']}: nominal model trained", flush=True))
+                 on_result=lambda i, _: print(f"case {cases[i]['case']}: nominal model trained", flush=True),
+                 backend=backend, names=[f"case {c['case']}" for c in cases])
         return 0
     todo = [c for c in cases if not any(r["case"] == c["case"] and r["variant"] == c["variant"]
                                         and r["effects"] == c["effects"] for r in done)]
@@ -444,7 +449,8 @@ def main(argv: list[str] | None = None) -> int:
 
     run_pool(functools.partial(run_case, work=work, sequences=args.sequences, steps=args.steps, train_args=train_args,
                                diagnose_options=diagnose_options(args)),
-             todo, workers=args.jobs, progress=False, on_result=finished)
+             todo, workers=args.jobs, progress=False, on_result=finished, backend=backend,
+             names=[f"case {c['case']}" for c in todo])
     if done and args.only is None:  # a run over every case records its command
         save(out, command, info, done, summarize, markdown)
     print(json.dumps(summarize(done), indent=2))

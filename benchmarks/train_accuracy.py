@@ -9,8 +9,11 @@ time, SSIM per step, and the encoder angle error.
     python benchmarks/train_accuracy.py --out results/train_accuracy --cases default --seeds 0 1
 
 Each finished run is appended to ``OUT.json`` (atomically), so an interrupted benchmark
-continues where it stopped. ``OUT.md`` is rewritten each time with the table. Runs are sequential,
-so training time is measured on the whole machine; the machine is recorded.
+continues where it stopped. ``OUT.md`` is rewritten each time with the table. Runs are sequential
+by default, so training time is measured on the whole machine; the machine is recorded. ``--jobs N``
+trains N runs at once (one torch thread each), and ``--ray auto|HOST:PORT`` trains them as tasks of a
+Ray cluster (one CPU and one torch thread each; on several machines ``--work`` must be one shared
+folder: the data files are collected there first, by this process).
 """
 
 from __future__ import annotations
@@ -24,8 +27,9 @@ from dataclasses import replace
 from pathlib import Path
 
 
-from common import machine
+from common import add_ray_option, machine, ray_backend
 from piga.io.atomic import atomic_output
+from piga.io.pool import run_pool
 from piga.data.collect import CollectConfig, collect
 from piga.training.convergence import check_convergence
 from piga.evaluation.evaluate import EvalConfig, evaluate
@@ -75,13 +79,30 @@ def table(runs: list[dict[str, object]]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def train_run(job: tuple[str, int, Path, Path]) -> dict[str, object]:
+    """Trains one (case, seed) run on the case's data with the default ``fast`` preset and evaluates it; its record."""
+    case, seed, data, run_dir = job
+    started = time.monotonic()
+    model, state = train(data, run_dir, TrainConfig(seed=seed, device="cpu"), PRESETS["fast"].model,
+                         progress=False)  # the 2-core CPU's times, on every machine
+    wall = time.monotonic() - started
+    metrics = evaluate(model, data, EvalConfig())
+    convergence = check_convergence(state)
+    return {"case": case, "seed": seed, "train_seconds": state.elapsed, "wall_seconds": wall, "history": state.history,
+            "metrics": metrics, "converged": convergence.converged, "convergence": convergence.to_dict()}
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0], allow_abbrev=False)
     p.add_argument("--out", default="results/train_accuracy", help="output stem (.json and .md)")
     p.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES))
     p.add_argument("--seeds", nargs="+", type=int, default=None, help="training seeds (default: 0-4 for 'default', 0 otherwise)")
     p.add_argument("--work", default="runs/bench", help="folder for data and run folders")
+    p.add_argument("--jobs", type=int, default=1, help="runs trained at once, one torch thread each (default 1: one at a "
+                   "time, on torch's default threads)")
+    add_ray_option(p, "the training runs")
     args = p.parse_args()
+    backend = ray_backend(p, args)
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     work = Path(args.work)
@@ -92,35 +113,33 @@ def main() -> None:
     record["command"] = " ".join(["python", *sys.argv])
     record["recipe"] = {"train": TrainConfig(device="cpu").__dict__, "preset": "fast", "model": ModelConfig().to_dict()}
     done = {(r["case"], r["seed"]) for r in record["runs"]}
+    todo: list[tuple[str, int, Path, Path]] = []
     for case in args.cases:
         gravity, gain, data_seed = CASES[case]
         seeds = args.seeds if args.seeds is not None else ([0, 1, 2, 3, 4] if case == "default" else [0])
         data = work / f"{case}.h5"
-        if not data.exists():
+        if not data.exists() and any((case, seed) not in done for seed in seeds):
             base = CollectConfig()
             collect(replace(base, env=replace(base.env, gravity=gravity, actuation_gain=gain), seed=data_seed), data,
                     progress=False, command=f"benchmark case {case}")
-        for seed in seeds:
-            if (case, seed) in done:
-                continue
-            run_dir = work / f"{case}-seed{seed}"
-            started = time.monotonic()
-            model, state = train(data, run_dir, TrainConfig(seed=seed, device="cpu"), PRESETS["fast"].model,
-                                 progress=False)  # the 2-core CPU's times, on every machine
-            wall = time.monotonic() - started
-            metrics = evaluate(model, data, EvalConfig())
-            convergence = check_convergence(state)
-            if not convergence.converged:
-                print(f"{case} seed {seed}: warning: not converged: {convergence.reason}", file=sys.stderr)
-            record["runs"].append({"case": case, "seed": seed, "train_seconds": state.elapsed, "wall_seconds": wall,
-                                   "history": state.history, "metrics": metrics, "converged": convergence.converged,
-                                   "convergence": convergence.to_dict()})
-            write_json(record_path, record)
-            with atomic_output(out.with_suffix(".md"), overwrite=True) as tmp:
-                tmp.write_text(markdown(record, out))
-            pe = metrics["parameter_errors"]
-            print(f"{case} seed {seed}: g={pe['g']['learned']:.4f} ({100 * pe['g']['relative_error']:.2f}%), "
-                  f"a={pe['a']['learned']:.4f} ({100 * pe['a']['relative_error']:.2f}%), {state.elapsed / 60:.1f} min", flush=True)
+        todo += [(case, seed, data, work / f"{case}-seed{seed}") for seed in seeds if (case, seed) not in done]
+
+    def finished(_: int, run: dict[str, object]) -> None:  # saved as each run ends, so that a stopped benchmark continues
+        record["runs"].append(run)
+        record["runs"].sort(key=lambda r: (list(CASES).index(r["case"]), r["seed"]))
+        write_json(record_path, record)
+        with atomic_output(out.with_suffix(".md"), overwrite=True) as tmp:
+            tmp.write_text(markdown(record, out))
+        pe = run["metrics"]["parameter_errors"]  # type: ignore[index]
+        name = f"{run['case']} seed {run['seed']}"
+        if not run["converged"]:
+            print(f"{name}: warning: not converged: {run['convergence']['reason']}", file=sys.stderr)  # type: ignore[index]
+        print(f"{name}: g={pe['g']['learned']:.4f} ({100 * pe['g']['relative_error']:.2f}%), "
+              f"a={pe['a']['learned']:.4f} ({100 * pe['a']['relative_error']:.2f}%), "
+              f"{run['train_seconds'] / 60:.1f} min", flush=True)  # type: ignore[operator]
+
+    run_pool(train_run, todo, workers=args.jobs, progress=False, on_result=finished, backend=backend,
+             names=[f"{case} seed {seed}" for case, seed, _, _ in todo])
 
 
 if __name__ == "__main__":

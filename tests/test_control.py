@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import importlib.util
 import math
 import signal
 import subprocess
+import sys
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -187,6 +189,30 @@ def test_summary_markdown_has_a_row_per_summary() -> None:
 def test_sweep_cli_bad_input(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert_one_line_error(ctl(capsys, "--oracle", "--sweep", "0.5:1.8:0.1"), "--model")
     assert_one_line_error(ctl(capsys, "--model", str(tmp_path / "none"), "--sweep", "1:2"), "START:STOP:STEP")
+
+
+def test_the_ray_option_is_checked_before_any_work(capsys: pytest.CaptureFixture[str]) -> None:
+    for bad in ("host:port", "ray://head:10001", "head:70000"):
+        assert ctl(capsys, "--oracle", "--ray", bad).returncode == 2
+        assert_one_line_error(ctl(capsys, "--oracle", "--ray", bad), "--ray", "HOST:PORT")
+    assert_one_line_error(ctl(capsys, "--oracle", "--ray", "auto"), "--ray runs the jobs of --sweep")
+    assert_one_line_error(ctl(capsys, "--env", "piga/DMCPendulum-v0", "--ray", "auto"), "--ray is not an option")
+
+
+def test_a_sweep_on_ray_without_ray_or_its_cluster_is_refused_in_one_line(control_model: Path, monkeypatch: pytest.MonkeyPatch,
+                                                                          capsys: pytest.CaptureFixture[str]) -> None:
+    import socket
+
+    with socket.socket() as free:
+        free.bind(("127.0.0.1", 0))
+        port = free.getsockname()[1]
+    sweep = ("--model", str(control_model), "--sweep", "1:1:1", "--episodes", "1", "--steps", "20", "--quiet")
+    if importlib.util.find_spec("ray") is not None:
+        line = assert_one_line_error(ctl(capsys, *sweep, "--ray", f"127.0.0.1:{port}"), "Connection refused")
+        assert line == f"piga-control: error: --ray 127.0.0.1:{port}: no Ray cluster at 127.0.0.1:{port}: Connection refused"
+    monkeypatch.setitem(sys.modules, "ray", None)  # as if Ray were not installed
+    line = assert_one_line_error(ctl(capsys, *sweep, "--ray", "auto"))
+    assert line == "piga-control: error: --ray auto: Ray is not installed: pip install -e '.[ray]'"
 
 
 def test_agents_import_nothing_from_diagnostics() -> None:

@@ -9,11 +9,13 @@ import subprocess
 import sys
 import textwrap
 import time
+import traceback
 from pathlib import Path
 
 import pytest
 
-from piga.io.pool import JobRecords, RecordedJob, git_commit, run_pool, run_recorded
+from piga.io.pool import (Backend, BackendError, JobFailed, JobRecords, RecordedJob, git_commit, job_name, run_pool,
+                          run_recorded)
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -107,6 +109,79 @@ def test_a_job_that_fails_keeps_the_records_of_those_that_ended(tmp_path: Path) 
         return {"ok": name}
 
     jobs = [RecordedJob(name, {}, name) for name in ("a", "bad", "c")]
-    with pytest.raises(RuntimeError, match="boom"):
+    with pytest.raises(JobFailed, match="job bad failed: RuntimeError: boom"):
         run_recorded(job, jobs, JobRecords(tmp_path), progress=False)
     assert [p.stem for p in tmp_path.glob("*.json")] == ["a"]
+
+
+def _fails_at_two(x: int) -> int:
+    if x == 2:
+        raise ValueError(f"no square for {x}")
+    return x * x
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_a_failing_job_is_named_and_the_ended_ones_kept(workers: int) -> None:
+    ended: list[int] = []
+    with pytest.raises(JobFailed, match=r"^job case 2 failed: ValueError: no square for 2$") as info:
+        run_pool(_fails_at_two, [0, 1, 2], workers=workers, progress=False, names=["case 0", "case 1", "case 2"],
+                 on_result=lambda i, r: ended.append(i))
+    assert isinstance(info.value.cause, ValueError) and info.value.job == "case 2"
+    if workers == 1:
+        assert ended == [0, 1]
+    assert "_fails_at_two" in "".join(traceback.format_exception(info.value)), "the job's own traceback is lost"
+
+
+def test_a_job_is_named_by_its_name_or_its_spec() -> None:
+    assert job_name(RecordedJob("seed3", {}, None)) == "seed3"
+    assert job_name({"case": 4, "effects": {}}) == "{'case': 4, 'effects': {}}"
+    assert len(job_name("x" * 500)) == 80
+    with pytest.raises(ValueError, match="2 names for 3 jobs"):
+        run_pool(_square, [1, 2, 3], names=["a", "b"], progress=False)
+
+
+@pytest.mark.parametrize("text, backend", [
+    (None, Backend()),
+    ("auto", Backend("ray", "auto")),
+    ("10.0.0.5:6379", Backend("ray", "10.0.0.5:6379")),
+    ("head", Backend("ray", "head")),
+])
+def test_the_ray_option_gives_a_backend(text: str | None, backend: Backend) -> None:
+    assert Backend.from_option(text) == backend
+
+
+@pytest.mark.parametrize("address", ["", ":6379", "host:0", "host:65536", "host:port", "ray://head:10001", "a b:1"])
+def test_a_bad_ray_address_is_refused(address: str) -> None:
+    with pytest.raises(ValueError, match="HOST:PORT"):
+        Backend("ray", address)
+    with pytest.raises(ValueError, match="kind must be one of"):
+        Backend("dask")  # type: ignore[arg-type]
+
+
+def test_without_ray_the_ray_backend_says_how_to_install_it(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setitem(sys.modules, "ray", None)  # import ray raises ImportError
+    with pytest.raises(BackendError, match=r"^Ray is not installed: pip install -e '\.\[ray\]'$"):
+        Backend("ray").connect()
+    with pytest.raises(BackendError, match="not installed"):
+        run_pool(_square, [1, 2], backend=Backend("ray", "10.0.0.5:6379"), progress=False)
+    assert run_pool(_square, [1, 2], backend=Backend(), progress=False) == [1, 4]  # local needs no Ray
+
+
+def _fails_in_a_bug(x: int) -> float:
+    return 1 / (x - 2)
+
+
+@pytest.mark.parametrize("function, code, needle", [
+    (_fails_at_two, 1, "prog: error: job case 2 failed: no square for 2"),
+    (_fails_in_a_bug, 70, "prog: internal error (JobFailed: job case 2 failed: ZeroDivisionError: division by zero)"),
+])
+def test_a_command_names_the_failed_job_in_its_one_line(function: object, code: int, needle: str,
+                                                       capsys: pytest.CaptureFixture[str]) -> None:
+    from tests.helpers import assert_one_line, run_in_process
+
+    def main(argv: object) -> int:
+        run_pool(function, [0, 1, 2, 3], workers=2, progress=False, names=[f"case {i}" for i in range(4)])  # type: ignore[arg-type]
+        return 0
+
+    exit_code, _, err = run_in_process("prog", main, capsys=capsys)
+    assert exit_code == code and assert_one_line(exit_code, err).startswith(needle), err

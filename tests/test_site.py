@@ -54,7 +54,7 @@ def test_the_readme_is_a_front_page() -> None:
     assert len(readme.splitlines()) <= 250, "the README is the front page; the reference belongs in docs/"
     assert "pip install torch==2.13.0 -e '.[dev]' && piga-demo --out demo\n" in readme
     ci = (ROOT / ".ci" / "run").read_text().strip().splitlines()[-1]
-    assert ci == "pip install torch==2.13.0 -e '.[dev]' && python -m pytest" and ci + "\n" in readme
+    assert ci == "pip install torch==2.13.0 -e '.[dev,ray]' && python -m pytest" and ci + "\n" in readme
     for word in ("../shared", "/work/", "GUIDE.md"):
         assert word not in readme, f"the README names {word!r}"
     assert not re.search(r"\b(issue|session) \d", readme, re.IGNORECASE), "the README is no development history"

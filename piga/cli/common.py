@@ -17,6 +17,7 @@ from typing import Any, NoReturn
 
 from envs.dmc import MissingExtraError
 from piga.io.atomic import OutputExistsError
+from piga.io.pool import Backend, BackendError, JobFailed, host_port
 from piga.data.schema import MAX_SEED, DataFormatError
 
 
@@ -59,6 +60,7 @@ USER_ERRORS: tuple[type[BaseException], ...] = (
     NotADirectoryError,
     ValueError,
     MissingExtraError,
+    BackendError,
 )
 
 
@@ -85,7 +87,8 @@ def run_cli(prog: str, main: Callable[[Sequence[str] | None], int | None], argv:
     """Runs ``main(argv)`` and exits; user errors become ``prog: error: ...`` on stderr (exit 1).
 
     An unexpected exception (a bug) prints one line that names a log file in :func:`log_folder`
-    holding the traceback, and exits with :data:`INTERNAL_ERROR`.
+    holding the traceback, and exits with :data:`INTERNAL_ERROR`. A job of a farm that failed
+    (:class:`~piga.io.pool.JobFailed`) is judged by its own error, and the line names the job.
 
     SIGTERM is turned into KeyboardInterrupt, so that ``finally`` blocks run. That is how a partly
     written output file gets removed.
@@ -97,24 +100,28 @@ def run_cli(prog: str, main: Callable[[Sequence[str] | None], int | None], argv:
         kept = str(exc) if isinstance(exc, Interrupted) else "nothing was written"
         print(f"{prog}: interrupted; {kept}", file=sys.stderr)
         sys.exit(130)
-    except USER_ERRORS as exc:
-        message = " ".join(str(exc).split()) or exc.__class__.__name__
-        print(f"{prog}: error: {message}", file=sys.stderr)
-        sys.exit(1)
-    except OSError as exc:  # h5py and friends: disk full, unreadable files
-        print(f"{prog}: error: {exc.__class__.__name__}: {' '.join(str(exc).split())}", file=sys.stderr)
-        sys.exit(1)
-    except MemoryError as exc:
-        print(f"{prog}: error: out of memory ({' '.join(str(exc).split()) or 'MemoryError'})", file=sys.stderr)
-        sys.exit(1)
-    except RuntimeError as exc:
-        if (wanted := _failed_allocation(exc)) is None:
-            _internal_error(prog, argv, exc)
-        print(f"{prog}: error: out of memory (an array of {wanted} did not fit); choose smaller sizes", file=sys.stderr)
-        sys.exit(1)
-    except Exception as exc:  # a bug: one line, and the traceback in a log file
-        _internal_error(prog, argv, exc)
+    except Exception as exc:
+        _exit_on_error(prog, argv, exc)
     sys.exit(code or 0)
+
+
+def _exit_on_error(prog: str, argv: Sequence[str] | None, exc: Exception) -> NoReturn:
+    """Prints the one line of the exception being handled and exits: 1 for the user's errors (and out of memory or
+    disk), :data:`INTERNAL_ERROR` for a bug (its traceback in a log file)."""
+    error: BaseException = exc.cause if isinstance(exc, JobFailed) else exc
+    job = f"job {exc.job} failed: " if isinstance(exc, JobFailed) else ""
+    if isinstance(error, USER_ERRORS):
+        message = " ".join(str(error).split()) or error.__class__.__name__
+        print(f"{prog}: error: {job}{message}", file=sys.stderr)
+    elif isinstance(error, OSError):  # h5py and friends: disk full, unreadable files
+        print(f"{prog}: error: {job}{error.__class__.__name__}: {' '.join(str(error).split())}", file=sys.stderr)
+    elif isinstance(error, MemoryError):
+        print(f"{prog}: error: {job}out of memory ({' '.join(str(error).split()) or 'MemoryError'})", file=sys.stderr)
+    elif isinstance(error, RuntimeError) and (wanted := _failed_allocation(error)) is not None:
+        print(f"{prog}: error: {job}out of memory (an array of {wanted} did not fit); choose smaller sizes", file=sys.stderr)
+    else:  # a bug: one line, and the traceback in a log file
+        _internal_error(prog, argv, exc)
+    sys.exit(1)
 
 
 def _internal_error(prog: str, argv: Sequence[str] | None, exc: BaseException) -> NoReturn:
@@ -249,6 +256,40 @@ thread_count = _number_type(int, lambda v: 0 <= v <= MAX_THREADS, f"an integer i
 and a huge count makes torch's thread pool crash)."""
 
 
+#: What ``--ray`` does, in every command and benchmark that farms jobs (each adds what its jobs are).
+RAY_HELP = ("run them as tasks of a Ray cluster, one CPU each, as many at once as it has free CPUs, instead of local "
+            "processes: 'auto' joins the Ray instance running on this machine or starts one, HOST:PORT joins the "
+            "cluster whose head is there (ray start --head prints it); the same results as local processes; needs "
+            "pip install -e '.[ray]' (default: local processes)")
+
+
+def ray_address(text: str) -> str:
+    """argparse type of ``--ray``: "auto" or HOST:PORT (HOST alone: Ray's port 6379)."""
+    text = text.strip()
+    if text != "auto":
+        try:
+            host_port(text)
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+    return text
+
+
+def add_ray_option(parser: argparse.ArgumentParser, what: str) -> argparse.Action:
+    """Adds ``--ray auto|HOST:PORT`` (default None: local processes), its help ``what`` (the jobs) and :data:`RAY_HELP`."""
+    return parser.add_argument("--ray", type=ray_address, metavar="auto|HOST:PORT", help=f"{what}: {RAY_HELP}")
+
+
+def connect_backend(ray: str | None) -> Backend:
+    """The job backend of a ``--ray`` value (None: local processes), connected now, before any work: Ray not
+    installed or no Ray cluster at the address is a :class:`PigaError` (one line)."""
+    backend = Backend.from_option(ray)
+    try:
+        backend.connect()
+    except BackendError as exc:
+        raise PigaError(f"--ray {ray}: {exc}") from None
+    return backend
+
+
 def format_default(value: Any) -> str:
     """A default as help text shows it: 1e-3 as 0.001, (0.8, 0.1, 0.1) as 0.8,0.1,0.1, True as on."""
     if isinstance(value, bool):
@@ -303,6 +344,6 @@ def split_type(text: str) -> tuple[float, float, float]:
     return values  # type: ignore[return-value]
 
 
-__all__ = ["ArgumentParser", "PigaError", "run_cli", "positive_int", "nonnegative_int", "seed_int", "thread_count", "positive_float", "nonnegative_float",
+__all__ = ["ArgumentParser", "PigaError", "RAY_HELP", "add_ray_option", "connect_backend", "ray_address", "run_cli", "positive_int", "nonnegative_int", "seed_int", "thread_count", "positive_float", "nonnegative_float",
            "split_type", "add_preset_option", "documented_default", "format_default", "Interrupted", "made_folder",
            "missing_folders", "remove_empty_folders", "remove_outputs", "add_device_option"]

@@ -14,8 +14,8 @@ import numpy as np
 
 from agents.config import MPCConfig
 from piga.io.atomic import atomic_output, check_writable_target, write_json
-from piga.cli.common import (ArgumentParser, PigaError, command_line, positive_float, positive_int, run_cli, seed_int,
-                             warn_if_unconverged)
+from piga.cli.common import (ArgumentParser, PigaError, add_ray_option, command_line, connect_backend, positive_float,
+                             positive_int, run_cli, seed_int, warn_if_unconverged)
 from piga.control.episodes import EpisodeConfig, parse_range, run_episodes
 from piga.evaluation.episodes import summary_markdown
 from piga.io.checkpoint import RunKind
@@ -75,8 +75,9 @@ def build_parser() -> ArgumentParser:
                    help="run the piga agent and the oracle at each gravity multiplier of the range (e.g. 0.5:1.8:0.1); "
                    "each agent is told the multiplier. Writes a table and, with --out, OUT.png")
     p.add_argument("--workers", type=positive_int, default=2,
-                   help="processes for --sweep, and for a baseline run's episodes (split over them; the same "
-                   "episodes and scores as one process) (default %(default)s)")
+                   help="processes for --sweep, and for a baseline run's episodes (split over them, into as many "
+                   "parts with --ray; the same episodes and scores as one process) (default %(default)s)")
+    add_ray_option(p, "the jobs of --sweep, and the parts of a baseline run's episodes")
     p.add_argument("--video", help="write episode 0 as .mp4 or .gif: real frames | the model's belief | its plan "
                    "(a PlaNet-style run: real frames | its world model's reconstruction; DDPG: the real frames)")
     p.add_argument("--out", help="write the results to OUT.json and a Markdown table to OUT.md (and OUT.png with --sweep)")
@@ -116,6 +117,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _baseline(args, kind, mpc, outputs, argv)
     if args.sweep:
         return _sweep(args, mpc, outputs, argv)
+    if args.ray:
+        raise PigaError("--ray runs the jobs of --sweep and a baseline run's episodes; a piga or oracle run without "
+                        "--sweep plays its episodes in this process")
     if args.video:
         if Path(args.video).suffix.lower() not in (".mp4", ".gif"):
             raise PigaError(f"--video must end in .mp4 or .gif, got {args.video}")
@@ -206,7 +210,7 @@ def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: 
                                             goal_angle=mpc.goal_angle, torque_arrow=args.torque_arrow),
                        mpc, model_dir=args.model if agent != "oracle" else None)
             for m in multipliers for agent in (kind.value, "oracle")]
-    results = run_jobs(jobs, workers=args.workers, progress=not args.quiet)
+    results = run_jobs(jobs, workers=args.workers, progress=not args.quiet, backend=connect_backend(args.ray))
     summaries = [r.summary for r in results]
     table = summary_markdown(summaries)
     print(table, end="")
@@ -279,10 +283,11 @@ def _baseline(args: argparse.Namespace, kind: RunKind, mpc: MPCConfig, outputs: 
               f"these episodes {'show' if args.torque_arrow else 'hide'} it", file=sys.stderr)
     config = EpisodeConfig(episodes=args.episodes, steps=args.steps, seed=args.seed, gravity_mult=args.gravity_mult,
                            torque_arrow=args.torque_arrow, frame_stack=agent.input_frames)
-    if args.workers > 1 and args.episodes > 1:  # latent CEM takes ~0.5 s a step: use the cores over episodes
+    if args.ray or args.workers > 1 and args.episodes > 1:  # latent CEM takes ~0.5 s a step: use the cores over episodes
         from piga.control.jobs import ControlJob, run_split
 
-        result = run_split(ControlJob(kind.value, config, mpc, model_dir=args.model), args.workers, progress=not args.quiet)
+        result = run_split(ControlJob(kind.value, config, mpc, model_dir=args.model), args.workers, progress=not args.quiet,
+                           backend=connect_backend(args.ray))
     else:
         result = run_episodes(agent, config, progress=not args.quiet, record=1 if args.video else 0)
     s = result.summary

@@ -1,8 +1,8 @@
 """Control jobs: batches of episodes for the piga agent or the oracle, run in worker processes.
 
 A :class:`ControlJob` holds all a worker needs to rebuild its agent (a run folder, not a model),
-so that jobs pickle; :func:`run_jobs` runs them in the shared worker pool (:func:`piga.io.pool.run_pool`),
-one torch thread each, and no worker outlives an interrupted command.
+so that jobs pickle; :func:`run_jobs` runs them through the one job runner (:func:`piga.io.pool.run_pool`:
+local processes or a Ray cluster), one torch thread each, and no worker outlives an interrupted command.
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ from piga.io.checkpoint import RunKind
 from piga.world.model import PhysicsModel
 from piga.io.choices import check_choices
 from piga.io.runs import convergence_warning, load_model
-from piga.io.pool import run_pool
+from piga.io.pool import Backend, run_pool
 
 
 class AgentCorrection(Protocol):
@@ -70,6 +70,13 @@ class ControlJob:
             raise ValueError(f"a {self.agent!r} job runs as trained; it takes no correction")
         if self.agent == "oracle" and self.correction is not None:
             raise ValueError("an 'oracle' job plans with the true physics; it takes no correction")
+
+    @property
+    def name(self) -> str:
+        """The job in words, for a line that names it: agent, gravity, episodes and tags."""
+        e = self.episodes
+        tags = "".join(f", {key} {value}" for key, value in self.tags)
+        return f"{self.agent} at gravity x{e.gravity_mult:g}, episodes {e.first_episode}-{e.first_episode + e.episodes - 1}{tags}"
 
 
 def build_agent(job: ControlJob) -> Agent:
@@ -118,23 +125,29 @@ def split_job(job: ControlJob, parts: int) -> list[ControlJob]:
     return [replace(job, episodes=replace(job.episodes, first_episode=s, episodes=k)) for s, k in zip(starts, sizes)]
 
 
-def run_split(job: ControlJob, workers: int = 1, progress: bool = True) -> EpisodeBatch:
-    """Runs ``job``'s episodes split over ``workers`` processes; the result is the one :func:`run_job`
-    gives in one process (the same episodes, starts, seeds and scores; each agent is reset per
-    episode), except the plan times, which are measured with the workers sharing the machine."""
-    if workers <= 1 or job.episodes.episodes <= 1:
+def run_split(job: ControlJob, workers: int = 1, progress: bool = True, backend: Backend | None = None) -> EpisodeBatch:
+    """Runs ``job``'s episodes split into ``workers`` jobs: processes, or on a Ray ``backend``, tasks
+    (:func:`run_jobs`). The result is the one :func:`run_job` gives in one process (the same episodes, starts,
+    seeds and scores; each agent is reset per episode), except the plan times, which are measured with the
+    jobs sharing the machines."""
+    on_ray = backend is not None and backend.kind == "ray"
+    if not on_ray and (workers <= 1 or job.episodes.episodes <= 1):
         return run_job(job)
-    results = run_jobs(split_job(job, workers), workers, progress, keep_plan_ms=True)
+    results = run_jobs(split_job(job, workers), workers, progress, keep_plan_ms=True, backend=backend)
     return _tagged(job, merge_results(job.episodes, results))
 
 
-def run_jobs(jobs: Sequence[ControlJob], workers: int = 1, progress: bool = True, keep_plan_ms: bool = False) -> list[EpisodeBatch]:
-    """Runs jobs, in ``workers`` processes when > 1 (results in the order of ``jobs``; ``keep_plan_ms`` as for :func:`run_job`).
+def run_jobs(jobs: Sequence[ControlJob], workers: int = 1, progress: bool = True, keep_plan_ms: bool = False,
+             backend: Backend | None = None) -> list[EpisodeBatch]:
+    """Runs jobs in ``workers`` processes when > 1, or on ``backend`` (:func:`piga.io.pool.run_pool`); the results
+    in the order of ``jobs`` (``keep_plan_ms`` as for :func:`run_job`).
 
     On KeyboardInterrupt (Ctrl-C, or SIGTERM turned into it by :func:`piga.cli.common.run_cli`) the
-    pool terminates its workers before the exception propagates; a worker whose parent is killed ends too.
+    pool terminates its workers (Ray: cancels its tasks) before the exception propagates; a worker whose
+    parent is killed ends too.
     """
     for run_dir in dict.fromkeys(j.model_dir for j in jobs if j.model_dir is not None):  # once per run, in order
         if (warning := convergence_warning(run_dir)) is not None:
             print(warning, file=sys.stderr)
-    return run_pool(functools.partial(run_job, keep_plan_ms=keep_plan_ms), jobs, workers, progress, desc="control jobs")
+    return run_pool(functools.partial(run_job, keep_plan_ms=keep_plan_ms), jobs, workers, progress, desc="control jobs",
+                    backend=backend)
