@@ -442,7 +442,9 @@ def train_piga(data: Path, run: Path, seed: int, cfg: BenchConfig, n: int) -> fl
     from piga.io.runs import load_model
     from piga.training.train import TrainConfig, train
 
-    config = TrainConfig(epochs=piga_epochs(cfg, n), seed=seed, threads=1, **cfg.overrides.get("piga", {}))
+    # device="cpu": the comparison's training times are the CPU's, on every machine
+    config = TrainConfig(epochs=piga_epochs(cfg, n), seed=seed, threads=1, device="cpu",
+                         **cfg.overrides.get("piga", {}))
     started = (run / "checkpoint.pt").exists()
     state = load_model(run)[1]["state"] if started else None
     if state is None or state["epoch"] < config.epochs:  # not begun, or stopped part-way: resume
@@ -460,7 +462,8 @@ def train_planet_run(data: Path, run: Path, seed: int, cfg: BenchConfig, n: int)
 
     metrics = run / "metrics.json"
     if not metrics.exists() or json.loads(metrics.read_text())["steps"] < cfg.planet_steps:
-        config = PlanetTrainConfig(steps=cfg.planet_steps, seed=seed, threads=1, **cfg.overrides.get("planet", {}))
+        config = PlanetTrainConfig(steps=cfg.planet_steps, seed=seed, threads=1, device="cpu",
+                                   **cfg.overrides.get("planet", {}))
         rssm = rssm_config_for(inspect_dataset(data), cfg.overrides.get("rssm"))
         resume = (run / "checkpoint.pt").exists()  # metrics.json comes last: resume a stopped or shorter run
         # the record piga-baseline planet writes (so that it can --resume this run too), with the steps now asked for
@@ -485,14 +488,14 @@ def train_ddpg_run(obs: str, steps: int, seed: int, data: Path, run: Path, cfg: 
     from agents.sb3.train import train_sb3
 
     if not (run / "metrics.json").exists():
-        config = SB3Config(obs=obs, algo=algo, steps=steps, seed=seed, **cfg.overrides.get("ddpg", {}))
+        config = SB3Config(obs=obs, algo=algo, steps=steps, seed=seed, device="cpu", **cfg.overrides.get("ddpg", {}))
         run.mkdir(parents=True, exist_ok=True)
         autoencoder = None
         if obs == "latent":
             autoencoder = run / AUTOENCODER
             if not autoencoder.exists():
                 train_autoencoder(data, AutoencoderConfig(seed=seed, **cfg.overrides.get("autoencoder", {})), autoencoder,
-                                  progress=False)
+                                  progress=False, device=config.device)
         train_sb3(config, run, autoencoder, resume=(run / "checkpoint.pt").exists(), progress=False)
         write_json(run / "config.json", {"kind": "ddpg", "data": str(data), "ddpg": config.to_dict()})
     return json.loads((run / "metrics.json").read_text())

@@ -448,7 +448,7 @@ def test_ddpg_interrupted_before_its_first_checkpoint_leaves_nothing(obs: str, t
     import agents.sb3.autoencoder as autoencoder
     import agents.sb3.train as ddpg
 
-    def interrupted_autoencoder(data: Any, config: Any, out: Path, progress: bool = True) -> None:
+    def interrupted_autoencoder(data: Any, config: Any, out: Path, progress: bool = True, device: str = "auto") -> None:
         Path(out).write_bytes(b"half an autoencoder")
         raise KeyboardInterrupt
 

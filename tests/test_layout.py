@@ -38,6 +38,8 @@ def _loaded_after(module: str) -> set[str]:
     ("agents.sb3.run", {"piga.training.train", "piga.control"}),
     ("piga.control.registry", {"piga.training.train", "piga.diagnostics"}),
     ("piga.io.checkpoint", {"agents", "piga.world.model", "torch"}),
+    ("piga.io.device", {"torch"}),
+    ("agents.planet.config", {"torch"}),
 ])
 def test_a_module_does_not_load(module: str, never: set[str]) -> None:
     loaded = _loaded_after(module)

@@ -112,9 +112,14 @@ def test_nan_stops_and_names_last_checkpoint(small_data: Path, tmp_path: Path, m
 
 
 def test_cli_trains_and_reports(small_data: Path, tmp_path: Path) -> None:
+    from piga.io.device import resolve_device
+
     out = tmp_path / "run"
-    result = run("piga-train-model", str(small_data), "--out", str(out), *SMALL)
+    result = run("piga-train-model", str(small_data), "--out", str(out), *SMALL, "--device", "auto")
     assert result.returncode in FINISHED, result.stderr
+    # --device auto says nothing on stderr, with or without a GPU: at most the tiny run's convergence warning
+    said = [line for line in result.stderr.splitlines() if "warning: not converged" not in line]
+    assert not said and "cuda" not in result.stderr.lower(), result.stderr
     assert "learned: g=" in result.stdout and "epoch 1:" in result.stdout
     for name in ("checkpoint.pt", "metrics.json", "config.json", "rollout.png", "templates.png", "curves.png"):
         assert (out / name).exists(), name
@@ -123,11 +128,14 @@ def test_cli_trains_and_reports(small_data: Path, tmp_path: Path) -> None:
     metrics = json.loads((out / "metrics.json").read_text())
     assert set(metrics["parameter_errors"]) == {"g", "a"} and "angle" not in metrics  # no /states, no angle error
     assert len(metrics["frame_ssim_per_step"]) == 15 - 4
+    assert metrics["training"]["device"] == str(resolve_device("auto"))
     # an existing run is not replaced without --overwrite or --resume
     assert_one_line_error(run("piga-train-model", str(small_data), "--out", str(out)), "--overwrite")
-    resumed = run("piga-train-model", str(small_data), "--out", str(out), "--resume", "--epochs", "2", "--quiet")
+    resumed = run("piga-train-model", str(small_data), "--out", str(out), "--resume", "--epochs", "2", "--quiet",
+                  "--device", "cpu")  # the device is not the recipe's
     assert resumed.returncode in FINISHED, resumed.stderr
     assert "epoch 2:" in resumed.stdout and "epoch 1:" not in resumed.stdout
+    assert json.loads((out / "metrics.json").read_text())["training"]["device"] == "cpu"
 
 
 def test_cli_bad_input(small_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

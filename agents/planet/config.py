@@ -12,6 +12,8 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 from agents.config import CEMConfig
+from piga.io.choices import check_choices
+from piga.io.device import Device
 
 #: Largest KL free nats per frame accepted (PlaNet uses 3; far larger values switch the KL term off
 #: entirely and, near float32's range, overflow the loss).
@@ -107,6 +109,10 @@ class PlanetTrainConfig:
     """Seed of initialisation, batch sampling and the stochastic states."""
     threads: int = 0
     """torch CPU threads (0: leave torch's default)."""
+    device: Device = "auto"
+    """Where to train (:mod:`piga.io.device`): "auto" (a CUDA GPU when torch sees one, else the CPU), "cpu" or
+    "cuda". Not part of the recipe: a run resumes on any device. The batches and the latent samples are
+    drawn on the CPU whatever the device; the trained model is returned, and planned with, on the CPU."""
     max_minutes: float = 0.0
     """Stop at the first checkpoint past this budget (0: no limit)."""
     max_sequences: int = 0
@@ -126,6 +132,7 @@ class PlanetTrainConfig:
             raise ValueError(f"PlanetTrainConfig.free_nats (--free-nats) must be at most {MAX_FREE_NATS:g} nats per frame (PlaNet uses 3), got {self.free_nats:g}")
         if self.seed < 0 or self.max_sequences < 0 or self.max_minutes < 0:
             raise ValueError("seed, max_sequences and max_minutes must be >= 0")
+        check_choices(self)
 
     def to_dict(self) -> dict[str, Any]:
         """A JSON-able copy."""

@@ -24,7 +24,8 @@ between as one input of R·A numbers, their rewards summed), and the methods bel
 An imagined action is held for R env steps, its R copies side by side.
 
 Frames enter as uint8 and are scaled to [-0.5, 0.5]. Randomness (the reparameterised samples) comes
-from an explicit ``torch.Generator``.
+from an explicit ``torch.Generator``, drawn on the generator's device (the CPU's for a plain
+``torch.Generator()``) and moved to the model's, so that a model on a GPU draws the CPU's numbers.
 """
 
 from __future__ import annotations
@@ -151,8 +152,9 @@ class RSSM(nn.Module):
         self.posterior_net = nn.Sequential(nn.Linear(d + config.embed_size, k), nn.ReLU(), nn.Linear(k, 2 * s))
 
     def initial(self, batch: int) -> Belief:
-        """The zero state before the first frame."""
-        return Belief(torch.zeros(batch, self.config.deter_size), torch.zeros(batch, self.config.stoch_size))
+        """The zero state before the first frame, on the model's device: h (B, D), s (B, S)."""
+        weight = self.pre_gru.weight
+        return Belief(weight.new_zeros(batch, self.config.deter_size), weight.new_zeros(batch, self.config.stoch_size))
 
     def _gaussian(self, raw: Tensor) -> Gaussian:
         mean, std = raw.chunk(2, dim=-1)
@@ -170,9 +172,11 @@ class RSSM(nn.Module):
 
 
 def sample(dist: Gaussian, generator: torch.Generator | None) -> Tensor:
-    """A reparameterised sample mean + std·ε, ε from ``generator``."""
-    noise = torch.randn(dist.mean.shape, generator=generator, dtype=dist.mean.dtype)
-    return dist.mean + dist.std * noise
+    """A reparameterised sample mean + std·ε, ε from ``generator`` on its device (None: torch's global
+    generator of the state's device), then moved to the state's device."""
+    device = dist.mean.device if generator is None else generator.device
+    noise = torch.randn(dist.mean.shape, generator=generator, dtype=dist.mean.dtype, device=device)
+    return dist.mean + dist.std * noise.to(dist.mean.device)
 
 
 def _kl(q: Gaussian, p: Gaussian) -> Tensor:
@@ -215,7 +219,7 @@ class WorldModel(nn.Module):
         b, t = frames.shape[:2]
         embeds = self.embed(frames)  # (B, T, E)
         belief = self.rssm.initial(b)
-        previous = torch.zeros(b, self.config.input_action_size)
+        previous = embeds.new_zeros(b, self.config.input_action_size)  # (B, R·A)
         hs, ss, priors, posts = [], [], [], []
         for step in range(t):
             h, prior = self.rssm.transition(belief, previous)
@@ -269,7 +273,7 @@ class WorldModel(nn.Module):
         b, t = frames.shape[:2]
         embeds = self.embed(frames[:, :context])  # (B, context, E)
         belief = self.rssm.initial(b)
-        previous = torch.zeros(b, self.config.input_action_size)
+        previous = embeds.new_zeros(b, self.config.input_action_size)  # (B, R·A)
         hs, ss = [], []
         for step in range(t):
             h, prior = self.rssm.transition(belief, previous)
@@ -286,7 +290,7 @@ class WorldModel(nn.Module):
         b, horizon = actions.shape[:2]
         actions = held(actions, self.config.action_repeat)  # (B, H, R·A)
         state = Belief(belief.h.expand(b, -1), belief.s.expand(b, -1))
-        total = torch.zeros(b)
+        total = belief.h.new_zeros(b)  # (B,)
         for step in range(horizon):
             h, prior = self.rssm.transition(state, actions[:, step])
             state = Belief(h, sample(prior, generator))

@@ -6,7 +6,8 @@ split (frames, actions and ``/rewards``), take one Adam step on PlaNet's loss
 (:meth:`agents.planet.rssm.WorldModel.loss`), clip the gradient norm, and every
 ``checkpoint_every`` steps write an atomic ``checkpoint.pt``, one point of the learning curve and
 TensorBoard scalars. Randomness comes from two explicit generators (numpy for the batches, torch
-for the latent samples), saved in each checkpoint, so ``resume`` continues exactly. A non-finite
+for the latent samples), saved in each checkpoint, so ``resume`` continues exactly. Both draw on the
+CPU whatever ``PlanetTrainConfig.device``; the batches are then copied to the device. A non-finite
 loss stops training with :class:`piga.training.train.TrainingDiverged`, naming the last good checkpoint.
 
 A run folder holds ``config.json`` (``kind: "planet"``), ``checkpoint.pt``, ``tensorboard/`` and
@@ -21,6 +22,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+import h5py
 import numpy as np
 import torch
 from tqdm.auto import tqdm
@@ -28,10 +30,13 @@ from tqdm.auto import tqdm
 from agents.planet.config import PlanetTrainConfig, RSSMConfig
 from agents.planet.rssm import WorldModel, model_steps
 from agents.planet.run import load_planet
-from piga.data.schema import (DataFormatError, DatasetInfo, check_actions, check_frames_have_signal, inspect_dataset, load_rewards,
-                              read_sequences)
+from piga.data.schema import (DataFormatError, DatasetInfo, check_actions_file, check_frames_have_signal, inspect_dataset, load_rewards,
+                              read_sequences, split_indices)
+from piga.data.windows import SequenceReader, loads_whole
+from piga.io.resources import available_memory
 from piga.io.atomic import write_json
 from piga.io.checkpoint import CHECKPOINT, RunKind, write_checkpoint
+from piga.io.device import module_device, resolve_device
 from piga.training.train import TrainingDiverged
 
 __all__ = ["PlanetState", "check_planet_data", "rssm_config_for", "train_planet"]
@@ -50,33 +55,47 @@ class PlanetState:
 
 
 class _Sequences:
-    """The train split in memory: frames uint8 (N, T, H, W), actions (N, T, A), rewards (N, T);
-    ``extra``'s train split (the iterative mode's collected episodes, all in it) appended."""
+    """A split's sequences (its first ``max_sequences`` with it): frames uint8 (N, T, H, W), actions (N, T, A),
+    rewards (N, T); ``extra``'s train split (the iterative mode's collected episodes, all in it) appended.
+    The frames are in memory, or with ``stream`` read from the file through a bounded cache
+    (:class:`piga.data.windows.SequenceReader`), for a file larger than memory: the same batches either way."""
 
-    def __init__(self, data: str | Path, split: str, max_sequences: int = 0, extra: str | Path | None = None):
-        frames, actions = read_sequences(data, split)
-        rewards = load_rewards(data, split)
-        if max_sequences:
-            frames, actions, rewards = frames[:max_sequences], actions[:max_sequences], rewards[:max_sequences]
-        if extra is not None:
-            more_frames, more_actions = read_sequences(extra, "train")
-            frames, actions = np.concatenate([frames, more_frames]), np.concatenate([actions, more_actions])
-            rewards = np.concatenate([rewards, load_rewards(extra, "train")])
-        self.frames = torch.from_numpy(frames)
+    def __init__(self, data: str | Path, split: str, max_sequences: int = 0, extra: str | Path | None = None,
+                 stream: bool = False):
+        limit = max_sequences or None
+        rewards = load_rewards(data, split, limit=limit)
+        self.reader: SequenceReader | None = None
+        if stream:
+            if extra is not None:
+                raise ValueError("streamed sequences take no extra file")
+            self.reader = SequenceReader(data, split_indices(data, split)[:limit])
+            with h5py.File(data, "r") as f:
+                actions = f["actions"][()][self.reader.sequences].astype(np.float32)  # (N, T, A)
+            self.frames = None
+        else:
+            frames, actions = read_sequences(data, split, limit=limit)
+            if extra is not None:
+                more_frames, more_actions = read_sequences(extra, "train")
+                frames, actions = np.concatenate([frames, more_frames]), np.concatenate([actions, more_actions])
+                rewards = np.concatenate([rewards, load_rewards(extra, "train")])
+            self.frames = torch.from_numpy(frames)
         self.actions = torch.from_numpy(actions)
         self.rewards = torch.from_numpy(rewards)
 
     def __len__(self) -> int:
-        return len(self.frames)
+        return len(self.actions)
 
     def batch(self, rng: np.random.Generator, size: int, length: int, repeat: int = 1) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """``size`` random windows of ``length`` model steps of ``repeat`` env steps each
         (:func:`agents.planet.rssm.model_steps`): frames (B, L, H, W), actions (B, L, R·A), rewards (B, L)."""
         length *= repeat  # env steps
-        seq = rng.integers(len(self.frames), size=size)
-        start = rng.integers(self.frames.shape[1] - length + 1, size=size)
+        seq = rng.integers(len(self), size=size)
+        start = rng.integers(self.actions.shape[1] - length + 1, size=size)
         rows = torch.from_numpy(seq)[:, None]
         cols = torch.from_numpy(start)[:, None] + torch.arange(length)[None]  # (B, L)
+        if self.reader is not None:
+            frames = torch.from_numpy(np.stack([self.reader(i)[j : j + length] for i, j in zip(seq, start)]))
+            return model_steps(frames, self.actions[rows, cols], self.rewards[rows, cols], repeat)
         return model_steps(self.frames[rows, cols], self.actions[rows, cols], self.rewards[rows, cols], repeat)
 
 
@@ -149,7 +168,9 @@ def open_loop_check(model: WorldModel, data: str | Path, run_dir: Path, seed: in
     seqs = _Sequences(data, split, sequences)
     frames, actions, rewards = model_steps(seqs.frames, seqs.actions, seqs.rewards, model.config.action_repeat)
     context = min(OPEN_LOOP_CONTEXT, frames.shape[1] - 1)
-    decoded, predicted = model.open_loop(frames, actions, context, torch.Generator().manual_seed(seed))
+    device = module_device(model)
+    generator = torch.Generator().manual_seed(seed)
+    decoded, predicted = (x.cpu() for x in model.open_loop(frames.to(device), actions.to(device), context, generator))
     imagined = (decoded.movedim(2, -1) + 0.5).clamp(0, 1)  # (B, T, H, W, C) in [0, 1]
     real = frames.float() / 255  # (B, T, H, W) gray, or (B, T, H, W, C)
     if real.dim() == 4:
@@ -175,7 +196,8 @@ def _valid_losses(model: WorldModel, data: str | Path, config: PlanetTrainConfig
     length = config.chunk_length
     repeat = model.config.action_repeat
     window = model_steps(seqs.frames[:, :length * repeat], seqs.actions[:, :length * repeat], seqs.rewards[:, :length * repeat], repeat)
-    parts = model.loss(*window, config, torch.Generator().manual_seed(config.seed))
+    device = module_device(model)
+    parts = model.loss(*(x.to(device) for x in window), config, torch.Generator().manual_seed(config.seed))
     return {name: float(value) for name, value in parts._asdict().items()}
 
 
@@ -196,13 +218,20 @@ def train_planet(
     more ``steps``); ``rssm`` is ignored. ``extra_data``: a file of the same frames whose sequences
     are trained on too (:mod:`agents.planet.iterative`'s collected episodes).
 
+    The model trains on ``config.device`` (:func:`piga.io.device.resolve_device`), where ``metrics.json``'s
+    losses are measured too, and is returned on the CPU, where the latent planner runs.
+
     Returns:
-        The trained model (eval mode) and the final state.
+        The trained model (eval mode, on the CPU) and the final state.
+
+    Raises:
+        ValueError: ``config.device`` is "cuda" and torch sees no CUDA device (before anything is read).
     """
+    device = resolve_device(config.device)
     run_dir = Path(run_dir)
     ckpt_path = run_dir / CHECKPOINT
     info = inspect_dataset(data)
-    check_actions(read_sequences(data, "train")[1], data)
+    check_actions_file(data)  # the actions only: the frames may not fit in memory
     if config.threads:
         torch.set_num_threads(config.threads)
     rng = np.random.default_rng(config.seed)
@@ -217,10 +246,14 @@ def train_planet(
         model = WorldModel(rssm or rssm_config_for(info))
         state = PlanetState()
     check_planet_data(info, config, model.config.action_repeat)
+    model.to(device)
     optimizer = torch.optim.Adam(model.parameters(), lr=config.lr, eps=config.adam_eps)
     if resume:
         optimizer.load_state_dict(ckpt["optimizer"])
-    seqs = _Sequences(data, "train", config.max_sequences, extra_data)
+    n_frames = (min(config.max_sequences or info.split_counts["train"], info.split_counts["train"]) * info.steps
+                * int(np.prod(info.image_shape)))
+    seqs = _Sequences(data, "train", config.max_sequences, extra_data,
+                      stream=extra_data is None and not loads_whole(n_frames, available_memory()))
     writer: Any = None
     model.train()
     started = time.monotonic() - state.elapsed
@@ -229,7 +262,8 @@ def train_planet(
     bar = tqdm(total=config.steps, initial=state.step, desc="planet", unit="step", disable=not progress)
     try:
         while state.step < config.steps:
-            frames, actions, rewards = seqs.batch(rng, config.batch_size, config.chunk_length, model.config.action_repeat)
+            batch = seqs.batch(rng, config.batch_size, config.chunk_length, model.config.action_repeat)
+            frames, actions, rewards = (x.to(device) for x in batch)  # uint8 (B, L, H, W), (B, L, R·A), (B, L)
             parts = model.loss(frames, actions, rewards, config, generator)
             if not torch.isfinite(parts.loss):
                 good = ckpt_path if ckpt_path.exists() else None
@@ -276,9 +310,10 @@ def train_planet(
         "collected_sequences": 0 if extra_data is None else inspect_dataset(extra_data).n_sequences,
         "steps": state.step,
         "train_seconds": state.elapsed,
+        "device": str(device),
         "learning_curve": state.history,
         "valid": _valid_losses(model, data, config, info),
         "open_loop": open_loop_check(model, data, run_dir, config.seed),
     }
     write_json(run_dir / "metrics.json", metrics)
-    return model, state
+    return model.cpu(), state

@@ -33,6 +33,7 @@ from torch import Tensor, nn
 from tqdm.auto import tqdm
 
 from piga.io.atomic import atomic_output
+from piga.io.device import Device, resolve_device
 from piga.data.schema import DataFormatError, DatasetInfo, check_frames_have_signal, inspect_dataset, read_sequences
 
 __all__ = ["AutoencoderConfig", "FrameAutoencoder", "autoencoder_seconds", "check_autoencoder_data", "load_autoencoder", "train_autoencoder"]
@@ -121,14 +122,19 @@ def check_autoencoder_data(info: DatasetInfo) -> None:
     check_frames_have_signal(info.path)
 
 
-def train_autoencoder(data: str | Path, config: AutoencoderConfig, out: str | Path, progress: bool = True) -> tuple[FrameAutoencoder, float]:
+def train_autoencoder(data: str | Path, config: AutoencoderConfig, out: str | Path, progress: bool = True,
+                      device: Device = "auto") -> tuple[FrameAutoencoder, float]:
     """Trains on the train split's frames of ``data`` and writes the model to ``out`` atomically.
 
     The file also records the training's wall seconds (``train_seconds``, read by :func:`autoencoder_seconds`).
+    It trains on ``device`` (:func:`piga.io.device.resolve_device`; the run's ``SB3Config.device``); the
+    initialisation and the batches are drawn on the CPU, and the model is saved and returned on the CPU,
+    where it encodes the env's frames.
 
     Returns:
-        The model (eval mode) and its final training MSE (mean over the last 100 steps).
+        The model (eval mode, on the CPU) and its final training MSE (mean over the last 100 steps).
     """
+    target = resolve_device(device)
     started = time.monotonic()
     check_autoencoder_data(inspect_dataset(data))
     frames, _ = read_sequences(data, "train")
@@ -137,11 +143,13 @@ def train_autoencoder(data: str | Path, config: AutoencoderConfig, out: str | Pa
     model = FrameAutoencoder(config)
     mean = torch.from_numpy(frames.mean(axis=(0, 1), dtype=np.float64) / 255.0).float()[None, None]  # (1, 1, 64, 64)
     model.mean_logit.copy_(torch.logit(mean.clamp(1e-3, 1 - 1e-3)))
+    model.to(target)
     optimizer = torch.optim.Adam(model.parameters(), lr=config.lr)
     rng = np.random.default_rng(config.seed)
     recent: list[float] = []
     for _ in tqdm(range(config.steps), desc="autoencoder", disable=not progress):
-        x = flat[torch.from_numpy(rng.integers(len(flat), size=config.batch_size))].float() / 255.0
+        rows = torch.from_numpy(rng.integers(len(flat), size=config.batch_size))
+        x = flat[rows].to(target).float() / 255.0  # (B, 1, 64, 64)
         loss = nn.functional.mse_loss(model(x), x)
         if not torch.isfinite(loss):
             raise RuntimeError(f"autoencoder training diverged (loss {loss.item()}); nothing was written")
@@ -151,10 +159,11 @@ def train_autoencoder(data: str | Path, config: AutoencoderConfig, out: str | Pa
         recent = (recent + [loss.item()])[-100:]
     model.eval()
     with torch.inference_mode():  # the raw codes' statistics, over (at most) 4096 training frames
-        sample = flat[torch.from_numpy(np.sort(rng.permutation(len(flat))[:4096]))].float() / 255.0
+        sample = flat[torch.from_numpy(np.sort(rng.permutation(len(flat))[:4096]))].to(target).float() / 255.0
         codes = torch.cat([model.encoder(batch) for batch in sample.split(512)])  # (S, Z)
     model.code_mean.copy_(codes.mean(0))
     model.code_std.copy_(codes.std(0).clamp_min(1e-6))
+    model.cpu()
     with atomic_output(out, overwrite=True) as tmp:
         torch.save({"config": asdict(config), "model": model.state_dict(), "mse": float(np.mean(recent)),
                     "train_seconds": time.monotonic() - started}, tmp)

@@ -12,6 +12,9 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 from typing import Any, Literal, get_args
 
+from piga.io.choices import check_choices
+from piga.io.device import Device
+
 __all__ = ["ALGORITHMS", "ALGORITHM_PRESETS", "EPISODE_STEPS", "OBSERVATIONS", "PRESETS", "Algorithm", "Observation", "SB3Config"]
 
 Observation = Literal["pixels", "latent", "state"]
@@ -84,12 +87,17 @@ class SB3Config:
     """SB3's ``seed=``, the episode starts and the evaluation starts."""
     threads: int = 1
     """torch CPU threads."""
+    device: Device = "auto"
+    """Where SB3 trains its networks (:mod:`piga.io.device`; passed to SB3's ``device``), and the latent
+    autoencoder trains: "auto" (a CUDA GPU when torch sees one, else the CPU), "cpu" or "cuda". Not part of
+    the recipe: a run resumes on any device. The trained policy acts on the CPU."""
 
     def __post_init__(self) -> None:
         if self.obs not in OBSERVATIONS:
             raise ValueError(f"unknown observation {self.obs!r}; expected one of {', '.join(OBSERVATIONS)}")
         if self.algo not in ALGORITHMS:
             raise ValueError(f"unknown algorithm {self.algo!r}; expected one of {', '.join(ALGORITHMS)}")
+        check_choices(self)
         for name, value in {**ALGORITHM_PRESETS[self.algo], **PRESETS[self.obs]}.items():
             if getattr(self, name) is None:
                 object.__setattr__(self, name, value)

@@ -11,11 +11,11 @@ folder, the agent (:class:`agents.sb3.run.SB3Agent`) and the evaluation are the 
 
 Training runs in chunks of ``eval_every`` steps (whole episodes). After each chunk, ``EvalCallback``
 has scored the policy, and one atomic ``checkpoint.pt`` holds the SB3 model, its replay buffer, the
-global numpy and torch RNG states (SB3 samples batches and noise from them) and the number of
-episodes started; every training episode's start depends on (seed, episode index) only
-(:class:`envs.observations.EpisodeSeeds`) and every evaluation uses the same seeded starts. So
-``resume`` continues exactly as the uninterrupted run would. ``model.zip`` (SB3's format) is the
-latest policy, for ``DDPG.load``.
+global numpy and torch RNG states (SB3 samples batches and noise from them; the GPU's too when it
+trains on one) and the number of episodes started; every training episode's start depends on
+(seed, episode index) only (:class:`envs.observations.EpisodeSeeds`) and every evaluation uses the
+same seeded starts. So ``resume`` continues exactly as the uninterrupted run would (on the same
+device). ``model.zip`` (SB3's format) is the latest policy, for ``DDPG.load``.
 """
 
 from __future__ import annotations
@@ -37,6 +37,7 @@ from envs.observations import EpisodeSeeds, FiniteActions, LatentObservation, No
 from envs.pendulum import PixelPendulumConfig
 from piga.io.atomic import atomic_output, write_json
 from piga.io.checkpoint import CHECKPOINT, RunKind, read_checkpoint, unreadable, write_checkpoint
+from piga.io.device import resolve_device
 
 __all__ = ["first_step_reaching", "make_env", "make_observation_env", "train_sb3"]
 
@@ -118,7 +119,8 @@ def _save(run_dir: Path, model: Any, config: SB3Config, episodes: int, history: 
         "model_zip": policy.getvalue(),
         "replay_buffer": buffer.getvalue(),
         "rng": {"numpy": np.random.get_state(), "torch": torch.get_rng_state(),
-                "action_space": model.action_space.np_random.bit_generator.state},
+                "action_space": model.action_space.np_random.bit_generator.state,
+                **({"cuda": torch.cuda.get_rng_state(model.device)} if model.device.type == "cuda" else {})},
         "episodes": episodes,
         "history": history,
         "elapsed": elapsed,
@@ -162,7 +164,8 @@ def train_sb3(config: SB3Config, run_dir: str | Path, autoencoder: str | Path | 
     (``tensorboard/``) and ``metrics.json`` (the EvalCallback learning curve) to ``run_dir``.
 
     Args:
-        config: the settings (with ``resume``: the run's own, possibly with more ``steps``).
+        config: the settings (with ``resume``: the run's own, possibly with more ``steps``, on any ``device``;
+            SB3 trains on ``config.device``, :func:`piga.io.device.resolve_device`).
         run_dir: the run folder.
         autoencoder: for ``obs="latent"``, the trained autoencoder (:mod:`agents.sb3.autoencoder`).
         resume: continue the run in ``run_dir`` exactly.
@@ -170,10 +173,14 @@ def train_sb3(config: SB3Config, run_dir: str | Path, autoencoder: str | Path | 
 
     Returns:
         The metrics written to ``metrics.json``.
+
+    Raises:
+        ValueError: ``config.device`` is "cuda" and torch sees no CUDA device.
     """
     from stable_baselines3.common.noise import NormalActionNoise
 
     algorithm = sb3_class(config.algo)
+    device = resolve_device(config.device)
     run_dir = Path(run_dir)
     torch.set_num_threads(config.threads)
     encoder, latent_size = None, 0
@@ -192,7 +199,8 @@ def train_sb3(config: SB3Config, run_dir: str | Path, autoencoder: str | Path | 
         ckpt = read_checkpoint(run_dir, RunKind.DDPG)
         try:
             # the zip holds the TensorBoard folder of the run's first invocation: log where the run is now
-            model = algorithm.load(io.BytesIO(ckpt["model_zip"]), env=venv, device="cpu", tensorboard_log=str(run_dir / "tensorboard"))
+            model = algorithm.load(io.BytesIO(ckpt["model_zip"]), env=venv, device=device,
+                                   tensorboard_log=str(run_dir / "tensorboard"))
             model.load_replay_buffer(io.BytesIO(ckpt["replay_buffer"]))
         except Exception as exc:  # a truncated or foreign file
             raise unreadable(run_dir / CHECKPOINT, RunKind.DDPG, exc) from None
@@ -200,6 +208,8 @@ def train_sb3(config: SB3Config, run_dir: str | Path, autoencoder: str | Path | 
         # of the moment of the checkpoint
         np.random.set_state(ckpt["rng"]["numpy"])
         torch.set_rng_state(ckpt["rng"]["torch"])
+        if device.type == "cuda" and "cuda" in ckpt["rng"]:  # saved on a GPU, resumed on one
+            torch.cuda.set_rng_state(ckpt["rng"]["cuda"], device)
         model.action_space.np_random.bit_generator.state = ckpt["rng"]["action_space"]
         # the last chunk ended an episode, and its automatic reset drew episode k's start; draw it
         # again (SB3's env.seed() in load left a seed for the next reset: make it episode k's)
@@ -214,7 +224,7 @@ def train_sb3(config: SB3Config, run_dir: str | Path, autoencoder: str | Path | 
                           buffer_size=config.buffer_size, learning_starts=config.learning_starts, batch_size=config.batch_size,
                           tau=config.tau, gamma=config.gamma, train_freq=config.train_freq, gradient_steps=config.gradient_steps,
                           action_noise=noise, policy_kwargs={"net_arch": list(config.net_arch)},
-                          tensorboard_log=str(run_dir / "tensorboard"), seed=config.seed, device="cpu", verbose=0)
+                          tensorboard_log=str(run_dir / "tensorboard"), seed=config.seed, device=device, verbose=0)
     callback = _eval_callback(config, eval_env)
     started = time.monotonic() - elapsed
     bar = tqdm(total=config.steps, initial=model.num_timesteps, desc=f"{config.algo} ({config.obs})", unit="step", disable=not progress)
@@ -247,6 +257,7 @@ def train_sb3(config: SB3Config, run_dir: str | Path, autoencoder: str | Path | 
         "obs": config.obs,
         "steps": int(model.num_timesteps),
         "train_seconds": elapsed,
+        "device": str(device),
         "learning_curve": history,
         "first_step_reaching_minus_200": first_step_reaching(history),
         "final_eval_mean_return": history[-1]["eval_mean_return"] if history else None,

@@ -18,9 +18,9 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from piga.cli.common import (ArgumentParser, Interrupted, PigaError, add_preset_option, command_line, format_default,
-                             made_folder, nonnegative_float, nonnegative_int, positive_float, positive_int,
-                             remove_outputs, run_cli, seed_int, thread_count)
+from piga.cli.common import (ArgumentParser, Interrupted, PigaError, add_device_option, add_preset_option, command_line,
+                             format_default, made_folder, nonnegative_float, nonnegative_int, positive_float,
+                             positive_int, remove_outputs, run_cli, seed_int, thread_count)
 from piga.io.checkpoint import CHECKPOINT, RunKind
 
 PROG = "piga-baseline"
@@ -60,6 +60,7 @@ def build_parser() -> ArgumentParser:
                       help="stop at the first checkpoint past this budget")
     q.add_argument("--seed", type=seed_int, default=planet.seed, help="seed (default %(default)s)")
     q.add_argument("--threads", type=thread_count, default=planet.threads, help="torch CPU threads (default %(default)s: torch's choice)")
+    add_device_option(q, planet.device)
     iterative = IterativeConfig()
     q.add_argument("--iterative", type=nonnegative_int, default=0, metavar="EPISODES",
                    help="after training, PlaNet's own loop: each round collects EPISODES episodes with the planner plus "
@@ -111,6 +112,7 @@ def build_parser() -> ArgumentParser:
     d.add_argument("--torque-arrow", action="store_true", help="show Gymnasium's torque arrow in the frames (off by default, as in piga-control)")
     d.add_argument("--seed", type=seed_int, default=ddpg.seed, help="seed (default %(default)s)")
     d.add_argument("--threads", type=thread_count, default=ddpg.threads, help="torch CPU threads (default %(default)s)")
+    add_device_option(d, ddpg.device)
     _common(d)
     return p
 
@@ -184,8 +186,9 @@ def _saved_config(run_dir: Path, record: dict[str, Any], key: str, cls: Any, opt
 
 
 #: Options that ``--resume`` takes besides those naming the run: the run's length and budget, and
-#: how this process runs. Any other option would change the run's recipe, so it is refused.
-RESUME_OPTIONS = {"planet": ("steps", "max_minutes", "rounds", "threads", "quiet"), "ddpg": ("steps", "threads", "quiet")}
+#: how this process runs (the device included). Any other option would change the run's recipe, so it is refused.
+RESUME_OPTIONS = {"planet": ("steps", "max_minutes", "rounds", "threads", "device", "quiet"),
+                  "ddpg": ("steps", "threads", "device", "quiet")}
 
 
 def _refuse_recipe_changes(args: Any, record: dict[str, Any], run_dir: Path) -> None:
@@ -250,9 +253,9 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
         _check_run_dir(run_dir, True, False, RunKind.PLANET)
         record = _read_record(run_dir)
         _refuse_recipe_changes(args, record, run_dir)
-        saved = _saved_config(run_dir, record, "train", PlanetTrainConfig)
+        saved = _saved_config(run_dir, record, "train", PlanetTrainConfig, optional=("device",))  # older runs have none
         config = replace(saved, steps=args.steps or saved.steps, max_minutes=args.max_minutes or saved.max_minutes,
-                         threads=args.threads or saved.threads)
+                         threads=args.threads or saved.threads, device=args.device)
         rssm = None
         record["train"] = config.to_dict()
         if args.iterative and not record.get("iterative"):
@@ -275,7 +278,7 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
     else:
         config = PlanetTrainConfig(steps=args.steps or PlanetTrainConfig.steps, batch_size=args.batch_size, chunk_length=args.chunk_length,
                                    max_sequences=args.max_sequences, free_nats=args.free_nats, seed=args.seed,
-                                   threads=args.threads, max_minutes=args.max_minutes or 0.0)
+                                   threads=args.threads, device=args.device, max_minutes=args.max_minutes or 0.0)
         rssm = rssm_config_for(info, {"deter_size": args.deter_size, "stoch_size": args.stoch_size, "action_repeat": args.action_repeat})
         check_planet_memory(rssm)
         if not args.iterative:
@@ -387,7 +390,8 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
     if args.resume:
         _check_run_dir(run_dir, True, False, RunKind.DDPG)
         record = _read_record(run_dir)
-        saved = _saved_config(run_dir, record, "ddpg", SB3Config, optional=("algo",))  # runs from before --algo are DDPG
+        # runs from before --algo are DDPG; runs from before --device have none
+        saved = _saved_config(run_dir, record, "ddpg", SB3Config, optional=("algo", "device"))
         if saved.obs != args.obs:
             raise PigaError(f"--resume: {run_dir} was trained with --obs {saved.obs}, not {args.obs}")
         if saved.algo != args.algo:
@@ -398,7 +402,7 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
         if args.steps and args.steps < saved.steps:
             raise PigaError(f"--resume --steps {args.steps}: the run already planned {saved.steps} steps; --resume may "
                             "raise --steps, never lower it")
-        config = replace(saved, steps=args.steps or saved.steps, threads=args.threads)
+        config = replace(saved, steps=args.steps or saved.steps, threads=args.threads, device=args.device)
         record["ddpg"] = config.to_dict()
         record.setdefault("resumed", []).append(command)
         checkpoint_bytes: float = (run_dir / CHECKPOINT).stat().st_size
@@ -407,7 +411,8 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
                                                  ("noise_std", args.noise_std)) if value is not None}  # else the presets'
         config = SB3Config(obs=args.obs, algo=args.algo, steps=args.steps or SB3Config.steps, eval_every=args.eval_every,
                             eval_episodes=args.eval_episodes, learning_rate=args.learning_rate, batch_size=args.batch_size,
-                            torque_arrow=args.torque_arrow, seed=args.seed, threads=args.threads, **given)
+                            torque_arrow=args.torque_arrow, seed=args.seed, threads=args.threads, device=args.device,
+                            **given)
         ae_config = AutoencoderConfig(steps=args.autoencoder_steps, seed=config.seed)
         if args.data:
             from agents.sb3.autoencoder import check_autoencoder_data
@@ -431,7 +436,8 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
             if autoencoder is not None and not args.resume:
                 from agents.sb3.autoencoder import train_autoencoder
 
-                _, mse = train_autoencoder(args.data, ae_config, autoencoder, progress=not args.quiet)
+                _, mse = train_autoencoder(args.data, ae_config, autoencoder, progress=not args.quiet,
+                                           device=config.device)
                 record["autoencoder"] = {**ae_config.__dict__, "train_mse": mse}
                 print(f"autoencoder trained on {args.data}: per-pixel MSE {mse:.5f}")
             print(f"training {config.algo.upper()} from {config.obs} for {config.steps} env steps -> {run_dir}")
@@ -454,6 +460,9 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    from piga.io.device import resolve_device
+
+    resolve_device(args.device)  # --device cuda without a GPU: one line, before anything is read or written
     return _planet(args, argv) if args.baseline == "planet" else _ddpg(args, argv)
 
 

@@ -316,6 +316,15 @@ def add_preset_option(parser: argparse.ArgumentParser, *flags: str, default: Any
     return action
 
 
+def add_device_option(parser: argparse.ArgumentParser, default: str) -> argparse.Action:
+    """``--device {auto,cpu,cuda}`` (:mod:`piga.io.device`), defaulting to ``default``, the command's config
+    dataclass's. A bad choice is argparse's one-line usage error; ``cuda`` without a GPU is refused when resolved."""
+    from piga.io.device import DEVICE_HELP, DEVICES
+
+    return parser.add_argument("--device", choices=DEVICES, default=default,
+                               help=f"{DEVICE_HELP} (default %(default)s)")
+
+
 def documented_default(action: argparse.Action) -> Any:
     """The default an option documents: the preset's (see :func:`add_preset_option`) or argparse's."""
     return getattr(action, "documented_default", action.default)
@@ -337,4 +346,4 @@ def split_type(text: str) -> tuple[float, float, float]:
 
 __all__ = ["ArgumentParser", "PigaError", "RAY_HELP", "add_ray_option", "connect_backend", "ray_address", "run_cli", "positive_int", "nonnegative_int", "seed_int", "thread_count", "positive_float", "nonnegative_float",
            "split_type", "add_preset_option", "documented_default", "format_default", "Interrupted", "made_folder",
-           "missing_folders", "remove_empty_folders", "remove_outputs"]
+           "missing_folders", "remove_empty_folders", "remove_outputs", "add_device_option"]

@@ -11,13 +11,14 @@ from pathlib import Path
 
 from typing import Any
 
-from piga.cli.common import (NOT_CONVERGED, ArgumentParser, Interrupted, PigaError, add_preset_option, command_line,
-                             format_default, missing_folders, nonnegative_int, positive_float, positive_int,
-                             remove_empty_folders, remove_outputs, run_cli, seed_int, thread_count, unit_fraction)
+from piga.cli.common import (NOT_CONVERGED, ArgumentParser, Interrupted, PigaError, add_device_option,
+                             add_preset_option, command_line, format_default, missing_folders, nonnegative_int,
+                             positive_float, positive_int, remove_empty_folders, remove_outputs, run_cli, seed_int,
+                             thread_count, unit_fraction)
 from piga.io.checkpoint import CHECKPOINT, require_piga_run
 
 #: The recipe options a user may give; each is a TrainConfig field of the same name.
-RECIPE_OPTIONS = ("epochs", "budget_steps", "max_minutes", "batch_size", "lr", "lr_physics", "warmup_fraction")
+RECIPE_OPTIONS = ("epochs", "budget_steps", "max_minutes", "batch_size", "lr", "lr_physics", "warmup_fraction", "window_stride")
 
 PROG = "piga-train-model"
 OUTPUTS = (CHECKPOINT, "metrics.json", "config.json", "rollout.png", "templates.png", "curves.png", "tensorboard")
@@ -26,6 +27,7 @@ OUTPUTS = (CHECKPOINT, "metrics.json", "config.json", "rollout.png", "templates.
 def build_parser() -> ArgumentParser:
     from piga.world.physics import GravityOptions  # noqa: PLC0415 (torch loads only when the command runs)
     from piga.training.train import PRESETS, TrainConfig  # noqa: PLC0415
+    from piga.io.choices import literal_fields  # noqa: PLC0415
 
     fast, paper = TrainConfig(), PRESETS["paper"].train
 
@@ -56,6 +58,8 @@ def build_parser() -> ArgumentParser:
     recipe("--lr-physics", "lr_physics", positive_float, "physical-parameter learning rate, log space")
     recipe("--warmup-fraction", "warmup_fraction", unit_fraction, "fraction of the run's steps that train the autoencoder "
            "alone, first")
+    recipe("--window-stride", "window_stride", positive_int, "frames between the start frames of a sequence's training "
+           "windows: a stride of T - L - T_pred + 1 takes one window per sequence, for a file of many sequences")
     p.add_argument("--signed-actuation", action="store_true",
                    help="learn the sign of a too (a in linear space, from +0.3): for a camera on the other side of the "
                    "hinge or a motor wired the other way, which flip the actuation the frames show")
@@ -64,8 +68,16 @@ def build_parser() -> ArgumentParser:
                       help="gravity data only, the paper's m run: hold g at G (your value; the file's parameters are "
                       "never read) and learn the bodies' shared mass m instead, starting from 1/G so that the force "
                       "g·m starts at 1 as in the g run")
+    p.add_argument("--data-loading", choices=dict(literal_fields(TrainConfig))["data_loading"], default=None,
+                   help="'memory': load the train split's frames whole; 'stream': read them from the file through a "
+                   "bounded cache, for a file larger than memory; 'auto': load when they need under 2 GiB and under a "
+                   f"quarter of the available memory (default {fast.data_loading})")
+    p.add_argument("--stream-cache-mb", type=positive_int, default=None, metavar="MB",
+                   help="the streaming reader's cache of decompressed sequences, capped at a quarter of the available "
+                   f"memory (default {fast.stream_cache_mb})")
     p.add_argument("--seed", type=seed_int, default=fast.seed, help="seed of initialisation and sampling (default %(default)s)")
     p.add_argument("--threads", type=thread_count, default=fast.threads, help="torch CPU threads (default %(default)s: torch's choice)")
+    add_device_option(p, fast.device)
     p.add_argument("--seed-retries", type=nonnegative_int, default=fast.seed_retries, metavar="N",
                    help="a scene whose object check finds an object missing is trained again from the start with the "
                    "next seed, up to N times (default %(default)s; 0: never; not with --resume)")
@@ -78,6 +90,9 @@ def build_parser() -> ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    from piga.io.device import resolve_device
+
+    device = resolve_device(args.device)  # --device cuda without a GPU: one line, before anything is read
     run_dir = Path(args.out)
     if run_dir.exists() and not run_dir.is_dir():
         raise PigaError(f"--out {run_dir} is a file, not a folder")
@@ -95,7 +110,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     from piga.data.schema import MAX_SEED, fingerprint, inspect_dataset
     from piga.training.report import write_run_report
     from piga.io.runs import load_model
-    from piga.training.train import TrainConfig, TrainingDiverged, check_trainable, model_config_for, preset_for, train
+    from piga.training.train import (TrainConfig, TrainingDiverged, check_trainable, model_config_for, preset_for,
+                                     resolve_loading, train)
 
     info = inspect_dataset(args.data)
     overrides = {k: getattr(args, k) for k in RECIPE_OPTIONS if getattr(args, k) is not None}
@@ -119,17 +135,21 @@ def main(argv: Sequence[str] | None = None) -> int:
         changed = (sorted(set(overrides) - {"epochs", "budget_steps", "max_minutes"}) + (["signed_actuation"] if args.signed_actuation else [])
                    + (["fixed_g"] if args.fixed_g is not None else []) + (["preset"] if args.preset != "fast" else [])
                    + (["seed"] if args.seed not in (saved.seed, TrainConfig().seed) else [])
-                   + (["seed_retries"] if args.seed_retries != TrainConfig().seed_retries else []))
+                   + (["seed_retries"] if args.seed_retries != TrainConfig().seed_retries else [])
+                   + [name for name in ("data_loading", "stream_cache_mb")
+                      if getattr(args, name) is not None and getattr(args, name) != getattr(saved, name)])
         if changed:
             raise PigaError(f"--resume keeps the run's recipe; drop {', '.join('--' + c.replace('_', '-') for c in changed)}")
-        train_config = replace(saved, **overrides)
+        train_config = replace(saved, device=args.device, **overrides)  # the device is not the recipe's
         model_config = saved_model.config
         record = _read_record(run_dir)
         record.setdefault("resumed", []).append(command)
     else:
         recipe = preset_for(args.preset, info)
-        train_config = replace(recipe.train, seed=args.seed, threads=args.threads, seed_retries=args.seed_retries,
-                               **overrides)  # explicit options win
+        reading = {name: getattr(args, name) for name in ("data_loading", "stream_cache_mb") if getattr(args, name) is not None}
+        train_config = replace(recipe.train, seed=args.seed, threads=args.threads, device=args.device,
+                               seed_retries=args.seed_retries, **overrides, **reading)  # explicit options win
+        train_config = resolve_loading(train_config, info)  # as the run records it
         model_config = model_config_for(info, recipe.model)
         for flag, option, value in (("--signed-actuation", "signed_actuation", args.signed_actuation or None),
                                     ("--fixed-g", "fixed_g", args.fixed_g)):
@@ -152,8 +172,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"{PROG}: warning: {args.data} has no test sequences; metrics.json and the figures will be measured on "
               "the train split, which is not held out", file=sys.stderr)
     print(f"training on {args.data} ({info.split_counts['train']} train sequences x {info.steps} frames); "
-          f"{info.system} parameters start at {_start_values(fresh)} -> {run_dir}")
+          f"{info.system} parameters start at {_start_values(fresh)} -> {run_dir} (device {device})")
     print(f"plan: {plan.describe(model_config.pred_frames)}")
+    if train_config.data_loading == "stream":
+        print(f"reading: the frames are streamed from {args.data} through a {train_config.stream_cache_mb} MiB cache, in "
+              "blocks of the sequences it holds")
     if not args.resume and model_config.pred_frames < recipe.model.pred_frames:
         print(f"{PROG}: note: sequences of {info.steps} frames: the physics predicts {model_config.pred_frames} frames "
               f"per window, not the recipe's {recipe.model.pred_frames}", file=sys.stderr)

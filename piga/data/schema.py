@@ -25,10 +25,11 @@ from __future__ import annotations
 
 import json
 import os
+import typing
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import TracebackType
-from typing import Any
+from typing import Any, Literal
 
 import h5py
 import numpy as np
@@ -43,6 +44,23 @@ SPLITS: dict[str, int] = {"train": 0, "valid": 1, "test": 2}
 MAX_SEED = 2**63 - 1
 
 REQUIRED_ATTRS = ("system", "dt")
+
+#: How ``/frames`` is stored: chunked one sequence per chunk, with a lossless filter (HDF5's gzip at a
+#: level, or LZF) or none. Files of any of them read the same; older unchunked files read too.
+FrameCodec = Literal["gzip-1", "gzip-4", "gzip-9", "lzf", "none"]
+#: What piga writes (chosen by ``benchmarks/storage.py``, results/storage.md).
+FRAME_CODEC: FrameCodec = "gzip-4"
+
+
+def codec_options(codec: FrameCodec) -> dict[str, Any]:
+    """h5py's ``create_dataset`` keywords of a :data:`FrameCodec`, e.g. ``{"compression": "gzip", "compression_opts": 4}``."""
+    if codec not in typing.get_args(FrameCodec):
+        raise ValueError(f"unknown frame codec {codec!r}; expected one of {', '.join(typing.get_args(FrameCodec))}")
+    if codec == "none":
+        return {}
+    if codec == "lzf":
+        return {"compression": "lzf"}
+    return {"compression": "gzip", "compression_opts": int(codec.split("-")[1])}
 #: Files whose frames need less memory than this are loaded whole by default when training.
 IN_MEMORY_LIMIT_BYTES = 2 * 1024**3
 
@@ -319,15 +337,18 @@ def _split_code(split: str) -> int:
     return SPLITS[split]
 
 
-def read_sequences(path: str | os.PathLike[str], split: str) -> tuple[np.ndarray, np.ndarray]:
-    """All frames (uint8 [n, T, H, W(, C)]) and actions (float32 [n, T, A]) of one split, in memory."""
-    idx = split_indices(path, split)
+def read_sequences(path: str | os.PathLike[str], split: str, limit: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """All frames (uint8 [n, T, H, W(, C)]) and actions (float32 [n, T, A]) of one split, in memory; with
+    ``limit``, only the split's first ``limit`` sequences are read (a file larger than memory is not loaded
+    to evaluate a few of them)."""
+    idx = split_indices(path, split)[:limit]
     with _open(path) as f:
         return _take(f["frames"], idx), _take(f["actions"], idx).astype(np.float32)
 
 
-def load_states(path: str | os.PathLike[str], split: str) -> np.ndarray:
-    """Ground-truth states (float32 [n, T, S]) of one split. **For evaluation only.**
+def load_states(path: str | os.PathLike[str], split: str, limit: int | None = None) -> np.ndarray:
+    """Ground-truth states (float32 [n, T, S]) of one split (its first ``limit`` sequences with ``limit``).
+    **For evaluation only.**
 
     Training code must never call this; the test suite trains on a file without ``/states``.
 
@@ -338,18 +359,19 @@ def load_states(path: str | os.PathLike[str], split: str) -> np.ndarray:
     with _open(path) as f:
         if "states" not in f:
             raise DataFormatError(f"{path}: has no /states (ground truth is optional in the schema)")
-        return _take(f["states"], idx).astype(np.float32)
+        return _take(f["states"], idx[:limit]).astype(np.float32)
 
 
-def load_rewards(path: str | os.PathLike[str], split: str) -> np.ndarray:
-    """Rewards (float32 [n, T]) of one split: ``rewards[n, t]`` is the env's reward for the action after
-    ``frames[n, t]``. For reward-based baselines only; piga's own training never calls this.
+def load_rewards(path: str | os.PathLike[str], split: str, limit: int | None = None) -> np.ndarray:
+    """Rewards (float32 [n, T]) of one split (its first ``limit`` sequences with ``limit``): ``rewards[n, t]``
+    is the env's reward for the action after ``frames[n, t]``. For reward-based baselines only; piga's own
+    training never calls this.
 
     Raises:
         DataFormatError: the file has no ``/rewards`` (optional in the schema; ``piga-collect`` writes it),
             or they hold NaN or infinite values (naming the first: sequence, step).
     """
-    idx = split_indices(path, split)
+    idx = split_indices(path, split)[:limit]
     with _open(path) as f:
         if "rewards" not in f:
             raise DataFormatError(f"{path}: has no /rewards (reward-based baselines need them; files from "
@@ -387,7 +409,7 @@ class DatasetWriter:
         rewards: whether the file has ``/rewards`` (float32 [N, T]); then :meth:`write` needs them.
         attrs: file attributes; dicts and lists are stored as JSON. ``system`` and ``dt`` are required.
         overwrite: allow replacing an existing file.
-        compression: h5py compression for ``/frames`` (gzip level 4 by default; None for none).
+        compression: how ``/frames`` is stored (:data:`FrameCodec`; :data:`FRAME_CODEC` by default), one sequence per chunk.
     """
 
     def __init__(
@@ -400,7 +422,7 @@ class DatasetWriter:
         state_dim: int | None,
         attrs: dict[str, Any],
         overwrite: bool = False,
-        compression: str | None = "gzip",
+        compression: FrameCodec = FRAME_CODEC,
         rewards: bool = False,
     ):
         missing = [key for key in REQUIRED_ATTRS if key not in attrs]
@@ -414,6 +436,7 @@ class DatasetWriter:
         self.action_dim, self.state_dim = action_dim, state_dim
         self.attrs = {"seed": -1, "piga_version": __version__, "command": "", "params": {}, **attrs}
         self.overwrite = overwrite
+        codec_options(compression)  # refuses an unknown codec before anything is written
         self.compression = compression
         self.rewards = rewards
         self._ctx: Any = None
@@ -429,7 +452,7 @@ class DatasetWriter:
         n, t = self.shape
         f = h5py.File(tmp, "w")
         self._file = f
-        opts: dict[str, Any] = {"compression": self.compression, "compression_opts": 4} if self.compression == "gzip" else {}
+        opts = codec_options(self.compression)
         f.create_dataset("frames", (n, t, *self.image_shape), dtype=np.uint8, chunks=(1, t, *self.image_shape), **opts)
         f.create_dataset("actions", (n, t, self.action_dim), dtype=np.float32)
         if self.state_dim is not None:

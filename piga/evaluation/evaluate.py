@@ -22,6 +22,7 @@ from skimage.metrics import structural_similarity
 
 from piga.data.schema import inspect_dataset, load_states, read_sequences
 from piga.io.choices import check_choices
+from piga.io.device import module_device
 from piga.world.model import PhysicsModel, frames_to_float
 
 #: Data-file parameter name -> model parameter name.
@@ -76,6 +77,10 @@ def parameter_errors(model: PhysicsModel, true_params: dict[str, Any]) -> dict[s
     return out
 
 
+#: Sequences evaluated at a time.
+EVAL_BATCH = 8
+
+
 @torch.no_grad()
 def rollout_frames(model: PhysicsModel, frames: np.ndarray, actions: np.ndarray, steps: int) -> tuple[np.ndarray, np.ndarray]:
     """Predicts ``steps`` frames after the first L of each sequence.
@@ -86,15 +91,19 @@ def rollout_frames(model: PhysicsModel, frames: np.ndarray, actions: np.ndarray,
         steps: frames to predict.
 
     Returns:
-        Predicted frames, float [B, steps, C, H, W] in [0, 1], and their coordinates [B, steps, N, D].
+        Predicted frames, float [B, steps, C, H, W] in [0, 1], and their coordinates [B, steps, N, D],
+        computed on the model's device.
     """
     cfg = model.config
-    x = frames_to_float(torch.from_numpy(frames[:, : cfg.input_frames]), cfg.channels)
+    device = module_device(model)
+    x = frames_to_float(torch.from_numpy(frames[:, : cfg.input_frames]).to(device), cfg.channels)
     coords = model.encode(x)
-    acts = torch.from_numpy(actions[:, cfg.input_frames - 1 : cfg.input_frames - 1 + steps]).float() if cfg.action_dim else None
-    last = torch.from_numpy(actions[:, cfg.input_frames - 2]).float() if cfg.action_dim else None  # (B, A)
+    acts = last = None
+    if cfg.action_dim:
+        acts = torch.from_numpy(actions[:, cfg.input_frames - 1 : cfg.input_frames - 1 + steps]).float().to(device)
+        last = torch.from_numpy(actions[:, cfg.input_frames - 2]).float().to(device)  # (B, A); acts (B, S, A)
     pred_coords = model.predict(coords, acts, steps, last)
-    return model.decoder(pred_coords).numpy(), pred_coords.numpy()
+    return model.decoder(pred_coords).cpu().numpy(), pred_coords.cpu().numpy()
 
 
 def _ssim(a: np.ndarray, b: np.ndarray) -> float:
@@ -110,15 +119,20 @@ def evaluate(model: PhysicsModel, data: str | Path, config: EvalConfig = EvalCon
     model.eval()
     cfg = model.config
     info = inspect_dataset(data)
-    frames, actions = read_sequences(data, config.split)
-    frames, actions = frames[: config.max_sequences], actions[: config.max_sequences]
+    frames, actions = read_sequences(data, config.split, limit=config.max_sequences)
     if len(frames) == 0:
         raise ValueError(f"{data}: split '{config.split}' is empty; nothing to evaluate")
     steps = config.frames_after_input(model, info.steps)
-    pred, _ = rollout_frames(model, frames, actions, steps)  # (B, S, C, H, W)
-    truth = frames_to_float(torch.from_numpy(frames[:, cfg.input_frames : cfg.input_frames + steps]), cfg.channels).numpy()
-    mse = ((pred - truth) ** 2).mean(axis=(0, 2, 3, 4))  # (S,)
-    ssim = np.array([[_ssim(pred[b, t], truth[b, t]) for t in range(steps)] for b in range(len(pred))]).mean(0)
+    squared = np.zeros(steps)  # (S,) summed squared errors
+    ssims: list[list[float]] = []  # (B, S)
+    for first in range(0, len(frames), EVAL_BATCH):  # in batches: the memory stays bounded whatever max_sequences is
+        part = slice(first, first + EVAL_BATCH)
+        pred, _ = rollout_frames(model, frames[part], actions[part], steps)  # (b, S, C, H, W)
+        truth = frames_to_float(torch.from_numpy(frames[part, cfg.input_frames : cfg.input_frames + steps]), cfg.channels).numpy()
+        squared += ((pred - truth) ** 2).sum(axis=(0, 2, 3, 4), dtype=np.float64)
+        ssims += [[_ssim(pred[b, t], truth[b, t]) for t in range(steps)] for b in range(len(pred))]
+    mse = squared / (len(frames) * int(np.prod(pred.shape[2:])))  # (S,)
+    ssim = np.array(ssims).mean(0)  # (S,)
     n_pred = min(cfg.pred_frames, steps)
     result: dict[str, Any] = {
         "data": str(data),
@@ -138,7 +152,7 @@ def evaluate(model: PhysicsModel, data: str | Path, config: EvalConfig = EvalCon
                            "extrapolation": float(mse[n_pred:].mean()) if steps > n_pred else None},
     }
     if info.has_states and cfg.system == "pendulum":
-        result["angle"] = angle_errors(model, frames, load_states(data, config.split)[: config.max_sequences])
+        result["angle"] = angle_errors(model, frames, load_states(data, config.split, limit=config.max_sequences))
     return result
 
 
@@ -150,8 +164,9 @@ def angle_errors(model: PhysicsModel, frames: np.ndarray, states: np.ndarray) ->
     best constant offset, and that best offset.
     """
     cfg = model.config
-    x = frames_to_float(torch.from_numpy(frames), cfg.channels)
-    theta = np.concatenate([model.encode(x[i : i + 64])[..., 0, 0].numpy() for i in range(0, len(x), 64)])  # (B, T)
+    device = module_device(model)
+    theta = np.concatenate([model.encode(frames_to_float(torch.from_numpy(frames[i : i + EVAL_BATCH]), cfg.channels).to(device))
+                            [..., 0, 0].cpu().numpy() for i in range(0, len(frames), EVAL_BATCH)])  # (B, T)
     phi = model.physical_parameters().get("offset", 0.0)
     diff = np.angle(np.exp(1j * (states[..., 0] - theta - phi)))  # true - (model + φ), wrapped
     best = float(np.angle(np.mean(np.exp(1j * diff))))

@@ -26,6 +26,7 @@ import cv2
 import numpy as np
 import torch
 
+from piga.io.device import module_device
 from piga.world.model import PhysicsModel, frames_to_float
 
 #: Residual peak over content peak above which an object counts as lost.
@@ -86,5 +87,5 @@ def check_objects(model: PhysicsModel, frames: np.ndarray, max_frames: int = 400
     cfg = model.config
     x = frames_to_float(torch.from_numpy(np.ascontiguousarray(frames)), cfg.channels).flatten(0, 1)  # (F, C, H, W)
     x = x[np.linspace(0, len(x) - 1, min(max_frames, len(x))).astype(int)]
-    rec = model.decoder(model.encode(x[:, None])[:, 0])  # (F, C, H, W)
-    return compare(x.numpy(), rec.numpy(), BLUR_FRACTION * cfg.image_size)
+    rec = model.decoder(model.encode(x[:, None].to(module_device(model)))[:, 0])  # (F, C, H, W), on the model's device
+    return compare(x.numpy(), rec.cpu().numpy(), BLUR_FRACTION * cfg.image_size)

@@ -34,8 +34,8 @@ def format_bytes(n: float) -> str:
     raise AssertionError("unreachable")
 
 
-def available_memory() -> int | None:
-    """Bytes of memory available to a new allocation (Linux: MemAvailable), or None if unknown."""
+def _machine_available() -> int | None:
+    """The machine's available memory (Linux: MemAvailable), or None if unknown."""
     try:
         with open("/proc/meminfo") as f:
             for line in f:
@@ -47,6 +47,72 @@ def available_memory() -> int | None:
         return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
     except (ValueError, OSError, AttributeError):
         return None
+
+
+def _cgroup_folders() -> list[Path]:
+    """This process's memory cgroup folders, its own first, then each parent up to the mount's root
+    (cgroup v1's memory controller, or v2's unified hierarchy). Empty where there is none or it cannot be read."""
+    try:
+        own = Path("/proc/self/cgroup").read_text().splitlines()
+        mounts = Path("/proc/self/mountinfo").read_text().splitlines()
+    except OSError:
+        return []
+    for line in own:  # "ID:CONTROLLERS:PATH"; v2's is "0::PATH"
+        _, controllers, path = line.split(":", 2)
+        v2 = controllers == ""
+        if not v2 and "memory" not in controllers.split(","):
+            continue
+        for mount in mounts:  # "... ROOT MOUNTPOINT OPTIONS ... - FSTYPE SOURCE SUPER_OPTIONS"
+            fields, _, tail = mount.partition(" - ")
+            fstype, _, super_options = (tail.split() + ["", "", ""])[:3]
+            if (fstype == "cgroup2") if v2 else (fstype == "cgroup" and "memory" in super_options.split(",")):
+                root, point = fields.split()[3:5]
+                relative = os.path.relpath(path, root)
+                if relative.startswith(".."):
+                    continue
+                folder = (Path(point) / relative).resolve()
+                return [folder, *[p for p in folder.parents if p.is_relative_to(point)]]
+    return []
+
+
+def _read_number(path: Path) -> int | None:
+    try:
+        text = path.read_text().strip()
+    except OSError:
+        return None
+    return int(text) if text.isdigit() else None  # v2's "max": no limit
+
+
+def _cgroup_available() -> int | None:
+    """Memory left under this process's memory cgroup limits (the tightest of its own and its parents'),
+    counting reclaimable page cache (inactive files) as available; None without a limit."""
+    left: int | None = None
+    for folder in _cgroup_folders():
+        v1 = (folder / "memory.limit_in_bytes").exists()
+        limit = _read_number(folder / ("memory.limit_in_bytes" if v1 else "memory.max"))
+        usage = _read_number(folder / ("memory.usage_in_bytes" if v1 else "memory.current"))
+        if limit is None or usage is None or limit >= 1 << 60:  # v1 writes "no limit" as about 2**63
+            continue
+        inactive = 0
+        try:
+            for line in (folder / "memory.stat").read_text().splitlines():
+                key, _, value = line.partition(" ")
+                if key == ("total_inactive_file" if v1 else "inactive_file"):
+                    inactive = int(value)
+        except (OSError, ValueError):
+            pass
+        free = max(0, limit - usage + inactive)
+        left = free if left is None else min(left, free)
+    return left
+
+
+def available_memory() -> int | None:
+    """Bytes of memory available to a new allocation, or None if unknown: the machine's (Linux:
+    MemAvailable), or less where a memory cgroup (a container's or a job's limit) leaves less."""
+    machine, cgroup = _machine_available(), _cgroup_available()
+    if machine is None or cgroup is None:
+        return cgroup if machine is None else machine
+    return min(machine, cgroup)
 
 
 def check_memory(needed: float, what: str) -> None:

@@ -13,6 +13,7 @@ from piga.evaluation.evaluate import PARAMETER_NAMES, EvalConfig, evaluate, roll
 from piga.world.model import PhysicsModel, frames_to_float
 from piga.evaluation.plots import curves_figure, rollout_figure, save_figure, templates_figure
 from piga.io.atomic import write_json
+from piga.io.device import module_device
 from piga.evaluation.objects import check_objects
 from piga.training.convergence import check_convergence
 from piga.training.train import TrainState
@@ -41,13 +42,13 @@ def write_run_report(model: PhysicsModel, state: TrainState, data: str | Path, r
         eval_config = EvalConfig(split=split, extrapolate_frames=eval_config.extrapolate_frames,
                                  max_sequences=eval_config.max_sequences)
     metrics = evaluate(model, data, eval_config)
-    frames, actions = read_sequences(data, split)
+    frames, actions = read_sequences(data, split, limit=eval_config.max_sequences)
     objects = None
     if model.config.coord_dim == 2:  # a scene of objects: did the autoencoder find each of them?
-        objects = check_objects(model, frames[: eval_config.max_sequences])
+        objects = check_objects(model, frames)
         metrics["objects"] = objects.to_dict()
     metrics["training"] = {"epochs": state.epoch, "steps": state.step, "seconds": state.elapsed,
-                           "threads": torch.get_num_threads()}
+                           "threads": torch.get_num_threads(), "device": state.device or None}
     if state.plan:
         convergence = check_convergence(state, objects=objects)
         metrics["converged"] = convergence.converged
@@ -66,17 +67,19 @@ def write_run_report(model: PhysicsModel, state: TrainState, data: str | Path, r
     # drawn alone (the other objects far off the picture): its transformed content and its mask after
     # the softmax against the background.
     n, d = cfg.n_objects if cfg.system != "pendulum" else 1, cfg.coord_dim
+    device = module_device(model)
     contents, masks = [], []
     for i in range(n):
-        pose = torch.zeros(1, n, d) if d == 1 else torch.full((1, n, d), -10.0 * cfg.image_size)
+        pose = torch.zeros(1, n, d) if d == 1 else torch.full((1, n, d), -10.0 * cfg.image_size)  # (1, N, D)
         if d == 2:
             pose[0, i] = cfg.image_size / 2
-        parts = model.decoder.render_parts(pose)
-        contents.append(_image(parts.contents[0, i].numpy()))  # (H, W[, C])
-        masks.append(parts.masks[0, i, 0].numpy())  # (H, W)
-    background_mask = model.decoder.render_parts(torch.full((1, n, d), -10.0 * cfg.image_size) if d == 2
-                                                 else torch.zeros(1, n, d)).masks[0, -1, 0].numpy()
-    save_figure(templates_figure(np.stack(contents), np.stack(masks), _image(parts.background.numpy()), background_mask),
+        parts = model.decoder.render_parts(pose.to(device))
+        contents.append(_image(parts.contents[0, i].cpu().numpy()))  # (H, W[, C])
+        masks.append(parts.masks[0, i, 0].cpu().numpy())  # (H, W)
+    away = torch.full((1, n, d), -10.0 * cfg.image_size) if d == 2 else torch.zeros(1, n, d)  # (1, N, D)
+    background_mask = model.decoder.render_parts(away.to(device)).masks[0, -1, 0].cpu().numpy()
+    background = _image(parts.background.cpu().numpy())
+    save_figure(templates_figure(np.stack(contents), np.stack(masks), background, background_mask),
                 run_dir / "templates.png")
     true = {PARAMETER_NAMES[k]: float(v) for k, v in info.params.items() if k in PARAMETER_NAMES}
     if state.history:

@@ -27,19 +27,21 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable, Literal
 
+import h5py
 import numpy as np
 import torch
 from torch.utils.data import DataLoader, RandomSampler
 from tqdm.auto import tqdm
 
 from piga.io.choices import check_choices
-from piga.data.schema import DatasetInfo, check_actions_file, fingerprint, inspect_dataset, read_sequences
+from piga.io.device import Device, resolve_device
+from piga.data.schema import DatasetInfo, check_actions_file, fingerprint, inspect_dataset, split_indices
 from piga.world.encoder import estimate_background
 from piga.world.model import SYSTEM_SHAPES, ModelConfig, PhysicsModel, frames_to_float
 from piga.world.physics import BouncingOptions, PendulumOptions
 from piga.io.checkpoint import CHECKPOINT, write_checkpoint
 from piga.io.runs import load_model
-from piga.data.windows import SequenceWindows
+from piga.data.windows import BlockShuffleSampler, SequenceWindows, loads_whole
 
 
 class TrainingDiverged(RuntimeError):
@@ -88,10 +90,26 @@ class TrainConfig:
     """Fraction of the planned steps over which the prediction horizon grows from 1 to T_pred (0: full horizon at once)."""
     window_stride: int = 1
     """Start frames of training windows are this far apart within a sequence."""
+    data_loading: Literal["auto", "memory", "stream"] = "auto"
+    """How the train split's frames are read. "memory": loaded whole, the windows in a uniformly random
+    order. "stream": read from the file through a bounded cache (``stream_cache_mb``), for a file larger
+    than memory, the windows shuffled within blocks of the sequences that the cache holds
+    (:class:`~piga.data.windows.BlockShuffleSampler`). "auto": "memory" when the frames need under 2 GiB
+    and under a quarter of the available memory (:func:`~piga.data.windows.loads_whole`), else "stream".
+    A run records the reading it used and resumes with it: the two orders differ, so the same seed
+    trains another run."""
+    stream_cache_mb: int = 256
+    """"stream": the cache of decompressed sequences, in MiB (at most a quarter of the available memory)."""
     seed: int = 0
     """Seed of initialisation and sampling."""
     threads: int = 0
     """torch CPU threads (0: leave torch's default)."""
+    device: Device = "auto"
+    """Where to train (:mod:`piga.io.device`): "auto" (a CUDA GPU when torch sees one, else the CPU), "cpu" or
+    "cuda". Not part of the recipe: a run resumes on any device. Sampling draws from the CPU's generator
+    everywhere, but a GPU's kernels round differently (cuDNN may convolve in TF32, PyTorch's default), so a
+    GPU run is not the CPU's bit for bit. No mixed precision: its effect on the identified parameters has
+    not been measured."""
     seed_retries: int = 1
     """``piga-train-model``: a scene run whose object check finds an object missing
     (:mod:`piga.evaluation.objects`, which reads frames only) is trained again from its start with the
@@ -109,7 +127,7 @@ class TrainConfig:
     steps: Polyak averaging, which removes most of the optimiser's step-to-step jitter (0: off)."""
 
     def __post_init__(self) -> None:
-        for name in ("epochs", "budget_steps", "lr_decay_epoch", "seed", "threads", "seed_retries"):
+        for name in ("epochs", "budget_steps", "lr_decay_epoch", "seed", "threads", "seed_retries", "stream_cache_mb"):
             if getattr(self, name) < 0:
                 raise ValueError(f"TrainConfig.{name} must be >= 0, got {getattr(self, name)}")
         if self.batch_size < 1 or self.window_stride < 1:
@@ -326,6 +344,8 @@ class TrainState:
     """Steps in ``average``."""
     plan: dict[str, int] = field(default_factory=dict)
     """The run's :class:`TrainPlan` (as a dict), for the convergence check."""
+    device: str = ""
+    """The torch device the latest training ran on ("cpu", "cuda:0"; empty in runs saved before it was recorded)."""
 
 
 #: The fewest frames the physics predicts in a training window (T_pred) when a file's sequences are
@@ -406,12 +426,31 @@ def save_checkpoint(path: Path, model: PhysicsModel, optimizer: torch.optim.Opti
 
 
 def _background(data: str | Path, channels: int, seed: int, max_frames: int = 2000) -> torch.Tensor:
-    """Label-free background of the training frames: a per-pixel median over up to ``max_frames``."""
-    frames, _ = read_sequences(data, "train")
-    flat = frames.reshape(-1, *frames.shape[2:])
-    pick = np.random.default_rng(seed).choice(len(flat), size=min(max_frames, len(flat)), replace=False)
-    sample = frames_to_float(torch.from_numpy(flat[np.sort(pick)])[:, None], channels)[:, 0]  # (F, C, H, W)
+    """Label-free background of the training frames: a per-pixel median over up to ``max_frames``, drawn
+    at random from all of them. Only the sequences drawn from are read, one at a time, so a file
+    larger than memory is not loaded."""
+    sequences = split_indices(data, "train")
+    steps = inspect_dataset(data).steps
+    pick = np.sort(np.random.default_rng(seed).choice(len(sequences) * steps, size=min(max_frames, len(sequences) * steps),
+                                                      replace=False))  # flat indices into the split's (n·T) frames
+    with h5py.File(data, "r") as f:
+        chosen = [f["frames"][int(sequences[row])][pick[pick // steps == row] % steps] for row in np.unique(pick // steps)]
+    sample = frames_to_float(torch.from_numpy(np.concatenate(chosen))[:, None], channels)[:, 0]  # (F, C, H, W)
     return estimate_background(sample)
+
+
+def resolve_loading(config: TrainConfig, info: DatasetInfo) -> TrainConfig:
+    """``config`` with its data reading made concrete for the file (:attr:`TrainConfig.data_loading`
+    "auto" decided, the cache capped at a quarter of the available memory), as the run records it."""
+    from piga.io.resources import available_memory
+
+    available = available_memory()
+    loading = config.data_loading
+    if loading == "auto":
+        loading = "memory" if loads_whole(info.split_counts["train"] * info.steps * int(np.prod(info.image_shape)),
+                                          available) else "stream"
+    cache = config.stream_cache_mb if available is None else max(1, min(config.stream_cache_mb, available // 4 // 2**20))
+    return replace(config, data_loading=loading, stream_cache_mb=cache)
 
 
 @torch.no_grad()
@@ -501,7 +540,7 @@ def _accumulate_average(state: TrainState, params: list[torch.Tensor], restart: 
         state.average_count = 0
     state.average_count += 1
     for i, p in enumerate(params):
-        avg = torch.tensor(state.average[i], dtype=p.dtype)
+        avg = torch.tensor(state.average[i], dtype=p.dtype, device=p.device)
         avg += (p.detach().flatten() - avg) / state.average_count
         state.average[i] = avg.tolist()
 
@@ -555,9 +594,17 @@ def train(
     average of the physical parameters); so the result is close to, not identical with, the
     straight run.
 
+    The model trains on ``train_config.device`` (:func:`piga.io.device.resolve_device`; ``on_epoch`` sees it
+    there) and is returned on the CPU, where evaluation, control and diagnosis run. Its initialisation,
+    the background estimate and every random draw happen on the CPU whatever the device.
+
     Returns:
-        The trained model (eval mode) and the final :class:`TrainState`.
+        The trained model (eval mode, on the CPU) and the final :class:`TrainState`.
+
+    Raises:
+        ValueError: ``train_config.device`` is "cuda" and torch sees no CUDA device (before anything is read).
     """
+    device = resolve_device(train_config.device)
     run_dir = Path(run_dir)
     info = inspect_dataset(data)
     data_fingerprint = fingerprint(data)
@@ -566,10 +613,10 @@ def train(
         torch.set_num_threads(train_config.threads)
     state = TrainState()
     if resume:
-        model, ckpt = load_model(run_dir)
-        model.train()
+        model, ckpt = load_model(run_dir)  # on the CPU, wherever it was saved
+        model.to(device).train()
         optimizer = _optimizer(model, train_config)
-        optimizer.load_state_dict(ckpt["optimizer"])
+        optimizer.load_state_dict(ckpt["optimizer"])  # its moments follow the parameters to the device
         state = TrainState(**ckpt["state"])
         _set_rng_state(ckpt["rng"])
     else:
@@ -583,13 +630,19 @@ def train(
             model.encoder.background.copy_(_background(data, model.config.channels, train_config.seed))
         if model.config.init_background:
             model.decoder.init_background(model.encoder.background)
+        model.to(device)
         optimizer = _optimizer(model, train_config)
         learned = model.learned_parameter_names()
         state.start = {k: v for k, v in model.physical_parameters().items() if k in learned}
     cfg = model.config
     plan = check_trainable(info, cfg, train_config)
     state.plan = asdict(plan)
-    windows = SequenceWindows(data, "train", window=cfg.window, stride=train_config.window_stride)
+    state.device = str(device)
+    cuda = device.type == "cuda"  # batches go through pinned memory, copied while the GPU works
+    if not resume or train_config.data_loading == "auto":  # a resumed run reads as it did (a run saved before the choice: auto)
+        train_config = resolve_loading(train_config, info)
+    windows = SequenceWindows(data, "train", window=cfg.window, stride=train_config.window_stride,
+                              in_memory=train_config.data_loading == "memory", cache_bytes=train_config.stream_cache_mb * 2**20)
     writer = _Scalars()
     physics_params = [p for p in model.system.parameters() if p.requires_grad]
     physics_ids = {id(p) for p in physics_params}
@@ -604,8 +657,9 @@ def train(
                 break
             # The sampler's generator depends on (seed, epoch) only, so a resumed run sees the same order.
             gen = torch.Generator().manual_seed(train_config.seed * 100_003 + state.epoch)
-            loader = DataLoader(windows, batch_size=train_config.batch_size, sampler=RandomSampler(windows, generator=gen),
-                                drop_last=True)
+            sampler = (RandomSampler(windows, generator=gen) if windows.in_memory
+                       else BlockShuffleSampler(windows, windows.sequences_cached, generator=gen))
+            loader = DataLoader(windows, batch_size=train_config.batch_size, sampler=sampler, drop_last=True, pin_memory=cuda)
             sums = {"loss": 0.0, "loss_pred": 0.0, "loss_rec": 0.0}
             count = 0
             bar = tqdm(loader, desc=f"epoch {state.epoch + 1}/{plan.epochs}", leave=False, disable=not progress)
@@ -614,7 +668,9 @@ def train(
                 for group in optimizer.param_groups:
                     group["lr"] = factor * (train_config.lr if group["name"] == "nets" else train_config.lr_physics)
                 horizon = _horizon(state.step, plan, cfg.pred_frames)
-                out = model(batch.frames, batch.actions, pred_frames=max(horizon, 1))
+                frames = batch.frames.to(device, non_blocking=cuda)  # uint8 (B, L+T, H, W[, C]); the model scales it
+                actions = batch.actions.to(device, non_blocking=cuda)  # (B, L+T, A)
+                out = model(frames, actions, pred_frames=max(horizon, 1))
                 loss = out.loss if horizon > 0 else cfg.alpha * out.loss_rec
                 if not torch.isfinite(loss):
                     raise TrainingDiverged(f"loss became {loss.item()} at step {state.step} (epoch {state.epoch + 1}); "
@@ -651,7 +707,7 @@ def train(
             if plan.average_steps and state.step == plan.total_steps and state.average_count:
                 with torch.no_grad():
                     for avg, p in zip(state.average, physics_params):
-                        p.copy_(torch.tensor(avg, dtype=p.dtype).view_as(p))
+                        p.copy_(torch.tensor(avg, dtype=p.dtype, device=p.device).view_as(p))
             state.epoch += 1
             state.elapsed = time.monotonic() - started
             record = {k: v / max(count, 1) for k, v in sums.items()}
@@ -672,4 +728,4 @@ def train(
         writer.close()
         windows.close()
     model.eval()
-    return model, state
+    return model.cpu(), state

@@ -1,0 +1,270 @@
+"""Benchmark: how much faster does training run on a GPU than on the CPU?
+
+On one pendulum file with ``/rewards`` (``piga-collect``'s), it times optimiser steps of two trainings on
+each device asked for, in this process, one after the other:
+
+- ``piga fast``: the world model of the fast preset, at its full horizon (L = 4 input frames, T_pred = 10),
+  batches of 32 windows from the training DataLoader;
+- ``PlaNet-style``: the RSSM of ``piga-baseline planet``'s defaults, batches of 16 chunks of 20 model steps.
+
+A step is what the training loops do per batch: read and copy the batch, forward, backward, clip,
+update, and read the loss back (and, for piga, its physical parameters). Checkpoints and evaluation are
+not timed. Each repeat times ``--steps`` steps after ``--warmup`` untimed ones (cuDNN picks its kernels,
+the allocator fills); the table gives the median over ``--repeats`` of the seconds per step, and the
+speed-up of each device over the CPU (the ratio of the medians). The CPU runs ``--threads`` torch
+threads (default 2: the 2-core machine the other results were measured on). ``--reference`` adds the
+rows of an earlier record, e.g. the CPU measured on another machine, and the speed-up over them.
+
+    python benchmarks/device_speed.py --data runs/bench/default.h5 --device cuda --out results/device_speed
+    python benchmarks/device_speed.py --data runs/bench/default.h5 --out runs/cpu_speed       # the CPU alone
+
+Writes ``OUT.json`` and ``OUT.md``. ``--device cuda`` on a machine without a GPU stops with one line.
+Mixed precision is not measured: training runs in float32 on every device (on a GPU, PyTorch's
+defaults apply: cuDNN may convolve in TF32).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import sys
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from common import machine, machine_words
+from piga.io.atomic import atomic_output, write_json
+from piga.io.device import cuda_available, resolve_device
+
+#: The trainings timed, in the order the page lists them.
+WORKLOADS = ("piga fast", "PlaNet-style")
+#: The ``machine`` of the rows measured by the invocation that wrote the record.
+THIS = "this machine"
+
+
+def gpu_name(device: torch.device) -> str:
+    """The device in words: the GPU's name, or "CPU"."""
+    return torch.cuda.get_device_name(device) if device.type == "cuda" else "CPU"
+
+
+def synchronize(device: torch.device) -> None:
+    """Waits for the device's queued work, so that the clock reads finished steps."""
+    if device.type == "cuda":
+        torch.cuda.synchronize(device)
+
+
+def piga_steps(data: Path, device: torch.device, seed: int) -> Iterator[None]:
+    """Training steps of the fast preset's model on ``data``, one per ``next``: the steps of
+    :func:`piga.training.train.train` at the full horizon."""
+    from torch.utils.data import DataLoader, RandomSampler
+
+    from piga.data.schema import inspect_dataset
+    from piga.data.windows import SequenceWindows
+    from piga.training.train import model_config_for, preset_for
+    from piga.world.model import PhysicsModel
+
+    info = inspect_dataset(data)
+    recipe = preset_for("fast", info)
+    torch.manual_seed(seed)
+    model = PhysicsModel(model_config_for(info, recipe.model)).to(device).train()
+    optimizer = torch.optim.Adam(model.parameters(), lr=recipe.train.lr)
+    windows = SequenceWindows(data, "train", window=model.config.window)
+    cuda = device.type == "cuda"
+    try:
+        while True:
+            loader = DataLoader(windows, batch_size=recipe.train.batch_size, drop_last=True, pin_memory=cuda,
+                                sampler=RandomSampler(windows, generator=torch.Generator().manual_seed(seed)))
+            for batch in loader:
+                frames = batch.frames.to(device, non_blocking=cuda)  # uint8 (B, L+T, H, W)
+                actions = batch.actions.to(device, non_blocking=cuda)  # (B, L+T, A)
+                out = model(frames, actions)
+                optimizer.zero_grad(set_to_none=True)
+                out.loss.backward()
+                torch.nn.utils.clip_grad_norm_(model.parameters(), recipe.train.grad_clip)
+                optimizer.step()
+                float(out.loss.detach())
+                model.physical_parameters()
+                yield
+    finally:
+        windows.close()
+
+
+def planet_steps(data: Path, device: torch.device, seed: int) -> Iterator[None]:
+    """Training steps of ``piga-baseline planet``'s default model on ``data``, one per ``next``: the steps of
+    :func:`agents.planet.train.train_planet`."""
+    from agents.planet.config import PlanetTrainConfig
+    from agents.planet.rssm import WorldModel, model_steps
+    from agents.planet.train import rssm_config_for
+    from piga.data.schema import inspect_dataset, load_rewards, read_sequences
+
+    info = inspect_dataset(data)
+    config = PlanetTrainConfig()
+    frames, actions = (torch.from_numpy(x) for x in read_sequences(data, "train"))  # (N, T, H, W), (N, T, A)
+    rewards = torch.from_numpy(load_rewards(data, "train"))  # (N, T)
+    torch.manual_seed(seed)
+    model = WorldModel(rssm_config_for(info)).to(device).train()
+    optimizer = torch.optim.Adam(model.parameters(), lr=config.lr, eps=config.adam_eps)
+    rng, generator = np.random.default_rng(seed), torch.Generator().manual_seed(seed)
+    repeat = model.config.action_repeat
+    length = config.chunk_length * repeat  # env steps per chunk
+    while True:
+        rows = torch.from_numpy(rng.integers(len(frames), size=config.batch_size))[:, None]  # (B, 1)
+        cols = torch.from_numpy(rng.integers(frames.shape[1] - length + 1, size=config.batch_size))[:, None] \
+            + torch.arange(length)[None]  # (B, L·R)
+        batch = model_steps(frames[rows, cols], actions[rows, cols], rewards[rows, cols], repeat)
+        parts = model.loss(*(x.to(device) for x in batch), config, generator)
+        optimizer.zero_grad(set_to_none=True)
+        parts.loss.backward()
+        torch.nn.utils.clip_grad_norm_(model.parameters(), config.grad_clip)
+        optimizer.step()
+        float(parts.loss.detach())
+        yield
+
+
+STEPS: dict[str, Callable[[Path, torch.device, int], Iterator[None]]] = {"piga fast": piga_steps,
+                                                                        "PlaNet-style": planet_steps}
+
+
+def check_data(data: Path) -> None:
+    """Refuses, before anything is timed, a file that either training would refuse.
+
+    Raises:
+        ValueError: naming the file and what is wrong (not a pendulum file, no /rewards, sequences too short).
+    """
+    from agents.planet.config import PlanetTrainConfig
+    from agents.planet.train import check_planet_data, rssm_config_for
+    from piga.data.schema import inspect_dataset
+    from piga.training.train import check_trainable, model_config_for, preset_for
+
+    info = inspect_dataset(data)
+    if info.system != "pendulum":
+        raise ValueError(f"{data}: holds {info.system} data; the benchmark times the pendulum's trainings")
+    recipe = preset_for("fast", info)
+    check_trainable(info, model_config_for(info, recipe.model), recipe.train)
+    check_planet_data(info, PlanetTrainConfig(), rssm_config_for(info).action_repeat)
+
+
+def seconds_per_step(workload: str, data: Path, device: torch.device, steps: int, warmup: int, seed: int) -> float:
+    """Wall seconds per step of ``steps`` steps after ``warmup`` untimed ones, on a fresh model."""
+    run = STEPS[workload](data, device, seed)
+    try:
+        for _ in range(warmup):
+            next(run)
+        synchronize(device)
+        started = time.perf_counter()
+        for _ in range(steps):
+            next(run)
+        synchronize(device)
+        return (time.perf_counter() - started) / steps
+    finally:
+        run.close()
+
+
+def measure(args: argparse.Namespace, devices: list[torch.device]) -> list[dict[str, Any]]:
+    """One row per (workload, device): the seconds per step of each repeat and their median."""
+    rows = []
+    for workload in WORKLOADS:
+        for device in devices:
+            times = [seconds_per_step(workload, args.data, device, args.steps, args.warmup, args.seed + k)
+                     for k in range(args.repeats)]
+            rows.append({"workload": workload, "device": str(device), "device_name": gpu_name(device),
+                         "threads": torch.get_num_threads(), "seconds_per_step": times,
+                         "median": statistics.median(times), "machine": THIS})
+            print(f"{workload} on {rows[-1]['device_name']}: {1000 * rows[-1]['median']:.1f} ms per step "
+                  f"(median of {args.repeats})", flush=True)
+    return rows
+
+
+def speedups(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """For each workload, each GPU row over each CPU row: the ratio of their medians."""
+    out = []
+    for workload in WORKLOADS:
+        mine = [r for r in rows if r["workload"] == workload]
+        for gpu in (r for r in mine if not r["device"].startswith("cpu")):
+            for cpu in (r for r in mine if r["device"].startswith("cpu")):
+                out.append({"workload": workload, "gpu": gpu["device_name"], "cpu_machine": cpu["machine"],
+                            "cpu_threads": cpu["threads"], "speedup": cpu["median"] / gpu["median"]})
+    return out
+
+
+def markdown(record: dict[str, Any]) -> str:
+    """The results page."""
+    settings = record["settings"]
+    lines = ["# Training speed on a GPU against the CPU", "",
+             f"Reproduce: `{record['command']}`. Each row times {settings['steps']} optimiser steps after "
+             f"{settings['warmup']} untimed ones, {settings['repeats']} times, on a fresh model each time "
+             "(`benchmarks/device_speed.py`: data, forward, backward, update; no checkpoints, no evaluation). "
+             "Training runs in float32 on every device; mixed precision is not used.", "",
+             f"Data: `{settings['data']}`.", "",
+             f"Machine: {machine_words(record['machine'])}"
+             + (f"; GPU: {record['machine']['gpu']}" if record["machine"].get("gpu") else "") + ".", ""]
+    for ref in record.get("references", []):
+        lines += [f"Reference `{ref['path']}`: {machine_words(ref['machine'])}.", ""]
+    lines += ["| training | device | machine | CPU threads | ms per step (median) | each repeat (ms) |",
+              "|---|---|---|---|---|---|"]
+    for r in record["rows"]:
+        repeats = ", ".join(f"{1000 * t:.1f}" for t in r["seconds_per_step"])
+        lines.append(f"| {r['workload']} | {r['device_name']} | {r['machine']} | {r['threads']} | "
+                     f"{1000 * r['median']:.1f} | {repeats} |")
+    if record["speedups"]:
+        lines += ["", "| training | GPU | over the CPU of | CPU threads | speed-up |", "|---|---|---|---|---|"]
+        for s in record["speedups"]:
+            lines.append(f"| {s['workload']} | {s['gpu']} | {s['cpu_machine']} | {s['cpu_threads']} | "
+                         f"**{s['speedup']:.1f}x** |")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], allow_abbrev=False)
+    p.add_argument("--data", required=True, type=Path, help="a pendulum file with /rewards (piga-collect's)")
+    p.add_argument("--out", required=True, type=Path, help="output prefix: OUT.json and OUT.md")
+    p.add_argument("--device", choices=("cpu", "cuda"), default="cpu",
+                   help="cuda: time the CPU and the GPU, and the speed-up; cpu: the CPU alone (default %(default)s)")
+    p.add_argument("--steps", type=int, default=30, help="timed steps per repeat (default %(default)s)")
+    p.add_argument("--warmup", type=int, default=5, help="untimed steps first (default %(default)s)")
+    p.add_argument("--repeats", type=int, default=3, help="repeats; the table gives their median (default %(default)s)")
+    p.add_argument("--threads", type=int, default=2, help="torch CPU threads (default %(default)s: the 2-core machine)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the models and batches (default %(default)s)")
+    p.add_argument("--reference", type=Path, action="append", default=[],
+                   help="an earlier OUT.json (e.g. the CPU of another machine): its rows join the table")
+    args = p.parse_args(argv)
+    if min(args.steps, args.repeats, args.threads) < 1 or args.warmup < 0:
+        p.error("--steps, --repeats and --threads must be >= 1 and --warmup >= 0")
+    if args.device == "cuda" and not cuda_available():
+        print("device_speed.py: error: --device cuda: no CUDA device is available "
+              "(torch.cuda.is_available() is False); run it on a machine with a GPU, or with --device cpu to time the CPU alone", file=sys.stderr)
+        return 1
+    devices = [torch.device("cpu")] + ([resolve_device("cuda")] if args.device == "cuda" else [])
+    try:
+        check_data(args.data)
+    except (OSError, ValueError) as exc:
+        print(f"device_speed.py: error: {' '.join(str(exc).split())}", file=sys.stderr)
+        return 1
+    torch.set_num_threads(args.threads)
+    rows = measure(args, devices)
+    here = machine() | ({"gpu": gpu_name(devices[-1])} if len(devices) > 1 else {})
+    references = []
+    for path in args.reference:
+        earlier = json.loads(path.read_text())
+        references.append({"path": str(path), "machine": earlier["machine"]})
+        words = earlier["machine"].get("gpu") or earlier["machine"].get("cpu", str(path))
+        rows += [{**r, "machine": f"{words} ({path.name})"} for r in earlier["rows"] if r["machine"] == THIS]
+    record = {"command": "python benchmarks/device_speed.py " + " ".join(argv if argv is not None else sys.argv[1:]),
+              "machine": here, "settings": {"data": str(args.data), "steps": args.steps, "warmup": args.warmup,
+                                            "repeats": args.repeats, "threads": args.threads, "seed": args.seed},
+              "references": references, "rows": rows, "speedups": speedups(rows)}
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    write_json(args.out.with_suffix(".json"), record, overwrite=True)
+    with atomic_output(args.out.with_suffix(".md"), overwrite=True) as tmp:
+        tmp.write_text(markdown(record))
+    print(markdown(record))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
