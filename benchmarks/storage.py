@@ -250,9 +250,11 @@ def markdown(result: dict[str, Any]) -> str:
                   f"Command: `{commands.get('throughput', result['command'])}`", "",
                   "The fast preset, one epoch of the pendulum file, one torch thread. `memory`: the train split loaded "
                   "whole; `stream`: read through the 256 MiB cache in blocks. Relative: against the first row.", "",
-                  "| frames | steps | steps/s (median) | relative |", "|---|---|---|---|"]
+                  "| frames | steps | steps/s, median (slowest, fastest run) | relative (medians) |", "|---|---|---|---|"]
         for row in result["throughput"]:
-            lines.append(f"| {row['run']} | {row['steps']} | {row['steps_per_s']:.2f} | {row['relative']:.3f} |")
+            rates = [row["steps"] / s for s in row["seconds"]]
+            lines.append(f"| {row['run']} | {row['steps']} | {row['steps_per_s']:.2f} ({min(rates):.2f}, {max(rates):.2f}) | "
+                         f"{row['relative']:.3f} |")
     if result.get("memory"):
         runs = result["memory"]
         cap = runs[0]["cap_bytes"]
