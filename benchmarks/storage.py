@@ -10,7 +10,8 @@ Three parts, each on files that the script makes in ``--work`` with piga's own c
 - **throughput.** The fast preset trains one epoch of the pendulum file (``piga-train-model --epochs 1
   --threads 1``) with its frames loaded whole and streamed, from files of each codec. Steps per second of
   the training loop (metrics.json's seconds, without the start-up and the evaluation), medians over
-  ``--repeats``, the runs interleaved so that a drift in the machine's load falls on all alike.
+  ``--repeats``, the runs interleaved, each repeat in its own seeded order, so that neither a drift in the
+  machine's speed nor a run's place in the repeat falls on one reading.
 - **memory.** Files of ``--big-sequences`` uncompressed sequences (the pendulum file's, repeated, their
   ``/states`` dropped), the largest more than 4x ``--cap-mb``, are each trained on for 1000 steps
   (``--window-stride 33``: one window per sequence, so every sequence is read once per epoch; the largest
@@ -31,6 +32,7 @@ import argparse
 import importlib.util
 import json
 import os
+import random
 import shlex
 import statistics
 import subprocess
@@ -156,8 +158,8 @@ def measure_throughput(pendulum: Path, work: Path, repeats: int) -> list[dict[st
             rewrite(pendulum, path, codec)
     seconds: dict[str, list[float]] = {label: [] for label, _, _ in RUNS}
     steps: dict[str, int] = {}
-    for r in range(repeats):
-        for label, codec, loading in RUNS:
+    for r in range(repeats):  # each repeat in its own seeded order, so that no reading always runs in one place
+        for label, codec, loading in random.Random(r).sample(RUNS, len(RUNS)):
             out = work / "throughput" / f"{label.replace(', ', '-')}-{r}"
             run(["piga-train-model", str(files[codec]), "--out", str(out), "--epochs", "1", "--threads", "1",
                  "--data-loading", loading, "--quiet", "--overwrite"], stdout=subprocess.DEVNULL)
