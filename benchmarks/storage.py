@@ -128,9 +128,8 @@ def measure_codecs(files: dict[str, Path], work: Path, repeats: int) -> list[dic
     rows = []
     for name, source in files.items():
         info = inspect_dataset(source)
-        raw = info.n_sequences * info.steps * int(np.prod(info.image_shape))
-        train_raw = info.split_counts["train"] * info.steps * int(np.prod(info.image_shape))
-        sequence = info.steps * int(np.prod(info.image_shape))
+        sequence = info.sequence_bytes
+        raw, train_raw = info.n_sequences * sequence, info.split_counts["train"] * sequence
         for codec in CODECS:
             target = work / "codecs" / f"{name}-{codec}.h5"
             target.parent.mkdir(parents=True, exist_ok=True)

@@ -22,7 +22,6 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-import h5py
 import numpy as np
 import torch
 from tqdm.auto import tqdm
@@ -30,8 +29,8 @@ from tqdm.auto import tqdm
 from agents.planet.config import PlanetTrainConfig, RSSMConfig
 from agents.planet.rssm import WorldModel, model_steps
 from agents.planet.run import load_planet
-from piga.data.schema import (DataFormatError, DatasetInfo, check_actions_file, check_frames_have_signal, inspect_dataset, load_rewards,
-                              read_sequences, split_indices)
+from piga.data.schema import (DataFormatError, DatasetInfo, check_actions_file, check_frames_have_signal, inspect_dataset, load_actions,
+                              load_rewards, read_sequences, split_indices)
 from piga.data.windows import SequenceReader, loads_whole
 from piga.io.resources import available_memory
 from piga.io.atomic import write_json
@@ -69,8 +68,7 @@ class _Sequences:
             if extra is not None:
                 raise ValueError("streamed sequences take no extra file")
             self.reader = SequenceReader(data, split_indices(data, split)[:limit])
-            with h5py.File(data, "r") as f:
-                actions = f["actions"][()][self.reader.sequences].astype(np.float32)  # (N, T, A)
+            actions = load_actions(data, split, limit=limit)  # (N, T, A)
             self.frames = None
         else:
             frames, actions = read_sequences(data, split, limit=limit)
@@ -250,8 +248,7 @@ def train_planet(
     optimizer = torch.optim.Adam(model.parameters(), lr=config.lr, eps=config.adam_eps)
     if resume:
         optimizer.load_state_dict(ckpt["optimizer"])
-    n_frames = (min(config.max_sequences or info.split_counts["train"], info.split_counts["train"]) * info.steps
-                * int(np.prod(info.image_shape)))
+    n_frames = min(config.max_sequences or info.split_counts["train"], info.split_counts["train"]) * info.sequence_bytes
     seqs = _Sequences(data, "train", config.max_sequences, extra_data,
                       stream=extra_data is None and not loads_whole(n_frames, available_memory()))
     writer: Any = None

@@ -124,6 +124,11 @@ class DatasetInfo:
     has_rewards: bool = False
     """Whether ``/rewards`` exists (reward-based baselines only)."""
 
+    @property
+    def sequence_bytes(self) -> int:
+        """Bytes of one sequence's frames, uncompressed (T·H·W[·C])."""
+        return self.steps * int(np.prod(self.image_shape))
+
 
 def _attr(value: Any) -> Any:
     if isinstance(value, bytes):
@@ -344,6 +349,14 @@ def read_sequences(path: str | os.PathLike[str], split: str, limit: int | None =
     idx = split_indices(path, split)[:limit]
     with _open(path) as f:
         return _take(f["frames"], idx), _take(f["actions"], idx).astype(np.float32)
+
+
+def load_actions(path: str | os.PathLike[str], split: str, limit: int | None = None) -> np.ndarray:
+    """Actions (float32 [n, T, A]) of one split (its first ``limit`` sequences with ``limit``), without its
+    frames: for a reader that streams the frames."""
+    idx = split_indices(path, split)[:limit]
+    with _open(path) as f:
+        return _take(f["actions"], idx).astype(np.float32)
 
 
 def load_states(path: str | os.PathLike[str], split: str, limit: int | None = None) -> np.ndarray:

@@ -15,7 +15,8 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset, Sampler
 
-from piga.data.schema import (IN_MEMORY_LIMIT_BYTES, DataFormatError, check_frames_have_signal, inspect_dataset, read_sequences,
+from piga.data.schema import (IN_MEMORY_LIMIT_BYTES, DataFormatError, check_frames_have_signal, inspect_dataset, load_actions,
+                              read_sequences,
                        split_indices)
 
 #: The streaming reader's cache of whole sequences of frames, in bytes.
@@ -132,8 +133,7 @@ class SequenceWindows(Dataset[Window]):
         if in_memory is None:
             from piga.io.resources import available_memory
 
-            in_memory = loads_whole(len(self.sequences) * self.info.steps * int(np.prod(self.info.image_shape)),
-                                    available_memory())
+            in_memory = loads_whole(len(self.sequences) * self.info.sequence_bytes, available_memory())
         self.in_memory = in_memory
         self._frames: np.ndarray | None = None
         self.reader: SequenceReader | None = None
@@ -141,8 +141,7 @@ class SequenceWindows(Dataset[Window]):
             self._frames, self._actions = read_sequences(self.path, split)
         else:
             self.reader = SequenceReader(self.path, self.sequences, cache_bytes)
-            with h5py.File(self.path, "r") as f:
-                self._actions = f["actions"][()][self.sequences].astype(np.float32)  # (n, T, A)
+            self._actions = load_actions(self.path, split)  # (n, T, A)
 
     def __len__(self) -> int:
         return len(self.sequences) * len(self.starts)

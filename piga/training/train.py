@@ -447,7 +447,7 @@ def resolve_loading(config: TrainConfig, info: DatasetInfo) -> TrainConfig:
     available = available_memory()
     loading = config.data_loading
     if loading == "auto":
-        loading = "memory" if loads_whole(info.split_counts["train"] * info.steps * int(np.prod(info.image_shape)),
+        loading = "memory" if loads_whole(info.split_counts["train"] * info.sequence_bytes,
                                           available) else "stream"
     cache = config.stream_cache_mb if available is None else max(1, min(config.stream_cache_mb, available // 4 // 2**20))
     return replace(config, data_loading=loading, stream_cache_mb=cache)
