@@ -15,8 +15,15 @@ speed-up of each device over the CPU (the ratio of the medians). The CPU runs ``
 threads (default 2: the 2-core machine the other results were measured on). ``--reference`` adds the
 rows of an earlier record, e.g. the CPU measured on another machine, and the speed-up over them.
 
-    python benchmarks/device_speed.py --data runs/bench/default.h5 --device cuda --out results/device_speed
-    python benchmarks/device_speed.py --data runs/bench/default.h5 --out runs/cpu_speed       # the CPU alone
+``--full gpu`` (or ``all``: every device timed) also trains the fast preset end to end on the GPU
+(``TrainConfig(device=...)``, the step budget it sizes from the file, its evaluation and report), and
+records the training time and the learned g and a with their errors (the truth is read only here, to
+score): whether accuracy holds on the GPU, and what a whole identification costs there.
+
+    piga-collect --out runs/default.h5 --seed 0                                                       # the data
+    python benchmarks/device_speed.py --data runs/default.h5 --full all --out results/device_speed_cpu  # the CPU alone
+    python benchmarks/device_speed.py --data runs/default.h5 --device cuda --full gpu \
+        --reference results/device_speed_cpu.json --out results/device_speed
 
 Writes ``OUT.json`` and ``OUT.md``. ``--device cuda`` on a machine without a GPU stops with one line.
 Mixed precision is not measured: training runs in float32 on every device (on a GPU, PyTorch's
@@ -192,6 +199,30 @@ def speedups(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     return out
 
 
+def full_run(data: Path, device: torch.device, threads: int, seed: int) -> dict[str, Any]:
+    """The fast preset trained end to end on ``device`` (in a temporary folder): its training seconds
+    (``TrainState.elapsed``: the epochs and their checkpoints, not the report), steps, learned g and a with
+    their relative errors, and the convergence check."""
+    import tempfile
+
+    from piga.training.report import write_run_report
+    from piga.training.train import TrainConfig, train
+
+    choice = "cuda" if device.type == "cuda" else "cpu"
+    config = TrainConfig(device=choice, threads=threads, seed=seed)
+    with tempfile.TemporaryDirectory(prefix="device_speed-") as work:
+        model, state = train(data, Path(work) / "run", config, progress=False)
+        metrics = write_run_report(model, state, data, Path(work) / "run")
+    errors = metrics["parameter_errors"]
+    row = {"device": str(device), "device_name": gpu_name(device), "threads": threads, "seconds": state.elapsed,
+           "steps": state.step, "learned": {k: v["learned"] for k, v in errors.items()},
+           "errors": {k: v["relative_error"] for k, v in errors.items()}, "converged": metrics.get("converged"),
+           "machine": THIS}
+    print(f"full fast-preset training on {row['device_name']}: {state.elapsed:.1f} s, {state.step} steps, "
+          + ", ".join(f"{k} error {100 * e:.3f}%" for k, e in row["errors"].items()), flush=True)
+    return row
+
+
 def markdown(record: dict[str, Any]) -> str:
     """The results page."""
     settings = record["settings"]
@@ -216,6 +247,15 @@ def markdown(record: dict[str, Any]) -> str:
         for s in record["speedups"]:
             lines.append(f"| {s['workload']} | {s['gpu']} | {s['cpu_machine']} | {s['cpu_threads']} | "
                          f"**{s['speedup']:.1f}x** |")
+    if record.get("full"):
+        lines += ["", "Whole fast-preset trainings (`--full`): the training time (`TrainState.elapsed`: the epochs and "
+                  "their checkpoints) and the learned parameters' relative errors (the truth is read only to score).",
+                  "", "| device | machine | CPU threads | steps | training seconds | g error | a error | converged |",
+                  "|---|---|---|---|---|---|---|---|"]
+        for r in record["full"]:
+            lines.append(f"| {r['device_name']} | {r['machine']} | {r['threads']} | {r['steps']} | {r['seconds']:.1f} | "
+                         f"{100 * r['errors']['g']:.3f}% | {100 * r['errors']['a']:.3f}% | "
+                         f"{'yes' if r['converged'] else 'no'} |")
     return "\n".join(lines) + "\n"
 
 
@@ -230,11 +270,16 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--repeats", type=int, default=3, help="repeats; the table gives their median (default %(default)s)")
     p.add_argument("--threads", type=int, default=2, help="torch CPU threads (default %(default)s: the 2-core machine)")
     p.add_argument("--seed", type=int, default=0, help="seed of the models and batches (default %(default)s)")
+    p.add_argument("--full", choices=("none", "gpu", "all"), default="none",
+                   help="also train the fast preset end to end: on the GPU (gpu, with --device cuda) or on every "
+                        "device timed (all); default %(default)s")
     p.add_argument("--reference", type=Path, action="append", default=[],
                    help="an earlier OUT.json (e.g. the CPU of another machine): its rows join the table")
     args = p.parse_args(argv)
     if min(args.steps, args.repeats, args.threads) < 1 or args.warmup < 0:
         p.error("--steps, --repeats and --threads must be >= 1 and --warmup >= 0")
+    if args.full == "gpu" and args.device != "cuda":
+        p.error("--full gpu needs --device cuda (--full all trains on the CPU too)")
     if args.device == "cuda" and not cuda_available():
         print("device_speed.py: error: --device cuda: no CUDA device is available "
               "(torch.cuda.is_available() is False); run it on a machine with a GPU, or with --device cpu to time the CPU alone", file=sys.stderr)
@@ -247,6 +292,8 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     torch.set_num_threads(args.threads)
     rows = measure(args, devices)
+    full_devices = devices if args.full == "all" else devices[1:] if args.full == "gpu" else []
+    full = [full_run(args.data, device, args.threads, args.seed) for device in full_devices]
     here = machine() | ({"gpu": gpu_name(devices[-1])} if len(devices) > 1 else {})
     references = []
     for path in args.reference:
@@ -254,10 +301,12 @@ def main(argv: list[str] | None = None) -> int:
         references.append({"path": str(path), "machine": earlier["machine"]})
         words = earlier["machine"].get("gpu") or earlier["machine"].get("cpu", str(path))
         rows += [{**r, "machine": f"{words} ({path.name})"} for r in earlier["rows"] if r["machine"] == THIS]
+        full += [{**r, "machine": f"{words} ({path.name})"} for r in earlier.get("full", []) if r["machine"] == THIS]
     record = {"command": "python benchmarks/device_speed.py " + " ".join(argv if argv is not None else sys.argv[1:]),
               "machine": here, "settings": {"data": str(args.data), "steps": args.steps, "warmup": args.warmup,
-                                            "repeats": args.repeats, "threads": args.threads, "seed": args.seed},
-              "references": references, "rows": rows, "speedups": speedups(rows)}
+                                            "repeats": args.repeats, "threads": args.threads, "seed": args.seed,
+                                            "full": args.full},
+              "references": references, "rows": rows, "speedups": speedups(rows), "full": full}
     args.out.parent.mkdir(parents=True, exist_ok=True)
     write_json(args.out.with_suffix(".json"), record, overwrite=True)
     with atomic_output(args.out.with_suffix(".md"), overwrite=True) as tmp:

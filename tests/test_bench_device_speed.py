@@ -52,3 +52,20 @@ def test_the_speed_up_is_the_ratio_of_the_medians() -> None:
              "machine": "EPYC (cpu.json)"}]
     assert [(s["cpu_machine"], s["speedup"]) for s in device_speed.speedups(rows)] == \
         [("this machine", pytest.approx(15.0)), ("EPYC (cpu.json)", pytest.approx(20.0))]
+
+
+def test_full_gpu_needs_the_gpu_timed(pendulum: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as stop:
+        device_speed.main(["--data", str(pendulum), "--out", str(tmp_path / "speed"), "--full", "gpu"])
+    assert stop.value.code == 2 and "--full gpu needs --device cuda" in capsys.readouterr().err
+    assert not list(tmp_path.iterdir())
+
+
+def test_the_page_lists_the_whole_trainings_and_a_reference_joins_them(tmp_path: Path) -> None:
+    full = {"device": "cpu", "device_name": "CPU", "threads": 2, "seconds": 190.0, "steps": 2022,
+            "learned": {"g": 10.001, "a": 0.999}, "errors": {"g": 1e-4, "a": 7e-4}, "converged": True,
+            "machine": "this machine"}
+    record = {"command": "c", "machine": {"cpu": "EPYC"}, "settings": {"data": "d", "steps": 1, "warmup": 0, "repeats": 1},
+              "references": [], "rows": [], "speedups": [], "full": [full]}
+    page = device_speed.markdown(record)
+    assert "| CPU | this machine | 2 | 2022 | 190.0 | 0.010% | 0.070% | yes |" in page

@@ -80,10 +80,11 @@ def runs(tiny_data: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[str,
     from agents.sb3.train import train_sb3
 
     folder = tmp_path_factory.mktemp("runs")
-    train_planet(tiny_data, folder / "planet", PlanetTrainConfig(steps=4, batch_size=4, chunk_length=8, checkpoint_every=2, threads=1),
+    train_planet(tiny_data, folder / "planet",
+                 PlanetTrainConfig(steps=4, batch_size=4, chunk_length=8, checkpoint_every=2, threads=1, device="cpu"),
                  RSSMConfig(depth=4, deter_size=16, stoch_size=4, hidden_size=16, action_repeat=1), progress=False)
     tiny = {"steps": 400, "learning_starts": 100, "eval_every": 200, "eval_episodes": 1, "batch_size": 16, "net_arch": (16, 16),
-            "buffer_size": 1000}
+            "buffer_size": 1000, "device": "cpu"}  # the CPU, where piga-control acts: the recorded episodes are its own
     for algo in ("ddpg", "sac"):
         train_sb3(SB3Config(algo=algo, **tiny), folder / algo, progress=False)  # type: ignore[arg-type]
     return {"planet": folder / "planet", "ddpg": folder / "ddpg", "sac": folder / "sac"}

@@ -16,7 +16,8 @@ from agents.planet.rssm import Belief, WorldModel, model_steps
 
 #: A model small enough for a test to train in a second.
 TINY = RSSMConfig(depth=4, deter_size=16, stoch_size=4, hidden_size=16, action_repeat=1)
-TINY_TRAIN = PlanetTrainConfig(steps=4, batch_size=4, chunk_length=8, checkpoint_every=2, threads=1)
+# on the CPU, where a resumed run continues bit for bit (on a GPU, CUDA's atomic accumulations differ run to run)
+TINY_TRAIN = PlanetTrainConfig(steps=4, batch_size=4, chunk_length=8, checkpoint_every=2, threads=1, device="cpu")
 TINY_CEM = LatentPlannerConfig(cem=CEMConfig(horizon=4, iterations=2, candidates=20, elites=4))
 
 
