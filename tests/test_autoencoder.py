@@ -45,3 +45,21 @@ def test_an_autoencoder_of_the_collapsing_layout_is_refused(tiny_data: Path, tmp
     torch.save(payload, path)
     with pytest.raises(ValueError, match="old, collapsing layout"):
         load_autoencoder(path)
+
+
+def test_a_file_larger_than_memory_is_streamed_with_the_same_batches(tiny_data: Path, tmp_path: Path,
+                                                                     monkeypatch: pytest.MonkeyPatch) -> None:
+    from agents.sb3 import autoencoder
+    from piga.data.windows import SequenceReader
+
+    torch.set_num_threads(1)
+    config = AutoencoderConfig(steps=30, depth=4, batch_size=8)
+    whole, _ = train_autoencoder(tiny_data, config, tmp_path / "whole.pt", progress=False, device="cpu")
+    reads: list[int] = []
+    monkeypatch.setattr(autoencoder, "loads_whole", lambda frame_bytes, available: False)
+    read = SequenceReader._read
+    monkeypatch.setattr(SequenceReader, "_read", lambda self, i: reads.append(i) or read(self, i))
+    streamed, _ = train_autoencoder(tiny_data, config, tmp_path / "streamed.pt", progress=False, device="cpu")
+    assert reads, "the streamed run read no sequence through the cache"
+    for (name, a), b in zip(whole.state_dict().items(), streamed.state_dict().values()):
+        assert torch.equal(a, b), name

@@ -32,9 +32,12 @@ import torch
 from torch import Tensor, nn
 from tqdm.auto import tqdm
 
+from piga.data.schema import (DataFormatError, DatasetInfo, check_frames_have_signal, inspect_dataset, read_sequences,
+                              split_indices)
+from piga.data.windows import SequenceReader, loads_whole
 from piga.io.atomic import atomic_output
 from piga.io.device import Device, resolve_device
-from piga.data.schema import DataFormatError, DatasetInfo, check_frames_have_signal, inspect_dataset, read_sequences
+from piga.io.resources import available_memory
 
 __all__ = ["AutoencoderConfig", "FrameAutoencoder", "autoencoder_seconds", "check_autoencoder_data", "load_autoencoder", "train_autoencoder"]
 
@@ -122,6 +125,49 @@ def check_autoencoder_data(info: DatasetInfo) -> None:
     check_frames_have_signal(info.path)
 
 
+class _TrainFrames:
+    """A file's train frames by flat index (sequence-major): in memory, or, for a file larger than memory
+    (:func:`piga.data.windows.loads_whole`), read by whole sequences through a bounded cache
+    (:class:`piga.data.windows.SequenceReader`). The same frames, and the same mean, either way."""
+
+    def __init__(self, data: str | Path, info: DatasetInfo, stream: bool):
+        self.steps = info.steps
+        self.count = info.split_counts["train"] * info.steps
+        self.reader: SequenceReader | None = None
+        self.flat: Tensor | None = None
+        if stream:
+            self.reader = SequenceReader(data, split_indices(data, "train"))
+        else:
+            frames, _ = read_sequences(data, "train")
+            self.flat = torch.from_numpy(frames.reshape(-1, 1, 64, 64))  # (N·T, 1, 64, 64) uint8
+
+    def __len__(self) -> int:
+        return self.count
+
+    def __getitem__(self, rows: np.ndarray) -> Tensor:
+        """Frames ``rows`` (B,) -> uint8 (B, 1, 64, 64)."""
+        if self.flat is not None:
+            return self.flat[torch.from_numpy(rows)]
+        assert self.reader is not None
+        return torch.from_numpy(np.stack([self.reader(r // self.steps)[r % self.steps].reshape(1, 64, 64) for r in rows]))
+
+    def sequence(self, position: int) -> np.ndarray:
+        """The frames of the split's sequence ``position``: uint8 (T, 64, 64)."""
+        if self.flat is not None:
+            return self.flat[position * self.steps:(position + 1) * self.steps, 0].numpy()
+        assert self.reader is not None
+        return self.reader(position).reshape(self.steps, 64, 64)
+
+    def mean(self) -> Tensor:
+        """The frames' mean in [0, 1]: float (1, 1, 64, 64), summed by sequence in float64."""
+        total = sum(self.sequence(i).sum(axis=0, dtype=np.float64) for i in range(self.count // self.steps))
+        return torch.from_numpy(total / (self.count * 255.0)).float()[None, None]
+
+    def close(self) -> None:
+        if self.reader is not None:
+            self.reader.close()
+
+
 def train_autoencoder(data: str | Path, config: AutoencoderConfig, out: str | Path, progress: bool = True,
                       device: Device = "auto") -> tuple[FrameAutoencoder, float]:
     """Trains on the train split's frames of ``data`` and writes the model to ``out`` atomically.
@@ -129,27 +175,36 @@ def train_autoencoder(data: str | Path, config: AutoencoderConfig, out: str | Pa
     The file also records the training's wall seconds (``train_seconds``, read by :func:`autoencoder_seconds`).
     It trains on ``device`` (:func:`piga.io.device.resolve_device`; the run's ``SB3Config.device``); the
     initialisation and the batches are drawn on the CPU, and the model is saved and returned on the CPU,
-    where it encodes the env's frames.
+    where it encodes the env's frames. A file larger than memory is read through a bounded cache
+    (:class:`_TrainFrames`), with the same batches.
 
     Returns:
         The model (eval mode, on the CPU) and its final training MSE (mean over the last 100 steps).
     """
     target = resolve_device(device)
     started = time.monotonic()
-    check_autoencoder_data(inspect_dataset(data))
-    frames, _ = read_sequences(data, "train")
-    flat = torch.from_numpy(frames.reshape(-1, 1, 64, 64))  # (N·T, 1, 64, 64) uint8
+    info = inspect_dataset(data)
+    check_autoencoder_data(info)
+    flat = _TrainFrames(data, info, stream=not loads_whole(info.split_counts["train"] * info.sequence_bytes,
+                                                           available_memory()))
+    try:
+        return _train(flat, config, out, progress, target, started)
+    finally:
+        flat.close()
+
+
+def _train(flat: _TrainFrames, config: AutoencoderConfig, out: str | Path, progress: bool, target: torch.device,
+           started: float) -> tuple[FrameAutoencoder, float]:
+    """:func:`train_autoencoder`'s steps on its frames."""
     torch.manual_seed(config.seed)
     model = FrameAutoencoder(config)
-    mean = torch.from_numpy(frames.mean(axis=(0, 1), dtype=np.float64) / 255.0).float()[None, None]  # (1, 1, 64, 64)
-    model.mean_logit.copy_(torch.logit(mean.clamp(1e-3, 1 - 1e-3)))
+    model.mean_logit.copy_(torch.logit(flat.mean().clamp(1e-3, 1 - 1e-3)))  # (1, 1, 64, 64)
     model.to(target)
     optimizer = torch.optim.Adam(model.parameters(), lr=config.lr)
     rng = np.random.default_rng(config.seed)
     recent: list[float] = []
     for _ in tqdm(range(config.steps), desc="autoencoder", disable=not progress):
-        rows = torch.from_numpy(rng.integers(len(flat), size=config.batch_size))
-        x = flat[rows].to(target).float() / 255.0  # (B, 1, 64, 64)
+        x = flat[rng.integers(len(flat), size=config.batch_size)].to(target).float() / 255.0  # (B, 1, 64, 64)
         loss = nn.functional.mse_loss(model(x), x)
         if not torch.isfinite(loss):
             raise RuntimeError(f"autoencoder training diverged (loss {loss.item()}); nothing was written")
@@ -159,7 +214,7 @@ def train_autoencoder(data: str | Path, config: AutoencoderConfig, out: str | Pa
         recent = (recent + [loss.item()])[-100:]
     model.eval()
     with torch.inference_mode():  # the raw codes' statistics, over (at most) 4096 training frames
-        sample = flat[torch.from_numpy(np.sort(rng.permutation(len(flat))[:4096]))].to(target).float() / 255.0
+        sample = flat[np.sort(rng.permutation(len(flat))[:4096])].to(target).float() / 255.0
         codes = torch.cat([model.encoder(batch) for batch in sample.split(512)])  # (S, Z)
     model.code_mean.copy_(codes.mean(0))
     model.code_std.copy_(codes.std(0).clamp_min(1e-6))
