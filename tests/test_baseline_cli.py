@@ -91,6 +91,19 @@ def test_planet_resume_reads_the_model_config_from_the_checkpoint(planet_run: Pa
     assert json.loads((run / "metrics.json").read_text())["steps"] == 3
 
 
+def test_planet_reward_options_reach_the_run_and_resume_keeps_them(tiny_data: Path, tmp_path: Path,
+                                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    run = tmp_path / "run"
+    code, _, err = run_in_process("piga-baseline", baseline.main, "planet", str(tiny_data), "--out", str(run), *TINY_PLANET,
+                                  "--reward-alignment", "transition", "--reward-scale", "10", capsys=capsys)
+    assert code == 0, err
+    record = json.loads((run / "config.json").read_text())
+    assert record["rssm"]["reward_alignment"] == "transition" and record["train"]["reward_scale"] == 10
+    code, _, err = run_in_process("piga-baseline", baseline.main, "planet", str(tiny_data), "--out", str(run), "--resume",
+                                  "--reward-scale", "5", "--quiet", capsys=capsys)
+    assert_one_line(code, err, "--resume keeps the run's recipe; drop --reward-scale")
+
+
 @pytest.mark.parametrize("args, needle", [
     (("planet", "missing.h5", "--out", "r"), "no such file"),
     (("ddpg", "--obs", "state", "--algo", "td3", "--out", "r"), "--algo: invalid choice: 'td3'"),

@@ -230,3 +230,17 @@ def test_iterative_resume_is_exact(tiny_data: Path, tmp_path: Path, monkeypatch:
         assert torch.equal(p, q), name
     for x, y in zip(read_sequences(tmp_path / "a" / "collected.h5", "train"), read_sequences(tmp_path / "b" / "collected.h5", "train")):
         assert np.array_equal(x, y)
+
+
+def test_transition_alignment_pairs_each_reward_with_the_state_its_actions_lead_to() -> None:
+    config = RSSMConfig(depth=4, deter_size=16, stoch_size=4, hidden_size=16, reward_alignment="transition")
+    model = WorldModel(config)
+    predicted, rewards = torch.arange(6.0).reshape(2, 3), -torch.arange(6.0).reshape(2, 3)  # (B, T)
+    head, target = model.aligned_rewards(predicted, rewards)
+    assert torch.equal(head, predicted[:, 1:]) and torch.equal(target, rewards[:, :-1])
+    assert WorldModel(replace(config, reward_alignment="frame")).aligned_rewards(predicted, rewards) == (predicted, rewards)
+    with pytest.raises(ValueError, match="RSSMConfig.reward_alignment must be one of 'frame', 'transition'"):
+        RSSMConfig(reward_alignment="later")  # type: ignore[arg-type]
+    frames = torch.randint(0, 256, (2, 5, 64, 64), dtype=torch.uint8)
+    parts = model.loss(frames, torch.zeros(2, 5, 2), torch.zeros(2, 5), TINY_TRAIN, torch.Generator().manual_seed(0))
+    assert torch.isfinite(parts.loss) and parts.reward >= 0

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field
-from typing import Any
+from typing import Any, Literal
 
 from agents.config import CEMConfig
 from piga.io.choices import check_choices
@@ -20,6 +20,12 @@ from piga.io.device import Device
 MAX_FREE_NATS = 1000.0
 #: Largest exploration noise accepted, as a fraction of the action bound (the noisy action is then clipped).
 MAX_EXPLORATION_NOISE = 10.0
+
+
+RewardAlignment = Literal["frame", "transition"]
+"""Which latent state the reward head reads for the summed reward of a model step's R actions (the
+actions after frame t·R): ``frame``, the state of frame t·R, before the actions; ``transition``,
+PlaNet's, the state they lead to, whose transition input holds them (:mod:`agents.planet.rssm`)."""
 
 
 @dataclass(frozen=True)
@@ -50,7 +56,15 @@ class RSSMConfig:
     With 2, PlaNet's 12 planning steps look 1.2 s ahead, and the model swings up and holds at 6000
     steps, where the same training with R = 1 did not (results/planet_tuning.md)."""
 
+    reward_alignment: RewardAlignment = "frame"
+    """Which state the reward head reads (:data:`RewardAlignment`). ``frame`` (the default, that of the
+    committed results) reads the state before the actions, which cannot see them: the pendulum's
+    action cost, and at an action repeat of 2 the second step's reward, which depends on where the
+    first action took the pendulum. ``transition`` is PlaNet's, a function of what the head sees; the
+    planner reads the head the same way under both (the state after each imagined action)."""
+
     def __post_init__(self) -> None:
+        check_choices(self)
         if self.image_size != 64:
             raise ValueError(f"the PlaNet encoder and decoder are built for 64x64 frames, got image_size={self.image_size}")
         for name in ("channels", "action_dim", "deter_size", "stoch_size", "hidden_size", "depth", "action_repeat"):

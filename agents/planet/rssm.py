@@ -10,13 +10,15 @@ state s. With a_t the action applied after frame t (piga's schema) and a_{-1} = 
 | prior | p(s_t | h_t) = N(μ, σ), σ = softplus(·) + min_std |
 | posterior | q(s_t | h_t, e_t) = N(μ, σ) |
 | decoder | (h_t, s_t) -> mean of x_t: four stride-2 transposed convs, PlaNet's |
-| reward head | (h_t, s_t) -> r_t, the env's reward for a_t |
+| reward head | (h_t, s_t) -> r_t, the env's reward for a_t; with ``reward_alignment="transition"``, (h_{t+1}, s_{t+1}) -> r_t |
 
 The loss per frame is PlaNet's: the negative log-likelihood of x_t under N(decoder, 1) (summed over
 pixels), of r_t under N(head, 1), and max(KL(q || p), free_nats), averaged over the batch and time.
 
 Pendulum's reward for a_t is -(θ_t² + 0.1·θ̇_t² + 0.001·a_t²): a function of the state of frame t
-plus an action cost of at most 0.004, which the head (reading the state only, as in PlaNet) cannot see.
+plus an action cost of at most 0.004, which the head cannot see when it reads frame t's state
+(``RSSMConfig.reward_alignment="frame"``). PlaNet's alignment (``"transition"``) reads the state that
+a_t leads to, whose GRU input holds a_t: the reward is then a function of what the head sees.
 
 With an action repeat R (``RSSMConfig.action_repeat``), one model step is R env steps:
 :func:`model_steps` turns env-step sequences into model steps (every R-th frame, the R actions in
@@ -250,11 +252,20 @@ class WorldModel(nn.Module):
         h, s, prior, post = self.observe(frames, actions, generator)
         target = frames_to_input(frames, self.config.channels)  # (B, T, C, H, W)
         reconstruction = 0.5 * (self.decode(h, s) - target).square().sum((-3, -2, -1)).mean()
-        reward = 0.5 * (self.reward(h, s) - rewards).square().mean()
+        predicted, target = self.aligned_rewards(self.reward(h, s), rewards)
+        reward = 0.5 * (predicted - target).square().mean()
         kl = _kl(post, prior)  # (B, T)
         kl_term = kl.clamp_min(config.free_nats).mean()
         loss = reconstruction + config.reward_scale * reward + config.kl_scale * kl_term
         return LossParts(loss, reconstruction, reward, kl.mean())
+
+    def aligned_rewards(self, predicted: Tensor, rewards: Tensor) -> tuple[Tensor, Tensor]:
+        """The head's outputs at states (B, T) and the rewards (B, T) of the actions after each frame, paired
+        as the head is trained (``RSSMConfig.reward_alignment``): with ``"transition"``, the output at
+        frame t+1 against the reward of the actions after frame t, (B, T - 1) each."""
+        if self.config.reward_alignment == "transition":
+            return predicted[:, 1:], rewards[:, :-1]
+        return predicted, rewards
 
     @torch.no_grad()
     def open_loop(self, frames: Tensor, actions: Tensor, context: int, generator: torch.Generator | None = None

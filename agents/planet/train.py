@@ -176,7 +176,8 @@ def open_loop_check(model: WorldModel, data: str | Path, run_dir: Path, seed: in
     pixel_axes = (0, 2, 3, 4)
     frame_mse = (imagined - real).square().mean(pixel_axes)  # (T,)
     mean_frame_mse = (real.mean((0, 1), keepdim=True) - real).square().mean(pixel_axes)  # (T,) the average frame as a guess
-    reward_error = (predicted - rewards).abs().mean(0)  # (T,)
+    predicted, rewards = model.aligned_rewards(predicted, rewards)  # (B, T) or, aligned to transitions, (B, T - 1)
+    reward_error = (predicted - rewards).abs().mean(0)  # (T,) or (T - 1,)
     shown = (lambda x: x.squeeze(-1)) if real.shape[-1] == 1 else (lambda x: x)  # gray as (H, W) for imshow
     save_figure(openloop_figure(shown(real).numpy(), shown(imagined).numpy(), rewards.numpy(), predicted.numpy(), context),
                 run_dir / "openloop.png")

@@ -16,7 +16,7 @@ import os
 from collections.abc import Iterator, Sequence
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import Any, get_args
 
 from piga.cli.common import (ArgumentParser, Interrupted, PigaError, add_device_option, add_preset_option, command_line,
                              format_default, made_folder, nonnegative_float, nonnegative_int, positive_float,
@@ -28,7 +28,7 @@ OUTPUTS = (CHECKPOINT, "config.json", "metrics.json", "model.zip", "autoencoder.
 
 
 def build_parser() -> ArgumentParser:
-    from agents.planet.config import IterativeConfig, PlanetTrainConfig, RSSMConfig
+    from agents.planet.config import IterativeConfig, PlanetTrainConfig, RewardAlignment, RSSMConfig
     from agents.sb3.autoencoder import AutoencoderConfig
     from agents.sb3.config import ALGORITHM_PRESETS, ALGORITHMS, OBSERVATIONS, PRESETS, SB3Config
 
@@ -55,6 +55,11 @@ def build_parser() -> ArgumentParser:
                    help="train on the first N train sequences only (default %(default)s: all)")
     q.add_argument("--free-nats", type=nonnegative_float, default=planet.free_nats, help="KL free nats (default %(default)s)")
     q.add_argument("--deter-size", type=positive_int, default=rssm.deter_size, help="GRU state size (default %(default)s)")
+    q.add_argument("--reward-alignment", choices=get_args(RewardAlignment), default=rssm.reward_alignment,
+                   help="which state the reward head reads for a model step's reward: frame (the state before its actions) "
+                   "or transition (PlaNet's: the state they lead to, which has seen them) (default %(default)s)")
+    q.add_argument("--reward-scale", type=nonnegative_float, default=planet.reward_scale,
+                   help="weight of the reward term of the loss (PlaNet's code: 10) (default %(default)s)")
     q.add_argument("--stoch-size", type=positive_int, default=rssm.stoch_size, help="stochastic state size (default %(default)s)")
     add_preset_option(q, "--max-minutes", default=planet.max_minutes, type=positive_float, shown="no limit",
                       help="stop at the first checkpoint past this budget")
@@ -277,9 +282,11 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
         record.setdefault("resumed", []).append(command)
     else:
         config = PlanetTrainConfig(steps=args.steps or PlanetTrainConfig.steps, batch_size=args.batch_size, chunk_length=args.chunk_length,
-                                   max_sequences=args.max_sequences, free_nats=args.free_nats, seed=args.seed,
+                                   max_sequences=args.max_sequences, free_nats=args.free_nats, reward_scale=args.reward_scale,
+                                   seed=args.seed,
                                    threads=args.threads, device=args.device, max_minutes=args.max_minutes or 0.0)
-        rssm = rssm_config_for(info, {"deter_size": args.deter_size, "stoch_size": args.stoch_size, "action_repeat": args.action_repeat})
+        rssm = rssm_config_for(info, {"deter_size": args.deter_size, "stoch_size": args.stoch_size, "action_repeat": args.action_repeat,
+                                      "reward_alignment": args.reward_alignment})
         check_planet_memory(rssm)
         if not args.iterative:
             given = [flag for flag, value, default in (("--rounds", args.rounds, None), ("--round-steps", args.round_steps, IterativeConfig.steps_per_round),
