@@ -39,3 +39,12 @@ def test_a_page_without_the_markers_is_refused(tmp_path: Path, capsys: pytest.Ca
     page.write_text("# no table\n")
     assert_one_line(ddpg_tuning.main(["--page", str(page)]), capsys.readouterr().err, "has no block between")
     assert page.read_text() == "# no table\n"
+
+
+def test_the_drqv2_curve_on_the_page_is_its_records() -> None:
+    record = json.loads((ddpg_tuning.ROOT / "results" / "drqv2_runs" / "records" / "pixels-s0.json").read_text())
+    curve = record["learning_curve"]
+    row = ("| evaluation return (5 episodes) | "
+           + " | ".join(f"{r['eval_mean_return']:.1f}".replace("-", "\u2212") for r in curve) + " |")
+    assert row in ddpg_tuning.PAGE.read_text()
+    assert record["config"]["algo"] == "drqv2" and record["command"].endswith("--out RUN")

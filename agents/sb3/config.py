@@ -1,7 +1,8 @@
-"""The settings of an SB3 baseline run: DDPG or SAC, as variants of one config.
+"""The settings of an SB3 baseline run: DDPG, SAC or DrQ-v2, as variants of one config.
 
 Each algorithm's defaults are the SB3 zoo's tuned ones for Pendulum-v1 (rl-baselines3-zoo,
-``hyperparams/ddpg.yml`` and ``hyperparams/sac.yml``; :data:`ALGORITHM_PRESETS`); each observation
+``hyperparams/ddpg.yml`` and ``hyperparams/sac.yml``) or, for DrQ-v2, its paper's for DMC's easy tasks
+(:data:`ALGORITHM_PRESETS`); each observation
 may change some of them (:data:`PRESETS`). A field left unset takes, in order, the observation's
 preset, then the algorithm's value: so ``SB3Config(algo="sac")`` has SAC's values, never DDPG's.
 Build a new config to change ``algo`` or ``obs`` (``dataclasses.replace`` keeps the values already set).
@@ -19,8 +20,9 @@ __all__ = ["ALGORITHMS", "ALGORITHM_PRESETS", "EPISODE_STEPS", "OBSERVATIONS", "
 
 Observation = Literal["pixels", "latent", "state"]
 """What the policy sees."""
-Algorithm = Literal["ddpg", "sac"]
-"""The SB3 algorithm: DDPG (the paper's), SAC (its stronger sibling)."""
+Algorithm = Literal["ddpg", "sac", "drqv2"]
+"""The algorithm: SB3's DDPG (the paper's) or SAC (its stronger sibling), or DrQ-v2 in SB3's loop
+(:mod:`agents.sb3.drqv2`; pixels only)."""
 #: What the policy can observe.
 OBSERVATIONS: tuple[Observation, ...] = get_args(Observation)
 #: The SB3 algorithms.
@@ -33,9 +35,20 @@ EPISODE_STEPS = 200
 #: SAC: the zoo's Pendulum-v1 entry sets only the learning rate (1e-3, as DDPG's); the rest are SB3's SAC
 #: defaults (gamma 0.99, buffer 1e6, learning starts 100, net_arch [256, 256], entropy coefficient "auto",
 #: no added action noise: SAC explores with its own stochastic policy).
+#: DrQ-v2 (Yarats et al. 2021, its DMC "easy" settings): gamma 0.99, 3-step returns, a warm-up of 4000
+#: frames, exploration std 1.0 falling linearly to 0.1 over 100000 steps, Adam 1e-4, batch 256, tau 0.01,
+#: an update every 2 env steps, MLPs of 1024 x 2, 3 stacked frames; a buffer of 100000 transitions (its
+#: 1e6 of 84x84 RGB frames does not fit a laptop; 100000 stacks of three 64x64 frames take 2.5 GB).
+#: The fields that only some algorithms read: ``n_step``, ``noise_final_std``, ``noise_decay_steps`` and
+#: ``feature_dim`` (DrQ-v2's), ``n_step`` too for DDPG and SAC (1: one-step returns).
+_SB3_COMMON = {"learning_rate": 1e-3, "batch_size": 256, "tau": 0.005, "train_freq": 1, "frame_stack": 4, "n_step": 1}
 ALGORITHM_PRESETS: dict[Algorithm, dict[str, Any]] = {
-    "ddpg": {"gamma": 0.98, "buffer_size": 200_000, "learning_starts": 10_000, "noise_std": 0.1, "net_arch": (400, 300)},
-    "sac": {"gamma": 0.99, "buffer_size": 1_000_000, "learning_starts": 100, "noise_std": 0.0, "net_arch": (256, 256)},
+    "ddpg": {"gamma": 0.98, "buffer_size": 200_000, "learning_starts": 10_000, "noise_std": 0.1, "net_arch": (400, 300),
+             **_SB3_COMMON},
+    "sac": {"gamma": 0.99, "buffer_size": 1_000_000, "learning_starts": 100, "noise_std": 0.0, "net_arch": (256, 256),
+            **_SB3_COMMON},
+    "drqv2": {"gamma": 0.99, "buffer_size": 100_000, "learning_starts": 4000, "noise_std": 1.0, "net_arch": (1024, 1024),
+              "learning_rate": 1e-4, "batch_size": 256, "tau": 0.01, "train_freq": 2, "frame_stack": 3, "n_step": 3},
 }
 #: Per-observation values, over the algorithm's. Pixels: a replay buffer of 200000 stacks of four 64x64
 #: frames takes 6.6 GB (observations and next observations); 50000 take 1.6 GB.
@@ -62,21 +75,30 @@ class SB3Config:
     learning_starts: int = None  # type: ignore[assignment]
     """Random-action steps before learning (zoo: DDPG 10000, SAC 100)."""
     noise_std: float = None  # type: ignore[assignment]
-    """Std of the Gaussian action noise, in SB3's [-1, 1] action scale (zoo: DDPG 0.1, SAC none)."""
-    train_freq: int = 1
-    """Env steps between updates (zoo)."""
+    """Std of the Gaussian action noise, in SB3's [-1, 1] action scale (zoo: DDPG 0.1, SAC none; DrQ-v2 1.0 at
+    the start of its schedule)."""
+    noise_final_std: float = 0.1
+    """DrQ-v2: the exploration std at the end of its linear schedule (DrQ-v2's 0.1)."""
+    noise_decay_steps: int = 100_000
+    """DrQ-v2: env steps over which the exploration std falls from ``noise_std`` to ``noise_final_std``."""
+    train_freq: int = None  # type: ignore[assignment]
+    """Env steps between updates (zoo: 1; DrQ-v2: 2)."""
     gradient_steps: int = 1
     """Gradient steps per update (zoo)."""
-    learning_rate: float = 1e-3
-    """Adam's learning rate for actor and critic (zoo)."""
-    batch_size: int = 256
-    """Minibatch (SB3's default)."""
-    tau: float = 0.005
-    """Target networks' soft-update rate (SB3's default)."""
+    learning_rate: float = None  # type: ignore[assignment]
+    """Adam's learning rate for actor and critic (zoo: 1e-3; DrQ-v2: 1e-4, the encoder's too)."""
+    batch_size: int = None  # type: ignore[assignment]
+    """Minibatch (SB3's default 256; DrQ-v2's 256)."""
+    tau: float = None  # type: ignore[assignment]
+    """Target networks' soft-update rate (SB3's default 0.005; DrQ-v2: 0.01)."""
+    n_step: int = None  # type: ignore[assignment]
+    """Returns over n steps (SB3's ``NStepReplayBuffer``): 1 for DDPG and SAC, 3 for DrQ-v2."""
     net_arch: tuple[int, ...] = None  # type: ignore[assignment]
-    """Hidden layers of actor and critic (zoo: DDPG (400, 300), SAC (256, 256))."""
-    frame_stack: int = 4
-    """K, frames (or codes) per observation for "pixels" and "latent"."""
+    """Hidden layers of actor and critic (zoo: DDPG (400, 300), SAC (256, 256); DrQ-v2 (1024, 1024))."""
+    feature_dim: int = 50
+    """DrQ-v2: the width of the actor's and the critic's trunk (LayerNorm, tanh) over the encoder's features."""
+    frame_stack: int = None  # type: ignore[assignment]
+    """K, frames (or codes) per observation for "pixels" and "latent" (4; DrQ-v2: 3)."""
     torque_arrow: bool = False
     """Whether the frames show Gymnasium's torque arrow (``piga-control``'s default is off)."""
     eval_every: int = 1000
@@ -97,8 +119,12 @@ class SB3Config:
             raise ValueError(f"unknown observation {self.obs!r}; expected one of {', '.join(OBSERVATIONS)}")
         if self.algo not in ALGORITHMS:
             raise ValueError(f"unknown algorithm {self.algo!r}; expected one of {', '.join(ALGORITHMS)}")
+        if self.algo == "drqv2" and self.obs != "pixels":
+            raise ValueError(f"DrQ-v2 learns from pixels; --obs {self.obs} is for ddpg or sac")
         check_choices(self)
-        for name, value in {**ALGORITHM_PRESETS[self.algo], **PRESETS[self.obs]}.items():
+        # DrQ-v2's buffer is its own (its stacks are of 3 frames, and it keeps a 100k-step run's every transition)
+        observation_preset = {} if self.algo == "drqv2" else PRESETS[self.obs]
+        for name, value in {**ALGORITHM_PRESETS[self.algo], **observation_preset}.items():
             if getattr(self, name) is None:
                 object.__setattr__(self, name, value)
         object.__setattr__(self, "net_arch", tuple(self.net_arch))  # a JSON record's list
@@ -107,10 +133,13 @@ class SB3Config:
         if self.eval_every < EPISODE_STEPS or self.eval_every % EPISODE_STEPS:
             raise ValueError(f"eval_every must be a multiple of the episode length {EPISODE_STEPS}, got {self.eval_every}")
         if min(self.buffer_size, self.batch_size, self.train_freq, self.gradient_steps, self.frame_stack,
-               self.eval_episodes, self.threads) < 1 or self.learning_starts < 0 or self.seed < 0:
+               self.eval_episodes, self.threads, self.n_step, self.feature_dim) < 1 or self.learning_starts < 0 or \
+                self.seed < 0 or self.noise_decay_steps < 0:
             raise ValueError(f"SB3Config: sizes, counts and threads must be >= 1, learning_starts and seed >= 0: {self}")
-        if not (0 < self.gamma <= 1 and self.learning_rate > 0 and 0 < self.tau <= 1 and self.noise_std >= 0):
-            raise ValueError(f"SB3Config: need 0 < gamma <= 1, learning_rate > 0, 0 < tau <= 1, noise_std >= 0: {self}")
+        if not (0 < self.gamma <= 1 and self.learning_rate > 0 and 0 < self.tau <= 1 and self.noise_std >= 0
+                and self.noise_final_std >= 0):
+            raise ValueError(f"SB3Config: need 0 < gamma <= 1, learning_rate > 0, 0 < tau <= 1, noise_std >= 0, "
+                             f"noise_final_std >= 0: {self}")
         if self.eval_every > self.steps:
             raise ValueError(f"eval_every ({self.eval_every}) is more than steps ({self.steps}): the run would never be "
                              "evaluated; lower eval_every or raise steps")

@@ -1,4 +1,4 @@
-"""Reading an SB3 baseline's run (``piga-baseline ddpg``, DDPG or SAC) and running it as an agent, without the training code."""
+"""Reading an SB3 baseline's run (``piga-baseline ddpg``, DDPG, SAC or DrQ-v2) and running it as an agent, without the training code."""
 
 from __future__ import annotations
 
@@ -22,10 +22,12 @@ AUTOENCODER = "autoencoder.pt"
 
 
 def sb3_class(algo: Algorithm) -> Any:
-    """The SB3 class of ``algo``."""
+    """The SB3 class of ``algo`` (DrQ-v2's: :class:`agents.sb3.drqv2.DrQV2`)."""
     from stable_baselines3 import DDPG, SAC
 
-    return {"ddpg": DDPG, "sac": SAC}[algo]
+    from agents.sb3.drqv2 import DrQV2
+
+    return {"ddpg": DDPG, "sac": SAC, "drqv2": DrQV2}[algo]
 
 
 def load_sb3(run_dir: str | Path) -> tuple[Any, SB3Config, FrameAutoencoder | None]:

@@ -1,4 +1,4 @@
-"""Training stable-baselines3 DDPG (or SAC) on the pixel pendulum, from pixels, from an autoencoder's latent, or from the true state.
+"""Training stable-baselines3 DDPG (or SAC, or DrQ-v2 in SB3's loop) on the pixel pendulum, from pixels, from an autoencoder's latent, or from the true state.
 
 Everything is SB3's own: ``DDPG`` with ``CnnPolicy`` (pixels) or ``MlpPolicy``, ``VecFrameStack``
 (channel-first uint8 stacks of K frames, or K stacked codes), ``Monitor``, ``EvalCallback`` for the
@@ -8,6 +8,8 @@ for Pendulum-v1 (:class:`agents.sb3.config.SB3Config`).
 ``algo="sac"`` trains SB3's SAC instead, with the zoo's Pendulum-v1 settings. It is the stronger
 sibling for pixels, where DDPG's deterministic actor saturates (``results/ddpg_tuning.md``); the run
 folder, the agent (:class:`agents.sb3.run.SB3Agent`) and the evaluation are the same.
+``algo="drqv2"`` trains DrQ-v2 (:mod:`agents.sb3.drqv2`), the pixel actor-critic whose encoder the
+critic trains, with augmentation, 3-step returns and scheduled exploration, in the same loop.
 
 Training runs in chunks of ``eval_every`` steps (whole episodes). After each chunk, ``EvalCallback``
 has scored the policy, and one atomic ``checkpoint.pt`` holds the SB3 model, its replay buffer, the
@@ -107,6 +109,16 @@ def _eval_callback(config: SB3Config, eval_env: Any) -> Any:
 
     return SeededEvalCallback(eval_env, n_eval_episodes=config.eval_episodes, eval_freq=config.eval_every,
                               deterministic=True, verbose=0)
+
+
+def _n_step_buffer(config: SB3Config) -> dict[str, Any]:
+    """SB3's arguments for ``config.n_step``-step returns: its ``NStepReplayBuffer`` named explicitly (the saved
+    model then loads without SB3's warning that its ``n_steps`` shortcut is ignored), or nothing for 1."""
+    if config.n_step == 1:
+        return {}
+    from stable_baselines3.common.buffers import NStepReplayBuffer
+
+    return {"replay_buffer_class": NStepReplayBuffer, "replay_buffer_kwargs": {"n_steps": config.n_step, "gamma": config.gamma}}
 
 
 def _save(run_dir: Path, model: Any, config: SB3Config, episodes: int, history: list[dict[str, float]], elapsed: float) -> None:
@@ -219,11 +231,18 @@ def train_sb3(config: SB3Config, run_dir: str | Path, autoencoder: str | Path | 
         history, elapsed = list(ckpt["history"]), float(ckpt["elapsed"])
     else:
         n_actions = venv.action_space.shape[0]
-        noise = NormalActionNoise(np.zeros(n_actions), config.noise_std * np.ones(n_actions)) if config.noise_std else None
+        policy_kwargs: dict[str, Any] = {"net_arch": list(config.net_arch)}
+        if config.algo == "drqv2":
+            from agents.sb3.drqv2 import ScheduledNoise
+
+            noise: Any = ScheduledNoise(n_actions, config.noise_std, config.noise_final_std, config.noise_decay_steps)
+            policy_kwargs["feature_dim"] = config.feature_dim
+        else:
+            noise = NormalActionNoise(np.zeros(n_actions), config.noise_std * np.ones(n_actions)) if config.noise_std else None
         model = algorithm("CnnPolicy" if config.obs == "pixels" else "MlpPolicy", venv, learning_rate=config.learning_rate,
                           buffer_size=config.buffer_size, learning_starts=config.learning_starts, batch_size=config.batch_size,
                           tau=config.tau, gamma=config.gamma, train_freq=config.train_freq, gradient_steps=config.gradient_steps,
-                          action_noise=noise, policy_kwargs={"net_arch": list(config.net_arch)},
+                          action_noise=noise, policy_kwargs=policy_kwargs, **_n_step_buffer(config),
                           tensorboard_log=str(run_dir / "tensorboard"), seed=config.seed, device=device, verbose=0)
     callback = _eval_callback(config, eval_env)
     started = time.monotonic() - elapsed

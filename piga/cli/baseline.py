@@ -83,8 +83,9 @@ def build_parser() -> ArgumentParser:
 
     ddpg = SB3Config()
     sac = ALGORITHM_PRESETS["sac"]
+    drqv2 = ALGORITHM_PRESETS["drqv2"]
     d = sub.add_parser("ddpg", help="SB3 DDPG (or SAC) from pixels, an autoencoder's latent, or the true state",
-                       description="Train SB3 DDPG (or, with --algo sac, SAC) with the SB3 zoo's Pendulum-v1 hyperparameters "
+                       description="Train SB3 DDPG (or, with --algo sac, SAC; with --algo drqv2, DrQ-v2 from pixels) with the SB3 zoo's Pendulum-v1 hyperparameters "
                        "on the pixel pendulum. Writes RUN_DIR/checkpoint.pt, model.zip, config.json, metrics.json "
                        "(EvalCallback's learning curve) and tensorboard/.")
     d.error = p.error  # type: ignore[method-assign]
@@ -96,21 +97,26 @@ def build_parser() -> ArgumentParser:
     d.add_argument("--out", required=True, help="run folder")
     d.add_argument("--data", help="with --obs latent: HDF5 file whose train frames the autoencoder learns")
     d.add_argument("--algo", choices=ALGORITHMS, default=ddpg.algo,
-                   help="the SB3 algorithm: ddpg (the paper's), or sac, its stronger sibling with the zoo's "
-                   "Pendulum-v1 settings (default %(default)s)")
+                   help="the algorithm: ddpg (the paper's), or sac, its stronger sibling with the zoo's Pendulum-v1 "
+                   "settings, or drqv2 (DrQ-v2: an encoder trained by the critic, augmentation, 3-step returns; "
+                   "--obs pixels; its paper's settings) (default %(default)s)")
     d.add_argument("--eval-every", type=positive_int, default=ddpg.eval_every,
                    help="env steps between evaluations and checkpoints, a multiple of 200 (default %(default)s)")
     d.add_argument("--eval-episodes", type=positive_int, default=ddpg.eval_episodes, help="episodes per evaluation (default %(default)s)")
     add_preset_option(d, "--learning-starts", default=ddpg.learning_starts, type=nonnegative_int,
-                      shown=f"{ddpg.learning_starts}; sac: {sac['learning_starts']}", help="random-action steps before learning")
-    d.add_argument("--learning-rate", type=positive_float, default=ddpg.learning_rate,
-                   help="Adam's learning rate for actor and critic (default %(default)s)")
-    d.add_argument("--batch-size", type=positive_int, default=ddpg.batch_size, help="minibatch (default %(default)s)")
+                      shown=f"{ddpg.learning_starts}; sac: {sac['learning_starts']}; drqv2: {drqv2['learning_starts']}",
+                      help="random-action steps before learning")
+    add_preset_option(d, "--learning-rate", default=ddpg.learning_rate, type=positive_float,
+                      shown=f"{ddpg.learning_rate}; drqv2: {drqv2['learning_rate']}",
+                      help="Adam's learning rate for actor and critic (and DrQ-v2's encoder)")
+    add_preset_option(d, "--batch-size", default=ddpg.batch_size, type=positive_int, help="minibatch")
     add_preset_option(d, "--noise-std", default=ddpg.noise_std, type=nonnegative_float,
-                      shown=f"{ddpg.noise_std}; sac: {format_default(sac['noise_std'])}",
+                      shown=f"{ddpg.noise_std}; sac: {format_default(sac['noise_std'])}; drqv2: {drqv2['noise_std']}, "
+                            f"falling to {ddpg.noise_final_std} over {ddpg.noise_decay_steps} steps",
                       help="std of the Gaussian action noise added to the policy's, in SB3's [-1, 1] action scale")
     add_preset_option(d, "--buffer-size", default=ddpg.buffer_size, type=positive_int,
-                      shown=f"{ddpg.buffer_size}; sac: {sac['buffer_size']}; pixels: {format_default(PRESETS['pixels']['buffer_size'])}",
+                      shown=f"{ddpg.buffer_size}; sac: {sac['buffer_size']}; pixels: {format_default(PRESETS['pixels']['buffer_size'])}; "
+                            f"drqv2: {drqv2['buffer_size']}",
                       help="replay buffer capacity")
     d.add_argument("--autoencoder-steps", type=positive_int, default=AutoencoderConfig.steps,
                    help="with --obs latent: the autoencoder's training steps (default %(default)s)")
@@ -415,9 +421,10 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
         checkpoint_bytes: float = (run_dir / CHECKPOINT).stat().st_size
     else:
         given = {name: value for name, value in (("buffer_size", args.buffer_size), ("learning_starts", args.learning_starts),
-                                                 ("noise_std", args.noise_std)) if value is not None}  # else the presets'
+                                                 ("noise_std", args.noise_std), ("learning_rate", args.learning_rate),
+                                                 ("batch_size", args.batch_size)) if value is not None}  # else the presets'
         config = SB3Config(obs=args.obs, algo=args.algo, steps=args.steps or SB3Config.steps, eval_every=args.eval_every,
-                            eval_episodes=args.eval_episodes, learning_rate=args.learning_rate, batch_size=args.batch_size,
+                            eval_episodes=args.eval_episodes,
                             torque_arrow=args.torque_arrow, seed=args.seed, threads=args.threads, device=args.device,
                             **given)
         ae_config = AutoencoderConfig(steps=args.autoencoder_steps, seed=config.seed)

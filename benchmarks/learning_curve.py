@@ -1,0 +1,44 @@
+"""An SB3 baseline run's learning curve, read from its checkpoint: for a run stopped part-way, whose
+``metrics.json`` is written only at the end.
+
+    python benchmarks/learning_curve.py RUN_DIR --out results/drqv2_runs/records/pixels-s0.json
+
+Writes OUT: the run's command (its ``config.json``; the run folder written RUN), its settings, the EvalCallback curve so far
+(step, mean return, seconds) and the training seconds.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shlex
+import sys
+from pathlib import Path
+
+from piga.io.atomic import write_json
+from piga.io.checkpoint import RunKind, read_checkpoint
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], allow_abbrev=False)
+    p.add_argument("run", type=Path, help="a piga-baseline ddpg run folder (DDPG, SAC or DrQ-v2)")
+    p.add_argument("--out", required=True, type=Path, help="the record to write (JSON)")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing record")
+    args = p.parse_args(argv)
+    try:
+        ckpt = read_checkpoint(args.run, RunKind.DDPG)
+        written = args.run / "config.json"  # piga-baseline's record of the command (a run trained in Python has none)
+        words = shlex.split(json.loads(written.read_text()).get("command") or "") if written.exists() else []
+        command = shlex.join("RUN" if i and words[i - 1] == "--out" else w for i, w in enumerate(words)) or None
+        record = {"command": command, "config": ckpt["config"], "learning_curve": ckpt["history"],
+                  "train_seconds": ckpt["elapsed"]}
+        write_json(args.out, record, overwrite=args.overwrite)
+    except (OSError, ValueError, KeyError) as exc:
+        print(f"learning_curve.py: error: {' '.join(str(exc).split())}", file=sys.stderr)
+        return 1
+    print(", ".join(f"{r['step']}: {r['eval_mean_return']:.1f}" for r in record["learning_curve"]))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

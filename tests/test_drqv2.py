@@ -1,0 +1,103 @@
+"""DrQ-v2 in SB3's loop: the augmentation shifts by whole pixels, the exploration std follows its
+schedule, the update trains the encoder by the critic alone, and a run resumes exactly and acts in
+piga's episodes."""
+
+from __future__ import annotations
+
+import json
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+import torch.nn.functional as F
+
+from agents.sb3.config import SB3Config
+from agents.sb3.drqv2 import DrQV2Policy, ScheduledNoise, random_shift
+
+#: Tiny settings: a few seconds of training (the encoder is DrQ-v2's, the MLPs small).
+TINY = SB3Config(algo="drqv2", obs="pixels", steps=400, learning_starts=100, eval_every=200, eval_episodes=1, batch_size=8,
+                 net_arch=(16, 16), feature_dim=8, buffer_size=500, threads=1, device="cpu")
+
+
+def test_random_shift_moves_each_image_by_whole_pixels_with_the_border_replicated() -> None:
+    x = torch.arange(2 * 3 * 12 * 12, dtype=torch.float32).reshape(2, 3, 12, 12)
+    generator = torch.Generator().manual_seed(5)
+    shifted = random_shift(x, pad=2, generator=generator)
+    shifts = torch.randint(0, 5, (2, 2), generator=torch.Generator().manual_seed(5))  # the same draw: (dx, dy) + pad
+    padded = F.pad(x, (2, 2, 2, 2), mode="replicate")
+    for i, (dx, dy) in enumerate(shifts.tolist()):
+        torch.testing.assert_close(shifted[i], padded[i, :, dy:dy + 12, dx:dx + 12])
+    torch.testing.assert_close(random_shift(x, pad=0), x)
+
+
+def test_the_exploration_std_falls_linearly_then_stays() -> None:
+    noise = ScheduledNoise(1, start=1.0, end=0.1, steps=100)
+    assert [noise.std(s) for s in (0, 50, 100, 1000)] == pytest.approx([1.0, 0.55, 0.1, 0.1])
+    np.random.seed(0)
+    noise.step = 100
+    draws = np.array([noise()[0] for _ in range(4000)])
+    assert draws.std() == pytest.approx(0.1, rel=0.05)
+
+
+def test_the_critic_trains_the_encoder_and_the_actor_does_not() -> None:
+    from stable_baselines3.common.buffers import NStepReplayBuffer
+
+    from agents.sb3.drqv2 import DrQV2
+    from agents.sb3.train import _vec_env
+
+    torch.manual_seed(0)
+    venv = _vec_env(TINY, None, 0, episode_seed=0)
+    model = DrQV2("CnnPolicy", venv, learning_rate=1e-3, buffer_size=100, learning_starts=40, batch_size=4, train_freq=2,
+                  action_noise=ScheduledNoise(1, 1.0, 0.1, 100), policy_kwargs={"net_arch": [16, 16], "feature_dim": 8},
+                  replay_buffer_class=NStepReplayBuffer, replay_buffer_kwargs={"n_steps": 3, "gamma": 0.99}, seed=0,
+                  device="cpu")
+    model.learn(50)
+    policy: DrQV2Policy = model.policy
+    # the actor's loss reaches the actor only: its features are detached from the encoder
+    features = policy.encoder(torch.randint(0, 256, (4, 3, 64, 64)).float())
+    policy.zero_grad()
+    (-torch.min(*policy.critic(features.detach(), policy.actor(features.detach())))).mean().backward()
+    assert all(p.grad is None for p in policy.encoder.parameters())
+    assert any(p.grad is not None and p.grad.abs().sum() > 0 for p in policy.actor.parameters())
+    encoder = [p.detach().clone() for p in policy.encoder.parameters()]
+    target = [p.detach().clone() for p in policy.critic_target.parameters()]
+    model.train(gradient_steps=1, batch_size=4)
+    assert any(not torch.equal(a, b) for a, b in zip(encoder, policy.encoder.parameters())), "the critic left the encoder"
+    assert any(not torch.equal(a, b) for a, b in zip(target, policy.critic_target.parameters())), "no soft update"
+    venv.close()
+
+
+def test_a_run_resumes_exactly_and_acts_in_piga_episodes(tmp_path: Path) -> None:
+    from agents.sb3.run import SB3Agent, load_sb3
+    from agents.sb3.train import train_sb3
+    from piga.control.episodes import EpisodeConfig, run_episodes
+
+    straight = train_sb3(TINY, tmp_path / "a", progress=False)
+    train_sb3(replace(TINY, steps=200), tmp_path / "b", progress=False)
+    resumed = train_sb3(TINY, tmp_path / "b", resume=True, progress=False)
+    assert [r["eval_mean_return"] for r in resumed["learning_curve"]] == [r["eval_mean_return"] for r in straight["learning_curve"]]
+    a, b = load_sb3(tmp_path / "a")[0], load_sb3(tmp_path / "b")[0]
+    for (name, p), q in zip(a.policy.state_dict().items(), b.policy.state_dict().values()):
+        assert torch.equal(p, q), name
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    import learning_curve
+
+    assert learning_curve.main([str(tmp_path / "b"), "--out", str(tmp_path / "curve.json")]) == 0
+    curve = json.loads((tmp_path / "curve.json").read_text())
+    assert curve["learning_curve"] == resumed["learning_curve"] and curve["config"]["algo"] == "drqv2"
+    agent = SB3Agent.from_run(tmp_path / "a")
+    assert agent.input_frames == 1 and agent.model.observation_space.shape == (3, 64, 64)
+    assert np.isfinite(run_episodes(agent, EpisodeConfig(episodes=1, steps=10, hold_steps=5)).summary.mean_return)
+
+
+def test_drqv2_has_its_papers_values_and_learns_from_pixels_only() -> None:
+    config = SB3Config(algo="drqv2", obs="pixels")
+    assert (config.learning_rate, config.batch_size, config.tau, config.train_freq, config.n_step, config.frame_stack,
+            config.net_arch, config.noise_std, config.noise_final_std, config.learning_starts) == \
+        (1e-4, 256, 0.01, 2, 3, 3, (1024, 1024), 1.0, 0.1, 4000)
+    assert config.buffer_size == 100_000  # its own, not the DDPG pixels preset's 50000
+    with pytest.raises(ValueError, match="DrQ-v2 learns from pixels; --obs state"):
+        SB3Config(algo="drqv2", obs="state")
