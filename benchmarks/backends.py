@@ -35,7 +35,7 @@ from collections import Counter
 from pathlib import Path
 from typing import Any
 
-from common import machine, machine_words
+from common import farm_main, machine, machine_words
 from piga.cli.common import ray_address
 from piga.io.atomic import atomic_output, write_json
 
@@ -210,6 +210,7 @@ def markdown(record: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+@farm_main
 def main() -> int:
     p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     p.add_argument("--model", required=True, help="run folder of piga-train-model (the sweep's agent, the diagnosis' model)")

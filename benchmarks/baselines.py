@@ -76,7 +76,7 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from common import add_ray_option, machine, ray_backend
+from common import add_ray_option, farm_main, machine, ray_backend
 
 from agents.planet.config import PlanetTrainConfig
 from piga.io.atomic import atomic_output, write_json
@@ -954,6 +954,7 @@ def aggregate(records: dict[str, dict[str, Any] | None], cfg: BenchConfig) -> di
     return out
 
 
+@farm_main
 def main() -> int:
     p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.split("\n\n")[0])
     p.add_argument("--out", required=True, help="writes OUT.json, OUT.md, OUT-*.png; runs in OUT_runs/")

@@ -1,19 +1,30 @@
 """What the benchmark scripts share: a record of the machine the numbers were measured on, the options passed
-through to ``piga-diagnose``, and ``--ray`` for the scripts that farm jobs."""
+through to ``piga-diagnose``, and for the scripts that farm jobs ``--ray``, the commands their jobs run, and
+the one line that a failed job ends the script with."""
 
 from __future__ import annotations
 
 import argparse
+import functools
+import inspect
 import os
 import platform
+import subprocess
+import sys
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any, TypeVar
 
 import torch
 
 from piga.cli.common import PigaError, add_ray_option, connect_backend
-from piga.io.pool import Backend
+from piga.io.pool import Backend, BackendError, JobFailed
+from piga.io.worker_signals import die_with_parent
 
-__all__ = ["add_diagnose_options", "add_ray_option", "diagnose_options", "machine", "machine_words", "ray_backend"]
+__all__ = ["add_diagnose_options", "add_ray_option", "diagnose_options", "farm_main", "job_command", "machine",
+           "machine_words", "ray_backend"]
+
+Main = TypeVar("Main", bound=Callable[..., Any])
 
 
 def machine() -> dict[str, object]:
@@ -75,3 +86,29 @@ def ray_backend(parser: argparse.ArgumentParser, args: argparse.Namespace) -> Ba
         return connect_backend(args.ray)
     except PigaError as exc:
         parser.exit(1, f"{parser.prog}: error: {exc}\n")
+
+
+def farm_main(main: Main) -> Main:
+    """Decorates a benchmark's ``main`` that farms jobs (:func:`piga.io.pool.run_pool`): a job that failed
+    (:class:`~piga.io.pool.JobFailed`) or a backend that cannot be used (:class:`~piga.io.pool.BackendError`)
+    ends the script with one line on stderr, ``SCRIPT: error: job NAME failed: ...``, and exit status 1,
+    instead of a traceback. The jobs that ended before it kept their records (each script saves them as they
+    end), so the same command continues. Ctrl-C is left as it was."""
+    script = Path(inspect.getfile(main)).name
+
+    @functools.wraps(main)
+    def wrapped(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return main(*args, **kwargs)
+        except (JobFailed, BackendError) as exc:
+            print(f"{script}: error: {' '.join(str(exc).split())}", file=sys.stderr)
+            raise SystemExit(1) from None
+
+    return wrapped  # type: ignore[return-value]
+
+
+def job_command(command: list[str], **kwargs: Any) -> subprocess.CompletedProcess:
+    """``subprocess.run(command, **kwargs)`` for a job: the command ends (SIGTERM, which piga's commands turn
+    into their clean interruption) when the process that runs the job ends. A job in a worker of the runner
+    (which leaves Ctrl-C to the parent, and is terminated by it) would otherwise leave its command running."""
+    return subprocess.run(command, preexec_fn=die_with_parent, **kwargs)

@@ -34,7 +34,7 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
-from common import add_ray_option, machine, ray_backend
+from common import add_ray_option, farm_main, machine, ray_backend
 from agents.cem import CEMConfig
 from agents.mpc import MPCConfig
 from piga.io.atomic import atomic_output, write_json
@@ -54,6 +54,7 @@ def goal_angles(g: float, a: float, count: int = 7) -> list[float]:
     return [round(x, 2) for x in span] + [round(math.remainder(180 + x, 360), 2) for x in span]
 
 
+@farm_main
 def main() -> int:
     p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     p.add_argument("--model", required=True, help="run folder of piga-train-model")

@@ -37,7 +37,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from common import add_diagnose_options, add_ray_option, diagnose_options, machine, ray_backend
+from common import add_diagnose_options, add_ray_option, diagnose_options, farm_main, job_command, machine, ray_backend
 from envs.pendulum import PixelPendulumConfig
 from piga.io.atomic import atomic_output, write_json
 from piga.data.collect import CollectConfig, collect
@@ -242,6 +242,7 @@ def save(out: Path, command: str, info: dict, runs: list[dict], summarize: Calla
     return summary
 
 
+@farm_main
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
     p.add_argument("--model", required=True, help="run folder of piga-train-model (the nominal, identified model)")
@@ -308,7 +309,7 @@ def run_diagnose(model: str | Path, data: Path, report_dir: Path, case: int, thr
     """``piga-diagnose`` on ``data`` in a fresh process, with ``options`` (e.g. ``("--fit-starts",)``): its
     report, or the one line of its refusal (an outcome, scored as wrong). A crash (an internal error, or no
     line at all) raises."""
-    done = subprocess.run(["piga-diagnose", "--model", str(model), "--data", str(data), "--out", str(report_dir),
+    done = job_command(["piga-diagnose", "--model", str(model), "--data", str(data), "--out", str(report_dir),
                            "--overwrite", "--quiet", *(["--threads", str(threads)] if threads else []), *options],
                           stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     if done.returncode != 0:

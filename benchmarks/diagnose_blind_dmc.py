@@ -53,7 +53,7 @@ import gymnasium as gym
 import h5py
 import numpy as np
 
-from common import add_diagnose_options, add_ray_option, diagnose_options, machine, ray_backend
+from common import add_diagnose_options, add_ray_option, diagnose_options, farm_main, job_command, machine, ray_backend
 from diagnose_blind import run_diagnose, save, strip_labels
 from diagnose_blind import score as score_gym
 from envs.dmc import DMCPendulumConfig, DMCPendulumEnv
@@ -310,10 +310,10 @@ def nominal_model(case: dict[str, Any], work: Path, sequences: int, steps: int, 
             command="", progress=False)
     command = ["piga-train-model", str(nominal), "--out", str(run_dir), "--preset", "fast", "--threads", "1",
                "--overwrite", "--quiet", *train_args]
-    trained = subprocess.run(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    trained = job_command(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     signed = trained.returncode == 1 and "--signed-actuation" in trained.stderr
     if signed:  # as a user would: the line says the frames show the actuation reversed, and names the flag
-        trained = subprocess.run([*command, "--signed-actuation"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        trained = job_command([*command, "--signed-actuation"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     if trained.returncode not in (0, NOT_CONVERGED):  # not converged: a warning, which the report shows
         raise RuntimeError(f"piga-train-model failed on case {case['case']}: {trained.stderr.strip()}")
     stamp_path.write_text(json.dumps({**stamp, "signed_actuation": signed}))
@@ -376,6 +376,7 @@ def true_angle_fit(case: dict[str, Any], work: Path, sequences: int, steps: int,
             "signed_error": {k: d.corrected[k] / true[k] - 1 for k in ("g", "a", "b") if k in d.corrected and true[k]}}
 
 
+@farm_main
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
     p.add_argument("--out", default="results/diagnose_blind_dmc")

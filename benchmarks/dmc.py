@@ -26,22 +26,29 @@ the commands themselves:
 
 Variants run for the first seed only unless ``--variant-seeds all``.
 
+The cases are jobs of piga's job runner (:func:`piga.io.pool.run_pool`): one at a time by default,
+``--jobs N`` at once in processes of this machine, or with ``--ray auto|HOST:PORT`` as tasks of a Ray
+cluster (``--work`` then one folder shared by every machine); each command trains with one thread.
+A command that fails stops the benchmark with one line naming the case and the command's log.
 Finished steps are kept in ``--work`` and skipped when the benchmark is run again, so an
-interrupted run continues. ``OUT.json`` holds every number, ``OUT.md`` the tables, with the
+interrupted or failed run continues. ``OUT.json`` holds every number, ``OUT.md`` the tables, with the
 published scores next to piga's point.
 """
 
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import os
 import subprocess
 import sys
 from pathlib import Path
+from typing import NamedTuple
 
-from common import add_diagnose_options, diagnose_options, machine
+from common import add_diagnose_options, add_ray_option, diagnose_options, farm_main, job_command, machine, ray_backend
 from piga.io.atomic import atomic_output, write_json
+from piga.io.pool import run_pool
 
 #: Published pixel-based scores on DMC pendulum-swingup, read from the score files that DreamerV3's
 #: authors publish for it and its baselines (github.com/danijar/dreamerv3, ``scores/dmc_vision-{dreamerv3,
@@ -67,13 +74,13 @@ PUBLISHED: list[dict[str, object]] = [
 
 
 def sh(*args: str, log: Path) -> None:
-    """Runs a piga command as a user would; its output goes to ``log``; a failure stops the benchmark."""
+    """Runs a piga command as a user would; its output goes to ``log``; a failure raises (and stops the benchmark)."""
     with log.open("a") as f:
         f.write("$ " + " ".join(args) + "\n")
         f.flush()
-        code = subprocess.run(list(args), stdout=f, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL).returncode
+        code = job_command(list(args), stdout=f, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL).returncode
     if code:
-        sys.exit(f"dmc benchmark: '{' '.join(args[:2])} ...' failed (exit {code}); see {log}")
+        raise RuntimeError(f"'{' '.join(args[:2])} ...' failed (exit {code}); see {log}")
 
 
 #: Identification floor (every parameter's relative error) and its stretch goal.
@@ -88,6 +95,23 @@ def case_name(seed: int, variant: list[str]) -> str:
 
 def flipped(variant: list[str]) -> bool:
     return any(v.startswith("flip=") and v != "flip=none" for v in variant)
+
+
+class Case(NamedTuple):
+    """One case of the benchmark: a seed, a variant of the pendulum (``--env-option``s), and whether it is diagnosed."""
+
+    seed: int
+    variant: list[str]
+    diagnose: bool
+
+    @property
+    def name(self) -> str:
+        return case_name(self.seed, self.variant)
+
+
+def run_job(case: Case, work: Path, args: argparse.Namespace) -> dict[str, object]:
+    """A job of the runner: :func:`run_case` of ``case``."""
+    return run_case(work, case.seed, case.variant, args, case.diagnose)
 
 
 def run_case(work: Path, seed: int, variant: list[str], args: argparse.Namespace, diagnose: bool) -> dict[str, object]:
@@ -267,6 +291,7 @@ def markdown(cases: list[dict[str, object]], command: str, info: dict[str, objec
     return "\n".join(lines) + "\n"
 
 
+@farm_main
 def main() -> None:
     p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     p.add_argument("--work", required=True, help="folder for data and runs (kept, reused on a rerun)")
@@ -286,15 +311,25 @@ def main() -> None:
     add_diagnose_options(p)
     p.add_argument("--skip-control", action="store_true",
                    help="no control episodes (identification and diagnosis only; the control table is left out)")
+    p.add_argument("--jobs", type=int, default=1, help="cases run at once, each in its own process (default 1)")
+    add_ray_option(p, "the cases (--work shared by every machine)")
     args = p.parse_args()
+    if args.jobs < 1:
+        p.error(f"--jobs must be >= 1, got {args.jobs}")
+    backend = ray_backend(p, args)
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     work = Path(args.work)
-    cases = []
+    todo = []
     for seed in args.seeds:
         diagnose = args.diagnose == "all" or (args.diagnose == "first" and seed == args.seeds[0])
         variants = args.variant if args.variant_seeds == "all" or seed == args.seeds[0] else []
-        for variant in [[], *([v] for v in variants)]:
-            cases.append(run_case(work, seed, variant, args, diagnose))
+        todo += [Case(seed, variant, diagnose) for variant in [[], *([v] for v in variants)]]
+
+    def finished(i: int, case: dict[str, object]) -> None:
+        print(f"{todo[i].name}: max error {100 * float(case['max_relative_error']):.2f}%", flush=True)  # type: ignore[arg-type]
+
+    cases = run_pool(functools.partial(run_job, work=work, args=args), todo, workers=args.jobs, progress=False,
+                     on_result=finished, backend=backend)
     command = "python benchmarks/dmc.py " + " ".join(sys.argv[1:])
     info = machine()
     out = Path(args.out)

@@ -31,6 +31,12 @@ mean distance under 1 px; pendulum: metrics.json's angle error under 5°; :func:
 
     python benchmarks/robustness.py --workers 2                             # two rows at once, one thread each
 
+Rows are jobs of piga's job runner (:func:`piga.io.pool.run_pool`): ``--workers`` processes of this machine
+(default 1: one row at a time), or with ``--ray auto|HOST:PORT`` tasks of a Ray cluster (``--work`` then one
+folder shared by every machine). Rows that share a data file or a run wait for each other through a lock
+file next to it, so each file is made and each run trained once. A row that raises for another reason than
+a file that could not be made stops the benchmark with one line naming it, keeping the rows finished before.
+
 Data and runs go to ``--work`` (default ``runs/robustness``, ignored by git). A row whose file cannot
 be made (``piga-collect`` refuses the options) is reported at the end and gets no record (exit status 1).
 
@@ -52,25 +58,24 @@ import re
 import shlex
 import shutil
 import signal
-import subprocess
 import sys
 import tempfile
-import threading
 import time
 from collections import defaultdict
-from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor, as_completed
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import h5py
 import numpy as np
+from filelock import FileLock
 
-from common import machine, machine_words
+from common import add_ray_option, farm_main, job_command, machine, machine_words, ray_backend
 from piga.cli.common import NOT_CONVERGED
 from piga.io.atomic import atomic_output, write_json
-from piga.io.pool import git_commit
+from piga.io.pool import git_commit, run_pool
 from piga.data.schema import DatasetWriter
 
 #: ``piga-collect --seed`` of every file: not the 100 that systems.py and train_accuracy.py check the recipe on.
@@ -537,16 +542,17 @@ def summary(records: list[dict[str, Any]], planned: int) -> dict[str, Any]:
 
 # ------------------------------------------------------------------------------------ running rows
 class Bench:
-    """Data files, runs and records of one ``--work`` folder; safe to call from several threads."""
+    """Data files, runs and records of one ``--work`` folder; safe to call from several processes (and machines
+    sharing the folder): a data file or a run is made under a lock file (``filelock``, torch's own dependency)."""
 
     def __init__(self, work: Path, out: Path, command: str, all_rows: list[Row]):
         self.work, self.out, self.command, self.all_rows = work, out, command, all_rows
-        self._locks: defaultdict[str, threading.Lock] = defaultdict(threading.Lock)
-        self._guard = threading.Lock()
 
-    def _lock(self, key: str) -> threading.Lock:
-        with self._guard:
-            return self._locks[key]
+    @contextmanager
+    def _lock(self, path: Path) -> Iterator[None]:
+        """Holds ``PATH.lock`` while ``path`` (a data file or a run folder) is made or read."""
+        with FileLock(path.with_name(path.name + ".lock")):
+            yield
 
     def record_path(self, row: Row) -> Path:
         return self.work / "records" / f"{row.name.replace('/', '--')}.json"
@@ -573,11 +579,11 @@ class Bench:
     def data(self, row: Row) -> Path:
         """The row's file: collected (``piga-collect``, as a subprocess) and post-processed, once."""
         source = self.work / "data" / f"{row.source_name}.h5"
-        with self._lock(str(source)):
+        with self._lock(source):
             if not source.exists() and row.renderer:
                 render_spring_opencv(source)
             elif not source.exists():
-                result = subprocess.run(row.collect_command(source), capture_output=True, text=True, env=_env())
+                result = job_command(row.collect_command(source), capture_output=True, text=True, env=_env())
                 _check_interrupt(result.returncode)
                 if result.returncode != 0:
                     raise RuntimeError(f"{shlex.join(row.collect_command(source))} exited {result.returncode}: "
@@ -585,7 +591,7 @@ class Bench:
         if not row.post:
             return source
         target = self.work / "data" / f"{row.data_name}.h5"
-        with self._lock(str(target)):
+        with self._lock(target):
             if not target.exists():
                 postprocess(source, target, row.post)
         return target
@@ -594,14 +600,14 @@ class Bench:
         """The row's training run (its folder and what the command did); reused when finished before."""
         run_dir = self.work / "runs" / row.run_name
         info_path = run_dir.with_name(f"{row.run_name}.run.json")
-        with self._lock(str(run_dir)):
+        with self._lock(run_dir):
             if info_path.exists():
                 return run_dir, json.loads(info_path.read_text())
             if run_dir.exists():  # an interrupted run starts again from scratch
                 shutil.rmtree(run_dir)
             command = row.train_command(data, run_dir)
             started = time.monotonic()
-            result = subprocess.run(command, capture_output=True, text=True, env=_env())
+            result = job_command(command, capture_output=True, text=True, env=_env())
             wall = time.monotonic() - started
             _check_interrupt(result.returncode)
             run_dir.with_name(f"{row.run_name}.stderr.txt").write_text(result.stderr)
@@ -619,6 +625,14 @@ class Bench:
         write_json(self.record_path(row), record)
         return record
 
+    def outcome(self, row: Row) -> dict[str, Any] | str:
+        """A job of the runner: the row's record (:meth:`row`), or what stopped it (a file that could not be made,
+        a command that failed), as a line: the benchmark goes on without its record."""
+        try:
+            return self.row(row)
+        except (OSError, RuntimeError, ValueError) as exc:
+            return f"{row.name}: no record ({exc.__class__.__name__}: {exc})"
+
     def records(self) -> list[dict[str, Any]]:
         """The saved records of today's rows, in row order."""
         out = []
@@ -631,15 +645,15 @@ class Bench:
         return out
 
     def write_results(self) -> None:
-        with self._guard:
-            records = self.records()
-            result = {"command": self.command, "machine": machine(),
-                      "thresholds": {"pass_error": PASS_ERROR, "fail_error": FAIL_ERROR, "found_px": FOUND_PX,
-                                     "found_deg": FOUND_DEG, "data_seed": DATA_SEED},
-                      "summary": summary(records, len(self.all_rows)), "rows": records}
-            write_json(self.out.with_suffix(".json"), result)
-            with atomic_output(self.out.with_suffix(".md"), overwrite=True) as tmp:
-                tmp.write_text(markdown(result, self.out))
+        """Rewrites OUT.json and OUT.md from the records (in the process that runs the benchmark)."""
+        records = self.records()
+        result = {"command": self.command, "machine": machine(),
+                  "thresholds": {"pass_error": PASS_ERROR, "fail_error": FAIL_ERROR, "found_px": FOUND_PX,
+                                 "found_deg": FOUND_DEG, "data_seed": DATA_SEED},
+                  "summary": summary(records, len(self.all_rows)), "rows": records}
+        write_json(self.out.with_suffix(".json"), result)
+        with atomic_output(self.out.with_suffix(".md"), overwrite=True) as tmp:
+            tmp.write_text(markdown(result, self.out))
 
 
 def _env() -> dict[str, str]:
@@ -848,6 +862,7 @@ def list_rows(bench: Bench, chosen: list[Row]) -> str:
     return "\n".join(lines)
 
 
+@farm_main
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
     p.add_argument("--out", type=Path, default=Path("results/robustness"), help="output stem: OUT.md and OUT.json "
@@ -857,12 +872,15 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--rows", nargs="+", metavar="PATTERN", help="only the rows whose name matches a shell pattern, "
                    "e.g. 'pendulum/*' 'seeds/spring-*' (default: all; see --list)")
     p.add_argument("--list", action="store_true", help="print the rows with their estimated cost and status, and stop")
-    p.add_argument("--workers", type=int, default=1, help="rows run at once, each training with one thread (default 1)")
+    p.add_argument("--workers", type=int, default=1, help="rows run at once, each in its own process, training with "
+                   "one thread (default 1)")
+    add_ray_option(p, "the rows (--work shared by every machine)")
     p.add_argument("--render", action="store_true", help="rewrite OUT.md and OUT.json from the records in WORK with "
                    "this script's scoring and page, run nothing, and keep the last invocation that ran rows")
     args = p.parse_args(argv)
     if args.workers < 1:
         p.error(f"--workers must be >= 1, got {args.workers}")
+    backend = ray_backend(p, args) if not (args.list or args.render) else None
     all_rows = rows()
     chosen = select(all_rows, args.rows)
     command = shlex.join(["python", "benchmarks/robustness.py", *(sys.argv[1:] if argv is None else argv)])
@@ -889,34 +907,20 @@ def main(argv: list[str] | None = None) -> int:
     from tqdm import tqdm
 
     print(f"{len(chosen) - len(todo)} of {len(chosen)} rows already have a record; running {len(todo)}", flush=True)
+    errors: list[str] = []
     with tqdm(total=len(todo), unit="row", dynamic_ncols=True) as bar:
-        def one(row: Row) -> dict[str, Any] | str:
-            """The row's record, or what stopped it (a file that could not be made): the benchmark goes on."""
-            try:
-                record = bench.row(row)
-            except (OSError, RuntimeError, ValueError) as exc:
-                return f"{row.name}: no record ({exc.__class__.__name__}: {exc})"
-            bench.write_results()
-            return record
-
-        def report(outcome: dict[str, Any] | str) -> None:
+        def report(_: int, outcome: dict[str, Any] | str) -> None:
             bar.update(1)
             if isinstance(outcome, str):
                 errors.append(outcome)
                 tqdm.write(outcome)
                 return
+            bench.write_results()
             tqdm.write(f"{outcome['row']}: {outcome['verdict']} ({outcome['verdict_reason']}); {_fmt_params(outcome)}; "
                        f"objects {_fmt_objects(outcome)}; {outcome['wall_seconds'] / 60:.1f} min")
 
-        errors: list[str] = []
-        if args.workers == 1:
-            for row in todo:
-                bar.set_postfix_str(row.name)
-                report(one(row))
-        else:
-            with ThreadPoolExecutor(args.workers) as pool:
-                for future in as_completed([pool.submit(one, row) for row in todo]):
-                    report(future.result())
+        run_pool(bench.outcome, todo, workers=args.workers, progress=False, on_result=report, backend=backend,
+                 names=[row.name for row in todo])
     bench.write_results()
     if errors:
         print(f"{len(errors)} rows have no record:\n" + "\n".join(errors), file=sys.stderr)

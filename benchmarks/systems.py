@@ -20,8 +20,13 @@ radius, colours, background), gravity at another g, the digits at other k, l.
 Runs are resumable: a finished run (its RUN_DIR/metrics.json) is read, not retrained, and each
 finished run is saved to ``OUT.json`` at once. A finished run whose model was built with another recipe
 than today's fast preset stops the benchmark with one line (remove it, or use another ``--work``); one
-evaluated with fewer extrapolated frames than its recipe's T_ext is re-evaluated from its checkpoint. Training runs one at a time with one thread, so its
-minutes are measured on one core of the machine (recorded in OUT.json), under whatever else runs.
+evaluated with fewer extrapolated frames than its recipe's T_ext is re-evaluated from its checkpoint. The data sets
+are collected first; then the runs are jobs of piga's job runner (:func:`piga.io.pool.run_pool`), each training
+with one thread: one at a time by default, so that its minutes are measured on one core of the machine (recorded
+in OUT.json), under whatever else runs; ``--jobs N`` trains N at once in processes of this machine, and
+``--ray auto|HOST:PORT`` as tasks of a Ray cluster (``--work`` then one folder shared by every machine). The
+learned values do not depend on where a run trained; its minutes do. A run that raises stops the benchmark with
+one line naming it, keeping the runs finished before it.
 Writes ``OUT.json``, ``OUT.md``, ``OUT-ssim.png`` (SSIM per step) and ``OUT-rollout-SYSTEM.png``.
 """
 
@@ -35,15 +40,16 @@ import statistics
 import sys
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
-from common import machine
+from common import add_ray_option, farm_main, machine, ray_backend
 
 from envs.scenes import scene_config
 from piga.io.atomic import write_json
 from piga.data.collect_scenes import SCENE_PRESETS as DATA_PRESETS
 from piga.data.collect_scenes import SCENE_STEPS, SceneCollectConfig, collect_scene
 from piga.data.schema import inspect_dataset
+from piga.io.pool import run_pool
 from piga.training.report import write_run_report
 from piga.training.train import preset_for, train
 
@@ -155,7 +161,7 @@ def _check_recipe(run_dir: Path, info: Any, model_config: Any) -> None:
     wanted = model_config_for(info, model_config).to_dict()
     changed = [k for k in wanted if k != "extrapolate_frames" and json.dumps(saved[k]) != json.dumps(wanted[k])]
     if changed:
-        raise SystemExit(f"{run_dir} was trained with another recipe ({', '.join(f'{k}: {saved.get(k)} -> {wanted[k]}' for k in changed)}); "
+        raise ValueError(f"{run_dir} was trained with another recipe ({', '.join(f'{k}: {saved.get(k)} -> {wanted[k]}' for k in changed)}); "
                          "remove it (or use another --work) to retrain it")
 
 
@@ -282,6 +288,30 @@ def _look(overrides: dict[str, Any]) -> str:
     return " ".join(parts)
 
 
+class RunJob(NamedTuple):
+    """One training run of the benchmark (the arguments of :func:`_run`)."""
+
+    case: str
+    seed: int
+    data: Path
+    folder: Path
+    overrides: dict[str, Any] | None = None
+    name: str | None = None
+
+
+def run_job(job: RunJob) -> dict[str, Any]:
+    """A job of the runner: :func:`_run` of ``job``."""
+    return _run(*job)
+
+
+def _errors_line(run: dict[str, Any], true: bool = False) -> str:
+    """A run's learned values and errors, e.g. "k=4.0123 (0.31%)" (with ``true``: "k=5.0123 (true 5, 0.25%)")."""
+    errors = run["metrics"]["parameter_errors"]
+    return ", ".join(f"{n}={e['learned']:.4f} (" + (f"true {e['true']:g}, " if true else "")
+                     + f"{100 * e['relative_error']:.2f}%)" for n, e in errors.items())
+
+
+@farm_main
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     p.add_argument("--out", type=Path, required=True, help="output prefix: OUT.json, OUT.md, OUT-*.png")
@@ -291,7 +321,13 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--work", type=Path, default=Path("runs/systems"), help="data and run folders (default %(default)s)")
     p.add_argument("--heldout", action="store_true",
                    help="also train once (seed 0) on each held-out data set of HELDOUT and add its table")
+    p.add_argument("--jobs", type=int, default=1, help="runs trained at once, each in its own process with one torch "
+                   "thread (default 1: one at a time, so that the training minutes are one core's)")
+    add_ray_option(p, "the training runs (--work shared by every machine)")
     args = p.parse_args(argv)
+    if args.jobs < 1:
+        p.error(f"--jobs must be >= 1, got {args.jobs}")
+    backend = ray_backend(p, args)
     from piga.evaluation.plots import save_figure
 
     args.work.mkdir(parents=True, exist_ok=True)
@@ -299,29 +335,35 @@ def main(argv: list[str] | None = None) -> int:
     record: dict[str, Any] = {"command": " ".join(["python", "benchmarks/systems.py", *(argv or sys.argv[1:])]),
                               "machine": machine(), "runs": []}
     cases = [c for c in SYSTEMS if c in args.systems]
-    for system in cases:
-        data = _data(system, args.work)
-        for seed in args.seeds:
-            run = _run(system, seed, data, args.work, CASES[system][1])
-            record["runs"].append(run)
-            print(f"{system} seed {seed}: " + ", ".join(
-                f"{n}={e['learned']:.4f} ({100 * e['relative_error']:.2f}%)"
-                for n, e in run["metrics"]["parameter_errors"].items()), flush=True)
-            record["summary"] = summary(record["runs"], cases)
-            write_json(args.out.with_suffix(".json"), record)
-        shutil.copyfile(Path(record["runs"][-len(args.seeds)]["run"]) / "rollout.png",
-                        args.out.parent / f"{args.out.name}-rollout-{system}.png")
+    jobs = [RunJob(system, seed, _data(system, args.work), args.work, CASES[system][1])
+            for system in cases for seed in args.seeds]
+    heldout = list(HELDOUT.items()) if args.heldout else []
+    jobs += [RunJob(scene, 0, _collect(name, scene, overrides, args.work), args.work, name=name)
+             for name, (scene, overrides) in heldout]
     if args.heldout:
         record["heldout"] = {}
-        for name, (scene, overrides) in HELDOUT.items():
-            data = _collect(name, scene, overrides, args.work)
-            run = _run(scene, 0, data, args.work, name=name)
-            run["collected_with"] = f"piga-collect --system {scene} {_look(overrides)}"
-            record["heldout"][name] = run
-            print(f"held out {name}: " + ", ".join(
-                f"{n}={e['learned']:.4f} (true {e['true']:g}, {100 * e['relative_error']:.2f}%)"
-                for n, e in run["metrics"]["parameter_errors"].items()), flush=True)
-            write_json(args.out.with_suffix(".json"), record)
+    runs: dict[int, dict[str, Any]] = {}  # by job
+    heldout_runs: dict[str, dict[str, Any]] = {}
+
+    def finished(i: int, run: dict[str, Any]) -> None:  # saved as each run ends, so that a stopped benchmark continues
+        job = jobs[i]
+        if job.name is None:
+            runs[i] = run
+            record["runs"] = [runs[j] for j in sorted(runs)]
+            record["summary"] = summary(record["runs"], cases)
+            print(f"{job.case} seed {job.seed}: {_errors_line(run)}", flush=True)
+        else:
+            run["collected_with"] = f"piga-collect --system {job.case} {_look(HELDOUT[job.name][1])}"
+            heldout_runs[job.name] = run
+            record["heldout"] = {name: heldout_runs[name] for name, _ in heldout if name in heldout_runs}
+            print(f"held out {job.name}: {_errors_line(run, true=True)}", flush=True)
+        write_json(args.out.with_suffix(".json"), record)
+
+    run_pool(run_job, jobs, workers=args.jobs, progress=False, on_result=finished, backend=backend,
+             names=[f"{job.name or job.case} seed {job.seed}" for job in jobs])
+    for system in cases:
+        first = next(r for r in record["runs"] if r["system"] == system)
+        shutil.copyfile(Path(first["run"]) / "rollout.png", args.out.parent / f"{args.out.name}-rollout-{system}.png")
     save_figure(ssim_figure(record["summary"]), args.out.parent / f"{args.out.name}-ssim.png")
     from piga.io.atomic import atomic_output
 

@@ -27,7 +27,7 @@ from dataclasses import replace
 from pathlib import Path
 
 
-from common import add_ray_option, machine, ray_backend
+from common import add_ray_option, farm_main, machine, ray_backend
 from piga.io.atomic import atomic_output
 from piga.io.pool import run_pool
 from piga.data.collect import CollectConfig, collect
@@ -92,6 +92,7 @@ def train_run(job: tuple[str, int, Path, Path]) -> dict[str, object]:
             "metrics": metrics, "converged": convergence.converged, "convergence": convergence.to_dict()}
 
 
+@farm_main
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0], allow_abbrev=False)
     p.add_argument("--out", default="results/train_accuracy", help="output stem (.json and .md)")

@@ -241,6 +241,75 @@ def test_a_refused_row_is_recorded_and_not_rerun(bench, spring_file: Path, tmp_p
     assert "Machine: " in page and "{" not in page.split("Machine: ")[1].splitlines()[0]  # in words, not a dict
 
 
+def _stand_ins(tmp_path: Path, spring_file: Path, monkeypatch: pytest.MonkeyPatch) -> tuple[Path, Path]:
+    """Stand-ins for the commands on PATH (as in the test above): piga-collect copies a tiny file and logs each call,
+    piga-train-model refuses the file (exit 2) and logs each call. Returns the two logs."""
+    folder = tmp_path / "bin"
+    folder.mkdir()
+    collected, trained = tmp_path / "collected", tmp_path / "trained"
+    _command(folder / "piga-collect", f"import shutil\nopen({str(collected)!r}, 'a').write(' '.join(sys.argv[1:]) + '\\n')\n"
+             f"shutil.copy({str(spring_file)!r}, sys.argv[sys.argv.index('--out') + 1])\n")
+    _command(folder / "piga-train-model", f"open({str(trained)!r}, 'a').write(' '.join(sys.argv[1:]) + '\\n')\n"
+             "print('piga-train-model: error: sequences have 10 frames; training needs 10', file=sys.stderr)\n"
+             "sys.exit(2)\n")
+    monkeypatch.setenv("PATH", f"{folder}{os.pathsep}{os.environ['PATH']}")
+    return collected, trained
+
+
+def _comparable(record: dict, work: Path) -> dict:
+    """A record without what depends on where and when it ran (the work folder, the wall time, the load)."""
+    text = json.dumps({k: v for k, v in record.items() if k not in ("wall_seconds", "load_average_at_end")})
+    return json.loads(text.replace(str(work), "WORK"))
+
+
+def test_rows_in_processes_give_the_records_of_one_process_and_share_their_data_file(
+        bench, spring_file: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Two seed rows on one data file, run by the job runner in two processes and in this one: the file is
+    collected once (the rows wait on its lock), and the records are the same."""
+    collected, trained = _stand_ins(tmp_path, spring_file, monkeypatch)
+    records = {}
+    for workers in ("2", "1"):
+        out, work = tmp_path / f"out{workers}" / "robustness", tmp_path / f"work{workers}"
+        assert bench.main(["--rows", "seeds/spring-seed[12]", "--out", str(out), "--work", str(work),
+                           "--workers", workers]) == 0
+        rows = json.loads(out.with_suffix(".json").read_text())["rows"]
+        records[workers] = [_comparable(r, work) for r in rows]
+        assert len(collected.read_text().splitlines()) == (1 if workers == "2" else 2)  # once per work folder
+    assert len(trained.read_text().splitlines()) == 4
+    assert [r["row"] for r in records["2"]] == ["seeds/spring-seed1", "seeds/spring-seed2"]
+    assert records["2"] == records["1"]
+
+
+def test_a_row_that_raises_ends_the_benchmark_with_one_line_and_keeps_the_rows_before(
+        bench, spring_file: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """A row that raises for another reason than a file that could not be made (here a bug in scoring) is a
+    failed job: one line naming the row, exit 1, no traceback; the row that finished before it keeps its
+    record and its page, and the same command continues from there."""
+    _stand_ins(tmp_path, spring_file, monkeypatch)
+    make_record = bench.make_record
+
+    def broken(row, *args):
+        if row.name == "seeds/spring-seed2":
+            raise KeyError("verdict")
+        return make_record(row, *args)
+
+    monkeypatch.setattr(bench, "make_record", broken)
+    out, work = tmp_path / "robustness", tmp_path / "work"
+    argv = ["--rows", "seeds/spring-seed[12]", "--out", str(out), "--work", str(work)]
+    with pytest.raises(SystemExit) as info:
+        bench.main(argv)
+    assert info.value.code == 1
+    err = capsys.readouterr().err
+    assert "Traceback" not in err  # the progress bar's lines, then the one line
+    assert err.strip().splitlines()[-1] == "robustness.py: error: job seeds/spring-seed2 failed: KeyError: 'verdict'"
+    assert sorted(p.name for p in (work / "records").iterdir()) == ["seeds--spring-seed1.json"]
+    assert [r["row"] for r in json.loads(out.with_suffix(".json").read_text())["rows"]] == ["seeds/spring-seed1"]
+    monkeypatch.setattr(bench, "make_record", make_record)
+    assert bench.main(argv) == 0
+    assert len(json.loads(out.with_suffix(".json").read_text())["rows"]) == 2
+
+
 @pytest.mark.slow
 def test_a_tiny_row_end_to_end(tmp_path: Path) -> None:
     """The real commands on the smallest row (pendulum, 50 sequences: a few minutes on one core)."""

@@ -2,8 +2,9 @@
 
 Determinism is the pendulum's (:mod:`piga.data.collect`): sequence n draws everything from
 ``SeedSequence(seed)``'s n-th child, so the arrays depend only on ``seed`` and the settings, not on
-``workers``. Workers are processes of a :class:`multiprocessing.pool.Pool` (no environment to step:
-a scene has no actions, so a Gymnasium vector env would add nothing).
+``workers``. Each batch of sequences is a farm of piga's job runner (:func:`piga.io.pool.run_pool`: one
+job per sequence, in ``workers`` processes; no environment to step: a scene has no actions, so a
+Gymnasium vector env would add nothing).
 
 The file: ``/frames`` uint8 [N, T, H, W, 3], ``/actions`` float32 [N, T, 0], ``/states`` float32
 [N, T, 4·n_objects] (x0, y0, x1, y1, ..., vx0, vy0, ...: pixels and pixels per second; evaluation
@@ -14,7 +15,7 @@ and ``scene_config``.
 
 from __future__ import annotations
 
-import multiprocessing
+import functools
 import shlex
 import sys
 from dataclasses import dataclass, field
@@ -28,7 +29,7 @@ from envs.scenes import SceneConfig, generate_sequence, scene_config, state_name
 from piga.io.atomic import check_writable_target
 from piga.data.collect import check_collect_sizes, sequence_rng, split_counts
 from piga.data.schema import SPLITS, DatasetWriter
-from piga.io.worker_signals import quiet_worker_signals
+from piga.io.pool import run_pool
 
 #: Frames per sequence by scene: L + T_pred + T_ext of the chosen windows (docs/systems.md).
 SCENE_STEPS: dict[str, int] = {"bouncing": 30, "spring": 30, "gravity": 40, "digits-spring": 30}
@@ -58,9 +59,8 @@ class SceneCollectConfig:
         check_collect_sizes(self.sequences, self.steps, self.workers, self.seed, self.batch, self.split)
 
 
-def _one(args: tuple[SceneConfig, int, int, int]) -> tuple[np.ndarray, np.ndarray]:
+def _one(n: int, scene: SceneConfig, seed: int, steps: int) -> tuple[np.ndarray, np.ndarray]:
     """Sequence n of a collection: frames (T, H, W, 3) and states (T, 4N)."""
-    scene, seed, n, steps = args
     _, rng = sequence_rng(seed, n)
     return generate_sequence(scene, rng, steps)
 
@@ -89,31 +89,24 @@ def collect_scene(config: SceneCollectConfig, out: str | Path, overwrite: bool =
     scene, n, t = config.scene, config.sequences, config.steps
     size = scene.image_size
     counts = split_counts(n, config.split)
-    workers = min(config.workers, n)
-    pool = multiprocessing.Pool(workers, initializer=quiet_worker_signals) if workers > 1 else None
-    try:
-        with DatasetWriter(out, n, t, (size, size, 3), 0, 4 * scene.n_objects, scene_attrs(config, command),
-                           overwrite=overwrite) as writer:
-            bar = tqdm(total=n, desc=f"collect {scene.scene}", unit="seq", disable=not progress)
+    one = functools.partial(_one, scene=scene, seed=config.seed, steps=t)
+    with DatasetWriter(out, n, t, (size, size, 3), 0, 4 * scene.n_objects, scene_attrs(config, command),
+                       overwrite=overwrite) as writer:
+        with tqdm(total=n, desc=f"collect {scene.scene}", unit="seq", disable=not progress) as bar:
             for start in range(0, n, config.batch):
                 stop = min(start + config.batch, n)
-                jobs = [(scene, config.seed, i, t) for i in range(start, stop)]
-                results = pool.imap(_one, jobs) if pool is not None else map(_one, jobs)
                 frames = np.zeros((stop - start, t, size, size, 3), np.uint8)
                 states = np.zeros((stop - start, t, 4 * scene.n_objects), np.float32)
-                for row, (f, s) in enumerate(results):
-                    frames[row], states[row] = f, s
+
+                def keep(row: int, sequence: tuple[np.ndarray, np.ndarray]) -> None:
+                    frames[row], states[row] = sequence
                     bar.update(1)
+
+                # one batch per farm, so that memory holds one batch (the runner keeps a farm's results)
+                run_pool(one, range(start, stop), config.workers, progress=False, on_result=keep,
+                         names=[f"sequence {i}" for i in range(start, stop)])
                 writer.write(start, frames, np.zeros((stop - start, t, 0), np.float32), states)
             writer.set_split(np.repeat(np.arange(3, dtype=np.int8), counts))
-            bar.close()
-    except BaseException:
-        if pool is not None:
-            pool.terminate()
-        raise
-    if pool is not None:
-        pool.close()
-        pool.join()
     return Path(out)
 
 

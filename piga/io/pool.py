@@ -19,7 +19,9 @@ from __future__ import annotations
 
 import functools
 import multiprocessing as mp
+import os
 import subprocess
+import sys
 import traceback
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -108,12 +110,15 @@ def job_name(spec: Any) -> str:
 
 def init_worker() -> None:
     """A pool worker's start: it ends at once, quietly, on SIGTERM (the pool's terminate) and when its parent
-    dies; Ctrl-C is the parent's to handle; one torch thread (small tensors, and the workers share the cores)."""
+    dies; Ctrl-C is the parent's to handle; one torch thread (small tensors, and the workers share the cores).
+
+    torch is not imported here when the parent has not imported it (seconds per worker, for jobs that may not
+    need it, such as drawing the scenes): ``OMP_NUM_THREADS=1`` gives a torch imported later its one thread."""
     quiet_worker_signals()
     die_with_parent()
-    import torch
-
-    torch.set_num_threads(1)
+    os.environ["OMP_NUM_THREADS"] = "1"
+    if "torch" in sys.modules:
+        sys.modules["torch"].set_num_threads(1)
 
 
 class _Failure(NamedTuple):
