@@ -5,18 +5,16 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import h5py
 import pytest
 import torch
 
 from piga.cli import train as cli
-from piga.data.collect import CollectConfig, collect
 from piga.training.convergence import check_convergence
 from piga.training.train import TrainState
 from piga.world.interaction import InteractionNetwork
 from piga.world.model import ModelConfig
 from piga.world.variants import MODELS, build_model
-from tests.helpers import assert_one_line, run_in_process
+from tests.helpers import assert_one_line, run_in_process, stateless_pendulum
 
 PROG = "piga-train-model"
 #: A run of seconds on ``small_data`` (2 steps): too short to learn, so it ends "untrained" (exit 1) with its files.
@@ -26,11 +24,7 @@ SMALL = ("--epochs", "1", "--batch-size", "8", "--warmup-fraction", "0.5", "--qu
 @pytest.fixture(scope="module")
 def small_data(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """10 pendulum sequences x 15 frames, split 8/1/1, without /states."""
-    path = tmp_path_factory.mktemp("small") / "small.h5"
-    collect(CollectConfig(sequences=10, steps=15, seed=7, workers=1, split=(8, 1, 1)), path, progress=False, command="t")
-    with h5py.File(path, "a") as f:
-        del f["states"]
-    return path
+    return stateless_pendulum(tmp_path_factory.mktemp("small") / "small.h5", 10, 15, seed=7, split=(8, 1, 1))
 
 
 @pytest.mark.parametrize("architecture", ["video-lstm", "in-ig"])

@@ -190,7 +190,7 @@ def main(argv: Sequence[str] | None = None) -> int:
              else f"a {model_config.architecture} model (no physical parameters)")
     print(f"training on {args.data} ({info.split_counts['train']} train sequences x {info.steps} frames); "
           f"{start} -> {run_dir} (device {device})")
-    print(f"plan: {plan.describe(model_config.pred_frames)}")
+    print(f"plan: {plan.describe(model_config.pred_frames, fresh.has_physics)}")
     if train_config.data_loading == "stream":
         print(f"reading: the frames are streamed from {args.data} through a {train_config.stream_cache_mb} MiB cache, in "
               "blocks of the sequences it holds")
@@ -200,6 +200,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     written: list[int] = []
     if args.overwrite and not args.resume and (run_dir / "tensorboard").is_dir():
         shutil.rmtree(run_dir / "tensorboard")  # the replaced run's curves, which the new run's would join
+    if args.overwrite and not args.resume and not fresh.has_objects:
+        (run_dir / "templates.png").unlink(missing_ok=True)  # the replaced run's; a model without objects draws none
 
     def on_epoch(state: Any, model: Any) -> None:  # the first checkpoint of this command: the record goes with it
         if not written:
