@@ -92,7 +92,8 @@ def rollout_frames(model: FrameModel, frames: np.ndarray, actions: np.ndarray, s
         steps: frames to predict.
 
     Returns:
-        Predicted frames, float [B, steps, C, H, W] in [0, 1], and their coordinates [B, steps, N, D] (None
+        Predicted frames, float [B, steps, C, H, W] in [0, 1] (video-lstm's, unsquashed, may stray a little
+        outside), and their coordinates [B, steps, N, D] (None
         for a model without object coordinates), computed on the model's device.
     """
     cfg = model.config
