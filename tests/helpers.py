@@ -81,3 +81,15 @@ def copy_without(src: Path, dst: Path, dataset: str) -> Path:
     with h5py.File(dst, "a") as f:
         del f[dataset]
     return dst
+
+
+def stateless_pendulum(path: Path, sequences: int, steps: int, seed: int, split: tuple[int, int, int]) -> Path:
+    """A pendulum file collected at ``path`` whose /states were deleted: training cannot read them."""
+    import h5py
+
+    from piga.data.collect import CollectConfig, collect
+
+    collect(CollectConfig(sequences=sequences, steps=steps, seed=seed, workers=1, split=split), path, progress=False, command="t")
+    with h5py.File(path, "a") as f:
+        del f["states"]
+    return path

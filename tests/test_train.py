@@ -18,7 +18,7 @@ from piga.data.collect import CollectConfig, collect
 from piga.world.model import PhysicsModel
 from piga.io.runs import load_model
 from piga.training.train import TrainConfig, TrainingDiverged, train
-from tests.helpers import assert_one_line, assert_one_line_error, run, run_in_process
+from tests.helpers import assert_one_line, assert_one_line_error, run, run_in_process, stateless_pendulum
 
 PROG = "piga-train-model"
 # on the CPU: the resume tests assert bit-for-bit continuation, which CUDA's atomic accumulations do not give
@@ -37,21 +37,13 @@ def small_data(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
     Its /states were deleted: training cannot read them.
     """
-    path = tmp_path_factory.mktemp("small") / "small.h5"
-    collect(CollectConfig(sequences=10, steps=15, seed=7, workers=1, split=(8, 1, 1)), path, progress=False, command="t")
-    with h5py.File(path, "a") as f:
-        del f["states"]
-    return path
+    return stateless_pendulum(tmp_path_factory.mktemp("small") / "small.h5", 10, 15, seed=7, split=(8, 1, 1))
 
 
 @pytest.fixture(scope="module")
 def stateless_data(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """40 sequences x 24 frames whose /states were deleted: training cannot read them."""
-    path = tmp_path_factory.mktemp("train") / "nostates.h5"
-    collect(CollectConfig(sequences=40, steps=24, seed=5, workers=1, split=(36, 2, 2)), path, progress=False, command="t")
-    with h5py.File(path, "a") as f:
-        del f["states"]
-    return path
+    return stateless_pendulum(tmp_path_factory.mktemp("train") / "nostates.h5", 40, 24, seed=5, split=(36, 2, 2))
 
 
 @pytest.mark.slow  # the learning run: ~200 steps

@@ -28,6 +28,7 @@ def build_parser() -> ArgumentParser:
     from piga.world.physics import GravityOptions  # noqa: PLC0415 (torch loads only when the command runs)
     from piga.training.train import PRESETS, TrainConfig  # noqa: PLC0415
     from piga.io.choices import literal_fields  # noqa: PLC0415
+    from piga.world.model import ModelConfig  # noqa: PLC0415
 
     fast, paper = TrainConfig(), PRESETS["paper"].train
 
@@ -36,8 +37,8 @@ def build_parser() -> ArgumentParser:
         also = f"; paper preset: {format_default(getattr(paper, field))}" if getattr(paper, field) != value else ""
         add_preset_option(p, flag, default=value, type=type_, shown=(shown or format_default(value)) + also, help=text)
 
-    p = ArgumentParser(prog=PROG, description="Train the physics-as-inverse-graphics model on a piga data file. "
-                       "Writes RUN_DIR/checkpoint.pt (every epoch), metrics.json, rollout.png, templates.png, "
+    p = ArgumentParser(prog=PROG, description="Train the physics-as-inverse-graphics model (or, with --model, a "
+                       "black-box baseline) on a piga data file. Writes RUN_DIR/checkpoint.pt (every epoch), metrics.json, rollout.png, templates.png, "
                        "curves.png and TensorBoard scalars in RUN_DIR/tensorboard.")
     p.add_argument("data", help="HDF5 file of piga's schema (only /frames and /actions are used for training)")
     p.add_argument("--out", required=True, help="run folder")
@@ -60,6 +61,13 @@ def build_parser() -> ArgumentParser:
            "alone, first")
     recipe("--window-stride", "window_stride", positive_int, "frames between the start frames of a sequence's training "
            "windows: a stride of T - L - T_pred + 1 takes one window per sequence, for a file of many sequences")
+    add_preset_option(p, "--model", choices=dict(literal_fields(ModelConfig))["architecture"],
+                      default=ModelConfig().architecture,
+                      help="which model: 'piga' (the physics); 'video-lstm', a black-box frame predictor (conv encoder, "
+                      "LSTM over the frames' codes and the actions, deconv decoder); 'in-ig', piga's encoder, velocity "
+                      "estimator and decoder with an Interaction Network in place of the physics. Both baselines train on "
+                      "the same windows with the same loss and are evaluated alike, and have no physical parameters "
+                      "(metrics.json says so; piga-control and piga-diagnose refuse their runs)")
     p.add_argument("--signed-actuation", action="store_true",
                    help="learn the sign of a too (a in linear space, from +0.3): for a camera on the other side of the "
                    "hinge or a motor wired the other way, which flip the actuation the frames show")
@@ -118,7 +126,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     command = command_line(PROG, argv)
     if args.resume:  # the run's own recipe and data; only the length and the budget may change
         require_piga_run(run_dir, "--resume continues a training run of the world model")
-        saved_model, ckpt = load_model(run_dir)
+        saved_model, ckpt = load_model(run_dir, any_model=True)
+        if args.model is not None and args.model != saved_model.config.architecture:
+            raise PigaError(f"--resume continues the run's own model ({saved_model.config.architecture}); drop --model "
+                            f"{args.model}, or train a new run in another --out")
         data = ckpt["data"]
         if tuple(data["image_shape"]) != info.image_shape or data["system"] != info.system:
             raise PigaError(f"--resume: {args.data} ({info.system}, {info.image_shape}) does not match the run's data "
@@ -151,19 +162,23 @@ def main(argv: Sequence[str] | None = None) -> int:
                                seed_retries=args.seed_retries, **overrides, **reading)  # explicit options win
         train_config = resolve_loading(train_config, info)  # as the run records it
         model_config = model_config_for(info, recipe.model)
+        if args.model is not None:
+            model_config = replace(model_config, architecture=args.model)
         for flag, option, value in (("--signed-actuation", "signed_actuation", args.signed_actuation or None),
                                     ("--fixed-g", "fixed_g", args.fixed_g)):
             if value is not None:
+                if model_config.architecture != "piga":
+                    raise PigaError(f"{flag} is an option of piga's physics; --model {model_config.architecture} has none")
                 try:
                     model_config = model_config.with_options(**{option: value})
                 except ValueError as exc:
                     raise PigaError(f"{flag}: {args.data} holds {info.system} data: {exc}") from None
         record = {"command": command}
     plan = check_trainable(info, model_config, train_config)
-    from piga.world.model import PhysicsModel
+    from piga.world.variants import build_model
     from piga.io.resources import adam_checkpoint_bytes, check_run_disk
 
-    fresh = PhysicsModel(model_config)  # its size and start values, before training builds its own
+    fresh = build_model(model_config)  # its size and start values, before training builds its own
     check_run_disk(run_dir, (run_dir / CHECKPOINT).stat().st_size if args.resume else adam_checkpoint_bytes(fresh),
                    "the training run")
     record.update({"data": str(args.data), "train": asdict(train_config), "plan": asdict(plan),
@@ -171,9 +186,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not info.split_counts["test"]:
         print(f"{PROG}: warning: {args.data} has no test sequences; metrics.json and the figures will be measured on "
               "the train split, which is not held out", file=sys.stderr)
+    start = (f"{info.system} parameters start at {_start_values(fresh)}" if fresh.has_physics
+             else f"a {model_config.architecture} model (no physical parameters)")
     print(f"training on {args.data} ({info.split_counts['train']} train sequences x {info.steps} frames); "
-          f"{info.system} parameters start at {_start_values(fresh)} -> {run_dir} (device {device})")
-    print(f"plan: {plan.describe(model_config.pred_frames)}")
+          f"{start} -> {run_dir} (device {device})")
+    print(f"plan: {plan.describe(model_config.pred_frames, fresh.has_physics)}")
     if train_config.data_loading == "stream":
         print(f"reading: the frames are streamed from {args.data} through a {train_config.stream_cache_mb} MiB cache, in "
               "blocks of the sequences it holds")
@@ -183,6 +200,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     written: list[int] = []
     if args.overwrite and not args.resume and (run_dir / "tensorboard").is_dir():
         shutil.rmtree(run_dir / "tensorboard")  # the replaced run's curves, which the new run's would join
+    if args.overwrite and not args.resume and not fresh.has_objects:
+        (run_dir / "templates.png").unlink(missing_ok=True)  # the replaced run's; a model without objects draws none
 
     def on_epoch(state: Any, model: Any) -> None:  # the first checkpoint of this command: the record goes with it
         if not written:
@@ -226,7 +245,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     from piga.evaluation.evaluate import summary_line
 
     print(f"learned: {summary_line(metrics)}")
-    if metrics.get("parameters", {}).get("a", 1.0) < 0:
+    if (metrics.get("parameters") or {}).get("a", 1.0) < 0:
         print("note: a < 0, the actuation is flipped: positive u turns the pendulum clockwise as the frames show it "
               "(a camera on the other side of the hinge, or a motor wired the other way)")
     ssim = metrics["frame_ssim_mean"]
@@ -237,7 +256,8 @@ def main(argv: Sequence[str] | None = None) -> int:
           f"wrote {run_dir}/metrics.json and figures")
     if convergence["outcome"] == "untrained":
         seeds = f" (seeds {', '.join(map(str, tried))} and {train_config.seed} tried)" if tried else ""
-        raise PigaError(f"the run did not identify its parameters{seeds}: {convergence['reason']}")
+        what = "identify its parameters" if model.has_physics else "learn to predict"
+        raise PigaError(f"the run did not {what}{seeds}: {convergence['reason']}")
     if convergence["outcome"] == "unsettled":
         print(f"{PROG}: warning: not converged: {convergence['reason']}", file=sys.stderr)
         return NOT_CONVERGED
@@ -267,7 +287,7 @@ def _saved_epoch(run_dir: Path) -> int:
     """Epochs completed in the run's checkpoint."""
     from piga.io.runs import load_model
 
-    return int(load_model(run_dir)[1]["state"]["epoch"])
+    return int(load_model(run_dir, any_model=True)[1]["state"]["epoch"])
 
 
 def entry() -> None:

@@ -23,7 +23,8 @@ from skimage.metrics import structural_similarity
 from piga.data.schema import inspect_dataset, load_states, read_sequences
 from piga.io.choices import check_choices
 from piga.io.device import module_device
-from piga.world.model import PhysicsModel, frames_to_float
+from piga.world.model import FrameModel, ObjectModel, PhysicsModel, frames_to_float
+from piga.world.variants import NO_PHYSICS
 
 #: Data-file parameter name -> model parameter name.
 PARAMETER_NAMES = {"g": "g", "actuation_gain": "a", "damping": "b", "k": "k", "l": "l", "m": "m"}
@@ -44,7 +45,7 @@ class EvalConfig:
     def __post_init__(self) -> None:
         check_choices(self)
 
-    def frames_after_input(self, model: PhysicsModel, sequence_steps: int) -> int:
+    def frames_after_input(self, model: FrameModel, sequence_steps: int) -> int:
         """T_pred + T_ext frames to predict after the L input frames, capped by the sequence length."""
         cfg = model.config
         ext = cfg.extrapolate_frames if self.extrapolate_frames is None else self.extrapolate_frames
@@ -82,7 +83,7 @@ EVAL_BATCH = 8
 
 
 @torch.no_grad()
-def rollout_frames(model: PhysicsModel, frames: np.ndarray, actions: np.ndarray, steps: int) -> tuple[np.ndarray, np.ndarray]:
+def rollout_frames(model: FrameModel, frames: np.ndarray, actions: np.ndarray, steps: int) -> tuple[np.ndarray, np.ndarray | None]:
     """Predicts ``steps`` frames after the first L of each sequence.
 
     Args:
@@ -91,19 +92,18 @@ def rollout_frames(model: PhysicsModel, frames: np.ndarray, actions: np.ndarray,
         steps: frames to predict.
 
     Returns:
-        Predicted frames, float [B, steps, C, H, W] in [0, 1], and their coordinates [B, steps, N, D],
-        computed on the model's device.
+        Predicted frames, float [B, steps, C, H, W] in [0, 1] (video-lstm's, unsquashed, may stray a little
+        outside), and their coordinates [B, steps, N, D] (None
+        for a model without object coordinates), computed on the model's device.
     """
     cfg = model.config
     device = module_device(model)
-    x = frames_to_float(torch.from_numpy(frames[:, : cfg.input_frames]).to(device), cfg.channels)
-    coords = model.encode(x)
-    acts = last = None
+    x = frames_to_float(torch.from_numpy(frames[:, : cfg.input_frames]).to(device), cfg.channels)  # (B, L, C, H, W)
+    acts = None
     if cfg.action_dim:
-        acts = torch.from_numpy(actions[:, cfg.input_frames - 1 : cfg.input_frames - 1 + steps]).float().to(device)
-        last = torch.from_numpy(actions[:, cfg.input_frames - 2]).float().to(device)  # (B, A); acts (B, S, A)
-    pred_coords = model.predict(coords, acts, steps, last)
-    return model.decoder(pred_coords).cpu().numpy(), pred_coords.cpu().numpy()
+        acts = torch.from_numpy(actions[:, : cfg.input_frames - 1 + steps]).float().to(device)  # (B, L-1+S, A)
+    pred, coords = model.predict_frames(x, acts, steps)
+    return pred.cpu().numpy(), None if coords is None else coords.cpu().numpy()
 
 
 def _ssim(a: np.ndarray, b: np.ndarray) -> float:
@@ -114,7 +114,7 @@ def _ssim(a: np.ndarray, b: np.ndarray) -> float:
 
 
 @torch.no_grad()
-def evaluate(model: PhysicsModel, data: str | Path, config: EvalConfig = EvalConfig()) -> dict[str, Any]:
+def evaluate(model: FrameModel, data: str | Path, config: EvalConfig = EvalConfig()) -> dict[str, Any]:
     """Metrics of a trained model on held-out data (see ``metrics.json`` in the README)."""
     model.eval()
     cfg = model.config
@@ -124,40 +124,55 @@ def evaluate(model: PhysicsModel, data: str | Path, config: EvalConfig = EvalCon
         raise ValueError(f"{data}: split '{config.split}' is empty; nothing to evaluate")
     steps = config.frames_after_input(model, info.steps)
     squared = np.zeros(steps)  # (S,) summed squared errors
+    blank = 0.0  # summed squared errors of the background alone over the prediction frames
+    n_pred = min(cfg.pred_frames, steps)
+    background = model.background_image().detach().cpu().numpy()  # (C, H, W)
     ssims: list[list[float]] = []  # (B, S)
     for first in range(0, len(frames), EVAL_BATCH):  # in batches: the memory stays bounded whatever max_sequences is
         part = slice(first, first + EVAL_BATCH)
         pred, _ = rollout_frames(model, frames[part], actions[part], steps)  # (b, S, C, H, W)
         truth = frames_to_float(torch.from_numpy(frames[part, cfg.input_frames : cfg.input_frames + steps]), cfg.channels).numpy()
         squared += ((pred - truth) ** 2).sum(axis=(0, 2, 3, 4), dtype=np.float64)
+        blank += float(((background - truth[:, :n_pred]) ** 2).sum(dtype=np.float64))
         ssims += [[_ssim(pred[b, t], truth[b, t]) for t in range(steps)] for b in range(len(pred))]
     mse = squared / (len(frames) * int(np.prod(pred.shape[2:])))  # (S,)
     ssim = np.array(ssims).mean(0)  # (S,)
-    n_pred = min(cfg.pred_frames, steps)
     result: dict[str, Any] = {
         "data": str(data),
         "split": config.split,
+        "model": cfg.architecture,
         "sequences": int(len(frames)),
         "input_frames": cfg.input_frames,
         "pred_frames": n_pred,
         "extrapolate_frames": steps - n_pred,
-        "parameters": model.physical_parameters(),
-        "parameter_errors": parameter_errors(model, info.params),
-        "fixed_parameters": fixed_parameters(model),
+        **physical_parameters_record(model, info.params),
         "frame_mse_per_step": mse.tolist(),
         "frame_ssim_per_step": ssim.tolist(),
         "frame_ssim_mean": {"prediction": float(ssim[:n_pred].mean()),
                             "extrapolation": float(ssim[n_pred:].mean()) if steps > n_pred else None},
         "frame_mse_mean": {"prediction": float(mse[:n_pred].mean()),
                            "extrapolation": float(mse[n_pred:].mean()) if steps > n_pred else None},
+        # the error of predicting the model's label-free background alone, for the check of a model without physics
+        "frame_mse_background": blank / (len(frames) * n_pred * int(np.prod(pred.shape[2:]))),
     }
-    if info.has_states and cfg.system == "pendulum":
+    if info.has_states and cfg.system == "pendulum" and isinstance(model, ObjectModel):
         result["angle"] = angle_errors(model, frames, load_states(data, config.split, limit=config.max_sequences))
     return result
 
 
+def physical_parameters_record(model: FrameModel, true_params: dict[str, Any]) -> dict[str, Any]:
+    """metrics.json's parameters: ``parameters``, ``parameter_errors`` and ``fixed_parameters`` for a model with
+    physics; for a baseline without (:data:`piga.world.variants.NO_PHYSICS`), ``parameters`` null,
+    ``physical_parameters`` null and ``physical_parameters_reason`` saying why, rather than any made-up value."""
+    if isinstance(model, PhysicsModel):
+        return {"parameters": model.physical_parameters(), "parameter_errors": parameter_errors(model, true_params),
+                "fixed_parameters": fixed_parameters(model)}
+    return {"parameters": None, "physical_parameters": None,
+            "physical_parameters_reason": NO_PHYSICS[model.config.architecture]}
+
+
 @torch.no_grad()
-def angle_errors(model: PhysicsModel, frames: np.ndarray, states: np.ndarray) -> dict[str, float]:
+def angle_errors(model: ObjectModel, frames: np.ndarray, states: np.ndarray) -> dict[str, float]:
     """Encoder angle (plus the learned offset φ) against the true θ; evaluation only.
 
     Returns mean and 90th-percentile absolute errors in degrees, with the learned φ and with the
@@ -182,7 +197,9 @@ def angle_errors(model: PhysicsModel, frames: np.ndarray, states: np.ndarray) ->
 
 
 def summary_line(metrics: dict[str, Any]) -> str:
-    """One line: learned parameters with their errors."""
+    """One line: learned parameters with their errors (or why there are none)."""
+    if metrics.get("parameters", {}) is None:
+        return f"no physical parameters ({metrics.get('physical_parameters_reason', 'none recorded')})"
     parts = []
     for name, e in metrics.get("parameter_errors", {}).items():
         parts.append(f"{name}={e['learned']:.4f} (true {e['true']:g}, error {100 * e['relative_error']:.2f}%)")

@@ -27,7 +27,7 @@ import numpy as np
 import torch
 
 from piga.io.device import module_device
-from piga.world.model import PhysicsModel, frames_to_float
+from piga.world.model import ObjectModel, frames_to_float
 
 #: Residual peak over content peak above which an object counts as lost.
 LOST_RATIO = 0.5
@@ -81,7 +81,7 @@ def compare(frames: np.ndarray, reconstructed: np.ndarray, sigma: float) -> Obje
 
 
 @torch.no_grad()
-def check_objects(model: PhysicsModel, frames: np.ndarray, max_frames: int = 400) -> ObjectCheck:
+def check_objects(model: ObjectModel, frames: np.ndarray, max_frames: int = 400) -> ObjectCheck:
     """Reconstructs single frames of (B, T, H, W[, C]) uint8 ``frames`` (at most ``max_frames``, spread over
     the sequences) through the model's encoder and decoder, and :func:`compare` s them."""
     cfg = model.config

@@ -18,13 +18,14 @@ import json
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, overload
 
 import torch
 
 from piga.io.checkpoint import CHECKPOINT, RunKind, read_checkpoint, unreadable
 from piga.io.choices import check_choices
-from piga.world.model import ModelConfig, PhysicsModel
+from piga.world.model import FrameModel, ModelConfig, PhysicsModel
+from piga.world.variants import NO_PHYSICS, build_model
 
 
 @dataclass(frozen=True)
@@ -53,14 +54,35 @@ class Nominal:
         check_choices(self)
 
 
-def load_model(run_dir: str | os.PathLike[str]) -> tuple[PhysicsModel, dict[str, Any]]:
-    """Rebuilds a trained model from ``RUN_DIR/checkpoint.pt``; returns it (eval mode) and the checkpoint."""
+@overload
+def load_model(run_dir: str | os.PathLike[str], any_model: Literal[False] = False) -> tuple[PhysicsModel, dict[str, Any]]: ...
+
+
+@overload
+def load_model(run_dir: str | os.PathLike[str], any_model: bool) -> tuple[FrameModel, dict[str, Any]]: ...
+
+
+def load_model(run_dir: str | os.PathLike[str], any_model: bool = False) -> tuple[FrameModel, dict[str, Any]]:
+    """Rebuilds a trained model from ``RUN_DIR/checkpoint.pt``; returns it (eval mode) and the checkpoint.
+
+    Everything that uses the identified physics (control, goal images, diagnosis, the benchmarks) reads
+    a run this way, so a run of a baseline without physical parameters (``piga-train-model --model
+    video-lstm`` or ``in-ig``) is refused here with one line. ``any_model``: return such a model too (for
+    resuming and evaluating it).
+
+    Raises:
+        ValueError: a baseline's run without ``any_model``, or an unreadable checkpoint.
+    """
     ckpt = read_checkpoint(run_dir, RunKind.PIGA)
     try:
-        model = PhysicsModel(ModelConfig.from_dict(ckpt["model_config"]))
+        model = build_model(ModelConfig.from_dict(ckpt["model_config"]))
         model.load_state_dict(ckpt["model"])
     except Exception as exc:  # a foreign or damaged payload
         raise unreadable(Path(run_dir) / CHECKPOINT, RunKind.PIGA, exc) from None
+    if not (any_model or model.has_physics):
+        raise ValueError(f"{run_dir} holds a piga-train-model --model {model.config.architecture} run: "
+                         f"{NO_PHYSICS[model.config.architecture].split(': ')[0]}, without the physical parameters "
+                         "(g, a, ...) that this needs; give a run trained with --model piga")
     model.eval()
     return model, ckpt
 

@@ -8,7 +8,7 @@ trajectory, :class:`piga.training.train.TrainState`), never the truth, and gives
 
 | outcome | meaning | ``piga-train-model`` |
 |---|---|---|
-| ``untrained`` | the physics never trained, a learned parameter never left its start, one collapsed to a float limit, the actuation gain faded toward 0, or (for a scene) an object was not found (:mod:`piga.evaluation.objects`) | exits 1 with a line that names the fix |
+| ``untrained`` | the physics never trained, a learned parameter never left its start, one collapsed to a float limit, the actuation gain faded toward 0, (for a scene) an object was not found (:mod:`piga.evaluation.objects`), or (for a baseline without physical parameters) its held-out predictions are no better than the background alone | exits 1 with a line that names the fix |
 | ``unsettled`` | it trained, but stopped before its plan ended, or a parameter still drifts at the end | exits 3 with a warning line |
 | ``converged`` | none of the above | exits 0 |
 
@@ -17,6 +17,10 @@ fit of its log through the recorded trajectory) exceeds ``drift_tolerance``, or 
 about that line, whichever is larger: at the end of the cosine schedule the learning rate is a few
 percent of its peak, so a parameter that still moves by more than 1% there has not found its value
 (a settled run of the default file moves g and a by under 0.5%).
+
+A baseline without physical parameters (``piga-train-model --model video-lstm`` or ``in-ig``) has no
+trajectory to judge; its check is that its held-out predictions beat drawing its label-free background
+alone (``blank_ratio``), read from frames only, then the plan's end as above.
 """
 
 from __future__ import annotations
@@ -51,6 +55,9 @@ class ConvergenceConfig:
     Measured on dm_control pendulums filmed from the other side (fast preset, a from 0.3): the runs settle at
     a = 0.0032 and 0.0034, 88x and 93x below the start, with g learned (the factor was 100 before them); a
     weak actuator 30x below the start is still learned as such."""
+    blank_ratio: float = 0.9
+    """A model without physical parameters whose held-out prediction MSE is above this fraction of the
+    background's (the prediction of a model that learned nothing) is untrained."""
 
 
 @dataclass(frozen=True)
@@ -95,7 +102,7 @@ def _fix(planned: int, steps: int) -> str:
 
 
 def check_convergence(state: Any, config: ConvergenceConfig = ConvergenceConfig(),
-                      objects: ObjectCheck | None = None) -> Convergence:
+                      objects: ObjectCheck | None = None, blank: tuple[float, float] | None = None) -> Convergence:
     """Judges a finished (or stopped) run from its :class:`~piga.training.train.TrainState`, and for a scene
     from ``objects`` (:func:`piga.evaluation.objects.check_objects`): a lost object leaves the physics to fit
     the others, so its parameters mean nothing.
@@ -103,6 +110,9 @@ def check_convergence(state: Any, config: ConvergenceConfig = ConvergenceConfig(
     ``state.plan`` is the run's :class:`~piga.training.train.TrainPlan` (as a dict), ``state.start`` the
     learned parameters before the first step, ``state.trace`` their values every few steps, and
     ``state.history[-1]`` the values the run ended with.
+
+    ``blank``, for a model without physical parameters: its held-out prediction MSE and that of its
+    background alone (metrics.json's ``frame_mse_mean["prediction"]`` and ``frame_mse_background``).
     """
     plan = state.plan
     steps = int(state.step)
@@ -140,6 +150,9 @@ def check_convergence(state: Any, config: ConvergenceConfig = ConvergenceConfig(
                                     f"value in {physics_steps} physics steps; raise --lr-physics or " + _fix(planned, steps))
     if objects is not None and objects.lost:
         return verdict("untrained", objects.reason())
+    if blank is not None and not blank[0] < config.blank_ratio * blank[1]:
+        return verdict("untrained", f"its held-out predictions (MSE {blank[0]:.4g}) are no better than drawing the "
+                                    f"background alone (MSE {blank[1]:.4g}); " + _fix(planned, steps))
     if steps < planned:
         return verdict("unsettled", f"the run stopped at step {steps} of {planned} planned, before its learning rate "
                                     "decayed; " + _fix(planned, steps))
@@ -154,7 +167,9 @@ def check_convergence(state: Any, config: ConvergenceConfig = ConvergenceConfig(
     if drifting:
         return verdict("unsettled", "still drifting at the end: " + "; ".join(drifting) + "; " + _fix(planned, steps))
     if not checks:
-        return verdict("converged", f"the physics trained for {physics_steps} steps (no parameter to learn)")
+        return verdict("converged", f"the {'physics' if blank is None else 'prediction'} trained for {physics_steps} "
+                                    f"steps (no parameter to learn)" + ("" if blank is None else
+                                    f"; its held-out MSE {blank[0]:.4g} is below the background's {blank[1]:.4g}"))
     return verdict("converged", f"every learned parameter left its start and settled over the last "
                                 f"{100 * config.tail:.0f}% of {planned} steps")
 

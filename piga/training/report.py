@@ -10,7 +10,7 @@ import torch
 
 from piga.data.schema import inspect_dataset, read_sequences
 from piga.evaluation.evaluate import PARAMETER_NAMES, EvalConfig, evaluate, rollout_frames
-from piga.world.model import PhysicsModel, frames_to_float
+from piga.world.model import FrameModel, ObjectModel, frames_to_float
 from piga.evaluation.plots import curves_figure, rollout_figure, save_figure, templates_figure
 from piga.io.atomic import write_json
 from piga.io.device import module_device
@@ -25,9 +25,12 @@ def _image(x: np.ndarray) -> np.ndarray:
 
 
 @torch.no_grad()
-def write_run_report(model: PhysicsModel, state: TrainState, data: str | Path, run_dir: str | Path,
+def write_run_report(model: FrameModel, state: TrainState, data: str | Path, run_dir: str | Path,
                      eval_config: EvalConfig = EvalConfig()) -> dict[str, Any]:
     """Evaluates on held-out data and writes metrics.json, rollout.png, templates.png and curves.png.
+
+    A model without object coordinates (video-lstm) has no templates to draw (no templates.png) and no objects
+    to check; a model without physical parameters has only its losses in curves.png.
 
     For a run that recorded its plan, metrics.json also holds the convergence check
     (:func:`piga.training.convergence.check_convergence`): ``converged`` (true or false) and ``convergence``
@@ -44,13 +47,14 @@ def write_run_report(model: PhysicsModel, state: TrainState, data: str | Path, r
     metrics = evaluate(model, data, eval_config)
     frames, actions = read_sequences(data, split, limit=eval_config.max_sequences)
     objects = None
-    if model.config.coord_dim == 2:  # a scene of objects: did the autoencoder find each of them?
+    if isinstance(model, ObjectModel) and model.config.coord_dim == 2:  # a scene of objects: did the autoencoder find each?
         objects = check_objects(model, frames)
         metrics["objects"] = objects.to_dict()
     metrics["training"] = {"epochs": state.epoch, "steps": state.step, "seconds": state.elapsed,
                            "threads": torch.get_num_threads(), "device": state.device or None}
     if state.plan:
-        convergence = check_convergence(state, objects=objects)
+        blank = None if model.has_physics else (metrics["frame_mse_mean"]["prediction"], metrics["frame_mse_background"])
+        convergence = check_convergence(state, objects=objects, blank=blank)
         metrics["converged"] = convergence.converged
         metrics["convergence"] = convergence.to_dict()
     write_json(run_dir / "metrics.json", metrics)
@@ -62,7 +66,18 @@ def write_run_report(model: PhysicsModel, state: TrainState, data: str | Path, r
     truth = frames_to_float(torch.from_numpy(frames[:, cfg.input_frames : cfg.input_frames + steps]), cfg.channels).numpy()
     to_img = lambda a: np.stack([[_image(f) for f in seq] for seq in a])  # noqa: E731
     save_figure(rollout_figure(to_img(truth), to_img(pred), cfg.input_frames, cfg.pred_frames), run_dir / "rollout.png")
+    if isinstance(model, ObjectModel):
+        save_figure(templates_figure(*_templates(model)), run_dir / "templates.png")
+    true = {PARAMETER_NAMES[k]: float(v) for k, v in info.params.items() if k in PARAMETER_NAMES}
+    if state.history:
+        save_figure(curves_figure(state.history, true), run_dir / "curves.png")
+    return metrics
 
+
+@torch.no_grad()
+def _templates(model: ObjectModel) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The templates figure's images: each object's content and mask, the background and its mask."""
+    cfg = model.config
     # What the decoder composes for each object at the reference pose (θ = 0, or the image centre),
     # drawn alone (the other objects far off the picture): its transformed content and its mask after
     # the softmax against the background.
@@ -79,9 +94,4 @@ def write_run_report(model: PhysicsModel, state: TrainState, data: str | Path, r
     away = torch.full((1, n, d), -10.0 * cfg.image_size) if d == 2 else torch.zeros(1, n, d)  # (1, N, D)
     background_mask = model.decoder.render_parts(away.to(device)).masks[0, -1, 0].cpu().numpy()
     background = _image(parts.background.cpu().numpy())
-    save_figure(templates_figure(np.stack(contents), np.stack(masks), background, background_mask),
-                run_dir / "templates.png")
-    true = {PARAMETER_NAMES[k]: float(v) for k, v in info.params.items() if k in PARAMETER_NAMES}
-    if state.history:
-        save_figure(curves_figure(state.history, true), run_dir / "curves.png")
-    return metrics
+    return np.stack(contents), np.stack(masks), background, background_mask

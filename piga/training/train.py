@@ -12,6 +12,9 @@ The loop is one readable flow, in the style of cleanrl:
 3. Physical parameters get their own learning rate (``lr_physics``), in log space.
 4. A convergence check of the physical parameters at the end (:mod:`piga.training.convergence`).
 
+The model is the one ``ModelConfig.architecture`` names (:mod:`piga.world.variants`): piga's, or a
+black-box baseline without physical parameters, trained by this same loop on the same windows and loss.
+
 Each epoch ends with an atomic checkpoint (``checkpoint.pt``). ``resume`` restores the model,
 the optimiser, the step count and every RNG, and continues exactly where the run stopped. A
 non-finite loss stops training with :class:`TrainingDiverged`, which names the last good
@@ -37,8 +40,9 @@ from piga.io.choices import check_choices
 from piga.io.device import Device, resolve_device
 from piga.data.schema import DatasetInfo, check_actions_file, fingerprint, inspect_dataset, split_indices
 from piga.world.encoder import estimate_background
-from piga.world.model import SYSTEM_SHAPES, ModelConfig, PhysicsModel, frames_to_float
+from piga.world.model import SYSTEM_SHAPES, FrameModel, ModelConfig, frames_to_float
 from piga.world.physics import BouncingOptions, PendulumOptions
+from piga.world.variants import build_model
 from piga.io.checkpoint import CHECKPOINT, write_checkpoint
 from piga.io.runs import load_model
 from piga.data.windows import BlockShuffleSampler, SequenceWindows, loads_whole
@@ -194,12 +198,13 @@ class TrainPlan:
         """Optimiser steps planned."""
         return self.epochs * self.steps_per_epoch
 
-    def describe(self, pred_frames: int) -> str:
-        """One line, e.g. "5400 steps = 16 epochs x 337 steps (10800 windows); warm-up 216, curriculum 594 (T 1->10), average of the last 337"."""
+    def describe(self, pred_frames: int, physics: bool = True) -> str:
+        """One line, e.g. "5400 steps = 16 epochs x 337 steps (10800 windows); warm-up 216, curriculum 594 (T 1->10), average of the last 337"
+        (no average for a model without physical parameters, ``physics`` False)."""
         return (f"{self.total_steps} steps = {self.epochs} epoch{'s' if self.epochs != 1 else ''} x {self.steps_per_epoch} "
                 f"steps ({self.windows} windows); autoencoder warm-up {self.warmup_steps} steps, curriculum "
                 f"{self.curriculum_steps} steps (T_pred 1 -> {pred_frames})"
-                + (f", parameters averaged over the last {self.average_steps}" if self.average_steps else "")
+                + (f", parameters averaged over the last {self.average_steps}" if self.average_steps and physics else "")
                 + (f"; a checkpoint every {self.checkpoint_every} epochs" if self.checkpoint_every > 1 else ""))
 
 
@@ -383,8 +388,8 @@ def model_config_for(info: DatasetInfo, model: ModelConfig | None = None) -> Mod
                    n_objects=n_objects, pred_frames=pred_frames_for(model, info.steps))
 
 
-def _optimizer(model: PhysicsModel, config: TrainConfig) -> torch.optim.Optimizer:
-    physics = list(model.system.parameters())
+def _optimizer(model: FrameModel, config: TrainConfig) -> torch.optim.Optimizer:
+    physics = model.physics_parameters()  # none for a model without physics: its group stays empty
     ids = {id(p) for p in physics}
     nets = [p for p in model.parameters() if id(p) not in ids]
     groups = [{"params": nets, "lr": config.lr, "name": "nets"},
@@ -406,7 +411,7 @@ def _set_rng_state(state: dict[str, Any]) -> None:
     random.setstate(state["python"])
 
 
-def save_checkpoint(path: Path, model: PhysicsModel, optimizer: torch.optim.Optimizer, state: TrainState,
+def save_checkpoint(path: Path, model: FrameModel, optimizer: torch.optim.Optimizer, state: TrainState,
                     train_config: TrainConfig, data_info: DatasetInfo, plan: TrainPlan, data_fingerprint: str) -> None:
     """Writes everything needed to resume or to use the model, atomically. ``data_fingerprint``:
     :func:`piga.data.schema.fingerprint` of the training file (read once per run, not per checkpoint)."""
@@ -575,8 +580,8 @@ def train(
     model_config: ModelConfig | None = None,
     resume: bool = False,
     progress: bool = True,
-    on_epoch: Callable[[TrainState, PhysicsModel], None] | None = None,
-) -> tuple[PhysicsModel, TrainState]:
+    on_epoch: Callable[[TrainState, FrameModel], None] | None = None,
+) -> tuple[FrameModel, TrainState]:
     """Trains on the train split of ``data``; writes checkpoints and TensorBoard scalars to ``run_dir``.
 
     Nothing is written (not even ``run_dir``) before the first checkpoint, at the end of the first
@@ -613,7 +618,7 @@ def train(
         torch.set_num_threads(train_config.threads)
     state = TrainState()
     if resume:
-        model, ckpt = load_model(run_dir)  # on the CPU, wherever it was saved
+        model, ckpt = load_model(run_dir, any_model=True)  # on the CPU, wherever it was saved
         model.to(device).train()
         optimizer = _optimizer(model, train_config)
         optimizer.load_state_dict(ckpt["optimizer"])  # its moments follow the parameters to the device
@@ -625,11 +630,8 @@ def train(
         torch.manual_seed(train_config.seed)
         np.random.seed(train_config.seed)
         random.seed(train_config.seed)
-        model = PhysicsModel(fitted)
-        with torch.no_grad():
-            model.encoder.background.copy_(_background(data, model.config.channels, train_config.seed))
-        if model.config.init_background:
-            model.decoder.init_background(model.encoder.background)
+        model = build_model(fitted)  # piga's, or a baseline of ModelConfig.architecture
+        model.set_background(_background(data, model.config.channels, train_config.seed))
         model.to(device)
         optimizer = _optimizer(model, train_config)
         learned = model.learned_parameter_names()
@@ -644,7 +646,7 @@ def train(
     windows = SequenceWindows(data, "train", window=cfg.window, stride=train_config.window_stride,
                               in_memory=train_config.data_loading == "memory", cache_bytes=train_config.stream_cache_mb * 2**20)
     writer = _Scalars()
-    physics_params = [p for p in model.system.parameters() if p.requires_grad]
+    physics_params = [p for p in model.physics_parameters() if p.requires_grad]
     physics_ids = {id(p) for p in physics_params}
     net_params = [p for p in model.parameters() if id(p) not in physics_ids]
     average_from = plan.total_steps - plan.average_steps  # the first step of the final average
@@ -721,7 +723,8 @@ def train(
                 writer.open(run_dir / "tensorboard")
                 (tqdm.write if progress else print)(
                     f"epoch {state.epoch}: loss {record['loss']:.5f} (pred {record['loss_pred']:.5f}, rec "
-                    f"{record['loss_rec']:.5f}), {_shown(model.physical_parameters())}, {state.elapsed / 60:.1f} min")
+                    f"{record['loss_rec']:.5f}), " + "".join(f"{_shown(p)}, " for p in [model.physical_parameters()] if p)
+                    + f"{state.elapsed / 60:.1f} min")
                 if on_epoch is not None:
                     on_epoch(state, model)
     finally:

@@ -12,13 +12,19 @@ loss = Σ_{t>L} MSE(x̃ᵖʳᵉᵈ_t, x_t) + α Σ_t MSE(x̃ᵃᵉ_t, x_t)
 
 Frames enter as uint8 [B, T, H, W] (gray) or [B, T, H, W, C], as a data file stores them. The
 actions are float [B, T, A], where ``actions[:, t]`` is applied after frame t.
+
+Every model that ``piga-train-model`` trains is a :class:`FrameModel`: frames and actions in, predicted
+frames and the parts of the loss out, so one training loop and one evaluation serve them all
+(``ModelConfig.architecture``, built by :func:`piga.world.variants.build_model`). :class:`ObjectModel` is
+the encoder, velocity estimator and decoder that piga's model and the Interaction-Network baseline
+(:mod:`piga.world.interaction`) share; they differ only in what rolls the object states forward.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, fields, replace
-from typing import Any, Literal, NamedTuple
+from typing import Any, ClassVar, Literal, NamedTuple
 
 import torch
 import torch.nn.functional as F
@@ -49,6 +55,11 @@ class ModelConfig:
 
     system: Literal["pendulum", "spring", "gravity", "bouncing"] = "pendulum"
     """Physics family: one of :data:`SYSTEM_SHAPES`."""
+    architecture: Literal["piga", "video-lstm", "in-ig"] = "piga"
+    """Which model (:mod:`piga.world.variants`): "piga" (encoder, velocity estimator, the system's physics,
+    decoder); "video-lstm", a black-box frame predictor (:mod:`piga.world.video_lstm`); "in-ig", piga's
+    encoder, velocity estimator and decoder with an Interaction Network in place of the physics
+    (:mod:`piga.world.interaction`). The two baselines have no physical parameters."""
     physics_init: dict[str, float] = field(default_factory=dict)
     """Initial physical parameters (empty: the system's far-from-truth defaults)."""
     system_options: SystemOptions | None = None
@@ -131,7 +142,7 @@ class ModelConfig:
     def __post_init__(self) -> None:
         if self.system not in SYSTEM_SHAPES:
             raise ValueError(f"unknown system {self.system!r}; known: {sorted(SYSTEM_SHAPES)}")
-        check_choices(self)  # rec_frames, integrator, readout
+        check_choices(self)  # architecture, rec_frames, integrator, readout
         if self.extrapolate_frames < 0:
             raise ValueError(f"extrapolate_frames must be >= 0, got {self.extrapolate_frames}")
         if self.input_frames < 2 or self.pred_frames < 1:
@@ -229,10 +240,45 @@ class ModelOutput(NamedTuple):
     """(B, T_pred, C, H, W) frames rendered from the physics."""
     rec: Tensor
     """(B, L+T or L, C, H, W) frames rendered from the encoder's coordinates (see ``rec_frames``)."""
-    coords: Tensor
-    """(B, L+T or L, N, D) encoder coordinates."""
-    coords_pred: Tensor
-    """(B, T_pred, N, D) physics coordinates."""
+    coords: Tensor | None
+    """(B, L+T or L, N, D) encoder coordinates (None: a model without object coordinates, video-lstm)."""
+    coords_pred: Tensor | None
+    """(B, T_pred, N, D) predicted coordinates (None as ``coords``)."""
+
+
+def prediction_losses(config: ModelConfig, x: Tensor, pred: Tensor, rec: Tensor, training: bool) -> tuple[Tensor, Tensor, Tensor]:
+    """(loss, loss_pred, loss_rec) of a window, the same for every model: L_pred the per-frame MSE of
+    the predicted frames summed over them (trimmed in training by ``pred_trim``), L_rec the same of the
+    reconstructed ones, and loss = L_pred + α·L_rec.
+
+    Args:
+        x: (B, L+T, C, H, W) the window's frames in [0, 1].
+        pred: (B, T, C, H, W) the predicted frames L+1 .. L+T.
+        rec: (B, R, C, H, W) the reconstructions of the first R frames.
+    """
+    ell = config.input_frames
+    loss_rec = F.mse_loss(rec, x[:, : rec.shape[1]], reduction="none").mean(dim=(2, 3, 4)).sum(1).mean()
+    per_window = F.mse_loss(pred, x[:, ell:], reduction="none").mean(dim=(2, 3, 4)).sum(1)  # (B,)
+    drop = int(round(config.pred_trim * per_window.shape[0])) if training else 0
+    loss_pred = per_window.sort().values[: per_window.shape[0] - drop].mean() if drop else per_window.mean()
+    return loss_pred + config.alpha * loss_rec, loss_pred, loss_rec
+
+
+def window_inputs(config: ModelConfig, frames: Tensor, actions: Tensor,
+                  pred_frames: int | None) -> tuple[Tensor, int, Tensor | None]:
+    """A training window made ready for a model's forward pass.
+
+    Returns:
+        The frames x (B, L+T, C, H, W) in [0, 1], T, and the actions after frames 1 .. L-1+T (B, L-1+T, A),
+        the ones a prediction of T frames may use (None if unactuated).
+    """
+    ell = config.input_frames
+    t_pred = config.pred_frames if pred_frames is None else pred_frames
+    x = frames_to_float(frames, config.channels)[:, : ell + t_pred]  # (B, L+T, C, H, W)
+    if x.shape[1] < ell + t_pred:
+        raise ValueError(f"need {ell + t_pred} frames per item, got {x.shape[1]}")
+    acts = actions[:, : ell - 1 + t_pred].float() if config.action_dim else None  # (B, L-1+T, A)
+    return x, t_pred, acts
 
 
 def frames_to_float(frames: Tensor, channels: int) -> Tensor:
@@ -258,25 +304,155 @@ class _Forces:
         return self.system.constrain(p, v)
 
 
-class PhysicsModel(nn.Module):
-    """Encoder + velocity estimator + differentiable physics + coordinate-consistent decoder."""
+class FrameModel(nn.Module):
+    """What the training loop and the evaluation ask of a model: frames and actions in, predicted frames and
+    the loss parts out. A model without physical parameters (a black-box baseline) keeps the defaults
+    of the physics methods: no parameters, none learned."""
 
-    def __init__(self, config: ModelConfig):
+    #: Whether the model has physical parameters (a physics engine) that control and diagnosis can use.
+    has_physics: ClassVar[bool] = False
+    #: Whether the model encodes frames to object coordinates and renders them (``encode``, ``decoder``).
+    has_objects: ClassVar[bool] = False
+    config: ModelConfig
+
+    def physics_parameters(self) -> list[nn.Parameter]:
+        """The tensors of the physical parameters (trained with ``lr_physics``; frozen ones included)."""
+        return []
+
+    def physical_parameters(self) -> dict[str, float]:
+        """Current physical parameter values by name (none for a black-box model)."""
+        return {}
+
+    def learned_parameter_names(self) -> list[str]:
+        """The physical parameters that training changes."""
+        return []
+
+    def set_background(self, background: Tensor) -> None:
+        """Starts the model from the label-free background (C, H, W) of the training frames."""
+        raise NotImplementedError
+
+    def background_image(self) -> Tensor:
+        """The label-free background (C, H, W) it was started from: the prediction of a model that learned nothing."""
+        raise NotImplementedError
+
+    def predict_frames(self, frames: Tensor, actions: Tensor | None, steps: int) -> tuple[Tensor, Tensor | None]:
+        """Predicts ``steps`` frames after L input frames.
+
+        Args:
+            frames: (B, L, C, H, W) float input frames in [0, 1].
+            actions: (B, L-1+steps, A), the actions after frames 1 .. L-1+steps (the last one moves the
+                system into the last predicted frame); None if unactuated.
+
+        Returns:
+            The frames (B, steps, C, H, W) and, for a model of objects, their coordinates (B, steps, N, D), else None.
+        """
+        raise NotImplementedError
+
+    def forward(self, frames: Tensor, actions: Tensor, pred_frames: int | None = None) -> ModelOutput:
+        """Loss and renders on a window of L + T frames (uint8 or float; see module docstring).
+
+        ``pred_frames`` (default: the config's T_pred) may be smaller, for a rollout curriculum;
+        frames after L + pred_frames are then ignored.
+        """
+        raise NotImplementedError
+
+
+def _split_actions(config: ModelConfig, actions: Tensor | None) -> tuple[Tensor | None, Tensor | None]:
+    """The actions after frames 1 .. L-1+T (B, L-1+T, A) -> the ones after input frame L, L+1, ... (B, T, A)
+    and the one after frame L-1 (B, A), as :meth:`ObjectModel.predict` takes them (None, None if unactuated)."""
+    if actions is None:
+        return None, None
+    ell = config.input_frames
+    return actions[:, ell - 1 :], actions[:, ell - 2]
+
+
+class ObjectModel(FrameModel):
+    """Encoder + velocity estimator + coordinate-consistent decoder, around what rolls the states forward
+    (:meth:`predict`: the physics, or a learned dynamics)."""
+
+    has_objects: ClassVar[bool] = True
+
+    def __init__(self, config: ModelConfig, n_objects: int, coord_dim: int):
         super().__init__()
         self.config = config
-        # the system first: it knows its N and D (a pendulum is one angle whatever n_objects says)
-        system = SYSTEMS[config.system].for_model(config.system_options, config.dt, config.n_objects, config.image_size,
-                                                   config.physics_init)
-        n, d = system.n_objects, system.coord_dim
+        n, d = n_objects, coord_dim
         self.encoder = Encoder(EncoderConfig(config.image_size, config.channels, n, d, config.readout,
                                              config.mask_width, config.loc_width, pixelwise=config.mask_pixelwise,
                                              **config.system_options.encoder_fields()))
         self.velocity = VelocityEstimator(VelocityConfig(config.input_frames, n, d, config.dt, config.image_size,
                                                          correction=config.velocity_correction))
+
+    def _add_decoder(self, n: int, d: int) -> None:
+        """The decoder, registered after the dynamics (the order of a piga checkpoint's parameters)."""
+        cfg = self.config
+        self.decoder = Decoder(DecoderConfig(cfg.image_size, cfg.channels, n, d, hidden=cfg.template_hidden,
+                                             template_size=cfg.template_size or None, init_scale=cfg.init_scale))
+
+    def background_image(self) -> Tensor:
+        return self.encoder.background
+
+    def set_background(self, background: Tensor) -> None:
+        with torch.no_grad():
+            self.encoder.background.copy_(background)
+        if self.config.init_background:
+            self.decoder.init_background(self.encoder.background)
+
+    def encode(self, frames: Tensor) -> Tensor:
+        """Float frames (B, T, C, H, W) -> coordinates (B, T, N, D)."""
+        b, t = frames.shape[:2]
+        coords = self.encoder(frames.flatten(0, 1).contiguous(memory_format=torch.channels_last))
+        return coords.view(b, t, *coords.shape[1:])
+
+    def predict(self, coords: Tensor, actions: Tensor | None, steps: int,
+                last_action: Tensor | None = None) -> Tensor:
+        """Rolls the states on from L encoded frames.
+
+        Args:
+            coords: (B, L, N, D), the encoder's coordinates of the input frames.
+            actions: (B, steps, A), the actions after input frame L, L+1, ...; None if unactuated.
+            steps: frames to predict.
+            last_action: (B, A), the action after input frame L-1 (for ``velocity_hold``).
+
+        Returns:
+            (B, steps, N, D) coordinates of frames L+1 .. L+steps.
+        """
+        raise NotImplementedError
+
+    def predict_frames(self, frames: Tensor, actions: Tensor | None, steps: int) -> tuple[Tensor, Tensor | None]:
+        acts, last = _split_actions(self.config, actions)
+        coords = self.predict(self.encode(frames), acts, steps, last)  # (B, steps, N, D)
+        return self.decoder(coords), coords
+
+    def forward(self, frames: Tensor, actions: Tensor, pred_frames: int | None = None) -> ModelOutput:
+        cfg = self.config
+        ell = cfg.input_frames
+        x, t_pred, acts = window_inputs(cfg, frames, actions, pred_frames)  # x (B, L+T, C, H, W)
+        coords = self.encode(x if cfg.rec_frames == "all" else x[:, :ell])  # (B, L+T or L, N, D)
+        after, last = _split_actions(cfg, acts)  # (B, T, A), (B, A)
+        coords_pred = self.predict(coords[:, :ell], after, t_pred, last)  # (B, T, N, D)
+        rec = self.decoder(coords)  # (B, L+T or L, C, H, W)
+        pred = self.decoder(coords_pred)  # (B, T, C, H, W)
+        loss, loss_pred, loss_rec = prediction_losses(cfg, x, pred, rec, self.training)
+        return ModelOutput(loss, loss_pred, loss_rec, x, pred, rec, coords, coords_pred)
+
+
+class PhysicsModel(ObjectModel):
+    """Encoder + velocity estimator + differentiable physics + coordinate-consistent decoder."""
+
+    has_physics: ClassVar[bool] = True
+
+    def __init__(self, config: ModelConfig):
+        # the system first: it knows its N and D (a pendulum is one angle whatever n_objects says)
+        system = SYSTEMS[config.system].for_model(config.system_options, config.dt, config.n_objects, config.image_size,
+                                                   config.physics_init)
+        n, d = system.n_objects, system.coord_dim
+        super().__init__(config, n, d)
         self.system: System = system
         self.integrator = make_integrator(config.integrator, config.substeps)
-        self.decoder = Decoder(DecoderConfig(config.image_size, config.channels, n, d, hidden=config.template_hidden,
-                                             template_size=config.template_size or None, init_scale=config.init_scale))
+        self._add_decoder(n, d)
+
+    def physics_parameters(self) -> list[nn.Parameter]:
+        return list(self.system.parameters())
 
     def learned_parameter_names(self) -> list[str]:
         """The physical parameters that training changes, e.g. ``["k", "l"]``; a fixed one (gravity's g
@@ -298,12 +474,6 @@ class PhysicsModel(nn.Module):
         if hasattr(self.system, "offset"):
             values["offset"] = float(self.system.offset.detach())
         return values
-
-    def encode(self, frames: Tensor) -> Tensor:
-        """Float frames (B, T, C, H, W) -> coordinates (B, T, N, D)."""
-        b, t = frames.shape[:2]
-        coords = self.encoder(frames.flatten(0, 1).contiguous(memory_format=torch.channels_last))
-        return coords.view(b, t, *coords.shape[1:])
 
     def initial_state(self, coords: Tensor, last_action: Tensor | None = None) -> tuple[Tensor, Tensor]:
         """Coordinates of L frames (B, L, N, D) -> (p_L, v_L), each (B, N, D).
@@ -336,42 +506,7 @@ class PhysicsModel(nn.Module):
 
     def predict(self, coords: Tensor, actions: Tensor | None, steps: int,
                 last_action: Tensor | None = None) -> Tensor:
-        """Rolls the physics on from L encoded frames.
-
-        Args:
-            coords: (B, L, N, D), the encoder's coordinates of the input frames.
-            actions: (B, steps, A), the actions after input frame L, L+1, ...; None if unactuated.
-            steps: frames to predict.
-            last_action: (B, A), the action after input frame L-1 (for ``velocity_hold``).
-
-        Returns:
-            (B, steps, N, D) coordinates of frames L+1 .. L+steps.
-        """
+        """Rolls the physics on from L encoded frames (see :meth:`ObjectModel.predict`)."""
         p0, v0 = self.initial_state(coords, last_action)
         positions, _ = rollout(self.system, self.integrator, p0, v0, actions, steps)
         return positions
-
-    def forward(self, frames: Tensor, actions: Tensor, pred_frames: int | None = None) -> ModelOutput:
-        """Loss and renders on a window of L + T frames (uint8 or float; see module docstring).
-
-        ``pred_frames`` (default: the config's T_pred) may be smaller, for a rollout curriculum;
-        frames after L + pred_frames are then ignored.
-        """
-        cfg = self.config
-        ell = cfg.input_frames
-        t_pred = cfg.pred_frames if pred_frames is None else pred_frames
-        x = frames_to_float(frames, cfg.channels)[:, : ell + t_pred]  # (B, L+T, C, H, W)
-        if x.shape[1] < ell + t_pred:
-            raise ValueError(f"need {ell + t_pred} frames per item, got {x.shape[1]}")
-        coords = self.encode(x if cfg.rec_frames == "all" else x[:, :ell])  # (B, L+T or L, N, D)
-        acts = actions[:, ell - 1 : ell - 1 + t_pred].float() if cfg.action_dim else None  # (B, T, A)
-        last = actions[:, ell - 2].float() if cfg.action_dim else None  # (B, A), over the last input frame
-        coords_pred = self.predict(coords[:, :ell], acts, t_pred, last)  # (B, T, N, D)
-        rec = self.decoder(coords)  # (B, L+T or L, C, H, W)
-        pred = self.decoder(coords_pred)  # (B, T, C, H, W)
-        loss_rec = F.mse_loss(rec, x[:, : rec.shape[1]], reduction="none").mean(dim=(2, 3, 4)).sum(1).mean()
-        per_window = F.mse_loss(pred, x[:, ell:], reduction="none").mean(dim=(2, 3, 4)).sum(1)  # (B,)
-        drop = int(round(cfg.pred_trim * per_window.shape[0])) if self.training else 0
-        loss_pred = per_window.sort().values[: per_window.shape[0] - drop].mean() if drop else per_window.mean()
-        loss = loss_pred + cfg.alpha * loss_rec
-        return ModelOutput(loss, loss_pred, loss_rec, x, pred, rec, coords, coords_pred)
