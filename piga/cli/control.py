@@ -14,8 +14,8 @@ import numpy as np
 
 from agents.config import MPCConfig
 from piga.io.atomic import atomic_output, check_writable_target, write_json
-from piga.cli.common import (ArgumentParser, PigaError, add_ray_option, command_line, connect_backend, positive_float,
-                             positive_int, run_cli, seed_int, warn_if_unconverged)
+from piga.cli.common import (ArgumentParser, PigaError, add_ray_option, command_line, connect_backend, int_up_to,
+                             positive_float, positive_int, run_cli, seed_int, warn_if_unconverged)
 from piga.control.episodes import EpisodeConfig, parse_range, run_episodes
 from piga.evaluation.episodes import summary_markdown
 from piga.io.checkpoint import RunKind
@@ -45,9 +45,9 @@ def build_parser() -> ArgumentParser:
                    help="with --env piga/DMCPendulum-v0: a field of its config, repeatable (mass, length, damping, "
                    "action_repeat, flip, shadows), as for piga-collect")
     p.add_argument("--oracle", action="store_true", help="plan with the true state and true parameters instead")
-    p.add_argument("--episodes", type=positive_int, default=episodes.episodes,
+    p.add_argument("--episodes", type=int_up_to(EpisodeConfig.MAX_EPISODES, "more would run for days"), default=episodes.episodes,
                    help="episodes (default %(default)s); episode 0 starts hanging down")
-    p.add_argument("--steps", type=positive_int, default=episodes.steps,
+    p.add_argument("--steps", type=int_up_to(EpisodeConfig.MAX_STEPS, "500 times Gymnasium's episode"), default=episodes.steps,
                    help=f"steps per episode, at least {episodes.hold_steps}: success is the goal held for the last "
                    f"{episodes.hold_steps} (default %(default)s)")
     p.add_argument("--gravity-mult", type=positive_float, default=episodes.gravity_mult,
@@ -195,6 +195,8 @@ def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: 
         raise PigaError("--sweep compares the piga agent with the oracle: give --model RUN_DIR (without --oracle)")
     if args.goal_image or args.video:
         raise PigaError("--sweep runs upright swing-ups; it does not take --goal-image or --video")
+    if args.gravity_mult != EpisodeConfig.gravity_mult:
+        raise PigaError("--sweep sets the gravity multiplier of each job; drop --gravity-mult")
     try:
         multipliers = parse_range(args.sweep)
     except ValueError as exc:

@@ -24,6 +24,7 @@ from piga.cli.common import (ArgumentParser, Interrupted, PigaError, command_lin
                              run_cli, seed_int, thread_count)
 from piga.data.collect import CollectConfig, collect
 from piga.data.schema import inspect_dataset
+from piga.io.atomic import check_folder_target
 from piga.io.checkpoint import CHECKPOINT
 
 PROG = "piga-demo"
@@ -94,8 +95,7 @@ def build_parser() -> ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise PigaError(f"--out {out} is a file, not a folder")
+    check_folder_target(out)
     data, strip, run_dir = out / "pendulum.h5", out / "frames.png", out / "model"
     goal_png, control_md = out / "goal.png", out / "control.md"
     if not args.overwrite:
