@@ -42,6 +42,10 @@ ALGORITHM_PRESETS: dict[Algorithm, dict[str, Any]] = {
 PRESETS: dict[Observation, dict[str, Any]] = {"state": {}, "latent": {}, "pixels": {"buffer_size": 50_000}}
 
 
+#: Largest std of the exploration noise, in SB3's [-1, 1] action scale (as PlaNet's exploration noise is bounded).
+MAX_NOISE_STD = 10.0
+
+
 @dataclass(frozen=True)
 class SB3Config:
     """An SB3 run's settings. Unset (None) fields take the observation's preset, then the algorithm's zoo
@@ -111,6 +115,9 @@ class SB3Config:
             raise ValueError(f"SB3Config: sizes, counts and threads must be >= 1, learning_starts and seed >= 0: {self}")
         if not (0 < self.gamma <= 1 and self.learning_rate > 0 and 0 < self.tau <= 1 and self.noise_std >= 0):
             raise ValueError(f"SB3Config: need 0 < gamma <= 1, learning_rate > 0, 0 < tau <= 1, noise_std >= 0: {self}")
+        if self.noise_std > MAX_NOISE_STD:
+            raise ValueError(f"noise_std must be at most {MAX_NOISE_STD:g} (a std in SB3's [-1, 1] action scale; far "
+                             f"beyond 1 every noisy action is clipped to a bound), got {self.noise_std:g}")
         if self.eval_every > self.steps:
             raise ValueError(f"eval_every ({self.eval_every}) is more than steps ({self.steps}): the run would never be "
                              "evaluated; lower eval_every or raise steps")

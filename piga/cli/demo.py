@@ -106,6 +106,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     check_angle("--goal-angle", args.goal_angle)
     collect_config = replace(CollectConfig(), sequences=args.sequences, seed=args.seed)  # checked before any folder
+    _check_enough_sequences(collect_config)
     outputs = (data, strip, run_dir / CHECKPOINT, goal_png, control_md)
     before = {path: path.exists() and path.stat().st_mtime_ns for path in outputs}
     try:
@@ -124,6 +125,23 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise Interrupted(f"{out} keeps {', '.join(kept)} from this demo; run it again with --overwrite to start "
                               "over") from None
         raise KeyboardInterrupt from None
+
+
+def _check_enough_sequences(config: CollectConfig) -> None:
+    """Refuses, before anything is collected, a --sequences whose train split holds fewer training windows than
+    the fast preset's one batch (piga-train-model would refuse the file, and piga-demo has no --batch-size)."""
+    from piga.data.collect import split_counts
+    from piga.training.train import PRESETS
+
+    recipe = PRESETS["fast"]
+    n_train = split_counts(config.sequences, config.split)[0]
+    per_sequence = max(0, config.steps - recipe.model.window + 1)
+    if n_train * per_sequence < recipe.train.batch_size:
+        least = next(n for n in range(config.sequences, 10**6)
+                     if split_counts(n, config.split)[0] * per_sequence >= recipe.train.batch_size)
+        raise PigaError(f"--sequences {config.sequences} gives {n_train} train sequences, {n_train * per_sequence} "
+                        f"training windows, fewer than one batch of {recipe.train.batch_size}; give --sequences {least} "
+                        "or more")
 
 
 def _run(args: argparse.Namespace, argv: Sequence[str] | None, out: Path, config: CollectConfig, data: Path, strip: Path,
