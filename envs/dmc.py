@@ -58,6 +58,9 @@ __all__ = ["DMC_PHYSICS_DT", "DMC_EPISODE_STEPS", "DMCPendulumConfig", "MissingE
 DMC_PHYSICS_DT = 0.02
 #: Physics steps of one DMC episode (20 s).
 DMC_EPISODE_STEPS = 1000
+#: Most physics steps per frame: 1 s between frames, half the pendulum's swing period; sparser frames would not show
+#: its motion (and a DMC episode must keep many frames: 1000 physics steps).
+MAX_ACTION_REPEAT = 50
 #: Radius of the sphere at the pole's tip in pendulum.xml (its only mass).
 TIP_RADIUS = 0.05
 #: Earth's gravity as MuJoCo's default ``option/gravity``.
@@ -111,7 +114,7 @@ class DMCPendulumConfig:
         checks = {
             "image_size": self.image_size >= 8,
             "frame_stack": self.frame_stack >= 1,
-            "action_repeat": self.action_repeat >= 1,
+            "action_repeat": 1 <= self.action_repeat <= MAX_ACTION_REPEAT,
             "episode_length": self.episode_length >= 0,
             "mass": self.mass > 0 and math.isfinite(self.mass),
             "length": 0 < self.length <= VIEW_HALF_SIDE - 2 * TIP_RADIUS,
@@ -125,7 +128,7 @@ class DMCPendulumConfig:
             if not ok:
                 raise ValueError(
                     f"DMCPendulumConfig.{name}={getattr(self, name)!r} is out of range (sizes and counts >= 1, "
-                    f"mass > 0, length in (0, {VIEW_HALF_SIDE - 2 * TIP_RADIUS:g}], damping >= 0, flip in {FLIPS}, "
+                    f"action_repeat <= {MAX_ACTION_REPEAT}, mass > 0, length in (0, {VIEW_HALF_SIDE - 2 * TIP_RADIUS:g}], damping >= 0, flip in {FLIPS}, "
                     "max_angle in [0, pi], max_speed >= 0, camera_distance in [(length + 0.1) / 0.7, 3])")
 
     @property

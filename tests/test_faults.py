@@ -984,3 +984,20 @@ def test_diagnose_refuses_before_any_work(argv: list[str], needle: str, code: in
     refused("piga-diagnose", ["--model", str(fake_planet_run), "--data", str(tiny_data), "--out", str(tmp_path / "report"),
                               "--quiet", *argv], capsys, needle, code=code)
     assert _listing(tmp_path) == []
+
+
+def test_control_warns_of_a_goal_angle_beyond_the_torque_limit(capsys: pytest.CaptureFixture[str]) -> None:
+    """A goal image beyond the holdable range was warned of, the same goal given in degrees was not."""
+    code, out, err = run_in_process("piga-control", control.main, "--oracle", "--goal-angle", "90", "--episodes", "1",
+                                    "--steps", "20", "--horizon", "3", "--candidates", "4", "--iterations", "1", "--quiet",
+                                    capsys=capsys)
+    assert code == 0 and err.count("\n") == 1, err
+    assert err.startswith("piga-control: warning: goal 90.0 deg needs torque") and "holdable goals are within" in err
+
+
+def test_a_dmc_frame_may_not_span_seconds() -> None:
+    """action_repeat 1e8 collected for ever (and a DMC episode of 1000 physics steps would hold no frame)."""
+    from envs.dmc import MAX_ACTION_REPEAT, DMCPendulumConfig
+
+    with pytest.raises(ValueError, match=f"action_repeat=100000000 is out of range .*action_repeat <= {MAX_ACTION_REPEAT}"):
+        DMCPendulumConfig(action_repeat=10**8)

@@ -148,6 +148,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         args.goal_angle = math.degrees(estimate.angle)
         print(f"goal read from {args.goal_image}: {args.goal_angle:.2f} deg (hold torque {estimate.hold_torque:+.2f})")
         mpc = replace(mpc, goal_angle=estimate.angle)
+    elif args.goal_angle:
+        from piga.control.goal import hold_warning
+
+        if (warning := hold_warning(mpc.goal_angle, args.gravity_mult)) is not None:
+            print(f"{PROG}: warning: {warning}", file=sys.stderr)
     if args.model:  # after every refusal, so that a refused command prints one line
         warn_if_unconverged(PROG, args.model)
     config = EpisodeConfig(episodes=args.episodes, steps=args.steps, seed=args.seed, gravity_mult=args.gravity_mult,
