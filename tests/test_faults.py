@@ -1001,3 +1001,22 @@ def test_a_dmc_frame_may_not_span_seconds() -> None:
 
     with pytest.raises(ValueError, match=f"action_repeat=100000000 is out of range .*action_repeat <= {MAX_ACTION_REPEAT}"):
         DMCPendulumConfig(action_repeat=10**8)
+
+
+def test_planet_refuses_more_sequences_than_the_file_has(tiny_data: Path, tmp_path: Path,
+                                                         capsys: pytest.CaptureFixture[str]) -> None:
+    """It trained on all 8 and recorded max_sequences 100."""
+    refused("piga-baseline", ["planet", str(tiny_data), "--out", str(tmp_path / "run"), *TINY_PLANET, "--max-sequences",
+                              "100"], capsys, "--max-sequences 100", "has 8 train sequences")
+    assert _listing(tmp_path) == []
+
+
+def test_import_refuses_a_ragged_row(frame_folders: dict[str, Path], tmp_path: Path,
+                                     capsys: pytest.CaptureFixture[str]) -> None:
+    """A row with a stray second column was read as its first, silently."""
+    csv = tmp_path / "u.csv"
+    csv.write_text("u\n" + "0.5\n" * 6 + "0.5,2\n" + "0.5\n" * 5)
+    refused("piga-import", [str(frame_folders["moving"]), str(csv), "--dt", "0.05", "--steps", "4", "--image-size", "32",
+                            "--split", "1,1,1", "--out", str(tmp_path / "out.h5")], capsys,
+            "line 8: 2 column(s), but line 1 has 1")
+    assert _listing(tmp_path) == ["u.csv"]

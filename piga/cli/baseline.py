@@ -305,6 +305,9 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
                                    threads=args.threads, device=args.device, max_minutes=args.max_minutes or 0.0)
         rssm = rssm_config_for(info, {"deter_size": args.deter_size, "stoch_size": args.stoch_size, "action_repeat": args.action_repeat})
         check_planet_memory(rssm, config)
+        if config.max_sequences > (n_train := info.split_counts["train"]):
+            raise PigaError(f"--max-sequences {config.max_sequences}: {args.data} has {n_train} train sequences; give at "
+                            f"most {n_train} (0: all)")
         if not args.iterative:
             given = [flag for flag, value, default in (("--rounds", args.rounds, None), ("--round-steps", args.round_steps, IterativeConfig.steps_per_round),
                                                        ("--episode-steps", args.episode_steps, IterativeConfig.episode_steps),
