@@ -1020,3 +1020,30 @@ def test_import_refuses_a_ragged_row(frame_folders: dict[str, Path], tmp_path: P
                             "--split", "1,1,1", "--out", str(tmp_path / "out.h5")], capsys,
             "line 8: 2 column(s), but line 1 has 1")
     assert _listing(tmp_path) == ["u.csv"]
+
+
+def test_an_invalid_dmc_physics_state_is_the_configs_error(capsys: pytest.CaptureFixture[str]) -> None:
+    """A tip of 1e-12 kg made MuJoCo's state invalid: an internal error, after absl's warning line. The config now
+    refuses such a mass; a state that still goes invalid is a ValueError naming the config, with no log line."""
+    pytest.importorskip("dm_control")
+    from envs.dmc import DMCPendulumConfig, DMCPendulumEnv
+
+    with pytest.raises(ValueError, match="mass=1e-12 is out of range"):
+        DMCPendulumConfig(mass=1e-12)
+    config = DMCPendulumConfig()
+    object.__setattr__(config, "mass", 1e-12)  # past the check, as a config that MuJoCo still cannot integrate
+    env = DMCPendulumEnv(config)
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="physics became invalid .* mass=1e-12"):
+        for _ in range(5):
+            env.step(np.ones(1))
+    env.close()
+    assert "QACC" not in capsys.readouterr().err
+
+
+def test_a_scene_with_forces_too_strong_names_them(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """--g 1e6 flings every start into a wall; the message named only the sequences, the speed and the image."""
+    refused("piga-collect", ["--out", str(tmp_path / "d.h5"), "--system", "gravity", "--g", "1e6", "--sequences", "2",
+                             "--steps", "30", "--workers", "1", "--split", "1,1,0", "--quiet"], capsys,
+            "stays clear of the walls", "weaker forces than g = 1e+06")
+    assert _listing(tmp_path) == []
