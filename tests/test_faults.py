@@ -1047,3 +1047,18 @@ def test_a_scene_with_forces_too_strong_names_them(tmp_path: Path, capsys: pytes
                              "--steps", "30", "--workers", "1", "--split", "1,1,0", "--quiet"], capsys,
             "stays clear of the walls", "weaker forces than g = 1e+06")
     assert _listing(tmp_path) == []
+
+
+@pytest.mark.parametrize("prog", ["piga-control", "piga-diagnose"])
+def test_a_checkpoint_lacking_an_entry_says_which(prog: str, tiny_piga_run: Path, tiny_data: Path, tmp_path: Path,
+                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    """A foreign checkpoint (an empty dict) was reported as "(KeyError: 'model_config'); it may be truncated"."""
+    import torch
+
+    run = _run_copy(tiny_piga_run, tmp_path / "run")
+    torch.save({}, run / "checkpoint.pt")
+    argv = ["--model", str(run), "--episodes", "1", "--quiet"] if prog == "piga-control" else \
+        ["--model", str(run), "--data", str(tiny_data), "--out", str(tmp_path / "report"), "--quiet"]
+    line = refused(prog, argv, capsys, "not a piga checkpoint: it lacks the entry 'model_config'")
+    assert "KeyError" not in line and "truncated" not in line
+    assert not (tmp_path / "report").exists()
