@@ -1062,3 +1062,12 @@ def test_a_checkpoint_lacking_an_entry_says_which(prog: str, tiny_piga_run: Path
     line = refused(prog, argv, capsys, "not a piga checkpoint: it lacks the entry 'model_config'")
     assert "KeyError" not in line and "truncated" not in line
     assert not (tmp_path / "report").exists()
+
+
+@pytest.mark.parametrize("name", ["s.txt", "s.h5"])
+def test_show_refuses_an_image_format_matplotlib_lacks(name: str, tiny_data: Path, tmp_path: Path,
+                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    """It drew the strip, then relayed matplotlib's "Format 'txt' is not supported", naming no option."""
+    refused("piga-show", [str(tiny_data), "--out", str(tmp_path / name)], capsys, f"--out {name}: matplotlib writes no",
+            "use .png")
+    assert _listing(tmp_path) == []
