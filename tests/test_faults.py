@@ -1071,3 +1071,17 @@ def test_show_refuses_an_image_format_matplotlib_lacks(name: str, tiny_data: Pat
     refused("piga-show", [str(tiny_data), "--out", str(tmp_path / name)], capsys, f"--out {name}: matplotlib writes no",
             "use .png")
     assert _listing(tmp_path) == []
+
+
+@pytest.mark.parametrize("argv", [["--episodes", "1", "--steps", "20"], ["--sweep", "1:1:1", "--episodes", "1"]])
+def test_control_refuses_a_model_of_another_frame_rate(argv: list[str], tiny_piga_run: Path, tmp_path: Path,
+                                                       capsys: pytest.CaptureFixture[str]) -> None:
+    """A model of frames 0.1 s apart (an imported recording) planned Gymnasium's 0.05 s steps with its own, silently."""
+    import torch
+
+    run = _run_copy(tiny_piga_run, tmp_path / "run")
+    checkpoint = torch.load(run / "checkpoint.pt", weights_only=False)
+    checkpoint["model_config"]["dt"] = 0.1
+    torch.save(checkpoint, run / "checkpoint.pt")
+    refused("piga-control", ["--model", str(run), "--quiet", *argv], capsys, "trained on frames 0.1 s apart",
+            "steps 0.05 s")

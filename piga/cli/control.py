@@ -22,6 +22,7 @@ from piga.io.checkpoint import RunKind
 
 if TYPE_CHECKING:
     from agents.mpc import PigaMPCAgent
+    from piga.world.model import PhysicsModel
 
 # torch, the agents and the model are imported once the arguments are checked: a mistyped
 # command is answered at once, without the seconds that importing torch takes.
@@ -135,8 +136,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     model = None
     if args.model:
         model, ckpt = load_model(args.model)
-        if model.config.system != "pendulum":
-            raise PigaError(f"{args.model}: a {model.config.system} model cannot control the pendulum")
+        check_pendulum_model(model, args.model)
     if args.goal_image:
         if model is None:
             raise PigaError("--goal-image needs --model: the goal is read from the image by the model's encoder")
@@ -210,9 +210,8 @@ def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: 
         raise PigaError(f"--sweep: gravity multipliers must be > 0, got {args.sweep}")
     if kind is RunKind.PIGA:
         model, _ = load_model(args.model)  # fail early, in this process, on a bad folder
+        check_pendulum_model(model, args.model)
         warn_if_unconverged(PROG, args.model)
-        if model.config.system != "pendulum":
-            raise PigaError(f"{args.model}: a {model.config.system} model cannot control the pendulum")
     jobs = [ControlJob(agent, EpisodeConfig(episodes=args.episodes, steps=args.steps, seed=args.seed, gravity_mult=m,
                                             goal_angle=mpc.goal_angle, torque_arrow=args.torque_arrow),
                        mpc, model_dir=args.model if agent != "oracle" else None)
@@ -317,6 +316,18 @@ def _baseline(args: argparse.Namespace, kind: RunKind, mpc: MPCConfig, outputs: 
             tmp.write_text(f"# {PROG}\n\nCommand: `{command_line(PROG, argv)}`\n\n{summary_markdown([result.summary])}")
         print(f"wrote {outputs[0]} and {outputs[1]}")
     return 0
+
+
+def check_pendulum_model(model: PhysicsModel, run_dir: str) -> None:
+    """Refuses a model that cannot plan for Gymnasium's pixel pendulum: another system's, or one trained on frames
+    of another rate (an imported recording): its physics would step another dt than the env's each frame."""
+    from envs.constants import PENDULUM_DT
+
+    if model.config.system != "pendulum":
+        raise PigaError(f"{run_dir}: a {model.config.system} model cannot control the pendulum")
+    if abs(model.config.dt - PENDULUM_DT) > 1e-9:
+        raise PigaError(f"{run_dir}: the model was trained on frames {model.config.dt:g} s apart, Gymnasium's pixel "
+                        f"pendulum steps {PENDULUM_DT:g} s; it can control only a system filmed at its own rate")
 
 
 def check_angle(flag: str, degrees: float) -> None:

@@ -74,6 +74,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     model, ckpt = load_model(args.model)
     if model.config.system != "pendulum":
         raise PigaError(f"{args.model}: piga-diagnose is for pendulum models; this one is a {model.config.system} model")
+    if effects is not None:  # MPC on Gymnasium's pendulum with the model's physics
+        from piga.cli.control import check_pendulum_model
+
+        check_pendulum_model(model, args.model)
     import torch
 
     torch.set_num_threads(args.threads or max(1, min(2, torch.get_num_threads())))
