@@ -1085,3 +1085,19 @@ def test_control_refuses_a_model_of_another_frame_rate(argv: list[str], tiny_pig
     torch.save(checkpoint, run / "checkpoint.pt")
     refused("piga-control", ["--model", str(run), "--quiet", *argv], capsys, "trained on frames 0.1 s apart",
             "steps 0.05 s")
+
+
+@pytest.mark.parametrize("prog, argv, needle", [
+    ("piga-control", ["--oracle", "--out", ""], "argument --out: expected a value, got ''"),
+    ("piga-control", ["--write-goal-image", "", "--angle", "3"], "argument --write-goal-image: expected a value"),
+    ("piga-collect", ["--out", " "], "argument --out: expected a value, got ' '"),
+    ("piga-train-model", ["", "--out", "run"], "argument data: expected a value"),
+    ("piga-baseline", ["ddpg", "--obs", "state", "--out", ""], "argument --out: expected a value"),
+])
+def test_empty_text_values_are_refused(prog: str, argv: list[str], needle: str, tmp_path: Path,
+                                       capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    """--out '' was taken for no --out (piga-control ran and wrote nothing, exit 0) or for the current folder
+    ("'.' is a folder"); --write-goal-image '' was answered "--angle goes with --write-goal-image"."""
+    monkeypatch.chdir(tmp_path)
+    refused(prog, argv, capsys, needle, code=2)
+    assert _listing(tmp_path) == []
