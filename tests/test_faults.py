@@ -368,7 +368,8 @@ def test_planet_on_a_full_disk(tiny_data: Path, tmp_path: Path, capsys: pytest.C
 @pytest.mark.parametrize("argv, edit, needles", [
     (("--batch-size", "4"), None, ["--resume keeps the run's recipe; drop --batch-size"]),
     (("--seed", "3", "--free-nats", "2"), None, ["drop --free-nats, --seed"]),
-    (("--iterative", "2"), None, ["was trained without it"]),
+    (("--iterative", "2"), None, ["--iterative:", "was trained without --iterative"]),
+    (("--rounds", "3"), None, ["--rounds:", "was trained without --iterative"]),  # it was ignored
     ((), lambda run: (run / "config.json").unlink(), ["config.json is missing", "--overwrite"]),
     ((), _edit_record(lambda r: r["train"].pop("steps")), ["'train' settings lack steps"]),
     ((), _edit_record(lambda r: r.pop("kind")), ["is a piga-train-model run", "not a planet run"]),

@@ -216,12 +216,12 @@ def _refuse_recipe_changes(args: Any, record: dict[str, Any], run_dir: Path) -> 
             raise PigaError(f"--resume: {run_dir} was trained on {recorded or 'no data file'}, not {args.data}; {drop}")
 
 
-def _refuse_fewer_steps(steps: int | None, planned: int) -> None:
-    """``--resume --steps`` below the run's plan would be ignored (the run keeps what it trained), while its record
-    said otherwise: refused."""
+def _refuse_fewer_steps(steps: int | None, planned: int, flag: str = "--steps") -> None:
+    """``--resume --steps`` (or ``--rounds``) below the run's plan would be ignored (the run keeps what it trained),
+    while its record said otherwise: refused."""
     if steps and steps < planned:
-        raise PigaError(f"--resume --steps {steps}: the run already planned {planned} steps; --resume may raise --steps, "
-                        "never lower it")
+        raise PigaError(f"--resume {flag} {steps}: the run already planned {planned} {flag[2:]}; --resume may raise "
+                        f"{flag}, never lower it")
 
 
 @contextlib.contextmanager
@@ -282,13 +282,16 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
                          threads=args.threads or saved.threads, device=args.device)
         rssm = None
         record["train"] = config.to_dict()
-        if args.iterative and not record.get("iterative"):
-            raise PigaError(f"--iterative: {run_dir} was trained without it; --resume continues a run as it was started")
+        for flag, given in (("--iterative", args.iterative), ("--rounds", args.rounds)):
+            if given and not record.get("iterative"):
+                raise PigaError(f"{flag}: {run_dir} was trained without --iterative; --resume continues a run as it was "
+                                "started")
         if record.get("iterative"):
             saved_iterative = _saved_config(run_dir, record, "iterative", IterativeConfig)
             if args.iterative and args.iterative != saved_iterative.episodes:
                 raise PigaError(f"--iterative: {run_dir} collects {saved_iterative.episodes} episodes a round; --resume "
                                 "keeps the run's recipe")
+            _refuse_fewer_steps(args.rounds, saved_iterative.rounds, "--rounds")
             iterative = replace(saved_iterative, rounds=args.rounds or saved_iterative.rounds)
             record["iterative"] = iterative.to_dict()
         if "rssm" not in record:  # a record without it (benchmarks/baselines.py wrote none before): the checkpoint's
