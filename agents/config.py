@@ -6,6 +6,11 @@ import math
 from dataclasses import dataclass, field
 
 
+#: Most model steps one CEM plan may take (candidates x horizon x iterations): 80 times PlaNet's 1.2e5, 500 times the
+#: pendulum's default; beyond, each control step takes minutes and a tensor of candidates x horizon may not fit.
+MAX_PLAN_STEPS = 10_000_000
+
+
 @dataclass(frozen=True)
 class CEMConfig:
     """CEM settings. The defaults are PlaNet's (Hafner et al., 2019)."""
@@ -29,6 +34,10 @@ class CEMConfig:
         if self.horizon < 1 or self.iterations < 1 or self.candidates < 2:
             raise ValueError(f"CEM needs horizon >= 1, iterations >= 1 and candidates >= 2, got horizon={self.horizon}, "
                              f"iterations={self.iterations}, candidates={self.candidates}")
+        if (work := self.candidates * self.horizon * self.iterations) > MAX_PLAN_STEPS:
+            raise ValueError(f"CEM candidates x horizon x iterations = {self.candidates} x {self.horizon} x "
+                             f"{self.iterations} = {work:.3g} model steps per plan, more than {MAX_PLAN_STEPS:.0e}: a "
+                             "control step would take minutes; lower the candidates, the horizon or the iterations")
         if not 1 <= self.elites <= self.candidates:
             raise ValueError(f"CEM elites must be in [1, candidates={self.candidates}], got {self.elites}")
         if not (self.init_std > 0 and self.min_std >= 0 and 0 <= self.momentum < 1):

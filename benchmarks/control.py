@@ -42,6 +42,7 @@ from piga.control.episodes import EpisodeConfig, parse_range
 from piga.control.jobs import ControlJob, run_jobs
 from piga.evaluation.episodes import EpisodeSummary, summary_markdown
 from piga.evaluation.plots import save_figure, sweep_figure
+from piga.io.runs import convergence_warning
 
 #: PlaNet's CEM (Hafner et al., 2019), re-planned from scratch each step.
 PLANET = MPCConfig(cem=CEMConfig(), warm_start=False)
@@ -107,6 +108,9 @@ def main() -> int:
                             part="goal", read_goal_deg=round(read[angle], 3)))
             jobs.append(job("oracle", 1.0, args.goal_episodes, replace(tuned, goal_angle=math.radians(angle)),
                             math.radians(angle), part="goal"))
+    for run_dir in dict.fromkeys(j.model_dir for j in jobs if j.model_dir is not None):  # once per run, in order
+        if (warning := convergence_warning(run_dir)) is not None:
+            print(warning, file=sys.stderr)
     t0 = time.time()
     results = run_jobs(jobs, workers=args.workers, backend=backend)
     minutes = (time.time() - t0) / 60

@@ -58,6 +58,12 @@ __all__ = ["DMC_PHYSICS_DT", "DMC_EPISODE_STEPS", "DMCPendulumConfig", "MissingE
 DMC_PHYSICS_DT = 0.02
 #: Physics steps of one DMC episode (20 s).
 DMC_EPISODE_STEPS = 1000
+#: Most physics steps per frame: 1 s between frames, half the pendulum's swing period; sparser frames would not show
+#: its motion (and a DMC episode must keep many frames: 1000 physics steps).
+MAX_ACTION_REPEAT = 50
+#: Lightest tip (kg): MuJoCo's accelerations overflow below about 1e-10 kg (its state becomes invalid); far above that
+#: already, one unit of torque swings the pendulum round in a frame.
+MIN_MASS = 1e-3
 #: Radius of the sphere at the pole's tip in pendulum.xml (its only mass).
 TIP_RADIUS = 0.05
 #: Earth's gravity as MuJoCo's default ``option/gravity``.
@@ -111,9 +117,9 @@ class DMCPendulumConfig:
         checks = {
             "image_size": self.image_size >= 8,
             "frame_stack": self.frame_stack >= 1,
-            "action_repeat": self.action_repeat >= 1,
+            "action_repeat": 1 <= self.action_repeat <= MAX_ACTION_REPEAT,
             "episode_length": self.episode_length >= 0,
-            "mass": self.mass > 0 and math.isfinite(self.mass),
+            "mass": MIN_MASS <= self.mass < math.inf,
             "length": 0 < self.length <= VIEW_HALF_SIDE - 2 * TIP_RADIUS,
             "damping": self.damping >= 0 and math.isfinite(self.damping),
             "flip": self.flip in FLIPS,
@@ -125,7 +131,7 @@ class DMCPendulumConfig:
             if not ok:
                 raise ValueError(
                     f"DMCPendulumConfig.{name}={getattr(self, name)!r} is out of range (sizes and counts >= 1, "
-                    f"mass > 0, length in (0, {VIEW_HALF_SIDE - 2 * TIP_RADIUS:g}], damping >= 0, flip in {FLIPS}, "
+                    f"action_repeat <= {MAX_ACTION_REPEAT}, mass >= {MIN_MASS:g}, length in (0, {VIEW_HALF_SIDE - 2 * TIP_RADIUS:g}], damping >= 0, flip in {FLIPS}, "
                     "max_angle in [0, pi], max_speed >= 0, camera_distance in [(length + 0.1) / 0.7, 3])")
 
     @property
@@ -176,6 +182,11 @@ def _import_dm_control() -> tuple[Any, Any]:
     except ImportError as exc:
         raise MissingExtraError(f"the DMC pendulum needs dm_control and MuJoCo: install piga[dmc] "
                                 f"(pip install -e '.[dmc]'); import failed: {exc}") from None
+    import logging
+
+    # dm_control logs MuJoCo's instability warnings through absl before raising PhysicsError, which step() turns
+    # into one ValueError: the log line would be a second line on stderr
+    logging.getLogger("absl").setLevel(logging.ERROR)
     return pendulum, control
 
 
@@ -226,6 +237,7 @@ class DMCPendulumEnv(gym.Env):
         self.config = config or DMCPendulumConfig()
         self.render_mode = "rgb_array"
         pendulum, control = _import_dm_control()
+        self._physics_error = control.PhysicsError
         xml, assets = pendulum.get_model_and_assets()
         xml = model_xml(self.config, xml.decode() if isinstance(xml, bytes) else xml)
         try:
@@ -280,7 +292,12 @@ class DMCPendulumEnv(gym.Env):
             if self.hinge_torque is not None:
                 data = self.physics.data
                 data.qfrc_applied[0] = self.hinge_torque(float(data.qpos[0]), float(data.qvel[0]))
-            reward += float(self._env.step(u).reward)
+            try:
+                reward += float(self._env.step(u).reward)
+            except self._physics_error as exc:  # a config that MuJoCo cannot integrate: the user's to change
+                raise ValueError(f"the DMC pendulum's physics became invalid ({exc}) with mass={self.config.mass:g}, "
+                                 f"length={self.config.length:g}, damping={self.config.damping:g}; choose values nearer "
+                                 "pendulum.xml's (1, 0.5, 0.1)") from None
         self._frames += 1
         truncated = self._frames >= self.config.frames_per_episode
         return self.render(), reward, False, truncated, {"state": self._state(), "dmc_reward": reward}

@@ -310,8 +310,10 @@ def draw_start(config: SceneConfig, rng: np.random.Generator, steps: int) -> tup
         good = np.flatnonzero(_acceptable(config, fine_p))
         if len(good):
             return simulate(config, p0[good[0]], v0[good[0]], steps)
+    values = ", ".join(f"{name} = {value:g}" for name, value in config.params.items())
+    forces = f", weaker forces than {values}" if values else ""  # e.g. --g 1e6: every start is flung into a wall
     raise SceneError(f"{config.scene}: no start in {config.max_tries} draws stays clear of the walls for {steps} "
-                     "frames; use shorter sequences, a lower speed or a larger image")
+                     f"frames; use shorter sequences, a lower speed{forces} or a larger image")
 
 
 # ---------------------------------------------------------------------------------------- rendering

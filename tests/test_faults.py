@@ -368,7 +368,8 @@ def test_planet_on_a_full_disk(tiny_data: Path, tmp_path: Path, capsys: pytest.C
 @pytest.mark.parametrize("argv, edit, needles", [
     (("--batch-size", "4"), None, ["--resume keeps the run's recipe; drop --batch-size"]),
     (("--seed", "3", "--free-nats", "2"), None, ["drop --free-nats, --seed"]),
-    (("--iterative", "2"), None, ["was trained without it"]),
+    (("--iterative", "2"), None, ["--iterative:", "was trained without --iterative"]),
+    (("--rounds", "3"), None, ["--rounds:", "was trained without --iterative"]),  # it was ignored
     ((), lambda run: (run / "config.json").unlink(), ["config.json is missing", "--overwrite"]),
     ((), _edit_record(lambda r: r["train"].pop("steps")), ["'train' settings lack steps"]),
     ((), _edit_record(lambda r: r.pop("kind")), ["is a piga-train-model run", "not a planet run"]),
@@ -845,3 +846,259 @@ def test_train_resume_tells_a_moved_file_from_another_of_the_same_shape(tiny_pig
     code, _, err = run_in_process("piga-train-model", cli.main, str(moved), "--out", str(run), "--resume", "--epochs", "2",
                                   "--quiet", capsys=capsys)
     assert code in (0, NOT_CONVERGED), err  # resumed and trained: a tiny run is too short to be judged converged
+
+
+# ---------------------------------------------------------------------------------------------
+# Options a command would ignore, work it would never finish, and outputs it cannot make
+# ---------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("prog, argv", [
+    ("piga-train-model", ["DATA", "--out", "afile/run", "--quiet"]),
+    ("piga-baseline", ["planet", "DATA", "--out", "afile/run", *TINY_PLANET]),
+    ("piga-baseline", ["ddpg", "--obs", "state", "--out", "afile/run", *TINY_DDPG]),
+    ("piga-demo", ["--out", "afile/demo", "--quiet"]),
+])
+def test_an_out_folder_below_a_file_names_the_file(prog: str, argv: list[str], tiny_data: Path, tmp_path: Path,
+                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    """It used to start training and fail with "[Errno 20] Not a directory" at the first checkpoint."""
+    (tmp_path / "afile").write_text("x")
+    argv = [str(tiny_data) if a == "DATA" else str(tmp_path / a) if a.startswith("afile") else a for a in argv]
+    line = refused(prog, argv, capsys, f"{tmp_path / 'afile'} is a file, not a folder")
+    assert "Errno" not in line
+    assert _listing(tmp_path) == ["afile"]
+
+
+@pytest.mark.parametrize("prog, argv, run", [
+    ("piga-train-model", ["DATA", "--out", "RUN", "--resume", "--overwrite", "--epochs", "2", "--quiet"], "piga"),
+    ("piga-baseline", ["planet", "DATA", "--out", "RUN", "--resume", "--overwrite", "--steps", "4", "--quiet"], "planet"),
+    ("piga-baseline", ["ddpg", "--obs", "state", "--out", "RUN", "--resume", "--overwrite", "--steps", "400", "--quiet"],
+     "ddpg"),
+])
+def test_resume_with_overwrite_is_refused(prog: str, argv: list[str], run: str, tiny_piga_run: Path,
+                                          baseline_runs: dict[str, Path], tiny_data: Path, tmp_path: Path,
+                                          capsys: pytest.CaptureFixture[str]) -> None:
+    """--overwrite beside --resume used to be ignored (the run was continued)."""
+    copy = _run_copy(tiny_piga_run if run == "piga" else baseline_runs[run], tmp_path / "run")
+    before = _listing(copy)
+    argv = [str(tiny_data) if a == "DATA" else str(copy) if a == "RUN" else a for a in argv]
+    refused(prog, argv, capsys, "--resume continues the run in --out and --overwrite replaces it")
+    assert _listing(copy) == before
+
+
+def test_train_refuses_a_stream_cache_for_a_file_read_whole(tiny_data: Path, tmp_path: Path,
+                                                           capsys: pytest.CaptureFixture[str]) -> None:
+    refused("piga-train-model", [str(tiny_data), "--out", str(tmp_path / "run"), "--data-loading", "memory",
+                                 "--stream-cache-mb", "10", "--quiet"], capsys, "--stream-cache-mb", "drop one")
+    assert _listing(tmp_path) == []
+
+
+@pytest.mark.parametrize("argv, needle, code", [
+    (["--episodes", "1000000000"], "--episodes: expected an integer in [1, 10000]", 2),
+    (["--steps", "1000000000"], "--steps: expected an integer in [1, 100000]", 2),
+    (["--horizon", "100000000"], "candidates x horizon x iterations = 200 x 100000000 x 5", 1),
+    (["--candidates", "1000000000"], "lower the candidates, the horizon or the iterations", 1),
+    (["--iterations", "100000000"], "more than 1e+07", 1),
+])
+def test_control_refuses_work_it_would_never_finish(argv: list[str], needle: str, code: int, tmp_path: Path,
+                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    """These used to plan or play for hours (or swap) without a word."""
+    refused("piga-control", ["--oracle", "--out", str(tmp_path / "o"), "--quiet", *argv], capsys, needle, code=code)
+    assert _listing(tmp_path) == []
+
+
+def test_control_sweep_refuses_a_gravity_multiplier(tiny_piga_run: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """--gravity-mult beside --sweep used to be ignored."""
+    refused("piga-control", ["--model", str(tiny_piga_run), "--sweep", "0.5:1:0.5", "--gravity-mult", "2"], capsys,
+            "drop --gravity-mult")
+
+
+def test_control_sweep_warns_once_about_an_unconverged_run(tiny_piga_run: Path, tmp_path: Path,
+                                                           capsys: pytest.CaptureFixture[str]) -> None:
+    """The sweep's jobs warned a second time, without the command's name."""
+    def unconverged(run: Path) -> None:
+        metrics = json.loads((run / "metrics.json").read_text()) if (run / "metrics.json").exists() else {}
+        (run / "metrics.json").write_text(json.dumps({**metrics, "converged": False, "convergence": {"reason": "too short"}}))
+
+    run = _run_copy(tiny_piga_run, tmp_path / "run", unconverged)
+    code, out, err = run_in_process("piga-control", control.main, "--model", str(run), "--sweep", "1:1:1",
+                                    "--episodes", "1", "--steps", "20", "--horizon", "3", "--candidates", "4", "--iterations",
+                                    "1", "--workers", "1", "--quiet", capsys=capsys)
+    assert code == 0, err
+    assert err.count("did not converge") == 1 and err.startswith("piga-control: warning:"), err
+
+
+def test_planet_refuses_a_batch_that_cannot_fit(tiny_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """--batch-size 1e6 used to swap for ever."""
+    refused("piga-baseline", ["planet", str(tiny_data), "--out", str(tmp_path / "run"), *TINY_PLANET, "--batch-size",
+                              "1000000"], capsys, "a batch of 1000000 x 8 frames", "of memory")
+    assert _listing(tmp_path) == []
+
+
+def test_planet_resume_refuses_fewer_steps(baseline_runs: dict[str, Path], tiny_data: Path, tmp_path: Path,
+                                           capsys: pytest.CaptureFixture[str]) -> None:
+    """It exited 0 having trained nothing, and recorded the lower count in config.json."""
+    run = _run_copy(baseline_runs["planet"], tmp_path / "run")
+    before = (run / "config.json").read_text()
+    refused("piga-baseline", ["planet", str(tiny_data), "--out", str(run), "--resume", "--steps", "1", "--quiet"], capsys,
+            "never lower it")
+    assert (run / "config.json").read_text() == before
+
+
+def test_planet_resumes_on_its_file_named_from_elsewhere(baseline_runs: dict[str, Path], tiny_data: Path, tmp_path: Path,
+                                                         capsys: pytest.CaptureFixture[str],
+                                                         monkeypatch: pytest.MonkeyPatch) -> None:
+    """A run trained on a relative path, resumed from another folder (or on a copy of the file), was refused as
+    "trained on another file"."""
+    run = _run_copy(baseline_runs["planet"], tmp_path / "run", _edit_record(lambda r: r.__setitem__("data", "tiny.h5")))
+    copy = tmp_path / "elsewhere" / "same.h5"
+    copy.parent.mkdir()
+    shutil.copyfile(tiny_data, copy)
+    code, _, err = run_in_process("piga-baseline", baseline.main, "planet", str(copy), "--out", str(run), "--resume",
+                                  "--steps", "3", "--quiet", capsys=capsys)
+    assert code == 0, err
+
+
+def test_ddpg_refuses_noise_beyond_the_action_scale(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    refused("piga-baseline", ["ddpg", "--obs", "state", "--out", str(tmp_path / "run"), *TINY_DDPG, "--noise-std", "1e9"],
+            capsys, "noise_std must be at most 10")
+    assert _listing(tmp_path) == []
+
+
+def test_demo_refuses_too_few_sequences_before_collecting(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """It collected and showed them, then relayed training's "lower the batch size", an option piga-demo lacks."""
+    line = refused("piga-demo", ["--out", str(tmp_path / "demo"), "--sequences", "1"], capsys,
+                   "fewer than one batch of 32", "give --sequences 2 or more")
+    assert "batch size" not in line
+    assert _listing(tmp_path) == []
+
+
+@pytest.mark.parametrize("argv, needle, code", [
+    (["--bootstrap", "1000000000"], "bootstrap must be at most 10000", 1),
+    (["--episodes", "3"], "--episodes sets the MPC episodes of --env", 1),
+    (["--env", "damping=0.2", "--episodes", "1000000000"], "--episodes: expected an integer in [1, 10000]", 2),
+])
+def test_diagnose_refuses_before_any_work(argv: list[str], needle: str, code: int, fake_planet_run: Path, tiny_data: Path,
+                                          tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A huge bootstrap ran for days; --episodes without --env was ignored; a huge --episodes was refused by the
+    episodes' config only after the whole diagnosis."""
+    refused("piga-diagnose", ["--model", str(fake_planet_run), "--data", str(tiny_data), "--out", str(tmp_path / "report"),
+                              "--quiet", *argv], capsys, needle, code=code)
+    assert _listing(tmp_path) == []
+
+
+def test_control_warns_of_a_goal_angle_beyond_the_torque_limit(capsys: pytest.CaptureFixture[str]) -> None:
+    """A goal image beyond the holdable range was warned of, the same goal given in degrees was not."""
+    code, out, err = run_in_process("piga-control", control.main, "--oracle", "--goal-angle", "90", "--episodes", "1",
+                                    "--steps", "20", "--horizon", "3", "--candidates", "4", "--iterations", "1", "--quiet",
+                                    capsys=capsys)
+    assert code == 0 and err.count("\n") == 1, err
+    assert err.startswith("piga-control: warning: goal 90.0 deg needs torque") and "holdable goals are within" in err
+
+
+def test_a_dmc_frame_may_not_span_seconds() -> None:
+    """action_repeat 1e8 collected for ever (and a DMC episode of 1000 physics steps would hold no frame)."""
+    from envs.dmc import MAX_ACTION_REPEAT, DMCPendulumConfig
+
+    with pytest.raises(ValueError, match=f"action_repeat=100000000 is out of range .*action_repeat <= {MAX_ACTION_REPEAT}"):
+        DMCPendulumConfig(action_repeat=10**8)
+
+
+def test_planet_refuses_more_sequences_than_the_file_has(tiny_data: Path, tmp_path: Path,
+                                                         capsys: pytest.CaptureFixture[str]) -> None:
+    """It trained on all 8 and recorded max_sequences 100."""
+    refused("piga-baseline", ["planet", str(tiny_data), "--out", str(tmp_path / "run"), *TINY_PLANET, "--max-sequences",
+                              "100"], capsys, "--max-sequences 100", "has 8 train sequences")
+    assert _listing(tmp_path) == []
+
+
+def test_import_refuses_a_ragged_row(frame_folders: dict[str, Path], tmp_path: Path,
+                                     capsys: pytest.CaptureFixture[str]) -> None:
+    """A row with a stray second column was read as its first, silently."""
+    csv = tmp_path / "u.csv"
+    csv.write_text("u\n" + "0.5\n" * 6 + "0.5,2\n" + "0.5\n" * 5)
+    refused("piga-import", [str(frame_folders["moving"]), str(csv), "--dt", "0.05", "--steps", "4", "--image-size", "32",
+                            "--split", "1,1,1", "--out", str(tmp_path / "out.h5")], capsys,
+            "line 8: 2 column(s), but line 1 has 1")
+    assert _listing(tmp_path) == ["u.csv"]
+
+
+def test_an_invalid_dmc_physics_state_is_the_configs_error(capsys: pytest.CaptureFixture[str]) -> None:
+    """A tip of 1e-12 kg made MuJoCo's state invalid: an internal error, after absl's warning line. The config now
+    refuses such a mass; a state that still goes invalid is a ValueError naming the config, with no log line."""
+    pytest.importorskip("dm_control")
+    from envs.dmc import DMCPendulumConfig, DMCPendulumEnv
+
+    with pytest.raises(ValueError, match="mass=1e-12 is out of range"):
+        DMCPendulumConfig(mass=1e-12)
+    config = DMCPendulumConfig()
+    object.__setattr__(config, "mass", 1e-12)  # past the check, as a config that MuJoCo still cannot integrate
+    env = DMCPendulumEnv(config)
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="physics became invalid .* mass=1e-12"):
+        for _ in range(5):
+            env.step(np.ones(1))
+    env.close()
+    assert "QACC" not in capsys.readouterr().err
+
+
+def test_a_scene_with_forces_too_strong_names_them(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """--g 1e6 flings every start into a wall; the message named only the sequences, the speed and the image."""
+    refused("piga-collect", ["--out", str(tmp_path / "d.h5"), "--system", "gravity", "--g", "1e6", "--sequences", "2",
+                             "--steps", "30", "--workers", "1", "--split", "1,1,0", "--quiet"], capsys,
+            "stays clear of the walls", "weaker forces than g = 1e+06")
+    assert _listing(tmp_path) == []
+
+
+@pytest.mark.parametrize("prog", ["piga-control", "piga-diagnose"])
+def test_a_checkpoint_lacking_an_entry_says_which(prog: str, tiny_piga_run: Path, tiny_data: Path, tmp_path: Path,
+                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    """A foreign checkpoint (an empty dict) was reported as "(KeyError: 'model_config'); it may be truncated"."""
+    import torch
+
+    run = _run_copy(tiny_piga_run, tmp_path / "run")
+    torch.save({}, run / "checkpoint.pt")
+    argv = ["--model", str(run), "--episodes", "1", "--quiet"] if prog == "piga-control" else \
+        ["--model", str(run), "--data", str(tiny_data), "--out", str(tmp_path / "report"), "--quiet"]
+    line = refused(prog, argv, capsys, "not a piga checkpoint: it lacks the entry 'model_config'")
+    assert "KeyError" not in line and "truncated" not in line
+    assert not (tmp_path / "report").exists()
+
+
+@pytest.mark.parametrize("name", ["s.txt", "s.h5"])
+def test_show_refuses_an_image_format_matplotlib_lacks(name: str, tiny_data: Path, tmp_path: Path,
+                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    """It drew the strip, then relayed matplotlib's "Format 'txt' is not supported", naming no option."""
+    refused("piga-show", [str(tiny_data), "--out", str(tmp_path / name)], capsys, f"--out {name}: matplotlib writes no",
+            "use .png")
+    assert _listing(tmp_path) == []
+
+
+@pytest.mark.parametrize("argv", [["--episodes", "1", "--steps", "20"], ["--sweep", "1:1:1", "--episodes", "1"]])
+def test_control_refuses_a_model_of_another_frame_rate(argv: list[str], tiny_piga_run: Path, tmp_path: Path,
+                                                       capsys: pytest.CaptureFixture[str]) -> None:
+    """A model of frames 0.1 s apart (an imported recording) planned Gymnasium's 0.05 s steps with its own, silently."""
+    import torch
+
+    run = _run_copy(tiny_piga_run, tmp_path / "run")
+    checkpoint = torch.load(run / "checkpoint.pt", weights_only=False)
+    checkpoint["model_config"]["dt"] = 0.1
+    torch.save(checkpoint, run / "checkpoint.pt")
+    refused("piga-control", ["--model", str(run), "--quiet", *argv], capsys, "trained on frames 0.1 s apart",
+            "steps 0.05 s")
+
+
+@pytest.mark.parametrize("prog, argv, needle", [
+    ("piga-control", ["--oracle", "--out", ""], "argument --out: expected a value, got ''"),
+    ("piga-control", ["--write-goal-image", "", "--angle", "3"], "argument --write-goal-image: expected a value"),
+    ("piga-collect", ["--out", " "], "argument --out: expected a value, got ' '"),
+    ("piga-train-model", ["", "--out", "run"], "argument data: expected a value"),
+    ("piga-baseline", ["ddpg", "--obs", "state", "--out", ""], "argument --out: expected a value"),
+])
+def test_empty_text_values_are_refused(prog: str, argv: list[str], needle: str, tmp_path: Path,
+                                       capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    """--out '' was taken for no --out (piga-control ran and wrote nothing, exit 0) or for the current folder
+    ("'.' is a folder"); --write-goal-image '' was answered "--angle goes with --write-goal-image"."""
+    monkeypatch.chdir(tmp_path)
+    refused(prog, argv, capsys, needle, code=2)
+    assert _listing(tmp_path) == []

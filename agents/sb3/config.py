@@ -55,6 +55,10 @@ ALGORITHM_PRESETS: dict[Algorithm, dict[str, Any]] = {
 PRESETS: dict[Observation, dict[str, Any]] = {"state": {}, "latent": {}, "pixels": {"buffer_size": 50_000}}
 
 
+#: Largest std of the exploration noise, in SB3's [-1, 1] action scale (as PlaNet's exploration noise is bounded).
+MAX_NOISE_STD = 10.0
+
+
 @dataclass(frozen=True)
 class SB3Config:
     """An SB3 run's settings. Unset (None) fields take the observation's preset, then the algorithm's zoo
@@ -140,6 +144,9 @@ class SB3Config:
                 and self.noise_final_std >= 0):
             raise ValueError(f"SB3Config: need 0 < gamma <= 1, learning_rate > 0, 0 < tau <= 1, noise_std >= 0, "
                              f"noise_final_std >= 0: {self}")
+        if max(self.noise_std, self.noise_final_std) > MAX_NOISE_STD:
+            raise ValueError(f"noise_std must be at most {MAX_NOISE_STD:g} (a std in SB3's [-1, 1] action scale; far "
+                             f"beyond 1 every noisy action is clipped to a bound), got {max(self.noise_std, self.noise_final_std):g}")
         if self.eval_every > self.steps:
             raise ValueError(f"eval_every ({self.eval_every}) is more than steps ({self.steps}): the run would never be "
                              "evaluated; lower eval_every or raise steps")

@@ -21,6 +21,7 @@ from typing import Any, get_args
 from piga.cli.common import (ArgumentParser, Interrupted, PigaError, add_device_option, add_preset_option, command_line,
                              format_default, made_folder, nonnegative_float, nonnegative_int, positive_float,
                              positive_int, remove_outputs, run_cli, seed_int, thread_count)
+from piga.io.atomic import check_folder_target
 from piga.io.checkpoint import CHECKPOINT, RunKind
 
 PROG = "piga-baseline"
@@ -136,8 +137,9 @@ def _common(p: ArgumentParser) -> None:
 
 def _check_run_dir(run_dir: Path, resume: bool, overwrite: bool, kind: RunKind) -> None:
     """Refuses to clobber a run, or to resume what is not one of this kind; clears it with ``overwrite``."""
-    if run_dir.exists() and not run_dir.is_dir():
-        raise PigaError(f"--out {run_dir} is a file, not a folder")
+    check_folder_target(run_dir)
+    if resume and overwrite:
+        raise PigaError("--resume continues the run in --out and --overwrite replaces it; give one of them")
     existing = [name for name in OUTPUTS if (run_dir / name).exists()]
     if resume:
         if not (run_dir / CHECKPOINT).exists():
@@ -214,10 +216,23 @@ def _refuse_recipe_changes(args: Any, record: dict[str, Any], run_dir: Path) -> 
         raise PigaError(f"--resume keeps the run's recipe; drop {', '.join('--' + c.replace('_', '-') for c in changed)}")
     recorded = record.get("data")
     if args.data and recorded != args.data:
-        same = recorded is not None and Path(recorded).exists() and Path(args.data).exists() and os.path.samefile(recorded, args.data)
+        if "data_fingerprint" in record:  # a moved or copied file, or one named from another folder, keeps its contents
+            from piga.data.schema import fingerprint
+
+            same = record["data_fingerprint"] == fingerprint(args.data)
+        else:  # a run from before fingerprints: the same file by its path
+            same = recorded is not None and Path(recorded).exists() and Path(args.data).exists() and os.path.samefile(recorded, args.data)
         if not same:
             drop = "give that file" if kind == "planet" else "drop --data (the run keeps its autoencoder)"
             raise PigaError(f"--resume: {run_dir} was trained on {recorded or 'no data file'}, not {args.data}; {drop}")
+
+
+def _refuse_fewer_steps(steps: int | None, planned: int, flag: str = "--steps") -> None:
+    """``--resume --steps`` (or ``--rounds``) below the run's plan would be ignored (the run keeps what it trained),
+    while its record said otherwise: refused."""
+    if steps and steps < planned:
+        raise PigaError(f"--resume {flag} {steps}: the run already planned {planned} {flag[2:]}; --resume may raise "
+                        f"{flag}, never lower it")
 
 
 @contextlib.contextmanager
@@ -236,14 +251,22 @@ def _nothing_left_unless_checkpointed(run_dir: Path, written: list[int], fresh: 
             raise
 
 
-def check_planet_memory(rssm: Any) -> None:
+def check_planet_memory(rssm: Any, config: Any = None) -> None:
     """Refuses model sizes whose weights, gradients and Adam's two moments (4 float32 copies) do not fit
-    in memory, before anything is allocated (a --stoch-size of 5e7 otherwise swaps for ever)."""
+    in memory, before anything is allocated (a --stoch-size of 5e7 otherwise swaps for ever); with the training
+    ``config``, also a batch whose frames and the activations of the conv encoder and decoder do not (a --batch-size
+    of 1e5 otherwise swaps for ever too)."""
     from agents.planet.rssm import parameter_count
     from piga.io.resources import ResourceError, check_memory
 
     try:
         check_memory(16.0 * parameter_count(rssm), "the PlaNet-style world model of these sizes")
+        if config is not None:
+            frames = config.batch_size * config.chunk_length  # (B, T) frames of 64 x 64 x C per optimiser step
+            # per frame about 32 float32 maps of its size: the input, the activations of the encoder's and the decoder's
+            # convolutions, and their gradients (depth 16 at 31x31 down to 2x2, and back)
+            check_memory(frames * 32.0 * 4 * 64 * 64 * rssm.channels,
+                         f"a batch of {config.batch_size} x {config.chunk_length} frames (--batch-size x --chunk-length)")
     except ResourceError as exc:
         raise PigaError(str(exc)) from None
 
@@ -253,7 +276,7 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
     from piga.io.resources import check_run_disk
     from piga.io.atomic import write_json
     from agents.planet.train import check_planet_data, rssm_config_for, train_planet
-    from piga.data.schema import inspect_dataset
+    from piga.data.schema import fingerprint, inspect_dataset
     from piga.training.train import TrainingDiverged
 
     run_dir = Path(args.out)
@@ -261,21 +284,25 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
     command = command_line(PROG, argv)
     iterative: IterativeConfig | None = None
     if args.resume:
-        _check_run_dir(run_dir, True, False, RunKind.PLANET)
+        _check_run_dir(run_dir, True, args.overwrite, RunKind.PLANET)
         record = _read_record(run_dir)
         _refuse_recipe_changes(args, record, run_dir)
         saved = _saved_config(run_dir, record, "train", PlanetTrainConfig, optional=("device",))  # older runs have none
+        _refuse_fewer_steps(args.steps, saved.steps)
         config = replace(saved, steps=args.steps or saved.steps, max_minutes=args.max_minutes or saved.max_minutes,
                          threads=args.threads or saved.threads, device=args.device)
         rssm = None
         record["train"] = config.to_dict()
-        if args.iterative and not record.get("iterative"):
-            raise PigaError(f"--iterative: {run_dir} was trained without it; --resume continues a run as it was started")
+        for flag, given in (("--iterative", args.iterative), ("--rounds", args.rounds)):
+            if given and not record.get("iterative"):
+                raise PigaError(f"{flag}: {run_dir} was trained without --iterative; --resume continues a run as it was "
+                                "started")
         if record.get("iterative"):
             saved_iterative = _saved_config(run_dir, record, "iterative", IterativeConfig)
             if args.iterative and args.iterative != saved_iterative.episodes:
                 raise PigaError(f"--iterative: {run_dir} collects {saved_iterative.episodes} episodes a round; --resume "
                                 "keeps the run's recipe")
+            _refuse_fewer_steps(args.rounds, saved_iterative.rounds, "--rounds")
             iterative = replace(saved_iterative, rounds=args.rounds or saved_iterative.rounds)
             record["iterative"] = iterative.to_dict()
         if "rssm" not in record:  # a record without it (benchmarks/baselines.py wrote none before): the checkpoint's
@@ -293,7 +320,10 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
                                    threads=args.threads, device=args.device, max_minutes=args.max_minutes or 0.0)
         rssm = rssm_config_for(info, {"deter_size": args.deter_size, "stoch_size": args.stoch_size, "action_repeat": args.action_repeat,
                                       "reward_alignment": args.reward_alignment})
-        check_planet_memory(rssm)
+        check_planet_memory(rssm, config)
+        if config.max_sequences > (n_train := info.split_counts["train"]):
+            raise PigaError(f"--max-sequences {config.max_sequences}: {args.data} has {n_train} train sequences; give at "
+                            f"most {n_train} (0: all)")
         if not args.iterative:
             given = [flag for flag, value, default in (("--rounds", args.rounds, None), ("--round-steps", args.round_steps, IterativeConfig.steps_per_round),
                                                        ("--episode-steps", args.episode_steps, IterativeConfig.episode_steps),
@@ -310,7 +340,8 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
 
             check_iterative_data(info, iterative)
         _check_run_dir(run_dir, False, args.overwrite, RunKind.PLANET)
-        record = {"kind": RunKind.PLANET.value, "command": command, "data": str(args.data), "train": config.to_dict(),
+        record = {"kind": RunKind.PLANET.value, "command": command, "data": str(args.data),
+                  "data_fingerprint": fingerprint(args.data), "train": config.to_dict(),
                   "rssm": rssm.to_dict(), **({"iterative": iterative.to_dict()} if iterative else {})}
     check_planet_data(info, config, record["rssm"].get("action_repeat", 1))
     if iterative is not None:
@@ -401,7 +432,7 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
     if args.obs != "latent" and args.autoencoder_steps != AutoencoderConfig.steps:
         raise PigaError(f"--autoencoder-steps is for --obs latent; --obs {args.obs} trains no autoencoder")
     if args.resume:
-        _check_run_dir(run_dir, True, False, RunKind.DDPG)
+        _check_run_dir(run_dir, True, args.overwrite, RunKind.DDPG)
         record = _read_record(run_dir)
         # runs from before --algo are DDPG; runs from before --device have none
         saved = _saved_config(run_dir, record, "ddpg", SB3Config, optional=("algo", "device"))
@@ -412,9 +443,7 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
         _refuse_recipe_changes(args, record, run_dir)
         if saved.obs == "latent" and not (run_dir / AUTOENCODER).exists():
             raise PigaError(f"--resume: {run_dir / AUTOENCODER} is missing; the latent run cannot be continued without it")
-        if args.steps and args.steps < saved.steps:
-            raise PigaError(f"--resume --steps {args.steps}: the run already planned {saved.steps} steps; --resume may "
-                            "raise --steps, never lower it")
+        _refuse_fewer_steps(args.steps, saved.steps)
         config = replace(saved, steps=args.steps or saved.steps, threads=args.threads, device=args.device)
         record["ddpg"] = config.to_dict()
         record.setdefault("resumed", []).append(command)
@@ -430,11 +459,13 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
         ae_config = AutoencoderConfig(steps=args.autoencoder_steps, seed=config.seed)
         if args.data:
             from agents.sb3.autoencoder import check_autoencoder_data
-            from piga.data.schema import inspect_dataset
+            from piga.data.schema import fingerprint, inspect_dataset
 
             check_autoencoder_data(inspect_dataset(args.data))  # blank or ill-sized frames: one line, before --out is touched
         _check_run_dir(run_dir, False, args.overwrite, RunKind.DDPG)
         record = {"kind": RunKind.DDPG.value, "command": command, "data": args.data, "ddpg": config.to_dict()}
+        if args.data:
+            record["data_fingerprint"] = fingerprint(args.data)
         checkpoint_bytes = _ddpg_checkpoint_bytes(config, ae_config.latent_size)
     check_run_disk(run_dir, checkpoint_bytes, f"{config.algo.upper()}'s run (a replay buffer of {config.buffer_size})")
     autoencoder = run_dir / AUTOENCODER if config.obs == "latent" else None

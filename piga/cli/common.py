@@ -44,8 +44,22 @@ class ArgumentParser(argparse.ArgumentParser):
         super().__init__(*args, **kwargs)
         self._negative_number_matcher = re.compile(r"^-\.?\d")
 
+    def add_argument(self, *args: Any, **kwargs: Any) -> argparse.Action:
+        """As argparse's; a text value (no ``type``, no ``choices``) may not be empty: ``--out ''`` is refused,
+        rather than read as the current folder or taken for an option not given."""
+        if "type" not in kwargs and "choices" not in kwargs and kwargs.get("action", "store") in ("store", "append"):
+            kwargs["type"] = nonempty_text
+        return super().add_argument(*args, **kwargs)
+
     def error(self, message: str) -> NoReturn:
         self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
+
+
+def nonempty_text(text: str) -> str:
+    """argparse type: any text but the empty one (a path, a run folder, a range)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError(f"expected a value, got {text!r}")
+    return text
 
 
 #: Exceptions that are the user's to fix; any other exception is a bug, and ``run_cli`` writes its

@@ -14,14 +14,15 @@ import numpy as np
 
 from agents.config import MPCConfig
 from piga.io.atomic import atomic_output, check_writable_target, write_json
-from piga.cli.common import (ArgumentParser, PigaError, add_ray_option, command_line, connect_backend, positive_float,
-                             positive_int, run_cli, seed_int, warn_if_unconverged)
+from piga.cli.common import (ArgumentParser, PigaError, add_ray_option, command_line, connect_backend, int_up_to,
+                             positive_float, positive_int, run_cli, seed_int, warn_if_unconverged)
 from piga.control.episodes import EpisodeConfig, parse_range, run_episodes
 from piga.evaluation.episodes import summary_markdown
 from piga.io.checkpoint import RunKind
 
 if TYPE_CHECKING:
     from agents.mpc import PigaMPCAgent
+    from piga.world.model import PhysicsModel
 
 # torch, the agents and the model are imported once the arguments are checked: a mistyped
 # command is answered at once, without the seconds that importing torch takes.
@@ -45,9 +46,9 @@ def build_parser() -> ArgumentParser:
                    help="with --env piga/DMCPendulum-v0: a field of its config, repeatable (mass, length, damping, "
                    "action_repeat, flip, shadows), as for piga-collect")
     p.add_argument("--oracle", action="store_true", help="plan with the true state and true parameters instead")
-    p.add_argument("--episodes", type=positive_int, default=episodes.episodes,
+    p.add_argument("--episodes", type=int_up_to(EpisodeConfig.MAX_EPISODES, "more would run for days"), default=episodes.episodes,
                    help="episodes (default %(default)s); episode 0 starts hanging down")
-    p.add_argument("--steps", type=positive_int, default=episodes.steps,
+    p.add_argument("--steps", type=int_up_to(EpisodeConfig.MAX_STEPS, "500 times Gymnasium's episode"), default=episodes.steps,
                    help=f"steps per episode, at least {episodes.hold_steps}: success is the goal held for the last "
                    f"{episodes.hold_steps} (default %(default)s)")
     p.add_argument("--gravity-mult", type=positive_float, default=episodes.gravity_mult,
@@ -135,8 +136,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     model = None
     if args.model:
         model, ckpt = load_model(args.model)
-        if model.config.system != "pendulum":
-            raise PigaError(f"{args.model}: a {model.config.system} model cannot control the pendulum")
+        check_pendulum_model(model, args.model)
     if args.goal_image:
         if model is None:
             raise PigaError("--goal-image needs --model: the goal is read from the image by the model's encoder")
@@ -148,6 +148,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         args.goal_angle = math.degrees(estimate.angle)
         print(f"goal read from {args.goal_image}: {args.goal_angle:.2f} deg (hold torque {estimate.hold_torque:+.2f})")
         mpc = replace(mpc, goal_angle=estimate.angle)
+    elif args.goal_angle:
+        from piga.control.goal import hold_warning
+
+        if (warning := hold_warning(mpc.goal_angle, args.gravity_mult)) is not None:
+            print(f"{PROG}: warning: {warning}", file=sys.stderr)
     if args.model:  # after every refusal, so that a refused command prints one line
         warn_if_unconverged(PROG, args.model)
     config = EpisodeConfig(episodes=args.episodes, steps=args.steps, seed=args.seed, gravity_mult=args.gravity_mult,
@@ -195,6 +200,8 @@ def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: 
         raise PigaError("--sweep compares the piga agent with the oracle: give --model RUN_DIR (without --oracle)")
     if args.goal_image or args.video:
         raise PigaError("--sweep runs upright swing-ups; it does not take --goal-image or --video")
+    if args.gravity_mult != EpisodeConfig.gravity_mult:
+        raise PigaError("--sweep sets the gravity multiplier of each job; drop --gravity-mult")
     try:
         multipliers = parse_range(args.sweep)
     except ValueError as exc:
@@ -203,9 +210,8 @@ def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: 
         raise PigaError(f"--sweep: gravity multipliers must be > 0, got {args.sweep}")
     if kind is RunKind.PIGA:
         model, _ = load_model(args.model)  # fail early, in this process, on a bad folder
+        check_pendulum_model(model, args.model)
         warn_if_unconverged(PROG, args.model)
-        if model.config.system != "pendulum":
-            raise PigaError(f"{args.model}: a {model.config.system} model cannot control the pendulum")
     jobs = [ControlJob(agent, EpisodeConfig(episodes=args.episodes, steps=args.steps, seed=args.seed, gravity_mult=m,
                                             goal_angle=mpc.goal_angle, torque_arrow=args.torque_arrow),
                        mpc, model_dir=args.model if agent != "oracle" else None)
@@ -310,6 +316,18 @@ def _baseline(args: argparse.Namespace, kind: RunKind, mpc: MPCConfig, outputs: 
             tmp.write_text(f"# {PROG}\n\nCommand: `{command_line(PROG, argv)}`\n\n{summary_markdown([result.summary])}")
         print(f"wrote {outputs[0]} and {outputs[1]}")
     return 0
+
+
+def check_pendulum_model(model: PhysicsModel, run_dir: str) -> None:
+    """Refuses a model that cannot plan for Gymnasium's pixel pendulum: another system's, or one trained on frames
+    of another rate (an imported recording): its physics would step another dt than the env's each frame."""
+    from envs.constants import PENDULUM_DT
+
+    if model.config.system != "pendulum":
+        raise PigaError(f"{run_dir}: a {model.config.system} model cannot control the pendulum")
+    if abs(model.config.dt - PENDULUM_DT) > 1e-9:
+        raise PigaError(f"{run_dir}: the model was trained on frames {model.config.dt:g} s apart, Gymnasium's pixel "
+                        f"pendulum steps {PENDULUM_DT:g} s; it can control only a system filmed at its own rate")
 
 
 def check_angle(flag: str, degrees: float) -> None:

@@ -24,6 +24,7 @@ from piga.cli.common import (ArgumentParser, Interrupted, PigaError, command_lin
                              run_cli, seed_int, thread_count)
 from piga.data.collect import CollectConfig, collect
 from piga.data.schema import inspect_dataset
+from piga.io.atomic import check_folder_target
 from piga.io.checkpoint import CHECKPOINT
 
 PROG = "piga-demo"
@@ -94,8 +95,7 @@ def build_parser() -> ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise PigaError(f"--out {out} is a file, not a folder")
+    check_folder_target(out)
     data, strip, run_dir = out / "pendulum.h5", out / "frames.png", out / "model"
     goal_png, control_md = out / "goal.png", out / "control.md"
     if not args.overwrite:
@@ -106,6 +106,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     check_angle("--goal-angle", args.goal_angle)
     collect_config = replace(CollectConfig(), sequences=args.sequences, seed=args.seed)  # checked before any folder
+    _check_enough_sequences(collect_config)
     outputs = (data, strip, run_dir / CHECKPOINT, goal_png, control_md)
     before = {path: path.exists() and path.stat().st_mtime_ns for path in outputs}
     try:
@@ -124,6 +125,23 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise Interrupted(f"{out} keeps {', '.join(kept)} from this demo; run it again with --overwrite to start "
                               "over") from None
         raise KeyboardInterrupt from None
+
+
+def _check_enough_sequences(config: CollectConfig) -> None:
+    """Refuses, before anything is collected, a --sequences whose train split holds fewer training windows than
+    the fast preset's one batch (piga-train-model would refuse the file, and piga-demo has no --batch-size)."""
+    from piga.data.collect import split_counts
+    from piga.training.train import PRESETS
+
+    recipe = PRESETS["fast"]
+    n_train = split_counts(config.sequences, config.split)[0]
+    per_sequence = max(0, config.steps - recipe.model.window + 1)
+    if n_train * per_sequence < recipe.train.batch_size:
+        least = next(n for n in range(config.sequences, 10**6)
+                     if split_counts(n, config.split)[0] * per_sequence >= recipe.train.batch_size)
+        raise PigaError(f"--sequences {config.sequences} gives {n_train} train sequences, {n_train * per_sequence} "
+                        f"training windows, fewer than one batch of {recipe.train.batch_size}; give --sequences {least} "
+                        "or more")
 
 
 def _run(args: argparse.Namespace, argv: Sequence[str] | None, out: Path, config: CollectConfig, data: Path, strip: Path,

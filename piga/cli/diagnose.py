@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from collections.abc import Sequence
 
-from piga.cli.common import (ArgumentParser, PigaError, command_line, nonnegative_int, positive_int, run_cli, seed_int,
+from piga.cli.common import (ArgumentParser, PigaError, command_line, int_up_to, nonnegative_int, run_cli, seed_int,
                              thread_count, warn_if_unconverged)
 
 PROG = "piga-diagnose"
@@ -22,8 +22,16 @@ def build_parser() -> ArgumentParser:
     p.add_argument("--env", metavar="EFFECTS",
                    help="the data come from a simulated real system with these effects (e.g. 'damping=0.2,delay=2', or "
                    "'none'): also run MPC on it with the nominal and with the corrected physics, and compare")
-    p.add_argument("--episodes", type=positive_int, default=5, help="MPC episodes per model with --env (default %(default)s)")
+    import inspect
+
+    from piga.control.closed_loop import compare_control
+    from piga.control.episodes import EpisodeConfig
     from piga.diagnostics.diagnose import DiagnoseConfig
+
+    episodes = inspect.signature(compare_control).parameters["episodes"].default
+    p.add_argument("--episodes", type=int_up_to(EpisodeConfig.MAX_EPISODES, "more would run for days"),
+                   help=f"MPC episodes per model with --env (default {episodes})")
+    p.set_defaults(default_episodes=episodes)
 
     d = DiagnoseConfig()
     p.add_argument("--bootstrap", type=nonnegative_int, default=d.bootstrap,
@@ -55,6 +63,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     # Everything is checked before any work, and the report folder is only created at the end
     # (atomically): a refusal leaves nothing behind.
     effects = _parse_env(args.env) if args.env is not None else None
+    if args.episodes is not None and effects is None:
+        raise PigaError("--episodes sets the MPC episodes of --env; without --env nothing is run, so drop it")
+    config = DiagnoseConfig(bootstrap=args.bootstrap, seed=args.seed, fit_starts=args.fit_starts,
+                            matched_angles=args.matched_angles)
     out = check_report_target(args.out, args.overwrite)
     inspect_dataset(args.data)  # schema errors first, with the file's name
     check_frames_have_signal(args.data)  # blank video: the diagnosis would divide by its zero variance
@@ -62,16 +74,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     model, ckpt = load_model(args.model)
     if model.config.system != "pendulum":
         raise PigaError(f"{args.model}: piga-diagnose is for pendulum models; this one is a {model.config.system} model")
+    if effects is not None:  # MPC on Gymnasium's pendulum with the model's physics
+        from piga.cli.control import check_pendulum_model
+
+        check_pendulum_model(model, args.model)
     import torch
 
     torch.set_num_threads(args.threads or max(1, min(2, torch.get_num_threads())))
-    config = DiagnoseConfig(bootstrap=args.bootstrap, seed=args.seed, fit_starts=args.fit_starts,
-                            matched_angles=args.matched_angles)
     diagnosis = diagnose(model, args.data, config, checkpoint=ckpt, progress=not args.quiet)
     if effects is not None:
         from piga.control.closed_loop import compare_control
 
-        diagnosis.control = compare_control(args.model, diagnosis, effects, episodes=args.episodes, seed=args.seed,
+        diagnosis.control = compare_control(args.model, diagnosis, effects, episodes=args.episodes or args.default_episodes,
+                                            seed=args.seed,
                                             progress=not args.quiet)
     report = write_report(diagnosis, out, args.model, args.data, command_line(PROG, argv), overwrite=args.overwrite)
     warn_if_unconverged(PROG, args.model)  # after the work: a refusal of the model stays the one line on stderr

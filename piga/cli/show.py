@@ -9,7 +9,7 @@ import numpy as np
 
 from piga.cli.common import ArgumentParser, positive_int, run_cli
 from piga.data.schema import SPLITS, check_actions_file, check_frames_have_signal, inspect_dataset, split_indices
-from piga.evaluation.plots import frame_strip, save_figure
+from piga.evaluation.plots import check_figure_target, frame_strip, save_figure
 
 PROG = "piga-show"
 
@@ -27,6 +27,7 @@ def build_parser() -> ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    check_figure_target(args.out, args.overwrite)
     info = inspect_dataset(args.data)
     check_frames_have_signal(args.data)  # a blank file, or a non-finite action, is named rather than drawn
     check_actions_file(args.data)

@@ -15,6 +15,7 @@ from piga.cli.common import (NOT_CONVERGED, ArgumentParser, Interrupted, PigaErr
                              add_preset_option, command_line, format_default, missing_folders, nonnegative_int,
                              positive_float, positive_int, remove_empty_folders, remove_outputs, run_cli, seed_int,
                              thread_count, unit_fraction)
+from piga.io.atomic import check_folder_target
 from piga.io.checkpoint import CHECKPOINT, require_piga_run
 
 #: The recipe options a user may give; each is a TrainConfig field of the same name.
@@ -102,8 +103,12 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     device = resolve_device(args.device)  # --device cuda without a GPU: one line, before anything is read
     run_dir = Path(args.out)
-    if run_dir.exists() and not run_dir.is_dir():
-        raise PigaError(f"--out {run_dir} is a file, not a folder")
+    check_folder_target(run_dir)
+    if args.data_loading == "memory" and args.stream_cache_mb is not None:
+        raise PigaError("--stream-cache-mb sizes the cache of --data-loading stream; --data-loading memory reads the "
+                        "frames whole, so drop one of them")
+    if args.resume and args.overwrite:
+        raise PigaError("--resume continues the run in --out and --overwrite replaces it; give one of them")
     existing = [name for name in OUTPUTS if (run_dir / name).exists()]
     has_checkpoint = (run_dir / CHECKPOINT).exists()
     if args.resume and not has_checkpoint:

@@ -19,7 +19,7 @@ import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 from tqdm.auto import tqdm
@@ -83,9 +83,16 @@ class EpisodeConfig(Scoring):
     of the sequence this seed gives, each with its own start and env seed, so a batch split across
     workers (:func:`piga.control.jobs.run_split`) runs the very episodes one process would."""
 
+    MAX_EPISODES: ClassVar[int] = 10_000
+    """Most episodes one run plays (each is a swing-up of seconds to minutes: more would run for days)."""
+    MAX_STEPS: ClassVar[int] = 100_000
+    """Most steps per episode (500 times Gymnasium's 200: one such episode already plans for many minutes)."""
+
     def __post_init__(self) -> None:
-        if self.episodes < 1:
-            raise ValueError(f"need at least 1 episode, got {self.episodes}")
+        if not 1 <= self.episodes <= self.MAX_EPISODES:
+            raise ValueError(f"episodes must be in [1, {self.MAX_EPISODES}], got {self.episodes}")
+        if self.steps > self.MAX_STEPS:
+            raise ValueError(f"steps must be at most {self.MAX_STEPS} per episode, got {self.steps}")
         if self.first_episode < 0:
             raise ValueError(f"first_episode must be >= 0, got {self.first_episode}")
         if self.hold_steps < 1 or self.steps < self.hold_steps:

@@ -101,6 +101,24 @@ class GoalEstimate:
 
 
 @torch.no_grad()
+def env_holdable_angle(gravity_mult: float = 1.0) -> float:
+    """:func:`holdable_angle` of the env's own physics at ``gravity_mult`` (rad)."""
+    return holdable_angle(PixelPendulumConfig(gravity_mult=gravity_mult).effective_gravity, PixelPendulumConfig.actuation_gain)
+
+
+def hold_warning(angle: float, gravity_mult: float = 1.0) -> str | None:
+    """One line when the goal ``angle`` (rad) cannot be held within the torque limit in the env at ``gravity_mult``
+    (judged with the env's own physics), else None."""
+    feasible = env_holdable_angle(gravity_mult)
+    if abs(math.sin(angle)) <= math.sin(feasible):
+        return None
+    config = PixelPendulumConfig(gravity_mult=gravity_mult)
+    needed = -config.effective_gravity * math.sin(angle) / (2 * config.actuation_gain)
+    return (f"goal {math.degrees(angle):.1f} deg needs torque {needed:+.2f} to hold, beyond the limit of {MAX_ACTION:g}; "
+            f"holdable goals are within ±{math.degrees(feasible):.1f} deg of upright (or of hanging down); the controller "
+            "will do its best")
+
+
 def read_goal(model: PhysicsModel, image: np.ndarray, g: float, a: float, mse_limit: float,
               gravity_mult: float = 1.0) -> GoalEstimate:
     """Encodes a goal image (uint8 (H, W)) and checks it.
@@ -121,16 +139,8 @@ def read_goal(model: PhysicsModel, image: np.ndarray, g: float, a: float, mse_li
     offset = model.physical_parameters().get("offset", 0.0)
     angle = math.remainder(float(coords[0, 0, 0, 0]) + offset, 2 * math.pi)
     hold = -g * math.sin(angle) / (2 * a)  # 1.5 g sin θ + 3 a u = 0
-    env_g, env_a = PixelPendulumConfig(gravity_mult=gravity_mult).effective_gravity, PixelPendulumConfig.actuation_gain
-    feasible = holdable_angle(env_g, env_a)
-    warnings = []
-    if abs(math.sin(angle)) > math.sin(feasible):
-        needed = -env_g * math.sin(angle) / (2 * env_a)
-        warnings.append(
-            f"goal {math.degrees(angle):.1f} deg needs torque {needed:+.2f} to hold, beyond the limit of {MAX_ACTION:g}; "
-            f"holdable goals are within ±{math.degrees(feasible):.1f} deg of upright (or of hanging down); the controller "
-            "will do its best"
-        )
+    feasible = env_holdable_angle(gravity_mult)
+    warnings = [w for w in (hold_warning(angle, gravity_mult),) if w is not None]
     if mse > mse_limit:
         warnings.append(
             f"the goal image does not look like the scene: the model re-renders it with MSE {mse:.4f} "

@@ -8,7 +8,6 @@ local processes or a Ray cluster), one torch thread each, and no worker outlives
 from __future__ import annotations
 
 import functools
-import sys
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any, Literal, Protocol
@@ -22,7 +21,7 @@ from piga.evaluation.episodes import EpisodeBatch
 from piga.io.checkpoint import RunKind
 from piga.world.model import PhysicsModel
 from piga.io.choices import check_choices
-from piga.io.runs import convergence_warning, load_model
+from piga.io.runs import load_model
 from piga.io.pool import Backend, run_pool
 
 
@@ -144,10 +143,7 @@ def run_jobs(jobs: Sequence[ControlJob], workers: int = 1, progress: bool = True
 
     On KeyboardInterrupt (Ctrl-C, or SIGTERM turned into it by :func:`piga.cli.common.run_cli`) the
     pool terminates its workers (Ray: cancels its tasks) before the exception propagates; a worker whose
-    parent is killed ends too.
+    parent is killed ends too. It prints nothing: the command that loaded the run warns once if it did not converge.
     """
-    for run_dir in dict.fromkeys(j.model_dir for j in jobs if j.model_dir is not None):  # once per run, in order
-        if (warning := convergence_warning(run_dir)) is not None:
-            print(warning, file=sys.stderr)
     return run_pool(functools.partial(run_job, keep_plan_ms=keep_plan_ms), jobs, workers, progress, desc="control jobs",
                     backend=backend)

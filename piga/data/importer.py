@@ -161,7 +161,8 @@ def read_actions(path: str | Path) -> np.ndarray:
     Raises:
         FileNotFoundError: no such file.
         ValueError: the file is empty, a value is not a finite number or beyond
-            ±:data:`piga.data.schema.MAX_ABS_ACTION` (the message gives the line), or the action column cannot be told.
+            ±:data:`piga.data.schema.MAX_ABS_ACTION` (the message gives the line), the action column cannot be told,
+            or a row has another number of columns than the first.
     """
     p = Path(path)
     if not p.is_file():
@@ -190,6 +191,10 @@ def read_actions(path: str | Path) -> np.ndarray:
     elif len(first) > 1:
         raise ValueError(f"{p}: {len(first)} columns and no header row; add a header that names the action column "
                          f"'u' or 'action'")
+    for number, row in rows:  # a ragged row: a stray separator, or a column shifted; which value is meant is unknown
+        if len(row) != len(first):
+            raise ValueError(f"{p}: line {number}: {len(row)} column(s), but line {first_number} has {len(first)}; give "
+                             "every row the same columns")
     values = np.empty(len(rows), np.float64)
     for i, (number, row) in enumerate(rows):
         cell = row[column] if column < len(row) else ""

@@ -67,7 +67,7 @@ import os
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from dataclasses import replace as dataclass_replace
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import torch
@@ -203,10 +203,16 @@ class DiagnoseConfig:
     camera: CameraConfig = field(default_factory=CameraConfig)
     """How the camera candidates (blur, shift, noise, dropped and delayed frames) are decided."""
 
+    MAX_BOOTSTRAP: ClassVar[int] = 10_000
+    """Most bootstrap replicates (20 by default)."""
+
     def __post_init__(self) -> None:
         if self.fit_horizon < 1 or self.stride < 1 or self.max_effects < 0 or self.bootstrap < 0 \
                 or self.reading_harmonics < 2 or self.beam < 1:
             raise ValueError(f"need fit_horizon, stride, beam >= 1, reading_harmonics >= 2 and max_effects, bootstrap >= 0, got {self}")
+        if self.bootstrap > self.MAX_BOOTSTRAP:
+            raise ValueError(f"bootstrap must be at most {self.MAX_BOOTSTRAP} replicates (each refits the chosen effects; "
+                             f"more would run for days), got {self.bootstrap}")
 
 
 #: Units of the candidates' parameters, from their terms (:mod:`piga.world.effects`). piga's engine is

@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from piga.io.atomic import atomic_output, check_writable_target, partial_path, write_json
+from piga.io.atomic import atomic_output, check_folder_target, check_writable_target, partial_path, write_json
 from piga.diagnostics.results import Diagnosis, VisionSummary
 from piga.diagnostics.twin import MEASURABLE_GAP
 from piga.evaluation.episodes import EpisodeSummary, summary_markdown
@@ -302,8 +302,7 @@ def check_report_target(out: str | os.PathLike[str], overwrite: bool) -> Path:
     none of :data:`REPORT_FILES` may be in it without ``overwrite``.
     """
     folder = Path(out)
-    if folder.exists() and not folder.is_dir():
-        raise NotADirectoryError(f"--out {folder} is a file, not a folder")
+    check_folder_target(folder)
     if folder.is_dir():
         for name in REPORT_FILES:
             check_writable_target(folder / name, overwrite)

@@ -44,6 +44,22 @@ def check_writable_target(path: str | os.PathLike[str], overwrite: bool) -> Path
     return target
 
 
+def check_folder_target(folder: str | os.PathLike[str], flag: str = "--out") -> Path:
+    """Fails early, before any work, if the output folder ``folder`` (given as ``flag``) cannot be made: it is a
+    file, or a file stands where one of its missing parents would go.
+
+    Raises:
+        NotADirectoryError: naming the file in the way.
+    """
+    path = Path(folder)
+    if path.exists() and not path.is_dir():
+        raise NotADirectoryError(f"{flag} {path} is a file, not a folder")
+    blocking = next((p for p in path.parents if p.exists()), None)
+    if blocking is not None and not blocking.is_dir():
+        raise NotADirectoryError(f"{flag} {path}: {blocking} is a file, not a folder, so {path} cannot be made there")
+    return path
+
+
 def partial_path(target: Path) -> Path:
     """The temporary sibling used while ``target`` is being written (unique per process)."""
     return target.with_name(f".{target.name}.partial-{os.getpid()}")

@@ -137,6 +137,10 @@ def read_checkpoint(run_dir: str | os.PathLike[str], kind: RunKind) -> dict[str,
 
 
 def unreadable(path: Path, kind: RunKind, exc: Exception) -> ValueError:
-    """The one-line error for a ``kind`` checkpoint that cannot be read: the file, and the first sentence of the cause."""
+    """The one-line error for a ``kind`` checkpoint that cannot be read: the file, and the first sentence of the cause
+    (for an entry it lacks, the entry: the file was written by something else, not cut short)."""
+    if isinstance(exc, KeyError) and exc.args:
+        return ValueError(f"{path}: not a {kind.label} checkpoint: it lacks the entry {exc.args[0]!r} that {kind.writer} "
+                          "writes; restore the run's own checkpoint, or train the run again with --overwrite")
     return ValueError(f"{path}: not a readable {kind.label} checkpoint ({exc.__class__.__name__}: {_first_sentence(exc)}); "
                       "it may be truncated (a full disk, an interrupted copy): restore it, or train the run again with --overwrite")
