@@ -102,6 +102,9 @@ def test_planet_reward_options_reach_the_run_and_resume_keeps_them(tiny_data: Pa
     code, _, err = run_in_process("piga-baseline", baseline.main, "planet", str(tiny_data), "--out", str(run), "--resume",
                                   "--reward-scale", "5", "--quiet", capsys=capsys)
     assert_one_line(code, err, "--resume keeps the run's recipe; drop --reward-scale")
+    code, _, err = run_in_process("piga-baseline", baseline.main, "planet", str(tiny_data), "--out", str(run), "--resume",
+                                  "--reward-alignment=frame", "--quiet", capsys=capsys)  # the default's value, given: refused too
+    assert_one_line(code, err, "--resume keeps the run's recipe; drop --reward-alignment")
 
 
 @pytest.mark.parametrize("args, needle", [

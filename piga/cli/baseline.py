@@ -8,11 +8,13 @@
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import dataclasses
 import json
 import math
 import os
+import sys
 from collections.abc import Iterator, Sequence
 from dataclasses import replace
 from pathlib import Path
@@ -204,14 +206,25 @@ RESUME_OPTIONS = {"planet": ("steps", "max_minutes", "rounds", "threads", "devic
                   "ddpg": ("steps", "threads", "device", "quiet")}
 
 
-def _refuse_recipe_changes(args: Any, record: dict[str, Any], run_dir: Path) -> None:
+def _given_options(kind: str, argv: Sequence[str]) -> set[str]:
+    """The destinations of the options written on the command line ``argv`` of subcommand ``kind``, even
+    where the value written is the default (the parsers take no abbreviations, so a flag is spelt whole)."""
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction)).choices[kind]
+    return {action.dest for action in sub._actions for flag in action.option_strings
+            if any(word == flag or word.startswith(flag + "=") for word in argv)}
+
+
+def _refuse_recipe_changes(args: Any, record: dict[str, Any], run_dir: Path, argv: Sequence[str] | None) -> None:
     """``--resume`` continues a run as it was started, as piga-train-model's does: refuses options
-    that would change its recipe (other than :data:`RESUME_OPTIONS`), and another data file."""
+    that would change its recipe (other than :data:`RESUME_OPTIONS`), given with any value, even the
+    default's, and another data file."""
     kind = args.baseline
     named = [kind, args.data, "--out", args.out] if kind == "planet" else [kind, "--obs", args.obs, "--out", args.out]
     defaults = vars(build_parser().parse_args(named))
-    skip = {"baseline", "data", "out", "obs", "algo", "resume", "overwrite", "iterative", *RESUME_OPTIONS[kind]}
-    changed = [name for name, value in vars(args).items() if name not in skip and value != defaults[name]]
+    skip = {"baseline", "data", "out", "obs", "algo", "resume", "overwrite", "iterative", "quiet", *RESUME_OPTIONS[kind]}
+    given = _given_options(kind, sys.argv[1:] if argv is None else argv)
+    changed = [name for name, value in vars(args).items()
+               if name not in skip and (value != defaults[name] or name in given)]
     if changed:
         raise PigaError(f"--resume keeps the run's recipe; drop {', '.join('--' + c.replace('_', '-') for c in changed)}")
     recorded = record.get("data")
@@ -286,7 +299,7 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
     if args.resume:
         _check_run_dir(run_dir, True, args.overwrite, RunKind.PLANET)
         record = _read_record(run_dir)
-        _refuse_recipe_changes(args, record, run_dir)
+        _refuse_recipe_changes(args, record, run_dir, argv)
         saved = _saved_config(run_dir, record, "train", PlanetTrainConfig, optional=("device",))  # older runs have none
         _refuse_fewer_steps(args.steps, saved.steps)
         config = replace(saved, steps=args.steps or saved.steps, max_minutes=args.max_minutes or saved.max_minutes,
@@ -440,7 +453,7 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
             raise PigaError(f"--resume: {run_dir} was trained with --obs {saved.obs}, not {args.obs}")
         if saved.algo != args.algo:
             raise PigaError(f"--resume: {run_dir} was trained with --algo {saved.algo}, not {args.algo}")
-        _refuse_recipe_changes(args, record, run_dir)
+        _refuse_recipe_changes(args, record, run_dir, argv)
         if saved.obs == "latent" and not (run_dir / AUTOENCODER).exists():
             raise PigaError(f"--resume: {run_dir / AUTOENCODER} is missing; the latent run cannot be continued without it")
         _refuse_fewer_steps(args.steps, saved.steps)
