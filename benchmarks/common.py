@@ -21,7 +21,7 @@ from piga.cli.common import PigaError, add_ray_option, connect_backend
 from piga.io.pool import Backend, BackendError, JobFailed
 from piga.io.worker_signals import die_with_parent
 
-__all__ = ["add_diagnose_options", "add_ray_option", "diagnose_options", "farm_main", "job_command", "machine",
+__all__ = ["add_diagnose_options", "add_ray_option", "diagnose_options", "farm_main", "job_command", "logged_command", "machine",
            "machine_words", "ray_backend"]
 
 Main = TypeVar("Main", bound=Callable[..., Any])
@@ -112,3 +112,13 @@ def job_command(command: list[str], **kwargs: Any) -> subprocess.CompletedProces
     into their clean interruption) when the process that runs the job ends. A job in a worker of the runner
     (which leaves Ctrl-C to the parent, and is terminated by it) would otherwise leave its command running."""
     return subprocess.run(command, preexec_fn=die_with_parent, **kwargs)
+
+
+def logged_command(command: list[str], log: Path) -> int:
+    """Runs a job's piga command as a user would (:func:`job_command`), its line and output appended to ``log``;
+    its exit status."""
+    log.parent.mkdir(parents=True, exist_ok=True)
+    with log.open("a") as f:
+        f.write("$ " + " ".join(command) + "\n")
+        f.flush()
+        return job_command(command, stdout=f, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL).returncode

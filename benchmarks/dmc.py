@@ -41,12 +41,11 @@ import argparse
 import functools
 import json
 import os
-import subprocess
 import sys
 from pathlib import Path
 from typing import NamedTuple
 
-from common import add_diagnose_options, add_ray_option, diagnose_options, farm_main, job_command, machine, ray_backend
+from common import add_diagnose_options, add_ray_option, diagnose_options, farm_main, logged_command, machine, ray_backend
 from piga.io.atomic import atomic_output, write_json
 from piga.io.pool import run_pool
 
@@ -75,10 +74,7 @@ PUBLISHED: list[dict[str, object]] = [
 
 def sh(*args: str, log: Path) -> None:
     """Runs a piga command as a user would; its output goes to ``log``; a failure raises (and stops the benchmark)."""
-    with log.open("a") as f:
-        f.write("$ " + " ".join(args) + "\n")
-        f.flush()
-        code = job_command(list(args), stdout=f, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL).returncode
+    code = logged_command(list(args), log)
     if code:
         raise RuntimeError(f"'{' '.join(args[:2])} ...' failed (exit {code}); see {log}")
 
