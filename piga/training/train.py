@@ -673,7 +673,9 @@ def train(
                 frames = batch.frames.to(device, non_blocking=cuda)  # uint8 (B, L+T, H, W[, C]); the model scales it
                 actions = batch.actions.to(device, non_blocking=cuda)  # (B, L+T, A)
                 out = model(frames, actions, pred_frames=max(horizon, 1))
-                loss = out.loss if horizon > 0 else cfg.alpha * out.loss_rec
+                # warm-up trains the autoencoder alone on α·L_rec; "pred-only" never trains on L_rec, so its
+                # warm-up steps predict one frame (the horizon's floor) instead
+                loss = out.loss if horizon > 0 or cfg.loss == "pred-only" else cfg.alpha * out.loss_rec
                 if not torch.isfinite(loss):
                     raise TrainingDiverged(f"loss became {loss.item()} at step {state.step} (epoch {state.epoch + 1}); "
                                            + _last_good(ckpt_path))
