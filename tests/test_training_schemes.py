@@ -133,6 +133,7 @@ def test_each_option_trains_is_recorded_and_kept_by_resume(flag: str, value: str
     field = flag[2:]
     code, stdout, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), flag, value, *SMALL, capsys=capsys)
     assert code in (0, 1, 3) and "epoch 1:" in stdout, err  # two steps: trained, whatever the verdict
+    assert ("no autoencoder warm-up" in stdout) == (value == "pred-only")
     metrics = json.loads((out / "metrics.json").read_text())
     assert metrics[field] == value and metrics["training"]["steps"] == 2
     assert json.loads((out / "config.json").read_text())["model"][field] == value

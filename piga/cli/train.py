@@ -212,7 +212,7 @@ def main(argv: Sequence[str] | None = None) -> int:
              else f"a {model_config.architecture} model (no physical parameters)")
     print(f"training on {args.data} ({info.split_counts['train']} train sequences x {info.steps} frames); "
           f"{start} -> {run_dir} (device {device})")
-    print(f"plan: {plan.describe(model_config.pred_frames, fresh.has_physics)}")
+    print(f"plan: {plan.describe(model_config.pred_frames, fresh.has_physics, model_config.loss != 'pred-only')}")
     if train_config.data_loading == "stream":
         print(f"reading: the frames are streamed from {args.data} through a {train_config.stream_cache_mb} MiB cache, in "
               "blocks of the sequences it holds")
