@@ -69,6 +69,16 @@ def build_parser() -> ArgumentParser:
                       "estimator and decoder with an Interaction Network in place of the physics. Both baselines train on "
                       "the same windows with the same loss and are evaluated alike, and have no physical parameters "
                       "(metrics.json says so; piga-control and piga-diagnose refuse their runs)")
+    choices = dict(literal_fields(ModelConfig))
+    add_preset_option(p, "--loss", choices=choices["loss"], default=ModelConfig().loss,
+                      help="training scheme (the paper's Table 2 ablation): 'joint', L_pred + alpha L_rec into every part; "
+                      "'pred-only', L_pred alone (no autoencoder loss, no autoencoder warm-up); 'separate', the encoder "
+                      "and decoder learn from L_rec only, the velocity estimator and the physics from L_pred only. Not "
+                      "with --model video-lstm, except 'pred-only'")
+    add_preset_option(p, "--decoder", choices=choices["decoder"], default=ModelConfig().decoder,
+                      help="'st': the coordinate-consistent spatial-transformer decoder; 'mlp': the paper's black-box "
+                      "decoder ablation, an MLP from the objects' coordinates to the frame (no templates.png). Not with "
+                      "--model video-lstm")
     p.add_argument("--signed-actuation", action="store_true",
                    help="learn the sign of a too (a in linear space, from +0.3): for a camera on the other side of the "
                    "hinge or a motor wired the other way, which flip the actuation the frames show")
@@ -132,9 +142,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.resume:  # the run's own recipe and data; only the length and the budget may change
         require_piga_run(run_dir, "--resume continues a training run of the world model")
         saved_model, ckpt = load_model(run_dir, any_model=True)
-        if args.model is not None and args.model != saved_model.config.architecture:
-            raise PigaError(f"--resume continues the run's own model ({saved_model.config.architecture}); drop --model "
-                            f"{args.model}, or train a new run in another --out")
+        for flag, given, own in (("--model", args.model, saved_model.config.architecture),
+                                 ("--loss", args.loss, saved_model.config.loss),
+                                 ("--decoder", args.decoder, saved_model.config.decoder)):
+            if given is not None and given != own:
+                raise PigaError(f"--resume continues the run's own {flag[2:]} ({own}); drop {flag} {given}, or train "
+                                "a new run in another --out")
         data = ckpt["data"]
         if tuple(data["image_shape"]) != info.image_shape or data["system"] != info.system:
             raise PigaError(f"--resume: {args.data} ({info.system}, {info.image_shape}) does not match the run's data "
@@ -167,8 +180,12 @@ def main(argv: Sequence[str] | None = None) -> int:
                                seed_retries=args.seed_retries, **overrides, **reading)  # explicit options win
         train_config = resolve_loading(train_config, info)  # as the run records it
         model_config = model_config_for(info, recipe.model)
-        if args.model is not None:
-            model_config = replace(model_config, architecture=args.model)
+        chosen = {field: value for field, value in (("architecture", args.model), ("loss", args.loss),
+                                                    ("decoder", args.decoder)) if value is not None}
+        try:
+            model_config = replace(model_config, **chosen)
+        except ValueError as exc:  # a choice another one excludes (video-lstm with --loss separate)
+            raise PigaError(str(exc)) from None
         for flag, option, value in (("--signed-actuation", "signed_actuation", args.signed_actuation or None),
                                     ("--fixed-g", "fixed_g", args.fixed_g)):
             if value is not None:
@@ -195,7 +212,7 @@ def main(argv: Sequence[str] | None = None) -> int:
              else f"a {model_config.architecture} model (no physical parameters)")
     print(f"training on {args.data} ({info.split_counts['train']} train sequences x {info.steps} frames); "
           f"{start} -> {run_dir} (device {device})")
-    print(f"plan: {plan.describe(model_config.pred_frames, fresh.has_physics)}")
+    print(f"plan: {plan.describe(model_config.pred_frames, fresh.has_physics, model_config.loss != 'pred-only')}")
     if train_config.data_loading == "stream":
         print(f"reading: the frames are streamed from {args.data} through a {train_config.stream_cache_mb} MiB cache, in "
               "blocks of the sequences it holds")
@@ -205,8 +222,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     written: list[int] = []
     if args.overwrite and not args.resume and (run_dir / "tensorboard").is_dir():
         shutil.rmtree(run_dir / "tensorboard")  # the replaced run's curves, which the new run's would join
-    if args.overwrite and not args.resume and not fresh.has_objects:
-        (run_dir / "templates.png").unlink(missing_ok=True)  # the replaced run's; a model without objects draws none
+    if args.overwrite and not args.resume and not fresh.has_templates:
+        (run_dir / "templates.png").unlink(missing_ok=True)  # the replaced run's; a model without templates draws none
 
     def on_epoch(state: Any, model: Any) -> None:  # the first checkpoint of this command: the record goes with it
         if not written:

@@ -141,6 +141,8 @@ def evaluate(model: FrameModel, data: str | Path, config: EvalConfig = EvalConfi
         "data": str(data),
         "split": config.split,
         "model": cfg.architecture,
+        "loss": cfg.loss,
+        "decoder": cfg.decoder,
         "sequences": int(len(frames)),
         "input_frames": cfg.input_frames,
         "pred_frames": n_pred,

@@ -29,7 +29,7 @@ def write_run_report(model: FrameModel, state: TrainState, data: str | Path, run
                      eval_config: EvalConfig = EvalConfig()) -> dict[str, Any]:
     """Evaluates on held-out data and writes metrics.json, rollout.png, templates.png and curves.png.
 
-    A model without object coordinates (video-lstm) has no templates to draw (no templates.png) and no objects
+    A model without object coordinates (video-lstm) or with the black-box MLP decoder has no templates to draw (no templates.png) and no objects
     to check; a model without physical parameters has only its losses in curves.png.
 
     For a run that recorded its plan, metrics.json also holds the convergence check
@@ -66,7 +66,7 @@ def write_run_report(model: FrameModel, state: TrainState, data: str | Path, run
     truth = frames_to_float(torch.from_numpy(frames[:, cfg.input_frames : cfg.input_frames + steps]), cfg.channels).numpy()
     to_img = lambda a: np.stack([[_image(f) for f in seq] for seq in a])  # noqa: E731
     save_figure(rollout_figure(to_img(truth), to_img(pred), cfg.input_frames, cfg.pred_frames), run_dir / "rollout.png")
-    if isinstance(model, ObjectModel):
+    if isinstance(model, ObjectModel) and model.has_templates:
         save_figure(templates_figure(*_templates(model)), run_dir / "templates.png")
     true = {PARAMETER_NAMES[k]: float(v) for k, v in info.params.items() if k in PARAMETER_NAMES}
     if state.history:

@@ -198,11 +198,14 @@ class TrainPlan:
         """Optimiser steps planned."""
         return self.epochs * self.steps_per_epoch
 
-    def describe(self, pred_frames: int, physics: bool = True) -> str:
+    def describe(self, pred_frames: int, physics: bool = True, autoencoder: bool = True) -> str:
         """One line, e.g. "5400 steps = 16 epochs x 337 steps (10800 windows); warm-up 216, curriculum 594 (T 1->10), average of the last 337"
-        (no average for a model without physical parameters, ``physics`` False)."""
+        (no average for a model without physical parameters, ``physics`` False; ``autoencoder`` False, a run that
+        never trains on L_rec (``ModelConfig.loss`` "pred-only"): its warm-up steps predict one frame)."""
+        warmup = (f"autoencoder warm-up {self.warmup_steps} steps" if autoencoder
+                  else f"no autoencoder warm-up (its {self.warmup_steps} steps predict 1 frame)")
         return (f"{self.total_steps} steps = {self.epochs} epoch{'s' if self.epochs != 1 else ''} x {self.steps_per_epoch} "
-                f"steps ({self.windows} windows); autoencoder warm-up {self.warmup_steps} steps, curriculum "
+                f"steps ({self.windows} windows); {warmup}, curriculum "
                 f"{self.curriculum_steps} steps (T_pred 1 -> {pred_frames})"
                 + (f", parameters averaged over the last {self.average_steps}" if self.average_steps and physics else "")
                 + (f"; a checkpoint every {self.checkpoint_every} epochs" if self.checkpoint_every > 1 else ""))
@@ -673,7 +676,9 @@ def train(
                 frames = batch.frames.to(device, non_blocking=cuda)  # uint8 (B, L+T, H, W[, C]); the model scales it
                 actions = batch.actions.to(device, non_blocking=cuda)  # (B, L+T, A)
                 out = model(frames, actions, pred_frames=max(horizon, 1))
-                loss = out.loss if horizon > 0 else cfg.alpha * out.loss_rec
+                # warm-up trains the autoencoder alone on α·L_rec; "pred-only" never trains on L_rec, so its
+                # warm-up steps predict one frame (the horizon's floor) instead
+                loss = out.loss if horizon > 0 or cfg.loss == "pred-only" else cfg.alpha * out.loss_rec
                 if not torch.isfinite(loss):
                     raise TrainingDiverged(f"loss became {loss.item()} at step {state.step} (epoch {state.epoch + 1}); "
                                            + _last_good(ckpt_path))

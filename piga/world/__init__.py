@@ -7,5 +7,5 @@ differentiable physics engine with a few interpretable parameters steps the stat
 (:mod:`.decoder`). :mod:`.model` assembles the four into one ``PhysicsModel``. The baselines it is
 compared with, without physical parameters, are :mod:`.video_lstm` (a black-box frame predictor) and
 :mod:`.interaction` (an Interaction Network in place of the physics); :mod:`.variants` builds each by
-name. Nothing here reads files, trains, or knows about agents.
+name. :mod:`.mlp_decoder` is the black-box decoder of the paper's decoder ablation. Nothing here reads files, trains, or knows about agents.
 """

@@ -33,6 +33,7 @@ from torch import Tensor, nn
 from piga.io.choices import check_choices
 from piga.world.decoder import Decoder, DecoderConfig
 from piga.world.encoder import Encoder, EncoderConfig
+from piga.world.mlp_decoder import MLPDecoder
 from piga.world.physics import SYSTEMS, System, SystemOptions, hold_velocity, make_integrator, rollout
 from piga.world.velocity import VelocityConfig, VelocityEstimator
 
@@ -60,6 +61,16 @@ class ModelConfig:
     decoder); "video-lstm", a black-box frame predictor (:mod:`piga.world.video_lstm`); "in-ig", piga's
     encoder, velocity estimator and decoder with an Interaction Network in place of the physics
     (:mod:`piga.world.interaction`). The two baselines have no physical parameters."""
+    loss: Literal["joint", "pred-only", "separate"] = "joint"
+    """Training scheme (the paper's Table 2 ablation): "joint", L_pred + α·L_rec into every part; "pred-only",
+    L_pred alone (L_rec is still measured, never trained on, and there is no autoencoder warm-up);
+    "separate", L_pred + α·L_rec with the gradients split: the encoder and decoder learn from L_rec only,
+    the velocity estimator and what rolls the states forward (the physics) from L_pred only
+    (:meth:`ObjectModel.forward` says where the gradient is stopped). Not for video-lstm, which has no such parts."""
+    decoder: Literal["st", "mlp"] = "st"
+    """Decoder of object coordinates to frames: "st", the coordinate-consistent spatial-transformer decoder
+    (:mod:`piga.world.decoder`); "mlp", the paper's black-box decoder ablation (:mod:`piga.world.mlp_decoder`),
+    an MLP from the objects' coordinates to the frame. Not for video-lstm, which has its own decoder."""
     physics_init: dict[str, float] = field(default_factory=dict)
     """Initial physical parameters (empty: the system's far-from-truth defaults)."""
     system_options: SystemOptions | None = None
@@ -142,7 +153,10 @@ class ModelConfig:
     def __post_init__(self) -> None:
         if self.system not in SYSTEM_SHAPES:
             raise ValueError(f"unknown system {self.system!r}; known: {sorted(SYSTEM_SHAPES)}")
-        check_choices(self)  # architecture, rec_frames, integrator, readout
+        check_choices(self)  # architecture, loss, decoder, rec_frames, integrator, readout
+        if self.architecture == "video-lstm" and (self.loss == "separate" or self.decoder != "st"):
+            raise ValueError("video-lstm has no separate encoder/decoder and dynamics to train apart, nor an object "
+                             "decoder to replace: it takes loss 'joint' or 'pred-only' and decoder 'st'")
         if self.extrapolate_frames < 0:
             raise ValueError(f"extrapolate_frames must be >= 0, got {self.extrapolate_frames}")
         if self.input_frames < 2 or self.pred_frames < 1:
@@ -249,7 +263,8 @@ class ModelOutput(NamedTuple):
 def prediction_losses(config: ModelConfig, x: Tensor, pred: Tensor, rec: Tensor, training: bool) -> tuple[Tensor, Tensor, Tensor]:
     """(loss, loss_pred, loss_rec) of a window, the same for every model: L_pred the per-frame MSE of
     the predicted frames summed over them (trimmed in training by ``pred_trim``), L_rec the same of the
-    reconstructed ones, and loss = L_pred + α·L_rec.
+    reconstructed ones, and loss = L_pred + α·L_rec, or L_pred alone when ``config.loss`` is "pred-only"
+    (L_rec is then reported, not trained on).
 
     Args:
         x: (B, L+T, C, H, W) the window's frames in [0, 1].
@@ -261,6 +276,8 @@ def prediction_losses(config: ModelConfig, x: Tensor, pred: Tensor, rec: Tensor,
     per_window = F.mse_loss(pred, x[:, ell:], reduction="none").mean(dim=(2, 3, 4)).sum(1)  # (B,)
     drop = int(round(config.pred_trim * per_window.shape[0])) if training else 0
     loss_pred = per_window.sort().values[: per_window.shape[0] - drop].mean() if drop else per_window.mean()
+    if config.loss == "pred-only":
+        return loss_pred, loss_pred, loss_rec.detach()
     return loss_pred + config.alpha * loss_rec, loss_pred, loss_rec
 
 
@@ -313,6 +330,8 @@ class FrameModel(nn.Module):
     has_physics: ClassVar[bool] = False
     #: Whether the model encodes frames to object coordinates and renders them (``encode``, ``decoder``).
     has_objects: ClassVar[bool] = False
+    #: Whether its decoder draws learned object templates (templates.png): the spatial-transformer decoder.
+    has_templates: bool = False
     config: ModelConfig
 
     def physics_parameters(self) -> list[nn.Parameter]:
@@ -383,10 +402,15 @@ class ObjectModel(FrameModel):
                                                          correction=config.velocity_correction))
 
     def _add_decoder(self, n: int, d: int) -> None:
-        """The decoder, registered after the dynamics (the order of a piga checkpoint's parameters)."""
+        """The decoder of ``config.decoder``, registered after the dynamics (the order of a piga checkpoint's parameters)."""
         cfg = self.config
-        self.decoder = Decoder(DecoderConfig(cfg.image_size, cfg.channels, n, d, hidden=cfg.template_hidden,
-                                             template_size=cfg.template_size or None, init_scale=cfg.init_scale))
+        self.has_templates = cfg.decoder == "st"
+        self.decoder: Decoder | MLPDecoder
+        if cfg.decoder == "mlp":
+            self.decoder = MLPDecoder(cfg.image_size, cfg.channels, n, d, hidden=cfg.template_hidden)
+        else:
+            self.decoder = Decoder(DecoderConfig(cfg.image_size, cfg.channels, n, d, hidden=cfg.template_hidden,
+                                                 template_size=cfg.template_size or None, init_scale=cfg.init_scale))
 
     def background_image(self) -> Tensor:
         return self.encoder.background
@@ -424,14 +448,32 @@ class ObjectModel(FrameModel):
         return self.decoder(coords), coords
 
     def forward(self, frames: Tensor, actions: Tensor, pred_frames: int | None = None) -> ModelOutput:
+        """See :meth:`FrameModel.forward`. With ``config.loss == "separate"`` the gradient of L_pred is stopped
+        at two places, so that it reaches the velocity estimator and the dynamics only:
+
+        1. the input coordinates of the prediction are detached from the encoder (``coords[:, :L].detach()``):
+           L_pred does not move the encoder, while the velocity estimator and the physics that follow get it;
+        2. the predicted frames are drawn by the decoder with its parameters detached
+           (``torch.func.functional_call`` with ``p.detach()`` for each): the gradient still flows through the
+           rendering into the predicted coordinates, hence into the physics, but not into the decoder's parameters.
+
+        L_rec reaches the encoder and decoder as in "joint"; it never reaches the velocity estimator or the
+        physics, which it does not use.
+        """
         cfg = self.config
         ell = cfg.input_frames
+        separate = cfg.loss == "separate"
         x, t_pred, acts = window_inputs(cfg, frames, actions, pred_frames)  # x (B, L+T, C, H, W)
         coords = self.encode(x if cfg.rec_frames == "all" else x[:, :ell])  # (B, L+T or L, N, D)
         after, last = _split_actions(cfg, acts)  # (B, T, A), (B, A)
-        coords_pred = self.predict(coords[:, :ell], after, t_pred, last)  # (B, T, N, D)
+        given = coords[:, :ell].detach() if separate else coords[:, :ell]  # (B, L, N, D); stop 1
+        coords_pred = self.predict(given, after, t_pred, last)  # (B, T, N, D)
         rec = self.decoder(coords)  # (B, L+T or L, C, H, W)
-        pred = self.decoder(coords_pred)  # (B, T, C, H, W)
+        if separate:  # stop 2: the decoder's parameters as constants, its input still differentiable
+            frozen = {name: p.detach() for name, p in self.decoder.named_parameters()}
+            pred = torch.func.functional_call(self.decoder, frozen, (coords_pred,))  # (B, T, C, H, W)
+        else:
+            pred = self.decoder(coords_pred)  # (B, T, C, H, W)
         loss, loss_pred, loss_rec = prediction_losses(cfg, x, pred, rec, self.training)
         return ModelOutput(loss, loss_pred, loss_rec, x, pred, rec, coords, coords_pred)
 
