@@ -76,7 +76,7 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from common import add_ray_option, farm_main, machine, ray_backend
+from common import add_ray_option, farm_main, machine, ray_backend, signed as _num
 
 from agents.planet.config import PlanetTrainConfig
 from piga.io.atomic import atomic_output, write_json
@@ -714,11 +714,6 @@ def agent_label(key: str) -> str:
         return AGENT_LABELS[key]
     algo, obs = key.split("-")
     return f"{algo.upper()} from {OBS_LABELS[obs]}"
-
-
-def _num(x: float, digits: int = 1) -> str:
-    """A number with a typographic minus, as the README writes them."""
-    return f"{x:.{digits}f}".replace("-", "\u2212")
 
 
 def _per_seed(values: list[float | None]) -> str:

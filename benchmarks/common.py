@@ -22,7 +22,7 @@ from piga.io.pool import Backend, BackendError, JobFailed
 from piga.io.worker_signals import die_with_parent
 
 __all__ = ["add_diagnose_options", "add_ray_option", "diagnose_options", "farm_main", "job_command", "logged_command", "machine",
-           "machine_words", "ray_backend"]
+           "machine_words", "ray_backend", "signed"]
 
 Main = TypeVar("Main", bound=Callable[..., Any])
 
@@ -45,6 +45,11 @@ def machine() -> dict[str, object]:
     # "AMD EPYC" names several generations, of different speeds (family 23 model 1 is Zen 1); family/model tells them apart
     return {"cpu": cpu, "cpu_family_model": f"{family}/{model}", "cores": os.cpu_count(), "torch_threads": torch.get_num_threads(), "torch": torch.__version__,
             "python": platform.python_version(), "platform": platform.platform()}
+
+
+def signed(x: float, digits: int = 1) -> str:
+    """A number with a typographic minus, as the README and the results pages write them."""
+    return f"{x:.{digits}f}".replace("-", "\u2212")
 
 
 def machine_words(m: dict[str, object]) -> str:

@@ -19,7 +19,9 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from common import machine_words
+from common import machine_words, signed
+
+from agents.sb3.train import first_step_reaching
 from piga.io.atomic import atomic_output
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -43,19 +45,16 @@ def row(record: dict[str, Any]) -> str:
     evaluation returns (EvalCallback's), its training time and where it ran."""
     spec, metrics = record["spec"], record["metrics"]
     curve = metrics["learning_curve"]  # [{step, eval_mean_return, seconds}, ...] every eval_every steps
-    first = next((p["step"] for p in curve if p["eval_mean_return"] >= SOLVED_RETURN), None)
+    first = first_step_reaching(curve, SOLVED_RETURN)
     best = max(curve, key=lambda p: p["eval_mean_return"])
     minutes = f"{metrics['train_seconds'] / 60:.1f}"
     if metrics.get("autoencoder_train_seconds"):
         minutes += f" (+ {metrics['autoencoder_train_seconds'] / 60:.1f} autoencoder)"
     m = record["machine"]
     where = f"{m['cpu']} {m['cpu_family_model']}, {m['torch_threads']} thread{'s' if m['torch_threads'] != 1 else ''}"
-    def ret(x: float) -> str:
-        return f"{x:.1f}".replace("-", "\u2212")
-
     return (f"| `{spec['name']}` | {metrics['algo'].upper()} | {spec['obs']} | {spec['seed']} | {spec['steps'] // 1000}k | "
-            f"{f'{first // 1000}k' if first is not None else 'never'} | {ret(best['eval_mean_return'])} ({best['step'] // 1000}k) | "
-            f"{ret(curve[-1]['eval_mean_return'])} | {minutes} | {where} |")
+            f"{f'{first // 1000}k' if first is not None else 'never'} | {signed(best['eval_mean_return'])} ({best['step'] // 1000}k) | "
+            f"{signed(curve[-1]['eval_mean_return'])} | {minutes} | {where} |")
 
 
 def table(records: list[dict[str, Any]]) -> str:
