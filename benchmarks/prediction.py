@@ -111,11 +111,13 @@ def train_job(job: Job) -> dict[str, Any]:
     """A job of the runner: trains ``job`` with ``piga-train-model`` and returns its record's fields (the scores that
     ``piga-train-model`` wrote to metrics.json, its exit status, minutes and machine)."""
     metrics_path = job.run_dir / "metrics.json"
+    # The command replaces the run (--overwrite); a stale metrics.json goes first so that one left behind is this
+    # run's (file times come from a coarser clock than time.time() and cannot tell a fresh file from a stale one).
+    metrics_path.unlink(missing_ok=True)
     started = time.time()
     log = job.run_dir.parent / f"{job.name}.log"
     code = logged_command(train_command(job), log)
-    fresh = metrics_path.exists() and metrics_path.stat().st_mtime >= started
-    if code not in RUN_EXITS or not fresh:
+    if code not in RUN_EXITS or not metrics_path.exists():
         raise RuntimeError(f"'piga-train-model --model {job.model}' failed (exit {code}); see {log}")
     m = json.loads(metrics_path.read_text())
     print(f"{job.name}: SSIM prediction {m['frame_ssim_mean']['prediction']:.3f}, extrapolation "

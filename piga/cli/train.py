@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import shutil
 import sys
-import time
 from collections.abc import Sequence
 from dataclasses import asdict, replace
 from pathlib import Path
@@ -233,7 +232,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     tried: list[int] = []  # seeds whose run lost an object and was trained again
     missing = missing_folders(run_dir)  # what train() makes at its first checkpoint
     while True:
-        started = time.time()
+        # the checkpoint as it was before this try (saves replace the file, so a new one has a new identity; file
+        # times alone come from a coarser clock than time.time())
+        before = _identity(run_dir / CHECKPOINT)
         try:
             model, state = train(args.data, run_dir, train_config, model_config, resume=args.resume,
                                  progress=not args.quiet, on_epoch=on_epoch)
@@ -241,7 +242,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise PigaError(f"training diverged: {exc}") from None
         except KeyboardInterrupt:
             checkpoint = run_dir / CHECKPOINT
-            if not written and checkpoint.exists() and checkpoint.stat().st_mtime >= started:
+            if not written and checkpoint.exists() and _identity(checkpoint) != before:
                 # interrupted between this command's first checkpoint and its on_epoch: the record goes with it
                 write_json(run_dir / "config.json", record)
                 written.append(_saved_epoch(run_dir))
@@ -303,6 +304,16 @@ def _read_record(run_dir: Path) -> dict[str, Any]:
     except (OSError, ValueError):
         return {}
     return record if isinstance(record, dict) else {}
+
+
+def _identity(path: Path) -> tuple[int, int] | None:
+    """A file's inode and time in ns, or None when it is missing: a checkpoint saved since differs (saves are atomic
+    replaces, so a new file has a new inode)."""
+    try:
+        st = path.stat()
+    except FileNotFoundError:
+        return None
+    return st.st_ino, st.st_mtime_ns
 
 
 def _saved_epoch(run_dir: Path) -> int:
