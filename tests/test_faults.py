@@ -848,6 +848,26 @@ def test_train_resume_tells_a_moved_file_from_another_of_the_same_shape(tiny_pig
     assert code in (0, NOT_CONVERGED), err  # resumed and trained: a tiny run is too short to be judged converged
 
 
+def test_train_resume_without_its_record_says_it_rebuilds_it(tiny_piga_run: Path, tiny_data: Path, tmp_path: Path,
+                                                              capsys: pytest.CaptureFixture[str]) -> None:
+    """The checkpoint holds the recipe and the model, so a lost config.json does not stop a resume; the rebuilt
+    record says that the first command is unknown, and so does one line on stderr."""
+    import json
+
+    from tests.helpers import run_in_process
+    from piga.cli import train as cli
+    from piga.cli.common import NOT_CONVERGED
+
+    run = _run_copy(tiny_piga_run, tmp_path / "a")
+    assert not (run / "config.json").exists()  # a run trained through the library has none
+    code, _, err = run_in_process("piga-train-model", cli.main, str(tiny_data), "--out", str(run), "--resume",
+                                  "--epochs", "2", "--quiet", capsys=capsys)
+    assert code in (0, NOT_CONVERGED), err
+    assert "config.json is missing; it is rewritten from the checkpoint" in err
+    record = json.loads((run / "config.json").read_text())
+    assert record["command"] is None and len(record["resumed"]) == 1 and record["train"]["epochs"] == 2
+
+
 # ---------------------------------------------------------------------------------------------
 # Options a command would ignore, work it would never finish, and outputs it cannot make
 # ---------------------------------------------------------------------------------------------

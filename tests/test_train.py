@@ -436,3 +436,14 @@ def test_cli_interrupted_right_after_its_first_checkpoint_keeps_it_with_its_reco
     code, _, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), "--resume", "--epochs", "2",
                                   "--quiet", capsys=capsys)
     assert code in FINISHED, err
+
+
+@pytest.mark.parametrize("text, said", [(None, None), ('{"converged": true}', None), ("{trunc", "cannot be read"),
+                                        ("[1, 2]", "not a metrics record")])
+def test_an_unreadable_metrics_record_is_said_not_skipped(tmp_path: Path, text: str | None, said: str | None) -> None:
+    from piga.io.runs import convergence_warning
+
+    if text is not None:
+        (tmp_path / "metrics.json").write_text(text)
+    warning = convergence_warning(tmp_path)
+    assert warning is None if said is None else said in warning and "unknown" in warning and "\n" not in warning

@@ -296,14 +296,22 @@ def _start_values(model: Any) -> str:
 
 
 def _read_record(run_dir: Path) -> dict[str, Any]:
-    """The run's config.json, or an empty record if it is missing or unreadable."""
+    """The run's config.json. When it is missing or unreadable, a record rebuilt from the checkpoint (which holds the
+    recipe and the model: config.json only records them) whose first command is unknown, with a note saying so."""
     import json
 
     try:
         record = json.loads((run_dir / "config.json").read_text())
-    except (OSError, ValueError):
-        return {}
-    return record if isinstance(record, dict) else {}
+        if isinstance(record, dict):
+            return record
+        why = "is not a run record"
+    except FileNotFoundError:
+        why = "is missing"
+    except (OSError, ValueError) as exc:
+        why = f"cannot be read ({type(exc).__name__})"
+    print(f"{PROG}: note: {run_dir / 'config.json'} {why}; it is rewritten from the checkpoint, without the command "
+          "that started the run", file=sys.stderr)
+    return {"command": None}
 
 
 def _identity(path: Path) -> tuple[int, int] | None:

@@ -38,7 +38,7 @@ def check_writable_target(path: str | os.PathLike[str], overwrite: bool) -> Path
         blocking = next((p for p in (folder, *folder.parents) if p.exists()), None)
         if blocking is not None and not blocking.is_dir():
             raise NotADirectoryError(f"{blocking} is a file, not a folder, so {target} cannot be written there")
-        raise FileNotFoundError(f"folder {folder} does not exist")
+        raise FileNotFoundError(f"folder {folder} does not exist; make it first (mkdir -p {folder})")
     if not os.access(folder, os.W_OK | os.X_OK):
         raise PermissionError(f"folder {folder} is not writable")
     return target

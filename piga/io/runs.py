@@ -92,15 +92,20 @@ def convergence_warning(run_dir: str | os.PathLike[str]) -> str | None:
 
     Every command and benchmark that reads a run prints it, so a run that did not identify its
     parameters cannot pass unnoticed. A run without the record (an older run, or one still training)
-    gives None.
+    gives None; a record that cannot be read gives a line saying that its convergence is unknown.
     """
     import json
 
+    path = Path(run_dir) / "metrics.json"
     try:
-        metrics = json.loads((Path(run_dir) / "metrics.json").read_text())
-    except (OSError, ValueError):
+        metrics = json.loads(path.read_text())
+    except FileNotFoundError:
         return None
-    if not isinstance(metrics, dict) or metrics.get("converged", True) is not False:
+    except (OSError, ValueError) as exc:
+        return f"warning: {path} cannot be read ({type(exc).__name__}); whether the run converged is unknown"
+    if not isinstance(metrics, dict):
+        return f"warning: {path} is not a metrics record; whether the run converged is unknown"
+    if metrics.get("converged", True) is not False:
         return None
     reason = (metrics.get("convergence") or {}).get("reason", "no reason recorded")
     return f"warning: the run {run_dir} did not converge: {reason}"
