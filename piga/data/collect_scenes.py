@@ -57,6 +57,9 @@ class SceneCollectConfig:
 
     def __post_init__(self) -> None:
         check_collect_sizes(self.sequences, self.steps, self.workers, self.seed, self.batch, self.split)
+        if self.scene.half and self.steps <= self.scene.half_frames:
+            raise ValueError(f"half data need more than {self.scene.half_frames} frames per sequence (the test "
+                             f"sequences go down after them), got {self.steps}")
 
 
 def _one(n: int, scene: SceneConfig, seed: int, steps: int, first_test: int) -> tuple[np.ndarray, np.ndarray]:
