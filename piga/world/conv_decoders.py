@@ -87,8 +87,10 @@ class BroadcastDecoder(nn.Module):
         for k in kernels[:-1]:
             convs += [nn.Conv2d(inputs, width, k, 1, k // 2), nn.ReLU()]
             inputs = width
-        convs.append(nn.Conv2d(inputs, channels + 1, kernels[-1], 1, kernels[-1] // 2))  # colour and mask logits
-        self.convs = nn.Sequential(*convs)
+        last = nn.Conv2d(inputs, channels + 1, kernels[-1], 1, kernels[-1] // 2)  # colour and mask logits
+        with torch.no_grad():  # objects start faint (mask logit -4 against the background's 0): frames are mostly background
+            last.bias[channels] = -4.0
+        self.convs = nn.Sequential(*convs, last)
         self.background_logit = nn.Parameter(torch.zeros(channels, image_size, image_size))
         self.background_mask_logit = nn.Parameter(torch.zeros(1, image_size, image_size))
 
