@@ -30,9 +30,8 @@ from pathlib import Path
 from typing import Any, get_args, get_type_hints
 
 import numpy as np
-from common import add_ray_option, farm_main, logged_command, machine, machine_words, ray_backend
+from common import add_training_options, farm_main, logged_command, machine, machine_words, ray_backend
 
-from piga.cli.common import positive_int
 from piga.io.atomic import atomic_output, write_json
 from piga.io.pool import JobRecords, RecordedJob, run_recorded
 from piga.world.model import ModelConfig
@@ -125,6 +124,24 @@ def strip_choice(data: Path, input_frames: int, pred_frames: int) -> tuple[int, 
     steps = np.flatnonzero(occupied[sequence]) + pred_frames
     picked = steps[np.linspace(0, len(steps) - 1, min(STRIP_FRAMES, len(steps))).round().astype(int)]
     return sequence, tuple(int(s) for s in dict.fromkeys(picked.tolist()))
+
+
+def reference(data: Path, strip: tuple[int, tuple[int, ...]], input_frames: int,
+              pred_frames: int) -> tuple[np.ndarray, dict[str, Any]]:
+    """The strip's true frames (F, H, W, C) uint8, and the scores of the truth with its bottom half left empty (the
+    background alone) over the test extrapolation frames whose truth shows a ball there: what a decoder that draws
+    nothing in the bottom half scores."""
+    from skimage.metrics import structural_similarity
+
+    from piga.data.schema import read_sequences
+
+    frames, _ = read_sequences(data, "test")  # (n, T, H, W, 3)
+    truth = frames[strip[0], [input_frames + s for s in strip[1]]]
+    ext = frames[:, input_frames + pred_frames :] / 255.0  # (n, T_ext, H, W, 3)
+    half = ext.shape[2] // 2
+    bottoms = ext[bottom_occupied(frames[:, input_frames + pred_frames :])][:, half:]  # (F, H/2, W, 3)
+    ssim = [structural_similarity(np.zeros_like(b), b, data_range=1.0, channel_axis=-1) for b in bottoms]
+    return truth, {"ssim_bottom_with_ball": float(np.mean(ssim)), "mse_bottom_with_ball": float((bottoms**2).mean())}
 
 
 def score_run(run_dir: Path, data: Path, strip: tuple[int, tuple[int, ...]]) -> dict[str, Any]:
@@ -260,7 +277,12 @@ def markdown(record: dict[str, Any], out: Path) -> str:
                      f"{_fmt(e['mse_bottom_with_ball']['mean'], 4)} | "
                      f"{'; '.join(_params(p) for p in e['parameter_errors'])} | "
                      f"{', '.join(f'{m:.1f}' for m in e['train_minutes'])} | {', '.join(map(str, e['exits']))} |")
-    lines += ["", "The decoders (`piga-train-model --decoder`): `st`, piga's spatial-transformer decoder (its parameters "
+    empty = record["empty_bottom"]
+    lines.append(f"| (the bottom half left empty) | - | - | - | - | {_fmt(empty['ssim_bottom_with_ball'])} | - | "
+                 f"{_fmt(empty['mse_bottom_with_ball'], 4)} | - | - | - |")
+    lines += ["", "The last row scores the truth with its bottom half blanked out: what drawing nothing there scores "
+              "(the balls are small on a black background, so SSIM stays high; MSE tells a missing ball apart).", "",
+              "The decoders (`piga-train-model --decoder`): `st`, piga's spatial-transformer decoder (its parameters "
               "are mostly the output layers of the small networks that generate its templates, as in the paper); "
               "`deconv`, an MLP to a 64 x 8 x 8 feature map and two stride-2 transposed convolutions; `broadcast`, a "
               "spatial-broadcast decoder (each object's coordinates and index tiled over the image with fixed x, y "
@@ -305,14 +327,7 @@ def parser() -> argparse.ArgumentParser:
                         "(default %(default)s)")
     p.add_argument("--decoders", nargs="+", choices=DECODERS, default=list(DEFAULTS.decoders),
                    help="default %(default)s")
-    p.add_argument("--seeds", nargs="+", type=int, default=list(DEFAULTS.seeds), help="training seeds (default %(default)s)")
-    p.add_argument("--budget-steps", type=positive_int, default=DEFAULTS.budget_steps,
-                   help="optimiser steps of every run (default %(default)s)")
-    p.add_argument("--sequences", type=int, default=DEFAULTS.sequences,
-                   help="sequences of the data set, split 80/10/10 (default %(default)s)")
-    p.add_argument("--jobs", type=positive_int, default=DEFAULTS.jobs,
-                   help="runs trained at once, each in its own process with one torch thread (default %(default)s)")
-    add_ray_option(p, "the training runs (OUT_runs/ shared by every machine)")
+    add_training_options(p, DEFAULTS, "sequences of the data set, split 80/10/10")
     return p
 
 
@@ -327,7 +342,6 @@ def main(argv: list[str] | None = None) -> int:
     backend = ray_backend(p, args)
     folder = args.out.parent / f"{args.out.name}_runs"
     data = collect_data(cfg, folder)  # the strip's truth comes from it, so it is kept
-    from piga.data.schema import read_sequences
     from piga.training.train import SCENE_PRESETS
 
     recipe = SCENE_PRESETS["spring"]["fast"].model
@@ -336,13 +350,12 @@ def main(argv: list[str] | None = None) -> int:
                         progress=False, backend=backend)
     from piga.evaluation.plots import save_figure
 
-    frames, _ = read_sequences(data, "test")
-    truth = frames[strip[0], [recipe.input_frames + s for s in strip[1]]]  # (F, H, W, 3)
+    truth, empty = reference(data, strip, recipe.input_frames, recipe.pred_frames)
     first_seed = {d: np.asarray(done[job_name(d, cfg.seeds[0])]["strip"], np.uint8) for d in cfg.decoders}
     runs = {name: {k: v for k, v in r.items() if k != "strip"} for name, r in done.items()}  # the frames: in the records
     record = {"command": " ".join(["python", "benchmarks/regions.py", *(sys.argv[1:] if argv is None else argv)]),
               "machine": next(iter(done.values()))["machine"], "config": asdict(cfg), "strip": [strip[0], list(strip[1])],
-              "runs": runs, "summary": summary(done, cfg)}
+              "runs": runs, "summary": summary(done, cfg), "empty_bottom": empty}
     write_json(args.out.with_suffix(".json"), record)
     save_figure(strip_figure(truth, first_seed, strip[1]), args.out.parent / f"{args.out.name}-strip.png")
     with atomic_output(args.out.with_suffix(".md"), overwrite=True) as tmp:
