@@ -9,7 +9,7 @@ physics, recipe and budget of optimiser steps), then scores each run's rollout o
 frame over the whole frame and over its bottom half, in the extrapolation frames, and over the bottom half of the
 extrapolation frames where a ball is there (its truth has a ball pixel in the bottom half).
 
-    python benchmarks/regions.py --out results/regions --seeds 0 --budget-steps 800 --jobs 1
+    python benchmarks/regions.py --out results/regions --seeds 0 --budget-steps 1650 --jobs 1
 
 Each (decoder, seed) is one job of piga's job runner (:func:`piga.io.pool.run_recorded`), as in
 ``benchmarks/prediction.py``: its record, ``OUT_runs/records/NAME.json`` (settings, scores, the strip's frames,
@@ -50,8 +50,9 @@ class BenchConfig:
 
     decoders: tuple[str, ...] = ("st", "deconv", "broadcast", "mlp")
     seeds: tuple[int, ...] = (0,)
-    budget_steps: int = 800
-    """Optimiser steps of every run (``piga-train-model --budget-steps``): the same for every decoder."""
+    budget_steps: int = 1650
+    """Optimiser steps of every run (``piga-train-model --budget-steps``; the scenes' fast recipe's): the same for
+    every decoder."""
     sequences: int = 100
     """Sequences of the data set (``piga-collect --sequences``), split 80/10/10."""
     data_seed: int = 100
