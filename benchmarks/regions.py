@@ -21,6 +21,7 @@ truth and each decoder's extrapolated frames of one test sequence where a ball i
 from __future__ import annotations
 
 import argparse
+import base64
 import json
 import statistics
 import sys
@@ -187,8 +188,19 @@ def score_run(run_dir: Path, data: Path, strip: tuple[int, tuple[int, ...]]) -> 
             "ssim_bottom_with_ball": float(ssim_bottom[:, ext][occupied].mean()) if occupied.any() else None,
             "mse_bottom_with_ball": float(mse_bottom[:, ext][occupied].mean()) if occupied.any() else None,
         },
-        "strip": (pred[sequence, list(strip_steps)] * 255).round().astype(np.uint8).tolist(),  # (F, H, W, C)
+        "strip": encode_frames((pred[sequence, list(strip_steps)] * 255).round().astype(np.uint8)),
     }
+
+
+def encode_frames(frames: np.ndarray) -> dict[str, Any]:
+    """uint8 frames (F, H, W, C) as a record keeps them: their shape and their bytes in base64 (a few kB, not a list
+    of numbers)."""
+    return {"shape": list(frames.shape), "base64": base64.b64encode(frames.tobytes()).decode("ascii")}
+
+
+def decode_frames(stored: dict[str, Any]) -> np.ndarray:
+    """:func:`encode_frames`' frames back, uint8 (F, H, W, C)."""
+    return np.frombuffer(base64.b64decode(stored["base64"]), np.uint8).reshape(stored["shape"])
 
 
 def train_job(job: Job) -> dict[str, Any]:
@@ -235,6 +247,7 @@ def summary(records: dict[str, dict[str, Any]], cfg: BenchConfig) -> dict[str, d
         rows = [records[job_name(decoder, seed)] for seed in cfg.seeds]
         entry: dict[str, Any] = {"decoder_parameters": rows[0]["decoder_parameters"], "exits": [r["exit"] for r in rows],
                                  "train_minutes": [r["train_seconds"] / 60 for r in rows],
+                                 "wall_minutes": [r["wall_seconds"] / 60 for r in rows],
                                  "parameter_errors": [r["parameter_errors"] for r in rows]}
         for key in rows[0]["scores"]:
             values = [r["scores"][key] for r in rows if r["scores"][key] is not None]
@@ -269,18 +282,19 @@ def markdown(record: dict[str, Any], out: Path) -> str:
              "whose truth shows a ball in the bottom half"
              + (", means over seeds." if len(cfg["seeds"]) > 1 else ", one seed."), "",
              "| decoder | decoder parameters | SSIM prediction | SSIM extrapolation | SSIM bottom, extrapolation | "
-             "SSIM bottom, with a ball | MSE extrapolation | MSE bottom, with a ball | k, l learned (true 4, 6) | train min | exit |",
-             "|---|---|---|---|---|---|---|---|---|---|---|"]
+             "SSIM bottom, with a ball | MSE extrapolation | MSE bottom, with a ball | k, l learned (true 4, 6) | train min | job min | exit |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for decoder, e in record["summary"].items():
         lines.append(f"| {decoder} | {e['decoder_parameters']:,} | {_fmt(e['ssim_prediction']['mean'])} | "
                      f"{_fmt(e['ssim_extrapolation']['mean'])} | {_fmt(e['ssim_bottom_extrapolation']['mean'])} | "
                      f"{_fmt(e['ssim_bottom_with_ball']['mean'])} | {_fmt(e['mse_extrapolation']['mean'], 4)} | "
                      f"{_fmt(e['mse_bottom_with_ball']['mean'], 4)} | "
                      f"{'; '.join(_params(p) for p in e['parameter_errors'])} | "
-                     f"{', '.join(f'{m:.1f}' for m in e['train_minutes'])} | {', '.join(map(str, e['exits']))} |")
+                     f"{', '.join(f'{m:.1f}' for m in e['train_minutes'])} | {', '.join(f'{m:.1f}' for m in e['wall_minutes'])} | "
+                     f"{', '.join(map(str, e['exits']))} |")
     empty = record["empty_bottom"]
     lines.append(f"| (the bottom half left empty) | - | - | - | - | {_fmt(empty['ssim_bottom_with_ball'])} | - | "
-                 f"{_fmt(empty['mse_bottom_with_ball'], 4)} | - | - | - |")
+                 f"{_fmt(empty['mse_bottom_with_ball'], 4)} | - | - | - | - |")
     lines += ["", "The last row scores the truth with its bottom half blanked out: what drawing nothing there scores "
               "(the balls are small on a black background, so SSIM stays high; MSE tells a missing ball apart).", "",
               "The decoders (`piga-train-model --decoder`): `st`, piga's spatial-transformer decoder (its parameters "
@@ -289,7 +303,10 @@ def markdown(record: dict[str, Any], out: Path) -> str:
               "spatial-broadcast decoder (each object's coordinates and index tiled over the image with fixed x, y "
               "channels, stride-1 convolutions of 16 channels, objects composed by masks); `mlp`, an MLP to the frame. "
               "MSE is per pixel channel, frames in [0, 1]. Exit is `piga-train-model`'s status: 0 converged, 3 not "
-              "converged, 1 its check failed. Training minutes are wall-clock with one torch thread, "
+              "converged, 1 its check failed (here: its object check found a blob the decoder does not draw, so "
+              "it trained again from the start with the next seed, `--seed-retries 1`, and failed again; the scores "
+              "are the last run's). Train minutes are the last run's, job minutes the whole job's (retry and "
+              "scoring included), wall-clock with one torch thread, "
               f"{cfg['jobs']} run(s) at once on the machine above (which may be shared).", "",
               f"![truth and each decoder's extrapolated frames]({out.name}-strip.png)", "",
               f"The strip: test sequence {record['strip'][0]}, extrapolation steps "
@@ -352,7 +369,7 @@ def main(argv: list[str] | None = None) -> int:
     from piga.evaluation.plots import save_figure
 
     truth, empty = reference(data, strip, recipe.input_frames, recipe.pred_frames)
-    first_seed = {d: np.asarray(done[job_name(d, cfg.seeds[0])]["strip"], np.uint8) for d in cfg.decoders}
+    first_seed = {d: decode_frames(done[job_name(d, cfg.seeds[0])]["strip"]) for d in cfg.decoders}
     runs = {name: {k: v for k, v in r.items() if k != "strip"} for name, r in done.items()}  # the frames: in the records
     record = {"command": " ".join(["python", "benchmarks/regions.py", *(sys.argv[1:] if argv is None else argv)]),
               "machine": next(iter(done.values()))["machine"], "config": asdict(cfg), "strip": [strip[0], list(strip[1])],

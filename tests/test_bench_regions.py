@@ -50,7 +50,7 @@ def _stand_ins(regions: Any, monkeypatch: pytest.MonkeyPatch, fail: str | None =
                 "scores": {"ssim_prediction": 0.99, "ssim_extrapolation": value, "mse_extrapolation": 1 - value,
                            "ssim_bottom_extrapolation": value, "mse_bottom_extrapolation": 1 - value,
                            "ssim_bottom_with_ball": value, "mse_bottom_with_ball": 1 - value},
-                "strip": np.full((len(strip[1]), 32, 32, 3), int(value * 255), np.uint8).tolist()}
+                "strip": regions.encode_frames(np.full((len(strip[1]), 32, 32, 3), int(value * 255), np.uint8))}
 
     monkeypatch.setattr(regions, "logged_command", logged)
     monkeypatch.setattr(regions, "score_run", score)
@@ -73,7 +73,7 @@ def test_the_page_strip_and_json_are_written_and_a_rerun_reuses_the_records(regi
     assert steps and all(6 <= s < 26 for s in steps)  # extrapolation steps, chosen where a ball is in the bottom half
     assert 0 < record["empty_bottom"]["mse_bottom_with_ball"] and record["empty_bottom"]["ssim_bottom_with_ball"] < 1
     page = out.with_suffix(".md").read_text()
-    assert "| st | 1,000 | 0.990 | 0.950 | 0.950 | 0.950 | 0.0500 | 0.0500 | k 4.10, l 5.90 | 1.0 | 0 |" in page
+    assert "| st | 1,000 | 0.990 | 0.950 | 0.950 | 0.950 | 0.0500 | 0.0500 | k 4.10, l 5.90 | 1.0 | 0.0 | 0 |" in page
     assert f"`python benchmarks/regions.py {' '.join(argv)}`" in page and "--budget-steps 7" in page
     assert (out.parent / "regions-strip.png").read_bytes()[:4] == b"\x89PNG"
     assert sorted(p.name for p in (out.parent / "regions_runs" / "records").iterdir())[0] == "spring-half-broadcast-s0.json"
