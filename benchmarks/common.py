@@ -21,7 +21,7 @@ from piga.cli.common import PigaError, add_ray_option, connect_backend
 from piga.io.pool import Backend, BackendError, JobFailed
 from piga.io.worker_signals import die_with_parent
 
-__all__ = ["add_diagnose_options", "add_ray_option", "diagnose_options", "farm_main", "job_command", "logged_command", "machine",
+__all__ = ["add_diagnose_options", "add_ray_option", "add_training_options", "diagnose_options", "farm_main", "job_command", "logged_command", "machine",
            "machine_words", "ray_backend", "signed"]
 
 Main = TypeVar("Main", bound=Callable[..., Any])
@@ -82,6 +82,23 @@ def diagnose_options(args: object) -> tuple[str, ...]:
         if value is not None:
             flags.append(flag if value else "--no-" + flag[2:])
     return tuple(flags)
+
+
+def add_training_options(parser: argparse.ArgumentParser, defaults: Any, sequences_help: str) -> None:
+    """The options of a benchmark that trains ``piga-train-model`` runs on collected data, with the defaults of its
+    ``BenchConfig`` (``defaults``: ``seeds``, ``budget_steps``, ``sequences``, ``jobs``): ``--seeds``,
+    ``--budget-steps``, ``--sequences`` (``sequences_help``), ``--jobs`` and ``--ray``."""
+    from piga.cli.common import positive_int
+
+    parser.add_argument("--seeds", nargs="+", type=int, default=list(defaults.seeds),
+                        help="training seeds (default %(default)s)")
+    parser.add_argument("--budget-steps", type=positive_int, default=defaults.budget_steps,
+                        help="optimiser steps of every run (default %(default)s)")
+    parser.add_argument("--sequences", type=int, default=defaults.sequences,
+                        help=f"{sequences_help} (default %(default)s)")
+    parser.add_argument("--jobs", type=positive_int, default=defaults.jobs,
+                        help="runs trained at once, each in its own process with one torch thread (default %(default)s)")
+    add_ray_option(parser, "the training runs (OUT_runs/ shared by every machine)")
 
 
 def ray_backend(parser: argparse.ArgumentParser, args: argparse.Namespace) -> Backend:

@@ -31,9 +31,8 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Literal, get_args, get_type_hints
 
-from common import add_ray_option, farm_main, logged_command, machine, machine_words, ray_backend
+from common import add_training_options, farm_main, logged_command, machine, machine_words, ray_backend
 
-from piga.cli.common import positive_int
 from piga.io.atomic import atomic_output, write_json
 from piga.io.pool import JobRecords, RecordedJob, run_recorded
 from piga.world.model import ModelConfig
@@ -252,14 +251,7 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--systems", nargs="+", choices=SYSTEMS, default=list(DEFAULTS.systems),
                    help="default %(default)s")
     p.add_argument("--models", nargs="+", choices=MODELS, default=list(DEFAULTS.models), help="default %(default)s")
-    p.add_argument("--seeds", nargs="+", type=int, default=list(DEFAULTS.seeds), help="training seeds (default %(default)s)")
-    p.add_argument("--budget-steps", type=positive_int, default=DEFAULTS.budget_steps,
-                   help="optimiser steps of every run (default %(default)s)")
-    p.add_argument("--sequences", type=int, default=DEFAULTS.sequences,
-                   help="sequences per data set, split 80/10/10 (default %(default)s)")
-    p.add_argument("--jobs", type=positive_int, default=DEFAULTS.jobs,
-                   help="runs trained at once, each in its own process with one torch thread (default %(default)s)")
-    add_ray_option(p, "the training runs (OUT_runs/ shared by every machine)")
+    add_training_options(p, DEFAULTS, "sequences per data set, split 80/10/10")
     return p
 
 

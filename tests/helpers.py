@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import contextlib
+import importlib.util
 import os
 import signal
 import subprocess
-from collections.abc import Callable, Sequence
+import sys
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -93,3 +96,21 @@ def stateless_pendulum(path: Path, sequences: int, steps: int, seed: int, split:
     with h5py.File(path, "a") as f:
         del f["states"]
     return path
+
+
+@contextlib.contextmanager
+def benchmark_module(name: str, module_name: str | None = None) -> Iterator[Any]:
+    """The script ``benchmarks/NAME.py`` imported as a module (``sys.modules[module_name or "bench_NAME"]`` while in use,
+    as dataclasses look their module up there), with ``benchmarks/`` on the path for its sibling module ``common``."""
+    root = Path(__file__).resolve().parents[1]
+    sys.path.insert(0, str(root / "benchmarks"))
+    spec = importlib.util.spec_from_file_location(module_name or f"bench_{name}", root / "benchmarks" / f"{name}.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    try:
+        spec.loader.exec_module(module)
+        yield module
+    finally:
+        sys.modules.pop(spec.name, None)
+        sys.path.remove(str(root / "benchmarks"))

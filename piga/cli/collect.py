@@ -10,7 +10,7 @@ from typing import Any
 from envs.dmc import DMCPendulumConfig
 from envs.effects import EFFECTS, format_effects, parse_effect
 from envs.pendulum import PixelPendulumConfig
-from envs.scenes import SCENES, scene_config
+from envs.scenes import HALF_SPEED, SCENES, SceneConfig, scene_config
 from piga.cli.common import (ArgumentParser, PigaError, add_preset_option, command_line, format_default, positive_float,
                              positive_int, run_cli, seed_int, split_type)
 from piga.data.collect import PAPER_MAX_SPEED, PRESETS, CollectConfig, collect
@@ -101,6 +101,11 @@ def build_parser() -> ArgumentParser:
                    "'#ffd91a', ...) (default the scene's; blue, green, red for balls, red, green for digits)")
     p.add_argument("--background", type=_color, default=None, metavar="COLOR",
                    help="a ball scene's background colour, as --colors (default the scene's; black)")
+    p.add_argument("--half", action="store_true", default=None,
+                   help="spring only, the paper's unseen-region data (its Appendix D): the balls stay wholly in the top "
+                   "half of the image in every frame of the train and valid sequences and in the first "
+                   f"{SceneConfig.half_frames} frames (L + T_pred) of the test sequences, whose later frames take a ball "
+                   f"wholly into the bottom half; starts at speed {HALF_SPEED:g} px/s, rejected until they comply")
     p.add_argument("--env", choices=ENVS, default=ENVS[0],
                    help="the env: Gymnasium's pixel pendulum, or dm_control's MuJoCo pendulum through a face-on camera "
                    "(needs piga[dmc]; actions u ~ U(-1, 1), frame dt = action_repeat x 0.02) (default %(default)s)")
@@ -148,7 +153,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if args.system != "pendulum":
         return _collect_scene(args, argv)
-    given = [flag for flag in (*SCENE_PARAMETERS, *SCENE_LOOK) if getattr(args, flag.lstrip("-")) is not None]
+    given = [flag for flag in (*SCENE_PARAMETERS, *SCENE_LOOK, "--half") if getattr(args, flag.lstrip("-")) is not None]
     if given:
         raise PigaError(f"{', '.join(given)} {'is' if len(given) == 1 else 'are'} for the scenes (--system "
                         f"{'/'.join(SYSTEM_CHOICES[1:])}); the pendulum takes --gravity and --actuation-gain")
@@ -241,6 +246,8 @@ def _collect_scene(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
         overrides["colors"] = tuple(args.colors)
     if args.background is not None:
         overrides["background"] = args.background
+    if args.half:
+        overrides["half"] = True
     scene = scene_config(args.system, **overrides)
     given = {key: getattr(args, key) for key in ("sequences", "split") if getattr(args, key) is not None}
     config = replace(SCENE_PRESETS[args.preset], scene=scene, seed=args.seed, workers=args.workers,  # explicit options win

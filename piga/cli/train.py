@@ -76,8 +76,10 @@ def build_parser() -> ArgumentParser:
                       "with --model video-lstm, except 'pred-only'")
     add_preset_option(p, "--decoder", choices=choices["decoder"], default=ModelConfig().decoder,
                       help="'st': the coordinate-consistent spatial-transformer decoder; 'mlp': the paper's black-box "
-                      "decoder ablation, an MLP from the objects' coordinates to the frame (no templates.png). Not with "
-                      "--model video-lstm")
+                      "decoder ablation, an MLP from the objects' coordinates to the frame; 'deconv': an MLP to a small "
+                      "feature map, then transposed convolutions; 'broadcast': a spatial-broadcast decoder (each object's "
+                      "coordinates tiled over the image with fixed x, y channels, stride-1 convolutions, composed by "
+                      "masks). Only 'st' writes templates.png. Not with --model video-lstm")
     p.add_argument("--signed-actuation", action="store_true",
                    help="learn the sign of a too (a in linear space, from +0.3): for a camera on the other side of the "
                    "hinge or a motor wired the other way, which flip the actuation the frames show")

@@ -57,12 +57,16 @@ class SceneCollectConfig:
 
     def __post_init__(self) -> None:
         check_collect_sizes(self.sequences, self.steps, self.workers, self.seed, self.batch, self.split)
+        if self.scene.half and self.steps <= self.scene.half_frames:
+            raise ValueError(f"half data need more than {self.scene.half_frames} frames per sequence (the test "
+                             f"sequences go down after them), got {self.steps}")
 
 
-def _one(n: int, scene: SceneConfig, seed: int, steps: int) -> tuple[np.ndarray, np.ndarray]:
-    """Sequence n of a collection: frames (T, H, W, 3) and states (T, 4N)."""
+def _one(n: int, scene: SceneConfig, seed: int, steps: int, first_test: int) -> tuple[np.ndarray, np.ndarray]:
+    """Sequence n of a collection: frames (T, H, W, 3) and states (T, 4N); sequences from ``first_test`` on are the
+    test split's (which matters to :attr:`envs.scenes.SceneConfig.half`)."""
     _, rng = sequence_rng(seed, n)
-    return generate_sequence(scene, rng, steps)
+    return generate_sequence(scene, rng, steps, test=n >= first_test)
 
 
 def scene_attrs(config: SceneCollectConfig, command: str | None = None) -> dict[str, Any]:
@@ -89,7 +93,7 @@ def collect_scene(config: SceneCollectConfig, out: str | Path, overwrite: bool =
     scene, n, t = config.scene, config.sequences, config.steps
     size = scene.image_size
     counts = split_counts(n, config.split)
-    one = functools.partial(_one, scene=scene, seed=config.seed, steps=t)
+    one = functools.partial(_one, scene=scene, seed=config.seed, steps=t, first_test=counts[0] + counts[1])
     with DatasetWriter(out, n, t, (size, size, 3), 0, 4 * scene.n_objects, scene_attrs(config, command),
                        overwrite=overwrite) as writer:
         with tqdm(total=n, desc=f"collect {scene.scene}", unit="seq", disable=not progress) as bar:

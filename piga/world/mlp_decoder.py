@@ -17,7 +17,13 @@ from __future__ import annotations
 import torch
 from torch import Tensor, nn
 
-__all__ = ["MLPDecoder"]
+__all__ = ["MLPDecoder", "scaled_coords"]
+
+
+def scaled_coords(coords: Tensor, image_size: int, coord_dim: int) -> Tensor:
+    """Coordinates (..., N, D) as the black-box decoders take them: pixels (D = 2) scaled to about [-1, 1]
+    (x / H · 2 − 1), angles (D = 1) as they are."""
+    return coords / image_size * 2 - 1 if coord_dim == 2 else coords
 
 
 class MLPDecoder(nn.Module):
@@ -41,8 +47,6 @@ class MLPDecoder(nn.Module):
     def forward(self, coords: Tensor) -> Tensor:
         """Coordinates (..., N, D) -> frames (..., C, H, W)."""
         lead = coords.shape[:-2]
-        z = coords.flatten(-2)  # (..., N·D)
-        if self.coord_dim == 2:
-            z = z / self.image_size * 2 - 1  # pixels -> about [-1, 1]
+        z = scaled_coords(coords, self.image_size, self.coord_dim).flatten(-2)  # (..., N·D), about [-1, 1]
         out = torch.sigmoid(self.net(z))  # (..., C·H·W)
         return out.view(*lead, self.channels, self.image_size, self.image_size)

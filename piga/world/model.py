@@ -33,6 +33,7 @@ from torch import Tensor, nn
 from piga.io.choices import check_choices
 from piga.world.decoder import Decoder, DecoderConfig
 from piga.world.encoder import Encoder, EncoderConfig
+from piga.world.conv_decoders import BroadcastDecoder, DeconvDecoder
 from piga.world.mlp_decoder import MLPDecoder
 from piga.world.physics import SYSTEMS, System, SystemOptions, hold_velocity, make_integrator, rollout
 from piga.world.velocity import VelocityConfig, VelocityEstimator
@@ -67,10 +68,13 @@ class ModelConfig:
     "separate", L_pred + α·L_rec with the gradients split: the encoder and decoder learn from L_rec only,
     the velocity estimator and what rolls the states forward (the physics) from L_pred only
     (:meth:`ObjectModel.forward` says where the gradient is stopped). Not for video-lstm, which has no such parts."""
-    decoder: Literal["st", "mlp"] = "st"
+    decoder: Literal["st", "mlp", "deconv", "broadcast"] = "st"
     """Decoder of object coordinates to frames: "st", the coordinate-consistent spatial-transformer decoder
     (:mod:`piga.world.decoder`); "mlp", the paper's black-box decoder ablation (:mod:`piga.world.mlp_decoder`),
-    an MLP from the objects' coordinates to the frame. Not for video-lstm, which has its own decoder."""
+    an MLP from the objects' coordinates to the frame; "deconv" and "broadcast", the black-box decoders of its
+    unseen-region ablation (:mod:`piga.world.conv_decoders`): an MLP to a small feature map then transposed
+    convolutions, and a spatial-broadcast decoder (each object's coordinates tiled over the grid with fixed x, y
+    channels, stride-1 convolutions, objects composed by masks). Not for video-lstm, which has its own decoder."""
     physics_init: dict[str, float] = field(default_factory=dict)
     """Initial physical parameters (empty: the system's far-from-truth defaults)."""
     system_options: SystemOptions | None = None
@@ -405,9 +409,13 @@ class ObjectModel(FrameModel):
         """The decoder of ``config.decoder``, registered after the dynamics (the order of a piga checkpoint's parameters)."""
         cfg = self.config
         self.has_templates = cfg.decoder == "st"
-        self.decoder: Decoder | MLPDecoder
+        self.decoder: Decoder | MLPDecoder | DeconvDecoder | BroadcastDecoder
         if cfg.decoder == "mlp":
             self.decoder = MLPDecoder(cfg.image_size, cfg.channels, n, d, hidden=cfg.template_hidden)
+        elif cfg.decoder == "deconv":
+            self.decoder = DeconvDecoder(cfg.image_size, cfg.channels, n, d, hidden=cfg.template_hidden)
+        elif cfg.decoder == "broadcast":
+            self.decoder = BroadcastDecoder(cfg.image_size, cfg.channels, n, d)
         else:
             self.decoder = Decoder(DecoderConfig(cfg.image_size, cfg.channels, n, d, hidden=cfg.template_hidden,
                                                  template_size=cfg.template_size or None, init_scale=cfg.init_scale))
