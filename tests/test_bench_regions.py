@@ -1,10 +1,11 @@
 """benchmarks/regions.py: the page, strip and JSON from its jobs' records, a rerun that reuses them, and a failed
-job's one line. ``piga-collect`` runs for real (a small half-spring file); ``piga-train-model`` and the scoring of
+job's one line. ``piga-collect`` gives a real small half-spring file; ``piga-train-model`` and the scoring of
 its run are stand-ins with known scores: the benchmark's bookkeeping is tested, not the decoders."""
 
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 from typing import Any
 
@@ -23,17 +24,29 @@ def regions():
         yield module
 
 
-def _stand_ins(regions: Any, monkeypatch: pytest.MonkeyPatch, fail: str | None = None) -> list[list[str]]:
-    """piga-collect runs in this process (10 sequences); piga-train-model writes a metrics.json (or exits 2 for the run
-    named ``fail``) and the scoring returns the decoder's known scores."""
+@pytest.fixture(scope="session")
+def half_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A real half-spring file of 10 sequences, collected once (its starts are drawn by rejection: seconds)."""
+    path = tmp_path_factory.mktemp("half") / "spring-half.h5"
+    assert collect_main(["--system", "spring", "--half", "--sequences", "10", "--seed", "100", "--out", str(path),
+                         "--workers", "1", "--quiet"]) == 0
+    return path
+
+
+def _stand_ins(regions: Any, monkeypatch: pytest.MonkeyPatch, half_file: Path,
+               fail: str | None = None) -> list[list[str]]:
+    """piga-collect copies ``half_file`` (a real file of the command's kind); piga-train-model writes a metrics.json
+    (or exits 2 for the run named ``fail``) and the scoring returns the decoder's known scores."""
     calls: list[list[str]] = []
 
     def logged(args: list[str], log: Path) -> int:
         calls.append(args)
         out = Path(args[args.index("--out") + 1])
         if args[0] == "piga-collect":
+            assert args[args.index("--sequences") + 1] == "10" and "--half" in args
             out.parent.mkdir(parents=True, exist_ok=True)
-            return collect_main([*args[1:], "--workers", "1"])
+            shutil.copy(half_file, out)
+            return 0
         if out.name == fail:
             return 2
         out.mkdir(parents=True, exist_ok=True)
@@ -57,9 +70,9 @@ def _stand_ins(regions: Any, monkeypatch: pytest.MonkeyPatch, fail: str | None =
     return calls
 
 
-def test_the_page_strip_and_json_are_written_and_a_rerun_reuses_the_records(regions, tmp_path: Path,
+def test_the_page_strip_and_json_are_written_and_a_rerun_reuses_the_records(regions, tmp_path: Path, half_file: Path,
                                                                            monkeypatch: pytest.MonkeyPatch) -> None:
-    calls = _stand_ins(regions, monkeypatch)
+    calls = _stand_ins(regions, monkeypatch, half_file)
     out = tmp_path / "results" / "regions"
     argv = ["--out", str(out), "--sequences", "10", "--budget-steps", "7", "--jobs", "1"]
     assert regions.main(argv) == 0
@@ -85,9 +98,9 @@ def test_the_page_strip_and_json_are_written_and_a_rerun_reuses_the_records(regi
     assert [c[c.index("--decoder") + 1] for c in calls if c[0] == "piga-train-model"] == ["st"]  # another budget
 
 
-def test_a_failed_job_ends_with_one_line(regions, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+def test_a_failed_job_ends_with_one_line(regions, tmp_path: Path, half_file: Path, monkeypatch: pytest.MonkeyPatch,
                                          capsys: pytest.CaptureFixture[str]) -> None:
-    _stand_ins(regions, monkeypatch, fail="spring-half-deconv-s0")
+    _stand_ins(regions, monkeypatch, half_file, fail="spring-half-deconv-s0")
     out = tmp_path / "regions"
     with pytest.raises(SystemExit) as info:
         regions.main(["--out", str(out), "--sequences", "10", "--jobs", "1"])
