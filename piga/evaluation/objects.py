@@ -19,7 +19,7 @@ pixel noise of σ = 25/255, 0.10 under H.264 at CRF 28), 0.63 for the lost ball.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from typing import Any
 
 import cv2
@@ -47,12 +47,29 @@ class ObjectCheck:
     """``residual_peak / content_peak``."""
     lost: bool
     """``ratio`` above :data:`LOST_RATIO`: a moving object that no object of the model renders."""
+    slots: int | None = None
+    """The model's object slots N (None: not compared with the scene's count)."""
+    scene_objects: int | None = None
+    """The objects the data file says its scene has (its ``n_objects`` attribute; None: not known)."""
+
+    @property
+    def too_few_slots(self) -> bool:
+        """The model has fewer slots than the scene has objects: some object cannot be found, whatever the seed."""
+        return self.slots is not None and self.scene_objects is not None and self.slots < self.scene_objects
+
+    def with_counts(self, slots: int, scene_objects: int | None) -> ObjectCheck:
+        """This check, knowing the model's slots and the scene's objects."""
+        return replace(self, slots=slots, scene_objects=scene_objects)
 
     def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
+        return {**asdict(self), "too_few_slots": self.too_few_slots}
 
     def reason(self) -> str:
         """The one-line cause of a lost object, with the fix."""
+        if self.too_few_slots:
+            return (f"an object was not found: the model has {self.slots} object slots for the scene's "
+                    f"{self.scene_objects} objects (a moving blob {self.ratio:.2f}x as strong as the objects is left "
+                    f"unrendered); train with --objects {self.scene_objects} to model them all")
         return (f"an object was not found: the reconstruction of single frames leaves a moving blob "
                 f"{self.ratio:.2f}x as strong as the scene's objects (at most {LOST_RATIO:g} when every object is "
                 "found); train again with another --seed (and --overwrite, or another --out)")

@@ -48,7 +48,8 @@ def write_run_report(model: FrameModel, state: TrainState, data: str | Path, run
     frames, actions = read_sequences(data, split, limit=eval_config.max_sequences)
     objects = None
     if isinstance(model, ObjectModel) and model.config.coord_dim == 2:  # a scene of objects: did the autoencoder find each?
-        objects = check_objects(model, frames)
+        scene = info.attrs.get("n_objects")  # the file's count, to compare with the model's slots (--objects)
+        objects = check_objects(model, frames).with_counts(model.config.n_objects, None if scene is None else int(scene))
         metrics["objects"] = objects.to_dict()
     metrics["training"] = {"epochs": state.epoch, "steps": state.step, "seconds": state.elapsed,
                            "threads": torch.get_num_threads(), "device": state.device or None}
