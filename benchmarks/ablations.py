@@ -318,19 +318,17 @@ def slots_figure(record: dict[str, Any]) -> Any:
                 g = _parameters(rows[name])
                 panels.append((f"{system}, {n} slots: {g}", *read_templates(run["templates"])))
     cols = max((len(p[1]) for p in panels), default=1)
-    fig, axes = plt.subplots(2 * max(len(panels), 1), cols, figsize=(1.6 * cols + 0.4, 3.4 * max(len(panels), 1)),
-                             squeeze=False)
-    for ax in axes.flat:
-        ax.axis("off")
-    for i, (title, objects, masks) in enumerate(panels):
+    fig = plt.figure(figsize=(1.5 * cols + 0.3, 3.4 * max(len(panels), 1)), layout="constrained")
+    for sub, (title, objects, masks) in zip(fig.subfigures(max(len(panels), 1), 1, squeeze=False)[:, 0], panels):
+        axes = sub.subplots(2, cols, squeeze=False)
+        for ax in axes.flat:
+            ax.axis("off")
         for j in range(len(objects)):
-            top, bottom = axes[2 * i, j], axes[2 * i + 1, j]
-            top.imshow(objects[j], cmap="gray" if objects[j].ndim == 2 else None, vmin=0, vmax=1)
-            bottom.imshow(masks[j], cmap="gray", vmin=0, vmax=1)
-            top.set_title(f"slot {j}: m⊙c", fontsize=7)
-            bottom.set_title(f"slot {j}: mask m", fontsize=7)
-        axes[2 * i, 0].text(0, 1.35, title, transform=axes[2 * i, 0].transAxes, fontsize=8, va="bottom")
-    fig.tight_layout()
+            axes[0, j].imshow(objects[j], cmap="gray" if objects[j].ndim == 2 else None, vmin=0, vmax=1)
+            axes[1, j].imshow(masks[j], cmap="gray", vmin=0, vmax=1)
+            axes[0, j].set_title(f"slot {j}: m⊙c", fontsize=7)
+            axes[1, j].set_title(f"slot {j}: mask m", fontsize=7)
+        sub.suptitle(title, fontsize=8)
     return fig
 
 
