@@ -374,7 +374,7 @@ def main(argv: list[str] | None = None) -> int:
 
     record = {"command": " ".join(["python", "benchmarks/ablations.py", *(sys.argv[1:] if argv is None else argv)]),
               "machine": next(iter(done.values()))["machine"], "config": asdict(cfg),
-              "runs": {name: {k: v for k, v in run.items()} for name, run in done.items()},
+              "runs": done,
               "summary": summary(done, cfg)}
     write_json(args.out.with_suffix(".json"), record)
     save_figure(slots_figure(record), args.out.parent / f"{args.out.name}-slots.png")

@@ -81,8 +81,9 @@ def build_parser() -> ArgumentParser:
                       "decoder ablation, an MLP from the objects' coordinates to the frame (no templates.png). Not with "
                       "--model video-lstm")
     add_preset_option(p, "--objects", type=positive_int, metavar="N", default=None,
-                      shown="the data file's object count (its n_objects attribute)",
-                      help=f"object slots N of the model (ModelConfig.n_objects: {OBJECTS_HELP}). A scene only: fewer "
+                      shown="the file's",
+                      help=f"{OBJECTS_HELP}, ModelConfig.n_objects: instead of the count "
+                      "the data file records (its n_objects attribute). A scene only: fewer "
                       "than the scene's objects leaves some unmodelled (the object check then reports an object lost, "
                       "and no seed is retried), more leaves slots empty (the paper's Appendix E)")
     p.add_argument("--signed-actuation", action="store_true",
