@@ -27,7 +27,6 @@ from __future__ import annotations
 import argparse
 import base64
 import io
-import json
 import statistics
 import sys
 import time
@@ -35,8 +34,8 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Literal, get_args, get_type_hints
 
-from common import add_ray_option, farm_main, logged_command, machine, machine_words, ray_backend
-from prediction import RUN_EXITS, collect_data, collect_command, data_path
+from common import add_ray_option, farm_main, machine, machine_words, ray_backend
+from prediction import collect_command, collect_data, data_path, run_training
 
 from piga.cli.common import positive_int
 from piga.io.atomic import atomic_output, write_json
@@ -156,14 +155,9 @@ def read_templates(text: str) -> tuple[Any, Any]:
 def train_job(job: Job) -> dict[str, Any]:
     """A job of the runner: trains ``job`` with ``piga-train-model`` and returns its record's fields (the scores
     ``piga-train-model`` wrote to metrics.json, :func:`inspect_run`'s, its exit status, minutes and machine)."""
-    metrics_path = job.run_dir / "metrics.json"
-    metrics_path.unlink(missing_ok=True)  # a stale one must not pass for this run's (see benchmarks/prediction.py)
     started = time.time()
-    log = job.run_dir.parent / f"{job.name}.log"
-    code = logged_command(train_command(job), log)
-    if code not in RUN_EXITS or not metrics_path.exists():
-        raise RuntimeError(f"'piga-train-model {' '.join(job.flags)}' failed (exit {code}); see {log}")
-    m = json.loads(metrics_path.read_text())
+    code, m = run_training(train_command(job), job.run_dir, job.run_dir.parent / f"{job.name}.log",
+                           f"piga-train-model {' '.join(job.flags)}")
     extra = inspect_run(job.run_dir, job.data)
     print(f"{job.name}: MSE prediction {m['frame_mse_mean']['prediction']:.5f}, parameters "
           f"{m.get('parameters')}, {m['training']['seconds'] / 60:.1f} min (exit {code})", flush=True)

@@ -83,8 +83,7 @@ def _stand_ins(ablations: Any, monkeypatch: pytest.MonkeyPatch, fail: str | None
         np.savez_compressed(buffer, objects=np.full((slots, 6, 6, 3), 128, np.uint8), masks=np.zeros((slots, 6, 6), np.uint8))
         return {"reconstruction_mse": 0.001, "templates": base64.b64encode(buffer.getvalue()).decode("ascii")}
 
-    monkeypatch.setattr(ablations, "logged_command", logged)
-    monkeypatch.setattr(sys.modules["prediction"], "logged_command", logged)  # the data set's collection
+    monkeypatch.setattr(sys.modules["prediction"], "logged_command", logged)  # the collection and trainings it runs
     monkeypatch.setattr(ablations, "inspect_run", inspect_run)
     return calls
 
