@@ -8,13 +8,14 @@ import inspect
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from envs.scenes import scene_config
 from piga.cli.train import OBJECTS_HELP, main as train_main
 from piga.data.collect_scenes import SceneCollectConfig, collect_scene
 from piga.data.schema import inspect_dataset
-from piga.evaluation.objects import ObjectCheck
+from piga.evaluation.objects import ObjectCheck, match_objects
 from piga.training.train import model_config_for, preset_for
 from piga.world.model import ModelConfig
 from tests.helpers import assert_one_line, run_in_process
@@ -90,3 +91,17 @@ def test_the_pendulum_refuses_slots(tiny_data: Path, tmp_path: Path, capsys: pyt
     assert code == 1
     assert_one_line(code, err, "--objects", "pendulum")
     assert not (tmp_path / "run").exists()
+
+
+def test_slots_are_matched_to_objects_whatever_their_counts() -> None:
+    rng = np.random.default_rng(0)
+    positions = rng.uniform(0, 36, (2, 5, 3, 2))  # (B, T, M=3, 2)
+    states = np.concatenate([positions.reshape(2, 5, 6), rng.normal(size=(2, 5, 6))], axis=-1)  # (B, T, 4·M)
+    same = match_objects(positions[:, :, [2, 0, 1]], states, found_px=1.0)
+    assert same["slots"] == [1, 2, 0] and same["found"] and max(same["mean_px"]) < 1e-9
+    two = match_objects(positions[:, :, [2, 0]] + 0.5, states, found_px=1.0)  # object 1 has no slot
+    assert two["slots"] == [1, None, 0] and two["mean_px"][1] is None and not two["found"]
+    assert two["mean_px"][0] == pytest.approx(0.5 * 2 ** 0.5)
+    far = np.full((2, 5, 1, 2), -100.0)  # an empty slot parked off the picture
+    four = match_objects(np.concatenate([positions, far], axis=2), states, found_px=1.0)
+    assert four["slots"] == [0, 1, 2] and four["unmatched_slots"] == [3] and four["found"]

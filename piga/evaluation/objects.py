@@ -26,6 +26,8 @@ import cv2
 import numpy as np
 import torch
 
+from scipy.optimize import linear_sum_assignment
+
 from piga.io.device import module_device
 from piga.world.model import ObjectModel, frames_to_float
 
@@ -106,3 +108,27 @@ def check_objects(model: ObjectModel, frames: np.ndarray, max_frames: int = 400)
     x = x[np.linspace(0, len(x) - 1, min(max_frames, len(x))).astype(int)]
     rec = model.decoder(model.encode(x[:, None].to(module_device(model)))[:, 0])  # (F, C, H, W), on the model's device
     return compare(x.numpy(), rec.cpu().numpy(), BLUR_FRACTION * cfg.image_size)
+
+
+def match_objects(coords: np.ndarray, states: np.ndarray, found_px: float) -> dict[str, Any]:
+    """The encoder's (x, y) per slot, (B, T, N, 2) ``coords``, against a scene's true centres, read from its
+    (B, T, 4·M) ``states`` (x0, y0, x1, y1, ..., then the velocities; evaluation only), under the assignment of
+    slots to objects with the least mean distance (SciPy's Hungarian solver, exact for any N and M: with N = M it
+    is the best permutation). N may differ from M (``piga-train-model --objects``): with fewer slots some objects
+    have none, with more some slots match none.
+
+    Returns ``mean_px`` and ``p90_px`` (per true object; None for an object no slot matches), ``slots`` (the slot
+    matched to each true object, or None), ``unmatched_slots``, and ``found``: every object has a slot within a
+    mean distance of ``found_px`` pixels."""
+    b, t, n, _ = coords.shape
+    m = states.shape[-1] // 4
+    true = states[..., : 2 * m].reshape(b, t, m, 2)  # (B, T, M, 2)
+    distance = np.linalg.norm(coords[:, :, :, None] - true[:, :, None], axis=-1).reshape(b * t, n, m)  # (B*T, N, M)
+    slots, objects = linear_sum_assignment(distance.mean(axis=0))
+    slot_of: list[int | None] = [None] * m
+    mean: list[float | None] = [None] * m
+    p90: list[float | None] = [None] * m
+    for i, j in zip(slots.tolist(), objects.tolist()):
+        slot_of[j], mean[j], p90[j] = i, float(distance[:, i, j].mean()), float(np.percentile(distance[:, i, j], 90))
+    return {"mean_px": mean, "p90_px": p90, "slots": slot_of, "unmatched_slots": sorted(set(range(n)) - set(slots.tolist())),
+            "found": all(e is not None and e < found_px for e in mean)}
