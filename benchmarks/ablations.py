@@ -245,8 +245,8 @@ def markdown(record: dict[str, Any], out: Path) -> str:
              f"Machine: {machine_words(record['machine'])}.", "",
              f"Each system: one data set, `piga-collect --system SYSTEM --sequences {cfg['sequences']} --seed "
              f"{cfg['data_seed']}` (split 80/10/10). Every variant trained on it with `piga-train-model DATA FLAGS "
-             f"--seed SEED --budget-steps {cfg['budget_steps']} --threads 1` (the scene's `fast` recipe otherwise: the "
-             f"same windows and budget for every variant), seeds {seeds}"
+             f"--seed SEED --budget-steps {cfg['budget_steps']} --seed-retries 0 --threads 1` (the scene's `fast` recipe "
+             f"otherwise: the same windows, seed and budget for every variant, one training each), seeds {seeds}"
              + (" (means over seeds)." if len(cfg["seeds"]) > 1 else ", one seed.")
              + " Scores are on the test split: prediction MSE and SSIM over the T_pred predicted frames "
              "(`piga-train-model`'s metrics.json), reconstruction MSE of single frames through the encoder and "
@@ -287,8 +287,7 @@ def markdown(record: dict[str, Any], out: Path) -> str:
               "last 10% of steps), 1 its check failed (the physics did not train, or the label-free object check found "
               "a moving object that no slot renders: with fewer slots than objects that is expected). The object check "
               "is the ratio of the blurred reconstruction residual's peak to the moving content's (above 0.5: an "
-              "object lost). The paper's numbers are in its own units (a sum over frames and pixels), so only the "
-              "ratios compare. Training minutes are wall-clock with one torch thread on the machine above (which may "
+              "object lost). The paper's numbers are in units it does not state, so only ratios compare with them. Training minutes are wall-clock with one torch thread on the machine above (which may "
               "be shared).", ""]
     return "\n".join(lines)
 
