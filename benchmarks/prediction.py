@@ -106,19 +106,26 @@ def collect_data(system: str, cfg: BenchConfig, folder: Path) -> None:
             raise RuntimeError(f"'piga-collect --system {system} ...' failed (exit {code}); see {log}")
 
 
-def train_job(job: Job) -> dict[str, Any]:
-    """A job of the runner: trains ``job`` with ``piga-train-model`` and returns its record's fields (the scores that
-    ``piga-train-model`` wrote to metrics.json, its exit status, minutes and machine)."""
-    metrics_path = job.run_dir / "metrics.json"
+def run_training(command: list[str], run_dir: Path, log: Path, what: str) -> tuple[int, dict[str, Any]]:
+    """Runs a ``piga-train-model ... --out RUN_DIR --overwrite`` command (its output appended to ``log``); its exit
+    status and the metrics.json it wrote. A command that fails (not a run that trained and was judged: those are
+    :data:`RUN_EXITS`) raises RuntimeError naming ``what`` and the log."""
+    metrics_path = run_dir / "metrics.json"
     # The command replaces the run (--overwrite); a stale metrics.json goes first so that one left behind is this
     # run's (file times come from a coarser clock than time.time() and cannot tell a fresh file from a stale one).
     metrics_path.unlink(missing_ok=True)
-    started = time.time()
-    log = job.run_dir.parent / f"{job.name}.log"
-    code = logged_command(train_command(job), log)
+    code = logged_command(command, log)
     if code not in RUN_EXITS or not metrics_path.exists():
-        raise RuntimeError(f"'piga-train-model --model {job.model}' failed (exit {code}); see {log}")
-    m = json.loads(metrics_path.read_text())
+        raise RuntimeError(f"'{what}' failed (exit {code}); see {log}")
+    return code, json.loads(metrics_path.read_text())
+
+
+def train_job(job: Job) -> dict[str, Any]:
+    """A job of the runner: trains ``job`` with ``piga-train-model`` and returns its record's fields (the scores that
+    ``piga-train-model`` wrote to metrics.json, its exit status, minutes and machine)."""
+    started = time.time()
+    code, m = run_training(train_command(job), job.run_dir, job.run_dir.parent / f"{job.name}.log",
+                           f"piga-train-model --model {job.model}")
     print(f"{job.name}: SSIM prediction {m['frame_ssim_mean']['prediction']:.3f}, extrapolation "
           f"{_fmt(m['frame_ssim_mean']['extrapolation'])}, {m['training']['seconds'] / 60:.1f} min (exit {code})",
           flush=True)

@@ -50,7 +50,6 @@ from __future__ import annotations
 
 import argparse
 import fnmatch
-import itertools
 import json
 import math
 import os
@@ -719,6 +718,7 @@ def object_errors(run_dir: Path, data: Path, metrics: dict[str, Any], system: st
     import torch
 
     from piga.data.schema import load_states, read_sequences
+    from piga.evaluation.objects import match_objects
     from piga.world.model import frames_to_float
     from piga.io.runs import load_model
 
@@ -730,14 +730,7 @@ def object_errors(run_dir: Path, data: Path, metrics: dict[str, Any], system: st
     with torch.no_grad():
         x = frames_to_float(torch.from_numpy(frames), model.config.channels)  # (B, T, C, H, W)
         coords = np.concatenate([model.encode(x[i : i + 16]).numpy() for i in range(0, len(x), 16)])  # (B, T, N, 2)
-    n = coords.shape[2]
-    true = true[..., : 2 * n].reshape(*true.shape[:2], n, 2)  # (B, T, N, 2): x0, y0, x1, y1, ...
-    best = min(itertools.permutations(range(n)),
-               key=lambda p: float(np.linalg.norm(coords[:, :, list(p)] - true, axis=-1).mean()))
-    distance = np.linalg.norm(coords[:, :, list(best)] - true, axis=-1).reshape(-1, n)  # (B*T, N)
-    per_object = distance.mean(axis=0)
-    return {"mean_px": per_object.tolist(), "p90_px": np.percentile(distance, 90, axis=0).tolist(),
-            "slots": list(best), "found": bool((per_object < FOUND_PX).all())}
+    return match_objects(coords, true, FOUND_PX)
 
 
 # ------------------------------------------------------------------------------------------- report
@@ -754,7 +747,7 @@ def _fmt_objects(record: dict[str, Any]) -> str:
         return "-"
     if "angle_error_deg" in o:
         return f"{o['angle_error_deg']:.1f}°" + ("" if o["found"] else " (lost)")
-    return ", ".join(f"{e:.2f}" for e in o["mean_px"]) + ("" if o["found"] else " (lost)")
+    return ", ".join("-" if e is None else f"{e:.2f}" for e in o["mean_px"]) + ("" if o["found"] else " (lost)")
 
 
 def _fmt_converged(record: dict[str, Any]) -> str:

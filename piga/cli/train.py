@@ -21,6 +21,8 @@ from piga.io.checkpoint import CHECKPOINT, require_piga_run
 RECIPE_OPTIONS = ("epochs", "budget_steps", "max_minutes", "batch_size", "lr", "lr_physics", "warmup_fraction", "window_stride")
 
 PROG = "piga-train-model"
+#: ``--objects``' help: the first sentence of :attr:`piga.world.model.ModelConfig.n_objects`' doc (a test checks it).
+OBJECTS_HELP = "N, the object slots of the encoder, decoder and physics (balls, digits)"
 OUTPUTS = (CHECKPOINT, "metrics.json", "config.json", "rollout.png", "templates.png", "curves.png", "tensorboard")
 
 
@@ -80,6 +82,12 @@ def build_parser() -> ArgumentParser:
                       "feature map, then transposed convolutions; 'broadcast': a spatial-broadcast decoder (each object's "
                       "coordinates tiled over the image with fixed x, y channels, stride-1 convolutions, composed by "
                       "masks). Only 'st' writes templates.png. Not with --model video-lstm")
+    add_preset_option(p, "--objects", type=positive_int, metavar="N", default=None,
+                      shown="the file's",
+                      help=f"{OBJECTS_HELP}, ModelConfig.n_objects: instead of the count "
+                      "the data file records (its n_objects attribute). A scene only: fewer "
+                      "than the scene's objects leaves some unmodelled (the object check then reports an object lost, "
+                      "and no seed is retried), more leaves slots empty (the paper's Appendix E)")
     p.add_argument("--signed-actuation", action="store_true",
                    help="learn the sign of a too (a in linear space, from +0.3): for a camera on the other side of the "
                    "hinge or a motor wired the other way, which flip the actuation the frames show")
@@ -145,7 +153,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         saved_model, ckpt = load_model(run_dir, any_model=True)
         for flag, given, own in (("--model", args.model, saved_model.config.architecture),
                                  ("--loss", args.loss, saved_model.config.loss),
-                                 ("--decoder", args.decoder, saved_model.config.decoder)):
+                                 ("--decoder", args.decoder, saved_model.config.decoder),
+                                 ("--objects", args.objects, saved_model.config.n_objects)):
             if given is not None and given != own:
                 raise PigaError(f"--resume continues the run's own {flag[2:]} ({own}); drop {flag} {given}, or train "
                                 "a new run in another --out")
@@ -182,7 +191,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         train_config = resolve_loading(train_config, info)  # as the run records it
         model_config = model_config_for(info, recipe.model)
         chosen = {field: value for field, value in (("architecture", args.model), ("loss", args.loss),
-                                                    ("decoder", args.decoder)) if value is not None}
+                                                    ("decoder", args.decoder), ("n_objects", args.objects))
+                  if value is not None}
+        if args.objects is not None and info.system == "pendulum":
+            raise PigaError(f"--objects: {args.data} holds pendulum data, whose model has one object (its angle); "
+                            "drop --objects")
         try:
             model_config = replace(model_config, **chosen)
         except ValueError as exc:  # a choice another one excludes (video-lstm with --loss separate)
@@ -239,7 +252,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         before = _identity(run_dir / CHECKPOINT)
         try:
             model, state = train(args.data, run_dir, train_config, model_config, resume=args.resume,
-                                 progress=not args.quiet, on_epoch=on_epoch)
+                                 progress=not args.quiet, on_epoch=on_epoch, n_objects=args.objects)
         except TrainingDiverged as exc:
             raise PigaError(f"training diverged: {exc}") from None
         except KeyboardInterrupt:
@@ -256,7 +269,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise
         metrics = write_run_report(model, state, args.data, run_dir)
         if (args.resume or not metrics.get("objects", {}).get("lost") or len(tried) >= train_config.seed_retries
-                or train_config.seed >= MAX_SEED):
+                or train_config.seed >= MAX_SEED or metrics["objects"].get("too_few_slots")):
             break
         tried.append(train_config.seed)
         train_config = replace(train_config, seed=train_config.seed + 1)

@@ -19,12 +19,14 @@ pixel noise of σ = 25/255, 0.10 under H.264 at CRF 28), 0.63 for the lost ball.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from typing import Any
 
 import cv2
 import numpy as np
 import torch
+
+from scipy.optimize import linear_sum_assignment
 
 from piga.io.device import module_device
 from piga.world.model import ObjectModel, frames_to_float
@@ -47,12 +49,29 @@ class ObjectCheck:
     """``residual_peak / content_peak``."""
     lost: bool
     """``ratio`` above :data:`LOST_RATIO`: a moving object that no object of the model renders."""
+    slots: int | None = None
+    """The model's object slots N (None: not compared with the scene's count)."""
+    scene_objects: int | None = None
+    """The objects the data file says its scene has (its ``n_objects`` attribute; None: not known)."""
+
+    @property
+    def too_few_slots(self) -> bool:
+        """The model has fewer slots than the scene has objects: some object cannot be found, whatever the seed."""
+        return self.slots is not None and self.scene_objects is not None and self.slots < self.scene_objects
+
+    def with_counts(self, slots: int, scene_objects: int | None) -> ObjectCheck:
+        """This check, knowing the model's slots and the scene's objects."""
+        return replace(self, slots=slots, scene_objects=scene_objects)
 
     def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
+        return {**asdict(self), "too_few_slots": self.too_few_slots}
 
     def reason(self) -> str:
         """The one-line cause of a lost object, with the fix."""
+        if self.too_few_slots:
+            return (f"an object was not found: the model has {self.slots} object slots for the scene's "
+                    f"{self.scene_objects} objects (a moving blob {self.ratio:.2f}x as strong as the objects is left "
+                    f"unrendered); train with --objects {self.scene_objects} to model them all")
         return (f"an object was not found: the reconstruction of single frames leaves a moving blob "
                 f"{self.ratio:.2f}x as strong as the scene's objects (at most {LOST_RATIO:g} when every object is "
                 "found); train again with another --seed (and --overwrite, or another --out)")
@@ -89,3 +108,27 @@ def check_objects(model: ObjectModel, frames: np.ndarray, max_frames: int = 400)
     x = x[np.linspace(0, len(x) - 1, min(max_frames, len(x))).astype(int)]
     rec = model.decoder(model.encode(x[:, None].to(module_device(model)))[:, 0])  # (F, C, H, W), on the model's device
     return compare(x.numpy(), rec.cpu().numpy(), BLUR_FRACTION * cfg.image_size)
+
+
+def match_objects(coords: np.ndarray, states: np.ndarray, found_px: float) -> dict[str, Any]:
+    """The encoder's (x, y) per slot, (B, T, N, 2) ``coords``, against a scene's true centres, read from its
+    (B, T, 4·M) ``states`` (x0, y0, x1, y1, ..., then the velocities; evaluation only), under the assignment of
+    slots to objects with the least mean distance (SciPy's Hungarian solver, exact for any N and M: with N = M it
+    is the best permutation). N may differ from M (``piga-train-model --objects``): with fewer slots some objects
+    have none, with more some slots match none.
+
+    Returns ``mean_px`` and ``p90_px`` (per true object; None for an object no slot matches), ``slots`` (the slot
+    matched to each true object, or None), ``unmatched_slots``, and ``found``: every object has a slot within a
+    mean distance of ``found_px`` pixels."""
+    b, t, n, _ = coords.shape
+    m = states.shape[-1] // 4
+    true = states[..., : 2 * m].reshape(b, t, m, 2)  # (B, T, M, 2)
+    distance = np.linalg.norm(coords[:, :, :, None] - true[:, :, None], axis=-1).reshape(b * t, n, m)  # (B*T, N, M)
+    slots, objects = linear_sum_assignment(distance.mean(axis=0))
+    slot_of: list[int | None] = [None] * m
+    mean: list[float | None] = [None] * m
+    p90: list[float | None] = [None] * m
+    for i, j in zip(slots.tolist(), objects.tolist()):
+        slot_of[j], mean[j], p90[j] = i, float(distance[:, i, j].mean()), float(np.percentile(distance[:, i, j], 90))
+    return {"mean_px": mean, "p90_px": p90, "slots": slot_of, "unmatched_slots": sorted(set(range(n)) - set(slots.tolist())),
+            "found": all(e is not None and e < found_px for e in mean)}

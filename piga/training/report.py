@@ -48,7 +48,8 @@ def write_run_report(model: FrameModel, state: TrainState, data: str | Path, run
     frames, actions = read_sequences(data, split, limit=eval_config.max_sequences)
     objects = None
     if isinstance(model, ObjectModel) and model.config.coord_dim == 2:  # a scene of objects: did the autoencoder find each?
-        objects = check_objects(model, frames)
+        scene = info.attrs.get("n_objects")  # the file's count, to compare with the model's slots (--objects)
+        objects = check_objects(model, frames).with_counts(model.config.n_objects, None if scene is None else int(scene))
         metrics["objects"] = objects.to_dict()
     metrics["training"] = {"epochs": state.epoch, "steps": state.step, "seconds": state.elapsed,
                            "threads": torch.get_num_threads(), "device": state.device or None}
@@ -67,7 +68,7 @@ def write_run_report(model: FrameModel, state: TrainState, data: str | Path, run
     to_img = lambda a: np.stack([[_image(f) for f in seq] for seq in a])  # noqa: E731
     save_figure(rollout_figure(to_img(truth), to_img(pred), cfg.input_frames, cfg.pred_frames), run_dir / "rollout.png")
     if isinstance(model, ObjectModel) and model.has_templates:
-        save_figure(templates_figure(*_templates(model)), run_dir / "templates.png")
+        save_figure(templates_figure(*template_images(model)), run_dir / "templates.png")
     true = {PARAMETER_NAMES[k]: float(v) for k, v in info.params.items() if k in PARAMETER_NAMES}
     if state.history:
         save_figure(curves_figure(state.history, true), run_dir / "curves.png")
@@ -75,7 +76,7 @@ def write_run_report(model: FrameModel, state: TrainState, data: str | Path, run
 
 
 @torch.no_grad()
-def _templates(model: ObjectModel) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def template_images(model: ObjectModel) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The templates figure's images: each object's content and mask, the background and its mask."""
     cfg = model.config
     # What the decoder composes for each object at the reference pose (θ = 0, or the image centre),

@@ -370,9 +370,9 @@ def pred_frames_for(model: ModelConfig, steps: int) -> int:
     return max(steps - model.input_frames, min(MIN_PRED_FRAMES, model.pred_frames))
 
 
-def model_config_for(info: DatasetInfo, model: ModelConfig | None = None) -> ModelConfig:
+def model_config_for(info: DatasetInfo, model: ModelConfig | None = None, n_objects: int | None = None) -> ModelConfig:
     """``model`` (None: the fast recipe's) fitted to a data file: system, dt, image size, channels and
-    objects from its attributes. Sequences shorter than the recipe's window L + T_pred shorten T_pred
+    objects from its attributes (``n_objects``: the model's object slots instead, ``piga-train-model --objects``). Sequences shorter than the recipe's window L + T_pred shorten T_pred
     to what they hold, down to :data:`MIN_PRED_FRAMES` (:func:`check_trainable` refuses shorter ones)."""
     if info.system not in SYSTEM_SHAPES:
         raise ValueError(f"{info.path}: system {info.system!r} has no physics model; known: {sorted(SYSTEM_SHAPES)}")
@@ -380,7 +380,8 @@ def model_config_for(info: DatasetInfo, model: ModelConfig | None = None) -> Mod
     if shape[0] != shape[1]:
         raise ValueError(f"{info.path}: frames must be square, got {shape}")
     channels = shape[2] if len(shape) == 3 else 1
-    n_objects = int(info.attrs.get("n_objects", SYSTEM_SHAPES[info.system][0]))
+    if n_objects is None:
+        n_objects = int(info.attrs.get("n_objects", SYSTEM_SHAPES[info.system][0]))
     model = model or ModelConfig()
     options = model.system_options
     if model.system != info.system:  # another system's model: only its default options make way for the file's
@@ -584,6 +585,7 @@ def train(
     resume: bool = False,
     progress: bool = True,
     on_epoch: Callable[[TrainState, FrameModel], None] | None = None,
+    n_objects: int | None = None,
 ) -> tuple[FrameModel, TrainState]:
     """Trains on the train split of ``data``; writes checkpoints and TensorBoard scalars to ``run_dir``.
 
@@ -594,7 +596,8 @@ def train(
     With ``resume``, the model, optimiser, step and RNGs come from ``run_dir``'s checkpoint and
     ``train_config`` should be the run's saved one (``TrainConfig.from_dict(ckpt["train_config"])``),
     possibly with more ``epochs``; ``model_config`` is ignored. Otherwise the model is ``model_config``
-    (None: the fast recipe's) fitted to the file (:func:`model_config_for`). Resuming with the same
+    (None: the fast recipe's) fitted to the file (:func:`model_config_for`), with ``n_objects`` object slots
+    (None: the file's count). Resuming with the same
     ``epochs`` continues exactly. With more ``epochs``, the cosine schedule is replanned over the
     new total: from the resumed step on, the learning rates are those a straight run of the new
     length has at that step (they rise again if the old run had finished its cosine), while the
@@ -628,7 +631,7 @@ def train(
         state = TrainState(**ckpt["state"])
         _set_rng_state(ckpt["rng"])
     else:
-        fitted = model_config_for(info, model_config)
+        fitted = model_config_for(info, model_config, n_objects)
         check_trainable(info, fitted, train_config)
         torch.manual_seed(train_config.seed)
         np.random.seed(train_config.seed)

@@ -87,7 +87,9 @@ class ModelConfig:
     channels: int = 1
     """C."""
     n_objects: int = 1
-    """N (balls, digits)."""
+    """N, the object slots of the encoder, decoder and physics (balls, digits); the data file's count unless
+    chosen (``piga-train-model --objects``: the paper's Appendix E gives 3-body gravity 2 and 4). A slot count
+    other than the scene's leaves an object unmodelled or a slot empty; the pendulum has one."""
     input_frames: int = 4
     """L, frames given to the encoder and velocity estimator."""
     pred_frames: int = 10
@@ -161,6 +163,10 @@ class ModelConfig:
         if self.architecture == "video-lstm" and (self.loss == "separate" or self.decoder != "st"):
             raise ValueError("video-lstm has no separate encoder/decoder and dynamics to train apart, nor an object "
                              "decoder to replace: it takes loss 'joint' or 'pred-only' and decoder 'st'")
+        if self.n_objects < 1:
+            raise ValueError(f"n_objects must be >= 1, got {self.n_objects}")
+        if self.system == "pendulum" and self.n_objects != 1:
+            raise ValueError(f"a pendulum model has one object (its angle), not n_objects={self.n_objects}")
         if self.extrapolate_frames < 0:
             raise ValueError(f"extrapolate_frames must be >= 0, got {self.extrapolate_frames}")
         if self.input_frames < 2 or self.pred_frames < 1:
