@@ -34,7 +34,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Literal, get_args, get_type_hints
 
-from common import add_ray_option, farm_main, machine, machine_words, ray_backend
+from common import TrainingBenchConfig, add_ray_option, farm_main, machine, machine_words, ray_backend
 from prediction import collect_command, collect_data, data_path, run_training
 
 from piga.cli.common import positive_int
@@ -53,7 +53,7 @@ REFERENCE = "joint"
 
 
 @dataclass(frozen=True)
-class BenchConfig:
+class BenchConfig(TrainingBenchConfig):
     """The benchmark's settings; a job's record is kept while its part of them is unchanged."""
 
     systems: tuple[str, ...] = ("gravity",)
@@ -61,14 +61,6 @@ class BenchConfig:
     """Table 2's rows (``joint`` always runs: the others are compared with it)."""
     slots: tuple[int, ...] = (2, 4)
     """Appendix E's object slot counts (``piga-train-model --objects``), besides the scene's own."""
-    seeds: tuple[int, ...] = (0,)
-    budget_steps: int = 1650
-    """Optimiser steps of every run (the scenes' fast recipe's own): the same for every variant."""
-    sequences: int = 100
-    """Sequences per data set (``piga-collect --sequences``), split 80/10/10."""
-    data_seed: int = 100
-    jobs: int = 1
-    """Runs trained at once, each in its own process with one torch thread."""
 
 
 DEFAULTS = BenchConfig()

@@ -12,6 +12,7 @@ import platform
 import subprocess
 import sys
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -82,6 +83,22 @@ def diagnose_options(args: object) -> tuple[str, ...]:
         if value is not None:
             flags.append(flag if value else "--no-" + flag[2:])
     return tuple(flags)
+
+
+@dataclass(frozen=True)
+class TrainingBenchConfig:
+    """The settings every benchmark that trains ``piga-train-model`` runs on collected scene data shares (each
+    benchmark's ``BenchConfig`` adds its own rows, and may give other defaults)."""
+
+    seeds: tuple[int, ...] = (0,)
+    budget_steps: int = 1650
+    """Optimiser steps of every run (``piga-train-model --budget-steps``; the scenes' fast recipe's): the same for
+    every run it compares."""
+    sequences: int = 100
+    """Sequences per data set (``piga-collect --sequences``), split 80/10/10."""
+    data_seed: int = 100
+    jobs: int = 1
+    """Runs trained at once, each in its own process with one torch thread."""
 
 
 def add_training_options(parser: argparse.ArgumentParser, defaults: Any, sequences_help: str) -> None:

@@ -31,7 +31,8 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Literal, get_args, get_type_hints
 
-from common import add_training_options, farm_main, logged_command, machine, machine_words, ray_backend
+from common import (TrainingBenchConfig, add_training_options, farm_main, logged_command, machine, machine_words,
+                    ray_backend)
 
 from piga.io.atomic import atomic_output, write_json
 from piga.io.pool import JobRecords, RecordedJob, run_recorded
@@ -47,19 +48,13 @@ RUN_EXITS = (0, 1, 3)
 
 
 @dataclass(frozen=True)
-class BenchConfig:
+class BenchConfig(TrainingBenchConfig):
     """The benchmark's settings; a job's record is kept while its part of them is unchanged."""
 
     systems: tuple[str, ...] = ("spring", "bouncing", "gravity")
     models: tuple[str, ...] = MODELS
-    seeds: tuple[int, ...] = (0,)
     budget_steps: int = 800
-    """Optimiser steps of every run (``piga-train-model --budget-steps``): the same for every model."""
-    sequences: int = 100
-    """Sequences per data set (``piga-collect --sequences``), split 80/10/10."""
-    data_seed: int = 100
     jobs: int = 2
-    """Runs trained at once, each in its own process with one torch thread."""
 
 
 DEFAULTS = BenchConfig()

@@ -31,7 +31,7 @@ from pathlib import Path
 from typing import Any, get_args, get_type_hints
 
 import numpy as np
-from common import add_training_options, farm_main, logged_command, machine, machine_words, ray_backend
+from common import TrainingBenchConfig, add_training_options, farm_main, logged_command, machine, machine_words, ray_backend
 
 from piga.io.atomic import atomic_output, write_json
 from piga.io.pool import JobRecords, RecordedJob, run_recorded
@@ -46,19 +46,10 @@ STRIP_FRAMES = 6
 
 
 @dataclass(frozen=True)
-class BenchConfig:
+class BenchConfig(TrainingBenchConfig):
     """The benchmark's settings; a job's record is kept while its part of them is unchanged."""
 
     decoders: tuple[str, ...] = ("st", "deconv", "broadcast", "mlp")
-    seeds: tuple[int, ...] = (0,)
-    budget_steps: int = 1650
-    """Optimiser steps of every run (``piga-train-model --budget-steps``; the scenes' fast recipe's): the same for
-    every decoder."""
-    sequences: int = 100
-    """Sequences of the data set (``piga-collect --sequences``), split 80/10/10."""
-    data_seed: int = 100
-    jobs: int = 1
-    """Runs trained at once, each in its own process with one torch thread."""
 
 
 DEFAULTS = BenchConfig()
