@@ -5,7 +5,7 @@ from __future__ import annotations
 import os
 import signal
 import subprocess
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -93,3 +93,22 @@ def stateless_pendulum(path: Path, sequences: int, steps: int, seed: int, split:
     with h5py.File(path, "a") as f:
         del f["states"]
     return path
+
+
+def benchmark_module(script: str) -> Iterator[Any]:
+    """Yields ``benchmarks/SCRIPT.py`` imported as a module (its sibling modules importable, as when it runs as a
+    script), for a fixture; removed again afterwards."""
+    import importlib.util
+    import sys
+
+    folder = Path(__file__).resolve().parents[1] / "benchmarks"
+    sys.path.insert(0, str(folder))  # the script imports its sibling modules (common, ...)
+    spec = importlib.util.spec_from_file_location(f"bench_{script}", folder / f"{script}.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # dataclasses look their module up there
+    try:
+        spec.loader.exec_module(module)
+        yield module
+    finally:
+        sys.modules.pop(spec.name, None)
+        sys.path.remove(str(folder))

@@ -4,31 +4,21 @@ are known): the benchmark's bookkeeping is tested, not the models."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import os
-import sys
 from pathlib import Path
 from typing import Any
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+from tests.helpers import benchmark_module
+
 PRED, EXT = 3, 5  # the stand-in's T_pred and T_ext
 
 
 @pytest.fixture
 def prediction():
-    sys.path.insert(0, str(ROOT / "benchmarks"))  # the script imports its sibling module common
-    spec = importlib.util.spec_from_file_location("bench_prediction", ROOT / "benchmarks" / "prediction.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # dataclasses look their module up there
-    try:
-        spec.loader.exec_module(module)
-        yield module
-    finally:
-        sys.modules.pop(spec.name, None)
-        sys.path.remove(str(ROOT / "benchmarks"))
+    yield from benchmark_module("prediction")
 
 
 def _ssim(model: str, seed: int, step: int) -> float:
