@@ -2,7 +2,8 @@
 
 :class:`PendulumPlanner` plans over whatever :class:`~agents.dynamics.Dynamics` it is given, in
 Gymnasium's convention (θ = 0 upright), with Gymnasium's reward -(wrap(θ - θ_goal)² + 0.1·θ̇² +
-0.001·u²) summed over the horizon (:class:`~agents.cost.PendulumCost`).
+0.001·u²) summed over the horizon (:class:`~agents.cost.PendulumCost`), or a cost it is given instead
+(a learned reward head: :class:`agents.reward_head.LearnedCost`).
 
 - :class:`OracleAgent` plans from the true state (``info["state"]``) with the true physics.
 - :class:`PigaMPCAgent` sees only frames. A :class:`StateReader` turns its last L frames into
