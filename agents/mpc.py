@@ -2,7 +2,8 @@
 
 :class:`PendulumPlanner` plans over whatever :class:`~agents.dynamics.Dynamics` it is given, in
 Gymnasium's convention (θ = 0 upright), with Gymnasium's reward -(wrap(θ - θ_goal)² + 0.1·θ̇² +
-0.001·u²) summed over the horizon (:class:`~agents.cost.PendulumCost`).
+0.001·u²) summed over the horizon (:class:`~agents.cost.PendulumCost`), or a cost it is given instead
+(a learned reward head: :class:`agents.reward_head.LearnedCost`).
 
 - :class:`OracleAgent` plans from the true state (``info["state"]``) with the true physics.
 - :class:`PigaMPCAgent` sees only frames. A :class:`StateReader` turns its last L frames into
@@ -24,7 +25,7 @@ import torch
 from torch import Tensor
 
 from agents.config import MPCConfig
-from agents.cost import PendulumCost
+from agents.cost import Cost, PendulumCost
 from agents.dynamics import Dynamics, PendulumDynamics, pendulum_state
 from agents.planner import Planner
 from envs.pendulum import MAX_ACTION, PENDULUM_DT, PixelPendulumConfig
@@ -41,10 +42,15 @@ class PendulumPlanner:
     Args:
         dynamics: what predicts the rollouts (learned, true or corrected physics, ...).
         config: planner settings.
+        cost: what every plan scores instead of Gymnasium's cost (a learned objective,
+            :class:`agents.reward_head.LearnedCost`); goal-free, so then the goal must be upright.
     """
 
-    def __init__(self, dynamics: Dynamics, config: MPCConfig = MPCConfig()):
+    def __init__(self, dynamics: Dynamics, config: MPCConfig = MPCConfig(), cost: Cost | None = None):
+        if cost is not None and config.goal_angle != 0.0:
+            raise ValueError(f"a learned cost scores one task, upright; got goal_angle {config.goal_angle}")
         self.config = config
+        self._cost = cost
         self.optimizer = Planner(dynamics, self.cost(config.goal_angle), [-MAX_ACTION], [MAX_ACTION], config.cem,
                                  warm_start=config.warm_fill if config.warm_start else "off",  # type: ignore[arg-type]
                                  execute=config.execute, seed=config.seed)  # type: ignore[arg-type]
@@ -56,8 +62,10 @@ class PendulumPlanner:
         """What the plans roll out."""
         return self.optimizer.dynamics
 
-    def cost(self, goal: float) -> PendulumCost:
-        """Gymnasium's cost with the configured weights, scored against ``goal``."""
+    def cost(self, goal: float) -> Cost:
+        """Gymnasium's cost with the configured weights, scored against ``goal`` (or the given cost)."""
+        if self._cost is not None:
+            return self._cost
         cfg = self.config
         return PendulumCost(goal, cfg.angle_weight, cfg.velocity_weight, cfg.action_weight)
 
@@ -195,10 +203,13 @@ class PigaMPCAgent:
             corrected by ``piga-diagnose``); already told of any gravity change.
         reader: how to read the state from frames instead of the model's encoder (for example
             through the camera found by ``piga-diagnose``).
+        cost: what to plan against instead of Gymnasium's cost (a learned objective:
+            :class:`agents.reward_head.LearnedCost`).
     """
 
     def __init__(self, model: PhysicsModel, config: MPCConfig = MPCConfig(), gravity_mult: float = 1.0,
-                 keep_trace: bool = False, dynamics: Dynamics | None = None, reader: StateReader | None = None):
+                 keep_trace: bool = False, dynamics: Dynamics | None = None, reader: StateReader | None = None,
+                 cost: Cost | None = None):
         if model.config.system != "pendulum":
             raise ValueError(f"PigaMPCAgent controls a pendulum model, got system {model.config.system!r}")
         if not (gravity_mult > 0 and math.isfinite(gravity_mult)):
@@ -208,7 +219,7 @@ class PigaMPCAgent:
         """φ: Gymnasium's θ = model θ + φ."""
         if dynamics is None:
             dynamics = PendulumDynamics.of(model.system, model.integrator, gravity_mult)  # type: ignore[arg-type]
-        self.planner = PendulumPlanner(dynamics, config)
+        self.planner = PendulumPlanner(dynamics, config, cost)
         self.read_state: StateReader = reader if reader is not None else EncoderReader(model)
         self.keep_trace = keep_trace
         self.trace: list[tuple[float, float, np.ndarray]] = []

@@ -359,13 +359,14 @@ def data_file(cfg: BenchConfig, folder: Path, n: int) -> Path:
 
 
 def evaluate(kind: str, run: Path | None, cfg: BenchConfig, gravity_mult: float = 1.0, episodes: int | None = None,
-             workers: int = 1) -> dict[str, Any]:
+             workers: int = 1, **job_fields: Any) -> dict[str, Any]:
     """piga.control.episodes' summary for one agent (kind "piga", "planet", "ddpg" or "oracle"), its episodes
-    split over ``workers`` processes (the same episodes and scores as one)."""
+    split over ``workers`` processes (the same episodes and scores as one); ``job_fields``: more fields of its
+    :class:`~piga.control.jobs.ControlJob` (the piga agent's ``told`` and ``reward_head``)."""
     from piga.control.jobs import ControlJob, run_split
 
     episode_config = episode_config_for(kind, cfg, gravity_mult, episodes)
-    job = ControlJob(kind, episode_config, model_dir=str(run) if run else None)
+    job = ControlJob(kind, episode_config, model_dir=str(run) if run else None, **job_fields)
     if kind == "planet" and "cem" in cfg.overrides:  # tiny preset only: PlaNet's planner, shrunk
         from agents.planet.planner import PlanetAgent
         from agents.planet.run import load_planet
@@ -437,8 +438,9 @@ def evaluate_kept(folder: Path, kind: str, run: Path | None, cfg: BenchConfig, g
     return summary
 
 
-def train_piga(data: Path, run: Path, seed: int, cfg: BenchConfig, n: int) -> float:
-    """Trains (unless done) and returns the run's training seconds."""
+def train_piga(data: Path, run: Path, seed: int, cfg: BenchConfig, n: int, model: Any = None) -> float:
+    """Trains (unless done) and returns the run's training seconds; ``model``: a
+    :class:`~piga.world.model.ModelConfig` instead of the fast recipe's (benchmarks/privilege.py's paper readout)."""
     from piga.io.runs import load_model
     from piga.training.train import TrainConfig, train
 
@@ -450,7 +452,8 @@ def train_piga(data: Path, run: Path, seed: int, cfg: BenchConfig, n: int) -> fl
     if state is None or state["epoch"] < config.epochs:  # not begun, or stopped part-way: resume
         from piga.world.model import ModelConfig
 
-        model = ModelConfig(rec_frames="input", pred_frames=4) if "piga" in cfg.overrides else None  # tiny preset: shrunk
+        if "piga" in cfg.overrides:  # tiny preset: shrunk
+            model = replace(model or ModelConfig(), rec_frames="input", pred_frames=4)
         state = asdict(train(data, run, config, model, resume=started, progress=False)[1])
     return float(state["elapsed"])
 

@@ -423,3 +423,44 @@ def test_piga_control_parses_its_arguments_without_torch() -> None:
     code = "import sys, piga.cli.control as c; c.build_parser().parse_args(['--oracle']); print('torch' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "False"
+
+
+def test_not_told_plans_with_the_learned_g_unscaled_in_an_env_at_the_multiplier(
+        control_model: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    """--not-told: the environment's gravity is x1.4, the agent's planning gravity its learned g (what it is told: 1)."""
+    import json
+
+    import agents.mpc
+    from agents.dynamics import PendulumDynamics
+    from piga.control.jobs import ControlJob, build_agent
+    from piga.io.runs import load_model
+
+    model, _ = load_model(control_model)
+    learned = PendulumDynamics.of(model.system, model.integrator).gravity_gain
+    built: list[PigaMPCAgent] = []
+
+    class Recorded(PigaMPCAgent):
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            built.append(self)
+
+    monkeypatch.setattr(agents.mpc, "PigaMPCAgent", Recorded)
+    gains = {}
+    for flags in ((), ("--not-told",)):
+        out = tmp_path / f"run{len(flags)}"
+        result = ctl(capsys, "--model", str(control_model), "--gravity-mult", "1.4", *flags, "--episodes", "1", "--steps",
+                     "20", "--out", str(out), "--quiet")
+        assert result.returncode == 0, result.stderr
+        assert json.loads(Path(f"{out}.json").read_text())["summary"]["gravity_mult"] == 1.4  # the env's, either way
+        gains[flags] = built[-1].planner.dynamics.gravity_gain
+        assert ("(not told)" in result.stdout) == bool(flags)
+    assert gains[("--not-told",)] == pytest.approx(learned) and gains[()] == pytest.approx(1.4 * learned)
+    episodes = EpisodeConfig(episodes=1, steps=20, gravity_mult=1.4)
+    assert build_agent(ControlJob("piga", episodes, model_dir=str(control_model), told=False)
+                       ).planner.dynamics.gravity_gain == pytest.approx(learned)
+    with pytest.raises(ValueError, match="piga agent"):
+        ControlJob("oracle", episodes, told=False)
+
+
+def test_not_told_is_refused_for_the_oracle(capsys: pytest.CaptureFixture[str]) -> None:
+    assert_one_line_error(ctl(capsys, "--oracle", "--not-told", "--gravity-mult", "1.4"), "--not-told", "oracle")

@@ -53,6 +53,10 @@ def build_parser() -> ArgumentParser:
                    f"{episodes.hold_steps} (default %(default)s)")
     p.add_argument("--gravity-mult", type=positive_float, default=episodes.gravity_mult,
                    help="multiply the environment's gravity; the agent is told and scales its learned g (default %(default)s)")
+    p.add_argument("--not-told", action="store_true",
+                   help="do not tell the piga agent --gravity-mult (nor, with --sweep, each multiplier): the environment's "
+                   "gravity changes while the agent plans with its learned g unscaled, as the baselines do (the oracle "
+                   "is always told)")
     p.add_argument("--goal-angle", type=float, default=math.degrees(mpc.goal_angle),
                    help="goal angle in degrees, 0 = upright (default %(default)g)")
     p.add_argument("--goal-image", help="PNG or JPEG of the scene at the goal; the encoder reads the goal angle from it "
@@ -101,6 +105,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         raise PigaError("--angle goes with --write-goal-image; to set the control goal use --goal-angle or --goal-image")
     if not args.oracle and not args.model:
         raise PigaError("give --model RUN_DIR (or --oracle)")
+    if args.not_told and args.oracle and not args.sweep:
+        raise PigaError("--not-told is for the piga agent; the oracle plans with the environment's true physics")
     check_angle("--goal-angle", args.goal_angle)
     hold = EpisodeConfig.hold_steps
     if args.steps < hold:
@@ -133,6 +139,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     from piga.io.runs import load_model
 
     torch.set_num_threads(1)  # small tensors: one thread plans fastest
+    told = 1.0 if args.not_told else args.gravity_mult  # the multiplier the agent believes
     model = None
     if args.model:
         model, ckpt = load_model(args.model)
@@ -142,7 +149,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise PigaError("--goal-image needs --model: the goal is read from the image by the model's encoder")
         from piga.control.goal import goal_from_image
 
-        estimate = goal_from_image(model, ckpt, args.goal_image, gravity_mult=args.gravity_mult)
+        estimate = goal_from_image(model, ckpt, args.goal_image, gravity_mult=told)
         for warning in estimate.warnings:
             print(f"{PROG}: warning: {warning}", file=sys.stderr)
         args.goal_angle = math.degrees(estimate.angle)
@@ -151,7 +158,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     elif args.goal_angle:
         from piga.control.goal import hold_warning
 
-        if (warning := hold_warning(mpc.goal_angle, args.gravity_mult)) is not None:
+        if (warning := hold_warning(mpc.goal_angle, told)) is not None:
             print(f"{PROG}: warning: {warning}", file=sys.stderr)
     if args.model:  # after every refusal, so that a refused command prints one line
         warn_if_unconverged(PROG, args.model)
@@ -164,15 +171,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         agent = OracleAgent.for_env(config.env_config(), mpc)
         label = "oracle"
     else:
-        agent = PigaMPCAgent(model, mpc, gravity_mult=args.gravity_mult, keep_trace=bool(args.video))
+        agent = PigaMPCAgent(model, mpc, gravity_mult=told, keep_trace=bool(args.video))
         config = replace(config, frame_stack=agent.input_frames)
         label = f"piga ({args.model})"
         on_episode_end = _keep_first_trace(agent, first_trace) if args.video else None
     result = run_episodes(agent, config, progress=not args.quiet, record=1 if args.video else 0,
                           on_episode_end=on_episode_end)
     s = result.summary
-    print(f"{label}, gravity x{args.gravity_mult:g}, goal {args.goal_angle:g} deg: success {100 * s.success_rate:.0f}% of "
-          f"{s.episodes}, mean return {s.mean_return:.1f}, final angle error {math.degrees(s.final_angle_error_mean):.2f} deg, "
+    print(f"{label}, gravity x{args.gravity_mult:g}{' (not told)' if args.not_told else ''}, goal {args.goal_angle:g} deg: "
+          f"success {100 * s.success_rate:.0f}% of {s.episodes}, mean return {s.mean_return:.1f}, final angle error {math.degrees(s.final_angle_error_mean):.2f} deg, "
           f"plan {s.plan_ms_median:.1f} ms median / {s.plan_ms_p95:.1f} ms p95")
     if args.video:
         from piga.evaluation.video import control_video
@@ -214,7 +221,7 @@ def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: 
         warn_if_unconverged(PROG, args.model)
     jobs = [ControlJob(agent, EpisodeConfig(episodes=args.episodes, steps=args.steps, seed=args.seed, gravity_mult=m,
                                             goal_angle=mpc.goal_angle, torque_arrow=args.torque_arrow),
-                       mpc, model_dir=args.model if agent != "oracle" else None)
+                       mpc, model_dir=args.model if agent != "oracle" else None, told=agent == "oracle" or not args.not_told)
             for m in multipliers for agent in (kind.value, "oracle")]
     results = run_jobs(jobs, workers=args.workers, progress=not args.quiet, backend=connect_backend(args.ray))
     summaries = [r.summary for r in results]

@@ -60,9 +60,17 @@ class ControlJob:
     """Extra (key, value) pairs copied into the result's summary (labels for tables)."""
     correction: AgentCorrection | None = None
     """For "piga": plan with this correction's dynamics and read frames with its reader (from ``piga-diagnose``)."""
+    told: bool = True
+    """For "piga": whether the agent is told the environment's gravity multiplier (``episodes.gravity_mult``) and
+    scales its learned g by it; False plans with the learned g unscaled (``piga-control --not-told``)."""
+    reward_head: str | None = None
+    """For "piga": plan against this learned reward head (:func:`agents.reward_head.save_reward_head`'s file)
+    instead of Gymnasium's cost."""
 
     def __post_init__(self) -> None:
         check_choices(self)  # "oracle" or a RunKind's value
+        if self.agent != "piga" and (not self.told or self.reward_head is not None):
+            raise ValueError(f"told=False and reward_head are the piga agent's; got agent {self.agent!r}")
         if self.agent != "oracle" and not self.model_dir:
             raise ValueError(f"a {self.agent!r} job needs model_dir")
         if self.agent != "oracle" and RunKind(self.agent).is_baseline and self.correction is not None:
@@ -80,7 +88,8 @@ class ControlJob:
 
 def build_agent(job: ControlJob) -> Agent:
     """The agent a job describes (loads the model for "piga" and the baselines). The piga agent is
-    told the environment's gravity multiplier; the oracle takes the environment's true g and a; a
+    told the environment's gravity multiplier (unless ``told`` is False) and plans against Gymnasium's cost
+    or its ``reward_head``; the oracle takes the environment's true g and a; a
     baseline runs as trained."""
     if job.agent == "oracle":
         return OracleAgent.for_env(job.episodes.env_config(), job.mpc)
@@ -91,11 +100,16 @@ def build_agent(job: ControlJob) -> Agent:
         return baseline_agent(RunKind(job.agent), job.model_dir, seed=job.mpc.seed)
     assert job.model_dir is not None
     model, _ = load_model(job.model_dir)
-    told = job.episodes.gravity_mult
+    told = job.episodes.gravity_mult if job.told else 1.0
+    cost = None
+    if job.reward_head is not None:
+        from agents.reward_head import LearnedCost, load_reward_head
+
+        cost = LearnedCost(load_reward_head(job.reward_head))
     if job.correction is None:
-        return PigaMPCAgent(model, job.mpc, gravity_mult=told)
+        return PigaMPCAgent(model, job.mpc, gravity_mult=told, cost=cost)
     return PigaMPCAgent(model, job.mpc, gravity_mult=told, dynamics=job.correction.dynamics(model, told),
-                        reader=job.correction.reader(model))
+                        reader=job.correction.reader(model), cost=cost)
 
 
 def run_job(job: ControlJob, keep_plan_ms: bool = False) -> EpisodeBatch:
