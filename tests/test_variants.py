@@ -95,7 +95,7 @@ def test_training_and_evaluation_see_the_same_predictions(architecture: str, sys
     torch.manual_seed(0)
     scene = system != "pendulum"
     config = ModelConfig(system=system, architecture=architecture, image_size=32, channels=3 if scene else 1,
-                         n_objects=2, dt=0.3 if scene else 0.05, input_frames=4, pred_frames=3,
+                         n_objects=2 if scene else 1, dt=0.3 if scene else 0.05, input_frames=4, pred_frames=3,
                          init_background=True)
     model = build_model(config).eval()
     model.set_background(torch.rand(config.channels, 32, 32) * 0.2)
