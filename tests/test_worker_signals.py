@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import multiprocessing as mp
+import os
 import signal
 import sys
 import time
@@ -53,3 +54,28 @@ def test_pool_worker_keeps_sigterm_default_and_dies_on_it() -> None:
     finally:
         if worker.is_alive():
             worker.kill()
+
+
+def _terminated_before_its_set_up() -> None:
+    """A pool worker whose parent's terminate lands between the fork and the worker's own signal set-up."""
+    from piga.io.pool import init_worker
+
+    os.kill(os.getpid(), signal.SIGTERM)
+    init_worker()
+    time.sleep(5)  # not reached: the held SIGTERM ends the worker as init_worker unblocks it
+
+
+def test_a_sigterm_before_the_worker_set_up_still_ends_it() -> None:
+    """With the parent's Python handler inherited (a command's), such a SIGTERM used to be dropped, and the pool's
+    exit waited for the worker for ever; workers forked under sigterm_held end with SIGTERM's default."""
+    from piga.io.worker_signals import sigterm_held
+
+    old = signal.signal(signal.SIGTERM, lambda *_: None)  # the parent's own handler, inherited by the fork
+    try:
+        with sigterm_held():
+            worker = mp.get_context("fork").Process(target=_terminated_before_its_set_up)
+            worker.start()
+        worker.join(30)
+        assert worker.exitcode == -signal.SIGTERM
+    finally:
+        signal.signal(signal.SIGTERM, old)

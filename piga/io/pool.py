@@ -32,7 +32,7 @@ from tqdm.auto import tqdm
 
 from piga.io.atomic import write_json
 from piga.io.choices import check_choices
-from piga.io.worker_signals import die_with_parent, quiet_worker_signals
+from piga.io.worker_signals import die_with_parent, quiet_worker_signals, sigterm_held
 
 Spec = TypeVar("Spec")
 Result = TypeVar("Result")
@@ -178,7 +178,9 @@ def run_pool(function: Callable[[Spec], Result], specs: Sequence[Spec], workers:
     # fork, as torch's DataLoader does: with spawn, torch's import makes the resource tracker warn
     # about leaked semaphores. The parent has rendered nothing; each child sets one torch thread.
     method = "fork" if "fork" in mp.get_all_start_methods() else "spawn"
-    with mp.get_context(method).Pool(min(workers, len(specs)), initializer=init_worker) as pool:  # exit: terminate
+    with sigterm_held():  # the workers and the pool's threads start with SIGTERM held, until init_worker
+        pool = mp.get_context(method).Pool(min(workers, len(specs)), initializer=init_worker)
+    with pool:  # exit: terminate
         done = pool.imap_unordered(functools.partial(_indexed, function), enumerate(specs))
         for i, result in tqdm(done, total=len(specs), desc=desc, disable=not progress):
             if isinstance(result, _Failure):  # the pool's exit terminates the jobs still running
