@@ -33,6 +33,7 @@ from typing import Any
 
 import numpy as np
 import torch
+from stable_baselines3.common.torch_layers import create_mlp
 from torch import Tensor, nn
 
 from piga.world.model import PhysicsModel, frames_to_float
@@ -69,11 +70,8 @@ class RewardHead(nn.Module):
     def __init__(self, config: RewardHeadConfig = RewardHeadConfig()):
         super().__init__()
         self.config = config
-        sizes = [4] + [config.hidden] * config.layers
-        layers: list[nn.Module] = []
-        for a, b in zip(sizes[:-1], sizes[1:]):
-            layers += [nn.Linear(a, b), nn.ReLU()]
-        self.net = nn.Sequential(*layers, nn.Linear(sizes[-1], 1))
+        # SB3's MLP builder: Linear and ReLU per hidden layer, then a Linear to the reward
+        self.net = nn.Sequential(*create_mlp(4, 1, [config.hidden] * config.layers, nn.ReLU))
 
     def forward(self, states: Tensor, actions: Tensor) -> Tensor:
         theta, speed = states[..., 0], states[..., 1]  # (...) each

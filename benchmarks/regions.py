@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import argparse
 import base64
-import json
 import statistics
 import sys
 import time
@@ -33,14 +32,14 @@ from typing import Any, get_args, get_type_hints
 import numpy as np
 from common import TrainingBenchConfig, add_training_options, farm_main, logged_command, machine, machine_words, ray_backend
 
+from prediction import run_training
+
 from piga.io.atomic import atomic_output, write_json
 from piga.io.pool import JobRecords, RecordedJob, run_recorded
 from piga.world.model import ModelConfig
 
 #: The decoders of ``piga-train-model --decoder`` (one source: :class:`ModelConfig`'s ``decoder``).
 DECODERS: tuple[str, ...] = get_args(get_type_hints(ModelConfig)["decoder"])
-#: ``piga-train-model``'s exit statuses for a run that trained and wrote its metrics (as ``benchmarks/prediction.py``).
-RUN_EXITS = (0, 1, 3)
 #: Frames of the strip: extrapolation frames of one test sequence with a ball in the bottom half.
 STRIP_FRAMES = 6
 
@@ -196,14 +195,9 @@ def decode_frames(stored: dict[str, Any]) -> np.ndarray:
 
 def train_job(job: Job) -> dict[str, Any]:
     """A job of the runner: trains ``job`` with ``piga-train-model``, scores its run and returns its record's fields."""
-    metrics_path = job.run_dir / "metrics.json"
-    metrics_path.unlink(missing_ok=True)  # a stale one must not pass for this run's (file times are too coarse)
     started = time.time()
-    log = job.run_dir.parent / f"{job.name}.log"
-    code = logged_command(train_command(job), log)
-    if code not in RUN_EXITS or not metrics_path.exists():
-        raise RuntimeError(f"'piga-train-model --decoder {job.decoder}' failed (exit {code}); see {log}")
-    m = json.loads(metrics_path.read_text())
+    code, m = run_training(train_command(job), job.run_dir, job.run_dir.parent / f"{job.name}.log",
+                           f"piga-train-model --decoder {job.decoder}")
     scored = score_run(job.run_dir, job.data, job.strip)
     s = scored["scores"]
     print(f"{job.name}: SSIM extrapolation {s['ssim_extrapolation']:.3f}, bottom half with a ball "

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import shutil
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -65,7 +66,8 @@ def _stand_ins(regions: Any, monkeypatch: pytest.MonkeyPatch, half_file: Path,
                            "ssim_bottom_with_ball": value, "mse_bottom_with_ball": 1 - value},
                 "strip": regions.encode_frames(np.full((len(strip[1]), 32, 32, 3), int(value * 255), np.uint8))}
 
-    monkeypatch.setattr(regions, "logged_command", logged)
+    monkeypatch.setattr(regions, "logged_command", logged)  # the collection
+    monkeypatch.setattr(sys.modules["prediction"], "logged_command", logged)  # the trainings (its run_training)
     monkeypatch.setattr(regions, "score_run", score)
     return calls
 
