@@ -38,6 +38,7 @@ from common import TrainingBenchConfig, add_ray_option, farm_main, machine, mach
 from prediction import collect_command, collect_data, data_path, run_training
 
 from piga.cli.common import positive_int
+from piga.evaluation.objects import EMPTY_RATIO, LOST_RATIO
 from piga.io.atomic import atomic_output, write_json
 from piga.io.pool import JobRecords, RecordedJob, run_recorded
 from piga.world.model import SYSTEM_SHAPES, ModelConfig
@@ -202,6 +203,8 @@ def summary(records: dict[str, dict[str, Any]], cfg: BenchConfig) -> dict[str, d
                                    "relative_error": _mean([m["parameter_errors"][k]["relative_error"] for m in metrics])}
                                for k in names},
                 "objects_lost": [bool((m.get("objects") or {}).get("lost")) for m in metrics],
+                # None: a record from before the empty-slot check
+                "empty_slots": [(m.get("objects") or {}).get("empty_slots") for m in metrics],
                 "object_ratio": _mean([(m.get("objects") or {}).get("ratio") for m in metrics]),
                 "exits": [r["exit"] for r in runs],
                 "outcomes": [r["convergence"].get("outcome") for r in runs],
@@ -264,12 +267,14 @@ def markdown(record: dict[str, Any], out: Path) -> str:
             own = SYSTEM_SHAPES[system][0]
             lines += ["", f"## {system}: object slots (Appendix E; the scene has {own} objects)", "",
                       "| slots | learned parameters | prediction SSIM | prediction MSE | extrapolation MSE | "
-                      "reconstruction MSE | object check (residual / objects) | exit (outcome) |",
+                      "reconstruction MSE | object check (residual / objects; empty slots) | exit (outcome) |",
                       "|---|---|---|---|---|---|---|---|"]
             for name in [REFERENCE, *slots]:
                 r = rows[name]
                 n = own if name == REFERENCE else int(name[len("slots"):])
                 lost = "lost" if any(r["objects_lost"]) else "all found"
+                empty = r.get("empty_slots") or [None]
+                lost += "; " + (" / ".join("not measured" if e is None else (", ".join(map(str, e)) or "none") for e in empty))
                 lines.append(f"| {n} | {_parameters(r)} | {_fmt(r['ssim_prediction'], '.3f')} | "
                              f"{_fmt(r['mse_prediction'], '.5f')} | {_fmt(r['mse_extrapolation'], '.5f')} | "
                              f"{_fmt(r['mse_reconstruction'], '.5f')} | {_fmt(r['object_ratio'], '.2f')} ({lost}) | "
@@ -277,9 +282,11 @@ def markdown(record: dict[str, Any], out: Path) -> str:
             lines += ["", f"![contents and masks per slot]({out.name}-slots.png)"]
     lines += ["", "Exit is `piga-train-model`'s status: 0 converged, 3 not converged (a parameter still moving over the "
               "last 10% of steps), 1 its check failed (the physics did not train, or the label-free object check found "
-              "a moving object that no slot renders: with fewer slots than objects that is expected). The object check "
-              "is the ratio of the blurred reconstruction residual's peak to the moving content's (above 0.5: an "
-              "object lost). The paper's numbers are in units it does not state, so only ratios compare with them. Training minutes are wall-clock with one torch thread on the machine above (which may "
+              "a moving object that no slot renders, with fewer slots than objects that is expected, or a slot that renders "
+              "nothing, which the physics still moves). The object check "
+              f"is the ratio of the blurred reconstruction residual's peak to the moving content's (above {LOST_RATIO:g}: an "
+              "object lost), and the slots whose removal from the reconstruction changes the frames by less than "
+              f"{EMPTY_RATIO:g} of the content's peak (empty). The paper's numbers are in units it does not state, so only ratios compare with them. Training minutes are wall-clock with one torch thread on the machine above (which may "
               "be shared).", ""]
     return "\n".join(lines)
 

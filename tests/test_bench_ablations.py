@@ -59,17 +59,17 @@ def _stand_ins(ablations: Any, monkeypatch: pytest.MonkeyPatch, fail: str | None
             return 2
         v = _variant(args)
         out.mkdir(parents=True, exist_ok=True)
-        lost = v == "slots2"
+        lost, empty = v == "slots2", v == "slots4"
         metrics = {"split": "test", "input_frames": 4, "pred_frames": 12, "extrapolate_frames": 24,
                    "frame_ssim_mean": {"prediction": 1 - 10 * MSE[v], "extrapolation": 1 - 20 * MSE[v]},
                    "frame_mse_mean": {"prediction": MSE[v], "extrapolation": 2 * MSE[v]},
                    "parameters": {"g": G[v]},
                    "parameter_errors": {"g": {"learned": G[v], "true": 60.0, "relative_error": abs(G[v] - 60) / 60}},
-                   "objects": {"ratio": 0.9 if lost else 0.1, "lost": lost}, "converged": not lost,
-                   "convergence": {"outcome": "untrained" if lost else "converged"},
+                   "objects": {"ratio": 0.9 if lost else 0.1, "lost": lost, "empty_slots": [3] if empty else []},
+                   "converged": not (lost or empty), "convergence": {"outcome": "untrained" if lost or empty else "converged"},
                    "training": {"seconds": 60.0, "steps": int(args[args.index("--budget-steps") + 1])}}
         (out / "metrics.json").write_text(json.dumps(metrics))
-        return 1 if lost else 0
+        return 1 if lost or empty else 0
 
     def inspect_run(run_dir: Path, data: Path) -> dict[str, Any]:
         v = run_dir.name.split("-", 1)[1].rsplit("-", 1)[0]
@@ -104,7 +104,8 @@ def test_the_page_figure_and_json_are_written_and_a_rerun_reuses_the_records(abl
     assert rows["mlp"]["mse_reconstruction"] == 0.002 and rows["slots2"]["objects_lost"] == [True]
     page = out.with_suffix(".md").read_text()
     assert "| separate gradients | `--loss separate` | 0.03000 | 30.00 | 0.00100 | g = 12 (80.0% off 60) |" in page
-    assert "| 2 | g = 40 (33.3% off 60) | 0.900 | 0.01000 | 0.02000 | 0.00100 | 0.90 (lost) | 1 (untrained) |" in page
+    assert "| 2 | g = 40 (33.3% off 60) | 0.900 | 0.01000 | 0.02000 | 0.00100 | 0.90 (lost; none) | 1 (untrained) |" in page
+    assert "| 0.10 (all found; 3) | 1 (untrained) |" in page  # 4 slots: slot 3 empty
     assert f"`python benchmarks/ablations.py {' '.join(argv)}`" in page and "28.1, 0.22" in page
     assert (out.parent / "ablations-slots.png").read_bytes()[:4] == b"\x89PNG"
 

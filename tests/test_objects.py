@@ -1,10 +1,11 @@
-"""The lost-object check (:mod:`piga.evaluation.objects`): a ball that no object renders stays in the residual."""
+"""The object check (:mod:`piga.evaluation.objects`): a ball that no object renders stays in the residual, and a slot
+that renders nothing leaves the frames the same when it is taken out."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from piga.evaluation.objects import LOST_RATIO, compare
+from piga.evaluation.objects import EMPTY_RATIO, LOST_RATIO, compare
 
 
 def scene(frames: int = 60, size: int = 32, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
@@ -40,3 +41,15 @@ def test_found_balls_under_pixel_noise_are_not_lost() -> None:
     assert not check.lost and check.ratio < LOST_RATIO / 2
     assert compare(frames, frames, sigma=1.5).ratio == 0
 
+
+
+def test_a_slot_that_draws_nothing_is_empty_and_the_fix_fits_the_counts() -> None:
+    frames, red_only = scene()
+    # slot 0 draws the blue ball (without it: red only); slot 1 draws nothing (without it: the same frames)
+    check = compare(frames, frames, sigma=1.5, without=[red_only, frames + 0.002])
+    assert check.empty_slots == [1] and check.slot_ratios[0] > 2 * EMPTY_RATIO and not check.lost
+    assert check.to_dict()["empty_slots"] == [1]
+    assert check.with_counts(3, 2).too_many_slots and "--objects 2" in check.with_counts(3, 2).empty_reason()
+    assert "another --seed" in check.with_counts(2, 2).empty_reason()  # the scene has an object for it
+    assert "--objects 1" in check.with_counts(2, None).empty_reason()  # the file does not say: the slots that draw
+    assert compare(frames, frames, sigma=1.5).empty_slots == []  # not measured: nothing to call empty

@@ -86,6 +86,35 @@ def test_a_run_whose_autoencoder_found_no_ball_trains_again_then_exits_1_naming_
     assert len(list((out / "tensorboard").iterdir())) == 1  # the first attempt's curves are gone
 
 
+@pytest.mark.parametrize("slots", [None, "3"])
+def test_a_slot_that_draws_nothing_retries_only_where_the_scene_has_an_object_for_it(
+        slots: str | None, spring_data: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """The object check (a stand-in here) finds the last slot empty. With the file's 2 slots another seed may fill
+    it: the run trains again, then exits 1 naming the seeds. With --objects 3 for 2 balls a seed cannot: no retry,
+    and the line names --objects 2."""
+    import piga.training.report as report
+    from piga.evaluation.objects import ObjectCheck
+
+    def one_empty(model: object, frames: object) -> ObjectCheck:
+        n = model.config.n_objects  # type: ignore[attr-defined]
+        return ObjectCheck(0.01, 0.3, 0.03, False, slot_ratios=(0.9,) * (n - 1) + (0.01,))
+
+    monkeypatch.setattr(report, "check_objects", one_empty)
+    out = tmp_path / "run"
+    code, stdout, err = run_in_process("piga-train-model", train_main, str(spring_data), "--out", str(out), "--epochs",
+                                       "1", "--batch-size", "16", "--warmup-fraction", "0.5", "--threads", "1", "--quiet",
+                                       "--seed", "5", *(["--objects", slots] if slots else []), capsys=capsys)
+    if slots is None:
+        assert_one_line(code, err, "slot 1 of 2 renders nothing", "another --seed", "seeds 5 and 6 tried")
+        assert "slot 1 drew nothing with seed 5; training again from the start with seed 6" in stdout
+    else:
+        assert_one_line(code, err, "slot 2 of 3 renders nothing", "the scene has 2 objects", "--objects 2")
+        assert "training again" not in stdout
+    assert code == 1
+    assert json.loads((out / "metrics.json").read_text())["objects"]["empty_slots"] == [int(slots or 2) - 1]
+
+
 def test_a_retry_stopped_before_its_first_checkpoint_leaves_no_folder(spring_data: Path, tmp_path: Path,
                                                                       monkeypatch: pytest.MonkeyPatch,
                                                                       capsys: pytest.CaptureFixture[str]) -> None:

@@ -415,6 +415,30 @@ def test_the_convergence_check_on_made_up_trajectories() -> None:
     assert warm.outcome == "untrained" and "never trained" in warm.reason and warm.physics_steps == 0
 
 
+def test_a_slot_that_draws_nothing_makes_a_converged_scene_run_untrained() -> None:
+    """An empty slot is still moved by the physics, so parameters that settled mean nothing; a baseline (``blank``
+    given: no physical parameters) has none to bend and is judged on its predictions alone."""
+    from types import SimpleNamespace
+
+    from piga.evaluation.objects import ObjectCheck
+    from piga.training.convergence import check_convergence
+    from piga.training.train import TrainPlan
+
+    plan = asdict(TrainPlan(windows=3200, steps_per_epoch=100, epochs=10, warmup_steps=40, curriculum_steps=100,
+                            average_steps=60))
+    steps = np.arange(10, 1001, 10.0)
+    g = 1 + 59 * (1 - np.exp(-steps / 150))
+    state = SimpleNamespace(step=1000, start={"g": 1.0}, trace=[[s, v] for s, v in zip(steps, g)], plan=plan,
+                            history=[{"g": g[-1]}])
+    full = ObjectCheck(0.01, 0.3, 0.03, False, slot_ratios=(0.98, 0.97, 0.99))
+    assert check_convergence(state, objects=full.with_counts(3, 3)).outcome == "converged"
+    empty = ObjectCheck(0.01, 0.3, 0.03, False, slot_ratios=(0.98, 0.97, 0.99, 0.006)).with_counts(4, 3)
+    verdict = check_convergence(state, objects=empty)
+    assert verdict.outcome == "untrained" and "slot 3 of 4 renders nothing" in verdict.reason
+    assert "--objects 3" in verdict.reason
+    assert check_convergence(state, objects=empty, blank=(0.001, 0.01)).outcome == "converged"
+
+
 def test_cli_interrupted_right_after_its_first_checkpoint_keeps_it_with_its_record(
         small_data: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
     """Ctrl-C between the first checkpoint's write and the record that goes with it: the run is kept, said so, and

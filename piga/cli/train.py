@@ -107,8 +107,8 @@ def build_parser() -> ArgumentParser:
     p.add_argument("--threads", type=thread_count, default=fast.threads, help="torch CPU threads (default %(default)s: torch's choice)")
     add_device_option(p, fast.device)
     p.add_argument("--seed-retries", type=nonnegative_int, default=fast.seed_retries, metavar="N",
-                   help="a scene whose object check finds an object missing is trained again from the start with the "
-                   "next seed, up to N times (default %(default)s; 0: never; not with --resume)")
+                   help="a scene whose object check finds an object missing (or a slot that draws nothing where the scene "
+                   "has an object for it) is trained again from the start with the next seed, up to N times (default %(default)s; 0: never; not with --resume)")
     p.add_argument("--resume", action="store_true", help="continue the run in --out; it may raise --epochs, --budget-steps or --max-minutes "
                    "(docs: piga-train-model; resuming replans the cosine schedule)")
     p.add_argument("--overwrite", action="store_true", help="replace the outputs of an earlier run in --out")
@@ -268,13 +268,19 @@ def main(argv: Sequence[str] | None = None) -> int:
                 remove_empty_folders(missing)
             raise
         metrics = write_run_report(model, state, args.data, run_dir)
-        if (args.resume or not metrics.get("objects", {}).get("lost") or len(tried) >= train_config.seed_retries
-                or train_config.seed >= MAX_SEED or metrics["objects"].get("too_few_slots")):
+        objects = metrics.get("objects", {})
+        # another seed can find a lost object, or fill a slot that should draw one; not make room for more
+        # objects than the slots, nor objects for slots beyond the scene's count
+        lost = objects.get("lost") and not objects.get("too_few_slots")
+        empty = (objects.get("empty_slots") and not objects.get("too_many_slots")
+                 and (metrics.get("convergence") or {}).get("outcome") == "untrained")
+        if args.resume or not (lost or empty) or len(tried) >= train_config.seed_retries or train_config.seed >= MAX_SEED:
             break
         tried.append(train_config.seed)
         train_config = replace(train_config, seed=train_config.seed + 1)
-        print(f"object check: an object was not found with seed {tried[-1]} (a blob {metrics['objects']['ratio']:.2f}x "
-              f"as strong as the objects); training again from the start with seed {train_config.seed} "
+        what = (f"an object was not found with seed {tried[-1]} (a blob {objects['ratio']:.2f}x as strong as the objects)"
+                if lost else f"slot {objects['empty_slots'][0]} drew nothing with seed {tried[-1]}")
+        print(f"object check: {what}; training again from the start with seed {train_config.seed} "
               f"(retry {len(tried)} of --seed-retries {train_config.seed_retries})")
         remove_outputs(run_dir, OUTPUTS)
         record.update({"train": asdict(train_config), "retried_seeds": list(tried)})

@@ -15,6 +15,14 @@ of all, the static background). Measured on the robustness benchmark's 30 seed-0
 dark-background gravity run at seed 0 trained without the retry (``benchmarks/object_check.py``,
 ``results/object_check.md``): 0.013-0.164 on the 30 that found every object (0.164 under Gaussian
 pixel noise of σ = 25/255, 0.10 under H.264 at CRF 28), 0.63 for the lost ball.
+
+The converse, a slot that renders nothing (a model given more slots than the scene has objects, with
+``piga-train-model --objects``), is as silent and as harmful: the physics still moves the empty slot, and
+its pull or its springs bend the learned parameters (measured: g 79% off with 4 slots for 3 balls, k 52%
+off with 4 slots for 2, at exit 0 before this check). Its sign needs no labels either: take the slot out of
+the reconstruction (park it off the picture) and the frames do not change. :func:`check_objects` measures,
+for each slot, the typical peak of the blurred change that removing it makes, against the same content
+peak, and calls a slot empty below :data:`EMPTY_RATIO`.
 """
 
 from __future__ import annotations
@@ -33,6 +41,8 @@ from piga.world.model import ObjectModel, frames_to_float
 
 #: Residual peak over content peak above which an object counts as lost.
 LOST_RATIO = 0.5
+#: Peak change on removing a slot over content peak below which the slot renders nothing.
+EMPTY_RATIO = 0.25
 #: Gaussian blur σ as a fraction of the image size (1.5 px on the scenes' 36 px frames: about a ball's radius).
 BLUR_FRACTION = 1 / 24
 
@@ -53,6 +63,14 @@ class ObjectCheck:
     """The model's object slots N (None: not compared with the scene's count)."""
     scene_objects: int | None = None
     """The objects the data file says its scene has (its ``n_objects`` attribute; None: not known)."""
+    slot_ratios: tuple[float, ...] | None = None
+    """Per slot: the median over frames of the largest blurred change that taking the slot out of the
+    reconstruction makes, over ``content_peak`` (None: not measured)."""
+
+    @property
+    def empty_slots(self) -> list[int]:
+        """The slots that render nothing (:data:`EMPTY_RATIO`): the frames are the same without them."""
+        return [i for i, r in enumerate(self.slot_ratios or ()) if r < EMPTY_RATIO]
 
     @property
     def too_few_slots(self) -> bool:
@@ -64,7 +82,8 @@ class ObjectCheck:
         return replace(self, slots=slots, scene_objects=scene_objects)
 
     def to_dict(self) -> dict[str, Any]:
-        return {**asdict(self), "too_few_slots": self.too_few_slots}
+        return {**asdict(self), "too_few_slots": self.too_few_slots, "too_many_slots": self.too_many_slots,
+                "empty_slots": self.empty_slots}
 
     def reason(self) -> str:
         """The one-line cause of a lost object, with the fix."""
@@ -75,6 +94,28 @@ class ObjectCheck:
         return (f"an object was not found: the reconstruction of single frames leaves a moving blob "
                 f"{self.ratio:.2f}x as strong as the scene's objects (at most {LOST_RATIO:g} when every object is "
                 "found); train again with another --seed (and --overwrite, or another --out)")
+
+    @property
+    def too_many_slots(self) -> bool:
+        """The model has more slots than the scene has objects (as the file says): some slot has nothing to draw."""
+        return self.slots is not None and self.scene_objects is not None and self.slots > self.scene_objects
+
+    def empty_reason(self) -> str:
+        """The one-line cause of empty slots, with the fix."""
+        empty, ratios = self.empty_slots, self.slot_ratios or ()
+        many = len(empty) > 1
+        slots = self.slots if self.slots is not None else len(ratios)
+        cause = (f"slot{'s' if many else ''} {', '.join(map(str, empty))} of {slots} render{'' if many else 's'} nothing "
+                 f"(taking {'them' if many else 'it'} out changes the frames by at most "
+                 f"{max(ratios[i] for i in empty):.2f}x the objects' contrast, at least {EMPTY_RATIO:g} for a slot that "
+                 f"draws an object), yet the physics still moves {'them' if many else 'it'}, so its parameters are bent")
+        if self.scene_objects is not None and not self.too_many_slots:
+            return (f"{cause}; the scene has {self.scene_objects} objects (the file's n_objects), so a slot that should draw "
+                    "one did not: train again with another --seed (and --overwrite, or another --out)")
+        count = self.scene_objects if self.too_many_slots else max(slots - len(empty), 1)
+        said = (f"the scene has {self.scene_objects} objects (the file's n_objects)" if self.too_many_slots
+                else f"{count} slot{'s' if count != 1 else ''} draw the scene")
+        return f"{cause}: {said}; train with --objects {count}"
 
 
 def _peaks(diff: np.ndarray, sigma: float) -> np.ndarray:
@@ -89,25 +130,37 @@ def _peaks(diff: np.ndarray, sigma: float) -> np.ndarray:
     return np.abs(blurred).mean(1).max(axis=(1, 2))
 
 
-def compare(frames: np.ndarray, reconstructed: np.ndarray, sigma: float) -> ObjectCheck:
-    """The check on (F, C, H, W) float ``frames`` in [0, 1] and their ``reconstructed`` single frames."""
+def compare(frames: np.ndarray, reconstructed: np.ndarray, sigma: float,
+            without: list[np.ndarray] | None = None) -> ObjectCheck:
+    """The check on (F, C, H, W) float ``frames`` in [0, 1] and their ``reconstructed`` single frames, and,
+    given ``without`` (per slot, the (F, C, H, W) reconstruction with that slot taken out), each slot's share."""
     residual = _peaks(frames - reconstructed, sigma)  # (F,)
     background = np.median(frames, axis=0)  # (C, H, W): the static scene
     content = _peaks(frames - background, sigma)  # (F,)
     r, c = float(np.median(residual)), float(np.median(content))
     ratio = r / c if c > 0 else 0.0
-    return ObjectCheck(r, c, ratio, bool(ratio > LOST_RATIO))
+    slots = None
+    if without is not None:
+        slots = tuple(float(np.median(_peaks(reconstructed - w, sigma))) / c if c > 0 else 0.0 for w in without)
+    return ObjectCheck(r, c, ratio, bool(ratio > LOST_RATIO), slot_ratios=slots)
 
 
 @torch.no_grad()
 def check_objects(model: ObjectModel, frames: np.ndarray, max_frames: int = 400) -> ObjectCheck:
     """Reconstructs single frames of (B, T, H, W[, C]) uint8 ``frames`` (at most ``max_frames``, spread over
-    the sequences) through the model's encoder and decoder, and :func:`compare` s them."""
+    the sequences) through the model's encoder and decoder, with every slot and with each slot taken out (parked
+    far off the picture), and :func:`compare` s them."""
     cfg = model.config
     x = frames_to_float(torch.from_numpy(np.ascontiguousarray(frames)), cfg.channels).flatten(0, 1)  # (F, C, H, W)
     x = x[np.linspace(0, len(x) - 1, min(max_frames, len(x))).astype(int)]
-    rec = model.decoder(model.encode(x[:, None].to(module_device(model)))[:, 0])  # (F, C, H, W), on the model's device
-    return compare(x.numpy(), rec.cpu().numpy(), BLUR_FRACTION * cfg.image_size)
+    coords = model.encode(x[:, None].to(module_device(model)))[:, 0]  # (F, N, 2), on the model's device
+    rec = model.decoder(coords).cpu().numpy()  # (F, C, H, W)
+    without = []
+    for i in range(coords.shape[1]):
+        parked = coords.clone()
+        parked[:, i] = -10.0 * cfg.image_size  # off the picture: the slot draws nothing
+        without.append(model.decoder(parked).cpu().numpy())  # (F, C, H, W)
+    return compare(x.numpy(), rec, BLUR_FRACTION * cfg.image_size, without)
 
 
 def match_objects(coords: np.ndarray, states: np.ndarray, found_px: float) -> dict[str, Any]:

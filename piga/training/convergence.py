@@ -8,7 +8,7 @@ trajectory, :class:`piga.training.train.TrainState`), never the truth, and gives
 
 | outcome | meaning | ``piga-train-model`` |
 |---|---|---|
-| ``untrained`` | the physics never trained, a learned parameter never left its start, one collapsed to a float limit, the actuation gain faded toward 0, (for a scene) an object was not found (:mod:`piga.evaluation.objects`), or (for a baseline without physical parameters) its held-out predictions are no better than the background alone | exits 1 with a line that names the fix |
+| ``untrained`` | the physics never trained, a learned parameter never left its start, one collapsed to a float limit, the actuation gain faded toward 0, (for a scene) an object was not found or a slot draws nothing (:mod:`piga.evaluation.objects`), or (for a baseline without physical parameters) its held-out predictions are no better than the background alone | exits 1 with a line that names the fix |
 | ``unsettled`` | it trained, but stopped before its plan ended, or a parameter still drifts at the end | exits 3 with a warning line |
 | ``converged`` | none of the above | exits 0 |
 
@@ -105,7 +105,8 @@ def check_convergence(state: Any, config: ConvergenceConfig = ConvergenceConfig(
                       objects: ObjectCheck | None = None, blank: tuple[float, float] | None = None) -> Convergence:
     """Judges a finished (or stopped) run from its :class:`~piga.training.train.TrainState`, and for a scene
     from ``objects`` (:func:`piga.evaluation.objects.check_objects`): a lost object leaves the physics to fit
-    the others, so its parameters mean nothing.
+    the others, and a slot that draws nothing is still moved by the physics (its pull, its springs), so in
+    either case the parameters mean nothing.
 
     ``state.plan`` is the run's :class:`~piga.training.train.TrainPlan` (as a dict), ``state.start`` the
     learned parameters before the first step, ``state.trace`` their values every few steps, and
@@ -150,6 +151,8 @@ def check_convergence(state: Any, config: ConvergenceConfig = ConvergenceConfig(
                                     f"value in {physics_steps} physics steps; raise --lr-physics or " + _fix(planned, steps))
     if objects is not None and objects.lost:
         return verdict("untrained", objects.reason())
+    if objects is not None and objects.empty_slots and blank is None:  # (a baseline has no parameters to bend)
+        return verdict("untrained", objects.empty_reason())
     if blank is not None and not blank[0] < config.blank_ratio * blank[1]:
         return verdict("untrained", f"its held-out predictions (MSE {blank[0]:.4g}) are no better than drawing the "
                                     f"background alone (MSE {blank[1]:.4g}); " + _fix(planned, steps))

@@ -115,8 +115,9 @@ class TrainConfig:
     GPU run is not the CPU's bit for bit. No mixed precision: its effect on the identified parameters has
     not been measured."""
     seed_retries: int = 1
-    """``piga-train-model``: a scene run whose object check finds an object missing
-    (:mod:`piga.evaluation.objects`, which reads frames only) is trained again from its start with the
+    """``piga-train-model``: a scene run whose object check finds an object missing, or a slot that draws
+    nothing where the scene has an object for it (:mod:`piga.evaluation.objects`, which reads frames only),
+    is trained again from its start with the
     next seed, up to this many times (0: never); :func:`train` itself trains once. Which objects an
     autoencoder discovers depends on its initialisation, as the published implementation's README
     says; the check makes a second draw possible without labels."""
