@@ -68,7 +68,10 @@ def _old(scene: str, name: str) -> tuple[TrainConfig, ModelConfig]:
     if scene != "pendulum":
         model["template_size"] = max(info.image_shape[0] // 2, 1)
     file_model = model_config_for(info)
-    return TrainConfig(**recipe.get("train", {})), ModelConfig.from_dict({**file_model.to_dict(), **model})  # flat overrides
+    train = dict(recipe.get("train", {}))
+    if name == "paper":  # since: one window per sequence, as the paper's epochs (a stride of the file's length)
+        train["window_stride"] = info.steps
+    return TrainConfig(**train), ModelConfig.from_dict({**file_model.to_dict(), **model})  # flat overrides
 
 
 @pytest.mark.parametrize("scene,name", [("pendulum", name) for name in OLD_PRESETS]
@@ -79,6 +82,20 @@ def test_each_recipe_resolves_to_the_configs_of_the_old_overrides(scene: str, na
     train, model = _old(scene, name)
     assert asdict(recipe.train) == asdict(train)
     assert model_config_for(info, recipe.model).to_dict() == model.to_dict()
+
+
+@pytest.mark.parametrize("scene", ["pendulum", "spring", "gravity"])
+def test_the_paper_preset_passes_once_over_the_sequences_per_epoch(scene: str) -> None:
+    """The paper's epoch: every training sequence once (500 epochs of 5000 sequences at batch 100 are 25,000 steps),
+    not every window of it (21 per 30-frame sequence)."""
+    info = _info(scene)
+
+    def starts(name: str) -> int:  # training windows per sequence, as the run's plan counts them
+        recipe = preset_for(name, info)
+        window = model_config_for(info, recipe.model).window
+        return len(range(0, info.steps - window + 1, recipe.train.window_stride))
+
+    assert starts("paper") == 1 and starts("fast") > 1
 
 
 def test_the_recipe_tables_hold_every_preset() -> None:

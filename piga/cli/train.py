@@ -62,7 +62,8 @@ def build_parser() -> ArgumentParser:
     recipe("--warmup-fraction", "warmup_fraction", unit_fraction, "fraction of the run's steps that train the autoencoder "
            "alone, first")
     recipe("--window-stride", "window_stride", positive_int, "frames between the start frames of a sequence's training "
-           "windows: a stride of T - L - T_pred + 1 takes one window per sequence, for a file of many sequences")
+           "windows: a stride of T - L - T_pred + 1 takes one window per sequence, for a file of many sequences",
+           shown="1; paper preset: one window per sequence, the first, as the paper's epochs pass over its sequences")
     add_preset_option(p, "--model", choices=dict(literal_fields(ModelConfig))["architecture"],
                       default=ModelConfig().architecture,
                       help="which model: 'piga' (the physics); 'video-lstm', a black-box frame predictor (conv encoder, "

@@ -313,9 +313,23 @@ SCENE_PRESETS: dict[str, dict[str, Recipe]] = {
 }
 
 
+#: Presets whose epoch is one pass over the file's sequences, one window each (the paper's: 500 epochs of
+#: its 5000 sequences are 25,000 steps at batch 100; every window of a 30-frame sequence would be 21 times as many).
+ONE_WINDOW_PER_SEQUENCE = ("paper",)
+
+
 def preset_for(name: str, info: DatasetInfo) -> Recipe:
     """The recipe ``name`` (a key of :data:`PRESETS`) for a data file: the pendulum's, or the scene's
-    (:data:`SCENE_PRESETS`), whose templates are H/2 whatever the preset."""
+    (:data:`SCENE_PRESETS`), whose templates are H/2 whatever the preset. A preset of
+    :data:`ONE_WINDOW_PER_SEQUENCE` takes the first window of each sequence (its window stride is the file's
+    sequence length)."""
+    recipe = _preset(name, info)
+    if name in ONE_WINDOW_PER_SEQUENCE:
+        recipe = replace(recipe, train=replace(recipe.train, window_stride=max(info.steps, 1)))
+    return recipe
+
+
+def _preset(name: str, info: DatasetInfo) -> Recipe:
     if name not in PRESETS:
         raise ValueError(f"unknown preset {name!r}; known: {sorted(PRESETS)}")
     if info.system == "pendulum":
