@@ -14,7 +14,7 @@ steps, seconds, machine and GPU) is kept: a rerun reuses it. ``--max-minutes`` b
 the epoch that ends past it, saved and judged "not converged"); a later ``--resume`` continues that run from its
 checkpoint, on any machine that has the run folder, and records it again. The file is collected with ``--seed 100``,
 so the same command gives the same data anywhere. A record names the git commit of the code; on a machine that got
-a copy of the files without ``.git``, set ``PIGA_COMMIT`` to the commit they are.
+a copy of the files (whose ``.git``, if any, may not be theirs), set ``PIGA_COMMIT`` to the commit they are.
 
 Writes OUT.md and OUT.json.
 """
@@ -62,8 +62,17 @@ def collect(system: str, data: Path, workers: int, log: Path) -> None:
         raise RuntimeError(f"'{shlex.join(command)}' failed; see {log}")
 
 
-def train(recipe: str, data: Path, run_dir: Path, args: argparse.Namespace, resume: bool) -> dict[str, Any]:
-    """Trains (or continues) one recipe; its record."""
+def _segment(record: dict[str, Any]) -> dict[str, Any]:
+    """What a record says of the stretch of training its command did (steps and seconds: where the run stood after it)."""
+    t = record["metrics"]["training"]
+    return {"command": record["command"], "commit": record["commit"], "steps": t["steps"], "seconds": t["seconds"],
+            "machine": record["machine"], "gpu": record.get("gpu")}
+
+
+def train(recipe: str, data: Path, run_dir: Path, args: argparse.Namespace, resume: bool,
+          earlier: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Trains (or continues) one recipe; its record. A continued run's record keeps the ``earlier`` record's stretches
+    of training (``segments``), each with its machine."""
     command = ["piga-train-model", str(data), "--out", str(run_dir), "--device", args.device, "--quiet"]
     if not resume:  # (a resumed run keeps its recipe and seed)
         command += ["--preset", recipe, "--seed", "0", "--seed-retries", "0"]
@@ -74,10 +83,12 @@ def train(recipe: str, data: Path, run_dir: Path, args: argparse.Namespace, resu
     command += ["--resume"] if resume else ["--overwrite"]
     started = time.time()
     code, metrics = run_training(command, run_dir, run_dir.parent / f"{run_dir.name}.log", f"piga-train-model --preset {recipe}")
-    record = {"recipe": recipe, "command": shlex.join(command), "commit": git_commit() or os.environ.get("PIGA_COMMIT"), "exit": code,
+    record = {"recipe": recipe, "command": shlex.join(command), "commit": os.environ.get("PIGA_COMMIT") or git_commit(), "exit": code,
               "metrics": {k: metrics.get(k) for k in KEEP}, "outcome": (metrics.get("convergence") or {}).get("outcome"),
               "planned_steps": (metrics.get("convergence") or {}).get("planned_steps"),
               "wall_seconds": time.time() - started, "machine": machine(), "gpu": gpu_name(args.device)}
+    before = (earlier.get("segments") or [_segment(earlier)]) if resume and earlier else []
+    record["segments"] = [*before, _segment(record)]
     t = metrics["training"]
     print(f"{recipe}: {t['steps']} steps in {t['seconds'] / 60:.1f} min, exit {code} ({record['outcome']})", flush=True)
     return record
@@ -90,7 +101,11 @@ def _params(record: dict[str, Any]) -> str:
 
 def markdown(records: dict[str, dict[str, Any]], command: str, system: str) -> str:
     lines = [f"# The paper's recipe against the fast one ({system})", "", f"Command: `{command}`", "",
-             *[f"Machine of the {name} run: {machine_words(r['machine'])}; {'GPU: ' + r['gpu'] if r.get('gpu') else 'no GPU'}."
+             "Where each run trained (a run continued with `--resume` lists each stretch; steps and minutes are where the "
+             "run stood after it):", "",
+             *[f"- {name}: " + "; ".join(f"to step {g['steps']:,} ({g['seconds'] / 60:.1f} min) on "
+                                          f"{'GPU ' + g['gpu'] + ', ' if g.get('gpu') else ''}{machine_words(g['machine'])}, "
+                                          f"commit {str(g['commit'])[:10]}" for g in r.get("segments") or [_segment(r)])
                for name, r in records.items()], "",
              f"Data: `piga-collect --system {system} --preset paper --seed 100` (the paper's 5000 / 500 / 500 sequences). "
              "Each recipe trained once, seed 0, with `piga-train-model --preset RECIPE` (the commands are in the records); "
@@ -107,7 +122,7 @@ def markdown(records: dict[str, dict[str, Any]], command: str, system: str) -> s
                      f"{_params(r)} | {ssim['prediction']:.3f} | {ext} | {r['exit']} ({r['outcome']}) |")
     lines += ["", "Exit is `piga-train-model`'s status: 0 converged, 3 not converged (stopped by `--max-minutes` before "
               "its plan ended, or a parameter still moving), 1 untrained. Train minutes are the training loop's "
-              "(metrics.json's `training.seconds`), on the device above.", ""]
+              "(metrics.json's `training.seconds`, summed over a continued run's stretches), on the machines above.", ""]
     return "\n".join(lines)
 
 
@@ -145,7 +160,8 @@ def run(args: argparse.Namespace, argv: list[str] | None) -> int:
         path = folder / "records" / f"{args.system}-{recipe}.json"
         resume = args.resume and recipe == "paper" and (folder / f"{args.system}-paper" / "checkpoint.pt").exists()
         if recipe in args.recipes and (resume or not path.exists()):
-            write_json(path, train(recipe, data, folder / f"{args.system}-{recipe}", args, resume), overwrite=True)
+            earlier = json.loads(path.read_text()) if resume and path.exists() else None
+            write_json(path, train(recipe, data, folder / f"{args.system}-{recipe}", args, resume, earlier), overwrite=True)
         if path.exists():
             records[recipe] = json.loads(path.read_text())
     if not records:
