@@ -27,7 +27,7 @@ import json
 import statistics
 import sys
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any, Literal, get_args, get_type_hints
 
@@ -40,6 +40,9 @@ from piga.world.model import ModelConfig
 
 #: The models of ``piga-train-model --model`` (one source: :class:`ModelConfig`'s ``architecture``).
 MODELS: tuple[str, ...] = get_args(get_type_hints(ModelConfig)["architecture"])
+#: Variants the benchmark can also train, by name: ``piga-train-model``'s flags for each (a capacity check:
+#: VideoLSTM at twice the widths, more parameters than piga's on every system).
+VARIANTS: dict[str, list[str]] = {"video-lstm-x2": ["--model", "video-lstm", "--video-lstm-scale", "2"]}
 System = Literal["spring", "bouncing", "gravity", "digits-spring"]
 SYSTEMS: tuple[str, ...] = get_args(System)
 #: ``piga-train-model``'s exit statuses for a run that trained and wrote its metrics: converged (0), its check
@@ -83,7 +86,8 @@ def collect_command(system: str, cfg: BenchConfig, path: Path) -> list[str]:
 
 
 def train_command(job: Job) -> list[str]:
-    return ["piga-train-model", str(job.data), "--out", str(job.run_dir), "--model", job.model, "--seed", str(job.seed),
+    flags = VARIANTS.get(job.model, ["--model", job.model])
+    return ["piga-train-model", str(job.data), "--out", str(job.run_dir), *flags, "--seed", str(job.seed),
             "--budget-steps", str(job.budget_steps), "--threads", "1", "--device", "cpu", "--quiet", "--overwrite"]
 
 
@@ -151,13 +155,35 @@ def jobs_for(cfg: BenchConfig, folder: Path) -> list[RecordedJob]:
     return out
 
 
+def parameter_counts(cfg: BenchConfig, folder: Path) -> dict[str, dict[str, int]]:
+    """Per system and model: the trainable parameters of the model ``piga-train-model --model MODEL`` builds for the
+    system's data set (collected if it is not there; nothing is trained)."""
+    from piga.data.schema import inspect_dataset
+    from piga.training.train import model_config_for, preset_for
+    from piga.world.variants import build_model
+
+    counts: dict[str, dict[str, int]] = {}
+    for system in cfg.systems:
+        collect_data(system, cfg, folder)
+        info = inspect_dataset(data_path(system, cfg, folder))
+        base = model_config_for(info, preset_for("fast", info).model)
+        counts[system] = {}
+        for model in cfg.models:
+            config = (replace(base, architecture="video-lstm", video_lstm_scale=2) if model == "video-lstm-x2"
+                      else replace(base, architecture=model))
+            counts[system][model] = sum(p.numel() for p in build_model(config).parameters() if p.requires_grad)
+    return counts
+
+
 def _spread(values: list[float]) -> float | None:
     """The sample standard deviation over seeds (None for one seed)."""
     return statistics.stdev(values) if len(values) > 1 else None
 
 
-def summary(records: dict[str, dict[str, Any]], cfg: BenchConfig) -> dict[str, dict[str, Any]]:
-    """Per system and model: per-step SSIM and MSE (mean and spread over seeds), and the horizons' means."""
+def summary(records: dict[str, dict[str, Any]], cfg: BenchConfig,
+            counts: dict[str, dict[str, int]] | None = None) -> dict[str, dict[str, Any]]:
+    """Per system and model: per-step SSIM and MSE (mean and spread over seeds), the horizons' means, and the
+    model's trainable parameters (``counts``, :func:`parameter_counts`)."""
     out: dict[str, dict[str, Any]] = {}
     for system in cfg.systems:
         for model in cfg.models:
@@ -167,6 +193,7 @@ def summary(records: dict[str, dict[str, Any]], cfg: BenchConfig) -> dict[str, d
             entry: dict[str, Any] = {"seeds": list(cfg.seeds), "input_frames": m0["input_frames"], "pred_frames": n_pred,
                                      "extrapolate_frames": m0["extrapolate_frames"],
                                      "exits": [r["exit"] for r in rows],
+                                     "parameters": (counts or {}).get(system, {}).get(model),
                                      "train_minutes": [r["train_seconds"] / 60 for r in rows]}
             for key, metric in (("ssim", "frame_ssim_per_step"), ("mse", "frame_mse_per_step")):
                 per_seed = [r["metrics"][metric] for r in rows]  # seeds x steps
@@ -186,6 +213,16 @@ def _cell(stat: dict[str, Any], digits: int) -> str:
     return _fmt(stat["mean"], digits) + (f" ± {stat['spread']:.{digits}f}" if stat["spread"] is not None else "")
 
 
+def _smaller(s: dict[str, dict[str, Any]]) -> str:
+    """Where VideoLSTM has fewer parameters than piga, in words."""
+    where = [system for system, m in s.items() if "video-lstm" in m and "piga" in m
+             and None not in (m["video-lstm"].get("parameters"), m["piga"].get("parameters"))
+             and m["video-lstm"]["parameters"] < m["piga"]["parameters"]]
+    if not where:
+        return ""
+    return ", with fewer parameters than piga's on " + ("every system" if len(where) == len(s) else ", ".join(where))
+
+
 def markdown(record: dict[str, Any], out: Path) -> str:
     cfg = record["config"]
     seeds = ", ".join(map(str, cfg["seeds"]))
@@ -199,12 +236,13 @@ def markdown(record: dict[str, Any], out: Path) -> str:
              "`piga-train-model`'s own, on the test split's sequences: SSIM and MSE per frame over the T_pred predicted "
              "frames (prediction) and the T_ext frames after them (extrapolation)"
              + (", mean ± standard deviation over seeds." if len(cfg["seeds"]) > 1 else ", one seed."), "",
-             "| system | L, T_pred, T_ext | model | SSIM prediction | SSIM extrapolation | MSE prediction | "
+             "| system | L, T_pred, T_ext | model | parameters | SSIM prediction | SSIM extrapolation | MSE prediction | "
              "MSE extrapolation | train min | exit |",
-             "|---|---|---|---|---|---|---|---|---|"]
+             "|---|---|---|---|---|---|---|---|---|---|"]
     for system, models in record["summary"].items():
         for model, e in models.items():
             lines.append(f"| {system} | {e['input_frames']}, {e['pred_frames']}, {e['extrapolate_frames']} | {model} | "
+                         f"{'-' if e.get('parameters') is None else format(e['parameters'], ',')} | "
                          f"{_cell(e['ssim_prediction'], 3)} | {_cell(e['ssim_extrapolation'], 3)} | "
                          f"{_cell(e['mse_prediction'], 4)} | {_cell(e['mse_extrapolation'], 4)} | "
                          f"{', '.join(f'{m:.1f}' for m in e['train_minutes'])} | "
@@ -213,8 +251,11 @@ def markdown(record: dict[str, Any], out: Path) -> str:
               "3 not converged (a parameter still moving over the last 10% of steps, or the run stopped short), "
               "1 its check failed (piga: the physics did not train or an object was lost; a baseline: its held-out "
               "predictions did not beat drawing the background alone). "
-              f"Training minutes are wall-clock with one torch thread, {cfg['jobs']} runs at once on the machine "
-              "above (which may be shared).", "", f"![SSIM per step]({out.name}-ssim.png)", ""]
+              f"Training minutes are wall-clock with one torch thread, {cfg['jobs']} run{'s' if cfg['jobs'] != 1 else ''} at once on the machine "
+              "above (which may be shared). Parameters are the trainable ones of each model as built for the system's "
+              "file. Most of piga's are its decoder's template generator (as the paper's: a 200-unit layer whose "
+              "output is every pixel of every object's content and mask), which IN+IG shares; VideoLSTM's sizes "
+              "(32-channel convolutions, an LSTM of 256 units) are its own" + _smaller(record["summary"]) + ".", "", f"![SSIM per step]({out.name}-ssim.png)", ""]
     return "\n".join(lines)
 
 
@@ -252,7 +293,8 @@ def parser() -> argparse.ArgumentParser:
                         "(default %(default)s)")
     p.add_argument("--systems", nargs="+", choices=SYSTEMS, default=list(DEFAULTS.systems),
                    help="default %(default)s")
-    p.add_argument("--models", nargs="+", choices=MODELS, default=list(DEFAULTS.models), help="default %(default)s")
+    p.add_argument("--models", nargs="+", choices=(*MODELS, *VARIANTS), default=list(DEFAULTS.models),
+                   help="default %(default)s; video-lstm-x2: VideoLSTM with --video-lstm-scale 2")
     add_training_options(p, DEFAULTS, "sequences per data set, split 80/10/10")
     return p
 
@@ -276,7 +318,8 @@ def main(argv: list[str] | None = None) -> int:
     from piga.evaluation.plots import save_figure
 
     record = {"command": " ".join(["python", "benchmarks/prediction.py", *(sys.argv[1:] if argv is None else argv)]),
-              "machine": next(iter(done.values()))["machine"], "config": asdict(cfg), "runs": done, "summary": summary(done, cfg)}
+              "machine": next(iter(done.values()))["machine"], "config": asdict(cfg), "runs": done,
+              "summary": summary(done, cfg, parameter_counts(cfg, folder))}
     write_json(args.out.with_suffix(".json"), record)
     save_figure(ssim_figure(record["summary"]), args.out.parent / f"{args.out.name}-ssim.png")
     with atomic_output(args.out.with_suffix(".md"), overwrite=True) as tmp:

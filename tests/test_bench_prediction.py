@@ -54,6 +54,10 @@ def _stand_ins(prediction: Any, monkeypatch: pytest.MonkeyPatch, fail: str | Non
         return 0
 
     monkeypatch.setattr(prediction, "logged_command", logged)
+    # the stand-in's files are not HDF5: the counts are the models' sizes as if built for them
+    monkeypatch.setattr(prediction, "parameter_counts", lambda cfg, folder: {
+        system: {model: {"piga": 1_263_203, "in-ig": 1_315_237, "video-lstm": 891_395}[model] for model in cfg.models}
+        for system in cfg.systems})
     return calls
 
 
@@ -74,7 +78,8 @@ def test_the_page_figure_and_json_are_written_and_a_rerun_reuses_the_records(pre
     assert entry["ssim_prediction"]["spread"] == pytest.approx(0.01 / 2 ** 0.5)  # the seeds' sample std
     assert entry["ssim_per_step"][PRED] == pytest.approx((_ssim("in-ig", 0, PRED) + _ssim("in-ig", 1, PRED)) / 2)
     page = out.with_suffix(".md").read_text()
-    assert "| spring | 4, 3, 5 | piga | 0.945 ± 0.007 | 0.905 ± 0.007 |" in page
+    assert "| spring | 4, 3, 5 | piga | 1,263,203 | 0.945 ± 0.007 | 0.905 ± 0.007 |" in page
+    assert "with fewer parameters than piga's on every system" in page
     assert f"`python benchmarks/prediction.py {' '.join(argv)}`" in page and "seeds 0, 1" in page
     assert (out.parent / "prediction-ssim.png").read_bytes()[:4] == b"\x89PNG"
     assert sorted(p.name for p in (out.parent / "prediction_runs" / "records").iterdir())[0] == "gravity-in-ig-s0.json"
@@ -107,3 +112,10 @@ def test_a_failed_job_ends_with_one_line_and_keeps_the_records_before(prediction
 def test_an_abbreviated_option_is_refused(prediction) -> None:
     with pytest.raises(SystemExit):
         prediction.parser().parse_args(["--budget", "5"])
+
+
+def test_the_capacity_variant_trains_a_wider_video_lstm(prediction) -> None:
+    job = prediction.Job("spring-video-lstm-x2-s0", "spring", "video-lstm-x2", 0, 7, Path("d.h5"), Path("run"))
+    command = prediction.train_command(job)
+    assert command[command.index("--model") + 1] == "video-lstm" and command[command.index("--video-lstm-scale") + 1] == "2"
+    assert prediction.parser().parse_args(["--models", "video-lstm-x2"]).models == ["video-lstm-x2"]

@@ -148,3 +148,36 @@ def test_the_interaction_network_is_relational() -> None:
     s = pair._features(p, v)  # (1, 2, F)
     expected = pair.relation(torch.cat([s[:, 0], s[:, 1], (p[:, 0] - p[:, 1]) / 16], dim=-1))  # (1, E)
     assert torch.allclose(seen[0][:, 0, s.shape[-1]:], expected, atol=1e-6)
+
+
+def test_the_video_lstm_scale_sizes_it_and_only_it(small_data: Path, tmp_path: Path,
+                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    import ast
+    import inspect
+
+    def count(**config: object) -> int:
+        model = build_model(ModelConfig(architecture="video-lstm", image_size=32, channels=3, **config))
+        return sum(p.numel() for p in model.parameters())
+
+    assert count(video_lstm_scale=2) > 3.5 * count()  # wider convolutions, latent and LSTM: about 4x
+    with pytest.raises(ValueError, match="video_lstm_scale sizes the video-lstm baseline"):
+        ModelConfig(architecture="in-ig", video_lstm_scale=2)
+    with pytest.raises(ValueError, match=">= 1"):
+        ModelConfig(architecture="video-lstm", video_lstm_scale=0)
+    tree = ast.parse(Path(inspect.getsourcefile(ModelConfig)).read_text())  # the help is the dataclass' doc
+    cls = next(n for n in tree.body if isinstance(n, ast.ClassDef) and n.name == "ModelConfig")
+    docs = {a.target.id: b.value.value for a, b in zip(cls.body, cls.body[1:])
+            if isinstance(a, ast.AnnAssign) and isinstance(b, ast.Expr) and isinstance(b.value, ast.Constant)}
+    assert " ".join(docs["video_lstm_scale"].split()).startswith(cli.VIDEO_LSTM_SCALE_HELP)
+
+    out = tmp_path / "run"
+    code, _, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), "--video-lstm-scale", "2", *SMALL,
+                                  capsys=capsys)
+    assert_one_line(code, err, "video_lstm_scale", "'piga'")  # piga has its own sizes
+    assert not out.exists()
+    code, _, _ = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), "--model", "video-lstm",
+                                "--video-lstm-scale", "2", *SMALL, capsys=capsys)
+    assert code == 1 and json.loads((out / "config.json").read_text())["model"]["video_lstm_scale"] == 2  # (2 steps: untrained)
+    code, _, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), "--resume", "--video-lstm-scale", "1",
+                                  "--epochs", "2", "--quiet", capsys=capsys)
+    assert_one_line(code, err, "--resume", "drop --video-lstm-scale 1")

@@ -23,6 +23,9 @@ RECIPE_OPTIONS = ("epochs", "budget_steps", "max_minutes", "batch_size", "lr", "
 PROG = "piga-train-model"
 #: ``--objects``' help: the first sentence of :attr:`piga.world.model.ModelConfig.n_objects`' doc (a test checks it).
 OBJECTS_HELP = "N, the object slots of the encoder, decoder and physics (balls, digits)"
+#: ``--video-lstm-scale``'s help: the first sentence of :attr:`piga.world.model.ModelConfig.video_lstm_scale`' doc.
+VIDEO_LSTM_SCALE_HELP = ("VideoLSTM's size: its convolution channels (32 and 64), frame latent (128) and LSTM units "
+                         "(256) times this")
 OUTPUTS = (CHECKPOINT, "metrics.json", "config.json", "rollout.png", "templates.png", "curves.png", "tensorboard")
 
 
@@ -83,6 +86,8 @@ def build_parser() -> ArgumentParser:
                       "feature map, then transposed convolutions; 'broadcast': a spatial-broadcast decoder (each object's "
                       "coordinates tiled over the image with fixed x, y channels, stride-1 convolutions, composed by "
                       "masks). Only 'st' writes templates.png. Not with --model video-lstm")
+    add_preset_option(p, "--video-lstm-scale", type=positive_int, metavar="S", default=ModelConfig().video_lstm_scale,
+                      help=VIDEO_LSTM_SCALE_HELP + " (ModelConfig.video_lstm_scale). Only with --model video-lstm")
     add_preset_option(p, "--objects", type=positive_int, metavar="N", default=None,
                       shown="the file's",
                       help=f"{OBJECTS_HELP}, ModelConfig.n_objects: instead of the count "
@@ -155,7 +160,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         for flag, given, own in (("--model", args.model, saved_model.config.architecture),
                                  ("--loss", args.loss, saved_model.config.loss),
                                  ("--decoder", args.decoder, saved_model.config.decoder),
-                                 ("--objects", args.objects, saved_model.config.n_objects)):
+                                 ("--objects", args.objects, saved_model.config.n_objects),
+                                 ("--video-lstm-scale", args.video_lstm_scale, saved_model.config.video_lstm_scale)):
             if given is not None and given != own:
                 raise PigaError(f"--resume continues the run's own {flag[2:]} ({own}); drop {flag} {given}, or train "
                                 "a new run in another --out")
@@ -192,7 +198,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         train_config = resolve_loading(train_config, info)  # as the run records it
         model_config = model_config_for(info, recipe.model)
         chosen = {field: value for field, value in (("architecture", args.model), ("loss", args.loss),
-                                                    ("decoder", args.decoder), ("n_objects", args.objects))
+                                                    ("decoder", args.decoder), ("n_objects", args.objects),
+                                                    ("video_lstm_scale", args.video_lstm_scale))
                   if value is not None}
         if args.objects is not None and info.system == "pendulum":
             raise PigaError(f"--objects: {args.data} holds pendulum data, whose model has one object (its angle); "

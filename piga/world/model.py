@@ -75,6 +75,9 @@ class ModelConfig:
     unseen-region ablation (:mod:`piga.world.conv_decoders`): an MLP to a small feature map then transposed
     convolutions, and a spatial-broadcast decoder (each object's coordinates tiled over the grid with fixed x, y
     channels, stride-1 convolutions, objects composed by masks). Not for video-lstm, which has its own decoder."""
+    video_lstm_scale: int = 1
+    """VideoLSTM's size: its convolution channels (32 and 64), frame latent (128) and LSTM units (256) times this
+    (2: more parameters than piga's on every scene of the prediction benchmark). Only for video-lstm."""
     physics_init: dict[str, float] = field(default_factory=dict)
     """Initial physical parameters (empty: the system's far-from-truth defaults)."""
     system_options: SystemOptions | None = None
@@ -163,6 +166,11 @@ class ModelConfig:
         if self.architecture == "video-lstm" and (self.loss == "separate" or self.decoder != "st"):
             raise ValueError("video-lstm has no separate encoder/decoder and dynamics to train apart, nor an object "
                              "decoder to replace: it takes loss 'joint' or 'pred-only' and decoder 'st'")
+        if self.video_lstm_scale < 1:
+            raise ValueError(f"video_lstm_scale must be >= 1, got {self.video_lstm_scale}")
+        if self.video_lstm_scale != 1 and self.architecture != "video-lstm":
+            raise ValueError(f"video_lstm_scale sizes the video-lstm baseline; architecture {self.architecture!r} has "
+                             "its own sizes")
         if self.n_objects < 1:
             raise ValueError(f"n_objects must be >= 1, got {self.n_objects}")
         if self.system == "pendulum" and self.n_objects != 1:
