@@ -251,6 +251,13 @@ def test_sweep_writes_a_table_per_multiplier(control_model: Path, tmp_path: Path
     assert Path(f"{out}.md").read_text().count("| piga |") == 2
     assert Path(f"{out}.png").read_bytes()[:4] == b"\x89PNG"
 
+    # --not-told: the piga agent plans with its learned g at each multiplier, and its rows say so
+    result = run("piga-control", "--model", str(control_model), "--sweep", "1.5:1.5:0.5", "--not-told", "--episodes", "1",
+                 "--steps", "20", "--workers", "1", "--out", str(tmp_path / "not-told"), "--quiet")
+    assert result.returncode == 0, result.stderr
+    rows = [r["summary"]["agent"] for r in json.loads((tmp_path / "not-told.json").read_text())["results"]]
+    assert rows == ["piga (not told)", "oracle"] and "| piga (not told) |" in result.stdout
+
 
 @pytest.mark.parametrize("suffix", [".mp4", ".gif"])
 def test_video_is_written_and_decodes(control_model: Path, tmp_path: Path, suffix: str) -> None:

@@ -78,7 +78,8 @@ def build_parser() -> ArgumentParser:
                    help="show Gymnasium's torque arrow in the frames the agent sees (off by default; see README)")
     p.add_argument("--sweep", metavar="START:STOP:STEP",
                    help="run the piga agent and the oracle at each gravity multiplier of the range (e.g. 0.5:1.8:0.1); "
-                   "each agent is told the multiplier. Writes a table and, with --out, OUT.png")
+                   "each agent is told the multiplier (the piga agent not, with --not-told: its rows say 'piga (not told)'). "
+                   "Writes a table and, with --out, OUT.png")
     p.add_argument("--workers", type=positive_int, default=2,
                    help="processes for --sweep, and for a baseline run's episodes (split over them, into as many "
                    "parts with --ray; the same episodes and scores as one process) (default %(default)s)")

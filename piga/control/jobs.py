@@ -125,8 +125,9 @@ def run_job(job: ControlJob, keep_plan_ms: bool = False) -> EpisodeBatch:
 
 
 def _tagged(job: ControlJob, result: EpisodeBatch) -> EpisodeBatch:
-    """``result`` without recordings, its summary labelled with ``agent`` and the job's tags."""
-    return result.labelled(**{"agent": job.agent, **dict(job.tags)})
+    """``result`` without recordings, its summary labelled with ``agent`` (``piga (not told)`` for a piga agent not told
+    the gravity multiplier: a row of its own in a table) and the job's tags."""
+    return result.labelled(**{"agent": job.agent if job.told else f"{job.agent} (not told)", **dict(job.tags)})
 
 
 def split_job(job: ControlJob, parts: int) -> list[ControlJob]:
