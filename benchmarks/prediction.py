@@ -255,7 +255,9 @@ def markdown(record: dict[str, Any], out: Path) -> str:
               "above (which may be shared). Parameters are the trainable ones of each model as built for the system's "
               "file. Most of piga's are its decoder's template generator (as the paper's: a 200-unit layer whose "
               "output is every pixel of every object's content and mask), which IN+IG shares; VideoLSTM's sizes "
-              "(32-channel convolutions, an LSTM of 256 units) are its own" + _smaller(record["summary"]) + ".", "", f"![SSIM per step]({out.name}-ssim.png)", ""]
+              "(32-channel convolutions, an LSTM of 256 units) are its own" + _smaller(record["summary"]) + "."
+              + (" video-lstm-x2 is VideoLSTM with every width doubled (`--video-lstm-scale 2`): a capacity check at "
+                 "more parameters than piga's." if "video-lstm-x2" in cfg["models"] else ""), "", f"![SSIM per step]({out.name}-ssim.png)", ""]
     return "\n".join(lines)
 
 
