@@ -326,6 +326,65 @@ def test_show_refuses_a_file_with_nothing_to_show(edit: Callable[[h5py.File], No
     assert _listing(tmp_path) == ["d.h5"]
 
 
+def _dangling_frames(f: h5py.File) -> None:
+    del f["frames"]
+    f["frames"] = h5py.ExternalLink("gone.h5", "/frames")
+
+
+def _attr_edit(key: str, value: Any) -> Callable[[h5py.File], None]:
+    return lambda f: f.attrs.__setitem__(key, value)
+
+
+@pytest.mark.parametrize("edit, needles", [
+    (_dangling_frames, ["/frames is a link that does not resolve", "gone.h5"]),
+    (lambda f: _replace(f, "states", np.full(f["states"].shape, b"x", "S1")), ["/states must be real numbers"]),
+    (lambda f: _replace(f, "states", f["states"][()].astype(np.complex64)), ["/states must be real numbers", "complex64"]),
+    (lambda f: _replace(f, "states", f["states"][()].astype(np.float64) * 1e300), ["/states holds NaN or infinite values"]),
+    (lambda f: _replace(f, "frames", np.zeros((*f["frames"].shape[:2], 0, 0), np.uint8)), ["/frames is empty"]),
+    (_attr_edit("dt", np.inf), ["attribute 'dt' must be the seconds between frames, 1e-05 to 10, got inf"]),
+    (_attr_edit("dt", 1e-300), ["attribute 'dt' must be the seconds between frames"]),
+    (_attr_edit("dt", True), ["attribute 'dt' must be"]),
+    (_attr_edit("params", '{"g": null, "actuation_gain": 1}'), ["'params' must give each parameter as a finite number", "g=None"]),
+    (_attr_edit("params", '{"g": "ten"}'), ["'params' must give each parameter as a finite number", "g='ten'"]),
+    (_attr_edit("params", '{"g": NaN}'), ["'params' must give each parameter as a finite number", "g=nan"]),
+])
+def test_a_file_that_breaks_the_schema_is_named_on_open(edit: Callable[[h5py.File], None], needles: list[str],
+                                                        tiny_data: Path, tmp_path: Path,
+                                                        capsys: pytest.CaptureFixture[str]) -> None:
+    """Dangling links, states that are not real numbers, frames of no pixels, a frame interval of no meaning and
+    true parameters that no error can be scored against: one line on open (they were internal errors, or a
+    run that trained before failing on them, or one whose scores read nan)."""
+    data = _variant(tiny_data, tmp_path / "d.h5", edit)
+    refused("piga-show", [str(data), "--out", str(tmp_path / "s.png")], capsys, *needles)
+    assert _listing(tmp_path) == ["d.h5"]
+
+
+def test_half_precision_actions_and_huge_rewards_are_read_without_warnings(tiny_data: Path, tmp_path: Path) -> None:
+    """float16 actions were compared with ±1e6 in float16 (an overflow warning on stderr); float64 rewards
+    beyond float32's range overflowed in the cast before the check named them."""
+    import warnings
+
+    from piga.data.schema import DataFormatError, check_actions, load_rewards
+
+    data = _variant(tiny_data, tmp_path / "d.h5", lambda f: _replace(f, "rewards", f["rewards"][()].astype(np.float64) * 1e300))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        check_actions(np.ones((2, 3, 1), np.float16), "a.h5")
+        with pytest.raises(DataFormatError, match="/rewards holds NaN or infinite values"):
+            load_rewards(data, "train")
+
+
+def test_a_true_parameter_of_zero_is_scored_infinitely_off() -> None:
+    """A file's true g = 0 divided the relative error by zero (an internal error after training)."""
+    import math
+
+    from piga.evaluation.evaluate import parameter_errors
+    from piga.world.model import ModelConfig, PhysicsModel
+
+    errors = parameter_errors(PhysicsModel(ModelConfig()), {"g": 0.0, "actuation_gain": 1.0})
+    assert math.isinf(errors["g"]["relative_error"]) and math.isfinite(errors["a"]["relative_error"])
+
+
 # ---------------------------------------------------------------------------------------------
 # piga-baseline planet
 # ---------------------------------------------------------------------------------------------
@@ -615,6 +674,18 @@ def test_train_model_refuses_data_on_open(data: str, needles: list[str], files: 
     refused("piga-train-model", [str(files[data]), "--out", str(tmp_path / "run"), "--batch-size", "4", "--threads", "1",
                                  "--quiet"], capsys, *needles)
     assert _listing(tmp_path) == []
+
+
+def test_train_model_refuses_frames_too_small_before_training(tiny_data: Path, tmp_path: Path,
+                                                            capsys: pytest.CaptureFixture[str]) -> None:
+    """4x4 frames trained a whole run, then failed in the SSIM with scikit-image's message, leaving a run
+    folder that made the rerun refuse."""
+    rng = np.random.default_rng(0)
+    data = _variant(tiny_data, tmp_path / "d.h5",
+                    lambda f: _replace(f, "frames", rng.integers(0, 255, (*f["frames"].shape[:2], 4, 4)).astype(np.uint8)))
+    refused("piga-train-model", [str(data), "--out", str(tmp_path / "run"), "--batch-size", "4", "--threads", "1", "--quiet"],
+            capsys, "frames of 4x4 px are too small to learn from; at least 8x8")
+    assert _listing(tmp_path) == ["d.h5"]
 
 
 def test_n_objects_must_agree_with_the_states(files: dict[str, Path], tmp_path: Path) -> None:

@@ -36,16 +36,13 @@ import numpy as np
 
 from piga.io.atomic import check_writable_target
 from piga.data.collect import split_counts
-from piga.data.schema import MAX_ABS_ACTION, SPLITS, DatasetWriter
+from piga.data.schema import MAX_ABS_ACTION, MAX_DT, MIN_DT, MIN_IMAGE_SIZE, SPLITS, DatasetWriter
 from piga.data.scene import read_image, scene_to_gray
 
 #: File name endings read from a folder of frames (case-insensitive).
 FRAME_EXTENSIONS = (".png", ".jpg", ".jpeg")
 #: Header names that mark the action column of a CSV with several columns (case-insensitive).
 ACTION_COLUMNS = ("u", "action")
-#: Accepted frame intervals, in seconds: a 100 kHz camera to one frame per 10 s (beyond, a swinging
-#: pendulum's frames no longer follow each other).
-MIN_DT, MAX_DT = 1e-5, 10.0
 
 
 @dataclass(frozen=True)
@@ -68,8 +65,8 @@ class ImportConfig:
                              f"{format(self.dt, 'g') if number else repr(self.dt)}")
         if self.steps < 2:
             raise ValueError(f"steps must be >= 2 (a video needs two frames), got {self.steps}")
-        if self.image_size < 8:
-            raise ValueError(f"image_size must be >= 8, got {self.image_size}")
+        if self.image_size < MIN_IMAGE_SIZE:
+            raise ValueError(f"image_size must be >= {MIN_IMAGE_SIZE}, got {self.image_size}")
 
 
 @dataclass(frozen=True)
