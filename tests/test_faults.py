@@ -568,6 +568,7 @@ def fake_planet_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
 @pytest.mark.parametrize("argv, needles", [
     (["--oracle", "--goal-angle", "1e300"], ["--goal-angle must be an angle", "[-180, 180]", "1e+300"]),
     (["--oracle", "--goal-angle", "nan"], ["--goal-angle must be an angle"]),
+    (["--oracle", "--goal-angle", "180.0000001"], ["within [-180, 180], got 180.0000001"]),  # it said "got 180"
     (["--write-goal-image", "g.png", "--angle", "-400"], ["--angle must be an angle"]),
 ])
 def test_control_refuses_meaningless_angles(argv: list[str], needles: list[str], tmp_path: Path,

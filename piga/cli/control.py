@@ -342,7 +342,7 @@ def check_angle(flag: str, degrees: float) -> None:
     """Refuses an angle outside [-180, 180] degrees (NaN and infinities included): a goal such as
     1e300 degrees means nothing, and reduced modulo a turn it would be an arbitrary angle."""
     if not -180 <= degrees <= 180:
-        raise PigaError(f"{flag} must be an angle in degrees from upright within [-180, 180], got {degrees:g}")
+        raise PigaError(f"{flag} must be an angle in degrees from upright within [-180, 180], got {degrees!r}")  # repr: 180.0000001 is no 180
 
 
 def default_elites(candidates: int) -> int:
