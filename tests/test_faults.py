@@ -1005,6 +1005,15 @@ def test_control_sweep_refuses_a_gravity_multiplier(tiny_piga_run: Path, capsys:
             "drop --gravity-mult")
 
 
+@pytest.mark.parametrize("sweep, needle", [
+    ("1e308:1e308:1", "--sweep: PixelPendulumConfig: gravity x gravity_mult = inf is out of range"),  # a job failed, after a warning
+    ("1e-300:2e-300:1e-300", "gravity multipliers must be > 0 (at 10 decimals)"),  # it read "> 0, got 1e-300"
+])
+def test_control_sweep_refuses_multipliers_up_front(sweep: str, needle: str, tiny_piga_run: Path,
+                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    refused("piga-control", ["--model", str(tiny_piga_run), "--sweep", sweep, "--episodes", "1", "--quiet"], capsys, needle)
+
+
 def test_control_sweep_warns_once_about_an_unconverged_run(tiny_piga_run: Path, tmp_path: Path,
                                                            capsys: pytest.CaptureFixture[str]) -> None:
     """The sweep's jobs warned a second time, without the command's name."""

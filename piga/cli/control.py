@@ -215,7 +215,13 @@ def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: 
     except ValueError as exc:
         raise PigaError(f"--sweep: {exc}") from None
     if multipliers[0] <= 0:
-        raise PigaError(f"--sweep: gravity multipliers must be > 0, got {args.sweep}")
+        raise PigaError(f"--sweep: gravity multipliers must be > 0 (at 10 decimals), got {args.sweep}")
+    from envs.pendulum import PixelPendulumConfig
+
+    try:  # the largest multiplier, here: in a job it failed after the others had run, with the job's name
+        PixelPendulumConfig(gravity_mult=multipliers[-1])
+    except ValueError as exc:
+        raise PigaError(f"--sweep: {exc}") from None
     if kind is RunKind.PIGA:
         model, _ = load_model(args.model)  # fail early, in this process, on a bad folder
         check_pendulum_model(model, args.model)
