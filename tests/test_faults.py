@@ -1005,6 +1005,25 @@ def test_control_sweep_refuses_a_gravity_multiplier(tiny_piga_run: Path, capsys:
             "drop --gravity-mult")
 
 
+def test_control_refuses_two_goals_and_reads_a_goal_image_quietly(tiny_piga_run: Path, tmp_path: Path,
+                                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    """--goal-angle beside --goal-image was ignored (exit 0); reading a goal image printed torch's
+    requires_grad warning on stderr."""
+    image = tmp_path / "g.png"
+    assert run_in_process("piga-control", control.main, "--write-goal-image", str(image), "--angle", "10", capsys=capsys)[0] == 0
+    refused("piga-control", ["--model", str(tiny_piga_run), "--goal-image", str(image), "--goal-angle", "10"], capsys,
+            "--goal-image sets the goal", "drop --goal-angle")
+    import warnings
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        code, _, err = run_in_process("piga-control", control.main, "--model", str(tiny_piga_run), "--goal-image", str(image),
+                                      "--episodes", "1", "--steps", "20", "--horizon", "2", "--candidates", "4",
+                                      "--iterations", "1", "--quiet", capsys=capsys)
+    assert code == 0, err
+    assert not [w for w in caught if "requires_grad" in str(w.message)]
+
+
 @pytest.mark.parametrize("sweep, needle", [
     ("1e308:1e308:1", "--sweep: PixelPendulumConfig: gravity x gravity_mult = inf is out of range"),  # a job failed, after a warning
     ("1e-300:2e-300:1e-300", "gravity multipliers must be > 0 (at 10 decimals)"),  # it read "> 0, got 1e-300"

@@ -109,6 +109,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.not_told and args.oracle and not args.sweep:
         raise PigaError("--not-told is for the piga agent; the oracle plans with the environment's true physics")
     check_angle("--goal-angle", args.goal_angle)
+    if args.goal_image and args.goal_angle:
+        raise PigaError("--goal-image sets the goal (the encoder reads its angle); drop --goal-angle")
     hold = EpisodeConfig.hold_steps
     if args.steps < hold:
         raise PigaError(f"--steps must be at least {hold}: success is the goal held for the last {hold} steps, got {args.steps}")
