@@ -289,6 +289,7 @@ def frame_folders(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     ("blank", ["0.5"] * 12, (), ["every frame is blank"]),
     ("moving", ["0.5"] * 12, ("--dt", "1e9"), ["dt must be the seconds between frames, 1e-05 to 10, got 1e+09"]),
     ("moving", ["0.5"] * 12, ("--dt", "1e-12"), ["dt must be the seconds between frames"]),
+    ("moving", ["0.5"] * 12, ("--dt", "10.000001"), ["1e-05 to 10, got 10.000001"]),  # it said "got 10"
     ("sizes", ["0.5"] * 12, (), ["f5.png: 30x50 px, but f0.png is 32x32", "share one size"]),
 ])
 def test_import_refuses(folder: str, values: list[str], argv: tuple[str, ...], needles: list[str],
@@ -1130,6 +1131,22 @@ def test_planet_refuses_more_sequences_than_the_file_has(tiny_data: Path, tmp_pa
     refused("piga-baseline", ["planet", str(tiny_data), "--out", str(tmp_path / "run"), *TINY_PLANET, "--max-sequences",
                               "100"], capsys, "--max-sequences 100", "has 8 train sequences")
     assert _listing(tmp_path) == []
+
+
+def test_import_passes_over_hidden_files(frame_folders: dict[str, Path], tmp_path: Path,
+                                         capsys: pytest.CaptureFixture[str]) -> None:
+    """macOS's ``._f0.png`` metadata beside each frame copied to a foreign disk: it was read as a frame
+    ("not a readable image")."""
+    folder = tmp_path / "frames"
+    shutil.copytree(frame_folders["moving"], folder)
+    (folder / "._f0.png").write_bytes(b"\x00\x05\x16\x07 AppleDouble")
+    csv = tmp_path / "u.csv"
+    csv.write_text("0.5\n" * 12)
+    code, _, err = run_in_process("piga-import", importer.main, str(folder), str(csv), "--dt", "0.05", "--steps", "4",
+                                  "--image-size", "32", "--split", "1,1,1", "--out", str(tmp_path / "out.h5"), capsys=capsys)
+    assert code == 0, err
+    with h5py.File(tmp_path / "out.h5") as f:
+        assert f["frames"].shape[:2] == (3, 4)
 
 
 def test_import_refuses_a_ragged_row(frame_folders: dict[str, Path], tmp_path: Path,
