@@ -82,6 +82,10 @@ def _two_actions(f: h5py.File) -> None:
     _replace(f, "actions", np.repeat(f["actions"][()], 2, axis=-1))
 
 
+def _no_actions(f: h5py.File) -> None:
+    _replace(f, "actions", np.zeros((*f["actions"].shape[:2], 0), np.float32))
+
+
 def _unknown_env_field(f: h5py.File) -> None:
     config = json.loads(f.attrs["env_config"])
     f.attrs["env_config"] = json.dumps({**config, "bogus": 1})
@@ -93,7 +97,7 @@ def _five_objects(f: h5py.File) -> None:
 
 VARIANTS: dict[str, Callable[[h5py.File], None]] = {
     "blank": _blank, "nan_state": _nan_state, "nan_reward": _nan_reward, "colour": _colour, "channel_axis": _channel_axis,
-    "two_actions": _two_actions, "unknown_env_field": _unknown_env_field,
+    "two_actions": _two_actions, "no_actions": _no_actions, "unknown_env_field": _unknown_env_field,
 }
 
 
@@ -396,6 +400,7 @@ def test_a_true_parameter_of_zero_is_scored_infinitely_off() -> None:
 @pytest.mark.parametrize("data, argv, needles", [
     ("colour", (), ["colour frames", "gray"]),
     ("two_actions", (), ["has 2 action dimensions", "takes one"]),
+    ("no_actions", (), ["has 0 action dimensions", "takes one"]),  # it said "RSSMConfig.action_dim must be >= 1"
     ("blank", (), ["every frame is blank"]),
     ("nan_state", (), ["/states holds NaN", "sequence 1, step 2"]),
     ("nan_reward", (), ["/rewards holds NaN", "sequence 1, step 2"]),
