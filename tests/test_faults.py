@@ -229,6 +229,8 @@ def test_a_failed_allocation_is_out_of_memory(capsys: pytest.CaptureFixture[str]
     (["--effect", "delay=1000000000"], ["delay must be an integer >= 1 and <= 1000"], 2),
     (["--effect", "noise=1e30"], ["noise must be > 0 and <= 1000"], 2),
     (["--system", "spring", "--radius", "1e-9"], ["radius must be at least 0.5 px"], 1),
+    (["--image-size", "7"], ["image_size=7 is out of range (image_size >= 8"], 1),  # it said "sizes ... >= 1"
+    (["--env", "piga/DMCPendulum-v0", "--image-size", "7"], ["image_size=7 is out of range (image_size >= 8"], 1),
     (["--system", "bouncing", "--radius", "1e308"], ["images are too small", "need at least inf px"], 1),  # an OverflowError
     (["--system", "gravity", "--radius", "1e200"], ["images are too small", "need at least 8e+200 px"], 1),
     (["--system", "bouncing", "--colors", "black", "black"], ["is the background's", "invisible"], 1),
