@@ -1015,6 +1015,22 @@ def test_control_sweep_refuses_a_gravity_multiplier(tiny_piga_run: Path, capsys:
             "drop --gravity-mult")
 
 
+@pytest.mark.parametrize("prog", ["piga-control", "piga-train-model"])
+def test_a_checkpoint_with_nan_weights_is_named(prog: str, tiny_piga_run: Path, tiny_data: Path, tmp_path: Path,
+                                                capsys: pytest.CaptureFixture[str]) -> None:
+    """A checkpoint whose log g is NaN: control failed in the physics' own check without naming the file, and a
+    resume trained to a NaN loss and called the damaged file the "last good checkpoint"."""
+    import torch
+
+    run = _run_copy(tiny_piga_run, tmp_path / "run")
+    ckpt = torch.load(run / "checkpoint.pt", weights_only=False)
+    ckpt["model"]["system.log_g"].fill_(float("nan"))
+    torch.save(ckpt, run / "checkpoint.pt")
+    argv = (["--model", str(run), "--oracle"][:2] + ["--episodes", "1", "--quiet"] if prog == "piga-control"
+            else [str(tiny_data), "--out", str(run), "--resume", "--epochs", "3", "--quiet"])
+    refused(prog, argv, capsys, "checkpoint.pt: holds NaN or infinite weights (system.log_g)", "train the run again")
+
+
 def test_control_refuses_two_goals_and_reads_a_goal_image_quietly(tiny_piga_run: Path, tmp_path: Path,
                                                                   capsys: pytest.CaptureFixture[str]) -> None:
     """--goal-angle beside --goal-image was ignored (exit 0); reading a goal image printed torch's
