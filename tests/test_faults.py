@@ -930,6 +930,20 @@ def test_train_resume_tells_a_moved_file_from_another_of_the_same_shape(tiny_pig
     assert code in (0, NOT_CONVERGED), err  # resumed and trained: a tiny run is too short to be judged converged
 
 
+def test_train_resume_says_the_file_has_changed(tiny_piga_run: Path, tiny_data: Path, tmp_path: Path,
+                                               capsys: pytest.CaptureFixture[str]) -> None:
+    """The run's own file, changed in place: it read "continues on the file the run trained on (X), not X"."""
+    import torch
+
+    data = _variant(tiny_data, tmp_path / "d.h5", lambda f: f["frames"].__setitem__(0, 255 - f["frames"][0]))
+    run = _run_copy(tiny_piga_run, tmp_path / "run")
+    ckpt = torch.load(run / "checkpoint.pt", weights_only=False)
+    ckpt["data"]["path"] = str(data)
+    torch.save(ckpt, run / "checkpoint.pt")
+    refused("piga-train-model", [str(data), "--out", str(run), "--resume", "--epochs", "3", "--quiet"], capsys,
+            f"--resume: {data} has changed since the run trained on it")
+
+
 def test_train_resume_without_its_record_says_it_rebuilds_it(tiny_piga_run: Path, tiny_data: Path, tmp_path: Path,
                                                               capsys: pytest.CaptureFixture[str]) -> None:
     """The checkpoint holds the recipe and the model, so a lost config.json does not stop a resume; the rebuilt
