@@ -130,7 +130,7 @@ class DMCPendulumConfig:
         for name, ok in checks.items():
             if not ok:
                 raise ValueError(
-                    f"DMCPendulumConfig.{name}={getattr(self, name)!r} is out of range (sizes and counts >= 1, "
+                    f"DMCPendulumConfig.{name}={getattr(self, name)!r} is out of range (image_size >= 8, other sizes and counts >= 1, "
                     f"action_repeat <= {MAX_ACTION_REPEAT}, mass >= {MIN_MASS:g}, length in (0, {VIEW_HALF_SIDE - 2 * TIP_RADIUS:g}], damping >= 0, flip in {FLIPS}, "
                     "max_angle in [0, pi], max_speed >= 0, camera_distance in [(length + 0.1) / 0.7, 3])")
 

@@ -132,7 +132,7 @@ class PixelPendulumConfig:
             if not ok:
                 raise ValueError(
                     f"PixelPendulumConfig.{name}={getattr(self, name)!r} is out of range "
-                    "(sizes and counts >= 1, gravity and gains > 0, max_angle in [0, pi], "
+                    "(image_size >= 8, other sizes and counts >= 1, gravity and gains > 0, max_angle in [0, pi], "
                     f"max_speed in [0, {PENDULUM_MAX_SPEED:g}])"
                 )
 

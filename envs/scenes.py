@@ -143,7 +143,7 @@ class SceneConfig:
             raise SceneError(f"{self.scene}: {self.image_size}x{self.image_size} images are too small for "
                              f"{self.n_objects} objects of radius {self.radius:g}"
                              + (f" and rest length 2l = {2 * self.params['l']:g}" if "l" in self.params else "")
-                             + f"; need at least {needed} px")
+                             + f"; need at least {needed:.6g} px")
 
     @property
     def margin(self) -> float:
@@ -163,15 +163,17 @@ def max_stable_k(dt: float, substeps: int, n_objects: int) -> float:
     return (2 / h) ** 2 / n_objects
 
 
-def _minimum_size(config: SceneConfig) -> int:
-    """The smallest image side on which starts can be drawn at all."""
+def _minimum_size(config: SceneConfig) -> float:
+    """The smallest image side on which starts can be drawn at all (a float: inf for a radius such as 1e308)."""
     r, n = config.radius, config.n_objects
     if config.physics == "spring":
-        return int(math.ceil(2 * (r + config.params.get("l", 0.0)) + 1))  # the centre of mass needs room
-    if config.physics == "gravity":
+        size = 2 * (r + config.params.get("l", 0.0)) + 1  # the centre of mass needs room
+    elif config.physics == "gravity":
         # the triangle's radius is H/4·[0.75, 1.25]; its balls must fit inside and apart from each other
-        return int(math.ceil(max(2 * r * n + 2, 8 * r)))
-    return int(math.ceil(2 * r * n + 2))  # bouncing: the balls must fit side by side
+        size = max(2 * r * n + 2, 8 * r)
+    else:
+        size = 2 * r * n + 2  # bouncing: the balls must fit side by side
+    return float(math.ceil(size)) if math.isfinite(size) else size
 
 
 #: Each scene's defaults (the paper's).

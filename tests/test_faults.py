@@ -82,6 +82,10 @@ def _two_actions(f: h5py.File) -> None:
     _replace(f, "actions", np.repeat(f["actions"][()], 2, axis=-1))
 
 
+def _no_actions(f: h5py.File) -> None:
+    _replace(f, "actions", np.zeros((*f["actions"].shape[:2], 0), np.float32))
+
+
 def _unknown_env_field(f: h5py.File) -> None:
     config = json.loads(f.attrs["env_config"])
     f.attrs["env_config"] = json.dumps({**config, "bogus": 1})
@@ -93,7 +97,7 @@ def _five_objects(f: h5py.File) -> None:
 
 VARIANTS: dict[str, Callable[[h5py.File], None]] = {
     "blank": _blank, "nan_state": _nan_state, "nan_reward": _nan_reward, "colour": _colour, "channel_axis": _channel_axis,
-    "two_actions": _two_actions, "unknown_env_field": _unknown_env_field,
+    "two_actions": _two_actions, "no_actions": _no_actions, "unknown_env_field": _unknown_env_field,
 }
 
 
@@ -225,6 +229,10 @@ def test_a_failed_allocation_is_out_of_memory(capsys: pytest.CaptureFixture[str]
     (["--effect", "delay=1000000000"], ["delay must be an integer >= 1 and <= 1000"], 2),
     (["--effect", "noise=1e30"], ["noise must be > 0 and <= 1000"], 2),
     (["--system", "spring", "--radius", "1e-9"], ["radius must be at least 0.5 px"], 1),
+    (["--image-size", "7"], ["image_size=7 is out of range (image_size >= 8"], 1),  # it said "sizes ... >= 1"
+    (["--env", "piga/DMCPendulum-v0", "--image-size", "7"], ["image_size=7 is out of range (image_size >= 8"], 1),
+    (["--system", "bouncing", "--radius", "1e308"], ["images are too small", "need at least inf px"], 1),  # an OverflowError
+    (["--system", "gravity", "--radius", "1e200"], ["images are too small", "need at least 8e+200 px"], 1),
     (["--system", "bouncing", "--colors", "black", "black"], ["is the background's", "invisible"], 1),
     (["--system", "bouncing", "--colors", "red", "white", "--background", "white"], ["object 1's colour"], 1),
     (["--system", "spring", "--k", "1e6"], ["k = 1e+06 is too stiff", "below 2222"], 1),
@@ -289,6 +297,7 @@ def frame_folders(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     ("blank", ["0.5"] * 12, (), ["every frame is blank"]),
     ("moving", ["0.5"] * 12, ("--dt", "1e9"), ["dt must be the seconds between frames, 1e-05 to 10, got 1e+09"]),
     ("moving", ["0.5"] * 12, ("--dt", "1e-12"), ["dt must be the seconds between frames"]),
+    ("moving", ["0.5"] * 12, ("--dt", "10.000001"), ["1e-05 to 10, got 10.000001"]),  # it said "got 10"
     ("sizes", ["0.5"] * 12, (), ["f5.png: 30x50 px, but f0.png is 32x32", "share one size"]),
 ])
 def test_import_refuses(folder: str, values: list[str], argv: tuple[str, ...], needles: list[str],
@@ -326,6 +335,65 @@ def test_show_refuses_a_file_with_nothing_to_show(edit: Callable[[h5py.File], No
     assert _listing(tmp_path) == ["d.h5"]
 
 
+def _dangling_frames(f: h5py.File) -> None:
+    del f["frames"]
+    f["frames"] = h5py.ExternalLink("gone.h5", "/frames")
+
+
+def _attr_edit(key: str, value: Any) -> Callable[[h5py.File], None]:
+    return lambda f: f.attrs.__setitem__(key, value)
+
+
+@pytest.mark.parametrize("edit, needles", [
+    (_dangling_frames, ["/frames is a link that does not resolve", "gone.h5"]),
+    (lambda f: _replace(f, "states", np.full(f["states"].shape, b"x", "S1")), ["/states must be real numbers"]),
+    (lambda f: _replace(f, "states", f["states"][()].astype(np.complex64)), ["/states must be real numbers", "complex64"]),
+    (lambda f: _replace(f, "states", f["states"][()].astype(np.float64) * 1e300), ["/states holds NaN or infinite values"]),
+    (lambda f: _replace(f, "frames", np.zeros((*f["frames"].shape[:2], 0, 0), np.uint8)), ["/frames is empty"]),
+    (_attr_edit("dt", np.inf), ["attribute 'dt' must be the seconds between frames, 1e-05 to 10, got inf"]),
+    (_attr_edit("dt", 1e-300), ["attribute 'dt' must be the seconds between frames"]),
+    (_attr_edit("dt", True), ["attribute 'dt' must be"]),
+    (_attr_edit("params", '{"g": null, "actuation_gain": 1}'), ["'params' must give each parameter as a finite number", "g=None"]),
+    (_attr_edit("params", '{"g": "ten"}'), ["'params' must give each parameter as a finite number", "g='ten'"]),
+    (_attr_edit("params", '{"g": NaN}'), ["'params' must give each parameter as a finite number", "g=nan"]),
+])
+def test_a_file_that_breaks_the_schema_is_named_on_open(edit: Callable[[h5py.File], None], needles: list[str],
+                                                        tiny_data: Path, tmp_path: Path,
+                                                        capsys: pytest.CaptureFixture[str]) -> None:
+    """Dangling links, states that are not real numbers, frames of no pixels, a frame interval of no meaning and
+    true parameters that no error can be scored against: one line on open (they were internal errors, or a
+    run that trained before failing on them, or one whose scores read nan)."""
+    data = _variant(tiny_data, tmp_path / "d.h5", edit)
+    refused("piga-show", [str(data), "--out", str(tmp_path / "s.png")], capsys, *needles)
+    assert _listing(tmp_path) == ["d.h5"]
+
+
+def test_half_precision_actions_and_huge_rewards_are_read_without_warnings(tiny_data: Path, tmp_path: Path) -> None:
+    """float16 actions were compared with ±1e6 in float16 (an overflow warning on stderr); float64 rewards
+    beyond float32's range overflowed in the cast before the check named them."""
+    import warnings
+
+    from piga.data.schema import DataFormatError, check_actions, load_rewards
+
+    data = _variant(tiny_data, tmp_path / "d.h5", lambda f: _replace(f, "rewards", f["rewards"][()].astype(np.float64) * 1e300))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        check_actions(np.ones((2, 3, 1), np.float16), "a.h5")
+        with pytest.raises(DataFormatError, match="/rewards holds NaN or infinite values"):
+            load_rewards(data, "train")
+
+
+def test_a_true_parameter_of_zero_is_scored_infinitely_off() -> None:
+    """A file's true g = 0 divided the relative error by zero (an internal error after training)."""
+    import math
+
+    from piga.evaluation.evaluate import parameter_errors
+    from piga.world.model import ModelConfig, PhysicsModel
+
+    errors = parameter_errors(PhysicsModel(ModelConfig()), {"g": 0.0, "actuation_gain": 1.0})
+    assert math.isinf(errors["g"]["relative_error"]) and math.isfinite(errors["a"]["relative_error"])
+
+
 # ---------------------------------------------------------------------------------------------
 # piga-baseline planet
 # ---------------------------------------------------------------------------------------------
@@ -334,6 +402,7 @@ def test_show_refuses_a_file_with_nothing_to_show(edit: Callable[[h5py.File], No
 @pytest.mark.parametrize("data, argv, needles", [
     ("colour", (), ["colour frames", "gray"]),
     ("two_actions", (), ["has 2 action dimensions", "takes one"]),
+    ("no_actions", (), ["has 0 action dimensions", "takes one"]),  # it said "RSSMConfig.action_dim must be >= 1"
     ("blank", (), ["every frame is blank"]),
     ("nan_state", (), ["/states holds NaN", "sequence 1, step 2"]),
     ("nan_reward", (), ["/rewards holds NaN", "sequence 1, step 2"]),
@@ -509,6 +578,7 @@ def fake_planet_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
 @pytest.mark.parametrize("argv, needles", [
     (["--oracle", "--goal-angle", "1e300"], ["--goal-angle must be an angle", "[-180, 180]", "1e+300"]),
     (["--oracle", "--goal-angle", "nan"], ["--goal-angle must be an angle"]),
+    (["--oracle", "--goal-angle", "180.0000001"], ["within [-180, 180], got 180.0000001"]),  # it said "got 180"
     (["--write-goal-image", "g.png", "--angle", "-400"], ["--angle must be an angle"]),
 ])
 def test_control_refuses_meaningless_angles(argv: list[str], needles: list[str], tmp_path: Path,
@@ -615,6 +685,18 @@ def test_train_model_refuses_data_on_open(data: str, needles: list[str], files: 
     refused("piga-train-model", [str(files[data]), "--out", str(tmp_path / "run"), "--batch-size", "4", "--threads", "1",
                                  "--quiet"], capsys, *needles)
     assert _listing(tmp_path) == []
+
+
+def test_train_model_refuses_frames_too_small_before_training(tiny_data: Path, tmp_path: Path,
+                                                            capsys: pytest.CaptureFixture[str]) -> None:
+    """4x4 frames trained a whole run, then failed in the SSIM with scikit-image's message, leaving a run
+    folder that made the rerun refuse."""
+    rng = np.random.default_rng(0)
+    data = _variant(tiny_data, tmp_path / "d.h5",
+                    lambda f: _replace(f, "frames", rng.integers(0, 255, (*f["frames"].shape[:2], 4, 4)).astype(np.uint8)))
+    refused("piga-train-model", [str(data), "--out", str(tmp_path / "run"), "--batch-size", "4", "--threads", "1", "--quiet"],
+            capsys, "frames of 4x4 px are too small to learn from; at least 8x8")
+    assert _listing(tmp_path) == ["d.h5"]
 
 
 def test_n_objects_must_agree_with_the_states(files: dict[str, Path], tmp_path: Path) -> None:
@@ -848,6 +930,20 @@ def test_train_resume_tells_a_moved_file_from_another_of_the_same_shape(tiny_pig
     assert code in (0, NOT_CONVERGED), err  # resumed and trained: a tiny run is too short to be judged converged
 
 
+def test_train_resume_says_the_file_has_changed(tiny_piga_run: Path, tiny_data: Path, tmp_path: Path,
+                                               capsys: pytest.CaptureFixture[str]) -> None:
+    """The run's own file, changed in place: it read "continues on the file the run trained on (X), not X"."""
+    import torch
+
+    data = _variant(tiny_data, tmp_path / "d.h5", lambda f: f["frames"].__setitem__(0, 255 - f["frames"][0]))
+    run = _run_copy(tiny_piga_run, tmp_path / "run")
+    ckpt = torch.load(run / "checkpoint.pt", weights_only=False)
+    ckpt["data"]["path"] = str(data)
+    torch.save(ckpt, run / "checkpoint.pt")
+    refused("piga-train-model", [str(data), "--out", str(run), "--resume", "--epochs", "3", "--quiet"], capsys,
+            f"--resume: {data} has changed since the run trained on it")
+
+
 def test_train_resume_without_its_record_says_it_rebuilds_it(tiny_piga_run: Path, tiny_data: Path, tmp_path: Path,
                                                               capsys: pytest.CaptureFixture[str]) -> None:
     """The checkpoint holds the recipe and the model, so a lost config.json does not stop a resume; the rebuilt
@@ -931,6 +1027,50 @@ def test_control_sweep_refuses_a_gravity_multiplier(tiny_piga_run: Path, capsys:
     """--gravity-mult beside --sweep used to be ignored."""
     refused("piga-control", ["--model", str(tiny_piga_run), "--sweep", "0.5:1:0.5", "--gravity-mult", "2"], capsys,
             "drop --gravity-mult")
+
+
+@pytest.mark.parametrize("prog", ["piga-control", "piga-train-model"])
+def test_a_checkpoint_with_nan_weights_is_named(prog: str, tiny_piga_run: Path, tiny_data: Path, tmp_path: Path,
+                                                capsys: pytest.CaptureFixture[str]) -> None:
+    """A checkpoint whose log g is NaN: control failed in the physics' own check without naming the file, and a
+    resume trained to a NaN loss and called the damaged file the "last good checkpoint"."""
+    import torch
+
+    run = _run_copy(tiny_piga_run, tmp_path / "run")
+    ckpt = torch.load(run / "checkpoint.pt", weights_only=False)
+    ckpt["model"]["system.log_g"].fill_(float("nan"))
+    torch.save(ckpt, run / "checkpoint.pt")
+    argv = (["--model", str(run), "--oracle"][:2] + ["--episodes", "1", "--quiet"] if prog == "piga-control"
+            else [str(tiny_data), "--out", str(run), "--resume", "--epochs", "3", "--quiet"])
+    refused(prog, argv, capsys, "checkpoint.pt: holds NaN or infinite weights (system.log_g)", "train the run again")
+
+
+def test_control_refuses_two_goals_and_reads_a_goal_image_quietly(tiny_piga_run: Path, tmp_path: Path,
+                                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    """--goal-angle beside --goal-image was ignored (exit 0); reading a goal image printed torch's
+    requires_grad warning on stderr."""
+    image = tmp_path / "g.png"
+    assert run_in_process("piga-control", control.main, "--write-goal-image", str(image), "--angle", "10", capsys=capsys)[0] == 0
+    refused("piga-control", ["--model", str(tiny_piga_run), "--goal-image", str(image), "--goal-angle", "10"], capsys,
+            "--goal-image sets the goal", "drop --goal-angle")
+    import warnings
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        code, _, err = run_in_process("piga-control", control.main, "--model", str(tiny_piga_run), "--goal-image", str(image),
+                                      "--episodes", "1", "--steps", "20", "--horizon", "2", "--candidates", "4",
+                                      "--iterations", "1", "--quiet", capsys=capsys)
+    assert code == 0, err
+    assert not [w for w in caught if "requires_grad" in str(w.message)]
+
+
+@pytest.mark.parametrize("sweep, needle", [
+    ("1e308:1e308:1", "--sweep: PixelPendulumConfig: gravity x gravity_mult = inf is out of range"),  # a job failed, after a warning
+    ("1e-300:2e-300:1e-300", "gravity multipliers must be > 0 (at 10 decimals)"),  # it read "> 0, got 1e-300"
+])
+def test_control_sweep_refuses_multipliers_up_front(sweep: str, needle: str, tiny_piga_run: Path,
+                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    refused("piga-control", ["--model", str(tiny_piga_run), "--sweep", sweep, "--episodes", "1", "--quiet"], capsys, needle)
 
 
 def test_control_sweep_warns_once_about_an_unconverged_run(tiny_piga_run: Path, tmp_path: Path,
@@ -1030,6 +1170,22 @@ def test_planet_refuses_more_sequences_than_the_file_has(tiny_data: Path, tmp_pa
     refused("piga-baseline", ["planet", str(tiny_data), "--out", str(tmp_path / "run"), *TINY_PLANET, "--max-sequences",
                               "100"], capsys, "--max-sequences 100", "has 8 train sequences")
     assert _listing(tmp_path) == []
+
+
+def test_import_passes_over_hidden_files(frame_folders: dict[str, Path], tmp_path: Path,
+                                         capsys: pytest.CaptureFixture[str]) -> None:
+    """macOS's ``._f0.png`` metadata beside each frame copied to a foreign disk: it was read as a frame
+    ("not a readable image")."""
+    folder = tmp_path / "frames"
+    shutil.copytree(frame_folders["moving"], folder)
+    (folder / "._f0.png").write_bytes(b"\x00\x05\x16\x07 AppleDouble")
+    csv = tmp_path / "u.csv"
+    csv.write_text("0.5\n" * 12)
+    code, _, err = run_in_process("piga-import", importer.main, str(folder), str(csv), "--dt", "0.05", "--steps", "4",
+                                  "--image-size", "32", "--split", "1,1,1", "--out", str(tmp_path / "out.h5"), capsys=capsys)
+    assert code == 0, err
+    with h5py.File(tmp_path / "out.h5") as f:
+        assert f["frames"].shape[:2] == (3, 4)
 
 
 def test_import_refuses_a_ragged_row(frame_folders: dict[str, Path], tmp_path: Path,

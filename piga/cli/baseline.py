@@ -331,6 +331,7 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
                                    max_sequences=args.max_sequences, free_nats=args.free_nats, reward_scale=args.reward_scale,
                                    seed=args.seed,
                                    threads=args.threads, device=args.device, max_minutes=args.max_minutes or 0.0)
+        check_planet_data(info, config, args.action_repeat)  # a bad file: one line naming it, before the model's sizes
         rssm = rssm_config_for(info, {"deter_size": args.deter_size, "stoch_size": args.stoch_size, "action_repeat": args.action_repeat,
                                       "reward_alignment": args.reward_alignment})
         check_planet_memory(rssm, config)
@@ -347,7 +348,6 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
             iterative = IterativeConfig(rounds=args.rounds or IterativeConfig.rounds, episodes=args.iterative,
                                         steps_per_round=args.round_steps, episode_steps=args.episode_steps,
                                         noise=args.exploration_noise)
-        check_planet_data(info, config, rssm.action_repeat)  # a bad file: one line, before the run folder is looked at
         if iterative is not None:
             from agents.planet.iterative import check_iterative_data
 

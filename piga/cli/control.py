@@ -109,6 +109,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.not_told and args.oracle and not args.sweep:
         raise PigaError("--not-told is for the piga agent; the oracle plans with the environment's true physics")
     check_angle("--goal-angle", args.goal_angle)
+    if args.goal_image and args.goal_angle:
+        raise PigaError("--goal-image sets the goal (the encoder reads its angle); drop --goal-angle")
     hold = EpisodeConfig.hold_steps
     if args.steps < hold:
         raise PigaError(f"--steps must be at least {hold}: success is the goal held for the last {hold} steps, got {args.steps}")
@@ -215,7 +217,13 @@ def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: 
     except ValueError as exc:
         raise PigaError(f"--sweep: {exc}") from None
     if multipliers[0] <= 0:
-        raise PigaError(f"--sweep: gravity multipliers must be > 0, got {args.sweep}")
+        raise PigaError(f"--sweep: gravity multipliers must be > 0 (at 10 decimals), got {args.sweep}")
+    from envs.pendulum import PixelPendulumConfig
+
+    try:  # the largest multiplier, here: in a job it failed after the others had run, with the job's name
+        PixelPendulumConfig(gravity_mult=multipliers[-1])
+    except ValueError as exc:
+        raise PigaError(f"--sweep: {exc}") from None
     if kind is RunKind.PIGA:
         model, _ = load_model(args.model)  # fail early, in this process, on a bad folder
         check_pendulum_model(model, args.model)
@@ -342,7 +350,7 @@ def check_angle(flag: str, degrees: float) -> None:
     """Refuses an angle outside [-180, 180] degrees (NaN and infinities included): a goal such as
     1e300 degrees means nothing, and reduced modulo a turn it would be an arbitrary angle."""
     if not -180 <= degrees <= 180:
-        raise PigaError(f"{flag} must be an angle in degrees from upright within [-180, 180], got {degrees:g}")
+        raise PigaError(f"{flag} must be an angle in degrees from upright within [-180, 180], got {degrees!r}")  # repr: 180.0000001 is no 180
 
 
 def default_elites(candidates: int) -> int:

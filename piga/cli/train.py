@@ -174,6 +174,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         else:  # a checkpoint from before fingerprints: the same path, or a file of the same shape
             same_data = Path(data["path"]).resolve() == Path(args.data).resolve() or (
                 data.get("sequences") == info.n_sequences and data.get("steps") == info.steps and data["dt"] == info.dt)
+        if not same_data and Path(data["path"]).resolve() == Path(args.data).resolve():
+            raise PigaError(f"--resume: {args.data} has changed since the run trained on it (its actions, split or first "
+                            "frames differ); train a new run (without --resume) to learn from the changed file")
         if not same_data:
             raise PigaError(f"--resume continues on the file the run trained on ({data['path']}), not {args.data}; "
                             "train a new run (without --resume) to learn from another file")

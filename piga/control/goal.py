@@ -133,8 +133,9 @@ def read_goal(model: PhysicsModel, image: np.ndarray, g: float, a: float, mse_li
             (:func:`holdable_angle`; :data:`HOLDABLE_ANGLE` at x1), not with the learned one.
     """
     x = frames_to_float(torch.from_numpy(image)[None, None], model.config.channels)  # (1, 1, C, H, W)
-    coords = model.encode(x)  # (1, 1, 1, 1)
-    rec = model.decoder(coords)
+    with torch.no_grad():  # a reading, not a training step (a float of a graph's tensor warned on stderr)
+        coords = model.encode(x)  # (1, 1, 1, 1)
+        rec = model.decoder(coords)
     mse = float(((rec - x) ** 2).mean())
     offset = model.physical_parameters().get("offset", 0.0)
     angle = math.remainder(float(coords[0, 0, 0, 0]) + offset, 2 * math.pi)

@@ -36,16 +36,13 @@ import numpy as np
 
 from piga.io.atomic import check_writable_target
 from piga.data.collect import split_counts
-from piga.data.schema import MAX_ABS_ACTION, SPLITS, DatasetWriter
+from piga.data.schema import MAX_ABS_ACTION, MAX_DT, MIN_DT, MIN_IMAGE_SIZE, SPLITS, DatasetWriter
 from piga.data.scene import read_image, scene_to_gray
 
 #: File name endings read from a folder of frames (case-insensitive).
 FRAME_EXTENSIONS = (".png", ".jpg", ".jpeg")
 #: Header names that mark the action column of a CSV with several columns (case-insensitive).
 ACTION_COLUMNS = ("u", "action")
-#: Accepted frame intervals, in seconds: a 100 kHz camera to one frame per 10 s (beyond, a swinging
-#: pendulum's frames no longer follow each other).
-MIN_DT, MAX_DT = 1e-5, 10.0
 
 
 @dataclass(frozen=True)
@@ -64,12 +61,14 @@ class ImportConfig:
     def __post_init__(self) -> None:
         number = isinstance(self.dt, (int, float, np.floating))
         if not (number and MIN_DT <= self.dt <= MAX_DT):
-            raise ValueError(f"dt must be the seconds between frames, {MIN_DT:g} to {MAX_DT:g}, got "
-                             f"{format(self.dt, 'g') if number else repr(self.dt)}")
+            shown = format(self.dt, "g") if number else repr(self.dt)
+            if number and float(shown) != self.dt:  # 10.000001 is not "10", which is in range
+                shown = repr(float(self.dt))
+            raise ValueError(f"dt must be the seconds between frames, {MIN_DT:g} to {MAX_DT:g}, got {shown}")
         if self.steps < 2:
             raise ValueError(f"steps must be >= 2 (a video needs two frames), got {self.steps}")
-        if self.image_size < 8:
-            raise ValueError(f"image_size must be >= 8, got {self.image_size}")
+        if self.image_size < MIN_IMAGE_SIZE:
+            raise ValueError(f"image_size must be >= {MIN_IMAGE_SIZE}, got {self.image_size}")
 
 
 @dataclass(frozen=True)
@@ -93,13 +92,15 @@ def _natural_key(path: Path) -> list[int | str]:
 
 
 def frame_files(folder: str | Path) -> list[Path]:
-    """The frame files of a folder, in natural name order (``f2.png`` before ``f10.png``).
+    """The frame files of a folder, in natural name order (``f2.png`` before ``f10.png``). Hidden files are
+    not frames (macOS leaves ``._f2.png`` metadata beside each file it copies to a foreign disk).
 
     Raises:
         ValueError: the folder holds no PNG or JPEG file.
     """
     folder = Path(folder)
-    files = sorted((p for p in folder.iterdir() if p.is_file() and p.suffix.lower() in FRAME_EXTENSIONS), key=_natural_key)
+    files = sorted((p for p in folder.iterdir() if p.is_file() and not p.name.startswith(".")
+                    and p.suffix.lower() in FRAME_EXTENSIONS), key=_natural_key)
     if not files:
         raise ValueError(f"{folder}: no frames in this folder (expected {', '.join(FRAME_EXTENSIONS)} files)")
     return files

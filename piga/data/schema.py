@@ -24,6 +24,7 @@ reward-based baselines (:mod:`agents.planet`) call; piga's own training never re
 from __future__ import annotations
 
 import json
+import math
 import os
 import typing
 from dataclasses import dataclass, field
@@ -44,6 +45,13 @@ SPLITS: dict[str, int] = {"train": 0, "valid": 1, "test": 2}
 MAX_SEED = 2**63 - 1
 
 REQUIRED_ATTRS = ("system", "dt")
+
+#: The smallest frame side, in pixels, that piga's models and data take (the encoder's and the SSIM's windows).
+MIN_IMAGE_SIZE = 8
+
+#: Accepted frame intervals ``dt``, in seconds: a 100 kHz camera to one frame per 10 s (beyond, a swinging
+#: pendulum's frames no longer follow each other). Files and ``piga-import --dt`` are held to it.
+MIN_DT, MAX_DT = 1e-5, 10.0
 
 #: How ``/frames`` is stored: chunked one sequence per chunk, with a lossless filter (HDF5's gzip at a
 #: level, or LZF) or none. Files of any of them read the same; older unchunked files read too.
@@ -80,6 +88,7 @@ def check_actions(actions: np.ndarray, path: str | os.PathLike[str]) -> None:
     Raises:
         DataFormatError: naming the file, the first bad entry (sequence, step) and its value.
     """
+    actions = np.asarray(actions, np.float64)  # float16 holds no 1e6: compare in float64
     bad = ~np.isfinite(actions) | (np.abs(np.nan_to_num(actions, nan=0.0)) > MAX_ABS_ACTION)
     if bad.any():
         n, t = (int(i) for i in np.argwhere(bad)[0][:2])
@@ -145,9 +154,22 @@ def _attr(value: Any) -> Any:
 
 def _validate(f: h5py.File, path: Path) -> DatasetInfo:
     def need(name: str) -> h5py.Dataset:
-        if name not in f or not isinstance(f[name], h5py.Dataset):
+        found = optional(name)
+        if found is None:
             raise DataFormatError(f"{path}: missing dataset /{name}")
-        return f[name]
+        return found
+
+    def optional(name: str) -> h5py.Dataset | None:
+        """``/name``, None if absent; a link that does not resolve (an external file that is gone) is named."""
+        if name not in f:
+            return None
+        try:
+            found = f[name]
+        except KeyError:
+            raise DataFormatError(f"{path}: /{name} is a link that does not resolve (to {f.get(name, getlink=True)!r})") from None
+        if not isinstance(found, h5py.Dataset):
+            raise DataFormatError(f"{path}: missing dataset /{name} (it is a {type(found).__name__.lower()})")
+        return found
 
     frames = need("frames")
     if frames.dtype != np.uint8 or frames.ndim not in (4, 5):
@@ -157,23 +179,20 @@ def _validate(f: h5py.File, path: Path) -> DatasetInfo:
     if frames.ndim == 5 and frames.shape[-1] not in (1, 3):
         raise DataFormatError(f"{path}: /frames colour axis must have 1 or 3 channels, got {frames.shape}")
     n, t = frames.shape[:2]
-    if n < 1 or t < 1:
+    if min(frames.shape) < 1:
         raise DataFormatError(f"{path}: /frames is empty, shape {frames.shape}")
     actions = need("actions")
     if actions.ndim != 3 or actions.shape[:2] != (n, t) or not np.issubdtype(actions.dtype, np.floating):
         raise DataFormatError(f"{path}: /actions must be float [N={n}, T={t}, A], got {actions.dtype} {actions.shape}")
-    has_states = "states" in f
-    if has_states:
-        states = f["states"]
-        if not isinstance(states, h5py.Dataset) or states.ndim != 3 or states.shape[:2] != (n, t):
-            raise DataFormatError(f"{path}: /states must be [N={n}, T={t}, S], got {getattr(states, 'shape', None)}")
-    has_rewards = "rewards" in f
-    if has_rewards:
-        rewards = f["rewards"]
-        if (not isinstance(rewards, h5py.Dataset) or rewards.shape != (n, t)
-                or not np.issubdtype(rewards.dtype, np.floating)):
-            raise DataFormatError(f"{path}: /rewards must be float32 [N={n}, T={t}], got "
-                                  f"{getattr(rewards, 'dtype', None)} {getattr(rewards, 'shape', None)}")
+    states = optional("states")
+    has_states = states is not None
+    if states is not None and (states.ndim != 3 or states.shape[:2] != (n, t)
+                               or not (np.issubdtype(states.dtype, np.floating) or np.issubdtype(states.dtype, np.integer))):
+        raise DataFormatError(f"{path}: /states must be real numbers [N={n}, T={t}, S], got {states.dtype} {states.shape}")
+    rewards = optional("rewards")
+    has_rewards = rewards is not None
+    if rewards is not None and (rewards.shape != (n, t) or not np.issubdtype(rewards.dtype, np.floating)):
+        raise DataFormatError(f"{path}: /rewards must be float32 [N={n}, T={t}], got {rewards.dtype} {rewards.shape}")
     split = need("split")
     if split.shape != (n,) or not np.issubdtype(split.dtype, np.integer):
         raise DataFormatError(f"{path}: /split must be int8 [N={n}], got {split.dtype} {split.shape}")
@@ -185,14 +204,19 @@ def _validate(f: h5py.File, path: Path) -> DatasetInfo:
         if key not in attrs:
             raise DataFormatError(f"{path}: missing file attribute '{key}'")
     try:
-        dt = float(attrs["dt"])
+        dt = float("nan") if isinstance(attrs["dt"], bool) else float(attrs["dt"])
     except (TypeError, ValueError):
         dt = float("nan")
-    if not dt > 0:
-        raise DataFormatError(f"{path}: attribute 'dt' must be a positive number, got {attrs['dt']!r}")
+    if not MIN_DT <= dt <= MAX_DT:
+        raise DataFormatError(f"{path}: attribute 'dt' must be the seconds between frames, {MIN_DT:g} to {MAX_DT:g}, "
+                              f"got {attrs['dt']!r}")
     params = attrs.get("params", {})
     if not isinstance(params, dict):
         raise DataFormatError(f"{path}: attribute 'params' must be a JSON object, got {params!r}")
+    for name, value in params.items():
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise DataFormatError(f"{path}: attribute 'params' must give each parameter as a finite number, got "
+                                  f"{name}={value!r}")
     return DatasetInfo(
         path=path,
         n_sequences=n,
@@ -268,8 +292,8 @@ def _check_attrs_agree(info: DatasetInfo, f: h5py.File) -> None:
             raise DataFormatError(f"{path}: attribute 'n_objects' is {attrs['n_objects']}, but 'state_names' names "
                                   f"{len(names)} values ({STATE_DIM_PER_OBJECT} per object); fix the attribute")
     if info.has_states:
-        states = f["states"][()]
-        bad = ~np.isfinite(states)
+        states = f["states"][()].astype(np.float64)  # read as float32: beyond its range is as useless as inf
+        bad = ~np.isfinite(states) | (np.abs(np.nan_to_num(states)) > np.finfo(np.float32).max)
         if bad.any():
             n, t, k = (int(i) for i in np.argwhere(bad)[0])
             raise DataFormatError(f"{path}: /states holds NaN or infinite values ({int(bad.sum())} entries; the first: "
@@ -389,13 +413,13 @@ def load_rewards(path: str | os.PathLike[str], split: str, limit: int | None = N
         if "rewards" not in f:
             raise DataFormatError(f"{path}: has no /rewards (reward-based baselines need them; files from "
                                   "piga-collect have them)")
-        rewards = _take(f["rewards"], idx).astype(np.float32)  # (n, T)
-    bad = ~np.isfinite(rewards)
+        rewards = _take(f["rewards"], idx).astype(np.float64)  # (n, T); checked before the cast (1e300 overflows float32)
+    bad = ~np.isfinite(rewards) | (np.abs(np.nan_to_num(rewards)) > np.finfo(np.float32).max)
     if bad.any():
         i, t = (int(k) for k in np.argwhere(bad)[0])
         raise DataFormatError(f"{path}: /rewards holds NaN or infinite values ({int(bad.sum())} entries; the first: "
                               f"sequence {int(idx[i])}, step {t}: {rewards[i, t]}); fix or recompute the rewards")
-    return rewards
+    return rewards.astype(np.float32)
 
 
 def _take(ds: h5py.Dataset, idx: np.ndarray) -> np.ndarray:

@@ -12,6 +12,8 @@ constant offset, to show how far the learned φ is from the best possible alignm
 
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
@@ -74,7 +76,9 @@ def parameter_errors(model: PhysicsModel, true_params: dict[str, Any]) -> dict[s
             if file_name == "actuation_gain":
                 true *= float(true_params.get("actuation_sign", 1.0))
             out[model_name] = {"learned": learned[model_name], "true": true,
-                               "relative_error": abs(learned[model_name] - true) / abs(true)}
+                               # a true value of 0 has no relative scale: any other learned value is infinitely off
+                               "relative_error": abs(learned[model_name] - true) / abs(true) if true
+                               else (0.0 if learned[model_name] == 0 else math.inf)}
     return out
 
 

@@ -79,6 +79,12 @@ def load_model(run_dir: str | os.PathLike[str], any_model: bool = False) -> tupl
         model.load_state_dict(ckpt["model"])
     except Exception as exc:  # a foreign or damaged payload
         raise unreadable(Path(run_dir) / CHECKPOINT, RunKind.PIGA, exc) from None
+    # Training stops at a non-finite loss before it saves, so such weights mean a damaged file; they would
+    # plan, diagnose or resume with NaN physics (g = nan reached the physics' own check, unnamed).
+    bad = [name for name, value in model.state_dict().items() if value.is_floating_point() and not torch.isfinite(value).all()]
+    if bad:
+        raise ValueError(f"{Path(run_dir) / CHECKPOINT}: holds NaN or infinite weights ({', '.join(bad[:3])}"
+                         f"{', ...' if len(bad) > 3 else ''}); the file is damaged: train the run again")
     if not (any_model or model.has_physics):
         raise ValueError(f"{run_dir} holds a piga-train-model --model {model.config.architecture} run: "
                          f"{NO_PHYSICS[model.config.architecture].split(': ')[0]}, without the physical parameters "

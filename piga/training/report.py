@@ -54,7 +54,7 @@ def write_run_report(model: FrameModel, state: TrainState, data: str | Path, run
     metrics["training"] = {"epochs": state.epoch, "steps": state.step, "seconds": state.elapsed,
                            "threads": torch.get_num_threads(), "device": state.device or None}
     if state.plan:
-        blank = None if model.has_physics else (metrics["frame_mse_mean"]["prediction"], metrics["frame_mse_background"])
+        blank = (metrics["frame_mse_mean"]["prediction"], metrics["frame_mse_background"])
         convergence = check_convergence(state, objects=objects, blank=blank)
         metrics["converged"] = convergence.converged
         metrics["convergence"] = convergence.to_dict()

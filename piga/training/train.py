@@ -38,7 +38,7 @@ from tqdm.auto import tqdm
 
 from piga.io.choices import check_choices
 from piga.io.device import Device, resolve_device
-from piga.data.schema import DatasetInfo, check_actions_file, fingerprint, inspect_dataset, split_indices
+from piga.data.schema import MIN_IMAGE_SIZE, DatasetInfo, check_actions_file, fingerprint, inspect_dataset, split_indices
 from piga.world.encoder import estimate_background
 from piga.world.model import SYSTEM_SHAPES, FrameModel, ModelConfig, frames_to_float
 from piga.world.physics import BouncingOptions, PendulumOptions
@@ -394,6 +394,9 @@ def model_config_for(info: DatasetInfo, model: ModelConfig | None = None, n_obje
     shape = info.image_shape
     if shape[0] != shape[1]:
         raise ValueError(f"{info.path}: frames must be square, got {shape}")
+    if shape[0] < MIN_IMAGE_SIZE:
+        raise ValueError(f"{info.path}: frames of {shape[0]}x{shape[1]} px are too small to learn from; "
+                         f"at least {MIN_IMAGE_SIZE}x{MIN_IMAGE_SIZE}")
     channels = shape[2] if len(shape) == 3 else 1
     if n_objects is None:
         n_objects = int(info.attrs.get("n_objects", SYSTEM_SHAPES[info.system][0]))
