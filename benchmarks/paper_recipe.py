@@ -69,7 +69,7 @@ def _segment(record: dict[str, Any]) -> dict[str, Any]:
             "machine": record["machine"], "gpu": record.get("gpu")}
 
 
-def train(recipe: str, data: Path, run_dir: Path, args: argparse.Namespace, resume: bool,
+def train(recipe: str, data: Path, run_dir: Path, args: argparse.Namespace, resume: bool, commit: str | None,
           earlier: dict[str, Any] | None = None) -> dict[str, Any]:
     """Trains (or continues) one recipe; its record. A continued run's record keeps the ``earlier`` record's stretches
     of training (``segments``), each with its machine."""
@@ -83,13 +83,16 @@ def train(recipe: str, data: Path, run_dir: Path, args: argparse.Namespace, resu
     command += ["--resume"] if resume else ["--overwrite"]
     started = time.time()
     code, metrics = run_training(command, run_dir, run_dir.parent / f"{run_dir.name}.log", f"piga-train-model --preset {recipe}")
-    record = {"recipe": recipe, "command": shlex.join(command), "commit": os.environ.get("PIGA_COMMIT") or git_commit(), "exit": code,
+    record = {"recipe": recipe, "command": shlex.join(command), "commit": commit, "exit": code,
               "metrics": {k: metrics.get(k) for k in KEEP}, "outcome": (metrics.get("convergence") or {}).get("outcome"),
               "planned_steps": (metrics.get("convergence") or {}).get("planned_steps"),
               "wall_seconds": time.time() - started, "machine": machine(), "gpu": gpu_name(args.device)}
     before = (earlier.get("segments") or [_segment(earlier)]) if resume and earlier else []
-    record["segments"] = [*before, _segment(record)]
     t = metrics["training"]
+    if before and before[-1]["steps"] == t["steps"]:  # a continuation that trained no step (its budget was spent)
+        print(f"{recipe}: no step trained (the run is at step {t['steps']:,}; raise --max-minutes to continue)", flush=True)
+        return earlier  # type: ignore[return-value]
+    record["segments"] = [*before, _segment(record)]
     print(f"{recipe}: {t['steps']} steps in {t['seconds'] / 60:.1f} min, exit {code} ({record['outcome']})", flush=True)
     return record
 
@@ -155,13 +158,16 @@ def run(args: argparse.Namespace, argv: list[str] | None) -> int:
     for sub in ("data", "records"):
         (folder / sub).mkdir(parents=True, exist_ok=True)
     collect(args.system, data, args.workers, data.with_suffix(".log"))
+    # the code that runs is the checkout's now: a commit read when a job ends may be a later one
+    commit = os.environ.get("PIGA_COMMIT") or git_commit()
     records: dict[str, dict[str, Any]] = {}
     for recipe in RECIPES:
         path = folder / "records" / f"{args.system}-{recipe}.json"
         resume = args.resume and recipe == "paper" and (folder / f"{args.system}-paper" / "checkpoint.pt").exists()
         if recipe in args.recipes and (resume or not path.exists()):
             earlier = json.loads(path.read_text()) if resume and path.exists() else None
-            write_json(path, train(recipe, data, folder / f"{args.system}-{recipe}", args, resume, earlier), overwrite=True)
+            write_json(path, train(recipe, data, folder / f"{args.system}-{recipe}", args, resume, commit, earlier),
+                       overwrite=True)
         if path.exists():
             records[recipe] = json.loads(path.read_text())
     if not records:

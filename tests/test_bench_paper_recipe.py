@@ -20,9 +20,9 @@ def paper_recipe():
         yield module
 
 
-def _stand_ins(module: Any, monkeypatch: pytest.MonkeyPatch, fail: bool = False) -> list[list[str]]:
+def _stand_ins(module: Any, monkeypatch: pytest.MonkeyPatch, fail: bool = False) -> tuple[list[list[str]], dict[str, int]]:
     calls: list[list[str]] = []
-    stood = {"steps": 0}
+    stood = {"steps": 0}  # where the stand-in's paper run stands
 
     def logged(args: list[str], log: Path) -> int:
         calls.append(args)
@@ -48,12 +48,12 @@ def _stand_ins(module: Any, monkeypatch: pytest.MonkeyPatch, fail: bool = False)
     monkeypatch.setattr(module, "logged_command", logged)
     monkeypatch.setattr(sys.modules["prediction"], "logged_command", logged)
     monkeypatch.setenv("PIGA_COMMIT", "abc1234")
-    return calls
+    return calls, stood
 
 
 def test_both_recipes_train_on_the_paper_file_and_a_resume_keeps_the_earlier_stretch(
         paper_recipe: Any, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    calls = _stand_ins(paper_recipe, monkeypatch)
+    calls, stood = _stand_ins(paper_recipe, monkeypatch)
     out = tmp_path / "results" / "paper_recipe"
     assert paper_recipe.main(["--out", str(out), "--max-minutes", "6.5", "--device", "cpu"]) == 0
     collect, fast, paper = calls
@@ -73,6 +73,11 @@ def test_both_recipes_train_on_the_paper_file_and_a_resume_keeps_the_earlier_str
     record = json.loads((out.parent / "paper_recipe_runs" / "records" / "spring-paper.json").read_text())
     assert [s["steps"] for s in record["segments"]] == [100, 200]
     assert "to step 100 (10.0 min)" in out.with_suffix(".md").read_text()
+
+    stood["steps"] -= 100  # a continuation whose budget is spent trains no step: the record stays as it was
+    assert paper_recipe.main(["--out", str(out), "--resume", "--max-minutes", "60"]) == 0
+    again = json.loads((out.parent / "paper_recipe_runs" / "records" / "spring-paper.json").read_text())
+    assert again == record
 
 
 def test_a_failed_command_is_one_line(paper_recipe: Any, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
