@@ -105,13 +105,13 @@ def add_training_options(parser: argparse.ArgumentParser, defaults: Any, sequenc
     """The options of a benchmark that trains ``piga-train-model`` runs on collected data, with the defaults of its
     ``BenchConfig`` (``defaults``: ``seeds``, ``budget_steps``, ``sequences``, ``jobs``): ``--seeds``,
     ``--budget-steps``, ``--sequences`` (``sequences_help``), ``--jobs`` and ``--ray``."""
-    from piga.cli.common import positive_int
+    from piga.cli.common import int_at_least, positive_int
 
     parser.add_argument("--seeds", nargs="+", type=int, default=list(defaults.seeds),
                         help="training seeds (default %(default)s)")
     parser.add_argument("--budget-steps", type=positive_int, default=defaults.budget_steps,
                         help="optimiser steps of every run (default %(default)s)")
-    parser.add_argument("--sequences", type=int, default=defaults.sequences,
+    parser.add_argument("--sequences", type=int_at_least(10, "the test split is a tenth of them"), default=defaults.sequences,
                         help=f"{sequences_help} (default %(default)s)")
     parser.add_argument("--jobs", type=positive_int, default=defaults.jobs,
                         help="runs trained at once, each in its own process with one torch thread (default %(default)s)")

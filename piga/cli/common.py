@@ -255,6 +255,11 @@ def int_up_to(limit: int, why: str) -> Callable[[str], Any]:
     return _number_type(int, lambda v: 1 <= v <= limit, f"an integer in [1, {limit}] ({why})")
 
 
+def int_at_least(limit: int, why: str) -> Callable[[str], Any]:
+    """argparse type: an integer >= ``limit``; ``why`` says what the limit is for."""
+    return _number_type(int, lambda v: v >= limit, f"an integer >= {limit} ({why})")
+
+
 positive_float = _number_type(float, lambda v: 0 < v < float("inf"), "a finite number > 0")
 """argparse type: a finite number > 0 (NaN is rejected too)."""
 nonnegative_float = _number_type(float, lambda v: 0 <= v < float("inf"), "a finite number >= 0")

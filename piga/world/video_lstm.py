@@ -73,22 +73,22 @@ class VideoLSTM(FrameModel):
 
     has_physics: ClassVar[bool] = False
     has_objects: ClassVar[bool] = False
-    latent: ClassVar[int] = 128
+    BASE_LATENT: ClassVar[int] = 128
     """Z, the size of a frame's latent, at ``ModelConfig.video_lstm_scale`` 1."""
-    hidden: ClassVar[int] = 256
+    BASE_HIDDEN: ClassVar[int] = 256
     """The LSTM's hidden units, at scale 1."""
-    width: ClassVar[int] = 32
+    BASE_WIDTH: ClassVar[int] = 32
     """The first convolution's channels (the others have twice as many), at scale 1."""
 
     def __init__(self, config: ModelConfig):
         super().__init__()
         self.config = config
         c, h, scale = config.channels, config.image_size, config.video_lstm_scale
-        self.latent, self.hidden = scale * type(self).latent, scale * type(self).hidden  # (instance sizes)
-        self.encoder = ConvEncoder(c, h, self.latent, width=scale * self.width)
+        self.latent, self.hidden = scale * self.BASE_LATENT, scale * self.BASE_HIDDEN  # Z and the LSTM's units
+        self.encoder = ConvEncoder(c, h, self.latent, width=scale * self.BASE_WIDTH)
         self.cell = nn.LSTMCell(self.latent + config.action_dim, self.hidden)
         self.head = nn.Linear(self.hidden, self.latent)
-        self.decoder = DeconvDecoder(c, h, self.latent, width=scale * self.width)
+        self.decoder = DeconvDecoder(c, h, self.latent, width=scale * self.BASE_WIDTH)
         self.register_buffer("background", torch.zeros(c, h, h))
 
     def set_background(self, background: Tensor) -> None:
