@@ -81,3 +81,9 @@ def test_preset_applies_and_explicit_options_win(tmp_path: Path, capsys: pytest.
     info = inspect_dataset(out)
     assert (info.n_sequences, info.steps) == (3, PRESETS["paper"].steps)  # --sequences wins, steps from the preset
     assert info.attrs["env_config"]["max_speed"] == PAPER_MAX_SPEED != CollectConfig().env.max_speed
+    # --sequences alone keeps the preset's split in counts (5000,500,500) as its proportions
+    out = tmp_path / "q.h5"
+    code, _, err = run_in_process("piga-collect", cli.main, "--out", str(out), "--preset", "paper", "--sequences", "12",
+                                  "--steps", "3", "--workers", "1", "--quiet", capsys=capsys)
+    assert code == 0, err
+    assert inspect_dataset(out).split_counts == {"train": 10, "valid": 1, "test": 1}

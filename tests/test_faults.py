@@ -258,6 +258,15 @@ def test_collect_into_a_path_through_a_file_names_the_file(tmp_path: Path, capsy
     assert _listing(tmp_path) == ["afile"]
 
 
+@pytest.mark.parametrize("prog, argv", [("piga-collect", ["--quiet"]), ("piga-show", ["data.h5"]),
+                                        ("piga-control", ["run"])])
+def test_an_output_file_named_as_a_folder_is_refused(prog: str, argv: list[str], tmp_path: Path,
+                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    # x.h5/ would write x.h5: the path's separator is dropped by the file system, not by the user
+    refused(prog, [*argv, "--out", str(tmp_path / "x.h5") + "/"], capsys, "--out", "expected a file name", code=2)
+    assert _listing(tmp_path) == []
+
+
 def test_blank_frames_are_never_kept(tmp_path: Path) -> None:
     from piga.data.schema import DataFormatError, DatasetWriter
 

@@ -267,6 +267,11 @@ def test_cli_interrupted_first_epoch_writes_nothing_and_rerun_works(
     assert record["command"] == first["command"]  # the original command is kept
     assert len(record["resumed"]) == 1 and "--resume --epochs 4" in record["resumed"][0]
     assert record["train"]["epochs"] == 4
+    # fewer epochs than planned would quietly re-evaluate the run as it is (the baselines refuse it too)
+    code, _, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), "--resume", "--epochs", "3",
+                                  "--quiet", capsys=capsys)
+    assert_one_line(code, err, "--resume --epochs 3", "planned 4 epochs", "never lower")
+    assert json.loads((out / "config.json").read_text()) == record
 
 
 def test_resume_with_more_epochs_replans_the_cosine(small_data: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

@@ -11,8 +11,8 @@ from envs.dmc import DMCPendulumConfig
 from envs.effects import EFFECTS, format_effects, parse_effect
 from envs.pendulum import PixelPendulumConfig
 from envs.scenes import HALF_SPEED, SCENES, SceneConfig, scene_config
-from piga.cli.common import (ArgumentParser, PigaError, add_preset_option, command_line, format_default, positive_float,
-                             positive_int, run_cli, seed_int, split_type)
+from piga.cli.common import (ArgumentParser, PigaError, add_preset_option, command_line, file_path, format_default,
+                             positive_float, positive_int, run_cli, seed_int, split_type)
 from piga.data.collect import PAPER_MAX_SPEED, PRESETS, CollectConfig, collect
 from piga.data.collect_scenes import SCENE_PRESETS, SCENE_STEPS, collect_scene
 from piga.data.schema import inspect_dataset
@@ -86,7 +86,7 @@ def build_parser() -> ArgumentParser:
         description="Collect pixel-pendulum sequences with random actions u ~ U(-2, 2) into an HDF5 file "
         "(schema: README, 'Data files').",
     )
-    p.add_argument("--out", required=True, help="output .h5 file (written atomically)")
+    p.add_argument("--out", required=True, type=file_path, help="output .h5 file (written atomically)")
     p.add_argument("--system", choices=SYSTEM_CHOICES, default="pendulum",
                    help="what to collect: the actuated pixel pendulum, or one of the paper's unactuated scenes "
                    "(README, 'Systems') (default %(default)s)")
@@ -118,7 +118,8 @@ def build_parser() -> ArgumentParser:
                    f"{paper.steps} frames, split {format_default(paper.split)}, reset speeds up to "
                    f"{format_default(paper.env.max_speed)}; for a scene, 'default' is {SCENE_PRESETS['default'].sequences} "
                    f"sequences and 'paper' {format_default(SCENE_PRESETS['paper'].split)}, of "
-                   f"{', '.join(f'{k} {v}' for k, v in SCENE_STEPS.items())} frames. Explicit options override the preset.")
+                   f"{', '.join(f'{k} {v}' for k, v in SCENE_STEPS.items())} frames. Explicit options override the preset; "
+                   "with --sequences alone, a preset's split in counts is kept as proportions.")
     add_preset_option(p, "--sequences", type=positive_int, default=defaults.sequences, help="number of sequences N")
     add_preset_option(p, "--steps", type=positive_int, default=defaults.steps, help="frames per sequence T, >= 2")
     p.add_argument("--gravity", type=positive_float, default=env.gravity, help="gravity g (default %(default)s)")
@@ -149,6 +150,15 @@ def build_parser() -> ArgumentParser:
     return p
 
 
+def _given(args: argparse.Namespace, preset_split: Sequence[float], keys: Sequence[str]) -> dict[str, Any]:
+    """The options given explicitly, which override the preset. ``--sequences`` without ``--split`` keeps a
+    preset's split in counts (the paper's 5000,500,500) as its proportions of the new number."""
+    given = {key: getattr(args, key) for key in keys if getattr(args, key) is not None}
+    if "sequences" in given and "split" not in given and sum(preset_split) not in (1, given["sequences"]):
+        given["split"] = tuple(x / sum(preset_split) for x in preset_split)
+    return given
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if args.system != "pendulum":
@@ -158,7 +168,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         raise PigaError(f"{', '.join(given)} {'is' if len(given) == 1 else 'are'} for the scenes (--system "
                         f"{'/'.join(SYSTEM_CHOICES[1:])}); the pendulum takes --gravity and --actuation-gain")
     preset = PRESETS[args.preset]
-    given = {key: getattr(args, key) for key in ("sequences", "steps", "split") if getattr(args, key) is not None}
+    given = _given(args, preset.split, ("sequences", "steps", "split"))
     # explicit options override the preset; the preset's reset speed, where it sets one, applies to either env
     preset_speed = preset.env.max_speed if preset.env.max_speed != PixelPendulumConfig.max_speed else None
     speed = args.max_speed if args.max_speed is not None else preset_speed
@@ -249,7 +259,7 @@ def _collect_scene(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     if args.half:
         overrides["half"] = True
     scene = scene_config(args.system, **overrides)
-    given = {key: getattr(args, key) for key in ("sequences", "split") if getattr(args, key) is not None}
+    given = _given(args, SCENE_PRESETS[args.preset].split, ("sequences", "split"))
     config = replace(SCENE_PRESETS[args.preset], scene=scene, seed=args.seed, workers=args.workers,  # explicit options win
                      steps=SCENE_STEPS[args.system] if args.steps is None else args.steps, **given)
     path = collect_scene(config, args.out, overwrite=args.overwrite, command=command_line(PROG, argv),

@@ -62,6 +62,15 @@ def nonempty_text(text: str) -> str:
     return text
 
 
+def file_path(text: str) -> str:
+    """argparse type: the path of a file to write. One that ends in a separator names a folder, which the
+    file system would otherwise quietly drop (``x.h5/`` would write ``x.h5``)."""
+    text = nonempty_text(text)
+    if text.endswith(("/", os.sep)):
+        raise argparse.ArgumentTypeError(f"expected a file name, got the folder {text!r}; name the file to write in it")
+    return text
+
+
 #: Exceptions that are the user's to fix; any other exception is a bug, and ``run_cli`` writes its
 #: traceback to a log file (:func:`log_folder`).
 USER_ERRORS: tuple[type[BaseException], ...] = (

@@ -14,8 +14,8 @@ import numpy as np
 
 from agents.config import MPCConfig
 from piga.io.atomic import atomic_output, check_writable_target, write_json
-from piga.cli.common import (ArgumentParser, PigaError, add_ray_option, command_line, connect_backend, int_up_to,
-                             positive_float, positive_int, run_cli, seed_int, warn_if_unconverged)
+from piga.cli.common import (ArgumentParser, PigaError, add_ray_option, command_line, connect_backend, file_path,
+                             int_up_to, positive_float, positive_int, run_cli, seed_int, warn_if_unconverged)
 from piga.control.episodes import EpisodeConfig, parse_range, run_episodes
 from piga.evaluation.episodes import summary_markdown
 from piga.io.checkpoint import RunKind
@@ -86,7 +86,8 @@ def build_parser() -> ArgumentParser:
     add_ray_option(p, "the jobs of --sweep, and the parts of a baseline run's episodes")
     p.add_argument("--video", help="write episode 0 as .mp4 or .gif: real frames | the model's belief | its plan "
                    "(a PlaNet-style run: real frames | its world model's reconstruction; DDPG: the real frames)")
-    p.add_argument("--out", help="write the results to OUT.json and a Markdown table to OUT.md (and OUT.png with --sweep)")
+    p.add_argument("--out", type=file_path,
+                   help="write the results to OUT.json and a Markdown table to OUT.md (and OUT.png with --sweep)")
     p.add_argument("--overwrite", action="store_true", help="replace existing --out files")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     return p

@@ -7,7 +7,7 @@ from collections.abc import Sequence
 import h5py
 import numpy as np
 
-from piga.cli.common import ArgumentParser, positive_int, run_cli
+from piga.cli.common import ArgumentParser, file_path, positive_int, run_cli
 from piga.data.schema import SPLITS, check_actions_file, check_frames_have_signal, inspect_dataset, split_indices
 from piga.evaluation.plots import check_figure_target, frame_strip, save_figure
 
@@ -17,7 +17,7 @@ PROG = "piga-show"
 def build_parser() -> ArgumentParser:
     p = ArgumentParser(prog=PROG, description="Save a grid of frames (rows: sequences, columns: time) from a piga data file.")
     p.add_argument("data", help="HDF5 file of piga's schema")
-    p.add_argument("--out", required=True, help="output image (.png)")
+    p.add_argument("--out", required=True, type=file_path, help="output image (.png)")
     p.add_argument("--split", choices=list(SPLITS), default="train", help="split to show (default %(default)s)")
     p.add_argument("--sequences", type=positive_int, default=4, help="rows (default %(default)s)")
     p.add_argument("--frames", type=positive_int, default=10, help="columns (default %(default)s)")
