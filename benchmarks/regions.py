@@ -40,6 +40,9 @@ from piga.world.model import ModelConfig
 
 #: The decoders of ``piga-train-model --decoder`` (one source: :class:`ModelConfig`'s ``decoder``).
 DECODERS: tuple[str, ...] = get_args(get_type_hints(ModelConfig)["decoder"])
+#: Variants beyond ``--decoder``: their ``piga-train-model`` options in its place. broadcast-w32 is the
+#: spatial-broadcast decoder at twice its channels (``--broadcast-width 32``): a capacity check.
+VARIANTS: dict[str, list[str]] = {"broadcast-w32": ["--decoder", "broadcast", "--broadcast-width", "32"]}
 #: Frames of the strip: extrapolation frames of one test sequence with a ball in the bottom half.
 STRIP_FRAMES = 6
 
@@ -78,7 +81,8 @@ def collect_command(cfg: BenchConfig, path: Path) -> list[str]:
 
 
 def train_command(job: Job) -> list[str]:
-    return ["piga-train-model", str(job.data), "--out", str(job.run_dir), "--decoder", job.decoder, "--seed",
+    return ["piga-train-model", str(job.data), "--out", str(job.run_dir),
+            *VARIANTS.get(job.decoder, ["--decoder", job.decoder]), "--seed",
             str(job.seed), "--budget-steps", str(job.budget_steps), "--threads", "1", "--device", "cpu", "--quiet",
             "--overwrite"]
 
@@ -197,7 +201,7 @@ def train_job(job: Job) -> dict[str, Any]:
     """A job of the runner: trains ``job`` with ``piga-train-model``, scores its run and returns its record's fields."""
     started = time.time()
     code, m = run_training(train_command(job), job.run_dir, job.run_dir.parent / f"{job.name}.log",
-                           f"piga-train-model --decoder {job.decoder}")
+                           f"piga-train-model {' '.join(VARIANTS.get(job.decoder, ['--decoder', job.decoder]))}")
     scored = score_run(job.run_dir, job.data, job.strip)
     s = scored["scores"]
     print(f"{job.name}: SSIM extrapolation {s['ssim_extrapolation']:.3f}, bottom half with a ball "
@@ -287,7 +291,9 @@ def markdown(record: dict[str, Any], out: Path) -> str:
               "`deconv`, an MLP to a 64 x 8 x 8 feature map and two stride-2 transposed convolutions; `broadcast`, a "
               "spatial-broadcast decoder (each object's coordinates and index tiled over the image with fixed x, y "
               "channels, stride-1 convolutions of 16 channels, objects composed by masks); `mlp`, an MLP to the frame. "
-              "MSE is per pixel channel, frames in [0, 1]. Exit is `piga-train-model`'s status: 0 converged, 3 not "
+              + ("`broadcast-w32` is the spatial-broadcast decoder with 32 channels (`--broadcast-width 32`): a "
+                 "capacity check. " if "broadcast-w32" in cfg["decoders"] else "")
+              + "MSE is per pixel channel, frames in [0, 1]. Exit is `piga-train-model`'s status: 0 converged, 3 not "
               "converged, 1 its check failed (here: its object check found a blob the decoder does not draw, so "
               "it trained again from the start with the next seed, `--seed-retries 1`, and failed again; the scores "
               "are the last run's). Train minutes are the last run's, job minutes the whole job's (retry and "
@@ -328,8 +334,8 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--out", type=Path, default=Path("results/regions"),
                    help="output prefix: OUT.json, OUT.md, OUT-strip.png; runs and records in OUT_runs/ "
                         "(default %(default)s)")
-    p.add_argument("--decoders", nargs="+", choices=DECODERS, default=list(DEFAULTS.decoders),
-                   help="default %(default)s")
+    p.add_argument("--decoders", nargs="+", choices=[*DECODERS, *VARIANTS], default=list(DEFAULTS.decoders),
+                   help="default %(default)s; broadcast-w32: the spatial-broadcast decoder with --broadcast-width 32")
     add_training_options(p, DEFAULTS, "sequences of the data set, split 80/10/10")
     return p
 

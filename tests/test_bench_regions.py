@@ -117,3 +117,13 @@ def test_a_failed_job_ends_with_one_line(regions, tmp_path: Path, half_file: Pat
 def test_an_abbreviated_option_is_refused(regions) -> None:
     with pytest.raises(SystemExit):
         regions.parser().parse_args(["--budget", "5"])
+
+
+def test_the_wider_broadcast_variant_is_a_decoder_option_pair(regions) -> None:
+    job = regions.Job("spring-half-broadcast-w32-s0", "broadcast-w32", 0, 7, Path("d.h5"), Path("run"), (0, (1,)))
+    command = regions.train_command(job)
+    assert command[command.index("--decoder") + 1] == "broadcast" and command[command.index("--broadcast-width") + 1] == "32"
+    assert regions.parser().parse_args(["--decoders", "st", "broadcast-w32"]).decoders == ["st", "broadcast-w32"]
+    from piga.cli.train import build_parser
+
+    build_parser().parse_args(["d.h5", *command[command.index("--out"):]])  # every option is piga-train-model's

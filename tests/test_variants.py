@@ -150,11 +150,39 @@ def test_the_interaction_network_is_relational() -> None:
     assert torch.allclose(seen[0][:, 0, s.shape[-1]:], expected, atol=1e-6)
 
 
-def test_the_video_lstm_scale_sizes_it_and_only_it(small_data: Path, tmp_path: Path,
-                                                   capsys: pytest.CaptureFixture[str]) -> None:
+def test_the_broadcast_width_sizes_that_decoder_and_only_it(small_data: Path, tmp_path: Path,
+                                                             capsys: pytest.CaptureFixture[str]) -> None:
+    def count(**config: object) -> int:
+        model = build_model(ModelConfig(system="spring", n_objects=2, image_size=32, channels=3, decoder="broadcast",
+                                        **config))
+        return sum(p.numel() for p in model.decoder.convs.parameters())  # the background is per pixel
+
+    assert count(broadcast_width=32) > 3 * count()  # the convolutions between widths grow with its square
+    with pytest.raises(ValueError, match="broadcast_width sizes the spatial-broadcast decoder"):
+        ModelConfig(decoder="st", broadcast_width=32)
+    with pytest.raises(ValueError, match=">= 1"):
+        ModelConfig(decoder="broadcast", broadcast_width=0)
+    assert " ".join(_field_docs()["broadcast_width"].split()).startswith(cli.BROADCAST_WIDTH_HELP)
+    out = tmp_path / "run"
+    code, _, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), "--broadcast-width", "32", *SMALL,
+                                  capsys=capsys)
+    assert_one_line(code, err, "broadcast_width", "'st'")
+    assert not out.exists()
+
+
+def _field_docs() -> dict[str, str]:
+    """ModelConfig's field docstrings by field name, which the command line's help texts begin with."""
     import ast
     import inspect
 
+    tree = ast.parse(Path(inspect.getsourcefile(ModelConfig)).read_text())
+    cls = next(n for n in tree.body if isinstance(n, ast.ClassDef) and n.name == "ModelConfig")
+    return {a.target.id: b.value.value for a, b in zip(cls.body, cls.body[1:])
+            if isinstance(a, ast.AnnAssign) and isinstance(b, ast.Expr) and isinstance(b.value, ast.Constant)}
+
+
+def test_the_video_lstm_scale_sizes_it_and_only_it(small_data: Path, tmp_path: Path,
+                                                   capsys: pytest.CaptureFixture[str]) -> None:
     def count(**config: object) -> int:
         model = build_model(ModelConfig(architecture="video-lstm", image_size=32, channels=3, **config))
         return sum(p.numel() for p in model.parameters())
@@ -164,11 +192,7 @@ def test_the_video_lstm_scale_sizes_it_and_only_it(small_data: Path, tmp_path: P
         ModelConfig(architecture="in-ig", video_lstm_scale=2)
     with pytest.raises(ValueError, match=">= 1"):
         ModelConfig(architecture="video-lstm", video_lstm_scale=0)
-    tree = ast.parse(Path(inspect.getsourcefile(ModelConfig)).read_text())  # the help is the dataclass' doc
-    cls = next(n for n in tree.body if isinstance(n, ast.ClassDef) and n.name == "ModelConfig")
-    docs = {a.target.id: b.value.value for a, b in zip(cls.body, cls.body[1:])
-            if isinstance(a, ast.AnnAssign) and isinstance(b, ast.Expr) and isinstance(b.value, ast.Constant)}
-    assert " ".join(docs["video_lstm_scale"].split()).startswith(cli.VIDEO_LSTM_SCALE_HELP)
+    assert " ".join(_field_docs()["video_lstm_scale"].split()).startswith(cli.VIDEO_LSTM_SCALE_HELP)  # the doc is the help
 
     out = tmp_path / "run"
     code, _, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), "--video-lstm-scale", "2", *SMALL,

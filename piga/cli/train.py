@@ -26,6 +26,9 @@ OBJECTS_HELP = "N, the object slots of the encoder, decoder and physics (balls, 
 #: ``--video-lstm-scale``'s help: the first sentence of :attr:`piga.world.model.ModelConfig.video_lstm_scale`' doc.
 VIDEO_LSTM_SCALE_HELP = ("VideoLSTM's size: its convolution channels (32 and 64), frame latent (128) and LSTM units "
                          "(256) times this")
+#: ``--broadcast-width``'s help: the first sentence of :attr:`piga.world.model.ModelConfig.broadcast_width`' doc.
+BROADCAST_WIDTH_HELP = ("The spatial-broadcast decoder's convolution channels (16: the per-pixel work of every object's "
+                        "maps at full resolution that a CPU affords; wider, a capacity check)")
 OUTPUTS = (CHECKPOINT, "metrics.json", "config.json", "rollout.png", "templates.png", "curves.png", "tensorboard")
 
 
@@ -88,6 +91,8 @@ def build_parser() -> ArgumentParser:
                       "masks). Only 'st' writes templates.png. Not with --model video-lstm")
     add_preset_option(p, "--video-lstm-scale", type=positive_int, metavar="S", default=ModelConfig().video_lstm_scale,
                       help=VIDEO_LSTM_SCALE_HELP + " (ModelConfig.video_lstm_scale). Only with --model video-lstm")
+    add_preset_option(p, "--broadcast-width", type=positive_int, metavar="W", default=ModelConfig().broadcast_width,
+                      help=BROADCAST_WIDTH_HELP + " (ModelConfig.broadcast_width). Only with --decoder broadcast")
     add_preset_option(p, "--objects", type=positive_int, metavar="N", default=None,
                       shown="the file's",
                       help=f"{OBJECTS_HELP}, ModelConfig.n_objects: instead of the count "
@@ -161,7 +166,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                                  ("--loss", args.loss, saved_model.config.loss),
                                  ("--decoder", args.decoder, saved_model.config.decoder),
                                  ("--objects", args.objects, saved_model.config.n_objects),
-                                 ("--video-lstm-scale", args.video_lstm_scale, saved_model.config.video_lstm_scale)):
+                                 ("--video-lstm-scale", args.video_lstm_scale, saved_model.config.video_lstm_scale),
+                                 ("--broadcast-width", args.broadcast_width, saved_model.config.broadcast_width)):
             if given is not None and given != own:
                 raise PigaError(f"--resume continues the run's own {flag[2:]} ({own}); drop {flag} {given}, or train "
                                 "a new run in another --out")
@@ -202,7 +208,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         model_config = model_config_for(info, recipe.model)
         chosen = {field: value for field, value in (("architecture", args.model), ("loss", args.loss),
                                                     ("decoder", args.decoder), ("n_objects", args.objects),
-                                                    ("video_lstm_scale", args.video_lstm_scale))
+                                                    ("video_lstm_scale", args.video_lstm_scale),
+                                                    ("broadcast_width", args.broadcast_width))
                   if value is not None}
         if args.objects is not None and info.system == "pendulum":
             raise PigaError(f"--objects: {args.data} holds pendulum data, whose model has one object (its angle); "

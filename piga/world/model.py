@@ -78,6 +78,9 @@ class ModelConfig:
     video_lstm_scale: int = 1
     """VideoLSTM's size: its convolution channels (32 and 64), frame latent (128) and LSTM units (256) times this
     (2: more parameters than piga's on every scene of the prediction benchmark). Only for video-lstm."""
+    broadcast_width: int = 16
+    """The spatial-broadcast decoder's convolution channels (16: the per-pixel work of every object's maps at full
+    resolution that a CPU affords; wider, a capacity check). Only with decoder "broadcast"."""
     physics_init: dict[str, float] = field(default_factory=dict)
     """Initial physical parameters (empty: the system's far-from-truth defaults)."""
     system_options: SystemOptions | None = None
@@ -171,6 +174,11 @@ class ModelConfig:
         if self.video_lstm_scale != 1 and self.architecture != "video-lstm":
             raise ValueError(f"video_lstm_scale sizes the video-lstm baseline; architecture {self.architecture!r} has "
                              "its own sizes")
+        if self.broadcast_width < 1:
+            raise ValueError(f"broadcast_width must be >= 1, got {self.broadcast_width}")
+        if self.broadcast_width != ModelConfig.broadcast_width and self.decoder != "broadcast":
+            raise ValueError(f"broadcast_width sizes the spatial-broadcast decoder; decoder {self.decoder!r} has its "
+                             "own sizes")
         if self.n_objects < 1:
             raise ValueError(f"n_objects must be >= 1, got {self.n_objects}")
         if self.system == "pendulum" and self.n_objects != 1:
@@ -429,7 +437,7 @@ class ObjectModel(FrameModel):
         elif cfg.decoder == "deconv":
             self.decoder = DeconvDecoder(cfg.image_size, cfg.channels, n, d, hidden=cfg.template_hidden)
         elif cfg.decoder == "broadcast":
-            self.decoder = BroadcastDecoder(cfg.image_size, cfg.channels, n, d)
+            self.decoder = BroadcastDecoder(cfg.image_size, cfg.channels, n, d, width=cfg.broadcast_width)
         else:
             self.decoder = Decoder(DecoderConfig(cfg.image_size, cfg.channels, n, d, hidden=cfg.template_hidden,
                                                  template_size=cfg.template_size or None, init_scale=cfg.init_scale))
