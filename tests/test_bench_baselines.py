@@ -31,7 +31,7 @@ def bench():
 
 def test_the_budget_preset_has_one_job_per_run(bench) -> None:
     names = [job.name for job in bench.jobs_for(bench.PRESETS["budget"])]
-    assert len(names) == len(set(names)) == 12 + 5 + 5 + 1 + 1  # piga 4 x 3, planet 3 + 2, DDPG 3 + 1 + 1, SAC 1, oracle
+    assert len(names) == len(set(names)) == 18 + 5 + 5 + 1 + 1  # piga 6 x 3, planet 3 + 2, DDPG 3 + 1 + 1, SAC 1, oracle
     assert "planet-n2000-s1" in names and "ddpg-pixels-s0" in names and "sac-pixels-s0" in names and names[-1] == "oracle"
 
 
@@ -69,7 +69,7 @@ def test_run_all_returns_kept_records_without_collecting_data(bench, tmp_path: P
     assert not list(tmp_path.glob("*.h5"))
     (tmp_path / "records" / "oracle.json").unlink()
     assert bench.run_all(cfg, tmp_path, only=("piga", "ddpg-state-s0"))["oracle"] is None  # not asked for: left to another invocation
-    assert json.loads(bench.record_path(tmp_path, bench.jobs_for(cfg)[0]).read_text())["name"] == "piga-n25-s0"
+    assert json.loads(bench.record_path(tmp_path, bench.jobs_for(cfg)[0]).read_text())["name"] == "piga-n5-s0"
 
 
 def test_the_summary_table_has_a_row_per_agent_and_size_over_its_seeds(bench) -> None:
@@ -90,7 +90,7 @@ def test_the_summary_table_has_a_row_per_agent_and_size_over_its_seeds(bench) ->
             record["metrics"] = {"autoencoder_train_seconds": 300.0} if job.obs == "latent" else {}
         records[job.name] = record
     rows = [line.split(" | ") for line in bench.summary_table(records, cfg).splitlines()[2:]]
-    assert len(rows) == 4 + 3 + 3 + 1 + 1  # piga's 4 sizes, PlaNet-style's 3, DDPG's 3 observations, SAC's 1, the oracle
+    assert len(rows) == 6 + 3 + 3 + 1 + 1  # piga's 6 sizes, PlaNet-style's 3, DDPG's 3 observations, SAC's 1, the oracle
     assert [r[0] for r in rows[-3:]] == ["| DDPG from pixels", "| SAC from pixels", "| oracle (true state and physics)"]
     planet_500 = next(r for r in rows if r[0] == "| PlaNet-style" and r[1].startswith("500 "))
     assert planet_500[1:6] == ["500 random-action sequences (2 seeds)", "10\u201320 min", "100%, 50%", "\u2212180.0",
@@ -147,7 +147,7 @@ def test_a_page_written_part_way_names_the_runs_still_to_run(bench, tmp_path: Pa
     records["planet-n100-s0"] = {**records["planet-n100-s0"], "machine": {"cpu": "other CPU", "cpu_family_model": "9/9", "cores": 2, "torch": "2.13.0+cpu"}}
     record, page = _page(bench, cfg, records, tmp_path)
     assert record["pending"] == ["planet-n2000-s0", "planet-n2000-s1", "ddpg-state-s1", "sac-pixels-s0"]
-    assert "**Part-way: 20 of 24 runs have a record.**" in page
+    assert "**Part-way: 26 of 30 runs have a record.**" in page
     assert "Machines: 2 (each run's under Compute), torch 2.13.0+cpu," in page  # the records', not the invocation's ("test CPU")
     assert "test CPU" not in page and "- other CPU (family/model 9/9), 2 cores: planet-n100-s0" in page
     floors = {f["floor"][:20]: f for f in record["floors"]}
