@@ -168,6 +168,22 @@ def test_the_broadcast_width_sizes_that_decoder_and_only_it(small_data: Path, tm
                                   capsys=capsys)
     assert_one_line(code, err, "broadcast_width", "'st'")
     assert not out.exists()
+    code, _, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), "--decoder", "broadcast",
+                                  "--broadcast-width", str(cli.MAX_BROADCAST_WIDTH + 1), *SMALL, capsys=capsys)
+    assert code == 2 and "gigabytes per batch" in err and not out.exists()
+
+
+def test_a_model_larger_than_the_memory_is_refused_before_it_is_built(small_data: Path, tmp_path: Path,
+                                                                      monkeypatch: pytest.MonkeyPatch,
+                                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    from piga.io import resources
+
+    monkeypatch.setattr(resources, "available_memory", lambda: 10**6)  # 1 MB: less than any model's weights
+    out = tmp_path / "run"
+    code, _, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), "--model", "video-lstm", *SMALL,
+                                  capsys=capsys)
+    assert_one_line(code, err, "the video-lstm model of these sizes", "needs about", "976.6 KiB is available")
+    assert not out.exists()
 
 
 def _field_docs() -> dict[str, str]:

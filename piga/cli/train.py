@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from piga.cli.common import (NOT_CONVERGED, ArgumentParser, Interrupted, PigaError, add_device_option,
-                             add_preset_option, command_line, format_default, missing_folders, nonnegative_int,
+                             add_preset_option, command_line, format_default, int_up_to, missing_folders, nonnegative_int,
                              positive_float, positive_int, remove_empty_folders, remove_outputs, run_cli, seed_int,
                              thread_count, unit_fraction)
 from piga.io.atomic import check_folder_target
@@ -29,6 +29,9 @@ VIDEO_LSTM_SCALE_HELP = ("VideoLSTM's size: its convolution channels (32 and 64)
 #: ``--broadcast-width``'s help: the first sentence of :attr:`piga.world.model.ModelConfig.broadcast_width`' doc.
 BROADCAST_WIDTH_HELP = ("The spatial-broadcast decoder's convolution channels (16: the per-pixel work of every object's "
                         "maps at full resolution that a CPU affords; wider, a capacity check)")
+#: ``--broadcast-width``'s largest: 256 channels of every object's full-resolution maps take about 4 GB per batch
+#: of 32 windows of 32x32 frames.
+MAX_BROADCAST_WIDTH = 256
 OUTPUTS = (CHECKPOINT, "metrics.json", "config.json", "rollout.png", "templates.png", "curves.png", "tensorboard")
 
 
@@ -91,7 +94,8 @@ def build_parser() -> ArgumentParser:
                       "masks). Only 'st' writes templates.png. Not with --model video-lstm")
     add_preset_option(p, "--video-lstm-scale", type=positive_int, metavar="S", default=ModelConfig().video_lstm_scale,
                       help=VIDEO_LSTM_SCALE_HELP + " (ModelConfig.video_lstm_scale). Only with --model video-lstm")
-    add_preset_option(p, "--broadcast-width", type=positive_int, metavar="W", default=ModelConfig().broadcast_width,
+    add_preset_option(p, "--broadcast-width", type=int_up_to(MAX_BROADCAST_WIDTH, "every object's maps at full "
+                      "resolution: wider ones take gigabytes per batch"), metavar="W", default=ModelConfig().broadcast_width,
                       help=BROADCAST_WIDTH_HELP + " (ModelConfig.broadcast_width). Only with --decoder broadcast")
     add_preset_option(p, "--objects", type=positive_int, metavar="N", default=None,
                       shown="the file's",
@@ -238,6 +242,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     from piga.world.variants import build_model
     from piga.io.resources import adam_checkpoint_bytes, check_run_disk
 
+    import torch
+
+    from piga.io.resources import check_memory
+
+    with torch.device("meta"):  # the model's size without its memory: one too large is refused here, not killed later
+        sized = build_model(model_config)
+    check_memory(16.0 * sum(p.numel() for p in sized.parameters()),
+                 f"the {model_config.architecture} model of these sizes (its weights, gradients and Adam's moments)")
     fresh = build_model(model_config)  # its size and start values, before training builds its own
     check_run_disk(run_dir, (run_dir / CHECKPOINT).stat().st_size if args.resume else adam_checkpoint_bytes(fresh),
                    "the training run")
