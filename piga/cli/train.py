@@ -233,11 +233,12 @@ def main(argv: Sequence[str] | None = None) -> int:
                     raise PigaError(f"{flag}: {args.data} holds {info.system} data: {exc}") from None
         record = {"command": command}
     plan = check_trainable(info, model_config, train_config)
-    if args.resume and plan.epochs < ckpt["plan"]["epochs"]:  # the baselines' --resume refuses the same
+    planned = ckpt.get("plan") or {} if args.resume else {}  # (a checkpoint from before plans were saved has none)
+    if plan.epochs < planned.get("epochs", 0):  # the baselines' --resume refuses the same
         given = " ".join(f"--{name.replace('_', '-')} {overrides[name]}" for name in ("epochs", "budget_steps")
                          if name in overrides)
-        raise PigaError(f"--resume {given}: the run already planned {ckpt['plan']['epochs']} epochs "
-                        f"({ckpt['plan']['epochs'] * ckpt['plan']['steps_per_epoch']} steps); --resume may raise "
+        raise PigaError(f"--resume {given}: the run already planned {planned['epochs']} epochs "
+                        f"({planned['epochs'] * planned.get('steps_per_epoch', 0)} steps); --resume may raise "
                         "--epochs or --budget-steps, never lower them")
     from piga.world.variants import build_model
     from piga.io.resources import adam_checkpoint_bytes, check_run_disk
