@@ -240,12 +240,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         raise PigaError(f"--resume {given}: the run already planned {planned['epochs']} epochs "
                         f"({planned['epochs'] * planned.get('steps_per_epoch', 0)} steps); --resume may raise "
                         "--epochs or --budget-steps, never lower them")
-    from piga.world.variants import build_model
-    from piga.io.resources import adam_checkpoint_bytes, check_run_disk
-
     import torch
 
-    from piga.io.resources import check_memory
+    from piga.io.resources import adam_checkpoint_bytes, check_memory, check_run_disk
+    from piga.world.variants import build_model
 
     with torch.device("meta"):  # the model's size without its memory: one too large is refused here, not killed later
         sized = build_model(model_config)
