@@ -234,11 +234,12 @@ def train_cost(cfg: BenchConfig, agent: str, n: int = 0, steps: int = 0) -> floa
     return seconds
 
 
-def estimate(cfg: BenchConfig) -> dict[str, float]:
+def estimate(cfg: BenchConfig, jobs: list[Job] | None = None) -> dict[str, float]:
     """Core-seconds per part from :data:`COST_S` (upper bounds: measured under load), and the wall
     time on ``workers`` cores (jobs packed longest first, a PlaNet-style run's episodes with its
-    training; the other episodes, a few minutes, spread evenly)."""
-    runs = {agent: [job for job in jobs_for(cfg) if job.agent == agent] for agent in AGENTS}
+    training; the other episodes, a few minutes, spread evenly), of ``jobs`` (None: the whole preset)."""
+    jobs = jobs_for(cfg) if jobs is None else jobs
+    runs = {agent: [job for job in jobs if job.agent == agent] for agent in AGENTS}
     piga, planet, ddpg = ([job_train_cost(cfg, job) for job in runs[agent]] for agent in ("piga", "planet", "ddpg"))
     step = cfg.episode_steps
     sweep = [m for m in parse_range(cfg.sweep) if m != 1.0]  # x1.0 is the run's own evaluation
@@ -252,10 +253,11 @@ def estimate(cfg: BenchConfig) -> dict[str, float]:
     planet_eval = len(runs["planet"]) * per_planet
     others = [(agent, len(runs[agent])) for agent in ("piga", "oracle", "ddpg")]
     other_eval = sum(count * episodes(agent) for agent, count in others) * step * COST_S["piga_episode_step"]
-    collect = sum(n * 1.2 for n in set(cfg.sizes + cfg.planet_size_list)) * COST_S["collect_sequence"] / cfg.workers
-    jobs = piga + [t + per_planet for t in planet] + ddpg  # a PlaNet-style run's episodes follow its training
+    sizes = {job.sequences for job in jobs if job.agent in ("piga", "planet")}  # (the data files they collect)
+    collect = sum(n * 1.2 for n in sizes) * COST_S["collect_sequence"] / cfg.workers
+    costs = piga + [t + per_planet for t in planet] + ddpg  # a PlaNet-style run's episodes follow its training
     cores = [0.0] * cfg.workers
-    for seconds in sorted(jobs, reverse=True):  # longest first, each to the least loaded core
+    for seconds in sorted(costs, reverse=True):  # longest first, each to the least loaded core
         cores[cores.index(min(cores))] += seconds
     parts = {"collect": collect, "train (core-s)": sum(piga + planet + ddpg), "planet episodes (core-s)": planet_eval,
              "other episodes (core-s)": other_eval}
@@ -973,6 +975,12 @@ def main() -> int:
     print(f"estimate (COST_S): {', '.join(f'{k} {v / 3600:.1f} h' for k, v in cost.items())}", flush=True)
     if args.estimate:
         return 0
+    out = Path(args.out)
+    folder = out.with_name(out.name + "_runs")
+    todo = [job for job in jobs_for(cfg) if (job.agent in only or job.name in only) and kept_record(folder, job, cfg) is None]
+    if todo:  # what this invocation runs: the jobs asked for that have no record yet
+        print(f"this invocation: {len(todo)} job(s) to run, wall {estimate(cfg, todo)['wall'] / 3600:.1f} h on "
+              f"{cfg.workers} core(s)", flush=True)
     import time
 
     import torch
@@ -980,8 +988,6 @@ def main() -> int:
     backend = ray_backend(p, args)
     torch.set_num_threads(1)
     started = time.monotonic()
-    out = Path(args.out)
-    folder = out.with_name(out.name + "_runs")
     folder.mkdir(parents=True, exist_ok=True)
     # the command that writes the whole page (any --only runs some jobs only), and this invocation's own
     command = ["python", "benchmarks/baselines.py", "--out", args.out, "--preset", args.preset]

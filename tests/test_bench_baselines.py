@@ -218,3 +218,13 @@ def test_a_piga_record_holds_its_runs_training_configs(bench, tiny_data: Path, t
     assert configs["train"]["epochs"] == bench.piga_epochs(cfg, 8) and configs["train"]["batch_size"] == 16
     assert set(configs["model"]) == {f.name for f in fields(ModelConfig)} and configs["model"]["pred_frames"] == 4
     assert {"episodes", "planner"} <= set(configs)
+
+
+def test_the_estimate_of_some_jobs_is_theirs(bench) -> None:
+    cfg = bench.PRESETS["budget"]
+    jobs = bench.jobs_for(cfg)
+    assert bench.estimate(cfg, jobs) == bench.estimate(cfg)
+    two = [job for job in jobs if job.name in ("piga-n5-s0", "piga-n10-s0")]
+    part = bench.estimate(cfg, two)
+    assert part["planet episodes (core-s)"] == 0 and 0 < part["wall"] < bench.estimate(cfg)["wall"] / 20
+    assert part["train (core-s)"] == sum(bench.job_train_cost(cfg, job) for job in two)
