@@ -58,7 +58,7 @@ def test_one_training_step_lowers_the_loss_on_a_tiny_file(name: str, half_spring
     optimiser.step()
     with torch.no_grad():
         after = model(frames, actions).loss
-    assert float(after) < float(before)
+    assert after.item() < before.item()
 
 
 def test_decoder_choices_come_from_the_model_config(capsys: pytest.CaptureFixture[str]) -> None:
