@@ -555,6 +555,9 @@ def run_all(cfg: BenchConfig, folder: Path, only: tuple[str, ...] = AGENTS,
     jobs = jobs_for(cfg)
     kept = {job.name: kept_record(folder, job, cfg) for job in jobs}
     todo = [job for job in jobs if (job.agent in only or job.name in only) and kept[job.name] is None]
+    if todo:  # what this invocation runs (the preset's whole cost is printed before): the jobs asked for, not kept
+        print(f"this invocation: {len(todo)} job(s) to run, wall {estimate(cfg, todo)['wall'] / 3600:.1f} h on "
+              f"{cfg.workers} core(s)", flush=True)
     largest = max(cfg.sizes + cfg.planet_size_list)
     needs = {job.sequences or largest for job in todo if job.agent in ("piga", "planet") or job.obs == "latent"}
     files = {n: data_file(cfg, folder, n) for n in sorted(needs)}
@@ -975,12 +978,6 @@ def main() -> int:
     print(f"estimate (COST_S): {', '.join(f'{k} {v / 3600:.1f} h' for k, v in cost.items())}", flush=True)
     if args.estimate:
         return 0
-    out = Path(args.out)
-    folder = out.with_name(out.name + "_runs")
-    todo = [job for job in jobs_for(cfg) if (job.agent in only or job.name in only) and kept_record(folder, job, cfg) is None]
-    if todo:  # what this invocation runs: the jobs asked for that have no record yet
-        print(f"this invocation: {len(todo)} job(s) to run, wall {estimate(cfg, todo)['wall'] / 3600:.1f} h on "
-              f"{cfg.workers} core(s)", flush=True)
     import time
 
     import torch
@@ -988,6 +985,8 @@ def main() -> int:
     backend = ray_backend(p, args)
     torch.set_num_threads(1)
     started = time.monotonic()
+    out = Path(args.out)
+    folder = out.with_name(out.name + "_runs")
     folder.mkdir(parents=True, exist_ok=True)
     # the command that writes the whole page (any --only runs some jobs only), and this invocation's own
     command = ["python", "benchmarks/baselines.py", "--out", args.out, "--preset", args.preset]

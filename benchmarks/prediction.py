@@ -160,7 +160,7 @@ def parameter_counts(cfg: BenchConfig, folder: Path) -> dict[str, dict[str, int]
     system's data set (collected if it is not there; nothing is trained)."""
     from piga.data.schema import inspect_dataset
     from piga.training.train import model_config_for, preset_for
-    from piga.world.variants import build_model
+    from piga.world.variants import parameter_count
 
     counts: dict[str, dict[str, int]] = {}
     for system in cfg.systems:
@@ -171,7 +171,7 @@ def parameter_counts(cfg: BenchConfig, folder: Path) -> dict[str, dict[str, int]
         for model in cfg.models:
             config = (replace(base, architecture="video-lstm", video_lstm_scale=2) if model == "video-lstm-x2"
                       else replace(base, architecture=model))
-            counts[system][model] = sum(p.numel() for p in build_model(config).parameters() if p.requires_grad)
+            counts[system][model] = parameter_count(config)
     return counts
 
 

@@ -71,6 +71,11 @@ class Job:
     """The strip's test sequence (its index in the split) and extrapolation steps (after the L input frames)."""
 
 
+def decoder_options(decoder: str) -> list[str]:
+    """``piga-train-model``'s options for a decoder of ``--decoders``: ``--decoder NAME``, or a variant's."""
+    return VARIANTS.get(decoder, ["--decoder", decoder])
+
+
 def job_name(decoder: str, seed: int) -> str:
     return f"spring-half-{decoder}-s{seed}"
 
@@ -82,7 +87,7 @@ def collect_command(cfg: BenchConfig, path: Path) -> list[str]:
 
 def train_command(job: Job) -> list[str]:
     return ["piga-train-model", str(job.data), "--out", str(job.run_dir),
-            *VARIANTS.get(job.decoder, ["--decoder", job.decoder]), "--seed",
+            *decoder_options(job.decoder), "--seed",
             str(job.seed), "--budget-steps", str(job.budget_steps), "--threads", "1", "--device", "cpu", "--quiet",
             "--overwrite"]
 
@@ -201,7 +206,7 @@ def train_job(job: Job) -> dict[str, Any]:
     """A job of the runner: trains ``job`` with ``piga-train-model``, scores its run and returns its record's fields."""
     started = time.time()
     code, m = run_training(train_command(job), job.run_dir, job.run_dir.parent / f"{job.name}.log",
-                           f"piga-train-model {' '.join(VARIANTS.get(job.decoder, ['--decoder', job.decoder]))}")
+                           f"piga-train-model {' '.join(decoder_options(job.decoder))}")
     scored = score_run(job.run_dir, job.data, job.strip)
     s = scored["scores"]
     print(f"{job.name}: SSIM extrapolation {s['ssim_extrapolation']:.3f}, bottom half with a ball "
@@ -335,7 +340,7 @@ def parser() -> argparse.ArgumentParser:
                    help="output prefix: OUT.json, OUT.md, OUT-strip.png; runs and records in OUT_runs/ "
                         "(default %(default)s)")
     p.add_argument("--decoders", nargs="+", choices=[*DECODERS, *VARIANTS], default=list(DEFAULTS.decoders),
-                   help="default %(default)s; broadcast-w32: the spatial-broadcast decoder with --broadcast-width 32")
+                   help="default %(default)s; " + "; ".join(f"{name}: {' '.join(options)}" for name, options in VARIANTS.items()))
     add_training_options(p, DEFAULTS, "sequences of the data set, split 80/10/10")
     return p
 

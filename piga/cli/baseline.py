@@ -270,10 +270,10 @@ def check_planet_memory(rssm: Any, config: Any = None) -> None:
     ``config``, also a batch whose frames and the activations of the conv encoder and decoder do not (a --batch-size
     of 1e5 otherwise swaps for ever too)."""
     from agents.planet.rssm import parameter_count
-    from piga.io.resources import ResourceError, check_memory
+    from piga.io.resources import ResourceError, check_memory, check_training_memory
 
     try:
-        check_memory(16.0 * parameter_count(rssm), "the PlaNet-style world model of these sizes")
+        check_training_memory(parameter_count(rssm), "the PlaNet-style world model of these sizes")
         if config is not None:
             frames = config.batch_size * config.chunk_length  # (B, T) frames of 64 x 64 x C per optimiser step
             # per frame about 32 float32 maps of its size: the input, the activations of the encoder's and the decoder's

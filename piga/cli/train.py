@@ -32,6 +32,9 @@ BROADCAST_WIDTH_HELP = ("The spatial-broadcast decoder's convolution channels (1
 #: ``--broadcast-width``'s largest: 256 channels of every object's full-resolution maps take about 4 GB per batch
 #: of 32 windows of 32x32 frames.
 MAX_BROADCAST_WIDTH = 256
+#: The model options a user may give: argparse dest -> the ModelConfig field it sets (a run's own, on --resume).
+MODEL_OPTIONS = {"model": "architecture", "loss": "loss", "decoder": "decoder", "objects": "n_objects",
+                 "video_lstm_scale": "video_lstm_scale", "broadcast_width": "broadcast_width"}
 OUTPUTS = (CHECKPOINT, "metrics.json", "config.json", "rollout.png", "templates.png", "curves.png", "tensorboard")
 
 
@@ -166,12 +169,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.resume:  # the run's own recipe and data; only the length and the budget may change
         require_piga_run(run_dir, "--resume continues a training run of the world model")
         saved_model, ckpt = load_model(run_dir, any_model=True)
-        for flag, given, own in (("--model", args.model, saved_model.config.architecture),
-                                 ("--loss", args.loss, saved_model.config.loss),
-                                 ("--decoder", args.decoder, saved_model.config.decoder),
-                                 ("--objects", args.objects, saved_model.config.n_objects),
-                                 ("--video-lstm-scale", args.video_lstm_scale, saved_model.config.video_lstm_scale),
-                                 ("--broadcast-width", args.broadcast_width, saved_model.config.broadcast_width)):
+        for dest, field in MODEL_OPTIONS.items():
+            flag, given, own = "--" + dest.replace("_", "-"), getattr(args, dest), getattr(saved_model.config, field)
             if given is not None and given != own:
                 raise PigaError(f"--resume continues the run's own {flag[2:]} ({own}); drop {flag} {given}, or train "
                                 "a new run in another --out")
@@ -210,11 +209,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                                seed_retries=args.seed_retries, **overrides, **reading)  # explicit options win
         train_config = resolve_loading(train_config, info)  # as the run records it
         model_config = model_config_for(info, recipe.model)
-        chosen = {field: value for field, value in (("architecture", args.model), ("loss", args.loss),
-                                                    ("decoder", args.decoder), ("n_objects", args.objects),
-                                                    ("video_lstm_scale", args.video_lstm_scale),
-                                                    ("broadcast_width", args.broadcast_width))
-                  if value is not None}
+        chosen = {field: getattr(args, dest) for dest, field in MODEL_OPTIONS.items() if getattr(args, dest) is not None}
         if args.objects is not None and info.system == "pendulum":
             raise PigaError(f"--objects: {args.data} holds pendulum data, whose model has one object (its angle); "
                             "drop --objects")
@@ -240,15 +235,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         raise PigaError(f"--resume {given}: the run already planned {planned['epochs']} epochs "
                         f"({planned['epochs'] * planned.get('steps_per_epoch', 0)} steps); --resume may raise "
                         "--epochs or --budget-steps, never lower them")
-    import torch
+    from piga.io.resources import adam_checkpoint_bytes, check_run_disk, check_training_memory
+    from piga.world.variants import build_model, parameter_count
 
-    from piga.io.resources import adam_checkpoint_bytes, check_memory, check_run_disk
-    from piga.world.variants import build_model
-
-    with torch.device("meta"):  # the model's size without its memory: one too large is refused here, not killed later
-        sized = build_model(model_config)
-    check_memory(16.0 * sum(p.numel() for p in sized.parameters()),
-                 f"the {model_config.architecture} model of these sizes (its weights, gradients and Adam's moments)")
+    # sized before it is built: a model too large for the memory is refused here, not killed by the kernel later
+    check_training_memory(parameter_count(model_config),
+                          f"the {model_config.architecture} model of these sizes (its weights, gradients and Adam's moments)")
     fresh = build_model(model_config)  # its size and start values, before training builds its own
     check_run_disk(run_dir, (run_dir / CHECKPOINT).stat().st_size if args.resume else adam_checkpoint_bytes(fresh),
                    "the training run")

@@ -123,6 +123,20 @@ def check_memory(needed: float, what: str) -> None:
                             "available; ask for less")
 
 
+#: Bytes per parameter of float32 training with Adam: the weights, their gradients and Adam's two moments.
+TRAINING_BYTES_PER_PARAMETER = 16
+
+
+def check_training_memory(parameters: int, what: str) -> None:
+    """Refuses, before anything is allocated, a model of ``parameters`` whose training state does not fit in memory
+    (:data:`TRAINING_BYTES_PER_PARAMETER` each); ``what`` names the model in the message.
+
+    Raises:
+        ResourceError: as :func:`check_memory`.
+    """
+    check_memory(float(TRAINING_BYTES_PER_PARAMETER * parameters), what)
+
+
 def check_disk(target: str | os.PathLike[str], needed: float, what: str, advice: str = "ask for less") -> None:
     """Raises :class:`ResourceError` if ``needed`` bytes exceed the free space where ``target`` goes.
 
@@ -162,4 +176,4 @@ def check_run_disk(run_dir: str | os.PathLike[str], checkpoint_bytes: float, wha
 
 
 __all__ = ["RECORDED_FRAME_COMPRESSION", "RENDERED_FRAME_COMPRESSION", "RUN_DISK_MARGIN", "ResourceError",
-           "adam_checkpoint_bytes", "available_memory", "check_disk", "check_memory", "check_run_disk", "format_bytes"]
+           "adam_checkpoint_bytes", "available_memory", "check_disk", "check_memory", "check_training_memory", "check_run_disk", "format_bytes"]

@@ -11,6 +11,8 @@ Each is a :class:`piga.world.model.FrameModel`, so one training loop and one eva
 
 from __future__ import annotations
 
+import torch
+
 from piga.world.interaction import InteractionModel
 from piga.world.model import FrameModel, ModelConfig, PhysicsModel
 from piga.world.video_lstm import VideoLSTM
@@ -30,3 +32,9 @@ NO_PHYSICS: dict[str, str] = {
 def build_model(config: ModelConfig) -> FrameModel:
     """A new (untrained) model of ``config.architecture``."""
     return MODELS[config.architecture](config)
+
+
+def parameter_count(config: ModelConfig) -> int:
+    """The trainable parameters of ``build_model(config)``, counted on torch's meta device (no memory taken)."""
+    with torch.device("meta"):
+        return sum(p.numel() for p in build_model(config).parameters() if p.requires_grad)
