@@ -50,7 +50,7 @@ records name each job's machine).
 
 | preset | what | collect | training (core-h) | PlaNet-style episodes (core-h) | other episodes (core-h) | wall on 2 idle cores |
 |---|---|---|---|---|---|---|
-| ``budget`` | piga at 5/10/25/50/100/250 sequences x 3 seeds (at least 3000 steps each); PlaNet-style at 100/500/2000 x 1 seed, and a second seed at 500 and 2000 (12000 steps each); DDPG state 30k x 3 seeds, latent 30k x 1, pixels 20k x 1; SAC pixels 20k x 1; 20 episodes per evaluation; sweep x0.6, 1.0, 1.4, 1.8 with 5 episodes each | 0.1 h | 16.1 | 1.7 | 0.5 | 9.3 h |
+| ``budget`` | piga at 5/10/25/50/100/250 sequences x 3 seeds (at least 3000 steps each); PlaNet-style at 100/250/500/1000/2000 x 1 seed, and a second seed at 500 and 2000 (12000 steps each); DDPG state 30k x 3 seeds, latent 30k x 1, pixels 20k x 1; SAC pixels 20k x 1; 20 episodes per evaluation; sweep x0.6, 1.0, 1.4, 1.8 with 5 episodes each | 0.2 h | 19.7 | 2.4 | 0.5 | 11.4 h |
 | ``full`` | the full design: piga at 5/10/25/50/100/250/500/1000/2000 sequences and PlaNet-style at 100/250/500/1000/2000, 3 seeds each, DDPG 30k/80k/80k x 3 seeds, SAC pixels 80k x 3 seeds, 20 episodes, 14 multipliers x 10 episodes | 0.2 h | 96.9 | 21.4 | 2.8 | 60.7 h |
 
 The budget preset answers every question of the comparison with what it can afford, and says what
@@ -184,7 +184,8 @@ COST_S = {
 
 PRESETS: dict[str, BenchConfig] = {
     "full": BenchConfig(planet_sizes=(100, 250, 500, 1000, 2000)),
-    "budget": BenchConfig(sizes=(5, 10, 25, 50, 100, 250), seeds=(0, 1, 2), planet_sizes=(100, 500, 2000), planet_seeds=(0,),
+    "budget": BenchConfig(sizes=(5, 10, 25, 50, 100, 250), seeds=(0, 1, 2), planet_sizes=(100, 250, 500, 1000, 2000),
+                          planet_seeds=(0,),
                           planet_more_seeds=((500, (1,)), (2000, (1,))),
                           piga_min_steps=3000,
                           ddpg_runs=(("state", 30000, (0, 1, 2)), ("latent", 30000, (0,)), ("pixels", 20000, (0,))),
