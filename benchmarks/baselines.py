@@ -77,6 +77,7 @@ from pathlib import Path
 from typing import Any
 
 from common import add_ray_option, farm_main, machine, ray_backend, signed as _num
+from efficiency import Point, data_ratio
 
 from agents.planet.config import PlanetTrainConfig
 from piga.io.atomic import atomic_output, write_json
@@ -863,6 +864,7 @@ def markdown(record: dict[str, Any]) -> str:
             lines.append(f"| {row['sequences']} | {row['agent']} | {seeds} | pending | pending | pending |")
     o = record["oracle"]
     lines += ["\nOracle: " + ("pending" if o is None else f"{100 * o['success_rate']:.0f}% success, mean return {o['mean_return']:.1f}") + ".\n",
+              *data_ratio_lines(record),
               "## DDPG (and SAC, its stronger sibling)\n", f"![DDPG learning curves]({record['figures']['ddpg']})\n",
               "| algorithm | observation | seed | steps | first step at >= -200 | final eval return | success | train s |",
               "|---|---|---|---|---|---|---|---|"]
@@ -932,6 +934,8 @@ def aggregate(records: dict[str, dict[str, Any] | None], cfg: BenchConfig) -> di
                            train_seconds_mean=statistics.mean(r["train_seconds"] for r in runs))
             rows.append(row)
     out["sample_efficiency"] = rows
+    out["data_ratio"] = data_ratios(rows)
+    out["data_ratio_claim"] = data_ratio_claim(out["data_ratio"])
     out["oracle"] = records["oracle"]["control"] if records["oracle"] else None
     out["ddpg"] = [{"algo": job.algo, "obs": job.obs, "seed": job.seed, "metrics": kept["metrics"], "control": kept["control"]}
                    for job in jobs_for(cfg) if job.agent == "ddpg" and (kept := records[job.name])]
@@ -956,6 +960,73 @@ def aggregate(records: dict[str, dict[str, Any] | None], cfg: BenchConfig) -> di
     out["floors"] = floors(out, cfg, pending)
     out["summary_table"] = summary_table(records, cfg)
     return out
+
+
+#: Success thresholds at which the two agents' data needs are compared (the floors' 80% and 95%).
+RATIO_THRESHOLDS = (0.8, 0.95)
+
+
+def data_ratios(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """At each of :data:`RATIO_THRESHOLDS`, the sequences piga and the PlaNet-style model need and their ratio
+    with bootstrap intervals (:func:`efficiency.data_ratio`), from the sample-efficiency rows with runs; none
+    until both agents have one."""
+    points = {agent: [Point(row["sequences"], tuple((round(r["control"]["success_rate"] * r["control"]["episodes"]),
+                                                     r["control"]["episodes"]) for r in row["runs"]))
+                      for row in rows if row["agent"] == agent and row["runs"]] for agent in ("piga", "planet")}
+    if not points["piga"] or not points["planet"]:
+        return []
+    return [data_ratio(points["planet"], points["piga"], threshold) for threshold in RATIO_THRESHOLDS]
+
+
+def _need_cell(need: dict[str, Any]) -> str:
+    interval, share = f"95%: {need['low']:,.0f}–{need['high']:,.0f}", need["bounded_draws"]
+    if need["bound"] != "exact":
+        what = "at most" if need["bound"] == "at_most" else "more than"
+        where = "smallest" if need["bound"] == "at_most" else "largest"
+        return f"{what} {need['value']:,.0f} (its {where} size; " + ("in every draw)" if share == 1 else f"{interval})")
+    return f"{need['value']:,.0f} ({interval}" + (f"; {100 * share:.0f}% of draws a bound)" if share else ")")
+
+
+def _ratio_cell(ratio: dict[str, Any], what: str = "") -> str:
+    prefix = {"exact": "", "at_least": "at least ", "at_most": "at most ", "undefined": "undefined: "}[ratio["bound"]]
+    return f"{prefix}{ratio['value']:,.0f}x{what} (95%: {ratio['low']:,.0f}–{ratio['high']:,.0f}x)"
+
+
+def data_ratio_claim(ratios: list[dict[str, Any]]) -> str:
+    """The README's data-efficiency sentence, from :func:`data_ratios` (empty until both agents have runs)."""
+    if not ratios:
+        return ""
+    first, *rest = ratios
+    text = (f"At {100 * first['threshold']:.0f}% success, the PlaNet-style model needs "
+            f"{_need_cell(first['numerator'])} sequences and piga {_need_cell(first['denominator'])}: "
+            f"{_ratio_cell(first['ratio'], ' the data')}")
+    more = "; ".join(f"At {100 * r['threshold']:.0f}%, {_ratio_cell(r['ratio'])}" for r in rest)
+    return text + "." + (f" {more}." if more else "")
+
+
+def data_ratio_lines(record: dict[str, Any]) -> list[str]:
+    """The results page's section on the data each agent needs at equal success."""
+    if not record["data_ratio"]:
+        return []
+    draws = record["data_ratio"][0]["draws"]
+    seeds = {agent: sorted({len(row["runs"]) for row in record["sample_efficiency"] if row["agent"] == agent and row["runs"]})
+             for agent in ("piga", "planet")}
+    spread = {agent: f"{min(n)}–{max(n)}" if min(n) != max(n) else f"{n[0]}" for agent, n in seeds.items()}
+    lines = ["## Data needed at equal success\n",
+             "The sequences each agent needs to reach a success rate at x1.0, read off its curve above (the mean over "
+             "seeds at each size) where it first reaches the rate, interpolated in log(sequences) between the grid "
+             "points around it; and the PlaNet-style model's need over piga's. A curve already at the rate at its "
+             "smallest size gives only an upper bound on that agent's need, so the ratio is then a lower bound (and its "
+             f"interval the bound's). Intervals: 95% percentiles over {draws:,} bootstrap draws that resample each "
+             "size's seeds, then each seed's episodes (`benchmarks/efficiency.py`), on one data draw"
+             + ("; the runs still to run are not in them" if record["pending"] else "") +
+             f". Seeds per point: piga {spread['piga']}, PlaNet-style {spread['planet']}; with so few, the "
+             "intervals understate the spread between seeds.\n",
+             "| success | piga needs (sequences) | PlaNet-style needs (sequences) | PlaNet-style / piga |", "|---|---|---|---|"]
+    for row in record["data_ratio"]:
+        lines.append(f"| {100 * row['threshold']:.0f}% | {_need_cell(row['denominator'])} | {_need_cell(row['numerator'])} | "
+                     f"{_ratio_cell(row['ratio'])} |")
+    return lines + ["", f"The README's sentence: {record['data_ratio_claim']}\n"]
 
 
 @farm_main

@@ -31,7 +31,7 @@ def bench():
 
 def test_the_budget_preset_has_one_job_per_run(bench) -> None:
     names = [job.name for job in bench.jobs_for(bench.PRESETS["budget"])]
-    assert len(names) == len(set(names)) == 18 + 5 + 5 + 1 + 1  # piga 6 x 3, planet 3 + 2, DDPG 3 + 1 + 1, SAC 1, oracle
+    assert len(names) == len(set(names)) == 18 + 7 + 5 + 1 + 1  # piga 6 x 3, planet 5 + 2, DDPG 3 + 1 + 1, SAC 1, oracle
     assert "planet-n2000-s1" in names and "ddpg-pixels-s0" in names and "sac-pixels-s0" in names and names[-1] == "oracle"
 
 
@@ -77,7 +77,7 @@ def test_the_summary_table_has_a_row_per_agent_and_size_over_its_seeds(bench) ->
     records = {}
     for job in bench.jobs_for(cfg):
         success = 0.5 if job.name == "planet-n500-s1" else 1.0
-        control = {"success_rate": success, "mean_return": -200.0 if job.name == "planet-n500-s1" else -160.0}
+        control = {"success_rate": success, "mean_return": -200.0 if job.name == "planet-n500-s1" else -160.0, "episodes": 20}
         record = {"control": control, "sweep": {"1.4": {"success_rate": 0.0 if job.agent in ("planet", "ddpg") else 1.0}},
                   "machine": {"cpu_family_model": "25/17"}}
         if job.agent != "oracle":
@@ -90,7 +90,7 @@ def test_the_summary_table_has_a_row_per_agent_and_size_over_its_seeds(bench) ->
             record["metrics"] = {"autoencoder_train_seconds": 300.0} if job.obs == "latent" else {}
         records[job.name] = record
     rows = [line.split(" | ") for line in bench.summary_table(records, cfg).splitlines()[2:]]
-    assert len(rows) == 6 + 3 + 3 + 1 + 1  # piga's 6 sizes, PlaNet-style's 3, DDPG's 3 observations, SAC's 1, the oracle
+    assert len(rows) == 6 + 5 + 3 + 1 + 1  # piga's 6 sizes, PlaNet-style's 5, DDPG's 3 observations, SAC's 1, the oracle
     assert [r[0] for r in rows[-3:]] == ["| DDPG from pixels", "| SAC from pixels", "| oracle (true state and physics)"]
     planet_500 = next(r for r in rows if r[0] == "| PlaNet-style" and r[1].startswith("500 "))
     assert planet_500[1:6] == ["500 random-action sequences (2 seeds)", "10\u201320 min", "100%, 50%", "\u2212180.0",
@@ -109,7 +109,7 @@ def _records(bench, cfg) -> dict:
     records = {}
     for job in bench.jobs_for(cfg):
         success = 0.5 if job.agent == "planet" and job.sequences < 2000 else 1.0
-        record = {"machine": machine, "control": {"success_rate": success, "mean_return": -170.0},
+        record = {"machine": machine, "control": {"success_rate": success, "mean_return": -170.0, "episodes": 20},
                   "sweep": {k: {"success_rate": 1.0 if job.agent in ("piga", "oracle") else 0.0} for k in sweep_keys}}
         if job.agent != "oracle":
             record["train_seconds"] = 600.0
@@ -141,13 +141,20 @@ def test_a_page_written_part_way_names_the_runs_still_to_run(bench, tmp_path: Pa
     record, page = _page(bench, cfg, records, tmp_path)
     assert record["pending"] == [] and "Part-way" not in page and "pending" not in page
     assert [f["met"] for f in record["floors"]] == [True, True, True, True, True]  # PlaNet-style: 80% first at 2000
+    # the data needed at equal success: PlaNet-style crosses 80% between 1000 (50%) and 2000 (100%), piga is at 100%
+    # from its smallest size, so the ratio is a lower bound
+    at_80 = record["data_ratio"][0]
+    assert at_80["numerator"]["value"] == pytest.approx(1000 * 2 ** 0.6) and at_80["denominator"]["bound"] == "at_most"
+    assert at_80["ratio"]["bound"] == "at_least" and at_80["ratio"]["value"] == pytest.approx(1000 * 2 ** 0.6 / 5)
+    assert "## Data needed at equal success" in page and record["data_ratio_claim"].startswith(
+        "At 80% success, the PlaNet-style model needs 1,516 (95%: ") and "at least 303x the data" in record["data_ratio_claim"]
 
     for name in ("planet-n2000-s0", "planet-n2000-s1", "ddpg-state-s1", "sac-pixels-s0"):
         records[name] = None
     records["planet-n100-s0"] = {**records["planet-n100-s0"], "machine": {"cpu": "other CPU", "cpu_family_model": "9/9", "cores": 2, "torch": "2.13.0+cpu"}}
     record, page = _page(bench, cfg, records, tmp_path)
     assert record["pending"] == ["planet-n2000-s0", "planet-n2000-s1", "ddpg-state-s1", "sac-pixels-s0"]
-    assert "**Part-way: 26 of 30 runs have a record.**" in page
+    assert "**Part-way: 28 of 32 runs have a record.**" in page
     assert "Machines: 2 (each run's under Compute), torch 2.13.0+cpu," in page  # the records', not the invocation's ("test CPU")
     assert "test CPU" not in page and "- other CPU (family/model 9/9), 2 cores: planet-n100-s0" in page
     floors = {f["floor"][:20]: f for f in record["floors"]}
@@ -158,7 +165,7 @@ def test_a_page_written_part_way_names_the_runs_still_to_run(bench, tmp_path: Pa
     row = next(r for r in record["summary_table"].splitlines() if r.startswith("| PlaNet-style | 2000 "))
     assert row.split(" | ")[3:5] == ["pending, pending", "pending"]
     assert "| DDPG from the true state | 30k env steps (3 seeds) | 10 min | 100%, pending, 100% |" in record["summary_table"]
-    assert record["sweep"]["runs"]["planet"] == "planet-n500-s0"  # the best among those with a record (a tie: the most data)
+    assert record["sweep"]["runs"]["planet"] == "planet-n1000-s0"  # the best among those with a record (a tie: the most data)
     # plan times are compared on the same CPU only: piga was not timed on planet-n100-s0's
     assert [(row["cpu"], row["ratio_per_step"]) for row in record["plan_time"]] == [("1/2", 75.0), ("9/9", None)]
     assert "| 150 ms (piga not timed on its CPU) |" in record["summary_table"] and "| 150 ms (75x piga) |" in record["summary_table"]
@@ -174,6 +181,7 @@ def test_a_page_written_part_way_names_the_runs_still_to_run(bench, tmp_path: Pa
     record, page = _page(bench, cfg, records, tmp_path)
     assert record["sweep"]["agents"] == ["oracle"] and record["goals"] == []
     assert record["plan_time"] == [] and record["floors"][-1]["measured"] == "no CPU with both timed yet"
+    assert record["data_ratio"] == [] and record["data_ratio_claim"] == "" and "Data needed" not in page
 
 
 def test_the_readme_baselines_table_is_the_committed_summary() -> None:
