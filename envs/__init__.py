@@ -13,6 +13,8 @@ Importing this package registers the env ids:
 :class:`envs.dmc.DMCPendulumConfig`.
 """
 
+from typing import Literal, get_args
+
 import gymnasium as gym
 
 from envs.constants import MAX_ACTION, PENDULUM_DT, PENDULUM_MAX_SPEED
@@ -28,6 +30,10 @@ from envs.pendulum import (
 )
 
 __all__ = [
+    "DMC_PENDULUM",
+    "ENV_IDS",
+    "PIXEL_PENDULUM",
+    "EnvId",
     "DMCPendulumConfig",
     "MissingExtraError",
     "make_dmc_pendulum",
@@ -44,6 +50,12 @@ __all__ = [
     "normalize_effects",
     "parse_effect",
 ]
+
+EnvId = Literal["piga/PixelPendulum-v0", "piga/DMCPendulum-v0"]
+"""The pendulums that piga's commands collect from and control (and the SB3 baselines train on)."""
+#: The envs of :data:`EnvId`, in order: Gymnasium's pixel pendulum first (the default).
+ENV_IDS: tuple[EnvId, ...] = get_args(EnvId)
+PIXEL_PENDULUM, DMC_PENDULUM = ENV_IDS
 
 _IDS = {
     "piga/PixelPendulum-v0": ("envs.pendulum:make_pixel_pendulum", {}),

@@ -16,6 +16,7 @@ import torch.nn.functional as F
 
 from agents.sb3.config import SB3Config
 from agents.sb3.drqv2 import DrQV2Policy, ScheduledNoise, random_shift
+from tests.test_dmc import needs_dmc
 
 #: Tiny settings: a few seconds of training (the encoder is DrQ-v2's, the MLPs small).
 TINY = SB3Config(algo="drqv2", obs="pixels", steps=400, learning_starts=100, eval_every=200, eval_episodes=1, batch_size=8,
@@ -101,3 +102,41 @@ def test_drqv2_has_its_papers_values_and_learns_from_pixels_only() -> None:
     assert config.buffer_size == 100_000  # its own, not the DDPG pixels preset's 50000
     with pytest.raises(ValueError, match="DrQ-v2 learns from pixels; --obs state"):
         SB3Config(algo="drqv2", obs="state")
+
+
+def test_the_dmc_pendulum_is_learnt_from_its_frames_in_whole_episodes_of_its_length() -> None:
+    from envs import DMC_PENDULUM
+
+    config = replace(TINY, env=DMC_PENDULUM, steps=1000, eval_every=500)
+    assert (config.episode_steps, config.learned_return) == (500, 200.0)  # 1000 physics steps at action repeat 2
+    for bad, needle in (({"obs": "state", "algo": "ddpg"}, "--obs state is for piga/PixelPendulum-v0"),
+                        ({"torque_arrow": True}, "no torque arrow"), ({"eval_every": 400}, "multiple of the episode length 500")):
+        with pytest.raises(ValueError, match=needle):
+            replace(config, **bad)
+
+
+@needs_dmc
+def test_a_drqv2_run_on_the_dmc_pendulum_is_scored_in_dmcs_episodes_and_nowhere_else(tmp_path: Path, capsys) -> None:
+    """``piga-baseline ddpg --env piga/DMCPendulum-v0`` trains on DMC's frames and reward; ``piga-control --env
+    piga/DMCPendulum-v0 --model`` scores it in DMC's units beside piga and the oracle, and the pixel pendulum refuses it."""
+    from piga.cli.baseline import main as baseline
+    from piga.cli.control import main as control
+    from tests.helpers import assert_one_line_error, completed_in_process, run_in_process
+
+    run = tmp_path / "drq"
+    code, out, _ = run_in_process("piga-baseline", baseline, "ddpg", "--env", "piga/DMCPendulum-v0", "--algo", "drqv2",
+                                  "--obs", "pixels", "--steps", "500", "--eval-every", "500", "--eval-episodes", "1",
+                                  "--learning-starts", "100", "--batch-size", "8", "--buffer-size", "600", "--out", str(run),
+                                  "--quiet", capsys=capsys)
+    assert code == 0 and ("never reached 200" in out or "first reached 200" in out)
+    metrics = json.loads((run / "metrics.json").read_text())
+    assert metrics["env"] == "piga/DMCPendulum-v0" and "first_step_reaching_200" in metrics
+    assert 0 <= metrics["final_eval_mean_return"] <= 1000  # DMC's score of one 500-frame episode
+    code, out, _ = run_in_process("piga-control", control, "--env", "piga/DMCPendulum-v0", "--model", str(run),
+                                  "--episodes", "1", "--quiet", capsys=capsys)
+    assert code == 0 and "| drqv2 |" in out and "Planner" not in out
+    assert_one_line_error(completed_in_process("piga-control", control, "--model", str(run), "--episodes", "1", "--quiet",
+                                               capsys=capsys), "trained on piga/DMCPendulum-v0", "--env piga/DMCPendulum-v0")
+    assert_one_line_error(completed_in_process("piga-control", control, "--env", "piga/DMCPendulum-v0", "--model", str(run),
+                                               "--env-option", "action_repeat=4", "--quiet", capsys=capsys),
+                          "action_repeat 2")

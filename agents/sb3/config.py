@@ -13,10 +13,12 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 from typing import Any, Literal, get_args
 
+from envs import DMC_PENDULUM, PIXEL_PENDULUM, EnvId
+from envs.dmc import DMCPendulumConfig
 from piga.io.choices import check_choices
 from piga.io.device import Device
 
-__all__ = ["ALGORITHMS", "ALGORITHM_PRESETS", "EPISODE_STEPS", "OBSERVATIONS", "PRESETS", "Algorithm", "Observation", "SB3Config"]
+__all__ = ["ALGORITHMS", "ALGORITHM_PRESETS", "ENV_EPISODE_STEPS", "EPISODE_STEPS", "LEARNED_RETURN", "OBSERVATIONS", "PRESETS", "Algorithm", "Observation", "SB3Config"]
 
 Observation = Literal["pixels", "latent", "state"]
 """What the policy sees."""
@@ -29,6 +31,11 @@ OBSERVATIONS: tuple[Observation, ...] = get_args(Observation)
 ALGORITHMS: tuple[Algorithm, ...] = get_args(Algorithm)
 #: Pendulum-v1's episode length (its TimeLimit).
 EPISODE_STEPS = 200
+#: Each env's episode length in env steps (DMC's: 1000 physics steps at its default action repeat of 2).
+ENV_EPISODE_STEPS: dict[EnvId, int] = {PIXEL_PENDULUM: EPISODE_STEPS, DMC_PENDULUM: DMCPendulumConfig().frames_per_episode}
+#: The evaluation return that counts as learning to swing up: Pendulum-v1's -200 (the SB3 zoo's mark) and, on
+#: DMC's 0-1000 scale, 200 (random actions score near 0 there: they rarely bring the pole within 8 degrees of upright).
+LEARNED_RETURN: dict[EnvId, float] = {PIXEL_PENDULUM: -200.0, DMC_PENDULUM: 200.0}
 
 #: Each algorithm's zoo values for Pendulum-v1. DDPG (``ddpg.yml``): gamma 0.98, buffer 200000, learning
 #: starts 10000, Gaussian action noise of std 0.1 (in SB3's [-1, 1] action scale), net_arch [400, 300].
@@ -65,6 +72,10 @@ class SB3Config:
     value (module docstring); the rest are the zoo's for both (one gradient step per env step, learning
     rate 1e-3) or SB3's defaults (batch 256, tau 0.005). The zoo trains 20000 steps."""
 
+    env: EnvId = PIXEL_PENDULUM
+    """The env: Gymnasium's pixel pendulum, or dm_control's pendulum-swingup through its face-on camera
+    (:mod:`envs.dmc`, its defaults: action repeat 2, 500 frames an episode, DMC's reward; needs ``piga[dmc]``;
+    "pixels" only). The pixel pendulum's rewards, or DMC's, are what the agent learns from."""
     obs: Observation = "state"
     """What the policy sees: "pixels" (K stacked frames, CnnPolicy), "latent" (K stacked autoencoder
     codes) or "state" ((cos θ, sin θ, θ̇), the reference point)."""
@@ -123,9 +134,12 @@ class SB3Config:
             raise ValueError(f"unknown observation {self.obs!r}; expected one of {', '.join(OBSERVATIONS)}")
         if self.algo not in ALGORITHMS:
             raise ValueError(f"unknown algorithm {self.algo!r}; expected one of {', '.join(ALGORITHMS)}")
+        check_choices(self)
         if self.algo == "drqv2" and self.obs != "pixels":
             raise ValueError(f"DrQ-v2 learns from pixels; --obs {self.obs} is for ddpg or sac")
-        check_choices(self)
+        if self.env == DMC_PENDULUM and (self.obs != "pixels" or self.torque_arrow):
+            raise ValueError(f"{DMC_PENDULUM} is learnt from its frames (--obs pixels), which show no torque arrow"
+                             + ("" if self.obs == "pixels" else f"; --obs {self.obs} is for {PIXEL_PENDULUM}"))
         # DrQ-v2's buffer is its own (its stacks are of 3 frames, and it keeps a 100k-step run's every transition)
         observation_preset = {} if self.algo == "drqv2" else PRESETS[self.obs]
         for name, value in {**ALGORITHM_PRESETS[self.algo], **observation_preset}.items():
@@ -134,8 +148,9 @@ class SB3Config:
         object.__setattr__(self, "net_arch", tuple(self.net_arch))  # a JSON record's list
         if self.steps < 1:
             raise ValueError(f"steps must be >= 1, got {self.steps}")
-        if self.eval_every < EPISODE_STEPS or self.eval_every % EPISODE_STEPS:
-            raise ValueError(f"eval_every must be a multiple of the episode length {EPISODE_STEPS}, got {self.eval_every}")
+        if self.eval_every < self.episode_steps or self.eval_every % self.episode_steps:
+            raise ValueError(f"eval_every must be a multiple of the episode length {self.episode_steps} ({self.env}), "
+                             f"got {self.eval_every}")
         if min(self.buffer_size, self.batch_size, self.train_freq, self.gradient_steps, self.frame_stack,
                self.eval_episodes, self.threads, self.n_step, self.feature_dim) < 1 or self.learning_starts < 0 or \
                 self.seed < 0 or self.noise_decay_steps < 0:
@@ -156,6 +171,16 @@ class SB3Config:
         if self.batch_size > self.buffer_size:
             raise ValueError(f"batch_size ({self.batch_size}) is more than buffer_size ({self.buffer_size}): a batch "
                              "cannot be drawn from the replay buffer; lower batch_size or raise buffer_size")
+
+    @property
+    def episode_steps(self) -> int:
+        """Env steps per episode (:data:`ENV_EPISODE_STEPS`)."""
+        return ENV_EPISODE_STEPS[self.env]
+
+    @property
+    def learned_return(self) -> float:
+        """The evaluation return that counts as learning (:data:`LEARNED_RETURN`)."""
+        return LEARNED_RETURN[self.env]
 
     @property
     def stacked(self) -> int:

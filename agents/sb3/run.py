@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import io
+import json
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -13,7 +14,7 @@ from agents.sb3.autoencoder import FrameAutoencoder, load_autoencoder
 from agents.sb3.config import Algorithm, SB3Config
 from piga.io.checkpoint import CHECKPOINT, RunKind, read_checkpoint, unreadable
 
-__all__ = ["AUTOENCODER", "MODEL", "SB3Agent", "load_sb3", "sb3_class"]
+__all__ = ["AUTOENCODER", "MODEL", "SB3Agent", "load_sb3", "sb3_class", "trained_env"]
 
 #: The latest policy in SB3's format, beside the run's checkpoint.
 MODEL = "model.zip"
@@ -28,6 +29,19 @@ def sb3_class(algo: Algorithm) -> Any:
     from agents.sb3.drqv2 import DrQV2
 
     return {"ddpg": DDPG, "sac": SAC, "drqv2": DrQV2}[algo]
+
+
+def trained_env(run_dir: str | Path) -> str:
+    """The env an SB3 run was trained on, from its ``config.json`` (cheap: the checkpoint holds the replay buffer);
+    the pixel pendulum for a run from before ``--env``, or without the file."""
+    from envs import PIXEL_PENDULUM
+
+    try:
+        record = json.loads((Path(run_dir) / "config.json").read_text())
+    except (OSError, ValueError):
+        return PIXEL_PENDULUM
+    settings = record.get("ddpg") if isinstance(record, dict) else None
+    return str(settings.get("env", PIXEL_PENDULUM)) if isinstance(settings, dict) else PIXEL_PENDULUM
 
 
 def load_sb3(run_dir: str | Path) -> tuple[Any, SB3Config, FrameAutoencoder | None]:

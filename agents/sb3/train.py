@@ -1,4 +1,4 @@
-"""Training stable-baselines3 DDPG (or SAC, or DrQ-v2 in SB3's loop) on the pixel pendulum, from pixels, from an autoencoder's latent, or from the true state.
+"""Training stable-baselines3 DDPG (or SAC, or DrQ-v2 in SB3's loop) on the pixel pendulum, from pixels, from an autoencoder's latent, or from the true state (or, from pixels, on dm_control's pendulum: ``SB3Config.env``).
 
 Everything is SB3's own: ``DDPG`` with ``CnnPolicy`` (pixels) or ``MlpPolicy``, ``VecFrameStack``
 (channel-first uint8 stacks of K frames, or K stacked codes), ``Monitor``, ``EvalCallback`` for the
@@ -46,14 +46,19 @@ __all__ = ["first_step_reaching", "make_env", "make_observation_env", "train_sb3
 
 def make_observation_env(config: SB3Config, encoder: Callable[[np.ndarray], np.ndarray] | None = None,
                          latent_size: int = 0, gravity_mult: float = 1.0) -> gym.Env:
-    """The registered pixel pendulum (one frame per observation) with the observation wrapper of ``config.obs``.
+    """The registered pixel pendulum (one frame per observation) with the observation wrapper of ``config.obs``,
+    or, for ``config.env`` DMC's, the registered DMC pendulum at its defaults (one frame per observation).
 
     For "state", Gymnasium's Pendulum-v1 itself (the same dynamics and starts, gravity times
     ``gravity_mult``) without rendering: rendering a frame costs more than the rest of a step, and
     the state policy never looks at it.
     """
-    import envs  # noqa: F401  (registers piga/PixelPendulum-v0)
+    from envs import DMC_PENDULUM  # importing envs registers the env ids
 
+    if config.env == DMC_PENDULUM:  # pixels only (SB3Config); its own reward and episode, at dm_control's defaults
+        if gravity_mult != 1.0:
+            raise ValueError(f"{DMC_PENDULUM} has no gravity multiplier (got {gravity_mult:g})")
+        return gym.make(DMC_PENDULUM, frame_stack=1)
     if config.obs == "state":
         g = PixelPendulumConfig(gravity_mult=gravity_mult).effective_gravity
         return StateObservation(gym.make("Pendulum-v1", g=g, max_episode_steps=EPISODE_STEPS))
@@ -170,6 +175,12 @@ def first_step_reaching(history: list[dict[str, float]], threshold: float = -200
     return next((int(r["step"]) for r in history if r["eval_mean_return"] >= threshold), None)
 
 
+def _reaching_key(threshold: float) -> str:
+    """metrics.json's key for the first step at ``threshold``: "first_step_reaching_minus_200" on the pixel pendulum,
+    "first_step_reaching_200" on DMC's scale."""
+    return f"first_step_reaching_{'minus_' if threshold < 0 else ''}{abs(threshold):g}"
+
+
 def train_sb3(config: SB3Config, run_dir: str | Path, autoencoder: str | Path | None = None, resume: bool = False,
                progress: bool = True, on_checkpoint: Callable[[int], None] | None = None) -> dict[str, Any]:
     """Trains ``config.algo`` for ``config.steps`` env steps; writes ``checkpoint.pt``, ``model.zip``, TensorBoard
@@ -278,7 +289,9 @@ def train_sb3(config: SB3Config, run_dir: str | Path, autoencoder: str | Path | 
         "train_seconds": elapsed,
         "device": str(device),
         "learning_curve": history,
-        "first_step_reaching_minus_200": first_step_reaching(history),
+        "env": config.env,
+        "learned_return": config.learned_return,
+        _reaching_key(config.learned_return): first_step_reaching(history, config.learned_return),
         "final_eval_mean_return": history[-1]["eval_mean_return"] if history else None,
     }
     if autoencoder is not None:  # its training came before DDPG's and is not in train_seconds

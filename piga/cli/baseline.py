@@ -34,6 +34,7 @@ def build_parser() -> ArgumentParser:
     from agents.planet.config import IterativeConfig, PlanetTrainConfig, RewardAlignment, RSSMConfig
     from agents.sb3.autoencoder import AutoencoderConfig
     from agents.sb3.config import ALGORITHM_PRESETS, ALGORITHMS, OBSERVATIONS, PRESETS, SB3Config
+    from envs import ENV_IDS
 
     p = ArgumentParser(prog=PROG, description="Train a baseline (the PlaNet-style world model, or SB3 DDPG) into a run "
                        "folder that piga-control --model evaluates like a piga run.")
@@ -89,9 +90,13 @@ def build_parser() -> ArgumentParser:
     drqv2 = ALGORITHM_PRESETS["drqv2"]
     d = sub.add_parser("ddpg", help="SB3 DDPG (or SAC) from pixels, an autoencoder's latent, or the true state",
                        description="Train SB3 DDPG (or, with --algo sac, SAC; with --algo drqv2, DrQ-v2 from pixels) with the SB3 zoo's Pendulum-v1 hyperparameters "
-                       "on the pixel pendulum. Writes RUN_DIR/checkpoint.pt, model.zip, config.json, metrics.json "
+                       "on the pixel pendulum (or, from pixels, dm_control's: --env). Writes RUN_DIR/checkpoint.pt, model.zip, config.json, metrics.json "
                        "(EvalCallback's learning curve) and tensorboard/.")
     d.error = p.error  # type: ignore[method-assign]
+    d.add_argument("--env", choices=ENV_IDS, default=ddpg.env,
+                   help="the env: Gymnasium's pixel pendulum, or dm_control's pendulum-swingup through a face-on camera "
+                   "(needs piga[dmc]; --obs pixels; action repeat 2, episodes of 500 frames, DMC's reward: evaluation "
+                   "returns are DMC scores, max 1000) (default %(default)s)")
     d.add_argument("--obs", required=True, choices=OBSERVATIONS,
                    help="pixels: stacked frames (CnnPolicy); latent: stacked autoencoder codes (needs --data); "
                    "state: (cos θ, sin θ, θ̇), the reference point")
@@ -104,7 +109,8 @@ def build_parser() -> ArgumentParser:
                    "settings, or drqv2 (DrQ-v2: an encoder trained by the critic, augmentation, 3-step returns; "
                    "--obs pixels; its paper's settings) (default %(default)s)")
     d.add_argument("--eval-every", type=positive_int, default=ddpg.eval_every,
-                   help="env steps between evaluations and checkpoints, a multiple of 200 (default %(default)s)")
+                   help="env steps between evaluations and checkpoints, a multiple of the episode length (200; DMC's 500) "
+                   "(default %(default)s)")
     d.add_argument("--eval-episodes", type=positive_int, default=ddpg.eval_episodes, help="episodes per evaluation (default %(default)s)")
     add_preset_option(d, "--learning-starts", default=ddpg.learning_starts, type=nonnegative_int,
                       shown=f"{ddpg.learning_starts}; sac: {sac['learning_starts']}; drqv2: {drqv2['learning_starts']}",
@@ -426,7 +432,7 @@ def _ddpg_checkpoint_bytes(config: Any, latent_size: int) -> float:
 
 def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
     from piga.io.atomic import write_json
-    from agents.sb3.config import SB3Config
+    from agents.sb3.config import ENV_EPISODE_STEPS, SB3Config
     from agents.sb3.run import AUTOENCODER
     from agents.sb3.train import first_step_reaching, train_sb3
     from piga.io.resources import check_run_disk
@@ -434,8 +440,9 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
 
     run_dir = Path(args.out)
     command = command_line(PROG, argv)
-    if args.eval_every % 200:
-        raise PigaError(f"--eval-every must be a multiple of the episode length 200, got {args.eval_every}")
+    if args.eval_every % ENV_EPISODE_STEPS[args.env]:
+        raise PigaError(f"--eval-every must be a multiple of the episode length {ENV_EPISODE_STEPS[args.env]} ({args.env}), "
+                        f"got {args.eval_every}")
     if args.obs == "latent" and not args.data and not args.resume:
         raise PigaError("--obs latent trains an autoencoder on collected frames: give --data DATA.h5")
     if args.obs != "latent" and args.data:
@@ -448,7 +455,7 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
         _check_run_dir(run_dir, True, args.overwrite, RunKind.DDPG)
         record = _read_record(run_dir)
         # runs from before --algo are DDPG; runs from before --device have none
-        saved = _saved_config(run_dir, record, "ddpg", SB3Config, optional=("algo", "device"))
+        saved = _saved_config(run_dir, record, "ddpg", SB3Config, optional=("algo", "device", "env"))
         if saved.obs != args.obs:
             raise PigaError(f"--resume: {run_dir} was trained with --obs {saved.obs}, not {args.obs}")
         if saved.algo != args.algo:
@@ -465,7 +472,7 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
         given = {name: value for name, value in (("buffer_size", args.buffer_size), ("learning_starts", args.learning_starts),
                                                  ("noise_std", args.noise_std), ("learning_rate", args.learning_rate),
                                                  ("batch_size", args.batch_size)) if value is not None}  # else the presets'
-        config = SB3Config(obs=args.obs, algo=args.algo, steps=args.steps or SB3Config.steps, eval_every=args.eval_every,
+        config = SB3Config(env=args.env, obs=args.obs, algo=args.algo, steps=args.steps or SB3Config.steps, eval_every=args.eval_every,
                             eval_episodes=args.eval_episodes,
                             torque_arrow=args.torque_arrow, seed=args.seed, threads=args.threads, device=args.device,
                             **given)
@@ -507,11 +514,12 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
         if written:
             raise Interrupted(f"{run_dir / CHECKPOINT} holds step {written[-1]}; continue with --resume") from None
         raise
-    reached = first_step_reaching(metrics["learning_curve"])
+    reached = first_step_reaching(metrics["learning_curve"], config.learned_return)
     final = metrics["final_eval_mean_return"]
+    mark = f"{config.learned_return:g}"
     print(f"trained {metrics['steps']} steps in {metrics['train_seconds'] / 60:.1f} min; final evaluation mean return "
           + (f"{final:.1f}" if final is not None else "n/a") + "; "
-          + (f"first reached -200 at step {reached}" if reached is not None else "never reached -200")
+          + (f"first reached {mark} at step {reached}" if reached is not None else f"never reached {mark}")
           + f"; wrote {run_dir}/metrics.json")
     return 0
 

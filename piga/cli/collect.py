@@ -7,6 +7,7 @@ from collections.abc import Sequence
 from dataclasses import replace
 from typing import Any
 
+from envs import DMC_PENDULUM, ENV_IDS, PIXEL_PENDULUM
 from envs.dmc import DMCPendulumConfig
 from envs.effects import EFFECTS, format_effects, parse_effect
 from envs.pendulum import PixelPendulumConfig
@@ -18,8 +19,6 @@ from piga.data.collect_scenes import SCENE_PRESETS, SCENE_STEPS, collect_scene
 from piga.data.schema import inspect_dataset
 
 PROG = "piga-collect"
-#: Env ids piga-collect collects the pendulum from (registered in :mod:`envs`).
-ENVS = ("piga/PixelPendulum-v0", "piga/DMCPendulum-v0")
 #: Options of Gymnasium's pendulum only, with their defaults; the DMC pendulum refuses them.
 GYMNASIUM_ONLY = {"gravity": "--gravity", "gravity_mult": "--gravity-mult", "actuation_gain": "--actuation-gain",
                   "no_torque_arrow": "--no-torque-arrow", "effect": "--effect"}
@@ -106,7 +105,7 @@ def build_parser() -> ArgumentParser:
                    "half of the image in every frame of the train and valid sequences and in the first "
                    f"{SceneConfig.half_frames} frames (L + T_pred) of the test sequences, whose later frames take a ball "
                    f"wholly into the bottom half; starts at speed {HALF_SPEED:g} px/s, rejected until they comply")
-    p.add_argument("--env", choices=ENVS, default=ENVS[0],
+    p.add_argument("--env", choices=ENV_IDS, default=PIXEL_PENDULUM,
                    help="the env: Gymnasium's pixel pendulum, or dm_control's MuJoCo pendulum through a face-on camera "
                    "(needs piga[dmc]; actions u ~ U(-1, 1), frame dt = action_repeat x 0.02) (default %(default)s)")
     p.add_argument("--env-option", action="append", type=_env_option, default=[], metavar="KEY=VALUE",
@@ -172,7 +171,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     # explicit options override the preset; the preset's reset speed, where it sets one, applies to either env
     preset_speed = preset.env.max_speed if preset.env.max_speed != PixelPendulumConfig.max_speed else None
     speed = args.max_speed if args.max_speed is not None else preset_speed
-    if args.env == "piga/DMCPendulum-v0":
+    if args.env == DMC_PENDULUM:
         parser_defaults = build_parser().parse_args(["--out", args.out])
         for key, flag in GYMNASIUM_ONLY.items():
             if getattr(args, key) != getattr(parser_defaults, key):
@@ -181,7 +180,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             args.env_option, image_size=args.image_size or DMCPendulumConfig.image_size, max_angle=args.max_angle,
             **({} if speed is None else {"max_speed": float(speed)}))  # type: ignore[arg-type]
     elif args.env_option:
-        raise PigaError("--env-option is for --env piga/DMCPendulum-v0")
+        raise PigaError(f"--env-option is for --env {DMC_PENDULUM}")
     else:
         env = _pixel_config(args, PixelPendulumConfig.max_speed if speed is None else speed)
     config = replace(preset, env=env, seed=args.seed, workers=args.workers, **given)

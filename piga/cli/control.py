@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from agents.config import MPCConfig
+from envs import DMC_PENDULUM, ENV_IDS, PIXEL_PENDULUM
 from piga.io.atomic import atomic_output, check_writable_target, write_json
 from piga.cli.common import (ArgumentParser, PigaError, add_ray_option, command_line, connect_backend, file_path,
                              int_up_to, positive_float, positive_int, run_cli, seed_int, warn_if_unconverged)
@@ -37,7 +38,7 @@ def build_parser() -> ArgumentParser:
                        "(CEM) over a trained piga model, from frames alone.")
     p.add_argument("--model", help="run folder of piga-train-model, or of piga-baseline (planet, ddpg: run as trained, "
                    "no goals); not needed with --oracle")
-    p.add_argument("--env", choices=("piga/PixelPendulum-v0", "piga/DMCPendulum-v0"), default="piga/PixelPendulum-v0",
+    p.add_argument("--env", choices=ENV_IDS, default=PIXEL_PENDULUM,
                    help="the env: Gymnasium's pixel pendulum, or dm_control's (needs piga[dmc]): then both the piga "
                    "agent (with --model) and the oracle run 10 episodes of 1000 physics steps with the energy-aware "
                    "swing-up planner, scored in DMC's units (max 1000); it takes --model, --oracle, --episodes, "
@@ -95,10 +96,10 @@ def build_parser() -> ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    if args.env == "piga/DMCPendulum-v0":
+    if args.env == DMC_PENDULUM:
         return _dmc(args, argv)
     if args.env_option:
-        raise PigaError("--env-option is for --env piga/DMCPendulum-v0")
+        raise PigaError(f"--env-option is for --env {DMC_PENDULUM}")
     if args.write_goal_image:
         if args.model or args.oracle:
             raise PigaError("--write-goal-image only writes a picture and exits; it takes no --model or --oracle")
@@ -272,6 +273,11 @@ def _baseline(args: argparse.Namespace, kind: RunKind, mpc: MPCConfig, outputs: 
     multiplier runs it as trained, saying so. The PlaNet-style agent plans with PlaNet's CEM settings
     (:class:`agents.planet.config.LatentPlannerConfig`), not with --horizon and the other CEM options.
     """
+    if kind is RunKind.DDPG:
+        from agents.sb3.run import trained_env
+
+        if (env := trained_env(args.model)) != PIXEL_PENDULUM:
+            raise PigaError(f"{args.model} was trained on {env}; score it there with --env {env}")
     why = f"a {kind.value} run has no goal input (it learned to swing up to upright from the env's reward)"
     if args.goal_image:
         raise PigaError(f"--goal-image: {why}, so it cannot be given a goal image; goal images need a piga run")
@@ -438,8 +444,25 @@ def _dmc(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
         from piga.io.checkpoint import run_kind
         from piga.io.runs import load_model
 
-        if (kind := run_kind(args.model)).is_baseline:
-            raise PigaError(f"{args.model} is a {kind.value} run; --env piga/DMCPendulum-v0 runs piga models (and the oracle)")
+        if (kind := run_kind(args.model)) is RunKind.DDPG:
+            from agents.sb3.run import SB3Agent, trained_env
+
+            if (env := trained_env(args.model)) != DMC_PENDULUM:
+                raise PigaError(f"{args.model} was trained on {env}; --env {DMC_PENDULUM} runs piga models, the oracle "
+                                "and SB3 runs trained on it (piga-baseline ddpg --env)")
+            from envs.dmc import DMCPendulumConfig
+
+            if config.env.action_repeat != DMCPendulumConfig.action_repeat:  # its policy acts once per trained frame
+                raise PigaError(f"{args.model} was trained at action_repeat {DMCPendulumConfig.action_repeat} (DMC's "
+                                f"default); drop --env-option action_repeat={config.env.action_repeat}")
+            sb3 = SB3Agent.from_run(args.model)
+            if sb3.config.env != DMC_PENDULUM:  # config.json and the checkpoint disagree: an edited folder
+                raise PigaError(f"{args.model}: its checkpoint was trained on {sb3.config.env}, its config.json says {env}")
+            results.append(run_dmc_episodes(sb3, sb3.config.algo, config, progress=not args.quiet))
+        elif kind.is_baseline:
+            raise PigaError(f"{args.model} is a {kind.value} run; --env {DMC_PENDULUM} runs piga models, the oracle and "
+                            "SB3 runs trained on it")
+    if args.model and not results:
         model, _ = load_model(args.model)
         warn_if_unconverged(PROG, args.model)
         if abs(model.config.dt - config.env.dt) > 1e-9:
