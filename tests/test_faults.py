@@ -122,6 +122,16 @@ def files(tiny_data: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[str
 
 
 @pytest.fixture(scope="module")
+def gravity_data(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A tiny 3-body gravity scene: 4 sequences x 6 frames."""
+    from envs.scenes import scene_config
+    from piga.data.collect_scenes import SceneCollectConfig, collect_scene
+
+    return collect_scene(SceneCollectConfig(scene=scene_config("gravity"), sequences=4, steps=6, workers=1, split=(2, 1, 1)),
+                         tmp_path_factory.mktemp("gravity") / "gravity.h5", progress=False, command="t")
+
+
+@pytest.fixture(scope="module")
 def baseline_runs(tiny_data: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     """A tiny PlaNet-style run and a tiny DDPG run (from the state)."""
     root = tmp_path_factory.mktemp("runs")
@@ -714,11 +724,16 @@ def test_train_model_refuses_data_on_open(data: str, needles: list[str], files: 
     (["--epochs", "9" * 20], ["epochs=99999999999999999999 plans", "more than 10,000,000", "lower --epochs"], 1),  # it trained for ever
     (["--budget-steps", "9" * 20], ["budget_steps=99999999999999999999 plans", "more than 10,000,000"], 1),
     (["--model", "video-lstm", "--video-lstm-scale", "99999999"], ["--video-lstm-scale: expected an integer in [1, 32]"], 2),
+    (["--data-file", "gravity", "--fixed-g", "1e308"], ["fixed_g must be in [1e-06, 1e+06]"], 1),  # the loss was NaN at step 0
+    (["--data-file", "gravity", "--fixed-g", "1e-300"], ["fixed_g must be in [1e-06, 1e+06]", "got 1e-300"], 1),
 ])
 def test_train_model_refuses_runs_it_could_never_finish(argv: list[str], needles: list[str], code: int, tiny_data: Path,
-                                                        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+                                                        gravity_data: Path, tmp_path: Path,
+                                                        capsys: pytest.CaptureFixture[str]) -> None:
     """--video-lstm-scale 1e8 was an internal error (torch's size arithmetic overflowed)."""
-    refused("piga-train-model", [str(tiny_data), "--out", str(tmp_path / "run"), "--batch-size", "4", "--threads", "1",
+    data = gravity_data if argv[:2] == ["--data-file", "gravity"] else tiny_data
+    argv = argv[2:] if data == gravity_data else argv
+    refused("piga-train-model", [str(data), "--out", str(tmp_path / "run"), "--batch-size", "4", "--threads", "1",
                                  "--quiet", *argv], capsys, *needles, code=code)
     assert _listing(tmp_path) == []
 
@@ -781,10 +796,12 @@ def test_an_empty_split_reads_as_no_sequences(tiny_data: Path, tmp_path: Path) -
     (["--epochs", "1000000000"], ["--epochs: expected an integer in [1, 200]", "small default job"]),
     (["--episodes", "1000000000"], ["--episodes: expected an integer in [1, 100]"]),
     (["--control-steps", "1000000000"], ["--control-steps: expected an integer in [1, 5000]"]),
+    (["--control-steps", "19"], ["--control-steps must be at least 20", "held for the last 20 steps"]),  # it ran, and a
+    # success meant the goal held for a step or two
 ])
 def test_demo_refusals_leave_no_folder(argv: list[str], needles: list[str], tmp_path: Path,
                                        capsys: pytest.CaptureFixture[str]) -> None:
-    code = 2 if argv[0] in ("--seed", "--epochs", "--episodes", "--control-steps") else 1  # the parser's refusals
+    code = 2 if needles[0].startswith(f"{argv[0]}: expected") else 1  # the parser's refusals
     refused("piga-demo", ["--out", str(tmp_path / "demo" / "out"), *argv], capsys, *needles, code=code)
     assert _listing(tmp_path) == []
 
