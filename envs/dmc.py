@@ -64,6 +64,11 @@ MAX_ACTION_REPEAT = 50
 #: Lightest tip (kg): MuJoCo's accelerations overflow below about 1e-10 kg (its state becomes invalid); far above that
 #: already, one unit of torque swings the pendulum round in a frame.
 MIN_MASS = 1e-3
+#: Fastest reset speed θ̇ (rad/s): half a turn per physics step; faster, MuJoCo's steps and the frames alias the motion.
+MAX_SPEED = math.pi / DMC_PHYSICS_DT
+#: Strongest hinge damping (N·m·s/rad), as the pixel pendulum's damping effect (:data:`envs.effects.MAX_PASSIVE`):
+#: far beyond it the pendulum stands still in every frame (1e308 was taken, and its data showed no motion).
+MAX_DAMPING = 100.0
 #: Radius of the sphere at the pole's tip in pendulum.xml (its only mass).
 TIP_RADIUS = 0.05
 #: Earth's gravity as MuJoCo's default ``option/gravity``.
@@ -121,18 +126,18 @@ class DMCPendulumConfig:
             "episode_length": self.episode_length >= 0,
             "mass": MIN_MASS <= self.mass < math.inf,
             "length": 0 < self.length <= VIEW_HALF_SIDE - 2 * TIP_RADIUS,
-            "damping": self.damping >= 0 and math.isfinite(self.damping),
+            "damping": 0 <= self.damping <= MAX_DAMPING,
             "flip": self.flip in FLIPS,
             "max_angle": 0 <= self.max_angle <= math.pi,
-            "max_speed": 0 <= self.max_speed < math.inf,
+            "max_speed": 0 <= self.max_speed <= MAX_SPEED,
             "camera_distance": (self.length + 2 * TIP_RADIUS) / VIEW_HALF_SIDE <= self.camera_distance <= 3.0,
         }
         for name, ok in checks.items():
             if not ok:
                 raise ValueError(
                     f"DMCPendulumConfig.{name}={getattr(self, name)!r} is out of range (image_size >= 8, other sizes and counts >= 1, "
-                    f"action_repeat <= {MAX_ACTION_REPEAT}, mass >= {MIN_MASS:g}, length in (0, {VIEW_HALF_SIDE - 2 * TIP_RADIUS:g}], damping >= 0, flip in {FLIPS}, "
-                    "max_angle in [0, pi], max_speed >= 0, camera_distance in [(length + 0.1) / 0.7, 3])")
+                    f"action_repeat <= {MAX_ACTION_REPEAT}, mass >= {MIN_MASS:g}, length in (0, {VIEW_HALF_SIDE - 2 * TIP_RADIUS:g}], damping in [0, {MAX_DAMPING:g}], flip in {FLIPS}, "
+                    f"max_angle in [0, pi], max_speed in [0, {MAX_SPEED:.4g}], camera_distance in [(length + 0.1) / 0.7, 3])")
 
     @property
     def dt(self) -> float:

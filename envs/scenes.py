@@ -337,15 +337,32 @@ def draw_start(config: SceneConfig, rng: np.random.Generator, steps: int,
         starts = [_start(config, rng) for _ in range(batch)]
         p0 = np.stack([p for p, _ in starts])  # (B, N, 2)
         v0 = np.stack([v for _, v in starts])
-        fine_p, _ = simulate(fine, p0, v0, (steps - 1) * config.substeps + 1)  # (T·M, B, N, 2)
-        good = np.flatnonzero(_acceptable(config, fine_p, test))
+        # forces such as --g 1e308 overflow to inf and NaN: those candidates fail the check, without a warning
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            fine_p, _ = simulate(fine, p0, v0, (steps - 1) * config.substeps + 1)  # (T·M, B, N, 2)
+            good = np.flatnonzero(_acceptable(config, fine_p, test))
         if len(good):
             return simulate(config, p0[good[0]], v0[good[0]], steps)
+    raise SceneError(f"{config.scene}: no start in {config.max_tries} draws stays clear of the walls"
+                     f"{' and in the top half' if config.half else ''} for {steps} frames; use shorter sequences, a lower "
+                     f"speed{_force_advice(config)} or a larger image")
+
+
+def _force_advice(config: SceneConfig) -> str:
+    """What to change in the forces of a scene whose starts all hit a wall: weaker forces where they exceed the
+    scene's own (--g 1e6 flings every start into a wall), stronger ones where they fall short of them (--k 1e-300 lets
+    the balls fly apart), other ones where both; nothing for a scene without forces, or with the scene's own."""
+    if not config.params:
+        return ""
     values = ", ".join(f"{name} = {value:g}" for name, value in config.params.items())
-    forces = f", weaker forces than {values}" if values else ""  # e.g. --g 1e6: every start is flung into a wall
-    where = " and in the top half" if config.half else ""
-    raise SceneError(f"{config.scene}: no start in {config.max_tries} draws stays clear of the walls{where} for {steps} "
-                     f"frames; use shorter sequences, a lower speed{forces} or a larger image")
+    own = SCENES[config.scene]["params"]
+    above = any(value > own.get(name, value) for name, value in config.params.items())
+    below = any(value < own.get(name, value) for name, value in config.params.items())
+    if not (above or below):  # the scene's own forces: the sequences, the speed or the image are the ones to change
+        return ""
+    kind = "other" if above and below else "weaker" if above else "stronger"
+    scene = ", ".join(f"{name} = {value:g}" for name, value in own.items())
+    return f", {kind} forces than {values} (the scene's own: {scene})"
 
 
 # ---------------------------------------------------------------------------------------- rendering

@@ -95,9 +95,14 @@ def _five_objects(f: h5py.File) -> None:
     f.attrs["n_objects"] = 5
 
 
+def _labelled_spring(f: h5py.File) -> None:
+    f.attrs["system"] = "spring"
+
+
 VARIANTS: dict[str, Callable[[h5py.File], None]] = {
     "blank": _blank, "nan_state": _nan_state, "nan_reward": _nan_reward, "colour": _colour, "channel_axis": _channel_axis,
     "two_actions": _two_actions, "no_actions": _no_actions, "unknown_env_field": _unknown_env_field,
+    "labelled_spring": _labelled_spring,
 }
 
 
@@ -114,6 +119,16 @@ def files(tiny_data: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[str
                           root / "balls.h5", progress=False, command="t")
     made["balls5"] = _variant(balls, root / "balls5.h5", _five_objects)
     return made
+
+
+@pytest.fixture(scope="module")
+def gravity_data(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A tiny 3-body gravity scene: 4 sequences x 6 frames."""
+    from envs.scenes import scene_config
+    from piga.data.collect_scenes import SceneCollectConfig, collect_scene
+
+    return collect_scene(SceneCollectConfig(scene=scene_config("gravity"), sequences=4, steps=6, workers=1, split=(2, 1, 1)),
+                         tmp_path_factory.mktemp("gravity") / "gravity.h5", progress=False, command="t")
 
 
 @pytest.fixture(scope="module")
@@ -244,6 +259,10 @@ def test_a_failed_allocation_is_out_of_memory(capsys: pytest.CaptureFixture[str]
     (["--effect", "blur=900"], ["blur=900 px would blur the pendulum away in a 64 px frame", "at most 32 px"], 1),
     (["--effect", "shift=-64"], ["shift=-64 px would move the pendulum out of a 64 px frame"], 1),
     (["--system", "bouncing", "--colors", "#000001", "white"], ["object 0's colour", "is within 0.1 of the background's"], 1),
+    (["--env", "piga/DMCPendulum-v0", "--max-speed", "1e308"], ["max_speed=1e+308 is out of range", "max_speed in [0, 157.1]"], 1),
+    (["--env", "piga/DMCPendulum-v0", "--env-option", "damping=1e300"], ["damping=1e+300 is out of range", "damping in [0, 100]"], 1),
+    (["--system", "gravity", "--g", "1e308"], ["weaker forces than g = 1e+308, m = 1 (the scene's own: g = 60, m = 1)"], 1),
+    (["--system", "spring", "--k", "1e-300", "--steps", "12", "--image-size", "20"], ["stronger forces than k = 1e-300"], 1),
 ])
 def test_collect_refuses(argv: list[str], needles: list[str], code: int, tmp_path: Path,
                          capsys: pytest.CaptureFixture[str]) -> None:
@@ -419,6 +438,9 @@ def test_a_true_parameter_of_zero_is_scored_infinitely_off() -> None:
     ("tiny", ("--iterative", "1", "--exploration-noise", "1e300"), ["exploration noise must be >= 0 and at most 10"]),
     ("unknown_env_field", ("--iterative", "1", "--episode-steps", "16"), ["'env_config' has unknown field(s) bogus"]),
     ("tiny", ("--stoch-size", "50000000"), ["world model of these sizes needs about", "ask for less"]),
+    ("tiny", ("--deter-size", "99999999999"), ["more weights than torch can index", "ask for less"]),  # an internal error
+    ("tiny", ("--steps", "9" * 20), ["steps (--steps) must be at most 10,000,000"]),  # it trained for ever
+    ("tiny", ("--iterative", "1", "--round-steps", "99999999999"), ["rounds x steps_per_round", "at most 10,000,000"]),
 ])
 def test_planet_refuses_before_touching_out(data: str, argv: tuple[str, ...], needles: list[str], files: dict[str, Path],
                                             tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -688,12 +710,45 @@ def test_diagnose_on_a_baseline_run_says_what_it_is(files: dict[str, Path], fake
     ("blank", ["every frame is blank"]),
     ("nan_state", ["/states holds NaN"]),
     ("balls5", ["attribute 'n_objects' is 5 but 'scene_config' says 2"]),
+    # a pendulum file labelled 'spring' trained as a scene, and its refusal blamed a lost object
+    ("labelled_spring", ["attribute 'system' says 'spring', whose model takes 0 action dimension(s), but /actions has 1"]),
 ])
 def test_train_model_refuses_data_on_open(data: str, needles: list[str], files: dict[str, Path], tmp_path: Path,
                                           capsys: pytest.CaptureFixture[str]) -> None:
     refused("piga-train-model", [str(files[data]), "--out", str(tmp_path / "run"), "--batch-size", "4", "--threads", "1",
                                  "--quiet"], capsys, *needles)
     assert _listing(tmp_path) == []
+
+
+@pytest.mark.parametrize("argv, needles, code", [
+    (["--epochs", "9" * 20], ["epochs=99999999999999999999 plans", "more than 10,000,000", "lower --epochs"], 1),  # it trained for ever
+    (["--budget-steps", "9" * 20], ["budget_steps=99999999999999999999 plans", "more than 10,000,000"], 1),
+    (["--model", "video-lstm", "--video-lstm-scale", "99999999"], ["--video-lstm-scale: expected an integer in [1, 32]"], 2),
+    (["--data-file", "gravity", "--fixed-g", "1e308"], ["fixed_g must be in [1e-06, 1e+06]"], 1),  # the loss was NaN at step 0
+    (["--data-file", "gravity", "--fixed-g", "1e-300"], ["fixed_g must be in [1e-06, 1e+06]", "got 1e-300"], 1),
+])
+def test_train_model_refuses_runs_it_could_never_finish(argv: list[str], needles: list[str], code: int, tiny_data: Path,
+                                                        gravity_data: Path, tmp_path: Path,
+                                                        capsys: pytest.CaptureFixture[str]) -> None:
+    """--video-lstm-scale 1e8 was an internal error (torch's size arithmetic overflowed)."""
+    data = gravity_data if argv[:2] == ["--data-file", "gravity"] else tiny_data
+    argv = argv[2:] if data == gravity_data else argv
+    refused("piga-train-model", [str(data), "--out", str(tmp_path / "run"), "--batch-size", "4", "--threads", "1",
+                                 "--quiet", *argv], capsys, *needles, code=code)
+    assert _listing(tmp_path) == []
+
+
+def test_a_model_too_large_to_count_is_a_resource_error() -> None:
+    from piga.io.resources import ResourceError
+    from piga.world.model import ModelConfig
+
+    with pytest.raises(ValueError, match=r"video_lstm_scale must be in \[1, 32\]"):
+        ModelConfig(architecture="video-lstm", video_lstm_scale=33)
+    from agents.planet.config import RSSMConfig
+    from agents.planet.rssm import parameter_count
+
+    with pytest.raises(ResourceError, match="more weights than torch can index"):
+        parameter_count(RSSMConfig(deter_size=10**11))
 
 
 def test_train_model_refuses_frames_too_small_before_training(tiny_data: Path, tmp_path: Path,
@@ -741,10 +796,12 @@ def test_an_empty_split_reads_as_no_sequences(tiny_data: Path, tmp_path: Path) -
     (["--epochs", "1000000000"], ["--epochs: expected an integer in [1, 200]", "small default job"]),
     (["--episodes", "1000000000"], ["--episodes: expected an integer in [1, 100]"]),
     (["--control-steps", "1000000000"], ["--control-steps: expected an integer in [1, 5000]"]),
+    (["--control-steps", "19"], ["--control-steps must be at least 20", "held for the last 20 steps"]),  # it ran, and a
+    # success meant the goal held for a step or two
 ])
 def test_demo_refusals_leave_no_folder(argv: list[str], needles: list[str], tmp_path: Path,
                                        capsys: pytest.CaptureFixture[str]) -> None:
-    code = 2 if argv[0] in ("--seed", "--epochs", "--episodes", "--control-steps") else 1  # the parser's refusals
+    code = 2 if needles[0].startswith(f"{argv[0]}: expected") else 1  # the parser's refusals
     refused("piga-demo", ["--out", str(tmp_path / "demo" / "out"), *argv], capsys, *needles, code=code)
     assert _listing(tmp_path) == []
 
@@ -895,6 +952,17 @@ def test_ddpg_refuses_settings_that_would_do_nothing(extra: list[str], needle: s
     """Settings a run would ignore, or that leave it never evaluated or never learning, used to exit 0."""
     refused("piga-baseline", ["ddpg", "--obs", "state", "--out", str(tmp_path / "run"), "--quiet", *extra], capsys, needle)
     assert not (tmp_path / "run").exists()
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["--steps", "9" * 20], "steps must be in [1, 10,000,000]"),
+    (["--eval-episodes", "99999999999"], "eval_episodes must be at most 10,000"),
+])
+def test_ddpg_refuses_work_it_would_never_finish(argv: list[str], needle: str, tmp_path: Path,
+                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    """Both were taken, and the run went on for ever."""
+    refused("piga-baseline", ["ddpg", "--obs", "state", "--out", str(tmp_path / "run"), *TINY_DDPG, *argv], capsys, needle)
+    assert _listing(tmp_path) == []
 
 
 def test_ddpg_resume_refuses_fewer_steps(baseline_runs: dict[str, Path], tmp_path: Path,

@@ -206,8 +206,9 @@ def test_the_video_lstm_scale_sizes_it_and_only_it(small_data: Path, tmp_path: P
     assert count(video_lstm_scale=2) > 3.5 * count()  # wider convolutions, latent and LSTM: about 4x
     with pytest.raises(ValueError, match="video_lstm_scale sizes the video-lstm baseline"):
         ModelConfig(architecture="in-ig", video_lstm_scale=2)
-    with pytest.raises(ValueError, match=">= 1"):
-        ModelConfig(architecture="video-lstm", video_lstm_scale=0)
+    for bad in (0, 33):
+        with pytest.raises(ValueError, match=r"must be in \[1, 32\]"):
+            ModelConfig(architecture="video-lstm", video_lstm_scale=bad)
     assert " ".join(_field_docs()["video_lstm_scale"].split()).startswith(cli.VIDEO_LSTM_SCALE_HELP)  # the doc is the help
 
     out = tmp_path / "run"

@@ -18,6 +18,9 @@ from piga.io.device import Device
 #: Largest KL free nats per frame accepted (PlaNet uses 3; far larger values switch the KL term off
 #: entirely and, near float32's range, overflow the loss).
 MAX_FREE_NATS = 1000.0
+#: Most optimiser steps a run may take, in its training and over all its iterative rounds together: weeks on a CPU
+#: (PlaNet's own runs take a few million); --steps 1e20 was taken, and trained for ever.
+MAX_STEPS = 10_000_000
 #: Largest exploration noise accepted, as a fraction of the action bound (the noisy action is then clipped).
 MAX_EXPLORATION_NOISE = 10.0
 
@@ -142,6 +145,8 @@ class PlanetTrainConfig:
                              f"max_minutes must be finite numbers: {self}")
         if not (self.lr > 0 and self.adam_eps > 0 and self.grad_clip > 0 and self.free_nats >= 0):
             raise ValueError("need lr, adam_eps, grad_clip > 0 and free_nats >= 0")
+        if self.steps > MAX_STEPS:
+            raise ValueError(f"PlanetTrainConfig.steps (--steps) must be at most {MAX_STEPS:,} (weeks on a CPU), got {self.steps:,}")
         if self.free_nats > MAX_FREE_NATS:
             raise ValueError(f"PlanetTrainConfig.free_nats (--free-nats) must be at most {MAX_FREE_NATS:g} nats per frame (PlaNet uses 3), got {self.free_nats:g}")
         if self.seed < 0 or self.max_sequences < 0 or self.max_minutes < 0:
@@ -175,6 +180,9 @@ class IterativeConfig:
         if self.rounds < 1 or self.episodes < 1 or self.steps_per_round < 1 or self.episode_steps < 1:
             raise ValueError(f"need rounds, episodes, steps_per_round and episode_steps >= 1, got {self.rounds}, "
                              f"{self.episodes}, {self.steps_per_round}, {self.episode_steps}")
+        if self.rounds * self.steps_per_round > MAX_STEPS:
+            raise ValueError(f"IterativeConfig: rounds x steps_per_round (--rounds x --round-steps) = {self.rounds:,} x "
+                             f"{self.steps_per_round:,} must be at most {MAX_STEPS:,} optimiser steps (weeks on a CPU)")
         if not 0 <= self.noise <= MAX_EXPLORATION_NOISE:
             raise ValueError(f"IterativeConfig.noise: the exploration noise must be >= 0 and at most "
                              f"{MAX_EXPLORATION_NOISE:g} (a fraction of the action bound), got {self.noise}")

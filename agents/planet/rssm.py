@@ -39,6 +39,7 @@ import torch.nn.functional as F
 from torch import Tensor, nn
 
 from agents.planet.config import PlanetTrainConfig, RSSMConfig
+from piga.io.resources import meta_parameter_count
 
 __all__ = ["RSSM", "Belief", "LossParts", "WorldModel", "frames_to_input", "held", "model_steps"]
 
@@ -311,5 +312,4 @@ class WorldModel(nn.Module):
 
 def parameter_count(config: RSSMConfig) -> int:
     """The number of parameters of ``WorldModel(config)``, counted on torch's meta device (no memory)."""
-    with torch.device("meta"):
-        return sum(p.numel() for p in WorldModel(config).parameters())
+    return meta_parameter_count(lambda: WorldModel(config))

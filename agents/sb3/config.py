@@ -25,6 +25,10 @@ Observation = Literal["pixels", "latent", "state"]
 Algorithm = Literal["ddpg", "sac", "drqv2"]
 """The algorithm: SB3's DDPG (the paper's) or SAC (its stronger sibling), or DrQ-v2 in SB3's loop
 (:mod:`agents.sb3.drqv2`; pixels only)."""
+#: Most env steps a run may take: 300 times the paper's 30k, weeks on a CPU; --steps 1e20 was taken and ran for ever.
+MAX_STEPS = 10_000_000
+#: Most episodes per evaluation, as piga-control's most episodes; --eval-episodes 1e11 was taken and evaluated for ever.
+MAX_EVAL_EPISODES = 10_000
 #: What the policy can observe.
 OBSERVATIONS: tuple[Observation, ...] = get_args(Observation)
 #: The SB3 algorithms.
@@ -146,8 +150,10 @@ class SB3Config:
             if getattr(self, name) is None:
                 object.__setattr__(self, name, value)
         object.__setattr__(self, "net_arch", tuple(self.net_arch))  # a JSON record's list
-        if self.steps < 1:
-            raise ValueError(f"steps must be >= 1, got {self.steps}")
+        if not 1 <= self.steps <= MAX_STEPS:
+            raise ValueError(f"steps must be in [1, {MAX_STEPS:,}] (more takes weeks on a CPU), got {self.steps:,}")
+        if self.eval_episodes > MAX_EVAL_EPISODES:
+            raise ValueError(f"eval_episodes must be at most {MAX_EVAL_EPISODES:,} (episodes per evaluation), got {self.eval_episodes:,}")
         if self.eval_every < self.episode_steps or self.eval_every % self.episode_steps:
             raise ValueError(f"eval_every must be a multiple of the episode length {self.episode_steps} ({self.env}), "
                              f"got {self.eval_every}")

@@ -103,8 +103,13 @@ def main(argv: Sequence[str] | None = None) -> int:
             if path.exists():
                 raise PigaError(f"{path} exists from an earlier demo; pass --overwrite to replace it")
     from piga.cli.control import check_angle
+    from piga.control.episodes import EpisodeConfig
 
     check_angle("--goal-angle", args.goal_angle)
+    hold = EpisodeConfig.hold_steps  # as piga-control: with fewer steps a success held for a step or two meant nothing
+    if args.control_steps < hold:
+        raise PigaError(f"--control-steps must be at least {hold}: success is the goal held for the last {hold} steps, "
+                        f"got {args.control_steps}")
     collect_config = replace(CollectConfig(), sequences=args.sequences, seed=args.seed)  # checked before any folder
     _check_enough_sequences(collect_config)
     outputs = (data, strip, run_dir / CHECKPOINT, goal_png, control_md)
@@ -196,8 +201,7 @@ def _control(run_dir: Path, goal_png: Path, control_md: Path, args) -> list[tupl
     for warning in estimate.warnings:
         print(f"{PROG}: warning: {warning}", file=sys.stderr)
     mpc = MPCConfig(seed=args.seed)
-    episodes = EpisodeConfig(episodes=args.episodes, seed=args.seed, steps=args.control_steps,
-                             hold_steps=min(20, args.control_steps))
+    episodes = EpisodeConfig(episodes=args.episodes, seed=args.seed, steps=args.control_steps)
     jobs = [
         ControlJob("piga", episodes, mpc, str(run_dir), tags=(("task", "upright, gravity x1.0"),)),
         ControlJob("piga", dc_replace(episodes, gravity_mult=1.4), mpc, str(run_dir), tags=(("task", "upright, gravity x1.4"),)),

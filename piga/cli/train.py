@@ -42,7 +42,7 @@ def build_parser() -> ArgumentParser:
     from piga.world.physics import GravityOptions  # noqa: PLC0415 (torch loads only when the command runs)
     from piga.training.train import PRESETS, TrainConfig  # noqa: PLC0415
     from piga.io.choices import literal_fields  # noqa: PLC0415
-    from piga.world.model import ModelConfig  # noqa: PLC0415
+    from piga.world.model import MAX_VIDEO_LSTM_SCALE, ModelConfig  # noqa: PLC0415
 
     fast, paper = TrainConfig(), PRESETS["paper"].train
 
@@ -95,7 +95,8 @@ def build_parser() -> ArgumentParser:
                       "feature map, then transposed convolutions; 'broadcast': a spatial-broadcast decoder (each object's "
                       "coordinates tiled over the image with fixed x, y channels, stride-1 convolutions, composed by "
                       "masks). Only 'st' writes templates.png. Not with --model video-lstm")
-    add_preset_option(p, "--video-lstm-scale", type=positive_int, metavar="S", default=ModelConfig().video_lstm_scale,
+    add_preset_option(p, "--video-lstm-scale", type=int_up_to(MAX_VIDEO_LSTM_SCALE, "its weights grow with its square: "
+                      "at 32 they take tens of gigabytes with Adam's moments"), metavar="S", default=ModelConfig().video_lstm_scale,
                       help=VIDEO_LSTM_SCALE_HELP + " (ModelConfig.video_lstm_scale). Only with --model video-lstm")
     add_preset_option(p, "--broadcast-width", type=int_up_to(MAX_BROADCAST_WIDTH, "every object's maps at full "
                       "resolution: wider ones take gigabytes per batch"), metavar="W", default=ModelConfig().broadcast_width,

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 import shutil
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -125,6 +126,26 @@ def check_memory(needed: float, what: str) -> None:
 
 #: Bytes per parameter of float32 training with Adam: the weights, their gradients and Adam's two moments.
 TRAINING_BYTES_PER_PARAMETER = 16
+
+
+def meta_parameter_count(build: Callable[[], Any], trainable_only: bool = False) -> int:
+    """The parameters of the torch module that ``build()`` makes, built on torch's meta device (no memory taken);
+    ``trainable_only``: those that require a gradient.
+
+    Raises:
+        ResourceError: sizes so large that torch's own size arithmetic overflows (a --deter-size of 1e11), which
+            no machine could hold.
+    """
+    import torch
+
+    try:
+        with torch.device("meta"):
+            return sum(p.numel() for p in build().parameters() if p.requires_grad or not trainable_only)
+    except RuntimeError as exc:
+        if "overflow" not in str(exc):
+            raise
+        raise ResourceError("a model of these sizes has more weights than torch can index, far more than any "
+                            "machine's memory; ask for less") from None
 
 
 def check_training_memory(parameters: int, what: str) -> None:

@@ -168,6 +168,9 @@ class TrainConfig:
         return cls(**values)
 
 
+#: The most optimiser steps a run may plan: 400 times the paper recipe's longest run (25,000 steps), weeks on a
+#: CPU; --epochs 1e20 was taken and planned its first checkpoint after 2e18 epochs.
+MAX_TRAIN_STEPS = 10_000_000
 #: Learning rates above this are refused: no recipe of piga's comes within a factor 100 of it, and a
 #: physics learning rate that large throws the log-space parameters to the float limits in one step.
 MAX_LR = 10.0
@@ -226,6 +229,10 @@ def plan_training(config: TrainConfig, windows: int) -> TrainPlan:
                          "would run; lower the batch size or give more data")
     epochs = config.epochs or max(1, math.ceil(config.budget_steps / per_epoch))
     total = epochs * per_epoch
+    if total > MAX_TRAIN_STEPS:
+        asked = f"epochs={config.epochs}" if config.epochs else f"budget_steps={config.budget_steps}"
+        raise ValueError(f"{asked} plans {total:,} steps ({epochs:,} epochs x {per_epoch} steps), more than "
+                         f"{MAX_TRAIN_STEPS:,} (weeks of training); lower --epochs or --budget-steps")
 
     def part(fraction: float) -> int:
         return 0 if fraction <= 0 else max(1, int(round(fraction * total)))
@@ -391,6 +398,10 @@ def model_config_for(info: DatasetInfo, model: ModelConfig | None = None, n_obje
     to what they hold, down to :data:`MIN_PRED_FRAMES` (:func:`check_trainable` refuses shorter ones)."""
     if info.system not in SYSTEM_SHAPES:
         raise ValueError(f"{info.path}: system {info.system!r} has no physics model; known: {sorted(SYSTEM_SHAPES)}")
+    actions = SYSTEM_SHAPES[info.system][2]
+    if info.action_dim != actions:  # a pendulum file labelled 'spring' trained as a scene, and blamed a lost object
+        raise ValueError(f"{info.path}: its attribute 'system' says {info.system!r}, whose model takes {actions} action "
+                         f"dimension(s), but /actions has {info.action_dim}; fix the attribute, or the file")
     shape = info.image_shape
     if shape[0] != shape[1]:
         raise ValueError(f"{info.path}: frames must be square, got {shape}")

@@ -47,6 +47,11 @@ SYSTEM_SHAPES: dict[str, tuple[int, int, int]] = {
 }
 
 
+#: The largest :attr:`ModelConfig.video_lstm_scale`: its weights grow with the square of the scale, and at 32 they,
+#: their gradients and Adam's moments take tens of gigabytes (a scale of 1e8 overflowed torch's size arithmetic).
+MAX_VIDEO_LSTM_SCALE = 32
+
+
 @dataclass(frozen=True)
 class ModelConfig:
     """Everything needed to rebuild a model (stored in checkpoints).
@@ -169,8 +174,9 @@ class ModelConfig:
         if self.architecture == "video-lstm" and (self.loss == "separate" or self.decoder != "st"):
             raise ValueError("video-lstm has no separate encoder/decoder and dynamics to train apart, nor an object "
                              "decoder to replace: it takes loss 'joint' or 'pred-only' and decoder 'st'")
-        if self.video_lstm_scale < 1:
-            raise ValueError(f"video_lstm_scale must be >= 1, got {self.video_lstm_scale}")
+        if not 1 <= self.video_lstm_scale <= MAX_VIDEO_LSTM_SCALE:
+            raise ValueError(f"video_lstm_scale must be in [1, {MAX_VIDEO_LSTM_SCALE}] (its weights grow with its square), "
+                             f"got {self.video_lstm_scale}")
         if self.video_lstm_scale != 1 and self.architecture != "video-lstm":
             raise ValueError(f"video_lstm_scale sizes the video-lstm baseline; architecture {self.architecture!r} has "
                              "its own sizes")

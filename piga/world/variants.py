@@ -11,8 +11,7 @@ Each is a :class:`piga.world.model.FrameModel`, so one training loop and one eva
 
 from __future__ import annotations
 
-import torch
-
+from piga.io.resources import meta_parameter_count
 from piga.world.interaction import InteractionModel
 from piga.world.model import FrameModel, ModelConfig, PhysicsModel
 from piga.world.video_lstm import VideoLSTM
@@ -36,5 +35,4 @@ def build_model(config: ModelConfig) -> FrameModel:
 
 def parameter_count(config: ModelConfig) -> int:
     """The trainable parameters of ``build_model(config)``, counted on torch's meta device (no memory taken)."""
-    with torch.device("meta"):
-        return sum(p.numel() for p in build_model(config).parameters() if p.requires_grad)
+    return meta_parameter_count(lambda: build_model(config), trainable_only=True)

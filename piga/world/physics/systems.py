@@ -398,6 +398,11 @@ class Spring(System):
         return force.sum(dim=2)  # (B, N, 2)
 
 
+#: The values ``GravityOptions.fixed_g`` may take besides 0: --fixed-g 1e308 and 1e-300 made the loss NaN at the
+#: first step (the mass 1/fixed_g is 0 or inf in float32).
+FIXED_G_RANGE = (1e-6, 1e6)
+
+
 @dataclass(frozen=True)
 class GravityOptions(SystemOptions):
     """A gravity model's options."""
@@ -409,8 +414,9 @@ class GravityOptions(SystemOptions):
     weak as in the g run (g = 1, m = 1), far from any true g·m."""
 
     def __post_init__(self) -> None:
-        if not (self.fixed_g >= 0 and math.isfinite(self.fixed_g)):
-            raise ValueError(f"fixed_g must be finite and > 0 (or 0: learn g), got {self.fixed_g}")
+        if not (self.fixed_g == 0 or FIXED_G_RANGE[0] <= self.fixed_g <= FIXED_G_RANGE[1]):
+            raise ValueError(f"fixed_g must be in [{FIXED_G_RANGE[0]:g}, {FIXED_G_RANGE[1]:g}] (or 0: learn g), got "
+                             f"{self.fixed_g:g}: the mass starts at 1/fixed_g, which float32 must hold with room to learn")
 
     def check_physics_init(self, physics_init: Mapping[str, float]) -> None:
         if self.fixed_g and "g" in physics_init:
