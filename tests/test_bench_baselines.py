@@ -190,6 +190,12 @@ def test_the_readme_baselines_table_is_the_committed_summary() -> None:
     assert summary in (ROOT / "README.md").read_text()
 
 
+def test_the_readme_data_claim_is_the_committed_one() -> None:
+    """The README's sentence on the data each agent needs is results/baselines.json's, verbatim (regenerate, then paste)."""
+    claim = json.loads((ROOT / "results" / "baselines.json").read_text())["data_ratio_claim"]
+    assert claim and claim in " ".join((ROOT / "README.md").read_text().split())
+
+
 def test_a_record_holds_the_commit_and_every_setting_and_is_not_run_again(bench, tmp_path: Path) -> None:
     """The tiny preset's oracle job, end to end through the shared runner: its record names the code's commit
     and the episodes' and planner's settings in full; a second invocation keeps it."""
