@@ -119,6 +119,7 @@ def test_read_actions(tmp_path: Path, text: str, want: list[float]) -> None:
         ("u\n0.5\nnan\n", "line 3"),
         ("1,2\n3,4\n", "2 columns and no header row"),
         ("a,b\n1,2\n", "names no column 'u' or 'action'"),
+        ("u,U\n1,2\n", "names 'u' more than once"),  # the first column was taken
         ("t,u\n0,1\n1\n", "line 3: 1 column(s), but line 1 has 2"),
     ],
 )

@@ -186,6 +186,9 @@ def read_actions(path: str | Path) -> np.ndarray:
             if not matches:
                 raise ValueError(f"{p}: line {first_number}: the header {first} names no column 'u' or 'action'")
             column = matches[0]
+            if names.count(names[column]) > 1:  # which of the two columns holds the actions is unknown
+                raise ValueError(f"{p}: line {first_number}: the header {first} names {first[column]!r} more than once; "
+                                 "name the action column once")
         rows = rows[1:]
         if not rows:
             raise ValueError(f"{p}: the actions file has a header and no values")
