@@ -432,7 +432,7 @@ def _ddpg_checkpoint_bytes(config: Any, latent_size: int) -> float:
 
 def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
     from piga.io.atomic import write_json
-    from agents.sb3.config import ENV_EPISODE_STEPS, SB3Config
+    from agents.sb3.config import SB3Config  # it checks --eval-every against the env's episode length
     from agents.sb3.run import AUTOENCODER
     from agents.sb3.train import first_step_reaching, train_sb3
     from piga.io.resources import check_run_disk
@@ -440,9 +440,6 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
 
     run_dir = Path(args.out)
     command = command_line(PROG, argv)
-    if args.eval_every % ENV_EPISODE_STEPS[args.env]:
-        raise PigaError(f"--eval-every must be a multiple of the episode length {ENV_EPISODE_STEPS[args.env]} ({args.env}), "
-                        f"got {args.eval_every}")
     if args.obs == "latent" and not args.data and not args.resume:
         raise PigaError("--obs latent trains an autoencoder on collected frames: give --data DATA.h5")
     if args.obs != "latent" and args.data:

@@ -22,6 +22,8 @@ from piga.evaluation.episodes import summary_markdown
 from piga.io.checkpoint import RunKind
 
 if TYPE_CHECKING:
+    from agents.sb3.run import SB3Agent
+    from envs.dmc import DMCPendulumConfig
     from agents.mpc import PigaMPCAgent
     from piga.world.model import PhysicsModel
 
@@ -410,6 +412,21 @@ def _write_goal_image(args: argparse.Namespace) -> int:
 DMC_OPTIONS = ("model", "oracle", "episodes", "seed", "env", "env_option", "out", "overwrite", "quiet")
 
 
+def _dmc_sb3_agent(run_dir: str, env: DMCPendulumConfig) -> SB3Agent:
+    """The policy of an SB3 run trained on the DMC pendulum (``piga-baseline ddpg --env``), for episodes of ``env``
+    (a :class:`envs.dmc.DMCPendulumConfig`); a run of another env, or another action repeat, is refused."""
+    from agents.sb3.run import SB3Agent, trained_env
+    from envs.dmc import DMCPendulumConfig
+
+    if (trained := trained_env(run_dir)) != DMC_PENDULUM:  # from config.json: the checkpoint holds the replay buffer
+        raise PigaError(f"{run_dir} was trained on {trained}; --env {DMC_PENDULUM} runs piga models, the oracle "
+                        "and SB3 runs trained on it (piga-baseline ddpg --env)")
+    if env.action_repeat != DMCPendulumConfig.action_repeat:  # its policy acts once per trained frame
+        raise PigaError(f"{run_dir} was trained at action_repeat {DMCPendulumConfig.action_repeat} (DMC's "
+                        f"default); drop --env-option action_repeat={env.action_repeat}")
+    return SB3Agent.from_run(run_dir)
+
+
 def _dmc(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     """``--env piga/DMCPendulum-v0``: the piga agent and/or the oracle, scored in DMC's units."""
     from piga.cli.collect import _env_option, dmc_config
@@ -445,31 +462,19 @@ def _dmc(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
         from piga.io.runs import load_model
 
         if (kind := run_kind(args.model)) is RunKind.DDPG:
-            from agents.sb3.run import SB3Agent, trained_env
-
-            if (env := trained_env(args.model)) != DMC_PENDULUM:
-                raise PigaError(f"{args.model} was trained on {env}; --env {DMC_PENDULUM} runs piga models, the oracle "
-                                "and SB3 runs trained on it (piga-baseline ddpg --env)")
-            from envs.dmc import DMCPendulumConfig
-
-            if config.env.action_repeat != DMCPendulumConfig.action_repeat:  # its policy acts once per trained frame
-                raise PigaError(f"{args.model} was trained at action_repeat {DMCPendulumConfig.action_repeat} (DMC's "
-                                f"default); drop --env-option action_repeat={config.env.action_repeat}")
-            sb3 = SB3Agent.from_run(args.model)
-            if sb3.config.env != DMC_PENDULUM:  # config.json and the checkpoint disagree: an edited folder
-                raise PigaError(f"{args.model}: its checkpoint was trained on {sb3.config.env}, its config.json says {env}")
+            sb3 = _dmc_sb3_agent(args.model, config.env)
             results.append(run_dmc_episodes(sb3, sb3.config.algo, config, progress=not args.quiet))
         elif kind.is_baseline:
             raise PigaError(f"{args.model} is a {kind.value} run; --env {DMC_PENDULUM} runs piga models, the oracle and "
                             "SB3 runs trained on it")
-    if args.model and not results:
-        model, _ = load_model(args.model)
-        warn_if_unconverged(PROG, args.model)
-        if abs(model.config.dt - config.env.dt) > 1e-9:
-            raise PigaError(f"{args.model}: the model was trained at dt {model.config.dt} s, the env steps {config.env.dt} s "
-                            "(set --env-option action_repeat)")
-        agent = PigaSwingUp(model, config.planner)
-        results.append(run_dmc_episodes(agent, "piga", config, model.config.input_frames, progress=not args.quiet))
+        else:
+            model, _ = load_model(args.model)
+            warn_if_unconverged(PROG, args.model)
+            if abs(model.config.dt - config.env.dt) > 1e-9:
+                raise PigaError(f"{args.model}: the model was trained at dt {model.config.dt} s, the env steps "
+                                f"{config.env.dt} s (set --env-option action_repeat)")
+            agent = PigaSwingUp(model, config.planner)
+            results.append(run_dmc_episodes(agent, "piga", config, model.config.input_frames, progress=not args.quiet))
     if args.oracle or not args.model:
         results.append(run_dmc_episodes(OracleSwingUp(config.env, config.planner), "oracle", config, progress=not args.quiet))
     command = command_line(PROG, argv)
