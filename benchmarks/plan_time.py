@@ -18,13 +18,19 @@ PlaNet's settings: horizon 12, 10 iterations, 1000 candidates, top 100) is timed
 process on the same episodes, and the page gives the ratio per env step: PlaNet-style plans once
 every action-repeat env steps and holds the action between, piga at every step. This is the
 benchmark's plan-time ratio measured in one run, on one machine, rather than across records.
+PlaNet's settings imagine more model steps per env step than piga's (1000 x 12 x 10 per plan every
+2 env steps, against 200 x 20 x 5 at every step: 3x). ``--equal-budget`` adds a row of the same
+PlaNet-style agent whose CEM imagines piga's model steps per env step, over piga's lookahead in env
+steps, with piga's iterations and elite fraction (:func:`equal_budget_cem`), and the page gives
+both ratios: at each agent's own budget and at equal budget.
 
 It trains nothing. Give it a run folder of ``piga-train-model``, for example the control
 benchmark's model (``piga-collect --out data/pendulum.h5`` then ``piga-train-model
 data/pendulum.h5 --out runs/pendulum``):
 
     python benchmarks/plan_time.py --model runs/pendulum --out results/plan_time
-    python benchmarks/plan_time.py --model runs/pendulum --planet runs/planet --no-reference --out results/plan_time_planet
+    python benchmarks/plan_time.py --model runs/pendulum --planet runs/planet --equal-budget --no-reference \
+        --episodes 20 --out results/plan_time_planet
 
 Writes OUT.json and OUT.md (with the machine). Nothing else should run on the machine meanwhile.
 """
@@ -35,6 +41,7 @@ import argparse
 import os
 import shlex
 import sys
+import math
 from dataclasses import replace
 from pathlib import Path
 
@@ -43,6 +50,7 @@ import torch
 from torch import Tensor
 
 from common import machine
+from agents.config import CEMConfig
 from agents.dynamics import PendulumDynamics, start_of
 from agents.mpc import MPCConfig, OracleAgent, PigaMPCAgent
 from piga.io.atomic import atomic_output, write_json
@@ -109,21 +117,52 @@ class UfuncDynamics:
 
 PLANET = "PlaNet-style (latent CEM, PlaNet's settings)"
 """The row label of the PlaNet-style agent."""
+PLANET_EQUAL = "PlaNet-style (latent CEM, piga's budget)"
+"""The row label of the PlaNet-style agent planning with piga's model steps per env step."""
+
+
+def model_steps(cem: CEMConfig) -> int:
+    """Model steps one plan imagines: candidates x horizon x iterations."""
+    return cem.candidates * cem.horizon * cem.iterations
+
+
+def equal_budget_cem(piga: CEMConfig, repeat: int, planet: CEMConfig = CEMConfig()) -> CEMConfig:
+    """A latent CEM that imagines piga's model steps per env step while planning once every ``repeat``
+    env steps: piga's lookahead in env steps (its horizon / ``repeat`` latent steps, rounded up), piga's
+    iterations and elite fraction, and the candidates that make up the work. PlaNet's other settings
+    (``planet``: its initial std, no momentum) stay.
+
+    For piga's 200 x 20 x 5 (top 20) and action repeat 2: 800 candidates x 10 steps x 5 iterations,
+    top 80, 40,000 model steps per plan, 20,000 per env step like piga's."""
+    horizon = math.ceil(piga.horizon / repeat)
+    candidates = round(model_steps(piga) * repeat / (horizon * piga.iterations))
+    return replace(planet, horizon=horizon, iterations=piga.iterations, candidates=candidates,
+                   elites=max(1, round(candidates * piga.elites / piga.candidates)))
 
 
 def planet_ratio(rows: list[dict]) -> dict | None:
-    """PlaNet-style's median time per env step (per plan / env steps per plan) over piga's, from the
-    rows of one run; None without a PlaNet-style row."""
+    """The PlaNet-style rows' median time per env step (per plan / env steps per plan) over piga's, from
+    the rows of one run (each row with its ``model_steps`` per plan); None without a PlaNet-style row."""
     by = {row["agent"]: row for row in rows}
     if PLANET not in by:
         return None
     piga_ms = by["piga"]["plan_ms_median"]
-    planet_plan = by[PLANET]["plan_ms_median"]
-    per_step = planet_plan / by[PLANET]["env_steps_per_plan"]
-    text = (f"Per env step, in this run: PlaNet-style {per_step:.1f} ms (a plan of {planet_plan:.1f} ms every "
-            f"{by[PLANET]['env_steps_per_plan']} env steps), piga {piga_ms:.2f} ms: piga plans {per_step / piga_ms:.0f}x faster.")
-    return {"piga_ms_per_step": piga_ms, "planet_ms_per_plan": planet_plan, "planet_ms_per_step": per_step,
-            "ratio_per_step": per_step / piga_ms, "text": text}
+    out: dict = {"piga_ms_per_step": piga_ms, "piga_model_steps_per_step": by["piga"]["model_steps"]}
+    texts = []
+    for key, label, what in (("own", PLANET, "at each agent's own budget"), ("equal", PLANET_EQUAL, "at equal budget")):
+        if label not in by:
+            continue
+        row = by[label]
+        repeat = row["env_steps_per_plan"]
+        per_step = row["plan_ms_median"] / repeat
+        out[key] = {"planet_ms_per_plan": row["plan_ms_median"], "planet_ms_per_step": per_step,
+                    "planet_model_steps_per_step": row["model_steps"] / repeat, "ratio_per_step": per_step / piga_ms}
+        texts.append(f"{what} ({row['model_steps'] / repeat:,.0f} model steps per env step against piga's "
+                     f"{by['piga']['model_steps']:,}), PlaNet-style {per_step:.1f} ms (a plan of {row['plan_ms_median']:.1f} ms "
+                     f"every {repeat} env steps) against piga's {piga_ms:.2f} ms: piga plans {per_step / piga_ms:.0f}x faster")
+    out["ratio_per_step"] = out["own"]["ratio_per_step"] if "own" in out else None
+    out["text"] = "Per env step, in this run: " + "; ".join(texts) + "."
+    return out
 
 
 def main() -> int:
@@ -135,7 +174,11 @@ def main() -> int:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--no-reference", action="store_true", help="skip the two reference-engine rows")
     p.add_argument("--planet", help="also time the PlaNet-style agent of this piga-baseline planet run (PlaNet's planner)")
+    p.add_argument("--equal-budget", action="store_true",
+                   help="with --planet: also time it planning piga's model steps per env step (equal_budget_cem)")
     args = p.parse_args()
+    if args.equal_budget and not args.planet:
+        p.error("--equal-budget times the --planet run's agent at piga's budget; give --planet")
     torch.set_num_threads(1)
     model, _ = load_model(args.model)
     learned = model.physical_parameters()
@@ -149,14 +192,25 @@ def main() -> int:
         learned_dynamics = PendulumDynamics.of(model.system, model.integrator)  # type: ignore[arg-type]
         agents.append(("piga, numpy operators", PigaMPCAgent(model, mpc, dynamics=UfuncDynamics(learned_dynamics))))
         agents.append(("piga, nn.Module engine", PigaMPCAgent(model, mpc, dynamics=ModuleDynamics(model))))
+    cems = {label: mpc.cem for label, _ in agents}
     if args.planet:  # piga-control's PlaNet-style agent: PlaNet's planner settings
-        agents.append((PLANET, baseline_agent(RunKind.PLANET, args.planet, seed=args.seed)))
+        planet = baseline_agent(RunKind.PLANET, args.planet, seed=args.seed)
+        agents.append((PLANET, planet))
+        cems[PLANET] = planet.config.cem  # type: ignore[attr-defined]
+        if args.equal_budget:
+            from agents.planet.config import LatentPlannerConfig
+            from agents.planet.planner import PlanetAgent
+
+            equal = equal_budget_cem(mpc.cem, planet.repeat, planet.config.cem)  # type: ignore[attr-defined]
+            agents.append((PLANET_EQUAL, PlanetAgent(planet.model, LatentPlannerConfig(cem=equal, seed=args.seed))))  # type: ignore[attr-defined]
+            cems[PLANET_EQUAL] = equal
     load_before = os.getloadavg()
     rows = []
     for label, agent in agents:
         # each agent reads the frames it needs (PlaNet-style: the newest), and plans every `repeat` env steps
         result = run_episodes(agent, replace(config, frame_stack=getattr(agent, "input_frames", config.frame_stack)))  # type: ignore[arg-type]
-        rows.append({"agent": label, **result.summary.to_dict(), "env_steps_per_plan": getattr(agent, "repeat", 1)})
+        rows.append({"agent": label, **result.summary.to_dict(), "env_steps_per_plan": getattr(agent, "repeat", 1),
+                     "cem": cems[label].__dict__, "model_steps": model_steps(cems[label])})
         s = rows[-1]
         print(f"{label}: plan {s['plan_ms_median']:.2f} ms median, {s['plan_ms_p95']:.2f} ms p95; "
               f"success {100 * s['success_rate']:.0f}%, mean return {s['mean_return']:.1f}")
@@ -182,8 +236,13 @@ def main() -> int:
         summary_markdown([EpisodeSummary.from_dict(r) for r in rows]).rstrip(),
         *([] if ratio is None else [
             "", f"PlaNet-style: `{args.planet}` (a `piga-baseline planet` run). Its row times its plans only: `act` at the "
-            "env steps where it plans (filtering the newest frame into its belief, then latent CEM with PlaNet's "
-            "settings); it holds the action in between.", "", ratio["text"]]),
+            "env steps where it plans (filtering the newest frame into its belief, then latent CEM); it holds the action "
+            "in between.", "", "| agent | CEM per plan (candidates x horizon x iterations, top) | env steps per plan | "
+            "model steps per env step |", "|---|---|---|---|",
+            *(f"| {r['agent']} | {r['cem']['candidates']} x {r['cem']['horizon']} x {r['cem']['iterations']}, top "
+              f"{r['cem']['elites']} | {r['env_steps_per_plan']} | {r['model_steps'] / r['env_steps_per_plan']:,.0f} |"
+              for r in rows if r["agent"] in ("piga", PLANET, PLANET_EQUAL)),
+            "", ratio["text"]]),
     ])
     out = Path(args.out)
     with atomic_output(out.with_suffix(".md"), overwrite=True) as tmp:

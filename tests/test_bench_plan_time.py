@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -23,18 +25,49 @@ def test_plan_time_times_the_planet_agent_in_the_same_run(tiny_data: Path, tmp_p
                  RSSMConfig(depth=4, deter_size=16, stoch_size=4, hidden_size=16, action_repeat=2), progress=False)
     out = tmp_path / "plan_time"
     result = run("python", str(ROOT / "benchmarks" / "plan_time.py"), "--model", str(piga_run), "--planet", str(planet_run),
-                 "--no-reference", "--episodes", "1", "--steps", "20", "--out", str(out))
+                 "--equal-budget", "--no-reference", "--episodes", "1", "--steps", "20", "--out", str(out))
     assert result.returncode == 0, result.stderr
     record = json.loads(out.with_suffix(".json").read_text())
     rows = {row["agent"]: row for row in record["rows"]}
     planet = rows["PlaNet-style (latent CEM, PlaNet's settings)"]
     assert planet["env_steps_per_plan"] == 2 and rows["piga"]["env_steps_per_plan"] == 1
+    equal = rows["PlaNet-style (latent CEM, piga's budget)"]
+    assert (equal["cem"]["candidates"], equal["cem"]["horizon"], equal["cem"]["iterations"]) == (800, 10, 5)
+    assert equal["model_steps"] / 2 == rows["piga"]["model_steps"] == 20_000 and planet["model_steps"] == 120_000
     ratio = record["planet_ratio"]
-    assert ratio["planet_ms_per_step"] == planet["plan_ms_median"] / 2
-    assert ratio["ratio_per_step"] == ratio["planet_ms_per_step"] / rows["piga"]["plan_ms_median"] > 0
+    for key, row in (("own", planet), ("equal", equal)):
+        assert ratio[key]["planet_ms_per_step"] == row["plan_ms_median"] / 2
+        assert ratio[key]["ratio_per_step"] == ratio[key]["planet_ms_per_step"] / rows["piga"]["plan_ms_median"] > 0
+    assert ratio["ratio_per_step"] == ratio["own"]["ratio_per_step"]
     page = out.with_suffix(".md").read_text()
-    assert "PlaNet-style" in page and f"{ratio['ratio_per_step']:.0f}x faster" in page and "reference rows" not in page
+    assert "reference rows" not in page and "| 800 x 10 x 5, top 80 | 2 | 20,000 |" in page
+    assert all(f"{ratio[key]['ratio_per_step']:.0f}x faster" in page for key in ("own", "equal"))
     assert len(record["load_average"]["before"]) == 3
+
+
+@pytest.fixture
+def plan_time():
+    sys.path.insert(0, str(ROOT / "benchmarks"))  # the script imports its sibling module common
+    spec = importlib.util.spec_from_file_location("bench_plan_time", ROOT / "benchmarks" / "plan_time.py")
+    module = importlib.util.module_from_spec(spec)
+    try:
+        spec.loader.exec_module(module)
+        yield module
+    finally:
+        sys.modules.pop("common", None)
+        sys.path.remove(str(ROOT / "benchmarks"))
+
+
+def test_equal_budget_cem_matches_model_steps_per_env_step(plan_time) -> None:
+    from agents.config import CEMConfig
+
+    equal_budget_cem, model_steps = plan_time.equal_budget_cem, plan_time.model_steps
+    piga = CEMConfig(horizon=20, iterations=5, candidates=200, elites=20)
+    for repeat in (1, 2, 4):
+        cem = equal_budget_cem(piga, repeat)
+        assert model_steps(cem) == repeat * model_steps(piga) and cem.horizon * repeat == 20
+        assert cem.elites / cem.candidates == 0.1 and cem.init_std == CEMConfig().init_std
+    assert equal_budget_cem(CEMConfig(horizon=5, iterations=2, candidates=10, elites=3), 2).horizon == 3  # lookahead rounded up
 
 
 @pytest.mark.slow  # a git worktree and four benchmark processes: about 25 s
