@@ -364,13 +364,14 @@ def data_file(cfg: BenchConfig, folder: Path, n: int) -> Path:
 
 
 def evaluate(kind: str, run: Path | None, cfg: BenchConfig, gravity_mult: float = 1.0, episodes: int | None = None,
-             workers: int = 1, **job_fields: Any) -> dict[str, Any]:
+             workers: int = 1, seed: int = 0, **job_fields: Any) -> dict[str, Any]:
     """piga.control.episodes' summary for one agent (kind "piga", "planet", "ddpg" or "oracle"), its episodes
-    split over ``workers`` processes (the same episodes and scores as one); ``job_fields``: more fields of its
-    :class:`~piga.control.jobs.ControlJob` (the piga agent's ``told`` and ``reward_head``)."""
+    split over ``workers`` processes (the same episodes and scores as one); ``seed``: the episodes' (0, the
+    table's); ``job_fields``: more fields of its :class:`~piga.control.jobs.ControlJob` (the piga agent's
+    ``told`` and ``reward_head``)."""
     from piga.control.jobs import ControlJob, run_split
 
-    episode_config = episode_config_for(kind, cfg, gravity_mult, episodes)
+    episode_config = episode_config_for(kind, cfg, gravity_mult, episodes, seed)
     job = ControlJob(kind, episode_config, model_dir=str(run) if run else None, **job_fields)
     if kind == "planet" and "cem" in cfg.overrides:  # tiny preset only: PlaNet's planner, shrunk
         from agents.planet.planner import PlanetAgent
@@ -382,14 +383,16 @@ def evaluate(kind: str, run: Path | None, cfg: BenchConfig, gravity_mult: float 
     return run_split(job, workers, progress=False).summary.to_dict()
 
 
-def episode_config_for(kind: str, cfg: BenchConfig, gravity_mult: float = 1.0, episodes: int | None = None) -> Any:
-    """The :class:`piga.control.episodes.EpisodeConfig` of one evaluation of ``kind``'s agent."""
+def episode_config_for(kind: str, cfg: BenchConfig, gravity_mult: float = 1.0, episodes: int | None = None,
+                       seed: int = 0) -> Any:
+    """The :class:`piga.control.episodes.EpisodeConfig` of one evaluation of ``kind``'s agent, on the episodes of
+    ``seed`` (the table's: 0)."""
     from piga.control.episodes import EpisodeConfig
 
     if episodes is None:
         episodes = cfg.planet_episode_count if kind == "planet" else cfg.episodes
     return EpisodeConfig(episodes=episodes, steps=cfg.episode_steps, hold_steps=min(20, cfg.episode_steps),
-                         gravity_mult=gravity_mult)
+                         gravity_mult=gravity_mult, seed=seed)
 
 
 def planet_planner(cfg: BenchConfig) -> Any:

@@ -2,10 +2,8 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -13,7 +11,7 @@ import pytest
 from agents.planet.config import PlanetTrainConfig, RSSMConfig
 from agents.planet.train import train_planet
 
-from .helpers import run, train_tiny
+from .helpers import benchmark_module, run, train_tiny
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -47,15 +45,8 @@ def test_plan_time_times_the_planet_agent_in_the_same_run(tiny_data: Path, tmp_p
 
 @pytest.fixture
 def plan_time():
-    sys.path.insert(0, str(ROOT / "benchmarks"))  # the script imports its sibling module common
-    spec = importlib.util.spec_from_file_location("bench_plan_time", ROOT / "benchmarks" / "plan_time.py")
-    module = importlib.util.module_from_spec(spec)
-    try:
-        spec.loader.exec_module(module)
+    with benchmark_module("plan_time") as module:
         yield module
-    finally:
-        sys.modules.pop("common", None)
-        sys.path.remove(str(ROOT / "benchmarks"))
 
 
 def test_equal_budget_cem_matches_model_steps_per_env_step(plan_time) -> None:
