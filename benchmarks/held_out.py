@@ -54,20 +54,21 @@ class Evaluation:
 def evaluations(runs: Path, names: tuple[str, ...] | None, seed: int) -> tuple[list[Evaluation], list[str]]:
     """The run folders of ``runs`` that have a record and a checkpoint (only ``names``, if given), and the oracle;
     and the names of the records whose folder is not here."""
-    records = sorted((runs / "records").glob("*.json"))
+    specs = {path.stem: json.loads(path.read_text())["spec"] for path in (runs / "records").glob("*.json")}
     todo, missing = [], []
-    for path in records:
-        name = path.stem
+    for name, spec in sorted(specs.items(), key=lambda item: (AGENTS.index(item[1]["agent"]) if item[1]["agent"] in AGENTS
+                                                              else len(AGENTS), item[1].get("sequences", 0),
+                                                              item[1].get("seed", 0), item[0])):
         if names is not None and name not in names:
             continue
-        agent = json.loads(path.read_text())["spec"]["agent"]
+        agent = spec["agent"]
         if agent == "oracle":
             todo.append(Evaluation(name, agent, None, seed))
         elif (runs / name / CHECKPOINT).exists():
             todo.append(Evaluation(name, agent, str(runs / name), seed))
         else:
             missing.append(name)
-    unknown = sorted(set(names or ()) - {p.stem for p in records})
+    unknown = sorted(set(names or ()) - set(specs))
     if unknown:
         raise SystemExit(f"held_out.py: error: no record in {runs / 'records'} for {', '.join(unknown)}")
     return todo, missing
