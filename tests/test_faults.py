@@ -1318,13 +1318,38 @@ def test_a_checkpoint_lacking_an_entry_says_which(prog: str, tiny_piga_run: Path
     assert not (tmp_path / "report").exists()
 
 
-@pytest.mark.parametrize("name", ["s.txt", "s.h5"])
-def test_show_refuses_an_image_format_matplotlib_lacks(name: str, tiny_data: Path, tmp_path: Path,
+@pytest.mark.parametrize("name, needle", [("s.txt", "matplotlib writes no .txt files"), ("s.h5", "matplotlib writes no"),
+                                          ("s", "an image file needs a suffix that names its format")])
+def test_show_refuses_an_image_format_matplotlib_lacks(name: str, needle: str, tiny_data: Path, tmp_path: Path,
                                                       capsys: pytest.CaptureFixture[str]) -> None:
-    """It drew the strip, then relayed matplotlib's "Format 'txt' is not supported", naming no option."""
-    refused("piga-show", [str(tiny_data), "--out", str(tmp_path / name)], capsys, f"--out {name}: matplotlib writes no",
-            "use .png")
+    """It drew the strip, then relayed matplotlib's "Format 'txt' is not supported", naming no option; a name without
+    a suffix was written as a PNG that its name did not call one."""
+    refused("piga-show", [str(tiny_data), "--out", str(tmp_path / name)], capsys, f"--out {name}: {needle}",
+            "use .png (or ", ".pdf", ".svg")
     assert _listing(tmp_path) == []
+
+
+@pytest.mark.parametrize("prog, argv", [("piga-collect", ["--sequences", "2", "--steps", "3", "--workers", "1"]),
+                                        ("piga-import", ["rec.mp4", "actions.csv", "--dt", "0.05"])])
+@pytest.mark.parametrize("name", ["o.txt", "o"])
+def test_an_hdf5_output_is_named_so(prog: str, argv: list[str], name: str, tmp_path: Path,
+                                    capsys: pytest.CaptureFixture[str]) -> None:
+    """piga-collect and piga-import wrote their HDF5 file as o.txt, or o, and exited 0."""
+    out = tmp_path / name
+    refused(prog, [*argv, "--out", str(out)], capsys, f"argument --out: expected an HDF5 file ending in .h5 or .hdf5, "
+            f"got '{out}'", code=2)
+    assert _listing(tmp_path) == []
+
+
+def test_an_hdf5_output_may_end_in_h5_or_hdf5_in_any_case() -> None:
+    import argparse
+
+    from piga.cli.common import h5_path
+
+    assert [h5_path(name) for name in ("d.h5", "d.hdf5", "d.H5", "runs/d.HDF5")] == ["d.h5", "d.hdf5", "d.H5", "runs/d.HDF5"]
+    for bad in ("d.h5.txt", "d.h", ".h5x"):
+        with pytest.raises(argparse.ArgumentTypeError, match="expected an HDF5 file ending in .h5 or .hdf5"):
+            h5_path(bad)
 
 
 @pytest.mark.parametrize("argv", [["--episodes", "1", "--steps", "20"], ["--sweep", "1:1:1", "--episodes", "1"]])

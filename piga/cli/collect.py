@@ -12,8 +12,8 @@ from envs.dmc import DMCPendulumConfig
 from envs.effects import EFFECTS, format_effects, parse_effect
 from envs.pendulum import PixelPendulumConfig
 from envs.scenes import HALF_SPEED, SCENES, SceneConfig, scene_config
-from piga.cli.common import (ArgumentParser, PigaError, add_preset_option, command_line, file_path, format_default,
-                             positive_float, positive_int, run_cli, seed_int, split_type)
+from piga.cli.common import (H5_SUFFIXES, ArgumentParser, PigaError, add_preset_option, command_line, format_default,
+                             h5_path, positive_float, positive_int, run_cli, seed_int, split_type)
 from piga.data.collect import PAPER_MAX_SPEED, PRESETS, CollectConfig, collect
 from piga.data.collect_scenes import SCENE_PRESETS, SCENE_STEPS, collect_scene
 from piga.data.schema import inspect_dataset
@@ -85,7 +85,8 @@ def build_parser() -> ArgumentParser:
         description="Collect pixel-pendulum sequences with random actions u ~ U(-2, 2) into an HDF5 file "
         "(schema: README, 'Data files').",
     )
-    p.add_argument("--out", required=True, type=file_path, help="output .h5 file (written atomically)")
+    p.add_argument("--out", required=True, type=h5_path,
+                   help=f"output {' or '.join(H5_SUFFIXES)} file (written atomically)")
     p.add_argument("--system", choices=SYSTEM_CHOICES, default="pendulum",
                    help="what to collect: the actuated pixel pendulum, or one of the paper's unactuated scenes "
                    "(README, 'Systems') (default %(default)s)")
@@ -234,7 +235,7 @@ def _scene_sizes() -> dict[str, int]:
 
 def _collect_scene(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     """``--system SCENE``: refuses the pendulum's options, builds the scene and collects it."""
-    defaults = build_parser().parse_args(["--out", "x"])
+    defaults = build_parser().parse_args(["--out", "x.h5"])
     pendulum_only = [f"--{name.replace('_', '-')}" for name in ("gravity", "gravity_mult", "actuation_gain", "max_angle",
                                                                 "no_torque_arrow", "effect", "max_speed", "env",
                                                                 "env_option")
