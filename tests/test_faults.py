@@ -254,6 +254,10 @@ def test_a_failed_allocation_is_out_of_memory(capsys: pytest.CaptureFixture[str]
     (["--seed", "9" * 25], ["--seed: expected an integer in [0, 2^63 - 1]"], 2),
     (["--actuation-gain", "1e39"], ["actuation_gain=1e+39 is out of range", "at most 1e+06"], 1),
     (["--gravity", "1e39"], ["gravity x gravity_mult = 1e+39 is out of range", "at most 1e+06"], 1),
+    (["--gravity", "1e-300"], ["gravity x gravity_mult = 1e-300 is out of range: at least 1e-06 m/s²",
+                               "under a hundredth of a pixel in a 200-step episode"], 1),  # data with no gravity in them
+    (["--gravity-mult", "1e-300"], ["gravity x gravity_mult = 1e-299 is out of range: at least 1e-06"], 1),
+    (["--actuation-gain", "1e-300"], ["actuation_gain=1e-300 is out of range: at least 1e-06", "a hundredth of a pixel"], 1),
     (["--effect", "delay=5"], ["delay=5 steps is not shorter than a sequence's 5 actions", "raise --steps"], 1),
     (["--effect", "frame_delay=7"], ["frame_delay=7 steps is not shorter", "all show the reset"], 1),
     (["--effect", "blur=900"], ["blur=900 px would blur the pendulum away in a 64 px frame", "at most 32 px"], 1),
@@ -1144,10 +1148,41 @@ def test_control_refuses_two_goals_and_reads_a_goal_image_quietly(tiny_piga_run:
 @pytest.mark.parametrize("sweep, needle", [
     ("1e308:1e308:1", "--sweep: PixelPendulumConfig: gravity x gravity_mult = inf is out of range"),  # a job failed, after a warning
     ("1e-300:2e-300:1e-300", "gravity multipliers must be > 0 (at 10 decimals)"),  # it read "> 0, got 1e-300"
+    ("0.00000001:1:0.5", "--sweep: PixelPendulumConfig: gravity x gravity_mult = 1e-07 is out of range: at least 1e-06"),
 ])
 def test_control_sweep_refuses_multipliers_up_front(sweep: str, needle: str, tiny_piga_run: Path,
                                                     capsys: pytest.CaptureFixture[str]) -> None:
     refused("piga-control", ["--model", str(tiny_piga_run), "--sweep", sweep, "--episodes", "1", "--quiet"], capsys, needle)
+
+
+def test_control_refuses_a_gravity_too_weak_to_show(capsys: pytest.CaptureFixture[str]) -> None:
+    """--gravity-mult 1e-300 ran swing-ups of a pendulum that never falls, and exited 0."""
+    refused("piga-control", ["--oracle", "--gravity-mult", "1e-300", "--episodes", "1", "--quiet"], capsys,
+            "--gravity-mult 1e-300: PixelPendulumConfig: gravity x gravity_mult = 1e-299 is out of range: at least 1e-06 m/s²")
+
+
+def test_the_weakest_gravity_and_gain_move_the_pendulum_by_under_a_hundredth_of_a_pixel() -> None:
+    """The floors' reason, as their errors give it: over a 200-step episode, the full torque at the weakest gain, or the
+    weakest gravity, moves the tip of Gymnasium's pendulum (1 of the 2.2 half-widths of its 500-pixel picture, so
+    14.5 px in a 64-pixel frame) by under 0.01 px against a pendulum without it; the floors themselves are accepted."""
+    import gymnasium as gym
+    import numpy as np
+
+    from envs.pendulum import MIN_ACTUATION_GAIN, MIN_GRAVITY, PixelPendulumConfig
+
+    PixelPendulumConfig(gravity=MIN_GRAVITY, actuation_gain=MIN_ACTUATION_GAIN)
+    PixelPendulumConfig(gravity_mult=MIN_GRAVITY / PixelPendulumConfig.gravity)
+
+    def angles(g: float, torque: float) -> np.ndarray:
+        env = gym.make("Pendulum-v1", g=g).unwrapped
+        env.reset(seed=0, options={"x_init": 0.0, "y_init": 0.0})
+        env.state = np.array([np.pi / 2, 0.0])  # gravity's torque at its largest
+        return np.array([env.step(np.array([torque], np.float32))[0] for _ in range(200)])[:, :2]  # (T, cos/sin)
+
+    tip_px = 64 / 500 * 500 / (2 * 2.2)
+    for g, torque in ((MIN_GRAVITY, 0.0), (0.0, 2 * MIN_ACTUATION_GAIN)):
+        moved = np.abs(angles(g, torque) - angles(0.0, 0.0)).max()  # |Δ(cos θ, sin θ)| <= |Δθ|, and ~ it when small
+        assert 0 < moved * tip_px < 0.01, (g, torque, moved * tip_px)
 
 
 def test_control_sweep_warns_once_about_an_unconverged_run(tiny_piga_run: Path, tmp_path: Path,

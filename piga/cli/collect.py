@@ -10,7 +10,7 @@ from typing import Any
 from envs import DMC_PENDULUM, ENV_IDS, PIXEL_PENDULUM
 from envs.dmc import DMCPendulumConfig
 from envs.effects import EFFECTS, format_effects, parse_effect
-from envs.pendulum import PixelPendulumConfig
+from envs.pendulum import MAX_ACTUATION_GAIN, MAX_GRAVITY, MIN_ACTUATION_GAIN, MIN_GRAVITY, PixelPendulumConfig
 from envs.scenes import HALF_SPEED, SCENES, SceneConfig, scene_config
 from piga.cli.common import (H5_SUFFIXES, ArgumentParser, PigaError, add_preset_option, command_line, format_default,
                              h5_path, positive_float, positive_int, run_cli, seed_int, split_type)
@@ -122,11 +122,13 @@ def build_parser() -> ArgumentParser:
                    "with --sequences alone, a preset's split in counts is kept as proportions.")
     add_preset_option(p, "--sequences", type=positive_int, default=defaults.sequences, help="number of sequences N")
     add_preset_option(p, "--steps", type=positive_int, default=defaults.steps, help="frames per sequence T, >= 2")
-    p.add_argument("--gravity", type=positive_float, default=env.gravity, help="gravity g (default %(default)s)")
+    p.add_argument("--gravity", type=positive_float, default=env.gravity, help="gravity g in m/s² (default %(default)s)")
     p.add_argument("--gravity-mult", type=positive_float, default=env.gravity_mult,
-                   help="multiplier on gravity; the env simulates gravity x mult (default %(default)s)")
+                   help=f"multiplier on gravity; the env simulates gravity x mult, which must lie in [{MIN_GRAVITY:g}, "
+                   f"{MAX_GRAVITY:g}] m/s² (default %(default)s)")
     p.add_argument("--actuation-gain", type=positive_float, default=env.actuation_gain,
-                   help="applied torque = gain x u (default %(default)s)")
+                   help=f"applied torque = gain x u, gain in [{MIN_ACTUATION_GAIN:g}, {MAX_ACTUATION_GAIN:g}] "
+                   "(default %(default)s)")
     add_preset_option(p, "--max-speed", type=float, default=env.max_speed,
                       shown=f"{env.max_speed:g}, Gymnasium's; the paper preset uses {PAPER_MAX_SPEED:g}",
                       help="reset draws theta_dot ~ U(-s, s), s in [0, 8]")
