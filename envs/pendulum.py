@@ -73,9 +73,9 @@ __all__ = ["MAX_ACTION", "PENDULUM_DT", "PENDULUM_MAX_SPEED", "ActuationGain", "
 #: far inside float32.
 MAX_ACTUATION_GAIN = MAX_GRAVITY = 1e6
 #: Smallest actuation gain, and smallest simulated gravity (m/s²): a millionth of the defaults. Weaker, over a
-#: 200-step episode (Gymnasium's, 10 s) the torque (at most 2 x gain) or gravity moves the pendulum by under 3e-4 rad
-#: (½ · 3 · 2e-6 · 10²), a hundredth of a pixel at its tip in a 64-pixel frame: no frame shows it, so there is nothing
-#: to identify or to control.
+#: 200-step episode (Gymnasium's, 10 s) the torque (at most 2 x gain) or gravity moves the pendulum by under
+#: 3e-4 rad (½ · 3 · 2e-6 · 10²), a hundredth of a pixel at its tip in a 64-pixel frame: no frame shows it, so
+#: there is nothing to identify or to control.
 MIN_ACTUATION_GAIN = MIN_GRAVITY = 1e-6
 #: Why the floors, as the out-of-range errors say it.
 _TOO_WEAK = "weaker, it moves the pendulum's tip by under a hundredth of a pixel in a 200-step episode"
@@ -146,8 +146,8 @@ class PixelPendulumConfig:
             raise ValueError(f"PixelPendulumConfig.actuation_gain={self.actuation_gain!r} is out of range: at least "
                              f"{MIN_ACTUATION_GAIN:g} ({_TOO_WEAK})")
         if self.effective_gravity < MIN_GRAVITY:
-            raise ValueError(f"PixelPendulumConfig: gravity x gravity_mult = {self.effective_gravity:g} is out of range: at "
-                             f"least {MIN_GRAVITY:g} m/s² ({_TOO_WEAK})")
+            raise ValueError(f"PixelPendulumConfig: gravity x gravity_mult = {self.effective_gravity:g} is out of range: "
+                             f"at least {MIN_GRAVITY:g} m/s² ({_TOO_WEAK})")
 
     @property
     def effective_gravity(self) -> float:

@@ -125,9 +125,9 @@ def test_a_drqv2_run_on_the_dmc_pendulum_is_scored_in_dmcs_episodes_and_nowhere_
 
     run = tmp_path / "drq"
     code, out, err = run_in_process("piga-baseline", baseline, "ddpg", "--env", "piga/DMCPendulum-v0", "--algo", "drqv2",
-                                  "--obs", "pixels", "--steps", "500", "--eval-every", "500", "--eval-episodes", "1",
-                                  "--learning-starts", "100", "--batch-size", "8", "--buffer-size", "600", "--out", str(run),
-                                  "--quiet", capsys=capsys)
+                                    "--obs", "pixels", "--steps", "500", "--eval-every", "500", "--eval-episodes", "1",
+                                    "--learning-starts", "100", "--batch-size", "8", "--buffer-size", "600", "--out",
+                                    str(run), "--quiet", capsys=capsys)
     assert_sb3_run_finished(code, err)  # 500 steps cannot learn: exit 1, the summary and the outputs kept
     assert ("never reached 200" in out and "never reached 200 in 500 env steps" in err) if code else "first reached 200" in out
     metrics = json.loads((run / "metrics.json").read_text())

@@ -1354,7 +1354,7 @@ def test_a_checkpoint_lacking_an_entry_says_which(prog: str, tiny_piga_run: Path
 
 
 @pytest.mark.parametrize("name, needle", [("s.txt", "matplotlib writes no .txt files"), ("s.h5", "matplotlib writes no"),
-                                          ("s", "an image file needs a suffix that names its format")])
+                                          ("s", "an image needs the suffix of its format")])
 def test_show_refuses_an_image_format_matplotlib_lacks(name: str, needle: str, tiny_data: Path, tmp_path: Path,
                                                       capsys: pytest.CaptureFixture[str]) -> None:
     """It drew the strip, then relayed matplotlib's "Format 'txt' is not supported", naming no option; a name without

@@ -122,7 +122,8 @@ def build_parser() -> ArgumentParser:
                    "with --sequences alone, a preset's split in counts is kept as proportions.")
     add_preset_option(p, "--sequences", type=positive_int, default=defaults.sequences, help="number of sequences N")
     add_preset_option(p, "--steps", type=positive_int, default=defaults.steps, help="frames per sequence T, >= 2")
-    p.add_argument("--gravity", type=positive_float, default=env.gravity, help="gravity g in m/s² (default %(default)s)")
+    p.add_argument("--gravity", type=positive_float, default=env.gravity,
+                   help="gravity g in m/s² (default %(default)s)")
     p.add_argument("--gravity-mult", type=positive_float, default=env.gravity_mult,
                    help=f"multiplier on gravity; the env simulates gravity x mult, which must lie in [{MIN_GRAVITY:g}, "
                    f"{MAX_GRAVITY:g}] m/s² (default %(default)s)")

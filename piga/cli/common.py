@@ -389,6 +389,6 @@ def split_type(text: str) -> tuple[float, float, float]:
 
 
 __all__ = ["ArgumentParser", "PigaError", "RAY_HELP", "add_ray_option", "connect_backend", "ray_address", "run_cli", "positive_int", "nonnegative_int", "seed_int", "thread_count", "positive_float", "nonnegative_float",
-           "split_type", "add_preset_option",
-           "file_path", "h5_path", "H5_SUFFIXES", "documented_default", "format_default", "Interrupted", "made_folder",
-           "missing_folders", "remove_empty_folders", "remove_outputs", "add_device_option"]
+           "split_type", "add_preset_option", "documented_default", "format_default", "Interrupted", "made_folder",
+           "missing_folders", "remove_empty_folders", "remove_outputs", "add_device_option", "file_path", "h5_path",
+           "H5_SUFFIXES"]

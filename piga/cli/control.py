@@ -56,8 +56,9 @@ def build_parser() -> ArgumentParser:
                    help=f"steps per episode, at least {episodes.hold_steps}: success is the goal held for the last "
                    f"{episodes.hold_steps} (default %(default)s)")
     p.add_argument("--gravity-mult", type=positive_float, default=episodes.gravity_mult,
-                   help=f"multiply the environment's gravity ({PixelPendulumConfig.gravity:g} m/s²; the product must lie in "
-                   f"[{MIN_GRAVITY:g}, {MAX_GRAVITY:g}]); the agent is told and scales its learned g (default %(default)s)")
+                   help=f"multiply the environment's gravity ({PixelPendulumConfig.gravity:g} m/s²; the product must lie "
+                   f"in [{MIN_GRAVITY:g}, {MAX_GRAVITY:g}]); the agent is told and scales its learned g "
+                   "(default %(default)s)")
     p.add_argument("--not-told", action="store_true",
                    help="do not tell the piga agent --gravity-mult (nor, with --sweep, each multiplier): the environment's "
                    "gravity changes while the agent plans with its learned g unscaled, as the baselines do (the oracle "
@@ -252,8 +253,8 @@ def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: 
 
 
 def _check_env_gravity(flag: str, gravity_mult: float) -> None:
-    """Refuses a gravity multiplier that gives the pixel pendulum a gravity out of its range (:class:`PixelPendulumConfig`),
-    before a model is read."""
+    """Refuses a gravity multiplier that gives the pixel pendulum a gravity out of its range
+    (:class:`PixelPendulumConfig`'s), before a model is read."""
     try:
         PixelPendulumConfig(gravity_mult=gravity_mult)
     except ValueError as exc:

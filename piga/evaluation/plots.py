@@ -38,7 +38,7 @@ def check_figure_target(path: str | os.PathLike[str], overwrite: bool, flag: str
     plt.close("all")
     suffix = target.suffix.lstrip(".").lower()
     if suffix not in formats:
-        what = f"matplotlib writes no .{suffix} files" if suffix else "an image file needs a suffix that names its format"
+        what = f"matplotlib writes no .{suffix} files" if suffix else "an image needs the suffix of its format"
         raise ValueError(f"{flag} {target.name}: {what}; use .png (or "
                          f"{', '.join('.' + f for f in sorted(formats) if f != 'png')})")
     return check_writable_target(target, overwrite)
