@@ -72,6 +72,13 @@ __all__ = ["MAX_ACTION", "PENDULUM_DT", "PENDULUM_MAX_SPEED", "ActuationGain", "
 #: Largest actuation gain, and largest simulated gravity ``gravity * gravity_mult``: torques stay
 #: far inside float32.
 MAX_ACTUATION_GAIN = MAX_GRAVITY = 1e6
+#: Smallest actuation gain, and smallest simulated gravity (m/s²): a millionth of the defaults. Weaker, over a
+#: 200-step episode (Gymnasium's, 10 s) the torque (at most 2 x gain) or gravity moves the pendulum by under
+#: 3e-4 rad (½ · 3 · 2e-6 · 10²), a hundredth of a pixel at its tip in a 64-pixel frame: no frame shows it, so
+#: there is nothing to identify or to control.
+MIN_ACTUATION_GAIN = MIN_GRAVITY = 1e-6
+#: Why the floors, as the out-of-range errors say it.
+_TOO_WEAK = "weaker, it moves the pendulum's tip by under a hundredth of a pixel in a 200-step episode"
 
 
 @dataclass(frozen=True)
@@ -135,6 +142,12 @@ class PixelPendulumConfig:
                     "(image_size >= 8, other sizes and counts >= 1, gravity and gains > 0, max_angle in [0, pi], "
                     f"max_speed in [0, {PENDULUM_MAX_SPEED:g}])"
                 )
+        if self.actuation_gain < MIN_ACTUATION_GAIN:
+            raise ValueError(f"PixelPendulumConfig.actuation_gain={self.actuation_gain!r} is out of range: at least "
+                             f"{MIN_ACTUATION_GAIN:g} ({_TOO_WEAK})")
+        if self.effective_gravity < MIN_GRAVITY:
+            raise ValueError(f"PixelPendulumConfig: gravity x gravity_mult = {self.effective_gravity:g} is out of range: "
+                             f"at least {MIN_GRAVITY:g} m/s² ({_TOO_WEAK})")
 
     @property
     def effective_gravity(self) -> float:

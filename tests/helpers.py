@@ -59,6 +59,14 @@ def assert_one_line(code: int, err: str, *needles: str) -> str:
     return lines[0]
 
 
+def assert_sb3_run_finished(code: int, err: str) -> None:
+    """A ``piga-baseline ddpg`` run that trained to its end: exit 0 (it learned), or exit 1 with the one line that says it
+    did not (what a tiny run does); its outputs are kept either way."""
+    if code != 0:
+        assert code == 1, err
+        assert_one_line(code, err, "the run did not learn: its evaluation return never reached", "its outputs are in")
+
+
 def assert_one_line_error(result: subprocess.CompletedProcess[str], *needles: str) -> str:
     """:func:`assert_one_line` for a subprocess result; returns the line."""
     return assert_one_line(result.returncode, result.stderr, *needles)

@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
 
 from piga.cli import baseline, control
-from tests.helpers import assert_one_line, copy_without, run_in_process
+from tests.helpers import assert_one_line, assert_sb3_run_finished, copy_without, run_in_process
 
 TINY_PLANET = ("--steps", "2", "--batch-size", "2", "--chunk-length", "8", "--deter-size", "8", "--stoch-size", "4",
                "--threads", "1", "--quiet")
@@ -34,12 +35,54 @@ class _NoCapture:
 
 
 @pytest.fixture(scope="module")
-def ddpg_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
+def ddpg_result(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, int, str, str]:
+    """A tiny DDPG run from the state: (run folder, exit code, stdout, stderr). 200 steps cannot learn the swing-up."""
+    import contextlib
+    import io
+
     out = tmp_path_factory.mktemp("ddpg") / "run"
-    code, _, _ = run_in_process("piga-baseline", baseline.main, "ddpg", "--obs", "state", "--out", str(out), *TINY_DDPG,
-                                capsys=_NoCapture())
-    assert code == 0
-    return out
+    stdout, stderr = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
+        code, _, _ = run_in_process("piga-baseline", baseline.main, "ddpg", "--obs", "state", "--out", str(out), *TINY_DDPG,
+                                    capsys=_NoCapture())
+    assert_sb3_run_finished(code, stderr.getvalue())
+    return out, code, stdout.getvalue(), stderr.getvalue()
+
+
+@pytest.fixture(scope="module")
+def ddpg_run(ddpg_result: tuple[Path, int, str, str]) -> Path:
+    return ddpg_result[0]
+
+
+def test_a_ddpg_run_that_never_learned_says_so_and_keeps_its_outputs(ddpg_result: tuple[Path, int, str, str]) -> None:
+    """Exit 1 and one line, not an exit 0 that a script would take for success; the summary, checkpoint and
+    records stay (--resume continues such a run: tests/test_device.py)."""
+    from agents.sb3.run import load_sb3
+
+    run, code, stdout, err = ddpg_result
+    assert stdout.splitlines()[-1].endswith(f"never reached -200; wrote {run}/metrics.json")
+    metrics = json.loads((run / "metrics.json").read_text())
+    assert metrics["first_step_reaching_minus_200"] is None and metrics["steps"] == 200
+    assert_one_line(code, err, "piga-baseline: error: the run did not learn: its evaluation return never reached -200 in "
+                    f"200 env steps (final {metrics['final_eval_mean_return']:.1f}); its outputs are in {run}")
+    assert code == 1
+    assert json.loads((run / "config.json").read_text())["kind"] == "ddpg"
+    assert load_sb3(run)[1].steps == 200
+
+
+def test_a_ddpg_run_that_learned_exits_0(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                         monkeypatch: pytest.MonkeyPatch) -> None:
+    import agents.sb3.train as sb3_train
+
+    def learned(config: Any, run_dir: Path, *args: Any, **kwargs: Any) -> dict[str, Any]:
+        return {"steps": 400, "train_seconds": 6.0, "final_eval_mean_return": -150.0,
+                "learning_curve": [{"step": 200, "eval_mean_return": -900.0}, {"step": 400, "eval_mean_return": -150.0}]}
+
+    monkeypatch.setattr(sb3_train, "train_sb3", learned)
+    code, stdout, err = run_in_process("piga-baseline", baseline.main, "ddpg", "--obs", "state", "--out",
+                                       str(tmp_path / "run"), *TINY_DDPG, capsys=capsys)
+    assert code == 0 and err == ""
+    assert "final evaluation mean return -150.0; first reached -200 at step 400" in stdout
 
 
 def test_ddpg_tuning_options_reach_the_run(ddpg_run: Path) -> None:
@@ -62,7 +105,7 @@ def test_sac_takes_its_own_presets_and_resumes_only_as_sac(tmp_path: Path, capsy
     code, stdout, err = run_in_process("piga-baseline", baseline.main, "ddpg", "--algo", "sac", "--obs", "state", "--out", str(out),
                                        "--steps", "200", "--eval-every", "200", "--eval-episodes", "1", "--batch-size", "16",
                                        "--learning-starts", "150", "--quiet", capsys=capsys)
-    assert code == 0, err
+    assert_sb3_run_finished(code, err)
     assert "training SAC from state" in stdout
     model, config, _ = load_sb3(out)
     assert isinstance(model, SAC) and model.action_noise is None  # SAC explores with its own policy

@@ -33,7 +33,7 @@ OUTPUTS = (CHECKPOINT, "config.json", "metrics.json", "model.zip", "autoencoder.
 def build_parser() -> ArgumentParser:
     from agents.planet.config import IterativeConfig, PlanetTrainConfig, RewardAlignment, RSSMConfig
     from agents.sb3.autoencoder import AutoencoderConfig
-    from agents.sb3.config import ALGORITHM_PRESETS, ALGORITHMS, OBSERVATIONS, PRESETS, SB3Config
+    from agents.sb3.config import ALGORITHM_PRESETS, ALGORITHMS, LEARNED_RETURN, OBSERVATIONS, PRESETS, SB3Config
     from envs import ENV_IDS
 
     p = ArgumentParser(prog=PROG, description="Train a baseline (the PlaNet-style world model, or SB3 DDPG) into a run "
@@ -88,10 +88,12 @@ def build_parser() -> ArgumentParser:
     ddpg = SB3Config()
     sac = ALGORITHM_PRESETS["sac"]
     drqv2 = ALGORITHM_PRESETS["drqv2"]
+    marks = ", ".join(f"{mark:g} on {env}" for env, mark in LEARNED_RETURN.items())
     d = sub.add_parser("ddpg", help="SB3 DDPG (or SAC) from pixels, an autoencoder's latent, or the true state",
                        description="Train SB3 DDPG (or, with --algo sac, SAC; with --algo drqv2, DrQ-v2 from pixels) with the SB3 zoo's Pendulum-v1 hyperparameters "
                        "on the pixel pendulum (or, from pixels, dm_control's: --env). Writes RUN_DIR/checkpoint.pt, model.zip, config.json, metrics.json "
-                       "(EvalCallback's learning curve) and tensorboard/.")
+                       "(EvalCallback's learning curve) and tensorboard/. A run whose evaluation return never reached the mark of learning "
+                       f"({marks}) keeps them and exits 1, saying it did not learn.")
     d.error = p.error  # type: ignore[method-assign]
     d.add_argument("--env", choices=ENV_IDS, default=ddpg.env,
                    help="the env: Gymnasium's pixel pendulum, or dm_control's pendulum-swingup through a face-on camera "
@@ -513,11 +515,15 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
         raise
     reached = first_step_reaching(metrics["learning_curve"], config.learned_return)
     final = metrics["final_eval_mean_return"]
+    final_text = f"{final:.1f}" if final is not None else "n/a"
     mark = f"{config.learned_return:g}"
     print(f"trained {metrics['steps']} steps in {metrics['train_seconds'] / 60:.1f} min; final evaluation mean return "
-          + (f"{final:.1f}" if final is not None else "n/a") + "; "
+          + f"{final_text}; "
           + (f"first reached {mark} at step {reached}" if reached is not None else f"never reached {mark}")
           + f"; wrote {run_dir}/metrics.json")
+    if reached is None:  # its outputs stay (--resume continues it), but no script may take it for a success
+        raise PigaError(f"the run did not learn: its evaluation return never reached {mark} in {metrics['steps']} env "
+                        f"steps (final {final_text}); its outputs are in {run_dir}")
     return 0
 
 

@@ -10,10 +10,10 @@ from typing import Any
 from envs import DMC_PENDULUM, ENV_IDS, PIXEL_PENDULUM
 from envs.dmc import DMCPendulumConfig
 from envs.effects import EFFECTS, format_effects, parse_effect
-from envs.pendulum import PixelPendulumConfig
+from envs.pendulum import MAX_ACTUATION_GAIN, MAX_GRAVITY, MIN_ACTUATION_GAIN, MIN_GRAVITY, PixelPendulumConfig
 from envs.scenes import HALF_SPEED, SCENES, SceneConfig, scene_config
-from piga.cli.common import (ArgumentParser, PigaError, add_preset_option, command_line, file_path, format_default,
-                             positive_float, positive_int, run_cli, seed_int, split_type)
+from piga.cli.common import (H5_SUFFIXES, ArgumentParser, PigaError, add_preset_option, command_line, format_default,
+                             h5_path, positive_float, positive_int, run_cli, seed_int, split_type)
 from piga.data.collect import PAPER_MAX_SPEED, PRESETS, CollectConfig, collect
 from piga.data.collect_scenes import SCENE_PRESETS, SCENE_STEPS, collect_scene
 from piga.data.schema import inspect_dataset
@@ -85,7 +85,8 @@ def build_parser() -> ArgumentParser:
         description="Collect pixel-pendulum sequences with random actions u ~ U(-2, 2) into an HDF5 file "
         "(schema: README, 'Data files').",
     )
-    p.add_argument("--out", required=True, type=file_path, help="output .h5 file (written atomically)")
+    p.add_argument("--out", required=True, type=h5_path,
+                   help=f"output {' or '.join(H5_SUFFIXES)} file (written atomically)")
     p.add_argument("--system", choices=SYSTEM_CHOICES, default="pendulum",
                    help="what to collect: the actuated pixel pendulum, or one of the paper's unactuated scenes "
                    "(README, 'Systems') (default %(default)s)")
@@ -121,11 +122,14 @@ def build_parser() -> ArgumentParser:
                    "with --sequences alone, a preset's split in counts is kept as proportions.")
     add_preset_option(p, "--sequences", type=positive_int, default=defaults.sequences, help="number of sequences N")
     add_preset_option(p, "--steps", type=positive_int, default=defaults.steps, help="frames per sequence T, >= 2")
-    p.add_argument("--gravity", type=positive_float, default=env.gravity, help="gravity g (default %(default)s)")
+    p.add_argument("--gravity", type=positive_float, default=env.gravity,
+                   help="gravity g in m/s² (default %(default)s)")
     p.add_argument("--gravity-mult", type=positive_float, default=env.gravity_mult,
-                   help="multiplier on gravity; the env simulates gravity x mult (default %(default)s)")
+                   help=f"multiplier on gravity; the env simulates gravity x mult, which must lie in [{MIN_GRAVITY:g}, "
+                   f"{MAX_GRAVITY:g}] m/s² (default %(default)s)")
     p.add_argument("--actuation-gain", type=positive_float, default=env.actuation_gain,
-                   help="applied torque = gain x u (default %(default)s)")
+                   help=f"applied torque = gain x u, gain in [{MIN_ACTUATION_GAIN:g}, {MAX_ACTUATION_GAIN:g}] "
+                   "(default %(default)s)")
     add_preset_option(p, "--max-speed", type=float, default=env.max_speed,
                       shown=f"{env.max_speed:g}, Gymnasium's; the paper preset uses {PAPER_MAX_SPEED:g}",
                       help="reset draws theta_dot ~ U(-s, s), s in [0, 8]")
@@ -234,7 +238,7 @@ def _scene_sizes() -> dict[str, int]:
 
 def _collect_scene(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     """``--system SCENE``: refuses the pendulum's options, builds the scene and collects it."""
-    defaults = build_parser().parse_args(["--out", "x"])
+    defaults = build_parser().parse_args(["--out", "x.h5"])
     pendulum_only = [f"--{name.replace('_', '-')}" for name in ("gravity", "gravity_mult", "actuation_gain", "max_angle",
                                                                 "no_torque_arrow", "effect", "max_speed", "env",
                                                                 "env_option")

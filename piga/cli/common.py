@@ -71,6 +71,22 @@ def file_path(text: str) -> str:
     return text
 
 
+#: The suffixes of an HDF5 file a command writes (``piga-collect --out``, ``piga-import --out``), in any case.
+H5_SUFFIXES = (".h5", ".hdf5")
+
+
+def h5_path(text: str) -> str:
+    """argparse type: the path of an HDF5 file to write (:func:`file_path`), ending in one of :data:`H5_SUFFIXES`; a
+    folder, a path without the suffix (``o``) or with another (``o.txt``) is refused before anything is written."""
+    text = file_path(text)
+    accepted = " or ".join(H5_SUFFIXES)
+    if os.path.isdir(text):
+        raise argparse.ArgumentTypeError(f"{text!r} is a folder; name the {accepted} file to write in it")
+    if Path(text).suffix.lower() not in H5_SUFFIXES:
+        raise argparse.ArgumentTypeError(f"expected an HDF5 file ending in {accepted}, got {text!r}")
+    return text
+
+
 #: Exceptions that are the user's to fix; any other exception is a bug, and ``run_cli`` writes its
 #: traceback to a log file (:func:`log_folder`).
 USER_ERRORS: tuple[type[BaseException], ...] = (
@@ -374,4 +390,5 @@ def split_type(text: str) -> tuple[float, float, float]:
 
 __all__ = ["ArgumentParser", "PigaError", "RAY_HELP", "add_ray_option", "connect_backend", "ray_address", "run_cli", "positive_int", "nonnegative_int", "seed_int", "thread_count", "positive_float", "nonnegative_float",
            "split_type", "add_preset_option", "documented_default", "format_default", "Interrupted", "made_folder",
-           "missing_folders", "remove_empty_folders", "remove_outputs", "add_device_option"]
+           "missing_folders", "remove_empty_folders", "remove_outputs", "add_device_option", "file_path", "h5_path",
+           "H5_SUFFIXES"]

@@ -14,6 +14,7 @@ import numpy as np
 
 from agents.config import MPCConfig
 from envs import DMC_PENDULUM, ENV_IDS, PIXEL_PENDULUM
+from envs.pendulum import MAX_GRAVITY, MIN_GRAVITY, PixelPendulumConfig
 from piga.io.atomic import atomic_output, check_writable_target, write_json
 from piga.cli.common import (ArgumentParser, PigaError, add_ray_option, command_line, connect_backend, file_path,
                              int_up_to, positive_float, positive_int, run_cli, seed_int, warn_if_unconverged)
@@ -55,7 +56,9 @@ def build_parser() -> ArgumentParser:
                    help=f"steps per episode, at least {episodes.hold_steps}: success is the goal held for the last "
                    f"{episodes.hold_steps} (default %(default)s)")
     p.add_argument("--gravity-mult", type=positive_float, default=episodes.gravity_mult,
-                   help="multiply the environment's gravity; the agent is told and scales its learned g (default %(default)s)")
+                   help=f"multiply the environment's gravity ({PixelPendulumConfig.gravity:g} m/s²; the product must lie "
+                   f"in [{MIN_GRAVITY:g}, {MAX_GRAVITY:g}]); the agent is told and scales its learned g "
+                   "(default %(default)s)")
     p.add_argument("--not-told", action="store_true",
                    help="do not tell the piga agent --gravity-mult (nor, with --sweep, each multiplier): the environment's "
                    "gravity changes while the agent plans with its learned g unscaled, as the baselines do (the oracle "
@@ -118,6 +121,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     hold = EpisodeConfig.hold_steps
     if args.steps < hold:
         raise PigaError(f"--steps must be at least {hold}: success is the goal held for the last {hold} steps, got {args.steps}")
+    _check_env_gravity(f"--gravity-mult {args.gravity_mult:g}", args.gravity_mult)
     mpc = _mpc_config(args, math.radians(args.goal_angle))
     outputs = []
     if args.out:
@@ -222,12 +226,8 @@ def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: 
         raise PigaError(f"--sweep: {exc}") from None
     if multipliers[0] <= 0:
         raise PigaError(f"--sweep: gravity multipliers must be > 0 (at 10 decimals), got {args.sweep}")
-    from envs.pendulum import PixelPendulumConfig
-
-    try:  # the largest multiplier, here: in a job it failed after the others had run, with the job's name
-        PixelPendulumConfig(gravity_mult=multipliers[-1])
-    except ValueError as exc:
-        raise PigaError(f"--sweep: {exc}") from None
+    for multiplier in (multipliers[0], multipliers[-1]):  # here: in a job it failed after the others had run
+        _check_env_gravity("--sweep", multiplier)
     if kind is RunKind.PIGA:
         model, _ = load_model(args.model)  # fail early, in this process, on a bad folder
         check_pendulum_model(model, args.model)
@@ -250,6 +250,15 @@ def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: 
         save_figure(sweep_figure([s.to_dict() for s in summaries]), outputs[2], overwrite=args.overwrite)
         print(f"wrote {', '.join(map(str, outputs))}")
     return 0
+
+
+def _check_env_gravity(flag: str, gravity_mult: float) -> None:
+    """Refuses a gravity multiplier that gives the pixel pendulum a gravity out of its range
+    (:class:`PixelPendulumConfig`'s), before a model is read."""
+    try:
+        PixelPendulumConfig(gravity_mult=gravity_mult)
+    except ValueError as exc:
+        raise PigaError(f"{flag}: {exc}") from None
 
 
 def _run_kind(args: argparse.Namespace) -> RunKind:

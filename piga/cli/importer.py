@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from piga.cli.common import (ArgumentParser, command_line, file_path, format_default, positive_float, positive_int, run_cli,
-                             split_type)
+from piga.cli.common import (H5_SUFFIXES, ArgumentParser, command_line, format_default, h5_path, positive_float,
+                             positive_int, run_cli, split_type)
 from piga.data.importer import MAX_DT, MIN_DT, ImportConfig, import_recording
 
 PROG = "piga-import"
@@ -24,7 +24,8 @@ def build_parser() -> ArgumentParser:
     p.add_argument("actions", help="CSV with one action per frame: one column, or a header naming the column "
                    "'u' or 'action'")
     p.add_argument("--dt", type=positive_float, required=True, help=f"seconds between frames, {MIN_DT:g} to {MAX_DT:g} (required)")
-    p.add_argument("--out", required=True, type=file_path, help="output .h5 file (written atomically)")
+    p.add_argument("--out", required=True, type=h5_path,
+                   help=f"output {' or '.join(H5_SUFFIXES)} file (written atomically)")
     p.add_argument("--steps", type=positive_int, default=defaults.steps,
                    help="frames per sequence T, >= 2; leftover frames at the end are dropped (default %(default)s)")
     p.add_argument("--image-size", type=positive_int, default=defaults.image_size,

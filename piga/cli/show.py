@@ -17,7 +17,8 @@ PROG = "piga-show"
 def build_parser() -> ArgumentParser:
     p = ArgumentParser(prog=PROG, description="Save a grid of frames (rows: sequences, columns: time) from a piga data file.")
     p.add_argument("data", help="HDF5 file of piga's schema")
-    p.add_argument("--out", required=True, type=file_path, help="output image (.png)")
+    p.add_argument("--out", required=True, type=file_path,
+                   help="output image: .png, or another suffix matplotlib writes (.pdf, .svg, .jpg, ...)")
     p.add_argument("--split", choices=list(SPLITS), default="train", help="split to show (default %(default)s)")
     p.add_argument("--sequences", type=positive_int, default=4, help="rows (default %(default)s)")
     p.add_argument("--frames", type=positive_int, default=10, help="columns (default %(default)s)")

@@ -28,17 +28,18 @@ def save_figure(fig: Figure, path: str | os.PathLike[str], overwrite: bool = Tru
 
 
 def check_figure_target(path: str | os.PathLike[str], overwrite: bool, flag: str = "--out") -> Path:
-    """Fails early, before any work, if :func:`save_figure` could not write ``path``: a suffix matplotlib has no
-    writer for (a suffix-less path is written as PNG), or a target :func:`~piga.io.atomic.check_writable_target`
-    refuses."""
+    """Fails early, before any work, if :func:`save_figure` could not write ``path`` as the user named it: no
+    suffix (the format would be a guess, and the file's name would not say it), a suffix matplotlib has no writer
+    for, or a target :func:`~piga.io.atomic.check_writable_target` refuses."""
     from piga.io.atomic import check_writable_target
 
     target = Path(path)
     formats = plt.figure().canvas.get_supported_filetypes()
     plt.close("all")
     suffix = target.suffix.lstrip(".").lower()
-    if suffix and suffix not in formats:
-        raise ValueError(f"{flag} {target.name}: matplotlib writes no .{suffix} files; use .png (or "
+    if suffix not in formats:
+        what = f"matplotlib writes no .{suffix} files" if suffix else "an image needs the suffix of its format"
+        raise ValueError(f"{flag} {target.name}: {what}; use .png (or "
                          f"{', '.join('.' + f for f in sorted(formats) if f != 'png')})")
     return check_writable_target(target, overwrite)
 
