@@ -27,7 +27,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from baselines import PRESETS, BenchConfig, evaluate, sweep_episodes
+from baselines import AGENTS, PRESETS, BenchConfig, evaluate, sweep_episodes
 from common import farm_main, machine, machine_words
 
 from piga.io.atomic import atomic_output, write_json
@@ -38,7 +38,6 @@ HELD_OUT_SEED = 4242
 """The held-out episodes' seed (starts drawn from ``default_rng(4242)``, env seeds 4242000 + e)."""
 GRAVITY = 1.4
 """The changed gravity multiplier (the baselines table's x1.4 column)."""
-AGENTS = ("piga", "planet", "ddpg", "oracle")
 
 
 @dataclass(frozen=True)
