@@ -48,6 +48,16 @@ def machine() -> dict[str, object]:
             "python": platform.python_version(), "platform": platform.platform()}
 
 
+def write_page(out: Path, record: dict[str, Any], page: str) -> None:
+    """Writes ``OUT.json`` (the record) and ``OUT.md`` (the page), each atomically, and says so."""
+    from piga.io.atomic import atomic_output, write_json
+
+    write_json(out.with_suffix(".json"), record, overwrite=True)
+    with atomic_output(out.with_suffix(".md"), overwrite=True) as tmp:
+        Path(tmp).write_text(page)
+    print(f"wrote {out.with_suffix('.md')} and {out.with_suffix('.json')}")
+
+
 def signed(x: float, digits: int = 1) -> str:
     """A number with a typographic minus, as the README and the results pages write them."""
     return f"{x:.{digits}f}".replace("-", "\u2212")

@@ -28,9 +28,8 @@ from pathlib import Path
 from typing import Any
 
 from baselines import AGENTS, PRESETS, BenchConfig, evaluate, sweep_episodes
-from common import farm_main, machine, machine_words
+from common import farm_main, machine, machine_words, write_page
 
-from piga.io.atomic import atomic_output, write_json
 from piga.io.checkpoint import CHECKPOINT
 from piga.io.pool import JobRecords, RecordedJob, run_recorded
 
@@ -161,10 +160,7 @@ def main(argv: list[str] | None = None) -> int:
     record = {"command": " ".join(["python", "benchmarks/held_out.py", *(sys.argv[1:] if argv is None else argv)]),
               "machine": next(iter(done.values()))["machine"], "seed": args.seed, "runs": rows,
               "summary": summary(rows), "not_here": missing}
-    write_json(args.out.with_suffix(".json"), record, overwrite=True)
-    with atomic_output(args.out.with_suffix(".md"), overwrite=True) as tmp:
-        Path(tmp).write_text(markdown(record))
-    print(f"wrote {args.out.with_suffix('.md')} and {args.out.with_suffix('.json')}")
+    write_page(args.out, record, markdown(record))
     return 0
 
 

@@ -33,9 +33,8 @@ from pathlib import Path
 from typing import Any, Literal, get_args
 
 from baselines import PRESETS, BenchConfig, data_file, evaluate, sweep_episodes, train_planet_run
-from common import farm_main, machine, machine_words
+from common import farm_main, machine, machine_words, write_page
 
-from piga.io.atomic import atomic_output, write_json
 from piga.io.pool import JobRecords, RecordedJob, run_recorded
 
 Variant = Literal["planet-reward"]
@@ -148,10 +147,7 @@ def main(argv: list[str] | None = None) -> int:
               "machine": next(iter(done.values()))["machine"], "sequences": args.sequences,
               "table": table_runs(args.runs, args.sequences),
               "runs": {name: {**r["spec"], **{k: v for k, v in r.items() if k != "spec"}} for name, r in done.items()}}
-    write_json(args.out.with_suffix(".json"), record, overwrite=True)
-    with atomic_output(args.out.with_suffix(".md"), overwrite=True) as tmp:
-        Path(tmp).write_text(markdown(record))
-    print(f"wrote {args.out.with_suffix('.md')} and {args.out.with_suffix('.json')}")
+    write_page(args.out, record, markdown(record))
     return 0
 
 
