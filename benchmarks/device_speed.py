@@ -106,7 +106,7 @@ def planet_steps(data: Path, device: torch.device, seed: int) -> Iterator[None]:
     :func:`agents.planet.train.train_planet`."""
     from agents.planet.config import PlanetTrainConfig
     from agents.planet.rssm import WorldModel, model_steps
-    from agents.planet.train import rssm_config_for
+    from agents.planet.train import optimizer_step, rssm_config_for
     from piga.data.schema import inspect_dataset, load_rewards, read_sequences
 
     info = inspect_dataset(data)
@@ -125,10 +125,7 @@ def planet_steps(data: Path, device: torch.device, seed: int) -> Iterator[None]:
             + torch.arange(length)[None]  # (B, L·R)
         batch = model_steps(frames[rows, cols], actions[rows, cols], rewards[rows, cols], repeat)
         parts = model.loss(*(x.to(device) for x in batch), config, generator)
-        optimizer.zero_grad(set_to_none=True)
-        parts.loss.backward()
-        torch.nn.utils.clip_grad_norm_(model.parameters(), config.grad_clip)
-        optimizer.step()
+        optimizer_step(model, optimizer, parts.loss, config.grad_clip)
         float(parts.loss.detach())
         yield
 

@@ -160,7 +160,7 @@ def planet_ratio(rows: list[dict]) -> dict | None:
         texts.append(f"{what} ({row['model_steps'] / repeat:,.0f} model steps per env step against piga's "
                      f"{by['piga']['model_steps']:,}), PlaNet-style {per_step:.1f} ms (a plan of {row['plan_ms_median']:.1f} ms "
                      f"every {repeat} env steps) against piga's {piga_ms:.2f} ms: piga plans {per_step / piga_ms:.0f}x faster")
-    out["ratio_per_step"] = out["own"]["ratio_per_step"] if "own" in out else None
+    out["ratio_per_step"] = out["own"]["ratio_per_step"]  # the own-budget row exists: PLANET is in the rows
     out["text"] = "Per env step, in this run: " + "; ".join(texts) + "."
     return out
 

@@ -52,19 +52,18 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, get_args
 
 import numpy as np
 import torch
 from torch import nn
 
-from common import machine, machine_words
-from agents.planet.config import LatentPlannerConfig, PlanetTrainConfig, RSSMConfig
+from common import machine, machine_words, write_page
+from agents.planet.config import LatentPlannerConfig, PlanetTrainConfig, RewardAlignment, RSSMConfig
 from agents.planet.rssm import WorldModel, model_steps
-from agents.planet.train import OPEN_LOOP_CONTEXT, _Sequences, check_planet_data, rssm_config_for
+from agents.planet.train import OPEN_LOOP_CONTEXT, _Sequences, check_planet_data, optimizer_step, rssm_config_for
 from piga.cli.common import nonnegative_float, positive_int, seed_int
 from piga.data.schema import inspect_dataset
-from piga.io.atomic import atomic_output, write_json
 
 #: How to make ``mbrl.models.planet`` importable beside piga (its wheel's own pins conflict with piga's).
 MBRL_INSTALL = ("pip install --no-deps mbrl==0.2.0 hydra-core==1.3.8 omegaconf==2.3.0 "
@@ -207,10 +206,7 @@ class PigaTrainer(Trainer):
         """One step of ``train_planet``'s loop on a batch of model steps."""
         started = time.perf_counter()
         parts = self.model.loss(frames, actions, rewards, self.config, self.generator)
-        self.optimizer.zero_grad(set_to_none=True)
-        parts.loss.backward()
-        torch.nn.utils.clip_grad_norm_(self.model.parameters(), self.config.grad_clip)
-        self.optimizer.step()
+        optimizer_step(self.model, self.optimizer, parts.loss, self.config.grad_clip)
         loss, reconstruction, reward = (float(x.detach()) for x in parts[:3])
         self.seconds.append(time.perf_counter() - started)
         self.batches.update(digest(frames, actions, rewards))
@@ -531,7 +527,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--depth", type=positive_int, default=rssm.depth, help="channels of the first conv (default %(default)s)")
     p.add_argument("--action-repeat", type=positive_int, default=rssm.action_repeat,
                    help="env steps per model step, for both models (default %(default)s)")
-    p.add_argument("--reward-alignment", choices=("transition", "frame"), default="transition",
+    p.add_argument("--reward-alignment", choices=get_args(RewardAlignment), default="transition",
                    help="the state piga's reward head reads; mbrl's is always 'transition' (default %(default)s, "
                         f"to match it; piga-baseline's is {rssm.reward_alignment!r})")
     p.add_argument("--free-nats", type=nonnegative_float, default=train.free_nats,
@@ -601,10 +597,7 @@ def main(argv: list[str] | None = None) -> int:
               "models": models, "valid": valid, "differences": differences(settings)}
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    write_json(out.with_suffix(".json"), record, overwrite=True)
-    with atomic_output(out.with_suffix(".md"), overwrite=True) as tmp:
-        tmp.write_text(page(record, settings))
-    print(f"wrote {out.with_suffix('.md')} and {out.with_suffix('.json')}")
+    write_page(out, record, page(record, settings))
     return 0
 
 

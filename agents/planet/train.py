@@ -38,7 +38,7 @@ from piga.io.checkpoint import CHECKPOINT, RunKind, write_checkpoint
 from piga.io.device import module_device, resolve_device
 from piga.training.train import TrainingDiverged
 
-__all__ = ["PlanetState", "check_planet_data", "rssm_config_for", "train_planet"]
+__all__ = ["PlanetState", "check_planet_data", "optimizer_step", "rssm_config_for", "train_planet"]
 
 
 @dataclass
@@ -200,6 +200,15 @@ def _valid_losses(model: WorldModel, data: str | Path, config: PlanetTrainConfig
     return {name: float(value) for name, value in parts._asdict().items()}
 
 
+def optimizer_step(model: WorldModel, optimizer: torch.optim.Optimizer, loss: torch.Tensor, grad_clip: float) -> None:
+    """One of :func:`train_planet`'s updates: the gradient of ``loss``, clipped to global norm ``grad_clip``, and
+    Adam's step."""
+    optimizer.zero_grad(set_to_none=True)
+    loss.backward()
+    torch.nn.utils.clip_grad_norm_(model.parameters(), grad_clip)
+    optimizer.step()
+
+
 def train_planet(
     data: str | Path,
     run_dir: str | Path,
@@ -267,10 +276,7 @@ def train_planet(
                 good = ckpt_path if ckpt_path.exists() else None
                 raise TrainingDiverged(f"loss became {parts.loss.item()} at step {state.step}; "
                                        + (f"last good checkpoint: {good}" if good else "no checkpoint was written yet"))
-            optimizer.zero_grad(set_to_none=True)
-            parts.loss.backward()
-            torch.nn.utils.clip_grad_norm_(model.parameters(), config.grad_clip)
-            optimizer.step()
+            optimizer_step(model, optimizer, parts.loss, config.grad_clip)
             state.step += 1
             count += 1
             for name, value in parts._asdict().items():
