@@ -466,14 +466,15 @@ def train_piga(data: Path, run: Path, seed: int, cfg: BenchConfig, n: int, model
     return float(state["elapsed"])
 
 
-def train_planet_run(data: Path, run: Path, seed: int, cfg: BenchConfig, n: int) -> float:
-    """Trains (unless done: a run of fewer steps is continued to ``cfg.planet_steps``) and returns the run's training seconds."""
+def train_planet_run(data: Path, run: Path, seed: int, cfg: BenchConfig, n: int, device: str = "cpu") -> float:
+    """Trains (unless done: a run of fewer steps is continued to ``cfg.planet_steps``, on ``device``) and returns the
+    run's training seconds."""
     from agents.planet.train import rssm_config_for, train_planet
     from piga.data.schema import inspect_dataset
 
     metrics = run / "metrics.json"
     if not metrics.exists() or json.loads(metrics.read_text())["steps"] < cfg.planet_steps:
-        config = PlanetTrainConfig(steps=cfg.planet_steps, seed=seed, threads=1, device="cpu",
+        config = PlanetTrainConfig(steps=cfg.planet_steps, seed=seed, threads=1, device=device,
                                    **cfg.overrides.get("planet", {}))
         rssm = rssm_config_for(inspect_dataset(data), cfg.overrides.get("rssm"))
         resume = (run / "checkpoint.pt").exists()  # metrics.json comes last: resume a stopped or shorter run

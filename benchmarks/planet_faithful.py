@@ -37,12 +37,17 @@ from common import farm_main, machine, machine_words, write_page
 
 from piga.io.pool import JobRecords, RecordedJob, run_recorded
 
-Variant = Literal["planet-reward"]
+Variant = Literal["planet-reward", "planet-sizes"]
 #: Each variant's settings: overrides of :class:`agents.planet.config.RSSMConfig` and of
 #: :class:`agents.planet.config.PlanetTrainConfig`, and the page's words for them.
 VARIANTS: dict[str, dict[str, Any]] = {
     "planet-reward": {"rssm": {"reward_alignment": "transition"}, "planet": {"reward_scale": 10.0},
                       "words": "PlaNet's reward: the head reads the state after the actions (`transition`), weight 10"},
+    "planet-sizes": {"rssm": {"deter_size": 200, "stoch_size": 30, "hidden_size": 200, "depth": 32, "reward_layers": 3,
+                              "reward_units": 300},
+                     "planet": {"batch_size": 50},
+                     "words": "PlaNet's sizes: GRU 200, stochastic state 30, MLPs 200, convs from 32 channels, reward head "
+                              "3 x 300, batches of 50 chunks (of 20 model steps: the data's 40 frames, not PlaNet's 50)"},
 }
 GRAVITY = 1.4
 """The changed gravity multiplier (the baselines table's x1.4 column; the model is not told it)."""
@@ -59,6 +64,10 @@ class Job:
     cfg: BenchConfig
     folder: Path
     runs: Path
+    device: str = "cpu"
+    """Where to train (not part of the recipe: a run continues on any device)."""
+    workers: int = 1
+    """Processes the evaluation episodes are split over (the same episodes and scores as one)."""
 
 
 def variant_config(base: BenchConfig, variant: str) -> BenchConfig:
@@ -68,19 +77,25 @@ def variant_config(base: BenchConfig, variant: str) -> BenchConfig:
     return replace(base, overrides={**base.overrides, **overrides})
 
 
-def run_job(job: Job) -> dict[str, Any]:
-    """Trains the variant (continuing a stopped run) and scores it at x1.0 and x1.4."""
+def train_job(job: Job) -> float:
+    """Trains the variant (continuing a stopped run); returns its training seconds."""
     import torch
 
     torch.set_num_threads(1)
-    cfg = variant_config(job.cfg, job.variant)
     data = data_file(job.cfg, job.runs, job.sequences)  # the table's file at this size (collected once, in --runs)
+    return train_planet_run(data, job.folder / job.name, job.seed, variant_config(job.cfg, job.variant), job.sequences,
+                            job.device)
+
+
+def run_job(job: Job) -> dict[str, Any]:
+    """Trains the variant (continuing a stopped run) and scores it at x1.0 and x1.4."""
+    seconds = train_job(job)
+    cfg = variant_config(job.cfg, job.variant)
     run = job.folder / job.name
-    seconds = train_planet_run(data, run, job.seed, cfg, job.sequences)
     metrics = json.loads((run / "metrics.json").read_text())
-    return {"machine": machine(), "train_seconds": seconds,
-            "x1": evaluate("planet", run, cfg),
-            "x1.4": evaluate("planet", run, cfg, GRAVITY, sweep_episodes(cfg, "planet")),
+    return {"machine": machine(), "train_seconds": seconds, "train_device": metrics.get("device"),
+            "x1": evaluate("planet", run, cfg, workers=job.workers),
+            "x1.4": evaluate("planet", run, cfg, GRAVITY, sweep_episodes(cfg, "planet"), workers=job.workers),
             "valid": metrics.get("valid"), "open_loop": metrics.get("open_loop")}
 
 
@@ -127,6 +142,12 @@ def main(argv: list[str] | None = None) -> int:
                    help="the baselines benchmark's folder: its data files and records (default %(default)s)")
     p.add_argument("--preset", choices=sorted(PRESETS), default="budget", help="the baselines preset (default %(default)s)")
     p.add_argument("--out", type=Path, default=Path("results/planet_faithful"), help="output prefix (default %(default)s)")
+    p.add_argument("--device", choices=["cpu", "cuda"], default="cpu",
+                   help="where to train (default %(default)s; a run continues on either)")
+    p.add_argument("--workers", type=int, default=1,
+                   help="processes the evaluation episodes are split over (default %(default)s; the same scores)")
+    p.add_argument("--train-only", action="store_true",
+                   help="train (or continue) the runs and stop: no evaluation, no record, no page")
     args = p.parse_args(argv)
     cfg = PRESETS[args.preset]
     if args.sequences not in cfg.planet_size_list:
@@ -141,7 +162,12 @@ def main(argv: list[str] | None = None) -> int:
             spec = {"variant": variant, "seed": seed, "sequences": args.sequences, "preset": args.preset,
                     "overrides": variant_config(cfg, variant).overrides, "steps": cfg.planet_steps,
                     "episodes": cfg.planet_episode_count, "data_seed": cfg.data_seed}
-            jobs.append(RecordedJob(name, spec, Job(name, variant, seed, args.sequences, cfg, folder, args.runs)))
+            jobs.append(RecordedJob(name, spec, Job(name, variant, seed, args.sequences, cfg, folder, args.runs,
+                                                    args.device, args.workers)))
+    if args.train_only:
+        for job in jobs:
+            print(f"{job.name}: trained, {train_job(job.args) / 60:.1f} min", flush=True)
+        return 0
     done = run_recorded(run_job, jobs, JobRecords(folder / "records"), 1, progress=False)
     record = {"command": " ".join(["python", "benchmarks/planet_faithful.py", *(sys.argv[1:] if argv is None else argv)]),
               "machine": next(iter(done.values()))["machine"], "sequences": args.sequences,

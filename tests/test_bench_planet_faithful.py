@@ -31,8 +31,8 @@ def test_a_variant_trains_with_its_settings_on_the_tables_data(faithful: Any, tm
         calls.append(("data", folder.name, n))
         return folder / f"data-n{n}.h5"
 
-    def train_planet_run(data, run, seed, cfg, n):
-        calls.append(("train", data.name, run.name, seed, cfg.overrides["rssm"], cfg.overrides["planet"]))
+    def train_planet_run(data, run, seed, cfg, n, device):
+        calls.append(("train", data.name, run.name, seed, cfg.overrides["rssm"], cfg.overrides["planet"], device))
         run.mkdir(parents=True)
         (run / "metrics.json").write_text(json.dumps({"valid": {"loss": 1.0}, "open_loop": {}}))
         return 6000.0
@@ -44,17 +44,26 @@ def test_a_variant_trains_with_its_settings_on_the_tables_data(faithful: Any, tm
     for name, stand_in in (("data_file", data_file), ("train_planet_run", train_planet_run), ("evaluate", evaluate)):
         monkeypatch.setattr(faithful, name, stand_in)
     out = tmp_path / "faithful"
-    assert faithful.main(["--runs", str(runs), "--out", str(out)]) == 0
+    args = ["--runs", str(runs), "--out", str(out), "--variants", "planet-reward"]
+    assert faithful.main(args) == 0
     assert calls == [("data", "runs", 500),
                      ("train", "data-n500.h5", "planet-reward-n500-s0", 0, {"reward_alignment": "transition"},
-                      {"reward_scale": 10.0}),
+                      {"reward_scale": 10.0}, "cpu"),
                      ("eval", "planet", "planet-reward-n500-s0", 1.0, None),
                      ("eval", "planet", "planet-reward-n500-s0", 1.4, 5)]
     page = out.with_suffix(".md").read_text()
     assert "| the table's (planet-n500-s0) |" in page and "| 0 | 50% (20) | -250.0 | 0% | 90 |" in page
     assert "| planet-reward (planet-reward-n500-s0) |" in page and "| 0 | 90% (20) | -190.0 | 20% | 100 |" in page
     calls.clear()
-    assert faithful.main(["--runs", str(runs), "--out", str(out)]) == 0 and calls == []  # the record is kept
+    assert faithful.main(args) == 0 and calls == []  # the record is kept
+    # --train-only trains PlaNet's sizes on the device asked for, and neither scores nor records nor writes a page
+    assert faithful.main([*args[:4], "--variants", "planet-sizes", "--device", "cuda", "--train-only",
+                          "--out", str(tmp_path / "trained")]) == 0
+    assert calls == [("data", "runs", 500),
+                     ("train", "data-n500.h5", "planet-sizes-n500-s0", 0,
+                      {"deter_size": 200, "stoch_size": 30, "hidden_size": 200, "depth": 32, "reward_layers": 3,
+                       "reward_units": 300}, {"batch_size": 50}, "cuda")]
+    assert not (tmp_path / "trained.md").exists() and not (tmp_path / "trained_runs" / "records").exists()
 
 
 def test_a_size_the_table_does_not_have_is_refused(faithful: Any, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

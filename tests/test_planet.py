@@ -12,7 +12,7 @@ import torch
 from agents.config import CEMConfig
 from agents.planet.config import IterativeConfig, LatentPlannerConfig, PlanetTrainConfig, RSSMConfig
 from agents.planet.planner import PlanetAgent
-from agents.planet.rssm import Belief, WorldModel, model_steps
+from agents.planet.rssm import Belief, WorldModel, model_steps, sample
 
 #: A model small enough for a test to train in a second.
 TINY = RSSMConfig(depth=4, deter_size=16, stoch_size=4, hidden_size=16, action_repeat=1)
@@ -244,3 +244,32 @@ def test_transition_alignment_pairs_each_reward_with_the_state_its_actions_lead_
     frames = torch.randint(0, 256, (2, 5, 64, 64), dtype=torch.uint8)
     parts = model.loss(frames, torch.zeros(2, 5, 2), torch.zeros(2, 5), TINY_TRAIN, torch.Generator().manual_seed(0))
     assert torch.isfinite(parts.loss) and parts.reward >= 0
+
+
+def test_observe_draws_the_noise_that_sampling_step_by_step_would() -> None:
+    """observe() draws its T noise tensors before the loop (one copy to the model's device): the same numbers as
+    sample() at each step, so that runs continue exactly across the change and across devices."""
+    config = RSSMConfig(depth=4, deter_size=16, stoch_size=4, hidden_size=16)
+    model = WorldModel(config)
+    frames, actions = torch.randint(0, 256, (2, 4, 64, 64), dtype=torch.uint8), torch.randn(2, 4, 2)
+    h, s, _, _ = model.observe(frames, actions, torch.Generator().manual_seed(7))
+    generator, embeds = torch.Generator().manual_seed(7), model.embed(frames)
+    belief, previous, expected = model.rssm.initial(2), torch.zeros(2, 2), []
+    for step in range(4):
+        hidden, _ = model.rssm.transition(belief, previous)
+        belief, previous = Belief(hidden, sample(model.rssm.posterior(hidden, embeds[:, step]), generator)), actions[:, step]
+        expected.append(belief.s)
+    assert torch.equal(s, torch.stack(expected, 1))
+
+
+def test_the_reward_head_has_the_layers_and_width_asked_for() -> None:
+    def widths(config: RSSMConfig) -> list[tuple[int, int]]:
+        return [(m.in_features, m.out_features) for m in WorldModel(config).reward_head if isinstance(m, torch.nn.Linear)]
+
+    small = RSSMConfig(depth=4, deter_size=16, stoch_size=4, hidden_size=8)
+    assert widths(small) == [(20, 8), (8, 8), (8, 1)]  # the default: 2 hidden layers of hidden_size
+    assert widths(replace(small, reward_layers=3, reward_units=12)) == [(20, 12), (12, 12), (12, 12), (12, 1)]
+    with pytest.raises(ValueError, match="reward_units must be >= 0"):
+        replace(small, reward_units=-1)
+    with pytest.raises(ValueError, match="reward_layers must be >= 1"):
+        replace(small, reward_layers=0)

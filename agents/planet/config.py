@@ -47,6 +47,10 @@ class RSSMConfig:
     """Size of the stochastic Gaussian state s (PlaNet: 30; the pendulum has two degrees of freedom)."""
     hidden_size: int = 100
     """Width of the MLPs around the GRU and of the reward head (PlaNet: 200, halved with ``deter_size``)."""
+    reward_layers: int = 2
+    """Hidden layers of the reward head (PlaNet: 3)."""
+    reward_units: int = 0
+    """Width of the reward head's hidden layers (0: ``hidden_size``; PlaNet: 300)."""
     depth: int = 16
     """Channels of the first conv layer, doubled at each of the four (PlaNet: 32; the convs are ~80% of
     a training step's time on a CPU, and a gray 64x64 pendulum needs less capacity than RGB scenes)."""
@@ -70,9 +74,12 @@ class RSSMConfig:
         check_choices(self)
         if self.image_size != 64:
             raise ValueError(f"the PlaNet encoder and decoder are built for 64x64 frames, got image_size={self.image_size}")
-        for name in ("channels", "action_dim", "deter_size", "stoch_size", "hidden_size", "depth", "action_repeat"):
+        for name in ("channels", "action_dim", "deter_size", "stoch_size", "hidden_size", "reward_layers", "depth",
+                     "action_repeat"):
             if getattr(self, name) < 1:
                 raise ValueError(f"RSSMConfig.{name} must be >= 1, got {getattr(self, name)}")
+        if self.reward_units < 0:
+            raise ValueError(f"RSSMConfig.reward_units must be >= 0 (0: hidden_size), got {self.reward_units}")
         if not self.min_std > 0:
             raise ValueError(f"RSSMConfig.min_std must be > 0, got {self.min_std}")
 

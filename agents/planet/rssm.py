@@ -174,12 +174,17 @@ class RSSM(nn.Module):
         return self._gaussian(self.posterior_net(torch.cat([h, embed], -1)))
 
 
+def draw_noise(shape: tuple[int, ...], like: Tensor, generator: torch.Generator | None) -> Tensor:
+    """Standard normal noise of ``shape`` in ``like``'s dtype, from ``generator`` on its device (None: torch's global
+    generator of ``like``'s device), not yet moved to ``like``'s device."""
+    device = like.device if generator is None else generator.device
+    return torch.randn(shape, generator=generator, dtype=like.dtype, device=device)
+
+
 def sample(dist: Gaussian, generator: torch.Generator | None) -> Tensor:
     """A reparameterised sample mean + std·ε, ε from ``generator`` on its device (None: torch's global
     generator of the state's device), then moved to the state's device."""
-    device = dist.mean.device if generator is None else generator.device
-    noise = torch.randn(dist.mean.shape, generator=generator, dtype=dist.mean.dtype, device=device)
-    return dist.mean + dist.std * noise.to(dist.mean.device)
+    return dist.mean + dist.std * draw_noise(tuple(dist.mean.shape), dist.mean, generator).to(dist.mean.device)
 
 
 def _kl(q: Gaussian, p: Gaussian) -> Tensor:
@@ -201,9 +206,11 @@ class WorldModel(nn.Module):
         self.encoder = Encoder(config)
         self.rssm = RSSM(config)
         self.decoder = Decoder(config)
-        k = config.hidden_size
-        self.reward_head = nn.Sequential(nn.Linear(config.deter_size + config.stoch_size, k), nn.ReLU(),
-                                         nn.Linear(k, k), nn.ReLU(), nn.Linear(k, 1))
+        k = config.reward_units or config.hidden_size
+        layers: list[nn.Module] = []
+        for width in (config.deter_size + config.stoch_size, *[k] * (config.reward_layers - 1)):
+            layers += [nn.Linear(width, k), nn.ReLU()]
+        self.reward_head = nn.Sequential(*layers, nn.Linear(k, 1))  # (..., D + S) -> (..., 1)
 
     def embed(self, frames: Tensor) -> Tensor:
         """uint8 frames (B, T, H, W[, C]) -> embeddings (B, T, E)."""
@@ -223,11 +230,15 @@ class WorldModel(nn.Module):
         embeds = self.embed(frames)  # (B, T, E)
         belief = self.rssm.initial(b)
         previous = embeds.new_zeros(b, self.config.input_action_size)  # (B, R·A)
+        # the T draws that sample() would make, in its order, moved in one copy: a CPU generator then costs a
+        # model on a GPU one wait for the GPU per batch rather than one per step
+        noise = torch.stack([draw_noise((b, self.config.stoch_size), embeds, generator) for _ in range(t)])
+        noise = noise.to(embeds.device)  # (T, B, S)
         hs, ss, priors, posts = [], [], [], []
         for step in range(t):
             h, prior = self.rssm.transition(belief, previous)
             post = self.rssm.posterior(h, embeds[:, step])
-            belief = Belief(h, sample(post, generator))
+            belief = Belief(h, post.mean + post.std * noise[step])
             previous = actions[:, step]
             hs.append(h)
             ss.append(belief.s)
