@@ -13,7 +13,7 @@ from piga.cli import baseline, control
 from tests.helpers import assert_one_line, assert_sb3_run_finished, copy_without, run_in_process
 
 TINY_PLANET = ("--steps", "2", "--batch-size", "2", "--chunk-length", "8", "--deter-size", "8", "--stoch-size", "4",
-               "--threads", "1", "--quiet")
+               "--hidden-size", "8", "--depth", "4", "--reward-layers", "1", "--reward-units", "6", "--threads", "1", "--quiet")
 TINY_DDPG = ("--steps", "200", "--eval-every", "200", "--eval-episodes", "1", "--learning-starts", "100", "--quiet",
              "--learning-rate", "0.0005", "--batch-size", "32", "--noise-std", "0.3")
 
@@ -187,6 +187,7 @@ def test_planet_run_records_its_kind_and_refuses_to_be_overwritten(planet_run: P
                                                                    capsys: pytest.CaptureFixture[str]) -> None:
     record = json.loads((planet_run / "config.json").read_text())
     assert record["kind"] == "planet" and record["rssm"]["deter_size"] == 8
+    assert [record["rssm"][k] for k in ("hidden_size", "depth", "reward_layers", "reward_units")] == [8, 4, 1, 6]
     metrics = json.loads((planet_run / "metrics.json").read_text())
     assert metrics["steps"] == 2 and len(metrics["learning_curve"]) == 1
     code, _, err = run_in_process("piga-baseline", baseline.main, "planet", str(tiny_data), "--out", str(planet_run),

@@ -46,11 +46,13 @@ class RSSMConfig:
     stoch_size: int = 16
     """Size of the stochastic Gaussian state s (PlaNet: 30; the pendulum has two degrees of freedom)."""
     hidden_size: int = 100
-    """Width of the MLPs around the GRU and of the reward head (PlaNet: 200, halved with ``deter_size``)."""
+    """Width of the MLPs around the GRU and, with ``reward_units`` 0, of the reward head (PlaNet: 200, halved with
+    ``deter_size``)."""
     reward_layers: int = 2
-    """Hidden layers of the reward head (PlaNet: 3)."""
+    """Hidden layers of the reward head (PlaNet: 3, its ``configs.py``'s ``head_network``)."""
     reward_units: int = 0
-    """Width of the reward head's hidden layers (0: ``hidden_size``; PlaNet: 300)."""
+    """Width of the reward head's hidden layers (0: ``hidden_size``; PlaNet: 300). Run at PlaNet's sizes in
+    benchmarks/planet_faithful.py (``planet-sizes``)."""
     depth: int = 16
     """Channels of the first conv layer, doubled at each of the four (PlaNet: 32; the convs are ~80% of
     a training step's time on a CPU, and a gray 64x64 pendulum needs less capacity than RGB scenes)."""

@@ -59,6 +59,14 @@ def build_parser() -> ArgumentParser:
                    help="train on the first N train sequences only (default %(default)s: all)")
     q.add_argument("--free-nats", type=nonnegative_float, default=planet.free_nats, help="KL free nats (default %(default)s)")
     q.add_argument("--deter-size", type=positive_int, default=rssm.deter_size, help="GRU state size (default %(default)s)")
+    q.add_argument("--hidden-size", type=positive_int, default=rssm.hidden_size,
+                   help="width of the MLPs around the GRU (PlaNet: 200) (default %(default)s)")
+    q.add_argument("--depth", type=positive_int, default=rssm.depth,
+                   help="channels of the first conv layer, doubled at each of four (PlaNet: 32) (default %(default)s)")
+    q.add_argument("--reward-layers", type=positive_int, default=rssm.reward_layers,
+                   help="hidden layers of the reward head (PlaNet: 3) (default %(default)s)")
+    q.add_argument("--reward-units", type=nonnegative_int, default=rssm.reward_units,
+                   help="width of the reward head's hidden layers (PlaNet: 300; 0: --hidden-size) (default %(default)s)")
     q.add_argument("--reward-alignment", choices=get_args(RewardAlignment), default=rssm.reward_alignment,
                    help="which state the reward head reads for a model step's reward: frame (the state before its actions) "
                    "or transition (PlaNet's: the state they lead to, which has seen them) (default %(default)s)")
@@ -341,7 +349,9 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
                                    threads=args.threads, device=args.device, max_minutes=args.max_minutes or 0.0)
         check_planet_data(info, config, args.action_repeat)  # a bad file: one line naming it, before the model's sizes
         rssm = rssm_config_for(info, {"deter_size": args.deter_size, "stoch_size": args.stoch_size, "action_repeat": args.action_repeat,
-                                      "reward_alignment": args.reward_alignment})
+                                      "reward_alignment": args.reward_alignment, "hidden_size": args.hidden_size,
+                                      "depth": args.depth, "reward_layers": args.reward_layers,
+                                      "reward_units": args.reward_units})
         check_planet_memory(rssm, config)
         if config.max_sequences > (n_train := info.split_counts["train"]):
             raise PigaError(f"--max-sequences {config.max_sequences}: {args.data} has {n_train} train sequences; give at "
