@@ -12,10 +12,12 @@ import torch
 from piga.io.checkpoint import CHECKPOINT, RunKind, read_checkpoint, require_piga_run, run_kind, write_checkpoint
 from tests.helpers import train_tiny
 
-#: The keys of each kind's checkpoint as runs wrote them before the checkpoint module (recorded from such runs).
+#: The keys of each kind's checkpoint as runs wrote them before the checkpoint module (recorded from such runs),
+#: plus the keys added since, which readers take as optional (PlaNet-style: ``best_model``, the weights of the
+#: lowest valid loss).
 PAYLOAD_KEYS = {
     RunKind.PIGA: ["data", "model", "model_config", "optimizer", "plan", "rng", "state", "train_config"],
-    RunKind.PLANET: ["data", "kind", "model", "optimizer", "rng", "rssm_config", "state", "train_config"],
+    RunKind.PLANET: ["best_model", "data", "kind", "model", "optimizer", "rng", "rssm_config", "state", "train_config"],
     RunKind.DDPG: ["config", "elapsed", "episodes", "history", "kind", "model_zip", "replay_buffer", "rng"],
 }
 

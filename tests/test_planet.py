@@ -92,6 +92,8 @@ def test_nan_stops_and_names_the_last_good_checkpoint(tiny_data: Path, tmp_path:
 
     def loss_that_blows_up(self, *args, **kwargs):  # type: ignore[no-untyped-def]
         parts = original(self, *args, **kwargs)
+        if not torch.is_grad_enabled():  # the valid split's loss at a checkpoint
+            return parts
         calls.append(1)
         return parts._replace(loss=parts.loss * float("nan")) if len(calls) == 3 else parts
 
@@ -273,3 +275,42 @@ def test_the_reward_head_has_the_layers_and_width_asked_for() -> None:
         replace(small, reward_units=-1)
     with pytest.raises(ValueError, match="reward_layers must be >= 1"):
         replace(small, reward_layers=0)
+
+
+def test_the_checkpoint_keeps_the_weights_of_the_lowest_valid_loss(tiny_data: Path, tmp_path: Path) -> None:
+    """Each checkpoint measures the valid split's loss; the lowest one's weights are kept (resumed exactly) and
+    write_selected makes them a run of their own: the weights a run stopped at that step has."""
+    import json
+
+    from agents.planet.run import load_planet, write_selected
+    from agents.planet.train import train_planet
+
+    config = replace(TINY_TRAIN, steps=6, checkpoint_every=1, lr=3e-2)  # a high rate: the valid loss moves about
+    _, state = train_planet(tiny_data, tmp_path / "run", config, TINY, progress=False)
+    losses = [r["valid_loss"] for r in state.history]
+    assert len(losses) == 6 and state.best_valid_loss == min(losses)
+    assert state.best_step == 1 + losses.index(min(losses))
+    metrics = json.loads((tmp_path / "run" / "metrics.json").read_text())
+    assert metrics["best_valid"] == {"step": state.best_step, "loss": state.best_valid_loss}
+    train_planet(tiny_data, tmp_path / "half", replace(config, steps=3), TINY, progress=False)
+    _, resumed = train_planet(tiny_data, tmp_path / "half", config, resume=True, progress=False)
+    assert (resumed.best_step, resumed.best_valid_loss) == (state.best_step, state.best_valid_loss)
+    assert write_selected(tmp_path / "half", tmp_path / "selected") == {"step": state.best_step, "loss": state.best_valid_loss}
+    train_planet(tiny_data, tmp_path / "stopped", replace(config, steps=state.best_step), TINY, progress=False)
+    for (name, p), q in zip(load_planet(tmp_path / "stopped")[0].state_dict().items(),
+                            load_planet(tmp_path / "selected")[0].state_dict().values()):
+        assert torch.equal(p, q), name
+    assert load_planet(tmp_path / "selected")[1]["state"]["step"] == state.best_step
+
+
+def test_no_model_is_selected_without_a_valid_loss(tiny_data: Path, tmp_path: Path) -> None:
+    from agents.planet.run import write_selected
+    from agents.planet.train import train_planet
+    from piga.io.checkpoint import CHECKPOINT
+
+    train_planet(tiny_data, tmp_path / "run", replace(TINY_TRAIN, steps=2), TINY, progress=False)
+    ckpt = torch.load(tmp_path / "run" / CHECKPOINT, weights_only=False)
+    ckpt["best_model"], ckpt["state"]["best_step"] = None, 0  # as a run trained before the valid loss was measured
+    torch.save(ckpt, tmp_path / "run" / CHECKPOINT)
+    with pytest.raises(ValueError, match="no valid loss was measured during training"):
+        write_selected(tmp_path / "run", tmp_path / "selected")

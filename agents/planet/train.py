@@ -16,6 +16,7 @@ A run folder holds ``config.json`` (``kind: "planet"``), ``checkpoint.pt``, ``te
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
@@ -50,7 +51,13 @@ class PlanetState:
     elapsed: float = 0.0
     """Training seconds so far."""
     history: list[dict[str, float]] = field(default_factory=list)
-    """The learning curve: per checkpoint, the mean losses since the previous one, the step and seconds."""
+    """The learning curve: per checkpoint, the mean losses since the previous one, the step and seconds, and the
+    loss on the valid split (``valid_loss``, where the file has one)."""
+    best_step: int = 0
+    """The checkpoint step of the lowest valid loss so far (0: none measured), whose weights the checkpoint keeps
+    as ``best_model``: a model selected on held-out sequences, never on control episodes."""
+    best_valid_loss: float | None = None
+    """That loss."""
 
 
 class _Sequences:
@@ -134,8 +141,10 @@ def check_planet_data(info: DatasetInfo, config: PlanetTrainConfig, repeat: int 
 
 
 def _save(path: Path, model: WorldModel, optimizer: torch.optim.Optimizer, state: PlanetState, config: PlanetTrainConfig,
-          rng: np.random.Generator, generator: torch.Generator, info: DatasetInfo) -> None:
+          rng: np.random.Generator, generator: torch.Generator, info: DatasetInfo,
+          best: dict[str, torch.Tensor] | None = None) -> None:
     payload = {
+        "best_model": best,
         "kind": RunKind.PLANET.value,
         "rssm_config": model.config.to_dict(),
         "train_config": config.to_dict(),
@@ -244,11 +253,13 @@ def train_planet(
         torch.set_num_threads(config.threads)
     rng = np.random.default_rng(config.seed)
     generator = torch.Generator().manual_seed(config.seed)
+    best: dict[str, torch.Tensor] | None = None  # the weights of the lowest valid loss, on the CPU
     if resume:
         model, ckpt = load_planet(run_dir)
         state = PlanetState(**ckpt["state"])
         rng.bit_generator.state = ckpt["rng"]["numpy"]
         generator.set_state(ckpt["rng"]["torch"])
+        best = ckpt.get("best_model")
     else:
         torch.manual_seed(config.seed)  # the layers' initialisation
         model = WorldModel(rssm or rssm_config_for(info))
@@ -288,10 +299,16 @@ def train_planet(
                 state.elapsed = time.monotonic() - started
                 record = {name: total / count for name, total in sums.items()}
                 record.update({"step": state.step, "seconds": state.elapsed})
+                valid = _valid_losses(model, data, config, info)  # its own generator: the training draws are untouched
+                if valid is not None:
+                    record["valid_loss"] = valid["loss"]
+                    if math.isfinite(valid["loss"]) and (state.best_valid_loss is None or valid["loss"] < state.best_valid_loss):
+                        state.best_step, state.best_valid_loss = state.step, valid["loss"]
+                        best = {name: tensor.detach().cpu().clone() for name, tensor in model.state_dict().items()}
                 state.history.append(record)
                 sums, count = {}, 0
                 run_dir.mkdir(parents=True, exist_ok=True)
-                _save(ckpt_path, model, optimizer, state, config, rng, generator, info)
+                _save(ckpt_path, model, optimizer, state, config, rng, generator, info, best)
                 if writer is None:
                     from torch.utils.tensorboard import SummaryWriter
 
@@ -317,6 +334,7 @@ def train_planet(
         "device": str(device),
         "learning_curve": state.history,
         "valid": _valid_losses(model, data, config, info),
+        "best_valid": None if state.best_valid_loss is None else {"step": state.best_step, "loss": state.best_valid_loss},
         "open_loop": open_loop_check(model, data, run_dir, config.seed),
     }
     write_json(run_dir / "metrics.json", metrics)
