@@ -94,6 +94,7 @@ def run_job(job: Job) -> dict[str, Any]:
     run = job.folder / job.name
     metrics = json.loads((run / "metrics.json").read_text())
     return {"machine": machine(), "train_seconds": seconds, "train_device": metrics.get("device"),
+            "train_device_name": metrics.get("device_name"),
             "x1": evaluate("planet", run, cfg, workers=job.workers),
             "x1.4": evaluate("planet", run, cfg, GRAVITY, sweep_episodes(cfg, "planet"), workers=job.workers),
             "valid": metrics.get("valid"), "open_loop": metrics.get("open_loop")}
@@ -109,14 +110,21 @@ def table_runs(runs: Path, sequences: int) -> dict[str, dict[str, Any]]:
     return out
 
 
+def _device(run: dict[str, Any]) -> str:
+    """" (on DEVICE)" for a run trained off the CPU, naming the GPU where its metrics do."""
+    device = run.get("train_device") or "cpu"
+    return "" if device == "cpu" else f" (on {run.get('train_device_name') or device})"
+
+
 def markdown(record: dict[str, Any]) -> str:
     n = record["sequences"]
-    lines = ["# The PlaNet-style model with PlaNet's reward settings", "",
+    lines = ["# The PlaNet-style model with PlaNet's reward settings and sizes", "",
              f"Command: `{record['command']}`", "",
              f"Machine: {machine_words(record['machine'])}.", "",
              f"Data, schedule and episodes are the baselines table's at {n} random-action sequences (results/baselines.md): "
              "the same file, 12000 training steps, 20 episodes at x1.0 and 5 at x1.4 (not told), the same starts and "
-             "success rule. Only the settings of each row differ.", "",
+             "success rule. Only the settings of each row differ. Training minutes are one CPU thread's unless the "
+             "row names the device it trained on.", "",
              "| row | settings | seed | success x1.0 (episodes) | mean return x1.0 | success x1.4 | training min |",
              "|---|---|---|---|---|---|---|"]
     for name, run in record["table"].items():
@@ -127,7 +135,7 @@ def markdown(record: dict[str, Any]) -> str:
     for name, run in record["runs"].items():
         lines.append(f"| {run['variant']} ({name}) | {VARIANTS[run['variant']]['words']} | {run['seed']} | "
                      f"{100 * run['x1']['success_rate']:.0f}% ({run['x1']['episodes']}) | {run['x1']['mean_return']:.1f} | "
-                     f"{100 * run['x1.4']['success_rate']:.0f}% | {run['train_seconds'] / 60:.0f} |")
+                     f"{100 * run['x1.4']['success_rate']:.0f}% | {run['train_seconds'] / 60:.0f}{_device(run)} |")
     return "\n".join(lines) + "\n"
 
 

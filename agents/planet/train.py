@@ -332,6 +332,7 @@ def train_planet(
         "steps": state.step,
         "train_seconds": state.elapsed,
         "device": str(device),
+        "device_name": torch.cuda.get_device_name(device) if device.type == "cuda" else None,
         "learning_curve": state.history,
         "valid": _valid_losses(model, data, config, info),
         "best_valid": None if state.best_valid_loss is None else {"step": state.best_step, "loss": state.best_valid_loss},
