@@ -383,6 +383,17 @@ def evaluate(kind: str, run: Path | None, cfg: BenchConfig, gravity_mult: float 
     return run_split(job, workers, progress=False).summary.to_dict()
 
 
+def planet_table_runs(runs: Path, sequences: int, gravity: float = 1.4) -> dict[str, dict[str, Any]]:
+    """The table's PlaNet-style records at ``sequences`` in ``runs/records``, by name: seed, scores at x1.0 and at
+    ``gravity`` (the sweep's), training seconds (benchmarks that set a variant beside the table's runs)."""
+    out = {}
+    for path in sorted((runs / "records").glob(f"planet-n{sequences}-s*.json")):
+        record = json.loads(path.read_text())
+        out[path.stem] = {"seed": record["spec"]["seed"], "x1": record["control"],
+                          "x1.4": record["sweep"][f"{gravity:g}"], "train_seconds": record["train_seconds"]}
+    return out
+
+
 def episode_config_for(kind: str, cfg: BenchConfig, gravity_mult: float = 1.0, episodes: int | None = None,
                        seed: int = 0) -> Any:
     """The :class:`piga.control.episodes.EpisodeConfig` of one evaluation of ``kind``'s agent, on the episodes of

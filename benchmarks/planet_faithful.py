@@ -32,7 +32,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Literal, get_args
 
-from baselines import PRESETS, BenchConfig, data_file, evaluate, sweep_episodes, train_planet_run
+from baselines import PRESETS, BenchConfig, data_file, evaluate, planet_table_runs, sweep_episodes, train_planet_run
 from common import farm_main, machine, machine_words, write_page
 
 from piga.io.pool import JobRecords, RecordedJob, run_recorded
@@ -98,16 +98,6 @@ def run_job(job: Job) -> dict[str, Any]:
             "x1": evaluate("planet", run, cfg, workers=job.workers),
             "x1.4": evaluate("planet", run, cfg, GRAVITY, sweep_episodes(cfg, "planet"), workers=job.workers),
             "valid": metrics.get("valid"), "open_loop": metrics.get("open_loop")}
-
-
-def table_runs(runs: Path, sequences: int) -> dict[str, dict[str, Any]]:
-    """The baselines table's PlaNet-style records at ``sequences``, by name."""
-    out = {}
-    for path in sorted((runs / "records").glob(f"planet-n{sequences}-s*.json")):
-        record = json.loads(path.read_text())
-        out[path.stem] = {"seed": record["spec"]["seed"], "x1": record["control"],
-                          "x1.4": record["sweep"][f"{GRAVITY:g}"], "train_seconds": record["train_seconds"]}
-    return out
 
 
 def _device(run: dict[str, Any]) -> str:
@@ -179,7 +169,7 @@ def main(argv: list[str] | None = None) -> int:
     done = run_recorded(run_job, jobs, JobRecords(folder / "records"), 1, progress=False)
     record = {"command": " ".join(["python", "benchmarks/planet_faithful.py", *(sys.argv[1:] if argv is None else argv)]),
               "machine": next(iter(done.values()))["machine"], "sequences": args.sequences,
-              "table": table_runs(args.runs, args.sequences),
+              "table": planet_table_runs(args.runs, args.sequences),
               "runs": {name: {**r["spec"], **{k: v for k, v in r.items() if k != "spec"}} for name, r in done.items()}}
     write_page(args.out, record, markdown(record))
     return 0

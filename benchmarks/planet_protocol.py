@@ -32,7 +32,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from baselines import COST_S, PRESETS, BenchConfig, data_file, evaluate, sweep_episodes
+from baselines import COST_S, PRESETS, BenchConfig, data_file, evaluate, planet_table_runs, sweep_episodes
 from common import farm_main, machine, machine_words, write_page
 
 from piga.io.atomic import write_json
@@ -142,16 +142,6 @@ def estimate_hours(plan: Plan, cfg: BenchConfig) -> float:
     return seconds / 3600
 
 
-def table_runs(runs: Path, sequences: int) -> dict[str, dict[str, Any]]:
-    """The baselines table's PlaNet-style records at ``sequences``, by name."""
-    out = {}
-    for path in sorted((runs / "records").glob(f"planet-n{sequences}-s*.json")):
-        record = json.loads(path.read_text())
-        out[path.stem] = {"seed": record["spec"]["seed"], "x1": record["control"],
-                          "x1.4": record["sweep"][f"{GRAVITY:g}"], "train_seconds": record["train_seconds"]}
-    return out
-
-
 def _cells(run: dict[str, Any]) -> str:
     x1 = run["x1"]
     return (f"{100 * x1['success_rate']:.0f}% ({x1['episodes']}) | {x1['mean_return']:.1f} | "
@@ -225,7 +215,7 @@ def main(argv: list[str] | None = None) -> int:
     record = {"command": " ".join(["python", "benchmarks/planet_protocol.py", *(sys.argv[1:] if argv is None else argv)]),
               "machine": next(iter(done.values()))["machine"], "sequences": list(plans), "frames": cfg.steps,
               "seed_sequences": args.seed_sequences,
-              "table": {str(n): table_runs(args.runs, n) for n in plans},
+              "table": {str(n): planet_table_runs(args.runs, n) for n in plans},
               "runs": {name: {**r["spec"], **{k: v for k, v in r.items() if k != "spec"}} for name, r in done.items()}}
     write_page(args.out, record, markdown(record))
     return 0
