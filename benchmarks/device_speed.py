@@ -5,7 +5,9 @@ each device asked for, in this process, one after the other:
 
 - ``piga fast``: the world model of the fast preset, at its full horizon (L = 4 input frames, T_pred = 10),
   batches of 32 windows from the training DataLoader;
-- ``PlaNet-style``: the RSSM of ``piga-baseline planet``'s defaults, batches of 16 chunks of 20 model steps.
+- ``PlaNet-style``: the RSSM of ``piga-baseline planet``'s defaults, batches of 16 chunks of 20 model steps;
+- ``PlaNet sizes`` (only with ``--workloads``): the same at PlaNet's sizes, batches of 50 chunks
+  (benchmarks/planet_faithful.py's ``planet-sizes``: what a CPU step costs at them).
 
 A step is what the training loops do per batch: read and copy the batch, forward, backward, clip,
 update, and read the loss back (and, for piga, its physical parameters). Checkpoints and evaluation are
@@ -34,6 +36,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import shlex
 import statistics
 import sys
 import time
@@ -48,8 +51,8 @@ from common import machine, machine_words
 from piga.io.atomic import atomic_output, write_json
 from piga.io.device import cuda_available, resolve_device
 
-#: The trainings timed, in the order the page lists them.
-WORKLOADS = ("piga fast", "PlaNet-style")
+#: The trainings that can be timed, in the order the page lists them; the first two unless ``--workloads`` says.
+WORKLOADS = ("piga fast", "PlaNet-style", "PlaNet sizes")
 #: The ``machine`` of the rows measured by the invocation that wrote the record.
 THIS = "this machine"
 
@@ -101,20 +104,23 @@ def piga_steps(data: Path, device: torch.device, seed: int) -> Iterator[None]:
         windows.close()
 
 
-def planet_steps(data: Path, device: torch.device, seed: int) -> Iterator[None]:
-    """Training steps of ``piga-baseline planet``'s default model on ``data``, one per ``next``: the steps of
-    :func:`agents.planet.train.train_planet`."""
+def planet_steps(data: Path, device: torch.device, seed: int, sizes: dict[str, Any] | None = None,
+                 batch_size: int | None = None) -> Iterator[None]:
+    """Training steps of ``piga-baseline planet``'s default model on ``data`` (``sizes``: RSSMConfig overrides,
+    ``batch_size``: chunks per batch), one per ``next``: the steps of :func:`agents.planet.train.train_planet`."""
+    from dataclasses import replace
+
     from agents.planet.config import PlanetTrainConfig
     from agents.planet.rssm import WorldModel, model_steps
     from agents.planet.train import optimizer_step, rssm_config_for
     from piga.data.schema import inspect_dataset, load_rewards, read_sequences
 
     info = inspect_dataset(data)
-    config = PlanetTrainConfig()
+    config = PlanetTrainConfig() if batch_size is None else replace(PlanetTrainConfig(), batch_size=batch_size)
     frames, actions = (torch.from_numpy(x) for x in read_sequences(data, "train"))  # (N, T, H, W), (N, T, A)
     rewards = torch.from_numpy(load_rewards(data, "train"))  # (N, T)
     torch.manual_seed(seed)
-    model = WorldModel(rssm_config_for(info)).to(device).train()
+    model = WorldModel(rssm_config_for(info, sizes)).to(device).train()
     optimizer = torch.optim.Adam(model.parameters(), lr=config.lr, eps=config.adam_eps)
     rng, generator = np.random.default_rng(seed), torch.Generator().manual_seed(seed)
     repeat = model.config.action_repeat
@@ -130,8 +136,11 @@ def planet_steps(data: Path, device: torch.device, seed: int) -> Iterator[None]:
         yield
 
 
-STEPS: dict[str, Callable[[Path, torch.device, int], Iterator[None]]] = {"piga fast": piga_steps,
-                                                                        "PlaNet-style": planet_steps}
+#: PlaNet's sizes (benchmarks/planet_faithful.py's ``planet-sizes`` variant).
+PLANET_SIZES = {"deter_size": 200, "stoch_size": 30, "hidden_size": 200, "depth": 32, "reward_layers": 3, "reward_units": 300}
+STEPS: dict[str, Callable[[Path, torch.device, int], Iterator[None]]] = {
+    "piga fast": piga_steps, "PlaNet-style": planet_steps,
+    "PlaNet sizes": lambda data, device, seed: planet_steps(data, device, seed, PLANET_SIZES, 50)}
 
 
 def check_data(data: Path) -> None:
@@ -172,7 +181,7 @@ def seconds_per_step(workload: str, data: Path, device: torch.device, steps: int
 def measure(args: argparse.Namespace, devices: list[torch.device]) -> list[dict[str, Any]]:
     """One row per (workload, device): the seconds per step of each repeat and their median."""
     rows = []
-    for workload in WORKLOADS:
+    for workload in args.workloads:
         for device in devices:
             times = [seconds_per_step(workload, args.data, device, args.steps, args.warmup, args.seed + k)
                      for k in range(args.repeats)]
@@ -267,6 +276,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--repeats", type=int, default=3, help="repeats; the table gives their median (default %(default)s)")
     p.add_argument("--threads", type=int, default=2, help="torch CPU threads (default %(default)s: the 2-core machine)")
     p.add_argument("--seed", type=int, default=0, help="seed of the models and batches (default %(default)s)")
+    p.add_argument("--workloads", nargs="+", choices=list(STEPS), default=list(WORKLOADS[:2]),
+                   help="the trainings to time (default: %(default)s)")
     p.add_argument("--full", choices=("none", "gpu", "all"), default="none",
                    help="also train the fast preset end to end: on the GPU (gpu, with --device cuda) or on every "
                         "device timed (all); default %(default)s")
@@ -299,9 +310,9 @@ def main(argv: list[str] | None = None) -> int:
         words = earlier["machine"].get("gpu") or earlier["machine"].get("cpu", str(path))
         rows += [{**r, "machine": f"{words} ({path.name})"} for r in earlier["rows"] if r["machine"] == THIS]
         full += [{**r, "machine": f"{words} ({path.name})"} for r in earlier.get("full", []) if r["machine"] == THIS]
-    record = {"command": "python benchmarks/device_speed.py " + " ".join(argv if argv is not None else sys.argv[1:]),
+    record = {"command": "python benchmarks/device_speed.py " + shlex.join(argv if argv is not None else sys.argv[1:]),
               "machine": here, "settings": {"data": str(args.data), "steps": args.steps, "warmup": args.warmup,
-                                            "repeats": args.repeats, "threads": args.threads, "seed": args.seed,
+                                            "repeats": args.repeats, "threads": args.threads, "seed": args.seed, "workloads": args.workloads,
                                             "full": args.full},
               "references": references, "rows": rows, "speedups": speedups(rows), "full": full}
     args.out.parent.mkdir(parents=True, exist_ok=True)
