@@ -383,7 +383,18 @@ def evaluate(kind: str, run: Path | None, cfg: BenchConfig, gravity_mult: float 
     return run_split(job, workers, progress=False).summary.to_dict()
 
 
-def planet_table_runs(runs: Path, sequences: int, gravity: float = 1.4) -> dict[str, dict[str, Any]]:
+#: The gravity multiplier of the table's changed-gravity column (the PlaNet-style model is not told it).
+TABLE_GRAVITY = 1.4
+
+
+def planet_scores(run: Path, cfg: BenchConfig, workers: int = 1) -> dict[str, Any]:
+    """A PlaNet-style run scored as the table's runs are: ``x1`` on its episodes at x1.0, ``x1.4`` on the sweep's at
+    :data:`TABLE_GRAVITY` (:func:`evaluate`'s summaries; benchmarks that set a variant beside the table's runs)."""
+    return {"x1": evaluate("planet", run, cfg, workers=workers),
+            "x1.4": evaluate("planet", run, cfg, TABLE_GRAVITY, sweep_episodes(cfg, "planet"), workers=workers)}
+
+
+def planet_table_runs(runs: Path, sequences: int, gravity: float = TABLE_GRAVITY) -> dict[str, dict[str, Any]]:
     """The table's PlaNet-style records at ``sequences`` in ``runs/records``, by name: seed, scores at x1.0 and at
     ``gravity`` (the sweep's), training seconds (benchmarks that set a variant beside the table's runs)."""
     out = {}

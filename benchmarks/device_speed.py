@@ -48,6 +48,7 @@ import numpy as np
 import torch
 
 from common import machine, machine_words
+from planet_faithful import VARIANTS
 from piga.io.atomic import atomic_output, write_json
 from piga.io.device import cuda_available, resolve_device
 
@@ -136,11 +137,12 @@ def planet_steps(data: Path, device: torch.device, seed: int, sizes: dict[str, A
         yield
 
 
-#: PlaNet's sizes (benchmarks/planet_faithful.py's ``planet-sizes`` variant).
-PLANET_SIZES = {"deter_size": 200, "stoch_size": 30, "hidden_size": 200, "depth": 32, "reward_layers": 3, "reward_units": 300}
+#: PlaNet's sizes: benchmarks/planet_faithful.py's ``planet-sizes`` variant, its model and batch.
+PLANET_SIZES = VARIANTS["planet-sizes"]
 STEPS: dict[str, Callable[[Path, torch.device, int], Iterator[None]]] = {
     "piga fast": piga_steps, "PlaNet-style": planet_steps,
-    "PlaNet sizes": lambda data, device, seed: planet_steps(data, device, seed, PLANET_SIZES, 50)}
+    "PlaNet sizes": lambda data, device, seed: planet_steps(data, device, seed, PLANET_SIZES["rssm"],
+                                                            PLANET_SIZES["planet"]["batch_size"])}
 
 
 def check_data(data: Path) -> None:

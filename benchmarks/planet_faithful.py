@@ -32,7 +32,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Literal, get_args
 
-from baselines import PRESETS, BenchConfig, data_file, evaluate, planet_table_runs, sweep_episodes, train_planet_run
+from baselines import PRESETS, BenchConfig, data_file, planet_scores, planet_table_runs, train_planet_run
 from common import farm_main, machine, machine_words, write_page
 
 from piga.io.pool import JobRecords, RecordedJob, run_recorded
@@ -49,8 +49,6 @@ VARIANTS: dict[str, dict[str, Any]] = {
                      "words": "PlaNet's sizes: GRU 200, stochastic state 30, MLPs 200, convs from 32 channels, reward head "
                               "3 x 300, batches of 50 chunks (of 20 model steps: the data's 40 frames, not PlaNet's 50)"},
 }
-GRAVITY = 1.4
-"""The changed gravity multiplier (the baselines table's x1.4 column; the model is not told it)."""
 
 
 @dataclass(frozen=True)
@@ -95,8 +93,7 @@ def run_job(job: Job) -> dict[str, Any]:
     metrics = json.loads((run / "metrics.json").read_text())
     return {"machine": machine(), "train_seconds": seconds, "train_device": metrics.get("device"),
             "train_device_name": metrics.get("device_name"),
-            "x1": evaluate("planet", run, cfg, workers=job.workers),
-            "x1.4": evaluate("planet", run, cfg, GRAVITY, sweep_episodes(cfg, "planet"), workers=job.workers),
+            **planet_scores(run, cfg, job.workers),
             "valid": metrics.get("valid"), "open_loop": metrics.get("open_loop")}
 
 

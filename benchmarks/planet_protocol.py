@@ -32,14 +32,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from baselines import COST_S, PRESETS, BenchConfig, data_file, evaluate, planet_table_runs, sweep_episodes
+from baselines import COST_S, PRESETS, BenchConfig, data_file, planet_scores, planet_table_runs, sweep_episodes
 from common import farm_main, machine, machine_words, write_page
 
 from piga.io.atomic import write_json
 from piga.io.pool import JobRecords, RecordedJob, run_recorded
-
-GRAVITY = 1.4
-"""The changed gravity multiplier (the baselines table's x1.4 column; the model is not told it)."""
 
 
 @dataclass(frozen=True)
@@ -130,8 +127,7 @@ def run_job(job: Job) -> dict[str, Any]:
     metrics = json.loads((run / "metrics.json").read_text())
     return {"machine": machine(), "train_seconds": seconds, "steps": metrics.get("steps"),
             "iterative": metrics.get("iterative"),
-            "x1": evaluate("planet", run, job.cfg),
-            "x1.4": evaluate("planet", run, job.cfg, GRAVITY, sweep_episodes(job.cfg, "planet"))}
+            **planet_scores(run, job.cfg)}
 
 
 def estimate_hours(plan: Plan, cfg: BenchConfig) -> float:

@@ -23,13 +23,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from baselines import PRESETS, BenchConfig, evaluate, sweep_episodes
+from baselines import PRESETS, TABLE_GRAVITY, BenchConfig, planet_scores
 from common import farm_main, machine, machine_words, write_page
 
 from piga.io.pool import JobRecords, RecordedJob, run_recorded
-
-GRAVITY = 1.4
-"""The changed gravity multiplier (the baselines table's x1.4 column; the model is not told it)."""
 
 
 @dataclass(frozen=True)
@@ -67,8 +64,7 @@ def run_job(job: Job) -> dict[str, Any]:
     torch.set_num_threads(1)
     selected = job.folder / f"{job.run.name}-valid"
     write_selected(job.run, selected)
-    return {"machine": machine(), "x1": evaluate("planet", selected, job.cfg),
-            "x1.4": evaluate("planet", selected, job.cfg, GRAVITY, sweep_episodes(job.cfg, "planet"))}
+    return {"machine": machine(), **planet_scores(selected, job.cfg)}
 
 
 def last_weights(run: Path) -> dict[str, Any] | None:
@@ -77,7 +73,7 @@ def last_weights(run: Path) -> dict[str, Any] | None:
     if not path.exists():
         return None
     record = json.loads(path.read_text())
-    x1, sweep = record.get("control") or record.get("x1"), record.get("sweep", {}).get(f"{GRAVITY:g}") or record.get("x1.4")
+    x1, sweep = record.get("control") or record.get("x1"), record.get("sweep", {}).get(f"{TABLE_GRAVITY:g}") or record.get("x1.4")
     return {"x1": x1, "x1.4": sweep} if x1 and sweep else None
 
 

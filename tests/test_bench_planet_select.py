@@ -4,6 +4,7 @@ without a valid loss are refused. Training is real and tiny; the episodes are st
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -36,7 +37,7 @@ def test_the_selected_weights_are_scored_beside_the_last(select: Any, tiny_data:
         calls.append((kind, folder.name, gravity_mult, episodes))
         return {"episodes": episodes or 20, "success_rate": 0.9 if gravity_mult == 1.0 else 0.2, "mean_return": -190.0}
 
-    monkeypatch.setattr(select, "evaluate", evaluate)
+    monkeypatch.setattr(sys.modules[select.planet_scores.__module__], "evaluate", evaluate)  # the table's scoring
     out = tmp_path / "select"
     assert select.main(["--runs", str(run), "--out", str(out)]) == 0
     assert calls == [("planet", "planet-n8-s0-valid", 1.0, None), ("planet", "planet-n8-s0-valid", 1.4, 5)]

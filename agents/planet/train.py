@@ -195,15 +195,23 @@ def open_loop_check(model: WorldModel, data: str | Path, run_dir: Path, seed: in
             "zero_reward_abs_error": rewards.abs().mean(0).tolist()}
 
 
-@torch.no_grad()
-def _valid_losses(model: WorldModel, data: str | Path, config: PlanetTrainConfig, info: DatasetInfo) -> dict[str, float] | None:
-    """Mean losses on (up to 64 sequences of) the valid split, one chunk from the start of each; None without one."""
+def _valid_window(data: str | Path, config: PlanetTrainConfig, info: DatasetInfo, repeat: int
+                  ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor] | None:
+    """One chunk from the start of each of (up to 64 of) the valid split's sequences, as model steps: frames, actions,
+    rewards (:func:`model_steps`); None without a valid split. Read once per training."""
     if not info.split_counts["valid"]:
         return None
     seqs = _Sequences(data, "valid", 64)
-    length = config.chunk_length
-    repeat = model.config.action_repeat
-    window = model_steps(seqs.frames[:, :length * repeat], seqs.actions[:, :length * repeat], seqs.rewards[:, :length * repeat], repeat)
+    length = config.chunk_length * repeat
+    return model_steps(seqs.frames[:, :length], seqs.actions[:, :length], seqs.rewards[:, :length], repeat)
+
+
+@torch.no_grad()
+def _valid_losses(model: WorldModel, window: tuple[torch.Tensor, ...] | None, config: PlanetTrainConfig
+                  ) -> dict[str, float] | None:
+    """Mean losses on the valid window (:func:`_valid_window`), with a generator of its own; None without one."""
+    if window is None:
+        return None
     device = module_device(model)
     parts = model.loss(*(x.to(device) for x in window), config, torch.Generator().manual_seed(config.seed))
     return {name: float(value) for name, value in parts._asdict().items()}
@@ -272,6 +280,8 @@ def train_planet(
     n_frames = min(config.max_sequences or info.split_counts["train"], info.split_counts["train"]) * info.sequence_bytes
     seqs = _Sequences(data, "train", config.max_sequences, extra_data,
                       stream=extra_data is None and not loads_whole(n_frames, available_memory()))
+    valid_window = _valid_window(data, config, info, model.config.action_repeat)
+    valid: dict[str, float] | None = None  # the valid losses at the latest checkpoint of this invocation
     writer: Any = None
     model.train()
     started = time.monotonic() - state.elapsed
@@ -299,7 +309,7 @@ def train_planet(
                 state.elapsed = time.monotonic() - started
                 record = {name: total / count for name, total in sums.items()}
                 record.update({"step": state.step, "seconds": state.elapsed})
-                valid = _valid_losses(model, data, config, info)  # its own generator: the training draws are untouched
+                valid = _valid_losses(model, valid_window, config)  # its own generator: the training draws are untouched
                 if valid is not None:
                     record["valid_loss"] = valid["loss"]
                     if math.isfinite(valid["loss"]) and (state.best_valid_loss is None or valid["loss"] < state.best_valid_loss):
@@ -334,7 +344,8 @@ def train_planet(
         "device": str(device),
         "device_name": torch.cuda.get_device_name(device) if device.type == "cuda" else None,
         "learning_curve": state.history,
-        "valid": _valid_losses(model, data, config, info),
+        # the last checkpoint's, unless this invocation wrote none (a finished run resumed)
+        "valid": valid if valid is not None else _valid_losses(model, valid_window, config),
         "best_valid": None if state.best_valid_loss is None else {"step": state.best_step, "loss": state.best_valid_loss},
         "open_loop": open_loop_check(model, data, run_dir, config.seed),
     }
