@@ -364,14 +364,15 @@ def data_file(cfg: BenchConfig, folder: Path, n: int) -> Path:
 
 
 def evaluate(kind: str, run: Path | None, cfg: BenchConfig, gravity_mult: float = 1.0, episodes: int | None = None,
-             workers: int = 1, seed: int = 0, **job_fields: Any) -> dict[str, Any]:
+             workers: int = 1, seed: int = 0, torque_arrow: bool = False, **job_fields: Any) -> dict[str, Any]:
     """piga.control.episodes' summary for one agent (kind "piga", "planet", "ddpg" or "oracle"), its episodes
     split over ``workers`` processes (the same episodes and scores as one); ``seed``: the episodes' (0, the
-    table's); ``job_fields``: more fields of its :class:`~piga.control.jobs.ControlJob` (the piga agent's
-    ``told`` and ``reward_head``)."""
+    table's); ``torque_arrow``: whether the frames show Gymnasium's torque arrow (the table's: not);
+    ``job_fields``: more fields of its :class:`~piga.control.jobs.ControlJob` (the piga agent's ``told`` and
+    ``reward_head``)."""
     from piga.control.jobs import ControlJob, run_split
 
-    episode_config = episode_config_for(kind, cfg, gravity_mult, episodes, seed)
+    episode_config = replace(episode_config_for(kind, cfg, gravity_mult, episodes, seed), torque_arrow=torque_arrow)
     job = ControlJob(kind, episode_config, model_dir=str(run) if run else None, **job_fields)
     if kind == "planet" and "cem" in cfg.overrides:  # tiny preset only: PlaNet's planner, shrunk
         from agents.planet.planner import PlanetAgent
@@ -403,6 +404,19 @@ def planet_table_runs(runs: Path, sequences: int, gravity: float = TABLE_GRAVITY
         out[path.stem] = {"seed": record["spec"]["seed"], "x1": record["control"],
                           "x1.4": record["sweep"][f"{gravity:g}"], "train_seconds": record["train_seconds"]}
     return out
+
+
+def recorded_scores(run: Path) -> dict[str, Any] | None:
+    """A run's table scores (``x1`` and ``x1.4``, :func:`evaluate`'s summaries) from its benchmark record,
+    ``records/NAME.json`` beside its folder (the baselines benchmark's ``control``/``sweep`` layout, or a
+    PlaNet-variant benchmark's ``x1``/``x1.4``); None without one."""
+    path = run.parent / "records" / f"{run.name}.json"
+    if not path.exists():
+        return None
+    record = json.loads(path.read_text())
+    x1 = record.get("control") or record.get("x1")
+    sweep = record.get("sweep", {}).get(f"{TABLE_GRAVITY:g}") or record.get("x1.4")
+    return {"x1": x1, "x1.4": sweep} if x1 and sweep else None
 
 
 def episode_config_for(kind: str, cfg: BenchConfig, gravity_mult: float = 1.0, episodes: int | None = None,

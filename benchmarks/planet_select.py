@@ -23,7 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from baselines import PRESETS, TABLE_GRAVITY, BenchConfig, planet_scores
+from baselines import PRESETS, BenchConfig, planet_scores, recorded_scores
 from common import farm_main, machine, machine_words, write_page
 
 from piga.io.pool import JobRecords, RecordedJob, run_recorded
@@ -65,16 +65,6 @@ def run_job(job: Job) -> dict[str, Any]:
     selected = job.folder / f"{job.run.name}-valid"
     write_selected(job.run, selected)
     return {"machine": machine(), **planet_scores(selected, job.cfg)}
-
-
-def last_weights(run: Path) -> dict[str, Any] | None:
-    """The last weights' scores from the run's benchmark record (``records/NAME.json`` beside it), if any."""
-    path = run.parent / "records" / f"{run.name}.json"
-    if not path.exists():
-        return None
-    record = json.loads(path.read_text())
-    x1, sweep = record.get("control") or record.get("x1"), record.get("sweep", {}).get(f"{TABLE_GRAVITY:g}") or record.get("x1.4")
-    return {"x1": x1, "x1.4": sweep} if x1 and sweep else None
 
 
 def _cells(scores: dict[str, Any] | None) -> str:
@@ -123,7 +113,7 @@ def main(argv: list[str] | None = None) -> int:
     done = run_recorded(run_job, jobs, JobRecords(folder / "records"), 1, progress=False)
     record = {"command": " ".join(["python", "benchmarks/planet_select.py", *(sys.argv[1:] if argv is None else argv)]),
               "machine": next(iter(done.values()))["machine"],
-              "runs": {name: {"selection": selections[name], "last": last_weights(Path(r["spec"]["run"])),
+              "runs": {name: {"selection": selections[name], "last": recorded_scores(Path(r["spec"]["run"])),
                               "x1": r["x1"], "x1.4": r["x1.4"]} for name, r in done.items()}}
     write_page(args.out, record, markdown(record))
     return 0
