@@ -1,0 +1,110 @@
+"""Benchmark: the baselines table's runs again on a second data draw.
+
+Every data file of the baselines table (benchmarks/baselines.py) is a nested subset of one random-action collection,
+``data_seed`` 100, so its curve and its data ratio say nothing of how much another collection would move them. This
+reruns chosen jobs of the table exactly as the table runs them (:func:`baselines.run_job`: the same recipes, training
+seeds, episodes, sweep and goal images; the same record fields) on the subsets of another collection, and sets each
+beside the table's record of the same job.
+
+    python benchmarks/data_draw.py --out results/data_draw                       # the default jobs, data seed 200
+    python benchmarks/data_draw.py --out results/data_draw --jobs piga-n2-s0 planet-n250-s0
+
+The default jobs are piga at its smallest size (2 sequences, 3 training seeds: the cell most exposed to the draw)
+and the PlaNet-style model where its curve crosses 80% (250 and 500 sequences, seed 0; about 2 h each on one core).
+Runs, data files and records go in ``OUT_runs/`` (the table's layout); a job whose record has the same settings is
+not run again, so the same command continues. Writes OUT.json and OUT.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+from baselines import PRESETS, TABLE_GRAVITY, _run_task, data_file, job_records, job_spec, jobs_for
+from common import farm_main, machine_words, write_page
+
+from piga.io.pool import RecordedJob, run_recorded
+
+DATA_SEED = 200
+"""The second collection's seed (the table's is ``BenchConfig.data_seed``, 100)."""
+JOBS = ("piga-n2-s0", "piga-n2-s1", "piga-n2-s2", "planet-n250-s0", "planet-n500-s0")
+"""The table's jobs run again by default."""
+
+
+def table_scores(records: Path, name: str) -> dict[str, Any] | None:
+    """The table's record of job ``name`` (its data seed, x1.0 and x1.4 summaries), None if it has none."""
+    path = records / f"{name}.json"
+    if not path.exists():
+        return None
+    record = json.loads(path.read_text())
+    return {"data_seed": record["spec"].get("data_seed"), "x1": record["control"],
+            "x1.4": record["sweep"][f"{TABLE_GRAVITY:g}"]}
+
+
+def _cells(scores: dict[str, Any] | None) -> str:
+    if scores is None:
+        return "no record | |"
+    x1, x14 = scores["x1"], scores["x1.4"]
+    return (f"{100 * x1['success_rate']:.0f}% ({x1['episodes']}) | {x1['mean_return']:.1f} | "
+            f"{100 * x14['success_rate']:.0f}% ({x14['episodes']})")
+
+
+def markdown(record: dict[str, Any]) -> str:
+    """The page: a row per job and draw, the table's first."""
+    lines = ["# The baselines table's runs on a second data draw", "",
+             f"Command: `{record['command']}`", "",
+             f"Machine: {machine_words(record['machine'])}.", "",
+             f"Each job runs exactly as in the baselines table (results/baselines.md), on the nested subsets of a "
+             f"second random-action collection (data seed {record['data_seed']}) instead of the table's (seed "
+             f"{record['table_data_seed']}). The episodes are the table's; piga is told x{TABLE_GRAVITY:g}, the "
+             "PlaNet-style model not.", "",
+             "| job | data seed | success x1.0 (episodes) | mean return x1.0 | success x1.4 (episodes) |",
+             "|---|---|---|---|---|"]
+    for name, row in record["jobs"].items():
+        lines.append(f"| {name} | {record['table_data_seed']} (the table) | {_cells(row['table'])} |")
+        lines.append(f"| {name} | {record['data_seed']} | {_cells(row)} |")
+    return "\n".join(lines) + "\n"
+
+
+@farm_main
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
+    p.add_argument("--jobs", nargs="+", default=list(JOBS), help="the table's job names (default: %(default)s)")
+    p.add_argument("--data-seed", type=int, default=DATA_SEED, help="the second collection's seed (default %(default)s)")
+    p.add_argument("--table", type=Path, default=Path("results/baselines_runs"),
+                   help="the table's runs folder, for its records (default %(default)s)")
+    p.add_argument("--preset", choices=sorted(PRESETS), default="budget", help="the baselines preset (default %(default)s)")
+    p.add_argument("--out", type=Path, default=Path("results/data_draw"), help="output prefix (default %(default)s)")
+    args = p.parse_args(argv)
+    table_cfg = PRESETS[args.preset]
+    if args.data_seed == table_cfg.data_seed:
+        p.error(f"--data-seed {args.data_seed} is the table's own draw; a second draw is another seed")
+    cfg = replace(table_cfg, data_seed=args.data_seed, workers=1)
+    known = {job.name: job for job in jobs_for(cfg) if job.agent in ("piga", "planet")}
+    unknown = [name for name in args.jobs if name not in known]
+    if unknown:
+        p.error(f"--jobs: not a piga or PlaNet-style job of the {args.preset} table: {', '.join(unknown)}")
+    folder = args.out.parent / f"{args.out.name}_runs"
+    folder.mkdir(parents=True, exist_ok=True)
+    jobs = [known[name] for name in dict.fromkeys(args.jobs)]
+    records = job_records(folder)
+    todo = [job for job in jobs if records.kept(job.name, job_spec(job, cfg)) is None]
+    files = {n: data_file(cfg, folder, n) for n in sorted({job.sequences for job in todo})}
+    recorded = [RecordedJob(job.name, job_spec(job, cfg), (job, cfg, folder, files.get(job.sequences))) for job in jobs]
+    done = run_recorded(_run_task, recorded, records, 1, progress=False)
+    rows = {name: {"table": table_scores(args.table / "records", name), "x1": r["control"],
+                   "x1.4": r["sweep"][f"{TABLE_GRAVITY:g}"], "train_seconds": r["train_seconds"]}
+            for name, r in done.items()}
+    record = {"command": " ".join(["python", "benchmarks/data_draw.py", *(sys.argv[1:] if argv is None else argv)]),
+              "machine": next(iter(done.values()))["machine"], "data_seed": args.data_seed,
+              "table_data_seed": table_cfg.data_seed, "jobs": rows}
+    write_page(args.out, record, markdown(record))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
