@@ -267,6 +267,9 @@ def test_a_failed_allocation_is_out_of_memory(capsys: pytest.CaptureFixture[str]
     (["--env", "piga/DMCPendulum-v0", "--env-option", "damping=1e300"], ["damping=1e+300 is out of range", "damping in [0, 100]"], 1),
     (["--system", "gravity", "--g", "1e308"], ["weaker forces than g = 1e+308, m = 1 (the scene's own: g = 60, m = 1)"], 1),
     (["--system", "spring", "--k", "1e-300", "--steps", "12", "--image-size", "20"], ["stronger forces than k = 1e-300"], 1),
+    (["--gravity", "-nan"], ["argument --gravity: expected a finite number > 0, got -nan"], 2),  # "expected one argument"
+    (["--env", "piga/DMCPendulum-v0", "--env-option", "action_repeat=1.5"],
+     ["--env-option action_repeat=1.5: expected an integer"], 1),  # it said "expected a int"
 ])
 def test_collect_refuses(argv: list[str], needles: list[str], code: int, tmp_path: Path,
                          capsys: pytest.CaptureFixture[str]) -> None:
@@ -614,6 +617,7 @@ def fake_planet_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
     (["--oracle", "--goal-angle", "1e300"], ["--goal-angle must be an angle", "[-180, 180]", "1e+300"]),
     (["--oracle", "--goal-angle", "nan"], ["--goal-angle must be an angle"]),
     (["--oracle", "--goal-angle", "180.0000001"], ["within [-180, 180], got 180.0000001"]),  # it said "got 180"
+    (["--oracle", "--goal-angle", "-inf"], ["within [-180, 180], got -inf"]),  # it said "expected one argument"
     (["--write-goal-image", "g.png", "--angle", "-400"], ["--angle must be an angle"]),
 ])
 def test_control_refuses_meaningless_angles(argv: list[str], needles: list[str], tmp_path: Path,
