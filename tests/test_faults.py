@@ -99,10 +99,21 @@ def _labelled_spring(f: h5py.File) -> None:
     f.attrs["system"] = "spring"
 
 
+def _still(f: h5py.File) -> None:
+    """Each sequence its first frame repeated: a frozen camera."""
+    frames = f["frames"][()]
+    f["frames"][...] = np.repeat(frames[:, :1], frames.shape[1], axis=1)
+
+
+def _text_env_field(f: h5py.File) -> None:
+    config = json.loads(f.attrs["env_config"])
+    f.attrs["env_config"] = json.dumps({**config, "gravity": "ten"})
+
+
 VARIANTS: dict[str, Callable[[h5py.File], None]] = {
     "blank": _blank, "nan_state": _nan_state, "nan_reward": _nan_reward, "colour": _colour, "channel_axis": _channel_axis,
     "two_actions": _two_actions, "no_actions": _no_actions, "unknown_env_field": _unknown_env_field,
-    "labelled_spring": _labelled_spring,
+    "labelled_spring": _labelled_spring, "still": _still, "text_env_field": _text_env_field,
 }
 
 
@@ -293,12 +304,16 @@ def test_an_output_file_named_as_a_folder_is_refused(prog: str, argv: list[str],
     assert _listing(tmp_path) == []
 
 
-def test_blank_frames_are_never_kept(tmp_path: Path) -> None:
+@pytest.mark.parametrize("frames, needle", [
+    (np.full((2, 3, 8, 8), 7, np.uint8), "every frame is blank"),
+    (np.repeat(np.arange(128, dtype=np.uint8).reshape(2, 1, 8, 8), 3, axis=1), "nothing moves"),  # a frozen camera: it was kept
+])
+def test_blank_or_still_frames_are_never_kept(frames: np.ndarray, needle: str, tmp_path: Path) -> None:
     from piga.data.schema import DataFormatError, DatasetWriter
 
-    with pytest.raises(DataFormatError, match="every frame is blank"):
+    with pytest.raises(DataFormatError, match=needle):
         with DatasetWriter(tmp_path / "d.h5", 2, 3, (8, 8), 1, None, {"system": "x", "dt": 1.0}) as writer:
-            writer.write(0, np.full((2, 3, 8, 8), 7, np.uint8), np.zeros((2, 3, 1), np.float32))
+            writer.write(0, frames, np.zeros((2, 3, 1), np.float32))
             writer.set_split(np.zeros(2))
     assert _listing(tmp_path) == []
 
@@ -669,6 +684,7 @@ def test_video_on_a_full_disk_is_one_line(tmp_path: Path, capsys: pytest.Capture
 
 @pytest.mark.parametrize("data, needles", [
     ("blank", ["every frame is blank"]),
+    ("still", ["nothing moves"]),
     ("nan_state", ["/states holds NaN"]),
 ])
 def test_diagnose_refuses_data_before_the_diagnosis(data: str, needles: list[str], files: dict[str, Path],
@@ -720,6 +736,7 @@ def test_diagnose_on_a_baseline_run_says_what_it_is(files: dict[str, Path], fake
     ("balls5", ["attribute 'n_objects' is 5 but 'scene_config' says 2"]),
     # a pendulum file labelled 'spring' trained as a scene, and its refusal blamed a lost object
     ("labelled_spring", ["attribute 'system' says 'spring', whose model takes 0 action dimension(s), but /actions has 1"]),
+    ("still", ["nothing moves"]),  # a model "learned" from a frozen camera, and the run exited as merely unconverged
 ])
 def test_train_model_refuses_data_on_open(data: str, needles: list[str], files: dict[str, Path], tmp_path: Path,
                                           capsys: pytest.CaptureFixture[str]) -> None:
