@@ -463,6 +463,10 @@ def test_a_true_parameter_of_zero_is_scored_infinitely_off() -> None:
     ("tiny", ("--deter-size", "99999999999"), ["more weights than torch can index", "ask for less"]),  # an internal error
     ("tiny", ("--steps", "9" * 20), ["steps (--steps) must be at most 10,000,000"]),  # it trained for ever
     ("tiny", ("--iterative", "1", "--round-steps", "99999999999"), ["rounds x steps_per_round", "at most 10,000,000"]),
+    ("tiny", ("--reward-layers", "100000"), ["reward_layers (--reward-layers) must be at most 100"]),  # it trained for hours
+    ("still", (), ["nothing moves", "no motion to learn from"]),  # it trained and exited 0
+    ("text_env_field", ("--iterative", "1", "--episode-steps", "16"),
+     ["'env_config' is not a valid PixelPendulumConfig", "gravity must be a number, got 'ten'"]),  # "can't multiply sequence"
 ])
 def test_planet_refuses_before_touching_out(data: str, argv: tuple[str, ...], needles: list[str], files: dict[str, Path],
                                             tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -477,6 +481,14 @@ def test_planet_trains_on_frames_with_a_channel_axis(files: dict[str, Path], tmp
                                   str(tmp_path / "run"), *TINY_PLANET, capsys=capsys)
     assert code == 0, err
     assert {"checkpoint.pt", "config.json", "metrics.json", "openloop.png"} <= set(_listing(tmp_path / "run"))
+
+
+def test_planet_refuses_a_reward_term_of_no_weight() -> None:
+    """--reward-scale 0 trained a reward head that never learned, which the planner then ranked its plans by (exit 0)."""
+    from agents.planet.config import PlanetTrainConfig
+
+    with pytest.raises(ValueError, match=r"reward_scale \(--reward-scale\) must be > 0, got 0: at 0 the reward head never learns"):
+        PlanetTrainConfig(reward_scale=0.0)
 
 
 def test_planet_on_a_full_disk(tiny_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str],
