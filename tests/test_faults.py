@@ -507,6 +507,8 @@ def test_planet_on_a_full_disk(tiny_data: Path, tmp_path: Path, capsys: pytest.C
     ((), lambda run: (run / "config.json").unlink(), ["config.json is missing", "--overwrite"]),
     ((), _edit_record(lambda r: r["train"].pop("steps")), ["'train' settings lack steps"]),
     ((), _edit_record(lambda r: r.pop("kind")), ["is a piga-train-model run", "not a planet run"]),
+    ((), _edit_record(lambda r: r["train"].__setitem__("steps", "many")),
+     ["'train' settings give steps as 'many', not an integer"]),  # "'<' not supported between instances of 'str' and 'int'"
 ])
 def test_planet_resume_refuses(argv: tuple[str, ...], edit: Callable[[Path], None] | None, needles: list[str],
                                baseline_runs: dict[str, Path], tiny_data: Path, tmp_path: Path,
@@ -516,6 +518,18 @@ def test_planet_resume_refuses(argv: tuple[str, ...], edit: Callable[[Path], Non
     refused("piga-baseline", ["planet", str(tiny_data), "--out", str(run), "--resume", "--steps", "4", "--quiet", *argv],
             capsys, *needles)
     assert _listing(run) == before
+
+
+def test_planet_resume_takes_the_model_sizes_from_its_checkpoint(baseline_runs: dict[str, Path], tiny_data: Path,
+                                                                 tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A config.json whose 'rssm' was edited into a list was an internal error (AttributeError); the checkpoint holds
+    the sizes, and the record is rewritten with them."""
+    own = json.loads((baseline_runs["planet"] / "config.json").read_text())["rssm"]
+    run = _run_copy(baseline_runs["planet"], tmp_path / "run", _edit_record(lambda r: r.__setitem__("rssm", [1])))
+    code, _, err = run_in_process("piga-baseline", baseline.main, "planet", str(tiny_data), "--out", str(run), "--resume",
+                                  "--steps", "3", "--quiet", capsys=capsys)
+    assert code == 0, err
+    assert json.loads((run / "config.json").read_text())["rssm"] == own
 
 
 def test_planet_resume_refuses_another_data_file(baseline_runs: dict[str, Path], files: dict[str, Path], tmp_path: Path,
@@ -565,6 +579,8 @@ def _truncate(run: Path) -> None:
     ((), _edit_record(lambda r: r["ddpg"].pop("net_arch")), ["'ddpg' settings lack net_arch"]),
     ((), _edit_record(lambda r: r.pop("ddpg")), ["has no 'ddpg' settings"]),
     ((), _truncate, ["checkpoint.pt: not a readable DDPG checkpoint", "truncated"]),
+    ((), _edit_record(lambda r: r["ddpg"].__setitem__("learning_rate", "fast")),
+     ["'ddpg' settings give learning_rate as 'fast', not a number"]),  # "'>' not supported between instances of 'str' and 'int'"
 ])
 def test_ddpg_resume_refuses(argv: tuple[str, ...], edit: Callable[[Path], None] | None, needles: list[str],
                              baseline_runs: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
