@@ -939,6 +939,8 @@ def test_threads_and_seeds_are_refused_beyond_what_the_machine_and_the_generator
 @pytest.mark.parametrize("argv, needle", [
     (["--model", "RUN", "--oracle"], "not both"),
     (["--write-goal-image", "OUT.png", "--angle", "30", "--oracle"], "takes no --model or --oracle"),
+    (["--write-goal-image", "OUT.png", "--angle", "30", "--episodes", "3"], "only writes a picture and exits; drop --episodes"),
+    (["--oracle", "--workers", "3"], "--workers runs the jobs of --sweep"),
 ])
 def test_control_refuses_options_it_would_ignore(argv: list[str], needle: str, tmp_path: Path,
                                                  capsys: pytest.CaptureFixture[str]) -> None:
@@ -951,10 +953,28 @@ def test_control_refuses_options_it_would_ignore(argv: list[str], needle: str, t
     assert not (tmp_path / "OUT.png").exists()
 
 
-def test_control_refuses_planner_options_for_a_baseline_run(baseline_runs: dict[str, Path],
+@pytest.mark.parametrize("argv, needles", [
+    (["--horizon", "7"], ["--horizon", "ddpg"]),
+    (["--no-warm-start"], ["--warm-start", "a policy, no planner"]),
+    (["--not-told"], ["--not-told is for the piga agent", "ddpg run is never told"]),
+])
+def test_control_refuses_planner_options_for_a_baseline_run(argv: list[str], needles: list[str],
+                                                            baseline_runs: dict[str, Path],
                                                             capsys: pytest.CaptureFixture[str]) -> None:
-    """A DDPG run has no planner and a PlaNet-style run plans with PlaNet's CEM: --horizon would be ignored."""
-    refused("piga-control", ["--model", str(baseline_runs["ddpg"]), "--horizon", "7"], capsys, "--horizon", "ddpg")
+    """A DDPG run has no planner and a PlaNet-style run plans with PlaNet's CEM: --horizon would be ignored, and
+    so was --not-told (a baseline is never told)."""
+    refused("piga-control", ["--model", str(baseline_runs["ddpg"]), *argv], capsys, *needles)
+
+
+@pytest.mark.parametrize("argv, needles", [
+    (["--model", "RUN"], ["the model was trained at dt 0.05 s", "--env-option action_repeat"]),  # after a warning line
+    (["--oracle", "--env-option", "mass2"], ["--env-option: expected KEY=VALUE"]),  # the flag was not named
+])
+def test_control_on_dmc_refuses_in_one_line(argv: list[str], needles: list[str], tiny_piga_run: Path,
+                                            capsys: pytest.CaptureFixture[str]) -> None:
+    pytest.importorskip("dm_control")
+    argv = [str(tiny_piga_run) if a == "RUN" else a for a in argv]
+    refused("piga-control", ["--env", "piga/DMCPendulum-v0", "--episodes", "1", "--quiet", *argv], capsys, *needles)
 
 
 @pytest.fixture(scope="module")
