@@ -779,6 +779,8 @@ def test_train_model_refuses_data_on_open(data: str, needles: list[str], files: 
     (["--model", "video-lstm", "--video-lstm-scale", "99999999"], ["--video-lstm-scale: expected an integer in [1, 32]"], 2),
     (["--data-file", "gravity", "--fixed-g", "1e308"], ["fixed_g must be in [1e-06, 1e+06]"], 1),  # the loss was NaN at step 0
     (["--data-file", "gravity", "--fixed-g", "1e-300"], ["fixed_g must be in [1e-06, 1e+06]", "got 1e-300"], 1),
+    (["--epochs", "1", "--budget-steps", "50"], ["--epochs and --budget-steps both set the run's length"], 1),  # the budget
+    (["--preset", "paper", "--budget-steps", "50"], ["the paper preset plans in epochs (1000)", "give --epochs"], 1),  # was ignored
 ])
 def test_train_model_refuses_runs_it_could_never_finish(argv: list[str], needles: list[str], code: int, tiny_data: Path,
                                                         gravity_data: Path, tmp_path: Path,
