@@ -44,8 +44,9 @@ shows only the pendulum.
 from __future__ import annotations
 
 import math
+import numbers
 import os
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass, fields, replace
 from typing import Any, SupportsFloat
 
 import gymnasium as gym
@@ -107,6 +108,15 @@ class PixelPendulumConfig:
     """Unmodelled effects as (name, value) pairs, e.g. (("damping", 0.2),); see :mod:`envs.effects`."""
 
     def __post_init__(self) -> None:
+        for field in fields(self):  # a config read from a file's attrs may hold text where a number belongs
+            value, default = getattr(self, field.name), field.default
+            if isinstance(default, bool):
+                kind, what = (bool, np.bool_), "true or false"
+            else:
+                kind, what = (numbers.Integral, "an integer") if isinstance(default, int) else (numbers.Real, "a number")
+            if isinstance(default, (int, float)) and (not isinstance(value, kind) or isinstance(value, (bool, np.bool_))
+                                                      != isinstance(default, bool)):
+                raise TypeError(f"PixelPendulumConfig.{field.name} must be {what}, got {value!r}")
         try:
             effects = normalize_effects(self.effects)
         except (TypeError, ValueError) as exc:

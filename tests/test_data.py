@@ -166,7 +166,8 @@ def test_user_recording_without_optional_attrs_is_readable(tmp_path: Path) -> No
     path = tmp_path / "mine.h5"
     with h5py.File(path, "w") as f:
         f["frames"] = np.zeros((3, 4, 16, 16), np.uint8)
-        f["frames"][:, :, 4:8, 4:8] = 200  # a square on black (all-blank frames are refused)
+        for t in range(4):  # a square moving on black (all-blank frames, and frames in which nothing moves, are refused)
+            f["frames"][:, t, 4:8, 4 + t : 8 + t] = 200
         f["actions"] = np.zeros((3, 4, 1), np.float32)
         f["split"] = np.array([0, 0, 2], np.int8)
         f.attrs["system"] = "pendulum"

@@ -99,10 +99,21 @@ def _labelled_spring(f: h5py.File) -> None:
     f.attrs["system"] = "spring"
 
 
+def _still(f: h5py.File) -> None:
+    """Each sequence its first frame repeated: a frozen camera."""
+    frames = f["frames"][()]
+    f["frames"][...] = np.repeat(frames[:, :1], frames.shape[1], axis=1)
+
+
+def _text_env_field(f: h5py.File) -> None:
+    config = json.loads(f.attrs["env_config"])
+    f.attrs["env_config"] = json.dumps({**config, "gravity": "ten"})
+
+
 VARIANTS: dict[str, Callable[[h5py.File], None]] = {
     "blank": _blank, "nan_state": _nan_state, "nan_reward": _nan_reward, "colour": _colour, "channel_axis": _channel_axis,
     "two_actions": _two_actions, "no_actions": _no_actions, "unknown_env_field": _unknown_env_field,
-    "labelled_spring": _labelled_spring,
+    "labelled_spring": _labelled_spring, "still": _still, "text_env_field": _text_env_field,
 }
 
 
@@ -267,6 +278,9 @@ def test_a_failed_allocation_is_out_of_memory(capsys: pytest.CaptureFixture[str]
     (["--env", "piga/DMCPendulum-v0", "--env-option", "damping=1e300"], ["damping=1e+300 is out of range", "damping in [0, 100]"], 1),
     (["--system", "gravity", "--g", "1e308"], ["weaker forces than g = 1e+308, m = 1 (the scene's own: g = 60, m = 1)"], 1),
     (["--system", "spring", "--k", "1e-300", "--steps", "12", "--image-size", "20"], ["stronger forces than k = 1e-300"], 1),
+    (["--gravity", "-nan"], ["argument --gravity: expected a finite number > 0, got -nan"], 2),  # "expected one argument"
+    (["--env", "piga/DMCPendulum-v0", "--env-option", "action_repeat=1.5"],
+     ["--env-option action_repeat=1.5: expected an integer"], 1),  # it said "expected a int"
 ])
 def test_collect_refuses(argv: list[str], needles: list[str], code: int, tmp_path: Path,
                          capsys: pytest.CaptureFixture[str]) -> None:
@@ -290,12 +304,16 @@ def test_an_output_file_named_as_a_folder_is_refused(prog: str, argv: list[str],
     assert _listing(tmp_path) == []
 
 
-def test_blank_frames_are_never_kept(tmp_path: Path) -> None:
+@pytest.mark.parametrize("frames, needle", [
+    (np.full((2, 3, 8, 8), 7, np.uint8), "every frame is blank"),
+    (np.repeat(np.arange(128, dtype=np.uint8).reshape(2, 1, 8, 8), 3, axis=1), "nothing moves"),  # a frozen camera: it was kept
+])
+def test_blank_or_still_frames_are_never_kept(frames: np.ndarray, needle: str, tmp_path: Path) -> None:
     from piga.data.schema import DataFormatError, DatasetWriter
 
-    with pytest.raises(DataFormatError, match="every frame is blank"):
+    with pytest.raises(DataFormatError, match=needle):
         with DatasetWriter(tmp_path / "d.h5", 2, 3, (8, 8), 1, None, {"system": "x", "dt": 1.0}) as writer:
-            writer.write(0, np.full((2, 3, 8, 8), 7, np.uint8), np.zeros((2, 3, 1), np.float32))
+            writer.write(0, frames, np.zeros((2, 3, 1), np.float32))
             writer.set_split(np.zeros(2))
     assert _listing(tmp_path) == []
 
@@ -445,6 +463,10 @@ def test_a_true_parameter_of_zero_is_scored_infinitely_off() -> None:
     ("tiny", ("--deter-size", "99999999999"), ["more weights than torch can index", "ask for less"]),  # an internal error
     ("tiny", ("--steps", "9" * 20), ["steps (--steps) must be at most 10,000,000"]),  # it trained for ever
     ("tiny", ("--iterative", "1", "--round-steps", "99999999999"), ["rounds x steps_per_round", "at most 10,000,000"]),
+    ("tiny", ("--reward-layers", "100000"), ["reward_layers (--reward-layers) must be at most 100"]),  # it trained for hours
+    ("still", (), ["nothing moves", "no motion to learn from"]),  # it trained and exited 0
+    ("text_env_field", ("--iterative", "1", "--episode-steps", "16"),
+     ["'env_config' is not a valid PixelPendulumConfig", "gravity must be a number, got 'ten'"]),  # "can't multiply sequence"
 ])
 def test_planet_refuses_before_touching_out(data: str, argv: tuple[str, ...], needles: list[str], files: dict[str, Path],
                                             tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -459,6 +481,14 @@ def test_planet_trains_on_frames_with_a_channel_axis(files: dict[str, Path], tmp
                                   str(tmp_path / "run"), *TINY_PLANET, capsys=capsys)
     assert code == 0, err
     assert {"checkpoint.pt", "config.json", "metrics.json", "openloop.png"} <= set(_listing(tmp_path / "run"))
+
+
+def test_planet_refuses_a_reward_term_of_no_weight() -> None:
+    """--reward-scale 0 trained a reward head that never learned, which the planner then ranked its plans by (exit 0)."""
+    from agents.planet.config import PlanetTrainConfig
+
+    with pytest.raises(ValueError, match=r"reward_scale \(--reward-scale\) must be > 0, got 0: at 0 the reward head never learns"):
+        PlanetTrainConfig(reward_scale=0.0)
 
 
 def test_planet_on_a_full_disk(tiny_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str],
@@ -477,6 +507,8 @@ def test_planet_on_a_full_disk(tiny_data: Path, tmp_path: Path, capsys: pytest.C
     ((), lambda run: (run / "config.json").unlink(), ["config.json is missing", "--overwrite"]),
     ((), _edit_record(lambda r: r["train"].pop("steps")), ["'train' settings lack steps"]),
     ((), _edit_record(lambda r: r.pop("kind")), ["is a piga-train-model run", "not a planet run"]),
+    ((), _edit_record(lambda r: r["train"].__setitem__("steps", "many")),
+     ["'train' settings give steps as 'many', not an integer"]),  # "'<' not supported between instances of 'str' and 'int'"
 ])
 def test_planet_resume_refuses(argv: tuple[str, ...], edit: Callable[[Path], None] | None, needles: list[str],
                                baseline_runs: dict[str, Path], tiny_data: Path, tmp_path: Path,
@@ -486,6 +518,18 @@ def test_planet_resume_refuses(argv: tuple[str, ...], edit: Callable[[Path], Non
     refused("piga-baseline", ["planet", str(tiny_data), "--out", str(run), "--resume", "--steps", "4", "--quiet", *argv],
             capsys, *needles)
     assert _listing(run) == before
+
+
+def test_planet_resume_takes_the_model_sizes_from_its_checkpoint(baseline_runs: dict[str, Path], tiny_data: Path,
+                                                                 tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A config.json whose 'rssm' was edited into a list was an internal error (AttributeError); the checkpoint holds
+    the sizes, and the record is rewritten with them."""
+    own = json.loads((baseline_runs["planet"] / "config.json").read_text())["rssm"]
+    run = _run_copy(baseline_runs["planet"], tmp_path / "run", _edit_record(lambda r: r.__setitem__("rssm", [1])))
+    code, _, err = run_in_process("piga-baseline", baseline.main, "planet", str(tiny_data), "--out", str(run), "--resume",
+                                  "--steps", "3", "--quiet", capsys=capsys)
+    assert code == 0, err
+    assert json.loads((run / "config.json").read_text())["rssm"] == own
 
 
 def test_planet_resume_refuses_another_data_file(baseline_runs: dict[str, Path], files: dict[str, Path], tmp_path: Path,
@@ -535,6 +579,8 @@ def _truncate(run: Path) -> None:
     ((), _edit_record(lambda r: r["ddpg"].pop("net_arch")), ["'ddpg' settings lack net_arch"]),
     ((), _edit_record(lambda r: r.pop("ddpg")), ["has no 'ddpg' settings"]),
     ((), _truncate, ["checkpoint.pt: not a readable DDPG checkpoint", "truncated"]),
+    ((), _edit_record(lambda r: r["ddpg"].__setitem__("learning_rate", "fast")),
+     ["'ddpg' settings give learning_rate as 'fast', not a number"]),  # "'>' not supported between instances of 'str' and 'int'"
 ])
 def test_ddpg_resume_refuses(argv: tuple[str, ...], edit: Callable[[Path], None] | None, needles: list[str],
                              baseline_runs: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -614,6 +660,7 @@ def fake_planet_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
     (["--oracle", "--goal-angle", "1e300"], ["--goal-angle must be an angle", "[-180, 180]", "1e+300"]),
     (["--oracle", "--goal-angle", "nan"], ["--goal-angle must be an angle"]),
     (["--oracle", "--goal-angle", "180.0000001"], ["within [-180, 180], got 180.0000001"]),  # it said "got 180"
+    (["--oracle", "--goal-angle", "-inf"], ["within [-180, 180], got -inf"]),  # it said "expected one argument"
     (["--write-goal-image", "g.png", "--angle", "-400"], ["--angle must be an angle"]),
 ])
 def test_control_refuses_meaningless_angles(argv: list[str], needles: list[str], tmp_path: Path,
@@ -665,6 +712,7 @@ def test_video_on_a_full_disk_is_one_line(tmp_path: Path, capsys: pytest.Capture
 
 @pytest.mark.parametrize("data, needles", [
     ("blank", ["every frame is blank"]),
+    ("still", ["nothing moves"]),
     ("nan_state", ["/states holds NaN"]),
 ])
 def test_diagnose_refuses_data_before_the_diagnosis(data: str, needles: list[str], files: dict[str, Path],
@@ -716,6 +764,7 @@ def test_diagnose_on_a_baseline_run_says_what_it_is(files: dict[str, Path], fake
     ("balls5", ["attribute 'n_objects' is 5 but 'scene_config' says 2"]),
     # a pendulum file labelled 'spring' trained as a scene, and its refusal blamed a lost object
     ("labelled_spring", ["attribute 'system' says 'spring', whose model takes 0 action dimension(s), but /actions has 1"]),
+    ("still", ["nothing moves"]),  # a model "learned" from a frozen camera, and the run exited as merely unconverged
 ])
 def test_train_model_refuses_data_on_open(data: str, needles: list[str], files: dict[str, Path], tmp_path: Path,
                                           capsys: pytest.CaptureFixture[str]) -> None:
@@ -730,6 +779,8 @@ def test_train_model_refuses_data_on_open(data: str, needles: list[str], files: 
     (["--model", "video-lstm", "--video-lstm-scale", "99999999"], ["--video-lstm-scale: expected an integer in [1, 32]"], 2),
     (["--data-file", "gravity", "--fixed-g", "1e308"], ["fixed_g must be in [1e-06, 1e+06]"], 1),  # the loss was NaN at step 0
     (["--data-file", "gravity", "--fixed-g", "1e-300"], ["fixed_g must be in [1e-06, 1e+06]", "got 1e-300"], 1),
+    (["--epochs", "1", "--budget-steps", "50"], ["--epochs and --budget-steps both set the run's length"], 1),  # the budget
+    (["--preset", "paper", "--budget-steps", "50"], ["the paper preset plans in epochs (1000)", "give --epochs"], 1),  # was ignored
 ])
 def test_train_model_refuses_runs_it_could_never_finish(argv: list[str], needles: list[str], code: int, tiny_data: Path,
                                                         gravity_data: Path, tmp_path: Path,
@@ -890,6 +941,8 @@ def test_threads_and_seeds_are_refused_beyond_what_the_machine_and_the_generator
 @pytest.mark.parametrize("argv, needle", [
     (["--model", "RUN", "--oracle"], "not both"),
     (["--write-goal-image", "OUT.png", "--angle", "30", "--oracle"], "takes no --model or --oracle"),
+    (["--write-goal-image", "OUT.png", "--angle", "30", "--episodes", "3"], "only writes a picture and exits; drop --episodes"),
+    (["--oracle", "--workers", "3"], "--workers runs the jobs of --sweep"),
 ])
 def test_control_refuses_options_it_would_ignore(argv: list[str], needle: str, tmp_path: Path,
                                                  capsys: pytest.CaptureFixture[str]) -> None:
@@ -902,10 +955,28 @@ def test_control_refuses_options_it_would_ignore(argv: list[str], needle: str, t
     assert not (tmp_path / "OUT.png").exists()
 
 
-def test_control_refuses_planner_options_for_a_baseline_run(baseline_runs: dict[str, Path],
+@pytest.mark.parametrize("argv, needles", [
+    (["--horizon", "7"], ["--horizon", "ddpg"]),
+    (["--no-warm-start"], ["--warm-start", "a policy, no planner"]),
+    (["--not-told"], ["--not-told is for the piga agent", "ddpg run is never told"]),
+])
+def test_control_refuses_planner_options_for_a_baseline_run(argv: list[str], needles: list[str],
+                                                            baseline_runs: dict[str, Path],
                                                             capsys: pytest.CaptureFixture[str]) -> None:
-    """A DDPG run has no planner and a PlaNet-style run plans with PlaNet's CEM: --horizon would be ignored."""
-    refused("piga-control", ["--model", str(baseline_runs["ddpg"]), "--horizon", "7"], capsys, "--horizon", "ddpg")
+    """A DDPG run has no planner and a PlaNet-style run plans with PlaNet's CEM: --horizon would be ignored, and
+    so was --not-told (a baseline is never told)."""
+    refused("piga-control", ["--model", str(baseline_runs["ddpg"]), *argv], capsys, *needles)
+
+
+@pytest.mark.parametrize("argv, needles", [
+    (["--model", "RUN"], ["the model was trained at dt 0.05 s", "--env-option action_repeat"]),  # after a warning line
+    (["--oracle", "--env-option", "mass2"], ["--env-option: expected KEY=VALUE"]),  # the flag was not named
+])
+def test_control_on_dmc_refuses_in_one_line(argv: list[str], needles: list[str], tiny_piga_run: Path,
+                                            capsys: pytest.CaptureFixture[str]) -> None:
+    pytest.importorskip("dm_control")
+    argv = [str(tiny_piga_run) if a == "RUN" else a for a in argv]
+    refused("piga-control", ["--env", "piga/DMCPendulum-v0", "--episodes", "1", "--quiet", *argv], capsys, *needles)
 
 
 @pytest.fixture(scope="module")

@@ -21,6 +21,9 @@ MAX_FREE_NATS = 1000.0
 #: Most optimiser steps a run may take, in its training and over all its iterative rounds together: weeks on a CPU
 #: (PlaNet's own runs take a few million); --steps 1e20 was taken, and trained for ever.
 MAX_STEPS = 10_000_000
+#: Most hidden layers of the reward head (PlaNet's has 3): --reward-layers 100000 built a head of a billion weights
+#: that passed the memory check and then trained for hours without a word.
+MAX_REWARD_LAYERS = 100
 #: Largest exploration noise accepted, as a fraction of the action bound (the noisy action is then clipped).
 MAX_EXPLORATION_NOISE = 10.0
 
@@ -80,6 +83,9 @@ class RSSMConfig:
                      "action_repeat"):
             if getattr(self, name) < 1:
                 raise ValueError(f"RSSMConfig.{name} must be >= 1, got {getattr(self, name)}")
+        if self.reward_layers > MAX_REWARD_LAYERS:
+            raise ValueError(f"RSSMConfig.reward_layers (--reward-layers) must be at most {MAX_REWARD_LAYERS} (PlaNet uses 3), "
+                             f"got {self.reward_layers}")
         if self.reward_units < 0:
             raise ValueError(f"RSSMConfig.reward_units must be >= 0 (0: hidden_size), got {self.reward_units}")
         if not self.min_std > 0:
@@ -154,6 +160,9 @@ class PlanetTrainConfig:
                              f"max_minutes must be finite numbers: {self}")
         if not (self.lr > 0 and self.adam_eps > 0 and self.grad_clip > 0 and self.free_nats >= 0):
             raise ValueError("need lr, adam_eps, grad_clip > 0 and free_nats >= 0")
+        if not self.reward_scale > 0:
+            raise ValueError(f"PlanetTrainConfig.reward_scale (--reward-scale) must be > 0, got {self.reward_scale:g}: at 0 the "
+                             "reward head never learns, and the planner ranks its plans by that head")
         if self.steps > MAX_STEPS:
             raise ValueError(f"PlanetTrainConfig.steps (--steps) must be at most {MAX_STEPS:,} (weeks on a CPU), got {self.steps:,}")
         if self.free_nats > MAX_FREE_NATS:

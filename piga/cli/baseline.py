@@ -15,6 +15,7 @@ import json
 import math
 import os
 import sys
+import typing
 from collections.abc import Iterator, Sequence
 from dataclasses import replace
 from pathlib import Path
@@ -70,7 +71,7 @@ def build_parser() -> ArgumentParser:
     q.add_argument("--reward-alignment", choices=get_args(RewardAlignment), default=rssm.reward_alignment,
                    help="which state the reward head reads for a model step's reward: frame (the state before its actions) "
                    "or transition (PlaNet's: the state they lead to, which has seen them) (default %(default)s)")
-    q.add_argument("--reward-scale", type=nonnegative_float, default=planet.reward_scale,
+    q.add_argument("--reward-scale", type=positive_float, default=planet.reward_scale,
                    help="weight of the reward term of the loss (PlaNet's code: 10) (default %(default)s)")
     q.add_argument("--stoch-size", type=positive_int, default=rssm.stoch_size, help="stochastic state size (default %(default)s)")
     add_preset_option(q, "--max-minutes", default=planet.max_minutes, type=positive_float, shown="no limit",
@@ -209,6 +210,11 @@ def _saved_config(run_dir: Path, record: dict[str, Any], key: str, cls: Any, opt
         raise PigaError(f"--resume: {where}'s '{key}' settings " + (f"lack {', '.join(missing)}" if missing else "")
                         + (" and " if missing and unknown else "") + (f"have unknown {', '.join(unknown)}" if unknown else "")
                         + " (edited, or from another version); start the run again with --overwrite")
+    for name, kind in typing.get_type_hints(cls).items():  # a number edited into text: the config's checks would compare it
+        value = saved.get(name)
+        if name in saved and kind in (int, float) and (isinstance(value, bool) or not isinstance(value, (int, kind))):
+            raise PigaError(f"--resume: {where}'s '{key}' settings give {name} as {value!r}, not "
+                            f"{'an integer' if kind is int else 'a number'} (edited); start the run again with --overwrite")
     try:
         return cls(**{name: tuple(value) if isinstance(value, list) else value for name, value in saved.items()})
     except (TypeError, ValueError) as exc:
@@ -334,13 +340,13 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
             _refuse_fewer_steps(args.rounds, saved_iterative.rounds, "--rounds")
             iterative = replace(saved_iterative, rounds=args.rounds or saved_iterative.rounds)
             record["iterative"] = iterative.to_dict()
-        if "rssm" not in record:  # a record without it (benchmarks/baselines.py wrote none before): the checkpoint's
-            from agents.planet.run import load_planet
+        from agents.planet.run import load_planet
 
-            try:
-                record["rssm"] = load_planet(run_dir)[0].config.to_dict()
-            except (FileNotFoundError, ValueError) as exc:
-                raise PigaError(str(exc)) from None
+        try:  # the model's sizes are the checkpoint's: a record may lack them (benchmarks/baselines.py wrote none
+            # before) or have been edited
+            record["rssm"] = load_planet(run_dir)[0].config.to_dict()
+        except (FileNotFoundError, ValueError) as exc:
+            raise PigaError(str(exc)) from None
         record.setdefault("resumed", []).append(command)
     else:
         config = PlanetTrainConfig(steps=args.steps or PlanetTrainConfig.steps, batch_size=args.batch_size, chunk_length=args.chunk_length,

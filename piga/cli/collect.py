@@ -73,7 +73,8 @@ def dmc_config(options: Sequence[tuple[str, str]], **fields: object) -> DMCPendu
             else:
                 values[key] = kind(text)
         except ValueError:
-            raise ValueError(f"--env-option {key}={text}: expected a {kind.__name__}") from None
+            what = {bool: "true or false (1, 0, on, off)", int: "an integer", float: "a number"}.get(kind, f"a {kind.__name__}")
+            raise ValueError(f"--env-option {key}={text}: expected {what}") from None
     return DMCPendulumConfig(**values)  # type: ignore[arg-type]
 
 

@@ -35,14 +35,15 @@ class ArgumentParser(argparse.ArgumentParser):
     Abbreviations are off (``allow_abbrev=False``): ``--gravity 14`` must not silently mean
     ``--gravity-mult 14``; an option is taken only as spelt in full. Subparsers inherit this class.
 
-    A value that starts with a minus and a digit (``-1,1,1``, ``-1e3``) is read as a value, not
-    as an unknown option, so that its own type check names what is wrong with it.
+    A value that starts with a minus and a digit (``-1,1,1``, ``-1e3``), or is a negative infinity or
+    NaN as Python spells them (``-inf``, ``-nan``), is read as a value, not as an unknown option, so that
+    its own type check names what is wrong with it.
     """
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         kwargs.setdefault("allow_abbrev", False)
         super().__init__(*args, **kwargs)
-        self._negative_number_matcher = re.compile(r"^-\.?\d")
+        self._negative_number_matcher = re.compile(r"^-(\.?\d|(inf|infinity|nan)$)", re.IGNORECASE)
 
     def add_argument(self, *args: Any, **kwargs: Any) -> argparse.Action:
         """As argparse's; a text value (no ``type``, no ``choices``) may not be empty: ``--out ''`` is refused,

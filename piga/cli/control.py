@@ -108,6 +108,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.write_goal_image:
         if args.model or args.oracle:
             raise PigaError("--write-goal-image only writes a picture and exits; it takes no --model or --oracle")
+        if given := _given_options(args, GOAL_IMAGE_OPTIONS):
+            raise PigaError(f"--write-goal-image only writes a picture and exits; drop {', '.join(given)}")
         return _write_goal_image(args)
     if args.angle is not None:
         raise PigaError("--angle goes with --write-goal-image; to set the control goal use --goal-angle or --goal-image")
@@ -135,9 +137,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _baseline(args, kind, mpc, outputs, argv)
     if args.sweep:
         return _sweep(args, mpc, outputs, argv)
-    if args.ray:
-        raise PigaError("--ray runs the jobs of --sweep and a baseline run's episodes; a piga or oracle run without "
-                        "--sweep plays its episodes in this process")
+    if args.ray or args.workers != build_parser().get_default("workers"):
+        raise PigaError(f"{'--ray' if args.ray else '--workers'} runs the jobs of --sweep and a baseline run's episodes; a "
+                        "piga or oracle run without --sweep plays its episodes in this process")
     if args.video:
         if Path(args.video).suffix.lower() not in (".mp4", ".gif"):
             raise PigaError(f"--video must end in .mp4 or .gif, got {args.video}")
@@ -294,6 +296,9 @@ def _baseline(args: argparse.Namespace, kind: RunKind, mpc: MPCConfig, outputs: 
         raise PigaError(f"--goal-image: {why}, so it cannot be given a goal image; goal images need a piga run")
     if args.goal_angle:
         raise PigaError(f"--goal-angle: {why}; only upright (0) can be scored")
+    if args.not_told:
+        raise PigaError(f"--not-told is for the piga agent; a {kind.value} run is never told a gravity change (it runs as "
+                        "trained)")
     if args.video:
         if args.sweep:
             raise PigaError("--sweep runs upright swing-ups; it does not take --goal-image or --video")
@@ -419,6 +424,15 @@ def _write_goal_image(args: argparse.Namespace) -> int:
 
 #: Options of piga-control that the DMC pendulum takes (the rest must keep their defaults there).
 DMC_OPTIONS = ("model", "oracle", "episodes", "seed", "env", "env_option", "out", "overwrite", "quiet")
+#: Options of piga-control that --write-goal-image takes (the rest must keep their defaults with it).
+GOAL_IMAGE_OPTIONS = ("write_goal_image", "angle", "env", "overwrite", "quiet")
+
+
+def _given_options(args: argparse.Namespace, taken: Sequence[str]) -> list[str]:
+    """The options of ``args`` outside ``taken`` (destinations) that differ from their defaults, as flags
+    (``--episodes``): options that a mode of the command would ignore."""
+    defaults = vars(build_parser().parse_args([]))
+    return [f"--{k.replace('_', '-')}" for k, v in vars(args).items() if k not in taken and v != defaults[k]]
 
 
 def _dmc_sb3_agent(run_dir: str, env: DMCPendulumConfig) -> SB3Agent:
@@ -441,16 +455,15 @@ def _dmc(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     from piga.cli.collect import _env_option, dmc_config
 
     defaults = vars(build_parser().parse_args([]))
-    given = [k for k, v in vars(args).items() if k not in DMC_OPTIONS and v != defaults[k]]
-    if given:
-        raise PigaError(f"--{given[0].replace('_', '-')} is not an option of --env piga/DMCPendulum-v0; it takes "
+    if given := _given_options(args, DMC_OPTIONS):
+        raise PigaError(f"{given[0]} is not an option of --env piga/DMCPendulum-v0; it takes "
                         + ", ".join(f"--{k.replace('_', '-')}" for k in DMC_OPTIONS))
     import argparse as _argparse
 
     try:
         pairs = [_env_option(text) for text in args.env_option]
     except _argparse.ArgumentTypeError as exc:
-        raise PigaError(str(exc)) from None
+        raise PigaError(f"--env-option: {exc}") from None
     from piga.control.dmc import DMCControlConfig, OracleSwingUp, PigaSwingUp, dmc_markdown, dmc_record, run_dmc_episodes
 
     episodes = args.episodes if args.episodes != defaults["episodes"] else DMCControlConfig.episodes
@@ -478,10 +491,10 @@ def _dmc(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
                             "SB3 runs trained on it")
         else:
             model, _ = load_model(args.model)
-            warn_if_unconverged(PROG, args.model)
             if abs(model.config.dt - config.env.dt) > 1e-9:
                 raise PigaError(f"{args.model}: the model was trained at dt {model.config.dt} s, the env steps "
                                 f"{config.env.dt} s (set --env-option action_repeat)")
+            warn_if_unconverged(PROG, args.model)  # after the refusals, so that a refused command prints one line
             agent = PigaSwingUp(model, config.planner)
             results.append(run_dmc_episodes(agent, "piga", config, model.config.input_frames, progress=not args.quiet))
     if args.oracle or not args.model:

@@ -30,7 +30,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     check_figure_target(args.out, args.overwrite)
     info = inspect_dataset(args.data)
-    check_frames_have_signal(args.data)  # a blank file, or a non-finite action, is named rather than drawn
+    check_frames_have_signal(args.data, motion=False)  # a blank file, or a non-finite action, is named rather than drawn;
+    # a still one is drawn: the strip shows what the file holds
     check_actions_file(args.data)
     idx = split_indices(args.data, args.split)[: args.sequences]
     if len(idx) == 0:

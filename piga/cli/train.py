@@ -228,6 +228,13 @@ def main(argv: Sequence[str] | None = None) -> int:
                 except ValueError as exc:
                     raise PigaError(f"{flag}: {args.data} holds {info.system} data: {exc}") from None
         record = {"command": command}
+    if "budget_steps" in overrides and train_config.epochs:  # a step budget sizes only a run not given in epochs
+        if "epochs" in overrides:
+            raise PigaError("--epochs and --budget-steps both set the run's length (--budget-steps only when --epochs "
+                            "is not given); give one of them")
+        source = "the run was planned" if args.resume else f"the {args.preset} preset plans"
+        raise PigaError(f"--budget-steps {train_config.budget_steps}: {source} in epochs ({train_config.epochs}), which "
+                        "take the place of a step budget; give --epochs instead")
     plan = check_trainable(info, model_config, train_config)
     planned = ckpt.get("plan") or {} if args.resume else {}  # (a checkpoint from before plans were saved has none)
     if plan.epochs < planned.get("epochs", 0):  # the baselines' --resume refuses the same

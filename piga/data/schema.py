@@ -312,30 +312,47 @@ def frames_have_signal(frames: np.ndarray) -> bool:
     return bool((flat.max(-1) != flat.min(-1)).any())
 
 
+def frames_move(frames: np.ndarray) -> bool:
+    """Whether any sequence of ``frames`` (uint8 [N, T, H, W] or [N, T, H, W, C]) holds a frame that differs
+    from its first; a sequence of one frame shows no motion either way, and counts as moving."""
+    return frames.shape[1] < 2 or bool((frames[:, 1:] != frames[:, :1]).any())
+
+
 def _blank_error(path: str | os.PathLike[str], level: int) -> DataFormatError:
     return DataFormatError(f"{path}: every frame is blank (one flat level, {level}): the video carries no signal to "
                            "learn from; check that the objects are drawn (their size, and colours against the background)")
 
 
-def _check_frames_signal(frames: h5py.Dataset, path: str | os.PathLike[str]) -> None:
+def _still_error(path: str | os.PathLike[str]) -> DataFormatError:
+    return DataFormatError(f"{path}: nothing moves: in every sequence each frame is the same picture as its first, so "
+                           "the video carries no motion to learn from; check the recording (a frozen camera, or one "
+                           "frame repeated)")
+
+
+def _check_frames_signal(frames: h5py.Dataset, path: str | os.PathLike[str], motion: bool) -> None:
+    signal, moves = False, not motion
     for start in range(len(frames)):  # one sequence (one chunk) at a time: a good file stops at the first
-        if frames_have_signal(frames[start : start + 1]):
+        sequence = frames[start : start + 1]  # (1, T, H, W[, C])
+        signal = signal or frames_have_signal(sequence)
+        moves = moves or frames_move(sequence)
+        if signal and moves:
             return
-    raise _blank_error(path, int(frames[0, 0].flat[0]))
+    raise _blank_error(path, int(frames[0, 0].flat[0])) if not signal else _still_error(path)
 
 
-def check_frames_have_signal(path: str | os.PathLike[str]) -> None:
+def check_frames_have_signal(path: str | os.PathLike[str], motion: bool = True) -> None:
     """Refuses a file whose frames are all blank (each one flat level), which no model can learn
-    from and no diagnosis can read. Training (:class:`piga.data.windows.SequenceWindows`), the baselines
-    and ``piga-diagnose`` run it when they open a file; :class:`DatasetWriter` runs the same test
-    before it keeps a file. It reads one sequence of a good file: it stops at the first frame that
-    is not blank.
+    from and no diagnosis can read, and (``motion``) one in which nothing moves: every sequence one
+    picture repeated. Training (:class:`piga.data.windows.SequenceWindows`), the baselines and
+    ``piga-diagnose`` run it when they open a file; :class:`DatasetWriter` runs the same test before
+    it keeps a file; ``piga-show`` draws a still video (``motion=False``). It reads one sequence of a
+    good file: it stops at the first that is not blank and moves.
 
     Raises:
-        DataFormatError: naming the file and the level.
+        DataFormatError: naming the file and the level, or saying that nothing moves.
     """
     with _open(path) as f:
-        _check_frames_signal(f["frames"], path)
+        _check_frames_signal(f["frames"], path, motion)
 
 
 def fingerprint(path: str | os.PathLike[str]) -> str:
@@ -436,7 +453,7 @@ class DatasetWriter:
 
     Use as a context manager. The file appears at ``path`` only when the block exits without
     error. Before that it is a hidden ``.NAME.partial-PID`` sibling, removed on failure. A file
-    whose frames are all blank is not kept either (:class:`DataFormatError`, as
+    whose frames are all blank, or in which nothing moves, is not kept either (:class:`DataFormatError`, as
     :func:`check_frames_have_signal`).
 
     Args:
@@ -481,6 +498,7 @@ class DatasetWriter:
         self._written = np.zeros(n_sequences, dtype=bool)
         self._split_set = False
         self._signal = False
+        self._moves = False
         self._level = 0
 
     def __enter__(self) -> DatasetWriter:
@@ -522,6 +540,7 @@ class DatasetWriter:
         if not self._signal and len(frames):
             self._signal = frames_have_signal(frames)
             self._level = int(frames.flat[0])
+        self._moves = self._moves or (len(frames) > 0 and frames_move(frames))
 
     def set_split(self, split: np.ndarray) -> None:
         """Sets ``/split`` (int8 [N], codes of :data:`SPLITS`)."""
@@ -542,8 +561,8 @@ class DatasetWriter:
             )
             self._ctx.__exit__(RuntimeError, error, None)
             raise error
-        if not self._signal:  # nothing to learn from: the file is not kept (check_frames_have_signal)
-            blank = _blank_error(self.path, self._level)
+        if not (self._signal and self._moves):  # nothing to learn from: the file is not kept (check_frames_have_signal)
+            blank = _blank_error(self.path, self._level) if not self._signal else _still_error(self.path)
             self._ctx.__exit__(DataFormatError, blank, None)
             raise blank
         self._ctx.__exit__(None, None, None)
