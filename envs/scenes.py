@@ -36,7 +36,7 @@ from typing import Any, Literal, get_args
 import numpy as np
 
 __all__ = ["SCENES", "SceneConfig", "scene_config", "accelerations", "simulate", "draw_start", "render",
-           "generate_sequence", "state_names", "SceneError"]
+           "generate_sequence", "state_names", "SceneError", "MIN_FORCE_SHIFT", "force_shift", "check_forces_visible"]
 
 
 #: Smallest ball radius (or half digit side) accepted, in pixels: smaller objects leave no trace in the frames.
@@ -346,6 +346,45 @@ def draw_start(config: SceneConfig, rng: np.random.Generator, steps: int,
     raise SceneError(f"{config.scene}: no start in {config.max_tries} draws stays clear of the walls"
                      f"{' and in the top half' if config.half else ''} for {steps} frames; use shorter sequences, a lower "
                      f"speed{_force_advice(config)} or a larger image")
+
+
+#: Least displacement, in pixels, by which a scene's forces must move some ball away from its force-free path (a straight
+#: line at its start velocity) over a collection's first batch of sequences: less, and no frame shows the forces, so
+#: their parameters cannot be learned (the pendulum's floors use the same hundredth of a pixel).
+MIN_FORCE_SHIFT = 0.01
+
+
+def force_shift(config: SceneConfig, states: np.ndarray) -> float:
+    """The largest distance, in pixels, between a ball's path and its force-free path (the straight line of its
+    start velocity), over the sequences of ``states`` (float [B, T, 4N]: positions, then velocities, as
+    :func:`generate_sequence` writes them); 0 for a scene without forces. The forces' scenes touch no wall, so
+    without forces their paths would be exactly these lines (semi-implicit Euler moves a free ball uniformly)."""
+    if config.physics == "bouncing":
+        return 0.0
+    n, t = config.n_objects, states.shape[1]
+    p = states[..., : 2 * n].astype(np.float64)  # (B, T, 2N)
+    v0 = states[:, :1, 2 * n :].astype(np.float64)  # (B, 1, 2N)
+    free = p[:, :1] + v0 * (config.dt * np.arange(t))[None, :, None]  # (B, T, 2N)
+    return float(np.abs(p - free).max()) if states.size else 0.0
+
+
+def check_forces_visible(config: SceneConfig, states: np.ndarray) -> None:
+    """Refuses forces too weak to show in the frames (:data:`MIN_FORCE_SHIFT`; ``states`` as :func:`force_shift`):
+    ``--g 1e-300`` leaves the gravity scene's balls on straight lines, and g could not be learned from them.
+
+    Raises:
+        SceneError: naming the parameters, the displacement and the scene's own values.
+    """
+    if not config.params:
+        return
+    shift = force_shift(config, states)
+    if shift < MIN_FORCE_SHIFT:
+        values = ", ".join(f"{name} = {value:g}" for name, value in config.params.items())
+        own = ", ".join(f"{name} = {value:g}" for name, value in SCENES[config.scene]["params"].items())
+        raise SceneError(f"{config.scene}: with {values} the forces move no ball by {MIN_FORCE_SHIFT:g} px from a straight "
+                         f"line in {states.shape[1]} frames (at most {shift:.3g} px), so the frames cannot show them and "
+                         f"their parameters cannot be learned; use stronger forces (the scene's own: {own}) or longer "
+                         "sequences")
 
 
 def _force_advice(config: SceneConfig) -> str:

@@ -279,6 +279,9 @@ def test_a_failed_allocation_is_out_of_memory(capsys: pytest.CaptureFixture[str]
     (["--system", "gravity", "--g", "1e308"], ["weaker forces than g = 1e+308, m = 1 (the scene's own: g = 60, m = 1)"], 1),
     (["--system", "spring", "--k", "1e-300", "--steps", "12", "--image-size", "20"], ["stronger forces than k = 1e-300"], 1),
     (["--gravity", "-nan"], ["argument --gravity: expected a finite number > 0, got -nan"], 2),  # "expected one argument"
+    (["--system", "gravity", "--g", "1e-300"], ["the forces move no ball by 0.01 px from a straight line in 6 frames",
+                                                "the scene's own: g = 60, m = 1"], 1),  # straight lines, "wrote"
+    (["--system", "gravity", "--m", "1e-10"], ["with g = 60, m = 1e-10 the forces move no ball by 0.01 px"], 1),
     (["--env", "piga/DMCPendulum-v0", "--env-option", "action_repeat=1.5"],
      ["--env-option action_repeat=1.5: expected an integer"], 1),  # it said "expected a int"
 ])

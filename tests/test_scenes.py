@@ -11,7 +11,7 @@ import pytest
 import torch
 from scipy.integrate import solve_ivp
 
-from envs.scenes import SceneError, accelerations, draw_start, render, scene_config, simulate
+from envs.scenes import SceneError, accelerations, draw_start, generate_sequence, render, scene_config, simulate
 from piga.cli.collect import main as collect_main
 from piga.data.collect_scenes import SceneCollectConfig, collect_scene
 from piga.data.schema import inspect_dataset, load_states
@@ -158,3 +158,18 @@ def test_a_start_that_cannot_avoid_the_walls_is_one_clear_error() -> None:
     config = scene_config("spring", speed=400.0, max_tries=64)
     with pytest.raises(SceneError, match="no start"):
         draw_start(config, np.random.default_rng(0), 30)
+
+
+def test_force_shift_measures_the_forces_against_straight_lines() -> None:
+    from envs.scenes import force_shift
+
+    rng = np.random.default_rng(0)
+    config = scene_config("gravity")
+    _, states = generate_sequence(config, rng, 8)  # (T, 4N)
+    assert force_shift(config, states[None]) > 1.0  # the scene's own g bends the paths by pixels in 8 frames
+    n, t = config.n_objects, 8
+    v = np.tile([2.0, -1.0], n)  # (2N,) one velocity per ball, kept
+    p = 10 + v * config.dt * np.arange(t)[:, None]  # (T, 2N): straight lines
+    straight = np.concatenate([p, np.tile(v, (t, 1))], axis=1)[None].astype(np.float32)
+    assert force_shift(config, straight) < 1e-5
+    assert force_shift(scene_config("bouncing"), straight[..., : 8]) == 0.0

@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 from tqdm.auto import tqdm
 
-from envs.scenes import SceneConfig, generate_sequence, scene_config, state_names
+from envs.scenes import SceneConfig, check_forces_visible, generate_sequence, scene_config, state_names
 from piga.io.atomic import check_writable_target
 from piga.data.collect import check_collect_sizes, sequence_rng, split_counts
 from piga.data.schema import SPLITS, DatasetWriter
@@ -109,6 +109,8 @@ def collect_scene(config: SceneCollectConfig, out: str | Path, overwrite: bool =
                 # one batch per farm, so that memory holds one batch (the runner keeps a farm's results)
                 run_pool(one, range(start, stop), config.workers, progress=False, on_result=keep,
                          names=[f"sequence {i}" for i in range(start, stop)])
+                if start == 0:  # forces too weak to show: refused before more is simulated (the file is not kept)
+                    check_forces_visible(scene, states)
                 writer.write(start, frames, np.zeros((stop - start, t, 0), np.float32), states)
             writer.set_split(np.repeat(np.arange(3, dtype=np.int8), counts))
     return Path(out)
