@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from baselines import PRESETS, TABLE_GRAVITY, BenchConfig, evaluate, recorded_scores, sweep_episodes
-from common import farm_main, machine, machine_words, write_page
+from common import change_cells, farm_main, machine, machine_words, write_page
 
 from piga.io.checkpoint import CHECKPOINT, RunKind, run_kind
 from piga.io.pool import JobRecords, RecordedJob, run_recorded
@@ -55,12 +55,6 @@ def run_job(job: Job) -> dict[str, Any]:
                              torque_arrow=True)}
 
 
-def _cell(before: dict[str, Any] | None, after: dict[str, Any], key: str, fmt: str) -> str:
-    scale = 100 if key == "success_rate" else 1
-    was = "—" if before is None else format(before[key] * scale, fmt)
-    return f"{was} → {format(after[key] * scale, fmt)}"
-
-
 def markdown(record: dict[str, Any]) -> str:
     """The page: a row per run, arrow hidden (its record) → arrow shown."""
     lines = ["# The torque arrow at evaluation as at training", "",
@@ -73,11 +67,7 @@ def markdown(record: dict[str, Any]) -> str:
              "| run | agent | success x1.0 (episodes) | mean return x1.0 | success x1.4 (episodes) |",
              "|---|---|---|---|---|"]
     for name, row in record["runs"].items():
-        before = row["hidden"] or {}
-        x1, x14 = row["x1"], row["x1.4"]
-        lines.append(f"| {name} | {row['agent']} | {_cell(before.get('x1'), x1, 'success_rate', '.0f')}% "
-                     f"({x1['episodes']}) | {_cell(before.get('x1'), x1, 'mean_return', '.1f')} | "
-                     f"{_cell(before.get('x1.4'), x14, 'success_rate', '.0f')}% ({x14['episodes']}) |")
+        lines.append(f"| {name} | {row['agent']} | {change_cells(row['hidden'], row)} |")
     return "\n".join(lines) + "\n"
 
 

@@ -48,6 +48,22 @@ def machine() -> dict[str, object]:
             "python": platform.python_version(), "platform": platform.platform()}
 
 
+def change_cells(before: dict[str, Any] | None, after: dict[str, Any]) -> str:
+    """Three table cells of one run scored twice (``x1`` and ``x1.4``, piga.control.episodes' summaries; ``before``
+    None when it has no earlier record): success at x1.0 (episodes), mean return at x1.0, success at x1.4
+    (episodes), each as "before → after"."""
+
+    def cell(key: str, was: dict[str, Any] | None, now: dict[str, Any], fmt: str) -> str:
+        scale = 100 if key == "success_rate" else 1
+        return f"{'—' if was is None else format(was[key] * scale, fmt)} → {format(now[key] * scale, fmt)}"
+
+    before = before or {}
+    x1, x14 = after["x1"], after["x1.4"]
+    return (f"{cell('success_rate', before.get('x1'), x1, '.0f')}% ({x1['episodes']}) | "
+            f"{cell('mean_return', before.get('x1'), x1, '.1f')} | "
+            f"{cell('success_rate', before.get('x1.4'), x14, '.0f')}% ({x14['episodes']})")
+
+
 def write_page(out: Path, record: dict[str, Any], page: str) -> None:
     """Writes ``OUT.json`` (the record) and ``OUT.md`` (the page), each atomically, and says so."""
     from piga.io.atomic import atomic_output, write_json

@@ -28,7 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from baselines import AGENTS, PRESETS, BenchConfig, evaluate, sweep_episodes
-from common import farm_main, machine, machine_words, write_page
+from common import change_cells, farm_main, machine, machine_words, write_page
 
 from piga.io.checkpoint import CHECKPOINT
 from piga.io.pool import JobRecords, RecordedJob, run_recorded
@@ -84,11 +84,6 @@ def run_job(args: tuple[Evaluation, BenchConfig]) -> dict[str, Any]:
             "x1.4": evaluate(job.agent, run, cfg, GRAVITY, sweep_episodes(cfg, job.agent), seed=job.seed)}
 
 
-def _cell(seed0: dict[str, Any] | None, held: dict[str, Any], key: str, fmt: str) -> str:
-    before = "—" if seed0 is None else format(seed0[key] * (100 if key == "success_rate" else 1), fmt)
-    return f"{before} → {format(held[key] * (100 if key == 'success_rate' else 1), fmt)}"
-
-
 def markdown(record: dict[str, Any]) -> str:
     """The page: a row per run, its seed-0 numbers (the table's) beside the held-out ones."""
     lines = ["# The baselines' agents on held-out episodes", "",
@@ -104,11 +99,8 @@ def markdown(record: dict[str, Any]) -> str:
     for name, row in record["runs"].items():
         seed0 = row.get("seed0") or {}
         spec = seed0.get("spec", {})
-        x1, x14 = row["x1"], row["x1.4"]
         lines.append(f"| {name} | {spec.get('agent', '?')} | {spec.get('sequences') or ''} | {spec.get('seed', '')} | "
-                     f"{_cell(seed0.get('x1'), x1, 'success_rate', '.0f')}% ({x1['episodes']}) | "
-                     f"{_cell(seed0.get('x1'), x1, 'mean_return', '.1f')} | "
-                     f"{_cell(seed0.get('x1.4'), x14, 'success_rate', '.0f')}% ({x14['episodes']}) |")
+                     f"{change_cells(row.get('seed0'), row)} |")
     lines += ["", "## Summary", ""]
     for agent, s in record["summary"].items():
         lines.append(f"- {agent}: {s['runs']} run(s); success x1.0 over its runs {s['seed0_x1']:.0f}% on seed 0, "
