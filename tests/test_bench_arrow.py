@@ -1,6 +1,6 @@
 """benchmarks/arrow.py: runs scored on the table's episodes with the torque arrow shown, beside their records'
-arrow-free numbers; what is not a piga or PlaNet-style run is refused. Training is real and tiny; the episodes are
-stand-ins that record the episode settings they were given."""
+arrow-free numbers; what is not a piga or PlaNet-style run is refused. The runs are empty stand-ins, and the
+episodes stand-ins that record the settings they were given."""
 
 from __future__ import annotations
 
@@ -20,15 +20,13 @@ def arrow():
         yield module
 
 
-def test_runs_are_scored_with_the_arrow_beside_their_records(arrow: Any, tiny_data: Path, tmp_path: Path,
+def test_runs_are_scored_with_the_arrow_beside_their_records(arrow: Any, tmp_path: Path,
                                                              monkeypatch: pytest.MonkeyPatch) -> None:
     import piga.control.jobs
-    from agents.planet.config import PlanetTrainConfig, RSSMConfig
-    from agents.planet.train import train_planet
 
     run = tmp_path / "table_runs" / "planet-n8-s0"
-    train_planet(tiny_data, run, PlanetTrainConfig(steps=2, batch_size=2, chunk_length=4, threads=1),
-                 RSSMConfig(depth=4, deter_size=8, stoch_size=4, hidden_size=8), progress=False)
+    run.mkdir(parents=True)
+    (run / "checkpoint.pt").write_bytes(b"")  # the episodes are stand-ins: nothing loads it
     (run / "config.json").write_text(json.dumps({"kind": "planet"}))  # as the benchmarks write it
     (run.parent / "records").mkdir()
     (run.parent / "records" / "planet-n8-s0.json").write_text(json.dumps(
