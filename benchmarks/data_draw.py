@@ -18,31 +18,18 @@ not run again, so the same command continues. Writes OUT.json and OUT.md.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from baselines import PRESETS, TABLE_GRAVITY, _run_task, data_file, job_records, job_spec, jobs_for
+from baselines import PRESETS, TABLE_GRAVITY, jobs_for, recorded_scores, run_all
 from common import farm_main, machine_words, write_page
-
-from piga.io.pool import RecordedJob, run_recorded
 
 DATA_SEED = 200
 """The second collection's seed (the table's is ``BenchConfig.data_seed``, 100)."""
 JOBS = ("piga-n2-s0", "piga-n2-s1", "piga-n2-s2", "planet-n250-s0", "planet-n500-s0")
 """The table's jobs run again by default."""
-
-
-def table_scores(records: Path, name: str) -> dict[str, Any] | None:
-    """The table's record of job ``name`` (its data seed, x1.0 and x1.4 summaries), None if it has none."""
-    path = records / f"{name}.json"
-    if not path.exists():
-        return None
-    record = json.loads(path.read_text())
-    return {"data_seed": record["spec"].get("data_seed"), "x1": record["control"],
-            "x1.4": record["sweep"][f"{TABLE_GRAVITY:g}"]}
 
 
 def _cells(scores: dict[str, Any] | None) -> str:
@@ -90,17 +77,13 @@ def main(argv: list[str] | None = None) -> int:
         p.error(f"--jobs: not a piga or PlaNet-style job of the {args.preset} table: {', '.join(unknown)}")
     folder = args.out.parent / f"{args.out.name}_runs"
     folder.mkdir(parents=True, exist_ok=True)
-    jobs = [known[name] for name in dict.fromkeys(args.jobs)]
-    records = job_records(folder)
-    todo = [job for job in jobs if records.kept(job.name, job_spec(job, cfg)) is None]
-    files = {n: data_file(cfg, folder, n) for n in sorted({job.sequences for job in todo})}
-    recorded = [RecordedJob(job.name, job_spec(job, cfg), (job, cfg, folder, files.get(job.sequences))) for job in jobs]
-    done = run_recorded(_run_task, recorded, records, 1, progress=False)
-    rows = {name: {"table": table_scores(args.table / "records", name), "x1": r["control"],
-                   "x1.4": r["sweep"][f"{TABLE_GRAVITY:g}"], "train_seconds": r["train_seconds"]}
-            for name, r in done.items()}
+    names = list(dict.fromkeys(args.jobs))
+    records = run_all(cfg, folder, only=tuple(names))  # the table's own runner: kept records, data files, jobs
+    rows = {name: {"table": recorded_scores(args.table / name), "x1": records[name]["control"],
+                   "x1.4": records[name]["sweep"][f"{TABLE_GRAVITY:g}"], "train_seconds": records[name]["train_seconds"]}
+            for name in names}
     record = {"command": " ".join(["python", "benchmarks/data_draw.py", *(sys.argv[1:] if argv is None else argv)]),
-              "machine": next(iter(done.values()))["machine"], "data_seed": args.data_seed,
+              "machine": records[names[0]]["machine"], "data_seed": args.data_seed,
               "table_data_seed": table_cfg.data_seed, "jobs": rows}
     write_page(args.out, record, markdown(record))
     return 0

@@ -354,6 +354,11 @@ def draw_start(config: SceneConfig, rng: np.random.Generator, steps: int,
 MIN_FORCE_SHIFT = 0.01
 
 
+def _params_text(params: dict[str, float]) -> str:
+    """``g = 60, m = 1``: a scene's physical values as its errors name them."""
+    return ", ".join(f"{name} = {value:g}" for name, value in params.items())
+
+
 def force_shift(config: SceneConfig, states: np.ndarray) -> float:
     """The largest distance, in pixels, between a ball's path and its force-free path (the straight line of its
     start velocity), over the sequences of ``states`` (float [B, T, 4N]: positions, then velocities, as
@@ -379,8 +384,7 @@ def check_forces_visible(config: SceneConfig, states: np.ndarray) -> None:
         return
     shift = force_shift(config, states)
     if shift < MIN_FORCE_SHIFT:
-        values = ", ".join(f"{name} = {value:g}" for name, value in config.params.items())
-        own = ", ".join(f"{name} = {value:g}" for name, value in SCENES[config.scene]["params"].items())
+        values, own = _params_text(config.params), _params_text(SCENES[config.scene]["params"])
         raise SceneError(f"{config.scene}: with {values} the forces move no ball by {MIN_FORCE_SHIFT:g} px from a straight "
                          f"line in {states.shape[1]} frames (at most {shift:.3g} px), so the frames cannot show them and "
                          f"their parameters cannot be learned; use stronger forces (the scene's own: {own}) or longer "
@@ -393,14 +397,14 @@ def _force_advice(config: SceneConfig) -> str:
     the balls fly apart), other ones where both; nothing for a scene without forces, or with the scene's own."""
     if not config.params:
         return ""
-    values = ", ".join(f"{name} = {value:g}" for name, value in config.params.items())
+    values = _params_text(config.params)
     own = SCENES[config.scene]["params"]
     above = any(value > own.get(name, value) for name, value in config.params.items())
     below = any(value < own.get(name, value) for name, value in config.params.items())
     if not (above or below):  # the scene's own forces: the sequences, the speed or the image are the ones to change
         return ""
     kind = "other" if above and below else "weaker" if above else "stronger"
-    scene = ", ".join(f"{name} = {value:g}" for name, value in own.items())
+    scene = _params_text(own)
     return f", {kind} forces than {values} (the scene's own: {scene})"
 
 

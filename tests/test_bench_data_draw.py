@@ -4,6 +4,7 @@ table's own draw and jobs the table has not are refused. The jobs are stand-ins 
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -41,8 +42,9 @@ def test_jobs_rerun_on_the_second_draw_beside_the_table(draw: Any, tmp_path: Pat
         return {"machine": machine(), "train_seconds": 1.0, "control": _summary(0.5),
                 "sweep": {"1.4": _summary(0.0, 5)}}
 
-    monkeypatch.setattr(draw, "data_file", data_file)
-    monkeypatch.setattr(draw, "_run_task", run_task)
+    table_module = sys.modules[draw.run_all.__module__]  # the jobs run through the table's own runner
+    monkeypatch.setattr(table_module, "data_file", data_file)
+    monkeypatch.setattr(table_module, "_run_task", run_task)
     out = tmp_path / "draw"
     argv = ["--jobs", "piga-n2-s0", "planet-n250-s0", "--table", str(table), "--out", str(out)]
     assert draw.main(argv) == 0

@@ -8,7 +8,7 @@ import sys
 from collections.abc import Callable, Sequence
 from dataclasses import replace
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -428,10 +428,10 @@ DMC_OPTIONS = ("model", "oracle", "episodes", "seed", "env", "env_option", "out"
 GOAL_IMAGE_OPTIONS = ("write_goal_image", "angle", "env", "overwrite", "quiet")
 
 
-def _given_options(args: argparse.Namespace, taken: Sequence[str]) -> list[str]:
-    """The options of ``args`` outside ``taken`` (destinations) that differ from their defaults, as flags
-    (``--episodes``): options that a mode of the command would ignore."""
-    defaults = vars(build_parser().parse_args([]))
+def _given_options(args: argparse.Namespace, taken: Sequence[str], defaults: dict[str, Any] | None = None) -> list[str]:
+    """The options of ``args`` outside ``taken`` (destinations) that differ from their defaults (``defaults``: the
+    parser's, if the caller has them), as flags (``--episodes``): options that a mode of the command would ignore."""
+    defaults = vars(build_parser().parse_args([])) if defaults is None else defaults
     return [f"--{k.replace('_', '-')}" for k, v in vars(args).items() if k not in taken and v != defaults[k]]
 
 
@@ -455,7 +455,7 @@ def _dmc(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     from piga.cli.collect import _env_option, dmc_config
 
     defaults = vars(build_parser().parse_args([]))
-    if given := _given_options(args, DMC_OPTIONS):
+    if given := _given_options(args, DMC_OPTIONS, defaults):
         raise PigaError(f"{given[0]} is not an option of --env piga/DMCPendulum-v0; it takes "
                         + ", ".join(f"--{k.replace('_', '-')}" for k in DMC_OPTIONS))
     import argparse as _argparse
