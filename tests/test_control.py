@@ -236,7 +236,7 @@ def control_model(tiny_data: Path, tmp_path_factory: pytest.TempPathFactory) -> 
     return train_tiny(tiny_data, tmp_path_factory.mktemp("control") / "model")
 
 
-def test_sweep_writes_a_table_per_multiplier(control_model: Path, tmp_path: Path) -> None:
+def test_sweep_writes_a_table_per_multiplier(control_model: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     import json
 
     out = tmp_path / "sweep-x1.0"  # a stem with a dot: OUT.json is appended, never replaces ".0"
@@ -252,7 +252,7 @@ def test_sweep_writes_a_table_per_multiplier(control_model: Path, tmp_path: Path
     assert Path(f"{out}.png").read_bytes()[:4] == b"\x89PNG"
 
     # --not-told: the piga agent plans with its learned g at each multiplier, and its rows say so
-    result = run("piga-control", "--model", str(control_model), "--sweep", "1.5:1.5:0.5", "--not-told", "--episodes", "1",
+    result = ctl(capsys, "--model", str(control_model), "--sweep", "1.5:1.5:0.5", "--not-told", "--episodes", "1",
                  "--steps", "20", "--workers", "1", "--out", str(tmp_path / "not-told"), "--quiet")
     assert result.returncode == 0, result.stderr
     rows = [r["summary"]["agent"] for r in json.loads((tmp_path / "not-told.json").read_text())["results"]]
@@ -260,16 +260,17 @@ def test_sweep_writes_a_table_per_multiplier(control_model: Path, tmp_path: Path
 
 
 @pytest.mark.parametrize("suffix", [".mp4", ".gif"])
-def test_video_is_written_and_decodes(control_model: Path, tmp_path: Path, suffix: str) -> None:
+def test_video_is_written_and_decodes(control_model: Path, tmp_path: Path, suffix: str,
+                                      capsys: pytest.CaptureFixture[str]) -> None:
     import imageio.v3 as iio
 
     video = tmp_path / f"episode{suffix}"
-    result = run("piga-control", "--model", str(control_model), "--episodes", "1", "--steps", "20", "--video", str(video),
+    result = ctl(capsys, "--model", str(control_model), "--episodes", "1", "--steps", "20", "--video", str(video),
                  "--quiet")
     assert result.returncode == 0, result.stderr
     frames = iio.imread(video)  # (T, H, W, 3): real | belief | plan, one per step
     assert frames.shape[0] == 20 and frames.shape[2] >= 3 * 64 and frames.std() > 1
-    assert_one_line_error(run("piga-control", "--model", str(control_model), "--episodes", "1", "--steps", "20", "--video",
+    assert_one_line_error(ctl(capsys, "--model", str(control_model), "--episodes", "1", "--steps", "20", "--video",
                               str(video)), "--overwrite")
 
 

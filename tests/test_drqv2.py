@@ -19,7 +19,7 @@ from agents.sb3.drqv2 import DrQV2Policy, ScheduledNoise, random_shift
 from tests.test_dmc import needs_dmc
 
 #: Tiny settings: a few seconds of training (the encoder is DrQ-v2's, the MLPs small).
-TINY = SB3Config(algo="drqv2", obs="pixels", steps=400, learning_starts=100, eval_every=200, eval_episodes=1, batch_size=8,
+TINY = SB3Config(algo="drqv2", obs="pixels", steps=400, learning_starts=150, eval_every=200, eval_episodes=1, batch_size=8,
                  net_arch=(16, 16), feature_dim=8, buffer_size=500, threads=1, device="cpu")
 
 
@@ -126,7 +126,7 @@ def test_a_drqv2_run_on_the_dmc_pendulum_is_scored_in_dmcs_episodes_and_nowhere_
     run = tmp_path / "drq"
     code, out, err = run_in_process("piga-baseline", baseline, "ddpg", "--env", "piga/DMCPendulum-v0", "--algo", "drqv2",
                                     "--obs", "pixels", "--steps", "500", "--eval-every", "500", "--eval-episodes", "1",
-                                    "--learning-starts", "100", "--batch-size", "8", "--buffer-size", "600", "--out",
+                                    "--learning-starts", "450", "--batch-size", "8", "--buffer-size", "600", "--out",
                                     str(run), "--quiet", capsys=capsys)
     assert_sb3_run_finished(code, err)  # 500 steps cannot learn: exit 1, the summary and the outputs kept
     assert ("never reached 200" in out and "never reached 200 in 500 env steps" in err) if code else "first reached 200" in out

@@ -105,7 +105,7 @@ def test_nan_stops_and_names_last_checkpoint(small_data: Path, tmp_path: Path, m
     assert not (tmp_path / "fresh").exists()
 
 
-def test_cli_trains_and_reports(small_data: Path, tmp_path: Path) -> None:
+def test_cli_trains_and_reports(small_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     from piga.io.device import resolve_device
 
     out = tmp_path / "run"
@@ -124,11 +124,12 @@ def test_cli_trains_and_reports(small_data: Path, tmp_path: Path) -> None:
     assert len(metrics["frame_ssim_per_step"]) == 15 - 4
     assert metrics["training"]["device"] == str(resolve_device("auto"))
     # an existing run is not replaced without --overwrite or --resume
-    assert_one_line_error(run("piga-train-model", str(small_data), "--out", str(out)), "--overwrite")
-    resumed = run("piga-train-model", str(small_data), "--out", str(out), "--resume", "--epochs", "2", "--quiet",
-                  "--device", "cpu")  # the device is not the recipe's
-    assert resumed.returncode in FINISHED, resumed.stderr
-    assert "epoch 2:" in resumed.stdout and "epoch 1:" not in resumed.stdout
+    code, _, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), capsys=capsys)
+    assert_one_line(code, err, "--overwrite")
+    code, stdout, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), "--resume", "--epochs", "2",
+                                       "--quiet", "--device", "cpu", capsys=capsys)  # the device is not the recipe's
+    assert code in FINISHED, err
+    assert "epoch 2:" in stdout and "epoch 1:" not in stdout
     assert json.loads((out / "metrics.json").read_text())["training"]["device"] == "cpu"
 
 

@@ -88,10 +88,18 @@ class AngleTable:
 
 
 @torch.no_grad()
-def angle_table(model: PhysicsModel, camera: Camera = Camera(), size: int = TABLE_SIZE) -> AngleTable:
-    """The decoder's renders of ``size`` angles, seen through ``camera``."""
+def decoder_renders(model: PhysicsModel, size: int = TABLE_SIZE) -> tuple[Tensor, Tensor]:
+    """The angles (K,) of a table of ``size`` and the decoder's renders of them (K, C, H, W), before any camera:
+    computed once where many cameras are tried on the same angles (the camera fits)."""
     angles = torch.arange(size, dtype=torch.float32) * (2 * math.pi / size) - math.pi
-    frames = model.decoder(angles[:, None, None])  # (K, C, H, W)
+    return angles, model.decoder(angles[:, None, None])
+
+
+@torch.no_grad()
+def angle_table(model: PhysicsModel, camera: Camera = Camera(), size: int = TABLE_SIZE,
+                renders: tuple[Tensor, Tensor] | None = None) -> AngleTable:
+    """The decoder's renders of ``size`` angles (or the given :func:`decoder_renders`), seen through ``camera``."""
+    angles, frames = decoder_renders(model, size) if renders is None else renders  # (K,), (K, C, H, W)
     return AngleTable(angles, camera.apply(frames).flatten(1))
 
 
@@ -122,15 +130,19 @@ def match(table: AngleTable, x: Tensor, batch: int = 2048) -> tuple[Tensor, Tens
     return torch.cat(thetas), torch.cat(errors)
 
 
-def matched_error(model: PhysicsModel, camera: Camera, x: Tensor, size: int = TABLE_SIZE // 2) -> float:
-    """Mean matched residual (pixel MSE) of frames ``x`` (M, P) under ``camera``."""
-    return float(match(angle_table(model, camera, size), x)[1].mean())
+def matched_error(model: PhysicsModel, camera: Camera, x: Tensor, size: int = TABLE_SIZE // 2,
+                  renders: tuple[Tensor, Tensor] | None = None) -> float:
+    """Mean matched residual (pixel MSE) of frames ``x`` (M, P) under ``camera`` (``renders``: the
+    :func:`decoder_renders` of ``size`` angles, when already computed)."""
+    return float(match(angle_table(model, camera, size, renders), x)[1].mean())
 
 
-def fit_camera(model: PhysicsModel, x: Tensor, blur: bool = True, shift: bool = True, rounds: int = 2) -> Camera:
+def fit_camera(model: PhysicsModel, x: Tensor, blur: bool = True, shift: bool = True, rounds: int = 2,
+               renders: tuple[Tensor, Tensor] | None = None) -> Camera:
     """The camera (blur σ and/or shift dx, dy) that minimises the matched residual of frames ``x`` (M, P).
 
-    Coordinate descent: bounded scalar searches on each parameter in turn, ``rounds`` times.
+    Coordinate descent: bounded scalar searches on each parameter in turn, ``rounds`` times. ``renders``: the
+    :func:`decoder_renders` of ``TABLE_SIZE // 2`` angles, when already computed.
     """
     from scipy.optimize import minimize_scalar
 
@@ -138,12 +150,13 @@ def fit_camera(model: PhysicsModel, x: Tensor, blur: bool = True, shift: bool = 
     names = (["dx", "dy"] if shift else []) + (["blur"] if blur else [])
     if not names:
         return Camera()
+    renders = decoder_renders(model, TABLE_SIZE // 2) if renders is None else renders  # the same for every camera tried
     for _ in range(rounds):
         for name in names:
             lo, hi = (0.0, MAX_BLUR) if name == "blur" else (-MAX_SHIFT, MAX_SHIFT)
 
             def objective(v: float, name: str = name) -> float:
-                return matched_error(model, Camera(**{**cam, name: float(v)}), x)
+                return matched_error(model, Camera(**{**cam, name: float(v)}), x, renders=renders)
 
             # a coarse scan first: the residual of a shift has side minima a pixel apart
             grid = np.linspace(lo, hi, 9 if name == "blur" else 11)
@@ -282,11 +295,11 @@ def camera_interval(model: PhysicsModel, camera: Camera, name: str, x: Tensor, c
                     step: float = 0.05) -> list[float]:
     """95% interval of one camera parameter: the sandwich (M-estimator) variance, robust to frames of a
     sequence being alike (clustered by ``clusters`` (M,)), from per-frame residual derivatives."""
-    errs = []
+    errs, renders = [], decoder_renders(model)
     for sign in (-1, 0, 1):
         value = getattr(camera, name) + sign * step
         cam = Camera(**{**camera.__dict__, name: max(value, 0.0) if name == "blur" else value})
-        errs.append(match(angle_table(model, cam), x)[1].double().numpy())
+        errs.append(match(angle_table(model, cam, renders=renders), x)[1].double().numpy())
     d1 = (errs[2] - errs[0]) / (2 * step)  # (M,)
     curvature = float(np.mean(errs[2] - 2 * errs[1] + errs[0])) / step**2
     sums = np.bincount(np.unique(clusters, return_inverse=True)[1], weights=d1 - d1.mean())
@@ -338,27 +351,28 @@ def camera_stage(model: PhysicsModel, path: str, theta: np.ndarray, fit: np.ndar
     channels = model.config.channels
     x_fit, x_held = _flat(raw_fit, channels), _flat(_sample(path, held_rows, config.held_frames, rng)[0], channels)
 
-    e0 = matched_error(model, Camera(), x_held)
+    renders = decoder_renders(model, TABLE_SIZE // 2)  # every candidate camera sees the same angles
+    e0 = matched_error(model, Camera(), x_held, renders=renders)
     table: list[dict] = [{"candidate": "none", "camera": Camera().__dict__, "held_out_matched_mse": e0, "drop": 0.0,
                           "accepted": False}]
 
     def row(name: str, cam: Camera, base: float, needs: set[str]) -> dict:
         """A candidate's table row; accepted when it lowers the residual enough and ``needs`` are material."""
-        e = matched_error(model, cam, x_held)
+        e = matched_error(model, cam, x_held, renders=renders)
         drop = 1 - e / base if base > 0 else 0.0
         return {"candidate": name, "camera": dict(cam.__dict__), "held_out_matched_mse": e, "drop": drop,
                 "accepted": bool(needs <= cam.material(config) and drop > config.min_drop)}
 
-    singles = [row("blur", fit_camera(model, x_fit, shift=False), e0, {"blur"})]
+    singles = [row("blur", fit_camera(model, x_fit, shift=False, renders=renders), e0, {"blur"})]
     bar.update()
-    singles.append(row("shift", fit_camera(model, x_fit, blur=False), e0, {"shift"}))
+    singles.append(row("shift", fit_camera(model, x_fit, blur=False, renders=renders), e0, {"shift"}))
     bar.update()
     table += singles
     best = max(singles, key=lambda r: r["drop"])
     camera, e_cam = Camera(), e0
     if best["accepted"]:
         camera, e_cam = Camera(**best["camera"]), best["held_out_matched_mse"]
-        both = row("blur+shift", fit_camera(model, x_fit), e_cam, {"blur", "shift"} - {best["candidate"]})
+        both = row("blur+shift", fit_camera(model, x_fit, renders=renders), e_cam, {"blur", "shift"} - {best["candidate"]})
         table.append(both)
         if both["accepted"]:
             camera, e_cam = Camera(**both["camera"]), both["held_out_matched_mse"]
