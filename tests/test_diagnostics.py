@@ -410,3 +410,19 @@ def test_the_smallest_default_file_is_accepted(tmp_path: Path) -> None:
     collect(CollectConfig(sequences=20, steps=12, seed=3, workers=1, split=(17, 2, 1)), fewer, progress=False, command="t")
     with pytest.raises(DiagnosisInputError, match="17 train and 3 held-out sequences; need at least 10 and 4"):
         check_compatible(model, fewer)
+
+
+def test_the_autocorrelation_of_short_sequences_stops_at_their_length() -> None:
+    """Residuals 4 steps long have lags 0..3 only (lag 4 and beyond once read empty slices: NaN and numpy warnings)."""
+    import warnings
+
+    from piga.diagnostics.residuals import Residuals, autocorrelation
+
+    grid = np.random.default_rng(0).normal(size=(50, 4))
+    res = Residuals(*(np.zeros(1),) * 4, grid, np.zeros((50, 12)), np.ones(1, bool))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        ac = autocorrelation(res)
+    assert ac["lags"] == [0, 1, 2, 3] and ac["acf"][0] == pytest.approx(1.0) and np.isfinite(ac["acf"]).all()
+    assert autocorrelation(Residuals(*(np.zeros(1),) * 4, np.ones((3, 30)), np.zeros((3, 38)), np.ones(1, bool)))["lags"] \
+        == list(range(11))  # long enough: the default 10 lags

@@ -90,9 +90,11 @@ def binned(res: Residuals) -> dict[str, list[dict]]:
 
 
 def autocorrelation(res: Residuals, max_lag: int = 10) -> dict[str, list[float] | float]:
-    """Pooled within-sequence autocorrelation of ρ at lags 0..max_lag, with the white-noise band."""
+    """Pooled within-sequence autocorrelation of ρ at lags 0..max_lag (at most the residual's length - 1: short
+    sequences have no longer lags), with the white-noise band."""
     r = res.grid - res.grid.mean()
     var = float((r**2).mean())
+    max_lag = min(max_lag, r.shape[1] - 1)
     acf = [float((r[:, : r.shape[1] - k] * r[:, k:]).mean() / var) if var > 0 else 0.0 for k in range(max_lag + 1)]
     return {"lags": list(range(max_lag + 1)), "acf": acf, "band": 1.96 / math.sqrt(r.size)}
 
