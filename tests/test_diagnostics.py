@@ -196,6 +196,8 @@ def test_corrected_dynamics_roll_the_corrected_physics() -> None:
 def test_cli_bad_env(tiny_model: Path, tiny_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert_one_line_error(diagnose_in_process(capsys, "--model", str(tiny_model), "--data", str(tiny_data), "--out",
                                               str(tmp_path / "r"), "--env", "dampng=0.2"), "--env", "unknown effect")
+    assert_one_line_error(diagnose_in_process(capsys, "--model", str(tiny_model), "--data", str(tiny_data), "--out",
+                                              str(tmp_path / "r"), "--env", "damping=0.2,,delay=2"), "--env", "empty item")
     assert not (tmp_path / "r").exists()
 
 

@@ -131,8 +131,12 @@ def _parse_env(text: str) -> tuple[tuple[str, float], ...]:
 
     if text.strip().lower() in ("", "none"):
         return ()
+    parts = [part.strip() for part in text.split(",")]
+    if not all(parts):
+        raise PigaError(f"--env: an empty item in {text!r}; give NAME=VALUE items separated by single commas, "
+                        "e.g. 'damping=0.2,delay=2'")
     try:
-        return normalize_effects([part.strip() for part in text.split(",") if part.strip()])
+        return normalize_effects(parts)
     except (ValueError, TypeError) as exc:
         raise PigaError(f"--env: {exc}") from None
 
