@@ -1,0 +1,132 @@
+"""Benchmark: when a spring run loses its balls: the object check at the end of the autoencoder warm-up.
+
+On the half spring data of ``benchmarks/regions.py`` (the balls stay in the top half of the image) some training seeds
+end with each object's template drawing its ball twice, side by side, and the object check fails (exit 1). This
+trains the spring's ``fast`` recipe (the same as ``piga-train-model DATA --seed SEED``) on that file and on the same
+collection without ``--half``, stops each run at its first checkpoint after the autoencoder warm-up (before the
+physics has trained for long), and measures there the object check of :mod:`piga.evaluation.objects` on the test
+split: the residual peak over the content peak (above 0.5 an object counts as lost at the end of a run). It also
+draws each half-data seed's templates at that point.
+
+    python benchmarks/warmup_objects.py --out results/regions_warmup --seeds 0 1 2 3
+
+Writes OUT.json, OUT.md and OUT-templates-sSEED.png (half data); data files and runs go in OUT_runs/.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+from common import farm_main, logged_command, machine, machine_words, write_page
+
+SEQUENCES, DATA_SEED = 100, 100
+"""The collection of ``benchmarks/regions.py`` (its defaults)."""
+
+
+class _WarmupDone(Exception):
+    """Raised from the training's checkpoint hook once the warm-up is over: the run stops there."""
+
+
+def collect_command(half: bool, path: Path) -> list[str]:
+    return ["piga-collect", "--system", "spring", *(["--half"] if half else []), "--sequences", str(SEQUENCES),
+            "--seed", str(DATA_SEED), "--out", str(path), "--quiet"]
+
+
+def data_file(half: bool, folder: Path) -> Path:
+    """The data set, collected once with ``piga-collect``."""
+    path = folder / ("spring-half.h5" if half else "spring.h5")
+    if not path.exists():
+        folder.mkdir(parents=True, exist_ok=True)
+        code = logged_command(collect_command(half, path), path.with_suffix(".log"))
+        if code:
+            raise RuntimeError(f"piga-collect failed (exit {code}); see {path.with_suffix('.log')}")
+    return path
+
+
+def at_warmup_end(data: Path, seed: int, run_dir: Path, templates: Path | None) -> dict[str, Any]:
+    """Trains the fast recipe with ``seed`` on ``data`` up to the first checkpoint after the warm-up; the object check
+    (and the templates figure, to ``templates``) there."""
+    from piga.data.schema import inspect_dataset, read_sequences
+    from piga.evaluation.objects import check_objects
+    from piga.evaluation.plots import save_figure, templates_figure
+    from piga.training.report import template_images
+    from piga.training.train import preset_for, train
+
+    recipe = preset_for("fast", inspect_dataset(data))
+    seen: dict[str, Any] = {}
+
+    def hook(state: Any, model: Any) -> None:
+        plan = state.plan  # TrainPlan's fields
+        if state.step >= plan["warmup_steps"]:
+            model = model.cpu().eval()  # the run stops here
+            seen.update(step=state.step, warmup_steps=plan["warmup_steps"], total_steps=plan["epochs"] * plan["steps_per_epoch"],
+                        check=check_objects(model, read_sequences(data, "test")[0]).to_dict())
+            if templates is not None:
+                save_figure(templates_figure(*template_images(model)), templates)
+            raise _WarmupDone
+
+    try:
+        train(data, run_dir, replace(recipe.train, seed=seed, threads=1), recipe.model, progress=False, on_epoch=hook)
+    except _WarmupDone:
+        pass
+    if not seen:
+        raise RuntimeError(f"the run on {data} ended before its warm-up did")
+    return seen
+
+
+def markdown(record: dict[str, Any]) -> str:
+    lines = ["# When a spring run loses its balls: the object check at the end of the warm-up", "",
+             f"Command: `{record['command']}`", "",
+             f"Machine: {machine_words(record['machine'])}.", "",
+             f"Data: `{' '.join(collect_command(True, Path('spring-half.h5')))}` (the half data of "
+             "[regions](regions.md)) and the same collection without `--half`. Each run is the spring's `fast` recipe "
+             "(`piga-train-model DATA --seed SEED`), stopped at its first checkpoint after the autoencoder warm-up; the "
+             "ratio is the object check's residual peak over the content peak on the test split (a finished run "
+             "fails the check above 0.5).", "",
+             "| seed | half data: ratio at step (warm-up) | default data: ratio at step (warm-up) |", "|---|---|---|"]
+    for seed in record["seeds"]:
+        cells = []
+        for kind in ("half", "default"):
+            r = record["runs"][kind][str(seed)]
+            cells.append(f"{r['check']['ratio']:.3f} at {r['step']} ({r['warmup_steps']} of {r['total_steps']})")
+        lines.append(f"| {seed} | {' | '.join(cells)} |")
+    lines.append("")
+    for seed in record["seeds"]:
+        lines.append(f"![half data, seed {seed}: templates at the end of the warm-up]({record['out_name']}-templates-s{seed}.png)")
+    return "\n".join(lines) + "\n"
+
+
+@farm_main
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
+    p.add_argument("--out", type=Path, default=Path("results/regions_warmup"), help="output prefix (default %(default)s)")
+    p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3], help="training seeds (default %(default)s)")
+    args = p.parse_args(argv)
+    import torch
+
+    torch.set_num_threads(1)
+    folder = args.out.parent / f"{args.out.name}_runs"
+    seeds = list(dict.fromkeys(args.seeds))
+    runs: dict[str, dict[str, Any]] = {"half": {}, "default": {}}
+    for kind in runs:
+        data = data_file(kind == "half", folder)
+        for seed in seeds:
+            templates = args.out.parent / f"{args.out.name}-templates-s{seed}.png" if kind == "half" else None
+            r = at_warmup_end(data, seed, folder / f"{kind}-s{seed}", templates)
+            runs[kind][str(seed)] = r
+            print(f"{kind} data, seed {seed}: object check ratio {r['check']['ratio']:.3f} at step {r['step']} "
+                  f"(warm-up {r['warmup_steps']})", flush=True)
+    from piga.io.pool import git_commit
+
+    record = {"command": " ".join(["python", "benchmarks/warmup_objects.py", *(sys.argv[1:] if argv is None else argv)]),
+              "machine": machine(), "commit": git_commit(), "seeds": seeds, "out_name": args.out.name, "runs": runs}
+    write_page(args.out, record, markdown(record))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
