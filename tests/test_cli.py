@@ -235,3 +235,21 @@ def test_demo_runs_the_chain(tmp_path: Path) -> None:
 def test_module_entry_points_importable_without_torch() -> None:
     code = "import sys, piga.cli.collect, piga.cli.show; print('torch' in sys.modules)"
     assert subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=ENV).stdout.strip() == "False"
+
+
+def test_show_cuts_a_long_title(tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    """A file's attributes are any text: a 100,000-character system name took matplotlib 18 s to lay out."""
+    import h5py
+
+    from piga.cli import show
+
+    data = tmp_path / "d.h5"
+    assert in_process(capsys, "piga-collect", "--out", str(data), "--sequences", "2", "--steps", "3", "--workers", "1",
+                      "--split", "2,0,0", "--quiet").returncode == 0
+    with h5py.File(data, "a") as f:
+        f.attrs["system"] = "pendulum" + "x" * 100_000
+    titles = []
+    real = show.frame_strip
+    monkeypatch.setattr(show, "frame_strip", lambda *a: titles.append(a[3]) or real(*a))
+    assert in_process(capsys, "piga-show", str(data), "--out", str(tmp_path / "s.png"), "--frames", "2").returncode == 0
+    assert len(titles[0]) == show.MAX_TITLE and titles[0].endswith("...")

@@ -26,6 +26,10 @@ def build_parser() -> ArgumentParser:
     return p
 
 
+#: Characters of the strip's title (the file's name, system and parameters) beyond which it is cut.
+MAX_TITLE = 200
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     check_figure_target(args.out, args.overwrite)
@@ -43,6 +47,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     labels = [f"seq {i}" for i in idx]
     cols = [f"t={k}" for k in range(t)]
     title = f"{info.path.name}: {info.system}, dt={info.dt:g}, params {info.params}"
+    if len(title) > MAX_TITLE:  # a file's attributes can be any text; matplotlib lays out every character
+        title = title[: MAX_TITLE - 3] + "..."
     fig = frame_strip(frames, labels, cols, title)
     for r in range(len(idx)):  # the action after each frame, under it
         for c in range(t):
