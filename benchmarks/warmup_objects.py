@@ -1,10 +1,10 @@
-"""Benchmark: when a spring run loses its balls: the object check at the end of the autoencoder warm-up.
+"""Benchmark: when a scene run loses its objects: the object check at the end of the autoencoder warm-up.
 
 On the half spring data of ``benchmarks/regions.py`` (the balls stay in the top half of the image) some training seeds
 end with each object's template drawing its ball twice, side by side, and the object check fails (exit 1). This
-trains the spring's ``fast`` recipe (the same as ``piga-train-model DATA --seed SEED``) on that file and on the same
-collection without ``--half``, stops each run at its first checkpoint after the autoencoder warm-up (before the
-physics has trained for long), and measures there the object check of :mod:`piga.evaluation.objects` on the test
+trains each scene's ``fast`` recipe (the same as ``piga-train-model DATA --seed SEED``) on that file and on each scene's
+own collection of the same size and seed, stops each run at its first checkpoint after the autoencoder warm-up (before
+the physics has trained for long), and measures there the object check of :mod:`piga.evaluation.objects` on the test
 split: the residual peak over the content peak (above 0.5 an object counts as lost at the end of a run). It also
 draws each half-data seed's templates at that point.
 
@@ -24,24 +24,29 @@ from typing import Any
 from common import farm_main, logged_command, machine, machine_words, write_page
 
 SEQUENCES, DATA_SEED = 100, 100
-"""The collection of ``benchmarks/regions.py`` (its defaults)."""
+"""The collection of ``benchmarks/regions.py`` (its defaults), for every data set."""
+DATA_SETS = {"spring-half": ["--system", "spring", "--half"], "spring": ["--system", "spring"],
+             "bouncing": ["--system", "bouncing"], "gravity": ["--system", "gravity"],
+             "digits-spring": ["--system", "digits-spring"]}
+"""``piga-collect``'s options of each data set: the half spring data, and each scene's default collection."""
+HALF = "spring-half"
 
 
 class _WarmupDone(Exception):
     """Raised from the training's checkpoint hook once the warm-up is over: the run stops there."""
 
 
-def collect_command(half: bool, path: Path) -> list[str]:
-    return ["piga-collect", "--system", "spring", *(["--half"] if half else []), "--sequences", str(SEQUENCES),
-            "--seed", str(DATA_SEED), "--out", str(path), "--quiet"]
+def collect_command(name: str, path: Path) -> list[str]:
+    return ["piga-collect", *DATA_SETS[name], "--sequences", str(SEQUENCES), "--seed", str(DATA_SEED), "--out",
+            str(path), "--quiet"]
 
 
-def data_file(half: bool, folder: Path) -> Path:
-    """The data set, collected once with ``piga-collect``."""
-    path = folder / ("spring-half.h5" if half else "spring.h5")
+def data_file(name: str, folder: Path) -> Path:
+    """The data set ``name``, collected once with ``piga-collect``."""
+    path = folder / f"{name}.h5"
     if not path.exists():
         folder.mkdir(parents=True, exist_ok=True)
-        code = logged_command(collect_command(half, path), path.with_suffix(".log"))
+        code = logged_command(collect_command(name, path), path.with_suffix(".log"))
         if code:
             raise RuntimeError(f"piga-collect failed (exit {code}); see {path.with_suffix('.log')}")
     return path
@@ -79,24 +84,25 @@ def at_warmup_end(data: Path, seed: int, run_dir: Path, templates: Path | None) 
 
 
 def markdown(record: dict[str, Any]) -> str:
-    lines = ["# When a spring run loses its balls: the object check at the end of the warm-up", "",
+    names = list(record["runs"])
+    lines = ["# When a scene run loses its objects: the object check at the end of the warm-up", "",
              f"Command: `{record['command']}`", "",
              f"Machine: {machine_words(record['machine'])}.", "",
-             f"Data: `{' '.join(collect_command(True, Path('spring-half.h5')))}` (the half data of "
-             "[regions](regions.md)) and the same collection without `--half`. Each run is the spring's `fast` recipe "
-             "(`piga-train-model DATA --seed SEED`), stopped at its first checkpoint after the autoencoder warm-up; the "
-             "ratio is the object check's residual peak over the content peak on the test split (a finished run "
-             "fails the check above 0.5).", "",
-             "| seed | half data: ratio at step (warm-up) | default data: ratio at step (warm-up) |", "|---|---|---|"]
+             f"Data: `{' '.join(collect_command(HALF, Path(HALF + '.h5')))}` (the half data of [regions](regions.md)), "
+             "and each scene's own collection of the same size and seed (`piga-collect --system SCENE ...`). Each run is "
+             "the scene's `fast` recipe (`piga-train-model DATA --seed SEED`), stopped at its first checkpoint after the "
+             "autoencoder warm-up; the ratio is the object check's residual peak over the content peak on the test split "
+             "(a finished run fails the check above 0.5). Steps: the checkpoint's, then the warm-up's and the run's.", "",
+             "| seed | " + " | ".join(names) + " |", "|---|" + "---|" * len(names)]
     for seed in record["seeds"]:
-        cells = []
-        for kind in ("half", "default"):
-            r = record["runs"][kind][str(seed)]
-            cells.append(f"{r['check']['ratio']:.3f} at {r['step']} ({r['warmup_steps']} of {r['total_steps']})")
+        cells = [f"{r['check']['ratio']:.3f} ({r['step']}; {r['warmup_steps']} of {r['total_steps']})"
+                 for r in (record["runs"][name][str(seed)] for name in names)]
         lines.append(f"| {seed} | {' | '.join(cells)} |")
     lines.append("")
-    for seed in record["seeds"]:
-        lines.append(f"![half data, seed {seed}: templates at the end of the warm-up]({record['out_name']}-templates-s{seed}.png)")
+    if HALF in record["runs"]:
+        for seed in record["seeds"]:
+            lines.append(f"![half data, seed {seed}: templates at the end of the warm-up]"
+                         f"({record['out_name']}-templates-s{seed}.png)")
     return "\n".join(lines) + "\n"
 
 
@@ -105,20 +111,22 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     p.add_argument("--out", type=Path, default=Path("results/regions_warmup"), help="output prefix (default %(default)s)")
     p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3], help="training seeds (default %(default)s)")
+    p.add_argument("--data-sets", nargs="+", choices=list(DATA_SETS), default=list(DATA_SETS),
+                   help="default %(default)s")
     args = p.parse_args(argv)
     import torch
 
     torch.set_num_threads(1)
     folder = args.out.parent / f"{args.out.name}_runs"
     seeds = list(dict.fromkeys(args.seeds))
-    runs: dict[str, dict[str, Any]] = {"half": {}, "default": {}}
-    for kind in runs:
-        data = data_file(kind == "half", folder)
+    runs: dict[str, dict[str, Any]] = {name: {} for name in dict.fromkeys(args.data_sets)}
+    for name in runs:
+        data = data_file(name, folder)
         for seed in seeds:
-            templates = args.out.parent / f"{args.out.name}-templates-s{seed}.png" if kind == "half" else None
-            r = at_warmup_end(data, seed, folder / f"{kind}-s{seed}", templates)
-            runs[kind][str(seed)] = r
-            print(f"{kind} data, seed {seed}: object check ratio {r['check']['ratio']:.3f} at step {r['step']} "
+            templates = args.out.parent / f"{args.out.name}-templates-s{seed}.png" if name == HALF else None
+            r = at_warmup_end(data, seed, folder / f"{name}-s{seed}", templates)
+            runs[name][str(seed)] = r
+            print(f"{name}, seed {seed}: object check ratio {r['check']['ratio']:.3f} at step {r['step']} "
                   f"(warm-up {r['warmup_steps']})", flush=True)
     from piga.io.pool import git_commit
 

@@ -27,13 +27,15 @@ def test_runs_stop_after_the_warm_up_and_the_page_has_each_seed_on_both_data_set
     with benchmark_module("warmup_objects") as bench:
         monkeypatch.setattr(bench, "SEQUENCES", 10)
         out = tmp_path / "warm"
-        assert bench.main(["--out", str(out), "--seeds", "0"]) == 0
+        assert bench.main(["--out", str(out), "--seeds", "0", "--data-sets", "spring-half", "spring"]) == 0
     record = json.loads(out.with_suffix(".json").read_text())
-    for kind in ("half", "default"):
-        run = record["runs"][kind]["0"]
+    assert list(record["runs"]) == ["spring-half", "spring"]
+    for name in ("spring-half", "spring"):
+        run = record["runs"][name]["0"]
         assert run["warmup_steps"] <= run["step"] < run["total_steps"]  # stopped after the warm-up, before the end
         assert math.isfinite(run["check"]["ratio"]) and run["check"]["ratio"] >= 0
     page = out.with_suffix(".md").read_text()
-    assert "| 0 | " in page and "--half" in page and "warm-templates-s0.png" in page
+    assert "| seed | spring-half | spring |" in page and "| 0 | " in page and "--half" in page
+    assert "warm-templates-s0.png" in page
     assert (tmp_path / "warm-templates-s0.png").read_bytes()[:4] == b"\x89PNG"
     assert not (tmp_path / "warm-templates-s1.png").exists()
