@@ -79,11 +79,53 @@ def test_a_run_whose_autoencoder_found_no_ball_trains_again_then_exits_1_naming_
     assert_one_line(code, err, "an object was not found", "seeds 5 and 6 tried", "--seed", "--overwrite")
     assert code == 1
     assert "training again from the start with seed 6 (retry 1 of --seed-retries 1)" in stdout
+    assert "object check: an object was not found with seed 5" in stdout  # at the end: a warm-up this short is not checked
     metrics = json.loads((out / "metrics.json").read_text())
     assert metrics["objects"]["lost"] and metrics["converged"] is False
     record = json.loads((out / "config.json").read_text())
     assert record["train"]["seed"] == 6 and record["retried_seeds"] == [5]
     assert len(list((out / "tensorboard").iterdir())) == 1  # the first attempt's curves are gone
+
+
+def test_an_object_lost_after_the_warm_up_restarts_the_run_there(spring_data: Path, tmp_path: Path,
+                                                                  monkeypatch: pytest.MonkeyPatch,
+                                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    """With a retry left, the object check runs at the first checkpoint after the autoencoder's warm-up: a lost
+    object (a stand-in check here) stops the try there and the next seed starts at once. The last try, with no
+    retry left, trains to its end, where the check decides as before."""
+    import piga.training.report as report
+    from piga.evaluation.objects import ObjectCheck
+
+    monkeypatch.setattr(report, "check_objects", lambda model, frames: ObjectCheck(0.3, 0.5, 0.6, True))
+    monkeypatch.setattr(report, "WARMUP_CHECK_MIN_STEPS", 20)  # a warm-up of 20 steps is checked (the floor: 250)
+    out = tmp_path / "run"
+    code, stdout, err = run_in_process("piga-train-model", train_main, str(spring_data), "--out", str(out), "--epochs",
+                                       "3", "--batch-size", "16", "--warmup-fraction", "0.3", "--threads", "1",
+                                       "--seed", "5", "--quiet", capsys=capsys)  # 3 x 22 steps, the warm-up's the first 20
+    assert_one_line(code, err, "an object was not found", "seeds 5 and 6 tried")
+    assert "object check after the autoencoder's warm-up (step 22 of 66): an object was not found with seed 5 (a blob " \
+           "0.60x as strong as the objects); training again from the start with seed 6 (retry 1 of --seed-retries 1)" in stdout
+    assert "epoch 2:" not in stdout.split("training again")[0] and "epoch 3:" in stdout  # the retry trained to its end
+    record = json.loads((out / "config.json").read_text())
+    assert record["train"]["seed"] == 6 and record["retried_seeds"] == [5]
+    assert json.loads((out / "metrics.json").read_text())["training"]["steps"] == 66
+
+
+def test_the_object_check_in_the_middle_of_a_run_changes_nothing_of_its_training(spring_data: Path,
+                                                                                  tmp_path: Path) -> None:
+    """The check after the warm-up reads the model and the file only: a run checked at every checkpoint ends with
+    the same parameters, to the bit, as one never checked."""
+    from piga.training.report import scene_objects
+
+    config = replace(preset_for("fast", inspect_dataset(spring_data)).train, epochs=3, batch_size=16,
+                     warmup_fraction=0.3, threads=1, seed=0)
+    checked = []
+    a, _ = train(spring_data, tmp_path / "a", config, progress=False,
+                 on_epoch=lambda state, model: checked.append(scene_objects(model, spring_data)))
+    b, _ = train(spring_data, tmp_path / "b", config, progress=False)
+    assert len(checked) >= 2 and all(c is not None for c in checked)
+    for (name, p), q in zip(a.state_dict().items(), b.state_dict().values()):
+        assert torch.equal(p, q), name
 
 
 @pytest.mark.parametrize("slots", [None, "3"])
@@ -133,7 +175,7 @@ def test_a_retry_stopped_before_its_first_checkpoint_leaves_no_folder(spring_dat
             raise KeyboardInterrupt
         run_dir.mkdir(parents=True)
         (run_dir / "checkpoint.pt").write_bytes(b"the first try")
-        on_epoch(SimpleNamespace(epoch=1), None)
+        on_epoch(SimpleNamespace(epoch=1, step=0, plan={"warmup_steps": 1}), None)  # still in the warm-up
         return None, SimpleNamespace(epoch=1)
 
     monkeypatch.setattr(training, "train", fake_train)

@@ -127,7 +127,9 @@ def build_parser() -> ArgumentParser:
     add_device_option(p, fast.device)
     p.add_argument("--seed-retries", type=nonnegative_int, default=fast.seed_retries, metavar="N",
                    help="a scene whose object check finds an object missing (or a slot that draws nothing where the scene "
-                   "has an object for it) is trained again from the start with the next seed, up to N times (default %(default)s; 0: never; not with --resume)")
+                   "has an object for it) is trained again from the start with the next seed, up to N times; while a retry is "
+                   "left, an object missing after the autoencoder's warm-up restarts the run there (default %(default)s; 0: "
+                   "never; not with --resume)")
     p.add_argument("--resume", action="store_true", help="continue the run in --out; it may raise --epochs, --budget-steps or --max-minutes "
                    "(docs: piga-train-model; resuming replans the cosine schedule)")
     p.add_argument("--overwrite", action="store_true", help="replace the outputs of an earlier run in --out")
@@ -158,8 +160,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         raise PigaError(f"{run_dir} holds outputs of an earlier run but no checkpoint ({', '.join(existing)}); "
                         "pass --overwrite to replace them")
     from piga.io.atomic import write_json
-    from piga.data.schema import MAX_SEED, fingerprint, inspect_dataset
-    from piga.training.report import write_run_report
+    from piga.data.schema import fingerprint, inspect_dataset
+    from piga.training import report
+    from piga.training.report import scene_objects, write_run_report
     from piga.io.runs import load_model
     from piga.training.train import (TrainConfig, TrainingDiverged, check_trainable, model_config_for, preset_for,
                                      resolve_loading, train)
@@ -274,20 +277,44 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.overwrite and not args.resume and not fresh.has_templates:
         (run_dir / "templates.png").unlink(missing_ok=True)  # the replaced run's; a model without templates draws none
 
+    tried: list[int] = []  # seeds whose run lost an object and was trained again
+    early: list[int] = []  # the step of this try's object check after the warm-up, once made
+
     def on_epoch(state: Any, model: Any) -> None:  # the first checkpoint of this command: the record goes with it
         if not written:
             write_json(run_dir / "config.json", record)
         written.append(state.epoch)
+        # with a retry left, a scene's objects are checked once the autoencoder's warm-up is over: an object not
+        # found then is not found at the end either (benchmarks/warmup_objects.py), and the retry starts at once
+        warmup = state.plan["warmup_steps"]
+        if early or args.resume or not _retry_left(tried, train_config) or state.step < warmup or \
+                warmup < report.WARMUP_CHECK_MIN_STEPS:
+            return
+        early.append(state.step)
+        objects = scene_objects(model, args.data)
+        if objects is not None and objects.lost and not objects.too_few_slots:
+            raise _LostInWarmup(objects.ratio, state.step, state.plan["epochs"] * state.plan["steps_per_epoch"])
 
-    tried: list[int] = []  # seeds whose run lost an object and was trained again
     missing = missing_folders(run_dir)  # what train() makes at its first checkpoint
     while True:
         # the checkpoint as it was before this try (saves replace the file, so a new one has a new identity; file
         # times alone come from a coarser clock than time.time())
         before = _identity(run_dir / CHECKPOINT)
+        early.clear()
         try:
             model, state = train(args.data, run_dir, train_config, model_config, resume=args.resume,
                                  progress=not args.quiet, on_epoch=on_epoch, n_objects=args.objects)
+        except _LostInWarmup as lost_early:
+            tried.append(train_config.seed)
+            train_config = replace(train_config, seed=train_config.seed + 1)
+            print(f"object check after the autoencoder's warm-up (step {lost_early.step:,} of {lost_early.total:,}): an "
+                  f"object was not found with seed {tried[-1]} (a blob {lost_early.ratio:.2f}x as strong as the objects); "
+                  f"training again from the start with seed {train_config.seed} (retry {len(tried)} of --seed-retries "
+                  f"{train_config.seed_retries})")
+            remove_outputs(run_dir, OUTPUTS)
+            record.update({"train": asdict(train_config), "retried_seeds": list(tried)})
+            written.clear()
+            continue
         except TrainingDiverged as exc:
             raise PigaError(f"training diverged: {exc}") from None
         except KeyboardInterrupt:
@@ -309,7 +336,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         lost = objects.get("lost") and not objects.get("too_few_slots")
         empty = (objects.get("empty_slots") and not objects.get("too_many_slots")
                  and (metrics.get("convergence") or {}).get("outcome") == "untrained")
-        if args.resume or not (lost or empty) or len(tried) >= train_config.seed_retries or train_config.seed >= MAX_SEED:
+        if args.resume or not (lost or empty) or not _retry_left(tried, train_config):
             break
         tried.append(train_config.seed)
         train_config = replace(train_config, seed=train_config.seed + 1)
@@ -368,6 +395,22 @@ def _read_record(run_dir: Path) -> dict[str, Any]:
     print(f"{PROG}: note: {run_dir / 'config.json'} {why}; it is rewritten from the checkpoint, without the command "
           "that started the run", file=sys.stderr)
     return {"command": None}
+
+
+class _LostInWarmup(Exception):
+    """A scene's object not found at the object check after the autoencoder's warm-up (``ratio``, the check's; at
+    ``step`` of the ``total`` planned): the try stops there, and the next seed is tried."""
+
+    def __init__(self, ratio: float, step: int, total: int):
+        super().__init__(f"object lost at step {step}")
+        self.ratio, self.step, self.total = ratio, step, total
+
+
+def _retry_left(tried: list[int], config: Any) -> bool:
+    """Whether ``--seed-retries`` allows another seed after the ``tried`` ones (and the next seed is valid)."""
+    from piga.data.schema import MAX_SEED
+
+    return len(tried) < config.seed_retries and config.seed < MAX_SEED
 
 
 def _identity(path: Path) -> tuple[int, int] | None:

@@ -14,7 +14,7 @@ from piga.world.model import FrameModel, ObjectModel, frames_to_float
 from piga.evaluation.plots import curves_figure, rollout_figure, save_figure, templates_figure
 from piga.io.atomic import write_json
 from piga.io.device import module_device
-from piga.evaluation.objects import check_objects
+from piga.evaluation.objects import ObjectCheck, check_objects
 from piga.training.convergence import check_convergence
 from piga.training.train import TrainState
 
@@ -22,6 +22,30 @@ from piga.training.train import TrainState
 def _image(x: np.ndarray) -> np.ndarray:
     """(C, H, W) -> (H, W) or (H, W, C)."""
     return x[0] if x.shape[0] == 1 else np.moveaxis(x, 0, -1)
+
+
+#: The fewest warm-up steps after which ``piga-train-model`` checks a scene's objects before the end of a run: the
+#: autoencoder has trained enough by then that a found object reads far below the threshold (0.03-0.06 of the
+#: objects' contrast at ~300 steps, in results/regions_warmup.md); after a few steps nothing is drawn yet.
+WARMUP_CHECK_MIN_STEPS = 250
+
+
+@torch.no_grad()
+def scene_objects(model: FrameModel, data: str | Path, eval_config: EvalConfig = EvalConfig(),
+                  frames: np.ndarray | None = None) -> ObjectCheck | None:
+    """Did the autoencoder find each object of a scene? :func:`~piga.evaluation.objects.check_objects` on the frames
+    that the run's report is measured on (``frames``, when already read: the eval split's, or the train split's for a
+    file without it), with the model's slots and the file's object count; None for a model that has no objects (the
+    pendulum's angle, a black-box video model). Reads and changes nothing of the model: a run checked in the middle
+    of its training trains on exactly as it would have."""
+    if not (isinstance(model, ObjectModel) and model.config.coord_dim == 2):
+        return None
+    info = inspect_dataset(data)
+    if frames is None:
+        split = eval_config.split if info.split_counts.get(eval_config.split) else "train"
+        frames = read_sequences(data, split, limit=eval_config.max_sequences)[0]
+    scene = info.attrs.get("n_objects")  # the file's count, to compare with the model's slots (--objects)
+    return check_objects(model, frames).with_counts(model.config.n_objects, None if scene is None else int(scene))
 
 
 @torch.no_grad()
@@ -46,10 +70,8 @@ def write_run_report(model: FrameModel, state: TrainState, data: str | Path, run
                                  max_sequences=eval_config.max_sequences)
     metrics = evaluate(model, data, eval_config)
     frames, actions = read_sequences(data, split, limit=eval_config.max_sequences)
-    objects = None
-    if isinstance(model, ObjectModel) and model.config.coord_dim == 2:  # a scene of objects: did the autoencoder find each?
-        scene = info.attrs.get("n_objects")  # the file's count, to compare with the model's slots (--objects)
-        objects = check_objects(model, frames).with_counts(model.config.n_objects, None if scene is None else int(scene))
+    objects = scene_objects(model, data, eval_config, frames)
+    if objects is not None:
         metrics["objects"] = objects.to_dict()
     metrics["training"] = {"epochs": state.epoch, "steps": state.step, "seconds": state.elapsed,
                            "threads": torch.get_num_threads(), "device": state.device or None}

@@ -118,9 +118,12 @@ class TrainConfig:
     """``piga-train-model``: a scene run whose object check finds an object missing, or a slot that draws
     nothing where the scene has an object for it (:mod:`piga.evaluation.objects`, which reads frames only),
     is trained again from its start with the
-    next seed, up to this many times (0: never); :func:`train` itself trains once. Which objects an
-    autoencoder discovers depends on its initialisation, as the published implementation's README
-    says; the check makes a second draw possible without labels."""
+    next seed, up to this many times (0: never); :func:`train` itself trains once. While a retry is left, the
+    missing object is also looked for at the first checkpoint after the autoencoder's warm-up, and a try that
+    has lost one then is restarted at once (an object not found then was not found at the end in any run
+    measured, ``benchmarks/warmup_objects.py``). Which objects an autoencoder discovers depends on its
+    initialisation, as the published implementation's README says; the check makes a second draw possible
+    without labels."""
     grad_clip: float = 10.0
     """Gradient-norm clip of the networks (0: none)."""
     physics_grad_clip: float = 3.0
