@@ -93,7 +93,7 @@ class ObjectCheck:
                     f"unrendered); train with --objects {self.scene_objects} to model them all")
         return (f"an object was not found: the reconstruction of single frames leaves a moving blob "
                 f"{self.ratio:.2f}x as strong as the scene's objects (at most {LOST_RATIO:g} when every object is "
-                "found); train again with another --seed (and --overwrite, or another --out)")
+                "found); train again with another --seed or more --seed-retries (and --overwrite, or another --out)")
 
     @property
     def too_many_slots(self) -> bool:
