@@ -55,10 +55,9 @@ def data_file(name: str, folder: Path) -> Path:
 def at_warmup_end(data: Path, seed: int, run_dir: Path, templates: Path | None) -> dict[str, Any]:
     """Trains the fast recipe with ``seed`` on ``data`` up to the first checkpoint after the warm-up; the object check
     (and the templates figure, to ``templates``) there."""
-    from piga.data.schema import inspect_dataset, read_sequences
-    from piga.evaluation.objects import check_objects
+    from piga.data.schema import inspect_dataset
     from piga.evaluation.plots import save_figure, templates_figure
-    from piga.training.report import template_images
+    from piga.training.report import scene_objects, template_images
     from piga.training.train import preset_for, train
 
     recipe = preset_for("fast", inspect_dataset(data))
@@ -69,7 +68,7 @@ def at_warmup_end(data: Path, seed: int, run_dir: Path, templates: Path | None) 
         if state.step >= plan["warmup_steps"]:
             model = model.cpu().eval()  # the run stops here
             seen.update(step=state.step, warmup_steps=plan["warmup_steps"], total_steps=plan["epochs"] * plan["steps_per_epoch"],
-                        check=check_objects(model, read_sequences(data, "test")[0]).to_dict())
+                        check=scene_objects(model, data).to_dict())  # what piga-train-model checks there
             if templates is not None:
                 save_figure(templates_figure(*template_images(model)), templates)
             raise _WarmupDone
