@@ -946,6 +946,8 @@ def test_threads_and_seeds_are_refused_beyond_what_the_machine_and_the_generator
     (["--write-goal-image", "OUT.png", "--angle", "30", "--oracle"], "takes no --model or --oracle"),
     (["--write-goal-image", "OUT.png", "--angle", "30", "--episodes", "3"], "only writes a picture and exits; drop --episodes"),
     (["--oracle", "--workers", "3"], "--workers runs the jobs of --sweep"),
+    (["--oracle", "--workers", "2"], "--workers runs the jobs of --sweep"),  # the default's value, given: still ignored
+    (["--write-goal-image", "OUT.png", "--angle", "30", "--episodes=5"], "drop --episodes"),  # the default, as FLAG=VALUE
 ])
 def test_control_refuses_options_it_would_ignore(argv: list[str], needle: str, tmp_path: Path,
                                                  capsys: pytest.CaptureFixture[str]) -> None:
@@ -960,6 +962,7 @@ def test_control_refuses_options_it_would_ignore(argv: list[str], needle: str, t
 
 @pytest.mark.parametrize("argv, needles", [
     (["--horizon", "7"], ["--horizon", "ddpg"]),
+    (["--horizon", "20"], ["--horizon", "ddpg"]),  # the piga planner's own default: still not a DDPG option
     (["--no-warm-start"], ["--warm-start", "a policy, no planner"]),
     (["--not-told"], ["--not-told is for the piga agent", "ddpg run is never told"]),
 ])

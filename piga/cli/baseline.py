@@ -14,7 +14,6 @@ import dataclasses
 import json
 import math
 import os
-import sys
 import typing
 from collections.abc import Iterator, Sequence
 from dataclasses import replace
@@ -22,8 +21,8 @@ from pathlib import Path
 from typing import Any, get_args
 
 from piga.cli.common import (ArgumentParser, Interrupted, PigaError, add_device_option, add_preset_option, command_line,
-                             format_default, made_folder, nonnegative_float, nonnegative_int, positive_float,
-                             positive_int, remove_outputs, run_cli, seed_int, thread_count)
+                             format_default, given_options, made_folder, nonnegative_float, nonnegative_int,
+                             positive_float, positive_int, remove_outputs, run_cli, seed_int, thread_count)
 from piga.io.atomic import check_folder_target
 from piga.io.checkpoint import CHECKPOINT, RunKind
 
@@ -228,12 +227,11 @@ RESUME_OPTIONS = {"planet": ("steps", "max_minutes", "rounds", "threads", "devic
                   "ddpg": ("steps", "threads", "device", "quiet")}
 
 
-def _given_options(kind: str, argv: Sequence[str]) -> set[str]:
+def _given_options(kind: str, argv: Sequence[str] | None) -> set[str]:
     """The destinations of the options written on the command line ``argv`` of subcommand ``kind``, even
-    where the value written is the default (the parsers take no abbreviations, so a flag is spelt whole)."""
+    where the value written is the default."""
     sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction)).choices[kind]
-    return {action.dest for action in sub._actions for flag in action.option_strings
-            if any(word == flag or word.startswith(flag + "=") for word in argv)}
+    return given_options(sub, argv)
 
 
 def _refuse_recipe_changes(args: Any, record: dict[str, Any], run_dir: Path, argv: Sequence[str] | None) -> None:
@@ -244,7 +242,7 @@ def _refuse_recipe_changes(args: Any, record: dict[str, Any], run_dir: Path, arg
     named = [kind, args.data, "--out", args.out] if kind == "planet" else [kind, "--obs", args.obs, "--out", args.out]
     defaults = vars(build_parser().parse_args(named))
     skip = {"baseline", "data", "out", "obs", "algo", "resume", "overwrite", "iterative", "quiet", *RESUME_OPTIONS[kind]}
-    given = _given_options(kind, sys.argv[1:] if argv is None else argv)
+    given = _given_options(kind, argv)
     changed = [name for name, value in vars(args).items()
                if name not in skip and (value != defaults[name] or name in given)]
     if changed:

@@ -335,6 +335,15 @@ def connect_backend(ray: str | None) -> Backend:
     return backend
 
 
+def given_options(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> set[str]:
+    """The destinations of ``parser``'s options written in ``argv`` (None: the command line), whatever their values:
+    an option given at its default value is given (the parsers take no abbreviations, so a flag is spelt whole)."""
+    words = sys.argv[1:] if argv is None else list(argv)
+    # argparse has no public list of a parser's options; _actions is the one every argparse extension reads
+    return {action.dest for action in parser._actions for flag in action.option_strings  # noqa: SLF001
+            if any(word == flag or word.startswith(flag + "=") for word in words)}
+
+
 def format_default(value: Any) -> str:
     """A default as help text shows it: 1e-3 as 0.001, (0.8, 0.1, 0.1) as 0.8,0.1,0.1, True as on."""
     if isinstance(value, bool):

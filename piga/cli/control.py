@@ -8,7 +8,7 @@ import sys
 from collections.abc import Callable, Sequence
 from dataclasses import replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -17,7 +17,8 @@ from envs import DMC_PENDULUM, ENV_IDS, PIXEL_PENDULUM
 from envs.pendulum import MAX_GRAVITY, MIN_GRAVITY, PixelPendulumConfig
 from piga.io.atomic import atomic_output, check_writable_target, write_json
 from piga.cli.common import (ArgumentParser, PigaError, add_ray_option, command_line, connect_backend, file_path,
-                             int_up_to, positive_float, positive_int, run_cli, seed_int, warn_if_unconverged)
+                             given_options, int_up_to, positive_float, positive_int, run_cli, seed_int,
+                             warn_if_unconverged)
 from piga.control.episodes import EpisodeConfig, parse_range, run_episodes
 from piga.evaluation.episodes import summary_markdown
 from piga.io.checkpoint import RunKind
@@ -108,7 +109,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.write_goal_image:
         if args.model or args.oracle:
             raise PigaError("--write-goal-image only writes a picture and exits; it takes no --model or --oracle")
-        if given := _given_options(args, GOAL_IMAGE_OPTIONS):
+        if given := _given_options(args, argv, GOAL_IMAGE_OPTIONS):
             raise PigaError(f"--write-goal-image only writes a picture and exits; drop {', '.join(given)}")
         return _write_goal_image(args)
     if args.angle is not None:
@@ -137,7 +138,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _baseline(args, kind, mpc, outputs, argv)
     if args.sweep:
         return _sweep(args, mpc, outputs, argv)
-    if args.ray or args.workers != build_parser().get_default("workers"):
+    if args.ray or "workers" in given_options(build_parser(), argv):  # --workers 2, the default, too
         raise PigaError(f"{'--ray' if args.ray else '--workers'} runs the jobs of --sweep and a baseline run's episodes; a "
                         "piga or oracle run without --sweep plays its episodes in this process")
     if args.video:
@@ -305,9 +306,9 @@ def _baseline(args: argparse.Namespace, kind: RunKind, mpc: MPCConfig, outputs: 
         if Path(args.video).suffix.lower() not in (".mp4", ".gif"):
             raise PigaError(f"--video must end in .mp4 or .gif, got {args.video}")
         check_writable_target(args.video, args.overwrite)
-    parser = build_parser()  # the CEM options' defaults, as --help shows them
+    given = given_options(build_parser(), argv)  # at their default values too
     planner = [f"--{name.replace('_', '-')}" for name in ("horizon", "candidates", "elites", "iterations", "warm_start")
-               if getattr(args, name) != parser.get_default(name)]
+               if name in given]
     if planner:
         raise PigaError(f"{', '.join(planner)}: a {kind.value} run plans with its own settings "
                         f"({'PlaNet' + chr(39) + 's CEM' if kind is RunKind.PLANET else 'a policy, no planner'}); "
@@ -428,11 +429,11 @@ DMC_OPTIONS = ("model", "oracle", "episodes", "seed", "env", "env_option", "out"
 GOAL_IMAGE_OPTIONS = ("write_goal_image", "angle", "env", "overwrite", "quiet")
 
 
-def _given_options(args: argparse.Namespace, taken: Sequence[str], defaults: dict[str, Any] | None = None) -> list[str]:
-    """The options of ``args`` outside ``taken`` (destinations) that differ from their defaults (``defaults``: the
-    parser's, if the caller has them), as flags (``--episodes``): options that a mode of the command would ignore."""
-    defaults = vars(build_parser().parse_args([])) if defaults is None else defaults
-    return [f"--{k.replace('_', '-')}" for k, v in vars(args).items() if k not in taken and v != defaults[k]]
+def _given_options(args: argparse.Namespace, argv: Sequence[str] | None, taken: Sequence[str]) -> list[str]:
+    """The options written in ``argv`` outside ``taken`` (destinations), at any value, the default's too, as flags
+    (``--episodes``) in the parser's order: options that a mode of the command would ignore."""
+    given = given_options(build_parser(), argv)
+    return [f"--{k.replace('_', '-')}" for k in vars(args) if k in given and k not in taken]
 
 
 def _dmc_sb3_agent(run_dir: str, env: DMCPendulumConfig) -> SB3Agent:
@@ -454,8 +455,7 @@ def _dmc(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     """``--env piga/DMCPendulum-v0``: the piga agent and/or the oracle, scored in DMC's units."""
     from piga.cli.collect import _env_option, dmc_config
 
-    defaults = vars(build_parser().parse_args([]))
-    if given := _given_options(args, DMC_OPTIONS, defaults):
+    if given := _given_options(args, argv, DMC_OPTIONS):
         raise PigaError(f"{given[0]} is not an option of --env piga/DMCPendulum-v0; it takes "
                         + ", ".join(f"--{k.replace('_', '-')}" for k in DMC_OPTIONS))
     import argparse as _argparse
@@ -466,7 +466,7 @@ def _dmc(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
         raise PigaError(f"--env-option: {exc}") from None
     from piga.control.dmc import DMCControlConfig, OracleSwingUp, PigaSwingUp, dmc_markdown, dmc_record, run_dmc_episodes
 
-    episodes = args.episodes if args.episodes != defaults["episodes"] else DMCControlConfig.episodes
+    episodes = args.episodes if "episodes" in given_options(build_parser(), argv) else DMCControlConfig.episodes
     config = DMCControlConfig(episodes=episodes, seed=args.seed, env=dmc_config(pairs))
     outputs = []
     if args.out:
