@@ -116,6 +116,9 @@ def main(argv: list[str] | None = None) -> int:
     import torch
 
     torch.set_num_threads(1)
+    from piga.io.pool import git_commit
+
+    commit = git_commit()  # the code that runs (read before the runs: commits made meanwhile do not count)
     folder = args.out.parent / f"{args.out.name}_runs"
     seeds = list(dict.fromkeys(args.seeds))
     runs: dict[str, dict[str, Any]] = {name: {} for name in dict.fromkeys(args.data_sets)}
@@ -127,10 +130,8 @@ def main(argv: list[str] | None = None) -> int:
             runs[name][str(seed)] = r
             print(f"{name}, seed {seed}: object check ratio {r['check']['ratio']:.3f} at step {r['step']} "
                   f"(warm-up {r['warmup_steps']})", flush=True)
-    from piga.io.pool import git_commit
-
     record = {"command": " ".join(["python", "benchmarks/warmup_objects.py", *(sys.argv[1:] if argv is None else argv)]),
-              "machine": machine(), "commit": git_commit(), "seeds": seeds, "out_name": args.out.name, "runs": runs}
+              "machine": machine(), "commit": commit, "seeds": seeds, "out_name": args.out.name, "runs": runs}
     write_page(args.out, record, markdown(record))
     return 0
 
