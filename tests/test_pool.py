@@ -185,3 +185,18 @@ def test_a_command_names_the_failed_job_in_its_one_line(function: object, code: 
 
     exit_code, _, err = run_in_process("prog", main, capsys=capsys)
     assert exit_code == code and assert_one_line(exit_code, err).startswith(needle), err
+
+
+def test_a_job_that_ends_after_a_commit_records_both_commits(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A job starts a command that runs the code on disk: code committed while the jobs run reaches the later jobs,
+    and their records say so instead of naming the first commit alone."""
+    import piga.io.pool as pool
+
+    heads = iter(["first", "first", "second"])  # the checkout's HEAD as each record is written
+    monkeypatch.setattr(pool, "git_commit", lambda: "first")  # read as the jobs start
+    monkeypatch.setattr(pool, "current_commit", lambda: next(heads))
+    jobs = [RecordedJob(name, {"n": i}, name) for i, name in enumerate("abc")]
+    out = run_recorded(lambda name: {"result": name}, jobs, JobRecords(tmp_path), progress=False)
+    assert [out[n]["commit"] for n in "abc"] == ["first"] * 3
+    assert "commit_at_end" not in out["a"] and "commit_at_end" not in out["b"] and out["c"]["commit_at_end"] == "second"
+    assert json.loads((tmp_path / "c.json").read_text())["commit_at_end"] == "second"

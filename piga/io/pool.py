@@ -194,7 +194,13 @@ def run_pool(function: Callable[[Spec], Result], specs: Sequence[Spec], workers:
 
 @functools.cache
 def git_commit(path: Path = Path(__file__).parent) -> str | None:
-    """The commit checked out where ``path`` is (by default piga's own code), or None outside a git checkout."""
+    """The commit checked out where ``path`` is (by default piga's own code), or None outside a git checkout; read
+    once per process (:func:`current_commit` reads it again)."""
+    return current_commit(path)
+
+
+def current_commit(path: Path = Path(__file__).parent) -> str | None:
+    """:func:`git_commit`, read now."""
     try:
         out = subprocess.run(["git", "rev-parse", "HEAD"], cwd=path, capture_output=True, text=True, timeout=30)
     except (OSError, subprocess.SubprocessError):
@@ -248,13 +254,18 @@ def run_recorded(function: Callable[[Any], dict[str, Any]], jobs: Sequence[Recor
     """Every job's record, by name: kept ones as they are; the others run in the given order, ``workers`` at a
     time (:func:`run_pool`, on ``backend``), with ``function(job.args)`` returning the record's fields. Each
     record is written as its job ends, as ``{"spec": job.spec, "commit": git_commit(), **fields}``, so that a
-    run stopped at any point keeps every finished job, and the next run does only the others."""
+    run stopped at any point keeps every finished job, and the next run does only the others. A job that ends
+    after the checkout moved to another commit (code committed while the jobs ran: a job that starts a command
+    runs whatever code is on disk then) also records ``commit_at_end``, so that its record does not pass for the
+    first commit's alone."""
     out = {job.name: kept for job in jobs if (kept := records.kept(job.name, job.spec)) is not None}
     todo = [job for job in jobs if job.name not in out]
     commit = git_commit()
 
     def save(i: int, fields: dict[str, Any]) -> None:
         record = {"spec": todo[i].spec, "commit": commit, **fields}
+        if (now := current_commit()) != commit:
+            record["commit_at_end"] = now
         records.write(todo[i].name, record)
         out[todo[i].name] = record
 
@@ -263,5 +274,5 @@ def run_recorded(function: Callable[[Any], dict[str, Any]], jobs: Sequence[Recor
     return {job.name: out[job.name] for job in jobs}
 
 
-__all__ = ["Backend", "BackendError", "JobFailed", "JobRecords", "RecordedJob", "git_commit", "host_port", "init_worker",
-           "job_name", "run_pool", "run_recorded"]
+__all__ = ["Backend", "BackendError", "JobFailed", "JobRecords", "RecordedJob", "current_commit", "git_commit", "host_port",
+           "init_worker", "job_name", "run_pool", "run_recorded"]
