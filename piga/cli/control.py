@@ -101,16 +101,18 @@ def build_parser() -> ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    given = given_options(parser, argv)  # the options written, at the default's value too
     if args.env == DMC_PENDULUM:
-        return _dmc(args, argv)
+        return _dmc(args, argv, given)
     if args.env_option:
         raise PigaError(f"--env-option is for --env {DMC_PENDULUM}")
     if args.write_goal_image:
         if args.model or args.oracle:
             raise PigaError("--write-goal-image only writes a picture and exits; it takes no --model or --oracle")
-        if given := _given_options(args, argv, GOAL_IMAGE_OPTIONS):
-            raise PigaError(f"--write-goal-image only writes a picture and exits; drop {', '.join(given)}")
+        if ignored := _ignored_options(args, given, GOAL_IMAGE_OPTIONS):
+            raise PigaError(f"--write-goal-image only writes a picture and exits; drop {', '.join(ignored)}")
         return _write_goal_image(args)
     if args.angle is not None:
         raise PigaError("--angle goes with --write-goal-image; to set the control goal use --goal-angle or --goal-image")
@@ -135,10 +137,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             check_writable_target(path, args.overwrite)
     kind = _run_kind(args)
     if kind.is_baseline:
-        return _baseline(args, kind, mpc, outputs, argv)
+        return _baseline(args, kind, mpc, outputs, argv, given)
     if args.sweep:
         return _sweep(args, mpc, outputs, argv)
-    if args.ray or "workers" in given_options(build_parser(), argv):  # --workers 2, the default, too
+    if args.ray or "workers" in given:  # --workers 2, the default, too
         raise PigaError(f"{'--ray' if args.ray else '--workers'} runs the jobs of --sweep and a baseline run's episodes; a "
                         "piga or oracle run without --sweep plays its episodes in this process")
     if args.video:
@@ -280,12 +282,14 @@ def _run_kind(args: argparse.Namespace) -> RunKind:
     return kind
 
 
-def _baseline(args: argparse.Namespace, kind: RunKind, mpc: MPCConfig, outputs: list[Path], argv: Sequence[str] | None) -> int:
+def _baseline(args: argparse.Namespace, kind: RunKind, mpc: MPCConfig, outputs: list[Path], argv: Sequence[str] | None,
+              given: set[str]) -> int:
     """A baseline run ("planet" or "ddpg") on the same episodes, starts, seeds and success definition as piga.
 
     It has no goal input and cannot be told a gravity change: goals are refused, and a gravity
     multiplier runs it as trained, saying so. The PlaNet-style agent plans with PlaNet's CEM settings
-    (:class:`agents.planet.config.LatentPlannerConfig`), not with --horizon and the other CEM options.
+    (:class:`agents.planet.config.LatentPlannerConfig`), not with --horizon and the other CEM options. ``given``: the
+    options written (:func:`~piga.cli.common.given_options`).
     """
     if kind is RunKind.DDPG:
         from agents.sb3.run import trained_env
@@ -306,7 +310,6 @@ def _baseline(args: argparse.Namespace, kind: RunKind, mpc: MPCConfig, outputs: 
         if Path(args.video).suffix.lower() not in (".mp4", ".gif"):
             raise PigaError(f"--video must end in .mp4 or .gif, got {args.video}")
         check_writable_target(args.video, args.overwrite)
-    given = given_options(build_parser(), argv)  # at their default values too
     planner = [f"--{name.replace('_', '-')}" for name in ("horizon", "candidates", "elites", "iterations", "warm_start")
                if name in given]
     if planner:
@@ -429,10 +432,9 @@ DMC_OPTIONS = ("model", "oracle", "episodes", "seed", "env", "env_option", "out"
 GOAL_IMAGE_OPTIONS = ("write_goal_image", "angle", "env", "overwrite", "quiet")
 
 
-def _given_options(args: argparse.Namespace, argv: Sequence[str] | None, taken: Sequence[str]) -> list[str]:
-    """The options written in ``argv`` outside ``taken`` (destinations), at any value, the default's too, as flags
+def _ignored_options(args: argparse.Namespace, given: set[str], taken: Sequence[str]) -> list[str]:
+    """The ``given`` options (:func:`~piga.cli.common.given_options`) outside ``taken`` (destinations), as flags
     (``--episodes``) in the parser's order: options that a mode of the command would ignore."""
-    given = given_options(build_parser(), argv)
     return [f"--{k.replace('_', '-')}" for k in vars(args) if k in given and k not in taken]
 
 
@@ -451,12 +453,12 @@ def _dmc_sb3_agent(run_dir: str, env: DMCPendulumConfig) -> SB3Agent:
     return SB3Agent.from_run(run_dir)
 
 
-def _dmc(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
+def _dmc(args: argparse.Namespace, argv: Sequence[str] | None, given: set[str]) -> int:
     """``--env piga/DMCPendulum-v0``: the piga agent and/or the oracle, scored in DMC's units."""
     from piga.cli.collect import _env_option, dmc_config
 
-    if given := _given_options(args, argv, DMC_OPTIONS):
-        raise PigaError(f"{given[0]} is not an option of --env piga/DMCPendulum-v0; it takes "
+    if ignored := _ignored_options(args, given, DMC_OPTIONS):
+        raise PigaError(f"{ignored[0]} is not an option of --env piga/DMCPendulum-v0; it takes "
                         + ", ".join(f"--{k.replace('_', '-')}" for k in DMC_OPTIONS))
     import argparse as _argparse
 
@@ -466,7 +468,7 @@ def _dmc(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
         raise PigaError(f"--env-option: {exc}") from None
     from piga.control.dmc import DMCControlConfig, OracleSwingUp, PigaSwingUp, dmc_markdown, dmc_record, run_dmc_episodes
 
-    episodes = args.episodes if "episodes" in given_options(build_parser(), argv) else DMCControlConfig.episodes
+    episodes = args.episodes if "episodes" in given else DMCControlConfig.episodes
     config = DMCControlConfig(episodes=episodes, seed=args.seed, env=dmc_config(pairs))
     outputs = []
     if args.out:

@@ -295,6 +295,21 @@ def main(argv: Sequence[str] | None = None) -> int:
         if objects is not None and objects.lost and not objects.too_few_slots:
             raise _LostInWarmup(objects.ratio, state.step, state.plan["epochs"] * state.plan["steps_per_epoch"])
 
+    def next_seed(check: str, what: str) -> None:
+        """Trains again from the start with the next seed after ``check`` found ``what``: says so, and drops the
+        lost try's outputs."""
+        nonlocal train_config
+        tried.append(train_config.seed)
+        train_config = replace(train_config, seed=train_config.seed + 1)
+        print(f"{check}: {what}; training again from the start with seed {train_config.seed} "
+              f"(retry {len(tried)} of --seed-retries {train_config.seed_retries})")
+        remove_outputs(run_dir, OUTPUTS)
+        record.update({"train": asdict(train_config), "retried_seeds": list(tried)})
+        written.clear()
+
+    def lost_with(ratio: float) -> str:
+        return f"an object was not found with seed {train_config.seed} (a blob {ratio:.2f}x as strong as the objects)"
+
     missing = missing_folders(run_dir)  # what train() makes at its first checkpoint
     while True:
         # the checkpoint as it was before this try (saves replace the file, so a new one has a new identity; file
@@ -305,15 +320,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             model, state = train(args.data, run_dir, train_config, model_config, resume=args.resume,
                                  progress=not args.quiet, on_epoch=on_epoch, n_objects=args.objects)
         except _LostInWarmup as lost_early:
-            tried.append(train_config.seed)
-            train_config = replace(train_config, seed=train_config.seed + 1)
-            print(f"object check after the autoencoder's warm-up (step {lost_early.step:,} of {lost_early.total:,}): an "
-                  f"object was not found with seed {tried[-1]} (a blob {lost_early.ratio:.2f}x as strong as the objects); "
-                  f"training again from the start with seed {train_config.seed} (retry {len(tried)} of --seed-retries "
-                  f"{train_config.seed_retries})")
-            remove_outputs(run_dir, OUTPUTS)
-            record.update({"train": asdict(train_config), "retried_seeds": list(tried)})
-            written.clear()
+            next_seed(f"object check after the autoencoder's warm-up (step {lost_early.step:,} of {lost_early.total:,})",
+                      lost_with(lost_early.ratio))
             continue
         except TrainingDiverged as exc:
             raise PigaError(f"training diverged: {exc}") from None
@@ -338,15 +346,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                  and (metrics.get("convergence") or {}).get("outcome") == "untrained")
         if args.resume or not (lost or empty) or not _retry_left(tried, train_config):
             break
-        tried.append(train_config.seed)
-        train_config = replace(train_config, seed=train_config.seed + 1)
-        what = (f"an object was not found with seed {tried[-1]} (a blob {objects['ratio']:.2f}x as strong as the objects)"
-                if lost else f"slot {objects['empty_slots'][0]} drew nothing with seed {tried[-1]}")
-        print(f"object check: {what}; training again from the start with seed {train_config.seed} "
-              f"(retry {len(tried)} of --seed-retries {train_config.seed_retries})")
-        remove_outputs(run_dir, OUTPUTS)
-        record.update({"train": asdict(train_config), "retried_seeds": list(tried)})
-        written.clear()
+        next_seed("object check", lost_with(objects["ratio"]) if lost
+                  else f"slot {objects['empty_slots'][0]} drew nothing with seed {train_config.seed}")
     convergence = metrics.get("convergence") or {"outcome": "converged"}
     from piga.evaluation.evaluate import summary_line
 

@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from piga.data.schema import inspect_dataset, read_sequences
+from piga.data.schema import DatasetInfo, inspect_dataset, read_sequences
 from piga.evaluation.evaluate import PARAMETER_NAMES, EvalConfig, evaluate, rollout_frames
 from piga.world.model import FrameModel, ObjectModel, frames_to_float
 from piga.evaluation.plots import curves_figure, rollout_figure, save_figure, templates_figure
@@ -32,15 +32,16 @@ WARMUP_CHECK_MIN_STEPS = 250
 
 @torch.no_grad()
 def scene_objects(model: FrameModel, data: str | Path, eval_config: EvalConfig = EvalConfig(),
-                  frames: np.ndarray | None = None) -> ObjectCheck | None:
+                  frames: np.ndarray | None = None, info: DatasetInfo | None = None) -> ObjectCheck | None:
     """Did the autoencoder find each object of a scene? :func:`~piga.evaluation.objects.check_objects` on the frames
     that the run's report is measured on (``frames``, when already read: the eval split's, or the train split's for a
-    file without it), with the model's slots and the file's object count; None for a model that has no objects (the
+    file without it), with the model's slots and the file's object count (``info``: the file's
+    :func:`~piga.data.schema.inspect_dataset`, when already read); None for a model that has no objects (the
     pendulum's angle, a black-box video model). Reads and changes nothing of the model: a run checked in the middle
     of its training trains on exactly as it would have."""
     if not (isinstance(model, ObjectModel) and model.config.coord_dim == 2):
         return None
-    info = inspect_dataset(data)
+    info = inspect_dataset(data) if info is None else info
     if frames is None:
         split = eval_config.split if info.split_counts.get(eval_config.split) else "train"
         frames = read_sequences(data, split, limit=eval_config.max_sequences)[0]
@@ -70,7 +71,7 @@ def write_run_report(model: FrameModel, state: TrainState, data: str | Path, run
                                  max_sequences=eval_config.max_sequences)
     metrics = evaluate(model, data, eval_config)
     frames, actions = read_sequences(data, split, limit=eval_config.max_sequences)
-    objects = scene_objects(model, data, eval_config, frames)
+    objects = scene_objects(model, data, eval_config, frames, info)
     if objects is not None:
         metrics["objects"] = objects.to_dict()
     metrics["training"] = {"epochs": state.epoch, "steps": state.step, "seconds": state.elapsed,
