@@ -48,6 +48,18 @@ def machine() -> dict[str, object]:
             "python": platform.python_version(), "platform": platform.platform()}
 
 
+def score_cells(scores: dict[str, Any] | None, missing: str = "no record", x14_episodes: bool = True) -> str:
+    """Three table cells of one run scored at x1.0 and x1.4 (``x1``/``x1.4``, piga.control.episodes' summaries):
+    success at x1.0 (episodes), mean return at x1.0, success at x1.4 (with its episodes unless ``x14_episodes`` is
+    False); ``missing`` and two empty cells where ``scores`` is None."""
+    if scores is None:
+        return f"{missing} | |"
+    x1, x14 = scores["x1"], scores["x1.4"]
+    tail = f" ({x14['episodes']})" if x14_episodes else ""
+    return (f"{100 * x1['success_rate']:.0f}% ({x1['episodes']}) | {x1['mean_return']:.1f} | "
+            f"{100 * x14['success_rate']:.0f}%{tail}")
+
+
 def change_cells(before: dict[str, Any] | None, after: dict[str, Any]) -> str:
     """Three table cells of one run scored twice (``x1`` and ``x1.4``, piga.control.episodes' summaries; ``before``
     None when it has no earlier record): success at x1.0 (episodes), mean return at x1.0, success at x1.4

@@ -24,20 +24,12 @@ from pathlib import Path
 from typing import Any
 
 from baselines import PRESETS, TABLE_GRAVITY, jobs_for, recorded_scores, run_all
-from common import farm_main, machine_words, write_page
+from common import farm_main, machine_words, score_cells, write_page
 
 DATA_SEED = 200
 """The second collection's seed (the table's is ``BenchConfig.data_seed``, 100)."""
 JOBS = ("piga-n2-s0", "piga-n2-s1", "piga-n2-s2", "planet-n250-s0", "planet-n500-s0")
 """The table's jobs run again by default."""
-
-
-def _cells(scores: dict[str, Any] | None) -> str:
-    if scores is None:
-        return "no record | |"
-    x1, x14 = scores["x1"], scores["x1.4"]
-    return (f"{100 * x1['success_rate']:.0f}% ({x1['episodes']}) | {x1['mean_return']:.1f} | "
-            f"{100 * x14['success_rate']:.0f}% ({x14['episodes']})")
 
 
 def markdown(record: dict[str, Any]) -> str:
@@ -52,8 +44,8 @@ def markdown(record: dict[str, Any]) -> str:
              "| job | data seed | success x1.0 (episodes) | mean return x1.0 | success x1.4 (episodes) |",
              "|---|---|---|---|---|"]
     for name, row in record["jobs"].items():
-        lines.append(f"| {name} | {record['table_data_seed']} (the table) | {_cells(row['table'])} |")
-        lines.append(f"| {name} | {record['data_seed']} | {_cells(row)} |")
+        lines.append(f"| {name} | {record['table_data_seed']} (the table) | {score_cells(row['table'])} |")
+        lines.append(f"| {name} | {record['data_seed']} | {score_cells(row)} |")
     return "\n".join(lines) + "\n"
 
 

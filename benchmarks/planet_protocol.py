@@ -33,7 +33,7 @@ from pathlib import Path
 from typing import Any
 
 from baselines import COST_S, PRESETS, BenchConfig, data_file, planet_scores, planet_table_runs, sweep_episodes
-from common import farm_main, machine, machine_words, write_page
+from common import farm_main, machine, machine_words, score_cells, write_page
 
 from piga.io.atomic import write_json
 from piga.io.pool import JobRecords, RecordedJob, run_recorded
@@ -139,9 +139,8 @@ def estimate_hours(plan: Plan, cfg: BenchConfig) -> float:
 
 
 def _cells(run: dict[str, Any]) -> str:
-    x1 = run["x1"]
-    return (f"{100 * x1['success_rate']:.0f}% ({x1['episodes']}) | {x1['mean_return']:.1f} | "
-            f"{100 * run['x1.4']['success_rate']:.0f}% | {run['train_seconds'] / 60:.0f}")
+    """The scores' three cells and the training minutes."""
+    return f"{score_cells(run, x14_episodes=False)} | {run['train_seconds'] / 60:.0f}"
 
 
 def markdown(record: dict[str, Any]) -> str:

@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from baselines import PRESETS, BenchConfig, planet_scores, recorded_scores
-from common import farm_main, machine, machine_words, write_page
+from common import farm_main, machine, machine_words, score_cells, write_page
 
 from piga.io.pool import JobRecords, RecordedJob, run_recorded
 
@@ -67,13 +67,6 @@ def run_job(job: Job) -> dict[str, Any]:
     return {"machine": machine(), **planet_scores(selected, job.cfg)}
 
 
-def _cells(scores: dict[str, Any] | None) -> str:
-    if scores is None:
-        return "not recorded | | "
-    x1 = scores["x1"]
-    return f"{100 * x1['success_rate']:.0f}% ({x1['episodes']}) | {x1['mean_return']:.1f} | {100 * scores['x1.4']['success_rate']:.0f}%"
-
-
 def markdown(record: dict[str, Any]) -> str:
     lines = ["# PlaNet-style runs with the weights their valid split selects", "",
              f"Command: `{record['command']}`", "",
@@ -84,9 +77,10 @@ def markdown(record: dict[str, Any]) -> str:
              "|---|---|---|---|---|---|---|"]
     for name, run in record["runs"].items():
         s = run["selection"]
-        lines.append(f"| {name} | last | {s['steps']:,} | {s['final_loss']:.4f} | {_cells(run['last'])} |")
+        last, selected = (score_cells(scores, "not recorded", x14_episodes=False) for scores in (run["last"], run))
+        lines.append(f"| {name} | last | {s['steps']:,} | {s['final_loss']:.4f} | {last} |")
         lines.append(f"| {name} | selected on the valid split | {s['selected_step']:,} ({s['steps']:,}) | "
-                     f"{s['selected_loss']:.4f} | {_cells(run)} |")
+                     f"{s['selected_loss']:.4f} | {selected} |")
     return "\n".join(lines) + "\n"
 
 
