@@ -88,7 +88,8 @@ def collect_command(system: str, cfg: BenchConfig, path: Path) -> list[str]:
 def train_command(job: Job) -> list[str]:
     flags = VARIANTS.get(job.model, ["--model", job.model])
     return ["piga-train-model", str(job.data), "--out", str(job.run_dir), *flags, "--seed", str(job.seed),
-            "--budget-steps", str(job.budget_steps), "--threads", "1", "--device", "cpu", "--quiet", "--overwrite"]
+            "--budget-steps", str(job.budget_steps), "--seed-retries", "1", "--threads", "1", "--device", "cpu", "--quiet",
+            "--overwrite"]  # one retry: the records were made with it
 
 
 def data_path(system: str, cfg: BenchConfig, folder: Path) -> Path:

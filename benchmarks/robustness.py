@@ -153,7 +153,8 @@ class Row:
 
     def train_command(self, data: Path, run: Path) -> list[str]:
         seed = [] if self.seed is None else ["--seed", str(self.seed)]
-        return ["piga-train-model", str(data), "--out", str(run), "--threads", "1", "--quiet", *seed]
+        # one retry: the records were made with it (piga-train-model's default was 1)
+        return ["piga-train-model", str(data), "--out", str(run), "--seed-retries", "1", "--threads", "1", "--quiet", *seed]
 
     def describe(self) -> str:
         """What differs from the system's default file, in words."""

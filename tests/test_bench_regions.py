@@ -127,3 +127,18 @@ def test_the_wider_broadcast_variant_is_a_decoder_option_pair(regions) -> None:
     from piga.cli.train import build_parser
 
     build_parser().parse_args(["d.h5", *command[command.index("--out"):]])  # every option is piga-train-model's
+
+
+def test_the_retry_count_is_the_pages_one_unless_given_and_then_part_of_a_jobs_settings(regions) -> None:
+    """The pages were made with one retry: their records carry no retry count and stay valid; another count is
+    another job (its records are not reused)."""
+    strip = (0, (1,))
+    kept = regions.jobs_for(regions.BenchConfig(decoders=("st",)), Path("runs"), strip)[0]
+    assert "seed_retries" not in kept.spec
+    command = regions.train_command(kept.args)
+    assert command[command.index("--seed-retries") + 1] == "1"
+    more = regions.jobs_for(regions.BenchConfig(decoders=("st",), seed_retries=3), Path("runs"), strip)[0]
+    assert more.spec["seed_retries"] == 3 and kept.spec == {k: v for k, v in more.spec.items() if k != "seed_retries"}
+    command = regions.train_command(more.args)
+    assert command[command.index("--seed-retries") + 1] == "3"
+    assert regions.parser().parse_args(["--seed-retries", "3"]).seed_retries == 3

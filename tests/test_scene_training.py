@@ -70,12 +70,12 @@ def test_unknown_system_in_a_file_is_one_line(spring_data: Path, tmp_path: Path,
 def test_a_run_whose_autoencoder_found_no_ball_trains_again_then_exits_1_naming_the_seed(
         spring_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """Two optimiser steps: the decoder renders no ball yet, so the balls stay in the residual. The run
-    trains again from the start with the next seed (``--seed-retries``, default 1), loses them again, and
+    trains again from the start with the next seed (``--seed-retries 1``), loses them again, and
     says so instead of reporting k and l."""
     out = tmp_path / "run"
     code, stdout, err = run_in_process("piga-train-model", train_main, str(spring_data), "--out", str(out), "--epochs",
                                        "1", "--batch-size", "16", "--warmup-fraction", "0.5", "--threads", "1",
-                                       "--quiet", "--seed", "5", capsys=capsys)
+                                       "--quiet", "--seed", "5", "--seed-retries", "1", capsys=capsys)
     assert_one_line(code, err, "an object was not found", "seeds 5 and 6 tried", "--seed", "--overwrite")
     assert code == 1
     assert "training again from the start with seed 6 (retry 1 of --seed-retries 1)" in stdout
@@ -101,7 +101,7 @@ def test_an_object_lost_after_the_warm_up_restarts_the_run_there(spring_data: Pa
     out = tmp_path / "run"
     code, stdout, err = run_in_process("piga-train-model", train_main, str(spring_data), "--out", str(out), "--epochs",
                                        "3", "--batch-size", "16", "--warmup-fraction", "0.3", "--threads", "1",
-                                       "--seed", "5", "--quiet", capsys=capsys)  # 3 x 22 steps, the warm-up's the first 20
+                                       "--seed", "5", "--seed-retries", "1", "--quiet", capsys=capsys)  # 3 x 22 steps, warm-up 20
     assert_one_line(code, err, "an object was not found", "seeds 5 and 6 tried")
     assert "object check after the autoencoder's warm-up (step 22 of 66): an object was not found with seed 5 (a blob " \
            "0.60x as strong as the objects); training again from the start with seed 6 (retry 1 of --seed-retries 1)" in stdout
@@ -133,7 +133,7 @@ def test_a_slot_that_draws_nothing_retries_only_where_the_scene_has_an_object_fo
         slots: str | None, spring_data: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
         capsys: pytest.CaptureFixture[str]) -> None:
     """The object check (a stand-in here) finds the last slot empty. With the file's 2 slots another seed may fill
-    it: the run trains again, then exits 1 naming the seeds. With --objects 3 for 2 balls a seed cannot: no retry,
+    it: the run trains again (three times, the default), then exits 1 naming the seeds. With --objects 3 for 2 balls a seed cannot: no retry,
     and the line names --objects 2."""
     import piga.training.report as report
     from piga.evaluation.objects import ObjectCheck
@@ -148,8 +148,9 @@ def test_a_slot_that_draws_nothing_retries_only_where_the_scene_has_an_object_fo
                                        "1", "--batch-size", "16", "--warmup-fraction", "0.5", "--threads", "1", "--quiet",
                                        "--seed", "5", *(["--objects", slots] if slots else []), capsys=capsys)
     if slots is None:
-        assert_one_line(code, err, "slot 1 of 2 renders nothing", "another --seed", "seeds 5 and 6 tried")
+        assert_one_line(code, err, "slot 1 of 2 renders nothing", "another --seed", "seeds 5, 6, 7 and 8 tried")
         assert "slot 1 drew nothing with seed 5; training again from the start with seed 6" in stdout
+        assert "with seed 8 (retry 3 of --seed-retries 3)" in stdout  # the default: three retries
     else:
         assert_one_line(code, err, "slot 2 of 3 renders nothing", "the scene has 2 objects", "--objects 2")
         assert "training again" not in stdout

@@ -11,9 +11,9 @@ from pathlib import Path
 from typing import Any
 
 from piga.cli.common import (NOT_CONVERGED, ArgumentParser, Interrupted, PigaError, add_device_option,
-                             add_preset_option, command_line, format_default, int_up_to, missing_folders, nonnegative_int,
-                             positive_float, positive_int, remove_empty_folders, remove_outputs, run_cli, seed_int,
-                             thread_count, unit_fraction)
+                             add_preset_option, command_line, format_default, given_options, int_up_to,
+                             missing_folders, nonnegative_int, positive_float, positive_int, remove_empty_folders,
+                             remove_outputs, run_cli, seed_int, thread_count, unit_fraction)
 from piga.io.atomic import check_folder_target
 from piga.io.checkpoint import CHECKPOINT, require_piga_run
 
@@ -138,7 +138,9 @@ def build_parser() -> ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    written = given_options(parser, argv)  # the options written, at the default's value too
     from piga.io.device import resolve_device
 
     device = resolve_device(args.device)  # --device cuda without a GPU: one line, before anything is read
@@ -197,7 +199,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         changed = (sorted(set(overrides) - {"epochs", "budget_steps", "max_minutes"}) + (["signed_actuation"] if args.signed_actuation else [])
                    + (["fixed_g"] if args.fixed_g is not None else []) + (["preset"] if args.preset != "fast" else [])
                    + (["seed"] if args.seed not in (saved.seed, TrainConfig().seed) else [])
-                   + (["seed_retries"] if args.seed_retries != TrainConfig().seed_retries else [])
+                   + (["seed_retries"] if "seed_retries" in written else [])
                    + [name for name in ("data_loading", "stream_cache_mb")
                       if getattr(args, name) is not None and getattr(args, name) != getattr(saved, name)])
         if changed:
