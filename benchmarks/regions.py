@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import base64
+import json
 import statistics
 import sys
 import time
@@ -213,10 +214,12 @@ def train_job(job: Job) -> dict[str, Any]:
     code, m = run_training(train_command(job), job.run_dir, job.run_dir.parent / f"{job.name}.log",
                            f"piga-train-model {' '.join(decoder_options(job.decoder))}")
     scored = score_run(job.run_dir, job.data, job.strip)
+    written = json.loads((job.run_dir / "config.json").read_text())  # piga-train-model's record of the run
+    seeds = [*written.get("retried_seeds", []), written["train"]["seed"]]
     s = scored["scores"]
     print(f"{job.name}: SSIM extrapolation {s['ssim_extrapolation']:.3f}, bottom half with a ball "
           f"{_fmt(s['ssim_bottom_with_ball'])}, {m['training']['seconds'] / 60:.1f} min (exit {code})", flush=True)
-    return {"command": " ".join(train_command(job)), "exit": code, **scored,
+    return {"command": " ".join(train_command(job)), "exit": code, "seeds_trained": seeds, **scored,
             "parameter_errors": m.get("parameter_errors"), "train_seconds": m["training"]["seconds"],
             "steps": m["training"].get("steps"), "wall_seconds": time.time() - started, "machine": machine()}
 
@@ -296,6 +299,11 @@ def markdown(record: dict[str, Any], out: Path) -> str:
     empty = record["empty_bottom"]
     lines.append(f"| (the bottom half left empty) | - | - | - | - | {_fmt(empty['ssim_bottom_with_ball'])} | - | "
                  f"{_fmt(empty['mse_bottom_with_ball'], 4)} | - | - | - | - |")
+    tried = {name: run["seeds_trained"] for name, run in record["runs"].items() if "seeds_trained" in run}
+    if tried:
+        lines += ["", "Seeds trained, in turn (a try whose object check found a ball missing stopped there, at the "
+                  "first checkpoint after the autoencoder's warm-up while a retry was left, or at its end): "
+                  + "; ".join(f"{name}: {', '.join(map(str, seeds))}" for name, seeds in tried.items()) + "."]
     lines += ["", "The last row scores the truth with its bottom half blanked out: what drawing nothing there scores "
               "(the balls are small on a black background, so SSIM stays high; MSE tells a missing ball apart).", "",
               "The decoders (`piga-train-model --decoder`): `st`, piga's spatial-transformer decoder (its parameters "

@@ -54,6 +54,9 @@ def _stand_ins(regions: Any, monkeypatch: pytest.MonkeyPatch, half_file: Path,
         metrics = {"parameter_errors": {"k": {"learned": 4.1}, "l": {"learned": 5.9}},
                    "training": {"seconds": 60.0, "steps": int(args[args.index("--budget-steps") + 1])}}
         (out / "metrics.json").write_text(json.dumps(metrics))
+        seed = int(args[args.index("--seed") + 1])
+        retried = [seed] if "-st-" in out.name else []  # the ST run lost a ball once and found both with the next seed
+        (out / "config.json").write_text(json.dumps({"train": {"seed": seed + len(retried)}, "retried_seeds": retried}))
         return 0
 
     def score(run_dir: Path, data: Path, strip: tuple[int, tuple[int, ...]]) -> dict[str, Any]:
@@ -90,6 +93,7 @@ def test_the_page_strip_and_json_are_written_and_a_rerun_reuses_the_records(regi
     page = out.with_suffix(".md").read_text()
     assert "| st | 1,000 | 0.990 | 0.950 | 0.950 | 0.950 | 0.0500 | 0.0500 | k 4.10, l 5.90 | 1.0 | 0.0 | 0 |" in page
     assert f"`python benchmarks/regions.py {' '.join(argv)}`" in page and "--budget-steps 7" in page
+    assert "spring-half-st-s0: 0, 1; spring-half-deconv-s0: 0;" in page  # the seeds each job trained
     assert (out.parent / "regions-strip.png").read_bytes()[:4] == b"\x89PNG"
     assert sorted(p.name for p in (out.parent / "regions_runs" / "records").iterdir())[0] == "spring-half-broadcast-s0.json"
 
