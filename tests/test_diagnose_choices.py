@@ -72,7 +72,7 @@ def test_a_clear_choice_is_not_ambiguous() -> None:
 
 def test_ambiguity_needs_overlapping_intervals_with_the_bootstrap() -> None:
     """With the bootstrap, the intervals of the values both fit (g, a) are compared: here they overlap."""
-    d = analyse(planted_spin(n=60), NOMINAL, DiagnoseConfig(bootstrap=4))
+    d = analyse(planted_spin(n=60), NOMINAL, DiagnoseConfig(bootstrap=10))
     assert d.verdict_class == "ambiguous", d.verdict
     assert d.ambiguity.intervals_overlap is True
 

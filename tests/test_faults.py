@@ -1323,7 +1323,7 @@ def test_demo_refuses_too_few_sequences_before_collecting(tmp_path: Path, capsys
 
 
 @pytest.mark.parametrize("argv, needle, code", [
-    (["--bootstrap", "1000000000"], "bootstrap must be at most 10000", 1),
+    (["--bootstrap", "1000000000"], "--bootstrap: expected 0 (no intervals) or an integer in [10, 10000]", 2),
     (["--episodes", "3"], "--episodes sets the MPC episodes of --env", 1),
     (["--env", "damping=0.2", "--episodes", "1000000000"], "--episodes: expected an integer in [1, 10000]", 2),
 ])
@@ -1438,6 +1438,27 @@ def test_show_refuses_an_image_format_matplotlib_lacks(name: str, needle: str, t
     a suffix was written as a PNG that its name did not call one."""
     refused("piga-show", [str(tiny_data), "--out", str(tmp_path / name)], capsys, f"--out {name}: {needle}",
             "use .png (or ", ".pdf", ".svg")
+    assert _listing(tmp_path) == []
+
+
+@pytest.mark.parametrize("count", ["1", "9"])
+def test_diagnose_refuses_a_bootstrap_too_small_for_an_interval(count: str, capsys: pytest.CaptureFixture[str]) -> None:
+    """One replicate gave the "95% interval" 1.29..1.29 to a gain estimated at 1.035, and turned a verdict of no
+    significant gap into a named gain."""
+    refused("piga-diagnose", ["--model", "m", "--data", "d.h5", "--out", "r", "--bootstrap", count], capsys,
+            f"argument --bootstrap: expected 0 (no intervals) or an integer in [10, 10000], got {count}", code=2)
+
+
+def test_show_refuses_pgf_without_its_tex_system(tiny_data: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    """matplotlib offers .pgf whether or not xelatex is installed, and its writer failed after the strip was drawn
+    (an internal error); the refusal listed .pgf among the formats to use."""
+    import shutil
+
+    monkeypatch.setattr(shutil, "which", lambda name, *args, **kwargs: None)
+    refused("piga-show", [str(tiny_data), "--out", str(tmp_path / "s.pgf")], capsys,
+            "--out s.pgf: matplotlib writes .pgf through xelatex, which is not installed", "use .png (or ")
+    assert ".pgf" not in refused("piga-show", [str(tiny_data), "--out", str(tmp_path / "s.txt")], capsys, "use .png (or ")
     assert _listing(tmp_path) == []
 
 

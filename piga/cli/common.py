@@ -254,7 +254,7 @@ def _write_traceback(prog: str, argv: Sequence[str] | None) -> Path | None:
     return path
 
 
-def _number_type(convert: Callable[[str], float], ok: Callable[[float], bool], what: str) -> Callable[[str], Any]:
+def number_type(convert: Callable[[str], float], ok: Callable[[float], bool], what: str) -> Callable[[str], Any]:
     """An argparse type that converts with ``convert`` and accepts values for which ``ok`` holds."""
 
     def parse(text: str) -> Any:
@@ -270,32 +270,32 @@ def _number_type(convert: Callable[[str], float], ok: Callable[[float], bool], w
     return parse
 
 
-positive_int = _number_type(int, lambda v: v >= 1, "a positive integer")
+positive_int = number_type(int, lambda v: v >= 1, "a positive integer")
 """argparse type: an integer >= 1."""
-nonnegative_int = _number_type(int, lambda v: v >= 0, "an integer >= 0")
+nonnegative_int = number_type(int, lambda v: v >= 0, "an integer >= 0")
 """argparse type: an integer >= 0."""
 
 
 def int_up_to(limit: int, why: str) -> Callable[[str], Any]:
     """argparse type: an integer in [1, ``limit``]; ``why`` says what the limit is for."""
-    return _number_type(int, lambda v: 1 <= v <= limit, f"an integer in [1, {limit}] ({why})")
+    return number_type(int, lambda v: 1 <= v <= limit, f"an integer in [1, {limit}] ({why})")
 
 
 def int_at_least(limit: int, why: str) -> Callable[[str], Any]:
     """argparse type: an integer >= ``limit``; ``why`` says what the limit is for."""
-    return _number_type(int, lambda v: v >= limit, f"an integer >= {limit} ({why})")
+    return number_type(int, lambda v: v >= limit, f"an integer >= {limit} ({why})")
 
 
-positive_float = _number_type(float, lambda v: 0 < v < float("inf"), "a finite number > 0")
+positive_float = number_type(float, lambda v: 0 < v < float("inf"), "a finite number > 0")
 """argparse type: a finite number > 0 (NaN is rejected too)."""
-nonnegative_float = _number_type(float, lambda v: 0 <= v < float("inf"), "a finite number >= 0")
+nonnegative_float = number_type(float, lambda v: 0 <= v < float("inf"), "a finite number >= 0")
 """argparse type: a finite number >= 0 (NaN is rejected too)."""
-unit_fraction = _number_type(float, lambda v: 0 <= v < 1, "a number in [0, 1)")
+unit_fraction = number_type(float, lambda v: 0 <= v < 1, "a number in [0, 1)")
 """argparse type: a fraction in [0, 1) (NaN is rejected too)."""
-seed_int = _number_type(int, lambda v: 0 <= v <= MAX_SEED, "an integer in [0, 2^63 - 1]")
+seed_int = number_type(int, lambda v: 0 <= v <= MAX_SEED, "an integer in [0, 2^63 - 1]")
 """argparse type: a seed, an integer in [0, 2^63 - 1]."""
 MAX_THREADS = max(1, os.cpu_count() or 1)
-thread_count = _number_type(int, lambda v: 0 <= v <= MAX_THREADS, f"an integer in [0, {MAX_THREADS}] (0: torch's choice; "
+thread_count = number_type(int, lambda v: 0 <= v <= MAX_THREADS, f"an integer in [0, {MAX_THREADS}] (0: torch's choice; "
                                                                   f"at most this machine's {MAX_THREADS} CPUs)")
 """argparse type: torch CPU threads, 0 (torch's choice) up to this machine's CPU count (more only slows it down,
 and a huge count makes torch's thread pool crash)."""

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from collections.abc import Sequence
 
-from piga.cli.common import (ArgumentParser, PigaError, command_line, int_up_to, nonnegative_int, run_cli, seed_int,
+from piga.cli.common import (ArgumentParser, PigaError, command_line, int_up_to, number_type, run_cli, seed_int,
                              thread_count, warn_if_unconverged)
 
 PROG = "piga-diagnose"
@@ -34,8 +34,11 @@ def build_parser() -> ArgumentParser:
     p.set_defaults(default_episodes=episodes)
 
     d = DiagnoseConfig()
-    p.add_argument("--bootstrap", type=nonnegative_int, default=d.bootstrap,
-                   help="bootstrap replicates for intervals (default %(default)s)")
+    p.add_argument("--bootstrap", type=number_type(int, lambda v: v == 0 or d.MIN_BOOTSTRAP <= v <= d.MAX_BOOTSTRAP,
+                                                    f"0 (no intervals) or an integer in [{d.MIN_BOOTSTRAP}, "
+                                                    f"{d.MAX_BOOTSTRAP}]"), default=d.bootstrap,
+                   help=f"bootstrap replicates for intervals: 0 (none: a gain error is then named on its estimate alone, "
+                   f"untested) or {d.MIN_BOOTSTRAP} to {d.MAX_BOOTSTRAP} (default %(default)s)")
     p.add_argument("--seed", type=seed_int, default=d.seed, help="seed of the bootstrap (default %(default)s)")
     p.add_argument("--fit-starts", action=argparse.BooleanOptionalAction, default=d.fit_starts,
                    help="refit the chosen effects' values with each fitting window's two start angles fitted too "

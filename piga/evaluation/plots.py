@@ -33,12 +33,18 @@ def check_figure_target(path: str | os.PathLike[str], overwrite: bool, flag: str
     for, or a target :func:`~piga.io.atomic.check_writable_target` refuses."""
     from piga.io.atomic import check_writable_target
 
+    import shutil
+
     target = Path(path)
-    formats = plt.figure().canvas.get_supported_filetypes()
+    formats = dict(plt.figure().canvas.get_supported_filetypes())
     plt.close("all")
+    tex = plt.rcParams["pgf.texsystem"]
+    if shutil.which(tex) is None:  # matplotlib's .pgf writer runs the TeX system, and offers it whether or not it is there
+        formats.pop("pgf", None)
     suffix = target.suffix.lstrip(".").lower()
     if suffix not in formats:
-        what = f"matplotlib writes no .{suffix} files" if suffix else "an image needs the suffix of its format"
+        what = (f"matplotlib writes .pgf through {tex}, which is not installed" if suffix == "pgf" else
+                f"matplotlib writes no .{suffix} files" if suffix else "an image needs the suffix of its format")
         raise ValueError(f"{flag} {target.name}: {what}; use .png (or "
                          f"{', '.join('.' + f for f in sorted(formats) if f != 'png')})")
     return check_writable_target(target, overwrite)
