@@ -35,7 +35,7 @@ from the state (θ_t, θ̇_t) *before* the step:
 | ``friction=c`` | passive | 0 < c <= 100 (N·m) | -c·tanh(θ̇_t / 0.1), a smoothed Coulomb friction (:data:`piga.world.effects.FRICTION_SMOOTHING`) | :class:`CoulombFriction` |
 | ``bias=τ0`` | passive | 0 < abs(τ0) <= 100 (N·m) | +τ0 | :class:`TorqueBias` |
 | ``cogging=k`` | passive | 0 < k <= 100 (N·m) | -k·sin(4θ_t), a detent torque; not a candidate of the diagnosis | :class:`CoggingTorque` |
-| ``speed_clip=v`` | clip | 0 < v < 8 (rad/s) | Pendulum-v1's speed clip ±8 becomes ±v | :class:`SpeedClip` |
+| ``speed_clip=v`` | clip | 1e-4 <= v < 8 (rad/s) | Pendulum-v1's speed clip ±8 becomes ±v | :class:`SpeedClip` |
 
 The step is Pendulum-v1's own step, given τ_t as its torque:
 
@@ -101,6 +101,10 @@ MAX_PASSIVE = 100.0
 MAX_PIXELS = 1000.0
 #: Largest ``noise`` standard deviation, in gray levels.
 MAX_NOISE = 1000.0
+#: Smallest ``speed_clip`` (rad/s): slower, the pendulum turns by under a thousandth of a radian in a
+#: 200-step episode (10 s), a few hundredths of a pixel at its tip in a 64-pixel frame, as with
+#: ``envs.pendulum.MIN_GRAVITY``: no frame shows it move (1e-9 wrote a file of a still pendulum).
+MIN_SPEED_CLIP = 1e-4
 
 
 # ---------------------------------------------------------------------------------------------
@@ -500,8 +504,9 @@ EFFECTS: dict[str, EffectSpec] = {
                        lambda v: v != 0 and abs(v) <= MAX_PASSIVE, TorqueBias, term=BIAS),
     "cogging": EffectSpec("passive", "cogging (detent) torque amplitude", "N·m", f"> 0 and <= {MAX_PASSIVE:g}",
                           lambda v: 0 < v <= MAX_PASSIVE, CoggingTorque, term=COGGING),
-    "speed_clip": EffectSpec("clip", "speed limit below Pendulum-v1's 8", "rad/s", f"in (0, {PENDULUM_MAX_SPEED:g})",
-                             lambda v: 0 < v < PENDULUM_MAX_SPEED, SpeedClip, term=SPEED_CLIP),
+    "speed_clip": EffectSpec("clip", "speed limit below Pendulum-v1's 8", "rad/s",
+                             f"in [{MIN_SPEED_CLIP:g}, {PENDULUM_MAX_SPEED:g})",
+                             lambda v: MIN_SPEED_CLIP <= v < PENDULUM_MAX_SPEED, SpeedClip, term=SPEED_CLIP),
     "blur": EffectSpec("vision", "Gaussian blur sigma", "px", f"> 0 and <= {MAX_PIXELS:g}", lambda v: 0 < v <= MAX_PIXELS,
                        FrameBlur),
     "shift": EffectSpec("vision", "image shift right and down", "px", f"a number != 0 within ±{MAX_PIXELS:g}",

@@ -305,7 +305,7 @@ def test_parse_effect() -> None:
         ("saturation=0", "in (0, 2)"),
         ("gain=1", "!= 1"),
         ("gain=-1", "> 0"),
-        ("speed_clip=8", "in (0, 8)"),
+        ("speed_clip=8", "in [0.0001, 8)"),
         ("blur=0", "blur must be > 0"),
         ("noise=-1", "noise must be > 0"),
         ("shift=0", "!= 0"),

@@ -284,6 +284,12 @@ def test_a_failed_allocation_is_out_of_memory(capsys: pytest.CaptureFixture[str]
     (["--system", "gravity", "--m", "1e-10"], ["with g = 60, m = 1e-10 the forces move no ball by 0.01 px"], 1),
     (["--env", "piga/DMCPendulum-v0", "--env-option", "action_repeat=1.5"],
      ["--env-option action_repeat=1.5: expected an integer"], 1),  # it said "expected a int"
+    (["--effect", "speed_clip=1e-9"], ["speed_clip must be in [0.0001, 8)"], 2),  # a still pendulum, "wrote"
+    # an option that does not apply, written at its default value: the file recorded it and ignored it
+    (["--env", "piga/DMCPendulum-v0", "--gravity", "10"], ["--gravity is an option of piga/PixelPendulum-v0 only"], 1),
+    (["--env", "piga/DMCPendulum-v0", "--gravity-mult", "1"], ["--gravity-mult is an option of piga/PixelPendulum-v0"], 1),
+    (["--env", "piga/DMCPendulum-v0", "--actuation-gain", "1"], ["--actuation-gain is an option of"], 1),
+    (["--system", "spring", "--env", "piga/PixelPendulum-v0"], ["--env: pendulum option(s), not for --system spring"], 1),
 ])
 def test_collect_refuses(argv: list[str], needles: list[str], code: int, tmp_path: Path,
                          capsys: pytest.CaptureFixture[str]) -> None:
@@ -1513,3 +1519,50 @@ def test_empty_text_values_are_refused(prog: str, argv: list[str], needle: str, 
     monkeypatch.chdir(tmp_path)
     refused(prog, argv, capsys, needle, code=2)
     assert _listing(tmp_path) == []
+
+
+# ---------------------------------------------------------------------------------------------
+# options that apply to nothing in the run, counts beyond the file, data that cannot identify a
+# ---------------------------------------------------------------------------------------------
+
+
+def test_train_refuses_seed_retries_where_there_is_no_object_check(tiny_data: Path, tmp_path: Path,
+                                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    """The pendulum's model has no object slots: the retries were accepted, recorded, and could never happen."""
+    refused("piga-train-model", [str(tiny_data), "--out", str(tmp_path / "run"), "--epochs", "1", "--seed-retries", "3",
+                                 "--quiet"], capsys, "--seed-retries retries a run whose object check",
+            "holds pendulum data, whose model has no object slots to check: drop --seed-retries")
+    assert _listing(tmp_path) == []
+
+
+def test_train_refuses_pendulum_data_whose_actions_are_all_zero(tiny_data: Path, tmp_path: Path,
+                                                                capsys: pytest.CaptureFixture[str]) -> None:
+    """a multiplies the actions: it never left its start, and the run blamed the learning rate and its length."""
+    zero = tmp_path / "zero.h5"
+    shutil.copy(tiny_data, zero)
+    with h5py.File(zero, "a") as f:
+        f["actions"][...] = 0.0
+    refused("piga-train-model", [str(zero), "--out", str(tmp_path / "run"), "--epochs", "1", "--quiet"], capsys,
+            "every action of its train split is 0", "actuation gain a", "cannot be identified")
+    assert _listing(tmp_path) == ["zero.h5"]
+
+
+@pytest.mark.parametrize("argv, needle", [(["--frames", "1000"], "--frames 1000: {data} has 16 frames per sequence; "
+                                                                 "give at most 16"),
+                                          (["--sequences", "9"], "--sequences 9: {data} has 8 sequences in its train "
+                                                                 "split; give at most 8")])
+def test_show_refuses_more_than_the_file_holds(argv: list[str], needle: str, tiny_data: Path, tmp_path: Path,
+                                               capsys: pytest.CaptureFixture[str]) -> None:
+    """It drew 16 frames x 8 sequences and said nothing."""
+    refused("piga-show", [str(tiny_data), "--out", str(tmp_path / "s.png"), *argv], capsys, needle.format(data=tiny_data))
+    assert _listing(tmp_path) == []
+
+
+def test_import_names_a_folder_given_as_the_actions(frame_folders: dict[str, Path], tmp_path: Path,
+                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    """It said "acts: no such actions file" of a folder that exists."""
+    acts = tmp_path / "acts"
+    acts.mkdir()
+    refused("piga-import", [str(frame_folders["moving"]), str(acts), "--dt", "0.05", "--out", str(tmp_path / "o.h5")],
+            capsys, f"{acts} is a folder, not an actions CSV file")
+    assert _listing(tmp_path) == ["acts"]

@@ -127,10 +127,12 @@ def test_cli_trains_and_reports(small_data: Path, tmp_path: Path, capsys: pytest
     code, _, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), capsys=capsys)
     assert_one_line(code, err, "--overwrite")
     code, stdout, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), "--resume", "--epochs", "2",
-                                       "--quiet", "--device", "cpu", capsys=capsys)  # the device is not the recipe's
+                                       "--quiet", "--device", "cpu", "--threads", "2",
+                                       capsys=capsys)  # the device and the threads are not the recipe's
     assert code in FINISHED, err
     assert "epoch 2:" in stdout and "epoch 1:" not in stdout
     assert json.loads((out / "metrics.json").read_text())["training"]["device"] == "cpu"
+    assert json.loads((out / "config.json").read_text())["train"]["threads"] == 2  # it was 1; --threads was ignored
 
 
 def test_cli_bad_input(small_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -13,13 +13,14 @@ from envs.effects import EFFECTS, format_effects, parse_effect
 from envs.pendulum import MAX_ACTUATION_GAIN, MAX_GRAVITY, MIN_ACTUATION_GAIN, MIN_GRAVITY, PixelPendulumConfig
 from envs.scenes import HALF_SPEED, SCENES, SceneConfig, scene_config
 from piga.cli.common import (H5_SUFFIXES, ArgumentParser, PigaError, add_preset_option, command_line, format_default,
-                             h5_path, positive_float, positive_int, run_cli, seed_int, split_type)
+                             given_options, h5_path, positive_float, positive_int, run_cli, seed_int,
+                             split_type)
 from piga.data.collect import PAPER_MAX_SPEED, PRESETS, CollectConfig, collect
 from piga.data.collect_scenes import SCENE_PRESETS, SCENE_STEPS, collect_scene
 from piga.data.schema import inspect_dataset
 
 PROG = "piga-collect"
-#: Options of Gymnasium's pendulum only, with their defaults; the DMC pendulum refuses them.
+#: Options of Gymnasium's pendulum only: the DMC pendulum refuses them when they are written.
 GYMNASIUM_ONLY = {"gravity": "--gravity", "gravity_mult": "--gravity-mult", "actuation_gain": "--actuation-gain",
                   "no_torque_arrow": "--no-torque-arrow", "effect": "--effect"}
 
@@ -164,9 +165,11 @@ def _given(args: argparse.Namespace, preset_split: Sequence[float], keys: Sequen
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    written = given_options(parser, argv)  # an option that does not apply is refused at its default value too
     if args.system != "pendulum":
-        return _collect_scene(args, argv)
+        return _collect_scene(args, argv, written)
     given = [flag for flag in (*SCENE_PARAMETERS, *SCENE_LOOK, "--half") if getattr(args, flag.lstrip("-")) is not None]
     if given:
         raise PigaError(f"{', '.join(given)} {'is' if len(given) == 1 else 'are'} for the scenes (--system "
@@ -177,9 +180,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     preset_speed = preset.env.max_speed if preset.env.max_speed != PixelPendulumConfig.max_speed else None
     speed = args.max_speed if args.max_speed is not None else preset_speed
     if args.env == DMC_PENDULUM:
-        parser_defaults = build_parser().parse_args(["--out", args.out])
         for key, flag in GYMNASIUM_ONLY.items():
-            if getattr(args, key) != getattr(parser_defaults, key):
+            if key in written:
                 raise PigaError(f"{flag} is an option of piga/PixelPendulum-v0 only; the DMC pendulum takes --env-option")
         env: PixelPendulumConfig | DMCPendulumConfig = dmc_config(
             args.env_option, image_size=args.image_size or DMCPendulumConfig.image_size, max_angle=args.max_angle,
@@ -237,13 +239,12 @@ def _scene_sizes() -> dict[str, int]:
     return {scene: int(values["image_size"]) for scene, values in SCENES.items()}
 
 
-def _collect_scene(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
-    """``--system SCENE``: refuses the pendulum's options, builds the scene and collects it."""
-    defaults = build_parser().parse_args(["--out", "x.h5"])
+def _collect_scene(args: argparse.Namespace, argv: Sequence[str] | None, written: set[str]) -> int:
+    """``--system SCENE``: refuses the pendulum's options (those ``written``), builds the scene and collects it."""
     pendulum_only = [f"--{name.replace('_', '-')}" for name in ("gravity", "gravity_mult", "actuation_gain", "max_angle",
                                                                 "no_torque_arrow", "effect", "max_speed", "env",
                                                                 "env_option")
-                     if getattr(args, name) != getattr(defaults, name)]
+                     if name in written]
     if pendulum_only:
         raise PigaError(f"{', '.join(pendulum_only)}: pendulum option(s), not for --system {args.system}")
     params = {flag.lstrip("-"): getattr(args, flag.lstrip("-")) for flag in SCENE_PARAMETERS

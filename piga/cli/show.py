@@ -7,7 +7,7 @@ from collections.abc import Sequence
 import h5py
 import numpy as np
 
-from piga.cli.common import ArgumentParser, file_path, positive_int, run_cli
+from piga.cli.common import ArgumentParser, file_path, given_options, positive_int, run_cli
 from piga.data.schema import SPLITS, check_actions_file, check_frames_have_signal, inspect_dataset, split_indices
 from piga.evaluation.plots import check_figure_target, frame_strip, save_figure
 
@@ -31,15 +31,23 @@ MAX_TITLE = 200
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    written = given_options(parser, argv)
     check_figure_target(args.out, args.overwrite)
     info = inspect_dataset(args.data)
     check_frames_have_signal(args.data, motion=False)  # a blank file, or a non-finite action, is named rather than drawn;
     # a still one is drawn: the strip shows what the file holds
     check_actions_file(args.data)
-    idx = split_indices(args.data, args.split)[: args.sequences]
-    if len(idx) == 0:
+    available = split_indices(args.data, args.split)
+    if len(available) == 0:
         raise ValueError(f"split '{args.split}' of {args.data} is empty")
+    # a count written beyond the file is refused (the defaults shrink to a small file: the strip shows what it holds)
+    for dest, have, what in (("sequences", len(available), f"sequences in its {args.split} split"),
+                             ("frames", info.steps, "frames per sequence")):
+        if dest in written and getattr(args, dest) > have:
+            raise ValueError(f"--{dest} {getattr(args, dest)}: {args.data} has {have} {what}; give at most {have}")
+    idx = available[: args.sequences]
     t = min(args.frames, info.steps)
     with h5py.File(args.data, "r") as f:
         frames = np.stack([f["frames"][int(i), :t] for i in idx])

@@ -204,7 +204,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                       if getattr(args, name) is not None and getattr(args, name) != getattr(saved, name)])
         if changed:
             raise PigaError(f"--resume keeps the run's recipe; drop {', '.join('--' + c.replace('_', '-') for c in changed)}")
-        train_config = replace(saved, device=args.device, **overrides)  # the device is not the recipe's
+        # the device and the threads are not the recipe's
+        train_config = replace(saved, device=args.device, **overrides,
+                               **({"threads": args.threads} if "threads" in written else {}))
         model_config = saved_model.config
         record = _read_record(run_dir)
         record.setdefault("resumed", []).append(command)
@@ -232,6 +234,12 @@ def main(argv: Sequence[str] | None = None) -> int:
                     model_config = model_config.with_options(**{option: value})
                 except ValueError as exc:
                     raise PigaError(f"{flag}: {args.data} holds {info.system} data: {exc}") from None
+        if "seed_retries" in written and (model_config.coord_dim != 2 or model_config.architecture == "video-lstm"):
+            # the retries follow the object check, which only a scene's object slots have (report.scene_objects)
+            why = (f"{args.data} holds pendulum data, whose model has no object slots" if info.system == "pendulum"
+                   else f"--model {model_config.architecture} has no object slots")
+            raise PigaError(f"--seed-retries retries a run whose object check finds an object missing; {why} to check: "
+                            "drop --seed-retries")
         record = {"command": command}
     if "budget_steps" in overrides and train_config.epochs:  # a step budget sizes only a run not given in epochs
         if "epochs" in overrides:

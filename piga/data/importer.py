@@ -161,11 +161,13 @@ def read_actions(path: str | Path) -> np.ndarray:
 
     Raises:
         FileNotFoundError: no such file.
-        ValueError: the file is empty, a value is not a finite number or beyond
+        ValueError: a folder, the file is empty, a value is not a finite number or beyond
             ±:data:`piga.data.schema.MAX_ABS_ACTION` (the message gives the line), the action column cannot be told,
             or a row has another number of columns than the first.
     """
     p = Path(path)
+    if p.is_dir():
+        raise ValueError(f"{p} is a folder, not an actions CSV file")
     if not p.is_file():
         raise FileNotFoundError(f"{p}: no such actions file")
     try:
