@@ -110,10 +110,14 @@ def _text_env_field(f: h5py.File) -> None:
     f.attrs["env_config"] = json.dumps({**config, "gravity": "ten"})
 
 
+def _labelled_dmc(f: h5py.File) -> None:
+    f.attrs["env_id"] = "piga/DMCPendulum-v0"
+
+
 VARIANTS: dict[str, Callable[[h5py.File], None]] = {
     "blank": _blank, "nan_state": _nan_state, "nan_reward": _nan_reward, "colour": _colour, "channel_axis": _channel_axis,
     "two_actions": _two_actions, "no_actions": _no_actions, "unknown_env_field": _unknown_env_field,
-    "labelled_spring": _labelled_spring, "still": _still, "text_env_field": _text_env_field,
+    "labelled_spring": _labelled_spring, "still": _still, "text_env_field": _text_env_field, "labelled_dmc": _labelled_dmc,
 }
 
 
@@ -562,6 +566,9 @@ def test_ddpg_that_diverges_stops_with_exit_1(tmp_path: Path, capsys: pytest.Cap
 @pytest.mark.parametrize("data, needles", [
     ("blank", ["every frame is blank"]),
     ("colour", ["the autoencoder takes gray 64x64 frames"]),
+    # the autoencoder learnt MuJoCo's frames, then DDPG ran on the pixel pendulum's (exit 0)
+    ("labelled_dmc", ["--obs latent learns its codes from the file's frames", "acts on piga/PixelPendulum-v0",
+                      "this file is pendulum from piga/DMCPendulum-v0"]),
 ])
 def test_ddpg_latent_refuses_unusable_frames(data: str, needles: list[str], files: dict[str, Path], tmp_path: Path,
                                              capsys: pytest.CaptureFixture[str]) -> None:
@@ -953,6 +960,7 @@ def test_threads_and_seeds_are_refused_beyond_what_the_machine_and_the_generator
     (["--write-goal-image", "OUT.png", "--angle", "30", "--episodes", "3"], "only writes a picture and exits; drop --episodes"),
     (["--oracle", "--workers", "3"], "--workers runs the jobs of --sweep"),
     (["--oracle", "--workers", "2"], "--workers runs the jobs of --sweep"),  # the default's value, given: still ignored
+    (["--oracle", "--torque-arrow"], "the oracle plans on the true state and sees no frames: drop --torque-arrow"),
     (["--write-goal-image", "OUT.png", "--angle", "30", "--episodes=5"], "drop --episodes"),  # the default, as FLAG=VALUE
 ])
 def test_control_refuses_options_it_would_ignore(argv: list[str], needle: str, tmp_path: Path,
@@ -1029,6 +1037,7 @@ def test_train_resume_refuses_a_baseline_run(baseline_runs: dict[str, Path], tin
 
 @pytest.mark.parametrize("extra, needle", [
     (["--autoencoder-steps", "5"], "--autoencoder-steps is for --obs latent"),
+    (["--torque-arrow"], "--obs state sees no frames"),  # the arrow was recorded for a policy that never saw it
     (["--steps", "200", "--eval-every", "400"], "never be evaluated"),
     (["--steps", "400", "--eval-every", "200", "--learning-starts", "5000"], "never learn"),
     (["--steps", "400", "--eval-every", "200", "--learning-starts", "100", "--batch-size", "500", "--buffer-size", "100"],
@@ -1215,8 +1224,9 @@ def test_control_refuses_two_goals_and_reads_a_goal_image_quietly(tiny_piga_run:
     requires_grad warning on stderr."""
     image = tmp_path / "g.png"
     assert run_in_process("piga-control", control.main, "--write-goal-image", str(image), "--angle", "10", capsys=capsys)[0] == 0
-    refused("piga-control", ["--model", str(tiny_piga_run), "--goal-image", str(image), "--goal-angle", "10"], capsys,
-            "--goal-image sets the goal", "drop --goal-angle")
+    for angle in ("10", "0"):  # 0, the default's value, written: still ignored
+        refused("piga-control", ["--model", str(tiny_piga_run), "--goal-image", str(image), "--goal-angle", angle], capsys,
+                "--goal-image sets the goal", "drop --goal-angle")
     import warnings
 
     with warnings.catch_warnings(record=True) as caught:
@@ -1566,3 +1576,51 @@ def test_import_names_a_folder_given_as_the_actions(frame_folders: dict[str, Pat
     refused("piga-import", [str(frame_folders["moving"]), str(acts), "--dt", "0.05", "--out", str(tmp_path / "o.h5")],
             capsys, f"{acts} is a folder, not an actions CSV file")
     assert _listing(tmp_path) == ["acts"]
+
+
+def test_planet_iterative_refuses_another_envs_file(files: dict[str, Path], tmp_path: Path,
+                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    refused("piga-baseline", ["planet", str(files["labelled_dmc"]), "--out", str(tmp_path / "run"), *TINY_PLANET,
+                              "--iterative", "1"], capsys, "the iterative mode collects on piga/PixelPendulum-v0",
+            "this file is pendulum from piga/DMCPendulum-v0")
+    assert _listing(tmp_path) == []
+
+
+def test_control_refuses_a_planet_run_of_dmc_frames(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A PlaNet-style run trained on dm_control's frames (0.04 s apart) was scored on Gymnasium's pendulum, exit 0."""
+    pytest.importorskip("dm_control")
+    data, run = tmp_path / "d.h5", tmp_path / "run"
+    assert _exit_code(collect.main, ["--out", str(data), "--env", "piga/DMCPendulum-v0", "--sequences", "12", "--steps", "16",
+                                     "--split", "8,2,2", "--workers", "1", "--quiet"]) == 0
+    assert _exit_code(baseline.main, ["planet", str(data), "--out", str(run), *TINY_PLANET]) == 0
+    refused("piga-control", ["--model", str(run), "--episodes", "1", "--steps", "20", "--workers", "1", "--quiet"], capsys,
+            "trained on frames of piga/DMCPendulum-v0, 0.04 s apart", "not of Gymnasium's pixel pendulum")
+
+
+@pytest.mark.parametrize("argv", [["--episodes", "1", "--steps", "20", "--workers", "1"], ["--sweep", "1:1:1", "--episodes", "1"]])
+def test_control_refuses_a_planet_run_of_another_frame_rate(argv: list[str], baseline_runs: dict[str, Path], tmp_path: Path,
+                                                            capsys: pytest.CaptureFixture[str]) -> None:
+    """A run whose checkpoint names no env (from before it was recorded) is judged by its frames' rate."""
+    import torch
+
+    run = _run_copy(baseline_runs["planet"], tmp_path / "run")
+    checkpoint = torch.load(run / "checkpoint.pt", weights_only=False)
+    assert checkpoint["data"]["env_id"] == "piga/PixelPendulum-v0"
+    checkpoint["data"] = {k: v for k, v in checkpoint["data"].items() if k != "env_id"} | {"dt": 0.04}
+    torch.save(checkpoint, run / "checkpoint.pt")
+    refused("piga-control", ["--model", str(run), "--quiet", *argv], capsys, "trained on frames 0.04 s apart", "steps 0.05 s")
+
+
+def test_control_on_a_state_run_says_nothing_of_the_torque_arrow(baseline_runs: dict[str, Path], tmp_path: Path,
+                                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    """A state policy sees no frames: "trained with the torque arrow shown; these episodes hide it" was noise."""
+    import torch
+
+    run = _run_copy(baseline_runs["ddpg"], tmp_path / "run", _edit_record(lambda r: r["ddpg"].__setitem__("torque_arrow", True)))
+    checkpoint = torch.load(run / "checkpoint.pt", weights_only=False)
+    checkpoint["config"]["torque_arrow"] = True  # a run made before --obs state refused the arrow
+    torch.save(checkpoint, run / "checkpoint.pt")
+    code, _, err = run_in_process("piga-control", control.main, "--model", str(run), "--episodes", "1", "--steps", "20",
+                                  "--workers", "1", "--quiet", capsys=capsys)
+    assert code == 0, err
+    assert "torque arrow" not in err, err

@@ -37,8 +37,10 @@ from agents.planet.planner import PlanetAgent
 from agents.planet.rssm import WorldModel
 from agents.planet.run import load_planet
 from agents.planet.train import PlanetState, check_planet_data, train_planet
+from envs import PIXEL_PENDULUM
 from envs.pendulum import PixelPendulumConfig, make_pixel_pendulum
-from piga.data.schema import DataFormatError, DatasetInfo, DatasetWriter, inspect_dataset, load_rewards, read_sequences
+from piga.data.schema import (DataFormatError, DatasetInfo, DatasetWriter, check_pixel_pendulum_file, inspect_dataset,
+                              load_rewards, read_sequences)
 from piga.io.atomic import write_json
 from piga.io.checkpoint import CHECKPOINT
 
@@ -54,10 +56,7 @@ def check_iterative_data(info: DatasetInfo, config: IterativeConfig) -> PixelPen
     Raises:
         DataFormatError: not the pixel pendulum's file, or episodes shorter than one sequence.
     """
-    env_id = info.attrs.get("env_id", "piga/PixelPendulum-v0")
-    if info.system != "pendulum" or env_id != "piga/PixelPendulum-v0" or "env_config" not in info.attrs:
-        raise DataFormatError(f"{info.path}: the iterative mode collects on piga/PixelPendulum-v0 and renders like "
-                              f"the file; this file is {info.system} from {env_id}")
+    check_pixel_pendulum_file(info, f"the iterative mode collects on {PIXEL_PENDULUM} and renders like the file")
     if config.episode_steps < info.steps:
         raise DataFormatError(f"{info.path}: collected episodes of {config.episode_steps} steps are shorter than the "
                               f"file's sequences of {info.steps} frames")

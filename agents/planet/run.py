@@ -10,7 +10,7 @@ from agents.planet.config import RSSMConfig
 from agents.planet.rssm import WorldModel
 from piga.io.checkpoint import CHECKPOINT, RunKind, read_checkpoint, unreadable, write_checkpoint
 
-__all__ = ["load_planet", "write_selected"]
+__all__ = ["load_planet", "trained_frames", "write_selected"]
 
 
 def load_planet(run_dir: str | Path) -> tuple[WorldModel, dict[str, Any]]:
@@ -22,6 +22,14 @@ def load_planet(run_dir: str | Path) -> tuple[WorldModel, dict[str, Any]]:
     except Exception as exc:  # a foreign or damaged payload
         raise unreadable(Path(run_dir) / CHECKPOINT, RunKind.PLANET, exc) from None
     return model.eval(), ckpt
+
+
+def trained_frames(run_dir: str | Path) -> dict[str, Any]:
+    """What the checkpoint of a ``piga-baseline planet`` run says of the frames it was trained on: the data file's
+    ``path``, ``image_shape``, ``dt`` (seconds between frames) and ``env_id`` (None for a file that names no env;
+    absent in runs from before it was recorded); {} for a checkpoint that says nothing of them."""
+    data = read_checkpoint(run_dir, RunKind.PLANET).get("data")
+    return data if isinstance(data, dict) else {}
 
 
 def write_selected(run_dir: str | Path, out_dir: str | Path) -> dict[str, Any]:

@@ -152,7 +152,8 @@ def _save(path: Path, model: WorldModel, optimizer: torch.optim.Optimizer, state
         "optimizer": optimizer.state_dict(),
         "state": asdict(state),
         "rng": {"numpy": rng.bit_generator.state, "torch": generator.get_state()},
-        "data": {"path": str(info.path), "image_shape": list(info.image_shape), "dt": info.dt},
+        "data": {"path": str(info.path), "image_shape": list(info.image_shape), "dt": info.dt,
+                 "env_id": info.attrs.get("env_id")},  # None: a file from before env ids, or an imported recording
     }
     write_checkpoint(path.parent, payload)
 

@@ -360,12 +360,12 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
         if config.max_sequences > (n_train := info.split_counts["train"]):
             raise PigaError(f"--max-sequences {config.max_sequences}: {args.data} has {n_train} train sequences; give at "
                             f"most {n_train} (0: all)")
-        if not args.iterative:
-            given = [flag for flag, value, default in (("--rounds", args.rounds, None), ("--round-steps", args.round_steps, IterativeConfig.steps_per_round),
-                                                       ("--episode-steps", args.episode_steps, IterativeConfig.episode_steps),
-                                                       ("--exploration-noise", args.exploration_noise, IterativeConfig.noise)) if value != default]
-            if given:
-                raise PigaError(f"{given[0]} goes with --iterative EPISODES (PlaNet's collect-then-train loop)")
+        if not args.iterative:  # each refused whenever written, at its default's value too
+            given = _given_options("planet", argv)
+            ignored = [f"--{name.replace('_', '-')}" for name in ("rounds", "round_steps", "episode_steps", "exploration_noise")
+                       if name in given]
+            if ignored:
+                raise PigaError(f"{ignored[0]} goes with --iterative EPISODES (PlaNet's collect-then-train loop)")
         else:
             iterative = IterativeConfig(rounds=args.rounds or IterativeConfig.rounds, episodes=args.iterative,
                                         steps_per_round=args.round_steps, episode_steps=args.episode_steps,
@@ -482,6 +482,9 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
         record.setdefault("resumed", []).append(command)
         checkpoint_bytes: float = (run_dir / CHECKPOINT).stat().st_size
     else:
+        if args.obs == "state" and args.torque_arrow:  # (--resume refuses it with the recipe's other changes)
+            raise PigaError("--torque-arrow shows the arrow in the frames; --obs state sees no frames (it observes "
+                            "cos θ, sin θ and θ̇): drop --torque-arrow")
         given = {name: value for name, value in (("buffer_size", args.buffer_size), ("learning_starts", args.learning_starts),
                                                  ("noise_std", args.noise_std), ("learning_rate", args.learning_rate),
                                                  ("batch_size", args.batch_size)) if value is not None}  # else the presets'
@@ -492,9 +495,13 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
         ae_config = AutoencoderConfig(steps=args.autoencoder_steps, seed=config.seed)
         if args.data:
             from agents.sb3.autoencoder import check_autoencoder_data
-            from piga.data.schema import fingerprint, inspect_dataset
+            from envs import PIXEL_PENDULUM
+            from piga.data.schema import check_pixel_pendulum_file, fingerprint, inspect_dataset
 
-            check_autoencoder_data(inspect_dataset(args.data))  # blank or ill-sized frames: one line, before --out is touched
+            info = inspect_dataset(args.data)
+            check_autoencoder_data(info)  # blank or ill-sized frames: one line, before --out is touched
+            check_pixel_pendulum_file(info, "--obs latent learns its codes from the file's frames and then acts on "
+                                      f"{PIXEL_PENDULUM}, whose frames they must be")
         _check_run_dir(run_dir, False, args.overwrite, RunKind.DDPG)
         record = {"kind": RunKind.DDPG.value, "command": command, "data": args.data, "ddpg": config.to_dict()}
         if args.data:

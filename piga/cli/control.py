@@ -118,10 +118,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         raise PigaError("--angle goes with --write-goal-image; to set the control goal use --goal-angle or --goal-image")
     if not args.oracle and not args.model:
         raise PigaError("give --model RUN_DIR (or --oracle)")
+    if args.torque_arrow and args.oracle and not args.model:
+        raise PigaError("--torque-arrow shows the arrow in the frames the agent sees; the oracle plans on the true state "
+                        "and sees no frames: drop --torque-arrow")
     if args.not_told and args.oracle and not args.sweep:
         raise PigaError("--not-told is for the piga agent; the oracle plans with the environment's true physics")
     check_angle("--goal-angle", args.goal_angle)
-    if args.goal_image and args.goal_angle:
+    if args.goal_image and "goal_angle" in given:  # --goal-angle 0, the default, too
         raise PigaError("--goal-image sets the goal (the encoder reads its angle); drop --goal-angle")
     hold = EpisodeConfig.hold_steps
     if args.steps < hold:
@@ -316,6 +319,8 @@ def _baseline(args: argparse.Namespace, kind: RunKind, mpc: MPCConfig, outputs: 
         raise PigaError(f"{', '.join(planner)}: a {kind.value} run plans with its own settings "
                         f"({'PlaNet' + chr(39) + 's CEM' if kind is RunKind.PLANET else 'a policy, no planner'}); "
                         "the CEM options set the piga agent's and the oracle's planner")
+    if kind is RunKind.PLANET:  # after the refusals of the command line: this reads the checkpoint
+        check_planet_frames(args.model)
     if args.sweep or args.gravity_mult != 1:
         print(f"note: the {kind.value} agent runs as trained: it cannot be told that gravity changed")
     if args.sweep:
@@ -326,8 +331,10 @@ def _baseline(args: argparse.Namespace, kind: RunKind, mpc: MPCConfig, outputs: 
 
     torch.set_num_threads(1)
     agent = baseline_agent(kind, args.model, seed=args.seed)
-    trained_arrow = getattr(getattr(agent, "config", None), "torque_arrow", None)
-    if kind is RunKind.DDPG and trained_arrow is not None and trained_arrow != args.torque_arrow:
+    trained = getattr(agent, "config", None)
+    trained_arrow = getattr(trained, "torque_arrow", None)
+    sees_frames = getattr(trained, "obs", "pixels") != "state"  # a state policy never saw the arrow, shown or not
+    if kind is RunKind.DDPG and sees_frames and trained_arrow is not None and trained_arrow != args.torque_arrow:
         print(f"{PROG}: warning: {args.model} was trained with the torque arrow {'shown' if trained_arrow else 'hidden'}; "
               f"these episodes {'show' if args.torque_arrow else 'hide'} it", file=sys.stderr)
     config = EpisodeConfig(episodes=args.episodes, steps=args.steps, seed=args.seed, gravity_mult=args.gravity_mult,
@@ -371,6 +378,25 @@ def check_pendulum_model(model: PhysicsModel, run_dir: str) -> None:
     if abs(model.config.dt - PENDULUM_DT) > 1e-9:
         raise PigaError(f"{run_dir}: the model was trained on frames {model.config.dt:g} s apart, Gymnasium's pixel "
                         f"pendulum steps {PENDULUM_DT:g} s; it can control only a system filmed at its own rate")
+
+
+def check_planet_frames(run_dir: str) -> None:
+    """Refuses a PlaNet-style run trained on frames that Gymnasium's pixel pendulum does not make: another env's
+    (dm_control's: its checkpoint names the env of its data file; older runs name none), or another rate's (an
+    imported recording, or dm_control's in an older run)."""
+    from agents.planet.run import trained_frames
+    from envs.constants import PENDULUM_DT
+
+    data = trained_frames(run_dir)
+    env_id, dt = data.get("env_id"), data.get("dt")
+    rate = f", {dt:g} s apart" if isinstance(dt, (int, float)) else ""
+    if env_id is not None and env_id != PIXEL_PENDULUM:
+        raise PigaError(f"{run_dir}: the PlaNet-style model was trained on frames of {env_id}{rate} (from "
+                        f"{data.get('path')}), not of Gymnasium's pixel pendulum ({PIXEL_PENDULUM}), which it would "
+                        "control here; train it on a file of that env")
+    if isinstance(dt, (int, float)) and abs(dt - PENDULUM_DT) > 1e-9:
+        raise PigaError(f"{run_dir}: the model was trained on frames {dt:g} s apart, Gymnasium's pixel pendulum steps "
+                        f"{PENDULUM_DT:g} s; it can control only a system filmed at its own rate")
 
 
 def check_angle(flag: str, degrees: float) -> None:

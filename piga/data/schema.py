@@ -355,6 +355,25 @@ def check_frames_have_signal(path: str | os.PathLike[str], motion: bool = True) 
         _check_frames_signal(f["frames"], path, motion)
 
 
+def check_pixel_pendulum_file(info: DatasetInfo, use: str) -> None:
+    """Refuses a file whose frames Gymnasium's pixel pendulum did not render (with the ``env_config``
+    that piga-collect records), for ``use``: a baseline that learns from the file and then acts in
+    that env, so frames of another env (dm_control's, a scene, an imported recording) would teach it
+    pictures it never sees.
+
+    Raises:
+        DataFormatError: naming the file, ``use`` and the file's system and env.
+    """
+    from envs import PIXEL_PENDULUM  # here: the schema is read without gymnasium's import
+
+    env_id = info.attrs.get("env_id", PIXEL_PENDULUM)  # files from before env ids hold none
+    if info.system != "pendulum" or env_id != PIXEL_PENDULUM:
+        raise DataFormatError(f"{info.path}: {use}; this file is {info.system} from {env_id}")
+    if "env_config" not in info.attrs:
+        raise DataFormatError(f"{info.path}: {use}; this file is {info.system} without the 'env_config' that "
+                              "piga-collect records (an imported recording?)")
+
+
 def fingerprint(path: str | os.PathLike[str]) -> str:
     """A short hash of what a file holds, not of where it lies: its /actions, /split and first sequence of
     frames (sha256, hex). A moved or copied file keeps it; another file of the same shape (another seed, another
