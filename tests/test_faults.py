@@ -1624,3 +1624,6 @@ def test_control_on_a_state_run_says_nothing_of_the_torque_arrow(baseline_runs: 
                                   "--workers", "1", "--quiet", capsys=capsys)
     assert code == 0, err
     assert "torque arrow" not in err, err
+    # and --torque-arrow, which shows the arrow only in frames it never sees, is refused (unless a --video shows them)
+    refused("piga-control", ["--model", str(run), "--episodes", "1", "--steps", "20", "--torque-arrow", "--quiet"], capsys,
+            "acts on the state (--obs state) and sees none, and no --video is written: drop --torque-arrow")

@@ -334,6 +334,9 @@ def _baseline(args: argparse.Namespace, kind: RunKind, mpc: MPCConfig, outputs: 
     trained = getattr(agent, "config", None)
     trained_arrow = getattr(trained, "torque_arrow", None)
     sees_frames = getattr(trained, "obs", "pixels") != "state"  # a state policy never saw the arrow, shown or not
+    if not sees_frames and args.torque_arrow and not args.video:
+        raise PigaError(f"--torque-arrow shows the arrow in the frames; {args.model} acts on the state (--obs state) and "
+                        "sees none, and no --video is written: drop --torque-arrow")
     if kind is RunKind.DDPG and sees_frames and trained_arrow is not None and trained_arrow != args.torque_arrow:
         print(f"{PROG}: warning: {args.model} was trained with the torque arrow {'shown' if trained_arrow else 'hidden'}; "
               f"these episodes {'show' if args.torque_arrow else 'hide'} it", file=sys.stderr)
