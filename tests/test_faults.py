@@ -1029,6 +1029,20 @@ def test_train_resume_refuses_what_it_would_ignore(extra: list[str], needles: li
             *needles)
 
 
+def test_train_resume_refuses_the_default_seed_written_for_a_run_of_another(tiny_piga_run: Path, tiny_data: Path,
+                                                                            tmp_path: Path,
+                                                                            capsys: pytest.CaptureFixture[str]) -> None:
+    """--seed 0, the default, went through (and was ignored) on the resume of a run of seed 3."""
+    import torch
+
+    run = _run_copy(tiny_piga_run, tmp_path / "run")
+    checkpoint = torch.load(run / "checkpoint.pt", weights_only=False)
+    checkpoint["train_config"]["seed"] = 3
+    torch.save(checkpoint, run / "checkpoint.pt")
+    refused("piga-train-model", [str(tiny_data), "--out", str(run), "--resume", "--epochs", "2", "--quiet", "--seed", "0"],
+            capsys, "drop --seed")
+
+
 def test_train_resume_refuses_a_baseline_run(baseline_runs: dict[str, Path], tiny_data: Path, tmp_path: Path,
                                              capsys: pytest.CaptureFixture[str]) -> None:
     run = _run_copy(baseline_runs["ddpg"], tmp_path / "run")

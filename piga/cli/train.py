@@ -198,7 +198,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         saved = TrainConfig.from_dict(ckpt["train_config"])
         changed = (sorted(set(overrides) - {"epochs", "budget_steps", "max_minutes"}) + (["signed_actuation"] if args.signed_actuation else [])
                    + (["fixed_g"] if args.fixed_g is not None else []) + (["preset"] if args.preset != "fast" else [])
-                   + (["seed"] if args.seed not in (saved.seed, TrainConfig().seed) else [])
+                   + (["seed"] if "seed" in written and args.seed != saved.seed else [])
                    + (["seed_retries"] if "seed_retries" in written else [])
                    + [name for name in ("data_loading", "stream_cache_mb")
                       if getattr(args, name) is not None and getattr(args, name) != getattr(saved, name)])
