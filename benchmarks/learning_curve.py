@@ -3,8 +3,9 @@
 
     python benchmarks/learning_curve.py RUN_DIR --out results/drqv2_runs/records/pixels-s0.json
 
-Writes OUT: the run's command (its ``config.json``; the run folder written RUN), its settings, the EvalCallback curve so far
-(step, mean return, seconds) and the training seconds.
+Writes OUT: the run's command (its ``config.json``; the run folder written RUN) and the commits of the code that
+started and continued it, its settings, the EvalCallback curve so far (step, mean return, seconds) and the training
+seconds.
 """
 
 from __future__ import annotations
@@ -28,9 +29,12 @@ def main(argv: list[str] | None = None) -> int:
     try:
         ckpt = read_checkpoint(args.run, RunKind.DDPG)
         written = args.run / "config.json"  # piga-baseline's record of the command (a run trained in Python has none)
-        words = shlex.split(json.loads(written.read_text()).get("command") or "") if written.exists() else []
+        started = json.loads(written.read_text()) if written.exists() else {}
+        words = shlex.split(started.get("command") or "")
         command = shlex.join("RUN" if i and words[i - 1] == "--out" else w for i, w in enumerate(words)) or None
-        record = {"command": command, "config": ckpt["config"], "learning_curve": ckpt["history"],
+        # the code's commits, as the run's record has them (runs started before it recorded them have none)
+        commits = {key: started[key] for key in ("commit", "resumed_commits") if key in started}
+        record = {"command": command, **commits, "config": ckpt["config"], "learning_curve": ckpt["history"],
                   "train_seconds": ckpt["elapsed"]}
         write_json(args.out, record, overwrite=args.overwrite)
     except (OSError, ValueError, KeyError) as exc:

@@ -66,7 +66,10 @@ def test_a_ddpg_run_that_never_learned_says_so_and_keeps_its_outputs(ddpg_result
     assert_one_line(code, err, "piga-baseline: error: the run did not learn: its evaluation return never reached -200 in "
                     f"200 env steps (final {metrics['final_eval_mean_return']:.1f}); its outputs are in {run}")
     assert code == 1
-    assert json.loads((run / "config.json").read_text())["kind"] == "ddpg"
+    record = json.loads((run / "config.json").read_text())
+    from piga.io.pool import git_commit
+
+    assert record["kind"] == "ddpg" and record["commit"] == git_commit()  # the code that trained it
     assert load_sb3(run)[1].steps == 200
 
 

@@ -89,6 +89,12 @@ def test_a_run_resumes_exactly_and_acts_in_piga_episodes(tmp_path: Path) -> None
     assert learning_curve.main([str(tmp_path / "b"), "--out", str(tmp_path / "curve.json")]) == 0
     curve = json.loads((tmp_path / "curve.json").read_text())
     assert curve["learning_curve"] == resumed["learning_curve"] and curve["config"]["algo"] == "drqv2"
+    assert "commit" not in curve  # trained in Python: no record of the command or its code
+    (tmp_path / "b" / "config.json").write_text(json.dumps({"command": f"piga-baseline ddpg --out {tmp_path / 'b'}",
+                                                           "commit": "abc", "resumed_commits": ["def"]}))
+    assert learning_curve.main([str(tmp_path / "b"), "--out", str(tmp_path / "curve.json"), "--overwrite"]) == 0
+    curve = json.loads((tmp_path / "curve.json").read_text())
+    assert (curve["command"], curve["commit"], curve["resumed_commits"]) == ("piga-baseline ddpg --out RUN", "abc", ["def"])
     agent = SB3Agent.from_run(tmp_path / "a")
     assert agent.input_frames == 1 and agent.model.observation_space.shape == (3, 64, 64)
     assert np.isfinite(run_episodes(agent, EpisodeConfig(episodes=1, steps=10, hold_steps=5)).summary.mean_return)

@@ -132,7 +132,11 @@ def test_cli_trains_and_reports(small_data: Path, tmp_path: Path, capsys: pytest
     assert code in FINISHED, err
     assert "epoch 2:" in stdout and "epoch 1:" not in stdout
     assert json.loads((out / "metrics.json").read_text())["training"]["device"] == "cpu"
-    assert json.loads((out / "config.json").read_text())["train"]["threads"] == 2  # it was 1; --threads was ignored
+    record = json.loads((out / "config.json").read_text())
+    assert record["train"]["threads"] == 2  # it was 1; --threads was ignored
+    from piga.io.pool import git_commit  # the code's commit, where it started and where it continued
+
+    assert record["commit"] == git_commit() and record["resumed_commits"] == [git_commit()]
 
 
 def test_cli_bad_input(small_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -22,7 +22,8 @@ from typing import Any, get_args
 
 from piga.cli.common import (ArgumentParser, Interrupted, PigaError, add_device_option, add_preset_option, command_line,
                              format_default, given_options, made_folder, nonnegative_float, nonnegative_int,
-                             positive_float, positive_int, remove_outputs, run_cli, seed_int, thread_count)
+                             positive_float, positive_int, record_resume, remove_outputs, run_cli, seed_int,
+                             started_record, thread_count)
 from piga.io.atomic import check_folder_target
 from piga.io.checkpoint import CHECKPOINT, RunKind
 
@@ -345,7 +346,7 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
             record["rssm"] = load_planet(run_dir)[0].config.to_dict()
         except (FileNotFoundError, ValueError) as exc:
             raise PigaError(str(exc)) from None
-        record.setdefault("resumed", []).append(command)
+        record_resume(record, command)
     else:
         config = PlanetTrainConfig(steps=args.steps or PlanetTrainConfig.steps, batch_size=args.batch_size, chunk_length=args.chunk_length,
                                    max_sequences=args.max_sequences, free_nats=args.free_nats, reward_scale=args.reward_scale,
@@ -375,9 +376,9 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
 
             check_iterative_data(info, iterative)
         _check_run_dir(run_dir, False, args.overwrite, RunKind.PLANET)
-        record = {"kind": RunKind.PLANET.value, "command": command, "data": str(args.data),
-                  "data_fingerprint": fingerprint(args.data), "train": config.to_dict(),
-                  "rssm": rssm.to_dict(), **({"iterative": iterative.to_dict()} if iterative else {})}
+        record = started_record(command, kind=RunKind.PLANET.value, data=str(args.data),
+                                data_fingerprint=fingerprint(args.data), train=config.to_dict(), rssm=rssm.to_dict(),
+                                **({"iterative": iterative.to_dict()} if iterative else {}))
     check_planet_data(info, config, record["rssm"].get("action_repeat", 1))
     if iterative is not None:
         from agents.planet.iterative import check_iterative_data, train_planet_iterative
@@ -479,7 +480,7 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
         _refuse_fewer_steps(args.steps, saved.steps)
         config = replace(saved, steps=args.steps or saved.steps, threads=args.threads, device=args.device)
         record["ddpg"] = config.to_dict()
-        record.setdefault("resumed", []).append(command)
+        record_resume(record, command)
         checkpoint_bytes: float = (run_dir / CHECKPOINT).stat().st_size
     else:
         if args.obs == "state" and args.torque_arrow:  # (--resume refuses it with the recipe's other changes)
@@ -503,7 +504,7 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
             check_pixel_pendulum_file(info, "--obs latent learns its codes from the file's frames and then acts on "
                                       f"{PIXEL_PENDULUM}, whose frames they must be")
         _check_run_dir(run_dir, False, args.overwrite, RunKind.DDPG)
-        record = {"kind": RunKind.DDPG.value, "command": command, "data": args.data, "ddpg": config.to_dict()}
+        record = started_record(command, kind=RunKind.DDPG.value, data=args.data, ddpg=config.to_dict())
         if args.data:
             record["data_fingerprint"] = fingerprint(args.data)
         checkpoint_bytes = _ddpg_checkpoint_bytes(config, ae_config.latent_size)

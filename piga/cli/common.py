@@ -335,6 +335,23 @@ def connect_backend(ray: str | None) -> Backend:
     return backend
 
 
+def record_resume(record: dict[str, Any], command: str) -> None:
+    """Adds a ``--resume`` invocation to a run's record (its ``config.json``): the command, and the commit of the code
+    that continues it (``resumed_commits``, in step; None outside a git checkout), beside the ``commit`` it started at."""
+    from piga.io.pool import git_commit
+
+    record.setdefault("resumed", []).append(command)
+    record.setdefault("resumed_commits", []).append(git_commit())
+
+
+def started_record(command: str, **fields: Any) -> dict[str, Any]:
+    """A new run's record (its ``config.json``): the command, the commit of the code that runs it (None outside a git
+    checkout) and ``fields``."""
+    from piga.io.pool import git_commit
+
+    return {"command": command, "commit": git_commit(), **fields}
+
+
 def given_options(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> set[str]:
     """The destinations of ``parser``'s options written in ``argv`` (None: the command line), whatever their values:
     an option given at its default value is given (the parsers take no abbreviations, so a flag is spelt whole)."""

@@ -12,8 +12,9 @@ from typing import Any
 
 from piga.cli.common import (NOT_CONVERGED, ArgumentParser, Interrupted, PigaError, add_device_option,
                              add_preset_option, command_line, format_default, given_options, int_up_to,
-                             missing_folders, nonnegative_int, positive_float, positive_int, remove_empty_folders,
-                             remove_outputs, run_cli, seed_int, thread_count, unit_fraction)
+                             missing_folders, nonnegative_int, positive_float, positive_int, record_resume,
+                             remove_empty_folders, remove_outputs, run_cli, seed_int, started_record, thread_count,
+                             unit_fraction)
 from piga.io.atomic import check_folder_target
 from piga.io.checkpoint import CHECKPOINT, require_piga_run
 
@@ -209,7 +210,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                                **({"threads": args.threads} if "threads" in written else {}))
         model_config = saved_model.config
         record = _read_record(run_dir)
-        record.setdefault("resumed", []).append(command)
+        record_resume(record, command)
     else:
         recipe = preset_for(args.preset, info)
         reading = {name: getattr(args, name) for name in ("data_loading", "stream_cache_mb") if getattr(args, name) is not None}
@@ -240,7 +241,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                    else f"--model {model_config.architecture} has no object slots")
             raise PigaError(f"--seed-retries retries a run whose object check finds an object missing; {why} to check: "
                             "drop --seed-retries")
-        record = {"command": command}
+        record = started_record(command)
     if "budget_steps" in overrides and train_config.epochs:  # a step budget sizes only a run not given in epochs
         if "epochs" in overrides:
             raise PigaError("--epochs and --budget-steps both set the run's length (--budget-steps only when --epochs "
