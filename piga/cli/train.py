@@ -130,7 +130,7 @@ def build_parser() -> ArgumentParser:
                    help="a scene whose object check finds an object missing (or a slot that draws nothing where the scene "
                    "has an object for it) is trained again from the start with the next seed, up to N times; while a retry is "
                    "left, an object missing after the autoencoder's warm-up restarts the run there (default %(default)s; 0: "
-                   "never; not with --resume)")
+                   "never; not with --resume, nor where there are no object slots: pendulum data, --model video-lstm)")
     p.add_argument("--resume", action="store_true", help="continue the run in --out; it may raise --epochs, --budget-steps or --max-minutes "
                    "(docs: piga-train-model; resuming replans the cosine schedule)")
     p.add_argument("--overwrite", action="store_true", help="replace the outputs of an earlier run in --out")
