@@ -42,6 +42,7 @@ motor the other way (gear -1): either flips the sign of the actuation as the fra
 from __future__ import annotations
 
 import math
+import sys
 import os
 import xml.etree.ElementTree as ET
 from dataclasses import asdict, dataclass, replace
@@ -119,6 +120,12 @@ class DMCPendulumConfig:
     a sliver of the floor."""
 
     def __post_init__(self) -> None:
+        for name in ("length", "damping"):  # written into the MJCF model, whose reader takes no subnormal number
+            value = getattr(self, name)
+            if value != 0 and abs(value) < sys.float_info.min:
+                raise ValueError(f"DMCPendulumConfig.{name}={value!r} is below the smallest normal number "
+                                 f"({sys.float_info.min:g}), which MuJoCo's model reader refuses; give "
+                                 + ("0 or " if name == "damping" else "") + "a larger value")
         checks = {
             "image_size": self.image_size >= 8,
             "frame_stack": self.frame_stack >= 1,

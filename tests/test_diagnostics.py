@@ -7,6 +7,7 @@ import subprocess
 from dataclasses import replace
 from pathlib import Path
 
+import h5py
 import numpy as np
 import pytest
 import torch
@@ -414,6 +415,15 @@ def test_the_smallest_default_file_is_accepted(tmp_path: Path) -> None:
     collect(CollectConfig(sequences=20, steps=12, seed=3, workers=1, split=(17, 2, 1)), fewer, progress=False, command="t")
     with pytest.raises(DiagnosisInputError, match="17 train and 3 held-out sequences; need at least 10 and 4"):
         check_compatible(model, fewer)
+    # gray frames with a channel axis, (H, W, 1), are gray frames: training takes them, and so does the diagnosis
+    # (it refused them: "frames are (64, 64, 1), the model takes 64x64 with 1 channel(s)")
+    with h5py.File(data, "a") as f:
+        frames = f["frames"][()]
+        del f["frames"]
+        f["frames"] = frames[..., None]
+    assert check_compatible(model, data).channels == 1
+    with pytest.raises(DiagnosisInputError, match=r"frames are \(64, 64, 1\), the model takes 64x64 with 3 channel"):
+        check_compatible(PhysicsModel(ModelConfig(channels=3)), data)
 
 
 def test_the_autocorrelation_of_short_sequences_stops_at_their_length() -> None:

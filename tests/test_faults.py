@@ -289,6 +289,9 @@ def test_a_failed_allocation_is_out_of_memory(capsys: pytest.CaptureFixture[str]
     (["--env", "piga/DMCPendulum-v0", "--env-option", "action_repeat=1.5"],
      ["--env-option action_repeat=1.5: expected an integer"], 1),  # it said "expected a int"
     (["--effect", "speed_clip=1e-9"], ["speed_clip must be in [0.0001, 8)"], 2),  # a still pendulum, "wrote"
+    (["--env", "piga/DMCPendulum-v0", "--env-option", "damping=1e-320"],
+     ["damping=1e-320 is below the smallest normal number", "give 0 or a larger value"], 1),  # MuJoCo: "too large"
+    (["--env", "piga/DMCPendulum-v0", "--env-option", "length=1e-320"], ["length=1e-320 is below the smallest normal"], 1),
     # an option that does not apply, written at its default value: the file recorded it and ignored it
     (["--env", "piga/DMCPendulum-v0", "--gravity", "10"], ["--gravity is an option of piga/PixelPendulum-v0 only"], 1),
     (["--env", "piga/DMCPendulum-v0", "--gravity-mult", "1"], ["--gravity-mult is an option of piga/PixelPendulum-v0"], 1),
@@ -496,12 +499,20 @@ def test_planet_trains_on_frames_with_a_channel_axis(files: dict[str, Path], tmp
     assert {"checkpoint.pt", "config.json", "metrics.json", "openloop.png"} <= set(_listing(tmp_path / "run"))
 
 
-def test_planet_refuses_a_reward_term_of_no_weight() -> None:
-    """--reward-scale 0 trained a reward head that never learned, which the planner then ranked its plans by (exit 0)."""
+@pytest.mark.parametrize("scale", [0.0, 1e-300, 9e-4])
+def test_planet_refuses_a_reward_term_of_no_weight(scale: float, tiny_data: Path, tmp_path: Path,
+                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    """--reward-scale 0 trained a reward head that never learned, which the planner then ranked its plans by (exit 0);
+    1e-300 got past that check and made the term exactly 0 in float32."""
     from agents.planet.config import PlanetTrainConfig
 
-    with pytest.raises(ValueError, match=r"reward_scale \(--reward-scale\) must be > 0, got 0: at 0 the reward head never learns"):
-        PlanetTrainConfig(reward_scale=0.0)
+    with pytest.raises(ValueError, match=r"reward_scale \(--reward-scale\) must be at least 0.001, got .*: below it the "
+                                         r"reward head barely learns"):
+        PlanetTrainConfig(reward_scale=scale)
+    if scale:
+        refused("piga-baseline", ["planet", str(tiny_data), "--out", str(tmp_path / "run"), "--reward-scale", str(scale),
+                                  "--quiet"], capsys, "--reward-scale) must be at least 0.001")
+        assert _listing(tmp_path) == []
 
 
 def test_planet_on_a_full_disk(tiny_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str],
@@ -1027,6 +1038,18 @@ def test_train_resume_refuses_what_it_would_ignore(extra: list[str], needles: li
         collect(replace(CollectConfig(), sequences=8, steps=16, workers=1, seed=3), data, command="t", progress=False)
     refused("piga-train-model", [str(data), "--out", str(run), "--resume", "--epochs", "2", "--quiet", *extra], capsys,
             *needles)
+
+
+def test_train_resume_refuses_a_file_whose_dt_changed(tiny_piga_run: Path, tiny_data: Path, tmp_path: Path,
+                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    """The fingerprint covers the arrays, not the attributes: a file whose 'dt' was edited was continued on, the
+    physics stepping the run's own dt."""
+    run, data = _run_copy(tiny_piga_run, tmp_path / "run"), tmp_path / "t.h5"
+    shutil.copy(tiny_data, data)
+    with h5py.File(data, "a") as f:
+        f.attrs["dt"] = 0.1
+    refused("piga-train-model", [str(data), "--out", str(run), "--resume", "--epochs", "2", "--quiet"], capsys,
+            "now says its frames are 0.1 s apart; the run trained on them as 0.05 s apart", "restore the file's 'dt'")
 
 
 def test_train_resume_refuses_the_default_seed_written_for_a_run_of_another(tiny_piga_run: Path, tiny_data: Path,
@@ -1641,3 +1664,62 @@ def test_control_on_a_state_run_says_nothing_of_the_torque_arrow(baseline_runs: 
     # and --torque-arrow, which shows the arrow only in frames it never sees, is refused (unless a --video shows them)
     refused("piga-control", ["--model", str(run), "--episodes", "1", "--steps", "20", "--torque-arrow", "--quiet"], capsys,
             "acts on the state (--obs state) and sees none, and no --video is written: drop --torque-arrow")
+
+
+def test_a_parameter_beyond_float_range_is_named_not_an_internal_error(tiny_data: Path, tmp_path: Path,
+                                                                       capsys: pytest.CaptureFixture[str]) -> None:
+    """JSON integers are unbounded: g = 10**400 raised OverflowError (exit 70) in every reader."""
+    data = tmp_path / "big.h5"
+    shutil.copy(tiny_data, data)
+    with h5py.File(data, "a") as f:
+        params = json.loads(f.attrs["params"])
+        f.attrs["params"] = json.dumps({**params, "g": 10**400})
+    for prog, argv in (("piga-show", [str(data), "--out", str(tmp_path / "s.png")]),
+                       ("piga-train-model", [str(data), "--out", str(tmp_path / "run"), "--quiet"])):
+        line = refused(prog, argv, capsys, "attribute 'params' must give each parameter as a finite number, got g=1000")
+        assert len(line) < 300, line  # the 401 digits are cut
+    assert _listing(tmp_path) == ["big.h5"]
+
+
+def _damage_chunk(path: Path, sequence: int) -> None:
+    """Overwrites bytes inside the compressed chunk of ``sequence``'s frames, so that its filter fails to read it."""
+    with h5py.File(path, "r") as f:
+        info = f["frames"].id.get_chunk_info_by_coord((sequence,) + (0,) * (f["frames"].ndim - 1))
+    with open(path, "r+b") as raw:
+        raw.seek(info.byte_offset + info.size // 3)
+        raw.write(b"\xff" * min(200, info.size // 3))
+
+
+@pytest.mark.parametrize("prog", ["piga-show", "piga-train-model"])
+def test_a_damaged_chunk_is_named_with_its_file_and_sequence(prog: str, tiny_data: Path, tmp_path: Path,
+                                                             capsys: pytest.CaptureFixture[str]) -> None:
+    """HDF5's "Can't synchronously read data (filter returned failure during read)" named neither the file nor what
+    in it; training failed after it had written its first checkpoint when the damage lay in a held-out sequence."""
+    data = tmp_path / "bad.h5"
+    shutil.copy(tiny_data, data)
+    _damage_chunk(data, 0)
+    argv = [str(data), "--out", str(tmp_path / ("s.png" if prog == "piga-show" else "run"))]
+    refused(prog, [*argv, *([] if prog == "piga-show" else ["--epochs", "1", "--batch-size", "4", "--quiet"])], capsys,
+            f"{data}: /frames of ", "cannot be read", "the file is damaged")
+    assert _listing(tmp_path) == ["bad.h5"]
+
+
+@pytest.mark.parametrize("option", ["--max-speed", "--max-angle"])
+def test_collect_reads_minus_zero_as_zero(option: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """-0 made the reset range -0 to 0, which numpy refused as "high - low < 0" (an error naming no option)."""
+    from piga.cli.collect import main as collect_main
+
+    assert collect_main(["--out", str(tmp_path / "d.h5"), "--sequences", "4", "--steps", "6", "--split", "2,1,1",
+                         "--workers", "1", "--quiet", option, "-0"]) == 0
+
+
+def test_an_image_beyond_pillows_limit_is_called_too_large(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A 40000 x 40000 goal image was "not a readable image (DecompressionBombError)"."""
+    from PIL import Image
+
+    from piga.data.scene import read_image
+
+    Image.new("L", (64, 64)).save(tmp_path / "g.png")
+    monkeypatch.setattr(Image, "MAX_IMAGE_PIXELS", 1000)  # a 64 x 64 picture is then beyond twice the limit
+    with pytest.raises(ValueError, match=r"g.png: the image is too large to read \(more than Pillow's limit of 2,000 "):
+        read_image(tmp_path / "g.png")

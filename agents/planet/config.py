@@ -21,6 +21,11 @@ MAX_FREE_NATS = 1000.0
 #: Most optimiser steps a run may take, in its training and over all its iterative rounds together: weeks on a CPU
 #: (PlaNet's own runs take a few million); --steps 1e20 was taken, and trained for ever.
 MAX_STEPS = 10_000_000
+#: Smallest reward weight. The reward head learns only from the reward term, whose gradients the weight scales;
+#: Adam divides them by their running size plus ``adam_eps`` (1e-4), so once they shrink toward that epsilon the
+#: head's steps shrink with them (a weight of 1e-300 made the term exactly 0 in float32: the head never learnt).
+#: PlaNet's code uses 10; 1e-3 leaves room for any tuning.
+MIN_REWARD_SCALE = 1e-3
 #: Most hidden layers of the reward head (PlaNet's has 3): --reward-layers 100000 built a head of a billion weights
 #: that passed the memory check and then trained for hours without a word.
 MAX_REWARD_LAYERS = 100
@@ -160,9 +165,10 @@ class PlanetTrainConfig:
                              f"max_minutes must be finite numbers: {self}")
         if not (self.lr > 0 and self.adam_eps > 0 and self.grad_clip > 0 and self.free_nats >= 0):
             raise ValueError("need lr, adam_eps, grad_clip > 0 and free_nats >= 0")
-        if not self.reward_scale > 0:
-            raise ValueError(f"PlanetTrainConfig.reward_scale (--reward-scale) must be > 0, got {self.reward_scale:g}: at 0 the "
-                             "reward head never learns, and the planner ranks its plans by that head")
+        if not self.reward_scale >= MIN_REWARD_SCALE:
+            raise ValueError(f"PlanetTrainConfig.reward_scale (--reward-scale) must be at least {MIN_REWARD_SCALE:g}, got "
+                             f"{self.reward_scale:g}: below it the reward head barely learns (at 0, never), and the planner "
+                             "ranks its plans by that head")
         if self.steps > MAX_STEPS:
             raise ValueError(f"PlanetTrainConfig.steps (--steps) must be at most {MAX_STEPS:,} (weeks on a CPU), got {self.steps:,}")
         if self.free_nats > MAX_FREE_NATS:

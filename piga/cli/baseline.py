@@ -72,7 +72,7 @@ def build_parser() -> ArgumentParser:
                    help="which state the reward head reads for a model step's reward: frame (the state before its actions) "
                    "or transition (PlaNet's: the state they lead to, which has seen them) (default %(default)s)")
     q.add_argument("--reward-scale", type=positive_float, default=planet.reward_scale,
-                   help="weight of the reward term of the loss (PlaNet's code: 10) (default %(default)s)")
+                   help="weight of the reward term of the loss, at least 0.001 (PlaNet's code: 10) (default %(default)s)")
     q.add_argument("--stoch-size", type=positive_int, default=rssm.stoch_size, help="stochastic state size (default %(default)s)")
     add_preset_option(q, "--max-minutes", default=planet.max_minutes, type=positive_float, shown="no limit",
                       help="stop at the first checkpoint past this budget")

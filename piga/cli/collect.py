@@ -12,8 +12,8 @@ from envs.dmc import DMCPendulumConfig
 from envs.effects import EFFECTS, format_effects, parse_effect
 from envs.pendulum import MAX_ACTUATION_GAIN, MAX_GRAVITY, MIN_ACTUATION_GAIN, MIN_GRAVITY, PixelPendulumConfig
 from envs.scenes import HALF_SPEED, SCENES, SceneConfig, scene_config
-from piga.cli.common import (H5_SUFFIXES, ArgumentParser, PigaError, add_preset_option, command_line, format_default,
-                             given_options, h5_path, positive_float, positive_int, run_cli, seed_int,
+from piga.cli.common import (H5_SUFFIXES, ArgumentParser, PigaError, add_preset_option, any_float, command_line,
+                             format_default, given_options, h5_path, positive_float, positive_int, run_cli, seed_int,
                              split_type)
 from piga.data.collect import PAPER_MAX_SPEED, PRESETS, CollectConfig, collect
 from piga.data.collect_scenes import SCENE_PRESETS, SCENE_STEPS, collect_scene
@@ -132,10 +132,10 @@ def build_parser() -> ArgumentParser:
     p.add_argument("--actuation-gain", type=positive_float, default=env.actuation_gain,
                    help=f"applied torque = gain x u, gain in [{MIN_ACTUATION_GAIN:g}, {MAX_ACTUATION_GAIN:g}] "
                    "(default %(default)s)")
-    add_preset_option(p, "--max-speed", type=float, default=env.max_speed,
+    add_preset_option(p, "--max-speed", type=any_float, default=env.max_speed,
                       shown=f"{env.max_speed:g}, Gymnasium's; the paper preset uses {PAPER_MAX_SPEED:g}",
                       help="reset draws theta_dot ~ U(-s, s), s in [0, 8]")
-    p.add_argument("--max-angle", type=float, default=env.max_angle,
+    p.add_argument("--max-angle", type=any_float, default=env.max_angle,
                    help="reset draws theta ~ U(-a, a), a in [0, pi] (default %(default).4g, i.e. pi)")
     add_preset_option(p, "--image-size", type=positive_int, default=env.image_size,
                       shown=f"{env.image_size}; a scene's own: {', '.join(f'{k} {v}' for k, v in _scene_sizes().items())}",

@@ -262,6 +262,7 @@ def number_type(convert: Callable[[str], float], ok: Callable[[float], bool], wh
             value = convert(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
+        value = value + 0  # -0.0 is 0.0: a range of -0 to 0 was "high - low < 0" in numpy
         if not ok(value):
             raise argparse.ArgumentTypeError(f"expected {what}, got {text}")
         return value
@@ -288,6 +289,8 @@ def int_at_least(limit: int, why: str) -> Callable[[str], Any]:
 
 positive_float = number_type(float, lambda v: 0 < v < float("inf"), "a finite number > 0")
 """argparse type: a finite number > 0 (NaN is rejected too)."""
+any_float = number_type(float, lambda v: True, "a number")
+"""argparse type: any float, -0 read as 0 (a range the config checks, with its own words)."""
 nonnegative_float = number_type(float, lambda v: 0 <= v < float("inf"), "a finite number >= 0")
 """argparse type: a finite number >= 0 (NaN is rejected too)."""
 unit_fraction = number_type(float, lambda v: 0 <= v < 1, "a number in [0, 1)")

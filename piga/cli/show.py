@@ -8,7 +8,8 @@ import h5py
 import numpy as np
 
 from piga.cli.common import ArgumentParser, file_path, given_options, positive_int, run_cli
-from piga.data.schema import SPLITS, check_actions_file, check_frames_have_signal, inspect_dataset, split_indices
+from piga.data.schema import (SPLITS, check_actions_file, check_frames_have_signal, inspect_dataset, read_rows,
+                              split_indices)
 from piga.evaluation.plots import check_figure_target, frame_strip, save_figure
 
 PROG = "piga-show"
@@ -50,8 +51,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     idx = available[: args.sequences]
     t = min(args.frames, info.steps)
     with h5py.File(args.data, "r") as f:
-        frames = np.stack([f["frames"][int(i), :t] for i in idx])
-        actions = np.stack([f["actions"][int(i), :t] for i in idx])
+        with read_rows(f["frames"], "the strip's sequences"):
+            frames = np.stack([f["frames"][int(i), :t] for i in idx])
+        with read_rows(f["actions"], "the strip's sequences"):
+            actions = np.stack([f["actions"][int(i), :t] for i in idx])
     labels = [f"seq {i}" for i in idx]
     cols = [f"t={k}" for k in range(t)]
     title = f"{info.path.name}: {info.system}, dt={info.dt:g}, params {info.params}"

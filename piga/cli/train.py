@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import shutil
 import sys
 from collections.abc import Sequence
@@ -196,6 +197,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         if not same_data:
             raise PigaError(f"--resume continues on the file the run trained on ({data['path']}), not {args.data}; "
                             "train a new run (without --resume) to learn from another file")
+        if "dt" in data and not math.isclose(float(data["dt"]), info.dt, rel_tol=1e-9):  # an attribute, outside the fingerprint
+            raise PigaError(f"--resume: {args.data} now says its frames are {info.dt:g} s apart; the run trained on them "
+                            f"as {float(data['dt']):g} s apart (its physics steps that long): restore the file's 'dt', or "
+                            "train a new run (without --resume)")
         saved = TrainConfig.from_dict(ckpt["train_config"])
         changed = (sorted(set(overrides) - {"epochs", "budget_steps", "max_minutes"}) + (["signed_actuation"] if args.signed_actuation else [])
                    + (["fixed_g"] if args.fixed_g is not None else []) + (["preset"] if args.preset != "fast" else [])

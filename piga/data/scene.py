@@ -65,7 +65,17 @@ def read_image(path: str | os.PathLike[str]) -> np.ndarray:
     try:
         return np.asarray(iio.imread(p))
     except Exception as exc:  # imageio raises many types for foreign or corrupt files
+        if exc.__class__.__name__ == "DecompressionBombError":  # Pillow's guard against huge images
+            raise ValueError(f"{p}: the image is too large to read (more than Pillow's limit of "
+                             f"{_pillow_limit()} pixels, twice its warning); give a smaller picture") from None
         raise ValueError(f"{p}: not a readable image ({exc.__class__.__name__})") from None
+
+
+def _pillow_limit() -> str:
+    """Pillow's error limit on pixels per image, for the message: twice ``Image.MAX_IMAGE_PIXELS``."""
+    from PIL import Image
+
+    return f"{2 * Image.MAX_IMAGE_PIXELS:,}" if Image.MAX_IMAGE_PIXELS else "no"
 
 
 def load_scene_image(path: str | os.PathLike[str], size: int) -> np.ndarray:

@@ -27,6 +27,8 @@ import json
 import math
 import os
 import typing
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import TracebackType
@@ -101,7 +103,9 @@ def check_actions(actions: np.ndarray, path: str | os.PathLike[str]) -> None:
 def check_actions_file(path: str | os.PathLike[str]) -> None:
     """:func:`check_actions` on a whole file's ``/actions`` (float32 [N, T, A], small next to the frames)."""
     with _open(path) as f:
-        check_actions(np.asarray(f["actions"][()]), path)
+        with read_rows(f["actions"], "every sequence"):
+            actions = np.asarray(f["actions"][()])
+        check_actions(actions, path)
 
 
 @dataclass(frozen=True)
@@ -132,6 +136,11 @@ class DatasetInfo:
     """All file attributes (JSON strings parsed)."""
     has_rewards: bool = False
     """Whether ``/rewards`` exists (reward-based baselines only)."""
+
+    @property
+    def channels(self) -> int:
+        """Colour channels of a frame: (H, W) and (H, W, 1) are gray, (H, W, 3) colour."""
+        return self.image_shape[2] if len(self.image_shape) == 3 else 1
 
     @property
     def sequence_bytes(self) -> int:
@@ -214,9 +223,10 @@ def _validate(f: h5py.File, path: Path) -> DatasetInfo:
     if not isinstance(params, dict):
         raise DataFormatError(f"{path}: attribute 'params' must be a JSON object, got {params!r}")
     for name, value in params.items():
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not _finite_float(value):
+            shown = f"{value!r}" if len(repr(value)) <= 40 else f"{repr(value)[:37]}..."  # JSON integers are unbounded
             raise DataFormatError(f"{path}: attribute 'params' must give each parameter as a finite number, got "
-                                  f"{name}={value!r}")
+                                  f"{name}={shown}")
     return DatasetInfo(
         path=path,
         n_sequences=n,
@@ -292,7 +302,8 @@ def _check_attrs_agree(info: DatasetInfo, f: h5py.File) -> None:
             raise DataFormatError(f"{path}: attribute 'n_objects' is {attrs['n_objects']}, but 'state_names' names "
                                   f"{len(names)} values ({STATE_DIM_PER_OBJECT} per object); fix the attribute")
     if info.has_states:
-        states = f["states"][()].astype(np.float64)  # read as float32: beyond its range is as useless as inf
+        with read_rows(f["states"], "every sequence"):
+            states = f["states"][()].astype(np.float64)  # read as float32: beyond its range is as useless as inf
         bad = ~np.isfinite(states) | (np.abs(np.nan_to_num(states)) > np.finfo(np.float32).max)
         if bad.any():
             n, t, k = (int(i) for i in np.argwhere(bad)[0])
@@ -332,7 +343,8 @@ def _still_error(path: str | os.PathLike[str]) -> DataFormatError:
 def _check_frames_signal(frames: h5py.Dataset, path: str | os.PathLike[str], motion: bool) -> None:
     signal, moves = False, not motion
     for start in range(len(frames)):  # one sequence (one chunk) at a time: a good file stops at the first
-        sequence = frames[start : start + 1]  # (1, T, H, W[, C])
+        with read_rows(frames, f"sequence {start}"):
+            sequence = frames[start : start + 1]  # (1, T, H, W[, C])
         signal = signal or frames_have_signal(sequence)
         moves = moves or frames_move(sequence)
         if signal and moves:
@@ -382,10 +394,20 @@ def fingerprint(path: str | os.PathLike[str]) -> str:
 
     digest = hashlib.sha256()
     with _open(path) as f:
-        for array in (f["actions"][()], f["split"][()], f["frames"][0]):
+        with read_rows(f["frames"], "sequence 0"):
+            first = f["frames"][0]
+        for array in (f["actions"][()], f["split"][()], first):
             digest.update(str((array.dtype.str, array.shape)).encode())
             digest.update(np.ascontiguousarray(array).tobytes())
     return digest.hexdigest()[:16]
+
+
+def _finite_float(value: int | float) -> bool:
+    """Whether ``value`` is a finite float64: a JSON integer beyond it (10**400) overflows instead of being inf."""
+    try:
+        return math.isfinite(float(value))
+    except OverflowError:
+        return False
 
 
 def split_indices(path: str | os.PathLike[str], split: str) -> np.ndarray:
@@ -459,12 +481,30 @@ def load_rewards(path: str | os.PathLike[str], split: str, limit: int | None = N
 
 
 def _take(ds: h5py.Dataset, idx: np.ndarray) -> np.ndarray:
-    """Rows ``idx`` of ``ds``; one contiguous read when the rows are a range (none: an empty array)."""
+    """Rows ``idx`` of ``ds``; one contiguous read when the rows are a range (none: an empty array).
+
+    Raises:
+        DataFormatError: a row cannot be read (:func:`read_rows`)."""
     if not len(idx):
         return np.empty((0, *ds.shape[1:]), ds.dtype)
-    if len(idx) and idx[-1] - idx[0] + 1 == len(idx):
-        return ds[int(idx[0]) : int(idx[-1]) + 1]
-    return ds[()][idx] if len(idx) > len(ds) // 4 else np.stack([ds[int(i)] for i in idx])
+    with read_rows(ds, f"sequences {int(idx[0])} to {int(idx[-1])}"):
+        if len(idx) and idx[-1] - idx[0] + 1 == len(idx):
+            return ds[int(idx[0]) : int(idx[-1]) + 1]
+        return ds[()][idx] if len(idx) > len(ds) // 4 else np.stack([ds[int(i)] for i in idx])
+
+
+@contextmanager
+def read_rows(ds: h5py.Dataset, which: str) -> Iterator[None]:
+    """Names the file, the dataset and ``which`` rows when HDF5 cannot read them: a damaged chunk fails its
+    decompression filter with an OSError that names neither.
+
+    Raises:
+        DataFormatError: in place of that OSError."""
+    try:
+        yield
+    except OSError as exc:
+        raise DataFormatError(f"{ds.file.filename}: {ds.name} of {which} cannot be read ({' '.join(str(exc).split())}): "
+                              "the file is damaged; collect, import or copy it again") from None
 
 
 class DatasetWriter:

@@ -16,7 +16,7 @@ import torch
 from torch.utils.data import Dataset, Sampler
 
 from piga.data.schema import (IN_MEMORY_LIMIT_BYTES, DataFormatError, check_frames_have_signal, inspect_dataset, load_actions,
-                              read_sequences,
+                              read_rows, read_sequences,
                        split_indices)
 
 #: The streaming reader's cache of whole sequences of frames, in bytes.
@@ -72,7 +72,9 @@ class SequenceReader:
     def _read(self, position: int) -> np.ndarray:
         if self._file is None:
             self._file = h5py.File(self.path, "r")
-        return self._file["frames"][int(self.sequences[position])]
+        index = int(self.sequences[position])
+        with read_rows(self._file["frames"], f"sequence {index}"):
+            return self._file["frames"][index]
 
     def __getstate__(self) -> dict[str, Any]:
         state = self.__dict__.copy()

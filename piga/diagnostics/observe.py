@@ -110,7 +110,7 @@ def check_compatible(model: PhysicsModel, path: str | os.PathLike[str], min_sequ
         raise DiagnosisInputError(f"the model is a {cfg.system} model; piga-diagnose handles the pendulum")
     if info.system != cfg.system:
         raise DiagnosisInputError(f"{path}: data of system {info.system!r}, but the model is a {cfg.system} model")
-    if info.image_shape[:2] != (cfg.image_size, cfg.image_size) or (len(info.image_shape) == 3) != (cfg.channels == 3):
+    if info.image_shape[:2] != (cfg.image_size, cfg.image_size) or info.channels != cfg.channels:
         raise DiagnosisInputError(f"{path}: frames are {info.image_shape}, the model takes {cfg.image_size}x{cfg.image_size} "
                                   f"with {cfg.channels} channel(s)")
     if info.action_dim != 1:

@@ -414,7 +414,7 @@ def model_config_for(info: DatasetInfo, model: ModelConfig | None = None, n_obje
     if shape[0] < MIN_IMAGE_SIZE:
         raise ValueError(f"{info.path}: frames of {shape[0]}x{shape[1]} px are too small to learn from; "
                          f"at least {MIN_IMAGE_SIZE}x{MIN_IMAGE_SIZE}")
-    channels = shape[2] if len(shape) == 3 else 1
+    channels = info.channels
     if n_objects is None:
         n_objects = int(info.attrs.get("n_objects", SYSTEM_SHAPES[info.system][0]))
     model = model or ModelConfig()
