@@ -114,10 +114,17 @@ def _labelled_dmc(f: h5py.File) -> None:
     f.attrs["env_id"] = "piga/DMCPendulum-v0"
 
 
+def _env_renders_32(f: h5py.File) -> None:
+    """``env_config`` says 32 px frames beside the file's 64 px ones."""
+    config = json.loads(f.attrs["env_config"])
+    f.attrs["env_config"] = json.dumps({**config, "image_size": 32})
+
+
 VARIANTS: dict[str, Callable[[h5py.File], None]] = {
     "blank": _blank, "nan_state": _nan_state, "nan_reward": _nan_reward, "colour": _colour, "channel_axis": _channel_axis,
     "two_actions": _two_actions, "no_actions": _no_actions, "unknown_env_field": _unknown_env_field,
     "labelled_spring": _labelled_spring, "still": _still, "text_env_field": _text_env_field, "labelled_dmc": _labelled_dmc,
+    "env_renders_32": _env_renders_32,
 }
 
 
@@ -480,6 +487,10 @@ def test_a_true_parameter_of_zero_is_scored_infinitely_off() -> None:
     ("still", (), ["nothing moves", "no motion to learn from"]),  # it trained and exited 0
     ("text_env_field", ("--iterative", "1", "--episode-steps", "16"),
      ["'env_config' is not a valid PixelPendulumConfig", "gravity must be a number, got 'ten'"]),  # "can't multiply sequence"
+    # it trained, then the planner's episodes of 32 px frames failed in a convolution (exit 70), leaving the run behind
+    ("env_renders_32", ("--iterative", "1", "--episode-steps", "16"),
+     ["env_renders_32.h5: attribute 'env_config' says the env renders 32x32 gray frames", "the file's frames are 64x64 gray",
+      "set env_config's image_size to 64"]),
 ])
 def test_planet_refuses_before_touching_out(data: str, argv: tuple[str, ...], needles: list[str], files: dict[str, Path],
                                             tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -569,6 +580,7 @@ def test_ddpg_that_diverges_stops_with_exit_1(tmp_path: Path, capsys: pytest.Cap
     # the autoencoder learnt MuJoCo's frames, then DDPG ran on the pixel pendulum's (exit 0)
     ("labelled_dmc", ["--obs latent learns its codes from the file's frames", "acts on piga/PixelPendulum-v0",
                       "this file is pendulum from piga/DMCPendulum-v0"]),
+    ("env_renders_32", ["attribute 'env_config' says the env renders 32x32 gray frames", "the file's frames are 64x64 gray"]),
 ])
 def test_ddpg_latent_refuses_unusable_frames(data: str, needles: list[str], files: dict[str, Path], tmp_path: Path,
                                              capsys: pytest.CaptureFixture[str]) -> None:
