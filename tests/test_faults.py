@@ -120,11 +120,15 @@ def _env_renders_32(f: h5py.File) -> None:
     f.attrs["env_config"] = json.dumps({**config, "image_size": 32})
 
 
+def _cropped_63(f: h5py.File) -> None:
+    _replace(f, "frames", f["frames"][()][:, :, :63, :63])
+
+
 VARIANTS: dict[str, Callable[[h5py.File], None]] = {
     "blank": _blank, "nan_state": _nan_state, "nan_reward": _nan_reward, "colour": _colour, "channel_axis": _channel_axis,
     "two_actions": _two_actions, "no_actions": _no_actions, "unknown_env_field": _unknown_env_field,
     "labelled_spring": _labelled_spring, "still": _still, "text_env_field": _text_env_field, "labelled_dmc": _labelled_dmc,
-    "env_renders_32": _env_renders_32,
+    "env_renders_32": _env_renders_32, "cropped_63": _cropped_63,
 }
 
 
@@ -1653,3 +1657,30 @@ def test_control_on_a_state_run_says_nothing_of_the_torque_arrow(baseline_runs: 
     # and --torque-arrow, which shows the arrow only in frames it never sees, is refused (unless a --video shows them)
     refused("piga-control", ["--model", str(run), "--episodes", "1", "--steps", "20", "--torque-arrow", "--quiet"], capsys,
             "acts on the state (--obs state) and sees none, and no --video is written: drop --torque-arrow")
+
+
+@pytest.fixture(scope="module")
+def foreign_frame_runs(files: dict[str, Path], tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """One-epoch piga runs on frames the pixel pendulum does not render: 63x63 gray ("cropped_63"), 64x64 colour ("colour")."""
+    from tests.helpers import train_tiny
+
+    root = tmp_path_factory.mktemp("foreign")
+    return {name: train_tiny(files[name], root / name) for name in ("cropped_63", "colour")}
+
+
+@pytest.mark.parametrize("run, needle", [("cropped_63", "takes 63x63 gray frames"), ("colour", "takes 64x64 3-channel frames")])
+@pytest.mark.parametrize("argv", [[], ["--goal-image", "GOAL"], ["--video", "OUT/v.mp4"], ["--sweep", "1:1:1", "--workers", "1"]])
+def test_control_refuses_a_model_of_frames_the_env_does_not_render(run: str, needle: str, argv: list[str],
+                                                                   foreign_frame_runs: dict[str, Path], tmp_path: Path,
+                                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    """A model trained on 63 px or colour frames failed on the env's 64 px gray ones (exit 70: "The size of tensor a
+    (64) must match ...", "frames must be (B, T, H, W) or (B, T, H, W, C=3)"), after the run's convergence warning."""
+    goal = tmp_path / "goal.png"
+    if "GOAL" in argv:
+        assert run_in_process("piga-control", control.main, "--write-goal-image", str(goal), "--angle", "10", capsys=capsys)[0] == 0
+    out = tmp_path / "out"
+    out.mkdir()
+    argv = [str(goal) if a == "GOAL" else str(out / "v.mp4") if a == "OUT/v.mp4" else a for a in argv]
+    refused("piga-control", ["--model", str(foreign_frame_runs[run]), "--episodes", "1", "--steps", "20", "--quiet", *argv],
+            capsys, needle, "Gymnasium's pixel pendulum renders 64x64 gray ones")
+    assert _listing(out) == []

@@ -372,14 +372,21 @@ def _baseline(args: argparse.Namespace, kind: RunKind, mpc: MPCConfig, outputs: 
 
 
 def check_pendulum_model(model: PhysicsModel, run_dir: str) -> None:
-    """Refuses a model that cannot plan for Gymnasium's pixel pendulum: another system's, or one trained on frames
+    """Refuses a model that cannot plan for Gymnasium's pixel pendulum: another system's, one trained on frames
+    of another size or colour than the env renders (its encoder would not read them), or one trained on frames
     of another rate (an imported recording): its physics would step another dt than the env's each frame."""
     from envs.constants import PENDULUM_DT
 
-    if model.config.system != "pendulum":
-        raise PigaError(f"{run_dir}: a {model.config.system} model cannot control the pendulum")
-    if abs(model.config.dt - PENDULUM_DT) > 1e-9:
-        raise PigaError(f"{run_dir}: the model was trained on frames {model.config.dt:g} s apart, Gymnasium's pixel "
+    config = model.config
+    if config.system != "pendulum":
+        raise PigaError(f"{run_dir}: a {config.system} model cannot control the pendulum")
+    size = EpisodeConfig().env_config().image_size  # the env the episodes run in renders gray frames of this side
+    if config.image_size != size or config.channels != 1:
+        frames = f"{config.image_size}x{config.image_size} " + ("gray" if config.channels == 1 else f"{config.channels}-channel")
+        raise PigaError(f"{run_dir}: the model takes {frames} frames, Gymnasium's pixel pendulum renders {size}x{size} "
+                        "gray ones; train it on frames the env renders (piga-collect)")
+    if abs(config.dt - PENDULUM_DT) > 1e-9:
+        raise PigaError(f"{run_dir}: the model was trained on frames {config.dt:g} s apart, Gymnasium's pixel "
                         f"pendulum steps {PENDULUM_DT:g} s; it can control only a system filmed at its own rate")
 
 
