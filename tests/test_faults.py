@@ -1684,3 +1684,46 @@ def test_control_refuses_a_model_of_frames_the_env_does_not_render(run: str, nee
     refused("piga-control", ["--model", str(foreign_frame_runs[run]), "--episodes", "1", "--steps", "20", "--quiet", *argv],
             capsys, needle, "Gymnasium's pixel pendulum renders 64x64 gray ones")
     assert _listing(out) == []
+
+
+def _latent(ae: Callable[[Path], None], data: Path) -> Callable[[Path], None]:
+    """An edit that turns a copy of the state DDPG run into a latent one of ``data`` (its record and checkpoint say so),
+    then makes its autoencoder with ``ae``."""
+    def edit(run: Path) -> None:
+        import torch
+
+        _edit_record(lambda r: r.update(data=str(data), ddpg={**r["ddpg"], "obs": "latent"}))(run)
+        checkpoint = torch.load(run / "checkpoint.pt", weights_only=False)
+        checkpoint["config"]["obs"] = "latent"
+        torch.save(checkpoint, run / "checkpoint.pt")
+        ae(run / "autoencoder.pt")
+
+    return edit
+
+
+def _truncated_torch_file(path: Path) -> None:
+    import torch
+
+    torch.save({"model": {"w": torch.zeros(1000)}, "config": {}}, path)
+    with open(path, "r+b") as f:
+        f.truncate(1000)
+
+
+@pytest.mark.parametrize("ae, needles", [
+    (_truncated_torch_file, ["autoencoder.pt: not a readable autoencoder of a latent DDPG run", "PytorchStreamReader",
+                             "may be truncated", "--overwrite"]),
+    (lambda path: None, ["autoencoder.pt is missing", "restore it, or train the run again with --overwrite"]),
+])
+@pytest.mark.parametrize("prog", ["piga-baseline", "piga-control"])
+def test_a_latent_ddpg_run_with_a_damaged_autoencoder_is_named(ae: Callable[[Path], None], needles: list[str], prog: str,
+                                                               baseline_runs: dict[str, Path], tiny_data: Path,
+                                                               tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A truncated autoencoder.pt was an internal error ("PytorchStreamReader failed reading zip archive"), a missing
+    one (in piga-control) a bare "[Errno 2] No such file or directory"."""
+    run = _run_copy(baseline_runs["ddpg"], tmp_path / "run", _latent(ae, tiny_data))
+    before = _listing(run)
+    argv = (["ddpg", "--obs", "latent", "--data", str(tiny_data), "--out", str(run), "--resume", "--steps", "400", "--quiet"]
+            if prog == "piga-baseline" else ["--model", str(run), "--episodes", "1", "--steps", "20", "--quiet"])
+    line = refused(prog, argv, capsys, str(run / "autoencoder.pt"), *needles)
+    assert "Errno" not in line
+    assert _listing(run) == before
