@@ -1727,3 +1727,14 @@ def test_a_latent_ddpg_run_with_a_damaged_autoencoder_is_named(ae: Callable[[Pat
     line = refused(prog, argv, capsys, str(run / "autoencoder.pt"), *needles)
     assert "Errno" not in line
     assert _listing(run) == before
+
+
+@pytest.mark.parametrize("kind", ["planet", "ddpg"])
+def test_control_on_a_baseline_run_without_its_record_names_the_record(kind: str, baseline_runs: dict[str, Path],
+                                                                       tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Without config.json, control took the run for a piga one and said that its checkpoint "is a piga-baseline planet
+    checkpoint, not a piga-train-model run", although it runs planet and ddpg runs."""
+    run = _run_copy(baseline_runs[kind], tmp_path / "run", lambda r: (r / "config.json").unlink())
+    refused("piga-control", ["--model", str(run), "--episodes", "1", "--steps", "20", "--quiet"], capsys,
+            f"{run / 'config.json'}, the run's record, is missing", f"piga-baseline {kind} checkpoint",
+            "read a run's kind from its config.json")

@@ -117,7 +117,8 @@ def read_checkpoint(run_dir: str | os.PathLike[str], kind: RunKind) -> dict[str,
     Raises:
         FileNotFoundError: no checkpoint, asking whether ``run_dir`` is a ``kind`` run folder.
         ValueError: a truncated or foreign file (naming the file and the cause), or another kind's
-            checkpoint (naming the kind found).
+            checkpoint (naming the kind found; for a baseline's without its ``config.json``, the missing record,
+            which :func:`run_kind` reads the kind from).
     """
     import torch
 
@@ -132,7 +133,13 @@ def read_checkpoint(run_dir: str | os.PathLike[str], kind: RunKind) -> dict[str,
         raise ValueError(f"{path}: not a readable {kind.label} checkpoint (it holds a {type(payload).__name__})")
     found = payload.get("kind", RunKind.PIGA.value)
     if found != kind.value:
-        raise ValueError(f"{path} is a {RunKind.parse(str(found), str(path)).writer} checkpoint, not a {kind.writer} run")
+        writer = RunKind.parse(str(found), str(path)).writer
+        record = Path(run_dir) / "config.json"
+        if found != RunKind.PIGA.value and not record.exists():  # a baseline's run is known by its record's kind
+            raise ValueError(f"{record}, the run's record, is missing: {path} is a {writer} checkpoint, and commands "
+                             f"read a run's kind from its config.json; restore the file, or train the run again with "
+                             "--overwrite")
+        raise ValueError(f"{path} is a {writer} checkpoint, not a {kind.writer} run")
     return payload
 
 
