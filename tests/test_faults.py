@@ -1738,3 +1738,16 @@ def test_control_on_a_baseline_run_without_its_record_names_the_record(kind: str
     refused("piga-control", ["--model", str(run), "--episodes", "1", "--steps", "20", "--quiet"], capsys,
             f"{run / 'config.json'}, the run's record, is missing", f"piga-baseline {kind} checkpoint",
             "read a run's kind from its config.json")
+
+
+def test_control_sweep_refuses_an_unreachable_ray_before_warning(tiny_piga_run: Path, tmp_path: Path,
+                                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    """The run's not-converged warning came first, so a refused --ray printed two lines."""
+    def unconverged(run: Path) -> None:
+        metrics = json.loads((run / "metrics.json").read_text()) if (run / "metrics.json").exists() else {}
+        (run / "metrics.json").write_text(json.dumps({**metrics, "converged": False, "convergence": {"reason": "too short"}}))
+
+    run = _run_copy(tiny_piga_run, tmp_path / "run", unconverged)
+    line = refused("piga-control", ["--model", str(run), "--sweep", "1:1:1", "--ray", "nohost:1", "--episodes", "1",
+                                    "--quiet"], capsys, "--ray nohost:1")
+    assert "converge" not in line
