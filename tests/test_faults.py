@@ -114,10 +114,21 @@ def _labelled_dmc(f: h5py.File) -> None:
     f.attrs["env_id"] = "piga/DMCPendulum-v0"
 
 
+def _env_renders_32(f: h5py.File) -> None:
+    """``env_config`` says 32 px frames beside the file's 64 px ones."""
+    config = json.loads(f.attrs["env_config"])
+    f.attrs["env_config"] = json.dumps({**config, "image_size": 32})
+
+
+def _cropped_63(f: h5py.File) -> None:
+    _replace(f, "frames", f["frames"][()][:, :, :63, :63])
+
+
 VARIANTS: dict[str, Callable[[h5py.File], None]] = {
     "blank": _blank, "nan_state": _nan_state, "nan_reward": _nan_reward, "colour": _colour, "channel_axis": _channel_axis,
     "two_actions": _two_actions, "no_actions": _no_actions, "unknown_env_field": _unknown_env_field,
     "labelled_spring": _labelled_spring, "still": _still, "text_env_field": _text_env_field, "labelled_dmc": _labelled_dmc,
+    "env_renders_32": _env_renders_32, "cropped_63": _cropped_63,
 }
 
 
@@ -483,6 +494,10 @@ def test_a_true_parameter_of_zero_is_scored_infinitely_off() -> None:
     ("still", (), ["nothing moves", "no motion to learn from"]),  # it trained and exited 0
     ("text_env_field", ("--iterative", "1", "--episode-steps", "16"),
      ["'env_config' is not a valid PixelPendulumConfig", "gravity must be a number, got 'ten'"]),  # "can't multiply sequence"
+    # it trained, then the planner's episodes of 32 px frames failed in a convolution (exit 70), leaving the run behind
+    ("env_renders_32", ("--iterative", "1", "--episode-steps", "16"),
+     ["env_renders_32.h5: attribute 'env_config' says the env renders 32x32 gray frames", "the file's frames are 64x64 gray",
+      "set env_config's image_size to 64"]),
 ])
 def test_planet_refuses_before_touching_out(data: str, argv: tuple[str, ...], needles: list[str], files: dict[str, Path],
                                             tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -580,6 +595,7 @@ def test_ddpg_that_diverges_stops_with_exit_1(tmp_path: Path, capsys: pytest.Cap
     # the autoencoder learnt MuJoCo's frames, then DDPG ran on the pixel pendulum's (exit 0)
     ("labelled_dmc", ["--obs latent learns its codes from the file's frames", "acts on piga/PixelPendulum-v0",
                       "this file is pendulum from piga/DMCPendulum-v0"]),
+    ("env_renders_32", ["attribute 'env_config' says the env renders 32x32 gray frames", "the file's frames are 64x64 gray"]),
 ])
 def test_ddpg_latent_refuses_unusable_frames(data: str, needles: list[str], files: dict[str, Path], tmp_path: Path,
                                              capsys: pytest.CaptureFixture[str]) -> None:
@@ -1723,3 +1739,97 @@ def test_an_image_beyond_pillows_limit_is_called_too_large(tmp_path: Path, monke
     monkeypatch.setattr(Image, "MAX_IMAGE_PIXELS", 1000)  # a 64 x 64 picture is then beyond twice the limit
     with pytest.raises(ValueError, match=r"g.png: the image is too large to read \(more than Pillow's limit of 2,000 "):
         read_image(tmp_path / "g.png")
+
+
+@pytest.fixture(scope="module")
+def foreign_frame_runs(files: dict[str, Path], tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """One-epoch piga runs on frames the pixel pendulum does not render: 63x63 gray ("cropped_63"), 64x64 colour ("colour")."""
+    from tests.helpers import train_tiny
+
+    root = tmp_path_factory.mktemp("foreign")
+    return {name: train_tiny(files[name], root / name) for name in ("cropped_63", "colour")}
+
+
+@pytest.mark.parametrize("run, needle", [("cropped_63", "takes 63x63 gray frames"), ("colour", "takes 64x64 3-channel frames")])
+@pytest.mark.parametrize("argv", [[], ["--goal-image", "GOAL"], ["--video", "OUT/v.mp4"], ["--sweep", "1:1:1", "--workers", "1"]])
+def test_control_refuses_a_model_of_frames_the_env_does_not_render(run: str, needle: str, argv: list[str],
+                                                                   foreign_frame_runs: dict[str, Path], tmp_path: Path,
+                                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    """A model trained on 63 px or colour frames failed on the env's 64 px gray ones (exit 70: "The size of tensor a
+    (64) must match ...", "frames must be (B, T, H, W) or (B, T, H, W, C=3)"), after the run's convergence warning."""
+    goal = tmp_path / "goal.png"
+    if "GOAL" in argv:
+        assert run_in_process("piga-control", control.main, "--write-goal-image", str(goal), "--angle", "10", capsys=capsys)[0] == 0
+    out = tmp_path / "out"
+    out.mkdir()
+    argv = [str(goal) if a == "GOAL" else str(out / "v.mp4") if a == "OUT/v.mp4" else a for a in argv]
+    refused("piga-control", ["--model", str(foreign_frame_runs[run]), "--episodes", "1", "--steps", "20", "--quiet", *argv],
+            capsys, needle, "Gymnasium's pixel pendulum renders 64x64 gray ones")
+    assert _listing(out) == []
+
+
+def _latent(ae: Callable[[Path], None], data: Path) -> Callable[[Path], None]:
+    """An edit that turns a copy of the state DDPG run into a latent one of ``data`` (its record and checkpoint say so),
+    then makes its autoencoder with ``ae``."""
+    def edit(run: Path) -> None:
+        import torch
+
+        _edit_record(lambda r: r.update(data=str(data), ddpg={**r["ddpg"], "obs": "latent"}))(run)
+        checkpoint = torch.load(run / "checkpoint.pt", weights_only=False)
+        checkpoint["config"]["obs"] = "latent"
+        torch.save(checkpoint, run / "checkpoint.pt")
+        ae(run / "autoencoder.pt")
+
+    return edit
+
+
+def _truncated_torch_file(path: Path) -> None:
+    import torch
+
+    torch.save({"model": {"w": torch.zeros(1000)}, "config": {}}, path)
+    with open(path, "r+b") as f:
+        f.truncate(1000)
+
+
+@pytest.mark.parametrize("ae, needles", [
+    (_truncated_torch_file, ["autoencoder.pt: not a readable autoencoder of a latent DDPG run", "PytorchStreamReader",
+                             "may be truncated", "--overwrite"]),
+    (lambda path: None, ["autoencoder.pt is missing", "restore it, or train the run again with --overwrite"]),
+])
+@pytest.mark.parametrize("prog", ["piga-baseline", "piga-control"])
+def test_a_latent_ddpg_run_with_a_damaged_autoencoder_is_named(ae: Callable[[Path], None], needles: list[str], prog: str,
+                                                               baseline_runs: dict[str, Path], tiny_data: Path,
+                                                               tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A truncated autoencoder.pt was an internal error ("PytorchStreamReader failed reading zip archive"), a missing
+    one (in piga-control) a bare "[Errno 2] No such file or directory"."""
+    run = _run_copy(baseline_runs["ddpg"], tmp_path / "run", _latent(ae, tiny_data))
+    before = _listing(run)
+    argv = (["ddpg", "--obs", "latent", "--data", str(tiny_data), "--out", str(run), "--resume", "--steps", "400", "--quiet"]
+            if prog == "piga-baseline" else ["--model", str(run), "--episodes", "1", "--steps", "20", "--quiet"])
+    line = refused(prog, argv, capsys, str(run / "autoencoder.pt"), *needles)
+    assert "Errno" not in line
+    assert _listing(run) == before
+
+
+@pytest.mark.parametrize("kind", ["planet", "ddpg"])
+def test_control_on_a_baseline_run_without_its_record_names_the_record(kind: str, baseline_runs: dict[str, Path],
+                                                                       tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Without config.json, control took the run for a piga one and said that its checkpoint "is a piga-baseline planet
+    checkpoint, not a piga-train-model run", although it runs planet and ddpg runs."""
+    run = _run_copy(baseline_runs[kind], tmp_path / "run", lambda r: (r / "config.json").unlink())
+    refused("piga-control", ["--model", str(run), "--episodes", "1", "--steps", "20", "--quiet"], capsys,
+            f"{run / 'config.json'}, the run's record, is missing", f"piga-baseline {kind} checkpoint",
+            "read a run's kind from its config.json")
+
+
+def test_control_sweep_refuses_an_unreachable_ray_before_warning(tiny_piga_run: Path, tmp_path: Path,
+                                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    """The run's not-converged warning came first, so a refused --ray printed two lines."""
+    def unconverged(run: Path) -> None:
+        metrics = json.loads((run / "metrics.json").read_text()) if (run / "metrics.json").exists() else {}
+        (run / "metrics.json").write_text(json.dumps({**metrics, "converged": False, "convergence": {"reason": "too short"}}))
+
+    run = _run_copy(tiny_piga_run, tmp_path / "run", unconverged)
+    line = refused("piga-control", ["--model", str(run), "--sweep", "1:1:1", "--ray", "nohost:1", "--episodes", "1",
+                                    "--quiet"], capsys, "--ray nohost:1")
+    assert "converge" not in line

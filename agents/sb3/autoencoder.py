@@ -232,10 +232,30 @@ def autoencoder_seconds(path: str | Path) -> float | None:
 
 
 def load_autoencoder(path: str | Path) -> FrameAutoencoder:
-    """The autoencoder written by :func:`train_autoencoder` (eval mode)."""
-    payload: dict[str, Any] = torch.load(path, map_location="cpu", weights_only=False)
-    if "code_std" not in payload["model"]:
+    """The autoencoder written by :func:`train_autoencoder` (eval mode).
+
+    Raises:
+        FileNotFoundError: no file at ``path`` (naming it, and what to do).
+        ValueError: a truncated or foreign file (naming it and the cause), or one of the old layout.
+    """
+    from piga.io.checkpoint import RunKind, unreadable
+
+    path = Path(path)
+    what = "autoencoder of a latent DDPG run"
+    if not path.is_file():
+        raise FileNotFoundError(f"{path} is missing: a latent DDPG run encodes its frames with the autoencoder it was "
+                                "trained with; restore it, or train the run again with --overwrite")
+    try:
+        payload: dict[str, Any] = torch.load(path, map_location="cpu", weights_only=False)
+        state, config = payload["model"], AutoencoderConfig(**payload["config"])
+        old = "code_std" not in state
+    except Exception as exc:  # a truncated or foreign file
+        raise unreadable(path, RunKind.DDPG, exc, what) from None
+    if old:
         raise ValueError(f"{path}: an autoencoder of the old, collapsing layout (tanh bottleneck); train it again")
-    model = FrameAutoencoder(AutoencoderConfig(**payload["config"]))
-    model.load_state_dict(payload["model"])
+    try:
+        model = FrameAutoencoder(config)
+        model.load_state_dict(state)
+    except Exception as exc:  # weights of other sizes than its config's
+        raise unreadable(path, RunKind.DDPG, exc, what) from None
     return model.eval()

@@ -475,8 +475,13 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
         if saved.algo != args.algo:
             raise PigaError(f"--resume: {run_dir} was trained with --algo {saved.algo}, not {args.algo}")
         _refuse_recipe_changes(args, record, run_dir, argv)
-        if saved.obs == "latent" and not (run_dir / AUTOENCODER).exists():
-            raise PigaError(f"--resume: {run_dir / AUTOENCODER} is missing; the latent run cannot be continued without it")
+        if saved.obs == "latent":  # missing or unreadable: one line before anything is written
+            from agents.sb3.autoencoder import load_autoencoder
+
+            try:
+                load_autoencoder(run_dir / AUTOENCODER)
+            except (FileNotFoundError, ValueError) as exc:
+                raise PigaError(f"--resume: {exc}") from None
         _refuse_fewer_steps(args.steps, saved.steps)
         config = replace(saved, steps=args.steps or saved.steps, threads=args.threads, device=args.device)
         record["ddpg"] = config.to_dict()

@@ -239,12 +239,14 @@ def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: 
     if kind is RunKind.PIGA:
         model, _ = load_model(args.model)  # fail early, in this process, on a bad folder
         check_pendulum_model(model, args.model)
+    backend = connect_backend(args.ray)  # before the warning: a refused --ray is the one line on stderr
+    if kind is RunKind.PIGA:
         warn_if_unconverged(PROG, args.model)
     jobs = [ControlJob(agent, EpisodeConfig(episodes=args.episodes, steps=args.steps, seed=args.seed, gravity_mult=m,
                                             goal_angle=mpc.goal_angle, torque_arrow=args.torque_arrow),
                        mpc, model_dir=args.model if agent != "oracle" else None, told=agent == "oracle" or not args.not_told)
             for m in multipliers for agent in (kind.value, "oracle")]
-    results = run_jobs(jobs, workers=args.workers, progress=not args.quiet, backend=connect_backend(args.ray))
+    results = run_jobs(jobs, workers=args.workers, progress=not args.quiet, backend=backend)
     summaries = [r.summary for r in results]
     table = summary_markdown(summaries)
     print(table, end="")
@@ -337,16 +339,18 @@ def _baseline(args: argparse.Namespace, kind: RunKind, mpc: MPCConfig, outputs: 
     if not sees_frames and args.torque_arrow and not args.video:
         raise PigaError(f"--torque-arrow shows the arrow in the frames; {args.model} acts on the state (--obs state) and "
                         "sees none, and no --video is written: drop --torque-arrow")
+    split = bool(args.ray) or args.workers > 1 and args.episodes > 1  # latent CEM takes ~0.5 s a step: use the cores
+    backend = connect_backend(args.ray) if split else None  # before the warning: a refused --ray is the one line
     if kind is RunKind.DDPG and sees_frames and trained_arrow is not None and trained_arrow != args.torque_arrow:
         print(f"{PROG}: warning: {args.model} was trained with the torque arrow {'shown' if trained_arrow else 'hidden'}; "
               f"these episodes {'show' if args.torque_arrow else 'hide'} it", file=sys.stderr)
     config = EpisodeConfig(episodes=args.episodes, steps=args.steps, seed=args.seed, gravity_mult=args.gravity_mult,
                            torque_arrow=args.torque_arrow, frame_stack=agent.input_frames)
-    if args.ray or args.workers > 1 and args.episodes > 1:  # latent CEM takes ~0.5 s a step: use the cores over episodes
+    if backend is not None:  # over episodes
         from piga.control.jobs import ControlJob, run_split
 
         result = run_split(ControlJob(kind.value, config, mpc, model_dir=args.model), args.workers, progress=not args.quiet,
-                           backend=connect_backend(args.ray))
+                           backend=backend)
     else:
         result = run_episodes(agent, config, progress=not args.quiet, record=1 if args.video else 0)
     s = result.summary
@@ -372,14 +376,21 @@ def _baseline(args: argparse.Namespace, kind: RunKind, mpc: MPCConfig, outputs: 
 
 
 def check_pendulum_model(model: PhysicsModel, run_dir: str) -> None:
-    """Refuses a model that cannot plan for Gymnasium's pixel pendulum: another system's, or one trained on frames
+    """Refuses a model that cannot plan for Gymnasium's pixel pendulum: another system's, one trained on frames
+    of another size or colour than the env renders (its encoder would not read them), or one trained on frames
     of another rate (an imported recording): its physics would step another dt than the env's each frame."""
     from envs.constants import PENDULUM_DT
 
-    if model.config.system != "pendulum":
-        raise PigaError(f"{run_dir}: a {model.config.system} model cannot control the pendulum")
-    if abs(model.config.dt - PENDULUM_DT) > 1e-9:
-        raise PigaError(f"{run_dir}: the model was trained on frames {model.config.dt:g} s apart, Gymnasium's pixel "
+    config = model.config
+    if config.system != "pendulum":
+        raise PigaError(f"{run_dir}: a {config.system} model cannot control the pendulum")
+    size = EpisodeConfig().env_config().image_size  # the env the episodes run in renders gray frames of this side
+    if config.image_size != size or config.channels != 1:
+        frames = f"{config.image_size}x{config.image_size} " + ("gray" if config.channels == 1 else f"{config.channels}-channel")
+        raise PigaError(f"{run_dir}: the model takes {frames} frames, Gymnasium's pixel pendulum renders {size}x{size} "
+                        "gray ones; train it on frames the env renders (piga-collect)")
+    if abs(config.dt - PENDULUM_DT) > 1e-9:
+        raise PigaError(f"{run_dir}: the model was trained on frames {config.dt:g} s apart, Gymnasium's pixel "
                         f"pendulum steps {PENDULUM_DT:g} s; it can control only a system filmed at its own rate")
 
 

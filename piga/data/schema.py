@@ -374,7 +374,8 @@ def check_pixel_pendulum_file(info: DatasetInfo, use: str) -> None:
     pictures it never sees.
 
     Raises:
-        DataFormatError: naming the file, ``use`` and the file's system and env.
+        DataFormatError: naming the file, ``use`` and the file's system and env; or frames of another size
+            than its ``env_config``'s ``image_size`` (or colour frames): the env would render others.
     """
     from envs import PIXEL_PENDULUM  # here: the schema is read without gymnasium's import
 
@@ -384,6 +385,16 @@ def check_pixel_pendulum_file(info: DatasetInfo, use: str) -> None:
     if "env_config" not in info.attrs:
         raise DataFormatError(f"{info.path}: {use}; this file is {info.system} without the 'env_config' that "
                               "piga-collect records (an imported recording?)")
+    config = info.attrs["env_config"]  # a JSON object (inspect_dataset checked it)
+    size = config.get("image_size") if isinstance(config, dict) else None
+    shape = info.image_shape
+    if isinstance(size, int) and not isinstance(size, bool) and shape not in ((size, size), (size, size, 1)):
+        gray = len(shape) == 2 or shape[2] == 1
+        frames = f"{shape[0]}x{shape[1]}" + (" gray" if gray else f" with {shape[2]} channels")
+        fix = (f"set env_config's image_size to {shape[0]}, or collect the file again" if gray and shape[0] == shape[1]
+               else "collect the file again with piga-collect")
+        raise DataFormatError(f"{info.path}: attribute 'env_config' says the env renders {size}x{size} gray frames "
+                              f"(image_size {size}), but the file's frames are {frames}; {use}: {fix}")
 
 
 def fingerprint(path: str | os.PathLike[str]) -> str:

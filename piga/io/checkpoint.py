@@ -117,7 +117,8 @@ def read_checkpoint(run_dir: str | os.PathLike[str], kind: RunKind) -> dict[str,
     Raises:
         FileNotFoundError: no checkpoint, asking whether ``run_dir`` is a ``kind`` run folder.
         ValueError: a truncated or foreign file (naming the file and the cause), or another kind's
-            checkpoint (naming the kind found).
+            checkpoint (naming the kind found; for a baseline's without its ``config.json``, the missing record,
+            which :func:`run_kind` reads the kind from).
     """
     import torch
 
@@ -132,15 +133,25 @@ def read_checkpoint(run_dir: str | os.PathLike[str], kind: RunKind) -> dict[str,
         raise ValueError(f"{path}: not a readable {kind.label} checkpoint (it holds a {type(payload).__name__})")
     found = payload.get("kind", RunKind.PIGA.value)
     if found != kind.value:
-        raise ValueError(f"{path} is a {RunKind.parse(str(found), str(path)).writer} checkpoint, not a {kind.writer} run")
+        writer = RunKind.parse(str(found), str(path)).writer
+        record = Path(run_dir) / "config.json"
+        if found != RunKind.PIGA.value and not record.exists():  # a baseline's run is known by its record's kind
+            raise ValueError(f"{record}, the run's record, is missing: {path} is a {writer} checkpoint, and commands "
+                             f"read a run's kind from its config.json; restore the file, or train the run again with "
+                             "--overwrite")
+        raise ValueError(f"{path} is a {writer} checkpoint, not a {kind.writer} run")
     return payload
 
 
-def unreadable(path: Path, kind: RunKind, exc: Exception) -> ValueError:
+def unreadable(path: Path, kind: RunKind, exc: Exception, what: str | None = None) -> ValueError:
     """The one-line error for a ``kind`` checkpoint that cannot be read: the file, and the first sentence of the cause
-    (for an entry it lacks, the entry: the file was written by something else, not cut short)."""
+    (for an entry it lacks, the entry: the file was written by something else, not cut short). ``what``: the file's
+    name in the message, for another file of the run (default: "<kind> checkpoint"; e.g. "autoencoder of a latent
+    DDPG run")."""
+    what = what or f"{kind.label} checkpoint"
     if isinstance(exc, KeyError) and exc.args:
-        return ValueError(f"{path}: not a {kind.label} checkpoint: it lacks the entry {exc.args[0]!r} that {kind.writer} "
-                          "writes; restore the run's own checkpoint, or train the run again with --overwrite")
-    return ValueError(f"{path}: not a readable {kind.label} checkpoint ({exc.__class__.__name__}: {_first_sentence(exc)}); "
+        article = "an" if what[:1].lower() in "aeiou" else "a"
+        return ValueError(f"{path}: not {article} {what}: it lacks the entry {exc.args[0]!r} that {kind.writer} "
+                          "writes; restore the run's own file, or train the run again with --overwrite")
+    return ValueError(f"{path}: not a readable {what} ({exc.__class__.__name__}: {_first_sentence(exc)}); "
                       "it may be truncated (a full disk, an interrupted copy): restore it, or train the run again with --overwrite")
