@@ -126,25 +126,24 @@ class DMCPendulumConfig:
                 raise ValueError(f"DMCPendulumConfig.{name}={value!r} is below the smallest normal number "
                                  f"({sys.float_info.min:g}), which MuJoCo's model reader refuses; give "
                                  + ("0 or " if name == "damping" else "") + "a larger value")
-        checks = {
-            "image_size": self.image_size >= 8,
-            "frame_stack": self.frame_stack >= 1,
-            "action_repeat": 1 <= self.action_repeat <= MAX_ACTION_REPEAT,
-            "episode_length": self.episode_length >= 0,
-            "mass": MIN_MASS <= self.mass < math.inf,
-            "length": 0 < self.length <= VIEW_HALF_SIDE - 2 * TIP_RADIUS,
-            "damping": 0 <= self.damping <= MAX_DAMPING,
-            "flip": self.flip in FLIPS,
-            "max_angle": 0 <= self.max_angle <= math.pi,
-            "max_speed": 0 <= self.max_speed <= MAX_SPEED,
-            "camera_distance": (self.length + 2 * TIP_RADIUS) / VIEW_HALF_SIDE <= self.camera_distance <= 3.0,
+        longest = VIEW_HALF_SIDE - 2 * TIP_RADIUS
+        checks = {  # each field: whether it is in range, and its range in words
+            "image_size": (self.image_size >= 8, "image_size >= 8"),
+            "frame_stack": (self.frame_stack >= 1, "frame_stack >= 1"),
+            "action_repeat": (1 <= self.action_repeat <= MAX_ACTION_REPEAT, f"action_repeat in [1, {MAX_ACTION_REPEAT}]"),
+            "episode_length": (self.episode_length >= 0, "episode_length >= 0"),
+            "mass": (MIN_MASS <= self.mass < math.inf, f"mass >= {MIN_MASS:g}, finite"),
+            "length": (0 < self.length <= longest, f"length in (0, {longest:g}]"),
+            "damping": (0 <= self.damping <= MAX_DAMPING, f"damping in [0, {MAX_DAMPING:g}]"),
+            "flip": (self.flip in FLIPS, f"flip in {FLIPS}"),
+            "max_angle": (0 <= self.max_angle <= math.pi, "max_angle in [0, pi]"),
+            "max_speed": (0 <= self.max_speed <= MAX_SPEED, f"max_speed in [0, {MAX_SPEED:.4g}]"),
+            "camera_distance": ((self.length + 2 * TIP_RADIUS) / VIEW_HALF_SIDE <= self.camera_distance <= 3.0,
+                                "camera_distance in [(length + 0.1) / 0.7, 3]"),
         }
-        for name, ok in checks.items():
+        for name, (ok, allowed) in checks.items():
             if not ok:
-                raise ValueError(
-                    f"DMCPendulumConfig.{name}={getattr(self, name)!r} is out of range (image_size >= 8, other sizes and counts >= 1, "
-                    f"action_repeat <= {MAX_ACTION_REPEAT}, mass >= {MIN_MASS:g}, length in (0, {VIEW_HALF_SIDE - 2 * TIP_RADIUS:g}], damping in [0, {MAX_DAMPING:g}], flip in {FLIPS}, "
-                    f"max_angle in [0, pi], max_speed in [0, {MAX_SPEED:.4g}], camera_distance in [(length + 0.1) / 0.7, 3])")
+                raise ValueError(f"DMCPendulumConfig.{name}={getattr(self, name)!r} is out of range ({allowed})")
 
     @property
     def dt(self) -> float:

@@ -135,23 +135,19 @@ class PixelPendulumConfig:
             if name == "shift" and abs(value) >= self.image_size:
                 raise ValueError(f"effect shift={value:g} px would move the pendulum out of a {self.image_size} px frame; "
                                  f"use |shift| < {self.image_size}")
-        checks = {
-            "image_size": self.image_size >= 8,
-            "frame_stack": self.frame_stack >= 1,
-            "gravity": self.gravity > 0 and math.isfinite(self.gravity),
-            "gravity_mult": self.gravity_mult > 0 and math.isfinite(self.gravity_mult),
-            "actuation_gain": self.actuation_gain > 0 and math.isfinite(self.actuation_gain),
-            "episode_length": self.episode_length >= 1,
-            "max_angle": 0 <= self.max_angle <= math.pi,
-            "max_speed": 0 <= self.max_speed <= PENDULUM_MAX_SPEED,
+        checks = {  # each field: whether it is in range, and its range in words
+            "image_size": (self.image_size >= 8, "image_size >= 8"),
+            "frame_stack": (self.frame_stack >= 1, "frame_stack >= 1"),
+            "gravity": (self.gravity > 0 and math.isfinite(self.gravity), "gravity > 0, finite"),
+            "gravity_mult": (self.gravity_mult > 0 and math.isfinite(self.gravity_mult), "gravity_mult > 0, finite"),
+            "actuation_gain": (self.actuation_gain > 0 and math.isfinite(self.actuation_gain), "actuation_gain > 0, finite"),
+            "episode_length": (self.episode_length >= 1, "episode_length >= 1"),
+            "max_angle": (0 <= self.max_angle <= math.pi, "max_angle in [0, pi]"),
+            "max_speed": (0 <= self.max_speed <= PENDULUM_MAX_SPEED, f"max_speed in [0, {PENDULUM_MAX_SPEED:g}]"),
         }
-        for name, ok in checks.items():
+        for name, (ok, allowed) in checks.items():
             if not ok:
-                raise ValueError(
-                    f"PixelPendulumConfig.{name}={getattr(self, name)!r} is out of range "
-                    "(image_size >= 8, other sizes and counts >= 1, gravity and gains > 0, max_angle in [0, pi], "
-                    f"max_speed in [0, {PENDULUM_MAX_SPEED:g}])"
-                )
+                raise ValueError(f"PixelPendulumConfig.{name}={getattr(self, name)!r} is out of range ({allowed})")
         if self.actuation_gain < MIN_ACTUATION_GAIN:
             raise ValueError(f"PixelPendulumConfig.actuation_gain={self.actuation_gain!r} is out of range: at least "
                              f"{MIN_ACTUATION_GAIN:g} ({_TOO_WEAK})")
