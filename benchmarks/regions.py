@@ -316,8 +316,9 @@ def markdown(record: dict[str, Any], out: Path) -> str:
               + "MSE is per pixel channel, frames in [0, 1]. Exit is `piga-train-model`'s status: 0 converged, 3 not "
               "converged, 1 its check failed (here: its object check found a blob the decoder does not draw, so "
               "it trained again from the start with the next seed, "
-              f"`--seed-retries {cfg.get('seed_retries', 1)}`, and failed again; the scores are the last run's). Train minutes are the last run's, job minutes the whole job's (retry and "
-              "scoring included), wall-clock with one torch thread, "
+              f"`--seed-retries {cfg.get('seed_retries', 1)}`, and failed again; the scores are the last run's). Train "
+              "minutes are the last run's, job minutes the whole job's (retry and scoring included), wall-clock with "
+              "one torch thread, "
               f"{cfg['jobs']} run(s) at once on the machine above (which may be shared).", "",
               f"![truth and each decoder's extrapolated frames]({out.name}-strip.png)", "",
               f"The strip: test sequence {record['strip'][0]}, extrapolation steps "

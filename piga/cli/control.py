@@ -379,8 +379,6 @@ def check_pendulum_model(model: PhysicsModel, run_dir: str) -> None:
     """Refuses a model that cannot plan for Gymnasium's pixel pendulum: another system's, one trained on frames
     of another size or colour than the env renders (its encoder would not read them), or one trained on frames
     of another rate (an imported recording): its physics would step another dt than the env's each frame."""
-    from envs.constants import PENDULUM_DT
-
     config = model.config
     if config.system != "pendulum":
         raise PigaError(f"{run_dir}: a {config.system} model cannot control the pendulum")
@@ -389,9 +387,7 @@ def check_pendulum_model(model: PhysicsModel, run_dir: str) -> None:
         frames = f"{config.image_size}x{config.image_size} " + ("gray" if config.channels == 1 else f"{config.channels}-channel")
         raise PigaError(f"{run_dir}: the model takes {frames} frames, Gymnasium's pixel pendulum renders {size}x{size} "
                         "gray ones; train it on frames the env renders (piga-collect)")
-    if abs(config.dt - PENDULUM_DT) > 1e-9:
-        raise PigaError(f"{run_dir}: the model was trained on frames {config.dt:g} s apart, Gymnasium's pixel "
-                        f"pendulum steps {PENDULUM_DT:g} s; it can control only a system filmed at its own rate")
+    _check_frame_rate(run_dir, config.dt)
 
 
 def check_planet_frames(run_dir: str) -> None:
@@ -399,7 +395,6 @@ def check_planet_frames(run_dir: str) -> None:
     (dm_control's: its checkpoint names the env of its data file; older runs name none), or another rate's (an
     imported recording, or dm_control's in an older run)."""
     from agents.planet.run import trained_frames
-    from envs.constants import PENDULUM_DT
 
     data = trained_frames(run_dir)
     env_id, dt = data.get("env_id"), data.get("dt")
@@ -408,7 +403,15 @@ def check_planet_frames(run_dir: str) -> None:
         raise PigaError(f"{run_dir}: the PlaNet-style model was trained on frames of {env_id}{rate} (from "
                         f"{data.get('path')}), not of Gymnasium's pixel pendulum ({PIXEL_PENDULUM}), which it would "
                         "control here; train it on a file of that env")
-    if isinstance(dt, (int, float)) and abs(dt - PENDULUM_DT) > 1e-9:
+    if isinstance(dt, (int, float)):
+        _check_frame_rate(run_dir, dt)
+
+
+def _check_frame_rate(run_dir: str, dt: float) -> None:
+    """Refuses a model trained on frames ``dt`` s apart where the pixel pendulum steps another dt."""
+    from envs.constants import PENDULUM_DT
+
+    if abs(dt - PENDULUM_DT) > 1e-9:
         raise PigaError(f"{run_dir}: the model was trained on frames {dt:g} s apart, Gymnasium's pixel pendulum steps "
                         f"{PENDULUM_DT:g} s; it can control only a system filmed at its own rate")
 

@@ -142,7 +142,7 @@ def build_parser() -> ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    written = given_options(parser, argv)  # the options written, at the default's value too
+    options_given = given_options(parser, argv)  # the options written, at the default's value too
     from piga.io.device import resolve_device
 
     device = resolve_device(args.device)  # --device cuda without a GPU: one line, before anything is read
@@ -204,15 +204,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         saved = TrainConfig.from_dict(ckpt["train_config"])
         changed = (sorted(set(overrides) - {"epochs", "budget_steps", "max_minutes"}) + (["signed_actuation"] if args.signed_actuation else [])
                    + (["fixed_g"] if args.fixed_g is not None else []) + (["preset"] if args.preset != "fast" else [])
-                   + (["seed"] if "seed" in written and args.seed != saved.seed else [])
-                   + (["seed_retries"] if "seed_retries" in written else [])
+                   + (["seed"] if "seed" in options_given and args.seed != saved.seed else [])
+                   + (["seed_retries"] if "seed_retries" in options_given else [])
                    + [name for name in ("data_loading", "stream_cache_mb")
                       if getattr(args, name) is not None and getattr(args, name) != getattr(saved, name)])
         if changed:
             raise PigaError(f"--resume keeps the run's recipe; drop {', '.join('--' + c.replace('_', '-') for c in changed)}")
         # the device and the threads are not the recipe's
         train_config = replace(saved, device=args.device, **overrides,
-                               **({"threads": args.threads} if "threads" in written else {}))
+                               **({"threads": args.threads} if "threads" in options_given else {}))
         model_config = saved_model.config
         record = _read_record(run_dir)
         record_resume(record, command)
@@ -240,8 +240,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                     model_config = model_config.with_options(**{option: value})
                 except ValueError as exc:
                     raise PigaError(f"{flag}: {args.data} holds {info.system} data: {exc}") from None
-        if "seed_retries" in written and (model_config.coord_dim != 2 or model_config.architecture == "video-lstm"):
-            # the retries follow the object check, which only a scene's object slots have (report.scene_objects)
+        if "seed_retries" in options_given and not report.checks_objects(model_config):  # the retries follow it
             why = (f"{args.data} holds pendulum data, whose model has no object slots" if info.system == "pendulum"
                    else f"--model {model_config.architecture} has no object slots")
             raise PigaError(f"--seed-retries retries a run whose object check finds an object missing; {why} to check: "

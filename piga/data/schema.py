@@ -100,12 +100,14 @@ def check_actions(actions: np.ndarray, path: str | os.PathLike[str]) -> None:
                               f"step {t}: {value}); fix the recording's actions")
 
 
-def check_actions_file(path: str | os.PathLike[str]) -> None:
-    """:func:`check_actions` on a whole file's ``/actions`` (float32 [N, T, A], small next to the frames)."""
+def check_actions_file(path: str | os.PathLike[str]) -> np.ndarray:
+    """:func:`check_actions` on a whole file's ``/actions`` (float32 [N, T, A], small next to the frames); returns
+    them."""
     with _open(path) as f:
         with read_rows(f["actions"], "every sequence"):
             actions = np.asarray(f["actions"][()])
-        check_actions(actions, path)
+    check_actions(actions, path)
+    return actions
 
 
 @dataclass(frozen=True)
@@ -499,7 +501,7 @@ def _take(ds: h5py.Dataset, idx: np.ndarray) -> np.ndarray:
     if not len(idx):
         return np.empty((0, *ds.shape[1:]), ds.dtype)
     with read_rows(ds, f"sequences {int(idx[0])} to {int(idx[-1])}"):
-        if len(idx) and idx[-1] - idx[0] + 1 == len(idx):
+        if idx[-1] - idx[0] + 1 == len(idx):
             return ds[int(idx[0]) : int(idx[-1]) + 1]
         return ds[()][idx] if len(idx) > len(ds) // 4 else np.stack([ds[int(i)] for i in idx])
 

@@ -31,9 +31,9 @@ def check_figure_target(path: str | os.PathLike[str], overwrite: bool, flag: str
     """Fails early, before any work, if :func:`save_figure` could not write ``path`` as the user named it: no
     suffix (the format would be a guess, and the file's name would not say it), a suffix matplotlib has no writer
     for, or a target :func:`~piga.io.atomic.check_writable_target` refuses."""
-    from piga.io.atomic import check_writable_target
-
     import shutil
+
+    from piga.io.atomic import check_writable_target
 
     target = Path(path)
     formats = dict(plt.figure().canvas.get_supported_filetypes())

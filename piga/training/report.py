@@ -10,7 +10,8 @@ import torch
 
 from piga.data.schema import DatasetInfo, inspect_dataset, read_sequences
 from piga.evaluation.evaluate import PARAMETER_NAMES, EvalConfig, evaluate, rollout_frames
-from piga.world.model import FrameModel, ObjectModel, frames_to_float
+from piga.world.model import FrameModel, ModelConfig, ObjectModel, frames_to_float
+from piga.world.variants import MODELS
 from piga.evaluation.plots import curves_figure, rollout_figure, save_figure, templates_figure
 from piga.io.atomic import write_json
 from piga.io.device import module_device
@@ -30,6 +31,12 @@ def _image(x: np.ndarray) -> np.ndarray:
 WARMUP_CHECK_MIN_STEPS = 250
 
 
+def checks_objects(config: ModelConfig) -> bool:
+    """Whether :func:`scene_objects` checks a model of ``config``: one with object slots of image coordinates (not
+    the pendulum's angle, nor a black-box video model)."""
+    return issubclass(MODELS[config.architecture], ObjectModel) and config.coord_dim == 2
+
+
 @torch.no_grad()
 def scene_objects(model: FrameModel, data: str | Path, eval_config: EvalConfig = EvalConfig(),
                   frames: np.ndarray | None = None, info: DatasetInfo | None = None) -> ObjectCheck | None:
@@ -39,7 +46,7 @@ def scene_objects(model: FrameModel, data: str | Path, eval_config: EvalConfig =
     :func:`~piga.data.schema.inspect_dataset`, when already read); None for a model that has no objects (the
     pendulum's angle, a black-box video model). Reads and changes nothing of the model: a run checked in the middle
     of its training trains on exactly as it would have."""
-    if not (isinstance(model, ObjectModel) and model.config.coord_dim == 2):
+    if not checks_objects(model.config):
         return None
     info = inspect_dataset(data) if info is None else info
     if frames is None:

@@ -39,7 +39,7 @@ from tqdm.auto import tqdm
 from piga.io.choices import check_choices
 from piga.io.device import Device, resolve_device
 from piga.data.schema import (MIN_IMAGE_SIZE, DataFormatError, DatasetInfo, check_actions_file, fingerprint,
-                              inspect_dataset, load_actions, split_indices)
+                              inspect_dataset, split_indices)
 from piga.world.encoder import estimate_background
 from piga.world.model import SYSTEM_SHAPES, FrameModel, ModelConfig, frames_to_float
 from piga.world.physics import BouncingOptions, PendulumOptions
@@ -604,10 +604,10 @@ def check_trainable(info: DatasetInfo, model_config: ModelConfig, train_config: 
     n_train = info.split_counts["train"]
     if not n_train:
         raise ValueError(f"{info.path}: the train split is empty")
-    check_actions_file(info.path)
+    actions = check_actions_file(info.path)  # (N, T, A), small
     if info.system == "pendulum" and model_config.architecture != "video-lstm" and info.action_dim:
-        # (N_train, T, A), small; a multiplies the actions: with every one 0 it never leaves its start
-        if not np.any(load_actions(info.path, "train")):
+        # a multiplies the actions: with every one of the train split 0 it never leaves its start
+        if not np.any(actions[split_indices(info.path, "train")]):
             raise DataFormatError(f"{info.path}: every action of its train split is 0, so the actuation gain a, which "
                                   "multiplies them, cannot be identified; train on data whose actions vary "
                                   "(piga-collect's random actions, or a recording with the motor driven)")
