@@ -15,6 +15,10 @@ one training each (``--seed-retries 0``: a variant that loses an object is a res
 
     python benchmarks/ablations.py --out results/ablations --seeds 0 --jobs 1
 
+``--no-curriculum`` trains every run without the fast recipe's autoencoder warm-up and rollout curriculum
+(``--warmup-fraction 0 --curriculum-fraction 0``: the full prediction horizon from the first step, as the paper's
+recipe trains), to see whether they are why a scheme other than joint training learns here.
+
 Each (system, variant, seed) is one job of piga's job runner (:func:`piga.io.pool.run_recorded`), as in
 ``benchmarks/prediction.py``: one torch thread, ``--jobs N`` at once (or ``--ray``); each job's record,
 ``OUT_runs/records/NAME.json`` (settings, scores, the slots' templates as a compressed array, exit status, minutes,
@@ -62,9 +66,13 @@ class BenchConfig(TrainingBenchConfig):
     """Table 2's rows (``joint`` always runs: the others are compared with it)."""
     slots: tuple[int, ...] = (2, 4)
     """Appendix E's object slot counts (``piga-train-model --objects``), besides the scene's own."""
+    curriculum: bool = True
+    """False: every run trains without the autoencoder warm-up and the rollout curriculum (:data:`NO_CURRICULUM`)."""
 
 
 DEFAULTS = BenchConfig()
+#: The ``piga-train-model`` options of ``--no-curriculum``: the full prediction horizon from the first step.
+NO_CURRICULUM = ("--warmup-fraction", "0", "--curriculum-fraction", "0")
 
 
 @dataclass(frozen=True)
@@ -89,6 +97,11 @@ def variant_flags(variant: str) -> tuple[str, ...]:
     if variant.startswith("slots"):
         return ("--objects", variant[len("slots"):])
     return ("--loss", variant)
+
+
+def job_flags(cfg: BenchConfig, variant: str) -> tuple[str, ...]:
+    """A run's ``piga-train-model`` options: its variant's, and ``--no-curriculum``'s."""
+    return variant_flags(variant) + (() if cfg.curriculum else NO_CURRICULUM)
 
 
 def variants(cfg: BenchConfig, system: str) -> list[str]:
@@ -167,7 +180,7 @@ def jobs_for(cfg: BenchConfig, folder: Path) -> list[RecordedJob]:
         for seed in cfg.seeds:
             for variant in variants(cfg, system):
                 name = job_name(system, variant, seed)
-                flags = variant_flags(variant)
+                flags = job_flags(cfg, variant)
                 spec = {"system": system, "variant": variant, "flags": list(flags), "seed": seed,
                         "budget_steps": cfg.budget_steps,
                         "data": " ".join(collect_command(system, cfg, Path(f"{system}.h5")))}
@@ -192,7 +205,7 @@ def summary(records: dict[str, dict[str, Any]], cfg: BenchConfig) -> dict[str, d
             metrics = [r["metrics"] for r in runs]
             names = list((metrics[0].get("parameter_errors") or {}))
             rows[variant] = {
-                "flags": " ".join(variant_flags(variant)),
+                "flags": " ".join(job_flags(cfg, variant)),
                 "mse_prediction": _mean([m["frame_mse_mean"]["prediction"] for m in metrics]),
                 "mse_extrapolation": _mean([m["frame_mse_mean"]["extrapolation"] for m in metrics]),
                 "ssim_prediction": _mean([m["frame_ssim_mean"]["prediction"] for m in metrics]),
@@ -243,6 +256,10 @@ def markdown(record: dict[str, Any], out: Path) -> str:
              f"--seed SEED --budget-steps {cfg['budget_steps']} --seed-retries 0 --threads 1` (the scene's `fast` recipe "
              f"otherwise: the same windows, seed and budget for every variant, one training each), seeds {seeds}"
              + (" (means over seeds)." if len(cfg["seeds"]) > 1 else ", one seed.")
+             + ("" if cfg.get("curriculum", True) else
+                f" Every run here trains without the fast recipe's autoencoder warm-up and rollout curriculum "
+                f"(`{' '.join(NO_CURRICULUM)}`): the full prediction horizon from the first step, as the paper's recipe "
+                "trains.")
              + " Scores are on the test split: prediction MSE and SSIM over the T_pred predicted frames "
              "(`piga-train-model`'s metrics.json), reconstruction MSE of single frames through the encoder and "
              "decoder (L_rec without its weight). MSE is per pixel channel, frames in [0, 1]."]
@@ -342,6 +359,9 @@ def parser() -> argparse.ArgumentParser:
                    help="sequences per data set, split 80/10/10 (default %(default)s)")
     p.add_argument("--jobs", type=positive_int, default=DEFAULTS.jobs,
                    help="runs trained at once, each in its own process with one torch thread (default %(default)s)")
+    p.add_argument("--no-curriculum", action="store_true",
+                   help=f"train every run with {' '.join(NO_CURRICULUM)}: no autoencoder warm-up, the full prediction "
+                   "horizon from the first step, as the paper's recipe trains")
     add_ray_option(p, "the training runs (OUT_runs/ shared by every machine)")
     return p
 
@@ -352,7 +372,8 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     cfg = BenchConfig(systems=tuple(dict.fromkeys(args.systems)), schemes=tuple(dict.fromkeys(args.schemes)),
                       slots=tuple(dict.fromkeys(args.slots)), seeds=tuple(dict.fromkeys(args.seeds)),
-                      budget_steps=args.budget_steps, sequences=args.sequences, jobs=args.jobs)
+                      budget_steps=args.budget_steps, sequences=args.sequences, jobs=args.jobs,
+                      curriculum=not args.no_curriculum)
     backend = ray_backend(p, args)
     folder = args.out.parent / f"{args.out.name}_runs"
     records = JobRecords(folder / "records")

@@ -136,3 +136,21 @@ def test_a_failed_job_ends_with_one_line_and_keeps_the_records_before(ablations,
 def test_an_abbreviated_option_is_refused(ablations) -> None:
     with pytest.raises(SystemExit):
         ablations.parser().parse_args(["--budget", "5"])
+
+
+def test_no_curriculum_trains_every_run_at_the_full_horizon_and_says_so(ablations, tmp_path: Path,
+                                                                        monkeypatch: pytest.MonkeyPatch) -> None:
+    calls = _stand_ins(ablations, monkeypatch)
+    out = tmp_path / "results" / "ablations"
+    assert ablations.main(["--out", str(out), "--jobs", "1", "--slots", "--schemes", "pred-only", "--no-curriculum"]) == 0
+    trained = [c for c in calls if c[0] == "piga-train-model"]
+    assert [_variant(c) for c in trained] == ["joint", "pred-only"]
+    assert all(c[c.index("--warmup-fraction") + 1] == "0" and c[c.index("--curriculum-fraction") + 1] == "0"
+               for c in trained)
+    page = out.with_suffix(".md").read_text()
+    assert "| only L_pred | `--loss pred-only --warmup-fraction 0 --curriculum-fraction 0` |" in page
+    assert "without the fast recipe's autoencoder warm-up and rollout curriculum" in page
+    calls.clear()
+    assert ablations.main(["--out", str(out), "--jobs", "1", "--slots", "--schemes", "pred-only"]) == 0
+    assert len([c for c in calls if c[0] == "piga-train-model"]) == 2  # the records of the other recipe are not reused
+    assert "rollout curriculum" not in out.with_suffix(".md").read_text()

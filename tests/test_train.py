@@ -201,6 +201,23 @@ def test_cli_refuses_unusable_actions_up_front(small_data: Path, tmp_path: Path,
     assert not out.exists()
 
 
+def test_cli_curriculum_fraction_plans_the_horizon_and_a_sum_of_one_is_refused(
+        small_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "r"  # 16 windows of batch 8: 2 steps an epoch, 10 epochs
+    code, stdout, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), "--batch-size", "8",
+                                       "--epochs", "10", "--warmup-fraction", "0", "--curriculum-fraction", "0",
+                                       "--quiet", "--threads", "1", capsys=capsys)
+    assert code in FINISHED, err
+    config = json.loads((out / "config.json").read_text())
+    assert config["train"]["curriculum_fraction"] == 0 and config["plan"]["curriculum_steps"] == 0
+    assert "no autoencoder warm-up, no curriculum (T_pred 10 from the first step)" in stdout
+    refused = tmp_path / "refused"
+    code, _, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(refused), "--warmup-fraction", "0.5",
+                                  "--curriculum-fraction", "0.5", "--quiet", capsys=capsys)
+    assert_one_line(code, err, "warmup_fraction + curriculum_fraction")
+    assert not refused.exists()
+
+
 def test_cli_refuses_a_run_without_a_single_batch(small_data: Path, tmp_path: Path,
                                                   capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "r"

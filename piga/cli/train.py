@@ -20,7 +20,8 @@ from piga.io.atomic import check_folder_target
 from piga.io.checkpoint import CHECKPOINT, require_piga_run
 
 #: The recipe options a user may give; each is a TrainConfig field of the same name.
-RECIPE_OPTIONS = ("epochs", "budget_steps", "max_minutes", "batch_size", "lr", "lr_physics", "warmup_fraction", "window_stride")
+RECIPE_OPTIONS = ("epochs", "budget_steps", "max_minutes", "batch_size", "lr", "lr_physics", "warmup_fraction",
+                  "curriculum_fraction", "window_stride")
 
 PROG = "piga-train-model"
 #: ``--objects``' help: the first sentence of :attr:`piga.world.model.ModelConfig.n_objects`' doc (a test checks it).
@@ -75,6 +76,8 @@ def build_parser() -> ArgumentParser:
     recipe("--lr-physics", "lr_physics", positive_float, "physical-parameter learning rate, log space")
     recipe("--warmup-fraction", "warmup_fraction", unit_fraction, "fraction of the run's steps that train the autoencoder "
            "alone, first")
+    recipe("--curriculum-fraction", "curriculum_fraction", unit_fraction, "fraction of the run's steps, after the "
+           "warm-up, over which the prediction horizon grows from 1 frame to T_pred (0: the full horizon at once)")
     recipe("--window-stride", "window_stride", positive_int, "frames between the start frames of a sequence's training "
            "windows: a stride of T - L - T_pred + 1 takes one window per sequence, for a file of many sequences",
            shown="1; paper preset: one window per sequence, the first, as the paper's epochs pass over its sequences")

@@ -212,11 +212,13 @@ class TrainPlan:
         """One line, e.g. "5400 steps = 16 epochs x 337 steps (10800 windows); warm-up 216, curriculum 594 (T 1->10), average of the last 337"
         (no average for a model without physical parameters, ``physics`` False; ``autoencoder`` False, a run that
         never trains on L_rec (``ModelConfig.loss`` "pred-only"): its warm-up steps predict one frame)."""
-        warmup = (f"autoencoder warm-up {self.warmup_steps} steps" if autoencoder
+        warmup = ("no autoencoder warm-up" if not self.warmup_steps
+                  else f"autoencoder warm-up {self.warmup_steps} steps" if autoencoder
                   else f"no autoencoder warm-up (its {self.warmup_steps} steps predict 1 frame)")
+        curriculum = (f"curriculum {self.curriculum_steps} steps (T_pred 1 -> {pred_frames})" if self.curriculum_steps
+                      else f"no curriculum (T_pred {pred_frames} from the first step)")
         return (f"{self.total_steps} steps = {self.epochs} epoch{'s' if self.epochs != 1 else ''} x {self.steps_per_epoch} "
-                f"steps ({self.windows} windows); {warmup}, curriculum "
-                f"{self.curriculum_steps} steps (T_pred 1 -> {pred_frames})"
+                f"steps ({self.windows} windows); {warmup}, {curriculum}"
                 + (f", parameters averaged over the last {self.average_steps}" if self.average_steps and physics else "")
                 + (f"; a checkpoint every {self.checkpoint_every} epochs" if self.checkpoint_every > 1 else ""))
 
