@@ -240,6 +240,30 @@ def test_abbreviations_are_refused(prog: str, argv: list[str], needle: str, tmp_
     assert _listing(tmp_path) == []
 
 
+@pytest.mark.parametrize("prog, argv, needle", [
+    ("piga-import", ["v.mp4", "a.csv", "--out", "o.h5", "--dt", "0.05", "--dt", "0.1"], "--dt is given twice (0.05, then 0.1)"),
+    ("piga-import", ["v.mp4", "a.csv", "--dt", "0.05", "--out=o1.h5", "--out", "o2.h5"], "--out is given twice (o1.h5, then o2.h5)"),
+    ("piga-show", ["x.h5", "--out", "a.png", "--split", "train", "--split=test"], "--split is given twice (train, then test)"),
+    ("piga-collect", ["--out", "x.h5", "--quiet", "--quiet"], "--quiet is given twice: give it once"),
+    ("piga-collect", ["--out", "x.h5", "--env", "piga/DMCPendulum-v0", "--env-option", "mass=2", "--env-option", "mass=3"],
+     "--env-option mass is given twice (2, then 3)"),
+    ("piga-demo", ["--sequences", "3", "--sequences", "4"], "--sequences is given twice (3, then 4)"),
+    ("piga-train-model", ["x.h5", "--out", "r", "--out", "s"], "--out is given twice (r, then s)"),
+    ("piga-control", ["--oracle", "--episodes", "1", "--episodes", "2"], "--episodes is given twice (1, then 2)"),
+    ("piga-control", ["--oracle", "--warm-start", "--no-warm-start"], "--warm-start/--no-warm-start is given twice"),
+    ("piga-diagnose", ["--model", "r", "--data", "x.h5", "--out", "d", "--model", "s"], "--model is given twice (r, then s)"),
+    ("piga-baseline", ["planet", "x.h5", "--out", "r", "--batch-size", "2", "--batch-size=3"], "--batch-size is given twice (2, then 3)"),
+    ("piga-baseline", ["ddpg", "--obs", "state", "--out", "r", "--obs", "pixels"], "--obs is given twice (state, then pixels)"),
+])
+def test_an_option_given_twice_is_refused(prog: str, argv: list[str], needle: str, tmp_path: Path,
+                                          capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    """The last of two values silently winning is a mistake waiting to be made; options meant to repeat still may."""
+    monkeypatch.chdir(tmp_path)
+    line = refused(prog, argv, capsys, needle, "give it once")
+    assert line.startswith(f"{prog}: error: ")
+    assert _listing(tmp_path) == []
+
+
 def test_script_parsers_take_no_abbreviations() -> None:
     """The benchmarks' and examples' own argparse parsers."""
     root = Path(__file__).parents[1]

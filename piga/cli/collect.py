@@ -61,7 +61,11 @@ def dmc_config(options: Sequence[tuple[str, str]], **fields: object) -> DMCPendu
 
     known = {f.name: f for f in dataclasses.fields(DMCPendulumConfig)}
     values: dict[str, object] = dict(fields)
+    given: dict[str, str] = {}
     for key, text in options:
+        if key in given:  # as --effect: the last would silently win
+            raise ValueError(f"--env-option {key} is given twice ({given[key]}, then {text}): give it once")
+        given[key] = text
         if key not in known or key in ("image_size", "frame_stack", "max_angle", "max_speed", "episode_length"):
             settable = sorted(set(known) - {"image_size", "frame_stack", "max_angle", "max_speed", "episode_length"})
             raise ValueError(f"--env-option {key}: unknown for piga/DMCPendulum-v0; known: {', '.join(settable)}")

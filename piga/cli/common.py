@@ -55,6 +55,31 @@ class ArgumentParser(argparse.ArgumentParser):
     def error(self, message: str) -> NoReturn:
         self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
 
+    def parse_known_args(self, args: Sequence[str] | None = None,  # type: ignore[override]
+                         namespace: argparse.Namespace | None = None) -> tuple[argparse.Namespace, list[str]]:
+        """As argparse's, but an option that holds one value, written twice, is a :class:`PigaError` (one line, exit 1)
+        rather than the last one silently winning (``--dt 0.05 --dt 0.1``). Options meant to repeat (``append``,
+        ``extend``, ``count``) may. Each parser (a subcommand's too) checks its own options."""
+        self._given_once: dict[argparse.Action, list[str]] = {}
+        return super().parse_known_args(args, namespace)
+
+    def _get_values(self, action: argparse.Action, arg_strings: list[str]) -> Any:
+        # argparse converts each occurrence of an option here, with the text as written (``--dt=0.1`` too)
+        if action.option_strings and isinstance(action, ONCE_ACTIONS):
+            if (first := self._given_once.get(action)) is not None:
+                flag = "/".join(action.option_strings) if isinstance(action, argparse.BooleanOptionalAction) \
+                    else max(action.option_strings, key=len)
+                values = f" ({' '.join(first)}, then {' '.join(arg_strings)})" if arg_strings else ""
+                raise PigaError(f"{flag} is given twice{values}: give it once")
+            self._given_once[action] = list(arg_strings)
+        return super()._get_values(action, arg_strings)
+
+
+#: The kinds of option that hold one value (store, store_const, store_true/false, --x/--no-x); written twice, the
+#: last would silently win. ``append``, ``extend`` and ``count`` are meant to repeat.
+ONCE_ACTIONS: tuple[type[argparse.Action], ...] = (
+    argparse._StoreAction, argparse._StoreConstAction, argparse.BooleanOptionalAction)  # noqa: SLF001
+
 
 def nonempty_text(text: str) -> str:
     """argparse type: any text but the empty one (a path, a run folder, a range)."""
