@@ -458,6 +458,11 @@ def _attr_edit(key: str, value: Any) -> Callable[[h5py.File], None]:
     (_attr_edit("params", '{"g": null, "actuation_gain": 1}'), ["'params' must give each parameter as a finite number", "g=None"]),
     (_attr_edit("params", '{"g": "ten"}'), ["'params' must give each parameter as a finite number", "g='ten'"]),
     (_attr_edit("params", '{"g": NaN}'), ["'params' must give each parameter as a finite number", "g=nan"]),
+    (_attr_edit("params", '{"g": 1e308, "actuation_gain": 1}'), ["'params' gives g=1e+308, outside the physically meaningful"]),
+    (_attr_edit("params", '{"g": 10, "actuation_gain": -1e-308}'), ["'params' gives actuation_gain=-1e-308", "1e-06 to 1e+06"]),
+    (_attr_edit("params", '{"damping": 2e6}'), ["'params' gives damping=2e+06, outside"]),
+    (_attr_edit("params", '{"g": -9.8}'), ["'params' gives g=-9.8; g is >= 0 in piga's conventions"]),
+    (_attr_edit("params", '{"m": -1}'), ["'params' gives m=-1; m is >= 0"]),
 ])
 def test_a_file_that_breaks_the_schema_is_named_on_open(edit: Callable[[h5py.File], None], needles: list[str],
                                                         tiny_data: Path, tmp_path: Path,
@@ -494,6 +499,40 @@ def test_a_true_parameter_of_zero_is_scored_infinitely_off() -> None:
 
     errors = parameter_errors(PhysicsModel(ModelConfig()), {"g": 0.0, "actuation_gain": 1.0})
     assert math.isinf(errors["g"]["relative_error"]) and math.isfinite(errors["a"]["relative_error"])
+
+
+@pytest.mark.parametrize("params", [{"g": 0, "actuation_gain": -1.0, "damping": 0.0}, {"g": 1e6, "actuation_gain": 1e-6},
+                                    {"g": 1e-6, "actuation_gain": -1e6, "gravity": 1e9}])
+def test_true_parameters_in_range_are_read_and_drawn_without_warnings(params: dict[str, float], tiny_data: Path,
+                                                                      tmp_path: Path) -> None:
+    """0, a signed actuation gain and the range's ends are accepted, and the learning curves draw them quietly (a true
+    g of 1e308 overflowed in matplotlib, two lines on stderr); a parameter nothing scores (gravity) is not bounded."""
+    import warnings
+
+    import matplotlib.pyplot as plt
+
+    from piga.data.schema import inspect_dataset
+    from piga.evaluation.plots import curves_figure
+
+    data = _variant(tiny_data, tmp_path / "d.h5", _attr_edit("params", json.dumps(params)))
+    assert inspect_dataset(data).params == params
+    history = [{"epoch": e, "loss": 1.0 / e, "loss_pred": 0.5 / e, "loss_rec": 0.5 / e, "g": 9.0 + e, "a": 0.5 + e}
+               for e in (1, 2)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        fig = curves_figure(history, {"g": params["g"], "a": params["actuation_gain"]})
+        fig.canvas.draw()
+    plt.close(fig)
+
+
+def test_a_true_parameter_of_zero_is_printed_without_an_error() -> None:
+    """``learned: g=1.0179 (true 0, error inf%)``: a true 0 has no relative error; metrics.json stores null."""
+    from piga.evaluation.evaluate import summary_line
+
+    metrics = {"parameter_errors": {"g": {"learned": 1.0179, "true": 0.0, "relative_error": math.inf},
+                                    "a": {"learned": 1.01, "true": 1.0, "relative_error": 0.01},
+                                    "b": {"learned": 0.02, "true": 0.0, "relative_error": None}}}
+    assert summary_line(metrics) == "g=1.0179 (true 0), a=1.0100 (true 1, error 1.00%), b=0.0200 (true 0)"
 
 
 # ---------------------------------------------------------------------------------------------

@@ -164,13 +164,15 @@ def _run(args: argparse.Namespace, argv: Sequence[str] | None, out: Path, config
                           *(["--quiet"] if args.quiet else [])])
     import json
 
+    from piga.evaluation.evaluate import true_and_error
+
     metrics = json.loads((run_dir / "metrics.json").read_text())
     info = inspect_dataset(data)
     errs = metrics["parameter_errors"]
     print(f"[4/4] control from pixels with the learned model: upright, gravity x1.4, goal image at {args.goal_angle:g} deg",
           flush=True)
     rows = _control(run_dir, goal_png, control_md, args)
-    print("summary: " + ", ".join(f"{n}: learned {e['learned']:.4f}, true {e['true']:g}, error {100 * e['relative_error']:.2f}%"
+    print("summary: " + ", ".join(f"{n}: learned {e['learned']:.4f}, {true_and_error(e)}"
                                   for n, e in errs.items())
           + f"; {info.n_sequences} sequences, {metrics['training']['seconds'] / 60:.1f} min of training")
     for label, s in rows:

@@ -229,6 +229,7 @@ def _validate(f: h5py.File, path: Path) -> DatasetInfo:
             shown = f"{value!r}" if len(repr(value)) <= 40 else f"{repr(value)[:37]}..."  # JSON integers are unbounded
             raise DataFormatError(f"{path}: attribute 'params' must give each parameter as a finite number, got "
                                   f"{name}={shown}")
+        _check_true_parameter(path, name, float(value))
     return DatasetInfo(
         path=path,
         n_sequences=n,
@@ -413,6 +414,33 @@ def fingerprint(path: str | os.PathLike[str]) -> str:
             digest.update(str((array.dtype.str, array.shape)).encode())
             digest.update(np.ascontiguousarray(array).tobytes())
     return digest.hexdigest()[:16]
+
+
+#: The true physical parameters that training scores a model against (a relative error each), and that may be signed:
+#: the actuation gain is negative for a motor wired the other way. Gravity g, damping, a spring's k and half rest
+#: length l and a mass m are >= 0 in piga's conventions (docs/conventions.md: θ = 0 is upright, so g > 0 pulls the
+#: pendulum down; a negative damping would feed the motion energy; the scenes' springs and masses are positive).
+SIGNED_PARAMETERS = ("actuation_gain",)
+NONNEGATIVE_PARAMETERS = ("g", "damping", "k", "l", "m")
+#: The magnitudes a true parameter may have, besides 0: the range the pixel pendulum itself takes for its gravity and
+#: actuation gain (``envs.pendulum.MIN_GRAVITY`` to ``MAX_GRAVITY``). Weaker, the effect moves nothing a frame shows;
+#: stronger, the motion is lost between frames (and the relative error, the scores and the learning-curve figure
+#: overflow float arithmetic near 1e308).
+MIN_TRUE_PARAMETER, MAX_TRUE_PARAMETER = 1e-6, 1e6
+
+
+def _check_true_parameter(path: str, name: str, value: float) -> None:
+    """Refuses a finite true parameter of a file's ``params`` that no model could be scored against: a sign piga's
+    conventions do not give it, or a magnitude outside :data:`MIN_TRUE_PARAMETER` to :data:`MAX_TRUE_PARAMETER`
+    (0 is accepted: it has no relative error, and the scores say so)."""
+    if name not in SIGNED_PARAMETERS and name not in NONNEGATIVE_PARAMETERS:
+        return
+    if name in NONNEGATIVE_PARAMETERS and value < 0:
+        raise DataFormatError(f"{path}: attribute 'params' gives {name}={value:g}; {name} is >= 0 in piga's conventions "
+                              f"(only {', '.join(SIGNED_PARAMETERS)} may be negative)")
+    if value != 0 and not MIN_TRUE_PARAMETER <= abs(value) <= MAX_TRUE_PARAMETER:
+        raise DataFormatError(f"{path}: attribute 'params' gives {name}={value:g}, outside the physically meaningful "
+                              f"range: 0, or {MIN_TRUE_PARAMETER:g} to {MAX_TRUE_PARAMETER:g} in magnitude")
 
 
 def _finite_float(value: int | float) -> bool:

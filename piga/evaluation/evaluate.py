@@ -202,13 +202,21 @@ def angle_errors(model: ObjectModel, frames: np.ndarray, states: np.ndarray) -> 
     }
 
 
+def true_and_error(error: dict[str, Any]) -> str:
+    """A parameter's true value and relative error (:func:`parameter_errors`, or as metrics.json stores it) in words:
+    "true 10, error 1.79%"; a true value of 0 has no relative error, so "true 0" alone."""
+    if error["true"] == 0 or error["relative_error"] is None:
+        return f"true {error['true']:g}"
+    return f"true {error['true']:g}, error {100 * error['relative_error']:.2f}%"
+
+
 def summary_line(metrics: dict[str, Any]) -> str:
     """One line: learned parameters with their errors (or why there are none)."""
     if metrics.get("parameters", {}) is None:
         return f"no physical parameters ({metrics.get('physical_parameters_reason', 'none recorded')})"
     parts = []
     for name, e in metrics.get("parameter_errors", {}).items():
-        parts.append(f"{name}={e['learned']:.4f} (true {e['true']:g}, error {100 * e['relative_error']:.2f}%)")
+        parts.append(f"{name}={e['learned']:.4f} ({true_and_error(e)})")
     if not parts:
         parts = [f"{k}={v:.4f}" for k, v in metrics.get("parameters", {}).items()]
     return ", ".join(parts)
