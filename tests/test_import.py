@@ -80,6 +80,25 @@ def test_video_files(tmp_path: Path, recording: tuple[Path, Path, np.ndarray, np
     assert np.abs(got.reshape(-1, 64, 64).astype(int) - frames[:16]).mean() < 4  # lossy, but the same pictures
 
 
+def test_an_image_stack_is_a_recording(tmp_path: Path, recording: tuple[Path, Path, np.ndarray, np.ndarray],
+                                       capsys: pytest.CaptureFixture[str]) -> None:
+    """A multi-page TIFF, which imageio reads as one array (T, H, W), gray or colour, is T frames; an array that is
+    no frames says what piga-import takes."""
+    _, csv, frames, _ = recording
+    gray, rgb = tmp_path / "gray.tif", tmp_path / "rgb.tif"
+    iio.imwrite(gray, frames)
+    iio.imwrite(rgb, np.repeat(frames[..., None], 3, axis=-1))
+    assert read_recording(gray, 64).tobytes() == frames.tobytes()
+    assert np.abs(read_recording(rgb, 64).astype(int) - frames).max() <= 1
+    code, out, err = _cli(str(gray), str(csv), "--dt", "0.05", "--out", str(tmp_path / "o.h5"), "--steps", "5",
+                          capsys=capsys)
+    assert code == 0 and err == "" and "3 sequences x 5 frames" in out
+    np.savez(tmp_path / "x.npz", a=np.zeros(5))
+    assert_one_line(*_cli(str(tmp_path / "x.npz"), str(csv), "--dt", "0.05", "--out", str(tmp_path / "n.h5"),
+                          capsys=capsys)[::2], "x.npz: holds an array of shape (5,), not frames",
+                    "a video file, an image stack such as a multi-page TIFF, or a folder of .png/.jpg frames")
+
+
 def test_frames_are_converted_as_the_env_converts_its_render(tmp_path: Path) -> None:
     rng = np.random.default_rng(0)
     pictures = rng.integers(0, 256, size=(4, 90, 120, 3), dtype=np.uint8)  # wide RGB, any size
@@ -101,6 +120,9 @@ def test_frames_are_converted_as_the_env_converts_its_render(tmp_path: Path) -> 
         ("t,action,other\n0,0.5,9\n1,-1,9\n\n2,2,9\n", [0.5, -1, 2]),
         ("\ufeffu;t\n0.5;0\n-1;1\n2;2\n", [0.5, -1, 2]),  # a BOM, semicolons
         ("U\t t\n0.5\t0\n-1\t1\n2\t2\n", [0.5, -1, 2]),
+        ("0.5,\n-1,\n2,\n", [0.5, -1, 2]),  # every row ends in a separator: data, not a header ['0.5', '']
+        ("u;\n0.5;\n-1;\n", [0.5, -1]),
+        ("2E0\n+2\n.5\n-1.\n", [2, 2, 0.5, -1]),  # the decimal spellings a CSV writer uses
     ],
 )
 def test_read_actions(tmp_path: Path, text: str, want: list[float]) -> None:
@@ -121,6 +143,11 @@ def test_read_actions(tmp_path: Path, text: str, want: list[float]) -> None:
         ("a,b\n1,2\n", "names no column 'u' or 'action'"),
         ("u,U\n1,2\n", "names 'u' more than once"),  # the first column was taken
         ("t,u\n0,1\n1\n", "line 3: 1 column(s), but line 1 has 2"),
+        ("1_0\n", "line 1: expected a finite number, got '1_0'"),  # float() reads 10: no CSV writer means it
+        ("0.5\n\u0661\n", "line 2: expected a finite number, got '\u0661'"),  # an Arabic-Indic 1
+        ("u\n\uff11\n", "line 2: expected a finite number, got '\uff11' (write it in ASCII decimal digits"),  # fullwidth
+        ("u,action\n1,2\n", "names both 'u' and 'action'; name one action column"),  # `u` was taken silently
+        ("0.1,,0.3\n", "3 columns and no header row"),  # an empty field is not a header's name
     ],
 )
 def test_read_actions_errors(tmp_path: Path, text: str, needle: str) -> None:

@@ -19,7 +19,8 @@ def build_parser() -> ArgumentParser:
         "'Data files'), cut into sequences of --steps frames. Frames are converted as the env converts its "
         "render: centre crop, INTER_AREA resize, Gymnasium's gray weights.",
     )
-    p.add_argument("recording", help="a video file (.mp4, .gif, ... anything imageio reads) or a folder of "
+    p.add_argument("recording", help="a video file (.mp4, .gif, ... anything imageio reads), an image stack such "
+                   "as a multi-page TIFF, or a folder of "
                    ".png/.jpg frames in natural name order")
     p.add_argument("actions", help="CSV with one action per frame: one column, or a header naming the column "
                    "'u' or 'action'")

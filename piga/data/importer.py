@@ -5,7 +5,7 @@ writes. It has no ``/states``, because a real recording has no ground truth.
 
 | input | what is accepted |
 |---|---|
-| recording | a video file that imageio reads (``.mp4``, ``.gif``, ...), or a folder of ``.png`` / ``.jpg`` / ``.jpeg`` frames in natural name order (``f2`` before ``f10``) |
+| recording | a video file that imageio reads (``.mp4``, ``.gif``, ...), an image stack (a multi-page TIFF: gray ``(T, H, W)`` or colour ``(T, H, W, 3 or 4)``), or a folder of ``.png`` / ``.jpg`` / ``.jpeg`` frames in natural name order (``f2`` before ``f10``) |
 | actions | a CSV with one row per frame: the action u_t applied after frame t. Either one column, with or without a header row, or a header row with a column named ``u`` or ``action`` |
 | dt | the frame interval in seconds |
 
@@ -29,6 +29,7 @@ import math
 import re
 import shlex
 import sys
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -130,34 +131,76 @@ def read_recording(path: str | Path, size: int) -> np.ndarray:
         return np.stack(frames)  # (F, size, size)
     if not p.is_file():
         raise FileNotFoundError(f"{p}: no such video file or frame folder")
-    import imageio.v3 as iio
-
     frames = []
-    try:
-        for image in iio.imiter(p):
-            frames.append(scene_to_gray(np.asarray(image), size))
-    except Exception as exc:  # imageio and its plugins raise many types for foreign or corrupt files
-        first = (str(exc).strip().splitlines() or [""])[0][:120]
-        raise ValueError(f"{p}: not a readable video ({exc.__class__.__name__}{': ' + first if first else ''})") from None
+    for image in _read_images(p):
+        for frame in _frames_of(image, p):
+            try:
+                frames.append(scene_to_gray(frame, size))
+            except ValueError as exc:
+                raise ValueError(f"{p}: {exc}") from None
     if not frames:
         raise ValueError(f"{p}: the video has no frames")
     return np.stack(frames)  # (F, size, size)
 
 
-def _number(text: str) -> float | None:
+#: What a recording may be, as the errors say it.
+RECORDINGS = "a video file, an image stack such as a multi-page TIFF, or a folder of .png/.jpg frames"
+
+
+def _read_images(path: Path) -> Iterator[np.ndarray]:
+    """The images imageio reads from a file, one at a time: a video's frames, or one array (an image stack)."""
+    import imageio.v3 as iio
+
     try:
-        value = float(text)
-    except ValueError:
-        return None
-    return value
+        for image in iio.imiter(path):
+            yield np.asarray(image)
+    except Exception as exc:  # imageio and its plugins raise many types for foreign or corrupt files
+        first = (str(exc).strip().splitlines() or [""])[0][:120]
+        raise ValueError(f"{path}: not a readable video ({exc.__class__.__name__}{': ' + first if first else ''}); "
+                         f"piga-import takes {RECORDINGS}") from None
+
+
+def _frames_of(image: np.ndarray, path: Path) -> Sequence[np.ndarray]:
+    """The frames in one array imageio read: an image, gray (H, W) or with channels (H, W, 1, 3 or 4), is one frame; a
+    stack of them (T, H, W) or (T, H, W, 1, 3 or 4), as a multi-page TIFF is read, is T frames."""
+    channels = (1, 3, 4)
+    if image.ndim == 2 or (image.ndim == 3 and image.shape[2] in channels):
+        return (image,)
+    if image.ndim == 3 or (image.ndim == 4 and image.shape[3] in channels):
+        return image  # type: ignore[return-value]
+    raise ValueError(f"{path}: holds an array of shape {image.shape}, not frames; piga-import takes {RECORDINGS}")
+
+
+#: A number as a CSV writes one: ASCII digits, an optional sign, point and exponent; or Python's words for NaN and the
+#: infinities (read, then refused as not finite). Python's float() takes more (``1_0``, Arabic-Indic or fullwidth
+#: digits), which no CSV writer means as a number.
+_CSV_NUMBER = re.compile(r"[+-]?(?:(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|nan|inf|infinity)", re.IGNORECASE)
+
+
+def _number(text: str) -> float | None:
+    """The number a CSV cell writes (:data:`_CSV_NUMBER`), or None."""
+    return float(text) if _CSV_NUMBER.fullmatch(text) else None
+
+
+def _is_header(row: list[str]) -> bool:
+    """Whether a CSV row is a header: a cell that is text, not an empty field and not a number in any spelling
+    Python reads (a first row ``1_0`` is a value to refuse, not a header to skip)."""
+    for cell in row:
+        try:
+            float(cell)
+        except ValueError:
+            if cell:
+                return True
+    return False
 
 
 def read_actions(path: str | Path) -> np.ndarray:
     """The actions of a CSV, one row per frame: float32 (F,).
 
     The CSV has one column, with an optional header row, or a header row that names the action
-    column ``u`` or ``action``. Commas, semicolons or tabs separate the columns, and blank lines are
-    skipped.
+    column ``u`` or ``action``. Commas, semicolons or tabs separate the columns, blank lines are
+    skipped, and a separator that ends every row (``0.26,``) is not a column. Values are written in ASCII decimal
+    (:data:`_CSV_NUMBER`).
 
     Raises:
         FileNotFoundError: no such file.
@@ -179,14 +222,19 @@ def read_actions(path: str | Path) -> np.ndarray:
         raise ValueError(f"{p}: the actions file is empty")
     delimiter = next((d for d in (",", ";", "\t") if d in lines[0][1]), ",")
     rows = [(number, [cell.strip() for cell in next(csv.reader([line], delimiter=delimiter))]) for number, line in lines]
+    if all(len(row) > 1 and row[-1] == "" for _, row in rows):  # every row ends in a separator (``0.26,``): no column
+        rows = [(number, row[:-1]) for number, row in rows]
     first_number, first = rows[0]
     column = 0
-    if any(_number(cell) is None for cell in first):  # a header row
+    if _is_header(first):
         names = [cell.lower() for cell in first]
         if len(first) > 1:
             matches = [names.index(name) for name in ACTION_COLUMNS if name in names]
             if not matches:
                 raise ValueError(f"{p}: line {first_number}: the header {first} names no column 'u' or 'action'")
+            if len(matches) > 1:  # which of the two holds the actions is unknown
+                raise ValueError(f"{p}: line {first_number}: the header {first} names both 'u' and 'action'; name one "
+                                 "action column")
             column = matches[0]
             if names.count(names[column]) > 1:  # which of the two columns holds the actions is unknown
                 raise ValueError(f"{p}: line {first_number}: the header {first} names {first[column]!r} more than once; "
@@ -206,7 +254,8 @@ def read_actions(path: str | Path) -> np.ndarray:
         cell = row[column] if column < len(row) else ""
         value = _number(cell)
         if value is None or not math.isfinite(value):
-            raise ValueError(f"{p}: line {number}: expected a finite number, got {cell!r}")
+            raise ValueError(f"{p}: line {number}: expected a finite number, got {cell!r} (write it in ASCII decimal "
+                             "digits, such as -0.5 or 1e-3)")
         if abs(value) > MAX_ABS_ACTION:  # beyond float32 it would be stored as inf
             raise ValueError(f"{p}: line {number}: the action {cell} is beyond ±{MAX_ABS_ACTION:g} (the pendulum's torque "
                              "is at most ±2); check the column's unit")
