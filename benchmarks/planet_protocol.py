@@ -35,6 +35,7 @@ from typing import Any
 from baselines import COST_S, PRESETS, BenchConfig, data_file, planet_scores, planet_table_runs, sweep_episodes
 from common import farm_main, machine, machine_words, score_cells, write_page
 
+from piga.cli.common import positive_int
 from piga.io.atomic import write_json
 from piga.io.pool import JobRecords, RecordedJob, run_recorded
 
@@ -88,6 +89,8 @@ class Job:
     cfg: BenchConfig
     folder: Path
     runs: Path
+    workers: int = 1
+    """Processes that play the scored episodes (the same episodes and scores as one; not part of the record's spec)."""
 
 
 def train(job: Job) -> float:
@@ -127,7 +130,7 @@ def run_job(job: Job) -> dict[str, Any]:
     metrics = json.loads((run / "metrics.json").read_text())
     return {"machine": machine(), "train_seconds": seconds, "steps": metrics.get("steps"),
             "iterative": metrics.get("iterative"),
-            **planet_scores(run, job.cfg)}
+            **planet_scores(run, job.cfg, workers=job.workers)}
 
 
 def estimate_hours(plan: Plan, cfg: BenchConfig) -> float:
@@ -180,6 +183,9 @@ def main(argv: list[str] | None = None) -> int:
                    help="optimiser steps on the seed sequences before the first round (default %(default)s)")
     p.add_argument("--runs", type=Path, default=Path("results/baselines_runs"),
                    help="the baselines benchmark's folder: its data files and records (default %(default)s)")
+    p.add_argument("--workers", type=positive_int, default=1,
+                   help="processes that play a job's scored episodes, one torch thread each (the same episodes and "
+                   "scores as one; default %(default)s)")
     p.add_argument("--preset", choices=sorted(PRESETS), default="budget", help="the baselines preset (default %(default)s)")
     p.add_argument("--out", type=Path, default=Path("results/planet_protocol"), help="output prefix (default %(default)s)")
     args = p.parse_args(argv)
@@ -201,7 +207,7 @@ def main(argv: list[str] | None = None) -> int:
             name = f"protocol-n{n}-s{seed}"
             spec = {"plan": plan.__dict__, "seed": seed, "preset": args.preset, "overrides": cfg.overrides,
                     "episodes": cfg.planet_episode_count, "data_seed": cfg.data_seed}
-            jobs.append(RecordedJob(name, spec, Job(name, plan, seed, cfg, folder, args.runs)))
+            jobs.append(RecordedJob(name, spec, Job(name, plan, seed, cfg, folder, args.runs, args.workers)))
     todo = [job for job in jobs if records.kept(job.name, job.spec) is None]
     print(f"{len(todo)} of {len(jobs)} job(s) to run, about "
           f"{sum(estimate_hours(job.args.plan, cfg) for job in todo):.1f} h on one core (less where a run continues)",

@@ -67,6 +67,27 @@ def test_each_budget_runs_once_and_sits_beside_the_tables_runs(protocol: Any, tm
     calls.clear()
     assert protocol.main(args) == 0 and calls == []  # the record is kept
     assert "0 of 1 job(s) to run" in capsys.readouterr().out
+    assert protocol.main([*args, "--workers", "2"]) == 0 and calls == []  # workers play the same episodes: kept too
+
+
+def test_workers_play_the_scored_episodes(protocol: Any, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    seen: list[int] = []
+
+    def train(job):
+        run = job.folder / job.name
+        run.mkdir(parents=True)
+        (run / "metrics.json").write_text(json.dumps({"steps": 12000, "iterative": {"rounds": job.plan.rounds}}))
+        return 1.0
+
+    def evaluate(kind, run, cfg, gravity_mult=1.0, episodes=None, workers=1, **job):
+        seen.append(workers)
+        return {"episodes": episodes or 20, "success_rate": 1.0, "mean_return": -150.0}
+
+    monkeypatch.setattr(protocol, "train", train)
+    monkeypatch.setattr(sys.modules[protocol.planet_scores.__module__], "evaluate", evaluate)
+    (tmp_path / "runs" / "records").mkdir(parents=True)
+    args = ["--runs", str(tmp_path / "runs"), "--out", str(tmp_path / "protocol"), "--sequences", "100", "--workers", "2"]
+    assert protocol.main(args) == 0 and seen == [2, 2]
 
 
 def test_a_budget_the_table_does_not_have_is_refused(protocol: Any, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
