@@ -112,7 +112,25 @@ def test_the_baselines_episodes_are_the_recorded_ones(name: str, kind: str, step
     torch.set_num_threads(1)
     job = ControlJob(kind, replace(EPISODES, steps=steps), MPC, model_dir=str(runs[name]))
     assert isinstance(build_agent(job), Agent)
-    assert _without_timing(run_job(job)) == RECORDED[name]
+    # the trained networks act in float32, whose kernels round differently on another CPU (vector widths): returns
+    # moved by 1e-9 relative on an Intel Xeon against records made on an AMD EPYC; every other field is exact
+    _assert_close(_without_timing(run_job(job)), RECORDED[name], rel=1e-6)
+
+
+def _assert_close(value: Any, recorded: Any, rel: float) -> None:
+    """``value == recorded``, but floats within ``rel`` (nested tuples, lists and dicts)."""
+    if isinstance(recorded, float):
+        assert value == pytest.approx(recorded, rel=rel)
+    elif isinstance(recorded, dict):
+        assert isinstance(value, dict) and value.keys() == recorded.keys()
+        for key in recorded:
+            _assert_close(value[key], recorded[key], rel)
+    elif isinstance(recorded, (list, tuple)):
+        assert isinstance(value, (list, tuple)) and len(value) == len(recorded)
+        for v, r in zip(value, recorded):
+            _assert_close(v, r, rel)
+    else:
+        assert value == recorded
 
 
 def test_a_summary_survives_its_json_record() -> None:

@@ -199,7 +199,12 @@ def test_the_engines_reproduce_the_recorded_values(group: str) -> None:
     for key, value in values.items():
         assert key in recorded, f"{key} was not recorded"
         atol = _tolerance(key)
-        if atol == 0.0:
+        if atol == 0.0 and np.asarray(value).dtype == np.float32:
+            # the same operations in the same order, but torch's float32 kernels round differently on another CPU
+            # (vector widths): 2e-5 relative on an Intel Xeon against records made on an AMD EPYC, up to 1.6e-4 where
+            # gravity's bodies pass close (a close pass amplifies the last bits); a changed engine moves far more
+            np.testing.assert_allclose(value, recorded[key], rtol=1e-3, atol=1e-3, err_msg=key)
+        elif atol == 0.0:
             np.testing.assert_array_equal(value, recorded[key], err_msg=key)
         else:
             np.testing.assert_allclose(value, recorded[key], atol=atol, rtol=atol, err_msg=key)

@@ -210,7 +210,7 @@ def test_cli_curriculum_fraction_plans_the_horizon_and_a_sum_of_one_is_refused(
     assert code in FINISHED, err
     config = json.loads((out / "config.json").read_text())
     assert config["train"]["curriculum_fraction"] == 0 and config["plan"]["curriculum_steps"] == 0
-    assert "no autoencoder warm-up, no curriculum (T_pred 10 from the first step)" in stdout
+    assert "no warm-up, no curriculum (T_pred 10 from the first step)" in stdout
     refused = tmp_path / "refused"
     code, _, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(refused), "--warmup-fraction", "0.5",
                                   "--curriculum-fraction", "0.5", "--quiet", capsys=capsys)
@@ -251,7 +251,7 @@ def test_short_sequences_shorten_the_rollout_to_what_they_hold(tmp_path: Path,
     code, out, err = run_in_process(PROG, cli.main, str(data), "--out", str(tmp_path / "r"), "--batch-size", "4",
                                     "--epochs", "1", "--warmup-fraction", "0", "--quiet", capsys=capsys)
     assert code in FINISHED, err
-    assert "T_pred 1 -> 6" in out and "predicts 6 frames per window, not the recipe's 10" in err
+    assert "T_pred 6 from the first step" in out and "predicts 6 frames per window, not the recipe's 10" in err
     assert load_model(tmp_path / "r")[0].config.pred_frames == 6
 
 
@@ -278,8 +278,8 @@ def test_cli_interrupted_first_epoch_writes_nothing_and_rerun_works(
     assert not out.exists()
     with monkeypatch.context() as m:  # interrupted in epoch 2: epoch 1's checkpoint and the record stay
         _poison(m, after_calls=3, error=KeyboardInterrupt)
-        code, _, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), *SMALL, "--epochs", "3",
-                                      capsys=capsys)
+        code, _, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), *SMALL[2:], "--epochs", "3",
+                                      capsys=capsys)  # SMALL without its --epochs 1
     assert code == 130 and "holds epoch 1; continue with --resume" in err, err
     first = json.loads((out / "config.json").read_text())
     assert first["command"].startswith(PROG) and "--epochs 3" in first["command"] and "resumed" not in first

@@ -212,9 +212,10 @@ class TrainPlan:
         """One line, e.g. "5400 steps = 16 epochs x 337 steps (10800 windows); warm-up 216, curriculum 594 (T 1->10), average of the last 337"
         (no average for a model without physical parameters, ``physics`` False; ``autoencoder`` False, a run that
         never trains on L_rec (``ModelConfig.loss`` "pred-only"): its warm-up steps predict one frame)."""
-        warmup = ("no autoencoder warm-up" if not self.warmup_steps
-                  else f"autoencoder warm-up {self.warmup_steps} steps" if autoencoder
-                  else f"no autoencoder warm-up (its {self.warmup_steps} steps predict 1 frame)")
+        if autoencoder:
+            warmup = f"autoencoder warm-up {self.warmup_steps} steps" if self.warmup_steps else "no warm-up"
+        else:
+            warmup = "no autoencoder warm-up" + (f" (its {self.warmup_steps} steps predict 1 frame)" if self.warmup_steps else "")
         curriculum = (f"curriculum {self.curriculum_steps} steps (T_pred 1 -> {pred_frames})" if self.curriculum_steps
                       else f"no curriculum (T_pred {pred_frames} from the first step)")
         return (f"{self.total_steps} steps = {self.epochs} epoch{'s' if self.epochs != 1 else ''} x {self.steps_per_epoch} "
