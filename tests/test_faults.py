@@ -580,7 +580,7 @@ def test_a_true_parameter_of_zero_is_printed_without_an_error() -> None:
 ])
 def test_planet_refuses_before_touching_out(data: str, argv: tuple[str, ...], needles: list[str], files: dict[str, Path],
                                             tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    refused("piga-baseline", ["planet", str(files[data]), "--out", str(tmp_path / "run"), *TINY_PLANET, *argv], capsys, *needles)
+    refused("piga-baseline", ["planet", str(files[data]), "--out", str(tmp_path / "run"), *_once(TINY_PLANET, argv)], capsys, *needles)
     assert _listing(tmp_path) == []
 
 
@@ -1428,8 +1428,8 @@ def test_control_sweep_warns_once_about_an_unconverged_run(tiny_piga_run: Path, 
 
 def test_planet_refuses_a_batch_that_cannot_fit(tiny_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """--batch-size 1e6 used to swap for ever."""
-    refused("piga-baseline", ["planet", str(tiny_data), "--out", str(tmp_path / "run"), *TINY_PLANET, "--batch-size",
-                              "1000000"], capsys, "a batch of 1000000 x 8 frames", "of memory")
+    refused("piga-baseline", ["planet", str(tiny_data), "--out", str(tmp_path / "run"), *_once(TINY_PLANET, ["--batch-size", "1000000"])],
+            capsys, "a batch of 1000000 x 8 frames", "of memory")
     assert _listing(tmp_path) == []
 
 
