@@ -30,8 +30,9 @@ from tqdm.auto import tqdm
 from agents.planet.config import PlanetTrainConfig, RSSMConfig
 from agents.planet.rssm import WorldModel, model_steps
 from agents.planet.run import load_planet
-from piga.data.schema import (DataFormatError, DatasetInfo, check_actions_file, check_frames_have_signal, inspect_dataset, load_actions,
-                              load_rewards, read_sequences, split_indices)
+from piga.data.schema import (DataFormatError, DatasetInfo, check_actions_file, check_frames_have_signal,
+                              check_pixel_pendulum_file, inspect_dataset, load_actions, load_rewards, read_sequences,
+                              split_indices)
 from piga.data.windows import SequenceReader, loads_whole
 from piga.io.resources import available_memory
 from piga.io.atomic import write_json
@@ -132,6 +133,10 @@ def check_planet_data(info: DatasetInfo, config: PlanetTrainConfig, repeat: int 
     if len(info.image_shape) == 3 and info.image_shape[2] != 1:
         raise DataFormatError(f"{info.path}: has colour frames {info.image_shape}; the PlaNet-style agent controls the "
                               "pixel pendulum from gray frames (collect the data with piga-collect)")
+    from envs import PIXEL_PENDULUM
+
+    if info.attrs.get("env_id") == PIXEL_PENDULUM and "env_config" in info.attrs:  # frames its env would not render
+        check_pixel_pendulum_file(info, f"the PlaNet-style agent learns the pictures that {PIXEL_PENDULUM} renders")
     check_frames_have_signal(info.path)
     if info.steps < config.chunk_length * repeat:
         raise DataFormatError(f"{info.path}: sequences of {info.steps} frames are shorter than chunk_length "

@@ -35,15 +35,19 @@ def _effect(text: str) -> tuple[str, int | float]:
 
 
 def _color(text: str) -> tuple[float, float, float]:
-    """A colour as matplotlib reads it (a name, '#rrggbb', 'tab:blue', ...) -> RGB in [0, 1]."""
+    """A colour as matplotlib reads it (a name, '#rrggbb', 'tab:blue', ...) -> RGB in [0, 1]; an opaque one only."""
     import argparse
 
-    from matplotlib.colors import to_rgb
+    from matplotlib.colors import to_rgba
 
     try:
-        return tuple(float(c) for c in to_rgb(text))  # type: ignore[return-value]
+        *rgb, alpha = to_rgba(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"not a colour: {text!r} (use a name such as 'gold', or '#ffd91a')") from None
+    if alpha != 1:  # the scene draws opaque balls: a see-through colour would be silently drawn solid
+        raise argparse.ArgumentTypeError(f"{text!r} is {'transparent' if alpha == 0 else 'see-through'} (alpha "
+                                         f"{alpha:g}); the balls are drawn opaque: give an opaque colour")
+    return tuple(float(c) for c in rgb)  # type: ignore[return-value]
 
 
 def _env_option(text: str) -> tuple[str, str]:

@@ -130,10 +130,15 @@ USER_ERRORS: tuple[type[BaseException], ...] = (
 
 
 def command_line(prog: str, argv: Sequence[str] | None) -> str:
-    """The command as typed, for records: ``prog`` and ``argv`` (default: this process's arguments)."""
+    """The command as typed, for records: ``prog`` and ``argv`` (default: this process's arguments).
+
+    Under a non-UTF-8 locale (``LC_ALL=C`` with ``PYTHONUTF8=0``) Python holds the bytes of a non-ASCII argument as
+    lone surrogates, which no UTF-8 record (an HDF5 attribute, JSON) can store; they are turned back into the bytes
+    typed and read as UTF-8 (a byte that is not UTF-8 becomes U+FFFD), so ``lc_ü.h5`` is recorded as typed."""
     import shlex
 
-    return shlex.join([prog, *(sys.argv[1:] if argv is None else argv)])
+    words = [prog, *(sys.argv[1:] if argv is None else argv)]
+    return shlex.join(os.fsencode(w).decode("utf-8", "replace") for w in words)
 
 
 def warn_if_unconverged(prog: str, run_dir: str | os.PathLike[str]) -> None:

@@ -21,13 +21,20 @@ GRAY_WEIGHTS = np.array([0.2125, 0.7154, 0.0721])
 def scene_to_gray(img: np.ndarray, size: int) -> np.ndarray:
     """A gray or RGB(A) picture of any size, as the env would see it: uint8 (size, size).
 
-    Alpha is dropped. A picture that is not uint8 is scaled by its own maximum to 0..255.
+    An opaque alpha channel is dropped. A picture that is not uint8 is scaled by its own maximum to 0..255.
 
     Raises:
-        ValueError: ``img`` is not a 2-D gray or RGB(A) picture of at least 2x2 pixels.
+        ValueError: ``img`` is not a 2-D gray or RGB(A) picture of at least 2x2 pixels, or it has transparent pixels
+            (what the camera would see behind them is unknown).
     """
     img = np.asarray(img)
     if img.ndim == 3 and img.shape[2] == 4:
+        alpha = img[..., 3]
+        opaque = np.iinfo(alpha.dtype).max if np.issubdtype(alpha.dtype, np.integer) else 1.0
+        if (see_through := int(np.count_nonzero(alpha < opaque))) > 0:
+            raise ValueError(f"{see_through} of its {alpha.size} pixels are transparent (alpha below {opaque:g}), and "
+                             "what the camera would see behind them is unknown; flatten it onto the scene's background "
+                             "first")
         img = img[..., :3]
     if img.ndim == 3 and img.shape[2] == 1:
         img = img[..., 0]
@@ -63,7 +70,10 @@ def read_image(path: str | os.PathLike[str]) -> np.ndarray:
     if not p.is_file():
         raise FileNotFoundError(f"{p}: no such image file")
     try:
-        return np.asarray(iio.imread(p))
+        try:
+            return np.asarray(iio.imread(p, rotate=True))  # turned as its EXIF orientation says (a phone's photo)
+        except TypeError:  # a plugin that has no orientation to apply (tifffile)
+            return np.asarray(iio.imread(p))
     except Exception as exc:  # imageio raises many types for foreign or corrupt files
         if exc.__class__.__name__ == "DecompressionBombError":  # Pillow's guard against huge images
             raise ValueError(f"{p}: the image is too large to read (more than Pillow's limit of "

@@ -64,11 +64,11 @@ def frame_strip(
             ax.set_xticks([])
             ax.set_yticks([])
             if r == 0 and col_labels:
-                ax.set_title(col_labels[c], fontsize=7)
+                ax.set_title(col_labels[c], fontsize=7, parse_math=False)
             if c == 0 and row_labels:
-                ax.set_ylabel(row_labels[r], fontsize=7)
+                ax.set_ylabel(row_labels[r], fontsize=7, parse_math=False)
     if title:
-        fig.suptitle(title, fontsize=9)
+        fig.suptitle(title, fontsize=9, parse_math=False)  # a file's name or attribute may hold '$': text, not TeX
     fig.subplots_adjust(wspace=0.05, hspace=0.1)
     return fig
 

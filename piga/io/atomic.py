@@ -31,8 +31,9 @@ def check_writable_target(path: str | os.PathLike[str], overwrite: bool) -> Path
     target = Path(path)
     if target.is_dir():
         raise IsADirectoryError(f"{target} is a folder, not a file path")
-    if target.exists() and not overwrite:
-        raise OutputExistsError(f"{target} exists; pass --overwrite to replace it")
+    if os.path.lexists(target) and not overwrite:  # a link to nothing too: os.replace would replace the link
+        raise OutputExistsError(f"{target} exists{' (a link to a missing file)' if not target.exists() else ''}; "
+                                "pass --overwrite to replace it")
     folder = target.parent if str(target.parent) else Path(".")
     if not folder.is_dir():
         blocking = next((p for p in (folder, *folder.parents) if p.exists()), None)
@@ -52,12 +53,27 @@ def check_folder_target(folder: str | os.PathLike[str], flag: str = "--out") -> 
         NotADirectoryError: naming the file in the way.
     """
     path = Path(folder)
+    try:
+        str(path).encode("utf-8")
+    except UnicodeEncodeError:  # TensorBoard's writer encodes its folder's name as UTF-8, strictly
+        raise ValueError(f"{flag} {path}: the name is not UTF-8 text in this locale ({_locale_name()}), and a run's "
+                         "logs cannot be written under it; use an ASCII name or a UTF-8 locale (LC_ALL=C.UTF-8)") from None
+    if path.is_symlink() and not path.exists():
+        raise NotADirectoryError(f"{flag} {path} is a link to {os.readlink(path)}, which does not exist; remove the "
+                                 "link or make its target first")
     if path.exists() and not path.is_dir():
         raise NotADirectoryError(f"{flag} {path} is a file, not a folder")
     blocking = next((p for p in path.parents if p.exists()), None)
     if blocking is not None and not blocking.is_dir():
         raise NotADirectoryError(f"{flag} {path}: {blocking} is a file, not a folder, so {path} cannot be made there")
     return path
+
+
+def _locale_name() -> str:
+    """The locale of text, as a message names it (``C``, ``POSIX``, ``en_US.ISO-8859-1``)."""
+    import locale
+
+    return locale.setlocale(locale.LC_CTYPE) or "C"
 
 
 def partial_path(target: Path) -> Path:
@@ -106,7 +122,7 @@ def atomic_output(path: str | os.PathLike[str], overwrite: bool = False) -> Iter
     tmp = partial_path(target)
     try:
         yield tmp
-        if target.exists() and not overwrite:  # appeared while we worked
+        if os.path.lexists(target) and not overwrite:  # appeared while we worked
             raise OutputExistsError(f"{target} appeared while writing; pass --overwrite to replace it")
         os.replace(tmp, target)
     finally:

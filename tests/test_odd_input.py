@@ -1,0 +1,112 @@
+"""Odd but legal input: names with '$', non-UTF-8 locales, dangling links, photos turned by EXIF, see-through pixels."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shlex
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from piga.data.scene import read_image, scene_to_gray
+from piga.io.atomic import OutputExistsError, check_folder_target, check_writable_target
+from tests.helpers import ENV
+
+
+def test_a_link_to_nothing_is_not_replaced_without_overwrite(tmp_path: Path) -> None:
+    """os.replace would replace the link itself, silently, where Path.exists() says there is nothing."""
+    link = tmp_path / "d.h5"
+    link.symlink_to(tmp_path / "missing.h5")
+    with pytest.raises(OutputExistsError, match="a link to a missing file"):
+        check_writable_target(link, overwrite=False)
+    assert check_writable_target(link, overwrite=True) == link
+    folder = tmp_path / "run"
+    folder.symlink_to(tmp_path / "gone")
+    with pytest.raises(NotADirectoryError, match="does not exist"):
+        check_folder_target(folder)
+
+
+def test_a_run_folder_name_that_is_not_utf8_in_this_locale_is_refused(tmp_path: Path) -> None:
+    """Under LC_ALL=C with PYTHONUTF8=0, 'rün' arrives as lone surrogates, which TensorBoard's writer cannot encode."""
+    with pytest.raises(ValueError, match="LC_ALL=C.UTF-8"):
+        check_folder_target(tmp_path / "r\udcc3\udcbcn")
+    assert check_folder_target(tmp_path / "rün") == tmp_path / "rün"
+
+
+def test_the_recorded_command_is_utf8_under_a_c_locale(tmp_path: Path) -> None:
+    """The bytes of a non-ASCII name, held as surrogates under a C locale, are recorded as the UTF-8 text typed."""
+    code = ("import sys; from piga.cli.common import command_line; "
+            "print(ascii(command_line('piga-collect', sys.argv[1:])))")
+    env = {**ENV, "LC_ALL": "C", "LANG": "C", "PYTHONUTF8": "0", "PYTHONCOERCECLOCALE": "0"}
+    out = subprocess.run([sys.executable, "-c", code, "--out", "lc_ü.h5"], capture_output=True, text=True, env=env)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == ascii(shlex.join(["piga-collect", "--out", "lc_ü.h5"]))
+
+
+def test_a_photo_is_read_turned_as_its_exif_says(tmp_path: Path) -> None:
+    from PIL import Image
+
+    picture = np.zeros((20, 30, 3), np.uint8)
+    picture[:5] = 255  # a white band at the top of the stored pixels
+    image = Image.fromarray(picture)
+    exif = image.getexif()
+    exif[0x0112] = 3  # orientation: turned 180 degrees
+    image.save(tmp_path / "photo.jpg", exif=exif, quality=95)
+    seen = read_image(tmp_path / "photo.jpg")  # (20, 30, 3)
+    assert seen[:5].mean() < 10 and seen[-5:].mean() > 240  # the band is at the bottom, as a viewer shows it
+
+
+def test_see_through_pixels_are_refused_and_an_opaque_alpha_is_dropped() -> None:
+    rgba = np.full((8, 8, 4), 255, np.uint8)
+    assert scene_to_gray(rgba, 4).tolist() == scene_to_gray(rgba[..., :3], 4).tolist()
+    rgba[0, 0, 3] = 128
+    with pytest.raises(ValueError, match="1 of its 64 pixels are transparent"):
+        scene_to_gray(rgba, 4)
+    deep = np.full((8, 8, 4), 65535, np.uint16)  # a 16-bit PNG: opaque is 65535
+    assert scene_to_gray(deep, 4).shape == (4, 4)
+
+
+@pytest.mark.parametrize("colour, ok", [("red", True), ("#ff000080", False), ("none", False), ("#00ff00ff", True)])
+def test_a_see_through_ball_colour_is_refused(colour: str, ok: bool) -> None:
+    from piga.cli.collect import _color
+
+    if ok:
+        assert len(_color(colour)) == 3
+    else:
+        with pytest.raises(argparse.ArgumentTypeError, match="opaque"):
+            _color(colour)
+
+
+def test_a_dollar_in_a_file_name_is_drawn_as_text(tmp_path: Path) -> None:
+    """matplotlib reads '$...$' as TeX: 'cost_$x^$.h5' stopped piga-show with a parse error."""
+    from piga.cli import collect, show
+
+    data = tmp_path / "cost_$x^$.h5"
+    assert collect.main(["--out", str(data), "--sequences", "2", "--steps", "3", "--workers", "1", "--split", "2,0,0",
+                         "--quiet"]) == 0
+    assert show.main([str(data), "--out", str(tmp_path / "s.png"), "--frames", "2"]) == 0
+    assert (tmp_path / "s.png").stat().st_size > 0
+    assert os.path.exists(data)
+
+
+def test_planet_refuses_a_pixel_pendulum_file_whose_env_config_contradicts_its_frames(tmp_path: Path) -> None:
+    """piga-control would render frames of env_config's size for a model that learned others."""
+    import h5py
+
+    from agents.planet.config import PlanetTrainConfig
+    from agents.planet.train import check_planet_data
+    from piga.cli import collect
+    from piga.data.schema import DataFormatError, inspect_dataset
+
+    data = tmp_path / "d.h5"
+    assert collect.main(["--out", str(data), "--sequences", "2", "--steps", "60", "--workers", "1", "--split", "2,0,0",
+                         "--quiet"]) == 0
+    check_planet_data(inspect_dataset(data), PlanetTrainConfig())  # as collected: accepted
+    with h5py.File(data, "a") as f:
+        f.attrs["env_config"] = '{"image_size": 32}'
+    with pytest.raises(DataFormatError, match="image_size 32"):
+        check_planet_data(inspect_dataset(data), PlanetTrainConfig())
