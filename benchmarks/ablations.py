@@ -23,7 +23,7 @@ Each (system, variant, seed) is one job of piga's job runner (:func:`piga.io.poo
 ``benchmarks/prediction.py``: one torch thread, ``--jobs N`` at once (or ``--ray``); each job's record,
 ``OUT_runs/records/NAME.json`` (settings, scores, the slots' templates as a compressed array, exit status, minutes,
 machine, commit), is kept while its settings are the job's, so that the same command continues a stopped
-benchmark without the data and run folders. Writes ``OUT.json``, ``OUT.md`` and ``OUT-slots.png``.
+benchmark without the data and run folders. Writes ``OUT.json``, ``OUT.md`` and, with slot runs, ``OUT-slots.png``.
 """
 
 from __future__ import annotations
@@ -388,7 +388,8 @@ def main(argv: list[str] | None = None) -> int:
               "runs": done,
               "summary": summary(done, cfg)}
     write_json(args.out.with_suffix(".json"), record)
-    save_figure(slots_figure(record), args.out.parent / f"{args.out.name}-slots.png")
+    if any(name.startswith("slots") for rows in record["summary"].values() for name in rows):  # else nothing to draw
+        save_figure(slots_figure(record), args.out.parent / f"{args.out.name}-slots.png")
     with atomic_output(args.out.with_suffix(".md"), overwrite=True) as tmp:
         Path(tmp).write_text(markdown(record, args.out))
     return 0

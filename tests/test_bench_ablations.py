@@ -116,6 +116,14 @@ def test_the_page_figure_and_json_are_written_and_a_rerun_reuses_the_records(abl
     assert [_variant(c) for c in calls if c[0] == "piga-train-model"] == ["slots5"]
 
 
+def test_without_slot_runs_no_slots_figure_is_written(ablations, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    _stand_ins(ablations, monkeypatch)
+    out = tmp_path / "ablations"
+    assert ablations.main(["--out", str(out), "--jobs", "1", "--slots", "--schemes", "joint"]) == 0
+    assert out.with_suffix(".md").exists() and not (out.parent / "ablations-slots.png").exists()
+    assert "-slots.png" not in out.with_suffix(".md").read_text()
+
+
 def test_a_failed_job_ends_with_one_line_and_keeps_the_records_before(ablations, tmp_path: Path,
                                                                      monkeypatch: pytest.MonkeyPatch,
                                                                      capsys: pytest.CaptureFixture[str]) -> None:
