@@ -132,9 +132,9 @@ class PixelPendulumConfig:
             if name == "blur" and value > self.image_size / 2:
                 raise ValueError(f"effect blur={value:g} px would blur the pendulum away in a {self.image_size} px frame; "
                                  f"use a sigma of at most {self.image_size / 2:g} px")
-            if name == "shift" and abs(value) >= self.image_size:
-                raise ValueError(f"effect shift={value:g} px would move the pendulum out of a {self.image_size} px frame; "
-                                 f"use |shift| < {self.image_size}")
+            if name == "shift" and abs(value) >= self.image_size / 2:  # the pivot, at the centre, would leave the frame
+                raise ValueError(f"effect shift={value:g} px would move the pendulum out of a {self.image_size} px frame "
+                                 f"(its pivot out of view); use |shift| < {self.image_size / 2:g}")
         checks = {  # each field: whether it is in range, and its range in words
             "image_size": (self.image_size >= 8, "image_size >= 8"),
             "frame_stack": (self.frame_stack >= 1, "frame_stack >= 1"),

@@ -110,3 +110,44 @@ def test_planet_refuses_a_pixel_pendulum_file_whose_env_config_contradicts_its_f
         f.attrs["env_config"] = '{"image_size": 32}'
     with pytest.raises(DataFormatError, match="image_size 32"):
         check_planet_data(inspect_dataset(data), PlanetTrainConfig())
+
+
+def test_a_name_near_the_filesystems_limit_is_written_and_one_beyond_it_is_refused(tmp_path: Path) -> None:
+    """The temporary sibling '.NAME.partial-PID' of a 251-byte name was too long to create (an OSError naming the hidden
+    file, and a traceback from its cleanup)."""
+    from piga.io.atomic import atomic_output, partial_path, remove_stale_partials
+
+    target = tmp_path / ("a" * 251 + ".h5")
+    with atomic_output(target) as tmp:
+        tmp.write_text("x")
+    assert target.read_text() == "x" and len(os.fsencode(partial_path(target).name)) <= 255
+    stale = partial_path(target).with_name(partial_path(target).name.rsplit("-", 1)[0] + "-999999999")
+    stale.write_text("left by a killed run")
+    assert remove_stale_partials(target) == [stale]
+    with pytest.raises(ValueError, match="the name is 259 bytes, longer than the 255"):
+        check_writable_target(tmp_path / ("b" * 256 + ".h5"), overwrite=False)
+    with pytest.raises(ValueError, match="--out .*the name is 256 bytes"):
+        check_folder_target(tmp_path / ("c" * 256))
+
+
+def test_stale_partials_of_a_name_with_glob_characters_are_removed(tmp_path: Path) -> None:
+    from piga.io.atomic import partial_path, remove_stale_partials
+
+    target = tmp_path / "run[1].h5"
+    stale = partial_path(target).with_name(f".{target.name}.partial-999999999")
+    stale.write_text("left by a killed run")
+    (tmp_path / ".run1.h5.partial-999999999").write_text("another file's")
+    assert remove_stale_partials(target) == [stale]
+    assert (tmp_path / ".run1.h5.partial-999999999").exists()
+
+
+@pytest.mark.parametrize("shift, ok", [(31, True), (-31, True), (32, False), (-63, False)])
+def test_a_shift_that_moves_the_pivot_out_of_the_frame_is_refused(shift: float, ok: bool) -> None:
+    """shift=-63 passed the old check (|shift| < 64), collected, and then every frame was blank."""
+    from envs.pendulum import PixelPendulumConfig
+
+    if ok:
+        PixelPendulumConfig(effects=(("shift", shift),))
+    else:
+        with pytest.raises(ValueError, match="its pivot out of view"):
+            PixelPendulumConfig(effects=(("shift", shift),))

@@ -8,6 +8,7 @@ sits in the target's own folder.
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import json
 import math
 import os
@@ -29,6 +30,10 @@ def check_writable_target(path: str | os.PathLike[str], overwrite: bool) -> Path
             writable, or ``path`` is a folder.
     """
     target = Path(path)
+    limit = _name_max(next((p for p in target.parents if p.is_dir()), Path(".")))
+    if len(os.fsencode(target.name)) > limit:  # checked first: every look at the path would raise ENAMETOOLONG
+        raise ValueError(f"{target.name[:40]}...: the name is {len(os.fsencode(target.name))} bytes, longer than the "
+                         f"{limit} that the filesystem takes; give a shorter name")
     if target.is_dir():
         raise IsADirectoryError(f"{target} is a folder, not a file path")
     if os.path.lexists(target) and not overwrite:  # a link to nothing too: os.replace would replace the link
@@ -58,6 +63,9 @@ def check_folder_target(folder: str | os.PathLike[str], flag: str = "--out") -> 
     except UnicodeEncodeError:  # TensorBoard's writer encodes its folder's name as UTF-8, strictly
         raise ValueError(f"{flag} {path}: the name is not UTF-8 text in this locale ({_locale_name()}), and a run's "
                          "logs cannot be written under it; use an ASCII name or a UTF-8 locale (LC_ALL=C.UTF-8)") from None
+    if len(os.fsencode(path.name)) > (limit := _name_max(next((p for p in path.parents if p.is_dir()), Path(".")))):
+        raise ValueError(f"{flag} {path.name[:40]}...: the name is {len(os.fsencode(path.name))} bytes, longer than the "
+                         f"{limit} that the filesystem takes; give a shorter name")
     if path.is_symlink() and not path.exists():
         raise NotADirectoryError(f"{flag} {path} is a link to {os.readlink(path)}, which does not exist; remove the "
                                  "link or make its target first")
@@ -76,9 +84,26 @@ def _locale_name() -> str:
     return locale.setlocale(locale.LC_CTYPE) or "C"
 
 
+def _name_max(folder: Path) -> int:
+    """The longest file name, in bytes, that ``folder``'s filesystem takes (255 where it does not say)."""
+    try:
+        return os.pathconf(folder if str(folder) else ".", "PC_NAME_MAX")
+    except (OSError, ValueError):
+        return 255
+
+
+def _partial_prefix(target: Path) -> str:
+    """``.NAME.partial-``, or for a name too long to take the prefix and a PID, ``.DIGEST.partial-`` (a digest of the
+    name), so that a legal name near the filesystem's limit can still be written through its temporary sibling."""
+    prefix = f".{target.name}.partial-"
+    if len(os.fsencode(prefix)) + 10 > _name_max(target.parent):  # 10: room for any PID
+        prefix = f".{hashlib.sha1(os.fsencode(target.name)).hexdigest()[:20]}.partial-"
+    return prefix
+
+
 def partial_path(target: Path) -> Path:
     """The temporary sibling used while ``target`` is being written (unique per process)."""
-    return target.with_name(f".{target.name}.partial-{os.getpid()}")
+    return target.with_name(f"{_partial_prefix(target)}{os.getpid()}")
 
 
 def _alive(pid: int) -> bool:
@@ -98,8 +123,11 @@ def remove_stale_partials(target: Path) -> list[Path]:
     of a live PID are left alone (another run may be writing). Returns the files removed.
     """
     removed = []
-    for path in target.parent.glob(f".{target.name}.partial-*"):
-        pid = path.name.rsplit("-", 1)[-1]
+    prefix = _partial_prefix(target)
+    for path in target.parent.iterdir() if target.parent.is_dir() else ():
+        if not path.name.startswith(prefix):
+            continue
+        pid = path.name[len(prefix):]
         if pid.isdigit() and int(pid) != os.getpid() and not _alive(int(pid)):
             with contextlib.suppress(FileNotFoundError):
                 path.unlink()
@@ -126,7 +154,7 @@ def atomic_output(path: str | os.PathLike[str], overwrite: bool = False) -> Iter
             raise OutputExistsError(f"{target} appeared while writing; pass --overwrite to replace it")
         os.replace(tmp, target)
     finally:
-        with contextlib.suppress(FileNotFoundError):
+        with contextlib.suppress(OSError):  # gone already (renamed, or never made)
             tmp.unlink()
 
 
