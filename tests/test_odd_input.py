@@ -151,3 +151,15 @@ def test_a_shift_that_moves_the_pivot_out_of_the_frame_is_refused(shift: float, 
     else:
         with pytest.raises(ValueError, match="its pivot out of view"):
             PixelPendulumConfig(effects=(("shift", shift),))
+
+
+def test_an_output_that_is_an_input_is_refused_even_with_overwrite(tmp_path: Path) -> None:
+    """piga-import --out ACTIONS.csv --overwrite replaced the actions it read."""
+    from piga.io.atomic import check_not_an_input
+
+    actions = tmp_path / "a.csv"
+    actions.write_text("0.5\n")
+    (tmp_path / "link.csv").symlink_to(actions)
+    with pytest.raises(ValueError, match="is the actions file"):
+        check_not_an_input(tmp_path / "link.csv", {"recording": tmp_path / "v.mp4", "actions file": actions})
+    check_not_an_input(tmp_path / "new.h5", {"actions file": actions})  # another path: accepted

@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from piga.io.atomic import check_writable_target
+from piga.io.atomic import check_not_an_input, check_writable_target
 from piga.data.collect import split_counts
 from piga.data.schema import MAX_ABS_ACTION, MAX_DT, MIN_DT, MIN_IMAGE_SIZE, SPLITS, DatasetWriter
 from piga.data.scene import read_image, scene_to_gray
@@ -302,6 +302,7 @@ def import_recording(
         OutputExistsError: ``out`` exists and ``overwrite`` is False.
     """
     target = check_writable_target(out, overwrite)  # before any decoding
+    check_not_an_input(target, {"recording": recording, "actions file": actions})
     recording, actions = Path(recording), Path(actions)
     if not recording.exists():
         raise FileNotFoundError(f"{recording}: no such video file or frame folder")

@@ -50,6 +50,23 @@ def check_writable_target(path: str | os.PathLike[str], overwrite: bool) -> Path
     return target
 
 
+def check_not_an_input(target: str | os.PathLike[str], inputs: dict[str, str | os.PathLike[str]],
+                       flag: str = "--out") -> None:
+    """Refuses an output that is one of the command's inputs, by any name (a link, ``./``): ``--overwrite`` would
+    replace what it reads.
+
+    Raises:
+        ValueError: naming the input.
+    """
+    for what, path in inputs.items():
+        try:
+            same = os.path.samefile(target, path)
+        except OSError:  # either is missing: not the same file
+            continue
+        if same:
+            raise ValueError(f"{flag} {target} is the {what} ({path}), which it would replace; write to another path")
+
+
 def check_folder_target(folder: str | os.PathLike[str], flag: str = "--out") -> Path:
     """Fails early, before any work, if the output folder ``folder`` (given as ``flag``) cannot be made: it is a
     file, or a file stands where one of its missing parents would go.
