@@ -1135,6 +1135,49 @@ def test_train_resume_refuses_what_it_would_ignore(extra: list[str], needles: li
             *needles)
 
 
+def _edit_checkpoint(change: Callable[[dict[str, Any]], None]) -> Callable[[Path], None]:
+    def edit(run: Path) -> None:
+        import torch
+
+        payload = torch.load(run / "checkpoint.pt", weights_only=False)
+        change(payload)
+        torch.save(payload, run / "checkpoint.pt")
+
+    return edit
+
+
+@pytest.mark.parametrize("change, needles", [
+    (lambda c: c.pop("state"), ["it lacks the entry 'state'"]),  # an internal error (KeyError)
+    (lambda c: c.pop("optimizer"), ["it lacks the entry 'optimizer'"]),
+    (lambda c: c["state"].__setitem__("bogus", 1), ["not a readable piga checkpoint", "'bogus'"]),
+    (lambda c: c["state"].__setitem__("step", -5), ["its step is -5, not a count"]),  # "trained 1 epoch (-5 steps)"
+])
+def test_train_resume_refuses_a_checkpoint_it_cannot_continue(change: Callable[[dict[str, Any]], None],
+                                                              needles: list[str], tiny_piga_run: Path, tiny_data: Path,
+                                                              tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    run = _run_copy(tiny_piga_run, tmp_path / "run", _edit_checkpoint(change))
+    before = _listing(run)
+    refused("piga-train-model", [str(tiny_data), "--out", str(run), "--resume", "--epochs", "2", "--quiet"], capsys,
+            *needles)
+    assert _listing(run) == before
+
+
+@pytest.mark.parametrize("kind, change, needles", [
+    ("planet", lambda c: c.pop("optimizer"), ["it lacks the entry 'optimizer'"]),
+    ("planet", lambda c: c["state"].__setitem__("step", "many"), ["its step is 'many', not a count"]),
+    ("ddpg", lambda c: c.pop("episodes"), ["it lacks the entry 'episodes'"]),
+])
+def test_baseline_resume_refuses_a_checkpoint_it_cannot_continue(kind: str, change: Callable[[dict[str, Any]], None],
+                                                                 needles: list[str], baseline_runs: dict[str, Path],
+                                                                 tiny_data: Path, tmp_path: Path,
+                                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    run = _run_copy(baseline_runs[kind], tmp_path / "run", _edit_checkpoint(change))
+    before = _listing(run)
+    argv = (["planet", str(tiny_data), "--steps", "4"] if kind == "planet" else ["ddpg", "--obs", "state", "--steps", "400"])
+    refused("piga-baseline", [*argv, "--out", str(run), "--resume", "--quiet"], capsys, *needles)
+    assert _listing(run) == before
+
+
 def test_train_resume_refuses_a_file_whose_dt_changed(tiny_piga_run: Path, tiny_data: Path, tmp_path: Path,
                                                       capsys: pytest.CaptureFixture[str]) -> None:
     """The fingerprint covers the arrays, not the attributes: a file whose 'dt' was edited was continued on, the
@@ -1253,7 +1296,8 @@ def test_train_resume_says_the_file_has_changed(tiny_piga_run: Path, tiny_data: 
 def test_train_resume_without_its_record_says_it_rebuilds_it(tiny_piga_run: Path, tiny_data: Path, tmp_path: Path,
                                                               capsys: pytest.CaptureFixture[str]) -> None:
     """The checkpoint holds the recipe and the model, so a lost config.json does not stop a resume; the rebuilt
-    record says that the first command is unknown, and so does one line on stderr."""
+    record says that the first command is unknown, and so does a note on stdout (stderr is kept for an error's one
+    line, which may follow: a checkpoint that cannot continue)."""
     import json
 
     from tests.helpers import run_in_process
@@ -1262,10 +1306,10 @@ def test_train_resume_without_its_record_says_it_rebuilds_it(tiny_piga_run: Path
 
     run = _run_copy(tiny_piga_run, tmp_path / "a")
     assert not (run / "config.json").exists()  # a run trained through the library has none
-    code, _, err = run_in_process("piga-train-model", cli.main, str(tiny_data), "--out", str(run), "--resume",
-                                  "--epochs", "2", "--quiet", capsys=capsys)
+    code, out, err = run_in_process("piga-train-model", cli.main, str(tiny_data), "--out", str(run), "--resume",
+                                    "--epochs", "2", "--quiet", capsys=capsys)
     assert code in (0, NOT_CONVERGED), err
-    assert "config.json is missing; it is rewritten from the checkpoint" in err
+    assert "config.json is missing; it is rewritten from the checkpoint" in out
     record = json.loads((run / "config.json").read_text())
     assert record["command"] is None and len(record["resumed"]) == 1 and record["train"]["epochs"] == 2
 

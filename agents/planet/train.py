@@ -36,7 +36,7 @@ from piga.data.schema import (DataFormatError, DatasetInfo, check_actions_file, 
 from piga.data.windows import SequenceReader, loads_whole
 from piga.io.resources import available_memory
 from piga.io.atomic import write_json
-from piga.io.checkpoint import CHECKPOINT, RunKind, write_checkpoint
+from piga.io.checkpoint import CHECKPOINT, RunKind, check_counts, resuming_from, write_checkpoint
 from piga.io.device import module_device, resolve_device
 from piga.training.train import TrainingDiverged
 
@@ -270,10 +270,12 @@ def train_planet(
     best: dict[str, torch.Tensor] | None = None  # the weights of the lowest valid loss, on the CPU
     if resume:
         model, ckpt = load_planet(run_dir)
-        state = PlanetState(**ckpt["state"])
-        rng.bit_generator.state = ckpt["rng"]["numpy"]
-        generator.set_state(ckpt["rng"]["torch"])
-        best = ckpt.get("best_model")
+        with resuming_from(ckpt_path, RunKind.PLANET):
+            state = PlanetState(**ckpt["state"])
+            rng.bit_generator.state = ckpt["rng"]["numpy"]
+            generator.set_state(ckpt["rng"]["torch"])
+            best = ckpt.get("best_model")
+        check_counts(ckpt_path, RunKind.PLANET, step=state.step)
     else:
         torch.manual_seed(config.seed)  # the layers' initialisation
         model = WorldModel(rssm or rssm_config_for(info))
@@ -282,7 +284,8 @@ def train_planet(
     model.to(device)
     optimizer = torch.optim.Adam(model.parameters(), lr=config.lr, eps=config.adam_eps)
     if resume:
-        optimizer.load_state_dict(ckpt["optimizer"])
+        with resuming_from(ckpt_path, RunKind.PLANET):
+            optimizer.load_state_dict(ckpt["optimizer"])
     n_frames = min(config.max_sequences or info.split_counts["train"], info.split_counts["train"]) * info.sequence_bytes
     seqs = _Sequences(data, "train", config.max_sequences, extra_data,
                       stream=extra_data is None and not loads_whole(n_frames, available_memory()))

@@ -38,7 +38,8 @@ from agents.sb3.run import MODEL, sb3_class
 from envs.observations import EpisodeSeeds, FiniteActions, LatentObservation, NonFiniteAction, StateObservation
 from envs.pendulum import PixelPendulumConfig
 from piga.io.atomic import atomic_output, write_json
-from piga.io.checkpoint import CHECKPOINT, RunKind, read_checkpoint, unreadable, write_checkpoint
+from piga.io.checkpoint import (CHECKPOINT, RunKind, check_counts, read_checkpoint, resuming_from, unreadable,
+                                write_checkpoint)
 from piga.io.device import resolve_device
 
 __all__ = ["first_step_reaching", "make_env", "make_observation_env", "train_sb3"]
@@ -229,17 +230,20 @@ def train_sb3(config: SB3Config, run_dir: str | Path, autoencoder: str | Path | 
             raise unreadable(run_dir / CHECKPOINT, RunKind.DDPG, exc) from None
         # load() reseeded everything with the run's seed (SB3's _setup_model): put back the states
         # of the moment of the checkpoint
-        np.random.set_state(ckpt["rng"]["numpy"])
-        torch.set_rng_state(ckpt["rng"]["torch"])
-        if device.type == "cuda" and "cuda" in ckpt["rng"]:  # saved on a GPU, resumed on one
-            torch.cuda.set_rng_state(ckpt["rng"]["cuda"], device)
-        model.action_space.np_random.bit_generator.state = ckpt["rng"]["action_space"]
+        with resuming_from(run_dir / CHECKPOINT, RunKind.DDPG):
+            np.random.set_state(ckpt["rng"]["numpy"])
+            torch.set_rng_state(ckpt["rng"]["torch"])
+            if device.type == "cuda" and "cuda" in ckpt["rng"]:  # saved on a GPU, resumed on one
+                torch.cuda.set_rng_state(ckpt["rng"]["cuda"], device)
+            model.action_space.np_random.bit_generator.state = ckpt["rng"]["action_space"]
+            episodes = ckpt["episodes"]
+            history, elapsed = list(ckpt["history"]), float(ckpt["elapsed"])
+        check_counts(run_dir / CHECKPOINT, RunKind.DDPG, episodes=episodes)
         # the last chunk ended an episode, and its automatic reset drew episode k's start; draw it
         # again (SB3's env.seed() in load left a seed for the next reset: make it episode k's)
-        k = int(ckpt["episodes"]) - 1
+        k = int(episodes) - 1
         _episode_seeds(venv).episodes = k
         venv.seed(_episode_seeds(venv).seed_of(k))
-        history, elapsed = list(ckpt["history"]), float(ckpt["elapsed"])
     else:
         n_actions = venv.action_space.shape[0]
         policy_kwargs: dict[str, Any] = {"net_arch": list(config.net_arch)}

@@ -412,7 +412,7 @@ def _read_record(run_dir: Path) -> dict[str, Any]:
     except (OSError, ValueError) as exc:
         why = f"cannot be read ({type(exc).__name__})"
     print(f"{PROG}: note: {run_dir / 'config.json'} {why}; it is rewritten from the checkpoint, without the command "
-          "that started the run", file=sys.stderr)
+          "that started the run")  # on stdout: stderr is kept for the one line of an error that may follow
     return {"command": None}
 
 

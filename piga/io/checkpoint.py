@@ -15,9 +15,11 @@ This module imports torch only when a checkpoint is read or written.
 
 from __future__ import annotations
 
+import contextlib
 import enum
 import json
 import os
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -155,3 +157,28 @@ def unreadable(path: Path, kind: RunKind, exc: Exception, what: str | None = Non
                           "writes; restore the run's own file, or train the run again with --overwrite")
     return ValueError(f"{path}: not a readable {what} ({exc.__class__.__name__}: {_first_sentence(exc)}); "
                       "it may be truncated (a full disk, an interrupted copy): restore it, or train the run again with --overwrite")
+
+
+@contextlib.contextmanager
+def resuming_from(path: Path, kind: RunKind) -> Iterator[None]:
+    """Inside: a ``kind`` checkpoint's entries are read to continue its run; an entry missing or malformed (a field
+    of another version, an optimiser state of another model) leaves as the one-line :func:`unreadable` error
+    instead of an internal one. Only reading goes inside: a broad catch over a few lines of reading, not over
+    training."""
+    try:
+        yield
+    except Exception as exc:  # KeyError, TypeError (a field too many), ValueError (torch's state checks), ...
+        raise unreadable(path, kind, exc) from None
+
+
+def check_counts(path: Path, kind: RunKind, **counts: object) -> None:
+    """Refuses a checkpoint whose counts (``step=...``, ``epoch=...``) are not whole numbers of at least 0: a run
+    resumed from ``step -5`` would report nonsense.
+
+    Raises:
+        ValueError: naming the file and the count.
+    """
+    for name, value in counts.items():
+        if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+            raise ValueError(f"{path}: not a {kind.label} checkpoint that can continue: its {name} is {value!r}, not a "
+                             "count; restore the run's own file, or train the run again with --overwrite")

@@ -44,7 +44,7 @@ from piga.world.encoder import estimate_background
 from piga.world.model import SYSTEM_SHAPES, FrameModel, ModelConfig, frames_to_float
 from piga.world.physics import BouncingOptions, PendulumOptions
 from piga.world.variants import build_model
-from piga.io.checkpoint import CHECKPOINT, write_checkpoint
+from piga.io.checkpoint import CHECKPOINT, RunKind, check_counts, resuming_from, write_checkpoint
 from piga.io.runs import load_model
 from piga.data.windows import BlockShuffleSampler, SequenceWindows, loads_whole
 
@@ -671,9 +671,11 @@ def train(
         model, ckpt = load_model(run_dir, any_model=True)  # on the CPU, wherever it was saved
         model.to(device).train()
         optimizer = _optimizer(model, train_config)
-        optimizer.load_state_dict(ckpt["optimizer"])  # its moments follow the parameters to the device
-        state = TrainState(**ckpt["state"])
-        _set_rng_state(ckpt["rng"])
+        with resuming_from(ckpt_path, RunKind.PIGA):
+            optimizer.load_state_dict(ckpt["optimizer"])  # its moments follow the parameters to the device
+            state = TrainState(**ckpt["state"])
+            _set_rng_state(ckpt["rng"])
+        check_counts(ckpt_path, RunKind.PIGA, step=state.step, epoch=state.epoch)
     else:
         fitted = model_config_for(info, model_config, n_objects)
         check_trainable(info, fitted, train_config)
