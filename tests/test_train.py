@@ -505,3 +505,12 @@ def test_an_unreadable_metrics_record_is_said_not_skipped(tmp_path: Path, text: 
         (tmp_path / "metrics.json").write_text(text)
     warning = convergence_warning(tmp_path)
     assert warning is None if said is None else said in warning and "unknown" in warning and "\n" not in warning
+
+
+@pytest.mark.parametrize("convergence", ['"settled"', "[1]", '{"reason": 5}', "null"])
+def test_a_convergence_entry_of_another_form_gives_the_warning_without_its_reason(tmp_path: Path, convergence: str) -> None:
+    """A 'convergence' entry edited into a string was an internal error in piga-control (AttributeError)."""
+    from piga.io.runs import convergence_warning
+
+    (tmp_path / "metrics.json").write_text(f'{{"converged": false, "convergence": {convergence}}}')
+    assert convergence_warning(tmp_path) == f"warning: the run {tmp_path} did not converge: no reason recorded"

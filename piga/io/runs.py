@@ -113,7 +113,9 @@ def convergence_warning(run_dir: str | os.PathLike[str]) -> str | None:
         return f"warning: {path} is not a metrics record; whether the run converged is unknown"
     if metrics.get("converged", True) is not False:
         return None
-    reason = (metrics.get("convergence") or {}).get("reason", "no reason recorded")
+    convergence = metrics.get("convergence")
+    reason = convergence.get("reason") if isinstance(convergence, dict) else None
+    reason = reason if isinstance(reason, str) else "no reason recorded"
     return f"warning: the run {run_dir} did not converge: {reason}"
 
 
