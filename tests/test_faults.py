@@ -1178,6 +1178,28 @@ def test_baseline_resume_refuses_a_checkpoint_it_cannot_continue(kind: str, chan
     assert _listing(run) == before
 
 
+def test_a_checkpoint_whose_bytes_changed_is_refused(tiny_piga_run: Path, tmp_path: Path) -> None:
+    """torch.load read a checkpoint with 64 bytes overwritten in the middle, and piga-control ran it (exit 0)."""
+    from piga.io.checkpoint import RunKind, read_checkpoint
+
+    run = _run_copy(tiny_piga_run, tmp_path / "run")
+    size = (run / "checkpoint.pt").stat().st_size
+    with open(run / "checkpoint.pt", "r+b") as f:
+        f.seek(size // 2)
+        f.write(b"\xff" * 64)
+    with pytest.raises(ValueError, match="fails its checksum"):
+        read_checkpoint(run, RunKind.PIGA)
+
+
+def test_a_baseline_run_whose_record_is_not_an_object_names_the_record(baseline_runs: dict[str, Path], tmp_path: Path,
+                                                                       capsys: pytest.CaptureFixture[str]) -> None:
+    """A config.json of '[1, 2]' made the PlaNet-style checkpoint look like the wrong kind of run."""
+    run = _run_copy(baseline_runs["planet"], tmp_path / "run")
+    (run / "config.json").write_text("[1, 2]")
+    refused("piga-control", ["--model", str(run), "--episodes", "1", "--quiet"], capsys,
+            "config.json, the run's record, is not a run record", "restore the file")
+
+
 def test_train_resume_refuses_a_file_whose_dt_changed(tiny_piga_run: Path, tiny_data: Path, tmp_path: Path,
                                                       capsys: pytest.CaptureFixture[str]) -> None:
     """The fingerprint covers the arrays, not the attributes: a file whose 'dt' was edited was continued on, the

@@ -163,3 +163,8 @@ def test_an_output_that_is_an_input_is_refused_even_with_overwrite(tmp_path: Pat
     with pytest.raises(ValueError, match="is the actions file"):
         check_not_an_input(tmp_path / "link.csv", {"recording": tmp_path / "v.mp4", "actions file": actions})
     check_not_an_input(tmp_path / "new.h5", {"actions file": actions})  # another path: accepted
+
+
+def test_a_folder_name_on_the_way_beyond_the_limit_is_named(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="a folder's name on the way is 300 bytes"):
+        check_writable_target(tmp_path / ("d" * 300) / "x.h5", overwrite=False)

@@ -497,7 +497,8 @@ def test_cli_interrupted_right_after_its_first_checkpoint_keeps_it_with_its_reco
 
 
 @pytest.mark.parametrize("text, said", [(None, None), ('{"converged": true}', None), ("{trunc", "cannot be read"),
-                                        ("[1, 2]", "not a metrics record")])
+                                        ("[1, 2]", "not a metrics record"),
+                                        ('{"converged": "no"}', "gives 'converged' as 'no', not true or false")])
 def test_an_unreadable_metrics_record_is_said_not_skipped(tmp_path: Path, text: str | None, said: str | None) -> None:
     from piga.io.runs import convergence_warning
 

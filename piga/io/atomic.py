@@ -30,10 +30,8 @@ def check_writable_target(path: str | os.PathLike[str], overwrite: bool) -> Path
             writable, or ``path`` is a folder.
     """
     target = Path(path)
-    limit = _name_max(next((p for p in target.parents if p.is_dir()), Path(".")))
-    if len(os.fsencode(target.name)) > limit:  # checked first: every look at the path would raise ENAMETOOLONG
-        raise ValueError(f"{target.name[:40]}...: the name is {len(os.fsencode(target.name))} bytes, longer than the "
-                         f"{limit} that the filesystem takes; give a shorter name")
+    _check_name_lengths(target)
+
     if target.is_dir():
         raise IsADirectoryError(f"{target} is a folder, not a file path")
     if os.path.lexists(target) and not overwrite:  # a link to nothing too: os.replace would replace the link
@@ -75,14 +73,12 @@ def check_folder_target(folder: str | os.PathLike[str], flag: str = "--out") -> 
         NotADirectoryError: naming the file in the way.
     """
     path = Path(folder)
+    _check_name_lengths(path, flag)
     try:
         str(path).encode("utf-8")
     except UnicodeEncodeError:  # TensorBoard's writer encodes its folder's name as UTF-8, strictly
         raise ValueError(f"{flag} {path}: the name is not UTF-8 text in this locale ({_locale_name()}), and a run's "
                          "logs cannot be written under it; use an ASCII name or a UTF-8 locale (LC_ALL=C.UTF-8)") from None
-    if len(os.fsencode(path.name)) > (limit := _name_max(next((p for p in path.parents if p.is_dir()), Path(".")))):
-        raise ValueError(f"{flag} {path.name[:40]}...: the name is {len(os.fsencode(path.name))} bytes, longer than the "
-                         f"{limit} that the filesystem takes; give a shorter name")
     if path.is_symlink() and not path.exists():
         raise NotADirectoryError(f"{flag} {path} is a link to {os.readlink(path)}, which does not exist; remove the "
                                  "link or make its target first")
@@ -92,6 +88,25 @@ def check_folder_target(folder: str | os.PathLike[str], flag: str = "--out") -> 
     if blocking is not None and not blocking.is_dir():
         raise NotADirectoryError(f"{flag} {path}: {blocking} is a file, not a folder, so {path} cannot be made there")
     return path
+
+
+def _check_name_lengths(path: Path, flag: str | None = None) -> None:
+    """Refuses a path with a name (the file's or a folder's on the way) longer than the filesystem takes, before any
+    other look at the path: each would raise ENAMETOOLONG, with the whole path in the message.
+
+    Raises:
+        ValueError: naming the part, its length and the limit.
+    """
+    limit = 255  # where no folder on the way says otherwise
+    for part in path.parts:
+        if len(os.fsencode(part)) > limit:
+            where = "the name" if part == path.name else "a folder's name on the way"
+            raise ValueError(f"{flag + ' ' if flag else ''}{part[:40]}...: {where} is {len(os.fsencode(part))} bytes, "
+                             f"longer than the {limit} that the filesystem takes; give a shorter name")
+    limit = _name_max(next((p for p in path.parents if p.is_dir()), Path(".")))
+    if len(os.fsencode(path.name)) > limit:
+        raise ValueError(f"{flag + ' ' if flag else ''}{path.name[:40]}...: the name is {len(os.fsencode(path.name))} "
+                         f"bytes, longer than the {limit} that the filesystem takes; give a shorter name")
 
 
 def _locale_name() -> str:

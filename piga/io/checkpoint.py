@@ -80,6 +80,30 @@ def run_kind(run_dir: str | os.PathLike[str]) -> RunKind:
     return RunKind.parse(str(kind), f"{folder}/config.json")
 
 
+def _failed_checksum(path: Path) -> str | None:
+    """The first entry of a checkpoint (torch writes a zip) whose bytes fail their CRC-32, or None. torch.load reads
+    a changed tensor without checking it; this reads the file once more (about a second per GB)."""
+    import zipfile
+
+    try:
+        with zipfile.ZipFile(path) as archive:
+            return archive.testzip()
+    except (zipfile.BadZipFile, OSError):  # not a zip (torch.load read it): nothing to check
+        return None
+
+
+def _record_damage(record: Path) -> str | None:
+    """What is wrong with a run's ``config.json`` ("is missing", "cannot be read (...)", "is not a run record"), or
+    None for a readable record."""
+    try:
+        payload = json.loads(record.read_text())
+    except FileNotFoundError:
+        return "is missing"
+    except (OSError, ValueError) as exc:
+        return f"cannot be read ({type(exc).__name__})"
+    return None if isinstance(payload, dict) else "is not a run record (not a JSON object)"
+
+
 def require_piga_run(run_dir: str | os.PathLike[str], purpose: str) -> None:
     """Refuses a baseline's run folder where a ``piga-train-model`` run is needed, saying which it is.
 
@@ -131,14 +155,17 @@ def read_checkpoint(run_dir: str | os.PathLike[str], kind: RunKind) -> dict[str,
         payload = torch.load(path, map_location="cpu", weights_only=False)
     except Exception as exc:  # a truncated or foreign file
         raise unreadable(path, kind, exc) from None
+    if (damaged := _failed_checksum(path)) is not None:
+        raise ValueError(f"{path}: a damaged {kind.label} checkpoint: its entry {damaged} fails its checksum (bytes "
+                         "changed on disk or in a copy); restore it, or train the run again with --overwrite")
     if not isinstance(payload, dict):
         raise ValueError(f"{path}: not a readable {kind.label} checkpoint (it holds a {type(payload).__name__})")
     found = payload.get("kind", RunKind.PIGA.value)
     if found != kind.value:
         writer = RunKind.parse(str(found), str(path)).writer
         record = Path(run_dir) / "config.json"
-        if found != RunKind.PIGA.value and not record.exists():  # a baseline's run is known by its record's kind
-            raise ValueError(f"{record}, the run's record, is missing: {path} is a {writer} checkpoint, and commands "
+        if found != RunKind.PIGA.value and (why := _record_damage(record)):  # a baseline's run: known by its record
+            raise ValueError(f"{record}, the run's record, {why}: {path} is a {writer} checkpoint, and commands "
                              f"read a run's kind from its config.json; restore the file, or train the run again with "
                              "--overwrite")
         raise ValueError(f"{path} is a {writer} checkpoint, not a {kind.writer} run")
@@ -156,7 +183,8 @@ def unreadable(path: Path, kind: RunKind, exc: Exception, what: str | None = Non
         return ValueError(f"{path}: not {article} {what}: it lacks the entry {exc.args[0]!r} that {kind.writer} "
                           "writes; restore the run's own file, or train the run again with --overwrite")
     return ValueError(f"{path}: not a readable {what} ({exc.__class__.__name__}: {_first_sentence(exc)}); "
-                      "it may be truncated (a full disk, an interrupted copy): restore it, or train the run again with --overwrite")
+                      "it may be truncated (a full disk, an interrupted copy) or edited: restore it, or train the run "
+                      "again with --overwrite")
 
 
 @contextlib.contextmanager

@@ -111,7 +111,10 @@ def convergence_warning(run_dir: str | os.PathLike[str]) -> str | None:
         return f"warning: {path} cannot be read ({type(exc).__name__}); whether the run converged is unknown"
     if not isinstance(metrics, dict):
         return f"warning: {path} is not a metrics record; whether the run converged is unknown"
-    if metrics.get("converged", True) is not False:
+    converged = metrics.get("converged", True)
+    if not isinstance(converged, bool):  # an edited record: "no" would read as converged
+        return f"warning: {path} gives 'converged' as {converged!r}, not true or false; whether the run converged is unknown"
+    if converged:
         return None
     convergence = metrics.get("convergence")
     reason = convergence.get("reason") if isinstance(convergence, dict) else None
