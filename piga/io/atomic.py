@@ -31,7 +31,6 @@ def check_writable_target(path: str | os.PathLike[str], overwrite: bool) -> Path
     """
     target = Path(path)
     _check_name_lengths(target)
-
     if target.is_dir():
         raise IsADirectoryError(f"{target} is a folder, not a file path")
     if os.path.lexists(target) and not overwrite:  # a link to nothing too: os.replace would replace the link
@@ -97,16 +96,16 @@ def _check_name_lengths(path: Path, flag: str | None = None) -> None:
     Raises:
         ValueError: naming the part, its length and the limit.
     """
-    limit = 255  # where no folder on the way says otherwise
-    for part in path.parts:
-        if len(os.fsencode(part)) > limit:
-            where = "the name" if part == path.name else "a folder's name on the way"
-            raise ValueError(f"{flag + ' ' if flag else ''}{part[:40]}...: {where} is {len(os.fsencode(part))} bytes, "
-                             f"longer than the {limit} that the filesystem takes; give a shorter name")
-    limit = _name_max(next((p for p in path.parents if p.is_dir()), Path(".")))
-    if len(os.fsencode(path.name)) > limit:
-        raise ValueError(f"{flag + ' ' if flag else ''}{path.name[:40]}...: the name is {len(os.fsencode(path.name))} "
-                         f"bytes, longer than the {limit} that the filesystem takes; give a shorter name")
+    def refuse(part: str, limit: int) -> None:
+        where = "the name" if part == path.name else "a folder's name on the way"
+        raise ValueError(f"{flag + ' ' if flag else ''}{part[:40]}...: {where} is {len(os.fsencode(part))} bytes, "
+                         f"longer than the {limit} that the filesystem takes; give a shorter name")
+
+    for part in path.parts:  # 255 (Linux's NAME_MAX) first: a longer folder name makes even is_dir() raise
+        if len(os.fsencode(part)) > 255:
+            refuse(part, 255)
+    if len(os.fsencode(path.name)) > (limit := _name_max(next((p for p in path.parents if p.is_dir()), Path(".")))):
+        refuse(path.name, limit)
 
 
 def _locale_name() -> str:
