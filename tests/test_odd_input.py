@@ -168,3 +168,13 @@ def test_an_output_that_is_an_input_is_refused_even_with_overwrite(tmp_path: Pat
 def test_a_folder_name_on_the_way_beyond_the_limit_is_named(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="a folder's name on the way is 300 bytes"):
         check_writable_target(tmp_path / ("d" * 300) / "x.h5", overwrite=False)
+
+
+def test_too_few_windows_names_a_stride_that_was_raised() -> None:
+    """--window-stride 1000 left 16 windows, and the refusal blamed only the batch size and the data."""
+    from piga.training.train import TrainConfig, plan_training
+
+    with pytest.raises(ValueError, match=r"or lower --window-stride \(now 1000\)"):
+        plan_training(TrainConfig(window_stride=1000), 16)
+    with pytest.raises(ValueError, match=r"give more data$"):
+        plan_training(TrainConfig(), 16)

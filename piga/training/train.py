@@ -234,8 +234,9 @@ def plan_training(config: TrainConfig, windows: int) -> TrainPlan:
     """
     per_epoch = windows // config.batch_size
     if per_epoch < 1:
+        stride = f", or lower --window-stride (now {config.window_stride})" if config.window_stride > 1 else ""
         raise ValueError(f"{windows} training windows are fewer than one batch of {config.batch_size}, so no step "
-                         "would run; lower the batch size or give more data")
+                         f"would run; lower the batch size or give more data{stride}")
     epochs = config.epochs or max(1, math.ceil(config.budget_steps / per_epoch))
     total = epochs * per_epoch
     if total > MAX_TRAIN_STEPS:
