@@ -241,7 +241,7 @@ def train_sb3(config: SB3Config, run_dir: str | Path, autoencoder: str | Path | 
         check_counts(run_dir / CHECKPOINT, RunKind.DDPG, episodes=episodes)
         # the last chunk ended an episode, and its automatic reset drew episode k's start; draw it
         # again (SB3's env.seed() in load left a seed for the next reset: make it episode k's)
-        k = int(episodes) - 1
+        k = episodes - 1
         _episode_seeds(venv).episodes = k
         venv.seed(_episode_seeds(venv).seed_of(k))
     else:

@@ -11,7 +11,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import dataclasses
-import json
 import math
 import os
 import typing
@@ -25,7 +24,7 @@ from piga.cli.common import (ArgumentParser, Interrupted, PigaError, add_device_
                              positive_float, positive_int, record_resume, remove_outputs, run_cli, seed_int,
                              started_record, thread_count)
 from piga.io.atomic import check_folder_target
-from piga.io.checkpoint import CHECKPOINT, RunKind
+from piga.io.checkpoint import CHECKPOINT, RunKind, read_run_record
 
 PROG = "piga-baseline"
 OUTPUTS = (CHECKPOINT, "config.json", "metrics.json", "model.zip", "autoencoder.pt", "tensorboard", "collected.h5")
@@ -166,7 +165,7 @@ def _check_run_dir(run_dir: Path, resume: bool, overwrite: bool, kind: RunKind) 
         if not (run_dir / "config.json").exists():
             raise PigaError(f"--resume: {run_dir / 'config.json'} is missing; it records the run's settings, so the "
                             f"run cannot be continued (start it again with --overwrite)")
-        record = _read_record(run_dir)
+        record, _ = read_run_record(run_dir)
         if not record:
             raise PigaError(f"--resume: {run_dir / 'config.json'} is not a readable JSON record; start the run again "
                             "with --overwrite")
@@ -182,14 +181,6 @@ def _check_run_dir(run_dir: Path, resume: bool, overwrite: bool, kind: RunKind) 
         raise PigaError(f"{run_dir} already holds a run ({', '.join(existing)}); pass --resume to continue it or "
                         "--overwrite to replace it")
     remove_outputs(run_dir, existing)
-
-
-def _read_record(run_dir: Path) -> dict[str, Any]:
-    try:
-        record = json.loads((run_dir / "config.json").read_text())
-    except (OSError, ValueError):
-        return {}
-    return record if isinstance(record, dict) else {}
 
 
 def _saved_config(run_dir: Path, record: dict[str, Any], key: str, cls: Any, optional: tuple[str, ...] = ()) -> Any:
@@ -319,7 +310,7 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
     iterative: IterativeConfig | None = None
     if args.resume:
         _check_run_dir(run_dir, True, args.overwrite, RunKind.PLANET)
-        record = _read_record(run_dir)
+        record, _ = read_run_record(run_dir)
         _refuse_recipe_changes(args, record, run_dir, argv)
         saved = _saved_config(run_dir, record, "train", PlanetTrainConfig, optional=("device",))  # older runs have none
         _refuse_fewer_steps(args.steps, saved.steps)
@@ -467,7 +458,7 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
         raise PigaError(f"--autoencoder-steps is for --obs latent; --obs {args.obs} trains no autoencoder")
     if args.resume:
         _check_run_dir(run_dir, True, args.overwrite, RunKind.DDPG)
-        record = _read_record(run_dir)
+        record, _ = read_run_record(run_dir)
         # runs from before --algo are DDPG; runs from before --device have none
         saved = _saved_config(run_dir, record, "ddpg", SB3Config, optional=("algo", "device", "env"))
         if saved.obs != args.obs:

@@ -17,7 +17,7 @@ from piga.cli.common import (NOT_CONVERGED, ArgumentParser, Interrupted, PigaErr
                              remove_empty_folders, remove_outputs, run_cli, seed_int, started_record, thread_count,
                              unit_fraction)
 from piga.io.atomic import check_folder_target
-from piga.io.checkpoint import CHECKPOINT, require_piga_run
+from piga.io.checkpoint import CHECKPOINT, read_run_record, require_piga_run
 
 #: The recipe options a user may give; each is a TrainConfig field of the same name.
 RECIPE_OPTIONS = ("epochs", "budget_steps", "max_minutes", "batch_size", "lr", "lr_physics", "warmup_fraction",
@@ -400,17 +400,9 @@ def _start_values(model: Any) -> str:
 def _read_record(run_dir: Path) -> dict[str, Any]:
     """The run's config.json. When it is missing or unreadable, a record rebuilt from the checkpoint (which holds the
     recipe and the model: config.json only records them) whose first command is unknown, with a note saying so."""
-    import json
-
-    try:
-        record = json.loads((run_dir / "config.json").read_text())
-        if isinstance(record, dict):
-            return record
-        why = "is not a run record"
-    except FileNotFoundError:
-        why = "is missing"
-    except (OSError, ValueError) as exc:
-        why = f"cannot be read ({type(exc).__name__})"
+    record, why = read_run_record(run_dir)
+    if why is None:
+        return record
     print(f"{PROG}: note: {run_dir / 'config.json'} {why}; it is rewritten from the checkpoint, without the command "
           "that started the run")  # on stdout: stderr is kept for the one line of an error that may follow
     return {"command": None}

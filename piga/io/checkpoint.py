@@ -71,13 +71,8 @@ def run_kind(run_dir: str | os.PathLike[str]) -> RunKind:
     Raises:
         ValueError: an unknown kind.
     """
-    folder = Path(run_dir)
-    try:
-        record = json.loads((folder / "config.json").read_text())
-    except (OSError, ValueError):
-        record = {}
-    kind = record.get("kind", "piga") if isinstance(record, dict) else "piga"
-    return RunKind.parse(str(kind), f"{folder}/config.json")
+    record, _ = read_run_record(run_dir)
+    return RunKind.parse(str(record.get("kind", "piga")), f"{Path(run_dir)}/config.json")
 
 
 def _failed_checksum(path: Path) -> str | None:
@@ -92,16 +87,16 @@ def _failed_checksum(path: Path) -> str | None:
         return None
 
 
-def _record_damage(record: Path) -> str | None:
-    """What is wrong with a run's ``config.json`` ("is missing", "cannot be read (...)", "is not a run record"), or
-    None for a readable record."""
+def read_run_record(run_dir: str | os.PathLike[str]) -> tuple[dict[str, Any], str | None]:
+    """A run's ``config.json``, and None; or ``{}`` and what is wrong with it ("is missing", "cannot be read (...)",
+    "is not a run record (not a JSON object)")."""
     try:
-        payload = json.loads(record.read_text())
+        payload = json.loads((Path(run_dir) / "config.json").read_text())
     except FileNotFoundError:
-        return "is missing"
+        return {}, "is missing"
     except (OSError, ValueError) as exc:
-        return f"cannot be read ({type(exc).__name__})"
-    return None if isinstance(payload, dict) else "is not a run record (not a JSON object)"
+        return {}, f"cannot be read ({type(exc).__name__})"
+    return (payload, None) if isinstance(payload, dict) else ({}, "is not a run record (not a JSON object)")
 
 
 def require_piga_run(run_dir: str | os.PathLike[str], purpose: str) -> None:
@@ -164,7 +159,7 @@ def read_checkpoint(run_dir: str | os.PathLike[str], kind: RunKind) -> dict[str,
     if found != kind.value:
         writer = RunKind.parse(str(found), str(path)).writer
         record = Path(run_dir) / "config.json"
-        if found != RunKind.PIGA.value and (why := _record_damage(record)):  # a baseline's run: known by its record
+        if found != RunKind.PIGA.value and (why := read_run_record(run_dir)[1]):  # a baseline's run: known by its record
             raise ValueError(f"{record}, the run's record, {why}: {path} is a {writer} checkpoint, and commands "
                              f"read a run's kind from its config.json; restore the file, or train the run again with "
                              "--overwrite")
