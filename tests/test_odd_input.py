@@ -178,3 +178,46 @@ def test_too_few_windows_names_a_stride_that_was_raised() -> None:
         plan_training(TrainConfig(window_stride=1000), 16)
     with pytest.raises(ValueError, match=r"give more data$"):
         plan_training(TrainConfig(), 16)
+
+
+@pytest.mark.skipif(not os.path.exists("/dev/full"), reason="needs /dev/full")
+def test_a_full_standard_output_is_reported_after_the_files_are_complete(tmp_path: Path) -> None:
+    """`> /dev/full` made the last 'wrote' line fail after the file was written: exit 1 with a disk-full line, and
+    the user (told nothing was saved) had the identical rerun refused as 'exists'. The line now says what failed."""
+    out = tmp_path / "d.h5"
+    with open("/dev/full", "w") as full:
+        done = subprocess.run(["piga-collect", "--sequences", "2", "--steps", "8", "--out", str(out)],
+                              stdout=full, stderr=subprocess.PIPE, text=True, env=ENV)
+    assert done.returncode == 1
+    assert done.stderr.strip().splitlines()[-1] == ("piga-collect: error: could not write to standard output (No space "
+                                                   "left on device); the command itself finished and its outputs are complete")
+    assert "Traceback" not in done.stderr and "Exception ignored" not in done.stderr
+    import h5py
+
+    with h5py.File(out) as f:
+        assert f["frames"].shape[:2] == (2, 8)
+
+
+def test_output_after_a_failed_write_is_dropped_and_the_failure_kept() -> None:
+    from piga.cli.common import _GuardedStdout
+
+    class Failing:
+        def __init__(self) -> None:
+            self.written: list[str] = []
+
+        def write(self, text: str) -> int:
+            if len(self.written) == 1:
+                raise OSError(28, "No space left on device")
+            self.written.append(text)
+            return len(text)
+
+        def flush(self) -> None:
+            pass
+
+    stream = Failing()
+    guard = _GuardedStdout(stream)
+    assert guard.write("a") == 1 and guard.failed is None
+    assert guard.write("b") == 1 and guard.failed is not None and guard.failed.errno == 28
+    guard.write("c")
+    guard.flush()
+    assert stream.written == ["a"]

@@ -164,15 +164,66 @@ def run_cli(prog: str, main: Callable[[Sequence[str] | None], int | None], argv:
     written output file gets removed.
     """
     signal.signal(signal.SIGTERM, _raise_interrupt)
+    stdout, sys.stdout = sys.stdout, _GuardedStdout(sys.stdout)
     try:
         code = main(argv)
+        sys.stdout.flush()
     except KeyboardInterrupt as exc:
         kept = str(exc) if isinstance(exc, Interrupted) else "nothing was written"
         print(f"{prog}: interrupted; {kept}", file=sys.stderr)
         sys.exit(130)
     except Exception as exc:
         _exit_on_error(prog, argv, exc)
+    finally:
+        guard, sys.stdout = sys.stdout, stdout
+    if isinstance(guard, _GuardedStdout) and guard.failed is not None:
+        # The work is done and its files are complete; only the report was lost. Exit 1 all the same
+        # (as coreutils do), so that a script notices, but say that a rerun is not needed.
+        reason = guard.failed.strerror or guard.failed.__class__.__name__
+        print(f"{prog}: error: could not write to standard output ({reason}); the command itself finished and "
+              "its outputs are complete", file=sys.stderr)
+        sys.exit(1)
     sys.exit(code or 0)
+
+
+class _GuardedStdout:
+    """``sys.stdout`` during a command: a failed write (``> /dev/full``, a closed pipe) must not stop
+    a command whose files are being written, nor leave it half done. The first failure is kept in
+    :attr:`failed`, later output is dropped, and ``run_cli`` reports it after the command finished.
+
+    Python's own stdout object has no such mode; its buffer would raise again at exit, so file
+    descriptor 1 is pointed at the null device once a write failed.
+    """
+
+    def __init__(self, stream: Any) -> None:
+        self._stream = stream
+        self.failed: OSError | None = None
+
+    def write(self, text: str) -> int:
+        if self.failed is None:
+            try:
+                return self._stream.write(text)
+            except OSError as exc:
+                self._fail(exc)
+        return len(text)
+
+    def flush(self) -> None:
+        if self.failed is None:
+            try:
+                self._stream.flush()
+            except OSError as exc:
+                self._fail(exc)
+
+    def _fail(self, exc: OSError) -> None:
+        self.failed = exc
+        with contextlib.suppress(OSError, ValueError, AttributeError):  # no descriptor (a test's capture)
+            fd = self._stream.fileno()
+            null = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(null, fd)
+            os.close(null)
+
+    def __getattr__(self, name: str) -> Any:  # isatty, encoding, fileno, ...: the stream's own
+        return getattr(self._stream, name)
 
 
 def _exit_on_error(prog: str, argv: Sequence[str] | None, exc: Exception) -> NoReturn:
