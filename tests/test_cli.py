@@ -56,7 +56,7 @@ def test_collect_then_show(tmp_path: Path) -> None:
         (["--split", "0.5,0.4,0.4"], "split"),
         (["--split", "a,b,c"], "--split"),
         (["--preset", "huge"], "--preset"),
-        (["--max-speed", "9"], "max_speed"),
+        (["--max-speed", "9"], "--max-speed=9.0 is out of range (--max-speed in"),
         (["--seed", "-1"], "--seed"),
         (["--bogus"], "--bogus"),
     ],
@@ -253,3 +253,18 @@ def test_show_cuts_a_long_title(tmp_path: Path, capsys: pytest.CaptureFixture[st
     monkeypatch.setattr(show, "frame_strip", lambda *a: titles.append(a[3]) or real(*a))
     assert in_process(capsys, "piga-show", str(data), "--out", str(tmp_path / "s.png"), "--frames", "2").returncode == 0
     assert len(titles[0]) == show.MAX_TITLE and titles[0].endswith("...")
+
+
+def test_a_configs_field_names_are_shown_as_the_flags_of_this_command() -> None:
+    """A config's ValueError names its fields; the command's one line names the flags a user types instead."""
+    from piga.cli.common import _FLAGS, with_flags
+
+    _FLAGS.clear()
+    _FLAGS.update(lr="--lr", warmup_fraction="--warmup-fraction", curriculum_fraction="--curriculum-fraction")
+    assert with_flags("TrainConfig.lr must be in (0, 10], got 20.0") == "--lr must be in (0, 10], got 20.0"
+    assert (with_flags("TrainConfig: warmup_fraction + curriculum_fraction must leave")
+            == "--warmup-fraction + --curriculum-fraction must leave")
+    # other words, file names and fields of options this command does not have stay as they are
+    for text in ("my_lr.h5 holds lr_x", "runs/warmup_fraction/x.h5", "DecoderConfig.coord_dim must be 1"):
+        assert with_flags(text) == text
+    _FLAGS.clear()

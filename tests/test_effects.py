@@ -415,7 +415,7 @@ def test_collect_cli_effect_given_twice(tmp_path: Path, capsys: pytest.CaptureFi
 
     code, _, err = run_in_process("piga-collect", cli.main, "--out", str(tmp_path / "d.h5"), "--effect", "bias=0.1",
                         "--effect", "bias=0.2", capsys=capsys)
-    assert code == 1 and err.strip() == "piga-collect: error: PixelPendulumConfig.effects: effect 'bias' is given twice"
+    assert code == 1 and err.strip() == "piga-collect: error: --effect: effect 'bias' is given twice"
 
 
 @pytest.mark.parametrize("effects", [{"gain": 1.3}, {"delay": 2, "damping": 0.3}, {"saturation": 0.5, "bias": 0.4}])

@@ -214,7 +214,7 @@ def test_cli_curriculum_fraction_plans_the_horizon_and_a_sum_of_one_is_refused(
     refused = tmp_path / "refused"
     code, _, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(refused), "--warmup-fraction", "0.5",
                                   "--curriculum-fraction", "0.5", "--quiet", capsys=capsys)
-    assert_one_line(code, err, "warmup_fraction + curriculum_fraction")
+    assert_one_line(code, err, "--warmup-fraction + --curriculum-fraction")
     assert not refused.exists()
 
 

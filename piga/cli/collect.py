@@ -22,7 +22,7 @@ from piga.data.schema import inspect_dataset
 PROG = "piga-collect"
 #: Options of Gymnasium's pendulum only: the DMC pendulum refuses them when they are written.
 GYMNASIUM_ONLY = {"gravity": "--gravity", "gravity_mult": "--gravity-mult", "actuation_gain": "--actuation-gain",
-                  "no_torque_arrow": "--no-torque-arrow", "effect": "--effect"}
+                  "no_torque_arrow": "--no-torque-arrow", "effects": "--effect"}
 
 
 def _effect(text: str) -> tuple[str, int | float]:
@@ -154,7 +154,7 @@ def build_parser() -> ArgumentParser:
                    help="parallel env processes (default %(default)s); the data do not depend on it")
     add_preset_option(p, "--split", type=split_type, default=defaults.split,
                       help="train,valid,test as fractions (0.8,0.1,0.1) or counts (5000,500,500)")
-    p.add_argument("--effect", action="append", type=_effect, default=[], metavar="NAME=VALUE",
+    p.add_argument("--effect", dest="effects", action="append", type=_effect, default=[], metavar="NAME=VALUE",
                    help="an unmodelled effect, repeatable (e.g. --effect damping=0.2 --effect delay=2). It changes the "
                    "frames and states; the stored actions stay the commanded u, and the file's attr 'effects' records it. "
                    f"Names: {', '.join(EFFECTS)} (equations: envs/effects.py)")
@@ -219,7 +219,7 @@ def _pixel_config(args: argparse.Namespace, max_speed: float) -> PixelPendulumCo
         max_angle=args.max_angle,
         max_speed=float(max_speed),
         draw_torque_arrow=not args.no_torque_arrow,
-        effects=tuple(args.effect),
+        effects=tuple(args.effects),
     )
 
 

@@ -29,6 +29,25 @@ class Interrupted(KeyboardInterrupt):
     """An interruption after which something was kept; its message says what (``run_cli`` prints it)."""
 
 
+#: The long flag of each option of the parsers that parsed this command line, by its dest (``lr`` -> ``--lr``).
+_FLAGS: dict[str, str] = {}
+
+
+def with_flags(message: str) -> str:
+    """A config's message in the command line's words: ``TrainConfig.lr must be ...`` -> ``--lr must be ...``,
+    ``TrainConfig: warmup_fraction + curriculum_fraction ...`` -> ``--warmup-fraction + --curriculum-fraction ...``.
+    Only the fields of the options this command parsed are renamed; other words stay."""
+    def flag(match: re.Match[str]) -> str:
+        return _FLAGS.get(match.group(2), match.group(0))
+
+    named = re.sub(r"\b(\w+Config)\.([a-z]\w*)\b", flag, message)
+    named = re.sub(r"(?<![\w./'-])()([a-z][a-z0-9]*(?:_[a-z0-9]+)+)(?![\w/'-]|\.\w)", flag, named)
+    if named != message:  # "PixelPendulumConfig: gravity x --gravity-mult = ..." -> "--gravity x --gravity-mult = ..."
+        named = re.sub(r"^\w+Config: ()([a-z]\w*)\b", flag, named)
+        named = re.sub(r"^\w+Config: ", "", named)
+    return re.sub(r"(--[\w-]+) \(\1\)", r"\1", named)  # "--free-nats (free_nats)" named both
+
+
 class ArgumentParser(argparse.ArgumentParser):
     """argparse that reports a usage error as a single line on stderr (exit 2).
 
@@ -61,6 +80,10 @@ class ArgumentParser(argparse.ArgumentParser):
         rather than the last one silently winning (``--dt 0.05 --dt 0.1``). Options meant to repeat (``append``,
         ``extend``, ``count``) may. Each parser (a subcommand's too) checks its own options."""
         self._given_once: dict[argparse.Action, list[str]] = {}
+        for action in self._actions:  # config fields named in a config's ValueError are shown as these flags
+            longs = [s for s in action.option_strings if s.startswith("--")]
+            if longs and action.dest not in ("help", argparse.SUPPRESS):
+                _FLAGS[action.dest] = longs[0]
         return super().parse_known_args(args, namespace)
 
     def _get_values(self, action: argparse.Action, arg_strings: list[str]) -> Any:
@@ -165,6 +188,7 @@ def run_cli(prog: str, main: Callable[[Sequence[str] | None], int | None], argv:
     """
     signal.signal(signal.SIGTERM, _raise_interrupt)
     stdout, sys.stdout = sys.stdout, _GuardedStdout(sys.stdout)
+    _FLAGS.clear()  # this command's parsers fill it
     try:
         code = main(argv)
         sys.stdout.flush()
@@ -233,6 +257,8 @@ def _exit_on_error(prog: str, argv: Sequence[str] | None, exc: Exception) -> NoR
     job = f"job {exc.job} failed: " if isinstance(exc, JobFailed) else ""
     if isinstance(error, USER_ERRORS):
         message = " ".join(str(error).split()) or error.__class__.__name__
+        if isinstance(error, ValueError) and not isinstance(error, DataFormatError):  # a config's check
+            message = with_flags(message)
         print(f"{prog}: error: {job}{message}", file=sys.stderr)
     elif isinstance(error, OSError):  # h5py and friends: disk full, unreadable files
         print(f"{prog}: error: {job}{error.__class__.__name__}: {' '.join(str(error).split())}", file=sys.stderr)

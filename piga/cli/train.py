@@ -6,14 +6,14 @@ import math
 import shutil
 import sys
 from collections.abc import Sequence
-from dataclasses import asdict, replace
+from dataclasses import asdict, fields, replace
 from pathlib import Path
 
 from typing import Any
 
 from piga.cli.common import (NOT_CONVERGED, ArgumentParser, Interrupted, PigaError, add_device_option,
                              add_preset_option, command_line, format_default, given_options, int_up_to,
-                             missing_folders, nonnegative_int, positive_float, positive_int, record_resume,
+                             missing_folders, nonnegative_int, number_type, positive_float, positive_int, record_resume,
                              remove_empty_folders, remove_outputs, run_cli, seed_int, started_record, thread_count,
                              unit_fraction)
 from piga.io.atomic import check_folder_target
@@ -43,7 +43,7 @@ OUTPUTS = (CHECKPOINT, "metrics.json", "config.json", "rollout.png", "templates.
 
 def build_parser() -> ArgumentParser:
     from piga.world.physics import GravityOptions  # noqa: PLC0415 (torch loads only when the command runs)
-    from piga.training.train import PRESETS, TrainConfig  # noqa: PLC0415
+    from piga.training.train import MAX_LR, PRESETS, TrainConfig  # noqa: PLC0415
     from piga.io.choices import literal_fields  # noqa: PLC0415
     from piga.world.model import MAX_VIDEO_LSTM_SCALE, ModelConfig  # noqa: PLC0415
 
@@ -72,8 +72,9 @@ def build_parser() -> ArgumentParser:
     recipe("--max-minutes", "max_minutes", positive_float, "stop after the epoch that ends past this budget",
            shown="no limit")
     recipe("--batch-size", "batch_size", positive_int, "windows per step")
-    recipe("--lr", "lr", positive_float, "network learning rate")
-    recipe("--lr-physics", "lr_physics", positive_float, "physical-parameter learning rate, log space")
+    learning_rate = number_type(float, lambda v: 0 < v <= MAX_LR, f"a number in (0, {MAX_LR:g}]")
+    recipe("--lr", "lr", learning_rate, f"network learning rate, in (0, {MAX_LR:g}]")
+    recipe("--lr-physics", "lr_physics", learning_rate, f"physical-parameter learning rate, log space, in (0, {MAX_LR:g}]")
     recipe("--warmup-fraction", "warmup_fraction", unit_fraction, "fraction of the run's steps that train the autoencoder "
            "alone, first")
     recipe("--curriculum-fraction", "curriculum_fraction", unit_fraction, "fraction of the run's steps, after the "
@@ -171,6 +172,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     from piga.training import report
     from piga.training.report import scene_objects, write_run_report
     from piga.io.runs import load_model
+    from piga.world.physics.systems import SYSTEMS
     from piga.training.train import (TrainConfig, TrainingDiverged, check_trainable, model_config_for, preset_for,
                                      resolve_loading, train)
 
@@ -239,10 +241,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             if value is not None:
                 if model_config.architecture != "piga":
                     raise PigaError(f"{flag} is an option of piga's physics; --model {model_config.architecture} has none")
-                try:
-                    model_config = model_config.with_options(**{option: value})
-                except ValueError as exc:
-                    raise PigaError(f"{flag}: {args.data} holds {info.system} data: {exc}") from None
+                owners = [name for name, cls in SYSTEMS.items() if option in {f.name for f in fields(cls.Options)}]
+                if info.system not in owners:
+                    raise PigaError(f"{flag} is an option for {' and '.join(owners)} models; {args.data} holds "
+                                    f"{info.system} data: drop {flag}")
+                model_config = model_config.with_options(**{option: value})
         if "seed_retries" in options_given and not report.checks_objects(model_config):  # the retries follow it
             why = (f"{args.data} holds pendulum data, whose model has no object slots" if info.system == "pendulum"
                    else f"--model {model_config.architecture} has no object slots")
