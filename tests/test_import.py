@@ -235,3 +235,16 @@ def test_script_needs_no_torch_and_reports_usage_errors(tmp_path: Path) -> None:
     code = "import sys, piga.cli.importer; print('torch' in sys.modules)"
     assert subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=ENV).stdout.strip() == "False"
     assert_one_line_error(subprocess.run([PROG], capture_output=True, text=True, env=ENV, timeout=60), "required")
+
+
+@pytest.mark.parametrize("size, enlarged", [(64, False), (32, False), (96, True)])
+def test_frames_enlarged_beyond_the_recording_are_noted(tmp_path: Path, recording: tuple[Path, Path, np.ndarray,
+                                                        np.ndarray], capsys: pytest.CaptureFixture[str], size: int,
+                                                        enlarged: bool) -> None:
+    """64 px frames imported at --image-size 96 were upsampled without a word: the file looks sharper than it is."""
+    folder, csv, _, _ = recording
+    code, out, err = _cli(str(folder), str(csv), "--dt", "0.05", "--out", str(tmp_path / "d.h5"), "--steps", "5",
+                          "--image-size", str(size), "--split", "1,1,1", capsys=capsys)
+    assert code == 0 and err == ""
+    assert ("note: the recording's frames are 64 px on their short side, so they were enlarged to 96 px" in out) \
+        == enlarged

@@ -45,6 +45,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                               command=command_line(PROG, argv))
     print(f"wrote {result.path}: {result.sequences} sequences x {config.steps} frames of "
           f"({config.image_size}, {config.image_size}), split {result.split_counts}, dt={config.dt:g}")
+    if result.source_side < config.image_size:
+        print(f"note: the recording's frames are {result.source_side} px on their short side, so they were enlarged to "
+              f"{config.image_size} px, which adds no detail (a smaller --image-size keeps them as recorded)")
     if result.dropped_frames:
         print(f"note: the last {result.dropped_frames} of {result.source_frames} frames (less than one sequence "
               f"of {config.steps}) were dropped")

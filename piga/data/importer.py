@@ -86,6 +86,8 @@ class ImportResult:
     """Frames left over at the end (fewer than one sequence), not written."""
     split_counts: dict[str, int]
     """Sequences per split name."""
+    source_side: int
+    """The side of the square cropped from the recording's frames, before resizing to ``image_size``."""
 
 
 def _natural_key(path: Path) -> list[int | str]:
@@ -114,6 +116,12 @@ def read_recording(path: str | Path, size: int) -> np.ndarray:
         FileNotFoundError: no such file or folder.
         ValueError: an unreadable video or frame (the message names it), or no frames at all.
     """
+    return _read_recording(path, size)[0]
+
+
+def _read_recording(path: str | Path, size: int) -> tuple[np.ndarray, int]:
+    """:func:`read_recording`'s frames (F, size, size), and the side of the square cropped from the first frame
+    (before resizing: a side below ``size`` means the frames were enlarged)."""
     p = Path(path)
     if p.is_dir():
         frames = []
@@ -128,19 +136,21 @@ def read_recording(path: str | Path, size: int) -> np.ndarray:
                 frames.append(scene_to_gray(image, size))
             except ValueError as exc:
                 raise ValueError(f"{file}: {exc}") from None
-        return np.stack(frames)  # (F, size, size)
+        return np.stack(frames), min(first[1]) if first else size  # (F, size, size); frame_files found some
     if not p.is_file():
         raise FileNotFoundError(f"{p}: no such video file or frame folder")
     frames = []
+    side = size
     for image in _read_images(p):
         for frame in _frames_of(image, p):
+            side = min(frame.shape[:2]) if not frames else side
             try:
                 frames.append(scene_to_gray(frame, size))
             except ValueError as exc:
                 raise ValueError(f"{p}: {exc}") from None
     if not frames:
         raise ValueError(f"{p}: the video has no frames")
-    return np.stack(frames)  # (F, size, size)
+    return np.stack(frames), side  # (F, size, size)
 
 
 #: What a recording may be, as the errors say it.
@@ -308,7 +318,7 @@ def import_recording(
         raise FileNotFoundError(f"{recording}: no such video file or frame folder")
     u = read_actions(actions)  # (F,)
     _check_resources(len(u), config.image_size, target)
-    frames = read_recording(recording, config.image_size)  # (F, S, S)
+    frames, side = _read_recording(recording, config.image_size)  # (F, S, S)
     if len(u) != len(frames):
         raise ValueError(f"{actions} has {len(u)} actions but {recording} has {len(frames)} frames; "
                          "give one action per frame")
@@ -334,7 +344,7 @@ def import_recording(
     with DatasetWriter(target, n, t, (size, size), 1, None, attrs, overwrite=overwrite) as writer:
         writer.write(0, frames[: n * t].reshape(n, t, size, size), u[: n * t].reshape(n, t, 1))
         writer.set_split(np.repeat(np.arange(3, dtype=np.int8), counts))
-    return ImportResult(target, n, len(frames), dropped, dict(zip(SPLITS, counts)))
+    return ImportResult(target, n, len(frames), dropped, dict(zip(SPLITS, counts)), side)
 
 
 __all__ = ["ImportConfig", "ImportResult", "frame_files", "import_recording", "read_actions", "read_recording"]
