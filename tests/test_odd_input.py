@@ -221,3 +221,14 @@ def test_output_after_a_failed_write_is_dropped_and_the_failure_kept() -> None:
     guard.write("c")
     guard.flush()
     assert stream.written == ["a"]
+
+
+@pytest.mark.parametrize("closed", [">&-", "2>&-", "<&-"])
+def test_a_closed_standard_stream_drops_what_it_would_show(tmp_path: Path, closed: str) -> None:
+    """Started with stdout closed, Python's sys.stdout is None: the 'wrote' line was an internal error (exit 70)
+    after the file was written. Each closed stream is now the null device."""
+    out = tmp_path / "d.h5"
+    command = f"piga-collect --sequences 2 --steps 8 --out {shlex.quote(str(out))} {closed}"
+    done = subprocess.run(["sh", "-c", command], capture_output=True, text=True, env=ENV)
+    assert done.returncode == 0, done.stderr
+    assert "internal error" not in done.stderr and out.exists()

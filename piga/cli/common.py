@@ -187,6 +187,7 @@ def run_cli(prog: str, main: Callable[[Sequence[str] | None], int | None], argv:
     written output file gets removed.
     """
     signal.signal(signal.SIGTERM, _raise_interrupt)
+    _open_closed_standard_streams()
     stdout, sys.stdout = sys.stdout, _GuardedStdout(sys.stdout)
     _FLAGS.clear()  # this command's parsers fill it
     try:
@@ -208,6 +209,22 @@ def run_cli(prog: str, main: Callable[[Sequence[str] | None], int | None], argv:
               "its outputs are complete", file=sys.stderr)
         sys.exit(1)
     sys.exit(code or 0)
+
+
+def _open_closed_standard_streams() -> None:
+    """Started with stdin, stdout or stderr closed (``>&-``), Python has ``None`` for it, and the next file
+    opened would take its descriptor, so that a library's write to "stdout" would land in a data file. Each
+    closed one is opened on the null device, as daemons do: what it would have shown is dropped."""
+    for fd, name, mode in ((0, "stdin", "r"), (1, "stdout", "w"), (2, "stderr", "w")):
+        try:
+            os.fstat(fd)
+        except OSError:
+            null = os.open(os.devnull, os.O_RDWR)
+            if null != fd:
+                os.dup2(null, fd)
+                os.close(null)
+        if getattr(sys, name) is None:
+            setattr(sys, name, open(fd, mode, closefd=False))  # noqa: SIM115 (for the process's life)
 
 
 class _GuardedStdout:
