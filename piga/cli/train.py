@@ -290,8 +290,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"reading: the frames are streamed from {args.data} through a {train_config.stream_cache_mb} MiB cache, in "
               "blocks of the sequences it holds")
     if not args.resume and model_config.pred_frames < recipe.model.pred_frames:
-        print(f"{PROG}: note: sequences of {info.steps} frames: the physics predicts {model_config.pred_frames} frames "
-              f"per window, not the recipe's {recipe.model.pred_frames}", file=sys.stderr)
+        print(f"note: sequences of {info.steps} frames: the physics predicts {model_config.pred_frames} frames "
+              f"per window, not the recipe's {recipe.model.pred_frames}")  # stdout: stderr is for what went wrong
     written: list[int] = []
     if args.overwrite and not args.resume and (run_dir / "tensorboard").is_dir():
         shutil.rmtree(run_dir / "tensorboard")  # the replaced run's curves, which the new run's would join
