@@ -567,6 +567,7 @@ def test_a_true_parameter_of_zero_is_printed_without_an_error() -> None:
     ("unknown_env_field", ("--iterative", "1", "--episode-steps", "16"), ["'env_config' has unknown field(s) bogus"]),
     ("tiny", ("--stoch-size", "50000000"), ["world model of these sizes needs about", "ask for less"]),
     ("tiny", ("--deter-size", "99999999999"), ["more weights than torch can index", "ask for less"]),  # an internal error
+    ("tiny", ("--reward-units", "1" + "0" * 20), ["more weights than torch can index"]),  # beyond int64: a TypeError
     ("tiny", ("--steps", "9" * 20), ["--steps must be at most 10,000,000"]),  # it trained for ever
     ("tiny", ("--iterative", "1", "--round-steps", "99999999999"), ["rounds x steps_per_round", "at most 10,000,000"]),
     ("tiny", ("--reward-layers", "100000"), ["--reward-layers must be at most 100"]),  # it trained for hours

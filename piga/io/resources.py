@@ -141,8 +141,8 @@ def meta_parameter_count(build: Callable[[], Any], trainable_only: bool = False)
     try:
         with torch.device("meta"):
             return sum(p.numel() for p in build().parameters() if p.requires_grad or not trainable_only)
-    except RuntimeError as exc:
-        if "overflow" not in str(exc):
+    except (RuntimeError, TypeError) as exc:  # TypeError: a size beyond int64 ("Overflow when unpacking long long")
+        if "overflow" not in str(exc).lower():
             raise
         raise ResourceError("a model of these sizes has more weights than torch can index, far more than any "
                             "machine's memory; ask for less") from None
