@@ -295,7 +295,9 @@ def test_planet_iterative_from_the_command_line(tiny_data: Path, tmp_path: Path,
     (("--round-steps", "100"), "--round-steps goes with --iterative"),  # the default's value, written: still ignored
     (("--exploration-noise=0.3",), "--exploration-noise goes with --iterative"),
     (("--iterative", "0", "--episode-steps", "200"), "--episode-steps goes with --iterative"),
-    (("--iterative", "1", "--exploration-noise", "-1"), "noise must be >= 0"),
+    (("--iterative", "1", "--exploration-noise", "-1"), "--exploration-noise: expected a number in [0, 10], got -1"),
+    (("--iterative", "1", "--exploration-noise", "1e300"), "--exploration-noise: expected a number in [0, 10]"),
+    (("--iterative", "1", "--exploration-noise", "nan"), "--exploration-noise: expected a number in [0, 10]"),
     (("--iterative", "1", "--episode-steps", "8"), "shorter than the file's sequences of 16 frames"),
     (("--iterative", "1", "--max-minutes", "5"), "bound the run with --rounds"),
 ])

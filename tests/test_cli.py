@@ -224,7 +224,7 @@ def test_demo_runs_the_chain(tmp_path: Path) -> None:
     result = run("piga-demo", "--out", str(tmp_path / "demo"), "--sequences", "10", "--epochs", "1", "--episodes", "1",
                  "--control-steps", "20")
     # one epoch of 6 steps is too short to judge: the chain runs to its end and exits 3, as piga-train-model does
-    assert result.returncode == 3 and "warning: not converged" in result.stderr, result.stderr
+    assert result.returncode == 3 and "piga-demo: warning: not converged" in result.stderr, result.stderr
     assert "summary: g: learned" in result.stdout and "a: learned" in result.stdout
     assert "summary: upright, gravity x1.4: success" in result.stdout
     for name in ("frames.png", "pendulum.h5", "model/metrics.json", "model/rollout.png", "goal.png", "control.md"):

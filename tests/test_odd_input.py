@@ -232,3 +232,41 @@ def test_a_closed_standard_stream_drops_what_it_would_show(tmp_path: Path, close
     done = subprocess.run(["sh", "-c", command], capture_output=True, text=True, env=ENV)
     assert done.returncode == 0, done.stderr
     assert "internal error" not in done.stderr and out.exists()
+
+
+def test_a_run_folder_under_a_read_only_folder_is_refused_before_any_work(tmp_path: Path,
+                                                                          monkeypatch: pytest.MonkeyPatch) -> None:
+    """train-model, planet, ddpg and demo printed their plan, worked, then failed with a raw 'OSError: [Errno 30]'
+    (a read-only mount stops root too, where a permission bit does not, so os.access is what is asked)."""
+    locked = tmp_path / "ro"
+    locked.mkdir()
+    real = os.access
+    monkeypatch.setattr(os, "access", lambda p, mode: False if Path(p) == locked else real(p, mode))
+    with pytest.raises(PermissionError, match=f"--out {locked / 'run' / 'a'}: folder {locked} is not writable"):
+        check_folder_target(locked / "run" / "a")
+    with pytest.raises(PermissionError, match="is not writable"):
+        check_folder_target(locked)  # an existing run folder, to be resumed into
+    assert check_folder_target(tmp_path / "free") == tmp_path / "free"
+
+
+def test_a_deleted_current_folder_is_one_line_before_torch_loads(tmp_path: Path) -> None:
+    """In a deleted folder torch's MKL fails to load with a fatal native exit (no Python error), and relative paths
+    point nowhere (h5py's raw error): each command says so first."""
+    code = f"import os; os.chdir('g'); os.rmdir('../g'); from piga.cli.diagnose import entry; entry()"
+    (tmp_path / "g").mkdir()
+    done = subprocess.run([sys.executable, "-c", code, "--help"], capture_output=True, text=True, env=ENV, cwd=tmp_path)
+    assert done.returncode == 1 and done.stdout == ""
+    assert done.stderr.strip() == ("piga-diagnose: error: the current folder no longer exists (it was deleted or "
+                                   "moved); cd to a folder that exists and run the command again")
+
+
+def test_ddpg_threads_0_is_torchs_choice_and_a_bad_count_names_its_field() -> None:
+    """The parser took --threads 0 (torch's choice, as for PlaNet-style) and the config then refused it with a dump
+    of every setting."""
+    from agents.sb3.config import SB3Config
+
+    assert SB3Config(threads=0).threads == 0
+    with pytest.raises(ValueError, match=r"^SB3Config.threads must be >= 0, got -1$"):
+        SB3Config(threads=-1)
+    with pytest.raises(ValueError, match=r"^SB3Config.batch_size must be >= 1, got 0$"):
+        SB3Config(batch_size=0)

@@ -127,7 +127,7 @@ class SB3Config:
     seed: int = 0
     """SB3's ``seed=``, the episode starts and the evaluation starts."""
     threads: int = 1
-    """torch CPU threads."""
+    """torch CPU threads (0: torch's choice)."""
     device: Device = "auto"
     """Where SB3 trains its networks (:mod:`piga.io.device`; passed to SB3's ``device``), and the latent
     autoencoder trains: "auto" (a CUDA GPU when torch sees one, else the CPU), "cpu" or "cuda". Not part of
@@ -157,10 +157,13 @@ class SB3Config:
         if self.eval_every < self.episode_steps or self.eval_every % self.episode_steps:
             raise ValueError(f"eval_every must be a multiple of the episode length {self.episode_steps} ({self.env}), "
                              f"got {self.eval_every}")
-        if min(self.buffer_size, self.batch_size, self.train_freq, self.gradient_steps, self.frame_stack,
-               self.eval_episodes, self.threads, self.n_step, self.feature_dim) < 1 or self.learning_starts < 0 or \
-                self.seed < 0 or self.noise_decay_steps < 0:
-            raise ValueError(f"SB3Config: sizes, counts and threads must be >= 1, learning_starts and seed >= 0: {self}")
+        for name in ("buffer_size", "batch_size", "train_freq", "gradient_steps", "frame_stack", "eval_episodes",
+                     "n_step", "feature_dim"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"SB3Config.{name} must be >= 1, got {getattr(self, name)}")
+        for name in ("learning_starts", "seed", "noise_decay_steps", "threads"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"SB3Config.{name} must be >= 0, got {getattr(self, name)}")
         if not (0 < self.gamma <= 1 and self.learning_rate > 0 and 0 < self.tau <= 1 and self.noise_std >= 0
                 and self.noise_final_std >= 0):
             raise ValueError(f"SB3Config: need 0 < gamma <= 1, learning_rate > 0, 0 < tau <= 1, noise_std >= 0, "

@@ -206,7 +206,8 @@ def train_sb3(config: SB3Config, run_dir: str | Path, autoencoder: str | Path | 
     algorithm = sb3_class(config.algo)
     device = resolve_device(config.device)
     run_dir = Path(run_dir)
-    torch.set_num_threads(config.threads)
+    if config.threads:
+        torch.set_num_threads(config.threads)
     encoder, latent_size = None, 0
     if config.obs == "latent":
         from agents.sb3.autoencoder import load_autoencoder

@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any, get_args
 
 from piga.cli.common import (ArgumentParser, Interrupted, PigaError, add_device_option, add_preset_option, command_line,
-                             format_default, given_options, made_folder, nonnegative_float, nonnegative_int,
+                             format_default, given_options, made_folder, nonnegative_float, nonnegative_int, number_type,
                              positive_float, positive_int, record_resume, remove_outputs, run_cli, seed_int,
                              started_record, thread_count)
 from piga.io.atomic import check_folder_target
@@ -31,7 +31,7 @@ OUTPUTS = (CHECKPOINT, "config.json", "metrics.json", "model.zip", "autoencoder.
 
 
 def build_parser() -> ArgumentParser:
-    from agents.planet.config import IterativeConfig, PlanetTrainConfig, RewardAlignment, RSSMConfig
+    from agents.planet.config import MAX_EXPLORATION_NOISE, IterativeConfig, PlanetTrainConfig, RewardAlignment, RSSMConfig
     from agents.sb3.autoencoder import AutoencoderConfig
     from agents.sb3.config import ALGORITHM_PRESETS, ALGORITHMS, LEARNED_RETURN, OBSERVATIONS, PRESETS, SB3Config
     from envs import ENV_IDS
@@ -89,7 +89,8 @@ def build_parser() -> ArgumentParser:
                    help="with --iterative: optimiser steps per round (default %(default)s)")
     q.add_argument("--episode-steps", type=positive_int, default=iterative.episode_steps,
                    help="with --iterative: env steps per collected episode (default %(default)s)")
-    q.add_argument("--exploration-noise", type=float, default=iterative.noise,
+    noise = number_type(float, lambda v: 0 <= v <= MAX_EXPLORATION_NOISE, f"a number in [0, {MAX_EXPLORATION_NOISE:g}]")
+    q.add_argument("--exploration-noise", type=noise, default=iterative.noise,
                    help="with --iterative: std of the Gaussian action noise, a fraction of the action bound (default %(default)s)")
     _common(q)
 
@@ -141,7 +142,8 @@ def build_parser() -> ArgumentParser:
                    help="with --obs latent: the autoencoder's training steps (default %(default)s)")
     d.add_argument("--torque-arrow", action="store_true", help="show Gymnasium's torque arrow in the frames (off by default, as in piga-control)")
     d.add_argument("--seed", type=seed_int, default=ddpg.seed, help="seed (default %(default)s)")
-    d.add_argument("--threads", type=thread_count, default=ddpg.threads, help="torch CPU threads (default %(default)s)")
+    d.add_argument("--threads", type=thread_count, default=ddpg.threads,
+                   help="torch CPU threads, 0: torch's choice (default %(default)s)")
     add_device_option(d, ddpg.device)
     _common(d)
     return p

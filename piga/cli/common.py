@@ -188,6 +188,12 @@ def run_cli(prog: str, main: Callable[[Sequence[str] | None], int | None], argv:
     """
     signal.signal(signal.SIGTERM, _raise_interrupt)
     _open_closed_standard_streams()
+    try:  # torch's MKL cannot load in a deleted folder (a fatal exit, no Python error), and relative paths mean nothing
+        os.getcwd()
+    except FileNotFoundError:
+        print(f"{prog}: error: the current folder no longer exists (it was deleted or moved); cd to a folder that "
+              "exists and run the command again", file=sys.stderr)
+        sys.exit(1)
     stdout, sys.stdout = sys.stdout, _GuardedStdout(sys.stdout)
     _FLAGS.clear()  # this command's parsers fill it
     try:

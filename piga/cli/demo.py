@@ -161,7 +161,7 @@ def _run(args: argparse.Namespace, argv: Sequence[str] | None, out: Path, config
     trained = train.main([str(data), "--out", str(run_dir), "--seed", str(args.seed), *over,
                           *(["--epochs", str(args.epochs)] if args.epochs else []),
                           *(["--threads", str(args.threads)] if args.threads else []),
-                          *(["--quiet"] if args.quiet else [])])
+                          *(["--quiet"] if args.quiet else [])], prog=PROG)
     import json
 
     from piga.evaluation.evaluate import true_and_error

@@ -143,7 +143,7 @@ def build_parser() -> ArgumentParser:
     return p
 
 
-def main(argv: Sequence[str] | None = None) -> int:
+def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     options_given = given_options(parser, argv)  # the options written, at the default's value too
@@ -279,7 +279,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     record.update({"data": str(args.data), "train": asdict(train_config), "plan": asdict(plan),
                    "model": model_config.to_dict()})
     if not info.split_counts["test"]:
-        print(f"{PROG}: warning: {args.data} has no test sequences; metrics.json and the figures will be measured on "
+        print(f"{prog}: warning: {args.data} has no test sequences; metrics.json and the figures will be measured on "
               "the train split, which is not held out", file=sys.stderr)
     start = (f"{info.system} parameters start at {_start_values(fresh)}" if fresh.has_physics
              else f"a {model_config.architecture} model (no physical parameters)")
@@ -387,7 +387,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         what = "identify its parameters" if model.has_physics else "learn to predict"
         raise PigaError(f"the run did not {what}{seeds}: {convergence['reason']}")
     if convergence["outcome"] == "unsettled":
-        print(f"{PROG}: warning: not converged: {convergence['reason']}", file=sys.stderr)
+        print(f"{prog}: warning: not converged: {convergence['reason']}", file=sys.stderr)
         return NOT_CONVERGED
     return 0
 

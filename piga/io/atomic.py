@@ -86,6 +86,9 @@ def check_folder_target(folder: str | os.PathLike[str], flag: str = "--out") -> 
     blocking = next((p for p in path.parents if p.exists()), None)
     if blocking is not None and not blocking.is_dir():
         raise NotADirectoryError(f"{flag} {path}: {blocking} is a file, not a folder, so {path} cannot be made there")
+    nearest = path if path.exists() else blocking  # where the first file or folder will be made
+    if nearest is not None and not os.access(nearest, os.W_OK | os.X_OK):  # a read-only mount too, even for root
+        raise PermissionError(f"{flag} {path}: folder {nearest} is not writable")
     return path
 
 
