@@ -270,3 +270,23 @@ def test_ddpg_threads_0_is_torchs_choice_and_a_bad_count_names_its_field() -> No
         SB3Config(threads=-1)
     with pytest.raises(ValueError, match=r"^SB3Config.batch_size must be >= 1, got 0$"):
         SB3Config(batch_size=0)
+
+
+def test_help_under_an_ascii_locale_is_printed_with_escapes() -> None:
+    """Under LC_ALL=C with PYTHONUTF8=0 stdout is ASCII: '--help' (θ, ·) failed with an encoding error (exit 1)."""
+    env = {**ENV, "LC_ALL": "C", "LANG": "C", "PYTHONUTF8": "0", "PYTHONCOERCECLOCALE": "0"}
+    done = subprocess.run(["piga-train-model", "--help"], capture_output=True, env=env)
+    assert done.returncode == 0 and done.stderr == b"", done.stderr
+    assert b"--lr-physics" in done.stdout
+
+
+def test_a_planet_sequence_of_one_step_names_its_flag() -> None:
+    from agents.planet.config import PlanetTrainConfig
+    from piga.cli.common import _FLAGS, with_flags
+
+    with pytest.raises(ValueError, match=r"^PlanetTrainConfig.chunk_length must be >= 2 \(a sequence") as info:
+        PlanetTrainConfig(chunk_length=1)
+    _FLAGS.clear()
+    _FLAGS["chunk_length"] = "--chunk-length"
+    assert with_flags(str(info.value)).startswith("--chunk-length must be >= 2")
+    _FLAGS.clear()

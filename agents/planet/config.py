@@ -156,9 +156,10 @@ class PlanetTrainConfig:
     """Use only the first N training sequences of the file (0: all), for sample-efficiency sweeps."""
 
     def __post_init__(self) -> None:
-        if self.steps < 1 or self.batch_size < 1 or self.chunk_length < 2 or self.checkpoint_every < 1:
-            raise ValueError(f"need steps >= 1, batch_size >= 1, chunk_length >= 2 and checkpoint_every >= 1, got "
-                             f"{self.steps}, {self.batch_size}, {self.chunk_length}, {self.checkpoint_every}")
+        for name, least in (("steps", 1), ("batch_size", 1), ("chunk_length", 2), ("checkpoint_every", 1)):
+            if getattr(self, name) < least:
+                why = " (a sequence: the first step is only observed)" if name == "chunk_length" else ""
+                raise ValueError(f"PlanetTrainConfig.{name} must be >= {least}{why}, got {getattr(self, name)}")
         if not all(math.isfinite(v) for v in (self.lr, self.adam_eps, self.grad_clip, self.free_nats, self.kl_scale,
                                               self.reward_scale, self.max_minutes)):
             raise ValueError(f"PlanetTrainConfig: lr, adam_eps, grad_clip, free_nats, kl_scale, reward_scale and "

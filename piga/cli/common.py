@@ -231,6 +231,8 @@ def _open_closed_standard_streams() -> None:
                 os.close(null)
         if getattr(sys, name) is None:
             setattr(sys, name, open(fd, mode, closefd=False))  # noqa: SIM115 (for the process's life)
+    with contextlib.suppress(AttributeError, ValueError):  # under LC_ALL=C (ASCII), '--help' has θ and ·: escape them
+        sys.stdout.reconfigure(errors="backslashreplace")
 
 
 class _GuardedStdout:
