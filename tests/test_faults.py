@@ -1032,7 +1032,7 @@ def test_demo_interrupted_in_training_says_what_it_kept(tmp_path: Path, capsys: 
     def fake_collect(config: Any, out: Path, **kwargs: Any) -> None:
         Path(out).write_bytes(b"data")
 
-    def interrupted_training(argv: Sequence[str]) -> int:  # as piga-train-model after its first checkpoint
+    def interrupted_training(argv: Sequence[str], prog: str) -> int:  # as piga-train-model after its first checkpoint
         raise Interrupted("model/checkpoint.pt holds epoch 1; continue with --resume")
 
     monkeypatch.setattr(demo, "collect", fake_collect)
