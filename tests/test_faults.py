@@ -1651,7 +1651,7 @@ def test_show_refuses_an_image_format_matplotlib_lacks(name: str, needle: str, t
                                                       capsys: pytest.CaptureFixture[str]) -> None:
     """It drew the strip, then relayed matplotlib's "Format 'txt' is not supported", naming no option; a name without
     a suffix was written as a PNG that its name did not call one."""
-    refused("piga-show", [str(tiny_data), "--out", str(tmp_path / name)], capsys, f"--out {name}: {needle}",
+    refused("piga-show", [str(tiny_data), "--out", str(tmp_path / name)], capsys, f"--out {tmp_path / name}: {needle}",
             "use .png (or ", ".pdf", ".svg")
     assert _listing(tmp_path) == []
 
@@ -1672,7 +1672,7 @@ def test_show_refuses_pgf_without_its_tex_system(tiny_data: Path, tmp_path: Path
 
     monkeypatch.setattr(shutil, "which", lambda name, *args, **kwargs: None)
     refused("piga-show", [str(tiny_data), "--out", str(tmp_path / "s.pgf")], capsys,
-            "--out s.pgf: matplotlib writes .pgf through xelatex, which is not installed", "use .png (or ")
+            f"--out {tmp_path / 's.pgf'}: matplotlib writes .pgf through xelatex, which is not installed", "use .png (or ")
     assert ".pgf" not in refused("piga-show", [str(tiny_data), "--out", str(tmp_path / "s.txt")], capsys, "use .png (or ")
     assert _listing(tmp_path) == []
 

@@ -45,7 +45,7 @@ def check_figure_target(path: str | os.PathLike[str], overwrite: bool, flag: str
     if suffix not in formats:
         what = (f"matplotlib writes .pgf through {tex}, which is not installed" if suffix == "pgf" else
                 f"matplotlib writes no .{suffix} files" if suffix else "an image needs the suffix of its format")
-        raise ValueError(f"{flag} {target.name}: {what}; use .png (or "
+        raise ValueError(f"{flag} {target}: {what}; use .png (or "
                          f"{', '.join('.' + f for f in sorted(formats) if f != 'png')})")
     return check_writable_target(target, overwrite)
 
