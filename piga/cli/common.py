@@ -37,13 +37,13 @@ def with_flags(message: str) -> str:
     """A config's message in the command line's words: ``TrainConfig.lr must be ...`` -> ``--lr must be ...``,
     ``TrainConfig: warmup_fraction + curriculum_fraction ...`` -> ``--warmup-fraction + --curriculum-fraction ...``.
     Only the fields of the options this command parsed are renamed; other words stay."""
-    def flag(match: re.Match[str]) -> str:
-        return _FLAGS.get(match.group(2), match.group(0))
+    def flag(match: re.Match[str]) -> str:  # the field is the last group
+        return _FLAGS.get(match.group(match.lastindex or 0), match.group(0))
 
-    named = re.sub(r"\b(\w+Config)\.([a-z]\w*)\b", flag, message)
-    named = re.sub(r"(?<![\w./'-])()([a-z][a-z0-9]*(?:_[a-z0-9]+)+)(?![\w/'-]|\.\w)", flag, named)
+    named = re.sub(r"\b\w+Config\.([a-z]\w*)\b", flag, message)
+    named = re.sub(r"(?<![\w./'-])([a-z][a-z0-9]*(?:_[a-z0-9]+)+)(?![\w/'-]|\.\w)", flag, named)
     if named != message:  # "PixelPendulumConfig: gravity x --gravity-mult = ..." -> "--gravity x --gravity-mult = ..."
-        named = re.sub(r"^\w+Config: ()([a-z]\w*)\b", flag, named)
+        named = re.sub(r"^\w+Config: ([a-z]\w*)\b", flag, named)
         named = re.sub(r"^\w+Config: ", "", named)
     return re.sub(r"(--[\w-]+) \(\1\)", r"\1", named)  # "--free-nats (free_nats)" named both
 
@@ -225,14 +225,19 @@ def _open_closed_standard_streams() -> None:
         try:
             os.fstat(fd)
         except OSError:
-            null = os.open(os.devnull, os.O_RDWR)
-            if null != fd:
-                os.dup2(null, fd)
-                os.close(null)
+            _null_onto(fd)
         if getattr(sys, name) is None:
             setattr(sys, name, open(fd, mode, closefd=False))  # noqa: SIM115 (for the process's life)
     with contextlib.suppress(AttributeError, ValueError):  # under LC_ALL=C (ASCII), '--help' has θ and ·: escape them
         sys.stdout.reconfigure(errors="backslashreplace")
+
+
+def _null_onto(fd: int) -> None:
+    """Points file descriptor ``fd`` at the null device (what was written to it is dropped)."""
+    null = os.open(os.devnull, os.O_RDWR)
+    if null != fd:
+        os.dup2(null, fd)
+        os.close(null)
 
 
 class _GuardedStdout:
@@ -266,10 +271,7 @@ class _GuardedStdout:
     def _fail(self, exc: OSError) -> None:
         self.failed = exc
         with contextlib.suppress(OSError, ValueError, AttributeError):  # no descriptor (a test's capture)
-            fd = self._stream.fileno()
-            null = os.open(os.devnull, os.O_WRONLY)
-            os.dup2(null, fd)
-            os.close(null)
+            _null_onto(self._stream.fileno())
 
     def __getattr__(self, name: str) -> Any:  # isatty, encoding, fileno, ...: the stream's own
         return getattr(self._stream, name)
