@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import argparse
+import errno
+import io
 import os
 import shlex
 import subprocess
@@ -196,6 +198,41 @@ def test_a_full_standard_output_is_reported_after_the_files_are_complete(tmp_pat
 
     with h5py.File(out) as f:
         assert f["frames"].shape[:2] == (2, 8)
+
+
+@pytest.mark.skipif(not os.path.exists("/dev/full"), reason="needs /dev/full")
+def test_help_onto_a_full_standard_output_is_not_a_silent_success() -> None:
+    """argparse's exit after --help passed by the check: `--help > /dev/full` exited 0 with nothing shown."""
+    with open("/dev/full", "w") as full:
+        done = subprocess.run(["piga-collect", "--help"], stdout=full, stderr=subprocess.PIPE, text=True, env=ENV)
+    assert done.returncode == 1
+    assert done.stderr.strip() == "piga-collect: error: could not write to standard output (No space left on device)"
+
+
+class _FullStream(io.StringIO):
+    """A standard output whose every write fails as a full disk does."""
+
+    def write(self, text: str) -> int:
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+
+@pytest.mark.parametrize("returned, expected", [(None, 1), (0, 1), (3, 3)])
+def test_a_lost_standard_output_keeps_the_commands_own_failure(monkeypatch: pytest.MonkeyPatch,
+                                                               capsys: pytest.CaptureFixture[str],
+                                                               returned: int | None, expected: int) -> None:
+    """A run that did not converge exits 3; with its stdout lost too it exited 1, hiding that."""
+    from piga.cli.common import run_cli
+
+    def main(argv: object) -> int | None:
+        print("trained")
+        return returned
+
+    monkeypatch.setattr(sys, "stdout", _FullStream())
+    with pytest.raises(SystemExit) as exit_:
+        run_cli("piga-x", main, [])
+    assert exit_.value.code == expected
+    assert capsys.readouterr().err.strip().endswith("could not write to standard output (No space left on device); "
+                                                    "the command itself finished and its outputs are complete")
 
 
 def test_output_after_a_failed_write_is_dropped_and_the_failure_kept() -> None:

@@ -196,8 +196,13 @@ def run_cli(prog: str, main: Callable[[Sequence[str] | None], int | None], argv:
         sys.exit(1)
     stdout, sys.stdout = sys.stdout, _GuardedStdout(sys.stdout)
     _FLAGS.clear()  # this command's parsers fill it
+    code: int | str | None
+    finished = "; the command itself finished and its outputs are complete"
     try:
         code = main(argv)
+        sys.stdout.flush()
+    except SystemExit as exc:  # argparse's own exits (--help, a usage error): what it printed may have failed too
+        code, finished = exc.code, ""
         sys.stdout.flush()
     except KeyboardInterrupt as exc:
         kept = str(exc) if isinstance(exc, Interrupted) else "nothing was written"
@@ -209,11 +214,11 @@ def run_cli(prog: str, main: Callable[[Sequence[str] | None], int | None], argv:
         guard, sys.stdout = sys.stdout, stdout
     if isinstance(guard, _GuardedStdout) and guard.failed is not None:
         # The work is done and its files are complete; only the report was lost. Exit 1 all the same
-        # (as coreutils do), so that a script notices, but say that a rerun is not needed.
+        # (as coreutils do), so that a script notices, but say that a rerun is not needed. A command that
+        # failed on its own (a usage error, a run that did not converge) keeps its own code.
         reason = guard.failed.strerror or guard.failed.__class__.__name__
-        print(f"{prog}: error: could not write to standard output ({reason}); the command itself finished and "
-              "its outputs are complete", file=sys.stderr)
-        sys.exit(1)
+        print(f"{prog}: error: could not write to standard output ({reason}){finished}", file=sys.stderr)
+        sys.exit(code if isinstance(code, int) and code != 0 else 1)
     sys.exit(code or 0)
 
 
