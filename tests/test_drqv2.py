@@ -147,3 +147,62 @@ def test_a_drqv2_run_on_the_dmc_pendulum_is_scored_in_dmcs_episodes_and_nowhere_
     assert_one_line_error(completed_in_process("piga-control", control, "--env", "piga/DMCPendulum-v0", "--model", str(run),
                                                "--env-option", "action_repeat=4", "--quiet", capsys=capsys),
                           "action_repeat 2")
+
+
+def test_the_bfloat16_encoder_gives_float32_features_close_to_float32s() -> None:
+    from agents.sb3.drqv2 import Encoder
+
+    torch.manual_seed(0)
+    exact, rounded = Encoder(3, 64), Encoder(3, 64, bfloat16=True)
+    rounded.load_state_dict(exact.state_dict())
+    x = torch.randint(0, 256, (4, 3, 64, 64)).float()
+    a, b = exact(x), rounded(x)
+    assert b.dtype == torch.float32 and not torch.equal(a, b)  # computed in bfloat16: rounded
+    assert ((a - b).norm() / a.norm()).item() < 0.03
+    b.sum().backward()
+    assert all(p.grad is not None and p.grad.dtype == torch.float32 for p in rounded.parameters())  # weights stay float32
+
+
+def test_auto_precision_is_bfloat16_only_for_drqv2_on_a_cpu_that_has_it(monkeypatch: pytest.MonkeyPatch) -> None:
+    import agents.sb3.config as sb3_config
+
+    cpu, cuda = torch.device("cpu"), torch.device("cuda")
+    drq = SB3Config(algo="drqv2", obs="pixels")
+    for hardware, expected in ((True, "bfloat16"), (False, "float32")):
+        monkeypatch.setattr(sb3_config, "bfloat16_in_hardware", lambda hardware=hardware: hardware)
+        assert sb3_config.resolve_precision(drq, cpu) == expected
+        assert sb3_config.resolve_precision(drq, cuda) == "float32"  # torch's TF32 convolutions there
+        assert sb3_config.resolve_precision(SB3Config(algo="ddpg", obs="pixels"), cpu) == "float32"
+        for given in ("float32", "bfloat16"):
+            assert sb3_config.resolve_precision(replace(drq, encoder_precision=given), cuda) == given
+    with pytest.raises(ValueError, match="encoder_precision bfloat16 is for DrQ-v2; SB3's sac"):
+        SB3Config(algo="sac", obs="pixels", encoder_precision="bfloat16")
+
+
+def test_a_run_keeps_its_precision_in_its_record_its_model_and_its_resume(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                                          capsys: pytest.CaptureFixture[str]) -> None:
+    """The record holds the precision resolved (not "auto", which another machine would read otherwise); a run
+    recorded before the option computed in float32 and resumes so."""
+    import agents.sb3.config as sb3_config
+    from agents.sb3.run import load_sb3
+    from piga.cli import baseline
+    from tests.helpers import assert_sb3_run_finished, run_in_process
+
+    monkeypatch.setattr(sb3_config, "bfloat16_in_hardware", lambda: True)
+    tiny = ("--algo", "drqv2", "--obs", "pixels", "--eval-every", "200", "--eval-episodes", "1", "--learning-starts",
+            "150", "--batch-size", "8", "--buffer-size", "500", "--device", "cpu", "--quiet")
+    for given, recorded in (("auto", "bfloat16"), ("float32", "float32")):
+        out = tmp_path / given
+        code, _, err = run_in_process("piga-baseline", baseline.main, "ddpg", "--out", str(out), "--steps", "200",
+                                      "--encoder-precision", given, *tiny, capsys=capsys)
+        assert_sb3_run_finished(code, err)
+        assert json.loads((out / "config.json").read_text())["ddpg"]["encoder_precision"] == recorded
+        assert load_sb3(out)[0].policy.encoder_precision == recorded
+    record = json.loads((out / "config.json").read_text())
+    del record["ddpg"]["encoder_precision"]  # as written before the option
+    (out / "config.json").write_text(json.dumps(record))
+    code, _, err = run_in_process("piga-baseline", baseline.main, "ddpg", "--out", str(out), "--resume", "--obs", "pixels",
+                                  "--algo", "drqv2", "--steps", "400", "--quiet", capsys=capsys)
+    assert_sb3_run_finished(code, err)
+    assert json.loads((out / "config.json").read_text())["ddpg"]["encoder_precision"] == "float32"
+    assert json.loads((out / "metrics.json").read_text())["encoder_precision"] == "float32"

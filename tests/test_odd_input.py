@@ -289,7 +289,7 @@ def test_a_run_folder_under_a_read_only_folder_is_refused_before_any_work(tmp_pa
 def test_a_deleted_current_folder_is_one_line_before_torch_loads(tmp_path: Path) -> None:
     """In a deleted folder torch's MKL fails to load with a fatal native exit (no Python error), and relative paths
     point nowhere (h5py's raw error): each command says so first."""
-    code = f"import os; os.chdir('g'); os.rmdir('../g'); from piga.cli.diagnose import entry; entry()"
+    code = "import os; os.chdir('g'); os.rmdir('../g'); from piga.cli.diagnose import entry; entry()"
     (tmp_path / "g").mkdir()
     done = subprocess.run([sys.executable, "-c", code, "--help"], capture_output=True, text=True, env=ENV, cwd=tmp_path)
     assert done.returncode == 1 and done.stdout == ""

@@ -11,6 +11,7 @@ DrQ-v2 is DDPG from pixels made to work. What it adds, each here:
 | exploration | Gaussian noise whose std falls linearly (1.0 to 0.1), clipped to ±0.3 in the updates | ``SB3Config.noise_std`` -> ``noise_final_std`` over ``noise_decay_steps`` |
 | returns | 3-step | SB3's ``NStepReplayBuffer`` (``SB3Config.n_step``) |
 | updates | every 2 env steps, batch 256, Adam 1e-4, target critic tau 0.01 | ``SB3Config`` drqv2 preset |
+| arithmetic | float32 (on its GPUs, torch's default TF32 convolutions) | the encoder's convolutions in bfloat16 on a CPU with bfloat16 hardware (``SB3Config.encoder_precision``), else float32 |
 
 Everything around it is SB3's: the env loop, the warm-up of uniform random actions (``learning_starts``),
 the replay buffer, ``predict``, saving and loading, TensorBoard logging. SB3 ships no DrQ-v2 (its DDPG
@@ -67,10 +68,12 @@ def random_shift(x: Tensor, pad: int = SHIFT_PAD, generator: torch.Generator | N
 
 
 class Encoder(nn.Module):
-    """uint8-valued stacks (B, K, H, W) as floats -> features (B, 32·(H/2 - 7)²); DrQ-v2's convs."""
+    """uint8-valued stacks (B, K, H, W) as floats -> float32 features (B, 32·(H/2 - 7)²); DrQ-v2's convs, computed
+    in bfloat16 (torch's autocast; the weights stay float32) when ``bfloat16``."""
 
-    def __init__(self, channels: int, size: int):
+    def __init__(self, channels: int, size: int, bfloat16: bool = False):
         super().__init__()
+        self.bfloat16 = bfloat16
         self.convnet = nn.Sequential(nn.Conv2d(channels, 32, 3, stride=2), nn.ReLU(),
                                      nn.Conv2d(32, 32, 3, stride=1), nn.ReLU(),
                                      nn.Conv2d(32, 32, 3, stride=1), nn.ReLU(),
@@ -80,7 +83,9 @@ class Encoder(nn.Module):
         self.apply(_orthogonal)
 
     def forward(self, obs: Tensor) -> Tensor:
-        return self.convnet(obs / 255.0 - 0.5).flatten(1)
+        with torch.autocast(obs.device.type, dtype=torch.bfloat16, enabled=self.bfloat16):
+            features = self.convnet(obs / 255.0 - 0.5).flatten(1)
+        return features.float()
 
 
 def _trunk(repr_dim: int, feature_dim: int) -> nn.Sequential:
@@ -138,16 +143,21 @@ class DrQV2Policy(BasePolicy):
         lr_schedule: SB3's learning-rate schedule (constant here).
         net_arch: the hidden widths of the actor's and each Q head's MLP.
         feature_dim: the trunks' width.
+        encoder_precision: "float32" or "bfloat16", the encoder's arithmetic (a model saved before the option
+            has none: float32).
     """
 
     def __init__(self, observation_space: spaces.Box, action_space: spaces.Box, lr_schedule: Callable[[float], float],
-                 net_arch: list[int] | tuple[int, ...] = (1024, 1024), feature_dim: int = 50, **kwargs: Any):
+                 net_arch: list[int] | tuple[int, ...] = (1024, 1024), feature_dim: int = 50,
+                 encoder_precision: str = "float32", **kwargs: Any):
         super().__init__(observation_space, action_space, squash_output=True, normalize_images=False, **kwargs)
         channels, size = observation_space.shape[0], observation_space.shape[-1]
         action_dim = int(np.prod(action_space.shape))
         hidden = tuple(net_arch)
-        self.net_arch, self.feature_dim = hidden, feature_dim
-        self.encoder = Encoder(channels, size)
+        if encoder_precision not in ("float32", "bfloat16"):
+            raise ValueError(f"encoder_precision must be float32 or bfloat16, got {encoder_precision!r}")
+        self.net_arch, self.feature_dim, self.encoder_precision = hidden, feature_dim, encoder_precision
+        self.encoder = Encoder(channels, size, bfloat16=encoder_precision == "bfloat16")
         self.actor = Actor(self.encoder.repr_dim, action_dim, feature_dim, hidden)
         self.critic = Critic(self.encoder.repr_dim, action_dim, feature_dim, hidden)
         self.critic_target = Critic(self.encoder.repr_dim, action_dim, feature_dim, hidden)
@@ -160,7 +170,7 @@ class DrQV2Policy(BasePolicy):
 
     def _get_constructor_parameters(self) -> dict[str, Any]:
         data = super()._get_constructor_parameters()
-        data.update(net_arch=self.net_arch, feature_dim=self.feature_dim)
+        data.update(net_arch=self.net_arch, feature_dim=self.feature_dim, encoder_precision=self.encoder_precision)
         return data
 
     def _predict(self, observation: Tensor, deterministic: bool = True) -> Tensor:

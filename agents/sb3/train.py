@@ -33,7 +33,7 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
-from agents.sb3.config import EPISODE_STEPS, SB3Config
+from agents.sb3.config import EPISODE_STEPS, SB3Config, resolve_precision
 from agents.sb3.run import MODEL, sb3_class
 from envs.observations import EpisodeSeeds, FiniteActions, LatentObservation, NonFiniteAction, StateObservation
 from envs.pendulum import PixelPendulumConfig
@@ -127,6 +127,28 @@ def _n_step_buffer(config: SB3Config) -> dict[str, Any]:
     return {"replay_buffer_class": NStepReplayBuffer, "replay_buffer_kwargs": {"n_steps": config.n_step, "gamma": config.gamma}}
 
 
+def new_model(config: SB3Config, venv: Any, device: torch.device, tensorboard_log: str | None = None) -> Any:
+    """A new SB3 model of ``config.algo`` on ``venv`` (:func:`train_sb3`'s, before any step), its networks on
+    ``device``, seeded with ``config.seed``."""
+    from stable_baselines3.common.noise import NormalActionNoise
+
+    n_actions = venv.action_space.shape[0]
+    policy_kwargs: dict[str, Any] = {"net_arch": list(config.net_arch)}
+    if config.algo == "drqv2":
+        from agents.sb3.drqv2 import ScheduledNoise
+
+        noise: Any = ScheduledNoise(n_actions, config.noise_std, config.noise_final_std, config.noise_decay_steps)
+        policy_kwargs.update(feature_dim=config.feature_dim, encoder_precision=resolve_precision(config, device))
+    else:
+        noise = NormalActionNoise(np.zeros(n_actions), config.noise_std * np.ones(n_actions)) if config.noise_std else None
+    return sb3_class(config.algo)("CnnPolicy" if config.obs == "pixels" else "MlpPolicy", venv, learning_rate=config.learning_rate,
+                                  buffer_size=config.buffer_size, learning_starts=config.learning_starts, batch_size=config.batch_size,
+                                  tau=config.tau, gamma=config.gamma, train_freq=config.train_freq,
+                                  gradient_steps=config.gradient_steps, action_noise=noise, policy_kwargs=policy_kwargs,
+                                  **_n_step_buffer(config), tensorboard_log=tensorboard_log, seed=config.seed, device=device,
+                                  verbose=0)
+
+
 def _save(run_dir: Path, model: Any, config: SB3Config, episodes: int, history: list[dict[str, float]], elapsed: float) -> None:
     policy, buffer = io.BytesIO(), io.BytesIO()
     model.save(policy)
@@ -201,8 +223,6 @@ def train_sb3(config: SB3Config, run_dir: str | Path, autoencoder: str | Path | 
     Raises:
         ValueError: ``config.device`` is "cuda" and torch sees no CUDA device.
     """
-    from stable_baselines3.common.noise import NormalActionNoise
-
     algorithm = sb3_class(config.algo)
     device = resolve_device(config.device)
     run_dir = Path(run_dir)
@@ -246,20 +266,7 @@ def train_sb3(config: SB3Config, run_dir: str | Path, autoencoder: str | Path | 
         _episode_seeds(venv).episodes = k
         venv.seed(_episode_seeds(venv).seed_of(k))
     else:
-        n_actions = venv.action_space.shape[0]
-        policy_kwargs: dict[str, Any] = {"net_arch": list(config.net_arch)}
-        if config.algo == "drqv2":
-            from agents.sb3.drqv2 import ScheduledNoise
-
-            noise: Any = ScheduledNoise(n_actions, config.noise_std, config.noise_final_std, config.noise_decay_steps)
-            policy_kwargs["feature_dim"] = config.feature_dim
-        else:
-            noise = NormalActionNoise(np.zeros(n_actions), config.noise_std * np.ones(n_actions)) if config.noise_std else None
-        model = algorithm("CnnPolicy" if config.obs == "pixels" else "MlpPolicy", venv, learning_rate=config.learning_rate,
-                          buffer_size=config.buffer_size, learning_starts=config.learning_starts, batch_size=config.batch_size,
-                          tau=config.tau, gamma=config.gamma, train_freq=config.train_freq, gradient_steps=config.gradient_steps,
-                          action_noise=noise, policy_kwargs=policy_kwargs, **_n_step_buffer(config),
-                          tensorboard_log=str(run_dir / "tensorboard"), seed=config.seed, device=device, verbose=0)
+        model = new_model(config, venv, device, tensorboard_log=str(run_dir / "tensorboard"))
     callback = _eval_callback(config, eval_env)
     started = time.monotonic() - elapsed
     bar = tqdm(total=config.steps, initial=model.num_timesteps, desc=f"{config.algo} ({config.obs})", unit="step", disable=not progress)
@@ -293,6 +300,7 @@ def train_sb3(config: SB3Config, run_dir: str | Path, autoencoder: str | Path | 
         "steps": int(model.num_timesteps),
         "train_seconds": elapsed,
         "device": str(device),
+        "encoder_precision": getattr(model.policy, "encoder_precision", "float32"),
         "learning_curve": history,
         "env": config.env,
         "learned_return": config.learned_return,

@@ -33,7 +33,7 @@ OUTPUTS = (CHECKPOINT, "config.json", "metrics.json", "model.zip", "autoencoder.
 def build_parser() -> ArgumentParser:
     from agents.planet.config import MAX_EXPLORATION_NOISE, IterativeConfig, PlanetTrainConfig, RewardAlignment, RSSMConfig
     from agents.sb3.autoencoder import AutoencoderConfig
-    from agents.sb3.config import ALGORITHM_PRESETS, ALGORITHMS, LEARNED_RETURN, OBSERVATIONS, PRESETS, SB3Config
+    from agents.sb3.config import ALGORITHM_PRESETS, ALGORITHMS, LEARNED_RETURN, OBSERVATIONS, PRECISIONS, PRESETS, SB3Config
     from envs import ENV_IDS
 
     p = ArgumentParser(prog=PROG, description="Train a baseline (the PlaNet-style world model, or SB3 DDPG) into a run "
@@ -141,6 +141,10 @@ def build_parser() -> ArgumentParser:
     d.add_argument("--autoencoder-steps", type=positive_int, default=AutoencoderConfig.steps,
                    help="with --obs latent: the autoencoder's training steps (default %(default)s)")
     d.add_argument("--torque-arrow", action="store_true", help="show Gymnasium's torque arrow in the frames (off by default, as in piga-control)")
+    d.add_argument("--encoder-precision", choices=PRECISIONS, default=ddpg.encoder_precision,
+                   help="with --algo drqv2: the encoder's convolutions in float32 or bfloat16 (autocast; the actor and "
+                   "the critic stay float32); auto: bfloat16 on a CPU with bfloat16 hardware (AMX, AVX-512 BF16), "
+                   "float32 elsewhere (default %(default)s)")
     d.add_argument("--seed", type=seed_int, default=ddpg.seed, help="seed (default %(default)s)")
     d.add_argument("--threads", type=thread_count, default=ddpg.threads,
                    help="torch CPU threads, 0: torch's choice (default %(default)s)")
@@ -442,7 +446,7 @@ def _ddpg_checkpoint_bytes(config: Any, latent_size: int) -> float:
 
 def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
     from piga.io.atomic import write_json
-    from agents.sb3.config import SB3Config  # it checks --eval-every against the env's episode length
+    from agents.sb3.config import SB3Config, resolve_precision  # it checks --eval-every against the env's episode length
     from agents.sb3.run import AUTOENCODER
     from agents.sb3.train import first_step_reaching, train_sb3
     from piga.io.resources import check_run_disk
@@ -462,7 +466,9 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
         _check_run_dir(run_dir, True, args.overwrite, RunKind.DDPG)
         record, _ = read_run_record(run_dir)
         # runs from before --algo are DDPG; runs from before --device have none
-        saved = _saved_config(run_dir, record, "ddpg", SB3Config, optional=("algo", "device", "env"))
+        saved = _saved_config(run_dir, record, "ddpg", SB3Config, optional=("algo", "device", "env", "encoder_precision"))
+        if "encoder_precision" not in record["ddpg"]:  # runs from before the option computed in float32
+            saved = replace(saved, encoder_precision="float32")
         if saved.obs != args.obs:
             raise PigaError(f"--resume: {run_dir} was trained with --obs {saved.obs}, not {args.obs}")
         if saved.algo != args.algo:
@@ -490,7 +496,11 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
         config = SB3Config(env=args.env, obs=args.obs, algo=args.algo, steps=args.steps or SB3Config.steps, eval_every=args.eval_every,
                             eval_episodes=args.eval_episodes,
                             torque_arrow=args.torque_arrow, seed=args.seed, threads=args.threads, device=args.device,
-                            **given)
+                            encoder_precision=args.encoder_precision, **given)
+        from piga.io.device import resolve_device
+
+        # the record holds the precision the run computes in, so that --resume continues it on any machine
+        config = replace(config, encoder_precision=resolve_precision(config, resolve_device(config.device)))
         ae_config = AutoencoderConfig(steps=args.autoencoder_steps, seed=config.seed)
         if args.data:
             from agents.sb3.autoencoder import check_autoencoder_data
