@@ -117,6 +117,19 @@ def _eval_callback(config: SB3Config, eval_env: Any) -> Any:
                               deterministic=True, verbose=0)
 
 
+def _bar_callback(bar: Any) -> Any:
+    """A callback that moves the run's progress bar at each env step: a chunk between checkpoints can last an hour
+    on a CPU (SB3's own ProgressBarCallback would draw a new bar for each chunk)."""
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class BarCallback(BaseCallback):
+        def _on_step(self) -> bool:
+            bar.update(self.training_env.num_envs)
+            return True
+
+    return BarCallback()
+
+
 def _n_step_buffer(config: SB3Config) -> dict[str, Any]:
     """SB3's arguments for ``config.n_step``-step returns: its ``NStepReplayBuffer`` named explicitly (the saved
     model then loads without SB3's warning that its ``n_steps`` shortcut is ignored), or nothing for 1."""
@@ -273,12 +286,12 @@ def train_sb3(config: SB3Config, run_dir: str | Path, autoencoder: str | Path | 
     try:
         while model.num_timesteps < config.steps:
             chunk = min(config.eval_every, config.steps - model.num_timesteps)
-            before = model.num_timesteps
             try:
-                model.learn(chunk, callback=callback, reset_num_timesteps=False, tb_log_name=config.algo)
+                model.learn(chunk, callback=[callback, _bar_callback(bar)], reset_num_timesteps=False,
+                            tb_log_name=config.algo)
             except NonFiniteAction as exc:
                 _diverged(str(exc), model.num_timesteps, run_dir / CHECKPOINT)
-            bar.update(model.num_timesteps - before)
+            bar.update(model.num_timesteps - bar.n)  # none, unless a step went uncounted
             _check_finite(model, callback, chunk == config.eval_every, run_dir / CHECKPOINT)
             elapsed = time.monotonic() - started
             if chunk == config.eval_every:  # the callback evaluated at the chunk's last step
