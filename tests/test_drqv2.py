@@ -206,3 +206,16 @@ def test_a_run_keeps_its_precision_in_its_record_its_model_and_its_resume(tmp_pa
     assert_sb3_run_finished(code, err)
     assert json.loads((out / "config.json").read_text())["ddpg"]["encoder_precision"] == "float32"
     assert json.loads((out / "metrics.json").read_text())["encoder_precision"] == "float32"
+
+
+def test_the_bfloat16_encoders_layout_changes_no_feature_order() -> None:
+    """Channels-last memory is a layout: the features must come out in the channel-first order of float32's."""
+    from agents.sb3.drqv2 import Encoder
+
+    torch.manual_seed(0)
+    exact, rounded = Encoder(3, 64), Encoder(3, 64, bfloat16=True)
+    rounded.load_state_dict(exact.state_dict())
+    assert rounded.convnet[0].weight.is_contiguous(memory_format=torch.channels_last)
+    x = torch.randint(0, 256, (2, 3, 64, 64)).float()
+    a, b = exact(x), rounded(x)
+    assert torch.corrcoef(torch.stack([a.flatten(), b.flatten()]))[0, 1] > 0.999

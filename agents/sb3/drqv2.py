@@ -69,7 +69,11 @@ def random_shift(x: Tensor, pad: int = SHIFT_PAD, generator: torch.Generator | N
 
 class Encoder(nn.Module):
     """uint8-valued stacks (B, K, H, W) as floats -> float32 features (B, 32·(H/2 - 7)²); DrQ-v2's convs, computed
-    in bfloat16 (torch's autocast; the weights stay float32) when ``bfloat16``."""
+    in bfloat16 (torch's autocast; the weights stay float32) when ``bfloat16``.
+
+    In bfloat16 the images and weights are kept channels-last in memory (the same tensors, another layout): oneDNN's
+    bfloat16 convolutions take that layout natively, and the update ran about 1.4x faster than with them reordered
+    from channels-first at each call (results/drqv2_precision.md)."""
 
     def __init__(self, channels: int, size: int, bfloat16: bool = False):
         super().__init__()
@@ -81,10 +85,15 @@ class Encoder(nn.Module):
         side = (size - 3) // 2 + 1 - 6
         self.repr_dim = 32 * side * side
         self.apply(_orthogonal)
+        if bfloat16:
+            self.convnet.to(memory_format=torch.channels_last)
 
     def forward(self, obs: Tensor) -> Tensor:
+        x = obs / 255.0 - 0.5
+        if self.bfloat16:
+            x = x.contiguous(memory_format=torch.channels_last)
         with torch.autocast(obs.device.type, dtype=torch.bfloat16, enabled=self.bfloat16):
-            features = self.convnet(obs / 255.0 - 0.5).flatten(1)
+            features = self.convnet(x).flatten(1)  # (B, 32, S, S) -> (B, 32·S²) in that order, whatever the layout
         return features.float()
 
 
