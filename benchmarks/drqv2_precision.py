@@ -3,7 +3,8 @@
 DrQ-v2's training time on a CPU is its update: convolutions over batches of 256 stacks, forward for the
 observation and the next one, backward for one (a py-spy profile of a run on the DMC pendulum put 95% of its
 time there; acting and rendering the rest). ``--encoder-precision bfloat16`` runs those convolutions under
-torch's autocast; the actor, the critic and the losses stay float32.
+torch's autocast, on images and weights kept channels-last in memory (oneDNN's native layout for them); the actor,
+the critic and the losses stay float32.
 
 For each precision the script builds the run's model exactly as ``piga-baseline ddpg --algo drqv2`` does
 (:func:`agents.sb3.train.new_model`, the same seed), fills its replay buffer with ``--fill`` random-action
@@ -106,7 +107,7 @@ def markdown(record: dict[str, Any]) -> str:
         f"{record['image_size']}, {record['env']}), medians over {record['repeats']} rounds of {record['updates']} updates each, "
         "the precisions alternating:",
         "",
-        "| encoder | seconds per update (median) | min | max |",
+        "| encoder (bfloat16: autocast, channels-last) | seconds per update (median) | min | max |",
         "|---|---|---|---|",
         *[f"| {p} | {m[p]['median']:.3f} | {m[p]['min']:.3f} | {m[p]['max']:.3f} |" for p in COMPARED],
         "",
