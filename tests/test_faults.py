@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 
 from piga.cli import baseline, collect, control, demo, diagnose, importer, show, train
-from tests.helpers import ENV, assert_one_line, run_in_process
+from tests.helpers import ENV, assert_one_line, assert_sb3_run_finished, run_in_process
 
 TINY_PLANET = ("--steps", "2", "--batch-size", "2", "--chunk-length", "8", "--deter-size", "8", "--stoch-size", "4",
                "--threads", "1", "--quiet")
@@ -737,6 +737,28 @@ def test_ddpg_interrupted_before_its_first_checkpoint_leaves_nothing(obs: str, t
                                   capsys=capsys)
     assert code == 130 and err.strip() == "piga-baseline: interrupted; nothing was written", err
     assert _listing(tmp_path) == []
+
+
+def test_a_resume_interrupted_before_its_next_checkpoint_keeps_the_run(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                                      monkeypatch: pytest.MonkeyPatch) -> None:
+    """It said "nothing was written" beside a run folder of hours of training, as if the run were lost."""
+    import agents.sb3.train as ddpg
+
+    out = tmp_path / "run"
+    code, _, err = run_in_process("piga-baseline", baseline.main, "ddpg", "--obs", "state", "--out", str(out), *TINY_DDPG,
+                                  capsys=capsys)
+    assert_sb3_run_finished(code, err)
+    before = _listing(tmp_path)
+
+    def interrupted_ddpg(config: Any, run_dir: Path, *args: Any, **kwargs: Any) -> None:
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(ddpg, "train_sb3", interrupted_ddpg)
+    code, _, err = run_in_process("piga-baseline", baseline.main, "ddpg", "--obs", "state", "--out", str(out), "--resume",
+                                  "--steps", "400", capsys=capsys)
+    assert code == 130 and err.strip() == (f"piga-baseline: interrupted; {out / 'checkpoint.pt'} is as it was (stopped "
+                                           "before the next checkpoint); continue with --resume"), err
+    assert _listing(tmp_path) == before
 
 
 def test_leftovers_without_a_checkpoint_are_named(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

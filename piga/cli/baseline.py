@@ -282,6 +282,16 @@ def _nothing_left_unless_checkpointed(run_dir: Path, written: list[int], fresh: 
             raise
 
 
+def _interrupted(run_dir: Path, written: list[int], resume: bool) -> None:
+    """Raises the line of a run interrupted after a checkpoint, or of a resumed one before its next checkpoint: its
+    checkpoint is kept either way ("nothing was written" would read as the run lost)."""
+    if written:
+        raise Interrupted(f"{run_dir / CHECKPOINT} holds step {written[-1]}; continue with --resume") from None
+    if resume:
+        raise Interrupted(f"{run_dir / CHECKPOINT} is as it was (stopped before the next checkpoint); continue with "
+                          "--resume") from None
+
+
 def check_planet_memory(rssm: Any, config: Any = None) -> None:
     """Refuses model sizes whose weights, gradients and Adam's two moments (4 float32 copies) do not fit
     in memory, before anything is allocated (a --stoch-size of 5e7 otherwise swaps for ever); with the training
@@ -407,8 +417,7 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
     except TrainingDiverged as exc:
         raise PigaError(f"training diverged: {exc}") from None
     except KeyboardInterrupt:
-        if written:
-            raise Interrupted(f"{run_dir / CHECKPOINT} holds step {written[-1]}; continue with --resume") from None
+        _interrupted(run_dir, written, args.resume)
         raise
     if not written:  # a resume with nothing left to do still records its command
         write_json(run_dir / "config.json", record)
@@ -540,8 +549,7 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
     except TrainingDiverged as exc:
         raise PigaError(f"training diverged: {exc}") from None
     except KeyboardInterrupt:
-        if written:
-            raise Interrupted(f"{run_dir / CHECKPOINT} holds step {written[-1]}; continue with --resume") from None
+        _interrupted(run_dir, written, args.resume)
         raise
     reached = first_step_reaching(metrics["learning_curve"], config.learned_return)
     final = metrics["final_eval_mean_return"]
