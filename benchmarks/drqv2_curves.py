@@ -1,0 +1,175 @@
+"""DrQ-v2's learning curves, from its runs' records, beside the published DrQ-v2 curve on DMC pendulum-swingup.
+
+Each ``--runs`` record is what ``benchmarks/learning_curve.py`` reads from a run's checkpoint (a run stopped part-way
+included): the command, the commits, the settings and the evaluation curve. ``--published`` is the published
+per-seed curve (``benchmarks/published_scores.py``: DrQ-v2's 9 seeds on pendulum-swingup). A DMC run's env steps
+are counted in frames as DrQ-v2's paper counts them (action repeat 2: two per env step), the published curves' unit.
+
+    python benchmarks/drqv2_curves.py --out results/drqv2 \
+        --published results/published/dmc_vision-drqv2-pendulum_swingup.json \
+        --runs results/drqv2_runs/records/pixels-s0.json results/drqv2_runs/records/pixels-cpu-s0.json \
+               results/drqv2_runs/records/dmc-float32-s0.json results/drqv2_runs/records/dmc-bf16-s0.json
+
+Writes OUT.md, OUT.json (each run's curve, and the published curve at its points) and OUT.png (the curves).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shlex
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from common import signed, write_page
+
+from agents.sb3.config import LEARNED_RETURN
+from envs import DMC_PENDULUM, PIXEL_PENDULUM
+from envs.dmc import DMCPendulumConfig
+
+#: Frames per DMC env step: its action repeat (DrQ-v2's paper and the published curves count frames).
+DMC_FRAMES_PER_STEP = DMCPendulumConfig().action_repeat
+
+
+def run_summary(name: str, record: dict[str, Any]) -> dict[str, Any]:
+    """One run: its env, device and precision, steps trained of those planned, its curve in frames."""
+    config = record["config"]
+    env = config.get("env", PIXEL_PENDULUM)
+    per_step = DMC_FRAMES_PER_STEP if env == DMC_PENDULUM else 1
+    curve = [{"step": r["step"], "frames": r["step"] * per_step, "score": r["eval_mean_return"]} for r in record["learning_curve"]]
+    mark = LEARNED_RETURN[env]
+    reached = next((r["step"] for r in curve if r["score"] > mark), None)
+    return {"name": name, "env": env, "device": config.get("device", "auto"),
+            "precision": config.get("encoder_precision", "float32"), "planned": config["steps"],
+            "trained": curve[-1]["step"] if curve else 0, "curve": curve, "mark": mark, "first_step_above_mark": reached,
+            "best": max((r["score"] for r in curve), default=None), "train_minutes": record.get("train_seconds", 0) / 60,
+            "command": record.get("command"), "commit": record.get("commit"), "resumed_commits": record.get("resumed_commits", [])}
+
+
+def published_at(published: dict[str, Any], frames: float) -> dict[str, float]:
+    """The published seeds' scores at ``frames`` (each seed's curve interpolated linearly), summarised."""
+    ys = np.array([np.interp(frames, s["xs"], s["ys"]) for s in published["seeds"]])
+    return {"mean": float(ys.mean()), "std": float(ys.std()), "min": float(ys.min()), "max": float(ys.max()),
+            "above_200": int((ys > 200).sum()), "seeds": len(ys)}
+
+
+def markdown(record: dict[str, Any]) -> str:
+    runs, published = record["runs"], record["published"]
+    lines = [
+        "# DrQ-v2 from pixels: learning curves",
+        "",
+        f"From `{record['command']}`. Each run's record was read from its checkpoint by `benchmarks/learning_curve.py` "
+        "(a run stopped part-way included); its command and commits are in the record. DrQ-v2's settings and what "
+        "it is given: [docs/commands/baseline.md](../docs/commands/baseline.md). Evaluation: 5 episodes from the "
+        "same seeded starts at each point (on DMC the score is DMC's, 0-1000; on the pixel pendulum, Pendulum-v1's "
+        "return). The encoder's precision is the run's `--encoder-precision` (bfloat16: "
+        "[results/drqv2_precision.md](drqv2_precision.md)).",
+        "",
+        "| run | env | device, encoder | env steps trained (planned) | best evaluation | first step above the mark | training min |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for r in runs:
+        first = f"{r['first_step_above_mark']:,}" if r["first_step_above_mark"] is not None else "not yet"
+        best = signed(r["best"]) if r["best"] is not None else "—"
+        lines.append(f"| {r['name']} | {r['env']} | {r['device']}, {r['precision']} | {r['trained']:,} ({r['planned']:,}) | "
+                     f"{best} | {first} (mark {r['mark']:g}) | {r['train_minutes']:.0f} |")
+    dmc = [r for r in runs if r["env"] == DMC_PENDULUM]
+    if dmc:
+        frames = sorted({p["frames"] for r in dmc for p in r["curve"]})
+        lines += [
+            "",
+            f"## {DMC_PENDULUM} against the published DrQ-v2",
+            "",
+            f"Published: {published['source']}, {len(published['seeds'])} seeds, each curve interpolated at the run's "
+            "frames (env steps x 2). A score outside the seeds' range is marked (above) or (below) it. DrQ-v2's "
+            "curve on this task is late and wide: at 100,000 frames 4 of its 9 seeds score above 200, at 200,000 "
+            "6 of 9.",
+            "",
+            "| frames | " + " | ".join(r["name"] for r in dmc) + " | published mean ± std | published range | seeds above 200 |",
+            "|---|" + "---|" * len(dmc) + "---|---|---|",
+        ]
+        for x in frames:
+            at = published_at(published, x)
+            cells = []
+            for r in dmc:
+                score = next((p["score"] for p in r["curve"] if p["frames"] == x), None)
+                side = "" if score is None or at["min"] <= score <= at["max"] else (" (above)" if score > at["max"] else " (below)")
+                cells.append("" if score is None else f"{score:.1f}{side}")
+            lines.append(f"| {x:,} | " + " | ".join(cells) + f" | {at['mean']:.0f} ± {at['std']:.0f} | "
+                         f"{at['min']:.0f}–{at['max']:.0f} | {at['above_200']} of {at['seeds']} |")
+    pixel = [r for r in runs if r["env"] == PIXEL_PENDULUM]
+    if pixel:
+        steps = sorted({p["step"] for r in pixel for p in r["curve"]})
+        lines += [
+            "",
+            f"## {PIXEL_PENDULUM}",
+            "",
+            "Evaluation return (Pendulum-v1's, 200 steps; the SB3 zoo's mark of a learned swing-up is −200):",
+            "",
+            "| env steps | " + " | ".join(f"{r['name']} ({r['device']}, {r['precision']})" for r in pixel) + " |",
+            "|---|" + "---|" * len(pixel),
+        ]
+        for s in steps:
+            cells = [next((signed(p["score"]) for p in r["curve"] if p["step"] == s), "") for r in pixel]
+            lines.append(f"| {s:,} | " + " | ".join(cells) + " |")
+    lines += ["", f"![DrQ-v2's curves]({Path(record['figure']).name})", ""]
+    return "\n".join(lines)
+
+
+def figure(record: dict[str, Any], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from piga.io.atomic import atomic_output
+
+    runs, published = record["runs"], record["published"]
+    fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4))
+    for s in published["seeds"]:
+        left.plot(np.array(s["xs"]) / 1000, s["ys"], color="0.75", lw=0.8)
+    xs = np.linspace(0, max(max(s["xs"]) for s in published["seeds"]), 51)
+    left.plot(xs / 1000, [published_at(published, x)["mean"] for x in xs], color="0.35", lw=1.5,
+              label=f"published DrQ-v2 ({len(published['seeds'])} seeds, mean in dark)")
+    for r in runs:
+        ax = left if r["env"] == DMC_PENDULUM else right
+        key = "frames" if ax is left else "step"
+        ax.plot([p[key] / 1000 for p in r["curve"]], [p["score"] for p in r["curve"]], marker="o", lw=2,
+                label=f"{r['name']} ({r['device']}, {r['precision']})")
+    left.set(xlim=(0, 220), xlabel="frames (thousands; env steps x 2)", ylabel="DMC score", title=DMC_PENDULUM)
+    left.axhline(200, color="k", ls=":", lw=0.8)
+    right.set(xlabel="env steps (thousands)", ylabel="evaluation return", title=PIXEL_PENDULUM)
+    right.axhline(-200, color="k", ls=":", lw=0.8)
+    for ax in (left, right):
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    with atomic_output(path, overwrite=True) as tmp:
+        fig.savefig(tmp, format="png", dpi=110)
+    plt.close(fig)
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], allow_abbrev=False)
+    p.add_argument("--out", type=Path, required=True, help="output prefix: OUT.md, OUT.json, OUT.png")
+    p.add_argument("--runs", type=Path, nargs="+", required=True, help="learning_curve.py records")
+    p.add_argument("--published", type=Path, required=True, help="published_scores.py's record of DrQ-v2's curve")
+    args = p.parse_args(argv)
+    try:
+        runs = [run_summary(path.stem, json.loads(path.read_text())) for path in args.runs]
+        published = json.loads(args.published.read_text())
+    except (OSError, ValueError, KeyError) as exc:
+        print(f"drqv2_curves.py: error: {' '.join(str(exc).split())}", file=sys.stderr)
+        return 1
+    command = shlex.join(["python", "benchmarks/drqv2_curves.py", *(sys.argv[1:] if argv is None else argv)])
+    record = {"command": command, "runs": runs, "published": published, "figure": str(args.out.with_suffix(".png"))}
+    figure(record, args.out.with_suffix(".png"))
+    write_page(args.out, {**record, "published": {"source": published["source"], "file": str(args.published)}},
+               markdown(record))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

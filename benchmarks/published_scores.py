@@ -1,0 +1,50 @@
+"""The published per-seed learning curves of one method on one DMC task, from the score files that DreamerV3's
+authors publish for it and its baselines (github.com/danijar/dreamerv3, ``scores/dmc_vision-METHOD.json.gz``).
+
+    git clone https://github.com/danijar/dreamerv3 && git -C dreamerv3 checkout e3f0224
+    python benchmarks/published_scores.py dreamerv3/scores/dmc_vision-drqv2.json.gz --task dmc_pendulum_swingup \
+        --source "github.com/danijar/dreamerv3 scores/dmc_vision-drqv2.json.gz (commit e3f0224)" \
+        --out results/published/dmc_vision-drqv2-pendulum_swingup.json
+
+Writes OUT (JSON): the source, the task, the method, and per seed the curve as published (``xs``: environment steps
+of 0.02 s, DMC's control step, so frames at action repeat 1; ``ys``: the evaluation score, 0-1000). The file is
+small, so that pages can compare with the curve without the download.
+"""
+
+from __future__ import annotations
+
+import argparse
+import gzip
+import json
+import sys
+from pathlib import Path
+
+from piga.io.atomic import write_json
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], allow_abbrev=False)
+    p.add_argument("scores", type=Path, help="a score file: a gzipped JSON list of {task, method, seed, xs, ys}")
+    p.add_argument("--task", required=True, help="the task's name in the file, e.g. dmc_pendulum_swingup")
+    p.add_argument("--source", required=True, help="where the file came from, for the record")
+    p.add_argument("--out", type=Path, required=True, help="the JSON to write")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing OUT")
+    args = p.parse_args(argv)
+    try:
+        with gzip.open(args.scores, "rt") as f:
+            runs = [r for r in json.load(f) if r["task"] == args.task]
+        if not runs:
+            raise ValueError(f"{args.scores} has no curve of task {args.task!r}")
+        methods = sorted({r["method"] for r in runs})
+        record = {"source": args.source, "task": args.task, "method": ", ".join(methods), "x_unit": "environment steps of 0.02 s",
+                  "seeds": [{"seed": r["seed"], "xs": r["xs"], "ys": r["ys"]} for r in sorted(runs, key=lambda r: r["seed"])]}
+        write_json(args.out, record, overwrite=args.overwrite)
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        print(f"published_scores.py: error: {' '.join(str(exc).split())}", file=sys.stderr)
+        return 1
+    print(f"wrote {args.out}: {len(runs)} seeds of {record['method']} on {args.task}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

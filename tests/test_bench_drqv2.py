@@ -1,0 +1,63 @@
+"""benchmarks/drqv2_curves.py and published_scores.py: the published curve read at a run's frames, a DMC run's
+steps counted as frames, and scores outside the published seeds' range marked; DrQ-v2's precision benchmark."""
+
+from __future__ import annotations
+
+import gzip
+import json
+import sys
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+
+import drqv2_curves  # noqa: E402
+import published_scores  # noqa: E402
+
+#: Two published seeds: linear from 0 to 100 and to 300 over 100,000 env steps.
+SEEDS = [{"task": "dmc_pendulum_swingup", "method": "drqv2", "seed": s, "xs": [0, 100_000], "ys": [0, top]}
+         for s, top in ((0, 100), (1, 300))] + [{"task": "dmc_cheetah_run", "method": "drqv2", "seed": 0, "xs": [0], "ys": [0]}]
+
+
+def _record(env: str | None, curve: list[tuple[int, float]], **config: object) -> dict[str, object]:
+    return {"command": "piga-baseline ddpg --out RUN", "commit": "abc",
+            "config": {"steps": 50_000, **({"env": env} if env else {}), **config},
+            "learning_curve": [{"step": s, "eval_mean_return": r, "seconds": 1.0} for s, r in curve], "train_seconds": 120.0}
+
+
+def test_the_published_curve_is_read_per_seed_and_runs_are_set_beside_it(tmp_path: Path) -> None:
+    scores = tmp_path / "scores.json.gz"
+    with gzip.open(scores, "wt") as f:
+        json.dump(SEEDS, f)
+    published = tmp_path / "published.json"
+    assert published_scores.main([str(scores), "--task", "dmc_pendulum_swingup", "--source", "test", "--out", str(published)]) == 0
+    assert [s["seed"] for s in json.loads(published.read_text())["seeds"]] == [0, 1]
+    assert published_scores.main([str(scores), "--task", "nope", "--source", "t", "--out", str(tmp_path / "n.json")]) == 1
+    at = drqv2_curves.published_at(json.loads(published.read_text()), 50_000)
+    assert (at["mean"], at["min"], at["max"], at["above_200"]) == (100.0, 50.0, 150.0, 0)
+
+    runs = tmp_path / "dmc.json"  # 25,000 env steps are 50,000 frames: the range there is 50-150
+    runs.write_text(json.dumps(_record("piga/DMCPendulum-v0", [(25_000, 160.0), (50_000, 250.0)], encoder_precision="bfloat16")))
+    pixel = tmp_path / "pixel.json"  # a run from before --env and --encoder-precision: the pixel pendulum, float32
+    pixel.write_text(json.dumps(_record(None, [(5000, -900.0), (10_000, -150.0)])))
+    out = tmp_path / "page"
+    assert drqv2_curves.main(["--out", str(out), "--published", str(published), "--runs", str(runs), str(pixel)]) == 0
+    page = out.with_suffix(".md").read_text()
+    assert "| 50,000 | 160.0 (above) | 100 ± 50 | 50–150 | 0 of 2 |" in page
+    assert "| 100,000 | 250.0 | 200 ± 100 | 100–300 | 1 of 2 |" in page
+    assert "| dmc | piga/DMCPendulum-v0 | auto, bfloat16 | 50,000 (50,000) | 250.0 | 50,000 (mark 200) | 2 |" in page
+    assert "| pixel | piga/PixelPendulum-v0 | auto, float32 | 10,000 (50,000) | −150.0 | 10,000 (mark -200) | 2 |" in page
+    assert out.with_suffix(".png").stat().st_size > 0
+
+
+def test_the_precision_benchmark_times_both_and_compares_one_update(tmp_path: Path) -> None:
+    import drqv2_precision
+
+    out = tmp_path / "precision"
+    assert drqv2_precision.main(["--out", str(out), "--fill", "300", "--repeats", "1", "--updates", "1", "--warmup", "0"]) == 0
+    record = json.loads(out.with_suffix(".json").read_text())
+    assert set(record["timing"]) == {"float32", "bfloat16"} and record["speedup"] > 0
+    assert 0.9 < record["agreement"]["encoder_gradient_cosine"] <= 1.0 + 1e-6
+    with pytest.raises(SystemExit):
+        drqv2_precision.main(["--out", str(out), "--fill", "10"])
