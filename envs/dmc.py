@@ -193,6 +193,11 @@ def _import_dm_control() -> tuple[Any, Any]:
     except ImportError as exc:
         raise MissingExtraError(f"the DMC pendulum needs dm_control and MuJoCo: install piga[dmc] "
                                 f"(pip install -e '.[dmc]'); import failed: {exc}") from None
+    except RuntimeError as exc:  # dm_control checks the variable as it imports its renderer
+        if "MUJOCO_GL" not in str(exc):
+            raise
+        raise ValueError(f"MUJOCO_GL={os.environ['MUJOCO_GL']!r} names no renderer dm_control knows; unset it (piga "
+                         "then renders with egl) or set egl, osmesa or glfw") from None
     import logging
 
     # dm_control logs MuJoCo's instability warnings through absl before raising PhysicsError, which step() turns

@@ -286,4 +286,7 @@ def make_pixel_pendulum(
     env = wrap_effects(env, config.effects, "frame")  # blur, shift, noise, frame delay, frame drop
     env = FrameStackObservation(env, config.frame_stack)
     env.metadata = {**env.metadata, "render_modes": ["rgb_array"]}
+    # Gymnasium's Pendulum-v1 advertises "human" too, and check_env(env.unwrapped) makes the env again in each mode
+    # its metadata lists: the base env's copy says what this env renders
+    env.unwrapped.metadata = {**env.unwrapped.metadata, "render_modes": ["rgb_array"]}
     return env

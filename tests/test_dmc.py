@@ -166,6 +166,21 @@ def test_missing_extra_gives_one_clear_line(tmp_path):
             make_dmc_pendulum()
 
 
+@needs_dmc
+def test_an_unknown_mujoco_gl_is_one_line_to_fix(tmp_path):
+    """dm_control refuses MUJOCO_GL=garbage with a RuntimeError as it imports its renderer: an internal error (70)."""
+    import os
+
+    env = {**os.environ, "MUJOCO_GL": "garbage", "OMP_NUM_THREADS": "1"}
+    result = subprocess.run(["piga-collect", "--env", "piga/DMCPendulum-v0", "--sequences", "4", "--steps", "6",
+                             "--workers", "1", "--split", "2,1,1", "--out", str(tmp_path / "x.h5"), "--quiet"],
+                            capture_output=True, text=True, timeout=120, env=env)
+    assert result.returncode == 1
+    assert result.stderr.strip() == ("piga-collect: error: MUJOCO_GL='garbage' names no renderer dm_control knows; unset "
+                                     "it (piga then renders with egl) or set egl, osmesa or glfw"), result.stderr
+    assert not (tmp_path / "x.h5").exists()
+
+
 def test_config_refuses_bad_values():
     with pytest.raises(ValueError, match="flip"):
         DMCPendulumConfig(flip="sideways")

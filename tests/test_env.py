@@ -18,6 +18,9 @@ def test_gymnasium_check_env() -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         check_env(gym.make("piga/PixelPendulum-v0"), skip_render_check=False)
+        # as Gymnasium recommends, on the base env: it makes the env again in each render mode the metadata lists
+        # (Pendulum-v1's said "human" too, which the pixel pendulum refuses)
+        check_env(gym.make("piga/PixelPendulum-v0").unwrapped, skip_render_check=False)
 
 
 def test_sb3_check_env() -> None:
