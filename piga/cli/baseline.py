@@ -25,6 +25,7 @@ from piga.cli.common import (ArgumentParser, Interrupted, PigaError, add_device_
                              started_record, thread_count)
 from piga.io.atomic import check_folder_target
 from piga.io.checkpoint import CHECKPOINT, RunKind, read_run_record
+from piga.io.lock import lock_run_folder
 
 PROG = "piga-baseline"
 OUTPUTS = (CHECKPOINT, "config.json", "metrics.json", "model.zip", "autoencoder.pt", "tensorboard", "collected.h5")
@@ -162,6 +163,7 @@ def _common(p: ArgumentParser) -> None:
 def _check_run_dir(run_dir: Path, resume: bool, overwrite: bool, kind: RunKind) -> None:
     """Refuses to clobber a run, or to resume what is not one of this kind; clears it with ``overwrite``."""
     check_folder_target(run_dir)
+    lock_run_folder(run_dir)  # a second command on this folder is refused until this one ends
     if resume and overwrite:
         raise PigaError("--resume continues the run in --out and --overwrite replaces it; give one of them")
     existing = [name for name in OUTPUTS if (run_dir / name).exists()]

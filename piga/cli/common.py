@@ -212,6 +212,9 @@ def run_cli(prog: str, main: Callable[[Sequence[str] | None], int | None], argv:
         _exit_on_error(prog, argv, exc)
     finally:
         guard, sys.stdout = sys.stdout, stdout
+        from piga.io.lock import release_run_folders
+
+        release_run_folders()
     if isinstance(guard, _GuardedStdout) and guard.failed is not None:
         # The work is done and its files are complete; only the report was lost. Exit 1 all the same
         # (as coreutils do), so that a script notices, but say that a rerun is not needed. A command that

@@ -26,6 +26,7 @@ from piga.data.collect import CollectConfig, collect
 from piga.data.schema import inspect_dataset
 from piga.io.atomic import check_folder_target
 from piga.io.checkpoint import CHECKPOINT
+from piga.io.lock import lock_run_folder
 
 PROG = "piga-demo"
 
@@ -96,6 +97,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     out = Path(args.out)
     check_folder_target(out)
+    lock_run_folder(out)  # a second command on this folder is refused until this one ends
     data, strip, run_dir = out / "pendulum.h5", out / "frames.png", out / "model"
     goal_png, control_md = out / "goal.png", out / "control.md"
     if not args.overwrite:

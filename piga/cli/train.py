@@ -18,6 +18,7 @@ from piga.cli.common import (NOT_CONVERGED, ArgumentParser, Interrupted, PigaErr
                              unit_fraction)
 from piga.io.atomic import check_folder_target
 from piga.io.checkpoint import CHECKPOINT, read_run_record, require_piga_run
+from piga.io.lock import lock_run_folder
 
 #: The recipe options a user may give; each is a TrainConfig field of the same name.
 RECIPE_OPTIONS = ("epochs", "budget_steps", "max_minutes", "batch_size", "lr", "lr_physics", "warmup_fraction",
@@ -152,6 +153,7 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
     device = resolve_device(args.device)  # --device cuda without a GPU: one line, before anything is read
     run_dir = Path(args.out)
     check_folder_target(run_dir)
+    lock_run_folder(run_dir)  # a second command on this folder is refused until this one ends
     if args.data_loading == "memory" and args.stream_cache_mb is not None:
         raise PigaError("--stream-cache-mb sizes the cache of --data-loading stream; --data-loading memory reads the "
                         "frames whole, so drop one of them")

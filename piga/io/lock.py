@@ -1,0 +1,73 @@
+"""One command at a time in a run folder.
+
+Two commands writing one run folder (the same ``--out`` twice, two ``--resume`` of one run) each passed the "already
+holds a run" check before either wrote anything, then replaced each other's checkpoint: a run that exited "trained"
+was gone. :func:`lock_run_folder` takes an exclusive lock for the folder's path until the process ends, and a
+second command is refused in one line naming the first one's PID.
+
+The lock is ``fcntl.flock`` on a file named by a digest of the folder's real path, in a ``piga-locks`` folder of
+the temporary folder, so that nothing is made in ``--out`` before a run exists. The kernel drops the lock when its
+process ends in any way (SIGKILL included), so a lock never outlives its run. Where no lock can be taken (no
+``fcntl``, a temporary folder that cannot be written), the command runs unlocked, as before.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import tempfile
+from pathlib import Path
+
+__all__ = ["FolderInUseError", "lock_run_folder", "release_run_folders"]
+
+#: Locks held by this process, kept open for its life (closing a descriptor drops its lock).
+_HELD: dict[str, int] = {}
+
+
+class FolderInUseError(ValueError):
+    """Another command holds the run folder."""
+
+
+def _lock_path(folder: Path) -> Path:
+    key = hashlib.sha256(os.path.realpath(folder).encode("utf-8", "surrogateescape")).hexdigest()[:32]
+    return Path(tempfile.gettempdir()) / "piga-locks" / f"{key}.lock"
+
+
+def lock_run_folder(folder: str | os.PathLike[str], flag: str = "--out") -> None:
+    """Locks ``folder`` (given as ``flag``) for this process, until it ends.
+
+    Raises:
+        FolderInUseError: another process holds it.
+    """
+    try:
+        import fcntl
+    except ImportError:  # not POSIX
+        return
+    path = _lock_path(Path(folder))
+    if str(path) in _HELD:
+        return
+    try:
+        path.parent.mkdir(mode=0o1777, exist_ok=True)
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
+    except OSError:  # a temporary folder that cannot be written, another user's lock file: run unlocked
+        return
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        holder = os.pread(fd, 32, 0).decode("ascii", "replace").strip() or "unknown"
+        os.close(fd)
+        raise FolderInUseError(f"{flag} {folder} is in use by another piga command (PID {holder}); wait for it to "
+                               f"end, or give another {flag}") from None
+    except OSError:  # a filesystem without locks
+        os.close(fd)
+        return
+    os.ftruncate(fd, 0)
+    os.pwrite(fd, str(os.getpid()).encode("ascii"), 0)
+    _HELD[str(path)] = fd
+
+
+def release_run_folders() -> None:
+    """Drops this process's locks: a command run in-process (a test, a notebook) releases its folder as it returns,
+    as a process does by ending."""
+    while _HELD:
+        os.close(_HELD.popitem()[1])

@@ -1,0 +1,64 @@
+"""One command at a time in a run folder: a second one is refused in one line, before it writes anything, and a
+lock ends with its command (or its process, however it ends)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from piga.cli import baseline, train
+from piga.io.lock import FolderInUseError, lock_run_folder, release_run_folders
+from tests.helpers import ENV, assert_one_line, run_in_process
+
+#: A process that locks the folder argv[1] as a command does, says so, and waits to be killed.
+HOLDER = "import sys, time; from piga.io.lock import lock_run_folder; lock_run_folder(sys.argv[1]); print('locked', flush=True); time.sleep(300)"
+
+
+def _hold(folder: Path) -> subprocess.Popen[str]:
+    proc = subprocess.Popen([sys.executable, "-c", HOLDER, str(folder)], stdout=subprocess.PIPE, text=True, env=ENV)
+    assert proc.stdout is not None and proc.stdout.readline().strip() == "locked"
+    return proc
+
+
+def test_a_second_command_on_a_folder_in_use_is_refused_before_it_writes(tmp_path: Path, tiny_data: Path,
+                                                                         capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "run"
+    holder = _hold(out)
+    try:
+        for prog, main, argv in (("piga-train-model", train.main, [str(tiny_data), "--out", str(out), "--epochs", "1"]),
+                                 ("piga-baseline", baseline.main, ["planet", str(tiny_data), "--out", str(out), "--steps", "2", "--chunk-length", "4"]),
+                                 ("piga-baseline", baseline.main, ["ddpg", "--obs", "state", "--out", str(out), "--resume"])):
+            code, _, err = run_in_process(prog, main, *argv, capsys=capsys)
+            assert_one_line(code, err, f"{prog}: error: --out {out} is in use by another piga command (PID {holder.pid}); "
+                                       "wait for it to end, or give another --out")
+        assert not out.exists()
+    finally:
+        holder.kill()
+        holder.wait()
+    lock_run_folder(out)  # the kernel dropped the killed holder's lock
+    release_run_folders()
+
+
+def test_a_lock_is_the_commands_and_ends_with_it(tmp_path: Path) -> None:
+    lock_run_folder(tmp_path / "a")
+    lock_run_folder(tmp_path / "a")  # the same process again: its own lock
+    other = subprocess.run([sys.executable, "-c", HOLDER.replace("time.sleep(300)", "pass"), str(tmp_path / "a")],
+                           capture_output=True, text=True, env=ENV)
+    assert other.returncode == 1 and "FolderInUseError" in other.stderr and f"PID {__import__('os').getpid()}" in other.stderr
+    release_run_folders()
+    started = time.monotonic()
+    holder = _hold(tmp_path / "a")  # released: another process takes it at once
+    holder.kill()
+    holder.wait()
+    assert time.monotonic() - started < 60
+    with pytest.raises(FolderInUseError):
+        held = _hold(tmp_path / "b")
+        try:
+            lock_run_folder(tmp_path / "b" / ".." / "b")  # the same folder by another spelling
+        finally:
+            held.kill()
+            held.wait()
