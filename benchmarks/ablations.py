@@ -41,7 +41,7 @@ from typing import Any, Literal, get_args, get_type_hints
 from common import TrainingBenchConfig, add_ray_option, farm_main, machine, machine_words, ray_backend
 from prediction import collect_command, collect_data, data_path, run_training
 
-from piga.cli.common import positive_int
+from piga.cli.common import positive_int, seed_int
 from piga.evaluation.objects import EMPTY_RATIO, LOST_RATIO
 from piga.io.atomic import atomic_output, write_json
 from piga.io.pool import JobRecords, RecordedJob, run_recorded
@@ -352,10 +352,10 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--slots", nargs="*", type=positive_int, default=list(DEFAULTS.slots),
                    help="object slot counts to train besides the scene's own (--objects N; none: no slot runs) "
                         "(default %(default)s)")
-    p.add_argument("--seeds", nargs="+", type=int, default=list(DEFAULTS.seeds), help="training seeds (default %(default)s)")
+    p.add_argument("--seeds", nargs="+", type=seed_int, default=list(DEFAULTS.seeds), help="training seeds (default %(default)s)")
     p.add_argument("--budget-steps", type=positive_int, default=DEFAULTS.budget_steps,
                    help="optimiser steps of every run (default %(default)s)")
-    p.add_argument("--sequences", type=int, default=DEFAULTS.sequences,
+    p.add_argument("--sequences", type=positive_int, default=DEFAULTS.sequences,
                    help="sequences per data set, split 80/10/10 (default %(default)s)")
     p.add_argument("--jobs", type=positive_int, default=DEFAULTS.jobs,
                    help="runs trained at once, each in its own process with one torch thread (default %(default)s)")
@@ -396,4 +396,6 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    from piga.cli.common import run_script
+
+    run_script(main, __file__)

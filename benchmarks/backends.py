@@ -36,7 +36,7 @@ from pathlib import Path
 from typing import Any
 
 from common import farm_main, machine, machine_words
-from piga.cli.common import ray_address
+from piga.cli.common import positive_int, ray_address
 from piga.io.atomic import atomic_output, write_json
 
 #: The blind benchmark's own sequences per case (``diagnose_blind.py --sequences``), for the page.
@@ -218,9 +218,9 @@ def main() -> int:
     p.add_argument("--out", required=True, help="OUT.json and OUT.md are written")
     p.add_argument("--ray", type=ray_address, default="auto", help="the Ray backend to compare with (default %(default)s)")
     p.add_argument("--sweep", default="0.6:1.4:0.2", help="gravity multipliers of the sweep (default %(default)s)")
-    p.add_argument("--episodes", type=int, default=5, help="episodes per sweep job (default %(default)s)")
-    p.add_argument("--cases", type=int, default=20, help="blind-benchmark cases (default %(default)s)")
-    p.add_argument("--sequences", type=int, default=100, help="sequences per blind case (default %(default)s)")
+    p.add_argument("--episodes", type=positive_int, default=5, help="episodes per sweep job (default %(default)s)")
+    p.add_argument("--cases", type=positive_int, default=20, help="blind-benchmark cases (default %(default)s)")
+    p.add_argument("--sequences", type=positive_int, default=100, help="sequences per blind case (default %(default)s)")
     p.add_argument("--cluster", type=ray_address, metavar="HOST:PORT",
                    help="also run the sweep, and a farm that reports where each of its tasks ran, on this Ray cluster")
     p.add_argument("--cluster-note", default="", help="what the cluster is, for the page")
@@ -272,4 +272,6 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from piga.cli.common import run_script
+
+    run_script(main, __file__)

@@ -84,6 +84,7 @@ from piga.io.atomic import atomic_output, write_json
 from piga.io.checkpoint import CHECKPOINT
 from piga.io.pool import Backend, JobRecords, RecordedJob, run_recorded
 from piga.control.episodes import parse_range
+from piga.cli.common import positive_int
 
 
 @dataclass(frozen=True)
@@ -1075,7 +1076,7 @@ def main() -> int:
     p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.split("\n\n")[0])
     p.add_argument("--out", required=True, help="writes OUT.json, OUT.md, OUT-*.png; runs in OUT_runs/")
     p.add_argument("--preset", choices=sorted(PRESETS), default="full")
-    p.add_argument("--workers", type=int, help="processes (default: the preset's, 2)")
+    p.add_argument("--workers", type=positive_int, help="processes (default: the preset's, 2)")
     add_ray_option(p, "the jobs (OUT_runs shared by every machine)")
     p.add_argument("--estimate", action="store_true", help="print the estimated cost of the preset and exit")
     p.add_argument("--only", default=",".join(AGENTS), metavar="JOBS",
@@ -1120,4 +1121,6 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from piga.cli.common import run_script
+
+    run_script(main, __file__)

@@ -18,7 +18,7 @@ from typing import Any, TypeVar
 
 import torch
 
-from piga.cli.common import PigaError, add_ray_option, connect_backend
+from piga.cli.common import PigaError, add_ray_option, connect_backend, seed_int
 from piga.io.pool import Backend, BackendError, JobFailed
 from piga.io.worker_signals import die_with_parent
 
@@ -145,7 +145,7 @@ def add_training_options(parser: argparse.ArgumentParser, defaults: Any, sequenc
     ``--budget-steps``, ``--sequences`` (``sequences_help``), ``--jobs`` and ``--ray``."""
     from piga.cli.common import int_at_least, positive_int
 
-    parser.add_argument("--seeds", nargs="+", type=int, default=list(defaults.seeds),
+    parser.add_argument("--seeds", nargs="+", type=seed_int, default=list(defaults.seeds),
                         help="training seeds (default %(default)s)")
     parser.add_argument("--budget-steps", type=positive_int, default=defaults.budget_steps,
                         help="optimiser steps of every run (default %(default)s)")

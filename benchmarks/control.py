@@ -43,6 +43,7 @@ from piga.control.jobs import ControlJob, run_jobs
 from piga.evaluation.episodes import EpisodeSummary, summary_markdown
 from piga.evaluation.plots import save_figure, sweep_figure
 from piga.io.runs import convergence_warning
+from piga.cli.common import positive_int, seed_int
 
 #: PlaNet's CEM (Hafner et al., 2019), re-planned from scratch each step.
 PLANET = MPCConfig(cem=CEMConfig(), warm_start=False)
@@ -60,14 +61,14 @@ def main() -> int:
     p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     p.add_argument("--model", required=True, help="run folder of piga-train-model")
     p.add_argument("--out", default="results/control", help="output prefix (default %(default)s)")
-    p.add_argument("--episodes", type=int, default=50)
+    p.add_argument("--episodes", type=positive_int, default=50)
     p.add_argument("--sweep", default="0.5:1.8:0.1")
-    p.add_argument("--sweep-episodes", type=int, default=10)
-    p.add_argument("--goal-episodes", type=int, default=3)
-    p.add_argument("--planet-episodes", type=int, default=10)
-    p.add_argument("--workers", type=int, default=2)
+    p.add_argument("--sweep-episodes", type=positive_int, default=10)
+    p.add_argument("--goal-episodes", type=positive_int, default=3)
+    p.add_argument("--planet-episodes", type=positive_int, default=10)
+    p.add_argument("--workers", type=positive_int, default=2)
     add_ray_option(p, "the control jobs")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=seed_int, default=0)
     p.add_argument("--torque-arrow", action="store_true", help="frames show Gymnasium's torque arrow (off by default)")
     p.add_argument("--extra-models", nargs="*", default=[],
                    help="more run folders (other training seeds): upright at x1.0 and x1.4, --sweep-episodes each")
@@ -183,4 +184,6 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from piga.cli.common import run_script
+
+    run_script(main, __file__)

@@ -51,6 +51,7 @@ from common import machine, machine_words
 from planet_faithful import VARIANTS
 from piga.io.atomic import atomic_output, write_json
 from piga.io.device import cuda_available, resolve_device
+from piga.cli.common import positive_int, seed_int
 
 #: The trainings that can be timed, in the order the page lists them; the first two unless ``--workloads`` says.
 WORKLOADS = ("piga fast", "PlaNet-style", "PlaNet sizes")
@@ -273,11 +274,11 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--out", required=True, type=Path, help="output prefix: OUT.json and OUT.md")
     p.add_argument("--device", choices=("cpu", "cuda"), default="cpu",
                    help="cuda: time the CPU and the GPU, and the speed-up; cpu: the CPU alone (default %(default)s)")
-    p.add_argument("--steps", type=int, default=30, help="timed steps per repeat (default %(default)s)")
+    p.add_argument("--steps", type=positive_int, default=30, help="timed steps per repeat (default %(default)s)")
     p.add_argument("--warmup", type=int, default=5, help="untimed steps first (default %(default)s)")
-    p.add_argument("--repeats", type=int, default=3, help="repeats; the table gives their median (default %(default)s)")
+    p.add_argument("--repeats", type=positive_int, default=3, help="repeats; the table gives their median (default %(default)s)")
     p.add_argument("--threads", type=int, default=2, help="torch CPU threads (default %(default)s: the 2-core machine)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the models and batches (default %(default)s)")
+    p.add_argument("--seed", type=seed_int, default=0, help="seed of the models and batches (default %(default)s)")
     p.add_argument("--workloads", nargs="+", choices=list(STEPS), default=list(WORKLOADS[:2]),
                    help="the trainings to time (default: %(default)s)")
     p.add_argument("--full", choices=("none", "gpu", "all"), default="none",
@@ -326,4 +327,6 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from piga.cli.common import run_script
+
+    run_script(main, __file__)

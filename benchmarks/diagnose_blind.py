@@ -42,6 +42,7 @@ from envs.pendulum import PixelPendulumConfig
 from piga.io.atomic import atomic_output, write_json
 from piga.data.collect import CollectConfig, collect
 from piga.io.pool import run_pool
+from piga.cli.common import positive_int, seed_int
 
 #: Candidate effects and how their magnitudes are drawn (rng -> value).
 DRAWS = {
@@ -248,11 +249,11 @@ def main() -> int:
     p.add_argument("--model", required=True, help="run folder of piga-train-model (the nominal, identified model)")
     p.add_argument("--out", default="results/diagnose_blind")
     p.add_argument("--work", default="runs/blind", help="folder for the case data and reports")
-    p.add_argument("--cases", type=int, default=30)
-    p.add_argument("--sequences", type=int, default=200)
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--workers", type=int, default=2, help="collection workers of one case (with --jobs 1)")
-    p.add_argument("--jobs", type=int, default=1,
+    p.add_argument("--cases", type=positive_int, default=30)
+    p.add_argument("--sequences", type=positive_int, default=200)
+    p.add_argument("--seed", type=seed_int, default=0)
+    p.add_argument("--workers", type=positive_int, default=2, help="collection workers of one case (with --jobs 1)")
+    p.add_argument("--jobs", type=positive_int, default=1,
                    help="cases run at once, each in its own process with one torch thread (a machine's cores)")
     add_ray_option(p, "the cases (each with one torch thread, as with --jobs > 1)")
     p.add_argument("--mix", choices=("all", "none"), default="all",
@@ -329,4 +330,6 @@ def refused(case: dict, message: str) -> dict:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from piga.cli.common import run_script
+
+    run_script(main, __file__)

@@ -57,7 +57,7 @@ from common import add_diagnose_options, add_ray_option, diagnose_options, farm_
 from diagnose_blind import run_diagnose, save, strip_labels
 from diagnose_blind import score as score_gym
 from envs.dmc import DMCPendulumConfig, DMCPendulumEnv
-from piga.cli.common import NOT_CONVERGED
+from piga.cli.common import NOT_CONVERGED, positive_int, seed_int
 from piga.data.collect import CollectConfig, collect
 from piga.io.pool import run_pool
 
@@ -381,16 +381,16 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
     p.add_argument("--out", default="results/diagnose_blind_dmc")
     p.add_argument("--work", default="runs/blind_dmc", help="folder for the case data, models and reports")
-    p.add_argument("--cases", type=int, default=24)
-    p.add_argument("--sequences", type=int, default=300)
-    p.add_argument("--steps", type=int, default=40)
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--cases", type=positive_int, default=24)
+    p.add_argument("--sequences", type=positive_int, default=300)
+    p.add_argument("--steps", type=positive_int, default=40)
+    p.add_argument("--seed", type=seed_int, default=0)
     p.add_argument("--quick", action="store_true",
                    help="2 cases of 40 sequences x 16 frames, a 6-epoch tiny model: checks the pipeline, not the diagnosis")
     p.add_argument("--models-only", action="store_true",
                    help="only collect the nominal files and train the nominal models (step 1), for a later run to keep")
     p.add_argument("--only", type=int, nargs="*", default=None, help="run only these case numbers")
-    p.add_argument("--jobs", type=int, default=1,
+    p.add_argument("--jobs", type=positive_int, default=1,
                    help="cases run at once, each in its own process with one torch thread (a machine's cores)")
     add_ray_option(p, "the cases")
     p.add_argument("--true-angles", type=int, default=None, metavar="CASE",
@@ -459,4 +459,6 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from piga.cli.common import run_script
+
+    run_script(main, __file__)

@@ -32,6 +32,7 @@ import numpy as np
 from common import add_diagnose_options, diagnose_options, machine
 from envs.pendulum import PixelPendulumConfig, make_pixel_pendulum
 from piga.io.atomic import atomic_output, write_json
+from piga.cli.common import seed_int
 
 class Case(NamedTuple):
     effects: dict
@@ -90,7 +91,7 @@ def main() -> int:
     p.add_argument("--out", default="results/diagnose_recordings")
     p.add_argument("--work", default="runs/recordings", help="folder for the recordings, data files and reports")
     p.add_argument("--frames", type=int, default=4000, help="frames per recording (100 sequences of 40)")
-    p.add_argument("--seed", type=int, default=5)
+    p.add_argument("--seed", type=seed_int, default=5)
     add_diagnose_options(p)
     args = p.parse_args()
     options = diagnose_options(args)
@@ -137,4 +138,6 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from piga.cli.common import run_script
+
+    run_script(main, __file__)

@@ -48,6 +48,7 @@ from typing import NamedTuple
 from common import add_diagnose_options, add_ray_option, diagnose_options, farm_main, logged_command, machine, ray_backend
 from piga.io.atomic import atomic_output, write_json
 from piga.io.pool import run_pool
+from piga.cli.common import positive_int, seed_int
 
 #: Published pixel-based scores on DMC pendulum-swingup, read from the score files that DreamerV3's
 #: authors publish for it and its baselines (github.com/danijar/dreamerv3, ``scores/dmc_vision-{dreamerv3,
@@ -292,13 +293,13 @@ def main() -> None:
     p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     p.add_argument("--work", required=True, help="folder for data and runs (kept, reused on a rerun)")
     p.add_argument("--out", required=True, help="OUT.json and OUT.md are written")
-    p.add_argument("--seeds", type=int, nargs="+", default=[0])
+    p.add_argument("--seeds", type=seed_int, nargs="+", default=[0])
     p.add_argument("--variant", action="append", default=[], metavar="KEY=VALUE",
                    help="also run the pendulum with this --env-option (repeatable; each one is its own case)")
-    p.add_argument("--sequences", type=int, default=500)
-    p.add_argument("--steps", type=int, default=40)
-    p.add_argument("--epochs", type=int, default=16)
-    p.add_argument("--episodes", type=int, default=10)
+    p.add_argument("--sequences", type=positive_int, default=500)
+    p.add_argument("--steps", type=positive_int, default=40)
+    p.add_argument("--epochs", type=positive_int, default=16)
+    p.add_argument("--episodes", type=positive_int, default=10)
     p.add_argument("--control-seed", type=int, default=0)
     p.add_argument("--diagnose", choices=("first", "all", "none"), default="first",
                    help="diagnose the cases of the first seed (default), of every seed, or none")
@@ -307,7 +308,7 @@ def main() -> None:
     add_diagnose_options(p)
     p.add_argument("--skip-control", action="store_true",
                    help="no control episodes (identification and diagnosis only; the control table is left out)")
-    p.add_argument("--jobs", type=int, default=1, help="cases run at once, each in its own process (default 1)")
+    p.add_argument("--jobs", type=positive_int, default=1, help="cases run at once, each in its own process (default 1)")
     add_ray_option(p, "the cases (--work shared by every machine)")
     args = p.parse_args()
     if args.jobs < 1:
@@ -336,4 +337,6 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    from piga.cli.common import run_script
+
+    run_script(main, __file__)

@@ -34,6 +34,7 @@ from typing import Any
 import torch
 
 from common import machine, machine_words, write_page
+from piga.cli.common import positive_int
 
 from agents.sb3.config import PRECISIONS, SB3Config, bfloat16_in_hardware
 from envs import ENV_IDS, PIXEL_PENDULUM
@@ -126,9 +127,9 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], allow_abbrev=False)
     p.add_argument("--out", type=Path, required=True, help="output prefix: OUT.json and OUT.md")
     p.add_argument("--env", choices=ENV_IDS, default=PIXEL_PENDULUM, help="the env (default %(default)s)")
-    p.add_argument("--fill", type=int, default=1000, help="random-action steps in the buffer (default %(default)s)")
-    p.add_argument("--repeats", type=int, default=5, help="rounds (default %(default)s)")
-    p.add_argument("--updates", type=int, default=5, help="timed updates per precision and round (default %(default)s)")
+    p.add_argument("--fill", type=positive_int, default=1000, help="random-action steps in the buffer (default %(default)s)")
+    p.add_argument("--repeats", type=positive_int, default=5, help="rounds (default %(default)s)")
+    p.add_argument("--updates", type=positive_int, default=5, help="timed updates per precision and round (default %(default)s)")
     p.add_argument("--warmup", type=int, default=2, help="untimed updates per precision first (default %(default)s)")
     p.add_argument("--threads", type=int, default=1, help="torch threads (default %(default)s)")
     args = p.parse_args(argv)
@@ -155,4 +156,6 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from piga.cli.common import run_script
+
+    run_script(main, __file__)

@@ -32,6 +32,7 @@ from common import change_cells, farm_main, machine, machine_words, write_page
 
 from piga.io.checkpoint import CHECKPOINT
 from piga.io.pool import JobRecords, RecordedJob, run_recorded
+from piga.cli.common import seed_int
 
 HELD_OUT_SEED = 4242
 """The held-out episodes' seed (starts drawn from ``default_rng(4242)``, env seeds 4242000 + e)."""
@@ -129,7 +130,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--runs", type=Path, default=Path("results/baselines_runs"),
                    help="the baselines benchmark's run folders and records (default %(default)s)")
     p.add_argument("--jobs", nargs="+", help="only these runs (record names, 'oracle' included; default: every one here)")
-    p.add_argument("--seed", type=int, default=HELD_OUT_SEED, help="the held-out episodes' seed (default %(default)s)")
+    p.add_argument("--seed", type=seed_int, default=HELD_OUT_SEED, help="the held-out episodes' seed (default %(default)s)")
     p.add_argument("--preset", choices=sorted(PRESETS), default="budget", help="the baselines preset (default %(default)s)")
     p.add_argument("--out", type=Path, default=Path("results/held_out"), help="output prefix (default %(default)s)")
     args = p.parse_args(argv)
@@ -157,4 +158,6 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    from piga.cli.common import run_script
+
+    run_script(main, __file__)

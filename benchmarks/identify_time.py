@@ -40,6 +40,7 @@ from piga.data.schema import inspect_dataset
 from piga.evaluation.evaluate import PARAMETER_NAMES
 from piga.training.report import write_run_report
 from piga.training.train import TrainConfig, train
+from piga.cli.common import positive_int
 
 #: The fast preset before its budget was sized from the data: 16 epochs, 200 warm-up and 600 curriculum
 #: steps of the default file's 16 x 337, and the last epoch averaged.
@@ -138,7 +139,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--data", type=Path, help="a pendulum file (default: piga-collect's defaults, seed 100, in --work)")
     p.add_argument("--work", type=Path, default=Path("runs/identify_time"), help="data and run folders")
     p.add_argument("--recipes", nargs="+", default=["before", "today"])
-    p.add_argument("--repeats", type=int, default=1, help="runs of each recipe (the time is their median)")
+    p.add_argument("--repeats", type=positive_int, default=1, help="runs of each recipe (the time is their median)")
     p.add_argument("--threads", type=int, default=0, help="torch threads (0: torch's default, as piga-train-model)")
     args = p.parse_args(argv)
     for name in args.recipes:
@@ -167,4 +168,6 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from piga.cli.common import run_script
+
+    run_script(main, __file__)

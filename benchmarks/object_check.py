@@ -82,4 +82,6 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from piga.cli.common import run_script
+
+    run_script(main, __file__)

@@ -61,6 +61,7 @@ from piga.io.checkpoint import RunKind
 from piga.world.model import PhysicsModel
 from piga.world.physics import rollout
 from piga.io.runs import load_model
+from piga.cli.common import positive_int, seed_int
 
 
 class ModuleDynamics:
@@ -169,9 +170,9 @@ def main() -> int:
     p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     p.add_argument("--model", required=True, help="run folder of piga-train-model (a pendulum model)")
     p.add_argument("--out", default="results/plan_time", help="output prefix (default %(default)s)")
-    p.add_argument("--episodes", type=int, default=5, help="episodes per agent (default %(default)s)")
-    p.add_argument("--steps", type=int, default=EpisodeConfig.steps, help="steps per episode (default %(default)s)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--episodes", type=positive_int, default=5, help="episodes per agent (default %(default)s)")
+    p.add_argument("--steps", type=positive_int, default=EpisodeConfig.steps, help="steps per episode (default %(default)s)")
+    p.add_argument("--seed", type=seed_int, default=0)
     p.add_argument("--no-reference", action="store_true", help="skip the two reference-engine rows")
     p.add_argument("--planet", help="also time the PlaNet-style agent of this piga-baseline planet run (PlaNet's planner)")
     p.add_argument("--equal-budget", action="store_true",
@@ -255,4 +256,6 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from piga.cli.common import run_script
+
+    run_script(main, __file__)

@@ -33,6 +33,7 @@ from typing import Any
 
 from common import machine, machine_words
 from piga.io.atomic import atomic_output, write_json
+from piga.cli.common import positive_int
 
 ROOT = Path(__file__).resolve().parents[1]
 AGENTS = ("oracle", "piga")
@@ -94,8 +95,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--model", required=True, help="a pendulum run folder that both revisions load")
     p.add_argument("--out", default="results/plan_time_revisions", help="output prefix (default %(default)s)")
     p.add_argument("--pairs", type=int, default=5, help="runs at each revision, alternating (default %(default)s)")
-    p.add_argument("--episodes", type=int, default=5, help="episodes per agent and run (default %(default)s)")
-    p.add_argument("--steps", type=int, default=None, help="steps per episode (default: plan_time.py's)")
+    p.add_argument("--episodes", type=positive_int, default=5, help="episodes per agent and run (default %(default)s)")
+    p.add_argument("--steps", type=positive_int, default=None, help="steps per episode (default: plan_time.py's)")
     args = p.parse_args(argv)
     import torch
 
@@ -137,4 +138,6 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from piga.cli.common import run_script
+
+    run_script(main, __file__)

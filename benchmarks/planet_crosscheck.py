@@ -608,4 +608,6 @@ def _mbrl_version() -> str:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from piga.cli.common import run_script
+
+    run_script(main, __file__)

@@ -36,6 +36,7 @@ from baselines import PRESETS, BenchConfig, data_file, planet_scores, planet_tab
 from common import farm_main, machine, machine_words, write_page
 
 from piga.io.pool import JobRecords, RecordedJob, run_recorded
+from piga.cli.common import positive_int, seed_int
 
 Variant = Literal["planet-reward", "planet-sizes"]
 #: Each variant's settings: overrides of :class:`agents.planet.config.RSSMConfig` and of
@@ -129,8 +130,8 @@ def markdown(record: dict[str, Any]) -> str:
 @farm_main
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
-    p.add_argument("--sequences", type=int, default=500, help="the table's data size to compare at (default %(default)s)")
-    p.add_argument("--seeds", type=int, nargs="+", default=[0], help="training seeds (default 0)")
+    p.add_argument("--sequences", type=positive_int, default=500, help="the table's data size to compare at (default %(default)s)")
+    p.add_argument("--seeds", type=seed_int, nargs="+", default=[0], help="training seeds (default 0)")
     p.add_argument("--variants", nargs="+", choices=get_args(Variant), default=list(get_args(Variant)),
                    help="the variants to train (default: all)")
     p.add_argument("--runs", type=Path, default=Path("results/baselines_runs"),
@@ -139,7 +140,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--out", type=Path, default=Path("results/planet_faithful"), help="output prefix (default %(default)s)")
     p.add_argument("--device", choices=["cpu", "cuda"], default="cpu",
                    help="where to train (default %(default)s; a run continues on either)")
-    p.add_argument("--workers", type=int, default=1,
+    p.add_argument("--workers", type=positive_int, default=1,
                    help="processes the evaluation episodes are split over (default %(default)s; the same scores)")
     p.add_argument("--train-only", action="store_true",
                    help="train (or continue) the runs and stop: no evaluation, no record, no page")
@@ -173,4 +174,6 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    from piga.cli.common import run_script
+
+    run_script(main, __file__)

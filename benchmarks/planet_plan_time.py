@@ -36,6 +36,7 @@ from agents.planet.config import LatentPlannerConfig, RSSMConfig
 from agents.planet.planner import PlanetAgent
 from agents.planet.rssm import WorldModel
 from piga.io.atomic import atomic_output, write_json
+from piga.cli.common import positive_int
 
 
 def measure(model: WorldModel, threads: int, steps: int, seed: int = 0) -> dict[str, object]:
@@ -70,7 +71,7 @@ def main() -> int:
     p.add_argument("--out", required=True, help="writes OUT.json and OUT.md")
     p.add_argument("--model", help="a piga-baseline planet run folder (default: an untrained default-size model)")
     p.add_argument("--threads", type=int, nargs="+", default=[1], help="torch thread counts to measure (default 1)")
-    p.add_argument("--steps", type=int, default=20, help="env steps timed per engine and thread count (default 20)")
+    p.add_argument("--steps", type=positive_int, default=20, help="env steps timed per engine and thread count (default 20)")
     args = p.parse_args()
     if args.model:
         from agents.planet.run import load_planet
@@ -101,4 +102,6 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from piga.cli.common import run_script
+
+    run_script(main, __file__)

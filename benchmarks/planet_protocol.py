@@ -35,7 +35,7 @@ from typing import Any
 from baselines import COST_S, PRESETS, BenchConfig, data_file, planet_scores, planet_table_runs, sweep_episodes
 from common import farm_main, machine, machine_words, score_cells, write_page
 
-from piga.cli.common import positive_int
+from piga.cli.common import positive_int, seed_int
 from piga.io.atomic import write_json
 from piga.io.pool import JobRecords, RecordedJob, run_recorded
 
@@ -174,9 +174,9 @@ def markdown(record: dict[str, Any]) -> str:
 @farm_main
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
-    p.add_argument("--sequences", type=int, nargs="+", default=[100, 250, 500],
+    p.add_argument("--sequences", type=positive_int, nargs="+", default=[100, 250, 500],
                    help="the table's points whose env steps the protocol matches (default %(default)s)")
-    p.add_argument("--seeds", type=int, nargs="+", default=[0], help="training seeds (default 0)")
+    p.add_argument("--seeds", type=seed_int, nargs="+", default=[0], help="training seeds (default 0)")
     p.add_argument("--seed-sequences", type=int, default=25,
                    help="random sequences that seed the protocol (default %(default)s: PlaNet's 5 seed episodes)")
     p.add_argument("--first-steps", type=int, default=1000,
@@ -223,4 +223,6 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    from piga.cli.common import run_script
+
+    run_script(main, __file__)

@@ -41,7 +41,7 @@ from baselines import PRESETS, data_file, evaluate, piga_epochs, train_piga
 from common import farm_main, machine, machine_words, signed
 
 from agents.reward_head import RewardHeadConfig
-from piga.cli.common import positive_int
+from piga.cli.common import positive_int, seed_int
 from piga.io.atomic import atomic_output, write_json
 from piga.io.pool import JobRecords, RecordedJob, run_recorded
 
@@ -251,7 +251,7 @@ def parser() -> argparse.ArgumentParser:
                    help="output prefix: OUT.json, OUT.md; runs and records in OUT_runs/ (default %(default)s)")
     p.add_argument("--sequences", type=positive_int, default=DEFAULTS.sequences,
                    help="training sequences (default %(default)s)")
-    p.add_argument("--seeds", nargs="+", type=int, default=list(DEFAULTS.seeds), help="training seeds (default %(default)s)")
+    p.add_argument("--seeds", nargs="+", type=seed_int, default=list(DEFAULTS.seeds), help="training seeds (default %(default)s)")
     p.add_argument("--episodes", type=positive_int, default=DEFAULTS.episodes,
                    help="episodes per row and gravity (default %(default)s)")
     p.add_argument("--preset", choices=sorted(PRESETS), default=DEFAULTS.baselines_preset,
@@ -280,4 +280,6 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    from piga.cli.common import run_script
+
+    run_script(main, __file__)

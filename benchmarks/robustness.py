@@ -72,7 +72,7 @@ import numpy as np
 from filelock import FileLock
 
 from common import add_ray_option, farm_main, job_command, machine, machine_words, ray_backend
-from piga.cli.common import NOT_CONVERGED
+from piga.cli.common import NOT_CONVERGED, positive_int
 from piga.io.atomic import atomic_output, write_json
 from piga.io.pool import git_commit, run_pool
 from piga.data.schema import DatasetWriter
@@ -866,7 +866,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--rows", nargs="+", metavar="PATTERN", help="only the rows whose name matches a shell pattern, "
                    "e.g. 'pendulum/*' 'seeds/spring-*' (default: all; see --list)")
     p.add_argument("--list", action="store_true", help="print the rows with their estimated cost and status, and stop")
-    p.add_argument("--workers", type=int, default=1, help="rows run at once, each in its own process, training with "
+    p.add_argument("--workers", type=positive_int, default=1, help="rows run at once, each in its own process, training with "
                    "one thread (default 1)")
     add_ray_option(p, "the rows (--work shared by every machine)")
     p.add_argument("--render", action="store_true", help="rewrite OUT.md and OUT.json from the records in WORK with "
@@ -922,4 +922,6 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    from piga.cli.common import run_script
+
+    run_script(main, __file__)

@@ -21,6 +21,7 @@ import numpy as np
 
 from envs.pendulum import MAX_ACTION, PENDULUM_DT
 from piga.io.atomic import atomic_output, write_json
+from piga.cli.common import positive_int, seed_int
 
 
 def fit(max_speed: float, sequences: int, steps: int, seed: int) -> dict[str, float]:
@@ -46,9 +47,9 @@ def fit(max_speed: float, sequences: int, steps: int, seed: int) -> dict[str, fl
 def main() -> None:
     p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.split("\n")[0])
     p.add_argument("--out", default="results/speed_clip_bias", help="output stem (.json and .md)")
-    p.add_argument("--sequences", type=int, default=500)
-    p.add_argument("--steps", type=int, default=40)
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--sequences", type=positive_int, default=500)
+    p.add_argument("--steps", type=positive_int, default=40)
+    p.add_argument("--seed", type=seed_int, default=0)
     args = p.parse_args()
     rows = [fit(s, args.sequences, args.steps, args.seed) for s in (1.0, 6.0)]
     command = shlex.join(["python", *sys.argv])
@@ -65,4 +66,6 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    from piga.cli.common import run_script
+
+    run_script(main, __file__)

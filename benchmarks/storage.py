@@ -51,6 +51,7 @@ from common import machine, machine_words
 from piga.data.schema import FRAME_CODEC, DatasetWriter, FrameCodec, inspect_dataset, read_sequences
 from piga.data.windows import BlockShuffleSampler, SequenceWindows
 from piga.io.atomic import atomic_output, write_json
+from piga.cli.common import positive_int
 
 CODECS: tuple[FrameCodec, ...] = typing.get_args(FrameCodec)
 #: The files measured: name -> piga-collect's arguments (after --out).
@@ -282,7 +283,7 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], allow_abbrev=False)
     p.add_argument("--work", type=Path, required=True, help="folder for the data files and runs")
     p.add_argument("--out", type=Path, required=True, help="writes OUT.json and OUT.md")
-    p.add_argument("--repeats", type=int, default=3, help="repeats of each timing (default %(default)s)")
+    p.add_argument("--repeats", type=positive_int, default=3, help="repeats of each timing (default %(default)s)")
     p.add_argument("--cap-mb", type=int, default=1536, help="the memory cap of the memory part, MiB (default %(default)s)")
     p.add_argument("--big-sequences", type=int, nargs="+", default=[10000, 20000, 40000],
                    help="sequences of the memory part's files, rounded up to whole copies (default %(default)s)")
@@ -317,4 +318,6 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    from piga.cli.common import run_script
+
+    run_script(main, __file__)

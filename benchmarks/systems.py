@@ -52,6 +52,7 @@ from piga.data.schema import inspect_dataset
 from piga.io.pool import run_pool
 from piga.training.report import write_run_report
 from piga.training.train import preset_for, train
+from piga.cli.common import positive_int, seed_int
 
 #: Case -> the paper's learned values (its Table 1; none for bouncing). A case is a system, or
 #: "gravity-m": the gravity data with g held at the collection's value and the mass m learned
@@ -317,11 +318,11 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--out", type=Path, required=True, help="output prefix: OUT.json, OUT.md, OUT-*.png")
     p.add_argument("--systems", nargs="+", choices=SYSTEMS, default=SYSTEMS,
                    help="cases: the systems, and gravity-m (the gravity data, g held at 60, m learned)")
-    p.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
+    p.add_argument("--seeds", nargs="+", type=seed_int, default=[0, 1, 2])
     p.add_argument("--work", type=Path, default=Path("runs/systems"), help="data and run folders (default %(default)s)")
     p.add_argument("--heldout", action="store_true",
                    help="also train once (seed 0) on each held-out data set of HELDOUT and add its table")
-    p.add_argument("--jobs", type=int, default=1, help="runs trained at once, each in its own process with one torch "
+    p.add_argument("--jobs", type=positive_int, default=1, help="runs trained at once, each in its own process with one torch "
                    "thread (default 1: one at a time, so that the training minutes are one core's)")
     add_ray_option(p, "the training runs (--work shared by every machine)")
     args = p.parse_args(argv)
@@ -374,4 +375,6 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    from piga.cli.common import run_script
+
+    run_script(main, __file__)

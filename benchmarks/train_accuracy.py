@@ -36,6 +36,7 @@ from piga.evaluation.evaluate import EvalConfig, evaluate
 from piga.io.atomic import write_json
 from piga.world.model import ModelConfig
 from piga.training.train import PRESETS, TrainConfig, train
+from piga.cli.common import positive_int, seed_int
 
 #: case name -> (gravity, actuation gain, data seed)
 CASES: dict[str, tuple[float, float, int]] = {
@@ -97,9 +98,9 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0], allow_abbrev=False)
     p.add_argument("--out", default="results/train_accuracy", help="output stem (.json and .md)")
     p.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES))
-    p.add_argument("--seeds", nargs="+", type=int, default=None, help="training seeds (default: 0-4 for 'default', 0 otherwise)")
+    p.add_argument("--seeds", nargs="+", type=seed_int, default=None, help="training seeds (default: 0-4 for 'default', 0 otherwise)")
     p.add_argument("--work", default="runs/bench", help="folder for data and run folders")
-    p.add_argument("--jobs", type=int, default=1, help="runs trained at once, one torch thread each (default 1: one at a "
+    p.add_argument("--jobs", type=positive_int, default=1, help="runs trained at once, one torch thread each (default 1: one at a "
                    "time, on torch's default threads)")
     add_ray_option(p, "the training runs")
     args = p.parse_args()
@@ -144,4 +145,6 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    from piga.cli.common import run_script
+
+    run_script(main, __file__)

@@ -30,6 +30,7 @@ from piga.io.atomic import atomic_output, write_json
 from piga.data.collect import sequence_rng
 from piga.data.collect_scenes import SCENE_STEPS
 from piga.world.model import ModelConfig, PhysicsModel
+from piga.cli.common import positive_int, seed_int
 
 SCENES = ("spring", "gravity", "digits-spring")
 MODES = {"cubic": {"velocity_physics": True}, "shoot": {"velocity_shoot": True}}
@@ -67,9 +68,9 @@ def fit(scene: str, positions: torch.Tensor, mode: str, steps: int, seed: int) -
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     p.add_argument("--out", type=Path, required=True, help="output prefix: OUT.json and OUT.md")
-    p.add_argument("--sequences", type=int, default=200, help="sequences per scene (default %(default)s)")
-    p.add_argument("--steps", type=int, default=1000, help="Adam steps per fit (default %(default)s)")
-    p.add_argument("--seed", type=int, default=100, help="data seed, as the systems benchmark's (default %(default)s)")
+    p.add_argument("--sequences", type=positive_int, default=200, help="sequences per scene (default %(default)s)")
+    p.add_argument("--steps", type=positive_int, default=1000, help="Adam steps per fit (default %(default)s)")
+    p.add_argument("--seed", type=seed_int, default=100, help="data seed, as the systems benchmark's (default %(default)s)")
     args = p.parse_args(argv)
     torch.set_num_threads(1)
     rows: list[dict[str, Any]] = []
@@ -97,4 +98,6 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    from piga.cli.common import run_script
+
+    run_script(main, __file__)

@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from common import farm_main, logged_command, machine, machine_words, write_page
+from piga.cli.common import seed_int
 
 SEQUENCES, DATA_SEED = 100, 100
 """The collection of ``benchmarks/regions.py`` (its defaults), for every data set."""
@@ -109,7 +110,7 @@ def markdown(record: dict[str, Any]) -> str:
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     p.add_argument("--out", type=Path, default=Path("results/regions_warmup"), help="output prefix (default %(default)s)")
-    p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3], help="training seeds (default %(default)s)")
+    p.add_argument("--seeds", type=seed_int, nargs="+", default=[0, 1, 2, 3], help="training seeds (default %(default)s)")
     p.add_argument("--data-sets", nargs="+", choices=list(DATA_SETS), default=list(DATA_SETS),
                    help="default %(default)s")
     args = p.parse_args(argv)
@@ -137,4 +138,6 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    from piga.cli.common import run_script
+
+    run_script(main, __file__)

@@ -143,6 +143,7 @@ USER_ERRORS: tuple[type[BaseException], ...] = (
     DataFormatError,
     OutputExistsError,
     FileNotFoundError,
+    FileExistsError,
     PermissionError,
     IsADirectoryError,
     NotADirectoryError,
@@ -223,6 +224,23 @@ def run_cli(prog: str, main: Callable[[Sequence[str] | None], int | None], argv:
         print(f"{prog}: error: could not write to standard output ({reason}){finished}", file=sys.stderr)
         sys.exit(code if isinstance(code, int) and code != 0 else 1)
     sys.exit(code or 0)
+
+
+def run_script(main: Callable[..., int | None], path: str) -> NoReturn:
+    """A benchmark script's entry (``if __name__ == "__main__": run_script(main, __file__)``): :func:`run_cli`
+    under the script's file name, so that its bad input is one line too; ``main`` with or without ``argv``."""
+    import inspect
+
+    takes_argv = bool(inspect.signature(main).parameters)
+
+    def script(argv: Sequence[str] | None) -> int | None:
+        try:
+            return main(argv) if takes_argv else main()
+        except KeyboardInterrupt:  # a farm keeps the records of the jobs that ended: not "nothing was written"
+            raise Interrupted("what finished before is kept (each script keeps its jobs' records as they end); run "
+                              "the same command to continue") from None
+
+    run_cli(Path(path).name, script)
 
 
 def _open_closed_standard_streams() -> None:
@@ -560,7 +578,7 @@ def split_type(text: str) -> tuple[float, float, float]:
     return values  # type: ignore[return-value]
 
 
-__all__ = ["ArgumentParser", "PigaError", "RAY_HELP", "add_ray_option", "connect_backend", "ray_address", "run_cli", "positive_int", "nonnegative_int", "seed_int", "thread_count", "positive_float", "nonnegative_float",
+__all__ = ["ArgumentParser", "PigaError", "RAY_HELP", "add_ray_option", "connect_backend", "ray_address", "run_cli", "run_script", "positive_int", "nonnegative_int", "seed_int", "thread_count", "positive_float", "nonnegative_float",
            "split_type", "add_preset_option", "documented_default", "format_default", "Interrupted", "made_folder",
            "missing_folders", "remove_empty_folders", "remove_outputs", "add_device_option", "file_path", "h5_path",
            "H5_SUFFIXES"]

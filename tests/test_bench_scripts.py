@@ -1,0 +1,38 @@
+"""The benchmark scripts as commands: bad input is one line on stderr (exit 1, or argparse's 2), never a traceback,
+and counts and seeds are checked as they are parsed, before any work."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from tests.helpers import ENV
+
+BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
+SCRIPTS = sorted(p for p in BENCHMARKS.glob("*.py") if "__main__" in p.read_text())
+
+
+@pytest.mark.parametrize("script", SCRIPTS, ids=lambda p: p.name)
+def test_every_script_runs_under_run_cli(script: Path) -> None:
+    assert script.read_text().rstrip().endswith("run_script(main, __file__)"), \
+        f"{script.name}: end with `run_script(main, __file__)` (piga.cli.common), so that its bad input is one line"
+
+
+@pytest.mark.parametrize("argv, code, line", [
+    (["control.py", "--model", "nowhere", "--out", "OUT"], 1,
+     "control.py: error: nowhere/checkpoint.pt: no checkpoint (is nowhere a piga-train-model run folder?)"),
+    (["control.py", "--model", "nowhere", "--workers", "0"], 2,
+     "control.py: error: argument --workers: expected a positive integer, got 0"),
+    (["ablations.py", "--seeds", "-1", "--out", "OUT"], 2,
+     "ablations.py: error: argument --seeds: expected an integer in [0, 2^63 - 1], got -1"),
+])
+def test_bad_input_to_a_script_is_one_line(tmp_path: Path, argv: list[str], code: int, line: str) -> None:
+    argv = [a.replace("OUT", str(tmp_path / "out")) for a in argv]
+    done = subprocess.run([sys.executable, str(BENCHMARKS / argv[0]), *argv[1:]], capture_output=True, text=True,
+                          env=ENV, cwd=tmp_path, timeout=120)
+    assert done.returncode == code and "Traceback" not in done.stderr, done.stderr
+    assert done.stderr.strip().splitlines()[-1] == line
+    assert list(tmp_path.iterdir()) == []
