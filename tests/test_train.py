@@ -516,3 +516,31 @@ def test_a_convergence_entry_of_another_form_gives_the_warning_without_its_reaso
 
     (tmp_path / "metrics.json").write_text(f'{{"converged": false, "convergence": {convergence}}}')
     assert convergence_warning(tmp_path) == f"warning: the run {tmp_path} did not converge: no reason recorded"
+
+
+def test_a_data_file_replaced_while_training_is_not_what_the_run_is_scored_on(
+        small_data: Path, tiny_data: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """`piga-collect --overwrite` onto the file mid-run: the run was scored on the new file's test split, and a run
+    that had not identified its parameters exited 0."""
+    import piga.training.train as training
+
+    data, out = tmp_path / "d.h5", tmp_path / "r"
+    shutil.copy(small_data, data)
+    real_train = training.train
+
+    def train_then_replace(*args: Any, **kwargs: Any) -> Any:
+        result = real_train(*args, **kwargs)
+        shutil.copy(tiny_data, data)  # another recording under the same name
+        return result
+
+    monkeypatch.setattr(training, "train", train_then_replace)
+    code, _, err = run_in_process(PROG, cli.main, str(data), "--out", str(out), *SMALL, capsys=capsys)
+    assert_one_line(code, err, f"{data} changed while the run trained", "keeps its checkpoint", "--resume")
+    assert (out / "checkpoint.pt").exists() and not (out / "metrics.json").exists()
+    monkeypatch.setattr(training, "train", real_train)
+    shutil.copy(small_data, data)  # put back: the same command with --resume scores it
+    code, _, err = run_in_process(PROG, cli.main, str(data), "--out", str(out), "--resume", "--quiet", "--threads", "1",
+                                  capsys=capsys)
+    assert code in FINISHED, err
+    assert (out / "metrics.json").exists()

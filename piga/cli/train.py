@@ -179,6 +179,7 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
                                      resolve_loading, train)
 
     info = inspect_dataset(args.data)
+    data_at_start = fingerprint(args.data)  # a file replaced while the run trains must not be what it is scored on
     overrides = {k: getattr(args, k) for k in RECIPE_OPTIONS if getattr(args, k) is not None}
     command = command_line(PROG, argv)
     if args.resume:  # the run's own recipe and data; only the length and the budget may change
@@ -360,6 +361,10 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
             if tried:  # a retry stopped before its first checkpoint: the folders held only the lost try
                 remove_empty_folders(missing)
             raise
+        if fingerprint(args.data) != data_at_start:
+            raise PigaError(f"{args.data} changed while the run trained (another file now has its name): the run in "
+                            f"{run_dir} keeps its checkpoint, but its evaluation would read the new file; put the "
+                            "trained file back and run the same command with --resume, or train on the new one")
         metrics = write_run_report(model, state, args.data, run_dir)
         objects = metrics.get("objects", {})
         # another seed can find a lost object, or fill a slot that should draw one; not make room for more
