@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import replace
-from typing import get_args
+from typing import Any, get_args
 
 import pytest
 
@@ -55,3 +55,28 @@ def test_the_env_configs_take_their_literals() -> None:
     assert {spec.kind for spec in EFFECTS.values()} <= set(get_args(EffectKind))
     with pytest.raises(ValueError, match="EffectSpec.kind must be one of 'actuator', 'passive', 'clip', 'vision'; got 'x'"):
         replace(next(iter(EFFECTS.values())), kind="x")  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("make, needle", [
+    (lambda: __import__("piga").CollectConfig(sequences="10"), "CollectConfig.sequences must be an integer; got '10' (str)"),
+    (lambda: __import__("piga").CollectConfig(sequences=2.5), "CollectConfig.sequences must be an integer; got 2.5"),
+    (lambda: __import__("piga").TrainConfig(lr=None), "TrainConfig.lr must be a number; got None"),
+    (lambda: __import__("piga").TrainConfig(batch_size=[32]), "TrainConfig.batch_size must be an integer; got [32]"),
+    (lambda: __import__("piga").ModelConfig(image_size="64"), "ModelConfig.image_size must be an integer"),
+    (lambda: __import__("piga").TrainConfig(epochs=True), "TrainConfig.epochs must be an integer; got True (bool)"),
+])
+def test_a_field_of_another_kind_is_named(make: Any, needle: str) -> None:
+    """A library caller without a type checker got "'<' not supported between instances of 'str' and 'int'"."""
+    with pytest.raises(TypeError) as error:
+        make()
+    assert needle in str(error.value)
+
+
+def test_numpy_numbers_and_lists_for_tuples_are_taken() -> None:
+    import numpy as np
+
+    import piga
+
+    config = piga.TrainConfig(epochs=np.int64(3), lr=np.float32(1e-3))
+    assert config.epochs == 3
+    assert piga.CollectConfig(sequences=np.int64(20), split=[16, 2, 2]).sequences == 20

@@ -38,6 +38,7 @@ from envs.pendulum import MAX_ACTION, PENDULUM_DT, PixelPendulumConfig, make_pix
 from piga.io.atomic import check_writable_target
 from piga.data.schema import MAX_SEED, SPLITS, DatasetWriter
 from piga.io.worker_signals import quiet_worker_signals
+from piga.io.choices import check_types
 
 #: Ranges of the paper's pendulum data: θ ~ U(-π, π), θ̇ ~ U(-6, 6).
 PAPER_MAX_SPEED = 6.0
@@ -66,6 +67,7 @@ class CollectConfig:
     """Sequences gathered between writes to disk (bounds memory)."""
 
     def __post_init__(self) -> None:
+        check_types(self)  # a number given as text fails here, naming the field, not at a comparison below
         check_collect_sizes(self.sequences, self.steps, self.workers, self.seed, self.batch, self.split)
         effects = dict(getattr(self.env, "effects", ()))
         if effects.get("delay", 0) >= self.steps - 1:

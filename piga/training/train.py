@@ -36,7 +36,7 @@ import torch
 from torch.utils.data import DataLoader, RandomSampler
 from tqdm.auto import tqdm
 
-from piga.io.choices import check_choices
+from piga.io.choices import check_choices, check_types
 from piga.io.device import Device, resolve_device
 from piga.data.schema import (MIN_IMAGE_SIZE, DataFormatError, DatasetInfo, check_actions_file, fingerprint,
                               inspect_dataset, split_indices)
@@ -138,6 +138,7 @@ class TrainConfig:
     steps: Polyak averaging, which removes most of the optimiser's step-to-step jitter (0: off)."""
 
     def __post_init__(self) -> None:
+        check_types(self)  # a number given as text fails here, naming the field, not at a comparison below
         for name in ("epochs", "budget_steps", "lr_decay_epoch", "seed", "threads", "seed_retries", "stream_cache_mb"):
             if getattr(self, name) < 0:
                 raise ValueError(f"TrainConfig.{name} must be >= 0, got {getattr(self, name)}")

@@ -30,7 +30,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-from piga.io.choices import check_choices
+from piga.io.choices import check_choices, check_types
 from piga.world.decoder import Decoder, DecoderConfig
 from piga.world.encoder import Encoder, EncoderConfig
 from piga.world.conv_decoders import BroadcastDecoder, DeconvDecoder
@@ -168,6 +168,7 @@ class ModelConfig:
     near 0, punishes that hard (a uniform 0.003 alone caps it near 0.92)."""
 
     def __post_init__(self) -> None:
+        check_types(self)  # a number given as text fails here, naming the field, not at a comparison below
         if self.system not in SYSTEM_SHAPES:
             raise ValueError(f"unknown system {self.system!r}; known: {sorted(SYSTEM_SHAPES)}")
         check_choices(self)  # architecture, loss, decoder, rec_frames, integrator, readout
