@@ -80,3 +80,21 @@ def test_numpy_numbers_and_lists_for_tuples_are_taken() -> None:
     config = piga.TrainConfig(epochs=np.int64(3), lr=np.float32(1e-3))
     assert config.epochs == 3
     assert piga.CollectConfig(sequences=np.int64(20), split=[16, 2, 2]).sequences == 20
+
+
+def test_the_library_entry_points_name_an_argument_of_another_kind(tmp_path: Any, tiny_data: Any) -> None:
+    import piga
+    from piga.data.schema import read_sequences
+    from piga.data.windows import SequenceWindows
+
+    with pytest.raises(TypeError, match="CollectConfig.env must be a PixelPendulumConfig or a DMCPendulumConfig"):
+        piga.CollectConfig(env=None)
+    with pytest.raises(TypeError, match="config must be a CollectConfig, got dict"):
+        piga.collect({"sequences": 4}, tmp_path / "x.h5")
+    with pytest.raises(TypeError, match="train_config must be a TrainConfig, got NoneType"):
+        piga.train(tiny_data, tmp_path / "r", None)
+    with pytest.raises(ValueError, match="limit must be None .* got -1"):
+        read_sequences(tiny_data, "test", limit=-1)  # it read all but the last
+    with pytest.raises(ValueError, match=r"window must be >= 1 \(frames per item\), got 0"):
+        SequenceWindows(tiny_data, "train", window=0)
+    assert not list(tmp_path.iterdir())

@@ -68,6 +68,8 @@ class CollectConfig:
 
     def __post_init__(self) -> None:
         check_types(self)  # a number given as text fails here, naming the field, not at a comparison below
+        if not isinstance(self.env, (PixelPendulumConfig, DMCPendulumConfig)):
+            raise TypeError(f"CollectConfig.env must be a PixelPendulumConfig or a DMCPendulumConfig, got {self.env!r}")
         check_collect_sizes(self.sequences, self.steps, self.workers, self.seed, self.batch, self.split)
         effects = dict(getattr(self.env, "effects", ()))
         if effects.get("delay", 0) >= self.steps - 1:
@@ -190,6 +192,8 @@ def collect(
     Returns:
         The path written.
     """
+    if not isinstance(config, CollectConfig):
+        raise TypeError(f"config must be a CollectConfig, got {type(config).__name__}")
     check_writable_target(out, overwrite)  # before any setup work
     check_resources(config, out)
     n, t = config.sequences, config.steps

@@ -465,11 +465,18 @@ def _split_code(split: str) -> int:
     return SPLITS[split]
 
 
+def _count(limit: int | None) -> int | None:
+    """A ``limit`` of sequences: None (all) or a count >= 0 (a negative one sliced from the end: [:-1] read all but one)."""
+    if limit is not None and (isinstance(limit, bool) or not isinstance(limit, (int, np.integer)) or limit < 0):
+        raise ValueError(f"limit must be None (every sequence) or a count >= 0, got {limit!r}")
+    return limit
+
+
 def read_sequences(path: str | os.PathLike[str], split: str, limit: int | None = None) -> tuple[np.ndarray, np.ndarray]:
     """All frames (uint8 [n, T, H, W(, C)]) and actions (float32 [n, T, A]) of one split, in memory; with
     ``limit``, only the split's first ``limit`` sequences are read (a file larger than memory is not loaded
     to evaluate a few of them)."""
-    idx = split_indices(path, split)[:limit]
+    idx = split_indices(path, split)[:_count(limit)]
     with _open(path) as f:
         return _take(f["frames"], idx), _take(f["actions"], idx).astype(np.float32)
 
@@ -477,7 +484,7 @@ def read_sequences(path: str | os.PathLike[str], split: str, limit: int | None =
 def load_actions(path: str | os.PathLike[str], split: str, limit: int | None = None) -> np.ndarray:
     """Actions (float32 [n, T, A]) of one split (its first ``limit`` sequences with ``limit``), without its
     frames: for a reader that streams the frames."""
-    idx = split_indices(path, split)[:limit]
+    idx = split_indices(path, split)[:_count(limit)]
     with _open(path) as f:
         return _take(f["actions"], idx).astype(np.float32)
 
@@ -507,7 +514,7 @@ def load_rewards(path: str | os.PathLike[str], split: str, limit: int | None = N
         DataFormatError: the file has no ``/rewards`` (optional in the schema; ``piga-collect`` writes it),
             or they hold NaN or infinite values (naming the first: sequence, step).
     """
-    idx = split_indices(path, split)[:limit]
+    idx = split_indices(path, split)[:_count(limit)]
     with _open(path) as f:
         if "rewards" not in f:
             raise DataFormatError(f"{path}: has no /rewards (reward-based baselines need them; files from "

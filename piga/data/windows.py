@@ -121,7 +121,11 @@ class SequenceWindows(Dataset[Window]):
         self.path = Path(path)
         self.info = inspect_dataset(self.path)
         check_frames_have_signal(self.path)  # a blank video has nothing to train on
-        if window < 1 or window > self.info.steps:
+        if window < 1:
+            raise ValueError(f"window must be >= 1 (frames per item), got {window}")
+        if cache_bytes < 0:
+            raise ValueError(f"cache_bytes must be >= 0, got {cache_bytes}")
+        if window > self.info.steps:
             raise DataFormatError(
                 f"{self.path}: sequences have {self.info.steps} frames, fewer than the {window} needed per item"
             )

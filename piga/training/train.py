@@ -661,6 +661,10 @@ def train(
     Raises:
         ValueError: ``train_config.device`` is "cuda" and torch sees no CUDA device (before anything is read).
     """
+    if not isinstance(train_config, TrainConfig):
+        raise TypeError(f"train_config must be a TrainConfig, got {type(train_config).__name__}")
+    if model_config is not None and not isinstance(model_config, ModelConfig):
+        raise TypeError(f"model_config must be a ModelConfig or None, got {type(model_config).__name__}")
     device = resolve_device(train_config.device)
     run_dir = Path(run_dir)
     info = inspect_dataset(data)
