@@ -327,3 +327,30 @@ def test_a_planet_sequence_of_one_step_names_its_flag() -> None:
     _FLAGS["chunk_length"] = "--chunk-length"
     assert with_flags(str(info.value)).startswith("--chunk-length must be >= 2")
     _FLAGS.clear()
+
+
+def test_a_failing_background_thread_is_logged_not_printed(capsys: pytest.CaptureFixture[str],
+                                                              monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    """TensorBoard's writer thread, its folder moved away mid-run, printed 'Exception in thread' and a traceback."""
+    import threading
+
+    from piga.cli import common
+
+    monkeypatch.setattr(common, "log_folder", lambda: tmp_path / "logs")
+
+    def main(argv: object) -> int:
+        def fail() -> None:
+            raise FileNotFoundError("events.out.tfevents")
+
+        thread = threading.Thread(target=fail, name="writer")
+        thread.start()
+        thread.join()
+        return 0
+
+    before = threading.excepthook
+    with pytest.raises(SystemExit) as exit_:
+        common.run_cli("piga-x", main, [])
+    assert exit_.value.code == 0 and capsys.readouterr().err == ""
+    (log,) = (tmp_path / "logs").iterdir()
+    assert "in thread writer" in log.read_text() and "events.out.tfevents" in log.read_text()
+    assert threading.excepthook is before  # restored for whatever runs next in this process

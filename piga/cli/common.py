@@ -197,6 +197,9 @@ def run_cli(prog: str, main: Callable[[Sequence[str] | None], int | None], argv:
         sys.exit(1)
     stdout, sys.stdout = sys.stdout, _GuardedStdout(sys.stdout)
     _FLAGS.clear()  # this command's parsers fill it
+    import threading
+
+    excepthook, threading.excepthook = threading.excepthook, _thread_errors_to_log(prog, argv)
     code: int | str | None
     finished = "; the command itself finished and its outputs are complete"
     try:
@@ -213,6 +216,7 @@ def run_cli(prog: str, main: Callable[[Sequence[str] | None], int | None], argv:
         _exit_on_error(prog, argv, exc)
     finally:
         guard, sys.stdout = sys.stdout, stdout
+        threading.excepthook = excepthook
         from piga.io.lock import release_run_folders
 
         release_run_folders()
@@ -412,6 +416,30 @@ def _write_traceback(prog: str, argv: Sequence[str] | None) -> Path | None:
     except OSError:
         return None
     return path
+
+
+def _thread_errors_to_log(prog: str, argv: Sequence[str] | None) -> Callable[[Any], None]:
+    """``threading.excepthook`` for a command: a library's background thread that fails (TensorBoard's event writer
+    when its folder was moved away) would print its traceback on stderr beside the command's own line; it goes to a
+    log file in :func:`log_folder` instead. What the failure means for the command, the command says itself."""
+
+    def hook(args: Any) -> None:
+        if args.exc_type is SystemExit:
+            return
+        import time
+        import traceback
+
+        path = log_folder() / f"{prog}-thread-{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}.log"
+        text = "".join(traceback.format_exception(args.exc_type, args.exc_value, args.exc_traceback))
+        name = args.thread.name if args.thread is not None else "?"
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            with path.open("a") as f:  # a thread's last words: appended, not atomic (several threads may fail)
+                f.write(f"{command_line(prog, argv)}\n\nin thread {name}:\n{text}\n")
+        except OSError:
+            pass
+
+    return hook
 
 
 def number_type(convert: Callable[[str], float], ok: Callable[[float], bool], what: str) -> Callable[[str], Any]:
