@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from piga.data.schema import SPLITS, DatasetInfo, check_actions, inspect_dataset, split_indices
+from piga.data.schema import SPLITS, DatasetInfo, check_actions, inspect_dataset, read_rows, split_indices
 from piga.diagnostics.repeats import stale_frames
 from piga.world.model import PhysicsModel, frames_to_float
 from piga.io.runs import training_steps
@@ -166,12 +166,14 @@ def observe(model: PhysicsModel, path: str | os.PathLike[str], batch: int = 16, 
         held = np.flatnonzero(split != SPLITS["train"])
         keep = held[:keep_frames]
         for start in tqdm(range(0, n, batch), desc="encoding", disable=not progress):
-            raw = f["frames"][start : start + batch]
+            with read_rows(f["frames"], f"sequences {start}-{min(start + batch, n) - 1}"):
+                raw = f["frames"][start : start + batch]
             stale[start : start + batch] = stale_frames(raw)
             x, coords, theta[start : start + batch] = read_frames(model, raw)
             rec[start : start + batch] = ((model.decoder(coords) - x) ** 2).mean(dim=(2, 3, 4)).double().numpy()
             blank[start : start + batch] = ((x - model.encoder.background) ** 2).mean(dim=(2, 3, 4)).double().numpy()
-        frames = f["frames"][np.sort(keep)] if len(keep) else np.zeros((0, info.steps, *info.image_shape), np.uint8)
+        with read_rows(f["frames"], "the held-out sequences kept for the report"):
+            frames = f["frames"][np.sort(keep)] if len(keep) else np.zeros((0, info.steps, *info.image_shape), np.uint8)
         attrs = dict(f.attrs)
     check_actions(actions, path)
     return Observations(theta, actions, rec, split == SPLITS["train"], float(info.dt), frames, np.sort(keep), stale,

@@ -38,7 +38,7 @@ from tqdm.auto import tqdm
 
 from piga.io.choices import check_choices, check_types
 from piga.io.device import Device, resolve_device
-from piga.data.schema import (MIN_IMAGE_SIZE, DataFormatError, DatasetInfo, check_actions_file, fingerprint,
+from piga.data.schema import (MIN_IMAGE_SIZE, DataFormatError, DatasetInfo, check_actions_file, fingerprint, read_rows,
                               inspect_dataset, split_indices)
 from piga.world.encoder import estimate_background
 from piga.world.model import SYSTEM_SHAPES, FrameModel, ModelConfig, frames_to_float
@@ -482,7 +482,7 @@ def _background(data: str | Path, channels: int, seed: int, max_frames: int = 20
     steps = inspect_dataset(data).steps
     pick = np.sort(np.random.default_rng(seed).choice(len(sequences) * steps, size=min(max_frames, len(sequences) * steps),
                                                       replace=False))  # flat indices into the split's (n·T) frames
-    with h5py.File(data, "r") as f:
+    with h5py.File(data, "r") as f, read_rows(f["frames"], "the training sequences sampled for the background"):
         chosen = [f["frames"][int(sequences[row])][pick[pick // steps == row] % steps] for row in np.unique(pick // steps)]
     sample = frames_to_float(torch.from_numpy(np.concatenate(chosen))[:, None], channels)[:, 0]  # (F, C, H, W)
     return estimate_background(sample)
