@@ -62,3 +62,23 @@ def test_a_lock_is_the_commands_and_ends_with_it(tmp_path: Path) -> None:
         finally:
             held.kill()
             held.wait()
+
+
+def test_a_run_still_training_is_named_by_the_commands_that_read_it(tmp_path: Path,
+                                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    """piga-control on a run mid-training scored its last checkpoint as if it were the model, without a word."""
+    from piga.cli.common import warn_if_unconverged
+    from piga.io.lock import held_by
+
+    run = tmp_path / "run"
+    assert held_by(run) is None
+    holder = _hold(run)
+    try:
+        assert held_by(run) == str(holder.pid)
+        warn_if_unconverged("piga-control", run)
+        assert capsys.readouterr().err.strip() == (f"piga-control: warning: the run {run} is still being trained (PID "
+                                                   f"{holder.pid}); this used its last checkpoint, not its final model")
+    finally:
+        holder.kill()
+        holder.wait()
+    assert held_by(run) is None

@@ -166,10 +166,15 @@ def command_line(prog: str, argv: Sequence[str] | None) -> str:
 
 
 def warn_if_unconverged(prog: str, run_dir: str | os.PathLike[str]) -> None:
-    """Prints one warning line when the run's metrics.json says it did not converge (:func:`piga.io.runs.convergence_warning`)."""
+    """Prints one warning line when the run's metrics.json says it did not converge (:func:`piga.io.runs.convergence_warning`),
+    or when another command still trains it (:func:`piga.io.lock.held_by`): its checkpoint is then the last saved."""
+    from piga.io.lock import held_by
     from piga.io.runs import convergence_warning
 
-    if (warning := convergence_warning(run_dir)) is not None:
+    if (pid := held_by(run_dir)) is not None:
+        print(f"{prog}: warning: the run {run_dir} is still being trained (PID {pid}); this used its last checkpoint, "
+              "not its final model", file=sys.stderr)
+    elif (warning := convergence_warning(run_dir)) is not None:
         print(f"{prog}: {warning}", file=sys.stderr)
 
 

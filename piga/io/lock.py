@@ -18,7 +18,7 @@ import os
 import tempfile
 from pathlib import Path
 
-__all__ = ["FolderInUseError", "lock_run_folder", "release_run_folders"]
+__all__ = ["FolderInUseError", "held_by", "lock_run_folder", "release_run_folders"]
 
 #: Locks held by this process, kept open for its life (closing a descriptor drops its lock).
 _HELD: dict[str, int] = {}
@@ -71,3 +71,27 @@ def release_run_folders() -> None:
     as a process does by ending."""
     while _HELD:
         os.close(_HELD.popitem()[1])
+
+
+def held_by(folder: str | os.PathLike[str]) -> str | None:
+    """The PID of another process that holds ``folder`` (a run still training), or None: free, or no way to tell."""
+    try:
+        import fcntl
+    except ImportError:
+        return None
+    path = _lock_path(Path(folder))
+    if str(path) in _HELD:
+        return None
+    try:
+        fd = os.open(path, os.O_RDONLY)
+    except OSError:  # never locked, or not ours to read
+        return None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return os.pread(fd, 32, 0).decode("ascii", "replace").strip() or "unknown"
+    except OSError:
+        return None
+    finally:
+        os.close(fd)  # a shared lock taken here ends with its descriptor
+    return None
