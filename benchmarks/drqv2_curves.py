@@ -66,7 +66,9 @@ def markdown(record: dict[str, Any]) -> str:
         "it is given: [docs/commands/baseline.md](../docs/commands/baseline.md). Evaluation: 5 episodes from the "
         "same seeded starts at each point (on DMC the score is DMC's, 0-1000; on the pixel pendulum, Pendulum-v1's "
         "return). The encoder's precision is the run's `--encoder-precision` (bfloat16: "
-        "[results/drqv2_precision.md](drqv2_precision.md)).",
+        "[results/drqv2_precision.md](drqv2_precision.md)). Training minutes are wall-clock time under whatever "
+        "else the machine ran, not a speed measure (the benchmark above is); a run whose steps trained are below "
+        "those planned continues (`piga-baseline ddpg --resume`).",
         "",
         "| run | env | device, encoder | env steps trained (planned) | best evaluation | first step above the mark | training min |",
         "|---|---|---|---|---|---|---|",
