@@ -127,7 +127,7 @@ def figure(record: dict[str, Any], path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from piga.io.atomic import atomic_output
+    from piga.evaluation.plots import save_figure
 
     runs, published = record["runs"], record["published"]
     fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4))
@@ -148,9 +148,7 @@ def figure(record: dict[str, Any], path: Path) -> None:
     for ax in (left, right):
         ax.legend(fontsize=7)
     fig.tight_layout()
-    with atomic_output(path, overwrite=True) as tmp:
-        fig.savefig(tmp, format="png", dpi=110)
-    plt.close(fig)
+    save_figure(fig, path, dpi=110)
 
 
 def main(argv: list[str] | None = None) -> int:
