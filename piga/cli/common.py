@@ -8,8 +8,9 @@ import os
 import re
 import shutil
 import signal
-import tempfile
 import sys
+import tempfile
+import threading
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
@@ -17,6 +18,7 @@ from typing import Any, NoReturn
 
 from envs.dmc import MissingExtraError
 from piga.io.atomic import OutputExistsError
+from piga.io.lock import release_run_folders
 from piga.io.pool import Backend, BackendError, JobFailed, host_port
 from piga.data.schema import MAX_SEED, DataFormatError
 
@@ -202,8 +204,6 @@ def run_cli(prog: str, main: Callable[[Sequence[str] | None], int | None], argv:
         sys.exit(1)
     stdout, sys.stdout = sys.stdout, _GuardedStdout(sys.stdout)
     _FLAGS.clear()  # this command's parsers fill it
-    import threading
-
     excepthook, threading.excepthook = threading.excepthook, _thread_errors_to_log(prog, argv)
     code: int | str | None
     finished = "; the command itself finished and its outputs are complete"
@@ -222,9 +222,7 @@ def run_cli(prog: str, main: Callable[[Sequence[str] | None], int | None], argv:
     finally:
         guard, sys.stdout = sys.stdout, stdout
         threading.excepthook = excepthook
-        from piga.io.lock import release_run_folders
-
-        release_run_folders()
+        release_run_folders()  # a command run in-process (a test, a notebook) releases its run folder as it returns
     if isinstance(guard, _GuardedStdout) and guard.failed is not None:
         # The work is done and its files are complete; only the report was lost. Exit 1 all the same
         # (as coreutils do), so that a script notices, but say that a rerun is not needed. A command that
