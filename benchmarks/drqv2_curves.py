@@ -63,7 +63,7 @@ def markdown(record: dict[str, Any]) -> str:
         "",
         f"From `{record['command']}`. Each run's record was read from its checkpoint by `benchmarks/learning_curve.py` "
         "(a run stopped part-way included); its command and commits are in the record. DrQ-v2's settings and what "
-        "it is given: [docs/commands/baseline.md](../docs/commands/baseline.md). Evaluation: 5 episodes from the "
+        "it is given: the command reference, `docs/commands/baseline.md`. Evaluation: 5 episodes from the "
         "same seeded starts at each point (on DMC the score is DMC's, 0-1000; on the pixel pendulum, Pendulum-v1's "
         "return). The encoder's precision is the run's `--encoder-precision` (bfloat16: "
         "[results/drqv2_precision.md](drqv2_precision.md)). Training minutes are wall-clock time under whatever "
