@@ -2015,3 +2015,17 @@ def test_control_sweep_refuses_an_unreachable_ray_before_warning(tiny_piga_run: 
     line = refused("piga-control", ["--model", str(run), "--sweep", "1:1:1", "--ray", "nohost:1", "--episodes", "1",
                                     "--quiet"], capsys, "--ray nohost:1")
     assert "converge" not in line
+
+
+def test_diagnose_refuses_sequences_too_short_for_its_fit_first(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """It encoded every frame (half a minute) before its fit found no window in sequences of 12 frames."""
+    from piga.data.collect import CollectConfig
+    from piga.data.collect import collect as collect_data
+
+    data = tmp_path / "short.h5"
+    collect_data(CollectConfig(sequences=20, steps=12, seed=1, workers=1), data, progress=False, command="test")
+    code, _, err = run_in_process("piga-diagnose", diagnose.main, "--data", str(data), "--model", str(tmp_path / "nowhere"),
+                                  "--out", str(tmp_path / "report"), capsys=capsys)
+    assert_one_line(code, err, f"{data}: sequences of 12 frames are too short to diagnose: the fit needs 13",
+                    "piga-collect --steps 13")
+    assert _listing(tmp_path) == ["short.h5"]

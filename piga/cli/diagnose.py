@@ -71,7 +71,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     config = DiagnoseConfig(bootstrap=args.bootstrap, seed=args.seed, fit_starts=args.fit_starts,
                             matched_angles=args.matched_angles)
     out = check_report_target(args.out, args.overwrite)
-    inspect_dataset(args.data)  # schema errors first, with the file's name
+    info = inspect_dataset(args.data)  # schema errors first, with the file's name
+    from piga.diagnostics.fit import min_frames
+
+    if info.steps < (need := min_frames(config.fit_horizon)):  # found after the encoding otherwise (half a minute)
+        raise PigaError(f"{args.data}: sequences of {info.steps} frames are too short to diagnose: the fit needs "
+                        f"{need} (windows of {config.fit_horizon} steps after {need - config.fit_horizon - 1} frames); "
+                        f"collect sequences of {need} frames or more (piga-collect --steps {need})")
     check_frames_have_signal(args.data)  # blank video: the diagnosis would divide by its zero variance
     require_piga_run(args.model, "piga-diagnose compares the physics a piga model identified with the data")
     model, ckpt = load_model(args.model)

@@ -139,6 +139,12 @@ class Windows:
     windows of 2 or more steps."""
 
 
+def min_frames(horizon: int) -> int:
+    """The fewest frames a sequence needs for one window of ``horizon`` steps (:func:`make_windows`): the first start
+    is frame MAX_DELAY, so that every delay fitted has its actions."""
+    return max(1, MAX_DELAY) + horizon + 1
+
+
 def make_windows(theta: np.ndarray, actions: np.ndarray, rows: np.ndarray, horizon: int | None, stride: int,
                  dt: float, stale: np.ndarray | None = None, repeat: bool = False) -> Windows:
     """Windows from sequences ``rows`` of (N, T) angles and actions.
