@@ -2029,3 +2029,24 @@ def test_diagnose_refuses_sequences_too_short_for_its_fit_first(tmp_path: Path, 
     assert_one_line(code, err, f"{data}: sequences of 12 frames are too short to diagnose: the fit needs 13",
                     "piga-collect --steps 13")
     assert _listing(tmp_path) == ["short.h5"]
+
+
+def test_a_virtual_dataset_whose_source_is_missing_is_named(tiny_data: Path, tmp_path: Path,
+                                                            capsys: pytest.CaptureFixture[str]) -> None:
+    """HDF5 reads a virtual dataset's missing source as its fill value: the frames were refused as "blank"."""
+    source, data = tmp_path / "source.h5", tmp_path / "virtual.h5"
+    shutil.copy(tiny_data, source)
+    shutil.copy(tiny_data, data)
+    with h5py.File(source) as f:
+        shape, dtype = f["frames"].shape, f["frames"].dtype
+    layout = h5py.VirtualLayout(shape=shape, dtype=dtype)
+    layout[:] = h5py.VirtualSource("source.h5", "frames", shape=shape)
+    with h5py.File(data, "a") as f:
+        del f["frames"]
+        f.create_virtual_dataset("frames", layout)
+    code, _, err = run_in_process("piga-show", show.main, str(data), "--out", str(tmp_path / "s.png"), capsys=capsys)
+    assert code == 0, err  # the source beside it: read through
+    source.unlink()
+    code, _, err = run_in_process("piga-show", show.main, str(data), "--out", str(tmp_path / "t.png"), "--overwrite",
+                                  capsys=capsys)
+    assert_one_line(code, err, f"{data}: /frames is a virtual dataset whose source file source.h5 is missing")

@@ -269,7 +269,24 @@ def inspect_dataset(path: str | os.PathLike[str]) -> DatasetInfo:
     with _open(path) as f:
         info = _validate(f, Path(path))
         _check_attrs_agree(info, f)
+        _check_virtual_sources(f, Path(path))
         return info
+
+
+def _check_virtual_sources(f: h5py.File, path: Path) -> None:
+    """A virtual dataset (HDF5's VDS) whose source file is missing reads as its fill value: the frames of a moved
+    file looked blank ("every frame is blank"), the actions zero. Each source is named instead."""
+    for name in ("frames", "actions", "split", "states", "rewards"):
+        ds = f.get(name)
+        if not isinstance(ds, h5py.Dataset) or not ds.is_virtual:
+            continue
+        for source in ds.virtual_sources():
+            where = Path(source.file_name)
+            # HDF5 looks for a relative source beside the file, then from the current folder
+            if source.file_name != "." and not any(c.exists() for c in ((where,) if where.is_absolute() else
+                                                                         (path.parent / where, where))):
+                raise DataFormatError(f"{path}: /{name} is a virtual dataset whose source file {source.file_name} is "
+                                      "missing (moved or deleted); put it back, or write a file that holds the data")
 
 
 def _check_attrs_agree(info: DatasetInfo, f: h5py.File) -> None:
