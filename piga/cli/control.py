@@ -124,6 +124,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.not_told and args.oracle and not args.sweep:
         raise PigaError("--not-told is for the piga agent; the oracle plans with the environment's true physics")
     check_angle("--goal-angle", args.goal_angle)
+    args.goal_angle += 0.0  # -0.0 (-1e-400 underflows to it) is 0: "goal -0 deg" otherwise
     if args.goal_image and "goal_angle" in given:  # --goal-angle 0, the default, too
         raise PigaError("--goal-image sets the goal (the encoder reads its angle); drop --goal-angle")
     hold = EpisodeConfig.hold_steps
