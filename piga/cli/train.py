@@ -195,7 +195,7 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
             raise PigaError(f"--resume: {args.data} ({info.system}, {info.image_shape}) does not match the run's data "
                             f"({data['system']}, {tuple(data['image_shape'])})")
         if "fingerprint" in data:  # a moved or copied file keeps its contents; another file is another run
-            same_data = data["fingerprint"] == fingerprint(args.data)
+            same_data = data["fingerprint"] == data_at_start
         else:  # a checkpoint from before fingerprints: the same path, or a file of the same shape
             same_data = Path(data["path"]).resolve() == Path(args.data).resolve() or (
                 data.get("sequences") == info.n_sequences and data.get("steps") == info.steps and data["dt"] == info.dt)
