@@ -151,6 +151,12 @@ def test_planet_reward_options_reach_the_run_and_resume_keeps_them(tiny_data: Pa
     code, _, err = run_in_process("piga-baseline", baseline.main, "planet", str(tiny_data), "--out", str(run), "--resume",
                                   "--reward-alignment=frame", "--quiet", capsys=capsys)  # the default's value, given: refused too
     assert_one_line(code, err, "--resume keeps the run's recipe; drop --reward-alignment")
+    # the starting command's own values may be repeated: that command plus --resume (and more steps) continues the run
+    code, _, err = run_in_process("piga-baseline", baseline.main, "planet", str(tiny_data), "--out", str(run), "--steps", "3",
+                                  *TINY_PLANET[2:], "--reward-alignment", "transition", "--reward-scale", "10", "--resume",
+                                  capsys=capsys)
+    assert code == 0, err
+    assert json.loads((run / "metrics.json").read_text())["steps"] == 3
 
 
 @pytest.mark.parametrize("args, needle", [

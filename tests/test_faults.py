@@ -467,6 +467,10 @@ def _attr_edit(key: str, value: Any) -> Callable[[h5py.File], None]:
     (lambda f: _replace(f, "states", f["states"][()].astype(np.complex64)), ["/states must be real numbers", "complex64"]),
     (lambda f: _replace(f, "states", f["states"][()].astype(np.float64) * 1e300), ["/states holds NaN or infinite values"]),
     (lambda f: _replace(f, "frames", np.zeros((*f["frames"].shape[:2], 0, 0), np.uint8)), ["/frames is empty"]),
+    (_attr_edit("system", np.array(["pendulum"], dtype=h5py.string_dtype())), ["attribute 'system' must be one string",
+                                                                              "got array(["]),
+    (_attr_edit("system", ""), ["attribute 'system' must be one string naming the system", "got ''"]),
+    (_attr_edit("system", 3), ["attribute 'system' must be one string", "got 3"]),
     (_attr_edit("dt", np.inf), ["attribute 'dt' must be the seconds between frames, 1e-05 to 10, got inf"]),
     (_attr_edit("dt", 1e-300), ["attribute 'dt' must be the seconds between frames"]),
     (_attr_edit("dt", True), ["attribute 'dt' must be"]),
@@ -593,6 +597,14 @@ def test_planet_trains_on_frames_with_a_channel_axis(files: dict[str, Path], tmp
     assert {"checkpoint.pt", "config.json", "metrics.json", "openloop.png"} <= set(_listing(tmp_path / "run"))
 
 
+def test_planet_refuses_a_reward_term_that_drowns_the_frames(tiny_data: Path, tmp_path: Path,
+                                                             capsys: pytest.CaptureFixture[str]) -> None:
+    """--reward-scale 1e308 was refused only after the run started, as "training diverged: loss became inf"."""
+    refused("piga-baseline", ["planet", str(tiny_data), "--out", str(tmp_path / "run"), "--reward-scale", "1e308",
+                              "--quiet"], capsys, "error: --reward-scale must be at most 1e+06")
+    assert _listing(tmp_path) == []
+
+
 @pytest.mark.parametrize("scale", [0.0, 1e-300, 9e-4])
 def test_planet_refuses_a_reward_term_of_no_weight(scale: float, tiny_data: Path, tmp_path: Path,
                                                    capsys: pytest.CaptureFixture[str]) -> None:
@@ -711,6 +723,18 @@ def test_ddpg_resume_refuses(argv: tuple[str, ...], edit: Callable[[Path], None]
     refused("piga-baseline", ["ddpg", "--obs", "state", "--out", str(run), "--resume", "--steps", "400", "--quiet", *argv],
             capsys, *needles)
     assert _listing(run) == before
+
+
+def test_ddpg_resume_takes_the_starting_command_again(baseline_runs: dict[str, Path], tmp_path: Path,
+                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    """The command that started a run, plus --resume, continues it: its recipe flags at the values it was started with
+    are no change (they were refused: "drop --eval-every, --eval-episodes, ..."); a flag at another value still is."""
+    run = _run_copy(baseline_runs["ddpg"], tmp_path / "run")
+    start = ["ddpg", "--obs", "state", "--out", str(run), *TINY_DDPG, "--resume"]
+    other = [("64" if word == "32" else word) for word in start]  # --batch-size 64
+    refused("piga-baseline", other, capsys, "--resume keeps the run's recipe; drop --batch-size")
+    code, stdout, err = run_in_process("piga-baseline", baseline.main, *start, capsys=capsys)
+    assert "recipe" not in err and "training DDPG from state for 200 env steps" in stdout, err
 
 
 @pytest.mark.parametrize("obs", ["state", "latent"])

@@ -143,8 +143,13 @@ def test_each_option_trains_is_recorded_and_kept_by_resume(flag: str, value: str
     code, _, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), "--resume", flag, other,
                                   "--epochs", "2", "--quiet", capsys=capsys)
     assert_one_line(code, err, "--resume", f"({value})", f"drop {flag} {other}")
+    code, _, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), "--resume", flag, value,
+                                  "--batch-size", "16", "--epochs", "2", "--quiet", capsys=capsys)
+    assert_one_line(code, err, "--resume keeps the run's recipe; drop --batch-size")
+    # the starting command's own values may be repeated: that command plus --resume (and more epochs) continues the run
     code, stdout, _ = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), "--resume", flag, value,
-                                     "--epochs", "2", "--quiet", capsys=capsys)
+                                     "--batch-size", "8", "--warmup-fraction", "0.5", "--epochs", "2", "--quiet",
+                                     capsys=capsys)
     assert "epoch 2:" in stdout and json.loads((out / "metrics.json").read_text())["training"]["steps"] == 4
 
 

@@ -26,6 +26,9 @@ MAX_STEPS = 10_000_000
 #: head's steps shrink with them (a weight of 1e-300 made the term exactly 0 in float32: the head never learnt).
 #: PlaNet's code uses 10; 1e-3 leaves room for any tuning.
 MIN_REWARD_SCALE = 1e-3
+#: Largest reward weight: six orders above PlaNet's 10, where the reward term's gradient already drowns the frames'
+#: (--reward-scale 1e308 overflowed the loss to inf at the first step, refused only as a divergence).
+MAX_REWARD_SCALE = 1e6
 #: Most hidden layers of the reward head (PlaNet's has 3): --reward-layers 100000 built a head of a billion weights
 #: that passed the memory check and then trained for hours without a word.
 MAX_REWARD_LAYERS = 100
@@ -170,6 +173,9 @@ class PlanetTrainConfig:
             raise ValueError(f"PlanetTrainConfig.reward_scale (--reward-scale) must be at least {MIN_REWARD_SCALE:g}, got "
                              f"{self.reward_scale:g}: below it the reward head barely learns (at 0, never), and the planner "
                              "ranks its plans by that head")
+        if self.reward_scale > MAX_REWARD_SCALE:
+            raise ValueError(f"PlanetTrainConfig.reward_scale (--reward-scale) must be at most {MAX_REWARD_SCALE:g}, got "
+                             f"{self.reward_scale:g}: above it the reward term drowns the frames' (PlaNet's code uses 10)")
         if self.steps > MAX_STEPS:
             raise ValueError(f"PlanetTrainConfig.steps (--steps) must be at most {MAX_STEPS:,} (weeks on a CPU), got {self.steps:,}")
         if self.free_nats > MAX_FREE_NATS:

@@ -21,8 +21,8 @@ from typing import Any, get_args
 
 from piga.cli.common import (ArgumentParser, Interrupted, PigaError, add_device_option, add_preset_option, command_line,
                              format_default, given_options, made_folder, nonnegative_float, nonnegative_int, number_type,
-                             positive_float, positive_int, record_resume, remove_outputs, run_cli, seed_int,
-                             started_record, thread_count)
+                             positive_float, positive_int, record_resume, recorded_options, remove_outputs, run_cli,
+                             seed_int, started_record, thread_count)
 from piga.io.atomic import check_folder_target
 from piga.io.checkpoint import CHECKPOINT, RunKind, read_run_record
 from piga.io.lock import lock_run_folder
@@ -72,7 +72,7 @@ def build_parser() -> ArgumentParser:
                    help="which state the reward head reads for a model step's reward: frame (the state before its actions) "
                    "or transition (PlaNet's: the state they lead to, which has seen them) (default %(default)s)")
     q.add_argument("--reward-scale", type=positive_float, default=planet.reward_scale,
-                   help="weight of the reward term of the loss, at least 0.001 (PlaNet's code: 10) (default %(default)s)")
+                   help="weight of the reward term of the loss, from 0.001 to 1e6 (PlaNet's code: 10) (default %(default)s)")
     q.add_argument("--stoch-size", type=positive_int, default=rssm.stoch_size, help="stochastic state size (default %(default)s)")
     add_preset_option(q, "--max-minutes", default=planet.max_minutes, type=positive_float, shown="no limit",
                       help="stop at the first checkpoint past this budget")
@@ -236,15 +236,17 @@ def _given_options(kind: str, argv: Sequence[str] | None) -> set[str]:
 
 def _refuse_recipe_changes(args: Any, record: dict[str, Any], run_dir: Path, argv: Sequence[str] | None) -> None:
     """``--resume`` continues a run as it was started, as piga-train-model's does: refuses options
-    that would change its recipe (other than :data:`RESUME_OPTIONS`), given with any value, even the
-    default's, and another data file."""
+    that would change its recipe (other than :data:`RESUME_OPTIONS`), given with any value but the one the run was
+    started with (so the starting command plus ``--resume`` continues it), and another data file."""
     kind = args.baseline
     named = [kind, args.data, "--out", args.out] if kind == "planet" else [kind, "--obs", args.obs, "--out", args.out]
     defaults = vars(build_parser().parse_args(named))
     skip = {"baseline", "data", "out", "obs", "algo", "resume", "overwrite", "iterative", "quiet", *RESUME_OPTIONS[kind]}
     given = _given_options(kind, argv)
+    started = recorded_options(build_parser(), record.get("command")) or {}  # the starting command's values may be repeated
     changed = [name for name, value in vars(args).items()
-               if name not in skip and (value != defaults[name] or name in given)]
+               if name not in skip and (value != defaults[name] or name in given)
+               and not (started.get("baseline") == kind and name in started and started[name] == value)]
     if changed:
         raise PigaError(f"--resume keeps the run's recipe; drop {', '.join('--' + c.replace('_', '-') for c in changed)}")
     recorded = record.get("data")

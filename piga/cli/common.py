@@ -555,6 +555,26 @@ def given_options(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -
             if any(word == flag or word.startswith(flag + "=") for word in words)}
 
 
+def recorded_options(parser: argparse.ArgumentParser, command: Any) -> dict[str, Any] | None:
+    """The options of the command that started a run (its record's ``command``, written by :func:`command_line`), as
+    ``parser`` reads them now: what a ``--resume`` may repeat. None where there is no command, or where it no longer
+    parses (edited, from another version, or naming a file that is gone): then every recipe option counts as a change."""
+    import io
+    import shlex
+
+    if not isinstance(command, str):
+        return None
+    try:
+        words = shlex.split(command)
+    except ValueError:
+        return None
+    try:
+        with contextlib.redirect_stderr(io.StringIO()):  # argparse's usage lines are not the user's error here
+            return vars(parser.parse_args(words[1:]))
+    except SystemExit:
+        return None
+
+
 def format_default(value: Any) -> str:
     """A default as help text shows it: 1e-3 as 0.001, (0.8, 0.1, 0.1) as 0.8,0.1,0.1, True as on."""
     if isinstance(value, bool):

@@ -14,8 +14,8 @@ from typing import Any
 from piga.cli.common import (NOT_CONVERGED, ArgumentParser, Interrupted, PigaError, add_device_option,
                              add_preset_option, command_line, format_default, given_options, int_up_to,
                              missing_folders, nonnegative_int, number_type, positive_float, positive_int, record_resume,
-                             remove_empty_folders, remove_outputs, run_cli, seed_int, started_record, thread_count,
-                             unit_fraction)
+                             recorded_options, remove_empty_folders, remove_outputs, run_cli, seed_int, started_record,
+                             thread_count, unit_fraction)
 from piga.io.atomic import check_folder_target
 from piga.io.checkpoint import CHECKPOINT, read_run_record, require_piga_run
 from piga.io.lock import lock_run_folder
@@ -216,7 +216,9 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
                    + (["seed_retries"] if "seed_retries" in options_given else [])
                    + [name for name in ("data_loading", "stream_cache_mb")
                       if getattr(args, name) is not None and getattr(args, name) != getattr(saved, name)])
-        if changed:
+        started = recorded_options(build_parser(), read_run_record(run_dir)[0].get("command")) or {}
+        changed = [name for name in changed if name not in started or started[name] != getattr(args, name)]
+        if changed:  # (the starting command's own values may be repeated: that command plus --resume continues the run)
             raise PigaError(f"--resume keeps the run's recipe; drop {', '.join('--' + c.replace('_', '-') for c in changed)}")
         # the device and the threads are not the recipe's
         train_config = replace(saved, device=args.device, **overrides,

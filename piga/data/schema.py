@@ -214,6 +214,10 @@ def _validate(f: h5py.File, path: Path) -> DatasetInfo:
     for key in REQUIRED_ATTRS:
         if key not in attrs:
             raise DataFormatError(f"{path}: missing file attribute '{key}'")
+    if not isinstance(attrs["system"], str) or not attrs["system"]:  # (an array of one name was shown, and then refused)
+        shown = repr(attrs["system"]) if len(repr(attrs["system"])) <= 40 else f"{repr(attrs['system'])[:37]}..."
+        raise DataFormatError(f"{path}: attribute 'system' must be one string naming the system (e.g. 'pendulum'), got "
+                              f"{shown}")
     try:
         dt = float("nan") if isinstance(attrs["dt"], bool) else float(attrs["dt"])
     except (TypeError, ValueError):
