@@ -44,6 +44,7 @@ def run_summary(name: str, record: dict[str, Any]) -> dict[str, Any]:
     reached = next((r["step"] for r in curve if r["score"] > mark), None)
     return {"name": name, "env": env, "device": config.get("device", "auto"),
             "precision": config.get("encoder_precision", "float32"), "planned": config["steps"],
+            "warmup_frames": config.get("learning_starts", 0) * per_step,
             "trained": curve[-1]["step"] if curve else 0, "curve": curve, "mark": mark, "first_step_above_mark": reached,
             "best": max((r["score"] for r in curve), default=None), "train_minutes": record.get("train_seconds", 0) / 60,
             "command": record.get("command"), "commit": record.get("commit"), "resumed_commits": record.get("resumed_commits", [])}
@@ -68,15 +69,19 @@ def markdown(record: dict[str, Any]) -> str:
         "return). The encoder's precision is the run's `--encoder-precision` (bfloat16: "
         "[results/drqv2_precision.md](drqv2_precision.md)). Training minutes are wall-clock time under whatever "
         "else the machine ran, not a speed measure (the benchmark above is); a run whose steps trained are below "
-        "those planned continues (`piga-baseline ddpg --resume`).",
+        "those planned continues (`piga-baseline ddpg --resume`). DrQ-v2's random warm-up is 4,000 frames "
+        f"(its num_seed_frames, physics steps); a DMC run started before piga counted it in frames warmed up for "
+        f"4,000 env steps, {4000 * DMC_FRAMES_PER_STEP:,} frames: the column says which.",
         "",
-        "| run | env | device, encoder | env steps trained (planned) | best evaluation | first step above the mark | training min |",
-        "|---|---|---|---|---|---|---|",
+        "| run | env | device, encoder | random warm-up (frames) | env steps trained (planned) | best evaluation | "
+        "first step above the mark | training min |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for r in runs:
         first = f"{r['first_step_above_mark']:,}" if r["first_step_above_mark"] is not None else "not yet"
         best = signed(r["best"]) if r["best"] is not None else "—"
-        lines.append(f"| {r['name']} | {r['env']} | {r['device']}, {r['precision']} | {r['trained']:,} ({r['planned']:,}) | "
+        lines.append(f"| {r['name']} | {r['env']} | {r['device']}, {r['precision']} | {r['warmup_frames']:,} | "
+                     f"{r['trained']:,} ({r['planned']:,}) | "
                      f"{best} | {first} (mark {r['mark']:g}) | {r['train_minutes']:.0f} |")
     dmc = [r for r in runs if r["env"] == DMC_PENDULUM]
     if dmc:

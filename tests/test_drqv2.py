@@ -106,6 +106,9 @@ def test_drqv2_has_its_papers_values_and_learns_from_pixels_only() -> None:
             config.net_arch, config.noise_std, config.noise_final_std, config.learning_starts) == \
         (1e-4, 256, 0.01, 2, 3, 3, (1024, 1024), 1.0, 0.1, 4000)
     assert config.buffer_size == 100_000  # its own, not the DDPG pixels preset's 50000
+    # its warm-up is 4000 frames, physics steps: 2000 env steps at the DMC pendulum's action repeat 2 (it was 4000)
+    assert SB3Config(algo="drqv2", obs="pixels", env="piga/DMCPendulum-v0").learning_starts == 2000
+    assert SB3Config(algo="drqv2", obs="pixels", env="piga/DMCPendulum-v0", learning_starts=10).learning_starts == 10
     with pytest.raises(ValueError, match="DrQ-v2 learns from pixels; --obs state"):
         SB3Config(algo="drqv2", obs="state")
 

@@ -40,8 +40,13 @@ ALGORITHMS: tuple[Algorithm, ...] = get_args(Algorithm)
 PRECISIONS: tuple[Precision, ...] = get_args(Precision)
 #: Pendulum-v1's episode length (its TimeLimit).
 EPISODE_STEPS = 200
+#: DrQ-v2's random warm-up, in its frames (physics steps; its ``num_seed_frames``). Its exploration schedule, by
+#: contrast, counts env steps (its ``global_step``), as ``SB3Config.noise_decay_steps`` does.
+DRQV2_SEED_FRAMES = 4000
 #: Each env's episode length in env steps (DMC's: 1000 physics steps at its default action repeat of 2).
 ENV_EPISODE_STEPS: dict[EnvId, int] = {PIXEL_PENDULUM: EPISODE_STEPS, DMC_PENDULUM: DMCPendulumConfig().frames_per_episode}
+#: Physics steps per env step (the action held over them): DrQ-v2's paper counts each as a frame.
+ENV_ACTION_REPEAT: dict[EnvId, int] = {PIXEL_PENDULUM: 1, DMC_PENDULUM: DMCPendulumConfig().action_repeat}
 #: The evaluation return that counts as learning to swing up: Pendulum-v1's -200 (the SB3 zoo's mark) and, on
 #: DMC's 0-1000 scale, 200 (random actions score near 0 there: they rarely bring the pole within 8 degrees of upright).
 LEARNED_RETURN: dict[EnvId, float] = {PIXEL_PENDULUM: -200.0, DMC_PENDULUM: 200.0}
@@ -52,7 +57,7 @@ LEARNED_RETURN: dict[EnvId, float] = {PIXEL_PENDULUM: -200.0, DMC_PENDULUM: 200.
 #: defaults (gamma 0.99, buffer 1e6, learning starts 100, net_arch [256, 256], entropy coefficient "auto",
 #: no added action noise: SAC explores with its own stochastic policy).
 #: DrQ-v2 (Yarats et al. 2021, its DMC "easy" settings): gamma 0.99, 3-step returns, a warm-up of 4000
-#: frames, exploration std 1.0 falling linearly to 0.1 over 100000 steps, Adam 1e-4, batch 256, tau 0.01,
+#: frames (physics steps: :data:`DRQV2_SEED_FRAMES`, so 2000 env steps at the DMC pendulum's action repeat 2), exploration std 1.0 falling linearly to 0.1 over 100000 steps, Adam 1e-4, batch 256, tau 0.01,
 #: an update every 2 env steps, MLPs of 1024 x 2, 3 stacked frames; a buffer of 100000 transitions (its
 #: 1e6 of 84x84 RGB frames does not fit a laptop; 100000 stacks of three 64x64 frames take 2.5 GB).
 #: The fields that only some algorithms read: ``n_step``, ``noise_final_std``, ``noise_decay_steps`` and
@@ -63,7 +68,7 @@ ALGORITHM_PRESETS: dict[Algorithm, dict[str, Any]] = {
              **_SB3_COMMON},
     "sac": {"gamma": 0.99, "buffer_size": 1_000_000, "learning_starts": 100, "noise_std": 0.0, "net_arch": (256, 256),
             **_SB3_COMMON},
-    "drqv2": {"gamma": 0.99, "buffer_size": 100_000, "learning_starts": 4000, "noise_std": 1.0, "net_arch": (1024, 1024),
+    "drqv2": {"gamma": 0.99, "buffer_size": 100_000, "learning_starts": None, "noise_std": 1.0, "net_arch": (1024, 1024),
               "learning_rate": 1e-4, "batch_size": 256, "tau": 0.01, "train_freq": 2, "frame_stack": 3, "n_step": 3},
 }
 #: Per-observation values, over the algorithm's. Pixels: a replay buffer of 200000 stacks of four 64x64
@@ -161,6 +166,8 @@ class SB3Config:
         for name, value in {**ALGORITHM_PRESETS[self.algo], **observation_preset}.items():
             if getattr(self, name) is None:
                 object.__setattr__(self, name, value)
+        if self.learning_starts is None:  # DrQ-v2's warm-up is counted in frames, of which an env step may hold several
+            object.__setattr__(self, "learning_starts", DRQV2_SEED_FRAMES // ENV_ACTION_REPEAT[self.env])
         object.__setattr__(self, "net_arch", tuple(self.net_arch))  # a JSON record's list
         if not 1 <= self.steps <= MAX_STEPS:
             raise ValueError(f"steps must be in [1, {MAX_STEPS:,}] (more takes weeks on a CPU), got {self.steps:,}")

@@ -34,8 +34,9 @@ OUTPUTS = (CHECKPOINT, "config.json", "metrics.json", "model.zip", "autoencoder.
 def build_parser() -> ArgumentParser:
     from agents.planet.config import MAX_EXPLORATION_NOISE, IterativeConfig, PlanetTrainConfig, RewardAlignment, RSSMConfig
     from agents.sb3.autoencoder import AutoencoderConfig
-    from agents.sb3.config import ALGORITHM_PRESETS, ALGORITHMS, LEARNED_RETURN, OBSERVATIONS, PRECISIONS, PRESETS, SB3Config
-    from envs import ENV_IDS
+    from agents.sb3.config import (ALGORITHM_PRESETS, ALGORITHMS, DRQV2_SEED_FRAMES, ENV_ACTION_REPEAT, LEARNED_RETURN,
+                                   OBSERVATIONS, PRECISIONS, PRESETS, SB3Config)
+    from envs import DMC_PENDULUM, ENV_IDS
 
     p = ArgumentParser(prog=PROG, description="Train a baseline (the PlaNet-style world model, or SB3 DDPG) into a run "
                        "folder that piga-control --model evaluates like a piga run.")
@@ -125,7 +126,8 @@ def build_parser() -> ArgumentParser:
                    "(default %(default)s)")
     d.add_argument("--eval-episodes", type=positive_int, default=ddpg.eval_episodes, help="episodes per evaluation (default %(default)s)")
     add_preset_option(d, "--learning-starts", default=ddpg.learning_starts, type=nonnegative_int,
-                      shown=f"{ddpg.learning_starts}; sac: {sac['learning_starts']}; drqv2: {drqv2['learning_starts']}",
+                      shown=f"{ddpg.learning_starts}; sac: {sac['learning_starts']}; drqv2: its {DRQV2_SEED_FRAMES} "
+                      f"frames, {DRQV2_SEED_FRAMES // ENV_ACTION_REPEAT[DMC_PENDULUM]} steps on {DMC_PENDULUM}",
                       help="random-action steps before learning")
     add_preset_option(d, "--learning-rate", default=ddpg.learning_rate, type=positive_float,
                       shown=f"{ddpg.learning_rate}; drqv2: {drqv2['learning_rate']}",
