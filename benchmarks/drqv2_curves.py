@@ -95,6 +95,12 @@ def markdown(record: dict[str, Any]) -> str:
             "curve on this task is late and wide: at 100,000 frames 4 of its 9 seeds score above 200, at 200,000 "
             "6 of 9.",
             "",
+            "What differs from the published runs (DrQ-v2's own code and its easy-task settings, which piga's "
+            "preset takes): the frames are 64x64 gray through a camera on the hinge axis (DrQ-v2's: 84x84 RGB "
+            "through the suite's camera 0); a replay buffer of 100,000 transitions (its 1e6; either holds every "
+            "transition of a 50,000-step run); 5 evaluation episodes at each point (its 10); the warm-up as the "
+            "first table gives it.",
+            "",
             "| frames | " + " | ".join(r["name"] for r in dmc) + " | published mean ± std | published range | seeds above 200 |",
             "|---|" + "---|" * len(dmc) + "---|---|---|",
         ]
