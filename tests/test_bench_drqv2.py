@@ -62,3 +62,15 @@ def test_the_precision_benchmark_times_both_and_compares_one_update(tmp_path: Pa
     assert 0.9 < record["agreement"]["encoder_gradient_cosine"] <= 1.0 + 1e-6
     with pytest.raises(SystemExit):
         drqv2_precision.main(["--out", str(out), "--fill", "10"])
+
+
+def test_the_checkpoint_memory_benchmark_measures_both_ways(tmp_path: Path) -> None:
+    import checkpoint_memory
+
+    out = tmp_path / "memory"
+    assert checkpoint_memory.main(["--out", str(out), "--buffer-size", "600"]) == 0
+    record = json.loads(out.with_suffix(".json").read_text())
+    assert set(record["ways"]) == {"bytes", "file"}
+    for way in record["ways"].values():
+        assert way["buffer_gb"] > 0 and way["checkpoint_gb"] >= way["buffer_gb"] and way["write_peak_over_gb"] >= 0
+    assert "its own file, streamed (piga's)" in out.with_suffix(".md").read_text()

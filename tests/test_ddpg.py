@@ -75,6 +75,28 @@ def test_training_resumes_exactly(tmp_path: Path) -> None:
     for (name, p), q in zip(a.policy.state_dict().items(), b.policy.state_dict().values()):
         assert torch.equal(p, q), name
     assert (tmp_path / "a" / "model.zip").exists() and (tmp_path / "a" / "tensorboard").is_dir()
+    # the replay buffer is a file of its own, named by the checkpoint; only the latest step's is kept
+    assert [p.name for p in (tmp_path / "a" / "replay_buffers").iterdir()] == ["400.pkl"]
+
+
+def test_a_checkpoint_with_its_replay_buffer_inside_resumes_exactly(tmp_path: Path) -> None:
+    """Runs checkpointed before the buffer had a file of its own held its bytes in checkpoint.pt: they continue; a
+    checkpoint whose buffer file is gone is named, not an internal error."""
+    from agents.sb3.train import train_sb3
+    from piga.io.checkpoint import write_checkpoint
+
+    straight = train_sb3(TINY, tmp_path / "a", progress=False)
+    train_sb3(replace(TINY, steps=200), tmp_path / "b", progress=False)
+    ckpt = torch.load(tmp_path / "b" / "checkpoint.pt", weights_only=False)
+    buffer = tmp_path / "b" / ckpt.pop("replay_buffer_file")
+    write_checkpoint(tmp_path / "b", {**ckpt, "replay_buffer": buffer.read_bytes()})
+    buffer.unlink()
+    resumed = train_sb3(TINY, tmp_path / "b", resume=True, progress=False)
+    assert resumed["learning_curve"] == [{**r, "seconds": q["seconds"]} for r, q in
+                                         zip(straight["learning_curve"], resumed["learning_curve"])]
+    (tmp_path / "b" / "replay_buffers" / "400.pkl").unlink()
+    with pytest.raises(ValueError, match=r"400.pkl, the replay buffer that .*checkpoint.pt names, is missing"):
+        train_sb3(replace(TINY, steps=600), tmp_path / "b", resume=True, progress=False)
 
 
 def test_a_pixel_policy_runs_in_piga_episodes_with_sb3s_stacking(tmp_path: Path) -> None:

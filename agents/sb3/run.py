@@ -14,12 +14,15 @@ from agents.sb3.autoencoder import FrameAutoencoder, load_autoencoder
 from agents.sb3.config import Algorithm, SB3Config
 from piga.io.checkpoint import CHECKPOINT, RunKind, read_checkpoint, unreadable
 
-__all__ = ["AUTOENCODER", "MODEL", "SB3Agent", "load_sb3", "sb3_class", "trained_env"]
+__all__ = ["AUTOENCODER", "MODEL", "REPLAY_BUFFERS", "SB3Agent", "load_sb3", "sb3_class", "trained_env"]
 
 #: The latest policy in SB3's format, beside the run's checkpoint.
 MODEL = "model.zip"
 #: A latent run's autoencoder.
 AUTOENCODER = "autoencoder.pt"
+#: The folder of a run's replay buffer, one file per checkpoint step (``STEP.pkl``, SB3's pickle), beside the
+#: checkpoint that names it; earlier ones are removed once a newer checkpoint names its own.
+REPLAY_BUFFERS = "replay_buffers"
 
 
 def sb3_class(algo: Algorithm) -> Any:

@@ -12,7 +12,7 @@ folder, the agent (:class:`agents.sb3.run.SB3Agent`) and the evaluation are the 
 critic trains, with augmentation, 3-step returns and scheduled exploration, in the same loop.
 
 Training runs in chunks of ``eval_every`` steps (whole episodes). After each chunk, ``EvalCallback``
-has scored the policy, and one atomic ``checkpoint.pt`` holds the SB3 model, its replay buffer, the
+has scored the policy, and one atomic ``checkpoint.pt`` holds the SB3 model, the name of its replay buffer's file (``replay_buffers/STEP.pkl``), the
 global numpy and torch RNG states (SB3 samples batches and noise from them; the GPU's too when it
 trains on one) and the number of episodes started; every training episode's start depends on
 (seed, episode index) only (:class:`envs.observations.EpisodeSeeds`) and every evaluation uses the
@@ -34,7 +34,7 @@ import torch
 from tqdm.auto import tqdm
 
 from agents.sb3.config import EPISODE_STEPS, SB3Config, resolve_precision
-from agents.sb3.run import MODEL, sb3_class
+from agents.sb3.run import MODEL, REPLAY_BUFFERS, sb3_class
 from envs.observations import EpisodeSeeds, FiniteActions, LatentObservation, NonFiniteAction, StateObservation
 from envs.pendulum import PixelPendulumConfig
 from piga.io.atomic import atomic_output, write_json
@@ -163,14 +163,22 @@ def new_model(config: SB3Config, venv: Any, device: torch.device, tensorboard_lo
 
 
 def _save(run_dir: Path, model: Any, config: SB3Config, episodes: int, history: list[dict[str, float]], elapsed: float) -> None:
-    policy, buffer = io.BytesIO(), io.BytesIO()
+    """The checkpoint: the replay buffer first, into a file of its own named by the step, which SB3's pickle streams to
+    disk (through bytes inside the checkpoint, a buffer of 2.5 GB took 17 GB of memory to save: the pickle, its copy,
+    torch's pickle of it and that one's copy); then ``checkpoint.pt``, atomically, naming it; then the buffers of
+    earlier checkpoints go. Killed at any point, the folder holds a checkpoint and the buffer it names."""
+    step = int(model.num_timesteps)
+    buffer = Path(REPLAY_BUFFERS) / f"{step}.pkl"
+    (run_dir / REPLAY_BUFFERS).mkdir(exist_ok=True)
+    with atomic_output(run_dir / buffer, overwrite=True) as tmp, open(tmp, "wb") as file:
+        model.save_replay_buffer(file)
+    policy = io.BytesIO()
     model.save(policy)
-    model.save_replay_buffer(buffer)
     payload = {
         "kind": RunKind.DDPG.value,
         "config": config.to_dict(),
         "model_zip": policy.getvalue(),
-        "replay_buffer": buffer.getvalue(),
+        "replay_buffer_file": buffer.as_posix(),
         "rng": {"numpy": np.random.get_state(), "torch": torch.get_rng_state(),
                 "action_space": model.action_space.np_random.bit_generator.state,
                 **({"cuda": torch.cuda.get_rng_state(model.device)} if model.device.type == "cuda" else {})},
@@ -179,8 +187,33 @@ def _save(run_dir: Path, model: Any, config: SB3Config, episodes: int, history: 
         "elapsed": elapsed,
     }
     write_checkpoint(run_dir, payload)
+    for earlier in (run_dir / REPLAY_BUFFERS).glob("*.pkl"):
+        if earlier.name != buffer.name:
+            earlier.unlink(missing_ok=True)
     with atomic_output(run_dir / MODEL, overwrite=True) as tmp:
         tmp.write_bytes(policy.getvalue())
+
+
+def _load_replay_buffer(model: Any, run_dir: Path, ckpt: dict[str, Any]) -> None:
+    """Fills ``model``'s replay buffer from the file the checkpoint names (or, in a checkpoint written before buffers
+    had files of their own, from its bytes)."""
+    if "replay_buffer" in ckpt:
+        model.load_replay_buffer(io.BytesIO(ckpt["replay_buffer"]))
+        return
+    if "replay_buffer_file" not in ckpt:
+        raise unreadable(run_dir / CHECKPOINT, RunKind.DDPG, KeyError("replay_buffer_file"))
+    name = ckpt["replay_buffer_file"]
+    if not isinstance(name, str) or Path(name).is_absolute() or ".." in Path(name).parts:
+        raise unreadable(run_dir / CHECKPOINT, RunKind.DDPG, ValueError(f"its replay buffer is {name!r}, not a file in "
+                                                                         "the run folder"))
+    path = run_dir / name
+    if not path.is_file():
+        raise ValueError(f"{path}, the replay buffer that {run_dir / CHECKPOINT} names, is missing: put it back, or "
+                         "train the run again with --overwrite")
+    try:
+        model.load_replay_buffer(path)
+    except Exception as exc:  # a truncated or foreign file
+        raise unreadable(path, RunKind.DDPG, exc, what=f"replay buffer of a {RunKind.DDPG.label} run") from None
 
 
 def _check_finite(model: Any, callback: Any, evaluated: bool, checkpoint: Path) -> None:
@@ -259,9 +292,9 @@ def train_sb3(config: SB3Config, run_dir: str | Path, autoencoder: str | Path | 
             # the zip holds the TensorBoard folder of the run's first invocation: log where the run is now
             model = algorithm.load(io.BytesIO(ckpt["model_zip"]), env=venv, device=device,
                                    tensorboard_log=str(run_dir / "tensorboard"))
-            model.load_replay_buffer(io.BytesIO(ckpt["replay_buffer"]))
         except Exception as exc:  # a truncated or foreign file
             raise unreadable(run_dir / CHECKPOINT, RunKind.DDPG, exc) from None
+        _load_replay_buffer(model, run_dir, ckpt)
         # load() reseeded everything with the run's seed (SB3's _setup_model): put back the states
         # of the moment of the checkpoint
         with resuming_from(run_dir / CHECKPOINT, RunKind.DDPG):

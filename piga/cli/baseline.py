@@ -28,7 +28,8 @@ from piga.io.checkpoint import CHECKPOINT, RunKind, read_run_record
 from piga.io.lock import lock_run_folder
 
 PROG = "piga-baseline"
-OUTPUTS = (CHECKPOINT, "config.json", "metrics.json", "model.zip", "autoencoder.pt", "tensorboard", "collected.h5")
+OUTPUTS = (CHECKPOINT, "config.json", "metrics.json", "model.zip", "autoencoder.pt", "tensorboard", "collected.h5",
+           "replay_buffers")
 
 
 def build_parser() -> ArgumentParser:
