@@ -2,13 +2,15 @@
 
 Each ``--runs`` record is what ``benchmarks/learning_curve.py`` reads from a run's checkpoint (a run stopped part-way
 included): the command, the commits, the settings and the evaluation curve. ``--published`` is the published
-per-seed curve (``benchmarks/published_scores.py``: DrQ-v2's 9 seeds on pendulum-swingup). A DMC run's env steps
+per-seed curve (``benchmarks/published_scores.py``: DrQ-v2's 9 seeds on pendulum-swingup); ``--reference``, what
+policies that learned nothing score at the runs' evaluation starts (``benchmarks/reference_policies.py``). A DMC run's env steps
 are counted in frames as DrQ-v2's paper counts them (action repeat 2: two per env step), the published curves' unit.
 
     python benchmarks/drqv2_curves.py --out results/drqv2 \
         --published results/published/dmc_vision-drqv2-pendulum_swingup.json \
         --runs results/drqv2_runs/records/pixels-s0.json results/drqv2_runs/records/pixels-cpu-s0.json \
-               results/drqv2_runs/records/dmc-float32-s0.json results/drqv2_runs/records/dmc-bf16-s0.json
+               results/drqv2_runs/records/dmc-float32-s0.json results/drqv2_runs/records/dmc-bf16-s0.json \
+        --reference results/reference_policies.json
 
 Writes OUT.md, OUT.json (each run's curve, and the published curve at its points) and OUT.png (the curves).
 """
@@ -57,6 +59,18 @@ def published_at(published: dict[str, Any], frames: float) -> dict[str, float]:
             "above_200": int((ys > 200).sum()), "seeds": len(ys)}
 
 
+def reference_lines(reference: dict[str, Any] | None) -> list[str]:
+    """The DMC scores of policies that learned nothing at the curve's own evaluation starts
+    (``benchmarks/reference_policies.py``), as a paragraph; none without ``--reference``."""
+    if not reference or DMC_PENDULUM not in reference["scores"]:
+        return []
+    first = reference["eval_episodes"]
+    cells = ", ".join(f"{name} {np.mean(returns[:first]):.1f}" for name, returns in reference["scores"][DMC_PENDULUM].items())
+    return [f"Policies that learned nothing, scored at the same {first} evaluation starts as each point above "
+            f"({reference['file']}, from `{reference['command']}`): {cells}. A run's score equal to a constant "
+            "torque's is its actor saturated at that bound.", ""]
+
+
 def markdown(record: dict[str, Any]) -> str:
     runs, published = record["runs"], record["published"]
     lines = [
@@ -101,6 +115,7 @@ def markdown(record: dict[str, Any]) -> str:
             "transition of a 50,000-step run); 5 evaluation episodes at each point (its 10); the warm-up as the "
             "first table gives it.",
             "",
+            *reference_lines(record.get("reference")),
             "| frames | " + " | ".join(r["name"] for r in dmc) + " | published mean ± std | published range | seeds above 200 |",
             "|---|" + "---|" * len(dmc) + "---|---|---|",
         ]
@@ -167,15 +182,20 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--out", type=Path, required=True, help="output prefix: OUT.md, OUT.json, OUT.png")
     p.add_argument("--runs", type=Path, nargs="+", required=True, help="learning_curve.py records")
     p.add_argument("--published", type=Path, required=True, help="published_scores.py's record of DrQ-v2's curve")
+    p.add_argument("--reference", type=Path, help="reference_policies.py's record: what policies that learned nothing "
+                   "score at the runs' evaluation starts")
     args = p.parse_args(argv)
     try:
         runs = [run_summary(path.stem, json.loads(path.read_text())) for path in args.runs]
         published = json.loads(args.published.read_text())
+        reference = ({**json.loads(args.reference.read_text()), "file": str(args.reference)} if args.reference
+                     else None)
     except (OSError, ValueError, KeyError) as exc:
         print(f"drqv2_curves.py: error: {' '.join(str(exc).split())}", file=sys.stderr)
         return 1
     command = shlex.join(["python", "benchmarks/drqv2_curves.py", *(sys.argv[1:] if argv is None else argv)])
-    record = {"command": command, "runs": runs, "published": published, "figure": str(args.out.with_suffix(".png"))}
+    record = {"command": command, "runs": runs, "published": published, "figure": str(args.out.with_suffix(".png")),
+              "reference": reference}
     figure(record, args.out.with_suffix(".png"))
     write_page(args.out, {**record, "published": {"source": published["source"], "file": str(args.published)}},
                markdown(record))

@@ -43,8 +43,13 @@ def test_the_published_curve_is_read_per_seed_and_runs_are_set_beside_it(tmp_pat
     pixel = tmp_path / "pixel.json"  # a run from before --env and --encoder-precision: the pixel pendulum, float32
     pixel.write_text(json.dumps(_record(None, [(5000, -900.0), (10_000, -150.0)], learning_starts=4000)))
     out = tmp_path / "page"
-    assert drqv2_curves.main(["--out", str(out), "--published", str(published), "--runs", str(runs), str(pixel)]) == 0
+    reference = tmp_path / "reference.json"
+    reference.write_text(json.dumps({"command": "python benchmarks/reference_policies.py", "eval_episodes": 2,
+                                     "scores": {"piga/DMCPendulum-v0": {"no torque": [1.0, 2.0, 30.0]}}}))
+    assert drqv2_curves.main(["--out", str(out), "--published", str(published), "--runs", str(runs), str(pixel),
+                              "--reference", str(reference)]) == 0
     page = out.with_suffix(".md").read_text()
+    assert "same 2 evaluation starts" in page and ": no torque 1.5. A run's score" in page
     assert "| 50,000 | 160.0 (above) | 100 ± 50 | 50–150 | 0 of 2 |" in page
     assert "| 100,000 | 250.0 | 200 ± 100 | 100–300 | 1 of 2 |" in page
     assert "| dmc | piga/DMCPendulum-v0 | auto, bfloat16 | 4,000 | 50,000 (50,000) | 250.0 | 50,000 (mark 200) | 2 |" in page
@@ -74,3 +79,18 @@ def test_the_checkpoint_memory_benchmark_measures_both_ways(tmp_path: Path) -> N
     for way in record["ways"].values():
         assert way["buffer_gb"] > 0 and way["checkpoint_gb"] >= way["buffer_gb"] and way["write_peak_over_gb"] >= 0
     assert "its own file, streamed (piga's)" in out.with_suffix(".md").read_text()
+
+
+def test_policies_that_learned_nothing_are_scored_at_the_runs_evaluation_starts(tmp_path: Path) -> None:
+    import reference_policies
+
+    out = tmp_path / "reference"
+    assert reference_policies.main(["--out", str(out), "--envs", "piga/PixelPendulum-v0", "--episodes", "5"]) == 0
+    scores = json.loads(out.with_suffix(".json").read_text())["scores"]["piga/PixelPendulum-v0"]
+    assert set(scores) == set(reference_policies.POLICIES) and all(len(r) == 5 for r in scores.values())
+    assert all(sum(returns) / 5 < -200 for returns in scores.values())  # none of them swings up
+    # the same seed plays the same starts: the runs' evaluation is seeded, and so is the random policy
+    again = reference_policies.scores("piga/PixelPendulum-v0", "uniform random", 0, 5)
+    assert again == scores["uniform random"]
+    with pytest.raises(SystemExit):
+        reference_policies.main(["--out", str(out), "--episodes", "2"])
