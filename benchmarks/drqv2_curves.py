@@ -59,13 +59,13 @@ def published_at(published: dict[str, Any], frames: float) -> dict[str, float]:
             "above_200": int((ys > 200).sum()), "seeds": len(ys)}
 
 
-def reference_lines(reference: dict[str, Any] | None) -> list[str]:
-    """The DMC scores of policies that learned nothing at the curve's own evaluation starts
+def reference_lines(reference: dict[str, Any] | None, env: str) -> list[str]:
+    """The scores on ``env`` of policies that learned nothing at the curve's own evaluation starts
     (``benchmarks/reference_policies.py``), as a paragraph; none without ``--reference``."""
-    if not reference or DMC_PENDULUM not in reference["scores"]:
+    if not reference or env not in reference["scores"]:
         return []
     first = reference["eval_episodes"]
-    cells = ", ".join(f"{name} {np.mean(returns[:first]):.1f}" for name, returns in reference["scores"][DMC_PENDULUM].items())
+    cells = ", ".join(f"{name} {signed(float(np.mean(returns[:first])))}" for name, returns in reference["scores"][env].items())
     return [f"Policies that learned nothing, scored at the same {first} evaluation starts as each point above "
             f"({reference['file']}, from `{reference['command']}`): {cells}. A run's score equal to a constant "
             "torque's is its actor saturated at that bound.", ""]
@@ -115,7 +115,7 @@ def markdown(record: dict[str, Any]) -> str:
             "transition of a 50,000-step run); 5 evaluation episodes at each point (its 10); the warm-up as the "
             "first table gives it.",
             "",
-            *reference_lines(record.get("reference")),
+            *reference_lines(record.get("reference"), DMC_PENDULUM),
             "| frames | " + " | ".join(r["name"] for r in dmc) + " | published mean ± std | published range | seeds above 200 |",
             "|---|" + "---|" * len(dmc) + "---|---|---|",
         ]
@@ -135,8 +135,9 @@ def markdown(record: dict[str, Any]) -> str:
             "",
             f"## {PIXEL_PENDULUM}",
             "",
-            "Evaluation return (Pendulum-v1's, 200 steps; the SB3 zoo's mark of a learned swing-up is −200):",
+            "Evaluation return (Pendulum-v1's, 200 steps; the SB3 zoo's mark of a learned swing-up is −200).",
             "",
+            *reference_lines(record.get("reference"), PIXEL_PENDULUM),
             "| env steps | " + " | ".join(f"{r['name']} ({r['device']}, {r['precision']})" for r in pixel) + " |",
             "|---|" + "---|" * len(pixel),
         ]

@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from common import machine, machine_words, write_page
+from common import machine, machine_words, signed, write_page
 from piga.cli.common import positive_int, seed_int
 
 from envs import DMC_PENDULUM, ENV_IDS, PIXEL_PENDULUM
@@ -81,8 +81,8 @@ def markdown(record: dict[str, Any]) -> str:
     for env, by_policy in record["scores"].items():
         for name, returns in by_policy.items():
             xs = np.array(returns)
-            lines.append(f"| {env} | {name} | {xs[:first].mean():.1f} | {xs.mean():.1f} ± {xs.std():.1f} | "
-                         f"{xs.min():.1f} to {xs.max():.1f} |")
+            lines.append(f"| {env} | {name} | {signed(xs[:first].mean())} | {signed(xs.mean())} ± {xs.std():.1f} | "
+                         f"{signed(xs.min())} to {signed(xs.max())} |")
     return "\n".join(lines + [""])
 
 
