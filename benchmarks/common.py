@@ -22,8 +22,8 @@ from piga.cli.common import PigaError, add_ray_option, connect_backend, seed_int
 from piga.io.pool import Backend, BackendError, JobFailed
 from piga.io.worker_signals import die_with_parent
 
-__all__ = ["add_diagnose_options", "add_ray_option", "add_training_options", "diagnose_options", "farm_main", "job_command", "logged_command", "machine",
-           "machine_words", "ray_backend", "signed"]
+__all__ = ["add_diagnose_options", "add_ray_option", "add_training_options", "check_record", "diagnose_options", "farm_main",
+           "is_number", "job_command", "logged_command", "machine", "machine_words", "ray_backend", "signed"]
 
 Main = TypeVar("Main", bound=Callable[..., Any])
 
@@ -84,6 +84,21 @@ def write_page(out: Path, record: dict[str, Any], page: str) -> None:
     with atomic_output(out.with_suffix(".md"), overwrite=True) as tmp:
         Path(tmp).write_text(page)
     print(f"wrote {out.with_suffix('.md')} and {out.with_suffix('.json')}")
+
+
+def is_number(value: Any) -> bool:
+    """Whether a JSON record's ``value`` is a finite real number (a boolean is not)."""
+    import math
+
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def check_record(path: Path, condition: bool, what: str) -> None:
+    """Refuses a record read from ``path`` that is not of the shape a script reads (a list where an object is
+    expected, text where a number is): ValueError naming the file and ``what`` it must hold, the one line the script
+    ends with (it was an internal error deep inside, a TypeError or a KeyError)."""
+    if not condition:
+        raise ValueError(f"{path}: {what}")
 
 
 def signed(x: float, digits: int = 1) -> str:

@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from common import signed, write_page
+from common import check_record, is_number, signed, write_page
 
 from agents.sb3.config import LEARNED_RETURN
 from envs import DMC_PENDULUM, PIXEL_PENDULUM
@@ -50,6 +50,45 @@ def run_summary(name: str, record: dict[str, Any]) -> dict[str, Any]:
             "trained": curve[-1]["step"] if curve else 0, "curve": curve, "mark": mark, "first_step_above_mark": reached,
             "best": max((r["score"] for r in curve), default=None), "train_minutes": record.get("train_seconds", 0) / 60,
             "command": record.get("command"), "commit": record.get("commit"), "resumed_commits": record.get("resumed_commits", [])}
+
+
+def check_run(path: Path, record: Any) -> dict[str, Any]:
+    """A learning_curve.py record read from ``path``, refused in one line unless it is of the shape read here."""
+    check_record(path, isinstance(record, dict), "must be a learning_curve.py record (a JSON object)")
+    config, curve = record.get("config"), record.get("learning_curve")
+    check_record(path, isinstance(config, dict) and isinstance(config.get("steps"), int) and not isinstance(config["steps"], bool),
+                 "must give the run's settings, 'config', with its planned 'steps' (an integer)")
+    check_record(path, isinstance(curve, list) and all(isinstance(r, dict) and isinstance(r.get("step"), int)
+                                                       and is_number(r.get("eval_mean_return")) for r in curve),
+                 "must give 'learning_curve' as a list of points, each a 'step' (an integer) and an 'eval_mean_return' "
+                 "(a number)")
+    check_record(path, is_number(record.get("train_seconds", 0)), "must give 'train_seconds' as a number")
+    return record
+
+
+def check_published(path: Path, published: Any) -> dict[str, Any]:
+    """A published_scores.py record read from ``path``, refused in one line unless it is of the shape read here."""
+    check_record(path, isinstance(published, dict) and isinstance(published.get("source"), str),
+                 "must be a published_scores.py record (a JSON object naming its 'source')")
+    seeds = published.get("seeds")
+    check_record(path, isinstance(seeds, list) and len(seeds) > 0 and all(
+        isinstance(s, dict) and isinstance(s.get("xs"), list) and isinstance(s.get("ys"), list)
+        and len(s["xs"]) == len(s["ys"]) > 0 and all(is_number(v) for v in s["xs"] + s["ys"]) for s in seeds),
+                 "must give 'seeds', a list of curves, each 'xs' and 'ys' (lists of as many numbers)")
+    return published
+
+
+def check_reference(path: Path, reference: Any) -> dict[str, Any]:
+    """A reference_policies.py record read from ``path``, refused in one line unless it is of the shape read here."""
+    check_record(path, isinstance(reference, dict) and isinstance(reference.get("command"), str)
+                 and isinstance(reference.get("eval_episodes"), int) and reference["eval_episodes"] > 0,
+                 "must be a reference_policies.py record (a JSON object with its 'command' and 'eval_episodes')")
+    scores = reference.get("scores")
+    check_record(path, isinstance(scores, dict) and all(
+        isinstance(policies, dict) and all(isinstance(r, list) and r and all(is_number(v) for v in r)
+                                           for r in policies.values()) for policies in scores.values()),
+                 "must give 'scores' as each env's policies' returns (lists of numbers)")
+    return {**reference, "file": str(path)}
 
 
 def published_at(published: dict[str, Any], frames: float) -> dict[str, float]:
@@ -186,11 +225,15 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--reference", type=Path, help="reference_policies.py's record: what policies that learned nothing "
                    "score at the runs' evaluation starts")
     args = p.parse_args(argv)
+    inputs = [*args.runs, args.published, *([args.reference] if args.reference else [])]
+    outputs = [args.out.with_suffix(suffix) for suffix in (".md", ".json", ".png")]
+    clash = next((o for o in outputs for i in inputs if o.resolve() == i.resolve()), None)
+    if clash is not None:
+        p.error(f"--out {args.out} would write {clash}, one of its inputs: give another --out")
     try:
-        runs = [run_summary(path.stem, json.loads(path.read_text())) for path in args.runs]
-        published = json.loads(args.published.read_text())
-        reference = ({**json.loads(args.reference.read_text()), "file": str(args.reference)} if args.reference
-                     else None)
+        runs = [run_summary(path.stem, check_run(path, json.loads(path.read_text()))) for path in args.runs]
+        published = check_published(args.published, json.loads(args.published.read_text()))
+        reference = check_reference(args.reference, json.loads(args.reference.read_text())) if args.reference else None
     except (OSError, ValueError, KeyError) as exc:
         print(f"drqv2_curves.py: error: {' '.join(str(exc).split())}", file=sys.stderr)
         return 1

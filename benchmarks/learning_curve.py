@@ -11,13 +11,12 @@ seconds.
 from __future__ import annotations
 
 import argparse
-import json
 import shlex
 import sys
 from pathlib import Path
 
 from piga.io.atomic import write_json
-from piga.io.checkpoint import RunKind, read_checkpoint
+from piga.io.checkpoint import RunKind, read_checkpoint, read_run_record
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -29,7 +28,15 @@ def main(argv: list[str] | None = None) -> int:
     try:
         ckpt = read_checkpoint(args.run, RunKind.DDPG)
         written = args.run / "config.json"  # piga-baseline's record of the command (a run trained in Python has none)
-        started = json.loads(written.read_text()) if written.exists() else {}
+        started, why = read_run_record(args.run)
+        if why is not None and why != "is missing":
+            raise ValueError(f"{written} {why}")
+        if not isinstance(started.get("command", ""), (str, type(None))):
+            raise ValueError(f"{written}: 'command' must be the command line as text, got {started['command']!r}")
+        history = ckpt["history"]
+        if not (isinstance(history, list) and all(isinstance(r, dict) and isinstance(r.get("step"), int)
+                                                  and isinstance(r.get("eval_mean_return"), (int, float)) for r in history)):
+            raise ValueError(f"{args.run / 'checkpoint.pt'}: its 'history' is not a learning curve (edited?)")
         words = shlex.split(started.get("command") or "")
         command = shlex.join("RUN" if i and words[i - 1] == "--out" else w for i, w in enumerate(words)) or None
         # the code's commits, as the run's record has them (runs started before it recorded them have none)

@@ -17,7 +17,10 @@ import argparse
 import gzip
 import json
 import sys
+import zlib
 from pathlib import Path
+
+from common import check_record, is_number
 
 from piga.io.atomic import write_json
 
@@ -32,14 +35,24 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     try:
         with gzip.open(args.scores, "rt") as f:
-            runs = [r for r in json.load(f) if r["task"] == args.task]
+            listed = json.load(f)
+        check_record(args.scores, isinstance(listed, list) and all(isinstance(r, dict) and isinstance(r.get("task"), str)
+                                                                   for r in listed),
+                     "must be a list of curves, each an object with a 'task'")
+        runs = [r for r in listed if r["task"] == args.task]
+        for r in runs:
+            check_record(args.scores, isinstance(r.get("method"), str) and isinstance(r.get("seed"), int)
+                         and isinstance(r.get("xs"), list) and isinstance(r.get("ys"), list) and len(r["xs"]) == len(r["ys"]) > 0
+                         and all(is_number(v) for v in r["xs"] + r["ys"]),
+                         f"each curve of {args.task} must give its method, its seed (an integer) and xs and ys (lists of "
+                         f"as many numbers); got {str(r)[:80]}")
         if not runs:
             raise ValueError(f"{args.scores} has no curve of task {args.task!r}")
         methods = sorted({r["method"] for r in runs})
         record = {"source": args.source, "task": args.task, "method": ", ".join(methods), "x_unit": "environment steps of 0.02 s",
                   "seeds": [{"seed": r["seed"], "xs": r["xs"], "ys": r["ys"]} for r in sorted(runs, key=lambda r: r["seed"])]}
         write_json(args.out, record, overwrite=args.overwrite)
-    except (OSError, ValueError, KeyError, TypeError) as exc:
+    except (OSError, EOFError, zlib.error, ValueError, KeyError, TypeError) as exc:  # (a gzip cut short or damaged)
         print(f"published_scores.py: error: {' '.join(str(exc).split())}", file=sys.stderr)
         return 1
     print(f"wrote {args.out}: {len(runs)} seeds of {record['method']} on {args.task}")

@@ -94,3 +94,50 @@ def test_policies_that_learned_nothing_are_scored_at_the_runs_evaluation_starts(
     assert again == scores["uniform random"]
     with pytest.raises(SystemExit):
         reference_policies.main(["--out", str(out), "--episodes", "2"])
+
+
+@pytest.mark.parametrize("which, content, needle", [
+    ("runs", [1, 2], "must be a learning_curve.py record"),
+    ("runs", {"config": {"steps": 10}, "learning_curve": [{"step": "5", "eval_mean_return": 1.0}]}, "'learning_curve' as a list"),
+    ("runs", {"config": {"steps": 10}, "learning_curve": [], "train_seconds": "60"}, "'train_seconds' as a number"),
+    ("published", {"source": "s", "seeds": [{"xs": ["0"], "ys": [1]}]}, "must give 'seeds'"),
+    ("published", {"seeds": []}, "must be a published_scores.py record"),
+    ("reference", {"command": "c", "eval_episodes": 5, "scores": {"e": {"p": ["x"]}}}, "must give 'scores'"),
+])
+def test_the_curves_page_refuses_records_of_another_shape(which: str, content: object, needle: str, tmp_path: Path,
+                                                          capsys: pytest.CaptureFixture[str]) -> None:
+    """Each was an internal error (a TypeError or a KeyError deep inside)."""
+    good_run = tmp_path / "run.json"
+    good_run.write_text(json.dumps(_record("piga/DMCPendulum-v0", [(2500, 1.0)])))
+    published = tmp_path / "published.json"
+    published.write_text(json.dumps({"source": "s", "seeds": [{"xs": [0, 10], "ys": [0, 1]}]}))
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps(content))
+    paths = {"runs": good_run, "published": published, "reference": None, which: bad}
+    argv = ["--out", str(tmp_path / "page"), "--runs", str(paths["runs"]), "--published", str(paths["published"])]
+    assert drqv2_curves.main(argv + (["--reference", str(bad)] if which == "reference" else [])) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"{bad}: " in err and needle in err, err
+    assert not (tmp_path / "page.md").exists()
+
+
+def test_the_curves_page_refuses_to_write_over_its_input(tmp_path: Path) -> None:
+    run = tmp_path / "page.json"
+    run.write_text(json.dumps(_record("piga/DMCPendulum-v0", [(2500, 1.0)])))
+    with pytest.raises(SystemExit):
+        drqv2_curves.main(["--out", str(tmp_path / "page"), "--runs", str(run), "--published", str(run)])
+    assert json.loads(run.read_text())["config"]["steps"] == 50_000  # untouched
+
+
+@pytest.mark.parametrize("content, needle", [(b"\x1f\x8b\x08\x00garbage", "published_scores.py: error:"),
+                                             (b"", "published_scores.py: error:")])
+def test_the_published_scores_refuse_a_damaged_file(content: bytes, needle: str, tmp_path: Path,
+                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    scores = tmp_path / "scores.json.gz"
+    scores.write_bytes(content)
+    assert published_scores.main([str(scores), "--task", "t", "--source", "s", "--out", str(tmp_path / "o.json")]) == 1
+    assert needle in capsys.readouterr().err and not (tmp_path / "o.json").exists()
+    with gzip.open(scores, "wt") as f:
+        json.dump([{"task": "t", "method": "m", "seed": 0, "xs": [0, 1], "ys": ["a", 1]}], f)
+    assert published_scores.main([str(scores), "--task", "t", "--source", "s", "--out", str(tmp_path / "o.json")]) == 1
+    assert "each curve of t must give" in capsys.readouterr().err

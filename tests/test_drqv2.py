@@ -95,6 +95,10 @@ def test_a_run_resumes_exactly_and_acts_in_piga_episodes(tmp_path: Path) -> None
     assert learning_curve.main([str(tmp_path / "b"), "--out", str(tmp_path / "curve.json"), "--overwrite"]) == 0
     curve = json.loads((tmp_path / "curve.json").read_text())
     assert (curve["command"], curve["commit"], curve["resumed_commits"]) == ("piga-baseline ddpg --out RUN", "abc", ["def"])
+    for record, needle in (([1], "config.json is not a run record"), ({"command": 5}, "'command' must be the command line")):
+        (tmp_path / "b" / "config.json").write_text(json.dumps(record))  # each was an internal error
+        assert learning_curve.main([str(tmp_path / "b"), "--out", str(tmp_path / "bad.json")]) == 1
+        assert not (tmp_path / "bad.json").exists()
     agent = SB3Agent.from_run(tmp_path / "a")
     assert agent.input_frames == 1 and agent.model.observation_space.shape == (3, 64, 64)
     assert np.isfinite(run_episodes(agent, EpisodeConfig(episodes=1, steps=10, hold_steps=5)).summary.mean_return)

@@ -1813,6 +1813,19 @@ def test_show_refuses_more_than_the_file_holds(argv: list[str], needle: str, tin
     assert _listing(tmp_path) == []
 
 
+@pytest.mark.parametrize("prog", ["piga-show", "piga-train-model"])
+def test_a_pipe_given_as_the_data_file_is_refused_not_waited_on(prog: str, tmp_path: Path,
+                                                                capsys: pytest.CaptureFixture[str]) -> None:
+    """A FIFO named as the data file: opening it waited for a writer for ever."""
+    import os
+
+    fifo = tmp_path / "pipe.h5"
+    os.mkfifo(fifo)
+    refused(prog, [str(fifo), "--out", str(tmp_path / ("s.png" if prog == "piga-show" else "run"))], capsys,
+            f"{fifo}: is not a regular file (a pipe, a socket or a device)")
+    assert _listing(tmp_path) == ["pipe.h5"]
+
+
 def test_import_names_a_folder_given_as_the_actions(frame_folders: dict[str, Path], tmp_path: Path,
                                                     capsys: pytest.CaptureFixture[str]) -> None:
     """It said "acts: no such actions file" of a folder that exists."""

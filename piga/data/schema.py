@@ -256,6 +256,8 @@ def _open(path: str | os.PathLike[str]) -> h5py.File:
         raise FileNotFoundError(f"{p}: no such file")
     if p.is_dir():
         raise DataFormatError(f"{p}: is a folder, not an HDF5 file")
+    if not p.is_file():  # a FIFO's open waits for a writer for ever; a device is no file to read
+        raise DataFormatError(f"{p}: is not a regular file (a pipe, a socket or a device), not an HDF5 file")
     try:
         return h5py.File(p, "r")
     except OSError as exc:
