@@ -212,7 +212,8 @@ def figure(record: dict[str, Any], path: Path) -> None:
     right.set(xlabel="env steps (thousands)", ylabel="evaluation return", title=PIXEL_PENDULUM)
     right.axhline(-200, color="k", ls=":", lw=0.8)
     for ax in (left, right):
-        ax.legend(fontsize=7)
+        if ax.get_legend_handles_labels()[0]:  # (no pixel pendulum run: its axis stays empty, with no legend to draw)
+            ax.legend(fontsize=7)
     fig.tight_layout()
     save_figure(fig, path, dpi=110)
 

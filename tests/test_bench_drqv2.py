@@ -141,3 +141,16 @@ def test_the_published_scores_refuse_a_damaged_file(content: bytes, needle: str,
         json.dump([{"task": "t", "method": "m", "seed": 0, "xs": [0, 1], "ys": ["a", 1]}], f)
     assert published_scores.main([str(scores), "--task", "t", "--source", "s", "--out", str(tmp_path / "o.json")]) == 1
     assert "each curve of t must give" in capsys.readouterr().err
+
+
+def test_a_page_of_dmc_runs_only_draws_without_a_warning(tmp_path: Path) -> None:
+    """The pixel pendulum's empty axis warned "No artists with labels found to put in legend" on stderr."""
+    import warnings
+
+    run = tmp_path / "run.json"
+    run.write_text(json.dumps(_record("piga/DMCPendulum-v0", [(2500, 1.0)])))
+    published = tmp_path / "published.json"
+    published.write_text(json.dumps({"source": "s", "seeds": [{"xs": [0, 10_000], "ys": [0, 1]}]}))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert drqv2_curves.main(["--out", str(tmp_path / "page"), "--runs", str(run), "--published", str(published)]) == 0

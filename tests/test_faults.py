@@ -1960,6 +1960,28 @@ def test_an_image_beyond_pillows_limit_is_called_too_large(tmp_path: Path, monke
         read_image(tmp_path / "g.png")
 
 
+def test_a_file_an_imageio_plugin_misreads_is_no_image_and_one_line(tmp_path: Path,
+                                                                    monkeypatch: pytest.MonkeyPatch) -> None:
+    """A piga checkpoint given as the goal image: imageio's SPE plugin read it as 0 frames, with a UserWarning on
+    stderr beside the error ("expected a 2-D gray or RGB image, got shape (0, 29043, 29808)")."""
+    import warnings
+
+    import imageio.v3 as iio
+
+    from piga.data.scene import read_image
+
+    def misread(path: object, **kwargs: object) -> np.ndarray:
+        warnings.warn("The file header claims there are 7 frames, but there are actually 0 frames.")
+        return np.zeros((0, 29043, 29808), np.uint8)
+
+    (tmp_path / "checkpoint.pt").write_bytes(b"PK\x03\x04 not an image")
+    monkeypatch.setattr(iio, "imread", misread)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a warning passed on would raise here
+        with pytest.raises(ValueError, match=r"checkpoint.pt: not a readable image \(it has no pixels\)"):
+            read_image(tmp_path / "checkpoint.pt")
+
+
 @pytest.fixture(scope="module")
 def foreign_frame_runs(files: dict[str, Path], tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     """One-epoch piga runs on frames the pixel pendulum does not render: 63x63 gray ("cropped_63"), 64x64 colour ("colour")."""

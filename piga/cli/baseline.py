@@ -249,7 +249,7 @@ def _refuse_recipe_changes(args: Any, record: dict[str, Any], run_dir: Path, arg
     started = recorded_options(build_parser(), record.get("command")) or {}  # the starting command's values may be repeated
     changed = [name for name, value in vars(args).items()
                if name not in skip and (value != defaults[name] or name in given)
-               and not (started.get("baseline") == kind and name in started and started[name] == value)]
+               and not (name in started and started[name] == value)]
     if changed:
         raise PigaError(f"--resume keeps the run's recipe; drop {', '.join('--' + c.replace('_', '-') for c in changed)}")
     recorded = record.get("data")

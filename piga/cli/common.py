@@ -556,23 +556,30 @@ def given_options(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -
 
 
 def recorded_options(parser: argparse.ArgumentParser, command: Any) -> dict[str, Any] | None:
-    """The options of the command that started a run (its record's ``command``, written by :func:`command_line`), as
-    ``parser`` reads them now: what a ``--resume`` may repeat. None where there is no command, or where it no longer
-    parses (edited, from another version, or naming a file that is gone): then every recipe option counts as a change."""
+    """The options written in the command that started a run (its record's ``command``, written by
+    :func:`command_line`), as ``parser`` reads them now: what a ``--resume`` may repeat at the same values (an option
+    the command did not write is not among them, even at its default). None where there is no command, or where it
+    no longer parses (edited, from another version, or naming a file that is gone): then every recipe option given
+    counts as a change."""
     import io
     import shlex
 
     if not isinstance(command, str):
         return None
     try:
-        words = shlex.split(command)
-    except ValueError:
-        return None
-    try:
+        words = shlex.split(command)[1:]
         with contextlib.redirect_stderr(io.StringIO()):  # argparse's usage lines are not the user's error here
-            return vars(parser.parse_args(words[1:]))
-    except SystemExit:
+            parsed = vars(parser.parse_args(words))
+    except (ValueError, SystemExit):
         return None
+    parsers, written = [parser], set()
+    while parsers:  # the parser's options and its subcommands' (argparse lists neither publicly: _actions, as above)
+        for action in parsers.pop()._actions:  # noqa: SLF001
+            if isinstance(action, argparse._SubParsersAction):  # noqa: SLF001
+                parsers.extend(action.choices.values())
+            elif any(word == flag or word.startswith(flag + "=") for flag in action.option_strings for word in words):
+                written.add(action.dest)
+    return {name: value for name, value in parsed.items() if name in written}
 
 
 def format_default(value: Any) -> str:

@@ -9,6 +9,7 @@ Goal images (:mod:`piga.control.goal`) and imported recordings (:mod:`piga.data.
 from __future__ import annotations
 
 import os
+import warnings
 from pathlib import Path
 
 import cv2
@@ -70,15 +71,26 @@ def read_image(path: str | os.PathLike[str]) -> np.ndarray:
     if not p.is_file():
         raise FileNotFoundError(f"{p}: no such image file")
     try:
-        try:
-            return np.asarray(iio.imread(p, rotate=True))  # turned as its EXIF orientation says (a phone's photo)
-        except TypeError:  # a plugin that has no orientation to apply (tifffile)
-            return np.asarray(iio.imread(p))
+        # imageio tries its plugins in turn, and some warn of a file that is not theirs (spe.py read a torch
+        # checkpoint as 0 frames, warning "The file header ... claims there are 7 frames"): the one line of the
+        # error says it. Pillow's warning of a huge image is passed on.
+        with warnings.catch_warnings(record=True) as said:
+            warnings.simplefilter("always")
+            try:
+                image = np.asarray(iio.imread(p, rotate=True))  # turned as its EXIF orientation says (a phone's photo)
+            except TypeError:  # a plugin that has no orientation to apply (tifffile)
+                image = np.asarray(iio.imread(p))
+        for warning in said:
+            if warning.category.__name__ == "DecompressionBombWarning":
+                warnings.warn_explicit(warning.message, warning.category, warning.filename, warning.lineno)
     except Exception as exc:  # imageio raises many types for foreign or corrupt files
         if exc.__class__.__name__ == "DecompressionBombError":  # Pillow's guard against huge images
             raise ValueError(f"{p}: the image is too large to read (more than Pillow's limit of "
                              f"{_pillow_limit()} pixels, twice its warning); give a smaller picture") from None
         raise ValueError(f"{p}: not a readable image ({exc.__class__.__name__})") from None
+    if image.size == 0:  # what a plugin made of a file that is not its own
+        raise ValueError(f"{p}: not a readable image (it has no pixels)")
+    return image
 
 
 def _pillow_limit() -> str:
