@@ -82,7 +82,7 @@ def write_page(out: Path, record: dict[str, Any], page: str) -> None:
 
     write_json(out.with_suffix(".json"), record, overwrite=True)
     with atomic_output(out.with_suffix(".md"), overwrite=True) as tmp:
-        Path(tmp).write_text(page)
+        Path(tmp).write_text(page, encoding="utf-8")
     print(f"wrote {out.with_suffix('.md')} and {out.with_suffix('.json')}")
 
 

@@ -1826,6 +1826,22 @@ def test_a_pipe_given_as_the_data_file_is_refused_not_waited_on(prog: str, tmp_p
     assert _listing(tmp_path) == ["pipe.h5"]
 
 
+def test_overwrite_never_replaces_a_device_or_a_pipe(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """--overwrite replaced a FIFO (and, as root, /dev/null) named as the output with a regular file."""
+    import os
+    import stat
+
+    from piga.io.atomic import atomic_output
+
+    fifo = tmp_path / "out.h5"
+    os.mkfifo(fifo)
+    refused("piga-collect", ["--sequences", "4", "--steps", "5", "--workers", "1", "--quiet", "--out", str(fifo),
+                             "--overwrite"], capsys, f"{fifo} is a device, a pipe or a socket, not a file")
+    with pytest.raises(PermissionError, match="is a device, a pipe or a socket"), atomic_output(fifo, overwrite=True):
+        pass
+    assert stat.S_ISFIFO(fifo.stat().st_mode) and _listing(tmp_path) == ["out.h5"]
+
+
 def test_import_names_a_folder_given_as_the_actions(frame_folders: dict[str, Path], tmp_path: Path,
                                                     capsys: pytest.CaptureFixture[str]) -> None:
     """It said "acts: no such actions file" of a folder that exists."""

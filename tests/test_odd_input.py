@@ -49,6 +49,18 @@ def test_the_recorded_command_is_utf8_under_a_c_locale(tmp_path: Path) -> None:
     assert out.stdout.strip() == ascii(shlex.join(["piga-collect", "--out", "lc_ü.h5"]))
 
 
+def test_a_non_ascii_file_name_under_a_c_locale_is_shown_and_its_pages_written(tiny_data: Path, tmp_path: Path) -> None:
+    """Under LC_ALL=C with PYTHONUTF8=0, piga-show's title of 'ü.h5' (held as surrogates) was a TypeError in
+    matplotlib (the pages' writes, piga-control's .md among them, are UTF-8 now too: they failed in ASCII)."""
+    import shutil
+
+    env = {**ENV, "LC_ALL": "C", "LANG": "C", "PYTHONUTF8": "0", "PYTHONCOERCECLOCALE": "0"}
+    shutil.copy(tiny_data, tmp_path / "ü.h5")
+    shown = subprocess.run(["piga-show", "ü.h5", "--out", "ü.png"], cwd=tmp_path, capture_output=True, text=True, env=env)
+    assert shown.returncode == 0 and shown.stderr == "", shown.stderr
+    assert (tmp_path / "ü.png").stat().st_size > 0
+
+
 def test_a_photo_is_read_turned_as_its_exif_says(tmp_path: Path) -> None:
     from PIL import Image
 

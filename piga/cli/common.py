@@ -164,7 +164,14 @@ def command_line(prog: str, argv: Sequence[str] | None) -> str:
     import shlex
 
     words = [prog, *(sys.argv[1:] if argv is None else argv)]
-    return shlex.join(os.fsencode(w).decode("utf-8", "replace") for w in words)
+    return shlex.join(typed_text(w) for w in words)
+
+
+def typed_text(text: str) -> str:
+    """A name as the user typed it, for records, pages and figures: under a non-UTF-8 locale (``LC_ALL=C`` with
+    ``PYTHONUTF8=0``) Python holds a non-ASCII name's bytes as lone surrogates, which neither UTF-8 text nor
+    matplotlib's fonts take; they are read back as UTF-8 (a byte that is not UTF-8 becomes U+FFFD)."""
+    return os.fsencode(text).decode("utf-8", "replace")
 
 
 def warn_if_unconverged(prog: str, run_dir: str | os.PathLike[str]) -> None:
@@ -415,7 +422,8 @@ def _write_traceback(prog: str, argv: Sequence[str] | None) -> Path | None:
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         with atomic_output(path, overwrite=True) as tmp:
-            tmp.write_text(f"{command_line(prog, argv)}\n\n{traceback.format_exc()}")
+            tmp.write_text(f"{command_line(prog, argv)}\n\n{traceback.format_exc()}", encoding="utf-8",
+                           errors="backslashreplace")  # (an ASCII locale's default cannot write ü)
     except OSError:
         return None
     return path

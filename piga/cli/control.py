@@ -211,7 +211,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         result = result.labelled(agent=label)
         write_json(outputs[0], {"agent": label, **result.to_dict(), "recordings": None}, overwrite=args.overwrite)
         with atomic_output(outputs[1], overwrite=args.overwrite) as tmp:
-            tmp.write_text(f"# {PROG}\n\nCommand: `{command_line(PROG, argv)}`\n\n{summary_markdown([result.summary])}")
+            tmp.write_text(f"# {PROG}\n\nCommand: `{command_line(PROG, argv)}`\n\n{summary_markdown([result.summary])}", encoding="utf-8")
         print(f"wrote {outputs[0]} and {outputs[1]}")
     return 0
 
@@ -257,7 +257,7 @@ def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: 
         write_json(outputs[0], {"model": args.model, "multipliers": multipliers, "results": [r.to_dict() for r in results]},
                    overwrite=args.overwrite)
         with atomic_output(outputs[1], overwrite=args.overwrite) as tmp:
-            tmp.write_text(f"# {PROG} --sweep\n\nCommand: `{command_line(PROG, argv)}`\n\n![sweep]({outputs[2].name})\n\n{table}")
+            tmp.write_text(f"# {PROG} --sweep\n\nCommand: `{command_line(PROG, argv)}`\n\n![sweep]({outputs[2].name})\n\n{table}", encoding="utf-8")
         save_figure(sweep_figure([s.to_dict() for s in summaries]), outputs[2], overwrite=args.overwrite)
         print(f"wrote {', '.join(map(str, outputs))}")
     return 0
@@ -371,7 +371,7 @@ def _baseline(args: argparse.Namespace, kind: RunKind, mpc: MPCConfig, outputs: 
         result = result.labelled(agent=label)
         write_json(outputs[0], {"agent": label, "kind": kind.value, **result.to_dict(), "recordings": None}, overwrite=args.overwrite)
         with atomic_output(outputs[1], overwrite=args.overwrite) as tmp:
-            tmp.write_text(f"# {PROG}\n\nCommand: `{command_line(PROG, argv)}`\n\n{summary_markdown([result.summary])}")
+            tmp.write_text(f"# {PROG}\n\nCommand: `{command_line(PROG, argv)}`\n\n{summary_markdown([result.summary])}", encoding="utf-8")
         print(f"wrote {outputs[0]} and {outputs[1]}")
     return 0
 
@@ -553,7 +553,7 @@ def _dmc(args: argparse.Namespace, argv: Sequence[str] | None, given: set[str]) 
                                                                "env": config.env.to_dict()},
                                 "results": [dmc_record(r) for r in results]}, overwrite=args.overwrite)
         with atomic_output(outputs[1], overwrite=args.overwrite) as tmp:
-            tmp.write_text(text)
+            tmp.write_text(text, encoding="utf-8")
     return 0
 
 

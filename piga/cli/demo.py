@@ -215,7 +215,7 @@ def _control(run_dir: Path, goal_png: Path, control_md: Path, args) -> list[tupl
     ]
     summaries = [r.summary for r in run_jobs(jobs, workers=2, progress=False)]
     with atomic_output(control_md, overwrite=args.overwrite) as tmp:
-        tmp.write_text("# piga-demo: control from pixels\n\n" + summary_markdown(summaries, extra=[("task", "task")]))
+        tmp.write_text("# piga-demo: control from pixels\n\n" + summary_markdown(summaries, extra=[("task", "task")]), encoding="utf-8")
     return [(s.labels["task"], summary_row(s)) for s in summaries]
 
 

@@ -7,7 +7,7 @@ from collections.abc import Sequence
 import h5py
 import numpy as np
 
-from piga.cli.common import ArgumentParser, file_path, given_options, positive_int, run_cli
+from piga.cli.common import ArgumentParser, file_path, given_options, positive_int, run_cli, typed_text
 from piga.data.schema import (SPLITS, check_actions_file, check_frames_have_signal, inspect_dataset, read_rows,
                               split_indices)
 from piga.evaluation.plots import check_figure_target, frame_strip, save_figure
@@ -59,7 +59,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             actions = np.stack([f["actions"][int(i), :t] for i in idx])
     labels = [f"seq {i}" for i in idx]
     cols = [f"t={k}" for k in range(t)]
-    title = f"{info.path.name}: {info.system}, dt={info.dt:g}, params {info.params}"
+    title = f"{typed_text(info.path.name)}: {info.system}, dt={info.dt:g}, params {info.params}"
     if len(title) > MAX_TITLE:  # a file's attributes can be any text; matplotlib lays out every character
         title = title[: MAX_TITLE - 3] + "..."
     fig = frame_strip(frames, labels, cols, title)

@@ -323,7 +323,7 @@ def _write_files(d: Diagnosis, folder: Path, model: str, data: str, command: str
         save_figure(frames_figure(d), folder / "frames.png", overwrite=overwrite)
     write_json(folder / "report.json", {"command": command, "model": model, "data": data, **d.to_dict()}, overwrite=overwrite)
     with atomic_output(folder / "report.md", overwrite=overwrite) as tmp:
-        tmp.write_text(markdown(d, model, data, command))
+        tmp.write_text(markdown(d, model, data, command), encoding="utf-8")
 
 
 def write_report(d: Diagnosis, out: str | os.PathLike[str], model: str, data: str, command: str,

@@ -33,6 +33,8 @@ def check_writable_target(path: str | os.PathLike[str], overwrite: bool) -> Path
     _check_name_lengths(target)
     if target.is_dir():
         raise IsADirectoryError(f"{target} is a folder, not a file path")
+    if target.exists() and not target.is_file():  # --overwrite replaced /dev/null with a file (as root, it may)
+        raise PermissionError(f"{target} is a device, a pipe or a socket, not a file: name a file to write")
     if os.path.lexists(target) and not overwrite:  # a link to nothing too: os.replace would replace the link
         raise OutputExistsError(f"{target} exists{' (a link to a missing file)' if not target.exists() else ''}; "
                                 "pass --overwrite to replace it")
