@@ -1224,6 +1224,18 @@ def test_baseline_resume_refuses_a_checkpoint_it_cannot_continue(kind: str, chan
     assert _listing(run) == before
 
 
+def test_a_zeroed_checkpoint_is_called_unreadable_not_lacking_an_entry(tiny_piga_run: Path, tmp_path: Path,
+                                                                         capsys: pytest.CaptureFixture[str]) -> None:
+    """torch's reader raises KeyError("filename 'storages' not found") for it, which read as a missing entry of that
+    name ("it lacks the entry \"filename 'storages' not found\" that piga-train-model writes")."""
+    run = _run_copy(tiny_piga_run, tmp_path / "run")
+    size = (run / "checkpoint.pt").stat().st_size
+    (run / "checkpoint.pt").write_bytes(bytes(size))
+    line = refused("piga-control", ["--model", str(run), "--episodes", "1", "--steps", "20", "--quiet"], capsys,
+                   "checkpoint.pt: not a readable piga checkpoint", "truncated")
+    assert "lacks the entry" not in line
+
+
 def test_a_checkpoint_whose_bytes_changed_is_refused(tiny_piga_run: Path, tmp_path: Path) -> None:
     """torch.load read a checkpoint with 64 bytes overwritten in the middle, and piga-control ran it (exit 0)."""
     from piga.io.checkpoint import RunKind, read_checkpoint

@@ -173,7 +173,8 @@ def unreadable(path: Path, kind: RunKind, exc: Exception, what: str | None = Non
     name in the message, for another file of the run (default: "<kind> checkpoint"; e.g. "autoencoder of a latent
     DDPG run")."""
     what = what or f"{kind.label} checkpoint"
-    if isinstance(exc, KeyError) and exc.args:
+    # (torch's zip reader raises KeyError("filename 'storages' not found") for a damaged file: that is no entry's name)
+    if isinstance(exc, KeyError) and exc.args and isinstance(exc.args[0], str) and exc.args[0].isidentifier():
         article = "an" if what[:1].lower() in "aeiou" else "a"
         return ValueError(f"{path}: not {article} {what}: it lacks the entry {exc.args[0]!r} that {kind.writer} "
                           "writes; restore the run's own file, or train the run again with --overwrite")
