@@ -82,3 +82,19 @@ def test_a_run_still_training_is_named_by_the_commands_that_read_it(tmp_path: Pa
         holder.kill()
         holder.wait()
     assert held_by(run) is None
+
+
+def test_a_run_started_but_not_yet_checkpointed_is_named_as_such(tmp_path: Path,
+                                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    """piga-control on a run that holds its folder but has no checkpoint yet asked whether it was a run folder."""
+    from piga.cli import control
+
+    run = tmp_path / "run"
+    holder = _hold(run)
+    try:
+        code, _, err = run_in_process("piga-control", control.main, "--model", str(run), "--episodes", "1", "--quiet",
+                                      capsys=capsys)
+        assert_one_line(code, err, "no checkpoint yet", f"is being trained by another piga command (PID {holder.pid})")
+    finally:
+        holder.kill()
+        holder.wait()

@@ -145,6 +145,11 @@ def read_checkpoint(run_dir: str | os.PathLike[str], kind: RunKind) -> dict[str,
 
     path = Path(run_dir) / CHECKPOINT
     if not path.exists():
+        from piga.io.lock import held_by
+
+        if (pid := held_by(run_dir)) is not None:  # a run started moments ago: its folder is not a wrong guess
+            raise FileNotFoundError(f"{path}: no checkpoint yet: {run_dir} is being trained by another piga command "
+                                    f"(PID {pid}); wait for its first checkpoint")
         raise FileNotFoundError(f"{path}: no checkpoint (is {run_dir} a {kind.writer} run folder?)")
     try:
         payload = torch.load(path, map_location="cpu", weights_only=False)
