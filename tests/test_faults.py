@@ -1854,6 +1854,21 @@ def test_overwrite_never_replaces_a_device_or_a_pipe(tmp_path: Path, capsys: pyt
     assert stat.S_ISFIFO(fifo.stat().st_mode) and _listing(tmp_path) == ["out.h5"]
 
 
+def test_import_names_a_pipe_or_a_device_as_such(frame_folders: dict[str, Path], tmp_path: Path,
+                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    """A FIFO or /dev/zero was "no such actions file" or "no such video file": they exist."""
+    import os
+
+    fifo = tmp_path / "acts.csv"
+    os.mkfifo(fifo)
+    refused("piga-import", [str(frame_folders["moving"]), str(fifo), "--dt", "0.05", "--out", str(tmp_path / "o.h5")],
+            capsys, f"{fifo}: is not a regular file (a pipe, a socket or a device), not an actions CSV file")
+    (tmp_path / "a.csv").write_text("0\n")
+    refused("piga-import", ["/dev/zero", str(tmp_path / "a.csv"), "--dt", "0.05", "--out", str(tmp_path / "o.h5")],
+            capsys, "/dev/zero: is not a regular file", "not a video file or frame folder")
+    assert sorted(_listing(tmp_path)) == ["a.csv", "acts.csv"]
+
+
 def test_import_names_a_folder_given_as_the_actions(frame_folders: dict[str, Path], tmp_path: Path,
                                                     capsys: pytest.CaptureFixture[str]) -> None:
     """It said "acts: no such actions file" of a folder that exists."""

@@ -138,6 +138,8 @@ def _read_recording(path: str | Path, size: int) -> tuple[np.ndarray, int]:
                 raise ValueError(f"{file}: {exc}") from None
         return np.stack(frames), min(first[1]) if first else size  # (F, size, size); frame_files found some
     if not p.is_file():
+        if p.exists():  # a FIFO, a socket, a device: exists, but no video to decode
+            raise ValueError(f"{p}: is not a regular file (a pipe, a socket or a device), not a video file or frame folder")
         raise FileNotFoundError(f"{p}: no such video file or frame folder")
     frames = []
     side = size
@@ -222,6 +224,8 @@ def read_actions(path: str | Path) -> np.ndarray:
     if p.is_dir():
         raise ValueError(f"{p} is a folder, not an actions CSV file")
     if not p.is_file():
+        if p.exists():
+            raise ValueError(f"{p}: is not a regular file (a pipe, a socket or a device), not an actions CSV file")
         raise FileNotFoundError(f"{p}: no such actions file")
     try:
         text = p.read_text(encoding="utf-8-sig")
