@@ -1854,6 +1854,13 @@ def test_overwrite_never_replaces_a_device_or_a_pipe(tmp_path: Path, capsys: pyt
     assert stat.S_ISFIFO(fifo.stat().st_mode) and _listing(tmp_path) == ["out.h5"]
 
 
+def test_control_names_a_missing_model_folder_before_judging_workers(tmp_path: Path,
+                                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    """--model of a folder that does not exist, with --workers, was told "--workers runs the jobs of --sweep"."""
+    refused("piga-control", ["--model", str(tmp_path / "none"), "--episodes", "1", "--workers", "1", "--quiet"], capsys,
+            f"--model {tmp_path / 'none'} does not exist")
+
+
 def test_import_names_a_pipe_or_a_device_as_such(frame_folders: dict[str, Path], tmp_path: Path,
                                                  capsys: pytest.CaptureFixture[str]) -> None:
     """A FIFO or /dev/zero was "no such actions file" or "no such video file": they exist."""

@@ -144,6 +144,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _baseline(args, kind, mpc, outputs, argv, given)
     if args.sweep:
         return _sweep(args, mpc, outputs, argv)
+    if args.model and not Path(args.model).is_dir():  # (before --workers is judged by the run's kind)
+        from piga.io.checkpoint import CHECKPOINT
+
+        what = "is a file, not a run folder" if Path(args.model).exists() else "does not exist"
+        raise PigaError(f"--model {args.model} {what} (give the folder that piga-train-model or piga-baseline wrote "
+                        f"its {CHECKPOINT} in)")
     if args.ray or "workers" in given:  # --workers 2, the default, too
         raise PigaError(f"{'--ray' if args.ray else '--workers'} runs the jobs of --sweep and a baseline run's episodes; a "
                         "piga or oracle run without --sweep plays its episodes in this process")
