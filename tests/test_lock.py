@@ -98,3 +98,33 @@ def test_a_run_started_but_not_yet_checkpointed_is_named_as_such(tmp_path: Path,
     finally:
         holder.kill()
         holder.wait()
+
+
+def test_the_lock_holds_across_temporary_folders(tmp_path: Path) -> None:
+    """A command run with another TMPDIR (a scheduler gives each job its own) locked in another folder, and both
+    commands wrote the run."""
+    other = tmp_path / "tmp"
+    other.mkdir()
+    proc = subprocess.Popen([sys.executable, "-c", HOLDER, str(tmp_path / "run")], stdout=subprocess.PIPE, text=True,
+                            env={**ENV, "TMPDIR": str(other)})
+    try:
+        assert proc.stdout is not None and proc.stdout.readline().strip() == "locked"
+        with pytest.raises(FolderInUseError, match=f"PID {proc.pid}"):
+            lock_run_folder(tmp_path / "run")
+    finally:
+        proc.kill()
+        proc.wait()
+        release_run_folders()
+
+
+def test_a_folder_where_the_lock_file_goes_is_named(tmp_path: Path) -> None:
+    """It made the command run unlocked, without a word."""
+    from piga.io.lock import _lock_path
+
+    path = _lock_path(tmp_path / "run")
+    path.mkdir(parents=True)
+    try:
+        with pytest.raises(FolderInUseError, match="its lock file .* is a folder; remove it"):
+            lock_run_folder(tmp_path / "run")
+    finally:
+        path.rmdir()

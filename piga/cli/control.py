@@ -144,8 +144,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _baseline(args, kind, mpc, outputs, argv, given)
     if args.sweep:
         return _sweep(args, mpc, outputs, argv)
-    if args.model and not Path(args.model).is_dir():  # (before --workers is judged by the run's kind)
-        from piga.io.checkpoint import CHECKPOINT
+    from piga.io.lock import held_by
+
+    if args.model and not Path(args.model).is_dir() and held_by(args.model) is None:  # (before --workers is judged by
+        from piga.io.checkpoint import CHECKPOINT  # the run's kind; a run just started has no folder yet: said below)
 
         what = "is a file, not a run folder" if Path(args.model).exists() else "does not exist"
         raise PigaError(f"--model {args.model} {what} (give the folder that piga-train-model or piga-baseline wrote "

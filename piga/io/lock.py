@@ -13,6 +13,7 @@ process ends in any way (SIGKILL included), so a lock never outlives its run. Wh
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
 import tempfile
@@ -29,8 +30,13 @@ class FolderInUseError(ValueError):
 
 
 def _lock_path(folder: Path) -> Path:
+    """The lock file of ``folder``: in ``/tmp/piga-locks`` whatever ``TMPDIR`` says (a scheduler gives each job a
+    TMPDIR of its own, and two jobs with two lock folders both wrote one run folder), or in the temporary folder
+    where there is no writable /tmp."""
     key = hashlib.sha256(os.path.realpath(folder).encode("utf-8", "surrogateescape")).hexdigest()[:32]
-    return Path(tempfile.gettempdir()) / "piga-locks" / f"{key}.lock"
+    shared = Path("/tmp")
+    root = shared if shared.is_dir() and os.access(shared, os.W_OK | os.X_OK) else Path(tempfile.gettempdir())
+    return root / "piga-locks" / f"{key}.lock"
 
 
 def lock_run_folder(folder: str | os.PathLike[str], flag: str = "--out") -> None:
@@ -46,11 +52,17 @@ def lock_run_folder(folder: str | os.PathLike[str], flag: str = "--out") -> None
     path = _lock_path(Path(folder))
     if str(path) in _HELD:
         return
+    if path.is_dir():  # os.open would fail, and the run would go unlocked without a word
+        raise FolderInUseError(f"{flag} {folder} cannot be locked: its lock file {path} is a folder; remove it")
     try:
-        path.parent.mkdir(mode=0o1777, exist_ok=True)
+        if not path.parent.is_dir():
+            path.parent.mkdir(exist_ok=True)
+            os.chmod(path.parent, 0o1777)  # every user's locks (mkdir's mode is cut by the umask), as /tmp's own
         fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
     except OSError:  # a temporary folder that cannot be written, another user's lock file: run unlocked
         return
+    with contextlib.suppress(OSError):  # another user's command must open it too (the umask cut the mode)
+        os.fchmod(fd, 0o666)
     try:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except BlockingIOError:
