@@ -1854,6 +1854,16 @@ def test_overwrite_never_replaces_a_device_or_a_pipe(tmp_path: Path, capsys: pyt
     assert stat.S_ISFIFO(fifo.stat().st_mode) and _listing(tmp_path) == ["out.h5"]
 
 
+def test_a_baseline_run_killed_before_its_record_says_overwrite_both_ways(baseline_runs: dict[str, Path], tmp_path: Path,
+                                                                         capsys: pytest.CaptureFixture[str]) -> None:
+    """Killed between its first checkpoint and its config.json, a run was told to --resume by the rerun and to
+    --overwrite by --resume: each sent the user to the other."""
+    run = _run_copy(baseline_runs["ddpg"], tmp_path / "run", lambda r: (r / "config.json").unlink())
+    argv = ["ddpg", "--obs", "state", "--out", str(run), *TINY_DDPG]
+    refused("piga-baseline", argv, capsys, "holds a checkpoint without the record of its settings", "pass --overwrite")
+    refused("piga-baseline", [*argv[:5], "--resume"], capsys, "config.json is missing", "--overwrite")
+
+
 def test_control_names_a_missing_model_folder_before_judging_workers(tmp_path: Path,
                                                                      capsys: pytest.CaptureFixture[str]) -> None:
     """--model of a folder that does not exist, with --workers, was told "--workers runs the jobs of --sweep"."""

@@ -189,6 +189,10 @@ def _check_run_dir(run_dir: Path, resume: bool, overwrite: bool, kind: RunKind) 
         if CHECKPOINT not in existing:  # a run killed before its first checkpoint: nothing to continue
             raise PigaError(f"{run_dir} holds outputs of an earlier run but no checkpoint ({', '.join(existing)}); "
                             "pass --overwrite to replace them")
+        if "config.json" not in existing:  # killed between its first checkpoint and its record: --resume cannot work
+            raise PigaError(f"{run_dir} holds a checkpoint without the record of its settings (config.json; the run "
+                            "was stopped as it wrote its first checkpoint), so it cannot be continued; pass --overwrite "
+                            "to start it again")
         raise PigaError(f"{run_dir} already holds a run ({', '.join(existing)}); pass --resume to continue it or "
                         "--overwrite to replace it")
     remove_outputs(run_dir, existing)
