@@ -5,6 +5,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from piga.io.choices import check_types
+
 
 #: Most model steps one CEM plan may take (candidates x horizon x iterations): 80 times PlaNet's 1.2e5, 500 times the
 #: pendulum's default; beyond, each control step takes minutes and a tensor of candidates x horizon may not fit.
@@ -31,6 +33,7 @@ class CEMConfig:
     """Weight of the previous mean and std in each refit (0: plain CEM)."""
 
     def __post_init__(self) -> None:
+        check_types(self)  # a value of the wrong kind named here, not met deep inside
         if self.horizon < 1 or self.iterations < 1 or self.candidates < 2:
             raise ValueError(f"CEM needs horizon >= 1, iterations >= 1 and candidates >= 2, got horizon={self.horizon}, "
                              f"iterations={self.iterations}, candidates={self.candidates}")
@@ -78,6 +81,7 @@ class MPCConfig:
     """Seed of the planner's RNG."""
 
     def __post_init__(self) -> None:
+        check_types(self)  # a value of the wrong kind named here, not met deep inside
         if self.execute not in ("mean", "best") or self.warm_fill not in ("middle", "repeat"):
             raise ValueError(f"execute must be 'mean' or 'best' and warm_fill 'middle' or 'repeat', got "
                              f"{self.execute!r}, {self.warm_fill!r}")

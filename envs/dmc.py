@@ -52,6 +52,8 @@ import gymnasium as gym
 import numpy as np
 from gymnasium.wrappers import FrameStackObservation, GrayscaleObservation
 
+from piga.io.choices import check_types
+
 __all__ = ["DMC_PHYSICS_DT", "DMC_EPISODE_STEPS", "DMCPendulumConfig", "MissingExtraError", "make_dmc_pendulum",
            "DMCPendulumEnv"]
 
@@ -120,6 +122,7 @@ class DMCPendulumConfig:
     a sliver of the floor."""
 
     def __post_init__(self) -> None:
+        check_types(self)  # a value of the wrong kind named here, not met deep inside
         for name in ("length", "damping"):  # written into the MJCF model, whose reader takes no subnormal number
             value = getattr(self, name)
             if value != 0 and abs(value) < sys.float_info.min:

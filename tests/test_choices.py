@@ -64,6 +64,16 @@ def test_the_env_configs_take_their_literals() -> None:
     (lambda: __import__("piga").TrainConfig(batch_size=[32]), "TrainConfig.batch_size must be an integer; got [32]"),
     (lambda: __import__("piga").ModelConfig(image_size="64"), "ModelConfig.image_size must be an integer"),
     (lambda: __import__("piga").TrainConfig(epochs=True), "TrainConfig.epochs must be an integer; got True (bool)"),
+    # the planners', the episodes', the diagnosis', the baselines' and the envs' configs check their fields' kinds too
+    (lambda: __import__("envs.dmc").dmc.DMCPendulumConfig(shadows="no"), "DMCPendulumConfig.shadows must be True or False"),
+    (lambda: __import__("envs.dmc").dmc.DMCPendulumConfig(image_size=float("inf")), "image_size must be an integer"),
+    (lambda: __import__("agents.planet.config").planet.config.PlanetTrainConfig(steps="5"),
+     "PlanetTrainConfig.steps must be an integer; got '5'"),
+    (lambda: __import__("agents.config").config.CEMConfig(horizon="20"), "CEMConfig.horizon must be an integer"),
+    (lambda: __import__("piga.control.episodes").control.episodes.EpisodeConfig(episodes=None),
+     "EpisodeConfig.episodes must be an integer"),
+    (lambda: __import__("agents.sb3.autoencoder").sb3.autoencoder.AutoencoderConfig(lr="fast"),
+     "AutoencoderConfig.lr must be a number"),
 ])
 def test_a_field_of_another_kind_is_named(make: Any, needle: str) -> None:
     """A library caller without a type checker got "'<' not supported between instances of 'str' and 'int'"."""
@@ -98,3 +108,18 @@ def test_the_library_entry_points_name_an_argument_of_another_kind(tmp_path: Any
     with pytest.raises(ValueError, match=r"window must be >= 1 \(frames per item\), got 0"):
         SequenceWindows(tiny_data, "train", window=0)
     assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("make, needle", [
+    (lambda: __import__("piga").ModelConfig(alpha=float("nan")), "ModelConfig.alpha must be a finite number >= 0"),
+    (lambda: __import__("piga").ModelConfig(dt=float("nan")), "ModelConfig.dt must be the seconds between frames"),
+    (lambda: __import__("piga").ModelConfig(physics_init=[1]), "ModelConfig.physics_init must map parameter names"),
+    (lambda: __import__("piga").ModelConfig(physics_init={"bogus": 1.0}), "unexpected keyword argument 'bogus'"),
+    (lambda: __import__("piga").ModelConfig(physics_init={"g": -1.0}), "does not fit a pendulum model"),
+    (lambda: __import__("agents.sb3.config").sb3.config.SB3Config(net_arch=[-5]), "net_arch must be hidden layer widths"),
+])
+def test_a_value_no_run_can_use_is_named_at_construction(make: Any, needle: str) -> None:
+    """Each was taken, and failed inside training: a nan loss at step 0 naming no field, or a keyword error."""
+    with pytest.raises(ValueError) as error:
+        make()
+    assert needle in str(error.value)

@@ -12,7 +12,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any, Literal
 
 from agents.config import CEMConfig
-from piga.io.choices import check_choices
+from piga.io.choices import check_choices, check_types
 from piga.io.device import Device
 
 #: Largest KL free nats per frame accepted (PlaNet uses 3; far larger values switch the KL term off
@@ -159,6 +159,7 @@ class PlanetTrainConfig:
     """Use only the first N training sequences of the file (0: all), for sample-efficiency sweeps."""
 
     def __post_init__(self) -> None:
+        check_types(self)  # a value of the wrong kind named here, not met deep inside
         for name, least in (("steps", 1), ("batch_size", 1), ("chunk_length", 2), ("checkpoint_every", 1)):
             if getattr(self, name) < least:
                 why = " (a sequence: the first step is only observed)" if name == "chunk_length" else ""
@@ -208,6 +209,7 @@ class IterativeConfig:
     bound (PlaNet's 0.3 for actions in [-1, 1]; here 0.6 for the pendulum's [-2, 2]); then clipped."""
 
     def __post_init__(self) -> None:
+        check_types(self)  # a value of the wrong kind named here, not met deep inside
         if self.rounds < 1 or self.episodes < 1 or self.steps_per_round < 1 or self.episode_steps < 1:
             raise ValueError(f"need rounds, episodes, steps_per_round and episode_steps >= 1, got {self.rounds}, "
                              f"{self.episodes}, {self.steps_per_round}, {self.episode_steps}")

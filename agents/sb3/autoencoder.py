@@ -38,6 +38,7 @@ from piga.data.windows import SequenceReader, loads_whole
 from piga.io.atomic import atomic_output
 from piga.io.device import Device, resolve_device
 from piga.io.resources import available_memory
+from piga.io.choices import check_types
 
 __all__ = ["AutoencoderConfig", "FrameAutoencoder", "autoencoder_seconds", "check_autoencoder_data", "load_autoencoder", "train_autoencoder"]
 
@@ -60,6 +61,7 @@ class AutoencoderConfig:
     """Seed of initialisation and batches."""
 
     def __post_init__(self) -> None:
+        check_types(self)  # a value of the wrong kind named here, not met deep inside
         if min(self.latent_size, self.depth, self.steps, self.batch_size) < 1 or not self.lr > 0 or self.seed < 0:
             raise ValueError(f"AutoencoderConfig needs sizes and steps >= 1, lr > 0 and seed >= 0, got {self}")
 

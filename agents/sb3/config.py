@@ -180,6 +180,9 @@ class SB3Config:
                      "n_step", "feature_dim"):
             if getattr(self, name) < 1:
                 raise ValueError(f"SB3Config.{name} must be >= 1, got {getattr(self, name)}")
+        if not self.net_arch or not all(isinstance(w, int) and not isinstance(w, bool) and 1 <= w <= 65536
+                                        for w in self.net_arch):
+            raise ValueError(f"SB3Config.net_arch must be hidden layer widths from 1 to 65536, got {self.net_arch}")
         for name in ("learning_starts", "seed", "noise_decay_steps", "threads"):
             if getattr(self, name) < 0:
                 raise ValueError(f"SB3Config.{name} must be >= 0, got {getattr(self, name)}")

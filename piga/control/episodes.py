@@ -27,6 +27,7 @@ from tqdm.auto import tqdm
 from agents.protocol import Agent
 from envs.pendulum import PixelPendulumConfig, make_pixel_pendulum
 from piga.evaluation.episodes import EpisodeBatch, EpisodeResult, Recording, summarize
+from piga.io.choices import check_types
 
 __all__ = ["EpisodeConfig", "EpisodeStart", "Scoring", "merge_results", "parse_range", "run_agent", "run_episodes"]
 
@@ -89,6 +90,7 @@ class EpisodeConfig(Scoring):
     """Most steps per episode (500 times Gymnasium's 200: one such episode already plans for many minutes)."""
 
     def __post_init__(self) -> None:
+        check_types(self)  # a value of the wrong kind named here, not met deep inside
         if not 1 <= self.episodes <= self.MAX_EPISODES:
             raise ValueError(f"episodes must be in [1, {self.MAX_EPISODES}], got {self.episodes}")
         if self.steps > self.MAX_STEPS:

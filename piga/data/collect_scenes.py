@@ -30,6 +30,7 @@ from piga.io.atomic import check_writable_target
 from piga.data.collect import check_collect_sizes, sequence_rng, split_counts
 from piga.data.schema import SPLITS, DatasetWriter
 from piga.io.pool import run_pool
+from piga.io.choices import check_types
 
 #: Frames per sequence by scene: L + T_pred + T_ext of the chosen windows (docs/systems.md).
 SCENE_STEPS: dict[str, int] = {"bouncing": 30, "spring": 30, "gravity": 40, "digits-spring": 30}
@@ -56,6 +57,7 @@ class SceneCollectConfig:
     """Sequences gathered between writes to disk (bounds memory)."""
 
     def __post_init__(self) -> None:
+        check_types(self)  # a value of the wrong kind named here, not met deep inside
         check_collect_sizes(self.sequences, self.steps, self.workers, self.seed, self.batch, self.split)
         if self.scene.half and self.steps <= self.scene.half_frames:
             raise ValueError(f"half data need more than {self.scene.half_frames} frames per sequence (the test "

@@ -82,6 +82,7 @@ from piga.diagnostics.results import (Ambiguity, CameraSummary, CandidateRow, Di
                                       Naming, PixelErrors, Score, SelectionStep, VisionSummary)
 from piga.diagnostics.twin import MEASURABLE_GAP, calibrate_floor, gap_closure, twin_floor
 from piga.diagnostics.vision import Camera, CameraConfig, CameraFindings, angle_table, camera_stage, match, match_file
+from piga.io.choices import check_types
 from piga.world.model import PhysicsModel
 from piga.diagnostics.fit import Nominal
 from piga.world.effects import (BIAS, CANDIDATES, DAMPING, DEADZONE, DELAY, EFFECTS, FRICTION, SPEED_CLIP, WITHIN_FRAME,
@@ -212,6 +213,7 @@ class DiagnoseConfig:
     extremes (one replicate gave the "95% interval" 1.29..1.29 to a gain estimated at 1.035)."""
 
     def __post_init__(self) -> None:
+        check_types(self)  # a value of the wrong kind named here, not met deep inside
         if self.fit_horizon < 1 or self.stride < 1 or self.max_effects < 0 or self.bootstrap < 0 \
                 or self.reading_harmonics < 2 or self.beam < 1:
             raise ValueError(f"need fit_horizon, stride, beam >= 1, reading_harmonics >= 2 and max_effects, bootstrap >= 0, got {self}")

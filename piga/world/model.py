@@ -22,6 +22,7 @@ the encoder, velocity estimator and decoder that piga's model and the Interactio
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, fields, replace
 from typing import Any, ClassVar, Literal, NamedTuple
@@ -201,9 +202,22 @@ class ModelConfig:
             raise ValueError(f"a {self.system} model takes {options.__name__}, not {type(self.system_options).__name__}")
         if not 0 <= self.pred_trim < 1:
             raise ValueError(f"pred_trim must be in [0, 1), got {self.pred_trim}")
-        if self.alpha < 0:
-            raise ValueError(f"alpha must be >= 0, got {self.alpha}")
-        self.system_options.check_physics_init(self.physics_init)
+        if not (math.isfinite(self.alpha) and self.alpha >= 0):  # nan passed "< 0", and the first loss was nan
+            raise ValueError(f"ModelConfig.alpha must be a finite number >= 0, got {self.alpha}")
+        if not (math.isfinite(self.dt) and self.dt > 0):
+            raise ValueError(f"ModelConfig.dt must be the seconds between frames, a finite number > 0, got {self.dt}")
+        init = self.physics_init
+        if not isinstance(init, Mapping) or not all(
+                isinstance(k, str) and isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+                for k, v in init.items()):
+            raise ValueError(f"ModelConfig.physics_init must map parameter names to finite numbers, got {init!r}"[:200])
+        self.system_options.check_physics_init(init)
+        if init:  # its names and values as the system takes them (they failed deep inside training before)
+            try:
+                SYSTEMS[self.system].for_model(self.system_options, self.dt, self.n_objects, self.image_size, dict(init))
+            except (TypeError, ValueError) as exc:
+                raise ValueError(f"ModelConfig.physics_init {dict(init)!r} does not fit a {self.system} model: "
+                                 f"{' '.join(str(exc).split())}"[:300]) from None
 
     @classmethod
     def from_dict(cls, values: Mapping[str, Any]) -> ModelConfig:
