@@ -52,7 +52,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium.wrappers import FrameStackObservation, GrayscaleObservation
 
-from piga.io.choices import check_types
+from envs.fields import check_field_kinds
 
 __all__ = ["DMC_PHYSICS_DT", "DMC_EPISODE_STEPS", "DMCPendulumConfig", "MissingExtraError", "make_dmc_pendulum",
            "DMCPendulumEnv"]
@@ -122,7 +122,7 @@ class DMCPendulumConfig:
     a sliver of the floor."""
 
     def __post_init__(self) -> None:
-        check_types(self)  # a value of the wrong kind named here, not met deep inside
+        check_field_kinds(self)  # a value of the wrong kind named here, not met deep inside (shadows="no" was on)
         for name in ("length", "damping"):  # written into the MJCF model, whose reader takes no subnormal number
             value = getattr(self, name)
             if value != 0 and abs(value) < sys.float_info.min:

@@ -44,9 +44,8 @@ shows only the pendulum.
 from __future__ import annotations
 
 import math
-import numbers
 import os
-from dataclasses import asdict, dataclass, fields, replace
+from dataclasses import asdict, dataclass, replace
 from typing import Any, SupportsFloat
 
 import gymnasium as gym
@@ -60,6 +59,7 @@ from gymnasium.wrappers import (
 
 from envs.constants import MAX_ACTION, PENDULUM_DT, PENDULUM_MAX_SPEED
 from envs.effects import EFFECTS, ShowCommandedTorque, normalize_effects, wrap_effects
+from envs.fields import check_field_kinds
 from piga.world.effects import scaled_gravity
 
 # pygame opens a display on its first render; on a headless machine it needs the dummy driver
@@ -108,15 +108,7 @@ class PixelPendulumConfig:
     """Unmodelled effects as (name, value) pairs, e.g. (("damping", 0.2),); see :mod:`envs.effects`."""
 
     def __post_init__(self) -> None:
-        for field in fields(self):  # a config read from a file's attrs may hold text where a number belongs
-            value, default = getattr(self, field.name), field.default
-            if isinstance(default, bool):
-                kind, what = (bool, np.bool_), "true or false"
-            else:
-                kind, what = (numbers.Integral, "an integer") if isinstance(default, int) else (numbers.Real, "a number")
-            if isinstance(default, (int, float)) and (not isinstance(value, kind) or isinstance(value, (bool, np.bool_))
-                                                      != isinstance(default, bool)):
-                raise TypeError(f"PixelPendulumConfig.{field.name} must be {what}, got {value!r}")
+        check_field_kinds(self)  # a config read from a file's attrs may hold text where a number belongs
         try:
             effects = normalize_effects(self.effects)
         except (TypeError, ValueError) as exc:

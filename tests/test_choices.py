@@ -65,7 +65,7 @@ def test_the_env_configs_take_their_literals() -> None:
     (lambda: __import__("piga").ModelConfig(image_size="64"), "ModelConfig.image_size must be an integer"),
     (lambda: __import__("piga").TrainConfig(epochs=True), "TrainConfig.epochs must be an integer; got True (bool)"),
     # the planners', the episodes', the diagnosis', the baselines' and the envs' configs check their fields' kinds too
-    (lambda: __import__("envs.dmc").dmc.DMCPendulumConfig(shadows="no"), "DMCPendulumConfig.shadows must be True or False"),
+    (lambda: __import__("envs.dmc").dmc.DMCPendulumConfig(shadows="no"), "DMCPendulumConfig.shadows must be true or false"),
     (lambda: __import__("envs.dmc").dmc.DMCPendulumConfig(image_size=float("inf")), "image_size must be an integer"),
     (lambda: __import__("agents.planet.config").planet.config.PlanetTrainConfig(steps="5"),
      "PlanetTrainConfig.steps must be an integer; got '5'"),

@@ -164,10 +164,10 @@ class PlanetTrainConfig:
             if getattr(self, name) < least:
                 why = " (a sequence: the first step is only observed)" if name == "chunk_length" else ""
                 raise ValueError(f"PlanetTrainConfig.{name} must be >= {least}{why}, got {getattr(self, name)}")
-        if not all(math.isfinite(v) for v in (self.lr, self.adam_eps, self.grad_clip, self.free_nats, self.kl_scale,
-                                              self.reward_scale, self.max_minutes)):
-            raise ValueError(f"PlanetTrainConfig: lr, adam_eps, grad_clip, free_nats, kl_scale, reward_scale and "
-                             f"max_minutes must be finite numbers: {self}")
+        infinite = [f"{n}={getattr(self, n)}" for n in ("lr", "adam_eps", "grad_clip", "free_nats", "kl_scale",
+                                                         "reward_scale", "max_minutes") if not math.isfinite(getattr(self, n))]
+        if infinite:  # (the whole config was printed: 600 characters to find the one)
+            raise ValueError(f"PlanetTrainConfig: {', '.join(infinite)}; each must be a finite number")
         if not (self.lr > 0 and self.adam_eps > 0 and self.grad_clip > 0 and self.free_nats >= 0):
             raise ValueError("need lr, adam_eps, grad_clip > 0 and free_nats >= 0")
         if not self.reward_scale >= MIN_REWARD_SCALE:

@@ -63,7 +63,9 @@ class AutoencoderConfig:
     def __post_init__(self) -> None:
         check_types(self)  # a value of the wrong kind named here, not met deep inside
         if min(self.latent_size, self.depth, self.steps, self.batch_size) < 1 or not self.lr > 0 or self.seed < 0:
-            raise ValueError(f"AutoencoderConfig needs sizes and steps >= 1, lr > 0 and seed >= 0, got {self}")
+            raise ValueError(f"AutoencoderConfig needs sizes and steps >= 1, lr > 0 and seed >= 0, got latent_size="
+                             f"{self.latent_size}, depth={self.depth}, steps={self.steps}, batch_size={self.batch_size}, "
+                             f"lr={self.lr}, seed={self.seed}")
 
 
 class FrameAutoencoder(nn.Module):

@@ -189,7 +189,8 @@ class SB3Config:
         if not (0 < self.gamma <= 1 and self.learning_rate > 0 and 0 < self.tau <= 1 and self.noise_std >= 0
                 and self.noise_final_std >= 0):
             raise ValueError(f"SB3Config: need 0 < gamma <= 1, learning_rate > 0, 0 < tau <= 1, noise_std >= 0, "
-                             f"noise_final_std >= 0: {self}")
+                             f"noise_final_std >= 0; got gamma={self.gamma}, learning_rate={self.learning_rate}, "
+                             f"tau={self.tau}, noise_std={self.noise_std}, noise_final_std={self.noise_final_std}")
         if max(self.noise_std, self.noise_final_std) > MAX_NOISE_STD:
             raise ValueError(f"noise_std must be at most {MAX_NOISE_STD:g} (a std in SB3's [-1, 1] action scale; far "
                              f"beyond 1 every noisy action is clipped to a bound), got {max(self.noise_std, self.noise_final_std):g}")
