@@ -48,7 +48,8 @@ def build(precision: str, env: str, fill: int, threads: int) -> Any:
     from agents.sb3.train import _vec_env, new_model
 
     episode = SB3Config(env=env, algo="drqv2", obs="pixels").episode_steps
-    config = SB3Config(env=env, algo="drqv2", obs="pixels", steps=fill + episode, learning_starts=fill + 1,
+    steps = (fill // episode + 2) * episode  # beyond the fill, a whole number of episodes (evaluations)
+    config = SB3Config(env=env, algo="drqv2", obs="pixels", steps=steps, learning_starts=fill + 1,
                        eval_every=episode, encoder_precision=precision, threads=threads, device="cpu")
     venv = _vec_env(config, None, 0, episode_seed=config.seed)
     model = new_model(config, venv, torch.device("cpu"))

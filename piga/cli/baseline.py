@@ -123,7 +123,8 @@ def build_parser() -> ArgumentParser:
                    "settings, or drqv2 (DrQ-v2: an encoder trained by the critic, augmentation, 3-step returns; "
                    "--obs pixels; its paper's settings) (default %(default)s)")
     d.add_argument("--eval-every", type=positive_int, default=ddpg.eval_every,
-                   help="env steps between evaluations and checkpoints, a multiple of the episode length (200; DMC's 500) "
+                   help="env steps between evaluations and checkpoints, a multiple of the episode length (200; DMC's 500), "
+                   "of which --steps is a multiple "
                    "(default %(default)s)")
     d.add_argument("--eval-episodes", type=positive_int, default=ddpg.eval_episodes, help="episodes per evaluation (default %(default)s)")
     add_preset_option(d, "--learning-starts", default=ddpg.learning_starts, type=nonnegative_int,
