@@ -13,8 +13,9 @@ critic trains, with augmentation, 3-step returns and scheduled exploration, in t
 
 Training runs in chunks of ``eval_every`` steps (whole episodes). After each chunk, ``EvalCallback``
 has scored the policy, and one atomic ``checkpoint.pt`` holds the SB3 model, the name of its replay
-buffer's file (``replay_buffers/STEP.pkl``, written before it), the global numpy and torch RNG states (SB3 samples batches and noise from them; the GPU's too when it
-trains on one) and the number of episodes started; every training episode's start depends on
+buffer's file (``replay_buffers/STEP.pkl``, written before it), the global numpy and torch RNG states
+(SB3 samples batches and noise from them; the GPU's too when it trains on one) and the number of
+episodes started; every training episode's start depends on
 (seed, episode index) only (:class:`envs.observations.EpisodeSeeds`) and every evaluation uses the
 same seeded starts. So ``resume`` continues exactly as the uninterrupted run would (on the same
 device). ``model.zip`` (SB3's format) is the latest policy, for ``DDPG.load``.
