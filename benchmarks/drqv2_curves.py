@@ -167,6 +167,12 @@ def markdown(record: dict[str, Any]) -> str:
                 cells.append("" if score is None else f"{score:.1f}{side}")
             lines.append(f"| {x:,} | " + " | ".join(cells) + f" | {at['mean']:.0f} ± {at['std']:.0f} | "
                          f"{at['min']:.0f}–{at['max']:.0f} | {at['above_200']} of {at['seeds']} |")
+        for r in dmc:  # the verdict the table shows: from which point on the run stays above every published seed
+            above = [p["score"] > published_at(published, p["frames"])["max"] for p in r["curve"]]
+            since = next((i for i in range(len(above)) if all(above[i:])), None) if above else None
+            if since is not None:
+                lines += ["", f"{r['name']} is above every published seed from {r['curve'][since]['frames']:,} frames "
+                          "on: outside the published spread, above it (one seed; what differs is listed above)."]
     pixel = [r for r in runs if r["env"] == PIXEL_PENDULUM]
     if pixel:
         steps = sorted({p["step"] for r in pixel for p in r["curve"]})
