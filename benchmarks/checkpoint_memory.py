@@ -80,7 +80,7 @@ def measure(way: str, buffer_size: int) -> dict[str, float]:
         else:
             _save(run, model, config, 1, [], 0.0)
         out["write_seconds"] = time.perf_counter() - start
-        now, peak = _rss_gb()
+        _, peak = _rss_gb()
         out.update(resident_gb=before, write_peak_over_gb=peak - before)
         model.replay_buffer = None  # the read fills a new model's buffer, as --resume does
         del buffer

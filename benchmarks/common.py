@@ -23,7 +23,7 @@ from piga.io.pool import Backend, BackendError, JobFailed
 from piga.io.worker_signals import die_with_parent
 
 __all__ = ["add_diagnose_options", "add_ray_option", "add_training_options", "check_record", "diagnose_options", "farm_main",
-           "is_number", "job_command", "logged_command", "machine", "machine_words", "ray_backend", "signed"]
+           "is_learning_curve", "is_number", "job_command", "logged_command", "machine", "machine_words", "ray_backend", "signed"]
 
 Main = TypeVar("Main", bound=Callable[..., Any])
 
@@ -91,6 +91,13 @@ def is_number(value: Any) -> bool:
     import math
 
     return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def is_learning_curve(curve: Any) -> bool:
+    """Whether ``curve`` is an SB3 run's learning curve as its checkpoint and learning_curve.py's record hold it: a list
+    of points, each a ``step`` (an integer) and an ``eval_mean_return`` (a finite number)."""
+    return isinstance(curve, list) and all(isinstance(r, dict) and isinstance(r.get("step"), int)
+                                           and is_number(r.get("eval_mean_return")) for r in curve)
 
 
 def check_record(path: Path, condition: bool, what: str) -> None:

@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from common import check_record, is_number, signed, write_page
+from common import check_record, is_learning_curve, is_number, signed, write_page
 
 from agents.sb3.config import LEARNED_RETURN
 from envs import DMC_PENDULUM, PIXEL_PENDULUM
@@ -58,10 +58,8 @@ def check_run(path: Path, record: Any) -> dict[str, Any]:
     config, curve = record.get("config"), record.get("learning_curve")
     check_record(path, isinstance(config, dict) and isinstance(config.get("steps"), int) and not isinstance(config["steps"], bool),
                  "must give the run's settings, 'config', with its planned 'steps' (an integer)")
-    check_record(path, isinstance(curve, list) and all(isinstance(r, dict) and isinstance(r.get("step"), int)
-                                                       and is_number(r.get("eval_mean_return")) for r in curve),
-                 "must give 'learning_curve' as a list of points, each a 'step' (an integer) and an 'eval_mean_return' "
-                 "(a number)")
+    check_record(path, is_learning_curve(curve), "must give 'learning_curve' as a list of points, each a 'step' (an "
+                 "integer) and an 'eval_mean_return' (a number)")
     check_record(path, is_number(record.get("train_seconds", 0)), "must give 'train_seconds' as a number")
     return record
 
@@ -158,8 +156,9 @@ def markdown(record: dict[str, Any]) -> str:
             "| frames | " + " | ".join(r["name"] for r in dmc) + " | published mean ± std | published range | seeds above 200 |",
             "|---|" + "---|" * len(dmc) + "---|---|---|",
         ]
+        at_frames = {x: published_at(published, x) for x in frames}
         for x in frames:
-            at = published_at(published, x)
+            at = at_frames[x]
             cells = []
             for r in dmc:
                 score = next((p["score"] for p in r["curve"] if p["frames"] == x), None)
@@ -168,9 +167,10 @@ def markdown(record: dict[str, Any]) -> str:
             lines.append(f"| {x:,} | " + " | ".join(cells) + f" | {at['mean']:.0f} ± {at['std']:.0f} | "
                          f"{at['min']:.0f}–{at['max']:.0f} | {at['above_200']} of {at['seeds']} |")
         for r in dmc:  # the verdict the table shows: from which point on the run stays above every published seed
-            above = [p["score"] > published_at(published, p["frames"])["max"] for p in r["curve"]]
-            since = next((i for i in range(len(above)) if all(above[i:])), None) if above else None
-            if since is not None:
+            since = len(r["curve"])  # the first of the points that, to the end, are all above the seeds' range
+            while since and r["curve"][since - 1]["score"] > at_frames[r["curve"][since - 1]["frames"]]["max"]:
+                since -= 1
+            if since < len(r["curve"]):
                 lines += ["", f"{r['name']} is above every published seed from {r['curve'][since]['frames']:,} frames "
                           "on: outside the published spread, above it (one seed; what differs is listed above)."]
     pixel = [r for r in runs if r["env"] == PIXEL_PENDULUM]

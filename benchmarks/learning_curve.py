@@ -15,6 +15,8 @@ import shlex
 import sys
 from pathlib import Path
 
+from common import is_learning_curve
+
 from piga.io.atomic import write_json
 from piga.io.checkpoint import RunKind, read_checkpoint, read_run_record
 
@@ -33,9 +35,7 @@ def main(argv: list[str] | None = None) -> int:
             raise ValueError(f"{written} {why}")
         if not isinstance(started.get("command", ""), (str, type(None))):
             raise ValueError(f"{written}: 'command' must be the command line as text, got {started['command']!r}")
-        history = ckpt["history"]
-        if not (isinstance(history, list) and all(isinstance(r, dict) and isinstance(r.get("step"), int)
-                                                  and isinstance(r.get("eval_mean_return"), (int, float)) for r in history)):
+        if not is_learning_curve(ckpt["history"]):
             raise ValueError(f"{args.run / 'checkpoint.pt'}: its 'history' is not a learning curve (edited?)")
         words = shlex.split(started.get("command") or "")
         command = shlex.join("RUN" if i and words[i - 1] == "--out" else w for i, w in enumerate(words)) or None

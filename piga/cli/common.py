@@ -555,12 +555,18 @@ def started_record(command: str, **fields: Any) -> dict[str, Any]:
 
 
 def given_options(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> set[str]:
-    """The destinations of ``parser``'s options written in ``argv`` (None: the command line), whatever their values:
-    an option given at its default value is given (the parsers take no abbreviations, so a flag is spelt whole)."""
+    """The destinations of ``parser``'s options (its subcommands' included) written in ``argv`` (None: the command
+    line), whatever their values: an option given at its default value is given (the parsers take no abbreviations,
+    so a flag is spelt whole)."""
     words = sys.argv[1:] if argv is None else list(argv)
-    # argparse has no public list of a parser's options; _actions is the one every argparse extension reads
-    return {action.dest for action in parser._actions for flag in action.option_strings  # noqa: SLF001
-            if any(word == flag or word.startswith(flag + "=") for word in words)}
+    parsers, given = [parser], set()
+    while parsers:  # the parser's options and its subcommands' (argparse has no public list of a parser's options;
+        for action in parsers.pop()._actions:  # noqa: SLF001  _actions is the one every argparse extension reads)
+            if isinstance(action, argparse._SubParsersAction):  # noqa: SLF001
+                parsers.extend(action.choices.values())
+            elif any(word == flag or word.startswith(flag + "=") for flag in action.option_strings for word in words):
+                given.add(action.dest)
+    return given
 
 
 def recorded_options(parser: argparse.ArgumentParser, command: Any) -> dict[str, Any] | None:
@@ -580,13 +586,7 @@ def recorded_options(parser: argparse.ArgumentParser, command: Any) -> dict[str,
             parsed = vars(parser.parse_args(words))
     except (ValueError, SystemExit):
         return None
-    parsers, written = [parser], set()
-    while parsers:  # the parser's options and its subcommands' (argparse lists neither publicly: _actions, as above)
-        for action in parsers.pop()._actions:  # noqa: SLF001
-            if isinstance(action, argparse._SubParsersAction):  # noqa: SLF001
-                parsers.extend(action.choices.values())
-            elif any(word == flag or word.startswith(flag + "=") for flag in action.option_strings for word in words):
-                written.add(action.dest)
+    written = given_options(parser, words)
     return {name: value for name, value in parsed.items() if name in written}
 
 

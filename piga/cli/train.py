@@ -216,7 +216,8 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
                    + (["seed_retries"] if "seed_retries" in options_given else [])
                    + [name for name in ("data_loading", "stream_cache_mb")
                       if getattr(args, name) is not None and getattr(args, name) != getattr(saved, name)])
-        started = recorded_options(build_parser(), read_run_record(run_dir)[0].get("command")) or {}
+        stored, why = read_run_record(run_dir)
+        started = recorded_options(build_parser(), stored.get("command")) or {}
         changed = [name for name in changed if name not in started or started[name] != getattr(args, name)]
         if changed:  # (the starting command's own values may be repeated: that command plus --resume continues the run)
             raise PigaError(f"--resume keeps the run's recipe; drop {', '.join('--' + c.replace('_', '-') for c in changed)}")
@@ -224,7 +225,7 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
         train_config = replace(saved, device=args.device, **overrides,
                                **({"threads": args.threads} if "threads" in options_given else {}))
         model_config = saved_model.config
-        record = _read_record(run_dir)
+        record = _record_or_rebuilt(run_dir, stored, why)
         record_resume(record, command)
     else:
         recipe = preset_for(args.preset, info)
@@ -409,10 +410,10 @@ def _start_values(model: Any) -> str:
                      if k != "offset") or "(none to learn)"
 
 
-def _read_record(run_dir: Path) -> dict[str, Any]:
-    """The run's config.json. When it is missing or unreadable, a record rebuilt from the checkpoint (which holds the
-    recipe and the model: config.json only records them) whose first command is unknown, with a note saying so."""
-    record, why = read_run_record(run_dir)
+def _record_or_rebuilt(run_dir: Path, record: dict[str, Any], why: str | None) -> dict[str, Any]:
+    """The run's config.json as :func:`~piga.io.checkpoint.read_run_record` read it (``record``, and ``why`` it is
+    unusable). When it is missing or unreadable, a record rebuilt from the checkpoint (which holds the recipe and the
+    model: config.json only records them) whose first command is unknown, with a note saying so."""
     if why is None:
         return record
     print(f"{PROG}: note: {run_dir / 'config.json'} {why}; it is rewritten from the checkpoint, without the command "
