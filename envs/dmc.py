@@ -15,7 +15,7 @@ user's own ``MUJOCO_GL`` (``osmesa``, ``glfw``) is respected.
 
 | space | shape | dtype | range |
 |---|---|---|---|
-| observation | (frame_stack, image_size, image_size) | uint8 | 0..255 gray, oldest frame first |
+| observation | (frame_stack × C, image_size, image_size) | uint8 | 0..255, oldest frame first; C = 1 (gray) or 3 (``color="rgb"``: R, G, B of each frame) |
 | action | (1,) | float32 | u in [-1, 1] (DMC's control range; clipped) |
 
 ## Dynamics (MuJoCo, dm_control's pendulum.xml with the config's edits)
@@ -37,6 +37,10 @@ over 1000 physics steps (at most 1000).
 
 ``flip="camera"`` films from the other side (the picture is mirrored), ``flip="motor"`` wires the
 motor the other way (gear -1): either flips the sign of the actuation as the frames show it.
+
+``camera="fixed"`` renders through dm_control's own camera 0 instead (1.5 m in front, 2 m up, looking down at
+45°: the swing is foreshortened), the view that DrQ-v2 and PlaNet learn DMC's tasks from (84x84 RGB there:
+``image_size=84, color="rgb"``). piga's models assume the face-on view; this one is for the baselines.
 """
 
 from __future__ import annotations
@@ -50,11 +54,11 @@ from typing import Any, Callable, Literal, SupportsFloat, get_args
 
 import gymnasium as gym
 import numpy as np
-from gymnasium.wrappers import FrameStackObservation, GrayscaleObservation
+from gymnasium.wrappers import FrameStackObservation, GrayscaleObservation, ReshapeObservation, TransformObservation
 
 from envs.fields import check_field_kinds
 
-__all__ = ["DMC_PHYSICS_DT", "DMC_EPISODE_STEPS", "DMCPendulumConfig", "MissingExtraError", "make_dmc_pendulum",
+__all__ = ["CAMERAS", "COLORS", "DMC_PHYSICS_DT", "DMC_EPISODE_STEPS", "DMCPendulumConfig", "MissingExtraError", "make_dmc_pendulum",
            "DMCPendulumEnv"]
 
 #: dm_control's pendulum physics step (pendulum.xml's ``timestep``), seconds.
@@ -83,6 +87,12 @@ CAMERA_FOVY = 45.0
 Flip = Literal["none", "camera", "motor"]
 #: What a flip turns over: nothing, the camera (filmed from the other side) or the motor (gear -1).
 FLIPS: tuple[Flip, ...] = get_args(Flip)
+Camera = Literal["face", "fixed"]
+#: The cameras: piga's face-on one on the hinge axis, or dm_control's own camera 0 (named "fixed" in pendulum.xml).
+CAMERAS: tuple[Camera, ...] = get_args(Camera)
+Color = Literal["gray", "rgb"]
+#: The frames' colour: one gray channel, or MuJoCo's three.
+COLORS: tuple[Color, ...] = get_args(Color)
 
 
 class MissingExtraError(ImportError):
@@ -116,6 +126,11 @@ class DMCPendulumConfig:
     camera_distance: float = 1.0
     """The face-on camera's distance from the hinge, as a multiple of the default (which frames
     ±0.7 m around the pivot): above 1 the pendulum looks smaller; below, it must still fit in view."""
+    camera: Camera = "face"
+    """"face" (piga's camera on the hinge axis) or "fixed" (dm_control's camera 0, looking down at 45°: the view
+    DrQ-v2 and PlaNet learn from; ``flip="camera"`` and ``camera_distance`` are for the face-on camera)."""
+    color: Color = "gray"
+    """"gray" (one channel per frame) or "rgb" (three: R, G, B, channel-first)."""
     shadows: bool = False
     """Render shadows (dm_control's 2048-pixel shadow map). Off by default: on a software
     rasteriser (llvmpipe) they make a frame ~4x slower, and seen face-on the shadow only darkens
@@ -141,12 +156,22 @@ class DMCPendulumConfig:
             "flip": (self.flip in FLIPS, f"flip in {FLIPS}"),
             "max_angle": (0 <= self.max_angle <= math.pi, "max_angle in [0, pi]"),
             "max_speed": (0 <= self.max_speed <= MAX_SPEED, f"max_speed in [0, {MAX_SPEED:.4g}]"),
+            "camera": (self.camera in CAMERAS, f"camera in {CAMERAS}"),
+            "color": (self.color in COLORS, f"color in {COLORS}"),
             "camera_distance": ((self.length + 2 * TIP_RADIUS) / VIEW_HALF_SIDE <= self.camera_distance <= 3.0,
                                 "camera_distance in [(length + 0.1) / 0.7, 3]"),
         }
         for name, (ok, allowed) in checks.items():
             if not ok:
                 raise ValueError(f"DMCPendulumConfig.{name}={getattr(self, name)!r} is out of range ({allowed})")
+        if self.camera == "fixed" and (self.flip == "camera" or self.camera_distance != 1.0):
+            raise ValueError("DMCPendulumConfig: flip='camera' and camera_distance move the face-on camera; "
+                             "camera='fixed' is dm_control's own, which they leave as it is")
+
+    @property
+    def channels(self) -> int:
+        """Channels of one frame: 1 gray, 3 RGB."""
+        return 3 if self.color == "rgb" else 1
 
     @property
     def dt(self) -> float:
@@ -282,7 +307,7 @@ class DMCPendulumEnv(gym.Env):
 
     def render(self) -> np.ndarray:
         size = self.config.image_size
-        return self.physics.render(size, size, camera_id="face")  # (H, W, 3) uint8
+        return self.physics.render(size, size, camera_id=self.config.camera)  # (H, W, 3) uint8
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         super().reset(seed=seed)
@@ -328,7 +353,9 @@ class DMCPendulumEnv(gym.Env):
 
 def make_dmc_pendulum(config: DMCPendulumConfig | None = None, render_mode: str | None = "rgb_array",
                       **overrides: Any) -> gym.Env:
-    """The DMC pendulum with gray frames: ``DMCPendulumEnv -> GrayscaleObservation -> FrameStackObservation``.
+    """The DMC pendulum with gray frames: ``DMCPendulumEnv -> GrayscaleObservation -> FrameStackObservation``, or
+    with ``color="rgb"`` channel-first RGB ones: ``DMCPendulumEnv -> TransformObservation (HWC to CHW) ->
+    FrameStackObservation -> ReshapeObservation`` (the K frames' channels in one axis, as DrQ-v2 stacks them).
 
     Args:
         config: the settings; None means the defaults.
@@ -337,13 +364,18 @@ def make_dmc_pendulum(config: DMCPendulumConfig | None = None, render_mode: str 
             (``gym.make("piga/DMCPendulum-v0", mass=1.2)`` passes its keywords here).
 
     Returns:
-        An env whose observation is uint8 (frame_stack, image_size, image_size).
+        An env whose observation is uint8 (frame_stack × channels, image_size, image_size).
 
     Raises:
         MissingExtraError: dm_control or MuJoCo is missing ("install piga[dmc]").
     """
     config = replace(config or DMCPendulumConfig(), **overrides)
     env: gym.Env = DMCPendulumEnv(config, render_mode)
-    env = GrayscaleObservation(env, keep_dim=False)
-    env = FrameStackObservation(env, config.frame_stack)
-    return env
+    if config.color == "gray":
+        env = GrayscaleObservation(env, keep_dim=False)  # (H, W)
+        return FrameStackObservation(env, config.frame_stack)  # (K, H, W)
+    size = config.image_size
+    env = TransformObservation(env, lambda frame: np.ascontiguousarray(frame.transpose(2, 0, 1)),
+                               gym.spaces.Box(0, 255, (3, size, size), np.uint8))  # (3, H, W)
+    env = FrameStackObservation(env, config.frame_stack)  # (K, 3, H, W)
+    return ReshapeObservation(env, (3 * config.frame_stack, size, size))  # (3K, H, W)

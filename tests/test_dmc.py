@@ -187,3 +187,33 @@ def test_config_refuses_bad_values():
     with pytest.raises(ValueError, match="length"):
         DMCPendulumConfig(length=2.0)
     assert DMCPendulumConfig(action_repeat=4).dt == pytest.approx(0.08)
+    with pytest.raises(ValueError, match="color"):
+        DMCPendulumConfig(color="blue")
+    with pytest.raises(ValueError, match="camera='fixed' is dm_control's own"):
+        DMCPendulumConfig(camera="fixed", flip="camera")
+    from piga.data.collect import CollectConfig
+
+    with pytest.raises(ValueError, match="piga's data files hold gray frames"):
+        CollectConfig(env=DMCPendulumConfig(color="rgb"))
+
+
+@needs_dmc
+def test_the_fixed_camera_in_rgb_stacks_each_frames_channels_and_sees_the_swing():
+    """camera="fixed" renders dm_control's camera 0, color="rgb" stacks each frame's R, G, B channel-first (oldest
+    frame first), and the pole moves in that view as the hinge turns."""
+    env = make_dmc_pendulum(camera="fixed", color="rgb", image_size=32, frame_stack=2)
+    assert env.observation_space.shape == (6, 32, 32)
+    obs, _ = env.reset(seed=0, options={"state": [0.0, 0.0]})
+    assert obs.shape == (6, 32, 32) and obs.dtype == np.uint8
+    np.testing.assert_array_equal(obs[3:], env.unwrapped.render().transpose(2, 0, 1))  # the newest frame, as rendered
+    assert not np.array_equal(obs[3], obs[4])  # colour: the channels differ
+    obs2, *_ = env.step(np.zeros(1, np.float32))
+    np.testing.assert_array_equal(obs2[:3], obs[3:])  # the stack moved on by one frame
+    upright = env.unwrapped.render()
+    env.reset(options={"state": [math.pi / 2, 0.0]})
+    assert np.abs(env.unwrapped.render().astype(int) - upright).max() > 50  # the swing is in view
+    face = make_dmc_pendulum(color="rgb", image_size=32)
+    face.reset(options={"state": [math.pi / 2, 0.0]})
+    assert not np.array_equal(face.unwrapped.render(), env.unwrapped.render())  # another camera
+    env.close()
+    face.close()

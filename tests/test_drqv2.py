@@ -226,3 +226,34 @@ def test_the_bfloat16_encoders_layout_changes_no_feature_order() -> None:
     x = torch.randint(0, 256, (2, 3, 64, 64)).float()
     a, b = exact(x), rounded(x)
     assert torch.corrcoef(torch.stack([a.flatten(), b.flatten()]))[0, 1] > 0.999
+
+
+@needs_dmc
+def test_a_dmc_run_of_drqv2s_view_sees_84x84_rgb_and_is_scored_through_it() -> None:
+    """``view="drqv2"``: the agent sees stacks of 3 RGB frames of 84x84 from dm_control's camera 0, piga's episodes
+    score it through the same view, and an env option that would show it other frames is refused."""
+    from agents.sb3.config import DMC_VIEWS
+    from agents.sb3.run import SB3Agent
+    from agents.sb3.train import _vec_env, new_model
+    from envs import DMC_PENDULUM
+    from envs.dmc import DMCPendulumConfig
+    from piga.cli.common import PigaError
+    from piga.cli.control import _sb3_view
+    from piga.control.dmc import DMCControlConfig, run_dmc_episodes
+
+    with pytest.raises(ValueError, match="a view of piga/DMCPendulum-v0"):
+        replace(TINY, view="drqv2")
+    config = replace(TINY, env=DMC_PENDULUM, steps=1000, eval_every=500, view="drqv2")
+    assert config.frame_pixels == 3 * 84 * 84 and replace(config, view="fixed").frame_pixels == 64 * 64
+    venv = _vec_env(config, None, 0, episode_seed=0)
+    assert venv.observation_space.shape == (9, 84, 84)  # DrQ-v2's 3 stacked RGB frames
+    agent = SB3Agent(new_model(config, venv, torch.device("cpu")), config)
+    env = _sb3_view(agent, DMCPendulumConfig(mass=1.1), {"mass"})
+    assert (env.camera, env.color, env.image_size, env.mass) == ("fixed", "rgb", 84, 1.1)
+    assert _sb3_view(agent, DMCPendulumConfig(image_size=84), {"image_size"}) == DMCPendulumConfig(**DMC_VIEWS["drqv2"])
+    with pytest.raises(PigaError, match="trained on its view 'drqv2'; drop --env-option color"):
+        _sb3_view(agent, DMCPendulumConfig(color="gray"), {"color"})
+    batch = run_dmc_episodes(agent, "drqv2", DMCControlConfig(episodes=1, env=replace(env, episode_length=20)))
+    assert len(batch.returns) == 1 and agent._stack.shape == (9, 84, 84)
+    frames = agent._stack
+    assert not np.array_equal(frames[-3], frames[-1])  # the newest frame's three channels, not one channel thrice

@@ -15,19 +15,28 @@ from typing import Any, Literal, get_args
 
 from envs import DMC_PENDULUM, PIXEL_PENDULUM, EnvId
 from envs.dmc import DMCPendulumConfig
+from envs.pendulum import PixelPendulumConfig
 from piga.io.choices import check_choices
 from piga.io.device import Device
 
-__all__ = ["ALGORITHMS", "ALGORITHM_PRESETS", "PRECISIONS", "Precision", "resolve_precision", "bfloat16_in_hardware", "ENV_EPISODE_STEPS", "EPISODE_STEPS", "LEARNED_RETURN", "OBSERVATIONS", "PRESETS", "Algorithm", "Observation", "SB3Config"]
+__all__ = ["ALGORITHMS", "ALGORITHM_PRESETS", "PRECISIONS", "Precision", "resolve_precision", "bfloat16_in_hardware", "ENV_EPISODE_STEPS", "EPISODE_STEPS", "LEARNED_RETURN", "OBSERVATIONS", "PRESETS", "Algorithm", "Observation", "SB3Config", "DMC_VIEWS", "VIEWS", "View"]
 
 Observation = Literal["pixels", "latent", "state"]
 """What the policy sees."""
 Precision = Literal["auto", "float32", "bfloat16"]
 """DrQ-v2's encoder arithmetic: float32, bfloat16 (torch's autocast over the convolutions; the actor, the critic and
 their losses stay float32), or auto (:func:`resolve_precision`)."""
+View = Literal["face", "fixed", "drqv2"]
+"""How the DMC pendulum is seen: piga's face-on camera in 64x64 gray; dm_control's camera 0 in 64x64 gray (the camera
+alone changed); or DrQ-v2's own view, dm_control's camera 0 in 84x84 RGB (:data:`DMC_VIEWS`)."""
 Algorithm = Literal["ddpg", "sac", "drqv2"]
 """The algorithm: SB3's DDPG (the paper's) or SAC (its stronger sibling), or DrQ-v2 in SB3's loop
 (:mod:`agents.sb3.drqv2`; pixels only)."""
+#: The DMC pendulum's config fields of each view.
+DMC_VIEWS: dict[View, dict[str, Any]] = {"face": {}, "fixed": {"camera": "fixed"},
+                                         "drqv2": {"camera": "fixed", "color": "rgb", "image_size": 84}}
+#: The views.
+VIEWS: tuple[View, ...] = get_args(View)
 #: Most env steps a run may take: 300 times the paper's 30k, weeks on a CPU; --steps 1e20 was taken and ran for ever.
 MAX_STEPS = 10_000_000
 #: Most episodes per evaluation, as piga-control's most episodes; --eval-episodes 1e11 was taken and evaluated for ever.
@@ -90,6 +99,10 @@ class SB3Config:
     """The env: Gymnasium's pixel pendulum, or dm_control's pendulum-swingup through its face-on camera
     (:mod:`envs.dmc`, its defaults: action repeat 2, 500 frames an episode, DMC's reward; needs ``piga[dmc]``;
     "pixels" only). The pixel pendulum's rewards, or DMC's, are what the agent learns from."""
+    view: View = "face"
+    """DMC's pendulum only: "face" (piga's face-on camera, 64x64 gray), "fixed" (dm_control's camera 0, looking down
+    at 45°, 64x64 gray) or "drqv2" (DrQ-v2's view: camera 0 in 84x84 RGB; a 100000-step buffer of its stacks takes
+    12.7 GB, and an update about 4 times as long on a CPU)."""
     obs: Observation = "state"
     """What the policy sees: "pixels" (K stacked frames, CnnPolicy), "latent" (K stacked autoencoder
     codes) or "state" ((cos θ, sin θ, θ̇), the reference point)."""
@@ -161,6 +174,8 @@ class SB3Config:
         if self.env == DMC_PENDULUM and (self.obs != "pixels" or self.torque_arrow):
             raise ValueError(f"{DMC_PENDULUM} is learnt from its frames (--obs pixels), which show no torque arrow"
                              + ("" if self.obs == "pixels" else f"; --obs {self.obs} is for {PIXEL_PENDULUM}"))
+        if self.view != "face" and self.env != DMC_PENDULUM:
+            raise ValueError(f"view {self.view!r} is a view of {DMC_PENDULUM}; {self.env} is seen as it renders")
         # DrQ-v2's buffer is its own (its stacks are of 3 frames, and it keeps a 100k-step run's every transition)
         observation_preset = {} if self.algo == "drqv2" else PRESETS[self.obs]
         for name, value in {**ALGORITHM_PRESETS[self.algo], **observation_preset}.items():
@@ -216,6 +231,14 @@ class SB3Config:
     def learned_return(self) -> float:
         """The evaluation return that counts as learning (:data:`LEARNED_RETURN`)."""
         return LEARNED_RETURN[self.env]
+
+    @property
+    def frame_pixels(self) -> int:
+        """Bytes of one frame as the policy sees it ("pixels"): channels x height x width."""
+        if self.env == DMC_PENDULUM:
+            env = DMCPendulumConfig(**DMC_VIEWS[self.view])
+            return env.channels * env.image_size**2
+        return PixelPendulumConfig().image_size**2
 
     @property
     def stacked(self) -> int:

@@ -90,14 +90,17 @@ class SB3Agent:
         self._stack = np.zeros(self.model.observation_space.shape, self.model.observation_space.dtype)
 
     def act(self, frames: np.ndarray, state: np.ndarray) -> np.ndarray:
-        """Action (1,) from the newest frame (uint8 (L, H, W)), or from ``state`` for obs="state"."""
+        """Action (1,) from the newest frame (uint8 (L·C, H, W), C channels a frame), or from ``state`` for obs="state"."""
         if self.config.obs == "state":
             obs = np.array([np.cos(state[0]), np.sin(state[0]), state[1]], np.float32)
         else:
             if self._stack is None:
                 self.reset()
             assert self._stack is not None
-            new = frames[-1:] if self.config.obs == "pixels" else self.encoder.encode_frame(frames[-1])
+            if self.config.obs == "pixels":  # the newest frame's channels (1 gray, 3 RGB)
+                new = frames[-(self._stack.shape[0] // self.config.frame_stack):]
+            else:
+                new = self.encoder.encode_frame(frames[-1])
             size = len(new)
             self._stack = np.concatenate([self._stack[size:], np.asarray(new, self._stack.dtype)])
             obs = self._stack

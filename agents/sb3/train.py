@@ -34,7 +34,7 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
-from agents.sb3.config import EPISODE_STEPS, SB3Config, resolve_precision
+from agents.sb3.config import DMC_VIEWS, EPISODE_STEPS, SB3Config, resolve_precision
 from agents.sb3.run import MODEL, REPLAY_BUFFERS, sb3_class
 from envs.observations import EpisodeSeeds, FiniteActions, LatentObservation, NonFiniteAction, StateObservation
 from envs.pendulum import PixelPendulumConfig
@@ -49,7 +49,8 @@ __all__ = ["first_step_reaching", "make_env", "make_observation_env", "train_sb3
 def make_observation_env(config: SB3Config, encoder: Callable[[np.ndarray], np.ndarray] | None = None,
                          latent_size: int = 0, gravity_mult: float = 1.0) -> gym.Env:
     """The registered pixel pendulum (one frame per observation) with the observation wrapper of ``config.obs``,
-    or, for ``config.env`` DMC's, the registered DMC pendulum at its defaults (one frame per observation).
+    or, for ``config.env`` DMC's, the registered DMC pendulum at its defaults but for ``config.view`` (one frame per
+    observation).
 
     For "state", Gymnasium's Pendulum-v1 itself (the same dynamics and starts, gravity times
     ``gravity_mult``) without rendering: rendering a frame costs more than the rest of a step, and
@@ -60,7 +61,7 @@ def make_observation_env(config: SB3Config, encoder: Callable[[np.ndarray], np.n
     if config.env == DMC_PENDULUM:  # pixels only (SB3Config); its own reward and episode, at dm_control's defaults
         if gravity_mult != 1.0:
             raise ValueError(f"{DMC_PENDULUM} has no gravity multiplier (got {gravity_mult:g})")
-        return gym.make(DMC_PENDULUM, frame_stack=1)
+        return gym.make(DMC_PENDULUM, frame_stack=1, **DMC_VIEWS[config.view])
     if config.obs == "state":
         g = PixelPendulumConfig(gravity_mult=gravity_mult).effective_gravity
         return StateObservation(gym.make("Pendulum-v1", g=g, max_episode_steps=EPISODE_STEPS))

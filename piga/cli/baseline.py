@@ -36,7 +36,7 @@ def build_parser() -> ArgumentParser:
     from agents.planet.config import MAX_EXPLORATION_NOISE, IterativeConfig, PlanetTrainConfig, RewardAlignment, RSSMConfig
     from agents.sb3.autoencoder import AutoencoderConfig
     from agents.sb3.config import (ALGORITHM_PRESETS, ALGORITHMS, DRQV2_SEED_FRAMES, ENV_ACTION_REPEAT, LEARNED_RETURN,
-                                   OBSERVATIONS, PRECISIONS, PRESETS, SB3Config)
+                                   OBSERVATIONS, PRECISIONS, PRESETS, VIEWS, SB3Config)
     from envs import DMC_PENDULUM, ENV_IDS
 
     p = ArgumentParser(prog=PROG, description="Train a baseline (the PlaNet-style world model, or SB3 DDPG) into a run "
@@ -111,6 +111,10 @@ def build_parser() -> ArgumentParser:
                    help="the env: Gymnasium's pixel pendulum, or dm_control's pendulum-swingup through a face-on camera "
                    "(needs piga[dmc]; --obs pixels; action repeat 2, episodes of 500 frames, DMC's reward: evaluation "
                    "returns are DMC scores, max 1000) (default %(default)s)")
+    d.add_argument("--view", choices=VIEWS, default=ddpg.view,
+                   help=f"with --env {DMC_PENDULUM}: face (piga's face-on camera, 64x64 gray), fixed (dm_control's "
+                   "camera 0, looking down at 45 degrees, 64x64 gray) or drqv2 (DrQ-v2's own view: camera 0 in 84x84 "
+                   "RGB; its replay buffer takes 5x the memory) (default %(default)s)")
     d.add_argument("--obs", required=True, choices=OBSERVATIONS,
                    help="pixels: stacked frames (CnnPolicy); latent: stacked autoencoder codes (needs --data); "
                    "state: (cos θ, sin θ, θ̇), the reference point")
@@ -461,7 +465,7 @@ def _collected_bytes(info: Any, iterative: Any) -> float:
 def _ddpg_checkpoint_bytes(config: Any, latent_size: int) -> float:
     """A DDPG checkpoint's size: its replay buffer, pickled at full capacity with observations and
     next observations, and the networks (:data:`piga.io.resources.RUN_DISK_MARGIN` covers them)."""
-    per_obs = {"pixels": config.frame_stack * 64 * 64, "latent": 4 * config.frame_stack * latent_size, "state": 4 * 3}[config.obs]
+    per_obs = {"pixels": config.frame_stack * config.frame_pixels, "latent": 4 * config.frame_stack * latent_size, "state": 4 * 3}[config.obs]
     return config.buffer_size * (2 * per_obs + 16)
 
 
@@ -487,7 +491,7 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
         _check_run_dir(run_dir, True, args.overwrite, RunKind.DDPG)
         record, _ = read_run_record(run_dir)
         # runs from before --algo are DDPG; runs from before --device have none
-        saved = _saved_config(run_dir, record, "ddpg", SB3Config, optional=("algo", "device", "env", "encoder_precision"))
+        saved = _saved_config(run_dir, record, "ddpg", SB3Config, optional=("algo", "device", "env", "encoder_precision", "view"))
         if "encoder_precision" not in record["ddpg"]:  # runs from before the option computed in float32
             saved = replace(saved, encoder_precision="float32")
         if saved.obs != args.obs:
@@ -517,7 +521,7 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
         config = SB3Config(env=args.env, obs=args.obs, algo=args.algo, steps=args.steps or SB3Config.steps, eval_every=args.eval_every,
                             eval_episodes=args.eval_episodes,
                             torque_arrow=args.torque_arrow, seed=args.seed, threads=args.threads, device=args.device,
-                            encoder_precision=args.encoder_precision, **given)
+                            encoder_precision=args.encoder_precision, view=args.view, **given)
         from piga.io.device import resolve_device
 
         # the record holds the precision the run computes in, so that --resume continues it on any machine

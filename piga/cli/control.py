@@ -505,6 +505,20 @@ def _dmc_sb3_agent(run_dir: str, env: DMCPendulumConfig) -> SB3Agent:
     return SB3Agent.from_run(run_dir)
 
 
+def _sb3_view(agent: SB3Agent, env: DMCPendulumConfig, given: set[str]) -> DMCPendulumConfig:
+    """``env`` seen as the SB3 run was trained to see it (its ``view``: camera, colour, size); an ``--env-option``
+    that sets one of those otherwise is refused (the policy reads only the frames it was trained on)."""
+    from agents.sb3.config import DMC_VIEWS
+    from envs.dmc import DMCPendulumConfig
+
+    view = DMC_VIEWS[agent.config.view]
+    for key in sorted(given & {"camera", "color", "image_size"}):
+        if getattr(env, key) != view.get(key, getattr(DMCPendulumConfig, key)):
+            raise PigaError(f"--env-option {key}={getattr(env, key)}: the run was trained on its view "
+                            f"{agent.config.view!r}; drop --env-option {key}")
+    return replace(env, **view)
+
+
 def _dmc(args: argparse.Namespace, argv: Sequence[str] | None, given: set[str]) -> int:
     """``--env piga/DMCPendulum-v0``: the piga agent and/or the oracle, scored in DMC's units."""
     from piga.cli.collect import _env_option, dmc_config
@@ -539,6 +553,7 @@ def _dmc(args: argparse.Namespace, argv: Sequence[str] | None, given: set[str]) 
 
         if (kind := run_kind(args.model)) is RunKind.DDPG:
             sb3 = _dmc_sb3_agent(args.model, config.env)
+            config = replace(config, env=_sb3_view(sb3, config.env, {key for key, _ in pairs}))
             results.append(run_dmc_episodes(sb3, sb3.config.algo, config, progress=not args.quiet))
         elif kind.is_baseline:
             raise PigaError(f"{args.model} is a {kind.value} run; --env {DMC_PENDULUM} runs piga models, the oracle and "

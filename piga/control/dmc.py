@@ -109,7 +109,8 @@ def dmc_record(batch: EpisodeBatch) -> dict[str, Any]:
 def dmc_markdown(results: list[EpisodeBatch], config: DMCControlConfig, command: str) -> str:
     """A Markdown table of the batches' DMC scores, with the command and the env."""
     lines = [f"Command: `{command}`", "",
-             f"DMC pendulum-swingup through the face-on camera: {json.dumps(config.env.to_dict())}; "
+             f"DMC pendulum-swingup through {'the face-on camera' if config.env.camera == 'face' else 'dm_control camera 0'}: "
+             f"{json.dumps(config.env.to_dict())}; "
              f"{config.episodes} episodes of 1000 physics steps of 0.02 s (score: sum of DMC's reward, max 1000), "
              f"seeds {config.seed}..{config.seed + config.episodes - 1}.", "",
              "| agent | mean score | std | min | max |", "|---|---|---|---|---|"]

@@ -70,6 +70,9 @@ class CollectConfig:
         check_types(self)  # a number given as text fails here, naming the field, not at a comparison below
         if not isinstance(self.env, (PixelPendulumConfig, DMCPendulumConfig)):
             raise TypeError(f"CollectConfig.env must be a PixelPendulumConfig or a DMCPendulumConfig, got {self.env!r}")
+        if getattr(self.env, "color", "gray") != "gray":
+            raise ValueError("piga's data files hold gray frames; the DMC pendulum's color='rgb' is a baseline's view "
+                             "(piga-baseline ddpg --view drqv2)")
         check_collect_sizes(self.sequences, self.steps, self.workers, self.seed, self.batch, self.split)
         effects = dict(getattr(self.env, "effects", ()))
         if effects.get("delay", 0) >= self.steps - 1:
