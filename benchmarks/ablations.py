@@ -41,7 +41,7 @@ from typing import Any, Literal, get_args, get_type_hints
 from common import TrainingBenchConfig, add_ray_option, farm_main, machine, machine_words, ray_backend
 from prediction import collect_command, collect_data, data_path, run_training
 
-from piga.cli.common import positive_int, seed_int
+from piga.cli.common import ArgumentParser, positive_int, seed_int
 from piga.evaluation.objects import EMPTY_RATIO, LOST_RATIO
 from piga.io.atomic import atomic_output, write_json
 from piga.io.pool import JobRecords, RecordedJob, run_recorded
@@ -342,7 +342,7 @@ def slots_figure(record: dict[str, Any]) -> Any:
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
+    p = ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--out", type=Path, default=Path("results/ablations"),
                    help="output prefix: OUT.json, OUT.md, OUT-slots.png; runs and records in OUT_runs/ (default %(default)s)")
     p.add_argument("--systems", nargs="+", choices=SYSTEMS, default=list(DEFAULTS.systems), help="default %(default)s")

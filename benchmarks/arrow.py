@@ -18,7 +18,6 @@ continues. Writes OUT.json and OUT.md.
 
 from __future__ import annotations
 
-import argparse
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -29,6 +28,7 @@ from common import change_cells, farm_main, machine, machine_words, write_page
 
 from piga.io.checkpoint import CHECKPOINT, RunKind, run_kind
 from piga.io.pool import JobRecords, RecordedJob, run_recorded
+from piga.cli.common import ArgumentParser
 
 AGENTS = {RunKind.PIGA: "piga", RunKind.PLANET: "planet"}
 """The run kinds scored here, by the agent name :func:`baselines.evaluate` takes. DDPG runs are left out: the
@@ -73,7 +73,7 @@ def markdown(record: dict[str, Any]) -> str:
 
 @farm_main
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
+    p = ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--runs", type=Path, nargs="+", required=True,
                    help="trained piga or PlaNet-style run folders, each with a benchmark record in records/ beside it")
     p.add_argument("--preset", choices=sorted(PRESETS), default="budget", help="the baselines preset (default %(default)s)")

@@ -36,7 +36,7 @@ from pathlib import Path
 from typing import Any
 
 from common import farm_main, machine, machine_words
-from piga.cli.common import positive_int, ray_address
+from piga.cli.common import ArgumentParser, positive_int, ray_address
 from piga.io.atomic import atomic_output, write_json
 
 #: The blind benchmark's own sequences per case (``diagnose_blind.py --sequences``), for the page.
@@ -212,7 +212,7 @@ def markdown(record: dict[str, Any]) -> str:
 
 @farm_main
 def main() -> int:
-    p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
+    p = ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--model", required=True, help="run folder of piga-train-model (the sweep's agent, the diagnosis' model)")
     p.add_argument("--work", required=True, help="folder for the farms' outputs (kept; a rerun skips finished farms)")
     p.add_argument("--out", required=True, help="OUT.json and OUT.md are written")

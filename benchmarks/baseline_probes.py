@@ -15,13 +15,13 @@
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from pathlib import Path
 
 import numpy as np
 import torch
+from piga.cli.common import ArgumentParser
 
 
 def knn_rmse(train_x: torch.Tensor, train_y: torch.Tensor, test_x: torch.Tensor, test_y: torch.Tensor, k: int = 5) -> list[float]:
@@ -76,7 +76,7 @@ def probe_actor(run: Path, data: Path) -> dict[str, object]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.split("\n\n")[0])
+    p = ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("what", choices=("autoencoder", "actor"))
     p.add_argument("run", type=Path, help="a piga-baseline ddpg run folder")
     p.add_argument("data", type=Path, help="a piga-collect file")

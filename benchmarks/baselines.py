@@ -65,7 +65,6 @@ Numbers of the ``tiny`` preset check the pipeline only; they are no result.
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import shlex
@@ -84,7 +83,7 @@ from piga.io.atomic import atomic_output, write_json
 from piga.io.checkpoint import CHECKPOINT
 from piga.io.pool import Backend, JobRecords, RecordedJob, run_recorded
 from piga.control.episodes import parse_range
-from piga.cli.common import positive_int
+from piga.cli.common import ArgumentParser, positive_int
 
 
 @dataclass(frozen=True)
@@ -1073,7 +1072,7 @@ def data_ratio_lines(record: dict[str, Any]) -> list[str]:
 
 @farm_main
 def main() -> int:
-    p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.split("\n\n")[0])
+    p = ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--out", required=True, help="writes OUT.json, OUT.md, OUT-*.png; runs in OUT_runs/")
     p.add_argument("--preset", choices=sorted(PRESETS), default="full")
     p.add_argument("--workers", type=positive_int, help="processes (default: the preset's, 2)")

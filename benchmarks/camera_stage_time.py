@@ -10,12 +10,12 @@ Prints the stage's seconds and the camera it found; writes nothing.
 
 from __future__ import annotations
 
-import argparse
 import time
+from piga.cli.common import ArgumentParser
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
+    p = ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("run", help="a piga-train-model run folder of the pendulum")
     p.add_argument("data", help="an HDF5 recording (piga-collect)")
     args = p.parse_args(argv)

@@ -25,7 +25,6 @@ Writes OUT.json, OUT.md (tables and checks against the floors) and OUT-sweep.png
 
 from __future__ import annotations
 
-import argparse
 import math
 import shlex
 import sys
@@ -43,7 +42,7 @@ from piga.control.jobs import ControlJob, run_jobs
 from piga.evaluation.episodes import EpisodeSummary, summary_markdown
 from piga.evaluation.plots import save_figure, sweep_figure
 from piga.io.runs import convergence_warning
-from piga.cli.common import positive_int, seed_int
+from piga.cli.common import ArgumentParser, positive_int, seed_int
 
 #: PlaNet's CEM (Hafner et al., 2019), re-planned from scratch each step.
 PLANET = MPCConfig(cem=CEMConfig(), warm_start=False)
@@ -58,7 +57,7 @@ def goal_angles(g: float, a: float, count: int = 7) -> list[float]:
 
 @farm_main
 def main() -> int:
-    p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
+    p = ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--model", required=True, help="run folder of piga-train-model")
     p.add_argument("--out", default="results/control", help="output prefix (default %(default)s)")
     p.add_argument("--episodes", type=positive_int, default=50)

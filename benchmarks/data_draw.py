@@ -17,7 +17,6 @@ not run again, so the same command continues. Writes OUT.json and OUT.md.
 
 from __future__ import annotations
 
-import argparse
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -25,6 +24,7 @@ from typing import Any
 
 from baselines import PRESETS, TABLE_GRAVITY, jobs_for, recorded_scores, run_all
 from common import farm_main, machine_words, score_cells, write_page
+from piga.cli.common import ArgumentParser
 
 DATA_SEED = 200
 """The second collection's seed (the table's is ``BenchConfig.data_seed``, 100)."""
@@ -51,7 +51,7 @@ def markdown(record: dict[str, Any]) -> str:
 
 @farm_main
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
+    p = ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--jobs", nargs="+", default=list(JOBS), help="the table's job names (default: %(default)s)")
     p.add_argument("--data-seed", type=int, default=DATA_SEED, help="the second collection's seed (default %(default)s)")
     p.add_argument("--table", type=Path, default=Path("results/baselines_runs"),

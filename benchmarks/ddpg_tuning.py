@@ -13,7 +13,6 @@ The rest of the page (the tries that have no record, the probes) names its own c
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from pathlib import Path
@@ -23,6 +22,7 @@ from common import machine_words, signed
 
 from agents.sb3.train import first_step_reaching
 from piga.io.atomic import atomic_output
+from piga.cli.common import ArgumentParser
 
 ROOT = Path(__file__).resolve().parents[1]
 RECORDS = ROOT / "results" / "baselines_runs" / "records"
@@ -82,7 +82,7 @@ def render(page: str, records: list[dict[str, Any]]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], allow_abbrev=False)
+    p = ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--check", action="store_true", help="only check that the page's table is the records' (exit 1 if not)")
     p.add_argument("--page", type=Path, default=PAGE, help="the page (default: results/ddpg_tuning.md)")
     p.add_argument("--records", type=Path, default=RECORDS, help="the records' folder (default: results/baselines_runs/records)")

@@ -51,7 +51,7 @@ from common import machine, machine_words
 from planet_faithful import VARIANTS
 from piga.io.atomic import atomic_output, write_json
 from piga.io.device import cuda_available, resolve_device
-from piga.cli.common import positive_int, seed_int
+from piga.cli.common import ArgumentParser, positive_int, seed_int
 
 #: The trainings that can be timed, in the order the page lists them; the first two unless ``--workloads`` says.
 WORKLOADS = ("piga fast", "PlaNet-style", "PlaNet sizes")
@@ -269,7 +269,7 @@ def markdown(record: dict[str, Any]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], allow_abbrev=False)
+    p = ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--data", required=True, type=Path, help="a pendulum file with /rewards (piga-collect's)")
     p.add_argument("--out", required=True, type=Path, help="output prefix: OUT.json and OUT.md")
     p.add_argument("--device", choices=("cpu", "cuda"), default="cpu",

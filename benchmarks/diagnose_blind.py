@@ -22,7 +22,6 @@ coefficient and delay errors, and free-run closure.
 
 from __future__ import annotations
 
-import argparse
 import functools
 import json
 import shlex
@@ -42,7 +41,7 @@ from envs.pendulum import PixelPendulumConfig
 from piga.io.atomic import atomic_output, write_json
 from piga.data.collect import CollectConfig, collect
 from piga.io.pool import run_pool
-from piga.cli.common import positive_int, seed_int
+from piga.cli.common import ArgumentParser, positive_int, seed_int
 
 #: Candidate effects and how their magnitudes are drawn (rng -> value).
 DRAWS = {
@@ -245,7 +244,7 @@ def save(out: Path, command: str, info: dict, runs: list[dict], summarize: Calla
 
 @farm_main
 def main() -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
+    p = ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--model", required=True, help="run folder of piga-train-model (the nominal, identified model)")
     p.add_argument("--out", default="results/diagnose_blind")
     p.add_argument("--work", default="runs/blind", help="folder for the case data and reports")

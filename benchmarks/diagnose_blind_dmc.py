@@ -37,7 +37,6 @@ is appended to OUT.json, so an interrupted run continues where it stopped.
 
 from __future__ import annotations
 
-import argparse
 import functools
 import json
 import math
@@ -57,7 +56,7 @@ from common import add_diagnose_options, add_ray_option, diagnose_options, farm_
 from diagnose_blind import run_diagnose, save, strip_labels
 from diagnose_blind import score as score_gym
 from envs.dmc import DMCPendulumConfig, DMCPendulumEnv
-from piga.cli.common import NOT_CONVERGED, positive_int, seed_int
+from piga.cli.common import ArgumentParser, NOT_CONVERGED, positive_int, seed_int
 from piga.data.collect import CollectConfig, collect
 from piga.io.pool import run_pool
 
@@ -378,7 +377,7 @@ def true_angle_fit(case: dict[str, Any], work: Path, sequences: int, steps: int,
 
 @farm_main
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
+    p = ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--out", default="results/diagnose_blind_dmc")
     p.add_argument("--work", default="runs/blind_dmc", help="folder for the case data, models and reports")
     p.add_argument("--cases", type=positive_int, default=24)

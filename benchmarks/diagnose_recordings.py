@@ -16,7 +16,6 @@ import keeps).
 
 from __future__ import annotations
 
-import argparse
 import json
 import shlex
 import subprocess
@@ -32,7 +31,7 @@ import numpy as np
 from common import add_diagnose_options, diagnose_options, machine
 from envs.pendulum import PixelPendulumConfig, make_pixel_pendulum
 from piga.io.atomic import atomic_output, write_json
-from piga.cli.common import seed_int
+from piga.cli.common import ArgumentParser, seed_int
 
 class Case(NamedTuple):
     effects: dict
@@ -86,7 +85,7 @@ def record(effects: dict, drop: float, blur: float, frames: int, seed: int, out:
 
 
 def main() -> int:
-    p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
+    p = ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--model", required=True, help="run folder of piga-train-model (the identified model)")
     p.add_argument("--out", default="results/diagnose_recordings")
     p.add_argument("--work", default="runs/recordings", help="folder for the recordings, data files and reports")

@@ -48,7 +48,7 @@ from typing import NamedTuple
 from common import add_diagnose_options, add_ray_option, diagnose_options, farm_main, logged_command, machine, ray_backend
 from piga.io.atomic import atomic_output, write_json
 from piga.io.pool import run_pool
-from piga.cli.common import positive_int, seed_int
+from piga.cli.common import ArgumentParser, positive_int, seed_int
 
 #: Published pixel-based scores on DMC pendulum-swingup, read from the score files that DreamerV3's
 #: authors publish for it and its baselines (github.com/danijar/dreamerv3, ``scores/dmc_vision-{dreamerv3,
@@ -290,7 +290,7 @@ def markdown(cases: list[dict[str, object]], command: str, info: dict[str, objec
 
 @farm_main
 def main() -> None:
-    p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
+    p = ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--work", required=True, help="folder for data and runs (kept, reused on a rerun)")
     p.add_argument("--out", required=True, help="OUT.json and OUT.md are written")
     p.add_argument("--seeds", type=seed_int, nargs="+", default=[0])

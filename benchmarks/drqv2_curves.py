@@ -17,7 +17,6 @@ Writes OUT.md, OUT.json (each run's curve, and the published curve at its points
 
 from __future__ import annotations
 
-import argparse
 import json
 import shlex
 import sys
@@ -31,6 +30,7 @@ from common import check_record, is_learning_curve, is_number, signed, write_pag
 from agents.sb3.config import LEARNED_RETURN
 from envs import DMC_PENDULUM, PIXEL_PENDULUM
 from envs.dmc import DMCPendulumConfig
+from piga.cli.common import ArgumentParser
 
 #: Frames per DMC env step: its action repeat (DrQ-v2's paper and the published curves count frames).
 DMC_FRAMES_PER_STEP = DMCPendulumConfig().action_repeat
@@ -225,7 +225,7 @@ def figure(record: dict[str, Any], path: Path) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], allow_abbrev=False)
+    p = ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--out", type=Path, required=True, help="output prefix: OUT.md, OUT.json, OUT.png")
     p.add_argument("--runs", type=Path, nargs="+", required=True, help="learning_curve.py records")
     p.add_argument("--published", type=Path, required=True, help="published_scores.py's record of DrQ-v2's curve")

@@ -23,7 +23,6 @@ Writes ``OUT.json`` and ``OUT.md``. Time it on an otherwise idle machine (one to
 
 from __future__ import annotations
 
-import argparse
 import shlex
 import statistics
 import sys
@@ -34,7 +33,7 @@ from typing import Any
 import torch
 
 from common import machine, machine_words, write_page
-from piga.cli.common import positive_int
+from piga.cli.common import ArgumentParser, positive_int
 
 from agents.sb3.config import PRECISIONS, SB3Config, bfloat16_in_hardware
 from envs import ENV_IDS, PIXEL_PENDULUM
@@ -125,7 +124,7 @@ def markdown(record: dict[str, Any]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], allow_abbrev=False)
+    p = ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--out", type=Path, required=True, help="output prefix: OUT.json and OUT.md")
     p.add_argument("--env", choices=ENV_IDS, default=PIXEL_PENDULUM, help="the env (default %(default)s)")
     p.add_argument("--fill", type=positive_int, default=1000, help="random-action steps in the buffer (default %(default)s)")

@@ -20,7 +20,6 @@ is one job of piga's job runner (:func:`piga.io.pool.run_recorded`, one torch th
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from dataclasses import dataclass
@@ -32,7 +31,7 @@ from common import change_cells, farm_main, machine, machine_words, write_page
 
 from piga.io.checkpoint import CHECKPOINT
 from piga.io.pool import JobRecords, RecordedJob, run_recorded
-from piga.cli.common import seed_int
+from piga.cli.common import ArgumentParser, seed_int
 
 HELD_OUT_SEED = 4242
 """The held-out episodes' seed (starts drawn from ``default_rng(4242)``, env seeds 4242000 + e)."""
@@ -126,7 +125,7 @@ def summary(rows: dict[str, dict[str, Any]]) -> dict[str, dict[str, float]]:
 
 @farm_main
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
+    p = ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--runs", type=Path, default=Path("results/baselines_runs"),
                    help="the baselines benchmark's run folders and records (default %(default)s)")
     p.add_argument("--jobs", nargs="+", help="only these runs (record names, 'oracle' included; default: every one here)")

@@ -22,7 +22,6 @@ Writes ``OUT.json``, ``OUT.md`` and ``OUT-error.png``. The speed-up is the ratio
 
 from __future__ import annotations
 
-import argparse
 import os
 import shutil
 import statistics
@@ -40,7 +39,7 @@ from piga.data.schema import inspect_dataset
 from piga.evaluation.evaluate import PARAMETER_NAMES
 from piga.training.report import write_run_report
 from piga.training.train import TrainConfig, train
-from piga.cli.common import positive_int
+from piga.cli.common import ArgumentParser, positive_int
 
 #: The fast preset before its budget was sized from the data: 16 epochs, 200 warm-up and 600 curriculum
 #: steps of the default file's 16 x 337, and the last epoch averaged.
@@ -134,7 +133,7 @@ def figure(runs: list[dict[str, Any]], path: Path) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], allow_abbrev=False)
+    p = ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--out", required=True, type=Path, help="output prefix: OUT.json, OUT.md, OUT-error.png")
     p.add_argument("--data", type=Path, help="a pendulum file (default: piga-collect's defaults, seed 100, in --work)")
     p.add_argument("--work", type=Path, default=Path("runs/identify_time"), help="data and run folders")

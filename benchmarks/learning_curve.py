@@ -10,7 +10,6 @@ seconds.
 
 from __future__ import annotations
 
-import argparse
 import shlex
 import sys
 from pathlib import Path
@@ -19,10 +18,11 @@ from common import is_learning_curve
 
 from piga.io.atomic import write_json
 from piga.io.checkpoint import RunKind, read_checkpoint, read_run_record
+from piga.cli.common import ArgumentParser
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], allow_abbrev=False)
+    p = ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("run", type=Path, help="a piga-baseline ddpg run folder (DDPG, SAC or DrQ-v2)")
     p.add_argument("--out", required=True, type=Path, help="the record to write (JSON)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing record")

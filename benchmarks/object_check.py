@@ -18,7 +18,6 @@ Writes OUT.json and OUT.md.
 
 from __future__ import annotations
 
-import argparse
 import json
 import shlex
 import sys
@@ -31,10 +30,11 @@ from piga.data.schema import read_sequences
 from piga.evaluation.objects import EMPTY_RATIO, LOST_RATIO, check_objects
 from piga.io.atomic import atomic_output, write_json
 from piga.io.runs import load_model
+from piga.cli.common import ArgumentParser
 
 
 def main() -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
+    p = ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("runs", nargs="+", help="run folders (RUN, or RUN=DATA when its config.json does not name the file)")
     p.add_argument("--out", default="results/object_check", help="output prefix (default %(default)s)")
     args = p.parse_args()

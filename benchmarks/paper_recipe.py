@@ -35,7 +35,7 @@ import torch
 from common import logged_command, machine, machine_words
 from prediction import run_training
 
-from piga.cli.common import positive_float, positive_int
+from piga.cli.common import ArgumentParser, positive_float, positive_int
 from piga.io.atomic import atomic_output, write_json
 from piga.io.pool import git_commit
 
@@ -130,7 +130,7 @@ def markdown(records: dict[str, dict[str, Any]], command: str, system: str) -> s
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
+    p = ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--system", choices=SYSTEMS, default="spring", help="the scene (default %(default)s)")
     p.add_argument("--recipes", nargs="+", choices=RECIPES, default=list(RECIPES), help="default: both")
     p.add_argument("--device", choices=("auto", "cpu", "cuda"), default="auto", help="piga-train-model's --device")

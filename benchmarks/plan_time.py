@@ -37,7 +37,6 @@ Writes OUT.json and OUT.md (with the machine). Nothing else should run on the ma
 
 from __future__ import annotations
 
-import argparse
 import os
 import shlex
 import sys
@@ -61,7 +60,7 @@ from piga.io.checkpoint import RunKind
 from piga.world.model import PhysicsModel
 from piga.world.physics import rollout
 from piga.io.runs import load_model
-from piga.cli.common import positive_int, seed_int
+from piga.cli.common import ArgumentParser, positive_int, seed_int
 
 
 class ModuleDynamics:
@@ -167,7 +166,7 @@ def planet_ratio(rows: list[dict]) -> dict | None:
 
 
 def main() -> int:
-    p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
+    p = ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--model", required=True, help="run folder of piga-train-model (a pendulum model)")
     p.add_argument("--out", default="results/plan_time", help="output prefix (default %(default)s)")
     p.add_argument("--episodes", type=positive_int, default=5, help="episodes per agent (default %(default)s)")

@@ -20,7 +20,6 @@ Writes OUT.json and OUT.md (with the machine). Nothing else should run on the ma
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import shlex
@@ -33,7 +32,7 @@ from typing import Any
 
 from common import machine, machine_words
 from piga.io.atomic import atomic_output, write_json
-from piga.cli.common import positive_int
+from piga.cli.common import ArgumentParser, positive_int
 
 ROOT = Path(__file__).resolve().parents[1]
 AGENTS = ("oracle", "piga")
@@ -90,7 +89,7 @@ def markdown(record: dict[str, Any]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
+    p = ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--baseline", required=True, help="the git revision to compare with (commit, tag or branch)")
     p.add_argument("--model", required=True, help="a pendulum run folder that both revisions load")
     p.add_argument("--out", default="results/plan_time_revisions", help="output prefix (default %(default)s)")

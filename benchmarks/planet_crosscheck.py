@@ -62,7 +62,7 @@ from common import machine, machine_words, write_page
 from agents.planet.config import LatentPlannerConfig, PlanetTrainConfig, RewardAlignment, RSSMConfig
 from agents.planet.rssm import WorldModel, model_steps
 from agents.planet.train import OPEN_LOOP_CONTEXT, _Sequences, check_planet_data, optimizer_step, rssm_config_for
-from piga.cli.common import nonnegative_float, positive_int, seed_int
+from piga.cli.common import ArgumentParser, nonnegative_float, positive_int, seed_int
 from piga.data.schema import inspect_dataset
 
 #: How to make ``mbrl.models.planet`` importable beside piga (its wheel's own pins conflict with piga's).
@@ -513,7 +513,7 @@ def page(record: dict[str, Any], settings: Settings) -> str:
 
 def build_parser() -> argparse.ArgumentParser:
     rssm, train = RSSMConfig(), PlanetTrainConfig()
-    p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.split("\n\n")[0])
+    p = ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--data", required=True, help="a pendulum HDF5 file with /rewards (piga-collect's)")
     p.add_argument("--out", default="results/planet_crosscheck", help="writes OUT.json and OUT.md (default %(default)s)")
     p.add_argument("--steps", type=positive_int, default=train.steps, help="optimiser steps of each model (default %(default)s)")

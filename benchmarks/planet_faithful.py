@@ -25,7 +25,6 @@ and OUT.md.
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from dataclasses import dataclass, replace
@@ -36,7 +35,7 @@ from baselines import PRESETS, BenchConfig, data_file, planet_scores, planet_tab
 from common import farm_main, machine, machine_words, write_page
 
 from piga.io.pool import JobRecords, RecordedJob, run_recorded
-from piga.cli.common import positive_int, seed_int
+from piga.cli.common import ArgumentParser, positive_int, seed_int
 
 Variant = Literal["planet-reward", "planet-sizes"]
 #: Each variant's settings: overrides of :class:`agents.planet.config.RSSMConfig` and of
@@ -129,7 +128,7 @@ def markdown(record: dict[str, Any]) -> str:
 
 @farm_main
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
+    p = ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--sequences", type=positive_int, default=500, help="the table's data size to compare at (default %(default)s)")
     p.add_argument("--seeds", type=seed_int, nargs="+", default=[0], help="training seeds (default 0)")
     p.add_argument("--variants", nargs="+", choices=get_args(Variant), default=list(get_args(Variant)),

@@ -21,7 +21,6 @@ machine meanwhile; otherwise, read only the ratio.
 
 from __future__ import annotations
 
-import argparse
 import os
 import shlex
 import sys
@@ -36,7 +35,7 @@ from agents.planet.config import LatentPlannerConfig, RSSMConfig
 from agents.planet.planner import PlanetAgent
 from agents.planet.rssm import WorldModel
 from piga.io.atomic import atomic_output, write_json
-from piga.cli.common import positive_int
+from piga.cli.common import ArgumentParser, positive_int
 
 
 def measure(model: WorldModel, threads: int, steps: int, seed: int = 0) -> dict[str, object]:
@@ -67,7 +66,7 @@ def measure(model: WorldModel, threads: int, steps: int, seed: int = 0) -> dict[
 
 
 def main() -> int:
-    p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.split("\n\n")[0])
+    p = ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--out", required=True, help="writes OUT.json and OUT.md")
     p.add_argument("--model", help="a piga-baseline planet run folder (default: an untrained default-size model)")
     p.add_argument("--threads", type=int, nargs="+", default=[1], help="torch thread counts to measure (default 1)")

@@ -25,7 +25,6 @@ OUT.json and OUT.md, with the table's records at each N beside the protocol's.
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from dataclasses import dataclass
@@ -35,7 +34,7 @@ from typing import Any
 from baselines import COST_S, PRESETS, BenchConfig, data_file, planet_scores, planet_table_runs, sweep_episodes
 from common import farm_main, machine, machine_words, score_cells, write_page
 
-from piga.cli.common import positive_int, seed_int
+from piga.cli.common import ArgumentParser, positive_int, seed_int
 from piga.io.atomic import write_json
 from piga.io.pool import JobRecords, RecordedJob, run_recorded
 
@@ -173,7 +172,7 @@ def markdown(record: dict[str, Any]) -> str:
 
 @farm_main
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
+    p = ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--sequences", type=positive_int, nargs="+", default=[100, 250, 500],
                    help="the table's points whose env steps the protocol matches (default %(default)s)")
     p.add_argument("--seeds", type=seed_int, nargs="+", default=[0], help="training seeds (default 0)")

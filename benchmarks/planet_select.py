@@ -16,7 +16,6 @@ run's selection is unchanged). The last weights' scores come from the run's reco
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from dataclasses import dataclass
@@ -27,6 +26,7 @@ from baselines import PRESETS, BenchConfig, planet_scores, recorded_scores
 from common import farm_main, machine, machine_words, score_cells, write_page
 
 from piga.io.pool import JobRecords, RecordedJob, run_recorded
+from piga.cli.common import ArgumentParser
 
 
 @dataclass(frozen=True)
@@ -86,7 +86,7 @@ def markdown(record: dict[str, Any]) -> str:
 
 @farm_main
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
+    p = ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--runs", type=Path, nargs="+", required=True, help="finished PlaNet-style run folders")
     p.add_argument("--preset", choices=sorted(PRESETS), default="budget", help="the baselines preset (default %(default)s)")
     p.add_argument("--out", type=Path, default=Path("results/planet_select"), help="output prefix (default %(default)s)")

@@ -37,6 +37,7 @@ from common import (TrainingBenchConfig, add_training_options, farm_main, logged
 from piga.io.atomic import atomic_output, write_json
 from piga.io.pool import JobRecords, RecordedJob, run_recorded
 from piga.world.model import ModelConfig
+from piga.cli.common import ArgumentParser
 
 #: The models of ``piga-train-model --model`` (one source: :class:`ModelConfig`'s ``architecture``).
 MODELS: tuple[str, ...] = get_args(get_type_hints(ModelConfig)["architecture"])
@@ -292,7 +293,7 @@ def ssim_figure(s: dict[str, dict[str, Any]]) -> Any:
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
+    p = ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--out", type=Path, default=Path("results/prediction"),
                    help="output prefix: OUT.json, OUT.md, OUT-ssim.png; runs and records in OUT_runs/ "
                         "(default %(default)s)")

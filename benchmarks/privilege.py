@@ -41,7 +41,7 @@ from baselines import PRESETS, data_file, evaluate, piga_epochs, train_piga
 from common import farm_main, machine, machine_words, signed
 
 from agents.reward_head import RewardHeadConfig
-from piga.cli.common import positive_int, seed_int
+from piga.cli.common import ArgumentParser, positive_int, seed_int
 from piga.io.atomic import atomic_output, write_json
 from piga.io.pool import JobRecords, RecordedJob, run_recorded
 
@@ -246,7 +246,7 @@ def markdown(record: dict[str, Any]) -> str:
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
+    p = ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--out", type=Path, default=Path("results/privilege"),
                    help="output prefix: OUT.json, OUT.md; runs and records in OUT_runs/ (default %(default)s)")
     p.add_argument("--sequences", type=positive_int, default=DEFAULTS.sequences,

@@ -13,7 +13,6 @@ small, so that pages can compare with the curve without the download.
 
 from __future__ import annotations
 
-import argparse
 import gzip
 import json
 import sys
@@ -23,10 +22,11 @@ from pathlib import Path
 from common import check_record, is_number
 
 from piga.io.atomic import write_json
+from piga.cli.common import ArgumentParser
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], allow_abbrev=False)
+    p = ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("scores", type=Path, help="a score file: a gzipped JSON list of {task, method, seed, xs, ys}")
     p.add_argument("--task", required=True, help="the task's name in the file, e.g. dmc_pendulum_swingup")
     p.add_argument("--source", required=True, help="where the file came from, for the record")

@@ -35,7 +35,7 @@ from common import TrainingBenchConfig, add_training_options, farm_main, logged_
 
 from prediction import run_training
 
-from piga.cli.common import nonnegative_int
+from piga.cli.common import ArgumentParser, nonnegative_int
 from piga.io.atomic import atomic_output, write_json
 from piga.io.pool import JobRecords, RecordedJob, run_recorded
 from piga.world.model import ModelConfig
@@ -351,7 +351,7 @@ def strip_figure(truth: np.ndarray, records: dict[str, np.ndarray], steps: tuple
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
+    p = ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--out", type=Path, default=Path("results/regions"),
                    help="output prefix: OUT.json, OUT.md, OUT-strip.png; runs and records in OUT_runs/ "
                         "(default %(default)s)")

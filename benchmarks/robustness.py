@@ -48,7 +48,6 @@ report ``converged: false``, and a parameter is more than 5% off; ``miss`` other
 
 from __future__ import annotations
 
-import argparse
 import fnmatch
 import json
 import math
@@ -72,7 +71,7 @@ import numpy as np
 from filelock import FileLock
 
 from common import add_ray_option, farm_main, job_command, machine, machine_words, ray_backend
-from piga.cli.common import NOT_CONVERGED, positive_int
+from piga.cli.common import ArgumentParser, NOT_CONVERGED, positive_int
 from piga.io.atomic import atomic_output, write_json
 from piga.io.pool import git_commit, run_pool
 from piga.data.schema import DatasetWriter
@@ -858,7 +857,7 @@ def list_rows(bench: Bench, chosen: list[Row]) -> str:
 
 @farm_main
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
+    p = ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--out", type=Path, default=Path("results/robustness"), help="output stem: OUT.md and OUT.json "
                    "(default %(default)s)")
     p.add_argument("--work", type=Path, default=Path("runs/robustness"),

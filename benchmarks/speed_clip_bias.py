@@ -11,7 +11,6 @@ clip touches and the fitted errors show why ``piga-collect`` keeps Gymnasium's Â
 
 from __future__ import annotations
 
-import argparse
 import shlex
 import sys
 from pathlib import Path
@@ -21,7 +20,7 @@ import numpy as np
 
 from envs.pendulum import MAX_ACTION, PENDULUM_DT
 from piga.io.atomic import atomic_output, write_json
-from piga.cli.common import positive_int, seed_int
+from piga.cli.common import ArgumentParser, positive_int, seed_int
 
 
 def fit(max_speed: float, sequences: int, steps: int, seed: int) -> dict[str, float]:
@@ -45,7 +44,7 @@ def fit(max_speed: float, sequences: int, steps: int, seed: int) -> dict[str, fl
 
 
 def main() -> None:
-    p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.split("\n")[0])
+    p = ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--out", default="results/speed_clip_bias", help="output stem (.json and .md)")
     p.add_argument("--sequences", type=positive_int, default=500)
     p.add_argument("--steps", type=positive_int, default=40)

@@ -28,7 +28,6 @@ rows from OUT.json's previous run, and the page names the command that measured 
 
 from __future__ import annotations
 
-import argparse
 import importlib.util
 import json
 import os
@@ -51,7 +50,7 @@ from common import machine, machine_words
 from piga.data.schema import FRAME_CODEC, DatasetWriter, FrameCodec, inspect_dataset, read_sequences
 from piga.data.windows import BlockShuffleSampler, SequenceWindows
 from piga.io.atomic import atomic_output, write_json
-from piga.cli.common import positive_int
+from piga.cli.common import ArgumentParser, positive_int
 
 CODECS: tuple[FrameCodec, ...] = typing.get_args(FrameCodec)
 #: The files measured: name -> piga-collect's arguments (after --out).
@@ -280,7 +279,7 @@ def markdown(result: dict[str, Any]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], allow_abbrev=False)
+    p = ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--work", type=Path, required=True, help="folder for the data files and runs")
     p.add_argument("--out", type=Path, required=True, help="writes OUT.json and OUT.md")
     p.add_argument("--repeats", type=positive_int, default=3, help="repeats of each timing (default %(default)s)")

@@ -32,7 +32,6 @@ Writes ``OUT.json``, ``OUT.md``, ``OUT-ssim.png`` (SSIM per step) and ``OUT-roll
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import shutil
@@ -52,7 +51,7 @@ from piga.data.schema import inspect_dataset
 from piga.io.pool import run_pool
 from piga.training.report import write_run_report
 from piga.training.train import preset_for, train
-from piga.cli.common import positive_int, seed_int
+from piga.cli.common import ArgumentParser, positive_int, seed_int
 
 #: Case -> the paper's learned values (its Table 1; none for bouncing). A case is a system, or
 #: "gravity-m": the gravity data with g held at the collection's value and the mass m learned
@@ -314,7 +313,7 @@ def _errors_line(run: dict[str, Any], true: bool = False) -> str:
 
 @farm_main
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
+    p = ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--out", type=Path, required=True, help="output prefix: OUT.json, OUT.md, OUT-*.png")
     p.add_argument("--systems", nargs="+", choices=SYSTEMS, default=SYSTEMS,
                    help="cases: the systems, and gravity-m (the gravity data, g held at 60, m learned)")

@@ -18,7 +18,6 @@ folder: the data files are collected there first, by this process).
 
 from __future__ import annotations
 
-import argparse
 import json
 import statistics
 import sys
@@ -36,7 +35,7 @@ from piga.evaluation.evaluate import EvalConfig, evaluate
 from piga.io.atomic import write_json
 from piga.world.model import ModelConfig
 from piga.training.train import PRESETS, TrainConfig, train
-from piga.cli.common import positive_int, seed_int
+from piga.cli.common import ArgumentParser, positive_int, seed_int
 
 #: case name -> (gravity, actuation gain, data seed)
 CASES: dict[str, tuple[float, float, int]] = {
@@ -95,7 +94,7 @@ def train_run(job: tuple[str, int, Path, Path]) -> dict[str, object]:
 
 @farm_main
 def main() -> None:
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0], allow_abbrev=False)
+    p = ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--out", default="results/train_accuracy", help="output stem (.json and .md)")
     p.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES))
     p.add_argument("--seeds", nargs="+", type=seed_int, default=None, help="training seeds (default: 0-4 for 'default', 0 otherwise)")

@@ -16,7 +16,6 @@ Writes OUT.json and OUT.md.
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 from typing import Any
@@ -30,7 +29,7 @@ from piga.io.atomic import atomic_output, write_json
 from piga.data.collect import sequence_rng
 from piga.data.collect_scenes import SCENE_STEPS
 from piga.world.model import ModelConfig, PhysicsModel
-from piga.cli.common import positive_int, seed_int
+from piga.cli.common import ArgumentParser, positive_int, seed_int
 
 SCENES = ("spring", "gravity", "digits-spring")
 MODES = {"cubic": {"velocity_physics": True}, "shoot": {"velocity_shoot": True}}
@@ -66,7 +65,7 @@ def fit(scene: str, positions: torch.Tensor, mode: str, steps: int, seed: int) -
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
+    p = ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--out", type=Path, required=True, help="output prefix: OUT.json and OUT.md")
     p.add_argument("--sequences", type=positive_int, default=200, help="sequences per scene (default %(default)s)")
     p.add_argument("--steps", type=positive_int, default=1000, help="Adam steps per fit (default %(default)s)")

@@ -15,14 +15,13 @@ Writes OUT.json, OUT.md and OUT-templates-sSEED.png (half data); data files and 
 
 from __future__ import annotations
 
-import argparse
 import sys
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 from common import farm_main, logged_command, machine, machine_words, write_page
-from piga.cli.common import seed_int
+from piga.cli.common import ArgumentParser, seed_int
 
 SEQUENCES, DATA_SEED = 100, 100
 """The collection of ``benchmarks/regions.py`` (its defaults), for every data set."""
@@ -108,7 +107,7 @@ def markdown(record: dict[str, Any]) -> str:
 
 @farm_main
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
+    p = ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--out", type=Path, default=Path("results/regions_warmup"), help="output prefix (default %(default)s)")
     p.add_argument("--seeds", type=seed_int, nargs="+", default=[0, 1, 2, 3], help="training seeds (default %(default)s)")
     p.add_argument("--data-sets", nargs="+", choices=list(DATA_SETS), default=list(DATA_SETS),

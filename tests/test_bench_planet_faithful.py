@@ -59,7 +59,7 @@ def test_a_variant_trains_with_its_settings_on_the_tables_data(faithful: Any, tm
     calls.clear()
     assert faithful.main(args) == 0 and calls == []  # the record is kept
     # --train-only trains PlaNet's sizes on the device asked for, and neither scores nor records nor writes a page
-    assert faithful.main([*args[:4], "--variants", "planet-sizes", "--device", "cuda", "--train-only",
+    assert faithful.main([*args[:2], "--variants", "planet-sizes", "--device", "cuda", "--train-only",
                           "--out", str(tmp_path / "trained")]) == 0
     assert calls == [("data", "runs", 500),
                      ("train", "data-n500.h5", "planet-sizes-n500-s0", 0,
