@@ -155,6 +155,31 @@ def test_stale_partials_of_a_name_with_glob_characters_are_removed(tmp_path: Pat
     assert (tmp_path / ".run1.h5.partial-999999999").exists()
 
 
+@pytest.mark.parametrize("hard_links", [True, False])
+def test_a_file_that_appears_while_writing_is_kept(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                  hard_links: bool) -> None:
+    """Two commands given one output both found it free: the second to finish is refused, and the first's file stays
+    (with hard links the refusal is one atomic step; without them, as on FAT, a check just before the rename)."""
+    from piga.io.atomic import atomic_output
+
+    if not hard_links:
+        def no_links(*args: object) -> None:
+            raise PermissionError(errno.EPERM, "Operation not permitted")
+        monkeypatch.setattr(os, "link", no_links)
+    target = tmp_path / "out.h5"
+    with pytest.raises(OutputExistsError, match="appeared while writing; pass --overwrite"):
+        with atomic_output(target) as tmp:
+            tmp.write_text("second")
+            target.write_text("first")
+    assert target.read_text() == "first" and os.listdir(tmp_path) == ["out.h5"]
+    with atomic_output(tmp_path / "new.h5") as tmp:
+        tmp.write_text("written")
+    assert (tmp_path / "new.h5").read_text() == "written" and sorted(os.listdir(tmp_path)) == ["new.h5", "out.h5"]
+    with atomic_output(target, overwrite=True) as tmp:
+        tmp.write_text("replaced")
+    assert target.read_text() == "replaced"
+
+
 @pytest.mark.parametrize("shift, ok", [(31, True), (-31, True), (32, False), (-63, False)])
 def test_a_shift_that_moves_the_pivot_out_of_the_frame_is_refused(shift: float, ok: bool) -> None:
     """shift=-63 passed the old check (|shift| < 64), collected, and then every frame was blank."""

@@ -171,6 +171,23 @@ def remove_stale_partials(target: Path) -> list[Path]:
     return removed
 
 
+def _rename_no_replace(tmp: Path, target: Path) -> None:
+    """Renames ``tmp`` to ``target`` unless ``target`` exists, in one step: a hard link refuses an existing name, so a
+    second writer that checked at the same moment (two commands given one ``--out``) cannot replace the first's file.
+    On a filesystem without hard links (FAT, some network shares): a check, then ``os.replace``."""
+    appeared = OutputExistsError(f"{target} appeared while writing; pass --overwrite to replace it")
+    try:
+        os.link(tmp, target)
+    except FileExistsError:
+        raise appeared from None
+    except OSError:  # no hard links here
+        if os.path.lexists(target):
+            raise appeared from None
+        os.replace(tmp, target)
+        return
+    tmp.unlink()
+
+
 @contextlib.contextmanager
 def atomic_output(path: str | os.PathLike[str], overwrite: bool = False) -> Iterator[Path]:
     """Yields a temporary path to write; on success renames it to ``path``.
@@ -186,9 +203,10 @@ def atomic_output(path: str | os.PathLike[str], overwrite: bool = False) -> Iter
     tmp = partial_path(target)
     try:
         yield tmp
-        if os.path.lexists(target) and not overwrite:  # appeared while we worked
-            raise OutputExistsError(f"{target} appeared while writing; pass --overwrite to replace it")
-        os.replace(tmp, target)
+        if overwrite:
+            os.replace(tmp, target)
+        else:
+            _rename_no_replace(tmp, target)
     finally:
         with contextlib.suppress(OSError):  # gone already (renamed, or never made)
             tmp.unlink()
