@@ -36,6 +36,10 @@ from piga.cli.common import ArgumentParser
 DMC_FRAMES_PER_STEP = DMCPendulumConfig().action_repeat
 
 
+#: Each DMC view (``piga-baseline ddpg --view``) in words; a record from before the option was seen face-on.
+VIEW_WORDS = {"face": "face-on camera, 64x64 gray", "fixed": "camera 0, 64x64 gray", "drqv2": "camera 0, 84x84 RGB"}
+
+
 def run_summary(name: str, record: dict[str, Any]) -> dict[str, Any]:
     """One run: its env, device and precision, steps trained of those planned, its curve in frames."""
     config = record["config"]
@@ -46,6 +50,7 @@ def run_summary(name: str, record: dict[str, Any]) -> dict[str, Any]:
     reached = next((r["step"] for r in curve if r["score"] > mark), None)
     return {"name": name, "env": env, "device": config.get("device", "auto"),
             "precision": config.get("encoder_precision", "float32"), "planned": config["steps"],
+            "view": VIEW_WORDS[config.get("view", "face")] if env == DMC_PENDULUM else "Gymnasium's render, 64x64 gray",
             "warmup_frames": config.get("learning_starts", 0) * per_step,
             "trained": curve[-1]["step"] if curve else 0, "curve": curve, "mark": mark, "first_step_above_mark": reached,
             "best": max((r["score"] for r in curve), default=None), "train_minutes": record.get("train_seconds", 0) / 60,
@@ -124,14 +129,14 @@ def markdown(record: dict[str, Any]) -> str:
         f"(its num_seed_frames, physics steps); a DMC run started before piga counted it in frames warmed up for "
         f"4,000 env steps, {4000 * DMC_FRAMES_PER_STEP:,} frames: the column says which.",
         "",
-        "| run | env | device, encoder | random warm-up (frames) | env steps trained (planned) | best evaluation | "
+        "| run | env | view | device, encoder | random warm-up (frames) | env steps trained (planned) | best evaluation | "
         "first step above the mark | training min |",
-        "|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for r in runs:
         first = f"{r['first_step_above_mark']:,}" if r["first_step_above_mark"] is not None else "not yet"
         best = signed(r["best"]) if r["best"] is not None else "—"
-        lines.append(f"| {r['name']} | {r['env']} | {r['device']}, {r['precision']} | {r['warmup_frames']:,} | "
+        lines.append(f"| {r['name']} | {r['env']} | {r['view']} | {r['device']}, {r['precision']} | {r['warmup_frames']:,} | "
                      f"{r['trained']:,} ({r['planned']:,}) | "
                      f"{best} | {first} (mark {r['mark']:g}) | {r['train_minutes']:.0f} |")
     dmc = [r for r in runs if r["env"] == DMC_PENDULUM]
@@ -147,10 +152,11 @@ def markdown(record: dict[str, Any]) -> str:
             "6 of 9.",
             "",
             "What differs from the published runs (DrQ-v2's own code and its easy-task settings, which piga's "
-            "preset takes): the frames are 64x64 gray through a camera on the hinge axis (DrQ-v2's: 84x84 RGB "
-            "through the suite's camera 0); a replay buffer of 100,000 transitions (its 1e6; either holds every "
-            "transition of a 50,000-step run); 5 evaluation episodes at each point (its 10); the warm-up as the "
-            "first table gives it.",
+            "preset takes): the view as the first table gives it (DrQ-v2's: 84x84 RGB through the suite's camera "
+            "0, in front of the pendulum and above it, looking down at 45°; piga's face-on camera sits on the hinge "
+            "axis); a replay buffer of 100,000 transitions (its 1e6; either holds every transition of a 50,000-step "
+            "run); 5 evaluation episodes at each point (its 10); the warm-up as the first table gives it. Two runs "
+            "that differ in their view alone show what the view changes.",
             "",
             *reference_lines(record.get("reference"), DMC_PENDULUM),
             "| frames | " + " | ".join(r["name"] for r in dmc) + " | published mean ± std | published range | seeds above 200 |",

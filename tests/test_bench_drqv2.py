@@ -39,7 +39,7 @@ def test_the_published_curve_is_read_per_seed_and_runs_are_set_beside_it(tmp_pat
 
     runs = tmp_path / "dmc.json"  # 25,000 env steps are 50,000 frames: the range there is 50-150
     runs.write_text(json.dumps(_record("piga/DMCPendulum-v0", [(25_000, 160.0), (50_000, 250.0)], encoder_precision="bfloat16",
-                                     learning_starts=2000)))
+                                     learning_starts=2000, view="fixed")))
     pixel = tmp_path / "pixel.json"  # a run from before --env and --encoder-precision: the pixel pendulum, float32
     pixel.write_text(json.dumps(_record(None, [(5000, -900.0), (10_000, -150.0)], learning_starts=4000)))
     out = tmp_path / "page"
@@ -52,8 +52,8 @@ def test_the_published_curve_is_read_per_seed_and_runs_are_set_beside_it(tmp_pat
     assert "same 2 evaluation starts" in page and ": no torque 1.5. A run's score" in page
     assert "| 50,000 | 160.0 (above) | 100 ± 50 | 50–150 | 0 of 2 |" in page
     assert "| 100,000 | 250.0 | 200 ± 100 | 100–300 | 1 of 2 |" in page
-    assert "| dmc | piga/DMCPendulum-v0 | auto, bfloat16 | 4,000 | 50,000 (50,000) | 250.0 | 50,000 (mark 200) | 2 |" in page
-    assert "| pixel | piga/PixelPendulum-v0 | auto, float32 | 4,000 | 10,000 (50,000) | −150.0 | 10,000 (mark -200) | 2 |" in page
+    assert "| dmc | piga/DMCPendulum-v0 | camera 0, 64x64 gray | auto, bfloat16 | 4,000 | 50,000 (50,000) | 250.0 | 50,000 (mark 200) | 2 |" in page
+    assert "| pixel | piga/PixelPendulum-v0 | Gymnasium's render, 64x64 gray | auto, float32 | 4,000 | 10,000 (50,000) | −150.0 | 10,000 (mark -200) | 2 |" in page
     assert out.with_suffix(".png").stat().st_size > 0
 
 
