@@ -52,6 +52,9 @@ def test_frames_to_float_layouts() -> None:
     assert frames_to_float(colour, 3).shape == (2, 3, 3, 8, 8)
     with pytest.raises(ValueError, match="frames must be"):
         frames_to_float(colour, 1)
+    assert torch.equal(frames_to_float(gray.numpy(), 1), frames_to_float(gray, 1))  # read_sequences' arrays as they are
+    with pytest.raises(TypeError, match="convert them with piga.frames_to_float"):
+        PhysicsModel(ModelConfig()).encode(gray.numpy())  # uint8 frames not converted
 
 
 def test_config_validation() -> None:

@@ -346,7 +346,8 @@ def window_inputs(config: ModelConfig, frames: Tensor, actions: Tensor,
 
 
 def frames_to_float(frames: Tensor, channels: int) -> Tensor:
-    """uint8 (B, T, H, W) or (B, T, H, W, C) -> float (B, T, C, H, W) in [0, 1]."""
+    """uint8 (B, T, H, W) or (B, T, H, W, C) -> float (B, T, C, H, W) in [0, 1]; a tensor or a numpy array."""
+    frames = torch.as_tensor(frames)  # read_sequences' numpy arrays too
     x = frames.float() / 255.0 if frames.dtype == torch.uint8 else frames.float()
     if x.dim() == 4:
         x = x.unsqueeze(2)  # (B, T, 1, H, W)
@@ -474,6 +475,9 @@ class ObjectModel(FrameModel):
 
     def encode(self, frames: Tensor) -> Tensor:
         """Float frames (B, T, C, H, W) -> coordinates (B, T, N, D)."""
+        if not isinstance(frames, Tensor) or frames.dim() != 5:
+            raise TypeError(f"encode takes float frames as a tensor (B, T, C, H, W), got {type(frames).__name__} "
+                            f"{tuple(getattr(frames, 'shape', ()))}: convert them with piga.frames_to_float")
         b, t = frames.shape[:2]
         coords = self.encoder(frames.flatten(0, 1).contiguous(memory_format=torch.channels_last))
         return coords.view(b, t, *coords.shape[1:])
