@@ -703,6 +703,17 @@ def test_ddpg_on_a_full_disk(tmp_path: Path, capsys: pytest.CaptureFixture[str],
     assert _listing(tmp_path) == []
 
 
+def test_ddpg_refuses_a_replay_buffer_beyond_the_memory(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                        monkeypatch: pytest.MonkeyPatch) -> None:
+    """SB3 allocates the buffer untouched and fills it as the run goes: refused before the run, not killed hours in."""
+    from piga.io import resources
+
+    monkeypatch.setattr(resources, "available_memory", lambda: 10**6)
+    refused("piga-baseline", ["ddpg", "--obs", "pixels", "--out", str(tmp_path / "run"), *TINY_DDPG], capsys,
+            "DDPG's replay buffer of", "(--buffer-size) needs about", "of memory, but 976.6 KiB is available; ask for less")
+    assert _listing(tmp_path) == []
+
+
 def _truncate(run: Path) -> None:
     with open(run / "checkpoint.pt", "r+b") as f:
         f.truncate(100)

@@ -474,7 +474,7 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
     from agents.sb3.config import SB3Config, resolve_precision  # it checks --eval-every against the env's episode length
     from agents.sb3.run import AUTOENCODER
     from agents.sb3.train import first_step_reaching, train_sb3
-    from piga.io.resources import check_run_disk
+    from piga.io.resources import check_memory, check_run_disk
     from piga.training.train import TrainingDiverged
 
     run_dir = Path(args.out)
@@ -542,6 +542,9 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
             record["data_fingerprint"] = fingerprint(args.data)
         checkpoint_bytes = _ddpg_checkpoint_bytes(config, ae_config.latent_size)
     check_run_disk(run_dir, checkpoint_bytes, f"{config.algo.upper()}'s run (a replay buffer of {config.buffer_size})")
+    # SB3 allocates the buffer untouched and fills it as the run goes: a buffer beyond the memory would be killed hours in
+    check_memory(_ddpg_checkpoint_bytes(config, AutoencoderConfig.latent_size),
+                 f"{config.algo.upper()}'s replay buffer of {config.buffer_size} (--buffer-size)")
     autoencoder = run_dir / AUTOENCODER if config.obs == "latent" else None
     written: list[int] = []
 
