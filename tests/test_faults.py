@@ -1877,6 +1877,27 @@ def test_a_baseline_run_killed_before_its_record_says_overwrite_both_ways(baseli
     refused("piga-baseline", [*argv[:5], "--resume"], capsys, "config.json is missing", "--overwrite")
 
 
+@pytest.mark.parametrize("kind", ["ddpg", "planet"])
+def test_a_baseline_runs_record_is_written_before_its_first_checkpoint(kind: str, tiny_data: Path, tmp_path: Path,
+                                                                       capsys: pytest.CaptureFixture[str],
+                                                                       monkeypatch: pytest.MonkeyPatch) -> None:
+    """So that no kill leaves a checkpoint without the record that --resume needs."""
+    import agents.planet.train as planet_train
+    import agents.sb3.train as sb3_train
+
+    module = sb3_train if kind == "ddpg" else planet_train
+    save, seen = module._save, []
+
+    def checked_save(*args: object, **kwargs: object) -> None:
+        seen.append((tmp_path / "run" / "config.json").exists() and not (tmp_path / "run" / "checkpoint.pt").exists())
+        save(*args, **kwargs)
+
+    monkeypatch.setattr(module, "_save", checked_save)
+    argv = ["ddpg", "--obs", "state", *TINY_DDPG] if kind == "ddpg" else ["planet", str(tiny_data), *TINY_PLANET]
+    code, _, err = run_in_process("piga-baseline", baseline.main, *argv, "--out", str(tmp_path / "run"), capsys=capsys)
+    assert code in (0, 1) and "Traceback" not in err and seen[:1] == [True], err
+
+
 def test_control_names_a_missing_model_folder_before_judging_workers(tmp_path: Path,
                                                                      capsys: pytest.CaptureFixture[str]) -> None:
     """--model of a folder that does not exist, with --workers, was told "--workers runs the jobs of --sweep"."""

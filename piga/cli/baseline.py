@@ -424,6 +424,8 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
 
     try:
         with _nothing_left_unless_checkpointed(run_dir, written, fresh=not args.resume):
+            if not args.resume:  # before the first checkpoint: a checkpoint is never without the record of its run
+                write_json(run_dir / "config.json", record)
             if iterative is not None:
                 _, state = train_planet_iterative(args.data, run_dir, config, iterative, rssm, resume=args.resume,
                                                   progress=not args.quiet, on_checkpoint=on_checkpoint, command=command)
@@ -555,6 +557,8 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
 
     try:
         with _nothing_left_unless_checkpointed(run_dir, written, fresh=not args.resume):
+            if not args.resume:  # before the first checkpoint (again after it, with the autoencoder's): see planet's
+                write_json(run_dir / "config.json", record)
             if autoencoder is not None and not args.resume:
                 from agents.sb3.autoencoder import train_autoencoder
 
