@@ -57,6 +57,7 @@ import numpy as np
 from gymnasium.wrappers import FrameStackObservation, GrayscaleObservation, ReshapeObservation, TransformObservation
 
 from envs.fields import check_field_kinds
+from envs.pendulum import MIN_ACTUATION_GAIN
 
 __all__ = ["CAMERAS", "COLORS", "DMC_PHYSICS_DT", "DMC_EPISODE_STEPS", "DMCPendulumConfig", "MissingExtraError", "make_dmc_pendulum",
            "DMCPendulumEnv"]
@@ -82,6 +83,12 @@ TIP_RADIUS = 0.05
 EARTH_GRAVITY = 9.81
 #: The camera sees a square of this half-side (metres) around the pivot: a pole up to 0.6 m fits.
 VIEW_HALF_SIDE = 0.7
+#: Largest frame side (pixels): MuJoCo renders it off-screen, and far larger frames would not fit a replay buffer.
+MAX_IMAGE_SIZE = 1024
+#: Most frames in one observation.
+MAX_FRAME_STACK = 64
+#: Longest episode in frames (a million: 11 hours of the pendulum's time at the default action repeat).
+MAX_EPISODE_LENGTH = 1_000_000
 #: Vertical field of view of the face-on camera, degrees.
 CAMERA_FOVY = 45.0
 Flip = Literal["none", "camera", "motor"]
@@ -146,11 +153,12 @@ class DMCPendulumConfig:
                                  + ("0 or " if name == "damping" else "") + "a larger value")
         longest = VIEW_HALF_SIDE - 2 * TIP_RADIUS
         checks = {  # each field: whether it is in range, and its range in words
-            "image_size": (self.image_size >= 8, "image_size >= 8"),
-            "frame_stack": (self.frame_stack >= 1, "frame_stack >= 1"),
+            "image_size": (8 <= self.image_size <= MAX_IMAGE_SIZE, f"image_size in [8, {MAX_IMAGE_SIZE}]"),
+            "frame_stack": (1 <= self.frame_stack <= MAX_FRAME_STACK, f"frame_stack in [1, {MAX_FRAME_STACK}]"),
             "action_repeat": (1 <= self.action_repeat <= MAX_ACTION_REPEAT, f"action_repeat in [1, {MAX_ACTION_REPEAT}]"),
-            "episode_length": (self.episode_length >= 0, "episode_length >= 0"),
-            "mass": (MIN_MASS <= self.mass < math.inf, f"mass >= {MIN_MASS:g}, finite"),
+            "episode_length": (0 <= self.episode_length <= MAX_EPISODE_LENGTH, f"episode_length in [0, {MAX_EPISODE_LENGTH:,}]"),
+            "mass": (MIN_MASS <= self.mass <= self.max_mass, f"mass in [{MIN_MASS:g}, {self.max_mass:.4g}]; heavier, "
+                     f"the torque's effect 1 / (3 I) is below {MIN_ACTUATION_GAIN:g}, too weak for a frame to show"),
             "length": (0 < self.length <= longest, f"length in (0, {longest:g}]"),
             "damping": (0 <= self.damping <= MAX_DAMPING, f"damping in [0, {MAX_DAMPING:g}]"),
             "flip": (self.flip in FLIPS, f"flip in {FLIPS}"),
@@ -167,6 +175,11 @@ class DMCPendulumConfig:
         if self.camera == "fixed" and (self.flip == "camera" or self.camera_distance != 1.0):
             raise ValueError("DMCPendulumConfig: flip='camera' and camera_distance move the face-on camera; "
                              "camera='fixed' is dm_control's own, which they leave as it is")
+
+    @property
+    def max_mass(self) -> float:
+        """The heaviest tip whose torque the frames still show (actuation gain at least :data:`MIN_ACTUATION_GAIN`)."""
+        return 1.0 / (3.0 * MIN_ACTUATION_GAIN * (self.length**2 + 0.4 * TIP_RADIUS**2))
 
     @property
     def channels(self) -> int:

@@ -189,6 +189,11 @@ def test_config_refuses_bad_values():
     assert DMCPendulumConfig(action_repeat=4).dt == pytest.approx(0.08)
     with pytest.raises(ValueError, match="color"):
         DMCPendulumConfig(color="blue")
+    with pytest.raises(ValueError, match="mass=1e\\+300 is out of range .*too weak for a frame to show"):
+        DMCPendulumConfig(mass=1e300)  # a file whose actions are 0 in float32 was written
+    for name in ("image_size", "frame_stack", "episode_length"):
+        with pytest.raises(ValueError, match=f"{name}=1000000000000000000000000000000 is out of range"):
+            DMCPendulumConfig(**{name: 10**30})
     with pytest.raises(ValueError, match="camera='fixed' is dm_control's own"):
         DMCPendulumConfig(camera="fixed", flip="camera")
     from piga.data.collect import CollectConfig

@@ -3,6 +3,7 @@ swing-up with a torque limit of 1, and piga-control's DMC options."""
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -80,3 +81,26 @@ def test_piga_control_dmc_oracle_scores_and_refuses_gymnasium_options(tmp_path, 
     for argv, needle in ((("--env", "piga/DMCPendulum-v0", "--horizon", "5"), "--horizon"),
                          (("--oracle", "--env-option", "mass=2"), "--env-option")):
         assert_one_line_error(completed_in_process("piga-control", main, *argv, capsys=capsys), needle)
+
+
+def test_a_piga_model_is_run_only_through_the_view_it_was_identified_on(tmp_path):
+    """A piga model given RGB frames failed inside its velocity estimator, and one given dm_control's camera 0 after
+    identification face-on scored through a camera it never saw: both refused before an episode."""
+    import h5py
+
+    from envs.dmc import DMCPendulumConfig
+    from piga.cli.common import PigaError
+    from piga.cli.control import _check_piga_view
+
+    data = tmp_path / "fixed.h5"
+    with h5py.File(data, "w") as f:
+        f.attrs["env_config"] = json.dumps({"camera": "fixed"})
+    fixed, face = {"data": {"path": str(data)}}, {"data": {"path": str(tmp_path / "gone.h5")}}
+    _check_piga_view("run", fixed, DMCPendulumConfig(camera="fixed"))
+    _check_piga_view("run", face, DMCPendulumConfig())
+    with pytest.raises(PigaError, match="read gray frames; drop --env-option color=rgb"):
+        _check_piga_view("run", face, DMCPendulumConfig(color="rgb"))
+    with pytest.raises(PigaError, match="identified through the 'face' camera, not 'fixed'; drop --env-option camera"):
+        _check_piga_view("run", face, DMCPendulumConfig(camera="fixed"))
+    with pytest.raises(PigaError, match="through the 'fixed' camera, not 'face'; give --env-option camera=fixed"):
+        _check_piga_view("run", fixed, DMCPendulumConfig())

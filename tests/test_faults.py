@@ -651,6 +651,44 @@ def test_planet_resume_refuses(argv: tuple[str, ...], edit: Callable[[Path], Non
     assert _listing(run) == before
 
 
+@pytest.mark.parametrize("kind", ["planet", "ddpg"])
+def test_resume_takes_the_runs_own_values_written_out(kind: str, baseline_runs: dict[str, Path], tiny_data: Path,
+                                                       tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """--seed 0 on a run of seed 0 was refused ("drop --seed") unless its starting command had written it, while
+    piga-train-model took it: the run's own values may be named on --resume, another is refused."""
+    run = _run_copy(baseline_runs[kind], tmp_path / "run")
+    section = "train" if kind == "planet" else "ddpg"
+    assert json.loads((run / "config.json").read_text())[section]["seed"] == 0
+    head = ["planet", str(tiny_data)] if kind == "planet" else ["ddpg", "--obs", "state"]
+    more = ["--steps", "4"] if kind == "planet" else ["--steps", "400"]
+    code, _, err = run_in_process("piga-baseline", baseline.main, *head, "--out", str(run), "--resume", *more, "--seed",
+                                  "0", "--threads", "1", "--quiet", capsys=capsys)
+    assert code in (0, 1) and "drop" not in err and "Traceback" not in err, err
+    refused("piga-baseline", [*head, "--out", str(run), "--resume", *more, "--seed", "5", "--quiet"], capsys,
+            "drop --seed")
+
+
+def test_ddpg_resume_names_an_edited_record_and_another_runs_buffer(baseline_runs: dict[str, Path], tmp_path: Path,
+                                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    """A record whose recipe no longer matched its checkpoint was blamed on the checkpoint ("may be truncated"), and
+    another run's replay buffer failed at the first step in numpy's words ("could not broadcast")."""
+    from stable_baselines3.common.buffers import ReplayBuffer
+    from stable_baselines3.common.save_util import save_to_pkl
+
+    run = _run_copy(baseline_runs["ddpg"], tmp_path / "run", _edit_record(lambda r: r["ddpg"].__setitem__("gamma", 0.5)))
+    argv = ["ddpg", "--obs", "state", "--out", str(run), "--resume", "--steps", "400", "--quiet"]
+    refused("piga-baseline", argv, capsys, "config.json does not describe the run its checkpoint holds (gamma 0.5 "
+            "there, 0.98 in the checkpoint): restore the record's values")
+    run = _run_copy(baseline_runs["ddpg"], tmp_path / "run2")
+    (buffer,) = (run / "replay_buffers").iterdir()
+    import gymnasium as gym
+
+    other = ReplayBuffer(10, gym.spaces.Box(-1, 1, (4,)), gym.spaces.Box(-1, 1, (1,)), device="cpu")
+    save_to_pkl(buffer, other)
+    refused("piga-baseline", [*argv[:4], str(run), *argv[5:]], capsys, f"{buffer} is the replay buffer of another run "
+            "(observations (4,), this run's (3,))")
+
+
 def test_planet_resume_takes_the_model_sizes_from_its_checkpoint(baseline_runs: dict[str, Path], tiny_data: Path,
                                                                  tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """A config.json whose 'rssm' was edited into a list was an internal error (AttributeError); the checkpoint holds
@@ -1896,6 +1934,28 @@ def test_a_baseline_runs_record_is_written_before_its_first_checkpoint(kind: str
     argv = ["ddpg", "--obs", "state", *TINY_DDPG] if kind == "ddpg" else ["planet", str(tiny_data), *TINY_PLANET]
     code, _, err = run_in_process("piga-baseline", baseline.main, *argv, "--out", str(tmp_path / "run"), capsys=capsys)
     assert code in (0, 1) and "Traceback" not in err and seen[:1] == [True], err
+
+
+def test_a_run_killed_before_its_first_checkpoint_is_simply_run_again(tmp_path: Path,
+                                                                       capsys: pytest.CaptureFixture[str]) -> None:
+    """A SIGKILL before the first checkpoint left TensorBoard's folder and the record, and the rerun was refused
+    ("pass --overwrite"). What such a run leaves is replaced; a file of value, or a config.json that is not such a
+    run's record, is still the user's to keep."""
+    run = tmp_path / "run"
+    (run / "tensorboard" / "ddpg_0").mkdir(parents=True)
+    (run / "tensorboard" / "ddpg_0" / "events.out").write_text("")
+    (run / "config.json").write_text(json.dumps({"command": "piga-baseline ddpg --obs state", "kind": "ddpg"}))
+    argv = ["ddpg", "--obs", "state", "--out", str(run), *TINY_DDPG]
+    code, out, err = run_in_process("piga-baseline", baseline.main, *argv, capsys=capsys)
+    assert code in (0, 1) and "removing what a run of" in out and (run / "checkpoint.pt").exists(), err
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "config.json").write_text('{"another tool": true}')
+    refused("piga-baseline", [*argv[:3], "--out", str(other), *TINY_DDPG], capsys,
+            "holds outputs of an earlier run but no checkpoint (config.json)", "--overwrite")
+    (run / "checkpoint.pt").unlink()
+    (run / "autoencoder.pt").write_text("minutes of training")
+    refused("piga-baseline", argv, capsys, "holds outputs of an earlier run but no checkpoint", "--overwrite")
 
 
 def test_control_names_a_missing_model_folder_before_judging_workers(tmp_path: Path,

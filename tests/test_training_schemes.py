@@ -146,11 +146,30 @@ def test_each_option_trains_is_recorded_and_kept_by_resume(flag: str, value: str
     code, _, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), "--resume", flag, value,
                                   "--batch-size", "16", "--epochs", "2", "--quiet", capsys=capsys)
     assert_one_line(code, err, "--resume keeps the run's recipe; drop --batch-size")
-    # the starting command's own values may be repeated: that command plus --resume (and more epochs) continues the run
+    code, _, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), "--resume", "--preset", "continuous",
+                                  "--epochs", "2", "--quiet", capsys=capsys)  # it was taken, and ignored
+    assert_one_line(code, err, "--resume keeps the run's recipe; drop --preset")
+    # the starting command's own values may be repeated: that command plus --resume (and more epochs) continues the
+    # run, and so may the run's own preset (the default's) be named
     code, stdout, _ = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), "--resume", flag, value,
                                      "--batch-size", "8", "--warmup-fraction", "0.5", "--epochs", "2", "--quiet",
-                                     capsys=capsys)
+                                     "--preset", "fast", capsys=capsys)
     assert "epoch 2:" in stdout and json.loads((out / "metrics.json").read_text())["training"]["steps"] == 4
+
+
+def test_resume_refuses_another_preset_and_takes_the_runs_own(small_data: Path, tmp_path: Path,
+                                                                capsys: pytest.CaptureFixture[str]) -> None:
+    """A run of --preset continuous resumed with --preset fast: the preset was taken and ignored."""
+    out = tmp_path / "run"
+    code, _, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), "--preset", "continuous",
+                                  "--budget-steps", "2", *SMALL[2:], capsys=capsys)
+    assert code in (0, 1, 3), err
+    code, _, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), "--resume", "--preset", "fast",
+                                  "--quiet", capsys=capsys)
+    assert_one_line(code, err, "--resume keeps the run's recipe; drop --preset")
+    code, _, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), "--resume", "--preset", "continuous",
+                                  "--quiet", capsys=capsys)
+    assert code in (0, 1, 3) and "Traceback" not in err, err
 
 
 def test_video_lstm_with_separate_is_refused_in_one_line(small_data: Path, tmp_path: Path,

@@ -196,6 +196,20 @@ def _save(run_dir: Path, model: Any, config: SB3Config, episodes: int, history: 
         tmp.write_bytes(policy.getvalue())
 
 
+def _check_record_matches(run_dir: Path, config: SB3Config, ckpt: dict[str, Any]) -> None:
+    """Raises a ValueError naming ``config.json`` where its recipe (``config``) differs from the one the checkpoint
+    holds (an edited record): the checkpoint is then not at fault."""
+    held = ckpt.get("config") if isinstance(ckpt.get("config"), dict) else {}
+    ours = config.to_dict()
+    differ = [name for name in ours if name in held and name not in ("steps", "threads", "device")
+              and (list(held[name]) if isinstance(held[name], tuple) else held[name])
+              != (list(ours[name]) if isinstance(ours[name], tuple) else ours[name])]
+    if differ:
+        raise ValueError(f"{run_dir / 'config.json'} does not describe the run its checkpoint holds ("
+                         + ", ".join(f"{n} {ours[n]!r} there, {held[n]!r} in the checkpoint" for n in differ)
+                         + "): restore the record's values")
+
+
 def _load_replay_buffer(model: Any, run_dir: Path, ckpt: dict[str, Any]) -> None:
     """Fills ``model``'s replay buffer from the file the checkpoint names (or, in a checkpoint written before buffers
     had files of their own, from its bytes)."""
@@ -216,6 +230,11 @@ def _load_replay_buffer(model: Any, run_dir: Path, ckpt: dict[str, Any]) -> None
         model.load_replay_buffer(path)
     except Exception as exc:  # a truncated or foreign file
         raise unreadable(path, RunKind.DDPG, exc, what=f"replay buffer of a {RunKind.DDPG.label} run") from None
+    shape = tuple(getattr(model.replay_buffer, "obs_shape", model.observation_space.shape))
+    if shape != tuple(model.observation_space.shape):  # another run's: the first step would fail to store into it
+        raise ValueError(f"{path} is the replay buffer of another run (observations {shape}, this run's "
+                         f"{tuple(model.observation_space.shape)}): put back the run's own, or train it again with "
+                         "--overwrite")
 
 
 def _check_finite(model: Any, callback: Any, evaluated: bool, checkpoint: Path) -> None:
@@ -290,6 +309,7 @@ def train_sb3(config: SB3Config, run_dir: str | Path, autoencoder: str | Path | 
     elapsed = 0.0
     if resume:
         ckpt = read_checkpoint(run_dir, RunKind.DDPG)
+        _check_record_matches(run_dir, config, ckpt)
         try:
             # the zip holds the TensorBoard folder of the run's first invocation: log where the run is now
             model = algorithm.load(io.BytesIO(ckpt["model_zip"]), env=venv, device=device,

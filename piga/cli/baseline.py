@@ -168,6 +168,23 @@ def _common(p: ArgumentParser) -> None:
     p.add_argument("--quiet", action="store_true", help="no progress bars")
 
 
+#: What a run of this command killed (SIGKILL, a power cut) before its first checkpoint leaves, and nothing of
+#: value: TensorBoard's first events, the record written before the checkpoint, a replay buffer's folder.
+DISPOSABLE = ("tensorboard", "config.json", "replay_buffers")
+
+
+def _left_before_a_checkpoint(run_dir: Path, existing: list[str], kind: RunKind) -> bool:
+    """Whether ``existing`` (no checkpoint among them) is only what a run of ``kind`` killed before its first
+    checkpoint leaves (:data:`DISPOSABLE`; a config.json only if it is such a run's record), so that rerunning the
+    command replaces it without ``--overwrite``; anything else (an autoencoder, collected data) is the user's to keep."""
+    if not set(existing) <= set(DISPOSABLE):
+        return False
+    if "config.json" in existing:
+        record, _ = read_run_record(run_dir)
+        return bool(record) and record.get("kind") == kind.value and isinstance(record.get("command"), str)
+    return True
+
+
 def _check_run_dir(run_dir: Path, resume: bool, overwrite: bool, kind: RunKind) -> None:
     """Refuses to clobber a run, or to resume what is not one of this kind; clears it with ``overwrite``."""
     check_folder_target(run_dir)
@@ -189,6 +206,10 @@ def _check_run_dir(run_dir: Path, resume: bool, overwrite: bool, kind: RunKind) 
         if recorded != kind.value:
             what = f"a {recorded} run" if recorded else "a piga-train-model run (its config.json has no 'kind')"
             raise PigaError(f"--resume: {run_dir} is {what}, not a {kind.value} run ({kind.writer})")
+        return
+    if existing and not overwrite and CHECKPOINT not in existing and _left_before_a_checkpoint(run_dir, existing, kind):
+        print(f"removing what a run of {run_dir} stopped before its first checkpoint left ({', '.join(existing)})")
+        remove_outputs(run_dir, existing)
         return
     if existing and not overwrite:
         if CHECKPOINT not in existing:  # a run killed before its first checkpoint: nothing to continue
@@ -256,9 +277,12 @@ def _refuse_recipe_changes(args: Any, record: dict[str, Any], run_dir: Path, arg
     skip = {"baseline", "data", "out", "obs", "algo", "resume", "overwrite", "iterative", "quiet", *RESUME_OPTIONS[kind]}
     given = _given_options(kind, argv)
     started = recorded_options(build_parser(), record.get("command")) or {}  # the starting command's values may be repeated
+    # and so may the run's own settings, as its record holds them (--seed 0 on a run of seed 0)
+    sections = ("rssm", "train", "iterative") if kind == "planet" else ("ddpg",)
+    own = {k: v for section in sections if isinstance(record.get(section), dict) for k, v in record[section].items()}
     changed = [name for name, value in vars(args).items()
                if name not in skip and (value != defaults[name] or name in given)
-               and not (name in started and started[name] == value)]
+               and not (name in started and started[name] == value) and not (name in own and own[name] == value)]
     if changed:
         raise PigaError(f"--resume keeps the run's recipe; drop {', '.join('--' + c.replace('_', '-') for c in changed)}")
     recorded = record.get("data")

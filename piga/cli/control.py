@@ -519,6 +519,19 @@ def _sb3_view(agent: SB3Agent, env: DMCPendulumConfig, given: set[str]) -> DMCPe
     return replace(env, **view)
 
 
+def _check_piga_view(run_dir: str, checkpoint: dict, env: DMCPendulumConfig) -> None:
+    """A piga model reads gray frames through the camera of the data it was identified on (its training file's,
+    face-on where the file is gone): another is refused before an episode runs."""
+    from piga.io.runs import training_env_config
+
+    if env.color != "gray":
+        raise PigaError("piga's models read gray frames; drop --env-option color=rgb")
+    trained = training_env_config(checkpoint).get("camera", "face")
+    if env.camera != trained:
+        raise PigaError(f"{run_dir} was identified through the {trained!r} camera, not {env.camera!r}; "
+                        + ("drop --env-option camera" if trained == "face" else f"give --env-option camera={trained}"))
+
+
 def _dmc(args: argparse.Namespace, argv: Sequence[str] | None, given: set[str]) -> int:
     """``--env piga/DMCPendulum-v0``: the piga agent and/or the oracle, scored in DMC's units."""
     from piga.cli.collect import _env_option, dmc_config
@@ -559,7 +572,8 @@ def _dmc(args: argparse.Namespace, argv: Sequence[str] | None, given: set[str]) 
             raise PigaError(f"{args.model} is a {kind.value} run; --env {DMC_PENDULUM} runs piga models, the oracle and "
                             "SB3 runs trained on it")
         else:
-            model, _ = load_model(args.model)
+            model, checkpoint = load_model(args.model)
+            _check_piga_view(args.model, checkpoint, config.env)
             if abs(model.config.dt - config.env.dt) > 1e-9:
                 raise PigaError(f"{args.model}: the model was trained at dt {model.config.dt} s, the env steps "
                                 f"{config.env.dt} s (set --env-option action_repeat)")

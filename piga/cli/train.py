@@ -210,14 +210,16 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
                             f"as {float(data['dt']):g} s apart (its physics steps that long): restore the file's 'dt', or "
                             "train a new run (without --resume)")
         saved = TrainConfig.from_dict(ckpt["train_config"])
+        stored, why = read_run_record(run_dir)
+        started = recorded_options(build_parser(), stored.get("command")) or {}
+        started_preset = started.get("preset", build_parser().get_default("preset"))  # the run's, as its command gave it
         changed = (sorted(set(overrides) - {"epochs", "budget_steps", "max_minutes"}) + (["signed_actuation"] if args.signed_actuation else [])
-                   + (["fixed_g"] if args.fixed_g is not None else []) + (["preset"] if args.preset != "fast" else [])
+                   + (["fixed_g"] if args.fixed_g is not None else [])
+                   + (["preset"] if "preset" in options_given and args.preset != started_preset else [])
                    + (["seed"] if "seed" in options_given and args.seed != saved.seed else [])
                    + (["seed_retries"] if "seed_retries" in options_given else [])
                    + [name for name in ("data_loading", "stream_cache_mb")
                       if getattr(args, name) is not None and getattr(args, name) != getattr(saved, name)])
-        stored, why = read_run_record(run_dir)
-        started = recorded_options(build_parser(), stored.get("command")) or {}
         changed = [name for name in changed if name not in started or started[name] != getattr(args, name)]
         if changed:  # (the starting command's own values may be repeated: that command plus --resume continues the run)
             raise PigaError(f"--resume keeps the run's recipe; drop {', '.join('--' + c.replace('_', '-') for c in changed)}")

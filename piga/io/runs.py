@@ -174,20 +174,26 @@ def training_blank_mse(model: PhysicsModel, checkpoint: dict[str, Any] | None, m
     return float(((x - model.encoder.background) ** 2).mean())
 
 
-def training_arrow(checkpoint: dict[str, Any] | None) -> bool:
-    """Whether the data the model was identified on showed Gymnasium's torque arrow: from the
-    ``env_config`` of the training file named in the checkpoint, if that file is still there, else
-    True (Gymnasium's own picture, the pixel pendulum's default)."""
+def training_env_config(checkpoint: dict[str, Any] | None) -> dict[str, Any]:
+    """The ``env_config`` of the training file named in the checkpoint, if that file is still there and has one,
+    else {} (a file of another source, or moved)."""
     import h5py
 
     path = training_data_path(checkpoint)
     if path is None:
-        return True
+        return {}
     try:
         with h5py.File(path, "r") as f:
-            return bool(json.loads(f.attrs["env_config"]).get("draw_torque_arrow", True))
+            config = json.loads(f.attrs["env_config"])
     except (OSError, KeyError, ValueError):
-        return True
+        return {}
+    return config if isinstance(config, dict) else {}
+
+
+def training_arrow(checkpoint: dict[str, Any] | None) -> bool:
+    """Whether the data the model was identified on showed Gymnasium's torque arrow: from the training file's
+    ``env_config`` (:func:`training_env_config`), else True (Gymnasium's own picture, the pixel pendulum's default)."""
+    return bool(training_env_config(checkpoint).get("draw_torque_arrow", True))
 
 
 def nominal_of(model: PhysicsModel) -> Nominal:
@@ -197,5 +203,5 @@ def nominal_of(model: PhysicsModel) -> Nominal:
                    float(p.get("b", 0.0)), model.config.integrator, bool(model.config.velocity_hold))
 
 
-__all__ = ["Nominal", "convergence_warning", "load_model", "nominal_of", "training_arrow", "training_blank_mse",
+__all__ = ["Nominal", "convergence_warning", "load_model", "nominal_of", "training_arrow", "training_env_config", "training_blank_mse",
            "training_reconstruction_mse", "training_steps"]
