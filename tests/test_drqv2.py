@@ -243,6 +243,10 @@ def test_a_dmc_run_of_drqv2s_view_sees_84x84_rgb_and_is_scored_through_it() -> N
 
     with pytest.raises(ValueError, match="a view of piga/DMCPendulum-v0"):
         replace(TINY, view="drqv2")
+    with pytest.raises(ValueError, match="a finite learning_rate > 0"):
+        replace(TINY, learning_rate=float("inf"))
+    with pytest.raises(ValueError, match="SB3Config.noise_final_std must be at most 10"):
+        replace(TINY, noise_final_std=float("inf"))
     config = replace(TINY, env=DMC_PENDULUM, steps=1000, eval_every=500, view="drqv2")
     assert config.frame_pixels == 3 * 84 * 84 and replace(config, view="fixed").frame_pixels == 64 * 64
     venv = _vec_env(config, None, 0, episode_seed=0)

@@ -10,6 +10,7 @@ Build a new config to change ``algo`` or ``obs`` (``dataclasses.replace`` keeps 
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass
 from typing import Any, Literal, get_args
 
@@ -201,14 +202,15 @@ class SB3Config:
         for name in ("learning_starts", "seed", "noise_decay_steps", "threads"):
             if getattr(self, name) < 0:
                 raise ValueError(f"SB3Config.{name} must be >= 0, got {getattr(self, name)}")
-        if not (0 < self.gamma <= 1 and self.learning_rate > 0 and 0 < self.tau <= 1 and self.noise_std >= 0
+        if not (0 < self.gamma <= 1 and 0 < self.learning_rate < math.inf and 0 < self.tau <= 1 and self.noise_std >= 0
                 and self.noise_final_std >= 0):
-            raise ValueError(f"SB3Config: need 0 < gamma <= 1, learning_rate > 0, 0 < tau <= 1, noise_std >= 0, "
+            raise ValueError(f"SB3Config: need 0 < gamma <= 1, a finite learning_rate > 0, 0 < tau <= 1, noise_std >= 0, "
                              f"noise_final_std >= 0; got gamma={self.gamma}, learning_rate={self.learning_rate}, "
                              f"tau={self.tau}, noise_std={self.noise_std}, noise_final_std={self.noise_final_std}")
-        if max(self.noise_std, self.noise_final_std) > MAX_NOISE_STD:
-            raise ValueError(f"noise_std must be at most {MAX_NOISE_STD:g} (a std in SB3's [-1, 1] action scale; far "
-                             f"beyond 1 every noisy action is clipped to a bound), got {max(self.noise_std, self.noise_final_std):g}")
+        for name in ("noise_std", "noise_final_std"):
+            if getattr(self, name) > MAX_NOISE_STD:
+                raise ValueError(f"SB3Config.{name} must be at most {MAX_NOISE_STD:g} (a std in SB3's [-1, 1] action "
+                                 f"scale; far beyond 1 every noisy action is clipped to a bound), got {getattr(self, name):g}")
         if self.eval_every > self.steps:
             raise ValueError(f"eval_every ({self.eval_every}) is more than steps ({self.steps}): the run would never be "
                              "evaluated; lower eval_every or raise steps")
