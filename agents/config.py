@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from piga.io.choices import check_types
+from piga.io.choices import check_ranges, check_types
 
 
 #: Most model steps one CEM plan may take (candidates x horizon x iterations): 80 times PlaNet's 1.2e5, 500 times the
@@ -43,6 +43,7 @@ class CEMConfig:
                              "control step would take minutes; lower the candidates, the horizon or the iterations")
         if not 1 <= self.elites <= self.candidates:
             raise ValueError(f"CEM elites must be in [1, candidates={self.candidates}], got {self.elites}")
+        check_ranges(self, {"init_std": (0, math.inf), "min_std": (0, math.inf)}, above=("init_std",))
         if not (self.init_std > 0 and self.min_std >= 0 and 0 <= self.momentum < 1):
             raise ValueError(f"CEM needs init_std > 0, min_std >= 0 and 0 <= momentum < 1, got init_std={self.init_std}, "
                              f"min_std={self.min_std}, momentum={self.momentum}")
@@ -82,6 +83,11 @@ class MPCConfig:
 
     def __post_init__(self) -> None:
         check_types(self)  # a value of the wrong kind named here, not met deep inside
+        if not isinstance(self.cem, CEMConfig):
+            raise TypeError(f"MPCConfig.cem must be a CEMConfig, got {self.cem!r}")
+        check_ranges(self, {"goal_angle": (-2 * math.pi, 2 * math.pi), "angle_weight": (0, math.inf),
+                            "velocity_weight": (0, math.inf), "action_weight": (0, math.inf),
+                            "swing_up_angle": (0, math.pi), "warm_init_std": (0, math.inf)}, above=("warm_init_std",))
         if self.execute not in ("mean", "best") or self.warm_fill not in ("middle", "repeat"):
             raise ValueError(f"execute must be 'mean' or 'best' and warm_fill 'middle' or 'repeat', got "
                              f"{self.execute!r}, {self.warm_fill!r}")

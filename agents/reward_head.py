@@ -36,6 +36,7 @@ import torch
 from stable_baselines3.common.torch_layers import create_mlp
 from torch import Tensor, nn
 
+from piga.io.choices import check_ranges, check_types
 from piga.world.model import PhysicsModel, frames_to_float
 
 __all__ = ["LearnedCost", "RewardHead", "RewardHeadConfig", "encoded_transitions", "load_reward_head",
@@ -60,6 +61,8 @@ class RewardHeadConfig:
     """Seed of the head's initialisation and of the minibatches."""
 
     def __post_init__(self) -> None:
+        check_types(self)  # hidden="64" was compared with 1
+        check_ranges(self, {"lr": (0, math.inf), "seed": (0, 2**63 - 1)}, above=("lr",))
         if min(self.hidden, self.layers, self.steps, self.batch_size) < 1 or not self.lr > 0:
             raise ValueError(f"RewardHeadConfig needs hidden, layers, steps and batch_size >= 1 and lr > 0, got {self}")
 

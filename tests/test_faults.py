@@ -2263,3 +2263,39 @@ def test_a_virtual_dataset_whose_source_is_missing_is_named(tiny_data: Path, tmp
     code, _, err = run_in_process("piga-show", show.main, str(data), "--out", str(tmp_path / "t.png"), "--overwrite",
                                   capsys=capsys)
     assert_one_line(code, err, f"{data}: /frames is a virtual dataset whose source file source.h5 is missing")
+
+
+def _config_cases() -> list[tuple[str, dict[str, object], str]]:
+    nan, inf = float("nan"), float("inf")
+    return [
+        ("agents.reward_head:RewardHeadConfig", {"hidden": "64"}, "RewardHeadConfig.hidden must be an integer"),
+        ("agents.reward_head:RewardHeadConfig", {"lr": inf}, "RewardHeadConfig.lr must be a finite number > 0"),
+        ("piga.control.episodes:EpisodeConfig", {"goal_angle": nan}, "EpisodeConfig.goal_angle must be a finite number"),
+        ("piga.control.episodes:EpisodeConfig", {"angle_tolerance": -1.0}, "EpisodeConfig.angle_tolerance must be"),
+        ("piga.control.episodes:EpisodeConfig", {"frame_stack": 0}, "frame_stack must be >= 1"),
+        ("agents.config:MPCConfig", {"cem": "abc"}, "MPCConfig.cem must be a CEMConfig"),
+        ("agents.config:MPCConfig", {"velocity_weight": inf}, "MPCConfig.velocity_weight must be a finite number >= 0"),
+        ("agents.config:MPCConfig", {"warm_init_std": -0.3}, "MPCConfig.warm_init_std must be a finite number > 0"),
+        ("agents.config:CEMConfig", {"init_std": inf}, "CEMConfig.init_std must be a finite number > 0"),
+        ("agents.planet.config:RSSMConfig", {"min_std": inf}, "RSSMConfig.min_std must be a finite number > 0"),
+        ("agents.planet.config:PlanetTrainConfig", {"kl_scale": -1.0}, "kl_scale=-1.0"),
+        ("agents.sb3.autoencoder:AutoencoderConfig", {"lr": inf}, "a finite lr > 0"),
+        ("piga.world.model:ModelConfig", {"channels": 0}, "channels 1 or 3"),
+        ("piga.world.model:ModelConfig", {"system": ["pendulum"]}, "unknown system ['pendulum']"),
+        ("piga.world.model:ModelConfig", {"init_scale": nan}, "ModelConfig.init_scale must be a finite number > 0"),
+        ("piga.evaluation.evaluate:EvalConfig", {"max_sequences": 0}, "EvalConfig.max_sequences must be >= 1"),
+    ]
+
+
+@pytest.mark.parametrize("target, values, needle", _config_cases())
+def test_the_librarys_configs_refuse_nonsense_naming_the_field(target: str, values: dict[str, object], needle: str) -> None:
+    """Values that were accepted (an infinite learning rate, a NaN goal, a weight below 0) or failed deep inside
+    ("'<' not supported", "unhashable type"): one error naming the field."""
+    import importlib
+
+    module, name = target.split(":")
+    cls = getattr(importlib.import_module(module), name)
+    with pytest.raises((TypeError, ValueError)) as error:
+        cls(**values)
+    assert needle in str(error.value) and "\n" not in str(error.value), str(error.value)
+    cls()  # the defaults stand

@@ -96,8 +96,8 @@ class RSSMConfig:
                              f"got {self.reward_layers}")
         if self.reward_units < 0:
             raise ValueError(f"RSSMConfig.reward_units must be >= 0 (0: hidden_size), got {self.reward_units}")
-        if not self.min_std > 0:
-            raise ValueError(f"RSSMConfig.min_std must be > 0, got {self.min_std}")
+        if not 0 < self.min_std < math.inf:
+            raise ValueError(f"RSSMConfig.min_std must be a finite number > 0, got {self.min_std}")
 
     @property
     def input_action_size(self) -> int:
@@ -181,8 +181,10 @@ class PlanetTrainConfig:
             raise ValueError(f"PlanetTrainConfig.steps (--steps) must be at most {MAX_STEPS:,} (weeks on a CPU), got {self.steps:,}")
         if self.free_nats > MAX_FREE_NATS:
             raise ValueError(f"PlanetTrainConfig.free_nats (--free-nats) must be at most {MAX_FREE_NATS:g} nats per frame (PlaNet uses 3), got {self.free_nats:g}")
-        if self.seed < 0 or self.max_sequences < 0 or self.max_minutes < 0:
-            raise ValueError("seed, max_sequences and max_minutes must be >= 0")
+        if self.seed < 0 or self.max_sequences < 0 or self.max_minutes < 0 or self.threads < 0 or self.kl_scale < 0:
+            raise ValueError(f"PlanetTrainConfig: seed, max_sequences, max_minutes, threads and kl_scale must be >= 0, got "
+                             f"seed={self.seed}, max_sequences={self.max_sequences}, max_minutes={self.max_minutes}, "
+                             f"threads={self.threads}, kl_scale={self.kl_scale}")
         check_choices(self)
 
     def to_dict(self) -> dict[str, Any]:

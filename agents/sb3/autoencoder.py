@@ -22,6 +22,7 @@ code with RMSE 0.006 (``benchmarks/baseline_probes.py autoencoder``; results/ddp
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -62,8 +63,8 @@ class AutoencoderConfig:
 
     def __post_init__(self) -> None:
         check_types(self)  # a value of the wrong kind named here, not met deep inside
-        if min(self.latent_size, self.depth, self.steps, self.batch_size) < 1 or not self.lr > 0 or self.seed < 0:
-            raise ValueError(f"AutoencoderConfig needs sizes and steps >= 1, lr > 0 and seed >= 0, got latent_size="
+        if min(self.latent_size, self.depth, self.steps, self.batch_size) < 1 or not 0 < self.lr < math.inf or self.seed < 0:
+            raise ValueError(f"AutoencoderConfig needs sizes and steps >= 1, a finite lr > 0 and seed >= 0, got latent_size="
                              f"{self.latent_size}, depth={self.depth}, steps={self.steps}, batch_size={self.batch_size}, "
                              f"lr={self.lr}, seed={self.seed}")
 

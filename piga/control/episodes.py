@@ -27,7 +27,7 @@ from tqdm.auto import tqdm
 from agents.protocol import Agent
 from envs.pendulum import PixelPendulumConfig, make_pixel_pendulum
 from piga.evaluation.episodes import EpisodeBatch, EpisodeResult, Recording, summarize
-from piga.io.choices import check_types
+from piga.io.choices import check_ranges, check_types
 
 __all__ = ["EpisodeConfig", "EpisodeStart", "Scoring", "merge_results", "parse_range", "run_agent", "run_episodes"]
 
@@ -102,6 +102,10 @@ class EpisodeConfig(Scoring):
                              f"{self.hold_steps} steps (hold_steps >= 1, steps >= hold_steps)")
         if not (self.gravity_mult > 0 and math.isfinite(self.gravity_mult)):
             raise ValueError(f"gravity_mult must be finite and > 0, got {self.gravity_mult}")
+        if self.frame_stack < 1:
+            raise ValueError(f"frame_stack must be >= 1, got {self.frame_stack}")
+        check_ranges(self, {"goal_angle": (-2 * math.pi, 2 * math.pi), "angle_tolerance": (0, math.pi),
+                            "speed_tolerance": (0, math.inf)}, above=("angle_tolerance", "speed_tolerance"))
 
     def starts(self) -> list[EpisodeStart]:
         """Its episodes' starts: episode e (``first_episode`` onwards) from (θ, θ̇) drawn in order from

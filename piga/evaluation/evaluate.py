@@ -46,6 +46,8 @@ class EvalConfig:
 
     def __post_init__(self) -> None:
         check_choices(self)
+        if self.max_sequences < 1:
+            raise ValueError(f"EvalConfig.max_sequences must be >= 1, got {self.max_sequences}")
 
     def frames_after_input(self, model: FrameModel, sequence_steps: int) -> int:
         """T_pred + T_ext frames to predict after the L input frames, capped by the sequence length."""

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import math
 import numbers
 import types
 import typing
@@ -72,4 +73,17 @@ def check_types(config: Any) -> None:
                             f"got {value!r} ({type(value).__name__})")
 
 
-__all__ = ["check_choices", "check_types", "literal_fields", "typed_fields"]
+def check_ranges(config: Any, ranges: dict[str, tuple[float, float]], above: tuple[str, ...] = ()) -> None:
+    """Raises a one-line ValueError naming the first field of ``config`` (a number, or None where a preset fills it)
+    outside its range in ``ranges``: finite, at least ``low`` (above it, for the fields in ``above``) and at most
+    ``high``. NaN and infinities are out of every range: ``lr=inf`` trained to NaN, ``goal_angle=nan`` scored 0."""
+    for name, (low, high) in ranges.items():
+        value = getattr(config, name)
+        if value is None:
+            continue
+        if not (math.isfinite(value) and (value > low if name in above else value >= low) and value <= high):
+            bound = f"{'>' if name in above else '>='} {low:g}" + (f" and <= {high:g}" if high != math.inf else "")
+            raise ValueError(f"{type(config).__name__}.{name} must be a finite number {bound}; got {value!r}")
+
+
+__all__ = ["check_choices", "check_ranges", "check_types", "literal_fields", "typed_fields"]

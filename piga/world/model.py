@@ -31,7 +31,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-from piga.io.choices import check_choices, check_types
+from piga.io.choices import check_choices, check_ranges, check_types
 from piga.world.decoder import Decoder, DecoderConfig
 from piga.world.encoder import Encoder, EncoderConfig
 from piga.world.conv_decoders import BroadcastDecoder, DeconvDecoder
@@ -170,9 +170,13 @@ class ModelConfig:
 
     def __post_init__(self) -> None:
         check_types(self)  # a number given as text fails here, naming the field, not at a comparison below
-        if self.system not in SYSTEM_SHAPES:
+        if not isinstance(self.system, str) or self.system not in SYSTEM_SHAPES:
             raise ValueError(f"unknown system {self.system!r}; known: {sorted(SYSTEM_SHAPES)}")
         check_choices(self)  # architecture, loss, decoder, rec_frames, integrator, readout
+        if self.image_size < 8 or self.channels not in (1, 3) or self.substeps < 1:
+            raise ValueError(f"ModelConfig needs image_size >= 8, channels 1 or 3 and substeps >= 1, got image_size="
+                             f"{self.image_size}, channels={self.channels}, substeps={self.substeps}")
+        check_ranges(self, {"init_scale": (0, math.inf)}, above=("init_scale",))
         if self.architecture == "video-lstm" and (self.loss == "separate" or self.decoder != "st"):
             raise ValueError("video-lstm has no separate encoder/decoder and dynamics to train apart, nor an object "
                              "decoder to replace: it takes loss 'joint' or 'pred-only' and decoder 'st'")
