@@ -83,5 +83,5 @@ def test_the_head_learns_from_frames_actions_and_rewards_never_states(model: Phy
 
 
 def test_the_config_refuses_nonsense() -> None:
-    with pytest.raises(ValueError, match="lr > 0"):
+    with pytest.raises(ValueError, match="lr must be a finite number > 0"):
         RewardHeadConfig(lr=0.0)
