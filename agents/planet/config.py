@@ -12,7 +12,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any, Literal
 
 from agents.config import CEMConfig
-from piga.io.choices import check_choices, check_types
+from piga.io.choices import check_choices, check_ranges, check_types
 from piga.io.device import Device
 
 #: Largest KL free nats per frame accepted (PlaNet uses 3; far larger values switch the KL term off
@@ -96,8 +96,7 @@ class RSSMConfig:
                              f"got {self.reward_layers}")
         if self.reward_units < 0:
             raise ValueError(f"RSSMConfig.reward_units must be >= 0 (0: hidden_size), got {self.reward_units}")
-        if not 0 < self.min_std < math.inf:
-            raise ValueError(f"RSSMConfig.min_std must be a finite number > 0, got {self.min_std}")
+        check_ranges(self, {"min_std": (0, math.inf)}, above=("min_std",))
 
     @property
     def input_action_size(self) -> int:

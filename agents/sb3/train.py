@@ -201,9 +201,12 @@ def _check_record_matches(run_dir: Path, config: SB3Config, ckpt: dict[str, Any]
     holds (an edited record): the checkpoint is then not at fault."""
     held = ckpt.get("config") if isinstance(ckpt.get("config"), dict) else {}
     ours = config.to_dict()
+
+    def plain(value: Any) -> Any:  # net_arch: a tuple in one, perhaps a list in the other
+        return list(value) if isinstance(value, tuple) else value
+
     differ = [name for name in ours if name in held and name not in ("steps", "threads", "device")
-              and (list(held[name]) if isinstance(held[name], tuple) else held[name])
-              != (list(ours[name]) if isinstance(ours[name], tuple) else ours[name])]
+              and plain(held[name]) != plain(ours[name])]
     if differ:
         raise ValueError(f"{run_dir / 'config.json'} does not describe the run its checkpoint holds ("
                          + ", ".join(f"{n} {ours[n]!r} there, {held[n]!r} in the checkpoint" for n in differ)

@@ -207,11 +207,11 @@ def _check_run_dir(run_dir: Path, resume: bool, overwrite: bool, kind: RunKind) 
             what = f"a {recorded} run" if recorded else "a piga-train-model run (its config.json has no 'kind')"
             raise PigaError(f"--resume: {run_dir} is {what}, not a {kind.value} run ({kind.writer})")
         return
-    if existing and not overwrite and CHECKPOINT not in existing and _left_before_a_checkpoint(run_dir, existing, kind):
-        print(f"removing what a run of {run_dir} stopped before its first checkpoint left ({', '.join(existing)})")
-        remove_outputs(run_dir, existing)
-        return
     if existing and not overwrite:
+        if CHECKPOINT not in existing and _left_before_a_checkpoint(run_dir, existing, kind):
+            print(f"removing what a run of {run_dir} stopped before its first checkpoint left ({', '.join(existing)})")
+            remove_outputs(run_dir, existing)
+            return
         if CHECKPOINT not in existing:  # a run killed before its first checkpoint: nothing to continue
             raise PigaError(f"{run_dir} holds outputs of an earlier run but no checkpoint ({', '.join(existing)}); "
                             "pass --overwrite to replace them")
@@ -537,6 +537,7 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
         record["ddpg"] = config.to_dict()
         record_resume(record, command)
         checkpoint_bytes: float = (run_dir / CHECKPOINT).stat().st_size
+        buffer_bytes = _ddpg_checkpoint_bytes(config, AutoencoderConfig.latent_size)  # (the run's autoencoder: its default size)
     else:
         if args.obs == "state" and args.torque_arrow:  # (--resume refuses it with the recipe's other changes)
             raise PigaError("--torque-arrow shows the arrow in the frames; --obs state sees no frames (it observes "
@@ -566,11 +567,10 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
         record = started_record(command, kind=RunKind.DDPG.value, data=args.data, ddpg=config.to_dict())
         if args.data:
             record["data_fingerprint"] = fingerprint(args.data)
-        checkpoint_bytes = _ddpg_checkpoint_bytes(config, ae_config.latent_size)
+        checkpoint_bytes = buffer_bytes = _ddpg_checkpoint_bytes(config, ae_config.latent_size)
     check_run_disk(run_dir, checkpoint_bytes, f"{config.algo.upper()}'s run (a replay buffer of {config.buffer_size})")
     # SB3 allocates the buffer untouched and fills it as the run goes: a buffer beyond the memory would be killed hours in
-    check_memory(_ddpg_checkpoint_bytes(config, AutoencoderConfig.latent_size),
-                 f"{config.algo.upper()}'s replay buffer of {config.buffer_size} (--buffer-size)")
+    check_memory(buffer_bytes, f"{config.algo.upper()}'s replay buffer of {config.buffer_size} (--buffer-size)")
     autoencoder = run_dir / AUTOENCODER if config.obs == "latent" else None
     written: list[int] = []
 
