@@ -103,7 +103,7 @@ class SB3Config:
     view: View = "face"
     """DMC's pendulum only: "face" (piga's face-on camera, 64x64 gray), "fixed" (dm_control's camera 0, looking down
     at 45°, 64x64 gray) or "drqv2" (DrQ-v2's view: camera 0 in 84x84 RGB; a 100000-step buffer of its stacks takes
-    12.7 GB, and an update about 4 times as long on a CPU)."""
+    12.7 GB)."""
     obs: Observation = "state"
     """What the policy sees: "pixels" (K stacked frames, CnnPolicy), "latent" (K stacked autoencoder
     codes) or "state" ((cos θ, sin θ, θ̇), the reference point)."""
