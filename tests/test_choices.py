@@ -123,3 +123,59 @@ def test_a_value_no_run_can_use_is_named_at_construction(make: Any, needle: str)
     with pytest.raises(ValueError) as error:
         make()
     assert needle in str(error.value)
+
+
+def _pendulum_options(**kw: Any) -> Any:
+    from piga.world.physics.systems import PendulumOptions
+
+    return PendulumOptions(**kw)
+
+
+def _diagnose(**kw: Any) -> Any:
+    from piga.diagnostics.diagnose import DiagnoseConfig
+
+    return DiagnoseConfig(**kw)
+
+
+def _camera(**kw: Any) -> Any:
+    from piga.diagnostics.vision import CameraConfig
+
+    return CameraConfig(**kw)
+
+
+def _fit_model(**kw: Any) -> Any:
+    from piga.diagnostics.fit import Model
+
+    return Model(**kw)
+
+
+@pytest.mark.parametrize("make, error, needle", [
+    (lambda: _pendulum_options(pivot_gate=1), TypeError, "PendulumOptions.pivot_gate must be a tuple"),
+    (lambda: _pendulum_options(pivot_gate=("a", "b")), ValueError, "PendulumOptions.pivot_gate must be two numbers"),
+    (lambda: _pendulum_options(pivot_gate=(0.3, 0.1)), ValueError, "0 <= inner <= outer < 0.5"),
+    (lambda: _pendulum_options(damping_init=0.0), ValueError, "PendulumOptions.damping_init must be a finite number > 0"),
+    (lambda: _pendulum_options(damping_init=float("nan")), ValueError, "damping_init must be a finite number"),
+    (lambda: _pendulum_options(angle_reference=1e9), ValueError, "PendulumOptions.angle_reference must be"),
+    (lambda: _pendulum_options(learn_offset="yes"), TypeError, "PendulumOptions.learn_offset must be True or False"),
+    (lambda: EncoderConfig(mask_width=0), ValueError, "EncoderConfig.mask_width must be a finite number >= 1"),
+    (lambda: EncoderConfig(image_size=10**9), ValueError, "EncoderConfig.image_size must be"),
+    (lambda: EncoderConfig(pivot_gate=(0.1,)), ValueError, "EncoderConfig.pivot_gate must be two numbers"),
+    (lambda: __import__("piga.world.physics.systems").world.physics.systems.GravityOptions(fixed_g="3"), TypeError,
+     "GravityOptions.fixed_g must be a number"),
+    (lambda: __import__("piga.data.collect_scenes").data.collect_scenes.SceneCollectConfig(scene=None), TypeError,
+     "SceneCollectConfig.scene must be an envs.scenes.SceneConfig"),
+    (lambda: _diagnose(min_gain=float("nan")), ValueError, "DiagnoseConfig.min_gain must be a finite number >= 0 and <= 1"),
+    (lambda: _diagnose(vision_ratio=0.0), ValueError, "DiagnoseConfig.vision_ratio must be a finite number > 0"),
+    (lambda: _diagnose(fit_horizon=10**9), ValueError, "DiagnoseConfig.fit_horizon must be"),
+    (lambda: _diagnose(camera=None), TypeError, "DiagnoseConfig.camera must be a CameraConfig"),
+    (lambda: _camera(min_noise=-1.0), ValueError, "CameraConfig.min_noise must be a finite number >= 0"),
+    (lambda: _camera(repeats=3), TypeError, "CameraConfig.repeats must be a RepeatConfig"),
+    (lambda: _fit_model(delay=-1), ValueError, "Model.delay must be an integer from 0 to"),
+    (lambda: _fit_model(substeps=10**6), ValueError, "Model.substeps must be an integer from 0 to"),
+])
+def test_the_library_configs_name_a_bad_field(make: Any, error: type, needle: str) -> None:
+    """Each was taken at construction and failed later in another's words (an iteration over an int, a NaN
+    comparison that passed), or ran: a damping start of 0 is log(0) in the physics."""
+    with pytest.raises(error) as raised:
+        make()
+    assert needle in str(raised.value) and "\n" not in str(raised.value)

@@ -230,3 +230,17 @@ def test_the_short_file_rule_quotes_the_code() -> None:
     text = (DOCS / "commands" / "train-model.md").read_text()
     assert f"L + T_pred ({model.input_frames} + {model.pred_frames} for the pendulum)" in text
     assert f"down to {MIN_PRED_FRAMES} (`MIN_PRED_FRAMES`)" in text
+
+
+def test_the_convergence_rules_quote_the_check() -> None:
+    """The train-model page's end-of-run rules name the thresholds of ``ConvergenceConfig`` and the profile's."""
+    from piga.evaluation.profile import PROFILE_FACTOR, PROFILE_SEQUENCES
+    from piga.training.convergence import ConvergenceConfig
+
+    config = ConvergenceConfig()
+    text = " ".join((DOCS / "commands" / "train-model.md").read_text().split())
+    assert f"MSE not below {config.blank_ratio:g} of `frame_mse_background`" in text
+    assert f"MSE not below {config.hold_ratio:g} of `frame_mse_hold`" in text
+    assert f"scaled by {PROFILE_FACTOR:.2f} or 1/{PROFILE_FACTOR:.2f}" in text
+    assert f"first windows of {PROFILE_SEQUENCES} training sequences are predicted more than " \
+           f"{100 * config.profile_tolerance:g}% better" in text

@@ -1326,6 +1326,26 @@ def test_train_resume_refuses_the_default_seed_written_for_a_run_of_another(tiny
             capsys, "drop --seed")
 
 
+def test_train_resume_without_its_record_takes_the_checkpoints_own_recipe(tiny_piga_run: Path, tiny_data: Path,
+                                                                           tmp_path: Path,
+                                                                           capsys: pytest.CaptureFixture[str]) -> None:
+    """A run without config.json has no starting command to read: its own batch size, written out on --resume, was
+    refused ("drop --batch-size"); it is the checkpoint's, and another is still refused."""
+    import torch
+
+    from tests.helpers import run_in_process
+    from piga.cli import train as cli
+    from piga.cli.common import NOT_CONVERGED
+
+    run = _run_copy(tiny_piga_run, tmp_path / "run")
+    own = torch.load(run / "checkpoint.pt", weights_only=False)["train_config"]["batch_size"]
+    refused("piga-train-model", [str(tiny_data), "--out", str(run), "--resume", "--epochs", "2", "--quiet",
+                                 "--batch-size", str(own + 1)], capsys, "drop --batch-size")
+    code, _, err = run_in_process("piga-train-model", cli.main, str(tiny_data), "--out", str(run), "--resume",
+                                  "--epochs", "2", "--quiet", "--batch-size", str(own), capsys=capsys)
+    assert code in (0, 1, NOT_CONVERGED) and "drop" not in err and "Traceback" not in err, err
+
+
 def test_train_resume_refuses_a_baseline_run(baseline_runs: dict[str, Path], tiny_data: Path, tmp_path: Path,
                                              capsys: pytest.CaptureFixture[str]) -> None:
     run = _run_copy(baseline_runs["ddpg"], tmp_path / "run")

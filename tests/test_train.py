@@ -432,6 +432,14 @@ def test_the_convergence_check_on_made_up_trajectories() -> None:
     # settled parameters whose model predicts worse than drawing the background: a 45-step run passed so, g 88% off
     blind = check_convergence(state(1 + 0.18 * settle, 0.3 - 0.01 * settle), blank=(0.0103, 0.0037))
     assert blind.outcome == "untrained" and "no better than drawing the background alone" in blind.reason
+    # settled parameters whose model beats the background but hardly a pendulum held still: 20 sequences of 10 frames
+    # settled so with g 67% off (MSE 0.50x the held frame's; identified runs measured 0.12x at most)
+    still = check_convergence(state(1 + 3 * settle, 0.3 + 0.2 * settle), blank=(0.0030, 0.0035), hold=0.0060)
+    assert still.outcome == "untrained" and "holding the last input frame still" in still.reason
+    moving = check_convergence(state(1 + 9 * settle, 0.3 + 0.7 * settle), blank=(0.0005, 0.0035), hold=0.0060)
+    assert moving.outcome == "converged", moving.reason
+    baseline = SimpleNamespace(step=1000, start={}, trace=[], plan=plan, history=[])  # no parameters: the hold is not asked
+    assert check_convergence(baseline, blank=(0.0030, 0.0035), hold=0.0060).outcome == "converged"
     drifting = check_convergence(state(1 + 9 * steps / 1000, 0.3 + 0.7 * settle))  # g still climbs at the end
     assert drifting.outcome == "unsettled" and "g moved" in drifting.reason and "a moved" not in drifting.reason
     stopped = check_convergence(state(1 + 9 * settle, 0.3 + 0.7 * settle, step=500))

@@ -220,8 +220,11 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
                    + (["seed_retries"] if "seed_retries" in options_given else [])
                    + [name for name in ("data_loading", "stream_cache_mb")
                       if getattr(args, name) is not None and getattr(args, name) != getattr(saved, name)])
-        changed = [name for name in changed if name not in started or started[name] != getattr(args, name)]
-        if changed:  # (the starting command's own values may be repeated: that command plus --resume continues the run)
+        # the starting command's own values may be repeated (that command plus --resume continues the run), and the
+        # checkpoint's recipe values too (a run whose config.json is lost has no starting command to read)
+        changed = [name for name in changed if not (name in started and started[name] == getattr(args, name))
+                   and not (name in overrides and overrides[name] == getattr(saved, name, object()))]
+        if changed:
             raise PigaError(f"--resume keeps the run's recipe; drop {', '.join('--' + c.replace('_', '-') for c in changed)}")
         # the device and the threads are not the recipe's
         train_config = replace(saved, device=args.device, **overrides,

@@ -58,6 +58,9 @@ class SceneCollectConfig:
 
     def __post_init__(self) -> None:
         check_types(self)  # a value of the wrong kind named here, not met deep inside
+        if not isinstance(self.scene, SceneConfig):
+            raise TypeError(f"SceneCollectConfig.scene must be an envs.scenes.SceneConfig (envs.scenes.scene_config"
+                            f"(NAME)); got {self.scene!r} ({type(self.scene).__name__})")
         check_collect_sizes(self.sequences, self.steps, self.workers, self.seed, self.batch, self.split)
         if self.scene.half and self.steps <= self.scene.half_frames:
             raise ValueError(f"half data need more than {self.scene.half_frames} frames per sequence (the test "

@@ -82,7 +82,7 @@ from piga.diagnostics.results import (Ambiguity, CameraSummary, CandidateRow, Di
                                       Naming, PixelErrors, Score, SelectionStep, VisionSummary)
 from piga.diagnostics.twin import MEASURABLE_GAP, calibrate_floor, gap_closure, twin_floor
 from piga.diagnostics.vision import Camera, CameraConfig, CameraFindings, angle_table, camera_stage, match, match_file
-from piga.io.choices import check_types
+from piga.io.choices import check_ranges, check_types
 from piga.world.model import PhysicsModel
 from piga.diagnostics.fit import Nominal
 from piga.world.effects import (BIAS, CANDIDATES, DAMPING, DEADZONE, DELAY, EFFECTS, FRICTION, SPEED_CLIP, WITHIN_FRAME,
@@ -92,6 +92,17 @@ from piga.io.runs import (nominal_of, training_arrow, training_blank_mse, traini
 
 #: Gymnasium Pendulum-v1's own speed clip (rad/s).
 GYM_SPEED_CLIP = PENDULUM_MAX_SPEED
+
+
+#: Bounds of DiagnoseConfig's numbers (besides those ``__post_init__`` states): the fractions within [0, 1], BIC
+#: margins, ratios and speeds finite, and the sizes bounded so that a typo cannot make the fit run for days.
+DIAGNOSE_RANGES = {
+    "fit_horizon": (1, 1000), "stride": (1, 1000), "reading_harmonics": (2, 100), "max_effects": (0, 10), "beam": (1, 100),
+    "bic_margin": (0, math.inf), "within_frame_bic_margin": (0, math.inf), "ambiguous_bic": (0, math.inf),
+    "min_gain": (0, 1), "unexplained_gain": (0, 1), "gain_tolerance": (0, 1), "clip_max_beyond": (0, 1),
+    "clip_min_binding": (0, 1), "deadzone_min_binding": (0, 1), "ambiguous_free_run": (0, 1),
+    "gym_clip_tolerance": (0, GYM_SPEED_CLIP), "clip_band": (0, GYM_SPEED_CLIP), "clip_min_at": (1, 1_000_000),
+    "vision_ratio": (0, math.inf), "max_scene_ratio": (0, math.inf), "max_training_fraction": (0, math.inf)}
 
 
 @dataclass(frozen=True)
@@ -214,6 +225,9 @@ class DiagnoseConfig:
 
     def __post_init__(self) -> None:
         check_types(self)  # a value of the wrong kind named here, not met deep inside
+        if not isinstance(self.camera, CameraConfig):
+            raise TypeError(f"DiagnoseConfig.camera must be a CameraConfig; got {self.camera!r} ({type(self.camera).__name__})")
+        check_ranges(self, DIAGNOSE_RANGES, above=("vision_ratio", "max_scene_ratio", "max_training_fraction"))
         if self.fit_horizon < 1 or self.stride < 1 or self.max_effects < 0 or self.bootstrap < 0 \
                 or self.reading_harmonics < 2 or self.beam < 1:
             raise ValueError(f"need fit_horizon, stride, beam >= 1, reading_harmonics >= 2 and max_effects, bootstrap >= 0, got {self}")

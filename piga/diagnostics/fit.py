@@ -63,6 +63,7 @@ from __future__ import annotations
 
 import functools
 import math
+import numbers
 from dataclasses import dataclass, field
 from dataclasses import replace as dataclass_replace
 
@@ -204,6 +205,11 @@ class Model:
         unknown = [e for e in self.effects if e not in CANDIDATES]
         if unknown:
             raise ValueError(f"unknown effect(s) {unknown} in a candidate physics; known: {', '.join(CANDIDATES)}")
+        # the delay and M a fit can use: those of the terms' grids (a longer delay has no actions in the windows)
+        if not (isinstance(self.delay, numbers.Integral) and 0 <= self.delay <= MAX_DELAY):
+            raise ValueError(f"Model.delay must be an integer from 0 to {MAX_DELAY} (frames); got {self.delay!r}")
+        if not (isinstance(self.substeps, numbers.Integral) and 0 <= self.substeps <= max(WITHIN_FRAME.grid)):
+            raise ValueError(f"Model.substeps must be an integer from 0 to {max(WITHIN_FRAME.grid)}; got {self.substeps!r}")
 
     @property
     def name(self) -> str:

@@ -19,6 +19,8 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from piga.io.choices import check_ranges, check_types
+
 #: Largest pixel change (gray levels) between a frame and the one before it that still counts as a
 #: repeat. A camera repeats a frame byte for byte, but a video codec re-encodes the copy: in an
 #: H.264 recording, repeated frames came back with changes of at most 1 gray level, while a
@@ -36,6 +38,10 @@ class RepeatConfig:
     """... and at least this many of them."""
     moving: float = 0.02
     """rad per step (1.1°) across a repeated frame at or below which it is not counted as a drop."""
+
+    def __post_init__(self) -> None:
+        check_types(self)
+        check_ranges(self, {"min_drop_rate": (0, 1), "min_drops": (1, 10_000_000), "moving": (0, math.pi)})
 
 
 class RepeatFindings(NamedTuple):

@@ -33,6 +33,7 @@ import torch.nn.functional as F
 from torch import Tensor
 
 from piga.diagnostics.repeats import RepeatConfig, repeated_frames
+from piga.io.choices import check_ranges, check_types
 from piga.world.model import PhysicsModel, frames_to_float
 
 #: Angles in the matching table (0.5° apart).
@@ -246,6 +247,13 @@ class CameraConfig:
     """Smallest sensor noise (gray levels) that is named (a clean camera gives 0)."""
     repeats: RepeatConfig = field(default_factory=RepeatConfig)
     """When repeated frames are named dropped frames (:mod:`piga.diagnostics.repeats`)."""
+
+    def __post_init__(self) -> None:
+        check_types(self)
+        if not isinstance(self.repeats, RepeatConfig):
+            raise TypeError(f"CameraConfig.repeats must be a RepeatConfig; got {self.repeats!r}")
+        check_ranges(self, {"fit_frames": (1, 10_000_000), "held_frames": (1, 10_000_000), "min_drop": (0, 1),
+                            "min_blur": (0, 100), "min_shift": (0, 100), "min_noise": (0, 255)})
 
 
 @dataclass

@@ -131,6 +131,7 @@ def evaluate(model: FrameModel, data: str | Path, config: EvalConfig = EvalConfi
     steps = config.frames_after_input(model, info.steps)
     squared = np.zeros(steps)  # (S,) summed squared errors
     blank = 0.0  # summed squared errors of the background alone over the prediction frames
+    hold = 0.0  # and of the last input frame held still
     n_pred = min(cfg.pred_frames, steps)
     background = model.background_image().detach().cpu().numpy()  # (C, H, W)
     ssims: list[list[float]] = []  # (B, S)
@@ -140,6 +141,8 @@ def evaluate(model: FrameModel, data: str | Path, config: EvalConfig = EvalConfi
         truth = frames_to_float(torch.from_numpy(frames[part, cfg.input_frames : cfg.input_frames + steps]), cfg.channels).numpy()
         squared += ((pred - truth) ** 2).sum(axis=(0, 2, 3, 4), dtype=np.float64)
         blank += float(((background - truth[:, :n_pred]) ** 2).sum(dtype=np.float64))
+        last = frames_to_float(torch.from_numpy(frames[part, cfg.input_frames - 1 : cfg.input_frames]), cfg.channels).numpy()  # (b, 1, C, H, W)
+        hold += float(((last - truth[:, :n_pred]) ** 2).sum(dtype=np.float64))
         ssims += [[_ssim(pred[b, t], truth[b, t]) for t in range(steps)] for b in range(len(pred))]
     mse = squared / (len(frames) * int(np.prod(pred.shape[2:])))  # (S,)
     ssim = np.array(ssims).mean(0)  # (S,)
@@ -162,6 +165,8 @@ def evaluate(model: FrameModel, data: str | Path, config: EvalConfig = EvalConfi
                            "extrapolation": float(mse[n_pred:].mean()) if steps > n_pred else None},
         # the error of predicting the model's label-free background alone, for the check of a model without physics
         "frame_mse_background": blank / (len(frames) * n_pred * int(np.prod(pred.shape[2:]))),
+        # and of a system that stands still: the last input frame held over the predicted ones
+        "frame_mse_hold": hold / (len(frames) * n_pred * int(np.prod(pred.shape[2:]))),
     }
     if info.has_states and cfg.system == "pendulum" and isinstance(model, ObjectModel):
         result["angle"] = angle_errors(model, frames, load_states(data, config.split, limit=config.max_sequences))

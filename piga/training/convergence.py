@@ -8,7 +8,7 @@ trajectory, :class:`piga.training.train.TrainState`), never the truth, and gives
 
 | outcome | meaning | ``piga-train-model`` |
 |---|---|---|
-| ``untrained`` | the physics never trained, a learned parameter never left its start, one collapsed to a float limit, the actuation gain faded toward 0, (for a scene) an object was not found or a slot draws nothing (:mod:`piga.evaluation.objects`), or its held-out predictions are no better than the background alone | exits 1 with a line that names the fix |
+| ``untrained`` | the physics never trained, a learned parameter never left its start, one collapsed to a float limit, the actuation gain faded toward 0, (for a scene) an object was not found or a slot draws nothing (:mod:`piga.evaluation.objects`), or its held-out predictions are no better than the background alone, or (with physical parameters) not clearly better than the last input frame held still | exits 1 with a line that names the fix |
 | ``unsettled`` | it trained, but stopped before its plan ended, or a parameter still drifts at the end | exits 3 with a warning line |
 | ``converged`` | none of the above | exits 0 |
 
@@ -19,7 +19,8 @@ percent of its peak, so a parameter that still moves by more than 1% there has n
 (a settled run of the default file moves g and a by under 0.5%).
 
 Every model's held-out predictions must beat drawing its label-free background alone (``blank_ratio``),
-read from frames only. A baseline without physical parameters (``piga-train-model --model video-lstm`` or
+and a model with physical parameters must clearly beat holding the last input frame still (``hold_ratio``),
+both read from frames only. A baseline without physical parameters (``piga-train-model --model video-lstm`` or
 ``in-ig``) has no trajectory to judge; that check and the plan's end are its whole check.
 """
 
@@ -33,6 +34,7 @@ import numpy as np
 
 if TYPE_CHECKING:  # the check itself needs torch and OpenCV; this module only reads its verdict
     from piga.evaluation.objects import ObjectCheck
+    from piga.evaluation.profile import ParameterProfile
 
 Outcome = Literal["converged", "unsettled", "untrained"]
 
@@ -58,6 +60,13 @@ class ConvergenceConfig:
     blank_ratio: float = 0.9
     """A model whose held-out prediction MSE is above this fraction of the background's (the prediction of a
     model that learned nothing) is untrained."""
+    hold_ratio: float = 0.3
+    """A model with physical parameters whose held-out prediction MSE is above this fraction of that of the last
+    input frame held still (a system that does not move) learned nothing of the motion, whatever its parameters
+    did: it is untrained. Chosen from ``results/convergence_calibration.md``."""
+    profile_tolerance: float = 0.02
+    """A learned parameter whose training frames are predicted this much better (relative MSE) with it scaled by
+    1.65 or 1/1.65 (:mod:`piga.evaluation.profile`) stopped short of its value: the run is unsettled."""
 
 
 @dataclass(frozen=True)
@@ -102,7 +111,8 @@ def _fix(planned: int, steps: int) -> str:
 
 
 def check_convergence(state: Any, config: ConvergenceConfig = ConvergenceConfig(),
-                      objects: ObjectCheck | None = None, blank: tuple[float, float] | None = None) -> Convergence:
+                      objects: ObjectCheck | None = None, blank: tuple[float, float] | None = None,
+                      hold: float | None = None, profile: dict[str, ParameterProfile] | None = None) -> Convergence:
     """Judges a finished (or stopped) run from its :class:`~piga.training.train.TrainState`, and for a scene
     from ``objects`` (:func:`piga.evaluation.objects.check_objects`): a lost object leaves the physics to fit
     the others, and a slot that draws nothing is still moved by the physics (its pull, its springs), so in
@@ -118,6 +128,14 @@ def check_convergence(state: Any, config: ConvergenceConfig = ConvergenceConfig(
     they have settled: a 45-step pendulum run whose g and a had moved and then stood still as its schedule
     decayed passed as converged, g 88% off, predicting worse than drawing no pendulum (2.8x the background's
     MSE; converged runs measured 0.37x at most).
+
+    ``hold``: the held-out MSE of the last input frame held still (metrics.json's ``frame_mse_hold``). A model
+    with parameters must beat it by ``config.hold_ratio``: pendulum runs on 20 sequences of 10 frames settled with
+    g 67% off, predicting 0.85x the background's MSE and 0.5x the held frame's (identified runs: 0.12x at most).
+
+    ``profile``: each learned parameter's profile on the training frames (:mod:`piga.evaluation.profile`). A
+    parameter whose frames are predicted clearly better with it 1.65x larger or smaller stopped short of its
+    value, however still it stands: the run is unsettled.
     """
     plan = state.plan
     steps = int(state.step)
@@ -180,6 +198,17 @@ def check_convergence(state: Any, config: ConvergenceConfig = ConvergenceConfig(
     if blank is not None and not blank[0] < config.blank_ratio * blank[1]:  # settled, but on what?
         return verdict("untrained", f"its parameters settled, but its held-out predictions (MSE {blank[0]:.4g}) are no "
                                     f"better than drawing the background alone (MSE {blank[1]:.4g}); " + _fix(planned, steps))
+    if blank is not None and hold is not None and not blank[0] < config.hold_ratio * hold:
+        return verdict("untrained", f"its parameters settled, but its held-out predictions (MSE {blank[0]:.4g}) are not "
+                                    f"{1 / config.hold_ratio:.3g}x better than holding the last input frame still (MSE "
+                                    f"{hold:.4g}): it did not learn the motion, so its parameters mean nothing; give it "
+                                    "more or longer sequences, or " + _fix(planned, steps))
+    short_of = [(name, p) for name, p in (profile or {}).items()
+                if name in checks and min(p.lower, p.upper) < 1 - config.profile_tolerance]
+    if short_of:
+        return verdict("unsettled", "a parameter stopped short of its value: " + "; ".join(
+            f"{name} = {p.value:.4g} settled, but the training frames are predicted {100 * (1 - min(p.lower, p.upper)):.0f}% "
+            f"better with {name} = {p.better:.4g}" for name, p in short_of) + "; " + _fix(planned, steps))
     return verdict("converged", f"every learned parameter left its start and settled over the last "
                                 f"{100 * config.tail:.0f}% of {planned} steps")
 

@@ -10,12 +10,13 @@ import torch
 
 from piga.data.schema import DatasetInfo, inspect_dataset, read_sequences
 from piga.evaluation.evaluate import PARAMETER_NAMES, EvalConfig, evaluate, rollout_frames
-from piga.world.model import FrameModel, ModelConfig, ObjectModel, frames_to_float
+from piga.world.model import FrameModel, ModelConfig, ObjectModel, PhysicsModel, frames_to_float
 from piga.world.variants import MODELS
 from piga.evaluation.plots import curves_figure, rollout_figure, save_figure, templates_figure
 from piga.io.atomic import write_json
 from piga.io.device import module_device
 from piga.evaluation.objects import ObjectCheck, check_objects
+from piga.evaluation.profile import PROFILE_SEQUENCES, parameter_profile, profile_dict
 from piga.training.convergence import check_convergence
 from piga.training.train import TrainState
 
@@ -85,7 +86,14 @@ def write_run_report(model: FrameModel, state: TrainState, data: str | Path, run
                            "threads": torch.get_num_threads(), "device": state.device or None}
     if state.plan:
         blank = (metrics["frame_mse_mean"]["prediction"], metrics["frame_mse_background"])
-        convergence = check_convergence(state, objects=objects, blank=blank)
+        profile = None
+        if isinstance(model, PhysicsModel) and state.start:
+            train_frames, train_actions = read_sequences(data, "train", limit=PROFILE_SEQUENCES)
+            if len(train_frames):
+                profile = parameter_profile(model, train_frames, train_actions)
+                metrics["profile"] = profile_dict(profile)
+        convergence = check_convergence(state, objects=objects, blank=blank, hold=metrics["frame_mse_hold"],
+                                        profile=profile)
         metrics["converged"] = convergence.converged
         metrics["convergence"] = convergence.to_dict()
     write_json(run_dir / "metrics.json", metrics)

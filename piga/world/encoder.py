@@ -36,14 +36,32 @@ Angles are returned in radians, positive counter-clockwise as displayed.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-from piga.io.choices import check_choices
+from piga.io.choices import check_choices, check_ranges, check_types
+
+
+def pivot_gate_pair(value: Any, owner: str) -> tuple[float, float]:
+    """``value`` as a pivot gate (inner, outer) with 0 <= inner <= outer < 0.5, or a ValueError naming ``owner``'s
+    field (a JSON list is taken)."""
+    try:
+        inner, outer = (float(r) for r in value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{owner}.pivot_gate must be two numbers (inner, outer); got {value!r}") from None
+    if not 0 <= inner <= outer < 0.5:
+        raise ValueError(f"{owner}.pivot_gate must be (inner, outer) with 0 <= inner <= outer < 0.5; got {value!r}")
+    return inner, outer
+
+
+#: Bounds of EncoderConfig's numbers: the sizes a model of piga's may have, and an angle in radians.
+ENCODER_RANGES = {"image_size": (8, 4096), "channels": (1, 64), "n_objects": (1, 64), "mask_width": (1, 1024),
+                  "loc_width": (1, 1024), "angle_reference": (-2 * math.pi, 2 * math.pi)}
 
 
 @dataclass(frozen=True)
@@ -79,11 +97,11 @@ class EncoderConfig:
 
     def __post_init__(self) -> None:
         check_choices(self)
+        check_types(self)
+        check_ranges(self, ENCODER_RANGES)
         if self.coord_dim not in (1, 2):
             raise ValueError(f"coord_dim must be 1 (angle) or 2 (cartesian), got {self.coord_dim}")
-        inner, outer = self.pivot_gate
-        if not 0 <= inner <= outer < 0.5:
-            raise ValueError(f"pivot_gate must be (inner, outer) with 0 <= inner <= outer < 0.5, got {self.pivot_gate}")
+        object.__setattr__(self, "pivot_gate", pivot_gate_pair(self.pivot_gate, "EncoderConfig"))
 
 
 class _MaskNet(nn.Module):

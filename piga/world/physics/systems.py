@@ -16,7 +16,9 @@ from typing import Any, ClassVar
 import torch
 from torch import Tensor, nn
 
+from piga.io.choices import check_types, check_ranges
 from piga.world.effects import DAMPING, pendulum_acceleration
+from piga.world.encoder import ENCODER_RANGES, pivot_gate_pair
 
 __all__ = ["System", "Pendulum", "Spring", "Gravity", "Bouncing", "SYSTEMS", "make_system", "SystemOptions",
            "PendulumOptions", "SpringOptions", "GravityOptions", "BouncingOptions"]
@@ -183,6 +185,10 @@ class System(nn.Module):
         )
 
 
+#: The largest initial damping b: 1e3 damps a pendulum of Gymnasium's size within one 0.05 s step already.
+DAMPING_INIT_MAX = 1e3
+
+
 @dataclass(frozen=True)
 class PendulumOptions(SystemOptions):
     """A pendulum model's options."""
@@ -212,7 +218,10 @@ class PendulumOptions(SystemOptions):
     (:class:`piga.world.encoder.EncoderConfig`)."""
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "pivot_gate", tuple(float(r) for r in self.pivot_gate))  # JSON gives a list
+        check_types(self)
+        check_ranges(self, {"damping_init": (0, DAMPING_INIT_MAX), "angle_reference": ENCODER_RANGES["angle_reference"]},
+                     above=("damping_init",))
+        object.__setattr__(self, "pivot_gate", pivot_gate_pair(self.pivot_gate, "PendulumOptions"))  # JSON gives a list
 
     def encoder_fields(self) -> dict[str, Any]:
         return {"angle_reference": self.angle_reference, "pivot_gate": self.pivot_gate}
@@ -414,6 +423,7 @@ class GravityOptions(SystemOptions):
     weak as in the g run (g = 1, m = 1), far from any true g·m."""
 
     def __post_init__(self) -> None:
+        check_types(self)
         if not (self.fixed_g == 0 or FIXED_G_RANGE[0] <= self.fixed_g <= FIXED_G_RANGE[1]):
             raise ValueError(f"fixed_g must be in [{FIXED_G_RANGE[0]:g}, {FIXED_G_RANGE[1]:g}] (or 0: learn g), got "
                              f"{self.fixed_g:g}: the mass starts at 1/fixed_g, which float32 must hold with room to learn")
