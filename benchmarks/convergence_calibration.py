@@ -123,7 +123,8 @@ def ratios(r: dict[str, Any]) -> tuple[float, float | None]:
 
 def profile_cell(r: dict[str, Any]) -> str:
     """Each learned parameter's training-frame MSE with it scaled down and up (relative to its value's)."""
-    return ", ".join(f"{k} {p['lower']:.3f} / {p['upper']:.3f}" for k, p in r["profile"].items()) or "-"
+    shown = lambda x: "inf" if x is None else f"{x:.3f}"  # noqa: E731 (JSON keeps a blown-up prediction's inf as null)
+    return ", ".join(f"{k} {shown(p['lower'])} / {shown(p['upper'])}" for k, p in r["profile"].items()) or "-"
 
 
 def verdict(r: dict[str, Any]) -> str:
@@ -147,8 +148,9 @@ def summary(records: list[dict[str, Any]]) -> list[str]:
                  f"or (a model with physical parameters) MSE / held frame not below `hold_ratio` = {config.hold_ratio:g} "
                  f"(`piga.training.convergence.ConvergenceConfig`); unsettled when a profile ratio is below "
                  f"1 - `profile_tolerance` = {1 - config.profile_tolerance:g}.")
-    short = [r for r in records if min((min(p["lower"], p["upper"]) for p in r["profile"].values()), default=1.0)
-             < 1 - config.profile_tolerance]
+    short = [r for r in records if min((min(x for x in (p["lower"], p["upper"]) if x is not None)
+                                        for p in r["profile"].values() if p["lower"] is not None or p["upper"] is not None),
+                                       default=1.0) < 1 - config.profile_tolerance]
     lines.append(f"- Runs with a parameter short of its value by the profile: {len(short)}"
                  + "".join(f"; {r['case']} s{r['seed']} ({verdict(r)})" for r in short) + ".")
     missed = [r for r in records if verdict(r) == "not identified" and r["exit"] == 0]

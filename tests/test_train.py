@@ -405,6 +405,7 @@ def test_converged_is_false_when_the_parameters_never_moved(small_data: Path, tm
     assert_one_line(code, err, "never left", "--lr-physics")
     metrics = json.loads((out / "metrics.json").read_text())
     assert metrics["converged"] is False
+    assert set(metrics["profile"]) == {"g", "a"} and metrics["frame_mse_hold"] > 0  # what the check read
     from piga.io.runs import convergence_warning
 
     assert "did not converge" in (convergence_warning(out) or "")  # what piga-control and piga-diagnose print

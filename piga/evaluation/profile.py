@@ -67,6 +67,9 @@ def parameter_profile(model: PhysicsModel, frames: np.ndarray, actions: np.ndarr
     model.eval()
     at_value = mse()
     out: dict[str, ParameterProfile] = {}
+    if not (math.isfinite(at_value) and at_value > 0):  # nothing to compare with (a perfect or a broken prediction)
+        model.train(was_training)
+        return out
     for name, p in model.system.named_parameters():
         if not (name.startswith("log_") and p.requires_grad and p.numel() == 1):
             continue
@@ -74,7 +77,8 @@ def parameter_profile(model: PhysicsModel, frames: np.ndarray, actions: np.ndarr
         ratios = []
         for shift in (-math.log(factor), math.log(factor)):
             p.copy_(base + shift)
-            ratios.append(mse() / at_value if at_value > 0 else 1.0)
+            ratio = mse() / at_value
+            ratios.append(ratio if math.isfinite(ratio) else math.inf)  # a prediction that blew up: worse
         p.copy_(base)
         out[name.removeprefix("log_")] = ParameterProfile(float(base.exp()), ratios[0], ratios[1], factor)
     model.train(was_training)
