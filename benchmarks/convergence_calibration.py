@@ -153,12 +153,19 @@ def summary(records: list[dict[str, Any]]) -> list[str]:
                                        default=1.0) < 1 - config.profile_tolerance]
     lines.append(f"- Runs with a parameter short of its value by the profile: {len(short)}"
                  + "".join(f"; {r['case']} s{r['seed']} ({verdict(r)})" for r in short) + ".")
+    lowest = [(min(x for p in r["profile"].values() for x in (p["lower"], p["upper"]) if x is not None), r)
+              for r in records if verdict(r) == "identified" and r["profile"]]
+    if lowest:
+        value, worst = min(lowest, key=lambda t: t[0])
+        lines.append(f"- The lowest profile ratio of an identified run: **{value:.3f}** ({worst['case']} s{worst['seed']}): "
+                     + ("no identified run has a parameter that predicts its frames better scaled."
+                        if value >= 1 - config.profile_tolerance else "an identified run is called unsettled."))
     missed = [r for r in records if verdict(r) == "not identified" and r["exit"] == 0]
-    refused = [r for r in records if verdict(r) == "identified" and r["exit"] == 1]
+    alarms = [r for r in records if verdict(r) == "identified" and r["exit"] != 0]
     lines.append(f"- Runs not identified that exit 0 (converged): {len(missed)}"
                  + (" (" + ", ".join(f"{r['case']} s{r['seed']}" for r in missed) + ")" if missed else "")
-                 + f"; identified runs that exit 1 (untrained): {len(refused)}"
-                 + (" (" + ", ".join(f"{r['case']} s{r['seed']}" for r in refused) + ")" if refused else "") + ".")
+                 + f"; identified runs that exit 1 or 3: {len(alarms)}"
+                 + (" (" + ", ".join(f"{r['case']} s{r['seed']}" for r in alarms) + ")" if alarms else "") + ".")
     return lines
 
 

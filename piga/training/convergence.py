@@ -9,7 +9,7 @@ trajectory, :class:`piga.training.train.TrainState`), never the truth, and gives
 | outcome | meaning | ``piga-train-model`` |
 |---|---|---|
 | ``untrained`` | the physics never trained, a learned parameter never left its start, one collapsed to a float limit, the actuation gain faded toward 0, (for a scene) an object was not found or a slot draws nothing (:mod:`piga.evaluation.objects`), or its held-out predictions are no better than the background alone, or (with physical parameters) not clearly better than the last input frame held still | exits 1 with a line that names the fix |
-| ``unsettled`` | it trained, but stopped before its plan ended, or a parameter still drifts at the end | exits 3 with a warning line |
+| ``unsettled`` | it trained, but stopped before its plan ended, a parameter still drifts at the end, or one stopped short of the value its training frames want (:mod:`piga.evaluation.profile`) | exits 3 with a warning line |
 | ``converged`` | none of the above | exits 0 |
 
 A parameter *drifts* when its change over the last ``tail`` of the planned steps (a straight-line
