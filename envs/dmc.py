@@ -79,6 +79,9 @@ MAX_SPEED = math.pi / DMC_PHYSICS_DT
 MAX_DAMPING = 100.0
 #: Radius of the sphere at the pole's tip in pendulum.xml (its only mass).
 TIP_RADIUS = 0.05
+#: The shortest pole (m): the tip's radius. A shorter one hides under its tip (at 64 pixels it is 2 pixels
+#: long), and 1e-300 failed in MuJoCo's words ("fromto points too close").
+MIN_LENGTH = TIP_RADIUS
 #: Earth's gravity as MuJoCo's default ``option/gravity``.
 EARTH_GRAVITY = 9.81
 #: The camera sees a square of this half-side (metres) around the pivot: a pole up to 0.6 m fits.
@@ -145,13 +148,14 @@ class DMCPendulumConfig:
 
     def __post_init__(self) -> None:
         check_field_kinds(self)  # a value of the wrong kind named here, not met deep inside (shadows="no" was on)
-        for name in ("length", "damping"):  # written into the MJCF model, whose reader takes no subnormal number
-            value = getattr(self, name)
-            if value != 0 and abs(value) < sys.float_info.min:
-                raise ValueError(f"DMCPendulumConfig.{name}={value!r} is below the smallest normal number "
-                                 f"({sys.float_info.min:g}), which MuJoCo's model reader refuses; give "
-                                 + ("0 or " if name == "damping" else "") + "a larger value")
+        # written into the MJCF model, whose reader takes no subnormal number (the length has a floor of its own)
+        if self.damping != 0 and abs(self.damping) < sys.float_info.min:
+            raise ValueError(f"DMCPendulumConfig.damping={self.damping!r} is below the smallest normal number "
+                             f"({sys.float_info.min:g}), which MuJoCo's model reader refuses; give 0 or a larger value")
         longest = VIEW_HALF_SIDE - 2 * TIP_RADIUS
+        if not MIN_LENGTH <= self.length <= longest:  # first: the mass's bound and the camera's follow from it
+            raise ValueError(f"DMCPendulumConfig.length={self.length!r} is out of range (length in [{MIN_LENGTH:g}, "
+                             f"{longest:g}] m; shorter, the pole is hidden under its tip)")
         checks = {  # each field: whether it is in range, and its range in words
             "image_size": (8 <= self.image_size <= MAX_IMAGE_SIZE, f"image_size in [8, {MAX_IMAGE_SIZE}]"),
             "frame_stack": (1 <= self.frame_stack <= MAX_FRAME_STACK, f"frame_stack in [1, {MAX_FRAME_STACK}]"),
@@ -159,7 +163,6 @@ class DMCPendulumConfig:
             "episode_length": (0 <= self.episode_length <= MAX_EPISODE_LENGTH, f"episode_length in [0, {MAX_EPISODE_LENGTH:,}]"),
             "mass": (MIN_MASS <= self.mass <= self.max_mass, f"mass in [{MIN_MASS:g}, {self.max_mass:.4g}]; heavier, "
                      f"the torque's effect 1 / (3 I) is below {MIN_ACTUATION_GAIN:g}, too weak for a frame to show"),
-            "length": (0 < self.length <= longest, f"length in (0, {longest:g}]"),
             "damping": (0 <= self.damping <= MAX_DAMPING, f"damping in [0, {MAX_DAMPING:g}]"),
             "flip": (self.flip in FLIPS, f"flip in {FLIPS}"),
             "max_angle": (0 <= self.max_angle <= math.pi, "max_angle in [0, pi]"),

@@ -342,7 +342,12 @@ def test_a_failed_allocation_is_out_of_memory(capsys: pytest.CaptureFixture[str]
     (["--effect", "speed_clip=1e-9"], ["speed_clip must be in [0.0001, 8)"], 2),  # a still pendulum, "wrote"
     (["--env", "piga/DMCPendulum-v0", "--env-option", "damping=1e-320"],
      ["damping=1e-320 is below the smallest normal number", "give 0 or a larger value"], 1),  # MuJoCo: "too large"
-    (["--env", "piga/DMCPendulum-v0", "--env-option", "length=1e-320"], ["length=1e-320 is below the smallest normal"], 1),
+    (["--env", "piga/DMCPendulum-v0", "--env-option", "length=1e-320"], ["length=1e-320 is out of range (length in [0.05"], 1),
+    # an OverflowError in the mass's bound (exit 70), the mass blamed, and MuJoCo's "fromto points too close"
+    (["--env", "piga/DMCPendulum-v0", "--env-option", "length=1e300"], ["length=1e+300 is out of range (length in [0.05"], 1),
+    (["--env", "piga/DMCPendulum-v0", "--env-option", "length=1e20"], ["length=1e+20 is out of range"], 1),
+    (["--env", "piga/DMCPendulum-v0", "--env-option", "length=1e-300"], ["length=1e-300 is out of range",
+                                                                          "hidden under its tip"], 1),
     # an option that does not apply, written at its default value: the file recorded it and ignored it
     (["--env", "piga/DMCPendulum-v0", "--gravity", "10"], ["--gravity is an option of piga/PixelPendulum-v0 only"], 1),
     (["--env", "piga/DMCPendulum-v0", "--gravity-mult", "1"], ["--gravity-mult is an option of piga/PixelPendulum-v0"], 1),
@@ -987,8 +992,10 @@ def test_train_model_refuses_data_on_open(data: str, needles: list[str], files: 
     (["--epochs", "9" * 20], ["epochs=99999999999999999999 plans", "more than 10,000,000", "lower --epochs"], 1),  # it trained for ever
     (["--budget-steps", "9" * 20], ["--budget-steps=99999999999999999999 plans", "more than 10,000,000"], 1),
     (["--model", "video-lstm", "--video-lstm-scale", "99999999"], ["--video-lstm-scale: expected an integer in [1, 32]"], 2),
-    (["--data-file", "gravity", "--fixed-g", "1e308"], ["--fixed-g must be in [1e-06, 1e+06]"], 1),  # the loss was NaN at step 0
-    (["--data-file", "gravity", "--fixed-g", "1e-300"], ["--fixed-g must be in [1e-06, 1e+06]", "got 1e-300"], 1),
+    (["--data-file", "gravity", "--fixed-g", "1e308"], ["--fixed-g: expected a number from 1e-06 to 1e+06"], 2),  # NaN loss
+    (["--data-file", "gravity", "--fixed-g", "1e-300"], ["--fixed-g: expected a number from 1e-06 to 1e+06", "got 1e-300"], 2),
+    # the library's "(or 0: learn g)" was quoted, and 0 was then refused as not > 0
+    (["--data-file", "gravity", "--fixed-g", "0"], ["--fixed-g: expected a number from 1e-06 to 1e+06, got 0"], 2),
     (["--epochs", "1", "--budget-steps", "50"], ["--epochs and --budget-steps both set the run's length"], 1),  # the budget
     (["--preset", "paper", "--budget-steps", "50"], ["the paper preset plans in epochs (1000)", "give --epochs"], 1),  # was ignored
 ])
@@ -1344,6 +1351,22 @@ def test_train_resume_without_its_record_takes_the_checkpoints_own_recipe(tiny_p
     code, _, err = run_in_process("piga-train-model", cli.main, str(tiny_data), "--out", str(run), "--resume",
                                   "--epochs", "2", "--quiet", "--batch-size", str(own), capsys=capsys)
     assert code in (0, 1, NOT_CONVERGED) and "drop" not in err and "Traceback" not in err, err
+
+
+def test_a_run_stopped_by_max_minutes_is_told_to_raise_it(tiny_data: Path, tmp_path: Path,
+                                                          capsys: pytest.CaptureFixture[str]) -> None:
+    """--max-minutes is a budget over the run's whole life: the advice "--resume and a larger --epochs" trained no
+    step and said the same again. The advice names --max-minutes, and a resume that could not train is refused."""
+    from tests.helpers import run_in_process
+    from piga.cli import train as cli
+
+    run = tmp_path / "run"
+    code, _, err = run_in_process("piga-train-model", cli.main, str(tiny_data), "--out", str(run), "--budget-steps",
+                                  "60", "--batch-size", "8", "--threads", "1", "--quiet", "--max-minutes", "1e-6",
+                                  capsys=capsys)
+    assert code in (1, 3) and "continue this run with --resume and a larger --max-minutes" in err, err
+    refused("piga-train-model", [str(tiny_data), "--out", str(run), "--resume", "--epochs", "40", "--quiet"], capsys,
+            "past its --max-minutes 1e-06 (a budget over the run's whole life", "give a larger --max-minutes")
 
 
 def test_train_resume_refuses_a_baseline_run(baseline_runs: dict[str, Path], tiny_data: Path, tmp_path: Path,

@@ -180,7 +180,7 @@ def test_cli_bad_input(tmp_path: Path, recording: tuple[Path, Path, np.ndarray, 
                      "no such actions file")
     junk_video = tmp_path / "junk.mp4"
     junk_video.write_text("not a video")
-    assert_one_line(*run(str(junk_video), str(csv), "--dt", "0.05", "--out", out), "junk.mp4", "not a readable video")
+    assert_one_line(*run(str(junk_video), str(csv), "--dt", "0.05", "--out", out), "junk.mp4", "not a readable video or image stack")
     empty = tmp_path / "empty"
     empty.mkdir()
     assert_one_line(*run(str(empty), str(csv), "--dt", "0.05", "--out", out), "no frames")

@@ -433,6 +433,9 @@ def test_the_convergence_check_on_made_up_trajectories() -> None:
     # settled parameters whose model predicts worse than drawing the background: a 45-step run passed so, g 88% off
     blind = check_convergence(state(1 + 0.18 * settle, 0.3 - 0.01 * settle), blank=(0.0103, 0.0037))
     assert blind.outcome == "untrained" and "no better than drawing the background alone" in blind.reason
+    # frames that hardly differ from the background (a pendulum that barely moves): the data's fault, not the training's
+    faint = check_convergence(state(1 + 0.18 * settle, 0.3 - 0.01 * settle), blank=(0.00412, 2.8e-6))
+    assert faint.outcome == "untrained" and "check the data, not the training" in faint.reason
     # settled parameters whose model beats the background but hardly a pendulum held still: 20 sequences of 10 frames
     # settled so with g 67% off (MSE 0.50x the held frame's; identified runs measured 0.12x at most)
     still = check_convergence(state(1 + 3 * settle, 0.3 + 0.2 * settle), blank=(0.0030, 0.0035), hold=0.0060)

@@ -44,6 +44,7 @@ OUTPUTS = (CHECKPOINT, "metrics.json", "config.json", "rollout.png", "templates.
 
 def build_parser() -> ArgumentParser:
     from piga.world.physics import GravityOptions  # noqa: PLC0415 (torch loads only when the command runs)
+    from piga.world.physics.systems import FIXED_G_RANGE  # noqa: PLC0415
     from piga.training.train import MAX_LR, PRESETS, TrainConfig  # noqa: PLC0415
     from piga.io.choices import literal_fields  # noqa: PLC0415
     from piga.world.model import MAX_VIDEO_LSTM_SCALE, ModelConfig  # noqa: PLC0415
@@ -117,7 +118,9 @@ def build_parser() -> ArgumentParser:
     p.add_argument("--signed-actuation", action="store_true",
                    help="learn the sign of a too (a in linear space, from +0.3): for a camera on the other side of the "
                    "hinge or a motor wired the other way, which flip the actuation the frames show")
-    add_preset_option(p, "--fixed-g", type=positive_float, default=GravityOptions().fixed_g, metavar="G",
+    low, high = FIXED_G_RANGE  # (the library's 0, "learn g", is the option left out)
+    fixed_g = number_type(float, lambda v: low <= v <= high, f"a number from {low:g} to {high:g}")
+    add_preset_option(p, "--fixed-g", type=fixed_g, default=GravityOptions().fixed_g, metavar="G",
                       shown="none: learn g with unit masses",
                       help="gravity data only, the paper's m run: hold g at G (your value; the file's parameters are "
                       "never read) and learn the bodies' shared mass m instead, starting from 1/G so that the force "
@@ -278,6 +281,12 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
         raise PigaError(f"--resume {given}: the run already planned {planned['epochs']} epochs "
                         f"({planned['epochs'] * planned.get('steps_per_epoch', 0)} steps); --resume may raise "
                         "--epochs or --budget-steps, never lower them")
+    trained = float((ckpt.get("state") or {}).get("elapsed", 0.0)) if args.resume else 0.0
+    if args.resume and train_config.max_minutes and trained > train_config.max_minutes * 60 \
+            and int((ckpt.get("state") or {}).get("epoch", 0)) < plan.epochs:  # it would stop before its first step
+        raise PigaError(f"--resume: the run has trained {trained / 60:.3g} min, past its --max-minutes "
+                        f"{train_config.max_minutes:g} (a budget over the run's whole life, resumes included); give a "
+                        "larger --max-minutes to continue it")
     from piga.io.resources import adam_checkpoint_bytes, check_run_disk, check_training_memory
     from piga.world.variants import build_model, parameter_count
 

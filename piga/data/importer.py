@@ -168,7 +168,7 @@ def _read_images(path: Path) -> Iterator[np.ndarray]:
             yield np.asarray(image)
     except Exception as exc:  # imageio and its plugins raise many types for foreign or corrupt files
         first = (str(exc).strip().splitlines() or [""])[0][:120]
-        raise ValueError(f"{path}: not a readable video ({exc.__class__.__name__}{': ' + first if first else ''}); "
+        raise ValueError(f"{path}: not a readable video or image stack ({exc.__class__.__name__}{': ' + first if first else ''}); "
                          f"piga-import takes {RECORDINGS}") from None
 
 

@@ -362,8 +362,8 @@ def _blank_error(path: str | os.PathLike[str], level: int) -> DataFormatError:
 
 def _still_error(path: str | os.PathLike[str]) -> DataFormatError:
     return DataFormatError(f"{path}: nothing moves: in every sequence each frame is the same picture as its first, so "
-                           "the video carries no motion to learn from; check the recording (a frozen camera, or one "
-                           "frame repeated)")
+                           "the video carries no motion to learn from; check its source (a recording: a frozen camera, "
+                           "or one frame repeated; a simulation: starts at rest, and actions too weak to move it)")
 
 
 def _check_frames_signal(frames: h5py.Dataset, path: str | os.PathLike[str], motion: bool) -> None:

@@ -106,8 +106,23 @@ class Convergence:
 
 
 def _fix(planned: int, steps: int) -> str:
+    if steps < planned:  # stopped by --max-minutes (a budget over the run's whole life): a larger one continues it
+        return ("train longer: continue this run with --resume and a larger --max-minutes (it took "
+                f"{steps} of {planned} planned steps), or give it more data")
     return ("train longer (--epochs or a larger --max-minutes, or more data), or continue this run with --resume "
             f"and a larger --epochs (it took {steps} of {planned} planned steps)")
+
+
+#: A background MSE below one gray level squared: the held-out frames hardly differ from the background.
+FAINT_BACKGROUND_MSE = (1 / 255) ** 2
+
+
+def _blank_fix(background: float, planned: int, steps: int) -> str:
+    """The fix for predictions no better than the background: the data's, when the frames are the background."""
+    if background < FAINT_BACKGROUND_MSE:
+        return ("the held-out frames differ from the background by under one gray level (the system hardly shows in "
+                "them, or hardly moves): check the data, not the training")
+    return _fix(planned, steps)
 
 
 def check_convergence(state: Any, config: ConvergenceConfig = ConvergenceConfig(),
@@ -177,7 +192,7 @@ def check_convergence(state: Any, config: ConvergenceConfig = ConvergenceConfig(
         return verdict("untrained", objects.empty_reason())
     if blank is not None and not checks and not blank[0] < config.blank_ratio * blank[1]:
         return verdict("untrained", f"its held-out predictions (MSE {blank[0]:.4g}) are no better than drawing the "
-                                    f"background alone (MSE {blank[1]:.4g}); " + _fix(planned, steps))
+                                    f"background alone (MSE {blank[1]:.4g}); " + _blank_fix(blank[1], planned, steps))
     if steps < planned:
         return verdict("unsettled", f"the run stopped at step {steps} of {planned} planned, before its learning rate "
                                     "decayed; " + _fix(planned, steps))
@@ -197,7 +212,7 @@ def check_convergence(state: Any, config: ConvergenceConfig = ConvergenceConfig(
                                     f"; its held-out MSE {blank[0]:.4g} is below the background's {blank[1]:.4g}"))
     if blank is not None and not blank[0] < config.blank_ratio * blank[1]:  # settled, but on what?
         return verdict("untrained", f"its parameters settled, but its held-out predictions (MSE {blank[0]:.4g}) are no "
-                                    f"better than drawing the background alone (MSE {blank[1]:.4g}); " + _fix(planned, steps))
+                                    f"better than drawing the background alone (MSE {blank[1]:.4g}); " + _blank_fix(blank[1], planned, steps))
     if blank is not None and hold is not None and not blank[0] < config.hold_ratio * hold:
         return verdict("untrained", f"its parameters settled, but its held-out predictions (MSE {blank[0]:.4g}) are not "
                                     f"{1 / config.hold_ratio:.3g}x better than holding the last input frame still (MSE "
