@@ -376,7 +376,7 @@ def test_a_run_stopped_before_its_physics_trained_exits_non_zero(small_data: Pat
     code, _, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), "--batch-size", "8", "--epochs", "10",
                                   "--warmup-fraction", "0.5", "--max-minutes", "1e-9", "--quiet", "--threads", "1",
                                   capsys=capsys)
-    line = assert_one_line(code, err, "physics never trained", "warm-up", "--epochs", "--resume")
+    line = assert_one_line(code, err, "physics never trained", "warm-up", "--resume and a larger --max-minutes")
     assert code == 1, line
     metrics = json.loads((out / "metrics.json").read_text())
     assert metrics["converged"] is False and metrics["convergence"]["outcome"] == "untrained"
