@@ -25,11 +25,11 @@ import time
 from pathlib import Path
 from typing import Any, NamedTuple
 
-from common import logged_command, machine, machine_words
+from common import logged_command, machine, machine_words, write_page
 from prediction import run_training
 
 from piga.cli.common import ArgumentParser, nonnegative_int
-from piga.io.atomic import atomic_output, write_json
+from piga.io.atomic import write_json
 from piga.io.pool import git_commit
 from piga.training.convergence import ConvergenceConfig
 
@@ -127,6 +127,17 @@ def profile_cell(r: dict[str, Any]) -> str:
     return ", ".join(f"{k} {shown(p['lower'])} / {shown(p['upper'])}" for k, p in r["profile"].items()) or "-"
 
 
+def lowest_profile(r: dict[str, Any]) -> float | None:
+    """A record's lowest profile ratio over its parameters and both scalings (None: no profile; a null is a
+    blown-up prediction, the worst)."""
+    values = [x for p in r["profile"].values() for x in (p["lower"], p["upper"]) if x is not None]
+    return min(values, default=None)
+
+
+def _names(records: list[dict[str, Any]]) -> str:
+    return " (" + ", ".join(f"{r['case']} s{r['seed']}" for r in records) + ")" if records else ""
+
+
 def verdict(r: dict[str, Any]) -> str:
     """``identified`` (every parameter within GOOD), ``not identified`` (one BAD or farther) or ``between``."""
     worst = max(r["parameter_errors"].values(), default=float("inf"))
@@ -148,24 +159,20 @@ def summary(records: list[dict[str, Any]]) -> list[str]:
                  f"or (a model with physical parameters) MSE / held frame not below `hold_ratio` = {config.hold_ratio:g} "
                  f"(`piga.training.convergence.ConvergenceConfig`); unsettled when a profile ratio is below "
                  f"1 - `profile_tolerance` = {1 - config.profile_tolerance:g}.")
-    short = [r for r in records if min((min(x for x in (p["lower"], p["upper"]) if x is not None)
-                                        for p in r["profile"].values() if p["lower"] is not None or p["upper"] is not None),
-                                       default=1.0) < 1 - config.profile_tolerance]
+    floor = 1 - config.profile_tolerance
+    short = [r for r in records if (lowest_profile(r) or 1.0) < floor]
     lines.append(f"- Runs with a parameter short of its value by the profile: {len(short)}"
                  + "".join(f"; {r['case']} s{r['seed']} ({verdict(r)})" for r in short) + ".")
-    lowest = [(min(x for p in r["profile"].values() for x in (p["lower"], p["upper"]) if x is not None), r)
-              for r in records if verdict(r) == "identified" and r["profile"]]
+    lowest = [(lowest_profile(r), r) for r in records if verdict(r) == "identified" and lowest_profile(r) is not None]
     if lowest:
         value, worst = min(lowest, key=lambda t: t[0])
         lines.append(f"- The lowest profile ratio of an identified run: **{value:.3f}** ({worst['case']} s{worst['seed']}): "
                      + ("no identified run has a parameter that predicts its frames better scaled."
-                        if value >= 1 - config.profile_tolerance else "an identified run is called unsettled."))
+                        if value >= floor else "an identified run is called unsettled."))
     missed = [r for r in records if verdict(r) == "not identified" and r["exit"] == 0]
     alarms = [r for r in records if verdict(r) == "identified" and r["exit"] != 0]
-    lines.append(f"- Runs not identified that exit 0 (converged): {len(missed)}"
-                 + (" (" + ", ".join(f"{r['case']} s{r['seed']}" for r in missed) + ")" if missed else "")
-                 + f"; identified runs that exit 1 or 3: {len(alarms)}"
-                 + (" (" + ", ".join(f"{r['case']} s{r['seed']}" for r in alarms) + ")" if alarms else "") + ".")
+    lines.append(f"- Runs not identified that exit 0 (converged): {len(missed)}{_names(missed)}; identified runs that "
+                 f"exit 1 or 3: {len(alarms)}{_names(alarms)}.")
     return lines
 
 
@@ -226,10 +233,7 @@ def run(args: argparse.Namespace, argv: list[str] | None) -> int:
     if not records:
         return 0
     command = shlex.join(["python", "benchmarks/convergence_calibration.py", *(argv if argv is not None else sys.argv[1:])])
-    with atomic_output(out.with_suffix(".md"), overwrite=True) as tmp:
-        tmp.write_text(markdown(records, command))
-    write_json(out.with_suffix(".json"), {"command": command, "good": GOOD, "bad": BAD, "records": records}, overwrite=True)
-    print(f"wrote {out.with_suffix('.md')}")
+    write_page(out, {"command": command, "good": GOOD, "bad": BAD, "records": records}, markdown(records, command))
     return 0
 
 

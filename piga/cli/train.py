@@ -281,9 +281,10 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
         raise PigaError(f"--resume {given}: the run already planned {planned['epochs']} epochs "
                         f"({planned['epochs'] * planned.get('steps_per_epoch', 0)} steps); --resume may raise "
                         "--epochs or --budget-steps, never lower them")
-    trained = float((ckpt.get("state") or {}).get("elapsed", 0.0)) if args.resume else 0.0
-    if args.resume and train_config.max_minutes and trained > train_config.max_minutes * 60 \
-            and int((ckpt.get("state") or {}).get("epoch", 0)) < plan.epochs:  # it would stop before its first step
+    stood = (ckpt.get("state") or {}) if args.resume else {}  # where the resumed run stands
+    trained = float(stood.get("elapsed", 0.0))
+    if train_config.max_minutes and trained > train_config.max_minutes * 60 \
+            and int(stood.get("epoch", 0)) < plan.epochs:  # it would stop before its first step
         raise PigaError(f"--resume: the run has trained {trained / 60:.3g} min, past its --max-minutes "
                         f"{train_config.max_minutes:g} (a budget over the run's whole life, resumes included); give a "
                         "larger --max-minutes to continue it")

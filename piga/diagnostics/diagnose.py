@@ -94,10 +94,11 @@ from piga.io.runs import (nominal_of, training_arrow, training_blank_mse, traini
 GYM_SPEED_CLIP = PENDULUM_MAX_SPEED
 
 
-#: Bounds of DiagnoseConfig's numbers (besides those ``__post_init__`` states): the fractions within [0, 1], BIC
+#: Bounds of DiagnoseConfig's numbers (the bootstrap's other limits are ``__post_init__``'s): the fractions within [0, 1], BIC
 #: margins, ratios and speeds finite, and the sizes bounded so that a typo cannot make the fit run for days.
 DIAGNOSE_RANGES = {
     "fit_horizon": (1, 1000), "stride": (1, 1000), "reading_harmonics": (2, 100), "max_effects": (0, 10), "beam": (1, 100),
+    "bootstrap": (0, math.inf),
     "bic_margin": (0, math.inf), "within_frame_bic_margin": (0, math.inf), "ambiguous_bic": (0, math.inf),
     "min_gain": (0, 1), "unexplained_gain": (0, 1), "gain_tolerance": (0, 1), "clip_max_beyond": (0, 1),
     "clip_min_binding": (0, 1), "deadzone_min_binding": (0, 1), "ambiguous_free_run": (0, 1),
@@ -228,9 +229,6 @@ class DiagnoseConfig:
         if not isinstance(self.camera, CameraConfig):
             raise TypeError(f"DiagnoseConfig.camera must be a CameraConfig; got {self.camera!r} ({type(self.camera).__name__})")
         check_ranges(self, DIAGNOSE_RANGES, above=("vision_ratio", "max_scene_ratio", "max_training_fraction"))
-        if self.fit_horizon < 1 or self.stride < 1 or self.max_effects < 0 or self.bootstrap < 0 \
-                or self.reading_harmonics < 2 or self.beam < 1:
-            raise ValueError(f"need fit_horizon, stride, beam >= 1, reading_harmonics >= 2 and max_effects, bootstrap >= 0, got {self}")
         if 0 < self.bootstrap < self.MIN_BOOTSTRAP:
             raise ValueError(f"bootstrap must be 0 (no intervals) or at least {self.MIN_BOOTSTRAP} replicates (a 95% "
                              f"interval of fewer is their extremes), got {self.bootstrap}")

@@ -146,6 +146,7 @@ def evaluate(model: FrameModel, data: str | Path, config: EvalConfig = EvalConfi
         ssims += [[_ssim(pred[b, t], truth[b, t]) for t in range(steps)] for b in range(len(pred))]
     mse = squared / (len(frames) * int(np.prod(pred.shape[2:])))  # (S,)
     ssim = np.array(ssims).mean(0)  # (S,)
+    predicted_values = len(frames) * n_pred * int(np.prod(pred.shape[2:]))  # pixel values over the prediction frames
     result: dict[str, Any] = {
         "data": str(data),
         "split": config.split,
@@ -164,9 +165,9 @@ def evaluate(model: FrameModel, data: str | Path, config: EvalConfig = EvalConfi
         "frame_mse_mean": {"prediction": float(mse[:n_pred].mean()),
                            "extrapolation": float(mse[n_pred:].mean()) if steps > n_pred else None},
         # the error of predicting the model's label-free background alone, for the check of a model without physics
-        "frame_mse_background": blank / (len(frames) * n_pred * int(np.prod(pred.shape[2:]))),
+        "frame_mse_background": blank / predicted_values,
         # and of a system that stands still: the last input frame held over the predicted ones
-        "frame_mse_hold": hold / (len(frames) * n_pred * int(np.prod(pred.shape[2:]))),
+        "frame_mse_hold": hold / predicted_values,
     }
     if info.has_states and cfg.system == "pendulum" and isinstance(model, ObjectModel):
         result["angle"] = angle_errors(model, frames, load_states(data, config.split, limit=config.max_sequences))

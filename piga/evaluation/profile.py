@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -65,23 +66,31 @@ def parameter_profile(model: PhysicsModel, frames: np.ndarray, actions: np.ndarr
 
     was_training = model.training
     model.eval()
-    at_value = mse()
-    out: dict[str, ParameterProfile] = {}
-    if not (math.isfinite(at_value) and at_value > 0):  # nothing to compare with (a perfect or a broken prediction)
+    try:
+        return _profile(model, mse, factor)
+    finally:
         model.train(was_training)
-        return out
+
+
+def _profile(model: PhysicsModel, mse: Callable[[], float], factor: float) -> dict[str, ParameterProfile]:
+    """The profiles, with ``mse()`` the prediction error of the model as it stands (in eval mode)."""
+    at_value = mse()
+    if not (math.isfinite(at_value) and at_value > 0):  # nothing to compare with (a perfect or a broken prediction)
+        return {}
+    out: dict[str, ParameterProfile] = {}
     for name, p in model.system.named_parameters():
         if not (name.startswith("log_") and p.requires_grad and p.numel() == 1):
             continue
         base = p.detach().clone()
         ratios = []
-        for shift in (-math.log(factor), math.log(factor)):
-            p.copy_(base + shift)
-            ratio = mse() / at_value
-            ratios.append(ratio if math.isfinite(ratio) else math.inf)  # a prediction that blew up: worse
-        p.copy_(base)
+        try:
+            for shift in (-math.log(factor), math.log(factor)):
+                p.copy_(base + shift)
+                ratio = mse() / at_value
+                ratios.append(ratio if math.isfinite(ratio) else math.inf)  # a prediction that blew up: worse
+        finally:  # the model leaves as it came, whatever stopped the loop
+            p.copy_(base)
         out[name.removeprefix("log_")] = ParameterProfile(float(base.exp()), ratios[0], ratios[1], factor)
-    model.train(was_training)
     return out
 
 
