@@ -50,6 +50,7 @@ def run_summary(name: str, record: dict[str, Any]) -> dict[str, Any]:
     reached = next((r["step"] for r in curve if r["score"] > mark), None)
     return {"name": name, "env": env, "device": config.get("device", "auto"),
             "precision": config.get("encoder_precision", "float32"), "planned": config["steps"],
+            "buffer_size": config.get("buffer_size"),  # None in a record that omits it
             "view": VIEW_WORDS[config.get("view", "face")] if env == DMC_PENDULUM else "Gymnasium's render, 64x64 gray",
             "warmup_frames": config.get("learning_starts", 0) * per_step,
             "trained": curve[-1]["step"] if curve else 0, "curve": curve, "mark": mark, "first_step_above_mark": reached,
@@ -142,6 +143,9 @@ def markdown(record: dict[str, Any]) -> str:
     dmc = [r for r in runs if r["env"] == DMC_PENDULUM]
     if dmc:
         frames = sorted({p["frames"] for r in dmc for p in r["curve"]})
+        sizes = sorted({r["buffer_size"] for r in dmc if r["buffer_size"] is not None})
+        buffers = " or ".join(f"{n:,}" for n in sizes) or "unrecorded"  # each run's, from its record
+        holds = all(r["buffer_size"] is not None and r["buffer_size"] >= r["planned"] for r in dmc)  # none dropped
         lines += [
             "",
             f"## {DMC_PENDULUM} against the published DrQ-v2",
@@ -154,9 +158,9 @@ def markdown(record: dict[str, Any]) -> str:
             "What differs from the published runs (DrQ-v2's own code and its easy-task settings, which piga's "
             "preset takes): the view as the first table gives it (DrQ-v2's: 84x84 RGB through the suite's camera "
             "0, in front of the pendulum and above it, looking down at 45°; piga's face-on camera sits on the hinge "
-            "axis); a replay buffer of 100,000 transitions (its 1e6; either holds every transition of a 50,000-step "
-            "run); 5 evaluation episodes at each point (its 10); the warm-up as the first table gives it. Two runs "
-            "that differ in their view alone show what the view changes.",
+            f"axis); a replay buffer of {buffers} transitions (its 1e6{'; each holds every transition of its run' if holds else ''}); 5 "
+            "evaluation episodes at each point (its 10); the warm-up as the first table gives it. Two runs that "
+            "differ in their view alone show what the view changes.",
             "",
             *reference_lines(record.get("reference"), DMC_PENDULUM),
             "| frames | " + " | ".join(r["name"] for r in dmc) + " | published mean ± std | published range | seeds above 200 |",
@@ -179,6 +183,15 @@ def markdown(record: dict[str, Any]) -> str:
             if since < len(r["curve"]):
                 lines += ["", f"{r['name']} is above every published seed from {r['curve'][since]['frames']:,} frames "
                           "on: outside the published spread, above it (one seed; what differs is listed above)."]
+        for r in dmc:  # a point below every published seed, next to how low the seeds go at the next points
+            below = [p for p in r["curve"] if p["score"] < at_frames[p["frames"]]["min"]]
+            if below:
+                points = []
+                for p in below:
+                    later = min((x for x in frames if x > p["frames"]), key=lambda x: at_frames[x]["min"], default=None)
+                    points.append(f"{p['score']:.1f} at {p['frames']:,} frames (the lowest seed {at_frames[p['frames']]['min']:.1f}"
+                                  + (f"; {at_frames[later]['min']:.1f} at {later:,}" if later else "") + ")")
+                lines += ["", f"{r['name']} is below every published seed at {len(below)} point(s): {', '.join(points)}."]
     pixel = [r for r in runs if r["env"] == PIXEL_PENDULUM]
     if pixel:
         steps = sorted({p["step"] for r in pixel for p in r["curve"]})

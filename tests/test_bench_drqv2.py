@@ -156,3 +156,21 @@ def test_a_page_of_dmc_runs_only_draws_without_a_warning(tmp_path: Path) -> None
         assert drqv2_curves.main(["--out", str(tmp_path / "page"), "--runs", str(run), "--published", str(published)]) == 0
     # its one point (5,000 frames: 1.0 against the seeds' 0.5) is above every seed: the page says so in words
     assert "run is above every published seed from 5,000 frames on" in (tmp_path / "page.md").read_text()
+
+
+def test_a_point_below_every_published_seed_is_named_with_how_low_the_seeds_go_next(tmp_path: Path) -> None:
+    """A run under the seeds' range is said so in words, beside the lowest seed there and at the later points; the
+    buffer sentence is the runs' own, and says every transition was kept only when each buffer held its run."""
+    run = tmp_path / "run.json"  # 2,500 env steps are 5,000 frames (seeds 5 and 10 there); 5,000 are 10,000 (0 and 20)
+    run.write_text(json.dumps(_record("piga/DMCPendulum-v0", [(2500, 1.0), (5000, 4.0)], buffer_size=50_000)))
+    published = tmp_path / "published.json"
+    published.write_text(json.dumps({"source": "s", "seeds": [{"xs": [0, 5000, 10_000], "ys": [0, 5, 0]},
+                                                              {"xs": [0, 5000, 10_000], "ys": [0, 10, 20]}]}))
+    assert drqv2_curves.main(["--out", str(tmp_path / "page"), "--runs", str(run), "--published", str(published)]) == 0
+    page = (tmp_path / "page.md").read_text()
+    assert "run is below every published seed at 1 point(s): 1.0 at 5,000 frames (the lowest seed 5.0; 0.0 at 10,000)." in page
+    assert "a replay buffer of 50,000 transitions (its 1e6; each holds every transition of its run)" in page
+    run.write_text(json.dumps(_record("piga/DMCPendulum-v0", [(2500, 1.0)], buffer_size=10_000)))  # under its 50,000 steps
+    assert drqv2_curves.main(["--out", str(tmp_path / "page"), "--runs", str(run), "--published", str(published)]) == 0
+    page = (tmp_path / "page.md").read_text()
+    assert "a replay buffer of 10,000 transitions (its 1e6); 5" in page
