@@ -17,6 +17,8 @@ The data files are collected once, with ``--seed 100``. Writes OUT.md and OUT.js
 
 from __future__ import annotations
 
+import math
+
 import argparse
 import json
 import shlex
@@ -134,6 +136,11 @@ def lowest_profile(r: dict[str, Any]) -> float | None:
     return min(values, default=None)
 
 
+def highest_profile(p: dict[str, Any]) -> float:
+    """One parameter's larger profile ratio of its two scalings (a null, a blown-up prediction, is inf)."""
+    return max(math.inf if x is None else x for x in (p["lower"], p["upper"]))
+
+
 def _names(records: list[dict[str, Any]]) -> str:
     return " (" + ", ".join(f"{r['case']} s{r['seed']}" for r in records) + ")" if records else ""
 
@@ -169,6 +176,18 @@ def summary(records: list[dict[str, Any]]) -> list[str]:
         lines.append(f"- The lowest profile ratio of an identified run: **{value:.3f}** ({worst['case']} s{worst['seed']}): "
                      + ("no identified run has a parameter that predicts its frames better scaled."
                         if value >= floor else "an identified run is called unsettled."))
+    flat_floor = 1 + config.flat_tolerance  # a parameter whose ratios both stay under it is not determined
+    curved = [(highest_profile(p), k, f"{r['case']} s{r['seed']}") for r in records if verdict(r) == "identified"
+              for k, p in r["profile"].items()]
+    flat = [t for t in curved if t[0] < flat_floor]
+    if curved:
+        lines.append(f"- Flat profiles (both ratios below 1 + `flat_tolerance` = {flat_floor:g}: not determined by the "
+                     f"frames) among identified runs: {len(flat)}" + "".join(f"; {k} of {run} ({v:.3f})" for v, k, run in flat)
+                     + ".")
+        others = [t for t in curved if t[0] >= flat_floor]
+        if others:
+            v, k, run = min(others)
+            lines.append(f"- The least curved of their other parameters: {k} of {run}, whose larger ratio is {v:.3f}.")
     missed = [r for r in records if verdict(r) == "not identified" and r["exit"] == 0]
     alarms = [r for r in records if verdict(r) == "identified" and r["exit"] != 0]
     lines.append(f"- Runs not identified that exit 0 (converged): {len(missed)}{_names(missed)}; identified runs that "

@@ -244,3 +244,5 @@ def test_the_convergence_rules_quote_the_check() -> None:
     assert f"scaled by {PROFILE_FACTOR:.2f} or 1/{PROFILE_FACTOR:.2f}" in text
     assert f"first windows of {PROFILE_SEQUENCES} training sequences are predicted more than " \
            f"{100 * config.profile_tolerance:g}% better" in text
+    assert f"predicted within {100 * config.flat_tolerance:g}% with it scaled by {PROFILE_FACTOR:.2f} and by " \
+           f"1/{PROFILE_FACTOR:.2f}) is not determined" in text

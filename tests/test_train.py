@@ -460,6 +460,25 @@ def test_the_convergence_check_on_made_up_trajectories() -> None:
     assert weak.outcome == "converged", weak.reason
     warm = check_convergence(state(np.ones_like(steps), np.full_like(steps, 0.3), step=30))
     assert warm.outcome == "untrained" and "never trained" in warm.reason and warm.physics_steps == 0
+    # profiles: one side clearly better stopped short (unsettled); flat within 2% both ways is not determined by
+    # the frames (a probe's file with actuation gain 1e-6: a flat within 1.3%), listed and said in the summary
+    from piga.evaluation.evaluate import summary_line
+    from piga.evaluation.profile import ParameterProfile
+
+    curved, flat_a = ParameterProfile(10.0, 4.2, 5.0, 1.65), ParameterProfile(1.0, 1.004, 1.013, 1.65)
+    short = check_convergence(state(1 + 9 * settle, 0.3 + 0.7 * settle), profile={"g": curved,
+                                                                               "a": ParameterProfile(1.0, 1.3, 0.94, 1.65)})
+    assert short.outcome == "unsettled" and "a = 1 settled" in short.reason and short.undetermined == []
+    flat = check_convergence(state(1 + 9 * settle, 0.3 + 0.7 * settle), profile={"g": curved, "a": flat_a})
+    assert flat.outcome == "converged" and flat.undetermined == ["a"]
+    assert check_convergence(state(1 + 9 * settle, 0.3 + 0.7 * settle), profile={
+        "g": curved, "a": ParameterProfile(1.0, 1.02, 1.19, 1.65)}).undetermined == []  # the least curved identified a
+    line = summary_line({"parameters": {"g": 10.0, "a": 1.0}, "convergence": flat.to_dict()})
+    assert line == "g=10.0000, a=1.0000 (not determined by the training frames: its profile is flat)"
+    errors = {"g": {"learned": 10.0, "true": 10.0, "relative_error": 0.0}, "a": {"learned": 1.0, "true": 1e-6, "relative_error": 1e6}}
+    assert "a=1.0000 (" in summary_line({"parameters": {}, "parameter_errors": errors, "convergence": flat.to_dict()})
+    assert summary_line({"parameters": {}, "parameter_errors": errors, "convergence": flat.to_dict()}).endswith(
+        "; not determined by the training frames: its profile is flat)")
 
 
 def test_a_slot_that_draws_nothing_makes_a_converged_scene_run_untrained() -> None:

@@ -222,10 +222,12 @@ def summary_line(metrics: dict[str, Any]) -> str:
     """One line: learned parameters with their errors (or why there are none)."""
     if metrics.get("parameters", {}) is None:
         return f"no physical parameters ({metrics.get('physical_parameters_reason', 'none recorded')})"
+    flat = set((metrics.get("convergence") or {}).get("undetermined") or ())  # flat profiles: not determined
+    note = "; not determined by the training frames: its profile is flat"
     parts = []
     for name, e in metrics.get("parameter_errors", {}).items():
-        parts.append(f"{name}={e['learned']:.4f} ({true_and_error(e)})")
+        parts.append(f"{name}={e['learned']:.4f} ({true_and_error(e)}{note if name in flat else ''})")
     if not parts:
-        parts = [f"{k}={v:.4f}" for k, v in metrics.get("parameters", {}).items()]
+        parts = [f"{k}={v:.4f}" + (f" ({note[2:]})" if k in flat else "") for k, v in metrics.get("parameters", {}).items()]
     return ", ".join(parts)
 

@@ -67,6 +67,12 @@ class ConvergenceConfig:
     profile_tolerance: float = 0.02
     """A learned parameter whose training frames are predicted this much better (relative MSE) with it scaled by
     1.65 or 1/1.65 (:mod:`piga.evaluation.profile`) stopped short of its value: the run is unsettled."""
+    flat_tolerance: float = 0.02
+    """A learned parameter whose training frames are predicted within this (relative MSE) with it scaled by 1.65
+    and by 1/1.65 is not determined by them: the run is judged on the others, and its summary says so. Identified
+    parameters in ``results/convergence_calibration.md`` change the MSE by 18% or more one way; the damping b
+    learned on Gymnasium's pendulum (truth 0) by 0.1%, and an actuation gain of a file whose actions barely move
+    the system by 1.3%."""
 
 
 @dataclass(frozen=True)
@@ -95,6 +101,8 @@ class Convergence:
     planned_steps: int
     steps: int
     parameters: dict[str, ParameterCheck] = field(default_factory=dict)
+    undetermined: list[str] = field(default_factory=list)
+    """Learned parameters the training frames do not determine: their profile is flat (``flat_tolerance``)."""
 
     @property
     def converged(self) -> bool:
@@ -151,6 +159,9 @@ def check_convergence(state: Any, config: ConvergenceConfig = ConvergenceConfig(
     ``profile``: each learned parameter's profile on the training frames (:mod:`piga.evaluation.profile`). A
     parameter whose frames are predicted clearly better with it 1.65x larger or smaller stopped short of its
     value, however still it stands: the run is unsettled.
+    One whose frames are predicted alike 1.65x larger and smaller is not determined by them: the verdict lists it
+    under ``undetermined`` (a probe's file whose actions had a gain of 1e-6 gave a = 0.09, 10^5x off, converged
+    beside a learned g; its profile was flat within 1.3%).
     """
     plan = state.plan
     steps = int(state.step)
@@ -160,8 +171,12 @@ def check_convergence(state: Any, config: ConvergenceConfig = ConvergenceConfig(
     checks = {name: _parameter(name, float(start), end_values[name], state.trace, list(state.start), planned, config)
               for name, start in state.start.items()}
 
+    flat = [name for name, p in (profile or {}).items()
+            if name in checks and max(p.lower, p.upper) < 1 + config.flat_tolerance
+            and min(p.lower, p.upper) >= 1 - config.profile_tolerance]
+
     def verdict(outcome: Outcome, reason: str) -> Convergence:
-        return Convergence(outcome, reason, physics_steps, planned, steps, checks)
+        return Convergence(outcome, reason, physics_steps, planned, steps, checks, flat)
 
     if physics_steps == 0:
         return verdict("untrained", f"the physics never trained: all {steps} steps were the autoencoder warm-up "
