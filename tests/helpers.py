@@ -67,6 +67,14 @@ def assert_sb3_run_finished(code: int, err: str) -> None:
         assert_one_line(code, err, "the run did not learn: its evaluation return never reached", "its outputs are in")
 
 
+def assert_planet_run_finished(code: int, err: str) -> None:
+    """A ``piga-baseline planet`` run that trained to its end: exit 0, or exit 1 with the one line that says it did not
+    learn (what a tiny run does: its reconstructions no better than the average frame); its outputs are kept."""
+    if code != 0:
+        assert code == 1, err
+        assert_one_line(code, err, "the run did not learn: its ", "its outputs are in")
+
+
 def assert_one_line_error(result: subprocess.CompletedProcess[str], *needles: str) -> str:
     """:func:`assert_one_line` for a subprocess result; returns the line."""
     return assert_one_line(result.returncode, result.stderr, *needles)

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from piga.cli import baseline, control
-from tests.helpers import assert_one_line, assert_sb3_run_finished, copy_without, run_in_process
+from tests.helpers import assert_one_line, assert_planet_run_finished, assert_sb3_run_finished, copy_without, run_in_process
 
 TINY_PLANET = ("--steps", "2", "--batch-size", "2", "--chunk-length", "8", "--deter-size", "8", "--stoch-size", "4",
                "--hidden-size", "8", "--depth", "4", "--reward-layers", "1", "--reward-units", "6", "--threads", "1", "--quiet")
@@ -23,7 +23,7 @@ def planet_run(tiny_data: Path, tmp_path_factory: pytest.TempPathFactory) -> Pat
     out = tmp_path_factory.mktemp("planet") / "run"
     code, _, err = run_in_process("piga-baseline", baseline.main, "planet", str(tiny_data), "--out", str(out), *TINY_PLANET,
                                   capsys=_NoCapture())
-    assert code == 0, err
+    assert code in (0, 1) and (out / "metrics.json").exists()  # 1: a 2-step run did not learn; its outputs stay
     return out
 
 
@@ -132,7 +132,7 @@ def test_planet_resume_reads_the_model_config_from_the_checkpoint(planet_run: Pa
     (run / "config.json").write_text(json.dumps(record))
     code, _, err = run_in_process("piga-baseline", baseline.main, "planet", str(tiny_data), "--out", str(run), "--resume",
                                   "--steps", "3", "--quiet", capsys=capsys)
-    assert code == 0, err
+    assert_planet_run_finished(code, err)
     assert json.loads((run / "config.json").read_text())["rssm"]["deter_size"] == 8
     assert json.loads((run / "metrics.json").read_text())["steps"] == 3
 
@@ -142,7 +142,7 @@ def test_planet_reward_options_reach_the_run_and_resume_keeps_them(tiny_data: Pa
     run = tmp_path / "run"
     code, _, err = run_in_process("piga-baseline", baseline.main, "planet", str(tiny_data), "--out", str(run), *TINY_PLANET,
                                   "--reward-alignment", "transition", "--reward-scale", "10", capsys=capsys)
-    assert code == 0, err
+    assert_planet_run_finished(code, err)
     record = json.loads((run / "config.json").read_text())
     assert record["rssm"]["reward_alignment"] == "transition" and record["train"]["reward_scale"] == 10
     code, _, err = run_in_process("piga-baseline", baseline.main, "planet", str(tiny_data), "--out", str(run), "--resume",
@@ -155,7 +155,7 @@ def test_planet_reward_options_reach_the_run_and_resume_keeps_them(tiny_data: Pa
     code, _, err = run_in_process("piga-baseline", baseline.main, "planet", str(tiny_data), "--out", str(run), "--steps", "3",
                                   *TINY_PLANET[2:], "--reward-alignment", "transition", "--reward-scale", "10", "--resume",
                                   capsys=capsys)
-    assert code == 0, err
+    assert_planet_run_finished(code, err)
     assert json.loads((run / "metrics.json").read_text())["steps"] == 3
 
 
@@ -285,14 +285,14 @@ def test_planet_iterative_from_the_command_line(tiny_data: Path, tmp_path: Path,
     code, stdout, err = run_in_process("piga-baseline", baseline.main, "planet", str(tiny_data), "--out", str(out), *TINY_PLANET,
                                        "--iterative", "1", "--rounds", "1", "--round-steps", "2", "--episode-steps", "16",
                                        capsys=capsys)
-    assert code == 0, err
+    assert_planet_run_finished(code, err)
     assert "then 1 rounds of 1 planner episodes + 2 steps" in stdout
     record = json.loads((out / "config.json").read_text())
     assert record["iterative"]["episodes"] == 1 and record["iterative"]["noise"] == 0.3
     assert json.loads((out / "metrics.json").read_text())["iterative"]["collected_sequences"] == 1
     code, stdout, err = run_in_process("piga-baseline", baseline.main, "planet", str(tiny_data), "--out", str(out), "--resume",
                                        "--rounds", "2", "--quiet", capsys=capsys)
-    assert code == 0, err
+    assert_planet_run_finished(code, err)
     assert json.loads((out / "metrics.json").read_text())["iterative"]["rounds"] == 2
 
 

@@ -17,7 +17,7 @@ from piga.cli import train as train_cli
 from piga.io import device as device_module
 from piga.io.checkpoint import CHECKPOINT
 from piga.io.device import cuda_available, resolve_device
-from tests.helpers import assert_one_line, assert_sb3_run_finished, run_in_process, train_tiny
+from tests.helpers import assert_one_line, assert_planet_run_finished, assert_sb3_run_finished, run_in_process, train_tiny
 
 TINY_PLANET = ("--steps", "2", "--batch-size", "2", "--chunk-length", "8", "--deter-size", "8", "--stoch-size", "4",
                "--threads", "1", "--quiet")
@@ -120,7 +120,7 @@ def test_a_planet_run_trained_on_a_gpu_resumes_on_the_cpu(tiny_data: Path, tmp_p
     run_dir = tmp_path / "planet"
     code, _, err = run_in_process("piga-baseline", baseline.main, "planet", str(tiny_data), "--out", str(run_dir),
                                   *TINY_PLANET, "--device", "cpu", capsys=capsys)
-    assert code == 0, err
+    assert_planet_run_finished(code, err)
     assert json.loads((run_dir / "metrics.json").read_text())["device"] == "cpu"
     as_if_saved_on_a_gpu(run_dir)
     record = json.loads((run_dir / "config.json").read_text())
@@ -128,7 +128,7 @@ def test_a_planet_run_trained_on_a_gpu_resumes_on_the_cpu(tiny_data: Path, tmp_p
     assert next(load_planet(run_dir)[0].parameters()).device.type == "cpu"
     code, _, err = run_in_process("piga-baseline", baseline.main, "planet", str(tiny_data), "--out", str(run_dir),
                                   "--resume", "--steps", "3", "--device", "cpu", "--quiet", capsys=capsys)
-    assert code == 0, err
+    assert_planet_run_finished(code, err)
     assert json.loads((run_dir / "config.json").read_text())["train"]["device"] == "cpu"
     assert json.loads((run_dir / "metrics.json").read_text())["steps"] == 3
 
@@ -180,7 +180,7 @@ def test_the_baselines_train_on_the_gpu_and_load_on_the_cpu(tiny_data: Path, tmp
 
     code, _, err = run_in_process("piga-baseline", baseline.main, "planet", str(tiny_data), "--out",
                                   str(tmp_path / "p"), *TINY_PLANET, "--device", "cuda", capsys=capsys)
-    assert code == 0, err
+    assert_planet_run_finished(code, err)
     assert json.loads((tmp_path / "p" / "metrics.json").read_text())["device"].startswith("cuda")
     assert next(load_planet(tmp_path / "p")[0].parameters()).device.type == "cpu"
     code, _, err = run_in_process("piga-baseline", baseline.main, "ddpg", "--obs", "latent", "--data", str(tiny_data),

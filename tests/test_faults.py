@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 
 from piga.cli import baseline, collect, control, demo, diagnose, importer, show, train
-from tests.helpers import ENV, assert_one_line, assert_sb3_run_finished, run_in_process
+from tests.helpers import ENV, assert_one_line, assert_planet_run_finished, assert_sb3_run_finished, run_in_process
 
 TINY_PLANET = ("--steps", "2", "--batch-size", "2", "--chunk-length", "8", "--deter-size", "8", "--stoch-size", "4",
                "--threads", "1", "--quiet")
@@ -165,7 +165,7 @@ def baseline_runs(tiny_data: Path, tmp_path_factory: pytest.TempPathFactory) -> 
     for argv in (("planet", str(tiny_data), "--out", str(runs["planet"]), *TINY_PLANET),
                  ("ddpg", "--obs", "state", "--out", str(runs["ddpg"]), *TINY_DDPG)):
         code = _exit_code(baseline.main, argv)
-        assert code == 0 or (argv[0] == "ddpg" and code == 1), argv  # 1: the tiny DDPG run did not learn (its outputs stay)
+        assert code in (0, 1), argv  # 1: the tiny run did not learn (its outputs stay)
     return runs
 
 
@@ -599,7 +599,7 @@ def test_planet_trains_on_frames_with_a_channel_axis(files: dict[str, Path], tmp
     """Gray frames stored as [N, T, H, W, 1]: the open-loop check after the first checkpoint works."""
     code, _, err = run_in_process("piga-baseline", baseline.main, "planet", str(files["channel_axis"]), "--out",
                                   str(tmp_path / "run"), *TINY_PLANET, capsys=capsys)
-    assert code == 0, err
+    assert_planet_run_finished(code, err)
     assert {"checkpoint.pt", "config.json", "metrics.json", "openloop.png"} <= set(_listing(tmp_path / "run"))
 
 
@@ -702,7 +702,7 @@ def test_planet_resume_takes_the_model_sizes_from_its_checkpoint(baseline_runs: 
     run = _run_copy(baseline_runs["planet"], tmp_path / "run", _edit_record(lambda r: r.__setitem__("rssm", [1])))
     code, _, err = run_in_process("piga-baseline", baseline.main, "planet", str(tiny_data), "--out", str(run), "--resume",
                                   "--steps", "3", "--quiet", capsys=capsys)
-    assert code == 0, err
+    assert_planet_run_finished(code, err)
     assert json.loads((run / "config.json").read_text())["rssm"] == own
 
 
@@ -1664,7 +1664,7 @@ def test_planet_resumes_on_its_file_named_from_elsewhere(baseline_runs: dict[str
     shutil.copyfile(tiny_data, copy)
     code, _, err = run_in_process("piga-baseline", baseline.main, "planet", str(copy), "--out", str(run), "--resume",
                                   "--steps", "3", "--quiet", capsys=capsys)
-    assert code == 0, err
+    assert_planet_run_finished(code, err)
 
 
 def test_ddpg_refuses_noise_beyond_the_action_scale(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -2039,7 +2039,8 @@ def test_control_refuses_a_planet_run_of_dmc_frames(tmp_path: Path, capsys: pyte
     data, run = tmp_path / "d.h5", tmp_path / "run"
     assert _exit_code(collect.main, ["--out", str(data), "--env", "piga/DMCPendulum-v0", "--sequences", "12", "--steps", "16",
                                      "--split", "8,2,2", "--workers", "1", "--quiet"]) == 0
-    assert _exit_code(baseline.main, ["planet", str(data), "--out", str(run), *TINY_PLANET]) == 0
+    assert _exit_code(baseline.main, ["planet", str(data), "--out", str(run), *TINY_PLANET]) in (0, 1)  # 1: did not learn, kept
+    capsys.readouterr()  # the tiny run's own did-not-learn line
     refused("piga-control", ["--model", str(run), "--episodes", "1", "--steps", "20", "--workers", "1", "--quiet"], capsys,
             "trained on frames of piga/DMCPendulum-v0, 0.04 s apart", "not of Gymnasium's pixel pendulum")
 

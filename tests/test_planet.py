@@ -314,3 +314,18 @@ def test_no_model_is_selected_without_a_valid_loss(tiny_data: Path, tmp_path: Pa
     torch.save(ckpt, tmp_path / "run" / CHECKPOINT)
     with pytest.raises(ValueError, match="no valid loss was measured during training"):
         write_selected(tmp_path / "run", tmp_path / "selected")
+
+
+def test_a_world_model_that_beats_neither_blind_guess_did_not_learn() -> None:
+    """The end-of-run check of ``piga-baseline planet``: the filtered frames' reconstructions against the mean frame,
+    the rewards against 0 (skipped when every reward is 0); the open-loop steps after the context do not count."""
+    from agents.planet.train import did_not_learn
+
+    trained = {"context": 2, "frame_mse": [0.001, 0.001, 0.05], "mean_frame_mse": [0.01, 0.01, 0.01],
+               "reward_abs_error": [0.2, 0.3], "zero_reward_abs_error": [5.0, 5.0]}
+    assert did_not_learn(trained) is None
+    blind = {**trained, "frame_mse": [0.0095, 0.0092, 0.001]}  # 0.935 of the mean frame's over the context
+    assert "no better than the average frame (MSE 0.01)" in did_not_learn(blind)
+    rewards = {**trained, "reward_abs_error": [4.6, 4.6]}
+    assert "no better than predicting 0 (mean error 5)" in did_not_learn(rewards)
+    assert did_not_learn({**rewards, "zero_reward_abs_error": [0.0, 0.0]}) is None  # no reward to learn

@@ -38,6 +38,7 @@ from piga.io.resources import available_memory
 from piga.io.atomic import write_json
 from piga.io.checkpoint import CHECKPOINT, RunKind, check_counts, resuming_from, write_checkpoint
 from piga.io.device import module_device, resolve_device
+from piga.training.convergence import ConvergenceConfig
 from piga.training.train import TrainingDiverged
 
 __all__ = ["PlanetState", "check_planet_data", "optimizer_step", "rssm_config_for", "train_planet"]
@@ -199,6 +200,25 @@ def open_loop_check(model: WorldModel, data: str | Path, run_dir: Path, seed: in
     return {"split": split, "sequences": len(frames), "context": context, "frame_mse": frame_mse.tolist(),
             "mean_frame_mse": mean_frame_mse.tolist(), "reward_abs_error": reward_error.tolist(),
             "zero_reward_abs_error": rewards.abs().mean(0).tolist()}
+
+
+def did_not_learn(open_loop: dict[str, Any], ratio: float = ConvergenceConfig.blank_ratio) -> str | None:
+    """Why a trained world model learned nothing, read off its :func:`open_loop_check` (None: it learned something).
+
+    The same test as a piga run's (``ConvergenceConfig.blank_ratio``): a model must beat a guess that learned
+    nothing. Its reconstructions of the frames it filters (the first ``context``) must beat the average frame, and
+    its rewards the guess 0 (unless every reward is 0). A 5-step run (loss 641) passed as a run; trained models
+    measure 0.05-0.10 of the average frame's MSE and 0.05 of the zero guess's reward error
+    (``results/planet_faithful.md``'s runs)."""
+    context = max(1, int(open_loop["context"]))
+    frame, average = (float(np.mean(open_loop[key][:context])) for key in ("frame_mse", "mean_frame_mse"))
+    if not frame < ratio * average:
+        return (f"its reconstructions of the frames it filtered (MSE {frame:.4g}) are no better than the average frame "
+                f"(MSE {average:.4g})")
+    reward, zero = (float(np.mean(open_loop[key])) for key in ("reward_abs_error", "zero_reward_abs_error"))
+    if zero > 0 and not reward < ratio * zero:
+        return f"its reward predictions (mean error {reward:.4g}) are no better than predicting 0 (mean error {zero:.4g})"
+    return None
 
 
 def _valid_window(data: str | Path, config: PlanetTrainConfig, info: DatasetInfo, repeat: int

@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import dataclasses
+import json
 import math
 import os
 import typing
@@ -46,7 +47,9 @@ def build_parser() -> ArgumentParser:
     planet, rssm = PlanetTrainConfig(), RSSMConfig()
     q = sub.add_parser("planet", help="the PlaNet-style RSSM with latent CEM, trained on a data file's random-action sequences",
                        description="Train the PlaNet-style world model (RSSM) on DATA.h5's train split (frames, actions and "
-                       "/rewards). Writes RUN_DIR/checkpoint.pt, config.json, metrics.json and tensorboard/.")
+                       "/rewards). Writes RUN_DIR/checkpoint.pt, config.json, metrics.json and tensorboard/. A run whose model "
+                       "reconstructs the frames it filters no better than the average frame, or predicts rewards no "
+                       "better than 0, keeps them and exits 1, saying it did not learn.")
     q.error = p.error  # type: ignore[method-assign]  (one-line usage errors, as the main parser's)
     q.add_argument("data", help="HDF5 file of piga's schema with /rewards (piga-collect writes them)")
     q.add_argument("--out", required=True, help="run folder")
@@ -467,6 +470,12 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
     print(f"trained {state.step} steps in {state.elapsed / 60:.1f} min; last loss {last.get('loss', float('nan')):.2f} "
           f"(reconstruction {last.get('reconstruction', float('nan')):.2f}, reward {last.get('reward', float('nan')):.4f}, "
           f"KL {last.get('kl', float('nan')):.2f}); wrote {run_dir}/metrics.json")
+    from agents.planet.train import did_not_learn
+
+    why = did_not_learn(json.loads((run_dir / "metrics.json").read_text())["open_loop"])
+    if why is not None:  # its outputs stay (--resume continues it), but no script may take it for a success
+        raise PigaError(f"the run did not learn: {why} after {state.step} steps; continue it with --resume and a "
+                        f"larger --steps, or give it more data; its outputs are in {run_dir}")
     return 0
 
 
