@@ -2335,3 +2335,92 @@ def test_the_librarys_configs_refuse_nonsense_naming_the_field(target: str, valu
         cls(**values)
     assert needle in str(error.value) and "\n" not in str(error.value), str(error.value)
     cls()  # the defaults stand
+
+
+def test_a_disk_that_fills_while_a_figure_is_written_is_named_in_one_line(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                                         capsys: pytest.CaptureFixture[str]) -> None:
+    """matplotlib's PDF writer broke on a full disk with an AttributeError ('Stream' object has no attribute 'pos'),
+    an internal error; a PNG's OSError was printed raw ("OSError: [Errno 28] No space left on device")."""
+    import errno
+    import shutil
+    from collections import namedtuple
+
+    from piga.cli.common import run_cli
+    from piga.evaluation import plots
+
+    def broken(*args: object, **kwargs: object) -> None:
+        raise AttributeError("'Stream' object has no attribute 'pos'")
+
+    usage = namedtuple("usage", "total used free")
+    monkeypatch.setattr(plots.Figure, "savefig", broken)
+    monkeypatch.setattr(shutil, "disk_usage", lambda path: usage(1 << 20, 1 << 20, 0))
+    with pytest.raises(OSError) as full:
+        plots.save_figure(plots.plt.figure(), tmp_path / "x.pdf")
+    assert full.value.errno == errno.ENOSPC and full.value.filename == str(tmp_path / "x.pdf")
+    assert list(tmp_path.iterdir()) == []  # the atomic write left no partial file
+    monkeypatch.setattr(shutil, "disk_usage", lambda path: usage(1 << 30, 0, 1 << 30))  # room left: the writer's own bug
+    with pytest.raises(AttributeError):
+        plots.save_figure(plots.plt.figure(), tmp_path / "x.pdf")
+
+    def fills(argv: object) -> int:
+        raise OSError(errno.ENOSPC, "No space left on device", "out/metrics.json")
+
+    with pytest.raises(SystemExit) as exit_:
+        run_cli("piga-x", fills, [])
+    assert exit_.value.code == 1
+    assert_one_line(1, capsys.readouterr().err, "piga-x: error: out/metrics.json: the disk is full", "free some space")
+
+
+def test_an_interrupt_after_the_last_checkpoint_says_the_run_is_kept(tiny_data: Path, tmp_path: Path,
+                                                                     monkeypatch: pytest.MonkeyPatch,
+                                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    """Ctrl-C (or SIGTERM) while the finished run wrote its report said "nothing was written", and the rerun was then
+    refused ("already holds a run"): the line names the checkpoint and --resume, which writes the report."""
+    from piga.cli.common import NOT_CONVERGED
+    from piga.training import report
+
+    def interrupted(*args: object, **kwargs: object) -> None:
+        raise KeyboardInterrupt
+
+    run = tmp_path / "run"
+    argv = [str(tiny_data), "--out", str(run), "--epochs", "1", "--batch-size", "4", "--threads", "1", "--quiet"]
+    with monkeypatch.context() as patch:
+        patch.setattr(report, "write_run_report", interrupted)
+        code, _, err = run_in_process("piga-train-model", train.main, *argv, capsys=capsys)
+    assert code == 130 and err.count("\n") == 1, err
+    assert f"{run / 'checkpoint.pt'} holds the trained model (epoch 1)" in err and "--resume" in err
+    code, _, err = run_in_process("piga-train-model", train.main, *argv, "--resume", capsys=capsys)
+    assert code in (0, 1, NOT_CONVERGED) and "Traceback" not in err, err
+    assert (run / "metrics.json").exists()
+
+
+def test_an_interrupt_inside_a_garbage_collector_callback_is_raised_again(capsys: pytest.CaptureFixture[str]) -> None:
+    """SIGTERM that landed in a weakref callback printed "Exception ignored in ... Traceback ... KeyboardInterrupt"
+    (9 lines) and was lost: it is delivered again, and the command stops with its one line."""
+    import gc
+    import time
+    import weakref
+
+    from piga.cli.common import run_cli
+
+    class Thing:
+        pass
+
+    def main(argv: object) -> int:
+        thing = Thing()
+
+        def callback(ref: object) -> None:
+            raise KeyboardInterrupt  # what the SIGTERM handler does when the signal lands here
+
+        ref = weakref.ref(thing, callback)  # kept alive until the thing goes
+        assert ref() is thing
+        del thing
+        gc.collect()
+        for _ in range(200):  # where the command's code runs next, the interrupt is raised (within 2 s here)
+            time.sleep(0.01)
+        return 0
+
+    with pytest.raises(SystemExit) as exit_:
+        run_cli("piga-x", main, [])
+    err = capsys.readouterr().err
+    assert exit_.value.code == 130 and err == "piga-x: interrupted; nothing was written\n", err

@@ -39,6 +39,8 @@ CASES = {
                               "--threads 1 --quiet"),
     "control video": ("piga-control", "--model {run} --video {disk}/v.mp4 --episodes 1 --quiet"),
     "demo": ("piga-demo", "--out {disk}/demo --threads 1 --quiet"),
+    "show": ("piga-show", "{data} --out {disk}/strip.pdf"),
+    "diagnose": ("piga-diagnose", "--model {run} --data {data} --out {disk}/diagnosis --threads 1 --quiet"),
 }
 
 

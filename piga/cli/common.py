@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import errno
+import functools
 import os
 import re
 import shutil
@@ -191,6 +193,29 @@ def _raise_interrupt(signum: int, frame: object) -> None:
     raise KeyboardInterrupt
 
 
+#: Set while a command's ``main`` runs (:func:`run_cli`): an interrupt delivered again then still has work to stop.
+_RUNNING = threading.Event()
+
+
+def _interrupt_again(previous: Callable[[Any], object], unraisable: Any) -> None:
+    """``sys.unraisablehook`` during a command: an interrupt that landed in a callback Python cannot raise from (a
+    weakref's, during garbage collection) printed "Exception ignored in ... Traceback ... KeyboardInterrupt" and was
+    lost. It is delivered again a moment later, from another thread (delivered from here, Python would raise it
+    inside this hook), so that it is raised where the command's code runs; once the command's work is done, there is
+    nothing left for it to stop, and it is dropped."""
+    if unraisable.exc_type is not None and issubclass(unraisable.exc_type, KeyboardInterrupt):
+        def deliver() -> None:
+            if _RUNNING.is_set():
+                import _thread
+
+                _thread.interrupt_main()
+
+        if _RUNNING.is_set():
+            threading.Timer(0.01, deliver).start()
+        return
+    previous(unraisable)  # anything else as before
+
+
 def run_cli(prog: str, main: Callable[[Sequence[str] | None], int | None], argv: Sequence[str] | None = None) -> NoReturn:
     """Runs ``main(argv)`` and exits; user errors become ``prog: error: ...`` on stderr (exit 1).
 
@@ -202,6 +227,8 @@ def run_cli(prog: str, main: Callable[[Sequence[str] | None], int | None], argv:
     written output file gets removed.
     """
     signal.signal(signal.SIGTERM, _raise_interrupt)
+    unraisablehook = sys.unraisablehook
+    sys.unraisablehook = functools.partial(_interrupt_again, unraisablehook)
     _open_closed_standard_streams()
     try:  # torch's MKL cannot load in a deleted folder (a fatal exit, no Python error), and relative paths mean nothing
         os.getcwd()
@@ -215,7 +242,9 @@ def run_cli(prog: str, main: Callable[[Sequence[str] | None], int | None], argv:
     code: int | str | None
     finished = "; the command itself finished and its outputs are complete"
     try:
+        _RUNNING.set()
         code = main(argv)
+        _RUNNING.clear()
         sys.stdout.flush()
     except SystemExit as exc:  # argparse's own exits (--help, a usage error): what it printed may have failed too
         code, finished = exc.code, ""
@@ -227,8 +256,9 @@ def run_cli(prog: str, main: Callable[[Sequence[str] | None], int | None], argv:
     except Exception as exc:
         _exit_on_error(prog, argv, exc)
     finally:
+        _RUNNING.clear()
         guard, sys.stdout = sys.stdout, stdout
-        threading.excepthook = excepthook
+        threading.excepthook, sys.unraisablehook = excepthook, unraisablehook
         release_run_folders()  # a command run in-process (a test, a notebook) releases its run folder as it returns
     if isinstance(guard, _GuardedStdout) and guard.failed is not None:
         # The work is done and its files are complete; only the report was lost. Exit 1 all the same
@@ -327,7 +357,11 @@ def _exit_on_error(prog: str, argv: Sequence[str] | None, exc: Exception) -> NoR
         if isinstance(error, ValueError) and not isinstance(error, DataFormatError):  # a config's check
             message = with_flags(message)
         print(f"{prog}: error: {job}{message}", file=sys.stderr)
-    elif isinstance(error, OSError):  # h5py and friends: disk full, unreadable files
+    elif isinstance(error, OSError) and error.errno == errno.ENOSPC:  # wherever the disk filled up
+        where = f"{error.filename}: " if error.filename else ""
+        print(f"{prog}: error: {job}{where}the disk is full (no space left on device); free some space, or write "
+              "elsewhere, and run the command again", file=sys.stderr)
+    elif isinstance(error, OSError):  # h5py and friends: unreadable files
         print(f"{prog}: error: {job}{error.__class__.__name__}: {' '.join(str(error).split())}", file=sys.stderr)
     elif isinstance(error, MemoryError):
         print(f"{prog}: error: {job}out of memory ({' '.join(str(error).split()) or 'MemoryError'})", file=sys.stderr)

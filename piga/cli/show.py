@@ -11,6 +11,7 @@ from piga.cli.common import ArgumentParser, file_path, given_options, positive_i
 from piga.data.schema import (SPLITS, check_actions_file, check_frames_have_signal, inspect_dataset, read_rows,
                               split_indices)
 from piga.evaluation.plots import check_figure_target, frame_strip, save_figure
+from piga.io.resources import FIGURE_DISK_BYTES, check_disk
 from piga.io.atomic import check_not_an_input
 
 PROG = "piga-show"
@@ -37,6 +38,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     written = given_options(parser, argv)
     check_figure_target(args.out, args.overwrite)
+    check_disk(args.out, FIGURE_DISK_BYTES, "the strip", advice="free some space, or give another --out")
     check_not_an_input(args.out, {"data file": args.data})
     info = inspect_dataset(args.data)
     check_frames_have_signal(args.data, motion=False)  # a blank file, or a non-finite action, is named rather than drawn;

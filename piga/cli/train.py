@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
+import contextlib
 import math
 import shutil
 import sys
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import asdict, fields, replace
 from pathlib import Path
 
@@ -383,7 +384,8 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
             raise PigaError(f"{args.data} changed while the run trained (another file now has its name): the run in "
                             f"{run_dir} keeps its checkpoint, but its evaluation would read the new file; put the "
                             "trained file back and run the same command with --resume, or train on the new one")
-        metrics = write_run_report(model, state, args.data, run_dir)
+        with _report_interrupted(run_dir, state.epoch):
+            metrics = write_run_report(model, state, args.data, run_dir)
         objects = metrics.get("objects", {})
         # another seed can find a lost object, or fill a slot that should draw one; not make room for more
         # objects than the slots, nor objects for slots beyond the scene's count
@@ -397,24 +399,38 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
     convergence = metrics.get("convergence") or {"outcome": "converged"}
     from piga.evaluation.evaluate import summary_line
 
-    print(f"learned: {summary_line(metrics)}")
-    if (metrics.get("parameters") or {}).get("a", 1.0) < 0:
-        print("note: a < 0, the actuation is flipped: positive u turns the pendulum clockwise as the frames show it "
-              "(a camera on the other side of the hinge, or a motor wired the other way)")
-    ssim = metrics["frame_ssim_mean"]
-    print(f"SSIM ({metrics['split']} split): prediction {ssim['prediction']:.3f}"
-          + (f", extrapolation {ssim['extrapolation']:.3f}" if ssim["extrapolation"] is not None else "")
-          + (f"; encoder angle error {metrics['angle']['mean_abs_error_deg']:.2f} deg" if "angle" in metrics else ""))
-    print(f"trained {state.epoch} epoch{'s' if state.epoch != 1 else ''} ({state.step} steps) in {state.elapsed / 60:.1f} min; "
-          f"wrote {run_dir}/metrics.json and figures")
-    if convergence["outcome"] == "untrained":
-        seeds = f" (seeds {', '.join(map(str, tried))} and {train_config.seed} tried)" if tried else ""
-        what = "identify its parameters" if model.has_physics else "learn to predict"
-        raise PigaError(f"the run did not {what}{seeds}: {convergence['reason']}")
-    if convergence["outcome"] == "unsettled":
-        print(f"{prog}: warning: not converged: {convergence['reason']}", file=sys.stderr)
-        return NOT_CONVERGED
+    with _report_interrupted(run_dir, state.epoch, written=True):  # the files are written: only the summary is cut
+        print(f"learned: {summary_line(metrics)}")
+        if (metrics.get("parameters") or {}).get("a", 1.0) < 0:
+            print("note: a < 0, the actuation is flipped: positive u turns the pendulum clockwise as the frames show it "
+                  "(a camera on the other side of the hinge, or a motor wired the other way)")
+        ssim = metrics["frame_ssim_mean"]
+        print(f"SSIM ({metrics['split']} split): prediction {ssim['prediction']:.3f}"
+              + (f", extrapolation {ssim['extrapolation']:.3f}" if ssim["extrapolation"] is not None else "")
+              + (f"; encoder angle error {metrics['angle']['mean_abs_error_deg']:.2f} deg" if "angle" in metrics else ""))
+        print(f"trained {state.epoch} epoch{'s' if state.epoch != 1 else ''} ({state.step} steps) in {state.elapsed / 60:.1f} min; "
+              f"wrote {run_dir}/metrics.json and figures")
+        if convergence["outcome"] == "untrained":
+            seeds = f" (seeds {', '.join(map(str, tried))} and {train_config.seed} tried)" if tried else ""
+            what = "identify its parameters" if model.has_physics else "learn to predict"
+            raise PigaError(f"the run did not {what}{seeds}: {convergence['reason']}")
+        if convergence["outcome"] == "unsettled":
+            print(f"{prog}: warning: not converged: {convergence['reason']}", file=sys.stderr)
+            return NOT_CONVERGED
     return 0
+
+
+@contextlib.contextmanager
+def _report_interrupted(run_dir: Path, epoch: int, written: bool = False) -> Iterator[None]:
+    """Ctrl-C or SIGTERM after the last checkpoint: the trained model is kept, and the line says so (not "nothing was
+    written", which a rerun then contradicted: "already holds a run"). ``written``: the report is complete too."""
+    try:
+        yield
+    except KeyboardInterrupt:
+        if written:
+            raise Interrupted(f"{run_dir} holds the finished run (epoch {epoch}) and its report") from None
+        raise Interrupted(f"{run_dir / CHECKPOINT} holds the trained model (epoch {epoch}), but its report was not "
+                          "finished; run the same command with --resume to write it") from None
 
 
 def _start_values(model: Any) -> str:

@@ -301,17 +301,21 @@ def check_report_target(out: str | os.PathLike[str], overwrite: bool) -> Path:
     The folder need not exist (it is created at the end, with any missing parents); if it exists,
     none of :data:`REPORT_FILES` may be in it without ``overwrite``.
     """
+    from piga.io.resources import FIGURE_DISK_BYTES, check_disk
+
     folder = Path(out)
     check_folder_target(folder)
     if folder.is_dir():
         for name in REPORT_FILES:
             check_writable_target(folder / name, overwrite)
-        return folder
-    parent = folder.parent
-    while not parent.exists() and parent != parent.parent:
-        parent = parent.parent
-    if not parent.is_dir() or not os.access(parent, os.W_OK | os.X_OK):
-        raise PermissionError(f"cannot create --out {folder}: {parent} is not a writable folder")
+    else:
+        parent = folder.parent
+        while not parent.exists() and parent != parent.parent:
+            parent = parent.parent
+        if not parent.is_dir() or not os.access(parent, os.W_OK | os.X_OK):
+            raise PermissionError(f"cannot create --out {folder}: {parent} is not a writable folder")
+    check_disk(folder / REPORT_FILES[0], FIGURE_DISK_BYTES, "the diagnosis's report and figures",
+               advice="free some space, or give another --out")
     return folder
 
 

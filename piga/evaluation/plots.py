@@ -20,10 +20,21 @@ from piga.io.atomic import atomic_output  # noqa: E402
 
 def save_figure(fig: Figure, path: str | os.PathLike[str], overwrite: bool = True, dpi: int = 100) -> Path:
     """Saves ``fig`` as PNG (or the format of the suffix) atomically, then closes it."""
+    import errno
+    import shutil
+
     target = Path(path)
-    with atomic_output(target, overwrite=overwrite) as tmp:
-        fig.savefig(tmp, format=target.suffix.lstrip(".") or "png", dpi=dpi, bbox_inches="tight")
-    plt.close(fig)
+    try:
+        with atomic_output(target, overwrite=overwrite) as tmp:
+            fig.savefig(tmp, format=target.suffix.lstrip(".") or "png", dpi=dpi, bbox_inches="tight")
+    except Exception as exc:
+        # matplotlib's PDF writer breaks on a full disk with an AttributeError of its own ('Stream' has no 'pos'):
+        # a failure where the disk has no room left is the disk's, whatever the writer said
+        if isinstance(exc, OSError) or shutil.disk_usage(target.parent).free >= 64 * 1024:
+            raise
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(target)) from exc
+    finally:
+        plt.close(fig)
     return target
 
 

@@ -176,6 +176,9 @@ def check_disk(target: str | os.PathLike[str], needed: float, what: str, advice:
 
 #: Room left on top of a training run's checkpoints, for its metrics, plots and TensorBoard.
 RUN_DISK_MARGIN = 64 * 1024**2
+#: Room a command that writes figures and a report only (``piga-show``, ``piga-diagnose``) asks for before its work:
+#: a diagnosis folder (report, JSON and four figures) or a strip of 30 sequences x 40 frames is under 2 MiB.
+FIGURE_DISK_BYTES = 4 * 1024**2
 
 
 def adam_checkpoint_bytes(module: Any) -> int:
@@ -196,5 +199,5 @@ def check_run_disk(run_dir: str | os.PathLike[str], checkpoint_bytes: float, wha
                advice="free some space, or give another --out")
 
 
-__all__ = ["RECORDED_FRAME_COMPRESSION", "RENDERED_FRAME_COMPRESSION", "RUN_DISK_MARGIN", "ResourceError",
+__all__ = ["FIGURE_DISK_BYTES", "RECORDED_FRAME_COMPRESSION", "RENDERED_FRAME_COMPRESSION", "RUN_DISK_MARGIN", "ResourceError",
            "adam_checkpoint_bytes", "available_memory", "check_disk", "check_memory", "check_training_memory", "check_run_disk", "format_bytes"]
