@@ -223,7 +223,7 @@ def main() -> int:
     p.add_argument("--sequences", type=positive_int, default=100, help="sequences per blind case (default %(default)s)")
     p.add_argument("--cluster", type=ray_address, metavar="HOST:PORT",
                    help="also run the sweep, and a farm that reports where each of its tasks ran, on this Ray cluster")
-    p.add_argument("--cluster-note", default="", help="what the cluster is, for the page")
+    p.add_argument("--cluster-note", help="what the cluster is, for the page (default none)")
     args = p.parse_args()
     work = Path(args.work)
     work.mkdir(parents=True, exist_ok=True)
@@ -256,7 +256,7 @@ def main() -> int:
         where = work / "cluster-where.json"
         if not where.exists():
             write_json(where, where_farm(args.cluster, 8))
-        record["cluster"] = {"where": json.loads(where.read_text()), "command": shown(command), "note": args.cluster_note,
+        record["cluster"] = {"where": json.loads(where.read_text()), "command": shown(command), "note": args.cluster_note or "",
                              "sweep": compare_sweeps(work / "sweep-local.json", work / "sweep-cluster.json")}
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -86,6 +86,17 @@ def write_page(out: Path, record: dict[str, Any], page: str) -> None:
     print(f"wrote {out.with_suffix('.md')} and {out.with_suffix('.json')}")
 
 
+def check_page_target(out: Path, *suffixes: str) -> None:
+    """Fails, before any work, where :func:`write_page` (``OUT.json``, ``OUT.md``) or a figure ``OUT{suffix}`` could not
+    be written (a missing folder, a file where a folder goes): the pages are written after the jobs, which took
+    minutes to learn what a path could have said at once."""
+    from piga.io.atomic import check_writable_target
+
+    for suffix in (".json", ".md", *suffixes):
+        check_writable_target(out.with_name(out.name + suffix) if suffix.startswith("-") else out.with_suffix(suffix),
+                              overwrite=True)
+
+
 def is_number(value: Any) -> bool:
     """Whether a JSON record's ``value`` is a finite real number (a boolean is not)."""
     import math

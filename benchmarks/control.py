@@ -33,7 +33,7 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
-from common import add_ray_option, farm_main, machine, ray_backend
+from common import add_ray_option, check_page_target, farm_main, machine, ray_backend
 from agents.cem import CEMConfig
 from agents.mpc import MPCConfig
 from piga.io.atomic import atomic_output, write_json
@@ -76,7 +76,10 @@ def main() -> int:
     from piga.control.goal import goal_from_image, render_goal_image
     from piga.io.runs import load_model
 
+    check_page_target(Path(args.out), "-sweep.png")  # before the jobs: the pages are written after them
     model, ckpt = load_model(args.model)
+    for extra in args.extra_models:  # each is read only inside its jobs, after the others' minutes
+        load_model(extra)
     learned = model.physical_parameters()
     tuned = MPCConfig(seed=args.seed)
     planet = replace(PLANET, seed=args.seed)

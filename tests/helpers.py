@@ -80,13 +80,18 @@ def assert_one_line_error(result: subprocess.CompletedProcess[str], *needles: st
     return assert_one_line(result.returncode, result.stderr, *needles)
 
 
-def train_tiny(data: Path, run_dir: Path, **overrides: Any) -> Path:
-    """A real run folder in seconds: the tiny-data recipe (batch 16, 4 predicted frames, one thread), with ``overrides`` of TrainConfig."""
+def train_tiny(data: Path, run_dir: Path, report: bool = True, **overrides: Any) -> Path:
+    """A real run folder in seconds: the tiny-data recipe (batch 16, 4 predicted frames, one thread), with ``overrides`` of
+    TrainConfig; with ``report``, finished as ``piga-train-model`` finishes it (metrics.json and its figures: a run
+    without them was stopped before its end, and the commands that read it say so)."""
+    from piga.training.report import write_run_report
     from piga.training.train import TrainConfig, train
     from piga.world.model import ModelConfig
 
     config = TrainConfig(**{"epochs": 1, "batch_size": 16, "warmup_fraction": 0.1, "curriculum_fraction": 0.1, "threads": 1, **overrides})
-    train(data, run_dir, config, ModelConfig(rec_frames="input", pred_frames=4), progress=False)
+    model, state = train(data, run_dir, config, ModelConfig(rec_frames="input", pred_frames=4), progress=False)
+    if report:
+        write_run_report(model, state, data, run_dir)
     return run_dir
 
 

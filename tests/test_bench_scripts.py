@@ -24,8 +24,12 @@ def test_every_script_runs_under_run_cli(script: Path) -> None:
 @pytest.mark.parametrize("argv, code, line", [
     (["control.py", "--model", "nowhere", "--out", "OUT"], 1,
      "control.py: error: nowhere/checkpoint.pt: no checkpoint (is nowhere a piga-train-model run folder?)"),
+    (["control.py", "--model", "nowhere", "--out", "/dev/null/x"], 1,  # refused before any job, not after an hour
+     "control.py: error: /dev/null is a file, not a folder, so /dev/null/x.json cannot be written there"),
     (["control.py", "--model", "nowhere", "--workers", "0"], 2,
      "control.py: error: argument --workers: expected a positive integer, got 0 (see --help)"),
+    (["backends.py", "--bogus", "1"], 2,  # every bad argument was "--cluster-note: expected a value, got ''", its default
+     "backends.py: error: the following arguments are required: --model, --work, --out (see --help)"),
     (["ablations.py", "--seeds", "-1", "--out", "OUT"], 2,
      "ablations.py: error: argument --seeds: expected an integer in [0, 2^63 - 1], got -1 (see --help)"),
 ])

@@ -293,7 +293,9 @@ def test_interrupted_sweep_ends_with_its_workers(control_model: Path, sig: signa
     finally:
         proc.kill()
     assert proc.returncode != 0
-    assert err.strip().splitlines() == ["piga-control: interrupted; nothing was written"], err
+    *warnings, last = err.strip().splitlines()  # the tiny model's own warning (it did not converge) may come first
+    assert last == "piga-control: interrupted; nothing was written" and len(warnings) <= 1, err
+    assert all(line.startswith("piga-control: warning: the run ") for line in warnings), err
     deadline = time.monotonic() + 10
     while any(map(_alive, workers)) and time.monotonic() < deadline:
         time.sleep(0.05)

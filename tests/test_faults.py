@@ -713,6 +713,20 @@ def test_planet_resume_refuses_another_data_file(baseline_runs: dict[str, Path],
             "was trained on", "two_actions.h5", "give that file")
 
 
+def test_planet_resume_refuses_its_file_written_over_in_place(baseline_runs: dict[str, Path], tiny_data: Path,
+                                                              tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The file's contents were compared only when its path differed: a file collected again under the same name
+    resumed the run on other data, exit 0 (piga-train-model refused it)."""
+    data = tmp_path / "d.h5"
+    shutil.copyfile(tiny_data, data)
+    run = _run_copy(baseline_runs["planet"], tmp_path / "run",
+                    _edit_record(lambda r: r.__setitem__("data", str(data))))
+    with h5py.File(data, "a") as f:  # another first sequence (the fingerprint reads the actions and the first sequence)
+        f["actions"][0] = -f["actions"][0]
+    refused("piga-baseline", ["planet", str(data), "--out", str(run), "--resume", "--steps", "4", "--quiet"], capsys,
+            f"{data} has changed since", "put the trained file back")
+
+
 # ---------------------------------------------------------------------------------------------
 # piga-baseline ddpg
 # ---------------------------------------------------------------------------------------------
@@ -1582,9 +1596,9 @@ def test_control_refuses_two_goals_and_reads_a_goal_image_quietly(tiny_piga_run:
 
 
 @pytest.mark.parametrize("sweep, needle", [
-    ("1e308:1e308:1", "--sweep: PixelPendulumConfig: gravity x gravity_mult = inf is out of range"),  # a job failed, after a warning
+    ("1e308:1e308:1", "--sweep: the gravity it gives, 10 x 1e+308 = inf m/s², is out of range"),  # a job failed, after a warning
     ("1e-300:2e-300:1e-300", "gravity multipliers must be > 0 (at 10 decimals)"),  # it read "> 0, got 1e-300"
-    ("0.00000001:1:0.5", "--sweep: PixelPendulumConfig: gravity x gravity_mult = 1e-07 is out of range: at least 1e-06"),
+    ("0.00000001:1:0.5", "--sweep: the gravity it gives, 10 x 1e-08 = 1e-07 m/s², is out of range: at least 1e-06"),
 ])
 def test_control_sweep_refuses_multipliers_up_front(sweep: str, needle: str, tiny_piga_run: Path,
                                                     capsys: pytest.CaptureFixture[str]) -> None:
@@ -1594,7 +1608,7 @@ def test_control_sweep_refuses_multipliers_up_front(sweep: str, needle: str, tin
 def test_control_refuses_a_gravity_too_weak_to_show(capsys: pytest.CaptureFixture[str]) -> None:
     """--gravity-mult 1e-300 ran swing-ups of a pendulum that never falls, and exited 0."""
     refused("piga-control", ["--oracle", "--gravity-mult", "1e-300", "--episodes", "1", "--quiet"], capsys,
-            "--gravity-mult 1e-300: PixelPendulumConfig: gravity x gravity_mult = 1e-299 is out of range: at least 1e-06 m/s²")
+            "--gravity-mult 1e-300: the gravity it gives, 10 x 1e-300 = 1e-299 m/s², is out of range: at least 1e-06 m/s²")
 
 
 def test_the_weakest_gravity_and_gain_move_the_pendulum_by_under_a_hundredth_of_a_pixel() -> None:
@@ -2424,3 +2438,23 @@ def test_an_interrupt_inside_a_garbage_collector_callback_is_raised_again(capsys
         run_cli("piga-x", main, [])
     err = capsys.readouterr().err
     assert exit_.value.code == 130 and err == "piga-x: interrupted; nothing was written\n", err
+
+
+def test_an_unreadable_image_says_why_in_words(tmp_path: Path) -> None:
+    """An empty or truncated goal image was "not a readable image (OSError)"; a file of no image format, imageio's
+    "Could not find a backend to open ... with iomode `r`"."""
+    from piga.data.scene import read_image
+
+    empty, truncated, text = tmp_path / "empty.png", tmp_path / "cut.png", tmp_path / "notes.xyz"
+    empty.write_bytes(b"")
+    iio_png = tmp_path / "whole.png"
+    import imageio.v3 as iio
+
+    iio.imwrite(iio_png, np.zeros((64, 64), np.uint8))
+    truncated.write_bytes(iio_png.read_bytes()[:40])
+    text.write_text("hello")
+    for path, why in ((empty, "the file is empty"), (truncated, "damaged, or not an image of its suffix's format"),
+                      (text, "no reader knows its format")):
+        with pytest.raises(ValueError, match="not a readable image") as bad:
+            read_image(path)
+        assert why in str(bad.value) and "\n" not in str(bad.value), str(bad.value)

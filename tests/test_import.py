@@ -248,3 +248,42 @@ def test_frames_enlarged_beyond_the_recording_are_noted(tmp_path: Path, recordin
     assert code == 0 and err == ""
     assert ("note: the recording's frames are 64 px on their short side, so they were enlarged to 96 px" in out) \
         == enlarged
+
+
+@pytest.mark.parametrize("levels, said", [((0,), "one flat level, 0"), ((0, 37, 74), "each one flat level, from 0 to 74")])
+def test_a_blank_recording_is_named_not_the_file_never_written(levels: tuple[int, ...], said: str, tmp_path: Path,
+                                                               capsys: pytest.CaptureFixture[str]) -> None:
+    """The line named the output (never written), said "one flat level, 0" of frames whose level changes from frame
+    to frame, and gave a simulation's advice (the objects' size and colours)."""
+    folder = tmp_path / "flat"
+    folder.mkdir()
+    for i in range(12):
+        iio.imwrite(folder / f"f{i}.png", np.full((64, 64), levels[i % len(levels)], np.uint8))
+    csv = tmp_path / "a.csv"
+    csv.write_text("".join(f"{0.1 * (i % 3)}\n" for i in range(12)))
+    out = tmp_path / "out.h5"
+    code, _, err = _cli(str(folder), str(csv), "--dt", "0.05", "--steps", "4", "--out", str(out), capsys=capsys)
+    line = assert_one_line(code, err, f"{folder}: every frame is blank ({said})", "check the recording")
+    assert str(out) not in line and "colours" not in line and not out.exists()
+
+
+def test_a_still_recording_and_too_few_frames_are_said_of_the_recording(tmp_path: Path,
+                                                                       capsys: pytest.CaptureFixture[str]) -> None:
+    """A frozen recording was blamed on the output file (never written); one frame was told "(lower steps)", and
+    --steps 1 is refused."""
+    still = tmp_path / "still.tif"
+    iio.imwrite(still, np.repeat(np.random.default_rng(0).integers(0, 255, (1, 64, 64), dtype=np.uint8), 12, 0))
+    csv = tmp_path / "a.csv"
+    csv.write_text("".join(f"{0.1 * (i % 3)}\n" for i in range(12)))
+    out = tmp_path / "out.h5"
+    code, _, err = _cli(str(still), str(csv), "--dt", "0.05", "--steps", "4", "--out", str(out), capsys=capsys)
+    assert str(out) not in assert_one_line(code, err, f"{still}: nothing moves", "check the recording")
+    code, _, err = _cli(str(still), str(csv), "--dt", "0.05", "--steps", "20", "--out", str(out), capsys=capsys)
+    assert_one_line(code, err, f"{still} has 12 frames, too few for one sequence of 20 frames (lower --steps to 12)")
+    one = tmp_path / "one.tif"
+    iio.imwrite(one, np.zeros((1, 64, 64), np.uint8) + np.arange(64, dtype=np.uint8))
+    (tmp_path / "one.csv").write_text("0.5\n")
+    code, _, err = _cli(str(one), str(tmp_path / "one.csv"), "--dt", "0.05", "--steps", "2", "--out", str(out),
+                        capsys=capsys)
+    assert_one_line(code, err, "has 1 frame, too few for one sequence of 2 frames (a recording needs at least 2)")
+    assert not out.exists()

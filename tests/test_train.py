@@ -440,6 +440,10 @@ def test_the_convergence_check_on_made_up_trajectories() -> None:
     # settled so with g 67% off (MSE 0.50x the held frame's; identified runs measured 0.12x at most)
     still = check_convergence(state(1 + 3 * settle, 0.3 + 0.2 * settle), blank=(0.0030, 0.0035), hold=0.0060)
     assert still.outcome == "untrained" and "holding the last input frame still" in still.reason
+    # a held-out split in which nothing moves (its frames the last input frame's): the data is named, not the training
+    frozen = check_convergence(state(1 + 9 * settle, 0.3 + 0.7 * settle), blank=(0.0005, 0.0035), hold=0.0)
+    assert frozen.outcome == "untrained" and "nothing moves in the held-out sequences" in frozen.reason
+    assert "train longer" not in frozen.reason
     moving = check_convergence(state(1 + 9 * settle, 0.3 + 0.7 * settle), blank=(0.0005, 0.0035), hold=0.0060)
     assert moving.outcome == "converged", moving.reason
     baseline = SimpleNamespace(step=1000, start={}, trace=[], plan=plan, history=[])  # no parameters: the hold is not asked
@@ -539,6 +543,17 @@ def test_an_unreadable_metrics_record_is_said_not_skipped(tmp_path: Path, text: 
         (tmp_path / "metrics.json").write_text(text)
     warning = convergence_warning(tmp_path)
     assert warning is None if said is None else said in warning and "unknown" in warning and "\n" not in warning
+
+
+def test_a_run_stopped_before_its_end_is_said_never_checked(tmp_path: Path) -> None:
+    """piga-control on an interrupted training run (a checkpoint, no metrics.json) gave no warning at all."""
+    from piga.io.runs import convergence_warning
+
+    assert convergence_warning(tmp_path) is None  # no run at all: whoever reads it refuses it on its own
+    (tmp_path / "checkpoint.pt").write_bytes(b"")
+    warning = convergence_warning(tmp_path)
+    assert warning is not None and "has no metrics.json" in warning and "never checked for convergence" in warning
+    assert "--resume" in warning and "\n" not in warning
 
 
 @pytest.mark.parametrize("convergence", ['"settled"', "[1]", '{"reason": 5}', "null"])

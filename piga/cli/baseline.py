@@ -289,14 +289,18 @@ def _refuse_recipe_changes(args: Any, record: dict[str, Any], run_dir: Path, arg
     if changed:
         raise PigaError(f"--resume keeps the run's recipe; drop {', '.join('--' + c.replace('_', '-') for c in changed)}")
     recorded = record.get("data")
-    if args.data and recorded != args.data:
-        if "data_fingerprint" in record:  # a moved or copied file, or one named from another folder, keeps its contents
-            from piga.data.schema import fingerprint
+    if args.data and "data_fingerprint" in record:  # by contents: a moved or copied file is the same, and a file
+        from piga.data.schema import fingerprint     # written over in place (same name) is not
 
-            same = record["data_fingerprint"] == fingerprint(args.data)
-        else:  # a run from before fingerprints: the same file by its path
-            same = recorded is not None and Path(recorded).exists() and Path(args.data).exists() and os.path.samefile(recorded, args.data)
-        if not same:
+        if record["data_fingerprint"] != fingerprint(args.data):
+            if recorded == args.data:
+                raise PigaError(f"--resume: {args.data} has changed since {run_dir} trained on it (its contents are not "
+                                "the same); put the trained file back, or start a new run on this one")
+            drop = "give that file" if kind == "planet" else "drop --data (the run keeps its autoencoder)"
+            raise PigaError(f"--resume: {run_dir} was trained on {recorded or 'no data file'}, not {args.data}; {drop}")
+    elif args.data and recorded != args.data:  # a run from before fingerprints: the same file by its path
+        if not (recorded is not None and Path(recorded).exists() and Path(args.data).exists()
+                and os.path.samefile(recorded, args.data)):
             drop = "give that file" if kind == "planet" else "drop --data (the run keeps its autoencoder)"
             raise PigaError(f"--resume: {run_dir} was trained on {recorded or 'no data file'}, not {args.data}; {drop}")
 

@@ -249,9 +249,9 @@ def _scene_sizes() -> dict[str, int]:
 
 def _collect_scene(args: argparse.Namespace, argv: Sequence[str] | None, written: set[str]) -> int:
     """``--system SCENE``: refuses the pendulum's options (those ``written``), builds the scene and collects it."""
-    pendulum_only = [f"--{name.replace('_', '-')}" for name in ("gravity", "gravity_mult", "actuation_gain", "max_angle",
-                                                                "no_torque_arrow", "effect", "max_speed", "env",
-                                                                "env_option")
+    pendulum_only = [GYMNASIUM_ONLY.get(name, f"--{name.replace('_', '-')}")  # (--effect's dest is "effects")
+                     for name in ("gravity", "gravity_mult", "actuation_gain", "max_angle", "no_torque_arrow", "effects",
+                                  "max_speed", "env", "env_option")
                      if name in written]
     if pendulum_only:
         raise PigaError(f"{', '.join(pendulum_only)}: pendulum option(s), not for --system {args.system}")

@@ -161,6 +161,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.oracle:
             raise PigaError("--video shows the model's belief and plan; it needs --model, not --oracle")
         check_writable_target(args.video, args.overwrite)
+        from piga.evaluation.video import check_video_disk
+
+        check_video_disk(args.video, args.steps)  # before the episode it shows is played
     import torch
 
     from agents.mpc import OracleAgent, PigaMPCAgent
@@ -274,10 +277,14 @@ def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: 
 def _check_env_gravity(flag: str, gravity_mult: float) -> None:
     """Refuses a gravity multiplier that gives the pixel pendulum a gravity out of its range
     (:class:`PixelPendulumConfig`'s), before a model is read."""
+    config = PixelPendulumConfig()
     try:
-        PixelPendulumConfig(gravity_mult=gravity_mult)
-    except ValueError as exc:
-        raise PigaError(f"{flag}: {exc}") from None
+        replace(config, gravity_mult=gravity_mult)
+    except ValueError as exc:  # the env's words ("PixelPendulumConfig: gravity x gravity_mult = ...") in the user's
+        effective = config.gravity * gravity_mult
+        bound = str(exc).split(" is out of range: ", 1)[-1]
+        raise PigaError(f"{flag}: the gravity it gives, {config.gravity:g} x {gravity_mult:g} = {effective:g} m/s², "
+                        f"is out of range: {bound}") from None
 
 
 def _run_kind(args: argparse.Namespace) -> RunKind:
@@ -324,6 +331,9 @@ def _baseline(args: argparse.Namespace, kind: RunKind, mpc: MPCConfig, outputs: 
         if Path(args.video).suffix.lower() not in (".mp4", ".gif"):
             raise PigaError(f"--video must end in .mp4 or .gif, got {args.video}")
         check_writable_target(args.video, args.overwrite)
+        from piga.evaluation.video import check_video_disk
+
+        check_video_disk(args.video, args.steps)  # before the episodes: real frames | reconstruction
     planner = [f"--{name.replace('_', '-')}" for name in ("horizon", "candidates", "elites", "iterations", "warm_start")
                if name in given]
     if planner:

@@ -168,14 +168,16 @@ def check_resources(config: CollectConfig, out: str | Path) -> None:
     Raises:
         piga.io.resources.ResourceError: naming what is needed and what is available.
     """
-    from piga.io.resources import RENDERED_FRAME_COMPRESSION, check_disk, check_memory
+    from piga.io.resources import (HDF5_FILE_OVERHEAD, RENDERED_FRAME_COMPRESSION, SHADED_FRAME_COMPRESSION, check_disk,
+                                   check_memory)
 
     n, t, pixels = config.sequences, config.steps, config.env.image_size**2
     workers = min(config.workers, n)
     rows = min(max(config.batch, workers) // workers * workers, n)
     what = f"{n} sequences x {t} frames of {config.env.image_size}x{config.env.image_size}"
     check_memory(rows * t * (pixels + 12) + (workers + 1) * 48 * pixels + 2 * n, what)
-    check_disk(out, n * t * (pixels / RENDERED_FRAME_COMPRESSION + 12), what)
+    shrink = SHADED_FRAME_COMPRESSION if isinstance(config.env, DMCPendulumConfig) else RENDERED_FRAME_COMPRESSION
+    check_disk(out, n * t * (pixels / shrink + 12) + HDF5_FILE_OVERHEAD, what)
 
 
 def collect(

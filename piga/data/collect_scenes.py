@@ -94,9 +94,14 @@ def scene_attrs(config: SceneCollectConfig, command: str | None = None) -> dict[
 def collect_scene(config: SceneCollectConfig, out: str | Path, overwrite: bool = False, command: str | None = None,
                   progress: bool = True) -> Path:
     """Simulates and renders ``config.sequences`` sequences and writes them to ``out`` atomically."""
+    from piga.io.resources import HDF5_FILE_OVERHEAD, SCENE_FRAME_COMPRESSION, check_disk, check_memory
+
     check_writable_target(out, overwrite)
     scene, n, t = config.scene, config.sequences, config.steps
     size = scene.image_size
+    what = f"{n} sequences x {t} frames of {size}x{size} RGB"  # before any simulation: a size that could never finish
+    check_memory(min(config.batch, n) * t * (3 * size * size + 16 * scene.n_objects), what)
+    check_disk(out, n * t * (3 * size * size / SCENE_FRAME_COMPRESSION + 16 * scene.n_objects) + HDF5_FILE_OVERHEAD, what)
     counts = split_counts(n, config.split)
     one = functools.partial(_one, scene=scene, seed=config.seed, steps=t, first_test=counts[0] + counts[1])
     with DatasetWriter(out, n, t, (size, size, 3), 0, 4 * scene.n_objects, scene_attrs(config, command),

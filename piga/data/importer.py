@@ -37,7 +37,8 @@ import numpy as np
 
 from piga.io.atomic import check_not_an_input, check_writable_target
 from piga.data.collect import split_counts
-from piga.data.schema import MAX_ABS_ACTION, MAX_DT, MIN_DT, MIN_IMAGE_SIZE, SPLITS, DatasetWriter
+from piga.data.schema import (MAX_ABS_ACTION, MAX_DT, MIN_DT, MIN_IMAGE_SIZE, SPLITS, DatasetWriter, flat_levels,
+                              frames_have_signal, frames_move)
 from piga.data.scene import read_image, scene_to_gray
 
 #: File name endings read from a folder of frames (case-insensitive).
@@ -168,8 +169,9 @@ def _read_images(path: Path) -> Iterator[np.ndarray]:
             yield np.asarray(image)
     except Exception as exc:  # imageio and its plugins raise many types for foreign or corrupt files
         first = (str(exc).strip().splitlines() or [""])[0][:120]
-        raise ValueError(f"{path}: not a readable video or image stack ({exc.__class__.__name__}{': ' + first if first else ''}); "
-                         f"piga-import takes {RECORDINGS}") from None
+        why = ("no reader knows its format" if "Could not find a backend" in first else  # imageio's words for it
+               f"{exc.__class__.__name__}{': ' + first if first else ''}")
+        raise ValueError(f"{path}: not a readable video or image stack ({why}); piga-import takes {RECORDINGS}") from None
 
 
 def _frames_of(image: np.ndarray, path: Path) -> Sequence[np.ndarray]:
@@ -326,10 +328,20 @@ def import_recording(
     if len(u) != len(frames):
         raise ValueError(f"{actions} has {len(u)} actions but {recording} has {len(frames)} frames; "
                          "give one action per frame")
+    if not frames_have_signal(frames[None]):  # the recording's fault, said before a file is written (not the file's)
+        raise ValueError(f"{recording}: every frame is blank ({flat_levels(int(frames.min()), int(frames.max()))}): the "
+                         "recording carries no picture to learn from; check the recording (the right file, the "
+                         "camera's exposure, a lens cap)")
     t = config.steps
     n = len(frames) // t
     if n < 1:
-        raise ValueError(f"{recording} has {len(frames)} frames, too few for one sequence of {t} frames (lower steps)")
+        lower = f"lower --steps to {len(frames)}" if len(frames) >= 2 else "a recording needs at least 2"
+        raise ValueError(f"{recording} has {len(frames)} frame{'s' if len(frames) != 1 else ''}, too few for one "
+                         f"sequence of {t} frames ({lower})")
+    if not frames_move(frames[: n * t].reshape(n, t, *frames.shape[1:])):  # the recording's fault, said as such
+        raise ValueError(f"{recording}: nothing moves: in every sequence of {t} frames each frame is the same picture as "
+                         "its first, so the recording carries no motion to learn from; check the recording (a frozen "
+                         "camera, or one frame repeated)")
     counts = split_counts(n, config.split)
     dropped = len(frames) - n * t
     size = config.image_size

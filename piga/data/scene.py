@@ -87,7 +87,10 @@ def read_image(path: str | os.PathLike[str]) -> np.ndarray:
         if exc.__class__.__name__ == "DecompressionBombError":  # Pillow's guard against huge images
             raise ValueError(f"{p}: the image is too large to read (more than Pillow's limit of "
                              f"{_pillow_limit()} pixels, twice its warning); give a smaller picture") from None
-        raise ValueError(f"{p}: not a readable image ({exc.__class__.__name__})") from None
+        why = ("the file is empty" if p.is_file() and p.stat().st_size == 0 else
+               "no reader knows its format" if "Could not find a backend" in str(exc) else
+               f"damaged, or not an image of its suffix's format: {exc.__class__.__name__}")
+        raise ValueError(f"{p}: not a readable image ({why})") from None
     if image.size == 0:  # what a plugin made of a file that is not its own
         raise ValueError(f"{p}: not a readable image (it has no pixels)")
     return image

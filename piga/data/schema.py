@@ -355,8 +355,14 @@ def frames_move(frames: np.ndarray) -> bool:
     return frames.shape[1] < 2 or bool((frames[:, 1:] != frames[:, :1]).any())
 
 
-def _blank_error(path: str | os.PathLike[str], level: int) -> DataFormatError:
-    return DataFormatError(f"{path}: every frame is blank (one flat level, {level}): the video carries no signal to "
+def flat_levels(low: int, high: int) -> str:
+    """The level of blank frames in words: "one flat level, 0", or, where it changes from frame to frame, "each one
+    flat level, from 0 to 255"."""
+    return f"one flat level, {low}" if low == high else f"each one flat level, from {low} to {high}"
+
+
+def _blank_error(path: str | os.PathLike[str], low: int, high: int) -> DataFormatError:
+    return DataFormatError(f"{path}: every frame is blank ({flat_levels(low, high)}): the video carries no signal to "
                            "learn from; check that the objects are drawn (their size, and colours against the background)")
 
 
@@ -368,6 +374,7 @@ def _still_error(path: str | os.PathLike[str]) -> DataFormatError:
 
 def _check_frames_signal(frames: h5py.Dataset, path: str | os.PathLike[str], motion: bool) -> None:
     signal, moves = False, not motion
+    low, high = 255, 0  # the flat levels of blank frames seen
     for start in range(len(frames)):  # one sequence (one chunk) at a time: a good file stops at the first
         with read_rows(frames, f"sequence {start}"):
             sequence = frames[start : start + 1]  # (1, T, H, W[, C])
@@ -375,7 +382,9 @@ def _check_frames_signal(frames: h5py.Dataset, path: str | os.PathLike[str], mot
         moves = moves or frames_move(sequence)
         if signal and moves:
             return
-    raise _blank_error(path, int(frames[0, 0].flat[0])) if not signal else _still_error(path)
+        if not signal:
+            low, high = min(low, int(sequence.min())), max(high, int(sequence.max()))
+    raise _blank_error(path, low, high) if not signal else _still_error(path)
 
 
 def check_frames_have_signal(path: str | os.PathLike[str], motion: bool = True) -> None:
@@ -629,7 +638,7 @@ class DatasetWriter:
         self._split_set = False
         self._signal = False
         self._moves = False
-        self._level = 0
+        self._levels = (255, 0)  # the lowest and highest flat level of the blank frames written
 
     def __enter__(self) -> DatasetWriter:
         self._ctx = atomic_output(self.path, overwrite=self.overwrite)
@@ -669,7 +678,7 @@ class DatasetWriter:
         self._written[start:stop] = True
         if not self._signal and len(frames):
             self._signal = frames_have_signal(frames)
-            self._level = int(frames.flat[0])
+            self._levels = (min(self._levels[0], int(frames.min())), max(self._levels[1], int(frames.max())))
         self._moves = self._moves or (len(frames) > 0 and frames_move(frames))
 
     def set_split(self, split: np.ndarray) -> None:
@@ -692,7 +701,7 @@ class DatasetWriter:
             self._ctx.__exit__(RuntimeError, error, None)
             raise error
         if not (self._signal and self._moves):  # nothing to learn from: the file is not kept (check_frames_have_signal)
-            blank = _blank_error(self.path, self._level) if not self._signal else _still_error(self.path)
+            blank = _blank_error(self.path, *self._levels) if not self._signal else _still_error(self.path)
             self._ctx.__exit__(DataFormatError, blank, None)
             raise blank
         self._ctx.__exit__(None, None, None)

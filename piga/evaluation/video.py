@@ -72,6 +72,15 @@ def panels_video(panels: list[tuple[str, np.ndarray]], path: str | os.PathLike[s
     return _write(np.stack(out), target, fps, overwrite)
 
 
+def check_video_disk(path: str | os.PathLike[str], steps: int, panels: int = 3, side: int = 256) -> None:
+    """Refuses, before the episodes that it shows are played, a video of ``steps`` frames of ``panels`` panels
+    (``side`` pixels, piga's 64-pixel frames 4x upscaled) whose disk has not the room :func:`_write` asks for."""
+    from piga.io.resources import check_disk
+
+    check_disk(path, steps * side * side * panels * 3 / 100 + 64 * 1024, f"the video {Path(path).name}",
+               advice="free some space, or write it elsewhere")
+
+
 def _write(video: np.ndarray, target: Path, fps: int, overwrite: bool) -> Path:
     """Writes uint8 RGB frames (T, H, W, 3) to ``target`` (.mp4 or .gif) atomically."""
     import imageio.v3 as iio

@@ -20,6 +20,13 @@ from piga.io.checkpoint import CHECKPOINT
 RENDERED_FRAME_COMPRESSION = 20.0
 #: Recorded video is noisier; the disk check of imported data assumes 2x.
 RECORDED_FRAME_COMPRESSION = 2.0
+#: dm_control's shaded frames shrink about 16x (40 sequences x 40 frames); the disk check assumes 10x.
+SHADED_FRAME_COMPRESSION = 10.0
+#: A scene's RGB frames shrink 18-20x for balls and 4.8x for digits (20 sequences of each); the check assumes 4x.
+SCENE_FRAME_COMPRESSION = 4.0
+#: An HDF5 file's own bytes beyond its data (its metadata and chunk index): a 12 x 12 dm_control file of 29 KiB of
+#: compressed frames takes 64 KiB.
+HDF5_FILE_OVERHEAD = 128 * 1024
 
 
 class ResourceError(ValueError):
@@ -199,5 +206,5 @@ def check_run_disk(run_dir: str | os.PathLike[str], checkpoint_bytes: float, wha
                advice="free some space, or give another --out")
 
 
-__all__ = ["FIGURE_DISK_BYTES", "RECORDED_FRAME_COMPRESSION", "RENDERED_FRAME_COMPRESSION", "RUN_DISK_MARGIN", "ResourceError",
+__all__ = ["FIGURE_DISK_BYTES", "HDF5_FILE_OVERHEAD", "RECORDED_FRAME_COMPRESSION", "RENDERED_FRAME_COMPRESSION", "SCENE_FRAME_COMPRESSION", "SHADED_FRAME_COMPRESSION", "RUN_DISK_MARGIN", "ResourceError",
            "adam_checkpoint_bytes", "available_memory", "check_disk", "check_memory", "check_training_memory", "check_run_disk", "format_bytes"]

@@ -97,16 +97,24 @@ def convergence_warning(run_dir: str | os.PathLike[str]) -> str | None:
     """One line when the run's metrics.json says it did not converge (``converged: false``), else None.
 
     Every command and benchmark that reads a run prints it, so a run that did not identify its
-    parameters cannot pass unnoticed. A run without the record (an older run, or one still training)
-    gives None; a record that cannot be read gives a line saying that its convergence is unknown.
+    parameters cannot pass unnoticed. A run with a checkpoint but without the record was stopped before its end
+    (interrupted, or killed) and never checked: that is said too (a run still training is told apart by its lock,
+    :func:`piga.cli.common.warn_if_unconverged`). A record that cannot be read gives a line saying that its
+    convergence is unknown.
     """
     import json
+
+    from piga.io.checkpoint import CHECKPOINT
 
     path = Path(run_dir) / "metrics.json"
     try:
         metrics = json.loads(path.read_text())
     except FileNotFoundError:
-        return None
+        if not (Path(run_dir) / CHECKPOINT).exists():
+            return None
+        return (f"warning: the run {run_dir} has no metrics.json: it stopped before its end (interrupted, or its report "
+                "not written) and was never checked for convergence; this used its last checkpoint (continue it with "
+                "--resume)")
     except (OSError, ValueError) as exc:
         return f"warning: {path} cannot be read ({type(exc).__name__}); whether the run converged is unknown"
     if not isinstance(metrics, dict):

@@ -228,6 +228,11 @@ def check_convergence(state: Any, config: ConvergenceConfig = ConvergenceConfig(
     if blank is not None and not blank[0] < config.blank_ratio * blank[1]:  # settled, but on what?
         return verdict("untrained", f"its parameters settled, but its held-out predictions (MSE {blank[0]:.4g}) are no "
                                     f"better than drawing the background alone (MSE {blank[1]:.4g}); " + _blank_fix(blank[1], planned, steps))
+    if blank is not None and hold is not None and hold < FAINT_BACKGROUND_MSE:  # the held-out split does not move
+        return verdict("untrained", f"its held-out frames differ from their last input frame by under one gray level "
+                                    f"(MSE {hold:.4g} of holding it still): nothing moves in the held-out sequences, so "
+                                    "they cannot tell whether it learned the motion; check the data (its test split), "
+                                    "not the training")
     if blank is not None and hold is not None and not blank[0] < config.hold_ratio * hold:
         return verdict("untrained", f"its parameters settled, but its held-out predictions (MSE {blank[0]:.4g}) are not "
                                     f"{1 / config.hold_ratio:.3g}x better than holding the last input frame still (MSE "
