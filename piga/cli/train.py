@@ -410,12 +410,14 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
               + (f"; encoder angle error {metrics['angle']['mean_abs_error_deg']:.2f} deg" if "angle" in metrics else ""))
         print(f"trained {state.epoch} epoch{'s' if state.epoch != 1 else ''} ({state.step} steps) in {state.elapsed / 60:.1f} min; "
               f"wrote {run_dir}/metrics.json and figures")
+        # another command training through this one (piga-demo) does not take these options: say whose they are
+        whose = "" if prog == PROG else f" (options of {PROG} {args.data} --out {run_dir})"
         if convergence["outcome"] == "untrained":
             seeds = f" (seeds {', '.join(map(str, tried))} and {train_config.seed} tried)" if tried else ""
             what = "identify its parameters" if model.has_physics else "learn to predict"
-            raise PigaError(f"the run did not {what}{seeds}: {convergence['reason']}")
+            raise PigaError(f"the run did not {what}{seeds}: {convergence['reason']}{whose}")
         if convergence["outcome"] == "unsettled":
-            print(f"{prog}: warning: not converged: {convergence['reason']}", file=sys.stderr)
+            print(f"{prog}: warning: not converged: {convergence['reason']}{whose}", file=sys.stderr)
             return NOT_CONVERGED
     return 0
 
