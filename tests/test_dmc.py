@@ -222,3 +222,15 @@ def test_the_fixed_camera_in_rgb_stacks_each_frames_channels_and_sees_the_swing(
     assert not np.array_equal(face.unwrapped.render(), env.unwrapped.render())  # another camera
     env.close()
     face.close()
+
+
+def test_env_option_help_lists_every_key_and_refusals_name_the_flag(capsys: pytest.CaptureFixture[str]) -> None:
+    """The help listed 6 of the 9 keys (not camera, camera_distance, color); a bad value was refused in the config's
+    words ("DMCPendulumConfig.flip='sideways' is out of range")."""
+    from piga.cli.collect import build_parser, dmc_config, env_option_keys
+
+    assert {"camera", "camera_distance", "color", "flip", "mass"} <= set(env_option_keys())
+    text = " ".join(build_parser().format_help().split())
+    assert ", ".join(env_option_keys()) in text
+    with pytest.raises(ValueError, match=r"^--env-option flip='sideways' is out of range"):
+        dmc_config([("flip", "sideways")])

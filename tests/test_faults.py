@@ -353,6 +353,9 @@ def test_a_failed_allocation_is_out_of_memory(capsys: pytest.CaptureFixture[str]
     (["--env", "piga/DMCPendulum-v0", "--gravity-mult", "1"], ["--gravity-mult is an option of piga/PixelPendulum-v0"], 1),
     (["--env", "piga/DMCPendulum-v0", "--actuation-gain", "1"], ["--actuation-gain is an option of"], 1),
     (["--system", "spring", "--env", "piga/PixelPendulum-v0"], ["--env: pendulum option(s), not for --system spring"], 1),
+    (["--system", "spring", "--effect", "damping=0.1"], ["--effect: pendulum option(s), not for --system spring"], 1),  # ignored
+    (["--system", "spring", "--g", "3"], ["--g: not a parameter of --system spring; it takes --k, --l"], 1),  # "['g']"
+    (["--env", "piga/DMCPendulum-v0", "--env-option", "flip=sideways"], ["--env-option flip='sideways' is out of range"], 1),
 ])
 def test_collect_refuses(argv: list[str], needles: list[str], code: int, tmp_path: Path,
                          capsys: pytest.CaptureFixture[str]) -> None:

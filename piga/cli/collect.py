@@ -59,6 +59,17 @@ def _env_option(text: str) -> tuple[str, str]:
     return key.strip().replace("-", "_"), value.strip()
 
 
+#: DMCPendulumConfig's fields that piga-collect sets through its own options, not through --env-option.
+NOT_ENV_OPTIONS = ("image_size", "frame_stack", "max_angle", "max_speed", "episode_length")
+
+
+def env_option_keys() -> list[str]:
+    """The keys ``--env-option`` takes: DMCPendulumConfig's fields but those of :data:`NOT_ENV_OPTIONS`."""
+    import dataclasses
+
+    return sorted(f.name for f in dataclasses.fields(DMCPendulumConfig) if f.name not in NOT_ENV_OPTIONS)
+
+
 def dmc_config(options: Sequence[tuple[str, str]], **fields: object) -> DMCPendulumConfig:
     """A :class:`DMCPendulumConfig` from ``--env-option KEY=VALUE`` pairs (converted to each field's type) and ``fields``."""
     import dataclasses
@@ -70,9 +81,8 @@ def dmc_config(options: Sequence[tuple[str, str]], **fields: object) -> DMCPendu
         if key in given:  # as --effect: the last would silently win
             raise ValueError(f"--env-option {key} is given twice ({given[key]}, then {text}): give it once")
         given[key] = text
-        if key not in known or key in ("image_size", "frame_stack", "max_angle", "max_speed", "episode_length"):
-            settable = sorted(set(known) - {"image_size", "frame_stack", "max_angle", "max_speed", "episode_length"})
-            raise ValueError(f"--env-option {key}: unknown for piga/DMCPendulum-v0; known: {', '.join(settable)}")
+        if key not in known or key in NOT_ENV_OPTIONS:
+            raise ValueError(f"--env-option {key}: unknown for piga/DMCPendulum-v0; known: {', '.join(env_option_keys())}")
         kind = type(getattr(DMCPendulumConfig(), key))
         try:
             if kind is bool:
@@ -84,7 +94,10 @@ def dmc_config(options: Sequence[tuple[str, str]], **fields: object) -> DMCPendu
         except ValueError:
             what = {bool: "true or false (1, 0, on, off)", int: "an integer", float: "a number"}.get(kind, f"a {kind.__name__}")
             raise ValueError(f"--env-option {key}={text}: expected {what}") from None
-    return DMCPendulumConfig(**values)  # type: ignore[arg-type]
+    try:
+        return DMCPendulumConfig(**values)  # type: ignore[arg-type]
+    except ValueError as exc:  # the config's words ("DMCPendulumConfig.flip='sideways' ...") in the command's
+        raise ValueError(str(exc).replace("DMCPendulumConfig.", "--env-option ")) from None
 
 
 def build_parser() -> ArgumentParser:
@@ -120,8 +133,8 @@ def build_parser() -> ArgumentParser:
                    help="the env: Gymnasium's pixel pendulum, or dm_control's MuJoCo pendulum through a face-on camera "
                    "(needs piga[dmc]; actions u ~ U(-1, 1), frame dt = action_repeat x 0.02) (default %(default)s)")
     p.add_argument("--env-option", action="append", type=_env_option, default=[], metavar="KEY=VALUE",
-                   help="a field of the DMC pendulum's config, repeatable: mass, length, damping, action_repeat, "
-                   "flip (none, camera, motor), shadows (envs/dmc.py)")
+                   help=f"a field of the DMC pendulum's config, repeatable: {', '.join(env_option_keys())} "
+                   "(their meanings and ranges: envs/dmc.py, DMCPendulumConfig)")
     paper = PRESETS["paper"]
     p.add_argument("--preset", choices=sorted(PRESETS), default="default",
                    help=f"'default': small, about a minute on 2 cores; 'paper': {paper.sequences} sequences x "
@@ -257,6 +270,11 @@ def _collect_scene(args: argparse.Namespace, argv: Sequence[str] | None, written
         raise PigaError(f"{', '.join(pendulum_only)}: pendulum option(s), not for --system {args.system}")
     params = {flag.lstrip("-"): getattr(args, flag.lstrip("-")) for flag in SCENE_PARAMETERS
               if getattr(args, flag.lstrip("-")) is not None}
+    own = SCENES[args.system]["params"]
+    foreign = [f"--{name}" for name in params if name not in own]
+    if foreign:  # in the command's words (the scene's own check names parameters, not flags)
+        takes = ", ".join(f"--{name}" for name in own) or "none of --k, --l, --g, --m"
+        raise PigaError(f"{', '.join(foreign)}: not a parameter of --system {args.system}; it takes {takes}")
     overrides: dict[str, object] = {"params": params}
     if args.image_size is not None:
         overrides["image_size"] = args.image_size
