@@ -1396,7 +1396,7 @@ def test_train_resume_refuses_a_baseline_run(baseline_runs: dict[str, Path], tin
     (["--autoencoder-steps", "5"], "--autoencoder-steps is for --obs latent"),
     (["--torque-arrow"], "--obs state sees no frames"),  # the arrow was recorded for a policy that never saw it
     (["--steps", "200", "--eval-every", "400"], "never be evaluated"),
-    (["--steps", "600", "--eval-every", "400"], "must be a multiple of --eval-every, got 600 and 400"),  # its last 200 steps unscored
+    (["--steps", "600", "--eval-every", "400"], "--steps must be a multiple of --eval-every, got 600 and 400"),  # its last 200 steps unscored
     (["--steps", "400", "--eval-every", "200", "--learning-starts", "5000"], "never learn"),
     (["--steps", "400", "--eval-every", "200", "--learning-starts", "100", "--batch-size", "500", "--buffer-size", "100"],
      "cannot be drawn from the replay buffer"),
@@ -1651,6 +1651,15 @@ def test_control_sweep_warns_once_about_an_unconverged_run(tiny_piga_run: Path, 
                                     "1", "--workers", "1", "--quiet", capsys=capsys)
     assert code == 0, err
     assert err.count("did not converge") == 1 and err.startswith("piga-control: warning:"), err
+
+
+def test_planet_names_its_chunk_length_flag_when_the_sequences_are_shorter(tiny_data: Path, tmp_path: Path,
+                                                                          capsys: pytest.CaptureFixture[str]) -> None:
+    """"shorter than chunk_length 7 x action repeat 2; lower it" named the config's field, not the flag."""
+    refused("piga-baseline", ["planet", str(tiny_data), "--out", str(tmp_path / "run"),
+                              *_once(TINY_PLANET, ["--chunk-length", "9"])], capsys,
+            "sequences of 16 frames are shorter than --chunk-length 9 x action repeat 2; lower it")
+    assert _listing(tmp_path) == []
 
 
 def test_planet_refuses_a_batch_that_cannot_fit(tiny_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -215,7 +215,7 @@ class SB3Config:
             raise ValueError(f"eval_every ({self.eval_every}) is more than steps ({self.steps}): the run would never be "
                              "evaluated; lower eval_every or raise steps")
         if self.steps % self.eval_every:  # the steps after the last evaluation went unscored, its return called final
-            raise ValueError(f"steps must be a multiple of eval_every, got {self.steps} and {self.eval_every}: a run "
+            raise ValueError(f"SB3Config.steps must be a multiple of eval_every, got {self.steps} and {self.eval_every}: a run "
                              "ends on an evaluation, whose return it reports as its final one")
         if self.learning_starts >= self.steps:
             raise ValueError(f"learning_starts ({self.learning_starts}) is not below steps ({self.steps}): the run would "
