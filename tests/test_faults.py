@@ -1396,6 +1396,7 @@ def test_train_resume_refuses_a_baseline_run(baseline_runs: dict[str, Path], tin
     (["--autoencoder-steps", "5"], "--autoencoder-steps is for --obs latent"),
     (["--torque-arrow"], "--obs state sees no frames"),  # the arrow was recorded for a policy that never saw it
     (["--steps", "200", "--eval-every", "400"], "never be evaluated"),
+    (["--steps", "450", "--eval-every", "1000"], "--eval-every (1000) is more than --steps (450)"),  # "than steps (450)"
     (["--steps", "600", "--eval-every", "400"], "--steps must be a multiple of --eval-every, got 600 and 400"),  # its last 200 steps unscored
     (["--steps", "400", "--eval-every", "200", "--learning-starts", "5000"], "never learn"),
     (["--steps", "400", "--eval-every", "200", "--learning-starts", "100", "--batch-size", "500", "--buffer-size", "100"],

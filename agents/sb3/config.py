@@ -212,8 +212,8 @@ class SB3Config:
                 raise ValueError(f"SB3Config.{name} must be at most {MAX_NOISE_STD:g} (a std in SB3's [-1, 1] action "
                                  f"scale; far beyond 1 every noisy action is clipped to a bound), got {getattr(self, name):g}")
         if self.eval_every > self.steps:
-            raise ValueError(f"eval_every ({self.eval_every}) is more than steps ({self.steps}): the run would never be "
-                             "evaluated; lower eval_every or raise steps")
+            raise ValueError(f"eval_every ({self.eval_every}) is more than SB3Config.steps ({self.steps}): the run would "
+                             "never be evaluated; lower eval_every or raise SB3Config.steps")
         if self.steps % self.eval_every:  # the steps after the last evaluation went unscored, its return called final
             raise ValueError(f"SB3Config.steps must be a multiple of eval_every, got {self.steps} and {self.eval_every}: a run "
                              "ends on an evaluation, whose return it reports as its final one")
