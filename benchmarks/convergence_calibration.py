@@ -17,10 +17,9 @@ The data files are collected once, with ``--seed 100``. Writes OUT.md and OUT.js
 
 from __future__ import annotations
 
-import math
-
 import argparse
 import json
+import math
 import shlex
 import sys
 import time

@@ -37,8 +37,8 @@ import numpy as np
 
 from piga.io.atomic import check_not_an_input, check_writable_target
 from piga.data.collect import split_counts
-from piga.data.schema import (MAX_ABS_ACTION, MAX_DT, MIN_DT, MIN_IMAGE_SIZE, SPLITS, DatasetWriter, flat_levels,
-                              frames_have_signal, frames_move)
+from piga.data.schema import (MAX_ABS_ACTION, MAX_DT, MIN_DT, MIN_IMAGE_SIZE, SPLITS, DatasetWriter, blank_error,
+                              frames_have_signal, frames_move, still_error)
 from piga.data.scene import read_image, scene_to_gray
 
 #: File name endings read from a folder of frames (case-insensitive).
@@ -329,9 +329,7 @@ def import_recording(
         raise ValueError(f"{actions} has {len(u)} actions but {recording} has {len(frames)} frames; "
                          "give one action per frame")
     if not frames_have_signal(frames[None]):  # the recording's fault, said before a file is written (not the file's)
-        raise ValueError(f"{recording}: every frame is blank ({flat_levels(int(frames.min()), int(frames.max()))}): the "
-                         "recording carries no picture to learn from; check the recording (the right file, the "
-                         "camera's exposure, a lens cap)")
+        raise blank_error(recording, int(frames.min()), int(frames.max()), recorded=True)
     t = config.steps
     n = len(frames) // t
     if n < 1:
@@ -339,9 +337,7 @@ def import_recording(
         raise ValueError(f"{recording} has {len(frames)} frame{'s' if len(frames) != 1 else ''}, too few for one "
                          f"sequence of {t} frames ({lower})")
     if not frames_move(frames[: n * t].reshape(n, t, *frames.shape[1:])):  # the recording's fault, said as such
-        raise ValueError(f"{recording}: nothing moves: in every sequence of {t} frames each frame is the same picture as "
-                         "its first, so the recording carries no motion to learn from; check the recording (a frozen "
-                         "camera, or one frame repeated)")
+        raise still_error(recording, recorded=True)
     counts = split_counts(n, config.split)
     dropped = len(frames) - n * t
     size = config.image_size

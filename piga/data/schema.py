@@ -355,21 +355,28 @@ def frames_move(frames: np.ndarray) -> bool:
     return frames.shape[1] < 2 or bool((frames[:, 1:] != frames[:, :1]).any())
 
 
-def flat_levels(low: int, high: int) -> str:
+def _flat_levels(low: int, high: int) -> str:
     """The level of blank frames in words: "one flat level, 0", or, where it changes from frame to frame, "each one
     flat level, from 0 to 255"."""
     return f"one flat level, {low}" if low == high else f"each one flat level, from {low} to {high}"
 
 
-def _blank_error(path: str | os.PathLike[str], low: int, high: int) -> DataFormatError:
-    return DataFormatError(f"{path}: every frame is blank ({flat_levels(low, high)}): the video carries no signal to "
-                           "learn from; check that the objects are drawn (their size, and colours against the background)")
+def blank_error(path: str | os.PathLike[str], low: int, high: int, recorded: bool = False) -> DataFormatError:
+    """Frames that are all blank, their flat levels from ``low`` to ``high``; ``recorded``: a recording's frames
+    (``piga-import``), whose advice is not a simulation's."""
+    check = ("check the recording (the right file, the camera's exposure, a lens cap)" if recorded else
+             "check that the objects are drawn (their size, and colours against the background)")
+    return DataFormatError(f"{path}: every frame is blank ({_flat_levels(low, high)}): the video carries no signal to "
+                           f"learn from; {check}")
 
 
-def _still_error(path: str | os.PathLike[str]) -> DataFormatError:
+def still_error(path: str | os.PathLike[str], recorded: bool = False) -> DataFormatError:
+    """Frames in which nothing moves; ``recorded`` as :func:`blank_error`."""
+    check = ("check the recording (a frozen camera, or one frame repeated)" if recorded else
+             "check its source (a recording: a frozen camera, or one frame repeated; a simulation: starts at rest, and "
+             "actions too weak to move it)")
     return DataFormatError(f"{path}: nothing moves: in every sequence each frame is the same picture as its first, so "
-                           "the video carries no motion to learn from; check its source (a recording: a frozen camera, "
-                           "or one frame repeated; a simulation: starts at rest, and actions too weak to move it)")
+                           f"the video carries no motion to learn from; {check}")
 
 
 def _check_frames_signal(frames: h5py.Dataset, path: str | os.PathLike[str], motion: bool) -> None:
@@ -384,7 +391,7 @@ def _check_frames_signal(frames: h5py.Dataset, path: str | os.PathLike[str], mot
             return
         if not signal:
             low, high = min(low, int(sequence.min())), max(high, int(sequence.max()))
-    raise _blank_error(path, low, high) if not signal else _still_error(path)
+    raise blank_error(path, low, high) if not signal else still_error(path)
 
 
 def check_frames_have_signal(path: str | os.PathLike[str], motion: bool = True) -> None:
@@ -701,7 +708,7 @@ class DatasetWriter:
             self._ctx.__exit__(RuntimeError, error, None)
             raise error
         if not (self._signal and self._moves):  # nothing to learn from: the file is not kept (check_frames_have_signal)
-            blank = _blank_error(self.path, *self._levels) if not self._signal else _still_error(self.path)
+            blank = blank_error(self.path, *self._levels) if not self._signal else still_error(self.path)
             self._ctx.__exit__(DataFormatError, blank, None)
             raise blank
         self._ctx.__exit__(None, None, None)

@@ -75,21 +75,24 @@ def panels_video(panels: list[tuple[str, np.ndarray]], path: str | os.PathLike[s
 def check_video_disk(path: str | os.PathLike[str], steps: int, panels: int = 3, side: int = 256) -> None:
     """Refuses, before the episodes that it shows are played, a video of ``steps`` frames of ``panels`` panels
     (``side`` pixels, piga's 64-pixel frames 4x upscaled) whose disk has not the room :func:`_write` asks for."""
+    _check_disk(Path(path), steps * side * side * panels * 3)
+
+
+def _check_disk(target: Path, raw_bytes: float) -> None:
+    """Refuses a video of ``raw_bytes`` of RGB frames whose disk has not the room for it: an MP4 or GIF of these
+    panels takes well under 1% of the raw frames (a 200-step episode: ~20 KB)."""
     from piga.io.resources import check_disk
 
-    check_disk(path, steps * side * side * panels * 3 / 100 + 64 * 1024, f"the video {Path(path).name}",
-               advice="free some space, or write it elsewhere")
+    check_disk(target, raw_bytes / 100 + 64 * 1024, f"the video {target.name}", advice="free some space, or write it elsewhere")
 
 
 def _write(video: np.ndarray, target: Path, fps: int, overwrite: bool) -> Path:
     """Writes uint8 RGB frames (T, H, W, 3) to ``target`` (.mp4 or .gif) atomically."""
     import imageio.v3 as iio
 
-    from piga.io.resources import check_disk, format_bytes
+    from piga.io.resources import format_bytes
 
-    # an MP4 or GIF of these panels takes well under 1% of the raw frames (a 200-step episode: ~20 KB)
-    check_disk(target, video.nbytes / 100 + 64 * 1024, f"the video {target.name}",
-               advice="free some space, or write it elsewhere")
+    _check_disk(target, video.nbytes)
     with atomic_output(target, overwrite=overwrite) as tmp:
         try:
             if target.suffix.lower() == ".gif":

@@ -206,5 +206,7 @@ def check_run_disk(run_dir: str | os.PathLike[str], checkpoint_bytes: float, wha
                advice="free some space, or give another --out")
 
 
-__all__ = ["FIGURE_DISK_BYTES", "HDF5_FILE_OVERHEAD", "RECORDED_FRAME_COMPRESSION", "RENDERED_FRAME_COMPRESSION", "SCENE_FRAME_COMPRESSION", "SHADED_FRAME_COMPRESSION", "RUN_DISK_MARGIN", "ResourceError",
-           "adam_checkpoint_bytes", "available_memory", "check_disk", "check_memory", "check_training_memory", "check_run_disk", "format_bytes"]
+__all__ = ["FIGURE_DISK_BYTES", "HDF5_FILE_OVERHEAD", "RECORDED_FRAME_COMPRESSION", "RENDERED_FRAME_COMPRESSION",
+           "RUN_DISK_MARGIN", "SCENE_FRAME_COMPRESSION", "SHADED_FRAME_COMPRESSION", "ResourceError",
+           "adam_checkpoint_bytes", "available_memory", "check_disk", "check_memory", "check_training_memory",
+           "check_run_disk", "format_bytes"]
