@@ -207,9 +207,8 @@ def did_not_learn(open_loop: dict[str, Any], ratio: float = ConvergenceConfig.bl
 
     The same test as a piga run's (``ConvergenceConfig.blank_ratio``): a model must beat a guess that learned
     nothing. Its reconstructions of the frames it filters (the first ``context``) must beat the average frame, and
-    its rewards the guess 0 (unless every reward is 0). A 5-step run (loss 641) passed as a run; trained models
-    measure 0.05-0.10 of the average frame's MSE and 0.05 of the zero guess's reward error
-    (``results/planet_faithful.md``'s runs)."""
+    its rewards the guess 0 (unless every reward is 0). A 5-step run (loss 641) passed as a run; the trained runs'
+    records (``results/planet_faithful_runs/records/``) hold their errors beside the guesses'."""
     context = max(1, int(open_loop["context"]))
     frame, average = (float(np.mean(open_loop[key][:context])) for key in ("frame_mse", "mean_frame_mse"))
     if not frame < ratio * average:
