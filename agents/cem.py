@@ -47,7 +47,7 @@ def cem(
         low, high: (A,) action bounds.
         config: see :class:`CEMConfig`.
         init_mean: (H, A) warm start of the sampling mean (default: the middle of the bounds).
-        generator: torch RNG for the samples (explicit, for reproducibility).
+        generator: torch RNG for the samples (explicit, for reproducibility), on the bounds' device.
 
     Returns:
         A :class:`CEMResult`.
@@ -64,7 +64,7 @@ def cem(
     best_actions, best_value = mean.clone(), float("-inf")
     k = config.elites
     for _ in range(config.iterations):
-        noise = torch.randn((config.candidates, h, a), generator=generator)
+        noise = torch.randn((config.candidates, h, a), generator=generator, device=low.device)
         samples = torch.addcmul(mean, std, noise).clamp_(low, high)  # (B, H, A): mean + std * noise, in bounds
         values = objective(samples)
         if values.shape != (config.candidates,):

@@ -51,22 +51,25 @@ class Planner:
         warm_start: see :data:`WarmStart`.
         execute: see :data:`Execute`.
         seed: seed of :attr:`generator`, reseeded at each :meth:`reset`.
+        device: where the candidates are drawn and scored (the dynamics' and the cost's device); a CUDA
+            generator draws other numbers than the CPU's for the same seed.
     """
 
     def __init__(self, dynamics: Dynamics, cost: Cost, low: Sequence[float], high: Sequence[float], cem: CEMConfig,
-                 warm_start: WarmStart = "repeat", execute: Execute = "mean", seed: int = 0):
+                 warm_start: WarmStart = "repeat", execute: Execute = "mean", seed: int = 0,
+                 device: str | torch.device = "cpu"):
         if warm_start not in ("off", "middle", "repeat") or execute not in ("mean", "best"):
             raise ValueError(f"warm_start must be 'off', 'middle' or 'repeat' and execute 'mean' or 'best', got "
                              f"{warm_start!r}, {execute!r}")
         self.dynamics = dynamics
         self.cost = cost
-        self.low = torch.tensor(low, dtype=torch.float32)  # (A,)
-        self.high = torch.tensor(high, dtype=torch.float32)  # (A,)
+        self.low = torch.tensor(low, dtype=torch.float32, device=device)  # (A,)
+        self.high = torch.tensor(high, dtype=torch.float32, device=device)  # (A,)
         self.cem = cem
         self.warm_start: WarmStart = warm_start
         self.execute: Execute = execute
         self.seed = seed
-        self.generator = torch.Generator().manual_seed(seed)
+        self.generator = torch.Generator(device=device).manual_seed(seed)
         """The RNG of CEM's candidates and of a stochastic dynamics' samples (an agent may draw from it too)."""
         self._mean: Tensor | None = None  # (H, A) the next plan's warm start
         self._fusable = isinstance(dynamics, FusedDynamics)  # checked once: a protocol check costs more than a rollout
@@ -110,7 +113,7 @@ class Planner:
             plan = result.actions  # a sample: within the bounds
         else:  # the mean of samples within the bounds, which a momentum can move out of them by a rounding
             plan = result.mean.clamp(self.low, self.high) if (cem_config or self.cem).momentum else result.mean
-        return plan.numpy().astype(np.float32)
+        return plan.cpu().numpy().astype(np.float32)
 
     def executed(self, action: np.ndarray) -> None:
         """Told the action (A,) that was sent (passed on to the dynamics, which may keep a history)."""

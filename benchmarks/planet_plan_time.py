@@ -15,6 +15,11 @@ no training unless ``--model RUN_DIR`` (a ``piga-baseline planet`` run) is given
 
     python benchmarks/planet_plan_time.py --out results/planet_plan_time --threads 1 2
 
+With ``--device cuda`` the agents filter and plan on a GPU (PlaNet's batched latent CEM, as PlaNet ran it),
+and the page names the GPU; each ``act`` ends with the action copied back to the CPU, so the times include the
+synchronisation. A CUDA generator draws other numbers than the CPU's, so only the two GPU engines' actions are
+compared with each other.
+
 Writes OUT.json and OUT.md (with the machine and the load average). Nothing else should run on the
 machine meanwhile; otherwise, read only the ratio.
 """
@@ -38,12 +43,12 @@ from piga.io.atomic import atomic_output, write_json
 from piga.cli.common import ArgumentParser, positive_int
 
 
-def measure(model: WorldModel, threads: int, steps: int, seed: int = 0) -> dict[str, object]:
-    """Median ms per ``act`` for both engines, alternating, on ``threads`` torch threads."""
+def measure(model: WorldModel, threads: int, steps: int, seed: int = 0, device: str = "cpu") -> dict[str, object]:
+    """Median ms per ``act`` for both engines, alternating, on ``threads`` torch threads and ``device``."""
     torch.set_num_threads(threads)
     frames = np.random.default_rng(seed).integers(0, 256, (steps, 1, 64, 64), dtype=np.uint8)
-    agents = {"reference": PlanetAgent(model, LatentPlannerConfig(seed=seed), fast=False),
-              "fast": PlanetAgent(model, LatentPlannerConfig(seed=seed))}
+    agents = {"reference": PlanetAgent(model, LatentPlannerConfig(seed=seed), fast=False, device=device),
+              "fast": PlanetAgent(model, LatentPlannerConfig(seed=seed), device=device)}
     times: dict[str, list[float]] = {name: [] for name in agents}
     actions: dict[str, list[float]] = {name: [] for name in agents}
     for agent in agents.values():
@@ -59,7 +64,7 @@ def measure(model: WorldModel, threads: int, steps: int, seed: int = 0) -> dict[
             planned[name].append(agent.planned)  # with an action repeat R, a plan at every R-th step only
     plans = {n: [t for t, p in zip(times[n], planned[n]) if p] for n in agents}
     reference, fast = (float(1000 * np.median(plans[n])) for n in ("reference", "fast"))
-    return {"threads": threads, "steps": steps, "action_repeat": model.config.action_repeat, "plans": len(plans["fast"]),
+    return {"device": device, "threads": threads, "steps": steps, "action_repeat": model.config.action_repeat, "plans": len(plans["fast"]),
             "reference_ms": reference, "fast_ms": fast, "speedup": reference / fast,
             "fast_ms_per_step": float(1000 * np.sum(times["fast"]) / steps),
             "same_actions": bool(np.allclose(actions["reference"], actions["fast"], atol=1e-4))}
@@ -71,7 +76,10 @@ def main() -> int:
     p.add_argument("--model", help="a piga-baseline planet run folder (default: an untrained default-size model)")
     p.add_argument("--threads", type=int, nargs="+", default=[1], help="torch thread counts to measure (default 1)")
     p.add_argument("--steps", type=positive_int, default=20, help="env steps timed per engine and thread count (default 20)")
+    p.add_argument("--device", choices=["cpu", "cuda"], default="cpu", help="where the agents plan (default cpu)")
     args = p.parse_args()
+    if args.device == "cuda" and not torch.cuda.is_available():
+        raise SystemExit("--device cuda: torch sees no CUDA GPU here")
     if args.model:
         from agents.planet.run import load_planet
 
@@ -80,14 +88,16 @@ def main() -> int:
         torch.manual_seed(0)
         model = WorldModel(RSSMConfig()).eval()
     load_before = os.getloadavg()
-    rows = [measure(model, t, args.steps) for t in args.threads]
-    record = {"command": shlex.join(["python", *sys.argv]), "machine": machine(), "model": args.model or "untrained RSSMConfig()",
+    rows = [measure(model, t, args.steps, device=args.device) for t in args.threads]
+    gpu = torch.cuda.get_device_name() if args.device == "cuda" else None
+    record = {"command": shlex.join(["python", *sys.argv]), "machine": machine(), "gpu": gpu, "model": args.model or "untrained RSSMConfig()",
               "load_average_before": load_before, "load_average_after": os.getloadavg(), "rows": rows}
     out = Path(args.out)
     write_json(out.with_suffix(".json"), record, overwrite=True)
     lines = [f"# PlaNet-style plan time per plan and per control step\n\nCommand: `{record['command']}`\n",
-             (f"Machine: {record['machine']['cpu']}, {record['machine']['cores']} cores; load average "
-             f"{load_before[0]:.2f} before, {record['load_average_after'][0]:.2f} after.\n"),
+             (f"Machine: {record['machine']['cpu']}, {record['machine']['cores']} cores"
+              + (f", planning on {gpu} (torch {torch.__version__})" if gpu else "")
+              + f"; load average {load_before[0]:.2f} before, {record['load_average_after'][0]:.2f} after.\n"),
              f"The agent plans once every {rows[0]['action_repeat']} env steps (its model's action repeat); the ms "
              "columns are medians per plan, and the last one is the fast engine's mean time per env step.\n",
              "| threads | plans | reference ms | fast ms | speedup | fast ms per env step | same actions |",

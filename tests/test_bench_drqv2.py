@@ -174,3 +174,15 @@ def test_a_point_below_every_published_seed_is_named_with_how_low_the_seeds_go_n
     assert drqv2_curves.main(["--out", str(tmp_path / "page"), "--runs", str(run), "--published", str(published)]) == 0
     page = (tmp_path / "page.md").read_text()
     assert "a replay buffer of 10,000 transitions (its 1e6); 5" in page
+
+
+def test_the_step_time_benchmark_times_each_part_and_the_whole_loop(tmp_path: Path) -> None:
+    import drqv2_step_time
+
+    out = tmp_path / "step"
+    assert drqv2_step_time.main(["--out", str(out), "--fill", "300", "--repeats", "1", "--loop", "2"]) == 0
+    record = json.loads(out.with_suffix(".json").read_text())
+    parts = record["result"]["parts_ms"]
+    assert set(parts) == {"env_step", "act", "sample", "update"} and all(v > 0 for v in parts.values())
+    assert parts["update"] > parts["sample"]  # the update samples its batch, then trains on it
+    assert record["result"]["loop_ms_per_step"] > 0 and "env steps per second" in out.with_suffix(".md").read_text()

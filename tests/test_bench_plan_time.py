@@ -80,3 +80,11 @@ def test_plan_time_at_two_revisions_alternates_and_gives_ratios(tiny_data: Path,
     bad = run("python", str(ROOT / "benchmarks" / "plan_time_revisions.py"), "--baseline", "no-such-rev", "--model",
               str(piga_run), "--out", str(out))
     assert bad.returncode != 0 and "not a revision" in bad.stderr
+
+
+def test_the_planet_plan_time_benchmark_times_both_engines_and_checks_their_actions(tmp_path: Path) -> None:
+    out = tmp_path / "planet_plan_time"
+    result = run("python", str(ROOT / "benchmarks" / "planet_plan_time.py"), "--steps", "2", "--out", str(out))
+    assert result.returncode == 0, result.stderr
+    (row,) = json.loads(out.with_suffix(".json").read_text())["rows"]
+    assert row["device"] == "cpu" and row["plans"] == 1 and row["same_actions"] and row["fast_ms"] > 0

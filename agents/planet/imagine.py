@@ -20,6 +20,8 @@ in the same order, so the result equals :meth:`WorldModel.imagine_return` up to 
 
 from __future__ import annotations
 
+import functools
+
 import torch
 import torch.nn.functional as F
 from torch import Tensor
@@ -66,17 +68,18 @@ class Imagination:
 
     def _allocate(self, batch: int, horizon: int) -> None:
         d, s, k = self.deter, self.stoch, self.hidden
-        self.features = torch.empty(horizon, batch, d + s)  # (H, B, D + S): every imagined (h_t, s_t)
-        self.x = torch.empty(batch, k)  # (B, K) GRU input
-        self.gi = torch.empty(batch, 3 * d)  # (B, 3D) input projection
-        self.gh = torch.empty(batch, 3 * d)  # (B, 3D) hidden projection
-        self.hidden_prior = torch.empty(batch, k)  # (B, K)
-        self.n = torch.empty(batch, d)  # (B, D) the GRU's candidate state
-        self.mean = torch.empty(batch, s)  # (B, S) the prior's mean
-        self.std = torch.empty(batch, s)  # (B, S) the prior's std
-        self.noise = torch.empty(batch, s)  # (B, S)
-        self.reward_hidden = [torch.empty(horizon * batch, w.shape[1]) for w, _ in self.reward_layers[:-1]]
-        self.rewards = torch.empty(horizon * batch, 1)
+        empty = functools.partial(torch.empty, device=self.w_ih.device)  # on the model's device
+        self.features = empty(horizon, batch, d + s)  # (H, B, D + S): every imagined (h_t, s_t)
+        self.x = empty(batch, k)  # (B, K) GRU input
+        self.gi = empty(batch, 3 * d)  # (B, 3D) input projection
+        self.gh = empty(batch, 3 * d)  # (B, 3D) hidden projection
+        self.hidden_prior = empty(batch, k)  # (B, K)
+        self.n = empty(batch, d)  # (B, D) the GRU's candidate state
+        self.mean = empty(batch, s)  # (B, S) the prior's mean
+        self.std = empty(batch, s)  # (B, S) the prior's std
+        self.noise = empty(batch, s)  # (B, S)
+        self.reward_hidden = [empty(horizon * batch, w.shape[1]) for w, _ in self.reward_layers[:-1]]
+        self.rewards = empty(horizon * batch, 1)
         self._shape = (batch, horizon)
 
     @torch.inference_mode()

@@ -118,19 +118,23 @@ class PlanetAgent:
         model: a trained world model.
         config: planner settings (PlaNet's by default).
         fast: score candidates with :class:`Imagination` (True) or by rolling out, then scoring.
+        device: where the model filters and plans ("cpu", or "cuda" for PlaNet's batched CEM on a GPU; the
+            model is moved there). A CUDA generator draws other numbers than the CPU's for the same seed.
     """
 
     input_frames = 1
     """Frames the agent needs per decision (its belief carries the history)."""
 
-    def __init__(self, model: WorldModel, config: LatentPlannerConfig = LatentPlannerConfig(), fast: bool = True):
+    def __init__(self, model: WorldModel, config: LatentPlannerConfig = LatentPlannerConfig(), fast: bool = True,
+                 device: str | torch.device = "cpu"):
         if model.config.action_dim != 1:
             raise ValueError(f"PlanetAgent controls the pendulum (one action), got a model with action_dim={model.config.action_dim}")
-        self.model = model.eval()
+        self.device = torch.device(device)
+        self.model = model.to(self.device).eval()
         self.config = config
         self.repeat = model.config.action_repeat
         self.planner = Planner(LatentDynamics(model, fast), RewardCost(model), [-MAX_ACTION], [MAX_ACTION], config.cem,
-                               warm_start="off", seed=config.seed)
+                               warm_start="off", seed=config.seed, device=self.device)
         self.generator = self.planner.generator
         """The planner's generator, which the posterior samples also draw from."""
         self.reset()
@@ -139,7 +143,7 @@ class PlanetAgent:
         """Starts an episode: the zero state, no previous action, the generator reseeded."""
         self.planner.reset()
         self.belief = self.model.rssm.initial(1)
-        self.previous = torch.zeros(1, self.model.config.input_action_size)  # (1, R·A) the actions since the last read frame
+        self.previous = torch.zeros(1, self.model.config.input_action_size, device=self.device)  # (1, R·A) the actions since the last read frame
         self.action = np.zeros(1, np.float32)  # (1,) the action held
         self.left = 0  # env steps the held action has left
         self.planned = False  # whether the last act planned (episodes time only those steps)
@@ -148,7 +152,7 @@ class PlanetAgent:
     def observe(self, frame: np.ndarray) -> Belief:
         """Updates the belief with the newest frame, uint8 (H, W) (after the previous action); returns it."""
         h, _ = self.model.rssm.transition(self.belief, self.previous)
-        embed = self.model.embed(torch.from_numpy(np.ascontiguousarray(frame))[None, None])[:, 0]  # (1, E)
+        embed = self.model.embed(torch.from_numpy(np.ascontiguousarray(frame)).to(self.device)[None, None])[:, 0]  # (1, E)
         self.belief = Belief(h, sample(self.model.rssm.posterior(h, embed), self.generator))
         return self.belief
 
@@ -162,7 +166,7 @@ class PlanetAgent:
         self.planned = self.left == 0
         if self.planned:
             self.action = choose(self.plan(self.observe(frames[-1])))
-            self.previous = held(torch.from_numpy(self.action)[None], self.repeat)  # (1, R·A): what the next read follows
+            self.previous = held(torch.from_numpy(self.action).to(self.device)[None], self.repeat)  # (1, R·A): what the next read follows
             self.left = self.repeat
         self.left -= 1
         return self.action.copy()
