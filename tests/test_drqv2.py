@@ -104,6 +104,30 @@ def test_a_run_resumes_exactly_and_acts_in_piga_episodes(tmp_path: Path) -> None
     assert np.isfinite(run_episodes(agent, EpisodeConfig(episodes=1, steps=10, hold_steps=5)).summary.mean_return)
 
 
+def test_a_run_with_its_observations_on_the_device_learns_and_resumes_as_one_in_host_memory(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The device-resident buffer (a GPU's; here forced on the CPU) gives the host buffer's run, and resumes exactly."""
+    import pickle
+
+    from agents.sb3 import replay
+    from agents.sb3.run import REPLAY_BUFFERS, load_sb3
+    from agents.sb3.train import train_sb3
+
+    host = train_sb3(TINY, tmp_path / "host", progress=False)
+    monkeypatch.setattr(replay, "fits_on_device", lambda *args: True)
+    straight = train_sb3(TINY, tmp_path / "a", progress=False)
+    train_sb3(replace(TINY, steps=200), tmp_path / "b", progress=False)
+    resumed = train_sb3(TINY, tmp_path / "b", resume=True, progress=False)
+    returns = [[r["eval_mean_return"] for r in run["learning_curve"]] for run in (host, straight, resumed)]
+    assert returns[0] == returns[1] == returns[2]
+    weights = [load_sb3(tmp_path / name)[0].policy.state_dict() for name in ("host", "a", "b")]
+    for name, p in weights[0].items():
+        assert torch.equal(p, weights[1][name]) and torch.equal(p, weights[2][name]), name
+    buffers = sorted((tmp_path / "b" / REPLAY_BUFFERS).glob("*.pkl"))
+    with open(buffers[-1], "rb") as file:
+        assert type(pickle.load(file)).__name__ == "DeviceNStepReplayBuffer"
+
+
 def test_drqv2_has_its_papers_values_and_learns_from_pixels_only() -> None:
     config = SB3Config(algo="drqv2", obs="pixels")
     assert (config.learning_rate, config.batch_size, config.tau, config.train_freq, config.n_step, config.frame_stack,

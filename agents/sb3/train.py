@@ -132,14 +132,21 @@ def _bar_callback(bar: Any) -> Any:
     return BarCallback()
 
 
-def _n_step_buffer(config: SB3Config) -> dict[str, Any]:
+def _n_step_buffer(config: SB3Config, venv: Any, device: torch.device) -> dict[str, Any]:
     """SB3's arguments for ``config.n_step``-step returns: its ``NStepReplayBuffer`` named explicitly (the saved
-    model then loads without SB3's warning that its ``n_steps`` shortcut is ignored), or nothing for 1."""
+    model then loads without SB3's warning that its ``n_steps`` shortcut is ignored), or nothing for 1. On a GPU
+    with room for the observations, :class:`agents.sb3.replay.DeviceNStepReplayBuffer` (the same batches, sampled
+    there)."""
     if config.n_step == 1:
         return {}
     from stable_baselines3.common.buffers import NStepReplayBuffer
 
-    return {"replay_buffer_class": NStepReplayBuffer, "replay_buffer_kwargs": {"n_steps": config.n_step, "gamma": config.gamma}}
+    from agents.sb3.replay import DeviceNStepReplayBuffer, fits_on_device
+
+    space = venv.observation_space
+    on_device = fits_on_device(device, config.buffer_size, space.shape, space.dtype)
+    return {"replay_buffer_class": DeviceNStepReplayBuffer if on_device else NStepReplayBuffer,
+            "replay_buffer_kwargs": {"n_steps": config.n_step, "gamma": config.gamma}}
 
 
 def new_model(config: SB3Config, venv: Any, device: torch.device, tensorboard_log: str | None = None) -> Any:
@@ -160,7 +167,7 @@ def new_model(config: SB3Config, venv: Any, device: torch.device, tensorboard_lo
                                   buffer_size=config.buffer_size, learning_starts=config.learning_starts, batch_size=config.batch_size,
                                   tau=config.tau, gamma=config.gamma, train_freq=config.train_freq,
                                   gradient_steps=config.gradient_steps, action_noise=noise, policy_kwargs=policy_kwargs,
-                                  **_n_step_buffer(config), tensorboard_log=tensorboard_log, seed=config.seed, device=device,
+                                  **_n_step_buffer(config, venv, device), tensorboard_log=tensorboard_log, seed=config.seed, device=device,
                                   verbose=0)
 
 
@@ -316,7 +323,7 @@ def train_sb3(config: SB3Config, run_dir: str | Path, autoencoder: str | Path | 
         try:
             # the zip holds the TensorBoard folder of the run's first invocation: log where the run is now
             model = algorithm.load(io.BytesIO(ckpt["model_zip"]), env=venv, device=device,
-                                   tensorboard_log=str(run_dir / "tensorboard"))
+                                   tensorboard_log=str(run_dir / "tensorboard"), **_n_step_buffer(config, venv, device))
         except Exception as exc:  # a truncated or foreign file
             raise unreadable(run_dir / CHECKPOINT, RunKind.DDPG, exc) from None
         _load_replay_buffer(model, run_dir, ckpt)
