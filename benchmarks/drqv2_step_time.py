@@ -32,6 +32,7 @@ import torch
 
 from common import machine, machine_words, write_page
 from piga.cli.common import ArgumentParser, positive_int
+from piga.io.pool import git_commit
 
 from agents.sb3.config import DMC_VIEWS, SB3Config
 from envs import ENV_IDS, PIXEL_PENDULUM
@@ -88,7 +89,8 @@ def markdown(record: dict[str, Any]) -> str:
     return "\n".join([
         "# Where DrQ-v2's training step goes",
         "",
-        f"Measured on {machine_words(record['machine'])}; model and batches on {device}. From `{record['command']}`.",
+        f"Measured on {machine_words(record['machine'])}; model and batches on {device}. From `{record['command']}` "
+        f"at commit {(record.get('commit') or 'unknown')[:7]}.",
         "",
         f"DrQ-v2 on `{record['env']}` (view {record['view']}), buffer filled with {record['fill']} random-action steps; "
         f"medians of {record['repeats']} calls each:",
@@ -134,7 +136,8 @@ def main(argv: list[str] | None = None) -> int:
     device = torch.device(args.device)
     result = measure(config, device, args.fill, args.repeats, args.loop)
     record = {"command": shlex.join(["python", "benchmarks/drqv2_step_time.py", *(sys.argv[1:] if argv is None else argv)]),
-              "machine": machine(), "gpu": torch.cuda.get_device_name() if device.type == "cuda" else None,
+              "commit": git_commit(), "machine": machine(),
+              "gpu": torch.cuda.get_device_name() if device.type == "cuda" else None,
               "env": args.env, "view": config.view, "fill": args.fill, "repeats": args.repeats, "loop": args.loop,
               "batch_size": config.batch_size, "train_freq": config.train_freq, "eval_every": args.eval_every,
               "eval_episodes": config.eval_episodes, "episode_steps": config.episode_steps, "result": result}

@@ -41,6 +41,7 @@ from agents.planet.planner import PlanetAgent
 from agents.planet.rssm import WorldModel
 from piga.io.atomic import atomic_output, write_json
 from piga.cli.common import ArgumentParser, positive_int
+from piga.io.pool import git_commit
 
 
 def measure(model: WorldModel, threads: int, steps: int, seed: int = 0, device: str = "cpu") -> dict[str, object]:
@@ -90,11 +91,12 @@ def main() -> int:
     load_before = os.getloadavg()
     rows = [measure(model, t, args.steps, device=args.device) for t in args.threads]
     gpu = torch.cuda.get_device_name() if args.device == "cuda" else None
-    record = {"command": shlex.join(["python", *sys.argv]), "machine": machine(), "gpu": gpu, "model": args.model or "untrained RSSMConfig()",
+    record = {"command": shlex.join(["python", *sys.argv]), "commit": git_commit(), "machine": machine(), "gpu": gpu, "model": args.model or "untrained RSSMConfig()",
               "load_average_before": load_before, "load_average_after": os.getloadavg(), "rows": rows}
     out = Path(args.out)
     write_json(out.with_suffix(".json"), record, overwrite=True)
-    lines = [f"# PlaNet-style plan time per plan and per control step\n\nCommand: `{record['command']}`\n",
+    lines = [f"# PlaNet-style plan time per plan and per control step\n\nCommand: `{record['command']}` at commit "
+             f"{(record['commit'] or 'unknown')[:7]}\n",
              (f"Machine: {record['machine']['cpu']}, {record['machine']['cores']} cores"
               + (f", planning on {gpu} (torch {torch.__version__})" if gpu else "")
               + f"; load average {load_before[0]:.2f} before, {record['load_average_after'][0]:.2f} after.\n"),

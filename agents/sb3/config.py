@@ -159,7 +159,9 @@ class SB3Config:
     device: Device = "auto"
     """Where SB3 trains its networks (:mod:`piga.io.device`; passed to SB3's ``device``), and the latent
     autoencoder trains: "auto" (a CUDA GPU when torch sees one, else the CPU), "cpu" or "cuda". Not part of
-    the recipe: a run resumes on any device. The trained policy acts on the CPU."""
+    the recipe: a run resumes on any device. The trained policy acts on the CPU. On a GPU, an n-step replay
+    buffer (DrQ-v2's) keeps its observations in GPU memory where they take at most half of what is free
+    (:mod:`agents.sb3.replay`): the same batches, sampled there."""
 
     def __post_init__(self) -> None:
         if self.obs not in OBSERVATIONS:
