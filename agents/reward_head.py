@@ -173,10 +173,10 @@ def train_reward_head(model: PhysicsModel, data: str | os.PathLike[str],
 
 def save_reward_head(path: str | os.PathLike[str], head: RewardHead, metrics: dict[str, Any] | None = None) -> None:
     """Writes the head, its config and ``metrics`` to ``path`` (atomically)."""
-    from piga.io.atomic import atomic_output
+    from piga.io.atomic import atomic_output, torch_save
 
     with atomic_output(Path(path), overwrite=True) as tmp:
-        torch.save({"config": asdict(head.config), "state": head.state_dict(), "metrics": metrics or {}}, tmp)
+        torch_save({"config": asdict(head.config), "state": head.state_dict(), "metrics": metrics or {}}, tmp)
 
 
 def load_reward_head(path: str | os.PathLike[str]) -> RewardHead:

@@ -602,8 +602,13 @@ def wrap_effects(env: gym.Env, effects: Effects, stage: str) -> gym.Env:
 
 
 def format_effects(effects: Effects) -> str:
-    """``"damping=0.2 delay=2"``, or ``"none"``."""
-    return " ".join(f"{name}={value:g}" for name, value in effects) or "none"
+    """``"damping=0.2 delay=2"``, or ``"none"``: each value as short as ``g`` writes it, unless that rounds it
+    (``deadzone=1.999999`` is not 2, which the effect refuses): then in full."""
+    def shown(value: float) -> str:
+        short = format(value, "g")
+        return short if float(short) == value else repr(float(value))
+
+    return " ".join(f"{name}={shown(value)}" for name, value in effects) or "none"
 
 
 __all__ = [

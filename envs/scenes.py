@@ -117,7 +117,7 @@ class SceneConfig:
         if self.scene == "digits-spring" and any(self.background):
             raise SceneError("digits-spring draws its digits over a texture; a background colour is for the balls")
         if self.radius < MIN_RADIUS:
-            raise SceneError(f"radius must be at least {MIN_RADIUS:g} px (a smaller object leaves no trace in the frames), "
+            raise SceneError(f"{type(self).__name__}.radius must be at least {MIN_RADIUS:g} px (a smaller object leaves no trace in the frames), "
                              f"got {self.radius:g}")
         if self.scene != "digits-spring":
             hidden = [j for j, rgb in enumerate(self.colors[: self.n_objects])
@@ -135,9 +135,9 @@ class SceneConfig:
                 raise SceneError(f"{self.scene}: k = {self.params['k']:g} is too stiff for {self.substeps} substeps of "
                                  f"{self.dt:g} s: the simulation would blow up; k must be below {stiffest:.4g}")
         if self.half and self.scene != "spring":
-            raise SceneError(f"half (the top-half data) is for the spring scene, not {self.scene}")
+            raise SceneError(f"{type(self).__name__}.half (the top-half data) is for the spring scene, not {self.scene}")
         if self.half_frames < 1:
-            raise SceneError(f"half_frames must be >= 1, got {self.half_frames}")
+            raise SceneError(f"{type(self).__name__}.half_frames must be >= 1, got {self.half_frames}")
         needed = _minimum_size(self)
         if self.image_size < needed:
             raise SceneError(f"{self.scene}: {self.image_size}x{self.image_size} images are too small for "

@@ -2471,3 +2471,134 @@ def test_an_unreadable_image_says_why_in_words(tmp_path: Path) -> None:
         with pytest.raises(ValueError, match="not a readable image") as bad:
             read_image(path)
         assert why in str(bad.value) and "\n" not in str(bad.value), str(bad.value)
+
+
+def test_a_data_file_stops_before_hdf5_runs_out_of_disk(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                        capsys: pytest.CaptureFixture[str]) -> None:
+    """HDF5 that runs out of disk mid-write left objects whose deallocation printed dozens of tracebacks, then the
+    process segfaulted: the writer checks the room for each slice first, and the partial file goes."""
+    from piga.data import schema
+
+    real = shutil.disk_usage
+    monkeypatch.setattr(schema.shutil, "disk_usage", lambda path: real(path)._replace(free=schema.WRITE_MARGIN_BYTES))
+    out = tmp_path / "d.h5"
+    refused("piga-collect", ["--out", str(out), "--sequences", "3", "--steps", "4", "--image-size", "16", "--workers", "1",
+                             "--quiet"], capsys, "d.h5: the disk is full")
+    assert _listing(tmp_path) == []
+
+
+def test_a_checkpoint_onto_a_full_disk_is_enospc_not_torchs_runtime_error() -> None:
+    """torch's zip writer reported a full disk as "RuntimeError: unexpected pos", which read as a bug (exit 70)."""
+    import errno
+
+    from piga.io.atomic import torch_save
+
+    with pytest.raises(OSError) as info:
+        torch_save({"weights": np.zeros(1000)}, "/dev/full")
+    assert info.value.errno == errno.ENOSPC
+
+
+@pytest.mark.parametrize("value, needle", [(np.nan, "1 of its 1024 pixel values are not finite"),
+                                           (np.inf, "1 of its 1024 pixel values are not finite"),
+                                           (-0.5, "its values go below 0 (down to -0.5)")])
+def test_import_refuses_a_float_stack_of_nonsense_pixels_naming_them(value: float, needle: str, tmp_path: Path,
+                                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    """A NaN pixel was cast to a black frame (and two numpy warnings), exit 0; negative frames were called blank."""
+    import imageio.v3 as iio
+
+    frames = np.zeros((12, 32, 32), np.float32)
+    for i in range(12):
+        frames[i, i : i + 6, 8:14] = 0.8
+    frames[5, 0, 0] = value
+    iio.imwrite(tmp_path / "v.tif", frames)
+    (tmp_path / "u.csv").write_text("\n".join(["0.5"] * 12) + "\n")
+    refused("piga-import", ["--dt", "0.05", "--steps", "4", "--image-size", "16", str(tmp_path / "v.tif"),
+                            str(tmp_path / "u.csv"), "--out", str(tmp_path / "x.h5")], capsys, needle)
+    assert not (tmp_path / "x.h5").exists()
+
+
+@pytest.mark.parametrize("text, needle", [("0x1\n" + "0.5\n" * 11, "line 1: expected a finite number, got '0x1'"),
+                                          ("caf\u00e9\n", "line 1: byte 0xe9 is not UTF-8 text")])
+def test_import_reads_no_malformed_number_as_a_header_and_names_a_latin1_file(
+        text: str, needle: str, frame_folders: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    csv = tmp_path / "u.csv"
+    csv.write_bytes(text.encode("latin-1"))
+    refused("piga-import", ["--dt", "0.05", "--steps", "4", str(frame_folders["moving"]), str(csv), "--out",
+                            str(tmp_path / "x.h5")], capsys, needle)
+
+
+def test_import_skips_comment_lines_of_the_actions() -> None:
+    from piga.data.importer import read_actions
+
+    path = Path(os.environ.get("TMPDIR", "/tmp")) / f"piga-comments-{os.getpid()}.csv"
+    try:
+        path.write_text("u\n# recorded at 20 Hz\n0.5\n  # a gap\n-1\n")
+        assert read_actions(path).tolist() == [0.5, -1.0]
+    finally:
+        path.unlink(missing_ok=True)
+
+
+@pytest.mark.parametrize("prog, argv, needle", [
+    ("piga-collect", ["--steps", "1"], "--steps must be >= 2"),
+    ("piga-collect", ["--system", "spring", "--radius", "0.3"], "--radius must be at least 0.5 px"),
+    ("piga-collect", ["--system", "bouncing", "--half"], "--half (the top-half data) is for the spring scene"),
+    ("piga-train-model", ["DATA", "--video-lstm-scale", "2"], "--video-lstm-scale sizes the video-lstm baseline"),
+    ("piga-train-model", ["DATA", "--broadcast-width", "8"], "--broadcast-width sizes the spatial-broadcast decoder"),
+])
+def test_a_configs_refusal_names_the_flag_not_the_field(prog: str, argv: list[str], needle: str, tiny_data: Path,
+                                                        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    argv = [str(tiny_data) if word == "DATA" else word for word in argv]
+    refused(prog, [*argv, "--out", str(tmp_path / ("o.h5" if prog == "piga-collect" else "run")), "--quiet"], capsys, needle)
+    assert _listing(tmp_path) == []
+
+
+def test_collects_summary_never_rounds_an_effect_into_a_refused_value() -> None:
+    from envs.effects import format_effects
+
+    assert format_effects([("deadzone", 1.999999), ("gain", 1.0000000000000002), ("delay", 2.0)]) == \
+        "deadzone=1.999999 gain=1.0000000000000002 delay=2"
+
+
+def test_a_report_interrupted_while_written_leaves_no_folder_it_made(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """An interrupted piga-diagnose said "nothing was written" and left the parents of its --out."""
+    from piga.diagnostics import report
+
+    def interrupted(*args: Any, **kwargs: Any) -> None:
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(report, "_write_files", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        report.write_report(None, tmp_path / "new" / "sub" / "g", "model", "data", "cmd")  # type: ignore[arg-type]
+    assert _listing(tmp_path) == []
+
+
+def test_an_error_line_comes_after_the_progress_bar_it_ended(tmp_path: Path) -> None:
+    """The interrupt's line landed inside collect's bar, which was redrawn after it when collected."""
+    result = subprocess.run(["python", "-c", "import sys, tqdm; from piga.cli.common import run_cli\n"
+                             "def main(argv):\n    bar = tqdm.tqdm(total=10, file=sys.stderr); bar.update(3)\n"
+                             "    raise ValueError('bad input')\nrun_cli('prog', main)"],
+                            capture_output=True, text=True, env=ENV, timeout=60)
+    assert result.returncode == 1 and result.stderr.rstrip().endswith("prog: error: bad input"), result.stderr
+
+
+def test_diagnose_refuses_an_env_that_contradicts_the_files_effects(tmp_path: Path,
+                                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    """The MPC comparison of --env would have run on another system than the one the data came from."""
+    data = tmp_path / "eff.h5"
+    assert run_in_process("piga-collect", collect.main, "--out", str(data), "--sequences", "20", "--steps", "24",
+                          "--image-size", "16", "--effect", "damping=0.2", "--workers", "1", "--quiet", capsys=capsys)[0] == 0
+    for env in ("delay=2", "none", "damping=0.3"):
+        refused("piga-diagnose", ["--model", str(tmp_path / "m"), "--data", str(data), "--env", env, "--out",
+                                  str(tmp_path / "rep"), "--quiet"], capsys, "was collected with effects damping=0.2",
+                "give --env 'damping=0.2'")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["eff.h5"]
+
+
+def test_a_split_counts_attribute_that_contradicts_the_split_is_named(tiny_data: Path, tmp_path: Path,
+                                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    def lie(f: h5py.File) -> None:
+        f.attrs["split_counts"] = json.dumps({"train": 1, "valid": 1, "test": 10})
+
+    data = _variant(tiny_data, tmp_path / "lie.h5", lie)
+    refused("piga-train-model", [str(data), "--out", str(tmp_path / "run"), "--quiet"], capsys,
+            "attribute 'split_counts' says", "but /split holds")

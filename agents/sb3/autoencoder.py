@@ -36,7 +36,7 @@ from tqdm.auto import tqdm
 from piga.data.schema import (DataFormatError, DatasetInfo, check_frames_have_signal, inspect_dataset, read_sequences,
                               split_indices)
 from piga.data.windows import SequenceReader, loads_whole
-from piga.io.atomic import atomic_output
+from piga.io.atomic import atomic_output, torch_save
 from piga.io.device import Device, resolve_device
 from piga.io.resources import available_memory
 from piga.io.choices import check_types
@@ -225,7 +225,7 @@ def _train(flat: _TrainFrames, config: AutoencoderConfig, out: str | Path, progr
     model.code_std.copy_(codes.std(0).clamp_min(1e-6))
     model.cpu()
     with atomic_output(out, overwrite=True) as tmp:
-        torch.save({"config": asdict(config), "model": model.state_dict(), "mse": float(np.mean(recent)),
+        torch_save({"config": asdict(config), "model": model.state_dict(), "mse": float(np.mean(recent)),
                     "train_seconds": time.monotonic() - started}, tmp)
     return model, float(np.mean(recent))
 

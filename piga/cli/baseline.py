@@ -23,7 +23,7 @@ from typing import Any, get_args
 from piga.cli.common import (ArgumentParser, Interrupted, PigaError, add_device_option, add_preset_option, command_line,
                              format_default, given_options, made_folder, nonnegative_float, nonnegative_int, number_type,
                              positive_float, positive_int, record_resume, recorded_options, remove_outputs, run_cli,
-                             seed_int, started_record, thread_count)
+                             seed_int, started_record, thread_count, with_flags)
 from piga.io.atomic import check_folder_target
 from piga.io.checkpoint import CHECKPOINT, RunKind, read_run_record
 from piga.io.lock import lock_run_folder
@@ -356,7 +356,7 @@ def check_planet_memory(rssm: Any, config: Any = None) -> None:
             check_memory(frames * 32.0 * 4 * 64 * 64 * rssm.channels,
                          f"a batch of {config.batch_size} x {config.chunk_length} frames (--batch-size x --chunk-length)")
     except ResourceError as exc:
-        raise PigaError(str(exc)) from None
+        raise PigaError(with_flags(str(exc))) from None
 
 
 def _planet(args: Any, argv: Sequence[str] | None) -> int:
@@ -399,7 +399,7 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
             # before) or have been edited
             record["rssm"] = load_planet(run_dir)[0].config.to_dict()
         except (FileNotFoundError, ValueError) as exc:
-            raise PigaError(str(exc)) from None
+            raise PigaError(with_flags(str(exc))) from None
         record_resume(record, command)
     else:
         config = PlanetTrainConfig(steps=args.steps or PlanetTrainConfig.steps, batch_size=args.batch_size, chunk_length=args.chunk_length,

@@ -19,7 +19,7 @@ from typing import Any, NoReturn
 
 
 from envs.dmc import MissingExtraError
-from piga.io.atomic import OutputExistsError
+from piga.io.atomic import OutputExistsError, missing_folders, remove_empty_folders
 from piga.io.lock import release_run_folders
 from piga.io.pool import Backend, BackendError, JobFailed, host_port
 from piga.data.schema import MAX_SEED, DataFormatError
@@ -193,6 +193,13 @@ def _raise_interrupt(signum: int, frame: object) -> None:
     raise KeyboardInterrupt
 
 
+def _exit_quietly_on_late_signals() -> None:
+    """SIGINT and SIGTERM from now on end the process at once, quietly (128 + the signal). The command's work is
+    over; an interrupt raised in the interpreter's shutdown (torch's atexit hooks) printed a 10-line traceback."""
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, lambda number, frame: os._exit(128 + number))
+
+
 #: Set while a command's ``main`` runs (:func:`run_cli`): an interrupt delivered again then still has work to stop.
 _RUNNING = threading.Event()
 
@@ -251,12 +258,15 @@ def run_cli(prog: str, main: Callable[[Sequence[str] | None], int | None], argv:
         sys.stdout.flush()
     except KeyboardInterrupt as exc:
         kept = str(exc) if isinstance(exc, Interrupted) else "nothing was written"
+        _close_progress_bars()
         print(f"{prog}: interrupted; {kept}", file=sys.stderr)
         sys.exit(130)
     except Exception as exc:
         _exit_on_error(prog, argv, exc)
     finally:
         _RUNNING.clear()
+        if argv is None:  # the command's own process, its work over and its exit code decided
+            _exit_quietly_on_late_signals()
         guard, sys.stdout = sys.stdout, stdout
         threading.excepthook, sys.unraisablehook = excepthook, unraisablehook
         release_run_folders()  # a command run in-process (a test, a notebook) releases its run folder as it returns
@@ -347,9 +357,20 @@ class _GuardedStdout:
         return getattr(self._stream, name)
 
 
+def _close_progress_bars() -> None:
+    """Closes tqdm's bars still open (an error or an interrupt left their loop), so that the command's last line is
+    not written into a bar's line, nor a bar redrawn after it when the bar is collected."""
+    from tqdm import tqdm
+
+    for bar in list(getattr(tqdm, "_instances", ())):
+        with contextlib.suppress(Exception):  # a bar half built, or its stream gone: nothing more to show
+            bar.close()
+
+
 def _exit_on_error(prog: str, argv: Sequence[str] | None, exc: Exception) -> NoReturn:
     """Prints the one line of the exception being handled and exits: 1 for the user's errors (and out of memory or
     disk), :data:`INTERNAL_ERROR` for a bug (its traceback in a log file)."""
+    _close_progress_bars()
     error: BaseException = exc.cause if isinstance(exc, JobFailed) else exc
     job = f"job {exc.job} failed: " if isinstance(exc, JobFailed) else ""
     if isinstance(error, USER_ERRORS):
@@ -403,20 +424,6 @@ def made_folder(folder: str | os.PathLike[str]) -> Iterator[Path]:
     except BaseException:
         remove_empty_folders(missing)
         raise
-
-
-def missing_folders(folder: Path) -> list[Path]:
-    """``folder`` and those of its parents that do not exist yet, innermost first."""
-    return [p for p in (folder, *folder.parents) if not p.exists()]
-
-
-def remove_empty_folders(folders: list[Path]) -> None:
-    """Removes ``folders`` (innermost first, as :func:`missing_folders` lists them) while they are empty."""
-    for p in folders:
-        try:
-            p.rmdir()
-        except OSError:  # not empty, or already gone: the outer ones stay
-            break
 
 
 def remove_outputs(run_dir: Path, names: Sequence[str], ignore_errors: bool = False) -> None:

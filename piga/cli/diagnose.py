@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 import argparse
+import math
 from collections.abc import Sequence
 
-from piga.cli.common import (ArgumentParser, PigaError, command_line, int_up_to, number_type, run_cli, seed_int,
-                             thread_count, warn_if_unconverged)
+from piga.cli.common import (ArgumentParser, Interrupted, PigaError, command_line, int_up_to, number_type, run_cli,
+                             seed_int, thread_count, warn_if_unconverged)
 
 PROG = "piga-diagnose"
 
@@ -79,6 +80,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                         f"{need} (windows of {config.fit_horizon} steps after {need - config.fit_horizon - 1} frames); "
                         f"collect sequences of {need} frames or more (piga-collect --steps {need})")
     check_frames_have_signal(args.data)  # blank video: the diagnosis would divide by its zero variance
+    if effects is not None:
+        _check_env_agrees(effects, info.attrs.get("effects"), args.data)
     require_piga_run(args.model, "piga-diagnose compares the physics a piga model identified with the data")
     model, ckpt = load_model(args.model)
     if model.config.system != "pendulum":
@@ -98,39 +101,42 @@ def main(argv: Sequence[str] | None = None) -> int:
                                             seed=args.seed,
                                             progress=not args.quiet)
     report = write_report(diagnosis, out, args.model, args.data, command_line(PROG, argv), overwrite=args.overwrite)
-    warn_if_unconverged(PROG, args.model)  # after the work: a refusal of the model stays the one line on stderr
-    g = diagnosis.gap
-    print(f"verdict: {diagnosis.verdict}")
-    for line in diagnosis.exclusions:
-        print(line)
-    for note in diagnosis.notes:
-        print(f"note: {note}")
-    headline = "–" if g.free_run_gap_closure is None else f"{number(100 * g.free_run_gap_closure, '.1f')}%"
-    if not g.floor_subtracted and g.free_run_gap_closure is not None:
-        headline += " raw"
-    if not g.gap_above_floor:
-        headline += " (no gap above the floor: a ratio of noise)"
-    if g.closure_basis == "pixels":
-        detail = (f"typical held-out window, pixel MSE {number(g.typical_pixel_mse_nominal)} -> "
-                  f"{number(g.typical_pixel_mse_corrected)}"
-                  + (f", of the gap above the matched floor {number(g.pixel_mse_floor)}" if g.floor_subtracted else ""))
-    else:
-        floor = g.typical_free_run_mse_floor
-        detail = (f"typical held-out window, angle MSE {number(g.typical_free_run_mse_nominal)} -> "
-                  f"{number(g.typical_free_run_mse_corrected)} rad²"
-                  + (f", of the gap above the twin's floor {number(floor)}" if floor is not None and g.floor_subtracted
-                     else ""))
-    corrected = "corrected " + ", ".join(f"{k} = {number(v, '.4g')}" for k, v in diagnosis.corrected.items())
-    if g.no_gap:
-        print(f"free-run closure: no gap to close (nothing named to correct; {detail}); {corrected}")
-    else:
-        print(f"free-run closure {headline} ({detail}; mean over all windows {number(100 * g.free_run_closure, '.1f')}%); "
-              + corrected)
-    if diagnosis.control:
-        for row in diagnosis.control["rows"]:
-            print(f"MPC on the simulated real system, {row['physics']} physics: success {100 * row['success_rate']:.0f}% of "
-                  f"{row['episodes']}, mean return {row['mean_return']:.1f}")
-    print(f"wrote {report} and its plots")
+    try:  # the report is complete from here: an interrupt says so (a rerun needs --overwrite)
+        warn_if_unconverged(PROG, args.model)  # after the work: a refusal of the model stays the one line on stderr
+        g = diagnosis.gap
+        print(f"verdict: {diagnosis.verdict}")
+        for line in diagnosis.exclusions:
+            print(line)
+        for note in diagnosis.notes:
+            print(f"note: {note}")
+        headline = "–" if g.free_run_gap_closure is None else f"{number(100 * g.free_run_gap_closure, '.1f')}%"
+        if not g.floor_subtracted and g.free_run_gap_closure is not None:
+            headline += " raw"
+        if not g.gap_above_floor:
+            headline += " (no gap above the floor: a ratio of noise)"
+        if g.closure_basis == "pixels":
+            detail = (f"typical held-out window, pixel MSE {number(g.typical_pixel_mse_nominal)} -> "
+                      f"{number(g.typical_pixel_mse_corrected)}"
+                      + (f", of the gap above the matched floor {number(g.pixel_mse_floor)}" if g.floor_subtracted else ""))
+        else:
+            floor = g.typical_free_run_mse_floor
+            detail = (f"typical held-out window, angle MSE {number(g.typical_free_run_mse_nominal)} -> "
+                      f"{number(g.typical_free_run_mse_corrected)} rad²"
+                      + (f", of the gap above the twin's floor {number(floor)}" if floor is not None and g.floor_subtracted
+                         else ""))
+        corrected = "corrected " + ", ".join(f"{k} = {number(v, '.4g')}" for k, v in diagnosis.corrected.items())
+        if g.no_gap:
+            print(f"free-run closure: no gap to close (nothing named to correct; {detail}); {corrected}")
+        else:
+            print(f"free-run closure {headline} ({detail}; mean over all windows {number(100 * g.free_run_closure, '.1f')}%); "
+                  + corrected)
+        if diagnosis.control:
+            for row in diagnosis.control["rows"]:
+                print(f"MPC on the simulated real system, {row['physics']} physics: success {100 * row['success_rate']:.0f}% of "
+                      f"{row['episodes']}, mean return {row['mean_return']:.1f}")
+        print(f"wrote {report} and its plots")
+    except KeyboardInterrupt:
+        raise Interrupted(f"the report {report} and its plots are complete") from None
     return 0
 
 
@@ -148,6 +154,26 @@ def _parse_env(text: str) -> tuple[tuple[str, float], ...]:
         return normalize_effects(parts)
     except (ValueError, TypeError) as exc:
         raise PigaError(f"--env: {exc}") from None
+
+
+def _check_env_agrees(effects: tuple[tuple[str, float], ...], recorded: object, data: str) -> None:
+    """Refuses an --env whose effects differ from those the data file says it was collected with (its ``effects``
+    attribute, written by piga-collect): the MPC comparison would run on another system than the data's. A file
+    without the attribute (a recording) is taken at its word."""
+    if not isinstance(recorded, dict):
+        return
+    try:
+        truth = {str(name): float(value) for name, value in recorded.items()}
+    except (TypeError, ValueError):
+        return
+    given = {name: float(value) for name, value in effects}
+    same = truth.keys() == given.keys() and all(math.isclose(truth[k], given[k], rel_tol=1e-6, abs_tol=1e-12) for k in truth)
+    if not same:
+        from envs.effects import format_effects
+
+        raise PigaError(f"--env {format_effects(list(given.items()))}: {data} was collected with effects "
+                        f"{format_effects(list(truth.items()))} (its effects attribute); give --env "
+                        f"'{format_effects(list(truth.items())).replace(' ', ',')}' or leave --env out")
 
 
 def entry() -> None:

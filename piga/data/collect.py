@@ -73,7 +73,7 @@ class CollectConfig:
         if getattr(self.env, "color", "gray") != "gray":
             raise ValueError("piga's data files hold gray frames; the DMC pendulum's color='rgb' is a baseline's view "
                              "(piga-baseline ddpg --view drqv2)")
-        check_collect_sizes(self.sequences, self.steps, self.workers, self.seed, self.batch, self.split)
+        check_collect_sizes(self.sequences, self.steps, self.workers, self.seed, self.batch, self.split, type(self).__name__)
         effects = dict(getattr(self.env, "effects", ()))
         if effects.get("delay", 0) >= self.steps - 1:
             raise ValueError(f"effect delay={effects['delay']:g} steps is not shorter than a sequence's {self.steps - 1} "
@@ -84,18 +84,19 @@ class CollectConfig:
 
 
 def check_collect_sizes(sequences: int, steps: int, workers: int, seed: int, batch: int,
-                        split: tuple[float, float, float]) -> None:
-    """ValueError unless the sizes of a collection make sense (shared by the pendulum's and the scenes' configs)."""
+                        split: tuple[float, float, float], owner: str = "CollectConfig") -> None:
+    """ValueError unless the sizes of a collection make sense (shared by the pendulum's and the scenes' configs);
+    the message names the field as ``owner.field`` (the command line shows it as its flag)."""
     if sequences < 1:
-        raise ValueError(f"sequences must be >= 1, got {sequences}")
+        raise ValueError(f"{owner}.sequences must be >= 1, got {sequences}")
     if steps < 2:
-        raise ValueError(f"steps must be >= 2 (a video needs two frames), got {steps}")
+        raise ValueError(f"{owner}.steps must be >= 2 (a video needs two frames), got {steps}")
     if workers < 1:
-        raise ValueError(f"workers must be >= 1, got {workers}")
+        raise ValueError(f"{owner}.workers must be >= 1, got {workers}")
     if not 0 <= seed <= MAX_SEED:
-        raise ValueError(f"seed must be >= 0 and <= {MAX_SEED} (2^63 - 1, the largest a data file stores), got {seed}")
+        raise ValueError(f"{owner}.seed must be >= 0 and <= {MAX_SEED} (2^63 - 1, the largest a data file stores), got {seed}")
     if batch < 1:
-        raise ValueError(f"batch must be >= 1, got {batch}")
+        raise ValueError(f"{owner}.batch must be >= 1, got {batch}")
     split_counts(sequences, split)  # validates
 
 
@@ -224,8 +225,8 @@ def collect(
     }
     vec = _vector_env(factory, workers)
     try:
-        with DatasetWriter(out, n, t, (size, size), 1, 2, attrs, overwrite=overwrite, rewards=True) as writer:
-            bar = tqdm(total=n, desc="collect", unit="seq", disable=not progress)
+        with DatasetWriter(out, n, t, (size, size), 1, 2, attrs, overwrite=overwrite, rewards=True) as writer, \
+                tqdm(total=n, desc="collect", unit="seq", disable=not progress) as bar:  # closed before an error's line
             batch = max(config.batch, workers) // workers * workers
             for start in range(0, n, batch):
                 stop = min(start + batch, n)
@@ -253,7 +254,6 @@ def collect(
                     bar.update(len(ids))
                 writer.write(start, frames, actions, states, rewards)
             writer.set_split(np.repeat(np.arange(3, dtype=np.int8), counts))
-            bar.close()
     except BaseException:  # interrupted or failed: stop the workers now, without waiting for their step
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")

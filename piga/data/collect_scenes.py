@@ -61,7 +61,8 @@ class SceneCollectConfig:
         if not isinstance(self.scene, SceneConfig):
             raise TypeError(f"SceneCollectConfig.scene must be an envs.scenes.SceneConfig (envs.scenes.scene_config"
                             f"(NAME)); got {self.scene!r} ({type(self.scene).__name__})")
-        check_collect_sizes(self.sequences, self.steps, self.workers, self.seed, self.batch, self.split)
+        check_collect_sizes(self.sequences, self.steps, self.workers, self.seed, self.batch, self.split,
+                            type(self).__name__)
         if self.scene.half and self.steps <= self.scene.half_frames:
             raise ValueError(f"half data need more than {self.scene.half_frames} frames per sequence (the test "
                              f"sequences go down after them), got {self.steps}")

@@ -66,9 +66,9 @@ class ImportConfig:
             shown = format(self.dt, "g") if number else repr(self.dt)
             if number and float(shown) != self.dt:  # 10.000001 is not "10", which is in range
                 shown = repr(float(self.dt))
-            raise ValueError(f"dt must be the seconds between frames, {MIN_DT:g} to {MAX_DT:g}, got {shown}")
+            raise ValueError(f"{type(self).__name__}.dt must be the seconds between frames, {MIN_DT:g} to {MAX_DT:g}, got {shown}")
         if self.steps < 2:
-            raise ValueError(f"steps must be >= 2 (a video needs two frames), got {self.steps}")
+            raise ValueError(f"{type(self).__name__}.steps must be >= 2 (a video needs two frames), got {self.steps}")
         if self.image_size < MIN_IMAGE_SIZE:
             raise ValueError(f"image_size must be >= {MIN_IMAGE_SIZE}, got {self.image_size}")
 
@@ -196,14 +196,19 @@ def _number(text: str) -> float | None:
     return float(text) if _CSV_NUMBER.fullmatch(text) else None
 
 
+#: A cell that starts as a number does (a sign, a point, a digit): never a column's name.
+_LOOKS_NUMERIC = re.compile(r"[+-]?\.?\d")
+
+
 def _is_header(row: list[str]) -> bool:
-    """Whether a CSV row is a header: a cell that is text, not an empty field and not a number in any spelling
-    Python reads (a first row ``1_0`` is a value to refuse, not a header to skip)."""
+    """Whether a CSV row is a header: a cell that is a name, neither empty nor a number in any spelling Python reads,
+    nor a malformed one (a first row ``1_0`` or ``0x1`` starts as a number does: a value to refuse, not a header to
+    skip)."""
     for cell in row:
         try:
             float(cell)
         except ValueError:
-            if cell:
+            if cell and not _LOOKS_NUMERIC.match(cell):
                 return True
     return False
 
@@ -212,8 +217,8 @@ def read_actions(path: str | Path) -> np.ndarray:
     """The actions of a CSV, one row per frame: float32 (F,).
 
     The CSV has one column, with an optional header row, or a header row that names the action
-    column ``u`` or ``action``. Commas, semicolons or tabs separate the columns, blank lines are
-    skipped, and a separator that ends every row (``0.26,``) is not a column. Values are written in ASCII decimal
+    column ``u`` or ``action``. Commas, semicolons or tabs separate the columns, blank lines and lines that start
+    with ``#`` are skipped, and a separator that ends every row (``0.26,``) is not a column. Values are written in ASCII decimal
     (:data:`_CSV_NUMBER`).
 
     Raises:
@@ -231,9 +236,13 @@ def read_actions(path: str | Path) -> np.ndarray:
         raise FileNotFoundError(f"{p}: no such actions file")
     try:
         text = p.read_text(encoding="utf-8-sig")
-    except UnicodeDecodeError:
-        raise ValueError(f"{p}: not a text CSV file") from None
-    lines = [(number, line) for number, line in enumerate(text.splitlines(), start=1) if line.strip()]
+    except UnicodeDecodeError as exc:
+        line = p.read_bytes()[:exc.start].count(b"\n") + 1
+        raise ValueError(f"{p}: line {line}: byte 0x{exc.object[exc.start]:02x} is not UTF-8 text; save the file as "
+                         "UTF-8 (or plain ASCII)") from None
+    # blank lines and comment lines (``#``, as numpy's loadtxt skips them) are not rows
+    lines = [(number, line) for number, line in enumerate(text.splitlines(), start=1)
+             if line.strip() and not line.lstrip().startswith("#")]
     if not lines:
         raise ValueError(f"{p}: the actions file is empty")
     delimiter = next((d for d in (",", ";", "\t") if d in lines[0][1]), ",")

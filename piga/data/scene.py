@@ -25,8 +25,8 @@ def scene_to_gray(img: np.ndarray, size: int) -> np.ndarray:
     An opaque alpha channel is dropped. A picture that is not uint8 is scaled by its own maximum to 0..255.
 
     Raises:
-        ValueError: ``img`` is not a 2-D gray or RGB(A) picture of at least 2x2 pixels, or it has transparent pixels
-            (what the camera would see behind them is unknown).
+        ValueError: ``img`` is not a 2-D gray or RGB(A) picture of at least 2x2 pixels, it has transparent pixels
+            (what the camera would see behind them is unknown), or (not uint8) values that are not finite or below 0.
     """
     img = np.asarray(img)
     if img.ndim == 3 and img.shape[2] == 4:
@@ -44,7 +44,14 @@ def scene_to_gray(img: np.ndarray, size: int) -> np.ndarray:
     if min(img.shape[:2]) < 2:
         raise ValueError(f"the image is {img.shape[1]}x{img.shape[0]} pixels, too small (at least 2x2)")
     if img.dtype != np.uint8:
-        img = np.clip(img.astype(np.float64) / (img.max() or 1) * 255, 0, 255).astype(np.uint8)
+        img = img.astype(np.float64)
+        if (bad := int(np.count_nonzero(~np.isfinite(img)))) > 0:
+            raise ValueError(f"{bad} of its {img.size} pixel values are not finite (NaN or infinity); a picture's values "
+                             "are brightnesses: replace them (with 0, say) first")
+        if (low := float(img.min())) < 0:
+            raise ValueError(f"its values go below 0 (down to {low:g}); a picture's values are brightnesses from 0 "
+                             "up: shift them (a picture in -1..1, say, to 0..2) first")
+        img = np.clip(img / (img.max() or 1) * 255, 0, 255).astype(np.uint8)
     h, w = img.shape[:2]
     side = min(h, w)
     top, left = (h - side) // 2, (w - side) // 2

@@ -23,9 +23,11 @@ reward-based baselines (:mod:`agents.planet`) call; piga's own training never re
 
 from __future__ import annotations
 
+import errno
 import json
 import math
 import os
+import shutil
 import typing
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -71,6 +73,11 @@ def codec_options(codec: FrameCodec) -> dict[str, Any]:
     if codec == "lzf":
         return {"compression": "lzf"}
     return {"compression": "gzip", "compression_opts": int(codec.split("-")[1])}
+#: Free space a :class:`DatasetWriter` keeps beyond a slice's raw bytes before writing it: HDF5's chunk caches (1 MiB
+#: a dataset, flushed at close) and its metadata. HDF5 that runs out of disk mid-write leaves objects whose
+#: deallocation fails (h5py printed dozens of tracebacks, then the process segfaulted), so the writer stops first.
+WRITE_MARGIN_BYTES = 8 * 2**20
+
 #: Files whose frames need less memory than this are loaded whole by default when training.
 IN_MEMORY_LIMIT_BYTES = 2 * 1024**3
 
@@ -296,7 +303,7 @@ def _check_virtual_sources(f: h5py.File, path: Path) -> None:
 
 
 def _check_attrs_agree(info: DatasetInfo, f: h5py.File) -> None:
-    """Refuses attributes that contradict the arrays (``n_objects``, ``state_names``) or are not the
+    """Refuses attributes that contradict the arrays (``n_objects``, ``state_names``, ``split_counts``) or are not the
     JSON objects they should be (``env_config``, ``scene_config``), and non-finite ``/states``."""
     path, attrs = info.path, info.attrs
     for key in ("env_config", "scene_config"):
@@ -317,6 +324,10 @@ def _check_attrs_agree(info: DatasetInfo, f: h5py.File) -> None:
             raise DataFormatError(f"{path}: attribute 'n_objects' is {n}, but /states holds {states_dim} values per frame "
                                   f"({STATE_DIM_PER_OBJECT} per object: {states_dim / STATE_DIM_PER_OBJECT:g} objects); "
                                   "fix the attribute")
+    recorded_split = attrs.get("split_counts")
+    if recorded_split is not None and recorded_split != info.split_counts:
+        raise DataFormatError(f"{path}: attribute 'split_counts' says {recorded_split}, but /split holds "
+                              f"{info.split_counts}; fix the attribute or drop it (/split is what is read)")
     names = attrs.get("state_names")
     if names is not None:
         if not isinstance(names, list):
@@ -640,6 +651,7 @@ class DatasetWriter:
         self.compression = compression
         self.rewards = rewards
         self._ctx: Any = None
+        self._tmp: Path | None = None
         self._file: h5py.File | None = None
         self._written = np.zeros(n_sequences, dtype=bool)
         self._split_set = False
@@ -650,6 +662,7 @@ class DatasetWriter:
     def __enter__(self) -> DatasetWriter:
         self._ctx = atomic_output(self.path, overwrite=self.overwrite)
         tmp = self._ctx.__enter__()
+        self._tmp = Path(tmp)
         n, t = self.shape
         f = h5py.File(tmp, "w")
         self._file = f
@@ -672,6 +685,7 @@ class DatasetWriter:
         stop = start + len(frames)
         if frames.shape[1:] != (self.shape[1], *self.image_shape):
             raise ValueError(f"frames slice has shape {frames.shape}, expected (n, {self.shape[1]}, {self.image_shape})")
+        self._check_room(sum(a.nbytes for a in (frames, actions, states, rewards) if a is not None))
         self._file["frames"][start:stop] = frames
         self._file["actions"][start:stop] = actions
         if self.state_dim is not None:
@@ -688,6 +702,13 @@ class DatasetWriter:
             self._levels = (min(self._levels[0], int(frames.min())), max(self._levels[1], int(frames.max())))
         self._moves = self._moves or (len(frames) > 0 and frames_move(frames))
 
+    def _check_room(self, raw_bytes: int) -> None:
+        """Raises OSError(ENOSPC) naming the file where its disk has less free space than ``raw_bytes`` (a slice,
+        uncompressed: at most what it takes compressed) plus :data:`WRITE_MARGIN_BYTES`, before HDF5 runs out."""
+        assert self._tmp is not None
+        if shutil.disk_usage(self._tmp.parent).free < raw_bytes + WRITE_MARGIN_BYTES:
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(self.path))
+
     def set_split(self, split: np.ndarray) -> None:
         """Sets ``/split`` (int8 [N], codes of :data:`SPLITS`)."""
         assert self._file is not None, "DatasetWriter.set_split outside its `with` block"
@@ -696,7 +717,14 @@ class DatasetWriter:
 
     def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None) -> None:
         assert self._file is not None and self._ctx is not None
-        self._file.close()
+        try:
+            self._file.close()
+        except (OSError, RuntimeError) as closing:  # its last flush failed (a full disk): the file is not kept
+            if exc_type is None:
+                error = OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(self.path)) if "errno = 28" in str(closing) \
+                    else closing
+                self._ctx.__exit__(type(error), error, None)
+                raise error from None
         if exc_type is not None:  # removes the partial file; the exception propagates
             self._ctx.__exit__(exc_type, exc, tb)
             return

@@ -10,7 +10,8 @@ from typing import Any
 
 import numpy as np
 
-from piga.io.atomic import atomic_output, check_folder_target, check_writable_target, partial_path, write_json
+from piga.io.atomic import (atomic_output, check_folder_target, check_writable_target, missing_folders, partial_path,
+                            remove_empty_folders, write_json)
 from piga.diagnostics.results import Diagnosis, VisionSummary
 from piga.diagnostics.twin import MEASURABLE_GAP
 from piga.evaluation.episodes import EpisodeSummary, summary_markdown
@@ -341,12 +342,15 @@ def write_report(d: Diagnosis, out: str | os.PathLike[str], model: str, data: st
     if folder.is_dir():
         _write_files(d, folder, model, data, command, overwrite)
         return folder / "report.md"
+    made = missing_folders(folder.parent)
     folder.parent.mkdir(parents=True, exist_ok=True)
     tmp = partial_path(folder)
     try:
         tmp.mkdir()
         _write_files(d, tmp, model, data, command, overwrite=True)
         os.rename(tmp, folder)
-    finally:
+    except BaseException:  # refused or interrupted: the parents made for it go too, while empty
         shutil.rmtree(tmp, ignore_errors=True)
+        remove_empty_folders(made)
+        raise
     return folder / "report.md"

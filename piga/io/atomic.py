@@ -225,3 +225,34 @@ def write_json(path: str | os.PathLike[str], payload: dict[str, Any], overwrite:
 
     with atomic_output(path, overwrite=overwrite) as tmp:
         tmp.write_text(json.dumps(clean(payload), indent=2) + "\n")
+
+
+def torch_save(payload: Any, path: str | os.PathLike[str]) -> None:
+    """``torch.save(payload, path)``, where a full disk is ``OSError(ENOSPC)`` naming ``path``.
+
+    torch's zip writer reports a failed write as a RuntimeError with no errno ("unexpected pos ..."), which reads
+    as a bug; so the payload is serialised in memory (checkpoints are model weights and optimiser states, not
+    data) and written with a plain file write, whose failure carries its errno.
+    """
+    import io
+
+    import torch
+
+    buffer = io.BytesIO()
+    torch.save(payload, buffer)
+    with open(path, "wb") as file:
+        file.write(buffer.getbuffer())
+
+
+def missing_folders(folder: Path) -> list[Path]:
+    """``folder`` and those of its parents that do not exist yet, innermost first."""
+    return [p for p in (folder, *folder.parents) if not p.exists()]
+
+
+def remove_empty_folders(folders: list[Path]) -> None:
+    """Removes ``folders`` (innermost first, as :func:`missing_folders` lists them) while they are empty."""
+    for p in folders:
+        try:
+            p.rmdir()
+        except OSError:  # not empty, or already gone: the outer ones stay
+            break

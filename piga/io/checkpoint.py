@@ -118,13 +118,11 @@ def write_checkpoint(run_dir: str | os.PathLike[str], payload: dict[str, Any]) -
 
     A baseline's payload names its kind (``payload["kind"]``, a :class:`RunKind` value); a piga run's has none.
     """
-    import torch
-
-    from piga.io.atomic import atomic_output
+    from piga.io.atomic import atomic_output, torch_save
 
     path = Path(run_dir) / CHECKPOINT
     with atomic_output(path, overwrite=True) as tmp:
-        torch.save(payload, tmp)
+        torch_save(payload, tmp)
     return path
 
 
