@@ -937,6 +937,66 @@ def test_video_on_a_full_disk_is_one_line(tmp_path: Path, capsys: pytest.Capture
     assert _listing(tmp_path) == []
 
 
+def _writes_to_a_full_disk(monkeypatch: pytest.MonkeyPatch, folder: Path) -> list[object]:
+    """Makes every atomic write in ``folder`` go through a link to ``/dev/full`` (the kernel's own ENOSPC, with no
+    mount), and collects what Python could not raise (a finaliser's traceback): the list that is returned."""
+    import sys
+
+    import piga.io.atomic
+
+    if not os.path.exists("/dev/full"):
+        pytest.skip("no /dev/full here")
+
+    def full(target: Path) -> Path:
+        link = folder / f".{target.name}.partial-{os.getpid()}"
+        if not os.path.lexists(link):
+            link.symlink_to("/dev/full")
+        return link
+
+    unraisable: list[object] = []
+    monkeypatch.setattr(piga.io.atomic, "partial_path", full)
+    monkeypatch.setattr(sys, "unraisablehook", unraisable.append)
+    return unraisable
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["--write-goal-image", "g.png", "--angle", "10"], "the disk is full"),
+    (["--model", "RUN", "--video", "v.gif", "--episodes", "1", "--steps", "20", "--candidates", "8", "--iterations", "1",
+      "--horizon", "2", "--quiet"], "its disk has"),
+])
+def test_an_image_on_a_disk_that_fills_is_one_line(argv: list[str], needle: str, tiny_piga_run: Path, tmp_path: Path,
+                                                   capsys: pytest.CaptureFixture[str],
+                                                   monkeypatch: pytest.MonkeyPatch) -> None:
+    """imageio's writer, failing as it closes the file, would print its finaliser's traceback when collected."""
+    import gc
+
+    argv = [str(tiny_piga_run) if word == "RUN" else word for word in argv]
+    out = tmp_path / "out"
+    out.mkdir()
+    monkeypatch.chdir(out)
+    unraisable = _writes_to_a_full_disk(monkeypatch, out)
+    code, _, err = run_in_process("piga-control", control.main, *argv, capsys=capsys)
+    gc.collect()
+    lines = [line for line in err.strip().splitlines() if "warning" not in line]  # the tiny run's "not converged"
+    assert_one_line(code, "\n".join(lines), needle)
+    assert unraisable == []
+    assert _listing(out) == []
+
+
+def test_a_gif_is_refused_before_the_episodes_where_an_mp4_fits(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A GIF takes about ten times an MP4's room: the check before the episodes knows."""
+    from piga.evaluation.video import check_video_disk
+    from piga.io.resources import ResourceError
+
+    class Usage:
+        total, used, free = 10**9, 10**9 - 2 * 1024**2, 2 * 1024**2
+
+    monkeypatch.setattr(shutil, "disk_usage", lambda path: Usage())
+    check_video_disk(tmp_path / "v.mp4", 200)
+    with pytest.raises(ResourceError, match="the video v.gif needs about"):
+        check_video_disk(tmp_path / "v.gif", 200)
+
+
 # ---------------------------------------------------------------------------------------------
 # piga-diagnose and piga-train-model: data files are checked on open
 # ---------------------------------------------------------------------------------------------

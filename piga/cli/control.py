@@ -471,9 +471,8 @@ def _keep_first_trace(agent: PigaMPCAgent, into: list[tuple[float, float, np.nda
 
 
 def _write_goal_image(args: argparse.Namespace) -> int:
-    import imageio.v3 as iio
-
     from piga.control.goal import render_goal_image
+    from piga.evaluation.video import encoded_image
 
     if args.angle is None:
         raise PigaError("--write-goal-image needs --angle in degrees")
@@ -483,7 +482,7 @@ def _write_goal_image(args: argparse.Namespace) -> int:
         raise PigaError(f"--write-goal-image: use a .png or .jpg path, got {target.name}")
     picture = render_goal_image(args.angle)
     with atomic_output(target, overwrite=args.overwrite) as tmp:
-        iio.imwrite(tmp, picture, extension=target.suffix.lower())
+        tmp.write_bytes(encoded_image(picture, target.suffix.lower()))
     print(f"wrote {target}: the pendulum at {args.angle:g} deg, {picture.shape[1]}x{picture.shape[0]}")
     return 0
 
