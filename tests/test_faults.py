@@ -983,6 +983,52 @@ def test_an_image_on_a_disk_that_fills_is_one_line(argv: list[str], needle: str,
     assert _listing(out) == []
 
 
+@pytest.mark.parametrize("argv, last", [
+    (["--oracle", "--out", "res"], "md"),
+    (["--model", "RUN", "--sweep", "1:1.2:0.2", "--workers", "1", "--out", "sw"], "png"),
+])
+def test_out_that_fills_the_disk_part_way_leaves_nothing_for_the_rerun(argv: list[str], last: str, tiny_piga_run: Path,
+                                                                      tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                                      monkeypatch: pytest.MonkeyPatch) -> None:
+    """OUT.json, OUT.md (and OUT.png) are one set: the disk filling on the last leaves none, and the rerun works."""
+    import errno
+
+    from matplotlib.figure import Figure
+
+    def full(self: object, path: object, *args: Any, **kwargs: Any) -> None:  # the .md or the .png only
+        if f".{last}." in Path(str(path if last == "png" else self)).name:
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        write(self, path, *args, **kwargs)
+
+    argv = [str(tiny_piga_run) if word == "RUN" else word for word in argv]
+    argv += ["--episodes", "1", "--steps", "20", "--candidates", "8", "--iterations", "1", "--horizon", "2", "--quiet"]
+    monkeypatch.chdir(tmp_path)
+    owner, name = (Path, "write_text") if last == "md" else (Figure, "savefig")
+    write = getattr(owner, name)
+    with monkeypatch.context() as patch:
+        patch.setattr(owner, name, full)
+        code, _, err = run_in_process("piga-control", control.main, *argv, capsys=capsys)
+    assert_one_line(code, "\n".join(line for line in err.splitlines() if "warning" not in line), "the disk is full")
+    assert _listing(tmp_path) == []
+    code, _, err = run_in_process("piga-control", control.main, *argv, capsys=capsys)
+    assert code == 0, err
+    assert len(_listing(tmp_path)) == (3 if last == "png" else 2)
+
+
+def test_written_together_removes_what_it_wrote_and_keeps_what_was_there(tmp_path: Path) -> None:
+    from piga.io.atomic import atomic_output, written_together
+
+    kept, replaced, new = tmp_path / "kept.md", tmp_path / "replaced.json", tmp_path / "new.png"
+    kept.write_text("old")
+    replaced.write_text("old")
+    with pytest.raises(OSError), written_together([kept, replaced, new]):
+        for path in (replaced, new):
+            with atomic_output(path, overwrite=True) as tmp:
+                tmp.write_text("new")
+        raise OSError("the disk filled on the last one")
+    assert _listing(tmp_path) == ["kept.md"]
+
+
 def test_a_gif_is_refused_before_the_episodes_where_an_mp4_fits(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """A GIF takes about ten times an MP4's room: the check before the episodes knows."""
     from piga.evaluation.video import check_video_disk

@@ -8,14 +8,14 @@ import sys
 from collections.abc import Callable, Sequence
 from dataclasses import replace
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from agents.config import MPCConfig
 from envs import DMC_PENDULUM, ENV_IDS, PIXEL_PENDULUM
 from envs.pendulum import MAX_GRAVITY, MIN_GRAVITY, PixelPendulumConfig
-from piga.io.atomic import atomic_output, check_writable_target, write_json
+from piga.io.atomic import atomic_output, check_writable_target, write_json, written_together
 from piga.cli.common import (ArgumentParser, PigaError, add_ray_option, command_line, connect_backend, file_path,
                              given_options, int_up_to, positive_float, positive_int, run_cli, seed_int,
                              warn_if_unconverged)
@@ -24,6 +24,8 @@ from piga.evaluation.episodes import summary_markdown
 from piga.io.checkpoint import RunKind
 
 if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
     from agents.sb3.run import SB3Agent
     from envs.dmc import DMCPendulumConfig
     from agents.mpc import PigaMPCAgent
@@ -220,9 +222,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"wrote {args.video}")
     if outputs:
         result = result.labelled(agent=label)
-        write_json(outputs[0], {"agent": label, **result.to_dict(), "recordings": None}, overwrite=args.overwrite)
-        with atomic_output(outputs[1], overwrite=args.overwrite) as tmp:
-            tmp.write_text(f"# {PROG}\n\nCommand: `{command_line(PROG, argv)}`\n\n{summary_markdown([result.summary])}", encoding="utf-8")
+        _write_outputs(outputs, {"agent": label, **result.to_dict(), "recordings": None},
+                       f"# {PROG}\n\nCommand: `{command_line(PROG, argv)}`\n\n{summary_markdown([result.summary])}",
+                       args.overwrite)
         print(f"wrote {outputs[0]} and {outputs[1]}")
     return 0
 
@@ -263,15 +265,28 @@ def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: 
     table = summary_markdown(summaries)
     print(table, end="")
     if outputs:
-        from piga.evaluation.plots import save_figure, sweep_figure
+        from piga.evaluation.plots import sweep_figure
 
-        write_json(outputs[0], {"model": args.model, "multipliers": multipliers, "results": [r.to_dict() for r in results]},
-                   overwrite=args.overwrite)
-        with atomic_output(outputs[1], overwrite=args.overwrite) as tmp:
-            tmp.write_text(f"# {PROG} --sweep\n\nCommand: `{command_line(PROG, argv)}`\n\n![sweep]({outputs[2].name})\n\n{table}", encoding="utf-8")
-        save_figure(sweep_figure([s.to_dict() for s in summaries]), outputs[2], overwrite=args.overwrite)
+        _write_outputs(outputs, {"model": args.model, "multipliers": multipliers, "results": [r.to_dict() for r in results]},
+                       f"# {PROG} --sweep\n\nCommand: `{command_line(PROG, argv)}`\n\n![sweep]({outputs[2].name})\n\n{table}",
+                       args.overwrite, figure=lambda: sweep_figure([s.to_dict() for s in summaries]))
         print(f"wrote {', '.join(map(str, outputs))}")
     return 0
+
+
+def _write_outputs(outputs: list[Path], record: dict[str, Any], page: str, overwrite: bool,
+                   figure: Callable[[], Figure] | None = None) -> None:
+    """Writes ``--out``'s set: OUT.json (``record``), OUT.md (``page``) and, where there is a third path, OUT.png
+    (``figure()``), all or none (:func:`~piga.io.atomic.written_together`): a failure part-way (a full disk) leaves
+    nothing that would refuse the rerun."""
+    with written_together(outputs):
+        write_json(outputs[0], record, overwrite=overwrite)
+        with atomic_output(outputs[1], overwrite=overwrite) as tmp:
+            tmp.write_text(page, encoding="utf-8")
+        if figure is not None:
+            from piga.evaluation.plots import save_figure
+
+            save_figure(figure(), outputs[2], overwrite=overwrite)
 
 
 def _check_env_gravity(flag: str, gravity_mult: float) -> None:
@@ -387,9 +402,9 @@ def _baseline(args: argparse.Namespace, kind: RunKind, mpc: MPCConfig, outputs: 
         print(f"wrote {args.video}")
     if outputs:
         result = result.labelled(agent=label)
-        write_json(outputs[0], {"agent": label, "kind": kind.value, **result.to_dict(), "recordings": None}, overwrite=args.overwrite)
-        with atomic_output(outputs[1], overwrite=args.overwrite) as tmp:
-            tmp.write_text(f"# {PROG}\n\nCommand: `{command_line(PROG, argv)}`\n\n{summary_markdown([result.summary])}", encoding="utf-8")
+        _write_outputs(outputs, {"agent": label, "kind": kind.value, **result.to_dict(), "recordings": None},
+                       f"# {PROG}\n\nCommand: `{command_line(PROG, argv)}`\n\n{summary_markdown([result.summary])}",
+                       args.overwrite)
         print(f"wrote {outputs[0]} and {outputs[1]}")
     return 0
 
@@ -595,11 +610,9 @@ def _dmc(args: argparse.Namespace, argv: Sequence[str] | None, given: set[str]) 
     text = dmc_markdown(results, config, command)
     print(text)
     if outputs:
-        write_json(outputs[0], {"command": command, "config": {"episodes": config.episodes, "seed": config.seed,
-                                                               "env": config.env.to_dict()},
-                                "results": [dmc_record(r) for r in results]}, overwrite=args.overwrite)
-        with atomic_output(outputs[1], overwrite=args.overwrite) as tmp:
-            tmp.write_text(text, encoding="utf-8")
+        _write_outputs(outputs, {"command": command, "config": {"episodes": config.episodes, "seed": config.seed,
+                                                                "env": config.env.to_dict()},
+                                 "results": [dmc_record(r) for r in results]}, text, args.overwrite)
     return 0
 
 
