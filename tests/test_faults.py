@@ -735,7 +735,11 @@ def test_planet_resume_refuses_its_file_written_over_in_place(baseline_runs: dic
 # ---------------------------------------------------------------------------------------------
 
 
-def test_ddpg_that_diverges_stops_with_exit_1(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_ddpg_that_diverges_stops_with_exit_1(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                             monkeypatch: pytest.MonkeyPatch) -> None:
+    import agents.sb3.config
+
+    monkeypatch.setattr(agents.sb3.config, "MAX_LEARNING_RATE", math.inf)  # a rate the command refuses, to diverge
     refused("piga-baseline", ["ddpg", "--obs", "state", "--out", str(tmp_path / "run"), *TINY_DDPG, "--learning-rate", "1e30"],
             capsys, "training diverged", "became", "no checkpoint was written yet")
     assert _listing(tmp_path) == []
@@ -1798,6 +1802,17 @@ def test_planet_resumes_on_its_file_named_from_elsewhere(baseline_runs: dict[str
     code, _, err = run_in_process("piga-baseline", baseline.main, "planet", str(copy), "--out", str(run), "--resume",
                                   "--steps", "3", "--quiet", capsys=capsys)
     assert_planet_run_finished(code, err)
+
+
+@pytest.mark.parametrize("algo", [("--algo", "ddpg", "--obs", "state"), ("--algo", "sac", "--obs", "state"),
+                                  ("--algo", "drqv2", "--obs", "pixels")], ids=lambda a: a[1])
+@pytest.mark.parametrize("rate", ["1e39", "1e300", "11"])
+def test_sb3_refuses_a_learning_rate_out_of_range_up_front(algo: tuple[str, ...], rate: str, tmp_path: Path,
+                                                           capsys: pytest.CaptureFixture[str]) -> None:
+    """Above float32's range, SB3's logs overflowed with an internal error."""
+    refused("piga-baseline", ["ddpg", *algo, "--out", str(tmp_path / "run"), *TINY_DDPG, "--learning-rate", rate],
+            capsys, "--learning-rate must be in (0, 10]")
+    assert _listing(tmp_path) == []
 
 
 def test_ddpg_refuses_noise_beyond_the_action_scale(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
