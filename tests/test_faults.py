@@ -2390,15 +2390,38 @@ def test_a_latent_ddpg_run_with_a_damaged_autoencoder_is_named(ae: Callable[[Pat
     assert _listing(run) == before
 
 
-@pytest.mark.parametrize("kind", ["planet", "ddpg"])
-def test_control_on_a_baseline_run_without_its_record_names_the_record(kind: str, baseline_runs: dict[str, Path],
-                                                                       tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+@pytest.mark.parametrize("flags", [[], ["--workers", "1"], ["--workers", "2"], ["--ray", "127.0.0.1:1"],
+                                   ["--candidates", "8"]], ids=lambda f: " ".join(f) or "none")
+@pytest.mark.parametrize("kind, record", [("planet", None), ("planet", '{"kind": '), ("ddpg", None)])
+def test_control_on_a_baseline_run_without_its_record_names_the_record(kind: str, record: str | None, flags: list[str],
+                                                                       baseline_runs: dict[str, Path], tmp_path: Path,
+                                                                       capsys: pytest.CaptureFixture[str]) -> None:
     """Without config.json, control took the run for a piga one and said that its checkpoint "is a piga-baseline planet
-    checkpoint, not a piga-train-model run", although it runs planet and ddpg runs."""
-    run = _run_copy(baseline_runs[kind], tmp_path / "run", lambda r: (r / "config.json").unlink())
-    refused("piga-control", ["--model", str(run), "--episodes", "1", "--steps", "20", "--quiet"], capsys,
-            f"{run / 'config.json'}, the run's record, is missing", f"piga-baseline {kind} checkpoint",
-            "read a run's kind from its config.json")
+    checkpoint, not a piga-train-model run", although it runs planet and ddpg runs; with --workers or --ray, it blamed
+    the flag, which a baseline's run takes."""
+    def damage(run: Path) -> None:
+        (run / "config.json").unlink() if record is None else (run / "config.json").write_text(record)
+
+    run = _run_copy(baseline_runs[kind], tmp_path / "run", damage)
+    refused("piga-control", ["--model", str(run), "--episodes", "1", "--steps", "20", "--quiet", *flags], capsys,
+            f"{run / 'config.json'}, the run's record, {'is missing' if record is None else 'cannot be read'}",
+            f"piga-baseline {kind} checkpoint", "read a run's kind from its config.json")
+
+
+@pytest.mark.parametrize("flags", [[], ["--candidates", "8"], ["--workers", "1"]], ids=lambda f: " ".join(f) or "none")
+def test_control_on_a_record_of_another_kind_than_its_checkpoint_names_both(flags: list[str], tiny_piga_run: Path,
+                                                                            tmp_path: Path,
+                                                                            capsys: pytest.CaptureFixture[str]) -> None:
+    """A piga run whose config.json says planet was judged as a planet run: --candidates was blamed."""
+    def planet(run: Path) -> None:
+        record = run / "config.json"
+        (run / "config.json").write_text(json.dumps({**(json.loads(record.read_text()) if record.exists() else {}),
+                                                     "kind": "planet"}))
+
+    run = _run_copy(tiny_piga_run, tmp_path / "run", planet)
+    refused("piga-control", ["--model", str(run), "--episodes", "1", "--steps", "20", "--quiet", *flags], capsys,
+            f"{run / 'config.json'} names a piga-baseline planet run", "is a piga-train-model checkpoint",
+            "restore the run's own config.json")
 
 
 def test_control_sweep_refuses_an_unreachable_ray_before_warning(tiny_piga_run: Path, tmp_path: Path,

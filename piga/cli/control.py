@@ -306,9 +306,9 @@ def _run_kind(args: argparse.Namespace) -> RunKind:
     """The kind of ``--model``'s run (piga for a piga-train-model run, or with --oracle alone)."""
     if not args.model:
         return RunKind.PIGA
-    from piga.io.checkpoint import run_kind
+    from piga.io.checkpoint import checked_run_kind
 
-    kind = run_kind(args.model)
+    kind = checked_run_kind(args.model)  # the checkpoint's word, before options are judged by the kind
     if args.oracle and kind.is_baseline:
         raise PigaError(f"--oracle: {args.model} is a {kind.writer} run, which runs as trained and knows no "
                         "physics to hand the oracle; drop --oracle to score the run, or drop --model to run the oracle")
@@ -585,10 +585,10 @@ def _dmc(args: argparse.Namespace, argv: Sequence[str] | None, given: set[str]) 
     torch.set_num_threads(1)
     results = []
     if args.model:
-        from piga.io.checkpoint import run_kind
+        from piga.io.checkpoint import checked_run_kind
         from piga.io.runs import load_model
 
-        if (kind := run_kind(args.model)) is RunKind.DDPG:
+        if (kind := checked_run_kind(args.model)) is RunKind.DDPG:
             sb3 = _dmc_sb3_agent(args.model, config.env)
             config = replace(config, env=_sb3_view(sb3, config.env, {key for key, _ in pairs}))
             results.append(run_dmc_episodes(sb3, sb3.config.algo, config, progress=not args.quiet))
