@@ -1317,7 +1317,7 @@ def test_control_refuses_planner_options_for_a_baseline_run(argv: list[str], nee
 
 
 @pytest.mark.parametrize("argv, needles", [
-    (["--model", "RUN"], ["the model was trained at dt 0.05 s", "--env-option action_repeat"]),  # after a warning line
+    (["--model", "RUN"], ["trained on frames of piga/PixelPendulum-v0", "control it with --env piga/PixelPendulum-v0"]),
     (["--oracle", "--env-option", "mass2"], ["--env-option: expected KEY=VALUE"]),  # the flag was not named
 ])
 def test_control_on_dmc_refuses_in_one_line(argv: list[str], needles: list[str], tiny_piga_run: Path,
@@ -1325,6 +1325,27 @@ def test_control_on_dmc_refuses_in_one_line(argv: list[str], needles: list[str],
     pytest.importorskip("dm_control")
     argv = [str(tiny_piga_run) if a == "RUN" else a for a in argv]
     refused("piga-control", ["--env", "piga/DMCPendulum-v0", "--episodes", "1", "--quiet", *argv], capsys, *needles)
+
+
+@pytest.mark.parametrize("dt, data, needles", [
+    (0.05, "pixel", ["trained on frames of piga/PixelPendulum-v0 (0.05 s apart)", "no action_repeat",
+                     "control it with --env piga/PixelPendulum-v0", "piga-collect --env piga/DMCPendulum-v0"]),
+    (0.05, None, ["frames 0.05 s apart (piga/PixelPendulum-v0's rate)", "control it with --env piga/PixelPendulum-v0"]),
+    (0.03, None, ["trained on frames 0.03 s apart, and no action_repeat", "train one on frames of piga/DMCPendulum-v0"]),
+    (0.06, None, ["the env steps 0.04 s; give --env-option action_repeat=3"]),
+])
+def test_a_piga_model_of_another_frame_rate_than_dmcs_is_told_what_matches(dt: float, data: str | None,
+                                                                           needles: list[str], tiny_data: Path) -> None:
+    """A model of the pixel pendulum's 0.05 s frames was told to set an action_repeat, which no integer makes."""
+    from envs.dmc import DMCPendulumConfig
+    from piga.cli.common import PigaError
+
+    checkpoint = {"data": {"path": str(tiny_data)}} if data else {}
+    with pytest.raises(PigaError) as info:
+        control._check_dmc_rate("run", checkpoint, dt, DMCPendulumConfig())
+    for needle in needles:
+        assert needle in str(info.value), str(info.value)
+    assert "control it with" not in str(info.value) or dt == 0.05
 
 
 @pytest.fixture(scope="module")

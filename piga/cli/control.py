@@ -556,6 +556,45 @@ def _check_piga_view(run_dir: str, checkpoint: dict, env: DMCPendulumConfig) -> 
                         + ("drop --env-option camera" if trained == "face" else f"give --env-option camera={trained}"))
 
 
+def _check_dmc_rate(run_dir: str, checkpoint: dict, dt: float, env: DMCPendulumConfig) -> None:
+    """Refuses a piga model trained on frames ``dt`` s apart where the DMC pendulum ``env`` steps another dt, saying
+    what would match: the action repeat that gives ``dt``, where one does; else the env of the model's frames."""
+    from envs.dmc import DMC_PHYSICS_DT, MAX_ACTION_REPEAT
+    from envs.constants import PENDULUM_DT
+
+    if abs(dt - env.dt) <= 1e-9:
+        return
+    repeat = round(dt / DMC_PHYSICS_DT)
+    if 1 <= repeat <= MAX_ACTION_REPEAT and abs(repeat * DMC_PHYSICS_DT - dt) <= 1e-9:
+        raise PigaError(f"{run_dir}: the model was trained on frames {dt:g} s apart, the env steps {env.dt:g} s; give "
+                        f"--env-option action_repeat={repeat} (physics steps of {DMC_PHYSICS_DT:g} s per frame)")
+    frames = f"frames {dt:g} s apart"
+    if (trained := _training_env_id(checkpoint)) is not None:
+        frames = f"frames of {trained} ({dt:g} s apart)"
+    elif abs(dt - PENDULUM_DT) <= 1e-9:  # the file is gone, or names no env: its rate is the pixel pendulum's
+        frames, trained = f"{frames} ({PIXEL_PENDULUM}'s rate)", PIXEL_PENDULUM
+    elsewhere = f"control it with --env {trained}, or " if trained and trained != DMC_PENDULUM else ""
+    raise PigaError(f"{run_dir}: the model was trained on {frames}, and no action_repeat of {DMC_PENDULUM} (physics "
+                    f"steps of {DMC_PHYSICS_DT:g} s) makes that rate; {elsewhere}train one on frames of "
+                    f"{DMC_PENDULUM} (piga-collect --env {DMC_PENDULUM})")
+
+
+def _training_env_id(checkpoint: dict) -> str | None:
+    """The env id of the file the model was trained on, where the file is still there and names one."""
+    import h5py
+
+    from piga.io.runs import training_data_path
+
+    if (path := training_data_path(checkpoint)) is None:
+        return None
+    try:
+        with h5py.File(path, "r") as f:
+            env_id = f.attrs.get("env_id")
+    except (OSError, ValueError):
+        return None
+    return env_id if isinstance(env_id, str) and env_id else None
+
+
 def _dmc(args: argparse.Namespace, argv: Sequence[str] | None, given: set[str]) -> int:
     """``--env piga/DMCPendulum-v0``: the piga agent and/or the oracle, scored in DMC's units."""
     from piga.cli.collect import _env_option, dmc_config
@@ -598,9 +637,7 @@ def _dmc(args: argparse.Namespace, argv: Sequence[str] | None, given: set[str]) 
         else:
             model, checkpoint = load_model(args.model)
             _check_piga_view(args.model, checkpoint, config.env)
-            if abs(model.config.dt - config.env.dt) > 1e-9:
-                raise PigaError(f"{args.model}: the model was trained at dt {model.config.dt} s, the env steps "
-                                f"{config.env.dt} s (set --env-option action_repeat)")
+            _check_dmc_rate(args.model, checkpoint, model.config.dt, config.env)
             warn_if_unconverged(PROG, args.model)  # after the refusals, so that a refused command prints one line
             agent = PigaSwingUp(model, config.planner)
             results.append(run_dmc_episodes(agent, "piga", config, model.config.input_frames, progress=not args.quiet))
