@@ -152,6 +152,12 @@ def test_write_goal_image(tmp_path: Path, capsys: pytest.CaptureFixture[str]) ->
     assert_one_line_error(ctl(capsys, "--write-goal-image", str(out), "--angle", "5"), "--overwrite")
 
 
+def test_write_goal_image_of_minus_zero_says_zero(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    result = ctl(capsys, "--write-goal-image", str(tmp_path / "goal.png"), "--angle", "-0")
+    assert result.returncode == 0, result.stderr
+    assert "the pendulum at 0 deg" in result.stdout, result.stdout
+
+
 def test_oracle_holds_a_tilted_goal_from_hanging() -> None:
     """A goal near the torque limit (hold torque 1.71 of 2), reached from hanging down, in state space."""
     torch.set_num_threads(1)

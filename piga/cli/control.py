@@ -492,6 +492,7 @@ def _write_goal_image(args: argparse.Namespace) -> int:
     if args.angle is None:
         raise PigaError("--write-goal-image needs --angle in degrees")
     check_angle("--angle", args.angle)
+    args.angle += 0.0  # -0.0 is 0, as --goal-angle's: "the pendulum at -0 deg" otherwise
     target = Path(args.write_goal_image)
     if target.suffix.lower() not in (".png", ".jpg", ".jpeg"):
         raise PigaError(f"--write-goal-image: use a .png or .jpg path, got {target.name}")
