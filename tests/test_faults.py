@@ -1825,6 +1825,18 @@ def test_planet_resumes_on_its_file_named_from_elsewhere(baseline_runs: dict[str
     assert_planet_run_finished(code, err)
 
 
+@pytest.mark.parametrize("obs", ["state", "latent"])
+def test_sb3_on_dmc_names_the_obs_it_was_given(obs: str, tiny_data: Path, tmp_path: Path,
+                                               capsys: pytest.CaptureFixture[str]) -> None:
+    """The refusal spoke of the torque arrow, which the user had not asked for."""
+    data = ["--data", str(tiny_data)] if obs == "latent" else []
+    line = refused("piga-baseline", ["ddpg", "--env", "piga/DMCPendulum-v0", "--obs", obs, *data, "--out",
+                                     str(tmp_path / "run"), "--quiet"], capsys, f"--obs {obs} is not available for piga/DMCPendulum-v0",
+                   "--obs pixels")
+    assert "arrow" not in line
+    assert _listing(tmp_path) == []
+
+
 @pytest.mark.parametrize("algo", [("--algo", "ddpg", "--obs", "state"), ("--algo", "sac", "--obs", "state"),
                                   ("--algo", "drqv2", "--obs", "pixels")], ids=lambda a: a[1])
 @pytest.mark.parametrize("rate", ["1e39", "1e300", "11"])

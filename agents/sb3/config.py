@@ -176,9 +176,11 @@ class SB3Config:
                              "own networks in float32")
         if self.algo == "drqv2" and self.obs != "pixels":
             raise ValueError(f"DrQ-v2 learns from pixels; --obs {self.obs} is for ddpg or sac")
-        if self.env == DMC_PENDULUM and (self.obs != "pixels" or self.torque_arrow):
-            raise ValueError(f"{DMC_PENDULUM} is learnt from its frames (--obs pixels), which show no torque arrow"
-                             + ("" if self.obs == "pixels" else f"; --obs {self.obs} is for {PIXEL_PENDULUM}"))
+        if self.env == DMC_PENDULUM and self.obs != "pixels":
+            raise ValueError(f"--obs {self.obs} is not available for {DMC_PENDULUM}, which is learnt from its frames "
+                             f"(--obs pixels) only; --obs {self.obs} is for {PIXEL_PENDULUM}")
+        if self.env == DMC_PENDULUM and self.torque_arrow:
+            raise ValueError(f"--torque-arrow: the frames of {DMC_PENDULUM} show no torque arrow; drop --torque-arrow")
         if self.view != "face" and self.env != DMC_PENDULUM:
             raise ValueError(f"view {self.view!r} is a view of {DMC_PENDULUM}; {self.env} is seen as it renders")
         # DrQ-v2's buffer is its own (its stacks are of 3 frames, and it keeps a 100k-step run's every transition)
