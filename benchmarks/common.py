@@ -77,12 +77,13 @@ def change_cells(before: dict[str, Any] | None, after: dict[str, Any]) -> str:
 
 
 def write_page(out: Path, record: dict[str, Any], page: str) -> None:
-    """Writes ``OUT.json`` (the record) and ``OUT.md`` (the page), each atomically, and says so."""
-    from piga.io.atomic import atomic_output, write_json
+    """Writes ``OUT.json`` (the record) and ``OUT.md`` (the page), both or neither, and says so."""
+    from piga.io.atomic import atomic_output, write_json, written_together
 
-    write_json(out.with_suffix(".json"), record, overwrite=True)
-    with atomic_output(out.with_suffix(".md"), overwrite=True) as tmp:
-        Path(tmp).write_text(page, encoding="utf-8")
+    with written_together([out.with_suffix(".json"), out.with_suffix(".md")]):  # no record without its page
+        write_json(out.with_suffix(".json"), record, overwrite=True)
+        with atomic_output(out.with_suffix(".md"), overwrite=True) as tmp:
+            Path(tmp).write_text(page, encoding="utf-8")
     print(f"wrote {out.with_suffix('.md')} and {out.with_suffix('.json')}")
 
 

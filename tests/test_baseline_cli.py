@@ -304,7 +304,7 @@ def test_planet_iterative_from_the_command_line(tiny_data: Path, tmp_path: Path,
     (("--iterative", "1", "--exploration-noise", "-1"), "--exploration-noise: expected a number in [0, 10], got -1"),
     (("--iterative", "1", "--exploration-noise", "1e300"), "--exploration-noise: expected a number in [0, 10]"),
     (("--iterative", "1", "--exploration-noise", "nan"), "--exploration-noise: expected a number in [0, 10]"),
-    (("--iterative", "1", "--episode-steps", "8"), "shorter than the file's sequences of 16 frames"),
+    (("--iterative", "1", "--episode-steps", "8"), "--episode-steps must be at least the sequence length"),
     (("--iterative", "1", "--max-minutes", "5"), "bound the run with --rounds"),
 ])
 def test_planet_iterative_bad_input_gets_one_line(tiny_data: Path, tmp_path: Path, option: tuple[str, ...], needle: str,

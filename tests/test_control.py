@@ -152,6 +152,27 @@ def test_write_goal_image(tmp_path: Path, capsys: pytest.CaptureFixture[str]) ->
     assert_one_line_error(ctl(capsys, "--write-goal-image", str(out), "--angle", "5"), "--overwrite")
 
 
+def test_a_one_frame_gif_is_a_goal_image_and_an_animation_is_refused(tmp_path: Path) -> None:
+    """imageio reads a GIF whole, as (frames, H, W, 3): one frame was refused as "not a 2-D image"."""
+    import imageio.v3 as iio
+
+    picture = render_goal_image(10.0)
+    still, animation = tmp_path / "one.gif", tmp_path / "two.gif"
+    iio.imwrite(still, picture[None], extension=".gif")
+    iio.imwrite(animation, np.stack([picture, render_goal_image(20.0)]), extension=".gif", duration=50)
+    png = tmp_path / "one.png"
+    iio.imwrite(png, picture)
+    assert np.abs(load_scene_image(still, 64).astype(int) - load_scene_image(png, 64).astype(int)).max() <= 8  # a palette
+    with pytest.raises(ValueError, match="two.gif: an animation of 2 frames; give one image"):
+        load_scene_image(animation, 64)
+
+
+def test_write_goal_image_of_minus_zero_says_zero(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    result = ctl(capsys, "--write-goal-image", str(tmp_path / "goal.png"), "--angle", "-0")
+    assert result.returncode == 0, result.stderr
+    assert "the pendulum at 0 deg" in result.stdout, result.stdout
+
+
 def test_oracle_holds_a_tilted_goal_from_hanging() -> None:
     """A goal near the torque limit (hold torque 1.71 of 2), reached from hanging down, in state space."""
     torch.set_num_threads(1)

@@ -267,7 +267,7 @@ def test_a_dmc_run_of_drqv2s_view_sees_84x84_rgb_and_is_scored_through_it() -> N
 
     with pytest.raises(ValueError, match="a view of piga/DMCPendulum-v0"):
         replace(TINY, view="drqv2")
-    with pytest.raises(ValueError, match="a finite learning_rate > 0"):
+    with pytest.raises(ValueError, match=r"SB3Config.learning_rate must be in \(0, 10\]"):
         replace(TINY, learning_rate=float("inf"))
     with pytest.raises(ValueError, match="SB3Config.noise_final_std must be at most 10"):
         replace(TINY, noise_final_std=float("inf"))

@@ -735,7 +735,11 @@ def test_planet_resume_refuses_its_file_written_over_in_place(baseline_runs: dic
 # ---------------------------------------------------------------------------------------------
 
 
-def test_ddpg_that_diverges_stops_with_exit_1(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_ddpg_that_diverges_stops_with_exit_1(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                             monkeypatch: pytest.MonkeyPatch) -> None:
+    import agents.sb3.config
+
+    monkeypatch.setattr(agents.sb3.config, "MAX_LEARNING_RATE", math.inf)  # a rate the command refuses, to diverge
     refused("piga-baseline", ["ddpg", "--obs", "state", "--out", str(tmp_path / "run"), *TINY_DDPG, "--learning-rate", "1e30"],
             capsys, "training diverged", "became", "no checkpoint was written yet")
     assert _listing(tmp_path) == []
@@ -935,6 +939,112 @@ def test_video_on_a_full_disk_is_one_line(tmp_path: Path, capsys: pytest.Capture
     code, _, err = run_in_process("piga-control", write, capsys=capsys)
     assert_one_line(code, err, "the video v.mp4 needs about", "of disk")
     assert _listing(tmp_path) == []
+
+
+def _writes_to_a_full_disk(monkeypatch: pytest.MonkeyPatch, folder: Path) -> list[object]:
+    """Makes every atomic write in ``folder`` go through a link to ``/dev/full`` (the kernel's own ENOSPC, with no
+    mount), and collects what Python could not raise (a finaliser's traceback): the list that is returned."""
+    import sys
+
+    import piga.io.atomic
+
+    if not os.path.exists("/dev/full"):
+        pytest.skip("no /dev/full here")
+
+    def full(target: Path) -> Path:
+        link = folder / f".{target.name}.partial-{os.getpid()}"
+        if not os.path.lexists(link):
+            link.symlink_to("/dev/full")
+        return link
+
+    unraisable: list[object] = []
+    monkeypatch.setattr(piga.io.atomic, "partial_path", full)
+    monkeypatch.setattr(sys, "unraisablehook", unraisable.append)
+    return unraisable
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["--write-goal-image", "g.png", "--angle", "10"], "the disk is full"),
+    (["--model", "RUN", "--video", "v.gif", "--episodes", "1", "--steps", "20", "--candidates", "8", "--iterations", "1",
+      "--horizon", "2", "--quiet"], "its disk has"),
+])
+def test_an_image_on_a_disk_that_fills_is_one_line(argv: list[str], needle: str, tiny_piga_run: Path, tmp_path: Path,
+                                                   capsys: pytest.CaptureFixture[str],
+                                                   monkeypatch: pytest.MonkeyPatch) -> None:
+    """imageio's writer, failing as it closes the file, would print its finaliser's traceback when collected."""
+    import gc
+
+    argv = [str(tiny_piga_run) if word == "RUN" else word for word in argv]
+    out = tmp_path / "out"
+    out.mkdir()
+    monkeypatch.chdir(out)
+    unraisable = _writes_to_a_full_disk(monkeypatch, out)
+    code, _, err = run_in_process("piga-control", control.main, *argv, capsys=capsys)
+    gc.collect()
+    lines = [line for line in err.strip().splitlines() if "warning" not in line]  # the tiny run's "not converged"
+    assert_one_line(code, "\n".join(lines), needle)
+    assert unraisable == []
+    assert _listing(out) == []
+
+
+@pytest.mark.parametrize("argv, last", [
+    (["--oracle", "--out", "res"], "md"),
+    (["--model", "RUN", "--sweep", "1:1.2:0.2", "--workers", "1", "--out", "sw"], "png"),
+])
+def test_out_that_fills_the_disk_part_way_leaves_nothing_for_the_rerun(argv: list[str], last: str, tiny_piga_run: Path,
+                                                                      tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                                      monkeypatch: pytest.MonkeyPatch) -> None:
+    """OUT.json, OUT.md (and OUT.png) are one set: the disk filling on the last leaves none, and the rerun works."""
+    import errno
+
+    from matplotlib.figure import Figure
+
+    def full(self: object, path: object, *args: Any, **kwargs: Any) -> None:  # the .md or the .png only
+        if f".{last}." in Path(str(path if last == "png" else self)).name:
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        write(self, path, *args, **kwargs)
+
+    argv = [str(tiny_piga_run) if word == "RUN" else word for word in argv]
+    argv += ["--episodes", "1", "--steps", "20", "--candidates", "8", "--iterations", "1", "--horizon", "2", "--quiet"]
+    monkeypatch.chdir(tmp_path)
+    owner, name = (Path, "write_text") if last == "md" else (Figure, "savefig")
+    write = getattr(owner, name)
+    with monkeypatch.context() as patch:
+        patch.setattr(owner, name, full)
+        code, _, err = run_in_process("piga-control", control.main, *argv, capsys=capsys)
+    assert_one_line(code, "\n".join(line for line in err.splitlines() if "warning" not in line), "the disk is full")
+    assert _listing(tmp_path) == []
+    code, _, err = run_in_process("piga-control", control.main, *argv, capsys=capsys)
+    assert code == 0, err
+    assert len(_listing(tmp_path)) == (3 if last == "png" else 2)
+
+
+def test_written_together_removes_what_it_wrote_and_keeps_what_was_there(tmp_path: Path) -> None:
+    from piga.io.atomic import atomic_output, written_together
+
+    kept, replaced, new = tmp_path / "kept.md", tmp_path / "replaced.json", tmp_path / "new.png"
+    kept.write_text("old")
+    replaced.write_text("old")
+    with pytest.raises(OSError), written_together([kept, replaced, new]):
+        for path in (replaced, new):
+            with atomic_output(path, overwrite=True) as tmp:
+                tmp.write_text("new")
+        raise OSError("the disk filled on the last one")
+    assert _listing(tmp_path) == ["kept.md"]
+
+
+def test_a_gif_is_refused_before_the_episodes_where_an_mp4_fits(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A GIF takes about ten times an MP4's room: the check before the episodes knows."""
+    from piga.evaluation.video import check_video_disk
+    from piga.io.resources import ResourceError
+
+    class Usage:
+        total, used, free = 10**9, 10**9 - 2 * 1024**2, 2 * 1024**2
+
+    monkeypatch.setattr(shutil, "disk_usage", lambda path: Usage())
+    check_video_disk(tmp_path / "v.mp4", 200)
+    with pytest.raises(ResourceError, match="the video v.gif needs about"):
+        check_video_disk(tmp_path / "v.gif", 200)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -1207,7 +1317,7 @@ def test_control_refuses_planner_options_for_a_baseline_run(argv: list[str], nee
 
 
 @pytest.mark.parametrize("argv, needles", [
-    (["--model", "RUN"], ["the model was trained at dt 0.05 s", "--env-option action_repeat"]),  # after a warning line
+    (["--model", "RUN"], ["trained on frames of piga/PixelPendulum-v0", "control it with --env piga/PixelPendulum-v0"]),
     (["--oracle", "--env-option", "mass2"], ["--env-option: expected KEY=VALUE"]),  # the flag was not named
 ])
 def test_control_on_dmc_refuses_in_one_line(argv: list[str], needles: list[str], tiny_piga_run: Path,
@@ -1215,6 +1325,27 @@ def test_control_on_dmc_refuses_in_one_line(argv: list[str], needles: list[str],
     pytest.importorskip("dm_control")
     argv = [str(tiny_piga_run) if a == "RUN" else a for a in argv]
     refused("piga-control", ["--env", "piga/DMCPendulum-v0", "--episodes", "1", "--quiet", *argv], capsys, *needles)
+
+
+@pytest.mark.parametrize("dt, data, needles", [
+    (0.05, "pixel", ["trained on frames of piga/PixelPendulum-v0 (0.05 s apart)", "no action_repeat",
+                     "control it with --env piga/PixelPendulum-v0", "piga-collect --env piga/DMCPendulum-v0"]),
+    (0.05, None, ["frames 0.05 s apart (piga/PixelPendulum-v0's rate)", "control it with --env piga/PixelPendulum-v0"]),
+    (0.03, None, ["trained on frames 0.03 s apart, and no action_repeat", "train one on frames of piga/DMCPendulum-v0"]),
+    (0.06, None, ["the env steps 0.04 s; give --env-option action_repeat=3"]),
+])
+def test_a_piga_model_of_another_frame_rate_than_dmcs_is_told_what_matches(dt: float, data: str | None,
+                                                                           needles: list[str], tiny_data: Path) -> None:
+    """A model of the pixel pendulum's 0.05 s frames was told to set an action_repeat, which no integer makes."""
+    from envs.dmc import DMCPendulumConfig
+    from piga.cli.common import PigaError
+
+    checkpoint = {"data": {"path": str(tiny_data)}} if data else {}
+    with pytest.raises(PigaError) as info:
+        control._check_dmc_rate("run", checkpoint, dt, DMCPendulumConfig())
+    for needle in needles:
+        assert needle in str(info.value), str(info.value)
+    assert "control it with" not in str(info.value) or dt == 0.05
 
 
 @pytest.fixture(scope="module")
@@ -1692,6 +1823,29 @@ def test_planet_resumes_on_its_file_named_from_elsewhere(baseline_runs: dict[str
     code, _, err = run_in_process("piga-baseline", baseline.main, "planet", str(copy), "--out", str(run), "--resume",
                                   "--steps", "3", "--quiet", capsys=capsys)
     assert_planet_run_finished(code, err)
+
+
+@pytest.mark.parametrize("obs", ["state", "latent"])
+def test_sb3_on_dmc_names_the_obs_it_was_given(obs: str, tiny_data: Path, tmp_path: Path,
+                                               capsys: pytest.CaptureFixture[str]) -> None:
+    """The refusal spoke of the torque arrow, which the user had not asked for."""
+    data = ["--data", str(tiny_data)] if obs == "latent" else []
+    line = refused("piga-baseline", ["ddpg", "--env", "piga/DMCPendulum-v0", "--obs", obs, *data, "--out",
+                                     str(tmp_path / "run"), "--quiet"], capsys, f"--obs {obs} is not available for piga/DMCPendulum-v0",
+                   "--obs pixels")
+    assert "arrow" not in line
+    assert _listing(tmp_path) == []
+
+
+@pytest.mark.parametrize("algo", [("--algo", "ddpg", "--obs", "state"), ("--algo", "sac", "--obs", "state"),
+                                  ("--algo", "drqv2", "--obs", "pixels")], ids=lambda a: a[1])
+@pytest.mark.parametrize("rate", ["1e39", "1e300", "11"])
+def test_sb3_refuses_a_learning_rate_out_of_range_up_front(algo: tuple[str, ...], rate: str, tmp_path: Path,
+                                                           capsys: pytest.CaptureFixture[str]) -> None:
+    """Above float32's range, SB3's logs overflowed with an internal error."""
+    refused("piga-baseline", ["ddpg", *algo, "--out", str(tmp_path / "run"), *TINY_DDPG, "--learning-rate", rate],
+            capsys, "--learning-rate must be in (0, 10]")
+    assert _listing(tmp_path) == []
 
 
 def test_ddpg_refuses_noise_beyond_the_action_scale(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -2269,15 +2423,38 @@ def test_a_latent_ddpg_run_with_a_damaged_autoencoder_is_named(ae: Callable[[Pat
     assert _listing(run) == before
 
 
-@pytest.mark.parametrize("kind", ["planet", "ddpg"])
-def test_control_on_a_baseline_run_without_its_record_names_the_record(kind: str, baseline_runs: dict[str, Path],
-                                                                       tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+@pytest.mark.parametrize("flags", [[], ["--workers", "1"], ["--workers", "2"], ["--ray", "127.0.0.1:1"],
+                                   ["--candidates", "8"]], ids=lambda f: " ".join(f) or "none")
+@pytest.mark.parametrize("kind, record", [("planet", None), ("planet", '{"kind": '), ("ddpg", None)])
+def test_control_on_a_baseline_run_without_its_record_names_the_record(kind: str, record: str | None, flags: list[str],
+                                                                       baseline_runs: dict[str, Path], tmp_path: Path,
+                                                                       capsys: pytest.CaptureFixture[str]) -> None:
     """Without config.json, control took the run for a piga one and said that its checkpoint "is a piga-baseline planet
-    checkpoint, not a piga-train-model run", although it runs planet and ddpg runs."""
-    run = _run_copy(baseline_runs[kind], tmp_path / "run", lambda r: (r / "config.json").unlink())
-    refused("piga-control", ["--model", str(run), "--episodes", "1", "--steps", "20", "--quiet"], capsys,
-            f"{run / 'config.json'}, the run's record, is missing", f"piga-baseline {kind} checkpoint",
-            "read a run's kind from its config.json")
+    checkpoint, not a piga-train-model run", although it runs planet and ddpg runs; with --workers or --ray, it blamed
+    the flag, which a baseline's run takes."""
+    def damage(run: Path) -> None:
+        (run / "config.json").unlink() if record is None else (run / "config.json").write_text(record)
+
+    run = _run_copy(baseline_runs[kind], tmp_path / "run", damage)
+    refused("piga-control", ["--model", str(run), "--episodes", "1", "--steps", "20", "--quiet", *flags], capsys,
+            f"{run / 'config.json'}, the run's record, {'is missing' if record is None else 'cannot be read'}",
+            f"piga-baseline {kind} checkpoint", "read a run's kind from its config.json")
+
+
+@pytest.mark.parametrize("flags", [[], ["--candidates", "8"], ["--workers", "1"]], ids=lambda f: " ".join(f) or "none")
+def test_control_on_a_record_of_another_kind_than_its_checkpoint_names_both(flags: list[str], tiny_piga_run: Path,
+                                                                            tmp_path: Path,
+                                                                            capsys: pytest.CaptureFixture[str]) -> None:
+    """A piga run whose config.json says planet was judged as a planet run: --candidates was blamed."""
+    def planet(run: Path) -> None:
+        record = run / "config.json"
+        (run / "config.json").write_text(json.dumps({**(json.loads(record.read_text()) if record.exists() else {}),
+                                                     "kind": "planet"}))
+
+    run = _run_copy(tiny_piga_run, tmp_path / "run", planet)
+    refused("piga-control", ["--model", str(run), "--episodes", "1", "--steps", "20", "--quiet", *flags], capsys,
+            f"{run / 'config.json'} names a piga-baseline planet run", "is a piga-train-model checkpoint",
+            "restore the run's own config.json")
 
 
 def test_control_sweep_refuses_an_unreachable_ray_before_warning(tiny_piga_run: Path, tmp_path: Path,

@@ -38,6 +38,7 @@ CASES = {
     "ddpg": ("piga-baseline", "ddpg --obs state --out {disk}/ddpg --steps 400 --eval-every 200 --learning-starts 100 "
                               "--threads 1 --quiet"),
     "control video": ("piga-control", "--model {run} --video {disk}/v.mp4 --episodes 1 --quiet"),
+    "control gif": ("piga-control", "--model {run} --video {disk}/v.gif --episodes 1 --steps 20 --quiet"),  # ~0.9 MB
     "demo": ("piga-demo", "--out {disk}/demo --threads 1 --quiet"),
     "show": ("piga-show", "{data} --out {disk}/strip.pdf"),
     "diagnose": ("piga-diagnose", "--model {run} --data {data} --out {disk}/diagnosis --threads 1 --quiet"),

@@ -54,12 +54,14 @@ def check_iterative_data(info: DatasetInfo, config: IterativeConfig) -> PixelPen
     """The env that renders frames like the data file's; refuses files it cannot extend.
 
     Raises:
-        DataFormatError: not the pixel pendulum's file, or episodes shorter than one sequence.
+        DataFormatError: not the pixel pendulum's file.
+        ValueError: ``config``'s episodes shorter than one of its sequences.
     """
     check_pixel_pendulum_file(info, f"the iterative mode collects on {PIXEL_PENDULUM} and renders like the file")
-    if config.episode_steps < info.steps:
-        raise DataFormatError(f"{info.path}: collected episodes of {config.episode_steps} steps are shorter than the "
-                              f"file's sequences of {info.steps} frames")
+    if config.episode_steps < info.steps:  # the config's to change, not the file: a ValueError, which names the field
+        raise ValueError(f"IterativeConfig.episode_steps must be at least the sequence length of {info.path} "
+                         f"({info.steps} frames): collected episodes of {config.episode_steps} steps would be shorter "
+                         f"than the file's sequences; raise IterativeConfig.episode_steps to {info.steps} or more")
     fields = info.attrs["env_config"]  # a JSON object (inspect_dataset checked it)
     known = {f.name for f in dataclasses.fields(PixelPendulumConfig)}
     unknown = sorted(set(fields) - known)

@@ -10,7 +10,6 @@ Build a new config to change ``algo`` or ``obs`` (``dataclasses.replace`` keeps 
 
 from __future__ import annotations
 
-import math
 from dataclasses import asdict, dataclass
 from typing import Any, Literal, get_args
 
@@ -20,7 +19,7 @@ from envs.pendulum import PixelPendulumConfig
 from piga.io.choices import check_choices
 from piga.io.device import Device
 
-__all__ = ["ALGORITHMS", "ALGORITHM_PRESETS", "PRECISIONS", "Precision", "resolve_precision", "bfloat16_in_hardware", "ENV_EPISODE_STEPS", "EPISODE_STEPS", "LEARNED_RETURN", "OBSERVATIONS", "PRESETS", "Algorithm", "Observation", "SB3Config", "DMC_VIEWS", "VIEWS", "View"]
+__all__ = ["ALGORITHMS", "ALGORITHM_PRESETS", "PRECISIONS", "Precision", "resolve_precision", "bfloat16_in_hardware", "ENV_EPISODE_STEPS", "EPISODE_STEPS", "LEARNED_RETURN", "MAX_LEARNING_RATE", "OBSERVATIONS", "PRESETS", "Algorithm", "Observation", "SB3Config", "DMC_VIEWS", "VIEWS", "View"]
 
 Observation = Literal["pixels", "latent", "state"]
 """What the policy sees."""
@@ -86,6 +85,9 @@ ALGORITHM_PRESETS: dict[Algorithm, dict[str, Any]] = {
 PRESETS: dict[Observation, dict[str, Any]] = {"state": {}, "latent": {}, "pixels": {"buffer_size": 50_000}}
 
 
+#: Largest learning rate, as piga-train-model's (:data:`piga.training.train.MAX_LR`): no recipe comes within a factor
+#: 100 of it, and SB3 turns the rate into a float32 for its logs, which overflows above ~3.4e38.
+MAX_LEARNING_RATE = 10.0
 #: Largest std of the exploration noise, in SB3's [-1, 1] action scale (as PlaNet's exploration noise is bounded).
 MAX_NOISE_STD = 10.0
 
@@ -174,9 +176,11 @@ class SB3Config:
                              "own networks in float32")
         if self.algo == "drqv2" and self.obs != "pixels":
             raise ValueError(f"DrQ-v2 learns from pixels; --obs {self.obs} is for ddpg or sac")
-        if self.env == DMC_PENDULUM and (self.obs != "pixels" or self.torque_arrow):
-            raise ValueError(f"{DMC_PENDULUM} is learnt from its frames (--obs pixels), which show no torque arrow"
-                             + ("" if self.obs == "pixels" else f"; --obs {self.obs} is for {PIXEL_PENDULUM}"))
+        if self.env == DMC_PENDULUM and self.obs != "pixels":
+            raise ValueError(f"--obs {self.obs} is not available for {DMC_PENDULUM}, which is learnt from its frames "
+                             f"(--obs pixels) only; --obs {self.obs} is for {PIXEL_PENDULUM}")
+        if self.env == DMC_PENDULUM and self.torque_arrow:
+            raise ValueError(f"--torque-arrow: the frames of {DMC_PENDULUM} show no torque arrow; drop --torque-arrow")
         if self.view != "face" and self.env != DMC_PENDULUM:
             raise ValueError(f"view {self.view!r} is a view of {DMC_PENDULUM}; {self.env} is seen as it renders")
         # DrQ-v2's buffer is its own (its stacks are of 3 frames, and it keeps a 100k-step run's every transition)
@@ -204,11 +208,12 @@ class SB3Config:
         for name in ("learning_starts", "seed", "noise_decay_steps", "threads"):
             if getattr(self, name) < 0:
                 raise ValueError(f"SB3Config.{name} must be >= 0, got {getattr(self, name)}")
-        if not (0 < self.gamma <= 1 and 0 < self.learning_rate < math.inf and 0 < self.tau <= 1 and self.noise_std >= 0
-                and self.noise_final_std >= 0):
-            raise ValueError(f"SB3Config: need 0 < gamma <= 1, a finite learning_rate > 0, 0 < tau <= 1, noise_std >= 0, "
-                             f"noise_final_std >= 0; got gamma={self.gamma}, learning_rate={self.learning_rate}, "
-                             f"tau={self.tau}, noise_std={self.noise_std}, noise_final_std={self.noise_final_std}")
+        if not 0 < self.learning_rate <= MAX_LEARNING_RATE:  # NaN too
+            raise ValueError(f"SB3Config.learning_rate must be in (0, {MAX_LEARNING_RATE:g}], got {self.learning_rate:g}")
+        if not (0 < self.gamma <= 1 and 0 < self.tau <= 1 and self.noise_std >= 0 and self.noise_final_std >= 0):
+            raise ValueError(f"SB3Config: need 0 < gamma <= 1, 0 < tau <= 1, noise_std >= 0, noise_final_std >= 0; got "
+                             f"gamma={self.gamma}, tau={self.tau}, noise_std={self.noise_std}, "
+                             f"noise_final_std={self.noise_final_std}")
         for name in ("noise_std", "noise_final_std"):
             if getattr(self, name) > MAX_NOISE_STD:
                 raise ValueError(f"SB3Config.{name} must be at most {MAX_NOISE_STD:g} (a std in SB3's [-1, 1] action "

@@ -37,7 +37,7 @@ def build_parser() -> ArgumentParser:
     from agents.planet.config import MAX_EXPLORATION_NOISE, IterativeConfig, PlanetTrainConfig, RewardAlignment, RSSMConfig
     from agents.sb3.autoencoder import AutoencoderConfig
     from agents.sb3.config import (ALGORITHM_PRESETS, ALGORITHMS, DRQV2_SEED_FRAMES, ENV_ACTION_REPEAT, LEARNED_RETURN,
-                                   OBSERVATIONS, PRECISIONS, PRESETS, VIEWS, SB3Config)
+                                   MAX_LEARNING_RATE, OBSERVATIONS, PRECISIONS, PRESETS, VIEWS, SB3Config)
     from envs import DMC_PENDULUM, ENV_IDS
 
     p = ArgumentParser(prog=PROG, description="Train a baseline (the PlaNet-style world model, or SB3 DDPG) into a run "
@@ -140,7 +140,7 @@ def build_parser() -> ArgumentParser:
                       help="random-action steps before learning")
     add_preset_option(d, "--learning-rate", default=ddpg.learning_rate, type=positive_float,
                       shown=f"{ddpg.learning_rate}; drqv2: {drqv2['learning_rate']}",
-                      help="Adam's learning rate for actor and critic (and DrQ-v2's encoder)")
+                      help=f"Adam's learning rate for actor and critic (and DrQ-v2's encoder), in (0, {MAX_LEARNING_RATE:g}]")
     add_preset_option(d, "--batch-size", default=ddpg.batch_size, type=positive_int, help="minibatch")
     add_preset_option(d, "--noise-std", default=ddpg.noise_std, type=nonnegative_float,
                       shown=f"{ddpg.noise_std}; sac: {format_default(sac['noise_std'])}; drqv2: {drqv2['noise_std']}, "

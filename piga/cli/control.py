@@ -8,14 +8,14 @@ import sys
 from collections.abc import Callable, Sequence
 from dataclasses import replace
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from agents.config import MPCConfig
 from envs import DMC_PENDULUM, ENV_IDS, PIXEL_PENDULUM
 from envs.pendulum import MAX_GRAVITY, MIN_GRAVITY, PixelPendulumConfig
-from piga.io.atomic import atomic_output, check_writable_target, write_json
+from piga.io.atomic import atomic_output, check_writable_target, write_json, written_together
 from piga.cli.common import (ArgumentParser, PigaError, add_ray_option, command_line, connect_backend, file_path,
                              given_options, int_up_to, positive_float, positive_int, run_cli, seed_int,
                              warn_if_unconverged)
@@ -24,6 +24,8 @@ from piga.evaluation.episodes import summary_markdown
 from piga.io.checkpoint import RunKind
 
 if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
     from agents.sb3.run import SB3Agent
     from envs.dmc import DMCPendulumConfig
     from agents.mpc import PigaMPCAgent
@@ -220,9 +222,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"wrote {args.video}")
     if outputs:
         result = result.labelled(agent=label)
-        write_json(outputs[0], {"agent": label, **result.to_dict(), "recordings": None}, overwrite=args.overwrite)
-        with atomic_output(outputs[1], overwrite=args.overwrite) as tmp:
-            tmp.write_text(f"# {PROG}\n\nCommand: `{command_line(PROG, argv)}`\n\n{summary_markdown([result.summary])}", encoding="utf-8")
+        _write_outputs(outputs, {"agent": label, **result.to_dict(), "recordings": None},
+                       f"# {PROG}\n\nCommand: `{command_line(PROG, argv)}`\n\n{summary_markdown([result.summary])}",
+                       args.overwrite)
         print(f"wrote {outputs[0]} and {outputs[1]}")
     return 0
 
@@ -263,15 +265,28 @@ def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: 
     table = summary_markdown(summaries)
     print(table, end="")
     if outputs:
-        from piga.evaluation.plots import save_figure, sweep_figure
+        from piga.evaluation.plots import sweep_figure
 
-        write_json(outputs[0], {"model": args.model, "multipliers": multipliers, "results": [r.to_dict() for r in results]},
-                   overwrite=args.overwrite)
-        with atomic_output(outputs[1], overwrite=args.overwrite) as tmp:
-            tmp.write_text(f"# {PROG} --sweep\n\nCommand: `{command_line(PROG, argv)}`\n\n![sweep]({outputs[2].name})\n\n{table}", encoding="utf-8")
-        save_figure(sweep_figure([s.to_dict() for s in summaries]), outputs[2], overwrite=args.overwrite)
+        _write_outputs(outputs, {"model": args.model, "multipliers": multipliers, "results": [r.to_dict() for r in results]},
+                       f"# {PROG} --sweep\n\nCommand: `{command_line(PROG, argv)}`\n\n![sweep]({outputs[2].name})\n\n{table}",
+                       args.overwrite, figure=lambda: sweep_figure([s.to_dict() for s in summaries]))
         print(f"wrote {', '.join(map(str, outputs))}")
     return 0
+
+
+def _write_outputs(outputs: list[Path], record: dict[str, Any], page: str, overwrite: bool,
+                   figure: Callable[[], Figure] | None = None) -> None:
+    """Writes ``--out``'s set: OUT.json (``record``), OUT.md (``page``) and, where there is a third path, OUT.png
+    (``figure()``), all or none (:func:`~piga.io.atomic.written_together`): a failure part-way (a full disk) leaves
+    nothing that would refuse the rerun."""
+    with written_together(outputs):
+        write_json(outputs[0], record, overwrite=overwrite)
+        with atomic_output(outputs[1], overwrite=overwrite) as tmp:
+            tmp.write_text(page, encoding="utf-8")
+        if figure is not None:
+            from piga.evaluation.plots import save_figure
+
+            save_figure(figure(), outputs[2], overwrite=overwrite)
 
 
 def _check_env_gravity(flag: str, gravity_mult: float) -> None:
@@ -291,9 +306,9 @@ def _run_kind(args: argparse.Namespace) -> RunKind:
     """The kind of ``--model``'s run (piga for a piga-train-model run, or with --oracle alone)."""
     if not args.model:
         return RunKind.PIGA
-    from piga.io.checkpoint import run_kind
+    from piga.io.checkpoint import checked_run_kind
 
-    kind = run_kind(args.model)
+    kind = checked_run_kind(args.model)  # the checkpoint's word, before options are judged by the kind
     if args.oracle and kind.is_baseline:
         raise PigaError(f"--oracle: {args.model} is a {kind.writer} run, which runs as trained and knows no "
                         "physics to hand the oracle; drop --oracle to score the run, or drop --model to run the oracle")
@@ -387,9 +402,9 @@ def _baseline(args: argparse.Namespace, kind: RunKind, mpc: MPCConfig, outputs: 
         print(f"wrote {args.video}")
     if outputs:
         result = result.labelled(agent=label)
-        write_json(outputs[0], {"agent": label, "kind": kind.value, **result.to_dict(), "recordings": None}, overwrite=args.overwrite)
-        with atomic_output(outputs[1], overwrite=args.overwrite) as tmp:
-            tmp.write_text(f"# {PROG}\n\nCommand: `{command_line(PROG, argv)}`\n\n{summary_markdown([result.summary])}", encoding="utf-8")
+        _write_outputs(outputs, {"agent": label, "kind": kind.value, **result.to_dict(), "recordings": None},
+                       f"# {PROG}\n\nCommand: `{command_line(PROG, argv)}`\n\n{summary_markdown([result.summary])}",
+                       args.overwrite)
         print(f"wrote {outputs[0]} and {outputs[1]}")
     return 0
 
@@ -471,19 +486,19 @@ def _keep_first_trace(agent: PigaMPCAgent, into: list[tuple[float, float, np.nda
 
 
 def _write_goal_image(args: argparse.Namespace) -> int:
-    import imageio.v3 as iio
-
     from piga.control.goal import render_goal_image
+    from piga.evaluation.video import encoded_image
 
     if args.angle is None:
         raise PigaError("--write-goal-image needs --angle in degrees")
     check_angle("--angle", args.angle)
+    args.angle += 0.0  # -0.0 is 0, as --goal-angle's: "the pendulum at -0 deg" otherwise
     target = Path(args.write_goal_image)
     if target.suffix.lower() not in (".png", ".jpg", ".jpeg"):
         raise PigaError(f"--write-goal-image: use a .png or .jpg path, got {target.name}")
     picture = render_goal_image(args.angle)
     with atomic_output(target, overwrite=args.overwrite) as tmp:
-        iio.imwrite(tmp, picture, extension=target.suffix.lower())
+        tmp.write_bytes(encoded_image(picture, target.suffix.lower()))
     print(f"wrote {target}: the pendulum at {args.angle:g} deg, {picture.shape[1]}x{picture.shape[0]}")
     return 0
 
@@ -542,6 +557,45 @@ def _check_piga_view(run_dir: str, checkpoint: dict, env: DMCPendulumConfig) -> 
                         + ("drop --env-option camera" if trained == "face" else f"give --env-option camera={trained}"))
 
 
+def _check_dmc_rate(run_dir: str, checkpoint: dict, dt: float, env: DMCPendulumConfig) -> None:
+    """Refuses a piga model trained on frames ``dt`` s apart where the DMC pendulum ``env`` steps another dt, saying
+    what would match: the action repeat that gives ``dt``, where one does; else the env of the model's frames."""
+    from envs.dmc import DMC_PHYSICS_DT, MAX_ACTION_REPEAT
+    from envs.constants import PENDULUM_DT
+
+    if abs(dt - env.dt) <= 1e-9:
+        return
+    repeat = round(dt / DMC_PHYSICS_DT)
+    if 1 <= repeat <= MAX_ACTION_REPEAT and abs(repeat * DMC_PHYSICS_DT - dt) <= 1e-9:
+        raise PigaError(f"{run_dir}: the model was trained on frames {dt:g} s apart, the env steps {env.dt:g} s; give "
+                        f"--env-option action_repeat={repeat} (physics steps of {DMC_PHYSICS_DT:g} s per frame)")
+    frames = f"frames {dt:g} s apart"
+    if (trained := _training_env_id(checkpoint)) is not None:
+        frames = f"frames of {trained} ({dt:g} s apart)"
+    elif abs(dt - PENDULUM_DT) <= 1e-9:  # the file is gone, or names no env: its rate is the pixel pendulum's
+        frames, trained = f"{frames} ({PIXEL_PENDULUM}'s rate)", PIXEL_PENDULUM
+    elsewhere = f"control it with --env {trained}, or " if trained and trained != DMC_PENDULUM else ""
+    raise PigaError(f"{run_dir}: the model was trained on {frames}, and no action_repeat of {DMC_PENDULUM} (physics "
+                    f"steps of {DMC_PHYSICS_DT:g} s) makes that rate; {elsewhere}train one on frames of "
+                    f"{DMC_PENDULUM} (piga-collect --env {DMC_PENDULUM})")
+
+
+def _training_env_id(checkpoint: dict) -> str | None:
+    """The env id of the file the model was trained on, where the file is still there and names one."""
+    import h5py
+
+    from piga.io.runs import training_data_path
+
+    if (path := training_data_path(checkpoint)) is None:
+        return None
+    try:
+        with h5py.File(path, "r") as f:
+            env_id = f.attrs.get("env_id")
+    except (OSError, ValueError):
+        return None
+    return env_id if isinstance(env_id, str) and env_id else None
+
+
 def _dmc(args: argparse.Namespace, argv: Sequence[str] | None, given: set[str]) -> int:
     """``--env piga/DMCPendulum-v0``: the piga agent and/or the oracle, scored in DMC's units."""
     from piga.cli.collect import _env_option, dmc_config
@@ -571,10 +625,10 @@ def _dmc(args: argparse.Namespace, argv: Sequence[str] | None, given: set[str]) 
     torch.set_num_threads(1)
     results = []
     if args.model:
-        from piga.io.checkpoint import run_kind
+        from piga.io.checkpoint import checked_run_kind
         from piga.io.runs import load_model
 
-        if (kind := run_kind(args.model)) is RunKind.DDPG:
+        if (kind := checked_run_kind(args.model)) is RunKind.DDPG:
             sb3 = _dmc_sb3_agent(args.model, config.env)
             config = replace(config, env=_sb3_view(sb3, config.env, {key for key, _ in pairs}))
             results.append(run_dmc_episodes(sb3, sb3.config.algo, config, progress=not args.quiet))
@@ -584,9 +638,7 @@ def _dmc(args: argparse.Namespace, argv: Sequence[str] | None, given: set[str]) 
         else:
             model, checkpoint = load_model(args.model)
             _check_piga_view(args.model, checkpoint, config.env)
-            if abs(model.config.dt - config.env.dt) > 1e-9:
-                raise PigaError(f"{args.model}: the model was trained at dt {model.config.dt} s, the env steps "
-                                f"{config.env.dt} s (set --env-option action_repeat)")
+            _check_dmc_rate(args.model, checkpoint, model.config.dt, config.env)
             warn_if_unconverged(PROG, args.model)  # after the refusals, so that a refused command prints one line
             agent = PigaSwingUp(model, config.planner)
             results.append(run_dmc_episodes(agent, "piga", config, model.config.input_frames, progress=not args.quiet))
@@ -596,11 +648,9 @@ def _dmc(args: argparse.Namespace, argv: Sequence[str] | None, given: set[str]) 
     text = dmc_markdown(results, config, command)
     print(text)
     if outputs:
-        write_json(outputs[0], {"command": command, "config": {"episodes": config.episodes, "seed": config.seed,
-                                                               "env": config.env.to_dict()},
-                                "results": [dmc_record(r) for r in results]}, overwrite=args.overwrite)
-        with atomic_output(outputs[1], overwrite=args.overwrite) as tmp:
-            tmp.write_text(text, encoding="utf-8")
+        _write_outputs(outputs, {"command": command, "config": {"episodes": config.episodes, "seed": config.seed,
+                                                                "env": config.env.to_dict()},
+                                 "results": [dmc_record(r) for r in results]}, text, args.overwrite)
     return 0
 
 

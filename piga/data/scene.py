@@ -63,12 +63,12 @@ def scene_to_gray(img: np.ndarray, size: int) -> np.ndarray:
 
 
 def read_image(path: str | os.PathLike[str]) -> np.ndarray:
-    """Reads a PNG, JPEG or other still image as an array, unconverted.
+    """Reads a PNG, JPEG or other still image as an array, unconverted (an animation of one frame: that frame).
 
     Raises:
         FileNotFoundError: no such file.
         IsADirectoryError: ``path`` is a folder.
-        ValueError: the file is not a readable image.
+        ValueError: the file is not a readable image, or is an animation of several frames.
     """
     import imageio.v3 as iio
 
@@ -100,6 +100,10 @@ def read_image(path: str | os.PathLike[str]) -> np.ndarray:
         raise ValueError(f"{p}: not a readable image ({why})") from None
     if image.size == 0:  # what a plugin made of a file that is not its own
         raise ValueError(f"{p}: not a readable image (it has no pixels)")
+    if image.ndim == 4:  # (frames, H, W, C): an animation (a GIF, an APNG) is read whole
+        if len(image) > 1:
+            raise ValueError(f"{p}: an animation of {len(image)} frames; give one image")
+        image = image[0]
     return image
 
 

@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from piga.io.atomic import (atomic_output, check_folder_target, check_writable_target, missing_folders, partial_path,
-                            remove_empty_folders, write_json)
+                            remove_empty_folders, write_json, written_together)
 from piga.diagnostics.results import Diagnosis, VisionSummary
 from piga.diagnostics.twin import MEASURABLE_GAP
 from piga.evaluation.episodes import EpisodeSummary, summary_markdown
@@ -339,8 +339,9 @@ def write_report(d: Diagnosis, out: str | os.PathLike[str], model: str, data: st
     to ``out``. Into an existing folder, each file is written atomically.
     """
     folder = check_report_target(out, overwrite)
-    if folder.is_dir():
-        _write_files(d, folder, model, data, command, overwrite)
+    if folder.is_dir():  # all or none of them, so that a failure part-way leaves nothing to refuse the rerun
+        with written_together(folder / name for name in REPORT_FILES):
+            _write_files(d, folder, model, data, command, overwrite)
         return folder / "report.md"
     made = missing_folders(folder.parent)
     folder.parent.mkdir(parents=True, exist_ok=True)

@@ -12,7 +12,7 @@ import hashlib
 import json
 import math
 import os
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -210,6 +210,33 @@ def atomic_output(path: str | os.PathLike[str], overwrite: bool = False) -> Iter
     finally:
         with contextlib.suppress(OSError):  # gone already (renamed, or never made)
             tmp.unlink()
+
+
+def _identity(path: Path) -> tuple[int, int, int] | None:
+    """What tells one file at ``path`` from another written there later (device, inode, change time); None if absent."""
+    try:
+        st = os.lstat(path)
+    except OSError:
+        return None
+    return st.st_dev, st.st_ino, st.st_ctime_ns
+
+
+@contextlib.contextmanager
+def written_together(paths: Iterable[str | os.PathLike[str]]) -> Iterator[None]:
+    """The outputs ``paths`` of one command (``OUT.json``, ``OUT.md``, ``OUT.png``), written in the body, each
+    atomically: if the body fails or is interrupted, those of them that it wrote are removed again, so that no part
+    of the set is left to block the command's rerun (``exists; pass --overwrite``) or to link to a missing file.
+    Files that were there before and that the body did not replace are kept."""
+    targets = [Path(p) for p in paths]
+    before = [_identity(p) for p in targets]
+    try:
+        yield
+    except BaseException:
+        for path, was in zip(targets, before):
+            if (now := _identity(path)) is not None and now != was:
+                with contextlib.suppress(OSError):
+                    path.unlink()
+        raise
 
 
 def write_json(path: str | os.PathLike[str], payload: dict[str, Any], overwrite: bool = True) -> None:

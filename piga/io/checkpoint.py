@@ -26,7 +26,7 @@ from typing import Any
 #: The checkpoint's file name in every run folder.
 CHECKPOINT = "checkpoint.pt"
 
-__all__ = ["CHECKPOINT", "RunKind", "read_checkpoint", "require_piga_run", "run_kind", "write_checkpoint", "unreadable"]
+__all__ = ["CHECKPOINT", "RunKind", "checked_run_kind", "checkpoint_kind", "kind_mismatch", "read_checkpoint", "require_piga_run", "run_kind", "write_checkpoint", "unreadable"]
 
 
 class RunKind(enum.Enum):
@@ -73,6 +73,53 @@ def run_kind(run_dir: str | os.PathLike[str]) -> RunKind:
     """
     record, _ = read_run_record(run_dir)
     return RunKind.parse(str(record.get("kind", "piga")), f"{Path(run_dir)}/config.json")
+
+
+def checkpoint_kind(run_dir: str | os.PathLike[str]) -> RunKind | None:
+    """The kind that ``run_dir``'s checkpoint names (``piga`` where it names none), read without its tensors (torch's
+    memory map): None where there is no checkpoint, or none that reads (the run's loader then says what is wrong)."""
+    import torch
+
+    path = Path(run_dir) / CHECKPOINT
+    if not path.is_file():
+        return None
+    try:
+        payload = torch.load(path, map_location="cpu", weights_only=False, mmap=True)
+        return RunKind(str(payload.get("kind", RunKind.PIGA.value)))
+    except Exception:  # truncated, foreign, not a zip (no memory map), an unknown kind: its loader's error says which
+        return None
+
+
+def checked_run_kind(run_dir: str | os.PathLike[str]) -> RunKind:
+    """:func:`run_kind`, with the checkpoint as the authority: a kind that ``config.json`` names otherwise, or cannot
+    name (missing, unreadable) for a baseline's checkpoint, is refused before a command judges its options by it.
+
+    Raises:
+        ValueError: as :func:`read_checkpoint` for another kind's checkpoint.
+    """
+    claimed = run_kind(run_dir)
+    found = checkpoint_kind(run_dir)
+    if found is None or found is claimed:
+        return claimed
+    raise kind_mismatch(run_dir, found, claimed)
+
+
+def kind_mismatch(run_dir: str | os.PathLike[str], found: RunKind, expected: RunKind) -> ValueError:
+    """The error for ``run_dir``'s checkpoint, of kind ``found``, where a ``expected`` run was looked for: for a
+    baseline's without a readable ``config.json``, the record; for one whose ``config.json`` names another kind, the
+    two files that disagree."""
+    path = Path(run_dir) / CHECKPOINT
+    record_path = Path(run_dir) / "config.json"
+    record, why = read_run_record(run_dir)
+    if found.is_baseline and why:  # a baseline's run: known by its record
+        return ValueError(f"{record_path}, the run's record, {why}: {path} is a {found.writer} checkpoint, and commands "
+                          f"read a run's kind from its config.json; restore the file, or train the run again with "
+                          "--overwrite")
+    if (named := record.get("kind", RunKind.PIGA.value)) != found.value and not why:
+        return ValueError(f"{record_path} names a {RunKind.parse(str(named), str(record_path)).writer} run, but {path} is "
+                          f"a {found.writer} checkpoint: the two are of different runs; restore the run's own "
+                          "config.json, or train the run again with --overwrite")
+    return ValueError(f"{path} is a {found.writer} checkpoint, not a {expected.writer} run")
 
 
 def _failed_checksum(path: Path) -> str | None:
@@ -160,13 +207,7 @@ def read_checkpoint(run_dir: str | os.PathLike[str], kind: RunKind) -> dict[str,
         raise ValueError(f"{path}: not a readable {kind.label} checkpoint (it holds a {type(payload).__name__})")
     found = payload.get("kind", RunKind.PIGA.value)
     if found != kind.value:
-        writer = RunKind.parse(str(found), str(path)).writer
-        record = Path(run_dir) / "config.json"
-        if found != RunKind.PIGA.value and (why := read_run_record(run_dir)[1]):  # a baseline's run: known by its record
-            raise ValueError(f"{record}, the run's record, {why}: {path} is a {writer} checkpoint, and commands "
-                             f"read a run's kind from its config.json; restore the file, or train the run again with "
-                             "--overwrite")
-        raise ValueError(f"{path} is a {writer} checkpoint, not a {kind.writer} run")
+        raise kind_mismatch(run_dir, RunKind.parse(str(found), str(path)), kind)
     return payload
 
 
