@@ -2779,3 +2779,22 @@ def test_a_split_counts_attribute_that_contradicts_the_split_is_named(tiny_data:
     data = _variant(tiny_data, tmp_path / "lie.h5", lie)
     refused("piga-train-model", [str(data), "--out", str(tmp_path / "run"), "--quiet"], capsys,
             "attribute 'split_counts' says", "but /split holds")
+
+
+@pytest.mark.parametrize("kind", ["planet", "ddpg"])
+def test_control_warns_that_a_baseline_run_did_not_learn(kind: str, baseline_runs: dict[str, Path], tmp_path: Path,
+                                                        capsys: pytest.CaptureFixture[str]) -> None:
+    """piga-baseline exits 1 on such a run, keeping it; piga-control scored it without a word, where a piga run that
+    did not converge is warned of."""
+    from piga.cli.control import baseline_did_not_learn
+    from piga.io.checkpoint import RunKind
+
+    run = baseline_runs[kind]
+    why = baseline_did_not_learn(run, RunKind(kind))
+    if why is None:
+        pytest.skip("the tiny run learned")
+    code, _, err = run_in_process("piga-control", control.main, "--model", str(run), "--episodes", "1", "--steps", "20",
+                                  "--workers", "1", "--quiet", capsys=capsys)
+    assert code == 0 and err.strip().splitlines() == [f"piga-control: warning: the run {run} did not learn ({why}); "
+                                                      "these episodes score it all the same"], err
+    assert baseline_did_not_learn(tmp_path, RunKind(kind)) is None  # no record: nothing to say

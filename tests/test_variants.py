@@ -166,7 +166,7 @@ def test_the_broadcast_width_sizes_that_decoder_and_only_it(small_data: Path, tm
     out = tmp_path / "run"
     code, _, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), "--broadcast-width", "32", *SMALL,
                                   capsys=capsys)
-    assert_one_line(code, err, "broadcast_width", "'st'")
+    assert_one_line(code, err, "--broadcast-width sizes", "'st'")
     assert not out.exists()
     code, _, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), "--decoder", "broadcast",
                                   "--broadcast-width", str(cli.MAX_BROADCAST_WIDTH + 1), *SMALL, capsys=capsys)
@@ -214,7 +214,7 @@ def test_the_video_lstm_scale_sizes_it_and_only_it(small_data: Path, tmp_path: P
     out = tmp_path / "run"
     code, _, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), "--video-lstm-scale", "2", *SMALL,
                                   capsys=capsys)
-    assert_one_line(code, err, "video_lstm_scale", "'piga'")  # piga has its own sizes
+    assert_one_line(code, err, "--video-lstm-scale sizes", "'piga'")  # piga has its own sizes
     assert not out.exists()
     code, _, _ = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), "--model", "video-lstm",
                                 "--video-lstm-scale", "2", *SMALL, capsys=capsys)

@@ -318,6 +318,28 @@ def _run_kind(args: argparse.Namespace) -> RunKind:
     return kind
 
 
+def baseline_did_not_learn(run_dir: str | Path, kind: RunKind) -> str | None:
+    """Why a baseline run did not learn, by the test ``piga-baseline`` exits 1 on, read off its metrics.json (PlaNet-style:
+    :func:`agents.planet.train.did_not_learn`; DDPG, SAC, DrQ-v2: its evaluation return never reached its mark); None
+    when it learned, or when the record cannot tell (a run stopped before its end has none)."""
+    import json
+
+    try:
+        metrics = json.loads((Path(run_dir) / "metrics.json").read_text())
+        if kind is RunKind.PLANET:
+            from agents.planet.train import did_not_learn
+
+            return did_not_learn(metrics["open_loop"])
+        from agents.sb3.train import first_step_reaching
+
+        mark = float(metrics["learned_return"])
+        if first_step_reaching(metrics["learning_curve"], mark) is not None:
+            return None
+        return f"its evaluation return never reached {mark:g} in {metrics['steps']} env steps"
+    except (OSError, ValueError, KeyError, TypeError, IndexError):
+        return None
+
+
 def _baseline(args: argparse.Namespace, kind: RunKind, mpc: MPCConfig, outputs: list[Path], argv: Sequence[str] | None,
               given: set[str]) -> int:
     """A baseline run ("planet" or "ddpg") on the same episodes, starts, seeds and success definition as piga.
@@ -357,6 +379,9 @@ def _baseline(args: argparse.Namespace, kind: RunKind, mpc: MPCConfig, outputs: 
                         "the CEM options set the piga agent's and the oracle's planner")
     if kind is RunKind.PLANET:  # after the refusals of the command line: this reads the checkpoint
         check_planet_frames(args.model)
+    if (why := baseline_did_not_learn(args.model, kind)) is not None:  # as a piga run that did not converge is
+        print(f"{PROG}: warning: the run {args.model} did not learn ({why}); these episodes score it all the same",
+              file=sys.stderr)
     if args.sweep or args.gravity_mult != 1:
         print(f"note: the {kind.value} agent runs as trained: it cannot be told that gravity changed")
     if args.sweep:
