@@ -143,7 +143,7 @@ class SceneConfig:
             raise SceneError(f"{self.scene}: {self.image_size}x{self.image_size} images are too small for "
                              f"{self.n_objects} objects of radius {self.radius:g}"
                              + (f" and rest length 2l = {2 * self.params['l']:g}" if "l" in self.params else "")
-                             + f"; need at least {needed:.6g} px")
+                             + f"; need at least {needed:.6g} px (a lower bound: moving objects may need more room)")
 
     @property
     def margin(self) -> float:
@@ -343,9 +343,14 @@ def draw_start(config: SceneConfig, rng: np.random.Generator, steps: int,
             good = np.flatnonzero(_acceptable(config, fine_p, test))
         if len(good):
             return simulate(config, p0[good[0]], v0[good[0]], steps)
+    if config.half and test:  # a test sequence must leave the top half: short ones cannot
+        raise SceneError(f"{config.scene}: no start in {config.max_tries} draws stays clear of the walls and in the top "
+                         f"half for its first {config.half_frames} frames, then reaches the bottom half within {steps} "
+                         f"frames (a --half test sequence); use longer sequences (--steps){_force_advice(config)} or a "
+                         "larger image (--image-size)")
     raise SceneError(f"{config.scene}: no start in {config.max_tries} draws stays clear of the walls"
-                     f"{' and in the top half' if config.half else ''} for {steps} frames; use shorter sequences, a lower "
-                     f"speed{_force_advice(config)} or a larger image")
+                     f"{' and in the top half' if config.half else ''} for {steps} frames; use shorter sequences "
+                     f"(--steps){_force_advice(config)} or a larger image (--image-size)")
 
 
 #: Least displacement, in pixels, by which a scene's forces must move some ball away from its force-free path (a straight

@@ -245,6 +245,7 @@ def test_show_cuts_a_long_title(tmp_path: Path, capsys: pytest.CaptureFixture[st
     import h5py
 
     from piga.cli import show
+    from piga.evaluation import plots
 
     data = tmp_path / "d.h5"
     assert in_process(capsys, "piga-collect", "--out", str(data), "--sequences", "2", "--steps", "3", "--workers", "1",
@@ -252,8 +253,8 @@ def test_show_cuts_a_long_title(tmp_path: Path, capsys: pytest.CaptureFixture[st
     with h5py.File(data, "a") as f:
         f.attrs["system"] = "pendulum" + "x" * 100_000
     titles = []
-    real = show.frame_strip
-    monkeypatch.setattr(show, "frame_strip", lambda *a: titles.append(a[3]) or real(*a))
+    real = plots.frame_strip
+    monkeypatch.setattr(plots, "frame_strip", lambda *a: titles.append(a[3]) or real(*a))  # show imports it in main
     assert in_process(capsys, "piga-show", str(data), "--out", str(tmp_path / "s.png"), "--frames", "2").returncode == 0
     assert len(titles[0]) == show.MAX_TITLE and titles[0].endswith("...")
 

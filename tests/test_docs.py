@@ -248,3 +248,13 @@ def test_the_convergence_rules_quote_the_check() -> None:
            f"{100 * config.profile_tolerance:g}% better" in text
     assert f"predicted within {100 * config.flat_tolerance:g}% with it scaled by {PROFILE_FACTOR:.2f} and by " \
            f"1/{PROFILE_FACTOR:.2f}) is not determined" in text
+
+
+def test_the_diagnose_page_gives_the_fewest_frames_the_fit_takes() -> None:
+    """The page said 12 frames, and 12 were refused ("the fit needs 13")."""
+    from piga.diagnostics.diagnose import DiagnoseConfig
+    from piga.diagnostics.fit import MAX_DELAY, min_frames
+
+    text = " ".join((Path(__file__).resolve().parents[1] / "docs" / "commands" / "diagnose.md").read_text().split())
+    horizon = DiagnoseConfig().fit_horizon
+    assert (f"or {min_frames(horizon)} frames (the fit's windows of {horizon} steps after {MAX_DELAY} frames)" in text)

@@ -2675,9 +2675,9 @@ def test_a_checkpoint_onto_a_full_disk_is_enospc_not_torchs_runtime_error() -> N
     assert info.value.errno == errno.ENOSPC
 
 
-@pytest.mark.parametrize("value, needle", [(np.nan, "1 of its 1024 pixel values are not finite"),
-                                           (np.inf, "1 of its 1024 pixel values are not finite"),
-                                           (-0.5, "its values go below 0 (down to -0.5)")])
+@pytest.mark.parametrize("value, needle", [(np.nan, "frame 5 (counted from 0): 1 of its 1024 pixel values are not finite"),
+                                           (np.inf, "frame 5 (counted from 0): 1 of its 1024 pixel values are not finite"),
+                                           (-0.5, "frame 5 (counted from 0): its values go below 0 (down to -0.5)")])
 def test_import_refuses_a_float_stack_of_nonsense_pixels_naming_them(value: float, needle: str, tmp_path: Path,
                                                                      capsys: pytest.CaptureFixture[str]) -> None:
     """A NaN pixel was cast to a black frame (and two numpy warnings), exit 0; negative frames were called blank."""
@@ -2798,3 +2798,127 @@ def test_control_warns_that_a_baseline_run_did_not_learn(kind: str, baseline_run
     assert code == 0 and err.strip().splitlines() == [f"piga-control: warning: the run {run} did not learn ({why}); "
                                                       "these episodes score it all the same"], err
     assert baseline_did_not_learn(tmp_path, RunKind(kind)) is None  # no record: nothing to say
+
+
+def test_a_stderr_open_only_for_reading_is_taken_as_closed(tmp_path: Path) -> None:
+    """pyenv's shim, run with 2>&-, left its script open on descriptor 2, read-only: the first write failed the command."""
+    script = tmp_path / "held.txt"
+    script.write_text("a file a launcher left open\n")
+    with script.open() as read_only:
+        result = subprocess.run(["python", "-m", "piga.cli.collect", "--out", str(tmp_path / "d.h5"), "--sequences", "3",
+                                 "--steps", "4", "--image-size", "16", "--workers", "1"], stderr=read_only,
+                                stdout=subprocess.PIPE, text=True, env=ENV, timeout=120)
+    assert result.returncode == 0 and (tmp_path / "d.h5").exists(), result.stdout
+
+
+def test_a_report_folder_made_meanwhile_by_another_command_is_named(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Two diagnoses given one --out: the second ended in "OSError: [Errno 39] Directory not empty"."""
+    import errno
+
+    from piga.diagnostics import report
+    from piga.io.atomic import OutputExistsError
+
+    def busy(src: object, dst: object) -> None:
+        raise OSError(errno.ENOTEMPTY, "Directory not empty")
+
+    monkeypatch.setattr(report, "_write_files", lambda *args, **kwargs: None)
+    monkeypatch.setattr(report.os, "rename", busy)
+    with pytest.raises(OutputExistsError, match="appeared while writing; pass --overwrite"):
+        report.write_report(None, tmp_path / "g", "model", "data", "cmd")  # type: ignore[arg-type]
+    assert _listing(tmp_path) == []
+
+
+def test_a_strip_of_renders_that_overshoot_draws_without_matplotlibs_warnings(tmp_path: Path) -> None:
+    import logging
+    import warnings
+
+    from piga.evaluation.plots import frame_strip
+
+    frames = np.full((1, 2, 8, 8, 3), 0.5, np.float32)
+    frames[0, 0, 0, 0] = (-0.01, 1.2, 0.5)  # a video-lstm render a little outside [0, 1]
+    records: list[logging.LogRecord] = []
+    handler = logging.Handler()
+    handler.emit = records.append  # type: ignore[method-assign]
+    logging.getLogger("matplotlib").addHandler(handler)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            frame_strip(frames)
+    finally:
+        logging.getLogger("matplotlib").removeHandler(handler)
+    assert not [r for r in records if "Clipping" in r.getMessage()]
+
+
+@pytest.mark.parametrize("kind", ["LA", "CMYK"])
+def test_import_reads_gray_with_alpha_and_cmyk_frames(kind: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """An opaque gray+alpha PNG was "expected a 2-D gray or RGB image"; a CMYK JPEG's K was read as an alpha."""
+    from PIL import Image
+
+    folder = tmp_path / "frames"
+    folder.mkdir()
+    for i in range(12):
+        x = np.zeros((32, 32), np.uint8)
+        x[i : i + 6, 8:14] = 220
+        image = Image.fromarray(np.stack([x, np.full_like(x, 255)], -1), "LA") if kind == "LA" else \
+            Image.fromarray(x).convert("CMYK")
+        image.save(folder / f"f{i}.{'png' if kind == 'LA' else 'jpg'}")
+    (tmp_path / "u.csv").write_text("0.5\n" * 12)
+    code, _, err = run_in_process("piga-import", importer.main, str(folder), str(tmp_path / "u.csv"), "--dt", "0.05",
+                                  "--steps", "4", "--image-size", "16", "--out", str(tmp_path / "x.h5"), capsys=capsys)
+    assert code == 0, err
+    with h5py.File(tmp_path / "x.h5") as f:
+        assert f["frames"][0, 0].max() > 100  # the square, not a blank or a refusal
+
+
+def test_a_frame_name_with_a_superscript_digit_sorts() -> None:
+    from piga.data.importer import _natural_key
+
+    names = [Path(n) for n in ("f10.png", "f3\u00b2.png", "f2.png")]
+    assert [p.name for p in sorted(names, key=_natural_key)] == ["f2.png", "f3\u00b2.png", "f10.png"]
+
+
+def test_a_path_too_long_for_its_temporary_name_is_refused_up_front(tmp_path: Path) -> None:
+    """A path just under PATH_MAX failed at its write, through its longer temporary name: "[Errno 36] File name too
+    long" with 4,000 characters of path (diagnose's, after its work)."""
+    from piga.io.atomic import check_folder_target, check_writable_target
+
+    parts, length = [], len(str(tmp_path))
+    while length + 201 < 4080 - 100:
+        parts.append("d" * 200)
+        length += 201
+    path = Path(tmp_path, *parts, "x" * (4080 - length - 1))  # 4080 bytes: a path the system takes
+    assert len(os.fsencode(str(path))) == 4080
+    with pytest.raises(ValueError, match="would pass the 4096 that the system takes for a path"):
+        check_writable_target(path, overwrite=False)
+    with pytest.raises(ValueError, match="and with the files in it"):
+        check_folder_target(path)
+
+
+def test_the_own_training_file_must_still_be_the_runs(tiny_data: Path, tmp_path: Path) -> None:
+    """A run's data path is relative to where it trained; from another folder it named another file, whose effects
+    a diagnosis then read as the run's own."""
+    from piga.data.schema import fingerprint
+    from piga.io.runs import training_data_path
+
+    other = _variant(tiny_data, tmp_path / "other.h5", lambda f: f["actions"].__setitem__(..., -f["actions"][()]))
+    own = {"data": {"path": str(tiny_data), "fingerprint": fingerprint(tiny_data)}}
+    assert training_data_path(own) == str(tiny_data)
+    assert training_data_path({"data": {**own["data"], "path": str(other)}}) is None
+    assert training_data_path({"data": {"path": str(other)}}) == str(other)  # an old checkpoint keeps no fingerprint
+
+
+def test_a_folder_matplotlib_cannot_write_gets_a_temporary_one_quietly(tiny_data: Path, tmp_path: Path) -> None:
+    """A read-only HOME (or MPLCONFIGDIR) gave two matplotlib warnings on stderr."""
+    env = {**ENV, "MPLCONFIGDIR": str(tiny_data / "not-a-folder")}  # under a file: never writable
+    result = subprocess.run(["python", "-m", "piga.cli.show", str(tiny_data), "--out", str(tmp_path / "s.png")],
+                            capture_output=True, text=True, env=env, timeout=120)
+    assert result.returncode == 0 and result.stderr == "", result.stderr
+
+
+def test_a_half_spring_too_short_for_its_test_sequences_says_longer(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The advice was "use shorter sequences, a lower speed", which --half refuses and no flag sets, after "job sequence
+    18 failed"."""
+    line = refused("piga-collect", ["--system", "spring", "--half", "--sequences", "20", "--steps", "11", "--out",
+                                    str(tmp_path / "h.h5"), "--quiet"], capsys,
+                   "then reaches the bottom half within 11 frames", "use longer sequences (--steps)")
+    assert "job" not in line and not (tmp_path / "h.h5").exists()

@@ -32,10 +32,22 @@ def test_a_link_to_nothing_is_not_replaced_without_overwrite(tmp_path: Path) -> 
         check_folder_target(folder)
 
 
-def test_a_run_folder_name_that_is_not_utf8_in_this_locale_is_refused(tmp_path: Path) -> None:
-    """Under LC_ALL=C with PYTHONUTF8=0, 'rün' arrives as lone surrogates, which TensorBoard's writer cannot encode."""
+def test_a_run_folder_name_that_is_not_utf8_in_this_locale_is_refused(tmp_path: Path,
+                                                                     monkeypatch: pytest.MonkeyPatch) -> None:
+    """Under LC_ALL=C with PYTHONUTF8=0, 'rün' arrives as lone surrogates, which TensorBoard's writer cannot encode;
+    under a UTF-8 locale such a name holds bytes that are not UTF-8, and a UTF-8 locale is no advice. A report, which
+    has no TensorBoard logs, takes it."""
+    from piga.io import atomic
+
+    odd = tmp_path / "r\udcc3\udcbcn"
+    monkeypatch.setattr(atomic, "_locale_name", lambda: "C")
     with pytest.raises(ValueError, match="LC_ALL=C.UTF-8"):
-        check_folder_target(tmp_path / "r\udcc3\udcbcn")
+        check_folder_target(odd)
+    monkeypatch.setattr(atomic, "_locale_name", lambda: "C.UTF-8")
+    with pytest.raises(ValueError, match="holds bytes that are not UTF-8 text") as info:
+        check_folder_target(odd)
+    assert "locale" not in str(info.value)
+    assert check_folder_target(odd, logs=False) == odd
     assert check_folder_target(tmp_path / "rün") == tmp_path / "rün"
 
 

@@ -243,6 +243,7 @@ def run_cli(prog: str, main: Callable[[Sequence[str] | None], int | None], argv:
         print(f"{prog}: error: the current folder no longer exists (it was deleted or moved); cd to a folder that "
               "exists and run the command again", file=sys.stderr)
         sys.exit(1)
+    _writable_matplotlib_folder()
     stdout, sys.stdout = sys.stdout, _GuardedStdout(sys.stdout)
     _FLAGS.clear()  # this command's parsers fill it
     excepthook, threading.excepthook = threading.excepthook, _thread_errors_to_log(prog, argv)
@@ -297,15 +298,54 @@ def run_script(main: Callable[..., int | None], path: str) -> NoReturn:
     run_cli(Path(path).name, script)
 
 
+def _writable_matplotlib_folder() -> None:
+    """matplotlib keeps its settings and font cache in ``MPLCONFIGDIR``, else under ``~/.config`` and ``~/.cache``;
+    where it cannot write there (a read-only or missing HOME) it made a temporary folder and said so in two warnings
+    on stderr. piga gives it a temporary folder first, quietly, removed at exit. Nothing is created to find out."""
+    def writable(folder: Path) -> bool:  # the folder, or the nearest existing folder it would be made in
+        existing = next((p for p in (folder, *folder.parents) if p.exists()), None)
+        return existing is not None and existing.is_dir() and os.access(existing, os.W_OK | os.X_OK)
+
+    if "MPLCONFIGDIR" in os.environ:
+        folders = [Path(os.environ["MPLCONFIGDIR"])]
+    else:
+        try:
+            home = Path.home()
+        except (RuntimeError, KeyError):  # no HOME and no user entry
+            home = None
+        folders = [Path(os.environ[var]) / "matplotlib" if os.environ.get(var) else
+                   (home / sub / "matplotlib" if home is not None else None)
+                   for var, sub in (("XDG_CONFIG_HOME", ".config"), ("XDG_CACHE_HOME", ".cache"))]
+    if all(folder is not None and writable(folder) for folder in folders):
+        return
+    import atexit
+
+    try:
+        folder = tempfile.mkdtemp(prefix="piga-matplotlib-")
+    except OSError:  # no temporary folder either: matplotlib says what it can
+        return
+    os.environ["MPLCONFIGDIR"] = folder
+    atexit.register(shutil.rmtree, folder, True)
+
+
 def _open_closed_standard_streams() -> None:
     """Started with stdin, stdout or stderr closed (``>&-``), Python has ``None`` for it, and the next file
     opened would take its descriptor, so that a library's write to "stdout" would land in a data file. Each
-    closed one is opened on the null device, as daemons do: what it would have shown is dropped."""
+    closed one is opened on the null device, as daemons do: what it would have shown is dropped. So is a stdout or
+    stderr open for reading only (closed by ``2>&-`` under a launcher that then opened a file, as pyenv's shim
+    opens its script): the first write to it failed, and the command with it."""
+    try:
+        import fcntl
+    except ImportError:  # not POSIX: whether a descriptor is open is all that can be asked
+        fcntl = None  # type: ignore[assignment]
     for fd, name, mode in ((0, "stdin", "r"), (1, "stdout", "w"), (2, "stderr", "w")):
         try:
-            os.fstat(fd)
+            flags = fcntl.fcntl(fd, fcntl.F_GETFL) if fcntl is not None else os.fstat(fd) and os.O_RDWR
         except OSError:
             _null_onto(fd)
+        else:
+            if mode == "w" and flags & os.O_ACCMODE == os.O_RDONLY:
+                _null_onto(fd)
         if getattr(sys, name) is None:
             setattr(sys, name, open(fd, mode, closefd=False))  # noqa: SIM115 (for the process's life)
     with contextlib.suppress(AttributeError, ValueError):  # under LC_ALL=C (ASCII), '--help' has θ and ·: escape them

@@ -256,6 +256,8 @@ def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: 
     backend = connect_backend(args.ray)  # before the warning: a refused --ray is the one line on stderr
     if kind is RunKind.PIGA:
         warn_if_unconverged(PROG, args.model)
+    else:
+        _warn_if_did_not_learn(args.model, kind)
     jobs = [ControlJob(agent, EpisodeConfig(episodes=args.episodes, steps=args.steps, seed=args.seed, gravity_mult=m,
                                             goal_angle=mpc.goal_angle, torque_arrow=args.torque_arrow),
                        mpc, model_dir=args.model if agent != "oracle" else None, told=agent == "oracle" or not args.not_told)
@@ -340,6 +342,14 @@ def baseline_did_not_learn(run_dir: str | Path, kind: RunKind) -> str | None:
         return None
 
 
+def _warn_if_did_not_learn(run_dir: str, kind: RunKind) -> None:
+    """One warning line for a baseline run that did not learn (:func:`baseline_did_not_learn`), as for a piga run that
+    did not converge; after the command's refusals, so that a refused command prints one line."""
+    if (why := baseline_did_not_learn(run_dir, kind)) is not None:
+        print(f"{PROG}: warning: the run {run_dir} did not learn ({why}); these episodes score it all the same",
+              file=sys.stderr)
+
+
 def _baseline(args: argparse.Namespace, kind: RunKind, mpc: MPCConfig, outputs: list[Path], argv: Sequence[str] | None,
               given: set[str]) -> int:
     """A baseline run ("planet" or "ddpg") on the same episodes, starts, seeds and success definition as piga.
@@ -379,9 +389,6 @@ def _baseline(args: argparse.Namespace, kind: RunKind, mpc: MPCConfig, outputs: 
                         "the CEM options set the piga agent's and the oracle's planner")
     if kind is RunKind.PLANET:  # after the refusals of the command line: this reads the checkpoint
         check_planet_frames(args.model)
-    if (why := baseline_did_not_learn(args.model, kind)) is not None:  # as a piga run that did not converge is
-        print(f"{PROG}: warning: the run {args.model} did not learn ({why}); these episodes score it all the same",
-              file=sys.stderr)
     if args.sweep or args.gravity_mult != 1:
         print(f"note: the {kind.value} agent runs as trained: it cannot be told that gravity changed")
     if args.sweep:
@@ -400,6 +407,7 @@ def _baseline(args: argparse.Namespace, kind: RunKind, mpc: MPCConfig, outputs: 
                         "sees none, and no --video is written: drop --torque-arrow")
     split = bool(args.ray) or args.workers > 1 and args.episodes > 1  # latent CEM takes ~0.5 s a step: use the cores
     backend = connect_backend(args.ray) if split else None  # before the warning: a refused --ray is the one line
+    _warn_if_did_not_learn(args.model, kind)
     if kind is RunKind.DDPG and sees_frames and trained_arrow is not None and trained_arrow != args.torque_arrow:
         print(f"{PROG}: warning: {args.model} was trained with the torque arrow {'shown' if trained_arrow else 'hidden'}; "
               f"these episodes {'show' if args.torque_arrow else 'hide'} it", file=sys.stderr)

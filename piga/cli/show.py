@@ -10,7 +10,6 @@ import numpy as np
 from piga.cli.common import ArgumentParser, file_path, given_options, positive_int, run_cli, typed_text
 from piga.data.schema import (SPLITS, check_actions_file, check_frames_have_signal, inspect_dataset, read_rows,
                               split_indices)
-from piga.evaluation.plots import check_figure_target, frame_strip, save_figure
 from piga.io.resources import FIGURE_DISK_BYTES, check_disk
 from piga.io.atomic import check_not_an_input
 
@@ -34,6 +33,8 @@ MAX_TITLE = 200
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    from piga.evaluation.plots import check_figure_target, frame_strip, save_figure  # matplotlib after run_cli's set-up
+
     parser = build_parser()
     args = parser.parse_args(argv)
     written = given_options(parser, argv)

@@ -25,11 +25,11 @@ from typing import Any
 import numpy as np
 from tqdm.auto import tqdm
 
-from envs.scenes import SceneConfig, check_forces_visible, generate_sequence, scene_config, state_names
+from envs.scenes import SceneConfig, SceneError, check_forces_visible, generate_sequence, scene_config, state_names
 from piga.io.atomic import check_writable_target
 from piga.data.collect import check_collect_sizes, sequence_rng, split_counts
 from piga.data.schema import SPLITS, DatasetWriter
-from piga.io.pool import run_pool
+from piga.io.pool import JobFailed, run_pool
 from piga.io.choices import check_types
 
 #: Frames per sequence by scene: L + T_pred + T_ext of the chosen windows (docs/systems.md).
@@ -118,8 +118,13 @@ def collect_scene(config: SceneCollectConfig, out: str | Path, overwrite: bool =
                     bar.update(1)
 
                 # one batch per farm, so that memory holds one batch (the runner keeps a farm's results)
-                run_pool(one, range(start, stop), config.workers, progress=False, on_result=keep,
-                         names=[f"sequence {i}" for i in range(start, stop)])
+                try:
+                    run_pool(one, range(start, stop), config.workers, progress=False, on_result=keep,
+                             names=[f"sequence {i}" for i in range(start, stop)])
+                except JobFailed as failed:  # a scene's own refusal (no start fits) is the scene's, not a job's
+                    if isinstance(failed.cause, SceneError):
+                        raise failed.cause from None
+                    raise
                 if start == 0:  # forces too weak to show: refused before more is simulated (the file is not kept)
                     check_forces_visible(scene, states)
                 writer.write(start, frames, np.zeros((stop - start, t, 0), np.float32), states)

@@ -92,7 +92,7 @@ class ImportResult:
 
 
 def _natural_key(path: Path) -> list[int | str]:
-    return [int(part) if part.isdigit() else part.lower() for part in re.split(r"(\d+)", path.name)]
+    return [int(part) if part.isdecimal() else part.lower() for part in re.split(r"(\d+)", path.name)]
 
 
 def frame_files(folder: str | Path) -> list[Path]:
@@ -150,7 +150,7 @@ def _read_recording(path: str | Path, size: int) -> tuple[np.ndarray, int]:
             try:
                 frames.append(scene_to_gray(frame, size))
             except ValueError as exc:
-                raise ValueError(f"{p}: {exc}") from None
+                raise ValueError(f"{p}: frame {len(frames)} (counted from 0): {exc}") from None
     if not frames:
         raise ValueError(f"{p}: the video has no frames")
     return np.stack(frames), side  # (F, size, size)

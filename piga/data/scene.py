@@ -22,21 +22,21 @@ GRAY_WEIGHTS = np.array([0.2125, 0.7154, 0.0721])
 def scene_to_gray(img: np.ndarray, size: int) -> np.ndarray:
     """A gray or RGB(A) picture of any size, as the env would see it: uint8 (size, size).
 
-    An opaque alpha channel is dropped. A picture that is not uint8 is scaled by its own maximum to 0..255.
+    An opaque alpha channel (of gray or RGB) is dropped. A picture that is not uint8 is scaled by its own maximum to 0..255.
 
     Raises:
         ValueError: ``img`` is not a 2-D gray or RGB(A) picture of at least 2x2 pixels, it has transparent pixels
             (what the camera would see behind them is unknown), or (not uint8) values that are not finite or below 0.
     """
     img = np.asarray(img)
-    if img.ndim == 3 and img.shape[2] == 4:
-        alpha = img[..., 3]
+    if img.ndim == 3 and img.shape[2] in (2, 4):  # gray or RGB, and alpha (a PNG's "LA" or "RGBA")
+        alpha = img[..., -1]
         opaque = np.iinfo(alpha.dtype).max if np.issubdtype(alpha.dtype, np.integer) else 1.0
         if (see_through := int(np.count_nonzero(alpha < opaque))) > 0:
             raise ValueError(f"{see_through} of its {alpha.size} pixels are transparent (alpha below {opaque:g}), and "
                              "what the camera would see behind them is unknown; flatten it onto the scene's background "
                              "first")
-        img = img[..., :3]
+        img = img[..., :-1]
     if img.ndim == 3 and img.shape[2] == 1:
         img = img[..., 0]
     if img.ndim not in (2, 3) or (img.ndim == 3 and img.shape[2] != 3):
@@ -104,7 +104,19 @@ def read_image(path: str | os.PathLike[str]) -> np.ndarray:
         if len(image) > 1:
             raise ValueError(f"{p}: an animation of {len(image)} frames; give one image")
         image = image[0]
+    if image.ndim == 3 and image.shape[2] == 4 and _pillow_mode(p) == "CMYK":  # ink, not RGB and alpha
+        image = np.asarray(iio.imread(p, mode="RGB"))
     return image
+
+
+def _pillow_mode(path: Path) -> str | None:
+    """Pillow's mode of an image file ("RGB", "CMYK", ...), or None where Pillow does not read it."""
+    import imageio.v3 as iio
+
+    try:
+        return iio.immeta(path, plugin="pillow").get("mode")
+    except Exception:  # not Pillow's format: tifffile and the others read no CMYK here
+        return None
 
 
 def _pillow_limit() -> str:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import errno
 import math
 import os
 import shutil
@@ -10,8 +11,8 @@ from typing import Any
 
 import numpy as np
 
-from piga.io.atomic import (atomic_output, check_folder_target, check_writable_target, missing_folders, partial_path,
-                            remove_empty_folders, write_json, written_together)
+from piga.io.atomic import (OutputExistsError, atomic_output, check_folder_target, check_writable_target,
+                            missing_folders, partial_path, remove_empty_folders, write_json, written_together)
 from piga.diagnostics.results import Diagnosis, VisionSummary
 from piga.diagnostics.twin import MEASURABLE_GAP
 from piga.evaluation.episodes import EpisodeSummary, summary_markdown
@@ -305,7 +306,7 @@ def check_report_target(out: str | os.PathLike[str], overwrite: bool) -> Path:
     from piga.io.resources import FIGURE_DISK_BYTES, check_disk
 
     folder = Path(out)
-    check_folder_target(folder)
+    check_folder_target(folder, logs=False)  # a report, no TensorBoard logs: any name the filesystem takes
     if folder.is_dir():
         for name in REPORT_FILES:
             check_writable_target(folder / name, overwrite)
@@ -349,7 +350,12 @@ def write_report(d: Diagnosis, out: str | os.PathLike[str], model: str, data: st
     try:
         tmp.mkdir()
         _write_files(d, tmp, model, data, command, overwrite=True)
-        os.rename(tmp, folder)
+        try:
+            os.rename(tmp, folder)
+        except OSError as exc:  # another command made it meanwhile (a rename never replaces a folder with files)
+            if exc.errno not in (errno.ENOTEMPTY, errno.EEXIST):
+                raise
+            raise OutputExistsError(f"{folder} appeared while writing; pass --overwrite to replace it") from None
     except BaseException:  # refused or interrupted: the parents made for it go too, while empty
         shutil.rmtree(tmp, ignore_errors=True)
         remove_empty_folders(made)

@@ -61,6 +61,12 @@ def check_figure_target(path: str | os.PathLike[str], overwrite: bool, flag: str
     return check_writable_target(target, overwrite)
 
 
+def _in_range(img: np.ndarray) -> np.ndarray:
+    """A float image clipped to [0, 1], where a model's renders can overshoot a little: matplotlib clips RGB itself,
+    but warns on every image (10 lines for a video-lstm run's strip)."""
+    return img if img.dtype == np.uint8 else np.clip(img, 0, 1)
+
+
 def frame_strip(
     frames: np.ndarray, row_labels: list[str] | None = None, col_labels: list[str] | None = None, title: str | None = None
 ) -> Figure:
@@ -71,7 +77,7 @@ def frame_strip(
         for c in range(cols):
             ax = axes[r, c]
             img = frames[r, c]
-            ax.imshow(img, cmap="gray" if img.ndim == 2 else None, vmin=0, vmax=255 if img.dtype == np.uint8 else 1)
+            ax.imshow(_in_range(img), cmap="gray" if img.ndim == 2 else None, vmin=0, vmax=255 if img.dtype == np.uint8 else 1)
             ax.set_xticks([])
             ax.set_yticks([])
             if r == 0 and col_labels:
@@ -120,7 +126,7 @@ def openloop_figure(real: np.ndarray, imagined: np.ndarray, rewards: np.ndarray,
         for row, (images, label) in enumerate(((real, f"real #{b}"), (imagined, f"model #{b}"))):
             for col, t in enumerate(steps):
                 ax = fig.add_subplot(grid[2 * b + row, col])
-                ax.imshow(images[b, t], cmap="gray", vmin=0, vmax=1)
+                ax.imshow(_in_range(images[b, t]), cmap="gray", vmin=0, vmax=1)
                 ax.set_xticks([])
                 ax.set_yticks([])
                 if b == 0 and row == 0:
@@ -154,7 +160,7 @@ def templates_figure(contents: np.ndarray, masks: np.ndarray, background: np.nda
         obj = c * (m[..., None] if c.ndim == 3 else m)
         for j, (img, title) in enumerate([(c, "content c"), (m, "mask m (softmax)"), (obj, "m⊙c")]):
             ax = axes[i, j]
-            ax.imshow(img, cmap="gray" if img.ndim == 2 else None, vmin=0, vmax=1)
+            ax.imshow(_in_range(img), cmap="gray" if img.ndim == 2 else None, vmin=0, vmax=1)
             ax.set_xticks([])
             ax.set_yticks([])
             ax.set_title(("background: " if i == n else f"object {i}: ") + title, fontsize=8)

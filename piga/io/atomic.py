@@ -66,20 +66,26 @@ def check_not_an_input(target: str | os.PathLike[str], inputs: dict[str, str | o
             raise ValueError(f"{flag} {target} is the {what} ({path}), which it would replace; write to another path")
 
 
-def check_folder_target(folder: str | os.PathLike[str], flag: str = "--out") -> Path:
+def check_folder_target(folder: str | os.PathLike[str], flag: str = "--out", logs: bool = True) -> Path:
     """Fails early, before any work, if the output folder ``folder`` (given as ``flag``) cannot be made: it is a
-    file, or a file stands where one of its missing parents would go.
+    file, or a file stands where one of its missing parents would go. ``logs``: TensorBoard writes under it, so its
+    name must be UTF-8 text.
 
     Raises:
         NotADirectoryError: naming the file in the way.
     """
     path = Path(folder)
-    _check_name_lengths(path, flag)
+    _check_name_lengths(path, flag, folder=True)
     try:
         str(path).encode("utf-8")
     except UnicodeEncodeError:  # TensorBoard's writer encodes its folder's name as UTF-8, strictly
-        raise ValueError(f"{flag} {path}: the name is not UTF-8 text in this locale ({_locale_name()}), and a run's "
-                         "logs cannot be written under it; use an ASCII name or a UTF-8 locale (LC_ALL=C.UTF-8)") from None
+        if logs and "utf" in _locale_name().lower().replace("-", ""):  # the bytes themselves are not UTF-8
+            raise ValueError(f"{flag} {path}: the name holds bytes that are not UTF-8 text, and a run's logs "
+                             "(TensorBoard's) cannot be written under it; use a UTF-8 or ASCII name") from None
+        if logs:
+            raise ValueError(f"{flag} {path}: the name is not UTF-8 text in this locale ({_locale_name()}), and a run's "
+                             "logs cannot be written under it; use an ASCII name or a UTF-8 locale (LC_ALL=C.UTF-8)"
+                             ) from None
     if path.is_symlink() and not path.exists():
         raise NotADirectoryError(f"{flag} {path} is a link to {os.readlink(path)}, which does not exist; remove the "
                                  "link or make its target first")
@@ -94,7 +100,7 @@ def check_folder_target(folder: str | os.PathLike[str], flag: str = "--out") -> 
     return path
 
 
-def _check_name_lengths(path: Path, flag: str | None = None) -> None:
+def _check_name_lengths(path: Path, flag: str | None = None, folder: bool = False) -> None:
     """Refuses a path with a name (the file's or a folder's on the way) longer than the filesystem takes, before any
     other look at the path: each would raise ENAMETOOLONG, with the whole path in the message.
 
@@ -109,8 +115,28 @@ def _check_name_lengths(path: Path, flag: str | None = None) -> None:
     for part in path.parts:  # 255 (Linux's NAME_MAX) first: a longer folder name makes even is_dir() raise
         if len(os.fsencode(part)) > 255:
             refuse(part, 255)
-    if len(os.fsencode(path.name)) > (limit := _name_max(next((p for p in path.parents if p.is_dir()), Path(".")))):
+    existing = next((p for p in path.parents if p.is_dir()), Path("."))
+    if len(os.fsencode(path.name)) > (limit := _name_max(existing)):
         refuse(path.name, limit)
+    # the whole path, as its temporary sibling spells it (and, for a folder, with room for the files written in it)
+    longest = len(os.fsencode(str(path))) - len(os.fsencode(path.name)) + len(os.fsencode(_partial_prefix(path))) + 10 \
+        + (FOLDER_CONTENT_ROOM if folder else 0)
+    if longest >= (limit := _path_max(existing)):
+        raise ValueError(f"{flag + ' ' if flag else ''}{str(path)[:40]}...: the path is {len(os.fsencode(str(path)))} "
+                         f"bytes; written through its temporary name{' and with the files in it' if folder else ''}, it "
+                         f"would pass the {limit} that the system takes for a path; give a shorter one")
+
+
+#: Bytes a folder target's path keeps free for the files written in it (``/plots/free_run_angles.png`` and such).
+FOLDER_CONTENT_ROOM = 64
+
+
+def _path_max(folder: Path) -> int:
+    """The longest path, in bytes with its terminating NUL, that the system takes (4096 where it does not say)."""
+    try:
+        return os.pathconf(folder if str(folder) else ".", "PC_PATH_MAX")
+    except (OSError, ValueError):
+        return 4096
 
 
 def _locale_name() -> str:

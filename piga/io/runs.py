@@ -149,9 +149,24 @@ def training_steps(checkpoint: dict[str, Any] | None) -> int | None:
 
 
 def training_data_path(checkpoint: dict[str, Any] | None) -> str | None:
-    """The training file that the checkpoint names, if it is still there (else None)."""
-    path = ((checkpoint or {}).get("data") or {}).get("path")
-    return path if path and os.path.exists(path) else None
+    """The training file that the checkpoint names, if it is still there and still the run's own (else None).
+
+    The path is as training was given it, relative to the folder it ran in; from another folder it can name another
+    file (a diagnosis read its "own training file" reference off a file of other effects). So the file must also
+    have the fingerprint the checkpoint keeps (:func:`piga.data.schema.fingerprint`), where it keeps one."""
+    data = (checkpoint or {}).get("data") or {}
+    path = data.get("path")
+    if not (isinstance(path, str) and path and os.path.isfile(path)):
+        return None
+    if "fingerprint" in data:
+        from piga.data.schema import fingerprint
+
+        try:
+            if fingerprint(path) != data["fingerprint"]:
+                return None
+        except (OSError, ValueError, KeyError):  # not a data file any more
+            return None
+    return path
 
 
 def training_blank_mse(model: PhysicsModel, checkpoint: dict[str, Any] | None, max_sequences: int = 64) -> float | None:

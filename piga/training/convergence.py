@@ -118,7 +118,8 @@ def _fix(planned: int, steps: int) -> str:
         return ("train longer: continue this run with --resume and a larger --max-minutes (it took "
                 f"{steps} of {planned} planned steps), or give it more data")
     return ("train longer (--epochs or a larger --max-minutes, or more data), or continue this run with --resume "
-            f"and a larger --epochs (it took {steps} of {planned} planned steps)")
+            f"and a larger --epochs or --budget-steps, whichever it was started with (it took {steps} of {planned} "
+            "planned steps)")
 
 
 #: A background MSE below one gray level squared: the held-out frames hardly differ from the background.
