@@ -204,7 +204,7 @@ def test_summary_markdown_has_a_row_per_summary() -> None:
     s = {"agent": "oracle", "gravity_mult": 1.0, "goal_angle": 0.0, "episodes": 2, "success_rate": 0.5, "mean_return": -200.0,
          "final_angle_error_mean": 0.01, "time_to_goal_steps_median": None, "plan_ms_median": 9.0, "plan_ms_p95": 12.0}
     table = summary_markdown([EpisodeSummary.from_dict(s), EpisodeSummary.from_dict({**s, "agent": "piga"})]).splitlines()
-    assert len(table) == 4 and "| oracle | 1.00 | 0.00 | 2 | 50% | -200.0 | 0.57 | – | 9.00 | 12.00 |" == table[2]
+    assert len(table) == 4 and "| oracle | 1 | 0.00 | 2 | 50% | -200.0 | 0.57 | – | 9.00 | 12.00 |" == table[2]
 
 
 def test_sweep_cli_bad_input(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

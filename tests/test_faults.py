@@ -2922,3 +2922,88 @@ def test_a_half_spring_too_short_for_its_test_sequences_says_longer(tmp_path: Pa
                                     str(tmp_path / "h.h5"), "--quiet"], capsys,
                    "then reaches the bottom half within 11 frames", "use longer sequences (--steps)")
     assert "job" not in line and not (tmp_path / "h.h5").exists()
+
+
+@pytest.mark.parametrize("text, needle", [("1:1e308:1e-308", "gives more than 1000 values"),
+                                          ("1:1.00000000001:1e-11", "its step repeats multipliers at the 10 decimals")])
+def test_a_sweep_range_too_long_or_too_fine_is_refused(text: str, needle: str, tiny_piga_run: Path,
+                                                       capsys: pytest.CaptureFixture[str]) -> None:
+    """1:1e308:1e-308 was an internal error (OverflowError); a step below 1e-10 gave duplicate multipliers."""
+    refused("piga-control", ["--model", str(tiny_piga_run), "--episodes", "1", "--steps", "20", "--sweep", text,
+                             "--quiet"], capsys, needle)
+
+
+@pytest.mark.parametrize("out", [".", ".."])
+def test_control_refuses_a_folder_for_out(out: str, capsys: pytest.CaptureFixture[str]) -> None:
+    """--out . was "PosixPath('.') has an empty name"; --out .. wrote the hidden files ./...json and ./...md."""
+    refused("piga-control", ["--oracle", "--episodes", "1", "--steps", "20", "--out", out], capsys,
+            "expected a file name, got the folder", code=2)
+
+
+def test_the_table_gives_the_gravity_multiplier_as_the_command_line_does() -> None:
+    from piga.evaluation.episodes import EpisodeSummary, summary_markdown
+
+    fields = {f: 0.0 for f in EpisodeSummary.__dataclass_fields__ if f != "labels"}
+    rows = [EpisodeSummary(**{**fields, "episodes": 1, "gravity_mult": m}) for m in (0.001, 1.001, 1.002)]
+    cells = [line.split("|")[2].strip() for line in summary_markdown(rows).splitlines()[2:]]
+    assert cells == ["0.001", "1.001", "1.002"]
+
+
+def test_a_not_told_run_and_a_sac_run_are_named_so_in_their_outputs(tiny_piga_run: Path, baseline_runs: dict[str, Path],
+                                                                     tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """OUT.json of --not-told read as a told run's; a SAC or DrQ-v2 run was called "ddpg" (all are piga-baseline ddpg runs)."""
+    from piga.control.jobs import agent_name
+
+    out = tmp_path / "nt"
+    code, stdout, err = run_in_process("piga-control", control.main, "--model", str(tiny_piga_run), "--episodes", "1",
+                                       "--steps", "20", "--gravity-mult", "1.4", "--not-told", "--candidates", "8",
+                                       "--iterations", "1", "--horizon", "2", "--quiet", "--out", str(out), capsys=capsys)
+    assert code == 0, err
+    assert json.loads(out.with_suffix(".json").read_text())["agent"] == f"piga (not told) ({tiny_piga_run})"
+    assert f"piga (not told) ({tiny_piga_run}), gravity x1.4" in stdout
+    run = _run_copy(baseline_runs["ddpg"], tmp_path / "sac", _edit_record(lambda r: r["ddpg"].__setitem__("algo", "sac")))
+    assert agent_name("ddpg", str(run)) == "sac" and agent_name("ddpg", str(baseline_runs["ddpg"])) == "ddpg"
+    assert agent_name("planet", str(baseline_runs["planet"])) == "planet"
+
+
+@pytest.mark.parametrize("edit", [lambda m: m["open_loop"].__setitem__("context", float("inf")),
+                                  lambda m: m["open_loop"].__setitem__("frame_mse", [])])
+def test_an_edited_planet_metrics_record_tells_nothing_and_says_nothing(edit: Callable[[dict[str, Any]], None],
+                                                                        baseline_runs: dict[str, Path], tmp_path: Path,
+                                                                        recwarn: pytest.WarningsRecorder) -> None:
+    """context: Infinity was an internal error (OverflowError); an empty list printed two numpy warnings."""
+    from piga.cli.control import baseline_did_not_learn
+    from piga.io.checkpoint import RunKind
+
+    run = _run_copy(baseline_runs["planet"], tmp_path / "run")
+    metrics = json.loads((run / "metrics.json").read_text())
+    edit(metrics)
+    (run / "metrics.json").write_text(json.dumps(metrics))
+    assert baseline_did_not_learn(run, RunKind.PLANET) is None
+    assert not [w for w in recwarn if issubclass(w.category, RuntimeWarning)]
+
+
+def test_resume_takes_a_default_the_run_was_started_at(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """--resume --encoder-precision auto on a run started without it was "drop --encoder-precision" (the record holds
+    the precision resolved); the run was started at auto all the same."""
+    out = str(tmp_path / "drq")
+    argv = ["ddpg", "--algo", "drqv2", "--obs", "pixels", "--out", out, "--steps", "200", "--eval-every", "200",
+            "--eval-episodes", "1", "--learning-starts", "100", "--buffer-size", "1000", "--batch-size", "8", "--threads",
+            "1", "--quiet"]
+    assert_sb3_run_finished(*run_in_process("piga-baseline", baseline.main, *argv, capsys=capsys)[::2])
+    code, _, err = run_in_process("piga-baseline", baseline.main, *argv, "--resume", "--encoder-precision", "auto",
+                                  capsys=capsys)
+    assert "recipe" not in err, err
+    assert_sb3_run_finished(code, err)
+
+
+def test_control_writes_its_outputs_for_a_non_ascii_model_under_a_c_locale(tiny_piga_run: Path, tmp_path: Path) -> None:
+    """Under LC_ALL=C with PYTHONUTF8=0 the model's name held lone surrogates, and OUT.md failed to encode after the
+    episodes ("surrogates not allowed")."""
+    run = Path(shutil.copytree(tiny_piga_run, tmp_path / "d\u00e9 mo"))
+    env = {**ENV, "LC_ALL": "C", "LANG": "C", "PYTHONUTF8": "0"}
+    result = subprocess.run(["python", "-m", "piga.cli.control", "--model", str(run), "--episodes", "1", "--steps", "20",
+                             "--candidates", "8", "--iterations", "1", "--horizon", "2", "--quiet", "--out",
+                             str(tmp_path / "o")], capture_output=True, env=env, timeout=180)
+    assert result.returncode == 0, result.stderr
+    assert f"piga (d\u00e9 mo" in (tmp_path / "o.md").read_text(encoding="utf-8").replace(str(tmp_path) + "/", "")

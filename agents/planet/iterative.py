@@ -79,7 +79,13 @@ def check_iterative_data(info: DatasetInfo, config: IterativeConfig) -> PixelPen
 def rounds_collected(run_dir: str | Path) -> int:
     """Rounds whose episodes ``run_dir/collected.h5`` holds (0 without one)."""
     path = Path(run_dir) / COLLECTED
-    return int(inspect_dataset(path).attrs["rounds"]) if path.exists() else 0
+    if not path.exists():
+        return 0
+    try:
+        return int(inspect_dataset(path).attrs["rounds"])
+    except (DataFormatError, KeyError, TypeError, ValueError) as exc:  # truncated or edited
+        raise DataFormatError(f"{path}, the run's collected episodes, cannot be read ({' '.join(str(exc).split())[:120]}): "
+                              "restore it, or train the run again with --overwrite") from None
 
 
 def collect_round(model: WorldModel, env_config: PixelPendulumConfig, config: IterativeConfig, planner: LatentPlannerConfig,
@@ -183,7 +189,8 @@ def train_planet_iterative(
         if done < r:
             if _step_of(run_dir) > target - iterative.steps_per_round:
                 raise ValueError(f"{collected} holds {done} rounds, but {run_dir / CHECKPOINT} was trained past round {r - 1}; "
-                                 "the run cannot continue exactly (was collected.h5 removed?)")
+                                 "the run cannot continue exactly (was collected.h5 removed?): restore it, or train the "
+                                 "run again with --overwrite")
             new = collect_round(load_planet(run_dir)[0], env_config, iterative, planner or LatentPlannerConfig(), config.seed, r,
                                 info.steps, progress)
             _append(collected, info, new, r, command)

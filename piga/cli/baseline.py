@@ -283,9 +283,12 @@ def _refuse_recipe_changes(args: Any, record: dict[str, Any], run_dir: Path, arg
     # and so may the run's own settings, as its record holds them (--seed 0 on a run of seed 0)
     sections = ("rssm", "train", "iterative") if kind == "planet" else ("ddpg",)
     own = {k: v for section in sections if isinstance(record.get(section), dict) for k, v in record[section].items()}
+    # a value at its default, where the starting command gave none, is the one the run started with (--encoder-precision
+    # auto on a run started without it, which its record holds resolved)
     changed = [name for name, value in vars(args).items()
                if name not in skip and (value != defaults[name] or name in given)
-               and not (name in started and started[name] == value) and not (name in own and own[name] == value)]
+               and not (name in started and started[name] == value) and not (name in own and own[name] == value)
+               and not (record.get("command") and name not in started and value == defaults[name])]
     if changed:
         raise PigaError(f"--resume keeps the run's recipe; drop {', '.join('--' + c.replace('_', '-') for c in changed)}")
     recorded = record.get("data")
@@ -583,7 +586,8 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
         checkpoint_bytes = buffer_bytes = _ddpg_checkpoint_bytes(config, ae_config.latent_size)
     check_run_disk(run_dir, checkpoint_bytes, f"{config.algo.upper()}'s run (a replay buffer of {config.buffer_size})")
     # SB3 allocates the buffer untouched and fills it as the run goes: a buffer beyond the memory would be killed hours in
-    check_memory(buffer_bytes, f"{config.algo.upper()}'s replay buffer of {config.buffer_size} (--buffer-size)")
+    source = f"as {run_dir / 'config.json'} gives it" if args.resume else "--buffer-size"  # a resume takes the record's
+    check_memory(buffer_bytes, f"{config.algo.upper()}'s replay buffer of {config.buffer_size} ({source})")
     autoencoder = run_dir / AUTOENCODER if config.obs == "latent" else None
     written: list[int] = []
 

@@ -119,7 +119,7 @@ def file_path(text: str) -> str:
     """argparse type: the path of a file to write. One that ends in a separator names a folder, which the
     file system would otherwise quietly drop (``x.h5/`` would write ``x.h5``)."""
     text = nonempty_text(text)
-    if text.endswith(("/", os.sep)):
+    if text.endswith(("/", os.sep)) or Path(text).name in ("", ".", ".."):  # ".", "..": folders too
         raise argparse.ArgumentTypeError(f"expected a file name, got the folder {text!r}; name the file to write in it")
     return text
 

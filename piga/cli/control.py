@@ -18,7 +18,7 @@ from envs.pendulum import MAX_GRAVITY, MIN_GRAVITY, PixelPendulumConfig
 from piga.io.atomic import atomic_output, check_writable_target, write_json, written_together
 from piga.cli.common import (ArgumentParser, PigaError, add_ray_option, command_line, connect_backend, file_path,
                              given_options, int_up_to, positive_float, positive_int, run_cli, seed_int,
-                             warn_if_unconverged)
+                             typed_text, warn_if_unconverged)
 from piga.control.episodes import EpisodeConfig, parse_range, run_episodes
 from piga.evaluation.episodes import summary_markdown
 from piga.io.checkpoint import RunKind
@@ -206,12 +206,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     else:
         agent = PigaMPCAgent(model, mpc, gravity_mult=told, keep_trace=bool(args.video))
         config = replace(config, frame_stack=agent.input_frames)
-        label = f"piga ({args.model})"
+        label = f"piga{' (not told)' if args.not_told else ''} ({typed_text(args.model)})"  # as a sweep's rows say it
         on_episode_end = _keep_first_trace(agent, first_trace) if args.video else None
     result = run_episodes(agent, config, progress=not args.quiet, record=1 if args.video else 0,
                           on_episode_end=on_episode_end)
     s = result.summary
-    print(f"{label}, gravity x{args.gravity_mult:g}{' (not told)' if args.not_told else ''}, goal {args.goal_angle:g} deg: "
+    print(f"{label}, gravity x{args.gravity_mult:g}, goal {args.goal_angle:g} deg: "
           f"success {100 * s.success_rate:.0f}% of {s.episodes}, mean return {s.mean_return:.1f}, final angle error {math.degrees(s.final_angle_error_mean):.2f} deg, "
           f"plan {s.plan_ms_median:.1f} ms median / {s.plan_ms_p95:.1f} ms p95")
     if args.video:
@@ -248,6 +248,9 @@ def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: 
         raise PigaError(f"--sweep: {exc}") from None
     if multipliers[0] <= 0:
         raise PigaError(f"--sweep: gravity multipliers must be > 0 (at 10 decimals), got {args.sweep}")
+    if len(set(multipliers)) < len(multipliers):  # a step below the 10 decimals kept
+        raise PigaError(f"--sweep {args.sweep}: its step repeats multipliers at the 10 decimals kept; give a step of "
+                        "1e-10 or more")
     for multiplier in (multipliers[0], multipliers[-1]):  # here: in a job it failed after the others had run
         _check_env_gravity("--sweep", multiplier)
     if kind is RunKind.PIGA:
@@ -258,6 +261,7 @@ def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: 
         warn_if_unconverged(PROG, args.model)
     else:
         _warn_if_did_not_learn(args.model, kind)
+        print(f"note: the {kind.value} agent runs as trained: it cannot be told that gravity changed")
     jobs = [ControlJob(agent, EpisodeConfig(episodes=args.episodes, steps=args.steps, seed=args.seed, gravity_mult=m,
                                             goal_angle=mpc.goal_angle, torque_arrow=args.torque_arrow),
                        mpc, model_dir=args.model if agent != "oracle" else None, told=agent == "oracle" or not args.not_told)
@@ -269,7 +273,7 @@ def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: 
     if outputs:
         from piga.evaluation.plots import sweep_figure
 
-        _write_outputs(outputs, {"model": args.model, "multipliers": multipliers, "results": [r.to_dict() for r in results]},
+        _write_outputs(outputs, {"model": typed_text(args.model), "multipliers": multipliers, "results": [r.to_dict() for r in results]},
                        f"# {PROG} --sweep\n\nCommand: `{command_line(PROG, argv)}`\n\n![sweep]({outputs[2].name})\n\n{table}",
                        args.overwrite, figure=lambda: sweep_figure([s.to_dict() for s in summaries]))
         print(f"wrote {', '.join(map(str, outputs))}")
@@ -325,20 +329,28 @@ def baseline_did_not_learn(run_dir: str | Path, kind: RunKind) -> str | None:
     :func:`agents.planet.train.did_not_learn`; DDPG, SAC, DrQ-v2: its evaluation return never reached its mark); None
     when it learned, or when the record cannot tell (a run stopped before its end has none)."""
     import json
+    import warnings
 
     try:
         metrics = json.loads((Path(run_dir) / "metrics.json").read_text())
         if kind is RunKind.PLANET:
             from agents.planet.train import did_not_learn
 
-            return did_not_learn(metrics["open_loop"])
+            check = metrics["open_loop"]
+            lists = [check[key] for key in ("frame_mse", "mean_frame_mse", "reward_abs_error", "zero_reward_abs_error")]
+            numbers = [float(check["context"]), *(float(v) for values in lists for v in values)]
+            if not all(lists) or not all(map(math.isfinite, numbers)):  # an edited record: it tells nothing
+                return None
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                return did_not_learn(check)
         from agents.sb3.train import first_step_reaching
 
         mark = float(metrics["learned_return"])
         if first_step_reaching(metrics["learning_curve"], mark) is not None:
             return None
         return f"its evaluation return never reached {mark:g} in {metrics['steps']} env steps"
-    except (OSError, ValueError, KeyError, TypeError, IndexError):
+    except (OSError, ValueError, KeyError, TypeError, IndexError, ArithmeticError):  # an edited record tells nothing
         return None
 
 
@@ -389,8 +401,6 @@ def _baseline(args: argparse.Namespace, kind: RunKind, mpc: MPCConfig, outputs: 
                         "the CEM options set the piga agent's and the oracle's planner")
     if kind is RunKind.PLANET:  # after the refusals of the command line: this reads the checkpoint
         check_planet_frames(args.model)
-    if args.sweep or args.gravity_mult != 1:
-        print(f"note: the {kind.value} agent runs as trained: it cannot be told that gravity changed")
     if args.sweep:
         return _sweep(args, mpc, outputs, argv, kind=kind)
     import torch
@@ -408,6 +418,8 @@ def _baseline(args: argparse.Namespace, kind: RunKind, mpc: MPCConfig, outputs: 
     split = bool(args.ray) or args.workers > 1 and args.episodes > 1  # latent CEM takes ~0.5 s a step: use the cores
     backend = connect_backend(args.ray) if split else None  # before the warning: a refused --ray is the one line
     _warn_if_did_not_learn(args.model, kind)
+    if args.gravity_mult != 1:
+        print(f"note: the {kind.value} agent runs as trained: it cannot be told that gravity changed")
     if kind is RunKind.DDPG and sees_frames and trained_arrow is not None and trained_arrow != args.torque_arrow:
         print(f"{PROG}: warning: {args.model} was trained with the torque arrow {'shown' if trained_arrow else 'hidden'}; "
               f"these episodes {'show' if args.torque_arrow else 'hide'} it", file=sys.stderr)
@@ -421,7 +433,9 @@ def _baseline(args: argparse.Namespace, kind: RunKind, mpc: MPCConfig, outputs: 
     else:
         result = run_episodes(agent, config, progress=not args.quiet, record=1 if args.video else 0)
     s = result.summary
-    label = f"{kind.value} ({args.model})"
+    from piga.control.jobs import agent_name
+
+    label = f"{agent_name(kind.value, args.model)} ({typed_text(args.model)})"
     print(f"{label}, gravity x{args.gravity_mult:g}, goal 0 deg: success {100 * s.success_rate:.0f}% of {s.episodes}, "
           f"mean return {s.mean_return:.1f}, final angle error {math.degrees(s.final_angle_error_mean):.2f} deg, "
           f"plan {s.plan_ms_median:.1f} ms median / {s.plan_ms_p95:.1f} ms p95")

@@ -230,7 +230,8 @@ def parse_range(text: str) -> list[float]:
         raise ValueError(f"expected START:STOP:STEP such as 0.5:1.8:0.1, got {text!r}") from None
     if not all(map(math.isfinite, (start, stop, step))) or step <= 0 or stop < start:
         raise ValueError(f"need finite START <= STOP and STEP > 0, got {text!r}")
-    n = int(math.floor((stop - start) / step + 1e-9)) + 1
-    if n > 1000:
-        raise ValueError(f"{text!r} gives {n} values; at most 1000")
-    return [round(start + i * step, 10) for i in range(n)]
+    count = (stop - start) / step + 1e-9  # (1e308 - 1) / 1e-308 is infinite: no int() of it
+    if not count < 1000:
+        raise ValueError(f"{text!r} gives {'more than 1000' if not math.isfinite(count) else int(count) + 1} values; "
+                         "at most 1000")
+    return [round(start + i * step, 10) for i in range(int(math.floor(count)) + 1)]

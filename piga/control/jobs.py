@@ -18,7 +18,7 @@ from agents.protocol import Agent
 from agents.mpc import MPCConfig, OracleAgent, PigaMPCAgent, StateReader
 from piga.control.episodes import EpisodeConfig, merge_results, run_episodes
 from piga.evaluation.episodes import EpisodeBatch
-from piga.io.checkpoint import RunKind
+from piga.io.checkpoint import RunKind, read_run_record
 from piga.world.model import PhysicsModel
 from piga.io.choices import check_choices
 from piga.io.runs import load_model
@@ -124,10 +124,21 @@ def run_job(job: ControlJob, keep_plan_ms: bool = False) -> EpisodeBatch:
     return _tagged(job, run_episodes(agent, episodes, keep_plan_ms=keep_plan_ms))
 
 
+def agent_name(agent: str, model_dir: str | None) -> str:
+    """A table's name of an agent: its kind, but for a "ddpg" run the algorithm its record names (``sac``,
+    ``drqv2``: all are ``piga-baseline ddpg`` runs)."""
+    if agent != RunKind.DDPG.value or model_dir is None:
+        return agent
+    algo = (read_run_record(model_dir)[0].get("ddpg") or {}).get("algo")
+    return algo if isinstance(algo, str) and algo.isidentifier() else agent
+
+
 def _tagged(job: ControlJob, result: EpisodeBatch) -> EpisodeBatch:
     """``result`` without recordings, its summary labelled with ``agent`` (``piga (not told)`` for a piga agent not told
-    the gravity multiplier: a row of its own in a table) and the job's tags."""
-    return result.labelled(**{"agent": job.agent if job.told else f"{job.agent} (not told)", **dict(job.tags)})
+    the gravity multiplier: a row of its own in a table; a DDPG run's algorithm, :func:`agent_name`) and the job's
+    tags."""
+    name = agent_name(job.agent, job.model_dir)
+    return result.labelled(**{"agent": name if job.told else f"{name} (not told)", **dict(job.tags)})
 
 
 def split_job(job: ControlJob, parts: int) -> list[ControlJob]:

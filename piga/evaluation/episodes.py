@@ -180,6 +180,8 @@ def summary_markdown(summaries: Sequence[EpisodeSummary], extra: Sequence[tuple[
             v = s.get(key)
             if key == "success_rate":
                 cells.append(f"{100 * v:.0f}%")
+            elif key == "gravity_mult":  # as the command line gives it: x0.001 and x1.001 are not "0.00" and "1.00"
+                cells.append(f"{v:g}")
             elif isinstance(v, float):
                 cells.append(f"{v:.2f}" if abs(v) < 100 else f"{v:.1f}")
             else:
