@@ -3007,3 +3007,18 @@ def test_control_writes_its_outputs_for_a_non_ascii_model_under_a_c_locale(tiny_
                              str(tmp_path / "o")], capture_output=True, env=env, timeout=180)
     assert result.returncode == 0, result.stderr
     assert f"piga (d\u00e9 mo" in (tmp_path / "o.md").read_text(encoding="utf-8").replace(str(tmp_path) + "/", "")
+
+
+@pytest.mark.parametrize("dt, told", [(0.04, True), (0.03, False)])
+def test_a_model_of_a_rate_dmc_steps_is_pointed_at_dmc(dt: float, told: bool, tiny_piga_run: Path, tmp_path: Path,
+                                                       capsys: pytest.CaptureFixture[str]) -> None:
+    """A model of DMC's frames (0.04 s apart) given to the pixel pendulum was refused without naming the env it fits."""
+    import torch
+
+    run = _run_copy(tiny_piga_run, tmp_path / "run")
+    checkpoint = torch.load(run / "checkpoint.pt", weights_only=False)
+    checkpoint["model_config"]["dt"] = dt
+    torch.save(checkpoint, run / "checkpoint.pt")
+    line = refused("piga-control", ["--model", str(run), "--quiet", "--episodes", "1", "--steps", "20"], capsys,
+                   f"trained on frames {dt:g} s apart")
+    assert ("--env piga/DMCPendulum-v0" in line) == told, line

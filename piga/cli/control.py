@@ -491,10 +491,15 @@ def check_planet_frames(run_dir: str) -> None:
 def _check_frame_rate(run_dir: str, dt: float) -> None:
     """Refuses a model trained on frames ``dt`` s apart where the pixel pendulum steps another dt."""
     from envs.constants import PENDULUM_DT
+    from envs.dmc import DMC_PHYSICS_DT, MAX_ACTION_REPEAT
 
     if abs(dt - PENDULUM_DT) > 1e-9:
+        repeat = round(dt / DMC_PHYSICS_DT)
+        dmc = 1 <= repeat <= MAX_ACTION_REPEAT and abs(repeat * DMC_PHYSICS_DT - dt) <= 1e-9  # a rate DMC's can step
         raise PigaError(f"{run_dir}: the model was trained on frames {dt:g} s apart, Gymnasium's pixel pendulum steps "
-                        f"{PENDULUM_DT:g} s; it can control only a system filmed at its own rate")
+                        f"{PENDULUM_DT:g} s; it can control only a system filmed at its own rate"
+                        + (f" (trained on frames of {DMC_PENDULUM}, it is controlled with --env {DMC_PENDULUM})"
+                           if dmc else ""))
 
 
 def check_angle(flag: str, degrees: float) -> None:
