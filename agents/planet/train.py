@@ -141,7 +141,7 @@ def check_planet_data(info: DatasetInfo, config: PlanetTrainConfig, repeat: int 
     check_frames_have_signal(info.path)
     if info.steps < config.chunk_length * repeat:
         raise ValueError(f"{info.path}: sequences of {info.steps} frames are shorter than chunk_length "  # (a setting's)
-                              f"{config.chunk_length}" + (f" x action repeat {repeat}" if repeat > 1 else "") + "; lower it")
+                         f"{config.chunk_length}" + (f" x action repeat {repeat}" if repeat > 1 else "") + "; lower it")
     if info.split_counts["train"] < 1:
         raise ValueError(f"{info.path}: the train split is empty")
 

@@ -292,20 +292,21 @@ def _refuse_recipe_changes(args: Any, record: dict[str, Any], run_dir: Path, arg
     if changed:
         raise PigaError(f"--resume keeps the run's recipe; drop {', '.join('--' + c.replace('_', '-') for c in changed)}")
     recorded = record.get("data")
-    if args.data and "data_fingerprint" in record:  # by contents: a moved or copied file is the same, and a file
-        from piga.data.schema import fingerprint     # written over in place (same name) is not
+    if not args.data:
+        return
+    if "data_fingerprint" in record:  # by contents: a moved or copied file is the same, one written over in place is not
+        from piga.data.schema import fingerprint
 
-        if record["data_fingerprint"] != fingerprint(args.data):
-            if recorded == args.data:
-                raise PigaError(f"--resume: {args.data} has changed since {run_dir} trained on it (its contents are not "
-                                "the same); put the trained file back, or start a new run on this one")
-            drop = "give that file" if kind == "planet" else "drop --data (the run keeps its autoencoder)"
-            raise PigaError(f"--resume: {run_dir} was trained on {recorded or 'no data file'}, not {args.data}; {drop}")
-    elif args.data and recorded != args.data:  # a run from before fingerprints: the same file by its path
-        if not (recorded is not None and Path(recorded).exists() and Path(args.data).exists()
-                and os.path.samefile(recorded, args.data)):
-            drop = "give that file" if kind == "planet" else "drop --data (the run keeps its autoencoder)"
-            raise PigaError(f"--resume: {run_dir} was trained on {recorded or 'no data file'}, not {args.data}; {drop}")
+        same = record["data_fingerprint"] == fingerprint(args.data)
+        if not same and recorded == args.data:
+            raise PigaError(f"--resume: {args.data} has changed since {run_dir} trained on it (its contents are not "
+                            "the same); put the trained file back, or start a new run on this one")
+    else:  # a run from before fingerprints: the same file by its path
+        same = recorded == args.data or (recorded is not None and Path(recorded).exists() and Path(args.data).exists()
+                                         and os.path.samefile(recorded, args.data))
+    if not same:
+        drop = "give that file" if kind == "planet" else "drop --data (the run keeps its autoencoder)"
+        raise PigaError(f"--resume: {run_dir} was trained on {recorded or 'no data file'}, not {args.data}; {drop}")
 
 
 def _refuse_fewer_steps(steps: int | None, planned: int, flag: str = "--steps") -> None:
@@ -346,20 +347,17 @@ def check_planet_memory(rssm: Any, config: Any = None) -> None:
     """Refuses model sizes whose weights, gradients and Adam's two moments (4 float32 copies) do not fit
     in memory, before anything is allocated (a --stoch-size of 5e7 otherwise swaps for ever); with the training
     ``config``, also a batch whose frames and the activations of the conv encoder and decoder do not (a --batch-size
-    of 1e5 otherwise swaps for ever too)."""
+    of 1e5 otherwise swaps for ever too). A refusal is a ResourceError, a ValueError: run_cli's one line, in flags."""
     from agents.planet.rssm import parameter_count
-    from piga.io.resources import ResourceError, check_memory, check_training_memory
+    from piga.io.resources import check_memory, check_training_memory
 
-    try:
-        check_training_memory(parameter_count(rssm), "the PlaNet-style world model of these sizes")
-        if config is not None:
-            frames = config.batch_size * config.chunk_length  # (B, T) frames of 64 x 64 x C per optimiser step
-            # per frame about 32 float32 maps of its size: the input, the activations of the encoder's and the decoder's
-            # convolutions, and their gradients (depth 16 at 31x31 down to 2x2, and back)
-            check_memory(frames * 32.0 * 4 * 64 * 64 * rssm.channels,
-                         f"a batch of {config.batch_size} x {config.chunk_length} frames (--batch-size x --chunk-length)")
-    except ResourceError as exc:
-        raise PigaError(with_flags(str(exc))) from None
+    check_training_memory(parameter_count(rssm), "the PlaNet-style world model of these sizes")
+    if config is not None:
+        frames = config.batch_size * config.chunk_length  # (B, T) frames of 64 x 64 x C per optimiser step
+        # per frame about 32 float32 maps of its size: the input, the activations of the encoder's and the decoder's
+        # convolutions, and their gradients (depth 16 at 31x31 down to 2x2, and back)
+        check_memory(frames * 32.0 * 4 * 64 * 64 * rssm.channels,
+                     f"a batch of {config.batch_size} x {config.chunk_length} frames (--batch-size x --chunk-length)")
 
 
 def _planet(args: Any, argv: Sequence[str] | None) -> int:

@@ -334,22 +334,30 @@ def _open_closed_standard_streams() -> None:
     closed one is opened on the null device, as daemons do: what it would have shown is dropped. So is a stdout or
     stderr open for reading only (closed by ``2>&-`` under a launcher that then opened a file, as pyenv's shim
     opens its script): the first write to it failed, and the command with it."""
-    try:
-        import fcntl
-    except ImportError:  # not POSIX: whether a descriptor is open is all that can be asked
-        fcntl = None  # type: ignore[assignment]
     for fd, name, mode in ((0, "stdin", "r"), (1, "stdout", "w"), (2, "stderr", "w")):
-        try:
-            flags = fcntl.fcntl(fd, fcntl.F_GETFL) if fcntl is not None else os.fstat(fd) and os.O_RDWR
-        except OSError:
+        if not _usable(fd, mode):
             _null_onto(fd)
-        else:
-            if mode == "w" and flags & os.O_ACCMODE == os.O_RDONLY:
-                _null_onto(fd)
         if getattr(sys, name) is None:
             setattr(sys, name, open(fd, mode, closefd=False))  # noqa: SIM115 (for the process's life)
     with contextlib.suppress(AttributeError, ValueError):  # under LC_ALL=C (ASCII), '--help' has θ and ·: escape them
         sys.stdout.reconfigure(errors="backslashreplace")
+
+
+def _usable(fd: int, mode: str) -> bool:
+    """Whether descriptor ``fd`` is open, and, for ``mode`` "w", open for writing (POSIX's access mode; elsewhere,
+    being open is all that can be asked)."""
+    try:
+        import fcntl
+    except ImportError:
+        fcntl = None  # type: ignore[assignment]
+    try:
+        if fcntl is None:
+            os.fstat(fd)
+            return True
+        access = fcntl.fcntl(fd, fcntl.F_GETFL) & os.O_ACCMODE  # raises for a closed descriptor
+    except OSError:
+        return False
+    return mode != "w" or access != os.O_RDONLY
 
 
 def _null_onto(fd: int) -> None:
@@ -402,6 +410,7 @@ def _close_progress_bars() -> None:
     not written into a bar's line, nor a bar redrawn after it when the bar is collected."""
     from tqdm import tqdm
 
+    # tqdm keeps its open bars in the class's _instances (what its own tqdm.write uses); it has no public list
     for bar in list(getattr(tqdm, "_instances", ())):
         with contextlib.suppress(Exception):  # a bar half built, or its stream gone: nothing more to show
             bar.close()

@@ -491,15 +491,20 @@ def check_planet_frames(run_dir: str) -> None:
 def _check_frame_rate(run_dir: str, dt: float) -> None:
     """Refuses a model trained on frames ``dt`` s apart where the pixel pendulum steps another dt."""
     from envs.constants import PENDULUM_DT
-    from envs.dmc import DMC_PHYSICS_DT, MAX_ACTION_REPEAT
 
     if abs(dt - PENDULUM_DT) > 1e-9:
-        repeat = round(dt / DMC_PHYSICS_DT)
-        dmc = 1 <= repeat <= MAX_ACTION_REPEAT and abs(repeat * DMC_PHYSICS_DT - dt) <= 1e-9  # a rate DMC's can step
         raise PigaError(f"{run_dir}: the model was trained on frames {dt:g} s apart, Gymnasium's pixel pendulum steps "
                         f"{PENDULUM_DT:g} s; it can control only a system filmed at its own rate"
                         + (f" (trained on frames of {DMC_PENDULUM}, it is controlled with --env {DMC_PENDULUM})"
-                           if dmc else ""))
+                           if _dmc_repeat(dt) is not None else ""))
+
+
+def _dmc_repeat(dt: float) -> int | None:
+    """The action repeat at which dm_control's pendulum steps frames ``dt`` s apart, or None where none does."""
+    from envs.dmc import DMC_PHYSICS_DT, MAX_ACTION_REPEAT
+
+    repeat = round(dt / DMC_PHYSICS_DT)
+    return repeat if 1 <= repeat <= MAX_ACTION_REPEAT and abs(repeat * DMC_PHYSICS_DT - dt) <= 1e-9 else None
 
 
 def check_angle(flag: str, degrees: float) -> None:
@@ -612,13 +617,12 @@ def _check_piga_view(run_dir: str, checkpoint: dict, env: DMCPendulumConfig) -> 
 def _check_dmc_rate(run_dir: str, checkpoint: dict, dt: float, env: DMCPendulumConfig) -> None:
     """Refuses a piga model trained on frames ``dt`` s apart where the DMC pendulum ``env`` steps another dt, saying
     what would match: the action repeat that gives ``dt``, where one does; else the env of the model's frames."""
-    from envs.dmc import DMC_PHYSICS_DT, MAX_ACTION_REPEAT
+    from envs.dmc import DMC_PHYSICS_DT
     from envs.constants import PENDULUM_DT
 
     if abs(dt - env.dt) <= 1e-9:
         return
-    repeat = round(dt / DMC_PHYSICS_DT)
-    if 1 <= repeat <= MAX_ACTION_REPEAT and abs(repeat * DMC_PHYSICS_DT - dt) <= 1e-9:
+    if (repeat := _dmc_repeat(dt)) is not None:
         raise PigaError(f"{run_dir}: the model was trained on frames {dt:g} s apart, the env steps {env.dt:g} s; give "
                         f"--env-option action_repeat={repeat} (physics steps of {DMC_PHYSICS_DT:g} s per frame)")
     frames = f"frames {dt:g} s apart"

@@ -16,7 +16,7 @@ from piga.cli.common import (NOT_CONVERGED, ArgumentParser, Interrupted, PigaErr
                              add_preset_option, command_line, format_default, given_options, int_up_to,
                              missing_folders, nonnegative_int, number_type, positive_float, positive_int, record_resume,
                              recorded_options, remove_empty_folders, remove_outputs, run_cli, seed_int, started_record,
-                             thread_count, unit_fraction, with_flags)
+                             thread_count, unit_fraction)
 from piga.io.atomic import check_folder_target
 from piga.io.checkpoint import CHECKPOINT, read_run_record, require_piga_run
 from piga.io.lock import lock_run_folder
@@ -247,10 +247,8 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
         if args.objects is not None and info.system == "pendulum":
             raise PigaError(f"--objects: {args.data} holds pendulum data, whose model has one object (its angle); "
                             "drop --objects")
-        try:
-            model_config = replace(model_config, **chosen)
-        except ValueError as exc:  # a choice another one excludes (video-lstm with --loss separate)
-            raise PigaError(with_flags(str(exc))) from None
+        # a choice another one excludes (video-lstm with --loss separate) is ModelConfig's ValueError: run_cli's one line
+        model_config = replace(model_config, **chosen)
         for flag, option, value in (("--signed-actuation", "signed_actuation", args.signed_actuation or None),
                                     ("--fixed-g", "fixed_g", args.fixed_g)):
             if value is not None:

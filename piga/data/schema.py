@@ -73,6 +73,8 @@ def codec_options(codec: FrameCodec) -> dict[str, Any]:
     if codec == "lzf":
         return {"compression": "lzf"}
     return {"compression": "gzip", "compression_opts": int(codec.split("-")[1])}
+
+
 #: Free space a :class:`DatasetWriter` keeps beyond a slice's raw bytes before writing it: HDF5's chunk caches (1 MiB
 #: a dataset, flushed at close) and its metadata. HDF5 that runs out of disk mid-write leaves objects whose
 #: deallocation fails (h5py printed dozens of tracebacks, then the process segfaulted), so the writer stops first.
@@ -651,7 +653,6 @@ class DatasetWriter:
         self.compression = compression
         self.rewards = rewards
         self._ctx: Any = None
-        self._tmp: Path | None = None
         self._file: h5py.File | None = None
         self._written = np.zeros(n_sequences, dtype=bool)
         self._split_set = False
@@ -662,7 +663,6 @@ class DatasetWriter:
     def __enter__(self) -> DatasetWriter:
         self._ctx = atomic_output(self.path, overwrite=self.overwrite)
         tmp = self._ctx.__enter__()
-        self._tmp = Path(tmp)
         n, t = self.shape
         f = h5py.File(tmp, "w")
         self._file = f
@@ -705,8 +705,8 @@ class DatasetWriter:
     def _check_room(self, raw_bytes: int) -> None:
         """Raises OSError(ENOSPC) naming the file where its disk has less free space than ``raw_bytes`` (a slice,
         uncompressed: at most what it takes compressed) plus :data:`WRITE_MARGIN_BYTES`, before HDF5 runs out."""
-        assert self._tmp is not None
-        if shutil.disk_usage(self._tmp.parent).free < raw_bytes + WRITE_MARGIN_BYTES:
+        assert self._file is not None
+        if shutil.disk_usage(Path(self._file.filename).parent).free < raw_bytes + WRITE_MARGIN_BYTES:
             raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(self.path))
 
     def set_split(self, split: np.ndarray) -> None:

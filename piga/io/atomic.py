@@ -79,13 +79,13 @@ def check_folder_target(folder: str | os.PathLike[str], flag: str = "--out", log
     try:
         str(path).encode("utf-8")
     except UnicodeEncodeError:  # TensorBoard's writer encodes its folder's name as UTF-8, strictly
-        if logs and "utf" in _locale_name().lower().replace("-", ""):  # the bytes themselves are not UTF-8
-            raise ValueError(f"{flag} {path}: the name holds bytes that are not UTF-8 text, and a run's logs "
-                             "(TensorBoard's) cannot be written under it; use a UTF-8 or ASCII name") from None
-        if logs:
-            raise ValueError(f"{flag} {path}: the name is not UTF-8 text in this locale ({_locale_name()}), and a run's "
-                             "logs cannot be written under it; use an ASCII name or a UTF-8 locale (LC_ALL=C.UTF-8)"
-                             ) from None
+        locale = _locale_name()
+        if logs:  # under a UTF-8 locale the bytes themselves are not UTF-8: another locale would not help
+            what, fix = (("holds bytes that are not UTF-8 text", "a UTF-8 or ASCII name")
+                         if "utf" in locale.lower().replace("-", "") else
+                         (f"is not UTF-8 text in this locale ({locale})", "an ASCII name or a UTF-8 locale (LC_ALL=C.UTF-8)"))
+            raise ValueError(f"{flag} {path}: the name {what}, and a run's logs (TensorBoard's) cannot be written under "
+                             f"it; use {fix}") from None
     if path.is_symlink() and not path.exists():
         raise NotADirectoryError(f"{flag} {path} is a link to {os.readlink(path)}, which does not exist; remove the "
                                  "link or make its target first")

@@ -14,6 +14,7 @@ training code:
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 from dataclasses import dataclass
@@ -159,14 +160,22 @@ def training_data_path(checkpoint: dict[str, Any] | None) -> str | None:
     if not (isinstance(path, str) and path and os.path.isfile(path)):
         return None
     if "fingerprint" in data:
-        from piga.data.schema import fingerprint
-
-        try:
-            if fingerprint(path) != data["fingerprint"]:
-                return None
-        except (OSError, ValueError, KeyError):  # not a data file any more
+        stat = os.stat(path)
+        if _fingerprint(path, stat.st_ino, stat.st_size, stat.st_mtime_ns) != data["fingerprint"]:
             return None
     return path
+
+
+@functools.lru_cache(maxsize=8)
+def _fingerprint(path: str, inode: int, size: int, mtime_ns: int) -> str | None:
+    """:func:`piga.data.schema.fingerprint` of ``path`` as it is now (its inode, size and time key the cache: a
+    command asks for its run's training file several times), or None where it is not a data file any more."""
+    from piga.data.schema import fingerprint
+
+    try:
+        return fingerprint(path)
+    except (OSError, ValueError, KeyError):
+        return None
 
 
 def training_blank_mse(model: PhysicsModel, checkpoint: dict[str, Any] | None, max_sequences: int = 64) -> float | None:
