@@ -46,8 +46,9 @@ motor the other way (gear -1): either flips the sign of the actuation as the fra
 from __future__ import annotations
 
 import math
-import sys
 import os
+import sys
+import warnings
 import xml.etree.ElementTree as ET
 from dataclasses import asdict, dataclass, replace
 from typing import Any, Callable, Literal, SupportsFloat, get_args
@@ -161,8 +162,9 @@ class DMCPendulumConfig:
             "frame_stack": (1 <= self.frame_stack <= MAX_FRAME_STACK, f"frame_stack in [1, {MAX_FRAME_STACK}]"),
             "action_repeat": (1 <= self.action_repeat <= MAX_ACTION_REPEAT, f"action_repeat in [1, {MAX_ACTION_REPEAT}]"),
             "episode_length": (0 <= self.episode_length <= MAX_EPISODE_LENGTH, f"episode_length in [0, {MAX_EPISODE_LENGTH:,}]"),
-            "mass": (MIN_MASS <= self.mass <= self.max_mass, f"mass in [{MIN_MASS:g}, {self.max_mass:.4g}]; heavier, "
-                     f"the torque's effect 1 / (3 I) is below {MIN_ACTUATION_GAIN:g}, too weak for a frame to show"),
+            "mass": (MIN_MASS <= self.mass <= self.max_mass, f"mass in [{MIN_MASS:g}, {self.max_mass:.4g}]" + (
+                     f"; heavier, the torque's effect 1 / (3 I) is below {MIN_ACTUATION_GAIN:g}, too weak for a frame "
+                     "to show" if self.mass > self.max_mass else "")),
             "damping": (0 <= self.damping <= MAX_DAMPING, f"damping in [0, {MAX_DAMPING:g}]"),
             "flip": (self.flip in FLIPS, f"flip in {FLIPS}"),
             "max_angle": (0 <= self.max_angle <= math.pi, "max_angle in [0, pi]"),
@@ -228,12 +230,30 @@ class DMCPendulumConfig:
         return asdict(self)
 
 
+def _renderer_error(cause: BaseException) -> ValueError:
+    """The one error for a renderer that ``MUJOCO_GL`` names but that cannot start on this machine."""
+    return ValueError(f"MUJOCO_GL={os.environ.get('MUJOCO_GL')!r}: dm_control could not start that renderer here "
+                      f"({type(cause).__name__}: {str(cause).splitlines()[0] if str(cause) else '-'}); unset "
+                      "MUJOCO_GL (piga then renders with egl, which needs no display)")
+
+
+def _quiet_half_made_context(hook: Callable[[Any], None]) -> Callable[[Any], None]:
+    """``sys.unraisablehook`` that drops the complaint of a rendering context that failed half made (its
+    ``__del__`` finds no pointer as it is collected), after the one error line has said why."""
+    def quiet(unraisable: Any) -> None:
+        if "Context" not in type(unraisable.object).__qualname__ and "Context" not in repr(unraisable.object):
+            hook(unraisable)
+    return quiet
+
+
 def _import_dm_control() -> tuple[Any, Any]:
     """dm_control's pendulum module and its ``control`` module, or one clear error."""
     os.environ.setdefault("MUJOCO_GL", "egl")
     try:
         from dm_control.rl import control
         from dm_control.suite import pendulum
+    except AttributeError as exc:  # PyOpenGL without the library MUJOCO_GL names ('NoneType' has no glGetError)
+        raise _renderer_error(exc) from None
     except ImportError as exc:
         raise MissingExtraError(f"the DMC pendulum needs dm_control and MuJoCo: install piga[dmc] "
                                 f"(pip install -e '.[dmc]'); import failed: {exc}") from None
@@ -296,7 +316,13 @@ class DMCPendulumEnv(gym.Env):
             raise ValueError(f"the DMC pendulum renders only as 'rgb_array', got render_mode={render_mode!r}")
         self.config = config or DMCPendulumConfig()
         self.render_mode = "rgb_array"
-        pendulum, control = _import_dm_control()
+        with warnings.catch_warnings():  # glfw warns (a second line) before it fails without a display
+            warnings.filterwarnings("ignore", module="glfw")
+            pendulum, control = _import_dm_control()
+            self._make(pendulum, control)
+
+    def _make(self, pendulum: Any, control: Any) -> None:
+        """The MuJoCo model, the task and one frame rendered: a renderer that cannot start here fails now, in one line."""
         self._physics_error = control.PhysicsError
         xml, assets = pendulum.get_model_and_assets()
         xml = model_xml(self.config, xml.decode() if isinstance(xml, bytes) else xml)
@@ -317,6 +343,16 @@ class DMCPendulumEnv(gym.Env):
         self.observation_space = gym.spaces.Box(0, 255, (size, size, 3), np.uint8)
         self.action_space = gym.spaces.Box(-1.0, 1.0, (1,), np.float32)
         self._frames = 0
+        try:
+            self.render()
+        except Exception as exc:  # mujoco.FatalError (glfw without a display), PyOpenGL's errors, ...
+            error = _renderer_error(exc)
+            del exc  # its traceback holds the half-made context
+            sys.unraisablehook = _quiet_half_made_context(sys.unraisablehook)
+            glfw = sys.modules.get("glfw")
+            if glfw is not None:  # and glfw's own warning at exit, as it terminates uninitialised
+                glfw.ERROR_REPORTING = "ignore"
+            raise error from None
 
     def _state(self) -> np.ndarray:
         return np.array([self.physics.data.qpos[0], self.physics.data.qvel[0]], dtype=np.float64)

@@ -118,7 +118,7 @@ class PixelPendulumConfig:
             raise ValueError(f"PixelPendulumConfig.actuation_gain={self.actuation_gain!r} is out of range: at most "
                              f"{MAX_ACTUATION_GAIN:g} (a larger torque overflows float32)")
         if self.effective_gravity > MAX_GRAVITY:
-            raise ValueError(f"PixelPendulumConfig: gravity x gravity_mult = {self.effective_gravity:g} is out of range: at "
+            raise ValueError(f"PixelPendulumConfig: gravity x gravity_mult = {self.effective_gravity:.10g} is out of range: at "
                              f"most {MAX_GRAVITY:g} (a larger gravity overflows float32)")
         for name, value in effects:
             if name == "blur" and value > self.image_size / 2:
@@ -182,6 +182,26 @@ class ActuationGain(gym.ActionWrapper):
     def action(self, action: np.ndarray) -> np.ndarray:
         u = np.clip(np.asarray(action, dtype=np.float32), -MAX_ACTION, MAX_ACTION)
         return (self.gain * u).astype(np.float32)
+
+
+#: The largest torque the arrow is drawn for. Gymnasium scales its arrow picture by |torque|: at 12 it is 680 pixels
+#: wide, past the 500-pixel render's edges, and a gain of 1000 asked pygame for an arrow of 10^10 pixels (out of
+#: memory; 500 took 100 s for 8 frames). A larger torque is drawn as this one.
+ARROW_MAX_TORQUE = 12.0
+
+
+class BoundedTorqueArrow(gym.Wrapper):
+    """Renders Pendulum's torque arrow for at most :data:`ARROW_MAX_TORQUE` (the torque applied is unchanged)."""
+
+    def render(self) -> Any:
+        base = self.env.unwrapped
+        saved = base.last_u
+        if saved is not None:
+            base.last_u = float(np.clip(saved, -ARROW_MAX_TORQUE, ARROW_MAX_TORQUE))
+        try:
+            return self.env.render()
+        finally:
+            base.last_u = saved
 
 
 class HideTorqueArrow(gym.Wrapper):
@@ -270,8 +290,7 @@ def make_pixel_pendulum(
     if any(EFFECTS[name].kind != "vision" for name, _ in config.effects):
         env = ShowCommandedTorque(env, config.actuation_gain)  # the arrow shows the command, not the effects
     env = PendulumStateInfo(env)
-    if not config.draw_torque_arrow:
-        env = HideTorqueArrow(env)
+    env = HideTorqueArrow(env) if not config.draw_torque_arrow else BoundedTorqueArrow(env)
     env = AddRenderObservation(env, render_only=True)
     env = ResizeObservation(env, (config.image_size, config.image_size))
     env = GrayscaleObservation(env, keep_dim=False)

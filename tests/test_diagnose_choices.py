@@ -50,6 +50,12 @@ def spin():
     return analyse(planted_spin(), NOMINAL, FAST)
 
 
+@pytest.fixture(scope="module")
+def damped():
+    """The diagnosis of planted damping, read (not changed) by several tests: one fit for all of them."""
+    return analyse(planted({"damping": 0.2}), NOMINAL, FAST)
+
+
 def test_two_candidates_the_data_cannot_separate_give_an_ambiguous_verdict(spin) -> None:
     d = spin
     assert d.verdict_class == "ambiguous", d.verdict
@@ -65,8 +71,8 @@ def test_two_candidates_the_data_cannot_separate_give_an_ambiguous_verdict(spin)
     assert "**Ambiguous between" in text and "would separate them" in text
 
 
-def test_a_clear_choice_is_not_ambiguous() -> None:
-    d = analyse(planted({"damping": 0.2}), NOMINAL, FAST)
+def test_a_clear_choice_is_not_ambiguous(damped) -> None:
+    d = damped
     assert d.ambiguity is None and d.verdict_class == "damping", d.verdict
 
 
@@ -203,15 +209,10 @@ def test_a_flipped_actuation_is_detected(nominal_a: float) -> None:
         assert float(fit.loss(m, NOMINAL, w)) < 1e-4
 
 
-def test_no_flip_on_a_delay() -> None:
-    d = analyse(planted({"delay": 2}), NOMINAL, FAST)
-    assert d.verdict_class == "delay", d.verdict
-
-
-def test_damping_is_reported_in_one_over_seconds() -> None:
+def test_damping_is_reported_in_one_over_seconds(damped) -> None:
     """(c) θ̈ = ... − 3·b·θ̇ with θ̈ in rad/s² and θ̇ in rad/s: b is a rate, 1/s, not N·m·s/rad."""
     assert UNITS["b"] == "1/s"
-    d = analyse(planted({"damping": 0.2}), NOMINAL, FAST)
+    d = damped
     (effect,) = d.effects
     assert effect.unit == "1/s"
     text = markdown(d, "m", "d", "c")
@@ -265,10 +266,10 @@ def test_clean_data_have_no_gap_to_close() -> None:
     assert "raw closure -" not in text
 
 
-def test_the_headline_is_labelled_raw_only_when_it_is() -> None:
+def test_the_headline_is_labelled_raw_only_when_it_is(damped) -> None:
     from piga.diagnostics.report import headline_text
 
-    d = analyse(planted({"damping": 0.2}), NOMINAL, FAST)
+    d = damped
     g = d.gap
     assert not g.floor_subtracted and "raw" in headline_text(d)  # no model: no twin, no floor
     shown = f"{100 * g.free_run_gap_closure:.1f}%"
@@ -280,7 +281,7 @@ def test_the_headline_is_labelled_raw_only_when_it_is() -> None:
 
 
 @pytest.mark.parametrize("above, at_floor", [(1.05, True), (3.0, False)])
-def test_a_floor_just_above_the_corrected_error_is_reached_and_one_far_above_is_none(monkeypatch, above: float,
+def test_a_floor_just_above_the_corrected_error_is_reached_and_one_far_above_is_none(monkeypatch, damped, above: float,
                                                                                      at_floor: bool) -> None:
     """The twin's floor is a median over held-out windows: a corrected error just under it, within its
     interval, has closed the gap (100%); far under it, the floor is no floor and the closure is raw."""
@@ -291,7 +292,7 @@ def test_a_floor_just_above_the_corrected_error_is_reached_and_one_far_above_is_
     D = importlib.import_module("piga.diagnostics.diagnose")  # the module (the package re-exports its function)
 
     obs = planted({"damping": 0.2})
-    corrected = analyse(obs, NOMINAL, FAST).gap.typical_free_run_mse_corrected
+    corrected = damped.gap.typical_free_run_mse_corrected  # the same file's diagnosis without a twin
     # windows' errors spread over orders of magnitude, as real ones do; their median: about `above` x
     windows = corrected * above * np.exp(np.random.default_rng(0).normal(0, 1, 200))
     monkeypatch.setattr(D, "twin_renderer", lambda *args, **kwargs: ("simulator", None))
@@ -429,10 +430,10 @@ def test_a_static_torque_below_the_reading_error_is_not_named() -> None:
     assert below_reading(tiny, NOMINAL, replace(reading, reading_decides=False)) == {}  # no reading error measured
 
 
-def test_the_report_says_which_damping_convention_its_numbers_use() -> None:
+def test_the_report_says_which_damping_convention_its_numbers_use(damped) -> None:
     """One Euler step per frame takes the damping explicitly (Gymnasium's way, as planted here); the note gives the
     factor by which MuJoCo's implicit convention would read g, a and b from the same frames."""
-    d = analyse(planted({"damping": 0.2}), NOMINAL, FAST)
+    d = damped
     note = next(n for n in d.notes if "takes the damping explicitly" in n)
     assert abs(d.corrected["b"] / 0.2 - 1) < 0.03
     convention = d.damping_convention

@@ -67,7 +67,7 @@ def test_energy_cost_pumps_from_hanging_down(sign):
 @needs_dmc
 def test_piga_control_dmc_oracle_scores_and_refuses_gymnasium_options(tmp_path, capsys):
     out = tmp_path / "oracle"
-    result = run("piga-control", "--env", "piga/DMCPendulum-v0", "--episodes", "1", "--seed", "1", "--quiet",
+    result = run("piga-control", "--env", "piga/DMCPendulum-v0", "--oracle", "--episodes", "1", "--seed", "1", "--quiet",
                  "--out", str(out))
     assert result.returncode == 0, result.stderr
     import json

@@ -163,13 +163,16 @@ def test_a_drqv2_run_on_the_dmc_pendulum_is_scored_in_dmcs_episodes_and_nowhere_
                                     "--learning-starts", "450", "--batch-size", "8", "--buffer-size", "600", "--out",
                                     str(run), "--quiet", capsys=capsys)
     assert_sb3_run_finished(code, err)  # 500 steps cannot learn: exit 1, the summary and the outputs kept
+    trained_code = code
     assert ("never reached 200" in out and "never reached 200 in 500 env steps" in err) if code else "first reached 200" in out
     metrics = json.loads((run / "metrics.json").read_text())
     assert metrics["env"] == "piga/DMCPendulum-v0" and "first_step_reaching_200" in metrics
     assert 0 <= metrics["final_eval_mean_return"] <= 1000  # DMC's score of one 500-frame episode
-    code, out, _ = run_in_process("piga-control", control, "--env", "piga/DMCPendulum-v0", "--model", str(run),
-                                  "--episodes", "1", "--quiet", capsys=capsys)
+    code, out, err = run_in_process("piga-control", control, "--env", "piga/DMCPendulum-v0", "--model", str(run),
+                                    "--episodes", "1", "--quiet", capsys=capsys)
     assert code == 0 and "| drqv2 |" in out and "Planner" not in out
+    # as on the pixel env: a run that did not learn is scored, and said so in one warning line
+    assert (err.count("\n") == 1 and "did not learn" in err) if trained_code else not err, err
     assert_one_line_error(completed_in_process("piga-control", control, "--model", str(run), "--episodes", "1", "--quiet",
                                                capsys=capsys), "trained on piga/DMCPendulum-v0", "--env piga/DMCPendulum-v0")
     assert_one_line_error(completed_in_process("piga-control", control, "--env", "piga/DMCPendulum-v0", "--model", str(run),

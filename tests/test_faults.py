@@ -25,6 +25,7 @@ import pytest
 
 from piga.cli import baseline, collect, control, demo, diagnose, importer, show, train
 from tests.helpers import ENV, assert_one_line, assert_planet_run_finished, assert_sb3_run_finished, run_in_process
+from tests.test_dmc import needs_dmc
 
 TINY_PLANET = ("--steps", "2", "--batch-size", "2", "--chunk-length", "8", "--deter-size", "8", "--stoch-size", "4",
                "--threads", "1", "--quiet")
@@ -312,6 +313,7 @@ def test_a_failed_allocation_is_out_of_memory(capsys: pytest.CaptureFixture[str]
     (["--image-size", "7"], ["--image-size=7 is out of range (--image-size >= 8)"], 1),  # it said "sizes ... >= 1"
     (["--max-speed", "-1"], ["--max-speed=-1.0 is out of range (--max-speed in [0, 8])"], 1),  # it listed every field's range
     (["--env", "piga/DMCPendulum-v0", "--image-size", "7"], ["--image-size=7 is out of range (--image-size in [8, 1024]"], 1),
+    (["--system", "digits-spring", "--background", "black"], ["--background: digits-spring draws its digits over a texture"], 1),
     (["--system", "bouncing", "--radius", "1e308"], ["images are too small", "need at least inf px"], 1),  # an OverflowError
     (["--system", "gravity", "--radius", "1e200"], ["images are too small", "need at least 8e+200 px"], 1),
     (["--system", "bouncing", "--colors", "black", "black"], ["is the background's", "invisible"], 1),
@@ -3022,3 +3024,171 @@ def test_a_model_of_a_rate_dmc_steps_is_pointed_at_dmc(dt: float, told: bool, ti
     line = refused("piga-control", ["--model", str(run), "--quiet", "--episodes", "1", "--steps", "20"], capsys,
                    f"trained on frames {dt:g} s apart")
     assert ("--env piga/DMCPendulum-v0" in line) == told, line
+
+
+# ---------------------------------------------------------------------------------------------
+# Environment variables, seeds, goal images, data a baseline cannot use
+# ---------------------------------------------------------------------------------------------
+
+
+@needs_dmc
+@pytest.mark.parametrize("renderer", ["glfw", "osmesa"])
+def test_a_renderer_that_cannot_start_here_is_one_line(renderer: str, tmp_path: Path) -> None:
+    """MUJOCO_GL=glfw without a display was exit 70 after glfw's warnings and a half-made context's complaint
+    (16 lines); osmesa without its library was exit 70 (PyOpenGL's AttributeError)."""
+    result = subprocess.run(["python", "-m", "piga.cli.control", "--oracle", "--env", "piga/DMCPendulum-v0", "--episodes",
+                             "1", "--quiet", "--out", str(tmp_path / "o")], capture_output=True, text=True, timeout=180,
+                            env={**ENV, "MUJOCO_GL": renderer, "DISPLAY": "", "OMP_NUM_THREADS": "1"})
+    assert result.returncode == 1, result.stderr
+    line = assert_one_line(1, result.stderr, f"MUJOCO_GL='{renderer}'", "unset MUJOCO_GL")
+    assert "Traceback" not in line and not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("variable, value", [("OMP_NUM_THREADS", "0"), ("OMP_NUM_THREADS", "abc"),
+                                             ("MPLBACKEND", "bogus")])
+def test_a_variable_a_library_cannot_use_changes_nothing(variable: str, value: str, tiny_data: Path,
+                                                         tmp_path: Path) -> None:
+    """OMP_NUM_THREADS=0 printed libgomp's "Invalid value" on stderr; MPLBACKEND=bogus failed at the first figure,
+    after the work (a sweep's outputs lost, a PlaNet-style run without metrics that blocked its rerun)."""
+    for argv in (["piga.cli.show", str(tiny_data), "--out", str(tmp_path / "s.png")],  # a figure
+                 ["piga.cli.control", "--write-goal-image", str(tmp_path / "g.png"), "--angle", "15"]):  # torch's threads
+        result = subprocess.run(["python", "-m", *argv], capture_output=True, text=True, timeout=180,
+                                env={**ENV, variable: value})
+        assert result.returncode == 0 and not result.stderr, result.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["g.png", "s.png"]
+
+
+@pytest.mark.parametrize("seed", [str(2**32), str(2**63 - 1)])
+def test_every_seed_the_parser_takes_runs(seed: str, tiny_data: Path, tmp_path: Path,
+                                          capsys: pytest.CaptureFixture[str]) -> None:
+    """Seeds from 2^32 to 2^63 - 1 passed the parser, then failed in numpy's global seeding ("Seed must be between 0
+    and 2**32 - 1") after the plan was printed: piga-train-model, piga-baseline ddpg and piga-demo."""
+    from piga.data.schema import legacy_seed
+
+    assert legacy_seed(7) == 7 and 0 <= legacy_seed(int(seed)) < 2**32 and legacy_seed(int(seed)) == legacy_seed(int(seed))
+    code, _, err = run_in_process("piga-train-model", train.main, str(tiny_data), "--out", str(tmp_path / "t"), "--seed",
+                                  seed, "--budget-steps", "4", "--batch-size", "4", "--threads", "1", "--quiet", capsys=capsys)
+    assert code in (0, 3) and "Seed must be" not in err, err  # 3: too short to judge, said in its warning
+    code, _, err = run_in_process("piga-baseline", baseline.main, "ddpg", "--obs", "state", "--out", str(tmp_path / "d"),
+                                  "--seed", seed, *TINY_DDPG, capsys=capsys)
+    assert_sb3_run_finished(code, err)
+
+
+@pytest.fixture(scope="module")
+def transparent_images(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """Pictures whose transparency is a colour key or a palette entry (a PNG's tRNS, a GIF's), not an alpha channel."""
+    from PIL import Image
+
+    root = tmp_path_factory.mktemp("goals")
+    gray = np.full((40, 40), 200, np.uint8)
+    gray[10:30, 18:22] = 30  # a pole; the rest is the key colour
+    made = {}
+    for name, image, info in (("gray.png", Image.fromarray(gray), {"transparency": 200}),
+                              ("rgb.png", Image.fromarray(np.repeat(gray[..., None], 3, -1)), {"transparency": (200, 200, 200)}),
+                              ("palette.png", Image.fromarray(gray).convert("P"), {"transparency": 200}),
+                              ("palette.gif", Image.fromarray(gray).convert("P"), {"transparency": 200})):
+        image.save(root / name, **info)
+        made[name] = root / name
+    return made
+
+
+@pytest.mark.parametrize("name", ["gray.png", "rgb.png", "palette.png", "palette.gif"])
+def test_a_transparent_colour_is_transparency(name: str, transparent_images: dict[str, Path]) -> None:
+    """The docs say a goal image with transparent pixels is refused; one whose transparency was a tRNS entry was read
+    as opaque, and its hidden pixels taken as the scene."""
+    from piga.data.scene import read_image, scene_to_gray
+
+    with pytest.raises(ValueError, match="transparent"):
+        scene_to_gray(read_image(transparent_images[name]), 32)
+
+
+def test_a_huge_image_is_read_without_pillows_warning(tmp_path: Path, recwarn: pytest.WarningsRecorder,
+                                                      monkeypatch: pytest.MonkeyPatch) -> None:
+    """An image between Pillow's warning and error limits printed its DecompressionBombWarning (two more lines)."""
+    from PIL import Image
+
+    from piga.data.scene import read_image
+
+    Image.fromarray(np.zeros((60, 60), np.uint8)).save(tmp_path / "big.png")
+    monkeypatch.setattr(Image, "MAX_IMAGE_PIXELS", 3000)  # 3600 pixels: above the warning, below twice it
+    assert read_image(tmp_path / "big.png").shape == (60, 60)
+    assert not [w for w in recwarn if "DecompressionBomb" in w.category.__name__]
+
+
+def test_a_device_is_not_called_missing(capsys: pytest.CaptureFixture[str]) -> None:
+    """--goal-image /dev/zero said "no such image file"."""
+    from piga.data.scene import read_image
+
+    with pytest.raises(ValueError, match="not a regular file"):
+        read_image("/dev/zero")
+
+
+@pytest.mark.parametrize("variant", ["labelled_dmc", "labelled_spring"])
+def test_planet_refuses_before_training_a_file_no_command_could_use_it_on(variant: str, files: dict[str, Path],
+                                                                          tmp_path: Path,
+                                                                          capsys: pytest.CaptureFixture[str]) -> None:
+    """PlaNet-style training on dm_control's frames ran (1.8 h at the defaults) and piga-control refused the run after;
+    a spring scene's file was said to lack the /rewards that piga-collect writes."""
+    out = tmp_path / "p"
+    refused("piga-baseline", ["planet", str(files[variant]), "--out", str(out), *TINY_PLANET], capsys,
+            "the PlaNet-style agent is trained on and controls piga/PixelPendulum-v0")
+    assert not out.exists()
+
+
+def test_drqv2_exploration_never_rises(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    """--algo drqv2 --noise-std 0.05 was a schedule that rose to 0.1 without a word."""
+    refused("piga-baseline", ["ddpg", "--algo", "drqv2", "--obs", "pixels", "--noise-std", "0.05", "--out",
+                              str(tmp_path / "d"), "--quiet"], capsys, "--noise-std (0.05) is below", "at least 0.1")
+
+
+@needs_dmc
+def test_dmc_control_runs_what_it_is_asked_for(capsys: pytest.CaptureFixture[str]) -> None:
+    """--env piga/DMCPendulum-v0 with neither --model nor --oracle ran the oracle; the pixel env refuses that."""
+    refused("piga-control", ["--env", "piga/DMCPendulum-v0", "--episodes", "1", "--quiet"], capsys, "give --model RUN_DIR")
+
+
+def test_a_mass_below_the_range_is_not_explained_by_the_heavy_side() -> None:
+    from envs.dmc import DMCPendulumConfig
+
+    with pytest.raises(ValueError) as light:
+        DMCPendulumConfig(mass=1e-4)
+    with pytest.raises(ValueError) as heavy:
+        DMCPendulumConfig(mass=1e7)
+    assert "heavier" not in str(light.value) and "heavier" in str(heavy.value)
+
+
+def test_a_parameter_the_file_gives_no_true_value_for_is_still_printed() -> None:
+    """A file whose params named g only printed "learned: g=1.0539 (true 10, ...)", leaving out the learned a."""
+    from piga.evaluation.evaluate import summary_line
+
+    line = summary_line({"parameters": {"g": 1.0539, "a": 0.3037, "offset": 0.0}, "fixed_parameters": {},
+                         "parameter_errors": {"g": {"learned": 1.0539, "true": 10.0, "relative_error": 0.8946}}})
+    assert line == "g=1.0539 (true 10, error 89.46%), a=0.3037"
+
+
+def test_a_huge_actuation_gain_draws_a_bounded_arrow() -> None:
+    """--actuation-gain 1000 was exit 70: Gymnasium's arrow, scaled by the torque, ran pygame out of memory."""
+    from envs.pendulum import ARROW_MAX_TORQUE, make_pixel_pendulum
+
+    env = make_pixel_pendulum(image_size=16, actuation_gain=1000.0)
+    env.reset(seed=0)
+    frame, *_ = env.step(np.array([2.0], np.float32))
+    assert frame.shape[-2:] == (16, 16) and abs(env.unwrapped.last_u) == 2000.0 > ARROW_MAX_TORQUE  # applied in full
+    env.close()
+
+
+def test_a_file_open_for_writing_elsewhere_is_said_to_be(tiny_data: Path, tmp_path: Path,
+                                                         capsys: pytest.CaptureFixture[str]) -> None:
+    """A file another process held open for writing was "not a readable HDF5 file (BlockingIOError)"."""
+    locked = tmp_path / "locked.h5"
+    shutil.copyfile(tiny_data, locked)
+    holder = subprocess.Popen(["python", "-c", "import h5py, sys, time; f = h5py.File(sys.argv[1], 'a'); print('open', "
+                               "flush=True); time.sleep(60)", str(locked)], stdout=subprocess.PIPE, text=True, env=ENV)
+    try:
+        assert holder.stdout is not None and holder.stdout.readline().strip() == "open"
+        refused("piga-show", [str(locked), "--out", str(tmp_path / "s.png")], capsys, "another process has it open for "
+                "writing", "wait for that process to end")
+    finally:
+        holder.kill()
+        holder.wait()
+    assert not (tmp_path / "s.png").exists()

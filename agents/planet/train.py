@@ -123,6 +123,13 @@ def check_planet_data(info: DatasetInfo, config: PlanetTrainConfig, repeat: int 
             sequences shorter than a chunk.
         ValueError: no training sequence.
     """
+    from envs import PIXEL_PENDULUM
+
+    env_id = info.attrs.get("env_id")  # files from before env ids, and imported ones, hold none
+    if info.system != "pendulum" or env_id not in (None, PIXEL_PENDULUM):  # before training: no command could use it
+        raise DataFormatError(f"{info.path}: the PlaNet-style agent is trained on and controls {PIXEL_PENDULUM}'s "
+                              f"pendulum; this file is {info.system}" + (f" from {env_id}" if env_id else "")
+                              + f" (collect one with piga-collect --env {PIXEL_PENDULUM})")
     if not info.has_rewards:
         raise DataFormatError(f"{info.path}: has no /rewards; the PlaNet-style model learns a reward head "
                               "(collect the data with piga-collect, which writes them)")
@@ -134,9 +141,7 @@ def check_planet_data(info: DatasetInfo, config: PlanetTrainConfig, repeat: int 
     if len(info.image_shape) == 3 and info.image_shape[2] != 1:
         raise DataFormatError(f"{info.path}: has colour frames {info.image_shape}; the PlaNet-style agent controls the "
                               "pixel pendulum from gray frames (collect the data with piga-collect)")
-    from envs import PIXEL_PENDULUM
-
-    if info.attrs.get("env_id") == PIXEL_PENDULUM and "env_config" in info.attrs:  # frames its env would not render
+    if env_id == PIXEL_PENDULUM and "env_config" in info.attrs:  # frames its env would not render
         check_pixel_pendulum_file(info, f"the PlaNet-style agent learns the pictures that {PIXEL_PENDULUM} renders")
     check_frames_have_signal(info.path)
     if info.steps < config.chunk_length * repeat:

@@ -218,6 +218,10 @@ class SB3Config:
             if getattr(self, name) > MAX_NOISE_STD:
                 raise ValueError(f"SB3Config.{name} must be at most {MAX_NOISE_STD:g} (a std in SB3's [-1, 1] action "
                                  f"scale; far beyond 1 every noisy action is clipped to a bound), got {getattr(self, name):g}")
+        if self.algo == "drqv2" and self.noise_std < self.noise_final_std:
+            raise ValueError(f"SB3Config.noise_std ({self.noise_std:g}) is below the std that DrQ-v2's exploration "
+                             f"schedule falls to ({self.noise_final_std:g}): it would rise instead; give at least "
+                             f"{self.noise_final_std:g}")
         if self.eval_every > self.steps:
             raise ValueError(f"eval_every ({self.eval_every}) is more than SB3Config.steps ({self.steps}): the run would "
                              "never be evaluated; lower eval_every or raise SB3Config.steps")

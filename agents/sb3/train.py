@@ -38,6 +38,7 @@ from agents.sb3.config import DMC_VIEWS, EPISODE_STEPS, SB3Config, resolve_preci
 from agents.sb3.run import MODEL, REPLAY_BUFFERS, sb3_class
 from envs.observations import EpisodeSeeds, FiniteActions, LatentObservation, NonFiniteAction, StateObservation
 from envs.pendulum import PixelPendulumConfig
+from piga.data.schema import legacy_seed
 from piga.io.atomic import atomic_output, write_json
 from piga.io.checkpoint import (CHECKPOINT, RunKind, check_counts, read_checkpoint, resuming_from, unreadable,
                                 write_checkpoint)
@@ -167,7 +168,7 @@ def new_model(config: SB3Config, venv: Any, device: torch.device, tensorboard_lo
                                   buffer_size=config.buffer_size, learning_starts=config.learning_starts, batch_size=config.batch_size,
                                   tau=config.tau, gamma=config.gamma, train_freq=config.train_freq,
                                   gradient_steps=config.gradient_steps, action_noise=noise, policy_kwargs=policy_kwargs,
-                                  **_n_step_buffer(config, venv, device), tensorboard_log=tensorboard_log, seed=config.seed, device=device,
+                                  **_n_step_buffer(config, venv, device), tensorboard_log=tensorboard_log, seed=legacy_seed(config.seed), device=device,
                                   verbose=0)
 
 

@@ -286,6 +286,9 @@ def _collect_scene(args: argparse.Namespace, argv: Sequence[str] | None, written
                             f"got {len(args.colors)} colour(s)")
         overrides["colors"] = tuple(args.colors)
     if args.background is not None:
+        if args.system == "digits-spring":  # black too: the scene's config cannot tell it from its default
+            raise PigaError("--background: digits-spring draws its digits over a texture; a background colour is for "
+                            "the balls")
         overrides["background"] = args.background
     if args.half:
         overrides["half"] = True

@@ -659,6 +659,8 @@ def _dmc(args: argparse.Namespace, argv: Sequence[str] | None, given: set[str]) 
     if ignored := _ignored_options(args, given, DMC_OPTIONS):
         raise PigaError(f"{ignored[0]} is not an option of --env piga/DMCPendulum-v0; it takes "
                         + ", ".join(f"--{k.replace('_', '-')}" for k in DMC_OPTIONS))
+    if not args.model and not args.oracle:  # as on the pixel env: nothing is run that was not asked for
+        raise PigaError("give --model RUN_DIR (or --oracle, or both)")
     import argparse as _argparse
 
     try:
@@ -679,6 +681,9 @@ def _dmc(args: argparse.Namespace, argv: Sequence[str] | None, given: set[str]) 
     import torch
 
     torch.set_num_threads(1)
+    from envs.dmc import DMCPendulumEnv
+
+    DMCPendulumEnv(config.env).close()  # a renderer that cannot start here: its one line before a model's warnings
     results = []
     if args.model:
         from piga.io.checkpoint import checked_run_kind
@@ -687,6 +692,7 @@ def _dmc(args: argparse.Namespace, argv: Sequence[str] | None, given: set[str]) 
         if (kind := checked_run_kind(args.model)) is RunKind.DDPG:
             sb3 = _dmc_sb3_agent(args.model, config.env)
             config = replace(config, env=_sb3_view(sb3, config.env, {key for key, _ in pairs}))
+            _warn_if_did_not_learn(args.model, kind)  # after the refusals, so that a refused command prints one line
             results.append(run_dmc_episodes(sb3, sb3.config.algo, config, progress=not args.quiet))
         elif kind.is_baseline:
             raise PigaError(f"{args.model} is a {kind.value} run; --env {DMC_PENDULUM} runs piga models, the oracle and "
@@ -698,7 +704,7 @@ def _dmc(args: argparse.Namespace, argv: Sequence[str] | None, given: set[str]) 
             warn_if_unconverged(PROG, args.model)  # after the refusals, so that a refused command prints one line
             agent = PigaSwingUp(model, config.planner)
             results.append(run_dmc_episodes(agent, "piga", config, model.config.input_frames, progress=not args.quiet))
-    if args.oracle or not args.model:
+    if args.oracle:
         results.append(run_dmc_episodes(OracleSwingUp(config.env, config.planner), "oracle", config, progress=not args.quiet))
     command = command_line(PROG, argv)
     text = dmc_markdown(results, config, command)

@@ -11,6 +11,7 @@ from __future__ import annotations
 import os
 import warnings
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -76,20 +77,20 @@ def read_image(path: str | os.PathLike[str]) -> np.ndarray:
     if p.is_dir():
         raise IsADirectoryError(f"{p}: is a folder, not an image file")
     if not p.is_file():
+        if p.exists():  # /dev/zero, a pipe: reading one could take all the memory, or wait for ever
+            raise ValueError(f"{p}: not a regular file (a device or a pipe); give an image file")
         raise FileNotFoundError(f"{p}: no such image file")
     try:
         # imageio tries its plugins in turn, and some warn of a file that is not theirs (spe.py read a torch
         # checkpoint as 0 frames, warning "The file header ... claims there are 7 frames"): the one line of the
-        # error says it. Pillow's warning of a huge image is passed on.
-        with warnings.catch_warnings(record=True) as said:
-            warnings.simplefilter("always")
+        # error says it. Pillow's warning of a huge image (above MAX_IMAGE_PIXELS, below twice that) is dropped
+        # too: the image is read whole all the same, and past twice the limit the error below says so.
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
             try:
                 image = np.asarray(iio.imread(p, rotate=True))  # turned as its EXIF orientation says (a phone's photo)
             except TypeError:  # a plugin that has no orientation to apply (tifffile)
                 image = np.asarray(iio.imread(p))
-        for warning in said:
-            if warning.category.__name__ == "DecompressionBombWarning":
-                warnings.warn_explicit(warning.message, warning.category, warning.filename, warning.lineno)
     except Exception as exc:  # imageio raises many types for foreign or corrupt files
         if exc.__class__.__name__ == "DecompressionBombError":  # Pillow's guard against huge images
             raise ValueError(f"{p}: the image is too large to read (more than Pillow's limit of "
@@ -104,19 +105,30 @@ def read_image(path: str | os.PathLike[str]) -> np.ndarray:
         if len(image) > 1:
             raise ValueError(f"{p}: an animation of {len(image)} frames; give one image")
         image = image[0]
-    if image.ndim == 3 and image.shape[2] == 4 and _pillow_mode(p) == "CMYK":  # ink, not RGB and alpha
+    meta = _pillow_meta(p)
+    if image.ndim == 3 and image.shape[2] == 4 and meta.get("mode") == "CMYK":  # ink, not RGB and alpha
         image = np.asarray(iio.imread(p, mode="RGB"))
+    elif "transparency" in meta and not (image.ndim == 3 and image.shape[2] in (2, 4)):
+        # a transparent colour or palette entry (a PNG's tRNS, a GIF's), which Pillow reads as opaque RGB or gray:
+        # as RGBA, its alpha is checked as any other's
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            image = np.asarray(iio.imread(p, mode="RGBA"))
+        image = image[0] if image.ndim == 4 else image
     return image
 
 
-def _pillow_mode(path: Path) -> str | None:
-    """Pillow's mode of an image file ("RGB", "CMYK", ...), or None where Pillow does not read it."""
+def _pillow_meta(path: Path) -> dict[str, Any]:
+    """Pillow's metadata of an image file ("mode": "RGB", "CMYK", ...; "transparency" where it has a transparent
+    colour), or {} where Pillow does not read it."""
     import imageio.v3 as iio
 
     try:
-        return iio.immeta(path, plugin="pillow").get("mode")
-    except Exception:  # not Pillow's format: tifffile and the others read no CMYK here
-        return None
+        with warnings.catch_warnings():  # Pillow's of a huge image: see read_image
+            warnings.simplefilter("ignore")
+            return dict(iio.immeta(path, plugin="pillow"))
+    except Exception:  # not Pillow's format: tifffile and the others read no CMYK or transparent colour here
+        return {}
 
 
 def _pillow_limit() -> str:

@@ -48,6 +48,13 @@ SPLITS: dict[str, int] = {"train": 0, "valid": 1, "test": 2}
 #: seeds up to it).
 MAX_SEED = 2**63 - 1
 
+
+def legacy_seed(seed: int) -> int:
+    """``seed`` for the generators that take 32 bits only (numpy's global ``np.random.seed``, which SB3's
+    ``set_random_seed`` calls): a seed below 2^32 as it is, a larger one hashed into 32 bits by numpy's
+    ``SeedSequence``, so that every seed up to :data:`MAX_SEED` runs and runs the same each time."""
+    return seed if 0 <= seed < 2**32 else int(np.random.SeedSequence(seed).generate_state(1)[0])
+
 REQUIRED_ATTRS = ("system", "dt")
 
 #: The smallest frame side, in pixels, that piga's models and data take (the encoder's and the SSIM's windows).
@@ -269,6 +276,9 @@ def _open(path: str | os.PathLike[str]) -> h5py.File:
         raise DataFormatError(f"{p}: is not a regular file (a pipe, a socket or a device), not an HDF5 file")
     try:
         return h5py.File(p, "r")
+    except BlockingIOError:  # HDF5's lock: the file is open for writing elsewhere (errno EAGAIN, "unable to lock file")
+        raise DataFormatError(f"{p}: another process has it open for writing (HDF5 locks a file while it is written); "
+                              "wait for that process to end, or close the file there, and run the command again") from None
     except OSError as exc:
         raise DataFormatError(f"{p}: not a readable HDF5 file ({exc.__class__.__name__})") from None
 

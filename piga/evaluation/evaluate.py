@@ -224,10 +224,12 @@ def summary_line(metrics: dict[str, Any]) -> str:
         return f"no physical parameters ({metrics.get('physical_parameters_reason', 'none recorded')})"
     flat = set((metrics.get("convergence") or {}).get("undetermined") or ())  # flat profiles: not determined
     note = "; not determined by the training frames: its profile is flat"
-    parts = []
-    for name, e in metrics.get("parameter_errors", {}).items():
-        parts.append(f"{name}={e['learned']:.4f} ({true_and_error(e)}{note if name in flat else ''})")
-    if not parts:
-        parts = [f"{k}={v:.4f}" + (f" ({note[2:]})" if k in flat else "") for k, v in metrics.get("parameters", {}).items()]
+    errors = metrics.get("parameter_errors", {})
+    parts = [f"{name}={e['learned']:.4f} ({true_and_error(e)}{note if name in flat else ''})" for name, e in errors.items()]
+    # beside those, the learned ones the file gives no true value for (its params may name only some): all of them
+    # where it gives none, the offset included
+    skipped = {*errors, *metrics.get("fixed_parameters", {}), "offset"} if errors else set()
+    parts += [f"{k}={v:.4f}" + (f" ({note[2:]})" if k in flat else "") for k, v in metrics.get("parameters", {}).items()
+              if k not in skipped]
     return ", ".join(parts)
 

@@ -38,7 +38,7 @@ from tqdm.auto import tqdm
 
 from piga.io.choices import check_choices, check_types
 from piga.io.device import Device, resolve_device
-from piga.data.schema import (MIN_IMAGE_SIZE, DataFormatError, DatasetInfo, check_actions_file, fingerprint, read_rows,
+from piga.data.schema import (MIN_IMAGE_SIZE, DataFormatError, DatasetInfo, check_actions_file, fingerprint, legacy_seed, read_rows,
                               inspect_dataset, split_indices)
 from piga.world.encoder import estimate_background
 from piga.world.model import SYSTEM_SHAPES, FrameModel, ModelConfig, frames_to_float
@@ -686,7 +686,7 @@ def train(
         fitted = model_config_for(info, model_config, n_objects)
         check_trainable(info, fitted, train_config)
         torch.manual_seed(train_config.seed)
-        np.random.seed(train_config.seed)
+        np.random.seed(legacy_seed(train_config.seed))
         random.seed(train_config.seed)
         model = build_model(fitted)  # piga's, or a baseline of ModelConfig.architecture
         model.set_background(_background(data, model.config.channels, train_config.seed))
@@ -716,7 +716,7 @@ def train(
             if train_config.max_minutes and state.elapsed > train_config.max_minutes * 60:
                 break
             # The sampler's generator depends on (seed, epoch) only, so a resumed run sees the same order.
-            gen = torch.Generator().manual_seed(train_config.seed * 100_003 + state.epoch)
+            gen = torch.Generator().manual_seed((train_config.seed * 100_003 + state.epoch) % 2**63)  # torch: int64
             sampler = (RandomSampler(windows, generator=gen) if windows.in_memory
                        else BlockShuffleSampler(windows, windows.sequences_cached, generator=gen))
             loader = DataLoader(windows, batch_size=train_config.batch_size, sampler=sampler, drop_last=True, pin_memory=cuda)
