@@ -69,6 +69,7 @@ def test_the_precision_benchmark_times_both_and_compares_one_update(tmp_path: Pa
         drqv2_precision.main(["--out", str(out), "--fill", "10"])
 
 
+@pytest.mark.slow  # two checkpoints of a pixel run, each way: about 15 s
 def test_the_checkpoint_memory_benchmark_measures_both_ways(tmp_path: Path) -> None:
     import checkpoint_memory
 
@@ -81,6 +82,7 @@ def test_the_checkpoint_memory_benchmark_measures_both_ways(tmp_path: Path) -> N
     assert "its own file, streamed (piga's)" in out.with_suffix(".md").read_text()
 
 
+@pytest.mark.slow  # 5 rendered episodes of each reference policy: about 17 s
 def test_policies_that_learned_nothing_are_scored_at_the_runs_evaluation_starts(tmp_path: Path) -> None:
     import reference_policies
 

@@ -104,6 +104,7 @@ def test_a_run_resumes_exactly_and_acts_in_piga_episodes(tmp_path: Path) -> None
     assert np.isfinite(run_episodes(agent, EpisodeConfig(episodes=1, steps=10, hold_steps=5)).summary.mean_return)
 
 
+@pytest.mark.slow  # two pixel runs; the batches themselves are compared in tests/test_replay.py
 def test_a_run_with_its_observations_on_the_device_learns_as_one_in_host_memory(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """The device-resident buffer (a GPU's; here forced on the CPU) gives the host buffer's run, and checkpoints as
@@ -210,6 +211,7 @@ def test_auto_precision_is_bfloat16_only_for_drqv2_on_a_cpu_that_has_it(monkeypa
         SB3Config(algo="sac", obs="pixels", encoder_precision="bfloat16")
 
 
+@pytest.mark.slow  # three pixel runs and a resume: about 22 s
 def test_a_run_keeps_its_precision_in_its_record_its_model_and_its_resume(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                                                                           capsys: pytest.CaptureFixture[str]) -> None:
     """The record holds the precision resolved (not "auto", which another machine would read otherwise); a run
@@ -221,7 +223,7 @@ def test_a_run_keeps_its_precision_in_its_record_its_model_and_its_resume(tmp_pa
 
     monkeypatch.setattr(sb3_config, "bfloat16_in_hardware", lambda: True)
     tiny = ("--algo", "drqv2", "--obs", "pixels", "--eval-every", "200", "--eval-episodes", "1", "--learning-starts",
-            "150", "--batch-size", "8", "--buffer-size", "500", "--device", "cpu", "--quiet")
+            "190", "--batch-size", "8", "--buffer-size", "500", "--device", "cpu", "--quiet")
     for given, recorded in (("auto", "bfloat16"), ("float32", "float32")):
         out = tmp_path / given
         code, _, err = run_in_process("piga-baseline", baseline.main, "ddpg", "--out", str(out), "--steps", "200",
