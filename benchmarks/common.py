@@ -233,3 +233,20 @@ def logged_command(command: list[str], log: Path) -> int:
         f.write("$ " + " ".join(command) + "\n")
         f.flush()
         return job_command(command, stdout=f, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL).returncode
+
+
+def checked_command(command: list[str]) -> None:
+    """Runs one piga command as a user would (:func:`job_command`, its output dropped); its failure ends the script
+    with the command's own one line (a CalledProcessError was an internal error, its second line)."""
+    done = job_command(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL)
+    if done.returncode:
+        said = done.stderr.strip().splitlines()
+        raise PigaError(said[-1] if said else f"{command[0]} failed (exit {done.returncode})")
+
+
+def check_piga_model(run_dir: str) -> None:
+    """``--model``: a piga run folder whose model loads, checked before any work (a missing one failed only after the
+    first case's data was made)."""
+    from piga.io.runs import load_model
+
+    load_model(run_dir)

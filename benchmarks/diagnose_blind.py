@@ -36,7 +36,8 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from common import add_diagnose_options, add_ray_option, diagnose_options, farm_main, job_command, machine, ray_backend
+from common import (add_diagnose_options, add_ray_option, check_piga_model, diagnose_options, farm_main, job_command, machine,
+                    ray_backend)
 from envs.pendulum import PixelPendulumConfig
 from piga.io.atomic import atomic_output, write_json
 from piga.data.collect import CollectConfig, collect
@@ -260,6 +261,7 @@ def main() -> int:
     add_diagnose_options(p)
     args = p.parse_args()
     backend = ray_backend(p, args)
+    check_piga_model(args.model)
     out, work = Path(args.out), Path(args.work)
     work.mkdir(parents=True, exist_ok=True)
     command = shlex.join(["python", *sys.argv])
@@ -276,10 +278,11 @@ def main() -> int:
     def finished(_: int, record: dict) -> None:  # saved as each case ends, so that a stopped run continues
         done.append(record)
         done.sort(key=lambda r: r["case"])
+        closure = record["score"]["free_run_closure"]  # None: the case was refused
         print(f"case {record['case']}: truth {record['effects'] or 'none'} -> {record['score']['verdict']} "
               f"({'ok' if record['score']['top1'] else 'WRONG'}, raw closure "
-              f"{100 * record['score']['free_run_closure']:.1f}%, gap closure {record['score']['free_run_gap_closure']})",
-              flush=True)
+              f"{'n/a' if closure is None else f'{100 * closure:.1f}%'}, gap closure "
+              f"{record['score']['free_run_gap_closure']})", flush=True)
         save(out, command, info, done, summarize, markdown)
 
     run_pool(run, todo, workers=args.jobs, progress=False, on_result=finished, backend=backend,

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import json
 import shlex
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -28,7 +27,7 @@ import cv2
 import imageio.v2 as imageio
 import numpy as np
 
-from common import add_diagnose_options, diagnose_options, machine
+from common import add_diagnose_options, check_piga_model, checked_command, diagnose_options, machine
 from envs.pendulum import PixelPendulumConfig, make_pixel_pendulum
 from piga.io.atomic import atomic_output, write_json
 from piga.cli.common import ArgumentParser, seed_int
@@ -94,6 +93,7 @@ def main() -> int:
     add_diagnose_options(p)
     args = p.parse_args()
     options = diagnose_options(args)
+    check_piga_model(args.model)
     work = Path(args.work)
     work.mkdir(parents=True, exist_ok=True)
     runs = []
@@ -102,11 +102,10 @@ def main() -> int:
         stem = work / f"recording{i}"
         video, csv = record(effects, drop, blur, args.frames, args.seed + i, stem)
         data = stem.with_suffix(".h5")
-        subprocess.run(["piga-import", str(video), str(csv), "--dt", "0.05", "--out", str(data), "--overwrite"], check=True,
-                       stdout=subprocess.DEVNULL)
+        checked_command(["piga-import", str(video), str(csv), "--dt", "0.05", "--out", str(data), "--overwrite"])
         report_dir = work / f"report{i}"
-        subprocess.run(["piga-diagnose", "--model", args.model, "--data", str(data), "--out", str(report_dir), "--overwrite",
-                        "--quiet", *options], check=True, stdout=subprocess.DEVNULL)
+        checked_command(["piga-diagnose", "--model", args.model, "--data", str(data), "--out", str(report_dir), "--overwrite",
+                         "--quiet", *options])
         report = json.loads((report_dir / "report.json").read_text())
         runs.append({"case": i, "effects": effects, "frame_drop": drop, "blur_full_size_px": blur, "truth": truth,
                      "verdict": report["verdict"],

@@ -48,7 +48,7 @@ from typing import NamedTuple
 from common import add_diagnose_options, add_ray_option, diagnose_options, farm_main, logged_command, machine, ray_backend
 from piga.io.atomic import atomic_output, write_json
 from piga.io.pool import run_pool
-from piga.cli.common import ArgumentParser, positive_int, seed_int
+from piga.cli.common import ArgumentParser, PigaError, positive_int, seed_int
 
 #: Published pixel-based scores on DMC pendulum-swingup, read from the score files that DreamerV3's
 #: authors publish for it and its baselines (github.com/danijar/dreamerv3, ``scores/dmc_vision-{dreamerv3,
@@ -77,7 +77,7 @@ def sh(*args: str, log: Path) -> None:
     """Runs a piga command as a user would; its output goes to ``log``; a failure raises (and stops the benchmark)."""
     code = logged_command(list(args), log)
     if code:
-        raise RuntimeError(f"'{' '.join(args[:2])} ...' failed (exit {code}); see {log}")
+        raise PigaError(f"'{' '.join(args[:2])} ...' failed (exit {code}); see {log}")  # its own failure: not a bug here
 
 
 #: Identification floor (every parameter's relative error) and its stretch goal.

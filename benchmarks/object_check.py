@@ -30,7 +30,7 @@ from piga.data.schema import read_sequences
 from piga.evaluation.objects import EMPTY_RATIO, LOST_RATIO, check_objects
 from piga.io.atomic import atomic_output, write_json
 from piga.io.runs import load_model
-from piga.cli.common import ArgumentParser
+from piga.cli.common import ArgumentParser, PigaError
 
 
 def main() -> int:
@@ -43,8 +43,9 @@ def main() -> int:
     for spec in args.runs:
         run, _, data = spec.partition("=")
         model, _ = load_model(run)
-        if model.config.coord_dim != 2:
-            continue  # not a scene of objects
+        if model.config.coord_dim != 2:  # a pendulum's angle: no objects to check (a page of 0 runs said nothing)
+            raise PigaError(f"{run} is a run of {model.config.system}, not of a scene of objects; give scene runs "
+                            "(piga-train-model on a spring, bouncing or gravity file)")
         if not data:
             data = json.loads((Path(run) / "config.json").read_text())["data"]
         check = check_objects(model, read_sequences(data, "test")[0]).with_counts(model.config.n_objects, None)

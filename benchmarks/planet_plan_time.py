@@ -75,7 +75,7 @@ def main() -> int:
     p = ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--out", required=True, help="writes OUT.json and OUT.md")
     p.add_argument("--model", help="a piga-baseline planet run folder (default: an untrained default-size model)")
-    p.add_argument("--threads", type=int, nargs="+", default=[1], help="torch thread counts to measure (default 1)")
+    p.add_argument("--threads", type=positive_int, nargs="+", default=[1], help="torch thread counts to measure (default 1)")
     p.add_argument("--steps", type=positive_int, default=20, help="env steps timed per engine and thread count (default 20)")
     p.add_argument("--device", choices=["cpu", "cuda"], default="cpu", help="where the agents plan (default cpu)")
     args = p.parse_args()

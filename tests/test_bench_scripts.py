@@ -32,6 +32,13 @@ def test_every_script_runs_under_run_cli(script: Path) -> None:
      "backends.py: error: the following arguments are required: --model, --work, --out (see --help)"),
     (["ablations.py", "--seeds", "-1", "--out", "OUT"], 2,
      "ablations.py: error: argument --seeds: expected an integer in [0, 2^63 - 1], got -1 (see --help)"),
+    # a missing model was an internal error (TypeError) after the first case's data was collected
+    (["diagnose_blind.py", "--model", "nowhere", "--cases", "1", "--out", "OUT", "--work", "W"], 1,
+     "diagnose_blind.py: error: nowhere/checkpoint.pt: no checkpoint (is nowhere a piga-train-model run folder?)"),
+    (["diagnose_recordings.py", "--model", "nowhere", "--out", "OUT", "--work", "W"], 1,  # was CalledProcessError, 2 lines
+     "diagnose_recordings.py: error: nowhere/checkpoint.pt: no checkpoint (is nowhere a piga-train-model run folder?)"),
+    (["planet_plan_time.py", "--out", "OUT", "--threads", "0"], 2,  # was torch's RuntimeError, exit 70
+     "planet_plan_time.py: error: argument --threads: expected a positive integer, got 0 (see --help)"),
 ])
 def test_bad_input_to_a_script_is_one_line(tmp_path: Path, argv: list[str], code: int, line: str) -> None:
     argv = [a.replace("OUT", str(tmp_path / "out")) for a in argv]

@@ -3197,3 +3197,58 @@ def test_a_file_open_for_writing_elsewhere_is_said_to_be(tiny_data: Path, tmp_pa
         holder.kill()
         holder.wait()
     assert not (tmp_path / "s.png").exists()
+
+
+def test_a_second_control_given_the_same_out_is_refused_before_its_episodes(tmp_path: Path,
+                                                                           capsys: pytest.CaptureFixture[str]) -> None:
+    """Two controls given one --out both ran their episodes; the second was refused only at its write, its work lost."""
+    stem = tmp_path / "o"
+    holder = subprocess.Popen(["python", "-c", "import sys, time; from piga.io.lock import lock_run_folder; "
+                               "lock_run_folder(sys.argv[1]); print('held', flush=True); time.sleep(60)", str(stem)],
+                              stdout=subprocess.PIPE, text=True, env=ENV)
+    try:
+        assert holder.stdout is not None and holder.stdout.readline().strip() == "held"
+        refused("piga-control", ["--oracle", "--episodes", "1", "--steps", "20", "--quiet", "--out", str(stem)], capsys,
+                f"--out {stem} is in use by another piga command (PID {holder.pid})")
+    finally:
+        holder.kill()
+        holder.wait()
+    assert _listing(tmp_path) == []
+
+
+@pytest.mark.parametrize("script, taken", [("piga-collect", True), ("notebook.py", False)])
+def test_ctrl_c_while_a_command_loads_is_one_line(script: str, taken: bool) -> None:
+    """Ctrl-C in a command's first ~0.25 s, inside its imports, printed Python's KeyboardInterrupt traceback (17 to
+    37 lines). A program that only imports piga keeps its own Ctrl-C."""
+    code = (f"import os, signal, sys, time; sys.argv[0] = {script!r}; import piga.cli; "
+            "print(signal.getsignal(signal.SIGINT) is signal.default_int_handler, flush=True); "
+            "os.kill(os.getpid(), signal.SIGINT); time.sleep(30)")
+    result = subprocess.run(["python", "-c", code], capture_output=True, text=True, timeout=60, env=ENV)
+    if taken:
+        assert result.stdout.strip() == "False" and result.returncode == 130, result.stderr
+        assert result.stderr == "piga-collect: interrupted; nothing was written\n"
+    else:
+        assert result.stdout.strip() == "True" and "KeyboardInterrupt" in result.stderr
+
+
+def test_a_signal_after_the_work_says_the_outputs_are_complete() -> None:
+    """A SIGTERM after piga-diagnose's report was complete ended it with exit 143 and no word: the user took the run
+    for lost, and the rerun was refused ("report.md exists")."""
+    code = ("import os, signal, time; from piga.cli.common import _exit_quietly_on_late_signals as late; "
+            "late('piga-x: interrupted after it finished its work; its outputs are complete'); "
+            "os.kill(os.getpid(), signal.SIGTERM); time.sleep(30)")
+    result = subprocess.run(["python", "-c", code], capture_output=True, text=True, timeout=60, env=ENV)
+    assert result.returncode == 143
+    assert result.stderr == "piga-x: interrupted after it finished its work; its outputs are complete\n"
+
+
+def test_the_readers_refuse_a_limit_or_window_that_is_no_count(tiny_data: Path) -> None:
+    """load_states(path, "test", -1) sliced from the end (the other readers refused it); SequenceWindows(window="14")
+    was "'<' not supported between instances of 'str' and 'int'", naming no argument."""
+    import piga
+
+    with pytest.raises(ValueError, match="limit must be None"):
+        piga.load_states(tiny_data, "test", -1)
+    for given in ({"window": "14"}, {"window": None}, {"window": 4, "stride": "2"}, {"window": 4, "stride": 1.0}):
+        with pytest.raises(TypeError, match=f"{'stride' if 'stride' in given else 'window'} must be an integer"):
+            piga.SequenceWindows(tiny_data, "train", **given)

@@ -18,4 +18,29 @@ def _environment_for_the_libraries() -> None:
         _os.environ["MPLBACKEND"] = "Agg"
 
 
+def _early_interrupt(number: int, frame: object) -> None:
+    """SIGINT while a command still loads its libraries, before :func:`piga.cli.common.run_cli` takes the signal: the
+    one line it would print then (Python's KeyboardInterrupt, raised inside an import, printed 17 to 37 lines)."""
+    import sys
+
+    name = _os.path.basename(sys.argv[0]) if sys.argv else ""
+    name = name if name.startswith("piga-") else "piga"  # (python -m piga.cli.X: "-m", then the module's file)
+    _os.write(2, f"{name}: interrupted; nothing was written\n".encode("utf-8", "replace"))
+    _os._exit(128 + number)
+
+
+def _take_early_interrupts() -> None:
+    """Installs :func:`_early_interrupt` for a command's own process only (a piga-* script, ``python -m piga.cli.X``),
+    never in a program that imports piga (a notebook's Ctrl-C stays its own), and only over Python's default."""
+    import signal
+    import sys
+    import threading
+
+    script = _os.path.basename(sys.argv[0]) if sys.argv else ""
+    if (script.startswith("piga-") or script == "-m") and threading.current_thread() is threading.main_thread() \
+            and signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+        signal.signal(signal.SIGINT, _early_interrupt)
+
+
 _environment_for_the_libraries()
+_take_early_interrupts()

@@ -193,11 +193,21 @@ def _raise_interrupt(signum: int, frame: object) -> None:
     raise KeyboardInterrupt
 
 
-def _exit_quietly_on_late_signals() -> None:
-    """SIGINT and SIGTERM from now on end the process at once, quietly (128 + the signal). The command's work is
-    over; an interrupt raised in the interpreter's shutdown (torch's atexit hooks) printed a 10-line traceback."""
+def _exit_quietly_on_late_signals(finished: str | None = None) -> None:
+    """SIGINT and SIGTERM from now on end the process at once (128 + the signal), with the line ``finished`` where the
+    command finished its work (a report complete, yet exit 130 and no word looked like a lost run), quietly where it
+    had already said why it ended. The command's work is over; an interrupt raised in the interpreter's shutdown
+    (torch's atexit hooks) printed a 10-line traceback."""
+    said = (finished + "\n").encode("utf-8", "replace") if finished else b""
+
+    def end(number: int, frame: object) -> None:
+        if said:
+            with contextlib.suppress(OSError):
+                os.write(2, said)
+        os._exit(128 + number)
+
     for signum in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signum, lambda number, frame: os._exit(128 + number))
+        signal.signal(signum, end)
 
 
 #: Set while a command's ``main`` runs (:func:`run_cli`): an interrupt delivered again then still has work to stop.
@@ -234,6 +244,10 @@ def run_cli(prog: str, main: Callable[[Sequence[str] | None], int | None], argv:
     written output file gets removed.
     """
     signal.signal(signal.SIGTERM, _raise_interrupt)
+    from piga.cli import _early_interrupt
+
+    if signal.getsignal(signal.SIGINT) is _early_interrupt:  # the libraries are loaded: Ctrl-C stops the work as usual
+        signal.signal(signal.SIGINT, signal.default_int_handler)
     unraisablehook = sys.unraisablehook
     sys.unraisablehook = functools.partial(_interrupt_again, unraisablehook)
     _open_closed_standard_streams()
@@ -249,9 +263,11 @@ def run_cli(prog: str, main: Callable[[Sequence[str] | None], int | None], argv:
     excepthook, threading.excepthook = threading.excepthook, _thread_errors_to_log(prog, argv)
     code: int | str | None
     finished = "; the command itself finished and its outputs are complete"
+    returned = False
     try:
         _RUNNING.set()
         code = main(argv)
+        returned = True
         _RUNNING.clear()
         sys.stdout.flush()
     except SystemExit as exc:  # argparse's own exits (--help, a usage error): what it printed may have failed too
@@ -267,7 +283,8 @@ def run_cli(prog: str, main: Callable[[Sequence[str] | None], int | None], argv:
     finally:
         _RUNNING.clear()
         if argv is None:  # the command's own process, its work over and its exit code decided
-            _exit_quietly_on_late_signals()
+            _exit_quietly_on_late_signals(f"{prog}: interrupted after it finished its work; its outputs are complete"
+                                          if returned else None)
         guard, sys.stdout = sys.stdout, stdout
         threading.excepthook, sys.unraisablehook = excepthook, unraisablehook
         release_run_folders()  # a command run in-process (a test, a notebook) releases its run folder as it returns

@@ -141,6 +141,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         outputs = [stem.with_name(stem.name + s) for s in (".json", ".md", *((".png",) if args.sweep else ()))]
         for path in outputs:
             check_writable_target(path, args.overwrite)
+        _claim(stem)
     kind = _run_kind(args)
     if kind.is_baseline:
         return _baseline(args, kind, mpc, outputs, argv, given)
@@ -293,6 +294,14 @@ def _write_outputs(outputs: list[Path], record: dict[str, Any], page: str, overw
             from piga.evaluation.plots import save_figure
 
             save_figure(figure(), outputs[2], overwrite=overwrite)
+
+
+def _claim(stem: Path) -> None:
+    """Takes ``--out``'s stem for this command (:func:`piga.io.lock.lock_run_folder`): a second command given the same
+    ``--out`` is refused now, rather than after its episodes, when it found the first one's files."""
+    from piga.io.lock import lock_run_folder
+
+    lock_run_folder(stem, "--out")
 
 
 def _check_env_gravity(flag: str, gravity_mult: float) -> None:
@@ -678,6 +687,7 @@ def _dmc(args: argparse.Namespace, argv: Sequence[str] | None, given: set[str]) 
         outputs = [stem.with_name(stem.name + s) for s in (".json", ".md")]
         for path in outputs:
             check_writable_target(path, args.overwrite)
+        _claim(stem)
     import torch
 
     torch.set_num_threads(1)

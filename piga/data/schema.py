@@ -564,7 +564,7 @@ def load_states(path: str | os.PathLike[str], split: str, limit: int | None = No
     with _open(path) as f:
         if "states" not in f:
             raise DataFormatError(f"{path}: has no /states (ground truth is optional in the schema)")
-        return _take(f["states"], idx[:limit]).astype(np.float32)
+        return _take(f["states"], idx[:_count(limit)]).astype(np.float32)
 
 
 def load_rewards(path: str | os.PathLike[str], split: str, limit: int | None = None) -> np.ndarray:

@@ -121,6 +121,9 @@ class SequenceWindows(Dataset[Window]):
         self.path = Path(path)
         self.info = inspect_dataset(self.path)
         check_frames_have_signal(self.path)  # a blank video has nothing to train on
+        for name, value in (("window", window), ("stride", stride)):
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+                raise TypeError(f"{name} must be an integer, got {value!r}")
         if window < 1:
             raise ValueError(f"window must be >= 1 (frames per item), got {window}")
         if cache_bytes < 0:
