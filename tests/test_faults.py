@@ -3013,7 +3013,7 @@ def test_control_writes_its_outputs_for_a_non_ascii_model_under_a_c_locale(tiny_
                              "--candidates", "8", "--iterations", "1", "--horizon", "2", "--quiet", "--out",
                              str(tmp_path / "o")], capture_output=True, env=env, timeout=180)
     assert result.returncode == 0, result.stderr
-    assert f"piga (d\u00e9 mo" in (tmp_path / "o.md").read_text(encoding="utf-8").replace(str(tmp_path) + "/", "")
+    assert "piga (d\u00e9 mo" in (tmp_path / "o.md").read_text(encoding="utf-8").replace(str(tmp_path) + "/", "")
 
 
 @pytest.mark.parametrize("dt, told", [(0.04, True), (0.03, False)])
