@@ -3252,3 +3252,27 @@ def test_the_readers_refuse_a_limit_or_window_that_is_no_count(tiny_data: Path) 
     for given in ({"window": "14"}, {"window": None}, {"window": 4, "stride": "2"}, {"window": 4, "stride": 1.0}):
         with pytest.raises(TypeError, match=f"{'stride' if 'stride' in given else 'window'} must be an integer"):
             piga.SequenceWindows(tiny_data, "train", **given)
+
+
+@pytest.mark.parametrize("names", [("f7.png", "f07.png"), ("f7.png", "f7.jpg")])
+def test_two_files_of_one_frame_number_are_refused(names: tuple[str, str], tmp_path: Path) -> None:
+    """f7.png beside f07.png were both imported, one of them at a guessed place in the timeline."""
+    from PIL import Image
+
+    from piga.data.importer import frame_files
+
+    for i, name in enumerate(("f1.png", "f2.png", *names)):
+        Image.fromarray(np.full((8, 8), 40 * i, np.uint8)).save(tmp_path / name)
+    with pytest.raises(ValueError, match="are the same frame in name order"):
+        frame_files(tmp_path)
+
+
+def test_overwrite_is_a_yes_or_no(tiny_data: Path, tmp_path: Path) -> None:
+    """piga.collect(config, path, overwrite="no") replaced the existing file: a string is truthy."""
+    import piga
+
+    out = tmp_path / "x.h5"
+    shutil.copyfile(tiny_data, out)
+    with pytest.raises(TypeError, match="overwrite must be True or False"):
+        piga.collect(piga.CollectConfig(sequences=4, steps=4), out, overwrite="no")
+    assert out.read_bytes() == tiny_data.read_bytes()

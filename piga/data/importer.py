@@ -107,6 +107,12 @@ def frame_files(folder: str | Path) -> list[Path]:
                     and p.suffix.lower() in FRAME_EXTENSIONS), key=_natural_key)
     if not files:
         raise ValueError(f"{folder}: no frames in this folder (expected {', '.join(FRAME_EXTENSIONS)} files)")
+    seen: dict[tuple[int | str, ...], Path] = {}
+    for p in files:  # f7.png and f07.png (or f7.jpg) are one place in the order: which comes first is a guess
+        key = tuple(_natural_key(Path(p.stem)))
+        if key in seen:
+            raise ValueError(f"{folder}: {seen[key].name} and {p.name} are the same frame in name order; keep one")
+        seen[key] = p
     return files
 
 

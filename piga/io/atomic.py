@@ -29,6 +29,8 @@ def check_writable_target(path: str | os.PathLike[str], overwrite: bool) -> Path
         NotADirectoryError / PermissionError / FileNotFoundError: the folder is missing or not
             writable, or ``path`` is a folder.
     """
+    if not isinstance(overwrite, bool):  # overwrite="no", a truthy string, replaced the file
+        raise TypeError(f"overwrite must be True or False, got {overwrite!r}")
     target = Path(path)
     _check_name_lengths(target)
     if target.is_dir():
