@@ -105,7 +105,7 @@ def test_a_dmc_command_that_fails_ends_with_one_line_naming_the_case(benchmarks,
     assert info.value.code == 1
     line = capsys.readouterr().err
     assert line.count("\n") == 1 and line.startswith("dmc.py: error: job seed3")
-    assert "failed: RuntimeError: 'piga-collect --env ...' failed (exit 1); see " in line
+    assert "failed: PigaError: 'piga-collect --env ...' failed (exit 1); see " in line
     log = Path(line.split("; see ")[1].strip())
     assert log.parent.parent == work and "piga-collect: error: no" in log.read_text()
     assert not out.with_suffix(".json").exists()
