@@ -3276,3 +3276,15 @@ def test_overwrite_is_a_yes_or_no(tiny_data: Path, tmp_path: Path) -> None:
     with pytest.raises(TypeError, match="overwrite must be True or False"):
         piga.collect(piga.CollectConfig(sequences=4, steps=4), out, overwrite="no")
     assert out.read_bytes() == tiny_data.read_bytes()
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["--episodes", "10000", "--steps", "100000"], "--episodes 10000 x --steps 100000 = 1,000,000,000 control steps"),
+    (["--episodes", "40", "--steps", "50000", "--candidates", "100000", "--horizon", "20", "--iterations", "5"],
+     "2e+13 imagined model steps"),
+    (["--sweep", "0.5:1.5:0.1", "--episodes", "10000", "--steps", "200"], "22 runs (--sweep's multipliers x 2 agents)"),
+])
+def test_control_that_would_plan_for_days_is_refused_up_front(argv: list[str], needle: str, tiny_piga_run: Path,
+                                                               capsys: pytest.CaptureFixture[str]) -> None:
+    """Each option within its own cap, 10,000 episodes of 100,000 steps started without a word (two weeks)."""
+    refused("piga-control", ["--model", str(tiny_piga_run), "--quiet", *argv], capsys, needle)

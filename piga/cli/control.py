@@ -134,6 +134,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         raise PigaError(f"--steps must be at least {hold}: success is the goal held for the last {hold} steps, got {args.steps}")
     _check_env_gravity(f"--gravity-mult {args.gravity_mult:g}", args.gravity_mult)
     mpc = _mpc_config(args, math.radians(args.goal_angle))
+    _check_total_work(args, mpc)
     outputs = []
     if args.out:
         stem = Path(args.out)  # OUT.json, OUT.md: appended, so a stem such as "x1.4" keeps its dot
@@ -294,6 +295,24 @@ def _write_outputs(outputs: list[Path], record: dict[str, Any], page: str, overw
             from piga.evaluation.plots import save_figure
 
             save_figure(figure(), outputs[2], overwrite=overwrite)
+
+
+def _check_total_work(args: argparse.Namespace, mpc: MPCConfig) -> None:
+    """Refuses, before anything runs, a command whose episodes, steps, multipliers and planner together would plan
+    for days (each within its own cap), naming the total and the options that make it."""
+    runs = 2 * len(parse_range(args.sweep)) if args.sweep else 1  # a sweep: the piga agent and the oracle at each
+    steps = runs * args.episodes * args.steps
+    made = (f"{runs} runs (--sweep's multipliers x 2 agents) x " if runs > 1 else "") + \
+        f"--episodes {args.episodes} x --steps {args.steps}"
+    if steps > EpisodeConfig.MAX_TOTAL_STEPS:
+        raise PigaError(f"{made} = {steps:,} control steps, more than {EpisodeConfig.MAX_TOTAL_STEPS:,} (10,000 of "
+                        "Gymnasium's episodes; more would plan for days); lower them, or split the work into commands")
+    cem = mpc.cem
+    imagined = steps * cem.candidates * cem.horizon * cem.iterations
+    if imagined > EpisodeConfig.MAX_TOTAL_MODEL_STEPS:
+        raise PigaError(f"{made} = {steps:,} plans of --candidates {cem.candidates} x --horizon {cem.horizon} x "
+                        f"--iterations {cem.iterations} = {imagined:.3g} imagined model steps, more than "
+                        f"{EpisodeConfig.MAX_TOTAL_MODEL_STEPS:.0e} (days of planning); lower them")
 
 
 def _claim(stem: Path) -> None:

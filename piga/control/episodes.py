@@ -88,6 +88,14 @@ class EpisodeConfig(Scoring):
     """Most episodes one run plays (each is a swing-up of seconds to minutes: more would run for days)."""
     MAX_STEPS: ClassVar[int] = 100_000
     """Most steps per episode (500 times Gymnasium's 200: one such episode already plans for many minutes)."""
+    MAX_TOTAL_STEPS: ClassVar[int] = 2_000_000
+    """Most control steps one command plays over all its episodes (and a sweep's multipliers and agents): 10,000 of
+    Gymnasium's episodes, about 45 min of planning at the default settings; 10,000 episodes of 100,000 steps each
+    passed both caps above and would have planned for two weeks without a word."""
+    MAX_TOTAL_MODEL_STEPS: ClassVar[float] = 4e10
+    """Most imagined model steps one command plans over all its control steps (plans x candidates x horizon x
+    iterations): the default planner over :data:`MAX_TOTAL_STEPS`, about 45 min; the largest planner per plan (1e7)
+    over 100 episodes of 100,000 steps was weeks."""
 
     def __post_init__(self) -> None:
         check_types(self)  # a value of the wrong kind named here, not met deep inside
