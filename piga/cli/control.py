@@ -138,7 +138,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     outputs = []
     if args.out:
         stem = Path(args.out)  # OUT.json, OUT.md: appended, so a stem such as "x1.4" keeps its dot
-        stem = stem.with_suffix("") if stem.suffix in (".json", ".md", ".png") else stem
+        stem = stem.with_suffix("") if stem.suffix.lower() in (".json", ".md", ".png") else stem
         outputs = [stem.with_name(stem.name + s) for s in (".json", ".md", *((".png",) if args.sweep else ()))]
         for path in outputs:
             check_writable_target(path, args.overwrite)
@@ -702,7 +702,7 @@ def _dmc(args: argparse.Namespace, argv: Sequence[str] | None, given: set[str]) 
     outputs = []
     if args.out:
         stem = Path(args.out)
-        stem = stem.with_suffix("") if stem.suffix in (".json", ".md") else stem
+        stem = stem.with_suffix("") if stem.suffix.lower() in (".json", ".md") else stem
         outputs = [stem.with_name(stem.name + s) for s in (".json", ".md")]
         for path in outputs:
             check_writable_target(path, args.overwrite)
