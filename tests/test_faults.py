@@ -3288,3 +3288,24 @@ def test_control_that_would_plan_for_days_is_refused_up_front(argv: list[str], n
                                                                capsys: pytest.CaptureFixture[str]) -> None:
     """Each option within its own cap, 10,000 episodes of 100,000 steps started without a word (two weeks)."""
     refused("piga-control", ["--model", str(tiny_piga_run), "--quiet", *argv], capsys, needle)
+
+
+def test_a_folder_removed_while_a_command_writes_in_it_is_said_in_words(tmp_path: Path,
+                                                                        capsys: pytest.CaptureFixture[str]) -> None:
+    """A run folder removed mid-run ended in "[Errno 2] No such file or directory: b'run/tensorboard/...'"."""
+    def main(argv: Sequence[str] | None) -> int:
+        open(os.fsencode(tmp_path / "gone" / "events.out"), "wb")  # the folder is not there any more
+        return 0
+
+    code = _exit_code_of(main, capsys)
+    err = capsys.readouterr().err
+    assert code == 1 and err.count("\n") == 1, err
+    assert f"{tmp_path / 'gone' / 'events.out'}: no such file or folder (was a folder the command writes in removed" in err
+
+
+def _exit_code_of(main: Callable[[Sequence[str] | None], int], capsys: pytest.CaptureFixture[str]) -> int:
+    from piga.cli.common import run_cli
+
+    with pytest.raises(SystemExit) as info:
+        run_cli("piga-x", main, [])
+    return int(info.value.code or 0)

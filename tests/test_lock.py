@@ -76,8 +76,15 @@ def test_a_run_still_training_is_named_by_the_commands_that_read_it(tmp_path: Pa
     try:
         assert held_by(run) == str(holder.pid)
         warn_if_unconverged("piga-control", run)
-        assert capsys.readouterr().err.strip() == (f"piga-control: warning: the run {run} is still being trained (PID "
-                                                   f"{holder.pid}); this used its last checkpoint, not its final model")
+        said = (f"piga-control: warning: the run {run} is still being trained (PID {holder.pid}); this used its last "
+                "checkpoint, not its final model")
+        assert capsys.readouterr().err.strip() == said
+        # a baseline run too: its "did not learn" read the records of a checkpoint on its way
+        from piga.cli.control import _warn_if_did_not_learn
+        from piga.io.checkpoint import RunKind
+
+        _warn_if_did_not_learn(str(run), RunKind.DDPG)
+        assert capsys.readouterr().err.strip() == said
     finally:
         holder.kill()
         holder.wait()

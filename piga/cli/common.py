@@ -439,7 +439,12 @@ def _exit_on_error(prog: str, argv: Sequence[str] | None, exc: Exception) -> NoR
     _close_progress_bars()
     error: BaseException = exc.cause if isinstance(exc, JobFailed) else exc
     job = f"job {exc.job} failed: " if isinstance(exc, JobFailed) else ""
-    if isinstance(error, USER_ERRORS):
+    if isinstance(error, FileNotFoundError) and error.errno == errno.ENOENT and error.filename is not None:
+        # the OS's own words ("[Errno 2] No such file or directory: b'run/tensorboard/...'"): a folder removed or
+        # moved while the command wrote in it, most often
+        print(f"{prog}: error: {job}{os.fsdecode(error.filename)}: no such file or folder (was a folder the command "
+              "writes in removed or moved while it ran?); run the command again", file=sys.stderr)
+    elif isinstance(error, USER_ERRORS):
         message = " ".join(str(error).split()) or error.__class__.__name__
         if isinstance(error, ValueError) and not isinstance(error, DataFormatError):  # a config's check
             message = with_flags(message)

@@ -385,7 +385,12 @@ def baseline_did_not_learn(run_dir: str | Path, kind: RunKind) -> str | None:
 def _warn_if_did_not_learn(run_dir: str, kind: RunKind) -> None:
     """One warning line for a baseline run that did not learn (:func:`baseline_did_not_learn`), as for a piga run that
     did not converge; after the command's refusals, so that a refused command prints one line."""
-    if (why := baseline_did_not_learn(run_dir, kind)) is not None:
+    from piga.io.lock import held_by
+
+    if (pid := held_by(run_dir)) is not None:  # its records are those of its last checkpoint, not of its end
+        print(f"{PROG}: warning: the run {run_dir} is still being trained (PID {pid}); this used its last checkpoint, "
+              "not its final model", file=sys.stderr)
+    elif (why := baseline_did_not_learn(run_dir, kind)) is not None:
         print(f"{PROG}: warning: the run {run_dir} did not learn ({why}); these episodes score it all the same",
               file=sys.stderr)
 
