@@ -241,7 +241,7 @@ def _quiet_half_made_context(hook: Callable[[Any], None]) -> Callable[[Any], Non
     """``sys.unraisablehook`` that drops the complaint of a rendering context that failed half made (its
     ``__del__`` finds no pointer as it is collected), after the one error line has said why."""
     def quiet(unraisable: Any) -> None:
-        if "Context" not in type(unraisable.object).__qualname__ and "Context" not in repr(unraisable.object):
+        if "Context" not in repr(unraisable.object):  # (MjrContext.__del__, GLContext's)
             hook(unraisable)
     return quiet
 

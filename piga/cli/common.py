@@ -179,14 +179,22 @@ def typed_text(text: str) -> str:
 def warn_if_unconverged(prog: str, run_dir: str | os.PathLike[str]) -> None:
     """Prints one warning line when the run's metrics.json says it did not converge (:func:`piga.io.runs.convergence_warning`),
     or when another command still trains it (:func:`piga.io.lock.held_by`): its checkpoint is then the last saved."""
-    from piga.io.lock import held_by
     from piga.io.runs import convergence_warning
 
-    if (pid := held_by(run_dir)) is not None:
-        print(f"{prog}: warning: the run {run_dir} is still being trained (PID {pid}); this used its last checkpoint, "
-              "not its final model", file=sys.stderr)
-    elif (warning := convergence_warning(run_dir)) is not None:
+    if not warn_if_still_training(prog, run_dir) and (warning := convergence_warning(run_dir)) is not None:
         print(f"{prog}: {warning}", file=sys.stderr)
+
+
+def warn_if_still_training(prog: str, run_dir: str | os.PathLike[str]) -> bool:
+    """Prints one warning line, and returns True, when another command still trains the run
+    (:func:`piga.io.lock.held_by`): what its records say is of its last checkpoint, not of its end."""
+    from piga.io.lock import held_by
+
+    if (pid := held_by(run_dir)) is None:
+        return False
+    print(f"{prog}: warning: the run {run_dir} is still being trained (PID {pid}); this used its last checkpoint, "
+          "not its final model", file=sys.stderr)
+    return True
 
 
 def _raise_interrupt(signum: int, frame: object) -> None:

@@ -18,10 +18,11 @@ from envs.pendulum import MAX_GRAVITY, MIN_GRAVITY, PixelPendulumConfig
 from piga.io.atomic import atomic_output, check_writable_target, write_json, written_together
 from piga.cli.common import (ArgumentParser, PigaError, add_ray_option, command_line, connect_backend, file_path,
                              given_options, int_up_to, positive_float, positive_int, run_cli, seed_int,
-                             typed_text, warn_if_unconverged)
+                             typed_text, warn_if_still_training, warn_if_unconverged)
 from piga.control.episodes import EpisodeConfig, parse_range, run_episodes
 from piga.evaluation.episodes import summary_markdown
 from piga.io.checkpoint import RunKind
+from piga.io.lock import held_by, lock_run_folder
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -142,14 +143,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         outputs = [stem.with_name(stem.name + s) for s in (".json", ".md", *((".png",) if args.sweep else ()))]
         for path in outputs:
             check_writable_target(path, args.overwrite)
-        _claim(stem)
+        # a second command given the same --out is refused now, not after its episodes, when it found these files
+        lock_run_folder(stem, "--out")
     kind = _run_kind(args)
     if kind.is_baseline:
         return _baseline(args, kind, mpc, outputs, argv, given)
     if args.sweep:
         return _sweep(args, mpc, outputs, argv)
-    from piga.io.lock import held_by
-
     if args.model and not Path(args.model).is_dir() and held_by(args.model) is None:  # (before --workers is judged by
         from piga.io.checkpoint import CHECKPOINT  # the run's kind; a run just started has no folder yet: said below)
 
@@ -315,14 +315,6 @@ def _check_total_work(args: argparse.Namespace, mpc: MPCConfig) -> None:
                         f"{EpisodeConfig.MAX_TOTAL_MODEL_STEPS:.0e} (days of planning); lower them")
 
 
-def _claim(stem: Path) -> None:
-    """Takes ``--out``'s stem for this command (:func:`piga.io.lock.lock_run_folder`): a second command given the same
-    ``--out`` is refused now, rather than after its episodes, when it found the first one's files."""
-    from piga.io.lock import lock_run_folder
-
-    lock_run_folder(stem, "--out")
-
-
 def _check_env_gravity(flag: str, gravity_mult: float) -> None:
     """Refuses a gravity multiplier that gives the pixel pendulum a gravity out of its range
     (:class:`PixelPendulumConfig`'s), before a model is read."""
@@ -385,12 +377,7 @@ def baseline_did_not_learn(run_dir: str | Path, kind: RunKind) -> str | None:
 def _warn_if_did_not_learn(run_dir: str, kind: RunKind) -> None:
     """One warning line for a baseline run that did not learn (:func:`baseline_did_not_learn`), as for a piga run that
     did not converge; after the command's refusals, so that a refused command prints one line."""
-    from piga.io.lock import held_by
-
-    if (pid := held_by(run_dir)) is not None:  # its records are those of its last checkpoint, not of its end
-        print(f"{PROG}: warning: the run {run_dir} is still being trained (PID {pid}); this used its last checkpoint, "
-              "not its final model", file=sys.stderr)
-    elif (why := baseline_did_not_learn(run_dir, kind)) is not None:
+    if not warn_if_still_training(PROG, run_dir) and (why := baseline_did_not_learn(run_dir, kind)) is not None:
         print(f"{PROG}: warning: the run {run_dir} did not learn ({why}); these episodes score it all the same",
               file=sys.stderr)
 
@@ -711,7 +698,7 @@ def _dmc(args: argparse.Namespace, argv: Sequence[str] | None, given: set[str]) 
         outputs = [stem.with_name(stem.name + s) for s in (".json", ".md")]
         for path in outputs:
             check_writable_target(path, args.overwrite)
-        _claim(stem)
+        lock_run_folder(stem, "--out")  # as on the pixel env
     import torch
 
     torch.set_num_threads(1)

@@ -80,6 +80,11 @@ def read_image(path: str | os.PathLike[str]) -> np.ndarray:
         if p.exists():  # /dev/zero, a pipe: reading one could take all the memory, or wait for ever
             raise ValueError(f"{p}: not a regular file (a device or a pipe); give an image file")
         raise FileNotFoundError(f"{p}: no such image file")
+    meta = _pillow_meta(p)
+    # Pillow is asked for RGB where the file is CMYK (ink, not RGB and alpha), and for RGBA where it has a transparent
+    # colour or palette entry (a PNG's tRNS, a GIF's), which it reads as opaque RGB or gray otherwise: its alpha is
+    # then checked as any other's
+    mode = "RGB" if meta.get("mode") == "CMYK" else "RGBA" if "transparency" in meta else None
     try:
         # imageio tries its plugins in turn, and some warn of a file that is not theirs (spe.py read a torch
         # checkpoint as 0 frames, warning "The file header ... claims there are 7 frames"): the one line of the
@@ -87,10 +92,13 @@ def read_image(path: str | os.PathLike[str]) -> np.ndarray:
         # too: the image is read whole all the same, and past twice the limit the error below says so.
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            try:
-                image = np.asarray(iio.imread(p, rotate=True))  # turned as its EXIF orientation says (a phone's photo)
-            except TypeError:  # a plugin that has no orientation to apply (tifffile)
-                image = np.asarray(iio.imread(p))
+            if mode is not None:
+                image = np.asarray(iio.imread(p, plugin="pillow", mode=mode, rotate=True))
+            else:
+                try:
+                    image = np.asarray(iio.imread(p, rotate=True))  # turned as its EXIF orientation says (a phone's photo)
+                except TypeError:  # a plugin that has no orientation to apply (tifffile)
+                    image = np.asarray(iio.imread(p))
     except Exception as exc:  # imageio raises many types for foreign or corrupt files
         if exc.__class__.__name__ == "DecompressionBombError":  # Pillow's guard against huge images
             raise ValueError(f"{p}: the image is too large to read (more than Pillow's limit of "
@@ -105,16 +113,6 @@ def read_image(path: str | os.PathLike[str]) -> np.ndarray:
         if len(image) > 1:
             raise ValueError(f"{p}: an animation of {len(image)} frames; give one image")
         image = image[0]
-    meta = _pillow_meta(p)
-    if image.ndim == 3 and image.shape[2] == 4 and meta.get("mode") == "CMYK":  # ink, not RGB and alpha
-        image = np.asarray(iio.imread(p, mode="RGB"))
-    elif "transparency" in meta and not (image.ndim == 3 and image.shape[2] in (2, 4)):
-        # a transparent colour or palette entry (a PNG's tRNS, a GIF's), which Pillow reads as opaque RGB or gray:
-        # as RGBA, its alpha is checked as any other's
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            image = np.asarray(iio.imread(p, mode="RGBA"))
-        image = image[0] if image.ndim == 4 else image
     return image
 
 

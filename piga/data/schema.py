@@ -55,6 +55,7 @@ def legacy_seed(seed: int) -> int:
     ``SeedSequence``, so that every seed up to :data:`MAX_SEED` runs and runs the same each time."""
     return seed if 0 <= seed < 2**32 else int(np.random.SeedSequence(seed).generate_state(1)[0])
 
+
 REQUIRED_ATTRS = ("system", "dt")
 
 #: The smallest frame side, in pixels, that piga's models and data take (the encoder's and the SSIM's windows).
