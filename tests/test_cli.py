@@ -225,7 +225,7 @@ def test_demo_runs_the_chain(tmp_path: Path) -> None:
                  "--control-steps", "20")
     # one epoch of 6 steps is too short to judge: the chain runs to its end and exits 3, as piga-train-model does
     assert result.returncode == 3 and "piga-demo: warning: not converged" in result.stderr, result.stderr
-    # its advice names piga-train-model's options (piga-demo has no --resume): whose they are, and on what
+    # its advice names piga-train-model's options: whose they are, and on what
     assert f"(options of piga-train-model {tmp_path / 'demo' / 'pendulum.h5'} --out {tmp_path / 'demo' / 'model'})" \
         in result.stderr, result.stderr
     assert "summary: g: learned" in result.stdout and "a: learned" in result.stdout

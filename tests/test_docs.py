@@ -258,3 +258,12 @@ def test_the_diagnose_page_gives_the_fewest_frames_the_fit_takes() -> None:
     text = " ".join((Path(__file__).resolve().parents[1] / "docs" / "commands" / "diagnose.md").read_text().split())
     horizon = DiagnoseConfig().fit_horizon
     assert (f"or {min_frames(horizon)} frames (the fit's windows of {horizon} steps after {MAX_DELAY} frames)" in text)
+
+
+def test_the_collect_page_names_every_env_option() -> None:
+    """The page listed 6 of the 9 keys that --env-option takes (help derives its list from DMCPendulumConfig)."""
+    from piga.cli.collect import env_option_keys
+
+    row = next(line for line in (DOCS / "commands" / "collect.md").read_text(encoding="utf-8").splitlines()
+               if line.startswith("| `--env-option"))
+    assert [key for key in env_option_keys() if f"`{key}`" not in row] == []

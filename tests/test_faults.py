@@ -16,6 +16,7 @@ import signal
 import subprocess
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -1263,10 +1264,56 @@ def test_demo_interrupted_in_training_says_what_it_kept(tmp_path: Path, capsys: 
     monkeypatch.setattr(demo.show, "main", lambda argv: 0)
     monkeypatch.setattr(demo.train, "main", interrupted_training)
     code, _, err = run_in_process("piga-demo", demo.main, "--out", str(tmp_path / "demo"), capsys=capsys)
-    assert code == 130 and "--resume" not in err
-    assert err.strip() == f"piga-demo: interrupted; {tmp_path / 'demo'} keeps pendulum.h5 from this demo; run it again with " \
-                          "--overwrite to start over", err
+    assert code == 130
+    assert err.strip() == f"piga-demo: interrupted; {tmp_path / 'demo'} keeps pendulum.h5 from this demo; run the same " \
+                          "command with --resume to continue it, or with --overwrite to start over", err
     assert _listing(tmp_path) == ["demo", "demo/pendulum.h5"]
+
+
+def test_demo_resume_continues_from_what_it_kept(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                 monkeypatch: pytest.MonkeyPatch) -> None:
+    """An interrupted demo blocked its plain rerun and had no way to continue: --resume keeps the data collected
+    with the same --sequences and --seed, continues the training from its checkpoint, and redoes the rest."""
+    from piga.cli.common import Interrupted
+    from piga.data.collect import collect
+
+    out = tmp_path / "demo"
+    calls: list[tuple[str, list[str]]] = []
+
+    def small_collect(config: Any, path: Path, **kwargs: Any) -> None:
+        calls.append(("collect", []))
+        collect(replace(config, steps=8, workers=1), path, **kwargs)
+
+    def interrupted_training(argv: Sequence[str], prog: str) -> int:
+        calls.append(("train", list(argv)))
+        (out / "model").mkdir()
+        (out / "model" / "checkpoint.pt").write_bytes(b"ckpt")
+        raise Interrupted("model/checkpoint.pt holds epoch 1; continue with --resume")
+
+    monkeypatch.setattr(demo, "collect", small_collect)
+    monkeypatch.setattr(demo, "_check_enough_sequences", lambda config: None)
+    monkeypatch.setattr(demo.show, "main", lambda argv: calls.append(("show", list(argv))) or 0)
+    monkeypatch.setattr(demo.train, "main", interrupted_training)
+    argv = ["--out", str(out), "--sequences", "4", "--quiet"]
+    code, _, err = run_in_process("piga-demo", demo.main, *argv, capsys=capsys)
+    assert code == 130 and "--resume to continue it" in err, err
+    refused("piga-demo", argv, capsys, "pass --resume to continue that demo or --overwrite to replace it")
+    refused("piga-demo", [*argv, "--resume", "--seed", "1"], capsys,
+            "holds 4 pendulum sequences collected with seed 0, not this command's --sequences 4 --seed 1")
+    refused("piga-demo", [*argv, "--resume", "--overwrite"], capsys, "give one of them")
+    calls.clear()
+
+    def resumed_training(argv: Sequence[str], prog: str) -> int:
+        calls.append(("train", list(argv)))
+        raise Interrupted("again")
+
+    monkeypatch.setattr(demo.train, "main", resumed_training)
+    code, out_text, err = run_in_process("piga-demo", demo.main, *argv, "--resume", capsys=capsys)
+    assert code == 130, err
+    assert "[1/4] keeping the 4 sequences" in out_text and "[3/4] continuing the training" in out_text, out_text
+    assert [name for name, _ in calls] == ["show", "train"]  # nothing collected again
+    assert "--overwrite" in calls[0][1] and "--resume" in calls[1][1] and "--overwrite" not in calls[1][1]
+    refused("piga-demo", ["--out", str(tmp_path / "empty"), "--resume"], capsys, "holds no earlier demo to continue")
 
 
 @pytest.mark.parametrize("prog, argv, needle", [
@@ -3216,19 +3263,53 @@ def test_a_second_control_given_the_same_out_is_refused_before_its_episodes(tmp_
     assert _listing(tmp_path) == []
 
 
-@pytest.mark.parametrize("script, taken", [("piga-collect", True), ("notebook.py", False)])
-def test_ctrl_c_while_a_command_loads_is_one_line(script: str, taken: bool) -> None:
+@pytest.mark.parametrize("script, module, taken", [("piga-collect", "", "piga-collect"), ("notebook.py", "", ""),
+                                                   ("-m", "piga.cli.importer", "piga-import"),
+                                                   ("-m", "piga.cli.train", "piga-train-model")])
+def test_ctrl_c_while_a_command_loads_is_one_line(script: str, module: str, taken: str) -> None:
     """Ctrl-C in a command's first ~0.25 s, inside its imports, printed Python's KeyboardInterrupt traceback (17 to
-    37 lines). A program that only imports piga keeps its own Ctrl-C."""
-    code = (f"import os, signal, sys, time; sys.argv[0] = {script!r}; import piga.cli; "
+    37 lines). A program that only imports piga keeps its own Ctrl-C. ``python -m piga.cli.X`` is named as its
+    command (it was "piga")."""
+    code = (f"import os, signal, sys, time; sys.argv[0] = {script!r}; "
+            f"sys.orig_argv = [sys.executable, '-m', {module!r}] if {module!r} else sys.orig_argv; import piga.cli; "
             "print(signal.getsignal(signal.SIGINT) is signal.default_int_handler, flush=True); "
             "os.kill(os.getpid(), signal.SIGINT); time.sleep(30)")
     result = subprocess.run(["python", "-c", code], capture_output=True, text=True, timeout=60, env=ENV)
     if taken:
         assert result.stdout.strip() == "False" and result.returncode == 130, result.stderr
-        assert result.stderr == "piga-collect: interrupted; nothing was written\n"
+        assert result.stderr == f"{taken}: interrupted; nothing was written\n"
     else:
         assert result.stdout.strip() == "True" and "KeyboardInterrupt" in result.stderr
+
+
+def test_ctrl_c_inside_an_import_waits_for_the_import(tmp_path: Path) -> None:
+    """A Ctrl-C that landed inside a library's import (torch's runs Python code from C++) aborted the command
+    ("terminate called after throwing an instance of 'pybind11::error_already_set'"), or ended it by SIGINT (exit -2)
+    after its own line. It is raised once the import is over: the module below is imported whole."""
+    (tmp_path / "slow_library.py").write_text(
+        "import os, signal, time\nos.kill(os.getpid(), signal.SIGINT)\n"
+        "exec('x = 1')\ntime.sleep(0.3)\nopen(os.environ['MARK'], 'w').close()\n", encoding="utf-8")
+    code = ("import sys, time; sys.argv[0] = 'piga-x'; from piga.cli.common import run_cli\n"
+            "def main(argv):\n    import slow_library\n    time.sleep(30)\n"
+            "run_cli('piga-x', main)")
+    mark = tmp_path / "imported"
+    started = time.monotonic()
+    result = subprocess.run(["python", "-c", code], capture_output=True, text=True, timeout=60, cwd=tmp_path,
+                            env={**ENV, "MARK": str(mark), "PYTHONPATH": f"{tmp_path}{os.pathsep}{ENV.get('PYTHONPATH', '')}"})
+    assert result.returncode == 130 and result.stderr == "piga-x: interrupted; nothing was written\n", result.stderr
+    assert mark.exists() and time.monotonic() - started < 20
+
+
+def test_a_signal_while_python_exits_keeps_the_commands_exit_code(tmp_path: Path) -> None:
+    """Python sets the signals' handlers back to the default as it shuts down: a Ctrl-C then killed a command that
+    had already printed its error (exit -2 for its 1). Here one lands as the script's globals are torn down."""
+    script = tmp_path / "late.py"
+    script.write_text("import os, signal, sys\nsys.argv[0] = 'piga-x'\nfrom piga.cli.common import PigaError, run_cli\n"
+                      "class Late:\n    def __del__(self):\n        os.kill(os.getpid(), signal.SIGINT)\n"
+                      "late = Late()\ndef main(argv):\n    raise PigaError('bad input')\nrun_cli('piga-x', main)\n",
+                      encoding="utf-8")
+    result = subprocess.run(["python", str(script)], capture_output=True, text=True, timeout=60, env=ENV)
+    assert result.returncode == 1 and result.stderr == "piga-x: error: bad input\n", (result.returncode, result.stderr)
 
 
 def test_a_signal_after_the_work_says_the_outputs_are_complete() -> None:
@@ -3309,3 +3390,26 @@ def _exit_code_of(main: Callable[[Sequence[str] | None], int], capsys: pytest.Ca
     with pytest.raises(SystemExit) as info:
         run_cli("piga-x", main, [])
     return int(info.value.code or 0)
+
+
+def test_a_title_in_a_script_the_font_lacks_warns_nothing(tmp_path: Path) -> None:
+    """piga-show on "ñ日本.h5" printed matplotlib's two-line "Glyph ... missing from font(s)" warning per glyph."""
+    import warnings
+
+    import matplotlib.pyplot as plt
+
+    from piga.evaluation.plots import save_figure
+
+    fig = plt.figure()
+    fig.suptitle("ñ日本.h5")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        save_figure(fig, tmp_path / "strip.png")
+    assert [str(w.message) for w in caught] == [] and (tmp_path / "strip.png").exists()
+
+
+@pytest.mark.skipif(not Path("/proc/self").is_dir() or shutil.disk_usage("/proc").total != 0, reason="needs Linux's /proc")
+def test_an_out_on_a_file_system_without_storage_says_so(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """--out /proc/x.h5 was "needs about 128.4 KiB of disk, but /proc has 0 B free; ask for less", for 1 sequence."""
+    refused("piga-collect", ["--out", "/proc/x.h5", "--sequences", "1", "--steps", "2", "--quiet", "--workers", "1"],
+            capsys, "cannot be written under /proc: it is on a file system that stores no files")

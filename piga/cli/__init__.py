@@ -24,7 +24,11 @@ def _early_interrupt(number: int, frame: object) -> None:
     import sys
 
     name = _os.path.basename(sys.argv[0]) if sys.argv else ""
-    name = name if name.startswith("piga-") else "piga"  # (python -m piga.cli.X: "-m", then the module's file)
+    if not name.startswith("piga-"):  # python -m piga.cli.X: sys.argv[0] is "-m" while X loads
+        given = getattr(sys, "orig_argv", [])
+        module = given[given.index("-m") + 1] if "-m" in given[:-1] else ""
+        short = module.rpartition(".")[2] if module.startswith("piga.cli.") else ""
+        name = {"train": "piga-train-model", "importer": "piga-import"}.get(short, f"piga-{short}" if short else "piga")
     _os.write(2, f"{name}: interrupted; nothing was written\n".encode("utf-8", "replace"))
     _os._exit(128 + number)
 

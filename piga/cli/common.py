@@ -197,8 +197,44 @@ def warn_if_still_training(prog: str, run_dir: str | os.PathLike[str]) -> bool:
     return True
 
 
-def _raise_interrupt(signum: int, frame: object) -> None:
-    raise KeyboardInterrupt
+def _in_import(frame: Any) -> bool:
+    """Whether ``frame`` (a Python frame) runs inside an import: importlib's frames are in its stack."""
+    while frame is not None:
+        if frame.f_code.co_filename.startswith("<frozen importlib"):
+            return True
+        frame = frame.f_back
+    return False
+
+
+#: Set while an interrupt waits for an import to end (:func:`_raise_interrupt`).
+_DEFERRED = threading.Event()
+
+
+def _raise_interrupt(signum: int, frame: Any) -> None:
+    """SIGINT and SIGTERM during a command's work: KeyboardInterrupt, so that ``finally`` blocks run, except inside an
+    import. A library's import runs Python code from C++ (torch's, through pybind11), where a KeyboardInterrupt cannot
+    pass: the process aborted ("terminate called after throwing an instance of 'pybind11::error_already_set'"), or
+    Python marked the interrupt unhandled and, after the command's own line, ended by SIGINT (exit -2, not 130). There
+    the interrupt waits for the import to end (a thread looks every 5 ms; imports take at most a second or two) and is
+    raised then. Python's signal module offers no deferral of its own; masking the signal would also hold it back
+    from the blocking calls that it should interrupt."""
+    if not _in_import(frame):
+        raise KeyboardInterrupt
+    if _DEFERRED.is_set():  # one is already waiting
+        return
+    _DEFERRED.set()
+    main = threading.main_thread().ident
+
+    def deliver() -> None:
+        import time
+
+        while _in_import(sys._current_frames().get(main)):
+            time.sleep(0.005)
+        _DEFERRED.clear()
+        if _RUNNING.is_set() and main is not None:  # (the work may have ended meanwhile: nothing left to stop)
+            signal.pthread_kill(main, signum)  # a signal, not _thread.interrupt_main: it wakes a blocking call too
+
+    threading.Thread(target=deliver, name="piga-deferred-interrupt", daemon=True).start()
 
 
 def _exit_quietly_on_late_signals(finished: str | None = None) -> None:
@@ -216,6 +252,14 @@ def _exit_quietly_on_late_signals(finished: str | None = None) -> None:
 
     for signum in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signum, end)
+
+
+def _ignore_signals_at_exit() -> None:
+    """The last of a command's ``atexit`` hooks: SIGINT and SIGTERM are ignored while the interpreter shuts down.
+    Python sets their handlers back to the default there, so a Ctrl-C at that moment killed a command that had
+    already said why it ended (its error line, then exit -2 for its 1). Python keeps an ignored signal ignored."""
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, signal.SIG_IGN)
 
 
 #: Set while a command's ``main`` runs (:func:`run_cli`): an interrupt delivered again then still has work to stop.
@@ -252,10 +296,14 @@ def run_cli(prog: str, main: Callable[[Sequence[str] | None], int | None], argv:
     written output file gets removed.
     """
     signal.signal(signal.SIGTERM, _raise_interrupt)
+    if argv is None:  # the command's own process; registered first, so run last (atexit runs its hooks in reverse)
+        import atexit
+
+        atexit.register(_ignore_signals_at_exit)
     from piga.cli import _early_interrupt
 
-    if signal.getsignal(signal.SIGINT) is _early_interrupt:  # the libraries are loaded: Ctrl-C stops the work as usual
-        signal.signal(signal.SIGINT, signal.default_int_handler)
+    if signal.getsignal(signal.SIGINT) is _early_interrupt:  # the libraries are loaded: Ctrl-C stops the work
+        signal.signal(signal.SIGINT, _raise_interrupt)
     unraisablehook = sys.unraisablehook
     sys.unraisablehook = functools.partial(_interrupt_again, unraisablehook)
     _open_closed_standard_streams()

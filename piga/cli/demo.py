@@ -89,6 +89,10 @@ def build_parser() -> ArgumentParser:
                    help="torch CPU threads for training (default %(default)s: torch's choice); control plans on one "
                    "thread per worker")
     p.add_argument("--overwrite", action="store_true", help="replace files of an earlier demo in --out")
+    p.add_argument("--resume", action="store_true",
+                   help="continue an earlier demo in --out (one that was interrupted): keep its data when collected with "
+                   "the same --sequences and --seed, continue its training (piga-train-model --resume), and redo the "
+                   "frames and the control")
     p.add_argument("--quiet", action="store_true", help="no progress bars (the stages and the summary are still printed)")
     return p
 
@@ -100,10 +104,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     lock_run_folder(out)  # a second command on this folder is refused until this one ends
     data, strip, run_dir = out / "pendulum.h5", out / "frames.png", out / "model"
     goal_png, control_md = out / "goal.png", out / "control.md"
-    if not args.overwrite:
+    if args.resume and args.overwrite:
+        raise PigaError("--resume continues the demo in --out and --overwrite replaces it; give one of them")
+    if args.resume and not (data.exists() or (run_dir / CHECKPOINT).exists()):
+        raise PigaError(f"--resume: {out} holds no earlier demo to continue (no {data.name}, no {run_dir.name}/"
+                        f"{CHECKPOINT}); run without --resume")
+    if not args.overwrite and not args.resume:
         for path in (data, strip, run_dir / CHECKPOINT, goal_png, control_md):
             if path.exists():
-                raise PigaError(f"{path} exists from an earlier demo; pass --overwrite to replace it")
+                raise PigaError(f"{path} exists from an earlier demo; pass --resume to continue that demo or "
+                                "--overwrite to replace it")
     from piga.cli.control import check_angle
     from piga.control.episodes import EpisodeConfig
 
@@ -129,8 +139,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         kept = [str(path.relative_to(out)) for path in outputs
                 if path.exists() and path.stat().st_mtime_ns != before[path]]
         if kept:
-            raise Interrupted(f"{out} keeps {', '.join(kept)} from this demo; run it again with --overwrite to start "
-                              "over") from None
+            raise Interrupted(f"{out} keeps {', '.join(kept)} from this demo; run the same command with --resume to "
+                              "continue it, or with --overwrite to start over") from None
         raise KeyboardInterrupt from None
 
 
@@ -151,16 +161,35 @@ def _check_enough_sequences(config: CollectConfig) -> None:
                         "or more")
 
 
+def _check_kept_data(data: Path, config: CollectConfig) -> None:
+    """Refuses to continue on a kept data file that another --sequences or --seed collected."""
+    info = inspect_dataset(data)
+    seed = info.attrs.get("seed")
+    if info.system != "pendulum" or info.n_sequences != config.sequences or seed != config.seed:
+        raise PigaError(f"--resume: {data} holds {info.n_sequences} {info.system} sequences collected with seed {seed}, "
+                        f"not this command's --sequences {config.sequences} --seed {config.seed}: give the earlier "
+                        "demo's values, or pass --overwrite (not --resume) to start over")
+
+
 def _run(args: argparse.Namespace, argv: Sequence[str] | None, out: Path, config: CollectConfig, data: Path, strip: Path,
          run_dir: Path, goal_png: Path, control_md: Path) -> int:
     """The demo's four steps, into the folder ``out`` (made by the caller); ``config`` collects the data."""
-    over = ["--overwrite"] if args.overwrite else []
-    print(f"[1/4] collecting {args.sequences} sequences into {data}", flush=True)
-    collect(config, data, overwrite=args.overwrite, command=command_line(PROG, argv), progress=not args.quiet)
+    redo = ["--overwrite"] if args.overwrite or args.resume else []  # the strip: made again from the data
+    if args.resume and data.exists():
+        _check_kept_data(data, config)
+        print(f"[1/4] keeping the {args.sequences} sequences in {data} (collected by the earlier demo)", flush=True)
+    else:
+        print(f"[1/4] collecting {args.sequences} sequences into {data}", flush=True)
+        collect(config, data, overwrite=args.overwrite, command=command_line(PROG, argv), progress=not args.quiet)
     print(f"[2/4] saving a strip of frames to {strip}", flush=True)
-    show.main([str(data), "--out", str(strip), *over])
-    print(f"[3/4] training the world model into {run_dir} (fast preset)", flush=True)
-    trained = train.main([str(data), "--out", str(run_dir), "--seed", str(args.seed), *over,
+    show.main([str(data), "--out", str(strip), *redo])
+    if args.resume and (run_dir / CHECKPOINT).exists():
+        print(f"[3/4] continuing the training in {run_dir} (piga-train-model --resume)", flush=True)
+        how = ["--resume"]
+    else:  # (an earlier demo interrupted before its first checkpoint left no run to continue)
+        print(f"[3/4] training the world model into {run_dir} (fast preset)", flush=True)
+        how = ["--overwrite"] if args.overwrite or args.resume else []
+    trained = train.main([str(data), "--out", str(run_dir), "--seed", str(args.seed), *how,
                           *(["--epochs", str(args.epochs)] if args.epochs else []),
                           *(["--threads", str(args.threads)] if args.threads else []),
                           *(["--quiet"] if args.quiet else [])], prog=PROG)
@@ -198,8 +227,9 @@ def _control(run_dir: Path, goal_png: Path, control_md: Path, args) -> list[tupl
     from piga.control.goal import goal_from_image
     from piga.io.runs import load_model
 
+    redo = args.overwrite or args.resume  # the goal image and the table: made again from the model
     control_cli.main(["--write-goal-image", str(goal_png), "--angle", str(args.goal_angle),
-                      *(["--overwrite"] if args.overwrite else [])])
+                      *(["--overwrite"] if redo else [])])
     model, ckpt = load_model(run_dir)
     estimate = goal_from_image(model, ckpt, goal_png)
     for warning in estimate.warnings:
@@ -214,7 +244,7 @@ def _control(run_dir: Path, goal_png: Path, control_md: Path, args) -> list[tupl
                    tags=(("task", f"goal image at {args.goal_angle:g} deg (read {math.degrees(estimate.angle):.2f})"),)),
     ]
     summaries = [r.summary for r in run_jobs(jobs, workers=2, progress=False)]
-    with atomic_output(control_md, overwrite=args.overwrite) as tmp:
+    with atomic_output(control_md, overwrite=redo) as tmp:
         tmp.write_text("# piga-demo: control from pixels\n\n" + summary_markdown(summaries, extra=[("task", "task")]), encoding="utf-8")
     return [(s.labels["task"], summary_row(s)) for s in summaries]
 

@@ -23,9 +23,14 @@ def save_figure(fig: Figure, path: str | os.PathLike[str], overwrite: bool = Tru
     import errno
     import shutil
 
+    import warnings
+
     target = Path(path)
     try:
-        with atomic_output(target, overwrite=overwrite) as tmp:
+        with atomic_output(target, overwrite=overwrite) as tmp, warnings.catch_warnings():
+            # a title that holds a file's name in a script the font lacks (CJK): a box per glyph, and matplotlib's
+            # two-line warning per glyph on stderr, which says nothing the picture does not
+            warnings.filterwarnings("ignore", message=r"Glyph \d+ .*missing from", category=UserWarning)
             fig.savefig(tmp, format=target.suffix.lstrip(".") or "png", dpi=dpi, bbox_inches="tight")
     except Exception as exc:
         # matplotlib's PDF writer breaks on a full disk with an AttributeError of its own ('Stream' has no 'pos'):

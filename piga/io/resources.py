@@ -175,7 +175,11 @@ def check_disk(target: str | os.PathLike[str], needed: float, what: str, advice:
     folder = Path(target).parent if str(Path(target).parent) else Path(".")
     while not folder.is_dir() and folder != folder.parent:
         folder = folder.parent
-    free = shutil.disk_usage(folder).free
+    usage = shutil.disk_usage(folder)
+    free = usage.free
+    if usage.total == 0:  # /proc, /sys: "0 B free; ask for less" asked for what no size can meet
+        raise ResourceError(f"{what} cannot be written under {folder}: it is on a file system that stores no files "
+                            "(0 B in all, as /proc and /sys are); write it somewhere else")
     if needed > free:
         raise ResourceError(f"{what} needs about {format_bytes(needed)} of disk, but {folder} has "
                             f"{format_bytes(free)} free; {advice}")
