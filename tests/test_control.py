@@ -366,7 +366,8 @@ def test_control_cli_bad_cem_and_episode_settings(capsys: pytest.CaptureFixture[
                           "--elites (20) must be at most --candidates (10)")
     assert_one_line_error(ctl(capsys, "--oracle", "--candidates", "1"), "--candidates must be at least 2")
     result = ctl(capsys, "--oracle", "--steps", "3")
-    assert_one_line_error(result, "--steps must be at least 20")
+    assert_one_line_error(result, "--steps: expected an integer in [20, 100000] (success is the goal held for the last 20 "
+                          "steps")
     assert "EpisodeConfig" not in result.stderr
     ok = ctl(capsys, "--oracle", "--candidates", "10", "--episodes", "1", "--steps", "20", "--quiet")
     assert ok.returncode == 0 and "success" in ok.stdout, ok.stderr

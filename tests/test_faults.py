@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import os
 import shutil
 import signal
@@ -1197,9 +1198,10 @@ def test_an_empty_split_reads_as_no_sequences(tiny_data: Path, tmp_path: Path) -
     (["--seed", "9" * 25], ["--seed: expected an integer in [0, 2^63 - 1]"]),
     (["--epochs", "1000000000"], ["--epochs: expected an integer in [1, 200]", "small default job"]),
     (["--episodes", "1000000000"], ["--episodes: expected an integer in [1, 100]"]),
-    (["--control-steps", "1000000000"], ["--control-steps: expected an integer in [1, 5000]"]),
-    (["--control-steps", "19"], ["--control-steps must be at least 20", "held for the last 20 steps"]),  # it ran, and a
-    # success meant the goal held for a step or two
+    (["--control-steps", "1000000000"], ["--control-steps: expected an integer in [20, 5000]"]),
+    # it ran, and a success meant the goal held for a step or two; then the range said [1, 5000] and a later line 20
+    (["--control-steps", "19"], ["--control-steps: expected an integer in [20, 5000]", "held for the last 20 steps"]),
+    (["--control-steps", "0"], ["--control-steps: expected an integer in [20, 5000]", "held for the last 20 steps"]),
 ])
 def test_demo_refusals_leave_no_folder(argv: list[str], needles: list[str], tmp_path: Path,
                                        capsys: pytest.CaptureFixture[str]) -> None:
@@ -2958,11 +2960,16 @@ def test_the_own_training_file_must_still_be_the_runs(tiny_data: Path, tmp_path:
     assert training_data_path({"data": {"path": str(other)}}) == str(other)  # an old checkpoint keeps no fingerprint
 
 
-def test_a_folder_matplotlib_cannot_write_gets_a_temporary_one_quietly(tiny_data: Path, tmp_path: Path) -> None:
-    """A read-only HOME (or MPLCONFIGDIR) gave two matplotlib warnings on stderr."""
-    env = {**ENV, "MPLCONFIGDIR": str(tiny_data / "not-a-folder")}  # under a file: never writable
+@pytest.mark.parametrize("where", ["under-a-file", "/proc/piga-matplotlib"])
+def test_a_folder_matplotlib_cannot_write_gets_a_temporary_one_quietly(where: str, tiny_data: Path,
+                                                                      tmp_path: Path) -> None:
+    """A read-only HOME (or MPLCONFIGDIR) gave two matplotlib warnings on stderr; so did a folder under /proc, which
+    root may write as far as os.access says."""
+    if where.startswith("/proc") and not Path("/proc/self").is_dir():
+        pytest.skip("needs Linux's /proc")
+    folder = str(tiny_data / "not-a-folder") if where == "under-a-file" else where  # never writable
     result = subprocess.run(["python", "-m", "piga.cli.show", str(tiny_data), "--out", str(tmp_path / "s.png")],
-                            capture_output=True, text=True, env=env, timeout=120)
+                            capture_output=True, text=True, env={**ENV, "MPLCONFIGDIR": folder}, timeout=120)
     assert result.returncode == 0 and result.stderr == "", result.stderr
 
 
@@ -3413,3 +3420,25 @@ def test_an_out_on_a_file_system_without_storage_says_so(tmp_path: Path, capsys:
     """--out /proc/x.h5 was "needs about 128.4 KiB of disk, but /proc has 0 B free; ask for less", for 1 sequence."""
     refused("piga-collect", ["--out", "/proc/x.h5", "--sequences", "1", "--steps", "2", "--quiet", "--workers", "1"],
             capsys, "cannot be written under /proc: it is on a file system that stores no files")
+
+
+@pytest.mark.parametrize("stems, gap", [
+    (["f1", "f2", "f4", "f5"], "jump from 2 (f2.png) to 4 (f4.png), where the others step by 1"),
+    (["cam2_0010", "cam2_0011", "cam2_0012", "cam2_0020"], "jump from 12 (cam2_0012.png) to 20"),
+    (["f0", "f5", "f10", "f15"], None),  # every 5th frame: evenly spaced
+    (["a1", "b2", "c4"], None),  # names that differ beside the number: no frame number to read
+    (["f1", "f3"], None),  # two frames: no usual step
+])
+def test_a_gap_in_the_frame_numbers_is_refused(stems: list[str], gap: str | None, tmp_path: Path) -> None:
+    """f1 f2 f4 was imported as three frames --dt apart: the missing frame made one step twice as long."""
+    from PIL import Image
+
+    from piga.data.importer import frame_files
+
+    for i, stem in enumerate(stems):
+        Image.fromarray(np.full((8, 8), 40 * i, np.uint8)).save(tmp_path / f"{stem}.png")
+    if gap is None:
+        assert [p.stem for p in frame_files(tmp_path)] == stems
+    else:
+        with pytest.raises(ValueError, match=re.escape(gap)):
+            frame_files(tmp_path)

@@ -377,7 +377,12 @@ def _writable_matplotlib_folder() -> None:
     on stderr. piga gives it a temporary folder first, quietly, removed at exit. Nothing is created to find out."""
     def writable(folder: Path) -> bool:  # the folder, or the nearest existing folder it would be made in
         existing = next((p for p in (folder, *folder.parents) if p.exists()), None)
-        return existing is not None and existing.is_dir() and os.access(existing, os.W_OK | os.X_OK)
+        if existing is None or not existing.is_dir() or not os.access(existing, os.W_OK | os.X_OK):
+            return False
+        try:  # /proc and /sys pass os.access as root, yet take no new folder
+            return existing == folder or shutil.disk_usage(existing).total > 0
+        except OSError:
+            return False
 
     if "MPLCONFIGDIR" in os.environ:
         folders = [Path(os.environ["MPLCONFIGDIR"])]
@@ -644,9 +649,9 @@ nonnegative_int = number_type(int, lambda v: v >= 0, "an integer >= 0")
 """argparse type: an integer >= 0."""
 
 
-def int_up_to(limit: int, why: str) -> Callable[[str], Any]:
-    """argparse type: an integer in [1, ``limit``]; ``why`` says what the limit is for."""
-    return number_type(int, lambda v: 1 <= v <= limit, f"an integer in [1, {limit}] ({why})")
+def int_up_to(limit: int, why: str, least: int = 1) -> Callable[[str], Any]:
+    """argparse type: an integer in [``least``, ``limit``]; ``why`` says what the limits are for."""
+    return number_type(int, lambda v: least <= v <= limit, f"an integer in [{least}, {limit}] ({why})")
 
 
 def int_at_least(limit: int, why: str) -> Callable[[str], Any]:

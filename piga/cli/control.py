@@ -56,7 +56,9 @@ def build_parser() -> ArgumentParser:
     p.add_argument("--oracle", action="store_true", help="plan with the true state and true parameters instead")
     p.add_argument("--episodes", type=int_up_to(EpisodeConfig.MAX_EPISODES, "more would run for days"), default=episodes.episodes,
                    help="episodes (default %(default)s); episode 0 starts hanging down")
-    p.add_argument("--steps", type=int_up_to(EpisodeConfig.MAX_STEPS, "500 times Gymnasium's episode"), default=episodes.steps,
+    p.add_argument("--steps", type=int_up_to(EpisodeConfig.MAX_STEPS, f"success is the goal held for the last "
+                                             f"{episodes.hold_steps} steps; the most is 500 times Gymnasium's episode",
+                                             least=episodes.hold_steps), default=episodes.steps,
                    help=f"steps per episode, at least {episodes.hold_steps}: success is the goal held for the last "
                    f"{episodes.hold_steps} (default %(default)s)")
     p.add_argument("--gravity-mult", type=positive_float, default=episodes.gravity_mult,
@@ -130,9 +132,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     args.goal_angle += 0.0  # -0.0 (-1e-400 underflows to it) is 0: "goal -0 deg" otherwise
     if args.goal_image and "goal_angle" in given:  # --goal-angle 0, the default, too
         raise PigaError("--goal-image sets the goal (the encoder reads its angle); drop --goal-angle")
-    hold = EpisodeConfig.hold_steps
-    if args.steps < hold:
-        raise PigaError(f"--steps must be at least {hold}: success is the goal held for the last {hold} steps, got {args.steps}")
     _check_env_gravity(f"--gravity-mult {args.gravity_mult:g}", args.gravity_mult)
     mpc = _mpc_config(args, math.radians(args.goal_angle))
     _check_total_work(args, mpc)

@@ -80,7 +80,12 @@ def build_parser() -> ArgumentParser:
                    help="training epochs (default: the fast preset's)")
     p.add_argument("--episodes", type=int_up_to(DEMO_LIMITS["episodes"], _DEMO_WHY), default=d.episodes,
                    help="control episodes per task (default %(default)s)")
-    p.add_argument("--control-steps", type=int_up_to(DEMO_LIMITS["control_steps"], _DEMO_WHY), default=d.control_steps,
+    from piga.control.episodes import EpisodeConfig
+
+    hold = EpisodeConfig.hold_steps  # as piga-control: with fewer steps a success held for a step or two meant nothing
+    p.add_argument("--control-steps", type=int_up_to(DEMO_LIMITS["control_steps"], f"success is the goal held for the "
+                                                     f"last {hold} steps; {_DEMO_WHY}", least=hold),
+                   default=d.control_steps,
                    help="steps per control episode (default %(default)s)")
     p.add_argument("--goal-angle", type=float, default=d.goal_angle,
                    help="angle of the goal image, degrees from upright (default %(default)s)")
@@ -115,13 +120,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                 raise PigaError(f"{path} exists from an earlier demo; pass --resume to continue that demo or "
                                 "--overwrite to replace it")
     from piga.cli.control import check_angle
-    from piga.control.episodes import EpisodeConfig
 
     check_angle("--goal-angle", args.goal_angle)
-    hold = EpisodeConfig.hold_steps  # as piga-control: with fewer steps a success held for a step or two meant nothing
-    if args.control_steps < hold:
-        raise PigaError(f"--control-steps must be at least {hold}: success is the goal held for the last {hold} steps, "
-                        f"got {args.control_steps}")
     collect_config = replace(CollectConfig(), sequences=args.sequences, seed=args.seed)  # checked before any folder
     _check_enough_sequences(collect_config)
     outputs = (data, strip, run_dir / CHECKPOINT, goal_png, control_md)

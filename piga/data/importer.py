@@ -29,6 +29,7 @@ import math
 import re
 import shlex
 import sys
+from collections import Counter
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -113,7 +114,26 @@ def frame_files(folder: str | Path) -> list[Path]:
         if key in seen:
             raise ValueError(f"{folder}: {seen[key].name} and {p.name} are the same frame in name order; keep one")
         seen[key] = p
+    _check_no_frame_missing(folder, files)
     return files
+
+
+def _check_no_frame_missing(folder: Path, files: list[Path]) -> None:
+    """Refuses frames numbered with a gap (``f1 f2 f4``): the step across it would last twice as long as the others,
+    and the physics would be learned from it as one step. The number is the last one in each name; names that differ
+    elsewhere, or fewer than three frames, are taken as they are. A constant stride (every 5th frame) is kept."""
+    parts = [re.fullmatch(r"(.*?)(\d+)(\D*)", p.stem) for p in files]
+    if len(files) < 3 or any(m is None for m in parts) or len({(m.group(1), m.group(3)) for m in parts if m}) > 1:
+        return
+    numbers = [int(m.group(2)) for m in parts if m]
+    steps = [b - a for a, b in zip(numbers, numbers[1:])]
+    usual = Counter(steps).most_common(1)[0][0]
+    for i, step in enumerate(steps):
+        if step != usual:
+            raise ValueError(f"{folder}: the frame numbers jump from {numbers[i]} ({files[i].name}) to {numbers[i + 1]} "
+                             f"({files[i + 1].name}), where the others step by {usual}: the frames there are not evenly "
+                             "spaced in time, yet each step counts as --dt; put the missing frames back, or import the "
+                             "frames before the gap and those after it as two recordings")
 
 
 def read_recording(path: str | Path, size: int) -> np.ndarray:
