@@ -313,6 +313,13 @@ def main() -> None:
     args = p.parse_args()
     if args.jobs < 1:
         p.error(f"--jobs must be >= 1, got {args.jobs}")
+    from piga.cli.collect import _env_option, dmc_config
+
+    for variant in args.variant:  # here, not in its case after the first seed's hour of work
+        try:
+            dmc_config([_env_option(variant)])
+        except (ValueError, argparse.ArgumentTypeError) as exc:
+            raise PigaError(f"--variant {variant}: {exc}") from None
     backend = ray_backend(p, args)
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     work = Path(args.work)

@@ -37,6 +37,9 @@ def test_every_script_runs_under_run_cli(script: Path) -> None:
      "diagnose_blind.py: error: nowhere/checkpoint.pt: no checkpoint (is nowhere a piga-train-model run folder?)"),
     (["diagnose_recordings.py", "--model", "nowhere", "--out", "OUT", "--work", "W"], 1,  # was CalledProcessError, 2 lines
      "diagnose_recordings.py: error: nowhere/checkpoint.pt: no checkpoint (is nowhere a piga-train-model run folder?)"),
+    (["dmc.py", "--work", "W", "--out", "OUT", "--variant", "bogus=1"], 1,  # was found after the first seed's hour
+     "dmc.py: error: --variant bogus=1: --env-option bogus: unknown for piga/DMCPendulum-v0; known: action_repeat, "
+     "camera, camera_distance, color, damping, flip, length, mass, shadows"),
     (["planet_plan_time.py", "--out", "OUT", "--threads", "0"], 2,  # was torch's RuntimeError, exit 70
      "planet_plan_time.py: error: argument --threads: expected a positive integer, got 0 (see --help)"),
 ])
