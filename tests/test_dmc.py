@@ -145,6 +145,25 @@ def test_collect_from_the_dmc_env(tmp_path):
     assert np.isfinite(load_states(out, "train")).all()
 
 
+@needs_dmc
+def test_collect_with_its_default_workers_finishes_and_matches_one_worker(tmp_path):
+    """piga-collect --env piga/DMCPendulum-v0 at its default --workers 2 waited for ever: Gymnasium's AsyncVectorEnv
+    makes one env in the parent first, which renders through EGL, and workers forked after that hung in their first
+    render. (Every other test here passes --workers 1.)"""
+    import h5py
+
+    frames = {}
+    for workers in ("2", "1"):
+        out = tmp_path / f"w{workers}.h5"
+        done = subprocess.run([sys.executable, "-m", "piga.cli.collect", "--env", "piga/DMCPendulum-v0", "--out", str(out),
+                               "--sequences", "4", "--steps", "5", "--workers", workers, "--quiet"],
+                              capture_output=True, text=True, timeout=120)
+        assert done.returncode == 0 and done.stderr == "", done.stderr
+        with h5py.File(out) as f:
+            frames[workers] = f["frames"][:]
+    assert np.array_equal(frames["2"], frames["1"])
+
+
 def test_missing_extra_gives_one_clear_line(tmp_path):
     """With dm_control unimportable, the env raises MissingExtraError and piga-collect prints one line."""
     code = (

@@ -1727,7 +1727,7 @@ def test_train_refuses_a_stream_cache_for_a_file_read_whole(tiny_data: Path, tmp
 
 @pytest.mark.parametrize("argv, needle, code", [
     (["--episodes", "1000000000"], "--episodes: expected an integer in [1, 10000]", 2),
-    (["--steps", "1000000000"], "--steps: expected an integer in [1, 100000]", 2),
+    (["--steps", "1000000000"], "--steps: expected an integer in [20, 100000]", 2),
     (["--horizon", "100000000"], "candidates x horizon x iterations = 200 x 100000000 x 5", 1),
     (["--candidates", "1000000000"], "lower the candidates, the horizon or the iterations", 1),
     (["--iterations", "100000000"], "more than 1e+07", 1),

@@ -223,7 +223,7 @@ def collect(
         "command": command if command is not None else shlex.join(sys.argv),
         "split_counts": dict(zip(SPLITS, counts)),
     }
-    vec = _vector_env(factory, workers)
+    vec = _vector_env(factory, workers, fresh=dmc)
     try:
         with DatasetWriter(out, n, t, (size, size), 1, 2, attrs, overwrite=overwrite, rewards=True) as writer, \
                 tqdm(total=n, desc="collect", unit="seq", disable=not progress) as bar:  # closed before an error's line
@@ -263,18 +263,22 @@ def collect(
     return Path(out)
 
 
-def _vector_env(factory: Callable[[], gym.Env], workers: int) -> gym.vector.VectorEnv:
+def _vector_env(factory: Callable[[], gym.Env], workers: int, fresh: bool = False) -> gym.vector.VectorEnv:
     """One env in this process, or ``workers`` env processes that leave Ctrl-C to this one.
 
     The workers are started with SIGINT blocked, and then ignore it (:func:`_episode_env`), so that a
     Ctrl-C, which reaches the whole process group, never interrupts them even during start-up.
+
+    ``fresh``: the workers come from a fresh interpreter (multiprocessing's forkserver), not a fork of this
+    process. The DMC pendulum renders through EGL, and AsyncVectorEnv makes one env here first (to read its
+    spaces), which renders a frame: workers forked after that waited for ever in their own first render.
     """
     if workers == 1:
         return gym.vector.SyncVectorEnv([factory])
     block = hasattr(signal, "pthread_sigmask")
     previous = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT}) if block else None
     try:
-        return gym.vector.AsyncVectorEnv([factory] * workers, shared_memory=True)
+        return gym.vector.AsyncVectorEnv([factory] * workers, shared_memory=True, context="forkserver" if fresh else None)
     finally:
         if previous is not None:
             signal.pthread_sigmask(signal.SIG_SETMASK, previous)
