@@ -104,3 +104,12 @@ def test_a_piga_model_is_run_only_through_the_view_it_was_identified_on(tmp_path
         _check_piga_view("run", face, DMCPendulumConfig(camera="fixed"))
     with pytest.raises(PigaError, match="through the 'fixed' camera, not 'face'; give --env-option camera=fixed"):
         _check_piga_view("run", fixed, DMCPendulumConfig())
+    # the camera's distance too: the pendulum another size in the frames (it ran, and scored through a view it never saw)
+    far = tmp_path / "far.h5"
+    with h5py.File(far, "w") as f:
+        f.attrs["env_config"] = json.dumps({"camera": "face", "camera_distance": 1.5})
+    _check_piga_view("run", {"data": {"path": str(far)}}, DMCPendulumConfig(camera_distance=1.5))
+    with pytest.raises(PigaError, match="camera_distance=1, not 2; drop --env-option camera_distance"):
+        _check_piga_view("run", face, DMCPendulumConfig(camera_distance=2.0))
+    with pytest.raises(PigaError, match="camera_distance=1.5, not 1; give --env-option camera_distance=1.5"):
+        _check_piga_view("run", {"data": {"path": str(far)}}, DMCPendulumConfig())

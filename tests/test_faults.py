@@ -3442,3 +3442,54 @@ def test_a_gap_in_the_frame_numbers_is_refused(stems: list[str], gap: str | None
     else:
         with pytest.raises(ValueError, match=re.escape(gap)):
             frame_files(tmp_path)
+
+
+@needs_dmc
+def test_a_scene_model_on_the_dmc_env_is_refused_for_its_system(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                                monkeypatch: pytest.MonkeyPatch) -> None:
+    """A spring model on --env piga/DMCPendulum-v0 was told to give --env-option action_repeat=15 (its frames' rate);
+    doing so, it was then refused for its system."""
+    from types import SimpleNamespace
+
+    import piga.io.checkpoint
+    import piga.io.runs
+    from piga.io.checkpoint import RunKind
+
+    monkeypatch.setattr(piga.io.checkpoint, "checked_run_kind", lambda run: RunKind.PIGA)
+    monkeypatch.setattr(piga.io.runs, "load_model",
+                        lambda run: (SimpleNamespace(config=SimpleNamespace(system="spring", dt=0.3)), {}))
+    (tmp_path / "run").mkdir()
+    refused("piga-control", ["--model", str(tmp_path / "run"), "--env", "piga/DMCPendulum-v0", "--episodes", "1"],
+            capsys, "a spring model cannot control the pendulum")
+
+
+def test_diagnose_names_a_scene_file_before_its_length(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A 12-frame spring file was first "too short to diagnose ... piga-collect --steps 13"; recollected, it was then
+    refused as spring data."""
+    data = tmp_path / "spring.h5"
+    assert collect.main(["--system", "spring", "--sequences", "4", "--steps", "12", "--out", str(data), "--quiet"]) == 0
+    refused("piga-diagnose", ["--model", str(tmp_path / "run"), "--data", str(data), "--out", str(tmp_path / "rep")],
+            capsys, "piga-diagnose is for pendulum data; this file holds spring data")
+
+
+def test_diagnose_env_on_a_model_of_another_rate_says_drop_env(tiny_piga_run: Path, tiny_data: Path, tmp_path: Path,
+                                                              capsys: pytest.CaptureFixture[str],
+                                                              monkeypatch: pytest.MonkeyPatch) -> None:
+    """A DMC model (frames 0.04 s apart) with --env was sent to "--env piga/DMCPendulum-v0", control's advice, which
+    diagnose's --env (effects) refuses."""
+    from dataclasses import replace as swap
+    from types import SimpleNamespace
+
+    import piga.io.runs
+
+    real = piga.io.runs.load_model
+
+    def dmc_rate(run: Any, **kwargs: Any) -> Any:
+        model, checkpoint = real(run, **kwargs)
+        return SimpleNamespace(config=swap(model.config, dt=0.04)), checkpoint
+
+    monkeypatch.setattr(piga.io.runs, "load_model", dmc_rate)
+    line = refused("piga-diagnose", ["--model", str(tiny_piga_run), "--data", str(tiny_data), "--out",
+                                     str(tmp_path / "rep"), "--env", "none"], capsys,
+                   "--env runs MPC episodes on Gymnasium's pixel pendulum", "drop --env")
+    assert "DMCPendulum" not in line

@@ -454,6 +454,12 @@ def test_the_convergence_check_on_made_up_trajectories() -> None:
     assert stopped.outcome == "unsettled" and "500 of 1000" in stopped.reason
     stuck = check_convergence(state(np.ones_like(steps), 0.3 + 0.7 * settle))
     assert stuck.outcome == "untrained" and "g never left" in stuck.reason
+    # a spring of one slot for two bodies has no pair: k and l stay put whatever the rate; the slots are the fix
+    from piga.evaluation.objects import ObjectCheck
+
+    one_slot = check_convergence(state(np.ones_like(steps), 0.3 + 0.7 * settle),
+                                 objects=ObjectCheck(0.3, 0.3, 1.04, True).with_counts(1, 2))
+    assert "has 1 object slot for the scene's 2 objects" in one_slot.reason and "--lr-physics" not in one_slot.reason
     collapsed = check_convergence(state(1 + 9 * settle, np.full_like(steps, 1e-9)))
     assert collapsed.outcome == "untrained" and "a collapsed" in collapsed.reason
     faded = check_convergence(state(1 + 9 * settle, 0.3 - 0.298 * settle))  # a settles at 0.002: reversed frames

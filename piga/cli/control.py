@@ -627,10 +627,19 @@ def _check_piga_view(run_dir: str, checkpoint: dict, env: DMCPendulumConfig) -> 
 
     if env.color != "gray":
         raise PigaError("piga's models read gray frames; drop --env-option color=rgb")
-    trained = training_env_config(checkpoint).get("camera", "face")
+    from envs.dmc import DMCPendulumConfig
+
+    own = training_env_config(checkpoint)
+    trained = own.get("camera", "face")
     if env.camera != trained:
         raise PigaError(f"{run_dir} was identified through the {trained!r} camera, not {env.camera!r}; "
                         + ("drop --env-option camera" if trained == "face" else f"give --env-option camera={trained}"))
+    distance = float(own.get("camera_distance", DMCPendulumConfig.camera_distance))
+    if abs(env.camera_distance - distance) > 1e-9:  # the pendulum another size in the frames than the model draws it
+        raise PigaError(f"{run_dir} was identified with the camera at camera_distance={distance:g}, not "
+                        f"{env.camera_distance:g}; " + ("drop --env-option camera_distance"
+                                                        if distance == DMCPendulumConfig.camera_distance
+                                                        else f"give --env-option camera_distance={distance:g}"))
 
 
 def _check_dmc_rate(run_dir: str, checkpoint: dict, dt: float, env: DMCPendulumConfig) -> None:
@@ -719,6 +728,8 @@ def _dmc(args: argparse.Namespace, argv: Sequence[str] | None, given: set[str]) 
                             "SB3 runs trained on it")
         else:
             model, checkpoint = load_model(args.model)
+            if model.config.system != "pendulum":  # before its frames' rate, whose advice would not help
+                raise PigaError(f"{args.model}: a {model.config.system} model cannot control the pendulum")
             _check_piga_view(args.model, checkpoint, config.env)
             _check_dmc_rate(args.model, checkpoint, model.config.dt, config.env)
             warn_if_unconverged(PROG, args.model)  # after the refusals, so that a refused command prints one line

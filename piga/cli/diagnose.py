@@ -73,6 +73,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                             matched_angles=args.matched_angles)
     out = check_report_target(args.out, args.overwrite)
     info = inspect_dataset(args.data)  # schema errors first, with the file's name
+    if info.system != "pendulum":  # before its length, whose advice would not help
+        raise PigaError(f"{args.data}: piga-diagnose is for pendulum data; this file holds {info.system} data")
     from piga.diagnostics.fit import min_frames
 
     if info.steps < (need := min_frames(config.fit_horizon)):  # found after the encoding otherwise (half a minute)
@@ -87,8 +89,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     if model.config.system != "pendulum":
         raise PigaError(f"{args.model}: piga-diagnose is for pendulum models; this one is a {model.config.system} model")
     if effects is not None:  # MPC on Gymnasium's pendulum with the model's physics
+        from envs.constants import PENDULUM_DT
         from piga.cli.control import check_pendulum_model
 
+        if abs(model.config.dt - PENDULUM_DT) > 1e-9:  # (control's own line would send the user to its --env)
+            raise PigaError(f"--env runs MPC episodes on Gymnasium's pixel pendulum, which steps {PENDULUM_DT:g} s, and "
+                            f"{args.model} was trained on frames {model.config.dt:g} s apart: drop --env (the "
+                            "diagnosis itself runs no episodes)")
         check_pendulum_model(model, args.model)
     import torch
 

@@ -88,9 +88,10 @@ class ObjectCheck:
     def reason(self) -> str:
         """The one-line cause of a lost object, with the fix."""
         if self.too_few_slots:
-            return (f"an object was not found: the model has {self.slots} object slots for the scene's "
-                    f"{self.scene_objects} objects (a moving blob {self.ratio:.2f}x as strong as the objects is left "
-                    f"unrendered); train with --objects {self.scene_objects} to model them all")
+            slots = f"{self.slots} object slot{'s' if self.slots != 1 else ''}"
+            return (f"an object was not found: the model has {slots} for the scene's {self.scene_objects} objects (a "
+                    f"moving blob {self.ratio:.2f}x as strong as the objects is left unrendered); train with --objects "
+                    f"{self.scene_objects} to model them all")
         return (f"an object was not found: the reconstruction of single frames leaves a moving blob "
                 f"{self.ratio:.2f}x as strong as the scene's objects (at most {LOST_RATIO:g} when every object is "
                 "found); train again with another --seed or more --seed-retries (and --overwrite, or another --out)")

@@ -198,6 +198,8 @@ def check_convergence(state: Any, config: ConvergenceConfig = ConvergenceConfig(
                                     "these frames the actions barely move the system, or move it the other way (a camera "
                                     "filming from the other side, a motor wired in reverse); retrain with "
                                     "--signed-actuation, or check the file's actions")
+    if objects is not None and objects.lost and objects.too_few_slots:  # no rate or length moves a spring of one body
+        return verdict("untrained", objects.reason())
     stuck = [name for name, c in scaled.items() if abs(c.change_from_start) < config.moved_tolerance]
     if stuck:
         return verdict("untrained", f"{', '.join(stuck)} never left {'its' if len(stuck) == 1 else 'their'} initial "
