@@ -3493,3 +3493,36 @@ def test_diagnose_env_on_a_model_of_another_rate_says_drop_env(tiny_piga_run: Pa
                                      str(tmp_path / "rep"), "--env", "none"], capsys,
                    "--env runs MPC episodes on Gymnasium's pixel pendulum", "drop --env")
     assert "DMCPendulum" not in line
+
+
+def test_resume_takes_the_seed_a_retried_run_was_started_with(tiny_piga_run: Path, tiny_data: Path, tmp_path: Path,
+                                                               capsys: pytest.CaptureFixture[str]) -> None:
+    """A scene run started with the default seed 0 and retried up to seed 3: "--resume --seed 0" was refused ("drop
+    --seed"), while "--seed 3", which the user never gave, was taken."""
+    import torch
+
+    def retried(run: Path) -> None:  # as three object-check retries leave it
+        checkpoint = torch.load(run / "checkpoint.pt", weights_only=False)
+        checkpoint["train_config"]["seed"] = 3
+        torch.save(checkpoint, run / "checkpoint.pt")
+
+    run = _run_copy(tiny_piga_run, tmp_path / "run", retried)
+    refused("piga-train-model", [str(tiny_data), "--out", str(run), "--resume", "--seed", "5", "--quiet"], capsys,
+            "--resume keeps the run's recipe; drop --seed")
+    code, _, err = run_in_process("piga-train-model", train.main, str(tiny_data), "--out", str(run), "--resume", "--seed",
+                                  "0", "--quiet", capsys=capsys)
+    assert "drop --seed" not in err and code in (0, 3), err
+
+
+@pytest.mark.parametrize("option, needle", [
+    ("image_size=32", "--env-option 'image_size=32': the frame side is piga-collect's own option: give --image-size"),
+    ("episode_length=3", "give --steps"),
+    ("frame_stack=2", "a file stores one frame per step"),
+])
+def test_an_env_option_that_collect_sets_itself_names_its_option(option: str, needle: str, tmp_path: Path,
+                                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    """--env-option image_size=32 was "--env-option --image-size: unknown for piga/DMCPendulum-v0", naming the key as
+    a flag, and not saying that --image-size itself sets it."""
+    refused("piga-collect", ["--env", "piga/DMCPendulum-v0", "--env-option", option, "--out", str(tmp_path / "x.h5")],
+            capsys, needle)
+    assert _listing(tmp_path) == []

@@ -121,3 +121,14 @@ def test_an_option_of_another_system_is_one_line_naming_both() -> None:
         ModelConfig(system="spring", system_options=PendulumOptions())
     with pytest.raises(ValueError, match="has no field or system option 'wall'"):
         ModelConfig.from_dict({"system": "bouncing", "wall": 3.0})
+
+
+@pytest.mark.parametrize("side", [16, 36, 50, 64])
+def test_the_location_network_reads_any_side_from_16(side: int) -> None:
+    """The paper's preset on the 3-body gravity scene (36x36 frames, the paper's size) was refused: "image_size must
+    be a multiple of 16 for the location network"; its four halvings leave 2x2 of 36 as of 32."""
+    from piga.world.encoder import _LocationNet
+
+    assert _LocationNet(3, 8, side, 4)(torch.zeros(2, 3, side, side)).shape == (2, 4)
+    with pytest.raises(ValueError, match="at least 16"):
+        _LocationNet(3, 8, 15, 4)

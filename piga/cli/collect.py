@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import argparse
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from typing import Any
 
@@ -61,6 +61,14 @@ def _env_option(text: str) -> tuple[str, str]:
 
 #: DMCPendulumConfig's fields that piga-collect sets through its own options, not through --env-option.
 NOT_ENV_OPTIONS = ("image_size", "frame_stack", "max_angle", "max_speed", "episode_length")
+#: What to give instead of each of them.
+OWN_OPTION = {
+    "image_size": "the frame side is piga-collect's own option: give --image-size",
+    "max_angle": "the reset angle's range is piga-collect's own option: give --max-angle",
+    "max_speed": "the reset speed's range is piga-collect's own option: give --max-speed",
+    "episode_length": "the sequences' length is piga-collect's own option: give --steps",
+    "frame_stack": "a file stores one frame per step; the commands that read it stack frames as their models need",
+}
 
 
 def env_option_keys() -> list[str]:
@@ -70,8 +78,10 @@ def env_option_keys() -> list[str]:
     return sorted(f.name for f in dataclasses.fields(DMCPendulumConfig) if f.name not in NOT_ENV_OPTIONS)
 
 
-def dmc_config(options: Sequence[tuple[str, str]], **fields: object) -> DMCPendulumConfig:
-    """A :class:`DMCPendulumConfig` from ``--env-option KEY=VALUE`` pairs (converted to each field's type) and ``fields``."""
+def dmc_config(options: Sequence[tuple[str, str]], own: Mapping[str, str] | None = None,
+               **fields: object) -> DMCPendulumConfig:
+    """A :class:`DMCPendulumConfig` from ``--env-option KEY=VALUE`` pairs (converted to each field's type) and ``fields``;
+    ``own``: for a field of :data:`NOT_ENV_OPTIONS`, the command's own option that sets it (:data:`OWN_OPTION`)."""
     import dataclasses
 
     known = {f.name: f for f in dataclasses.fields(DMCPendulumConfig)}
@@ -81,6 +91,8 @@ def dmc_config(options: Sequence[tuple[str, str]], **fields: object) -> DMCPendu
         if key in given:  # as --effect: the last would silently win
             raise ValueError(f"--env-option {key} is given twice ({given[key]}, then {text}): give it once")
         given[key] = text
+        if own is not None and key in own:  # quoted: the key as given (unquoted, the message would show it as its flag)
+            raise ValueError(f"--env-option '{key}={text}': {own[key]}")
         if key not in known or key in NOT_ENV_OPTIONS:
             raise ValueError(f"--env-option {key}: unknown for piga/DMCPendulum-v0; known: {', '.join(env_option_keys())}")
         kind = type(getattr(DMCPendulumConfig(), key))
@@ -205,7 +217,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             if key in written:
                 raise PigaError(f"{flag} is an option of piga/PixelPendulum-v0 only; the DMC pendulum takes --env-option")
         env: PixelPendulumConfig | DMCPendulumConfig = dmc_config(
-            args.env_option, image_size=args.image_size or DMCPendulumConfig.image_size, max_angle=args.max_angle,
+            args.env_option, OWN_OPTION, image_size=args.image_size or DMCPendulumConfig.image_size, max_angle=args.max_angle,
             **({} if speed is None else {"max_speed": float(speed)}))  # type: ignore[arg-type]
     elif args.env_option:
         raise PigaError(f"--env-option is for --env {DMC_PENDULUM}")
