@@ -440,3 +440,13 @@ def test_the_autocorrelation_of_short_sequences_stops_at_their_length() -> None:
     assert ac["lags"] == [0, 1, 2, 3] and ac["acf"][0] == pytest.approx(1.0) and np.isfinite(ac["acf"]).all()
     assert autocorrelation(Residuals(*(np.zeros(1),) * 4, np.ones((3, 30)), np.zeros((3, 38)), np.ones(1, bool)))["lags"] \
         == list(range(11))  # long enough: the default 10 lags
+
+
+def test_actions_beyond_the_range_are_noted() -> None:
+    """An imported file's actions x2 (half of them beyond ±2) were clipped without a word: "gain 0.677 (0.636..0.709)"
+    for a true 0.5."""
+    from piga.diagnostics.diagnose import clipped_actions_notes
+
+    assert clipped_actions_notes(np.array([[0.5, 2.0, -2.0, 1.0]])) == []
+    note = clipped_actions_notes(np.array([[0.5, 3.0, -2.5, 1.0]]))
+    assert len(note) == 1 and note[0].startswith("50% of the recording's actions lie beyond ±2") and "gain" in note[0]

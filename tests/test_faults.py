@@ -427,7 +427,7 @@ def frame_folders(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     ("moving", ["0.5"] * 12, ("--dt", "1e9"), ["dt must be the seconds between frames, 1e-05 to 10, got 1e+09"]),
     ("moving", ["0.5"] * 12, ("--dt", "1e-12"), ["dt must be the seconds between frames"]),
     ("moving", ["0.5"] * 12, ("--dt", "10.000001"), ["1e-05 to 10, got 10.000001"]),  # it said "got 10"
-    ("sizes", ["0.5"] * 12, (), ["f5.png: 30x50 px, but f0.png is 32x32", "share one size"]),
+    ("sizes", ["0.5"] * 12, (), ["f5.png: 50x30 px (width x height), but f0.png is 32x32", "share one size"]),
 ])
 def test_import_refuses(folder: str, values: list[str], argv: tuple[str, ...], needles: list[str],
                         frame_folders: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -1303,6 +1303,10 @@ def test_demo_resume_continues_from_what_it_kept(tmp_path: Path, capsys: pytest.
     refused("piga-demo", [*argv, "--resume", "--seed", "1"], capsys,
             "holds 4 pendulum sequences collected with seed 0, not this command's --sequences 4 --seed 1")
     refused("piga-demo", [*argv, "--resume", "--overwrite"], capsys, "give one of them")
+    kept = (out / "pendulum.h5").read_bytes()
+    (out / "pendulum.h5").write_bytes(kept[: len(kept) // 2])  # truncated: its line named no way out
+    refused("piga-demo", [*argv, "--resume"], capsys, "pendulum.h5", "pass --overwrite (not --resume) to start the demo over")
+    (out / "pendulum.h5").write_bytes(kept)
     calls.clear()
 
     def resumed_training(argv: Sequence[str], prog: str) -> int:
@@ -1316,6 +1320,15 @@ def test_demo_resume_continues_from_what_it_kept(tmp_path: Path, capsys: pytest.
     assert [name for name, _ in calls] == ["show", "train"]  # nothing collected again
     assert "--overwrite" in calls[0][1] and "--resume" in calls[1][1] and "--overwrite" not in calls[1][1]
     refused("piga-demo", ["--out", str(tmp_path / "empty"), "--resume"], capsys, "holds no earlier demo to continue")
+    # a folder that kept only the pictures: --resume starts over (it said "no earlier demo", the plain rerun "pass
+    # --resume", each sending the user to the other)
+    shutil.rmtree(out / "model")
+    (out / "pendulum.h5").unlink()
+    (out / "frames.png").write_bytes(b"png")  # (the faked piga-show wrote none)
+    calls.clear()
+    code, out_text, err = run_in_process("piga-demo", demo.main, *argv, "--resume", capsys=capsys)
+    assert code == 130 and "[1/4] collecting 4 sequences" in out_text, (out_text, err)
+    assert [name for name, _ in calls] == ["collect", "show", "train"] and "--overwrite" in calls[2][1]
 
 
 @pytest.mark.parametrize("prog, argv, needle", [
@@ -3525,4 +3538,31 @@ def test_an_env_option_that_collect_sets_itself_names_its_option(option: str, ne
     a flag, and not saying that --image-size itself sets it."""
     refused("piga-collect", ["--env", "piga/DMCPendulum-v0", "--env-option", option, "--out", str(tmp_path / "x.h5")],
             capsys, needle)
+    assert _listing(tmp_path) == []
+
+
+def test_a_video_the_memory_cannot_hold_is_refused_before_its_episode(tmp_path: Path,
+                                                                      monkeypatch: pytest.MonkeyPatch) -> None:
+    """--steps 15000 --video under an 8 GB limit played its 2.4-minute episode, then failed "out of memory (an array
+    of 640.0 KiB did not fit)": the frames are held whole until they are encoded."""
+    import piga.io.resources
+    from piga.evaluation.video import check_video_disk
+    from piga.io.resources import ResourceError
+
+    monkeypatch.setattr(piga.io.resources, "available_memory", lambda: 2 * 1024**3)
+    check_video_disk(tmp_path / "v.mp4", 200)
+    with pytest.raises(ResourceError, match=r"the video v.mp4 \(15,000 frames, held whole until encoded\) needs about "
+                                            r".* give fewer --steps, or drop --video"):
+        check_video_disk(tmp_path / "v.mp4", 15000)
+
+
+@pytest.mark.parametrize("argv, needle", [
+    # "lower --eval-every or raise --steps", where --eval-every was at its least already
+    (["--steps", "100", "--eval-every", "200"], "--steps (100) is less than one episode of 200 steps"),
+    (["--steps", "200", "--eval-every", "200", "--learning-starts", "10000"],
+     "--learning-starts (10000) is not below --steps (200)"),  # it said "raise steps"
+])
+def test_a_ddpg_budget_below_one_evaluation_names_what_to_give(argv: list[str], needle: str, tmp_path: Path,
+                                                               capsys: pytest.CaptureFixture[str]) -> None:
+    refused("piga-baseline", ["ddpg", "--obs", "state", "--out", str(tmp_path / "run"), *argv], capsys, needle)
     assert _listing(tmp_path) == []

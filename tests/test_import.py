@@ -80,6 +80,24 @@ def test_video_files(tmp_path: Path, recording: tuple[Path, Path, np.ndarray, np
     assert np.abs(got.reshape(-1, 64, 64).astype(int) - frames[:16]).mean() < 4  # lossy, but the same pictures
 
 
+def test_a_video_whose_rate_disagrees_with_dt_is_said(tmp_path: Path, recording: tuple[Path, Path, np.ndarray, np.ndarray],
+                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    """A 20 fps MP4 imported with --dt 0.1 was taken silently; its physics then stepped twice the time per frame."""
+    from piga.data.importer import recording_frame_seconds
+
+    folder, csv, frames, _ = recording
+    mp4, gif = tmp_path / "r.mp4", tmp_path / "r.gif"
+    iio.imwrite(mp4, np.repeat(frames[..., None], 3, axis=-1), fps=20)
+    iio.imwrite(gif, frames, duration=100)
+    assert recording_frame_seconds(mp4) == pytest.approx(0.05) and recording_frame_seconds(gif) == pytest.approx(0.1)
+    assert recording_frame_seconds(folder) is None
+    code, _, err = _cli(str(mp4), str(csv), "--dt", "0.1", "--out", str(tmp_path / "a.h5"), "--steps", "8", capsys=capsys)
+    assert code == 0 and err == f"piga-import: warning: {mp4} says its frames are 0.05 s apart; the file takes --dt 0.1, " \
+                                "as given, and the physics steps that long per frame\n", err
+    code, _, err = _cli(str(mp4), str(csv), "--dt", "0.05", "--out", str(tmp_path / "b.h5"), "--steps", "8", capsys=capsys)
+    assert code == 0 and err == ""
+
+
 def test_an_image_stack_is_a_recording(tmp_path: Path, recording: tuple[Path, Path, np.ndarray, np.ndarray],
                                        capsys: pytest.CaptureFixture[str]) -> None:
     """A multi-page TIFF, which imageio reads as one array (T, H, W), gray or colour, is T frames; an array that is
@@ -139,7 +157,12 @@ def test_read_actions(tmp_path: Path, text: str, want: list[float]) -> None:
         ("u\n", "header and no values"),
         ("0.5\nfast\n", "line 2: expected a finite number, got 'fast'"),
         ("u\n0.5\nnan\n", "line 3"),
-        ("1,2\n3,4\n", "2 columns and no header row"),
+        ("1,2\n3,4\n", "one number with a decimal comma or two columns of integers"),
+        ("1,2,3\n3,4,5\n", "3 columns and no header row"),
+        # a European locale's decimal comma: it was "2 columns ... add a header", and the header then "2 column(s),
+        # but line 1 has 1"
+        ("-0,5123\n0,25\n", "write numbers with a decimal point"),
+        ("u\n-0,5123\n0,25\n", "line 2: '-0,5123', as every row, is one number with a decimal comma"),
         ("a,b\n1,2\n", "names no column 'u' or 'action'"),
         ("u,U\n1,2\n", "names 'u' more than once"),  # the first column was taken
         ("t,u\n0,1\n1\n", "line 3: 1 column(s), but line 1 has 2"),

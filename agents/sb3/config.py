@@ -222,6 +222,10 @@ class SB3Config:
             raise ValueError(f"SB3Config.noise_std ({self.noise_std:g}) is below the std that DrQ-v2's exploration "
                              f"schedule falls to ({self.noise_final_std:g}): it would rise instead; give at least "
                              f"{self.noise_final_std:g}")
+        if self.eval_every > self.steps and self.steps < self.episode_steps:  # eval_every can go no lower
+            raise ValueError(f"SB3Config.steps ({self.steps}) is less than one episode of {self.episode_steps} steps "
+                             f"({self.env}), the least between two evaluations: the run would never be evaluated; "
+                             f"give SB3Config.steps {self.episode_steps} or more")
         if self.eval_every > self.steps:
             raise ValueError(f"eval_every ({self.eval_every}) is more than SB3Config.steps ({self.steps}): the run would "
                              "never be evaluated; lower eval_every or raise SB3Config.steps")
@@ -229,8 +233,9 @@ class SB3Config:
             raise ValueError(f"SB3Config.steps must be a multiple of eval_every, got {self.steps} and {self.eval_every}: a run "
                              "ends on an evaluation, whose return it reports as its final one")
         if self.learning_starts >= self.steps:
-            raise ValueError(f"learning_starts ({self.learning_starts}) is not below steps ({self.steps}): the run would "
-                             "only collect random actions and never learn; lower learning_starts or raise steps")
+            raise ValueError(f"learning_starts ({self.learning_starts}) is not below SB3Config.steps ({self.steps}): the "
+                             "run would only collect random actions and never learn; lower learning_starts or raise "
+                             "SB3Config.steps")
         if self.batch_size > self.buffer_size:
             raise ValueError(f"batch_size ({self.batch_size}) is more than buffer_size ({self.buffer_size}): a batch "
                              "cannot be drawn from the replay buffer; lower batch_size or raise buffer_size")

@@ -111,9 +111,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     goal_png, control_md = out / "goal.png", out / "control.md"
     if args.resume and args.overwrite:
         raise PigaError("--resume continues the demo in --out and --overwrite replaces it; give one of them")
-    if args.resume and not (data.exists() or (run_dir / CHECKPOINT).exists()):
-        raise PigaError(f"--resume: {out} holds no earlier demo to continue (no {data.name}, no {run_dir.name}/"
-                        f"{CHECKPOINT}); run without --resume")
+    if args.resume and not any(path.exists() for path in (data, strip, run_dir / CHECKPOINT, goal_png, control_md)):
+        raise PigaError(f"--resume: {out} holds no earlier demo to continue; run without --resume")
+    # (a demo that kept only its pictures continues from the start: they are made again)
     if not args.overwrite and not args.resume:
         for path in (data, strip, run_dir / CHECKPOINT, goal_png, control_md):
             if path.exists():
@@ -162,8 +162,13 @@ def _check_enough_sequences(config: CollectConfig) -> None:
 
 
 def _check_kept_data(data: Path, config: CollectConfig) -> None:
-    """Refuses to continue on a kept data file that another --sequences or --seed collected."""
-    info = inspect_dataset(data)
+    """Refuses to continue on a kept data file that another --sequences or --seed collected, or that is damaged."""
+    from piga.data.schema import DataFormatError
+
+    try:
+        info = inspect_dataset(data)
+    except DataFormatError as exc:  # (its own line named no way out)
+        raise PigaError(f"--resume: {exc}; pass --overwrite (not --resume) to start the demo over") from None
     seed = info.attrs.get("seed")
     if info.system != "pendulum" or info.n_sequences != config.sequences or seed != config.seed:
         raise PigaError(f"--resume: {data} holds {info.n_sequences} {info.system} sequences collected with seed {seed}, "

@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Sequence
 
 from piga.cli.common import (H5_SUFFIXES, ArgumentParser, command_line, format_default, h5_path, positive_float,
                              positive_int, run_cli, split_type)
-from piga.data.importer import MAX_DT, MIN_DT, ImportConfig, import_recording
+from piga.data.importer import MAX_DT, MIN_DT, ImportConfig, import_recording, recording_frame_seconds
 
 PROG = "piga-import"
 
@@ -51,6 +52,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     if result.dropped_frames:
         print(f"note: the last {result.dropped_frames} of {result.source_frames} frames (less than one sequence "
               f"of {config.steps}) were dropped")
+    said = recording_frame_seconds(args.recording)
+    if said is not None and abs(said - config.dt) > 0.02 * config.dt:  # (a video slowed down says its own rate)
+        print(f"{PROG}: warning: {args.recording} says its frames are {said:.4g} s apart; the file takes --dt "
+              f"{config.dt:g}, as given, and the physics steps that long per frame", file=sys.stderr)
     return 0
 
 

@@ -92,6 +92,26 @@ class ImportResult:
     """The side of the square cropped from the recording's frames, before resizing to ``image_size``."""
 
 
+def recording_frame_seconds(path: str | Path) -> float | None:
+    """The seconds between frames that a video file says (an MP4's fps, a GIF's frame duration), or None where it
+    says none (a folder of frames, an image stack) or cannot be read for it."""
+    p = Path(path)
+    if not p.is_file():
+        return None
+    import imageio.v3 as iio
+
+    try:
+        meta = iio.immeta(p)
+    except Exception:  # noqa: BLE001 (a reader's own errors: the frames were read; only the rate is unknown)
+        return None
+    fps, duration = meta.get("fps"), meta.get("duration")
+    if isinstance(fps, (int, float)) and math.isfinite(fps) and fps > 0:
+        return 1.0 / fps
+    if p.suffix.lower() == ".gif" and isinstance(duration, (int, float)) and math.isfinite(duration) and duration > 0:
+        return duration / 1000.0  # Pillow's GIF duration: milliseconds per frame
+    return None
+
+
 def _natural_key(path: Path) -> list[int | str]:
     return [int(part) if part.isdecimal() else part.lower() for part in re.split(r"(\d+)", path.name)]
 
@@ -157,8 +177,8 @@ def _read_recording(path: str | Path, size: int) -> tuple[np.ndarray, int]:
             image = read_image(file)  # its errors name the file
             first = first or (file, image.shape[:2])
             if image.shape[:2] != first[1]:
-                raise ValueError(f"{file}: {image.shape[0]}x{image.shape[1]} px, but {first[0].name} is "
-                                 f"{first[1][0]}x{first[1][1]}: the frames of one recording share one size")
+                raise ValueError(f"{file}: {image.shape[1]}x{image.shape[0]} px (width x height), but {first[0].name} "
+                                 f"is {first[1][1]}x{first[1][0]}: the frames of one recording share one size")
             try:
                 frames.append(scene_to_gray(image, size))
             except ValueError as exc:
@@ -277,6 +297,12 @@ def read_actions(path: str | Path) -> np.ndarray:
         rows = [(number, row[:-1]) for number, row in rows]
     first_number, first = rows[0]
     column = 0
+    values = lines[1:] if _is_header(first) else lines
+    if delimiter == "," and len(first) <= 2 and not (_is_header(first) and len(first) == 2) and values and all(re.fullmatch(r"[-+]?\d+,\d+", line.strip()) for _, line in values):
+        # "-0,5123" on every row: a decimal comma (a European locale's), or two columns of integers: either way one line
+        raise ValueError(f"{p}: line {values[0][0]}: {values[0][1].strip()!r}, as every row, is one number with a decimal "
+                         "comma or two columns of integers; write numbers with a decimal point, or, for two columns, "
+                         "add a header that names the action column 'u' or 'action'")
     if _is_header(first):
         names = [cell.lower() for cell in first]
         if len(first) > 1:
@@ -394,4 +420,5 @@ def import_recording(
     return ImportResult(target, n, len(frames), dropped, dict(zip(SPLITS, counts)), side)
 
 
-__all__ = ["ImportConfig", "ImportResult", "frame_files", "import_recording", "read_actions", "read_recording"]
+__all__ = ["ImportConfig", "ImportResult", "frame_files", "import_recording", "read_actions", "read_recording",
+           "recording_frame_seconds"]

@@ -73,7 +73,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from envs.constants import PENDULUM_MAX_SPEED
+from envs.constants import MAX_ACTION, PENDULUM_MAX_SPEED
 from piga.diagnostics import fit
 from piga.diagnostics.observe import DiagnosisInputError, Observations, check_scene, check_training, observe
 from piga.diagnostics.residuals import (action_correlation, autocorrelation, binned, generic_features, heatmap,
@@ -837,6 +837,19 @@ def ambiguity_of(chosen: Score, rival: Score, nom: Nominal, w: WindowSet | None,
                      separate_by=" or ".join(hints) if hints else "more data")
 
 
+def clipped_actions_notes(actions: np.ndarray) -> list[str]:
+    """A note where the recording's actions go beyond the action range, ±2 (an imported file's, in other units): the
+    diagnosis takes the system's commands as Gymnasium's pendulum applies them, clipped there (its effects act on the
+    clipped command), so if the system applied them in full, its gain is misjudged, and the interval does not say so
+    (a probe's actions x2: "gain 0.677 (0.636..0.709)" for a true 0.5)."""
+    beyond = float(np.mean(np.abs(actions) > MAX_ACTION)) if actions.size else 0.0
+    if beyond == 0.0:
+        return []
+    return [f"{100 * beyond:.3g}% of the recording's actions lie beyond ±{MAX_ACTION:g}, which the diagnosis clips as "
+            f"Gymnasium's pendulum does: if this system applied them in full, its gain (and any command effect) is "
+            f"misjudged; import the actions in the env's units, within ±{MAX_ACTION:g}, to diagnose it"]
+
+
 def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: CameraFindings | None,
                  generic: GenericBasis, config: DiagnoseConfig, from_gymnasium: bool = True,
                  ambiguity: Ambiguity | None = None, flip_bic_drop: float | None = None,
@@ -1252,7 +1265,7 @@ def analyse(obs: Observations, nom: Nominal, config: DiagnoseConfig = DiagnoseCo
         gap=gap, vision=vision,
         residuals={"heatmap": heatmap(res_nom), "bins": binned(res_nom), "autocorrelation": autocorrelation(res_nom),
                    "action_correlation": action_correlation(res_nom)},
-        notes=naming.notes + small_notes + vision_notes + reading_notes,
+        notes=naming.notes + small_notes + vision_notes + reading_notes + clipped_actions_notes(obs.actions),
         pictures=_pictures(model, obs, theta, camera.camera if camera is not None and camera.rematched else None)
         if model is not None and len(obs.frames_index) else None,
         ambiguity=ambiguity, excluded=excluded, exclusions=exclusions,

@@ -82,8 +82,15 @@ MP4_COMPRESSION = 0.01
 
 def check_video_disk(path: str | os.PathLike[str], steps: int, panels: int = 3, side: int = 256) -> None:
     """Refuses, before the episodes that it shows are played, a video of ``steps`` frames of ``panels`` panels
-    (``side`` pixels, piga's 64-pixel frames 4x upscaled) whose disk has not the room :func:`_write` asks for."""
-    _check_disk(Path(path), steps * side * side * panels * 3)
+    (``side`` pixels, piga's 64-pixel frames 4x upscaled) whose disk has not the room :func:`_write` asks for, or
+    whose frames the memory cannot hold: they are kept whole until they are encoded, twice over as they are stacked
+    (a 15,000-step episode failed "out of memory" after it was played)."""
+    from piga.io.resources import check_memory
+
+    raw = steps * side * side * panels * 3
+    check_memory(2 * raw, f"the video {Path(path).name} ({steps:,} frames, held whole until encoded)",
+                 advice="give fewer --steps, or drop --video")
+    _check_disk(Path(path), raw)
 
 
 def _check_disk(target: Path, raw_bytes: float) -> None:

@@ -123,12 +123,12 @@ def available_memory() -> int | None:
     return min(machine, cgroup)
 
 
-def check_memory(needed: float, what: str) -> None:
-    """Raises :class:`ResourceError` if ``needed`` bytes exceed the available memory."""
+def check_memory(needed: float, what: str, advice: str = "ask for less") -> None:
+    """Raises :class:`ResourceError` if ``needed`` bytes exceed the available memory; ``advice`` ends the message."""
     available = available_memory()
     if available is not None and needed > available:
         raise ResourceError(f"{what} needs about {format_bytes(needed)} of memory, but {format_bytes(available)} is "
-                            "available; ask for less")
+                            f"available; {advice}")
 
 
 #: Bytes per parameter of float32 training with Adam: the weights, their gradients and Adam's two moments.
