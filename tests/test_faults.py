@@ -3518,6 +3518,8 @@ def test_resume_takes_the_seed_a_retried_run_was_started_with(tiny_piga_run: Pat
         checkpoint = torch.load(run / "checkpoint.pt", weights_only=False)
         checkpoint["train_config"]["seed"] = 3
         torch.save(checkpoint, run / "checkpoint.pt")
+        (run / "config.json").write_text(json.dumps({"command": f"piga-train-model {tiny_data} --out {run}",
+                                                     "retried_seeds": [0, 1, 2]}))
 
     run = _run_copy(tiny_piga_run, tmp_path / "run", retried)
     refused("piga-train-model", [str(tiny_data), "--out", str(run), "--resume", "--seed", "5", "--quiet"], capsys,

@@ -220,9 +220,9 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
         changed = (sorted(set(overrides) - {"epochs", "budget_steps", "max_minutes"}) + (["signed_actuation"] if args.signed_actuation else [])
                    + (["fixed_g"] if args.fixed_g is not None else [])
                    + (["preset"] if "preset" in options_given and args.preset != started_preset else [])
-                   # the seed it was started with (given or the default), or the one a retry moved it to
+                   # the seed it trains with, or, where retries moved it there, the one it was started with
                    + (["seed"] if "seed" in options_given and args.seed not in
-                      (saved.seed, started.get("seed", build_parser().get_default("seed"))) else [])
+                      (saved.seed, *(stored.get("retried_seeds") or [])[:1]) else [])
                    + (["seed_retries"] if "seed_retries" in options_given else [])
                    + [name for name in ("data_loading", "stream_cache_mb")
                       if getattr(args, name) is not None and getattr(args, name) != getattr(saved, name)])
