@@ -46,7 +46,7 @@ from the state 0.011 s; SAC from pixels about 0.6 s; DrQ-v2 from pixels 0.49 s. 
 PlaNet-style 108 min (12000 steps, whatever the data size) and its episodes 23 min (x1.0 and the
 sweep); piga 7-8 min (at least 3000 steps) on up to 250 sequences, 16 min on 500 (16 epochs); DDPG
 from the state 5 min (30k), from the latent 12 min (30k, autoencoder included), from pixels 64 min
-(20k); SAC from pixels about 3 h (20k); DrQ-v2 from pixels 66 min (12k). An older CPU takes longer
+(20k); SAC from pixels about 3 h (20k); DrQ-v2 from pixels 46-66 min (12k). An older CPU takes longer
 (the records name each job's machine).
 ``--estimate`` adds them up (jobs packed longest first on ``--workers`` cores):
 
@@ -186,7 +186,8 @@ COST_S = {
     "sac_state_step": 0.023,  # SAC from the state: 20k steps in 7.8 min beside two other jobs (results/ddpg_tuning.md)
     "sac_pixels_step": 0.6,  # SAC from pixels (two critics, separate CNNs): ~10 min per 1000 steps beside other jobs, a partial run
     # DrQ-v2 from pixels, its encoder in bfloat16 ("auto" on a CPU with bfloat16 hardware), an update every 2 steps: wall time of
-    # results/drqv2_runs/records/pixels-cpu-s0.json, 20k steps in 7903 s, less its 4000 warm-up steps (ddpg_pixels_warmup_step)
+    # results/drqv2_runs/records/pixels-cpu-s0.json, 20k steps in 7903 s, less its 4000 warm-up steps (ddpg_pixels_warmup_step);
+    # the budget preset's drqv2-pixels-s0 took 0.34 s a step (12k in 2763 s on the Zen 4), so this is an upper bound
     "drqv2_pixels_step": 0.49,
     "autoencoder_step": 0.135,  # agents.sb3.autoencoder, 2000 steps before DDPG from the latent
     "collect_sequence": 0.25,  # piga-collect, 40 frames
