@@ -8,7 +8,8 @@ same machine:
    (nested subsets of one random-action collection), over seeds; the oracle as a line.
 2. **DDPG learning curves**: EvalCallback's mean return against env steps, from pixels, from an
    autoencoder's latent and from the true state, with the first step at which each reached -200;
-   and SAC, DDPG's stronger sibling, from pixels, where DDPG's actor saturates.
+   SAC, DDPG's stronger sibling, from pixels, where DDPG's actor saturates; and DrQ-v2 (DDPG from
+   pixels with an augmented encoder trained by the critic, 3-step returns; :mod:`agents.sb3.drqv2`).
 3. **Zero-shot gravity sweep**: piga told the multiplier, the oracle, PlaNet-style and DDPG not told.
 4. **Goal images**: piga reaches them; the baselines refuse (no goal input), as recorded.
 5. **Plan time per step**: piga's CEM against PlaNet-style latent CEM, measured in this run.
@@ -41,24 +42,26 @@ torch thread) on a 2-core AMD EPYC, measured as process CPU time while other job
 machine, so roughly what an idle core takes: a PlaNet-style training step 0.54 s (16 x 20 model steps
 of 2 frames), a piga training step 0.145 s, latent CEM 0.17 s per control step (one plan of ~0.34 s
 per 2 steps), a DDPG step from pixels 0.37 s once learning starts, from the latent 0.020 s,
-from the state 0.011 s; SAC from pixels about 0.6 s. One run each: PlaNet-style 108 min (12000 steps,
-whatever the data size) and its episodes 23 min (x1.0 and the sweep); piga 7-8 min (at least 3000 steps) on up to 250 sequences,
-16 min on 500 (16 epochs); DDPG from the state 5 min (30k), from the latent 12 min (30k, autoencoder
-included), from pixels 64 min (20k); SAC from pixels about 3 h (20k). An older CPU takes longer (the
-records name each job's machine).
+from the state 0.011 s; SAC from pixels about 0.6 s; DrQ-v2 from pixels 0.49 s. One run each:
+PlaNet-style 108 min (12000 steps, whatever the data size) and its episodes 23 min (x1.0 and the
+sweep); piga 7-8 min (at least 3000 steps) on up to 250 sequences, 16 min on 500 (16 epochs); DDPG
+from the state 5 min (30k), from the latent 12 min (30k, autoencoder included), from pixels 64 min
+(20k); SAC from pixels about 3 h (20k); DrQ-v2 from pixels 46-66 min (12k). An older CPU takes longer
+(the records name each job's machine).
 ``--estimate`` adds them up (jobs packed longest first on ``--workers`` cores):
 
 | preset | what | collect | training (core-h) | PlaNet-style episodes (core-h) | other episodes (core-h) | wall on 2 idle cores |
 |---|---|---|---|---|---|---|
-| ``budget`` | piga at 2/5/10/25/50/100/250 sequences x 3 seeds (at least 3000 steps each); PlaNet-style at 100/250/500/1000/2000 x 1 seed, and a second seed at 500 and 2000 (12000 steps each); DDPG state 30k x 3 seeds, latent 30k x 1, pixels 20k x 1; SAC pixels 20k x 1; 20 episodes per evaluation; sweep x0.6, 1.0, 1.4, 1.8 with 5 episodes each | 0.2 h | 20.0 | 2.4 | 0.6 | 11.7 h |
-| ``full`` | the full design: piga at 2/5/10/25/50/100/250/500/1000/2000 sequences and PlaNet-style at 100/250/500/1000/2000, 3 seeds each, DDPG 30k/80k/80k x 3 seeds, SAC pixels 80k x 3 seeds, 20 episodes, 14 multipliers x 10 episodes | 0.2 h | 96.9 | 21.4 | 3.0 | 60.8 h |
+| ``budget`` | piga at 2/5/10/25/50/100/250 sequences x 3 seeds (at least 3000 steps each); PlaNet-style at 100/250/500/1000/2000 x 1 seed, and a second seed at 500 and 2000 (12000 steps each); DDPG state 30k x 3 seeds, latent 30k x 1, pixels 20k x 1; SAC pixels 20k x 1; DrQ-v2 pixels 12k x 1; 20 episodes per evaluation; sweep x0.6, 1.0, 1.4, 1.8 with 5 episodes each | 0.2 h | 21.1 | 2.4 | 0.6 | 12.2 h |
+| ``full`` | the full design: piga at 2/5/10/25/50/100/250/500/1000/2000 sequences and PlaNet-style at 100/250/500/1000/2000, 3 seeds each, DDPG 30k/80k/80k x 3 seeds, SAC and DrQ-v2 pixels 80k x 3 seeds each, 20 episodes, 14 multipliers x 10 episodes | 0.2 h | 128.0 | 21.4 | 3.2 | 76.5 h |
 
 The budget preset answers every question of the comparison with what it can afford, and says what
 it cut: PlaNet-style has one seed per point and a second at 500 and 2000 sequences (its 12000 steps
 are almost two hours each), its points are where it might reach 80% rather than where piga does, DDPG
 from pixels gets 20k steps (10k of them the zoo's random warm-up, so 10k of learning; the paper's DDPG
-from pixels failed), SAC from pixels 20k (learning from step 100) and DDPG from the latent 30k, not
-the paper's 80k. The results page states the budget spent (training seconds per run).
+from pixels failed), SAC from pixels 20k (learning from step 100), DrQ-v2 from pixels 12k (4k of them
+its random warm-up; it passed -200 at 10k in results/drqv2.md) and DDPG from the latent 30k, not the
+paper's 80k. The results page states the budget spent (training seconds per run).
 
 Numbers of the ``tiny`` preset check the pipeline only; they are no result.
 """
@@ -120,6 +123,9 @@ class BenchConfig:
     sac_runs: tuple[tuple[str, int, tuple[int, ...]], ...] = (("pixels", 80000, (0, 1, 2)),)
     """SB3's SAC (observation, env steps, seeds): DDPG's stronger sibling, where DDPG's actor saturates
     (from pixels; results/ddpg_tuning.md). Scored as DDPG's runs are, in their tables and curves."""
+    drqv2_runs: tuple[tuple[str, int, tuple[int, ...]], ...] = (("pixels", 80000, (0, 1, 2)),)
+    """DrQ-v2 (observation, env steps, seeds; pixels only): DDPG from pixels made to work (an encoder trained by the
+    critic on shifted frames, 3-step returns; results/drqv2.md). Scored as DDPG's runs are, in their tables and curves."""
     episodes: int = 20
     """Control episodes per evaluation of piga, the oracle and DDPG."""
     planet_episodes: int | None = None
@@ -179,6 +185,10 @@ COST_S = {
     "ddpg_pixels_step": 0.372,  # rendering + one CnnPolicy gradient step on 256 stacks of 4 frames
     "sac_state_step": 0.023,  # SAC from the state: 20k steps in 7.8 min beside two other jobs (results/ddpg_tuning.md)
     "sac_pixels_step": 0.6,  # SAC from pixels (two critics, separate CNNs): ~10 min per 1000 steps beside other jobs, a partial run
+    # DrQ-v2 from pixels, its encoder in bfloat16 ("auto" on a CPU with bfloat16 hardware), an update every 2 steps: wall time of
+    # results/drqv2_runs/records/pixels-cpu-s0.json, 20k steps in 7903 s, less its 4000 warm-up steps (ddpg_pixels_warmup_step);
+    # the budget preset's drqv2-pixels-s0 took 0.34 s a step (12k in 2763 s on the Zen 4), so this is an upper bound
+    "drqv2_pixels_step": 0.49,
     "autoencoder_step": 0.135,  # agents.sb3.autoencoder, 2000 steps before DDPG from the latent
     "collect_sequence": 0.25,  # piga-collect, 40 frames
 }
@@ -191,11 +201,11 @@ PRESETS: dict[str, BenchConfig] = {
                           planet_more_seeds=((500, (1,)), (2000, (1,))),
                           piga_min_steps=3000,
                           ddpg_runs=(("state", 30000, (0, 1, 2)), ("latent", 30000, (0,)), ("pixels", 20000, (0,))),
-                          sac_runs=(("pixels", 20000, (0,)),),
+                          sac_runs=(("pixels", 20000, (0,)),), drqv2_runs=(("pixels", 12000, (0,)),),
                           sweep="0.6:1.8:0.4", sweep_episodes=5),
     "tiny": BenchConfig(sizes=(8, 16), seeds=(0,), planet_sizes=(16,), steps=16, piga_epochs=1, planet_steps=4,
                         ddpg_runs=(("state", 400, (0,)), ("latent", 400, (0,)), ("pixels", 400, (0,))),
-                        sac_runs=(("pixels", 400, (0,)),), episodes=2,
+                        sac_runs=(("pixels", 400, (0,)),), drqv2_runs=(("pixels", 400, (0,)),), episodes=2,
                         sweep="1.0:1.4:0.4", sweep_episodes=1, goal_angles=(15.0,), episode_steps=20,
                         overrides={"planet": {"batch_size": 2, "chunk_length": 8}, "rssm": {"deter_size": 8, "stoch_size": 4},
                                    "piga": {"batch_size": 16, "warmup_fraction": 0.1, "curriculum_fraction": 0.1},
@@ -219,7 +229,7 @@ def piga_epochs(cfg: BenchConfig, n: int) -> int:
 
 def train_cost(cfg: BenchConfig, agent: str, n: int = 0, steps: int = 0) -> float:
     """Estimated core-seconds of one training (:data:`COST_S`): "piga" or "planet" on ``n`` sequences,
-    or "ALGO_OBS" (an SB3 run: "ddpg_pixels", "sac_pixels") for ``steps`` env steps."""
+    or "ALGO_OBS" (an SB3 run: "ddpg_pixels", "sac_pixels", "drqv2_pixels") for ``steps`` env steps."""
     if agent == "piga":
         return piga_epochs(cfg, n) * _piga_steps_per_epoch(cfg, n) * COST_S["piga_train_step"]
     if agent == "planet":
@@ -269,7 +279,7 @@ def estimate(cfg: BenchConfig, jobs: list[Job] | None = None) -> dict[str, float
 
 
 AGENTS = ("piga", "planet", "ddpg", "oracle")
-"""The kinds of job, as ``--only`` takes them (besides job names); "ddpg" are the SB3 runs, SAC's included."""
+"""The kinds of job, as ``--only`` takes them (besides job names); "ddpg" are the SB3 runs, SAC's and DrQ-v2's included."""
 
 
 @dataclass(frozen=True)
@@ -288,7 +298,7 @@ class Job:
     steps: int = 0
     """DDPG's env steps."""
     algo: str = "ddpg"
-    """The SB3 algorithm of a "ddpg" job: "ddpg" or "sac"."""
+    """The algorithm of a "ddpg" job (an SB3 run, ``piga-baseline ddpg --algo ALGO``): "ddpg", "sac" or "drqv2"."""
 
 
 def jobs_for(cfg: BenchConfig) -> list[Job]:
@@ -297,7 +307,8 @@ def jobs_for(cfg: BenchConfig) -> list[Job]:
             for agent, sizes, seeds_at in (("piga", cfg.sizes, cfg.piga_seeds_at), ("planet", cfg.planet_size_list, cfg.planet_seeds_at))
             for n in sizes for seed in seeds_at(n)]
     jobs += [Job(f"{algo}-{obs}-s{seed}", "ddpg", seed=seed, obs=obs, steps=steps, algo=algo)
-             for algo, runs in (("ddpg", cfg.ddpg_runs), ("sac", cfg.sac_runs)) for obs, steps, seeds in runs for seed in seeds]
+             for algo, runs in (("ddpg", cfg.ddpg_runs), ("sac", cfg.sac_runs), ("drqv2", cfg.drqv2_runs))
+             for obs, steps, seeds in runs for seed in seeds]
     return jobs + [Job("oracle", "oracle")]
 
 
@@ -529,7 +540,7 @@ def _autoencoder_seconds(metrics: dict[str, Any]) -> str:
 
 
 def train_ddpg_run(obs: str, steps: int, seed: int, data: Path, run: Path, cfg: BenchConfig, algo: str = "ddpg") -> dict[str, Any]:
-    """Trains an SB3 run (``algo``: "ddpg" or "sac"; unless done) and returns its metrics (learning curve, seconds)."""
+    """Trains an SB3 run (``algo``: "ddpg", "sac" or "drqv2"; unless done) and returns its metrics (learning curve, seconds)."""
     from agents.sb3.autoencoder import AutoencoderConfig, train_autoencoder
     from agents.sb3.config import SB3Config
     from agents.sb3.run import AUTOENCODER
@@ -617,7 +628,7 @@ def best_run(record: dict[str, Any], agent: str) -> str | None:
     times use, so that each agent is shown at its best. The PlaNet-style runs differ by more than data
     size (a run on 500 sequences beat one on 2000 in the budget preset), so "the largest" would not do.
     None while none of the agent's runs has a record."""
-    if agent == "ddpg":  # DDPG's own runs (the paper's baseline), not SAC's
+    if agent == "ddpg":  # DDPG's own runs (the paper's baseline), not SAC's or DrQ-v2's
         runs = [(f"ddpg-{r['obs']}-s{r['seed']}", r["control"], 0) for r in record["ddpg"] if r["algo"] == "ddpg"]
     else:
         runs = [(f"{agent}-n{row['sequences']}-s{run['seed']}", run["control"], row["sequences"])
@@ -693,7 +704,7 @@ def figures(record: dict[str, Any], out: Path) -> dict[str, str]:
         for r in runs:
             curve = r["metrics"]["learning_curve"]
             ax.plot([c["step"] for c in curve], [c["eval_mean_return"] for c in curve], color=f"C{i}", alpha=0.8,
-                    ls="-" if algo == "ddpg" else ":", label=f"{algo.upper()}, {obs}" if r is runs[0] else None)
+                    ls={"ddpg": "-", "sac": ":"}.get(algo, "-."), label=f"{ALGO_LABELS[algo]}, {obs}" if r is runs[0] else None)
     ax.axhline(-200, color="gray", ls="--", lw=0.8)
     ax.set_xlabel("env steps")
     ax.set_ylabel("evaluation mean return")
@@ -757,6 +768,8 @@ def floors(record: dict[str, Any], cfg: BenchConfig, pending: tuple[Job, ...] = 
 AGENT_LABELS = {"piga": "piga", "planet": "PlaNet-style", "oracle": "oracle (true state and physics)"}
 """The agents' names in the summary table; an SB3 run's is "ALGO from" its observation's (:data:`OBS_LABELS`)."""
 OBS_LABELS = {"state": "the true state", "latent": "an autoencoder's latent", "pixels": "pixels"}
+ALGO_LABELS = {"ddpg": "DDPG", "sac": "SAC", "drqv2": "DrQ-v2"}
+"""The SB3 runs' algorithms (:attr:`Job.algo`) as the tables, the figures and the summary name them."""
 
 
 def agent_label(key: str) -> str:
@@ -764,7 +777,7 @@ def agent_label(key: str) -> str:
     if key in AGENT_LABELS:
         return AGENT_LABELS[key]
     algo, obs = key.split("-")
-    return f"{algo.upper()} from {OBS_LABELS[obs]}"
+    return f"{ALGO_LABELS[algo]} from {OBS_LABELS[obs]}"
 
 
 def _per_seed(values: list[float | None]) -> str:
@@ -906,16 +919,16 @@ def markdown(record: dict[str, Any]) -> str:
     o = record["oracle"]
     lines += ["\nOracle: " + ("pending" if o is None else f"{100 * o['success_rate']:.0f}% success, mean return {o['mean_return']:.1f}") + ".\n",
               *data_ratio_lines(record),
-              "## DDPG (and SAC, its stronger sibling)\n", f"![DDPG learning curves]({record['figures']['ddpg']})\n",
+              "## DDPG (and SAC, its stronger sibling, and DrQ-v2)\n", f"![DDPG learning curves]({record['figures']['ddpg']})\n",
               "| algorithm | observation | seed | steps | first step at >= -200 | final eval return | success | train s |",
               "|---|---|---|---|---|---|---|---|"]
     for r in record["ddpg"]:
         final = r["metrics"]["final_eval_mean_return"]
-        lines.append(f"| {r['algo'].upper()} | {r['obs']} | {r['seed']} | {r['metrics']['steps']} | "
+        lines.append(f"| {ALGO_LABELS[r['algo']]} | {r['obs']} | {r['seed']} | {r['metrics']['steps']} | "
                      f"{r['metrics']['first_step_reaching_minus_200'] or 'never'} | "
                      f"{'n/a' if final is None else f'{final:.1f}'} | {100 * r['control']['success_rate']:.0f}% | "
                      f"{r['metrics']['train_seconds']:.0f}" + _autoencoder_seconds(r['metrics']) + " |")
-    sb3_pending = [name for name in record["pending"] if name.startswith(("ddpg-", "sac-"))]
+    sb3_pending = [name for name in record["pending"] if name.startswith(tuple(f"{algo}-" for algo in ALGO_LABELS))]
     if sb3_pending:
         lines.append(f"\nPending: {', '.join(sb3_pending)}.")
     lines += ["\n## Zero-shot gravity sweep (piga and the oracle told the multiplier; baselines not told)\n",

@@ -31,8 +31,9 @@ def bench():
 
 def test_the_budget_preset_has_one_job_per_run(bench) -> None:
     names = [job.name for job in bench.jobs_for(bench.PRESETS["budget"])]
-    assert len(names) == len(set(names)) == 21 + 7 + 5 + 1 + 1  # piga 7 x 3, planet 5 + 2, DDPG 3 + 1 + 1, SAC 1, oracle
+    assert len(names) == len(set(names)) == 21 + 7 + 5 + 1 + 1 + 1  # piga 7 x 3, planet 5 + 2, DDPG 3 + 1 + 1, SAC 1, DrQ-v2 1, oracle
     assert "planet-n2000-s1" in names and "ddpg-pixels-s0" in names and "sac-pixels-s0" in names and names[-1] == "oracle"
+    assert "drqv2-pixels-s0" in names
 
 
 def test_the_committed_records_are_kept_by_the_budget_preset(bench) -> None:
@@ -90,8 +91,9 @@ def test_the_summary_table_has_a_row_per_agent_and_size_over_its_seeds(bench) ->
             record["metrics"] = {"autoencoder_train_seconds": 300.0} if job.obs == "latent" else {}
         records[job.name] = record
     rows = [line.split(" | ") for line in bench.summary_table(records, cfg).splitlines()[2:]]
-    assert len(rows) == 7 + 5 + 3 + 1 + 1  # piga's 7 sizes, PlaNet-style's 5, DDPG's 3 observations, SAC's 1, the oracle
-    assert [r[0] for r in rows[-3:]] == ["| DDPG from pixels", "| SAC from pixels", "| oracle (true state and physics)"]
+    assert len(rows) == 7 + 5 + 3 + 1 + 1 + 1  # piga's 7 sizes, PlaNet-style's 5, DDPG's 3 observations, SAC's 1, DrQ-v2's 1, the oracle
+    assert [r[0] for r in rows[-4:]] == ["| DDPG from pixels", "| SAC from pixels", "| DrQ-v2 from pixels",
+                                         "| oracle (true state and physics)"]
     planet_500 = next(r for r in rows if r[0] == "| PlaNet-style" and r[1].startswith("500 "))
     assert planet_500[1:6] == ["500 random-action sequences (2 seeds)", "10\u201320 min", "100%, 50%", "\u2212180.0",
                                "0%, 0% (not told)"]
@@ -154,7 +156,7 @@ def test_a_page_written_part_way_names_the_runs_still_to_run(bench, tmp_path: Pa
     records["planet-n100-s0"] = {**records["planet-n100-s0"], "machine": {"cpu": "other CPU", "cpu_family_model": "9/9", "cores": 2, "torch": "2.13.0+cpu"}}
     record, page = _page(bench, cfg, records, tmp_path)
     assert record["pending"] == ["planet-n2000-s0", "planet-n2000-s1", "ddpg-state-s1", "sac-pixels-s0"]
-    assert "**Part-way: 31 of 35 runs have a record.**" in page
+    assert "**Part-way: 32 of 36 runs have a record.**" in page
     assert "Machines: 2 (each run's under Compute), torch 2.13.0+cpu," in page  # the records', not the invocation's ("test CPU")
     assert "test CPU" not in page and "- other CPU (family/model 9/9), 2 cores: planet-n100-s0" in page
     floors = {f["floor"][:20]: f for f in record["floors"]}
@@ -242,3 +244,34 @@ def test_the_estimate_of_some_jobs_is_theirs(bench) -> None:
     part = bench.estimate(cfg, two)
     assert part["planet episodes (core-s)"] == 0 and 0 < part["wall"] < bench.estimate(cfg)["wall"] / 20
     assert part["train (core-s)"] == sum(bench.job_train_cost(cfg, job) for job in two)
+
+
+def test_drqv2_is_a_third_model_free_row_scored_as_ddpgs_runs(bench, tmp_path: Path) -> None:
+    """DrQ-v2 from pixels: its own jobs, spec, cost, rows and pending cells, beside DDPG's and SAC's runs."""
+    cfg = bench.PRESETS["budget"]
+    jobs = {job.name: job for job in bench.jobs_for(cfg)}
+    job = jobs["drqv2-pixels-s0"]
+    assert (job.agent, job.algo, job.obs, job.steps, job.seed) == ("ddpg", "drqv2", "pixels", 12000, 0)
+    assert [j.name for j in bench.jobs_for(bench.PRESETS["full"]) if j.algo == "drqv2"] == [f"drqv2-pixels-s{s}" for s in (0, 1, 2)]
+    assert [(j.name, j.steps) for j in bench.jobs_for(bench.PRESETS["tiny"]) if j.algo == "drqv2"] == [("drqv2-pixels-s0", 400)]
+    assert bench.job_spec(job, cfg)["algo"] == "drqv2" and "algo" not in bench.job_spec(jobs["ddpg-pixels-s0"], cfg)
+    # its 4000 warm-up steps render only; one run fits 90 min of one core
+    cost = bench.job_train_cost(cfg, job)
+    assert cost == pytest.approx(4000 * bench.COST_S["ddpg_pixels_warmup_step"] + 8000 * bench.COST_S["drqv2_pixels_step"])
+    assert cost < 90 * 60
+    tiny = bench.PRESETS["tiny"]
+    assert bench.job_train_cost(tiny, bench.Job("drqv2-pixels-s0", "ddpg", obs="pixels", steps=400, algo="drqv2")) == pytest.approx(
+        100 * bench.COST_S["ddpg_pixels_warmup_step"] + 300 * bench.COST_S["drqv2_pixels_step"])  # the tiny preset's warm-up
+
+    records = _records(bench, cfg)
+    records["drqv2-pixels-s0"] = {**records["drqv2-pixels-s0"], "control": {"success_rate": 1.0, "mean_return": -150.0, "episodes": 20}}
+    record, page = _page(bench, cfg, records, tmp_path)
+    assert [(r["algo"], r["obs"]) for r in record["ddpg"]][-2:] == [("sac", "pixels"), ("drqv2", "pixels")]
+    assert record["sweep"]["runs"]["ddpg"].startswith("ddpg-")  # DDPG's sweep is DDPG's own best run, however DrQ-v2 did
+    assert "| DrQ-v2 | pixels | 0 | 12000 | 2000 | -190.0 | 100% | 600 |" in page
+    assert "| DrQ-v2 from pixels | 12k env steps | 10 min | 100% | \u2212150.0 | 0% (not told) | refused (no goal input) |  |" in page
+    records["drqv2-pixels-s0"] = None
+    record, page = _page(bench, cfg, records, tmp_path)
+    assert record["pending"] == ["drqv2-pixels-s0"] and "\nPending: drqv2-pixels-s0.\n" in page
+    assert "| DrQ-v2 from pixels | 12k env steps |  | pending | pending | pending (not told) |" in record["summary_table"]
+    assert [f["pending"] for f in record["floors"]] == [[]] * 5  # no floor waits for it
