@@ -78,7 +78,7 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from common import add_ray_option, farm_main, machine, ray_backend, signed as _num
+from common import ALGO_LABELS, add_ray_option, farm_main, machine, ray_backend, signed as _num
 from efficiency import Point, data_ratio
 
 from agents.planet.config import PlanetTrainConfig
@@ -768,8 +768,6 @@ def floors(record: dict[str, Any], cfg: BenchConfig, pending: tuple[Job, ...] = 
 AGENT_LABELS = {"piga": "piga", "planet": "PlaNet-style", "oracle": "oracle (true state and physics)"}
 """The agents' names in the summary table; an SB3 run's is "ALGO from" its observation's (:data:`OBS_LABELS`)."""
 OBS_LABELS = {"state": "the true state", "latent": "an autoencoder's latent", "pixels": "pixels"}
-ALGO_LABELS = {"ddpg": "DDPG", "sac": "SAC", "drqv2": "DrQ-v2"}
-"""The SB3 runs' algorithms (:attr:`Job.algo`) as the tables, the figures and the summary name them."""
 
 
 def agent_label(key: str) -> str:

@@ -22,10 +22,13 @@ from piga.cli.common import PigaError, add_ray_option, connect_backend, seed_int
 from piga.io.pool import Backend, BackendError, JobFailed
 from piga.io.worker_signals import die_with_parent
 
-__all__ = ["add_diagnose_options", "add_ray_option", "add_training_options", "check_record", "diagnose_options", "farm_main",
+__all__ = ["ALGO_LABELS", "add_diagnose_options", "add_ray_option", "add_training_options", "check_record", "diagnose_options", "farm_main",
            "is_learning_curve", "is_number", "job_command", "logged_command", "machine", "machine_words", "ray_backend", "signed"]
 
 Main = TypeVar("Main", bound=Callable[..., Any])
+
+#: The model-free baselines' algorithms (a record's ``algo``) as the tables, the figures and the summaries name them.
+ALGO_LABELS = {"ddpg": "DDPG", "sac": "SAC", "drqv2": "DrQ-v2"}
 
 
 def machine() -> dict[str, object]:

@@ -18,7 +18,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from common import machine_words, signed
+from common import ALGO_LABELS, machine_words, signed
 
 from agents.sb3.train import first_step_reaching
 from piga.io.atomic import atomic_output
@@ -35,7 +35,7 @@ SOLVED_RETURN = -200.0
 
 
 def model_free_records(folder: Path = RECORDS) -> list[dict[str, Any]]:
-    """The DDPG and SAC records, in name order."""
+    """The model-free records (DDPG, SAC and DrQ-v2: agent "ddpg"), in name order."""
     records = [json.loads(p.read_text()) for p in sorted(folder.glob("*.json"))]
     return [r for r in records if r["spec"]["agent"] in ("ddpg", "sac")]
 
@@ -52,7 +52,7 @@ def row(record: dict[str, Any]) -> str:
         minutes += f" (+ {metrics['autoencoder_train_seconds'] / 60:.1f} autoencoder)"
     m = record["machine"]
     where = f"{m['cpu']} {m['cpu_family_model']}, {m['torch_threads']} thread{'s' if m['torch_threads'] != 1 else ''}"
-    return (f"| `{spec['name']}` | {metrics['algo'].upper()} | {spec['obs']} | {spec['seed']} | {spec['steps'] // 1000}k | "
+    return (f"| `{spec['name']}` | {ALGO_LABELS.get(metrics['algo'], metrics['algo'])} | {spec['obs']} | {spec['seed']} | {spec['steps'] // 1000}k | "
             f"{f'{first // 1000}k' if first is not None else 'never'} | {signed(best['eval_mean_return'])} ({best['step'] // 1000}k) | "
             f"{signed(curve[-1]['eval_mean_return'])} | {minutes} | {where} |")
 
