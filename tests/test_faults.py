@@ -3568,3 +3568,61 @@ def test_a_ddpg_budget_below_one_evaluation_names_what_to_give(argv: list[str], 
                                                                capsys: pytest.CaptureFixture[str]) -> None:
     refused("piga-baseline", ["ddpg", "--obs", "state", "--out", str(tmp_path / "run"), *argv], capsys, needle)
     assert _listing(tmp_path) == []
+
+
+def test_an_interrupted_resume_leaves_no_report_of_the_older_state(tiny_piga_run: Path, tiny_data: Path, tmp_path: Path,
+                                                                    capsys: pytest.CaptureFixture[str],
+                                                                    monkeypatch: pytest.MonkeyPatch) -> None:
+    """A finished run resumed with more epochs and interrupted kept metrics.json and its figures (10 epochs, g 1.7, not
+    converged) beside a checkpoint of epoch 24 (g 10.07): piga-diagnose judged the newer model by the older report."""
+    import piga.training.train
+
+    real = piga.training.train.train
+
+    def interrupted_after_its_first_checkpoint(*args: Any, on_epoch: Any = None, **kwargs: Any) -> Any:
+        def hook(state: Any, model: Any) -> None:
+            on_epoch(state, model)
+            raise KeyboardInterrupt
+
+        return real(*args, on_epoch=hook, **kwargs)
+
+    run = _run_copy(tiny_piga_run, tmp_path / "run")
+    assert (run / "metrics.json").exists()
+    monkeypatch.setattr(piga.training.train, "train", interrupted_after_its_first_checkpoint)
+    code, _, err = run_in_process("piga-train-model", train.main, str(tiny_data), "--out", str(run), "--resume",
+                                  "--epochs", "3", "--quiet", capsys=capsys)
+    assert code == 130 and "holds epoch 2; continue with --resume" in err, err
+    assert (run / "checkpoint.pt").exists() and not any((run / name).exists() for name in
+                                                        ("metrics.json", "rollout.png", "curves.png"))
+
+
+def test_frames_in_external_raw_storage_not_found_are_named(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                            monkeypatch: pytest.MonkeyPatch) -> None:
+    """HDF5 looks for a dataset's external raw file from the current folder: run from another, the file was "damaged;
+    collect, import or copy it again", with HDF5's own words."""
+    frames = np.random.default_rng(0).integers(0, 255, (12, 20, 32, 32), dtype=np.uint8)
+    frames.tofile(tmp_path / "raw.bin")
+    with h5py.File(tmp_path / "ext.h5", "w") as f:
+        f.create_dataset("frames", shape=frames.shape, dtype=np.uint8, external=[("raw.bin", 0, frames.nbytes)])
+        f["actions"] = np.zeros((12, 20, 1), np.float32)
+        f["split"] = np.array([0] * 10 + [1, 2], np.int8)
+        f.attrs.update(system="pendulum", dt=0.05, params=json.dumps({}))
+    (tmp_path / "elsewhere").mkdir()
+    monkeypatch.chdir(tmp_path / "elsewhere")
+    refused("piga-show", [str(tmp_path / "ext.h5"), "--out", "x.png"], capsys,
+            "/frames keeps its data in the external file raw.bin, which is not found from the current folder")
+    monkeypatch.chdir(tmp_path)
+    code, _, err = run_in_process("piga-show", show.main, "ext.h5", "--out", "x.png", capsys=capsys)
+    assert code == 0, err
+
+
+def test_a_stream_cache_that_auto_does_not_use_is_said(tiny_data: Path, tmp_path: Path,
+                                                       capsys: pytest.CaptureFixture[str]) -> None:
+    """--data-loading auto --stream-cache-mb 5 on a file that fits in memory recorded the cache and read the file whole,
+    without a word (an explicit --data-loading memory with it is refused)."""
+    code, out, err = run_in_process("piga-train-model", train.main, str(tiny_data), "--out", str(tmp_path / "run"),
+                                    "--stream-cache-mb", "5", "--epochs", "1", "--batch-size", "8", "--quiet",
+                                    "--threads", "1", capsys=capsys)
+    assert code in (0, 1, 3), err
+    assert f"note: --data-loading auto reads {tiny_data} whole (it fits in memory), so --stream-cache-mb 5 is not " \
+           "used" in out, out

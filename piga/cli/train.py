@@ -41,6 +41,8 @@ MAX_BROADCAST_WIDTH = 256
 MODEL_OPTIONS = {"model": "architecture", "loss": "loss", "decoder": "decoder", "objects": "n_objects",
                  "video_lstm_scale": "video_lstm_scale", "broadcast_width": "broadcast_width"}
 OUTPUTS = (CHECKPOINT, "metrics.json", "config.json", "rollout.png", "templates.png", "curves.png", "tensorboard")
+#: The outputs that report on a finished state of the run (written at its end, from its checkpoint).
+REPORT_OUTPUTS = ("metrics.json", "rollout.png", "templates.png", "curves.png")
 
 
 def build_parser() -> ArgumentParser:
@@ -244,6 +246,10 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
         train_config = replace(recipe.train, seed=args.seed, threads=args.threads, device=args.device,
                                seed_retries=args.seed_retries, **overrides, **reading)  # explicit options win
         train_config = resolve_loading(train_config, info)  # as the run records it
+        if args.stream_cache_mb is not None and train_config.data_loading == "memory":  # (it was ignored silently)
+            print(f"note: --data-loading {args.data_loading or 'auto'} reads {args.data} whole (it fits in memory), so "
+                  f"--stream-cache-mb {args.stream_cache_mb} is not used; give --data-loading stream to read it "
+                  "through that cache")
         model_config = model_config_for(info, recipe.model)
         chosen = {field: getattr(args, dest) for dest, field in MODEL_OPTIONS.items() if getattr(args, dest) is not None}
         if args.objects is not None and info.system == "pendulum":
@@ -329,6 +335,9 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
     def on_epoch(state: Any, model: Any) -> None:  # the first checkpoint of this command: the record goes with it
         if not written:
             write_json(run_dir / "config.json", record)
+            if args.resume:  # the report of the state resumed from no longer describes the checkpoint: an interrupted
+                # resume left it beside a newer model, which piga-diagnose then judged by the old report's numbers
+                remove_outputs(run_dir, REPORT_OUTPUTS)
         written.append(state.epoch)
         # with a retry left, a scene's objects are checked once the autoencoder's warm-up is over: an object not
         # found then is not found at the end either (benchmarks/warmup_objects.py), and the retry starts at once

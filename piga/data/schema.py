@@ -301,9 +301,17 @@ def inspect_dataset(path: str | os.PathLike[str]) -> DatasetInfo:
 
 def _check_virtual_sources(f: h5py.File, path: Path) -> None:
     """A virtual dataset (HDF5's VDS) whose source file is missing reads as its fill value: the frames of a moved
-    file looked blank ("every frame is blank"), the actions zero. Each source is named instead."""
+    file looked blank ("every frame is blank"), the actions zero. Each source is named instead; so is the file of a
+    dataset in HDF5's external raw storage that is not found from the current folder (it was "the file is damaged")."""
     for name in ("frames", "actions", "split", "states", "rewards"):
         ds = f.get(name)
+        if isinstance(ds, h5py.Dataset) and ds.external:  # HDF5's external raw storage, found from the current folder
+            for source, _, _ in ds.external:
+                where = Path(source.decode() if isinstance(source, bytes) else source)
+                if not where.exists():
+                    raise DataFormatError(f"{path}: /{name} keeps its data in the external file {where}, which is not "
+                                          "found from the current folder (HDF5 looks for it there); run from the folder "
+                                          "that holds it, or write a file that holds the data")
         if not isinstance(ds, h5py.Dataset) or not ds.is_virtual:
             continue
         for source in ds.virtual_sources():
