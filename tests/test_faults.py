@@ -3626,3 +3626,26 @@ def test_a_stream_cache_that_auto_does_not_use_is_said(tiny_data: Path, tmp_path
     assert code in (0, 1, 3), err
     assert f"note: --data-loading auto reads {tiny_data} whole (it fits in memory), so --stream-cache-mb 5 is not " \
            "used" in out, out
+
+
+def test_a_data_file_removed_while_the_run_trained_says_the_checkpoint_is_kept(tiny_data: Path, tmp_path: Path,
+                                                                              capsys: pytest.CaptureFixture[str],
+                                                                              monkeypatch: pytest.MonkeyPatch) -> None:
+    """The file removed or truncated while the run trained ended in "w.h5: no such file" or "not a readable HDF5 file
+    (OSError)", without saying that the run keeps its checkpoint and how to go on."""
+    import piga.data.schema
+    from piga.data.schema import DataFormatError
+
+    real = piga.data.schema.fingerprint
+
+    def gone_after_the_start(path: Any) -> str:  # read again once the run has its checkpoint: gone by then
+        if (tmp_path / "run" / "checkpoint.pt").exists():
+            raise DataFormatError(f"{path}: no such file")
+        return real(path)
+
+    monkeypatch.setattr(piga.data.schema, "fingerprint", gone_after_the_start)
+    line = refused("piga-train-model", [str(tiny_data), "--out", str(tmp_path / "run"), "--epochs", "1", "--batch-size",
+                                        "8", "--quiet", "--threads", "1"], capsys,
+                   f"{tiny_data}: no such file now, after the run trained on it: the run in {tmp_path / 'run'} keeps its "
+                   "checkpoint", "run the same command with --resume")
+    assert (tmp_path / "run" / "checkpoint.pt").exists(), line

@@ -176,7 +176,7 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
         raise PigaError(f"{run_dir} holds outputs of an earlier run but no checkpoint ({', '.join(existing)}); "
                         "pass --overwrite to replace them")
     from piga.io.atomic import write_json
-    from piga.data.schema import fingerprint, inspect_dataset
+    from piga.data.schema import DataFormatError, fingerprint, inspect_dataset
     from piga.training import report
     from piga.training.report import scene_objects, write_run_report
     from piga.io.runs import load_model
@@ -392,7 +392,13 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
             if tried:  # a retry stopped before its first checkpoint: the folders held only the lost try
                 remove_empty_folders(missing)
             raise
-        if fingerprint(args.data) != data_at_start:
+        try:
+            now = fingerprint(args.data)
+        except (DataFormatError, FileNotFoundError) as exc:  # removed or truncated while the run trained on it
+            raise PigaError(f"{exc} now, after the run trained on it: the run in {run_dir} keeps its checkpoint, but "
+                            "its evaluation reads the file; put the trained file back and run the same command with "
+                            "--resume") from None
+        if now != data_at_start:
             raise PigaError(f"{args.data} changed while the run trained (another file now has its name): the run in "
                             f"{run_dir} keeps its checkpoint, but its evaluation would read the new file; put the "
                             "trained file back and run the same command with --resume, or train on the new one")
