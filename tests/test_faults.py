@@ -3649,3 +3649,21 @@ def test_a_data_file_removed_while_the_run_trained_says_the_checkpoint_is_kept(t
                    f"{tiny_data}: no such file now, after the run trained on it: the run in {tmp_path / 'run'} keeps its "
                    "checkpoint", "run the same command with --resume")
     assert (tmp_path / "run" / "checkpoint.pt").exists(), line
+
+
+def test_frames_whose_chunks_were_never_written_are_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Sequences 6 to 11 of a chunked /frames never written read as 0: the file trained and scored a blank test split
+    ("SSIM 0.000, encoder angle error 109.54 deg") without a word. A chunk written with zeros counts as written."""
+    for written, name in ((6, "cut.h5"), (12, "zeros.h5")):
+        with h5py.File(tmp_path / name, "w") as f:
+            frames = f.create_dataset("frames", (12, 20, 32, 32), np.uint8, chunks=(1, 20, 32, 32))
+            frames[:written] = np.random.default_rng(0).integers(0, 255, (written, 20, 32, 32), dtype=np.uint8) \
+                if name == "cut.h5" else 0
+            f["actions"] = np.zeros((12, 20, 1), np.float32)
+            f["split"] = np.array([0] * 10 + [1, 2], np.int8)
+            f.attrs.update(system="pendulum", dt=0.05, params=json.dumps({}))
+    refused("piga-show", [str(tmp_path / "cut.h5"), "--out", str(tmp_path / "x.png")], capsys,
+            "/frames holds 6 of its 12 chunks; the rest were never written")
+    from piga.data.schema import inspect_dataset
+
+    assert inspect_dataset(tmp_path / "zeros.h5").n_sequences == 12  # (blank, which the commands refuse for that)
