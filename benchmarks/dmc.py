@@ -313,11 +313,11 @@ def main() -> None:
     args = p.parse_args()
     if args.jobs < 1:
         p.error(f"--jobs must be >= 1, got {args.jobs}")
-    from piga.cli.collect import _env_option, dmc_config
+    from piga.cli.collect import dmc_config, parse_env_option
 
     for variant in args.variant:  # here, not in its case after the first seed's hour of work
         try:
-            dmc_config([_env_option(variant)])
+            dmc_config([parse_env_option(variant)])
         except (ValueError, argparse.ArgumentTypeError) as exc:
             raise PigaError(f"--variant {variant}: {exc}") from None
     backend = ray_backend(p, args)

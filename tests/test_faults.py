@@ -1039,16 +1039,16 @@ def test_written_together_removes_what_it_wrote_and_keeps_what_was_there(tmp_pat
 
 def test_a_gif_is_refused_before_the_episodes_where_an_mp4_fits(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """A GIF takes about ten times an MP4's room: the check before the episodes knows."""
-    from piga.evaluation.video import check_video_disk
+    from piga.evaluation.video import check_video_room
     from piga.io.resources import ResourceError
 
     class Usage:
         total, used, free = 10**9, 10**9 - 2 * 1024**2, 2 * 1024**2
 
     monkeypatch.setattr(shutil, "disk_usage", lambda path: Usage())
-    check_video_disk(tmp_path / "v.mp4", 200)
+    check_video_room(tmp_path / "v.mp4", 200)
     with pytest.raises(ResourceError, match="the video v.gif needs about"):
-        check_video_disk(tmp_path / "v.gif", 200)
+        check_video_room(tmp_path / "v.gif", 200)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -3548,14 +3548,14 @@ def test_a_video_the_memory_cannot_hold_is_refused_before_its_episode(tmp_path: 
     """--steps 15000 --video under an 8 GB limit played its 2.4-minute episode, then failed "out of memory (an array
     of 640.0 KiB did not fit)": the frames are held whole until they are encoded."""
     import piga.io.resources
-    from piga.evaluation.video import check_video_disk
+    from piga.evaluation.video import check_video_room
     from piga.io.resources import ResourceError
 
     monkeypatch.setattr(piga.io.resources, "available_memory", lambda: 2 * 1024**3)
-    check_video_disk(tmp_path / "v.mp4", 200)
+    check_video_room(tmp_path / "v.mp4", 200)
     with pytest.raises(ResourceError, match=r"the video v.mp4 \(15,000 frames, held whole until encoded\) needs about "
                                             r".* give fewer --steps, or drop --video"):
-        check_video_disk(tmp_path / "v.mp4", 15000)
+        check_video_room(tmp_path / "v.mp4", 15000)
 
 
 @pytest.mark.parametrize("argv, needle", [

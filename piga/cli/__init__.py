@@ -27,8 +27,15 @@ def _early_interrupt(number: int, frame: object) -> None:
     if not name.startswith("piga-"):  # python -m piga.cli.X: sys.argv[0] is "-m" while X loads
         given = getattr(sys, "orig_argv", [])
         module = given[given.index("-m") + 1] if "-m" in given[:-1] else ""
-        short = module.rpartition(".")[2] if module.startswith("piga.cli.") else ""
-        name = {"train": "piga-train-model", "importer": "piga-import"}.get(short, f"piga-{short}" if short else "piga")
+        name = "piga"
+        if module.startswith("piga.cli."):  # the script that runs the same entry (pyproject's [project.scripts])
+            try:
+                from importlib.metadata import entry_points
+
+                name = next((e.name for e in entry_points(group="console_scripts") if e.value == f"{module}:entry"),
+                            name)
+            except Exception:  # noqa: BLE001 (no installed metadata: the generic name)
+                pass
     _os.write(2, f"{name}: interrupted; nothing was written\n".encode("utf-8", "replace"))
     _os._exit(128 + number)
 

@@ -50,7 +50,7 @@ def _color(text: str) -> tuple[float, float, float]:
     return tuple(float(c) for c in rgb)  # type: ignore[return-value]
 
 
-def _env_option(text: str) -> tuple[str, str]:
+def parse_env_option(text: str) -> tuple[str, str]:
     import argparse
 
     key, sep, value = text.partition("=")
@@ -144,7 +144,7 @@ def build_parser() -> ArgumentParser:
     p.add_argument("--env", choices=ENV_IDS, default=PIXEL_PENDULUM,
                    help="the env: Gymnasium's pixel pendulum, or dm_control's MuJoCo pendulum through a face-on camera "
                    "(needs piga[dmc]; actions u ~ U(-1, 1), frame dt = action_repeat x 0.02) (default %(default)s)")
-    p.add_argument("--env-option", action="append", type=_env_option, default=[], metavar="KEY=VALUE",
+    p.add_argument("--env-option", action="append", type=parse_env_option, default=[], metavar="KEY=VALUE",
                    help=f"a field of the DMC pendulum's config, repeatable: {', '.join(env_option_keys())} "
                    "(their meanings and ranges: envs/dmc.py, DMCPendulumConfig)")
     paper = PRESETS["paper"]

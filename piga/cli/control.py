@@ -164,9 +164,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.oracle:
             raise PigaError("--video shows the model's belief and plan; it needs --model, not --oracle")
         check_writable_target(args.video, args.overwrite)
-        from piga.evaluation.video import check_video_disk
+        from piga.evaluation.video import check_video_room
 
-        check_video_disk(args.video, args.steps)  # before the episode it shows is played
+        check_video_room(args.video, args.steps)  # before the episode it shows is played
     import torch
 
     from agents.mpc import OracleAgent, PigaMPCAgent
@@ -409,9 +409,9 @@ def _baseline(args: argparse.Namespace, kind: RunKind, mpc: MPCConfig, outputs: 
         if Path(args.video).suffix.lower() not in (".mp4", ".gif"):
             raise PigaError(f"--video must end in .mp4 or .gif, got {args.video}")
         check_writable_target(args.video, args.overwrite)
-        from piga.evaluation.video import check_video_disk
+        from piga.evaluation.video import check_video_room
 
-        check_video_disk(args.video, args.steps)  # before the episodes: real frames | reconstruction
+        check_video_room(args.video, args.steps)  # before the episodes: real frames | reconstruction
     planner = [f"--{name.replace('_', '-')}" for name in ("horizon", "candidates", "elites", "iterations", "warm_start")
                if name in given]
     if planner:
@@ -682,7 +682,7 @@ def _training_env_id(checkpoint: dict) -> str | None:
 
 def _dmc(args: argparse.Namespace, argv: Sequence[str] | None, given: set[str]) -> int:
     """``--env piga/DMCPendulum-v0``: the piga agent and/or the oracle, scored in DMC's units."""
-    from piga.cli.collect import _env_option, dmc_config
+    from piga.cli.collect import dmc_config, parse_env_option
 
     if ignored := _ignored_options(args, given, DMC_OPTIONS):
         raise PigaError(f"{ignored[0]} is not an option of --env piga/DMCPendulum-v0; it takes "
@@ -692,7 +692,7 @@ def _dmc(args: argparse.Namespace, argv: Sequence[str] | None, given: set[str]) 
     import argparse as _argparse
 
     try:
-        pairs = [_env_option(text) for text in args.env_option]
+        pairs = [parse_env_option(text) for text in args.env_option]
     except _argparse.ArgumentTypeError as exc:
         raise PigaError(f"--env-option: {exc}") from None
     from piga.control.dmc import DMCControlConfig, OracleSwingUp, PigaSwingUp, dmc_markdown, dmc_record, run_dmc_episodes

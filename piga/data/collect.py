@@ -278,7 +278,8 @@ def _vector_env(factory: Callable[[], gym.Env], workers: int, fresh: bool = Fals
     block = hasattr(signal, "pthread_sigmask")
     previous = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT}) if block else None
     try:
-        return gym.vector.AsyncVectorEnv([factory] * workers, shared_memory=True, context="forkserver" if fresh else None)
+        return gym.vector.AsyncVectorEnv([factory] * workers, shared_memory=True,
+                                         context="forkserver" if fresh else None)
     finally:
         if previous is not None:
             signal.pthread_sigmask(signal.SIG_SETMASK, previous)

@@ -297,13 +297,15 @@ def read_actions(path: str | Path) -> np.ndarray:
         rows = [(number, row[:-1]) for number, row in rows]
     first_number, first = rows[0]
     column = 0
-    values = lines[1:] if _is_header(first) else lines
-    if delimiter == "," and len(first) <= 2 and not (_is_header(first) and len(first) == 2) and values and all(re.fullmatch(r"[-+]?\d+,\d+", line.strip()) for _, line in values):
+    header = _is_header(first)
+    values = lines[1:] if header else lines
+    if delimiter == "," and not (header and len(first) > 1) and values \
+            and all(re.fullmatch(r"[-+]?\d+,\d+", line.strip()) for _, line in values):
         # "-0,5123" on every row: a decimal comma (a European locale's), or two columns of integers: either way one line
         raise ValueError(f"{p}: line {values[0][0]}: {values[0][1].strip()!r}, as every row, is one number with a decimal "
                          "comma or two columns of integers; write numbers with a decimal point, or, for two columns, "
                          "add a header that names the action column 'u' or 'action'")
-    if _is_header(first):
+    if header:
         names = [cell.lower() for cell in first]
         if len(first) > 1:
             matches = [names.index(name) for name in ACTION_COLUMNS if name in names]

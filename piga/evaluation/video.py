@@ -80,7 +80,7 @@ GIF_COMPRESSION = 0.1
 MP4_COMPRESSION = 0.01
 
 
-def check_video_disk(path: str | os.PathLike[str], steps: int, panels: int = 3, side: int = 256) -> None:
+def check_video_room(path: str | os.PathLike[str], steps: int, panels: int = 3, side: int = 256) -> None:
     """Refuses, before the episodes that it shows are played, a video of ``steps`` frames of ``panels`` panels
     (``side`` pixels, piga's 64-pixel frames 4x upscaled) whose disk has not the room :func:`_write` asks for, or
     whose frames the memory cannot hold: they are kept whole until they are encoded, twice over as they are stacked

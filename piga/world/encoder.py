@@ -137,9 +137,7 @@ class _LocationNet(nn.Module):
             layers += [nn.Conv2d(c, w, 4, stride=2, padding=1), nn.ReLU()]
             c = w
         self.convs = nn.Sequential(*layers)
-        side = image_size
-        for _ in range(4):  # each conv (kernel 4, stride 2, padding 1) halves the side, rounding down: 36 -> 2
-            side //= 2
+        side = image_size // 16  # each conv (kernel 4, stride 2, padding 1) halves the side, rounding down: 36 -> 2
         if side < 1:
             raise ValueError(f"image_size must be at least 16 for the location network's 4 halvings, got {image_size}")
         self.head = nn.Linear(width * side * side, out)
