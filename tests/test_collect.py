@@ -8,7 +8,7 @@ import h5py
 import numpy as np
 import pytest
 
-from piga.data.collect import PAPER_MAX_SPEED, PRESETS, CollectConfig, collect, split_counts
+from piga.data.collect import PAPER_MAX_SPEED, PRESETS, CollectConfig, collect, empty_split_warning, split_counts
 from piga.data.schema import inspect_dataset
 from tests.helpers import run_in_process
 
@@ -69,6 +69,24 @@ def test_split_counts() -> None:
     for bad in [(0.5, 0.5), (0.5, 0.4, 0.4), (0, 0.5, 0.5), (-1, 1, 1), (5, 5, 5)]:
         with pytest.raises(ValueError):
             split_counts(10, bad)
+    with pytest.raises(ValueError, match="no share"):  # rounding would have left it one sequence
+        split_counts(5, (0, 0.5, 0.5))
+
+
+def test_empty_split_warned() -> None:
+    assert "valid and test empty" in empty_split_warning((0.8, 0.1, 0.1), {"train": 4, "valid": 0, "test": 0})
+    assert "--split 2,1,1" in empty_split_warning((0.8, 0.1, 0.1), {"train": 4, "valid": 0, "test": 0})
+    assert "test empty" in empty_split_warning((0.5, 0.5, 0.0001), {"train": 1, "valid": 1, "test": 0})
+    assert empty_split_warning((1, 0, 0), {"train": 4, "valid": 0, "test": 0}) is None  # as asked
+    assert empty_split_warning((0.8, 0.1, 0.1), {"train": 8, "valid": 1, "test": 1}) is None
+
+
+def test_collect_warns_of_an_empty_split(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from piga.cli import collect as cli
+
+    code, _, err = run_in_process("piga-collect", cli.main, "--out", str(tmp_path / "a.h5"), "--sequences", "4",
+                                  "--steps", "4", "--workers", "1", "--quiet", capsys=capsys)
+    assert code == 0 and err.count("\n") == 1 and "warning: the split 0.8,0.1,0.1 of 4 sequences" in err
 
 
 def test_preset_applies_and_explicit_options_win(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

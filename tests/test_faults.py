@@ -147,7 +147,13 @@ def files(tiny_data: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[str
     balls = collect_scene(SceneCollectConfig(scene=scene_config("spring"), sequences=4, steps=6, workers=1, split=(2, 1, 1)),
                           root / "balls.h5", progress=False, command="t")
     made["balls5"] = _variant(balls, root / "balls5.h5", _five_objects)
+    made["scene_gravity"] = _variant(balls, root / "scene_gravity.h5", _scene_gravity)
     return made
+
+
+def _scene_gravity(f: h5py.File) -> None:
+    """A spring file whose 'scene' says gravity: the recipe followed the scene, the model the system."""
+    f.attrs["scene"] = "gravity"
 
 
 @pytest.fixture(scope="module")
@@ -1108,6 +1114,7 @@ def test_diagnose_on_a_baseline_run_says_what_it_is(files: dict[str, Path], fake
     ("blank", ["every frame is blank"]),
     ("nan_state", ["/states holds NaN"]),
     ("balls5", ["attribute 'n_objects' is 5 but 'scene_config' says 2"]),
+    ("scene_gravity", ["attribute 'scene' is 'gravity', a gravity scene, but 'system' says 'spring'"]),
     # a pendulum file labelled 'spring' trained as a scene, and its refusal blamed a lost object
     ("labelled_spring", ["attribute 'system' says 'spring', whose model takes 0 action dimension(s), but /actions has 1"]),
     ("still", ["nothing moves"]),  # a model "learned" from a frozen camera, and the run exited as merely unconverged
@@ -1250,6 +1257,28 @@ def test_demo_refused_in_training_leaves_nothing(tmp_path: Path, capsys: pytest.
     for _ in range(2):
         refused("piga-demo", ["--out", str(tmp_path / "demo"), "--sequences", "1"], capsys, "fewer than one batch")
         assert _listing(tmp_path) == []
+
+
+def test_demo_failed_after_a_checkpoint_keeps_its_data_for_resume(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                                  monkeypatch: pytest.MonkeyPatch) -> None:
+    """Training diverged after its first checkpoint: the data stays beside the model (it was deleted, the model kept)."""
+    from piga.cli.common import PigaError
+
+    def fake_collect(config: Any, out: Path, **kwargs: Any) -> None:
+        Path(out).write_bytes(b"data")
+
+    def diverged(argv: Sequence[str], prog: str) -> int:
+        run = Path(argv[argv.index("--out") + 1])
+        run.mkdir(parents=True, exist_ok=True)
+        (run / "checkpoint.pt").write_bytes(b"ckpt")
+        raise PigaError("the loss became NaN at epoch 3; model/checkpoint.pt holds epoch 2")
+
+    monkeypatch.setattr(demo, "collect", fake_collect)
+    monkeypatch.setattr(demo.show, "main", lambda argv: 0)
+    monkeypatch.setattr(demo.train, "main", diverged)
+    refused("piga-demo", ["--out", str(tmp_path / "demo")], capsys, "the loss became NaN",
+            "keeps this demo's data and model", "--resume")
+    assert {"demo/pendulum.h5", "demo/model/checkpoint.pt"} <= set(_listing(tmp_path))
 
 
 def test_demo_interrupted_in_training_says_what_it_kept(tmp_path: Path, capsys: pytest.CaptureFixture[str],
@@ -1418,6 +1447,23 @@ def tiny_piga_run(tiny_data: Path, tmp_path_factory: pytest.TempPathFactory) -> 
     from tests.helpers import train_tiny
 
     return train_tiny(tiny_data, tmp_path_factory.mktemp("piga") / "run")
+
+
+@pytest.mark.parametrize("env_id, warned", [(None, True), ("piga/PixelPendulum-v0", False)])
+def test_control_warns_of_a_model_that_learned_other_frames(env_id: str | None, warned: bool, tiny_piga_run: Path,
+                                                            tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A model trained on an imported recording (its checkpoint names no env) controls Gymnasium's pendulum from
+    the env's frames, another camera's picture: said in one warning line (it was said nowhere)."""
+    import torch
+
+    run = _run_copy(tiny_piga_run, tmp_path / "run")
+    ckpt = torch.load(run / "checkpoint.pt", weights_only=False)
+    assert ckpt["data"]["env_id"] == "piga/PixelPendulum-v0"  # what training records
+    ckpt["data"]["env_id"] = env_id
+    torch.save(ckpt, run / "checkpoint.pt")
+    _, _, err = run_in_process("piga-control", control.main, "--model", str(run), "--episodes", "1", "--steps", "20",
+                               "--candidates", "8", "--iterations", "1", "--horizon", "2", "--quiet", capsys=capsys)
+    assert ("not collected by piga-collect (an imported recording?)" in err) is warned, err
 
 
 @pytest.mark.parametrize("extra, needles", [

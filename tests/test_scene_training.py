@@ -215,3 +215,41 @@ def inspect_dataset_like():
 
     return DatasetInfo(path=Path("spring.h5"), n_sequences=1, steps=4, image_shape=(32, 32, 3), action_dim=0,
                        has_states=False, system="spring", dt=0.3, params={}, split_counts={}, attrs={"n_objects": 2})
+
+
+def test_a_run_interrupted_in_a_retry_goes_on_retrying_after_resume(spring_data: Path, tmp_path: Path,
+                                                                    monkeypatch: pytest.MonkeyPatch,
+                                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    """--seed-retries 2 with an object always lost (a stand-in check): seed 5 is lost, the retry with seed 6 is
+    interrupted after its checkpoint, and --resume continues seed 6 and then still retries seed 7 (the resumed run
+    used to stop retrying)."""
+    import piga.training.report as report
+    import piga.training.train as training
+    from piga.evaluation.objects import ObjectCheck
+
+    monkeypatch.setattr(report, "check_objects", lambda model, frames: ObjectCheck(0.3, 0.5, 0.6, True))
+    real, calls = training.train, []
+
+    def interrupted_in_the_retry(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202
+        calls.append(kwargs["resume"])
+        if len(calls) == 2:  # the retry: interrupted after its first checkpoint
+            on_epoch = kwargs["on_epoch"]
+
+            def stop(state, model) -> None:  # noqa: ANN001
+                on_epoch(state, model)
+                raise KeyboardInterrupt
+            kwargs["on_epoch"] = stop
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(training, "train", interrupted_in_the_retry)
+    out = tmp_path / "run"
+    argv = [str(spring_data), "--out", str(out), "--epochs", "1", "--batch-size", "16", "--warmup-fraction", "0.5",
+            "--threads", "1", "--seed", "5", "--seed-retries", "2", "--quiet"]
+    code, stdout, err = run_in_process("piga-train-model", train_main, *argv, capsys=capsys)
+    assert code == 130 and "continue with --resume" in err
+    assert json.loads((out / "config.json").read_text())["retried_seeds"] == [5]
+    code, stdout, err = run_in_process("piga-train-model", train_main, *argv, "--resume", capsys=capsys)
+    assert_one_line(code, err, "an object was not found", "seeds 5, 6 and 7 tried")
+    assert calls == [False, False, True, False]  # seed 5, seed 6 cut, seed 6 resumed, seed 7 afresh
+    assert "training again from the start with seed 7 (retry 2 of --seed-retries 2)" in stdout
+    assert json.loads((out / "config.json").read_text())["retried_seeds"] == [5, 6]

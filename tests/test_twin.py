@@ -8,7 +8,7 @@ import pytest
 from envs.pendulum import PixelPendulumConfig, make_pixel_pendulum
 from piga.diagnostics import fit
 from piga.diagnostics.residuals import ridge
-from piga.diagnostics.twin import gap_closure, render_angles, repeat_stale, twin_angles
+from piga.diagnostics.twin import gap_closure, mean_gap_closure, render_angles, repeat_stale, twin_angles
 from piga.world.effects import CANDIDATES
 from tests.test_diagnostics import NOMINAL, planted
 
@@ -49,6 +49,12 @@ def test_stale_frames_repeat_in_the_twin() -> None:
 def test_gap_closure_is_the_share_above_the_floor() -> None:
     assert gap_closure(1.0, 0.2, 0.1) == pytest.approx(0.8 / 0.9)
     assert gap_closure(0.1, 0.1, 0.2) is None  # no gap above the floor
+
+
+def test_the_means_closure_is_not_a_ratio_of_noise() -> None:
+    assert mean_gap_closure(1.0, 0.2, 0.1) == pytest.approx(0.8 / 0.9)
+    assert mean_gap_closure(0.00073, 0.000626, 0.000729) is None  # was "13192%": no gap above the floor
+    assert mean_gap_closure(1.0, 0.05, 0.1) is None  # the corrected model below the floor: it is no floor
 
 
 def test_ridge_matches_least_squares_when_well_posed_and_stays_bounded_when_not() -> None:

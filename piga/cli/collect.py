@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from typing import Any
@@ -15,7 +16,7 @@ from envs.scenes import HALF_SPEED, SCENES, SceneConfig, scene_config
 from piga.cli.common import (H5_SUFFIXES, ArgumentParser, PigaError, add_preset_option, any_float, command_line,
                              format_default, given_options, h5_path, positive_float, positive_int, run_cli, seed_int,
                              split_type)
-from piga.data.collect import PAPER_MAX_SPEED, PRESETS, CollectConfig, collect
+from piga.data.collect import PAPER_MAX_SPEED, PRESETS, CollectConfig, collect, empty_split_warning
 from piga.data.collect_scenes import SCENE_PRESETS, SCENE_STEPS, collect_scene
 from piga.data.schema import inspect_dataset
 
@@ -232,7 +233,13 @@ def main(argv: Sequence[str] | None = None) -> int:
           f"split {info.split_counts}, g={info.params['g']:g}, actuation_gain={info.params['actuation_gain']:g}"
           + (f", damping={info.params['damping']:g}" if "damping" in info.params else "")
           + (f", effects {format_effects(effects)}" if effects else ""))
+    _warn_empty_split(config.split, info.split_counts)
     return 0
+
+
+def _warn_empty_split(split: Sequence[float], counts: dict[str, int]) -> None:
+    if (warning := empty_split_warning(split, counts)) is not None:
+        print(f"{PROG}: warning: {warning}", file=sys.stderr)
 
 
 def _pixel_config(args: argparse.Namespace, max_speed: float) -> PixelPendulumConfig:
@@ -314,6 +321,7 @@ def _collect_scene(args: argparse.Namespace, argv: Sequence[str] | None, written
     shown = ", ".join(f"{k}={v:g}" for k, v in info.params.items())
     print(f"wrote {path}: {args.system}, {info.n_sequences} sequences x {info.steps} frames of {info.image_shape}, "
           f"split {info.split_counts}" + (f", {shown}" if shown else ""))
+    _warn_empty_split(config.split, info.split_counts)
     return 0
 
 

@@ -196,6 +196,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(f"{PROG}: warning: {warning}", file=sys.stderr)
     if args.model:  # after every refusal, so that a refused command prints one line
         warn_if_unconverged(PROG, args.model)
+        _warn_if_other_frames(args.model, ckpt)
     config = EpisodeConfig(episodes=args.episodes, steps=args.steps, seed=args.seed, gravity_mult=args.gravity_mult,
                            goal_angle=mpc.goal_angle, torque_arrow=args.torque_arrow)
     agent: OracleAgent | PigaMPCAgent
@@ -255,11 +256,12 @@ def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: 
     for multiplier in (multipliers[0], multipliers[-1]):  # here: in a job it failed after the others had run
         _check_env_gravity("--sweep", multiplier)
     if kind is RunKind.PIGA:
-        model, _ = load_model(args.model)  # fail early, in this process, on a bad folder
+        model, checkpoint = load_model(args.model)  # fail early, in this process, on a bad folder
         check_pendulum_model(model, args.model)
     backend = connect_backend(args.ray)  # before the warning: a refused --ray is the one line on stderr
     if kind is RunKind.PIGA:
         warn_if_unconverged(PROG, args.model)
+        _warn_if_other_frames(args.model, checkpoint)
     else:
         _warn_if_did_not_learn(args.model, kind)
         print(f"note: the {kind.value} agent runs as trained: it cannot be told that gravity changed")
@@ -488,6 +490,18 @@ def check_pendulum_model(model: PhysicsModel, run_dir: str) -> None:
         raise PigaError(f"{run_dir}: the model takes {frames} frames, Gymnasium's pixel pendulum renders {size}x{size} "
                         "gray ones; train it on frames the env renders (piga-collect)")
     _check_frame_rate(run_dir, config.dt)
+
+
+def _warn_if_other_frames(run_dir: str, checkpoint: dict) -> None:
+    """One warning line when the model learned from frames that piga-collect did not draw from Gymnasium's pixel
+    pendulum (an imported recording: its checkpoint names no env), which it controls here from the env's frames:
+    of the same size and rate, they are still another camera's picture, which its encoder may misread."""
+    data = checkpoint.get("data") or {}
+    if "env_id" in data and data["env_id"] != PIXEL_PENDULUM:  # (older checkpoints do not say)
+        source = f"from {data['env_id']}" if data["env_id"] else "not collected by piga-collect (an imported recording?)"
+        print(f"{PROG}: warning: the model learned from {data.get('path')}, {source}; it controls {PIXEL_PENDULUM} here "
+              "from that env's frames, which its encoder may misread: the success below measures that too",
+              file=sys.stderr)
 
 
 def check_planet_frames(run_dir: str) -> None:

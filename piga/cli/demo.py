@@ -130,7 +130,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         with made_folder(out):
             try:
                 return _run(args, argv, out, collect_config, data, strip, run_dir, goal_png, control_md)
-            except Exception:  # a later stage refused: the files this demo made would make the rerun refuse
+            except Exception as exc:
+                checkpoint = run_dir / CHECKPOINT
+                if checkpoint.exists() and checkpoint.stat().st_mtime_ns != before[checkpoint]:
+                    # training got as far as a checkpoint: the data stays with it, for --resume
+                    if isinstance(exc, PigaError):
+                        raise PigaError(f"{' '.join(str(exc).split())}; {out} keeps this demo's data and model: run the "
+                                        "same command with --resume to continue it, or with --overwrite to start "
+                                        "over") from None
+                    raise
+                # refused before a model: the files this demo made would make the rerun refuse for them
                 for path in (data, strip, goal_png, control_md):
                     if before[path] is False and path.exists():
                         path.unlink()

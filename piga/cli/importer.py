@@ -7,6 +7,7 @@ from collections.abc import Sequence
 
 from piga.cli.common import (H5_SUFFIXES, ArgumentParser, command_line, format_default, h5_path, positive_float,
                              positive_int, run_cli, split_type)
+from piga.data.collect import empty_split_warning
 from piga.data.importer import MAX_DT, MIN_DT, ImportConfig, import_recording, recording_frame_seconds
 
 PROG = "piga-import"
@@ -52,6 +53,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if result.dropped_frames:
         print(f"note: the last {result.dropped_frames} of {result.source_frames} frames (less than one sequence "
               f"of {config.steps}) were dropped")
+    if (warning := empty_split_warning(config.split, result.split_counts)) is not None:
+        print(f"{PROG}: warning: {warning}", file=sys.stderr)
     said = recording_frame_seconds(args.recording)
     if said is not None and abs(said - config.dt) > 0.02 * config.dt:  # (a video slowed down says its own rate)
         print(f"{PROG}: warning: {args.recording} says its frames are {said:.4g} s apart; the file takes --dt "

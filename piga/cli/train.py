@@ -329,20 +329,22 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
     if args.overwrite and not args.resume and not fresh.has_templates:
         (run_dir / "templates.png").unlink(missing_ok=True)  # the replaced run's; a model without templates draws none
 
-    tried: list[int] = []  # seeds whose run lost an object and was trained again
+    # seeds whose run lost an object and was trained again (a resumed run's too: its retries go on after the resume)
+    tried: list[int] = [int(seed) for seed in record.get("retried_seeds") or []] if args.resume else []
+    resuming = args.resume  # this try continues the checkpoint (a retry after it starts afresh)
     early: list[int] = []  # the step of this try's object check after the warm-up, once made
 
     def on_epoch(state: Any, model: Any) -> None:  # the first checkpoint of this command: the record goes with it
         if not written:
             write_json(run_dir / "config.json", record)
-            if args.resume:  # the report of the state resumed from no longer describes the checkpoint: an interrupted
+            if resuming:  # the report of the state resumed from no longer describes the checkpoint: an interrupted
                 # resume left it beside a newer model, which piga-diagnose then judged by the old report's numbers
                 remove_outputs(run_dir, REPORT_OUTPUTS)
         written.append(state.epoch)
         # with a retry left, a scene's objects are checked once the autoencoder's warm-up is over: an object not
         # found then is not found at the end either (benchmarks/warmup_objects.py), and the retry starts at once
         warmup = state.plan["warmup_steps"]
-        if early or args.resume or not _retry_left(tried, train_config) or state.step < warmup or \
+        if early or resuming or not _retry_left(tried, train_config) or state.step < warmup or \
                 warmup < report.WARMUP_CHECK_MIN_STEPS:
             return
         early.append(state.step)
@@ -353,8 +355,9 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
     def next_seed(check: str, what: str) -> None:
         """Trains again from the start with the next seed after ``check`` found ``what``: says so, and drops the
         lost try's outputs."""
-        nonlocal train_config
+        nonlocal train_config, resuming
         tried.append(train_config.seed)
+        resuming = False
         train_config = replace(train_config, seed=train_config.seed + 1)
         print(f"{check}: {what}; training again from the start with seed {train_config.seed} "
               f"(retry {len(tried)} of --seed-retries {train_config.seed_retries})")
@@ -372,7 +375,7 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
         before = _identity(run_dir / CHECKPOINT)
         early.clear()
         try:
-            model, state = train(args.data, run_dir, train_config, model_config, resume=args.resume,
+            model, state = train(args.data, run_dir, train_config, model_config, resume=resuming,
                                  progress=not args.quiet, on_epoch=on_epoch, n_objects=args.objects)
         except _LostInWarmup as lost_early:
             next_seed(f"object check after the autoencoder's warm-up (step {lost_early.step:,} of {lost_early.total:,})",
@@ -386,7 +389,7 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
                 # interrupted between this command's first checkpoint and its on_epoch: the record goes with it
                 write_json(run_dir / "config.json", record)
                 written.append(_saved_epoch(run_dir))
-            if written or args.resume:
+            if written or resuming:
                 epoch = written[-1] if written else _saved_epoch(run_dir)
                 raise Interrupted(f"{run_dir / CHECKPOINT} holds epoch {epoch}; continue with --resume") from None
             if tried:  # a retry stopped before its first checkpoint: the folders held only the lost try
@@ -410,7 +413,7 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
         lost = objects.get("lost") and not objects.get("too_few_slots")
         empty = (objects.get("empty_slots") and not objects.get("too_many_slots")
                  and (metrics.get("convergence") or {}).get("outcome") == "untrained")
-        if args.resume or not (lost or empty) or not _retry_left(tried, train_config):
+        if not (lost or empty) or not _retry_left(tried, train_config):
             break
         next_seed("object check", lost_with(objects["ratio"]) if lost
                   else f"slot {objects['empty_slots'][0]} drew nothing with seed {train_config.seed}")

@@ -107,6 +107,8 @@ def split_counts(n: int, split: Sequence[float]) -> tuple[int, int, int]:
     if all(float(x).is_integer() for x in split) and sum(split) == n and sum(split) != 1:
         train, valid, test = (int(x) for x in split)
     elif abs(sum(split) - 1.0) < 1e-6:
+        if split[0] == 0:  # (else the rounding of valid and test below could leave one sequence to train on)
+            raise ValueError(f"split {tuple(split)} gives the training split no share of the {n} sequences")
         valid, test = round(split[1] * n), round(split[2] * n)
         train = n - valid - test
     else:
@@ -114,6 +116,17 @@ def split_counts(n: int, split: Sequence[float]) -> tuple[int, int, int]:
     if train < 1:
         raise ValueError(f"split {tuple(split)} leaves no training sequence out of {n}")
     return train, valid, test
+
+
+def empty_split_warning(split: Sequence[float], counts: dict[str, int]) -> str | None:
+    """A warning when the split asked for valid or test sequences and their share rounded to none, else None."""
+    empty = [name for name, share in zip(("valid", "test"), split[1:]) if share > 0 and not counts.get(name)]
+    if not empty:
+        return None
+    n = sum(counts.values())
+    advice = f"give more sequences, or counts such as --split {n - 2},1,1" if n >= 3 else "give 3 sequences or more"
+    return (f"the split {','.join(f'{x:g}' for x in split)} of {n} sequences leaves {' and '.join(empty)} empty, so "
+            f"piga-train-model's metrics will come from the train split, which is not held out ({advice})")
 
 
 #: ``piga-collect``'s presets: 'default' is :class:`CollectConfig`'s defaults; 'paper' the paper's pendulum

@@ -343,6 +343,26 @@ def _check_virtual_sources(f: h5py.File, path: Path) -> None:
                                       "missing (moved or deleted); put it back, or write a file that holds the data")
 
 
+def _check_scene_attr(info: DatasetInfo) -> None:
+    """Refuses a ``scene`` attribute (or ``scene_config``'s ``physics``) whose physics is not the file's ``system``:
+    the recipe follows the scene and the model the system, so a hand-edited one trained a mix of the two."""
+    path, attrs = info.path, info.attrs
+    scene = attrs.get("scene")
+    if scene is not None:
+        from envs.scenes import SCENES  # (only for a scene file: reading a pendulum file does not pay for it)
+
+        if not isinstance(scene, str) or scene not in SCENES:
+            raise DataFormatError(f"{path}: attribute 'scene' must name one of the scenes ({', '.join(SCENES)}), got "
+                                  f"{str(scene)[:40]!r}; fix it or drop it")
+        if SCENES[scene]["physics"] != info.system:
+            raise DataFormatError(f"{path}: attribute 'scene' is {scene!r}, a {SCENES[scene]['physics']} scene, but "
+                                  f"'system' says {info.system!r}; fix one of them")
+    physics = attrs.get("scene_config", {}).get("physics") if isinstance(attrs.get("scene_config"), dict) else None
+    if physics is not None and physics != info.system:
+        raise DataFormatError(f"{path}: attribute 'scene_config' has physics {str(physics)[:40]!r}, but 'system' says "
+                              f"{info.system!r}; fix one of them")
+
+
 def _check_attrs_agree(info: DatasetInfo, f: h5py.File) -> None:
     """Refuses attributes that contradict the arrays (``n_objects``, ``state_names``, ``split_counts``) or are not the
     JSON objects they should be (``env_config``, ``scene_config``), and non-finite ``/states``."""
@@ -350,6 +370,7 @@ def _check_attrs_agree(info: DatasetInfo, f: h5py.File) -> None:
     for key in ("env_config", "scene_config"):
         if key in attrs and not isinstance(attrs[key], dict):
             raise DataFormatError(f"{path}: attribute '{key}' must be a JSON object, got {str(attrs[key])[:80]!r}")
+    _check_scene_attr(info)
     states_dim = f["states"].shape[2] if info.has_states else None
     if "n_objects" in attrs:
         n = attrs["n_objects"]

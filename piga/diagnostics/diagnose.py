@@ -80,7 +80,7 @@ from piga.diagnostics.residuals import (action_correlation, autocorrelation, bin
                                         GENERIC_COLUMNS, one_step_residuals, reading_features, ridge)
 from piga.diagnostics.results import (Ambiguity, CameraSummary, CandidateRow, Diagnosis, Effect, Gap, GenericBasis,
                                       Naming, PixelErrors, Score, SelectionStep, VisionSummary)
-from piga.diagnostics.twin import MEASURABLE_GAP, calibrate_floor, gap_closure, twin_floor
+from piga.diagnostics.twin import MEASURABLE_GAP, calibrate_floor, gap_closure, mean_gap_closure, twin_floor
 from piga.diagnostics.vision import Camera, CameraConfig, CameraFindings, angle_table, camera_stage, match, match_file
 from piga.io.choices import check_ranges, check_types
 from piga.world.model import PhysicsModel
@@ -1110,7 +1110,8 @@ def measure_gap(candidates: Candidates, chosen: Score, nom: Nominal, obs: Observ
     raw_typical = float(1 - typ_fin / typ_nom) if typ_nom > 0 else None
     typical_gap = gap_closure(typ_nom, typ_fin, typ_floor) if floor is not None else raw_typical
     floored = floor is not None  # typical_gap is above the twin's floor
-    mean_gap = gap_closure(float(h_nom.mean()), float(h_fin.mean()), float(floor.horizon.mean())) if floor is not None else None
+    mean_gap = mean_gap_closure(float(h_nom.mean()), float(h_fin.mean()), float(floor.horizon.mean())) \
+        if floor is not None else None
     pixels = _pixel_errors(model, obs, nom, nominal_model, final, theta, camera.camera if camera else Camera(), stale) \
         if model is not None else PixelErrors()
     pixel_closure = None

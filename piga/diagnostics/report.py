@@ -230,8 +230,11 @@ def markdown(d: Diagnosis, model: str, data: str, command: str) -> str:
     lines += ambiguity_lines(d)
     headline = headline_text(d)
     floor = "" if g.free_run_mse_floor is None else (
-        f" On the twin, an exactly right model has {number(g.free_run_mse_floor, '.3g')} rad²: "
-        f"{_pct(g.mean_free_run_gap_closure)} of the gap above that floor is closed.")
+        f" On the twin, an exactly right model has {number(g.free_run_mse_floor, '.3g')} rad²" + (
+            f": {_pct(g.mean_free_run_gap_closure)} of the gap above that floor is closed."
+            if g.mean_free_run_gap_closure is not None else
+            f", so no closure above it is given for the means (the nominal error is not {MEASURABLE_GAP:g} times that floor, or the "
+            "corrected one lies below it: a ratio of noise)."))
     lines += [
         "## Size of the gap, and how far it shrinks", "", headline, "",
         f"Mean over all held-out windows and horizons 1..{g.horizon[-1]}: angle MSE {number(g.free_run_mse_nominal, '.3g')} rad² "

@@ -182,3 +182,12 @@ MEASURABLE_GAP = 1.5
 def gap_closure(nominal: float, corrected: float, floor: float) -> float | None:
     """Share of the gap above the floor that the correction closes: (nominal - corrected) / (nominal - floor)."""
     return float((nominal - corrected) / (nominal - floor)) if nominal - floor > 0 and math.isfinite(floor) else None
+
+
+def mean_gap_closure(nominal: float, corrected: float, floor: float) -> float | None:
+    """:func:`gap_closure` of the means over all windows, or None where it would be a ratio of noise: the
+    nominal error not measurably above the floor, or the corrected one below it (then it is no floor:
+    measured, 0.00073 nominal, 0.000626 corrected and a floor of 0.000729 rad² gave "13192%")."""
+    if not (nominal > MEASURABLE_GAP * floor and corrected >= floor):
+        return None
+    return gap_closure(nominal, corrected, floor)
