@@ -1995,6 +1995,15 @@ def test_control_warns_of_a_goal_angle_beyond_the_torque_limit(capsys: pytest.Ca
     assert err.startswith("piga-control: warning: goal 90.0 deg needs torque") and "holdable goals are within" in err
 
 
+def test_a_goal_is_judged_holdable_in_the_env_the_agent_was_not_told_of(tiny_piga_run: Path,
+                                                                         capsys: pytest.CaptureFixture[str]) -> None:
+    """20 deg is holdable at gravity x1 (±23.6 deg), not at x1.4 (±16.6): --not-told judged it at x1, in silence."""
+    _, _, err = run_in_process("piga-control", control.main, "--model", str(tiny_piga_run), "--goal-angle", "20",
+                               "--gravity-mult", "1.4", "--not-told", "--episodes", "1", "--steps", "20", "--horizon",
+                               "2", "--candidates", "8", "--iterations", "1", "--quiet", capsys=capsys)
+    assert "goal 20.0 deg needs torque" in err and "within ±16.6 deg" in err, err
+
+
 def test_a_dmc_frame_may_not_span_seconds() -> None:
     """action_repeat 1e8 collected for ever (and a DMC episode of 1000 physics steps would hold no frame)."""
     from envs.dmc import MAX_ACTION_REPEAT, DMCPendulumConfig

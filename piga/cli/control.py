@@ -183,16 +183,17 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise PigaError("--goal-image needs --model: the goal is read from the image by the model's encoder")
         from piga.control.goal import goal_from_image
 
-        estimate = goal_from_image(model, ckpt, args.goal_image, gravity_mult=told)
+        estimate = goal_from_image(model, ckpt, args.goal_image, gravity_mult=args.gravity_mult, told=told)
         for warning in estimate.warnings:
             print(f"{PROG}: warning: {warning}", file=sys.stderr)
         args.goal_angle = math.degrees(estimate.angle)
-        print(f"goal read from {args.goal_image}: {args.goal_angle:.2f} deg (hold torque {estimate.hold_torque:+.2f})")
+        print(f"goal read from {args.goal_image}: {args.goal_angle:.2f} deg (hold torque {estimate.hold_torque:+.2f} by the "
+              "model's physics)")
         mpc = replace(mpc, goal_angle=estimate.angle)
     elif args.goal_angle:
         from piga.control.goal import hold_warning
 
-        if (warning := hold_warning(mpc.goal_angle, told)) is not None:
+        if (warning := hold_warning(mpc.goal_angle, args.gravity_mult)) is not None:  # the env's, told or not
             print(f"{PROG}: warning: {warning}", file=sys.stderr)
     if args.model:  # after every refusal, so that a refused command prints one line
         warn_if_unconverged(PROG, args.model)

@@ -114,7 +114,8 @@ def hold_warning(angle: float, gravity_mult: float = 1.0) -> str | None:
         return None
     config = PixelPendulumConfig(gravity_mult=gravity_mult)
     needed = -config.effective_gravity * math.sin(angle) / (2 * config.actuation_gain)
-    return (f"goal {math.degrees(angle):.1f} deg needs torque {needed:+.2f} to hold, beyond the limit of {MAX_ACTION:g}; "
+    return (f"goal {math.degrees(angle):.1f} deg needs torque {needed:+.2f} to hold in the env (its own physics), beyond "
+            f"the limit of {MAX_ACTION:g}; "
             f"holdable goals are within ±{math.degrees(feasible):.1f} deg of upright (or of hanging down); the controller "
             "will do its best")
 
@@ -151,8 +152,11 @@ def read_goal(model: PhysicsModel, image: np.ndarray, g: float, a: float, mse_li
 
 
 def goal_from_image(model: PhysicsModel, checkpoint: dict, path: str | os.PathLike[str],
-                    gravity_mult: float = 1.0) -> GoalEstimate:
+                    gravity_mult: float = 1.0, told: float | None = None) -> GoalEstimate:
     """Reads the goal from an image file for a model loaded by :func:`piga.io.runs.load_model`.
+
+    ``gravity_mult`` is the env's (whether the goal can be held), ``told`` the multiplier the agent
+    believes (its hold torque; by default the env's).
 
     The image is first compared with the environment's renders (:func:`scene_mismatch`). The
     model's "not the scene" warning limit is 4x its own final reconstruction MSE per frame.
@@ -171,7 +175,8 @@ def goal_from_image(model: PhysicsModel, checkpoint: dict, path: str | os.PathLi
             f"{path}: not a picture of the pendulum scene: no render of the pendulum at any angle comes close to it "
             f"(mismatch {mismatch:.2f}; a render scores 0, the empty background 1, the limit is {MAX_SCENE_MISMATCH})")
     typical = training_reconstruction_mse(model, checkpoint) or 0.001
-    return read_goal(model, image, g=scaled_gravity(learned["g"], gravity_mult), a=learned["a"], mse_limit=4 * typical,
+    believed = gravity_mult if told is None else told
+    return read_goal(model, image, g=scaled_gravity(learned["g"], believed), a=learned["a"], mse_limit=4 * typical,
                      gravity_mult=gravity_mult)
 
 
