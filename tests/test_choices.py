@@ -117,6 +117,10 @@ def test_the_library_entry_points_name_an_argument_of_another_kind(tmp_path: Any
     (lambda: __import__("piga").ModelConfig(physics_init={"bogus": 1.0}), "unexpected keyword argument 'bogus'"),
     (lambda: __import__("piga").ModelConfig(physics_init={"g": -1.0}), "does not fit a pendulum model"),
     (lambda: __import__("agents.sb3.config").sb3.config.SB3Config(net_arch=[-5]), "net_arch must be hidden layer widths"),
+    # torch's generator failed on them: "Overflow when unpacking long long"
+    (lambda: __import__("piga").TrainConfig(seed=2**70), "TrainConfig.seed must be <= 9223372036854775807"),
+    (lambda: __import__("agents.planet.config").planet.config.PlanetTrainConfig(seed=2**63), "PlanetTrainConfig.seed must be <="),
+    (lambda: __import__("agents.sb3.config").sb3.config.SB3Config(seed=2**63), "SB3Config.seed must be <="),
 ])
 def test_a_value_no_run_can_use_is_named_at_construction(make: Any, needle: str) -> None:
     """Each was taken, and failed inside training: a nan loss at step 0 naming no field, or a keyword error."""
@@ -179,3 +183,15 @@ def test_the_library_configs_name_a_bad_field(make: Any, error: type, needle: st
     with pytest.raises(error) as raised:
         make()
     assert needle in str(raised.value) and "\n" not in str(raised.value)
+
+
+def test_more_threads_than_cpus_is_named_before_torch_takes_them(tiny_data: Any, tmp_path: Any) -> None:
+    """100000 threads segfaulted torch's thread pool (exit 139, nothing on stderr), where --threads refused them."""
+    import os
+
+    import piga
+
+    with pytest.raises(ValueError, match=r"TrainConfig.threads must be at most this machine's \d+ CPUs"):
+        piga.train(tiny_data, tmp_path / "run", piga.TrainConfig(epochs=1, threads=(os.cpu_count() or 1) + 1),
+                   progress=False)
+    assert not (tmp_path / "run").exists()

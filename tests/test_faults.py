@@ -3722,3 +3722,75 @@ def test_frames_whose_chunks_were_never_written_are_refused(tmp_path: Path, caps
     from piga.data.schema import inspect_dataset
 
     assert inspect_dataset(tmp_path / "zeros.h5").n_sequences == 12  # (blank, which the commands refuse for that)
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["--oracle", "--episodes", "1", "--steps", "20", "--out", "/proc/o8"], "--out /proc/o8.json cannot be written under /proc"),
+    (["--write-goal-image", "/proc/g.png", "--angle", "30"], "--write-goal-image /proc/g.png cannot be written under /proc"),
+    (["--write-goal-image", "GOAL/.png", "--angle", "30"], "the name is only a suffix; give a name before it, such as goal.png"),
+    (["--write-goal-image", ".", "--angle", "30"], "names a folder, not a file"),
+    (["--oracle", "--out", "GOAL/.json"], "the name is only a suffix; give a name before it, such as results.json"),
+    (["--model", "RUN", "--video", "GOAL/.mp4"], "the name is only a suffix; give a name before it, such as episode.mp4"),
+])
+def test_control_outputs_that_cannot_be_written_are_refused_before_the_episodes(
+        argv: list[str], needle: str, tiny_piga_run: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """/proc's --out failed after the episodes, "removed or moved while it ran?"; ".png" was told to "use a .png path"."""
+    if argv[1].startswith("/proc") and not os.path.isdir("/proc"):
+        pytest.skip("no /proc here")
+    argv = [str(tiny_piga_run) if a == "RUN" else a.replace("GOAL", str(tmp_path)) for a in argv]
+    refused("piga-control", argv, capsys, needle)
+    assert _listing(tmp_path) == []
+
+
+def test_a_video_goes_with_the_out_set_that_failed(tiny_piga_run: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    """The --out set failing after the video was written left the video, and the rerun was refused for it."""
+    import errno
+
+    def full(*args: Any, **kwargs: Any) -> None:
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(control, "_write_outputs", full)
+    code, _, err = run_in_process("piga-control", control.main, "--model", str(tiny_piga_run), "--video",
+                                  str(tmp_path / "v.gif"), "--out", str(tmp_path / "res"), "--episodes", "1", "--steps",
+                                  "20", "--candidates", "8", "--iterations", "1", "--horizon", "2", "--quiet", capsys=capsys)
+    assert code == 1 and "the disk is full" in err
+    assert _listing(tmp_path) == []
+
+
+def test_an_earlier_sweeps_figure_goes_when_its_set_is_overwritten(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """OUT.png of a sweep stayed beside OUT.json and OUT.md that now described one oracle run."""
+    (tmp_path / "sw.png").write_bytes(b"an earlier sweep's figure")
+    for name in ("sw.json", "sw.md"):
+        (tmp_path / name).write_text("{}")
+    code, _, err = run_in_process("piga-control", control.main, "--oracle", "--episodes", "1", "--steps", "20",
+                                  "--horizon", "3", "--candidates", "4", "--iterations", "1", "--quiet", "--out",
+                                  str(tmp_path / "sw"), "--overwrite", capsys=capsys)
+    assert code == 0, err
+    assert _listing(tmp_path) == ["sw.json", "sw.md"]
+
+
+@pytest.mark.parametrize("suffix, needle", [
+    (".webp", "beyond .webp's limit of 16383 px a side; give at most --frames 227, or write .png"),
+    (".jpg", "beyond .jpg's limit of 65500 px a side; give at most --frames 909, or write .png"),
+])
+def test_a_strip_too_wide_for_its_format_is_refused_before_it_is_drawn(suffix: str, needle: str, tmp_path: Path,
+                                                                       capsys: pytest.CaptureFixture[str]) -> None:
+    from piga.data.collect import CollectConfig, collect as collect_data
+
+    data = collect_data(CollectConfig(sequences=1, steps=1000, split=(1, 0, 0), workers=1), tmp_path / "long.h5",
+                        progress=False, command="t")
+    refused("piga-show", [str(data), "--out", str(tmp_path / f"s{suffix}"), "--frames", "1000"], capsys, needle)
+    refused("piga-show", [str(data), "--out", str(tmp_path / ".png")], capsys, "the name is only a suffix")
+
+
+def test_an_lzw_tiff_goal_image_is_read(tmp_path: Path) -> None:
+    """cv2 writes TIFF with LZW, which imageio's tifffile reads only with imagecodecs: it was "not a readable image"."""
+    import cv2
+
+    from piga.data.scene import read_image
+
+    picture = np.zeros((40, 30, 3), np.uint8)
+    picture[10:20, 5:15] = (10, 200, 30)
+    assert cv2.imwrite(str(tmp_path / "g.tiff"), picture)
+    assert np.array_equal(read_image(tmp_path / "g.tiff"), picture[..., ::-1])

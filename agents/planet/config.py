@@ -12,6 +12,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any, Literal
 
 from agents.config import CEMConfig
+from piga.data.schema import MAX_SEED
 from piga.io.choices import check_choices, check_ranges, check_types
 from piga.io.device import Device
 
@@ -184,6 +185,8 @@ class PlanetTrainConfig:
             raise ValueError(f"PlanetTrainConfig: seed, max_sequences, max_minutes, threads and kl_scale must be >= 0, got "
                              f"seed={self.seed}, max_sequences={self.max_sequences}, max_minutes={self.max_minutes}, "
                              f"threads={self.threads}, kl_scale={self.kl_scale}")
+        if self.seed > MAX_SEED:
+            raise ValueError(f"PlanetTrainConfig.seed must be <= {MAX_SEED} (2^63 - 1), got {self.seed}")
         check_choices(self)
 
     def to_dict(self) -> dict[str, Any]:

@@ -37,7 +37,7 @@ from piga.data.windows import SequenceReader, loads_whole
 from piga.io.resources import available_memory
 from piga.io.atomic import write_json
 from piga.io.checkpoint import CHECKPOINT, RunKind, check_counts, resuming_from, write_checkpoint
-from piga.io.device import module_device, resolve_device
+from piga.io.device import module_device, resolve_device, set_threads
 from piga.training.convergence import ConvergenceConfig
 from piga.training.train import TrainingDiverged
 
@@ -287,8 +287,7 @@ def train_planet(
     ckpt_path = run_dir / CHECKPOINT
     info = inspect_dataset(data)
     check_actions_file(data)  # the actions only: the frames may not fit in memory
-    if config.threads:
-        torch.set_num_threads(config.threads)
+    set_threads(config.threads, "PlanetTrainConfig")
     rng = np.random.default_rng(config.seed)
     generator = torch.Generator().manual_seed(config.seed)
     best: dict[str, torch.Tensor] | None = None  # the weights of the lowest valid loss, on the CPU

@@ -16,6 +16,7 @@ from typing import Any, Literal, get_args
 from envs import DMC_PENDULUM, PIXEL_PENDULUM, EnvId
 from envs.dmc import DMCPendulumConfig
 from envs.pendulum import PixelPendulumConfig
+from piga.data.schema import MAX_SEED
 from piga.io.choices import check_choices
 from piga.io.device import Device
 
@@ -208,6 +209,8 @@ class SB3Config:
         for name in ("learning_starts", "seed", "noise_decay_steps", "threads"):
             if getattr(self, name) < 0:
                 raise ValueError(f"SB3Config.{name} must be >= 0, got {getattr(self, name)}")
+        if self.seed > MAX_SEED:
+            raise ValueError(f"SB3Config.seed must be <= {MAX_SEED} (2^63 - 1), got {self.seed}")
         if not 0 < self.learning_rate <= MAX_LEARNING_RATE:  # NaN too
             raise ValueError(f"SB3Config.learning_rate must be in (0, {MAX_LEARNING_RATE:g}], got {self.learning_rate:g}")
         if not (0 < self.gamma <= 1 and 0 < self.tau <= 1 and self.noise_std >= 0 and self.noise_final_std >= 0):

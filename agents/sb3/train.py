@@ -42,7 +42,7 @@ from piga.data.schema import legacy_seed
 from piga.io.atomic import atomic_output, write_json
 from piga.io.checkpoint import (CHECKPOINT, RunKind, check_counts, read_checkpoint, resuming_from, unreadable,
                                 write_checkpoint)
-from piga.io.device import resolve_device
+from piga.io.device import resolve_device, set_threads
 
 __all__ = ["first_step_reaching", "make_env", "make_observation_env", "train_sb3"]
 
@@ -304,8 +304,7 @@ def train_sb3(config: SB3Config, run_dir: str | Path, autoencoder: str | Path | 
     algorithm = sb3_class(config.algo)
     device = resolve_device(config.device)
     run_dir = Path(run_dir)
-    if config.threads:
-        torch.set_num_threads(config.threads)
+    set_threads(config.threads, "SB3Config")
     encoder, latent_size = None, 0
     if config.obs == "latent":
         from agents.sb3.autoencoder import load_autoencoder

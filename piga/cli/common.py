@@ -314,6 +314,9 @@ def run_cli(prog: str, main: Callable[[Sequence[str] | None], int | None], argv:
               "exists and run the command again", file=sys.stderr)
         sys.exit(1)
     _writable_matplotlib_folder()
+    import tqdm  # its monitor thread, started with the first bar, warned in 3 lines where no thread could start
+
+    tqdm.tqdm.monitor_interval = 0
     stdout, sys.stdout = sys.stdout, _GuardedStdout(sys.stdout)
     _FLAGS.clear()  # this command's parsers fill it
     excepthook, threading.excepthook = threading.excepthook, _thread_errors_to_log(prog, argv)

@@ -15,7 +15,8 @@ import numpy as np
 from agents.config import MPCConfig
 from envs import DMC_PENDULUM, ENV_IDS, PIXEL_PENDULUM
 from envs.pendulum import MAX_GRAVITY, MIN_GRAVITY, PixelPendulumConfig
-from piga.io.atomic import atomic_output, check_writable_target, write_json, written_together
+from piga.io.atomic import (atomic_output, check_file_name, check_not_an_input, check_writable_target, write_json,
+                             written_together)
 from piga.cli.common import (ArgumentParser, PigaError, add_ray_option, command_line, connect_backend, file_path,
                              given_options, int_up_to, positive_float, positive_int, run_cli, seed_int,
                              typed_text, warn_if_still_training, warn_if_unconverged)
@@ -140,8 +141,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         stem = Path(args.out)  # OUT.json, OUT.md: appended, so a stem such as "x1.4" keeps its dot
         stem = stem.with_suffix("") if stem.suffix.lower() in (".json", ".md", ".png") else stem
         outputs = [stem.with_name(stem.name + s) for s in (".json", ".md", *((".png",) if args.sweep else ()))]
-        for path in outputs:
-            check_writable_target(path, args.overwrite)
+        _check_out_set(outputs, args.overwrite)
         # a second command given the same --out is refused now, not after its episodes, when it found these files
         lock_run_folder(stem, "--out")
     kind = _run_kind(args)
@@ -159,8 +159,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         raise PigaError(f"{'--ray' if args.ray else '--workers'} runs the jobs of --sweep and a baseline run's episodes; a "
                         "piga or oracle run without --sweep plays its episodes in this process")
     if args.video:
+        check_file_name(args.video, "--video", "episode.mp4")
         if Path(args.video).suffix.lower() not in (".mp4", ".gif"):
             raise PigaError(f"--video must end in .mp4 or .gif, got {args.video}")
+        check_not_an_input(args.video, {"--goal-image": args.goal_image} if args.goal_image else {}, flag="--video")
         if args.oracle:
             raise PigaError("--video shows the model's belief and plan; it needs --model, not --oracle")
         check_writable_target(args.video, args.overwrite)
@@ -217,18 +219,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(f"{label}, gravity x{args.gravity_mult:g}, goal {args.goal_angle:g} deg: "
           f"success {100 * s.success_rate:.0f}% of {s.episodes}, mean return {s.mean_return:.1f}, final angle error {math.degrees(s.final_angle_error_mean):.2f} deg, "
           f"plan {s.plan_ms_median:.1f} ms median / {s.plan_ms_p95:.1f} ms p95")
-    if args.video:
-        from piga.evaluation.video import control_video
+    with written_together([*([args.video] if args.video else []), *outputs]):  # the video and --out: all or none
+        if args.video:
+            from piga.evaluation.video import control_video
 
-        assert model is not None
-        control_video(model, result.recordings[0].frames, first_trace, args.video, overwrite=args.overwrite)
-        print(f"wrote {args.video}")
-    if outputs:
-        result = result.labelled(agent=label)
-        _write_outputs(outputs, {"agent": label, **result.to_dict(), "recordings": None},
-                       f"# {PROG}\n\nCommand: `{command_line(PROG, argv)}`\n\n{summary_markdown([result.summary])}",
-                       args.overwrite)
-        print(f"wrote {outputs[0]} and {outputs[1]}")
+            assert model is not None
+            control_video(model, result.recordings[0].frames, first_trace, args.video, overwrite=args.overwrite)
+            print(f"wrote {args.video}")
+        if outputs:
+            result = result.labelled(agent=label)
+            _write_outputs(outputs, {"agent": label, **result.to_dict(), "recordings": None},
+                           f"# {PROG}\n\nCommand: `{command_line(PROG, argv)}`\n\n{summary_markdown([result.summary])}",
+                           args.overwrite)
+            print(f"wrote {outputs[0]} and {outputs[1]}")
     return 0
 
 
@@ -284,6 +287,18 @@ def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: 
     return 0
 
 
+def _check_out_set(outputs: list[Path], overwrite: bool) -> None:
+    """Refuses, before the episodes, an ``--out`` set that could not be written: an existing file without
+    --overwrite, a missing folder, or a file system that stores no files (/proc, /sys: it failed after the episodes,
+    as "removed or moved while it ran?")."""
+    from piga.io.resources import FIGURE_DISK_BYTES, check_disk
+
+    check_file_name(outputs[0].with_name(outputs[0].name[: -len(".json")]), "--out", "results")
+    for path in outputs:
+        check_writable_target(path, overwrite)
+    check_disk(outputs[0], FIGURE_DISK_BYTES, f"--out {outputs[0]}", advice="free some space, or give another --out")
+
+
 def _write_outputs(outputs: list[Path], record: dict[str, Any], page: str, overwrite: bool,
                    figure: Callable[[], Figure] | None = None) -> None:
     """Writes ``--out``'s set: OUT.json (``record``), OUT.md (``page``) and, where there is a third path, OUT.png
@@ -297,12 +312,17 @@ def _write_outputs(outputs: list[Path], record: dict[str, Any], page: str, overw
             from piga.evaluation.plots import save_figure
 
             save_figure(figure(), outputs[2], overwrite=overwrite)
+    if figure is None and overwrite:  # an earlier sweep's OUT.png would sit beside a set that no longer draws it
+        outputs[0].with_name(outputs[0].name[: -len(".json")] + ".png").unlink(missing_ok=True)
 
 
 def _check_total_work(args: argparse.Namespace, mpc: MPCConfig) -> None:
     """Refuses, before anything runs, a command whose episodes, steps, multipliers and planner together would plan
     for days (each within its own cap), naming the total and the options that make it."""
-    runs = 2 * len(parse_range(args.sweep)) if args.sweep else 1  # a sweep: the piga agent and the oracle at each
+    try:
+        runs = 2 * len(parse_range(args.sweep)) if args.sweep else 1  # a sweep: the piga agent and the oracle at each
+    except ValueError as exc:
+        raise PigaError(f"--sweep: {exc}") from None
     steps = runs * args.episodes * args.steps
     made = (f"{runs} runs (--sweep's multipliers x 2 agents) x " if runs > 1 else "") + \
         f"--episodes {args.episodes} x --steps {args.steps}"
@@ -409,6 +429,7 @@ def _baseline(args: argparse.Namespace, kind: RunKind, mpc: MPCConfig, outputs: 
     if args.video:
         if args.sweep:
             raise PigaError("--sweep runs upright swing-ups; it does not take --goal-image or --video")
+        check_file_name(args.video, "--video", "episode.mp4")
         if Path(args.video).suffix.lower() not in (".mp4", ".gif"):
             raise PigaError(f"--video must end in .mp4 or .gif, got {args.video}")
         check_writable_target(args.video, args.overwrite)
@@ -461,20 +482,21 @@ def _baseline(args: argparse.Namespace, kind: RunKind, mpc: MPCConfig, outputs: 
     print(f"{label}, gravity x{args.gravity_mult:g}, goal 0 deg: success {100 * s.success_rate:.0f}% of {s.episodes}, "
           f"mean return {s.mean_return:.1f}, final angle error {math.degrees(s.final_angle_error_mean):.2f} deg, "
           f"plan {s.plan_ms_median:.1f} ms median / {s.plan_ms_p95:.1f} ms p95")
-    if args.video:
-        from piga.control.registry import episode_panels
-        from piga.evaluation.video import panels_video
+    with written_together([*([args.video] if args.video else []), *outputs]):  # the video and --out: all or none
+        if args.video:
+            from piga.control.registry import episode_panels
+            from piga.evaluation.video import panels_video
 
-        # episode 0 again in this process when the workers ran it (the same start and seeds: the same episode)
-        recording = (result.recordings or run_episodes(agent, replace(config, episodes=1), record=1).recordings)[0]
-        panels_video(episode_panels(agent, recording), args.video, overwrite=args.overwrite)
-        print(f"wrote {args.video}")
-    if outputs:
-        result = result.labelled(agent=label)
-        _write_outputs(outputs, {"agent": label, "kind": kind.value, **result.to_dict(), "recordings": None},
-                       f"# {PROG}\n\nCommand: `{command_line(PROG, argv)}`\n\n{summary_markdown([result.summary])}",
-                       args.overwrite)
-        print(f"wrote {outputs[0]} and {outputs[1]}")
+            # episode 0 again in this process when the workers ran it (the same start and seeds: the same episode)
+            recording = (result.recordings or run_episodes(agent, replace(config, episodes=1), record=1).recordings)[0]
+            panels_video(episode_panels(agent, recording), args.video, overwrite=args.overwrite)
+            print(f"wrote {args.video}")
+        if outputs:
+            result = result.labelled(agent=label)
+            _write_outputs(outputs, {"agent": label, "kind": kind.value, **result.to_dict(), "recordings": None},
+                           f"# {PROG}\n\nCommand: `{command_line(PROG, argv)}`\n\n{summary_markdown([result.summary])}",
+                           args.overwrite)
+            print(f"wrote {outputs[0]} and {outputs[1]}")
     return 0
 
 
@@ -585,8 +607,13 @@ def _write_goal_image(args: argparse.Namespace) -> int:
     check_angle("--angle", args.angle)
     args.angle += 0.0  # -0.0 is 0, as --goal-angle's: "the pendulum at -0 deg" otherwise
     target = Path(args.write_goal_image)
+    check_file_name(target, "--write-goal-image", "goal.png")
     if target.suffix.lower() not in (".png", ".jpg", ".jpeg"):
         raise PigaError(f"--write-goal-image: use a .png or .jpg path, got {target.name}")
+    check_writable_target(target, args.overwrite)
+    from piga.io.resources import FIGURE_DISK_BYTES, check_disk
+
+    check_disk(target, FIGURE_DISK_BYTES, f"--write-goal-image {target}", advice="free some space, or write elsewhere")
     picture = render_goal_image(args.angle)
     with atomic_output(target, overwrite=args.overwrite) as tmp:
         tmp.write_bytes(encoded_image(picture, target.suffix.lower()))
@@ -719,8 +746,7 @@ def _dmc(args: argparse.Namespace, argv: Sequence[str] | None, given: set[str]) 
         stem = Path(args.out)
         stem = stem.with_suffix("") if stem.suffix.lower() in (".json", ".md") else stem
         outputs = [stem.with_name(stem.name + s) for s in (".json", ".md")]
-        for path in outputs:
-            check_writable_target(path, args.overwrite)
+        _check_out_set(outputs, args.overwrite)
         lock_run_folder(stem, "--out")  # as on the pixel env
     import torch
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
+from pathlib import Path
 
 import h5py
 import numpy as np
@@ -55,6 +56,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise ValueError(f"--{dest} {getattr(args, dest)}: {args.data} has {have} {what}; give at most {have}")
     idx = available[: args.sequences]
     t = min(args.frames, info.steps)
+    _check_strip_fits(args.out, t, len(idx))
     with h5py.File(args.data, "r") as f:
         with read_rows(f["frames"], "the strip's sequences"):
             frames = np.stack([f["frames"][int(i), :t] for i in idx])
@@ -73,6 +75,28 @@ def main(argv: Sequence[str] | None = None) -> int:
     path = save_figure(fig, args.out, overwrite=args.overwrite)
     print(f"wrote {path}")
     return 0
+
+
+#: The largest side, in pixels, of an image that Pillow writes in each format with a limit (libjpeg's, libwebp's):
+#: beyond it the strip failed after the drawing with the library's words ("Maximum supported image dimension").
+IMAGE_SIDE_LIMITS = {"jpg": 65500, "jpeg": 65500, "webp": 16383}
+#: Pixels a frame of the strip takes, a little above (measured: 182 frames were 12,729 px wide, 70 a frame, once
+#: bbox_inches="tight" trimmed frame_strip's 0.9 x 0.95 inches at save_figure's 100 dpi).
+STRIP_CELL_PX = (72, 95)
+
+
+def _check_strip_fits(out: str, frames: int, sequences: int) -> None:
+    """Refuses, before the strip is drawn, a strip wider or taller than its format can hold (.jpg, .webp)."""
+    suffix = Path(out).suffix.lstrip(".").lower()
+    if (limit := IMAGE_SIDE_LIMITS.get(suffix)) is None:
+        return
+    width, height = frames * STRIP_CELL_PX[0], sequences * STRIP_CELL_PX[1]
+    if max(width, height) > limit:
+        most = (f"--frames {limit // STRIP_CELL_PX[0]}" if width > limit else "") + \
+            (" and " if width > limit and height > limit else "") + \
+            (f"--sequences {limit // STRIP_CELL_PX[1]}" if height > limit else "")
+        raise ValueError(f"--out {out}: a strip of {sequences} x {frames} frames is about {width} x {height} px, beyond "
+                         f".{suffix}'s limit of {limit} px a side; give at most {most}, or write .png")
 
 
 def entry() -> None:

@@ -96,9 +96,16 @@ def read_image(path: str | os.PathLike[str]) -> np.ndarray:
                 image = np.asarray(iio.imread(p, plugin="pillow", mode=mode, rotate=True))
             else:
                 try:
-                    image = np.asarray(iio.imread(p, rotate=True))  # turned as its EXIF orientation says (a phone's photo)
-                except TypeError:  # a plugin that has no orientation to apply (tifffile)
-                    image = np.asarray(iio.imread(p))
+                    try:
+                        image = np.asarray(iio.imread(p, rotate=True))  # turned as its EXIF orientation says
+                    except TypeError:  # a plugin that has no orientation to apply (tifffile)
+                        image = np.asarray(iio.imread(p))
+                except Exception:
+                    if not meta:
+                        raise
+                    # a file that Pillow reads, which the plugin imageio chose could not (an LZW TIFF, which tifffile
+                    # decodes only with the imagecodecs package): Pillow's reading
+                    image = np.asarray(iio.imread(p, plugin="pillow", rotate=True))
     except Exception as exc:  # imageio raises many types for foreign or corrupt files
         if exc.__class__.__name__ == "DecompressionBombError":  # Pillow's guard against huge images
             raise ValueError(f"{p}: the image is too large to read (more than Pillow's limit of "

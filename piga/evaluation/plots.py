@@ -49,9 +49,10 @@ def check_figure_target(path: str | os.PathLike[str], overwrite: bool, flag: str
     for, or a target :func:`~piga.io.atomic.check_writable_target` refuses."""
     import shutil
 
-    from piga.io.atomic import check_writable_target
+    from piga.io.atomic import check_file_name, check_writable_target
 
     target = Path(path)
+    check_file_name(target, flag, "figure.png")
     formats = dict(plt.figure().canvas.get_supported_filetypes())
     plt.close("all")
     tex = plt.rcParams["pgf.texsystem"]

@@ -51,6 +51,17 @@ def check_writable_target(path: str | os.PathLike[str], overwrite: bool) -> Path
     return target
 
 
+def check_file_name(path: str | os.PathLike[str], flag: str, example: str) -> None:
+    """Refuses a path whose name is only a suffix (".png", "out/.mp4": a hidden file with no suffix, to Python) or is
+    empty ("."), naming what is missing: "use a .png path, got .png" told the user to use what they gave."""
+    name = Path(path).name
+    if not name or name in (".", ".."):
+        raise ValueError(f"{flag} {path}: names a folder, not a file; give a file name such as {example}")
+    if name.startswith(".") and Path(name).suffix == "" and name.count(".") == 1:
+        raise ValueError(f"{flag} {path}: the name is only a suffix; give a name before it, such as "
+                         f"{Path(example).stem}{name}")
+
+
 def check_not_an_input(target: str | os.PathLike[str], inputs: dict[str, str | os.PathLike[str]],
                        flag: str = "--out") -> None:
     """Refuses an output that is one of the command's inputs, by any name (a link, ``./``): ``--overwrite`` would

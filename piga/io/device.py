@@ -66,6 +66,21 @@ def resolve_device(choice: str) -> torch.device:
     return torch.device("cpu")
 
 
+def set_threads(threads: int, owner: str) -> None:
+    """Sets torch's CPU threads for a run (0: torch's default). More than this machine's CPUs is refused, naming
+    ``owner``'s field: it only slows a run down, and a huge count crashed torch's thread pool (a segfault at 100000,
+    libgomp's "Thread creation failed" at 20000), where the commands' ``--threads`` had refused it."""
+    import os
+
+    import torch
+
+    cpus = max(1, os.cpu_count() or 1)
+    if threads > cpus:
+        raise ValueError(f"{owner}.threads must be at most this machine's {cpus} CPUs (0: torch's choice), got {threads}")
+    if threads:
+        torch.set_num_threads(threads)
+
+
 def module_device(module: Any) -> torch.device:
     """The device of a module's first parameter (or buffer); the CPU for a module that has neither."""
     import torch

@@ -37,8 +37,8 @@ from torch.utils.data import DataLoader, RandomSampler
 from tqdm.auto import tqdm
 
 from piga.io.choices import check_choices, check_types
-from piga.io.device import Device, resolve_device
-from piga.data.schema import (MIN_IMAGE_SIZE, DataFormatError, DatasetInfo, check_actions_file, fingerprint, legacy_seed, read_rows,
+from piga.io.device import Device, resolve_device, set_threads
+from piga.data.schema import (MAX_SEED, MIN_IMAGE_SIZE, DataFormatError, DatasetInfo, check_actions_file, fingerprint, legacy_seed, read_rows,
                               inspect_dataset, split_indices)
 from piga.world.encoder import estimate_background
 from piga.world.model import SYSTEM_SHAPES, FrameModel, ModelConfig, frames_to_float
@@ -142,6 +142,8 @@ class TrainConfig:
         for name in ("epochs", "budget_steps", "lr_decay_epoch", "seed", "threads", "seed_retries", "stream_cache_mb"):
             if getattr(self, name) < 0:
                 raise ValueError(f"TrainConfig.{name} must be >= 0, got {getattr(self, name)}")
+        if self.seed > MAX_SEED:  # (torch's generator took it and failed with "Overflow when unpacking long long")
+            raise ValueError(f"TrainConfig.seed must be <= {MAX_SEED} (2^63 - 1), got {self.seed}")
         if self.batch_size < 1 or self.window_stride < 1:
             raise ValueError(f"TrainConfig.batch_size and window_stride must be >= 1, got {self.batch_size}, "
                              f"{self.window_stride}")
@@ -670,8 +672,7 @@ def train(
     info = inspect_dataset(data)
     data_fingerprint = fingerprint(data)
     ckpt_path = run_dir / CHECKPOINT
-    if train_config.threads:
-        torch.set_num_threads(train_config.threads)
+    set_threads(train_config.threads, "TrainConfig")
     state = TrainState()
     if resume:
         model, ckpt = load_model(run_dir, any_model=True)  # on the CPU, wherever it was saved
