@@ -459,3 +459,13 @@ def test_the_two_damping_conventions_make_the_same_frames() -> None:
         v2 = (v2 + h * (1.5 * g * f * np.sin(x2) + 3 * a * f * u)) / (1 + h * 3 * b * f)
         x2 = x2 + h * v2
         assert x2 == pytest.approx(x1, abs=1e-12)
+
+
+def test_the_report_says_when_no_lag_peaks(damped) -> None:
+    """A Python "lag None" was printed into report.md when no correlation peaked outside the band."""
+    import copy
+
+    d = copy.deepcopy(damped)
+    d.residuals["action_correlation"]["peak_lag"] = None
+    text = markdown(d, "m", "d", "c")
+    assert "lag None" not in text and "no positive peak outside the band" in text

@@ -3625,11 +3625,14 @@ def test_a_ddpg_budget_below_one_evaluation_names_what_to_give(argv: list[str], 
     assert _listing(tmp_path) == []
 
 
-def test_an_interrupted_resume_leaves_no_report_of_the_older_state(tiny_piga_run: Path, tiny_data: Path, tmp_path: Path,
+@pytest.mark.parametrize("how, epoch", [(["--resume", "--epochs", "3"], 2), (["--overwrite", "--epochs", "2", "--batch-size", "16"], 1)])
+def test_an_interrupted_resume_leaves_no_report_of_the_older_state(how: list[str], epoch: int, tiny_piga_run: Path,
+                                                                    tiny_data: Path, tmp_path: Path,
                                                                     capsys: pytest.CaptureFixture[str],
                                                                     monkeypatch: pytest.MonkeyPatch) -> None:
     """A finished run resumed with more epochs and interrupted kept metrics.json and its figures (10 epochs, g 1.7, not
-    converged) beside a checkpoint of epoch 24 (g 10.07): piga-diagnose judged the newer model by the older report."""
+    converged) beside a checkpoint of epoch 24 (g 10.07): piga-diagnose judged the newer model by the older report.
+    An interrupted --overwrite did the same (and piga-control trusted the replaced run's convergence)."""
     import piga.training.train
 
     real = piga.training.train.train
@@ -3644,9 +3647,9 @@ def test_an_interrupted_resume_leaves_no_report_of_the_older_state(tiny_piga_run
     run = _run_copy(tiny_piga_run, tmp_path / "run")
     assert (run / "metrics.json").exists()
     monkeypatch.setattr(piga.training.train, "train", interrupted_after_its_first_checkpoint)
-    code, _, err = run_in_process("piga-train-model", train.main, str(tiny_data), "--out", str(run), "--resume",
-                                  "--epochs", "3", "--quiet", capsys=capsys)
-    assert code == 130 and "holds epoch 2; continue with --resume" in err, err
+    code, _, err = run_in_process("piga-train-model", train.main, str(tiny_data), "--out", str(run), *how, "--quiet",
+                                  capsys=capsys)
+    assert code == 130 and f"holds epoch {epoch}; continue with --resume" in err, err
     assert (run / "checkpoint.pt").exists() and not any((run / name).exists() for name in
                                                         ("metrics.json", "rollout.png", "curves.png"))
 

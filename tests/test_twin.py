@@ -54,7 +54,7 @@ def test_gap_closure_is_the_share_above_the_floor() -> None:
 def test_the_means_closure_is_not_a_ratio_of_noise() -> None:
     assert mean_gap_closure(1.0, 0.2, 0.1) == pytest.approx(0.8 / 0.9)
     assert mean_gap_closure(0.00073, 0.000626, 0.000729) is None  # was "13192%": no gap above the floor
-    assert mean_gap_closure(1.0, 0.05, 0.1) is None  # the corrected model below the floor: it is no floor
+    assert mean_gap_closure(1.0, 0.05, 0.1) == 1.0  # the corrected model at or below the floor: the gap is closed
 
 
 def test_ridge_matches_least_squares_when_well_posed_and_stays_bounded_when_not() -> None:

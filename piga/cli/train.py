@@ -337,9 +337,10 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
     def on_epoch(state: Any, model: Any) -> None:  # the first checkpoint of this command: the record goes with it
         if not written:
             write_json(run_dir / "config.json", record)
-            if resuming:  # the report of the state resumed from no longer describes the checkpoint: an interrupted
-                # resume left it beside a newer model, which piga-diagnose then judged by the old report's numbers
-                remove_outputs(run_dir, REPORT_OUTPUTS)
+            # the report of the state resumed from, or of the run --overwrite replaces, no longer describes the
+            # checkpoint: an interrupted resume or overwrite left it beside a newer model, which piga-diagnose then
+            # judged by the old report's numbers (and piga-control by its convergence)
+            remove_outputs(run_dir, REPORT_OUTPUTS)
         written.append(state.epoch)
         # with a retry left, a scene's objects are checked once the autoencoder's warm-up is over: an object not
         # found then is not found at the end either (benchmarks/warmup_objects.py), and the retry starts at once

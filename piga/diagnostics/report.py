@@ -140,8 +140,10 @@ def _camera_lines(v: VisionSummary) -> list[str]:
     lines = [
         f"- **Camera**: {noise}; "
         f"{c.repeated_frames} frames repeat the previous one (within 2 gray levels) ({c.dropped_frames} while the pendulum moves: "
-        f"rate {100 * c.drop_rate:.2f}%), and the first {c.leading_repeats} frame(s) of nearly every sequence repeat "
-        "the first. The dynamics are fitted on "
+        f"rate {100 * c.drop_rate:.2f}%)"
+        + (f", and the first {c.leading_repeats} frame{'s' if c.leading_repeats != 1 else ''} of nearly every sequence "
+           "repeat the first" if c.leading_repeats else "; no sequence starts with repeated frames")
+        + ". The dynamics are fitted on "
         + ("angles matched to the decoder's renders through the fitted camera." if c.angles == "matched"
            else "the encoder's angles."), "",
         "  Camera candidates, fitted by matching frames to the decoder's renders over the whole circle "
@@ -233,8 +235,8 @@ def markdown(d: Diagnosis, model: str, data: str, command: str) -> str:
         f" On the twin, an exactly right model has {number(g.free_run_mse_floor, '.3g')} rad²" + (
             f": {_pct(g.mean_free_run_gap_closure)} of the gap above that floor is closed."
             if g.mean_free_run_gap_closure is not None else
-            f", so no closure above it is given for the means (the nominal error is not {MEASURABLE_GAP:g} times that floor, or the "
-            "corrected one lies below it: a ratio of noise)."))
+            f", so no closure above it is given for the means (the nominal error is not {MEASURABLE_GAP:g} times that "
+            "floor: a ratio of noise)."))
     lines += [
         "## Size of the gap, and how far it shrinks", "", headline, "",
         f"Mean over all held-out windows and horizons 1..{g.horizon[-1]}: angle MSE {number(g.free_run_mse_nominal, '.3g')} rad² "
@@ -279,8 +281,11 @@ def markdown(d: Diagnosis, model: str, data: str, command: str) -> str:
         for b in group:
             lines.append(f"| {b['bin']} | {b['n']} | {_fmt(b['mean'])} | {_fmt(b['rms'])} |")
     cc = d.residuals["action_correlation"]
-    lines += ["", f"Residual–action cross-correlation peak: lag {cc['peak_lag']} (band ±{cc['band']:.3f}; a peak at lag k "
-              "points to a delay of k steps).", "", "## Candidates", "",
+    peak = (f"Residual–action cross-correlation peak: lag {cc['peak_lag']} (band ±{cc['band']:.3f}; a peak at lag k "
+            "points to a delay of k steps)." if cc["peak_lag"] is not None else
+            f"Residual–action cross-correlation: no positive peak outside the band ±{cc['band']:.3f} (a peak at lag k "
+            "would point to a delay of k steps).")
+    lines += ["", peak, "", "## Candidates", "",
               "Each fitted with g and a on the fit split; BIC of one-step residuals on the fit split (lower is better); "
               "error on the held-out split.", "",
               "| candidate | BIC | ΔBIC vs none | held-out free-run MSE, typical window (rad²) | mean (rad²) | fitted values |",

@@ -308,7 +308,7 @@ class Gap(_ByKey):
     """Closure above the floor on the typical window (raw when no floor)."""
     mean_free_run_gap_closure: float | None
     """Closure above the floor of the means over all windows; None where the means give no measurable
-    gap above the floor, or the corrected mean lies below it (:func:`piga.diagnostics.twin.mean_gap_closure`)."""
+    gap above the floor, 1 where the corrected mean is at or below it (:func:`piga.diagnostics.twin.mean_gap_closure`)."""
     closure_basis: str
     """"state" (angles) or "pixels" (a camera effect changed the angles)."""
     pixel_free_run_gap_closure: float | None

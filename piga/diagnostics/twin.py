@@ -185,9 +185,10 @@ def gap_closure(nominal: float, corrected: float, floor: float) -> float | None:
 
 
 def mean_gap_closure(nominal: float, corrected: float, floor: float) -> float | None:
-    """:func:`gap_closure` of the means over all windows, or None where it would be a ratio of noise: the
-    nominal error not measurably above the floor, or the corrected one below it (then it is no floor:
-    measured, 0.00073 nominal, 0.000626 corrected and a floor of 0.000729 rad² gave "13192%")."""
-    if not (nominal > MEASURABLE_GAP * floor and corrected >= floor):
+    """:func:`gap_closure` of the means over all windows: None where the nominal error is not measurably above the
+    floor (a ratio of noise: 0.00073 nominal, 0.000626 corrected and a floor of 0.000729 rad² gave "13192%"), and 1
+    (closed) where the corrected error is at or below the floor (1.0012 was quoted as 100.1%)."""
+    if not nominal > MEASURABLE_GAP * floor:
         return None
-    return gap_closure(nominal, corrected, floor)
+    closure = gap_closure(nominal, corrected, floor)
+    return None if closure is None else min(closure, 1.0)

@@ -209,8 +209,10 @@ def check_convergence(state: Any, config: ConvergenceConfig = ConvergenceConfig(
     if objects is not None and objects.empty_slots and checks:  # (a baseline has no parameters to bend)
         return verdict("untrained", objects.empty_reason())
     if blank is not None and not checks and not blank[0] < config.blank_ratio * blank[1]:
-        return verdict("untrained", f"its held-out predictions (MSE {blank[0]:.4g}) are no better than drawing the "
-                                    f"background alone (MSE {blank[1]:.4g}); " + _blank_fix(blank[1], planned, steps))
+        return verdict("untrained", f"its held-out predictions (MSE {blank[0]:.4g}) are not clearly better than drawing "
+                                    f"the background alone (MSE {blank[1]:.4g}; the bar is "
+                                    f"{config.blank_ratio:g}x it, {config.blank_ratio * blank[1]:.4g}); "
+                                    + _blank_fix(blank[1], planned, steps))
     if steps < planned:
         return verdict("unsettled", f"the run stopped at step {steps} of {planned} planned, before its learning rate "
                                     "decayed; " + _fix(planned, steps))
@@ -229,8 +231,10 @@ def check_convergence(state: Any, config: ConvergenceConfig = ConvergenceConfig(
                                     f"steps (no parameter to learn)" + ("" if blank is None else
                                     f"; its held-out MSE {blank[0]:.4g} is below the background's {blank[1]:.4g}"))
     if blank is not None and not blank[0] < config.blank_ratio * blank[1]:  # settled, but on what?
-        return verdict("untrained", f"its parameters settled, but its held-out predictions (MSE {blank[0]:.4g}) are no "
-                                    f"better than drawing the background alone (MSE {blank[1]:.4g}); " + _blank_fix(blank[1], planned, steps))
+        return verdict("untrained", f"its parameters settled, but its held-out predictions (MSE {blank[0]:.4g}) are not "
+                                    f"clearly better than drawing the background alone (MSE {blank[1]:.4g}; the bar is "
+                                    f"{config.blank_ratio:g}x it, {config.blank_ratio * blank[1]:.4g}); "
+                                    + _blank_fix(blank[1], planned, steps))
     if blank is not None and hold is not None and hold < FAINT_BACKGROUND_MSE:  # the held-out split does not move
         return verdict("untrained", f"its held-out frames differ from their last input frame by under one gray level "
                                     f"(MSE {hold:.4g} of holding it still): nothing moves in the held-out sequences, so "
