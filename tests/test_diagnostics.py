@@ -61,7 +61,7 @@ def planted(effects: dict, n: int = 120, t: int = 30, noise: float = 0.002, seed
             a = np.sign(a) * np.maximum(np.abs(a) - effects["deadzone"], 0)
         a = a * effects.get("gain", 1.0)
         tau = a - effects.get("damping", 0) * v + effects.get("bias", 0) - effects.get("cogging", 0) * np.sin(4 * x)
-        v = v + 0.05 * (15 * np.sin(x) + 3 * tau)
+        v = v + 0.05 * (15 * effects.get("gravity", 1.0) * np.sin(x) + 3 * tau)
         x = x + 0.05 * v
         th[:, i + 1] = x
     fit_split = np.arange(n) < int(0.75 * n)
@@ -108,6 +108,14 @@ def test_a_gain_error_is_the_refitted_a() -> None:
     d = analyse(planted({"gain": 0.8}), NOMINAL, FAST)
     assert d.verdict_class == "gain", d.verdict
     assert abs(d.effects[0]["value"] - 0.8) < 0.01
+
+
+def test_a_gravity_error_is_named_not_called_no_gap() -> None:
+    """Gravity x0.5 read "no significant gap" (a note only), with the gap 1,500 times the corrected error."""
+    d = analyse(planted({"gravity": 0.5}), NOMINAL, FAST)
+    assert d.verdict_class == "gravity", d.verdict
+    (e,) = d.effects
+    assert e.value == pytest.approx(0.5, abs=0.01) and not d.gap.no_gap
 
 
 def test_a_gain_whose_interval_holds_the_nominal_is_not_named() -> None:

@@ -997,8 +997,20 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
     g_ratio = reference.values["g"] / ref_g
     g_plain = 1.0 if refit is None else refit.values["g"] / nom.g
     if abs(g_ratio - 1) > config.gain_tolerance and (refit is None or abs(g_plain - 1) > config.gain_tolerance):
-        notes.append(f"g refits to {reference.values['g']:.3f} (x{g_ratio:.3f} the reference {ref_g:.3f}): gravity, or the "
-                     "pendulum's length, differs from the identified model")
+        g_int = interval("g")
+        if g_int and reference is not final:  # the reference's g: final's interval, shifted with it
+            g_int = [x * reference.values["g"] / final.values["g"] for x in g_int]
+        low, high = (1 - config.gain_tolerance) * ref_g, (1 + config.gain_tolerance) * ref_g
+        if g_int and min(g_int) <= high and max(g_int) >= low:
+            notes.append(f"g refits to {reference.values['g']:.3f} (x{g_ratio:.3f} the reference {ref_g:.3f}), but its 95% "
+                         f"interval {min(g_int):.3f}..{max(g_int):.3f} reaches within {100 * config.gain_tolerance:.0f}% of "
+                         "the reference: not named a gravity error")
+        else:
+            # named as the gain is: gravity x0.5 read "no significant gap" with the gap 1,500 times the corrected error
+            effects.append(Effect("gravity", g_ratio, "factor on the nominal g",
+                                  sorted(x / ref_g for x in g_int) if g_int else None))
+            notes.append(f"g refits to {reference.values['g']:.3f} (x{g_ratio:.3f} the reference {ref_g:.3f}): gravity, or "
+                         "the pendulum's length, differs from the identified model")
     if any(isinstance(EFFECTS.get(e.effect), TorqueTerm) for e in effects):
         notes.append(UNITS_NOTE)
 
