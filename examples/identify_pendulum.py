@@ -24,7 +24,9 @@ out.mkdir(parents=True, exist_ok=True)
 
 data = piga.collect(piga.CollectConfig(sequences=args.sequences, workers=1), out / "pendulum.h5",
                             overwrite=True, progress=False)
-piga.train(data, out / "run", piga.TrainConfig(epochs=args.epochs), progress=False)  # writes run/checkpoint.pt
+model, state = piga.train(data, out / "run", piga.TrainConfig(epochs=args.epochs), progress=False)  # run/checkpoint.pt
+metrics = piga.write_run_report(model, state, data, out / "run")  # run/metrics.json: held-out errors, convergence
+print("converged:", metrics["converged"], (metrics.get("convergence") or {}).get("reason", ""))
 
 model, _ = piga.load_model(out / "run")  # the trained model, in eval mode
 frames, actions = piga.read_sequences(data, "test")  # uint8 (N, T, 64, 64), float32 (N, T, 1)

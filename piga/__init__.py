@@ -37,6 +37,7 @@ _API: dict[str, str] = {
     "CollectConfig": "piga.data.collect",
     "train": "piga.training.train",
     "TrainConfig": "piga.training.train",
+    "write_run_report": "piga.training.report",
     "inspect_dataset": "piga.data.schema",
     "read_sequences": "piga.data.schema",
     "load_states": "piga.data.schema",
@@ -60,6 +61,7 @@ if TYPE_CHECKING:  # for type checkers and IDEs; at run time the names load lazi
     from piga.world.model import ModelConfig, PhysicsModel, frames_to_float
     from piga.world.physics import rollout
     from piga.io.runs import load_model
+    from piga.training.report import write_run_report
     from piga.training.train import TrainConfig, train
     from piga.data.windows import SequenceWindows
 

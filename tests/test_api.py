@@ -62,3 +62,13 @@ def test_the_data_pages_example_writes_a_valid_file(tmp_path: Path) -> None:
     block = re.search(r"```python\n(.*?)```", (ROOT / "docs" / "data.md").read_text(), re.DOTALL).group(1)
     out = subprocess.run([sys.executable, "-c", block], capture_output=True, text=True, timeout=120, env=ENV, cwd=tmp_path)
     assert out.returncode == 0 and "n_sequences=3" in out.stdout, out.stderr[-2000:]
+
+
+def test_a_run_trained_through_the_library_is_not_called_interrupted(tmp_path: Path) -> None:
+    """piga.train writes no metrics.json: every such run was "stopped before its end ... continue it with --resume"."""
+    from piga.io.runs import convergence_warning
+
+    (tmp_path / "checkpoint.pt").write_bytes(b"")
+    assert "piga.write_run_report" in convergence_warning(tmp_path) and "--resume" not in convergence_warning(tmp_path)
+    (tmp_path / "config.json").write_text("{}")  # piga-train-model's record: a CLI run cut before its report
+    assert "stopped before its end" in convergence_warning(tmp_path)

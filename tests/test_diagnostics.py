@@ -231,6 +231,12 @@ def test_cli_with_env_writes_a_complete_report_and_the_control_comparison(tiny_m
     assert report["control"]["effects"] == {"damping": 0.3}
     g = report["gap"]
     assert g["closure_basis"] == "state" or g["pixel_free_run_gap_closure"] is not None
+    if g["pixel_free_run_gap_closure"] is not None:  # raw where the matched floor lay above the corrected error, and said
+        raw = 1 - g["typical_pixel_mse_corrected"] / g["typical_pixel_mse_nominal"]
+        above = (g["typical_pixel_mse_nominal"] - g["typical_pixel_mse_corrected"]) / \
+            (g["typical_pixel_mse_nominal"] - g["pixel_mse_floor"])
+        assert g["pixel_free_run_gap_closure"] == pytest.approx(raw if g["pixel_closure_raw"] else above)
+        assert g["pixel_closure_raw"] == (above > 1)
     if g["closure_basis"] == "state":  # the floor comes from the twin: finite, one value per horizon
         assert len(g["state_mse_floor"]) == len(g["horizon"]) and np.isfinite(g["state_mse_floor"]).all()
         assert g["typical_free_run_mse_floor"] >= 0

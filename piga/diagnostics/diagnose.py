@@ -1184,7 +1184,7 @@ def measure_gap(candidates: Candidates, chosen: Score, nom: Nominal, obs: Observ
         pixel_mse_floor=pixels.pixel_mse_floor, typical_pixel_mse_nominal=pixels.typical_pixel_mse_nominal,
         typical_pixel_mse_corrected=pixels.typical_pixel_mse_corrected,
         floor_note=floor_note, floor_subtracted=bool(floor_subtracted and headline is not None),
-        no_gap=not corrects,
+        no_gap=not corrects, pixel_closure_raw=bool(pixel_raw and pixel_closure is not None),
     )
 
 

@@ -312,7 +312,8 @@ class Gap(_ByKey):
     closure_basis: str
     """"state" (angles) or "pixels" (a camera effect changed the angles)."""
     pixel_free_run_gap_closure: float | None
-    """Closure of the typical pixel gap above the matched floor."""
+    """Closure of the typical pixel gap above the matched floor; raw (1 − corrected / nominal) where
+    ``pixel_closure_raw``: the floor lay above the corrected model's pixel error, so it is no floor."""
     gap_above_floor: bool
     """The nominal error exceeds the floor enough for a closure to mean something."""
     one_step_rms_nominal_rad: float
@@ -336,6 +337,8 @@ class Gap(_ByKey):
     no_gap: bool = False
     """Nothing was named to correct (no effect): there is no gap to close, and no headline closure
     (``free_run_gap_closure`` None; the raw numbers stay for reference)."""
+    pixel_closure_raw: bool = False
+    """``pixel_free_run_gap_closure`` is raw, with no floor subtracted (it held the raw value unsaid)."""
 
 
 @dataclass

@@ -113,6 +113,9 @@ def convergence_warning(run_dir: str | os.PathLike[str]) -> str | None:
     except FileNotFoundError:
         if not (Path(run_dir) / CHECKPOINT).exists():
             return None
+        if not (Path(run_dir) / "config.json").exists():  # piga.train writes neither record (piga-train-model both)
+            return (f"warning: the run {run_dir} has no metrics.json, so it was never checked for convergence (a run "
+                    "trained through the library's piga.train is checked by piga.write_run_report, which writes it)")
         return (f"warning: the run {run_dir} has no metrics.json: it stopped before its end (interrupted, or its report "
                 "not written) and was never checked for convergence; this used its last checkpoint (continue it with "
                 "--resume)")
