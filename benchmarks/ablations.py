@@ -38,7 +38,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Literal, get_args, get_type_hints
 
-from common import TrainingBenchConfig, add_ray_option, farm_main, machine, machine_words, ray_backend
+from common import add_ray_option, farm_main, machine, machine_words, out_prefix, ray_backend, TrainingBenchConfig
 from prediction import collect_command, collect_data, data_path, run_training
 
 from piga.cli.common import ArgumentParser, positive_int, seed_int
@@ -343,7 +343,7 @@ def slots_figure(record: dict[str, Any]) -> Any:
 
 def parser() -> argparse.ArgumentParser:
     p = ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--out", type=Path, default=Path("results/ablations"),
+    p.add_argument("--out", type=out_prefix, default=Path("results/ablations"),
                    help="output prefix: OUT.json, OUT.md, OUT-slots.png; runs and records in OUT_runs/ (default %(default)s)")
     p.add_argument("--systems", nargs="+", choices=SYSTEMS, default=list(DEFAULTS.systems), help="default %(default)s")
     p.add_argument("--schemes", nargs="+", choices=SCHEMES, default=list(DEFAULTS.schemes),

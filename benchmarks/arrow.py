@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from baselines import PRESETS, TABLE_GRAVITY, BenchConfig, evaluate, recorded_scores, sweep_episodes
-from common import change_cells, farm_main, machine, machine_words, write_page
+from common import change_cells, farm_main, machine, machine_words, out_prefix, write_page
 
 from piga.io.checkpoint import CHECKPOINT, RunKind, run_kind
 from piga.io.pool import JobRecords, RecordedJob, run_recorded
@@ -77,7 +77,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--runs", type=Path, nargs="+", required=True,
                    help="trained piga or PlaNet-style run folders, each with a benchmark record in records/ beside it")
     p.add_argument("--preset", choices=sorted(PRESETS), default="budget", help="the baselines preset (default %(default)s)")
-    p.add_argument("--out", type=Path, default=Path("results/arrow"), help="output prefix (default %(default)s)")
+    p.add_argument("--out", type=out_prefix, default=Path("results/arrow"), help="output prefix (default %(default)s)")
     args = p.parse_args(argv)
     cfg = PRESETS[args.preset]
     runs = list(dict.fromkeys(args.runs))

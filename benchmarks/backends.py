@@ -35,7 +35,7 @@ from collections import Counter
 from pathlib import Path
 from typing import Any
 
-from common import farm_main, machine, machine_words
+from common import farm_main, machine, machine_words, out_prefix, work_folder
 from piga.cli.common import ArgumentParser, positive_int, ray_address
 from piga.io.atomic import atomic_output, write_json
 
@@ -214,8 +214,8 @@ def markdown(record: dict[str, Any]) -> str:
 def main() -> int:
     p = ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--model", required=True, help="run folder of piga-train-model (the sweep's agent, the diagnosis' model)")
-    p.add_argument("--work", required=True, help="folder for the farms' outputs (kept; a rerun skips finished farms)")
-    p.add_argument("--out", required=True, help="OUT.json and OUT.md are written")
+    p.add_argument("--work", type=work_folder, required=True, help="folder for the farms' outputs (kept; a rerun skips finished farms)")
+    p.add_argument("--out", type=out_prefix, required=True, help="OUT.json and OUT.md are written")
     p.add_argument("--ray", type=ray_address, default="auto", help="the Ray backend to compare with (default %(default)s)")
     p.add_argument("--sweep", default="0.6:1.4:0.2", help="gravity multipliers of the sweep (default %(default)s)")
     p.add_argument("--episodes", type=positive_int, default=5, help="episodes per sweep job (default %(default)s)")
@@ -225,6 +225,13 @@ def main() -> int:
                    help="also run the sweep, and a farm that reports where each of its tasks ran, on this Ray cluster")
     p.add_argument("--cluster-note", help="what the cluster is, for the page (default none)")
     args = p.parse_args()
+    from piga.cli.common import connect_backend
+    from piga.io.ray_backend import disconnect
+
+    for address in (args.ray, args.cluster):  # refused in seconds, before the local farms (it came after them)
+        if address is not None:
+            connect_backend(address)
+            disconnect()
     work = Path(args.work)
     work.mkdir(parents=True, exist_ok=True)
     from piga.control.episodes import parse_range

@@ -78,7 +78,7 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from common import ALGO_LABELS, add_ray_option, farm_main, machine, ray_backend, signed as _num
+from common import ALGO_LABELS, add_ray_option, farm_main, machine, out_prefix, ray_backend, signed as _num
 from efficiency import Point, data_ratio
 
 from agents.planet.config import PlanetTrainConfig
@@ -1084,7 +1084,7 @@ def data_ratio_lines(record: dict[str, Any]) -> list[str]:
 @farm_main
 def main() -> int:
     p = ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--out", required=True, help="writes OUT.json, OUT.md, OUT-*.png; runs in OUT_runs/")
+    p.add_argument("--out", type=out_prefix, required=True, help="writes OUT.json, OUT.md, OUT-*.png; runs in OUT_runs/")
     p.add_argument("--preset", choices=sorted(PRESETS), default="full")
     p.add_argument("--workers", type=positive_int, help="processes (default: the preset's, 2)")
     add_ray_option(p, "the jobs (OUT_runs shared by every machine)")
@@ -1113,7 +1113,7 @@ def main() -> int:
     folder = out.with_name(out.name + "_runs")
     folder.mkdir(parents=True, exist_ok=True)
     # the command that writes the whole page (any --only runs some jobs only), and this invocation's own
-    command = ["python", "benchmarks/baselines.py", "--out", args.out, "--preset", args.preset]
+    command = ["python", "benchmarks/baselines.py", "--out", str(args.out), "--preset", args.preset]
     record: dict[str, Any] = {"command": shlex.join(command), "invocation": shlex.join(["python", *sys.argv]),
                               "preset": args.preset, "config": asdict(cfg), "machine": machine(), "estimate_seconds": cost}
     records = run_all(cfg, folder, only, backend)

@@ -19,17 +19,17 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("run", help="a piga-train-model run folder of the pendulum")
     p.add_argument("data", help="an HDF5 recording (piga-collect)")
     args = p.parse_args(argv)
-    import h5py
     import numpy as np
     import torch
 
+    from piga.data.schema import inspect_dataset
     from piga.diagnostics.vision import camera_stage
     from piga.io.runs import load_model
 
     torch.set_num_threads(1)
+    info = inspect_dataset(args.data)  # a missing or foreign file in one line (it was h5py's text)
     model, _ = load_model(args.run)
-    with h5py.File(args.data, "r") as f:
-        n, t = f["frames"].shape[:2]
+    n, t = info.n_sequences, info.steps
     fit = np.arange(n) < int(0.75 * n)  # the diagnosis's fit split
     started = time.perf_counter()
     found = camera_stage(model, args.data, np.zeros((n, t)), fit, None)

@@ -30,7 +30,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from common import machine, machine_words, write_page
+from common import machine, machine_words, out_prefix, write_page
 from piga.cli.common import ArgumentParser, positive_int
 
 #: The ways compared: the buffer as bytes inside checkpoint.pt (as before), or streamed into its own file (piga's).
@@ -131,7 +131,7 @@ def markdown(record: dict[str, Any]) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     p = ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--out", type=Path, required=True, help="output prefix: OUT.md and OUT.json")
+    p.add_argument("--out", type=out_prefix, required=True, help="output prefix: OUT.md and OUT.json")
     p.add_argument("--buffer-size", type=positive_int, default=30_000,
                    help="transitions in the replay buffer (DrQ-v2's runs: 100000, 2.5 GB) (default %(default)s)")
     args = p.parse_args(argv)

@@ -101,6 +101,40 @@ def check_page_target(out: Path, *suffixes: str) -> None:
                               overwrite=True)
 
 
+def out_prefix(text: str) -> Path:
+    """argparse type of a benchmark's ``--out``, the prefix of the pages (OUT.json, OUT.md, figures) written after its
+    jobs: refused at once where they could not be written (an unwritable folder, a file where a folder goes, /proc),
+    which the scripts found out only after hours, as "removed or moved while it ran?"."""
+    path = Path(text)
+    if not text.strip() or path.name in ("", ".", ".."):
+        raise argparse.ArgumentTypeError(f"expected a file prefix such as results/name, got {text!r}")
+    existing = next((p for p in (path.parent, *path.parent.parents) if p.exists()), Path("."))
+    if not existing.is_dir():
+        raise argparse.ArgumentTypeError(f"{existing} is a file, not a folder, so {text} cannot be written there")
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise argparse.ArgumentTypeError(f"folder {existing} is not writable")
+    import shutil
+
+    if shutil.disk_usage(existing).total == 0:  # /proc, /sys
+        raise argparse.ArgumentTypeError(f"{existing} is on a file system that stores no files (as /proc and /sys "
+                                         "are); write elsewhere")
+    return path
+
+
+def work_folder(text: str) -> Path:
+    """argparse type of a benchmark's ``--work`` (its data and runs, kept for a rerun): a folder, or a path where one
+    can be made (a file there gave "[Errno 17] File exists")."""
+    path = Path(text)
+    if not text.strip():
+        raise argparse.ArgumentTypeError("expected a folder such as runs/name, got ''")
+    existing = next((p for p in (path, *path.parents) if p.exists()), Path("."))
+    if not existing.is_dir():
+        raise argparse.ArgumentTypeError(f"{existing} is a file, not a folder: give a folder for the data and runs")
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise argparse.ArgumentTypeError(f"folder {existing} is not writable")
+    return path
+
+
 def is_number(value: Any) -> bool:
     """Whether a JSON record's ``value`` is a finite real number (a boolean is not)."""
     import math

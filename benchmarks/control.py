@@ -33,7 +33,7 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
-from common import add_ray_option, check_page_target, farm_main, machine, ray_backend
+from common import add_ray_option, check_page_target, farm_main, machine, out_prefix, ray_backend
 from agents.cem import CEMConfig
 from agents.mpc import MPCConfig
 from piga.io.atomic import atomic_output, write_json
@@ -59,7 +59,7 @@ def goal_angles(g: float, a: float, count: int = 7) -> list[float]:
 def main() -> int:
     p = ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--model", required=True, help="run folder of piga-train-model")
-    p.add_argument("--out", default="results/control", help="output prefix (default %(default)s)")
+    p.add_argument("--out", type=out_prefix, default="results/control", help="output prefix (default %(default)s)")
     p.add_argument("--episodes", type=positive_int, default=50)
     p.add_argument("--sweep", default="0.5:1.8:0.1")
     p.add_argument("--sweep-episodes", type=positive_int, default=10)

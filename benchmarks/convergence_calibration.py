@@ -26,7 +26,7 @@ import time
 from pathlib import Path
 from typing import Any, NamedTuple
 
-from common import logged_command, machine, machine_words, write_page
+from common import logged_command, machine, machine_words, out_prefix, write_page
 from prediction import run_training
 
 from piga.cli.common import ArgumentParser, nonnegative_int
@@ -223,7 +223,7 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--cases", nargs="+", choices=tuple(CASES), default=list(CASES), help="default: all")
     p.add_argument("--seeds", nargs="+", type=nonnegative_int, default=[0], help="training seeds (default 0)")
     p.add_argument("--retrain", action="store_true", help="train the cases again rather than reuse their records")
-    p.add_argument("--out", default="results/convergence_calibration", help="output prefix (default %(default)s)")
+    p.add_argument("--out", type=out_prefix, default="results/convergence_calibration", help="output prefix (default %(default)s)")
     return p
 
 

@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from baselines import PRESETS, TABLE_GRAVITY, jobs_for, recorded_scores, run_all
-from common import farm_main, machine_words, score_cells, write_page
+from common import farm_main, machine_words, out_prefix, score_cells, write_page
 from piga.cli.common import ArgumentParser
 
 DATA_SEED = 200
@@ -57,7 +57,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--table", type=Path, default=Path("results/baselines_runs"),
                    help="the table's runs folder, for its records (default %(default)s)")
     p.add_argument("--preset", choices=sorted(PRESETS), default="budget", help="the baselines preset (default %(default)s)")
-    p.add_argument("--out", type=Path, default=Path("results/data_draw"), help="output prefix (default %(default)s)")
+    p.add_argument("--out", type=out_prefix, default=Path("results/data_draw"), help="output prefix (default %(default)s)")
     args = p.parse_args(argv)
     table_cfg = PRESETS[args.preset]
     if args.data_seed == table_cfg.data_seed:

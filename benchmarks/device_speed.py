@@ -47,7 +47,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from common import machine, machine_words
+from common import machine, machine_words, out_prefix
 from planet_faithful import VARIANTS
 from piga.io.atomic import atomic_output, write_json
 from piga.io.device import cuda_available, resolve_device
@@ -271,7 +271,7 @@ def markdown(record: dict[str, Any]) -> str:
 def main(argv: list[str] | None = None) -> int:
     p = ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--data", required=True, type=Path, help="a pendulum file with /rewards (piga-collect's)")
-    p.add_argument("--out", required=True, type=Path, help="output prefix: OUT.json and OUT.md")
+    p.add_argument("--out", required=True, type=out_prefix, help="output prefix: OUT.json and OUT.md")
     p.add_argument("--device", choices=("cpu", "cuda"), default="cpu",
                    help="cuda: time the CPU and the GPU, and the speed-up; cpu: the CPU alone (default %(default)s)")
     p.add_argument("--steps", type=positive_int, default=30, help="timed steps per repeat (default %(default)s)")

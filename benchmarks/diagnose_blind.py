@@ -36,8 +36,8 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from common import (add_diagnose_options, add_ray_option, check_piga_model, diagnose_options, farm_main, job_command, machine,
-                    ray_backend)
+from common import (add_diagnose_options, add_ray_option, check_piga_model, diagnose_options, farm_main, job_command,
+                    machine, out_prefix, ray_backend, work_folder)
 from envs.pendulum import PixelPendulumConfig
 from piga.io.atomic import atomic_output, write_json
 from piga.data.collect import CollectConfig, collect
@@ -247,8 +247,8 @@ def save(out: Path, command: str, info: dict, runs: list[dict], summarize: Calla
 def main() -> int:
     p = ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--model", required=True, help="run folder of piga-train-model (the nominal, identified model)")
-    p.add_argument("--out", default="results/diagnose_blind")
-    p.add_argument("--work", default="runs/blind", help="folder for the case data and reports")
+    p.add_argument("--out", type=out_prefix, default="results/diagnose_blind")
+    p.add_argument("--work", type=work_folder, default="runs/blind", help="folder for the case data and reports")
     p.add_argument("--cases", type=positive_int, default=30)
     p.add_argument("--sequences", type=positive_int, default=200)
     p.add_argument("--seed", type=seed_int, default=0)

@@ -52,7 +52,8 @@ import gymnasium as gym
 import h5py
 import numpy as np
 
-from common import add_diagnose_options, add_ray_option, diagnose_options, farm_main, job_command, machine, ray_backend
+from common import (add_diagnose_options, add_ray_option, diagnose_options, farm_main, job_command, machine,
+                    out_prefix, ray_backend, work_folder)
 from diagnose_blind import run_diagnose, save, strip_labels
 from diagnose_blind import score as score_gym
 from envs.dmc import DMCPendulumConfig, DMCPendulumEnv
@@ -378,8 +379,8 @@ def true_angle_fit(case: dict[str, Any], work: Path, sequences: int, steps: int,
 @farm_main
 def main(argv: list[str] | None = None) -> int:
     p = ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--out", default="results/diagnose_blind_dmc")
-    p.add_argument("--work", default="runs/blind_dmc", help="folder for the case data, models and reports")
+    p.add_argument("--out", type=out_prefix, default="results/diagnose_blind_dmc")
+    p.add_argument("--work", type=work_folder, default="runs/blind_dmc", help="folder for the case data, models and reports")
     p.add_argument("--cases", type=positive_int, default=24)
     p.add_argument("--sequences", type=positive_int, default=300)
     p.add_argument("--steps", type=positive_int, default=40)

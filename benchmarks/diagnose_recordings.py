@@ -27,7 +27,8 @@ import cv2
 import imageio.v2 as imageio
 import numpy as np
 
-from common import add_diagnose_options, check_piga_model, checked_command, diagnose_options, machine
+from common import (add_diagnose_options, check_piga_model, checked_command, diagnose_options, machine, out_prefix,
+                    work_folder)
 from envs.pendulum import PixelPendulumConfig, make_pixel_pendulum
 from piga.io.atomic import atomic_output, write_json
 from piga.cli.common import ArgumentParser, seed_int
@@ -86,8 +87,8 @@ def record(effects: dict, drop: float, blur: float, frames: int, seed: int, out:
 def main() -> int:
     p = ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--model", required=True, help="run folder of piga-train-model (the identified model)")
-    p.add_argument("--out", default="results/diagnose_recordings")
-    p.add_argument("--work", default="runs/recordings", help="folder for the recordings, data files and reports")
+    p.add_argument("--out", type=out_prefix, default="results/diagnose_recordings")
+    p.add_argument("--work", type=work_folder, default="runs/recordings", help="folder for the recordings, data files and reports")
     p.add_argument("--frames", type=int, default=4000, help="frames per recording (100 sequences of 40)")
     p.add_argument("--seed", type=seed_int, default=5)
     add_diagnose_options(p)

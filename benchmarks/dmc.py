@@ -45,7 +45,8 @@ import sys
 from pathlib import Path
 from typing import NamedTuple
 
-from common import add_diagnose_options, add_ray_option, diagnose_options, farm_main, logged_command, machine, ray_backend
+from common import (add_diagnose_options, add_ray_option, diagnose_options, farm_main, logged_command, machine,
+                    out_prefix, ray_backend, work_folder)
 from piga.io.atomic import atomic_output, write_json
 from piga.io.pool import run_pool
 from piga.cli.common import ArgumentParser, PigaError, positive_int, seed_int
@@ -291,8 +292,8 @@ def markdown(cases: list[dict[str, object]], command: str, info: dict[str, objec
 @farm_main
 def main() -> None:
     p = ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--work", required=True, help="folder for data and runs (kept, reused on a rerun)")
-    p.add_argument("--out", required=True, help="OUT.json and OUT.md are written")
+    p.add_argument("--work", type=work_folder, required=True, help="folder for data and runs (kept, reused on a rerun)")
+    p.add_argument("--out", type=out_prefix, required=True, help="OUT.json and OUT.md are written")
     p.add_argument("--seeds", type=seed_int, nargs="+", default=[0])
     p.add_argument("--variant", action="append", default=[], metavar="KEY=VALUE",
                    help="also run the pendulum with this --env-option (repeatable; each one is its own case)")
@@ -300,7 +301,7 @@ def main() -> None:
     p.add_argument("--steps", type=positive_int, default=40)
     p.add_argument("--epochs", type=positive_int, default=16)
     p.add_argument("--episodes", type=positive_int, default=10)
-    p.add_argument("--control-seed", type=int, default=0)
+    p.add_argument("--control-seed", type=seed_int, default=0)
     p.add_argument("--diagnose", choices=("first", "all", "none"), default="first",
                    help="diagnose the cases of the first seed (default), of every seed, or none")
     p.add_argument("--variant-seeds", choices=("first", "all"), default="first",

@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from common import check_record, is_learning_curve, is_number, signed, write_page
+from common import check_record, is_learning_curve, is_number, out_prefix, signed, write_page
 
 from agents.sb3.config import LEARNED_RETURN
 from envs import DMC_PENDULUM, PIXEL_PENDULUM
@@ -245,7 +245,7 @@ def figure(record: dict[str, Any], path: Path) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     p = ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--out", type=Path, required=True, help="output prefix: OUT.md, OUT.json, OUT.png")
+    p.add_argument("--out", type=out_prefix, required=True, help="output prefix: OUT.md, OUT.json, OUT.png")
     p.add_argument("--runs", type=Path, nargs="+", required=True, help="learning_curve.py records")
     p.add_argument("--published", type=Path, required=True, help="published_scores.py's record of DrQ-v2's curve")
     p.add_argument("--reference", type=Path, help="reference_policies.py's record: what policies that learned nothing "

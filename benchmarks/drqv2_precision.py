@@ -32,7 +32,7 @@ from typing import Any
 
 import torch
 
-from common import machine, machine_words, write_page
+from common import machine, machine_words, out_prefix, write_page
 from piga.cli.common import ArgumentParser, positive_int
 
 from agents.sb3.config import PRECISIONS, SB3Config, bfloat16_in_hardware
@@ -125,7 +125,7 @@ def markdown(record: dict[str, Any]) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     p = ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--out", type=Path, required=True, help="output prefix: OUT.json and OUT.md")
+    p.add_argument("--out", type=out_prefix, required=True, help="output prefix: OUT.json and OUT.md")
     p.add_argument("--env", choices=ENV_IDS, default=PIXEL_PENDULUM, help="the env (default %(default)s)")
     p.add_argument("--fill", type=positive_int, default=1000, help="random-action steps in the buffer (default %(default)s)")
     p.add_argument("--repeats", type=positive_int, default=5, help="rounds (default %(default)s)")

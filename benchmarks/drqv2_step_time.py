@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from common import machine, machine_words, write_page
+from common import machine, machine_words, out_prefix, write_page
 from piga.cli.common import ArgumentParser, positive_int
 from piga.io.pool import git_commit
 
@@ -112,7 +112,7 @@ def markdown(record: dict[str, Any]) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     p = ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--out", type=Path, required=True, help="output prefix: OUT.json and OUT.md")
+    p.add_argument("--out", type=out_prefix, required=True, help="output prefix: OUT.json and OUT.md")
     p.add_argument("--env", choices=ENV_IDS, default=PIXEL_PENDULUM, help="the env (default %(default)s)")
     p.add_argument("--view", choices=sorted(DMC_VIEWS), default="face", help="the DMC env's view (default %(default)s)")
     p.add_argument("--device", choices=["cpu", "cuda"], default="cpu", help="where the model trains (default %(default)s)")

@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from baselines import AGENTS, PRESETS, BenchConfig, evaluate, sweep_episodes
-from common import change_cells, farm_main, machine, machine_words, write_page
+from common import change_cells, farm_main, machine, machine_words, out_prefix, write_page
 
 from piga.io.checkpoint import CHECKPOINT
 from piga.io.pool import JobRecords, RecordedJob, run_recorded
@@ -131,7 +131,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--jobs", nargs="+", help="only these runs (record names, 'oracle' included; default: every one here)")
     p.add_argument("--seed", type=seed_int, default=HELD_OUT_SEED, help="the held-out episodes' seed (default %(default)s)")
     p.add_argument("--preset", choices=sorted(PRESETS), default="budget", help="the baselines preset (default %(default)s)")
-    p.add_argument("--out", type=Path, default=Path("results/held_out"), help="output prefix (default %(default)s)")
+    p.add_argument("--out", type=out_prefix, default=Path("results/held_out"), help="output prefix (default %(default)s)")
     args = p.parse_args(argv)
     if args.seed == 0:
         p.error("--seed 0 gives the table's own episodes; a held-out seed is another")

@@ -32,14 +32,14 @@ from typing import Any
 
 import numpy as np
 
-from common import machine
+from common import machine, out_prefix, work_folder
 from piga.io.atomic import atomic_output, write_json
 from piga.data.collect import CollectConfig, collect
 from piga.data.schema import inspect_dataset
 from piga.evaluation.evaluate import PARAMETER_NAMES
 from piga.training.report import write_run_report
 from piga.training.train import TrainConfig, train
-from piga.cli.common import ArgumentParser, positive_int
+from piga.cli.common import ArgumentParser, positive_int, thread_count
 
 #: The fast preset before its budget was sized from the data: 16 epochs, 200 warm-up and 600 curriculum
 #: steps of the default file's 16 x 337, and the last epoch averaged.
@@ -56,8 +56,11 @@ def recipe(name: str, threads: int) -> TrainConfig:
     if name == "before":
         return replace(BEFORE, threads=threads, device="cpu")
     if name.startswith("budget-"):
-        return TrainConfig(budget_steps=int(name.split("-", 1)[1]), threads=threads, device="cpu")
-    raise ValueError(f"unknown recipe {name!r}: today, before or budget-N")
+        steps = name.split("-", 1)[1]
+        if not (steps.isdecimal() and int(steps) >= 1):  # (int() said "invalid literal for int() with base 10")
+            raise ValueError(f"--recipes {name}: budget-N takes a whole number of steps N >= 1")
+        return TrainConfig(budget_steps=int(steps), threads=threads, device="cpu")
+    raise ValueError(f"--recipes: unknown recipe {name!r}: today, before or budget-N")
 
 
 def error_curve(trace: list[list[float]], names: list[str], truth: dict[str, float]) -> dict[str, list[float]]:
@@ -134,12 +137,12 @@ def figure(runs: list[dict[str, Any]], path: Path) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     p = ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--out", required=True, type=Path, help="output prefix: OUT.json, OUT.md, OUT-error.png")
+    p.add_argument("--out", required=True, type=out_prefix, help="output prefix: OUT.json, OUT.md, OUT-error.png")
     p.add_argument("--data", type=Path, help="a pendulum file (default: piga-collect's defaults, seed 100, in --work)")
-    p.add_argument("--work", type=Path, default=Path("runs/identify_time"), help="data and run folders")
+    p.add_argument("--work", type=work_folder, default=Path("runs/identify_time"), help="data and run folders")
     p.add_argument("--recipes", nargs="+", default=["before", "today"])
     p.add_argument("--repeats", type=positive_int, default=1, help="runs of each recipe (the time is their median)")
-    p.add_argument("--threads", type=int, default=0, help="torch threads (0: torch's default, as piga-train-model)")
+    p.add_argument("--threads", type=thread_count, default=0, help="torch threads (0: torch's default, as piga-train-model)")
     args = p.parse_args(argv)
     for name in args.recipes:
         recipe(name, 0)  # unknown names fail before any work

@@ -14,7 +14,7 @@ import shlex
 import sys
 from pathlib import Path
 
-from common import is_learning_curve
+from common import is_learning_curve, out_prefix
 
 from piga.io.atomic import write_json
 from piga.io.checkpoint import RunKind, read_checkpoint, read_run_record
@@ -24,7 +24,7 @@ from piga.cli.common import ArgumentParser
 def main(argv: list[str] | None = None) -> int:
     p = ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("run", type=Path, help="a piga-baseline ddpg run folder (DDPG, SAC or DrQ-v2)")
-    p.add_argument("--out", required=True, type=Path, help="the record to write (JSON)")
+    p.add_argument("--out", required=True, type=out_prefix, help="the record to write (JSON)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing record")
     args = p.parse_args(argv)
     try:

@@ -25,7 +25,7 @@ from pathlib import Path
 
 import torch
 
-from common import machine, machine_words
+from common import machine, machine_words, out_prefix
 from piga.data.schema import read_sequences
 from piga.evaluation.objects import EMPTY_RATIO, LOST_RATIO, check_objects
 from piga.io.atomic import atomic_output, write_json
@@ -36,7 +36,7 @@ from piga.cli.common import ArgumentParser, PigaError
 def main() -> int:
     p = ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("runs", nargs="+", help="run folders (RUN, or RUN=DATA when its config.json does not name the file)")
-    p.add_argument("--out", default="results/object_check", help="output prefix (default %(default)s)")
+    p.add_argument("--out", type=out_prefix, default="results/object_check", help="output prefix (default %(default)s)")
     args = p.parse_args()
     torch.set_num_threads(1)
     rows = []

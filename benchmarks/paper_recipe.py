@@ -32,7 +32,7 @@ from typing import Any
 
 import torch
 
-from common import logged_command, machine, machine_words
+from common import logged_command, machine, machine_words, out_prefix
 from prediction import run_training
 
 from piga.cli.common import ArgumentParser, positive_float, positive_int
@@ -139,7 +139,7 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--max-minutes", type=positive_float, default=None,
                    help="stop the paper run after the epoch that ends past this (default: no limit)")
     p.add_argument("--resume", action="store_true", help="continue a stopped paper run in OUT_runs/ (and record it again)")
-    p.add_argument("--out", default="results/paper_recipe", help="output prefix (default %(default)s)")
+    p.add_argument("--out", type=out_prefix, default="results/paper_recipe", help="output prefix (default %(default)s)")
     return p
 
 

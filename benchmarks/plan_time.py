@@ -48,7 +48,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from common import machine
+from common import machine, out_prefix
 from agents.config import CEMConfig
 from agents.dynamics import PendulumDynamics, start_of
 from agents.mpc import MPCConfig, OracleAgent, PigaMPCAgent
@@ -168,7 +168,7 @@ def planet_ratio(rows: list[dict]) -> dict | None:
 def main() -> int:
     p = ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--model", required=True, help="run folder of piga-train-model (a pendulum model)")
-    p.add_argument("--out", default="results/plan_time", help="output prefix (default %(default)s)")
+    p.add_argument("--out", type=out_prefix, default="results/plan_time", help="output prefix (default %(default)s)")
     p.add_argument("--episodes", type=positive_int, default=5, help="episodes per agent (default %(default)s)")
     p.add_argument("--steps", type=positive_int, default=EpisodeConfig.steps, help="steps per episode (default %(default)s)")
     p.add_argument("--seed", type=seed_int, default=0)

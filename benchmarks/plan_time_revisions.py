@@ -30,7 +30,7 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from common import machine, machine_words
+from common import machine, machine_words, out_prefix
 from piga.io.atomic import atomic_output, write_json
 from piga.cli.common import ArgumentParser, positive_int
 
@@ -92,7 +92,7 @@ def main(argv: list[str] | None = None) -> int:
     p = ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--baseline", required=True, help="the git revision to compare with (commit, tag or branch)")
     p.add_argument("--model", required=True, help="a pendulum run folder that both revisions load")
-    p.add_argument("--out", default="results/plan_time_revisions", help="output prefix (default %(default)s)")
+    p.add_argument("--out", type=out_prefix, default="results/plan_time_revisions", help="output prefix (default %(default)s)")
     p.add_argument("--pairs", type=int, default=5, help="runs at each revision, alternating (default %(default)s)")
     p.add_argument("--episodes", type=positive_int, default=5, help="episodes per agent and run (default %(default)s)")
     p.add_argument("--steps", type=positive_int, default=None, help="steps per episode (default: plan_time.py's)")

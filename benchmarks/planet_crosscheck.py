@@ -58,7 +58,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from common import machine, machine_words, write_page
+from common import machine, machine_words, out_prefix, write_page
 from agents.planet.config import LatentPlannerConfig, PlanetTrainConfig, RewardAlignment, RSSMConfig
 from agents.planet.rssm import WorldModel, model_steps
 from agents.planet.train import OPEN_LOOP_CONTEXT, _Sequences, check_planet_data, optimizer_step, rssm_config_for
@@ -515,7 +515,7 @@ def build_parser() -> argparse.ArgumentParser:
     rssm, train = RSSMConfig(), PlanetTrainConfig()
     p = ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--data", required=True, help="a pendulum HDF5 file with /rewards (piga-collect's)")
-    p.add_argument("--out", default="results/planet_crosscheck", help="writes OUT.json and OUT.md (default %(default)s)")
+    p.add_argument("--out", type=out_prefix, default="results/planet_crosscheck", help="writes OUT.json and OUT.md (default %(default)s)")
     p.add_argument("--steps", type=positive_int, default=train.steps, help="optimiser steps of each model (default %(default)s)")
     p.add_argument("--batch-size", type=positive_int, default=train.batch_size, help="chunks per batch (default %(default)s)")
     p.add_argument("--chunk-length", type=positive_int, default=train.chunk_length,

@@ -32,7 +32,7 @@ from pathlib import Path
 from typing import Any, Literal, get_args
 
 from baselines import PRESETS, BenchConfig, data_file, planet_scores, planet_table_runs, train_planet_run
-from common import farm_main, machine, machine_words, write_page
+from common import farm_main, machine, machine_words, out_prefix, write_page
 
 from piga.io.pool import JobRecords, RecordedJob, run_recorded
 from piga.cli.common import ArgumentParser, positive_int, seed_int
@@ -136,7 +136,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--runs", type=Path, default=Path("results/baselines_runs"),
                    help="the baselines benchmark's folder: its data files and records (default %(default)s)")
     p.add_argument("--preset", choices=sorted(PRESETS), default="budget", help="the baselines preset (default %(default)s)")
-    p.add_argument("--out", type=Path, default=Path("results/planet_faithful"), help="output prefix (default %(default)s)")
+    p.add_argument("--out", type=out_prefix, default=Path("results/planet_faithful"), help="output prefix (default %(default)s)")
     p.add_argument("--device", choices=["cpu", "cuda"], default="cpu",
                    help="where to train (default %(default)s; a run continues on either)")
     p.add_argument("--workers", type=positive_int, default=1,

@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from common import machine
+from common import machine, out_prefix
 from agents.planet.config import LatentPlannerConfig, RSSMConfig
 from agents.planet.planner import PlanetAgent
 from agents.planet.rssm import WorldModel
@@ -73,7 +73,7 @@ def measure(model: WorldModel, threads: int, steps: int, seed: int = 0, device: 
 
 def main() -> int:
     p = ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--out", required=True, help="writes OUT.json and OUT.md")
+    p.add_argument("--out", type=out_prefix, required=True, help="writes OUT.json and OUT.md")
     p.add_argument("--model", help="a piga-baseline planet run folder (default: an untrained default-size model)")
     p.add_argument("--threads", type=positive_int, nargs="+", default=[1], help="torch thread counts to measure (default 1)")
     p.add_argument("--steps", type=positive_int, default=20, help="env steps timed per engine and thread count (default 20)")

@@ -32,7 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from baselines import COST_S, PRESETS, BenchConfig, data_file, planet_scores, planet_table_runs, sweep_episodes
-from common import farm_main, machine, machine_words, score_cells, write_page
+from common import farm_main, machine, machine_words, out_prefix, score_cells, write_page
 
 from piga.cli.common import ArgumentParser, positive_int, seed_int
 from piga.io.atomic import write_json
@@ -186,7 +186,7 @@ def main(argv: list[str] | None = None) -> int:
                    help="processes that play a job's scored episodes, one torch thread each (the same episodes and "
                    "scores as one; default %(default)s)")
     p.add_argument("--preset", choices=sorted(PRESETS), default="budget", help="the baselines preset (default %(default)s)")
-    p.add_argument("--out", type=Path, default=Path("results/planet_protocol"), help="output prefix (default %(default)s)")
+    p.add_argument("--out", type=out_prefix, default=Path("results/planet_protocol"), help="output prefix (default %(default)s)")
     args = p.parse_args(argv)
     cfg = PRESETS[args.preset]
     plans = {}

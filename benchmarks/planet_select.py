@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from baselines import PRESETS, BenchConfig, planet_scores, recorded_scores
-from common import farm_main, machine, machine_words, score_cells, write_page
+from common import farm_main, machine, machine_words, out_prefix, score_cells, write_page
 
 from piga.io.pool import JobRecords, RecordedJob, run_recorded
 from piga.cli.common import ArgumentParser
@@ -89,7 +89,7 @@ def main(argv: list[str] | None = None) -> int:
     p = ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--runs", type=Path, nargs="+", required=True, help="finished PlaNet-style run folders")
     p.add_argument("--preset", choices=sorted(PRESETS), default="budget", help="the baselines preset (default %(default)s)")
-    p.add_argument("--out", type=Path, default=Path("results/planet_select"), help="output prefix (default %(default)s)")
+    p.add_argument("--out", type=out_prefix, default=Path("results/planet_select"), help="output prefix (default %(default)s)")
     args = p.parse_args(argv)
     cfg = PRESETS[args.preset]
     folder = args.out.parent / f"{args.out.name}_runs"

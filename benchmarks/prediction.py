@@ -31,8 +31,8 @@ from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any, Literal, get_args, get_type_hints
 
-from common import (TrainingBenchConfig, add_training_options, farm_main, logged_command, machine, machine_words,
-                    ray_backend)
+from common import (add_training_options, farm_main, logged_command, machine, machine_words, out_prefix, ray_backend,
+                    TrainingBenchConfig)
 
 from piga.io.atomic import atomic_output, write_json
 from piga.io.pool import JobRecords, RecordedJob, run_recorded
@@ -294,7 +294,7 @@ def ssim_figure(s: dict[str, dict[str, Any]]) -> Any:
 
 def parser() -> argparse.ArgumentParser:
     p = ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--out", type=Path, default=Path("results/prediction"),
+    p.add_argument("--out", type=out_prefix, default=Path("results/prediction"),
                    help="output prefix: OUT.json, OUT.md, OUT-ssim.png; runs and records in OUT_runs/ "
                         "(default %(default)s)")
     p.add_argument("--systems", nargs="+", choices=SYSTEMS, default=list(DEFAULTS.systems),

@@ -38,7 +38,7 @@ from pathlib import Path
 from typing import Any, Literal, get_args
 
 from baselines import PRESETS, data_file, evaluate, piga_epochs, train_piga
-from common import farm_main, machine, machine_words, signed
+from common import farm_main, machine, machine_words, out_prefix, signed
 
 from agents.reward_head import RewardHeadConfig
 from piga.cli.common import ArgumentParser, positive_int, seed_int
@@ -247,7 +247,7 @@ def markdown(record: dict[str, Any]) -> str:
 
 def parser() -> argparse.ArgumentParser:
     p = ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--out", type=Path, default=Path("results/privilege"),
+    p.add_argument("--out", type=out_prefix, default=Path("results/privilege"),
                    help="output prefix: OUT.json, OUT.md; runs and records in OUT_runs/ (default %(default)s)")
     p.add_argument("--sequences", type=positive_int, default=DEFAULTS.sequences,
                    help="training sequences (default %(default)s)")

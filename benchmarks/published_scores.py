@@ -19,7 +19,7 @@ import sys
 import zlib
 from pathlib import Path
 
-from common import check_record, is_number
+from common import check_record, is_number, out_prefix
 
 from piga.io.atomic import write_json
 from piga.cli.common import ArgumentParser
@@ -30,7 +30,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("scores", type=Path, help="a score file: a gzipped JSON list of {task, method, seed, xs, ys}")
     p.add_argument("--task", required=True, help="the task's name in the file, e.g. dmc_pendulum_swingup")
     p.add_argument("--source", required=True, help="where the file came from, for the record")
-    p.add_argument("--out", type=Path, required=True, help="the JSON to write")
+    p.add_argument("--out", type=out_prefix, required=True, help="the JSON to write")
     p.add_argument("--overwrite", action="store_true", help="replace an existing OUT")
     args = p.parse_args(argv)
     try:

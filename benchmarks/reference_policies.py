@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from common import machine, machine_words, signed, write_page
+from common import machine, machine_words, out_prefix, signed, write_page
 from piga.cli.common import ArgumentParser, positive_int, seed_int
 
 from envs import DMC_PENDULUM, ENV_IDS, PIXEL_PENDULUM
@@ -87,7 +87,7 @@ def markdown(record: dict[str, Any]) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     p = ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--out", type=Path, required=True, help="output prefix: OUT.md and OUT.json")
+    p.add_argument("--out", type=out_prefix, required=True, help="output prefix: OUT.md and OUT.json")
     p.add_argument("--envs", nargs="+", choices=ENV_IDS, default=list(ENV_IDS), help="the envs (default: both)")
     p.add_argument("--episodes", type=positive_int, default=50, help="episodes per policy (default %(default)s)")
     p.add_argument("--seed", type=seed_int, default=0, help="the run seed whose evaluation starts are played (default %(default)s)")

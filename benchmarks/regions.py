@@ -31,7 +31,8 @@ from pathlib import Path
 from typing import Any, get_args, get_type_hints
 
 import numpy as np
-from common import TrainingBenchConfig, add_training_options, farm_main, logged_command, machine, machine_words, ray_backend
+from common import (add_training_options, farm_main, logged_command, machine, machine_words, out_prefix, ray_backend,
+                    TrainingBenchConfig)
 
 from prediction import run_training
 
@@ -352,7 +353,7 @@ def strip_figure(truth: np.ndarray, records: dict[str, np.ndarray], steps: tuple
 
 def parser() -> argparse.ArgumentParser:
     p = ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--out", type=Path, default=Path("results/regions"),
+    p.add_argument("--out", type=out_prefix, default=Path("results/regions"),
                    help="output prefix: OUT.json, OUT.md, OUT-strip.png; runs and records in OUT_runs/ "
                         "(default %(default)s)")
     p.add_argument("--decoders", nargs="+", choices=[*DECODERS, *VARIANTS], default=list(DEFAULTS.decoders),

@@ -70,7 +70,7 @@ import h5py
 import numpy as np
 from filelock import FileLock
 
-from common import add_ray_option, farm_main, job_command, machine, machine_words, ray_backend
+from common import add_ray_option, farm_main, job_command, machine, machine_words, out_prefix, ray_backend, work_folder
 from piga.cli.common import ArgumentParser, NOT_CONVERGED, positive_int
 from piga.io.atomic import atomic_output, write_json
 from piga.io.pool import git_commit, run_pool
@@ -858,9 +858,9 @@ def list_rows(bench: Bench, chosen: list[Row]) -> str:
 @farm_main
 def main(argv: list[str] | None = None) -> int:
     p = ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--out", type=Path, default=Path("results/robustness"), help="output stem: OUT.md and OUT.json "
+    p.add_argument("--out", type=out_prefix, default=Path("results/robustness"), help="output stem: OUT.md and OUT.json "
                    "(default %(default)s)")
-    p.add_argument("--work", type=Path, default=Path("runs/robustness"),
+    p.add_argument("--work", type=work_folder, default=Path("runs/robustness"),
                    help="data files, run folders and per-row records (default %(default)s)")
     p.add_argument("--rows", nargs="+", metavar="PATTERN", help="only the rows whose name matches a shell pattern, "
                    "e.g. 'pendulum/*' 'seeds/spring-*' (default: all; see --list)")

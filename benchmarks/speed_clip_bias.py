@@ -20,6 +20,7 @@ import numpy as np
 
 from envs.pendulum import MAX_ACTION, PENDULUM_DT
 from piga.io.atomic import atomic_output, write_json
+from common import out_prefix
 from piga.cli.common import ArgumentParser, positive_int, seed_int
 
 
@@ -45,7 +46,7 @@ def fit(max_speed: float, sequences: int, steps: int, seed: int) -> dict[str, fl
 
 def main() -> None:
     p = ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("--out", default="results/speed_clip_bias", help="output stem (.json and .md)")
+    p.add_argument("--out", type=out_prefix, default="results/speed_clip_bias", help="output stem (.json and .md)")
     p.add_argument("--sequences", type=positive_int, default=500)
     p.add_argument("--steps", type=positive_int, default=40)
     p.add_argument("--seed", type=seed_int, default=0)

@@ -46,7 +46,7 @@ import numpy as np
 import torch
 from torch.utils.data import RandomSampler
 
-from common import machine, machine_words
+from common import machine, machine_words, out_prefix, work_folder
 from piga.data.schema import FRAME_CODEC, DatasetWriter, FrameCodec, inspect_dataset, read_sequences
 from piga.data.windows import BlockShuffleSampler, SequenceWindows
 from piga.io.atomic import atomic_output, write_json
@@ -280,11 +280,11 @@ def markdown(result: dict[str, Any]) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     p = ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--work", type=Path, required=True, help="folder for the data files and runs")
-    p.add_argument("--out", type=Path, required=True, help="writes OUT.json and OUT.md")
+    p.add_argument("--work", type=work_folder, required=True, help="folder for the data files and runs")
+    p.add_argument("--out", type=out_prefix, required=True, help="writes OUT.json and OUT.md")
     p.add_argument("--repeats", type=positive_int, default=3, help="repeats of each timing (default %(default)s)")
-    p.add_argument("--cap-mb", type=int, default=1536, help="the memory cap of the memory part, MiB (default %(default)s)")
-    p.add_argument("--big-sequences", type=int, nargs="+", default=[10000, 20000, 40000],
+    p.add_argument("--cap-mb", type=positive_int, default=1536, help="the memory cap of the memory part, MiB (default %(default)s)")
+    p.add_argument("--big-sequences", type=positive_int, nargs="+", default=[10000, 20000, 40000],
                    help="sequences of the memory part's files, rounded up to whole copies (default %(default)s)")
     p.add_argument("--skip-throughput", action="store_true",
                    help="no training-throughput part (the page keeps the one of OUT.json's previous run, if any)")

@@ -41,7 +41,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any, NamedTuple
 
-from common import add_ray_option, farm_main, machine, ray_backend
+from common import add_ray_option, farm_main, machine, out_prefix, ray_backend, work_folder
 
 from envs.scenes import scene_config
 from piga.io.atomic import write_json
@@ -314,11 +314,11 @@ def _errors_line(run: dict[str, Any], true: bool = False) -> str:
 @farm_main
 def main(argv: list[str] | None = None) -> int:
     p = ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--out", type=Path, required=True, help="output prefix: OUT.json, OUT.md, OUT-*.png")
+    p.add_argument("--out", type=out_prefix, required=True, help="output prefix: OUT.json, OUT.md, OUT-*.png")
     p.add_argument("--systems", nargs="+", choices=SYSTEMS, default=SYSTEMS,
                    help="cases: the systems, and gravity-m (the gravity data, g held at 60, m learned)")
     p.add_argument("--seeds", nargs="+", type=seed_int, default=[0, 1, 2])
-    p.add_argument("--work", type=Path, default=Path("runs/systems"), help="data and run folders (default %(default)s)")
+    p.add_argument("--work", type=work_folder, default=Path("runs/systems"), help="data and run folders (default %(default)s)")
     p.add_argument("--heldout", action="store_true",
                    help="also train once (seed 0) on each held-out data set of HELDOUT and add its table")
     p.add_argument("--jobs", type=positive_int, default=1, help="runs trained at once, each in its own process with one torch "

@@ -26,7 +26,7 @@ from dataclasses import replace
 from pathlib import Path
 
 
-from common import add_ray_option, farm_main, machine, ray_backend
+from common import add_ray_option, farm_main, machine, out_prefix, ray_backend, work_folder
 from piga.io.atomic import atomic_output
 from piga.io.pool import run_pool
 from piga.data.collect import CollectConfig, collect
@@ -95,10 +95,10 @@ def train_run(job: tuple[str, int, Path, Path]) -> dict[str, object]:
 @farm_main
 def main() -> None:
     p = ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("--out", default="results/train_accuracy", help="output stem (.json and .md)")
+    p.add_argument("--out", type=out_prefix, default="results/train_accuracy", help="output stem (.json and .md)")
     p.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES))
     p.add_argument("--seeds", nargs="+", type=seed_int, default=None, help="training seeds (default: 0-4 for 'default', 0 otherwise)")
-    p.add_argument("--work", default="runs/bench", help="folder for data and run folders")
+    p.add_argument("--work", type=work_folder, default="runs/bench", help="folder for data and run folders")
     p.add_argument("--jobs", type=positive_int, default=1, help="runs trained at once, one torch thread each (default 1: one at a "
                    "time, on torch's default threads)")
     add_ray_option(p, "the training runs")

@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 import torch
-from common import machine
+from common import machine, out_prefix
 
 from envs.scenes import draw_start, scene_config
 from piga.io.atomic import atomic_output, write_json
@@ -66,7 +66,7 @@ def fit(scene: str, positions: torch.Tensor, mode: str, steps: int, seed: int) -
 
 def main(argv: list[str] | None = None) -> int:
     p = ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--out", type=Path, required=True, help="output prefix: OUT.json and OUT.md")
+    p.add_argument("--out", type=out_prefix, required=True, help="output prefix: OUT.json and OUT.md")
     p.add_argument("--sequences", type=positive_int, default=200, help="sequences per scene (default %(default)s)")
     p.add_argument("--steps", type=positive_int, default=1000, help="Adam steps per fit (default %(default)s)")
     p.add_argument("--seed", type=seed_int, default=100, help="data seed, as the systems benchmark's (default %(default)s)")

@@ -20,7 +20,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from common import farm_main, logged_command, machine, machine_words, write_page
+from common import farm_main, logged_command, machine, machine_words, out_prefix, write_page
 from piga.cli.common import ArgumentParser, seed_int
 
 SEQUENCES, DATA_SEED = 100, 100
@@ -108,7 +108,7 @@ def markdown(record: dict[str, Any]) -> str:
 @farm_main
 def main(argv: list[str] | None = None) -> int:
     p = ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--out", type=Path, default=Path("results/regions_warmup"), help="output prefix (default %(default)s)")
+    p.add_argument("--out", type=out_prefix, default=Path("results/regions_warmup"), help="output prefix (default %(default)s)")
     p.add_argument("--seeds", type=seed_int, nargs="+", default=[0, 1, 2, 3], help="training seeds (default %(default)s)")
     p.add_argument("--data-sets", nargs="+", choices=list(DATA_SETS), default=list(DATA_SETS),
                    help="default %(default)s")

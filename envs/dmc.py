@@ -421,6 +421,9 @@ def make_dmc_pendulum(config: DMCPendulumConfig | None = None, render_mode: str 
     Raises:
         MissingExtraError: dm_control or MuJoCo is missing ("install piga[dmc]").
     """
+    if config is not None and not isinstance(config, DMCPendulumConfig):
+        raise TypeError(f"config must be a DMCPendulumConfig or None, got {type(config).__name__}; give fields as "
+                        "keywords or build the config")
     config = replace(config or DMCPendulumConfig(), **overrides)
     env: gym.Env = DMCPendulumEnv(config, render_mode)
     if config.color == "gray":

@@ -276,6 +276,9 @@ def make_pixel_pendulum(
     """
     if render_mode not in (None, "rgb_array"):
         raise ValueError(f"the pixel pendulum renders only as 'rgb_array', got render_mode={render_mode!r}")
+    if config is not None and not isinstance(config, PixelPendulumConfig):  # (dataclasses' replace() named no argument)
+        raise TypeError(f"config must be a PixelPendulumConfig or None, got {type(config).__name__}; give fields as "
+                        "keywords (make_pixel_pendulum(gravity=3.0)) or build the config")
     config = replace(config or PixelPendulumConfig(), **overrides)
     env = gym.make(
         "Pendulum-v1",

@@ -24,8 +24,25 @@ def test_every_script_runs_under_run_cli(script: Path) -> None:
 @pytest.mark.parametrize("argv, code, line", [
     (["control.py", "--model", "nowhere", "--out", "OUT"], 1,
      "control.py: error: nowhere/checkpoint.pt: no checkpoint (is nowhere a piga-train-model run folder?)"),
-    (["control.py", "--model", "nowhere", "--out", "/dev/null/x"], 1,  # refused before any job, not after an hour
-     "control.py: error: /dev/null is a file, not a folder, so /dev/null/x.json cannot be written there"),
+    (["control.py", "--model", "nowhere", "--out", "/dev/null/x"], 2,  # refused before any job, not after an hour
+     "control.py: error: argument --out: /dev/null is a file, not a folder, so /dev/null/x cannot be written there "
+     "(see --help)"),
+    # each trained or collected first, then failed "removed or moved while it ran?" (/proc) or "[Errno 17]" (a file)
+    (["identify_time.py", "--out", "/proc/x/y"], 2, "identify_time.py: error: argument --out: /proc is on a file "
+     "system that stores no files (as /proc and /sys are); write elsewhere (see --help)"),
+    (["train_accuracy.py", "--work", "/dev/null"], 2, "train_accuracy.py: error: argument --work: /dev/null is a file, "
+     "not a folder: give a folder for the data and runs (see --help)"),
+    (["identify_time.py", "--out", "OUT", "--recipes", "budget-abc"], 1,
+     "identify_time.py: error: --recipes budget-abc: budget-N takes a whole number of steps N >= 1"),
+    (["identify_time.py", "--out", "OUT", "--threads", "-1"], 2, "identify_time.py: error: argument --threads: "
+     "expected an integer in [0, MAX] (0: torch's choice; at most this machine's MAX CPUs), got -1 (see --help)"),
+    (["storage.py", "--out", "OUT", "--work", "W", "--cap-mb", "0"], 2,
+     "storage.py: error: argument --cap-mb: expected a positive integer, got 0 (see --help)"),
+    (["dmc.py", "--out", "OUT", "--work", "W", "--control-seed", "-1"], 2,
+     "dmc.py: error: argument --control-seed: expected an integer in [0, 2^63 - 1], got -1 (see --help)"),
+    (["backends.py", "--model", "m", "--out", "OUT", "--work", "W", "--ray", "garbage"], 1,  # after the local sweep
+     "backends.py: error: --ray garbage: no Ray cluster at garbage:6379: unknown host (Name or service not known)"),
+    (["camera_stage_time.py", "run", "nowhere.h5"], 1, "camera_stage_time.py: error: nowhere.h5: no such file"),
     (["control.py", "--model", "nowhere", "--workers", "0"], 2,
      "control.py: error: argument --workers: expected a positive integer, got 0 (see --help)"),
     (["backends.py", "--bogus", "1"], 2,  # every bad argument was "--cluster-note: expected a value, got ''", its default
@@ -44,7 +61,10 @@ def test_every_script_runs_under_run_cli(script: Path) -> None:
      "planet_plan_time.py: error: argument --threads: expected a positive integer, got 0 (see --help)"),
 ])
 def test_bad_input_to_a_script_is_one_line(tmp_path: Path, argv: list[str], code: int, line: str) -> None:
+    import os
+
     argv = [a.replace("OUT", str(tmp_path / "out")) for a in argv]
+    line = line.replace("MAX", str(os.cpu_count()))
     done = subprocess.run([sys.executable, str(BENCHMARKS / argv[0]), *argv[1:]], capture_output=True, text=True,
                           env=ENV, cwd=tmp_path, timeout=120)
     assert done.returncode == code and "Traceback" not in done.stderr, done.stderr

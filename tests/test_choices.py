@@ -195,3 +195,22 @@ def test_more_threads_than_cpus_is_named_before_torch_takes_them(tiny_data: Any,
         piga.train(tiny_data, tmp_path / "run", piga.TrainConfig(epochs=1, threads=(os.cpu_count() or 1) + 1),
                    progress=False)
     assert not (tmp_path / "run").exists()
+
+
+def test_the_api_names_an_argument_of_the_wrong_kind(tiny_data: Any, tmp_path: Any) -> None:
+    """Each failed deep inside dataclasses, functools or torch, naming nothing of the call."""
+    import torch
+
+    import piga
+
+    with pytest.raises(TypeError, match="config must be a PixelPendulumConfig or None, got dict"):
+        piga.make_pixel_pendulum(config={"gravity": 3})
+    with pytest.raises(TypeError, match="make_env must be a function"):
+        piga.collect(piga.CollectConfig(sequences=2, steps=4, workers=1), tmp_path / "x.h5", make_env=5)
+    model = piga.PhysicsModel(piga.ModelConfig())
+    x = torch.zeros(1, 2, 1, 64, 64)
+    assert model.encode(x).shape == (1, 2, 1, 1)
+    with pytest.raises(ValueError, match=r"encode takes frames of \(C, H, W\) = \(1, 64, 64\), the model's, got \(1, 32, 32\)"):
+        model.encode(x[..., :32, :32])
+    with pytest.raises(TypeError, match="encode takes torch.float32 frames, got torch.float64"):
+        model.encode(x.double())

@@ -213,6 +213,8 @@ def collect(
     """
     if not isinstance(config, CollectConfig):
         raise TypeError(f"config must be a CollectConfig, got {type(config).__name__}")
+    if make_env is not None and not callable(make_env):  # (functools said "the first argument must be callable")
+        raise TypeError(f"make_env must be a function from the env config to an env, or None; got {type(make_env).__name__}")
     check_writable_target(out, overwrite)  # before any setup work
     check_resources(config, out)
     n, t = config.sequences, config.steps

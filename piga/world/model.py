@@ -482,6 +482,13 @@ class ObjectModel(FrameModel):
         if not isinstance(frames, Tensor) or frames.dim() != 5:
             raise TypeError(f"encode takes float frames as a tensor (B, T, C, H, W), got {type(frames).__name__} "
                             f"{tuple(getattr(frames, 'shape', ()))}: convert them with piga.frames_to_float")
+        expected = (self.config.channels, self.config.image_size, self.config.image_size)
+        if tuple(frames.shape[2:]) != expected:  # (torch said "The size of tensor a (32) must match ... (64)")
+            raise ValueError(f"encode takes frames of (C, H, W) = {expected}, the model's, got {tuple(frames.shape[2:])}")
+        weight = next(self.encoder.parameters(), None)
+        if not frames.is_floating_point() or (weight is not None and frames.dtype != weight.dtype):
+            raise TypeError(f"encode takes {weight.dtype if weight is not None else 'float'} frames, got {frames.dtype}: "
+                            "convert them with piga.frames_to_float")
         b, t = frames.shape[:2]
         coords = self.encoder(frames.flatten(0, 1).contiguous(memory_format=torch.channels_last))
         return coords.view(b, t, *coords.shape[1:])
