@@ -14,6 +14,7 @@ import re
 import os
 import shutil
 import signal
+import sys
 import subprocess
 import time
 from collections.abc import Callable, Sequence
@@ -3797,3 +3798,28 @@ def test_an_lzw_tiff_goal_image_is_read(tmp_path: Path) -> None:
     picture[10:20, 5:15] = (10, 200, 30)
     assert cv2.imwrite(str(tmp_path / "g.tiff"), picture)
     assert np.array_equal(read_image(tmp_path / "g.tiff"), picture[..., ::-1])
+
+
+def test_a_collection_worker_killed_under_a_step_is_one_line(tmp_path: Path) -> None:
+    """A worker of AsyncVectorEnv that died (SIGKILL here; a process-group SIGTERM once raced the parent's own handler)
+    left the parent reading its closed pipe: an internal error (EOFError) with 24 lines of Gymnasium's traceback."""
+    out = tmp_path / "x.h5"
+    proc = subprocess.Popen([sys.executable, "-m", "piga.cli.collect", "--out", str(out), "--sequences", "4000",
+                             "--steps", "20", "--workers", "2", "--quiet"], env=ENV, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.time() + 60
+        workers: list[str] = []
+        while time.time() < deadline and len(workers) < 2:  # AsyncVectorEnv's two workers (forks), once started
+            time.sleep(0.5)
+            workers = subprocess.run(["pgrep", "-P", str(proc.pid)], capture_output=True, text=True).stdout.split()
+        assert len(workers) == 2, "the workers did not start"
+        time.sleep(1.0)
+        os.kill(int(workers[0]), signal.SIGKILL)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 1, err
+    assert_one_line(proc.returncode, err, "a collection worker process ended in the middle of a step")
+    assert _listing(tmp_path) == []

@@ -18,6 +18,7 @@ object, name -> value, empty without effects) and ``env_config``.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import math
 import multiprocessing
@@ -269,10 +270,14 @@ def collect(
                     bar.update(len(ids))
                 writer.write(start, frames, actions, states, rewards)
             writer.set_split(np.repeat(np.arange(3, dtype=np.int8), counts))
-    except BaseException:  # interrupted or failed: stop the workers now, without waiting for their step
-        with warnings.catch_warnings():
+    except BaseException as exc:  # interrupted or failed: stop the workers now, without waiting for their step
+        with warnings.catch_warnings(), contextlib.suppress(EOFError, OSError):  # (a dead worker's pipe, again)
             warnings.simplefilter("ignore")
             vec.close(terminate=True)
+        if isinstance(exc, (EOFError, ConnectionError)):  # a worker's pipe closed: the worker died (a signal, the OOM
+            # killer) under a step; it was an internal error with Gymnasium's traceback
+            raise ChildProcessError(f"a collection worker process ended in the middle of a step (killed by a signal, "
+                                    f"or out of memory?); nothing was written to {out}: run the command again") from None
         raise
     vec.close()
     return Path(out)
