@@ -57,7 +57,7 @@ from common import (add_diagnose_options, add_ray_option, diagnose_options, farm
 from diagnose_blind import run_diagnose, save, strip_labels
 from diagnose_blind import score as score_gym
 from envs.dmc import DMCPendulumConfig, DMCPendulumEnv
-from piga.cli.common import ArgumentParser, NOT_CONVERGED, positive_int, seed_int
+from piga.cli.common import ArgumentParser, NOT_CONVERGED, nonnegative_float, nonnegative_int, positive_int, seed_int
 from piga.data.collect import CollectConfig, collect
 from piga.io.pool import run_pool
 
@@ -393,15 +393,17 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--jobs", type=positive_int, default=1,
                    help="cases run at once, each in its own process with one torch thread (a machine's cores)")
     add_ray_option(p, "the cases")
-    p.add_argument("--true-angles", type=int, default=None, metavar="CASE",
+    p.add_argument("--true-angles", type=nonnegative_int, default=None, metavar="CASE",
                    help="outside the blind protocol: fit the candidates to case CASE's true angles and print the verdict "
                         "and the signed errors of g, a, b (what the physics gets wrong without the vision)")
-    p.add_argument("--angle-noise", type=float, default=0.0, metavar="RAD",
+    p.add_argument("--angle-noise", type=nonnegative_float, default=0.0, metavar="RAD",
                    help="with --true-angles: add independent Gaussian errors of this rms (rad) to the true angles")
     add_diagnose_options(p, {"--fit-starts": "; with --true-angles: DiagnoseConfig.fit_starts, off unless given"})
     p.add_argument("--rescore", action="store_true",
                    help="score the finished cases' reports (in --work) again with this script's scorer, and rewrite OUT")
     args = p.parse_args(argv)
+    if args.angle_noise and args.true_angles is None:  # (it was ignored in silence)
+        p.error("--angle-noise goes with --true-angles (errors added to the true angles)")
     if args.quick:
         args.cases, args.sequences, args.steps = min(args.cases, 2), 40, 16
     # --quick: a tiny model (the tests' recipe), which may well be refused: it checks the pipeline

@@ -58,7 +58,7 @@ import numpy as np
 from gymnasium.wrappers import FrameStackObservation, GrayscaleObservation, ReshapeObservation, TransformObservation
 
 from envs.fields import check_field_kinds
-from envs.pendulum import MIN_ACTUATION_GAIN
+from envs.pendulum import MAX_IMAGE_SIZE, MIN_ACTUATION_GAIN
 
 __all__ = ["CAMERAS", "COLORS", "DMC_PHYSICS_DT", "DMC_EPISODE_STEPS", "DMCPendulumConfig", "MissingExtraError", "make_dmc_pendulum",
            "DMCPendulumEnv"]
@@ -87,8 +87,6 @@ MIN_LENGTH = TIP_RADIUS
 EARTH_GRAVITY = 9.81
 #: The camera sees a square of this half-side (metres) around the pivot: a pole up to 0.6 m fits.
 VIEW_HALF_SIDE = 0.7
-#: Largest frame side (pixels): MuJoCo renders it off-screen, and far larger frames would not fit a replay buffer.
-MAX_IMAGE_SIZE = 1024
 #: Most frames in one observation.
 MAX_FRAME_STACK = 64
 #: Longest episode in frames (a million: 11 hours of the pendulum's time at the default action repeat).

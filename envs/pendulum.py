@@ -82,6 +82,11 @@ MIN_ACTUATION_GAIN = MIN_GRAVITY = 1e-6
 _TOO_WEAK = "weaker, it moves the pendulum's tip by under a hundredth of a pixel in a 200-step episode"
 
 
+#: Largest frame side (pixels), of either pendulum: MuJoCo renders it off-screen, Gymnasium's render (500 px) is
+#: resized to it, and far larger frames would not fit a replay buffer (5000 px frames were collected, upscaled).
+MAX_IMAGE_SIZE = 1024
+
+
 @dataclass(frozen=True)
 class PixelPendulumConfig:
     """Settings of the pixel pendulum. Every field has a Gymnasium-faithful default."""
@@ -128,7 +133,7 @@ class PixelPendulumConfig:
                 raise ValueError(f"effect shift={value:g} px would move the pendulum out of a {self.image_size} px frame "
                                  f"(its pivot out of view); use |shift| < {self.image_size / 2:g}")
         checks = {  # each field: whether it is in range, and its range in words
-            "image_size": (self.image_size >= 8, "image_size >= 8"),
+            "image_size": (8 <= self.image_size <= MAX_IMAGE_SIZE, f"image_size in [8, {MAX_IMAGE_SIZE}]"),
             "frame_stack": (self.frame_stack >= 1, "frame_stack >= 1"),
             "gravity": (self.gravity > 0 and math.isfinite(self.gravity), "gravity > 0, finite"),
             "gravity_mult": (self.gravity_mult > 0 and math.isfinite(self.gravity_mult), "gravity_mult > 0, finite"),

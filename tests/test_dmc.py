@@ -156,7 +156,7 @@ def test_collect_with_its_default_workers_finishes_and_matches_one_worker(tmp_pa
     for workers in ("2", "1"):
         out = tmp_path / f"w{workers}.h5"
         done = subprocess.run([sys.executable, "-m", "piga.cli.collect", "--env", "piga/DMCPendulum-v0", "--out", str(out),
-                               "--sequences", "4", "--steps", "5", "--workers", workers, "--quiet"],
+                               "--sequences", "4", "--steps", "5", "--split", "2,1,1", "--workers", workers, "--quiet"],
                               capture_output=True, text=True, timeout=120)
         assert done.returncode == 0 and done.stderr == "", done.stderr
         with h5py.File(out) as f:

@@ -340,7 +340,8 @@ def train_planet(
             if state.step % config.checkpoint_every == 0 or state.step == config.steps:
                 state.elapsed = time.monotonic() - started
                 record = {name: total / count for name, total in sums.items()}
-                record.update({"step": state.step, "seconds": state.elapsed})
+                # the means since the last record: over steps first_step..step (a resume starts a new window)
+                record.update({"step": state.step, "first_step": state.step - count + 1, "seconds": state.elapsed})
                 valid = _valid_losses(model, valid_window, config)  # its own generator: the training draws are untouched
                 if valid is not None:
                     record["valid_loss"] = valid["loss"]

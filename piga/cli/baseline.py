@@ -472,7 +472,9 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
     if not written:  # a resume with nothing left to do still records its command
         write_json(run_dir / "config.json", record)
     last = state.history[-1] if state.history else {}
-    print(f"trained {state.step} steps in {state.elapsed / 60:.1f} min; last loss {last.get('loss', float('nan')):.2f} "
+    window = (f"mean loss over steps {last['first_step']:,}..{last['step']:,}" if "first_step" in last and "step" in last
+              else "last loss")  # (a mean since the last record: after a resume, over the steps since it)
+    print(f"trained {state.step} steps in {state.elapsed / 60:.1f} min; {window} {last.get('loss', float('nan')):.2f} "
           f"(reconstruction {last.get('reconstruction', float('nan')):.2f}, reward {last.get('reward', float('nan')):.4f}, "
           f"KL {last.get('kl', float('nan')):.2f}); wrote {run_dir}/metrics.json")
     from agents.planet.train import did_not_learn

@@ -689,6 +689,9 @@ RAY_HELP = ("run them as tasks of a Ray cluster, one CPU each, as many at once a
 def ray_address(text: str) -> str:
     """argparse type of ``--ray``: "auto" or HOST:PORT (HOST alone: Ray's port 6379)."""
     text = text.strip()
+    if text.lower() == "local":  # Ray's own word for a new instance, taken as a host name and run undocumented
+        raise argparse.ArgumentTypeError("'local' is not a Ray address here: give 'auto' (the Ray instance running on "
+                                         "this machine, or a new one) or HOST:PORT")
     if text != "auto":
         try:
             host_port(text)

@@ -466,7 +466,9 @@ def score_candidates(nom: Nominal, w: WindowSet, progress: bool = False, exclude
     if refit is None or not math.isfinite(refit.bic):
         raise DiagnosisInputError(f"refitting g and a to this recording's angles diverged (from g = {nom.g:.3g}, "
                                   f"a = {nom.a:.3g}): the angles read from it are no pendulum motion that the nominal "
-                                  "physics can follow; is the model trained well enough on this camera?")
+                                  "physics can follow: a camera the model does not read (is it trained well enough on "
+                                  "this camera?), or an effect far beyond the nominal physics (a damping that stops "
+                                  "the swing within a few frames)")
     bar.update()
     flip_bic_drop = 0.0
     if actuation_sign(nom, w.fit1) * nom.a < 0:  # the observed response to the actions has the other sign
