@@ -148,7 +148,7 @@ def test_stale_partial_files_are_removed_by_the_next_run(tmp_path: Path) -> None
         alive.wait()
 
 
-@pytest.mark.parametrize("args", [["--steps", "1000000000"], ["--image-size", "100000"], ["--sequences", "1000000000"]])
+@pytest.mark.parametrize("args", [["--steps", "1000000000"], ["--image-size", "1024", "--sequences", "200000"], ["--sequences", "1000000000"]])
 def test_sizes_that_cannot_fit_are_refused_before_allocating(tmp_path: Path, args: list[str],
                                                              capsys: pytest.CaptureFixture[str]) -> None:
     from piga.cli import collect as cli

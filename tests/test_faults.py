@@ -319,7 +319,7 @@ def test_a_failed_allocation_is_out_of_memory(capsys: pytest.CaptureFixture[str]
     (["--effect", "delay=1000000000"], ["delay must be an integer >= 1 and <= 1000"], 2),
     (["--effect", "noise=1e30"], ["noise must be > 0 and <= 1000"], 2),
     (["--system", "spring", "--radius", "1e-9"], ["radius must be at least 0.5 px"], 1),
-    (["--image-size", "7"], ["--image-size=7 is out of range (--image-size >= 8)"], 1),  # it said "sizes ... >= 1"
+    (["--image-size", "7"], ["--image-size=7 is out of range (--image-size in [8, 1024])"], 1),  # it said "sizes ... >= 1"
     (["--max-speed", "-1"], ["--max-speed=-1.0 is out of range (--max-speed in [0, 8])"], 1),  # it listed every field's range
     (["--env", "piga/DMCPendulum-v0", "--image-size", "7"], ["--image-size=7 is out of range (--image-size in [8, 1024]"], 1),
     (["--system", "digits-spring", "--background", "black"], ["--background: digits-spring draws its digits over a texture"], 1),
@@ -3536,7 +3536,7 @@ def test_diagnose_names_a_scene_file_before_its_length(tmp_path: Path, capsys: p
     """A 12-frame spring file was first "too short to diagnose ... piga-collect --steps 13"; recollected, it was then
     refused as spring data."""
     data = tmp_path / "spring.h5"
-    assert collect.main(["--system", "spring", "--sequences", "4", "--steps", "12", "--out", str(data), "--quiet"]) == 0
+    assert collect.main(["--system", "spring", "--sequences", "4", "--steps", "12", "--split", "2,1,1", "--out", str(data), "--quiet"]) == 0
     refused("piga-diagnose", ["--model", str(tmp_path / "run"), "--data", str(data), "--out", str(tmp_path / "rep")],
             capsys, "piga-diagnose is for pendulum data; this file holds spring data")
 

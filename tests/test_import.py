@@ -91,10 +91,12 @@ def test_a_video_whose_rate_disagrees_with_dt_is_said(tmp_path: Path, recording:
     iio.imwrite(gif, frames, duration=100)
     assert recording_frame_seconds(mp4) == pytest.approx(0.05) and recording_frame_seconds(gif) == pytest.approx(0.1)
     assert recording_frame_seconds(folder) is None
-    code, _, err = _cli(str(mp4), str(csv), "--dt", "0.1", "--out", str(tmp_path / "a.h5"), "--steps", "8", capsys=capsys)
+    code, _, err = _cli(str(mp4), str(csv), "--dt", "0.1", "--out", str(tmp_path / "a.h5"), "--steps", "8", "--split",
+                        "1,1,0", capsys=capsys)
     assert code == 0 and err == f"piga-import: warning: {mp4} says its frames are 0.05 s apart; the file takes --dt 0.1, " \
                                 "as given, and the physics steps that long per frame\n", err
-    code, _, err = _cli(str(mp4), str(csv), "--dt", "0.05", "--out", str(tmp_path / "b.h5"), "--steps", "8", capsys=capsys)
+    code, _, err = _cli(str(mp4), str(csv), "--dt", "0.05", "--out", str(tmp_path / "b.h5"), "--steps", "8", "--split",
+                        "1,1,0", capsys=capsys)
     assert code == 0 and err == ""
 
 
@@ -109,7 +111,7 @@ def test_an_image_stack_is_a_recording(tmp_path: Path, recording: tuple[Path, Pa
     assert read_recording(gray, 64).tobytes() == frames.tobytes()
     assert np.abs(read_recording(rgb, 64).astype(int) - frames).max() <= 1
     code, out, err = _cli(str(gray), str(csv), "--dt", "0.05", "--out", str(tmp_path / "o.h5"), "--steps", "5",
-                          capsys=capsys)
+                          "--split", "1,1,1", capsys=capsys)
     assert code == 0 and err == "" and "3 sequences x 5 frames" in out
     np.savez(tmp_path / "x.npz", a=np.zeros(5))
     assert_one_line(*_cli(str(tmp_path / "x.npz"), str(csv), "--dt", "0.05", "--out", str(tmp_path / "n.h5"),
@@ -226,7 +228,7 @@ def test_cli_bad_input(tmp_path: Path, recording: tuple[Path, Path, np.ndarray, 
     assert_one_line(*run(str(folder), str(csv), "--dt", "-0.05", "--out", out), "--dt")
     assert_one_line(*run(str(folder), str(csv), "--out", out), "--dt")
     assert_one_line(*run(str(folder), str(csv), "--dt", "0.05", "--out", out, "--steps", "5", "--split", "0,0,1"),
-                     "no training sequence")
+                     "gives the training split no share")
     assert not Path(out).exists()
     assert list(tmp_path.glob(".*partial*")) == []
 

@@ -558,6 +558,7 @@ def test_a_run_stopped_before_its_end_is_said_never_checked(tmp_path: Path) -> N
 
     assert convergence_warning(tmp_path) is None  # no run at all: whoever reads it refuses it on its own
     (tmp_path / "checkpoint.pt").write_bytes(b"")
+    (tmp_path / "config.json").write_text("{}")  # piga-train-model's record, written at its first checkpoint
     warning = convergence_warning(tmp_path)
     assert warning is not None and "has no metrics.json" in warning and "never checked for convergence" in warning
     assert "--resume" in warning and "\n" not in warning
