@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from piga.cli.common import ArgumentParser
+from piga.cli.common import ArgumentParser, PigaError
 
 
 def knn_rmse(train_x: torch.Tensor, train_y: torch.Tensor, test_x: torch.Tensor, test_y: torch.Tensor, k: int = 5) -> list[float]:
@@ -58,7 +58,7 @@ def probe_actor(run: Path, data: Path) -> dict[str, object]:
 
     model, config, _ = load_sb3(run)
     if config.obs != "pixels":
-        raise SystemExit(f"{run}: a --obs {config.obs} run; the actor probe is for pixel runs")
+        raise PigaError(f"{run}: a --obs {config.obs} run; the actor probe is for pixel runs")
     with h5py.File(data, "r") as f:
         obs = f["frames"][:50, 4:4 + config.frame_stack]  # (50, K, 64, 64) uint8
     actions, _ = model.predict(obs, deterministic=True)

@@ -57,7 +57,8 @@ from common import (add_diagnose_options, add_ray_option, diagnose_options, farm
 from diagnose_blind import run_diagnose, save, strip_labels
 from diagnose_blind import score as score_gym
 from envs.dmc import DMCPendulumConfig, DMCPendulumEnv
-from piga.cli.common import ArgumentParser, NOT_CONVERGED, nonnegative_float, nonnegative_int, positive_int, seed_int
+from piga.cli.common import (ArgumentParser, NOT_CONVERGED, PigaError, nonnegative_float, nonnegative_int, positive_int,
+                             seed_int)
 from piga.data.collect import CollectConfig, collect
 from piga.io.pool import run_pool
 
@@ -429,7 +430,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.true_angles is not None:
         case = next((c for c in cases if c["case"] == args.true_angles), None)
         if case is None:
-            raise SystemExit(f"--true-angles: no case {args.true_angles} among the {args.cases} drawn")
+            raise PigaError(f"--true-angles: no case {args.true_angles} among the {args.cases} drawn")
         print(json.dumps(true_angle_fit(case, work, args.sequences, args.steps, args.angle_noise, bool(args.fit_starts)),
                          indent=2))
         return 0

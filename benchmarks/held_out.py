@@ -31,7 +31,7 @@ from common import change_cells, farm_main, machine, machine_words, out_prefix, 
 
 from piga.io.checkpoint import CHECKPOINT
 from piga.io.pool import JobRecords, RecordedJob, run_recorded
-from piga.cli.common import ArgumentParser, seed_int
+from piga.cli.common import ArgumentParser, PigaError, seed_int
 
 HELD_OUT_SEED = 4242
 """The held-out episodes' seed (starts drawn from ``default_rng(4242)``, env seeds 4242000 + e)."""
@@ -68,7 +68,7 @@ def evaluations(runs: Path, names: tuple[str, ...] | None, seed: int) -> tuple[l
             missing.append(name)
     unknown = sorted(set(names or ()) - set(specs))
     if unknown:
-        raise SystemExit(f"held_out.py: error: no record in {runs / 'records'} for {', '.join(unknown)}")
+        raise PigaError(f"no record in {runs / 'records'} for {', '.join(unknown)}")
     return todo, missing
 
 

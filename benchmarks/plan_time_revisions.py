@@ -32,7 +32,7 @@ from typing import Any
 
 from common import machine, machine_words, out_prefix
 from piga.io.atomic import atomic_output, write_json
-from piga.cli.common import ArgumentParser, positive_int
+from piga.cli.common import ArgumentParser, PigaError, positive_int
 
 ROOT = Path(__file__).resolve().parents[1]
 AGENTS = ("oracle", "piga")
@@ -51,7 +51,7 @@ def plan_time(tree: Path, model: str, out: Path, episodes: int, steps: int | Non
                            *(["--steps", str(steps)] if steps else [])], cwd=tree, env=env, capture_output=True,
                           text=True)
     if done.returncode != 0:
-        raise SystemExit(f"plan_time.py failed in {tree}: {(done.stderr.strip().splitlines() or ['no output'])[-1]}")
+        raise PigaError(f"plan_time.py failed in {tree}: {(done.stderr.strip().splitlines() or ['no output'])[-1]}")
     rows = json.loads(out.with_suffix(".json").read_text())["rows"]
     return {row["agent"]: float(row["plan_ms_median"]) for row in rows if row["agent"] in AGENTS}
 
@@ -101,14 +101,14 @@ def main(argv: list[str] | None = None) -> int:
 
     torch.set_num_threads(1)  # what each run uses (OMP_NUM_THREADS=1), and so what the machine record says
     if args.pairs < 1 or args.episodes < 1:
-        raise SystemExit("--pairs and --episodes must be at least 1")
+        raise PigaError("--pairs and --episodes must be at least 1")
     model = str(Path(args.model).resolve())
     if not (Path(model) / "checkpoint.pt").exists():
-        raise SystemExit(f"--model {args.model}: no checkpoint.pt there")
+        raise PigaError(f"--model {args.model}: no checkpoint.pt there")
     try:
         base_commit = git("rev-parse", "--verify", f"{args.baseline}^{{commit}}")
     except subprocess.CalledProcessError:
-        raise SystemExit(f"--baseline {args.baseline}: not a revision of this repository") from None
+        raise PigaError(f"--baseline {args.baseline}: not a revision of this repository") from None
     command = shlex.join(["python", *(sys.argv if argv is None else ["benchmarks/plan_time_revisions.py", *argv])])
     runs: dict[str, list[dict[str, float]]] = {"baseline": [], "current": []}
     with tempfile.TemporaryDirectory(prefix="piga-revisions-") as tmp:

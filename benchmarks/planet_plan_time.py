@@ -40,7 +40,7 @@ from agents.planet.config import LatentPlannerConfig, RSSMConfig
 from agents.planet.planner import PlanetAgent
 from agents.planet.rssm import WorldModel
 from piga.io.atomic import atomic_output, write_json
-from piga.cli.common import ArgumentParser, positive_int
+from piga.cli.common import ArgumentParser, PigaError, positive_int
 from piga.io.pool import git_commit
 
 
@@ -80,7 +80,7 @@ def main() -> int:
     p.add_argument("--device", choices=["cpu", "cuda"], default="cpu", help="where the agents plan (default cpu)")
     args = p.parse_args()
     if args.device == "cuda" and not torch.cuda.is_available():
-        raise SystemExit("--device cuda: torch sees no CUDA GPU here")
+        raise PigaError("--device cuda: torch sees no CUDA GPU here")
     if args.model:
         from agents.planet.run import load_planet
 

@@ -71,7 +71,7 @@ import numpy as np
 from filelock import FileLock
 
 from common import add_ray_option, farm_main, job_command, machine, machine_words, out_prefix, ray_backend, work_folder
-from piga.cli.common import ArgumentParser, NOT_CONVERGED, positive_int
+from piga.cli.common import ArgumentParser, PigaError, NOT_CONVERGED, positive_int
 from piga.io.atomic import atomic_output, write_json
 from piga.io.pool import git_commit, run_pool
 from piga.data.schema import DatasetWriter
@@ -218,7 +218,7 @@ def select(all_rows: list[Row], patterns: list[str] | None) -> list[Row]:
         return all_rows
     chosen = [r for r in all_rows if any(fnmatch.fnmatchcase(r.name, p) for p in patterns)]
     if not chosen:
-        raise SystemExit(f"--rows {' '.join(patterns)}: no row matches; see --list")
+        raise PigaError(f"--rows {' '.join(patterns)}: no row matches; see --list")
     return chosen
 
 
@@ -883,7 +883,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     if args.render:
         if not (args.work / "records").is_dir():
-            raise SystemExit(f"--render: {args.work / 'records'} does not exist; nothing to render")
+            raise PigaError(f"--render: {args.work / 'records'} does not exist; nothing to render")
         published = args.out.with_suffix(".json")
         if published.exists():
             bench.command = json.loads(published.read_text()).get("command", command)
@@ -891,7 +891,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"wrote {args.out.with_suffix('.md')} and {published} from {args.work / 'records'}")
         return 0
     if shutil.which("piga-train-model") is None or shutil.which("piga-collect") is None:
-        raise SystemExit("piga-train-model or piga-collect is not on PATH; install piga (pip install -e .)")
+        raise PigaError("piga-train-model or piga-collect is not on PATH; install piga (pip install -e .)")
     args.out.parent.mkdir(parents=True, exist_ok=True)
     if adopted := bench.prepare():
         print(f"{len(adopted)} rows taken from {args.out.with_suffix('.json')} (their records were not in {args.work})",

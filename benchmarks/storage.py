@@ -50,7 +50,7 @@ from common import machine, machine_words, out_prefix, work_folder
 from piga.data.schema import FRAME_CODEC, DatasetWriter, FrameCodec, inspect_dataset, read_sequences
 from piga.data.windows import BlockShuffleSampler, SequenceWindows
 from piga.io.atomic import atomic_output, write_json
-from piga.cli.common import ArgumentParser, positive_int
+from piga.cli.common import ArgumentParser, PigaError, positive_int
 
 CODECS: tuple[FrameCodec, ...] = typing.get_args(FrameCodec)
 #: The files measured: name -> piga-collect's arguments (after --out).
@@ -177,7 +177,7 @@ def memory_cgroup(cap_bytes: int) -> Path:
 
     folders = _cgroup_folders()
     if not folders:
-        raise SystemExit("storage.py: no memory cgroup to make a capped one in; run with --skip-memory")
+        raise PigaError("no memory cgroup to make a capped one in; run with --skip-memory")
     group = folders[0] / f"piga-storage-{os.getpid()}"
     try:
         group.mkdir()
@@ -186,7 +186,7 @@ def memory_cgroup(cap_bytes: int) -> Path:
         if v1 and (group / "memory.memsw.limit_in_bytes").exists():  # no swap either
             (group / "memory.memsw.limit_in_bytes").write_text(str(cap_bytes))
     except OSError as exc:
-        raise SystemExit(f"storage.py: cannot make a capped memory cgroup ({exc}); run as root, or with --skip-memory")
+        raise PigaError(f"cannot make a capped memory cgroup ({exc}); run as root, or with --skip-memory")
     return group
 
 

@@ -65,7 +65,9 @@ def test_held_out_refuses_the_tables_own_seed_and_unknown_runs(held_out: Any, tm
     with pytest.raises(SystemExit):
         held_out.main(["--runs", str(runs), "--seed", "0"])
     assert "--seed 0 gives the table's own episodes" in capsys.readouterr().err
-    with pytest.raises(SystemExit, match="no record .* for piga-n9-s0"):
+    from piga.cli.common import PigaError
+
+    with pytest.raises(PigaError, match="no record .* for piga-n9-s0"):  # one line under run_script, "error:" and all
         held_out.main(["--runs", str(runs), "--jobs", "piga-n9-s0"])
 
 
