@@ -253,3 +253,24 @@ def test_a_run_interrupted_in_a_retry_goes_on_retrying_after_resume(spring_data:
     assert calls == [False, False, True, False]  # seed 5, seed 6 cut, seed 6 resumed, seed 7 afresh
     assert "training again from the start with seed 7 (retry 2 of --seed-retries 2)" in stdout
     assert json.loads((out / "config.json").read_text())["retried_seeds"] == [5, 6]
+
+
+def test_a_finished_run_resumed_for_longer_is_not_retried(spring_data: Path, tmp_path: Path,
+                                                           monkeypatch: pytest.MonkeyPatch,
+                                                           capsys: pytest.CaptureFixture[str]) -> None:
+    """A run that finished (its report written) and is resumed with more epochs is the user's: an object lost at its
+    new end is said, and no retry throws it away for another seed."""
+    import piga.training.report as report
+    from piga.evaluation.objects import ObjectCheck
+
+    out = tmp_path / "run"
+    argv = [str(spring_data), "--out", str(out), "--batch-size", "16", "--warmup-fraction", "0.5", "--threads", "1",
+            "--seed", "5", "--seed-retries", "2", "--quiet"]
+    monkeypatch.setattr(report, "check_objects", lambda model, frames: ObjectCheck(0.1, 0.5, 0.2, False))  # found
+    code, _, err = run_in_process("piga-train-model", train_main, *argv, "--epochs", "1", capsys=capsys)
+    assert (out / "metrics.json").exists() and "retried_seeds" not in json.loads((out / "config.json").read_text()), err
+    monkeypatch.setattr(report, "check_objects", lambda model, frames: ObjectCheck(0.3, 0.5, 0.6, True))  # lost
+    code, stdout, err = run_in_process("piga-train-model", train_main, *argv, "--epochs", "2", "--resume", capsys=capsys)
+    assert_one_line(code, err, "an object was not found")
+    assert "training again" not in stdout
+    assert json.loads((out / "config.json").read_text())["train"]["seed"] == 5

@@ -329,8 +329,11 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
     if args.overwrite and not args.resume and not fresh.has_templates:
         (run_dir / "templates.png").unlink(missing_ok=True)  # the replaced run's; a model without templates draws none
 
-    # seeds whose run lost an object and was trained again (a resumed run's too: its retries go on after the resume)
+    # seeds whose run lost an object and was trained again (a resumed run's too: the retries of a run interrupted
+    # before its end go on after the resume; a finished run resumed for longer is the user's, and no retry drops it)
     tried: list[int] = [int(seed) for seed in record.get("retried_seeds") or []] if args.resume else []
+    finished = bool(args.resume and (run_dir / "metrics.json").exists())  # its report: of this checkpoint (a later
+    # command's first checkpoint removes it)
     resuming = args.resume  # this try continues the checkpoint (a retry after it starts afresh)
     early: list[int] = []  # the step of this try's object check after the warm-up, once made
 
@@ -345,7 +348,7 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
         # with a retry left, a scene's objects are checked once the autoencoder's warm-up is over: an object not
         # found then is not found at the end either (benchmarks/warmup_objects.py), and the retry starts at once
         warmup = state.plan["warmup_steps"]
-        if early or resuming or not _retry_left(tried, train_config) or state.step < warmup or \
+        if early or resuming or finished or not _retry_left(tried, train_config) or state.step < warmup or \
                 warmup < report.WARMUP_CHECK_MIN_STEPS:
             return
         early.append(state.step)
@@ -414,7 +417,7 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
         lost = objects.get("lost") and not objects.get("too_few_slots")
         empty = (objects.get("empty_slots") and not objects.get("too_many_slots")
                  and (metrics.get("convergence") or {}).get("outcome") == "untrained")
-        if not (lost or empty) or not _retry_left(tried, train_config):
+        if finished or not (lost or empty) or not _retry_left(tried, train_config):
             break
         next_seed("object check", lost_with(objects["ratio"]) if lost
                   else f"slot {objects['empty_slots'][0]} drew nothing with seed {train_config.seed}")
