@@ -118,6 +118,9 @@ def out_prefix(text: str) -> Path:
     if shutil.disk_usage(existing).total == 0:  # /proc, /sys
         raise argparse.ArgumentTypeError(f"{existing} is on a file system that stores no files (as /proc and /sys "
                                          "are); write elsewhere")
+    for page in (path.with_suffix(".json"), path.with_suffix(".md")):  # a folder there failed after the work
+        if page.is_dir():
+            raise argparse.ArgumentTypeError(f"{page} is a folder, so the page {page.name} cannot be written there")
     return path
 
 

@@ -19,8 +19,7 @@ import gymnasium as gym
 import numpy as np
 
 from envs.pendulum import MAX_ACTION, PENDULUM_DT
-from piga.io.atomic import atomic_output, write_json
-from common import out_prefix
+from common import out_prefix, write_page
 from piga.cli.common import ArgumentParser, positive_int, seed_int
 
 
@@ -58,11 +57,8 @@ def main() -> None:
              "| reset θ̇ range | steps at the ±8 clip | fitted g | g error | fitted a | a error |", "|---|---|---|---|---|---|"]
     lines += [f"| ±{r['max_speed']:g} | {100 * r['clipped_share']:.1f}% | {r['g']:.3f} | {100 * r['g_error']:+.1f}% | {r['a']:.3f} | "
               f"{100 * r['a_error']:+.1f}% |" for r in rows]
-    out = Path(args.out)
-    with atomic_output(out.with_suffix(".md"), overwrite=True) as tmp:
-        tmp.write_text("\n".join(lines) + "\n")
-    write_json(out.with_suffix(".json"), {"command": command, "rows": rows})
     print("\n".join(lines))
+    write_page(Path(args.out), {"command": command, "rows": rows}, "\n".join(lines) + "\n")  # both or neither
 
 
 if __name__ == "__main__":

@@ -17,15 +17,13 @@ Writes OUT.json and OUT.md.
 from __future__ import annotations
 
 import sys
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
-from common import machine, out_prefix
+from common import machine, out_prefix, write_page
 
 from envs.scenes import draw_start, scene_config
-from piga.io.atomic import atomic_output, write_json
 from piga.data.collect import sequence_rng
 from piga.data.collect_scenes import SCENE_STEPS
 from piga.world.model import ModelConfig, PhysicsModel
@@ -84,15 +82,13 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"{scene} {mode} {name}: {value:.4f} (true {truth[name]:g})", flush=True)
     record = {"command": " ".join(["python", "benchmarks/velocity_bias.py", *(argv or sys.argv[1:])]),
               "machine": machine(), "sequences": args.sequences, "steps": args.steps, "rows": rows}
-    write_json(args.out.with_suffix(".json"), record)
     lines = ["# The scenes' velocity reading and the bias of the parameters (true positions, no pixels)", "",
              f"Reproduce: `{record['command']}`. {args.sequences} sequences per scene, the paper's values, the fast "
              "preset's windows, Euler M = 5 (the data: 10 substeps), parameters from 1.", "",
              "| scene | velocity at frame L | parameter | true | learned | signed error |", "|---|---|---|---|---|---|"]
     lines += [f"| {r['scene']} | {r['mode']} | {r['parameter']} | {r['true']:g} | {r['learned']:.4f} | "
               f"{100 * r['relative_error']:+.2f}% |" for r in rows]
-    with atomic_output(args.out.with_suffix(".md"), overwrite=True) as tmp:
-        Path(tmp).write_text("\n".join(lines) + "\n")
+    write_page(args.out, record, "\n".join(lines) + "\n")  # both or neither
     return 0
 
 

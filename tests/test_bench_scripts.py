@@ -70,3 +70,14 @@ def test_bad_input_to_a_script_is_one_line(tmp_path: Path, argv: list[str], code
     assert done.returncode == code and "Traceback" not in done.stderr, done.stderr
     assert done.stderr.strip().splitlines() == [line]  # (argparse's own parser would print its usage first)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_folder_where_a_page_goes_is_refused_before_the_work(tmp_path: Path) -> None:
+    """speed_clip_bias.py wrote OUT.md, then failed on OUT.json (a folder): half a pair, after the work."""
+    (tmp_path / "dd.json").mkdir()
+    done = subprocess.run([sys.executable, str(BENCHMARKS / "speed_clip_bias.py"), "--out", "dd"], capture_output=True,
+                          text=True, env=ENV, cwd=tmp_path, timeout=120)
+    assert done.returncode == 2 and done.stderr.strip().splitlines() == [
+        "speed_clip_bias.py: error: argument --out: dd.json is a folder, so the page dd.json cannot be written there "
+        "(see --help)"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["dd.json"]

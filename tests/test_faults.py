@@ -3823,3 +3823,28 @@ def test_a_collection_worker_killed_under_a_step_is_one_line(tmp_path: Path) -> 
     assert proc.returncode == 1, err
     assert_one_line(proc.returncode, err, "a collection worker process ended in the middle of a step")
     assert _listing(tmp_path) == []
+
+
+def test_a_path_beyond_path_max_is_named(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Folder names each under 255 bytes but 4 KB in all made is_dir() raise: "OSError: [Errno 36]" and the whole path."""
+    deep = tmp_path / (("b" * 200 + "/") * 21) / "x.h5"
+    refused("piga-collect", ["--out", str(deep), "--sequences", "4", "--steps", "4", "--workers", "1", "--quiet"], capsys,
+            "the path is", "bytes", "give a shorter one")
+
+
+def test_control_out_may_not_replace_its_models_own_files(tiny_piga_run: Path, tmp_path: Path,
+                                                          capsys: pytest.CaptureFixture[str]) -> None:
+    """--out RUN/metrics --overwrite replaced the run's metrics.json with a control summary (its "did not converge"
+    warning gone with it)."""
+    run = _run_copy(tiny_piga_run, tmp_path / "run")
+    before = (run / "metrics.json").read_bytes()
+    refused("piga-control", ["--model", str(run), "--out", str(run / "metrics"), "--overwrite", "--episodes", "1"], capsys,
+            "is the --model run's metrics.json", "write to another path")
+    assert (run / "metrics.json").read_bytes() == before
+
+
+def test_demo_out_on_a_file_system_that_stores_no_files(capsys: pytest.CaptureFixture[str]) -> None:
+    """/proc/d was "removed or moved while it ran?; run the command again" (and /sys/d an errno line)."""
+    if not os.path.isdir("/proc/self"):
+        pytest.skip("no /proc here")
+    refused("piga-demo", ["--out", "/proc/piga-demo-test", "--sequences", "6"], capsys, "cannot be written under /proc")

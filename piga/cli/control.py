@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import math
 import sys
 from collections.abc import Callable, Sequence
@@ -141,7 +142,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         stem = Path(args.out)  # OUT.json, OUT.md: appended, so a stem such as "x1.4" keeps its dot
         stem = stem.with_suffix("") if stem.suffix.lower() in (".json", ".md", ".png") else stem
         outputs = [stem.with_name(stem.name + s) for s in (".json", ".md", *((".png",) if args.sweep else ()))]
-        _check_out_set(outputs, args.overwrite)
+        _check_out_set(outputs, args)
         # a second command given the same --out is refused now, not after its episodes, when it found these files
         lock_run_folder(stem, "--out")
     kind = _run_kind(args)
@@ -287,15 +288,20 @@ def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: 
     return 0
 
 
-def _check_out_set(outputs: list[Path], overwrite: bool) -> None:
+def _check_out_set(outputs: list[Path], args: argparse.Namespace) -> None:
     """Refuses, before the episodes, an ``--out`` set that could not be written: an existing file without
-    --overwrite, a missing folder, or a file system that stores no files (/proc, /sys: it failed after the episodes,
-    as "removed or moved while it ran?")."""
+    --overwrite, a missing folder, a file system that stores no files (/proc, /sys: it failed after the episodes,
+    as "removed or moved while it ran?"), or one of the command's inputs (the --model run's own files, whose
+    metrics.json a control summary replaced, and the goal image)."""
     from piga.io.resources import FIGURE_DISK_BYTES, check_disk
 
     check_file_name(outputs[0].with_name(outputs[0].name[: -len(".json")]), "--out", "results")
+    inputs: dict[str, str | os.PathLike[str]] = {"--goal-image": args.goal_image} if args.goal_image else {}
+    if args.model and Path(args.model).is_dir():
+        inputs.update({f"--model run's {f.name}": f for f in Path(args.model).iterdir() if f.is_file()})
     for path in outputs:
-        check_writable_target(path, overwrite)
+        check_writable_target(path, args.overwrite)
+        check_not_an_input(path, inputs)
     check_disk(outputs[0], FIGURE_DISK_BYTES, f"--out {outputs[0]}", advice="free some space, or give another --out")
 
 
@@ -746,7 +752,7 @@ def _dmc(args: argparse.Namespace, argv: Sequence[str] | None, given: set[str]) 
         stem = Path(args.out)
         stem = stem.with_suffix("") if stem.suffix.lower() in (".json", ".md") else stem
         outputs = [stem.with_name(stem.name + s) for s in (".json", ".md")]
-        _check_out_set(outputs, args.overwrite)
+        _check_out_set(outputs, args)
         lock_run_folder(stem, "--out")  # as on the pixel env
     import torch
 

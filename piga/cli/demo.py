@@ -106,6 +106,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     out = Path(args.out)
     check_folder_target(out)
+    from piga.io.resources import FIGURE_DISK_BYTES, check_disk
+
+    check_disk(out / "pendulum.h5", FIGURE_DISK_BYTES, f"--out {out}",  # /proc, /sys: "removed or moved while it ran?"
+               advice="free some space, or give another --out")
     lock_run_folder(out)  # a second command on this folder is refused until this one ends
     data, strip, run_dir = out / "pendulum.h5", out / "frames.png", out / "model"
     goal_png, control_md = out / "goal.png", out / "control.md"

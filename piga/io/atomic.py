@@ -128,7 +128,13 @@ def _check_name_lengths(path: Path, flag: str | None = None, folder: bool = Fals
     for part in path.parts:  # 255 (Linux's NAME_MAX) first: a longer folder name makes even is_dir() raise
         if len(os.fsencode(part)) > 255:
             refuse(part, 255)
-    existing = next((p for p in path.parents if p.is_dir()), Path("."))
+    def is_folder(p: Path) -> bool:  # a path beyond PATH_MAX makes is_dir() raise ENAMETOOLONG (an OSError line)
+        try:
+            return p.is_dir()
+        except OSError:
+            return False
+
+    existing = next((p for p in path.parents if is_folder(p)), Path("."))
     if len(os.fsencode(path.name)) > (limit := _name_max(existing)):
         refuse(path.name, limit)
     # the whole path, as its temporary sibling spells it (and, for a folder, with room for the files written in it)
