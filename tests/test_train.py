@@ -298,6 +298,11 @@ def test_cli_interrupted_first_epoch_writes_nothing_and_rerun_works(
                                   "--quiet", capsys=capsys)
     assert_one_line(code, err, "--resume --epochs 3", "planned 4 epochs", "never lower")
     assert json.loads((out / "config.json").read_text()) == record
+    # a resume with no step left writes the report again, and is recorded as every resume is
+    code, _, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), "--resume", "--epochs", "4",
+                                  "--quiet", capsys=capsys)
+    assert code in FINISHED, err
+    assert len(json.loads((out / "config.json").read_text())["resumed"]) == 2
 
 
 def test_resume_with_more_epochs_replans_the_cosine(small_data: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

@@ -421,6 +421,8 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
             break
         next_seed("object check", lost_with(objects["ratio"]) if lost
                   else f"slot {objects['empty_slots'][0]} drew nothing with seed {train_config.seed}")
+    if args.resume and not written:  # a resume that only wrote the report (no step left): its command is recorded too
+        write_json(run_dir / "config.json", record)
     convergence = metrics.get("convergence") or {"outcome": "converged"}
     from piga.evaluation.evaluate import summary_line
 
