@@ -469,3 +469,37 @@ def test_the_report_says_when_no_lag_peaks(damped) -> None:
     d.residuals["action_correlation"]["peak_lag"] = None
     text = markdown(d, "m", "d", "c")
     assert "lag None" not in text and "no positive peak outside the band" in text
+
+
+def test_effects_that_predict_worse_than_the_nominal_are_not_a_correction(damped) -> None:
+    """A camera moved 20 px was named "blur 4 px; noise 89.7; damping 6.39; bias 63.3; gravity 0.385" with a one-step
+    error of 12.0 deg against the nominal's 4.1: said "not explained", naming the errors."""
+    import copy
+
+    from piga.diagnostics.diagnose import _worse_than_nominal
+    from piga.diagnostics.results import Naming
+
+    d = copy.deepcopy(damped)
+    naming = Naming(d.effects, [], d.verdict, d.verdict_class)
+    final = fit.Model(("damping",), 0, {"g": NOMINAL.g, "a": NOMINAL.a, "b": 0.2})
+    assert _worse_than_nominal(naming, d.gap, final, NOMINAL) is naming  # the damped case: a correction
+    worse = _worse_than_nominal(naming, replace(d.gap, one_step_rms_corrected_rad=2 * d.gap.one_step_rms_nominal_rad),
+                                final, NOMINAL)
+    assert worse.verdict_class == "unexplained" and "corrects nothing" in worse.verdict
+    ran_off = fit.Model(("damping",), 0, {"g": NOMINAL.g / 1000, "a": NOMINAL.a, "b": 0.2})
+    assert _worse_than_nominal(naming, d.gap, ran_off, NOMINAL).verdict_class == "unexplained"
+
+
+def test_constant_actions_are_said() -> None:
+    from piga.diagnostics.diagnose import constant_actions_notes
+
+    assert "cannot be judged" in constant_actions_notes(np.zeros((3, 5)))[0]
+    assert constant_actions_notes(np.linspace(-1, 1, 15).reshape(3, 5)) == []
+
+
+def test_a_fit_started_at_a_non_positive_g_is_said_to_run_off() -> None:
+    """A blur of 10 px ended piga-diagnose with "math domain error" (the log of a refitted g <= 0)."""
+    from piga.diagnostics.observe import DiagnosisInputError
+
+    with pytest.raises(DiagnosisInputError, match="a fit to this recording's angles ran off"):
+        fit.parameters_of(fit.Model((), 0, {"g": 0.0, "a": 1.0}), NOMINAL)

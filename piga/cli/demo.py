@@ -139,9 +139,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                 if checkpoint.exists() and checkpoint.stat().st_mtime_ns != before[checkpoint]:
                     # training got as far as a checkpoint: the data stays with it, for --resume
                     if isinstance(exc, PigaError):
-                        raise PigaError(f"{' '.join(str(exc).split())}; {out} keeps this demo's data and model: run the "
-                                        "same command with --resume to continue it, or with --overwrite to start "
-                                        "over") from None
+                        raise PigaError(f"{' '.join(str(exc).split())}; {out} keeps this demo's data and model: run it "
+                                        "with --resume to continue it (and a larger --epochs where the training used "
+                                        "all its planned steps), or with --overwrite to start over") from None
                     raise
                 # refused before a model: the files this demo made would make the rerun refuse for them
                 for path in (data, strip, goal_png, control_md):

@@ -852,6 +852,38 @@ def clipped_actions_notes(actions: np.ndarray) -> list[str]:
             f"misjudged; import the actions in the env's units, within ±{MAX_ACTION:g}, to diagnose it"]
 
 
+def constant_actions_notes(actions: np.ndarray) -> list[str]:
+    """A note where the recording's actions never change (all 0, say): the actuation gain cannot be read from it, and
+    the actuator's effects cannot show (an import with a column of zeros read "no significant gap", unsaid)."""
+    if actions.size == 0 or float(np.ptp(actions)) > 0:
+        return []
+    return [f"the recording's actions are all {float(actions.flat[0]):g}: the actuation gain a and the actuator's "
+            "effects (gain, delay, deadzone, saturation) cannot be judged from it; only the unforced dynamics can"]
+
+
+#: A corrected physics whose held-out one-step error is above this factor times the nominal's corrects nothing.
+WORSE_THAN_NOMINAL = 1.5
+
+
+def _worse_than_nominal(naming: Naming, gap: Gap, final: fit.Model, nom: Nominal) -> Naming:
+    """The verdict "not explained" where the named effects make the physics worse than the nominal one (one step
+    ahead, on the held-out windows) or run off (g or a collapsed): a camera shift of 20 px was named "blur 4 px;
+    noise 89.7 gray levels; damping 6.39; bias 63.3; gravity 0.385", with a = 3e-10 and a one-step error of 12.0 deg
+    against the nominal's 4.1, and a positive headline."""
+    if not naming.effects:
+        return naming
+    worse = gap.one_step_rms_corrected_rad > WORSE_THAN_NOMINAL * gap.one_step_rms_nominal_rad
+    if not (worse or fit.collapsed(final, nom, factor=100.0)):
+        return naming
+    why = (f"its held-out one-step error is {math.degrees(gap.one_step_rms_corrected_rad):.2f} deg against the nominal "
+           f"model's {math.degrees(gap.one_step_rms_nominal_rad):.2f}" if worse else
+           f"its g or a ran off (g = {final.values.get('g', nom.g):.3g}, a = {final.values.get('a', nom.a):.3g})")
+    verdict = (f"not explained by the candidates: the best fit ({'; '.join(e.describe() for e in naming.effects)}) "
+               f"corrects nothing, {why}; is the recording the scene the model knows (a camera moved far, or the "
+               "frames cut off)?")
+    return Naming(naming.effects, naming.notes, verdict, "unexplained")
+
+
 def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: CameraFindings | None,
                  generic: GenericBasis, config: DiagnoseConfig, from_gymnasium: bool = True,
                  ambiguity: Ambiguity | None = None, flip_bic_drop: float | None = None,
@@ -1266,6 +1298,7 @@ def analyse(obs: Observations, nom: Nominal, config: DiagnoseConfig = DiagnoseCo
     vision, vision_notes = summarise_vision(obs, rec_training, camera, stale, naming.effects, config)
     gap = measure_gap(candidates, chosen, nom, obs, theta, stale, windows, config, model, camera, arrow,
                       vision.ratio, corrects=bool(naming.effects) or ambiguity is not None)
+    naming = _worse_than_nominal(naming, gap, final, nom)
     res_nom = one_step_residuals(candidates.nominal.model, nom, obs.theta, obs.actions, np.arange(len(obs.theta)))
     exclusions = [f"excluded by the file's provenance: {e} ({why})" for e, why in excluded.items() if e in obs.impossible]
     exclusions += [f"not tried: {e} ({why})" for e, why in excluded.items() if e not in obs.impossible]
@@ -1280,7 +1313,8 @@ def analyse(obs: Observations, nom: Nominal, config: DiagnoseConfig = DiagnoseCo
         gap=gap, vision=vision,
         residuals={"heatmap": heatmap(res_nom), "bins": binned(res_nom), "autocorrelation": autocorrelation(res_nom),
                    "action_correlation": action_correlation(res_nom)},
-        notes=naming.notes + small_notes + vision_notes + reading_notes + clipped_actions_notes(obs.actions),
+        notes=naming.notes + small_notes + vision_notes + reading_notes + clipped_actions_notes(obs.actions)
+        + constant_actions_notes(obs.actions),
         pictures=_pictures(model, obs, theta, camera.camera if camera is not None and camera.rematched else None)
         if model is not None and len(obs.frames_index) else None,
         ambiguity=ambiguity, excluded=excluded, exclusions=exclusions,

@@ -325,8 +325,15 @@ def parameters_of(model: Model, nominal: Nominal) -> dict[str, Tensor]:
 
     a is fitted in log space; a negative a (a flipped actuation) keeps its sign in ``a_sign``, which
     is held, not fitted."""
-    a = model.values.get("a", nominal.a)
-    values = {"log_g": math.log(model.values.get("g", nominal.g)), "log_a": math.log(abs(a))}
+    a, g = model.values.get("a", nominal.a), model.values.get("g", nominal.g)
+    if not (g > 0 and a != 0 and math.isfinite(g) and math.isfinite(a)):  # (it was "math domain error", one line)
+        from piga.diagnostics.observe import DiagnosisInputError
+
+        raise DiagnosisInputError(f"a fit to this recording's angles ran off (g = {g:.3g}, a = {a:.3g}): the angles read "
+                                  "from it are no pendulum motion that the model's physics can follow: a camera the "
+                                  "model does not read (blurred, moved or cut off), or an effect far beyond the "
+                                  "nominal physics")
+    values = {"log_g": math.log(g), "log_a": math.log(abs(a))}
     for term in model.terms:
         if term.parameter is not None:
             values[term.parameter] = model.values.get(term.parameter, term.grid[0])
