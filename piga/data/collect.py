@@ -271,9 +271,7 @@ def collect(
                 writer.write(start, frames, actions, states, rewards)
             writer.set_split(np.repeat(np.arange(3, dtype=np.int8), counts))
     except BaseException as exc:  # interrupted or failed: stop the workers now, without waiting for their step
-        with warnings.catch_warnings(), contextlib.suppress(EOFError, OSError):  # (a dead worker's pipe, again)
-            warnings.simplefilter("ignore")
-            vec.close(terminate=True)
+        _force_close(vec)
         if isinstance(exc, (EOFError, ConnectionError)):  # a worker's pipe closed: the worker died (a signal, the OOM
             # killer) under a step; it was an internal error with Gymnasium's traceback
             raise ChildProcessError(f"a collection worker process ended in the middle of a step (killed by a signal, "
@@ -281,6 +279,27 @@ def collect(
         raise
     vec.close()
     return Path(out)
+
+
+def _force_close(vec: gym.vector.VectorEnv) -> None:
+    """Closes ``vec`` at once, terminating its workers. Where a worker died, Gymnasium's close first waits for the
+    pending step on its closed pipe and raises EOFError; then the workers are terminated here, and the env marked
+    closed, so that its ``__del__`` does not close it again (it printed that EOFError's traceback at exit)."""
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            vec.close(terminate=True)
+    except (EOFError, OSError):
+        processes = getattr(vec, "processes", [])
+        for process in processes:
+            if process.is_alive():
+                process.terminate()
+        for pipe in getattr(vec, "parent_pipes", []):
+            with contextlib.suppress(OSError):
+                pipe.close()
+        for process in processes:
+            process.join(timeout=10)
+        vec.closed = True
 
 
 def _vector_env(factory: Callable[[], gym.Env], workers: int, fresh: bool = False) -> gym.vector.VectorEnv:
