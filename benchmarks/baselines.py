@@ -201,7 +201,7 @@ PRESETS: dict[str, BenchConfig] = {
                           planet_more_seeds=((500, (1,)), (2000, (1,))),
                           piga_min_steps=3000,
                           ddpg_runs=(("state", 30000, (0, 1, 2)), ("latent", 30000, (0,)), ("pixels", 20000, (0,))),
-                          sac_runs=(("pixels", 20000, (0,)),), drqv2_runs=(("pixels", 12000, (0,)),),
+                          sac_runs=(("pixels", 20000, (0,)),), drqv2_runs=(("pixels", 12000, (0, 1)),),
                           sweep="0.6:1.8:0.4", sweep_episodes=5),
     "tiny": BenchConfig(sizes=(8, 16), seeds=(0,), planet_sizes=(16,), steps=16, piga_epochs=1, planet_steps=4,
                         ddpg_runs=(("state", 400, (0,)), ("latent", 400, (0,)), ("pixels", 400, (0,))),

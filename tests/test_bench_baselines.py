@@ -31,7 +31,7 @@ def bench():
 
 def test_the_budget_preset_has_one_job_per_run(bench) -> None:
     names = [job.name for job in bench.jobs_for(bench.PRESETS["budget"])]
-    assert len(names) == len(set(names)) == 21 + 7 + 5 + 1 + 1 + 1  # piga 7 x 3, planet 5 + 2, DDPG 3 + 1 + 1, SAC 1, DrQ-v2 1, oracle
+    assert len(names) == len(set(names)) == 21 + 7 + 5 + 1 + 2 + 1  # piga 7 x 3, planet 5 + 2, DDPG 3 + 1 + 1, SAC 1, DrQ-v2 2, oracle
     assert "planet-n2000-s1" in names and "ddpg-pixels-s0" in names and "sac-pixels-s0" in names and names[-1] == "oracle"
     assert "drqv2-pixels-s0" in names
 
@@ -156,7 +156,7 @@ def test_a_page_written_part_way_names_the_runs_still_to_run(bench, tmp_path: Pa
     records["planet-n100-s0"] = {**records["planet-n100-s0"], "machine": {"cpu": "other CPU", "cpu_family_model": "9/9", "cores": 2, "torch": "2.13.0+cpu"}}
     record, page = _page(bench, cfg, records, tmp_path)
     assert record["pending"] == ["planet-n2000-s0", "planet-n2000-s1", "ddpg-state-s1", "sac-pixels-s0"]
-    assert "**Part-way: 32 of 36 runs have a record.**" in page
+    assert "**Part-way: 33 of 37 runs have a record.**" in page
     assert "Machines: 2 (each run's under Compute), torch 2.13.0+cpu," in page  # the records', not the invocation's ("test CPU")
     assert "test CPU" not in page and "- other CPU (family/model 9/9), 2 cores: planet-n100-s0" in page
     floors = {f["floor"][:20]: f for f in record["floors"]}
@@ -264,14 +264,16 @@ def test_drqv2_is_a_third_model_free_row_scored_as_ddpgs_runs(bench, tmp_path: P
         100 * bench.COST_S["ddpg_pixels_warmup_step"] + 300 * bench.COST_S["drqv2_pixels_step"])  # the tiny preset's warm-up
 
     records = _records(bench, cfg)
-    records["drqv2-pixels-s0"] = {**records["drqv2-pixels-s0"], "control": {"success_rate": 1.0, "mean_return": -150.0, "episodes": 20}}
+    for name in ("drqv2-pixels-s0", "drqv2-pixels-s1"):
+        records[name] = {**records[name], "control": {"success_rate": 1.0, "mean_return": -150.0, "episodes": 20}}
     record, page = _page(bench, cfg, records, tmp_path)
-    assert [(r["algo"], r["obs"]) for r in record["ddpg"]][-2:] == [("sac", "pixels"), ("drqv2", "pixels")]
+    assert [(r["algo"], r["obs"]) for r in record["ddpg"]][-3:] == [("sac", "pixels"), ("drqv2", "pixels"), ("drqv2", "pixels")]
     assert record["sweep"]["runs"]["ddpg"].startswith("ddpg-")  # DDPG's sweep is DDPG's own best run, however DrQ-v2 did
     assert "| DrQ-v2 | pixels | 0 | 12000 | 2000 | -190.0 | 100% | 600 |" in page
-    assert "| DrQ-v2 from pixels | 12k env steps | 10 min | 100% | \u2212150.0 | 0% (not told) | refused (no goal input) |  |" in page
-    records["drqv2-pixels-s0"] = None
+    assert "| DrQ-v2 from pixels | 12k env steps (2 seeds) | 10 min | 100%, 100% | \u2212150.0 | 0%, 0% (not told) | refused (no goal input) |  |" in page
+    records["drqv2-pixels-s0"] = records["drqv2-pixels-s1"] = None
     record, page = _page(bench, cfg, records, tmp_path)
-    assert record["pending"] == ["drqv2-pixels-s0"] and "\nPending: drqv2-pixels-s0.\n" in page
-    assert "| DrQ-v2 from pixels | 12k env steps |  | pending | pending | pending (not told) |" in record["summary_table"]
+    assert record["pending"] == ["drqv2-pixels-s0", "drqv2-pixels-s1"] and "\nPending: drqv2-pixels-s0, drqv2-pixels-s1.\n" in page
+    assert "| DrQ-v2 from pixels | 12k env steps (2 seeds) |  | pending, pending | pending | pending, pending (not told) |" \
+        in record["summary_table"]
     assert [f["pending"] for f in record["floors"]] == [[]] * 5  # no floor waits for it
