@@ -3848,3 +3848,35 @@ def test_demo_out_on_a_file_system_that_stores_no_files(capsys: pytest.CaptureFi
     if not os.path.isdir("/proc/self"):
         pytest.skip("no /proc here")
     refused("piga-demo", ["--out", "/proc/piga-demo-test", "--sequences", "6"], capsys, "cannot be written under /proc")
+
+
+def test_objects_for_a_model_without_slots_is_refused(gravity_data: Path, tmp_path: Path,
+                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    """video-lstm with --objects 5: accepted, recorded, then enforced on --resume ("continues the run's own objects")."""
+    refused("piga-train-model", [str(gravity_data), "--out", str(tmp_path / "run"), "--model", "video-lstm", "--objects",
+                                 "5", "--quiet"], capsys, "--model video-lstm has none: drop --objects")
+    assert _listing(tmp_path) == []
+
+
+def test_a_scene_run_cut_short_is_continued_not_retried(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """--max-minutes stopped each try after a step or two; its objects, barely trained, were "not found", and three
+    more seeds were tried, then "train again with another --seed ... --overwrite"."""
+    from envs.scenes import scene_config
+    from piga.data.collect_scenes import SceneCollectConfig, collect_scene
+
+    data = collect_scene(SceneCollectConfig(scene=scene_config("gravity"), sequences=8, steps=20, workers=1,
+                                            split=(6, 1, 1)), tmp_path / "g.h5", progress=False, command="t")
+    code, stdout, err = run_in_process("piga-train-model", train.main, str(data), "--out", str(tmp_path / "run"),
+                                       "--max-minutes", "0.0001", "--preset", "paper", "--batch-size", "2", "--quiet",
+                                       capsys=capsys)
+    assert code in (1, 3) and "training again" not in stdout, (stdout, err)  # (1: g had not moved yet, said too)
+    assert "another --seed" not in err and "--resume and a larger --max-minutes" in err
+
+
+def test_a_planet_run_cut_short_by_its_budget_says_so(tiny_data: Path, tmp_path: Path,
+                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    """It said "use a larger --steps", which --max-minutes stopped again."""
+    argv = ["planet", str(tiny_data), "--out", str(tmp_path / "pl"), "--steps", "500", "--max-minutes", "0.00001",
+            *TINY_PLANET[2:]]  # (TINY_PLANET without its --steps 2)
+    code, _, err = run_in_process("piga-baseline", baseline.main, *argv, capsys=capsys)
+    assert code in (1, 3) and "--max-minutes stopped" in err and "of 500" in err, err

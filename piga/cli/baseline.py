@@ -14,13 +14,14 @@ import dataclasses
 import json
 import math
 import os
+import sys
 import typing
 from collections.abc import Iterator, Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Any, get_args
 
-from piga.cli.common import (ArgumentParser, Interrupted, PigaError, add_device_option, add_preset_option, command_line,
+from piga.cli.common import (NOT_CONVERGED, ArgumentParser, Interrupted, PigaError, add_device_option, add_preset_option, command_line,
                              format_default, given_options, made_folder, nonnegative_float, nonnegative_int, number_type,
                              positive_float, positive_int, record_resume, recorded_options, remove_outputs, run_cli,
                              seed_int, started_record, thread_count, with_flags)
@@ -480,9 +481,17 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
     from agents.planet.train import did_not_learn
 
     why = did_not_learn(json.loads((run_dir / "metrics.json").read_text())["open_loop"])
+    planned = config.steps + (iterative.rounds * iterative.steps_per_round if iterative is not None else 0)
+    cut = state.step < planned  # --max-minutes stopped it: a larger --steps alone would stop it again
     if why is not None:  # its outputs stay (--resume continues it), but no script may take it for a success
-        raise PigaError(f"the run did not learn: {why} after {state.step} steps; continue it with --resume and a "
-                        f"larger --steps, or give it more data; its outputs are in {run_dir}")
+        more = (f"--max-minutes stopped it at step {state.step:,} of {planned:,}: continue it with --resume and "
+                "a larger --max-minutes" if cut else "continue it with --resume and a larger --steps")
+        raise PigaError(f"the run did not learn: {why} after {state.step} steps; {more}, or give it more data; its "
+                        f"outputs are in {run_dir}")
+    if cut:  # it learned, but did not run its plan: not a finished run
+        print(f"{PROG}: warning: --max-minutes stopped the run at step {state.step:,} of {planned:,}; continue it "
+              "with --resume and a larger --max-minutes", file=sys.stderr)
+        return NOT_CONVERGED
     return 0
 
 

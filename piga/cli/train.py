@@ -257,6 +257,9 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
                             "drop --objects")
         # a choice another one excludes (video-lstm with --loss separate) is ModelConfig's ValueError: run_cli's one line
         model_config = replace(model_config, **chosen)
+        if args.objects is not None and not report.checks_objects(model_config):  # (it was recorded, then enforced)
+            raise PigaError(f"--objects sets the object slots of an object model; --model {model_config.architecture} "
+                            "has none: drop --objects")
         for flag, option, value in (("--signed-actuation", "signed_actuation", args.signed_actuation or None),
                                     ("--fixed-g", "fixed_g", args.fixed_g)):
             if value is not None:
@@ -414,8 +417,10 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
         objects = metrics.get("objects", {})
         # another seed can find a lost object, or fill a slot that should draw one; not make room for more
         # objects than the slots, nor objects for slots beyond the scene's count
-        lost = objects.get("lost") and not objects.get("too_few_slots")
-        empty = (objects.get("empty_slots") and not objects.get("too_many_slots")
+        # (not a try cut short by --max-minutes: it barely trained, and --resume continues it)
+        cut_short = state.step < state.plan["epochs"] * state.plan["steps_per_epoch"]
+        lost = objects.get("lost") and not objects.get("too_few_slots") and not cut_short
+        empty = (objects.get("empty_slots") and not objects.get("too_many_slots") and not cut_short
                  and (metrics.get("convergence") or {}).get("outcome") == "untrained")
         if finished or not (lost or empty) or not _retry_left(tried, train_config):
             break

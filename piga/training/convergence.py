@@ -204,6 +204,11 @@ def check_convergence(state: Any, config: ConvergenceConfig = ConvergenceConfig(
     if stuck:
         return verdict("untrained", f"{', '.join(stuck)} never left {'its' if len(stuck) == 1 else 'their'} initial "
                                     f"value in {physics_steps} physics steps; raise --lr-physics or " + _fix(planned, steps))
+    if objects is not None and (objects.lost or (objects.empty_slots and checks)) and steps < planned:
+        # cut short (--max-minutes): untrained objects are those of a run that barely trained, which --resume
+        # continues; another seed was asked for, and the run thrown away
+        return verdict("unsettled", f"the run stopped at step {steps} of {planned} planned, before its objects were "
+                                    "learned; " + _fix(planned, steps))
     if objects is not None and objects.lost:
         return verdict("untrained", objects.reason())
     if objects is not None and objects.empty_slots and checks:  # (a baseline has no parameters to bend)
