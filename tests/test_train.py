@@ -520,6 +520,12 @@ def test_a_slot_that_draws_nothing_makes_a_converged_scene_run_untrained() -> No
     assert "--objects 3" in verdict.reason
     baseline = SimpleNamespace(step=1000, start={}, trace=[[s] for s in steps], plan=plan, history=[{}])
     assert check_convergence(baseline, objects=empty, blank=(0.001, 0.01)).outcome == "converged"
+    # cut short (--max-minutes at step 500 of 1000): objects not yet learned are continued, not blamed on the seed
+    short = SimpleNamespace(step=500, start={"g": 1.0}, trace=[[s, v] for s, v in zip(steps, g) if s <= 500], plan=plan,
+                            history=[{"g": g[49]}])
+    lost = ObjectCheck(0.3, 0.5, 0.6, True).with_counts(3, 3)
+    verdict = check_convergence(short, objects=lost)
+    assert verdict.outcome == "unsettled" and "before its objects were learned" in verdict.reason
 
 
 def test_cli_interrupted_right_after_its_first_checkpoint_keeps_it_with_its_record(
