@@ -177,7 +177,7 @@ def test_a_retry_stopped_before_its_first_checkpoint_leaves_no_folder(spring_dat
         run_dir.mkdir(parents=True)
         (run_dir / "checkpoint.pt").write_bytes(b"the first try")
         on_epoch(SimpleNamespace(epoch=1, step=0, plan={"warmup_steps": 1}), None)  # still in the warm-up
-        return None, SimpleNamespace(epoch=1)
+        return None, SimpleNamespace(epoch=1, step=4, plan={"epochs": 1, "steps_per_epoch": 4})  # its plan run out
 
     monkeypatch.setattr(training, "train", fake_train)
     monkeypatch.setattr(report, "write_run_report", lambda *args: {"objects": {"lost": True, "ratio": 0.6}})
