@@ -3774,16 +3774,23 @@ def test_an_earlier_sweeps_figure_goes_when_its_set_is_overwritten(tmp_path: Pat
     assert _listing(tmp_path) == ["sw.json", "sw.md"]
 
 
+@pytest.fixture(scope="module")
+def long_data(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """One pendulum sequence of 1000 frames."""
+    from piga.data.collect import CollectConfig, collect as collect_data
+
+    return collect_data(CollectConfig(sequences=1, steps=1000, split=(1, 0, 0), workers=1),
+                        tmp_path_factory.mktemp("long") / "long.h5", progress=False, command="t")
+
+
 @pytest.mark.parametrize("suffix, needle", [
     (".webp", "beyond .webp's limit of 16383 px a side; give at most --frames 227, or write .png"),
     (".jpg", "beyond .jpg's limit of 65500 px a side; give at most --frames 909, or write .png"),
 ])
-def test_a_strip_too_wide_for_its_format_is_refused_before_it_is_drawn(suffix: str, needle: str, tmp_path: Path,
+def test_a_strip_too_wide_for_its_format_is_refused_before_it_is_drawn(suffix: str, needle: str, long_data: Path,
+                                                                       tmp_path: Path,
                                                                        capsys: pytest.CaptureFixture[str]) -> None:
-    from piga.data.collect import CollectConfig, collect as collect_data
-
-    data = collect_data(CollectConfig(sequences=1, steps=1000, split=(1, 0, 0), workers=1), tmp_path / "long.h5",
-                        progress=False, command="t")
+    data = long_data
     refused("piga-show", [str(data), "--out", str(tmp_path / f"s{suffix}"), "--frames", "1000"], capsys, needle)
     refused("piga-show", [str(data), "--out", str(tmp_path / ".png")], capsys, "the name is only a suffix")
 
@@ -3873,10 +3880,17 @@ def test_a_scene_run_cut_short_is_continued_not_retried(tmp_path: Path, capsys: 
     assert "another --seed" not in err and "--resume and a larger --max-minutes" in err
 
 
-def test_a_planet_run_cut_short_by_its_budget_says_so(tiny_data: Path, tmp_path: Path,
+def test_a_planet_run_cut_short_by_its_budget_says_so(tiny_data: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                                                       capsys: pytest.CaptureFixture[str]) -> None:
-    """It said "use a larger --steps", which --max-minutes stopped again."""
-    argv = ["planet", str(tiny_data), "--out", str(tmp_path / "pl"), "--steps", "500", "--max-minutes", "0.00001",
+    """It said "use a larger --steps", which --max-minutes stopped again (a stand-in stops the run at step 2 of 500,
+    as --max-minutes would at a checkpoint)."""
+    import agents.planet.train as planet_training
+
+    real = planet_training.train_planet
+    monkeypatch.setattr(planet_training, "train_planet",
+                        lambda data, run_dir, config, *args, **kwargs: real(data, run_dir, replace(config, steps=2), *args,
+                                                                             **kwargs))
+    argv = ["planet", str(tiny_data), "--out", str(tmp_path / "pl"), "--steps", "500", "--max-minutes", "1",
             *TINY_PLANET[2:]]  # (TINY_PLANET without its --steps 2)
     code, _, err = run_in_process("piga-baseline", baseline.main, *argv, capsys=capsys)
     assert code in (1, 3) and "--max-minutes stopped" in err and "of 500" in err, err
