@@ -108,11 +108,7 @@ def out_prefix(text: str) -> Path:
     path = Path(text)
     if not text.strip() or path.name in ("", ".", ".."):
         raise argparse.ArgumentTypeError(f"expected a file prefix such as results/name, got {text!r}")
-    existing = next((p for p in (path.parent, *path.parent.parents) if p.exists()), Path("."))
-    if not existing.is_dir():
-        raise argparse.ArgumentTypeError(f"{existing} is a file, not a folder, so {text} cannot be written there")
-    if not os.access(existing, os.W_OK | os.X_OK):
-        raise argparse.ArgumentTypeError(f"folder {existing} is not writable")
+    existing = _writable_folder_above(path.parent, f", so {text} cannot be written there")
     import shutil
 
     if shutil.disk_usage(existing).total == 0:  # /proc, /sys
@@ -130,12 +126,19 @@ def work_folder(text: str) -> Path:
     path = Path(text)
     if not text.strip():
         raise argparse.ArgumentTypeError("expected a folder such as runs/name, got ''")
+    _writable_folder_above(path, ": give a folder for the data and runs")
+    return path
+
+
+def _writable_folder_above(path: Path, after_file: str) -> Path:
+    """``path`` or its nearest existing parent, which must be a writable folder (the folders below it are made
+    later); a file there is refused with ``after_file`` ending the line."""
     existing = next((p for p in (path, *path.parents) if p.exists()), Path("."))
     if not existing.is_dir():
-        raise argparse.ArgumentTypeError(f"{existing} is a file, not a folder: give a folder for the data and runs")
+        raise argparse.ArgumentTypeError(f"{existing} is a file, not a folder{after_file}")
     if not os.access(existing, os.W_OK | os.X_OK):
         raise argparse.ArgumentTypeError(f"folder {existing} is not writable")
-    return path
+    return existing
 
 
 def is_number(value: Any) -> bool:

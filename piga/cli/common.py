@@ -20,6 +20,7 @@ from typing import Any, NoReturn
 
 from envs.dmc import MissingExtraError
 from piga.io.atomic import OutputExistsError, missing_folders, remove_empty_folders
+from piga.io.device import MAX_THREADS
 from piga.io.lock import release_run_folders
 from piga.io.pool import Backend, BackendError, JobFailed, host_port
 from piga.data.schema import MAX_SEED, DataFormatError
@@ -672,7 +673,6 @@ unit_fraction = number_type(float, lambda v: 0 <= v < 1, "a number in [0, 1)")
 """argparse type: a fraction in [0, 1) (NaN is rejected too)."""
 seed_int = number_type(int, lambda v: 0 <= v <= MAX_SEED, "an integer in [0, 2^63 - 1]")
 """argparse type: a seed, an integer in [0, 2^63 - 1]."""
-MAX_THREADS = max(1, os.cpu_count() or 1)
 thread_count = number_type(int, lambda v: 0 <= v <= MAX_THREADS, f"an integer in [0, {MAX_THREADS}] (0: torch's choice; "
                                                                   f"at most this machine's {MAX_THREADS} CPUs)")
 """argparse type: torch CPU threads, 0 (torch's choice) up to this machine's CPU count (more only slows it down,

@@ -295,7 +295,7 @@ def _check_out_set(outputs: list[Path], args: argparse.Namespace) -> None:
     metrics.json a control summary replaced, and the goal image)."""
     from piga.io.resources import FIGURE_DISK_BYTES, check_disk
 
-    check_file_name(outputs[0].with_name(outputs[0].name[: -len(".json")]), "--out", "results")
+    check_file_name(_stem(outputs), "--out", "results")
     inputs: dict[str, str | os.PathLike[str]] = {"--goal-image": args.goal_image} if args.goal_image else {}
     if args.model and Path(args.model).is_dir():
         inputs.update({f"--model run's {f.name}": f for f in Path(args.model).iterdir() if f.is_file()})
@@ -319,7 +319,12 @@ def _write_outputs(outputs: list[Path], record: dict[str, Any], page: str, overw
 
             save_figure(figure(), outputs[2], overwrite=overwrite)
     if figure is None and overwrite:  # an earlier sweep's OUT.png would sit beside a set that no longer draws it
-        outputs[0].with_name(outputs[0].name[: -len(".json")] + ".png").unlink(missing_ok=True)
+        (stem := _stem(outputs)).with_name(stem.name + ".png").unlink(missing_ok=True)
+
+
+def _stem(outputs: list[Path]) -> Path:
+    """OUT, of the ``--out`` set OUT.json, OUT.md (, OUT.png)."""
+    return outputs[0].with_name(outputs[0].name.removesuffix(".json"))
 
 
 def _check_total_work(args: argparse.Namespace, mpc: MPCConfig) -> None:

@@ -18,18 +18,23 @@ parsers quickly.
 from __future__ import annotations
 
 import itertools
+import os
 import warnings
 from typing import TYPE_CHECKING, Any, Literal, get_args
 
 if TYPE_CHECKING:
     import torch
 
-__all__ = ["DEVICES", "DEVICE_HELP", "Device", "cuda_available", "module_device", "resolve_device"]
+__all__ = ["DEVICES", "DEVICE_HELP", "Device", "MAX_THREADS", "cuda_available", "module_device", "resolve_device",
+           "set_threads"]
 
 Device = Literal["auto", "cpu", "cuda"]
 """A device choice (the module docstring's table)."""
 #: The device choices, in the order the help lists them.
 DEVICES: tuple[Device, ...] = get_args(Device)
+#: Most torch CPU threads a run takes: this machine's CPUs (more only slows it down, and a huge count crashed torch's
+#: thread pool).
+MAX_THREADS = max(1, os.cpu_count() or 1)
 #: The help of every ``--device`` option.
 DEVICE_HELP = ("where to train: auto (a CUDA GPU when torch sees one, else the CPU), cpu, or cuda (refused without a "
                "GPU); not part of the recipe, so --resume may change it")
@@ -70,13 +75,11 @@ def set_threads(threads: int, owner: str) -> None:
     """Sets torch's CPU threads for a run (0: torch's default). More than this machine's CPUs is refused, naming
     ``owner``'s field: it only slows a run down, and a huge count crashed torch's thread pool (a segfault at 100000,
     libgomp's "Thread creation failed" at 20000), where the commands' ``--threads`` had refused it."""
-    import os
-
     import torch
 
-    cpus = max(1, os.cpu_count() or 1)
-    if threads > cpus:
-        raise ValueError(f"{owner}.threads must be at most this machine's {cpus} CPUs (0: torch's choice), got {threads}")
+    if threads > MAX_THREADS:
+        raise ValueError(f"{owner}.threads must be at most this machine's {MAX_THREADS} CPUs (0: torch's choice), got "
+                         f"{threads}")
     if threads:
         torch.set_num_threads(threads)
 
