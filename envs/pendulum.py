@@ -85,6 +85,9 @@ _TOO_WEAK = "weaker, it moves the pendulum's tip by under a hundredth of a pixel
 #: Largest frame side (pixels), of either pendulum: MuJoCo renders it off-screen, Gymnasium's render (500 px) is
 #: resized to it, and far larger frames would not fit a replay buffer (5000 px frames were collected, upscaled).
 MAX_IMAGE_SIZE = 1024
+#: The largest ``blur`` sigma is the frame side over this: at σ = side/8 (8 px in 64 px frames) a frame still spans
+#: 18 gray levels and its motion moves pixels by 7; at side/4 they were 5 and 2 levels (the frames were nearly blank).
+MAX_BLUR_FRACTION = 8
 
 
 @dataclass(frozen=True)
@@ -126,9 +129,9 @@ class PixelPendulumConfig:
             raise ValueError(f"PixelPendulumConfig: gravity x gravity_mult = {self.effective_gravity:.10g} is out of range: at "
                              f"most {MAX_GRAVITY:g} (a larger gravity overflows float32)")
         for name, value in effects:
-            if name == "blur" and value > self.image_size / 2:
+            if name == "blur" and value > self.image_size / MAX_BLUR_FRACTION:
                 raise ValueError(f"effect blur={value:g} px would blur the pendulum away in a {self.image_size} px frame; "
-                                 f"use a sigma of at most {self.image_size / 2:g} px")
+                                 f"use a sigma of at most {self.image_size / MAX_BLUR_FRACTION:g} px")
             if name == "shift" and abs(value) >= self.image_size / 2:  # the pivot, at the centre, would leave the frame
                 raise ValueError(f"effect shift={value:g} px would move the pendulum out of a {self.image_size} px frame "
                                  f"(its pivot out of view); use |shift| < {self.image_size / 2:g}")

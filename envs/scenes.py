@@ -133,7 +133,8 @@ class SceneConfig:
             stiffest = max_stable_k(self.dt, self.substeps, self.n_objects)
             if self.params.get("k", 0.0) >= stiffest:
                 raise SceneError(f"{self.scene}: k = {self.params['k']:g} is too stiff for {self.substeps} substeps of "
-                                 f"{self.dt:g} s: the simulation would blow up; k must be below {stiffest:.4g}")
+                                 f"{self.dt:g} s: the simulation would blow up; k must be below {stiffest:.8g} "
+                                 "((2·substeps/dt)²/objects)")
         if self.half and self.scene != "spring":
             raise SceneError(f"{type(self).__name__}.half (the top-half data) is for the spring scene, not {self.scene}")
         if self.half_frames < 1:

@@ -118,6 +118,7 @@ def test_interrupted_collect_leaves_no_target(tmp_path: Path, sig: signal.Signal
     if sig != signal.SIGKILL:  # a catchable signal also removes the partial file, with one line
         assert list(tmp_path.iterdir()) == []
         assert "interrupted" in err and "Traceback" not in err
+        assert proc.returncode == 128 + sig  # as a shell reports it: 130 for Ctrl-C, 143 for SIGTERM (it was 130)
 
 
 def test_ctrl_c_with_two_workers_prints_one_line(tmp_path: Path) -> None:

@@ -327,7 +327,7 @@ def test_a_failed_allocation_is_out_of_memory(capsys: pytest.CaptureFixture[str]
     (["--system", "gravity", "--radius", "1e200"], ["images are too small", "need at least 8e+200 px"], 1),
     (["--system", "bouncing", "--colors", "black", "black"], ["is the background's", "invisible"], 1),
     (["--system", "bouncing", "--colors", "red", "white", "--background", "white"], ["object 1's colour"], 1),
-    (["--system", "spring", "--k", "1e6"], ["k = 1e+06 is too stiff", "below 2222"], 1),
+    (["--system", "spring", "--k", "1e6"], ["k = 1e+06 is too stiff", "below 2222.2222 "], 1),
     (["--seed", "9" * 25], ["--seed: expected an integer in [0, 2^63 - 1]"], 2),
     (["--actuation-gain", "1e39"], ["--actuation-gain=1e+39 is out of range", "at most 1e+06"], 1),
     (["--gravity", "1e39"], ["--gravity x --gravity-mult = 1e+39 is out of range", "at most 1e+06"], 1),
@@ -337,7 +337,8 @@ def test_a_failed_allocation_is_out_of_memory(capsys: pytest.CaptureFixture[str]
     (["--actuation-gain", "1e-300"], ["--actuation-gain=1e-300 is out of range: at least 1e-06", "a hundredth of a pixel"], 1),
     (["--effect", "delay=5"], ["delay=5 steps is not shorter than a sequence's 5 actions", "raise --steps"], 1),
     (["--effect", "frame_delay=7"], ["frame_delay=7 steps is not shorter", "all show the reset"], 1),
-    (["--effect", "blur=900"], ["blur=900 px would blur the pendulum away in a 64 px frame", "at most 32 px"], 1),
+    (["--effect", "blur=900"], ["blur=900 px would blur the pendulum away in a 64 px frame", "at most 8 px"], 1),
+    (["--effect", "blur=9"], ["at most 8 px"], 1),  # half the frame (32 px) was allowed: frames of 5 gray levels
     (["--effect", "shift=-64"], ["shift=-64 px would move the pendulum out of a 64 px frame"], 1),
     (["--system", "bouncing", "--colors", "#000001", "white"], ["object 0's colour", "is within 0.1 of the background's"], 1),
     (["--env", "piga/DMCPendulum-v0", "--max-speed", "1e308"], ["--max-speed=1e+308 is out of range", "--max-speed in [0, 157.1]"], 1),
@@ -1236,6 +1237,18 @@ def test_demo_keeps_a_folder_that_existed(tmp_path: Path, capsys: pytest.Capture
     assert os.listdir(tmp_path / "demo") == []
 
 
+def test_demo_refuses_a_run_folder(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A demo into a train-model run's folder locked it for minutes: other commands called that finished run "still
+    being trained"."""
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "checkpoint.pt").write_bytes(b"a run's")
+    for extra in ([], ["--overwrite"]):
+        refused("piga-demo", ["--out", str(run), *extra], capsys, "holds a run of its own (checkpoint.pt)",
+                "give another --out")
+    assert _listing(tmp_path) == ["run", "run/checkpoint.pt"]
+
+
 def test_demo_refused_in_training_leaves_nothing(tmp_path: Path, capsys: pytest.CaptureFixture[str],
                                                  monkeypatch: pytest.MonkeyPatch) -> None:
     """Training refuses the collected data (too few sequences): the data and the strip go too, so that the
@@ -1408,6 +1421,22 @@ def test_control_refuses_planner_options_for_a_baseline_run(argv: list[str], nee
     """A DDPG run has no planner and a PlaNet-style run plans with PlaNet's CEM: --horizon would be ignored, and
     so was --not-told (a baseline is never told)."""
     refused("piga-control", ["--model", str(baseline_runs["ddpg"]), *argv], capsys, *needles)
+
+
+@pytest.mark.parametrize("argv, needles", [
+    (["--not-told"], ["sac run is never told"]),
+    (["--goal-angle", "30"], ["a sac run has no goal input"]),
+    (["--horizon", "7"], ["a sac run plans with its own settings"]),
+])
+def test_control_names_a_ddpg_runs_algorithm(argv: list[str], needles: list[str], baseline_runs: dict[str, Path],
+                                             tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A SAC run (a ``piga-baseline ddpg --algo sac`` run) was called "the ddpg agent" in control's refusals."""
+    run = tmp_path / "sac"
+    shutil.copytree(baseline_runs["ddpg"], run)
+    record = json.loads((run / "config.json").read_text())
+    record["ddpg"]["algo"] = "sac"  # the refusals come before the policy is loaded
+    (run / "config.json").write_text(json.dumps(record))
+    refused("piga-control", ["--model", str(run), *argv], capsys, *needles)
 
 
 @pytest.mark.parametrize("argv, needles", [
@@ -3397,6 +3426,29 @@ def test_a_signal_after_the_work_says_the_outputs_are_complete() -> None:
     result = subprocess.run(["python", "-c", code], capture_output=True, text=True, timeout=60, env=ENV)
     assert result.returncode == 143
     assert result.stderr == "piga-x: interrupted after it finished its work; its outputs are complete\n"
+
+
+def test_a_signal_between_the_last_write_and_the_return_says_the_outputs_are_complete(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """piga-control interrupted after it had written its --out set, before it returned, said "nothing was written"
+    beside the complete set. A command calls work_finished() once its outputs are complete."""
+    code = ("import os, signal, time; from piga.cli.common import run_cli, work_finished\n"
+            "def main(argv):\n    work_finished(); os.kill(os.getpid(), signal.SIGTERM); time.sleep(30)\n"
+            "run_cli('piga-x', main)\n")
+    result = subprocess.run(["python", "-c", code], capture_output=True, text=True, timeout=60, env=ENV)
+    assert result.returncode == 143
+    assert result.stderr == "piga-x: interrupted after it finished its work; its outputs are complete\n"
+
+    def main(argv: Sequence[str] | None) -> int:  # in a caller's process (a test, a notebook): the same line
+        from piga.cli.common import work_finished
+
+        work_finished()
+        raise KeyboardInterrupt
+
+    code_, _, err = run_in_process("piga-x", main, capsys=capsys)
+    assert code_ == 130 and err == "piga-x: interrupted after it finished its work; its outputs are complete\n"
+    code_, _, err = run_in_process("piga-x", lambda argv: (_ for _ in ()).throw(KeyboardInterrupt), capsys=capsys)
+    assert err == "piga-x: interrupted; nothing was written\n"  # the next command starts unfinished
 
 
 def test_the_readers_refuse_a_limit_or_window_that_is_no_count(tiny_data: Path) -> None:

@@ -124,6 +124,57 @@ def test_the_lock_holds_across_temporary_folders(tmp_path: Path) -> None:
         release_run_folders()
 
 
+def test_a_released_lock_leaves_no_file(tmp_path: Path) -> None:
+    """Every command left its lock file behind: /tmp/piga-locks held 10,640 of them."""
+    from piga.io.lock import _lock_path, held_by
+
+    path = _lock_path(tmp_path / "run")
+    lock_run_folder(tmp_path / "run")
+    assert path.is_file()
+    release_run_folders()
+    assert not path.exists() and held_by(tmp_path / "run") is None
+    holder = _hold(tmp_path / "run")  # taken again at once, on a new file
+    try:
+        with pytest.raises(FolderInUseError, match=f"PID {holder.pid}"):
+            lock_run_folder(tmp_path / "run")
+    finally:
+        holder.kill()
+        holder.wait()
+    assert path.is_file()  # a killed holder leaves its file: unlocked, and reused
+    lock_run_folder(tmp_path / "run")
+    release_run_folders()
+    assert not path.exists()
+
+
+def test_a_lock_file_removed_between_open_and_lock_is_not_trusted(tmp_path: Path,
+                                                                  monkeypatch: pytest.MonkeyPatch) -> None:
+    """A holder that removes its file as it ends can do so after a second command opened it: the second then locked
+    a removed file, and a third, on a new file, took the folder too. The lock is taken on the file the path names."""
+    import fcntl
+
+    from piga.io.lock import _lock_path
+
+    path = _lock_path(tmp_path / "run")
+    real = fcntl.flock
+    removed = []
+
+    def flock_after_removal(fd: int, operation: int) -> None:
+        if not removed:  # the first try: its holder removes the file just now
+            removed.append(fd)
+            path.unlink()
+        real(fd, operation)
+
+    monkeypatch.setattr(fcntl, "flock", flock_after_removal)
+    lock_run_folder(tmp_path / "run")
+    try:
+        assert removed and path.is_file()
+        other = subprocess.run([sys.executable, "-c", HOLDER.replace("time.sleep(300)", "pass"), str(tmp_path / "run")],
+                               capture_output=True, text=True, env=ENV)
+        assert other.returncode == 1 and "FolderInUseError" in other.stderr  # the file there is the one locked
+    finally:
+        release_run_folders()
+
+
 def test_a_folder_where_the_lock_file_goes_is_named(tmp_path: Path) -> None:
     """It made the command run unlocked, without a word."""
     from piga.io.lock import _lock_path

@@ -31,6 +31,9 @@ def test_a_ball_left_out_of_the_reconstruction_is_lost() -> None:
     frames, red_only = scene()
     lost = compare(frames, red_only, sigma=1.5)
     assert lost.lost and lost.ratio > 1.5 * LOST_RATIO
+    assert "another --seed" in lost.reason() and "--objects" not in lost.reason()
+    # more slots than the file's objects (--objects 3 for 2 balls): the count is named before another seed
+    assert "--objects 2 (or without --objects)" in lost.with_counts(3, 2).reason()
 
 
 def test_found_balls_under_pixel_noise_are_not_lost() -> None:

@@ -450,6 +450,9 @@ def test_the_convergence_check_on_made_up_trajectories() -> None:
     frozen = check_convergence(state(1 + 9 * settle, 0.3 + 0.7 * settle), blank=(0.0005, 0.0035), hold=0.0)
     assert frozen.outcome == "untrained" and "nothing moves in the held-out sequences" in frozen.reason
     assert "train longer" not in frozen.reason
+    unsplit = check_convergence(state(1 + 3 * settle, 0.3 + 0.2 * settle), blank=(0.0030, 0.0035), hold=0.0060,
+                                held_out=False)  # a file without a test split is judged on its training frames
+    assert "its training-split predictions" in unsplit.reason and "held-out" not in unsplit.reason
     moving = check_convergence(state(1 + 9 * settle, 0.3 + 0.7 * settle), blank=(0.0005, 0.0035), hold=0.0060)
     assert moving.outcome == "converged", moving.reason
     baseline = SimpleNamespace(step=1000, start={}, trace=[], plan=plan, history=[])  # no parameters: the hold is not asked

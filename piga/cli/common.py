@@ -207,6 +207,10 @@ def _in_import(frame: Any) -> bool:
     return False
 
 
+#: The last signal that interrupted the command's work (:func:`_raise_interrupt`); SIGINT for a KeyboardInterrupt
+#: raised otherwise (Python's own handler).
+_SIGNALLED = [int(signal.SIGINT)]
+
 #: Set while an interrupt waits for an import to end (:func:`_raise_interrupt`).
 _DEFERRED = threading.Event()
 
@@ -219,6 +223,7 @@ def _raise_interrupt(signum: int, frame: Any) -> None:
     the interrupt waits for the import to end (a thread looks every 5 ms; imports take at most a second or two) and is
     raised then. Python's signal module offers no deferral of its own; masking the signal would also hold it back
     from the blocking calls that it should interrupt."""
+    _SIGNALLED[0] = signum  # the exit code says which signal ended the command (128 + its number, as a shell's)
     if not _in_import(frame):
         raise KeyboardInterrupt
     if _DEFERRED.is_set():  # one is already waiting
@@ -253,6 +258,26 @@ def _exit_quietly_on_late_signals(finished: str | None = None) -> None:
 
     for signum in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signum, end)
+
+
+#: Set by :func:`work_finished` while a command runs: its outputs are complete.
+_FINISHED = threading.Event()
+
+#: The late line of a command whose outputs are complete (:func:`work_finished`, :func:`run_cli`).
+_FINISHED_LINE = "{prog}: interrupted after it finished its work; its outputs are complete"
+
+
+def work_finished() -> None:
+    """Called by a command once its outputs are complete (before what it prints about them): a signal from then on
+    says so, and in the command's own process ends it at once (128 + the signal). Between a command's last write and
+    its return, an interrupt said "nothing was written" beside a complete output set."""
+    _FINISHED.set()
+    if _OWN_PROG:
+        _exit_quietly_on_late_signals(_FINISHED_LINE.format(prog=_OWN_PROG[0]))
+
+
+#: The command's name while it runs in its own process (``run_cli`` with ``argv=None``).
+_OWN_PROG: list[str] = []
 
 
 def _ignore_signals_at_exit() -> None:
@@ -297,6 +322,9 @@ def run_cli(prog: str, main: Callable[[Sequence[str] | None], int | None], argv:
     written output file gets removed.
     """
     signal.signal(signal.SIGTERM, _raise_interrupt)
+    _SIGNALLED[0] = int(signal.SIGINT)
+    _FINISHED.clear()
+    _OWN_PROG[:] = [prog] if argv is None else []
     if argv is None:  # the command's own process; registered first, so run last (atexit runs its hooks in reverse)
         import atexit
 
@@ -336,15 +364,14 @@ def run_cli(prog: str, main: Callable[[Sequence[str] | None], int | None], argv:
     except KeyboardInterrupt as exc:
         kept = str(exc) if isinstance(exc, Interrupted) else "nothing was written"
         _close_progress_bars()
-        print(f"{prog}: interrupted; {kept}", file=sys.stderr)
-        sys.exit(130)
+        print(_FINISHED_LINE.format(prog=prog) if _FINISHED.is_set() else f"{prog}: interrupted; {kept}", file=sys.stderr)
+        sys.exit(128 + _SIGNALLED[0])  # 130 for Ctrl-C, 143 for SIGTERM
     except Exception as exc:
         _exit_on_error(prog, argv, exc)
     finally:
         _RUNNING.clear()
         if argv is None:  # the command's own process, its work over and its exit code decided
-            _exit_quietly_on_late_signals(f"{prog}: interrupted after it finished its work; its outputs are complete"
-                                          if returned else None)
+            _exit_quietly_on_late_signals(_FINISHED_LINE.format(prog=prog) if returned else None)
         guard, sys.stdout = sys.stdout, stdout
         threading.excepthook, sys.unraisablehook = excepthook, unraisablehook
         release_run_folders()  # a command run in-process (a test, a notebook) releases its run folder as it returns

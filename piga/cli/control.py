@@ -20,7 +20,7 @@ from piga.io.atomic import (atomic_output, check_file_name, check_not_an_input, 
                              written_together)
 from piga.cli.common import (ArgumentParser, PigaError, add_ray_option, command_line, connect_backend, file_path,
                              given_options, int_up_to, positive_float, positive_int, run_cli, seed_int,
-                             typed_text, warn_if_still_training, warn_if_unconverged)
+                             typed_text, warn_if_still_training, warn_if_unconverged, work_finished)
 from piga.control.episodes import EpisodeConfig, parse_range, run_episodes
 from piga.evaluation.episodes import summary_markdown
 from piga.io.checkpoint import RunKind
@@ -226,14 +226,24 @@ def main(argv: Sequence[str] | None = None) -> int:
 
             assert model is not None
             control_video(model, result.recordings[0].frames, first_trace, args.video, overwrite=args.overwrite)
-            print(f"wrote {args.video}")
         if outputs:
             result = result.labelled(agent=label)
             _write_outputs(outputs, {"agent": label, **result.to_dict(), "recordings": None},
                            f"# {PROG}\n\nCommand: `{command_line(PROG, argv)}`\n\n{summary_markdown([result.summary])}",
                            args.overwrite)
-            print(f"wrote {outputs[0]} and {outputs[1]}")
+    _say_written(args.video, outputs)
     return 0
+
+
+def _say_written(video: str | None, outputs: list[Path]) -> None:
+    """The lines that name what was written, once all of it is (an interrupt inside :func:`written_together` removes
+    the set again, after a "wrote" line had named it)."""
+    if video or outputs:
+        work_finished()
+    if video:
+        print(f"wrote {video}")
+    if outputs:
+        print(f"wrote {outputs[0]} and {outputs[1]}")
 
 
 def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: Sequence[str] | None,
@@ -269,7 +279,10 @@ def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: 
         _warn_if_other_frames(args.model, checkpoint)
     else:
         _warn_if_did_not_learn(args.model, kind)
-        print(f"note: the {kind.value} agent runs as trained: it cannot be told that gravity changed")
+        from piga.control.jobs import agent_name
+
+        print(f"note: the {agent_name(kind.value, args.model)} agent runs as trained: it cannot be told that gravity "
+              "changed")
     jobs = [ControlJob(agent, EpisodeConfig(episodes=args.episodes, steps=args.steps, seed=args.seed, gravity_mult=m,
                                             goal_angle=mpc.goal_angle, torque_arrow=args.torque_arrow),
                        mpc, model_dir=args.model if agent != "oracle" else None, told=agent == "oracle" or not args.not_told)
@@ -284,6 +297,7 @@ def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: 
         _write_outputs(outputs, {"model": typed_text(args.model), "multipliers": multipliers, "results": [r.to_dict() for r in results]},
                        f"# {PROG} --sweep\n\nCommand: `{command_line(PROG, argv)}`\n\n![sweep]({outputs[2].name})\n\n{table}",
                        args.overwrite, figure=lambda: sweep_figure([s.to_dict() for s in summaries]))
+        work_finished()
         print(f"wrote {', '.join(map(str, outputs))}")
     return 0
 
@@ -429,13 +443,16 @@ def _baseline(args: argparse.Namespace, kind: RunKind, mpc: MPCConfig, outputs: 
 
         if (env := trained_env(args.model)) != PIXEL_PENDULUM:
             raise PigaError(f"{args.model} was trained on {env}; score it there with --env {env}")
-    why = f"a {kind.value} run has no goal input (it learned to swing up to upright from the env's reward)"
+    from piga.control.jobs import agent_name
+
+    name = agent_name(kind.value, args.model)  # a DDPG run's algorithm (sac, drqv2) where its record names one
+    why = f"a {name} run has no goal input (it learned to swing up to upright from the env's reward)"
     if args.goal_image:
         raise PigaError(f"--goal-image: {why}, so it cannot be given a goal image; goal images need a piga run")
     if args.goal_angle:
         raise PigaError(f"--goal-angle: {why}; only upright (0) can be scored")
     if args.not_told:
-        raise PigaError(f"--not-told is for the piga agent; a {kind.value} run is never told a gravity change (it runs as "
+        raise PigaError(f"--not-told is for the piga agent; a {name} run is never told a gravity change (it runs as "
                         "trained)")
     if args.video:
         if args.sweep:
@@ -450,7 +467,7 @@ def _baseline(args: argparse.Namespace, kind: RunKind, mpc: MPCConfig, outputs: 
     planner = [f"--{name.replace('_', '-')}" for name in ("horizon", "candidates", "elites", "iterations", "warm_start")
                if name in given]
     if planner:
-        raise PigaError(f"{', '.join(planner)}: a {kind.value} run plans with its own settings "
+        raise PigaError(f"{', '.join(planner)}: a {name} run plans with its own settings "
                         f"({'PlaNet' + chr(39) + 's CEM' if kind is RunKind.PLANET else 'a policy, no planner'}); "
                         "the CEM options set the piga agent's and the oracle's planner")
     if kind is RunKind.PLANET:  # after the refusals of the command line: this reads the checkpoint
@@ -473,7 +490,7 @@ def _baseline(args: argparse.Namespace, kind: RunKind, mpc: MPCConfig, outputs: 
     backend = connect_backend(args.ray) if split else None  # before the warning: a refused --ray is the one line
     _warn_if_did_not_learn(args.model, kind)
     if args.gravity_mult != 1:
-        print(f"note: the {kind.value} agent runs as trained: it cannot be told that gravity changed")
+        print(f"note: the {name} agent runs as trained: it cannot be told that gravity changed")
     if kind is RunKind.DDPG and sees_frames and trained_arrow is not None and trained_arrow != args.torque_arrow:
         print(f"{PROG}: warning: {args.model} was trained with the torque arrow {'shown' if trained_arrow else 'hidden'}; "
               f"these episodes {'show' if args.torque_arrow else 'hide'} it", file=sys.stderr)
@@ -487,9 +504,7 @@ def _baseline(args: argparse.Namespace, kind: RunKind, mpc: MPCConfig, outputs: 
     else:
         result = run_episodes(agent, config, progress=not args.quiet, record=1 if args.video else 0)
     s = result.summary
-    from piga.control.jobs import agent_name
-
-    label = f"{agent_name(kind.value, args.model)} ({typed_text(args.model)})"
+    label = f"{name} ({typed_text(args.model)})"
     print(f"{label}, gravity x{args.gravity_mult:g}, goal 0 deg: success {100 * s.success_rate:.0f}% of {s.episodes}, "
           f"mean return {s.mean_return:.1f}, final angle error {math.degrees(s.final_angle_error_mean):.2f} deg, "
           f"plan {s.plan_ms_median:.1f} ms median / {s.plan_ms_p95:.1f} ms p95")
@@ -501,13 +516,12 @@ def _baseline(args: argparse.Namespace, kind: RunKind, mpc: MPCConfig, outputs: 
             # episode 0 again in this process when the workers ran it (the same start and seeds: the same episode)
             recording = (result.recordings or run_episodes(agent, replace(config, episodes=1), record=1).recordings)[0]
             panels_video(episode_panels(agent, recording), args.video, overwrite=args.overwrite)
-            print(f"wrote {args.video}")
         if outputs:
             result = result.labelled(agent=label)
             _write_outputs(outputs, {"agent": label, "kind": kind.value, **result.to_dict(), "recordings": None},
                            f"# {PROG}\n\nCommand: `{command_line(PROG, argv)}`\n\n{summary_markdown([result.summary])}",
                            args.overwrite)
-            print(f"wrote {outputs[0]} and {outputs[1]}")
+    _say_written(args.video, outputs)
     return 0
 
 

@@ -106,6 +106,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     out = Path(args.out)
     check_folder_target(out)
+    if (out / CHECKPOINT).exists():  # its lock would have called that run "still being trained" while the demo ran
+        raise PigaError(f"--out {out} holds a run of its own ({CHECKPOINT}); a demo writes its data, pictures and run "
+                        "(in --out/model) into a folder of its own: give another --out")
     from piga.io.resources import FIGURE_DISK_BYTES, check_disk
 
     check_disk(out / "pendulum.h5", FIGURE_DISK_BYTES, f"--out {out}",  # /proc, /sys: "removed or moved while it ran?"

@@ -92,9 +92,13 @@ class ObjectCheck:
             return (f"an object was not found: the model has {slots} for the scene's {self.scene_objects} objects (a "
                     f"moving blob {self.ratio:.2f}x as strong as the objects is left unrendered); train with --objects "
                     f"{self.scene_objects} to model them all")
-        return (f"an object was not found: the reconstruction of single frames leaves a moving blob "
-                f"{self.ratio:.2f}x as strong as the scene's objects (at most {LOST_RATIO:g} when every object is "
-                "found); train again with another --seed or more --seed-retries (and --overwrite, or another --out)")
+        blob = (f"an object was not found: the reconstruction of single frames leaves a moving blob "
+                f"{self.ratio:.2f}x as strong as the scene's objects (at most {LOST_RATIO:g} when every object is found)")
+        if self.too_many_slots:  # the spare slots may have split an object between them: the count is the first fix
+            return (f"{blob}; the model has {self.slots} object slots for the scene's {self.scene_objects} objects (the "
+                    f"file's n_objects): train with --objects {self.scene_objects} (or without --objects), or with "
+                    "another --seed (and --overwrite, or another --out)")
+        return f"{blob}; train again with another --seed or more --seed-retries (and --overwrite, or another --out)"
 
     @property
     def too_many_slots(self) -> bool:

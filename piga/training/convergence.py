@@ -136,7 +136,8 @@ def _blank_fix(background: float, planned: int, steps: int) -> str:
 
 def check_convergence(state: Any, config: ConvergenceConfig = ConvergenceConfig(),
                       objects: ObjectCheck | None = None, blank: tuple[float, float] | None = None,
-                      hold: float | None = None, profile: dict[str, ParameterProfile] | None = None) -> Convergence:
+                      hold: float | None = None, profile: dict[str, ParameterProfile] | None = None,
+                      held_out: bool = True) -> Convergence:
     """Judges a finished (or stopped) run from its :class:`~piga.training.train.TrainState`, and for a scene
     from ``objects`` (:func:`piga.evaluation.objects.check_objects`): a lost object leaves the physics to fit
     the others, and a slot that draws nothing is still moved by the physics (its pull, its springs), so in
@@ -156,6 +157,9 @@ def check_convergence(state: Any, config: ConvergenceConfig = ConvergenceConfig(
     ``hold``: the held-out MSE of the last input frame held still (metrics.json's ``frame_mse_hold``). A model
     with parameters must beat it by ``config.hold_ratio``: pendulum runs on 20 sequences of 10 frames settled with
     g 67% off, predicting 0.85x the background's MSE and 0.5x the held frame's (identified runs: 0.12x at most).
+
+    ``held_out``: whether ``blank`` and ``hold`` were measured on a held-out split; a file without a test split is
+    measured on its training split, and the reasons say so rather than "held-out".
 
     ``profile``: each learned parameter's profile on the training frames (:mod:`piga.evaluation.profile`). A
     parameter whose frames are predicted clearly better with it 1.65x larger or smaller stopped short of its
@@ -177,6 +181,8 @@ def check_convergence(state: Any, config: ConvergenceConfig = ConvergenceConfig(
             and min(p.lower, p.upper) >= 1 - config.profile_tolerance]
 
     def verdict(outcome: Outcome, reason: str) -> Convergence:
+        if not held_out:  # the file has no test split: the report was measured on the training frames
+            reason = reason.replace("check the data (its test split)", "check the data").replace("held-out", "training-split")
         return Convergence(outcome, reason, physics_steps, planned, steps, checks, flat)
 
     if physics_steps == 0:

@@ -93,7 +93,7 @@ def write_run_report(model: FrameModel, state: TrainState, data: str | Path, run
                 profile = parameter_profile(model, train_frames, train_actions)
                 metrics["profile"] = profile_dict(profile)
         convergence = check_convergence(state, objects=objects, blank=blank, hold=metrics["frame_mse_hold"],
-                                        profile=profile)
+                                        profile=profile, held_out=split != "train")
         metrics["converged"] = convergence.converged
         metrics["convergence"] = convergence.to_dict()
     write_json(run_dir / "metrics.json", metrics)
