@@ -3781,8 +3781,8 @@ def test_frames_whose_chunks_were_never_written_are_refused(tmp_path: Path, caps
 
 
 @pytest.mark.parametrize("argv, needle", [
-    (["--oracle", "--episodes", "1", "--steps", "20", "--out", "/proc/o8"], "--out /proc/o8.json cannot be written under /proc"),
-    (["--write-goal-image", "/proc/g.png", "--angle", "30"], "--write-goal-image /proc/g.png cannot be written under /proc"),
+    (["--oracle", "--episodes", "1", "--steps", "20", "--out", "/proc/o8"], "/proc/o8.json cannot be written under /proc"),
+    (["--write-goal-image", "/proc/g.png", "--angle", "30"], "/proc/g.png cannot be written under /proc"),
     (["--write-goal-image", "GOAL/.png", "--angle", "30"], "the name is only a suffix; give a name before it, such as goal.png"),
     (["--write-goal-image", ".", "--angle", "30"], "names a folder, not a file"),
     (["--oracle", "--out", "GOAL/.json"], "the name is only a suffix; give a name before it, such as results.json"),

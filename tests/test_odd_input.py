@@ -32,6 +32,17 @@ def test_a_link_to_nothing_is_not_replaced_without_overwrite(tmp_path: Path) -> 
         check_folder_target(folder)
 
 
+def test_a_file_system_that_stores_no_files_is_refused_where_the_target_is_checked() -> None:
+    """/proc and /sys are writable to root, yet hold no files: only the commands that also checked the disk said so
+    before their work."""
+    for folder in ("/proc", "/sys"):
+        if not os.path.isdir(folder):
+            pytest.skip(f"no {folder}")
+        with pytest.raises(PermissionError, match=f"{folder}/x.json cannot be written under {folder}: it is on a file "
+                                                  "system that stores no files"):
+            check_writable_target(f"{folder}/x.json", overwrite=False)
+
+
 def test_a_run_folder_name_that_is_not_utf8_in_this_locale_is_refused(tmp_path: Path,
                                                                      monkeypatch: pytest.MonkeyPatch) -> None:
     """Under LC_ALL=C with PYTHONUTF8=0, 'rün' arrives as lone surrogates, which TensorBoard's writer cannot encode;

@@ -12,6 +12,7 @@ import hashlib
 import json
 import math
 import os
+import shutil
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
@@ -48,6 +49,13 @@ def check_writable_target(path: str | os.PathLike[str], overwrite: bool) -> Path
         raise FileNotFoundError(f"folder {folder} does not exist; make it first (mkdir -p {folder})")
     if not os.access(folder, os.W_OK | os.X_OK):
         raise PermissionError(f"folder {folder} is not writable")
+    try:
+        total = shutil.disk_usage(folder).total
+    except OSError:  # no answer: the write itself will say
+        total = None
+    if total == 0:  # /proc, /sys: writable to root, yet no file can be made there (a command said so only at the end)
+        raise PermissionError(f"{target} cannot be written under {folder}: it is on a file system that stores no files "
+                              "(0 B in all, as /proc and /sys are); write it somewhere else")
     return target
 
 
