@@ -38,12 +38,12 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Literal, get_args, get_type_hints
 
-from common import add_ray_option, farm_main, machine, machine_words, out_prefix, ray_backend, TrainingBenchConfig
+from common import (add_ray_option, farm_main, machine, machine_words, out_prefix, ray_backend, TrainingBenchConfig,
+                    write_page)
 from prediction import collect_command, collect_data, data_path, run_training
 
 from piga.cli.common import ArgumentParser, positive_int, seed_int
 from piga.evaluation.objects import EMPTY_RATIO, LOST_RATIO
-from piga.io.atomic import atomic_output, write_json
 from piga.io.pool import JobRecords, RecordedJob, run_recorded
 from piga.world.model import SYSTEM_SHAPES, ModelConfig
 
@@ -387,11 +387,9 @@ def main(argv: list[str] | None = None) -> int:
               "machine": next(iter(done.values()))["machine"], "config": asdict(cfg),
               "runs": done,
               "summary": summary(done, cfg)}
-    write_json(args.out.with_suffix(".json"), record)
     if any(name.startswith("slots") for rows in record["summary"].values() for name in rows):  # else nothing to draw
         save_figure(slots_figure(record), args.out.parent / f"{args.out.name}-slots.png")
-    with atomic_output(args.out.with_suffix(".md"), overwrite=True) as tmp:
-        Path(tmp).write_text(markdown(record, args.out))
+    write_page(args.out, record, markdown(record, args.out))
     return 0
 
 

@@ -35,9 +35,9 @@ from collections import Counter
 from pathlib import Path
 from typing import Any
 
-from common import farm_main, machine, machine_words, out_prefix, work_folder
+from common import farm_main, machine, machine_words, out_prefix, work_folder, write_page
 from piga.cli.common import ArgumentParser, positive_int, ray_address
-from piga.io.atomic import atomic_output, write_json
+from piga.io.atomic import write_json
 
 #: The blind benchmark's own sequences per case (``diagnose_blind.py --sequences``), for the page.
 BLIND_SEQUENCES = 200
@@ -267,10 +267,9 @@ def main() -> int:
                              "sweep": compare_sweeps(work / "sweep-local.json", work / "sweep-cluster.json")}
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    write_json(out.with_suffix(".json"), record, overwrite=True)
-    with atomic_output(out.with_suffix(".md"), overwrite=True) as tmp:
-        tmp.write_text(markdown(record))
-    print(markdown(record))
+    page = markdown(record)
+    write_page(out, record, page)
+    print(page)
     files = record["blind_files"]
     identical = record["sweep"]["identical"] and record["blind"]["identical"] and \
         files["data_files_identical"] == files["data_files"] and files["reports_identical"] == files["reports"] and \

@@ -82,7 +82,7 @@ from common import ALGO_LABELS, add_ray_option, farm_main, machine, out_prefix, 
 from efficiency import Point, data_ratio
 
 from agents.planet.config import PlanetTrainConfig
-from piga.io.atomic import atomic_output, write_json
+from piga.io.atomic import atomic_output, write_json, written_together
 from piga.io.checkpoint import CHECKPOINT
 from piga.io.pool import Backend, JobRecords, RecordedJob, run_recorded
 from piga.control.episodes import parse_range
@@ -1123,9 +1123,10 @@ def main() -> int:
               f"{', '.join(record['pending'])}. {out.with_suffix('.md')} is written from the records there are.", flush=True)
     record["wall_seconds"] = time.monotonic() - started
     record["figures"] = figures(record, out)
-    write_json(out.with_suffix(".json"), record)
-    with atomic_output(out.with_suffix(".md"), overwrite=True) as tmp:
-        tmp.write_text(markdown(record))
+    with written_together([out.with_suffix(".json"), out.with_suffix(".md")]):
+        write_json(out.with_suffix(".json"), record)
+        with atomic_output(out.with_suffix(".md"), overwrite=True) as tmp:
+            tmp.write_text(markdown(record))
     print(f"wrote {out.with_suffix('.json')}, {out.with_suffix('.md')} and the figures {', '.join(record['figures'].values())}")
     return 0
 

@@ -36,7 +36,7 @@ from pathlib import Path
 from common import add_ray_option, check_page_target, farm_main, machine, out_prefix, ray_backend
 from agents.cem import CEMConfig
 from agents.mpc import MPCConfig
-from piga.io.atomic import atomic_output, write_json
+from piga.io.atomic import atomic_output, write_json, written_together
 from piga.control.episodes import EpisodeConfig, parse_range
 from piga.control.jobs import ControlJob, run_jobs
 from piga.evaluation.episodes import EpisodeSummary, summary_markdown
@@ -174,12 +174,13 @@ def main() -> int:
         summary_markdown(goal_piga + goal_oracle, extra=[("read_goal_deg", "goal read from image (deg)")]),
     ]
     md = "\n".join(lines)
-    with atomic_output(out.with_suffix(".md"), overwrite=True) as tmp_md:
-        tmp_md.write_text(md)
-    write_json(out.with_suffix(".json"), {"command": command, "machine": where, "backend": str(backend), "model": args.model,
-                                          "learned": learned, "minutes": minutes,
-                                          "checks": [{"floor": n, "measured": v, "met": ok} for n, v, ok in checks],
-                                          "results": [r.to_dict() for r in results]}, overwrite=True)
+    with written_together([out.with_suffix(".json"), out.with_suffix(".md")]):
+        with atomic_output(out.with_suffix(".md"), overwrite=True) as tmp_md:
+            tmp_md.write_text(md)
+        write_json(out.with_suffix(".json"), {"command": command, "machine": where, "backend": str(backend),
+                                              "model": args.model, "learned": learned, "minutes": minutes,
+                                              "checks": [{"floor": n, "measured": v, "met": ok} for n, v, ok in checks],
+                                              "results": [r.to_dict() for r in results]}, overwrite=True)
     print("\n".join(f"{'PASS' if ok else 'FAIL'}  {n}: {v}" for n, v, ok in checks))
     print(f"wrote {out.with_suffix('.md')}, {out.with_suffix('.json')}, {plot}")
     return 0

@@ -47,9 +47,8 @@ from typing import Any
 import numpy as np
 import torch
 
-from common import machine, machine_words, out_prefix
+from common import machine, machine_words, out_prefix, write_page
 from planet_faithful import VARIANTS
-from piga.io.atomic import atomic_output, write_json
 from piga.io.device import cuda_available, resolve_device
 from piga.cli.common import ArgumentParser, positive_int, seed_int
 
@@ -319,10 +318,9 @@ def main(argv: list[str] | None = None) -> int:
                                             "full": args.full},
               "references": references, "rows": rows, "speedups": speedups(rows), "full": full}
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    write_json(args.out.with_suffix(".json"), record, overwrite=True)
-    with atomic_output(args.out.with_suffix(".md"), overwrite=True) as tmp:
-        tmp.write_text(markdown(record))
-    print(markdown(record))
+    page = markdown(record)
+    write_page(args.out, record, page)
+    print(page)
     return 0
 
 

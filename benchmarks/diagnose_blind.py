@@ -39,7 +39,7 @@ import numpy as np
 from common import (add_diagnose_options, add_ray_option, check_piga_model, diagnose_options, farm_main, job_command,
                     machine, out_prefix, ray_backend, work_folder)
 from envs.pendulum import PixelPendulumConfig
-from piga.io.atomic import atomic_output, write_json
+from piga.io.atomic import atomic_output, write_json, written_together
 from piga.data.collect import CollectConfig, collect
 from piga.io.pool import run_pool
 from piga.cli.common import ArgumentParser, positive_int, seed_int
@@ -234,12 +234,15 @@ def markdown(runs: list[dict], summary: dict, command: str, info: dict) -> str:
 def save(out: Path, command: str, info: dict, runs: list[dict], summarize: Callable[[list[dict]], dict],
          markdown: Callable[[list[dict], dict, str, dict], str]) -> dict:
     """Summarises ``runs`` and writes OUT.json (the command, ``info``, the summary and every run) and
-    OUT.md (``markdown`` of the runs in case order), each atomically; returns the summary."""
+    OUT.md (``markdown`` of the runs in case order), each atomically and both or neither; returns the summary."""
     summary = summarize(runs)
     out.parent.mkdir(parents=True, exist_ok=True)
-    write_json(out.with_suffix(".json"), {"command": command, **info, "summary": summary, "runs": runs}, overwrite=True)
-    with atomic_output(out.with_suffix(".md"), overwrite=True) as tmp:
-        tmp.write_text(markdown(sorted(runs, key=lambda r: r["case"]), summary, command, info))
+    # the record last: a failed page keeps the previous one to continue from
+    with written_together([out.with_suffix(".json"), out.with_suffix(".md")]):
+        with atomic_output(out.with_suffix(".md"), overwrite=True) as tmp:
+            tmp.write_text(markdown(sorted(runs, key=lambda r: r["case"]), summary, command, info))
+        write_json(out.with_suffix(".json"), {"command": command, **info, "summary": summary, "runs": runs},
+                   overwrite=True)
     return summary
 
 

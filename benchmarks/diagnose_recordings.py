@@ -28,9 +28,8 @@ import imageio.v2 as imageio
 import numpy as np
 
 from common import (add_diagnose_options, check_piga_model, checked_command, diagnose_options, machine, out_prefix,
-                    work_folder)
+                    work_folder, write_page)
 from envs.pendulum import PixelPendulumConfig, make_pixel_pendulum
-from piga.io.atomic import atomic_output, write_json
 from piga.cli.common import ArgumentParser, seed_int
 
 class Case(NamedTuple):
@@ -116,7 +115,6 @@ def main() -> int:
                      "seconds": time.time() - t0})
         print(f"recording {i}: {effects or 'none'}, drop {drop}, blur {blur} -> {report['verdict']}", flush=True)
     info = {"command": shlex.join(["python", *sys.argv]), "model": args.model, "frames": args.frames, "machine": machine()}
-    write_json(Path(args.out).with_suffix(".json"), {**info, "runs": runs}, overwrite=True)
     pct = lambda v: "–" if v is None else f"{100 * v:.0f}%"  # noqa: E731
     lines = ["# piga-diagnose on imported video recordings", "", f"Command: `{info['command']}`", "",
              f"Model: `{args.model}`. Each recording: one episode of {args.frames} frames of random actions, Gymnasium's "
@@ -130,8 +128,7 @@ def main() -> int:
         eff += f", lens blur σ={r['blur_full_size_px']:g} px of the full-size render" if r.get("blur_full_size_px") else ""
         lines.append(f"| {r['case']} | {eff} | {r['verdict']} | {'yes' if r['correct'] else '**no**'} | "
                      f"{pct(r['closure'])} ({r['closure_basis']}) |")
-    with atomic_output(Path(args.out).with_suffix(".md"), overwrite=True) as tmp:
-        tmp.write_text("\n".join(lines) + "\n")
+    write_page(Path(args.out), {**info, "runs": runs}, "\n".join(lines) + "\n")
     print("\n".join(lines))
     return 0
 

@@ -46,8 +46,7 @@ from pathlib import Path
 from typing import NamedTuple
 
 from common import (add_diagnose_options, add_ray_option, diagnose_options, farm_main, logged_command, machine,
-                    out_prefix, ray_backend, work_folder)
-from piga.io.atomic import atomic_output, write_json
+                    out_prefix, ray_backend, work_folder, write_page)
 from piga.io.pool import run_pool
 from piga.cli.common import ArgumentParser, PigaError, positive_int, seed_int
 
@@ -338,10 +337,8 @@ def main() -> None:
     command = "python benchmarks/dmc.py " + " ".join(sys.argv[1:])
     info = machine()
     out = Path(args.out)
-    write_json(out.with_suffix(".json"), {"command": command, "machine": info, "cases": cases, "published": PUBLISHED})
-    with atomic_output(out.with_suffix(".md"), overwrite=True) as tmp:
-        tmp.write_text(markdown(cases, command, info))
-    print(f"wrote {out.with_suffix('.md')}")
+    write_page(out, {"command": command, "machine": info, "cases": cases, "published": PUBLISHED},
+               markdown(cases, command, info))
 
 
 if __name__ == "__main__":

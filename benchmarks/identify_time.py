@@ -32,8 +32,8 @@ from typing import Any
 
 import numpy as np
 
-from common import machine, out_prefix, work_folder
-from piga.io.atomic import atomic_output, write_json
+from common import machine, out_prefix, work_folder, write_page
+from piga.io.atomic import atomic_output
 from piga.data.collect import CollectConfig, collect
 from piga.data.schema import inspect_dataset
 from piga.evaluation.evaluate import PARAMETER_NAMES
@@ -162,10 +162,9 @@ def main(argv: list[str] | None = None) -> int:
               "speedup": medians["before"] / medians["today"] if {"before", "today"} <= set(medians) else None,
               "figure": str(out.with_name(out.name + "-error.png"))}
     figure(runs, Path(record["figure"]))
-    write_json(out.with_suffix(".json"), record, overwrite=True)
-    with atomic_output(out.with_suffix(".md"), overwrite=True) as tmp:
-        tmp.write_text(markdown(record))
-    print(markdown(record))
+    page = markdown(record)
+    write_page(out, record, page)
+    print(page)
     return 0
 
 

@@ -25,10 +25,9 @@ from pathlib import Path
 
 import torch
 
-from common import machine, machine_words, out_prefix
+from common import machine, machine_words, out_prefix, write_page
 from piga.data.schema import read_sequences
 from piga.evaluation.objects import EMPTY_RATIO, LOST_RATIO, check_objects
-from piga.io.atomic import atomic_output, write_json
 from piga.io.runs import load_model
 from piga.cli.common import ArgumentParser, PigaError
 
@@ -74,11 +73,8 @@ def main() -> int:
               f"{', '.join(map(str, r['empty_slots'])) or 'none'} |" for r in rows]
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_output(out.with_suffix(".md"), overwrite=True) as tmp:
-        tmp.write_text("\n".join(lines) + "\n")
-    write_json(out.with_suffix(".json"), {"command": shlex.join(["python", *sys.argv]), "threshold": LOST_RATIO,
-                                          "empty_threshold": EMPTY_RATIO,
-                                          "machine": machine(), "rows": rows}, overwrite=True)
+    write_page(out, {"command": shlex.join(["python", *sys.argv]), "threshold": LOST_RATIO,
+                     "empty_threshold": EMPTY_RATIO, "machine": machine(), "rows": rows}, "\n".join(lines) + "\n")
     return 0
 
 

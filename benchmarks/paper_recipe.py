@@ -32,11 +32,11 @@ from typing import Any
 
 import torch
 
-from common import logged_command, machine, machine_words, out_prefix
+from common import logged_command, machine, machine_words, out_prefix, write_page
 from prediction import run_training
 
 from piga.cli.common import ArgumentParser, positive_float, positive_int
-from piga.io.atomic import atomic_output, write_json
+from piga.io.atomic import write_json
 from piga.io.pool import git_commit
 
 SYSTEMS = ("spring", "bouncing", "gravity")
@@ -173,10 +173,8 @@ def run(args: argparse.Namespace, argv: list[str] | None) -> int:
     if not records:
         return 0
     command = shlex.join(["python", "benchmarks/paper_recipe.py", *(argv if argv is not None else sys.argv[1:])])
-    with atomic_output(out.with_suffix(".md"), overwrite=True) as tmp:
-        tmp.write_text(markdown(records, command, args.system))
-    write_json(out.with_suffix(".json"), {"command": command, "system": args.system, "records": records}, overwrite=True)
-    print(f"wrote {out.with_suffix('.md')}")
+    write_page(out, {"command": command, "system": args.system, "records": records},
+               markdown(records, command, args.system))
     return 0
 
 

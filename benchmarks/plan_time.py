@@ -48,11 +48,10 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from common import machine, out_prefix
+from common import machine, out_prefix, write_page
 from agents.config import CEMConfig
 from agents.dynamics import PendulumDynamics, start_of
 from agents.mpc import MPCConfig, OracleAgent, PigaMPCAgent
-from piga.io.atomic import atomic_output, write_json
 from piga.control.registry import baseline_agent
 from piga.control.episodes import EpisodeConfig, run_episodes
 from piga.evaluation.episodes import EpisodeSummary, summary_markdown
@@ -245,12 +244,8 @@ def main() -> int:
             "", ratio["text"]]),
     ])
     out = Path(args.out)
-    with atomic_output(out.with_suffix(".md"), overwrite=True) as tmp:
-        tmp.write_text(md)
-    write_json(out.with_suffix(".json"), {"command": command, "machine": where, "model": args.model, "learned": learned,
-                                          "load_average": load, "rows": rows, "planet": args.planet, "planet_ratio": ratio},
-               overwrite=True)
-    print(f"wrote {out.with_suffix('.md')} and {out.with_suffix('.json')}")
+    write_page(out, {"command": command, "machine": where, "model": args.model, "learned": learned,
+                     "load_average": load, "rows": rows, "planet": args.planet, "planet_ratio": ratio}, md)
     return 0
 
 

@@ -31,7 +31,7 @@ from pathlib import Path
 from typing import Any
 
 from common import machine, machine_words, out_prefix
-from piga.io.atomic import atomic_output, write_json
+from piga.io.atomic import atomic_output, write_json, written_together
 from piga.cli.common import ArgumentParser, PigaError, positive_int
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -129,9 +129,10 @@ def main(argv: list[str] | None = None) -> int:
               "runs": runs, "summary": summarize(runs)}
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_output(out.with_suffix(".md"), overwrite=True) as path:
-        Path(path).write_text(markdown(record))
-    write_json(out.with_suffix(".json"), record, overwrite=True)
+    with written_together([out.with_suffix(".json"), out.with_suffix(".md")]):
+        with atomic_output(out.with_suffix(".md"), overwrite=True) as path:
+            Path(path).write_text(markdown(record))
+        write_json(out.with_suffix(".json"), record, overwrite=True)
     print(json.dumps(record["summary"], indent=2))
     return 0
 

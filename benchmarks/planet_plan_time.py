@@ -35,11 +35,10 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from common import machine, out_prefix
+from common import machine, out_prefix, write_page
 from agents.planet.config import LatentPlannerConfig, RSSMConfig
 from agents.planet.planner import PlanetAgent
 from agents.planet.rssm import WorldModel
-from piga.io.atomic import atomic_output, write_json
 from piga.cli.common import ArgumentParser, PigaError, positive_int
 from piga.io.pool import git_commit
 
@@ -94,7 +93,6 @@ def main() -> int:
     record = {"command": shlex.join(["python", *sys.argv]), "commit": git_commit(), "machine": machine(), "gpu": gpu, "model": args.model or "untrained RSSMConfig()",
               "load_average_before": load_before, "load_average_after": os.getloadavg(), "rows": rows}
     out = Path(args.out)
-    write_json(out.with_suffix(".json"), record, overwrite=True)
     lines = [f"# PlaNet-style plan time per plan and per control step\n\nCommand: `{record['command']}` at commit "
              f"{(record['commit'] or 'unknown')[:7]}\n",
              (f"Machine: {record['machine']['cpu']}, {record['machine']['cores']} cores"
@@ -106,8 +104,7 @@ def main() -> int:
              "|---|---|---|---|---|---|---|"]
     lines += [f"| {r['threads']} | {r['plans']} | {r['reference_ms']:.0f} | {r['fast_ms']:.0f} | {r['speedup']:.2f}x | "
               f"{r['fast_ms_per_step']:.0f} | {r['same_actions']} |" for r in rows]
-    with atomic_output(out.with_suffix(".md"), overwrite=True) as tmp:
-        tmp.write_text("\n".join(lines) + "\n")
+    write_page(out, record, "\n".join(lines) + "\n")
     print("\n".join(lines[2:]))
     return 0
 

@@ -32,9 +32,8 @@ from pathlib import Path
 from typing import Any, Literal, get_args, get_type_hints
 
 from common import (add_training_options, farm_main, logged_command, machine, machine_words, out_prefix, ray_backend,
-                    TrainingBenchConfig)
+                    TrainingBenchConfig, write_page)
 
-from piga.io.atomic import atomic_output, write_json
 from piga.io.pool import JobRecords, RecordedJob, run_recorded
 from piga.world.model import ModelConfig
 from piga.cli.common import ArgumentParser
@@ -324,10 +323,8 @@ def main(argv: list[str] | None = None) -> int:
     record = {"command": " ".join(["python", "benchmarks/prediction.py", *(sys.argv[1:] if argv is None else argv)]),
               "machine": next(iter(done.values()))["machine"], "config": asdict(cfg), "runs": done,
               "summary": summary(done, cfg, parameter_counts(cfg, folder))}
-    write_json(args.out.with_suffix(".json"), record)
     save_figure(ssim_figure(record["summary"]), args.out.parent / f"{args.out.name}-ssim.png")
-    with atomic_output(args.out.with_suffix(".md"), overwrite=True) as tmp:
-        Path(tmp).write_text(markdown(record, args.out))
+    write_page(args.out, record, markdown(record, args.out))
     return 0
 
 

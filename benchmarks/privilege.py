@@ -38,11 +38,10 @@ from pathlib import Path
 from typing import Any, Literal, get_args
 
 from baselines import PRESETS, data_file, evaluate, piga_epochs, train_piga
-from common import farm_main, machine, machine_words, out_prefix, signed
+from common import farm_main, machine, machine_words, out_prefix, signed, write_page
 
 from agents.reward_head import RewardHeadConfig
 from piga.cli.common import ArgumentParser, positive_int, seed_int
-from piga.io.atomic import atomic_output, write_json
 from piga.io.pool import JobRecords, RecordedJob, run_recorded
 
 Row = Literal["default", "learned-reward", "paper-readout", "not-told"]
@@ -273,9 +272,7 @@ def main(argv: list[str] | None = None) -> int:
               "baselines": {k: v for k, v in asdict(cfg.baselines).items() if k not in ("sizes", "planet_sizes", "seeds")},
               "runs": done,
               "summary": summary(done, cfg)}
-    write_json(args.out.with_suffix(".json"), record)
-    with atomic_output(args.out.with_suffix(".md"), overwrite=True) as tmp:
-        Path(tmp).write_text(markdown(record))
+    write_page(args.out, record, markdown(record))
     return 0
 
 

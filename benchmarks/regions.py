@@ -32,12 +32,11 @@ from typing import Any, get_args, get_type_hints
 
 import numpy as np
 from common import (add_training_options, farm_main, logged_command, machine, machine_words, out_prefix, ray_backend,
-                    TrainingBenchConfig)
+                    TrainingBenchConfig, write_page)
 
 from prediction import run_training
 
 from piga.cli.common import ArgumentParser, nonnegative_int
-from piga.io.atomic import atomic_output, write_json
 from piga.io.pool import JobRecords, RecordedJob, run_recorded
 from piga.world.model import ModelConfig
 
@@ -389,10 +388,8 @@ def main(argv: list[str] | None = None) -> int:
     record = {"command": " ".join(["python", "benchmarks/regions.py", *(sys.argv[1:] if argv is None else argv)]),
               "machine": next(iter(done.values()))["machine"], "config": asdict(cfg), "strip": [strip[0], list(strip[1])],
               "runs": runs, "summary": summary(done, cfg), "empty_bottom": empty}
-    write_json(args.out.with_suffix(".json"), record)
     save_figure(strip_figure(truth, first_seed, strip[1]), args.out.parent / f"{args.out.name}-strip.png")
-    with atomic_output(args.out.with_suffix(".md"), overwrite=True) as tmp:
-        Path(tmp).write_text(markdown(record, args.out))
+    write_page(args.out, record, markdown(record, args.out))
     return 0
 
 

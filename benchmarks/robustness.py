@@ -72,7 +72,7 @@ from filelock import FileLock
 
 from common import add_ray_option, farm_main, job_command, machine, machine_words, out_prefix, ray_backend, work_folder
 from piga.cli.common import ArgumentParser, PigaError, NOT_CONVERGED, positive_int
-from piga.io.atomic import atomic_output, write_json
+from piga.io.atomic import atomic_output, write_json, written_together
 from piga.io.pool import git_commit, run_pool
 from piga.data.schema import DatasetWriter
 
@@ -650,9 +650,11 @@ class Bench:
                   "thresholds": {"pass_error": PASS_ERROR, "fail_error": FAIL_ERROR, "found_px": FOUND_PX,
                                  "found_deg": FOUND_DEG, "data_seed": DATA_SEED},
                   "summary": summary(records, len(self.all_rows)), "rows": records}
-        write_json(self.out.with_suffix(".json"), result)
-        with atomic_output(self.out.with_suffix(".md"), overwrite=True) as tmp:
-            tmp.write_text(markdown(result, self.out))
+        # the record last: a failed page keeps the previous one
+        with written_together([self.out.with_suffix(".json"), self.out.with_suffix(".md")]):
+            with atomic_output(self.out.with_suffix(".md"), overwrite=True) as tmp:
+                tmp.write_text(markdown(result, self.out))
+            write_json(self.out.with_suffix(".json"), result)
 
 
 def _env() -> dict[str, str]:

@@ -49,7 +49,7 @@ from torch.utils.data import RandomSampler
 from common import machine, machine_words, out_prefix, work_folder
 from piga.data.schema import FRAME_CODEC, DatasetWriter, FrameCodec, inspect_dataset, read_sequences
 from piga.data.windows import BlockShuffleSampler, SequenceWindows
-from piga.io.atomic import atomic_output, write_json
+from piga.io.atomic import atomic_output, write_json, written_together
 from piga.cli.common import ArgumentParser, PigaError, positive_int
 
 CODECS: tuple[FrameCodec, ...] = typing.get_args(FrameCodec)
@@ -309,9 +309,11 @@ def main(argv: list[str] | None = None) -> int:
             result["commands"][part] = command
             result[part] = (measure_throughput(files["pendulum"], args.work, args.repeats) if part == "throughput" else
                             [measure_memory(files["pendulum"], args.work, args.cap_mb, n) for n in args.big_sequences])
-    write_json(args.out.with_suffix(".json"), result)
-    with atomic_output(args.out.with_suffix(".md"), overwrite=True) as tmp:
-        tmp.write_text(markdown(result))
+    # the record last: a failed page keeps the previous rows
+    with written_together([args.out.with_suffix(".json"), args.out.with_suffix(".md")]):
+        with atomic_output(args.out.with_suffix(".md"), overwrite=True) as tmp:
+            tmp.write_text(markdown(result))
+        write_json(args.out.with_suffix(".json"), result)
     print(markdown(result))
     return 0
 

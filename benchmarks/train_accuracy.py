@@ -32,7 +32,7 @@ from piga.io.pool import run_pool
 from piga.data.collect import CollectConfig, collect
 from piga.training.convergence import check_convergence
 from piga.evaluation.evaluate import EvalConfig, evaluate
-from piga.io.atomic import write_json
+from piga.io.atomic import write_json, written_together
 from piga.world.model import ModelConfig
 from piga.training.train import PRESETS, TrainConfig, train
 from piga.cli.common import ArgumentParser, positive_int, seed_int
@@ -128,9 +128,11 @@ def main() -> None:
     def finished(_: int, run: dict[str, object]) -> None:  # saved as each run ends, so that a stopped benchmark continues
         record["runs"].append(run)
         record["runs"].sort(key=lambda r: (list(CASES).index(r["case"]), r["seed"]))
-        write_json(record_path, record)
-        with atomic_output(out.with_suffix(".md"), overwrite=True) as tmp:
-            tmp.write_text(markdown(record, out))
+        # the record last: a failed page keeps the previous one to continue from
+        with written_together([record_path, out.with_suffix(".md")]):
+            with atomic_output(out.with_suffix(".md"), overwrite=True) as tmp:
+                tmp.write_text(markdown(record, out))
+            write_json(record_path, record)
         pe = run["metrics"]["parameter_errors"]  # type: ignore[index]
         name = f"{run['case']} seed {run['seed']}"
         if not run["converged"]:
