@@ -84,9 +84,11 @@ def write_page(out: Path, record: dict[str, Any], page: str) -> None:
     from piga.io.atomic import atomic_output, write_json, written_together
 
     with written_together([out.with_suffix(".json"), out.with_suffix(".md")]):  # no record without its page
-        write_json(out.with_suffix(".json"), record, overwrite=True)
+        # the page first: a failed record write then removes only the new page, and a record that a script reads back
+        # (to continue a stopped run) stays; written the other way, a failed page removed the only copy of the record
         with atomic_output(out.with_suffix(".md"), overwrite=True) as tmp:
             Path(tmp).write_text(page, encoding="utf-8")
+        write_json(out.with_suffix(".json"), record, overwrite=True)
     print(f"wrote {out.with_suffix('.md')} and {out.with_suffix('.json')}")
 
 
