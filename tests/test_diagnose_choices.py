@@ -488,6 +488,33 @@ def test_effects_that_predict_worse_than_the_nominal_are_not_a_correction(damped
     assert worse.verdict_class == "unexplained" and "corrects nothing" in worse.verdict
     ran_off = fit.Model(("damping",), 0, {"g": NOMINAL.g / 1000, "a": NOMINAL.a, "b": 0.2})
     assert _worse_than_nominal(naming, d.gap, ran_off, NOMINAL).verdict_class == "unexplained"
+    # a cogging torque's best fit, "gravity 0.502", strayed 1.43x further in free runs; its gravity note asserted it
+    noted = Naming(d.effects, ["g refits to 5.031 (x0.502 the reference 10.018): gravity, or the pendulum's length, "
+                               "differs from the identified model"], d.verdict, d.verdict_class)
+    strays = replace(d.gap, typical_free_run_mse_corrected=1.43 * d.gap.typical_free_run_mse_nominal)
+    drifted = _worse_than_nominal(noted, strays, final, NOMINAL)
+    assert drifted.verdict_class == "unexplained" and "strays further than the nominal model's" in drifted.verdict
+    assert drifted.effects == [] and "damping" in drifted.verdict  # the fit is in the verdict, no effect established
+    assert drifted.notes == ["g refits to 5.031 (x0.502 the reference 10.018) in a fit that predicts worse than the "
+                             "nominal model: no gravity error is claimed"]
+    slightly = replace(d.gap, typical_free_run_mse_corrected=1.09 * d.gap.typical_free_run_mse_nominal)
+    assert _worse_than_nominal(naming, slightly, final, NOMINAL) is naming  # noise, as a small gain measured
+
+
+def test_no_gap_is_not_claimed_where_the_nominal_model_strays_far_above_its_floor(damped) -> None:
+    """Torques applied but logged as 0: the nominal error was 8.5x the twin's floor, no candidate named it, and the
+    verdict read "no significant gap"."""
+    from piga.diagnostics.diagnose import _gap_left_unnamed
+    from piga.diagnostics.results import Naming
+
+    none = Naming([], [], "no significant gap", "none")
+    far = replace(damped.gap, typical_free_run_mse_nominal=0.0019, typical_free_run_mse_floor=0.000222,
+                  closure_basis="state")
+    left = _gap_left_unnamed(none, far)
+    assert left.verdict_class == "unexplained" and "strays 8.6x as far as on its twin" in left.verdict, left.verdict
+    clean = replace(far, typical_free_run_mse_nominal=1.39 * 0.000222)  # the most measured without an effect
+    assert _gap_left_unnamed(none, clean) is none
+    assert _gap_left_unnamed(none, replace(far, typical_free_run_mse_floor=None)) is none  # no twin: nothing to judge
 
 
 def test_constant_actions_are_said() -> None:

@@ -47,10 +47,12 @@ def test_candidate_physics_matches_the_effect_wrappers(effects: dict) -> None:
     np.testing.assert_allclose(predicted, states, atol=1e-5)
 
 
-def planted(effects: dict, n: int = 120, t: int = 30, noise: float = 0.002, seed: int = 0) -> Observations:
-    """Encoded-angle-like observations of a pendulum with ``effects``, written independently of piga's code."""
+def planted(effects: dict, n: int = 120, t: int = 30, noise: float = 0.002, seed: int = 0,
+            constant: float | None = None) -> Observations:
+    """Encoded-angle-like observations of a pendulum with ``effects``, written independently of piga's code; with
+    ``constant``, every action is that value."""
     rng = np.random.default_rng(seed)
-    u = rng.uniform(-2, 2, (n, t))
+    u = rng.uniform(-2, 2, (n, t)) if constant is None else np.full((n, t), constant)
     th = np.zeros((n, t))
     x, v = rng.uniform(-math.pi, math.pi, n), rng.uniform(-1, 1, n)
     th[:, 0] = x
@@ -116,6 +118,28 @@ def test_a_gravity_error_is_named_not_called_no_gap() -> None:
     assert d.verdict_class == "gravity", d.verdict
     (e,) = d.effects
     assert e.value == pytest.approx(0.5, abs=0.01) and not d.gap.no_gap
+
+
+def test_constant_actions_name_no_gain_nor_actuator_effect() -> None:
+    """All-1 actions read "gain 0.0271 factor on the nominal a" beside a note that the gain cannot be judged: a
+    constant command times a gain is a constant torque."""
+    d = analyse(planted({"gain": 0.5}, constant=1.0), NOMINAL, replace(FAST, bootstrap=10))
+    assert "gain" not in d.verdict_class.split("+") and "gain" not in d.verdict, d.verdict
+    assert {"delay", "deadzone", "saturation"} <= set(d.excluded)
+    assert any("the actions never change" in n or "actions are all 1" in n for n in d.notes), d.notes
+
+
+def test_a_gain_the_actions_barely_show_is_not_given_a_value() -> None:
+    """A gain of 0.001 read "gain 3.39e-07 (95% interval 3.39e-07..3.39e-07)": every bootstrap refit stayed where
+    it started, and the interval excluded the truth."""
+    from piga.diagnostics.diagnose import gain_undetermined
+
+    assert gain_undetermined([3.39e-07, 3.39e-07]) and gain_undetermined([7.36e-07, 0.231])
+    assert gain_undetermined([0.0013, 0.00566])  # below GAIN_FLOOR: the interval excluded the truth, 0.001
+    assert not gain_undetermined([1.95, 2.01]) and not gain_undetermined([0.45, 0.52])
+    d = analyse(planted({"gain": 0.001}), NOMINAL, replace(FAST, bootstrap=10))
+    assert d.verdict_class == "unexplained" and "the actions barely move the system" in d.verdict, d.verdict
+    assert not any(e.effect == "gain" for e in d.effects)
 
 
 def test_a_gain_whose_interval_holds_the_nominal_is_not_named() -> None:

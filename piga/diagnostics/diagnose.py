@@ -85,8 +85,8 @@ from piga.diagnostics.vision import Camera, CameraConfig, CameraFindings, angle_
 from piga.io.choices import check_ranges, check_types
 from piga.world.model import PhysicsModel
 from piga.diagnostics.fit import Nominal
-from piga.world.effects import (BIAS, CANDIDATES, DAMPING, DEADZONE, DELAY, EFFECTS, FRICTION, SPEED_CLIP, WITHIN_FRAME,
-                                TorqueTerm, pendulum_gains)
+from piga.world.effects import (BIAS, CANDIDATES, DAMPING, DEADZONE, DELAY, EFFECTS, FRICTION, SATURATION, SPEED_CLIP,
+                                TorqueTerm, WITHIN_FRAME, pendulum_gains)
 from piga.io.runs import (nominal_of, training_arrow, training_blank_mse, training_data_path,
                           training_reconstruction_mse)
 
@@ -852,10 +852,15 @@ def clipped_actions_notes(actions: np.ndarray) -> list[str]:
             f"misjudged; import the actions in the env's units, within ±{MAX_ACTION:g}, to diagnose it"]
 
 
+def actions_vary(actions: np.ndarray) -> bool:
+    """Whether the recording's actions take more than one value (an empty recording: as if they did)."""
+    return actions.size == 0 or float(np.ptp(actions)) > 0
+
+
 def constant_actions_notes(actions: np.ndarray) -> list[str]:
     """A note where the recording's actions never change (all 0, say): the actuation gain cannot be read from it, and
     the actuator's effects cannot show (an import with a column of zeros read "no significant gap", unsaid)."""
-    if actions.size == 0 or float(np.ptp(actions)) > 0:
+    if actions_vary(actions):
         return []
     return [f"the recording's actions are all {float(actions.flat[0]):g}: the actuation gain a and the actuator's "
             "effects (gain, delay, deadzone, saturation) cannot be judged from it; only the unforced dynamics can"]
@@ -863,6 +868,29 @@ def constant_actions_notes(actions: np.ndarray) -> list[str]:
 
 #: A corrected physics whose held-out one-step error is above this factor times the nominal's corrects nothing.
 WORSE_THAN_NOMINAL = 1.5
+#: A corrected physics whose typical held-out free-run angle MSE is above this factor times the nominal's corrects
+#: nothing (a cogging torque's best fit, "gravity 0.502": 1.43x; a true gain of 0.97 read 0.966 at 1.09x, by noise).
+DRIFTS_FURTHER = 1.2
+#: A gain's 95% bootstrap interval whose lower end is below this fraction of its upper end does not pin the gain down
+#: (a probe's actions unrelated to the motion: 7.4e-07..0.231; a constant command: 5.4e-07..0.113; a gain of 2 read
+#: 1.95..2.01).
+GAIN_SPAN = 0.01
+#: A gain whose whole interval lies below this factor is not measured: the actions move the system less than the
+#: angles' noise shows one step ahead, and the bootstrap refits stall at the fit's start (a planted gain of 0.001
+#: read 0.00566, 95% interval 0.0013..0.00566; a collected one 3.39e-07..3.39e-07).
+GAIN_FLOOR = 0.05
+#: "No significant gap" needs the nominal model's typical held-out free-run error within this factor of the twin's
+#: floor (what the nominal physics leaves on its own simulated twin): measured 0.54-1.39x on recordings without an
+#: effect; torques applied but logged as 0 left 8.5x with no candidate to name, and read "no significant gap".
+NO_GAP_FACTOR = 3.0
+
+
+def gain_undetermined(interval: list[float]) -> bool:
+    """Whether a gain's bootstrap interval (low, high), as factors on the reference a, leaves it undetermined: every
+    refit stayed where it started (a width of zero: a gain of 0.001 read "3.39e-07 (95% interval 3.39e-07..3.39e-07)"),
+    the interval spans orders of magnitude (:data:`GAIN_SPAN`), or it lies below :data:`GAIN_FLOOR`."""
+    low, high = interval
+    return not high > 0 or high - low <= 1e-6 * high or low < GAIN_SPAN * high or high < GAIN_FLOOR
 
 
 def _worse_than_nominal(naming: Naming, gap: Gap, final: fit.Model, nom: Nominal) -> Naming:
@@ -873,14 +901,36 @@ def _worse_than_nominal(naming: Naming, gap: Gap, final: fit.Model, nom: Nominal
     if not naming.effects:
         return naming
     worse = gap.one_step_rms_corrected_rad > WORSE_THAN_NOMINAL * gap.one_step_rms_nominal_rad
-    if not (worse or fit.collapsed(final, nom, factor=100.0)):
+    drifts = gap.typical_free_run_mse_corrected > DRIFTS_FURTHER * gap.typical_free_run_mse_nominal
+    if not (worse or drifts or fit.collapsed(final, nom, factor=100.0)):
         return naming
     why = (f"its held-out one-step error is {math.degrees(gap.one_step_rms_corrected_rad):.2f} deg against the nominal "
            f"model's {math.degrees(gap.one_step_rms_nominal_rad):.2f}" if worse else
+           f"its typical held-out free run strays further than the nominal model's (angle MSE "
+           f"{gap.typical_free_run_mse_corrected:.3g} against {gap.typical_free_run_mse_nominal:.3g} rad²)" if drifts else
            f"its g or a ran off (g = {final.values.get('g', nom.g):.3g}, a = {final.values.get('a', nom.a):.3g})")
     verdict = (f"not explained by the candidates: the best fit ({'; '.join(e.describe() for e in naming.effects)}) "
                f"corrects nothing, {why}; is the recording the scene the model knows (a camera moved far, or the "
-               "frames cut off)?")
+               "frames cut off), or does the system have an effect that is no candidate?")
+    # a fit that predicts worse establishes none of its effects: they stay in the verdict, not in the list of effects
+    notes = [note.replace(": gravity, or the pendulum's length, differs from the identified model",
+                          " in a fit that predicts worse than the nominal model: no gravity error is claimed")
+             for note in naming.notes]
+    return Naming([], notes, verdict, "unexplained")
+
+
+def _gap_left_unnamed(naming: Naming, gap: Gap) -> Naming:
+    """The verdict "not explained" for "no significant gap" where the nominal model's typical held-out free run strays
+    :data:`NO_GAP_FACTOR` times its twin's floor or more: a gap that no candidate names is still a gap."""
+    floor = gap.typical_free_run_mse_floor
+    if naming.verdict_class != "none" or floor is None or floor <= 0 or gap.closure_basis != "state":
+        return naming
+    ratio = gap.typical_free_run_mse_nominal / floor
+    if ratio < NO_GAP_FACTOR:
+        return naming
+    verdict = (f"not explained by the candidates: the nominal model's typical held-out free run strays {ratio:.1f}x "
+               f"as far as on its twin (angle MSE {gap.typical_free_run_mse_nominal:.3g} against the floor {floor:.3g} "
+               f"rad²; under {NO_GAP_FACTOR:g}x without a gap), and no candidate closes it")
     return Naming(naming.effects, naming.notes, verdict, "unexplained")
 
 
@@ -888,7 +938,8 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
                  generic: GenericBasis, config: DiagnoseConfig, from_gymnasium: bool = True,
                  ambiguity: Ambiguity | None = None, flip_bic_drop: float | None = None,
                  draws: dict[str, list[float]] | None = None, refit: fit.Model | None = None,
-                 own: Observations | Callable[[], Observations | None] | None = None) -> Naming:
+                 own: Observations | Callable[[], Observations | None] | None = None,
+                 varied_actions: bool = True) -> Naming:
     """Step 4: the effects that the chosen physics and the camera stage name, with intervals, and the verdict.
 
     Gymnasium's own speed clip is no gap (for a recording that the file says came from Gymnasium's
@@ -907,6 +958,11 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
     effects were chosen), the a and g of a gain or gravity error are
     compared with those that the same effects read from that file (:func:`own_reading`), not with
     the nominal model's, which were identified without the effects.
+
+    Without ``varied_actions`` (the recording's actions never change) no gain is named: a constant command times a
+    gain is a constant torque, which a bias or gravity explains as well (a probe's all-1 actions read "gain 0.0271").
+    A gain whose bootstrap refits do not pin it (:func:`gain_undetermined`) is not named either, and the verdict says
+    that the actions barely move the system.
     """
     notes: list[str] = []
     named = [e for e in final.effects if ambiguity is None or e not in ambiguity.between[0].split("+")]
@@ -944,6 +1000,10 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
         gain_error = False
         notes.append(f"|a| refits to x{gain:.3f} the nominal a; with the sign flipped, the nominal a is no reference "
                      "for its size (a model trained on such frames shrinks a toward 0), so no gain error is named")
+    if gain_error and not varied_actions:
+        gain_error = False
+        notes.append(f"a refits to {reference.values['a']:.3g} (x{gain:.3g} the nominal), but the actions never change: "
+                     "a constant command times a gain is a constant torque, so no gain error is named")
     if gain_error and plain is not None and abs(plain - 1) <= config.gain_tolerance:
         gain_error = False
         notes.append(f"a refits to {reference.values['a']:.3f} (x{gain:.3f} the nominal) with the effects, but to "
@@ -1010,6 +1070,13 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
         a_int = [x * reference.values["a"] / final.values["a"] for x in a_int]
     if a_int:
         a_int = sorted(abs(x) for x in a_int) if a_int[0] * a_int[1] > 0 else [0.0, max(abs(x) for x in a_int)]
+    undetermined = None
+    if gain_error and a_int and gain_undetermined([x / ref_a for x in a_int]):
+        gain_error = False
+        undetermined = (f"the actions barely move the system: a refits to {reference.values['a']:.3g} (x{gain:.3g} the "
+                        f"reference {ref_a:.3g}), and its bootstrap refits ({a_int[0]:.3g}..{a_int[1]:.3g}) do not pin "
+                        "it down; a gain far below the nominal, or actions that do not drive the motion (another "
+                        "signal, other units), cannot be told apart here")
     low, high = (1 - config.gain_tolerance) * ref_a, (1 + config.gain_tolerance) * ref_a
     if gain_error and a_int and a_int[0] <= high and a_int[1] >= low:
         # a deadzone or a saturation trades off against a: the refit may move a while its
@@ -1054,7 +1121,11 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
                      "held-out one-step residual, and a flexible state-action basis little on top of it): a limit of the "
                      "nominal model's vision on this camera, not a gap in the physics, so it is not named an effect")
     names = [x.effect for x in effects]
-    if generic.significant:
+    if undetermined is not None:
+        verdict_class = "unexplained"
+        verdict = "not explained by the candidates: " + undetermined + (
+            f" (the fit also reads {'; '.join(x.describe() for x in effects)})" if effects else "")
+    elif generic.significant:
         verdict_class = "unexplained"
         verdict = ("not explained by the candidates: a flexible state-action basis still explains "
                    f"{100 * generic.held_out_drop:.0f}% of the held-out residual"
@@ -1294,11 +1365,12 @@ def analyse(obs: Observations, nom: Nominal, config: DiagnoseConfig = DiagnoseCo
                                                                   config, draws)
     naming = name_effects(final, nom, reading, camera, generic, config, from_gymnasium=obs.from_gymnasium,
                           ambiguity=ambiguity, flip_bic_drop=candidates.flip_bic_drop, draws=draws,
-                          refit=candidates.refit.model, own=own)
+                          refit=candidates.refit.model, own=own, varied_actions=actions_vary(obs.actions))
     vision, vision_notes = summarise_vision(obs, rec_training, camera, stale, naming.effects, config)
     gap = measure_gap(candidates, chosen, nom, obs, theta, stale, windows, config, model, camera, arrow,
                       vision.ratio, corrects=bool(naming.effects) or ambiguity is not None)
     naming = _worse_than_nominal(naming, gap, final, nom)
+    naming = _gap_left_unnamed(naming, gap)
     res_nom = one_step_residuals(candidates.nominal.model, nom, obs.theta, obs.actions, np.arange(len(obs.theta)))
     exclusions = [f"excluded by the file's provenance: {e} ({why})" for e, why in excluded.items() if e in obs.impossible]
     exclusions += [f"not tried: {e} ({why})" for e, why in excluded.items() if e not in obs.impossible]
@@ -1327,6 +1399,9 @@ def excluded_candidates(obs: Observations, nom: Nominal, config: DiagnoseConfig)
     :func:`piga.diagnostics.observe.impossible_effects`), and ``within_frame`` for a nominal model
     that already moves within the frame (RK4)."""
     excluded = dict(obs.impossible) if config.use_provenance else {}
+    if not actions_vary(obs.actions):  # a constant command cannot show how the actuator passes it on
+        for term in (DELAY, DEADZONE, SATURATION):
+            excluded[term.name] = "the recording's actions never change, so an actuator effect cannot show"
     if fit.nominal_integrator(nom) == "rk4":
         excluded[WITHIN_FRAME.name] = "the nominal model integrates within the frame already (RK4)"
     return excluded
