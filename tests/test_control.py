@@ -496,3 +496,28 @@ def test_not_told_plans_with_the_learned_g_unscaled_in_an_env_at_the_multiplier(
 
 def test_not_told_is_refused_for_the_oracle(capsys: pytest.CaptureFixture[str]) -> None:
     assert_one_line_error(ctl(capsys, "--oracle", "--not-told", "--gravity-mult", "1.4"), "--not-told", "oracle")
+
+
+def test_an_out_set_records_what_the_model_run_says_against_it(control_model: Path, tmp_path: Path,
+                                                                capsys: pytest.CaptureFixture[str]) -> None:
+    """A run that did not converge scored "success 100%" in OUT.json and OUT.md without a word: the warning reached
+    stderr only."""
+    import json
+    import shutil
+
+    run = tmp_path / "run"
+    shutil.copytree(control_model, run)
+    metrics = json.loads((run / "metrics.json").read_text())
+    for converged in (False, True):
+        metrics.update(converged=converged, convergence={"outcome": "unsettled", "reason": "still drifting at the end"})
+        (run / "metrics.json").write_text(json.dumps(metrics))
+        out = tmp_path / f"scored-{converged}"
+        result = ctl(capsys, "--model", str(run), "--episodes", "1", "--steps", "20", "--out", str(out), "--quiet")
+        assert result.returncode == 0, result.stderr
+        warning = json.loads(Path(f"{out}.json").read_text())["model_warning"]
+        page = Path(f"{out}.md").read_text()
+        if converged:
+            assert warning is None and "Warning" not in page
+        else:
+            assert warning == f"the run {run} did not converge: still drifting at the end"
+            assert f"**Warning:** {warning}" in page and page.startswith("# piga-control\n\n**Warning:**")

@@ -3703,6 +3703,8 @@ def test_an_interrupted_resume_leaves_no_report_of_the_older_state(how: list[str
     code, _, err = run_in_process("piga-train-model", train.main, str(tiny_data), "--out", str(run), *how, "--quiet",
                                   capsys=capsys)
     assert code == 130 and f"holds epoch {epoch}; continue with --resume" in err, err
+    # the same command with --resume was refused beside --overwrite ("give one of them"): the line says so
+    assert ("in place of --overwrite" in err) == ("--overwrite" in how), err
     assert (run / "checkpoint.pt").exists() and not any((run / name).exists() for name in
                                                         ("metrics.json", "rollout.png", "curves.png"))
 

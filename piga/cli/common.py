@@ -267,6 +267,12 @@ _FINISHED = threading.Event()
 _FINISHED_LINE = "{prog}: interrupted after it finished its work; its outputs are complete"
 
 
+def resume_option(overwrite: bool) -> str:
+    """The option that continues an interrupted run, as its line names it: ``--resume``, or for a command given
+    --overwrite, which refuses --resume beside it, ``--resume in place of --overwrite``."""
+    return "--resume in place of --overwrite" if overwrite else "--resume"
+
+
 def work_finished() -> None:
     """Called by a command once its outputs are complete (before what it prints about them): a signal from then on
     says so, and in the command's own process ends it at once (128 + the signal). Between a command's last write and

@@ -230,7 +230,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             result = result.labelled(agent=label)
             _write_outputs(outputs, {"agent": label, **result.to_dict(), "recordings": None},
                            f"# {PROG}\n\nCommand: `{command_line(PROG, argv)}`\n\n{summary_markdown([result.summary])}",
-                           args.overwrite)
+                           args.overwrite, model=args.model)
     _say_written(args.video, outputs)
     return 0
 
@@ -296,7 +296,8 @@ def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: 
 
         _write_outputs(outputs, {"model": typed_text(args.model), "multipliers": multipliers, "results": [r.to_dict() for r in results]},
                        f"# {PROG} --sweep\n\nCommand: `{command_line(PROG, argv)}`\n\n![sweep]({outputs[2].name})\n\n{table}",
-                       args.overwrite, figure=lambda: sweep_figure([s.to_dict() for s in summaries]))
+                       args.overwrite, figure=lambda: sweep_figure([s.to_dict() for s in summaries]), model=args.model,
+                       kind=kind)
         work_finished()
         print(f"wrote {', '.join(map(str, outputs))}")
     return 0
@@ -320,10 +321,19 @@ def _check_out_set(outputs: list[Path], args: argparse.Namespace) -> None:
 
 
 def _write_outputs(outputs: list[Path], record: dict[str, Any], page: str, overwrite: bool,
-                   figure: Callable[[], Figure] | None = None) -> None:
+                   figure: Callable[[], Figure] | None = None, model: str | None = None,
+                   kind: RunKind = RunKind.PIGA) -> None:
     """Writes ``--out``'s set: OUT.json (``record``), OUT.md (``page``) and, where there is a third path, OUT.png
     (``figure()``), all or none (:func:`~piga.io.atomic.written_together`): a failure part-way (a full disk) leaves
-    nothing that would refuse the rerun."""
+    nothing that would refuse the rerun. With the ``model`` run's folder, what its records say against it (it did not
+    converge, or did not learn) goes into both as ``model_warning``: a success rate of a run that did not converge
+    read as any other, the warning only on stderr."""
+    if model:
+        warning = _model_warning(model, kind)
+        record = {**record, "model_warning": warning}
+        if warning:
+            title, _, rest = page.partition("\n\n")
+            page = f"{title}\n\n**Warning:** {warning}\n\n{rest}"
     with written_together(outputs):
         write_json(outputs[0], record, overwrite=overwrite)
         with atomic_output(outputs[1], overwrite=overwrite) as tmp:
@@ -334,6 +344,17 @@ def _write_outputs(outputs: list[Path], record: dict[str, Any], page: str, overw
             save_figure(figure(), outputs[2], overwrite=overwrite)
     if figure is None and overwrite:  # an earlier sweep's OUT.png would sit beside a set that no longer draws it
         (stem := _stem(outputs)).with_name(stem.name + ".png").unlink(missing_ok=True)
+
+
+def _model_warning(run_dir: str, kind: RunKind) -> str | None:
+    """What the ``run_dir`` run's records say against it, as its warning line says it (None: nothing)."""
+    if kind is RunKind.PIGA:
+        from piga.io.runs import convergence_warning
+
+        warning = convergence_warning(run_dir)
+        return warning.removeprefix("warning: ") if warning else None
+    why = baseline_did_not_learn(run_dir, kind)
+    return f"the run {run_dir} did not learn: {why}" if why else None
 
 
 def _stem(outputs: list[Path]) -> Path:
@@ -520,7 +541,7 @@ def _baseline(args: argparse.Namespace, kind: RunKind, mpc: MPCConfig, outputs: 
             result = result.labelled(agent=label)
             _write_outputs(outputs, {"agent": label, "kind": kind.value, **result.to_dict(), "recordings": None},
                            f"# {PROG}\n\nCommand: `{command_line(PROG, argv)}`\n\n{summary_markdown([result.summary])}",
-                           args.overwrite)
+                           args.overwrite, model=args.model, kind=kind)
     _say_written(args.video, outputs)
     return 0
 

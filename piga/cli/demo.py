@@ -21,7 +21,7 @@ from pathlib import Path
 
 from piga.cli import show, train
 from piga.cli.common import (ArgumentParser, Interrupted, PigaError, command_line, int_up_to, made_folder, positive_int,
-                             run_cli, seed_int, thread_count)
+                             resume_option, run_cli, seed_int, thread_count)
 from piga.data.collect import CollectConfig, collect
 from piga.data.schema import inspect_dataset
 from piga.io.atomic import check_folder_target
@@ -155,8 +155,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         kept = [str(path.relative_to(out)) for path in outputs
                 if path.exists() and path.stat().st_mtime_ns != before[path]]
         if kept:
-            raise Interrupted(f"{out} keeps {', '.join(kept)} from this demo; run the same command with --resume to "
-                              "continue it, or with --overwrite to start over") from None
+            raise Interrupted(f"{out} keeps {', '.join(kept)} from this demo; run the same command with "
+                              f"{resume_option(args.overwrite)} to continue it, or with --overwrite to start over") from None
         raise KeyboardInterrupt from None
 
 

@@ -15,7 +15,7 @@ from typing import Any
 from piga.cli.common import (NOT_CONVERGED, ArgumentParser, Interrupted, PigaError, add_device_option,
                              add_preset_option, command_line, format_default, given_options, int_up_to,
                              missing_folders, nonnegative_int, number_type, positive_float, positive_int, record_resume,
-                             recorded_options, remove_empty_folders, remove_outputs, run_cli, seed_int, started_record,
+                             recorded_options, remove_empty_folders, remove_outputs, resume_option, run_cli, seed_int, started_record,
                              thread_count, unit_fraction)
 from piga.io.atomic import check_folder_target
 from piga.io.checkpoint import CHECKPOINT, read_run_record, require_piga_run
@@ -398,7 +398,8 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
                 written.append(_saved_epoch(run_dir))
             if written or resuming:
                 epoch = written[-1] if written else _saved_epoch(run_dir)
-                raise Interrupted(f"{run_dir / CHECKPOINT} holds epoch {epoch}; continue with --resume") from None
+                raise Interrupted(f"{run_dir / CHECKPOINT} holds epoch {epoch}; continue with "
+                                  f"{resume_option(args.overwrite)}") from None
             if tried:  # a retry stopped before its first checkpoint: the folders held only the lost try
                 remove_empty_folders(missing)
             raise
@@ -407,12 +408,13 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
         except (DataFormatError, FileNotFoundError) as exc:  # removed or truncated while the run trained on it
             raise PigaError(f"{exc} now, after the run trained on it: the run in {run_dir} keeps its checkpoint, but "
                             "its evaluation reads the file; put the trained file back and run the same command with "
-                            "--resume") from None
+                            f"{resume_option(args.overwrite)}") from None
         if now != data_at_start:
             raise PigaError(f"{args.data} changed while the run trained (another file now has its name): the run in "
                             f"{run_dir} keeps its checkpoint, but its evaluation would read the new file; put the "
-                            "trained file back and run the same command with --resume, or train on the new one")
-        with _report_interrupted(run_dir, state.epoch):
+                            f"trained file back and run the same command with {resume_option(args.overwrite)}, or "
+                            "train on the new one")
+        with _report_interrupted(run_dir, state.epoch, resume=resume_option(args.overwrite)):
             metrics = write_run_report(model, state, args.data, run_dir)
         objects = metrics.get("objects", {})
         # another seed can find a lost object, or fill a slot that should draw one; not make room for more
@@ -455,7 +457,7 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
 
 
 @contextlib.contextmanager
-def _report_interrupted(run_dir: Path, epoch: int, written: bool = False) -> Iterator[None]:
+def _report_interrupted(run_dir: Path, epoch: int, written: bool = False, resume: str = "--resume") -> Iterator[None]:
     """Ctrl-C or SIGTERM after the last checkpoint: the trained model is kept, and the line says so (not "nothing was
     written", which a rerun then contradicted: "already holds a run"). ``written``: the report is complete too."""
     try:
@@ -464,7 +466,7 @@ def _report_interrupted(run_dir: Path, epoch: int, written: bool = False) -> Ite
         if written:
             raise Interrupted(f"{run_dir} holds the finished run (epoch {epoch}) and its report") from None
         raise Interrupted(f"{run_dir / CHECKPOINT} holds the trained model (epoch {epoch}), but its report was not "
-                          "finished; run the same command with --resume to write it") from None
+                          f"finished; run the same command with {resume} to write it") from None
 
 
 def _start_values(model: Any) -> str:
