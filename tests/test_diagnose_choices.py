@@ -512,6 +512,7 @@ def test_no_gap_is_not_claimed_where_the_nominal_model_strays_far_above_its_floo
                   closure_basis="state")
     left = _gap_left_unnamed(none, far)
     assert left.verdict_class == "unexplained" and "strays 8.6x as far as on its twin" in left.verdict, left.verdict
+    assert _gap_left_unnamed(none, replace(far, typical_free_run_mse_nominal=4.9 * 0.000222)) is none  # the margin
     clean = replace(far, typical_free_run_mse_nominal=1.39 * 0.000222)  # the most measured without an effect
     assert _gap_left_unnamed(none, clean) is none
     assert _gap_left_unnamed(none, replace(far, typical_free_run_mse_floor=None)) is none  # no twin: nothing to judge

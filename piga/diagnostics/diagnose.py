@@ -881,8 +881,9 @@ GAIN_SPAN = 0.01
 GAIN_FLOOR = 0.05
 #: "No significant gap" needs the nominal model's typical held-out free-run error within this factor of the twin's
 #: floor (what the nominal physics leaves on its own simulated twin): measured 0.54-1.39x on recordings without an
-#: effect; torques applied but logged as 0 left 8.5x with no candidate to name, and read "no significant gap".
-NO_GAP_FACTOR = 3.0
+#: effect; torques applied but logged as 0 left 7.0-8.6x with no candidate to name, and read "no significant gap".
+#: The factor keeps a wide margin above the clean recordings, whose spread over models is not yet measured.
+NO_GAP_FACTOR = 5.0
 
 
 def gain_undetermined(interval: list[float]) -> bool:
