@@ -36,8 +36,9 @@ from common import (add_training_options, farm_main, logged_command, machine, ma
 
 from prediction import run_training
 
-from piga.cli.common import ArgumentParser, nonnegative_int
+from piga.cli.common import ArgumentParser, int_up_to
 from piga.io.pool import JobRecords, RecordedJob, run_recorded
+from piga.training.train import MAX_SEED_RETRIES
 from piga.world.model import ModelConfig
 
 #: The decoders of ``piga-train-model --decoder`` (one source: :class:`ModelConfig`'s ``decoder``).
@@ -358,7 +359,8 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--decoders", nargs="+", choices=[*DECODERS, *VARIANTS], default=list(DEFAULTS.decoders),
                    help="default %(default)s; " + "; ".join(f"{name}: {' '.join(options)}" for name, options in VARIANTS.items()))
     add_training_options(p, DEFAULTS, "sequences of the data set, split 80/10/10")
-    p.add_argument("--seed-retries", type=nonnegative_int, default=DEFAULTS.seed_retries,
+    p.add_argument("--seed-retries", type=int_up_to(MAX_SEED_RETRIES, "each retry can cost a whole run", least=0),
+                   default=DEFAULTS.seed_retries,
                    help="piga-train-model --seed-retries of every run (default %(default)s, as the pages were made; "
                    "the command's own default is 3)")
     return p

@@ -57,7 +57,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium.wrappers import FrameStackObservation, GrayscaleObservation, ReshapeObservation, TransformObservation
 
-from envs.fields import check_field_kinds
+from envs.fields import check_field_kinds, upper_bound_text
 from envs.pendulum import MAX_IMAGE_SIZE, MIN_ACTUATION_GAIN
 
 __all__ = ["CAMERAS", "COLORS", "DMC_PHYSICS_DT", "DMC_EPISODE_STEPS", "DMCPendulumConfig", "MissingExtraError", "make_dmc_pendulum",
@@ -75,6 +75,8 @@ MAX_ACTION_REPEAT = 50
 MIN_MASS = 1e-3
 #: Fastest reset speed θ̇ (rad/s): half a turn per physics step; faster, MuJoCo's steps and the frames alias the motion.
 MAX_SPEED = math.pi / DMC_PHYSICS_DT
+#: :data:`MAX_SPEED` as ranges write it (help and errors).
+MAX_SPEED_TEXT = f"π/{DMC_PHYSICS_DT:g} ≈ {upper_bound_text(MAX_SPEED, 7)}"
 #: Strongest hinge damping (N·m·s/rad), as the pixel pendulum's damping effect (:data:`envs.effects.MAX_PASSIVE`):
 #: far beyond it the pendulum stands still in every frame (1e308 was taken, and its data showed no motion).
 MAX_DAMPING = 100.0
@@ -160,13 +162,13 @@ class DMCPendulumConfig:
             "frame_stack": (1 <= self.frame_stack <= MAX_FRAME_STACK, f"frame_stack in [1, {MAX_FRAME_STACK}]"),
             "action_repeat": (1 <= self.action_repeat <= MAX_ACTION_REPEAT, f"action_repeat in [1, {MAX_ACTION_REPEAT}]"),
             "episode_length": (0 <= self.episode_length <= MAX_EPISODE_LENGTH, f"episode_length in [0, {MAX_EPISODE_LENGTH:,}]"),
-            "mass": (MIN_MASS <= self.mass <= self.max_mass, f"mass in [{MIN_MASS:g}, {self.max_mass:.4g}]" + (
+            "mass": (MIN_MASS <= self.mass <= self.max_mass, f"mass in [{MIN_MASS:g}, {upper_bound_text(self.max_mass, 4)}]" + (
                      f"; heavier, the torque's effect 1 / (3 I) is below {MIN_ACTUATION_GAIN:g}, too weak for a frame "
                      "to show" if self.mass > self.max_mass else "")),
             "damping": (0 <= self.damping <= MAX_DAMPING, f"damping in [0, {MAX_DAMPING:g}]"),
             "flip": (self.flip in FLIPS, f"flip in {FLIPS}"),
             "max_angle": (0 <= self.max_angle <= math.pi, "max_angle in [0, pi]"),
-            "max_speed": (0 <= self.max_speed <= MAX_SPEED, f"max_speed in [0, {MAX_SPEED:.4g}]"),
+            "max_speed": (0 <= self.max_speed <= MAX_SPEED, f"max_speed in [0, {MAX_SPEED_TEXT}]"),
             "camera": (self.camera in CAMERAS, f"camera in {CAMERAS}"),
             "color": (self.color in COLORS, f"color in {COLORS}"),
             "camera_distance": ((self.length + 2 * TIP_RADIUS) / VIEW_HALF_SIDE <= self.camera_distance <= 3.0,

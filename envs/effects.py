@@ -22,19 +22,19 @@ Let u_t be the commanded action, the one that the agent sends and that a data fi
 | effect | kind | parameter | equation | wrapper |
 |---|---|---|---|---|
 | ``delay=k`` | actuator | integer 1 <= k <= 1000 (steps) | ũ_t = u_{t-k}, and ũ_t = 0 for t < k (reset clears it) | :class:`ActionDelay` |
-| ``deadzone=d`` | actuator | 0 < d < 2 (action units) | ũ = sign(u)·max(abs(u) - d, 0) | :class:`ActionDeadzone` |
-| ``saturation=s`` | actuator | 0 < s < 2 (action units) | ũ = clip(u, -s, s) | :class:`ActionSaturation` |
-| ``gain=m`` | actuator | 0 < m <= 100, m != 1 (factor) | ũ = m·u (an actuator gain error) | :class:`ActionGainError` |
+| ``deadzone=d`` | actuator | 1e-6 <= d < 2 (action units) | ũ = sign(u)·max(abs(u) - d, 0) | :class:`ActionDeadzone` |
+| ``saturation=s`` | actuator | 1e-6 <= s < 2 (action units) | ũ = clip(u, -s, s) | :class:`ActionSaturation` |
+| ``gain=m`` | actuator | 1e-6 <= m <= 100, abs(m - 1) >= 1e-6 (factor) | ũ = m·u (an actuator gain error) | :class:`ActionGainError` |
 
 The applied torque τ_t is ``actuation_gain·ũ_t`` plus the passive torques. These are computed
 from the state (θ_t, θ̇_t) *before* the step:
 
 | effect | kind | parameter | passive torque | wrapper |
 |---|---|---|---|---|
-| ``damping=b`` | passive | 0 < b <= 100 (N·m·s/rad) | -b·θ̇_t | :class:`ViscousDamping` |
-| ``friction=c`` | passive | 0 < c <= 100 (N·m) | -c·tanh(θ̇_t / 0.1), a smoothed Coulomb friction (:data:`piga.world.effects.FRICTION_SMOOTHING`) | :class:`CoulombFriction` |
-| ``bias=τ0`` | passive | 0 < abs(τ0) <= 100 (N·m) | +τ0 | :class:`TorqueBias` |
-| ``cogging=k`` | passive | 0 < k <= 100 (N·m) | -k·sin(4θ_t), a detent torque; not a candidate of the diagnosis | :class:`CoggingTorque` |
+| ``damping=b`` | passive | 1e-6 <= b <= 100 (N·m·s/rad) | -b·θ̇_t | :class:`ViscousDamping` |
+| ``friction=c`` | passive | 1e-6 <= c <= 100 (N·m) | -c·tanh(θ̇_t / 0.1), a smoothed Coulomb friction (:data:`piga.world.effects.FRICTION_SMOOTHING`) | :class:`CoulombFriction` |
+| ``bias=τ0`` | passive | 1e-6 <= abs(τ0) <= 100 (N·m) | +τ0 | :class:`TorqueBias` |
+| ``cogging=k`` | passive | 1e-6 <= k <= 100 (N·m) | -k·sin(4θ_t), a detent torque; not a candidate of the diagnosis | :class:`CoggingTorque` |
 | ``speed_clip=v`` | clip | 1e-4 <= v < 8 (rad/s) | Pendulum-v1's speed clip ±8 becomes ±v | :class:`SpeedClip` |
 
 The step is Pendulum-v1's own step, given τ_t as its torque:
@@ -62,11 +62,11 @@ first (one normal per pixel), then the drop (one uniform); reset draws only the 
 
 | effect | kind | parameter | frame x -> observed frame | wrapper |
 |---|---|---|---|---|
-| ``blur=σ`` | vision | 0 < σ <= 1000 (px) | ``cv2.GaussianBlur(x, (0, 0), σ)``: the kernel size follows from σ | :class:`FrameBlur` |
-| ``shift=p`` | vision | 0 < abs(p) <= 1000 (px) | x'[r, c] = x[r - p, c - p]: p px right and p px down, border replicated (``cv2.warpAffine``) | :class:`FrameShift` |
-| ``noise=s`` | vision | 0 < s <= 1000 (gray levels) | clip(round(x + s·ε), 0, 255) as uint8, ε ~ N(0, 1) per pixel | :class:`FrameNoise` |
+| ``blur=σ`` | vision | 1e-6 <= σ <= 1000 (px) | ``cv2.GaussianBlur(x, (0, 0), σ)``: the kernel size follows from σ | :class:`FrameBlur` |
+| ``shift=p`` | vision | 1e-6 <= abs(p) <= 1000 (px) | x'[r, c] = x[r - p, c - p]: p px right and p px down, border replicated (``cv2.warpAffine``) | :class:`FrameShift` |
+| ``noise=s`` | vision | 1e-6 <= s <= 1000 (gray levels) | clip(round(x + s·ε), 0, 255) as uint8, ε ~ N(0, 1) per pixel | :class:`FrameNoise` |
 | ``frame_delay=k`` | vision | integer 1 <= k <= 1000 (steps) | at step t, the frame of step t - k; the reset frame for t < k | :class:`FrameDelay` |
-| ``frame_drop=p`` | vision | 0 < p < 1 (probability) | at each step, with probability p, the previous observed frame again (a dropped frame); never on reset | :class:`FrameDrop` |
+| ``frame_drop=p`` | vision | 1e-6 <= p < 1 (probability) | at each step, with probability p, the previous observed frame again (a dropped frame); never on reset | :class:`FrameDrop` |
 
 ``env.render()`` still returns Gymnasium's clean full-size picture. The vision effects act only
 on the observation.
@@ -85,6 +85,7 @@ import gymnasium as gym
 import numpy as np
 
 from envs.constants import MAX_ACTION, PENDULUM_MAX_SPEED
+from envs.fields import number_text
 from piga.world.effects import BIAS, COGGING, DAMPING, DEADZONE, DELAY, FRICTION, GAIN, SATURATION, SPEED_CLIP, Effect
 
 # Upper bounds of the effects' parameters: far beyond any real system's (the pendulum's torque is
@@ -105,6 +106,11 @@ MAX_NOISE = 1000.0
 #: 200-step episode (10 s), a few hundredths of a pixel at its tip in a 64-pixel frame, as with
 #: ``envs.pendulum.MIN_GRAVITY``: no frame shows it move (1e-9 wrote a file of a still pendulum).
 MIN_SPEED_CLIP = 1e-4
+#: Smallest magnitude of every other continuous effect (and of ``gain - 1``), in the effect's units: a millionth, as
+#: the floors of gravity and the actuation gain (``envs.pendulum.MIN_GRAVITY``). A torque this small moves the
+#: pendulum's tip by about a hundredth of a pixel in an episode; smaller values are lost to rounding (the command is
+#: float32, the frames uint8): 1e-320 was recorded in a file whose frames were the nominal ones, byte for byte.
+MIN_EFFECT = 1e-6
 
 
 # ---------------------------------------------------------------------------------------------
@@ -490,33 +496,34 @@ class EffectSpec:
 EFFECTS: dict[str, EffectSpec] = {
     "delay": EffectSpec("actuator", "actuator dead time", "steps", f"an integer >= 1 and <= {MAX_DELAY_STEPS}",
                         lambda v: 1 <= v <= MAX_DELAY_STEPS, ActionDelay, integer=True, term=DELAY),
-    "deadzone": EffectSpec("actuator", "actuator deadzone half-width", "action units", f"in (0, {MAX_ACTION:g})",
-                           lambda v: 0 < v < MAX_ACTION, ActionDeadzone, term=DEADZONE),
-    "saturation": EffectSpec("actuator", "actuator limit below 2", "action units", f"in (0, {MAX_ACTION:g})",
-                             lambda v: 0 < v < MAX_ACTION, ActionSaturation, term=SATURATION),
-    "gain": EffectSpec("actuator", "actuator gain error factor", "factor", f"> 0 and != 1, at most {MAX_GAIN_ERROR:g}",
-                       lambda v: 0 < v <= MAX_GAIN_ERROR and v != 1, ActionGainError, term=GAIN),
-    "damping": EffectSpec("passive", "viscous damping coefficient", "N·m·s/rad", f"> 0 and <= {MAX_PASSIVE:g}",
-                          lambda v: 0 < v <= MAX_PASSIVE, ViscousDamping, term=DAMPING),
-    "friction": EffectSpec("passive", "smoothed Coulomb friction torque", "N·m", f"> 0 and <= {MAX_PASSIVE:g}",
-                           lambda v: 0 < v <= MAX_PASSIVE, CoulombFriction, term=FRICTION),
-    "bias": EffectSpec("passive", "constant torque bias", "N·m", f"a number != 0 within ±{MAX_PASSIVE:g}",
-                       lambda v: v != 0 and abs(v) <= MAX_PASSIVE, TorqueBias, term=BIAS),
-    "cogging": EffectSpec("passive", "cogging (detent) torque amplitude", "N·m", f"> 0 and <= {MAX_PASSIVE:g}",
-                          lambda v: 0 < v <= MAX_PASSIVE, CoggingTorque, term=COGGING),
+    "deadzone": EffectSpec("actuator", "actuator deadzone half-width", "action units", f"in [{MIN_EFFECT:g}, {MAX_ACTION:g})",
+                           lambda v: MIN_EFFECT <= v < MAX_ACTION, ActionDeadzone, term=DEADZONE),
+    "saturation": EffectSpec("actuator", "actuator limit below 2", "action units", f"in [{MIN_EFFECT:g}, {MAX_ACTION:g})",
+                             lambda v: MIN_EFFECT <= v < MAX_ACTION, ActionSaturation, term=SATURATION),
+    "gain": EffectSpec("actuator", "actuator gain error factor", "factor",
+                       f"in [{MIN_EFFECT:g}, {MAX_GAIN_ERROR:g}] and at least {MIN_EFFECT:g} from 1",
+                       lambda v: MIN_EFFECT <= v <= MAX_GAIN_ERROR and abs(v - 1) >= MIN_EFFECT, ActionGainError, term=GAIN),
+    "damping": EffectSpec("passive", "viscous damping coefficient", "N·m·s/rad", f"in [{MIN_EFFECT:g}, {MAX_PASSIVE:g}]",
+                          lambda v: MIN_EFFECT <= v <= MAX_PASSIVE, ViscousDamping, term=DAMPING),
+    "friction": EffectSpec("passive", "smoothed Coulomb friction torque", "N·m", f"in [{MIN_EFFECT:g}, {MAX_PASSIVE:g}]",
+                           lambda v: MIN_EFFECT <= v <= MAX_PASSIVE, CoulombFriction, term=FRICTION),
+    "bias": EffectSpec("passive", "constant torque bias", "N·m", f"a number within ±{MAX_PASSIVE:g}, at least {MIN_EFFECT:g} from 0",
+                       lambda v: MIN_EFFECT <= abs(v) <= MAX_PASSIVE, TorqueBias, term=BIAS),
+    "cogging": EffectSpec("passive", "cogging (detent) torque amplitude", "N·m", f"in [{MIN_EFFECT:g}, {MAX_PASSIVE:g}]",
+                          lambda v: MIN_EFFECT <= v <= MAX_PASSIVE, CoggingTorque, term=COGGING),
     "speed_clip": EffectSpec("clip", "speed limit below Pendulum-v1's 8", "rad/s",
                              f"in [{MIN_SPEED_CLIP:g}, {PENDULUM_MAX_SPEED:g})",
                              lambda v: MIN_SPEED_CLIP <= v < PENDULUM_MAX_SPEED, SpeedClip, term=SPEED_CLIP),
-    "blur": EffectSpec("vision", "Gaussian blur sigma", "px", f"> 0 and <= {MAX_PIXELS:g}", lambda v: 0 < v <= MAX_PIXELS,
-                       FrameBlur),
-    "shift": EffectSpec("vision", "image shift right and down", "px", f"a number != 0 within ±{MAX_PIXELS:g}",
-                        lambda v: v != 0 and abs(v) <= MAX_PIXELS, FrameShift),
-    "noise": EffectSpec("vision", "pixel noise standard deviation", "gray levels", f"> 0 and <= {MAX_NOISE:g}",
-                        lambda v: 0 < v <= MAX_NOISE, FrameNoise),
+    "blur": EffectSpec("vision", "Gaussian blur sigma", "px", f"in [{MIN_EFFECT:g}, {MAX_PIXELS:g}]",
+                       lambda v: MIN_EFFECT <= v <= MAX_PIXELS, FrameBlur),
+    "shift": EffectSpec("vision", "image shift right and down", "px", f"a number within ±{MAX_PIXELS:g}, at least {MIN_EFFECT:g} from 0",
+                        lambda v: MIN_EFFECT <= abs(v) <= MAX_PIXELS, FrameShift),
+    "noise": EffectSpec("vision", "pixel noise standard deviation", "gray levels", f"in [{MIN_EFFECT:g}, {MAX_NOISE:g}]",
+                        lambda v: MIN_EFFECT <= v <= MAX_NOISE, FrameNoise),
     "frame_delay": EffectSpec("vision", "camera latency", "steps", f"an integer >= 1 and <= {MAX_DELAY_STEPS}",
                               lambda v: 1 <= v <= MAX_DELAY_STEPS, FrameDelay, integer=True),
-    "frame_drop": EffectSpec("vision", "probability of a dropped frame", "probability", "in (0, 1)",
-                             lambda v: 0 < v < 1, FrameDrop),
+    "frame_drop": EffectSpec("vision", "probability of a dropped frame", "probability", f"in [{MIN_EFFECT:g}, 1)",
+                             lambda v: MIN_EFFECT <= v < 1, FrameDrop),
 }
 
 #: Where :func:`wrap_effects` puts each effect in the pixel pendulum, innermost wrapper first.
@@ -604,11 +611,7 @@ def wrap_effects(env: gym.Env, effects: Effects, stage: str) -> gym.Env:
 def format_effects(effects: Effects) -> str:
     """``"damping=0.2 delay=2"``, or ``"none"``: each value as short as ``g`` writes it, unless that rounds it
     (``deadzone=1.999999`` is not 2, which the effect refuses): then in full."""
-    def shown(value: float) -> str:
-        short = format(value, "g")
-        return short if float(short) == value else repr(float(value))
-
-    return " ".join(f"{name}={shown(value)}" for name, value in effects) or "none"
+    return " ".join(f"{name}={number_text(value)}" for name, value in effects) or "none"
 
 
 __all__ = [

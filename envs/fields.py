@@ -1,16 +1,17 @@
 """The envs' configs check each field's kind against its default's, without importing piga (the envs stay free of the
 model and of torch: tests/test_layout.py): a config read from a file's attributes, or built in Python, may hold text
-where a number belongs, or a truthy word where a flag does."""
+where a number belongs, or a truthy word where a flag does. And the one way an error line writes a checked number."""
 
 from __future__ import annotations
 
 import numbers
+from decimal import ROUND_FLOOR, Context
 from dataclasses import fields
 from typing import Any
 
 import numpy as np
 
-__all__ = ["check_field_kinds"]
+__all__ = ["check_field_kinds", "number_text", "upper_bound_text"]
 
 
 def check_field_kinds(config: Any) -> None:
@@ -25,3 +26,18 @@ def check_field_kinds(config: Any) -> None:
         if isinstance(default, (int, float)) and (not isinstance(value, kind) or isinstance(value, (bool, np.bool_))
                                                   != isinstance(default, bool)):
             raise TypeError(f"{type(config).__name__}.{field.name} must be {what}, got {value!r}")
+
+
+def number_text(value: float) -> str:
+    """A number as an error line writes it: as short as ``g`` writes it (1e+06, 0.5), unless that rounds it (10.0000001
+    is not 10, a bound it would seem to meet): then as Python's ``repr`` writes it, the shortest text that reads back
+    as the same float (also the shorter for 1e-320, which ``g`` writes 9.99989e-321)."""
+    value = float(value)
+    short, full = format(value, "g"), repr(value)
+    return short if float(short) == value and len(short) <= len(full) else full
+
+
+def upper_bound_text(bound: float, digits: int) -> str:
+    """An upper bound as a range writes it: ``digits`` significant digits, rounded down (π/0.02 as 157.0796 with 7, not
+    157.1 with 4, which a refused 157.09 would seem to meet). ``decimal`` rounds down; ``format`` only to nearest."""
+    return format(float(Context(prec=digits, rounding=ROUND_FLOOR).create_decimal(bound)), f".{digits}g")

@@ -59,7 +59,7 @@ from gymnasium.wrappers import (
 
 from envs.constants import MAX_ACTION, PENDULUM_DT, PENDULUM_MAX_SPEED
 from envs.effects import EFFECTS, ShowCommandedTorque, normalize_effects, wrap_effects
-from envs.fields import check_field_kinds
+from envs.fields import check_field_kinds, number_text
 from piga.world.effects import scaled_gravity
 
 # pygame opens a display on its first render; on a headless machine it needs the dummy driver
@@ -126,14 +126,14 @@ class PixelPendulumConfig:
             raise ValueError(f"PixelPendulumConfig.actuation_gain={self.actuation_gain!r} is out of range: at most "
                              f"{MAX_ACTUATION_GAIN:g} (a larger torque overflows float32)")
         if self.effective_gravity > MAX_GRAVITY:
-            raise ValueError(f"PixelPendulumConfig: gravity x gravity_mult = {self.effective_gravity:.10g} is out of range: at "
+            raise ValueError(f"PixelPendulumConfig: gravity x gravity_mult = {number_text(self.effective_gravity)} is out of range: at "
                              f"most {MAX_GRAVITY:g} (a larger gravity overflows float32)")
         for name, value in effects:
             if name == "blur" and value > self.image_size / MAX_BLUR_FRACTION:
-                raise ValueError(f"effect blur={value:g} px would blur the pendulum away in a {self.image_size} px frame; "
+                raise ValueError(f"effect blur={number_text(value)} px would blur the pendulum away in a {self.image_size} px frame; "
                                  f"use a sigma of at most {self.image_size / MAX_BLUR_FRACTION:g} px")
             if name == "shift" and abs(value) >= self.image_size / 2:  # the pivot, at the centre, would leave the frame
-                raise ValueError(f"effect shift={value:g} px would move the pendulum out of a {self.image_size} px frame "
+                raise ValueError(f"effect shift={number_text(value)} px would move the pendulum out of a {self.image_size} px frame "
                                  f"(its pivot out of view); use |shift| < {self.image_size / 2:g}")
         checks = {  # each field: whether it is in range, and its range in words
             "image_size": (8 <= self.image_size <= MAX_IMAGE_SIZE, f"image_size in [8, {MAX_IMAGE_SIZE}]"),
@@ -152,7 +152,7 @@ class PixelPendulumConfig:
             raise ValueError(f"PixelPendulumConfig.actuation_gain={self.actuation_gain!r} is out of range: at least "
                              f"{MIN_ACTUATION_GAIN:g} ({_TOO_WEAK})")
         if self.effective_gravity < MIN_GRAVITY:
-            raise ValueError(f"PixelPendulumConfig: gravity x gravity_mult = {self.effective_gravity:g} is out of range: "
+            raise ValueError(f"PixelPendulumConfig: gravity x gravity_mult = {number_text(self.effective_gravity)} is out of range: "
                              f"at least {MIN_GRAVITY:g} m/s² ({_TOO_WEAK})")
 
     @property

@@ -35,6 +35,8 @@ from typing import Any, Literal, get_args
 
 import numpy as np
 
+from envs.fields import number_text
+
 __all__ = ["SCENES", "SceneConfig", "scene_config", "accelerations", "simulate", "draw_start", "render",
            "generate_sequence", "state_names", "SceneError", "MIN_FORCE_SHIFT", "force_shift", "check_forces_visible"]
 
@@ -118,7 +120,7 @@ class SceneConfig:
             raise SceneError("digits-spring draws its digits over a texture; a background colour is for the balls")
         if self.radius < MIN_RADIUS:
             raise SceneError(f"{type(self).__name__}.radius must be at least {MIN_RADIUS:g} px (a smaller object leaves no trace in the frames), "
-                             f"got {self.radius:g}")
+                             f"got {number_text(self.radius)}")
         if self.scene != "digits-spring":
             hidden = [j for j, rgb in enumerate(self.colors[: self.n_objects])
                       if max(abs(a - b) for a, b in zip(rgb, self.background)) < MIN_CONTRAST]
@@ -132,7 +134,7 @@ class SceneConfig:
         if self.physics == "spring":
             stiffest = max_stable_k(self.dt, self.substeps, self.n_objects)
             if self.params.get("k", 0.0) >= stiffest:
-                raise SceneError(f"{self.scene}: k = {self.params['k']:g} is too stiff for {self.substeps} substeps of "
+                raise SceneError(f"{self.scene}: k = {number_text(self.params['k'])} is too stiff for {self.substeps} substeps of "
                                  f"{self.dt:g} s: the simulation would blow up; k must be below {stiffest:.8g} "
                                  "((2·substeps/dt)²/objects)")
         if self.half and self.scene != "spring":

@@ -235,11 +235,17 @@ def test_cli_bad_input(tmp_path: Path, recording: tuple[Path, Path, np.ndarray, 
 
 def test_cli_refuses_a_frame_size_that_cannot_fit(tmp_path: Path, recording: tuple[Path, Path, np.ndarray, np.ndarray],
                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    """Above piga-collect's largest side the option refuses it; the memory check, before decoding, still names the
+    frames that cannot fit."""
+    from piga.data.importer import _check_resources
+
     folder, csv, _, _ = recording
     out = tmp_path / "o.h5"
     code, _, err = _cli(str(folder), str(csv), "--dt", "0.05", "--out", str(out), "--image-size", "2000000", capsys=capsys)
-    assert_one_line(code, err, "17 frames of 2000000x2000000 needs about", "of memory")
+    assert_one_line(code, err, "argument --image-size: expected an integer in [8, 1024]")
     assert list(tmp_path.iterdir()) == []
+    with pytest.raises(ValueError, match="17 frames of 2000000x2000000 needs about .* of memory"):
+        _check_resources(17, 2_000_000, out)
 
 
 def test_cli_refuses_to_overwrite(tmp_path: Path, recording: tuple[Path, Path, np.ndarray, np.ndarray],

@@ -171,16 +171,22 @@ class PlanetTrainConfig:
         if not (self.lr > 0 and self.adam_eps > 0 and self.grad_clip > 0 and self.free_nats >= 0):
             raise ValueError("need lr, adam_eps, grad_clip > 0 and free_nats >= 0")
         if not self.reward_scale >= MIN_REWARD_SCALE:
+            from envs.fields import number_text  # here: the config is read without gymnasium's import
+
             raise ValueError(f"PlanetTrainConfig.reward_scale (--reward-scale) must be at least {MIN_REWARD_SCALE:g}, got "
-                             f"{self.reward_scale:g}: below it the reward head barely learns (at 0, never), and the planner "
+                             f"{number_text(self.reward_scale)}: below it the reward head barely learns (at 0, never), and the planner "
                              "ranks its plans by that head")
         if self.reward_scale > MAX_REWARD_SCALE:
+            from envs.fields import number_text  # here: the config is read without gymnasium's import
+
             raise ValueError(f"PlanetTrainConfig.reward_scale (--reward-scale) must be at most {MAX_REWARD_SCALE:g}, got "
-                             f"{self.reward_scale:g}: above it the reward term drowns the frames' (PlaNet's code uses 10)")
+                             f"{number_text(self.reward_scale)}: above it the reward term drowns the frames' (PlaNet's code uses 10)")
         if self.steps > MAX_STEPS:
             raise ValueError(f"PlanetTrainConfig.steps (--steps) must be at most {MAX_STEPS:,} (weeks on a CPU), got {self.steps:,}")
         if self.free_nats > MAX_FREE_NATS:
-            raise ValueError(f"PlanetTrainConfig.free_nats (--free-nats) must be at most {MAX_FREE_NATS:g} nats per frame (PlaNet uses 3), got {self.free_nats:g}")
+            from envs.fields import number_text  # here: the config is read without gymnasium's import
+
+            raise ValueError(f"PlanetTrainConfig.free_nats (--free-nats) must be at most {MAX_FREE_NATS:g} nats per frame (PlaNet uses 3), got {number_text(self.free_nats)}")
         if self.seed < 0 or self.max_sequences < 0 or self.max_minutes < 0 or self.threads < 0 or self.kl_scale < 0:
             raise ValueError(f"PlanetTrainConfig: seed, max_sequences, max_minutes, threads and kl_scale must be >= 0, got "
                              f"seed={self.seed}, max_sequences={self.max_sequences}, max_minutes={self.max_minutes}, "

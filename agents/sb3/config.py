@@ -15,6 +15,7 @@ from typing import Any, Literal, get_args
 
 from envs import DMC_PENDULUM, PIXEL_PENDULUM, EnvId
 from envs.dmc import DMCPendulumConfig
+from envs.fields import number_text
 from envs.pendulum import PixelPendulumConfig
 from piga.data.schema import MAX_SEED
 from piga.io.choices import check_choices
@@ -212,7 +213,7 @@ class SB3Config:
         if self.seed > MAX_SEED:
             raise ValueError(f"SB3Config.seed must be <= {MAX_SEED} (2^63 - 1), got {self.seed}")
         if not 0 < self.learning_rate <= MAX_LEARNING_RATE:  # NaN too
-            raise ValueError(f"SB3Config.learning_rate must be in (0, {MAX_LEARNING_RATE:g}], got {self.learning_rate:g}")
+            raise ValueError(f"SB3Config.learning_rate must be in (0, {MAX_LEARNING_RATE:g}], got {number_text(self.learning_rate)}")
         if not (0 < self.gamma <= 1 and 0 < self.tau <= 1 and self.noise_std >= 0 and self.noise_final_std >= 0):
             raise ValueError(f"SB3Config: need 0 < gamma <= 1, 0 < tau <= 1, noise_std >= 0, noise_final_std >= 0; got "
                              f"gamma={self.gamma}, tau={self.tau}, noise_std={self.noise_std}, "
@@ -220,11 +221,11 @@ class SB3Config:
         for name in ("noise_std", "noise_final_std"):
             if getattr(self, name) > MAX_NOISE_STD:
                 raise ValueError(f"SB3Config.{name} must be at most {MAX_NOISE_STD:g} (a std in SB3's [-1, 1] action "
-                                 f"scale; far beyond 1 every noisy action is clipped to a bound), got {getattr(self, name):g}")
+                                 f"scale; far beyond 1 every noisy action is clipped to a bound), got {number_text(getattr(self, name))}")
         if self.algo == "drqv2" and self.noise_std < self.noise_final_std:
-            raise ValueError(f"SB3Config.noise_std ({self.noise_std:g}) is below the std that DrQ-v2's exploration "
-                             f"schedule falls to ({self.noise_final_std:g}): it would rise instead; give at least "
-                             f"{self.noise_final_std:g}")
+            raise ValueError(f"SB3Config.noise_std ({number_text(self.noise_std)}) is below the std that DrQ-v2's exploration "
+                             f"schedule falls to ({number_text(self.noise_final_std)}): it would rise instead; give at least "
+                             f"{number_text(self.noise_final_std)}")
         if self.eval_every > self.steps and self.steps < self.episode_steps:  # eval_every can go no lower
             raise ValueError(f"SB3Config.steps ({self.steps}) is less than one episode of {self.episode_steps} steps "
                              f"({self.env}), the least between two evaluations: the run would never be evaluated; "

@@ -3,13 +3,15 @@
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from typing import Any
 
 from envs import DMC_PENDULUM, ENV_IDS, PIXEL_PENDULUM
-from envs.dmc import DMCPendulumConfig
+from envs.constants import PENDULUM_MAX_SPEED
+from envs.dmc import MAX_SPEED_TEXT, DMCPendulumConfig
 from envs.effects import EFFECTS, format_effects, parse_effect
 from envs.pendulum import MAX_ACTUATION_GAIN, MAX_GRAVITY, MIN_ACTUATION_GAIN, MIN_GRAVITY, PixelPendulumConfig
 from envs.scenes import HALF_SPEED, SCENES, SceneConfig, scene_config
@@ -110,7 +112,11 @@ def dmc_config(options: Sequence[tuple[str, str]], own: Mapping[str, str] | None
     try:
         return DMCPendulumConfig(**values)  # type: ignore[arg-type]
     except ValueError as exc:  # the config's words ("DMCPendulumConfig.flip='sideways' ...") in the command's
-        raise ValueError(str(exc).replace("DMCPendulumConfig.", "--env-option ")) from None
+        message = str(exc)
+        named = re.match(r"DMCPendulumConfig\.(\w+)=", message)
+        if named and named.group(1) in fields:  # set by the command's own option: "max_speed=...", shown as its flag
+            raise ValueError(message.removeprefix("DMCPendulumConfig.")) from None
+        raise ValueError(message.replace("DMCPendulumConfig.", "--env-option ")) from None
 
 
 def build_parser() -> ArgumentParser:
@@ -168,7 +174,8 @@ def build_parser() -> ArgumentParser:
                    "(default %(default)s)")
     add_preset_option(p, "--max-speed", type=any_float, default=env.max_speed,
                       shown=f"{env.max_speed:g}, Gymnasium's; the paper preset uses {PAPER_MAX_SPEED:g}",
-                      help="reset draws theta_dot ~ U(-s, s), s in [0, 8]")
+                      help=f"reset draws theta_dot ~ U(-s, s), s in [0, {PENDULUM_MAX_SPEED:g}] on {PIXEL_PENDULUM} "
+                      f"(Gymnasium's speed clip), [0, {MAX_SPEED_TEXT}] on {DMC_PENDULUM} (half a turn per physics step)")
     p.add_argument("--max-angle", type=any_float, default=env.max_angle,
                    help="reset draws theta ~ U(-a, a), a in [0, pi] (default %(default).4g, i.e. pi)")
     add_preset_option(p, "--image-size", type=positive_int, default=env.image_size,

@@ -15,6 +15,7 @@ import numpy as np
 
 from agents.config import MPCConfig
 from envs import DMC_PENDULUM, ENV_IDS, PIXEL_PENDULUM
+from envs.fields import number_text
 from envs.pendulum import MAX_GRAVITY, MIN_GRAVITY, PixelPendulumConfig
 from piga.io.atomic import (atomic_output, check_file_name, check_not_an_input, check_writable_target, write_json,
                              written_together)
@@ -134,7 +135,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args.goal_angle += 0.0  # -0.0 (-1e-400 underflows to it) is 0: "goal -0 deg" otherwise
     if args.goal_image and "goal_angle" in given:  # --goal-angle 0, the default, too
         raise PigaError("--goal-image sets the goal (the encoder reads its angle); drop --goal-angle")
-    _check_env_gravity(f"--gravity-mult {args.gravity_mult:g}", args.gravity_mult)
+    _check_env_gravity(f"--gravity-mult {number_text(args.gravity_mult)}", args.gravity_mult)
     mpc = _mpc_config(args, math.radians(args.goal_angle))
     _check_total_work(args, mpc)
     outputs = []
@@ -392,7 +393,7 @@ def _check_env_gravity(flag: str, gravity_mult: float) -> None:
     except ValueError as exc:  # the env's words ("PixelPendulumConfig: gravity x gravity_mult = ...") in the user's
         effective = config.gravity * gravity_mult
         bound = str(exc).split(" is out of range: ", 1)[-1]
-        raise PigaError(f"{flag}: the gravity it gives, {config.gravity:g} x {gravity_mult:g} = {effective:g} m/s², "
+        raise PigaError(f"{flag}: the gravity it gives, {config.gravity:g} x {number_text(gravity_mult)} = {number_text(effective)} m/s², "
                         f"is out of range: {bound}") from None
 
 
@@ -556,8 +557,10 @@ def check_pendulum_model(model: PhysicsModel, run_dir: str) -> None:
     size = EpisodeConfig().env_config().image_size  # the env the episodes run in renders gray frames of this side
     if config.image_size != size or config.channels != 1:
         frames = f"{config.image_size}x{config.image_size} " + ("gray" if config.channels == 1 else f"{config.channels}-channel")
+        default = ", its default" if size == PixelPendulumConfig.image_size else ""
         raise PigaError(f"{run_dir}: the model takes {frames} frames, Gymnasium's pixel pendulum renders {size}x{size} "
-                        "gray ones; train it on frames the env renders (piga-collect)")
+                        f"gray ones; collect frames of that size (piga-collect --image-size {size}{default}) and train a "
+                        "model on them")
     _check_frame_rate(run_dir, config.dt)
 
 

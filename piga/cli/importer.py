@@ -5,10 +5,12 @@ from __future__ import annotations
 import sys
 from collections.abc import Sequence
 
-from piga.cli.common import (H5_SUFFIXES, ArgumentParser, command_line, format_default, h5_path, positive_float,
-                             positive_int, run_cli, split_type)
+from envs.pendulum import MAX_IMAGE_SIZE
+from piga.cli.common import (H5_SUFFIXES, ArgumentParser, command_line, format_default, h5_path, int_up_to,
+                             positive_float, positive_int, run_cli, split_type)
 from piga.data.collect import empty_split_warning
 from piga.data.importer import MAX_DT, MIN_DT, ImportConfig, import_recording, recording_frame_seconds
+from piga.data.schema import MIN_IMAGE_SIZE
 
 PROG = "piga-import"
 
@@ -31,8 +33,9 @@ def build_parser() -> ArgumentParser:
                    help=f"output {' or '.join(H5_SUFFIXES)} file (written atomically)")
     p.add_argument("--steps", type=positive_int, default=defaults.steps,
                    help="frames per sequence T, >= 2; leftover frames at the end are dropped (default %(default)s)")
-    p.add_argument("--image-size", type=positive_int, default=defaults.image_size,
-                   help="frame side in pixels, >= 8 (default %(default)s)")
+    p.add_argument("--image-size", type=int_up_to(MAX_IMAGE_SIZE, "piga-collect's largest frames", least=MIN_IMAGE_SIZE),
+                   default=defaults.image_size,
+                   help=f"frame side in pixels, {MIN_IMAGE_SIZE} to {MAX_IMAGE_SIZE} (default %(default)s)")
     p.add_argument("--split", type=split_type, default=defaults.split,
                    help="train,valid,test as fractions or counts of sequences, in recording order "
                    f"(default {format_default(defaults.split)})")

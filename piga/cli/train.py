@@ -14,8 +14,9 @@ from typing import Any
 
 from piga.cli.common import (NOT_CONVERGED, ArgumentParser, Interrupted, PigaError, add_device_option,
                              add_preset_option, command_line, format_default, given_options, int_up_to,
-                             missing_folders, nonnegative_int, number_type, positive_float, positive_int, record_resume,
-                             recorded_options, remove_empty_folders, remove_outputs, resume_option, run_cli, seed_int, started_record,
+                             missing_folders, number_type, positive_float, positive_int, record_resume,
+                             recorded_options, remove_empty_folders, remove_outputs, resume_option, run_cli, seed_int,
+                             started_record,
                              thread_count, unit_fraction)
 from piga.io.atomic import check_folder_target
 from piga.io.checkpoint import CHECKPOINT, read_run_record, require_piga_run
@@ -48,9 +49,10 @@ REPORT_OUTPUTS = ("metrics.json", "rollout.png", "templates.png", "curves.png")
 def build_parser() -> ArgumentParser:
     from piga.world.physics import GravityOptions  # noqa: PLC0415 (torch loads only when the command runs)
     from piga.world.physics.systems import FIXED_G_RANGE  # noqa: PLC0415
-    from piga.training.train import MAX_LR, PRESETS, TrainConfig  # noqa: PLC0415
+    from piga.training.train import MAX_LR, MAX_SEED_RETRIES, PRESETS, TrainConfig  # noqa: PLC0415
     from piga.io.choices import literal_fields  # noqa: PLC0415
     from piga.world.model import MAX_VIDEO_LSTM_SCALE, ModelConfig  # noqa: PLC0415
+    from piga.world.encoder import MAX_OBJECTS  # noqa: PLC0415
 
     fast, paper = TrainConfig(), PRESETS["paper"].train
 
@@ -112,9 +114,9 @@ def build_parser() -> ArgumentParser:
     add_preset_option(p, "--broadcast-width", type=int_up_to(MAX_BROADCAST_WIDTH, "every object's maps at full "
                       "resolution: wider ones take gigabytes per batch"), metavar="W", default=ModelConfig().broadcast_width,
                       help=BROADCAST_WIDTH_HELP + " (ModelConfig.broadcast_width). Only with --decoder broadcast")
-    add_preset_option(p, "--objects", type=positive_int, metavar="N", default=None,
-                      shown="the file's",
-                      help=f"{OBJECTS_HELP}, ModelConfig.n_objects: instead of the count "
+    add_preset_option(p, "--objects", type=int_up_to(MAX_OBJECTS, "a model's most object slots"), metavar="N",
+                      default=None, shown="the file's",
+                      help=f"{OBJECTS_HELP}, ModelConfig.n_objects, at most {MAX_OBJECTS}: instead of the count "
                       "the data file records (its n_objects attribute). A scene only: fewer "
                       "than the scene's objects leaves some unmodelled (the object check then reports an object lost, "
                       "and no seed is retried), more leaves slots empty (the paper's Appendix E)")
@@ -138,9 +140,11 @@ def build_parser() -> ArgumentParser:
     p.add_argument("--seed", type=seed_int, default=fast.seed, help="seed of initialisation and sampling (default %(default)s)")
     p.add_argument("--threads", type=thread_count, default=fast.threads, help="torch CPU threads (default %(default)s: torch's choice)")
     add_device_option(p, fast.device)
-    p.add_argument("--seed-retries", type=nonnegative_int, default=fast.seed_retries, metavar="N",
+    p.add_argument("--seed-retries", type=int_up_to(MAX_SEED_RETRIES, "each retry can cost a whole run", least=0),
+                   default=fast.seed_retries, metavar="N",
                    help="a scene whose object check finds an object missing (or a slot that draws nothing where the scene "
-                   "has an object for it) is trained again from the start with the next seed, up to N times; while a retry is "
+                   "has an object for it) is trained again from the start with the next seed, up to N times (at most "
+                   f"{MAX_SEED_RETRIES}: each retry can cost a whole run); while a retry is "
                    "left, an object missing after the autoencoder's warm-up restarts the run there (default %(default)s; 0: "
                    "never; not with --resume, nor where there are no object slots: pendulum data, --model video-lstm)")
     p.add_argument("--resume", action="store_true", help="continue the run in --out; it may raise --epochs, --budget-steps or --max-minutes "

@@ -81,7 +81,8 @@ class CollectConfig:
                              "actions: no action would reach a frame; lower it or raise --steps")
         if effects.get("frame_delay", 0) >= self.steps - 1:
             raise ValueError(f"effect frame_delay={effects['frame_delay']:g} steps is not shorter than a sequence's "
-                             f"{self.steps} frames: they would all show the reset; lower it or raise --steps")
+                             f"{self.steps - 1} steps (between its {self.steps} frames): they would all show the reset; "
+                             "lower it or raise --steps")
 
 
 def check_collect_sizes(sequences: int, steps: int, workers: int, seed: int, batch: int,

@@ -36,6 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
+from envs.pendulum import MAX_IMAGE_SIZE
 from piga.io.atomic import check_not_an_input, check_writable_target
 from piga.data.collect import split_counts
 from piga.data.schema import (MAX_ABS_ACTION, MAX_DT, MIN_DT, MIN_IMAGE_SIZE, SPLITS, DatasetWriter, blank_error,
@@ -70,8 +71,8 @@ class ImportConfig:
             raise ValueError(f"{type(self).__name__}.dt must be the seconds between frames, {MIN_DT:g} to {MAX_DT:g}, got {shown}")
         if self.steps < 2:
             raise ValueError(f"{type(self).__name__}.steps must be >= 2 (a video needs two frames), got {self.steps}")
-        if self.image_size < MIN_IMAGE_SIZE:
-            raise ValueError(f"image_size must be >= {MIN_IMAGE_SIZE}, got {self.image_size}")
+        if not MIN_IMAGE_SIZE <= self.image_size <= MAX_IMAGE_SIZE:  # the largest piga-collect draws
+            raise ValueError(f"image_size must be in [{MIN_IMAGE_SIZE}, {MAX_IMAGE_SIZE}], got {self.image_size}")
 
 
 @dataclass(frozen=True)
@@ -338,6 +339,10 @@ def read_actions(path: str | Path) -> np.ndarray:
         if abs(value) > MAX_ABS_ACTION:  # beyond float32 it would be stored as inf
             raise ValueError(f"{p}: line {number}: the action {cell} is beyond ±{MAX_ABS_ACTION:g} (the pendulum's torque "
                              "is at most ±2); check the column's unit")
+        if value != 0 and abs(value) < np.finfo(np.float32).tiny:  # float32 would store it as 0 or a rounded subnormal
+            raise ValueError(f"{p}: line {number}: the action {cell} is nonzero and below {np.finfo(np.float32).tiny!s} in "
+                             "magnitude, float32's smallest normal number: the file's float32 actions would hold it as 0 "
+                             "or rounded; scale the actions to the env's units (the pendulum's torque is at most ±2)")
         values[i] = value
     return values.astype(np.float32)
 

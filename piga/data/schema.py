@@ -551,7 +551,9 @@ def _check_true_parameter(path: str, name: str, value: float) -> None:
         raise DataFormatError(f"{path}: attribute 'params' gives {name}={value:g}; {name} is >= 0 in piga's conventions "
                               f"(only {', '.join(SIGNED_PARAMETERS)} may be negative)")
     if abs(value) > MAX_TRUE_PARAMETER:
-        raise DataFormatError(f"{path}: attribute 'params' gives {name}={value:g}, beyond any physical value "
+        from envs.fields import number_text  # here: the schema is read without gymnasium's import
+
+        raise DataFormatError(f"{path}: attribute 'params' gives {name}={number_text(value)}, beyond any physical value "
                               f"(at most {MAX_TRUE_PARAMETER:g} in magnitude)")
 
 

@@ -59,8 +59,11 @@ def pivot_gate_pair(value: Any, owner: str) -> tuple[float, float]:
     return inner, outer
 
 
+#: Most object slots of a model (``piga-train-model --objects``): each slot is an encoder mask, a decoder template
+#: and a body of the physics, and the paper's scenes have 2 or 3 objects.
+MAX_OBJECTS = 64
 #: Bounds of EncoderConfig's numbers: the sizes a model of piga's may have, and an angle in radians.
-ENCODER_RANGES = {"image_size": (8, 4096), "channels": (1, 64), "n_objects": (1, 64), "mask_width": (1, 1024),
+ENCODER_RANGES = {"image_size": (8, 4096), "channels": (1, 64), "n_objects": (1, MAX_OBJECTS), "mask_width": (1, 1024),
                   "loc_width": (1, 1024), "angle_reference": (-2 * math.pi, 2 * math.pi)}
 
 

@@ -425,8 +425,10 @@ class GravityOptions(SystemOptions):
     def __post_init__(self) -> None:
         check_types(self)
         if not (self.fixed_g == 0 or FIXED_G_RANGE[0] <= self.fixed_g <= FIXED_G_RANGE[1]):
+            from envs.fields import number_text  # here: the model is built without gymnasium's import
+
             raise ValueError(f"fixed_g must be in [{FIXED_G_RANGE[0]:g}, {FIXED_G_RANGE[1]:g}] (or 0: learn g), got "
-                             f"{self.fixed_g:g}: the mass starts at 1/fixed_g, which float32 must hold with room to learn")
+                             f"{number_text(self.fixed_g)}: the mass starts at 1/fixed_g, which float32 must hold with room to learn")
 
     def check_physics_init(self, physics_init: Mapping[str, float]) -> None:
         if self.fixed_g and "g" in physics_init:

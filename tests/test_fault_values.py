@@ -1,0 +1,229 @@
+"""Values at their bounds: error lines that print the value as checked, floors that keep effects visible, bounds named
+by their options."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from envs.effects import EFFECTS, MIN_EFFECT, parse_effect
+from envs.fields import number_text, upper_bound_text
+from envs.pendulum import MAX_BLUR_FRACTION, MAX_IMAGE_SIZE
+from piga.cli import collect, importer, train
+from piga.cli.common import PigaError
+from tests.test_faults import TINY_DDPG, refused
+
+ROOT = Path(__file__).parents[1]
+COLLECT = ("--sequences", "3", "--steps", "6", "--workers", "1", "--split", "1,1,1", "--quiet")
+ORACLE = ("--oracle", "--episodes", "1", "--steps", "20", "--horizon", "3", "--candidates", "4", "--iterations", "1",
+          "--quiet")
+
+
+def _listing(folder: Path) -> list[str]:
+    return sorted(p.relative_to(folder).as_posix() for p in folder.rglob("*"))
+
+
+# ---------------------------------------------------------------------------------------------
+# The value as checked: no rounding that puts it on the accepted side of its bound
+# ---------------------------------------------------------------------------------------------
+
+
+def test_number_text_is_short_unless_that_rounds() -> None:
+    assert [number_text(v) for v in (1e6, 0.5, 900.0, 10.0000001, 1000000.1, 1e-320, 2)] == \
+        ["1e+06", "0.5", "900", "10.0000001", "1000000.1", "1e-320", "2"]
+    assert upper_bound_text(math.pi / 0.02, 7) == "157.0796" and upper_bound_text(math.pi / 0.02, 4) == "157"
+
+
+@pytest.mark.parametrize("argv, needles", [
+    (["--gravity-mult", "9.9999999e-08"], ["--gravity-mult 9.9999999e-08: the gravity it gives, 10 x 9.9999999e-08 = "
+                                           "9.999999900000001e-07 m/s², is out of range: at least 1e-06"]),
+    (["--gravity-mult", "100000.01"], ["--gravity-mult 100000.01:", "10 x 100000.01 = 1000000.1 m/s²", "at most 1e+06"]),
+])
+def test_control_prints_the_gravity_as_checked(argv: list[str], needles: list[str], tmp_path: Path,
+                                               capsys: pytest.CaptureFixture[str]) -> None:
+    """It read "10 x 1e-07 = 1e-06 m/s², is out of range: at least 1e-06"."""
+    refused("piga-control", [*ORACLE, *argv], capsys, *needles)
+
+
+@pytest.mark.parametrize("argv, needles", [
+    (["--system", "spring", "--k", "2222.2223"], ["k = 2222.2223 is too stiff", "below 2222.2222 "]),  # "k = 2222.22"
+    (["--effect", "blur=8.0000001"], ["blur=8.0000001 px would blur the pendulum away", "at most 8 px"]),
+])
+def test_collect_prints_the_value_as_checked(argv: list[str], needles: list[str], tmp_path: Path,
+                                             capsys: pytest.CaptureFixture[str]) -> None:
+    refused("piga-collect", ["--out", str(tmp_path / "d.h5"), *COLLECT, *argv], capsys, *needles)
+    assert _listing(tmp_path) == []
+
+
+def test_planet_prints_the_reward_scale_as_checked(tiny_data: Path, tmp_path: Path,
+                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    """It read "--reward-scale must be at most 1e+06, got 1e+06"."""
+    refused("piga-baseline", ["planet", str(tiny_data), "--out", str(tmp_path / "run"), "--reward-scale", "1000000.1",
+                              "--quiet"], capsys, "--reward-scale must be at most 1e+06, got 1000000.1:")
+    assert _listing(tmp_path) == []
+
+
+def test_ddpg_prints_the_learning_rate_as_checked(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """It read "--learning-rate must be in (0, 10], got 10"."""
+    refused("piga-baseline", ["ddpg", "--obs", "state", "--out", str(tmp_path / "run"), *TINY_DDPG, "--learning-rate",
+                              "10.0000001"], capsys, "--learning-rate must be in (0, 10], got 10.0000001")
+    assert _listing(tmp_path) == []
+
+
+def test_the_config_checks_print_the_value_as_checked() -> None:
+    from agents.planet.config import PlanetTrainConfig
+    from agents.sb3.config import SB3Config
+    from piga.world.physics.systems import FIXED_G_RANGE, GravityOptions
+
+    with pytest.raises(ValueError, match=r"at most 1000 nats per frame \(PlaNet uses 3\), got 1000.0000001$"):
+        PlanetTrainConfig(free_nats=1000.0000001)
+    with pytest.raises(ValueError, match=r"noise_std must be at most 10 .*, got 10.0000001$"):
+        SB3Config(noise_std=10.0000001)
+    with pytest.raises(ValueError, match=r"noise_std \(0.1\) is below .* falls to \(0.10000001\)"):
+        SB3Config(algo="drqv2", obs="pixels", noise_std=0.1, noise_final_std=0.10000001)
+    high = FIXED_G_RANGE[1] * (1 + 1e-9)
+    with pytest.raises(ValueError, match=f"got {number_text(high)}:"):
+        GravityOptions(fixed_g=high)
+    assert number_text(high) != f"{FIXED_G_RANGE[1]:g}"
+
+
+# ---------------------------------------------------------------------------------------------
+# Effects: a floor on every continuous one, so that a recorded effect changes the data
+# ---------------------------------------------------------------------------------------------
+
+#: The continuous effects with a floor of MIN_EFFECT (speed_clip has its own; delays are whole steps).
+FLOORED = [name for name, spec in EFFECTS.items() if not spec.integer and name != "speed_clip"]
+
+
+@pytest.mark.parametrize("name", FLOORED)
+def test_a_continuous_effect_below_its_floor_is_refused(name: str) -> None:
+    """``--effect shift=1e-320`` wrote frames byte-identical to the nominal file's, and an attr that said shift 1e-320."""
+    for value in (1e-320, MIN_EFFECT / 2):
+        with pytest.raises(ValueError, match=f"{name} must be .*{MIN_EFFECT:g}"):
+            parse_effect(f"{name}={value!r}")
+    assert parse_effect(f"{name}={MIN_EFFECT!r}") == (name, MIN_EFFECT)
+    if name in ("bias", "shift"):
+        assert parse_effect(f"{name}={-MIN_EFFECT!r}") == (name, -MIN_EFFECT)
+
+
+def test_a_gain_error_must_differ_from_one_by_the_floor() -> None:
+    with pytest.raises(ValueError, match="at least 1e-06 from 1"):
+        parse_effect("gain=1.0000000001")
+    assert parse_effect(f"gain={1 + 2 * MIN_EFFECT!r}")[1] == 1 + 2 * MIN_EFFECT
+
+
+def test_collect_refuses_a_subnormal_effect(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    refused("piga-collect", ["--out", str(tmp_path / "e.h5"), *COLLECT, "--effect", "damping=1e-320"], capsys,
+            "effect damping=1e-320 is out of range: damping must be in [1e-06, 100]", code=2)
+    assert _listing(tmp_path) == []
+
+
+# ---------------------------------------------------------------------------------------------
+# Bounds named by the user's options, and given in --help
+# ---------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("speed", ["1000", "157.08"])
+def test_a_dmc_reset_speed_is_refused_as_max_speed(speed: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """It read "--env-option --max-speed=1000.0 is out of range (--max-speed in [0, 157.1])": the user gave --max-speed,
+    and 157.08 is not within 157.1's bound (π/0.02 = 157.0796...)."""
+    line = refused("piga-collect", ["--out", str(tmp_path / "d.h5"), *COLLECT, "--env", "piga/DMCPendulum-v0",
+                                    "--max-speed", speed], capsys,
+                   f"--max-speed={float(speed)!r} is out of range (--max-speed in [0, π/0.02 ≈ 157.0796])")
+    assert "--env-option" not in line
+
+
+def test_max_speed_help_gives_each_envs_range() -> None:
+    text = " ".join(collect.build_parser().format_help().split())
+    assert "s in [0, 8] on piga/PixelPendulum-v0" in text and "[0, π/0.02 ≈ 157.0796] on piga/DMCPendulum-v0" in text
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["--objects", "1000"], "argument --objects: expected an integer in [1, 64]"),  # it said EncoderConfig.n_objects
+    (["--objects", "65"], "argument --objects: expected an integer in [1, 64]"),
+    (["--seed-retries", "1000000"], "argument --seed-retries: expected an integer in [0, 10]"),  # it trained without end
+])
+def test_train_bounds_objects_and_seed_retries(argv: list[str], needle: str, tmp_path: Path,
+                                               capsys: pytest.CaptureFixture[str]) -> None:
+    refused("piga-train-model", [str(tmp_path / "gr.h5"), "--out", str(tmp_path / "run"), "--quiet", *argv], capsys,
+            needle, code=2)
+    assert _listing(tmp_path) == []
+
+
+def test_train_help_and_config_share_the_bounds() -> None:
+    from piga.training.train import MAX_SEED_RETRIES, TrainConfig
+    from piga.world.encoder import ENCODER_RANGES, MAX_OBJECTS
+
+    assert ENCODER_RANGES["n_objects"] == (1, MAX_OBJECTS)
+    text = " ".join(train.build_parser().format_help().split())
+    assert f"ModelConfig.n_objects, at most {MAX_OBJECTS}:" in text
+    assert f"up to N times (at most {MAX_SEED_RETRIES}: each retry can cost a whole run)" in text
+    with pytest.raises(ValueError, match=f"seed_retries must be <= {MAX_SEED_RETRIES}"):
+        TrainConfig(seed_retries=MAX_SEED_RETRIES + 1)
+
+
+@pytest.mark.parametrize("size", ["1025", "4096"])
+def test_import_bounds_the_image_size_as_collect_does(size: str, tmp_path: Path,
+                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    """piga-import upscaled to 4096 px frames, which piga-collect refuses above 1024."""
+    refused("piga-import", [str(tmp_path / "rec"), str(tmp_path / "u.csv"), "--dt", "0.05", "--out",
+                            str(tmp_path / "o.h5"), "--image-size", size], capsys,
+            f"argument --image-size: expected an integer in [8, {MAX_IMAGE_SIZE}]", code=2)
+    assert f"8 to {MAX_IMAGE_SIZE}" in " ".join(importer.build_parser().format_help().split())
+    from piga.data.importer import ImportConfig
+
+    with pytest.raises(ValueError, match=f"image_size must be in \\[8, {MAX_IMAGE_SIZE}\\], got {size}"):
+        ImportConfig(dt=0.05, image_size=int(size))
+
+
+# ---------------------------------------------------------------------------------------------
+# Messages and docs that state the true bound
+# ---------------------------------------------------------------------------------------------
+
+
+def test_a_frame_delay_is_refused_with_the_bound_it_breaks(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """It read "frame_delay=7 steps is not shorter than a sequence's 8 frames" (7 < 8)."""
+    refused("piga-collect", ["--out", str(tmp_path / "x.h5"), "--quiet", "--workers", "1", "--sequences", "5", "--steps",
+                             "8", "--image-size", "16", "--effect", "frame_delay=7"], capsys,
+            "frame_delay=7 steps is not shorter than a sequence's 7 steps (between its 8 frames)")
+    assert _listing(tmp_path) == []
+
+
+def test_the_collect_page_gives_the_blur_bound_of_the_code() -> None:
+    text = " ".join((ROOT / "docs" / "commands" / "collect.md").read_text().split())
+    assert MAX_BLUR_FRACTION == 8 and "sigma at most an eighth of the frame's side (8 px in 64 px frames)" in text
+    assert "`blur` at most half" not in text
+
+
+def test_a_model_of_other_frames_is_told_to_collect_at_the_envs_size() -> None:
+    """It said "train it on frames the env renders (piga-collect)" of data that piga-collect made at 32 px."""
+    from piga.cli.control import check_pendulum_model
+
+    model = SimpleNamespace(config=SimpleNamespace(system="pendulum", image_size=32, channels=1, dt=0.05))
+    with pytest.raises(PigaError, match=r"renders 64x64 gray ones; collect frames of that size \(piga-collect "
+                                        r"--image-size 64, its default\) and train a model on them"):
+        check_pendulum_model(model, "run")  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("value", ["1e-300", "-1e-40"])
+def test_import_refuses_an_action_float32_cannot_hold(value: str, tmp_path: Path,
+                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    """Actions of 1e-300 were stored as 0 without a word (float32 underflow)."""
+    import imageio.v3 as iio
+
+    folder = tmp_path / "rec"
+    folder.mkdir()
+    for i in range(12):
+        frame = np.zeros((32, 32), np.uint8)
+        frame[i : i + 6, 8:14] = 220
+        iio.imwrite(folder / f"f{i}.png", frame)
+    (tmp_path / "u.csv").write_text("\n".join(["0.5"] * 3 + [value] + ["0"] * 8) + "\n")
+    refused("piga-import", [str(folder), str(tmp_path / "u.csv"), "--dt", "0.05", "--steps", "4", "--image-size", "32",
+                            "--split", "1,1,1", "--out", str(tmp_path / "o.h5")], capsys,
+            f"line 4: the action {value} is nonzero and below 1.1754944e-38 in magnitude",
+            "scale the actions to the env's units")
+    assert not (tmp_path / "o.h5").exists()
