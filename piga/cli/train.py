@@ -16,8 +16,7 @@ from piga.cli.common import (NOT_CONVERGED, ArgumentParser, Interrupted, PigaErr
                              add_preset_option, command_line, format_default, given_options, int_up_to,
                              missing_folders, number_type, positive_float, positive_int, record_resume,
                              recorded_options, remove_empty_folders, remove_outputs, resume_option, run_cli, seed_int,
-                             started_record,
-                             thread_count, unit_fraction)
+                             started_record, thread_count, unit_fraction)
 from piga.io.atomic import check_folder_target
 from piga.io.checkpoint import CHECKPOINT, read_run_record, require_piga_run
 from piga.io.lock import lock_run_folder
