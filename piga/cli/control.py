@@ -348,14 +348,17 @@ def _write_outputs(outputs: list[Path], record: dict[str, Any], page: str, overw
 
 
 def _model_warning(run_dir: str, kind: RunKind) -> str | None:
-    """What the ``run_dir`` run's records say against it, as its warning line says it (None: nothing)."""
+    """What the ``run_dir`` run's records say against it, as its warning line says it (None: nothing); the run's name
+    as typed (:func:`~piga.cli.common.typed_text`: lone surrogates under a C locale cannot be written as UTF-8)."""
     if kind is RunKind.PIGA:
         from piga.io.runs import convergence_warning
 
         warning = convergence_warning(run_dir)
-        return warning.removeprefix("warning: ") if warning else None
-    why = baseline_did_not_learn(run_dir, kind)
-    return f"the run {run_dir} did not learn: {why}" if why else None
+        warning = warning.removeprefix("warning: ") if warning else None
+    else:
+        why = baseline_did_not_learn(run_dir, kind)
+        warning = f"the run {run_dir} did not learn: {why}" if why else None
+    return warning.encode("utf-8", "surrogateescape").decode("utf-8", "replace") if warning else None
 
 
 def _stem(outputs: list[Path]) -> Path:
