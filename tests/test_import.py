@@ -281,6 +281,22 @@ def test_frames_enlarged_beyond_the_recording_are_noted(tmp_path: Path, recordin
         == enlarged
 
 
+def test_a_crop_to_a_square_is_noted(tmp_path: Path, recording: tuple[Path, Path, np.ndarray, np.ndarray],
+                                     capsys: pytest.CaptureFixture[str]) -> None:
+    """A tall recording lost its top and bottom to the centre crop without a word (the help says "centre crop")."""
+    folder, csv, frames, _ = recording
+    tall = tmp_path / "tall"
+    tall.mkdir()
+    for i, frame in enumerate(frames):
+        iio.imwrite(tall / f"f{i}.png", np.pad(frame, ((16, 16), (0, 0)), mode="edge"))  # 64 wide, 96 high
+    for source, said in ((tall, "64x96 px (width x height); their centre square was kept, cutting 32 px in all from "
+                                "its top and bottom"), (folder, None)):
+        code, out, err = _cli(str(source), str(csv), "--dt", "0.05", "--out", str(tmp_path / f"{source.name}.h5"),
+                              "--steps", "5", "--split", "1,1,1", capsys=capsys)
+        assert code == 0 and err == "", err
+        assert (said in out) if said else "centre square" not in out, out
+
+
 @pytest.mark.parametrize("levels, said", [((0,), "one flat level, 0"), ((0, 37, 74), "each one flat level, from 0 to 74")])
 def test_a_blank_recording_is_named_not_the_file_never_written(levels: tuple[int, ...], said: str, tmp_path: Path,
                                                                capsys: pytest.CaptureFixture[str]) -> None:

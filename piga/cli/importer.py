@@ -53,6 +53,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     if result.source_side < config.image_size:
         print(f"note: the recording's frames are {result.source_side} px on their short side, so they were enlarged to "
               f"{config.image_size} px, which adds no detail (a smaller --image-size keeps them as recorded)")
+    height, width = result.source_shape
+    if height != width:  # the pixel pendulum's frames are square: the long side loses its ends, which the user may miss
+        cut, side = abs(height - width), ("left and right" if width > height else "top and bottom")
+        print(f"note: the recording's frames are {width}x{height} px (width x height); their centre square was kept, "
+              f"cutting {cut} px in all from its {side}: check that the pendulum stays inside it")
     if result.dropped_frames:
         print(f"note: the last {result.dropped_frames} of {result.source_frames} frames (less than one sequence "
               f"of {config.steps}) were dropped")

@@ -89,8 +89,13 @@ class ImportResult:
     """Frames left over at the end (fewer than one sequence), not written."""
     split_counts: dict[str, int]
     """Sequences per split name."""
-    source_side: int
-    """The side of the square cropped from the recording's frames, before resizing to ``image_size``."""
+    source_shape: tuple[int, int]
+    """(height, width) of the recording's frames, before the centre crop to a square and the resize to ``image_size``."""
+
+    @property
+    def source_side(self) -> int:
+        """The side of the square cropped from the recording's frames, before resizing to ``image_size``."""
+        return min(self.source_shape)
 
 
 def recording_frame_seconds(path: str | Path) -> float | None:
@@ -167,9 +172,9 @@ def read_recording(path: str | Path, size: int) -> np.ndarray:
     return _read_recording(path, size)[0]
 
 
-def _read_recording(path: str | Path, size: int) -> tuple[np.ndarray, int]:
-    """:func:`read_recording`'s frames (F, size, size), and the side of the square cropped from the first frame
-    (before resizing: a side below ``size`` means the frames were enlarged)."""
+def _read_recording(path: str | Path, size: int) -> tuple[np.ndarray, tuple[int, int]]:
+    """:func:`read_recording`'s frames (F, size, size), and the first frame's (height, width), before the centre crop
+    to a square and the resize (a short side below ``size`` means the frames were enlarged)."""
     p = Path(path)
     if p.is_dir():
         frames = []
@@ -184,23 +189,24 @@ def _read_recording(path: str | Path, size: int) -> tuple[np.ndarray, int]:
                 frames.append(scene_to_gray(image, size))
             except ValueError as exc:
                 raise ValueError(f"{file}: {exc}") from None
-        return np.stack(frames), min(first[1]) if first else size  # (F, size, size); frame_files found some
+        shape = (int(first[1][0]), int(first[1][1])) if first else (size, size)
+        return np.stack(frames), shape  # (F, size, size); frame_files found some
     if not p.is_file():
         if p.exists():  # a FIFO, a socket, a device: exists, but no video to decode
             raise ValueError(f"{p}: is not a regular file (a pipe, a socket or a device), not a video file or frame folder")
         raise FileNotFoundError(f"{p}: no such video file or frame folder")
     frames = []
-    side = size
+    shape = (size, size)
     for image in _read_images(p):
         for frame in _frames_of(image, p):
-            side = min(frame.shape[:2]) if not frames else side
+            shape = (int(frame.shape[0]), int(frame.shape[1])) if not frames else shape
             try:
                 frames.append(scene_to_gray(frame, size))
             except ValueError as exc:
                 raise ValueError(f"{p}: frame {len(frames)} (counted from 0): {exc}") from None
     if not frames:
         raise ValueError(f"{p}: the video has no frames")
-    return np.stack(frames), side  # (F, size, size)
+    return np.stack(frames), shape  # (F, size, size)
 
 
 #: What a recording may be, as the errors say it.
@@ -392,7 +398,7 @@ def import_recording(
         raise FileNotFoundError(f"{recording}: no such video file or frame folder")
     u = read_actions(actions)  # (F,)
     _check_resources(len(u), config.image_size, target)
-    frames, side = _read_recording(recording, config.image_size)  # (F, S, S)
+    frames, shape = _read_recording(recording, config.image_size)  # (F, S, S)
     if len(u) != len(frames):
         raise ValueError(f"{actions} has {len(u)} actions but {recording} has {len(frames)} frames; "
                          "give one action per frame")
@@ -424,7 +430,7 @@ def import_recording(
     with DatasetWriter(target, n, t, (size, size), 1, None, attrs, overwrite=overwrite) as writer:
         writer.write(0, frames[: n * t].reshape(n, t, size, size), u[: n * t].reshape(n, t, 1))
         writer.set_split(np.repeat(np.arange(3, dtype=np.int8), counts))
-    return ImportResult(target, n, len(frames), dropped, dict(zip(SPLITS, counts)), side)
+    return ImportResult(target, n, len(frames), dropped, dict(zip(SPLITS, counts)), shape)
 
 
 __all__ = ["ImportConfig", "ImportResult", "frame_files", "import_recording", "read_actions", "read_recording",
