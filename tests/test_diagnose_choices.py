@@ -495,8 +495,8 @@ def test_effects_that_predict_worse_than_the_nominal_are_not_a_correction(damped
     drifted = _worse_than_nominal(noted, strays, final, NOMINAL)
     assert drifted.verdict_class == "unexplained" and "strays further than the nominal model's" in drifted.verdict
     assert drifted.effects == [] and "damping" in drifted.verdict  # the fit is in the verdict, no effect established
-    assert drifted.notes == ["g refits to 5.031 (x0.502 the reference 10.018) in a fit that predicts worse than the "
-                             "nominal model: no gravity error is claimed"]
+    assert drifted.notes == ["g refits to 5.031 (x0.502 the reference 10.018) in a fit that does not explain the "
+                             "recording: no gravity error is claimed"]
     slightly = replace(d.gap, typical_free_run_mse_corrected=1.09 * d.gap.typical_free_run_mse_nominal)
     assert _worse_than_nominal(naming, slightly, final, NOMINAL) is naming  # noise, as a small gain measured
 

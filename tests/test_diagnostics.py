@@ -488,3 +488,12 @@ def test_actions_beyond_the_range_are_noted() -> None:
     assert clipped_actions_notes(np.array([[0.5, 2.0, -2.0, 1.0]])) == []
     note = clipped_actions_notes(np.array([[0.5, 3.0, -2.5, 1.0]]))
     assert len(note) == 1 and note[0].startswith("50% of the recording's actions lie beyond ±2") and "gain" in note[0]
+
+
+def test_an_interval_is_printed_with_the_digits_that_keep_its_bounds_apart() -> None:
+    """Gravity x2 read "gravity 2 factor on the nominal g (95% interval 2..2)" while its record held 1.9973..2.0010."""
+    from piga.diagnostics.results import Effect, interval_text
+
+    assert interval_text(1.9973, 2.0010) == "1.997..2.001" and interval_text(0.864, 0.949) == "0.864..0.949"
+    assert interval_text(1.9973, 2.0010, digits=4) == "1.997..2.001" and interval_text(5.04, 5.04) == "5.04..5.04"
+    assert "(95% interval 1.997..2.001)" in Effect("gravity", 2.0, "factor on the nominal g", [1.9973, 2.0010]).describe()

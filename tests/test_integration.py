@@ -179,3 +179,17 @@ def test_parameter_errors_compare_a_with_the_signed_truth_of_a_flipped_file() ->
     assert parameter_errors(model, flipped)["a"]["true"] == pytest.approx(-1.328)
     assert parameter_errors(model, flipped)["a"]["relative_error"] == pytest.approx(0.028 / 1.328, rel=1e-5)
     assert parameter_errors(model, {**flipped, "actuation_sign": 1.0})["a"]["relative_error"] > 1.9
+
+
+def test_a_gain_effect_is_part_of_the_true_a() -> None:
+    """A model that learned a = 0.21 from frames collected with --effect gain=0.2 was scored 79% off a true a of 1."""
+    from piga.evaluation.evaluate import applied_params, parameter_errors
+    from piga.world.model import ModelConfig, PhysicsModel
+
+    params = {"g": 10.0, "actuation_gain": 1.0}
+    assert applied_params(params, '{"gain": 0.2, "damping": 0.1}')["actuation_gain"] == pytest.approx(0.2)
+    assert applied_params(params, {"blur": 2.0}) == params and applied_params(params, "not json") == params
+    model = PhysicsModel(ModelConfig(image_size=32))
+    model.system.set_parameters(a=0.21)
+    error = parameter_errors(model, applied_params(params, '{"gain": 0.2}'))["a"]
+    assert error["true"] == pytest.approx(0.2) and error["relative_error"] == pytest.approx(0.05, rel=1e-4)

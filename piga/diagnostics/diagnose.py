@@ -467,8 +467,10 @@ def score_candidates(nom: Nominal, w: WindowSet, progress: bool = False, exclude
         raise DiagnosisInputError(f"refitting g and a to this recording's angles diverged (from g = {nom.g:.3g}, "
                                   f"a = {nom.a:.3g}): the angles read from it are no pendulum motion that the nominal "
                                   "physics can follow: a camera the model does not read (is it trained well enough on "
-                                  "this camera?), or an effect far beyond the nominal physics (a damping that stops "
-                                  "the swing within a few frames)")
+                                  "this camera?), an effect far beyond the nominal physics (a damping that stops "
+                                  "the swing within a few frames), or actions logged in other units than the env's "
+                                  f"±{MAX_ACTION:g} or from another signal (g ran to "
+                                  f"{refit_model.values.get('g', nom.g):.3g}, a to {refit_model.values.get('a', nom.a):.3g})")
     bar.update()
     flip_bic_drop = 0.0
     if actuation_sign(nom, w.fit1) * nom.a < 0:  # the observed response to the actions has the other sign
@@ -902,7 +904,9 @@ def _worse_than_nominal(naming: Naming, gap: Gap, final: fit.Model, nom: Nominal
     if not naming.effects:
         return naming
     worse = gap.one_step_rms_corrected_rad > WORSE_THAN_NOMINAL * gap.one_step_rms_nominal_rad
-    drifts = gap.typical_free_run_mse_corrected > DRIFTS_FURTHER * gap.typical_free_run_mse_nominal
+    # (in angles only where the angles compare: a camera effect's corrected model reads other angles from the frames)
+    drifts = (gap.closure_basis == "state"
+              and gap.typical_free_run_mse_corrected > DRIFTS_FURTHER * gap.typical_free_run_mse_nominal)
     if not (worse or drifts or fit.collapsed(final, nom, factor=100.0)):
         return naming
     why = (f"its held-out one-step error is {math.degrees(gap.one_step_rms_corrected_rad):.2f} deg against the nominal "
@@ -914,10 +918,13 @@ def _worse_than_nominal(naming: Naming, gap: Gap, final: fit.Model, nom: Nominal
                f"corrects nothing, {why}; is the recording the scene the model knows (a camera moved far, or the "
                "frames cut off), or does the system have an effect that is no candidate?")
     # a fit that predicts worse establishes none of its effects: they stay in the verdict, not in the list of effects
-    notes = [note.replace(": gravity, or the pendulum's length, differs from the identified model",
-                          " in a fit that predicts worse than the nominal model: no gravity error is claimed")
-             for note in naming.notes]
-    return Naming([], notes, verdict, "unexplained")
+    return Naming([], [_unclaimed(note) for note in naming.notes], verdict, "unexplained")
+
+
+def _unclaimed(note: str) -> str:
+    """``note``, where it claims a gravity error, told that the fit it comes from is not a correction."""
+    return note.replace(": gravity, or the pendulum's length, differs from the identified model",
+                        " in a fit that does not explain the recording: no gravity error is claimed")
 
 
 def _gap_left_unnamed(naming: Naming, gap: Gap) -> Naming:
@@ -1130,7 +1137,10 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
         verdict_class = "unexplained"
         verdict = ("not explained by the candidates: a flexible state-action basis still explains "
                    f"{100 * generic.held_out_drop:.0f}% of the held-out residual"
-                   + (f" after adding {'+'.join(names)}" if names else ""))
+                   + (f" after adding {'; '.join(x.describe() for x in effects)}" if names else ""))
+        # what is left is no candidate's: the best fit's effects are not established (a speed clip of 1 rad/s read as
+        # "damping -0.025; gravity 0.0295" in the list of effects), and stay in the verdict only
+        effects, notes = [], [_unclaimed(note) for note in notes]
     elif ambiguity is not None:
         verdict_class = "ambiguous"
         verdict = "; ".join([x.describe() for x in effects] + [ambiguity.describe()])
@@ -1270,7 +1280,8 @@ def measure_gap(candidates: Candidates, chosen: Score, nom: Nominal, obs: Observ
     if basis == "pixels":
         measurable = pixels.typical_pixel_mse_nominal > MEASURABLE_GAP * pixels.pixel_mse_floor
     else:
-        measurable = typ_floor is None or typ_floor >= typ_fin or typ_nom > MEASURABLE_GAP * typ_floor
+        measurable = (typ_floor is None or typ_nom > MEASURABLE_GAP * typ_floor
+                      or typ_nom > typ_floor >= typ_fin)  # (a nominal error below the floor: no gap to measure)
     return Gap(
         horizon=list(range(1, len(h_nom) + 1)),
         state_mse_nominal=h_nom.tolist(), state_mse_corrected=h_fin.tolist(), closure=closure,
@@ -1353,9 +1364,10 @@ def analyse(obs: Observations, nom: Nominal, config: DiagnoseConfig = DiagnoseCo
     reading_notes = []
     if config.matched_angles and matched is not None and not (camera is not None and camera.rematched):
         reading = cut_windows(obs, matched() if callable(matched) else matched, stale, config)
-        reading_notes.append("the chosen effects' values are read on angles found by matching every frame to the "
-                             "decoder's renders, in this recording and in the model's own training file alike; the "
-                             "selection and the gap are on the encoder's angles")
+        if final.effects:  # (no effect chosen: no value read)
+            reading_notes.append("the chosen effects' values are read on angles found by matching every frame to the "
+                                 "decoder's renders, in this recording and in the model's own training file alike; "
+                                 "the selection and the gap are on the encoder's angles")
     if config.fit_starts:
         reading = dataclass_replace(reading, fit=dataclass_replace(reading.fit, fit_starts=True))
     if reading is not windows:  # the chosen effects' values (and what they are judged against) read anew

@@ -13,7 +13,7 @@ import numpy as np
 
 from piga.io.atomic import (OutputExistsError, atomic_output, check_folder_target, check_writable_target,
                             missing_folders, partial_path, remove_empty_folders, write_json, written_together)
-from piga.diagnostics.results import Diagnosis, VisionSummary
+from piga.diagnostics.results import Diagnosis, VisionSummary, interval_text
 from piga.diagnostics.twin import MEASURABLE_GAP
 from piga.evaluation.episodes import EpisodeSummary, summary_markdown
 from piga.evaluation.plots import plt, save_figure
@@ -127,7 +127,7 @@ def number(x: float | None, spec: str = ".3g") -> str:
 
 
 def _interval(ci: list[float] | None) -> str:
-    return "–" if not ci or not all(math.isfinite(x) for x in ci) else f"{ci[0]:.4g} .. {ci[1]:.4g}"
+    return "–" if not ci or not all(math.isfinite(x) for x in ci) else interval_text(*ci, digits=4).replace("..", " .. ")
 
 
 def _camera_lines(v: VisionSummary) -> list[str]:

@@ -32,6 +32,16 @@ class _ByKey:
         return getattr(self, key) if key in self else default
 
 
+def interval_text(low: float, high: float, digits: int = 3) -> str:
+    """``low..high`` to ``digits`` significant digits, or as many more (up to 8) as keep two different bounds apart:
+    an interval of 1.9973..2.0010 read "2..2", as if it had no width."""
+    for digits in range(digits, max(digits, 8) + 1):
+        text = f"{low:.{digits}g}..{high:.{digits}g}"
+        if low == high or f"{low:.{digits}g}" != f"{high:.{digits}g}":
+            return text
+    return text
+
+
 @dataclass(frozen=True)
 class Effect(_ByKey):
     """A named effect with its coefficient."""
@@ -67,7 +77,7 @@ class Effect(_ByKey):
             return (f"the system integrates within the frame (moves under the held action between frames; "
                     f"fits best as {self.value:g} substeps per frame)")
         known = self.interval is not None and all(math.isfinite(x) for x in self.interval)
-        ci = f" (95% interval {self.interval[0]:.3g}..{self.interval[1]:.3g})" if known else ""
+        ci = f" (95% interval {interval_text(*self.interval)})" if known else ""
         if self.effect == "shift":
             return f"shift {self.dx:.3g} px right, {self.dy:.3g} px down (mean {self.value:.3g}{ci})"
         value = f"{self.value:.3g}" if self.value is not None and math.isfinite(self.value) else "–"

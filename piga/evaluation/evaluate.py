@@ -62,6 +62,23 @@ def fixed_parameters(model: PhysicsModel) -> dict[str, float]:
     return {name: value for name, value in model.physical_parameters().items() if name not in learned and name != "offset"}
 
 
+def applied_params(params: dict[str, Any], effects: Any) -> dict[str, Any]:
+    """A file's true ``params`` as its frames show them: a ``gain`` effect (``piga-collect --effect gain=0.2``) scales
+    the actuation gain the env applies, so a model that learned a = 0.21 from such frames was scored 79% off a true 1.
+    ``effects``: the file's ``effects`` attribute (JSON text or a dict; anything else: no effect)."""
+    import json
+
+    if isinstance(effects, (str, bytes)):
+        try:
+            effects = json.loads(effects)
+        except ValueError:
+            return params
+    gain = effects.get("gain") if isinstance(effects, dict) else None
+    if "actuation_gain" not in params or not isinstance(gain, (int, float)) or not math.isfinite(gain):
+        return params
+    return {**params, "actuation_gain": float(params["actuation_gain"]) * float(gain)}
+
+
 def parameter_errors(model: PhysicsModel, true_params: dict[str, Any]) -> dict[str, dict[str, float]]:
     """Learned vs true physical parameters, with relative errors, for every learned parameter the file knows.
 
@@ -157,7 +174,7 @@ def evaluate(model: FrameModel, data: str | Path, config: EvalConfig = EvalConfi
         "input_frames": cfg.input_frames,
         "pred_frames": n_pred,
         "extrapolate_frames": steps - n_pred,
-        **physical_parameters_record(model, info.params),
+        **physical_parameters_record(model, applied_params(info.params, info.attrs.get("effects"))),
         "frame_mse_per_step": mse.tolist(),
         "frame_ssim_per_step": ssim.tolist(),
         "frame_ssim_mean": {"prediction": float(ssim[:n_pred].mean()),

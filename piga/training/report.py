@@ -9,7 +9,7 @@ import numpy as np
 import torch
 
 from piga.data.schema import DatasetInfo, inspect_dataset, read_sequences
-from piga.evaluation.evaluate import PARAMETER_NAMES, EvalConfig, evaluate, rollout_frames
+from piga.evaluation.evaluate import PARAMETER_NAMES, EvalConfig, applied_params, evaluate, rollout_frames
 from piga.world.model import FrameModel, ModelConfig, ObjectModel, PhysicsModel, frames_to_float
 from piga.world.variants import MODELS
 from piga.evaluation.plots import curves_figure, rollout_figure, save_figure, templates_figure
@@ -107,7 +107,8 @@ def write_run_report(model: FrameModel, state: TrainState, data: str | Path, run
     save_figure(rollout_figure(to_img(truth), to_img(pred), cfg.input_frames, cfg.pred_frames), run_dir / "rollout.png")
     if isinstance(model, ObjectModel) and model.has_templates:
         save_figure(templates_figure(*template_images(model)), run_dir / "templates.png")
-    true = {PARAMETER_NAMES[k]: float(v) for k, v in info.params.items() if k in PARAMETER_NAMES}
+    applied = applied_params(info.params, info.attrs.get("effects"))
+    true = {PARAMETER_NAMES[k]: float(v) for k, v in applied.items() if k in PARAMETER_NAMES}
     if state.history:
         save_figure(curves_figure(state.history, true), run_dir / "curves.png")
     return metrics
