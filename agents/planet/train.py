@@ -35,7 +35,7 @@ from piga.data.schema import (DataFormatError, DatasetInfo, check_actions_file, 
                               split_indices)
 from piga.data.windows import SequenceReader, loads_whole
 from piga.io.resources import available_memory
-from piga.io.atomic import write_json
+from piga.io.atomic import OutputFolder, write_json
 from piga.io.checkpoint import CHECKPOINT, RunKind, check_counts, resuming_from, write_checkpoint
 from piga.io.device import module_device, resolve_device, set_threads
 from piga.training.convergence import ConvergenceConfig
@@ -284,6 +284,7 @@ def train_planet(
     """
     device = resolve_device(config.device)
     run_dir = Path(run_dir)
+    folder = OutputFolder(run_dir)  # moved or removed while the run trains: said, not made again
     ckpt_path = run_dir / CHECKPOINT
     info = inspect_dataset(data)
     check_actions_file(data)  # the actions only: the frames may not fit in memory
@@ -350,8 +351,9 @@ def train_planet(
                         best = {name: tensor.detach().cpu().clone() for name, tensor in model.state_dict().items()}
                 state.history.append(record)
                 sums, count = {}, 0
-                run_dir.mkdir(parents=True, exist_ok=True)
+                folder.make()
                 _save(ckpt_path, model, optimizer, state, config, rng, generator, info, best)
+                folder.check()  # before TensorBoard's writer makes its folder, and so the run's, again
                 if writer is None:
                     from torch.utils.tensorboard import SummaryWriter
 
@@ -367,6 +369,7 @@ def train_planet(
         if writer is not None:
             writer.close()
     model.eval()
+    folder.check()  # before the open-loop check draws into it
     metrics = {
         "kind": "planet",
         "data": str(data),
@@ -382,5 +385,6 @@ def train_planet(
         "best_valid": None if state.best_valid_loss is None else {"step": state.best_step, "loss": state.best_valid_loss},
         "open_loop": open_loop_check(model, data, run_dir, config.seed),
     }
-    write_json(run_dir / "metrics.json", metrics)
+    with folder.kept():
+        write_json(run_dir / "metrics.json", metrics)
     return model.cpu(), state

@@ -243,10 +243,11 @@ def load_autoencoder(path: str | Path) -> FrameAutoencoder:
         FileNotFoundError: no file at ``path`` (naming it, and what to do).
         ValueError: a truncated or foreign file (naming it and the cause), or one of the old layout.
     """
-    from piga.io.checkpoint import RunKind, unreadable
+    from piga.io.checkpoint import RunKind, check_run_file, unreadable
 
     path = Path(path)
     what = "autoencoder of a latent DDPG run"
+    check_run_file(path)  # a pipe: refused, not read (its open waits for ever)
     if not path.is_file():
         raise FileNotFoundError(f"{path} is missing: a latent DDPG run encodes its frames with the autoencoder it was "
                                 "trained with; restore it, or train the run again with --overwrite")

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import io
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -12,7 +11,7 @@ import numpy as np
 
 from agents.sb3.autoencoder import FrameAutoencoder, load_autoencoder
 from agents.sb3.config import Algorithm, SB3Config
-from piga.io.checkpoint import CHECKPOINT, RunKind, read_checkpoint, unreadable
+from piga.io.checkpoint import CHECKPOINT, RunKind, read_checkpoint, read_run_record, unreadable
 
 __all__ = ["AUTOENCODER", "MODEL", "REPLAY_BUFFERS", "SB3Agent", "load_sb3", "sb3_class", "trained_env"]
 
@@ -39,11 +38,8 @@ def trained_env(run_dir: str | Path) -> str:
     the pixel pendulum for a run from before ``--env``, or without the file."""
     from envs import PIXEL_PENDULUM
 
-    try:
-        record = json.loads((Path(run_dir) / "config.json").read_text())
-    except (OSError, ValueError):
-        return PIXEL_PENDULUM
-    settings = record.get("ddpg") if isinstance(record, dict) else None
+    record, _ = read_run_record(run_dir)  # a pipe refused, not read
+    settings = record.get("ddpg")
     return str(settings.get("env", PIXEL_PENDULUM)) if isinstance(settings, dict) else PIXEL_PENDULUM
 
 

@@ -39,7 +39,7 @@ from agents.sb3.run import MODEL, REPLAY_BUFFERS, sb3_class
 from envs.observations import EpisodeSeeds, FiniteActions, LatentObservation, NonFiniteAction, StateObservation
 from envs.pendulum import PixelPendulumConfig
 from piga.data.schema import legacy_seed
-from piga.io.atomic import atomic_output, write_json
+from piga.io.atomic import OutputFolder, atomic_output, write_json
 from piga.io.checkpoint import (CHECKPOINT, RunKind, check_counts, read_checkpoint, resuming_from, unreadable,
                                 write_checkpoint)
 from piga.io.device import resolve_device, set_threads
@@ -304,6 +304,7 @@ def train_sb3(config: SB3Config, run_dir: str | Path, autoencoder: str | Path | 
     algorithm = sb3_class(config.algo)
     device = resolve_device(config.device)
     run_dir = Path(run_dir)
+    folder = OutputFolder(run_dir)  # moved or removed while the run trains: said, not made again
     set_threads(config.threads, "SB3Config")
     encoder, latent_size = None, 0
     if config.obs == "latent":
@@ -363,7 +364,7 @@ def train_sb3(config: SB3Config, run_dir: str | Path, autoencoder: str | Path | 
                 history.append({"step": model.num_timesteps, "eval_mean_return": float(callback.last_mean_reward),
                                 "seconds": elapsed})
                 bar.set_postfix(eval_return=f"{callback.last_mean_reward:.1f}")
-            run_dir.mkdir(parents=True, exist_ok=True)
+            folder.make()
             _save(run_dir, model, config, _episode_seeds(venv).episodes, history, elapsed)
             if on_checkpoint is not None:
                 on_checkpoint(model.num_timesteps)
@@ -389,5 +390,6 @@ def train_sb3(config: SB3Config, run_dir: str | Path, autoencoder: str | Path | 
         from agents.sb3.autoencoder import autoencoder_seconds
 
         metrics["autoencoder_train_seconds"] = autoencoder_seconds(autoencoder)
-    write_json(run_dir / "metrics.json", metrics)
+    with folder.kept():
+        write_json(run_dir / "metrics.json", metrics)
     return metrics

@@ -18,6 +18,20 @@ def _environment_for_the_libraries() -> None:
         _os.environ["MPLBACKEND"] = "Agg"
 
 
+#: Each command's module and the script that runs it, as pyproject's [project.scripts] pairs them (a test checks
+#: that the two agree): the early interrupt's line names the command from here, with no lookup that can fail mid-import.
+SCRIPTS = {
+    "piga.cli.collect": "piga-collect",
+    "piga.cli.show": "piga-show",
+    "piga.cli.demo": "piga-demo",
+    "piga.cli.train": "piga-train-model",
+    "piga.cli.control": "piga-control",
+    "piga.cli.diagnose": "piga-diagnose",
+    "piga.cli.importer": "piga-import",
+    "piga.cli.baseline": "piga-baseline",
+}
+
+
 def _early_interrupt(number: int, frame: object) -> None:
     """SIGINT while a command still loads its libraries, before :func:`piga.cli.common.run_cli` takes the signal: the
     one line it would print then (Python's KeyboardInterrupt, raised inside an import, printed 17 to 37 lines)."""
@@ -27,15 +41,7 @@ def _early_interrupt(number: int, frame: object) -> None:
     if not name.startswith("piga-"):  # python -m piga.cli.X: sys.argv[0] is "-m" while X loads
         given = getattr(sys, "orig_argv", [])
         module = given[given.index("-m") + 1] if "-m" in given[:-1] else ""
-        name = "piga"
-        if module.startswith("piga.cli."):  # the script that runs the same entry (pyproject's [project.scripts])
-            try:
-                from importlib.metadata import entry_points
-
-                name = next((e.name for e in entry_points(group="console_scripts") if e.value == f"{module}:entry"),
-                            name)
-            except Exception:  # noqa: BLE001 (no installed metadata: the generic name)
-                pass
+        name = SCRIPTS.get(module, "piga")
     _os.write(2, f"{name}: interrupted; nothing was written\n".encode("utf-8", "replace"))
     _os._exit(128 + number)
 

@@ -26,7 +26,7 @@ from piga.cli.common import (NOT_CONVERGED, ArgumentParser, Interrupted, PigaErr
                              positive_float, positive_int, record_resume, recorded_options, remove_outputs, run_cli,
                              seed_int, started_record, thread_count, with_flags)
 from piga.io.atomic import check_folder_target
-from piga.io.checkpoint import CHECKPOINT, RunKind, read_run_record
+from piga.io.checkpoint import CHECKPOINT, RunKind, check_run_files, read_run_record
 from piga.io.lock import lock_run_folder
 
 PROG = "piga-baseline"
@@ -195,6 +195,7 @@ def _check_run_dir(run_dir: Path, resume: bool, overwrite: bool, kind: RunKind) 
     lock_run_folder(run_dir)  # a second command on this folder is refused until this one ends
     if resume and overwrite:
         raise PigaError("--resume continues the run in --out and --overwrite replaces it; give one of them")
+    check_run_files(run_dir)  # a pipe as its checkpoint: refused, neither read nor removed
     existing = [name for name in OUTPUTS if (run_dir / name).exists()]
     if resume:
         if not (run_dir / CHECKPOINT).exists():

@@ -542,6 +542,11 @@ def _exit_on_error(prog: str, argv: Sequence[str] | None, exc: Exception) -> NoR
         # moved while the command wrote in it, most often
         print(f"{prog}: error: {job}{os.fsdecode(error.filename)}: no such file or folder (was a folder the command "
               "writes in removed or moved while it ran?); run the command again", file=sys.stderr)
+    elif isinstance(error, FileNotFoundError) and error.errno == errno.ENOENT and \
+            (opened := re.search(r"unable to open file: name = '(.*?)', errno = 2", str(error))):
+        # h5py's: the file's name inside HDF5's message, not in ``filename``; a file checked at the start is gone
+        print(f"{prog}: error: {job}{opened.group(1)}: no such file (removed or moved while it ran?); put it back, and "
+              "run the command again", file=sys.stderr)
     elif isinstance(error, USER_ERRORS):
         message = " ".join(str(error).split()) or error.__class__.__name__
         if isinstance(error, ValueError) and not isinstance(error, DataFormatError):  # a config's check

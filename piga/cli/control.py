@@ -152,8 +152,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.sweep:
         return _sweep(args, mpc, outputs, argv)
     if args.model and not Path(args.model).is_dir() and held_by(args.model) is None:  # (before --workers is judged by
+        from piga.io.atomic import link_loop, loop_message
         from piga.io.checkpoint import CHECKPOINT  # the run's kind; a run just started has no folder yet: said below)
 
+        if (loop := link_loop(args.model)) is not None:
+            raise PigaError(loop_message(args.model, loop, "--model"))
         what = "is a file, not a run folder" if Path(args.model).exists() else "does not exist"
         raise PigaError(f"--model {args.model} {what} (give the folder that piga-train-model or piga-baseline wrote "
                         f"its {CHECKPOINT} in)")
@@ -423,6 +426,9 @@ def baseline_did_not_learn(run_dir: str | Path, kind: RunKind) -> str | None:
     import json
     import warnings
 
+    from piga.io.checkpoint import check_run_file
+
+    check_run_file(Path(run_dir) / "metrics.json")  # a pipe: refused, not read (its open waits for ever)
     try:
         metrics = json.loads((Path(run_dir) / "metrics.json").read_text())
         if kind is RunKind.PLANET:

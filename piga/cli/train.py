@@ -17,8 +17,8 @@ from piga.cli.common import (NOT_CONVERGED, ArgumentParser, Interrupted, PigaErr
                              missing_folders, number_type, positive_float, positive_int, record_resume,
                              recorded_options, remove_empty_folders, remove_outputs, resume_option, run_cli, seed_int,
                              started_record, thread_count, unit_fraction)
-from piga.io.atomic import check_folder_target
-from piga.io.checkpoint import CHECKPOINT, read_run_record, require_piga_run
+from piga.io.atomic import OutputFolder, check_folder_target
+from piga.io.checkpoint import CHECKPOINT, check_run_files, read_run_record, require_piga_run
 from piga.io.lock import lock_run_folder
 
 #: The recipe options a user may give; each is a TrainConfig field of the same name.
@@ -168,6 +168,7 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
                         "frames whole, so drop one of them")
     if args.resume and args.overwrite:
         raise PigaError("--resume continues the run in --out and --overwrite replaces it; give one of them")
+    check_run_files(run_dir)  # a pipe as its checkpoint: refused now, not at the first checkpoint after an epoch
     existing = [name for name in OUTPUTS if (run_dir / name).exists()]
     has_checkpoint = (run_dir / CHECKPOINT).exists()
     if args.resume and not has_checkpoint:
@@ -343,9 +344,12 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
     resuming = args.resume  # this try continues the checkpoint (a retry after it starts afresh)
     early: list[int] = []  # the step of this try's object check after the warm-up, once made
 
+    folder = OutputFolder(run_dir)  # moved or removed while the run trains: said, not made again by a later write
+
     def on_epoch(state: Any, model: Any) -> None:  # the first checkpoint of this command: the record goes with it
         if not written:
-            write_json(run_dir / "config.json", record)
+            with folder.kept():
+                write_json(run_dir / "config.json", record)
             # the report of the state resumed from, or of the run --overwrite replaces, no longer describes the
             # checkpoint: an interrupted resume or overwrite left it beside a newer model, which piga-diagnose then
             # judged by the old report's numbers (and piga-control by its convergence)
@@ -417,7 +421,7 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
                             f"{run_dir} keeps its checkpoint, but its evaluation would read the new file; put the "
                             f"trained file back and run the same command with {resume_option(args.overwrite)}, or "
                             "train on the new one")
-        with _report_interrupted(run_dir, state.epoch, resume=resume_option(args.overwrite)):
+        with _report_interrupted(run_dir, state.epoch, resume=resume_option(args.overwrite)), folder.kept():
             metrics = write_run_report(model, state, args.data, run_dir)
         objects = metrics.get("objects", {})
         # another seed can find a lost object, or fill a slot that should draw one; not make room for more
@@ -432,7 +436,8 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
         next_seed("object check", lost_with(objects["ratio"]) if lost
                   else f"slot {objects['empty_slots'][0]} drew nothing with seed {train_config.seed}")
     if args.resume and not written:  # a resume that only wrote the report (no step left): its command is recorded too
-        write_json(run_dir / "config.json", record)
+        with folder.kept():
+            write_json(run_dir / "config.json", record)
     convergence = metrics.get("convergence") or {"outcome": "converged"}
     from piga.evaluation.evaluate import summary_line
 

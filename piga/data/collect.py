@@ -37,7 +37,7 @@ from tqdm.auto import tqdm
 from envs.dmc import DMCPendulumConfig, make_dmc_pendulum
 from envs.pendulum import MAX_ACTION, PENDULUM_DT, PixelPendulumConfig, make_pixel_pendulum
 from piga.io.atomic import check_writable_target
-from piga.data.schema import MAX_SEED, SPLITS, DatasetWriter
+from piga.data.schema import MAX_SEED, SPLITS, DatasetWriter, write_room
 from piga.io.worker_signals import quiet_worker_signals
 from piga.io.choices import check_types
 
@@ -193,7 +193,9 @@ def check_resources(config: CollectConfig, out: str | Path) -> None:
     what = f"{n} sequences x {t} frames of {config.env.image_size}x{config.env.image_size}"
     check_memory(rows * t * (pixels + 12) + (workers + 1) * 48 * pixels + 2 * n, what)
     shrink = SHADED_FRAME_COMPRESSION if isinstance(config.env, DMCPendulumConfig) else RENDERED_FRAME_COMPRESSION
-    check_disk(out, n * t * (pixels / shrink + 12) + HDF5_FILE_OVERHEAD, what)
+    # with the room the writer keeps free as it writes the last batch (uncompressed), so that it does not refuse later
+    check_disk(out, n * t * (pixels / shrink + 12) + HDF5_FILE_OVERHEAD
+               + write_room(rows * t * (pixels + 16), n * t * (pixels + 16)), what)
 
 
 def collect(

@@ -28,7 +28,7 @@ from tqdm.auto import tqdm
 from envs.scenes import SceneConfig, SceneError, check_forces_visible, generate_sequence, scene_config, state_names
 from piga.io.atomic import check_writable_target
 from piga.data.collect import check_collect_sizes, sequence_rng, split_counts
-from piga.data.schema import SPLITS, DatasetWriter
+from piga.data.schema import SPLITS, DatasetWriter, write_room
 from piga.io.pool import JobFailed, run_pool
 from piga.io.choices import check_types
 
@@ -102,7 +102,9 @@ def collect_scene(config: SceneCollectConfig, out: str | Path, overwrite: bool =
     size = scene.image_size
     what = f"{n} sequences x {t} frames of {size}x{size} RGB"  # before any simulation: a size that could never finish
     check_memory(min(config.batch, n) * t * (3 * size * size + 16 * scene.n_objects), what)
-    check_disk(out, n * t * (3 * size * size / SCENE_FRAME_COMPRESSION + 16 * scene.n_objects) + HDF5_FILE_OVERHEAD, what)
+    step_bytes = 3 * size * size + 16 * scene.n_objects  # raw; the writer keeps room for a batch's, uncompressed
+    check_disk(out, n * t * (3 * size * size / SCENE_FRAME_COMPRESSION + 16 * scene.n_objects) + HDF5_FILE_OVERHEAD
+               + write_room(min(config.batch, n) * t * step_bytes, n * t * step_bytes), what)
     counts = split_counts(n, config.split)
     one = functools.partial(_one, scene=scene, seed=config.seed, steps=t, first_test=counts[0] + counts[1])
     with DatasetWriter(out, n, t, (size, size, 3), 0, 4 * scene.n_objects, scene_attrs(config, command),

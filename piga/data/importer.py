@@ -40,7 +40,7 @@ from envs.pendulum import MAX_IMAGE_SIZE
 from piga.io.atomic import check_not_an_input, check_writable_target
 from piga.data.collect import split_counts
 from piga.data.schema import (MAX_ABS_ACTION, MAX_DT, MIN_DT, MIN_IMAGE_SIZE, SPLITS, DatasetWriter, blank_error,
-                              frames_have_signal, frames_move, still_error)
+                              frames_have_signal, frames_move, still_error, write_room)
 from piga.data.scene import read_image, scene_to_gray
 
 #: File name endings read from a folder of frames (case-insensitive).
@@ -365,7 +365,9 @@ def _check_resources(n_frames: int, size: int, target: Path) -> None:
     pixels = size * size
     what = f"{n_frames} frames of {size}x{size}"
     check_memory(2 * n_frames * pixels + 48 * pixels, what)
-    check_disk(target, n_frames * (pixels / RECORDED_FRAME_COMPRESSION + 4), what)
+    # with the room the writer keeps free as it writes them (uncompressed, at once), so that it does not refuse later
+    raw = n_frames * (pixels + 4)
+    check_disk(target, n_frames * (pixels / RECORDED_FRAME_COMPRESSION + 4) + write_room(raw, raw), what)
 
 
 def import_recording(

@@ -39,7 +39,7 @@ from typing import Any, Literal
 import h5py
 import numpy as np
 from piga import __version__
-from piga.io.atomic import atomic_output
+from piga.io.atomic import atomic_output, link_loop, loop_message
 
 SPLITS: dict[str, int] = {"train": 0, "valid": 1, "test": 2}
 """Split name -> code stored in ``/split``."""
@@ -87,6 +87,24 @@ def codec_options(codec: FrameCodec) -> dict[str, Any]:
 #: a dataset, flushed at close) and its metadata. HDF5 that runs out of disk mid-write leaves objects whose
 #: deallocation fails (h5py printed dozens of tracebacks, then the process segfaulted), so the writer stops first.
 WRITE_MARGIN_BYTES = 8 * 2**20
+
+
+def write_margin(file_bytes: float) -> float:
+    """The free space a :class:`DatasetWriter` keeps beyond a slice's raw bytes, for a file whose arrays take
+    ``file_bytes`` uncompressed: :data:`WRITE_MARGIN_BYTES`, or for a smaller file those bytes and
+    :data:`~piga.io.resources.HDF5_FILE_OVERHEAD`, as HDF5's caches hold no more than the file's data (a full
+    8 MiB refused a 100 KB file on a 6 MiB disk)."""
+    from piga.io.resources import HDF5_FILE_OVERHEAD
+
+    return min(WRITE_MARGIN_BYTES, file_bytes + HDF5_FILE_OVERHEAD)
+
+
+def write_room(slice_bytes: float, file_bytes: float) -> float:
+    """The free space a :class:`DatasetWriter` asks for before it writes a slice of ``slice_bytes`` (raw) into a file
+    of ``file_bytes`` (raw): the slice and :func:`write_margin`. A command's disk check before its work adds it to
+    the file's size, so that the writer's own check does not refuse after the work."""
+    return slice_bytes + write_margin(file_bytes)
+
 
 #: Files whose frames need less memory than this are loaded whole by default when training.
 IN_MEMORY_LIMIT_BYTES = 2 * 1024**3
@@ -270,7 +288,8 @@ def _validate(f: h5py.File, path: Path) -> DatasetInfo:
 def _open(path: str | os.PathLike[str]) -> h5py.File:
     p = Path(path)
     if not p.exists():
-        raise FileNotFoundError(f"{p}: no such file")
+        loop = link_loop(p)  # exists() is False for a link that loops
+        raise FileNotFoundError(f"{p}: no such file" if loop is None else loop_message(p, loop))
     if p.is_dir():
         raise DataFormatError(f"{p}: is a folder, not an HDF5 file")
     if not p.is_file():  # a FIFO's open waits for a writer for ever; a device is no file to read
@@ -747,7 +766,7 @@ class DatasetWriter:
         stop = start + len(frames)
         if frames.shape[1:] != (self.shape[1], *self.image_shape):
             raise ValueError(f"frames slice has shape {frames.shape}, expected (n, {self.shape[1]}, {self.image_shape})")
-        self._check_room(sum(a.nbytes for a in (frames, actions, states, rewards) if a is not None))
+        self._check_room(sum(a.nbytes for a in (frames, actions, states, rewards) if a is not None), len(frames))
         self._file["frames"][start:stop] = frames
         self._file["actions"][start:stop] = actions
         if self.state_dim is not None:
@@ -764,12 +783,32 @@ class DatasetWriter:
             self._levels = (min(self._levels[0], int(frames.min())), max(self._levels[1], int(frames.max())))
         self._moves = self._moves or (len(frames) > 0 and frames_move(frames))
 
-    def _check_room(self, raw_bytes: int) -> None:
-        """Raises OSError(ENOSPC) naming the file where its disk has less free space than ``raw_bytes`` (a slice,
-        uncompressed: at most what it takes compressed) plus :data:`WRITE_MARGIN_BYTES`, before HDF5 runs out."""
+    def file_bytes(self) -> int:
+        """The file's arrays, uncompressed."""
+        n, t = self.shape
+        per_step = math.prod(self.image_shape) + 4 * (self.action_dim + (self.state_dim or 0) + int(self.rewards))
+        return n * t * per_step + n  # + /split
+
+    def _check_room(self, raw_bytes: int, sequences: int) -> None:
+        """Refuses a slice of ``sequences`` where the file's disk has less free space than :func:`write_room` (the
+        slice's ``raw_bytes``, uncompressed: at most what it takes compressed, and :func:`write_margin`), before HDF5
+        runs out.
+
+        Raises:
+            piga.io.resources.ResourceError: the free space and the need, in numbers (the disk need not be full).
+        """
+        from piga.io.resources import ResourceError, format_bytes
+
         assert self._file is not None
-        if shutil.disk_usage(Path(self._file.filename).parent).free < raw_bytes + WRITE_MARGIN_BYTES:
-            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(self.path))
+        free = shutil.disk_usage(Path(self._file.filename).parent).free
+        margin = write_margin(self.file_bytes())
+        if free < raw_bytes + margin:
+            shown = format_bytes if format_bytes(free) != format_bytes(raw_bytes + margin) else "{:,.0f} B".format
+            raise ResourceError(f"{self.path}: its disk has {shown(free)} free, less than the "
+                                f"{shown(raw_bytes + margin)} that writing the next {sequences} sequences "
+                                f"takes ({format_bytes(raw_bytes)} uncompressed, and {format_bytes(margin)} kept free "
+                                "for HDF5's caches, which must not run out mid-write); free some space, or write "
+                                "elsewhere")
 
     def set_split(self, split: np.ndarray) -> None:
         """Sets ``/split`` (int8 [N], codes of :data:`SPLITS`)."""

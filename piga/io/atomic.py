@@ -8,6 +8,7 @@ sits in the target's own folder.
 from __future__ import annotations
 
 import contextlib
+import errno
 import hashlib
 import json
 import math
@@ -22,6 +23,30 @@ class OutputExistsError(FileExistsError):
     """The target exists and the caller did not allow overwriting it."""
 
 
+def link_loop(path: str | os.PathLike[str]) -> Path | None:
+    """The first link on ``path`` (a folder on the way, or the path itself) that loops back on itself (``a -> a``, or
+    ``a -> b -> a``), or None. pathlib's ``exists()`` and ``is_dir()`` answer False for such a link, so that a check
+    called it missing ("make it first", "a link to a missing file") and the write then failed with ELOOP."""
+    path = Path(path)
+    for part in (*reversed(path.parents), path):
+        if str(part) in ("", "."):
+            continue
+        try:
+            os.stat(part)
+        except OSError as exc:
+            if exc.errno == errno.ELOOP:
+                return part
+            return None  # missing, or not a folder: the checks that follow say which
+    return None
+
+
+def loop_message(path: str | os.PathLike[str], loop: Path, flag: str | None = None) -> str:
+    """The one line for ``path`` (given as ``flag``) whose link ``loop`` loops (:func:`link_loop`)."""
+    where = f"{flag} {path}: " if flag else "" if Path(path) == loop else f"{path}: "
+    return (f"{where}{loop} is a link that loops back on itself (too many levels of symbolic links); remove or fix "
+            "the link")
+
+
 def check_writable_target(path: str | os.PathLike[str], overwrite: bool) -> Path:
     """Fails early, before any work, if ``path`` cannot or may not be written.
 
@@ -34,6 +59,10 @@ def check_writable_target(path: str | os.PathLike[str], overwrite: bool) -> Path
         raise TypeError(f"overwrite must be True or False, got {overwrite!r}")
     target = Path(path)
     _check_name_lengths(target)
+    if (loop := link_loop(target)) is not None and loop != target:  # a folder on the way
+        raise NotADirectoryError(loop_message(target, loop))
+    if loop is not None and not overwrite:  # the target, a link: --overwrite replaces the link
+        raise OutputExistsError(f"{target} exists (a link that loops back on itself); pass --overwrite to replace it")
     if target.is_dir():
         raise IsADirectoryError(f"{target} is a folder, not a file path")
     if target.exists() and not target.is_file():  # --overwrite replaced /dev/null with a file (as root, it may)
@@ -57,6 +86,66 @@ def check_writable_target(path: str | os.PathLike[str], overwrite: bool) -> Path
         raise PermissionError(f"{target} cannot be written under {folder}: it is on a file system that stores no files "
                               "(0 B in all, as /proc and /sys are); write it somewhere else")
     return target
+
+
+class FolderMovedError(FileNotFoundError):
+    """An output folder was removed, moved or replaced by another folder while the command wrote in it."""
+
+
+class OutputFolder:
+    """A run's output folder, which the run makes at its first checkpoint (or finds there: ``--resume``,
+    ``--overwrite``): once it has been seen, each later write checks that the path still names that folder (its
+    device and inode), so that a folder moved or removed while the run trained is said, and not made again, empty,
+    beside the moved one (a later checkpoint and the report went into the new folder, the record into the old).
+    """
+
+    def __init__(self, path: str | os.PathLike[str], flag: str = "--out"):
+        self.path = Path(path)
+        self.flag = flag
+        self._identity: tuple[int, int] | None = None
+        self.check()
+
+    def _now(self) -> tuple[int, int] | None:
+        try:
+            st = os.stat(self.path)
+        except OSError:
+            return None
+        return st.st_dev, st.st_ino
+
+    def check(self) -> None:
+        """Takes the folder as this run's the first time it is there; after that, refuses another, or none.
+
+        Raises:
+            FolderMovedError: the path names no folder now, or another one.
+        """
+        now = self._now()
+        if self._identity is None:
+            self._identity = now if self.path.is_dir() else None
+        elif now != self._identity:
+            raise FolderMovedError(f"{self.flag} {self.path} was removed, moved or replaced while the run was training "
+                                   "(if it was moved, the folder it went to holds the run's last checkpoint); move it "
+                                   "back and continue the run with --resume, or train it again")
+
+    def make(self) -> Path:
+        """The folder for the next write: made (with missing parents) if the run has none yet, else :meth:`check`-ed."""
+        self.check()
+        if self._identity is None:
+            self.path.mkdir(parents=True, exist_ok=True)
+            self.check()
+        return self.path
+
+    @contextlib.contextmanager
+    def kept(self) -> Iterator[Path]:
+        """Inside: writes in the folder, :meth:`check`-ed before; a write that fails as the folder is gone (a missing
+        folder's own FileNotFoundError, "folder ... does not exist") raises :class:`FolderMovedError` instead."""
+        self.check()
+        try:
+            yield self.path
+        except FolderMovedError:
+            raise
+        except FileNotFoundError:
+            self.check()
+            raise
 
 
 def check_file_name(path: str | os.PathLike[str], flag: str, example: str) -> None:
@@ -107,6 +196,8 @@ def check_folder_target(folder: str | os.PathLike[str], flag: str = "--out", log
                          (f"is not UTF-8 text in this locale ({locale})", "an ASCII name or a UTF-8 locale (LC_ALL=C.UTF-8)"))
             raise ValueError(f"{flag} {path}: the name {what}, and a run's logs (TensorBoard's) cannot be written under "
                              f"it; use {fix}") from None
+    if (loop := link_loop(path)) is not None:
+        raise NotADirectoryError(loop_message(path, loop, flag))
     if path.is_symlink() and not path.exists():
         raise NotADirectoryError(f"{flag} {path} is a link to {os.readlink(path)}, which does not exist; remove the "
                                  "link or make its target first")

@@ -26,7 +26,11 @@ from typing import Any
 #: The checkpoint's file name in every run folder.
 CHECKPOINT = "checkpoint.pt"
 
-__all__ = ["CHECKPOINT", "RunKind", "checked_run_kind", "checkpoint_kind", "kind_mismatch", "read_checkpoint", "require_piga_run", "run_kind", "write_checkpoint", "unreadable"]
+#: The files of a run folder that commands read: its checkpoint and its two records.
+RUN_FILES = (CHECKPOINT, "config.json", "metrics.json")
+
+__all__ = ["CHECKPOINT", "RUN_FILES", "RunKind", "check_run_file", "check_run_files", "checked_run_kind", "checkpoint_kind",
+           "kind_mismatch", "read_checkpoint", "require_piga_run", "run_kind", "write_checkpoint", "unreadable"]
 
 
 class RunKind(enum.Enum):
@@ -122,6 +126,36 @@ def kind_mismatch(run_dir: str | os.PathLike[str], found: RunKind, expected: Run
     return ValueError(f"{path} is a {found.writer} checkpoint, not a {expected.writer} run")
 
 
+def check_run_file(path: str | os.PathLike[str]) -> None:
+    """Refuses a run folder's file (:data:`RUN_FILES`) that is there but is no regular file, before it is opened: the
+    open of a pipe waits for a writer for ever, and a device or a socket is no run's file. A file that is absent or
+    cannot be looked at is left to the read that follows.
+
+    Raises:
+        ValueError: naming the file and what it is.
+    """
+    import stat
+
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:
+        return
+    if stat.S_ISREG(mode):
+        return
+    what = ("a folder" if stat.S_ISDIR(mode) else "a pipe (FIFO)" if stat.S_ISFIFO(mode)
+            else "a socket" if stat.S_ISSOCK(mode) else "a device")
+    name = Path(path).name
+    raise ValueError(f"{path} is {what}, not a regular file: it is not the run's {name}; remove it, then restore the "
+                     f"run's own {name} or train the run again")
+
+
+def check_run_files(run_dir: str | os.PathLike[str]) -> None:
+    """:func:`check_run_file` for each of ``run_dir``'s :data:`RUN_FILES`: a command that writes the run refuses one up
+    front, not at its first write after the work."""
+    for name in RUN_FILES:
+        check_run_file(Path(run_dir) / name)
+
+
 def _failed_checksum(path: Path) -> str | None:
     """The first entry of a checkpoint (torch writes a zip) whose bytes fail their CRC-32, or None. torch.load reads
     a changed tensor without checking it; this reads the file once more (about a second per GB)."""
@@ -136,9 +170,15 @@ def _failed_checksum(path: Path) -> str | None:
 
 def read_run_record(run_dir: str | os.PathLike[str]) -> tuple[dict[str, Any], str | None]:
     """A run's ``config.json``, and None; or ``{}`` and what is wrong with it ("is missing", "cannot be read (...)",
-    "is not a run record (not a JSON object)")."""
+    "is not a run record (not a JSON object)").
+
+    Raises:
+        ValueError: ``config.json`` is a pipe, a device or a folder (:func:`check_run_file`).
+    """
+    path = Path(run_dir) / "config.json"
+    check_run_file(path)
     try:
-        payload = json.loads((Path(run_dir) / "config.json").read_text())
+        payload = json.loads(path.read_text())
     except FileNotFoundError:
         return {}, "is missing"
     except (OSError, ValueError) as exc:
@@ -190,12 +230,17 @@ def read_checkpoint(run_dir: str | os.PathLike[str], kind: RunKind) -> dict[str,
 
     path = Path(run_dir) / CHECKPOINT
     if not path.exists():
+        from piga.io.atomic import link_loop, loop_message
         from piga.io.lock import held_by
+
+        if (loop := link_loop(path)) is not None:  # exists() is False for a link that loops
+            raise FileNotFoundError(loop_message(path, loop))
 
         if (pid := held_by(run_dir)) is not None:  # a run started moments ago: its folder is not a wrong guess
             raise FileNotFoundError(f"{path}: no checkpoint yet: {run_dir} is being trained by another piga command "
                                     f"(PID {pid}); wait for its first checkpoint")
         raise FileNotFoundError(f"{path}: no checkpoint (is {run_dir} a {kind.writer} run folder?)")
+    check_run_file(path)
     try:
         payload = torch.load(path, map_location="cpu", weights_only=False)
     except Exception as exc:  # a truncated or foreign file

@@ -102,12 +102,16 @@ def convergence_warning(run_dir: str | os.PathLike[str]) -> str | None:
     (interrupted, or killed) and never checked: that is said too (a run still training is told apart by its lock,
     :func:`piga.cli.common.warn_if_unconverged`). A record that cannot be read gives a line saying that its
     convergence is unknown.
+
+    Raises:
+        ValueError: ``metrics.json`` is a pipe, a device or a folder (:func:`~piga.io.checkpoint.check_run_file`).
     """
     import json
 
-    from piga.io.checkpoint import CHECKPOINT
+    from piga.io.checkpoint import CHECKPOINT, check_run_file
 
     path = Path(run_dir) / "metrics.json"
+    check_run_file(path)
     try:
         metrics = json.loads(path.read_text())
     except FileNotFoundError:

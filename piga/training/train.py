@@ -36,6 +36,7 @@ import torch
 from torch.utils.data import DataLoader, RandomSampler
 from tqdm.auto import tqdm
 
+from piga.io.atomic import FolderMovedError, OutputFolder
 from piga.io.choices import check_choices, check_types
 from piga.io.device import Device, resolve_device, set_threads
 from piga.data.schema import (MAX_SEED, MIN_IMAGE_SIZE, DataFormatError, DatasetInfo, check_actions_file, fingerprint, legacy_seed, read_rows,
@@ -576,9 +577,15 @@ class _Scalars:
                 self.writer.add_scalar(tag, value, step)
             self.pending.clear()
 
-    def close(self) -> None:
-        if self.writer is not None:
-            self.writer.close()
+    def close(self, quiet: bool = False) -> None:
+        """Closes the writer (once); ``quiet``: whatever it raises is dropped (another error is being raised)."""
+        writer, self.writer = self.writer, None
+        if writer is not None:
+            try:
+                writer.close()
+            except Exception:
+                if not quiet:
+                    raise
 
 
 def _last_good(ckpt_path: Path) -> str:
@@ -676,6 +683,7 @@ def train(
         raise TypeError(f"model_config must be a ModelConfig or None, got {type(model_config).__name__}")
     device = resolve_device(train_config.device)
     run_dir = Path(run_dir)
+    folder = OutputFolder(run_dir)  # moved or removed while the run trains: said, not made again
     info = inspect_dataset(data)
     data_fingerprint = fingerprint(data)
     ckpt_path = run_dir / CHECKPOINT
@@ -786,8 +794,9 @@ def train(
             state.history.append(record)
             last = state.epoch == plan.epochs or bool(train_config.max_minutes and state.elapsed > train_config.max_minutes * 60)
             if state.epoch % plan.checkpoint_every == 0 or last:
-                run_dir.mkdir(parents=True, exist_ok=True)
+                folder.make()
                 save_checkpoint(ckpt_path, model, optimizer, state, train_config, info, plan, data_fingerprint)
+                folder.check()  # before TensorBoard's writer makes its folder, and so the run's, again
                 writer.open(run_dir / "tensorboard")
                 (tqdm.write if progress else print)(
                     f"epoch {state.epoch}: loss {record['loss']:.5f} (pred {record['loss_pred']:.5f}, rec "
@@ -795,6 +804,11 @@ def train(
                     + f"{state.elapsed / 60:.1f} min")
                 if on_epoch is not None:
                     on_epoch(state, model)
+    except BaseException as exc:
+        writer.close(quiet=True)  # what it raises as it closes (its thread's failure, again) would hide this error
+        if isinstance(exc, FileNotFoundError) and not isinstance(exc, FolderMovedError):
+            folder.check()  # TensorBoard's writer raises its thread's failure to write in a folder moved away
+        raise
     finally:
         writer.close()
         windows.close()
