@@ -82,7 +82,7 @@ def test_a_bad_count_is_one_line(value: str, tmp_path: Path, capsys: pytest.Capt
     code, _, err = run_in_process("piga-train-model", train_main, "x.h5", "--out", str(tmp_path / "run"), "--objects",
                                   value, capsys=capsys)
     assert code == 2
-    assert_one_line(code, err, "--objects", "positive integer")
+    assert_one_line(code, err, "--objects", "expected an integer in [1, 64]")
 
 
 def test_the_pendulum_refuses_slots(tiny_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
