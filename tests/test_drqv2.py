@@ -150,6 +150,7 @@ def test_the_dmc_pendulum_is_learnt_from_its_frames_in_whole_episodes_of_its_len
             replace(config, **bad)
 
 
+@pytest.mark.slow  # a DrQ-v2 run on MuJoCo's renders, then its DMC episodes: about 16 s
 @needs_dmc
 def test_a_drqv2_run_on_the_dmc_pendulum_is_scored_in_dmcs_episodes_and_nowhere_else(tmp_path: Path, capsys) -> None:
     """``piga-baseline ddpg --env piga/DMCPendulum-v0`` trains on DMC's frames and reward; ``piga-control --env

@@ -40,6 +40,7 @@ def test_the_model_is_read_from_the_file(spring_data: Path) -> None:
     assert preset_for("fast", replace(info, system="pendulum")) == PRESETS["fast"]  # the pendulum's recipe is untouched
 
 
+@pytest.mark.slow  # a spring run long enough for k to move: about 22 s
 def test_tiny_spring_training_moves_k_toward_the_truth(spring_data: Path, tmp_path: Path) -> None:
     """~420 steps on 32 sequences: k and l leave 1 and land near the truth (4, 6). Measured: k 3.89, l 5.98."""
     info = inspect_dataset(spring_data)
