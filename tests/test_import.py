@@ -334,3 +334,18 @@ def test_a_still_recording_and_too_few_frames_are_said_of_the_recording(tmp_path
                         capsys=capsys)
     assert_one_line(code, err, "has 1 frame, too few for one sequence of 2 frames (a recording needs at least 2)")
     assert not out.exists()
+
+
+def test_a_pipe_named_as_a_frame_is_refused(tmp_path: Path, recording: tuple[Path, Path, np.ndarray, np.ndarray],
+                                            capsys: pytest.CaptureFixture[str]) -> None:
+    """A FIFO named f0099b.png in the frame folder was skipped: 200 frames written, one of them missing, rc 0."""
+    import os
+    import shutil
+
+    folder, csv, _, _ = recording
+    copy = Path(shutil.copytree(folder, tmp_path / "frames"))
+    os.mkfifo(copy / "f3b.png")
+    code, _, err = _cli(str(copy), str(csv), "--dt", "0.05", "--out", str(tmp_path / "d.h5"), "--steps", "5",
+                        capsys=capsys)
+    assert_one_line(code, err, "f3b.png: is not a regular file (a pipe, a socket or a device), though named as a frame")
+    assert not (tmp_path / "d.h5").exists()

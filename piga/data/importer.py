@@ -130,8 +130,12 @@ def frame_files(folder: str | Path) -> list[Path]:
         ValueError: the folder holds no PNG or JPEG file.
     """
     folder = Path(folder)
-    files = sorted((p for p in folder.iterdir() if p.is_file() and not p.name.startswith(".")
-                    and p.suffix.lower() in FRAME_EXTENSIONS), key=_natural_key)
+    named = [p for p in folder.iterdir() if not p.name.startswith(".") and p.suffix.lower() in FRAME_EXTENSIONS]
+    odd = next((p for p in named if p.exists() and not p.is_file() and not p.is_dir()), None)
+    if odd is not None:  # a pipe named as a frame was skipped, and the recording lost a frame without a word
+        raise ValueError(f"{odd}: is not a regular file (a pipe, a socket or a device), though named as a frame; "
+                         "remove it or replace it with the frame")
+    files = sorted((p for p in named if p.is_file()), key=_natural_key)
     if not files:
         raise ValueError(f"{folder}: no frames in this folder (expected {', '.join(FRAME_EXTENSIONS)} files)")
     seen: dict[tuple[int | str, ...], Path] = {}
