@@ -371,7 +371,8 @@ def _check_resources(n_frames: int, size: int, target: Path) -> None:
     check_memory(2 * n_frames * pixels + 48 * pixels, what)
     # with the room the writer keeps free as it writes them (uncompressed, at once), so that it does not refuse later
     raw = n_frames * (pixels + 4)
-    check_disk(target, n_frames * (pixels / RECORDED_FRAME_COMPRESSION + 4) + write_room(raw, raw), what)
+    check_disk(target, n_frames * (pixels / RECORDED_FRAME_COMPRESSION + 4) + write_room(raw, raw), what,
+               advice="free some space, write --out elsewhere, or give a smaller --image-size")  # (no count to lower)
 
 
 def import_recording(
