@@ -305,3 +305,20 @@ def test_ctrl_c_while_a_module_loads_names_the_command_without_a_lookup() -> Non
             "os.kill(os.getpid(), signal.SIGINT); time.sleep(30)")
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, env=ENV)
     assert result.returncode == 130 and result.stderr == "piga-import: interrupted; nothing was written\n", result.stderr
+
+
+def test_an_import_without_room_is_told_what_import_can_change(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                               capsys: pytest.CaptureFixture[str]) -> None:
+    """piga-import's disk refusal ended "ask for less", though import has no count to lower."""
+    import imageio.v3 as iio
+    import numpy as np
+
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    for i in range(6):
+        iio.imwrite(frames / f"f{i}.png", np.full((64, 64), 40 * i, np.uint8))
+    (tmp_path / "a.csv").write_text("0.5\n" * 6)
+    _small_disk(monkeypatch, 1000)
+    line = refused("piga-import", [str(frames), str(tmp_path / "a.csv"), "--dt", "0.05", "--steps", "3", "--out",
+                                   str(tmp_path / "d.h5")], capsys, "needs about", "a smaller --image-size")
+    assert "ask for less" not in line and not (tmp_path / "d.h5").exists()
