@@ -414,3 +414,12 @@ def test_a_failing_background_thread_is_logged_not_printed(capsys: pytest.Captur
     (log,) = (tmp_path / "logs").iterdir()
     assert "in thread writer" in log.read_text() and "events.out.tfevents" in log.read_text()
     assert threading.excepthook is before  # restored for whatever runs next in this process
+
+
+def test_a_quoted_tilde_is_named_not_made(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """--out '~/x.h5' (quoted) was told "make it first (mkdir -p ~)", which the shell expands to the home folder."""
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(FileNotFoundError, match="the shell did not expand it"):
+        check_writable_target("~/x.h5", overwrite=False)
+    with pytest.raises(FileNotFoundError, match=r"mkdir -p 'a b'\)"):  # a name with a space, as a shell takes it
+        check_writable_target("a b/x.h5", overwrite=False)

@@ -13,6 +13,7 @@ import hashlib
 import json
 import math
 import os
+import shlex
 import shutil
 from collections.abc import Iterable, Iterator
 from pathlib import Path
@@ -75,7 +76,10 @@ def check_writable_target(path: str | os.PathLike[str], overwrite: bool) -> Path
         blocking = next((p for p in (folder, *folder.parents) if p.exists()), None)
         if blocking is not None and not blocking.is_dir():
             raise NotADirectoryError(f"{blocking} is a file, not a folder, so {target} cannot be written there")
-        raise FileNotFoundError(f"folder {folder} does not exist; make it first (mkdir -p {folder})")
+        if folder.parts and folder.parts[0].startswith("~"):  # quoted, so the shell did not expand it
+            raise FileNotFoundError(f"folder {folder} does not exist: '~' is a folder's name here, as the shell did not "
+                                    "expand it (it was quoted); give the path unquoted, or as $HOME/...")
+        raise FileNotFoundError(f"folder {folder} does not exist; make it first (mkdir -p {shlex.quote(str(folder))})")
     if not os.access(folder, os.W_OK | os.X_OK):
         raise PermissionError(f"folder {folder} is not writable")
     try:
