@@ -423,3 +423,14 @@ def test_a_quoted_tilde_is_named_not_made(tmp_path: Path, monkeypatch: pytest.Mo
         check_writable_target("~/x.h5", overwrite=False)
     with pytest.raises(FileNotFoundError, match=r"mkdir -p 'a b'\)"):  # a name with a space, as a shell takes it
         check_writable_target("a b/x.h5", overwrite=False)
+
+
+def test_a_folder_that_cannot_be_made_on_a_read_only_disk_is_named(tmp_path: Path,
+                                                                   monkeypatch: pytest.MonkeyPatch) -> None:
+    """On a read-only file system, --out ro/sub/x.h5 was told "make it first (mkdir -p ro/sub)", which fails there."""
+    class ReadOnly:
+        f_flag = os.ST_RDONLY
+
+    monkeypatch.setattr(os, "statvfs", lambda path: ReadOnly())
+    with pytest.raises(PermissionError, match=f"{tmp_path} is on a read-only file system"):
+        check_writable_target(tmp_path / "sub" / "x.h5", overwrite=False)

@@ -76,6 +76,9 @@ def check_writable_target(path: str | os.PathLike[str], overwrite: bool) -> Path
         blocking = next((p for p in (folder, *folder.parents) if p.exists()), None)
         if blocking is not None and not blocking.is_dir():
             raise NotADirectoryError(f"{blocking} is a file, not a folder, so {target} cannot be written there")
+        if blocking is not None and _read_only(blocking):  # mkdir -p would fail there too
+            raise PermissionError(f"folder {folder} does not exist, and cannot be made: {blocking} is on a read-only "
+                                  "file system; write somewhere else")
         if folder.parts and folder.parts[0].startswith("~"):  # quoted, so the shell did not expand it
             raise FileNotFoundError(f"folder {folder} does not exist: '~' is a folder's name here, as the shell did not "
                                     "expand it (it was quoted); give the path unquoted, or as $HOME/...")
@@ -150,6 +153,14 @@ class OutputFolder:
         except FileNotFoundError:
             self.check()
             raise
+
+
+def _read_only(folder: Path) -> bool:
+    """Whether ``folder`` is on a file system mounted read-only (False where that cannot be told)."""
+    try:
+        return bool(os.statvfs(folder).f_flag & os.ST_RDONLY)
+    except (OSError, AttributeError):  # (no statvfs: not POSIX)
+        return False
 
 
 def check_file_name(path: str | os.PathLike[str], flag: str, example: str) -> None:
