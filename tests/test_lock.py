@@ -186,3 +186,23 @@ def test_a_folder_where_the_lock_file_goes_is_named(tmp_path: Path) -> None:
             lock_run_folder(tmp_path / "run")
     finally:
         path.rmdir()
+
+
+def test_collect_import_and_diagnose_refuse_an_output_in_use(tmp_path: Path, tiny_data: Path,
+                                                             capsys: pytest.CaptureFixture[str]) -> None:
+    """Two piga-collect --overwrite into one file both said "wrote", and a second diagnosis into one folder was
+    refused only after its work ("appeared while writing")."""
+    from piga.cli import collect, diagnose, importer
+
+    for prog, main, out, argv in (
+            ("piga-collect", collect.main, tmp_path / "d.h5", ["--sequences", "3", "--steps", "4", "--quiet"]),
+            ("piga-import", importer.main, tmp_path / "i.h5", [str(tmp_path), str(tmp_path / "a.csv"), "--dt", "0.05"]),
+            ("piga-diagnose", diagnose.main, tmp_path / "rep", ["--model", str(tmp_path), "--data", str(tiny_data)])):  # refused before the model is read
+        holder = _hold(out)
+        try:
+            code, _, err = run_in_process(prog, main, *argv, "--out", str(out), capsys=capsys)
+            assert_one_line(code, err, f"is in use by another piga command (PID {holder.pid})")
+        finally:
+            holder.kill()
+            holder.wait()
+        assert not out.exists()

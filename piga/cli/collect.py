@@ -21,6 +21,7 @@ from piga.cli.common import (H5_SUFFIXES, ArgumentParser, PigaError, add_preset_
 from piga.data.collect import PAPER_MAX_SPEED, PRESETS, CollectConfig, collect, empty_split_warning
 from piga.data.collect_scenes import SCENE_PRESETS, SCENE_STEPS, collect_scene
 from piga.data.schema import inspect_dataset
+from piga.io.lock import lock_run_folder
 
 PROG = "piga-collect"
 #: Options of Gymnasium's pendulum only: the DMC pendulum refuses them when they are written.
@@ -208,6 +209,7 @@ def _given(args: argparse.Namespace, preset_split: Sequence[float], keys: Sequen
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    lock_run_folder(args.out)  # a second command writing the same file is refused until this one ends
     written = given_options(parser, argv)  # an option that does not apply is refused at its default value too
     if args.system != "pendulum":
         return _collect_scene(args, argv, written)

@@ -8,6 +8,7 @@ from collections.abc import Sequence
 
 from piga.cli.common import (ArgumentParser, Interrupted, PigaError, command_line, int_up_to, number_type, run_cli,
                              seed_int, thread_count, warn_if_unconverged)
+from piga.io.lock import lock_run_folder
 
 PROG = "piga-diagnose"
 
@@ -72,6 +73,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     config = DiagnoseConfig(bootstrap=args.bootstrap, seed=args.seed, fit_starts=args.fit_starts,
                             matched_angles=args.matched_angles)
     out = check_report_target(args.out, args.overwrite)
+    lock_run_folder(out)  # a second diagnosis into the same folder is refused at once, not after its work
     info = inspect_dataset(args.data)  # schema errors first, with the file's name
     if info.system != "pendulum":  # before its length, whose advice would not help
         raise PigaError(f"{args.data}: piga-diagnose is for pendulum data; this file holds {info.system} data")

@@ -11,6 +11,7 @@ from piga.cli.common import (H5_SUFFIXES, ArgumentParser, command_line, format_d
 from piga.data.collect import empty_split_warning
 from piga.data.importer import MAX_DT, MIN_DT, ImportConfig, import_recording, recording_frame_seconds
 from piga.data.schema import MIN_IMAGE_SIZE
+from piga.io.lock import lock_run_folder
 
 PROG = "piga-import"
 
@@ -46,6 +47,7 @@ def build_parser() -> ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     config = ImportConfig(dt=args.dt, steps=args.steps, image_size=args.image_size, split=args.split)
+    lock_run_folder(args.out)  # a second command writing the same file is refused until this one ends
     result = import_recording(args.recording, args.actions, args.out, config, overwrite=args.overwrite,
                               command=command_line(PROG, argv))
     print(f"wrote {result.path}: {result.sequences} sequences x {config.steps} frames of "
