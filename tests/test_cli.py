@@ -121,6 +121,21 @@ def test_interrupted_collect_leaves_no_target(tmp_path: Path, sig: signal.Signal
         assert proc.returncode == 128 + sig  # as a shell reports it: 130 for Ctrl-C, 143 for SIGTERM (it was 130)
 
 
+@pytest.mark.slow  # a collect with two env workers, killed: about 5 s
+def test_workers_end_quietly_with_a_parent_killed_outright(tmp_path: Path) -> None:
+    """SIGKILL of collect's main process alone (the OOM killer's way) left its two env workers printing 66 lines of
+    pipe tracebacks for a second or more; they now end with it."""
+    out = tmp_path / "d.h5"
+    proc = subprocess.Popen(["piga-collect", "--out", str(out), "--sequences", "3000", "--workers", "2", "--quiet"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV, start_new_session=True)
+    _wait_for_partial(tmp_path, proc)
+    proc.kill()  # the main process only: the workers are left to notice
+    _, err = proc.communicate(timeout=60)
+    time.sleep(2)  # what the workers would print comes through the same stderr, until they end
+    assert err == "", err
+    assert subprocess.run(["pgrep", "-f", str(out)], capture_output=True).returncode == 1, "a worker outlived it"
+
+
 def test_ctrl_c_with_two_workers_prints_one_line(tmp_path: Path) -> None:
     """Ctrl-C reaches the whole process group: the env workers must stay quiet."""
     out = tmp_path / "d.h5"

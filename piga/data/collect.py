@@ -38,7 +38,7 @@ from envs.dmc import DMCPendulumConfig, make_dmc_pendulum
 from envs.pendulum import MAX_ACTION, PENDULUM_DT, PixelPendulumConfig, make_pixel_pendulum
 from piga.io.atomic import check_writable_target
 from piga.data.schema import MAX_SEED, SPLITS, DatasetWriter, write_room
-from piga.io.worker_signals import quiet_worker_signals
+from piga.io.worker_signals import die_with_parent, quiet_worker_signals
 from piga.io.choices import check_types
 
 #: Ranges of the paper's pendulum data: θ ~ U(-π, π), θ̇ ~ U(-6, 6).
@@ -146,6 +146,7 @@ def _episode_env(env_config: PixelPendulumConfig | DMCPendulumConfig) -> gym.Env
         # handles it (one line, partial file removed) and terminates the workers, which must not
         # print KeyboardInterrupt tracebacks of their own.
         quiet_worker_signals()
+        die_with_parent()  # a parent killed outright (SIGKILL, the OOM killer) left them printing pipe tracebacks
     if isinstance(env_config, DMCPendulumConfig):
         return make_dmc_pendulum(env_config)
     return make_pixel_pendulum(env_config)
