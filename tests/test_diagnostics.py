@@ -497,3 +497,13 @@ def test_an_interval_is_printed_with_the_digits_that_keep_its_bounds_apart() -> 
     assert interval_text(1.9973, 2.0010) == "1.997..2.001" and interval_text(0.864, 0.949) == "0.864..0.949"
     assert interval_text(1.9973, 2.0010, digits=4) == "1.997..2.001" and interval_text(5.04, 5.04) == "5.04..5.04"
     assert "(95% interval 1.997..2.001)" in Effect("gravity", 2.0, "factor on the nominal g", [1.9973, 2.0010]).describe()
+
+
+def test_bootstrap_refits_that_never_moved_are_said() -> None:
+    """A gain of 5 read "5.04 (95% interval 5.04..5.08)", its lower end exactly the estimate: refits that stay at their
+    start put an end of the interval there, unmeasured."""
+    from piga.diagnostics.diagnose import stalled_refits
+
+    (note,) = stalled_refits({"a": [5.04115] * 3 + [5.05, 5.06] * 20, "g": [10.0, 10.1] * 20}, {"a": 5.04115, "g": 9.9})
+    assert note.startswith("3 of 43 bootstrap refits of a stayed at its estimate")
+    assert stalled_refits({"a": [5.04115] + [5.05] * 99}, {"a": 5.04115}) == []  # 1%: a draw, not a stall

@@ -888,6 +888,19 @@ GAIN_FLOOR = 0.05
 NO_GAP_FACTOR = 5.0
 
 
+def stalled_refits(draws: dict[str, list[float]], estimates: dict[str, float]) -> list[str]:
+    """A note for each parameter whose bootstrap refits stayed exactly at its estimate (their start) in more than 2.5%
+    of the draws: an end of its 95% interval then sits at the estimate, unmeasured (a gain of 5 read "5.04 (95%
+    interval 5.04..5.08)", both 5.041150664934099, excluding the truth)."""
+    notes = []
+    for key, values in draws.items():
+        stayed = sum(v == estimates.get(key) for v in values)
+        if values and stayed > 0.025 * len(values):
+            notes.append(f"{stayed} of {len(values)} bootstrap refits of {key} stayed at its estimate (the fit did not "
+                         "move from its start): the end of its 95% interval at the estimate is not measured")
+    return notes
+
+
 def gain_undetermined(interval: list[float]) -> bool:
     """Whether a gain's bootstrap interval (low, high), as factors on the reference a, leaves it undetermined: every
     refit stayed where it started (a width of zero: a gain of 0.001 read "3.39e-07 (95% interval 3.39e-07..3.39e-07)"),
@@ -1025,6 +1038,8 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
     def interval(key: str) -> list[float] | None:
         d = draws.get(key)
         return [float(np.percentile(d, 2.5)), float(np.percentile(d, 97.5))] if d else None
+
+    notes += stalled_refits(draws, final.values)
 
     effects = [Effect(**e) for e in camera.effects] if camera is not None else []
     if flipped:
