@@ -41,6 +41,16 @@ def test_fitted_starts_solve_each_window_and_leave_exact_data_alone() -> None:
     assert torch.equal(same, fit.loss(model, NOMINAL, w1))
 
 
+def test_a_window_whose_simulation_overflows_keeps_its_starts() -> None:
+    """A dm_control recording with a damping of 100 ended in exit 70: "torch.linalg.solve: The solver failed because
+    the input matrix is singular" (its windows' simulation overflowed, so their Jacobians were not finite)."""
+    exact = planted({"damping": 0.2}, n=20, t=20, noise=0.0)
+    w = fit.make_windows(exact.theta, exact.actions, np.arange(20), 8, 2, exact.dt)
+    model = fit.Model(("damping",), 0, {"g": 10.0, "a": 1.0, "b": 1e300})  # explicit damping at 1e300: overflow
+    d = fit.fitted_starts(model, NOMINAL, w, fit.parameters_of(model, NOMINAL))
+    assert d.shape == (len(w.theta0), 2) and bool(torch.isfinite(d).all())
+
+
 def test_the_option_refits_the_chosen_values(noisy) -> None:
     """``DiagnoseConfig.fit_starts``: the same choice (damping), its value refitted (read starts: b 7% high)."""
     fitted = analyse(noisy, NOMINAL, DiagnoseConfig(bootstrap=0))  # on by default

@@ -377,7 +377,12 @@ def fitted_starts(model: Model, nominal: Nominal, w: Windows, params: dict[str, 
                 columns.append((residuals(d + step) - r) / eps)
             jac = torch.stack(columns, -1)  # (B, H, 2)
             grad = (jac.transpose(1, 2) @ r[..., None])[..., 0] + d  # (B, 2)
-            d = d - torch.linalg.solve(jac.transpose(1, 2) @ jac + eye, grad[..., None])[..., 0]
+            system = jac.transpose(1, 2) @ jac + eye  # (B, 2, 2)
+            # a window whose simulation overflowed (a damping of 100 on nearly still frames) keeps its starts: its
+            # non-finite system made the solve fail ("the input matrix is singular"), an internal error
+            bad = ~(torch.isfinite(system).all(dim=(1, 2)) & torch.isfinite(grad).all(dim=1))
+            system[bad], grad[bad] = eye, 0.0
+            d = d - torch.linalg.solve(system, grad[..., None])[..., 0]
     return d
 
 
