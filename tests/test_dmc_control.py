@@ -113,3 +113,30 @@ def test_a_piga_model_is_run_only_through_the_view_it_was_identified_on(tmp_path
         _check_piga_view("run", face, DMCPendulumConfig(camera_distance=2.0))
     with pytest.raises(PigaError, match="camera_distance=1.5, not 1; give --env-option camera_distance=1.5"):
         _check_piga_view("run", {"data": {"path": str(far)}}, DMCPendulumConfig())
+
+
+def test_a_piga_model_is_run_on_frames_of_its_own_size(tmp_path, monkeypatch, capsys):
+    """A DMC model identified on 32 px frames was given 64 px ones ("encode takes frames of (C, H, W) = (1, 32, 32), the
+    model's, got (1, 64, 64)"), with no option to change them: the env renders at the model's size."""
+    from types import SimpleNamespace
+
+    import piga.control.dmc as dmc
+    import piga.io.checkpoint
+    import piga.io.runs
+    from piga.cli import control
+    from piga.io.checkpoint import RunKind
+    from tests.helpers import run_in_process
+
+    sizes = []
+    model = SimpleNamespace(config=SimpleNamespace(system="pendulum", image_size=32, dt=0.04, input_frames=2))
+    monkeypatch.setattr(piga.io.checkpoint, "checked_run_kind", lambda run: RunKind.PIGA)
+    monkeypatch.setattr(piga.io.runs, "load_model", lambda run: (model, {}))
+    monkeypatch.setattr(control, "_check_piga_view", lambda *args: None)
+    monkeypatch.setattr(control, "_check_dmc_rate", lambda *args: None)
+    monkeypatch.setattr(control, "warn_if_unconverged", lambda *args: None)
+    monkeypatch.setattr(dmc, "PigaSwingUp", lambda model, planner: None)
+    monkeypatch.setattr(dmc, "run_dmc_episodes", lambda agent, name, config, *args, **kwargs:
+                        sizes.append(config.env.image_size) or (_ for _ in ()).throw(KeyboardInterrupt))
+    code, _, _ = run_in_process("piga-control", control.main, "--env", "piga/DMCPendulum-v0", "--model",
+                                str(tmp_path), "--episodes", "1", "--quiet", capsys=capsys)
+    assert sizes == [32] and code == 130  # (stopped there: the size is what is checked)

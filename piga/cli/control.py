@@ -831,6 +831,9 @@ def _dmc(args: argparse.Namespace, argv: Sequence[str] | None, given: set[str]) 
                 raise PigaError(f"{args.model}: a {model.config.system} model cannot control the pendulum")
             _check_piga_view(args.model, checkpoint, config.env)
             _check_dmc_rate(args.model, checkpoint, model.config.dt, config.env)
+            # rendered at the size of the frames the model was identified on (piga-collect --image-size): a 32 px
+            # model was fed 64 px frames ("encode takes frames of ... got (1, 64, 64)"), with no option to change it
+            config = replace(config, env=replace(config.env, image_size=model.config.image_size))
             warn_if_unconverged(PROG, args.model)  # after the refusals, so that a refused command prints one line
             agent = PigaSwingUp(model, config.planner)
             results.append(run_dmc_episodes(agent, "piga", config, model.config.input_frames, progress=not args.quiet))
