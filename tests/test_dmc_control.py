@@ -115,6 +115,7 @@ def test_a_piga_model_is_run_only_through_the_view_it_was_identified_on(tmp_path
         _check_piga_view("run", {"data": {"path": str(far)}}, DMCPendulumConfig())
 
 
+@needs_dmc
 def test_a_piga_model_is_run_on_frames_of_its_own_size(tmp_path, monkeypatch, capsys):
     """A DMC model identified on 32 px frames was given 64 px ones ("encode takes frames of (C, H, W) = (1, 32, 32), the
     model's, got (1, 64, 64)"), with no option to change them: the env renders at the model's size."""
