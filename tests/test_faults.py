@@ -1423,6 +1423,18 @@ def test_control_refuses_planner_options_for_a_baseline_run(argv: list[str], nee
     refused("piga-control", ["--model", str(baseline_runs["ddpg"]), *argv], capsys, *needles)
 
 
+def test_a_folder_of_another_kind_is_not_offered_resume(baseline_runs: dict[str, Path], tiny_data: Path,
+                                                        capsys: pytest.CaptureFixture[str]) -> None:
+    """A train-model run into a DDPG run's folder was told "already holds a run ... pass --resume", which then refused
+    it as another kind's run; the same for the baselines into each other's folders."""
+    line = refused("piga-train-model", [str(tiny_data), "--out", str(baseline_runs["ddpg"]), "--quiet"], capsys,
+                   "already holds a piga-baseline ddpg run", "give another --out, or --overwrite")
+    assert "--resume" not in line
+    line = refused("piga-baseline", ["ddpg", "--obs", "state", "--out", str(baseline_runs["planet"])], capsys,
+                   "already holds a piga-baseline planet run", "give another --out")
+    assert "--resume" not in line
+
+
 @pytest.mark.parametrize("argv, needles", [
     (["--not-told"], ["sac run is never told"]),
     (["--goal-angle", "30"], ["a sac run has no goal input"]),

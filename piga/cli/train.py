@@ -18,7 +18,7 @@ from piga.cli.common import (NOT_CONVERGED, ArgumentParser, Interrupted, PigaErr
                              recorded_options, remove_empty_folders, remove_outputs, resume_option, run_cli, seed_int,
                              started_record, thread_count, unit_fraction)
 from piga.io.atomic import OutputFolder, check_folder_target
-from piga.io.checkpoint import CHECKPOINT, check_run_files, read_run_record, require_piga_run
+from piga.io.checkpoint import CHECKPOINT, RunKind, check_run_files, held_kind, read_run_record, require_piga_run
 from piga.io.lock import lock_run_folder
 
 #: The recipe options a user may give; each is a TrainConfig field of the same name.
@@ -174,6 +174,10 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
     if args.resume and not has_checkpoint:
         raise PigaError(f"--resume: {run_dir / CHECKPOINT} does not exist")
     if not args.resume and existing and not args.overwrite:
+        other = held_kind(run_dir) if has_checkpoint else None
+        if other is not None and other is not RunKind.PIGA:  # its --resume would be refused as a baseline's run
+            raise PigaError(f"{run_dir} already holds a {other.writer} run ({', '.join(existing)}); give another --out, "
+                            "or --overwrite to replace it")
         if has_checkpoint:
             raise PigaError(f"{run_dir} already holds a run ({', '.join(existing)}); pass --resume to continue it "
                             "or --overwrite to replace it")

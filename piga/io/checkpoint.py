@@ -79,6 +79,15 @@ def run_kind(run_dir: str | os.PathLike[str]) -> RunKind:
     return RunKind.parse(str(record.get("kind", "piga")), f"{Path(run_dir)}/config.json")
 
 
+def held_kind(run_dir: str | os.PathLike[str]) -> RunKind | None:
+    """The kind of run a folder holds, by its record (``config.json``'s ``kind``; a piga run where it names none),
+    or None where the record names no known kind (the command's own checks then say what is wrong)."""
+    try:
+        return run_kind(run_dir)
+    except (ValueError, OSError):
+        return None
+
+
 def checkpoint_kind(run_dir: str | os.PathLike[str]) -> RunKind | None:
     """The kind that ``run_dir``'s checkpoint names (``piga`` where it names none), read without its tensors (torch's
     memory map): None where there is no checkpoint, or none that reads (the run's loader then says what is wrong)."""
