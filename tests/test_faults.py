@@ -339,6 +339,7 @@ def test_a_failed_allocation_is_out_of_memory(capsys: pytest.CaptureFixture[str]
     (["--effect", "frame_delay=7"], ["frame_delay=7 steps is not shorter", "all show the reset"], 1),
     (["--effect", "blur=900"], ["blur=900 px would blur the pendulum away in a 64 px frame", "at most 8 px"], 1),
     (["--effect", "blur=9"], ["at most 8 px"], 1),  # half the frame (32 px) was allowed: frames of 5 gray levels
+    (["--env", "piga/DMCPendulum-v0", "--k", "3"], ["is for the scenes", "--env-option (mass, length, damping"], 1),
     (["--effect", "shift=-64"], ["shift=-64 px would move the pendulum out of a 64 px frame"], 1),
     (["--system", "bouncing", "--colors", "#000001", "white"], ["object 0's colour", "is within 0.1 of the background's"], 1),
     (["--env", "piga/DMCPendulum-v0", "--max-speed", "1e308"], ["--max-speed=1e+308 is out of range", "--max-speed in [0, π/0.02 ≈ 157.0796]"], 1),

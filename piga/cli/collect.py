@@ -216,7 +216,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     given = [flag for flag in (*SCENE_PARAMETERS, *SCENE_LOOK, "--half") if getattr(args, flag.lstrip("-")) is not None]
     if given:
         raise PigaError(f"{', '.join(given)} {'is' if len(given) == 1 else 'are'} for the scenes (--system "
-                        f"{'/'.join(SYSTEM_CHOICES[1:])}); the pendulum takes --gravity and --actuation-gain")
+                        f"{'/'.join(SYSTEM_CHOICES[1:])}); the pendulum takes "
+                        + ("--env-option (mass, length, damping, ...) on the DMC pendulum" if args.env == DMC_PENDULUM
+                           else "--gravity and --actuation-gain"))
     preset = PRESETS[args.preset]
     given = _given(args, preset.split, ("sequences", "steps", "split"))
     # explicit options override the preset; the preset's reset speed, where it sets one, applies to either env
