@@ -3196,6 +3196,15 @@ def test_a_model_of_a_rate_dmc_steps_is_pointed_at_dmc(dt: float, told: bool, ti
     line = refused("piga-control", ["--model", str(run), "--quiet", "--episodes", "1", "--steps", "20"], capsys,
                    f"trained on frames {dt:g} s apart")
     assert ("--env piga/DMCPendulum-v0" in line) == told, line
+    if told:  # a 32 px DMC model too: its rate names the env before its size (whose advice pointed at piga-collect)
+        from types import SimpleNamespace
+
+        from piga.cli.common import PigaError
+
+        small = SimpleNamespace(config=SimpleNamespace(system="pendulum", image_size=32, channels=1, dt=dt))
+        with pytest.raises(PigaError, match="--env piga/DMCPendulum-v0") as refusal:
+            control.check_pendulum_model(small, str(run))
+        assert "piga-collect --image-size" not in str(refusal.value)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -563,6 +563,7 @@ def check_pendulum_model(model: PhysicsModel, run_dir: str) -> None:
     config = model.config
     if config.system != "pendulum":
         raise PigaError(f"{run_dir}: a {config.system} model cannot control the pendulum")
+    _check_frame_rate(run_dir, config.dt)  # first: a DMC model's line points at --env piga/DMCPendulum-v0
     size = EpisodeConfig().env_config().image_size  # the env the episodes run in renders gray frames of this side
     if config.image_size != size or config.channels != 1:
         frames = f"{config.image_size}x{config.image_size} " + ("gray" if config.channels == 1 else f"{config.channels}-channel")
@@ -570,7 +571,6 @@ def check_pendulum_model(model: PhysicsModel, run_dir: str) -> None:
         raise PigaError(f"{run_dir}: the model takes {frames} frames, Gymnasium's pixel pendulum renders {size}x{size} "
                         f"gray ones; collect frames of that size (piga-collect --image-size {size}{default}) and train a "
                         "model on them")
-    _check_frame_rate(run_dir, config.dt)
 
 
 def _warn_if_other_frames(run_dir: str, checkpoint: dict) -> None:
