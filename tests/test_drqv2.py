@@ -284,6 +284,8 @@ def test_a_dmc_run_of_drqv2s_view_sees_84x84_rgb_and_is_scored_through_it() -> N
     assert _sb3_view(agent, DMCPendulumConfig(image_size=84), {"image_size"}) == DMCPendulumConfig(**DMC_VIEWS["drqv2"])
     with pytest.raises(PigaError, match="trained on its view 'drqv2'; drop --env-option color"):
         _sb3_view(agent, DMCPendulumConfig(color="gray"), {"color"})
+    with pytest.raises(PigaError, match="trained on its view 'drqv2'; drop --env-option camera_distance"):
+        _sb3_view(agent, DMCPendulumConfig(camera_distance=1.5), {"camera_distance"})  # it scored through it, silently
     batch = run_dmc_episodes(agent, "drqv2", DMCControlConfig(episodes=1, env=replace(env, episode_length=20)))
     assert len(batch.returns) == 1 and agent._stack.shape == (9, 84, 84)
     frames = agent._stack

@@ -713,7 +713,7 @@ def _sb3_view(agent: SB3Agent, env: DMCPendulumConfig, given: set[str]) -> DMCPe
     from envs.dmc import DMCPendulumConfig
 
     view = DMC_VIEWS[agent.config.view]
-    for key in sorted(given & {"camera", "color", "image_size"}):
+    for key in sorted(given & {"camera", "camera_distance", "color", "image_size"}):  # the distance: its size in view
         if getattr(env, key) != view.get(key, getattr(DMCPendulumConfig, key)):
             raise PigaError(f"--env-option {key}={getattr(env, key)}: the run was trained on its view "
                             f"{agent.config.view!r}; drop --env-option {key}")
