@@ -227,3 +227,15 @@ def test_import_refuses_an_action_float32_cannot_hold(value: str, tmp_path: Path
             f"line 4: the action {value} is nonzero and below 1.1754944e-38 in magnitude",
             "scale the actions to the env's units")
     assert not (tmp_path / "o.h5").exists()
+
+
+def test_a_file_that_is_no_hdf5_is_named_in_words(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """"rec.csv: not a readable HDF5 file (OSError)": the line gave an exception's name, not what the file is."""
+    cases = {"rec.csv": (b"a,b\n1,2\n", "another kind of file: an HDF5 file (.h5) from piga-collect or piga-import"),
+             "cut.h5": (b"\x89HDF\r\n\x1a\n" + b"\0" * 100, "damaged or cut short: it starts as an HDF5 file"),
+             "empty.h5": (b"", "it is empty")}
+    for name, (content, said) in cases.items():
+        (tmp_path / name).write_bytes(content)
+        line = refused("piga-show", [str(tmp_path / name), "--out", str(tmp_path / "s.png")], capsys,
+                       f"{name}: not a readable HDF5 file ({said}")
+        assert "Error" not in line, line

@@ -2807,7 +2807,7 @@ def test_an_unreadable_image_says_why_in_words(tmp_path: Path) -> None:
     iio.imwrite(iio_png, np.zeros((64, 64), np.uint8))
     truncated.write_bytes(iio_png.read_bytes()[:40])
     text.write_text("hello")
-    for path, why in ((empty, "the file is empty"), (truncated, "damaged, or not an image of its suffix's format"),
+    for path, why in ((empty, "the file is empty"), (truncated, "damaged, or not a picture in the format its suffix names"),
                       (text, "no reader knows its format")):
         with pytest.raises(ValueError, match="not a readable image") as bad:
             read_image(path)

@@ -112,7 +112,7 @@ def read_image(path: str | os.PathLike[str]) -> np.ndarray:
                              f"{_pillow_limit()} pixels, twice its warning); give a smaller picture") from None
         why = ("the file is empty" if p.is_file() and p.stat().st_size == 0 else
                "no reader knows its format" if "Could not find a backend" in str(exc) else
-               f"damaged, or not an image of its suffix's format: {exc.__class__.__name__}")
+               "damaged, or not a picture in the format its suffix names; give a PNG or a JPEG")
         raise ValueError(f"{p}: not a readable image ({why})") from None
     if image.size == 0:  # what a plugin made of a file that is not its own
         raise ValueError(f"{p}: not a readable image (it has no pixels)")
