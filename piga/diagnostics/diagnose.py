@@ -874,7 +874,7 @@ WORSE_THAN_NOMINAL = 1.5
 #: nothing (a cogging torque's best fit, "gravity 0.502": 1.43x; a true gain of 0.97 read 0.966 at 1.09x, by noise).
 DRIFTS_FURTHER = 1.2
 #: A gain's 95% bootstrap interval whose lower end is below this fraction of its upper end does not pin the gain down
-#: (a probe's actions unrelated to the motion: 7.4e-07..0.231; a constant command: 5.4e-07..0.113; a gain of 2 read
+#: (actions unrelated to the motion: 7.4e-07..0.231; a constant command: 5.4e-07..0.113; a gain of 2 read
 #: 1.95..2.01).
 GAIN_SPAN = 0.01
 #: A gain whose whole interval lies below this factor is not measured: the actions move the system less than the
@@ -981,7 +981,7 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
     the nominal model's, which were identified without the effects.
 
     Without ``varied_actions`` (the recording's actions never change) no gain is named: a constant command times a
-    gain is a constant torque, which a bias or gravity explains as well (a probe's all-1 actions read "gain 0.0271").
+    gain is a constant torque, which a bias or gravity explains as well (all-1 actions read "gain 0.0271").
     A gain whose bootstrap refits do not pin it (:func:`gain_undetermined`) is not named either, and the verdict says
     that the actions barely move the system.
     """
