@@ -155,8 +155,10 @@ class DMCPendulumConfig:
                              f"({sys.float_info.min:g}), which MuJoCo's model reader refuses; give 0 or a larger value")
         longest = VIEW_HALF_SIDE - 2 * TIP_RADIUS
         if not MIN_LENGTH <= self.length <= longest:  # first: the mass's bound and the camera's follow from it
+            why = ("shorter, the pole is hidden under its tip" if self.length < MIN_LENGTH
+                   else "longer, the tip leaves the camera's view")  # the reason of the bound it breaks
             raise ValueError(f"DMCPendulumConfig.length={self.length!r} is out of range (length in [{MIN_LENGTH:g}, "
-                             f"{longest:g}] m; shorter, the pole is hidden under its tip)")
+                             f"{longest:g}] m; {why})")
         checks = {  # each field: whether it is in range, and its range in words
             "image_size": (8 <= self.image_size <= MAX_IMAGE_SIZE, f"image_size in [8, {MAX_IMAGE_SIZE}]"),
             "frame_stack": (1 <= self.frame_stack <= MAX_FRAME_STACK, f"frame_stack in [1, {MAX_FRAME_STACK}]"),
