@@ -403,8 +403,10 @@ def test_angles_that_no_pendulum_follows_are_refused_in_one_line() -> None:
     obs = planted({}, n=60)
     rng = np.random.default_rng(0)
     scrambled = np.unwrap(rng.uniform(-math.pi, math.pi, obs.theta.shape), axis=1)
-    with pytest.raises(DiagnosisInputError, match="no pendulum motion"):
+    with pytest.raises(DiagnosisInputError, match="no pendulum motion") as refusal:
         analyse(replace(obs, theta=scrambled), NOMINAL, FAST)
+    # actions in other units were blamed on the camera or a damping; no bound is quoted (DMC's is ±1, Gymnasium's ±2)
+    assert "actions logged in other units than the env's or from another signal (g ran to" in str(refusal.value)
 
 
 def test_a_fit_that_runs_off_is_collapsed() -> None:

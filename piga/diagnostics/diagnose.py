@@ -469,7 +469,7 @@ def score_candidates(nom: Nominal, w: WindowSet, progress: bool = False, exclude
                                   "physics can follow: a camera the model does not read (is it trained well enough on "
                                   "this camera?), an effect far beyond the nominal physics (a damping that stops "
                                   "the swing within a few frames), or actions logged in other units than the env's "
-                                  f"±{MAX_ACTION:g} or from another signal (g ran to "
+                                  f"or from another signal (g ran to "
                                   f"{refit_model.values.get('g', nom.g):.3g}, a to {refit_model.values.get('a', nom.a):.3g})")
     bar.update()
     flip_bic_drop = 0.0
