@@ -2925,14 +2925,15 @@ def test_an_error_line_comes_after_the_progress_bar_it_ended(tmp_path: Path) -> 
     assert result.returncode == 1 and result.stderr.rstrip().endswith("prog: error: bad input"), result.stderr
 
 
-def test_diagnose_refuses_an_env_that_contradicts_the_files_effects(tmp_path: Path,
+def test_diagnose_refuses_an_env_that_contradicts_the_files_effects(tmp_path: Path, tiny_piga_run: Path,
                                                                      capsys: pytest.CaptureFixture[str]) -> None:
-    """The MPC comparison of --env would have run on another system than the one the data came from."""
+    """The MPC comparison of --env would have run on another system than the one the data came from. (Judged after
+    the model's own checks: a DMC model was told "give --env 'none'", which its frame rate then refused.)"""
     data = tmp_path / "eff.h5"
     assert run_in_process("piga-collect", collect.main, "--out", str(data), "--sequences", "20", "--steps", "24",
                           "--image-size", "16", "--effect", "damping=0.2", "--workers", "1", "--quiet", capsys=capsys)[0] == 0
     for env in ("delay=2", "none", "damping=0.3"):
-        refused("piga-diagnose", ["--model", str(tmp_path / "m"), "--data", str(data), "--env", env, "--out",
+        refused("piga-diagnose", ["--model", str(tiny_piga_run), "--data", str(data), "--env", env, "--out",
                                   str(tmp_path / "rep"), "--quiet"], capsys, "was collected with effects damping=0.2",
                 "give --env 'damping=0.2'")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["eff.h5"]

@@ -84,8 +84,6 @@ def main(argv: Sequence[str] | None = None) -> int:
                         f"{need} (windows of {config.fit_horizon} steps after {need - config.fit_horizon - 1} frames); "
                         f"collect sequences of {need} frames or more (piga-collect --steps {need})")
     check_frames_have_signal(args.data)  # blank video: the diagnosis would divide by its zero variance
-    if effects is not None:
-        _check_env_agrees(effects, info.attrs.get("effects"), args.data)
     require_piga_run(args.model, "piga-diagnose compares the physics a piga model identified with the data")
     model, ckpt = load_model(args.model)
     if model.config.system != "pendulum":
@@ -99,6 +97,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                             f"{args.model} was trained on frames {model.config.dt:g} s apart: drop --env (the "
                             "diagnosis itself runs no episodes)")
         check_pendulum_model(model, args.model)
+        # after the model's own checks: its advice ("give --env 'none'") is then one that runs
+        _check_env_agrees(effects, info.attrs.get("effects"), args.data)
     import torch
 
     torch.set_num_threads(args.threads or max(1, min(2, torch.get_num_threads())))
