@@ -187,9 +187,9 @@ def test_a_gain_effect_is_part_of_the_true_a() -> None:
     from piga.world.model import ModelConfig, PhysicsModel
 
     params = {"g": 10.0, "actuation_gain": 1.0}
-    assert applied_params(params, '{"gain": 0.2, "damping": 0.1}')["actuation_gain"] == pytest.approx(0.2)
+    assert applied_params(params, {"gain": 0.2, "damping": 0.1})["actuation_gain"] == pytest.approx(0.2)
     assert applied_params(params, {"blur": 2.0}) == params and applied_params(params, "not json") == params
     model = PhysicsModel(ModelConfig(image_size=32))
     model.system.set_parameters(a=0.21)
-    error = parameter_errors(model, applied_params(params, '{"gain": 0.2}'))["a"]
+    error = parameter_errors(model, applied_params(params, {"gain": 0.2}))["a"]
     assert error["true"] == pytest.approx(0.2) and error["relative_error"] == pytest.approx(0.05, rel=1e-4)

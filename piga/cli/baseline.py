@@ -21,12 +21,12 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any, get_args
 
-from piga.cli.common import (NOT_CONVERGED, ArgumentParser, Interrupted, PigaError, add_device_option, add_preset_option, command_line,
-                             format_default, given_options, made_folder, nonnegative_float, nonnegative_int, number_type,
-                             positive_float, positive_int, record_resume, recorded_options, remove_outputs, run_cli,
-                             seed_int, started_record, thread_count, with_flags)
+from piga.cli.common import (NOT_CONVERGED, ArgumentParser, Interrupted, PigaError, add_device_option, add_preset_option,
+                             command_line, format_default, given_options, held_run_error, made_folder, nonnegative_float,
+                             nonnegative_int, number_type, positive_float, positive_int, record_resume, recorded_options,
+                             remove_outputs, run_cli, seed_int, started_record, thread_count, with_flags)
 from piga.io.atomic import check_folder_target
-from piga.io.checkpoint import CHECKPOINT, RunKind, check_run_files, held_kind, read_run_record
+from piga.io.checkpoint import CHECKPOINT, RunKind, check_run_files, read_run_record
 from piga.io.lock import lock_run_folder
 
 PROG = "piga-baseline"
@@ -224,12 +224,7 @@ def _check_run_dir(run_dir: Path, resume: bool, overwrite: bool, kind: RunKind) 
             raise PigaError(f"{run_dir} holds a checkpoint without the record of its settings (config.json; the run "
                             "was stopped as it wrote its first checkpoint), so it cannot be continued; pass --overwrite "
                             "to start it again")
-        other = held_kind(run_dir)
-        if other is not None and other is not kind:  # its --resume would be refused as another kind's run
-            raise PigaError(f"{run_dir} already holds a {other.writer} run ({', '.join(existing)}); give another --out, "
-                            "or --overwrite to replace it")
-        raise PigaError(f"{run_dir} already holds a run ({', '.join(existing)}); pass --resume to continue it or "
-                        "--overwrite to replace it")
+        raise held_run_error(run_dir, existing, kind)
     remove_outputs(run_dir, existing)
 
 

@@ -267,6 +267,21 @@ _FINISHED = threading.Event()
 _FINISHED_LINE = "{prog}: interrupted after it finished its work; its outputs are complete"
 
 
+def held_run_error(run_dir: Path, existing: Sequence[str], kind: Any) -> PigaError:
+    """The refusal of ``run_dir``, which already holds a run's ``existing`` outputs, for a command that writes runs of
+    ``kind`` (a :class:`~piga.io.checkpoint.RunKind`) without --resume or --overwrite: --resume where the run is of
+    that kind; where it is another's (its record says), another --out, since --resume would refuse it."""
+    from piga.io.checkpoint import held_kind
+
+    files = ", ".join(existing)
+    other = held_kind(run_dir)
+    if other is not None and other is not kind:
+        return PigaError(f"{run_dir} already holds a {other.writer} run ({files}); give another --out, or --overwrite "
+                         "to replace it")
+    return PigaError(f"{run_dir} already holds a run ({files}); pass --resume to continue it or --overwrite to replace "
+                     "it")
+
+
 def resume_option(overwrite: bool) -> str:
     """The option that continues an interrupted run, as its line names it: ``--resume``, or for a command given
     --overwrite, which refuses --resume beside it, ``--resume in place of --overwrite``."""

@@ -13,12 +13,12 @@ from pathlib import Path
 from typing import Any
 
 from piga.cli.common import (NOT_CONVERGED, ArgumentParser, Interrupted, PigaError, add_device_option,
-                             add_preset_option, command_line, format_default, given_options, int_up_to,
+                             add_preset_option, command_line, format_default, given_options, held_run_error, int_up_to,
                              missing_folders, number_type, positive_float, positive_int, record_resume,
                              recorded_options, remove_empty_folders, remove_outputs, resume_option, run_cli, seed_int,
                              started_record, thread_count, unit_fraction)
 from piga.io.atomic import OutputFolder, check_folder_target
-from piga.io.checkpoint import CHECKPOINT, RunKind, check_run_files, held_kind, read_run_record, require_piga_run
+from piga.io.checkpoint import CHECKPOINT, RunKind, check_run_files, read_run_record, require_piga_run
 from piga.io.lock import lock_run_folder
 
 #: The recipe options a user may give; each is a TrainConfig field of the same name.
@@ -174,13 +174,8 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
     if args.resume and not has_checkpoint:
         raise PigaError(f"--resume: {run_dir / CHECKPOINT} does not exist")
     if not args.resume and existing and not args.overwrite:
-        other = held_kind(run_dir) if has_checkpoint else None
-        if other is not None and other is not RunKind.PIGA:  # its --resume would be refused as a baseline's run
-            raise PigaError(f"{run_dir} already holds a {other.writer} run ({', '.join(existing)}); give another --out, "
-                            "or --overwrite to replace it")
         if has_checkpoint:
-            raise PigaError(f"{run_dir} already holds a run ({', '.join(existing)}); pass --resume to continue it "
-                            "or --overwrite to replace it")
+            raise held_run_error(run_dir, existing, RunKind.PIGA)
         raise PigaError(f"{run_dir} holds outputs of an earlier run but no checkpoint ({', '.join(existing)}); "
                         "pass --overwrite to replace them")
     from piga.io.atomic import write_json

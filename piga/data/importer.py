@@ -43,6 +43,9 @@ from piga.data.schema import (MAX_ABS_ACTION, MAX_DT, MIN_DT, MIN_IMAGE_SIZE, SP
                               frames_have_signal, frames_move, still_error, write_room)
 from piga.data.scene import read_image, scene_to_gray
 
+#: float32's smallest normal number: a nonzero action below it would be stored as 0 or rounded.
+FLOAT32_TINY = np.finfo(np.float32).tiny
+
 #: File name endings read from a folder of frames (case-insensitive).
 FRAME_EXTENSIONS = (".png", ".jpg", ".jpeg")
 #: Header names that mark the action column of a CSV with several columns (case-insensitive).
@@ -349,8 +352,8 @@ def read_actions(path: str | Path) -> np.ndarray:
         if abs(value) > MAX_ABS_ACTION:  # beyond float32 it would be stored as inf
             raise ValueError(f"{p}: line {number}: the action {cell} is beyond ±{MAX_ABS_ACTION:g} (the pendulum's torque "
                              "is at most ±2); check the column's unit")
-        if value != 0 and abs(value) < np.finfo(np.float32).tiny:  # float32 would store it as 0 or a rounded subnormal
-            raise ValueError(f"{p}: line {number}: the action {cell} is nonzero and below {np.finfo(np.float32).tiny!s} in "
+        if value != 0 and abs(value) < FLOAT32_TINY:  # float32 would store it as 0 or a rounded subnormal
+            raise ValueError(f"{p}: line {number}: the action {cell} is nonzero and below {FLOAT32_TINY!s} in "
                              "magnitude, float32's smallest normal number: the file's float32 actions would hold it as 0 "
                              "or rounded; scale the actions to the env's units (the pendulum's torque is at most ±2)")
         values[i] = value

@@ -299,14 +299,11 @@ def _open(path: str | os.PathLike[str]) -> h5py.File:
     except BlockingIOError:  # HDF5's lock: the file is open for writing elsewhere (errno EAGAIN, "unable to lock file")
         raise DataFormatError(f"{p}: another process has it open for writing (HDF5 locks a file while it is written); "
                               "wait for that process to end, or close the file there, and run the command again") from None
-    except OSError:
-        try:  # what the file is, in words rather than the exception's name
-            with open(p, "rb") as f:
-                head: bytes | None = f.read(8)
-        except OSError:
-            head = None
-        what = ("it cannot be read" if head is None else "it is empty" if not head else "damaged or cut short: it starts as an HDF5 file, but cannot be read" if head == b"\x89HDF\r\n\x1a\n"
-                else "another kind of file: an HDF5 file (.h5) from piga-collect or piga-import is needed")
+    except OSError:  # what the file is, in words rather than the exception's name (h5py's signature test)
+        what = ("it cannot be read (no permission)" if not os.access(p, os.R_OK) else
+                "it is empty" if p.stat().st_size == 0 else
+                "damaged or cut short: it starts as an HDF5 file, but cannot be read" if h5py.is_hdf5(p) else
+                "another kind of file: an HDF5 file (.h5) from piga-collect or piga-import is needed")
         raise DataFormatError(f"{p}: not a readable HDF5 file ({what})") from None
 
 

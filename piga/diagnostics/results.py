@@ -36,10 +36,10 @@ def interval_text(low: float, high: float, digits: int = 3) -> str:
     """``low..high`` to ``digits`` significant digits, or as many more (up to 8) as keep two different bounds apart:
     an interval of 1.9973..2.0010 read "2..2", as if it had no width."""
     for digits in range(digits, max(digits, 8) + 1):
-        text = f"{low:.{digits}g}..{high:.{digits}g}"
-        if low == high or f"{low:.{digits}g}" != f"{high:.{digits}g}":
-            return text
-    return text
+        a, b = f"{low:.{digits}g}", f"{high:.{digits}g}"
+        if a != b or low == high:
+            break
+    return f"{a}..{b}"
 
 
 @dataclass(frozen=True)

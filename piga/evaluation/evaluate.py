@@ -65,14 +65,8 @@ def fixed_parameters(model: PhysicsModel) -> dict[str, float]:
 def applied_params(params: dict[str, Any], effects: Any) -> dict[str, Any]:
     """A file's true ``params`` as its frames show them: a ``gain`` effect (``piga-collect --effect gain=0.2``) scales
     the actuation gain the env applies, so a model that learned a = 0.21 from such frames was scored 79% off a true 1.
-    ``effects``: the file's ``effects`` attribute (JSON text or a dict; anything else: no effect)."""
-    import json
-
-    if isinstance(effects, (str, bytes)):
-        try:
-            effects = json.loads(effects)
-        except ValueError:
-            return params
+    ``effects``: the file's ``effects`` attribute as :class:`~piga.data.schema.DatasetInfo` decodes it (a dict;
+    anything else: no effect)."""
     gain = effects.get("gain") if isinstance(effects, dict) else None
     if "actuation_gain" not in params or not isinstance(gain, (int, float)) or not math.isfinite(gain):
         return params
