@@ -90,9 +90,14 @@ def check_writable_target(path: str | os.PathLike[str], overwrite: bool) -> Path
     except OSError:  # no answer: the write itself will say
         total = None
     if total == 0:  # /proc, /sys: writable to root, yet no file can be made there (a command said so only at the end)
-        raise PermissionError(f"{target} cannot be written under {folder}: it is on a file system that stores no files "
-                              "(0 B in all, as /proc and /sys are); write it somewhere else")
+        raise PermissionError(stores_no_files(str(target), folder))
     return target
+
+
+def stores_no_files(what: str, folder: Path) -> str:
+    """The line for ``what``, to be written under ``folder`` on a file system of 0 B in all (/proc, /sys)."""
+    return (f"{what} cannot be written under {folder}: it is on a file system that stores no files (0 B in all, as "
+            "/proc and /sys are); write it somewhere else")
 
 
 class FolderMovedError(FileNotFoundError):

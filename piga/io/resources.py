@@ -13,6 +13,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from piga.io.atomic import stores_no_files
 from piga.io.checkpoint import CHECKPOINT
 
 #: gzip (level 4) shrinks piga-collect's pendulum frames about 25x (measured on its default data);
@@ -178,8 +179,7 @@ def check_disk(target: str | os.PathLike[str], needed: float, what: str, advice:
     usage = shutil.disk_usage(folder)
     free = usage.free
     if usage.total == 0:  # /proc, /sys: "0 B free; ask for less" asked for what no size can meet
-        raise ResourceError(f"{what} cannot be written under {folder}: it is on a file system that stores no files "
-                            "(0 B in all, as /proc and /sys are); write it somewhere else")
+        raise ResourceError(stores_no_files(what, folder))
     if needed > free:
         raise ResourceError(f"{what} needs about {format_bytes(needed)} of disk, but {folder} has "
                             f"{format_bytes(free)} free; {advice}")
