@@ -3449,9 +3449,18 @@ def test_a_signal_after_the_work_says_the_outputs_are_complete() -> None:
     code = ("import os, signal, time; from piga.cli.common import _exit_quietly_on_late_signals as late; "
             "late('piga-x: interrupted after it finished its work; its outputs are complete'); "
             "os.kill(os.getpid(), signal.SIGTERM); time.sleep(30)")
+    _ends_by_sigterm_saying_complete(code)
+
+
+#: The line of a command interrupted once its outputs are complete.
+COMPLETE = "piga-x: interrupted after it finished its work; its outputs are complete\n"
+
+
+def _ends_by_sigterm_saying_complete(code: str) -> None:
+    """Runs ``code`` (which sends itself SIGTERM) in its own interpreter: exit 143 and :data:`COMPLETE` alone."""
     result = subprocess.run(["python", "-c", code], capture_output=True, text=True, timeout=60, env=ENV)
     assert result.returncode == 143
-    assert result.stderr == "piga-x: interrupted after it finished its work; its outputs are complete\n"
+    assert result.stderr == COMPLETE
 
 
 def test_a_signal_between_the_last_write_and_the_return_says_the_outputs_are_complete(
@@ -3461,9 +3470,7 @@ def test_a_signal_between_the_last_write_and_the_return_says_the_outputs_are_com
     code = ("import os, signal, time; from piga.cli.common import run_cli, work_finished\n"
             "def main(argv):\n    work_finished(); os.kill(os.getpid(), signal.SIGTERM); time.sleep(30)\n"
             "run_cli('piga-x', main)\n")
-    result = subprocess.run(["python", "-c", code], capture_output=True, text=True, timeout=60, env=ENV)
-    assert result.returncode == 143
-    assert result.stderr == "piga-x: interrupted after it finished its work; its outputs are complete\n"
+    _ends_by_sigterm_saying_complete(code)
 
     def main(argv: Sequence[str] | None) -> int:  # in a caller's process (a test, a notebook): the same line
         from piga.cli.common import work_finished
@@ -3472,7 +3479,7 @@ def test_a_signal_between_the_last_write_and_the_return_says_the_outputs_are_com
         raise KeyboardInterrupt
 
     code_, _, err = run_in_process("piga-x", main, capsys=capsys)
-    assert code_ == 130 and err == "piga-x: interrupted after it finished its work; its outputs are complete\n"
+    assert code_ == 130 and err == COMPLETE
     code_, _, err = run_in_process("piga-x", lambda argv: (_ for _ in ()).throw(KeyboardInterrupt), capsys=capsys)
     assert err == "piga-x: interrupted; nothing was written\n"  # the next command starts unfinished
 
