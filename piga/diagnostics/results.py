@@ -148,7 +148,8 @@ class SelectionStep(_ByKey):
     accepted: bool
     """Each of its effects earns its place against the same set without it (BIC and free-run drops)."""
     ambiguous: bool = False
-    """Accepted too, and explains the data about as well as the chosen set."""
+    """Accepted too, and explains the data about as well as the chosen set; or, where no set is accepted, favoured by
+    the held-out free run at a BIC close to "none"'s."""
 
 
 @dataclass(frozen=True)

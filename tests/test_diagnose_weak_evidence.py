@@ -1,0 +1,124 @@
+"""The diagnosis where the one-step BIC barely sees the actions or an effect (few or short sequences), and where the
+actions are misaligned with the frames: a flipped actuation decided on the held-out free run, a refit of the nominal
+sign that runs off, a single effect that the free run favours, which keeps "none"'s g and a from being named a
+gravity or gain error on their own, and a motion that answers its actions before they are logged."""
+
+from __future__ import annotations
+
+import importlib
+
+from dataclasses import replace
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from piga.diagnostics import DiagnoseConfig, analyse, fit
+from piga.diagnostics.diagnose import (Candidates, DiagnosisInputError, action_response, check_actions_lead, cut_windows,
+                                       name_effects, score_candidates, select)
+from piga.diagnostics.results import GenericBasis, Score
+from tests.test_diagnostics import NOMINAL, planted
+
+FAST = DiagnoseConfig(bootstrap=0)
+NOTHING_LEFT = GenericBasis(bic_drop=0.0, held_out_drop=0.0, significant=False)
+
+
+def flipped_windows():
+    obs = planted({})
+    obs = replace(obs, actions=-obs.actions)
+    return cut_windows(obs, obs.theta, None, FAST)
+
+
+def test_a_flip_is_taken_on_the_free_run_where_the_bic_margin_is_not_reached() -> None:
+    w = flipped_windows()
+    # a margin no BIC drop reaches: the held-out free run decides
+    assert score_candidates(NOMINAL, w, bic_margin=1e9).flipped
+    # and where it may not decide either, the nominal sign stays
+    assert not score_candidates(NOMINAL, w, bic_margin=1e9, min_gain=1.0).flipped
+
+
+def test_the_opposite_sign_is_tried_before_a_refit_that_ran_off_is_refused(monkeypatch) -> None:
+    w = flipped_windows()
+    real = fit.fit_candidate
+
+    def nominal_sign_runs_off(effects, start, nom, windows, *args):
+        m = real(effects, start, nom, windows, *args)
+        return m.with_values({**m.values, "g": 1e-12}) if not effects and "a" not in start else m
+
+    monkeypatch.setattr(fit, "fit_candidate", nominal_sign_runs_off)
+    c = score_candidates(NOMINAL, w)
+    assert c.refit.model.values["a"] < 0 and c.flipped
+
+    def both_run_off(effects, start, nom, windows, *args):
+        m = real(effects, start, nom, windows, *args)
+        return m.with_values({**m.values, "g": 1e-12}) if not effects else m
+
+    monkeypatch.setattr(fit, "fit_candidate", both_run_off)
+    with pytest.raises(DiagnosisInputError, match="diverged"):
+        score_candidates(NOMINAL, w)
+
+
+def scored(effects: tuple[str, ...], bic: float, typical: float, **values: float) -> Score:
+    model = fit.Model(effects, 0, {"g": NOMINAL.g, "a": NOMINAL.a, **values})
+    return Score(model, bic, typical, np.full(3, typical), typical)
+
+
+@pytest.mark.parametrize("bic, typical, rival", [
+    (-995.0, 0.6e-3, "damping"),   # BIC 5 above "none", free run 40% better: a rival
+    (-970.0, 0.6e-3, None),        # BIC 30 above: the one-step residuals refute it
+    (-995.0, 0.95e-3, None),       # free run 5% better: no evidence at all
+])
+def test_a_single_the_free_run_favours_is_a_rival_of_none(bic: float, typical: float, rival: str | None) -> None:
+    none = scored((), -1000.0, 1e-3)
+    single = scored(("damping",), bic, typical, b=-0.06)
+    candidates = Candidates(none, none, [single])
+    s = select(candidates, NOMINAL, SimpleNamespace(fit1=None), DiagnoseConfig())
+    assert s.chosen is none
+    assert (s.rival.name if s.rival else None) == rival
+    assert [x.ambiguous for x in s.steps] == [rival is not None]
+
+
+def test_gravity_read_by_none_alone_is_not_named_when_the_rival_reads_none() -> None:
+    final = fit.Model((), 0, {"g": 1.07 * NOMINAL.g, "a": 0.65 * NOMINAL.a})
+    kwargs = dict(w=None, camera=None, generic=NOTHING_LEFT, config=FAST)
+    alone = name_effects(final, NOMINAL, **kwargs)
+    assert {e.effect for e in alone.effects} == {"gain", "gravity"}, alone.verdict
+    rival = fit.Model(("damping",), 0, {"g": 1.01 * NOMINAL.g, "a": 0.5 * NOMINAL.a, "b": -0.06})
+    both = name_effects(final, NOMINAL, rival=rival, **kwargs)
+    assert {e.effect for e in both.effects} == {"gain"}, both.verdict  # both forms read a gain error
+    assert any("not named a gravity error" in n and "damping" in n for n in both.notes)
+    assert any("a reads x0.500" in n for n in both.notes)
+
+
+def test_a_rival_that_changes_no_claim_is_not_said(monkeypatch) -> None:
+    """On clean data, a single that the free run of a few held-out sequences happens to favour (a bias, on a model's
+    own training file) leaves "no significant gap" as it was."""
+    module = importlib.import_module("piga.diagnostics.diagnose")  # (the package exports a function of that name)
+
+    real = module.select
+
+    def with_a_rival(candidates, *args, **kwargs):
+        s = real(candidates, *args, **kwargs)
+        bias = next(c for c in candidates.singles if c.model.effects == ("bias",))
+        steps = [replace(x, ambiguous=x.tried == "bias") for x in s.steps]
+        return module.Selection(s.chosen, steps, bias)
+
+    monkeypatch.setattr(module, "select", with_a_rival)
+    d = analyse(planted({}), NOMINAL, FAST)
+    assert d.verdict_class == "none", d.verdict
+    assert d.ambiguity is None
+    assert not any(s["ambiguous"] for s in d.selection)
+
+
+def test_a_recording_whose_motion_answers_actions_before_they_are_logged_is_refused() -> None:
+    """Frames one step early against their actions had read "within_frame + gain 0.889": no candidate is a lead."""
+    obs = planted({})
+    late = obs.actions.copy()
+    late[:, 1:] = obs.actions[:, :-1]  # each action logged one step after it acted
+    with pytest.raises(DiagnosisInputError, match="one frame before the action is logged"):
+        analyse(replace(obs, actions=late), NOMINAL, FAST)
+    # the response where it belongs, or later (an actuator delay), is no lead
+    assert action_response(obs.theta, obs.actions, None, NOMINAL)[1][1] > 20
+    for effects in ({}, {"delay": 1}):
+        d = planted(effects)
+        check_actions_lead(d.theta, d.actions, None, NOMINAL)
