@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 from dataclasses import replace
 from pathlib import Path
 
@@ -79,6 +80,8 @@ def test_a_run_whose_autoencoder_found_no_ball_trains_again_then_exits_1_naming_
                                        "--quiet", "--seed", "5", "--seed-retries", "1", capsys=capsys)
     assert_one_line(code, err, "an object was not found", "seeds 5 and 6 tried", "--seed", "--overwrite")
     assert code == 1
+    # one epoch, where the recipe plans many: the length is named before another seed
+    assert re.search(r"in runs of \d+ steps where the fast preset plans [\d,]+ for this file: train it that long", err), err
     assert "training again from the start with seed 6 (retry 1 of --seed-retries 1)" in stdout
     assert "object check: an object was not found with seed 5" in stdout  # at the end: a warm-up this short is not checked
     metrics = json.loads((out / "metrics.json").read_text())

@@ -172,8 +172,8 @@ def _check_enough_sequences(config: CollectConfig) -> None:
     if n_train * per_sequence < recipe.train.batch_size:
         least = next(n for n in range(config.sequences, 10**6)
                      if split_counts(n, config.split)[0] * per_sequence >= recipe.train.batch_size)
-        raise PigaError(f"--sequences {config.sequences} gives {n_train} train sequences, {n_train * per_sequence} "
-                        f"training windows, fewer than one batch of {recipe.train.batch_size}; give --sequences {least} "
+        raise PigaError(f"--sequences {config.sequences} gives {n_train} train sequence{'s' if n_train != 1 else ''}, "
+                        f"{n_train * per_sequence} training window{'s' if n_train * per_sequence != 1 else ''}, fewer than one batch of {recipe.train.batch_size}; give --sequences {least} "
                         "or more")
 
 

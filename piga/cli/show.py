@@ -48,7 +48,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     check_actions_file(args.data)
     available = split_indices(args.data, args.split)
     if len(available) == 0:
-        raise ValueError(f"split '{args.split}' of {args.data} is empty")
+        held = [name for name, n in info.split_counts.items() if n]
+        raise ValueError(f"split '{args.split}' of {args.data} is empty; give --split "
+                         + " or ".join(f"{name} ({info.split_counts[name]} sequences)" for name in held))
     # a count written beyond the file is refused (the defaults shrink to a small file: the strip shows what it holds)
     for dest, have, what in (("sequences", len(available), f"sequences in its {args.split} split"),
                              ("frames", info.steps, "frames per sequence")):

@@ -287,6 +287,13 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
         raise PigaError(f"--budget-steps {train_config.budget_steps}: {source} in epochs ({train_config.epochs}), which "
                         "take the place of a step budget; give --epochs instead")
     plan = check_trainable(info, model_config, train_config)
+    # a run planned shorter than its recipe (--epochs, --budget-steps): an object that its seeds did not find is first
+    # the length's (a spring file trained for 20 steps was blamed on the seed alone)
+    recipe_steps = None
+    if not args.resume and {"epochs", "budget_steps"} & set(overrides) and report.checks_objects(model_config):
+        full = check_trainable(info, model_config, replace(train_config, epochs=recipe.train.epochs,
+                                                            budget_steps=recipe.train.budget_steps))
+        recipe_steps = full.total_steps if full.total_steps > plan.total_steps else None
     planned = ckpt.get("plan") or {} if args.resume else {}  # (a checkpoint from before plans were saved has none)
     if plan.epochs < planned.get("epochs", 0):  # the baselines' --resume refuses the same
         given = " ".join(f"--{name.replace('_', '-')} {overrides[name]}" for name in ("epochs", "budget_steps")
@@ -320,7 +327,7 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
     if args.resume:  # (its first lines looked like a fresh run's)
         start = (f"continuing from epoch {int(stood.get('epoch', 0))} (step {int(stood.get('step', 0)):,}, "
                  f"{trained / 60:.1f} min trained)")
-    print(f"training on {args.data} ({info.split_counts['train']} train sequences x {info.steps} frames); "
+    print(f"training on {args.data} ({info.split_counts['train']} train sequence{'s' if info.split_counts['train'] != 1 else ''} x {info.steps} frames); "
           f"{start} -> {run_dir} (device {device})")
     print(f"plan: {plan.describe(model_config.pred_frames, fresh.has_physics, model_config.loss != 'pred-only')}")
     if train_config.data_loading == "stream":
@@ -456,7 +463,13 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
         if convergence["outcome"] == "untrained":
             seeds = f" (seeds {', '.join(map(str, tried))} and {train_config.seed} tried)" if tried else ""
             what = "identify its parameters" if model.has_physics else "learn to predict"
-            raise PigaError(f"the run did not {what}{seeds}: {convergence['reason']}{whose}")
+            reason = convergence["reason"]
+            if recipe_steps is not None and (lost or empty):  # the cause, with the length's fix for the seed's
+                reason = (f"{reason.split('; ')[0]}, in {'runs' if tried else 'a run'} of {state.step:,} steps "
+                          f"where the {args.preset} preset plans {recipe_steps:,} for this file: train it that long "
+                          "(leave out --epochs and --budget-steps, with --overwrite or another --out) before another "
+                          "--seed")
+            raise PigaError(f"the run did not {what}{seeds}: {reason}{whose}")
         if convergence["outcome"] == "unsettled":
             print(f"{prog}: warning: not converged: {convergence['reason']}{whose}", file=sys.stderr)
             return NOT_CONVERGED

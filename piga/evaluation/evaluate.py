@@ -246,5 +246,5 @@ def summary_line(metrics: dict[str, Any]) -> str:
     skipped = {*errors, *metrics.get("fixed_parameters", {}), "offset"} if errors else set()
     parts += [f"{k}={v:.4f}" + (f" ({note[2:]})" if k in flat else "") for k, v in metrics.get("parameters", {}).items()
               if k not in skipped]
-    return ", ".join(parts)
+    return ", ".join(parts) or "no parameter (none to learn)"
 

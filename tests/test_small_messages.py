@@ -1,0 +1,41 @@
+"""Messages about small files: the splits that a strip can show, counts of one, a system with nothing to learn."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import h5py
+import pytest
+
+from piga.cli import show
+from piga.data.collect import empty_split_warning
+from piga.evaluation.evaluate import summary_line
+from tests.helpers import assert_one_line, run_in_process
+
+
+def test_an_empty_split_names_the_splits_that_hold_sequences(tiny_data: Path, tmp_path: Path,
+                                                            capsys: pytest.CaptureFixture[str]) -> None:
+    data = tmp_path / "no_test.h5"
+    shutil.copy(tiny_data, data)
+    with h5py.File(data, "a") as f:
+        split = f["split"][:]
+        split[split == 2] = 1  # the test sequences become validation ones
+        f["split"][...] = split
+        if "split_counts" in f.attrs:
+            f.attrs["split_counts"] = json.dumps({"train": 8, "valid": 4, "test": 0})
+    code, _, err = run_in_process("piga-show", show.main, str(data), "--out", str(tmp_path / "s.png"), "--split", "test",
+                                  capsys=capsys)
+    assert_one_line(code, err, f"split 'test' of {data} is empty; give --split train (8 sequences) or valid (4 sequences)")
+
+
+def test_counts_of_one_are_singular() -> None:
+    assert "of 1 sequence leaves" in empty_split_warning((0.8, 0.1, 0.1), {"train": 1, "valid": 0, "test": 0})
+    assert "of 4 sequences leaves" in empty_split_warning((0.8, 0.1, 0.1), {"train": 4, "valid": 0, "test": 0})
+
+
+def test_a_system_with_nothing_to_learn_says_so() -> None:
+    """Bouncing balls printed a bare "learned: " line."""
+    assert summary_line({"parameters": {}, "parameter_errors": {}}) == "no parameter (none to learn)"
+    assert summary_line({"parameters": {"g": 9.9}, "parameter_errors": {}}) == "g=9.9000"
