@@ -51,6 +51,16 @@ def test_a_window_whose_simulation_overflows_keeps_its_starts() -> None:
     assert d.shape == (len(w.theta0), 2) and bool(torch.isfinite(d).all())
 
 
+def test_a_window_whose_system_is_singular_though_finite_keeps_its_starts() -> None:
+    """dm_control's camera 0 read by a model of the face-on camera ended in exit 70 the same way: a finite Jacobian so
+    large that adding the identity leaves the 2x2 system singular in float64."""
+    huge = torch.tensor([[[1e300, 1e300], [1e300, 1e300]], [[2.0, 0.0], [0.0, 2.0]]], dtype=torch.float64)
+    step = fit.gauss_newton_step(huge + torch.eye(2, dtype=torch.float64), torch.tensor([[1.0, 1.0], [2.0, 4.0]],
+                                                                                         dtype=torch.float64))
+    assert torch.equal(step[0], torch.zeros(2, dtype=torch.float64))  # kept
+    assert torch.allclose(step[1], torch.tensor([2.0 / 3.0, 4.0 / 3.0], dtype=torch.float64))  # solved
+
+
 def test_the_option_refits_the_chosen_values(noisy) -> None:
     """``DiagnoseConfig.fit_starts``: the same choice (damping), its value refitted (read starts: b 7% high)."""
     fitted = analyse(noisy, NOMINAL, DiagnoseConfig(bootstrap=0))  # on by default

@@ -26,12 +26,12 @@ from piga.cli.common import (NOT_CONVERGED, ArgumentParser, Interrupted, PigaErr
                              nonnegative_int, number_type, positive_float, positive_int, record_resume, recorded_options,
                              remove_outputs, run_cli, seed_int, started_record, thread_count, with_flags)
 from piga.io.atomic import check_folder_target
-from piga.io.checkpoint import CHECKPOINT, RunKind, check_run_files, read_run_record
+from piga.io.checkpoint import CHECKPOINT, RUN_OUTPUTS, RunKind, check_run_files, read_run_record
 from piga.io.lock import lock_run_folder
 
 PROG = "piga-baseline"
 OUTPUTS = (CHECKPOINT, "config.json", "metrics.json", "model.zip", "autoencoder.pt", "tensorboard", "collected.h5",
-           "replay_buffers")
+           "replay_buffers", "openloop.png")
 
 
 def build_parser() -> ArgumentParser:
@@ -225,7 +225,7 @@ def _check_run_dir(run_dir: Path, resume: bool, overwrite: bool, kind: RunKind) 
                             "was stopped as it wrote its first checkpoint), so it cannot be continued; pass --overwrite "
                             "to start it again")
         raise held_run_error(run_dir, existing, kind)
-    remove_outputs(run_dir, existing)
+    remove_outputs(run_dir, RUN_OUTPUTS if overwrite else existing)  # --overwrite: a run of another kind's too
 
 
 def _saved_config(run_dir: Path, record: dict[str, Any], key: str, cls: Any, optional: tuple[str, ...] = ()) -> Any:

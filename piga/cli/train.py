@@ -18,7 +18,7 @@ from piga.cli.common import (NOT_CONVERGED, ArgumentParser, Interrupted, PigaErr
                              recorded_options, remove_empty_folders, remove_outputs, resume_option, run_cli, seed_int,
                              started_record, thread_count, unit_fraction)
 from piga.io.atomic import OutputFolder, check_folder_target
-from piga.io.checkpoint import CHECKPOINT, RunKind, check_run_files, read_run_record, require_piga_run
+from piga.io.checkpoint import CHECKPOINT, RUN_OUTPUTS, RunKind, check_run_files, read_run_record, require_piga_run
 from piga.io.lock import lock_run_folder
 
 #: The recipe options a user may give; each is a TrainConfig field of the same name.
@@ -358,8 +358,10 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
                 write_json(run_dir / "config.json", record)
             # the report of the state resumed from, or of the run --overwrite replaces, no longer describes the
             # checkpoint: an interrupted resume or overwrite left it beside a newer model, which piga-diagnose then
-            # judged by the old report's numbers (and piga-control by its convergence)
-            remove_outputs(run_dir, REPORT_OUTPUTS)
+            # judged by the old report's numbers (and piga-control by its convergence); so do the outputs of a run of
+            # another kind that --overwrite replaces (a baseline's model.zip, openloop.png)
+            remove_outputs(run_dir, REPORT_OUTPUTS + (tuple(n for n in RUN_OUTPUTS if n not in OUTPUTS)
+                                                      if args.overwrite else ()))
         written.append(state.epoch)
         # with a retry left, a scene's objects are checked once the autoencoder's warm-up is over: an object not
         # found then is not found at the end either (benchmarks/warmup_objects.py), and the retry starts at once

@@ -378,12 +378,23 @@ def fitted_starts(model: Model, nominal: Nominal, w: Windows, params: dict[str, 
             jac = torch.stack(columns, -1)  # (B, H, 2)
             grad = (jac.transpose(1, 2) @ r[..., None])[..., 0] + d  # (B, 2)
             system = jac.transpose(1, 2) @ jac + eye  # (B, 2, 2)
-            # a window whose simulation overflowed (a damping of 100 on nearly still frames) keeps its starts: its
-            # non-finite system made the solve fail ("the input matrix is singular"), an internal error
-            bad = ~(torch.isfinite(system).all(dim=(1, 2)) & torch.isfinite(grad).all(dim=1))
-            system[bad], grad[bad] = eye, 0.0
-            d = d - torch.linalg.solve(system, grad[..., None])[..., 0]
+            d = d - gauss_newton_step(system, grad)
     return d
+
+
+def gauss_newton_step(system: Tensor, grad: Tensor) -> Tensor:
+    """(B, 2) the solutions of the (B, 2, 2) ``system`` for the (B, 2) ``grad``, 0 for a window whose system cannot be
+    solved: one whose simulation overflowed (a damping of 100 on nearly still frames) is not finite, and one whose
+    Jacobian is finite but so large that adding the identity leaves it singular in float64 (dm_control's camera 0 on
+    a model of the face-on camera); either made the solve fail ("the input matrix is singular"), an internal error.
+    Such a window keeps its read starts."""
+    finite = torch.isfinite(system).all(dim=(1, 2)) & torch.isfinite(grad).all(dim=1)
+    eye = torch.eye(system.shape[-1], dtype=system.dtype).expand_as(system)
+    step, info = torch.linalg.solve_ex(torch.where(finite[:, None, None], system, eye),
+                                       torch.where(finite[:, None], grad, 0.0)[..., None])
+    step = step[..., 0]
+    ok = finite & (info == 0) & torch.isfinite(step).all(dim=1)
+    return torch.where(ok[:, None], step, 0.0)
 
 
 def loss(model: Model, nominal: Nominal, w: Windows, weights: Tensor | None = None,

@@ -25,6 +25,11 @@ from typing import Any
 
 #: The checkpoint's file name in every run folder.
 CHECKPOINT = "checkpoint.pt"
+#: Every file or folder that a run of any kind (piga-train-model's, a baseline's) writes into its folder: what
+#: ``--overwrite`` replaces, whichever kind of run the folder held (a PlaNet-style run over a piga run kept the piga
+#: run's figures beside its own).
+RUN_OUTPUTS = (CHECKPOINT, "config.json", "metrics.json", "tensorboard", "rollout.png", "templates.png", "curves.png",
+               "openloop.png", "model.zip", "autoencoder.pt", "collected.h5", "replay_buffers")
 
 #: The files of a run folder that commands read: its checkpoint and its two records.
 RUN_FILES = (CHECKPOINT, "config.json", "metrics.json")
