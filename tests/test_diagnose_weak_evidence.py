@@ -1,7 +1,8 @@
 """The diagnosis where the one-step BIC barely sees the actions or an effect (few or short sequences), and where the
 actions are misaligned with the frames: a flipped actuation decided on the held-out free run, a refit of the nominal
 sign that runs off, a single effect that the free run favours, which keeps "none"'s g and a from being named a
-gravity or gain error on their own, and a motion that answers its actions before they are logged."""
+gravity or gain error on their own, a motion that answers its actions before they are logged, and a camera beyond
+the camera candidates' range."""
 
 from __future__ import annotations
 
@@ -14,8 +15,11 @@ import numpy as np
 import pytest
 
 from piga.diagnostics import DiagnoseConfig, analyse, fit
-from piga.diagnostics.diagnose import (Candidates, DiagnosisInputError, action_response, check_actions_lead, cut_windows,
-                                       name_effects, score_candidates, select)
+from piga.diagnostics.diagnose import (Candidates, DiagnosisInputError, action_response, check_actions_lead,
+                                       check_camera_in_range, cut_windows, name_effects, readings_agree,
+                                       score_candidates, select)
+from piga.diagnostics.observe import NotTheSceneError
+from piga.diagnostics.vision import MAX_BLUR, MAX_SHIFT, Camera
 from piga.diagnostics.results import GenericBasis, Score
 from tests.test_diagnostics import NOMINAL, planted
 
@@ -83,11 +87,21 @@ def test_gravity_read_by_none_alone_is_not_named_when_the_rival_reads_none() -> 
     kwargs = dict(w=None, camera=None, generic=NOTHING_LEFT, config=FAST)
     alone = name_effects(final, NOMINAL, **kwargs)
     assert {e.effect for e in alone.effects} == {"gain", "gravity"}, alone.verdict
-    rival = fit.Model(("damping",), 0, {"g": 1.01 * NOMINAL.g, "a": 0.5 * NOMINAL.a, "b": -0.06})
+    rival = fit.Model(("damping",), 0, {"g": 1.01 * NOMINAL.g, "a": 0.6 * NOMINAL.a, "b": -0.06})
     both = name_effects(final, NOMINAL, rival=rival, **kwargs)
-    assert {e.effect for e in both.effects} == {"gain"}, both.verdict  # both forms read a gain error
+    assert {e.effect for e in both.effects} == {"gain"}, both.verdict  # both forms read a gain error of about 0.6
     assert any("not named a gravity error" in n and "damping" in n for n in both.notes)
-    assert any("a reads x0.500" in n for n in both.notes)
+    assert any("a reads x0.600" in n for n in both.notes)
+    # a rival that reads the gain far from "none"'s: neither reading is named
+    far = name_effects(final, NOMINAL, rival=rival.with_values({**rival.values, "a": 0.4 * NOMINAL.a}), **kwargs)
+    assert not far.effects, far.verdict
+    assert any("the two readings disagree, so no gain error is named" in n for n in far.notes)
+
+
+def test_two_readings_agree_on_the_same_side_within_the_interval() -> None:
+    assert readings_agree(0.65, 0.6, None) and not readings_agree(0.65, 0.45, None)
+    assert not readings_agree(1.43, 0.98, None)  # the other side of 1
+    assert not readings_agree(1.43, 1.04, [1.19, 1.82]) and readings_agree(1.43, 1.2, [1.19, 1.82])
 
 
 def test_a_rival_that_changes_no_claim_is_not_said(monkeypatch) -> None:
@@ -122,3 +136,11 @@ def test_a_recording_whose_motion_answers_actions_before_they_are_logged_is_refu
     for effects in ({}, {"delay": 1}):
         d = planted(effects)
         check_actions_lead(d.theta, d.actions, None, NOMINAL)
+
+
+def test_a_camera_fit_that_stops_at_a_bound_is_refused() -> None:
+    """dm_control's camera 0 read by a model of the face-on camera: "blur 4 px; shift -5, -5 px; damping 48.7"."""
+    check_camera_in_range(Camera(blur=1.2, dx=-3.0, dy=2.0), 2e-4, 1.7e-4)  # within the candidates' range
+    with pytest.raises(NotTheSceneError, match=r"bound \(blur 4 px, shift right -5 px, shift down -5 px; .*re-render "
+                                               r"50x worse"):
+        check_camera_in_range(Camera(blur=MAX_BLUR, dx=-MAX_SHIFT, dy=-MAX_SHIFT), 8.5e-3, 1.7e-4)

@@ -76,13 +76,15 @@ from torch import Tensor
 
 from envs.constants import MAX_ACTION, PENDULUM_MAX_SPEED
 from piga.diagnostics import fit
-from piga.diagnostics.observe import DiagnosisInputError, Observations, check_scene, check_training, observe
+from piga.diagnostics.observe import (DiagnosisInputError, NotTheSceneError, Observations, check_scene, check_training,
+                                      observe)
 from piga.diagnostics.residuals import (action_correlation, autocorrelation, binned, generic_features, heatmap,
                                         GENERIC_COLUMNS, one_step_residuals, reading_features, ridge)
 from piga.diagnostics.results import (Ambiguity, CameraSummary, CandidateRow, Diagnosis, Effect, Gap, GenericBasis,
                                       Naming, PixelErrors, Score, SelectionStep, VisionSummary)
 from piga.diagnostics.twin import MEASURABLE_GAP, calibrate_floor, gap_closure, mean_gap_closure, twin_floor
-from piga.diagnostics.vision import Camera, CameraConfig, CameraFindings, angle_table, camera_stage, match, match_file
+from piga.diagnostics.vision import (MAX_BLUR, MAX_SHIFT, Camera, CameraConfig, CameraFindings, angle_table,
+                                     camera_stage, match, match_file)
 from piga.io.choices import check_ranges, check_types
 from piga.world.model import PhysicsModel
 from piga.diagnostics.fit import Nominal
@@ -282,10 +284,29 @@ def diagnose(model: PhysicsModel, data: str | os.PathLike[str], config: Diagnose
                                   "there is no motion to diagnose")
     camera = camera_stage(model, str(data), obs.theta, obs.fit, obs.stale, config.camera, seed=config.seed,
                           progress=progress)
+    check_camera_in_range(camera.camera, camera.matched_error, rec_training)
     return analyse(obs, nominal_of(model), config, model=model, rec_training=rec_training,
                    progress=progress, camera=camera, arrow=training_arrow(checkpoint),
                    own=lambda: observe_own(model, checkpoint, progress, rematch=camera.rematched or config.matched_angles),
                    matched=lambda: match_file(model, str(data), Camera()))  # both read only when needed
+
+
+def check_camera_in_range(camera: Camera, matched_error: float, rec_training: float) -> None:
+    """Refuses a recording whose accepted camera stops at a bound of the camera candidates (blur
+    :data:`~piga.diagnostics.vision.MAX_BLUR` px, shifts :data:`~piga.diagnostics.vision.MAX_SHIFT` px): the camera
+    lies beyond what they describe, and every angle read through it is a guess (dm_control's camera 0, looking down
+    at 45°, read by a model of the face-on camera: "blur 4 px; shift -5, -5 px; damping 48.7", with the actuation
+    "flipped")."""
+    at = [f"blur {camera.blur:g} px"] if camera.blur >= (1 - 1e-3) * MAX_BLUR else []
+    at += [f"{name} {value:g} px" for name, value in (("shift right", camera.dx), ("shift down", camera.dy))
+           if abs(value) >= (1 - 1e-3) * MAX_SHIFT]
+    if not at:
+        return
+    worse = f", and its frames still re-render {matched_error / rec_training:.0f}x worse than the model's training " \
+            "frames" if rec_training > 0 else ""
+    raise NotTheSceneError(f"this is not a camera the model knows: the best camera fit stops at the candidates' bound "
+                           f"({', '.join(at)}; blur up to {MAX_BLUR:g} px, shifts up to {MAX_SHIFT:g} px){worse}; "
+                           "identify a model on this camera's frames")
 
 
 def observe_own(model: PhysicsModel, checkpoint: dict | None, progress: bool = False,
@@ -980,6 +1001,18 @@ def stalled_refits(draws: dict[str, list[float]], estimates: dict[str, float]) -
     return notes
 
 
+def readings_agree(ours: float, theirs: float, interval: list[float] | None) -> bool:
+    """Whether two readings of one factor (a gain, a g ratio: "none"'s and its rival's, :func:`select`) agree on an
+    error: on the same side of 1, and ``theirs`` within ``interval`` (ours's 95% interval), or without one, within
+    half of ours's error in log terms (a dm_control pendulum without its hinge damping: "none" read a gain of 1.43,
+    interval 1.19..1.82, the damping rival 1.04; the truth was 1)."""
+    if (ours - 1) * (theirs - 1) <= 0:
+        return False
+    if interval is not None:
+        return interval[0] <= theirs <= interval[1]
+    return abs(math.log(theirs / ours)) <= 0.5 * abs(math.log(ours))
+
+
 def gain_undetermined(interval: list[float]) -> bool:
     """Whether a gain's bootstrap interval (low, high), as factors on the reference a, leaves it undetermined: every
     refit stayed where it started (a width of zero: a gain of 0.001 read "3.39e-07 (95% interval 3.39e-07..3.39e-07)"),
@@ -1112,9 +1145,6 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
             notes.append(f"a refits to {reference.values['a']:.3f} (x{gain:.3f} the reference {ref_a:.3f}) with no effect, "
                          f"but to x{rival_gain:.3f} its reference with {rival.name}, which the held-out free runs favour: "
                          "not named a gain error")
-        else:
-            notes.append(f"with {rival.name}, which the held-out free runs favour, a reads x{rival_gain:.3f} its "
-                         f"reference (x{gain:.3f} with no effect)")
     plain = None if refit is None else abs(refit.values["a"] / nom.a)  # the nominal form's reading
     if flipped and gain_error:
         # a model trained on flipped frames without --signed-actuation shrank its a toward 0: its size
@@ -1210,6 +1240,11 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
         notes.append(f"a refits to {reference.values['a']:.3f} (x{gain:.3f} the reference {ref_a:.3f}), but its 95% "
                      f"interval {a_int[0]:.3f}..{a_int[1]:.3f} reaches within {100 * config.gain_tolerance:.0f}% of "
                      "the reference: not named a gain error")
+    if gain_error and rival_gain is not None:
+        gain_error = readings_agree(gain, rival_gain, [x / ref_a for x in a_int] if a_int else None)
+        notes.append(f"with {rival.name}, which the held-out free runs favour, a reads x{rival_gain:.3f} its reference "
+                     f"(x{gain:.3f} with no effect)" + ("" if gain_error else ": the two readings disagree, so no gain "
+                                                        "error is named"))
     if gain_error:
         effects.append(Effect("gain", gain, "factor on the nominal a", [x / ref_a for x in a_int] if a_int else None))
         if not a_int:
@@ -1236,6 +1271,11 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
             notes.append(f"g refits to {reference.values['g']:.3f} (x{g_ratio:.3f} the reference {ref_g:.3f}), but its 95% "
                          f"interval {min(g_int):.3f}..{max(g_int):.3f} reaches within {100 * config.gain_tolerance:.0f}% of "
                          "the reference: not named a gravity error")
+        elif rival_g is not None and not readings_agree(g_ratio, rival_g, sorted(x / ref_g for x in g_int) if g_int
+                                                        else None):
+            notes.append(f"g refits to x{g_ratio:.3f} the reference with no effect and to x{rival_g:.3f} its reference "
+                         f"with {rival.name}, which the held-out free runs favour: the two readings disagree, so no "
+                         "gravity error is named")
         else:
             # named as the gain is: gravity x0.5 read "no significant gap" with the gap 1,500 times the corrected error
             effects.append(Effect("gravity", g_ratio, "factor on the nominal g",
