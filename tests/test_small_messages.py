@@ -39,3 +39,20 @@ def test_a_system_with_nothing_to_learn_says_so() -> None:
     """Bouncing balls printed a bare "learned: " line."""
     assert summary_line({"parameters": {}, "parameter_errors": {}}) == "no parameter (none to learn)"
     assert summary_line({"parameters": {"g": 9.9}, "parameter_errors": {}}) == "g=9.9000"
+
+
+def test_not_told_at_gravity_x1_is_refused(capsys: pytest.CaptureFixture[str]) -> None:
+    from piga.cli import control
+
+    code, _, err = run_in_process("piga-control", control.main, "--model", "nowhere", "--not-told", capsys=capsys)
+    assert_one_line(code, err, "--not-told", "at --gravity-mult 1 (the default) nothing changes")
+
+
+def test_a_demo_folder_given_as_a_run_names_its_model(tmp_path: Path) -> None:
+    from piga.io.checkpoint import CHECKPOINT, RunKind, read_checkpoint
+
+    (tmp_path / "demo" / "model").mkdir(parents=True)
+    (tmp_path / "demo" / "model" / CHECKPOINT).write_bytes(b"x")
+    with pytest.raises(FileNotFoundError, match=r"looks like a piga-demo folder, whose trained run is .*demo/model; give "
+                                                r"that"):
+        read_checkpoint(tmp_path / "demo", RunKind.PIGA)

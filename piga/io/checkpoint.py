@@ -253,6 +253,9 @@ def read_checkpoint(run_dir: str | os.PathLike[str], kind: RunKind) -> dict[str,
         if (pid := held_by(run_dir)) is not None:  # a run started moments ago: its folder is not a wrong guess
             raise FileNotFoundError(f"{path}: no checkpoint yet: {run_dir} is being trained by another piga command "
                                     f"(PID {pid}); wait for its first checkpoint")
+        if (Path(run_dir) / "model" / CHECKPOINT).exists():  # a piga-demo folder: its run is one level down
+            raise FileNotFoundError(f"{path}: no checkpoint: {run_dir} looks like a piga-demo folder, whose trained run "
+                                    f"is {Path(run_dir) / 'model'}; give that")
         raise FileNotFoundError(f"{path}: no checkpoint (is {run_dir} a {kind.writer} run folder?)")
     check_run_file(path)
     try:
