@@ -16,8 +16,8 @@ import pytest
 
 from piga.diagnostics import DiagnoseConfig, analyse, fit
 from piga.diagnostics.diagnose import (Candidates, DiagnosisInputError, action_response, check_actions_lead,
-                                       check_camera_in_range, cut_windows, name_effects, readings_agree,
-                                       score_candidates, select)
+                                       Naming, _worse_than_nominal, check_camera_in_range, cut_windows, name_effects,
+                                       readings_agree, score_candidates, select)
 from piga.diagnostics.observe import NotTheSceneError
 from piga.diagnostics.vision import MAX_BLUR, MAX_SHIFT, Camera
 from piga.diagnostics.results import GenericBasis, Score
@@ -144,3 +144,29 @@ def test_a_camera_fit_that_stops_at_a_bound_is_refused() -> None:
     with pytest.raises(NotTheSceneError, match=r"bound \(blur 4 px, shift right -5 px, shift down -5 px; .*re-render "
                                                r"50x worse"):
         check_camera_in_range(Camera(blur=MAX_BLUR, dx=-MAX_SHIFT, dy=-MAX_SHIFT), 8.5e-3, 1.7e-4)
+
+
+@pytest.fixture(scope="module")
+def gain_read() -> tuple:
+    d = analyse(planted({"gain": 0.7}), NOMINAL, FAST)
+    assert d.verdict_class == "gain" and d.gap.closure_basis == "state"
+    return Naming(list(d.effects), list(d.notes), d.verdict, d.verdict_class), d.gap, d.corrected_model()
+
+
+@pytest.mark.parametrize("nominal, corrected, kept", [
+    (20.0, 1.1, True),    # a gain that closes the gap
+    (40.0, 38.0, False),  # what is left stays 38x the floor (actions of other sequences: "gain 0.133")
+    (6.2, 7.1, False),    # a clear gap that the correction widens (noisy logged actions: "gain 0.891", 1.14x)
+    (1.5, 1.6, True),     # no clear gap: 7% is noise
+])
+def test_effects_that_leave_the_gap_are_not_established(gain_read: tuple, nominal: float, corrected: float,
+                                                        kept: bool) -> None:
+    naming, gap, final = gain_read
+    floor = 1e-4  # the twin's (drawn by a model's decoder: none here)
+    gap = replace(gap, typical_free_run_mse_floor=floor, typical_free_run_mse_nominal=nominal * floor,
+                  typical_free_run_mse_corrected=corrected * floor)
+    judged = _worse_than_nominal(naming, gap, final, NOMINAL)
+    assert (judged.verdict_class == "gain") is kept, judged.verdict
+    if not kept:
+        assert judged.verdict.startswith("not explained by the candidates: the best fit (gain 0.") and not judged.effects
+        assert ("still strays 38.0x as far as on its twin" in judged.verdict) is (corrected == 38.0)
