@@ -170,3 +170,11 @@ def test_effects_that_leave_the_gap_are_not_established(gain_read: tuple, nomina
     if not kept:
         assert judged.verdict.startswith("not explained by the candidates: the best fit (gain 0.") and not judged.effects
         assert ("still strays 38.0x as far as on its twin" in judged.verdict) is (corrected == 38.0)
+
+
+def test_a_report_with_no_gap_gives_no_closure_at_all() -> None:
+    """A no-gap report read "typical_free_run_gap_closure": 0.414 beside its null headline."""
+    d = analyse(planted({}), NOMINAL, FAST)
+    assert d.verdict_class == "none" and d.gap.no_gap
+    assert d.gap.free_run_gap_closure is None and d.gap.typical_free_run_gap_closure is None
+    assert d.gap.mean_free_run_gap_closure is None and d.gap.pixel_free_run_gap_closure is None

@@ -1469,8 +1469,10 @@ def measure_gap(candidates: Candidates, chosen: Score, nom: Nominal, obs: Observ
         free_run_gap_closure=headline if corrects else None,
         typical_free_run_mse_nominal=typ_nom, typical_free_run_mse_corrected=typ_fin,
         typical_free_run_mse_floor=typ_floor, typical_free_run_closure=raw_typical, floor_source=floor_source,
-        typical_free_run_gap_closure=typical_gap, mean_free_run_gap_closure=mean_gap,
-        closure_basis=basis, pixel_free_run_gap_closure=pixel_closure,
+        # (no correction, no closure: a no-gap report read "typical_free_run_gap_closure": 0.414 beside a null headline)
+        typical_free_run_gap_closure=typical_gap if corrects else None,
+        mean_free_run_gap_closure=mean_gap if corrects else None,
+        closure_basis=basis, pixel_free_run_gap_closure=pixel_closure if corrects else None,
         gap_above_floor=bool(measurable),
         one_step_rms_nominal_rad=math.sqrt(float(fit.horizon_errors(nominal_model, nom, w.held1_nominal)[0])),
         one_step_rms_corrected_rad=math.sqrt(float(one_step)),

@@ -234,7 +234,7 @@ def markdown(d: Diagnosis, model: str, data: str, command: str) -> str:
     floor = "" if g.free_run_mse_floor is None else (
         f" On the twin, an exactly right model has {number(g.free_run_mse_floor, '.3g')} rad²" + (
             f": {_pct(g.mean_free_run_gap_closure)} of the gap above that floor is closed."
-            if g.mean_free_run_gap_closure is not None else
+            if g.mean_free_run_gap_closure is not None else " (nothing to close)." if g.no_gap else
             f", so no closure above it is given for the means (the nominal error is not {MEASURABLE_GAP:g} times that "
             "floor: a ratio of noise)."))
     lines += [
