@@ -1,6 +1,7 @@
 """The envs' configs check each field's kind against its default's, without importing piga (the envs stay free of the
 model and of torch: tests/test_layout.py): a config read from a file's attributes, or built in Python, may hold text
-where a number belongs, or a truthy word where a flag does. And the one way an error line writes a checked number."""
+where a number belongs, or a truthy word where a flag does. And the one way an error line writes a checked number, and
+a count."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["check_field_kinds", "number_text", "upper_bound_text"]
+__all__ = ["check_field_kinds", "counted", "number_text", "upper_bound_text"]
 
 
 def check_field_kinds(config: Any) -> None:
@@ -35,6 +36,12 @@ def number_text(value: float) -> str:
     value = float(value)
     short, full = format(value, "g"), repr(value)
     return short if float(short) == value and len(short) <= len(full) else full
+
+
+def counted(n: int, noun: str) -> str:
+    """A count as a line writes it: ``n`` and ``noun``, plural (``noun`` + "s") unless ``n`` is 1: "1 sequence",
+    "2 sequences"."""
+    return f"{n} {noun}{'' if n == 1 else 's'}"
 
 
 def upper_bound_text(bound: float, digits: int) -> str:

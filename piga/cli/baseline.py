@@ -21,10 +21,12 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any, get_args
 
+from envs.fields import counted
 from piga.cli.common import (NOT_CONVERGED, ArgumentParser, Interrupted, PigaError, add_device_option, add_preset_option,
-                             command_line, format_default, given_options, held_run_error, made_folder, nonnegative_float,
-                             nonnegative_int, number_type, positive_float, positive_int, record_resume, recorded_options,
-                             remove_outputs, run_cli, seed_int, started_record, thread_count, with_flags)
+                             check_not_demo_folder, command_line, format_default, given_options, held_run_error,
+                             made_folder, nonnegative_float, nonnegative_int, number_type, positive_float, positive_int,
+                             record_resume, recorded_options, remove_outputs, run_cli, seed_int, started_record,
+                             thread_count, with_flags)
 from piga.io.atomic import check_folder_target
 from piga.io.checkpoint import CHECKPOINT, RUN_OUTPUTS, RunKind, check_run_files, read_run_record
 from piga.io.lock import lock_run_folder
@@ -192,6 +194,7 @@ def _left_before_a_checkpoint(run_dir: Path, existing: list[str], kind: RunKind)
 def _check_run_dir(run_dir: Path, resume: bool, overwrite: bool, kind: RunKind) -> None:
     """Refuses to clobber a run, or to resume what is not one of this kind; clears it with ``overwrite``."""
     check_folder_target(run_dir)
+    check_not_demo_folder(run_dir)
     lock_run_folder(run_dir)  # a second command on this folder is refused until this one ends
     if resume and overwrite:
         raise PigaError("--resume continues the run in --out and --overwrite replaces it; give one of them")
@@ -445,7 +448,7 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
     check_run_disk(run_dir, _planet_checkpoint_bytes(run_dir, record["rssm"], args.resume), "the PlaNet-style run",
                    extra=0 if iterative is None else 2 * _collected_bytes(info, iterative))
     used = min(info.split_counts["train"], config.max_sequences or info.split_counts["train"])
-    print(f"training the PlaNet-style model on {args.data} ({used} train sequences x {info.steps} frames) -> {run_dir}"
+    print(f"training the PlaNet-style model on {args.data} ({counted(used, 'train sequence')} x {info.steps} frames) -> {run_dir}"
           + (f", then {iterative.rounds} rounds of {iterative.episodes} planner episodes + {iterative.steps_per_round} steps"
              if iterative else ""))
     written: list[int] = []
@@ -475,7 +478,7 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
     last = state.history[-1] if state.history else {}
     window = (f"mean loss over steps {last['first_step']:,}..{last['step']:,}" if "first_step" in last and "step" in last
               else "last loss")  # (a mean since the last record: after a resume, over the steps since it)
-    print(f"trained {state.step} steps in {state.elapsed / 60:.1f} min; {window} {last.get('loss', float('nan')):.2f} "
+    print(f"trained {counted(state.step, 'step')} in {state.elapsed / 60:.1f} min; {window} {last.get('loss', float('nan')):.2f} "
           f"(reconstruction {last.get('reconstruction', float('nan')):.2f}, reward {last.get('reward', float('nan')):.4f}, "
           f"KL {last.get('kl', float('nan')):.2f}); wrote {run_dir}/metrics.json")
     from agents.planet.train import did_not_learn
@@ -628,7 +631,8 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
     final = metrics["final_eval_mean_return"]
     final_text = f"{final:.1f}" if final is not None else "n/a"
     mark = f"{config.learned_return:g}"
-    print(f"trained {metrics['steps']} steps in {metrics['train_seconds'] / 60:.1f} min; final evaluation mean return "
+    print(f"trained {counted(metrics['steps'], 'step')} in {metrics['train_seconds'] / 60:.1f} min; final evaluation "
+          "mean return "
           + f"{final_text}; "
           + (f"first reached {mark} at step {reached}" if reached is not None else f"never reached {mark}")
           + f"; wrote {run_dir}/metrics.json")

@@ -13,6 +13,7 @@ from envs import DMC_PENDULUM, ENV_IDS, PIXEL_PENDULUM
 from envs.constants import PENDULUM_MAX_SPEED
 from envs.dmc import MAX_SPEED_TEXT, DMCPendulumConfig
 from envs.effects import EFFECTS, format_effects, parse_effect
+from envs.fields import counted
 from envs.pendulum import MAX_ACTUATION_GAIN, MAX_GRAVITY, MIN_ACTUATION_GAIN, MIN_GRAVITY, PixelPendulumConfig
 from envs.scenes import HALF_SPEED, SCENES, SceneConfig, scene_config
 from piga.cli.common import (H5_SUFFIXES, ArgumentParser, PigaError, add_preset_option, any_float, command_line,
@@ -240,7 +241,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                    progress=not args.quiet)
     info = inspect_dataset(path)
     effects = getattr(env, "effects", ())
-    print(f"wrote {path}: {info.n_sequences} sequences x {info.steps} frames of {info.image_shape}, "
+    print(f"wrote {path}: {counted(info.n_sequences, 'sequence')} x {info.steps} frames of {info.image_shape}, "
           f"split {info.split_counts}, g={info.params['g']:g}, actuation_gain={info.params['actuation_gain']:g}"
           + (f", damping={info.params['damping']:g}" if "damping" in info.params else "")
           + (f", effects {format_effects(effects)}" if effects else ""))
@@ -330,7 +331,7 @@ def _collect_scene(args: argparse.Namespace, argv: Sequence[str] | None, written
                          progress=not args.quiet)
     info = inspect_dataset(path)
     shown = ", ".join(f"{k}={v:g}" for k, v in info.params.items())
-    print(f"wrote {path}: {args.system}, {info.n_sequences} sequences x {info.steps} frames of {info.image_shape}, "
+    print(f"wrote {path}: {args.system}, {counted(info.n_sequences, 'sequence')} x {info.steps} frames of {info.image_shape}, "
           f"split {info.split_counts}" + (f", {shown}" if shown else ""))
     _warn_empty_split(config.split, info.split_counts)
     return 0

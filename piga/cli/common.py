@@ -282,6 +282,16 @@ def held_run_error(run_dir: Path, existing: Sequence[str], kind: Any) -> PigaErr
                      "it")
 
 
+def check_not_demo_folder(run_dir: Path) -> None:
+    """Refuses a piga-demo's folder as the --out of a command that writes a run, with or without --overwrite: the run
+    would sit among the demo's files, or replace them in part, and piga-demo would then refuse the folder."""
+    from piga.io.checkpoint import DEMO_RUN, is_demo_folder
+
+    if is_demo_folder(run_dir):
+        raise PigaError(f"--out {run_dir} is a piga-demo's folder (its run is {run_dir / DEMO_RUN}); a run of your own "
+                        "goes in a folder of its own: give another --out")
+
+
 def resume_option(overwrite: bool) -> str:
     """The option that continues an interrupted run, as its line names it: ``--resume``, or for a command given
     --overwrite, which refuses --resume beside it, ``--resume in place of --overwrite``."""

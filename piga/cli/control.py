@@ -132,8 +132,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.not_told and args.oracle and not args.sweep:
         raise PigaError("--not-told is for the piga agent; the oracle plans with the environment's true physics")
     if args.not_told and not args.sweep and args.gravity_mult == 1.0:
-        raise PigaError("--not-told keeps the piga agent's gravity at x1 while the env's changes; at --gravity-mult 1 (the "
-                        "default) nothing changes: give --gravity-mult, or drop --not-told")
+        at, change = ((f"--gravity-mult {number_text(args.gravity_mult)}", "give another --gravity-mult")
+                      if "gravity_mult" in given else ("--gravity-mult 1 (the default)", "give --gravity-mult"))
+        raise PigaError(f"--not-told keeps the piga agent's gravity at x1 while the env's changes; at {at} nothing "
+                        f"changes: {change}, or drop --not-told")
     check_angle("--goal-angle", args.goal_angle)
     args.goal_angle += 0.0  # -0.0 (-1e-400 underflows to it) is 0: "goal -0 deg" otherwise
     if args.goal_image and "goal_angle" in given:  # --goal-angle 0, the default, too

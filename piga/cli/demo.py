@@ -25,7 +25,7 @@ from piga.cli.common import (ArgumentParser, Interrupted, PigaError, command_lin
 from piga.data.collect import CollectConfig, collect
 from piga.data.schema import inspect_dataset
 from piga.io.atomic import check_folder_target
-from piga.io.checkpoint import CHECKPOINT
+from piga.io.checkpoint import CHECKPOINT, DEMO_RUN
 from piga.io.lock import lock_run_folder
 
 PROG = "piga-demo"
@@ -114,7 +114,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     check_disk(out / "pendulum.h5", FIGURE_DISK_BYTES, f"--out {out}",  # /proc, /sys: "removed or moved while it ran?"
                advice="free some space, or give another --out")
     lock_run_folder(out)  # a second command on this folder is refused until this one ends
-    data, strip, run_dir = out / "pendulum.h5", out / "frames.png", out / "model"
+    data, strip, run_dir = out / "pendulum.h5", out / "frames.png", out / DEMO_RUN
     goal_png, control_md = out / "goal.png", out / "control.md"
     if args.resume and args.overwrite:
         raise PigaError("--resume continues the demo in --out and --overwrite replaces it; give one of them")

@@ -5,6 +5,7 @@ from __future__ import annotations
 import sys
 from collections.abc import Sequence
 
+from envs.fields import counted
 from envs.pendulum import MAX_IMAGE_SIZE
 from piga.cli.common import (H5_SUFFIXES, ArgumentParser, command_line, format_default, h5_path, int_up_to,
                              positive_float, positive_int, run_cli, split_type)
@@ -50,7 +51,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     lock_run_folder(args.out)  # a second command writing the same file is refused until this one ends
     result = import_recording(args.recording, args.actions, args.out, config, overwrite=args.overwrite,
                               command=command_line(PROG, argv))
-    print(f"wrote {result.path}: {result.sequences} sequences x {config.steps} frames of "
+    print(f"wrote {result.path}: {counted(result.sequences, 'sequence')} x {config.steps} frames of "
           f"({config.image_size}, {config.image_size}), split {result.split_counts}, dt={config.dt:g}")
     if result.source_side < config.image_size:
         print(f"note: the recording's frames are {result.source_side} px on their short side, so they were enlarged to "

@@ -8,6 +8,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from envs.fields import counted
 from piga.cli.common import ArgumentParser, file_path, given_options, positive_int, run_cli, typed_text
 from piga.data.schema import (SPLITS, check_actions_file, check_frames_have_signal, inspect_dataset, read_rows,
                               split_indices)
@@ -50,12 +51,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     if len(available) == 0:
         held = [name for name, n in info.split_counts.items() if n]
         raise ValueError(f"split '{args.split}' of {args.data} is empty; give --split "
-                         + " or ".join(f"{name} ({info.split_counts[name]} sequences)" for name in held))
+                         + " or ".join(f"{name} ({counted(info.split_counts[name], 'sequence')})" for name in held))
     # a count written beyond the file is refused (the defaults shrink to a small file: the strip shows what it holds)
-    for dest, have, what in (("sequences", len(available), f"sequences in its {args.split} split"),
-                             ("frames", info.steps, "frames per sequence")):
+    for dest, have, noun, where in (("sequences", len(available), "sequence", f"in its {args.split} split"),
+                                    ("frames", info.steps, "frame", "per sequence")):
         if dest in written and getattr(args, dest) > have:
-            raise ValueError(f"--{dest} {getattr(args, dest)}: {args.data} has {have} {what}; give at most {have}")
+            raise ValueError(f"--{dest} {getattr(args, dest)}: {args.data} has {counted(have, noun)} {where}; give at "
+                             f"most {have}")
     idx = available[: args.sequences]
     t = min(args.frames, info.steps)
     _check_strip_fits(args.out, t, len(idx))

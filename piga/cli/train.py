@@ -12,11 +12,12 @@ from pathlib import Path
 
 from typing import Any
 
+from envs.fields import counted
 from piga.cli.common import (NOT_CONVERGED, ArgumentParser, Interrupted, PigaError, add_device_option,
-                             add_preset_option, command_line, format_default, given_options, held_run_error, int_up_to,
-                             missing_folders, number_type, positive_float, positive_int, record_resume,
-                             recorded_options, remove_empty_folders, remove_outputs, resume_option, run_cli, seed_int,
-                             started_record, thread_count, unit_fraction)
+                             add_preset_option, check_not_demo_folder, command_line, format_default, given_options,
+                             held_run_error, int_up_to, missing_folders, number_type, positive_float, positive_int,
+                             record_resume, recorded_options, remove_empty_folders, remove_outputs, resume_option, run_cli,
+                             seed_int, started_record, thread_count, unit_fraction)
 from piga.io.atomic import OutputFolder, check_folder_target
 from piga.io.checkpoint import CHECKPOINT, RUN_OUTPUTS, RunKind, check_run_files, read_run_record, require_piga_run
 from piga.io.lock import lock_run_folder
@@ -162,6 +163,7 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
     device = resolve_device(args.device)  # --device cuda without a GPU: one line, before anything is read
     run_dir = Path(args.out)
     check_folder_target(run_dir)
+    check_not_demo_folder(run_dir)
     lock_run_folder(run_dir)  # a second command on this folder is refused until this one ends
     if args.data_loading == "memory" and args.stream_cache_mb is not None:
         raise PigaError("--stream-cache-mb sizes the cache of --data-loading stream; --data-loading memory reads the "
@@ -458,7 +460,7 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
         print(f"SSIM ({metrics['split']} split): prediction {ssim['prediction']:.3f}"
               + (f", extrapolation {ssim['extrapolation']:.3f}" if ssim["extrapolation"] is not None else "")
               + (f"; encoder angle error {metrics['angle']['mean_abs_error_deg']:.2f} deg" if "angle" in metrics else ""))
-        print(f"trained {state.epoch} epoch{'s' if state.epoch != 1 else ''} ({state.step} steps) in {state.elapsed / 60:.1f} min; "
+        print(f"trained {counted(state.epoch, 'epoch')} ({counted(state.step, 'step')}) in {state.elapsed / 60:.1f} min; "
               f"wrote {run_dir}/metrics.json and figures")
         # another command training through this one (piga-demo) does not take these options: say whose they are
         whose = "" if prog == PROG else f" (options of {PROG} {args.data} --out {run_dir})"

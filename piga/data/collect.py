@@ -35,6 +35,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from envs.dmc import DMCPendulumConfig, make_dmc_pendulum
+from envs.fields import counted
 from envs.pendulum import MAX_ACTION, PENDULUM_DT, PixelPendulumConfig, make_pixel_pendulum
 from piga.io.atomic import check_writable_target
 from piga.data.schema import MAX_SEED, SPLITS, DatasetWriter, write_room
@@ -110,7 +111,7 @@ def split_counts(n: int, split: Sequence[float]) -> tuple[int, int, int]:
         train, valid, test = (int(x) for x in split)
     elif abs(sum(split) - 1.0) < 1e-6:
         if split[0] == 0:  # (else the rounding of valid and test below could leave one sequence to train on)
-            raise ValueError(f"split {tuple(split)} gives the training split no share of the {n} sequences")
+            raise ValueError(f"split {tuple(split)} gives the training split no share of the {counted(n, 'sequence')}")
         valid, test = round(split[1] * n), round(split[2] * n)
         train = n - valid - test
     else:

@@ -36,6 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
+from envs.fields import counted
 from envs.pendulum import MAX_IMAGE_SIZE
 from piga.io.atomic import check_not_an_input, check_writable_target
 from piga.data.collect import split_counts
@@ -410,15 +411,15 @@ def import_recording(
     _check_resources(len(u), config.image_size, target)
     frames, shape = _read_recording(recording, config.image_size)  # (F, S, S)
     if len(u) != len(frames):
-        raise ValueError(f"{actions} has {len(u)} actions but {recording} has {len(frames)} frames; "
-                         "give one action per frame")
+        raise ValueError(f"{actions} has {counted(len(u), 'action')} but {recording} has "
+                         f"{counted(len(frames), 'frame')}; give one action per frame")
     if not frames_have_signal(frames[None]):  # the recording's fault, said before a file is written (not the file's)
         raise blank_error(recording, int(frames.min()), int(frames.max()), recorded=True)
     t = config.steps
     n = len(frames) // t
     if n < 1:
         lower = f"lower --steps to {len(frames)}" if len(frames) >= 2 else "a recording needs at least 2"
-        raise ValueError(f"{recording} has {len(frames)} frame{'s' if len(frames) != 1 else ''}, too few for one "
+        raise ValueError(f"{recording} has {counted(len(frames), 'frame')}, too few for one "
                          f"sequence of {t} frames ({lower})")
     if not frames_move(frames[: n * t].reshape(n, t, *frames.shape[1:])):  # the recording's fault, said as such
         raise still_error(recording, recorded=True)

@@ -34,8 +34,9 @@ RUN_OUTPUTS = (CHECKPOINT, "config.json", "metrics.json", "tensorboard", "rollou
 #: The files of a run folder that commands read: its checkpoint and its two records.
 RUN_FILES = (CHECKPOINT, "config.json", "metrics.json")
 
-__all__ = ["CHECKPOINT", "RUN_FILES", "RunKind", "check_run_file", "check_run_files", "checked_run_kind", "checkpoint_kind",
-           "kind_mismatch", "read_checkpoint", "require_piga_run", "run_kind", "write_checkpoint", "unreadable"]
+__all__ = ["CHECKPOINT", "DEMO_RUN", "RUN_FILES", "RunKind", "check_run_file", "check_run_files", "checked_run_kind",
+           "checkpoint_kind", "is_demo_folder", "kind_mismatch", "read_checkpoint", "require_piga_run", "run_kind",
+           "write_checkpoint", "unreadable"]
 
 
 class RunKind(enum.Enum):
@@ -231,6 +232,18 @@ def _first_sentence(exc: Exception) -> str:
     return " ".join(str(exc).split()).split(". ")[0][:160]
 
 
+#: The run folder of a piga-demo, inside its --out (:mod:`piga.cli.demo`).
+DEMO_RUN = "model"
+
+
+def is_demo_folder(folder: str | os.PathLike[str]) -> bool:
+    """Whether ``folder`` looks like a piga-demo's ``--out``: its trained run in :data:`DEMO_RUN`, or the data and the
+    frame strip that it writes before that run's first checkpoint (``pendulum.h5``, ``frames.png``)."""
+    folder = Path(folder)
+    return (folder / DEMO_RUN / CHECKPOINT).exists() or all((folder / name).exists()
+                                                            for name in ("pendulum.h5", "frames.png"))
+
+
 def read_checkpoint(run_dir: str | os.PathLike[str], kind: RunKind) -> dict[str, Any]:
     """The checkpoint of ``run_dir``, which must be a ``kind`` run's.
 
@@ -253,9 +266,14 @@ def read_checkpoint(run_dir: str | os.PathLike[str], kind: RunKind) -> dict[str,
         if (pid := held_by(run_dir)) is not None:  # a run started moments ago: its folder is not a wrong guess
             raise FileNotFoundError(f"{path}: no checkpoint yet: {run_dir} is being trained by another piga command "
                                     f"(PID {pid}); wait for its first checkpoint")
-        if (Path(run_dir) / "model" / CHECKPOINT).exists():  # a piga-demo folder: its run is one level down
-            raise FileNotFoundError(f"{path}: no checkpoint: {run_dir} looks like a piga-demo folder, whose trained run "
-                                    f"is {Path(run_dir) / 'model'}; give that")
+        if is_demo_folder(run_dir):  # its run is one level down
+            demo_run = Path(run_dir) / DEMO_RUN
+            if (demo_run / CHECKPOINT).exists():
+                raise FileNotFoundError(f"{path}: no checkpoint: {run_dir} looks like a piga-demo folder, whose trained "
+                                        f"run is {demo_run}; give that")
+            raise FileNotFoundError(f"{path}: no checkpoint: {run_dir} looks like a piga-demo folder, whose run "
+                                    f"{demo_run} has no checkpoint yet; continue the demo with piga-demo --out "
+                                    f"{run_dir} --resume")
         raise FileNotFoundError(f"{path}: no checkpoint (is {run_dir} a {kind.writer} run folder?)")
     check_run_file(path)
     try:

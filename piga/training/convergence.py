@@ -229,8 +229,11 @@ def check_convergence(state: Any, config: ConvergenceConfig = ConvergenceConfig(
                                     "decayed; " + _fix(planned, steps))
     short = [name for name, c in checks.items() if c.tail_change is None]
     if short:
-        return verdict("unsettled", f"the run is too short to judge whether {', '.join(short)} settled ({steps} steps, "
-                                    "fewer than 5 recorded over its last tenth); " + _fix(planned, steps))
+        from envs.fields import counted  # here: training runs without gymnasium's import
+
+        return verdict("unsettled", f"the run is too short to judge whether {', '.join(short)} settled "
+                                    f"({counted(steps, 'step')}, fewer than 5 recorded over its last tenth); "
+                                    + _fix(planned, steps))
     drifting = []
     for name, c in checks.items():
         if c.tail_change is not None and abs(c.tail_change) > max(config.drift_tolerance, 2 * (c.tail_spread or 0.0)):

@@ -223,15 +223,19 @@ class TrainPlan:
         """One line, e.g. "5400 steps = 16 epochs x 337 steps (10800 windows); warm-up 216, curriculum 594 (T 1->10), average of the last 337"
         (no average for a model without physical parameters, ``physics`` False; ``autoencoder`` False, a run that
         never trains on L_rec (``ModelConfig.loss`` "pred-only"): its warm-up steps predict one frame)."""
+        from envs.fields import counted  # here: training runs without gymnasium's import
+
         if autoencoder:
-            warmup = f"autoencoder warm-up {self.warmup_steps} steps" if self.warmup_steps else "no warm-up"
+            warmup = f"autoencoder warm-up {counted(self.warmup_steps, 'step')}" if self.warmup_steps else "no warm-up"
         else:
-            warmup = "no autoencoder warm-up" + (f" (its {self.warmup_steps} steps predict 1 frame)" if self.warmup_steps else "")
-        curriculum = (f"curriculum {self.curriculum_steps} steps (T_pred 1 -> {pred_frames})" if self.curriculum_steps
-                      else f"no curriculum (T_pred {pred_frames} from the first step)")
-        return (f"{self.total_steps} steps = {self.epochs} epoch{'s' if self.epochs != 1 else ''} x {self.steps_per_epoch} "
-                f"steps ({self.windows} windows); {warmup}, {curriculum}"
-                + (f", parameters averaged over the last {self.average_steps}" if self.average_steps and physics else "")
+            warmup = "no autoencoder warm-up" + (f" (its warm-up of {counted(self.warmup_steps, 'step')} predicts 1 frame)"
+                                                 if self.warmup_steps else "")
+        curriculum = (f"curriculum {counted(self.curriculum_steps, 'step')} (T_pred 1 -> {pred_frames})"
+                      if self.curriculum_steps else f"no curriculum (T_pred {pred_frames} from the first step)")
+        return (f"{counted(self.total_steps, 'step')} = {counted(self.epochs, 'epoch')} x "
+                f"{counted(self.steps_per_epoch, 'step')} ({counted(self.windows, 'window')}); {warmup}, {curriculum}"
+                + (f", parameters averaged over the last {counted(self.average_steps, 'step')}"
+                   if self.average_steps and physics else "")
                 + (f"; a checkpoint every {self.checkpoint_every} epochs" if self.checkpoint_every > 1 else ""))
 
 
@@ -636,7 +640,9 @@ def check_trainable(info: DatasetInfo, model_config: ModelConfig, train_config: 
     try:
         return plan_training(train_config, windows)
     except ValueError as exc:
-        raise ValueError(f"{info.path}: {exc} ({n_train} train sequences)") from None
+        from envs.fields import counted  # here: training runs without gymnasium's import
+
+        raise ValueError(f"{info.path}: {exc} ({counted(n_train, 'train sequence')})") from None
 
 
 def train(
