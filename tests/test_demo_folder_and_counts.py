@@ -126,16 +126,3 @@ def test_a_run_of_one_step_is_too_short_to_judge_in_the_singular() -> None:
     state = SimpleNamespace(step=1, start={"g": 1.0, "a": 0.3}, trace=[[1, 1.5, 0.4]], plan=plan,
                             history=[{"g": 1.5, "a": 0.4}])
     assert "settled (1 step, fewer than 5 recorded" in check_convergence(state).reason
-
-
-# ---------------------------------------------------------------------------------------------
-# piga-control --not-told
-# ---------------------------------------------------------------------------------------------
-
-
-@pytest.mark.parametrize("value", ["1", "1.0"])
-def test_not_told_at_a_given_gravity_mult_of_1_is_not_called_the_default(value: str,
-                                                                          capsys: pytest.CaptureFixture[str]) -> None:
-    line = refused("piga-control", ["--model", "nowhere", "--not-told", "--gravity-mult", value], capsys,
-                   "at --gravity-mult 1 nothing changes: give another --gravity-mult, or drop --not-told")
-    assert "the default" not in line

@@ -41,11 +41,25 @@ def test_a_system_with_nothing_to_learn_says_so() -> None:
     assert summary_line({"parameters": {"g": 9.9}, "parameter_errors": {}}) == "g=9.9000"
 
 
-def test_not_told_at_gravity_x1_is_refused(capsys: pytest.CaptureFixture[str]) -> None:
+@pytest.fixture(scope="module")
+def piga_run(tiny_data: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    from tests.helpers import train_tiny
+
+    return train_tiny(tiny_data, tmp_path_factory.mktemp("run") / "run")
+
+
+@pytest.mark.parametrize("given, said", [
+    ((), "at --gravity-mult 1 (the default) nothing changes: give --gravity-mult"),
+    (("--gravity-mult", "1"), "at --gravity-mult 1 nothing changes: give another --gravity-mult"),
+    (("--gravity-mult", "1.0"), "at --gravity-mult 1 nothing changes: give another --gravity-mult"),
+])
+def test_not_told_at_gravity_x1_is_refused(piga_run: Path, given: tuple[str, ...], said: str,
+                                           capsys: pytest.CaptureFixture[str]) -> None:
     from piga.cli import control
 
-    code, _, err = run_in_process("piga-control", control.main, "--model", "nowhere", "--not-told", capsys=capsys)
-    assert_one_line(code, err, "--not-told", "at --gravity-mult 1 (the default) nothing changes")
+    code, _, err = run_in_process("piga-control", control.main, "--model", str(piga_run), "--not-told", *given,
+                                  capsys=capsys)
+    assert_one_line(code, err, "--not-told keeps the piga agent's gravity at x1", said)
 
 
 def test_a_demo_folder_given_as_a_run_names_its_model(tmp_path: Path) -> None:

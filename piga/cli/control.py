@@ -131,11 +131,6 @@ def main(argv: Sequence[str] | None = None) -> int:
                         "and sees no frames: drop --torque-arrow")
     if args.not_told and args.oracle and not args.sweep:
         raise PigaError("--not-told is for the piga agent; the oracle plans with the environment's true physics")
-    if args.not_told and not args.sweep and args.gravity_mult == 1.0:
-        at, change = ((f"--gravity-mult {number_text(args.gravity_mult)}", "give another --gravity-mult")
-                      if "gravity_mult" in given else ("--gravity-mult 1 (the default)", "give --gravity-mult"))
-        raise PigaError(f"--not-told keeps the piga agent's gravity at x1 while the env's changes; at {at} nothing "
-                        f"changes: {change}, or drop --not-told")
     check_angle("--goal-angle", args.goal_angle)
     args.goal_angle += 0.0  # -0.0 (-1e-400 underflows to it) is 0: "goal -0 deg" otherwise
     if args.goal_image and "goal_angle" in given:  # --goal-angle 0, the default, too
@@ -156,6 +151,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _baseline(args, kind, mpc, outputs, argv, given)
     if args.sweep:
         return _sweep(args, mpc, outputs, argv)
+    if args.not_told and args.gravity_mult == 1.0:  # (a baseline run is refused --not-told above, in its own words)
+        at, change = ((f"--gravity-mult {number_text(args.gravity_mult)}", "give another --gravity-mult")
+                      if "gravity_mult" in given else ("--gravity-mult 1 (the default)", "give --gravity-mult"))
+        raise PigaError(f"--not-told keeps the piga agent's gravity at x1 while the env's changes; at {at} nothing "
+                        f"changes: {change}, or drop --not-told")
     if args.model and not Path(args.model).is_dir() and held_by(args.model) is None:  # (before --workers is judged by
         from piga.io.atomic import link_loop, loop_message
         from piga.io.checkpoint import CHECKPOINT  # the run's kind; a run just started has no folder yet: said below)
