@@ -1,5 +1,5 @@
-"""A piga-demo's folder refused as the --out of a training command; counts of one in the singular; --not-told's
-refusal at a given --gravity-mult 1."""
+"""A piga-demo's folder refused as the --out of a training command, and a demo whose run was replaced by another
+kind's refused --resume before it changes anything; counts of one in the singular."""
 
 from __future__ import annotations
 
@@ -126,3 +126,25 @@ def test_a_run_of_one_step_is_too_short_to_judge_in_the_singular() -> None:
     state = SimpleNamespace(step=1, start={"g": 1.0, "a": 0.3}, trace=[[1, 1.5, 0.4]], plan=plan,
                             history=[{"g": 1.5, "a": 0.4}])
     assert "settled (1 step, fewer than 5 recorded" in check_convergence(state).reason
+
+
+def test_a_demo_whose_run_is_another_kinds_is_refused_resume_before_anything_is_made(tiny_data: Path, tmp_path: Path,
+                                                                                     capsys: pytest.CaptureFixture[str]
+                                                                                     ) -> None:
+    """A PlaNet-style run in place of the demo's model: the refusal came at the third step, after the strip was drawn
+    again, and named no way out."""
+    import json
+
+    demo = _demo_folder(tmp_path, tiny_data, trained=True)
+    (demo / DEMO_RUN / "config.json").write_text(json.dumps({"kind": "planet"}))
+    before = _snapshot(demo)
+    refused("piga-demo", ["--out", str(demo), "--sequences", "12", "--resume"], capsys,
+            f"--resume: {demo / DEMO_RUN} holds a piga-baseline planet run", "pass --overwrite (not --resume)")
+    assert _snapshot(demo) == before
+
+
+def test_one_training_window_is_said_in_the_singular() -> None:
+    from piga.training.train import TrainConfig, plan_training
+
+    with pytest.raises(ValueError, match=r"^1 training window is fewer than one batch of 32, .*--batch-size"):
+        plan_training(TrainConfig(batch_size=32), 1)

@@ -19,6 +19,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+from envs.fields import counted
 from piga.cli import show, train
 from piga.cli.common import (ArgumentParser, Interrupted, PigaError, command_line, int_up_to, made_folder, positive_int,
                              resume_option, run_cli, seed_int, thread_count)
@@ -120,6 +121,17 @@ def main(argv: Sequence[str] | None = None) -> int:
         raise PigaError("--resume continues the demo in --out and --overwrite replaces it; give one of them")
     if args.resume and not any(path.exists() for path in (data, strip, run_dir / CHECKPOINT, goal_png, control_md)):
         raise PigaError(f"--resume: {out} holds no earlier demo to continue; run without --resume")
+    if args.resume and (run_dir / CHECKPOINT).exists():  # before anything is made again: not this demo's kind of run
+        from piga.io.checkpoint import RunKind, checked_run_kind
+
+        try:
+            kind = checked_run_kind(run_dir)
+        except ValueError as exc:
+            raise PigaError(f"--resume: {' '.join(str(exc).split())}; pass --overwrite (not --resume) to start the demo "
+                            "over") from None
+        if kind is not RunKind.PIGA:
+            raise PigaError(f"--resume: {run_dir} holds a {kind.writer} run, not the piga-train-model run of a demo; "
+                            "pass --overwrite (not --resume) to start the demo over")
     # (a demo that kept only its pictures continues from the start: they are made again)
     if not args.overwrite and not args.resume:
         for path in (data, strip, run_dir / CHECKPOINT, goal_png, control_md):
@@ -172,9 +184,9 @@ def _check_enough_sequences(config: CollectConfig) -> None:
     if n_train * per_sequence < recipe.train.batch_size:
         least = next(n for n in range(config.sequences, 10**6)
                      if split_counts(n, config.split)[0] * per_sequence >= recipe.train.batch_size)
-        raise PigaError(f"--sequences {config.sequences} gives {n_train} train sequence{'s' if n_train != 1 else ''}, "
-                        f"{n_train * per_sequence} training window{'s' if n_train * per_sequence != 1 else ''}, fewer than one batch of {recipe.train.batch_size}; give --sequences {least} "
-                        "or more")
+        raise PigaError(f"--sequences {config.sequences} gives {counted(n_train, 'train sequence')}, "
+                        f"{counted(n_train * per_sequence, 'training window')}, fewer than one batch of "
+                        f"{recipe.train.batch_size}; give --sequences {least} or more")
 
 
 def _check_kept_data(data: Path, config: CollectConfig) -> None:

@@ -249,9 +249,11 @@ def plan_training(config: TrainConfig, windows: int) -> TrainPlan:
     """
     per_epoch = windows // config.batch_size
     if per_epoch < 1:
+        from envs.fields import counted  # here: training runs without gymnasium's import
         stride = f", or lower --window-stride (now {config.window_stride})" if config.window_stride > 1 else ""
-        raise ValueError(f"{windows} training windows are fewer than one batch of {config.batch_size}, so no step "
-                         f"would run; lower the batch size or give more data{stride}")
+        raise ValueError(f"{counted(windows, 'training window')} {'is' if windows == 1 else 'are'} fewer than one "
+                         f"batch of {config.batch_size}, so no step would run; lower the batch size (--batch-size) or "
+                         f"give more data{stride}")
     epochs = config.epochs or max(1, math.ceil(config.budget_steps / per_epoch))
     total = epochs * per_epoch
     if total > MAX_TRAIN_STEPS:
