@@ -17,7 +17,7 @@ import pytest
 from piga.diagnostics import DiagnoseConfig, analyse, fit
 from piga.diagnostics.diagnose import (Candidates, DiagnosisInputError, action_response, check_actions_lead,
                                        Naming, _worse_than_nominal, check_camera_in_range, cut_windows, name_effects,
-                                       readings_agree, score_candidates, select)
+                                       own_reading, readings_agree, score_candidates, select)
 from piga.diagnostics.observe import NotTheSceneError
 from piga.diagnostics.vision import MAX_BLUR, MAX_SHIFT, Camera
 from piga.diagnostics.results import GenericBasis, Score
@@ -178,3 +178,16 @@ def test_a_report_with_no_gap_gives_no_closure_at_all() -> None:
     assert d.verdict_class == "none" and d.gap.no_gap
     assert d.gap.free_run_gap_closure is None and d.gap.typical_free_run_gap_closure is None
     assert d.gap.mean_free_run_gap_closure is None and d.gap.pixel_free_run_gap_closure is None
+
+
+def test_the_own_files_reading_starts_from_the_nominal_a_where_the_recordings_shrank() -> None:
+    """A start near 0 stays there (a is fitted in log space): the training file's |a| read 0.000."""
+    from piga.diagnostics.diagnose import SHRUNK_A, own_start_a
+
+    shrunk = fit.Model((), 0, {"g": NOMINAL.g, "a": 3e-9})
+    assert own_start_a(shrunk, NOMINAL) == NOMINAL.a
+    assert own_start_a(fit.Model((), 0, {"g": NOMINAL.g, "a": -0.8}), NOMINAL) == 0.8  # the nominal's sign
+    assert own_start_a(fit.Model((), 0, {"g": NOMINAL.g, "a": 2 * SHRUNK_A}), NOMINAL) == 2 * SHRUNK_A
+    own = planted({})
+    read = own_reading(shrunk.with_values({**shrunk.values, "a": own_start_a(shrunk, NOMINAL)}), NOMINAL, own, FAST)
+    assert abs(read.values["a"] - 1.0) < 0.05, read.values

@@ -330,6 +330,15 @@ def observe_own(model: PhysicsModel, checkpoint: dict | None, progress: bool = F
         return None
 
 
+def own_start_a(physics: fit.Model, nom: Nominal) -> float:
+    """The a that the own file's reading (:func:`own_reading`) of ``physics`` starts from: its |a| with the nominal's
+    sign, or the nominal a where its |a| shrank below :data:`SHRUNK_A` of it (a is fitted in log space, so a start
+    near 0 stays there: a dm_control motor wired the other way read the training file's |a| as 0.000, and the
+    recording's a of 3e-09 as no gain error)."""
+    a = abs(physics.values["a"])
+    return nom.a if a < SHRUNK_A * abs(nom.a) else math.copysign(a, nom.a)
+
+
 def own_reading(physics: fit.Model, nom: Nominal, own: Observations, config: DiagnoseConfig) -> fit.Model:
     """The physics that the model's own training file ``own`` shows, of ``physics``' effects: its g and a.
 
@@ -1137,7 +1146,7 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
     ref_g, ref_a = nom.g, abs(nom.a)  # what the recording's g and a are compared with
     if use_own:
         # both files read the same way, within the frame too: the recording's own reading is compared
-        start = {**final.values, "a": math.copysign(abs(final.values["a"]), nom.a)}
+        start = {**final.values, "a": own_start_a(final, nom)}
         read = own_reading(final.with_values(start), nom, own_obs, config)
         ref_g, ref_a = read.values["g"], abs(read.values["a"])
         if max(abs(ref_g / nom.g - 1), abs(ref_a / abs(nom.a) - 1)) > config.gain_tolerance:
@@ -1150,7 +1159,7 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
     if rival is not None:
         rival_ref_g, rival_ref_a = nom.g, abs(nom.a)
         if use_own:
-            start = {**rival.values, "a": math.copysign(abs(rival.values["a"]), nom.a)}
+            start = {**rival.values, "a": own_start_a(rival, nom)}
             read = own_reading(rival.with_values(start), nom, own_obs, config)
             rival_ref_g, rival_ref_a = read.values["g"], abs(read.values["a"])
         rival_gain, rival_g = abs(rival.values["a"]) / rival_ref_a, rival.values["g"] / rival_ref_g
@@ -1244,8 +1253,9 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
         gain_error = False
         undetermined = (f"the actions barely move the system: a refits to {reference.values['a']:.3g} (x{gain:.3g} the "
                         f"reference {ref_a:.3g}), and its bootstrap refits ({a_int[0]:.3g}..{a_int[1]:.3g}) do not pin "
-                        "it down; a gain far below the nominal, or actions that do not drive the motion (another "
-                        "signal, other units), cannot be told apart here")
+                        "it down; a gain far below the nominal, actions that move it the other way (a motor wired in "
+                        "reverse, a camera on the other side of the hinge: a of the wrong sign shrinks toward 0), or "
+                        "actions that do not drive the motion (another signal, other units), cannot be told apart here")
     low, high = (1 - config.gain_tolerance) * ref_a, (1 + config.gain_tolerance) * ref_a
     if gain_error and a_int and a_int[0] <= high and a_int[1] >= low:
         # a deadzone or a saturation trades off against a: the refit may move a while its
