@@ -480,7 +480,7 @@ def test_the_convergence_check_on_made_up_trajectories() -> None:
     warm = check_convergence(state(np.ones_like(steps), np.full_like(steps, 0.3), step=30))
     assert warm.outcome == "untrained" and "never trained" in warm.reason and warm.physics_steps == 0
     # profiles: one side clearly better stopped short (unsettled); flat within 2% both ways is not determined by
-    # the frames (a probe's file with actuation gain 1e-6: a flat within 1.3%), listed and said in the summary
+    # the frames (a file with actuation gain 1e-6: a flat within 1.3%), listed and said in the summary
     from piga.evaluation.evaluate import summary_line
     from piga.evaluation.profile import ParameterProfile
 

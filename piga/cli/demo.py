@@ -53,7 +53,7 @@ class DemoConfig:
 
 
 #: The demo's largest --epochs, --episodes and --control-steps: it is the small default job, and larger
-#: values (the probe tried 1e9) only make it run for days; piga-train-model and piga-control take any.
+#: values (1e9 was tried) only make it run for days; piga-train-model and piga-control take any.
 DEMO_LIMITS = {"epochs": 200, "episodes": 100, "control_steps": 5000}
 _DEMO_WHY = "piga-demo is the small default job; piga-train-model and piga-control run larger ones"
 

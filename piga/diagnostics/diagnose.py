@@ -954,7 +954,7 @@ def clipped_actions_notes(actions: np.ndarray) -> list[str]:
     """A note where the recording's actions go beyond the action range, ±2 (an imported file's, in other units): the
     diagnosis takes the system's commands as Gymnasium's pendulum applies them, clipped there (its effects act on the
     clipped command), so if the system applied them in full, its gain is misjudged, and the interval does not say so
-    (a probe's actions x2: "gain 0.677 (0.636..0.709)" for a true 0.5)."""
+    (actions logged x2: "gain 0.677 (0.636..0.709)" for a true 0.5)."""
     beyond = float(np.mean(np.abs(actions) > MAX_ACTION)) if actions.size else 0.0
     if beyond == 0.0:
         return []

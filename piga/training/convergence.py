@@ -165,7 +165,7 @@ def check_convergence(state: Any, config: ConvergenceConfig = ConvergenceConfig(
     parameter whose frames are predicted clearly better with it 1.65x larger or smaller stopped short of its
     value, however still it stands: the run is unsettled.
     One whose frames are predicted alike 1.65x larger and smaller is not determined by them: the verdict lists it
-    under ``undetermined`` (a probe's file whose actions had a gain of 1e-6 gave a = 0.09, 10^5x off, converged
+    under ``undetermined`` (a file whose actions had a gain of 1e-6 gave a = 0.09, 10^5x off, converged
     beside a learned g; its profile was flat within 1.3%).
     """
     plan = state.plan
