@@ -329,7 +329,7 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
     if args.resume:  # (its first lines looked like a fresh run's)
         start = (f"continuing from epoch {int(stood.get('epoch', 0))} (step {int(stood.get('step', 0)):,}, "
                  f"{trained / 60:.1f} min trained)")
-    print(f"training on {args.data} ({info.split_counts['train']} train sequence{'s' if info.split_counts['train'] != 1 else ''} x {info.steps} frames); "
+    print(f"training on {args.data} ({counted(info.split_counts['train'], 'train sequence')} x {info.steps} frames); "
           f"{start} -> {run_dir} (device {device})")
     print(f"plan: {plan.describe(model_config.pred_frames, fresh.has_physics, model_config.loss != 'pred-only')}")
     if train_config.data_loading == "stream":

@@ -128,7 +128,7 @@ def empty_split_warning(split: Sequence[float], counts: dict[str, int]) -> str |
         return None
     n = sum(counts.values())
     advice = f"give more sequences, or counts such as --split {n - 2},1,1" if n >= 3 else "give 3 sequences or more"
-    return (f"the split {','.join(f'{x:g}' for x in split)} of {n} sequence{'s' if n != 1 else ''} leaves {' and '.join(empty)} empty, so "
+    return (f"the split {','.join(f'{x:g}' for x in split)} of {counted(n, 'sequence')} leaves {' and '.join(empty)} empty, so "
             f"piga-train-model's metrics will come from the train split, which is not held out ({advice})")
 
 

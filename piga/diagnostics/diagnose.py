@@ -467,18 +467,25 @@ def actuation_sign(nom: Nominal, w1: fit.Windows, min_t: float = 5.0) -> float:
     of the largest action coefficient (a delay moves it to lag k, a flip turns it negative), when
     its t-statistic is above ``min_t``.
     """
-    th = (w1.theta0 + nom.offset).numpy()
     acc = ((w1.target[:, 0] - w1.theta0 - nom.dt * w1.v0) / nom.dt**2).numpy()
     lags = w1.actions[:, : fit.MAX_DELAY + 1].numpy()[:, ::-1]  # (B, K): u_s, u_{s-1}, ...
-    x = np.column_stack([np.sin(th), np.cos(th), np.ones_like(th), w1.v0.numpy(), lags])
-    if len(acc) <= x.shape[1]:
-        return 0.0
+    c, t = action_coefficients((w1.theta0 + nom.offset).numpy(), w1.v0.numpy(), acc, lags)
+    k = int(np.argmax(np.abs(c)))
+    return float(np.sign(c[k])) if abs(t[k]) > min_t else 0.0
+
+
+def action_coefficients(th: np.ndarray, v: np.ndarray, acc: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(K,) coefficients and (K,) t-statistics of the actions ``u`` (n, K) in the least-squares regression of the
+    accelerations ``acc`` (n,) on sin and cos of the angles ``th`` (n,), a constant, the speeds ``v`` (n,) and ``u``;
+    zeros where the samples are too few (under two residual degrees of freedom) or not all finite."""
+    x = np.column_stack([np.sin(th), np.cos(th), np.ones_like(th), v, u])  # (n, 4 + K)
+    if len(acc) <= x.shape[1] + 1 or not np.isfinite(x).all() or not np.isfinite(acc).all():
+        return np.zeros(u.shape[1]), np.zeros(u.shape[1])
     coef, *_ = np.linalg.lstsq(x, acc, rcond=None)
     resid = acc - x @ coef
     cov = np.linalg.pinv(x.T @ x) * float(resid @ resid) / (len(acc) - x.shape[1])
     c, se = coef[4:], np.sqrt(np.maximum(np.diag(cov)[4:], 1e-300))
-    k = int(np.argmax(np.abs(c)))
-    return float(np.sign(c[k])) if abs(c[k]) / se[k] > min_t else 0.0
+    return c, c / se
 
 
 def action_response(theta: np.ndarray, actions: np.ndarray, stale: np.ndarray | None, nom: Nominal) -> tuple[np.ndarray,
@@ -493,8 +500,7 @@ def action_response(theta: np.ndarray, actions: np.ndarray, stale: np.ndarray | 
     """
     lags = np.arange(-1, fit.MAX_DELAY + 1)
     th = theta + nom.offset  # (N, T)
-    n, t = th.shape
-    first, last = 1 + fit.MAX_DELAY, t - 2  # s: every lag's action and the next frame exist
+    first, last = 1 + fit.MAX_DELAY, th.shape[1] - 2  # s: every lag's action and the next frame exist
     if last < first:
         return np.zeros(len(lags)), np.zeros(len(lags))
     s = np.arange(first, last + 1)
@@ -504,15 +510,7 @@ def action_response(theta: np.ndarray, actions: np.ndarray, stale: np.ndarray | 
     keep = np.ones(acc.shape, bool)
     if stale is not None:
         keep = ~(stale[:, s + 1] | stale[:, s] | stale[:, s - 1])
-    x = np.concatenate([np.stack([np.sin(th[:, s]), np.cos(th[:, s]), np.ones_like(acc), v], axis=-1), u], axis=-1)[keep]
-    y = acc[keep]
-    if len(y) <= x.shape[1] + 1 or not np.isfinite(x).all() or not np.isfinite(y).all():
-        return np.zeros(len(lags)), np.zeros(len(lags))
-    coef, *_ = np.linalg.lstsq(x, y, rcond=None)
-    resid = y - x @ coef
-    cov = np.linalg.pinv(x.T @ x) * float(resid @ resid) / (len(y) - x.shape[1])
-    c, se = coef[4:], np.sqrt(np.maximum(np.diag(cov)[4:], 1e-300))
-    return c, c / se
+    return action_coefficients(th[:, s][keep], v[keep], acc[keep], u[keep])
 
 
 def check_actions_lead(theta: np.ndarray, actions: np.ndarray, stale: np.ndarray | None, nom: Nominal,
@@ -522,7 +520,7 @@ def check_actions_lead(theta: np.ndarray, actions: np.ndarray, stale: np.ndarray
     candidate is such a lead (no system answers an action before it is sent): its actions and frames are misaligned
     (measured: frames one step early were read as "within_frame + gain 0.889")."""
     c, tstat = action_response(theta, actions, stale, nom)
-    if len(c) < 2 or not abs(tstat[0]) > min_t or abs(c[0]) < np.abs(c).max() or abs(c[0]) < 2 * abs(c[1]):
+    if not abs(tstat[0]) > min_t or abs(c[0]) < np.abs(c).max() or abs(c[0]) < 2 * abs(c[1]):
         return
     raise DiagnosisInputError(
         f"the motion in this recording answers each action one frame before the action is logged (the response to "
@@ -552,17 +550,20 @@ def score_candidates(nom: Nominal, w: WindowSet, progress: bool = False, exclude
     nominal = score(nominal_model, nom, w.fit1_nominal, w.free_nominal)
     allowed = [c for c in CANDIDATES if c not in excluded]
     bar = tqdm(total=2 + len(allowed), desc="fitting candidates", disable=not progress)
-    refit_model = fit.fit_candidate((), {}, nom, w.fit)
-    refit = None if fit.collapsed(refit_model, nom) else score(refit_model, nom, w.fit1, w.free)
-    if refit is not None and not math.isfinite(refit.bic):
-        refit = None
+
+    def refitted(start: dict[str, float]) -> tuple[fit.Model, Score | None]:
+        """"none" refitted from ``start``, and its score (None where the fit ran off or its BIC is not finite)."""
+        m = fit.fit_candidate((), start, nom, w.fit)
+        scored = None if fit.collapsed(m, nom) else score(m, nom, w.fit1, w.free)
+        return m, scored if scored is not None and math.isfinite(scored.bic) else None
+
+    refit_model, refit = refitted({})
     bar.update()
     flip_bic_drop = 0.0
     if (refit is None or abs(refit.model.values["a"]) < SHRUNK_A * abs(nom.a)
             or actuation_sign(nom, w.fit1) * nom.a < 0):  # the frames may show the actuation the other way round
-        flipped_model = fit.fit_candidate((), {"a": -nom.a}, nom, w.fit)
-        flipped = None if fit.collapsed(flipped_model, nom) else score(flipped_model, nom, w.fit1, w.free)
-        if flipped is not None and math.isfinite(flipped.bic):
+        _, flipped = refitted({"a": -nom.a})
+        if flipped is not None:
             if refit is None:
                 refit = flipped
             else:
@@ -1096,7 +1097,8 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
                  ambiguity: Ambiguity | None = None, flip_bic_drop: float | None = None,
                  draws: dict[str, list[float]] | None = None, refit: fit.Model | None = None,
                  own: Observations | Callable[[], Observations | None] | None = None,
-                 varied_actions: bool = True, rival: fit.Model | None = None) -> Naming:
+                 varied_actions: bool = True, rival: fit.Model | None = None,
+                 own_readings: dict[tuple, fit.Model] | None = None) -> Naming:
     """Step 4: the effects that the chosen physics and the camera stage name, with intervals, and the verdict.
 
     Gymnasium's own speed clip is no gap (for a recording that the file says came from Gymnasium's
@@ -1124,7 +1126,8 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
 
     With ``rival`` (where "none" was chosen: the single effect that the held-out free run favours and the one-step BIC
     does not see, fitted as ``final`` is, see :func:`select`), a gain or gravity error is named only when the rival,
-    read against its own reference, shows it too: an effect left out bends g and a.
+    read against its own reference, shows it too: an effect left out bends g and a. ``own_readings`` keeps the own
+    file's readings of one analysis, which may name its effects more than once (the same physics, the same reading).
     """
     notes: list[str] = []
     named = [e for e in final.effects if ambiguity is None or e not in ambiguity.between[0].split("+")]
@@ -1139,6 +1142,16 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
     if own is not None and w is not None:
         own_obs = own() if callable(own) else own
     use_own = own_obs is not None
+    own_readings = {} if own_readings is None else own_readings
+
+    def read_own(physics: fit.Model) -> fit.Model:
+        """The own file's reading of ``physics``' form (:func:`own_reading`), started from its values."""
+        start = physics.with_values({**physics.values, "a": own_start_a(physics, nom)})
+        key = (start.effects, start.delay, start.substeps, tuple(sorted(start.values.items())))
+        if key not in own_readings:
+            own_readings[key] = own_reading(start, nom, own_obs, config)
+        return own_readings[key]
+
     reference = final
     if final.has(WITHIN_FRAME) and w is not None and not use_own:
         euler = tuple(e for e in final.effects if e != WITHIN_FRAME.name)
@@ -1146,8 +1159,7 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
     ref_g, ref_a = nom.g, abs(nom.a)  # what the recording's g and a are compared with
     if use_own:
         # both files read the same way, within the frame too: the recording's own reading is compared
-        start = {**final.values, "a": own_start_a(final, nom)}
-        read = own_reading(final.with_values(start), nom, own_obs, config)
+        read = read_own(final)
         ref_g, ref_a = read.values["g"], abs(read.values["a"])
         if max(abs(ref_g / nom.g - 1), abs(ref_a / abs(nom.a) - 1)) > config.gain_tolerance:
             notes.append(f"read from the model's own training file in the same form ({read.name or 'no effect'}), g = "
@@ -1159,8 +1171,7 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
     if rival is not None:
         rival_ref_g, rival_ref_a = nom.g, abs(nom.a)
         if use_own:
-            start = {**rival.values, "a": own_start_a(rival, nom)}
-            read = own_reading(rival.with_values(start), nom, own_obs, config)
+            read = read_own(rival)
             rival_ref_g, rival_ref_a = read.values["g"], abs(read.values["a"])
         rival_gain, rival_g = abs(rival.values["a"]) / rival_ref_a, rival.values["g"] / rival_ref_g
     if gain_error and rival_gain is not None:
@@ -1567,7 +1578,7 @@ def analyse(obs: Observations, nom: Nominal, config: DiagnoseConfig = DiagnoseCo
     if callable(own):
         own = functools.cache(own)  # read once, however often the naming asks
     kwargs = dict(from_gymnasium=obs.from_gymnasium, flip_bic_drop=candidates.flip_bic_drop, draws=draws,
-                  refit=candidates.refit.model, own=own, varied_actions=actions_vary(obs.actions))
+                  refit=candidates.refit.model, own=own, varied_actions=actions_vary(obs.actions), own_readings={})
     ambiguity = None
     if selection.rival is not None and not final.effects:
         # a rival of "none" (the free run's choice) matters only where it reads no gain or gravity error that "none"
@@ -1576,11 +1587,10 @@ def analyse(obs: Observations, nom: Nominal, config: DiagnoseConfig = DiagnoseCo
         naming = name_effects(final, nom, reading, camera, generic, config, **kwargs)
         if {"gain", "gravity"} & {e.effect for e in naming.effects}:
             rival = fit.fit(selection.rival.model, nom, reading.fit) if reading is not windows else selection.rival.model
-            rivalled = name_effects(final, nom, reading, camera, generic, config, rival=rival, **kwargs)
+            said = ambiguity_of(selection.chosen, selection.rival, nom, reading, config, draws)  # (it names no effect)
+            rivalled = name_effects(final, nom, reading, camera, generic, config, ambiguity=said, rival=rival, **kwargs)
             if {e.effect for e in rivalled.effects} != {e.effect for e in naming.effects}:
-                ambiguity = ambiguity_of(selection.chosen, selection.rival, nom, reading, config, draws)
-                naming = name_effects(final, nom, reading, camera, generic, config, ambiguity=ambiguity, rival=rival,
-                                      **kwargs)
+                naming, ambiguity = rivalled, said
         if ambiguity is None:
             selection = Selection(selection.chosen, [dataclass_replace(x, ambiguous=False) for x in selection.steps])
     else:
