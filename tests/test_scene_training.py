@@ -137,8 +137,8 @@ def test_a_slot_that_draws_nothing_retries_only_where_the_scene_has_an_object_fo
         slots: str | None, spring_data: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
         capsys: pytest.CaptureFixture[str]) -> None:
     """The object check (a stand-in here) finds the last slot empty. With the file's 2 slots another seed may fill
-    it: the run trains again (three times, the default), then exits 1 naming the seeds. With --objects 3 for 2 balls a seed cannot: no retry,
-    and the line names --objects 2."""
+    it: the run trains again (three times, as --seed-retries 3 asks: a run this short retries no seed by default), then
+    exits 1 naming the seeds. With --objects 3 for 2 balls a seed cannot: no retry, and the line names --objects 2."""
     import piga.training.report as report
     from piga.evaluation.objects import ObjectCheck
 
@@ -150,11 +150,12 @@ def test_a_slot_that_draws_nothing_retries_only_where_the_scene_has_an_object_fo
     out = tmp_path / "run"
     code, stdout, err = run_in_process("piga-train-model", train_main, str(spring_data), "--out", str(out), "--epochs",
                                        "1", "--batch-size", "16", "--warmup-fraction", "0.5", "--threads", "1", "--quiet",
-                                       "--seed", "5", *(["--objects", slots] if slots else []), capsys=capsys)
+                                       "--seed", "5", "--seed-retries", "3", *(["--objects", slots] if slots else []),
+                                       capsys=capsys)
     if slots is None:
         assert_one_line(code, err, "slot 1 of 2 renders nothing", "another --seed", "seeds 5, 6, 7 and 8 tried")
         assert "slot 1 drew nothing with seed 5; training again from the start with seed 6" in stdout
-        assert "with seed 8 (retry 3 of --seed-retries 3)" in stdout  # the default: three retries
+        assert "with seed 8 (retry 3 of --seed-retries 3)" in stdout
     else:
         assert_one_line(code, err, "slot 2 of 3 renders nothing", "the scene has 2 objects", "--objects 2")
         assert "training again" not in stdout

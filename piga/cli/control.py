@@ -279,6 +279,10 @@ def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: 
                         "1e-10 or more")
     for multiplier in (multipliers[0], multipliers[-1]):  # here: in a job it failed after the others had run
         _check_env_gravity("--sweep", multiplier)
+    if args.not_told and all(m == 1 for m in multipliers):  # as a single run at x1 is refused --not-told
+        raise PigaError(f"--not-told keeps the piga agent's gravity at x1 while the env's changes; at --sweep "
+                        f"{args.sweep} (every multiplier x1) nothing changes: give a --sweep that leaves x1, or drop "
+                        "--not-told")
     if kind is RunKind.PIGA:
         model, checkpoint = load_model(args.model)  # fail early, in this process, on a bad folder
         check_pendulum_model(model, args.model)

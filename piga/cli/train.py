@@ -145,8 +145,9 @@ def build_parser() -> ArgumentParser:
                    help="a scene whose object check finds an object missing (or a slot that draws nothing where the scene "
                    "has an object for it) is trained again from the start with the next seed, up to N times (at most "
                    f"{MAX_SEED_RETRIES}: each retry can cost a whole run); while a retry is "
-                   "left, an object missing after the autoencoder's warm-up restarts the run there (default %(default)s; 0: "
-                   "never; not with --resume, nor where there are no object slots: pendulum data, --model video-lstm)")
+                   "left, an object missing after the autoencoder's warm-up restarts the run there (default %(default)s; "
+                   "a run shorter than its preset plans, by --epochs or --budget-steps, retries only when it is given; "
+                   "0: never; not with --resume, nor where there are no object slots: pendulum data, --model video-lstm)")
     p.add_argument("--resume", action="store_true", help="continue the run in --out; it may raise --epochs, --budget-steps or --max-minutes "
                    "(docs: piga-train-model; resuming replans the cosine schedule)")
     p.add_argument("--overwrite", action="store_true", help="replace the outputs of an earlier run in --out")
@@ -296,6 +297,8 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
         full = check_trainable(info, model_config, replace(train_config, epochs=recipe.train.epochs,
                                                             budget_steps=recipe.train.budget_steps))
         recipe_steps = full.total_steps if full.total_steps > plan.total_steps else None
+        if recipe_steps is not None and "seed_retries" not in options_given:  # another seed cannot make up the length
+            train_config = replace(train_config, seed_retries=0)
     planned = ckpt.get("plan") or {} if args.resume else {}  # (a checkpoint from before plans were saved has none)
     if plan.epochs < planned.get("epochs", 0):  # the baselines' --resume refuses the same
         given = " ".join(f"--{name.replace('_', '-')} {overrides[name]}" for name in ("epochs", "budget_steps")

@@ -1,0 +1,88 @@
+"""The lengths that commands are given: a training run shorter than its recipe, a control episode's video, a gravity
+sweep that changes nothing."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from piga.cli import baseline, control
+from piga.cli.train import main as train_main
+from tests.helpers import assert_one_line, run_in_process, train_tiny
+from tests.test_baseline_cli import TINY_PLANET, _NoCapture
+from tests.test_faults import refused
+
+
+@pytest.fixture(scope="module")
+def small_spring(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """5 spring sequences x 11 frames: a file whose fast recipe plans far more steps than a test trains."""
+    from envs.scenes import scene_config
+    from piga.data.collect_scenes import SceneCollectConfig, collect_scene
+
+    path = tmp_path_factory.mktemp("spring") / "spring.h5"
+    config = SceneCollectConfig(scene=scene_config("spring"), sequences=5, steps=11, seed=0, workers=1, split=(3, 1, 1))
+    return collect_scene(config, path, progress=False, command="test")
+
+
+def test_a_scene_run_shorter_than_its_recipe_retries_no_seed(small_spring: Path, tmp_path: Path,
+                                                             monkeypatch: pytest.MonkeyPatch,
+                                                             capsys: pytest.CaptureFixture[str]) -> None:
+    """--budget-steps 20 where the fast preset plans 1,650: an object lost (a stand-in check) is the length's, so the
+    run stops after its first check with the line that names the length, not after three more seeds of 20 steps."""
+    import piga.training.report as report
+    from piga.evaluation.objects import ObjectCheck
+
+    monkeypatch.setattr(report, "check_objects", lambda model, frames: ObjectCheck(0.3, 0.5, 0.6, True))
+    out = tmp_path / "run"
+    code, stdout, err = run_in_process("piga-train-model", train_main, str(small_spring), "--out", str(out),
+                                       "--batch-size", "3", "--budget-steps", "20", "--threads", "1", "--quiet",
+                                       capsys=capsys)
+    line = assert_one_line(code, err, "did not identify its parameters", "an object was not found",
+                           "in a run of 20 steps where the fast preset plans", "train it that long")
+    assert code == 1 and "seeds" not in line
+    assert "training again" not in stdout
+    record = json.loads((out / "config.json").read_text())
+    assert record["train"]["seed"] == 0 and record["train"]["seed_retries"] == 0 and "retried_seeds" not in record
+
+
+@pytest.fixture(scope="module")
+def planet_run(tiny_data: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("planet") / "run"
+    code, _, _ = run_in_process("piga-baseline", baseline.main, "planet", str(tiny_data), "--out", str(out),
+                                *TINY_PLANET, capsys=_NoCapture())
+    assert code in (0, 1) and (out / "metrics.json").exists()  # 1: a 2-step run did not learn; its outputs stay
+    return out
+
+
+def test_every_agents_video_of_n_steps_holds_n_frames(planet_run: Path, tiny_data: Path, tmp_path: Path,
+                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    """One video frame per step, the frame the agent acted on, for piga's agent and the PlaNet-style one. A GIF stores
+    a frame that repeats the one before as that frame shown longer (Pillow's encoder merges them, and the PlaNet
+    belief holds each frame for its action repeat): its frames' durations still add up to the 20 steps."""
+    from PIL import Image, ImageSequence
+
+    piga_run = train_tiny(tiny_data, tmp_path / "piga")
+    cheap = ("--candidates", "8", "--iterations", "1")  # piga's planner (PlaNet-style plans with its own settings)
+    for run, planner in ((piga_run, cheap), (planet_run, ())):
+        video = tmp_path / f"{run.parent.name}.gif"
+        code, _, err = run_in_process("piga-control", control.main, "--model", str(run), "--episodes", "1", "--steps",
+                                      "20", *planner, "--video", str(video), "--quiet", capsys=capsys)
+        assert code == 0, err
+        with Image.open(video) as gif:
+            durations = [frame.info["duration"] for frame in ImageSequence.Iterator(gif)]
+        assert sum(durations) == 20 * 50, (run, durations)  # 20 frames a second
+        assert all(d % 50 == 0 for d in durations), durations
+
+
+@pytest.mark.parametrize("sweep", ["1:1:0.1", "1:1.05:0.1"])
+def test_not_told_refuses_a_sweep_whose_every_multiplier_is_1(sweep: str, tmp_path: Path,
+                                                               capsys: pytest.CaptureFixture[str]) -> None:
+    """As a single run at x1 is refused --not-told: nothing changes. Refused before the run folder is read."""
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "config.json").write_text("{}")
+    refused("piga-control", ["--model", str(run), "--sweep", sweep, "--not-told", "--quiet"], capsys,
+            "--not-told keeps the piga agent's gravity at x1", f"at --sweep {sweep} (every multiplier x1) nothing "
+            "changes", "drop --not-told")
