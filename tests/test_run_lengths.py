@@ -1,5 +1,5 @@
-"""The lengths that commands are given: a training run shorter than its recipe, a control episode's video, a gravity
-sweep that changes nothing."""
+"""The lengths that commands are given: a training run shorter than its recipe, a gravity sweep that changes
+nothing."""
 
 from __future__ import annotations
 
@@ -8,10 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from piga.cli import baseline, control
 from piga.cli.train import main as train_main
-from tests.helpers import assert_one_line, run_in_process, train_tiny
-from tests.test_baseline_cli import TINY_PLANET, _NoCapture
+from tests.helpers import assert_one_line, run_in_process
 from tests.test_faults import refused
 
 
@@ -45,35 +43,6 @@ def test_a_scene_run_shorter_than_its_recipe_retries_no_seed(small_spring: Path,
     assert "training again" not in stdout
     record = json.loads((out / "config.json").read_text())
     assert record["train"]["seed"] == 0 and record["train"]["seed_retries"] == 0 and "retried_seeds" not in record
-
-
-@pytest.fixture(scope="module")
-def planet_run(tiny_data: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    out = tmp_path_factory.mktemp("planet") / "run"
-    code, _, _ = run_in_process("piga-baseline", baseline.main, "planet", str(tiny_data), "--out", str(out),
-                                *TINY_PLANET, capsys=_NoCapture())
-    assert code in (0, 1) and (out / "metrics.json").exists()  # 1: a 2-step run did not learn; its outputs stay
-    return out
-
-
-def test_every_agents_video_of_n_steps_holds_n_frames(planet_run: Path, tiny_data: Path, tmp_path: Path,
-                                                      capsys: pytest.CaptureFixture[str]) -> None:
-    """One video frame per step, the frame the agent acted on, for piga's agent and the PlaNet-style one. A GIF stores
-    a frame that repeats the one before as that frame shown longer (Pillow's encoder merges them, and the PlaNet
-    belief holds each frame for its action repeat): its frames' durations still add up to the 20 steps."""
-    from PIL import Image, ImageSequence
-
-    piga_run = train_tiny(tiny_data, tmp_path / "piga")
-    cheap = ("--candidates", "8", "--iterations", "1")  # piga's planner (PlaNet-style plans with its own settings)
-    for run, planner in ((piga_run, cheap), (planet_run, ())):
-        video = tmp_path / f"{run.parent.name}.gif"
-        code, _, err = run_in_process("piga-control", control.main, "--model", str(run), "--episodes", "1", "--steps",
-                                      "20", *planner, "--video", str(video), "--quiet", capsys=capsys)
-        assert code == 0, err
-        with Image.open(video) as gif:
-            durations = [frame.info["duration"] for frame in ImageSequence.Iterator(gif)]
-        assert sum(durations) == 20 * 50, (run, durations)  # 20 frames a second
-        assert all(d % 50 == 0 for d in durations), durations
 
 
 @pytest.mark.parametrize("sweep", ["1:1:0.1", "1:1.05:0.1"])
