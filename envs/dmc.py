@@ -57,7 +57,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium.wrappers import FrameStackObservation, GrayscaleObservation, ReshapeObservation, TransformObservation
 
-from envs.fields import check_field_kinds, upper_bound_text
+from envs.fields import check_field_kinds, number_text, upper_bound_text
 from envs.pendulum import MAX_IMAGE_SIZE, MIN_ACTUATION_GAIN
 
 __all__ = ["CAMERAS", "COLORS", "DMC_PHYSICS_DT", "DMC_EPISODE_STEPS", "DMCPendulumConfig", "MissingExtraError", "make_dmc_pendulum",
@@ -157,8 +157,8 @@ class DMCPendulumConfig:
         if not MIN_LENGTH <= self.length <= longest:  # first: the mass's bound and the camera's follow from it
             why = ("shorter, the pole is hidden under its tip" if self.length < MIN_LENGTH
                    else "longer, the tip leaves the camera's view")  # the reason of the bound it breaks
-            raise ValueError(f"DMCPendulumConfig.length={self.length!r} is out of range (length in [{MIN_LENGTH:g}, "
-                             f"{longest:g}] m; {why})")
+            raise ValueError(f"DMCPendulumConfig.length={number_text(self.length)} is out of range (length in "
+                             f"[{MIN_LENGTH:g}, {longest:g}] m; {why})")
         checks = {  # each field: whether it is in range, and its range in words
             "image_size": (8 <= self.image_size <= MAX_IMAGE_SIZE, f"image_size in [8, {MAX_IMAGE_SIZE}]"),
             "frame_stack": (1 <= self.frame_stack <= MAX_FRAME_STACK, f"frame_stack in [1, {MAX_FRAME_STACK}]"),
@@ -178,7 +178,7 @@ class DMCPendulumConfig:
         }
         for name, (ok, allowed) in checks.items():
             if not ok:
-                raise ValueError(f"DMCPendulumConfig.{name}={getattr(self, name)!r} is out of range ({allowed})")
+                raise ValueError(f"DMCPendulumConfig.{name}={number_text(getattr(self, name))} is out of range ({allowed})")
         if self.camera == "fixed" and (self.flip == "camera" or self.camera_distance != 1.0):
             raise ValueError("DMCPendulumConfig: flip='camera' and camera_distance move the face-on camera; "
                              "camera='fixed' is dm_control's own, which they leave as it is")

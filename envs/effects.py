@@ -488,7 +488,8 @@ class EffectSpec:
         """The value as stored (int for counts, else float); raises ValueError naming the effect and the range."""
         ok = _is_number(value) and (not self.integer or float(value).is_integer()) and self.validator(float(value))
         if not ok:
-            raise ValueError(f"effect {name}={value!r} is out of range: {name} must be {self.requirement} ({self.meaning})")
+            raise ValueError(f"effect {name}={number_text(value)} is out of range: {name} must be {self.requirement} "
+                             f"({self.meaning})")
         return int(value) if self.integer else float(value)
 
 

@@ -29,12 +29,18 @@ def check_field_kinds(config: Any) -> None:
             raise TypeError(f"{type(config).__name__}.{field.name} must be {what}, got {value!r}")
 
 
-def number_text(value: float) -> str:
+def number_text(value: Any) -> str:
     """A number as an error line writes it: as short as ``g`` writes it (1e+06, 0.5), unless that rounds it (10.0000001
     is not 10, a bound it would seem to meet): then as Python's ``repr`` writes it, the shortest text that reads back
-    as the same float (also the shorter for 1e-320, which ``g`` writes 9.99989e-321)."""
+    as the same float (also the shorter for 1e-320, which ``g`` writes 9.99989e-321), less the ``.0`` of a whole
+    number (1234567, not 1234567.0). An integer keeps all its digits; a value that is no number (text where one
+    belongs, a flag) is written as ``repr`` writes it."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        return repr(value)
+    if isinstance(value, numbers.Integral):
+        return str(int(value))
     value = float(value)
-    short, full = format(value, "g"), repr(value)
+    short, full = format(value, "g"), repr(value).removesuffix(".0")
     return short if float(short) == value and len(short) <= len(full) else full
 
 

@@ -123,7 +123,7 @@ class PixelPendulumConfig:
             raise type(exc)(f"PixelPendulumConfig.effects: {exc}") from None
         object.__setattr__(self, "effects", effects)  # canonical order, checked values
         if self.actuation_gain > MAX_ACTUATION_GAIN:
-            raise ValueError(f"PixelPendulumConfig.actuation_gain={self.actuation_gain!r} is out of range: at most "
+            raise ValueError(f"PixelPendulumConfig.actuation_gain={number_text(self.actuation_gain)} is out of range: at most "
                              f"{MAX_ACTUATION_GAIN:g} (a larger torque overflows float32)")
         if self.effective_gravity > MAX_GRAVITY:
             raise ValueError(f"PixelPendulumConfig: gravity x gravity_mult = {number_text(self.effective_gravity)} is out of range: at "
@@ -147,9 +147,9 @@ class PixelPendulumConfig:
         }
         for name, (ok, allowed) in checks.items():
             if not ok:
-                raise ValueError(f"PixelPendulumConfig.{name}={getattr(self, name)!r} is out of range ({allowed})")
+                raise ValueError(f"PixelPendulumConfig.{name}={number_text(getattr(self, name))} is out of range ({allowed})")
         if self.actuation_gain < MIN_ACTUATION_GAIN:
-            raise ValueError(f"PixelPendulumConfig.actuation_gain={self.actuation_gain!r} is out of range: at least "
+            raise ValueError(f"PixelPendulumConfig.actuation_gain={number_text(self.actuation_gain)} is out of range: at least "
                              f"{MIN_ACTUATION_GAIN:g} ({_TOO_WEAK})")
         if self.effective_gravity < MIN_GRAVITY:
             raise ValueError(f"PixelPendulumConfig: gravity x gravity_mult = {number_text(self.effective_gravity)} is out of range: "

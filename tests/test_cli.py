@@ -56,7 +56,7 @@ def test_collect_then_show(tmp_path: Path) -> None:
         (["--split", "0.5,0.4,0.4"], "split"),
         (["--split", "a,b,c"], "--split"),
         (["--preset", "huge"], "--preset"),
-        (["--max-speed", "9"], "--max-speed=9.0 is out of range (--max-speed in"),
+        (["--max-speed", "9"], "--max-speed=9 is out of range (--max-speed in"),
         (["--seed", "-1"], "--seed"),
         (["--bogus"], "--bogus"),
     ],

@@ -133,7 +133,7 @@ def test_a_dmc_reset_speed_is_refused_as_max_speed(speed: str, tmp_path: Path, c
     and 157.08 is not within 157.1's bound (π/0.02 = 157.0796...)."""
     line = refused("piga-collect", ["--out", str(tmp_path / "d.h5"), *COLLECT, "--env", "piga/DMCPendulum-v0",
                                     "--max-speed", speed], capsys,
-                   f"--max-speed={float(speed)!r} is out of range (--max-speed in [0, π/0.02 ≈ 157.0796])")
+                   f"--max-speed={number_text(float(speed))} is out of range (--max-speed in [0, π/0.02 ≈ 157.0796])")
     assert "--env-option" not in line
 
 

@@ -320,7 +320,7 @@ def test_a_failed_allocation_is_out_of_memory(capsys: pytest.CaptureFixture[str]
     (["--effect", "noise=1e30"], ["noise must be in [1e-06, 1000]"], 2),
     (["--system", "spring", "--radius", "1e-9"], ["radius must be at least 0.5 px"], 1),
     (["--image-size", "7"], ["--image-size=7 is out of range (--image-size in [8, 1024])"], 1),  # it said "sizes ... >= 1"
-    (["--max-speed", "-1"], ["--max-speed=-1.0 is out of range (--max-speed in [0, 8])"], 1),  # it listed every field's range
+    (["--max-speed", "-1"], ["--max-speed=-1 is out of range (--max-speed in [0, 8])"], 1),  # it listed every field's range
     (["--env", "piga/DMCPendulum-v0", "--image-size", "7"], ["--image-size=7 is out of range (--image-size in [8, 1024]"], 1),
     (["--system", "digits-spring", "--background", "black"], ["--background: digits-spring draws its digits over a texture"], 1),
     (["--system", "bouncing", "--radius", "1e308"], ["images are too small", "need at least inf px"], 1),  # an OverflowError

@@ -227,7 +227,7 @@ def _check_run_dir(run_dir: Path, resume: bool, overwrite: bool, kind: RunKind) 
             raise PigaError(f"{run_dir} holds a checkpoint without the record of its settings (config.json; the run "
                             "was stopped as it wrote its first checkpoint), so it cannot be continued; pass --overwrite "
                             "to start it again")
-        raise held_run_error(run_dir, existing, kind)
+        raise held_run_error(run_dir, kind)
     remove_outputs(run_dir, RUN_OUTPUTS if overwrite else existing)  # --overwrite: a run of another kind's too
 
 

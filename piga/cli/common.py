@@ -267,13 +267,14 @@ _FINISHED = threading.Event()
 _FINISHED_LINE = "{prog}: interrupted after it finished its work; its outputs are complete"
 
 
-def held_run_error(run_dir: Path, existing: Sequence[str], kind: Any) -> PigaError:
-    """The refusal of ``run_dir``, which already holds a run's ``existing`` outputs, for a command that writes runs of
-    ``kind`` (a :class:`~piga.io.checkpoint.RunKind`) without --resume or --overwrite: --resume where the run is of
-    that kind; where it is another's (its record says), another --out, since --resume would refuse it."""
-    from piga.io.checkpoint import held_kind
+def held_run_error(run_dir: Path, kind: Any) -> PigaError:
+    """The refusal of ``run_dir``, which already holds a run, for a command that writes runs of ``kind`` (a
+    :class:`~piga.io.checkpoint.RunKind`) without --resume or --overwrite: --resume where the run is of that kind;
+    where it is another's (its record says), another --out, since --resume would refuse it. It lists every output of
+    any kind of run that the folder holds (:data:`~piga.io.checkpoint.RUN_OUTPUTS`), not only this command's."""
+    from piga.io.checkpoint import RUN_OUTPUTS, held_kind
 
-    files = ", ".join(existing)
+    files = ", ".join(name for name in RUN_OUTPUTS if (run_dir / name).exists())
     other = held_kind(run_dir)
     if other is not None and other is not kind:
         return PigaError(f"{run_dir} already holds a {other.writer} run ({files}); give another --out, or --overwrite "

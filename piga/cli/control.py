@@ -634,7 +634,7 @@ def check_angle(flag: str, degrees: float) -> None:
     """Refuses an angle outside [-180, 180] degrees (NaN and infinities included): a goal such as
     1e300 degrees means nothing, and reduced modulo a turn it would be an arbitrary angle."""
     if not -180 <= degrees <= 180:
-        raise PigaError(f"{flag} must be an angle in degrees from upright within [-180, 180], got {degrees!r}")  # repr: 180.0000001 is no 180
+        raise PigaError(f"{flag} must be an angle in degrees from upright within [-180, 180], got {number_text(degrees)}")
 
 
 def default_elites(candidates: int) -> int:
@@ -666,7 +666,7 @@ def _keep_first_trace(agent: PigaMPCAgent, into: list[tuple[float, float, np.nda
 
 
 def _write_goal_image(args: argparse.Namespace) -> int:
-    from piga.control.goal import render_goal_image
+    from piga.control.goal import GOAL_IMAGE_FORMATS, render_goal_image
     from piga.evaluation.video import encoded_image
 
     if args.angle is None:
@@ -675,15 +675,16 @@ def _write_goal_image(args: argparse.Namespace) -> int:
     args.angle += 0.0  # -0.0 is 0, as --goal-angle's: "the pendulum at -0 deg" otherwise
     target = Path(args.write_goal_image)
     check_file_name(target, "--write-goal-image", "goal.png")
-    if target.suffix.lower() not in (".png", ".jpg", ".jpeg"):
-        raise PigaError(f"--write-goal-image: use a .png or .jpg path, got {target.name}")
+    if (suffix := target.suffix.lower()) not in GOAL_IMAGE_FORMATS:
+        *most, last = GOAL_IMAGE_FORMATS
+        raise PigaError(f"--write-goal-image: use a path ending in {', '.join(most)} or {last}, got {target.name}")
     check_writable_target(target, args.overwrite)
     from piga.io.resources import FIGURE_DISK_BYTES, check_disk
 
     check_disk(target, FIGURE_DISK_BYTES, f"--write-goal-image {target}", advice="free some space, or write elsewhere")
     picture = render_goal_image(args.angle)
     with atomic_output(target, overwrite=args.overwrite) as tmp:
-        tmp.write_bytes(encoded_image(picture, target.suffix.lower()))
+        tmp.write_bytes(encoded_image(picture, suffix, **GOAL_IMAGE_FORMATS[suffix]))
     print(f"wrote {target}: the pendulum at {args.angle:g} deg, {picture.shape[1]}x{picture.shape[0]}")
     return 0
 

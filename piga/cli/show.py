@@ -44,14 +44,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     check_disk(args.out, FIGURE_DISK_BYTES, "the strip", advice="free some space, or give another --out")
     check_not_an_input(args.out, {"data file": args.data})
     info = inspect_dataset(args.data)
-    check_frames_have_signal(args.data, motion=False)  # a blank file, or a non-finite action, is named rather than drawn;
-    # a still one is drawn: the strip shows what the file holds
-    check_actions_file(args.data)
     available = split_indices(args.data, args.split)
-    if len(available) == 0:
+    if len(available) == 0:  # first: the --split to change, before what the other splits' frames hold
         held = [name for name, n in info.split_counts.items() if n]
         raise ValueError(f"split '{args.split}' of {args.data} is empty; give --split "
                          + " or ".join(f"{name} ({counted(info.split_counts[name], 'sequence')})" for name in held))
+    check_frames_have_signal(args.data, motion=False)  # a blank file, or a non-finite action, is named rather than drawn;
+    # a still one is drawn: the strip shows what the file holds
+    check_actions_file(args.data)
     # a count written beyond the file is refused (the defaults shrink to a small file: the strip shows what it holds)
     for dest, have, noun, where in (("sequences", len(available), "sequence", f"in its {args.split} split"),
                                     ("frames", info.steps, "frame", "per sequence")):

@@ -178,7 +178,7 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
         raise PigaError(f"--resume: {run_dir / CHECKPOINT} does not exist")
     if not args.resume and existing and not args.overwrite:
         if has_checkpoint:
-            raise held_run_error(run_dir, existing, RunKind.PIGA)
+            raise held_run_error(run_dir, RunKind.PIGA)
         raise PigaError(f"{run_dir} holds outputs of an earlier run but no checkpoint ({', '.join(existing)}); "
                         "pass --overwrite to replace them")
     from piga.io.atomic import write_json

@@ -15,6 +15,7 @@ import functools
 import math
 import os
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import torch
@@ -25,8 +26,8 @@ from piga.world.effects import scaled_gravity
 from piga.world.model import PhysicsModel, frames_to_float
 from piga.data.scene import GRAY_WEIGHTS, load_scene_image, scene_to_gray
 
-__all__ = ["GRAY_WEIGHTS", "HOLDABLE_ANGLE", "GoalEstimate", "NotTheSceneError", "goal_from_image", "holdable_angle",
-           "load_scene_image", "read_goal",
+__all__ = ["GOAL_IMAGE_FORMATS", "GRAY_WEIGHTS", "HOLDABLE_ANGLE", "GoalEstimate", "NotTheSceneError", "goal_from_image",
+           "holdable_angle", "load_scene_image", "read_goal",
            "render_goal_image", "scene_mismatch", "scene_to_gray"]
 
 SCENE_ANGLES = 120
@@ -178,6 +179,13 @@ def goal_from_image(model: PhysicsModel, checkpoint: dict, path: str | os.PathLi
     believed = gravity_mult if told is None else told
     return read_goal(model, image, g=scaled_gravity(learned["g"], believed), a=learned["a"], mse_limit=4 * typical,
                      gravity_mult=gravity_mult)
+
+
+#: The suffixes that ``--write-goal-image`` writes, each with imageio's options for it: every one lossless but JPEG's,
+#: whose error the goal's reading absorbs; each reads back through :func:`load_scene_image` to the angle written
+#: (tests/test_cli_wording.py). Pillow writes WebP lossy unless told.
+GOAL_IMAGE_FORMATS: dict[str, dict[str, Any]] = {".png": {}, ".jpg": {}, ".jpeg": {}, ".webp": {"lossless": True},
+                                                 ".bmp": {}, ".tif": {}, ".tiff": {}}
 
 
 def render_goal_image(angle_deg: float) -> np.ndarray:

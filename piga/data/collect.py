@@ -35,7 +35,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from envs.dmc import DMCPendulumConfig, make_dmc_pendulum
-from envs.fields import counted
+from envs.fields import counted, number_text
 from envs.pendulum import MAX_ACTION, PENDULUM_DT, PixelPendulumConfig, make_pixel_pendulum
 from piga.io.atomic import check_writable_target
 from piga.data.schema import MAX_SEED, SPLITS, DatasetWriter, write_room
@@ -105,19 +105,20 @@ def check_collect_sizes(sequences: int, steps: int, workers: int, seed: int, bat
 
 def split_counts(n: int, split: Sequence[float]) -> tuple[int, int, int]:
     """Train/valid/test counts from fractions (sum 1) or counts (sum n)."""
+    shown = f"({', '.join(map(number_text, split))})"  # as its errors write it: (2, 1, 0), not (2.0, 1.0, 0.0)
     if len(split) != 3 or any(not math.isfinite(x) or x < 0 for x in split):
-        raise ValueError(f"split needs three non-negative numbers (train, valid, test), got {tuple(split)}")
+        raise ValueError(f"split needs three non-negative numbers (train, valid, test), got {shown}")
     if all(float(x).is_integer() for x in split) and sum(split) == n and sum(split) != 1:
         train, valid, test = (int(x) for x in split)
     elif abs(sum(split) - 1.0) < 1e-6:
         if split[0] == 0:  # (else the rounding of valid and test below could leave one sequence to train on)
-            raise ValueError(f"split {tuple(split)} gives the training split no share of the {counted(n, 'sequence')}")
+            raise ValueError(f"split {shown} gives the training split no share of the {counted(n, 'sequence')}")
         valid, test = round(split[1] * n), round(split[2] * n)
         train = n - valid - test
     else:
-        raise ValueError(f"split {tuple(split)} must be fractions summing to 1 or counts summing to {n}")
+        raise ValueError(f"split {shown} must be fractions summing to 1 or counts summing to {n}")
     if train < 1:
-        raise ValueError(f"split {tuple(split)} leaves no training sequence out of {n}")
+        raise ValueError(f"split {shown} leaves no training sequence out of {n}")
     return train, valid, test
 
 
