@@ -1,12 +1,14 @@
 """The diagnosis where the one-step BIC barely sees the actions or an effect (few or short sequences), and where the
 actions are misaligned with the frames: a flipped actuation decided on the held-out free run, a refit of the nominal
 sign that runs off, a single effect that the free run favours, which keeps "none"'s g and a from being named a
-gravity or gain error on their own, a motion that answers its actions before they are logged, and a camera beyond
-the camera candidates' range."""
+gravity or gain error on their own, as does a damping that the one-step BIC does not tell from "none", Gymnasium's
+own speed clip where it binds too rarely to pile the speeds up, a motion that answers its actions before they are
+logged, and a camera beyond the camera candidates' range."""
 
 from __future__ import annotations
 
 import importlib
+import math
 
 from dataclasses import replace
 from types import SimpleNamespace
@@ -15,10 +17,11 @@ import numpy as np
 import pytest
 
 from piga.diagnostics import DiagnoseConfig, analyse, fit
-from piga.diagnostics.diagnose import (Candidates, DiagnosisInputError, action_response, check_actions_lead,
-                                       Naming, _worse_than_nominal, check_camera_in_range, cut_windows, name_effects,
+from piga.diagnostics.diagnose import (GYM_SPEED_CLIP, Candidates, DiagnosisInputError, action_response,
+                                       check_actions_lead, Naming, _worse_than_nominal, check_camera_in_range,
+                                       clip_refuted, cut_windows, damping_check, name_effects, observed_speeds,
                                        own_reading, readings_agree, score_candidates, select)
-from piga.diagnostics.observe import NotTheSceneError
+from piga.diagnostics.observe import NotTheSceneError, Observations
 from piga.diagnostics.vision import MAX_BLUR, MAX_SHIFT, Camera
 from piga.diagnostics.results import GenericBasis, Score
 from tests.test_diagnostics import NOMINAL, planted
@@ -96,6 +99,72 @@ def test_gravity_read_by_none_alone_is_not_named_when_the_rival_reads_none() -> 
     far = name_effects(final, NOMINAL, rival=rival.with_values({**rival.values, "a": 0.4 * NOMINAL.a}), **kwargs)
     assert not far.effects, far.verdict
     assert any("the two readings disagree, so no gain error is named" in n for n in far.notes)
+
+
+def test_gravity_read_by_none_alone_is_not_named_when_the_damping_reads_none() -> None:
+    """dm_control at mass 0.5 (a doubled, the hinge damping's effect doubled, g unchanged): "none" read "gain 1.8;
+    gravity 0.868", the damping single x0.986 at a BIC 0.7 lower, but 24% worse on the typical held-out window, so no
+    rival of "none"."""
+    final = fit.Model((), 0, {"g": 0.868 * NOMINAL.g, "a": 1.8 * NOMINAL.a})
+    kwargs = dict(w=None, camera=None, generic=NOTHING_LEFT, config=FAST)
+    damped = fit.Model(("damping",), 0, {"g": 0.986 * NOMINAL.g, "a": 2.0 * NOMINAL.a, "b": 0.13})
+    named = name_effects(final, NOMINAL, damped=lambda: damped, **kwargs)
+    assert {e.effect for e in named.effects} == {"gain"}, named.verdict
+    assert any("x0.986 its reference with the damping refitted" in n and "no gravity error is named" in n
+               for n in named.notes), named.notes
+    # a gravity error that the damping reads too is named (a length of 0.55: "none" x0.915, with the damping x0.893)
+    longer = final.with_values({"g": 0.915 * NOMINAL.g, "a": NOMINAL.a})
+    shorter = damped.with_values({"g": 0.893 * NOMINAL.g, "a": NOMINAL.a, "b": -0.03})
+    assert "gravity" in {e.effect for e in name_effects(longer, NOMINAL, damped=lambda: shorter, **kwargs).effects}
+
+
+def test_the_damping_is_read_only_where_its_bic_is_close_to_nones() -> None:
+    none = scored((), -1000.0, 1e-3)
+    reading = cut_windows(planted({}), planted({}).theta, None, FAST)
+    for bic, read in ((-995.0, True), (-970.0, False)):
+        check = damping_check(Candidates(none, none, [scored(("damping",), bic, 1.2e-3, b=0.1)]), reading, NOMINAL,
+                              FAST)
+        assert (check is not None) is read
+    assert damping_check(Candidates(none, none, [scored(("bias",), -995.0, 1e-3, tau0=0.1)]), reading, NOMINAL,
+                         FAST) is None
+
+
+def gymnasium_clipped(gain: float, n: int = 120, t: int = 30, seed: int = 2) -> Observations:
+    """Encoded-angle-like observations of Gymnasium's pendulum (its speed clipped at ±8 rad/s) with an actuation
+    gain, written independently of piga's code."""
+    rng = np.random.default_rng(seed)
+    u = rng.uniform(-2, 2, (n, t))
+    th = np.zeros((n, t))
+    x, v = rng.uniform(-math.pi, math.pi, n), rng.uniform(-1, 1, n)
+    th[:, 0] = x
+    for i in range(t - 1):
+        v = np.clip(v + 0.05 * (15 * np.sin(x) + 3 * gain * u[:, i]), -8, 8)
+        x = x + 0.05 * v
+        th[:, i + 1] = x
+    return Observations(th + rng.normal(0, 0.002, th.shape), u, np.zeros((n, t)), np.arange(n) < int(0.75 * n), 0.05,
+                        np.zeros((0, t, 8, 8), np.uint8), np.zeros(0, int))
+
+
+def test_gymnasiums_own_clip_is_fitted_where_it_binds_too_rarely_to_pile_up() -> None:
+    """The pixel pendulum with a gain of 1.15: speeds reach the clip in under 1% of the steps, fewer at 8 than just
+    below, and none beyond; without the clip "none" read the gain 1.139 (95% interval 1.12..1.14)."""
+    obs = gymnasium_clipped(1.15)
+    speeds = observed_speeds(obs.theta, obs.dt, None)
+    at = np.count_nonzero(np.abs(speeds - GYM_SPEED_CLIP) <= FAST.clip_band)
+    assert 0 < at < np.count_nonzero((speeds > GYM_SPEED_CLIP - 3 * FAST.clip_band)
+                                     & (speeds < GYM_SPEED_CLIP - FAST.clip_band))
+    assert not np.any(speeds > GYM_SPEED_CLIP + FAST.clip_band)
+    d = analyse(obs, NOMINAL, FAST)
+    assert "speed_clip" in d.corrected_effects and abs(d.corrected["v"] - GYM_SPEED_CLIP) < 0.1, d.corrected
+    assert [e.effect for e in d.effects] == ["gain"] and abs(d.effects[0].value - 1.15) < 0.005, d.verdict
+    assert any("Gymnasium's own ±8 rad/s clip" in n for n in d.notes)
+    # from another system the same clip is a hypothesis, which the missing pile-up refutes
+    w = cut_windows(obs, obs.theta, None, FAST)
+    clip = fit.Model(("speed_clip",), 0, {"g": NOMINAL.g, "a": 1.15, "v": GYM_SPEED_CLIP})
+    assert clip_refuted(clip, NOMINAL, w.fit1, speeds, FAST)
+    assert not clip_refuted(clip, NOMINAL, w.fit1, speeds, FAST, known=GYM_SPEED_CLIP)
+    # speeds that pass the known level refute it too
+    assert clip_refuted(clip, NOMINAL, w.fit1, np.concatenate([speeds, np.full(at, 9.0)]), FAST, known=GYM_SPEED_CLIP)
 
 
 def test_two_readings_agree_on_the_same_side_within_the_interval() -> None:
