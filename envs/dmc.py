@@ -179,9 +179,12 @@ class DMCPendulumConfig:
         for name, (ok, allowed) in checks.items():
             if not ok:
                 raise ValueError(f"DMCPendulumConfig.{name}={number_text(getattr(self, name))} is out of range ({allowed})")
-        if self.camera == "fixed" and (self.flip == "camera" or self.camera_distance != 1.0):
-            raise ValueError("DMCPendulumConfig: flip='camera' and camera_distance move the face-on camera; "
-                             "camera='fixed' is dm_control's own, which they leave as it is")
+        clash = [name for name, given in (("flip=camera", self.flip == "camera"),
+                                          (f"camera_distance={number_text(self.camera_distance)}",
+                                           self.camera_distance != 1.0)) if given]
+        if self.camera == "fixed" and clash:  # they move the face-on camera only
+            raise ValueError(f"DMCPendulumConfig.camera=fixed is dm_control's own camera, which {' and '.join(clash)} "
+                             f"cannot move: drop {'it' if len(clash) == 1 else 'them'} or camera=fixed")
 
     @property
     def max_mass(self) -> float:

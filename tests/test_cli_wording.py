@@ -207,3 +207,27 @@ def test_control_page_gives_the_units_of_out_json(option: str) -> None:
     assert "radians" in row and "degrees" in row, row
     keys = set(re.findall(r"`(\w+_angle\w*)`", row))
     assert keys and keys <= {f for f in EpisodeSummary.__dataclass_fields__}, keys
+
+
+# ---------------------------------------------------------------------------------------------
+# Lines that name only what the user gave, and pages that name every file written
+# ---------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["--env", "piga/DMCPendulum-v0", "--env-option", "camera=fixed", "--env-option", "camera_distance=3"],
+     "--env-option camera=fixed is dm_control's own camera, which camera_distance=3 cannot move: drop it or camera=fixed"),
+    (["--half"], "--half is for the spring scene (--system spring); the pendulum takes --gravity"),
+])
+def test_a_clash_names_the_options_given(argv: list[str], needle: str, tmp_path: Path,
+                                         capsys: pytest.CaptureFixture[str]) -> None:
+    """The fixed camera's line had named flip='camera' and "DMCPendulumConfig", --half "the scenes" (bouncing too)."""
+    line = refused("piga-collect", ["--out", str(tmp_path / "d.h5"), "--sequences", "4", *argv], capsys, needle)
+    assert "DMCPendulumConfig" not in line and "flip" not in line
+
+
+def test_the_diagnose_page_names_every_file_of_a_report() -> None:
+    from piga.diagnostics.report import REPORT_FILES
+
+    page = (DOCS / "commands" / "diagnose.md").read_text()
+    assert all(f"`{name}`" in page for name in REPORT_FILES), REPORT_FILES

@@ -213,7 +213,7 @@ def test_config_refuses_bad_values():
     for name in ("image_size", "frame_stack", "episode_length"):
         with pytest.raises(ValueError, match=f"{name}=1000000000000000000000000000000 is out of range"):
             DMCPendulumConfig(**{name: 10**30})
-    with pytest.raises(ValueError, match="camera='fixed' is dm_control's own"):
+    with pytest.raises(ValueError, match="camera=fixed is dm_control's own camera"):
         DMCPendulumConfig(camera="fixed", flip="camera")
     from piga.data.collect import CollectConfig
 

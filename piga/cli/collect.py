@@ -216,8 +216,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _collect_scene(args, argv, written)
     given = [flag for flag in (*SCENE_PARAMETERS, *SCENE_LOOK, "--half") if getattr(args, flag.lstrip("-")) is not None]
     if given:
-        raise PigaError(f"{', '.join(given)} {'is' if len(given) == 1 else 'are'} for the scenes (--system "
-                        f"{'/'.join(SYSTEM_CHOICES[1:])}); the pendulum takes "
+        scenes = "the spring scene (--system spring)" if given == ["--half"] else \
+            f"the scenes (--system {'/'.join(SYSTEM_CHOICES[1:])})"
+        raise PigaError(f"{', '.join(given)} {'is' if len(given) == 1 else 'are'} for {scenes}; the pendulum takes "
                         + ("--env-option (mass, length, damping, ...) on the DMC pendulum" if args.env == DMC_PENDULUM
                            else "--gravity and --actuation-gain"))
     preset = PRESETS[args.preset]
