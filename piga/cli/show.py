@@ -24,8 +24,10 @@ def build_parser() -> ArgumentParser:
     p.add_argument("--out", required=True, type=file_path,
                    help="output image: .png, or another suffix matplotlib writes (.pdf, .svg, .jpg, ...)")
     p.add_argument("--split", choices=list(SPLITS), default="train", help="split to show (default %(default)s)")
-    p.add_argument("--sequences", type=positive_int, default=4, help="rows (default %(default)s)")
-    p.add_argument("--frames", type=positive_int, default=10, help="columns (default %(default)s)")
+    p.add_argument("--sequences", type=positive_int, default=4, help="rows (default %(default)s, or all the split holds "
+                   "where it holds fewer; more than it holds is refused where given)")
+    p.add_argument("--frames", type=positive_int, default=10, help="columns (default %(default)s, or all a sequence holds "
+                   "where it holds fewer; more is refused where given)")
     p.add_argument("--overwrite", action="store_true", help="replace --out if it exists")
     return p
 
