@@ -135,3 +135,22 @@ def benchmark_module(name: str, module_name: str | None = None) -> Iterator[Any]
     finally:
         sys.modules.pop(spec.name, None)
         sys.path.remove(str(root / "benchmarks"))
+
+
+def once_per_run(tmp_path_factory: pytest.TempPathFactory, name: str, make: Callable[[], Any]) -> Any:
+    """``make()``, computed once in a test run: pytest-xdist's workers each run a module's fixture for the tests they
+    were dealt, so a costly one (a diagnosis of half a minute) ran in both; here the first computes and pickles it
+    under the run's shared temporary folder, behind a file lock, and the others read it (the recipe of xdist's docs)."""
+    import pickle
+
+    from filelock import FileLock
+
+    if os.environ.get("PYTEST_XDIST_WORKER") is None:  # one process: nothing to share
+        return make()
+    path = tmp_path_factory.getbasetemp().parent / f"{name}.pickle"  # the parent is common to the workers
+    with FileLock(f"{path}.lock"):
+        if path.is_file():
+            return pickle.loads(path.read_bytes())
+        value = make()
+        path.write_bytes(pickle.dumps(value))
+        return value

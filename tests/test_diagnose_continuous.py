@@ -15,6 +15,7 @@ from piga.diagnostics.diagnose import clip_supported
 from piga.diagnostics.observe import from_gymnasium
 from piga.diagnostics.report import markdown
 from piga.io.runs import Nominal
+from tests.helpers import once_per_run
 
 TRUTH = {"g": 13.03, "a": 1.328, "b": 0.1328}  # dm_control's pendulum in piga's form
 DT = 0.04
@@ -40,10 +41,10 @@ def planted_within_frame(n: int = 100, t: int = 30, noise: float = 0.002, seed: 
 
 
 @pytest.fixture(scope="module")
-def diagnosis():
+def diagnosis(tmp_path_factory: pytest.TempPathFactory):
     # the nominal model as one Euler step per frame identifies it: a and g low; 0.5 mrad of angle noise
-    return analyse(planted_within_frame(noise=0.0005), Nominal(g=12.4, a=1.2, offset=0.0, dt=DT),
-                   DiagnoseConfig(bootstrap=0))
+    return once_per_run(tmp_path_factory, "within_frame_diagnosis", lambda: analyse(
+        planted_within_frame(noise=0.0005), Nominal(g=12.4, a=1.2, offset=0.0, dt=DT), DiagnoseConfig(bootstrap=0)))
 
 
 def test_names_damping_and_the_integration_within_the_frame_not_a_clip(diagnosis):
