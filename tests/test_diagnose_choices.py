@@ -533,3 +533,16 @@ def test_a_fit_started_at_a_non_positive_g_is_said_to_run_off() -> None:
 
     with pytest.raises(DiagnosisInputError, match="a fit to this recording's angles ran off"):
         fit.parameters_of(fit.Model((), 0, {"g": 0.0, "a": 1.0}), NOMINAL)
+
+
+def test_an_ambiguity_says_which_side_the_free_runs_favour() -> None:
+    """A rival of "none" is made by free runs 10% better at a close BIC: "the data cannot tell them apart" had stood
+    beside errors 7.5x apart."""
+    from piga.diagnostics.results import Ambiguity
+
+    def described(errors: list[float]) -> str:
+        return Ambiguity(between=["none", "damping"], candidates=["none", "damping"], bic=[0.0, 3.0],
+                         typical_free_run_mse=errors, intervals_overlap=None, separate_by="more data").describe()
+
+    assert "which favour damping" in described([2.09e-3, 2.79e-4]) and "cannot tell them apart" in described([2.09e-3, 2.79e-4])
+    assert "the data cannot tell them apart" in described([2.09e-3, 2.0e-3])

@@ -174,9 +174,16 @@ class Ambiguity(_ByKey):
     def describe(self) -> str:
         """The verdict's phrase."""
         a, b = self.between
+        first, second = self.typical_free_run_mse
+        from piga.diagnostics.diagnose import DiagnoseConfig  # (diagnose imports this module)
+
+        # a rival of "none" is one that the held-out free runs favour where the one-step fit cannot choose: say so
+        lower = 1 - DiagnoseConfig.min_gain  # the free-run drop that makes a rival
+        favoured = b if second < lower * first else a if first < lower * second else None
+        why = ("the one-step fit cannot tell them apart, and the free runs of a few held-out sequences, which favour "
+               f"{favoured}, are too few to decide" if favoured else "the data cannot tell them apart")
         return (f"ambiguous between {a} and {b} (ΔBIC {abs(self.bic[1] - self.bic[0]):.1f}, typical held-out free-run "
-                f"errors {self.typical_free_run_mse[0]:.3g} and {self.typical_free_run_mse[1]:.3g} rad²): the data "
-                f"cannot tell them apart; {self.separate_by} would separate them")
+                f"errors {first:.3g} and {second:.3g} rad²): {why}; {self.separate_by} would separate them")
 
 
 @dataclass(frozen=True)
