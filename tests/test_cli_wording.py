@@ -216,7 +216,8 @@ def test_control_page_gives_the_units_of_out_json(option: str) -> None:
 
 @pytest.mark.parametrize("argv, needle", [
     (["--env", "piga/DMCPendulum-v0", "--env-option", "camera=fixed", "--env-option", "camera_distance=3"],
-     "--env-option camera=fixed is dm_control's own camera, which camera_distance=3 cannot move: drop it or camera=fixed"),
+     "--env-option camera=fixed is dm_control's own camera, which camera_distance=3 cannot move: drop it or "
+     "camera=fixed"),
     (["--half"], "--half is for the spring scene (--system spring); the pendulum takes --gravity"),
 ])
 def test_a_clash_names_the_options_given(argv: list[str], needle: str, tmp_path: Path,
