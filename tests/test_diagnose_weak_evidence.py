@@ -2,8 +2,9 @@
 actions are misaligned with the frames: a flipped actuation decided on the held-out free run, a refit of the nominal
 sign that runs off, a single effect that the free run favours, which keeps "none"'s g and a from being named a
 gravity or gain error on their own, as does a damping that the one-step BIC does not tell from "none", Gymnasium's
-own speed clip where it binds too rarely to pile the speeds up, a motion that answers its actions before they are
-logged, and a camera beyond the camera candidates' range."""
+own speed clip where it binds too rarely to pile the speeds up (beside other effects too, and in the nominal form that
+a gain is checked against), a gravity error that "none" misses while it bends a, a motion that answers its actions
+before they are logged, and a camera beyond the camera candidates' range."""
 
 from __future__ import annotations
 
@@ -260,3 +261,79 @@ def test_the_own_files_reading_starts_from_the_nominal_a_where_the_recordings_sh
     own = planted({})
     read = own_reading(shrunk.with_values({**shrunk.values, "a": own_start_a(shrunk, NOMINAL)}), NOMINAL, own, FAST)
     assert abs(read.values["a"] - 1.0) < 0.05, read.values
+
+
+def test_gravity_that_the_nominal_form_misses_while_it_bends_a_is_named() -> None:
+    """The pixel pendulum at g = 11 with a damping of 0.2: "none" read g x0.992 and a x1.16, the damping g x1.10 and
+    a x0.995, and the verdict had named the damping alone, with no word of g."""
+    kwargs = dict(w=None, camera=None, generic=NOTHING_LEFT, config=FAST)
+    final = fit.Model(("damping",), 0, {"g": 1.10 * NOMINAL.g, "a": 0.995 * NOMINAL.a, "b": 0.2})
+    bent = fit.Model((), 0, {"g": 0.992 * NOMINAL.g, "a": 1.16 * NOMINAL.a})
+    named = name_effects(final, NOMINAL, refit=bent, **kwargs)
+    assert [e.effect for e in named.effects] == ["damping", "gravity"], named.verdict
+    assert abs(named.effects[1].value - 1.10) < 1e-9
+    # a nominal form that reads the nominal a and g: the effects' g compensates them, and a note says so
+    plain = bent.with_values({"g": 0.992 * NOMINAL.g, "a": 1.01 * NOMINAL.a})
+    kept = name_effects(final, NOMINAL, refit=plain, **kwargs)
+    assert [e.effect for e in kept.effects] == ["damping"], kept.verdict
+    assert any(n.startswith("g refits to 11.000 (x1.100 the reference 10.000) with the effects, but to 9.920 (x0.992)")
+               and "not a gravity error" in n for n in kept.notes), kept.notes
+
+
+def test_a_gain_under_gymnasiums_own_clip_is_checked_against_the_nominal_form_with_that_clip() -> None:
+    """A gain of 1.15, starts of up to 6 rad/s: the clip alone was chosen (a x1.154), "none" read a x1.001, and the
+    verdict was "no significant gap"."""
+    from piga.diagnostics.diagnose import nominal_form
+
+    none = scored((), -1000.0, 1.2e-4)
+    none = replace(none, model=none.model.with_values({"g": 0.974 * NOMINAL.g, "a": 1.001 * NOMINAL.a}))
+    clip = scored(("speed_clip",), -1161.0, 1.8e-5, v=7.99)
+    clip = replace(clip, model=clip.model.with_values({**clip.model.values, "a": 1.145 * NOMINAL.a}))
+    candidates = Candidates(none, none, [clip])
+    final = clip.model.with_values({**clip.model.values, "a": 1.154 * NOMINAL.a, "v": 8.0})
+    assert nominal_form(candidates, final, True, FAST) is clip.model
+    assert nominal_form(candidates, final, False, FAST) is none.model  # from another system the clip is a gap
+    at6 = final.with_values({**final.values, "v": 6.0})
+    assert nominal_form(candidates, at6, True, FAST) is none.model  # a clip that is not Gymnasium's
+    kwargs = dict(w=None, camera=None, generic=NOTHING_LEFT, config=FAST)
+    named = name_effects(final, NOMINAL, refit=nominal_form(candidates, final, True, FAST), **kwargs)
+    assert named.verdict_class == "gain" and abs(named.effects[0].value - 1.154) < 1e-9, named.verdict
+    assert any("Gymnasium's own ±8 rad/s clip" in n for n in named.notes)
+    plain = name_effects(final, NOMINAL, refit=none.model, **kwargs)
+    assert plain.verdict_class == "none"
+    assert any("(x1.001) in the nominal model's own form (no effect)" in n for n in plain.notes), plain.notes
+
+
+def test_gymnasiums_own_clip_beside_an_effect_needs_no_free_run_gain(monkeypatch) -> None:
+    """Friction 0.15 and a gain of 1.2 on Gymnasium's pendulum: the clip beside friction lowered the BIC by 77 but the
+    typical free-run error rose 7%, so friction + clip was refused and damping + clip (2.4x worse on the free run)
+    chosen, read "damping 0.0323; gain 1.2"."""
+    module = importlib.import_module("piga.diagnostics.diagnose")
+    none = scored((), -1000.0, 2.15e-4)
+    table = {frozenset(s.model.effects): s for s in [
+        scored(("speed_clip",), -1075.2, 2.21e-4, v=7.94),
+        scored(("friction",), -1063.8, 2.47e-5, c=0.156),
+        scored(("damping",), -1055.5, 7.35e-5, b=0.036),
+        scored(("friction", "speed_clip"), -1140.6, 2.64e-5, c=0.15, v=8.0),
+        scored(("damping", "speed_clip"), -1122.0, 6.36e-5, b=0.032, v=8.03),
+        scored(("damping", "friction"), -1057.3, 2.54e-5, b=0.0, c=0.156),
+    ]}
+
+    def from_table(effects, start, nom, windows, *args):
+        s = table.get(frozenset(effects))
+        return s.model if s is not None else fit.Model(tuple(effects), 0, {"g": 1e-12, "a": 1.0})  # ran off
+
+    monkeypatch.setattr(fit, "fit_candidate", from_table)
+    monkeypatch.setattr(module, "score", lambda m, *args: table[frozenset(m.effects)])
+    monkeypatch.setattr(module, "clip_binding", lambda *args: 0.007)
+    singles = sorted((s for k, s in table.items() if len(k) == 1), key=lambda s: s.bic)
+    config = DiagnoseConfig(max_effects=2)
+    w = SimpleNamespace(fit=None, fit1=None, free=None)
+    s = select(Candidates(none, none, singles), NOMINAL, w, config, known_clip=GYM_SPEED_CLIP)
+    assert s.chosen.name == "friction+speed_clip", [(x.tried, x.accepted) for x in s.steps]
+    assert s.rival is None
+    # the clip alone still earns no place on the free run, and beside friction it still needs the BIC drop
+    assert not next(x for x in s.steps if x.tried == "speed_clip").accepted
+    table[frozenset({"friction", "speed_clip"})] = scored(("friction", "speed_clip"), -1070.0, 2.64e-5, c=0.15, v=8.0)
+    assert select(Candidates(none, none, singles), NOMINAL, w, config, known_clip=GYM_SPEED_CLIP).chosen.name \
+        == "damping+speed_clip"
