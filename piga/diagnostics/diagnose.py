@@ -1458,7 +1458,14 @@ def summarise_vision(obs: Observations, rec_training: float, camera: CameraFindi
     if camera is not None:
         summary = CameraSummary(camera.camera, camera.table, camera.noise, int(stale.sum()) if stale is not None else 0,
                                 camera.drops, camera.drop_rate, camera.leading, camera.matched_error_nominal,
-                                camera.matched_error, "matched" if camera.rematched else "encoder")
+                                camera.matched_error, "matched" if camera.rematched else "encoder",
+                                camera.noise_correlation)
+        if camera.noise > config.camera.min_noise and camera.noise_correlation > config.camera.max_noise_correlation:
+            notes.append(f"the pixels that the pendulum never reaches change (a spread of {camera.noise:.2f} gray levels), "
+                         f"but their changes persist from frame to frame (correlation {camera.noise_correlation:.2f} between "
+                         f"successive frames, above {config.camera.max_noise_correlation:g}; sensor noise is drawn anew "
+                         "for every frame): a change of the picture that is not sensor noise, such as a moving shadow or "
+                         "the lighting, so no noise is named")
         if camera.rematched:
             notes.append("the dynamics are fitted on angles found by matching every frame to the decoder's renders "
                          "through the fitted camera (analysis by synthesis), not on the encoder's angles")

@@ -137,6 +137,8 @@ def _camera_lines(v: VisionSummary) -> list[str]:
         return []
     noise = (f"sensor noise {c.noise:.2f} gray levels on the pixels the pendulum never reaches"
              if math.isfinite(c.noise) else "sensor noise not measured (the pendulum reaches every pixel)")
+    if math.isfinite(c.noise_correlation):
+        noise += f" (their correlation between successive frames is {c.noise_correlation:.2f}; sensor noise's is 0)"
     lines = [
         f"- **Camera**: {noise}; "
         f"{c.repeated_frames} frames repeat the previous one (within 2 gray levels) ({c.dropped_frames} while the pendulum moves: "

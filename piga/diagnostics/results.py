@@ -248,6 +248,8 @@ class CameraSummary(_ByKey):
     """... with the accepted camera."""
     angles: str
     """"matched" (the dynamics use angles matched through the camera) or "encoder"."""
+    noise_correlation: float = float("nan")
+    """Correlation of the still pixels between successive frames: sensor noise has none (NaN: not measured)."""
 
 
 @dataclass(frozen=True)
