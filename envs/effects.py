@@ -64,6 +64,7 @@ first (one normal per pixel), then the drop (one uniform); reset draws only the 
 |---|---|---|---|---|
 | ``blur=σ`` | vision | 1e-6 <= σ <= 1000 (px) | ``cv2.GaussianBlur(x, (0, 0), σ)``: the kernel size follows from σ | :class:`FrameBlur` |
 | ``shift=p`` | vision | 1e-6 <= abs(p) <= 1000 (px) | x'[r, c] = x[r - p, c - p]: p px right and p px down, border replicated (``cv2.warpAffine``) | :class:`FrameShift` |
+| ``exposure=k`` | vision | 1e-6 <= k <= 100, abs(k - 1) >= 1e-6 (factor) | clip(round(k·x), 0, 255) as uint8: exposure or lighting; black stays black | :class:`FrameExposure` |
 | ``noise=s`` | vision | 1e-6 <= s <= 1000 (gray levels) | clip(round(x + s·ε), 0, 255) as uint8, ε ~ N(0, 1) per pixel | :class:`FrameNoise` |
 | ``frame_delay=k`` | vision | integer 1 <= k <= 1000 (steps) | at step t, the frame of step t - k; the reset frame for t < k | :class:`FrameDelay` |
 | ``frame_drop=p`` | vision | 1e-6 <= p < 1 (probability) | at each step, with probability p, the previous observed frame again (a dropped frame); never on reset | :class:`FrameDrop` |
@@ -379,6 +380,23 @@ class FrameShift(gym.ObservationWrapper):
         return cv2.warpAffine(observation, self._matrix, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
 
 
+class FrameExposure(gym.ObservationWrapper):
+    """A change of exposure or lighting: every gray level times a factor k, rounded and clipped to 0..255.
+
+    ``x' = clip(rint(k·x), 0, 255)``: black stays black, a white background becomes 255·k (k < 1: a darker
+    picture) or stays at 255 (k > 1: only the pendulum brightens).
+    """
+
+    def __init__(self, env: gym.Env, factor: float):
+        factor = _validated("exposure", factor)
+        _check_frame_space(env, "FrameExposure")
+        super().__init__(env)
+        self.factor = factor
+
+    def observation(self, observation: np.ndarray) -> np.ndarray:
+        return np.clip(np.rint(observation * self.factor), 0, 255).astype(np.uint8)
+
+
 class FrameNoise(gym.ObservationWrapper):
     """Sensor noise: adds N(0, s²) per pixel from the env's ``np_random``, rounds, and clips to 0..255."""
 
@@ -519,6 +537,9 @@ EFFECTS: dict[str, EffectSpec] = {
                        lambda v: MIN_EFFECT <= v <= MAX_PIXELS, FrameBlur),
     "shift": EffectSpec("vision", "image shift right and down", "px", f"a number within ±{MAX_PIXELS:g}, at least {MIN_EFFECT:g} from 0",
                         lambda v: MIN_EFFECT <= abs(v) <= MAX_PIXELS, FrameShift),
+    "exposure": EffectSpec("vision", "factor on every gray level (exposure, lighting)", "factor",
+                           f"in [{MIN_EFFECT:g}, {MAX_GAIN_ERROR:g}] and at least {MIN_EFFECT:g} from 1",
+                           lambda v: MIN_EFFECT <= v <= MAX_GAIN_ERROR and abs(v - 1) >= MIN_EFFECT, FrameExposure),
     "noise": EffectSpec("vision", "pixel noise standard deviation", "gray levels", f"in [{MIN_EFFECT:g}, {MAX_NOISE:g}]",
                         lambda v: MIN_EFFECT <= v <= MAX_NOISE, FrameNoise),
     "frame_delay": EffectSpec("vision", "camera latency", "steps", f"an integer >= 1 and <= {MAX_DELAY_STEPS}",
@@ -533,7 +554,7 @@ EFFECTS: dict[str, EffectSpec] = {
 STAGES: dict[str, tuple[str, ...]] = {
     "torque": ("speed_clip", "cogging", "bias", "friction", "damping", "gain"),
     "command": ("saturation", "deadzone", "delay"),
-    "frame": ("blur", "shift", "noise", "frame_delay", "frame_drop"),
+    "frame": ("blur", "shift", "exposure", "noise", "frame_delay", "frame_drop"),
 }
 
 Effects = tuple[tuple[str, float], ...]
@@ -630,6 +651,7 @@ __all__ = [
     "FrameBlur",
     "FrameDelay",
     "FrameDrop",
+    "FrameExposure",
     "FrameNoise",
     "FrameShift",
     "SpeedClip",

@@ -1,5 +1,5 @@
-"""What the diagnosis says about the picture: sensor noise against a change of the picture, and frames that the model
-cannot read."""
+"""What the diagnosis says about the picture: sensor noise against a change of the picture, and a picture darker or
+brighter than the model's, which its encoder cannot read."""
 
 from __future__ import annotations
 
@@ -24,14 +24,18 @@ def model():
     return rod_model(SIZE)
 
 
-def _recording(path: Path, model, change: str) -> Path:
-    """A file of N swinging sequences of T frames from the rod model's decoder, with sensor noise or a shadow drawn on."""
+def _recording(path: Path, model, change: str, exposure: float = 1.0, noise: float = 3.0) -> Path:
+    """A file of N swinging sequences of T frames from the rod model's decoder, with sensor noise or a shadow drawn on
+    (or neither: ``change`` "none"), seen with an ``exposure``."""
     rng = np.random.default_rng(3)
     t = np.arange(T)
     theta = rng.uniform(-math.pi, math.pi, (N, 1)) + 0.3 * np.sin(0.5 * t + rng.uniform(0, 6, (N, 1)))  # (N, T)
     frames = _renders(model, torch.from_numpy(theta.ravel())).astype(np.float64).reshape(N, T, SIZE, SIZE)
-    if change == "noise":
-        frames += 3.0 * rng.normal(size=frames.shape)
+    frames = np.minimum(frames * exposure, 255)
+    if change == "none":
+        pass
+    elif change == "noise":
+        frames += noise * rng.normal(size=frames.shape)
     else:  # a soft dark blob that drifts across the picture, as a moving shadow does
         ys, xs = np.mgrid[0:SIZE, 0:SIZE]
         cx = rng.uniform(0, SIZE, (N, 1)) + 1.5 * t  # (N, T)
@@ -75,3 +79,50 @@ def test_repeated_frames_do_not_hide_sensor_noise(model, tmp_path: Path) -> None
         f["frames"][...] = frames
     found = V.camera_stage(model, str(path), np.zeros((N, T)), np.arange(N) < 16, stale)
     assert abs(found.noise_correlation) < 0.1 and "noise" in {e["effect"] for e in found.effects}
+
+
+@pytest.mark.parametrize("exposure, change, noise", [(0.85, "none", 0), (0.7, "noise", 3), (1.3, "none", 0),
+                                                    (1.0, "none", 0), (1.0, "noise", 3), (1.0, "noise", 20)])
+def test_another_exposure_is_named_and_read_through(model, tmp_path: Path, exposure: float, change: str,
+                                                    noise: float) -> None:
+    """A picture 15% darker than the model's was read by the encoder 110° off, and the diagnosis blamed the dynamics;
+    it is an exposure, fitted with the camera and matched through. A clean or merely noisy picture has none (noise of
+    20 gray levels, clipped at white, was read as a darker picture by a least-squares fit)."""
+    path = _recording(tmp_path / "rec.h5", model, change, exposure, noise)
+    found = V.camera_stage(model, str(path), np.zeros((N, T)), np.arange(N) < 16, None)
+    named = {e["effect"]: e for e in found.effects}
+    if exposure == 1.0:
+        assert "exposure" not in named and abs(found.camera.exposure - 1) * 255 <= V.CameraConfig().min_exposure
+        return
+    assert set(named) == ({"exposure", "noise"} if change == "noise" else {"exposure"})
+    lo, hi = named["exposure"]["interval"]
+    # a brighter picture shows only on the rod, whose edges are anti-aliased: within 3%
+    assert named["exposure"]["value"] == pytest.approx(exposure, abs=0.01 if exposure < 1 else 0.03) and lo <= named["exposure"]["value"] <= hi
+    assert found.rematched and found.camera.blur == 0 and found.camera.dx == found.camera.dy == 0
+    assert found.matched_error < (0.2 if exposure < 1 else 0.6) * found.matched_error_nominal
+
+
+def test_the_diagnose_page_gives_the_camera_stage_s_thresholds() -> None:
+    """The page's numbers are CameraConfig's."""
+    text = " ".join((Path(__file__).resolve().parents[1] / "docs" / "commands" / "diagnose.md").read_text().split())
+    c = V.CameraConfig()
+    assert f"changes white by more than {c.min_exposure:g} gray levels" in text
+    assert f"lowers the held-out residual by more than {100 * c.min_drop:g}%" in text
+    assert f"lower it by more than {100 * c.min_drop:g}%" in text
+    assert f"named above {c.min_noise:g} gray level" in text
+    assert f"successive frames of at most {c.max_noise_correlation:g}" in text
+
+
+def test_another_scene_is_refused_unless_a_camera_explains_it() -> None:
+    """A picture 30% darker re-rendered 237x worse than the training frames and was refused as another scene; through
+    its exposure it matches at 0.5x, and is diagnosed. Without an accepted camera, or one that still matches badly,
+    the refusal stands."""
+    from piga.diagnostics.diagnose import check_scene_through_camera
+    from piga.diagnostics.observe import NotTheSceneError
+
+    unlike = NotTheSceneError("this is not the scene the model knows")
+    check_scene_through_camera(None, V.Camera(), 1.0, 1e-4, 100)  # the scene passed: nothing to decide
+    check_scene_through_camera(unlike, V.Camera(exposure=0.7), 1.8e-4, 3.9e-4, 100)
+    for camera, matched in ((V.Camera(), 1e-4), (V.Camera(exposure=0.7), 0.05), (V.Camera(exposure=0.7), math.nan)):
+        with pytest.raises(NotTheSceneError):
+            check_scene_through_camera(unlike, camera, matched, 3.9e-4, 100)

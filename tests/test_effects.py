@@ -193,6 +193,14 @@ def test_shift_moves_the_picture_right_and_down(plain: tuple[np.ndarray, np.ndar
         assert got.tobytes() == clean[np.ix_(rows, rows)].tobytes()
 
 
+@pytest.mark.parametrize("k", [0.85, 1.3])
+def test_exposure_multiplies_every_level_and_clips_at_white(plain: tuple[np.ndarray, np.ndarray], k: float) -> None:
+    states, frames = rollout({"exposure": k}, image_size=SIZE)
+    assert states.tobytes() == plain[0].tobytes()  # a camera effect leaves the motion alone
+    expected = np.clip(np.rint(plain[1].astype(np.float64) * k), 0, 255).astype(np.uint8)
+    assert frames.tobytes() == expected.tobytes()
+
+
 def test_noise_is_gaussian_from_np_random_and_reproducible(plain: tuple[np.ndarray, np.ndarray]) -> None:
     std = 6.0
     states, frames = rollout({"noise": std}, image_size=SIZE)

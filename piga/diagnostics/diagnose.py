@@ -88,8 +88,8 @@ from piga.diagnostics.residuals import (action_correlation, autocorrelation, bin
 from piga.diagnostics.results import (Ambiguity, CameraSummary, CandidateRow, Diagnosis, Effect, Gap, GenericBasis,
                                       Naming, PixelErrors, Score, SelectionStep, VisionSummary)
 from piga.diagnostics.twin import MEASURABLE_GAP, calibrate_floor, gap_closure, mean_gap_closure, twin_floor
-from piga.diagnostics.vision import (MAX_BLUR, MAX_SHIFT, Camera, CameraConfig, CameraFindings, angle_table,
-                                     camera_stage, match, match_file)
+from piga.diagnostics.vision import (MAX_BLUR, MAX_EXPOSURE, MAX_SHIFT, MIN_EXPOSURE, Camera, CameraConfig,
+                                     CameraFindings, angle_table, camera_stage, match, match_file)
 from piga.io.choices import check_ranges, check_types
 from piga.world.model import PhysicsModel
 from piga.diagnostics.fit import Nominal
@@ -283,12 +283,19 @@ def diagnose(model: PhysicsModel, data: str | os.PathLike[str], config: Diagnose
     obs = observe(model, data, progress=progress)
     if blank is None:  # the training file is gone: the recording's frames give the scale
         check_training(checkpoint, rec_training, obs.blank_mse, config.max_training_fraction)
-    check_scene(obs, rec_training, config.max_scene_ratio)
+    try:
+        check_scene(obs, rec_training, config.max_scene_ratio)
+        unlike = None
+    except NotTheSceneError as error:  # unless a camera (another exposure) explains it: decided after the camera stage
+        unlike = error
     if obs.stale is not None and obs.stale[:, 1:].all():  # before the camera stage, which would match them all
+        if unlike is not None:
+            raise unlike
         raise DiagnosisInputError("every frame of the recording repeats the previous one (a constant or frozen video): "
                                   "there is no motion to diagnose")
     camera = camera_stage(model, str(data), obs.theta, obs.fit, obs.stale, config.camera, seed=config.seed,
                           progress=progress)
+    check_scene_through_camera(unlike, camera.camera, camera.matched_error, rec_training, config.max_scene_ratio)
     check_camera_in_range(camera.camera, camera.matched_error, rec_training)
     return analyse(obs, nominal_of(model), config, model=model, rec_training=rec_training,
                    progress=progress, camera=camera, arrow=training_arrow(checkpoint),
@@ -296,21 +303,35 @@ def diagnose(model: PhysicsModel, data: str | os.PathLike[str], config: Diagnose
                    matched=lambda: match_file(model, str(data), Camera()))  # both read only when needed
 
 
+def check_scene_through_camera(unlike: NotTheSceneError | None, camera: Camera, matched_error: float,
+                               rec_training: float, max_ratio: float) -> None:
+    """Raises ``unlike`` (the encoder's re-rendering refused the recording as another scene) unless the accepted
+    ``camera`` explains the difference: its frames then match the decoder's renders through that camera within
+    ``max_ratio`` times the training error (a picture 30% darker re-rendered 237x worse than the training frames, and
+    was refused as another scene; through its exposure 0.70 it matches at 0.5x)."""
+    if unlike is not None and (camera == Camera() or not matched_error <= max_ratio * rec_training):
+        raise unlike
+
+
 def check_camera_in_range(camera: Camera, matched_error: float, rec_training: float) -> None:
     """Refuses a recording whose accepted camera stops at a bound of the camera candidates (blur
-    :data:`~piga.diagnostics.vision.MAX_BLUR` px, shifts :data:`~piga.diagnostics.vision.MAX_SHIFT` px): the camera
+    :data:`~piga.diagnostics.vision.MAX_BLUR` px, shifts :data:`~piga.diagnostics.vision.MAX_SHIFT` px, the exposure's
+    :data:`~piga.diagnostics.vision.MIN_EXPOSURE` and :data:`~piga.diagnostics.vision.MAX_EXPOSURE`): the camera
     lies beyond what they describe, and every angle read through it is a guess (dm_control's camera 0, looking down
     at 45°, read by a model of the face-on camera: "blur 4 px; shift -5, -5 px; damping 48.7", with the actuation
     "flipped")."""
     at = [f"blur {camera.blur:g} px"] if camera.blur >= (1 - 1e-3) * MAX_BLUR else []
     at += [f"{name} {value:g} px" for name, value in (("shift right", camera.dx), ("shift down", camera.dy))
            if abs(value) >= (1 - 1e-3) * MAX_SHIFT]
+    at += [f"exposure {camera.exposure:g}" for bound in (MIN_EXPOSURE, MAX_EXPOSURE)
+           if abs(camera.exposure - bound) <= 1e-3 * bound]
     if not at:
         return
     worse = f", and its frames still re-render {matched_error / rec_training:.0f}x worse than the model's training " \
             "frames" if rec_training > 0 else ""
     raise NotTheSceneError(f"this is not a camera the model knows: the best camera fit stops at the candidates' bound "
-                           f"({', '.join(at)}; blur up to {MAX_BLUR:g} px, shifts up to {MAX_SHIFT:g} px){worse}; "
+                           f"({', '.join(at)}; blur up to {MAX_BLUR:g} px, shifts up to {MAX_SHIFT:g} px, "
+                           f"exposure {MIN_EXPOSURE:g} to {MAX_EXPOSURE:g}){worse}; "
                            "identify a model on this camera's frames")
 
 
@@ -1469,7 +1490,7 @@ def summarise_vision(obs: Observations, rec_training: float, camera: CameraFindi
         if camera.rematched:
             notes.append("the dynamics are fitted on angles found by matching every frame to the decoder's renders "
                          "through the fitted camera (analysis by synthesis), not on the encoder's angles")
-    named_vision = {"blur", "shift", "noise"} & {e.effect for e in effects}
+    named_vision = {"blur", "shift", "exposure", "noise"} & {e.effect for e in effects}
     if ratio is not None and ratio > config.vision_ratio and not named_vision:
         notes.append(f"vision gap: the autoencoder re-renders the real frames {ratio:.1f}x worse than its "
                      "training frames (blur, noise, a shifted camera or a different scene?)")

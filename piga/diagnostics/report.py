@@ -150,12 +150,13 @@ def _camera_lines(v: VisionSummary) -> list[str]:
            else "the encoder's angles."), "",
         "  Camera candidates, fitted by matching frames to the decoder's renders over the whole circle "
         "(fit split), scored on held-out frames:", "",
-        "  | candidate | blur σ (px) | dx (px) | dy (px) | held-out matched MSE | drop | accepted |", "  |---|---|---|---|---|---|---|",
+        "  | candidate | blur σ (px) | dx (px) | dy (px) | exposure | held-out matched MSE | drop | accepted |",
+        "  |---|---|---|---|---|---|---|---|",
     ]
     for row in c.camera_candidates:
         cam = row["camera"]
         lines.append(f"  | {row['candidate']} | {cam['blur']:.3f} | {cam['dx']:.3f} | {cam['dy']:.3f} | "
-                     f"{row['held_out_matched_mse']:.3e} | {100 * row['drop']:.1f}% | {'yes' if row['accepted'] else 'no'} |")
+                     f"{cam.get('exposure', 1.0):.3f} | {row['held_out_matched_mse']:.3e} | {100 * row['drop']:.1f}% | {'yes' if row['accepted'] else 'no'} |")
     lines.append("")
     return lines
 

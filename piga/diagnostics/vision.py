@@ -1,4 +1,4 @@
-"""Camera-side candidates of the gap: blur, a shifted camera, sensor noise, dropped and delayed frames.
+"""Camera-side candidates of the gap: blur, a shifted camera, exposure, sensor noise, dropped and delayed frames.
 
 The dynamics candidates (:mod:`piga.diagnostics.fit`) explain the encoded angles. A camera effect
 instead changes how a state looks, so it is fitted on the rendering side, by analysis by synthesis
@@ -14,6 +14,10 @@ with the identified decoder D:
   bounded scalar searches), and scored on a held-out sample. V_ψ blurs with a Gaussian kernel
   (``cv2.GaussianBlur``'s, reflected border) and then translates with ``affine_grid`` /
   ``grid_sample`` (border replicated), the equations of :mod:`envs.effects`.
+- **Exposure k** (a darker or brighter picture: the exposure, the lighting) multiplies every level,
+  clipped at white, after the blur and the shift. It is fitted first (:func:`fit_exposure`), and the
+  blur and the shift on top of it: the encoder, trained on one exposure, reads a picture darkened by
+  15% as angles 110° off (median), while matching through the fitted exposure reads them within 0.1°.
 - **Noise s** (gray levels) is fitted on the pixels that the pendulum never reaches (the decoder's
   renders over the whole circle leave them at the background): their temporal spread around the
   per-pixel median, by maximum likelihood of a rounded Gaussian censored at 0 and 255 (a white
@@ -42,6 +46,8 @@ from piga.world.model import PhysicsModel, frames_to_float
 TABLE_SIZE = 720
 #: Bounds of the camera fit: blur σ in px, shift in px.
 MAX_BLUR, MAX_SHIFT = 4.0, 5.0
+#: Bounds of the exposure factor's fit.
+MIN_EXPOSURE, MAX_EXPOSURE = 0.4, 2.5
 
 
 @dataclass(frozen=True)
@@ -54,11 +60,14 @@ class Camera:
     """Shift to the right (px): x'[r, c] = x[r, c - dx]."""
     dy: float = 0.0
     """Shift down (px): x'[r, c] = x[r - dy, c]."""
+    exposure: float = 1.0
+    """Factor on every level, clipped at white (exposure, lighting): x' = min(k·x, 1); 1: none."""
 
     def material(self, config: CameraConfig) -> set[str]:
-        """The effects of this camera that are big enough to name: "blur" and/or "shift"."""
+        """The effects of this camera that are big enough to name: "blur", "shift" and/or "exposure"."""
         return ({"blur"} if self.blur > config.min_blur else set()) | \
-            ({"shift"} if max(abs(self.dx), abs(self.dy)) > config.min_shift else set())
+            ({"shift"} if max(abs(self.dx), abs(self.dy)) > config.min_shift else set()) | \
+            ({"exposure"} if 255 * abs(self.exposure - 1) > config.min_exposure else set())
 
     def apply(self, frames: Tensor) -> Tensor:
         """(K, C, H, W) frames in [0, 1] -> the same frames as this camera sees them."""
@@ -77,6 +86,8 @@ class Camera:
             omega = torch.tensor([[1.0, 0.0, -2 * self.dx / w], [0.0, 1.0, -2 * self.dy / h]], dtype=x.dtype)
             grid = F.affine_grid(omega.expand(n, 2, 3), list(x.shape), align_corners=False)  # (K, H, W, 2)
             x = F.grid_sample(x, grid, mode="bilinear", padding_mode="border", align_corners=False)
+        if abs(self.exposure - 1) > 1e-6:
+            x = (x * self.exposure).clamp(max=1.0)
         return x
 
 
@@ -141,18 +152,19 @@ def matched_error(model: PhysicsModel, camera: Camera, x: Tensor, size: int = TA
 
 
 def fit_camera(model: PhysicsModel, x: Tensor, blur: bool = True, shift: bool = True, rounds: int = 2,
-               renders: tuple[Tensor, Tensor] | None = None) -> Camera:
-    """The camera (blur σ and/or shift dx, dy) that minimises the matched residual of frames ``x`` (M, P).
+               renders: tuple[Tensor, Tensor] | None = None, base: Camera = Camera()) -> Camera:
+    """The camera (blur σ and/or shift dx, dy) that minimises the matched residual of frames ``x`` (M, P); the
+    parameters not fitted keep the values of ``base`` (its exposure, :func:`fit_exposure`).
 
     Coordinate descent: bounded scalar searches on each parameter in turn, ``rounds`` times. ``renders``: the
     :func:`decoder_renders` of ``TABLE_SIZE // 2`` angles, when already computed.
     """
     from scipy.optimize import minimize_scalar
 
-    cam = {"blur": 0.0, "dx": 0.0, "dy": 0.0}
+    cam = dict(base.__dict__)
     names = (["dx", "dy"] if shift else []) + (["blur"] if blur else [])
     if not names:
-        return Camera()
+        return base
     renders = decoder_renders(model, TABLE_SIZE // 2) if renders is None else renders  # the same for every camera tried
     for _ in range(rounds):
         for name in names:
@@ -169,6 +181,43 @@ def fit_camera(model: PhysicsModel, x: Tensor, blur: bool = True, shift: bool = 
                                   options={"xatol": 0.01})
             cam[name] = float(res.x) if res.fun <= objective(best) else float(best)
     return Camera(**cam)
+
+
+def fit_exposure(model: PhysicsModel, frames: np.ndarray, still: np.ndarray, x: Tensor,
+                 renders: tuple[Tensor, Tensor], min_change: float) -> Camera:
+    """The exposure k of uint8 frames (M, H, W) (first channel), flattened in ``x`` (M, P).
+
+    Where the pixels that the pendulum never reaches (``still``, (H, W)) show it (not black), k is the median over them of
+    each pixel's median over the frames divided by the decoder's background there: medians, because a least-squares
+    fit is biased by sensor noise on a white background, which the clip at 255 censors from above (measured: noise
+    of 20 gray levels fitted as k = 0.972, a "darker picture" of 7 gray levels), and a moving shadow covers a pixel
+    in a few frames only. A white background that stays white (k within ``min_change`` gray levels of 1 there) does
+    not show a brighter picture, which only lightens the pendulum: k >= 1 is then fitted by the matched residual,
+    where the noise's censoring can only pull k below 1.
+    """
+    from scipy.optimize import minimize_scalar
+
+    background = renders[1].median(0).values[0].numpy()  # (H, W) the decoder's level, in [0, 1]
+    lit = still & (background > 0.2)  # a black background stays black under any exposure
+    if lit.any():
+        background = background[lit]  # (S,)
+        levels = np.median(frames[:, lit], axis=0) / 255.0  # (S,)
+        k = float(np.median(levels / background))
+        if 255 * abs(k - 1) > min_change or (background < 0.9).mean() > 0.5:  # a change, or a background that shows one
+            return Camera(exposure=float(np.clip(k, MIN_EXPOSURE, MAX_EXPOSURE)))
+        lo = 1.0
+    else:
+        lo = MIN_EXPOSURE
+
+    def objective(v: float) -> float:
+        return matched_error(model, Camera(exposure=float(v)), x, renders=renders)
+
+    grid = np.linspace(lo, MAX_EXPOSURE, 16)
+    best = grid[int(np.argmin([objective(v) for v in grid]))]
+    step = grid[1] - grid[0]
+    res = minimize_scalar(objective, bounds=(max(lo, best - step), min(MAX_EXPOSURE, best + step)), method="bounded",
+                          options={"xatol": 1e-3})
+    return Camera(exposure=float(res.x) if res.fun <= objective(best) else float(best))
 
 
 @torch.no_grad()
@@ -262,6 +311,8 @@ class CameraConfig:
     """Smallest blur σ (px) that is named."""
     min_shift: float = 0.3
     """Smallest shift (px, either axis) that is named."""
+    min_exposure: float = 3.0
+    """Smallest change of white by the exposure (gray levels, 255·|k - 1|) that is named."""
     min_noise: float = 1.0
     """Smallest sensor noise (gray levels) that is named (a clean camera gives 0)."""
     max_noise_correlation: float = 0.5
@@ -278,6 +329,7 @@ class CameraConfig:
             raise TypeError(f"CameraConfig.repeats must be a RepeatConfig; got {self.repeats!r}")
         check_ranges(self, {"fit_frames": (1, 10_000_000), "held_frames": (1, 10_000_000), "min_drop": (0, 1),
                             "min_blur": (0, 100), "min_shift": (0, 100), "min_noise": (0, 255),
+                            "min_exposure": (0, 255),
                             "max_noise_correlation": (-1, 1)})
 
 
@@ -302,7 +354,7 @@ class CameraFindings:
     matched_error: float
     """... with the accepted camera: the floor of any prediction's pixel error."""
     effects: list[dict]
-    """Named camera effects (blur, shift, noise, frame_drop) with value and unit."""
+    """Named camera effects (blur, shift, exposure, noise, frame_drop) with value and unit."""
     theta: np.ndarray | None = None
     """(N, T) angles matched under the accepted camera (None: the encoder's angles stand)."""
     noise_correlation: float = float("nan")
@@ -381,7 +433,7 @@ def camera_stage(model: PhysicsModel, path: str, theta: np.ndarray, fit: np.ndar
     """
     from tqdm.auto import tqdm
 
-    bar = tqdm(total=5, desc="camera candidates", disable=not progress)
+    bar = tqdm(total=6, desc="camera candidates", disable=not progress)
     rng = np.random.default_rng(seed)
     fit_rows, held_rows = np.flatnonzero(fit), np.flatnonzero(~fit)
     raw_fit, fit_seqs, fit_times = _sample(path, fit_rows, config.fit_frames, rng)
@@ -400,16 +452,27 @@ def camera_stage(model: PhysicsModel, path: str, theta: np.ndarray, fit: np.ndar
         return {"candidate": name, "camera": dict(cam.__dict__), "held_out_matched_mse": e, "drop": drop,
                 "accepted": bool(needs <= cam.material(config) and drop > config.min_drop)}
 
-    singles = [row("blur", fit_camera(model, x_fit, shift=False, renders=renders), e0, {"blur"})]
+    # the exposure first: a darker picture leaves every blur and shift worse than none (measured: a picture
+    # darkened by 15% gave the blur candidate no drop); the blur and the shift are then fitted on top of it
+    frames_2d = raw_fit if raw_fit.ndim == 3 else raw_fit[..., 0]
+    still = static_pixels(model)
+    lit = row("exposure", fit_exposure(model, frames_2d, still, x_fit, renders, config.min_exposure), e0, {"exposure"})
+    table.append(lit)
+    base, e_base = (Camera(**lit["camera"]), lit["held_out_matched_mse"]) if lit["accepted"] else (Camera(), e0)
     bar.update()
-    singles.append(row("shift", fit_camera(model, x_fit, blur=False, renders=renders), e0, {"shift"}))
+    label = "exposure+" if lit["accepted"] else ""
+    singles = [row(label + "blur", fit_camera(model, x_fit, shift=False, renders=renders, base=base), e_base, {"blur"})]
+    bar.update()
+    singles.append(row(label + "shift", fit_camera(model, x_fit, blur=False, renders=renders, base=base), e_base,
+                       {"shift"}))
     bar.update()
     table += singles
     best = max(singles, key=lambda r: r["drop"])
-    camera, e_cam = Camera(), e0
+    camera, e_cam = base, e_base
     if best["accepted"]:
         camera, e_cam = Camera(**best["camera"]), best["held_out_matched_mse"]
-        both = row("blur+shift", fit_camera(model, x_fit, renders=renders), e_cam, {"blur", "shift"} - {best["candidate"]})
+        both = row(label + "blur+shift", fit_camera(model, x_fit, renders=renders, base=base), e_cam,
+                   {"blur", "shift"} - {best["candidate"].removeprefix(label)})
         table.append(both)
         if both["accepted"]:
             camera, e_cam = Camera(**both["camera"]), both["held_out_matched_mse"]
@@ -423,9 +486,10 @@ def camera_stage(model: PhysicsModel, path: str, theta: np.ndarray, fit: np.ndar
         effects.append({"effect": "shift", "value": 0.5 * (camera.dx + camera.dy), "dx": camera.dx, "dy": camera.dy,
                         "dx_interval": ix, "dy_interval": iy, "unit": "px (mean of right and down)",
                         "interval": [0.5 * (ix[0] + iy[0]), 0.5 * (ix[1] + iy[1])]})
+    if camera.exposure != 1:
+        effects.append({"effect": "exposure", "value": camera.exposure, "unit": "factor on every gray level",
+                        "interval": camera_interval(model, camera, "exposure", x_fit, fit_seqs, step=0.01)})
 
-    frames_2d = raw_fit if raw_fit.ndim == 3 else raw_fit[..., 0]
-    still = static_pixels(model)
     noise, noise_ci = noise_level(frames_2d, still, interval=True)
     correlation = float("nan")
     if noise > config.min_noise:
