@@ -193,6 +193,19 @@ def test_a_frame_delay_is_refused_with_the_bound_it_breaks(tmp_path: Path, capsy
     assert _listing(tmp_path) == []
 
 
+def test_a_delay_and_a_frame_delay_that_add_up_to_a_sequence_are_refused(tmp_path: Path,
+                                                                         capsys: pytest.CaptureFixture[str]) -> None:
+    """delay=6 with frame_delay=6 in 12 frames passed each check alone and wrote frames that no action reached (the
+    same bytes with gain=50)."""
+    refused("piga-collect", ["--out", str(tmp_path / "x.h5"), "--quiet", "--workers", "1", "--sequences", "3", "--steps",
+                             "12", "--split", "1,1,1", "--image-size", "16", "--effect", "delay=6", "--effect",
+                             "frame_delay=5"], capsys,
+            "delay=6 and frame_delay=5 add up to 11 steps, not shorter than a sequence's 11 steps", "lower one of them")
+    assert _listing(tmp_path) == []
+    text = " ".join((ROOT / "docs" / "commands" / "collect.md").read_text().split())
+    assert "A `delay` or `frame_delay`, and the two together, must be shorter than a sequence" in text
+
+
 def test_the_collect_page_gives_the_blur_bound_of_the_code() -> None:
     text = " ".join((ROOT / "docs" / "commands" / "collect.md").read_text().split())
     assert MAX_BLUR_FRACTION == 8 and "sigma at most an eighth of the frame's side (8 px in 64 px frames)" in text

@@ -84,6 +84,13 @@ class CollectConfig:
             raise ValueError(f"effect frame_delay={effects['frame_delay']:g} steps is not shorter than a sequence's "
                              f"{self.steps - 1} steps (between its {self.steps} frames): they would all show the reset; "
                              "lower it or raise --steps")
+        # The action after frame 0 moves the state of step delay + 1, which the camera shows frame_delay steps later:
+        # each alone can pass its check while together they push every action past the last frame.
+        delay, frame_delay = effects.get("delay", 0), effects.get("frame_delay", 0)
+        if delay and frame_delay and delay + frame_delay >= self.steps - 1:
+            raise ValueError(f"effects delay={delay:g} and frame_delay={frame_delay:g} add up to {delay + frame_delay:g} "
+                             f"steps, not shorter than a sequence's {self.steps - 1} steps (between its {self.steps} "
+                             "frames): no action would reach a frame; lower one of them or raise --steps")
 
 
 def check_collect_sizes(sequences: int, steps: int, workers: int, seed: int, batch: int,
