@@ -206,6 +206,16 @@ def test_a_delay_and_a_frame_delay_that_add_up_to_a_sequence_are_refused(tmp_pat
     assert "A `delay` or `frame_delay`, and the two together, must be shorter than a sequence" in text
 
 
+def test_frames_stilled_by_frame_drop_name_the_effect(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """frame_drop=0.999999 (in its range) was told "a frozen camera ... actions too weak to move it"."""
+    line = refused("piga-collect", ["--out", str(tmp_path / "x.h5"), "--quiet", "--workers", "1", "--sequences", "3",
+                                    "--steps", "6", "--split", "1,1,1", "--image-size", "16", "--effect",
+                                    "frame_drop=0.999999"], capsys,
+                   "nothing moves: --effect frame_drop=0.999999 dropped every frame", "lower --effect frame_drop")
+    assert "too weak" not in line
+    assert _listing(tmp_path) == []
+
+
 def test_the_collect_page_gives_the_blur_bound_of_the_code() -> None:
     text = " ".join((ROOT / "docs" / "commands" / "collect.md").read_text().split())
     assert MAX_BLUR_FRACTION == 8 and "sigma at most an eighth of the frame's side (8 px in 64 px frames)" in text

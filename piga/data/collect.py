@@ -38,7 +38,7 @@ from envs.dmc import DMCPendulumConfig, make_dmc_pendulum
 from envs.fields import counted, number_text
 from envs.pendulum import MAX_ACTION, PENDULUM_DT, PixelPendulumConfig, make_pixel_pendulum
 from piga.io.atomic import check_writable_target
-from piga.data.schema import MAX_SEED, SPLITS, DatasetWriter, write_room
+from piga.data.schema import MAX_SEED, SPLITS, DatasetWriter, StillFramesError, write_room
 from piga.io.worker_signals import die_with_parent, quiet_worker_signals
 from piga.io.choices import check_types
 
@@ -289,6 +289,12 @@ def collect(
             # killer) under a step; it was an internal error with Gymnasium's traceback
             raise ChildProcessError(f"a collection worker process ended in the middle of a step (killed by a signal, "
                                     f"or out of memory?); nothing was written to {out}: run the command again") from None
+        drop = dict(attrs["effects"]).get("frame_drop")
+        if isinstance(exc, StillFramesError) and drop:  # the camera repeated the reset frame, not a still pendulum
+            raise StillFramesError(
+                f"{out}: nothing moves: --effect frame_drop={number_text(drop)} dropped every frame after the first in "
+                f"every sequence (each of the {t - 1} later frames is dropped with probability {number_text(drop)}), "
+                "so the video shows no motion; lower --effect frame_drop") from None
         raise
     vec.close()
     return Path(out)

@@ -114,6 +114,11 @@ class DataFormatError(ValueError):
     """A file does not follow piga's schema. The message names the dataset or attribute at fault."""
 
 
+class StillFramesError(DataFormatError):
+    """Frames in which nothing moves (:func:`still_error`): a writer that knows why (an effect that repeats frames)
+    can name that cause instead of the generic advice."""
+
+
 #: Largest |action| accepted in a file. Far beyond any torque of the systems here (the pendulum's
 #: is clipped to ±2); larger values are a unit or recording error, and they overflow the physics.
 MAX_ABS_ACTION = 1e6
@@ -466,12 +471,12 @@ def blank_error(path: str | os.PathLike[str], low: int, high: int, recorded: boo
                            f"learn from; {check}")
 
 
-def still_error(path: str | os.PathLike[str], recorded: bool = False) -> DataFormatError:
+def still_error(path: str | os.PathLike[str], recorded: bool = False) -> StillFramesError:
     """Frames in which nothing moves; ``recorded`` as :func:`blank_error`."""
     check = ("check the recording (a frozen camera, or one frame repeated)" if recorded else
              "check its source (a recording: a frozen camera, or one frame repeated; a simulation: starts at rest, and "
              "actions too weak to move it)")
-    return DataFormatError(f"{path}: nothing moves: in every sequence each frame is the same picture as its first, so "
+    return StillFramesError(f"{path}: nothing moves: in every sequence each frame is the same picture as its first, so "
                            f"the video carries no motion to learn from; {check}")
 
 
