@@ -2968,6 +2968,21 @@ def test_control_warns_that_a_baseline_run_did_not_learn(kind: str, baseline_run
     assert baseline_did_not_learn(tmp_path, RunKind(kind)) is None  # no record: nothing to say
 
 
+@pytest.mark.parametrize("kind", ["planet", "ddpg"])
+def test_control_warns_that_a_baseline_run_stopped_before_its_end(kind: str, baseline_runs: dict[str, Path],
+                                                                  tmp_path: Path,
+                                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    """An interrupted run (a checkpoint, no metrics.json) was scored without a word; a finished one that did not learn
+    was warned of, and so was a piga run without metrics.json."""
+    run = _run_copy(baseline_runs[kind], tmp_path / "run")
+    (run / "metrics.json").unlink()
+    code, _, err = run_in_process("piga-control", control.main, "--model", str(run), "--episodes", "1", "--steps", "20",
+                                  "--workers", "1", "--quiet", capsys=capsys)
+    assert code == 0 and err.strip().splitlines() == [
+        f"piga-control: warning: the run {run} has no metrics.json: it stopped before its end (interrupted, or killed) "
+        "and was never checked for learning; this used its last checkpoint (continue it with piga-baseline --resume)"], err
+
+
 def test_a_stderr_open_only_for_reading_is_taken_as_closed(tmp_path: Path) -> None:
     """pyenv's shim, run with 2>&-, left its script open on descriptor 2, read-only: the first write failed the command."""
     script = tmp_path / "held.txt"

@@ -368,8 +368,9 @@ def _model_warning(run_dir: str, kind: RunKind) -> str | None:
         warning = convergence_warning(run_dir)
         warning = warning.removeprefix("warning: ") if warning else None
     else:
-        why = baseline_did_not_learn(run_dir, kind)
-        warning = f"the run {run_dir} did not learn: {why}" if why else None
+        warning = baseline_unfinished(run_dir)
+        if warning is None and (why := baseline_did_not_learn(run_dir, kind)):
+            warning = f"the run {run_dir} did not learn: {why}"
     return warning.encode("utf-8", "surrogateescape").decode("utf-8", "replace") if warning else None
 
 
@@ -461,10 +462,27 @@ def baseline_did_not_learn(run_dir: str | Path, kind: RunKind) -> str | None:
         return None
 
 
+def baseline_unfinished(run_dir: str | Path) -> str | None:
+    """The warning (without its "warning: ") for a baseline run with a checkpoint but no metrics.json: piga-baseline
+    writes the record at its end, so the run was interrupted or killed, and never checked for learning; else None."""
+    from piga.io.checkpoint import CHECKPOINT, check_run_file
+
+    check_run_file(Path(run_dir) / "metrics.json")  # a pipe: refused, not tested
+    if (Path(run_dir) / "metrics.json").exists() or not (Path(run_dir) / CHECKPOINT).exists():
+        return None
+    return (f"the run {run_dir} has no metrics.json: it stopped before its end (interrupted, or killed) and was never "
+            "checked for learning; this used its last checkpoint (continue it with piga-baseline --resume)")
+
+
 def _warn_if_did_not_learn(run_dir: str, kind: RunKind) -> None:
-    """One warning line for a baseline run that did not learn (:func:`baseline_did_not_learn`), as for a piga run that
-    did not converge; after the command's refusals, so that a refused command prints one line."""
-    if not warn_if_still_training(PROG, run_dir) and (why := baseline_did_not_learn(run_dir, kind)) is not None:
+    """One warning line for a baseline run that did not learn (:func:`baseline_did_not_learn`) or stopped before its
+    end (:func:`baseline_unfinished`), as for a piga run that did not converge or stopped; after the command's
+    refusals, so that a refused command prints one line."""
+    if warn_if_still_training(PROG, run_dir):
+        return
+    if (unfinished := baseline_unfinished(run_dir)) is not None:
+        print(f"{PROG}: warning: {unfinished}", file=sys.stderr)
+    elif (why := baseline_did_not_learn(run_dir, kind)) is not None:
         print(f"{PROG}: warning: the run {run_dir} did not learn ({why}); these episodes score it all the same",
               file=sys.stderr)
 
