@@ -231,8 +231,20 @@ def _read_images(path: Path) -> Iterator[np.ndarray]:
     except Exception as exc:  # imageio and its plugins raise many types for foreign or corrupt files
         first = (str(exc).strip().splitlines() or [""])[0][:120]
         why = ("no reader knows its format" if "Could not find a backend" in first else  # imageio's words for it
-               f"{exc.__class__.__name__}{': ' + first if first else ''}")
+               "it is empty" if path.stat().st_size == 0 else
+               "it is an HDF5 file, such as piga's data files, which need no import" if _is_hdf5(path) else
+               f"damaged, or of a format its reader does not take{': ' + first if first else ''}")
         raise ValueError(f"{path}: not a readable video or image stack ({why}); piga-import takes {RECORDINGS}") from None
+
+
+def _is_hdf5(path: Path) -> bool:
+    """Whether ``path`` starts as an HDF5 file (a data file, not a recording); False where it cannot be read."""
+    import h5py
+
+    try:
+        return bool(h5py.is_hdf5(path))
+    except OSError:
+        return False
 
 
 def _frames_of(image: np.ndarray, path: Path) -> Sequence[np.ndarray]:

@@ -19,6 +19,7 @@ import contextlib
 import enum
 import json
 import os
+import pickle
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -197,8 +198,18 @@ def read_run_record(run_dir: str | os.PathLike[str]) -> tuple[dict[str, Any], st
     except FileNotFoundError:
         return {}, "is missing"
     except (OSError, ValueError) as exc:
-        return {}, f"cannot be read ({type(exc).__name__})"
+        return {}, f"cannot be read ({unreadable_record(exc)})"
     return (payload, None) if isinstance(payload, dict) else ({}, "is not a run record (not a JSON object)")
+
+
+def unreadable_record(exc: Exception) -> str:
+    """Why a JSON record of a run cannot be read, in words: its JSON broken (where), its bytes not text, or the
+    system's reason (no permission)."""
+    if isinstance(exc, json.JSONDecodeError):
+        return f"not valid JSON: {exc.msg.lower()} at line {exc.lineno}, column {exc.colno}"
+    if isinstance(exc, UnicodeDecodeError):
+        return "not text: its bytes are not UTF-8"
+    return exc.strerror.lower() if isinstance(exc, OSError) and exc.strerror else _first_sentence(exc)
 
 
 def require_piga_run(run_dir: str | os.PathLike[str], purpose: str) -> None:
@@ -302,9 +313,21 @@ def unreadable(path: Path, kind: RunKind, exc: Exception, what: str | None = Non
         article = "an" if what[:1].lower() in "aeiou" else "a"
         return ValueError(f"{path}: not {article} {what}: it lacks the entry {exc.args[0]!r} that {kind.writer} "
                           "writes; restore the run's own file, or train the run again with --overwrite")
-    return ValueError(f"{path}: not a readable {what} ({exc.__class__.__name__}: {_first_sentence(exc)}); "
+    return ValueError(f"{path}: not a readable {what} ({_unreadable_cause(path, exc)}); "
                       "it may be truncated (a full disk, an interrupted copy) or edited: restore it, or train the run "
                       "again with --overwrite")
+
+
+def _unreadable_cause(path: Path, exc: Exception) -> str:
+    """Why torch could not read ``path``, in words rather than an exception's name: an empty file ("Ran out of input"),
+    bytes that are no torch file at all (pickle's decode errors), or torch's own first sentence (a zip archive cut
+    short: "PytorchStreamReader failed reading zip archive: failed finding central directory")."""
+    with contextlib.suppress(OSError):
+        if path.stat().st_size == 0:
+            return "it is empty"
+    if isinstance(exc, (EOFError, UnicodeDecodeError, pickle.UnpicklingError)):
+        return "its bytes are not a torch file"
+    return _first_sentence(exc)
 
 
 @contextlib.contextmanager

@@ -108,7 +108,7 @@ def convergence_warning(run_dir: str | os.PathLike[str]) -> str | None:
     """
     import json
 
-    from piga.io.checkpoint import CHECKPOINT, check_run_file
+    from piga.io.checkpoint import CHECKPOINT, check_run_file, unreadable_record
 
     path = Path(run_dir) / "metrics.json"
     check_run_file(path)
@@ -124,7 +124,7 @@ def convergence_warning(run_dir: str | os.PathLike[str]) -> str | None:
                 "not written) and was never checked for convergence; this used its last checkpoint (continue it with "
                 "--resume)")
     except (OSError, ValueError) as exc:
-        return f"warning: {path} cannot be read ({type(exc).__name__}); whether the run converged is unknown"
+        return f"warning: {path} cannot be read ({unreadable_record(exc)}); whether the run converged is unknown"
     if not isinstance(metrics, dict):
         return f"warning: {path} is not a metrics record; whether the run converged is unknown"
     converged = metrics.get("converged", True)

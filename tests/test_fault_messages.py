@@ -1,0 +1,68 @@
+"""Messages in plain words: what is wrong with a file, not the name of the exception that found it."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+import torch
+
+from tests.test_faults import refused
+
+#: A Python exception's name, as it must not appear in a user's line.
+EXCEPTION_NAME = re.compile(r"\b[A-Z]\w*(Error|Exception)\b|EOFError")
+
+
+@pytest.mark.parametrize("content, needle", [
+    (b"", "checkpoint.pt: not a readable piga checkpoint (it is empty)"),  # "EOFError: Ran out of input"
+    (bytes(range(0xC1, 0x100)) * 20, "(its bytes are not a torch file)"),  # "UnicodeDecodeError: 'utf-8' codec ..."
+    (None, "(PytorchStreamReader failed reading zip archive"),  # "RuntimeError: PytorchStreamReader ..."
+], ids=["empty", "random", "cut"])
+def test_an_unreadable_checkpoint_is_said_in_words(content: bytes | None, needle: str, tmp_path: Path) -> None:
+    from piga.io.checkpoint import CHECKPOINT, RunKind, read_checkpoint
+
+    path = tmp_path / CHECKPOINT
+    if content is None:  # a checkpoint cut short
+        torch.save({"model": {"w": torch.zeros(1000)}}, path)
+        content = path.read_bytes()[:1000]
+    path.write_bytes(content)
+    with pytest.raises(ValueError) as error:
+        read_checkpoint(tmp_path, RunKind.PIGA)
+    assert needle in str(error.value) and "truncated" in str(error.value), error.value
+    assert not EXCEPTION_NAME.search(str(error.value)), error.value
+
+
+def test_a_broken_metrics_record_is_said_in_words(tmp_path: Path) -> None:
+    """It read "metrics.json cannot be read (JSONDecodeError)"."""
+    from piga.io.checkpoint import read_run_record
+    from piga.io.runs import convergence_warning
+
+    (tmp_path / "metrics.json").write_text("{bad")
+    (tmp_path / "config.json").write_bytes(b"\xff\xfe{")
+    warning = convergence_warning(tmp_path)
+    assert warning == (f"warning: {tmp_path / 'metrics.json'} cannot be read (not valid JSON: expecting property name "
+                       "enclosed in double quotes at line 1, column 2); whether the run converged is unknown"), warning
+    assert read_run_record(tmp_path) == ({}, "cannot be read (not text: its bytes are not UTF-8)")
+
+
+@pytest.mark.parametrize("name, needle", [
+    ("d.h5", "(it is an HDF5 file, such as piga's data files, which need no import)"),  # "OSError: cannot find loader"
+    ("empty.mp4", "(it is empty)"),
+    ("broken.mp4", "(damaged, or of a format its reader does not take"),  # "OSError: Could not load meta information"
+])
+def test_import_says_why_a_recording_cannot_be_read(name: str, needle: str, tmp_path: Path,
+                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    recording = tmp_path / name
+    if name.endswith(".h5"):
+        with h5py.File(recording, "w") as f:
+            f["frames"] = np.zeros((1, 4, 8, 8), np.uint8)
+    else:
+        recording.write_bytes(b"" if name == "empty.mp4" else b"\0\0\0\x18ftypmp42" + bytes(range(256)) * 8)
+    (tmp_path / "u.csv").write_text("u\n" + "0.1\n" * 12)
+    line = refused("piga-import", [str(recording), str(tmp_path / "u.csv"), "--dt", "0.05", "--steps", "4", "--out",
+                                   str(tmp_path / "o.h5")], capsys, f"{name}: not a readable video or image stack", needle)
+    assert not EXCEPTION_NAME.search(line), line
+    assert not (tmp_path / "o.h5").exists()
