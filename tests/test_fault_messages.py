@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+from dataclasses import replace
 from pathlib import Path
 
 import h5py
@@ -66,3 +67,29 @@ def test_import_says_why_a_recording_cannot_be_read(name: str, needle: str, tmp_
                                    str(tmp_path / "o.h5")], capsys, f"{name}: not a readable video or image stack", needle)
     assert not EXCEPTION_NAME.search(line), line
     assert not (tmp_path / "o.h5").exists()
+
+
+@pytest.fixture(scope="module")
+def continuous_run(tiny_data: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A one-epoch run of the 'continuous' preset's model (RK4 within the frame, a learned damping), finished."""
+    from piga.training.report import write_run_report
+    from piga.training.train import PRESETS, TrainConfig, train
+
+    run = tmp_path_factory.mktemp("continuous") / "run"
+    config = TrainConfig(epochs=1, batch_size=16, warmup_fraction=0.1, curriculum_fraction=0.1, threads=1)
+    model_config = replace(PRESETS["continuous"].model, rec_frames="input", pred_frames=4)
+    model, state = train(tiny_data, run, config, model_config, progress=False)
+    write_run_report(model, state, tiny_data, run)
+    return run
+
+
+@pytest.mark.parametrize("goal", [False, True])
+def test_control_refuses_a_continuous_model_before_reading_or_warning(goal: bool, continuous_run: Path, tmp_path: Path,
+                                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    """It printed the "did not converge" warning, and read --goal-image ("goal read from g15.png: 15.07 deg"), before
+    the refusal: two lines for one error."""
+    argv = ["--model", str(continuous_run), "--episodes", "1", "--steps", "20", "--quiet"]
+    if goal:
+        (tmp_path / "goal.png").write_bytes(b"not read: the refusal comes first")
+        argv += ["--goal-image", str(tmp_path / "goal.png")]
+    refused("piga-control", argv, capsys, f"{continuous_run}: this model integrates within the frame or learned a damping")

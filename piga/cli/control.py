@@ -190,6 +190,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.model:
         model, ckpt = load_model(args.model)
         check_pendulum_model(model, args.model)
+        _check_plannable(model, args.model)  # before the goal image is read and the warnings: the one line
     if args.goal_image:
         if model is None:
             raise PigaError("--goal-image needs --model: the goal is read from the image by the model's encoder")
@@ -286,6 +287,7 @@ def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: 
     if kind is RunKind.PIGA:
         model, checkpoint = load_model(args.model)  # fail early, in this process, on a bad folder
         check_pendulum_model(model, args.model)
+        _check_plannable(model, args.model)
     backend = connect_backend(args.ray)  # before the warning: a refused --ray is the one line on stderr
     if kind is RunKind.PIGA:
         warn_if_unconverged(PROG, args.model)
@@ -598,6 +600,18 @@ def check_pendulum_model(model: PhysicsModel, run_dir: str) -> None:
         raise PigaError(f"{run_dir}: the model takes {frames} frames, Gymnasium's pixel pendulum renders {size}x{size} "
                         f"gray ones; collect frames of that size (piga-collect --image-size {size}{default}) and train a "
                         "model on them")
+
+
+def _check_plannable(model: PhysicsModel, run_dir: str) -> None:
+    """Refuses a model that the pendulum planner's engine would plan wrongly (``--preset continuous``: RK4 within the
+    frame, or a learned damping), before anything else is read or warned of; the agent refuses it in the same words
+    (:meth:`agents.dynamics.PendulumDynamics.of`), after the goal image and the convergence warning."""
+    from agents.dynamics import PendulumDynamics
+
+    try:
+        PendulumDynamics.of(model.system, model.integrator)  # type: ignore[arg-type]
+    except ValueError as exc:
+        raise PigaError(f"{run_dir}: {exc}") from None
 
 
 def _warn_if_other_frames(run_dir: str, checkpoint: dict) -> None:
