@@ -216,6 +216,19 @@ def test_frames_stilled_by_frame_drop_name_the_effect(tmp_path: Path, capsys: py
     assert _listing(tmp_path) == []
 
 
+@pytest.mark.parametrize("argv", [["--effect", "frame_drop=0.999999"],  # refused as the file closes
+                                  ["--system", "spring", "--k", "1e-6"]])  # refused after the first batch
+def test_a_refusal_clears_the_progress_bar(argv: list[str], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Without --quiet, the bar stayed on the line above the error ("collect: 100%| 3/3"): two lines for one error."""
+    from tests.helpers import run_in_process
+
+    code, _, err = run_in_process("piga-collect", collect.main, "--out", str(tmp_path / "x.h5"), "--workers", "1",
+                                  "--sequences", "3", "--steps", "6", "--split", "1,1,1", *argv, capsys=capsys)
+    assert code == 1 and err.count("\n") == 1, repr(err)
+    shown = err.split("\r")[-1]  # what a terminal shows: the bar's line cleared, then overwritten by the error
+    assert shown.startswith("piga-collect: error: ") and "%|" not in shown, repr(err)
+
+
 def test_the_collect_page_gives_the_blur_bound_of_the_code() -> None:
     text = " ".join((ROOT / "docs" / "commands" / "collect.md").read_text().split())
     assert MAX_BLUR_FRACTION == 8 and "sigma at most an eighth of the frame's side (8 px in 64 px frames)" in text

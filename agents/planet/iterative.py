@@ -43,6 +43,7 @@ from piga.data.schema import (DataFormatError, DatasetInfo, DatasetWriter, check
                               load_rewards, read_sequences)
 from piga.io.atomic import write_json
 from piga.io.checkpoint import CHECKPOINT
+from piga.io.progress import close_bar
 
 #: The collected episodes' file in a run folder.
 COLLECTED = "collected.h5"
@@ -123,7 +124,7 @@ def collect_round(model: WorldModel, env_config: PixelPendulumConfig, config: It
             actions.append(shape(ep["actions"], np.float32))
             rewards.append(shape(ep["rewards"], np.float32))
     finally:
-        bar.close()
+        close_bar(bar)  # cleared on an error: its line is the last
         env.close()
     return {"frames": np.concatenate(frames), "actions": np.concatenate(actions), "rewards": np.concatenate(rewards), "returns": returns}
 

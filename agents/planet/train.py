@@ -34,6 +34,7 @@ from piga.data.schema import (DataFormatError, DatasetInfo, check_actions_file, 
                               check_pixel_pendulum_file, inspect_dataset, load_actions, load_rewards, read_sequences,
                               split_indices)
 from piga.data.windows import SequenceReader, loads_whole
+from piga.io.progress import close_bar
 from piga.io.resources import available_memory
 from piga.io.atomic import OutputFolder, write_json
 from piga.io.checkpoint import CHECKPOINT, RunKind, check_counts, resuming_from, write_checkpoint
@@ -365,7 +366,7 @@ def train_planet(
                 if config.max_minutes and state.elapsed > config.max_minutes * 60:
                     break
     finally:
-        bar.close()
+        close_bar(bar)  # cleared on an error: its line is the last
         if writer is not None:
             writer.close()
     model.eval()

@@ -43,6 +43,7 @@ from piga.io.atomic import OutputFolder, atomic_output, write_json
 from piga.io.checkpoint import (CHECKPOINT, RunKind, check_counts, read_checkpoint, resuming_from, unreadable,
                                 write_checkpoint)
 from piga.io.device import resolve_device, set_threads
+from piga.io.progress import close_bar
 
 __all__ = ["first_step_reaching", "make_env", "make_observation_env", "train_sb3"]
 
@@ -369,7 +370,7 @@ def train_sb3(config: SB3Config, run_dir: str | Path, autoencoder: str | Path | 
             if on_checkpoint is not None:
                 on_checkpoint(model.num_timesteps)
     finally:
-        bar.close()
+        close_bar(bar)  # cleared on an error: its line is the last
         venv.close()
         eval_env.close()
     metrics = {

@@ -554,6 +554,7 @@ def _close_progress_bars() -> None:
     # tqdm keeps its open bars in the class's _instances (what its own tqdm.write uses); it has no public list
     for bar in list(getattr(tqdm, "_instances", ())):
         with contextlib.suppress(Exception):  # a bar half built, or its stream gone: nothing more to show
+            bar.leave = False  # cleared, not left standing above the error line
             bar.close()
 
 

@@ -32,12 +32,12 @@ from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
-from tqdm.auto import tqdm
 
 from envs.dmc import DMCPendulumConfig, make_dmc_pendulum
 from envs.fields import counted, number_text
 from envs.pendulum import MAX_ACTION, PENDULUM_DT, PixelPendulumConfig, make_pixel_pendulum
 from piga.io.atomic import check_writable_target
+from piga.io.progress import progress_bar
 from piga.data.schema import MAX_SEED, SPLITS, DatasetWriter, StillFramesError, write_room
 from piga.io.worker_signals import die_with_parent, quiet_worker_signals
 from piga.io.choices import check_types
@@ -254,8 +254,9 @@ def collect(
     }
     vec = _vector_env(factory, workers, fresh=dmc)
     try:
-        with DatasetWriter(out, n, t, (size, size), 1, 2, attrs, overwrite=overwrite, rewards=True) as writer, \
-                tqdm(total=n, desc="collect", unit="seq", disable=not progress) as bar:  # closed before an error's line
+        # the bar outside the writer: one that refuses the file as it closes (frames in which nothing moves) clears it
+        with progress_bar(total=n, desc="collect", unit="seq", disable=not progress) as bar, \
+                DatasetWriter(out, n, t, (size, size), 1, 2, attrs, overwrite=overwrite, rewards=True) as writer:
             batch = max(config.batch, workers) // workers * workers
             for start in range(0, n, batch):
                 stop = min(start + batch, n)

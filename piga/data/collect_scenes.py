@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from tqdm.auto import tqdm
+from piga.io.progress import progress_bar
 
 from envs.scenes import SceneConfig, SceneError, check_forces_visible, generate_sequence, scene_config, state_names
 from piga.io.atomic import check_writable_target
@@ -107,9 +107,10 @@ def collect_scene(config: SceneCollectConfig, out: str | Path, overwrite: bool =
                + write_room(min(config.batch, n) * t * step_bytes, n * t * step_bytes), what)
     counts = split_counts(n, config.split)
     one = functools.partial(_one, scene=scene, seed=config.seed, steps=t, first_test=counts[0] + counts[1])
-    with DatasetWriter(out, n, t, (size, size, 3), 0, 4 * scene.n_objects, scene_attrs(config, command),
-                       overwrite=overwrite) as writer:
-        with tqdm(total=n, desc=f"collect {scene.scene}", unit="seq", disable=not progress) as bar:
+    # the bar outside the writer: one that refuses the file as it closes (blank frames) clears it
+    with progress_bar(total=n, desc=f"collect {scene.scene}", unit="seq", disable=not progress) as bar:
+        with DatasetWriter(out, n, t, (size, size, 3), 0, 4 * scene.n_objects, scene_attrs(config, command),
+                           overwrite=overwrite) as writer:
             for start in range(0, n, config.batch):
                 stop = min(start + config.batch, n)
                 frames = np.zeros((stop - start, t, size, size, 3), np.uint8)

@@ -5,6 +5,6 @@ checks memory and disk before a command allocates or writes, :mod:`.worker_signa
 processes stop cleanly, :mod:`.pool` runs jobs in worker processes (or, through :mod:`.ray_backend`, on a
 Ray cluster) and resumes them from their records, :mod:`.choices` checks a config's ``Literal`` fields,
 :mod:`.checkpoint` says what kind a run folder is and writes and reads its one checkpoint, :mod:`.runs`
-reads a training run's folder (its model and what it says about itself), and :mod:`.device` resolves the
-``--device`` choice to a torch device.
+reads a training run's folder (its model and what it says about itself), :mod:`.device` resolves the
+``--device`` choice to a torch device, and :mod:`.progress` clears a progress bar that an error ends.
 """
