@@ -216,6 +216,15 @@ def test_frames_stilled_by_frame_drop_name_the_effect(tmp_path: Path, capsys: py
     assert _listing(tmp_path) == []
 
 
+def test_fractional_counts_that_sum_to_the_sequences_are_told_to_be_whole(tmp_path: Path,
+                                                                         capsys: pytest.CaptureFixture[str]) -> None:
+    """--split 8.5,1,0.5 of 10 sequences was told to be "counts summing to 10", which it is."""
+    refused("piga-collect", ["--out", str(tmp_path / "x.h5"), "--quiet", "--sequences", "10", "--steps", "4",
+                             "--split", "8.5,1,0.5"], capsys,
+            "split (8.5, 1, 0.5) sums to 10 as counts must, but the counts must be whole numbers")
+    assert _listing(tmp_path) == []
+
+
 @pytest.mark.parametrize("argv", [["--effect", "frame_drop=0.999999"],  # refused as the file closes
                                   ["--system", "spring", "--k", "1e-6"]])  # refused after the first batch
 def test_a_refusal_clears_the_progress_bar(argv: list[str], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -122,6 +122,8 @@ def split_counts(n: int, split: Sequence[float]) -> tuple[int, int, int]:
             raise ValueError(f"split {shown} gives the training split no share of the {counted(n, 'sequence')}")
         valid, test = round(split[1] * n), round(split[2] * n)
         train = n - valid - test
+    elif sum(split) == n:  # they add up, but a sequence is not split in parts
+        raise ValueError(f"split {shown} sums to {n} as counts must, but the counts must be whole numbers")
     else:
         raise ValueError(f"split {shown} must be fractions summing to 1 or counts summing to {n}")
     if train < 1:
