@@ -178,6 +178,32 @@ def test_stale_partials_of_a_name_with_glob_characters_are_removed(tmp_path: Pat
     assert (tmp_path / ".run1.h5.partial-999999999").exists()
 
 
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="a zombie is told apart through Linux's /proc")
+def test_the_partial_file_of_a_zombie_writer_is_removed(tmp_path: Path) -> None:
+    """A rerun right after `timeout -s KILL` kept `.k4.h5.partial-PID`: the killed writer was a zombie, not yet reaped,
+    and kill(PID, 0) still found it."""
+    import subprocess
+    import time
+
+    from piga.io.atomic import partial_path, remove_stale_partials
+
+    target = tmp_path / "k4.h5"
+    child = subprocess.Popen(["true"])  # not waited for: a zombie once it exits
+    try:
+        deadline = time.monotonic() + 10
+        while Path(f"/proc/{child.pid}/stat").read_text().rpartition(")")[2].split()[0] != "Z":
+            assert time.monotonic() < deadline, "the child did not exit"
+            time.sleep(0.01)
+        stale = partial_path(target).with_name(partial_path(target).name.rsplit("-", 1)[0] + f"-{child.pid}")
+        stale.write_text("left by a killed run")
+        alive = partial_path(target).with_name(partial_path(target).name.rsplit("-", 1)[0] + f"-{os.getppid()}")
+        alive.write_text("a running writer's")
+        assert remove_stale_partials(target) == [stale]
+        assert alive.exists()
+    finally:
+        child.wait()
+
+
 @pytest.mark.parametrize("hard_links", [True, False])
 def test_a_file_that_appears_while_writing_is_kept(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                                                   hard_links: bool) -> None:

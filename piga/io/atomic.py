@@ -307,13 +307,22 @@ def partial_path(target: Path) -> Path:
 
 
 def _alive(pid: int) -> bool:
+    """Whether process ``pid`` still runs. A zombie does not: a writer killed by SIGKILL together with its parent
+    (``timeout -s KILL`` signals its own group, itself included) waits as one until init reaps it, and
+    ``kill(pid, 0)`` still finds it: a rerun started at once kept the partial file in 2 tries of 2, one started 2 s
+    later removed it. Linux's /proc gives the state ('Z', or 'X' for dead)."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
         return False
-    except PermissionError:  # alive, another user's
-        return True
-    return True
+    except PermissionError:  # alive, another user's (or a zombie: /proc says)
+        pass
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:  # no /proc (macOS): kill's word; or it has just been reaped
+        return not Path("/proc/self").exists() or Path(f"/proc/{pid}").exists()
+    state = stat.rpartition(")")[2].split()[:1]  # "pid (comm) S ...": comm may hold spaces and parentheses
+    return state not in (["Z"], ["X"])
 
 
 def remove_stale_partials(target: Path) -> list[Path]:
