@@ -57,7 +57,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium.wrappers import FrameStackObservation, GrayscaleObservation, ReshapeObservation, TransformObservation
 
-from envs.fields import check_field_kinds, number_text, upper_bound_text
+from envs.fields import check_field_kinds, lower_bound_text, number_text, upper_bound_text
 from envs.pendulum import MAX_IMAGE_SIZE, MIN_ACTUATION_GAIN
 
 __all__ = ["CAMERAS", "COLORS", "DMC_PHYSICS_DT", "DMC_EPISODE_STEPS", "DMCPendulumConfig", "MissingExtraError", "make_dmc_pendulum",
@@ -173,8 +173,9 @@ class DMCPendulumConfig:
             "max_speed": (0 <= self.max_speed <= MAX_SPEED, f"max_speed in [0, {MAX_SPEED_TEXT}]"),
             "camera": (self.camera in CAMERAS, f"camera in {CAMERAS}"),
             "color": (self.color in COLORS, f"color in {COLORS}"),
-            "camera_distance": ((self.length + 2 * TIP_RADIUS) / VIEW_HALF_SIDE <= self.camera_distance <= 3.0,
-                                "camera_distance in [(length + 0.1) / 0.7, 3]"),
+            "camera_distance": (self.camera_near <= self.camera_distance <= 3.0,
+                                f"camera_distance in [{lower_bound_text(self.camera_near, 4)}, 3] at length "
+                                f"{number_text(self.length)}: nearer, the camera crops the pendulum"),
         }
         for name, (ok, allowed) in checks.items():
             if not ok:
@@ -185,6 +186,12 @@ class DMCPendulumConfig:
         if self.camera == "fixed" and clash:  # they move the face-on camera only
             raise ValueError(f"DMCPendulumConfig.camera=fixed is dm_control's own camera, which {' and '.join(clash)} "
                              f"cannot move: drop {'it' if len(clash) == 1 else 'them'} or camera=fixed")
+
+    @property
+    def camera_near(self) -> float:
+        """The nearest ``camera_distance`` at which the pole and its tip, (length + 0.1) m, stay in the view, whose half
+        side is 0.7 m at distance 1."""
+        return (self.length + 2 * TIP_RADIUS) / VIEW_HALF_SIDE
 
     @property
     def max_mass(self) -> float:

@@ -6,13 +6,13 @@ a count."""
 from __future__ import annotations
 
 import numbers
-from decimal import ROUND_FLOOR, Context
+from decimal import ROUND_CEILING, ROUND_FLOOR, Context
 from dataclasses import fields
 from typing import Any
 
 import numpy as np
 
-__all__ = ["check_field_kinds", "counted", "number_text", "upper_bound_text"]
+__all__ = ["check_field_kinds", "counted", "lower_bound_text", "number_text", "upper_bound_text"]
 
 
 def check_field_kinds(config: Any) -> None:
@@ -54,3 +54,9 @@ def upper_bound_text(bound: float, digits: int) -> str:
     """An upper bound as a range writes it: ``digits`` significant digits, rounded down (π/0.02 as 157.0796 with 7, not
     157.1 with 4, which a refused 157.09 would seem to meet). ``decimal`` rounds down; ``format`` only to nearest."""
     return format(float(Context(prec=digits, rounding=ROUND_FLOOR).create_decimal(bound)), f".{digits}g")
+
+
+def lower_bound_text(bound: float, digits: int) -> str:
+    """A lower bound as a range writes it: ``digits`` significant digits, rounded up (0.6/0.7 as 0.8572 with 4, not
+    0.8571, which a refused 0.85714 would seem to meet); :func:`upper_bound_text`'s mirror."""
+    return format(float(Context(prec=digits, rounding=ROUND_CEILING).create_decimal(bound)), f".{digits}g")

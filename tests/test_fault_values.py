@@ -4,6 +4,7 @@ by their options."""
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -284,3 +285,16 @@ def test_a_file_that_is_no_hdf5_is_named_in_words(tmp_path: Path, capsys: pytest
         line = refused("piga-show", [str(tmp_path / name), "--out", str(tmp_path / "s.png")], capsys,
                        f"{name}: not a readable HDF5 file ({said}")
         assert "Error" not in line, line
+
+
+@pytest.mark.parametrize("length, bound", [(0.5, "0.8572"), (0.2, "0.4286")])
+def test_the_camera_distance_bound_is_a_number_at_the_length(length: float, bound: str) -> None:
+    """It read "camera_distance in [(length + 0.1) / 0.7, 3]": a formula in a default the user may not know."""
+    from envs.dmc import DMCPendulumConfig
+    from envs.fields import lower_bound_text
+
+    with pytest.raises(ValueError, match=re.escape(f"(camera_distance in [{bound}, 3] at length {length:g}: nearer, "
+                                                   "the camera crops the pendulum)")):
+        DMCPendulumConfig(length=length, camera_distance=0.01)
+    assert lower_bound_text(0.6 / 0.7, 4) == "0.8572" and lower_bound_text(0.5, 4) == "0.5"
+    DMCPendulumConfig(length=length, camera_distance=float(bound))  # the bound written is inside the range
