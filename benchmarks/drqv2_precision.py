@@ -27,7 +27,6 @@ import shlex
 import statistics
 import sys
 import time
-from pathlib import Path
 from typing import Any
 
 import torch

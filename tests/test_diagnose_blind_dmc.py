@@ -88,7 +88,7 @@ def test_an_explicit_reading_is_scored_under_mujocos_implicit_damping(bench) -> 
     case = {"variant": {"mass": 1.0, "length": 0.5, "damping": 0.1, "action_repeat": 1, "camera_distance": 1.0,
                         "flip": "none"}, "effects": {}}
     true = bench.truth(case)
-    h, factor = 0.02, 1 / (1 + 0.02 * 3 * true["b"])  # what an exact explicit reading gives
+    factor = 1 / (1 + 0.02 * 3 * true["b"])  # what an exact explicit reading gives (h = 0.02 s)
     explicit = {k: true[k] * factor for k in ("g", "a", "b")}
     older = bench.score(case, _report(["damping"], corrected=explicit))
     assert max(older["parameter_error"].values()) < 1e-9
