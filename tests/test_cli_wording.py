@@ -95,14 +95,19 @@ def blank_test_only(small_data: Path, tmp_path: Path) -> Path:
     return Path(path)
 
 
-def test_show_names_an_empty_split_before_blank_frames(blank_test_only: Path, tmp_path: Path,
+def test_show_names_an_empty_split_and_draws_blank_frames(blank_test_only: Path, tmp_path: Path,
                                                        capsys: pytest.CaptureFixture[str]) -> None:
     """It said "every frame is blank": true, but what --split to give is the first thing to change."""
     refused("piga-show", [str(blank_test_only), "--out", str(tmp_path / "m.png"), "--split", "valid"], capsys,
             "split 'valid' of", "is empty; give --split test (4 sequences)")
-    refused("piga-show", [str(blank_test_only), "--out", str(tmp_path / "m.png"), "--split", "test"], capsys,
-            "every frame is blank")  # a split that holds sequences: the frames are what is wrong
     assert not (tmp_path / "m.png").exists()
+    # a split that holds sequences: the blank frames are drawn, with one warning (a viewer is how one finds out)
+    from piga.cli.show import main
+
+    code, _, err = run_in_process("piga-show", main, str(blank_test_only), "--out", str(tmp_path / "m.png"), "--split",
+                                  "test", capsys=capsys)
+    assert code == 0 and (tmp_path / "m.png").exists()
+    assert err.count("\n") == 1 and "warning: " in err and "every frame is blank" in err and "drawn all the same" in err
 
 
 # ---------------------------------------------------------------------------------------------

@@ -266,6 +266,14 @@ def test_clean_data_have_no_gap_to_close() -> None:
     assert "raw closure -" not in text
 
 
+def test_an_unexplained_gap_is_not_called_no_gap_to_close() -> None:
+    """Actions logged as 0 read "not explained ... 221x" and then "no gap to close": the gap is there, unclosed."""
+    d = analyse(planted({"cogging": 0.6}, n=160), NOMINAL, FAST)
+    assert d.verdict_class == "unexplained" and d.gap.no_gap, d.verdict
+    text = markdown(d, "m", "d", "c")
+    assert "**No closure measured**: the gap is not explained" in text and "No gap to close" not in text
+
+
 def test_the_headline_is_labelled_raw_only_when_it_is(damped) -> None:
     from piga.diagnostics.report import headline_text
 

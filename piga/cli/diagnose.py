@@ -134,7 +134,10 @@ def main(argv: Sequence[str] | None = None) -> int:
                       + (f", of the gap above the twin's floor {number(floor)}" if floor is not None and g.floor_subtracted
                          else ""))
         corrected = "corrected " + ", ".join(f"{k} = {number(v, '.4g')}" for k, v in diagnosis.corrected.items())
-        if g.no_gap:
+        if g.no_gap and diagnosis.verdict_class == "unexplained":  # a gap, but nothing named that would close it
+            print(f"free-run closure: none measured (the gap is not explained, so nothing was corrected; {detail}); "
+                  + corrected)
+        elif g.no_gap:
             print(f"free-run closure: no gap to close (nothing named to correct; {detail}); {corrected}")
         else:
             print(f"free-run closure {headline} ({detail}; mean over all windows {number(100 * g.free_run_closure, '.1f')}%); "

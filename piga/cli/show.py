@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -10,8 +11,8 @@ import numpy as np
 
 from envs.fields import counted
 from piga.cli.common import ArgumentParser, file_path, given_options, positive_int, run_cli, typed_text
-from piga.data.schema import (SPLITS, check_actions_file, check_frames_have_signal, inspect_dataset, read_rows,
-                              split_indices)
+from piga.data.schema import (SPLITS, DataFormatError, check_actions_file, check_frames_have_signal, inspect_dataset,
+                              read_rows, split_indices)
 from piga.io.resources import FIGURE_DISK_BYTES, check_disk
 from piga.io.atomic import check_not_an_input
 
@@ -51,9 +52,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         held = [name for name, n in info.split_counts.items() if n]
         raise ValueError(f"split '{args.split}' of {args.data} is empty; give --split "
                          + " or ".join(f"{name} ({counted(info.split_counts[name], 'sequence')})" for name in held))
-    check_frames_have_signal(args.data, motion=False)  # a blank file, or a non-finite action, is named rather than drawn;
-    # a still one is drawn: the strip shows what the file holds
-    check_actions_file(args.data)
+    try:  # a blank or still file is drawn, with a warning for the blank one: a viewer is how one finds out
+        check_frames_have_signal(args.data, motion=False)
+    except DataFormatError as blank:
+        print(f"{PROG}: warning: {blank}; drawn all the same", file=sys.stderr)
+    check_actions_file(args.data)  # a non-finite action is named rather than drawn
     # a count written beyond the file is refused (the defaults shrink to a small file: the strip shows what it holds)
     for dest, have, noun, where in (("sequences", len(available), "sequence", f"in its {args.split} split"),
                                     ("frames", info.steps, "frame", "per sequence")):

@@ -327,8 +327,8 @@ def check_camera_in_range(camera: Camera, matched_error: float, rec_training: fl
            if abs(camera.exposure - bound) <= 1e-3 * bound]
     if not at:
         return
-    worse = f", and its frames still re-render {matched_error / rec_training:.0f}x worse than the model's training " \
-            "frames" if rec_training > 0 else ""
+    worse = f", where its frames match the model's renders at {matched_error / rec_training:.2g}x the model's training " \
+            "error" if rec_training > 0 else ""
     raise NotTheSceneError(f"this is not a camera the model knows: the best camera fit stops at the candidates' bound "
                            f"({', '.join(at)}; blur up to {MAX_BLUR:g} px, shifts up to {MAX_SHIFT:g} px, "
                            f"exposure {MIN_EXPOSURE:g} to {MAX_EXPOSURE:g}){worse}; "

@@ -179,7 +179,10 @@ def headline_text(d: Diagnosis) -> str:
     """The headline closure, labelled as what it is: above a floor, raw, or no gap to close."""
     g = d.gap
     if g.no_gap:
-        return ("**No gap to close**: nothing was named to correct, so a closure would be a ratio of noise. For "
+        lead = ("**No closure measured**: the gap is not explained by the candidates, so nothing was corrected."
+                if d.verdict_class == "unexplained" else
+                "**No gap to close**: nothing was named to correct, so a closure would be a ratio of noise.")
+        return (lead + " For "
                 "reference, the typical held-out window's free-run angle MSE (the median over windows of each window's "
                 f"mean squared error) is {number(g.typical_free_run_mse_nominal, '.3g')} rad² for the nominal model and "
                 f"{number(g.typical_free_run_mse_corrected, '.3g')} rad² with g and a refitted.")
