@@ -97,7 +97,8 @@ def test_another_exposure_is_named_and_read_through(model, tmp_path: Path, expos
     assert set(named) == ({"exposure", "noise"} if change == "noise" else {"exposure"})
     lo, hi = named["exposure"]["interval"]
     # a brighter picture shows only on the rod, whose edges are anti-aliased: within 3%
-    assert named["exposure"]["value"] == pytest.approx(exposure, abs=0.01 if exposure < 1 else 0.03) and lo <= named["exposure"]["value"] <= hi
+    k = named["exposure"]["value"]
+    assert k == pytest.approx(exposure, abs=0.01 if exposure < 1 else 0.03) and lo <= k <= hi
     assert found.rematched and found.camera.blur == 0 and found.camera.dx == found.camera.dy == 0
     assert found.matched_error < (0.2 if exposure < 1 else 0.6) * found.matched_error_nominal
 
@@ -111,6 +112,7 @@ def test_the_diagnose_page_gives_the_camera_stage_s_thresholds() -> None:
     assert f"lower it by more than {100 * c.min_drop:g}%" in text
     assert f"named above {c.min_noise:g} gray level" in text
     assert f"successive frames of at most {c.max_noise_correlation:g}" in text
+    assert f"more than {100 * c.max_missing:g}% of such held-out frames is refused" in text
 
 
 def test_another_scene_is_refused_unless_a_camera_explains_it() -> None:
@@ -126,3 +128,20 @@ def test_another_scene_is_refused_unless_a_camera_explains_it() -> None:
     for camera, matched in ((V.Camera(), 1e-4), (V.Camera(exposure=0.7), 0.05), (V.Camera(exposure=0.7), math.nan)):
         with pytest.raises(NotTheSceneError):
             check_scene_through_camera(unlike, camera, matched, 3.9e-4, 100)
+
+
+@pytest.mark.parametrize("blank", [0, T // 2])
+def test_frames_without_the_pendulum_are_counted(model, tmp_path: Path, blank: int) -> None:
+    """A file whose second half of every sequence was blank read "blur 1.68 px"; its empty frames are now counted, and
+    piga-diagnose refuses it beyond CameraConfig.max_missing."""
+    path = _recording(tmp_path / "rec.h5", model, "noise")
+    with h5py.File(path, "a") as f:
+        frames = f["frames"][...]
+        empty = 255 + 3.0 * np.random.default_rng(4).normal(size=frames[:, T - blank :].shape)  # white, and noise
+        frames[:, T - blank :] = np.clip(np.rint(empty), 0, 255)
+        f["frames"][...] = frames
+    found = V.camera_stage(model, str(path), np.zeros((N, T)), np.arange(N) < 16, None)
+    if blank:
+        assert found.missing == pytest.approx(blank / T, abs=0.1) and found.missing > V.CameraConfig().max_missing
+    else:
+        assert found.missing == 0

@@ -296,6 +296,10 @@ def diagnose(model: PhysicsModel, data: str | os.PathLike[str], config: Diagnose
     camera = camera_stage(model, str(data), obs.theta, obs.fit, obs.stale, config.camera, seed=config.seed,
                           progress=progress)
     check_scene_through_camera(unlike, camera.camera, camera.matched_error, rec_training, config.max_scene_ratio)
+    if camera.missing > config.camera.max_missing:
+        raise NotTheSceneError(f"the pendulum is not in view in {100 * camera.missing:.0f}% of the held-out frames (they are "
+                               "closer to the empty scene than to any angle of the pendulum): cut those frames out of "
+                               "the recording, or record with the pendulum in view")
     check_camera_in_range(camera.camera, camera.matched_error, rec_training)
     return analyse(obs, nominal_of(model), config, model=model, rec_training=rec_training,
                    progress=progress, camera=camera, arrow=training_arrow(checkpoint),
