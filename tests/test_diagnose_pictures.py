@@ -145,3 +145,16 @@ def test_frames_without_the_pendulum_are_counted(model, tmp_path: Path, blank: i
         assert found.missing == pytest.approx(blank / T, abs=0.1) and found.missing > V.CameraConfig().max_missing
     else:
         assert found.missing == 0
+
+
+def test_a_blur_is_not_read_as_a_brighter_picture(model, tmp_path: Path) -> None:
+    """A blur lightens the rod's core as a brighter exposure does: fitted first, k = 1.48 took a blur of 1.85 px's place
+    (named "blur 0.62 px, exposure 1.48"); now a brighter picture competes with the blur, and the blur wins."""
+    import cv2
+
+    path = _recording(tmp_path / "rec.h5", model, "none")
+    with h5py.File(path, "a") as f:
+        frames = f["frames"][...].reshape(-1, SIZE, SIZE)
+        f["frames"][...] = np.stack([cv2.GaussianBlur(x, (0, 0), 1.85) for x in frames]).reshape(N, T, SIZE, SIZE)
+    found = V.camera_stage(model, str(path), np.zeros((N, T)), np.arange(N) < 16, None)
+    assert [e["effect"] for e in found.effects] == ["blur"] and found.camera.blur == pytest.approx(1.85, abs=0.1)

@@ -15,8 +15,10 @@ with the identified decoder D:
   (``cv2.GaussianBlur``'s, reflected border) and then translates with ``affine_grid`` /
   ``grid_sample`` (border replicated), the equations of :mod:`envs.effects`.
 - **Exposure k** (a darker or brighter picture: the exposure, the lighting) multiplies every level,
-  clipped at white, after the blur and the shift. It is fitted first (:func:`fit_exposure`), and the
-  blur and the shift on top of it: the encoder, trained on one exposure, reads a picture darkened by
+  clipped at white, after the blur and the shift (:func:`fit_exposure`). Where the background shows
+  it (a darker picture, or a background that is not white) it is fitted first, and the blur and the
+  shift on top of it; a brighter picture on a white background shows on the pendulum alone, like a
+  blur, and competes with the blur and the shift instead: the encoder, trained on one exposure, reads a picture darkened by
   15% as angles 110° off (median), while matching through the fitted exposure reads them within 0.1°.
 - **Noise s** (gray levels) is fitted on the pixels that the pendulum never reaches (the decoder's
   renders over the whole circle leave them at the background): their temporal spread around the
@@ -184,8 +186,9 @@ def fit_camera(model: PhysicsModel, x: Tensor, blur: bool = True, shift: bool = 
 
 
 def fit_exposure(model: PhysicsModel, frames: np.ndarray, still: np.ndarray, x: Tensor,
-                 renders: tuple[Tensor, Tensor], min_change: float) -> Camera:
-    """The exposure k of uint8 frames (M, H, W) (first channel), flattened in ``x`` (M, P).
+                 renders: tuple[Tensor, Tensor], min_change: float) -> tuple[Camera, bool]:
+    """The exposure k of uint8 frames (M, H, W) (first channel), flattened in ``x`` (M, P), and whether the
+    background showed it.
 
     Where the pixels that the pendulum never reaches (``still``, (H, W)) show it (not black), k is the median over them
     of each pixel's median over the frames divided by the decoder's background there: medians, because a least-squares
@@ -193,7 +196,8 @@ def fit_exposure(model: PhysicsModel, frames: np.ndarray, still: np.ndarray, x: 
     of 20 gray levels fitted as k = 0.972, a "darker picture" of 7 gray levels), and a moving shadow covers a pixel
     in a few frames only. A white background that stays white (k within ``min_change`` gray levels of 1 there) does
     not show a brighter picture, which only lightens the pendulum: k >= 1 is then fitted by the matched residual,
-    where the noise's censoring can only pull k below 1.
+    where the noise's censoring can only pull k below 1, but a blur, which lightens the rod's core too, can push it
+    above (measured: blur 1.85 px fitted as k = 1.48): such a k competes with the blur and the shift.
     """
     from scipy.optimize import minimize_scalar
 
@@ -204,7 +208,7 @@ def fit_exposure(model: PhysicsModel, frames: np.ndarray, still: np.ndarray, x: 
         levels = np.median(frames[:, lit], axis=0) / 255.0  # (S,)
         k = float(np.median(levels / background))
         if 255 * abs(k - 1) > min_change or (background < 0.9).mean() > 0.5:  # a change, or a background that shows one
-            return Camera(exposure=float(np.clip(k, MIN_EXPOSURE, MAX_EXPOSURE)))
+            return Camera(exposure=float(np.clip(k, MIN_EXPOSURE, MAX_EXPOSURE))), True
         lo = 1.0
     else:
         lo = MIN_EXPOSURE
@@ -217,7 +221,7 @@ def fit_exposure(model: PhysicsModel, frames: np.ndarray, still: np.ndarray, x: 
     step = grid[1] - grid[0]
     res = minimize_scalar(objective, bounds=(max(lo, best - step), min(MAX_EXPOSURE, best + step)), method="bounded",
                           options={"xatol": 1e-3})
-    return Camera(exposure=float(res.x) if res.fun <= objective(best) else float(best))
+    return Camera(exposure=float(res.x) if res.fun <= objective(best) else float(best)), False
 
 
 @torch.no_grad()
@@ -458,27 +462,38 @@ def camera_stage(model: PhysicsModel, path: str, theta: np.ndarray, fit: np.ndar
         return {"candidate": name, "camera": dict(cam.__dict__), "held_out_matched_mse": e, "drop": drop,
                 "accepted": bool(needs <= cam.material(config) and drop > config.min_drop)}
 
-    # the exposure first: a darker picture leaves every blur and shift worse than none (measured: a picture
-    # darkened by 15% gave the blur candidate no drop); the blur and the shift are then fitted on top of it
+    # the exposure first. Where the background shows it, it is fitted first and the blur and the shift on top of it:
+    # a darker picture leaves every blur and shift worse than none (measured: a picture darkened by 15% gave the blur
+    # candidate no drop). A brighter one, seen on the pendulum alone, competes with them.
     frames_2d = raw_fit if raw_fit.ndim == 3 else raw_fit[..., 0]
     still = static_pixels(model)
-    lit = row("exposure", fit_exposure(model, frames_2d, still, x_fit, renders, config.min_exposure), e0, {"exposure"})
+    exposed, shown = fit_exposure(model, frames_2d, still, x_fit, renders, config.min_exposure)
+    lit = row("exposure", exposed, e0, {"exposure"})
     table.append(lit)
-    base, e_base = (Camera(**lit["camera"]), lit["held_out_matched_mse"]) if lit["accepted"] else (Camera(), e0)
+    first = shown and lit["accepted"]
+    base, e_base = (exposed, lit["held_out_matched_mse"]) if first else (Camera(), e0)
     bar.update()
-    label = "exposure+" if lit["accepted"] else ""
+    label = "exposure+" if first else ""
     singles = [row(label + "blur", fit_camera(model, x_fit, shift=False, renders=renders, base=base), e_base, {"blur"})]
     bar.update()
     singles.append(row(label + "shift", fit_camera(model, x_fit, blur=False, renders=renders, base=base), e_base,
                        {"shift"}))
     bar.update()
     table += singles
-    best = max(singles, key=lambda r: r["drop"])
+    best = max(singles if shown else [*singles, lit], key=lambda r: r["drop"])
     camera, e_cam = base, e_base
     if best["accepted"]:
         camera, e_cam = Camera(**best["camera"]), best["held_out_matched_mse"]
-        both = row(label + "blur+shift", fit_camera(model, x_fit, renders=renders, base=base), e_cam,
-                   {"blur", "shift"} - {best["candidate"].removeprefix(label)})
+        if best is lit:  # a brighter picture: the blur and the shift on top, where material
+            fitted = fit_camera(model, x_fit, renders=renders, base=camera)
+            more = fitted.material(config) - {"exposure"}
+            on_top = Camera("blur" in more and fitted.blur or 0.0, "shift" in more and fitted.dx or 0.0,
+                            "shift" in more and fitted.dy or 0.0, fitted.exposure)
+            both = row("+".join(["exposure", *sorted(more)]) if more else "exposure+blur+shift", on_top, e_cam,
+                       more or {"blur", "shift"})
+        else:
+            both = row(label + "blur+shift", fit_camera(model, x_fit, renders=renders, base=base), e_cam,
+                       {"blur", "shift"} - {best["candidate"].removeprefix(label)})
         table.append(both)
         if both["accepted"]:
             camera, e_cam = Camera(**both["camera"]), both["held_out_matched_mse"]
