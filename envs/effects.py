@@ -37,6 +37,10 @@ from the state (θ_t, θ̇_t) *before* the step:
 | ``cogging=k`` | passive | 1e-6 <= k <= 100 (N·m) | -k·sin(4θ_t), a detent torque; not a candidate of the diagnosis | :class:`CoggingTorque` |
 | ``speed_clip=v`` | clip | 1e-4 <= v < 8 (rad/s) | Pendulum-v1's speed clip ±8 becomes ±v | :class:`SpeedClip` |
 
+:class:`~envs.pendulum.PixelPendulumConfig` also refuses a damping, a friction or a cogging that the explicit step
+below cannot integrate (:func:`explicit_step_problem`): at g = 10 and dt = 0.05, a damping below 13.2 and a friction
+of at most 13.2, lower together or with cogging.
+
 The step is Pendulum-v1's own step, given τ_t as its torque:
 
 | quantity | equation |
