@@ -37,6 +37,10 @@ from the state (θ_t, θ̇_t) *before* the step:
 | ``cogging=k`` | passive | 1e-6 <= k <= 100 (N·m) | -k·sin(4θ_t), a detent torque; not a candidate of the diagnosis | :class:`CoggingTorque` |
 | ``speed_clip=v`` | clip | 1e-4 <= v < 8 (rad/s) | Pendulum-v1's speed clip ±8 becomes ±v | :class:`SpeedClip` |
 
+:class:`~envs.pendulum.PixelPendulumConfig` also refuses a damping, a friction or a cogging that the explicit step
+below cannot integrate (:func:`explicit_step_problem`): at g = 10 and dt = 0.05, a damping below 13.2 and a friction
+of at most 13.2, lower together or with cogging.
+
 The step is Pendulum-v1's own step, given τ_t as its torque:
 
 | quantity | equation |
@@ -86,8 +90,9 @@ import gymnasium as gym
 import numpy as np
 
 from envs.constants import MAX_ACTION, PENDULUM_MAX_SPEED
-from envs.fields import number_text
-from piga.world.effects import BIAS, COGGING, DAMPING, DEADZONE, DELAY, FRICTION, GAIN, SATURATION, SPEED_CLIP, Effect
+from envs.fields import number_text, upper_bound_text
+from piga.world.effects import (BIAS, COGGING, COGGING_PERIODS, DAMPING, DEADZONE, DELAY, FRICTION, GAIN, SATURATION,
+                                SPEED_CLIP, Effect, pendulum_gains)
 
 # Upper bounds of the effects' parameters: far beyond any real system's (the pendulum's torque is
 # at most 2 N·m, its frames 64 px and 255 gray levels), and small enough that a typo such as
@@ -636,6 +641,71 @@ def format_effects(effects: Effects) -> str:
     return " ".join(f"{name}={number_text(value)}" for name, value in effects) or "none"
 
 
+# ---------------------------------------------------------------------------------------------
+# Passive torques that the explicit step cannot integrate
+# ---------------------------------------------------------------------------------------------
+
+#: Largest speed amplitude (rad/s) of the chatter that a strong ``friction`` makes where the pendulum would stick.
+#: Pendulum-v1's explicit step cannot stop at θ̇ = 0: once k_τ·c·dt / 0.1 > 2 (c > 1.32 N·m at dt = 0.05) the speed
+#: flips sign every step, with an amplitude of at most k_τ·c·dt / D (D = 2 at no stiffness; see
+#: :func:`explicit_step_problem`). Measured over 40 sequences of 40 steps at g = 10 (its median chatter): 0.07 rad/s at
+#: c = 2, 0.39 at 7, 0.74 at 10, 1.5 at 20, 3.8 at 50 (the speed then touches the ±8 clip), and 7.3 at 100, on the clip
+#: in 42% of the steps, a video of a pendulum shaking between two angles. At 1 rad/s the angle jitters by
+#: dt·1 = 0.05 rad, under a pixel at the tip of a 64 px frame (the rod is 14.5 px long): the frames show a pendulum
+#: that sticks. The bound it gives, c <= 13.2 N·m at g = 10, lies above g/2 + 2 = 7 N·m, the most torque that gravity
+#: and the motor exert together, beyond which a real pendulum sticks at every angle: no friction that changes what
+#: the pendulum does is refused.
+MAX_FRICTION_CHATTER = 1.0
+
+
+def explicit_step_problem(effects: Mapping[str, float], gravity: float, dt: float) -> str | None:
+    """Why Pendulum-v1's explicit step makes no meaningful recording of these passive effects, or None.
+
+    Linearised at the hanging rest θ = π, where gravity (k_g·g) and the cogging detents (k_τ·4·k) both pull back
+    hardest, the step θ̇' = θ̇ + dt·(-s·x - k_τ·b·θ̇), x' = x + dt·θ̇' (x = θ - π, s = k_g·g + 4·k_τ·k) has the
+    matrix [[1 - s·dt², dt·(1 - k_τ·b·dt)], [-s·dt, 1 - k_τ·b·dt]]. Its eigenvalues stay inside the unit circle
+    (the Jury test) while D = 2 - k_τ·b·dt - s·dt²/2 > 0: at g = 10 and dt = 0.05, damping b < 13.21 N·m·s/rad.
+    Beyond it the speed flips sign every step and grows to the ±8 clip (measured with no action: b = 13.2 stays
+    under 0.8 rad/s in 400 steps, 13.25 reaches the clip, 14 sits on it in 45% of the steps).
+
+    Friction's slope at θ̇ = 0 (c / 0.1) is no such limit: past it the speed settles into a bounded chatter of
+    amplitude at most k_τ·c·dt / D (the period-2 orbit of the same step with the friction torque saturated at ±c),
+    refused above :data:`MAX_FRICTION_CHATTER`. Gravity so strong that the step is unstable without any effect
+    (k_g·g·dt² >= 4) is not blamed on the effects.
+    """
+    damping, friction, cogging = (float(effects.get(name, 0.0)) for name in ("damping", "friction", "cogging"))
+    if not (damping or friction or cogging):
+        return None
+    gravity_gain, torque_gain = pendulum_gains()
+    margin_free = 2.0 - gravity_gain * gravity * dt**2 / 2  # D with no effect
+    if margin_free <= 0:
+        return None
+    stiffness = gravity_gain * gravity + COGGING_PERIODS * torque_gain * cogging
+    stiff_margin = 2.0 - stiffness * dt**2 / 2  # D without damping
+    margin = stiff_margin - torque_gain * damping * dt
+    step = f"Pendulum-v1's explicit step (dt = {dt:g} s, gravity {number_text(gravity)})"
+    if margin <= 0:
+        if stiff_margin <= 0:  # cogging alone is too stiff: its detents would need dt·ω < 2
+            limit = (4.0 / dt**2 - gravity_gain * gravity) / (COGGING_PERIODS * torque_gain)
+            return (f"effect cogging={number_text(cogging)} N·m is too stiff for {step}: the pendulum's speed flips sign "
+                    f"each step and grows to the speed clip; use cogging below {upper_bound_text(limit, 4)}")
+        limit = stiff_margin / (torque_gain * dt)
+        also = f" with cogging={number_text(cogging)} (or a weaker cogging)" if cogging else ""
+        return (f"effect damping={number_text(damping)} N·m·s/rad is unstable in {step}: the pendulum's speed flips sign "
+                f"each step and grows to the speed clip; use damping below {upper_bound_text(limit, 4)}{also}")
+    chatter = torque_gain * friction * dt / margin
+    if chatter > MAX_FRICTION_CHATTER:
+        limit = MAX_FRICTION_CHATTER * margin / (torque_gain * dt)
+        others = [(name, value) for name, value in (("damping", damping), ("cogging", cogging)) if value]
+        also = " and ".join(f"{name}={number_text(value)}" for name, value in others)
+        lower = " or ".join(name for name, _ in others)
+        return (f"effect friction={number_text(friction)} N·m makes {step} chatter where the pendulum would stick: its "
+                f"speed flips sign each step, by up to {chatter:.3g} rad/s; use friction of at most "
+                f"{upper_bound_text(limit, 4)} (a chatter of {MAX_FRICTION_CHATTER:g} rad/s)"
+                f"{f' with {also}, or lower {lower}' if also else ''}")
+    return None
+
+
 __all__ = [
     "EFFECTS",
     "PENDULUM_MAX_SPEED",
@@ -657,6 +727,8 @@ __all__ = [
     "SpeedClip",
     "TorqueBias",
     "ViscousDamping",
+    "MAX_FRICTION_CHATTER",
+    "explicit_step_problem",
     "format_effects",
     "normalize_effects",
     "parse_effect",

@@ -58,7 +58,7 @@ from gymnasium.wrappers import (
 )
 
 from envs.constants import MAX_ACTION, PENDULUM_DT, PENDULUM_MAX_SPEED
-from envs.effects import EFFECTS, ShowCommandedTorque, normalize_effects, wrap_effects
+from envs.effects import EFFECTS, ShowCommandedTorque, explicit_step_problem, normalize_effects, wrap_effects
 from envs.fields import check_field_kinds, number_text
 from piga.world.effects import scaled_gravity
 
@@ -154,6 +154,9 @@ class PixelPendulumConfig:
         if self.effective_gravity < MIN_GRAVITY:
             raise ValueError(f"PixelPendulumConfig: gravity x gravity_mult = {number_text(self.effective_gravity)} is out of range: "
                              f"at least {MIN_GRAVITY:g} m/s² ({_TOO_WEAK})")
+        unstable = explicit_step_problem(dict(effects), self.effective_gravity, PENDULUM_DT)
+        if unstable:  # damping, friction or cogging that Pendulum-v1's step turns into a shaking, meaningless recording
+            raise ValueError(unstable)
 
     @property
     def effective_gravity(self) -> float:

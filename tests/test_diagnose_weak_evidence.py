@@ -266,6 +266,23 @@ def test_the_own_files_reading_starts_from_the_nominal_a_where_the_recordings_sh
     assert abs(read.values["a"] - 1.0) < 0.05, read.values
 
 
+def test_the_own_files_reading_starts_from_the_nominal_g_where_the_recordings_collapsed() -> None:
+    """A recording of a speed flipping sign each step read g = 6.3e-07; the training file, read from there, gave the
+    reference g = 0.000 and |a| = 0.785 (of a model with g = 9.992 and a = 1.003)."""
+    from piga.diagnostics.diagnose import SHRUNK_A, implausible_own_reading, own_start_g
+
+    collapsed = fit.Model((), 0, {"g": 6.3e-7, "a": NOMINAL.a})
+    assert own_start_g(collapsed, NOMINAL) == NOMINAL.g
+    assert own_start_g(fit.Model((), 0, {"g": 1.4 * NOMINAL.g, "a": NOMINAL.a}), NOMINAL) == 1.4 * NOMINAL.g
+    heavy = NOMINAL.g / (2 * SHRUNK_A)  # five times the nominal g: a reading, not a run-off
+    assert own_start_g(fit.Model((), 0, {"g": heavy, "a": NOMINAL.a}), NOMINAL) == heavy
+    read = own_reading(collapsed.with_values({**collapsed.values, "g": own_start_g(collapsed, NOMINAL)}), NOMINAL,
+                       planted({}), FAST)
+    assert abs(read.values["g"] / NOMINAL.g - 1) < 0.05 and not implausible_own_reading(read, NOMINAL), read.values
+    assert implausible_own_reading(fit.Model((), 0, {"g": 6.3e-7, "a": 0.785}), NOMINAL)
+    assert implausible_own_reading(fit.Model((), 0, {"g": NOMINAL.g, "a": SHRUNK_A / 2}), NOMINAL)
+
+
 def test_gravity_that_the_nominal_form_misses_while_it_bends_a_is_named() -> None:
     """The pixel pendulum at g = 11 with a damping of 0.2: "none" read g x0.992 and a x1.16, the damping g x1.10 and
     a x0.995, and the verdict had named the damping alone, with no word of g."""

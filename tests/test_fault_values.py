@@ -298,3 +298,75 @@ def test_the_camera_distance_bound_is_a_number_at_the_length(length: float, boun
         DMCPendulumConfig(length=length, camera_distance=0.01)
     assert lower_bound_text(0.6 / 0.7, 4) == "0.8572" and lower_bound_text(0.5, 4) == "0.5"
     DMCPendulumConfig(length=length, camera_distance=float(bound))  # the bound written is inside the range
+
+
+# ---------------------------------------------------------------------------------------------
+# Passive torques that Pendulum-v1's explicit step cannot integrate
+# ---------------------------------------------------------------------------------------------
+
+
+def _speeds(effects: tuple[tuple[str, float], ...], steps: int) -> np.ndarray:
+    """θ̇ after each of ``steps`` steps of no action from 8 starts, through the env's own torque wrappers (no frames)."""
+    import gymnasium as gym
+
+    from envs.effects import wrap_effects
+    from envs.pendulum import ActuationGain, ResetRange
+
+    env = ActuationGain(wrap_effects(ResetRange(gym.make("Pendulum-v1", g=10.0, max_episode_steps=10**6), math.pi, 1.0),
+                                     effects, "torque"), 1.0)
+    out = []
+    for seed in range(8):
+        env.reset(seed=seed)
+        out.append([env.step(np.zeros(1, np.float32))[0][2] for _ in range(steps)])
+    return np.abs(np.asarray(out))  # (8, steps)
+
+
+@pytest.mark.parametrize("argv, needles", [
+    (["--effect", "damping=14"], ["damping=14 N·m·s/rad is unstable in Pendulum-v1's explicit step (dt = 0.05 s",
+                                  "grows to the speed clip; use damping below 13.2"]),
+    (["--effect", "damping=100"], ["use damping below 13.2"]),
+    (["--effect", "friction=100"], ["friction=100 N·m makes Pendulum-v1's explicit step", "by up to 7.57 rad/s",
+                                    "use friction of at most 13.2"]),
+    (["--effect", "damping=10", "--effect", "friction=5"], ["friction=5 N·m", "at most 3.208",
+                                                             "with damping=10, or lower damping"]),
+    (["--effect", "damping=10", "--effect", "cogging=100"], ["use damping below 3.208 with cogging=100"]),
+])
+def test_collect_refuses_a_passive_torque_the_step_cannot_integrate(argv: list[str], needles: list[str], tmp_path: Path,
+                                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    """damping=14 (in its range, [1e-6, 100]) wrote a file whose speed flipped sign each step up to the ±8 clip, and
+    friction=100 one that shook between two angles at ±8 rad/s; piga-diagnose then said the actions barely move it."""
+    refused("piga-collect", ["--out", str(tmp_path / "d.h5"), *COLLECT, *argv], capsys, *needles)
+    assert _listing(tmp_path) == []
+
+
+def test_the_passive_bounds_are_where_the_env_stops_making_sense() -> None:
+    """The bounds the refusal states are the env's: damping just past it grows to the clip, just inside it does not,
+    and friction at its bound chatters by under 1 rad/s, at 100 by about 7.5."""
+    from envs.effects import MAX_FRICTION_CHATTER, explicit_step_problem
+
+    assert explicit_step_problem({"damping": 13.2}, 10.0, 0.05) is None
+    assert "below 13.2" in (explicit_step_problem({"damping": 13.21}, 10.0, 0.05) or "")
+    assert _speeds((("damping", 13.2),), 400)[:, -100:].max() < 0.5  # the reset's ±1 rad/s dies out, slowly
+    past = _speeds((("damping", 13.25),), 400)  # (8, 400): grows, slowly this near the bound
+    assert past[:, -100:].max() > 2 * past[:, 100:200].max()
+    assert _speeds((("damping", 14.0),), 100)[:, -50:].max() == 8.0
+    late = _speeds((("friction", 13.2),), 60)[:, 30:]  # (8, 30): settled where gravity cannot move it
+    chatter = _speeds((("friction", 100.0),), 60)[:, 30:]
+    assert np.median(late) <= MAX_FRICTION_CHATTER < np.median(chatter) and np.median(chatter) > 7.0
+
+
+def test_the_benchmarks_passive_effects_stay_accepted() -> None:
+    from envs.pendulum import PixelPendulumConfig
+
+    for effects in ({"damping": 0.3, "friction": 0.5, "cogging": 0.6}, {"damping": 13.2}, {"friction": 13.2},
+                    {"cogging": 100.0}, {"damping": 0.4, "friction": 0.3}):
+        PixelPendulumConfig(effects=tuple(effects.items()))
+
+
+def test_the_collect_page_gives_the_passive_bounds_of_the_code() -> None:
+    from envs.effects import explicit_step_problem
+
+    text = " ".join((ROOT / "docs" / "commands" / "collect.md").read_text().split())
+    assert "`damping` must be below 13.2 N·m·s/rad" in text and "A `friction` must be at most 13.2 N·m" in text
+    assert "below 13.2" in (explicit_step_problem({"damping": 13.3}, 10.0, 0.05) or "")
+    assert "at most 13.2 " in (explicit_step_problem({"friction": 13.3}, 10.0, 0.05) or "")

@@ -369,6 +369,22 @@ def own_start_a(physics: fit.Model, nom: Nominal) -> float:
     return nom.a if a < SHRUNK_A * abs(nom.a) else math.copysign(a, nom.a)
 
 
+def own_start_g(physics: fit.Model, nom: Nominal) -> float:
+    """The g that the own file's reading (:func:`own_reading`) of ``physics`` starts from: its g, or the nominal g
+    where it lies more than 1 / :data:`SHRUNK_A` times away from it. g too is fitted in log space: a recording of
+    nothing but a speed flipping sign each step (Gymnasium's step at a damping of 100) read g = 6.3e-07, and the
+    nominal training file, read from there, gave g = 0.000 and |a| = 0.785 as the reference."""
+    g = physics.values["g"]
+    return g if SHRUNK_A * nom.g <= g <= nom.g / SHRUNK_A else nom.g
+
+
+def implausible_own_reading(read: fit.Model, nom: Nominal) -> bool:
+    """Whether the own file's reading of g or |a| lies more than 1 / :data:`SHRUNK_A` times from the nominal model's:
+    the model was identified on that very file, so such a reading is a fit that ran off, not a reference."""
+    g, a = read.values["g"], abs(read.values["a"])
+    return not (SHRUNK_A * nom.g <= g <= nom.g / SHRUNK_A and SHRUNK_A * abs(nom.a) <= a <= abs(nom.a) / SHRUNK_A)
+
+
 def own_reading(physics: fit.Model, nom: Nominal, own: Observations, config: DiagnoseConfig) -> fit.Model:
     """The physics that the model's own training file ``own`` shows, of ``physics``' effects: its g and a.
 
@@ -1209,7 +1225,7 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
 
     def read_own(physics: fit.Model) -> fit.Model:
         """The own file's reading of ``physics``' form (:func:`own_reading`), started from its values."""
-        start = physics.with_values({**physics.values, "a": own_start_a(physics, nom)})
+        start = physics.with_values({**physics.values, "a": own_start_a(physics, nom), "g": own_start_g(physics, nom)})
         key = (start.effects, start.delay, start.substeps, tuple(sorted(start.values.items())))
         if key not in own_readings:
             own_readings[key] = own_reading(start, nom, own_obs, config)
@@ -1224,7 +1240,13 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
         # both files read the same way, within the frame too: the recording's own reading is compared
         read = read_own(final)
         ref_g, ref_a = read.values["g"], abs(read.values["a"])
-        if max(abs(ref_g / nom.g - 1), abs(ref_a / abs(nom.a) - 1)) > config.gain_tolerance:
+        if implausible_own_reading(read, nom):
+            notes.append(f"the model's own training file read in the same form ({read.name or 'no effect'}) gave g = "
+                         f"{ref_g:.3g} and |a| = {ref_a:.3g}, far from the nominal model's g = {nom.g:.3f} and |a| = "
+                         f"{abs(nom.a):.3f}, identified on that file: the recording's g and a are compared with the "
+                         "nominal model's")
+            ref_g, ref_a = nom.g, abs(nom.a)
+        elif max(abs(ref_g / nom.g - 1), abs(ref_a / abs(nom.a) - 1)) > config.gain_tolerance:
             notes.append(f"read from the model's own training file in the same form ({read.name or 'no effect'}), g = "
                          f"{ref_g:.3f} and |a| = {ref_a:.3f}, where the nominal model has g = {nom.g:.3f} and |a| = "
                          f"{abs(nom.a):.3f}: the recording's g and a are compared with the former")
@@ -1235,7 +1257,8 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
         rival_ref_g, rival_ref_a = nom.g, abs(nom.a)
         if use_own:
             read = read_own(rival)
-            rival_ref_g, rival_ref_a = read.values["g"], abs(read.values["a"])
+            if not implausible_own_reading(read, nom):
+                rival_ref_g, rival_ref_a = read.values["g"], abs(read.values["a"])
         rival_gain, rival_g = abs(rival.values["a"]) / rival_ref_a, rival.values["g"] / rival_ref_g
     if gain_error and rival_gain is not None:
         if abs(rival_gain - 1) <= config.gain_tolerance:
@@ -1374,7 +1397,9 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
     if g_error and not final.effects and damped is not None and (alt := damped()) is not None:
         # a change of mass or inertia scales a and the hinge damping's effect together; "none" holds the damping at the
         # nominal's, and g takes up the difference (see damping_check)
-        alt_g = alt.values["g"] / (read_own(alt).values["g"] if use_own else nom.g)
+        alt_read = read_own(alt) if use_own else None
+        alt_ref = nom.g if alt_read is None or implausible_own_reading(alt_read, nom) else alt_read.values["g"]
+        alt_g = alt.values["g"] / alt_ref
         if abs(alt_g - 1) <= config.gain_tolerance:
             g_error = False
             notes.append(f"g refits to {reference.values['g']:.3f} (x{g_ratio:.3f} the reference {ref_g:.3f}) with no "
