@@ -241,6 +241,7 @@ def test_the_convergence_rules_quote_the_check() -> None:
     text = " ".join((DOCS / "commands" / "train-model.md").read_text().split())
     assert f"MSE not below {config.blank_ratio:g} of `frame_mse_background`" in text
     assert f"MSE not below {config.hold_ratio:g} of `frame_mse_hold`" in text
+    assert f"{config.speed_tolerance:g} or more of the sum of its learning rate" in text
     planet = " ".join((DOCS / "commands" / "baseline.md").read_text().split())
     assert f"filtered frames are not below {config.blank_ratio:g} of the mean frame's MSE (`ConvergenceConfig.blank_ratio`" in planet
     assert f"scaled by {PROFILE_FACTOR:.2f} or 1/{PROFILE_FACTOR:.2f}" in text

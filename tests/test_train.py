@@ -500,6 +500,50 @@ def test_the_convergence_check_on_made_up_trajectories() -> None:
         "; not determined by the training frames: its profile is flat)")
 
 
+def test_a_parameter_still_moving_as_fast_as_its_decayed_learning_rate_allows_is_unsettled() -> None:
+    """The trajectory of a 300-step run on 2 spring sequences (recorded every 3 steps): it passed as converged with k
+    71% and l 43% off, its profile curved (k 2.2 / 2.6, l 2.1 / 2.7), because the cosine schedule had decayed to a
+    few percent of its peak and l moved only 0.53% over the last 30 steps; that is 0.83x the sum of its learning
+    rate over them (identified runs moved at most 0.13x, a run with a still 8% short 0.63x)."""
+    from types import SimpleNamespace
+
+    from piga.evaluation.profile import ParameterProfile
+    from piga.training.convergence import ConvergenceConfig, check_convergence
+    from piga.training.train import TrainConfig, TrainPlan, physics_lr
+
+    plan = asdict(TrainPlan(windows=22, steps_per_epoch=2, epochs=150, warmup_steps=54, curriculum_steps=108,
+                            average_steps=50, checkpoint_every=3))
+    config = TrainConfig(budget_steps=300, batch_size=8, lr_physics=0.01, lr_final_fraction=0.01)
+    lr = lambda step: physics_lr(step, plan, config)  # noqa: E731
+    steps = np.arange(3, 301, 3.0)
+    # log l climbs in step with the learning rate as it shrinks to its floor (the straight-line fit over the tail
+    # reads such a decelerating climb at about 0.86x the rate's sum, as the run's recorded 0.83x)
+    rate = np.array([lr(int(s)) for s in steps])
+    climb = np.cumsum(rate) * 3
+    l_on_its_way = 3.4 * np.exp(climb - climb[-1])
+    settled = 1 + 0.168 * (1 - np.exp(-steps / 40))
+
+    def run(l: np.ndarray) -> SimpleNamespace:
+        trace = [[s, k, lv] for s, k, lv in zip(steps, settled, l)]
+        return SimpleNamespace(step=300, start={"k": 1.0, "l": 1.0}, trace=trace, plan=plan,
+                               history=[{"k": trace[-1][1], "l": trace[-1][2]}])
+
+    profile = {"k": ParameterProfile(1.168, 2.202, 2.616, 1.65), "l": ParameterProfile(3.4, 2.068, 2.66, 1.65)}
+    numbers = dict(blank=(0.00473, 0.01629), hold=0.0205, profile=profile, held_out=False)
+    verdict = check_convergence(run(l_on_its_way), physics_lr=lr, **numbers)
+    assert verdict.outcome == "unsettled", verdict.reason
+    assert verdict.reason.startswith("a parameter was still on its way when the learning rate decayed: l moved +0.4")
+    assert "0.86x the sum of its learning rate" in verdict.reason
+    assert f"(the bar is {ConvergenceConfig.speed_tolerance:g}x)" in verdict.reason
+    assert "train longer" in verdict.reason and "k moved" not in verdict.reason
+    assert 0.8 < verdict.parameters["l"].tail_speed < 0.9 and abs(verdict.parameters["k"].tail_speed) < 0.1
+    # before, without the learning rate: the drift test alone took it for settled
+    assert check_convergence(run(l_on_its_way), **numbers).outcome == "converged"
+    # the same l at half that pace (identified short pendulum runs: 0.05x; a run with a 8% short: 0.63x)
+    slower = 3.4 * np.exp(0.5 * (climb - climb[-1]))
+    assert check_convergence(run(slower), physics_lr=lr, **numbers).outcome == "converged"
+
+
 def test_a_slot_that_draws_nothing_makes_a_converged_scene_run_untrained() -> None:
     """An empty slot is still moved by the physics, so parameters that settled mean nothing; a baseline (``blank``
     given: no physical parameters) has none to bend and is judged on its predictions alone."""

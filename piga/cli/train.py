@@ -187,8 +187,8 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
     from piga.training.report import scene_objects, write_run_report
     from piga.io.runs import load_model
     from piga.world.physics.systems import SYSTEMS
-    from piga.training.train import (TrainConfig, TrainingDiverged, check_trainable, model_config_for, preset_for,
-                                     resolve_loading, train)
+    from piga.training.train import (TrainConfig, TrainingDiverged, check_trainable, model_config_for, physics_lr,
+                                     preset_for, resolve_loading, train)
 
     info = inspect_dataset(args.data)
     data_at_start = fingerprint(args.data)  # a file replaced while the run trains must not be what it is scored on
@@ -435,7 +435,8 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
                             f"trained file back and run the same command with {resume_option(args.overwrite)}, or "
                             "train on the new one")
         with _report_interrupted(run_dir, state.epoch, resume=resume_option(args.overwrite)), folder.kept():
-            metrics = write_run_report(model, state, args.data, run_dir)
+            metrics = write_run_report(model, state, args.data, run_dir,
+                                       physics_lr=lambda step: physics_lr(step, state.plan, train_config))
         objects = metrics.get("objects", {})
         # another seed can find a lost object, or fill a slot that should draw one; not make room for more
         # objects than the slots, nor objects for slots beyond the scene's count

@@ -9,7 +9,7 @@ trajectory, :class:`piga.training.train.TrainState`), never the truth, and gives
 | outcome | meaning | ``piga-train-model`` |
 |---|---|---|
 | ``untrained`` | the physics never trained, a learned parameter never left its start, one collapsed to a float limit, the actuation gain faded toward 0, (for a scene) an object was not found or a slot draws nothing (:mod:`piga.evaluation.objects`), or its held-out predictions are no better than the background alone, or (with physical parameters) not clearly better than the last input frame held still | exits 1 with a line that names the fix |
-| ``unsettled`` | it trained, but stopped before its plan ended, a parameter still drifts at the end, or one stopped short of the value its training frames want (:mod:`piga.evaluation.profile`) | exits 3 with a warning line |
+| ``unsettled`` | it trained, but stopped before its plan ended, a parameter still drifts at the end or still moves about as fast as its decayed learning rate lets it, or one stopped short of the value its training frames want (:mod:`piga.evaluation.profile`) | exits 3 with a warning line |
 | ``converged`` | none of the above | exits 0 |
 
 A parameter *drifts* when its change over the last ``tail`` of the planned steps (a straight-line
@@ -17,6 +17,12 @@ fit of its log through the recorded trajectory) exceeds ``drift_tolerance``, or 
 about that line, whichever is larger: at the end of the cosine schedule the learning rate is a few
 percent of its peak, so a parameter that still moves by more than 1% there has not found its value
 (a settled run of the default file moves g and a by under 0.5%).
+
+A short run's learning rate is so small over its tail that a parameter still on its way moves by less than that,
+so each parameter's change over the tail is also measured against the most its learning rate lets it move there
+(Adam moves a log-parameter by about its learning rate a step when the gradient keeps its sign; the sum over
+those steps): a parameter that moved ``speed_tolerance`` of that or more was still on its way when the schedule
+ended it.
 
 Every model's held-out predictions must beat drawing its label-free background alone (``blank_ratio``),
 and a model with physical parameters must clearly beat holding the last input frame still (``hold_ratio``),
@@ -28,6 +34,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
@@ -47,6 +54,14 @@ class ConvergenceConfig:
     """Fraction of the planned steps, at the end, over which drift is measured."""
     drift_tolerance: float = 0.01
     """Largest relative change over the tail of a settled parameter."""
+    speed_tolerance: float = 0.75
+    """Largest change over the tail of a settled parameter, as a fraction of the sum of its learning rate over those
+    steps (about the most Adam can move a log-parameter there). Measured: 300 steps on 2 spring sequences
+    settled with k 71% and l 43% off, l moving 0.53% (0.83 of its learning rate's sum); 300 steps on 60 spring
+    sequences of 12 frames with k 20% off, k moving 0.81% (1.28). Identified runs moved 0.01 (spring, 1650
+    steps) to 0.13 (the default pendulum, 2022 steps), 0.05 and 0.06 (pendulums of 20 sequences, 432 and
+    406 steps); two with a still 8% short of its value moved it 0.53 (dm_control, 20 sequences, 432 steps)
+    and 0.63 (a 32-pixel pendulum, 400 steps)."""
     moved_tolerance: float = 1e-3
     """Smallest relative change from its start of a parameter that was learned."""
     collapse_factor: float = 1e4
@@ -87,6 +102,8 @@ class ParameterCheck:
     """Relative change over the tail by the straight-line fit (None: too few recorded points)."""
     tail_spread: float | None
     """Standard deviation (relative) about that line."""
+    tail_speed: float | None = None
+    """``tail_change`` over the sum of the physics learning rate over the same steps (None: not known)."""
 
 
 @dataclass(frozen=True)
@@ -137,7 +154,7 @@ def _blank_fix(background: float, planned: int, steps: int) -> str:
 def check_convergence(state: Any, config: ConvergenceConfig = ConvergenceConfig(),
                       objects: ObjectCheck | None = None, blank: tuple[float, float] | None = None,
                       hold: float | None = None, profile: dict[str, ParameterProfile] | None = None,
-                      held_out: bool = True) -> Convergence:
+                      held_out: bool = True, physics_lr: Callable[[int], float] | None = None) -> Convergence:
     """Judges a finished (or stopped) run from its :class:`~piga.training.train.TrainState`, and for a scene
     from ``objects`` (:func:`piga.evaluation.objects.check_objects`): a lost object leaves the physics to fit
     the others, and a slot that draws nothing is still moved by the physics (its pull, its springs), so in
@@ -158,6 +175,12 @@ def check_convergence(state: Any, config: ConvergenceConfig = ConvergenceConfig(
     with parameters must beat it by ``config.hold_ratio``: pendulum runs on 20 sequences of 10 frames settled with
     g 67% off, predicting 0.85x the background's MSE and 0.5x the held frame's (identified runs: 0.12x at most).
 
+    ``physics_lr``: the physical parameters' learning rate at a step (:func:`piga.training.train.physics_lr`). A
+    parameter whose change over the tail is ``config.speed_tolerance`` or more of that rate's sum over the tail's
+    steps was still moving when the schedule decayed, however little: a 300-step spring run on 2 sequences
+    passed as converged with k 71% and l 43% off, l moving 0.53% (0.83 of that sum; identified runs 0.13 at
+    most, and 0.63 for one with a still 8% short).
+
     ``held_out``: whether ``blank`` and ``hold`` were measured on a held-out split; a file without a test split is
     measured on its training split, and the reasons say so rather than "held-out".
 
@@ -173,8 +196,8 @@ def check_convergence(state: Any, config: ConvergenceConfig = ConvergenceConfig(
     planned = int(plan["epochs"]) * int(plan["steps_per_epoch"])
     physics_steps = max(0, steps - int(plan["warmup_steps"]))
     end_values = {k: float(state.history[-1][k]) for k in state.start} if state.history else dict(state.start)
-    checks = {name: _parameter(name, float(start), end_values[name], state.trace, list(state.start), planned, config)
-              for name, start in state.start.items()}
+    checks = {name: _parameter(name, float(start), end_values[name], state.trace, list(state.start), planned, config,
+                               physics_lr) for name, start in state.start.items()}
 
     flat = [name for name, p in (profile or {}).items()
             if name in checks and max(p.lower, p.upper) < 1 + config.flat_tolerance
@@ -259,6 +282,13 @@ def check_convergence(state: Any, config: ConvergenceConfig = ConvergenceConfig(
                                     f"{1 / config.hold_ratio:.3g}x better than holding the last input frame still (MSE "
                                     f"{hold:.4g}): it did not learn the motion, so its parameters mean nothing; give it "
                                     "more or longer sequences, or " + _fix(planned, steps))
+    moving = [f"{name} moved {100 * c.tail_change:+.2f}% over the last {100 * config.tail:.0f}% of steps, "
+              f"{abs(c.tail_speed):.2f}x the sum of its learning rate there (the bar is {config.speed_tolerance:g}x)"
+              for name, c in checks.items() if c.tail_speed is not None and c.tail_change is not None
+              and abs(c.tail_speed) >= config.speed_tolerance]
+    if moving:
+        return verdict("unsettled", "a parameter was still on its way when the learning rate decayed: " + "; ".join(moving)
+                       + "; " + _fix(planned, steps))
     short_of = [(name, p) for name, p in (profile or {}).items()
                 if name in checks and min(p.lower, p.upper) < 1 - config.profile_tolerance]
     if short_of:
@@ -270,9 +300,9 @@ def check_convergence(state: Any, config: ConvergenceConfig = ConvergenceConfig(
 
 
 def _parameter(name: str, start: float, end: float, trace: list[list[float]], names: list[str], planned: int,
-               config: ConvergenceConfig) -> ParameterCheck:
+               config: ConvergenceConfig, physics_lr: Callable[[int], float] | None = None) -> ParameterCheck:
     scale = abs(start) or 1.0
-    tail_change = tail_spread = None
+    tail_change = tail_spread = tail_speed = None
     if trace and math.isfinite(end):
         rows = np.asarray(trace, dtype=np.float64)  # (K, 1 + P): step, then the parameters
         rows = rows[rows[:, 0] > planned * (1 - config.tail)]
@@ -283,4 +313,7 @@ def _parameter(name: str, start: float, end: float, trace: list[list[float]], na
             slope, intercept = np.polyfit(rows[:, 0], y, 1)
             tail_change = float(slope * (rows[-1, 0] - rows[0, 0]))
             tail_spread = float(np.std(y - (slope * rows[:, 0] + intercept)))
-    return ParameterCheck(start, end, (end - start) / scale, tail_change, tail_spread)
+            allowed = sum(physics_lr(step) for step in range(int(rows[0, 0]), int(rows[-1, 0]))) if physics_lr else 0.0
+            if allowed > 0:
+                tail_speed = tail_change / allowed
+    return ParameterCheck(start, end, (end - start) / scale, tail_change, tail_spread, tail_speed)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -59,7 +60,8 @@ def scene_objects(model: FrameModel, data: str | Path, eval_config: EvalConfig =
 
 @torch.no_grad()
 def write_run_report(model: FrameModel, state: TrainState, data: str | Path, run_dir: str | Path,
-                     eval_config: EvalConfig = EvalConfig()) -> dict[str, Any]:
+                     eval_config: EvalConfig = EvalConfig(),
+                     physics_lr: Callable[[int], float] | None = None) -> dict[str, Any]:
     """Evaluates on held-out data and writes metrics.json, rollout.png, templates.png and curves.png.
 
     A model without object coordinates (video-lstm) or with the black-box MLP decoder has no templates to draw (no templates.png) and no objects
@@ -70,6 +72,8 @@ def write_run_report(model: FrameModel, state: TrainState, data: str | Path, run
     (the outcome, its reason and each parameter's trajectory summary). For a scene of objects it holds
     ``objects`` (:func:`piga.evaluation.objects.check_objects`), and a lost object makes the outcome
     ``untrained``: the physics fitted the objects that were found, and its parameters mean nothing.
+    ``physics_lr``: the physical parameters' learning rate at a step (:func:`piga.training.train.physics_lr`), for
+    the check of a parameter still moving as fast as it allows when the schedule ended.
     """
     run_dir = Path(run_dir)
     info = inspect_dataset(data)
@@ -93,7 +97,7 @@ def write_run_report(model: FrameModel, state: TrainState, data: str | Path, run
                 profile = parameter_profile(model, train_frames, train_actions)
                 metrics["profile"] = profile_dict(profile)
         convergence = check_convergence(state, objects=objects, blank=blank, hold=metrics["frame_mse_hold"],
-                                        profile=profile, held_out=split != "train")
+                                        profile=profile, held_out=split != "train", physics_lr=physics_lr)
         metrics["converged"] = convergence.converged
         metrics["convergence"] = convergence.to_dict()
     write_json(run_dir / "metrics.json", metrics)

@@ -547,6 +547,13 @@ def _lr_factor(step: int, epoch: int, plan: TrainPlan, config: TrainConfig) -> f
     return low + (1 - low) * 0.5 * (1 + math.cos(math.pi * progress))
 
 
+def physics_lr(step: int, plan: dict[str, int], config: TrainConfig) -> float:
+    """The physical parameters' learning rate at ``step`` of a run planned as ``plan`` (its :class:`TrainPlan` as a
+    dict): the convergence check measures a parameter's last movements against it."""
+    schedule = TrainPlan(**plan)
+    return config.lr_physics * _lr_factor(step, step // max(schedule.steps_per_epoch, 1), schedule, config)
+
+
 def _horizon(step: int, plan: TrainPlan, t_pred: int) -> int:
     """Prediction frames at a given step: 0 during warm-up, then growing to T_pred."""
     if step < plan.warmup_steps:
