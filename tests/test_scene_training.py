@@ -185,7 +185,7 @@ def test_a_retry_stopped_before_its_first_checkpoint_leaves_no_folder(spring_dat
         return None, SimpleNamespace(epoch=1, step=4, plan={"epochs": 1, "steps_per_epoch": 4})  # its plan run out
 
     monkeypatch.setattr(training, "train", fake_train)
-    monkeypatch.setattr(report, "write_run_report", lambda *args: {"objects": {"lost": True, "ratio": 0.6}})
+    monkeypatch.setattr(report, "write_run_report", lambda *args, **kwargs: {"objects": {"lost": True, "ratio": 0.6}})
     out = tmp_path / "run"
     code, stdout, err = run_in_process("piga-train-model", train_main, str(spring_data), "--out", str(out), "--quiet",
                                        capsys=capsys)

@@ -11,7 +11,7 @@ import numpy as np
 
 from envs.fields import counted
 from piga.cli.common import ArgumentParser, file_path, given_options, positive_int, run_cli, typed_text
-from piga.data.schema import (SPLITS, DataFormatError, check_actions_file, check_frames_have_signal, inspect_dataset,
+from piga.data.schema import (SPLITS, BlankFramesError, check_actions_file, check_frames_have_signal, inspect_dataset,
                               read_rows, split_indices)
 from piga.io.resources import FIGURE_DISK_BYTES, check_disk
 from piga.io.atomic import check_not_an_input
@@ -54,7 +54,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                          + " or ".join(f"{name} ({counted(info.split_counts[name], 'sequence')})" for name in held))
     try:  # a blank or still file is drawn, with a warning for the blank one: a viewer is how one finds out
         check_frames_have_signal(args.data, motion=False)
-    except DataFormatError as blank:
+    except BlankFramesError as blank:
         print(f"{PROG}: warning: {blank}; drawn all the same", file=sys.stderr)
     check_actions_file(args.data)  # a non-finite action is named rather than drawn
     # a count written beyond the file is refused (the defaults shrink to a small file: the strip shows what it holds)

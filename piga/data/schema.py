@@ -114,6 +114,10 @@ class DataFormatError(ValueError):
     """A file does not follow piga's schema. The message names the dataset or attribute at fault."""
 
 
+class BlankFramesError(DataFormatError):
+    """Frames that are all blank (:func:`blank_error`): nothing to learn from, but a viewer still draws them."""
+
+
 class StillFramesError(DataFormatError):
     """Frames in which nothing moves (:func:`still_error`): a writer that knows why (an effect that repeats frames)
     can name that cause instead of the generic advice."""
@@ -462,12 +466,12 @@ def _flat_levels(low: int, high: int) -> str:
     return f"one flat level, {low}" if low == high else f"each one flat level, from {low} to {high}"
 
 
-def blank_error(path: str | os.PathLike[str], low: int, high: int, recorded: bool = False) -> DataFormatError:
+def blank_error(path: str | os.PathLike[str], low: int, high: int, recorded: bool = False) -> BlankFramesError:
     """Frames that are all blank, their flat levels from ``low`` to ``high``; ``recorded``: a recording's frames
     (``piga-import``), whose advice is not a simulation's."""
     check = ("check the recording (the right file, the camera's exposure, a lens cap)" if recorded else
              "check that the objects are drawn (their size, and colours against the background)")
-    return DataFormatError(f"{path}: every frame is blank ({_flat_levels(low, high)}): the video carries no signal to "
+    return BlankFramesError(f"{path}: every frame is blank ({_flat_levels(low, high)}): the video carries no signal to "
                            f"learn from; {check}")
 
 
