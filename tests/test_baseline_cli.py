@@ -286,7 +286,7 @@ def test_planet_iterative_from_the_command_line(tiny_data: Path, tmp_path: Path,
                                        "--iterative", "1", "--rounds", "1", "--round-steps", "2", "--episode-steps", "16",
                                        capsys=capsys)
     assert_planet_run_finished(code, err)
-    assert "then 1 rounds of 1 planner episodes + 2 steps" in stdout
+    assert "then 1 round of 1 planner episode + 2 steps" in stdout
     record = json.loads((out / "config.json").read_text())
     assert record["iterative"]["episodes"] == 1 and record["iterative"]["noise"] == 0.3
     assert json.loads((out / "metrics.json").read_text())["iterative"]["collected_sequences"] == 1

@@ -449,8 +449,8 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
                    extra=0 if iterative is None else 2 * _collected_bytes(info, iterative))
     used = min(info.split_counts["train"], config.max_sequences or info.split_counts["train"])
     print(f"training the PlaNet-style model on {args.data} ({counted(used, 'train sequence')} x {info.steps} frames) -> {run_dir}"
-          + (f", then {iterative.rounds} rounds of {iterative.episodes} planner episodes + {iterative.steps_per_round} steps"
-             if iterative else ""))
+          + (f", then {counted(iterative.rounds, 'round')} of {counted(iterative.episodes, 'planner episode')} + "
+             f"{counted(iterative.steps_per_round, 'step')}" if iterative else ""))
     written: list[int] = []
 
     def on_checkpoint(state: Any) -> None:

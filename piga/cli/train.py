@@ -473,7 +473,8 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
             what = "identify its parameters" if model.has_physics else "learn to predict"
             reason = convergence["reason"]
             if recipe_steps is not None and (lost or empty):  # the cause, with the length's fix for the seed's
-                reason = (f"{reason.split('; ')[0]}, in {'runs' if tried else 'a run'} of {state.step:,} steps "
+                steps = f"{state.step:,} step" + ("" if state.step == 1 else "s")
+                reason = (f"{reason.split('; ')[0]}, in {'runs' if tried else 'a run'} of {steps} "
                           f"where the {args.preset} preset plans {recipe_steps:,} for this file: train it that long "
                           "(leave out --epochs and --budget-steps, with --overwrite or another --out) before another "
                           "--seed")
