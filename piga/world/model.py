@@ -177,9 +177,12 @@ class ModelConfig:
             raise ValueError(f"ModelConfig needs image_size >= 8, channels 1 or 3 and substeps >= 1, got image_size="
                              f"{self.image_size}, channels={self.channels}, substeps={self.substeps}")
         check_ranges(self, {"init_scale": (0, math.inf)}, above=("init_scale",))
-        if self.architecture == "video-lstm" and (self.loss == "separate" or self.decoder != "st"):
-            raise ValueError("video-lstm has no separate encoder/decoder and dynamics to train apart, nor an object "
-                             "decoder to replace: it takes loss 'joint' or 'pred-only' and decoder 'st'")
+        if self.architecture == "video-lstm" and self.loss == "separate":
+            raise ValueError("video-lstm has no separate encoder/decoder and dynamics to train apart: it takes loss "
+                             f"'joint' or 'pred-only', not {self.loss!r}")
+        if self.architecture == "video-lstm" and self.decoder != "st":
+            raise ValueError(f"video-lstm draws its frames with its own network, not an object decoder: decoder "
+                             f"{self.decoder!r} does not apply to it (leave the decoder out)")
         if not 1 <= self.video_lstm_scale <= MAX_VIDEO_LSTM_SCALE:
             raise ValueError(f"video_lstm_scale must be in [1, {MAX_VIDEO_LSTM_SCALE}] (its weights grow with its square), "
                              f"got {self.video_lstm_scale}")
