@@ -12,6 +12,7 @@ from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 
 from piga.cli.common import run_cli
@@ -154,3 +155,16 @@ def once_per_run(tmp_path_factory: pytest.TempPathFactory, name: str, make: Call
         value = make()
         path.write_bytes(pickle.dumps(value))
         return value
+
+
+def moving_png_folder(folder: Path, frames: int = 12) -> Path:
+    """``folder`` made and filled with ``frames`` 32x32 PNGs of a bright block sliding down a black picture (f0.png ...):
+    a recording for ``piga-import``."""
+    import imageio.v3 as iio
+
+    folder.mkdir()
+    for i in range(frames):
+        frame = np.zeros((32, 32), np.uint8)
+        frame[i : i + 6, 8:14] = 220
+        iio.imwrite(folder / f"f{i}.png", frame)
+    return folder

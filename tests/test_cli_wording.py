@@ -15,7 +15,7 @@ import torch
 
 from envs.fields import number_text
 from piga.cli import control
-from tests.helpers import run_in_process
+from tests.helpers import moving_png_folder, run_in_process
 from tests.test_faults import refused
 
 DOCS = Path(__file__).resolve().parents[1] / "docs"
@@ -62,14 +62,7 @@ def test_refusals_write_the_users_whole_numbers_as_integers(prog: str, argv: lis
 
 def test_import_writes_the_split_as_given(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """12 frames in sequences of 4 are 3 sequences; the split's counts are written as the user gave them."""
-    import imageio.v3 as iio
-
-    folder = tmp_path / "frames"
-    folder.mkdir()
-    for i in range(12):
-        frame = np.zeros((32, 32), np.uint8)
-        frame[i : i + 6, 8:14] = 220
-        iio.imwrite(folder / f"f{i}.png", frame)
+    folder = moving_png_folder(tmp_path / "frames")
     csv = tmp_path / "u.csv"
     csv.write_text("0.5\n" * 12)
     refused("piga-import", [str(folder), str(csv), "--dt", "0.05", "--steps", "4", "--image-size", "32", "--split",

@@ -16,6 +16,7 @@ from envs.fields import number_text, upper_bound_text
 from envs.pendulum import MAX_BLUR_FRACTION, MAX_IMAGE_SIZE
 from piga.cli import collect, importer, train
 from piga.cli.common import PigaError
+from tests.helpers import moving_png_folder
 from tests.test_faults import TINY_DDPG, refused
 
 ROOT = Path(__file__).parents[1]
@@ -259,14 +260,7 @@ def test_a_model_of_other_frames_is_told_to_collect_at_the_envs_size() -> None:
 def test_import_refuses_an_action_float32_cannot_hold(value: str, tmp_path: Path,
                                                       capsys: pytest.CaptureFixture[str]) -> None:
     """Actions of 1e-300 were stored as 0 without a word (float32 underflow)."""
-    import imageio.v3 as iio
-
-    folder = tmp_path / "rec"
-    folder.mkdir()
-    for i in range(12):
-        frame = np.zeros((32, 32), np.uint8)
-        frame[i : i + 6, 8:14] = 220
-        iio.imwrite(folder / f"f{i}.png", frame)
+    folder = moving_png_folder(tmp_path / "rec")
     (tmp_path / "u.csv").write_text("\n".join(["0.5"] * 3 + [value] + ["0"] * 8) + "\n")
     refused("piga-import", [str(folder), str(tmp_path / "u.csv"), "--dt", "0.05", "--steps", "4", "--image-size", "32",
                             "--split", "1,1,1", "--out", str(tmp_path / "o.h5")], capsys,

@@ -375,14 +375,18 @@ def own_start_g(physics: fit.Model, nom: Nominal) -> float:
     nothing but a speed flipping sign each step (Gymnasium's step at a damping of 100) read g = 6.3e-07, and the
     nominal training file, read from there, gave g = 0.000 and |a| = 0.785 as the reference."""
     g = physics.values["g"]
-    return g if SHRUNK_A * nom.g <= g <= nom.g / SHRUNK_A else nom.g
+    return g if within_factor(g, nom.g) else nom.g
 
 
 def implausible_own_reading(read: fit.Model, nom: Nominal) -> bool:
     """Whether the own file's reading of g or |a| lies more than 1 / :data:`SHRUNK_A` times from the nominal model's:
     the model was identified on that very file, so such a reading is a fit that ran off, not a reference."""
-    g, a = read.values["g"], abs(read.values["a"])
-    return not (SHRUNK_A * nom.g <= g <= nom.g / SHRUNK_A and SHRUNK_A * abs(nom.a) <= a <= abs(nom.a) / SHRUNK_A)
+    return not (within_factor(read.values["g"], nom.g) and within_factor(abs(read.values["a"]), abs(nom.a)))
+
+
+def within_factor(value: float, reference: float) -> bool:
+    """Whether ``value`` lies within 1 / :data:`SHRUNK_A` times of ``reference`` (> 0), either way."""
+    return SHRUNK_A * reference <= value <= reference / SHRUNK_A
 
 
 def own_reading(physics: fit.Model, nom: Nominal, own: Observations, config: DiagnoseConfig) -> fit.Model:

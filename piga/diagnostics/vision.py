@@ -201,7 +201,7 @@ def fit_exposure(model: PhysicsModel, frames: np.ndarray, still: np.ndarray, x: 
     """
     from scipy.optimize import minimize_scalar
 
-    background = renders[1].median(0).values[0].numpy()  # (H, W) the decoder's level, in [0, 1]
+    background = empty_scene(renders)[0].numpy()  # (H, W) the decoder's level, in [0, 1]
     lit = still & (background > 0.2)  # a black background stays black under any exposure
     if lit.any():
         background = background[lit]  # (S,)
@@ -487,8 +487,9 @@ def camera_stage(model: PhysicsModel, path: str, theta: np.ndarray, fit: np.ndar
         if best is lit:  # a brighter picture: the blur and the shift on top, where material
             fitted = fit_camera(model, x_fit, renders=renders, base=camera)
             more = fitted.material(config) - {"exposure"}
-            on_top = Camera("blur" in more and fitted.blur or 0.0, "shift" in more and fitted.dx or 0.0,
-                            "shift" in more and fitted.dy or 0.0, fitted.exposure)
+            shift = "shift" in more
+            on_top = Camera(blur=fitted.blur if "blur" in more else 0.0, dx=fitted.dx if shift else 0.0,
+                            dy=fitted.dy if shift else 0.0, exposure=fitted.exposure)
             both = row("+".join(["exposure", *sorted(more)]) if more else "exposure+blur+shift", on_top, e_cam,
                        more or {"blur", "shift"})
         else:
@@ -535,12 +536,17 @@ def camera_stage(model: PhysicsModel, path: str, theta: np.ndarray, fit: np.ndar
                           missing)
 
 
+def empty_scene(renders: tuple[Tensor, Tensor]) -> Tensor:
+    """(C, H, W) the scene without the pendulum: the per-pixel median of the :func:`decoder_renders` over the circle
+    (no pixel holds the pendulum at half of the angles)."""
+    return renders[1].median(0).values
+
+
 @torch.no_grad()
 def empty_frames(model: PhysicsModel, camera: Camera, x: Tensor, renders: tuple[Tensor, Tensor]) -> float:
     """The fraction of frames ``x`` (M, P) closer to the empty scene than to any render of the pendulum, through
-    ``camera``: frames in which the pendulum is not in view. The empty scene is the per-pixel median of the renders
-    over the circle (no pixel holds the pendulum at half of the angles). A frame with the pendulum is far closer to
+    ``camera``: frames in which the pendulum is not in view (the empty scene: :func:`empty_scene`). A frame with the pendulum is far closer to
     its render (measured on a default model: matched MSE about 3e-4 against 2e-2 to the empty scene)."""
-    empty = camera.apply(renders[1].median(0).values[None]).flatten(1)  # (1, P)
+    empty = camera.apply(empty_scene(renders)[None]).flatten(1)  # (1, P)
     _, matched = match(angle_table(model, camera, renders=renders), x)  # (M,)
     return float((((x - empty) ** 2).mean(1) <= matched).double().mean()) if len(x) else 0.0
