@@ -671,7 +671,7 @@ def explicit_step_problem(effects: Mapping[str, float], gravity: float, dt: floa
     Friction's slope at θ̇ = 0 (c / 0.1) is no such limit: past it the speed settles into a bounded chatter of
     amplitude at most k_τ·c·dt / D (the period-2 orbit of the same step with the friction torque saturated at ±c),
     refused above :data:`MAX_FRICTION_CHATTER`. Gravity so strong that the step is unstable without any effect
-    (k_g·g·dt² >= 4) is not blamed on the effects.
+    (k_g·g·dt² >= 4, refused by :class:`envs.pendulum.PixelPendulumConfig`) is not blamed on the effects.
     """
     damping, friction, cogging = (float(effects.get(name, 0.0)) for name in ("damping", "friction", "cogging"))
     if not (damping or friction or cogging):

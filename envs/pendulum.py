@@ -70,9 +70,13 @@ __all__ = ["MAX_ACTION", "PENDULUM_DT", "PENDULUM_MAX_SPEED", "ActuationGain", "
            "PixelPendulumConfig", "ResetRange", "make_pixel_pendulum"]
 
 
-#: Largest actuation gain, and largest simulated gravity ``gravity * gravity_mult``: torques stay
-#: far inside float32.
-MAX_ACTUATION_GAIN = MAX_GRAVITY = 1e6
+#: Largest actuation gain: torques stay far inside float32.
+MAX_ACTUATION_GAIN = 1e6
+#: Largest simulated gravity ``gravity * gravity_mult`` (m/s²). Pendulum-v1's semi-implicit Euler step, linearised at the
+#: hanging rest (:func:`envs.effects.explicit_step_problem`), is unstable once k_g·g·dt² >= 4, g >= 4 / (1.5 · 0.05²) =
+#: 1066.7: the speed then flips sign every step and grows to the ±8 rad/s clip, a recording of the step, not of a
+#: pendulum. Rounded down to a number a help line can give.
+MAX_GRAVITY = 1066.0
 #: Smallest actuation gain, and smallest simulated gravity (m/s²): a millionth of the defaults. Weaker, over a
 #: 200-step episode (Gymnasium's, 10 s) the torque (at most 2 x gain) or gravity moves the pendulum by under
 #: 3e-4 rad (½ · 3 · 2e-6 · 10²), a hundredth of a pixel at its tip in a 64-pixel frame: no frame shows it, so
@@ -127,7 +131,7 @@ class PixelPendulumConfig:
                              f"{MAX_ACTUATION_GAIN:g} (a larger torque overflows float32)")
         if self.effective_gravity > MAX_GRAVITY:
             raise ValueError(f"PixelPendulumConfig: gravity x gravity_mult = {number_text(self.effective_gravity)} is out of range: at "
-                             f"most {MAX_GRAVITY:g} (a larger gravity overflows float32)")
+                             f"most {MAX_GRAVITY:g} (stronger, Pendulum-v1's explicit step of {PENDULUM_DT:g} s is unstable)")
         for name, value in effects:
             if name == "blur" and value > self.image_size / MAX_BLUR_FRACTION:
                 raise ValueError(f"effect blur={number_text(value)} px would blur the pendulum away in a {self.image_size} px frame; "

@@ -330,7 +330,9 @@ def test_a_failed_allocation_is_out_of_memory(capsys: pytest.CaptureFixture[str]
     (["--system", "spring", "--k", "1e6"], ["k = 1e+06 is too stiff", "below 2222.2222 "], 1),
     (["--seed", "9" * 25], ["--seed: expected an integer in [0, 2^63 - 1]"], 2),
     (["--actuation-gain", "1e39"], ["--actuation-gain=1e+39 is out of range", "at most 1e+06"], 1),
-    (["--gravity", "1e39"], ["--gravity x --gravity-mult = 1e+39 is out of range", "at most 1e+06"], 1),
+    (["--gravity", "1e39"], ["--gravity x --gravity-mult = 1e+39 is out of range", "at most 1066"], 1),
+    (["--gravity", "1100"], ["--gravity x --gravity-mult = 1100 is out of range", "at most 1066",
+                             "explicit step of 0.05 s is unstable"], 1),  # a recording of the integrator's flip-flop
     (["--gravity", "1e-300"], ["--gravity x --gravity-mult = 1e-300 is out of range: at least 1e-06 m/s²",
                                "under a hundredth of a pixel in a 200-step episode"], 1),  # data with no gravity in them
     (["--gravity-mult", "1e-300"], ["--gravity x --gravity-mult = 1e-299 is out of range: at least 1e-06"], 1),

@@ -41,6 +41,15 @@ def test_a_system_with_nothing_to_learn_says_so() -> None:
     assert summary_line({"parameters": {"g": 9.9}, "parameter_errors": {}}) == "g=9.9000"
 
 
+def test_the_learned_line_shows_the_offset_the_warning_names() -> None:
+    """A run left unsettled by its offset warned "offset moved ..." beside a learned line without the offset."""
+    errors = {"g": {"learned": 9.9, "true": 10.0, "relative_error": 0.01}}
+    metrics = {"parameters": {"g": 9.9, "offset": 0.02}, "parameter_errors": errors}
+    assert "offset" not in summary_line(metrics | {"convergence": {"reason": "every learned parameter settled"}})
+    unsettled = {"reason": "still drifting at the end: offset moved +3.00% over the last 10% of steps; train longer"}
+    assert summary_line(metrics | {"convergence": unsettled}).endswith(", offset=0.0200")
+
+
 @pytest.fixture(scope="module")
 def piga_run(tiny_data: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
     from tests.helpers import train_tiny

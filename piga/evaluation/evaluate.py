@@ -13,6 +13,7 @@ constant offset, to show how far the learned φ is from the best possible alignm
 from __future__ import annotations
 
 import math
+import re
 
 from dataclasses import dataclass
 from pathlib import Path
@@ -242,8 +243,10 @@ def summary_line(metrics: dict[str, Any]) -> str:
     errors = metrics.get("parameter_errors", {})
     parts = [f"{name}={e['learned']:.4f} ({true_and_error(e)}{note if name in flat else ''})" for name, e in errors.items()]
     # beside those, the learned ones the file gives no true value for (its params may name only some): all of them
-    # where it gives none, the offset included
-    skipped = {*errors, *metrics.get("fixed_parameters", {}), "offset"} if errors else set()
+    # where it gives none, the offset included, and the offset wherever the convergence verdict names it (a warning
+    # "offset moved ..." beside a line that did not show it)
+    named = re.findall(r"[A-Za-z_]+", (metrics.get("convergence") or {}).get("reason") or "")
+    skipped = {*errors, *metrics.get("fixed_parameters", {})} | ({"offset"} - set(named)) if errors else set()
     parts += [f"{k}={v:.4f}" + (f" ({note[2:]})" if k in flat else "") for k, v in metrics.get("parameters", {}).items()
               if k not in skipped]
     return ", ".join(parts) or "no parameter (none to learn)"
