@@ -268,3 +268,11 @@ def test_the_collect_page_names_every_env_option() -> None:
     row = next(line for line in (DOCS / "commands" / "collect.md").read_text(encoding="utf-8").splitlines()
                if line.startswith("| `--env-option"))
     assert [key for key in env_option_keys() if f"`{key}`" not in row] == []
+
+
+def test_the_gravity_range_on_the_pages_is_the_envs() -> None:
+    """The collect and control pages gave [1e-6, 1e6] m/s² after the bound moved to where the explicit step is stable."""
+    from envs.pendulum import MAX_GRAVITY, MIN_GRAVITY
+
+    for page in ("collect.md", "control.md"):
+        assert f"[{MIN_GRAVITY:g}, {MAX_GRAVITY:g}] m/s²" in (DOCS / "commands" / page).read_text(encoding="utf-8"), page
