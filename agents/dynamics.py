@@ -166,8 +166,7 @@ class PendulumDynamics:
         """
         if not isinstance(integrator, Euler) or getattr(system, "has_damping", False):
             raise ValueError("this model integrates within the frame or learned a damping (--preset continuous); the "
-                             "pendulum planner's engine is semi-implicit Euler without damping (for dm_control's "
-                             "pendulum use piga-control --env piga/DMCPendulum-v0)")
+                             "pendulum planner's engine is semi-implicit Euler without damping")
         p = system.parameters_dict()
         return cls(scaled_gravity(p["g"], gravity_mult), p["a"], system.dt, integrator.substeps, system.length, system.mass)
 

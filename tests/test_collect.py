@@ -77,6 +77,12 @@ def test_empty_split_warned() -> None:
     assert "valid and test empty" in empty_split_warning((0.8, 0.1, 0.1), {"train": 4, "valid": 0, "test": 0})
     assert "--split 2,1,1" in empty_split_warning((0.8, 0.1, 0.1), {"train": 4, "valid": 0, "test": 0})
     assert "test empty" in empty_split_warning((0.5, 0.5, 0.0001), {"train": 1, "valid": 1, "test": 0})
+    # each empty split says whose numbers fall back to the train split: train-model measures on test only
+    valid_only = empty_split_warning((0.05, 0.05, 0.9), {"train": 1, "valid": 0, "test": 9}) or ""
+    assert "leaves valid empty, so the PlaNet-style baseline's validation will come from the train split" in valid_only
+    assert "piga-train-model" not in valid_only
+    assert "test empty, so piga-train-model's metrics will" in empty_split_warning((0.5, 0.5, 0.0001),
+                                                                                  {"train": 1, "valid": 1, "test": 0})
     assert empty_split_warning((1, 0, 0), {"train": 4, "valid": 0, "test": 0}) is None  # as asked
     assert empty_split_warning((0.8, 0.1, 0.1), {"train": 8, "valid": 1, "test": 1}) is None
 

@@ -939,6 +939,7 @@ def test_holdable_range_is_one_value() -> None:
     """The README's holdable range and the goal-image warning's come from the same computed angle."""
     import re
 
+    from envs.fields import upper_bound_text
     from piga.control.goal import HOLDABLE_ANGLE, holdable_angle
 
     assert HOLDABLE_ANGLE == holdable_angle(10.0, 1.0) == math.asin(0.4)
@@ -946,7 +947,7 @@ def test_holdable_range_is_one_value() -> None:
     pages = [root / "README.md", *sorted((root / "docs").rglob("*.md"))]
     quoted = [value for page in pages if page.is_file()
               for value in re.findall(r"holdable\s+range \(±([\d.]+)°", page.read_text())]
-    assert quoted and set(quoted) == {f"{math.degrees(HOLDABLE_ANGLE):.1f}"}
+    assert quoted and set(quoted) == {upper_bound_text(math.degrees(HOLDABLE_ANGLE), 4)}  # as the warning writes it
 
 
 def test_video_on_a_full_disk_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str],
@@ -2045,7 +2046,16 @@ def test_control_warns_of_a_goal_angle_beyond_the_torque_limit(capsys: pytest.Ca
                                     "--steps", "20", "--horizon", "3", "--candidates", "4", "--iterations", "1", "--quiet",
                                     capsys=capsys)
     assert code == 0 and err.count("\n") == 1, err
-    assert err.startswith("piga-control: warning: goal 90.0 deg needs torque") and "holdable goals are within" in err
+    assert err.startswith("piga-control: warning: goal 90 deg needs torque") and "holdable goals are within" in err
+
+
+def test_the_hold_warning_at_the_edge_does_not_contradict_itself() -> None:
+    """23.6 deg read "needs torque -2.00 ..., beyond the limit of 2; holdable goals are within ±23.6 deg"."""
+    from piga.control.goal import hold_warning
+
+    line = hold_warning(math.radians(23.6)) or ""
+    assert "goal 23.6 deg needs torque -2.002" in line and "within ±23.57 deg" in line, line
+    assert hold_warning(math.radians(23.57)) is None and hold_warning(math.radians(-23.57)) is None
 
 
 def test_a_goal_is_judged_holdable_in_the_env_the_agent_was_not_told_of(tiny_piga_run: Path,
@@ -2054,7 +2064,7 @@ def test_a_goal_is_judged_holdable_in_the_env_the_agent_was_not_told_of(tiny_pig
     _, _, err = run_in_process("piga-control", control.main, "--model", str(tiny_piga_run), "--goal-angle", "20",
                                "--gravity-mult", "1.4", "--not-told", "--episodes", "1", "--steps", "20", "--horizon",
                                "2", "--candidates", "8", "--iterations", "1", "--quiet", capsys=capsys)
-    assert "goal 20.0 deg needs torque" in err and "within ±16.6 deg" in err, err
+    assert "goal 20 deg needs torque" in err and "within ±16.6 deg" in err, err
 
 
 def test_a_dmc_frame_may_not_span_seconds() -> None:

@@ -602,6 +602,17 @@ def check_pendulum_model(model: PhysicsModel, run_dir: str) -> None:
                         "model on them")
 
 
+def _plannable(model: PhysicsModel) -> bool:
+    """Whether the pendulum planner's engine takes the model (:meth:`agents.dynamics.PendulumDynamics.of`)."""
+    from agents.dynamics import PendulumDynamics
+
+    try:
+        PendulumDynamics.of(model.system, model.integrator)  # type: ignore[arg-type]
+    except ValueError:
+        return False
+    return True
+
+
 def _check_plannable(model: PhysicsModel, run_dir: str) -> None:
     """Refuses a model that the pendulum planner's engine would plan wrongly (``--preset continuous``: RK4 within the
     frame, or a learned damping), before anything else is read or warned of; the agent refuses it in the same words
@@ -611,7 +622,14 @@ def _check_plannable(model: PhysicsModel, run_dir: str) -> None:
     try:
         PendulumDynamics.of(model.system, model.integrator)  # type: ignore[arg-type]
     except ValueError as exc:
-        raise PigaError(f"{run_dir}: {exc}") from None
+        # the fix: dm_control's env, which plans such a model, where it steps the model's frame rate; else a model
+        # trained with the preset that Gymnasium's pendulum is planned with
+        if (repeat := _dmc_repeat(model.system.dt)) is not None:
+            fix = f"control it with --env {DMC_PENDULUM}" + ("" if repeat == 1 else f" --env-option action_repeat={repeat}")
+        else:
+            fix = (f"no env plans it at its frames' rate ({model.system.dt:g} s apart): to control {PIXEL_PENDULUM}, "
+                   "train a model with --preset fast")
+        raise PigaError(f"{run_dir}: {exc}; {fix}") from None
 
 
 def _warn_if_other_frames(run_dir: str, checkpoint: dict) -> None:
@@ -784,9 +802,11 @@ def _check_piga_view(run_dir: str, checkpoint: dict, env: DMCPendulumConfig) -> 
                                                         else f"give --env-option camera_distance={distance:g}"))
 
 
-def _check_dmc_rate(run_dir: str, checkpoint: dict, dt: float, env: DMCPendulumConfig) -> None:
+def _check_dmc_rate(run_dir: str, checkpoint: dict, dt: float, env: DMCPendulumConfig, euler: bool = True) -> None:
     """Refuses a piga model trained on frames ``dt`` s apart where the DMC pendulum ``env`` steps another dt, saying
-    what would match: the action repeat that gives ``dt``, where one does; else the env of the model's frames."""
+    what would match: the action repeat that gives ``dt``, where one does; else the env of the model's frames, where
+    its planner takes the model (``euler``: one semi-implicit Euler step per frame, no damping; a ``--preset
+    continuous`` model of Gymnasium's frames is planned by neither env)."""
     from envs.dmc import DMC_PHYSICS_DT
     from envs.constants import PENDULUM_DT
 
@@ -800,7 +820,12 @@ def _check_dmc_rate(run_dir: str, checkpoint: dict, dt: float, env: DMCPendulumC
         frames = f"frames of {trained} ({dt:g} s apart)"
     elif abs(dt - PENDULUM_DT) <= 1e-9:  # the file is gone, or names no env: its rate is the pixel pendulum's
         frames, trained = f"{frames} ({PIXEL_PENDULUM}'s rate)", PIXEL_PENDULUM
-    elsewhere = f"control it with --env {trained}, or " if trained and trained != DMC_PENDULUM else ""
+    elsewhere = (f"control it with --env {trained}, or " if trained and trained != DMC_PENDULUM
+                 and (euler or trained != PIXEL_PENDULUM) else "")
+    if not euler and trained == PIXEL_PENDULUM:
+        raise PigaError(f"{run_dir}: the model was trained on {frames} with --preset continuous, which no env plans at "
+                        f"that rate: to control {PIXEL_PENDULUM}, train a model with --preset fast; to control "
+                        f"{DMC_PENDULUM}, train one on its frames (piga-collect --env {DMC_PENDULUM})")
     raise PigaError(f"{run_dir}: the model was trained on {frames}, and no action_repeat of {DMC_PENDULUM} (physics "
                     f"steps of {DMC_PHYSICS_DT:g} s) makes that rate; {elsewhere}train one on frames of "
                     f"{DMC_PENDULUM} (piga-collect --env {DMC_PENDULUM})")
@@ -872,7 +897,7 @@ def _dmc(args: argparse.Namespace, argv: Sequence[str] | None, given: set[str]) 
             if model.config.system != "pendulum":  # before its frames' rate, whose advice would not help
                 raise PigaError(f"{args.model}: a {model.config.system} model cannot control the pendulum")
             _check_piga_view(args.model, checkpoint, config.env)
-            _check_dmc_rate(args.model, checkpoint, model.config.dt, config.env)
+            _check_dmc_rate(args.model, checkpoint, model.config.dt, config.env, _plannable(model))
             # rendered at the size of the frames the model was identified on (piga-collect --image-size): a 32 px
             # model was fed 64 px frames ("encode takes frames of ... got (1, 64, 64)"), with no option to change it
             config = replace(config, env=replace(config.env, image_size=model.config.image_size))

@@ -21,6 +21,7 @@ import numpy as np
 import torch
 
 from envs.constants import MAX_ACTION
+from envs.fields import upper_bound_text
 from envs.pendulum import PixelPendulumConfig
 from piga.world.effects import scaled_gravity
 from piga.world.model import PhysicsModel, frames_to_float
@@ -46,7 +47,7 @@ def holdable_angle(g: float, a: float = 1.0, max_action: float = MAX_ACTION) -> 
 
 
 HOLDABLE_ANGLE = holdable_angle(PixelPendulumConfig.gravity, PixelPendulumConfig.actuation_gain)
-"""The pixel pendulum's holdable range around upright (rad), at its own gravity: asin(0.4), ±23.6°.
+"""The pixel pendulum's holdable range around upright (rad), at its own gravity: asin(0.4), ±23.578°.
 The README quotes it; the goal-image warning prints the same value (for gravity x1)."""
 
 
@@ -115,10 +116,12 @@ def hold_warning(angle: float, gravity_mult: float = 1.0) -> str | None:
         return None
     config = PixelPendulumConfig(gravity_mult=gravity_mult)
     needed = -config.effective_gravity * math.sin(angle) / (2 * config.actuation_gain)
-    return (f"goal {math.degrees(angle):.1f} deg needs torque {needed:+.2f} to hold in the env (its own physics), beyond "
+    # the goal as given and the bound rounded down, the torque to 4 digits: at the edge, "goal 23.6 deg needs torque
+    # -2.00 ... within ±23.6 deg" contradicted itself (the bound is 23.578)
+    return (f"goal {math.degrees(angle):.6g} deg needs torque {needed:+.4g} to hold in the env (its own physics), beyond "
             f"the limit of {MAX_ACTION:g}; "
-            f"holdable goals are within ±{math.degrees(feasible):.1f} deg of upright (or of hanging down); the controller "
-            "will do its best")
+            f"holdable goals are within ±{upper_bound_text(math.degrees(feasible), 4)} deg of upright (or of hanging "
+            "down); the controller will do its best")
 
 
 def read_goal(model: PhysicsModel, image: np.ndarray, g: float, a: float, mse_limit: float,

@@ -138,8 +138,12 @@ def empty_split_warning(split: Sequence[float], counts: dict[str, int]) -> str |
         return None
     n = sum(counts.values())
     advice = f"give more sequences, or counts such as --split {n - 2},1,1" if n >= 3 else "give 3 sequences or more"
+    # what each empty split costs: piga-train-model measures on the test split, the PlaNet-style baseline validates on
+    # the valid split; each falls back to the train split, which is not held out
+    cost = {"test": "piga-train-model's metrics", "valid": "the PlaNet-style baseline's validation"}
+    whose = " and ".join(cost[name] for name in empty)
     return (f"the split {','.join(f'{x:g}' for x in split)} of {counted(n, 'sequence')} leaves {' and '.join(empty)} empty, so "
-            f"piga-train-model's metrics will come from the train split, which is not held out ({advice})")
+            f"{whose} will come from the train split, which is not held out ({advice})")
 
 
 #: ``piga-collect``'s presets: 'default' is :class:`CollectConfig`'s defaults; 'paper' the paper's pendulum
