@@ -597,9 +597,11 @@ def check_pendulum_model(model: PhysicsModel, run_dir: str) -> None:
     if config.image_size != size or config.channels != 1:
         frames = f"{config.image_size}x{config.image_size} " + ("gray" if config.channels == 1 else f"{config.channels}-channel")
         default = ", its default" if size == PixelPendulumConfig.image_size else ""
+        fix = (f"collect frames of that size (piga-collect --image-size {size}{default}) and train a model on them"
+               if config.image_size != size else
+               "train a model on gray frames (piga-collect writes them, and piga-import turns a colour recording gray)")
         raise PigaError(f"{run_dir}: the model takes {frames} frames, Gymnasium's pixel pendulum renders {size}x{size} "
-                        f"gray ones; collect frames of that size (piga-collect --image-size {size}{default}) and train a "
-                        "model on them")
+                        f"gray ones; {fix}")
 
 
 def _plannable(model: PhysicsModel) -> bool:
