@@ -113,6 +113,8 @@ def test_the_diagnose_page_gives_the_camera_stage_s_thresholds() -> None:
     assert f"named above {c.min_noise:g} gray level" in text
     assert f"successive frames of at most {c.max_noise_correlation:g}" in text
     assert f"more than {100 * c.max_missing:g}% of such held-out frames is refused" in text
+    assert f"{'half' if c.min_core_share == 0.5 else c.min_core_share} of its brightening" in text
+    assert f"through the accepted camera by {c.repeats.visible:g} gray levels or more" in text
 
 
 def test_another_scene_is_refused_unless_a_camera_explains_it() -> None:
@@ -158,3 +160,74 @@ def test_a_blur_is_not_read_as_a_brighter_picture(model, tmp_path: Path) -> None
         f["frames"][...] = np.stack([cv2.GaussianBlur(x, (0, 0), 1.85) for x in frames]).reshape(N, T, SIZE, SIZE)
     found = V.camera_stage(model, str(path), np.zeros((N, T)), np.arange(N) < 16, None)
     assert [e["effect"] for e in found.effects] == ["blur"] and found.camera.blur == pytest.approx(1.85, abs=0.1)
+
+
+def _patched_model():
+    """The rod model with a faint gray patch in its background, as a decoder draws the mean of a torque arrow that
+    the training frames showed and a recording may lack."""
+    from tests.test_vision import rod_model as plain
+
+    m = plain(SIZE)
+    with torch.no_grad():
+        background = torch.ones(1, SIZE, SIZE)
+        background[:, SIZE // 2 - 6 : SIZE // 2 + 6, 2:12] = 0.9
+        ys, xs = torch.meshgrid(torch.arange(SIZE) + 0.5, torch.arange(SIZE) + 0.5, indexing="ij")
+        rod = ((xs - SIZE / 2).abs() < 1.6) & (ys > 4) & (ys < SIZE / 2 + 1)
+        m.decoder.load_templates(torch.full((1, 1, SIZE, SIZE), 0.2), torch.where(rod, 8.0, -8.0)[None, None],
+                                 background=background, background_mask_logit=torch.zeros(1, SIZE, SIZE))
+    return m.eval()
+
+
+def test_a_picture_without_the_arrow_is_not_a_brighter_exposure(tmp_path: Path) -> None:
+    """A recording without the torque arrow of the training frames read "exposure 1.05": brightening the renders
+    whitened the decoder's faint arrow. A real exposure brightens the pendulum itself, which here stays as drawn."""
+    model = _patched_model()
+    path = _recording(tmp_path / "rec.h5", model, "none")
+    with h5py.File(path, "a") as f:
+        frames = f["frames"][...]
+        frames[..., SIZE // 2 - 6 : SIZE // 2 + 6, 2:12] = np.maximum(frames[..., SIZE // 2 - 6 : SIZE // 2 + 6, 2:12],
+                                                                       np.where(frames[..., SIZE // 2 - 6 : SIZE // 2 + 6, 2:12] > 200, 255, 0).astype(np.uint8))
+        f["frames"][...] = frames
+    found = V.camera_stage(model, str(path), np.zeros((N, T)), np.arange(N) < 16, None)
+    lit = next(row for row in found.table if row["candidate"] == "exposure")
+    assert lit["drop"] > V.CameraConfig().min_drop and lit["camera"]["exposure"] > 1  # it lowers the residual ...
+    assert lit["core_brightening"] == pytest.approx(1.0, abs=0.01) and not lit["accepted"]  # ... not on the rod
+    assert "exposure" not in {e["effect"] for e in found.effects}
+    brighter = _recording(tmp_path / "bright.h5", _patched_model(), "none", exposure=1.3)
+    assert V.core_brightening(model, V._flat(h5py.File(brighter)["frames"][:4].reshape(-1, SIZE, SIZE)),
+                              V.decoder_renders(model, V.TABLE_SIZE // 2)) == pytest.approx(1.3, abs=0.03)
+
+
+def test_a_large_shift_moves_the_pendulum_onto_pixels_not_read_as_noise(model, tmp_path: Path) -> None:
+    """A shift of 4.9 px, beyond the still pixels' margin of 4, read "noise 8.34": the still pixels are now those the
+    pendulum never reaches through the accepted camera."""
+    import cv2
+
+    path = _recording(tmp_path / "rec.h5", model, "none")
+    with h5py.File(path, "a") as f:
+        frames = f["frames"][...].reshape(-1, SIZE, SIZE)
+        warp = np.array([[1.0, 0.0, 4.9], [0.0, 1.0, 4.9]])
+        f["frames"][...] = np.stack([cv2.warpAffine(x, warp, (SIZE, SIZE), flags=cv2.INTER_LINEAR,
+                                                    borderMode=cv2.BORDER_REPLICATE) for x in frames]).reshape(N, T, SIZE, SIZE)
+    found = V.camera_stage(model, str(path), np.zeros((N, T)), np.arange(N) < 16, None)
+    assert [e["effect"] for e in found.effects] == ["shift"] and found.camera.dx == pytest.approx(4.9, abs=0.1)
+    assert found.noise < V.CameraConfig().min_noise  # clean frames: the still pixels never change
+
+
+def test_a_blurred_pendulum_moving_slowly_does_not_drop_frames(model, tmp_path: Path) -> None:
+    """Through a 3.9 px blur, steps of 0.02-0.028 rad changed the frames by at most 2 gray levels and read "frame_drop
+    0.0118": a repeat counts as a drop only across a step that shows through the accepted camera."""
+    import cv2
+
+    from piga.diagnostics.repeats import stale_frames
+
+    theta = np.linspace(0, 0.025 * (T - 1), T)[None] + np.linspace(-3, 3, N)[:, None]  # (N, T) 0.025 rad per step
+    frames = _renders(model, torch.from_numpy(theta.ravel())).reshape(-1, SIZE, SIZE)
+    frames = np.stack([cv2.GaussianBlur(x, (0, 0), 3.9) for x in frames]).reshape(N, T, SIZE, SIZE)
+    path = tmp_path / "rec.h5"
+    with h5py.File(path, "w") as f:
+        f["frames"] = frames
+    stale = stale_frames(frames)
+    assert stale.sum() >= 5  # the blur leaves moving frames within a repeat's tolerance
+    found = V.camera_stage(model, str(path), theta, np.arange(N) < 16, stale)
+    assert found.camera.blur == pytest.approx(3.9, abs=0.2) and "frame_drop" not in {e["effect"] for e in found.effects}

@@ -33,7 +33,7 @@ with the identified decoder D:
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import torch
@@ -133,7 +133,7 @@ def match(table: AngleTable, x: Tensor, batch: int = 2048) -> tuple[Tensor, Tens
     thetas, errors = [], []
     for start in range(0, x.shape[0], batch):
         xb = x[start : start + batch]
-        d = (xb**2).sum(1, keepdim=True) - 2 * xb @ table.renders.T + r2  # (m, K) squared distances
+        d = _distances(table, xb, r2)  # (m, K)
         j = d.argmin(1)  # (m,)
         d0 = d.gather(1, j[:, None])[:, 0]
         dm = d.gather(1, ((j - 1) % k)[:, None])[:, 0]
@@ -144,6 +144,11 @@ def match(table: AngleTable, x: Tensor, batch: int = 2048) -> tuple[Tensor, Tens
         thetas.append(torch.remainder(table.angles[j] + delta * step + math.pi, 2 * math.pi) - math.pi)
         errors.append((d0 - 0.25 * (dm - dp) * delta).clamp_min(0) / x.shape[1])
     return torch.cat(thetas), torch.cat(errors)
+
+
+def _distances(table: AngleTable, x: Tensor, r2: Tensor) -> Tensor:
+    """(m, K) squared distances of frames ``x`` (m, P) to the table's renders, whose squared norms are ``r2`` (K,)."""
+    return (x**2).sum(1, keepdim=True) - 2 * x @ table.renders.T + r2
 
 
 def matched_error(model: PhysicsModel, camera: Camera, x: Tensor, size: int = TABLE_SIZE // 2,
@@ -225,8 +230,28 @@ def fit_exposure(model: PhysicsModel, frames: np.ndarray, still: np.ndarray, x: 
 
 
 @torch.no_grad()
-def static_pixels(model: PhysicsModel, margin: int = 4, tolerance: float = 8 / 255) -> np.ndarray:
-    """(H, W) bool: pixels that the decoder leaves at its background for every angle, ``margin`` px away.
+def core_brightening(model: PhysicsModel, x: Tensor, renders: tuple[Tensor, Tensor], dark: float = 0.5) -> float:
+    """The median, over the pixels darker than ``dark`` in each frame's matched render (the pendulum's own, no
+    camera), of the frames ``x`` (M, P) over that render: how much brighter the pendulum is than the decoder draws
+    it. An exposure k brightens it by k; a change elsewhere in the picture (a missing torque arrow, which leaves
+    faint pixels of the decoder's white) does not."""
+    table = angle_table(model, Camera(), renders=renders)
+    r2 = (table.renders**2).sum(1)  # (K,)
+    ratios = []
+    for start in range(0, len(x), 2048):
+        xb = x[start : start + 2048]  # (m, P)
+        r = table.renders[_distances(table, xb, r2).argmin(1)]  # (m, P) each frame's nearest render
+        core = r < dark
+        ratios.append(xb[core] / r[core].clamp_min(1e-6))
+    values = torch.cat(ratios)
+    return float(values.median()) if len(values) else 1.0
+
+
+@torch.no_grad()
+def static_pixels(model: PhysicsModel, margin: int = 4, tolerance: float = 8 / 255, camera: Camera = Camera()) -> np.ndarray:
+    """(H, W) bool: pixels that the decoder leaves at its background for every angle, ``margin`` px away, seen
+    through ``camera`` (a shift of 4.9 px moved the pendulum past the margin onto pixels whose changes read "noise
+    8.34"; a blur spreads it).
 
     "At its background" is within ``tolerance`` (8 gray levels; the pendulum is about 200 from the
     background). A decoder leaks a few gray levels of the pendulum's template across the image (measured:
@@ -236,7 +261,7 @@ def static_pixels(model: PhysicsModel, margin: int = 4, tolerance: float = 8 / 2
     """
     import cv2
 
-    table = angle_table(model, Camera(), 180)
+    table = angle_table(model, camera, 180)
     cfg = model.config
     frames = table.renders.view(-1, cfg.channels, cfg.image_size, cfg.image_size)
     spread = (frames - frames.median(0).values).abs().amax(dim=(0, 1)).numpy()  # (H, W)
@@ -319,6 +344,11 @@ class CameraConfig:
     """Smallest change of white by the exposure (gray levels, 255·|k - 1|) that is named."""
     min_noise: float = 1.0
     """Smallest sensor noise (gray levels) that is named (a clean camera gives 0)."""
+    min_core_share: float = 0.5
+    """Share of a brighter picture's k - 1 that the pendulum's own dark pixels must show (:func:`core_brightening`)
+    for it to be named where the white background cannot show it: a real exposure brightens them by k (measured: k =
+    1.3 showed 1.31), while a recording without the torque arrow that the training frames had fitted k = 1.046 on the
+    arrow's faint pixels, its pendulum brightened by 1.013."""
     max_missing: float = 0.05
     """Largest fraction of held-out frames without the pendulum in view (:func:`empty_frames`) that is diagnosed:
     beyond it the recording is refused (a file whose every second half of a sequence was blank read "blur 1.68 px";
@@ -337,7 +367,7 @@ class CameraConfig:
             raise TypeError(f"CameraConfig.repeats must be a RepeatConfig; got {self.repeats!r}")
         check_ranges(self, {"fit_frames": (1, 10_000_000), "held_frames": (1, 10_000_000), "min_drop": (0, 1),
                             "min_blur": (0, 100), "min_shift": (0, 100), "min_noise": (0, 255),
-                            "min_exposure": (0, 255), "max_missing": (0, 1),
+                            "min_exposure": (0, 255), "min_core_share": (0, 1), "max_missing": (0, 1),
                             "max_noise_correlation": (-1, 1)})
 
 
@@ -469,6 +499,10 @@ def camera_stage(model: PhysicsModel, path: str, theta: np.ndarray, fit: np.ndar
     still = static_pixels(model)
     exposed, shown = fit_exposure(model, frames_2d, still, x_fit, renders, config.min_exposure)
     lit = row("exposure", exposed, e0, {"exposure"})
+    if lit["accepted"] and not shown:  # a brighter picture on white: the pendulum itself must show it
+        core = core_brightening(model, x_fit, renders)
+        lit["core_brightening"] = core
+        lit["accepted"] = core - 1 >= config.min_core_share * (exposed.exposure - 1)
     table.append(lit)
     first = shown and lit["accepted"]
     base, e_base = (exposed, lit["held_out_matched_mse"]) if first else (Camera(), e0)
@@ -512,6 +546,8 @@ def camera_stage(model: PhysicsModel, path: str, theta: np.ndarray, fit: np.ndar
         effects.append({"effect": "exposure", "value": camera.exposure, "unit": "factor on every gray level",
                         "interval": camera_interval(model, camera, "exposure", x_fit, fit_seqs, step=0.01)})
 
+    if camera.blur or camera.dx or camera.dy:  # the pixels the pendulum never reaches in these frames
+        still = static_pixels(model, camera=camera)
     noise, noise_ci = noise_level(frames_2d, still, interval=True)
     correlation = float("nan")
     if noise > config.min_noise:
@@ -522,18 +558,35 @@ def camera_stage(model: PhysicsModel, path: str, theta: np.ndarray, fit: np.ndar
     if noisy:
         effects.append({"effect": "noise", "value": noise, "unit": "gray levels (σ)", "interval": noise_ci})
 
-    leading, drops, drop_rate, repeat_effects = repeated_frames(stale, theta, config.repeats)
-    effects += repeat_effects
-    bar.update()
-
-    missing = empty_frames(model, camera, x_held, renders)
     theta_c = None
     if camera != Camera() or noisy:
         theta_c = match_file(model, path, camera)
     bar.update()
+    # whether the pendulum moves across a repeated frame: on the angles matched through the accepted camera where
+    # there is one (the encoder misreads frames through another camera: a 3.9 px blur read "frame_drop 0.0118" from
+    # repeats where its angles moved and the pendulum did not)
+    repeats = config.repeats
+    if camera != Camera():  # a step must show through it
+        repeats = replace(repeats, moving=max(repeats.moving, visible_step(model, camera, repeats.visible)))
+    leading, drops, drop_rate, repeat_effects = repeated_frames(stale, theta if theta_c is None else theta_c, repeats)
+    effects += repeat_effects
+    missing = empty_frames(model, camera, x_held, renders)
+    bar.update()
     bar.close()
     return CameraFindings(camera, noise, drop_rate, drops, leading, table, e0, e_cam, effects, theta_c, correlation,
                           missing)
+
+
+@torch.no_grad()
+def visible_step(model: PhysicsModel, camera: Camera, levels: float, size: int = 1440) -> float:
+    """The smallest angle step (rad) that changes the decoder's renders through ``camera`` by ``levels`` gray levels
+    (the largest pixel change, the median over the circle): a step under it can leave a frame within a repeat's
+    tolerance of the one before (π where none does)."""
+    renders = angle_table(model, camera, size).renders  # (K, P)
+    for k in range(1, size // 2):
+        if float((renders - renders.roll(-k, 0)).abs().amax(1).median()) * 255 >= levels:
+            return k * 2 * math.pi / size
+    return math.pi
 
 
 def empty_scene(renders: tuple[Tensor, Tensor]) -> Tensor:
