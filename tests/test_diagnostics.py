@@ -202,6 +202,11 @@ def test_cli_bad_inputs(tiny_model: Path, tiny_data: Path, tmp_path: Path, capsy
     assert_one_line_error(diagnose_in_process(capsys, "--model", str(tiny_model), "--data", str(small), "--out", out),
                           "32")
     assert not (tmp_path / "report").exists()  # a refusal leaves no folder behind
+    before = sorted(p.name for p in tiny_model.iterdir())
+    assert_one_line_error(diagnose_in_process(capsys, "--model", str(tiny_model), "--data", str(tiny_data), "--out",
+                                              str(tiny_model), "--overwrite"),
+                          f"--out {tiny_model} is the model's run folder; give another folder for the report")
+    assert sorted(p.name for p in tiny_model.iterdir()) == before
 
 
 def test_corrected_dynamics_roll_the_corrected_physics() -> None:
@@ -451,7 +456,8 @@ def test_the_smallest_default_file_is_accepted(tmp_path: Path) -> None:
     assert check_compatible(model, data).n_sequences == 20
     fewer = tmp_path / "three-held-out.h5"
     collect(CollectConfig(sequences=20, steps=12, seed=3, workers=1, split=(17, 2, 1)), fewer, progress=False, command="t")
-    with pytest.raises(DiagnosisInputError, match="17 train and 3 held-out sequences; need at least 10 and 4"):
+    with pytest.raises(DiagnosisInputError, match="17 train and 3 held-out sequences; need at least 10 and 4; collect or import it "
+                       "again with a split that holds out at least 4, such as --split 16,2,2$"):
         check_compatible(model, fewer)
     # gray frames with a channel axis, (H, W, 1), are gray frames: training takes them, and so does the diagnosis
     # (it refused them: "frames are (64, 64, 1), the model takes 64x64 with 1 channel(s)")

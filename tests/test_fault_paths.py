@@ -322,3 +322,16 @@ def test_an_import_without_room_is_told_what_import_can_change(tmp_path: Path, m
     line = refused("piga-import", [str(frames), str(tmp_path / "a.csv"), "--dt", "0.05", "--steps", "3", "--out",
                                    str(tmp_path / "d.h5")], capsys, "needs about", "a smaller --image-size")
     assert "ask for less" not in line and not (tmp_path / "d.h5").exists()
+
+
+@pytest.mark.parametrize("name", ["checkpoint.pt", "data.h5"])
+def test_a_run_given_as_a_file_asks_for_its_folder(name: str, tmp_path: Path) -> None:
+    """--model model/checkpoint.pt read "model/checkpoint.pt/checkpoint.pt: no checkpoint (is model/checkpoint.pt a
+    piga-train-model run folder?)", a path the user never typed."""
+    from piga.io.checkpoint import RunKind, read_checkpoint
+
+    (tmp_path / name).write_bytes(b"x")
+    folder = f" ({tmp_path})" if name == "checkpoint.pt" else ""
+    with pytest.raises(FileNotFoundError) as info:
+        read_checkpoint(tmp_path / name, RunKind.PIGA)
+    assert str(info.value) == f"{tmp_path / name} is a file; give the run's folder{folder}"

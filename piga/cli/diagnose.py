@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import math
 from collections.abc import Sequence
+from pathlib import Path
 
 from piga.cli.common import (ArgumentParser, Interrupted, PigaError, command_line, int_up_to, number_type, run_cli,
                              seed_int, thread_count, warn_if_unconverged)
@@ -72,6 +73,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         raise PigaError("--episodes sets the MPC episodes of --env; without --env nothing is run, so drop it")
     config = DiagnoseConfig(bootstrap=args.bootstrap, seed=args.seed, fit_starts=args.fit_starts,
                             matched_angles=args.matched_angles)
+    if Path(args.out).resolve() == Path(args.model).resolve():  # its report would sit among the run's files
+        raise PigaError(f"--out {args.out} is the model's run folder; give another folder for the report")
     out = check_report_target(args.out, args.overwrite)
     lock_run_folder(out)  # a second diagnosis into the same folder is refused at once, not after its work
     info = inspect_dataset(args.data)  # schema errors first, with the file's name

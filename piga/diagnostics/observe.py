@@ -126,8 +126,14 @@ def check_compatible(model: PhysicsModel, path: str | os.PathLike[str], min_sequ
     # split (0.8, 0.1, 0.1) gives 16 and 4, so the smallest file that collect makes by default is accepted.
     min_fit, min_held_out = min_sequences // 2, max(1, min_sequences // 5)
     if n_fit < min_fit or info.n_sequences - n_fit < min_held_out:
-        raise DiagnosisInputError(f"{path}: {n_fit} train and {info.n_sequences - n_fit} held-out sequences; "
-                                  f"need at least {min_fit} and {min_held_out}")
+        n = info.n_sequences
+        fix = ""  # the file's own split decides: piga-collect or piga-import writes another
+        if n >= min_fit + min_held_out:
+            held = min_held_out
+            fix = (f"; collect or import it again with a split that holds out at least {held}, such as --split "
+                   f"{n - held},{held // 2},{held - held // 2}")
+        raise DiagnosisInputError(f"{path}: {n_fit} train and {n - n_fit} held-out sequences; "
+                                  f"need at least {min_fit} and {min_held_out}{fix}")
     return info
 
 

@@ -277,6 +277,9 @@ def read_checkpoint(run_dir: str | os.PathLike[str], kind: RunKind) -> dict[str,
         if (pid := held_by(run_dir)) is not None:  # a run started moments ago: its folder is not a wrong guess
             raise FileNotFoundError(f"{path}: no checkpoint yet: {run_dir} is being trained by another piga command "
                                     f"(PID {pid}); wait for its first checkpoint")
+        if Path(run_dir).is_file():  # the checkpoint itself, or another file: the commands take the run's folder
+            folder = Path(run_dir).parent if Path(run_dir).name == CHECKPOINT else None
+            raise FileNotFoundError(f"{run_dir} is a file; give the run's folder" + (f" ({folder})" if folder else ""))
         if is_demo_folder(run_dir):  # its run is one level down
             demo_run = Path(run_dir) / DEMO_RUN
             if (demo_run / CHECKPOINT).exists():
