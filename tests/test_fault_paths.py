@@ -322,3 +322,12 @@ def test_an_import_without_room_is_told_what_import_can_change(tmp_path: Path, m
     line = refused("piga-import", [str(frames), str(tmp_path / "a.csv"), "--dt", "0.05", "--steps", "3", "--out",
                                    str(tmp_path / "d.h5")], capsys, "needs about", "a smaller --image-size")
     assert "ask for less" not in line and not (tmp_path / "d.h5").exists()
+
+
+def test_control_refuses_a_folder_as_its_out_stem(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``--out co`` with a folder co wrote co.json and co.md beside it; piga-collect and piga-import refuse a folder."""
+    folder = tmp_path / "co"
+    folder.mkdir()
+    refused("piga-control", ["--oracle", "--episodes", "1", "--steps", "20", "--quiet", "--out", str(folder)], capsys,
+            f"argument --out: '{folder}' is a folder; name the files to write in it", code=2)
+    assert _listing(tmp_path) == ["co"]
