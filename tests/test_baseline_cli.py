@@ -137,6 +137,64 @@ def test_planet_resume_reads_the_model_config_from_the_checkpoint(planet_run: Pa
     assert json.loads((run / "metrics.json").read_text())["steps"] == 3
 
 
+def test_planet_resume_without_its_record_rebuilds_it_from_the_checkpoint_exactly(
+        planet_run: Path, tiny_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """With config.json deleted, --resume was refused ("start it again with --overwrite"), throwing the checkpoint
+    away; piga-train-model rebuilds its record from the checkpoint. The run continues as the one with its record."""
+    import shutil
+
+    import torch
+
+    from agents.planet.run import load_planet
+
+    runs = {name: tmp_path / name for name in ("kept", "lost")}
+    for name, run in runs.items():
+        shutil.copytree(planet_run, run)
+        if name == "lost":
+            (run / "config.json").unlink()
+        code, out, err = run_in_process("piga-baseline", baseline.main, "planet", str(tiny_data), "--out", str(run),
+                                        "--resume", "--steps", "3", "--quiet", capsys=capsys)
+        assert_planet_run_finished(code, err)
+        assert ("config.json is missing; it is rewritten from the checkpoint" in out) == (name == "lost"), out
+    kept, lost = (load_planet(runs[name])[0].state_dict() for name in ("kept", "lost"))
+    assert all(torch.equal(kept[key], lost[key]) for key in kept)
+    record = json.loads((runs["lost"] / "config.json").read_text())
+    assert record["command"] is None and record["kind"] == "planet" and record["train"]["steps"] == 3
+    assert record["rssm"]["deter_size"] == 8 and len(record["resumed"]) == 1
+
+
+def test_ddpg_resume_without_its_record_rebuilds_it_from_the_checkpoint(ddpg_run: Path, tmp_path: Path,
+                                                                         capsys: pytest.CaptureFixture[str]) -> None:
+    import shutil
+
+    run = tmp_path / "run"
+    shutil.copytree(ddpg_run, run)
+    recorded = json.loads((run / "config.json").read_text())["ddpg"]
+    (run / "config.json").unlink()
+    code, out, err = run_in_process("piga-baseline", baseline.main, "ddpg", "--obs", "state", "--out", str(run),
+                                    "--resume", "--steps", "400", "--quiet", capsys=capsys)
+    assert_sb3_run_finished(code, err)
+    assert "config.json is missing; it is rewritten from the checkpoint" in out, out
+    record = json.loads((run / "config.json").read_text())
+    assert record["command"] is None and record["kind"] == "ddpg"
+    assert record["ddpg"] == {**recorded, "steps": 400, "device": record["ddpg"]["device"]}
+
+
+def test_an_iterative_planet_run_without_its_record_says_what_the_checkpoint_lacks(
+        planet_run: Path, tiny_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    import shutil
+
+    run = tmp_path / "run"
+    shutil.copytree(planet_run, run)
+    (run / "config.json").unlink()
+    (run / "collected.h5").write_bytes(b"")  # the rounds' episodes: an --iterative run
+    code, _, err = run_in_process("piga-baseline", baseline.main, "planet", str(tiny_data), "--out", str(run), "--resume",
+                                  "--rounds", "2", "--quiet", capsys=capsys)
+    assert_one_line(code, err, "config.json is missing, and the checkpoint does not hold the --iterative settings",
+                    "restore config.json, or start the run again with --overwrite")
+    assert not (run / "config.json").exists()
+
+
 def test_planet_reward_options_reach_the_run_and_resume_keeps_them(tiny_data: Path, tmp_path: Path,
                                                                     capsys: pytest.CaptureFixture[str]) -> None:
     run = tmp_path / "run"

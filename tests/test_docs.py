@@ -277,3 +277,24 @@ def test_the_gravity_range_on_the_pages_is_the_envs() -> None:
     low = f"{MIN_GRAVITY:.0e}".replace("e-0", "e-")  # as the pages write it: 1e-6
     for page in ("collect.md", "control.md"):
         assert f"[{low}, {MAX_GRAVITY:g}] m/s²" in (DOCS / "commands" / page).read_text(encoding="utf-8"), page
+
+
+def test_the_control_page_names_what_write_goal_image_takes() -> None:
+    """The page said that --write-goal-image takes only --overwrite besides; --quiet and --env are taken too."""
+    from piga.cli.control import GOAL_IMAGE_OPTIONS
+
+    row = next(line for line in (DOCS / "commands" / "control.md").read_text(encoding="utf-8").splitlines()
+               if line.startswith("| `--write-goal-image"))
+    assert [name for name in GOAL_IMAGE_OPTIONS if f"`--{name.replace('_', '-')}" not in row] == []
+
+
+def test_collect_help_names_the_reset_speed_default_of_each_env() -> None:
+    """--help said "(default 1, Gymnasium's ...)", while on the DMC pendulum the default recorded is 0 (at rest)."""
+    from envs import DMC_PENDULUM, PIXEL_PENDULUM
+    from envs.dmc import DMCPendulumConfig
+    from envs.pendulum import PixelPendulumConfig
+
+    action = next(a for a in build_parser("piga-collect")._actions if "--max-speed" in a.option_strings)
+    text = " ".join((action.help or "").split())
+    assert f"default {PixelPendulumConfig.max_speed:g} on {PIXEL_PENDULUM}" in text, text
+    assert f"{DMCPendulumConfig.max_speed:g} on {DMC_PENDULUM}" in text, text

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+import shutil
 from dataclasses import replace
 from pathlib import Path
 
@@ -92,6 +93,7 @@ def test_control_refuses_a_continuous_model_before_reading_or_warning(goal: bool
     if goal:
         (tmp_path / "goal.png").write_bytes(b"not read: the refusal comes first")
         argv += ["--goal-image", str(tmp_path / "goal.png")]
+<<<<<<< HEAD
     refused("piga-control", argv, capsys, f"{continuous_run}: this model integrates within the frame or learned a damping",
             "no env plans it at its frames' rate (0.05 s apart): to control piga/PixelPendulum-v0, train a model with "
             "--preset fast")
@@ -103,3 +105,25 @@ def test_a_continuous_model_of_gymnasiums_frames_is_not_sent_back_to_gymnasiums_
     refused("piga-control", ["--model", str(continuous_run), "--env", "piga/DMCPendulum-v0", "--episodes", "1", "--quiet"],
             capsys, "with --preset continuous, which no env plans at that rate: to control piga/PixelPendulum-v0, train "
             "a model with --preset fast; to control piga/DMCPendulum-v0, train one on its frames")
+=======
+    refused("piga-control", argv, capsys, f"{continuous_run}: this model integrates within the frame or learned a damping")
+
+
+@pytest.mark.parametrize("axis", ["sequences", "frames"])
+@pytest.mark.parametrize("prog", ["piga-show", "piga-train-model"])
+def test_frames_that_disagree_with_every_other_array_are_named(axis: str, prog: str, tiny_data: Path, tmp_path: Path,
+                                                               capsys: pytest.CaptureFixture[str]) -> None:
+    """It blamed /actions ("/actions must be float [N=6, T=16, A], got float32 (12, 16, 1)") when /frames alone differed."""
+    data = tmp_path / "cut.h5"
+    shutil.copyfile(tiny_data, data)
+    with h5py.File(data, "a") as f:
+        frames = f["frames"][:6] if axis == "sequences" else f["frames"][:, :6]
+        del f["frames"]
+        f["frames"] = frames
+    needle = ("/frames holds 6 sequences but /actions, /rewards, /split, /states hold 12" if axis == "sequences" else
+              "/frames holds 6 frames per sequence but /actions, /rewards, /states hold 16")
+    argv = [str(data), "--out", str(tmp_path / "out.png")] if prog == "piga-show" else [
+        str(data), "--out", str(tmp_path / "run"), "--threads", "1", "--quiet"]
+    line = refused(prog, argv, capsys, needle)
+    assert "/actions must be" not in line, line
+>>>>>>> fixC2

@@ -335,3 +335,12 @@ def test_a_run_given_as_a_file_asks_for_its_folder(name: str, tmp_path: Path) ->
     with pytest.raises(FileNotFoundError) as info:
         read_checkpoint(tmp_path / name, RunKind.PIGA)
     assert str(info.value) == f"{tmp_path / name} is a file; give the run's folder{folder}"
+
+
+def test_control_refuses_a_folder_as_its_out_stem(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``--out co`` with a folder co wrote co.json and co.md beside it; piga-collect and piga-import refuse a folder."""
+    folder = tmp_path / "co"
+    folder.mkdir()
+    refused("piga-control", ["--oracle", "--episodes", "1", "--steps", "20", "--quiet", "--out", str(folder)], capsys,
+            f"argument --out: '{folder}' is a folder; name the files to write in it", code=2)
+    assert _listing(tmp_path) == ["co"]

@@ -666,7 +666,8 @@ def test_planet_on_a_full_disk(tiny_data: Path, tmp_path: Path, capsys: pytest.C
     (("--seed", "3", "--free-nats", "2"), None, ["drop --free-nats, --seed"]),
     (("--iterative", "2"), None, ["--iterative:", "was trained without --iterative"]),
     (("--rounds", "3"), None, ["--rounds:", "was trained without --iterative"]),  # it was ignored
-    ((), lambda run: (run / "config.json").unlink(), ["config.json is missing", "--overwrite"]),
+    (("--iterative", "2"), lambda run: (run / "config.json").unlink(),
+     ["config.json is missing, and the checkpoint does not hold the --iterative settings", "--overwrite"]),
     ((), _edit_record(lambda r: r["train"].pop("steps")), ["'train' settings lack steps"]),
     ((), _edit_record(lambda r: r.pop("kind")), ["is a piga-train-model run", "not a planet run"]),
     ((), _edit_record(lambda r: r["train"].__setitem__("steps", "many")),
@@ -2306,11 +2307,15 @@ def test_overwrite_never_replaces_a_device_or_a_pipe(tmp_path: Path, capsys: pyt
 def test_a_baseline_run_killed_before_its_record_says_overwrite_both_ways(baseline_runs: dict[str, Path], tmp_path: Path,
                                                                          capsys: pytest.CaptureFixture[str]) -> None:
     """Killed between its first checkpoint and its config.json, a run was told to --resume by the rerun and to
-    --overwrite by --resume: each sent the user to the other."""
+    --overwrite by --resume: each sent the user to the other. The rerun names both; --resume rebuilds the record from
+    the checkpoint."""
     run = _run_copy(baseline_runs["ddpg"], tmp_path / "run", lambda r: (r / "config.json").unlink())
     argv = ["ddpg", "--obs", "state", "--out", str(run), *TINY_DDPG]
-    refused("piga-baseline", argv, capsys, "holds a checkpoint without the record of its settings", "pass --overwrite")
-    refused("piga-baseline", [*argv[:5], "--resume"], capsys, "config.json is missing", "--overwrite")
+    refused("piga-baseline", argv, capsys, "holds a checkpoint without the record of its settings",
+            "continue it with --resume", "pass --overwrite")
+    code, out, err = run_in_process("piga-baseline", baseline.main, *argv[:5], "--resume", "--quiet", capsys=capsys)
+    assert_sb3_run_finished(code, err)
+    assert "config.json is missing; it is rewritten from the checkpoint" in out and (run / "config.json").exists()
 
 
 @pytest.mark.parametrize("kind", ["ddpg", "planet"])

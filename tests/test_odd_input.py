@@ -7,16 +7,18 @@ import errno
 import io
 import os
 import shlex
+import shutil
 import subprocess
 import sys
 from pathlib import Path
 
+import h5py
 import numpy as np
 import pytest
 
 from piga.data.scene import read_image, scene_to_gray
 from piga.io.atomic import OutputExistsError, check_folder_target, check_writable_target
-from tests.helpers import ENV
+from tests.helpers import ENV, run_in_process
 
 
 def test_a_link_to_nothing_is_not_replaced_without_overwrite(tmp_path: Path) -> None:
@@ -460,3 +462,31 @@ def test_a_folder_that_cannot_be_made_on_a_read_only_disk_is_named(tmp_path: Pat
     monkeypatch.setattr(os, "statvfs", lambda path: ReadOnly())
     with pytest.raises(PermissionError, match=f"{tmp_path} is on a read-only file system"):
         check_writable_target(tmp_path / "sub" / "x.h5", overwrite=False)
+
+
+@pytest.mark.parametrize("odd, needle", [
+    ("actions", "has 2 action columns (a pendulum takes 1): piga-train-model"),
+    ("frames", "has 1 frame per sequence (a video needs two): piga-train-model"),
+    ("both", "has 2 action columns (a pendulum takes 1) and 1 frame per sequence (a video needs two): piga-train-model"),
+])
+def test_show_warns_once_of_what_the_other_commands_refuse(odd: str, needle: str, tiny_data: Path, tmp_path: Path,
+                                                           capsys: pytest.CaptureFixture[str]) -> None:
+    """It drew a file of two action columns, or of one frame a sequence, without a word, which every other command
+    refuses."""
+    from piga.cli.show import main
+
+    data = tmp_path / "odd.h5"
+    shutil.copyfile(tiny_data, data)
+    with h5py.File(data, "a") as f:
+        for name in ("frames", "actions", "states", "rewards"):
+            array = f[name][()]
+            if odd != "actions":
+                array = array[:, :1]
+            if odd != "frames" and name == "actions":
+                array = np.repeat(array, 2, axis=-1)
+            del f[name]
+            f[name] = array
+    code, out, err = run_in_process("piga-show", main, str(data), "--out", str(tmp_path / "s.png"), capsys=capsys)
+    assert code == 0 and (tmp_path / "s.png").exists() and "wrote" in out, err
+    assert err.count("\n") == 1 and err.startswith("piga-show: warning: ") and needle in err, err
+    assert "drawn all the same" in err, err

@@ -203,13 +203,9 @@ def _check_run_dir(run_dir: Path, resume: bool, overwrite: bool, kind: RunKind) 
     if resume:
         if not (run_dir / CHECKPOINT).exists():
             raise PigaError(f"--resume: {run_dir / CHECKPOINT} does not exist")
-        if not (run_dir / "config.json").exists():
-            raise PigaError(f"--resume: {run_dir / 'config.json'} is missing; it records the run's settings, so the "
-                            f"run cannot be continued (start it again with --overwrite)")
         record, _ = read_run_record(run_dir)
-        if not record:
-            raise PigaError(f"--resume: {run_dir / 'config.json'} is not a readable JSON record; start the run again "
-                            "with --overwrite")
+        if not record:  # missing or unreadable: rebuilt from the checkpoint (:func:`_resumed_record`), which names its kind
+            return
         recorded = record.get("kind")
         if recorded != kind.value:
             what = f"a {recorded} run" if recorded else "a piga-train-model run (its config.json has no 'kind')"
@@ -223,12 +219,47 @@ def _check_run_dir(run_dir: Path, resume: bool, overwrite: bool, kind: RunKind) 
         if CHECKPOINT not in existing:  # a run killed before its first checkpoint: nothing to continue
             raise PigaError(f"{run_dir} holds outputs of an earlier run but no checkpoint ({', '.join(existing)}); "
                             "pass --overwrite to replace them")
-        if "config.json" not in existing:  # killed between its first checkpoint and its record: --resume cannot work
+        if "config.json" not in existing:  # killed between its first checkpoint and its record
             raise PigaError(f"{run_dir} holds a checkpoint without the record of its settings (config.json; the run "
-                            "was stopped as it wrote its first checkpoint), so it cannot be continued; pass --overwrite "
-                            "to start it again")
+                            "was stopped as it wrote its first checkpoint); continue it with --resume (its settings "
+                            "are rebuilt from the checkpoint), or pass --overwrite to start it again")
         raise held_run_error(run_dir, kind)
     remove_outputs(run_dir, RUN_OUTPUTS if overwrite else existing)  # --overwrite: a run of another kind's too
+
+
+def _resumed_record(run_dir: Path, kind: RunKind, args: Any) -> dict[str, Any]:
+    """The record (``config.json``) of the run that ``--resume`` continues; where it is missing or unreadable, one
+    rebuilt from the checkpoint, as piga-train-model rebuilds its own: the checkpoint holds the run's settings (a
+    planet run's training and model sizes and its data file's path; a DDPG or DrQ-v2 run's whole recipe), and the
+    rebuilt record says that the command that started the run is unknown. An ``--iterative`` planet run's settings
+    of its rounds are only in the record: refused, saying so."""
+    record, why = read_run_record(run_dir)
+    if why is None:
+        return record
+    from piga.io.checkpoint import read_checkpoint
+
+    where = run_dir / "config.json"
+    try:
+        ckpt = read_checkpoint(run_dir, kind)
+    except (FileNotFoundError, ValueError) as exc:
+        raise PigaError(with_flags(str(exc))) from None
+    if kind is RunKind.PLANET:
+        from agents.planet.iterative import COLLECTED
+
+        if (run_dir / COLLECTED).exists() or args.iterative or args.rounds:
+            raise PigaError(f"--resume: {where} {why}, and the checkpoint does not hold the --iterative settings it "
+                            "records (the episodes, rounds and steps of each round); restore config.json, or start the "
+                            "run again with --overwrite")
+        data = ckpt.get("data") if isinstance(ckpt.get("data"), dict) else {}
+        rebuilt = {"data": data.get("path"), "train": ckpt.get("train_config"), "rssm": ckpt.get("rssm_config")}
+    else:
+        rebuilt = {"ddpg": ckpt.get("config")}  # (the data file of --obs latent is the autoencoder's, already trained)
+    if not all(isinstance(section, dict) for name, section in rebuilt.items() if name != "data"):
+        raise PigaError(f"--resume: {where} {why}, and the checkpoint does not hold the run's settings (an older "
+                        "version's); restore config.json, or start the run again with --overwrite")
+    print(f"{PROG}: note: {where} {why}; it is rewritten from the checkpoint, without the command that started the "
+          "run")  # on stdout: stderr is kept for the one line of an error that may follow
+    return {"command": None, "kind": kind.value, **rebuilt}
 
 
 def _saved_config(run_dir: Path, record: dict[str, Any], key: str, cls: Any, optional: tuple[str, ...] = ()) -> Any:
@@ -296,7 +327,7 @@ def _refuse_recipe_changes(args: Any, record: dict[str, Any], run_dir: Path, arg
     if changed:
         raise PigaError(f"--resume keeps the run's recipe; drop {', '.join('--' + c.replace('_', '-') for c in changed)}")
     recorded = record.get("data")
-    if not args.data:
+    if not args.data or "data" not in record:  # a DDPG record rebuilt from its checkpoint, which names no data file
         return
     if "data_fingerprint" in record:  # by contents: a moved or copied file is the same, one written over in place is not
         from piga.data.schema import fingerprint
@@ -378,7 +409,7 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
     iterative: IterativeConfig | None = None
     if args.resume:
         _check_run_dir(run_dir, True, args.overwrite, RunKind.PLANET)
-        record, _ = read_run_record(run_dir)
+        record = _resumed_record(run_dir, RunKind.PLANET, args)
         _refuse_recipe_changes(args, record, run_dir, argv)
         saved = _saved_config(run_dir, record, "train", PlanetTrainConfig, optional=("device",))  # older runs have none
         _refuse_fewer_steps(args.steps, saved.steps)
@@ -543,7 +574,7 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
         raise PigaError(f"--autoencoder-steps is for --obs latent; --obs {args.obs} trains no autoencoder")
     if args.resume:
         _check_run_dir(run_dir, True, args.overwrite, RunKind.DDPG)
-        record, _ = read_run_record(run_dir)
+        record = _resumed_record(run_dir, RunKind.DDPG, args)
         # runs from before --algo are DDPG; runs from before --device have none
         saved = _saved_config(run_dir, record, "ddpg", SB3Config, optional=("algo", "device", "env", "encoder_precision", "view"))
         if "encoder_precision" not in record["ddpg"]:  # runs from before the option computed in float32
@@ -627,6 +658,8 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
     except KeyboardInterrupt:
         _interrupted(run_dir, written, args.resume)
         raise
+    if not written:  # a resume with nothing left to do still records its command (and a rebuilt record)
+        write_json(run_dir / "config.json", record)
     reached = first_step_reaching(metrics["learning_curve"], config.learned_return)
     final = metrics["final_eval_mean_return"]
     final_text = f"{final:.1f}" if final is not None else "n/a"

@@ -175,7 +175,8 @@ def build_parser() -> ArgumentParser:
                    help=f"applied torque = gain x u, gain in [{MIN_ACTUATION_GAIN:g}, {MAX_ACTUATION_GAIN:g}] "
                    "(default %(default)s)")
     add_preset_option(p, "--max-speed", type=any_float, default=env.max_speed,
-                      shown=f"{env.max_speed:g}, Gymnasium's; the paper preset uses {PAPER_MAX_SPEED:g}",
+                      shown=f"{env.max_speed:g} on {PIXEL_PENDULUM}, Gymnasium's; {DMCPendulumConfig.max_speed:g} on "
+                      f"{DMC_PENDULUM}, at rest as DMC's; the paper preset uses {PAPER_MAX_SPEED:g} on either",
                       help=f"reset draws theta_dot ~ U(-s, s), s in [0, {PENDULUM_MAX_SPEED:g}] on {PIXEL_PENDULUM} "
                       f"(Gymnasium's speed clip), [0, {MAX_SPEED_TEXT}] on {DMC_PENDULUM} (half a turn per physics step)")
     p.add_argument("--max-angle", type=any_float, default=env.max_angle,

@@ -125,6 +125,16 @@ def file_path(text: str) -> str:
     return text
 
 
+def stem_path(text: str) -> str:
+    """argparse type: the stem of a set of files to write (``piga-control --out OUT``: OUT.json, OUT.md), a
+    :func:`file_path`; an existing folder is refused, as by :func:`h5_path`: its files would be written beside it."""
+    text = file_path(text)
+    if os.path.isdir(text):
+        raise argparse.ArgumentTypeError(f"{text!r} is a folder; name the files to write in it without their suffix "
+                                         f"(such as {os.path.join(text, 'results')})")
+    return text
+
+
 #: The suffixes of an HDF5 file a command writes (``piga-collect --out``, ``piga-import --out``), in any case.
 H5_SUFFIXES = (".h5", ".hdf5")
 
@@ -890,5 +900,5 @@ def split_type(text: str) -> tuple[float, float, float]:
 
 __all__ = ["ArgumentParser", "PigaError", "RAY_HELP", "add_ray_option", "connect_backend", "ray_address", "run_cli", "run_script", "positive_int", "nonnegative_int", "seed_int", "thread_count", "positive_float", "nonnegative_float",
            "split_type", "add_preset_option", "documented_default", "format_default", "Interrupted", "made_folder",
-           "missing_folders", "remove_empty_folders", "remove_outputs", "add_device_option", "file_path", "h5_path",
+           "missing_folders", "remove_empty_folders", "remove_outputs", "add_device_option", "file_path", "stem_path", "h5_path",
            "H5_SUFFIXES"]

@@ -19,9 +19,9 @@ from envs.fields import number_text
 from envs.pendulum import MAX_GRAVITY, MIN_GRAVITY, PixelPendulumConfig
 from piga.io.atomic import (atomic_output, check_file_name, check_not_an_input, check_writable_target, write_json,
                              written_together)
-from piga.cli.common import (ArgumentParser, PigaError, add_ray_option, command_line, connect_backend, file_path,
+from piga.cli.common import (ArgumentParser, PigaError, add_ray_option, command_line, connect_backend,
                              given_options, int_up_to, positive_float, positive_int, run_cli, seed_int,
-                             typed_text, warn_if_still_training, warn_if_unconverged, work_finished)
+                             stem_path, typed_text, warn_if_still_training, warn_if_unconverged, work_finished)
 from piga.control.episodes import EpisodeConfig, parse_range, run_episodes
 from piga.evaluation.episodes import summary_markdown
 from piga.io.checkpoint import RunKind
@@ -101,7 +101,7 @@ def build_parser() -> ArgumentParser:
     add_ray_option(p, "the jobs of --sweep, and the parts of a baseline run's episodes")
     p.add_argument("--video", help="write episode 0 as .mp4 or .gif: real frames | the model's belief | its plan "
                    "(a PlaNet-style run: real frames | its world model's reconstruction; DDPG: the real frames)")
-    p.add_argument("--out", type=file_path,
+    p.add_argument("--out", type=stem_path,
                    help="write the results to OUT.json and a Markdown table to OUT.md (and OUT.png with --sweep)")
     p.add_argument("--overwrite", action="store_true", help="replace existing --out files")
     p.add_argument("--quiet", action="store_true", help="no progress bar")

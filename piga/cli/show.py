@@ -11,8 +11,8 @@ import numpy as np
 
 from envs.fields import counted
 from piga.cli.common import ArgumentParser, file_path, given_options, positive_int, run_cli, typed_text
-from piga.data.schema import (SPLITS, BlankFramesError, check_actions_file, check_frames_have_signal, inspect_dataset,
-                              read_rows, split_indices)
+from piga.data.schema import (SPLITS, BlankFramesError, DatasetInfo, check_actions_file, check_frames_have_signal,
+                              inspect_dataset, read_rows, split_indices)
 from piga.io.resources import FIGURE_DISK_BYTES, check_disk
 from piga.io.atomic import check_not_an_input
 
@@ -56,6 +56,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         check_frames_have_signal(args.data, motion=False)
     except BlankFramesError as blank:
         print(f"{PROG}: warning: {blank}; drawn all the same", file=sys.stderr)
+    if (odd := _refused_elsewhere(info)) is not None:
+        print(f"{PROG}: warning: {odd}; drawn all the same", file=sys.stderr)
     check_actions_file(args.data)  # a non-finite action is named rather than drawn
     # a count written beyond the file is refused (the defaults shrink to a small file: the strip shows what it holds)
     for dest, have, noun, where in (("sequences", len(available), "sequence", f"in its {args.split} split"),
@@ -84,6 +86,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     path = save_figure(fig, args.out, overwrite=args.overwrite)
     print(f"wrote {path}")
     return 0
+
+
+def _refused_elsewhere(info: DatasetInfo) -> str | None:
+    """What the other commands refuse in a file that the strip draws all the same, in one line: a pendulum's action
+    columns other than its one torque, and sequences of one frame (None: neither)."""
+    odd = []
+    if info.system == "pendulum" and info.action_dim != 1:
+        odd.append(f"{counted(info.action_dim, 'action column')} (a pendulum takes 1)")
+    if info.steps < 2:
+        odd.append(f"{counted(info.steps, 'frame')} per sequence (a video needs two)")
+    if not odd:
+        return None
+    return (f"{typed_text(str(info.path))} has {' and '.join(odd)}: piga-train-model, piga-baseline and piga-diagnose "
+            "refuse it")
 
 
 #: The largest side, in pixels, of an image that Pillow writes in each format with a limit (libjpeg's, libwebp's):

@@ -207,6 +207,31 @@ def _attr(value: Any) -> Any:
     return value
 
 
+def _check_frames_not_odd_one_out(f: h5py.File, path: Path, n: int, t: int) -> None:
+    """Where /actions, /split and the optional arrays agree with each other on the number of sequences (or of steps) and
+    only /frames differs, names /frames: the checks that follow would blame /actions."""
+    sizes: dict[str, tuple[int, ...]] = {}
+    for name, ndim in (("actions", 3), ("split", 1), ("states", 3), ("rewards", 2)):
+        try:
+            found = f.get(name)
+        except (KeyError, OSError):  # a link that does not resolve: named by the checks that follow
+            continue
+        if isinstance(found, h5py.Dataset) and found.ndim == ndim:
+            sizes[name] = found.shape
+    if "actions" not in sizes or "split" not in sizes:
+        return
+    counts = {shape[0] for shape in sizes.values()}
+    if len(counts) == 1 and (other := counts.pop()) != n:
+        names = ", ".join(f"/{name}" for name in sorted(sizes))
+        raise DataFormatError(f"{path}: /frames holds {n} sequence{'s' * (n != 1)} but {names} hold {other}; every array "
+                              "needs one row per sequence")
+    steps = {shape[1] for name, shape in sizes.items() if name != "split"}
+    if len(steps) == 1 and (other := steps.pop()) != t and len(sizes) > 2:
+        names = ", ".join(f"/{name}" for name in sorted(sizes) if name != "split")
+        raise DataFormatError(f"{path}: /frames holds {t} frame{'s' * (t != 1)} per sequence but {names} hold {other}; "
+                              "every array needs one entry per frame")
+
+
 def _validate(f: h5py.File, path: Path) -> DatasetInfo:
     def need(name: str) -> h5py.Dataset:
         found = optional(name)
@@ -236,6 +261,7 @@ def _validate(f: h5py.File, path: Path) -> DatasetInfo:
     n, t = frames.shape[:2]
     if min(frames.shape) < 1:
         raise DataFormatError(f"{path}: /frames is empty, shape {frames.shape}")
+    _check_frames_not_odd_one_out(f, path, n, t)
     actions = need("actions")
     if actions.ndim != 3 or actions.shape[:2] != (n, t) or not np.issubdtype(actions.dtype, np.floating):
         raise DataFormatError(f"{path}: /actions must be float [N={n}, T={t}, A], got {actions.dtype} {actions.shape}")
