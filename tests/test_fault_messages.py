@@ -93,7 +93,6 @@ def test_control_refuses_a_continuous_model_before_reading_or_warning(goal: bool
     if goal:
         (tmp_path / "goal.png").write_bytes(b"not read: the refusal comes first")
         argv += ["--goal-image", str(tmp_path / "goal.png")]
-<<<<<<< HEAD
     refused("piga-control", argv, capsys, f"{continuous_run}: this model integrates within the frame or learned a damping",
             "no env plans it at its frames' rate (0.05 s apart): to control piga/PixelPendulum-v0, train a model with "
             "--preset fast")
@@ -105,8 +104,6 @@ def test_a_continuous_model_of_gymnasiums_frames_is_not_sent_back_to_gymnasiums_
     refused("piga-control", ["--model", str(continuous_run), "--env", "piga/DMCPendulum-v0", "--episodes", "1", "--quiet"],
             capsys, "with --preset continuous, which no env plans at that rate: to control piga/PixelPendulum-v0, train "
             "a model with --preset fast; to control piga/DMCPendulum-v0, train one on its frames")
-=======
-    refused("piga-control", argv, capsys, f"{continuous_run}: this model integrates within the frame or learned a damping")
 
 
 @pytest.mark.parametrize("axis", ["sequences", "frames"])
@@ -126,4 +123,3 @@ def test_frames_that_disagree_with_every_other_array_are_named(axis: str, prog: 
         str(data), "--out", str(tmp_path / "run"), "--threads", "1", "--quiet"]
     line = refused(prog, argv, capsys, needle)
     assert "/actions must be" not in line, line
->>>>>>> fixC2
