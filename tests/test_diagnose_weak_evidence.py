@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import importlib
 import math
+import re
 
 from dataclasses import replace
 from types import SimpleNamespace
@@ -199,8 +200,11 @@ def test_a_recording_whose_motion_answers_actions_before_they_are_logged_is_refu
     obs = planted({})
     late = obs.actions.copy()
     late[:, 1:] = obs.actions[:, :-1]  # each action logged one step after it acted
-    with pytest.raises(DiagnosisInputError, match="one frame before the action is logged"):
+    with pytest.raises(DiagnosisInputError, match="one frame before the action is logged") as info:
         analyse(replace(obs, actions=late), NOMINAL, FAST)
+    # its numbers say what they are ("t = 64, against 0.5 where it belongs" left both unexplained)
+    assert re.search(r"the t-statistic of the angular acceleration's response to the action is \d+ one step before it, "
+                     r"and [\d.]+ at its own step", str(info.value)), info.value
     # the response where it belongs, or later (an actuator delay), is no lead
     assert action_response(obs.theta, obs.actions, None, NOMINAL)[1][1] > 20
     for effects in ({}, {"delay": 1}):

@@ -139,6 +139,7 @@ def test_a_gain_the_actions_barely_show_is_not_given_a_value() -> None:
     assert not gain_undetermined([1.95, 2.01]) and not gain_undetermined([0.45, 0.52])
     d = analyse(planted({"gain": 0.001}), NOMINAL, replace(FAST, bootstrap=10))
     assert d.verdict_class == "unexplained" and "the actions barely move the system" in d.verdict, d.verdict
+    assert f"act more than {fit.MAX_DELAY} frames late (the longest delay fitted)" in d.verdict  # a longer latency
     assert not any(e.effect == "gain" for e in d.effects)
 
 

@@ -573,10 +573,11 @@ def check_actions_lead(theta: np.ndarray, actions: np.ndarray, stale: np.ndarray
     if not abs(tstat[0]) > min_t or abs(c[0]) < np.abs(c).max() or abs(c[0]) < 2 * abs(c[1]):
         return
     raise DiagnosisInputError(
-        f"the motion in this recording answers each action one frame before the action is logged (the response to "
-        f"the actions peaks one step ahead of them, t = {abs(tstat[0]):.0f}, against {abs(tstat[1]):.1f} where it "
-        "belongs): its actions are one step late against its frames, or its frames one step early; shift the actions "
-        "one step earlier (or the frames one step later) and diagnose again")
+        f"the motion in this recording answers each action one frame before the action is logged (the t-statistic of "
+        f"the angular acceleration's response to the action is {abs(tstat[0]):.0f} one step before it, and "
+        f"{abs(tstat[1]):.1f} at its own step, where a system's response belongs): its actions are one step late "
+        "against its frames, or its frames one step early; shift the actions one step earlier (or the frames one step "
+        "later) and diagnose again")
 
 
 def score_candidates(nom: Nominal, w: WindowSet, progress: bool = False, excluded: dict[str, str] | None = None,
@@ -1341,7 +1342,14 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
                              "reading itself)")
         else:
             key = term.parameter
-            effects.append(Effect(e, final.values[key], term.unit, interval(key)))
+            value, bracket = final.values[key], interval(key)
+            if bracket and not bracket[0] <= value <= bracket[1]:
+                # percentiles of refits that all land away from the fit (an actuation gain of 1.5 read "damping
+                # 0.837 (95% interval -0.12..0.129)"): no interval, and a note that the fit is unstable
+                notes.append(f"the bootstrap refits of {e} ({bracket[0]:.3g}..{bracket[1]:.3g}, 95%) do not bracket its "
+                             f"fit {value:.3g}: the fit is unstable, and no interval is given")
+                bracket = None
+            effects.append(Effect(e, value, term.unit, bracket))
     if DAMPING.name in named and not final.has(WITHIN_FRAME):
         if (convention := damping_convention(final, nom)) is not None:
             notes.append(convention_note(convention))
@@ -1356,8 +1364,9 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
         undetermined = (f"the actions barely move the system: a refits to {reference.values['a']:.3g} (x{gain:.3g} the "
                         f"reference {ref_a:.3g}), and its bootstrap refits ({a_int[0]:.3g}..{a_int[1]:.3g}) do not pin "
                         "it down; a gain far below the nominal, actions that move it the other way (a motor wired in "
-                        "reverse, a camera on the other side of the hinge: a of the wrong sign shrinks toward 0), or "
-                        "actions that do not drive the motion (another signal, other units), cannot be told apart here")
+                        "reverse, a camera on the other side of the hinge: a of the wrong sign shrinks toward 0), "
+                        "actions that do not drive the motion (another signal, other units), or actions that act more "
+                        f"than {fit.MAX_DELAY} frames late (the longest delay fitted), cannot be told apart here")
     low, high = (1 - config.gain_tolerance) * ref_a, (1 + config.gain_tolerance) * ref_a
     if gain_error and a_int and a_int[0] <= high and a_int[1] >= low:
         # a deadzone or a saturation trades off against a: the refit may move a while its
