@@ -804,11 +804,12 @@ def _check_piga_view(run_dir: str, checkpoint: dict, env: DMCPendulumConfig) -> 
                                                         else f"give --env-option camera_distance={distance:g}"))
 
 
-def _check_dmc_rate(run_dir: str, checkpoint: dict, dt: float, env: DMCPendulumConfig, euler: bool = True) -> None:
+def _check_dmc_rate(run_dir: str, checkpoint: dict, dt: float, env: DMCPendulumConfig,
+                    model: PhysicsModel | None = None) -> None:
     """Refuses a piga model trained on frames ``dt`` s apart where the DMC pendulum ``env`` steps another dt, saying
     what would match: the action repeat that gives ``dt``, where one does; else the env of the model's frames, where
-    its planner takes the model (``euler``: one semi-implicit Euler step per frame, no damping; a ``--preset
-    continuous`` model of Gymnasium's frames is planned by neither env)."""
+    its planner takes the ``model`` (:func:`_plannable`: one semi-implicit Euler step per frame, no damping; a
+    ``--preset continuous`` model of Gymnasium's frames is planned by neither env)."""
     from envs.dmc import DMC_PHYSICS_DT
     from envs.constants import PENDULUM_DT
 
@@ -822,6 +823,7 @@ def _check_dmc_rate(run_dir: str, checkpoint: dict, dt: float, env: DMCPendulumC
         frames = f"frames of {trained} ({dt:g} s apart)"
     elif abs(dt - PENDULUM_DT) <= 1e-9:  # the file is gone, or names no env: its rate is the pixel pendulum's
         frames, trained = f"{frames} ({PIXEL_PENDULUM}'s rate)", PIXEL_PENDULUM
+    euler = model is None or _plannable(model)
     elsewhere = (f"control it with --env {trained}, or " if trained and trained != DMC_PENDULUM
                  and (euler or trained != PIXEL_PENDULUM) else "")
     if not euler and trained == PIXEL_PENDULUM:
@@ -899,7 +901,7 @@ def _dmc(args: argparse.Namespace, argv: Sequence[str] | None, given: set[str]) 
             if model.config.system != "pendulum":  # before its frames' rate, whose advice would not help
                 raise PigaError(f"{args.model}: a {model.config.system} model cannot control the pendulum")
             _check_piga_view(args.model, checkpoint, config.env)
-            _check_dmc_rate(args.model, checkpoint, model.config.dt, config.env, _plannable(model))
+            _check_dmc_rate(args.model, checkpoint, model.config.dt, config.env, model)
             # rendered at the size of the frames the model was identified on (piga-collect --image-size): a 32 px
             # model was fed 64 px frames ("encode takes frames of ... got (1, 64, 64)"), with no option to change it
             config = replace(config, env=replace(config.env, image_size=model.config.image_size))
