@@ -108,7 +108,9 @@ def train(name: str, seed: int, data: Path, run_dir: Path, commit: str | None) -
               "commit": commit, "exit": code, "outcome": (m.get("convergence") or {}).get("outcome"),
               "reason": (m.get("convergence") or {}).get("reason"), "parameter_errors": errors,
               "frame_mse_prediction": pred, "frame_mse_background": m["frame_mse_background"],
-              "frame_mse_hold": m.get("frame_mse_hold"), "profile": m.get("profile") or {}, "steps": m["training"]["steps"],
+              "frame_mse_hold": m.get("frame_mse_hold"), "profile": m.get("profile") or {},
+              "tail_speed": {k: p.get("tail_speed") for k, p in ((m.get("convergence") or {}).get("parameters") or {}).items()},
+              "steps": m["training"]["steps"],
               "train_seconds": m["training"]["seconds"], "wall_seconds": time.time() - started, "machine": machine()}
     print(f"{name} s{seed}: exit {code} ({record['outcome']}), errors "
           + ", ".join(f"{k} {100 * v:.1f}%" for k, v in errors.items())
@@ -187,6 +189,13 @@ def summary(records: list[dict[str, Any]]) -> list[str]:
         if others:
             v, k, run = min(others)
             lines.append(f"- The least curved of their other parameters: {k} of {run}, whose larger ratio is {v:.3f}.")
+    for group in ("identified", "not identified"):  # the parameters' speed over the tail (records that keep it)
+        fastest = [(max(abs(x) for x in r["tail_speed"].values() if x is not None), r) for r in records
+                   if verdict(r) == group and any(x is not None for x in (r.get("tail_speed") or {}).values())]
+        if fastest:
+            value, run = max(fastest, key=lambda t: t[0])
+            lines.append(f"- The fastest tail of a run {group}: {value:.2f}x the sum of its learning rate there "
+                         f"({run['case']} s{run['seed']}; `speed_tolerance` = {config.speed_tolerance:g}).")
     missed = [r for r in records if verdict(r) == "not identified" and r["exit"] == 0]
     alarms = [r for r in records if verdict(r) == "identified" and r["exit"] != 0]
     lines.append(f"- Runs not identified that exit 0 (converged): {len(missed)}{_names(missed)}; identified runs that "

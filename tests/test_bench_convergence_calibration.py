@@ -27,3 +27,13 @@ def test_the_page_says_which_ratio_separates_the_runs_and_reads_a_blown_up_profi
     assert "the ratio separates them." in lines
     assert "short of its value by the profile: 1; short s0 (not identified)." in lines
     assert "Runs not identified that exit 0 (converged): 1 (flat s0); identified runs that exit 1 or 3: 0." in lines
+
+
+def test_the_page_gives_the_fastest_tail_of_each_group_where_records_keep_it() -> None:
+    """The speed rule's threshold (``speed_tolerance``) is read off these records: each group's fastest tail."""
+    good = _record("good", {"g": 0.01}, 0.001, 0.01, {}, 0) | {"tail_speed": {"g": 0.12, "a": -0.4}}
+    bad = _record("bad", {"g": 0.5}, 0.002, 0.012, {}, 3) | {"tail_speed": {"g": 1.28, "a": None}}
+    old = _record("old", {"g": 0.6}, 0.002, 0.012, {}, 3)  # a record from before the speed was kept
+    lines = "\n".join(cc.summary([good, bad, old]))
+    assert "The fastest tail of a run identified: 0.40x the sum of its learning rate there (good s0;" in lines
+    assert "The fastest tail of a run not identified: 1.28x the sum of its learning rate there (bad s0;" in lines
