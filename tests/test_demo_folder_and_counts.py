@@ -148,3 +148,27 @@ def test_one_training_window_is_said_in_the_singular() -> None:
 
     with pytest.raises(ValueError, match=r"^1 training window is fewer than one batch of 32, .*--batch-size"):
         plan_training(TrainConfig(batch_size=32), 1)
+
+
+@pytest.mark.parametrize("extra", [[], ["--overwrite"], ["--resume"]])
+@pytest.mark.parametrize("mine", [b"x\n", None])
+def test_a_data_file_the_demo_did_not_write_is_not_offered_to_overwrite(mine: bytes | None, extra: list[str],
+                                                                        tiny_data: Path, tmp_path: Path,
+                                                                        capsys: pytest.CaptureFixture[str]) -> None:
+    """An unrelated u/pendulum.h5 was called "from an earlier demo; pass --resume ... or --overwrite", and --overwrite
+    would have destroyed it. (``None``: another command's HDF5 file, piga-collect's.)"""
+    from piga.cli import demo
+
+    out = tmp_path / "u"
+    out.mkdir()
+    if mine is None:
+        shutil.copy(tiny_data, out / "pendulum.h5")
+    else:
+        (out / "pendulum.h5").write_bytes(mine)
+    before = _snapshot(out)
+    code, _, err = run_in_process("piga-demo", demo.main, "--out", str(out), "--sequences", "2", "--epochs", "1",
+                                  "--threads", "1", "--quiet", *extra, capsys=capsys)
+    assert code == 1 and err.strip() == (f"piga-demo: error: {out / 'pendulum.h5'} exists and is not a piga-demo's data "
+                                         "file; give another --out (a demo writes pendulum.h5, frames.png, model/, "
+                                         "goal.png and control.md into it)"), err
+    assert _snapshot(out) == before

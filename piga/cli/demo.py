@@ -103,6 +103,20 @@ def build_parser() -> ArgumentParser:
     return p
 
 
+def _written_by_demo(path: Path) -> bool:
+    """Whether ``path`` may be the data file piga-demo collected: an HDF5 file whose ``command`` attribute names
+    piga-demo, or one too damaged to read it (a demo's, cut short: --resume and --overwrite say what to do)."""
+    import h5py
+
+    try:
+        with h5py.File(path, "r") as f:
+            command = f.attrs.get("command")
+    except (OSError, ValueError):
+        with open(path, "rb") as f:
+            return f.read(8) == b"\x89HDF\r\n\x1a\n"  # HDF5's signature
+    return isinstance(command, str) and command.startswith(PROG)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     out = Path(args.out)
@@ -133,6 +147,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise PigaError(f"--resume: {run_dir} holds a {kind.writer} run, not the piga-train-model run of a demo; "
                             "pass --overwrite (not --resume) to start the demo over")
     # (a demo that kept only its pictures continues from the start: they are made again)
+    if data.exists() and not _written_by_demo(data):  # a file of the user's: --overwrite would destroy it
+        raise PigaError(f"{data} exists and is not a piga-demo's data file; give another --out (a demo writes "
+                        "pendulum.h5, frames.png, model/, goal.png and control.md into it)")
     if not args.overwrite and not args.resume:
         for path in (data, strip, run_dir / CHECKPOINT, goal_png, control_md):
             if path.exists():
