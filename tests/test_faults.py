@@ -3212,6 +3212,22 @@ def test_resume_takes_a_default_the_run_was_started_at(tmp_path: Path, capsys: p
     assert_sb3_run_finished(code, err)
 
 
+def test_train_model_resume_takes_auto_loading_the_run_was_started_at(tiny_data: Path, tmp_path: Path,
+                                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    """--resume --data-loading auto on a run started without it was "drop --data-loading" (the checkpoint holds the
+    loading that auto resolved to); another value than the run's is still refused."""
+    from piga.cli import train as train_cli
+
+    argv = [str(tiny_data), "--out", str(tmp_path / "run"), "--batch-size", "4", "--threads", "1", "--quiet"]
+    code, _, err = run_in_process("piga-train-model", train_cli.main, *argv, "--epochs", "1", capsys=capsys)
+    assert code in (0, 1, 3) and "Traceback" not in err, err
+    code, _, err = run_in_process("piga-train-model", train_cli.main, *argv, "--epochs", "2", "--resume",
+                                  "--data-loading", "auto", capsys=capsys)
+    assert code in (0, 1, 3) and "recipe" not in err, err
+    refused("piga-train-model", [*argv, "--epochs", "3", "--resume", "--data-loading", "stream"], capsys,
+            "--resume keeps the run's recipe; drop --data-loading")
+
+
 def test_control_writes_its_outputs_for_a_non_ascii_model_under_a_c_locale(tiny_piga_run: Path, tmp_path: Path) -> None:
     """Under LC_ALL=C with PYTHONUTF8=0 the model's name held lone surrogates, and OUT.md failed to encode after the
     episodes ("surrogates not allowed")."""

@@ -237,7 +237,9 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
         # the starting command's own values may be repeated (that command plus --resume continues the run), and the
         # checkpoint's recipe values too (a run whose config.json is lost has no starting command to read)
         changed = [name for name in changed if not (name in started and started[name] == getattr(args, name))
-                   and not (name in overrides and overrides[name] == getattr(saved, name, object()))]
+                   and not (name in overrides and overrides[name] == getattr(saved, name, object()))
+                   # "auto", the default, on a run started without the option: the value it was started with
+                   and not (name == "data_loading" and args.data_loading == "auto" and name not in started)]
         if changed:
             raise PigaError(f"--resume keeps the run's recipe; drop {', '.join('--' + c.replace('_', '-') for c in changed)}")
         # the device and the threads are not the recipe's
