@@ -754,6 +754,21 @@ def test_planet_resume_refuses_its_file_written_over_in_place(baseline_runs: dic
             f"{data} has changed since", "put the trained file back")
 
 
+def test_planet_resume_refuses_rewards_written_over_in_place(baseline_runs: dict[str, Path], tiny_data: Path,
+                                                             tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """/rewards, which the reward head learns from, changed in place: the resume trained on them (the fingerprint
+    reads the actions, the split and the first sequence's frames only)."""
+    data = tmp_path / "d.h5"
+    shutil.copyfile(tiny_data, data)
+    run = _run_copy(baseline_runs["planet"], tmp_path / "run",
+                    _edit_record(lambda r: r.__setitem__("data", str(data))))
+    assert "rewards_fingerprint" in json.loads((run / "config.json").read_text())
+    with h5py.File(data, "a") as f:
+        f["rewards"][3] = f["rewards"][3] + 1
+    refused("piga-baseline", ["planet", str(data), "--out", str(run), "--resume", "--steps", "4", "--quiet"], capsys,
+            f"{data} has changed since", "put the trained file back")
+
+
 # ---------------------------------------------------------------------------------------------
 # piga-baseline ddpg
 # ---------------------------------------------------------------------------------------------

@@ -333,6 +333,10 @@ def _refuse_recipe_changes(args: Any, record: dict[str, Any], run_dir: Path, arg
         from piga.data.schema import fingerprint
 
         same = record["data_fingerprint"] == fingerprint(args.data)
+        if same and "rewards_fingerprint" in record:  # a PlaNet-style run's reward head learns from /rewards too
+            from piga.data.schema import rewards_fingerprint
+
+            same = record["rewards_fingerprint"] == rewards_fingerprint(args.data)
         if not same and recorded == args.data:
             raise PigaError(f"--resume: {args.data} has changed since {run_dir} trained on it (its contents are not "
                             "the same); put the trained file back, or start a new run on this one")
@@ -400,7 +404,7 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
     from piga.io.resources import check_run_disk
     from piga.io.atomic import write_json
     from agents.planet.train import check_planet_data, rssm_config_for, train_planet
-    from piga.data.schema import fingerprint, inspect_dataset
+    from piga.data.schema import fingerprint, inspect_dataset, rewards_fingerprint
     from piga.training.train import TrainingDiverged
 
     run_dir = Path(args.out)
@@ -467,7 +471,8 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
             check_iterative_data(info, iterative)
         _check_run_dir(run_dir, False, args.overwrite, RunKind.PLANET)
         record = started_record(command, kind=RunKind.PLANET.value, data=str(args.data),
-                                data_fingerprint=fingerprint(args.data), train=config.to_dict(), rssm=rssm.to_dict(),
+                                data_fingerprint=fingerprint(args.data), rewards_fingerprint=rewards_fingerprint(args.data),
+                                train=config.to_dict(), rssm=rssm.to_dict(),
                                 **({"iterative": iterative.to_dict()} if iterative else {}))
     check_planet_data(info, config, record["rssm"].get("action_repeat", 1))
     if iterative is not None:

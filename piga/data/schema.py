@@ -586,6 +586,20 @@ def fingerprint(path: str | os.PathLike[str]) -> str:
     return digest.hexdigest()[:16]
 
 
+def rewards_fingerprint(path: str | os.PathLike[str]) -> str | None:
+    """A short hash of the file's /rewards (sha256, hex; None without them): what the PlaNet-style baseline's reward
+    head learns from, beside the frames and actions that :func:`fingerprint` covers."""
+    import hashlib
+
+    with _open(path) as f:
+        if "rewards" not in f:
+            return None
+        rewards = f["rewards"][()]
+    digest = hashlib.sha256(str((rewards.dtype.str, rewards.shape)).encode())
+    digest.update(np.ascontiguousarray(rewards).tobytes())
+    return digest.hexdigest()[:16]
+
+
 #: The true physical parameters that training scores a model against (a relative error each), and that may be signed:
 #: the actuation gain is negative for a motor wired the other way. Gravity g, damping, a spring's k and half rest
 #: length l and a mass m are >= 0 in piga's conventions (docs/conventions.md: θ = 0 is upright, so g > 0 pulls the
