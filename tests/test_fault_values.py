@@ -54,6 +54,9 @@ def test_control_prints_the_gravity_as_checked(argv: list[str], needles: list[st
 @pytest.mark.parametrize("argv, needles", [
     (["--system", "spring", "--k", "2222.2223"], ["k = 2222.2223 is too stiff", "below 2222.2222 "]),  # "k = 2222.22"
     (["--effect", "blur=8.0000001"], ["blur=8.0000001 px would blur the pendulum away", "at most 8 px"]),
+    (["--effect", "exposure=100"], ["every frame is blank (one flat level, 255)", "--effect exposure=100 turns the "
+                                    "pendulum as white as the background: give a factor nearer 1"]),  # "their size"
+    (["--effect", "exposure=0.001"], ["one flat level, 0)", "exposure=0.001 turns the whole picture black"]),
 ])
 def test_collect_prints_the_value_as_checked(argv: list[str], needles: list[str], tmp_path: Path,
                                              capsys: pytest.CaptureFixture[str]) -> None:

@@ -38,7 +38,7 @@ from envs.fields import counted, number_text
 from envs.pendulum import MAX_ACTION, PENDULUM_DT, PixelPendulumConfig, make_pixel_pendulum
 from piga.io.atomic import check_writable_target
 from piga.io.progress import progress_bar
-from piga.data.schema import MAX_SEED, SPLITS, DatasetWriter, StillFramesError, write_room
+from piga.data.schema import MAX_SEED, SPLITS, BlankFramesError, DatasetWriter, StillFramesError, write_room
 from piga.io.worker_signals import die_with_parent, quiet_worker_signals
 from piga.io.choices import check_types
 
@@ -302,6 +302,12 @@ def collect(
                 f"{out}: nothing moves: --effect frame_drop={number_text(drop)} dropped every frame after the first in "
                 f"every sequence (each of the {t - 1} later frames is dropped with probability {number_text(drop)}), "
                 "so the video shows no motion; lower --effect frame_drop") from None
+        exposure = dict(attrs["effects"]).get("exposure")
+        if isinstance(exc, BlankFramesError) and exposure:  # not the drawing's fault: the camera's
+            raise BlankFramesError(
+                f"{str(exc).split('; check')[0]}; --effect exposure={number_text(exposure)} turns "
+                + ("the pendulum as white as the background" if exposure > 1 else "the whole picture black")
+                + ": give a factor nearer 1") from None
         raise
     vec.close()
     return Path(out)
