@@ -3227,6 +3227,24 @@ def test_resume_takes_a_default_the_run_was_started_at(tmp_path: Path, capsys: p
     assert_sb3_run_finished(code, err)
 
 
+def test_a_goal_image_of_another_shape_is_warned_of(tiny_piga_run: Path, tmp_path: Path) -> None:
+    """A 33x47 copy of a 15° render was read as 10.66° without a word: only its centre square is read."""
+    import cv2
+
+    from piga.control.goal import goal_from_image, render_goal_image
+    from piga.io.runs import load_model
+
+    square = tmp_path / "g15.png"
+    cv2.imwrite(str(square), render_goal_image(15.0)[..., ::-1])  # (RGB to cv2's BGR)
+    squashed = tmp_path / "squashed.png"
+    cv2.imwrite(str(squashed), cv2.resize(cv2.imread(str(square)), (33, 47), interpolation=cv2.INTER_AREA))
+    model, checkpoint = load_model(tiny_piga_run)
+    warned = [w for w in goal_from_image(model, checkpoint, squashed).warnings if "not square" in w]
+    assert warned == [f"{squashed} is 33x47, not square: its centre 33x33 square is read, as the env's square frame "
+                      "would show it; a picture resized to another shape reads another angle"]
+    assert not any("not square" in w for w in goal_from_image(model, checkpoint, square).warnings)
+
+
 def test_train_model_resume_takes_auto_loading_the_run_was_started_at(tiny_data: Path, tmp_path: Path,
                                                                      capsys: pytest.CaptureFixture[str]) -> None:
     """--resume --data-loading auto on a run started without it was "drop --data-loading" (the checkpoint holds the

@@ -25,7 +25,7 @@ from envs.fields import upper_bound_text
 from envs.pendulum import PixelPendulumConfig
 from piga.world.effects import scaled_gravity
 from piga.world.model import PhysicsModel, frames_to_float
-from piga.data.scene import GRAY_WEIGHTS, load_scene_image, scene_to_gray
+from piga.data.scene import GRAY_WEIGHTS, load_scene_image, read_image, scene_to_gray
 
 __all__ = ["GOAL_IMAGE_FORMATS", "GRAY_WEIGHTS", "HOLDABLE_ANGLE", "GoalEstimate", "NotTheSceneError", "goal_from_image",
            "holdable_angle", "load_scene_image", "read_goal",
@@ -180,8 +180,15 @@ def goal_from_image(model: PhysicsModel, checkpoint: dict, path: str | os.PathLi
             f"(mismatch {mismatch:.2f}; a render scores 0, the empty background 1, the limit is {MAX_SCENE_MISMATCH})")
     typical = training_reconstruction_mse(model, checkpoint) or 0.001
     believed = gravity_mult if told is None else told
-    return read_goal(model, image, g=scaled_gravity(learned["g"], believed), a=learned["a"], mse_limit=4 * typical,
+    goal = read_goal(model, image, g=scaled_gravity(learned["g"], believed), a=learned["a"], mse_limit=4 * typical,
                      gravity_mult=gravity_mult)
+    height, width = read_image(path).shape[:2]
+    if abs(width - height) > 0.01 * max(width, height):  # a 33x47 copy of a 15° render read 10.66°, in silence
+        side = min(width, height)
+        goal.warnings.append(f"{path} is {width}x{height}, not square: its centre {side}x{side} square is read, as "
+                             "the env's square frame would show it; a picture resized to another shape reads another "
+                             "angle")
+    return goal
 
 
 #: The suffixes that ``--write-goal-image`` writes, each with imageio's options for it: every one lossless but JPEG's,
