@@ -231,3 +231,23 @@ def test_a_blurred_pendulum_moving_slowly_does_not_drop_frames(model, tmp_path: 
     assert stale.sum() >= 5  # the blur leaves moving frames within a repeat's tolerance
     found = V.camera_stage(model, str(path), theta, np.arange(N) < 16, stale)
     assert found.camera.blur == pytest.approx(3.9, abs=0.2) and "frame_drop" not in {e["effect"] for e in found.effects}
+
+
+def test_an_exposure_is_named_relative_to_the_models_own_frames(model, tmp_path: Path) -> None:
+    """A model trained on g = 3 frames drew the whole scene 1.6% darker than they were, and its own training file read
+    "exposure 1.02": the exposure is the recording's over the own file's, where that file is there."""
+    own = _recording(tmp_path / "own.h5", model, "none", exposure=0.984)  # the decoder draws 1 / 0.984 of these
+    same = _recording(tmp_path / "same.h5", model, "none", exposure=0.984)
+    darker = _recording(tmp_path / "darker.h5", model, "none", exposure=0.984 * 0.8)
+    fit = np.arange(N) < 16
+    alone = V.camera_stage(model, str(same), np.zeros((N, T)), fit, None)
+    assert "exposure" in {e["effect"] for e in alone.effects}  # against the decoder alone: its own bias
+    found = V.camera_stage(model, str(same), np.zeros((N, T)), fit, None, reference=str(own))
+    assert "exposure" not in {e["effect"] for e in found.effects}
+    named = {e["effect"]: e for e in V.camera_stage(model, str(darker), np.zeros((N, T)), fit, None,
+                                                   reference=str(own)).effects}
+    assert named["exposure"]["value"] == pytest.approx(0.8, abs=0.01)
+    lo, hi = named["exposure"]["interval"]
+    assert lo <= named["exposure"]["value"] <= hi
+    gone = V.camera_stage(model, str(same), np.zeros((N, T)), fit, None, reference=str(tmp_path / "gone.h5"))
+    assert "exposure" in {e["effect"] for e in gone.effects}  # no own file: the decoder is the reference

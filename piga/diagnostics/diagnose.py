@@ -293,8 +293,9 @@ def diagnose(model: PhysicsModel, data: str | os.PathLike[str], config: Diagnose
             raise unlike
         raise DiagnosisInputError("every frame of the recording repeats the previous one (a constant or frozen video): "
                                   "there is no motion to diagnose")
+    own = training_data_path(checkpoint)
     camera = camera_stage(model, str(data), obs.theta, obs.fit, obs.stale, config.camera, seed=config.seed,
-                          progress=progress)
+                          progress=progress, reference=None if own is None else str(own))
     check_scene_through_camera(unlike, camera.camera, camera.matched_error, rec_training, config.max_scene_ratio)
     if camera.missing > config.camera.max_missing:
         raise NotTheSceneError(f"the pendulum is not in view in {100 * camera.missing:.0f}% of the held-out frames (they are "

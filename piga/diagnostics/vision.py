@@ -190,6 +190,19 @@ def fit_camera(model: PhysicsModel, x: Tensor, blur: bool = True, shift: bool = 
     return Camera(**cam)
 
 
+def background_exposure(frames: np.ndarray, still: np.ndarray, renders: tuple[Tensor, Tensor]) -> float | None:
+    """The median, over the pixels ``still`` (H, W) that are not black in the decoder's background, of each pixel's
+    median over uint8 frames (M, H, W) divided by that background: the frames' exposure as the background shows it
+    (None where no such pixel lies: a black background stays black under any exposure). :func:`fit_exposure` says
+    why medians."""
+    background = empty_scene(renders)[0].numpy()  # (H, W) the decoder's level, in [0, 1]
+    lit = still & (background > 0.2)
+    if not lit.any():
+        return None
+    levels = np.median(frames[:, lit], axis=0) / 255.0  # (S,)
+    return float(np.median(levels / background[lit]))
+
+
 def fit_exposure(model: PhysicsModel, frames: np.ndarray, still: np.ndarray, x: Tensor,
                  renders: tuple[Tensor, Tensor], min_change: float) -> tuple[Camera, bool]:
     """The exposure k of uint8 frames (M, H, W) (first channel), flattened in ``x`` (M, P), and whether the
@@ -207,11 +220,9 @@ def fit_exposure(model: PhysicsModel, frames: np.ndarray, still: np.ndarray, x: 
     from scipy.optimize import minimize_scalar
 
     background = empty_scene(renders)[0].numpy()  # (H, W) the decoder's level, in [0, 1]
-    lit = still & (background > 0.2)  # a black background stays black under any exposure
-    if lit.any():
-        background = background[lit]  # (S,)
-        levels = np.median(frames[:, lit], axis=0) / 255.0  # (S,)
-        k = float(np.median(levels / background))
+    k = background_exposure(frames, still, renders)
+    if k is not None:
+        background = background[still & (background > 0.2)]  # (S,)
         if 255 * abs(k - 1) > min_change or (background < 0.9).mean() > 0.5:  # a change, or a background that shows one
             return Camera(exposure=float(np.clip(k, MIN_EXPOSURE, MAX_EXPOSURE))), True
         lo = 1.0
@@ -462,7 +473,8 @@ def match_file(model: PhysicsModel, path: str, camera: Camera, batch: int = 64) 
 
 
 def camera_stage(model: PhysicsModel, path: str, theta: np.ndarray, fit: np.ndarray, stale: np.ndarray | None,
-                 config: CameraConfig = CameraConfig(), seed: int = 0, progress: bool = False) -> CameraFindings:
+                 config: CameraConfig = CameraConfig(), seed: int = 0, progress: bool = False,
+                 reference: str | None = None) -> CameraFindings:
     """Fits and tests the camera candidates on the recording ``path``.
 
     Args:
@@ -470,6 +482,8 @@ def camera_stage(model: PhysicsModel, path: str, theta: np.ndarray, fit: np.ndar
         fit: (N,) bool, the fit split.
         stale: (N, T) repeated frames (:func:`~piga.diagnostics.repeats.stale_frames`), or None.
         progress: show a progress bar over the fits.
+        reference: the model's own training file, where it is there: an exposure is named relative to that file's
+            (:func:`reference_exposure`), since a decoder may draw the whole scene a little darker than its frames.
     """
     from tqdm.auto import tqdm
 
@@ -542,9 +556,11 @@ def camera_stage(model: PhysicsModel, path: str, theta: np.ndarray, fit: np.ndar
         effects.append({"effect": "shift", "value": 0.5 * (camera.dx + camera.dy), "dx": camera.dx, "dy": camera.dy,
                         "dx_interval": ix, "dy_interval": iy, "unit": "px (mean of right and down)",
                         "interval": [0.5 * (ix[0] + iy[0]), 0.5 * (ix[1] + iy[1])]})
-    if camera.exposure != 1:
-        effects.append({"effect": "exposure", "value": camera.exposure, "unit": "factor on every gray level",
-                        "interval": camera_interval(model, camera, "exposure", x_fit, fit_seqs, step=0.01)})
+    own = reference_exposure(model, reference, still, renders, config.fit_frames, seed) if camera.exposure != 1 else 1.0
+    if camera.exposure != 1 and 255 * abs(camera.exposure / own - 1) > config.min_exposure:
+        lo, hi = camera_interval(model, camera, "exposure", x_fit, fit_seqs, step=0.01)
+        effects.append({"effect": "exposure", "value": camera.exposure / own, "unit": "factor on every gray level",
+                        "interval": [lo / own, hi / own]})
 
     if camera.blur or camera.dx or camera.dy:  # the pixels the pendulum never reaches in these frames
         still = static_pixels(model, camera=camera)
@@ -587,6 +603,29 @@ def visible_step(model: PhysicsModel, camera: Camera, levels: float, size: int =
         if float((renders - renders.roll(-k, 0)).abs().amax(1).median()) * 255 >= levels:
             return k * 2 * math.pi / size
     return math.pi
+
+
+def reference_exposure(model: PhysicsModel, reference: str | None, still: np.ndarray, renders: tuple[Tensor, Tensor],
+                       count: int, seed: int) -> float:
+    """:func:`background_exposure` of ``count`` frames of the model's own training file ``reference``: how much
+    brighter than its decoder's background its own frames are (1 where the file is gone, unreadable, of other
+    frames, or its background cannot show it). A model trained on g = 3 frames drew them 1.6% darker, and its own
+    training file read "exposure 1.02"."""
+    if reference is None:
+        return 1.0
+    try:
+        import h5py
+
+        with h5py.File(reference, "r") as f:
+            rows = np.arange(f["frames"].shape[0])
+        frames = _sample(reference, rows, count, np.random.default_rng(seed))[0]
+    except (OSError, KeyError, ValueError):
+        return 1.0
+    frames = frames if frames.ndim == 3 else frames[..., 0]
+    if frames.shape[1:] != still.shape:
+        return 1.0
+    k = background_exposure(frames, still, renders)
+    return 1.0 if k is None or not k > 0 else k
 
 
 def empty_scene(renders: tuple[Tensor, Tensor]) -> Tensor:
