@@ -1242,6 +1242,7 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
         euler = tuple(e for e in final.effects if e != WITHIN_FRAME.name)
         reference = fit.fit_candidate(euler, final.values, nom, w.fit, delay=final.delay or None)
     ref_g, ref_a = nom.g, abs(nom.a)  # what the recording's g and a are compared with
+    own_reference = False  # whether they are the own file's reading in the same form
     if use_own:
         # both files read the same way, within the frame too: the recording's own reading is compared
         read = read_own(final)
@@ -1252,7 +1253,9 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
                          f"{abs(nom.a):.3f}, identified on that file: the recording's g and a are compared with the "
                          "nominal model's")
             ref_g, ref_a = nom.g, abs(nom.a)
-        elif max(abs(ref_g / nom.g - 1), abs(ref_a / abs(nom.a) - 1)) > config.gain_tolerance:
+        else:
+            own_reference = True
+        if own_reference and max(abs(ref_g / nom.g - 1), abs(ref_a / abs(nom.a) - 1)) > config.gain_tolerance:
             notes.append(f"read from the model's own training file in the same form ({read.name or 'no effect'}), g = "
                          f"{ref_g:.3f} and |a| = {ref_a:.3f}, where the nominal model has g = {nom.g:.3f} and |a| = "
                          f"{abs(nom.a):.3f}: the recording's g and a are compared with the former")
@@ -1284,11 +1287,16 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
         notes.append(f"a refits to {reference.values['a']:.3g} (x{gain:.3g} the nominal), but the actions never change: "
                      "a constant command times a gain is a constant torque, so no gain error is named")
     own_form = "no effect" if refit is None or not refit.effects else "no effect but Gymnasium's own clip"
-    if gain_error and plain is not None and abs(plain - 1) <= config.gain_tolerance:
+    # (an a read against the own file in the same form has its effects compensated there already: the nominal form,
+    # which leaves them out, is no witness then; it dismissed a gain of 1.3 beside a damping of 0.2 as "compensation")
+    if gain_error and plain is not None and abs(plain - 1) <= config.gain_tolerance and not own_reference:
         gain_error = False
         notes.append(f"a refits to {reference.values['a']:.3f} (x{gain:.3f} the nominal) with the effects, but to "
                      f"{refit.values['a']:.3f} (x{plain:.3f}) in the nominal model's own form ({own_form}): the "
-                     "difference compensates the effects, not a gain error")
+                     "difference compensates the effects, not a gain error"
+                     + ("" if use_own else "; the model's own training file, read in the same form, would tell a gain "
+                        "from such compensation, but it is not there (give the run's data file back at its recorded "
+                        "path)"))
 
     # uncertainties
     if draws is None:
