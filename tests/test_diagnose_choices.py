@@ -505,6 +505,13 @@ def test_effects_that_predict_worse_than_the_nominal_are_not_a_correction(damped
     drifted = _worse_than_nominal(noted, strays, final, NOMINAL)
     assert drifted.verdict_class == "unexplained" and "strays further than the nominal model's" in drifted.verdict
     assert drifted.effects == [] and "damping" in drifted.verdict  # the fit is in the verdict, no effect established
+    from piga.diagnostics.diagnose import closure_of
+
+    # a best fit that explains nothing closes nothing: its closure was printed beside the verdict ("-1467.5%")
+    assert d.gap.free_run_gap_closure is not None and closure_of(naming, d.gap) is d.gap
+    unclosed = closure_of(drifted, strays)
+    assert unclosed.no_gap and unclosed.free_run_gap_closure is None and unclosed.typical_free_run_gap_closure is None
+    assert unclosed.mean_free_run_gap_closure is None and unclosed.pixel_free_run_gap_closure is None
     assert drifted.notes == ["g refits to 5.031 (x0.502 the reference 10.018) in a fit that does not explain the "
                              "recording: no gravity error is claimed"]
     slightly = replace(d.gap, typical_free_run_mse_corrected=1.09 * d.gap.typical_free_run_mse_nominal)

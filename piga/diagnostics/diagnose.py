@@ -1681,6 +1681,16 @@ def measure_gap(candidates: Candidates, chosen: Score, nom: Nominal, obs: Observ
     )
 
 
+def closure_of(naming: Naming, gap: Gap) -> Gap:
+    """``gap`` with no closure where the verdict is that the gap is not explained: a best fit that explains nothing
+    closes nothing (its closure was printed beside the verdict, "Free-run closure -1467.5%")."""
+    if naming.verdict_class != "unexplained" or gap.no_gap:
+        return gap
+    return dataclass_replace(gap, free_run_gap_closure=None, typical_free_run_gap_closure=None,
+                             mean_free_run_gap_closure=None, pixel_free_run_gap_closure=None, no_gap=True,
+                             floor_subtracted=False)
+
+
 def median_interval(values: np.ndarray, seed: int, replicates: int = 1000) -> tuple[float, float]:
     """95% bootstrap interval of the median of ``values`` (B,)."""
     rng = np.random.default_rng(seed)
@@ -1786,6 +1796,7 @@ def analyse(obs: Observations, nom: Nominal, config: DiagnoseConfig = DiagnoseCo
                       vision.ratio, corrects=bool(naming.effects) or ambiguity is not None)
     naming = _worse_than_nominal(naming, gap, final, nom)
     naming = _gap_left_unnamed(naming, gap)
+    gap = closure_of(naming, gap)
     res_nom = one_step_residuals(candidates.nominal.model, nom, obs.theta, obs.actions, np.arange(len(obs.theta)))
     exclusions = [f"excluded by the file's provenance: {e} ({why})" for e, why in excluded.items() if e in obs.impossible]
     exclusions += [f"not tried: {e} ({why})" for e, why in excluded.items() if e not in obs.impossible]
