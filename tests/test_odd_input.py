@@ -268,6 +268,12 @@ def test_too_few_windows_names_a_stride_that_was_raised() -> None:
         plan_training(TrainConfig(window_stride=1000), 16)
     with pytest.raises(ValueError, match=r"give more data$"):
         plan_training(TrainConfig(), 16)
+    # sequences one window long give one window at any stride: a bouncing file of 10 x 10 frames at the scene
+    # preset's stride of 2 was told to lower it
+    with pytest.raises(ValueError, match=r"give more data$"):
+        plan_training(TrainConfig(window_stride=2), 8, at_stride_one=8)
+    with pytest.raises(ValueError, match=r"or lower --window-stride \(now 2\)"):
+        plan_training(TrainConfig(window_stride=2), 16, at_stride_one=32)
 
 
 @pytest.mark.skipif(not os.path.exists("/dev/full"), reason="needs /dev/full")

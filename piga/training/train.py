@@ -239,18 +239,21 @@ class TrainPlan:
                 + (f"; a checkpoint every {self.checkpoint_every} epochs" if self.checkpoint_every > 1 else ""))
 
 
-def plan_training(config: TrainConfig, windows: int) -> TrainPlan:
+def plan_training(config: TrainConfig, windows: int, at_stride_one: int | None = None) -> TrainPlan:
     """Sizes a recipe to a file of ``windows`` training windows.
 
     With ``config.epochs`` 0 the run is the fewest whole epochs that reach ``budget_steps``; the
     warm-up, the curriculum and the final average are fractions of the planned steps (at least one
     step each when their fraction is not 0), so that the physics trains for most of the run whatever
-    the file's size.
+    the file's size. ``at_stride_one``: the windows that a stride of 1 would give (None: not known), for the advice
+    when there are fewer than a batch.
     """
     per_epoch = windows // config.batch_size
     if per_epoch < 1:
         from envs.fields import counted  # here: training runs without gymnasium's import
-        stride = f", or lower --window-stride (now {config.window_stride})" if config.window_stride > 1 else ""
+        # (a stride of 1 where it would fill a batch: sequences one window long give one window at any stride)
+        helps = config.window_stride > 1 and (at_stride_one is None or at_stride_one >= config.batch_size)
+        stride = f", or lower --window-stride (now {config.window_stride})" if helps else ""
         raise ValueError(f"{counted(windows, 'training window')} {'is' if windows == 1 else 'are'} fewer than one "
                          f"batch of {config.batch_size}, so no step would run; lower the batch size (--batch-size) or "
                          f"give more data{stride}")
@@ -633,7 +636,9 @@ def check_trainable(info: DatasetInfo, model_config: ModelConfig, train_config: 
     """
     needed = model_config.window
     if info.steps < needed:
-        raise ValueError(f"{info.path}: sequences have {info.steps} frames; training needs at least "
+        from envs.fields import counted  # here: training runs without gymnasium's import
+
+        raise ValueError(f"{info.path}: sequences have {counted(info.steps, 'frame')}; training needs at least "
                          f"L + T_pred = {model_config.input_frames} + {model_config.pred_frames} = {needed}")
     n_train = info.split_counts["train"]
     if not n_train:
@@ -647,7 +652,7 @@ def check_trainable(info: DatasetInfo, model_config: ModelConfig, train_config: 
                                   "(piga-collect's random actions, or a recording with the motor driven)")
     windows = n_train * len(range(0, info.steps - needed + 1, train_config.window_stride))
     try:
-        return plan_training(train_config, windows)
+        return plan_training(train_config, windows, n_train * (info.steps - needed + 1))
     except ValueError as exc:
         from envs.fields import counted  # here: training runs without gymnasium's import
 
