@@ -101,6 +101,7 @@ def test_control_refuses_a_continuous_model_before_reading_or_warning(goal: bool
 def test_a_continuous_model_of_gymnasiums_frames_is_not_sent_back_to_gymnasiums_env(
         continuous_run: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """Each env's refusal pointed to the other, which refused it too."""
+    pytest.importorskip("dm_control", reason="needs the optional extra piga[dmc]")
     refused("piga-control", ["--model", str(continuous_run), "--env", "piga/DMCPendulum-v0", "--episodes", "1", "--quiet"],
             capsys, "with --preset continuous, which no env plans at that rate: to control piga/PixelPendulum-v0, train "
             "a model with --preset fast; to control piga/DMCPendulum-v0, train one on its frames")
