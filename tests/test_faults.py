@@ -3243,6 +3243,13 @@ def test_a_goal_image_of_another_shape_is_warned_of(tiny_piga_run: Path, tmp_pat
     assert warned == [f"{squashed} is 33x47, not square: its centre 33x33 square is read, as the env's square frame "
                       "would show it; a picture resized to another shape reads another angle"]
     assert not any("not square" in w for w in goal_from_image(model, checkpoint, square).warnings)
+    tiny = tmp_path / "tiny.png"  # a 16 px copy: "not a picture of the pendulum scene (mismatch 0.51 ...)", no why
+    cv2.imwrite(str(tiny), cv2.resize(cv2.imread(str(square)), (8, 8), interpolation=cv2.INTER_AREA))
+    from piga.control.goal import NotTheSceneError
+
+    with pytest.raises(NotTheSceneError, match="at 8x8 it is enlarged to the model's 64x64 frames, which blurs it: "
+                                               "give a picture of 64x64 or larger$"):
+        goal_from_image(model, checkpoint, tiny)
 
 
 def test_train_model_resume_takes_auto_loading_the_run_was_started_at(tiny_data: Path, tmp_path: Path,
