@@ -604,34 +604,32 @@ def check_pendulum_model(model: PhysicsModel, run_dir: str) -> None:
                         f"gray ones; {fix}")
 
 
-def _plannable(model: PhysicsModel) -> bool:
-    """Whether the pendulum planner's engine takes the model (:meth:`agents.dynamics.PendulumDynamics.of`)."""
+def _unplannable(model: PhysicsModel) -> str | None:
+    """Why the pendulum planner's engine does not take the model (:meth:`agents.dynamics.PendulumDynamics.of`), or
+    None where it does."""
     from agents.dynamics import PendulumDynamics
 
     try:
         PendulumDynamics.of(model.system, model.integrator)  # type: ignore[arg-type]
-    except ValueError:
-        return False
-    return True
+    except ValueError as exc:
+        return str(exc)
+    return None
 
 
 def _check_plannable(model: PhysicsModel, run_dir: str) -> None:
     """Refuses a model that the pendulum planner's engine would plan wrongly (``--preset continuous``: RK4 within the
     frame, or a learned damping), before anything else is read or warned of; the agent refuses it in the same words
     (:meth:`agents.dynamics.PendulumDynamics.of`), after the goal image and the convergence warning."""
-    from agents.dynamics import PendulumDynamics
-
-    try:
-        PendulumDynamics.of(model.system, model.integrator)  # type: ignore[arg-type]
-    except ValueError as exc:
-        # the fix: dm_control's env, which plans such a model, where it steps the model's frame rate; else a model
-        # trained with the preset that Gymnasium's pendulum is planned with
-        if (repeat := _dmc_repeat(model.system.dt)) is not None:
-            fix = f"control it with --env {DMC_PENDULUM}" + ("" if repeat == 1 else f" --env-option action_repeat={repeat}")
-        else:
-            fix = (f"no env plans it at its frames' rate ({model.system.dt:g} s apart): to control {PIXEL_PENDULUM}, "
-                   "train a model with --preset fast")
-        raise PigaError(f"{run_dir}: {exc}; {fix}") from None
+    if (why := _unplannable(model)) is None:
+        return
+    # the fix: dm_control's env, which plans such a model, where it steps the model's frame rate; else a model
+    # trained with the preset that Gymnasium's pendulum is planned with
+    if (repeat := _dmc_repeat(model.system.dt)) is not None:
+        fix = f"control it with --env {DMC_PENDULUM}" + ("" if repeat == 1 else f" --env-option action_repeat={repeat}")
+    else:
+        fix = (f"no env plans it at its frames' rate ({model.system.dt:g} s apart): to control {PIXEL_PENDULUM}, "
+               "train a model with --preset fast")
+    raise PigaError(f"{run_dir}: {why}; {fix}")
 
 
 def _warn_if_other_frames(run_dir: str, checkpoint: dict) -> None:
@@ -808,7 +806,7 @@ def _check_dmc_rate(run_dir: str, checkpoint: dict, dt: float, env: DMCPendulumC
                     model: PhysicsModel | None = None) -> None:
     """Refuses a piga model trained on frames ``dt`` s apart where the DMC pendulum ``env`` steps another dt, saying
     what would match: the action repeat that gives ``dt``, where one does; else the env of the model's frames, where
-    its planner takes the ``model`` (:func:`_plannable`: one semi-implicit Euler step per frame, no damping; a
+    its planner takes the ``model`` (:func:`_unplannable`: one semi-implicit Euler step per frame, no damping; a
     ``--preset continuous`` model of Gymnasium's frames is planned by neither env)."""
     from envs.dmc import DMC_PHYSICS_DT
     from envs.constants import PENDULUM_DT
@@ -823,7 +821,7 @@ def _check_dmc_rate(run_dir: str, checkpoint: dict, dt: float, env: DMCPendulumC
         frames = f"frames of {trained} ({dt:g} s apart)"
     elif abs(dt - PENDULUM_DT) <= 1e-9:  # the file is gone, or names no env: its rate is the pixel pendulum's
         frames, trained = f"{frames} ({PIXEL_PENDULUM}'s rate)", PIXEL_PENDULUM
-    euler = model is None or _plannable(model)
+    euler = model is None or _unplannable(model) is None
     elsewhere = (f"control it with --env {trained}, or " if trained and trained != DMC_PENDULUM
                  and (euler or trained != PIXEL_PENDULUM) else "")
     if not euler and trained == PIXEL_PENDULUM:

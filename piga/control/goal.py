@@ -173,9 +173,9 @@ def goal_from_image(model: PhysicsModel, checkpoint: dict, path: str | os.PathLi
     from piga.io.runs import training_reconstruction_mse
 
     image = load_scene_image(path, model.config.image_size)
+    height, width = read_image(path).shape[:2]  # (the image as given: load_scene_image returns it converted)
     mismatch = scene_mismatch(image)
     if mismatch > MAX_SCENE_MISMATCH:
-        height, width = read_image(path).shape[:2]
         side = model.config.image_size
         small = (f"; at {width}x{height} it is enlarged to the model's {side}x{side} frames, which blurs it: give a "
                  f"picture of {side}x{side} or larger") if min(width, height) < side else ""
@@ -187,7 +187,6 @@ def goal_from_image(model: PhysicsModel, checkpoint: dict, path: str | os.PathLi
     believed = gravity_mult if told is None else told
     goal = read_goal(model, image, g=scaled_gravity(learned["g"], believed), a=learned["a"], mse_limit=4 * typical,
                      gravity_mult=gravity_mult)
-    height, width = read_image(path).shape[:2]  # (read again: load_scene_image returns it converted)
     if abs(width - height) > 0.01 * max(width, height):  # a 33x47 copy of a 15° render read 10.66°, in silence
         side = min(width, height)
         goal.warnings.append(f"{path} is {width}x{height}, not square: its centre {side}x{side} square is read, as "

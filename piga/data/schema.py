@@ -574,29 +574,27 @@ def fingerprint(path: str | os.PathLike[str]) -> str:
     """A short hash of what a file holds, not of where it lies: its /actions, /split and first sequence of
     frames (sha256, hex). A moved or copied file keeps it; another file of the same shape (another seed, another
     recording) does not. It reads a few hundred kB of a default file."""
-    import hashlib
-
-    digest = hashlib.sha256()
     with _open(path) as f:
         with read_rows(f["frames"], "sequence 0"):
             first = f["frames"][0]
-        for array in (f["actions"][()], f["split"][()], first):
-            digest.update(str((array.dtype.str, array.shape)).encode())
-            digest.update(np.ascontiguousarray(array).tobytes())
-    return digest.hexdigest()[:16]
+        return _digest(f["actions"][()], f["split"][()], first)
 
 
 def rewards_fingerprint(path: str | os.PathLike[str]) -> str | None:
-    """A short hash of the file's /rewards (sha256, hex; None without them): what the PlaNet-style baseline's reward
-    head learns from, beside the frames and actions that :func:`fingerprint` covers."""
+    """A short hash of the file's /rewards (as :func:`fingerprint`'s; None without them): what the PlaNet-style
+    baseline's reward head learns from, beside the frames and actions that :func:`fingerprint` covers."""
+    with _open(path) as f:
+        return _digest(f["rewards"][()]) if "rewards" in f else None
+
+
+def _digest(*arrays: np.ndarray) -> str:
+    """sha256 of the arrays' dtypes, shapes and bytes, in order: 16 hex digits."""
     import hashlib
 
-    with _open(path) as f:
-        if "rewards" not in f:
-            return None
-        rewards = f["rewards"][()]
-    digest = hashlib.sha256(str((rewards.dtype.str, rewards.shape)).encode())
-    digest.update(np.ascontiguousarray(rewards).tobytes())
+    digest = hashlib.sha256()
+    for array in arrays:
+        digest.update(str((array.dtype.str, array.shape)).encode())
+        digest.update(np.ascontiguousarray(array).tobytes())
     return digest.hexdigest()[:16]
 
 

@@ -1247,15 +1247,14 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
         # both files read the same way, within the frame too: the recording's own reading is compared
         read = read_own(final)
         ref_g, ref_a = read.values["g"], abs(read.values["a"])
-        if implausible_own_reading(read, nom):
+        own_reference = not implausible_own_reading(read, nom)
+        if not own_reference:
             notes.append(f"the model's own training file read in the same form ({read.name or 'no effect'}) gave g = "
                          f"{ref_g:.3g} and |a| = {ref_a:.3g}, far from the nominal model's g = {nom.g:.3f} and |a| = "
                          f"{abs(nom.a):.3f}, identified on that file: the recording's g and a are compared with the "
                          "nominal model's")
             ref_g, ref_a = nom.g, abs(nom.a)
-        else:
-            own_reference = True
-        if own_reference and max(abs(ref_g / nom.g - 1), abs(ref_a / abs(nom.a) - 1)) > config.gain_tolerance:
+        elif max(abs(ref_g / nom.g - 1), abs(ref_a / abs(nom.a) - 1)) > config.gain_tolerance:
             notes.append(f"read from the model's own training file in the same form ({read.name or 'no effect'}), g = "
                          f"{ref_g:.3f} and |a| = {ref_a:.3f}, where the nominal model has g = {nom.g:.3f} and |a| = "
                          f"{abs(nom.a):.3f}: the recording's g and a are compared with the former")

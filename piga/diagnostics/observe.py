@@ -129,9 +129,8 @@ def check_compatible(model: PhysicsModel, path: str | os.PathLike[str], min_sequ
         n = info.n_sequences
         fix = ""  # the file's own split decides: piga-collect or piga-import writes another
         if n >= min_fit + min_held_out:
-            held = min_held_out
-            fix = (f"; collect or import it again with a split that holds out at least {held}, such as --split "
-                   f"{n - held},{held // 2},{held - held // 2}")
+            fix = (f"; collect or import it again with a split that holds out at least {min_held_out}, such as --split "
+                   f"{n - min_held_out},{min_held_out // 2},{min_held_out - min_held_out // 2}")
         raise DiagnosisInputError(f"{path}: {n_fit} train and {n - n_fit} held-out sequences; "
                                   f"need at least {min_fit} and {min_held_out}{fix}")
     return info

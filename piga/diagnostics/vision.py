@@ -190,17 +190,21 @@ def fit_camera(model: PhysicsModel, x: Tensor, blur: bool = True, shift: bool = 
     return Camera(**cam)
 
 
-def background_exposure(frames: np.ndarray, still: np.ndarray, renders: tuple[Tensor, Tensor]) -> float | None:
-    """The median, over the pixels ``still`` (H, W) that are not black in the decoder's background, of each pixel's
-    median over uint8 frames (M, H, W) divided by that background: the frames' exposure as the background shows it
-    (None where no such pixel lies: a black background stays black under any exposure). :func:`fit_exposure` says
-    why medians."""
-    background = empty_scene(renders)[0].numpy()  # (H, W) the decoder's level, in [0, 1]
-    lit = still & (background > 0.2)
+def background_exposure(frames: np.ndarray, lit: np.ndarray, background: np.ndarray) -> float | None:
+    """The median, over the pixels ``lit`` (H, W; :func:`lit_pixels`), of each pixel's median over uint8 frames (M, H,
+    W) divided by the decoder's ``background`` (H, W) there: the frames' exposure as the background shows it (None
+    where no pixel is lit). :func:`fit_exposure` says why medians."""
     if not lit.any():
         return None
     levels = np.median(frames[:, lit], axis=0) / 255.0  # (S,)
     return float(np.median(levels / background[lit]))
+
+
+def lit_pixels(still: np.ndarray, renders: tuple[Tensor, Tensor]) -> tuple[np.ndarray, np.ndarray]:
+    """The decoder's background (H, W, in [0, 1]; :func:`empty_scene`) and its pixels ``still`` (H, W) that can show an
+    exposure: not black, since a black background stays black under any exposure."""
+    background = empty_scene(renders)[0].numpy()
+    return still & (background > 0.2), background
 
 
 def fit_exposure(model: PhysicsModel, frames: np.ndarray, still: np.ndarray, x: Tensor,
@@ -219,11 +223,10 @@ def fit_exposure(model: PhysicsModel, frames: np.ndarray, still: np.ndarray, x: 
     """
     from scipy.optimize import minimize_scalar
 
-    background = empty_scene(renders)[0].numpy()  # (H, W) the decoder's level, in [0, 1]
-    k = background_exposure(frames, still, renders)
+    lit, background = lit_pixels(still, renders)
+    k = background_exposure(frames, lit, background)
     if k is not None:
-        background = background[still & (background > 0.2)]  # (S,)
-        if 255 * abs(k - 1) > min_change or (background < 0.9).mean() > 0.5:  # a change, or a background that shows one
+        if 255 * abs(k - 1) > min_change or (background[lit] < 0.9).mean() > 0.5:  # a change, or a background that shows one
             return Camera(exposure=float(np.clip(k, MIN_EXPOSURE, MAX_EXPOSURE))), True
         lo = 1.0
     else:
@@ -556,11 +559,12 @@ def camera_stage(model: PhysicsModel, path: str, theta: np.ndarray, fit: np.ndar
         effects.append({"effect": "shift", "value": 0.5 * (camera.dx + camera.dy), "dx": camera.dx, "dy": camera.dy,
                         "dx_interval": ix, "dy_interval": iy, "unit": "px (mean of right and down)",
                         "interval": [0.5 * (ix[0] + iy[0]), 0.5 * (ix[1] + iy[1])]})
-    own = reference_exposure(model, reference, still, renders, config.fit_frames, seed) if camera.exposure != 1 else 1.0
-    if camera.exposure != 1 and 255 * abs(camera.exposure / own - 1) > config.min_exposure:
-        lo, hi = camera_interval(model, camera, "exposure", x_fit, fit_seqs, step=0.01)
-        effects.append({"effect": "exposure", "value": camera.exposure / own, "unit": "factor on every gray level",
-                        "interval": [lo / own, hi / own]})
+    if camera.exposure != 1:  # named relative to the model's own frames
+        own = reference_exposure(model, reference, still, renders, config.fit_frames, seed)
+        if 255 * abs(camera.exposure / own - 1) > config.min_exposure:
+            lo, hi = camera_interval(model, camera, "exposure", x_fit, fit_seqs, step=0.01)
+            effects.append({"effect": "exposure", "value": camera.exposure / own, "unit": "factor on every gray level",
+                            "interval": [lo / own, hi / own]})
 
     if camera.blur or camera.dx or camera.dy:  # the pixels the pendulum never reaches in these frames
         still = static_pixels(model, camera=camera)
@@ -624,7 +628,7 @@ def reference_exposure(model: PhysicsModel, reference: str | None, still: np.nda
     frames = frames if frames.ndim == 3 else frames[..., 0]
     if frames.shape[1:] != still.shape:
         return 1.0
-    k = background_exposure(frames, still, renders)
+    k = background_exposure(frames, *lit_pixels(still, renders))
     return 1.0 if k is None or not k > 0 else k
 
 

@@ -245,8 +245,8 @@ def summary_line(metrics: dict[str, Any]) -> str:
     # beside those, the learned ones the file gives no true value for (its params may name only some): all of them
     # where it gives none, the offset included, and the offset wherever the convergence verdict names it (a warning
     # "offset moved ..." beside a line that did not show it)
-    named = re.findall(r"[A-Za-z_]+", (metrics.get("convergence") or {}).get("reason") or "")
-    skipped = {*errors, *metrics.get("fixed_parameters", {})} | ({"offset"} - set(named)) if errors else set()
+    named = re.search(r"\boffset\b", (metrics.get("convergence") or {}).get("reason") or "")
+    skipped = {*errors, *metrics.get("fixed_parameters", {}), *([] if named else ["offset"])} if errors else set()
     parts += [f"{k}={v:.4f}" + (f" ({note[2:]})" if k in flat else "") for k, v in metrics.get("parameters", {}).items()
               if k not in skipped]
     return ", ".join(parts) or "no parameter (none to learn)"

@@ -196,8 +196,11 @@ def check_convergence(state: Any, config: ConvergenceConfig = ConvergenceConfig(
     planned = int(plan["epochs"]) * int(plan["steps_per_epoch"])
     physics_steps = max(0, steps - int(plan["warmup_steps"]))
     end_values = {k: float(state.history[-1][k]) for k in state.start} if state.history else dict(state.start)
+    # the most the learning rate lets a parameter move over the tail's recorded steps, the same for each of them
+    tail = [int(row[0]) for row in state.trace or () if row[0] > planned * (1 - config.tail)]
+    allowed = sum(physics_lr(step) for step in range(tail[0], tail[-1])) if physics_lr and tail else 0.0
     checks = {name: _parameter(name, float(start), end_values[name], state.trace, list(state.start), planned, config,
-                               physics_lr) for name, start in state.start.items()}
+                               allowed) for name, start in state.start.items()}
 
     flat = [name for name, p in (profile or {}).items()
             if name in checks and max(p.lower, p.upper) < 1 + config.flat_tolerance
@@ -300,7 +303,8 @@ def check_convergence(state: Any, config: ConvergenceConfig = ConvergenceConfig(
 
 
 def _parameter(name: str, start: float, end: float, trace: list[list[float]], names: list[str], planned: int,
-               config: ConvergenceConfig, physics_lr: Callable[[int], float] | None = None) -> ParameterCheck:
+               config: ConvergenceConfig, allowed: float = 0.0) -> ParameterCheck:
+    """``allowed``: the sum of the physics learning rate over the tail's recorded steps (0: not known)."""
     scale = abs(start) or 1.0
     tail_change = tail_spread = tail_speed = None
     if trace and math.isfinite(end):
@@ -313,7 +317,6 @@ def _parameter(name: str, start: float, end: float, trace: list[list[float]], na
             slope, intercept = np.polyfit(rows[:, 0], y, 1)
             tail_change = float(slope * (rows[-1, 0] - rows[0, 0]))
             tail_spread = float(np.std(y - (slope * rows[:, 0] + intercept)))
-            allowed = sum(physics_lr(step) for step in range(int(rows[0, 0]), int(rows[-1, 0]))) if physics_lr else 0.0
             if allowed > 0:
                 tail_speed = tail_change / allowed
     return ParameterCheck(start, end, (end - start) / scale, tail_change, tail_spread, tail_speed)
