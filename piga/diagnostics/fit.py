@@ -84,7 +84,8 @@ from piga.world.effects import (
     Effect,
     TorqueTerm,
     VelocityTerm,
-    pendulum_acceleration,
+    acceleration_of,
+    pendulum_coefficients,
     pendulum_gains,
 )
 from piga.world.physics import euler_step, rk4_step, shoot_velocity
@@ -277,9 +278,11 @@ def simulate(model: Model, params: dict[str, Tensor], nominal: Nominal, w: Windo
     else:
         step = rk4_step if nominal_integrator(nominal) == "rk4" else euler_step
 
+    coefficients = pendulum_coefficients(g, gain=a, passive=passive)  # taken once, not at every step
+
     def frame(theta: Tensor, v: Tensor, c: Tensor) -> tuple[Tensor, Tensor]:
         def acceleration(q: Tensor, dq: Tensor) -> Tensor:
-            return pendulum_acceleration(q, dq, g, nominal.offset, actuation=(a, c), passive=passive)
+            return acceleration_of(coefficients, q, dq, nominal.offset, c)
 
         for _ in range(substeps):
             theta, v = step(acceleration, theta, v, h, limit if limits else None)

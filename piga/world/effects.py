@@ -36,7 +36,7 @@ import math
 import sys
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
-from typing import Any, ClassVar, Literal
+from typing import Any, ClassVar, Literal, NamedTuple
 
 import numpy as np
 
@@ -52,7 +52,10 @@ __all__ = [
     "TorqueTerm",
     "VelocityTerm",
     "clip",
+    "PendulumCoefficients",
+    "acceleration_of",
     "pendulum_acceleration",
+    "pendulum_coefficients",
     "pendulum_gains",
     "scaled_gravity",
     "sin",
@@ -114,9 +117,44 @@ def clip(x: Array, limit: Array) -> Array:
 # ---------------------------------------------------------------------------------------------
 
 
+class PendulumCoefficients(NamedTuple):
+    """The pendulum's equation with its gains multiplied in (:func:`pendulum_coefficients`)."""
+
+    gravity: Array
+    """k_g·g (rad/s²)."""
+    drive: Array | None
+    """k_τ·a, the acceleration per unit of command; None without actuation."""
+    passive: tuple[tuple[TorqueTerm, Array], ...]
+    """(term, k_τ·value) of each passive torque."""
+
+
 def pendulum_gains(length: float = 1.0, mass: float = 1.0) -> tuple[float, float]:
     """(k_g, k_τ) = (3 / 2l, 3 / m l²): θ̈ = k_g·g·sin(θ + φ) + k_τ·τ for a rod of mass m and length l."""
     return 3.0 / (2.0 * length), 3.0 / (mass * length**2)
+
+
+def pendulum_coefficients(g: Array, length: float = 1.0, mass: float = 1.0, *, gain: Array | None = None,
+                          passive: Iterable[tuple[TorqueTerm, Array]] = ()) -> PendulumCoefficients:
+    """The equation's coefficients, multiplied once: (k_g·g, k_τ·a or None, [(term, k_τ·value), ...]).
+
+    A caller that steps the same equation many times (a fit's rollout) takes them once, and
+    :func:`acceleration_of` then costs one product per term and step.
+    """
+    gravity_gain, torque_gain = pendulum_gains(length, mass)
+    return PendulumCoefficients(gravity_gain * g, None if gain is None else torque_gain * gain,
+                                tuple((term, torque_gain * value) for term, value in passive))
+
+
+def acceleration_of(coefficients: PendulumCoefficients, theta: Array, v: Array, offset: Array = 0.0,
+                    command: Array | None = None) -> Array:
+    """θ̈ of the pendulum whose :func:`pendulum_coefficients` are given, under ``command`` ũ (None: no actuation)."""
+    # an offset that is the float 0 adds nothing: skipped, it would be one more op per step of a rollout
+    acc = coefficients.gravity * sin(theta if isinstance(offset, float) and offset == 0.0 else theta + offset)
+    if command is not None:
+        acc = acc + coefficients.drive * command
+    for term, value in coefficients.passive:
+        acc = acc + value * term.input(theta, v)
+    return acc
 
 
 def pendulum_acceleration(theta: Array, v: Array, g: Array, offset: Array = 0.0, length: float = 1.0, mass: float = 1.0,
@@ -130,14 +168,8 @@ def pendulum_acceleration(theta: Array, v: Array, g: Array, offset: Array = 0.0,
     (so a model trained before the terms were shared predicts to the last bit). Torques are in N·m
     for a rod of mass ``mass`` and length ``length``.
     """
-    gravity_gain, torque_gain = pendulum_gains(length, mass)
-    acc = gravity_gain * g * sin(theta + offset)
-    if actuation is not None:
-        gain, command = actuation
-        acc = acc + torque_gain * gain * command
-    for term, value in passive:
-        acc = acc + torque_gain * value * term.input(theta, v)
-    return acc
+    gain, command = actuation if actuation is not None else (None, None)
+    return acceleration_of(pendulum_coefficients(g, length, mass, gain=gain, passive=passive), theta, v, offset, command)
 
 
 def scaled_gravity(g: float, gravity_mult: float) -> float:
