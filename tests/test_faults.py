@@ -3129,6 +3129,31 @@ def test_the_own_training_file_must_still_be_the_runs(tiny_data: Path, tmp_path:
     assert training_data_path({"data": {"path": str(other)}}) == str(other)  # an old checkpoint keeps no fingerprint
 
 
+def test_the_own_training_file_is_found_beside_a_moved_run_and_given_by_hand(tiny_data: Path, tmp_path: Path) -> None:
+    """A run trained in another folder records its data path relative to that folder: from here the diagnosis found
+    no own file and judged a gain against the nominal model's a (a dm_control model "gain 1.05" on its own system).
+    The file is found by its absolute path, or beside the run folder, or given by hand, each checked by content."""
+    import shutil
+
+    from piga.data.schema import fingerprint
+    from piga.io.runs import training_data_path, with_training_file
+
+    data = {"path": "elsewhere/tiny.h5", "fingerprint": fingerprint(tiny_data)}
+    run = tmp_path / "runs" / "r"
+    run.mkdir(parents=True)
+    assert training_data_path(with_training_file({"data": data}, run)) is None  # nowhere to be found
+    found = with_training_file({"data": {**data, "absolute_path": str(tiny_data)}}, run)
+    assert training_data_path(found) == str(tiny_data)
+    beside = shutil.copy(tiny_data, tmp_path / "runs" / "tiny.h5")
+    assert training_data_path(with_training_file({"data": data}, run)) == str(beside)
+    assert with_training_file({"data": data}, run, given=tiny_data)["data"]["path"] == str(tiny_data)
+    other = _variant(tiny_data, tmp_path / "other.h5", lambda f: f["actions"].__setitem__(..., -f["actions"][()]))
+    with pytest.raises(ValueError, match=r"other\.h5 is not the file .* was trained on \(its content differs"):
+        with_training_file({"data": data}, run, given=other)
+    with pytest.raises(ValueError, match="no such file"):
+        with_training_file({"data": data}, run, given=tmp_path / "gone.h5")
+
+
 @pytest.mark.parametrize("where", ["under-a-file", "/proc/piga-matplotlib"])
 def test_a_folder_matplotlib_cannot_write_gets_a_temporary_one_quietly(where: str, tiny_data: Path,
                                                                       tmp_path: Path) -> None:

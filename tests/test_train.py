@@ -124,6 +124,10 @@ def test_cli_trains_and_reports(small_data: Path, tmp_path: Path, capsys: pytest
     assert set(metrics["parameter_errors"]) == {"g", "a"} and "angle" not in metrics  # no /states, no angle error
     assert len(metrics["frame_ssim_per_step"]) == 15 - 4
     assert metrics["training"]["device"] == str(resolve_device("auto"))
+    from piga.io.checkpoint import RunKind, read_checkpoint
+
+    data = read_checkpoint(out, RunKind.PIGA)["data"]  # found from elsewhere by its absolute path too
+    assert data["path"] == str(small_data) and data["absolute_path"] == str(small_data.absolute())
     # an existing run is not replaced without --overwrite or --resume
     code, _, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), capsys=capsys)
     assert_one_line(code, err, "--overwrite")

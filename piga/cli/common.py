@@ -430,6 +430,12 @@ def run_cli(prog: str, main: Callable[[Sequence[str] | None], int | None], argv:
 def run_script(main: Callable[..., int | None], path: str) -> NoReturn:
     """A benchmark script's entry (``if __name__ == "__main__": run_script(main, __file__)``): :func:`run_cli`
     under the script's file name, so that its bad input is one line too; ``main`` with or without ``argv``."""
+    run_cli(Path(path).name, script_entry(main))
+
+
+def script_entry(main: Callable[..., int | None]) -> Callable[[Sequence[str] | None], int | None]:
+    """A benchmark script's ``main`` as :func:`run_cli` runs it (:func:`run_script`): with ``argv`` where it takes
+    it (else it reads ``sys.argv``), and an interrupt said as a farm's."""
     import inspect
 
     takes_argv = bool(inspect.signature(main).parameters)
@@ -441,7 +447,7 @@ def run_script(main: Callable[..., int | None], path: str) -> NoReturn:
             raise Interrupted("what finished before is kept (each script keeps its jobs' records as they end); run "
                               "the same command to continue") from None
 
-    run_cli(Path(path).name, script)
+    return script
 
 
 def _writable_matplotlib_folder() -> None:

@@ -22,6 +22,10 @@ def build_parser() -> ArgumentParser:
     p.add_argument("--model", required=True, help="run folder of piga-train-model (the identified model)")
     p.add_argument("--data", required=True, help="HDF5 file of the real system (piga-collect --effect, or piga-import)")
     p.add_argument("--out", required=True, help="report folder: report.md, report.json and plots")
+    p.add_argument("--training-data", metavar="FILE",
+                   help="the HDF5 file the model was trained on, where it is not found at the path its run recorded (nor "
+                        "beside the run folder): a gain or gravity error is judged against the same effects' reading of "
+                        "it (checked to be that file by its content)")
     p.add_argument("--env", metavar="EFFECTS",
                    help="the data come from a simulated real system with these effects (e.g. 'damping=0.2,delay=2', or "
                    "'none'): also run MPC on it with the nominal and with the corrected physics, and compare")
@@ -64,7 +68,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     from piga.data.schema import check_frames_have_signal, inspect_dataset
     from piga.diagnostics import DiagnoseConfig, diagnose
     from piga.diagnostics.report import check_report_target, number, write_report
-    from piga.io.runs import load_model
+    from piga.io.runs import load_model, with_training_file
 
     # Everything is checked before any work, and the report folder is only created at the end
     # (atomically): a refusal leaves nothing behind.
@@ -91,6 +95,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     model, ckpt = load_model(args.model)
     if model.config.system != "pendulum":
         raise PigaError(f"{args.model}: piga-diagnose is for pendulum models; this one is a {model.config.system} model")
+    try:
+        ckpt = with_training_file(ckpt, args.model, args.training_data)
+    except ValueError as error:
+        raise PigaError(f"--training-data {error}") from None
     if effects is not None:  # MPC on Gymnasium's pendulum with the model's physics
         from envs.constants import PENDULUM_DT
         from piga.cli.control import check_pendulum_model

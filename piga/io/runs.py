@@ -161,16 +161,58 @@ def training_data_path(checkpoint: dict[str, Any] | None) -> str | None:
 
     The path is as training was given it, relative to the folder it ran in; from another folder it can name another
     file (a diagnosis read its "own training file" reference off a file of other effects). So the file must also
-    have the fingerprint the checkpoint keeps (:func:`piga.data.schema.fingerprint`), where it keeps one."""
+    have the fingerprint the checkpoint keeps (:func:`piga.data.schema.fingerprint`), where it keeps one.
+    :func:`with_training_file` finds it from elsewhere."""
     data = (checkpoint or {}).get("data") or {}
     path = data.get("path")
-    if not (isinstance(path, str) and path and os.path.isfile(path)):
-        return None
-    if "fingerprint" in data:
-        stat = os.stat(path)
-        if _fingerprint(path, stat.st_ino, stat.st_size, stat.st_mtime_ns) != data["fingerprint"]:
-            return None
-    return path
+    return path if isinstance(path, str) and _is_training_file(path, data) else None
+
+
+def _is_training_file(path: str | os.PathLike[str], data: dict[str, Any]) -> bool:
+    """Whether ``path`` is a file with the fingerprint that the checkpoint's ``data`` record keeps (where it keeps one)."""
+    if not (str(path) and os.path.isfile(path)):
+        return False
+    if "fingerprint" not in data:
+        return True
+    stat = os.stat(path)
+    return _fingerprint(str(path), stat.st_ino, stat.st_size, stat.st_mtime_ns) == data["fingerprint"]
+
+
+def recorded_training_path(checkpoint: dict[str, Any] | None) -> str | None:
+    """The training file's path as the checkpoint records it (whether or not it is found from here)."""
+    path = ((checkpoint or {}).get("data") or {}).get("path")
+    return path if isinstance(path, str) and path else None
+
+
+def with_training_file(checkpoint: dict[str, Any], run_dir: str | os.PathLike[str],
+                       given: str | os.PathLike[str] | None = None) -> dict[str, Any]:
+    """``checkpoint`` with its training file's path as found from here (a copy; the file on disk is not changed).
+
+    The path is recorded as training was given it, relative to the folder it ran in. Where it does not lead to the
+    file from here, these are tried, each only if it has the fingerprint the checkpoint keeps: the absolute path
+    that training recorded too, and the file's name beside the run folder or inside it (runs are often moved with
+    their data). ``given`` (a command's ``--training-data``) is taken first.
+
+    Raises:
+        ValueError: ``given`` is not the file the run was trained on (another fingerprint), or not a file.
+    """
+    data = dict(checkpoint.get("data") or {})
+    recorded = recorded_training_path(checkpoint)
+    if given is not None:
+        if not os.path.isfile(given):
+            raise ValueError(f"{given}: no such file (give the data file the model was trained on)")
+        if not _is_training_file(given, data):
+            raise ValueError(f"{given} is not the file {run_dir} was trained on (its content differs from the one "
+                             f"recorded at training{'' if recorded is None else f', {recorded}'})")
+        return {**checkpoint, "data": {**data, "path": str(given)}}
+    if recorded is None or training_data_path(checkpoint) is not None or "fingerprint" not in data:
+        return checkpoint  # found as recorded, or nothing to find it by
+    run = Path(run_dir)
+    name = Path(recorded).name
+    for candidate in (data.get("absolute_path"), run.parent / name, run / name, run.parent / recorded):
+        if isinstance(candidate, (str, Path)) and _is_training_file(candidate, data):
+            return {**checkpoint, "data": {**data, "path": str(candidate)}}
+    return checkpoint
 
 
 @functools.lru_cache(maxsize=8)

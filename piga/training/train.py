@@ -486,7 +486,8 @@ def save_checkpoint(path: Path, model: FrameModel, optimizer: torch.optim.Optimi
         "optimizer": optimizer.state_dict(),
         "state": asdict(state),
         "rng": _rng_state(),
-        "data": {"path": str(data_info.path), "system": data_info.system, "image_shape": list(data_info.image_shape),
+        "data": {"path": str(data_info.path), "absolute_path": str(Path(data_info.path).absolute()),
+                 "system": data_info.system, "image_shape": list(data_info.image_shape),
                  "dt": data_info.dt, "sequences": data_info.n_sequences, "steps": data_info.steps,
                  "fingerprint": data_fingerprint, "env_id": data_info.attrs.get("env_id")},  # (None: not collected)
     }
