@@ -661,3 +661,20 @@ def test_a_data_file_replaced_while_training_is_not_what_the_run_is_scored_on(
                                   capsys=capsys)
     assert code in FINISHED, err
     assert (out / "metrics.json").exists()
+
+
+def test_a_one_step_model_of_a_file_not_from_gymnasium_is_told_of_the_continuous_preset() -> None:
+    """dm_control's pendulum trained with the fast preset exits 0 with g 6% and a 8% low (its model steps once per
+    frame; the system moves between frames): the summary says so, and names the preset that models it."""
+    from types import SimpleNamespace
+
+    from piga.cli.train import one_step_note
+    from piga.training.train import PRESETS
+
+    fast, continuous = (SimpleNamespace(config=PRESETS[p].model) for p in ("fast", "continuous"))
+    note = one_step_note(fast, {"env_id": "piga/DMCPendulum-v0"})
+    assert note is not None and "--preset continuous" in note and "\n" not in note
+    assert one_step_note(fast, {"env_id": "piga/PixelPendulum-v0"}) is None
+    assert one_step_note(continuous, {"env_id": "piga/DMCPendulum-v0"}) is None
+    assert one_step_note(fast, {}) is not None  # an imported recording: no env said
+
