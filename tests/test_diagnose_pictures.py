@@ -68,6 +68,34 @@ def test_a_moving_shadow_is_not_named_sensor_noise(model, tmp_path: Path, change
         assert len(persist) == 1 and "not sensor noise" in persist[0] and f"{found.noise:.2f} gray levels" in persist[0]
 
 
+@pytest.mark.parametrize("zoom", [1.0, 0.8, 1.2])
+def test_a_zoomed_picture_is_said_and_not_named_a_shift(model, tmp_path: Path, zoom: float) -> None:
+    """dm_control filmed from 1.2 times farther (the pendulum drawn smaller, the physics nominal) was named "shift
+    -0.725 px down" at a 21% drop: the pendulum's drawn size is measured against the decoder's renders, and where it
+    differs no blur or shift is accepted, and the report says so."""
+    import cv2
+
+    path = _recording(tmp_path / "rec.h5", model, "none")
+    with h5py.File(path, "a") as f:
+        c = SIZE / 2 - 0.5  # the hinge, in the pixel centres' coordinates
+        warp = np.array([[zoom, 0.0, (1 - zoom) * c], [0.0, zoom, (1 - zoom) * c]])
+        frames = f["frames"][...].reshape(-1, SIZE, SIZE)
+        f["frames"][...] = np.stack([cv2.warpAffine(x, warp, (SIZE, SIZE), flags=cv2.INTER_LINEAR,
+                                                    borderMode=cv2.BORDER_REPLICATE) for x in frames]).reshape(N, T, SIZE, SIZE)
+    found = V.camera_stage(model, str(path), np.zeros((N, T)), np.arange(N) < 16, None)
+    assert found.scale == pytest.approx(zoom, abs=0.06)
+    config = DiagnoseConfig()
+    _, notes = summarise_vision(SimpleNamespace(rec_mse=np.ones(3)), 1.0, found, None, [], config)
+    said = [n for n in notes if "no zoom candidate" in n]
+    if zoom == 1.0:
+        assert not found.rescaled(config.camera) and not said
+    else:
+        assert found.rescaled(config.camera) and len(said) == 1 and f"x{found.scale:.2f} the size" in said[0]
+        assert not any(r["accepted"] for r in found.table if "shift" in r["candidate"] or "blur" in r["candidate"])
+        assert found.camera.dx == found.camera.dy == found.camera.blur == 0
+        assert not {"shift", "blur"} & {e["effect"] for e in found.effects}
+
+
 def test_repeated_frames_do_not_hide_sensor_noise(model, tmp_path: Path) -> None:
     """A repeated frame (a dropped frame) repeats its noise: the repeats are left out of the correlation."""
     path = _recording(tmp_path / "rec.h5", model, "noise")

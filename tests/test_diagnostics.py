@@ -77,6 +77,30 @@ def test_no_effect_is_no_gap() -> None:
     assert d.verdict == "no significant gap"
 
 
+def test_no_gap_through_a_large_vision_gap_says_the_vision_may_hide_one() -> None:
+    """dm_control with shadows on re-rendered 39.5x worse than the training frames and read "no significant gap" where
+    the same physics without shadows reads a damping: a verdict of no gap says that its vision may hide one."""
+    obs = planted({}, n=60, t=20)
+    clean = analyse(replace(obs, rec_mse=np.full(len(obs.theta), 1.05e-3)), NOMINAL, FAST, rec_training=1e-3)
+    assert clean.verdict == "no significant gap"
+    d = analyse(replace(obs, rec_mse=np.full(len(obs.theta), 0.04)), NOMINAL, FAST, rec_training=1e-3)
+    assert d.verdict_class == "none", d.verdict
+    assert d.verdict.startswith("no significant gap seen through a vision gap of 40.0x")
+    assert "may hide a gap in the physics" in d.verdict
+
+
+def test_an_actuation_reversed_in_the_matched_angles_alone_is_named_a_flip() -> None:
+    """An encoder that misreads a camera on the other side of the hinge showed no response to the actions, and the
+    matched angles' reading of the nominal sign shrank a to 3e-08 ("the actions barely move the system"): the reading
+    on the matched angles tries the other sign too."""
+    encoder = planted({"damping": 0.2, "gain": 0.0}, n=40, t=16)  # the actions show nowhere in the encoder's angles
+    matched = planted({"damping": 0.2, "gain": -1.0}, n=40, t=16).theta  # the same motion, the torque reversed
+    d = analyse(encoder, NOMINAL, FAST, matched=matched)
+    assert d.verdict_class == "damping+flip", d.verdict
+    assert d.corrected["a"] == pytest.approx(-1.0, abs=0.05)
+    assert any("the angles matched to the decoder's renders do" in note for note in d.notes)
+
+
 def test_planted_damping_is_found_with_its_coefficient_and_closes_the_gap() -> None:
     d = analyse(planted({"damping": 0.2}), NOMINAL, replace(FAST, bootstrap=10))
     assert d.verdict_class == "damping", d.verdict

@@ -372,6 +372,13 @@ class CameraConfig:
     their spread is named sensor noise: above it, more than half of their changes persist from frame to frame, a
     change of the picture, not noise (measured: |r| <= 0.01 for planted noise of 4 to 20 gray levels on the pixel
     and dm_control pendulums; 0.86 to 0.89 for dm_control with shadows on, whose spread read "noise 2.5")."""
+    max_scale_change: float = 0.1
+    """Largest relative difference between the pendulum's drawn size in the recording and in the decoder's renders
+    (:func:`drawn_scale`) at which a blur or a shift may be accepted: beyond it the picture is zoomed (a camera nearer
+    or farther) or the pendulum has another length, which no camera candidate describes, and a shift fitted to renders
+    of another size only takes up the difference (measured: dm_control at camera distance 1.2 read x0.84 and "shift
+    -0.725 px down" at a 21% drop; planted blur, shifts, noise and a missing torque arrow on the pixel pendulum
+    x0.99 to x1.04 through their fitted blur, a dm_control pendulum of length 0.4 x0.82)."""
     repeats: RepeatConfig = field(default_factory=RepeatConfig)
     """When repeated frames are named dropped frames (:mod:`piga.diagnostics.repeats`)."""
 
@@ -382,6 +389,7 @@ class CameraConfig:
         check_ranges(self, {"fit_frames": (1, 10_000_000), "held_frames": (1, 10_000_000), "min_drop": (0, 1),
                             "min_blur": (0, 100), "min_shift": (0, 100), "min_noise": (0, 255),
                             "min_exposure": (0, 255), "min_core_share": (0, 1), "max_missing": (0, 1),
+                            "max_scale_change": (0, 10),
                             "max_noise_correlation": (-1, 1)})
 
 
@@ -413,6 +421,13 @@ class CameraFindings:
     """Correlation of the still pixels between successive frames (:func:`noise_correlation`; NaN: not measured)."""
     missing: float = 0.0
     """Fraction of the held-out frames in which the pendulum is not in view (:func:`empty_frames`)."""
+    scale: float | None = None
+    """The pendulum's drawn size in the recording over that in the decoder's renders (:func:`drawn_scale`; None: not
+    measured). Beyond ``CameraConfig.max_scale_change`` from 1, no blur or shift is accepted."""
+
+    def rescaled(self, config: CameraConfig) -> bool:
+        """Whether the pendulum is drawn at another size than the model's renders (:func:`drawn_scale`)."""
+        return self.scale is not None and abs(self.scale - 1) > config.max_scale_change
 
     @property
     def rematched(self) -> bool:
@@ -530,6 +545,11 @@ def camera_stage(model: PhysicsModel, path: str, theta: np.ndarray, fit: np.ndar
     singles.append(row(label + "shift", fit_camera(model, x_fit, blur=False, renders=renders, base=base), e_base,
                        {"shift"}))
     bar.update()
+    # seen through the fitted blur, which widens the pendulum's lit reach (a 3.9 px blur read x0.5 against sharp renders)
+    scale = drawn_scale(frames_2d, renders, Camera(**singles[0]["camera"]))
+    if scale is not None and abs(scale - 1) > config.max_scale_change:  # fitted against renders of another size
+        for r in singles:
+            r["accepted"], r["rescaled"] = False, True
     table += singles
     best = max(singles if shown else [*singles, lit], key=lambda r: r["drop"])
     camera, e_cam = base, e_base
@@ -594,7 +614,45 @@ def camera_stage(model: PhysicsModel, path: str, theta: np.ndarray, fit: np.ndar
     bar.update()
     bar.close()
     return CameraFindings(camera, noise, drop_rate, drops, leading, table, e0, e_cam, effects, theta_c, correlation,
-                          missing)
+                          missing, scale)
+
+
+def pendulum_reach(frames: np.ndarray, background: np.ndarray, hinge: np.ndarray, sign: float) -> float | None:
+    """The median over frames (M, H, W) in [0, 1] of the farthest distance (px) from ``hinge`` (2,) (row, column) of a
+    pixel that the pendulum lights: one that differs from ``background`` (H, W) by more than half the pendulum's
+    contrast, of the pendulum's ``sign`` (+1: brighter than the background; a shadow of the other sign is left out).
+    None where under half the frames show the pendulum."""
+    d = frames - background  # (M, H, W)
+    contrast = float(np.percentile(sign * d, 99.9))
+    if not contrast > 0:
+        return None
+    lit = sign * d > contrast / 2  # (M, H, W)
+    rows, cols = np.mgrid[: frames.shape[1], : frames.shape[2]]
+    r = np.hypot(rows - hinge[0], cols - hinge[1])  # (H, W)
+    shown = lit.any(axis=(1, 2))
+    if shown.sum() < 0.5 * len(frames):
+        return None
+    return float(np.median(np.where(lit[shown], r, 0.0).max(axis=(1, 2))))
+
+
+def drawn_scale(frames: np.ndarray, renders: tuple[Tensor, Tensor], camera: Camera = Camera()) -> float | None:
+    """The pendulum's size in uint8 frames (M, H, W) over its size in the decoder's renders over the whole circle
+    (:func:`decoder_renders`) seen through ``camera``: the ratio of their :func:`pendulum_reach` from the renders' hinge
+    (the pixels they light most often; the frames' background is their per-pixel median, the renders'
+    :func:`empty_scene`). A zoom or another pendulum length scales it; a shift of a pixel or sensor noise move it by a
+    few percent, a blur too where ``camera`` has it. None where it cannot be measured (a pendulum that shows in under
+    half the frames, or a still one, which the median takes for the background)."""
+    angles, seen = renders[0], camera.apply(renders[1])
+    drawn = seen[:, 0].numpy()  # (K, H, W)
+    empty = empty_scene((angles, seen))[0].numpy()
+    d = drawn - empty
+    sign = 1.0 if d.sum() >= 0 else -1.0  # the pendulum brighter or darker than the scene
+    often = (sign * d > np.percentile(sign * d, 99.9) / 2).mean(0)  # (H, W) how often each pixel is lit
+    hinge = np.argwhere(often >= 0.9 * often.max()).mean(0)
+    own = pendulum_reach(drawn, empty, hinge, sign)
+    x = frames.astype(np.float32) / 255.0
+    theirs = pendulum_reach(x, np.median(x, axis=0), hinge, sign)
+    return None if own is None or theirs is None or own <= 0 else theirs / own
 
 
 @torch.no_grad()
