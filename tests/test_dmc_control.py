@@ -115,6 +115,19 @@ def test_a_piga_model_is_run_only_through_the_view_it_was_identified_on(tmp_path
         _check_piga_view("run", {"data": {"path": str(far)}}, DMCPendulumConfig())
 
 
+@pytest.mark.parametrize("env", [(), ("--env", "piga/DMCPendulum-v0")])
+def test_a_missing_model_folder_is_said_alike_on_both_envs(tmp_path, capsys, env):
+    """With the DMC env, a missing --model read "nosuchdir/checkpoint.pt: no checkpoint (is nosuchdir a
+    piga-train-model run folder?)", where the pixel env says that the folder does not exist."""
+    from piga.cli.control import main
+
+    missing = str(tmp_path / "nosuchdir")
+    assert_one_line_error(completed_in_process("piga-control", main, *env, "--model", missing, "--episodes", "1",
+                                               "--quiet", capsys=capsys),
+                          f"--model {missing} does not exist (give the folder that piga-train-model or piga-baseline "
+                          "wrote its checkpoint.pt in)")
+
+
 @needs_dmc
 def test_a_piga_model_is_run_on_frames_of_its_own_size(tmp_path, monkeypatch, capsys):
     """A DMC model identified on 32 px frames was given 64 px ones ("encode takes frames of (C, H, W) = (1, 32, 32), the

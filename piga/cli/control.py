@@ -156,15 +156,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                       if "gravity_mult" in given else ("--gravity-mult 1 (the default)", "give --gravity-mult"))
         raise PigaError(f"--not-told keeps the piga agent's gravity at x1 while the env's changes; at {at} nothing "
                         f"changes: {change}, or drop --not-told")
-    if args.model and not Path(args.model).is_dir() and held_by(args.model) is None:  # (before --workers is judged by
-        from piga.io.atomic import link_loop, loop_message
-        from piga.io.checkpoint import CHECKPOINT  # the run's kind; a run just started has no folder yet: said below)
-
-        if (loop := link_loop(args.model)) is not None:
-            raise PigaError(loop_message(args.model, loop, "--model"))
-        what = "is a file, not a run folder" if Path(args.model).exists() else "does not exist"
-        raise PigaError(f"--model {args.model} {what} (give the folder that piga-train-model or piga-baseline wrote "
-                        f"its {CHECKPOINT} in)")
+    if args.model:  # (before --workers is judged by the run's kind)
+        _check_model_folder(args.model)
     if args.ray or "workers" in given:  # --workers 2, the default, too
         raise PigaError(f"{'--ray' if args.ray else '--workers'} runs the jobs of --sweep and a baseline run's episodes; a "
                         "piga or oracle run without --sweep plays its episodes in this process")
@@ -849,6 +842,21 @@ def _training_env_id(checkpoint: dict) -> str | None:
     return env_id if isinstance(env_id, str) and env_id else None
 
 
+def _check_model_folder(model: str) -> None:
+    """Refuses a ``--model`` that is no folder (missing, a file, a link that loops) in one line, on either env; a run
+    just started has no folder yet, and is said by the checkpoint's loader."""
+    if Path(model).is_dir() or held_by(model) is not None:
+        return
+    from piga.io.atomic import link_loop, loop_message
+    from piga.io.checkpoint import CHECKPOINT
+
+    if (loop := link_loop(model)) is not None:
+        raise PigaError(loop_message(model, loop, "--model"))
+    what = "is a file, not a run folder" if Path(model).exists() else "does not exist"
+    raise PigaError(f"--model {model} {what} (give the folder that piga-train-model or piga-baseline wrote its "
+                    f"{CHECKPOINT} in)")
+
+
 def _dmc(args: argparse.Namespace, argv: Sequence[str] | None, given: set[str]) -> int:
     """``--env piga/DMCPendulum-v0``: the piga agent and/or the oracle, scored in DMC's units."""
     from piga.cli.collect import dmc_config, parse_env_option
@@ -858,6 +866,8 @@ def _dmc(args: argparse.Namespace, argv: Sequence[str] | None, given: set[str]) 
                         + ", ".join(f"--{k.replace('_', '-')}" for k in DMC_OPTIONS))
     if not args.model and not args.oracle:  # as on the pixel env: nothing is run that was not asked for
         raise PigaError("give --model RUN_DIR (or --oracle, or both)")
+    if args.model:  # as on the pixel env, before the env is made
+        _check_model_folder(args.model)
     import argparse as _argparse
 
     try:
