@@ -248,8 +248,11 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
         model_config = saved_model.config
         record = _record_or_rebuilt(run_dir, stored, why)
         record_resume(record, command)
+        preset = started_preset
+        recipe = preset_for(preset, info)  # the length it plans, which a run started shorter is still judged by
     else:
-        recipe = preset_for(args.preset, info)
+        preset = args.preset
+        recipe = preset_for(preset, info)
         reading = {name: getattr(args, name) for name in ("data_loading", "stream_cache_mb") if getattr(args, name) is not None}
         train_config = replace(recipe.train, seed=args.seed, threads=args.threads, device=args.device,
                                seed_retries=args.seed_retries, **overrides, **reading)  # explicit options win
@@ -293,13 +296,15 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
                         "take the place of a step budget; give --epochs instead")
     plan = check_trainable(info, model_config, train_config)
     # a run planned shorter than its recipe (--epochs, --budget-steps): an object that its seeds did not find is first
-    # the length's (a spring file trained for 20 steps was blamed on the seed alone)
+    # the length's (a spring file trained for 20 steps was blamed on the seed alone); a resumed run too, as long as it
+    # stays shorter (its advice turned to "another --seed" once resumed for a few steps more)
     recipe_steps = None
-    if not args.resume and {"epochs", "budget_steps"} & set(overrides) and report.checks_objects(model_config):
+    if (args.resume or {"epochs", "budget_steps"} & set(overrides)) and report.checks_objects(model_config):
         full = check_trainable(info, model_config, replace(train_config, epochs=recipe.train.epochs,
                                                             budget_steps=recipe.train.budget_steps))
         recipe_steps = full.total_steps if full.total_steps > plan.total_steps else None
-        if recipe_steps is not None and "seed_retries" not in options_given:  # another seed cannot make up the length
+        # another seed cannot make up the length (a resumed run keeps the retries it was started with)
+        if recipe_steps is not None and not args.resume and "seed_retries" not in options_given:
             train_config = replace(train_config, seed_retries=0)
     planned = ckpt.get("plan") or {} if args.resume else {}  # (a checkpoint from before plans were saved has none)
     if plan.epochs < planned.get("epochs", 0):  # the baselines' --resume refuses the same
@@ -477,7 +482,7 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
             if recipe_steps is not None and (lost or empty):  # the cause, with the length's fix for the seed's
                 steps = f"{state.step:,} step" + ("" if state.step == 1 else "s")
                 reason = (f"{reason.split('; ')[0]}, in {'runs' if tried else 'a run'} of {steps} "
-                          f"where the {args.preset} preset plans {recipe_steps:,} for this file: train it that long "
+                          f"where the {preset} preset plans {recipe_steps:,} for this file: train it that long "
                           "(leave out --epochs and --budget-steps, with --overwrite or another --out) before another "
                           "--seed")
             raise PigaError(f"the run did not {what}{seeds}: {reason}{whose}")
