@@ -740,6 +740,22 @@ def test_planet_resume_refuses_another_data_file(baseline_runs: dict[str, Path],
             "was trained on", "two_actions.h5", "give that file")
 
 
+def test_planet_resume_names_its_file_from_the_current_folder(baseline_runs: dict[str, Path], files: dict[str, Path],
+                                                             tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                             capsys: pytest.CaptureFixture[str]) -> None:
+    """config.json records the data file as its command gave it and the folder that command ran in: the refusal
+    names the file from the current folder, not by a path relative to another."""
+    assert json.loads((baseline_runs["planet"] / "config.json").read_text())["data_folder"]
+
+    def moved(record: dict[str, Any]) -> None:
+        record.update({"data": "../moved.h5", "data_folder": str(tmp_path / "a" / "b")})
+
+    run = _run_copy(baseline_runs["planet"], tmp_path / "run", _edit_record(moved))
+    monkeypatch.chdir(tmp_path)
+    refused("piga-baseline", ["planet", str(files["two_actions"]), "--out", str(run), "--resume", "--steps", "4"], capsys,
+            f"was trained on {Path('a') / 'moved.h5'}, not ", "give that file")
+
+
 def test_planet_resume_refuses_its_file_written_over_in_place(baseline_runs: dict[str, Path], tiny_data: Path,
                                                               tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """The file's contents were compared only when its path differed: a file collected again under the same name
@@ -1772,6 +1788,54 @@ def test_train_resume_tells_a_moved_file_from_another_of_the_same_shape(tiny_pig
     code, _, err = run_in_process("piga-train-model", cli.main, str(moved), "--out", str(run), "--resume", "--epochs", "2",
                                   "--quiet", capsys=capsys)
     assert code in (0, NOT_CONVERGED), err  # resumed and trained: a tiny run is too short to be judged converged
+
+
+def test_train_resume_names_the_trained_file_from_the_current_folder(tiny_piga_run: Path, tiny_data: Path,
+                                                                    tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    """A run resumed in elsewhere/deep on ../moved.h5 was refused another file from the folder above with "continues on
+    the file the run trained on (../moved.h5)": a path relative to the folder it trained in, which from here is
+    another (missing) file. The checkpoint records that folder, and the line names the file from here."""
+    import torch
+
+    from piga.cli import train as cli
+    from piga.cli.common import NOT_CONVERGED
+    from tests.helpers import run_in_process
+
+    deep = tmp_path / "elsewhere" / "deep"
+    run = _run_copy(tiny_piga_run, deep / "copy1")
+    shutil.copy(tiny_data, tmp_path / "elsewhere" / "moved.h5")
+    monkeypatch.chdir(deep)
+    code, _, err = run_in_process("piga-train-model", cli.main, "../moved.h5", "--out", "copy1", "--resume", "--epochs",
+                                  "2", "--quiet", capsys=capsys)
+    assert code in (0, NOT_CONVERGED), err
+    data = torch.load(run / "checkpoint.pt", weights_only=False)["data"]
+    assert data["path"] == "../moved.h5" and data["folder"] == str(deep)
+    monkeypatch.chdir(tmp_path)
+    other = _variant(tiny_data, tmp_path / "other.h5", lambda f: f["frames"].__setitem__(0, 255 - f["frames"][0]))
+    refused("piga-train-model", [str(other), "--out", "elsewhere/deep/copy1", "--resume", "--epochs", "3", "--quiet"],
+            capsys, "continues on the file the run trained on (elsewhere/moved.h5), not ")
+    monkeypatch.chdir(tmp_path / "elsewhere")  # below the run's folder: the file's path from here stays relative
+    refused("piga-train-model", [str(other), "--out", "deep/copy1", "--resume", "--epochs", "3", "--quiet"],
+            capsys, "continues on the file the run trained on (moved.h5), not ")
+    monkeypatch.chdir(deep / "copy1")  # beside it: absolute
+    refused("piga-train-model", [str(other), "--out", ".", "--resume", "--epochs", "3", "--quiet"],
+            capsys, f"continues on the file the run trained on ({tmp_path / 'elsewhere' / 'moved.h5'}), not ")
+
+
+def test_a_recorded_path_is_read_from_the_folder_it_was_recorded_in(tmp_path: Path,
+                                                                    monkeypatch: pytest.MonkeyPatch) -> None:
+    """Paths in a run's records are as its command was given them: read against the folder that command ran in."""
+    from piga.io.checkpoint import recorded_data_path, recorded_path
+
+    monkeypatch.chdir(tmp_path)
+    assert recorded_path("../moved.h5", str(tmp_path / "a" / "b")) == str(Path("a") / "moved.h5")
+    assert recorded_path("../moved.h5", str(tmp_path)) == "../moved.h5"  # recorded here: as given
+    assert recorded_path("x.h5", str(tmp_path / "a" / "b")) == str(Path("a") / "b" / "x.h5")
+    assert recorded_path("x.h5", "/elsewhere") == "/elsewhere/x.h5"
+    assert recorded_path("/data/x.h5", str(tmp_path / "a")) == "/data/x.h5"
+    assert recorded_path("x.h5", None) == "x.h5"  # an older record: as it is
+    assert recorded_data_path({"path": "x.h5"}) == "x.h5" and recorded_data_path({}) is None
 
 
 def test_train_resume_says_the_file_has_changed(tiny_piga_run: Path, tiny_data: Path, tmp_path: Path,

@@ -24,7 +24,7 @@ from piga.cli.common import (ArgumentParser, PigaError, add_ray_option, command_
                              stem_path, typed_text, warn_if_still_training, warn_if_unconverged, work_finished)
 from piga.control.episodes import EpisodeConfig, parse_range, run_episodes
 from piga.evaluation.episodes import summary_markdown
-from piga.io.checkpoint import RunKind
+from piga.io.checkpoint import RunKind, recorded_data_path
 from piga.io.lock import held_by, lock_run_folder
 
 if TYPE_CHECKING:
@@ -632,7 +632,7 @@ def _warn_if_other_frames(run_dir: str, checkpoint: dict) -> None:
     data = checkpoint.get("data") or {}
     if "env_id" in data and data["env_id"] != PIXEL_PENDULUM:  # (older checkpoints do not say)
         source = f"from {data['env_id']}" if data["env_id"] else "not collected by piga-collect (an imported recording?)"
-        print(f"{PROG}: warning: the model learned from {data.get('path')}, {source}; it controls {PIXEL_PENDULUM} here "
+        print(f"{PROG}: warning: the model learned from {recorded_data_path(data)}, {source}; it controls {PIXEL_PENDULUM} here "
               "from that env's frames, which its encoder may misread: the success below measures that too",
               file=sys.stderr)
 
@@ -648,7 +648,7 @@ def check_planet_frames(run_dir: str) -> None:
     rate = f", {dt:g} s apart" if isinstance(dt, (int, float)) else ""
     if env_id is not None and env_id != PIXEL_PENDULUM:
         raise PigaError(f"{run_dir}: the PlaNet-style model was trained on frames of {env_id}{rate} (from "
-                        f"{data.get('path')}), not of Gymnasium's pixel pendulum ({PIXEL_PENDULUM}), which it would "
+                        f"{recorded_data_path(data)}), not of Gymnasium's pixel pendulum ({PIXEL_PENDULUM}), which it would "
                         "control here; train it on a file of that env")
     if isinstance(dt, (int, float)):
         _check_frame_rate(run_dir, dt)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import math
+import os
 import shutil
 import sys
 from collections.abc import Iterator, Sequence
@@ -19,7 +20,8 @@ from piga.cli.common import (NOT_CONVERGED, ArgumentParser, Interrupted, PigaErr
                              record_resume, recorded_options, remove_empty_folders, remove_outputs, resume_option, run_cli,
                              seed_int, started_record, thread_count, unit_fraction)
 from piga.io.atomic import OutputFolder, check_folder_target
-from piga.io.checkpoint import CHECKPOINT, RUN_OUTPUTS, RunKind, check_run_files, read_run_record, require_piga_run
+from piga.io.checkpoint import (CHECKPOINT, RUN_OUTPUTS, RunKind, check_run_files, read_run_record, recorded_data_path,
+                                require_piga_run)
 from piga.io.lock import lock_run_folder
 
 #: The recipe options a user may give; each is a TrainConfig field of the same name.
@@ -203,19 +205,20 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
                 raise PigaError(f"--resume continues the run's own {flag[2:]} ({own}); drop {flag} {given}, or train "
                                 "a new run in another --out")
         data = ckpt["data"]
+        trained_on = recorded_data_path(data)  # the path from here (it was recorded relative to its command's folder)
         if tuple(data["image_shape"]) != info.image_shape or data["system"] != info.system:
             raise PigaError(f"--resume: {args.data} ({info.system}, {info.image_shape}) does not match the run's data "
                             f"({data['system']}, {tuple(data['image_shape'])})")
         if "fingerprint" in data:  # a moved or copied file keeps its contents; another file is another run
             same_data = data["fingerprint"] == data_at_start
         else:  # a checkpoint from before fingerprints: the same path, or a file of the same shape
-            same_data = Path(data["path"]).resolve() == Path(args.data).resolve() or (
+            same_data = Path(trained_on).resolve() == Path(args.data).resolve() or (
                 data.get("sequences") == info.n_sequences and data.get("steps") == info.steps and data["dt"] == info.dt)
-        if not same_data and Path(data["path"]).resolve() == Path(args.data).resolve():
+        if not same_data and Path(trained_on).resolve() == Path(args.data).resolve():
             raise PigaError(f"--resume: {args.data} has changed since the run trained on it (its actions, split or first "
                             "frames differ); train a new run (without --resume) to learn from the changed file")
         if not same_data:
-            raise PigaError(f"--resume continues on the file the run trained on ({data['path']}), not {args.data}; "
+            raise PigaError(f"--resume continues on the file the run trained on ({trained_on}), not {args.data}; "
                             "train a new run (without --resume) to learn from another file")
         if "dt" in data and not math.isclose(float(data["dt"]), info.dt, rel_tol=1e-9):  # an attribute, outside the fingerprint
             raise PigaError(f"--resume: {args.data} now says its frames are {info.dt:g} s apart; the run trained on them "
@@ -329,7 +332,7 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
     fresh = build_model(model_config)  # its size and start values, before training builds its own
     check_run_disk(run_dir, (run_dir / CHECKPOINT).stat().st_size if args.resume else adam_checkpoint_bytes(fresh),
                    "the training run")
-    record.update({"data": str(args.data), "train": asdict(train_config), "plan": asdict(plan),
+    record.update({"data": str(args.data), "data_folder": os.getcwd(), "train": asdict(train_config), "plan": asdict(plan),
                    "model": model_config.to_dict()})
     if not info.split_counts["test"]:
         print(f"{prog}: warning: {args.data} has no test sequences; metrics.json and the figures will be measured on "

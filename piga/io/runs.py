@@ -23,7 +23,7 @@ from typing import Any, Literal, overload
 
 import torch
 
-from piga.io.checkpoint import CHECKPOINT, RunKind, read_checkpoint, unreadable
+from piga.io.checkpoint import CHECKPOINT, RunKind, read_checkpoint, recorded_data_path, unreadable
 from piga.io.choices import check_choices
 from piga.world.model import FrameModel, ModelConfig, PhysicsModel
 from piga.world.variants import NO_PHYSICS, build_model
@@ -159,12 +159,14 @@ def training_steps(checkpoint: dict[str, Any] | None) -> int | None:
 def training_data_path(checkpoint: dict[str, Any] | None) -> str | None:
     """The training file that the checkpoint names, if it is still there and still the run's own (else None).
 
-    The path is as training was given it, relative to the folder it ran in; from another folder it can name another
-    file (a diagnosis read its "own training file" reference off a file of other effects). So the file must also
-    have the fingerprint the checkpoint keeps (:func:`piga.data.schema.fingerprint`), where it keeps one."""
+    The path is as training was given it, relative to the folder it ran in, which the checkpoint records beside it
+    (:func:`~piga.io.checkpoint.recorded_data_path`); an older checkpoint does not, and from another folder its path
+    can name another file (a diagnosis read its "own training file" reference off a file of other effects). So the
+    file must also have the fingerprint the checkpoint keeps (:func:`piga.data.schema.fingerprint`), where it keeps
+    one."""
     data = (checkpoint or {}).get("data") or {}
-    path = data.get("path")
-    if not (isinstance(path, str) and path and os.path.isfile(path)):
+    path = recorded_data_path(data)
+    if not (path and os.path.isfile(path)):
         return None
     if "fingerprint" in data:
         stat = os.stat(path)
