@@ -1938,6 +1938,27 @@ def test_control_sweep_refuses_a_gravity_multiplier(tiny_piga_run: Path, capsys:
             "drop --gravity-mult")
 
 
+@pytest.mark.parametrize("extra, needles", [
+    (["--goal-image", "goal.png"], ["--sweep gives each job its goal as an angle: give --goal-angle DEG, not --goal-image"]),
+    (["--video", "v.mp4"], ["--sweep plays its jobs in worker processes and films none of them: drop --video"]),
+])
+def test_control_sweep_refuses_a_goal_image_and_a_video_for_what_they_are(
+        extra: list[str], needles: list[str], tiny_piga_run: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """It said "--sweep runs upright swing-ups", while a sweep takes --goal-angle and runs every job to that goal."""
+    monkeypatch.chdir(tmp_path)
+    line = refused("piga-control", ["--model", str(tiny_piga_run), "--sweep", "1:1.2:0.2", "--episodes", "1", "--steps",
+                                    "20", "--workers", "1", "--quiet", *extra], capsys, *needles)
+    assert "upright" not in line
+
+
+def test_a_baseline_sweep_refuses_a_video_for_what_it_is(baseline_runs: dict[str, Path],
+                                                         capsys: pytest.CaptureFixture[str]) -> None:
+    refused("piga-control", ["--model", str(baseline_runs["planet"]), "--sweep", "1:1.2:0.2", "--episodes", "1", "--steps",
+                             "20", "--workers", "1", "--quiet", "--video", "v.mp4"], capsys,
+            "--sweep plays its jobs in worker processes and films none of them")
+
+
 @pytest.mark.parametrize("prog", ["piga-control", "piga-train-model"])
 def test_a_checkpoint_with_nan_weights_is_named(prog: str, tiny_piga_run: Path, tiny_data: Path, tmp_path: Path,
                                                 capsys: pytest.CaptureFixture[str]) -> None:

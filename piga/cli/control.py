@@ -249,6 +249,18 @@ def _say_written(video: str | None, outputs: list[Path]) -> None:
         print(f"wrote {outputs[0]} and {outputs[1]}")
 
 
+def _refuse_sweep_goal_image_and_video(args: argparse.Namespace) -> None:
+    """--sweep takes its goal as an angle (--goal-angle, upright by default) and films nothing: a goal image is read
+    and judged by a single run, and a video shows one run's episode 0, where a sweep plays many jobs in worker
+    processes."""
+    if args.goal_image:
+        raise PigaError("--sweep gives each job its goal as an angle: give --goal-angle DEG, not --goal-image (a run "
+                        "without --sweep reads the goal from an image)")
+    if args.video:
+        raise PigaError("--sweep plays its jobs in worker processes and films none of them: drop --video, or film one "
+                        "multiplier in a run without --sweep (--gravity-mult M --video)")
+
+
 def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: Sequence[str] | None,
            kind: RunKind = RunKind.PIGA) -> int:
     """--sweep: the run's agent (``kind``) and the oracle at each multiplier; piga and the oracle are
@@ -258,8 +270,7 @@ def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: 
 
     if args.oracle or not args.model:
         raise PigaError("--sweep compares the piga agent with the oracle: give --model RUN_DIR (without --oracle)")
-    if args.goal_image or args.video:
-        raise PigaError("--sweep runs upright swing-ups; it does not take --goal-image or --video")
+    _refuse_sweep_goal_image_and_video(args)
     if args.gravity_mult != EpisodeConfig.gravity_mult:
         raise PigaError("--sweep sets the gravity multiplier of each job; drop --gravity-mult")
     try:
@@ -509,7 +520,7 @@ def _baseline(args: argparse.Namespace, kind: RunKind, mpc: MPCConfig, outputs: 
                         "trained)")
     if args.video:
         if args.sweep:
-            raise PigaError("--sweep runs upright swing-ups; it does not take --goal-image or --video")
+            _refuse_sweep_goal_image_and_video(args)
         check_file_name(args.video, "--video", "episode.mp4")
         if Path(args.video).suffix.lower() not in (".mp4", ".gif"):
             raise PigaError(f"--video must end in .mp4 or .gif, got {args.video}")
