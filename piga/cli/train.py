@@ -480,7 +480,8 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
         whose = "" if prog == PROG else f" (options of {PROG} {args.data} --out {run_dir})"
         if convergence["outcome"] == "untrained":
             seeds = f" (seeds {', '.join(map(str, tried))} and {train_config.seed} tried)" if tried else ""
-            what = "identify its parameters" if model.has_physics else "learn to predict"
+            # (bouncing balls have physics but no parameter: it was refused as not identifying them)
+            what = "identify its parameters" if model.learned_parameter_names() else "learn to predict"
             reason = convergence["reason"]
             if recipe_steps is not None and (lost or empty):  # the cause, with the length's fix for the seed's
                 steps = f"{state.step:,} step" + ("" if state.step == 1 else "s")
