@@ -1545,6 +1545,7 @@ def test_control_warns_of_a_model_that_learned_other_frames(env_id: str | None, 
     run = _run_copy(tiny_piga_run, tmp_path / "run")
     ckpt = torch.load(run / "checkpoint.pt", weights_only=False)
     assert ckpt["data"]["env_id"] == "piga/PixelPendulum-v0"  # what training records
+    assert ckpt["data"]["env_config"]["image_size"] == 64  # the file's env settings too, kept where the file is gone
     ckpt["data"]["env_id"] = env_id
     torch.save(ckpt, run / "checkpoint.pt")
     _, _, err = run_in_process("piga-control", control.main, "--model", str(run), "--episodes", "1", "--steps", "20",

@@ -806,6 +806,51 @@ def _check_piga_view(run_dir: str, checkpoint: dict, env: DMCPendulumConfig) -> 
                                                         else f"give --env-option camera_distance={distance:g}"))
 
 
+#: The DMC pendulum's config fields that change its physics: an env that differs from the model's training file in them
+#: is a fair test of a model identified on other physics (sim-to-real), so it runs, with a warning.
+DMC_PHYSICS_FIELDS = ("mass", "length", "damping", "flip")
+
+
+def physics_difference(trained: dict[str, Any], env: DMCPendulumConfig) -> tuple[str, str] | None:
+    """Where the DMC pendulum ``env`` differs in its physics (:data:`DMC_PHYSICS_FIELDS`) from ``trained``, the
+    ``env_config`` of the model's training file (a field it lacks, from an older file, at its default): the env's values
+    and the trained ones, e.g. ("flip=motor", "flip=none"); None where they agree."""
+    from envs.dmc import DMCPendulumConfig
+
+    pairs = []
+    for name in DMC_PHYSICS_FIELDS:
+        now, then = getattr(env, name), trained.get(name, getattr(DMCPendulumConfig, name))
+        same = (now == then if isinstance(now, str) or isinstance(then, str)
+                else math.isclose(float(now), float(then), rel_tol=1e-9, abs_tol=0.0))
+        if not same:
+            pairs.append((f"{name}={now if isinstance(now, str) else number_text(now)}",
+                          f"{name}={then if isinstance(then, str) else number_text(then)}"))
+    if not pairs:
+        return None
+    return ", ".join(now for now, _ in pairs), ", ".join(then for _, then in pairs)
+
+
+def _warn_if_other_physics(checkpoint: dict[str, Any], env: DMCPendulumConfig) -> None:
+    """One warning line where the DMC pendulum ``env`` has other physics than the piga model's training file: a
+    fair test of a model identified on other physics, which its planner does not know. Where the file's config is
+    not known (an older checkpoint whose file is gone), against DMC's defaults, saying so; nothing for a model of an
+    imported recording."""
+    from envs.dmc import DMCPendulumConfig
+    from piga.io.runs import training_env_config
+
+    if trained := training_env_config(checkpoint):
+        if (differs := physics_difference(trained, env)) is not None:
+            print(f"{PROG}: warning: the env differs from the model's training file in {differs[0]} (trained on "
+                  f"{differs[1]}): the planner's physics will not match", file=sys.stderr)
+        return
+    if (checkpoint.get("data") or {}).get("env_id", DMC_PENDULUM) != DMC_PENDULUM:  # (None: an imported recording)
+        return
+    if (differs := physics_difference(DMCPendulumConfig().to_dict(), env)) is not None:
+        print(f"{PROG}: warning: the env differs from DMC's default pendulum in {differs[0]} (default {differs[1]}), "
+              "and the model's training file, which would say what it was trained on, is not found: the planner's "
+              "physics may not match", file=sys.stderr)
+
+
 def _check_dmc_rate(run_dir: str, checkpoint: dict, dt: float, env: DMCPendulumConfig,
                     model: PhysicsModel | None = None) -> None:
     """Refuses a piga model trained on frames ``dt`` s apart where the DMC pendulum ``env`` steps another dt, saying
@@ -924,7 +969,8 @@ def _dmc(args: argparse.Namespace, argv: Sequence[str] | None, given: set[str]) 
             # rendered at the size of the frames the model was identified on (piga-collect --image-size): a 32 px
             # model was fed 64 px frames ("encode takes frames of ... got (1, 64, 64)"), with no option to change it
             config = replace(config, env=replace(config.env, image_size=model.config.image_size))
-            warn_if_unconverged(PROG, args.model)  # after the refusals, so that a refused command prints one line
+            _warn_if_other_physics(checkpoint, config.env)  # after the refusals, so that a refused command prints one
+            warn_if_unconverged(PROG, args.model)  # line
             agent = PigaSwingUp(model, config.planner)
             results.append(run_dmc_episodes(agent, "piga", config, model.config.input_frames, progress=not args.quiet))
     if args.oracle:

@@ -216,10 +216,13 @@ def training_blank_mse(model: PhysicsModel, checkpoint: dict[str, Any] | None, m
 
 
 def training_env_config(checkpoint: dict[str, Any] | None) -> dict[str, Any]:
-    """The ``env_config`` of the training file named in the checkpoint, if that file is still there and has one,
-    else {} (a file of another source, or moved)."""
+    """The ``env_config`` of the run's training file: as the checkpoint keeps it, else (an older checkpoint) read from
+    the file it names, if that file is still there and has one, else {} (a file of another source, or gone)."""
     import h5py
 
+    kept = ((checkpoint or {}).get("data") or {}).get("env_config")
+    if isinstance(kept, dict):
+        return kept
     path = training_data_path(checkpoint)
     if path is None:
         return {}

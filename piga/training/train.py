@@ -491,7 +491,8 @@ def save_checkpoint(path: Path, model: FrameModel, optimizer: torch.optim.Optimi
         "data": {"path": str(data_info.path), "folder": os.getcwd(), "system": data_info.system,
                  "image_shape": list(data_info.image_shape),
                  "dt": data_info.dt, "sequences": data_info.n_sequences, "steps": data_info.steps,
-                 "fingerprint": data_fingerprint, "env_id": data_info.attrs.get("env_id")},  # (None: not collected)
+                 "fingerprint": data_fingerprint, "env_id": data_info.attrs.get("env_id"),  # (None: not collected)
+                 "env_config": data_info.attrs.get("env_config")},  # the env's settings, kept where the file is gone
     }
     write_checkpoint(path.parent, payload)
 
