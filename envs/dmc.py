@@ -89,6 +89,11 @@ MIN_LENGTH = TIP_RADIUS
 EARTH_GRAVITY = 9.81
 #: The camera sees a square of this half-side (metres) around the pivot: a pole up to 0.6 m fits.
 VIEW_HALF_SIDE = 0.7
+#: Farthest ``camera_distance``: the view's side is then 4.2 m, and the tip sphere (0.1 m) about 1.5 pixels of a
+#: 64-pixel frame; farther, the pendulum is too small for the frames to show its angle.
+MAX_CAMERA_DISTANCE = 3.0
+#: The tip sphere's width in a 64-pixel frame at :data:`MAX_CAMERA_DISTANCE` (the far bound's reason in words).
+FARTHEST_TIP_PIXELS = 64 * 2 * TIP_RADIUS / (2 * VIEW_HALF_SIDE * MAX_CAMERA_DISTANCE)
 #: Most frames in one observation.
 MAX_FRAME_STACK = 64
 #: Longest episode in frames (a million: 11 hours of the pendulum's time at the default action repeat).
@@ -136,7 +141,8 @@ class DMCPendulumConfig:
     """Reset draws θ̇ ~ U(-max_speed, max_speed) (DMC: 0, at rest)."""
     camera_distance: float = 1.0
     """The face-on camera's distance from the hinge, as a multiple of the default (which frames
-    ±0.7 m around the pivot): above 1 the pendulum looks smaller; below, it must still fit in view."""
+    ±0.7 m around the pivot): above 1 the pendulum looks smaller (at most 3, where its tip is 1.5 pixels of a 64-pixel
+    frame); below, it must still fit in view."""
     camera: Camera = "face"
     """"face" (piga's camera on the hinge axis) or "fixed" (dm_control's camera 0, looking down at 45°: the view
     DrQ-v2 and PlaNet learn from; ``flip="camera"`` and ``camera_distance`` are for the face-on camera)."""
@@ -173,9 +179,13 @@ class DMCPendulumConfig:
             "max_speed": (0 <= self.max_speed <= MAX_SPEED, f"max_speed in [0, {MAX_SPEED_TEXT}]"),
             "camera": (self.camera in CAMERAS, f"camera in {CAMERAS}"),
             "color": (self.color in COLORS, f"color in {COLORS}"),
-            "camera_distance": (self.camera_near <= self.camera_distance <= 3.0,
-                                f"camera_distance in [{lower_bound_text(self.camera_near, 4)}, 3] at length "
-                                f"{number_text(self.length)}: nearer, the camera crops the pendulum"),
+            "camera_distance": (self.camera_near <= self.camera_distance <= MAX_CAMERA_DISTANCE,
+                                f"camera_distance in [{lower_bound_text(self.camera_near, 4)}, {MAX_CAMERA_DISTANCE:g}] "
+                                f"at length {number_text(self.length)}" + (
+                                    f"; farther, the pendulum is too small to read: its tip is {FARTHEST_TIP_PIXELS:.1f} "
+                                    "pixels wide in a 64-pixel frame" if self.camera_distance > MAX_CAMERA_DISTANCE
+                                    else "; nearer, the camera crops the pendulum" if self.camera_distance < self.camera_near
+                                    else "")),  # NaN: no side
         }
         for name, (ok, allowed) in checks.items():
             if not ok:

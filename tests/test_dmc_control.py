@@ -115,6 +115,86 @@ def test_a_piga_model_is_run_only_through_the_view_it_was_identified_on(tmp_path
         _check_piga_view("run", {"data": {"path": str(far)}}, DMCPendulumConfig())
 
 
+@pytest.mark.parametrize("env", [(), ("--env", "piga/DMCPendulum-v0")])
+def test_a_missing_model_folder_is_said_alike_on_both_envs(tmp_path, capsys, env):
+    """With the DMC env, a missing --model read "nosuchdir/checkpoint.pt: no checkpoint (is nosuchdir a
+    piga-train-model run folder?)", where the pixel env says that the folder does not exist."""
+    from piga.cli.control import main
+
+    missing = str(tmp_path / "nosuchdir")
+    assert_one_line_error(completed_in_process("piga-control", main, *env, "--model", missing, "--episodes", "1",
+                                               "--quiet", capsys=capsys),
+                          f"--model {missing} does not exist (give the folder that piga-train-model or piga-baseline "
+                          "wrote its checkpoint.pt in)")
+
+
+def test_the_physics_an_env_changes_from_the_training_file_are_named():
+    from piga.cli.control import physics_difference
+
+    trained = DMCPendulumConfig().to_dict()
+    assert physics_difference(trained, DMCPendulumConfig()) is None
+    assert physics_difference(trained, DMCPendulumConfig(shadows=True, max_speed=1.0)) is None  # no physics
+    assert physics_difference(trained, DMCPendulumConfig(flip="motor")) == ("flip=motor", "flip=none")
+    assert (physics_difference({"mass": 2.0, "flip": "camera"}, DMCPendulumConfig(length=0.3)) ==
+            ("mass=1, length=0.3, flip=none", "mass=2, length=0.5, flip=camera"))  # absent: the default
+
+
+@pytest.mark.parametrize("data, said", [
+    ({"env_config": DMCPendulumConfig(damping=0.2).to_dict()},
+     "the env differs from the model's training file in damping=0.1, flip=motor (trained on damping=0.2, flip=none): the "
+     "planner's physics will not match"),
+    # the training file gone, and an older checkpoint that does not keep its config: against DMC's defaults, saying so
+    ({"path": "gone.h5", "env_id": "piga/DMCPendulum-v0"},
+     "the env differs from DMC's default pendulum in flip=motor (default flip=none), and the model's training file, "
+     "which would say what it was trained on, is not found: the planner's physics may not match"),
+    ({"path": "gone.h5", "env_id": None}, None),  # an imported recording's model: nothing is known
+])
+def test_the_warning_of_other_physics_says_what_it_compares_with(data, said, tmp_path, monkeypatch, capsys):
+    from piga.cli.control import _warn_if_other_physics
+
+    monkeypatch.chdir(tmp_path)
+    _warn_if_other_physics({"data": data}, DMCPendulumConfig(flip="motor", damping=0.1))
+    err = capsys.readouterr().err
+    assert err == ("" if said is None else f"piga-control: warning: {said}\n")
+
+
+@needs_dmc
+@pytest.mark.parametrize("options, said", [(("flip=motor",), "flip=motor (trained on flip=none)"),
+                                           (("length=0.3", "mass=2"), "mass=2, length=0.3 (trained on mass=1, "
+                                                                      "length=0.5)"),
+                                           ((), None)])
+def test_an_env_of_other_physics_runs_with_a_warning(options, said, tmp_path, monkeypatch, capsys):
+    """flip=motor ran silently (a score of 0 where the model's own env scores 922), while the camera's options are
+    refused: it is a fair sim-to-real test, so it runs, and one line says what the model assumes."""
+    from types import SimpleNamespace
+
+    import piga.control.dmc as dmc
+    import piga.io.checkpoint
+    import piga.io.runs
+    from piga.cli import control
+    from piga.io.checkpoint import RunKind
+    from tests.helpers import run_in_process
+
+    model = SimpleNamespace(config=SimpleNamespace(system="pendulum", image_size=16, dt=0.04, input_frames=2))
+    monkeypatch.setattr(piga.io.checkpoint, "checked_run_kind", lambda run: RunKind.PIGA)
+    monkeypatch.setattr(piga.io.runs, "load_model", lambda run: (model, {}))
+    monkeypatch.setattr(piga.io.runs, "training_env_config", lambda checkpoint: DMCPendulumConfig().to_dict())
+    monkeypatch.setattr(control, "_check_dmc_rate", lambda *args: None)
+    monkeypatch.setattr(control, "warn_if_unconverged", lambda *args: None)
+    monkeypatch.setattr(dmc, "PigaSwingUp", lambda model, planner: None)
+    monkeypatch.setattr(dmc, "run_dmc_episodes", lambda *args, **kwargs: (_ for _ in ()).throw(KeyboardInterrupt))
+    argv = [arg for option in options for arg in ("--env-option", option)]
+    code, _, err = run_in_process("piga-control", control.main, "--env", "piga/DMCPendulum-v0", "--model",
+                                  str(tmp_path), "--episodes", "1", "--quiet", *argv, capsys=capsys)
+    assert code == 130  # (stopped at the episodes: the warning before them is what is checked)
+    warnings = [line for line in err.splitlines() if "warning" in line]
+    if said is None:
+        assert warnings == [], err
+    else:
+        assert warnings == [f"piga-control: warning: the env differs from the model's training file in {said}: the "
+                            "planner's physics will not match"], err
+
+
 @needs_dmc
 def test_a_piga_model_is_run_on_frames_of_its_own_size(tmp_path, monkeypatch, capsys):
     """A DMC model identified on 32 px frames was given 64 px ones ("encode takes frames of (C, H, W) = (1, 32, 32), the

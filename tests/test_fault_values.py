@@ -290,11 +290,23 @@ def test_the_camera_distance_bound_is_a_number_at_the_length(length: float, boun
     from envs.dmc import DMCPendulumConfig
     from envs.fields import lower_bound_text
 
-    with pytest.raises(ValueError, match=re.escape(f"(camera_distance in [{bound}, 3] at length {length:g}: nearer, "
+    with pytest.raises(ValueError, match=re.escape(f"(camera_distance in [{bound}, 3] at length {length:g}; nearer, "
                                                    "the camera crops the pendulum)")):
         DMCPendulumConfig(length=length, camera_distance=0.01)
     assert lower_bound_text(0.6 / 0.7, 4) == "0.8572" and lower_bound_text(0.5, 4) == "0.5"
     DMCPendulumConfig(length=length, camera_distance=float(bound))  # the bound written is inside the range
+
+
+@pytest.mark.parametrize("distance", [3.01, 10.0, 1e9])
+def test_a_camera_too_far_is_refused_for_the_far_side(distance: float) -> None:
+    """A distance of 10 was refused with the near side's reason ("nearer, the camera crops the pendulum")."""
+    from envs.dmc import DMCPendulumConfig
+
+    with pytest.raises(ValueError, match=re.escape("[0.8572, 3] at length 0.5; farther, the pendulum is too small to "
+                                                   "read: its tip is 1.5 pixels wide in a 64-pixel frame)")) as caught:
+        DMCPendulumConfig(camera_distance=distance)
+    assert "nearer" not in str(caught.value)
+    DMCPendulumConfig(camera_distance=3.0)
 
 
 # ---------------------------------------------------------------------------------------------

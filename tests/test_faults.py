@@ -740,6 +740,22 @@ def test_planet_resume_refuses_another_data_file(baseline_runs: dict[str, Path],
             "was trained on", "two_actions.h5", "give that file")
 
 
+def test_planet_resume_names_its_file_from_the_current_folder(baseline_runs: dict[str, Path], files: dict[str, Path],
+                                                             tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                             capsys: pytest.CaptureFixture[str]) -> None:
+    """config.json records the data file as its command gave it and the folder that command ran in: the refusal
+    names the file from the current folder, not by a path relative to another."""
+    assert json.loads((baseline_runs["planet"] / "config.json").read_text())["data_folder"]
+
+    def moved(record: dict[str, Any]) -> None:
+        record.update({"data": "../moved.h5", "data_folder": str(tmp_path / "a" / "b")})
+
+    run = _run_copy(baseline_runs["planet"], tmp_path / "run", _edit_record(moved))
+    monkeypatch.chdir(tmp_path)
+    refused("piga-baseline", ["planet", str(files["two_actions"]), "--out", str(run), "--resume", "--steps", "4"], capsys,
+            f"was trained on {Path('a') / 'moved.h5'}, not ", "give that file")
+
+
 def test_planet_resume_refuses_its_file_written_over_in_place(baseline_runs: dict[str, Path], tiny_data: Path,
                                                               tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """The file's contents were compared only when its path differed: a file collected again under the same name
@@ -1529,6 +1545,7 @@ def test_control_warns_of_a_model_that_learned_other_frames(env_id: str | None, 
     run = _run_copy(tiny_piga_run, tmp_path / "run")
     ckpt = torch.load(run / "checkpoint.pt", weights_only=False)
     assert ckpt["data"]["env_id"] == "piga/PixelPendulum-v0"  # what training records
+    assert ckpt["data"]["env_config"]["image_size"] == 64  # the file's env settings too, kept where the file is gone
     ckpt["data"]["env_id"] = env_id
     torch.save(ckpt, run / "checkpoint.pt")
     _, _, err = run_in_process("piga-control", control.main, "--model", str(run), "--episodes", "1", "--steps", "20",
@@ -1774,6 +1791,54 @@ def test_train_resume_tells_a_moved_file_from_another_of_the_same_shape(tiny_pig
     assert code in (0, NOT_CONVERGED), err  # resumed and trained: a tiny run is too short to be judged converged
 
 
+def test_train_resume_names_the_trained_file_from_the_current_folder(tiny_piga_run: Path, tiny_data: Path,
+                                                                    tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    """A run resumed in elsewhere/deep on ../moved.h5 was refused another file from the folder above with "continues on
+    the file the run trained on (../moved.h5)": a path relative to the folder it trained in, which from here is
+    another (missing) file. The checkpoint records that folder, and the line names the file from here."""
+    import torch
+
+    from piga.cli import train as cli
+    from piga.cli.common import NOT_CONVERGED
+    from tests.helpers import run_in_process
+
+    deep = tmp_path / "elsewhere" / "deep"
+    run = _run_copy(tiny_piga_run, deep / "copy1")
+    shutil.copy(tiny_data, tmp_path / "elsewhere" / "moved.h5")
+    monkeypatch.chdir(deep)
+    code, _, err = run_in_process("piga-train-model", cli.main, "../moved.h5", "--out", "copy1", "--resume", "--epochs",
+                                  "2", "--quiet", capsys=capsys)
+    assert code in (0, NOT_CONVERGED), err
+    data = torch.load(run / "checkpoint.pt", weights_only=False)["data"]
+    assert data["path"] == "../moved.h5" and data["folder"] == str(deep)
+    monkeypatch.chdir(tmp_path)
+    other = _variant(tiny_data, tmp_path / "other.h5", lambda f: f["frames"].__setitem__(0, 255 - f["frames"][0]))
+    refused("piga-train-model", [str(other), "--out", "elsewhere/deep/copy1", "--resume", "--epochs", "3", "--quiet"],
+            capsys, "continues on the file the run trained on (elsewhere/moved.h5), not ")
+    monkeypatch.chdir(tmp_path / "elsewhere")  # below the run's folder: the file's path from here stays relative
+    refused("piga-train-model", [str(other), "--out", "deep/copy1", "--resume", "--epochs", "3", "--quiet"],
+            capsys, "continues on the file the run trained on (moved.h5), not ")
+    monkeypatch.chdir(deep / "copy1")  # beside it: absolute
+    refused("piga-train-model", [str(other), "--out", ".", "--resume", "--epochs", "3", "--quiet"],
+            capsys, f"continues on the file the run trained on ({tmp_path / 'elsewhere' / 'moved.h5'}), not ")
+
+
+def test_a_recorded_path_is_read_from_the_folder_it_was_recorded_in(tmp_path: Path,
+                                                                    monkeypatch: pytest.MonkeyPatch) -> None:
+    """Paths in a run's records are as its command was given them: read against the folder that command ran in."""
+    from piga.io.checkpoint import recorded_data_path, recorded_path
+
+    monkeypatch.chdir(tmp_path)
+    assert recorded_path("../moved.h5", str(tmp_path / "a" / "b")) == str(Path("a") / "moved.h5")
+    assert recorded_path("../moved.h5", str(tmp_path)) == "../moved.h5"  # recorded here: as given
+    assert recorded_path("x.h5", str(tmp_path / "a" / "b")) == str(Path("a") / "b" / "x.h5")
+    assert recorded_path("x.h5", "/elsewhere") == "/elsewhere/x.h5"
+    assert recorded_path("/data/x.h5", str(tmp_path / "a")) == "/data/x.h5"
+    assert recorded_path("x.h5", None) == "x.h5"  # an older record: as it is
+    assert recorded_data_path({"path": "x.h5"}) == "x.h5" and recorded_data_path({}) is None
+
+
 def test_train_resume_says_the_file_has_changed(tiny_piga_run: Path, tiny_data: Path, tmp_path: Path,
                                                capsys: pytest.CaptureFixture[str]) -> None:
     """The run's own file, changed in place: it read "continues on the file the run trained on (X), not X"."""
@@ -1872,6 +1937,27 @@ def test_control_sweep_refuses_a_gravity_multiplier(tiny_piga_run: Path, capsys:
     """--gravity-mult beside --sweep used to be ignored."""
     refused("piga-control", ["--model", str(tiny_piga_run), "--sweep", "0.5:1:0.5", "--gravity-mult", "2"], capsys,
             "drop --gravity-mult")
+
+
+@pytest.mark.parametrize("extra, needles", [
+    (["--goal-image", "goal.png"], ["--sweep gives each job its goal as an angle: give --goal-angle DEG, not --goal-image"]),
+    (["--video", "v.mp4"], ["--sweep plays its jobs in worker processes and films none of them: drop --video"]),
+])
+def test_control_sweep_refuses_a_goal_image_and_a_video_for_what_they_are(
+        extra: list[str], needles: list[str], tiny_piga_run: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """It said "--sweep runs upright swing-ups", while a sweep takes --goal-angle and runs every job to that goal."""
+    monkeypatch.chdir(tmp_path)
+    line = refused("piga-control", ["--model", str(tiny_piga_run), "--sweep", "1:1.2:0.2", "--episodes", "1", "--steps",
+                                    "20", "--workers", "1", "--quiet", *extra], capsys, *needles)
+    assert "upright" not in line
+
+
+def test_a_baseline_sweep_refuses_a_video_for_what_it_is(baseline_runs: dict[str, Path],
+                                                         capsys: pytest.CaptureFixture[str]) -> None:
+    refused("piga-control", ["--model", str(baseline_runs["planet"]), "--sweep", "1:1.2:0.2", "--episodes", "1", "--steps",
+                             "20", "--workers", "1", "--quiet", "--video", "v.mp4"], capsys,
+            "--sweep plays its jobs in worker processes and films none of them")
 
 
 @pytest.mark.parametrize("prog", ["piga-control", "piga-train-model"])
@@ -3132,7 +3218,8 @@ def test_the_own_training_file_must_still_be_the_runs(tiny_data: Path, tmp_path:
 def test_the_own_training_file_is_found_beside_a_moved_run_and_given_by_hand(tiny_data: Path, tmp_path: Path) -> None:
     """A run trained in another folder records its data path relative to that folder: from here the diagnosis found
     no own file and judged a gain against the nominal model's a (a dm_control model "gain 1.05" on its own system).
-    The file is found by its absolute path, or beside the run folder, or given by hand, each checked by content."""
+    The file is found through the folder the run recorded, or beside the run folder, or given by hand, each checked
+    by content."""
     import shutil
 
     from piga.data.schema import fingerprint
@@ -3142,11 +3229,12 @@ def test_the_own_training_file_is_found_beside_a_moved_run_and_given_by_hand(tin
     run = tmp_path / "runs" / "r"
     run.mkdir(parents=True)
     assert training_data_path(with_training_file({"data": data}, run)) is None  # nowhere to be found
-    found = with_training_file({"data": {**data, "absolute_path": str(tiny_data)}}, run)
-    assert training_data_path(found) == str(tiny_data)
+    found = with_training_file({"data": {**data, "path": tiny_data.name, "folder": str(tiny_data.parent)}}, run)
+    assert found["data"]["path"] == tiny_data.name and training_data_path(found) in (str(tiny_data), tiny_data.name)
     beside = shutil.copy(tiny_data, tmp_path / "runs" / "tiny.h5")
     assert training_data_path(with_training_file({"data": data}, run)) == str(beside)
-    assert with_training_file({"data": data}, run, given=tiny_data)["data"]["path"] == str(tiny_data)
+    given = with_training_file({"data": {**data, "folder": "/elsewhere"}}, run, given=tiny_data)
+    assert training_data_path(given) == str(tiny_data)
     other = _variant(tiny_data, tmp_path / "other.h5", lambda f: f["actions"].__setitem__(..., -f["actions"][()]))
     with pytest.raises(ValueError, match=r"other\.h5 is not the file .* was trained on \(its content differs"):
         with_training_file({"data": data}, run, given=other)

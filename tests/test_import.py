@@ -137,7 +137,8 @@ def test_frames_are_converted_as_the_env_converts_its_render(tmp_path: Path) -> 
     [
         ("0.5\n-1\n2\n", [0.5, -1, 2]),
         ("torque\n0.5\n-1\n2\n", [0.5, -1, 2]),  # one column: any header name
-        ("t,action,other\n0,0.5,9\n1,-1,9\n\n2,2,9\n", [0.5, -1, 2]),
+        ("t,action,other\n0,0.5,9\n1,-1,9\n2,2,9\n\n \n", [0.5, -1, 2]),  # blank lines at the end: the file's end
+        ("\n\nu\n# recorded at 20 Hz\n0.5\n-1\n", [0.5, -1]),  # blank lines before the header
         ("\ufeffu;t\n0.5;0\n-1;1\n2;2\n", [0.5, -1, 2]),  # a BOM, semicolons
         ("U\t t\n0.5\t0\n-1\t1\n2\t2\n", [0.5, -1, 2]),
         ("0.5,\n-1,\n2,\n", [0.5, -1, 2]),  # every row ends in a separator: data, not a header ['0.5', '']
@@ -173,6 +174,13 @@ def test_read_actions(tmp_path: Path, text: str, want: list[float]) -> None:
         ("u\n\uff11\n", "line 2: expected a finite number, got '\uff11' (write it in ASCII decimal digits"),  # fullwidth
         ("u,action\n1,2\n", "names both 'u' and 'action'; name one action column"),  # `u` was taken silently
         ("0.1,,0.3\n", "3 columns and no header row"),  # an empty field is not a header's name
+        # a blank line before a value: a missing action there shifted every later one by a frame (or, where the count
+        # no longer matched the frames, read only "has 47 actions but ... has 48 frames")
+        ("0.5\n\n-1\n", "line 2 is empty, and actions follow it (line 3): a missing value would shift every later "
+                         "action by one frame"),
+        ("u\n0.5\n \n# a gap\n-1\n\n", "line 3 is empty, and actions follow it (line 5)"),
+        ("u\n\n0.5\n", "line 2 is empty, and actions follow it (line 3)"),
+        ("\n0.5\n-1\n", "line 1 is empty, and actions follow it (line 2)"),
     ],
 )
 def test_read_actions_errors(tmp_path: Path, text: str, needle: str) -> None:
@@ -231,6 +239,24 @@ def test_cli_bad_input(tmp_path: Path, recording: tuple[Path, Path, np.ndarray, 
                      "gives the training split no share")
     assert not Path(out).exists()
     assert list(tmp_path.glob(".*partial*")) == []
+
+
+def test_cli_refuses_a_gap_in_the_actions_even_where_their_count_matches(
+        tmp_path: Path, recording: tuple[Path, Path, np.ndarray, np.ndarray], capsys: pytest.CaptureFixture[str]) -> None:
+    """An empty line between the values was skipped: a value missing there, with one more at the end, shifted every
+    later action by a frame and the import succeeded. Empty lines at the end of the file are still its end."""
+    folder, csv, _, actions = recording
+    values = [f"{float(u)!r}" for u in actions]
+    gap = tmp_path / "gap.csv"
+    gap.write_text("u\n" + "\n".join(values[:6] + [""] + values[7:] + ["0.0"]) + "\n")
+    out = tmp_path / "o.h5"
+    code, _, err = _cli(str(folder), str(gap), "--dt", "0.05", "--out", str(out), "--steps", "5", capsys=capsys)
+    assert_one_line(code, err, "gap.csv: line 8 is empty, and actions follow it (line 9)")
+    assert not out.exists()
+    tail = tmp_path / "tail.csv"
+    tail.write_text("u\n" + "\n".join(values) + "\n\n\n")
+    code, _, err = _cli(str(folder), str(tail), "--dt", "0.05", "--out", str(out), "--steps", "5", capsys=capsys)
+    assert code == 0, err
 
 
 def test_cli_refuses_a_frame_size_that_cannot_fit(tmp_path: Path, recording: tuple[Path, Path, np.ndarray, np.ndarray],

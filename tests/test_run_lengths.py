@@ -45,6 +45,24 @@ def test_a_scene_run_shorter_than_its_recipe_retries_no_seed(small_spring: Path,
     assert record["train"]["seed"] == 0 and record["train"]["seed_retries"] == 0 and "retried_seeds" not in record
 
 
+def test_a_resumed_scene_run_still_shorter_than_its_recipe_is_told_to_train_that_long(
+        small_spring: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    """After --resume --epochs 3 of a 2-epoch run (6 steps of 1,650 planned), the advice turned to "train again with
+    another --seed or more --seed-retries", contradicting the first run's "train it that long"."""
+    import piga.training.report as report
+    from piga.evaluation.objects import ObjectCheck
+
+    monkeypatch.setattr(report, "check_objects", lambda model, frames: ObjectCheck(0.3, 0.5, 0.6, True))
+    out = tmp_path / "run"
+    common = [str(small_spring), "--out", str(out), "--batch-size", "3", "--threads", "1", "--quiet"]
+    code, _, err = run_in_process("piga-train-model", train_main, *common, "--epochs", "2", capsys=capsys)
+    assert_one_line(code, err, "where the fast preset plans", "train it that long")
+    code, _, err = run_in_process("piga-train-model", train_main, *common, "--epochs", "3", "--resume", capsys=capsys)
+    line = assert_one_line(code, err, "an object was not found", "in a run of 3 steps where the fast preset plans",
+                           "train it that long")
+    assert "another --seed or more --seed-retries" not in line
+
+
 @pytest.mark.parametrize("sweep", ["1:1:0.1", "1:1.05:0.1"])
 def test_not_told_refuses_a_sweep_whose_every_multiplier_is_1(sweep: str, tmp_path: Path,
                                                                capsys: pytest.CaptureFixture[str]) -> None:

@@ -41,6 +41,25 @@ def test_a_system_with_nothing_to_learn_says_so() -> None:
     assert summary_line({"parameters": {"g": 9.9}, "parameter_errors": {}}) == "g=9.9000"
 
 
+def test_a_run_with_no_parameter_that_lost_an_object_is_not_said_to_miss_its_parameters(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    """Bouncing balls (no physical parameter) with an object lost read "the run did not identify its parameters",
+    while the run's own line said "learned: no parameter (none to learn)"."""
+    import piga.training.report as report
+    from envs.scenes import scene_config
+    from piga.cli.train import main as train_main
+    from piga.data.collect_scenes import SceneCollectConfig, collect_scene
+    from piga.evaluation.objects import ObjectCheck
+
+    data = collect_scene(SceneCollectConfig(scene=scene_config("bouncing"), sequences=5, steps=11, seed=0, workers=1,
+                                            split=(3, 1, 1)), tmp_path / "bouncing.h5", progress=False, command="test")
+    monkeypatch.setattr(report, "check_objects", lambda model, frames: ObjectCheck(0.3, 0.5, 0.6, True))
+    code, _, err = run_in_process("piga-train-model", train_main, str(data), "--out", str(tmp_path / "run"),
+                                  "--batch-size", "3", "--budget-steps", "3", "--threads", "1", "--quiet", capsys=capsys)
+    line = assert_one_line(code, err, "the run did not learn to predict: an object was not found")
+    assert "parameters" not in line
+
+
 def test_the_learned_line_shows_the_offset_the_warning_names() -> None:
     """A run left unsettled by its offset warned "offset moved ..." beside a learned line without the offset."""
     errors = {"g": {"learned": 9.9, "true": 10.0, "relative_error": 0.01}}

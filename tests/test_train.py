@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import shutil
 from dataclasses import asdict, replace
 from pathlib import Path
@@ -126,8 +127,8 @@ def test_cli_trains_and_reports(small_data: Path, tmp_path: Path, capsys: pytest
     assert metrics["training"]["device"] == str(resolve_device("auto"))
     from piga.io.checkpoint import RunKind, read_checkpoint
 
-    data = read_checkpoint(out, RunKind.PIGA)["data"]  # found from elsewhere by its absolute path too
-    assert data["path"] == str(small_data) and data["absolute_path"] == str(small_data.absolute())
+    data = read_checkpoint(out, RunKind.PIGA)["data"]  # found from elsewhere through the folder it is relative to
+    assert data["path"] == str(small_data) and data["folder"] == os.getcwd()
     # an existing run is not replaced without --overwrite or --resume
     code, _, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), capsys=capsys)
     assert_one_line(code, err, "--overwrite")

@@ -17,6 +17,7 @@ A run folder holds ``config.json`` (``kind: "planet"``), ``checkpoint.pt``, ``te
 from __future__ import annotations
 
 import math
+import os
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
@@ -164,7 +165,7 @@ def _save(path: Path, model: WorldModel, optimizer: torch.optim.Optimizer, state
         "optimizer": optimizer.state_dict(),
         "state": asdict(state),
         "rng": {"numpy": rng.bit_generator.state, "torch": generator.get_state()},
-        "data": {"path": str(info.path), "image_shape": list(info.image_shape), "dt": info.dt,
+        "data": {"path": str(info.path), "folder": os.getcwd(), "image_shape": list(info.image_shape), "dt": info.dt,
                  "env_id": info.attrs.get("env_id")},  # None: a file from before env ids, or an imported recording
     }
     write_checkpoint(path.parent, payload)

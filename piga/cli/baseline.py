@@ -28,7 +28,7 @@ from piga.cli.common import (NOT_CONVERGED, ArgumentParser, Interrupted, PigaErr
                              record_resume, recorded_options, remove_outputs, run_cli, seed_int, started_record,
                              thread_count, with_flags)
 from piga.io.atomic import check_folder_target
-from piga.io.checkpoint import CHECKPOINT, RUN_OUTPUTS, RunKind, check_run_files, read_run_record
+from piga.io.checkpoint import CHECKPOINT, RUN_OUTPUTS, RunKind, check_run_files, read_run_record, recorded_path
 from piga.io.lock import lock_run_folder
 
 PROG = "piga-baseline"
@@ -251,10 +251,11 @@ def _resumed_record(run_dir: Path, kind: RunKind, args: Any) -> dict[str, Any]:
                             "records (the episodes, rounds and steps of each round); restore config.json, or start the "
                             "run again with --overwrite")
         data = ckpt.get("data") if isinstance(ckpt.get("data"), dict) else {}
-        rebuilt = {"data": data.get("path"), "train": ckpt.get("train_config"), "rssm": ckpt.get("rssm_config")}
+        rebuilt = {"data": data.get("path"), "data_folder": data.get("folder"), "train": ckpt.get("train_config"),
+                   "rssm": ckpt.get("rssm_config")}
     else:
         rebuilt = {"ddpg": ckpt.get("config")}  # (the data file of --obs latent is the autoencoder's, already trained)
-    if not all(isinstance(section, dict) for name, section in rebuilt.items() if name != "data"):
+    if not all(isinstance(section, dict) for name, section in rebuilt.items() if name not in ("data", "data_folder")):
         raise PigaError(f"--resume: {where} {why}, and the checkpoint does not hold the run's settings (an older "
                         "version's); restore config.json, or start the run again with --overwrite")
     print(f"{PROG}: note: {where} {why}; it is rewritten from the checkpoint, without the command that started the "
@@ -327,6 +328,8 @@ def _refuse_recipe_changes(args: Any, record: dict[str, Any], run_dir: Path, arg
     if changed:
         raise PigaError(f"--resume keeps the run's recipe; drop {', '.join('--' + c.replace('_', '-') for c in changed)}")
     recorded = record.get("data")
+    if isinstance(recorded, str):  # as its command gave it: from here (a resume in another folder read another path)
+        recorded = recorded_path(recorded, record.get("data_folder"))
     if not args.data or "data" not in record:  # a DDPG record rebuilt from its checkpoint, which names no data file
         return
     if "data_fingerprint" in record:  # by contents: a moved or copied file is the same, one written over in place is not
@@ -337,12 +340,12 @@ def _refuse_recipe_changes(args: Any, record: dict[str, Any], run_dir: Path, arg
             from piga.data.schema import rewards_fingerprint
 
             same = record["rewards_fingerprint"] == rewards_fingerprint(args.data)
-        if not same and recorded == args.data:
+        if not same and recorded is not None and os.path.abspath(recorded) == os.path.abspath(args.data):
             raise PigaError(f"--resume: {args.data} has changed since {run_dir} trained on it (its contents are not "
                             "the same); put the trained file back, or start a new run on this one")
     else:  # a run from before fingerprints: the same file by its path
-        same = recorded == args.data or (recorded is not None and Path(recorded).exists() and Path(args.data).exists()
-                                         and os.path.samefile(recorded, args.data))
+        same = recorded is not None and (os.path.abspath(recorded) == os.path.abspath(args.data) or (
+            Path(recorded).exists() and Path(args.data).exists() and os.path.samefile(recorded, args.data)))
     if not same:
         drop = "give that file" if kind == "planet" else "drop --data (the run keeps its autoencoder)"
         raise PigaError(f"--resume: {run_dir} was trained on {recorded or 'no data file'}, not {args.data}; {drop}")
@@ -470,7 +473,7 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
 
             check_iterative_data(info, iterative)
         _check_run_dir(run_dir, False, args.overwrite, RunKind.PLANET)
-        record = started_record(command, kind=RunKind.PLANET.value, data=str(args.data),
+        record = started_record(command, kind=RunKind.PLANET.value, data=str(args.data), data_folder=os.getcwd(),
                                 data_fingerprint=fingerprint(args.data), rewards_fingerprint=rewards_fingerprint(args.data),
                                 train=config.to_dict(), rssm=rssm.to_dict(),
                                 **({"iterative": iterative.to_dict()} if iterative else {}))
@@ -628,7 +631,8 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
             check_pixel_pendulum_file(info, "--obs latent learns its codes from the file's frames and then acts on "
                                       f"{PIXEL_PENDULUM}, whose frames they must be")
         _check_run_dir(run_dir, False, args.overwrite, RunKind.DDPG)
-        record = started_record(command, kind=RunKind.DDPG.value, data=args.data, ddpg=config.to_dict())
+        record = started_record(command, kind=RunKind.DDPG.value, data=args.data, data_folder=os.getcwd(),
+                                ddpg=config.to_dict())
         if args.data:
             record["data_fingerprint"] = fingerprint(args.data)
         checkpoint_bytes = buffer_bytes = _ddpg_checkpoint_bytes(config, ae_config.latent_size)

@@ -24,7 +24,7 @@ from piga.cli.common import (ArgumentParser, PigaError, add_ray_option, command_
                              stem_path, typed_text, warn_if_still_training, warn_if_unconverged, work_finished)
 from piga.control.episodes import EpisodeConfig, parse_range, run_episodes
 from piga.evaluation.episodes import summary_markdown
-from piga.io.checkpoint import RunKind
+from piga.io.checkpoint import RunKind, recorded_data_path
 from piga.io.lock import held_by, lock_run_folder
 
 if TYPE_CHECKING:
@@ -156,15 +156,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                       if "gravity_mult" in given else ("--gravity-mult 1 (the default)", "give --gravity-mult"))
         raise PigaError(f"--not-told keeps the piga agent's gravity at x1 while the env's changes; at {at} nothing "
                         f"changes: {change}, or drop --not-told")
-    if args.model and not Path(args.model).is_dir() and held_by(args.model) is None:  # (before --workers is judged by
-        from piga.io.atomic import link_loop, loop_message
-        from piga.io.checkpoint import CHECKPOINT  # the run's kind; a run just started has no folder yet: said below)
-
-        if (loop := link_loop(args.model)) is not None:
-            raise PigaError(loop_message(args.model, loop, "--model"))
-        what = "is a file, not a run folder" if Path(args.model).exists() else "does not exist"
-        raise PigaError(f"--model {args.model} {what} (give the folder that piga-train-model or piga-baseline wrote "
-                        f"its {CHECKPOINT} in)")
+    if args.model:  # (before --workers is judged by the run's kind)
+        _check_model_folder(args.model)
     if args.ray or "workers" in given:  # --workers 2, the default, too
         raise PigaError(f"{'--ray' if args.ray else '--workers'} runs the jobs of --sweep and a baseline run's episodes; a "
                         "piga or oracle run without --sweep plays its episodes in this process")
@@ -256,6 +249,18 @@ def _say_written(video: str | None, outputs: list[Path]) -> None:
         print(f"wrote {outputs[0]} and {outputs[1]}")
 
 
+def _refuse_sweep_goal_image_and_video(args: argparse.Namespace) -> None:
+    """--sweep takes its goal as an angle (--goal-angle, upright by default) and films nothing: a goal image is read
+    and judged by a single run, and a video shows one run's episode 0, where a sweep plays many jobs in worker
+    processes."""
+    if args.goal_image:
+        raise PigaError("--sweep gives each job its goal as an angle: give --goal-angle DEG, not --goal-image (a run "
+                        "without --sweep reads the goal from an image)")
+    if args.video:
+        raise PigaError("--sweep plays its jobs in worker processes and films none of them: drop --video, or film one "
+                        "multiplier in a run without --sweep (--gravity-mult M --video)")
+
+
 def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: Sequence[str] | None,
            kind: RunKind = RunKind.PIGA) -> int:
     """--sweep: the run's agent (``kind``) and the oracle at each multiplier; piga and the oracle are
@@ -265,8 +270,7 @@ def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: 
 
     if args.oracle or not args.model:
         raise PigaError("--sweep compares the piga agent with the oracle: give --model RUN_DIR (without --oracle)")
-    if args.goal_image or args.video:
-        raise PigaError("--sweep runs upright swing-ups; it does not take --goal-image or --video")
+    _refuse_sweep_goal_image_and_video(args)
     if args.gravity_mult != EpisodeConfig.gravity_mult:
         raise PigaError("--sweep sets the gravity multiplier of each job; drop --gravity-mult")
     try:
@@ -516,7 +520,7 @@ def _baseline(args: argparse.Namespace, kind: RunKind, mpc: MPCConfig, outputs: 
                         "trained)")
     if args.video:
         if args.sweep:
-            raise PigaError("--sweep runs upright swing-ups; it does not take --goal-image or --video")
+            _refuse_sweep_goal_image_and_video(args)
         check_file_name(args.video, "--video", "episode.mp4")
         if Path(args.video).suffix.lower() not in (".mp4", ".gif"):
             raise PigaError(f"--video must end in .mp4 or .gif, got {args.video}")
@@ -639,7 +643,7 @@ def _warn_if_other_frames(run_dir: str, checkpoint: dict) -> None:
     data = checkpoint.get("data") or {}
     if "env_id" in data and data["env_id"] != PIXEL_PENDULUM:  # (older checkpoints do not say)
         source = f"from {data['env_id']}" if data["env_id"] else "not collected by piga-collect (an imported recording?)"
-        print(f"{PROG}: warning: the model learned from {data.get('path')}, {source}; it controls {PIXEL_PENDULUM} here "
+        print(f"{PROG}: warning: the model learned from {recorded_data_path(data)}, {source}; it controls {PIXEL_PENDULUM} here "
               "from that env's frames, which its encoder may misread: the success below measures that too",
               file=sys.stderr)
 
@@ -655,7 +659,7 @@ def check_planet_frames(run_dir: str) -> None:
     rate = f", {dt:g} s apart" if isinstance(dt, (int, float)) else ""
     if env_id is not None and env_id != PIXEL_PENDULUM:
         raise PigaError(f"{run_dir}: the PlaNet-style model was trained on frames of {env_id}{rate} (from "
-                        f"{data.get('path')}), not of Gymnasium's pixel pendulum ({PIXEL_PENDULUM}), which it would "
+                        f"{recorded_data_path(data)}), not of Gymnasium's pixel pendulum ({PIXEL_PENDULUM}), which it would "
                         "control here; train it on a file of that env")
     if isinstance(dt, (int, float)):
         _check_frame_rate(run_dir, dt)
@@ -802,6 +806,51 @@ def _check_piga_view(run_dir: str, checkpoint: dict, env: DMCPendulumConfig) -> 
                                                         else f"give --env-option camera_distance={distance:g}"))
 
 
+#: The DMC pendulum's config fields that change its physics: an env that differs from the model's training file in them
+#: is a fair test of a model identified on other physics (sim-to-real), so it runs, with a warning.
+DMC_PHYSICS_FIELDS = ("mass", "length", "damping", "flip")
+
+
+def physics_difference(trained: dict[str, Any], env: DMCPendulumConfig) -> tuple[str, str] | None:
+    """Where the DMC pendulum ``env`` differs in its physics (:data:`DMC_PHYSICS_FIELDS`) from ``trained``, the
+    ``env_config`` of the model's training file (a field it lacks, from an older file, at its default): the env's values
+    and the trained ones, e.g. ("flip=motor", "flip=none"); None where they agree."""
+    from envs.dmc import DMCPendulumConfig
+
+    pairs = []
+    for name in DMC_PHYSICS_FIELDS:
+        now, then = getattr(env, name), trained.get(name, getattr(DMCPendulumConfig, name))
+        same = (now == then if isinstance(now, str) or isinstance(then, str)
+                else math.isclose(float(now), float(then), rel_tol=1e-9, abs_tol=0.0))
+        if not same:
+            pairs.append((f"{name}={now if isinstance(now, str) else number_text(now)}",
+                          f"{name}={then if isinstance(then, str) else number_text(then)}"))
+    if not pairs:
+        return None
+    return ", ".join(now for now, _ in pairs), ", ".join(then for _, then in pairs)
+
+
+def _warn_if_other_physics(checkpoint: dict[str, Any], env: DMCPendulumConfig) -> None:
+    """One warning line where the DMC pendulum ``env`` has other physics than the piga model's training file: a
+    fair test of a model identified on other physics, which its planner does not know. Where the file's config is
+    not known (an older checkpoint whose file is gone), against DMC's defaults, saying so; nothing for a model of an
+    imported recording."""
+    from envs.dmc import DMCPendulumConfig
+    from piga.io.runs import training_env_config
+
+    if trained := training_env_config(checkpoint):
+        if (differs := physics_difference(trained, env)) is not None:
+            print(f"{PROG}: warning: the env differs from the model's training file in {differs[0]} (trained on "
+                  f"{differs[1]}): the planner's physics will not match", file=sys.stderr)
+        return
+    if (checkpoint.get("data") or {}).get("env_id", DMC_PENDULUM) != DMC_PENDULUM:  # (None: an imported recording)
+        return
+    if (differs := physics_difference(DMCPendulumConfig().to_dict(), env)) is not None:
+        print(f"{PROG}: warning: the env differs from DMC's default pendulum in {differs[0]} (default {differs[1]}), "
+              "and the model's training file, which would say what it was trained on, is not found: the planner's "
+              "physics may not match", file=sys.stderr)
+
+
 def _check_dmc_rate(run_dir: str, checkpoint: dict, dt: float, env: DMCPendulumConfig,
                     model: PhysicsModel | None = None) -> None:
     """Refuses a piga model trained on frames ``dt`` s apart where the DMC pendulum ``env`` steps another dt, saying
@@ -849,6 +898,21 @@ def _training_env_id(checkpoint: dict) -> str | None:
     return env_id if isinstance(env_id, str) and env_id else None
 
 
+def _check_model_folder(model: str) -> None:
+    """Refuses a ``--model`` that is no folder (missing, a file, a link that loops) in one line, on either env; a run
+    just started has no folder yet, and is said by the checkpoint's loader."""
+    if Path(model).is_dir() or held_by(model) is not None:
+        return
+    from piga.io.atomic import link_loop, loop_message
+    from piga.io.checkpoint import CHECKPOINT
+
+    if (loop := link_loop(model)) is not None:
+        raise PigaError(loop_message(model, loop, "--model"))
+    what = "is a file, not a run folder" if Path(model).exists() else "does not exist"
+    raise PigaError(f"--model {model} {what} (give the folder that piga-train-model or piga-baseline wrote its "
+                    f"{CHECKPOINT} in)")
+
+
 def _dmc(args: argparse.Namespace, argv: Sequence[str] | None, given: set[str]) -> int:
     """``--env piga/DMCPendulum-v0``: the piga agent and/or the oracle, scored in DMC's units."""
     from piga.cli.collect import dmc_config, parse_env_option
@@ -858,6 +922,8 @@ def _dmc(args: argparse.Namespace, argv: Sequence[str] | None, given: set[str]) 
                         + ", ".join(f"--{k.replace('_', '-')}" for k in DMC_OPTIONS))
     if not args.model and not args.oracle:  # as on the pixel env: nothing is run that was not asked for
         raise PigaError("give --model RUN_DIR (or --oracle, or both)")
+    if args.model:  # as on the pixel env, before the env is made
+        _check_model_folder(args.model)
     import argparse as _argparse
 
     try:
@@ -903,7 +969,8 @@ def _dmc(args: argparse.Namespace, argv: Sequence[str] | None, given: set[str]) 
             # rendered at the size of the frames the model was identified on (piga-collect --image-size): a 32 px
             # model was fed 64 px frames ("encode takes frames of ... got (1, 64, 64)"), with no option to change it
             config = replace(config, env=replace(config.env, image_size=model.config.image_size))
-            warn_if_unconverged(PROG, args.model)  # after the refusals, so that a refused command prints one line
+            _warn_if_other_physics(checkpoint, config.env)  # after the refusals, so that a refused command prints one
+            warn_if_unconverged(PROG, args.model)  # line
             agent = PigaSwingUp(model, config.planner)
             results.append(run_dmc_episodes(agent, "piga", config, model.config.input_frames, progress=not args.quiet))
     if args.oracle:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import math
+import os
 import shutil
 import sys
 from collections.abc import Iterator, Sequence
@@ -19,7 +20,8 @@ from piga.cli.common import (NOT_CONVERGED, ArgumentParser, Interrupted, PigaErr
                              record_resume, recorded_options, remove_empty_folders, remove_outputs, resume_option, run_cli,
                              seed_int, started_record, thread_count, unit_fraction)
 from piga.io.atomic import OutputFolder, check_folder_target
-from piga.io.checkpoint import CHECKPOINT, RUN_OUTPUTS, RunKind, check_run_files, read_run_record, require_piga_run
+from piga.io.checkpoint import (CHECKPOINT, RUN_OUTPUTS, RunKind, check_run_files, read_run_record, recorded_data_path,
+                                require_piga_run)
 from piga.io.lock import lock_run_folder
 
 #: The recipe options a user may give; each is a TrainConfig field of the same name.
@@ -203,19 +205,20 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
                 raise PigaError(f"--resume continues the run's own {flag[2:]} ({own}); drop {flag} {given}, or train "
                                 "a new run in another --out")
         data = ckpt["data"]
+        trained_on = recorded_data_path(data)  # the path from here (it was recorded relative to its command's folder)
         if tuple(data["image_shape"]) != info.image_shape or data["system"] != info.system:
             raise PigaError(f"--resume: {args.data} ({info.system}, {info.image_shape}) does not match the run's data "
                             f"({data['system']}, {tuple(data['image_shape'])})")
         if "fingerprint" in data:  # a moved or copied file keeps its contents; another file is another run
             same_data = data["fingerprint"] == data_at_start
         else:  # a checkpoint from before fingerprints: the same path, or a file of the same shape
-            same_data = Path(data["path"]).resolve() == Path(args.data).resolve() or (
+            same_data = Path(trained_on).resolve() == Path(args.data).resolve() or (
                 data.get("sequences") == info.n_sequences and data.get("steps") == info.steps and data["dt"] == info.dt)
-        if not same_data and Path(data["path"]).resolve() == Path(args.data).resolve():
+        if not same_data and Path(trained_on).resolve() == Path(args.data).resolve():
             raise PigaError(f"--resume: {args.data} has changed since the run trained on it (its actions, split or first "
                             "frames differ); train a new run (without --resume) to learn from the changed file")
         if not same_data:
-            raise PigaError(f"--resume continues on the file the run trained on ({data['path']}), not {args.data}; "
+            raise PigaError(f"--resume continues on the file the run trained on ({trained_on}), not {args.data}; "
                             "train a new run (without --resume) to learn from another file")
         if "dt" in data and not math.isclose(float(data["dt"]), info.dt, rel_tol=1e-9):  # an attribute, outside the fingerprint
             raise PigaError(f"--resume: {args.data} now says its frames are {info.dt:g} s apart; the run trained on them "
@@ -248,8 +251,11 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
         model_config = saved_model.config
         record = _record_or_rebuilt(run_dir, stored, why)
         record_resume(record, command)
+        preset = started_preset
+        recipe = preset_for(preset, info)  # the length it plans, which a run started shorter is still judged by
     else:
-        recipe = preset_for(args.preset, info)
+        preset = args.preset
+        recipe = preset_for(preset, info)
         reading = {name: getattr(args, name) for name in ("data_loading", "stream_cache_mb") if getattr(args, name) is not None}
         train_config = replace(recipe.train, seed=args.seed, threads=args.threads, device=args.device,
                                seed_retries=args.seed_retries, **overrides, **reading)  # explicit options win
@@ -293,13 +299,15 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
                         "take the place of a step budget; give --epochs instead")
     plan = check_trainable(info, model_config, train_config)
     # a run planned shorter than its recipe (--epochs, --budget-steps): an object that its seeds did not find is first
-    # the length's (a spring file trained for 20 steps was blamed on the seed alone)
+    # the length's (a spring file trained for 20 steps was blamed on the seed alone); a resumed run too, as long as it
+    # stays shorter (its advice turned to "another --seed" once resumed for a few steps more)
     recipe_steps = None
-    if not args.resume and {"epochs", "budget_steps"} & set(overrides) and report.checks_objects(model_config):
+    if (args.resume or {"epochs", "budget_steps"} & set(overrides)) and report.checks_objects(model_config):
         full = check_trainable(info, model_config, replace(train_config, epochs=recipe.train.epochs,
                                                             budget_steps=recipe.train.budget_steps))
         recipe_steps = full.total_steps if full.total_steps > plan.total_steps else None
-        if recipe_steps is not None and "seed_retries" not in options_given:  # another seed cannot make up the length
+        # another seed cannot make up the length (a resumed run keeps the retries it was started with)
+        if recipe_steps is not None and not args.resume and "seed_retries" not in options_given:
             train_config = replace(train_config, seed_retries=0)
     planned = ckpt.get("plan") or {} if args.resume else {}  # (a checkpoint from before plans were saved has none)
     if plan.epochs < planned.get("epochs", 0):  # the baselines' --resume refuses the same
@@ -324,7 +332,7 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
     fresh = build_model(model_config)  # its size and start values, before training builds its own
     check_run_disk(run_dir, (run_dir / CHECKPOINT).stat().st_size if args.resume else adam_checkpoint_bytes(fresh),
                    "the training run")
-    record.update({"data": str(args.data), "train": asdict(train_config), "plan": asdict(plan),
+    record.update({"data": str(args.data), "data_folder": os.getcwd(), "train": asdict(train_config), "plan": asdict(plan),
                    "model": model_config.to_dict()})
     if not info.split_counts["test"]:
         print(f"{prog}: warning: {args.data} has no test sequences; metrics.json and the figures will be measured on "
@@ -474,12 +482,13 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
         whose = "" if prog == PROG else f" (options of {PROG} {args.data} --out {run_dir})"
         if convergence["outcome"] == "untrained":
             seeds = f" (seeds {', '.join(map(str, tried))} and {train_config.seed} tried)" if tried else ""
-            what = "identify its parameters" if model.has_physics else "learn to predict"
+            # (bouncing balls have physics but no parameter: it was refused as not identifying them)
+            what = "identify its parameters" if model.learned_parameter_names() else "learn to predict"
             reason = convergence["reason"]
             if recipe_steps is not None and (lost or empty):  # the cause, with the length's fix for the seed's
                 steps = f"{state.step:,} step" + ("" if state.step == 1 else "s")
                 reason = (f"{reason.split('; ')[0]}, in {'runs' if tried else 'a run'} of {steps} "
-                          f"where the {args.preset} preset plans {recipe_steps:,} for this file: train it that long "
+                          f"where the {preset} preset plans {recipe_steps:,} for this file: train it that long "
                           "(leave out --epochs and --budget-steps, with --overwrite or another --out) before another "
                           "--seed")
             raise PigaError(f"the run did not {what}{seeds}: {reason}{whose}")

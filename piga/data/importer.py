@@ -290,13 +290,14 @@ def read_actions(path: str | Path) -> np.ndarray:
     """The actions of a CSV, one row per frame: float32 (F,).
 
     The CSV has one column, with an optional header row, or a header row that names the action
-    column ``u`` or ``action``. Commas, semicolons or tabs separate the columns, blank lines and lines that start
-    with ``#`` are skipped, and a separator that ends every row (``0.26,``) is not a column. Values are written in ASCII decimal
-    (:data:`_CSV_NUMBER`).
+    column ``u`` or ``action``. Commas, semicolons or tabs separate the columns, lines that start with ``#`` and blank
+    lines before the header or after the last value are skipped, and a separator that ends every row (``0.26,``) is not
+    a column. Values are written in ASCII decimal (:data:`_CSV_NUMBER`).
 
     Raises:
         FileNotFoundError: no such file.
-        ValueError: a folder, the file is empty, a value is not a finite number or beyond
+        ValueError: a folder, the file is empty, a blank line comes before a value (a value missing there would shift
+            every later action by a frame), a value is not a finite number or beyond
             ±:data:`piga.data.schema.MAX_ABS_ACTION` (the message gives the line), the action column cannot be told,
             or a row has another number of columns than the first.
     """
@@ -351,6 +352,14 @@ def read_actions(path: str | Path) -> np.ndarray:
     elif len(first) > 1:
         raise ValueError(f"{p}: {len(first)} columns and no header row; add a header that names the action column "
                          f"'u' or 'action'")
+    # a blank line before a value: a missing value there would shift every action after it by a frame, unseen
+    # wherever the count still matches the frames (trailing blank lines are the file's end)
+    start = first_number if header else 0
+    if blank := next((number for number, line in enumerate(text.splitlines(), start=1)
+                      if start < number < rows[-1][0] and not line.strip()), None):
+        after = next(number for number, _ in rows if number > blank)
+        raise ValueError(f"{p}: line {blank} is empty, and actions follow it (line {after}): a missing value would "
+                         "shift every later action by one frame; write the missing action there, or delete the line")
     for number, row in rows:  # a ragged row: a stray separator, or a column shifted; which value is meant is unknown
         if len(row) != len(first):
             raise ValueError(f"{p}: line {number}: {len(row)} column(s), but line {first_number} has {len(first)}; give "

@@ -36,8 +36,8 @@ RUN_OUTPUTS = (CHECKPOINT, "config.json", "metrics.json", "tensorboard", "rollou
 RUN_FILES = (CHECKPOINT, "config.json", "metrics.json")
 
 __all__ = ["CHECKPOINT", "DEMO_RUN", "RUN_FILES", "RunKind", "check_run_file", "check_run_files", "checked_run_kind",
-           "checkpoint_kind", "is_demo_folder", "kind_mismatch", "read_checkpoint", "require_piga_run", "run_kind",
-           "write_checkpoint", "unreadable"]
+           "checkpoint_kind", "is_demo_folder", "kind_mismatch", "read_checkpoint", "recorded_data_path", "recorded_path",
+           "require_piga_run", "run_kind", "write_checkpoint", "unreadable"]
 
 
 class RunKind(enum.Enum):
@@ -200,6 +200,29 @@ def read_run_record(run_dir: str | os.PathLike[str]) -> tuple[dict[str, Any], st
     except (OSError, ValueError) as exc:
         return {}, f"cannot be read ({unreadable_record(exc)})"
     return (payload, None) if isinstance(payload, dict) else ({}, "is not a run record (not a JSON object)")
+
+
+def recorded_path(path: str, folder: object) -> str:
+    """A path that a run recorded as its command was given it, relative to ``folder`` (the folder that command ran in;
+    None in the records of older runs, whose relative paths are left as they are), as a path from the current folder:
+    as recorded from that folder, relative below it, absolute elsewhere (``../moved.h5`` recorded in
+    ``elsewhere/deep`` is ``elsewhere/moved.h5`` from the folder that holds ``elsewhere``)."""
+    if os.path.isabs(path) or not isinstance(folder, str) or not folder:
+        return path
+    here = os.getcwd()
+    if os.path.normpath(folder) == here:
+        return path
+    full = os.path.normpath(os.path.join(folder, path))
+    relative = os.path.relpath(full, here)
+    return full if relative == os.pardir or relative.startswith(os.pardir + os.sep) else relative
+
+
+def recorded_data_path(data: object) -> str | None:
+    """The training file that a checkpoint's ``data`` entry names (its ``path``, relative to its ``folder``), as a path
+    from the current folder (:func:`recorded_path`); None where it names none."""
+    if not isinstance(data, dict) or not isinstance(data.get("path"), str) or not data["path"]:
+        return None
+    return recorded_path(data["path"], data.get("folder"))
 
 
 def unreadable_record(exc: Exception) -> str:

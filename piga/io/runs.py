@@ -23,7 +23,7 @@ from typing import Any, Literal, overload
 
 import torch
 
-from piga.io.checkpoint import CHECKPOINT, RunKind, read_checkpoint, unreadable
+from piga.io.checkpoint import CHECKPOINT, RunKind, read_checkpoint, recorded_data_path, unreadable
 from piga.io.choices import check_choices
 from piga.world.model import FrameModel, ModelConfig, PhysicsModel
 from piga.world.variants import NO_PHYSICS, build_model
@@ -159,13 +159,14 @@ def training_steps(checkpoint: dict[str, Any] | None) -> int | None:
 def training_data_path(checkpoint: dict[str, Any] | None) -> str | None:
     """The training file that the checkpoint names, if it is still there and still the run's own (else None).
 
-    The path is as training was given it, relative to the folder it ran in; from another folder it can name another
-    file (a diagnosis read its "own training file" reference off a file of other effects). So the file must also
-    have the fingerprint the checkpoint keeps (:func:`piga.data.schema.fingerprint`), where it keeps one.
-    :func:`with_training_file` finds it from elsewhere."""
+    The path is as training was given it, relative to the folder it ran in, which the checkpoint records beside it
+    (:func:`~piga.io.checkpoint.recorded_data_path`); an older checkpoint does not, and from another folder its path
+    can name another file (a diagnosis read its "own training file" reference off a file of other effects). So the
+    file must also have the fingerprint the checkpoint keeps (:func:`piga.data.schema.fingerprint`), where it keeps
+    one. :func:`with_training_file` finds it where the run was moved with it."""
     data = (checkpoint or {}).get("data") or {}
-    path = data.get("path")
-    return path if isinstance(path, str) and _is_training_file(path, data) else None
+    path = recorded_data_path(data)
+    return path if path is not None and _is_training_file(path, data) else None
 
 
 def _is_training_file(path: str | os.PathLike[str], data: dict[str, Any]) -> bool:
@@ -179,19 +180,18 @@ def _is_training_file(path: str | os.PathLike[str], data: dict[str, Any]) -> boo
 
 
 def recorded_training_path(checkpoint: dict[str, Any] | None) -> str | None:
-    """The training file's path as the checkpoint records it (whether or not it is found from here)."""
-    path = ((checkpoint or {}).get("data") or {}).get("path")
-    return path if isinstance(path, str) and path else None
+    """The training file's path as the checkpoint records it, from the current folder (whether or not it is there)."""
+    return recorded_data_path((checkpoint or {}).get("data"))
 
 
 def with_training_file(checkpoint: dict[str, Any], run_dir: str | os.PathLike[str],
                        given: str | os.PathLike[str] | None = None) -> dict[str, Any]:
     """``checkpoint`` with its training file's path as found from here (a copy; the file on disk is not changed).
 
-    The path is recorded as training was given it, relative to the folder it ran in. Where it does not lead to the
-    file from here, these are tried, each only if it has the fingerprint the checkpoint keeps: the absolute path
-    that training recorded too, and the file's name beside the run folder or inside it (runs are often moved with
-    their data). ``given`` (a command's ``--training-data``) is taken first.
+    The path is recorded as training was given it, with the folder it ran in (:func:`training_data_path`). Where it
+    does not lead to the file from here, these are tried, each only if it has the fingerprint the checkpoint keeps:
+    the file's name beside the run folder or inside it (runs are often moved with their data), and the recorded
+    path read from the run folder's parent. ``given`` (a command's ``--training-data``) is taken first.
 
     Raises:
         ValueError: ``given`` is not the file the run was trained on (another fingerprint), or not a file.
@@ -204,14 +204,14 @@ def with_training_file(checkpoint: dict[str, Any], run_dir: str | os.PathLike[st
         if not _is_training_file(given, data):
             raise ValueError(f"{given} is not the file {run_dir} was trained on (its content differs from the one "
                              f"recorded at training{'' if recorded is None else f', {recorded}'})")
-        return {**checkpoint, "data": {**data, "path": str(given)}}
+        return {**checkpoint, "data": {**data, "path": os.path.abspath(given)}}  # (absolute: whatever its "folder")
     if recorded is None or training_data_path(checkpoint) is not None or "fingerprint" not in data:
         return checkpoint  # found as recorded, or nothing to find it by
     run = Path(run_dir)
     name = Path(recorded).name
-    for candidate in (data.get("absolute_path"), run.parent / name, run / name, run.parent / recorded):
-        if isinstance(candidate, (str, Path)) and _is_training_file(candidate, data):
-            return {**checkpoint, "data": {**data, "path": str(candidate)}}
+    for candidate in (run.parent / name, run / name, run.parent / data["path"]):
+        if _is_training_file(candidate, data):
+            return {**checkpoint, "data": {**data, "path": os.path.abspath(candidate)}}
     return checkpoint
 
 
@@ -256,10 +256,13 @@ def training_blank_mse(model: PhysicsModel, checkpoint: dict[str, Any] | None, m
 
 
 def training_env_config(checkpoint: dict[str, Any] | None) -> dict[str, Any]:
-    """The ``env_config`` of the training file named in the checkpoint, if that file is still there and has one,
-    else {} (a file of another source, or moved)."""
+    """The ``env_config`` of the run's training file: as the checkpoint keeps it, else (an older checkpoint) read from
+    the file it names, if that file is still there and has one, else {} (a file of another source, or gone)."""
     import h5py
 
+    kept = ((checkpoint or {}).get("data") or {}).get("env_config")
+    if isinstance(kept, dict):
+        return kept
     path = training_data_path(checkpoint)
     if path is None:
         return {}

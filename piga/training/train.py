@@ -24,6 +24,7 @@ checkpoint.
 from __future__ import annotations
 
 import math
+import os
 import random
 import time
 from dataclasses import asdict, dataclass, field, replace
@@ -486,10 +487,12 @@ def save_checkpoint(path: Path, model: FrameModel, optimizer: torch.optim.Optimi
         "optimizer": optimizer.state_dict(),
         "state": asdict(state),
         "rng": _rng_state(),
-        "data": {"path": str(data_info.path), "absolute_path": str(Path(data_info.path).absolute()),
-                 "system": data_info.system, "image_shape": list(data_info.image_shape),
+        # the path as given, and the folder it is relative to (where the command ran)
+        "data": {"path": str(data_info.path), "folder": os.getcwd(), "system": data_info.system,
+                 "image_shape": list(data_info.image_shape),
                  "dt": data_info.dt, "sequences": data_info.n_sequences, "steps": data_info.steps,
-                 "fingerprint": data_fingerprint, "env_id": data_info.attrs.get("env_id")},  # (None: not collected)
+                 "fingerprint": data_fingerprint, "env_id": data_info.attrs.get("env_id"),  # (None: not collected)
+                 "env_config": data_info.attrs.get("env_config")},  # the env's settings, kept where the file is gone
     }
     write_checkpoint(path.parent, payload)
 
