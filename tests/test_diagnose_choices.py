@@ -562,6 +562,21 @@ def test_the_closure_line_gives_each_numbers_basis(damped) -> None:
     assert "not comparable" not in state and "not comparable" not in markdown(damped, "m", "d", "c")
 
 
+def test_the_report_gives_a_shift_by_component(damped) -> None:
+    """The effect table read "| shift | 1.002 | 1.001 .. 1.002 | px (mean of right and down) |" for a shift of 2 px
+    right: its length and each component now have a row, each with its own interval."""
+    import copy
+
+    from piga.diagnostics.results import Effect
+
+    d = copy.deepcopy(damped)
+    d.effects = [Effect("shift", 2.0015, "px (length of the shift; dx right, dy down)", [2.0012, 2.0019], dx=2.0015,
+                        dy=0.00325, dx_interval=[2.0011, 2.0019], dy_interval=[-0.0041, 0.0106])]
+    text = markdown(d, "m", "d", "c")
+    assert "| shift right (dx) | 2.002 | 2.001 .. 2.002 | px |" in text, text
+    assert "| shift down (dy) | 0.00325 | -0.0041 .. 0.0106 | px |" in text and "mean of right" not in text
+
+
 def test_no_gap_is_not_claimed_where_the_nominal_model_strays_far_above_its_floor(damped) -> None:
     """Torques applied but logged as 0: the nominal error was 8.5x the twin's floor, no candidate named it, and the
     verdict read "no significant gap"."""

@@ -13,7 +13,7 @@ import numpy as np
 
 from piga.io.atomic import (OutputExistsError, atomic_output, check_folder_target, check_writable_target,
                             missing_folders, partial_path, remove_empty_folders, write_json, written_together)
-from piga.diagnostics.results import Diagnosis, VisionSummary, interval_text
+from piga.diagnostics.results import Diagnosis, VisionSummary, interval_text, value_text
 from piga.diagnostics.twin import MEASURABLE_GAP
 from piga.evaluation.episodes import EpisodeSummary, summary_markdown
 from piga.evaluation.plots import plt, save_figure
@@ -267,7 +267,13 @@ def markdown(d: Diagnosis, model: str, data: str, command: str) -> str:
     if d.effects:
         lines += ["| effect | value | 95% interval | unit |", "|---|---|---|---|"]
         for e in d.effects:
-            lines.append(f"| {e.effect} | {_fmt(e.value)} | {_interval(e.interval)} | {e.unit} |")
+            rows = [(e.effect, e.value, e.interval, e.unit)]
+            if e.effect == "shift":  # its length, and each component with its own interval
+                rows += [("shift right (dx)", e.dx, e.dx_interval, "px"), ("shift down (dy)", e.dy, e.dy_interval, "px")]
+            for name, value, ci, unit in rows:
+                shown = value_text(value, ci if ci and all(math.isfinite(x) for x in ci) else None, digits=4) \
+                    if isinstance(value, float) else _fmt(value)
+                lines.append(f"| {name} | {shown} | {_interval(ci)} | {unit} |")
         lines.append("")
     lines += [f"- {n}" for n in d.exclusions + d.notes] + ([""] if d.notes or d.exclusions else [])
     lines += ambiguity_lines(d)
