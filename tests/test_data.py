@@ -134,6 +134,26 @@ def test_validation_names_the_culprit(tmp_path: Path, how: str, message: str) ->
         inspect_dataset(path)
 
 
+@pytest.mark.parametrize("cut", ["sequences", "frames"])
+def test_states_left_whole_in_a_cut_file_is_named_as_a_shape(tmp_path: Path, cut: str) -> None:
+    """A file with /frames, /actions and /split cut to fewer sequences (or /frames and /actions to fewer frames), and
+    /states left whole, was refused as "/states must be real numbers [N=19, T=30, S], got float32 (60, 30, 2)"."""
+    path = tmp_path / "d.h5"
+    _write(path)
+    with h5py.File(path, "a") as f:
+        names = ("frames", "actions", "split") if cut == "sequences" else ("frames", "actions")
+        for name in names:
+            data = f[name][:4] if cut == "sequences" else f[name][:, :3]
+            del f[name]
+            f[name] = data
+    with pytest.raises(DataFormatError) as refused:
+        inspect_dataset(path)
+    message = str(refused.value)
+    shape = "(4, 5)" if cut == "sequences" else "(6, 3)"
+    assert "/states has shape (6, 5, 3)" in message and shape in message and "real numbers" not in message, message
+    assert "cut it the same way or drop it" in message and "\n" not in message
+
+
 def test_not_hdf5_and_missing(tmp_path: Path) -> None:
     junk = tmp_path / "junk.h5"
     junk.write_text("not hdf5")

@@ -518,6 +518,65 @@ def test_effects_that_predict_worse_than_the_nominal_are_not_a_correction(damped
     assert _worse_than_nominal(naming, slightly, final, NOMINAL) is naming  # noise, as a small gain measured
 
 
+def test_a_camera_effect_that_predicts_worse_in_pixels_is_not_a_correction(damped) -> None:
+    """A shift rolled into every other sequence was named "shift 1.23 px right" although the corrected model's typical
+    rendered free run was 1.44x the nominal's (pixel MSE 0.00171 against 0.00119, headline -149%): on the pixel basis
+    the one-step and angle rules cannot judge it, the pixels must."""
+    from piga.diagnostics.diagnose import _worse_than_nominal
+    from piga.diagnostics.results import Effect, Naming
+
+    shift = Effect("shift", 1.23, "px", dx=1.23, dy=0.0652, dx_interval=[1.0, 1.4], dy_interval=[0.0, 0.1])
+    naming = Naming([shift], [], shift.describe(), "shift")
+    final = fit.Model((), 0, {"g": NOMINAL.g, "a": NOMINAL.a})
+    pixels = replace(damped.gap, closure_basis="pixels", typical_pixel_mse_nominal=0.00119,
+                     typical_pixel_mse_corrected=0.00171, pixel_mse_floor=0.000842,
+                     one_step_rms_corrected_rad=0.25 * damped.gap.one_step_rms_nominal_rad)
+    judged = _worse_than_nominal(naming, pixels, final, NOMINAL)
+    assert judged.verdict_class == "unexplained" and not judged.effects, judged.verdict
+    assert "pixel MSE 0.00171 against 0.00119" in judged.verdict and "sequences may disagree" in judged.verdict
+    # a camera effect that lowers the rendered error is a correction; so is one within noise of no clear gap
+    assert _worse_than_nominal(naming, replace(pixels, typical_pixel_mse_corrected=0.00046), final, NOMINAL) is naming
+    assert _worse_than_nominal(naming, replace(pixels, typical_pixel_mse_corrected=0.00125), final, NOMINAL) is naming
+    # with a clear gap above the matched floor, straying further at all corrects nothing
+    clear = replace(pixels, pixel_mse_floor=0.0004, typical_pixel_mse_corrected=0.00125)
+    assert _worse_than_nominal(naming, clear, final, NOMINAL).verdict_class == "unexplained"
+
+
+def test_the_closure_line_gives_each_numbers_basis(damped) -> None:
+    """A blur's command line read "free-run closure 97.6% (typical held-out window, pixel MSE 0.000287 -> 0.00011 ...;
+    mean over all windows -654.9%)": the -654.9% was the angles' mean, which a camera effect makes incomparable."""
+    import copy
+
+    from piga.diagnostics.report import closure_line, markdown
+
+    d = copy.deepcopy(damped)
+    d.gap = replace(d.gap, closure_basis="pixels", typical_pixel_mse_nominal=0.000287, typical_pixel_mse_corrected=0.00011,
+                    pixel_mse_floor=0.000106, free_run_gap_closure=0.976, free_run_mse_nominal=0.00578,
+                    free_run_mse_corrected=0.0436, free_run_closure=1 - 0.0436 / 0.00578, floor_subtracted=True)
+    line = closure_line(d)
+    assert line.startswith("free-run closure in pixels 97.6% (typical held-out window, pixel MSE 0.000287 -> 0.00011"), line
+    assert "mean over all windows in angles: MSE 0.00578 -> 0.0436 rad², raw closure -654.3%, not comparable" in line
+    assert "not comparable, unlike the headline in pixels" in markdown(d, "m", "d", "c")
+    state = closure_line(damped)
+    assert state.startswith("free-run closure in angles ") and "mean over all windows in angles: MSE" in state
+    assert "not comparable" not in state and "not comparable" not in markdown(damped, "m", "d", "c")
+
+
+def test_the_report_gives_a_shift_by_component(damped) -> None:
+    """The effect table read "| shift | 1.002 | 1.001 .. 1.002 | px (mean of right and down) |" for a shift of 2 px
+    right: its length and each component now have a row, each with its own interval."""
+    import copy
+
+    from piga.diagnostics.results import Effect
+
+    d = copy.deepcopy(damped)
+    d.effects = [Effect("shift", 2.0015, "px (length of the shift; dx right, dy down)", [2.0012, 2.0019], dx=2.0015,
+                        dy=0.00325, dx_interval=[2.0011, 2.0019], dy_interval=[-0.0041, 0.0106])]
+    text = markdown(d, "m", "d", "c")
+    assert "| shift right (dx) | 2.002 | 2.001 .. 2.002 | px |" in text, text
+    assert "| shift down (dy) | 0.00325 | -0.0041 .. 0.0106 | px |" in text and "mean of right" not in text
+
+
 def test_no_gap_is_not_claimed_where_the_nominal_model_strays_far_above_its_floor(damped) -> None:
     """Torques applied but logged as 0: the nominal error was 8.5x the twin's floor, no candidate named it, and the
     verdict read "no significant gap"."""

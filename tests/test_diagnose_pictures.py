@@ -239,6 +239,11 @@ def test_a_large_shift_moves_the_pendulum_onto_pixels_not_read_as_noise(model, t
                                                     borderMode=cv2.BORDER_REPLICATE) for x in frames]).reshape(N, T, SIZE, SIZE)
     found = V.camera_stage(model, str(path), np.zeros((N, T)), np.arange(N) < 16, None)
     assert [e["effect"] for e in found.effects] == ["shift"] and found.camera.dx == pytest.approx(4.9, abs=0.1)
+    (shift,) = found.effects  # its length, each component, and each with an interval that holds it
+    assert shift["value"] == pytest.approx(math.hypot(found.camera.dx, found.camera.dy))
+    for key in ("", "dx_", "dy_"):
+        low, high = shift[key + "interval"]
+        assert low <= shift[key[:-1] or "value"] <= high, shift
     assert found.noise < V.CameraConfig().min_noise  # clean frames: the still pixels never change
 
 

@@ -530,6 +530,27 @@ def test_an_interval_is_printed_with_the_digits_that_keep_its_bounds_apart() -> 
     assert "(95% interval 1.997..2.001)" in Effect("gravity", 2.0, "factor on the nominal g", [1.9973, 2.0010]).describe()
 
 
+def test_a_printed_value_lies_within_its_printed_interval() -> None:
+    """A shift of 2 px right read "shift 2 px right, 0.00325 px down (mean 1 (95% interval 1.001..1.002))": the value
+    to 3 digits, its bounds to 4, and a "mean" of the two components. Each component is printed with its own interval,
+    to the interval's digits."""
+    import re
+
+    from piga.diagnostics.results import Effect
+
+    shift = Effect("shift", 2.0015, "px (length of the shift; dx right, dy down)", [2.0012, 2.0019], dx=2.0015,
+                   dy=0.00325, dx_interval=[2.0011, 2.0019], dy_interval=[-0.0041, 0.0106])
+    text = shift.describe()
+    assert "mean" not in text and text.count("95% interval") == 2, text
+    found = re.findall(r"(-?[\d.e+-]+) px (right|down) \(95% interval (-?[\d.e+-]+)\.\.(-?[\d.e+-]+)\)", text)
+    assert [side for _, side, _, _ in found] == ["right", "down"], text
+    for value, _, low, high in found:
+        assert float(low) <= float(value) <= float(high), text
+    assert Effect("gain", 1.0015, "factor on the nominal a", [1.0011, 1.0019]).describe().startswith("gain 1.002 ")
+    assert Effect("gain", 1.0015, "factor", None).describe() == "gain 1 factor"  # no interval: 3 digits
+    assert Effect("gain", float("nan"), "factor", None).describe() == "gain – factor"
+
+
 def test_bootstrap_refits_that_never_moved_are_said() -> None:
     """A gain of 5 read "5.04 (95% interval 5.04..5.08)", its lower end exactly the estimate: refits that stay at their
     start put an end of the interval there, unmeasured."""

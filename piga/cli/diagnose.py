@@ -67,7 +67,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     from piga.io.checkpoint import require_piga_run
     from piga.data.schema import check_frames_have_signal, inspect_dataset
     from piga.diagnostics import DiagnoseConfig, diagnose
-    from piga.diagnostics.report import check_report_target, number, write_report
+    from piga.diagnostics.report import check_report_target, closure_line, write_report
     from piga.io.runs import load_model, with_training_file
 
     # Everything is checked before any work, and the report folder is only created at the end
@@ -123,36 +123,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     report = write_report(diagnosis, out, args.model, args.data, command_line(PROG, argv), overwrite=args.overwrite)
     try:  # the report is complete from here: an interrupt says so (a rerun needs --overwrite)
         warn_if_unconverged(PROG, args.model)  # after the work: a refusal of the model stays the one line on stderr
-        g = diagnosis.gap
         print(f"verdict: {diagnosis.verdict}")
         for line in diagnosis.exclusions:
             print(line)
         for note in diagnosis.notes:
             print(f"note: {note}")
-        headline = "–" if g.free_run_gap_closure is None else f"{number(100 * g.free_run_gap_closure, '.1f')}%"
-        if not g.floor_subtracted and g.free_run_gap_closure is not None:
-            headline += " raw"
-        if not g.gap_above_floor:
-            headline += " (no gap above the floor: a ratio of noise)"
-        if g.closure_basis == "pixels":
-            detail = (f"typical held-out window, pixel MSE {number(g.typical_pixel_mse_nominal)} -> "
-                      f"{number(g.typical_pixel_mse_corrected)}"
-                      + (f", of the gap above the matched floor {number(g.pixel_mse_floor)}" if g.floor_subtracted else ""))
-        else:
-            floor = g.typical_free_run_mse_floor
-            detail = (f"typical held-out window, angle MSE {number(g.typical_free_run_mse_nominal)} -> "
-                      f"{number(g.typical_free_run_mse_corrected)} rad²"
-                      + (f", of the gap above the twin's floor {number(floor)}" if floor is not None and g.floor_subtracted
-                         else ""))
-        corrected = "corrected " + ", ".join(f"{k} = {number(v, '.4g')}" for k, v in diagnosis.corrected.items())
-        if g.no_gap and diagnosis.verdict_class == "unexplained":  # a gap, but nothing named that would close it
-            print(f"free-run closure: none measured (the gap is not explained, so nothing was corrected; {detail}); "
-                  + corrected)
-        elif g.no_gap:
-            print(f"free-run closure: no gap to close (nothing named to correct; {detail}); {corrected}")
-        else:
-            print(f"free-run closure {headline} ({detail}; mean over all windows {number(100 * g.free_run_closure, '.1f')}%); "
-                  + corrected)
+        print(closure_line(diagnosis))
         if diagnosis.control:
             for row in diagnosis.control["rows"]:
                 print(f"MPC on the simulated real system, {row['physics']} physics: success {100 * row['success_rate']:.0f}% of "

@@ -267,9 +267,15 @@ def _validate(f: h5py.File, path: Path) -> DatasetInfo:
         raise DataFormatError(f"{path}: /actions must be float [N={n}, T={t}, A], got {actions.dtype} {actions.shape}")
     states = optional("states")
     has_states = states is not None
-    if states is not None and (states.ndim != 3 or states.shape[:2] != (n, t)
-                               or not (np.issubdtype(states.dtype, np.floating) or np.issubdtype(states.dtype, np.integer))):
+    if states is not None and (states.ndim != 3 or not (np.issubdtype(states.dtype, np.floating)
+                                                        or np.issubdtype(states.dtype, np.integer))):
         raise DataFormatError(f"{path}: /states must be real numbers [N={n}, T={t}, S], got {states.dtype} {states.shape}")
+    if states is not None and states.shape[:2] != (n, t):
+        # (it was refused as "must be real numbers" for a file cut to fewer sequences with /states left whole). The
+        # training report scores the encoder against /states row by row, so a /states of other rows would misreport
+        raise DataFormatError(f"{path}: /states has shape {states.shape}, but /frames and /actions hold {n} sequences of "
+                              f"{t} frames {tuple(frames.shape[:2])}; /states must be [N={n}, T={t}, S]: cut it the same "
+                              "way or drop it (ground truth is optional, and piga-diagnose never reads it)")
     rewards = optional("rewards")
     has_rewards = rewards is not None
     if rewards is not None and (rewards.shape != (n, t) or not np.issubdtype(rewards.dtype, np.floating)):

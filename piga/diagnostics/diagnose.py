@@ -1147,7 +1147,8 @@ def gain_undetermined(interval: list[float]) -> bool:
 def _worse_than_nominal(naming: Naming, gap: Gap, final: fit.Model, nom: Nominal) -> Naming:
     """The verdict "not explained" where the named effects make the physics worse than the nominal one (one step
     ahead, on the held-out windows), leave the typical free run far above the twin's floor, or run off (g or a
-    collapsed): a camera shift of 20 px was named "blur 4 px; noise 89.7 gray levels; damping 6.39; bias 63.3; gravity
+    collapsed); on the pixel basis of a camera effect, where its typical rendered free run strays further than the
+    nominal model's. A camera shift of 20 px was named "blur 4 px; noise 89.7 gray levels; damping 6.39; bias 63.3; gravity
     0.385", with a = 3e-10 and a one-step error of 12.0 deg against the nominal's 4.1, and a positive headline."""
     if not naming.effects:
         return naming
@@ -1163,12 +1164,21 @@ def _worse_than_nominal(naming: Naming, gap: Gap, final: fit.Model, nom: Nominal
     # far above the floor: what the named effects leave is no effect of theirs (actions of other sequences read
     # "gain 0.133" at 38x the floor; named effects of the blind benchmark leave 0.85-1.42x)
     far = floor is not None and corrected >= NO_GAP_FACTOR * floor
-    if not (worse or drifts or far or fit.collapsed(final, nom, factor=100.0)):
+    # on the pixel basis (a camera effect: the two models read other angles), the same rules on the rendered free run,
+    # above the matched floor (a shift rolled into half of the sequences read "shift 1.23 px right" with a pixel error
+    # 1.44x the nominal's, and was named)
+    pn, pc, pf = gap.typical_pixel_mse_nominal, gap.typical_pixel_mse_corrected, gap.pixel_mse_floor
+    drifts_pixels = (gap.closure_basis == "pixels" and pn is not None and pc is not None
+                     and (pc > DRIFTS_FURTHER * pn or (pf is not None and pf > 0 and pn >= CLEAR_GAP * pf and pc > pn)))
+    if not (worse or drifts or far or drifts_pixels or fit.collapsed(final, nom, factor=100.0)):
         return naming
     why = (f"its held-out one-step error is {math.degrees(gap.one_step_rms_corrected_rad):.2f} deg against the nominal "
            f"model's {math.degrees(gap.one_step_rms_nominal_rad):.2f}" if worse else
            f"its typical held-out free run strays further than the nominal model's (angle MSE "
            f"{corrected:.3g} against {nominal:.3g} rad²)" if drifts else
+           f"its typical held-out free run, rendered, strays further than the nominal model's (pixel MSE {pc:.3g} "
+           f"against {pn:.3g}): a camera effect that only some sequences have (the sequences may disagree) is read "
+           "as one camera for all, and predicts the others worse" if drifts_pixels else
            f"its typical held-out free run still strays {corrected / floor:.1f}x as far as on its twin (angle MSE "
            f"{corrected:.3g} against the floor {floor:.3g} rad²; the effects it names would leave under "
            f"{NO_GAP_FACTOR:g}x)" if far else

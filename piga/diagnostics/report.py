@@ -13,7 +13,7 @@ import numpy as np
 
 from piga.io.atomic import (OutputExistsError, atomic_output, check_folder_target, check_writable_target,
                             missing_folders, partial_path, remove_empty_folders, write_json, written_together)
-from piga.diagnostics.results import Diagnosis, VisionSummary, interval_text
+from piga.diagnostics.results import Diagnosis, VisionSummary, interval_text, value_text
 from piga.diagnostics.twin import MEASURABLE_GAP
 from piga.evaluation.episodes import EpisodeSummary, summary_markdown
 from piga.evaluation.plots import plt, save_figure
@@ -175,6 +175,41 @@ def ambiguity_lines(d: Diagnosis) -> list[str]:
             f"separate them. The gap below is measured with {a.candidates[0]} (the lower BIC).", ""]
 
 
+def closure_line(d: Diagnosis) -> str:
+    """The command's one line on the closure, each number with its basis: the headline in pixels or angles, and the
+    mean over all windows, which is always in angles (a blur's "free-run closure 97.6% (pixel MSE ...; mean over all
+    windows -654.9%)" read as if both were pixels; the -654.9% was the angles', which that corrected model reads
+    through its camera, unlike the nominal one)."""
+    g = d.gap
+    pixels = g.closure_basis == "pixels"
+    headline = "–" if g.free_run_gap_closure is None else f"{number(100 * g.free_run_gap_closure, '.1f')}%"
+    if not g.floor_subtracted and g.free_run_gap_closure is not None:
+        headline += " raw"
+    if not g.gap_above_floor:
+        headline += " (no gap above the floor: a ratio of noise)"
+    if pixels:
+        detail = (f"typical held-out window, pixel MSE {number(g.typical_pixel_mse_nominal)} -> "
+                  f"{number(g.typical_pixel_mse_corrected)}"
+                  + (f", of the gap above the matched floor {number(g.pixel_mse_floor)}" if g.floor_subtracted else ""))
+    else:
+        floor = g.typical_free_run_mse_floor
+        detail = (f"typical held-out window, angle MSE {number(g.typical_free_run_mse_nominal)} -> "
+                  f"{number(g.typical_free_run_mse_corrected)} rad²"
+                  + (f", of the gap above the twin's floor {number(floor)}" if floor is not None and g.floor_subtracted
+                     else ""))
+    corrected = "corrected " + ", ".join(f"{k} = {number(v, '.4g')}" for k, v in d.corrected.items())
+    basis = "in pixels" if pixels else "in angles"
+    if g.no_gap and d.verdict_class == "unexplained":  # a gap, but nothing named that would close it
+        return f"free-run closure: none measured (the gap is not explained, so nothing was corrected; {detail}); {corrected}"
+    if g.no_gap:
+        return f"free-run closure: no gap to close (nothing named to correct; {detail}); {corrected}"
+    mean = (f"mean over all windows in angles: MSE {number(g.free_run_mse_nominal)} -> {number(g.free_run_mse_corrected)} "
+            f"rad², raw closure {number(100 * g.free_run_closure, '.1f')}%")
+    if pixels:
+        mean += ", not comparable: the corrected model reads its angles through the fitted camera"
+    return f"free-run closure {basis} {headline} ({detail}; {mean}); {corrected}"
+
+
 def headline_text(d: Diagnosis) -> str:
     """The headline closure, labelled as what it is: above a floor, raw, or no gap to close."""
     g = d.gap
@@ -232,7 +267,13 @@ def markdown(d: Diagnosis, model: str, data: str, command: str) -> str:
     if d.effects:
         lines += ["| effect | value | 95% interval | unit |", "|---|---|---|---|"]
         for e in d.effects:
-            lines.append(f"| {e.effect} | {_fmt(e.value)} | {_interval(e.interval)} | {e.unit} |")
+            rows = [(e.effect, e.value, e.interval, e.unit)]
+            if e.effect == "shift":  # its length, and each component with its own interval
+                rows += [("shift right (dx)", e.dx, e.dx_interval, "px"), ("shift down (dy)", e.dy, e.dy_interval, "px")]
+            for name, value, ci, unit in rows:
+                shown = value_text(value, ci if ci and all(math.isfinite(x) for x in ci) else None, digits=4) \
+                    if isinstance(value, float) else _fmt(value)
+                lines.append(f"| {name} | {shown} | {_interval(ci)} | {unit} |")
         lines.append("")
     lines += [f"- {n}" for n in d.exclusions + d.notes] + ([""] if d.notes or d.exclusions else [])
     lines += ambiguity_lines(d)
@@ -247,7 +288,9 @@ def markdown(d: Diagnosis, model: str, data: str, command: str) -> str:
         "## Size of the gap, and how far it shrinks", "", headline, "",
         f"Mean over all held-out windows and horizons 1..{g.horizon[-1]}: angle MSE {number(g.free_run_mse_nominal, '.3g')} rad² "
         f"nominal, {number(g.free_run_mse_corrected, '.3g')} rad² corrected"
-        + (" (nothing to close)" if g.no_gap else f": raw closure {100 * g.free_run_closure:.1f}%") + ". That mean "
+        + (" (nothing to close)" if g.no_gap else f": raw closure {100 * g.free_run_closure:.1f}%")
+        + (", in angles, which the corrected model reads through the fitted camera and the nominal one through the "
+           "encoder: not comparable, unlike the headline in pixels" if g.closure_basis == "pixels" else "") + ". That mean "
         "is dominated by the few windows that pass near upright, where any error grows fast, even in an exactly right "
         "model." + floor + " One step: RMSE "
         f"{math.degrees(g.one_step_rms_nominal_rad):.3f}° nominal, {math.degrees(g.one_step_rms_corrected_rad):.3f}° corrected.", "",

@@ -32,14 +32,37 @@ class _ByKey:
         return getattr(self, key) if key in self else default
 
 
+def _interval_digits(low: float, high: float, digits: int) -> int:
+    """``digits``, or as many more (up to 8) as keep two different bounds apart."""
+    for digits in range(digits, max(digits, 8) + 1):
+        if f"{low:.{digits}g}" != f"{high:.{digits}g}" or low == high:
+            break
+    return digits
+
+
 def interval_text(low: float, high: float, digits: int = 3) -> str:
     """``low..high`` to ``digits`` significant digits, or as many more (up to 8) as keep two different bounds apart:
     an interval of 1.9973..2.0010 read "2..2", as if it had no width."""
-    for digits in range(digits, max(digits, 8) + 1):
-        a, b = f"{low:.{digits}g}", f"{high:.{digits}g}"
-        if a != b or low == high:
-            break
-    return f"{a}..{b}"
+    digits = _interval_digits(low, high, digits)
+    return f"{low:.{digits}g}..{high:.{digits}g}"
+
+
+def value_text(value: float, interval: list[float] | None, digits: int = 3) -> str:
+    """``value`` to as many significant digits as its 95% ``interval`` is printed with (:func:`interval_text`), so that
+    a value within its interval reads within it too (rounding to a fixed number of significant digits keeps the order):
+    "mean 1 (95% interval 1.001..1.002)" printed 1.0015 to 3 digits and its bounds to 4."""
+    if value is None or not math.isfinite(value):
+        return "–"
+    if interval is not None and all(math.isfinite(x) for x in interval):
+        digits = _interval_digits(*interval, digits)
+    return f"{value:.{digits}g}"
+
+
+def _with_interval(value: float | None, interval: list[float] | None, unit: str) -> str:
+    """"value unit (95% interval low..high)", the value to the interval's digits; without a finite interval, none."""
+    known = interval is not None and all(math.isfinite(x) for x in interval)
+    ci = f" (95% interval {interval_text(*interval)})" if known else ""
+    return f"{value_text(value, interval if known else None)} {unit}{ci}"
 
 
 @dataclass(frozen=True)
@@ -76,12 +99,10 @@ class Effect(_ByKey):
         if self.effect == "within_frame":
             return (f"the system integrates within the frame (moves under the held action between frames; "
                     f"fits best as {self.value:g} substeps per frame)")
-        known = self.interval is not None and all(math.isfinite(x) for x in self.interval)
-        ci = f" (95% interval {interval_text(*self.interval)})" if known else ""
-        if self.effect == "shift":
-            return f"shift {self.dx:.3g} px right, {self.dy:.3g} px down (mean {self.value:.3g}{ci})"
-        value = f"{self.value:.3g}" if self.value is not None and math.isfinite(self.value) else "–"
-        return f"{self.effect} {value} {self.unit}{ci}"
+        if self.effect == "shift":  # each component with its own interval
+            return (f"shift {_with_interval(self.dx, self.dx_interval, 'px right')}, "
+                    f"{_with_interval(self.dy, self.dy_interval, 'px down')}")
+        return f"{self.effect} {_with_interval(self.value, self.interval, self.unit)}"
 
     def to_dict(self) -> dict[str, Any]:
         shift_only = ("dx", "dy", "dx_interval", "dy_interval")

@@ -452,16 +452,23 @@ def _sample(path: str, rows: np.ndarray, count: int,
 def camera_interval(model: PhysicsModel, camera: Camera, name: str, x: Tensor, clusters: np.ndarray,
                     step: float = 0.05) -> list[float]:
     """95% interval of one camera parameter: the sandwich (M-estimator) variance, robust to frames of a
-    sequence being alike (clustered by ``clusters`` (M,)), from per-frame residual derivatives."""
+    sequence being alike (clustered by ``clusters`` (M,)), from per-frame residual derivatives.
+
+    ``name`` "shift" is the shift's length, sqrt(dx² + dy²), varied along its own direction."""
     errs, renders = [], decoder_renders(model)
+    length = math.hypot(camera.dx, camera.dy)
     for sign in (-1, 0, 1):
-        value = getattr(camera, name) + sign * step
-        cam = Camera(**{**camera.__dict__, name: max(value, 0.0) if name == "blur" else value})
+        if name == "shift":
+            scale = (length + sign * step) / length if length > 0 else 1.0
+            cam = Camera(**{**camera.__dict__, "dx": camera.dx * scale, "dy": camera.dy * scale})
+        else:
+            value = getattr(camera, name) + sign * step
+            cam = Camera(**{**camera.__dict__, name: max(value, 0.0) if name == "blur" else value})
         errs.append(match(angle_table(model, cam, renders=renders), x)[1].double().numpy())
     d1 = (errs[2] - errs[0]) / (2 * step)  # (M,)
     curvature = float(np.mean(errs[2] - 2 * errs[1] + errs[0])) / step**2
     sums = np.bincount(np.unique(clusters, return_inverse=True)[1], weights=d1 - d1.mean())
-    value = getattr(camera, name)
+    value = length if name == "shift" else getattr(camera, name)
     if curvature <= 0:
         return [float("nan"), float("nan")]
     sd = math.sqrt(float((sums**2).sum())) / (len(d1) * curvature)
@@ -582,10 +589,12 @@ def camera_stage(model: PhysicsModel, path: str, theta: np.ndarray, fit: np.ndar
         effects.append({"effect": "blur", "value": camera.blur, "unit": "px (Gaussian σ)",
                         "interval": camera_interval(model, camera, "blur", x_fit, fit_seqs)})
     if camera.dx or camera.dy:
-        ix, iy = (camera_interval(model, camera, k, x_fit, fit_seqs) for k in ("dx", "dy"))
-        effects.append({"effect": "shift", "value": 0.5 * (camera.dx + camera.dy), "dx": camera.dx, "dy": camera.dy,
-                        "dx_interval": ix, "dy_interval": iy, "unit": "px (mean of right and down)",
-                        "interval": [0.5 * (ix[0] + iy[0]), 0.5 * (ix[1] + iy[1])]})
+        # the value is the shift's length, with its interval along its direction; dx and dy each with its own (the
+        # mean of the two, "mean 1 (95% interval 1.001..1.002)" for a shift of 2 px right, said little)
+        ix, iy, length = (camera_interval(model, camera, k, x_fit, fit_seqs) for k in ("dx", "dy", "shift"))
+        effects.append({"effect": "shift", "value": math.hypot(camera.dx, camera.dy), "dx": camera.dx, "dy": camera.dy,
+                        "dx_interval": ix, "dy_interval": iy, "unit": "px (length of the shift; dx right, dy down)",
+                        "interval": length})
     if camera.exposure != 1:  # named relative to the model's own frames
         own = reference_exposure(model, reference, still, renders, config.fit_frames, seed)
         if 255 * abs(camera.exposure / own - 1) > config.min_exposure:
