@@ -96,6 +96,23 @@ def test_a_zoomed_picture_is_said_and_not_named_a_shift(model, tmp_path: Path, z
         assert not {"shift", "blur"} & {e["effect"] for e in found.effects}
 
 
+def test_a_verdict_not_explained_on_a_zoomed_picture_names_the_zoom_first() -> None:
+    """dm_control filmed from 0.9 times as far read "not explained ...: the actions barely move the system", its
+    actuation unchanged: the size difference that no candidate describes comes first."""
+    from piga.diagnostics.diagnose import _zoom_first
+    from piga.diagnostics.results import Naming
+
+    config = V.CameraConfig()
+    unexplained = Naming([], [], "not explained by the candidates: the actions barely move the system", "unexplained")
+    zoomed = SimpleNamespace(scale=1.12, rescaled=lambda c: True)
+    said = _zoom_first(unexplained, zoomed, config).verdict
+    assert said.startswith("not explained: the pendulum is drawn x1.12 the size of the model's renders")
+    assert said.endswith("What the fits read through it: " + unexplained.verdict)
+    named = Naming([], [], "damping 0.128 1/s", "damping")  # a named effect stays as it is (the note says the size)
+    assert _zoom_first(named, zoomed, config) is named
+    assert _zoom_first(unexplained, SimpleNamespace(scale=1.0, rescaled=lambda c: False), config) is unexplained
+
+
 def test_repeated_frames_do_not_hide_sensor_noise(model, tmp_path: Path) -> None:
     """A repeated frame (a dropped frame) repeats its noise: the repeats are left out of the correlation."""
     path = _recording(tmp_path / "rec.h5", model, "noise")

@@ -3240,6 +3240,11 @@ def test_the_own_training_file_is_found_beside_a_moved_run_and_given_by_hand(tin
         with_training_file({"data": data}, run, given=other)
     with pytest.raises(ValueError, match="no such file"):
         with_training_file({"data": data}, run, given=tmp_path / "gone.h5")
+    with pytest.raises(ValueError, match="is a folder: give the data file"):
+        with_training_file({"data": data}, run, given=tmp_path)
+    (tmp_path / "notes.txt").write_text("not data\n")
+    with pytest.raises(ValueError, match=r"notes\.txt is not a piga data file \(HDF5"):
+        with_training_file({"data": data}, run, given=tmp_path / "notes.txt")
 
 
 @pytest.mark.parametrize("where", ["under-a-file", "/proc/piga-matplotlib"])

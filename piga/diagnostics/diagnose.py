@@ -1230,6 +1230,18 @@ def _seen_through_vision_gap(naming: Naming, vision_ratio: float | None) -> Nami
     return Naming(naming.effects, naming.notes, verdict, naming.verdict_class)
 
 
+def _zoom_first(naming: Naming, camera: CameraFindings | None, config: CameraConfig) -> Naming:
+    """A verdict of "not explained" on a picture drawn at another size than the model's renders names that first: no
+    candidate describes a zoom, and what the fits read through it may come from it (dm_control filmed from 0.9 times
+    as far read "the actions barely move the system: a refits to 5.32e-09", its actuation unchanged)."""
+    if camera is None or not camera.rescaled(config) or not naming.verdict.startswith("not explained"):
+        return naming
+    verdict = (f"not explained: the pendulum is drawn x{camera.scale:.2f} the size of the model's renders (a camera "
+               "nearer or farther, or a pendulum of another length), which piga-diagnose has no candidate for; identify "
+               "a model on this camera's frames. What the fits read through it: " + naming.verdict)
+    return Naming(naming.effects, naming.notes, verdict, naming.verdict_class)
+
+
 def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: CameraFindings | None,
                  generic: GenericBasis, config: DiagnoseConfig, from_gymnasium: bool = True,
                  ambiguity: Ambiguity | None = None, flip_bic_drop: float | None = None,
@@ -1887,6 +1899,7 @@ def analyse(obs: Observations, nom: Nominal, config: DiagnoseConfig = DiagnoseCo
     naming = _worse_than_nominal(naming, gap, final, nom)
     naming = _gap_left_unnamed(naming, gap)
     naming = _seen_through_vision_gap(naming, vision.ratio)
+    naming = _zoom_first(naming, camera, config.camera)
     gap = closure_of(naming, gap)
     # (whether the own file was read is known only now: a gain or gravity error asks for it)
     alike = " and in the model's own training file alike" if own_was_read(own) else ""

@@ -199,8 +199,14 @@ def with_training_file(checkpoint: dict[str, Any], run_dir: str | os.PathLike[st
     data = dict(checkpoint.get("data") or {})
     recorded = recorded_training_path(checkpoint)
     if given is not None:
+        if os.path.isdir(given):
+            raise ValueError(f"{given} is a folder: give the data file the model was trained on")
         if not os.path.isfile(given):
             raise ValueError(f"{given}: no such file (give the data file the model was trained on)")
+        stat = os.stat(given)
+        if "fingerprint" in data and _fingerprint(str(given), stat.st_ino, stat.st_size, stat.st_mtime_ns) is None:
+            raise ValueError(f"{given} is not a piga data file (HDF5 with /frames and /actions): give the file the "
+                             "model was trained on")
         if not _is_training_file(given, data):
             raise ValueError(f"{given} is not the file {run_dir} was trained on (its content differs from the one "
                              f"recorded at training{'' if recorded is None else f', {recorded}'})")
