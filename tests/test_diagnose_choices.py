@@ -505,6 +505,16 @@ def test_effects_that_predict_worse_than_the_nominal_are_not_a_correction(damped
     drifted = _worse_than_nominal(noted, strays, final, NOMINAL)
     assert drifted.verdict_class == "unexplained" and "strays further than the nominal model's" in drifted.verdict
     assert drifted.effects == [] and "damping" in drifted.verdict  # the fit is in the verdict, no effect established
+    # an exposure in half the sequences read "the frames show the actuation reversed ... retrain it with
+    # --signed-actuation" beside a free run 75x worse: a fit that explains nothing asks for no retraining
+    flipped = Naming(d.effects, ["the frames show the actuation reversed: a refits to -0.000 against the nominal 1.000 "
+                                 "(ΔBIC 727 for the reversed sign): a camera filming from the other side of the hinge, "
+                                 "or a motor wired the other way. A model trained on such frames without "
+                                 "--signed-actuation can only shrink its a toward 0 (its a is learnt in log space): "
+                                 "retrain it with --signed-actuation"], d.verdict, d.verdict_class)
+    note, = _worse_than_nominal(flipped, strays, final, NOMINAL).notes
+    assert note.startswith("the frames show the actuation reversed: a refits to -0.000 against the nominal 1.000")
+    assert "no flipped actuation is claimed" in note and "retrain" not in note
     from piga.diagnostics.diagnose import closure_of
 
     # a best fit that explains nothing closes nothing: its closure was printed beside the verdict ("-1467.5%")

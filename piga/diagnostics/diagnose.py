@@ -1192,9 +1192,19 @@ def _worse_than_nominal(naming: Naming, gap: Gap, final: fit.Model, nom: Nominal
 
 
 def _unclaimed(note: str) -> str:
-    """``note``, where it claims a gravity error, told that the fit it comes from is not a correction."""
+    """``note``, where it claims a gravity error or a flipped actuation, told that the fit it comes from is not a
+    correction (an exposure in half of a recording's sequences read "the frames show the actuation reversed ...
+    retrain it with --signed-actuation", with a = -8.6e-08 and a free run 75x worse than the nominal's)."""
+    if note.startswith(FLIP_NOTE):
+        reading = note.split(": a camera filming", 1)[0]
+        return (f"{reading}, in a fit that does not explain the recording: no flipped actuation is claimed, and "
+                "nothing here asks for --signed-actuation")
     return note.replace(": gravity, or the pendulum's length, differs from the identified model",
                         " in a fit that does not explain the recording: no gravity error is claimed")
+
+
+#: How the note of a flipped actuation begins (:func:`name_effects`).
+FLIP_NOTE = "the frames show the actuation reversed"
 
 
 def _gap_left_unnamed(naming: Naming, gap: Gap) -> Naming:
@@ -1393,7 +1403,7 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
     effects = [Effect(**e) for e in camera.effects] if camera is not None else []
     if flipped:
         effects.insert(0, Effect("flip", -1.0, "sign of the actuation"))
-        notes.append(f"the frames show the actuation reversed: a refits to {final.values['a']:.3f} against the nominal "
+        notes.append(f"{FLIP_NOTE}: a refits to {final.values['a']:.3f} against the nominal "
                      f"{nom.a:.3f}" + (f" (ΔBIC {-flip_bic_drop:.0f} for the reversed sign)" if flip_bic_drop else "")
                      + ": a camera filming from the other side of the hinge, or a motor wired the other way. A model "
                      "trained on such frames without --signed-actuation can only shrink its a toward 0 (its a is "
