@@ -835,7 +835,6 @@ def _warn_if_other_physics(checkpoint: dict[str, Any], env: DMCPendulumConfig) -
     fair test of a model identified on other physics, which its planner does not know. Where the file's config is
     not known (an older checkpoint whose file is gone), against DMC's defaults, saying so; nothing for a model of an
     imported recording."""
-    from envs.dmc import DMCPendulumConfig
     from piga.io.runs import training_env_config
 
     if trained := training_env_config(checkpoint):
@@ -845,7 +844,7 @@ def _warn_if_other_physics(checkpoint: dict[str, Any], env: DMCPendulumConfig) -
         return
     if (checkpoint.get("data") or {}).get("env_id", DMC_PENDULUM) != DMC_PENDULUM:  # (None: an imported recording)
         return
-    if (differs := physics_difference(DMCPendulumConfig().to_dict(), env)) is not None:
+    if (differs := physics_difference({}, env)) is not None:  # (every field at its default)
         print(f"{PROG}: warning: the env differs from DMC's default pendulum in {differs[0]} (default {differs[1]}), "
               "and the model's training file, which would say what it was trained on, is not found: the planner's "
               "physics may not match", file=sys.stderr)

@@ -95,7 +95,8 @@ from piga.world.model import PhysicsModel
 from piga.diagnostics.fit import Nominal
 from piga.world.effects import (BIAS, CANDIDATES, DAMPING, DEADZONE, DELAY, EFFECTS, FRICTION, SATURATION, SPEED_CLIP,
                                 TorqueTerm, WITHIN_FRAME, pendulum_gains)
-from piga.io.runs import (nominal_of, recorded_training_path, training_arrow, training_blank_mse, training_data_path,
+from piga.io.checkpoint import recorded_data_path
+from piga.io.runs import (nominal_of, training_arrow, training_blank_mse, training_data_path,
                           training_reconstruction_mse)
 
 #: Gymnasium Pendulum-v1's own speed clip (rad/s).
@@ -312,7 +313,7 @@ def diagnose(model: PhysicsModel, data: str | os.PathLike[str], config: Diagnose
     return analyse(obs, nominal_of(model), config, model=model, rec_training=rec_training,
                    progress=progress, camera=camera, arrow=training_arrow(checkpoint),
                    own=lambda: observe_own(model, checkpoint, progress, rematch=camera.rematched or config.matched_angles),
-                   own_missing=recorded_training_path(checkpoint) if own is None else None,
+                   own_missing=recorded_data_path((checkpoint or {}).get("data")) if own is None else None,
                    matched=lambda: match_file(model, str(data), Camera()))  # both read only when needed
 
 
@@ -1807,14 +1808,6 @@ def candidate_table(candidates: Candidates) -> list[CandidateRow]:
     return rows
 
 
-def own_was_read(own: Observations | Callable[[], Observations | None] | None) -> bool:
-    """Whether the model's own training file was read (``own`` given, or a cached reader that was asked and found it)."""
-    if own is None or isinstance(own, Observations):
-        return own is not None
-    info = getattr(own, "cache_info", None)
-    return info is not None and info().currsize > 0 and own() is not None
-
-
 def analyse(obs: Observations, nom: Nominal, config: DiagnoseConfig = DiagnoseConfig(), model: PhysicsModel | None = None,
             rec_training: float = 0.0, progress: bool = False, camera: CameraFindings | None = None,
             arrow: bool = True, own: Observations | Callable[[], Observations | None] | None = None,
@@ -1911,8 +1904,8 @@ def analyse(obs: Observations, nom: Nominal, config: DiagnoseConfig = DiagnoseCo
     naming = _seen_through_vision_gap(naming, vision.ratio)
     naming = _zoom_first(naming, camera, config.camera)
     gap = closure_of(naming, gap)
-    # (whether the own file was read is known only now: a gain or gravity error asks for it)
-    alike = " and in the model's own training file alike" if own_was_read(own) else ""
+    # (whether the own file was read is known only now: the naming reads it where it judges a gain or gravity error)
+    alike = " and in the model's own training file alike" if kwargs["own_readings"] else ""
     reading_notes = [note.format(own=alike) for note in reading_notes]
     res_nom = one_step_residuals(candidates.nominal.model, nom, obs.theta, obs.actions, np.arange(len(obs.theta)))
     exclusions = [f"excluded by the file's provenance: {e} ({why})" for e, why in excluded.items() if e in obs.impossible]

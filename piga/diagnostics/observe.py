@@ -193,9 +193,10 @@ def from_gymnasium(attrs: dict) -> bool:
     env_id = attrs.get("env_id")
     if env_id is not None:
         return str(env_id) == "piga/PixelPendulum-v0"
-    try:
-        config = json.loads(attrs.get("env_config", "{}"))
-    except (TypeError, ValueError):
+    config = attrs.get("env_config", {})
+    try:  # (a file's raw attribute is JSON text; piga.data.schema.inspect_dataset's attrs hold it parsed)
+        config = json.loads(config) if isinstance(config, (str, bytes)) else config
+    except ValueError:
         return False
     return isinstance(config, dict) and "draw_torque_arrow" in config
 

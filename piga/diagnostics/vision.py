@@ -640,17 +640,22 @@ def pendulum_reach(frames: np.ndarray, background: np.ndarray, hinge: np.ndarray
     pixel that the pendulum lights: one that differs from ``background`` (H, W) by more than half the pendulum's
     contrast, of the pendulum's ``sign`` (+1: brighter than the background; a shadow of the other sign is left out).
     None where under half the frames show the pendulum."""
-    d = frames - background  # (M, H, W)
-    contrast = float(np.percentile(sign * d, 99.9))
-    if not contrast > 0:
+    lit = _lit(frames - background, sign)  # (M, H, W)
+    if lit is None:
         return None
-    lit = sign * d > contrast / 2  # (M, H, W)
     rows, cols = np.mgrid[: frames.shape[1], : frames.shape[2]]
     r = np.hypot(rows - hinge[0], cols - hinge[1])  # (H, W)
     shown = lit.any(axis=(1, 2))
     if shown.sum() < 0.5 * len(frames):
         return None
     return float(np.median(np.where(lit[shown], r, 0.0).max(axis=(1, 2))))
+
+
+def _lit(d: np.ndarray, sign: float) -> np.ndarray | None:
+    """Where differences ``d`` from the background (M, H, W) exceed half the pendulum's contrast (their 99.9th
+    percentile) with its ``sign``; None where there is no contrast of that sign."""
+    contrast = float(np.percentile(sign * d, 99.9))
+    return sign * d > contrast / 2 if contrast > 0 else None
 
 
 def drawn_scale(frames: np.ndarray, renders: tuple[Tensor, Tensor], camera: Camera = Camera()) -> float | None:
@@ -665,7 +670,10 @@ def drawn_scale(frames: np.ndarray, renders: tuple[Tensor, Tensor], camera: Came
     empty = empty_scene((angles, seen))[0].numpy()
     d = drawn - empty
     sign = 1.0 if d.sum() >= 0 else -1.0  # the pendulum brighter or darker than the scene
-    often = (sign * d > np.percentile(sign * d, 99.9) / 2).mean(0)  # (H, W) how often each pixel is lit
+    lit = _lit(d, sign)
+    if lit is None:
+        return None
+    often = lit.mean(0)  # (H, W) how often each pixel is lit
     hinge = np.argwhere(often >= 0.9 * often.max()).mean(0)
     own = pendulum_reach(drawn, empty, hinge, sign)
     x = frames.astype(np.float32) / 255.0

@@ -173,15 +173,13 @@ def _is_training_file(path: str | os.PathLike[str], data: dict[str, Any]) -> boo
     """Whether ``path`` is a file with the fingerprint that the checkpoint's ``data`` record keeps (where it keeps one)."""
     if not (str(path) and os.path.isfile(path)):
         return False
-    if "fingerprint" not in data:
-        return True
+    return "fingerprint" not in data or _file_fingerprint(path) == data["fingerprint"]
+
+
+def _file_fingerprint(path: str | os.PathLike[str]) -> str | None:
+    """:func:`_fingerprint` of the file ``path`` as it is now."""
     stat = os.stat(path)
-    return _fingerprint(str(path), stat.st_ino, stat.st_size, stat.st_mtime_ns) == data["fingerprint"]
-
-
-def recorded_training_path(checkpoint: dict[str, Any] | None) -> str | None:
-    """The training file's path as the checkpoint records it, from the current folder (whether or not it is there)."""
-    return recorded_data_path((checkpoint or {}).get("data"))
+    return _fingerprint(str(path), stat.st_ino, stat.st_size, stat.st_mtime_ns)
 
 
 def with_training_file(checkpoint: dict[str, Any], run_dir: str | os.PathLike[str],
@@ -197,14 +195,13 @@ def with_training_file(checkpoint: dict[str, Any], run_dir: str | os.PathLike[st
         ValueError: ``given`` is not the file the run was trained on (another fingerprint), or not a file.
     """
     data = dict(checkpoint.get("data") or {})
-    recorded = recorded_training_path(checkpoint)
+    recorded = recorded_data_path(data)
     if given is not None:
         if os.path.isdir(given):
             raise ValueError(f"{given} is a folder: give the data file the model was trained on")
         if not os.path.isfile(given):
             raise ValueError(f"{given}: no such file (give the data file the model was trained on)")
-        stat = os.stat(given)
-        if "fingerprint" in data and _fingerprint(str(given), stat.st_ino, stat.st_size, stat.st_mtime_ns) is None:
+        if "fingerprint" in data and _file_fingerprint(given) is None:
             raise ValueError(f"{given} is not a piga data file (HDF5 with /frames and /actions): give the file the "
                              "model was trained on")
         if not _is_training_file(given, data):
