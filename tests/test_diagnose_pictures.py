@@ -85,7 +85,8 @@ def test_a_zoomed_picture_is_said_and_not_named_a_shift(model, tmp_path: Path, z
     found = V.camera_stage(model, str(path), np.zeros((N, T)), np.arange(N) < 16, None)
     assert found.scale == pytest.approx(zoom, abs=0.06)
     config = DiagnoseConfig()
-    _, notes = summarise_vision(SimpleNamespace(rec_mse=np.ones(3)), 1.0, found, None, [], config)
+    vision, notes = summarise_vision(SimpleNamespace(rec_mse=np.ones(3)), 1.0, found, None, [], config)
+    assert vision.to_dict()["drawn_scale"] == found.scale  # in report.json's vision
     said = [n for n in notes if "no zoom candidate" in n]
     if zoom == 1.0:
         assert not found.rescaled(config.camera) and not said

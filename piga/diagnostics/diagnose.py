@@ -1624,7 +1624,7 @@ def summarise_vision(obs: Observations, rec_training: float, camera: CameraFindi
         summary = CameraSummary(camera.camera, camera.table, camera.noise, int(stale.sum()) if stale is not None else 0,
                                 camera.drops, camera.drop_rate, camera.leading, camera.matched_error_nominal,
                                 camera.matched_error, "matched" if camera.rematched else "encoder",
-                                camera.noise_correlation)
+                                camera.noise_correlation, camera.scale)
         if camera.noise > config.camera.min_noise and camera.noise_correlation > config.camera.max_noise_correlation:
             notes.append(f"the pixels that the pendulum never reaches change (a spread of {camera.noise:.2f} gray levels), "
                          f"but their changes persist from frame to frame (correlation {camera.noise_correlation:.2f} between "

@@ -271,6 +271,8 @@ class CameraSummary(_ByKey):
     """"matched" (the dynamics use angles matched through the camera) or "encoder"."""
     noise_correlation: float = float("nan")
     """Correlation of the still pixels between successive frames: sensor noise has none (NaN: not measured)."""
+    drawn_scale: float | None = None
+    """The pendulum's drawn size over the decoder's renders', through the accepted camera (None: not measured)."""
 
 
 @dataclass(frozen=True)
