@@ -1636,7 +1636,11 @@ def summarise_vision(obs: Observations, rec_training: float, camera: CameraFindi
                          "hinge, median over frames): a camera nearer or farther (a zoom), or a pendulum of another "
                          "length. piga-diagnose has no zoom candidate, so no blur or shift is named on these frames (fitted "
                          "to renders of another size, a shift only takes up the difference)")
-        if camera.rematched:
+        if camera.matched_for_sign:
+            notes.append("the encoder's angles did not show the actuation's sign, the angles found by matching every "
+                         "frame to the decoder's renders do: the selection, the values and the gap are all on those "
+                         "angles (analysis by synthesis), not on the encoder's")
+        elif camera.rematched:
             notes.append("the dynamics are fitted on angles found by matching every frame to the decoder's renders "
                          "through the fitted camera (analysis by synthesis), not on the encoder's angles")
     named_vision = {"blur", "shift", "exposure", "noise"} & {e.effect for e in effects}
@@ -1849,9 +1853,11 @@ def analyse(obs: Observations, nom: Nominal, config: DiagnoseConfig = DiagnoseCo
         generic = generic_basis(chosen.model, nom, obs, theta, stale, config)
     final = chosen.model
     reading = windows  # the windows the chosen effects' values are read on
+    reading_angles = None  # (N, T) their angles, where not the selection's
     reading_notes = []
     if config.matched_angles and matched is not None and not (camera is not None and camera.rematched):
-        reading = cut_windows(obs, matched() if callable(matched) else matched, stale, config)
+        reading_angles = matched() if callable(matched) else matched
+        reading = cut_windows(obs, reading_angles, stale, config)
         if final.effects:  # (no effect chosen: no value read)
             reading_notes.append("the chosen effects' values are read on angles found by matching every frame to the "
                                  "decoder's renders, in this recording{own}; the selection and the gap are on the "
@@ -1861,6 +1867,14 @@ def analyse(obs: Observations, nom: Nominal, config: DiagnoseConfig = DiagnoseCo
     flip_bic_drop = candidates.flip_bic_drop
     if reading is not windows:  # the chosen effects' values (and what they are judged against) read anew
         final, read_flip = read_with_sign(final, nom, reading, config.bic_margin)
+        if read_flip and camera is not None and reading_angles is not None:
+            # the encoder misreads this recording (it missed the actuation's sign): the selection and the gap on its
+            # angles are no better than their sign, so everything is done again on the matched angles (measured:
+            # dm_control filmed from the other side of the hinge with its damping tripled was named "flipped
+            # actuation" alone, at a free-run closure of -12.5% on the encoder's angles)
+            return analyse(obs, nom, config, model, rec_training, progress,
+                           dataclass_replace(camera, theta=reading_angles, matched_for_sign=True), arrow, own, None,
+                           own_missing)
         if read_flip:
             flip_bic_drop = read_flip
             reading_notes.append("the encoder's angles did not show the actuation's sign, the angles matched to the "
