@@ -81,3 +81,21 @@ def test_matched_angles_read_the_chosen_values_on_the_matched_angles(noisy) -> N
     assert any("matching every frame to the decoder's renders" in n for n in on_matched.notes)
     plain = analyse(noisy, NOMINAL, replace(config, matched_angles=False), matched=lambda: matched)
     assert plain.corrected["b"] > 0.203 and not any("decoder's renders" in n for n in plain.notes)
+
+
+def test_a_sign_seen_only_on_the_matched_angles_moves_the_whole_diagnosis_onto_them() -> None:
+    """An encoder that misreads the recording (here: angles that barely respond to the actions) misses the actuation's
+    sign, and with it the selection misses what else there is; the matched angles show the reversed actuation: then the
+    selection, the values and the gap are all done on them (dm_control filmed from the other side of the hinge, with
+    its damping tripled, was named "flipped actuation" alone, at a free-run closure of -12.5%)."""
+    from piga.diagnostics.vision import Camera, CameraFindings
+
+    truth = planted({"gain": -1.0, "damping": 0.3}, n=40, t=20)
+    misread = planted({"gain": 0.05}, n=40, t=20, noise=0.02)  # the same actions (seed), hardly any response
+    camera = CameraFindings(Camera(), 0.0, 0.0, 0, 0, [], 1e-4, 1e-4, [])
+    d = analyse(misread, NOMINAL, DiagnoseConfig(bootstrap=0, fit_starts=False, matched_angles=True), camera=camera,
+                matched=lambda: truth.theta)
+    named = {e.effect: e.value for e in d.effects}
+    assert "flip" in named and abs(named.get("damping", 0) / 0.3 - 1) < 0.05, d.verdict
+    assert any("the selection, the values and the gap are all on those angles" in n for n in d.notes)
+    assert d.vision.camera.angles == "matched"

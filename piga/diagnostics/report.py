@@ -14,6 +14,7 @@ import numpy as np
 from piga.io.atomic import (OutputExistsError, atomic_output, check_folder_target, check_writable_target,
                             missing_folders, partial_path, remove_empty_folders, write_json, written_together)
 from piga.diagnostics.results import Diagnosis, VisionSummary, interval_text, value_text
+from piga.diagnostics.vision import Camera
 from piga.diagnostics.twin import MEASURABLE_GAP
 from piga.evaluation.episodes import EpisodeSummary, summary_markdown
 from piga.evaluation.plots import plt, save_figure
@@ -146,7 +147,8 @@ def _camera_lines(v: VisionSummary) -> list[str]:
         + (f", and the first {c.leading_repeats} frame{'s' if c.leading_repeats != 1 else ''} of nearly every sequence "
            "repeat the first" if c.leading_repeats else "; no sequence starts with repeated frames")
         + ". The dynamics are fitted on "
-        + ("angles matched to the decoder's renders through the fitted camera." if c.angles == "matched"
+        + ("angles matched to the decoder's renders" + (" through the fitted camera." if c.camera != Camera() else ".")
+           if c.angles == "matched"
            else "the encoder's angles."), "",
         "  Camera candidates, fitted by matching frames to the decoder's renders over the whole circle "
         "(fit split), scored on held-out frames:", "",
@@ -206,7 +208,7 @@ def closure_line(d: Diagnosis) -> str:
     mean = (f"mean over all windows in angles: MSE {number(g.free_run_mse_nominal)} -> {number(g.free_run_mse_corrected)} "
             f"rad², raw closure {number(100 * g.free_run_closure, '.1f')}%")
     if pixels:
-        mean += ", not comparable: the corrected model reads its angles through the fitted camera"
+        mean += ", not comparable: the corrected model reads its angles by matching the frames to the decoder's renders"
     return f"free-run closure {basis} {headline} ({detail}; {mean}); {corrected}"
 
 
@@ -224,8 +226,8 @@ def headline_text(d: Diagnosis) -> str:
     note = f" {g.floor_note[0].upper()}{g.floor_note[1:]}." if g.floor_note else ""
     if g.closure_basis == "pixels":
         kind = "of the gap above the matched floor, in pixels" if g.floor_subtracted else "raw, in pixels"
-        headline = (f"**Free-run closure {_pct(g.free_run_gap_closure)}, {kind}**: a camera effect was found, so the "
-                    "corrected model reads other angles from the frames than the encoder, and angle errors of the two "
+        headline = (f"**Free-run closure {_pct(g.free_run_gap_closure)}, {kind}**: the corrected model reads its angles "
+                    "by matching the frames to the decoder's renders, not with the encoder, and angle errors of the two "
                     "would not be comparable. On the typical held-out window (the median over windows of each window's "
                     f"mean pixel MSE of the rendered free run), the nominal model is at {number(g.typical_pixel_mse_nominal, '.3g')}, "
                     f"the corrected one at {number(g.typical_pixel_mse_corrected, '.3g')}, and no prediction can beat "
@@ -289,8 +291,8 @@ def markdown(d: Diagnosis, model: str, data: str, command: str) -> str:
         f"Mean over all held-out windows and horizons 1..{g.horizon[-1]}: angle MSE {number(g.free_run_mse_nominal, '.3g')} rad² "
         f"nominal, {number(g.free_run_mse_corrected, '.3g')} rad² corrected"
         + (" (nothing to close)" if g.no_gap else f": raw closure {100 * g.free_run_closure:.1f}%")
-        + (", in angles, which the corrected model reads through the fitted camera and the nominal one through the "
-           "encoder: not comparable, unlike the headline in pixels" if g.closure_basis == "pixels" else "") + ". That mean "
+        + (", in angles, which the corrected model reads by matching the frames to the decoder's renders and the "
+           "nominal one with the encoder: not comparable, unlike the headline in pixels" if g.closure_basis == "pixels" else "") + ". That mean "
         "is dominated by the few windows that pass near upright, where any error grows fast, even in an exactly right "
         "model." + floor + " One step: RMSE "
         f"{math.degrees(g.one_step_rms_nominal_rad):.3f}° nominal, {math.degrees(g.one_step_rms_corrected_rad):.3f}° corrected.", "",

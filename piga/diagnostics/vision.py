@@ -427,6 +427,10 @@ class CameraFindings:
     """The pendulum's drawn size in the recording over that in the decoder's renders (:func:`drawn_scale`; None: not
     measured). Beyond ``CameraConfig.max_scale_change`` from 1, no blur or shift is accepted."""
 
+    matched_for_sign: bool = False
+    """``theta`` holds the angles matched with no camera because the encoder's angles missed the actuation's sign
+    (:func:`~piga.diagnostics.diagnose.read_with_sign`), not because a camera or noise was accepted."""
+
     def rescaled(self, config: CameraConfig) -> bool:
         """Whether the pendulum is drawn at another size than the model's renders (:func:`drawn_scale`)."""
         return self.scale is not None and abs(self.scale - 1) > config.max_scale_change
