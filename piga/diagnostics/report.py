@@ -158,7 +158,7 @@ def _camera_lines(v: VisionSummary) -> list[str]:
     for row in c.camera_candidates:
         cam = row["camera"]
         lines.append(f"  | {row['candidate']} | {cam['blur']:.3f} | {cam['dx']:.3f} | {cam['dy']:.3f} | "
-                     f"{cam.get('exposure', 1.0):.3f} | {row['held_out_matched_mse']:.3e} | {100 * row['drop']:.1f}% | {'yes' if row['accepted'] else 'no'} |")
+                     f"{cam.get('exposure', 1.0):.3f} | {row['held_out_matched_mse']:.3e} | {100 * row['drop']:.1f}% | {'yes' if row['accepted'] else 'no (in part of the recording only)' if row.get('partial') else 'no'} |")
     lines.append("")
     return lines
 
@@ -269,7 +269,7 @@ def markdown(d: Diagnosis, model: str, data: str, command: str) -> str:
     if d.effects:
         lines += ["| effect | value | 95% interval | unit |", "|---|---|---|---|"]
         for e in d.effects:
-            rows = [(e.effect, e.value, e.interval, e.unit)]
+            rows = [(e.effect, e.value, e.interval, e.unit + (f", {e.where}" if e.where else ""))]
             if e.effect == "shift":  # its length, and each component with its own interval
                 rows += [("shift right (dx)", e.dx, e.dx_interval, "px"), ("shift down (dy)", e.dy, e.dy_interval, "px")]
             for name, value, ci, unit in rows:

@@ -85,6 +85,10 @@ class Effect(_ByKey):
     """Shift only: 95% interval of dx."""
     dy_interval: list[float] | None = None
     """Shift only: 95% interval of dy."""
+    where: str | None = None
+    """A camera effect in part of the recording only: where it shows ("in 25 of 50 sequences (the even ones; in the
+    others, none)", "from frame 12 on (in the frames before it, none)"; :mod:`piga.diagnostics.partial`); None: in
+    all of it."""
 
     def describe(self) -> str:
         """One phrase for the verdict line."""
@@ -99,14 +103,16 @@ class Effect(_ByKey):
         if self.effect == "within_frame":
             return (f"the system integrates within the frame (moves under the held action between frames; "
                     f"fits best as {self.value:g} substeps per frame)")
+        where = f" {self.where}" if self.where else ""
         if self.effect == "shift":  # each component with its own interval
             return (f"shift {_with_interval(self.dx, self.dx_interval, 'px right')}, "
-                    f"{_with_interval(self.dy, self.dy_interval, 'px down')}")
-        return f"{self.effect} {_with_interval(self.value, self.interval, self.unit)}"
+                    f"{_with_interval(self.dy, self.dy_interval, 'px down')}{where}")
+        return f"{self.effect} {_with_interval(self.value, self.interval, self.unit)}{where}"
 
     def to_dict(self) -> dict[str, Any]:
         shift_only = ("dx", "dy", "dx_interval", "dy_interval")
-        return {k: v for k, v in asdict(self).items() if k not in shift_only or self.effect == "shift"}
+        return {k: v for k, v in asdict(self).items()
+                if (k not in shift_only or self.effect == "shift") and (k != "where" or v is not None)}
 
 
 @dataclass(frozen=True)
