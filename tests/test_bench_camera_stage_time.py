@@ -33,4 +33,5 @@ def test_it_gives_the_stage_the_fit_split_and_prints_its_time_and_camera(
     assert path == str(tiny_data) and shape == (n, t) and stale is None
     assert fit == [i < int(0.75 * n) for i in range(n)]
     out = capsys.readouterr().out
-    assert out.startswith("camera stage: ") and out.rstrip().endswith("camera Camera(blur=0.5, dx=0.0, dy=0.0, exposure=1.0)")
+    assert out.startswith("camera stage: ")
+    assert out.rstrip().endswith("camera Camera(blur=0.5, dx=0.0, dy=0.0, exposure=1.0, zoom=1.0)")

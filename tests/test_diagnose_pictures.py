@@ -14,6 +14,7 @@ import torch
 
 from piga.diagnostics import vision as V
 from piga.diagnostics.diagnose import DiagnoseConfig, summarise_vision
+from piga.diagnostics.results import Effect
 from tests.test_vision import SIZE, _renders, rod_model
 
 N, T = 24, 16
@@ -68,33 +69,56 @@ def test_a_moving_shadow_is_not_named_sensor_noise(model, tmp_path: Path, change
         assert len(persist) == 1 and "not sensor noise" in persist[0] and f"{found.noise:.2f} gray levels" in persist[0]
 
 
-@pytest.mark.parametrize("zoom", [1.0, 0.8, 1.2])
-def test_a_zoomed_picture_is_said_and_not_named_a_shift(model, tmp_path: Path, zoom: float) -> None:
-    """dm_control filmed from 1.2 times farther (the pendulum drawn smaller, the physics nominal) was named "shift
-    -0.725 px down" at a 21% drop: the pendulum's drawn size is measured against the decoder's renders, and where it
-    differs no blur or shift is accepted, and the report says so."""
+def _zoomed(path: Path, zoom: float) -> Path:
+    """The file's frames zoomed by ``zoom`` about the image centre (the rod's hinge), as cv2 warps them."""
     import cv2
 
-    path = _recording(tmp_path / "rec.h5", model, "none")
     with h5py.File(path, "a") as f:
         c = SIZE / 2 - 0.5  # the hinge, in the pixel centres' coordinates
         warp = np.array([[zoom, 0.0, (1 - zoom) * c], [0.0, zoom, (1 - zoom) * c]])
         frames = f["frames"][...].reshape(-1, SIZE, SIZE)
         f["frames"][...] = np.stack([cv2.warpAffine(x, warp, (SIZE, SIZE), flags=cv2.INTER_LINEAR,
                                                     borderMode=cv2.BORDER_REPLICATE) for x in frames]).reshape(N, T, SIZE, SIZE)
-    found = V.camera_stage(model, str(path), np.zeros((N, T)), np.arange(N) < 16, None)
-    assert found.scale == pytest.approx(zoom, abs=0.06)
-    config = DiagnoseConfig()
+    return path
+
+
+@pytest.mark.parametrize("zoom", [1.0, 0.8])
+def test_a_zoomed_picture_is_named_a_zoom_and_not_a_shift(model, tmp_path: Path, zoom: float) -> None:
+    """dm_control filmed from 1.1 times farther (the pendulum drawn x0.91, the physics nominal) was named "shift -0.492
+    px down": the zoom is a camera candidate, named with its factor, the angles read through it, and no shift."""
+    path = _zoomed(_recording(tmp_path / "rec.h5", model, "none"), zoom)
+    config = DiagnoseConfig(camera=V.CameraConfig(fit_frames=120, held_frames=60))  # fewer frames: a faster fit
+    found = V.camera_stage(model, str(path), np.zeros((N, T)), np.arange(N) < 16, None, config.camera)
     vision, notes = summarise_vision(SimpleNamespace(rec_mse=np.ones(3)), 1.0, found, None, [], config)
     assert vision.to_dict()["drawn_scale"] == found.scale  # in report.json's vision
-    said = [n for n in notes if "no zoom candidate" in n]
+    assert not found.rescaled(config.camera) and found.scale == pytest.approx(1.0, abs=0.06)  # through the zoom
+    said = [n for n in notes if "drawn x" in n]
+    named = {e["effect"]: e for e in found.effects}
+    assert found.camera.dx == found.camera.dy == found.camera.blur == 0
+    assert not {"shift", "blur", "exposure"} & set(named)
     if zoom == 1.0:
-        assert not found.rescaled(config.camera) and not said
+        assert found.camera == V.Camera() and not said and not found.rematched
     else:
-        assert found.rescaled(config.camera) and len(said) == 1 and f"x{found.scale:.2f} the size" in said[0]
-        assert not any(r["accepted"] for r in found.table if "shift" in r["candidate"] or "blur" in r["candidate"])
-        assert found.camera.dx == found.camera.dy == found.camera.blur == 0
-        assert not {"shift", "blur"} & {e["effect"] for e in found.effects}
+        assert found.camera.zoom == pytest.approx(zoom, abs=0.02) and found.rematched
+        lo, hi = named["zoom"]["interval"]
+        assert lo <= found.camera.zoom <= hi and hi - lo < 0.05
+        assert len(said) == 1 and f"drawn x{found.camera.zoom:.3g} the size" in said[0] and "another length" in said[0]
+        assert "zoom" in Effect(**named["zoom"]).describe() and "another length" in Effect(**named["zoom"]).describe()
+
+
+def test_a_size_that_no_zoom_takes_up_accepts_no_shift(model, tmp_path: Path) -> None:
+    """Where the zoom is not tried (or does not take the size difference up), no blur or shift fitted to renders of
+    another size is accepted, and the report says the size."""
+    path = _zoomed(_recording(tmp_path / "rec.h5", model, "none"), 0.8)
+    config = V.CameraConfig(zoom_scale=10.0)  # the zoom never tried
+    found = V.camera_stage(model, str(path), np.zeros((N, T)), np.arange(N) < 16, None, config)
+    assert found.scale == pytest.approx(0.8, abs=0.06) and found.rescaled(config)
+    _, notes = summarise_vision(SimpleNamespace(rec_mse=np.ones(3)), 1.0, found, None, [],
+                                DiagnoseConfig(camera=config))
+    said = [n for n in notes if "does not describe" in n]
+    assert len(said) == 1 and f"x{found.scale:.2f} the size" in said[0]
+    assert not any(r["accepted"] for r in found.table if "shift" in r["candidate"] or "blur" in r["candidate"])
+    assert found.camera == V.Camera() and not found.effects
 
 
 def test_a_verdict_not_explained_on_a_zoomed_picture_names_the_zoom_first() -> None:
@@ -161,6 +185,9 @@ def test_the_diagnose_page_gives_the_camera_stage_s_thresholds() -> None:
     assert f"more than {100 * c.max_missing:g}% of such held-out frames is refused" in text
     assert f"{'half' if c.min_core_share == 0.5 else c.min_core_share} of its brightening" in text
     assert f"through the accepted camera by {c.repeats.visible:g} gray levels or more" in text
+    assert f"renders by more than {100 * c.zoom_scale:g}% (`CameraConfig.zoom_scale`)" in text
+    assert f"|z − 1| exceeds {c.min_zoom:g} (`CameraConfig.min_zoom`)" in text
+    assert f"differs by more than {100 * c.max_scale_change:g}% (`CameraConfig.max_scale_change`)" in text
 
 
 def test_another_scene_is_refused_unless_a_camera_explains_it() -> None:

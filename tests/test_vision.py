@@ -58,6 +58,17 @@ def test_camera_shift_is_the_warp_of_the_shift_effect(dx: float, dy: float) -> N
     np.testing.assert_allclose(ours, theirs, atol=1e-4)
 
 
+@pytest.mark.parametrize("zoom, dx, dy", [(0.9, 0.0, 0.0), (1.15, 0.0, 0.0), (0.85, 1.5, -0.5)])
+def test_camera_zoom_is_the_warp_about_the_image_centre(zoom: float, dx: float, dy: float) -> None:
+    """A zoom about the image centre, then the shift: cv2's warp of a camera nearer or farther (the frame-edit's)."""
+    x = np.random.default_rng(1).random((SIZE, SIZE)).astype(np.float32)
+    ours = V.Camera(zoom=zoom, dx=dx, dy=dy).apply(torch.from_numpy(x)[None, None])[0, 0].numpy()
+    c = SIZE / 2 - 0.5
+    warp = cv2.getRotationMatrix2D((c, c), 0, zoom) + np.array([[0.0, 0.0, dx], [0.0, 0.0, dy]])
+    theirs = cv2.warpAffine(x, warp, (SIZE, SIZE), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    np.testing.assert_allclose(ours, theirs, atol=1e-4)
+
+
 def test_matching_recovers_the_angle_of_each_frame() -> None:
     model = rod_model(64)
     theta = torch.rand(64, generator=torch.Generator().manual_seed(2)) * 2 * math.pi - math.pi
@@ -83,6 +94,20 @@ def test_fit_camera_recovers_a_planted_blur_or_shift(model: PhysicsModel, camera
     for name in ("blur", "dx", "dy"):
         assert getattr(fitted, name) == pytest.approx(getattr(camera, name), abs=0.08), fitted
     assert V.matched_error(model, fitted, x) < 0.2 * V.matched_error(model, V.Camera(), x)
+
+
+@pytest.mark.parametrize("zoom", [0.9, 1.1])
+def test_fit_camera_recovers_a_planted_zoom(model: PhysicsModel, zoom: float) -> None:
+    theta = torch.rand(150, generator=torch.Generator().manual_seed(3)) * 2 * math.pi - math.pi
+    c = SIZE / 2 - 0.5
+    frames = np.stack([cv2.warpAffine(f, cv2.getRotationMatrix2D((c, c), 0, zoom), (SIZE, SIZE), flags=cv2.INTER_LINEAR,
+                                      borderMode=cv2.BORDER_REPLICATE) for f in _renders(model, theta)])
+    x = V._flat(frames)
+    fitted = V.fit_camera(model, x, blur=False, shift=False, zoom=True, rounds=1)
+    assert fitted.zoom == pytest.approx(zoom, abs=0.01) and fitted.material(V.CameraConfig()) == {"zoom"}
+    assert V.matched_error(model, fitted, x) < 0.3 * V.matched_error(model, V.Camera(), x)
+    clean = V.fit_camera(model, V._flat(_renders(model, theta)), blur=False, shift=False, zoom=True, rounds=1)
+    assert abs(clean.zoom - 1) < V.CameraConfig().min_zoom, clean
 
 
 def test_a_clean_recording_gains_nothing_from_a_camera(model: PhysicsModel) -> None:

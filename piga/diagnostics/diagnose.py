@@ -9,9 +9,9 @@ Steps (no state labels, no effect labels; only frames and actions of the "real" 
    :mod:`piga.diagnostics.repeats`). The re-rendering error against the model's own training error
    says how much of the gap is vision; far above it (``DiagnoseConfig.max_scene_ratio``), the recording is not the
    scene the model knows, and the diagnosis refuses rather than name effects.
-2. The camera stage (:func:`~piga.diagnostics.vision.camera_stage`): blur, shift and noise fitted
-   by matching frames to the decoder's renders; dropped frames and a late camera from the
-   repeats. With blur, shift or noise, the dynamics below use the matched angles.
+2. The camera stage (:func:`~piga.diagnostics.vision.camera_stage`): blur, shift, zoom, exposure and noise
+   fitted by matching frames to the decoder's renders; dropped frames and a late camera from the
+   repeats. With any of them, the dynamics below use the matched angles.
 3. Cut the angles into windows: multi-step (8 steps) on the fit split (the file's train split)
    for fitting, one-step for the information criterion, free-run on the held-out split. Repeated
    frames are left out of the fits, and a free run predicts their repeat.
@@ -89,8 +89,8 @@ from piga.diagnostics.residuals import (action_correlation, autocorrelation, bin
 from piga.diagnostics.results import (Ambiguity, CameraSummary, CandidateRow, Diagnosis, Effect, Gap, GenericBasis,
                                       Naming, PixelErrors, Score, SelectionStep, VisionSummary)
 from piga.diagnostics.twin import MEASURABLE_GAP, calibrate_floor, gap_closure, mean_gap_closure, twin_floor
-from piga.diagnostics.vision import (MAX_BLUR, MAX_EXPOSURE, MAX_SHIFT, MIN_EXPOSURE, Camera, CameraConfig,
-                                     CameraFindings, angle_table, camera_stage, match, match_file)
+from piga.diagnostics.vision import (MAX_BLUR, MAX_EXPOSURE, MAX_SHIFT, MAX_ZOOM, MIN_EXPOSURE, MIN_ZOOM, Camera,
+                                     CameraConfig, CameraFindings, angle_table, camera_stage, match, match_file)
 from piga.io.choices import check_ranges, check_types
 from piga.world.model import PhysicsModel
 from piga.diagnostics.fit import Nominal
@@ -332,7 +332,8 @@ def check_scene_through_camera(unlike: NotTheSceneError | None, camera: Camera, 
 def check_camera_in_range(camera: Camera, matched_error: float, rec_training: float) -> None:
     """Refuses a recording whose accepted camera stops at a bound of the camera candidates (blur
     :data:`~piga.diagnostics.vision.MAX_BLUR` px, shifts :data:`~piga.diagnostics.vision.MAX_SHIFT` px, the exposure's
-    :data:`~piga.diagnostics.vision.MIN_EXPOSURE` and :data:`~piga.diagnostics.vision.MAX_EXPOSURE`): the camera
+    :data:`~piga.diagnostics.vision.MIN_EXPOSURE` and :data:`~piga.diagnostics.vision.MAX_EXPOSURE`, the zoom's
+    :data:`~piga.diagnostics.vision.MIN_ZOOM` and :data:`~piga.diagnostics.vision.MAX_ZOOM`): the camera
     lies beyond what they describe, and every angle read through it is a guess (dm_control's camera 0, looking down
     at 45°, read by a model of the face-on camera: "blur 4 px; shift -5, -5 px; damping 48.7", with the actuation
     "flipped")."""
@@ -341,13 +342,14 @@ def check_camera_in_range(camera: Camera, matched_error: float, rec_training: fl
            if abs(value) >= (1 - 1e-3) * MAX_SHIFT]
     at += [f"exposure {camera.exposure:g}" for bound in (MIN_EXPOSURE, MAX_EXPOSURE)
            if abs(camera.exposure - bound) <= 1e-3 * bound]
+    at += [f"zoom {camera.zoom:g}" for bound in (MIN_ZOOM, MAX_ZOOM) if abs(camera.zoom - bound) <= 1e-3 * bound]
     if not at:
         return
     worse = f", where its frames match the model's renders at {matched_error / rec_training:.2g}x the model's training " \
             "error" if rec_training > 0 else ""
     raise NotTheSceneError(f"this is not a camera the model knows: the best camera fit stops at the candidates' bound "
                            f"({', '.join(at)}; blur up to {MAX_BLUR:g} px, shifts up to {MAX_SHIFT:g} px, "
-                           f"exposure {MIN_EXPOSURE:g} to {MAX_EXPOSURE:g}){worse}; "
+                           f"exposure {MIN_EXPOSURE:g} to {MAX_EXPOSURE:g}, zoom {MIN_ZOOM:g} to {MAX_ZOOM:g}){worse}; "
                            "identify a model on this camera's frames")
 
 
@@ -1272,14 +1274,14 @@ def _seen_through_vision_gap(naming: Naming, vision_ratio: float | None) -> Nami
 
 
 def _zoom_first(naming: Naming, camera: CameraFindings | None, config: CameraConfig) -> Naming:
-    """A verdict of "not explained" on a picture drawn at another size than the model's renders names that first: no
-    candidate describes a zoom, and what the fits read through it may come from it (dm_control filmed from 0.9 times
-    as far read "the actions barely move the system: a refits to 5.32e-09", its actuation unchanged)."""
+    """A verdict of "not explained" on a picture drawn at another size than the model's renders, which the zoom
+    candidate did not take up, names that first: what the fits read through it may come from it (dm_control filmed
+    from 0.9 times as far read "the actions barely move the system: a refits to 5.32e-09", its actuation unchanged)."""
     if camera is None or not camera.rescaled(config) or not naming.verdict.startswith("not explained"):
         return naming
     verdict = (f"not explained: the pendulum is drawn x{camera.scale:.2f} the size of the model's renders (a camera "
-               "nearer or farther, or a pendulum of another length), which piga-diagnose has no candidate for; identify "
-               "a model on this camera's frames. What the fits read through it: " + naming.verdict)
+               "nearer or farther, or a pendulum of another length), which the zoom candidate does not describe; "
+               "identify a model on this camera's frames. What the fits read through it: " + naming.verdict)
     return Naming(naming.effects, naming.notes, verdict, naming.verdict_class)
 
 
@@ -1678,10 +1680,16 @@ def summarise_vision(obs: Observations, rec_training: float, camera: CameraFindi
                          "the lighting" + (", here the camera effect in part of the recording" if camera.partial else "")
                          + ", so no noise is named")
         if camera.rescaled(config.camera):
-            notes.append(f"the pendulum is drawn x{camera.scale:.2f} the size of the model's renders (its reach from the "
-                         "hinge, median over frames): a camera nearer or farther (a zoom), or a pendulum of another "
-                         "length. piga-diagnose has no zoom candidate, so no blur or shift is named on these frames (fitted "
-                         "to renders of another size, a shift only takes up the difference)")
+            notes.append(f"the pendulum is drawn x{camera.scale:.2f} the size of the model's renders (its reach from "
+                         "the hinge, median over frames): a camera nearer or farther (a zoom), or a pendulum of "
+                         "another length, which the zoom candidate (about the image centre) does not describe, so no "
+                         "blur, shift or zoom is named on these frames (fitted to renders of another size, a shift "
+                         "only takes up the difference)")
+        elif camera.camera.zoom != 1:
+            notes.append(f"the pendulum is drawn x{camera.camera.zoom:.3g} the size of the model's renders (the zoom "
+                         "about the image centre that matches the frames best): a camera nearer or farther, or a "
+                         "pendulum of another length, draws it so. The angles are read through it; a pendulum of "
+                         "another length shows in the physics too (g/l)")
         if camera.matched_for_sign:
             notes.append("the encoder's angles did not show the actuation's sign, the angles found by matching every "
                          "frame to the decoder's renders do: the selection, the values and the gap are all on those "
@@ -1691,7 +1699,7 @@ def summarise_vision(obs: Observations, rec_training: float, camera: CameraFindi
         elif camera.rematched:
             notes.append("the dynamics are fitted on angles found by matching every frame to the decoder's renders "
                          "through the fitted camera (analysis by synthesis), not on the encoder's angles")
-    named_vision = {"blur", "shift", "exposure", "noise"} & {e.effect for e in effects}
+    named_vision = {"blur", "shift", "exposure", "noise", "zoom"} & {e.effect for e in effects}
     if ratio is not None and ratio > config.vision_ratio and not named_vision:
         notes.append(f"vision gap: the autoencoder re-renders the real frames {ratio:.1f}x worse than its "
                      "training frames (blur, noise, a shifted camera or a different scene?)")

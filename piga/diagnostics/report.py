@@ -152,13 +152,15 @@ def _camera_lines(v: VisionSummary) -> list[str]:
            else "the encoder's angles."), "",
         "  Camera candidates, fitted by matching frames to the decoder's renders over the whole circle "
         "(fit split), scored on held-out frames:", "",
-        "  | candidate | blur σ (px) | dx (px) | dy (px) | exposure | held-out matched MSE | drop | accepted |",
-        "  |---|---|---|---|---|---|---|---|",
+        "  | candidate | blur σ (px) | dx (px) | dy (px) | exposure | zoom | held-out matched MSE | drop | accepted |",
+        "  |---|---|---|---|---|---|---|---|---|",
     ]
     for row in c.camera_candidates:
         cam = row["camera"]
         lines.append(f"  | {row['candidate']} | {cam['blur']:.3f} | {cam['dx']:.3f} | {cam['dy']:.3f} | "
-                     f"{cam.get('exposure', 1.0):.3f} | {row['held_out_matched_mse']:.3e} | {100 * row['drop']:.1f}% | {'yes' if row['accepted'] else 'no (in part of the recording only)' if row.get('partial') else 'no'} |")
+                     f"{cam.get('exposure', 1.0):.3f} | {cam.get('zoom', 1.0):.3f} | "
+                     f"{row['held_out_matched_mse']:.3e} | {100 * row['drop']:.1f}% | "
+                     f"{'yes' if row['accepted'] else 'no (in part of the recording only)' if row.get('partial') else 'no'} |")
     lines.append("")
     return lines
 

@@ -70,7 +70,8 @@ class Effect(_ByKey):
     """A named effect with its coefficient."""
 
     effect: str
-    """Its name: a dynamics candidate, "gain", "frame_delay", or a camera effect (blur, shift, noise, frame_drop)."""
+    """Its name: a dynamics candidate, "gain", "frame_delay", or a camera effect (blur, shift, zoom, exposure, noise,
+    frame_drop)."""
     value: float
     """Its coefficient (steps for a delay)."""
     unit: str
@@ -104,6 +105,9 @@ class Effect(_ByKey):
             return (f"the system integrates within the frame (moves under the held action between frames; "
                     f"fits best as {self.value:g} substeps per frame)")
         where = f" {self.where}" if self.where else ""
+        if self.effect == "zoom":
+            return (f"zoom {_with_interval(self.value, self.interval, 'x the drawn size')}{where}: a camera nearer or "
+                    "farther, or a pendulum of another length, draws it so")
         if self.effect == "shift":  # each component with its own interval
             return (f"shift {_with_interval(self.dx, self.dx_interval, 'px right')}, "
                     f"{_with_interval(self.dy, self.dy_interval, 'px down')}{where}")

@@ -14,6 +14,10 @@ with the identified decoder D:
   bounded scalar searches), and scored on a held-out sample. V_ψ blurs with a Gaussian kernel
   (``cv2.GaussianBlur``'s, reflected border) and then translates with ``affine_grid`` /
   ``grid_sample`` (border replicated), the equations of :mod:`envs.effects`.
+- **Zoom z** (the pendulum drawn at another size: a camera nearer or farther, or a pendulum of another length)
+  scales the picture about the image centre in the same ``affine_grid`` warp, before the shift. It is fitted like
+  the shift, and tried only where the pendulum's drawn size (:func:`drawn_scale`) differs from the renders': a
+  blur, which a zoom out partly mimics, would otherwise meet it on every blurred recording.
 - **Exposure k** (a darker or brighter picture: the exposure, the lighting) multiplies every level,
   clipped at white, after the blur and the shift (:func:`fit_exposure`). Where the background shows
   it (a darker picture, or a background that is not white) it is fitted first, and the blur and the
@@ -54,11 +58,16 @@ TABLE_SIZE = 720
 MAX_BLUR, MAX_SHIFT = 4.0, 5.0
 #: Bounds of the exposure factor's fit.
 MIN_EXPOSURE, MAX_EXPOSURE = 0.4, 2.5
+#: Bounds of the zoom's fit (factor on the drawn size).
+MIN_ZOOM, MAX_ZOOM = 0.7, 1.4
+#: The unit of a named zoom.
+ZOOM_UNIT = "factor on the pendulum's drawn size (about the image centre)"
 
 
 @dataclass(frozen=True)
 class Camera:
-    """A camera model V_ψ applied to rendered frames: Gaussian blur, then a translation."""
+    """A camera model V_ψ applied to rendered frames: Gaussian blur, then a zoom about the image centre and a
+    translation, then the exposure."""
 
     blur: float = 0.0
     """σ of the Gaussian blur (px); 0: none."""
@@ -68,12 +77,17 @@ class Camera:
     """Shift down (px): x'[r, c] = x[r - dy, c]."""
     exposure: float = 1.0
     """Factor on every level, clipped at white (exposure, lighting): x' = min(k·x, 1); 1: none."""
+    zoom: float = 1.0
+    """Factor on the drawn size about the image centre (a camera nearer, > 1, or farther, < 1, along its axis; the
+    dm_control camera's principal point and the Gymnasium pendulum's hinge are the centre): x'(p) = x(c + (p - c)/z),
+    before the shift; 1: none."""
 
     def material(self, config: CameraConfig) -> set[str]:
-        """The effects of this camera that are big enough to name: "blur", "shift" and/or "exposure"."""
+        """The effects of this camera that are big enough to name: "blur", "shift", "exposure" and/or "zoom"."""
         return ({"blur"} if self.blur > config.min_blur else set()) | \
             ({"shift"} if max(abs(self.dx), abs(self.dy)) > config.min_shift else set()) | \
-            ({"exposure"} if 255 * abs(self.exposure - 1) > config.min_exposure else set())
+            ({"exposure"} if 255 * abs(self.exposure - 1) > config.min_exposure else set()) | \
+            ({"zoom"} if abs(self.zoom - 1) > config.min_zoom else set())
 
     def apply(self, frames: Tensor) -> Tensor:
         """(K, C, H, W) frames in [0, 1] -> the same frames as this camera sees them."""
@@ -87,9 +101,10 @@ class Camera:
             c = x.shape[1]
             x = F.conv2d(F.pad(x, (r, r, 0, 0), mode="reflect"), k.view(1, 1, 1, -1).expand(c, 1, 1, -1), groups=c)
             x = F.conv2d(F.pad(x, (0, 0, r, r), mode="reflect"), k.view(1, 1, -1, 1).expand(c, 1, -1, 1), groups=c)
-        if abs(self.dx) > 1e-6 or abs(self.dy) > 1e-6:
+        if abs(self.dx) > 1e-6 or abs(self.dy) > 1e-6 or abs(self.zoom - 1) > 1e-6:
             n, _, h, w = x.shape
-            omega = torch.tensor([[1.0, 0.0, -2 * self.dx / w], [0.0, 1.0, -2 * self.dy / h]], dtype=x.dtype)
+            z = 1 / self.zoom  # output point p (normalised, centre 0) samples the input at (p - shift) / zoom
+            omega = torch.tensor([[z, 0.0, -2 * z * self.dx / w], [0.0, z, -2 * z * self.dy / h]], dtype=x.dtype)
             grid = F.affine_grid(omega.expand(n, 2, 3), list(x.shape), align_corners=False)  # (K, H, W, 2)
             x = F.grid_sample(x, grid, mode="bilinear", padding_mode="border", align_corners=False)
         if abs(self.exposure - 1) > 1e-6:
@@ -163,8 +178,8 @@ def matched_error(model: PhysicsModel, camera: Camera, x: Tensor, size: int = TA
 
 
 def fit_camera(model: PhysicsModel, x: Tensor, blur: bool = True, shift: bool = True, rounds: int = 2,
-               renders: tuple[Tensor, Tensor] | None = None, base: Camera = Camera()) -> Camera:
-    """The camera (blur σ and/or shift dx, dy) that minimises the matched residual of frames ``x`` (M, P); the
+               renders: tuple[Tensor, Tensor] | None = None, base: Camera = Camera(), zoom: bool = False) -> Camera:
+    """The camera (zoom, blur σ and/or shift dx, dy) that minimises the matched residual of frames ``x`` (M, P); the
     parameters not fitted keep the values of ``base`` (its exposure, :func:`fit_exposure`).
 
     Coordinate descent: bounded scalar searches on each parameter in turn, ``rounds`` times. ``renders``: the
@@ -173,19 +188,21 @@ def fit_camera(model: PhysicsModel, x: Tensor, blur: bool = True, shift: bool = 
     from scipy.optimize import minimize_scalar
 
     cam = dict(base.__dict__)
-    names = (["dx", "dy"] if shift else []) + (["blur"] if blur else [])
+    names = (["zoom"] if zoom else []) + (["dx", "dy"] if shift else []) + (["blur"] if blur else [])
     if not names:
         return base
     renders = decoder_renders(model, TABLE_SIZE // 2) if renders is None else renders  # the same for every camera tried
+    bounds = {"blur": (0.0, MAX_BLUR), "zoom": (MIN_ZOOM, MAX_ZOOM), "dx": (-MAX_SHIFT, MAX_SHIFT),
+              "dy": (-MAX_SHIFT, MAX_SHIFT)}
     for _ in range(rounds):
         for name in names:
-            lo, hi = (0.0, MAX_BLUR) if name == "blur" else (-MAX_SHIFT, MAX_SHIFT)
+            lo, hi = bounds[name]
 
             def objective(v: float, name: str = name) -> float:
                 return matched_error(model, Camera(**{**cam, name: float(v)}), x, renders=renders)
 
             # a coarse scan first: the residual of a shift has side minima a pixel apart
-            grid = np.linspace(lo, hi, 9 if name == "blur" else 11)
+            grid = np.linspace(lo, hi, {"blur": 9, "zoom": 15}.get(name, 11))
             best = grid[int(np.argmin([objective(v) for v in grid]))]
             step = grid[1] - grid[0]
             res = minimize_scalar(objective, bounds=(max(lo, best - step), min(hi, best + step)), method="bounded",
@@ -360,6 +377,18 @@ class CameraConfig:
     """Smallest shift (px, either axis) that is named."""
     min_exposure: float = 3.0
     """Smallest change of white by the exposure (gray levels, 255·|k - 1|) that is named."""
+    min_zoom: float = 0.03
+    """Smallest change of the drawn size by a zoom (|z - 1|) that is named (measured: fitted on clean Gymnasium and
+    dm_control frames, z = 1.000; on the 42 recordings of the blind benchmark without a planted blur or shift, within
+    0.0075 of 1, at held-out drops under 0.1%)."""
+    zoom_scale: float = 0.03
+    """Smallest relative difference of the pendulum's drawn size (:func:`drawn_scale`, through no camera but an
+    exposure fitted first) from the decoder's renders at which a zoom is fitted and tried (measured without a camera:
+    clean Gymnasium frames x0.986, dm_control x1.003; the blind benchmark's 42 recordings x0.976 to x0.989 where no
+    shift is planted, among them blurs of 1.8 to 2.2 px, on which a zoom alone fitted 0.83 to 0.90 at held-out drops
+    of 19 to 26%, and x0.93 to x1.13 with shifts of 0.8 to 3 px, zoom drops 4 to 9%; Gymnasium frames zoomed x0.9,
+    x1.1, x1.2 read x0.88, x1.09, x1.19, dm_control at camera distance 1.1 x0.91; a dm_control pendulum of length
+    0.45, x0.91 about its hinge, which is not the image centre, fitted a zoom of 0.988 at a 9% drop, not named)."""
     min_noise: float = 1.0
     """Smallest sensor noise (gray levels) that is named (a clean camera gives 0)."""
     min_core_share: float = 0.5
@@ -386,13 +415,14 @@ class CameraConfig:
     two dm_control recordings."""
     max_scale_change: float = 0.06
     """Largest relative difference between the pendulum's drawn size in the recording and in the decoder's renders
-    (:func:`drawn_scale`, through the accepted camera) at which a blur or a shift may be accepted: beyond it the picture
-    is zoomed (a camera nearer or farther) or the pendulum has another length, which no camera candidate describes,
-    and a shift fitted to renders of another size only takes up the difference (measured: dm_control at camera
-    distance 1.2 read x0.84 and "shift -0.725 px down" at a 21% drop, at 1.1 "shift -0.492 px down"; a dm_control
-    pendulum of length 0.4 x0.82; the 42 recordings of the pixel pendulum's blind benchmark, with blur, shift, noise,
-    exposure and physics effects, x0.98 to x1.02 through their accepted camera, others with blur 3 to 3.9, shift 3 to
-    4.9, exposure 1.3 or no torque arrow x0.97 to x1.04)."""
+    (:func:`drawn_scale`, through the accepted camera) at which a blur, a shift or a zoom may be accepted: beyond it the
+    picture is zoomed (a camera nearer or farther) or the pendulum has another length, which the accepted camera (its
+    zoom included) does not describe, and a shift fitted to renders of another size only takes up the difference
+    (measured without the zoom candidate: dm_control at camera distance 1.2 read x0.84 and "shift -0.725 px down" at a
+    21% drop, at 1.1 "shift -0.492 px down"; with it, distances 1.1 and 1.3 read "zoom 0.93" and "zoom 0.826", through
+    which they are drawn x0.98 and x0.95; a dm_control pendulum of length 0.4 x0.82; the 42 recordings of the pixel
+    pendulum's blind benchmark, with blur, shift, noise, exposure and physics effects, x0.98 to x1.02 through their
+    accepted camera, others with blur 3 to 3.9, shift 3 to 4.9, exposure 1.3 or no torque arrow x0.97 to x1.04)."""
     repeats: RepeatConfig = field(default_factory=RepeatConfig)
     """When repeated frames are named dropped frames (:mod:`piga.diagnostics.repeats`)."""
 
@@ -402,6 +432,7 @@ class CameraConfig:
             raise TypeError(f"CameraConfig.repeats must be a RepeatConfig; got {self.repeats!r}")
         check_ranges(self, {"fit_frames": (1, 10_000_000), "held_frames": (1, 10_000_000), "min_drop": (0, 1),
                             "min_blur": (0, 100), "min_shift": (0, 100), "min_noise": (0, 255),
+                            "min_zoom": (0, 1), "zoom_scale": (0, 10),
                             "min_exposure": (0, 255), "min_core_share": (0, 1), "max_missing": (0, 1),
                             "max_scale_change": (0, 10), "min_split_share": (0, 1),
                             "max_noise_correlation": (-1, 1)})
@@ -576,19 +607,30 @@ def camera_stage(model: PhysicsModel, path: str, theta: np.ndarray, fit: np.ndar
     bar.update()
     singles.append(row(label + "shift", fit_camera(model, x_fit, blur=False, renders=renders, base=base), e_base,
                        {"shift"}))
+    # a zoom (a camera nearer or farther, a pendulum of another length), where the drawn size shows one: a blur or a
+    # shift fitted to renders of another size takes up part of the difference (dm_control filmed from 1.1 times as far,
+    # drawn x0.91, read "shift -0.492 px down"), and a picture zoomed out, which shows less of the dark pendulum, reads
+    # as a brighter one (x0.9 read "exposure 1.14")
+    scale = drawn_scale(frames_2d, renders, base)
+    zoomed = None
+    if scale is None or abs(scale - 1) > config.zoom_scale:
+        zoomed = row(label + "zoom", fit_camera(model, x_fit, blur=False, shift=False, zoom=True, renders=renders,
+                                                base=base), e_base, {"zoom"})
+        singles.append(zoomed)
     bar.update()
     table += singles
     best = max(singles if shown else [*singles, lit], key=lambda r: r["drop"])
     camera, e_cam = base, e_base
     if best["accepted"]:
         camera, e_cam = Camera(**best["camera"]), best["held_out_matched_mse"]
-        if best is lit:  # a brighter picture: the blur and the shift on top, where material
-            fitted = fit_camera(model, x_fit, renders=renders, base=camera)
-            more = fitted.material(config) - {"exposure"}
+        if best is lit or best is zoomed:  # a brighter picture or a zoom: the blur and the shift on top, where material
+            kind = "exposure" if best is lit else label + "zoom"
+            fitted = fit_camera(model, x_fit, renders=renders, base=camera, zoom=best is zoomed)
+            more = fitted.material(config) - {"exposure", "zoom"}
             shift = "shift" in more
             on_top = Camera(blur=fitted.blur if "blur" in more else 0.0, dx=fitted.dx if shift else 0.0,
-                            dy=fitted.dy if shift else 0.0, exposure=fitted.exposure)
-            both = row("+".join(["exposure", *sorted(more)]) if more else "exposure+blur+shift", on_top, e_cam,
+                            dy=fitted.dy if shift else 0.0, exposure=fitted.exposure, zoom=fitted.zoom)
+            both = row("+".join([kind, *sorted(more)]) if more else kind + "+blur+shift", on_top, e_cam,
                        more or {"blur", "shift"})
         else:
             both = row(label + "blur+shift", fit_camera(model, x_fit, renders=renders, base=base), e_cam,
@@ -600,11 +642,12 @@ def camera_stage(model: PhysicsModel, path: str, theta: np.ndarray, fit: np.ndar
     # against sharp renders), its shift moves the hinge (a 3 px shift read x1.16 unshifted, x0.99 through it)
     scale = drawn_scale(frames_2d, renders, camera)
     if scale is not None and abs(scale - 1) > config.max_scale_change:
-        # a blur or a shift fitted against renders of another size only takes up the difference
+        # a blur or a shift fitted against renders of another size only takes up the difference; a zoom that leaves
+        # the size off has not found it
         for r in table:
-            if {"blur", "shift"} & set(r["candidate"].split("+")):
+            if {"blur", "shift", "zoom"} & set(r["candidate"].split("+")):
                 r["accepted"], r["rescaled"] = False, True
-        if camera.blur or camera.dx or camera.dy:
+        if camera.blur or camera.dx or camera.dy or camera.zoom != 1:
             camera = Camera(exposure=camera.exposure)  # an accepted exposure stays (fitted first, or the best single)
             e_cam = e_base if camera == base else lit["held_out_matched_mse"]
             scale = drawn_scale(frames_2d, renders, camera)
@@ -632,6 +675,9 @@ def camera_stage(model: PhysicsModel, path: str, theta: np.ndarray, fit: np.ndar
         effects.append({"effect": "shift", "value": math.hypot(camera.dx, camera.dy), "dx": camera.dx, "dy": camera.dy,
                         "dx_interval": ix, "dy_interval": iy, "unit": "px (length of the shift; dx right, dy down)",
                         "interval": length})
+    if camera.zoom != 1:
+        effects.append({"effect": "zoom", "value": camera.zoom, "unit": ZOOM_UNIT,
+                        "interval": camera_interval(model, camera, "zoom", x_fit, fit_seqs, step=0.01)})
     if camera.exposure != 1:  # named relative to the model's own frames
         own = reference_exposure(model, reference, still, renders, config.fit_frames, seed)
         if 255 * abs(camera.exposure / own - 1) > config.min_exposure:
@@ -643,7 +689,7 @@ def camera_stage(model: PhysicsModel, path: str, theta: np.ndarray, fit: np.ndar
         own = reference_exposure(model, reference, still, renders, config.fit_frames, seed)
         effects += partial_effects(model, partial, x_fit, fit_seqs, fit_times, config, own)
 
-    if camera.blur or camera.dx or camera.dy:  # the pixels the pendulum never reaches in these frames
+    if camera.blur or camera.dx or camera.dy or camera.zoom != 1:  # the pixels the pendulum never reaches in them
         still = static_pixels(model, camera=camera)
     noise, noise_ci = noise_level(frames_2d, still, interval=True)
     correlation = float("nan")
