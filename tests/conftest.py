@@ -33,3 +33,12 @@ def tiny_data(tmp_path_factory: pytest.TempPathFactory) -> Path:
     path = tmp_path_factory.mktemp("data") / "tiny.h5"
     collect(CollectConfig(sequences=12, steps=16, seed=3, workers=1, split=(8, 2, 2)), path, progress=False, command="test")
     return path
+
+
+@pytest.fixture(scope="session")
+def tiny_run(tiny_data: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A one-epoch piga-train-model run on ``tiny_data`` (seconds), trained once per session (per xdist worker) for
+    every module that reads it; a test that writes into a run copies it first."""
+    from tests.helpers import train_tiny
+
+    return train_tiny(tiny_data, tmp_path_factory.mktemp("tiny_run") / "run")

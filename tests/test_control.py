@@ -20,7 +20,7 @@ from piga.cli.control import main as control_main
 from piga.control.episodes import EpisodeConfig, run_episodes
 from piga.control.goal import load_scene_image, render_goal_image
 from piga.world.model import ModelConfig, PhysicsModel
-from tests.helpers import ENV, assert_one_line_error, completed_in_process, run, train_tiny
+from tests.helpers import ENV, assert_one_line_error, completed_in_process, run
 
 
 def ctl(capsys: pytest.CaptureFixture[str], *argv: str) -> subprocess.CompletedProcess[str]:
@@ -252,9 +252,9 @@ def test_agents_import_nothing_from_diagnostics() -> None:
 
 
 @pytest.fixture(scope="module")
-def control_model(tiny_data: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A pendulum model trained for one epoch on the tiny data: a real run folder, quickly."""
-    return train_tiny(tiny_data, tmp_path_factory.mktemp("control") / "model")
+def control_model(tiny_run: Path) -> Path:
+    """A pendulum model trained for one epoch on the tiny data: the session's run folder (tests/conftest.py)."""
+    return tiny_run
 
 
 def test_sweep_writes_a_table_per_multiplier(control_model: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -114,7 +114,7 @@ def test_planted_damping_is_found_with_its_coefficient_and_closes_the_gap() -> N
 
 def test_planted_delay_is_exact_and_shows_in_the_cross_correlation() -> None:
     # a camera stage that found no repeated start: the delay is the actuator's (a late camera: the test below)
-    d = analyse(planted({"delay": 2}), NOMINAL, FAST, camera=_findings([], 0))
+    d = analyse(planted({"delay": 2}, n=60), NOMINAL, FAST, camera=_findings([], 0))  # (at 60 sequences as at 120)
     assert d.verdict_class == "delay", d.verdict  # a late response is not read as a flipped actuation
     assert d.effects[0]["value"] == 2
     assert d.residuals["action_correlation"]["peak_lag"] == 2
@@ -147,7 +147,7 @@ def test_a_gravity_error_is_named_not_called_no_gap() -> None:
 def test_constant_actions_name_no_gain_nor_actuator_effect() -> None:
     """All-1 actions read "gain 0.0271 factor on the nominal a" beside a note that the gain cannot be judged: a
     constant command times a gain is a constant torque."""
-    d = analyse(planted({"gain": 0.5}, constant=1.0), NOMINAL, replace(FAST, bootstrap=10))
+    d = analyse(planted({"gain": 0.5}, n=60, constant=1.0), NOMINAL, replace(FAST, bootstrap=10))
     assert "gain" not in d.verdict_class.split("+") and "gain" not in d.verdict, d.verdict
     assert {"delay", "deadzone", "saturation"} <= set(d.excluded)
     assert any("the actions never change" in n or "actions are all 1" in n for n in d.notes), d.notes
@@ -161,7 +161,7 @@ def test_a_gain_the_actions_barely_show_is_not_given_a_value() -> None:
     assert gain_undetermined([3.39e-07, 3.39e-07]) and gain_undetermined([7.36e-07, 0.231])
     assert gain_undetermined([0.0013, 0.00566])  # below GAIN_FLOOR: the interval excluded the truth, 0.001
     assert not gain_undetermined([1.95, 2.01]) and not gain_undetermined([0.45, 0.52])
-    d = analyse(planted({"gain": 0.001}), NOMINAL, replace(FAST, bootstrap=10))
+    d = analyse(planted({"gain": 0.001}, n=60), NOMINAL, replace(FAST, bootstrap=10))  # a refits to 0.0049
     assert d.verdict_class == "unexplained" and "the actions barely move the system" in d.verdict, d.verdict
     assert f"act more than {fit.MAX_DELAY} frames late (the longest delay fitted)" in d.verdict  # a longer latency
     assert not any(e.effect == "gain" for e in d.effects)

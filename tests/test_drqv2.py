@@ -76,9 +76,10 @@ def test_a_run_resumes_exactly_and_acts_in_piga_episodes(tmp_path: Path) -> None
     from agents.sb3.train import train_sb3
     from piga.control.episodes import EpisodeConfig, run_episodes
 
-    straight = train_sb3(TINY, tmp_path / "a", progress=False)
-    train_sb3(replace(TINY, steps=200), tmp_path / "b", progress=False)
-    resumed = train_sb3(TINY, tmp_path / "b", resume=True, progress=False)
+    tiny = replace(TINY, learning_starts=190)  # 10 updates before the cut at step 200, 200 after it
+    straight = train_sb3(tiny, tmp_path / "a", progress=False)
+    train_sb3(replace(tiny, steps=200), tmp_path / "b", progress=False)
+    resumed = train_sb3(tiny, tmp_path / "b", resume=True, progress=False)
     assert [r["eval_mean_return"] for r in resumed["learning_curve"]] == [r["eval_mean_return"] for r in straight["learning_curve"]]
     a, b = load_sb3(tmp_path / "a")[0], load_sb3(tmp_path / "b")[0]
     for (name, p), q in zip(a.policy.state_dict().items(), b.policy.state_dict().values()):

@@ -19,11 +19,9 @@ from tests.test_faults import TINY_PLANET, _listing, refused
 
 
 @pytest.fixture(scope="module")
-def piga_run(tiny_data: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A one-epoch piga-train-model run on ``tiny_data`` (seconds)."""
-    from tests.helpers import train_tiny
-
-    return train_tiny(tiny_data, tmp_path_factory.mktemp("piga") / "run")
+def piga_run(tiny_run: Path) -> Path:
+    """A one-epoch piga-train-model run on ``tiny_data``: the session's (tests/conftest.py)."""
+    return tiny_run
 
 
 @contextlib.contextmanager

@@ -1528,11 +1528,9 @@ def test_a_piga_model_of_another_frame_rate_than_dmcs_is_told_what_matches(dt: f
 
 
 @pytest.fixture(scope="module")
-def tiny_piga_run(tiny_data: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A one-epoch piga-train-model run on ``tiny_data`` (seconds)."""
-    from tests.helpers import train_tiny
-
-    return train_tiny(tiny_data, tmp_path_factory.mktemp("piga") / "run")
+def tiny_piga_run(tiny_run: Path) -> Path:
+    """A one-epoch piga-train-model run on ``tiny_data``: the session's (tests/conftest.py)."""
+    return tiny_run
 
 
 @pytest.mark.parametrize("env_id, warned", [(None, True), ("piga/PixelPendulum-v0", False)])
@@ -3336,8 +3334,8 @@ def test_resume_takes_a_default_the_run_was_started_at(tmp_path: Path, capsys: p
     the precision resolved); the run was started at auto all the same."""
     out = str(tmp_path / "drq")
     argv = ["ddpg", "--algo", "drqv2", "--obs", "pixels", "--out", out, "--steps", "200", "--eval-every", "200",
-            "--eval-episodes", "1", "--learning-starts", "100", "--buffer-size", "1000", "--batch-size", "8", "--threads",
-            "1", "--quiet"]
+            "--eval-episodes", "1", "--learning-starts", "190", "--buffer-size", "1000", "--batch-size", "8", "--threads",
+            "1", "--quiet"]  # (10 updates)
     assert_sb3_run_finished(*run_in_process("piga-baseline", baseline.main, *argv, capsys=capsys)[::2])
     code, _, err = run_in_process("piga-baseline", baseline.main, *argv, "--resume", "--encoder-precision", "auto",
                                   capsys=capsys)

@@ -70,10 +70,9 @@ def test_the_learned_line_shows_the_offset_the_warning_names() -> None:
 
 
 @pytest.fixture(scope="module")
-def piga_run(tiny_data: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    from tests.helpers import train_tiny
-
-    return train_tiny(tiny_data, tmp_path_factory.mktemp("run") / "run")
+def piga_run(tiny_run: Path) -> Path:
+    """A one-epoch piga-train-model run on ``tiny_data``: the session's (tests/conftest.py)."""
+    return tiny_run
 
 
 @pytest.mark.parametrize("given, said", [

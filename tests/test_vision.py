@@ -69,6 +69,31 @@ def test_camera_zoom_is_the_warp_about_the_image_centre(zoom: float, dx: float, 
     np.testing.assert_allclose(ours, theirs, atol=1e-4)
 
 
+@pytest.mark.parametrize("camera", [V.Camera(blur=4.0, zoom=1.2, dx=-4.5, dy=2.3, exposure=1.3),
+                                    V.Camera(blur=0.6, dx=0.4), V.Camera(zoom=0.8, dy=-1.7), V.Camera(blur=9.0)])
+def test_camera_matrices_are_the_2d_convolution_and_warp(camera: V.Camera) -> None:
+    """Every axis as one matrix (the rows, then the columns) gives what the depthwise convolutions with reflected
+    padding and affine_grid + grid_sample give, on a batch of RGB frames, at the borders too (σ 9: the radius held at
+    the 11 px image's 10)."""
+    import torch.nn.functional as F
+
+    x = torch.from_numpy(np.random.default_rng(4).random((3, 3, 11 if camera.blur > 5 else SIZE, SIZE)).astype(np.float32))
+    n, c, h, w = x.shape
+    ref = x
+    for axis, size in ((-1, w), (-2, h)):
+        r = max(1, min(math.ceil(4 * camera.blur), size - 1))
+        k = torch.exp(-0.5 * (torch.arange(-r, r + 1, dtype=x.dtype) / camera.blur) ** 2)
+        kernel = (k / k.sum()).view(1, 1, *((1, -1) if axis == -1 else (-1, 1))).expand(c, 1, -1, -1)
+        pad = (r, r, 0, 0) if axis == -1 else (0, 0, r, r)
+        ref = F.conv2d(F.pad(ref, pad, mode="reflect"), kernel, groups=c) if camera.blur else ref
+    z = 1 / camera.zoom
+    omega = torch.tensor([[z, 0.0, -2 * z * camera.dx / w], [0.0, z, -2 * z * camera.dy / h]])
+    grid = F.affine_grid(omega.expand(n, 2, 3), [n, c, h, w], align_corners=False)
+    ref = F.grid_sample(ref, grid, mode="bilinear", padding_mode="border", align_corners=False)
+    ref = (ref * camera.exposure).clamp(max=1.0)
+    torch.testing.assert_close(camera.apply(x), ref, atol=2e-6, rtol=0)
+
+
 def test_matching_recovers_the_angle_of_each_frame() -> None:
     model = rod_model(64)
     theta = torch.rand(64, generator=torch.Generator().manual_seed(2)) * 2 * math.pi - math.pi

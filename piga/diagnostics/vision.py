@@ -12,10 +12,11 @@ with the identified decoder D:
 - **Blur σ and shift (dx, dy)** (:class:`Camera`) are fitted by minimising the mean matched
   residual min_j ||x - V_ψ(D(θ_j))||² over a sample of the fit split (coordinate descent with
   bounded scalar searches), and scored on a held-out sample. V_ψ blurs with a Gaussian kernel
-  (``cv2.GaussianBlur``'s, reflected border) and then translates with ``affine_grid`` /
-  ``grid_sample`` (border replicated), the equations of :mod:`envs.effects`.
+  (``cv2.GaussianBlur``'s, reflected border) and then translates by bilinear interpolation (border
+  replicated), the equations of :mod:`envs.effects`; both act on the rows and the columns apart, as one
+  matrix product per axis (:func:`blur_matrix`, :func:`warp_matrix`).
 - **Zoom z** (the pendulum drawn at another size: a camera nearer or farther, or a pendulum of another length)
-  scales the picture about the image centre in the same ``affine_grid`` warp, before the shift. It is fitted like
+  scales the picture about the image centre in the same warp, before the shift. It is fitted like
   the shift, and tried only where the pendulum's drawn size (:func:`drawn_scale`) differs from the renders': a
   blur, which a zoom out partly mimics, would otherwise meet it on every blurred recording.
 - **Exposure k** (a darker or brighter picture: the exposure, the lighting) multiplies every level,
@@ -92,24 +93,52 @@ class Camera:
     def apply(self, frames: Tensor) -> Tensor:
         """(K, C, H, W) frames in [0, 1] -> the same frames as this camera sees them."""
         x = frames
-        if self.blur > 1e-3:
-            # cv2.GaussianBlur's kernel for float images: radius ceil(4σ), normalised; its default
-            # border (BORDER_REFLECT_101) is torch's "reflect" padding.
-            r = max(1, min(int(math.ceil(4 * self.blur)), x.shape[-1] - 1))
-            k = torch.exp(-0.5 * (torch.arange(-r, r + 1, dtype=x.dtype) / self.blur) ** 2)
-            k = (k / k.sum()).to(x)
-            c = x.shape[1]
-            x = F.conv2d(F.pad(x, (r, r, 0, 0), mode="reflect"), k.view(1, 1, 1, -1).expand(c, 1, 1, -1), groups=c)
-            x = F.conv2d(F.pad(x, (0, 0, r, r), mode="reflect"), k.view(1, 1, -1, 1).expand(c, 1, -1, 1), groups=c)
-        if abs(self.dx) > 1e-6 or abs(self.dy) > 1e-6 or abs(self.zoom - 1) > 1e-6:
-            n, _, h, w = x.shape
-            z = 1 / self.zoom  # output point p (normalised, centre 0) samples the input at (p - shift) / zoom
-            omega = torch.tensor([[z, 0.0, -2 * z * self.dx / w], [0.0, z, -2 * z * self.dy / h]], dtype=x.dtype)
-            grid = F.affine_grid(omega.expand(n, 2, 3), list(x.shape), align_corners=False)  # (K, H, W, 2)
-            x = F.grid_sample(x, grid, mode="bilinear", padding_mode="border", align_corners=False)
+        h, w = x.shape[-2:]
+        rows, columns = torch.eye(h, dtype=x.dtype), torch.eye(w, dtype=x.dtype)  # each a linear map of one axis
+        if self.blur > 1e-3:  # cv2.GaussianBlur's, reflected border
+            rows, columns = blur_matrix(h, self.blur, x.dtype), blur_matrix(w, self.blur, x.dtype)
+        if abs(self.dx) > 1e-6 or abs(self.dy) > 1e-6 or abs(self.zoom - 1) > 1e-6:  # after the blur
+            rows = warp_matrix(h, self.zoom, self.dy).to(x.dtype) @ rows
+            columns = warp_matrix(w, self.zoom, self.dx).to(x.dtype) @ columns
+        if self.blur > 1e-3 or abs(self.dx) > 1e-6 or abs(self.dy) > 1e-6 or abs(self.zoom - 1) > 1e-6:
+            x = rows @ (x @ columns.T)
         if abs(self.exposure - 1) > 1e-6:
             x = (x * self.exposure).clamp(max=1.0)
         return x
+
+
+def blur_matrix(n: int, sigma: float, dtype: torch.dtype = torch.float32) -> Tensor:
+    """(n, n) matrix B of a 1-D Gaussian blur of σ ``sigma``: B @ v blurs a length-n signal v as cv2.GaussianBlur does
+    for float images (kernel radius ceil(4σ), at most n - 1, normalised; border BORDER_REFLECT_101, v[-i] = v[i]).
+
+    Blurring (K, C, H, W) frames as two matrix products (rows, then columns) is ~20x faster than as two depthwise
+    convolutions (360 gray renders of 64x64 on one CPU thread: 10-12 ms against 210-260 ms)."""
+    r = max(1, min(int(math.ceil(4 * sigma)), n - 1))
+    k = torch.exp(-0.5 * (torch.arange(-r, r + 1, dtype=dtype) / sigma) ** 2)
+    k = k / k.sum()
+    source = (torch.arange(n)[:, None] + torch.arange(-r, r + 1)[None, :]).abs()  # (n, 2r + 1), reflected below 0
+    source = torch.where(source > n - 1, 2 * (n - 1) - source, source)  # and above n - 1
+    rows = torch.arange(n)[:, None].expand_as(source)
+    return torch.zeros(n, n, dtype=dtype).index_put_((rows, source), k.expand_as(source), accumulate=True)
+
+
+def warp_matrix(n: int, zoom: float, shift: float) -> Tensor:
+    """(n, n) float64 matrix A of a zoom about the centre then a shift along one axis: A @ v samples a length-n signal
+    v at (p - shift - c)/zoom + c for each pixel p (c = (n - 1)/2), linearly between its pixels, the coordinate held
+    within [0, n - 1] (the edge pixel repeats): one axis of ``F.affine_grid`` + ``F.grid_sample`` (bilinear, border,
+    align_corners False) with a diagonal affine map, which is separable. A blur and a shift as one matrix per axis:
+    9 ms against 250 ms for the convolutions and the 2-D warp (360 gray renders of 64x64, one CPU thread), 33 ms
+    against 510 ms in RGB."""
+    p = torch.arange(n, dtype=torch.float64)
+    c = (n - 1) / 2
+    source = ((p - shift - c) / zoom + c).clamp(0, n - 1)  # (n,)
+    low = source.floor().clamp(max=n - 2).long() if n > 1 else torch.zeros(n, dtype=torch.long)
+    frac = source - low
+    a = torch.zeros(n, n, dtype=torch.float64)
+    a[torch.arange(n), low] = 1 - frac
+    if n > 1:
+        a[torch.arange(n), low + 1] += frac
+    return a
 
 
 @dataclass(frozen=True)
