@@ -474,6 +474,7 @@ def test_a_folder_that_cannot_be_made_on_a_read_only_disk_is_named(tmp_path: Pat
     ("actions", "has 2 action columns (a pendulum takes 1): piga-train-model"),
     ("frames", "has 1 frame per sequence (a video needs two): piga-train-model"),
     ("both", "has 2 action columns (a pendulum takes 1) and 1 frame per sequence (a video needs two): piga-train-model"),
+    ("wide", "has frames of 64x24 px (a model takes square ones): piga-train-model"),
 ])
 def test_show_warns_once_of_what_the_other_commands_refuse(odd: str, needle: str, tiny_data: Path, tmp_path: Path,
                                                            capsys: pytest.CaptureFixture[str]) -> None:
@@ -486,10 +487,13 @@ def test_show_warns_once_of_what_the_other_commands_refuse(odd: str, needle: str
     with h5py.File(data, "a") as f:
         for name in ("frames", "actions", "states", "rewards"):
             array = f[name][()]
-            if odd != "actions":
-                array = array[:, :1]
-            if odd != "frames" and name == "actions":
-                array = np.repeat(array, 2, axis=-1)
+            if odd == "wide":
+                array = array[..., 20:44] if name == "frames" else array
+            else:
+                if odd != "actions":
+                    array = array[:, :1]
+                if odd != "frames" and name == "actions":
+                    array = np.repeat(array, 2, axis=-1)
             del f[name]
             f[name] = array
     code, out, err = run_in_process("piga-show", main, str(data), "--out", str(tmp_path / "s.png"), capsys=capsys)

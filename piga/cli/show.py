@@ -90,8 +90,10 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def _refused_elsewhere(info: DatasetInfo) -> str | None:
     """What the other commands refuse in a file that the strip draws all the same, in one line: a pendulum's action
-    columns other than its one torque, and sequences of one frame (None: neither)."""
+    columns other than its one torque, sequences of one frame, and frames that are not square (None: none)."""
     odd = []
+    if info.image_shape[0] != info.image_shape[1]:
+        odd.append(f"frames of {info.image_shape[0]}x{info.image_shape[1]} px (a model takes square ones)")
     if info.system == "pendulum" and info.action_dim != 1:
         odd.append(f"{counted(info.action_dim, 'action column')} (a pendulum takes 1)")
     if info.steps < 2:

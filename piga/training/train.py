@@ -435,7 +435,9 @@ def model_config_for(info: DatasetInfo, model: ModelConfig | None = None, n_obje
                          f"dimension(s), but /actions has {info.action_dim}; fix the attribute, or the file")
     shape = info.image_shape
     if shape[0] != shape[1]:
-        raise ValueError(f"{info.path}: frames must be square, got {shape}")
+        raise ValueError(f"{info.path}: frames of {shape[0]}x{shape[1]} px; the model takes square frames: crop or "
+                         "resize them (piga-import crops a video's or an image stack's centre square and resizes it to "
+                         "--image-size)")
     if shape[0] < MIN_IMAGE_SIZE:
         raise ValueError(f"{info.path}: frames of {shape[0]}x{shape[1]} px are too small to learn from; "
                          f"at least {MIN_IMAGE_SIZE}x{MIN_IMAGE_SIZE}")
