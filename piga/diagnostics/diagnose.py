@@ -1383,9 +1383,9 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
                          "nominal model's")
             ref_g, ref_a = nom.g, abs(nom.a)
         else:
-            damped = damped_reference(reference, read_own, nom, w)
-            if damped is not None:  # the training file's damping, which the recording lacks, read in both
-                reference, read = damped
+            both_damped = damped_reference(reference, read_own, nom, w)
+            if both_damped is not None:  # the training file's damping, which the recording lacks, read in both
+                reference, read = both_damped
                 ref_g, ref_a = read.values["g"], abs(read.values["a"])
                 notes.append(f"the model's own training file shows a damping (b = {read.values['b']:.3g}) that the "
                              f"recording does not (b = {reference.values['b']:.3g} when fitted): g and a are compared "
@@ -1406,8 +1406,8 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
             read = read_own(rival)
             if not implausible_own_reading(read, nom):
                 rival_ref_g, rival_ref_a = read.values["g"], abs(read.values["a"])
-                if (damped := damped_reference(rival, read_own, nom, w)) is not None:  # as the chosen's, above
-                    read_rival, read = damped
+                if (rival_damped := damped_reference(rival, read_own, nom, w)) is not None:  # as the chosen's, above
+                    read_rival, read = rival_damped
                     rival_ref_g, rival_ref_a = read.values["g"], abs(read.values["a"])
         rival_gain, rival_g = abs(read_rival.values["a"]) / rival_ref_a, read_rival.values["g"] / rival_ref_g
     if gain_error and rival_gain is not None:
