@@ -391,6 +391,18 @@ def test_a_damping_that_only_the_training_file_has_is_read_in_both_files() -> No
     assert any("shows a damping" in n for n in d.notes)
 
 
+def test_a_gravity_beside_a_damping_that_only_the_training_file_has() -> None:
+    """The same, with "none" chosen and g off: the gravity error is judged with the damping read in both files
+    (dm_control at length 0.6 with no hinge damping stopped with an internal error on this path)."""
+    low = Nominal(g=10.0, a=0.9, offset=0.0, dt=0.05)
+    real = planted({"gravity": 0.83}, n=80, t=24)
+    own = planted({"damping": 0.2}, n=80, seed=3)
+    d = analyse(real, low, FAST, own=own)
+    gravity = {e.effect: e.value for e in d.effects}.get("gravity")
+    assert gravity is not None and abs(gravity / 0.83 - 1) < 0.02, d.verdict
+    assert any("shows a damping" in n for n in d.notes)
+
+
 def test_the_own_file_is_read_in_the_recordings_form_where_an_effect_can_vanish() -> None:
     """On the training file, a torque or a deadzone of the recording is fitted whether the file shows it
     or not (there it lands near 0 and leaves a where it is); a delay only when the file shows it."""

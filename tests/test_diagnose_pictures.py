@@ -106,6 +106,21 @@ def test_a_zoomed_picture_is_named_a_zoom_and_not_a_shift(model, tmp_path: Path,
         assert "zoom" in Effect(**named["zoom"]).describe() and "another length" in Effect(**named["zoom"]).describe()
 
 
+def test_no_size_is_claimed_through_heavy_noise(model, tmp_path: Path) -> None:
+    """Noise of 60 gray levels lit pixels far from the hinge, and a recording named "noise 59.5" got a note of a
+    pendulum drawn x2.76: beyond ``CameraConfig.max_scale_noise`` the stage measures no size, and tries no zoom."""
+    import h5py
+
+    path = _recording(tmp_path / "rec.h5", model, "none")
+    with h5py.File(path, "r+") as f:
+        frames = f["frames"][()].astype(float)
+        f["frames"][...] = np.clip(frames + np.random.default_rng(0).normal(0, 40, frames.shape), 0, 255)
+    config = V.CameraConfig(fit_frames=120, held_frames=60)
+    found = V.camera_stage(model, str(path), np.zeros((N, T)), np.arange(N) < 16, None, config)
+    assert found.noise > config.max_scale_noise and found.scale is None and not found.rescaled(config)
+    assert not any("zoom" in r["candidate"] for r in found.table)
+
+
 def test_a_size_that_no_zoom_takes_up_accepts_no_shift(model, tmp_path: Path) -> None:
     """Where the zoom is not tried (or does not take the size difference up), no blur or shift fitted to renders of
     another size is accepted, and the report says the size."""

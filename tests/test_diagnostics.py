@@ -89,6 +89,21 @@ def test_no_gap_through_a_large_vision_gap_says_the_vision_may_hide_one() -> Non
     assert "may hide a gap in the physics" in d.verdict
 
 
+def test_not_explained_through_a_large_vision_gap_says_so_first() -> None:
+    """dm_control with shadows on (35.8x) and mass 2 read "not explained: the actions barely move the system", where the
+    same physics without shadows reads its gain: a verdict of not explained on the encoder's angles says first that
+    they come through the vision gap; not on angles matched through a fitted camera, nor below the gap's threshold."""
+    from piga.diagnostics.diagnose import Naming, _seen_through_vision_gap
+
+    said = "not explained by the candidates: the actions barely move the system"
+    naming = Naming([], [], said, "unexplained")
+    d = _seen_through_vision_gap(naming, 35.8)
+    assert d.verdict.startswith("not explained, seen through a vision gap of 35.8x") and d.verdict.endswith(said)
+    assert d.verdict_class == "unexplained"
+    assert _seen_through_vision_gap(naming, 35.8, encoder=False).verdict == said
+    assert _seen_through_vision_gap(naming, 5.0).verdict == said
+
+
 def test_an_actuation_reversed_in_the_matched_angles_alone_is_named_a_flip() -> None:
     """An encoder that misreads a camera on the other side of the hinge showed no response to the actions, and the
     matched angles' reading of the nominal sign shrank a to 3e-08 ("the actions barely move the system"): the reading

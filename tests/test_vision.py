@@ -248,3 +248,4 @@ def test_a_codec_copy_is_a_repeat_but_motion_is_not() -> None:
     moved[..., 3, 4] += 12  # one pixel of a moving edge
     stale = R.stale_frames(np.concatenate([first, copy, moved], axis=1))
     np.testing.assert_array_equal(stale[0], [False, True, False])
+
