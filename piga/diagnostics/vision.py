@@ -43,7 +43,6 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
-import torch.nn.functional as F
 from torch import Tensor
 
 from piga.diagnostics.repeats import RepeatConfig, repeated_frames
