@@ -7,27 +7,32 @@ import pytest
 from envs.pendulum import PixelPendulumConfig
 
 
-@pytest.mark.parametrize("trained, said", [
-    ({"gravity": 5.0, "gravity_mult": 1.0, "actuation_gain": 2.0, "effects": []},
-     "the env runs g = 10 m/s², actuation gain 1 (times --gravity-mult), the model's training file was collected at "
-     "g = 5 m/s², actuation gain 2: its planner plans with the physics it identified there, so the success below "
-     "measures that mismatch too (--gravity-mult 0.5 --not-told runs the env at the trained gravity)"),
-    ({"gravity": 10.0, "gravity_mult": 1.2, "actuation_gain": 1.0, "effects": []},
-     "the env runs g = 10 m/s² (times --gravity-mult), the model's training file was collected at g = 12 m/s²: its "
-     "planner plans with the physics it identified there, so the success below measures that mismatch too "
-     "(--gravity-mult 1.2 --not-told runs the env at the trained gravity)"),
-    ({"gravity": 10.0, "gravity_mult": 1.0, "actuation_gain": 1.0, "effects": [["delay", 2]]},
-     "the env runs no effect (times --gravity-mult), the model's training file was collected at the effects "
-     "[[\"delay\", 2]]: its planner plans with the physics it identified there, so the success below measures that "
+@pytest.mark.parametrize("trained, mult, told, said", [
+    ({"gravity": 5.0, "gravity_mult": 1.0, "actuation_gain": 2.0, "effects": []}, 1.0, 1.0,
+     "the env runs g = 10 m/s², actuation gain 1, the model's training file was collected at g = 5 m/s², actuation "
+     "gain 2: its planner plans with the physics it identified there, so the success below measures that mismatch "
+     "too (--gravity-mult 0.5 --not-told runs the env at the trained gravity)"),
+    ({"gravity": 10.0, "gravity_mult": 1.2, "actuation_gain": 1.0, "effects": []}, 1.0, 1.0,
+     "the env runs g = 10 m/s², the model's training file was collected at g = 12 m/s²: its planner plans with the "
+     "physics it identified there, so the success below measures that mismatch too (--gravity-mult 1.2 --not-told "
+     "runs the env at the trained gravity)"),
+    ({"gravity": 14.0, "gravity_mult": 1.0, "actuation_gain": 1.0, "effects": []}, 1.4, 1.0, None),  # as it hints
+    ({"gravity": 10.0, "gravity_mult": 1.0, "actuation_gain": 1.0, "effects": []}, 1.4, 1.4, None),  # zero-shot, told
+    ({"gravity": 10.0, "gravity_mult": 1.0, "actuation_gain": 1.0, "effects": []}, 1.4, 1.0, None),  # not told
+    ({"gravity": 10.0, "gravity_mult": 1.0, "actuation_gain": 0.6, "effects": [["damping", 0.3]]}, 1.0, 1.0,
+     "the env runs actuation gain 1, no effect, the model's training file was collected at actuation gain 0.6, the "
+     "effects damping=0.3: its planner plans with the physics it identified there, so the success below measures that "
      "mismatch too"),
-    ({"gravity": 10.0, "gravity_mult": 1.0, "actuation_gain": 1.0, "effects": []}, None),
-    ({}, None),
+    ({"gravity": 10.0, "gravity_mult": 1.0, "actuation_gain": 1.0, "effects": []}, 1.0, 1.0, None),
+    ({}, 1.0, 1.0, None),
 ])
-def test_a_model_of_other_physics_than_the_env_is_run_with_a_warning(trained, said, capsys):
+def test_a_model_of_other_physics_than_the_env_is_run_with_a_warning(trained, mult, told, said, capsys):
     """A model identified at g = 5 and gain 2 (to within 1%) swung up 0 of 2 episodes of the default env without a
-    word, and 2 of 2 at its own gravity: one line says that the env is not the physics it learned."""
+    word, and 2 of 2 at its own gravity: one line says that the env is not the physics it learned; none where the env
+    runs the gravity that the agent believes, or the model was trained at the env's base gravity (zero-shot, told or
+    not)."""
     from piga.cli.control import _warn_if_other_pixel_physics
 
-    _warn_if_other_pixel_physics({"data": {"env_config": trained}}, PixelPendulumConfig())
+    _warn_if_other_pixel_physics({"data": {"env_config": trained}}, PixelPendulumConfig(gravity_mult=mult), told)
     err = capsys.readouterr().err
     assert err == ("" if said is None else f"piga-control: warning: {said}\n")

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import json
 import math
 import sys
 from collections.abc import Callable, Sequence
@@ -205,7 +204,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.model:  # after every refusal, so that a refused command prints one line
         warn_if_unconverged(PROG, args.model)
         _warn_if_other_frames(args.model, ckpt)
-        _warn_if_other_pixel_physics(ckpt, PixelPendulumConfig())
+        _warn_if_other_pixel_physics(ckpt, PixelPendulumConfig(gravity_mult=args.gravity_mult), told)
     config = EpisodeConfig(episodes=args.episodes, steps=args.steps, seed=args.seed, gravity_mult=args.gravity_mult,
                            goal_angle=mpc.goal_angle, torque_arrow=args.torque_arrow)
     agent: OracleAgent | PigaMPCAgent
@@ -651,9 +650,11 @@ def _warn_if_other_frames(run_dir: str, checkpoint: dict) -> None:
               file=sys.stderr)
 
 
-def pixel_physics_difference(trained: dict[str, Any], env: PixelPendulumConfig) -> tuple[str, str] | None:
-    """Where the training file's ``env_config`` (``trained``) had other physics than Gymnasium's pendulum ``env``
-    before its gravity multiplier (the multiplier is the episodes' own change): the gravity (the file's gravity times
+def pixel_physics_difference(trained: dict[str, Any], env: PixelPendulumConfig,
+                             believed: float = 1.0) -> tuple[str, str] | None:
+    """Where the training file's ``env_config`` (``trained``) had other physics than Gymnasium's pendulum ``env``: the
+    gravity (the file's gravity times its multiplier; compared only where it differs from the env's base gravity too,
+    and where the agent's belief, it times ``believed``, the multiplier it is told, is not the env's gravity times
     its multiplier), the actuation gain, the effects. The env's values and the trained ones, e.g. ("g = 10 m/s²,
     actuation gain 1", "g = 5 m/s², actuation gain 2"); None where they agree, or where the file does not say."""
     pairs = []
@@ -662,34 +663,39 @@ def pixel_physics_difference(trained: dict[str, Any], env: PixelPendulumConfig) 
         gain = float(trained.get("actuation_gain", env.actuation_gain))
     except (TypeError, ValueError):  # (a file's attrs written by hand: nothing to compare)
         return None
-    if not math.isclose(g, env.gravity, rel_tol=1e-6):
-        pairs.append((f"g = {number_text(env.gravity)} m/s²", f"g = {number_text(g)} m/s²"))
+    runs = env.gravity * env.gravity_mult
+    if not math.isclose(g, env.gravity, rel_tol=1e-6) and not math.isclose(g * believed, runs, rel_tol=1e-6):
+        pairs.append((f"g = {number_text(runs)} m/s²", f"g = {number_text(g)} m/s²"))
     if not math.isclose(gain, env.actuation_gain, rel_tol=1e-6):
         pairs.append((f"actuation gain {number_text(env.actuation_gain)}", f"actuation gain {number_text(gain)}"))
     effects = trained.get("effects") or []
     if effects and effects != list(env.effects):
-        pairs.append(("no effect" if not env.effects else "its effects", f"the effects {json.dumps(effects)}"))
+        try:
+            named = ", ".join(f"{name}={number_text(float(value))}" for name, value in effects)
+        except (TypeError, ValueError):
+            named = str(effects)
+        pairs.append(("no effect" if not env.effects else "other effects", f"the effects {named}"))
     if not pairs:
         return None
     return ", ".join(now for now, _ in pairs), ", ".join(then for _, then in pairs)
 
 
-def _warn_if_other_pixel_physics(checkpoint: dict, env: PixelPendulumConfig) -> None:
+def _warn_if_other_pixel_physics(checkpoint: dict, env: PixelPendulumConfig, believed: float = 1.0) -> None:
     """One warning line where the model's training file was collected with other physics than the pixel pendulum
-    that the episodes run (:func:`pixel_physics_difference`): its planner plans with the physics it identified, and a
-    success of 0% would read as a failed identification (a model of g = 5, a = 2, read to within 1%, swung up 0 of 2
-    episodes at g = 10 and gain 1 without a word, and 2 of 2 at g = 5)."""
+    that the episodes run (:func:`pixel_physics_difference`; ``believed``: the gravity multiplier the agent is told):
+    its planner plans with the physics it identified, and a success of 0% would read as a failed identification (a
+    model of g = 5, a = 2, read to within 1%, swung up 0 of 2 episodes at g = 10 and gain 1 without a word, and 2 of 2
+    at g = 5)."""
     from piga.io.runs import training_env_config
 
     trained = training_env_config(checkpoint)
-    if trained and (differs := pixel_physics_difference(trained, env)) is not None:
+    if trained and (differs := pixel_physics_difference(trained, env, believed)) is not None:
         mult = float(trained.get("gravity", env.gravity)) * float(trained.get("gravity_mult", 1.0)) / env.gravity
         hint = (f" (--gravity-mult {number_text(mult)} --not-told runs the env at the trained gravity)"
-                if not math.isclose(mult, 1.0, rel_tol=1e-6) and MIN_GRAVITY <= mult * env.gravity <= MAX_GRAVITY
-                else "")
-        print(f"{PROG}: warning: the env runs {differs[0]} (times --gravity-mult), the model's training file was "
-              f"collected at {differs[1]}: its planner plans with the physics it identified there, so the success "
-              f"below measures that mismatch too{hint}", file=sys.stderr)
+                if "g = " in differs[0] and MIN_GRAVITY <= mult * env.gravity <= MAX_GRAVITY else "")
+        print(f"{PROG}: warning: the env runs {differs[0]}, the model's training file was collected at {differs[1]}: "
+              f"its planner plans with the physics it identified there, so the success below measures that mismatch "
+              f"too{hint}", file=sys.stderr)
 
 
 def check_planet_frames(run_dir: str) -> None:
