@@ -658,10 +658,12 @@ def pixel_physics_difference(trained: dict[str, Any], env: PixelPendulumConfig,
     its multiplier), the actuation gain, the effects. The env's values and the trained ones, e.g. ("g = 10 m/s²,
     actuation gain 1", "g = 5 m/s², actuation gain 2"); None where they agree, or where the file does not say."""
     pairs = []
+    g = _trained_gravity(trained, env)
     try:
-        g = float(trained.get("gravity", env.gravity)) * float(trained.get("gravity_mult", 1.0))
         gain = float(trained.get("actuation_gain", env.actuation_gain))
     except (TypeError, ValueError):  # (a file's attrs written by hand: nothing to compare)
+        return None
+    if g is None:
         return None
     runs = env.gravity * env.gravity_mult
     if not math.isclose(g, env.gravity, rel_tol=1e-6) and not math.isclose(g * believed, runs, rel_tol=1e-6):
@@ -680,6 +682,15 @@ def pixel_physics_difference(trained: dict[str, Any], env: PixelPendulumConfig,
     return ", ".join(now for now, _ in pairs), ", ".join(then for _, then in pairs)
 
 
+def _trained_gravity(trained: dict[str, Any], env: PixelPendulumConfig) -> float | None:
+    """The gravity of the training file's ``env_config`` (its gravity times its multiplier; the env's where it does
+    not say); None where a hand-written attribute is no number."""
+    try:
+        return float(trained.get("gravity", env.gravity)) * float(trained.get("gravity_mult", 1.0))
+    except (TypeError, ValueError):
+        return None
+
+
 def _warn_if_other_pixel_physics(checkpoint: dict, env: PixelPendulumConfig, believed: float = 1.0) -> None:
     """One warning line where the model's training file was collected with other physics than the pixel pendulum
     that the episodes run (:func:`pixel_physics_difference`; ``believed``: the gravity multiplier the agent is told):
@@ -690,7 +701,7 @@ def _warn_if_other_pixel_physics(checkpoint: dict, env: PixelPendulumConfig, bel
 
     trained = training_env_config(checkpoint)
     if trained and (differs := pixel_physics_difference(trained, env, believed)) is not None:
-        mult = float(trained.get("gravity", env.gravity)) * float(trained.get("gravity_mult", 1.0)) / env.gravity
+        mult = (_trained_gravity(trained, env) or env.gravity) / env.gravity
         hint = (f" (--gravity-mult {number_text(mult)} --not-told runs the env at the trained gravity)"
                 if "g = " in differs[0] and MIN_GRAVITY <= mult * env.gravity <= MAX_GRAVITY else "")
         print(f"{PROG}: warning: the env runs {differs[0]}, the model's training file was collected at {differs[1]}: "

@@ -402,15 +402,16 @@ def implausible_own_reading(read: fit.Model, nom: Nominal) -> bool:
     return not (within_factor(read.values["g"], nom.g) and within_factor(abs(read.values["a"]), abs(nom.a)))
 
 
-def damped_reference(physics: fit.Model, read_own: Callable[..., fit.Model], nom: Nominal,
-                     w: WindowSet) -> tuple[fit.Model, fit.Model] | None:
+def damped_reference(physics: fit.Model, read_own: Callable[..., fit.Model], nom: Nominal, w: WindowSet,
+                     readings: dict[tuple, fit.Model] | None = None) -> tuple[fit.Model, fit.Model] | None:
     """The recording's ``physics`` and the own file's reading (``read_own``, see :func:`own_reading`) both with a
     damping added, where ``physics`` has none and the training file shows one; else None.
 
     Read in the recording's form, without a damping, the training file's g and a take up a damping that its system had
     and the recording's has not, and a gain or gravity error is judged against that bent reading (measured: dm_control
     at mass 1.5 with the hinge damping removed, 50 sequences of 24 frames, read "gain 0.746, 95% interval
-    0.724..0.771" against a true 0.667; with a damping in both readings, 0.676)."""
+    0.724..0.771" against a true 0.667; with a damping in both readings, 0.676). ``readings`` keeps the recording's
+    damped readings of one analysis, whose naming may ask for the same one more than once."""
     if physics.has(DAMPING):
         return None
     form = tuple(e for e in CANDIDATES if e in (*physics.effects, DAMPING.name))
@@ -418,8 +419,12 @@ def damped_reference(physics: fit.Model, read_own: Callable[..., fit.Model], nom
     own = read_own(fit.Model(form, physics.delay, start, physics.substeps), (DAMPING.name,))
     if not own.has(DAMPING):
         return None
-    recording = fit.fit_candidate(form, start, nom, w.fit, delay=physics.delay or None,
-                                  substeps=physics.substeps or None)
+    key = ("recording", form, physics.delay, physics.substeps, tuple(sorted(start.items())))
+    readings = {} if readings is None else readings
+    if key not in readings:
+        readings[key] = fit.fit_candidate(form, start, nom, w.fit, delay=physics.delay or None,
+                                          substeps=physics.substeps or None)
+    recording = readings[key]
     return (None if fit.collapsed(recording, nom) or implausible_own_reading(own, nom) else (recording, own))
 
 
@@ -1340,7 +1345,8 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
     With ``rival`` (where "none" was chosen: the single effect that the held-out free run favours and the one-step BIC
     does not see, fitted as ``final`` is, see :func:`select`), a gain or gravity error is named only when the rival,
     read against its own reference, shows it too: an effect left out bends g and a. ``own_readings`` keeps the own
-    file's readings of one analysis, which may name its effects more than once (the same physics, the same reading).
+    file's readings of one analysis, which may name its effects more than once (the same physics, the same reading),
+    and the recording's damped readings (:func:`damped_reference`).
 
     With ``damped`` (where "none" was chosen: a function that gives the damping single read on the same windows as
     ``final``, or None, see :func:`damping_check`), a gravity error that "none" reads is named only where that form,
@@ -1399,7 +1405,7 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
                          "nominal model's")
             ref_g, ref_a = nom.g, abs(nom.a)
         else:
-            both_damped = damped_reference(reference, read_own, nom, w)
+            both_damped = damped_reference(reference, read_own, nom, w, own_readings)
             if both_damped is not None:  # the training file's damping, which the recording lacks, read in both
                 reference, read = both_damped
                 ref_g, ref_a = read.values["g"], abs(read.values["a"])
@@ -1422,7 +1428,7 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
             read = read_own(rival)
             if not implausible_own_reading(read, nom):
                 rival_ref_g, rival_ref_a = read.values["g"], abs(read.values["a"])
-                if (rival_damped := damped_reference(rival, read_own, nom, w)) is not None:  # as the chosen's, above
+                if (rival_damped := damped_reference(rival, read_own, nom, w, own_readings)) is not None:  # as above
                     read_rival, read = rival_damped
                     rival_ref_g, rival_ref_a = read.values["g"], abs(read.values["a"])
         rival_gain, rival_g = abs(read_rival.values["a"]) / rival_ref_a, read_rival.values["g"] / rival_ref_g
