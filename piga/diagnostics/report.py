@@ -179,6 +179,16 @@ def ambiguity_lines(d: Diagnosis) -> list[str]:
             f"separate them. The gap below is measured with {a.candidates[0]} (the lower BIC).", ""]
 
 
+#: How the physics refitted to the recording is labelled where nothing was named to correct (no closure): its values
+#: are shown for reference, and are no correction ("no gap to close ...; corrected g = 12.52" read as one).
+REFITTED = "refitted for reference, not a correction"
+
+
+def values_text(values: dict[str, float]) -> str:
+    """"g = 12.52, a = 1.002" of a physics' values."""
+    return ", ".join(f"{k} = {number(v, '.4g')}" for k, v in values.items())
+
+
 def closure_line(d: Diagnosis) -> str:
     """The command's one line on the closure, each number with its basis: the headline in pixels or angles, and the
     mean over all windows, which is always in angles (a blur's "free-run closure 97.6% (pixel MSE ...; mean over all
@@ -204,9 +214,11 @@ def closure_line(d: Diagnosis) -> str:
     corrected = "corrected " + ", ".join(f"{k} = {number(v, '.4g')}" for k, v in d.corrected.items())
     basis = "in pixels" if pixels else "in angles"
     if g.no_gap and d.verdict_class == "unexplained":  # a gap, but nothing named that would close it
-        return f"free-run closure: none measured (the gap is not explained, so nothing was corrected; {detail}); {corrected}"
+        return (f"free-run closure: none measured (the gap is not explained, so nothing was corrected; {detail}); "
+                f"{REFITTED}: {values_text(d.corrected)}")
     if g.no_gap:
-        return f"free-run closure: no gap to close (nothing named to correct; {detail}); {corrected}"
+        return (f"free-run closure: no gap to close (nothing named to correct; {detail}); {REFITTED}: "
+                f"{values_text(d.corrected)}")
     mean = (f"mean over all windows in angles: MSE {number(g.free_run_mse_nominal)} -> {number(g.free_run_mse_corrected)} "
             f"rad², raw closure {number(100 * g.free_run_closure, '.1f')}%")
     if pixels:
@@ -224,7 +236,8 @@ def headline_text(d: Diagnosis) -> str:
         return (lead + " For "
                 "reference, the typical held-out window's free-run angle MSE (the median over windows of each window's "
                 f"mean squared error) is {number(g.typical_free_run_mse_nominal, '.3g')} rad² for the nominal model and "
-                f"{number(g.typical_free_run_mse_corrected, '.3g')} rad² with g and a refitted.")
+                f"{number(g.typical_free_run_mse_corrected, '.3g')} rad² with the physics {REFITTED} "
+                f"({values_text(d.corrected)}).")
     note = f" {g.floor_note[0].upper()}{g.floor_note[1:]}." if g.floor_note else ""
     if g.closure_basis == "pixels":
         kind = "of the gap above the matched floor, in pixels" if g.floor_subtracted else "raw, in pixels"
@@ -271,7 +284,9 @@ def markdown(d: Diagnosis, model: str, data: str, command: str) -> str:
     if d.effects:
         lines += ["| effect | value | 95% interval | unit |", "|---|---|---|---|"]
         for e in d.effects:
-            rows = [(e.effect, e.value, e.interval, e.unit + (f", {e.where}" if e.where else ""))]
+            rows = [(e.effect, e.value, e.interval, e.unit + (f", {e.where}" if e.where else "")
+                     + (f", in the recording ({number(e.training, '.3g')} in the model's own training file)"
+                        if e.training is not None else ""))]
             if e.effect == "shift":  # its length, and each component with its own interval
                 rows += [("shift right (dx)", e.dx, e.dx_interval, "px"), ("shift down (dy)", e.dy, e.dy_interval, "px")]
             for name, value, ci, unit in rows:
@@ -298,7 +313,8 @@ def markdown(d: Diagnosis, model: str, data: str, command: str) -> str:
         "is dominated by the few windows that pass near upright, where any error grows fast, even in an exactly right "
         "model." + floor + " One step: RMSE "
         f"{math.degrees(g.one_step_rms_nominal_rad):.3f}° nominal, {math.degrees(g.one_step_rms_corrected_rad):.3f}° corrected.", "",
-        f"Nominal g = {number(d.nominal['g'], '.4f')}, a = {number(d.nominal['a'], '.4f')}; corrected: "
+        f"Nominal g = {number(d.nominal['g'], '.4f')}, a = {number(d.nominal['a'], '.4f')}; "
+        + (f"{REFITTED}: " if g.no_gap else "corrected: ")
         + ", ".join(f"{k} = {_fmt(v)}" for k, v in d.corrected.items()), "",
         "![gap](gap.png)", "",
         "| horizon | angle RMSE nominal (deg) | corrected (deg) | closure | pixel MSE nominal | corrected |", "|---|---|---|---|---|---|",

@@ -90,6 +90,10 @@ class Effect(_ByKey):
     """A camera effect in part of the recording only: where it shows ("in 25 of 50 sequences (the even ones; in the
     others, none)", "from frame 12 on (in the frames before it, none)"; :mod:`piga.diagnostics.partial`); None: in
     all of it."""
+    training: float | None = None
+    """A damping only: the same parameter as the model's own training file reads it, where the two files differ in it
+    (``value`` is then the recording's reading, both on top of the nominal model's own damping; see
+    :func:`piga.diagnostics.diagnose.damping_differs`); None: no such comparison."""
 
     def describe(self) -> str:
         """One phrase for the verdict line."""
@@ -111,12 +115,19 @@ class Effect(_ByKey):
         if self.effect == "shift":  # each component with its own interval
             return (f"shift {_with_interval(self.dx, self.dx_interval, 'px right')}, "
                     f"{_with_interval(self.dy, self.dy_interval, 'px down')}{where}")
+        if self.training is not None:
+            known = self.interval is not None and all(math.isfinite(x) for x in self.interval)
+            none = self.value <= 0 or (known and self.interval[0] <= 0)
+            recording = (f"none (b = {_with_interval(self.value, self.interval, self.unit)})" if none else
+                         _with_interval(self.value, self.interval, self.unit))
+            return (f"{self.effect} {self.training:.3g} {self.unit} in the model's own training file, {recording} in "
+                    "the recording")
         return f"{self.effect} {_with_interval(self.value, self.interval, self.unit)}{where}"
 
     def to_dict(self) -> dict[str, Any]:
         shift_only = ("dx", "dy", "dx_interval", "dy_interval")
         return {k: v for k, v in asdict(self).items()
-                if (k not in shift_only or self.effect == "shift") and (k != "where" or v is not None)}
+                if (k not in shift_only or self.effect == "shift") and (k not in ("where", "training") or v is not None)}
 
 
 @dataclass(frozen=True)
