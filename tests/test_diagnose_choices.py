@@ -626,6 +626,31 @@ def test_the_closure_line_gives_each_numbers_basis(damped) -> None:
     assert "not comparable" not in state and "not comparable" not in markdown(damped, "m", "d", "c")
 
 
+def test_no_gap_above_the_floor_leads_with_no_closure_percentage(damped) -> None:
+    """Noise of 50 gray levels read "free-run closure in pixels 95.8% (no gap above the floor: a ratio of noise)": a
+    headline percentage beside the statement that it means nothing. The line and the report's headline now lead with
+    "no gap above the floor to close", and give the MSEs."""
+    import copy
+
+    from piga.diagnostics.report import closure_line, headline_text
+
+    d = copy.deepcopy(damped)
+    d.gap = replace(d.gap, closure_basis="pixels", typical_pixel_mse_nominal=0.0244, typical_pixel_mse_corrected=0.0195,
+                    pixel_mse_floor=0.0193, free_run_gap_closure=0.958, floor_subtracted=True, gap_above_floor=False)
+    line = closure_line(d)
+    assert line.startswith("free-run closure in pixels: no gap above the floor to close (typical held-out window, pixel "
+                           "MSE 0.0244 -> 0.0195 beside the matched floor 0.0193: the nominal is within 1.5x the floor, "
+                           "so the closure (95.8%) is a ratio of noise; mean over all windows in angles"), line
+    text = headline_text(d)
+    assert text.startswith("**No gap above the floor to close**") and text.count("**") == 2, text
+    state = copy.deepcopy(damped)
+    state.gap = replace(state.gap, typical_free_run_mse_floor=state.gap.typical_free_run_mse_nominal,
+                        floor_subtracted=True, gap_above_floor=False)
+    line = closure_line(state)
+    assert line.startswith("free-run closure in angles: no gap above the floor to close (typical held-out window, angle "
+                           "MSE ") and "rad² beside the twin's floor" in line, line
+
+
 def test_the_report_gives_a_shift_by_component(damped) -> None:
     """The effect table read "| shift | 1.002 | 1.001 .. 1.002 | px (mean of right and down) |" for a shift of 2 px
     right: its length and each component now have a row, each with its own interval."""

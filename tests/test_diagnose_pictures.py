@@ -220,6 +220,23 @@ def test_another_scene_is_refused_unless_a_camera_explains_it() -> None:
             check_scene_through_camera(unlike, camera, matched, 3.9e-4, 100)
 
 
+def test_a_recording_too_noisy_to_read_is_refused_as_noise() -> None:
+    """Sensor noise of 80 gray levels was refused as "not the scene the model knows" (137x); the named noise explains
+    that error, and the line says so, with the noise this model reads. Frames whose error noise does not explain
+    (uniform random frames: their spread reads as noise of about 74) keep the refusal as another scene."""
+    from piga.diagnostics.diagnose import check_scene_through_camera
+    from piga.diagnostics.observe import NotTheSceneError
+
+    unlike = NotTheSceneError("this is not the scene the model knows")
+    with pytest.raises(NotTheSceneError, match=r"^these frames are too noisy to read: sensor noise of about 79.5 gray "
+                       r"levels \(σ\) has the model re-render them with MSE 0.0535, 137x its training error 0.000391 "
+                       r"\(the limit is 100x\); it reads noise up to about 67 gray levels: record with less"):
+        check_scene_through_camera(unlike, V.Camera(), 1.0, 3.91e-4, 100, rec_real=0.0535, noise=79.5)
+    for rec_real, noise in ((0.0535, 0.0), (0.27, 74.0)):
+        with pytest.raises(NotTheSceneError, match="^this is not the scene the model knows$"):
+            check_scene_through_camera(unlike, V.Camera(), 1.0, 3.91e-4, 100, rec_real=rec_real, noise=noise)
+
+
 @pytest.mark.parametrize("blank", [0, T // 2])
 def test_frames_without_the_pendulum_are_counted(model, tmp_path: Path, blank: int) -> None:
     """A file whose second half of every sequence was blank read "blur 1.68 px"; its empty frames are now counted, and

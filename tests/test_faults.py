@@ -2158,6 +2158,30 @@ def test_the_hold_warning_at_the_edge_does_not_contradict_itself() -> None:
     assert hold_warning(math.radians(23.57)) is None and hold_warning(math.radians(-23.57)) is None
 
 
+def test_a_sweep_names_the_multipliers_at_which_its_goal_cannot_be_held(tiny_piga_run: Path, monkeypatch: pytest.MonkeyPatch,
+                                                                        capsys: pytest.CaptureFixture[str]) -> None:
+    """A single run at x0.9 warned that 30 deg needs torque -2.25; a sweep over x0.9 and x1 to the same goal said
+    nothing. Its one line names the multipliers, before any job is played."""
+    from piga.control import jobs
+    from piga.control.goal import hold_warning
+
+    line = hold_warning(math.radians(30), [0.5, 0.9, 1.0]) or ""
+    assert line.startswith("goal 30 deg needs torque -2.25 to -2.5 to hold in the env at gravity x0.9, x1 "), line
+    assert "holdable goals there are within ±26.38 to ±23.57 deg" in line and "x0.5" not in line, line
+    assert hold_warning(math.radians(30), [0.5, 0.8]) is None
+    assert "at gravity x1 to x1.4 (5 of the sweep's 6)" in (hold_warning(math.radians(25), [0.9, 1, 1.1, 1.2, 1.3, 1.4]) or "")
+
+    def played(*_: object, **__: object) -> None:
+        raise RuntimeError("no job is played here")
+
+    monkeypatch.setattr(jobs, "run_jobs", played)
+    with pytest.raises(RuntimeError, match="no job is played here"):
+        control.main(["--model", str(tiny_piga_run), "--sweep", "0.5:1:0.5", "--goal-angle", "25", "--episodes", "1",
+                      "--steps", "20", "--workers", "1", "--quiet"])
+    warnings = [w for w in capsys.readouterr().err.splitlines() if "holdable" in w]
+    assert len(warnings) == 1 and "at gravity x1 (its own physics)" in warnings[0], warnings
+
+
 def test_a_goal_is_judged_holdable_in_the_env_the_agent_was_not_told_of(tiny_piga_run: Path,
                                                                          capsys: pytest.CaptureFixture[str]) -> None:
     """20 deg is holdable at gravity x1 (±23.6 deg), not at x1.4 (±16.6): --not-told judged it at x1, in silence."""

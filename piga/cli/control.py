@@ -294,6 +294,10 @@ def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: 
         check_pendulum_model(model, args.model)
         _check_plannable(model, args.model)
     backend = connect_backend(args.ray)  # before the warning: a refused --ray is the one line on stderr
+    from piga.control.goal import hold_warning
+
+    if (warning := hold_warning(mpc.goal_angle, multipliers)) is not None:  # the env's: every agent plays in it
+        print(f"{PROG}: warning: {warning}", file=sys.stderr)
     if kind is RunKind.PIGA:
         warn_if_unconverged(PROG, args.model)
         _warn_if_other_frames(args.model, checkpoint)

@@ -15,13 +15,13 @@ import functools
 import math
 import os
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Sequence
 
 import numpy as np
 import torch
 
 from envs.constants import MAX_ACTION
-from envs.fields import upper_bound_text
+from envs.fields import number_text, upper_bound_text
 from envs.pendulum import PixelPendulumConfig
 from piga.world.effects import scaled_gravity
 from piga.world.model import PhysicsModel, frames_to_float
@@ -108,20 +108,32 @@ def env_holdable_angle(gravity_mult: float = 1.0) -> float:
     return holdable_angle(PixelPendulumConfig(gravity_mult=gravity_mult).effective_gravity, PixelPendulumConfig.actuation_gain)
 
 
-def hold_warning(angle: float, gravity_mult: float = 1.0) -> str | None:
+def hold_warning(angle: float, gravity_mult: float | Sequence[float] = 1.0) -> str | None:
     """One line when the goal ``angle`` (rad) cannot be held within the torque limit in the env at ``gravity_mult``
-    (judged with the env's own physics), else None."""
-    feasible = env_holdable_angle(gravity_mult)
-    if abs(math.sin(angle)) <= math.sin(feasible):
+    (judged with the env's own physics), else None.
+
+    Given a sweep's multipliers (a sequence), the one line names those at which the goal cannot be held, with the
+    range of torques it needs and of goals that can be held there; a single run's line names none."""
+    sweep = not isinstance(gravity_mult, (int, float))
+    multipliers = list(gravity_mult) if sweep else [gravity_mult]  # type: ignore[arg-type]
+    beyond = [m for m in multipliers if abs(math.sin(angle)) > math.sin(env_holdable_angle(m))]
+    if not beyond:
         return None
-    config = PixelPendulumConfig(gravity_mult=gravity_mult)
-    needed = -config.effective_gravity * math.sin(angle) / (2 * config.actuation_gain)
+    gain = PixelPendulumConfig.actuation_gain
+    needed = sorted({f"{-PixelPendulumConfig(gravity_mult=m).effective_gravity * math.sin(angle) / (2 * gain):+.4g}"
+                     for m in beyond}, key=lambda t: abs(float(t)))  # (the torque grows with the gravity)
+    bounds = [f"±{upper_bound_text(math.degrees(env_holdable_angle(m)), 4)}" for m in (beyond[0], beyond[-1])]
+    where, there = "", ""
+    if sweep:
+        named = ", ".join(f"x{number_text(m)}" for m in beyond) if len(beyond) <= 4 else \
+            f"x{number_text(beyond[0])} to x{number_text(beyond[-1])} ({len(beyond)} of the sweep's {len(multipliers)})"
+        where, there = f" at gravity {named}", " there"
     # the goal as given and the bound rounded down, the torque to 4 digits: at the edge, "goal 23.6 deg needs torque
     # -2.00 ... within ±23.6 deg" contradicted itself (the bound is 23.578)
-    return (f"goal {math.degrees(angle):.6g} deg needs torque {needed:+.4g} to hold in the env (its own physics), beyond "
-            f"the limit of {MAX_ACTION:g}; "
-            f"holdable goals are within ±{upper_bound_text(math.degrees(feasible), 4)} deg of upright (or of hanging "
-            "down); the controller will do its best")
+    return (f"goal {math.degrees(angle):.6g} deg needs torque {' to '.join(dict.fromkeys((needed[0], needed[-1])))} "
+            f"to hold in the env{where} (its own physics), beyond the limit of {MAX_ACTION:g}; holdable goals{there} are "
+            f"within {' to '.join(dict.fromkeys(bounds))} deg of upright (or of hanging down); the controller will do "
+            "its best")
 
 
 def read_goal(model: PhysicsModel, image: np.ndarray, g: float, a: float, mse_limit: float,

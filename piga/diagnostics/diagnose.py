@@ -81,8 +81,8 @@ from torch import Tensor
 
 from envs.constants import MAX_ACTION, PENDULUM_MAX_SPEED
 from piga.diagnostics import fit
-from piga.diagnostics.observe import (DiagnosisInputError, NotTheSceneError, Observations, check_scene, check_training,
-                                      observe)
+from piga.diagnostics.observe import (DiagnosisInputError, NotTheSceneError, Observations, check_noise_explains,
+                                      check_scene, check_training, observe)
 from piga.diagnostics.partial import PartialCamera
 from piga.diagnostics.residuals import (action_correlation, autocorrelation, binned, generic_features, heatmap,
                                         GENERIC_COLUMNS, one_step_residuals, reading_features, ridge)
@@ -224,7 +224,9 @@ class DiagnoseConfig:
     defaults, 2 epochs of piga-train-model, training MSE 4.6e-4) on 40 x 20 frames of each: the
     pendulum 0.9x (clean or damped), blur σ 2.5 px 3.7x, a 3 px shift 8.5x, camera noise of 30 gray
     levels 27x (the blind check's strongest is 22); uniform random frames 700x, black frames 2100x.
-    100x lies between: ~4x above the strongest real camera, ~7x below noise."""
+    100x lies between: ~4x above the strongest real camera, ~7x below noise. Sensor noise of 60 gray
+    levels re-renders at 83x on the default model (training MSE 3.9e-4), 70 at 108x and 80 at 137x: those
+    are refused as too noisy to read (:func:`~piga.diagnostics.observe.check_noise_explains`)."""
     max_training_fraction: float = 1.0
     """The model's training reconstruction error above this fraction of the error of drawing no
     pendulum on its training frames (their MSE against the model's own background): its training
@@ -305,8 +307,10 @@ def diagnose(model: PhysicsModel, data: str | os.PathLike[str], config: Diagnose
     own = training_data_path(checkpoint)
     camera = camera_stage(model, str(data), obs.theta, obs.fit, obs.stale, config.camera, seed=config.seed,
                           progress=progress, reference=None if own is None else str(own))
+    noise = next((e["value"] for e in camera.effects if e["effect"] == "noise"), 0.0)  # the named noise, σ
     check_scene_through_camera(unlike, camera.camera if camera.partial is None else camera.partial.camera,
-                               camera.matched_error, rec_training, config.max_scene_ratio)
+                               camera.matched_error, rec_training, config.max_scene_ratio,
+                               rec_real=float(np.mean(obs.rec_mse)), noise=noise)
     # a camera at its candidates' bound first: the frames it matches worse than the empty scene are then its (a blur of
     # 7.5 px, read through the largest blur of 4 px, was refused as "not in view in 100%")
     check_camera_in_range(camera.camera, camera.matched_error, rec_training)
@@ -324,12 +328,16 @@ def diagnose(model: PhysicsModel, data: str | os.PathLike[str], config: Diagnose
 
 
 def check_scene_through_camera(unlike: NotTheSceneError | None, camera: Camera, matched_error: float,
-                               rec_training: float, max_ratio: float) -> None:
+                               rec_training: float, max_ratio: float, rec_real: float = math.nan,
+                               noise: float = 0.0) -> None:
     """Raises ``unlike`` (the encoder's re-rendering refused the recording as another scene) unless the accepted
     ``camera`` explains the difference: its frames then match the decoder's renders through that camera within
     ``max_ratio`` times the training error (a picture 30% darker re-rendered 237x worse than the training frames, and
-    was refused as another scene; through its exposure 0.70 it matches at 0.5x)."""
+    was refused as another scene; through its exposure 0.70 it matches at 0.5x). Where the named sensor ``noise``
+    (gray levels σ) explains the re-rendering error ``rec_real``, the refusal says the frames are too noisy to read
+    instead (:func:`~piga.diagnostics.observe.check_noise_explains`)."""
     if unlike is not None and (camera == Camera() or not matched_error <= max_ratio * rec_training):
+        check_noise_explains(rec_real, rec_training, noise, max_ratio)
         raise unlike
 
 

@@ -72,6 +72,27 @@ def check_scene(obs: Observations, rec_training: float, max_ratio: float) -> Non
             f"{rec_real / rec_training:.0f}x its training error {rec_training:.3g} (the limit is {max_ratio:g}x)")
 
 
+def check_noise_explains(rec_real: float, rec_training: float, noise: float, max_ratio: float) -> None:
+    """Refuses, in its own words, a recording refused as another scene (:func:`check_scene`) whose re-rendering error
+    the sensor noise measured on its still pixels (``noise``, gray levels σ; 0: none named) explains: noise of σ adds
+    at most (σ/255)² to a frame's MSE (a clip at the white background censors about half of it; measured with a
+    default model, training MSE 3.9e-4: 0.54 to 0.62 of (σ/255)² at noise 50 to 80). Nothing is raised otherwise.
+
+    The line names the largest noise this model reads: the σ at which the same share of (σ/255)² meets the limit,
+    from this recording's own share (measured with that model: noise 60 re-renders at 83x and is diagnosed as noise
+    59.6; noise 70 at 108x and 80 at 137x are refused; the line reads 65, 66 and 67 from the three).
+    """
+    excess = rec_real - rec_training
+    if not (noise > 0 and rec_training > 0 and 0 < excess <= (noise / 255) ** 2):
+        return
+    readable = noise * math.sqrt((max_ratio - 1) * rec_training / excess)
+    raise NotTheSceneError(
+        f"these frames are too noisy to read: sensor noise of about {noise:.3g} gray levels (σ) has the model re-render "
+        f"them with MSE {rec_real:.3g}, {rec_real / rec_training:.0f}x its training error {rec_training:.3g} (the limit "
+        f"is {max_ratio:g}x); it reads noise up to about {math.floor(readable):d} gray levels: record with less sensor "
+        "noise (more light, a lower gain), or average or denoise the frames")
+
+
 @dataclass(frozen=True)
 class Observations:
     """A recording as the model sees it. N sequences of T frames."""

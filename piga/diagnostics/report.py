@@ -199,8 +199,6 @@ def closure_line(d: Diagnosis) -> str:
     headline = "–" if g.free_run_gap_closure is None else f"{number(100 * g.free_run_gap_closure, '.1f')}%"
     if not g.floor_subtracted and g.free_run_gap_closure is not None:
         headline += " raw"
-    if not g.gap_above_floor:
-        headline += " (no gap above the floor: a ratio of noise)"
     if pixels:
         detail = (f"typical held-out window, pixel MSE {number(g.typical_pixel_mse_nominal)} -> "
                   f"{number(g.typical_pixel_mse_corrected)}"
@@ -223,6 +221,14 @@ def closure_line(d: Diagnosis) -> str:
             f"rad², raw closure {number(100 * g.free_run_closure, '.1f')}%")
     if pixels:
         mean += ", not comparable: the corrected model reads its angles by matching the frames to the decoder's renders"
+    if not g.gap_above_floor:  # the closure is a ratio of noise: no percentage leads the line
+        nominal, fixed, floor = ((g.typical_pixel_mse_nominal, g.typical_pixel_mse_corrected, g.pixel_mse_floor) if pixels
+                                 else (g.typical_free_run_mse_nominal, g.typical_free_run_mse_corrected,
+                                       g.typical_free_run_mse_floor))
+        kind, unit, floor_name = ("pixel", "", "matched floor") if pixels else ("angle", " rad²", "twin's floor")
+        return (f"free-run closure {basis}: no gap above the floor to close (typical held-out window, {kind} MSE "
+                f"{number(nominal)} -> {number(fixed)}{unit} beside the {floor_name} {number(floor)}: the nominal is "
+                f"within {MEASURABLE_GAP:g}x the floor, so the closure ({headline}) is a ratio of noise; {mean}); {corrected}")
     return f"free-run closure {basis} {headline} ({detail}; {mean}); {corrected}"
 
 
@@ -239,9 +245,10 @@ def headline_text(d: Diagnosis) -> str:
                 f"{number(g.typical_free_run_mse_corrected, '.3g')} rad² with the physics {REFITTED} "
                 f"({values_text(d.corrected)}).")
     note = f" {g.floor_note[0].upper()}{g.floor_note[1:]}." if g.floor_note else ""
+    bold = "**" if g.gap_above_floor else ""  # (a ratio of noise leads with no bold percentage)
     if g.closure_basis == "pixels":
         kind = "of the gap above the matched floor, in pixels" if g.floor_subtracted else "raw, in pixels"
-        headline = (f"**Free-run closure {_pct(g.free_run_gap_closure)}, {kind}**: the corrected model reads its angles "
+        headline = (f"{bold}Free-run closure {_pct(g.free_run_gap_closure)}, {kind}{bold}: the corrected model reads its angles "
                     "by matching the frames to the decoder's renders, not with the encoder, and angle errors of the two "
                     "would not be comparable. On the typical held-out window (the median over windows of each window's "
                     f"mean pixel MSE of the rendered free run), the nominal model is at {number(g.typical_pixel_mse_nominal, '.3g')}, "
@@ -250,7 +257,7 @@ def headline_text(d: Diagnosis) -> str:
                     + ("; the closure is the share of the gap above that floor that the correction removes."
                        if g.floor_subtracted else "; the closure is 1 − corrected / nominal." + note))
     elif g.floor_subtracted:
-        headline = (f"**Free-run closure {_pct(g.free_run_gap_closure)}** of the gap above the floor, on the typical "
+        headline = (f"{bold}Free-run closure {_pct(g.free_run_gap_closure)}{bold} of the gap above the floor, on the typical "
                     "held-out window (the median over windows of each window's mean squared free-run angle error): "
                     f"{number(g.typical_free_run_mse_nominal, '.3g')} rad² nominal, {number(g.typical_free_run_mse_corrected, '.3g')} rad² "
                     f"corrected, and a floor of {number(g.typical_free_run_mse_floor, '.3g')} rad², the corrected model's own error "
@@ -262,7 +269,7 @@ def headline_text(d: Diagnosis) -> str:
                     + ". Raw, with no floor subtracted (1 − corrected / nominal of the same two numbers): "
                     f"{_pct(g.typical_free_run_closure)}." + note)
     else:
-        headline = (f"**Free-run closure {_pct(g.free_run_gap_closure)}, raw**: 1 − err_corrected / err_nominal on the "
+        headline = (f"{bold}Free-run closure {_pct(g.free_run_gap_closure)}, raw{bold}: 1 − err_corrected / err_nominal on the "
                     "typical held-out window (the median over windows of each window's mean squared free-run angle "
                     f"error: {number(g.typical_free_run_mse_nominal, '.3g')} rad² nominal, "
                     f"{number(g.typical_free_run_mse_corrected, '.3g')} rad² corrected). No floor is subtracted." + note)
