@@ -4,6 +4,7 @@ brighter than the model's, which its encoder cannot read."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -151,6 +152,23 @@ def test_a_verdict_not_explained_on_a_zoomed_picture_names_the_zoom_first() -> N
     named = Naming([], [], "damping 0.128 1/s", "damping")  # a named effect stays as it is (the note says the size)
     assert _zoom_first(named, zoomed, config) is named
     assert _zoom_first(unexplained, SimpleNamespace(scale=1.0, rescaled=lambda c: False), config) is unexplained
+
+
+def test_a_camera_change_under_the_naming_size_is_said_in_a_note() -> None:
+    """dm_control filmed from 1.05 times as far: a zoom of 0.972 lowered the matched residual by 40%, under the 3%
+    named, and nothing said the picture differs."""
+    config = DiagnoseConfig()
+    none = {"candidate": "none", "camera": V.Camera().__dict__, "drop": 0.0, "accepted": False}
+    zoom = {"candidate": "zoom", "camera": {**V.Camera().__dict__, "zoom": 0.972}, "drop": 0.40, "accepted": False}
+    shift = {"candidate": "shift", "camera": {**V.Camera().__dict__, "dy": -0.27}, "drop": 0.17, "accepted": False}
+    found = V.CameraFindings(V.Camera(), 0.0, 0.0, 0, 0, [none, shift, zoom], 1e-3, 1e-3, [])
+    _, notes = summarise_vision(SimpleNamespace(rec_mse=np.ones(3)), 1.0, found, None, [], config)
+    said = [n for n in notes if n.startswith("a camera a little different")]
+    assert len(said) == 1 and "the zoom candidate (zoom 0.972)" in said[0] and "by 40%" in said[0], notes
+    for quiet in (replace(found, table=[none, {**zoom, "drop": 0.05}]),  # a drop under min_drop
+                  replace(found, table=[none, {**zoom, "rescaled": True}]),  # refused for the size: its own note
+                  replace(found, camera=V.Camera(blur=1.0))):  # a camera named
+        assert quiet.below_naming(config.camera) is None
 
 
 def test_repeated_frames_do_not_hide_sensor_noise(model, tmp_path: Path) -> None:

@@ -1786,6 +1786,13 @@ def summarise_vision(obs: Observations, rec_training: float, camera: CameraFindi
                          "about the image centre that matches the frames best): a camera nearer or farther, or a "
                          "pendulum of another length, draws it so. The angles are read through it; a pendulum of "
                          "another length shows in the physics too (g/l)")
+        if (small := camera.below_naming(config.camera)) is not None:
+            change = ", ".join(f"{k} {v:.3g}" for k, v in small["camera"].items() if v != getattr(Camera(), k))
+            notes.append(f"a camera a little different from the model's: the {small['candidate']} candidate ({change}) "
+                         f"lowers the held-out matched residual by {100 * small['drop']:.0f}%, but its change is under "
+                         "the size that is named (blur or shift "
+                         f"{config.camera.min_blur:g}/{config.camera.min_shift:g} px, exposure {config.camera.min_exposure:g} "
+                         f"gray levels, zoom {config.camera.min_zoom:g}), so no camera is named")
         if camera.matched_for_sign:
             notes.append("the encoder's angles did not show the actuation's sign, the angles found by matching every "
                          "frame to the decoder's renders do: the selection, the values and the gap are all on those "
