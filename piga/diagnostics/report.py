@@ -209,7 +209,7 @@ def closure_line(d: Diagnosis) -> str:
                   f"{number(g.typical_free_run_mse_corrected)} rad²"
                   + (f", of the gap above the twin's floor {number(floor)}" if floor is not None and g.floor_subtracted
                      else ""))
-    corrected = "corrected " + ", ".join(f"{k} = {number(v, '.4g')}" for k, v in d.corrected.items())
+    corrected = "corrected " + values_text(d.corrected)
     basis = "in pixels" if pixels else "in angles"
     if g.no_gap and d.verdict_class == "unexplained":  # a gap, but nothing named that would close it
         return (f"free-run closure: none measured (the gap is not explained, so nothing was corrected; {detail}); "
