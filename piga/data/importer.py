@@ -6,7 +6,7 @@ writes. It has no ``/states``, because a real recording has no ground truth.
 | input | what is accepted |
 |---|---|
 | recording | a video file that imageio reads (``.mp4``, ``.gif``, ...), an image stack (a multi-page TIFF: gray ``(T, H, W)`` or colour ``(T, H, W, 3 or 4)``), or a folder of ``.png`` / ``.jpg`` / ``.jpeg`` frames in natural name order (``f2`` before ``f10``) |
-| actions | a CSV with one row per frame: the action u_t applied after frame t. Either one column, with or without a header row, or a header row with a column named ``u`` or ``action`` |
+| actions | a CSV with one row per frame: the action u_t applied after frame t. Either one column, with or without a header row naming it ``u`` or ``action``, or a header row with a column named ``u`` or ``action`` |
 | dt | the frame interval in seconds |
 
 Each frame is converted as the env converts its render (:func:`piga.data.scene.scene_to_gray`): a
@@ -289,8 +289,8 @@ def _is_header(row: list[str]) -> bool:
 def read_actions(path: str | Path) -> np.ndarray:
     """The actions of a CSV, one row per frame: float32 (F,).
 
-    The CSV has one column, with an optional header row, or a header row that names the action
-    column ``u`` or ``action``. Commas, semicolons or tabs separate the columns, lines that start with ``#`` and blank
+    The CSV has one column, with an optional header row that names it ``u`` or ``action``, or several columns under
+    a header row that names the action column ``u`` or ``action``. Commas, semicolons or tabs separate the columns, lines that start with ``#`` and blank
     lines before the header or after the last value are skipped, and a separator that ends every row (``0.26,``) is not
     a column. Values are written in ASCII decimal (:data:`_CSV_NUMBER`).
 
@@ -335,6 +335,9 @@ def read_actions(path: str | Path) -> np.ndarray:
                          "add a header that names the action column 'u' or 'action'")
     if header:
         names = [cell.lower() for cell in first]
+        if len(first) == 1 and names[0] not in ACTION_COLUMNS:  # a word in place of the first value, or another name
+            raise ValueError(f"{p}: line {first_number}: expected a finite number or a header naming the column 'u' or "
+                             f"'action', got {first[0]!r}")
         if len(first) > 1:
             matches = [names.index(name) for name in ACTION_COLUMNS if name in names]
             if not matches:
