@@ -669,7 +669,6 @@ def test_planet_on_a_full_disk(tiny_data: Path, tmp_path: Path, capsys: pytest.C
     (("--iterative", "2"), lambda run: (run / "config.json").unlink(),
      ["config.json is missing, and the checkpoint does not hold the --iterative settings", "--overwrite"]),
     ((), _edit_record(lambda r: r["train"].pop("steps")), ["'train' settings lack steps"]),
-    ((), _edit_record(lambda r: r.pop("kind")), ["is a piga-train-model run", "not a planet run"]),
     ((), _edit_record(lambda r: r["train"].__setitem__("steps", "many")),
      ["'train' settings give steps as 'many', not an integer"]),  # "'<' not supported between instances of 'str' and 'int'"
 ])
@@ -681,6 +680,27 @@ def test_planet_resume_refuses(argv: tuple[str, ...], edit: Callable[[Path], Non
     refused("piga-baseline", ["planet", str(tiny_data), "--out", str(run), "--resume", "--steps", "4", "--quiet", *argv],
             capsys, *needles)
     assert _listing(run) == before
+
+
+@pytest.mark.parametrize("record", [{"zz": 1}, "drop kind"])
+def test_planet_resume_judges_a_record_without_kind_by_its_checkpoint(record: Any, baseline_runs: dict[str, Path],
+                                                                      tiny_data: Path, tmp_path: Path,
+                                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    """A planet run whose config.json was a JSON object without 'kind' was called "a piga-train-model run"; it is
+    rebuilt from its planet checkpoint (here up to the recipe check), and a piga-train-model run is named by its own."""
+    edit = _edit_record(lambda r: r.pop("kind")) if record == "drop kind" else (
+        lambda run: (run / "config.json").write_text(json.dumps(record)))
+    run = _run_copy(baseline_runs["planet"], tmp_path / "run", edit)
+    argv = ["planet", str(tiny_data), "--resume", "--steps", "4", "--quiet", "--batch-size", "4"]
+    line = refused("piga-baseline", [*argv, "--out", str(run)], capsys, "drop --batch-size")
+    assert "piga-train-model" not in line
+
+
+def test_planet_resume_names_a_piga_run_by_its_checkpoint(tiny_run: Path, tiny_data: Path, tmp_path: Path,
+                                                          capsys: pytest.CaptureFixture[str]) -> None:
+    run = _run_copy(tiny_run, tmp_path / "run", lambda run: (run / "config.json").write_text('{"zz": 1}'))
+    refused("piga-baseline", ["planet", str(tiny_data), "--out", str(run), "--resume", "--steps", "4", "--quiet"], capsys,
+            f"--resume: {run} is a piga-train-model run (its checkpoint.pt), not a planet run (piga-baseline planet)")
 
 
 @pytest.mark.parametrize("kind", ["planet", "ddpg"])

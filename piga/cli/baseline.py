@@ -28,7 +28,7 @@ from piga.cli.common import (NOT_CONVERGED, ArgumentParser, Interrupted, PigaErr
                              record_resume, recorded_options, remove_outputs, run_cli, seed_int, started_record,
                              thread_count, with_flags)
 from piga.io.atomic import check_folder_target
-from piga.io.checkpoint import CHECKPOINT, RUN_OUTPUTS, RunKind, check_run_files, read_run_record, recorded_path
+from piga.io.checkpoint import CHECKPOINT, RUN_OUTPUTS, RunKind, check_run_files, checkpoint_kind, read_run_record, recorded_path
 from piga.io.lock import lock_run_folder
 
 PROG = "piga-baseline"
@@ -207,10 +207,15 @@ def _check_run_dir(run_dir: Path, resume: bool, overwrite: bool, kind: RunKind) 
         if not record:  # missing or unreadable: rebuilt from the checkpoint (:func:`_resumed_record`), which names its kind
             return
         recorded = record.get("kind")
-        if recorded != kind.value:
-            what = f"a {recorded} run" if recorded else "a piga-train-model run (its config.json has no 'kind')"
-            raise PigaError(f"--resume: {run_dir} is {what}, not a {kind.value} run ({kind.writer})")
-        return
+        if recorded == kind.value:
+            return
+        if not recorded:  # piga-train-model's record names no kind, nor does a damaged one: the checkpoint tells them apart
+            found = checkpoint_kind(run_dir)
+            if found is None or found is kind:  # this kind's, or unreadable: the record is rebuilt from it, or its
+                return  # loader says what is wrong with it (:func:`_resumed_record`)
+            raise PigaError(f"--resume: {run_dir} is a {found.writer} run (its {CHECKPOINT}), not a {kind.value} run "
+                            f"({kind.writer})")
+        raise PigaError(f"--resume: {run_dir} is a {recorded} run, not a {kind.value} run ({kind.writer})")
     if existing and not overwrite:
         if CHECKPOINT not in existing and _left_before_a_checkpoint(run_dir, existing, kind):
             print(f"removing what a run of {run_dir} stopped before its first checkpoint left ({', '.join(existing)})")
@@ -234,6 +239,8 @@ def _resumed_record(run_dir: Path, kind: RunKind, args: Any) -> dict[str, Any]:
     rebuilt record says that the command that started the run is unknown. An ``--iterative`` planet run's settings
     of its rounds are only in the record: refused, saying so."""
     record, why = read_run_record(run_dir)
+    if why is None and not record.get("kind"):  # a JSON object without the record's fields (:func:`_check_run_dir`
+        why = "names no run kind (it lacks a run record's fields)"  # found this kind's checkpoint, or none that reads)
     if why is None:
         return record
     from piga.io.checkpoint import read_checkpoint
