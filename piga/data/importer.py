@@ -41,7 +41,7 @@ from envs.pendulum import MAX_IMAGE_SIZE
 from piga.io.atomic import check_not_an_input, check_writable_target
 from piga.data.collect import split_counts
 from piga.data.schema import (MAX_ABS_ACTION, MAX_DT, MIN_DT, MIN_IMAGE_SIZE, SPLITS, DatasetWriter, blank_error,
-                              frames_have_signal, frames_move, still_error, write_room)
+                              check_data_disk, frames_have_signal, frames_move, still_error)
 from piga.data.scene import read_image, scene_to_gray
 
 #: float32's smallest normal number: a nonzero action below it would be stored as 0 or rounded.
@@ -392,15 +392,15 @@ def _check_resources(n_frames: int, size: int, target: Path) -> None:
     (~48 bytes per output pixel). Disk: the frames gzip-compressed
     (:data:`piga.io.resources.RECORDED_FRAME_COMPRESSION`).
     """
-    from piga.io.resources import RECORDED_FRAME_COMPRESSION, check_disk, check_memory
+    from piga.io.resources import RECORDED_FRAME_COMPRESSION, check_memory
 
     pixels = size * size
     what = f"{n_frames} frames of {size}x{size}"
     check_memory(2 * n_frames * pixels + 48 * pixels, what)
     # with the room the writer keeps free as it writes them (uncompressed, at once), so that it does not refuse later
     raw = n_frames * (pixels + 4)
-    check_disk(target, n_frames * (pixels / RECORDED_FRAME_COMPRESSION + 4) + write_room(raw, raw), what,
-               advice="free some space, write --out elsewhere, or give a smaller --image-size")  # (no count to lower)
+    check_data_disk(target, n_frames * (pixels / RECORDED_FRAME_COMPRESSION + 4), raw, raw, what,
+                    advice="free some space, write --out elsewhere, or give a smaller --image-size")  # (no count to lower)
 
 
 def import_recording(
