@@ -195,7 +195,7 @@ def test_a_file_the_writer_has_no_room_for_is_refused_before_the_work(tmp_path: 
     monkeypatch.setattr(collecting, "_vector_env", never)
     _small_disk(monkeypatch, 6 * 2**20)
     line = refused("piga-collect", ["--sequences", "300", "--steps", "50", "--workers", "1", "--quiet", "--out",
-                                    str(tmp_path / "c.h5")], capsys, "needs about", "has 6.0 MiB free")
+                                    str(tmp_path / "c.h5")], capsys, "needs up to", "has 6.0 MiB free")
     assert "full" not in line
     assert _listing(tmp_path) == []
 
@@ -318,7 +318,7 @@ def test_an_import_without_room_is_told_what_import_can_change(tmp_path: Path, m
     (tmp_path / "a.csv").write_text("0.5\n" * 6)
     _small_disk(monkeypatch, 1000)
     line = refused("piga-import", [str(frames), str(tmp_path / "a.csv"), "--dt", "0.05", "--steps", "3", "--out",
-                                   str(tmp_path / "d.h5")], capsys, "needs about", "a smaller --image-size")
+                                   str(tmp_path / "d.h5")], capsys, "needs up to", "a smaller --image-size")
     assert "ask for less" not in line and not (tmp_path / "d.h5").exists()
 
 

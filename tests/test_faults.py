@@ -661,6 +661,82 @@ def test_planet_on_a_full_disk(tiny_data: Path, tmp_path: Path, capsys: pytest.C
     assert _listing(tmp_path) == []
 
 
+def _disk_with_free(monkeypatch: pytest.MonkeyPatch, free: int) -> None:
+    """Every disk has ``free`` bytes free."""
+    real = shutil.disk_usage
+    monkeypatch.setattr(shutil, "disk_usage", lambda path: real(path)._replace(free=free))
+
+
+def test_a_resumed_run_counts_the_checkpoint_it_replaces(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A run that started on a disk was refused its own --resume there: the check asked again for two checkpoints,
+    counting the one the resume replaces as used, and offered "give another --out", which continues nothing."""
+    from piga.io.resources import RUN_DISK_MARGIN, ResourceError, check_run_disk
+
+    run = tmp_path / "run"
+    run.mkdir()
+    checkpoint = 10 * 2**20
+    with open(run / "checkpoint.pt", "wb") as f:
+        f.truncate(checkpoint)
+    _disk_with_free(monkeypatch, checkpoint + RUN_DISK_MARGIN + 2**20)  # the first run's need less its checkpoint
+    check_run_disk(run, checkpoint, "the training run", resume=True)
+    with pytest.raises(ResourceError, match=r"needs about 84\.0 MiB of disk, .*; free some space, or give another --out$"):
+        check_run_disk(run, checkpoint, "the training run")
+    _disk_with_free(monkeypatch, 60 * 2**20)
+    with pytest.raises(ResourceError) as info:
+        check_run_disk(run, checkpoint, "the training run", resume=True)
+    assert str(info.value).startswith(f"the training run needs about 74.0 MiB of disk beyond the 10.0 MiB of {run} that "
+                                      "it replaces, but "), str(info.value)
+    assert str(info.value).endswith("has 60.0 MiB free; free some space"), str(info.value)
+
+
+@pytest.mark.parametrize("prog, head", [("piga-train-model", []), ("piga-baseline", ["planet"])])
+def test_resume_on_a_small_disk_counts_the_runs_checkpoint(prog: str, head: list[str], tiny_run: Path,
+                                                           baseline_runs: dict[str, Path], tiny_data: Path,
+                                                           tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                           capsys: pytest.CaptureFixture[str]) -> None:
+    run = _run_copy(tiny_run if prog == "piga-train-model" else baseline_runs["planet"], tmp_path / "run")
+    _disk_with_free(monkeypatch, 2**20)
+    more = ["--epochs", "2"] if prog == "piga-train-model" else ["--steps", "8"]
+    refused(prog, [*head, str(tiny_data), "--out", str(run), "--resume", *more, "--quiet"], capsys,
+            "of disk beyond the", f"of {run} that it replaces, but", "1.0 MiB free; free some space")
+
+
+@pytest.mark.parametrize("prog, argv, needles", [
+    ("piga-show", ["{data}", "--out", "{tmp}/s.png"],
+     ["the strip keeps at least 4.0 MiB of disk free (what it writes takes under 2 MiB), but"]),
+    ("piga-control", ["--write-goal-image", "{tmp}/g.png", "--angle", "10"],
+     ["--write-goal-image", "keeps at least 4.0 MiB of disk free (what it writes takes under 2 MiB)"]),
+    ("piga-collect", ["--out", "{tmp}/c.h5", "--sequences", "60", "--steps", "40", "--workers", "1"],
+     ["needs up to 18.0 MiB of disk as it writes (a file of about 636.1 KiB once compressed, and 17.4 MiB kept free"]),
+    ("piga-demo", ["--out", "{tmp}/demo", "--sequences", "12"],
+     ["needs about 144.2 MiB of disk for the whole demo (the data file, about 229.6 KiB; the training run, 140.0 MiB",
+      "and 4.0 MiB kept free for its pictures and table), but", "free some space, or give another --out"]),
+])
+def test_disk_refusals_state_the_whole_need_or_the_headroom(prog: str, argv: list[str], needles: list[str],
+                                                            tiny_data: Path, tmp_path: Path,
+                                                            monkeypatch: pytest.MonkeyPatch,
+                                                            capsys: pytest.CaptureFixture[str]) -> None:
+    """On a 2 MiB disk the commands that write figures said "needs about 4.0 MiB" for files of some KiB, piga-demo
+    said 4.0 MiB and then, on a larger disk, 140 MiB for its training, and piga-collect stated a write margin as the
+    file's need."""
+    _disk_with_free(monkeypatch, 2 * 2**20)
+    refused(prog, [a.format(data=tiny_data, tmp=tmp_path) for a in argv], capsys, *needles)
+    assert _listing(tmp_path) == []
+
+
+def test_a_resumed_demo_counts_its_data_and_checkpoint(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                       capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "demo"
+    (out / "model").mkdir(parents=True)
+    for path, size in ((out / "pendulum.h5", 2**20), (out / "model" / "checkpoint.pt", 38 * 2**20)):
+        with open(path, "wb") as f:
+            f.truncate(size)
+    _disk_with_free(monkeypatch, 2 * 2**20)
+    refused("piga-demo", ["--out", str(out), "--sequences", "12", "--resume"], capsys,
+            "needs about 106.0 MiB of disk for the whole demo (the training run, 102.0 MiB for its checkpoints of "
+            "38.0 MiB, metrics and figures, less the checkpoint it replaces;", "2.0 MiB free; free some space")
+
+
 @pytest.mark.parametrize("argv, edit, needles", [
     (("--batch-size", "4"), None, ["--resume keeps the run's recipe; drop --batch-size"]),
     (("--seed", "3", "--free-nats", "2"), None, ["drop --free-nats, --seed"]),
@@ -669,7 +745,6 @@ def test_planet_on_a_full_disk(tiny_data: Path, tmp_path: Path, capsys: pytest.C
     (("--iterative", "2"), lambda run: (run / "config.json").unlink(),
      ["config.json is missing, and the checkpoint does not hold the --iterative settings", "--overwrite"]),
     ((), _edit_record(lambda r: r["train"].pop("steps")), ["'train' settings lack steps"]),
-    ((), _edit_record(lambda r: r.pop("kind")), ["is a piga-train-model run", "not a planet run"]),
     ((), _edit_record(lambda r: r["train"].__setitem__("steps", "many")),
      ["'train' settings give steps as 'many', not an integer"]),  # "'<' not supported between instances of 'str' and 'int'"
 ])
@@ -681,6 +756,27 @@ def test_planet_resume_refuses(argv: tuple[str, ...], edit: Callable[[Path], Non
     refused("piga-baseline", ["planet", str(tiny_data), "--out", str(run), "--resume", "--steps", "4", "--quiet", *argv],
             capsys, *needles)
     assert _listing(run) == before
+
+
+@pytest.mark.parametrize("record", [{"zz": 1}, "drop kind"])
+def test_planet_resume_judges_a_record_without_kind_by_its_checkpoint(record: Any, baseline_runs: dict[str, Path],
+                                                                      tiny_data: Path, tmp_path: Path,
+                                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    """A planet run whose config.json was a JSON object without 'kind' was called "a piga-train-model run"; it is
+    rebuilt from its planet checkpoint (here up to the recipe check), and a piga-train-model run is named by its own."""
+    edit = _edit_record(lambda r: r.pop("kind")) if record == "drop kind" else (
+        lambda run: (run / "config.json").write_text(json.dumps(record)))
+    run = _run_copy(baseline_runs["planet"], tmp_path / "run", edit)
+    argv = ["planet", str(tiny_data), "--resume", "--steps", "4", "--quiet", "--batch-size", "4"]
+    line = refused("piga-baseline", [*argv, "--out", str(run)], capsys, "drop --batch-size")
+    assert "piga-train-model" not in line
+
+
+def test_planet_resume_names_a_piga_run_by_its_checkpoint(tiny_run: Path, tiny_data: Path, tmp_path: Path,
+                                                          capsys: pytest.CaptureFixture[str]) -> None:
+    run = _run_copy(tiny_run, tmp_path / "run", lambda run: (run / "config.json").write_text('{"zz": 1}'))
+    refused("piga-baseline", ["planet", str(tiny_data), "--out", str(run), "--resume", "--steps", "4", "--quiet"], capsys,
+            f"--resume: {run} is a piga-train-model run (its checkpoint.pt), not a planet run (piga-baseline planet)")
 
 
 @pytest.mark.parametrize("kind", ["planet", "ddpg"])

@@ -136,7 +136,7 @@ def test_frames_are_converted_as_the_env_converts_its_render(tmp_path: Path) -> 
     "text, want",
     [
         ("0.5\n-1\n2\n", [0.5, -1, 2]),
-        ("torque\n0.5\n-1\n2\n", [0.5, -1, 2]),  # one column: any header name
+        ("Action\n0.5\n-1\n2\n", [0.5, -1, 2]),  # one column under its header
         ("t,action,other\n0,0.5,9\n1,-1,9\n2,2,9\n\n \n", [0.5, -1, 2]),  # blank lines at the end: the file's end
         ("\n\nu\n# recorded at 20 Hz\n0.5\n-1\n", [0.5, -1]),  # blank lines before the header
         ("\ufeffu;t\n0.5;0\n-1;1\n2;2\n", [0.5, -1, 2]),  # a BOM, semicolons
@@ -169,6 +169,9 @@ def test_read_actions(tmp_path: Path, text: str, want: list[float]) -> None:
         ("a,b\n1,2\n", "names no column 'u' or 'action'"),
         ("u,U\n1,2\n", "names 'u' more than once"),  # the first column was taken
         ("t,u\n0,1\n1\n", "line 3: 1 column(s), but line 1 has 2"),
+        # a first line that is no number is a header only where it names the column as --help says
+        ("abc\nabc\n", "line 1: expected a finite number or a header naming the column 'u' or 'action', got 'abc'"),
+        ("torque\n0.5\n", "line 1: expected a finite number or a header naming the column 'u' or 'action', got 'torque'"),
         ("1_0\n", "line 1: expected a finite number, got '1_0'"),  # float() reads 10: no CSV writer means it
         ("0.5\n\u0661\n", "line 2: expected a finite number, got '\u0661'"),  # an Arabic-Indic 1
         ("u\n\uff11\n", "line 2: expected a finite number, got '\uff11' (write it in ASCII decimal digits"),  # fullwidth

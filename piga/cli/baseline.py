@@ -28,7 +28,7 @@ from piga.cli.common import (NOT_CONVERGED, ArgumentParser, Interrupted, PigaErr
                              record_resume, recorded_options, remove_outputs, run_cli, seed_int, started_record,
                              thread_count, with_flags)
 from piga.io.atomic import check_folder_target
-from piga.io.checkpoint import CHECKPOINT, RUN_OUTPUTS, RunKind, check_run_files, read_run_record, recorded_path
+from piga.io.checkpoint import CHECKPOINT, RUN_OUTPUTS, RunKind, check_run_files, checkpoint_kind, read_run_record, recorded_path
 from piga.io.lock import lock_run_folder
 
 PROG = "piga-baseline"
@@ -207,10 +207,15 @@ def _check_run_dir(run_dir: Path, resume: bool, overwrite: bool, kind: RunKind) 
         if not record:  # missing or unreadable: rebuilt from the checkpoint (:func:`_resumed_record`), which names its kind
             return
         recorded = record.get("kind")
-        if recorded != kind.value:
-            what = f"a {recorded} run" if recorded else "a piga-train-model run (its config.json has no 'kind')"
-            raise PigaError(f"--resume: {run_dir} is {what}, not a {kind.value} run ({kind.writer})")
-        return
+        if recorded == kind.value:
+            return
+        if not recorded:  # piga-train-model's record names no kind, nor does a damaged one: the checkpoint tells them apart
+            found = checkpoint_kind(run_dir)
+            if found is None or found is kind:  # this kind's, or unreadable: the record is rebuilt from it, or its
+                return  # loader says what is wrong with it (:func:`_resumed_record`)
+            raise PigaError(f"--resume: {run_dir} is a {found.writer} run (its {CHECKPOINT}), not a {kind.value} run "
+                            f"({kind.writer})")
+        raise PigaError(f"--resume: {run_dir} is a {recorded} run, not a {kind.value} run ({kind.writer})")
     if existing and not overwrite:
         if CHECKPOINT not in existing and _left_before_a_checkpoint(run_dir, existing, kind):
             print(f"removing what a run of {run_dir} stopped before its first checkpoint left ({', '.join(existing)})")
@@ -234,6 +239,8 @@ def _resumed_record(run_dir: Path, kind: RunKind, args: Any) -> dict[str, Any]:
     rebuilt record says that the command that started the run is unknown. An ``--iterative`` planet run's settings
     of its rounds are only in the record: refused, saying so."""
     record, why = read_run_record(run_dir)
+    if why is None and not record.get("kind"):  # a JSON object without the record's fields (:func:`_check_run_dir`
+        why = "names no run kind (it lacks a run record's fields)"  # found this kind's checkpoint, or none that reads)
     if why is None:
         return record
     from piga.io.checkpoint import read_checkpoint
@@ -485,7 +492,7 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
             raise PigaError("--max-minutes stops one training; with --iterative, bound the run with --rounds instead")
         check_iterative_data(info, iterative)
     check_run_disk(run_dir, _planet_checkpoint_bytes(run_dir, record["rssm"], args.resume), "the PlaNet-style run",
-                   extra=0 if iterative is None else 2 * _collected_bytes(info, iterative))
+                   extra=0 if iterative is None else 2 * _collected_bytes(info, iterative), resume=args.resume)
     used = min(info.split_counts["train"], config.max_sequences or info.split_counts["train"])
     print(f"training the PlaNet-style model on {args.data} ({counted(used, 'train sequence')} x {info.steps} frames) -> {run_dir}"
           + (f", then {counted(iterative.rounds, 'round')} of {counted(iterative.episodes, 'planner episode')} + "
@@ -565,7 +572,7 @@ def _ddpg_checkpoint_bytes(config: Any, latent_size: int) -> float:
 def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
     from piga.io.atomic import write_json
     from agents.sb3.config import SB3Config, resolve_precision  # it checks --eval-every against the env's episode length
-    from agents.sb3.run import AUTOENCODER
+    from agents.sb3.run import AUTOENCODER, REPLAY_BUFFERS
     from agents.sb3.train import first_step_reaching, train_sb3
     from piga.io.resources import check_memory, check_run_disk
     from piga.training.train import TrainingDiverged
@@ -603,8 +610,9 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
         config = replace(saved, steps=args.steps or saved.steps, threads=args.threads, device=args.device)
         record["ddpg"] = config.to_dict()
         record_resume(record, command)
-        checkpoint_bytes: float = (run_dir / CHECKPOINT).stat().st_size
         buffer_bytes = _ddpg_checkpoint_bytes(config, AutoencoderConfig.latent_size)  # (the run's autoencoder: its default size)
+        # the next checkpoint's buffer file, at most full, beside the run's present one, which it then replaces
+        checkpoint_bytes: float = buffer_bytes + (run_dir / CHECKPOINT).stat().st_size
     else:
         if args.obs == "state" and args.torque_arrow:  # (--resume refuses it with the recipe's other changes)
             raise PigaError("--torque-arrow shows the arrow in the frames; --obs state sees no frames (it observes "
@@ -636,7 +644,8 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
         if args.data:
             record["data_fingerprint"] = fingerprint(args.data)
         checkpoint_bytes = buffer_bytes = _ddpg_checkpoint_bytes(config, ae_config.latent_size)
-    check_run_disk(run_dir, checkpoint_bytes, f"{config.algo.upper()}'s run (a replay buffer of {config.buffer_size})")
+    check_run_disk(run_dir, checkpoint_bytes, f"{config.algo.upper()}'s run (a replay buffer of {config.buffer_size})",
+                   resume=args.resume, rewritten=(REPLAY_BUFFERS,))
     # SB3 allocates the buffer untouched and fills it as the run goes: a buffer beyond the memory would be killed hours in
     source = f"as {run_dir / 'config.json'} gives it" if args.resume else "--buffer-size"  # a resume takes the record's
     check_memory(buffer_bytes, f"{config.algo.upper()}'s replay buffer of {config.buffer_size} ({source})")

@@ -333,7 +333,7 @@ def _check_out_set(outputs: list[Path], args: argparse.Namespace) -> None:
     --overwrite, a missing folder, a file system that stores no files (/proc, /sys: it failed after the episodes,
     as "removed or moved while it ran?"), or one of the command's inputs (the --model run's own files, whose
     metrics.json a control summary replaced, and the goal image)."""
-    from piga.io.resources import FIGURE_DISK_BYTES, check_disk
+    from piga.io.resources import check_figure_disk
 
     check_file_name(_stem(outputs), "--out", "results")
     inputs: dict[str, str | os.PathLike[str]] = {"--goal-image": args.goal_image} if args.goal_image else {}
@@ -342,7 +342,7 @@ def _check_out_set(outputs: list[Path], args: argparse.Namespace) -> None:
     for path in outputs:
         check_writable_target(path, args.overwrite)
         check_not_an_input(path, inputs)
-    check_disk(outputs[0], FIGURE_DISK_BYTES, f"--out {outputs[0]}", advice="free some space, or give another --out")
+    check_figure_disk(outputs[0], f"--out {outputs[0]}")
 
 
 def _write_outputs(outputs: list[Path], record: dict[str, Any], page: str, overwrite: bool,
@@ -798,9 +798,9 @@ def _write_goal_image(args: argparse.Namespace) -> int:
         *most, last = GOAL_IMAGE_FORMATS
         raise PigaError(f"--write-goal-image: use a path ending in {', '.join(most)} or {last}, got {target.name}")
     check_writable_target(target, args.overwrite)
-    from piga.io.resources import FIGURE_DISK_BYTES, check_disk
+    from piga.io.resources import check_figure_disk
 
-    check_disk(target, FIGURE_DISK_BYTES, f"--write-goal-image {target}", advice="free some space, or write elsewhere")
+    check_figure_disk(target, f"--write-goal-image {target}", advice="free some space, or write elsewhere")
     picture = render_goal_image(args.angle)
     with atomic_output(target, overwrite=args.overwrite) as tmp:
         tmp.write_bytes(encoded_image(picture, suffix, **GOAL_IMAGE_FORMATS[suffix]))

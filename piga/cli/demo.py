@@ -124,10 +124,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if (out / CHECKPOINT).exists():  # its lock would have called that run "still being trained" while the demo ran
         raise PigaError(f"--out {out} holds a run of its own ({CHECKPOINT}); a demo writes its data, pictures and run "
                         "(in --out/model) into a folder of its own: give another --out")
-    from piga.io.resources import FIGURE_DISK_BYTES, check_disk
-
-    check_disk(out / "pendulum.h5", FIGURE_DISK_BYTES, f"--out {out}",  # /proc, /sys: "removed or moved while it ran?"
-               advice="free some space, or give another --out")
+    collect_config = replace(CollectConfig(), sequences=args.sequences, seed=args.seed)
+    check_demo_disk(out, collect_config, args.resume)  # /proc, /sys: "removed or moved while it ran?"
     lock_run_folder(out)  # a second command on this folder is refused until this one ends
     data, strip, run_dir = out / "pendulum.h5", out / "frames.png", out / DEMO_RUN
     goal_png, control_md = out / "goal.png", out / "control.md"
@@ -158,8 +156,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     from piga.cli.control import check_angle
 
     check_angle("--goal-angle", args.goal_angle)
-    collect_config = replace(CollectConfig(), sequences=args.sequences, seed=args.seed)  # checked before any folder
-    _check_enough_sequences(collect_config)
+    _check_enough_sequences(collect_config)  # checked before any folder
     outputs = (data, strip, run_dir / CHECKPOINT, goal_png, control_md)
     before = {path: path.exists() and path.stat().st_mtime_ns for path in outputs}
     try:
@@ -187,6 +184,39 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise Interrupted(f"{out} keeps {', '.join(kept)} from this demo; run the same command with "
                               f"{resume_option(args.overwrite)} to continue it, or with --overwrite to start over") from None
         raise KeyboardInterrupt from None
+
+
+def check_demo_disk(out: Path, config: CollectConfig, resume: bool) -> None:
+    """Refuses, before anything is made, a --out whose disk cannot hold the whole demo: its data file (about
+    :func:`piga.data.collect.disk_need`'s size, and the room the writer keeps free as it writes it), the fast preset's
+    training run (:func:`piga.io.resources.run_disk_need`) and the pictures and table
+    (:data:`piga.io.resources.FIGURE_DISK_BYTES`); a resumed demo less what its data file and checkpoint already take.
+
+    Raises:
+        piga.io.resources.ResourceError: the whole need, its parts, and the free space.
+    """
+    import torch
+
+    from piga.data.collect import disk_need
+    from piga.data.schema import write_room
+    from piga.io.resources import FIGURE_DISK_BYTES, adam_checkpoint_bytes, check_disk, format_bytes, run_disk_need
+    from piga.training.train import PRESETS
+    from piga.world.variants import build_model
+
+    data, run_dir = out / "pendulum.h5", out / DEMO_RUN
+    file_bytes, slice_bytes, raw_bytes = disk_need(config)
+    kept = resume and data.is_file()  # the earlier demo's data: kept, not written again
+    collecting = 0.0 if kept else file_bytes + write_room(slice_bytes, raw_bytes)
+    with torch.device("meta"):  # its size only: no memory taken
+        checkpoint_bytes = adam_checkpoint_bytes(build_model(PRESETS["fast"].model))
+    run_bytes, _ = run_disk_need(run_dir, checkpoint_bytes, resume=resume)
+    data_part = f"the data file, about {format_bytes(file_bytes)}; " if not kept else ""
+    check_disk(data, max(collecting, (0.0 if kept else file_bytes) + run_bytes + FIGURE_DISK_BYTES), f"--out {out}",
+               advice="free some space" if resume else "free some space, or give another --out",
+               detail=f" for the whole demo ({data_part}the training run, {format_bytes(run_bytes)} for its "
+                      f"checkpoints of {format_bytes(checkpoint_bytes)}, metrics and figures"
+                      f"{', less the checkpoint it replaces' if resume and (run_dir / CHECKPOINT).is_file() else ''}; "
+                      f"and {format_bytes(FIGURE_DISK_BYTES)} kept free for its pictures and table)")
 
 
 def _check_enough_sequences(config: CollectConfig) -> None:

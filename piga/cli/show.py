@@ -13,7 +13,7 @@ from envs.fields import counted
 from piga.cli.common import ArgumentParser, file_path, given_options, positive_int, run_cli, typed_text
 from piga.data.schema import (SPLITS, BlankFramesError, DatasetInfo, check_actions_file, check_frames_have_signal,
                               inspect_dataset, read_rows, split_indices)
-from piga.io.resources import FIGURE_DISK_BYTES, check_disk
+from piga.io.resources import check_figure_disk
 from piga.io.atomic import check_not_an_input
 
 PROG = "piga-show"
@@ -44,7 +44,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     written = given_options(parser, argv)
     check_figure_target(args.out, args.overwrite)
-    check_disk(args.out, FIGURE_DISK_BYTES, "the strip", advice="free some space, or give another --out")
+    check_figure_disk(args.out, "the strip")
     check_not_an_input(args.out, {"data file": args.data})
     info = inspect_dataset(args.data)
     available = split_indices(args.data, args.split)

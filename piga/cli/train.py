@@ -331,7 +331,7 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
                           f"the {model_config.architecture} model of these sizes (its weights, gradients and Adam's moments)")
     fresh = build_model(model_config)  # its size and start values, before training builds its own
     check_run_disk(run_dir, (run_dir / CHECKPOINT).stat().st_size if args.resume else adam_checkpoint_bytes(fresh),
-                   "the training run")
+                   "the training run", resume=args.resume)
     record.update({"data": str(args.data), "data_folder": os.getcwd(), "train": asdict(train_config), "plan": asdict(plan),
                    "model": model_config.to_dict()})
     if not info.split_counts["test"]:

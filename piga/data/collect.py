@@ -38,7 +38,7 @@ from envs.fields import counted, number_text
 from envs.pendulum import MAX_ACTION, PENDULUM_DT, PixelPendulumConfig, make_pixel_pendulum
 from piga.io.atomic import check_writable_target
 from piga.io.progress import progress_bar
-from piga.data.schema import MAX_SEED, SPLITS, BlankFramesError, DatasetWriter, StillFramesError, write_room
+from piga.data.schema import MAX_SEED, SPLITS, BlankFramesError, DatasetWriter, StillFramesError, check_data_disk
 from piga.io.worker_signals import die_with_parent, quiet_worker_signals
 from piga.io.choices import check_types
 
@@ -200,18 +200,33 @@ def check_resources(config: CollectConfig, out: str | Path) -> None:
     Raises:
         piga.io.resources.ResourceError: naming what is needed and what is available.
     """
-    from piga.io.resources import (HDF5_FILE_OVERHEAD, RENDERED_FRAME_COMPRESSION, SHADED_FRAME_COMPRESSION, check_disk,
-                                   check_memory)
+    from piga.io.resources import check_memory
 
     n, t, pixels = config.sequences, config.steps, config.env.image_size**2
     workers = min(config.workers, n)
-    rows = min(max(config.batch, workers) // workers * workers, n)
     what = f"{n} sequences x {t} frames of {config.env.image_size}x{config.env.image_size}"
-    check_memory(rows * t * (pixels + 12) + (workers + 1) * 48 * pixels + 2 * n, what)
-    shrink = SHADED_FRAME_COMPRESSION if isinstance(config.env, DMCPendulumConfig) else RENDERED_FRAME_COMPRESSION
+    check_memory(_batch_rows(config) * t * (pixels + 12) + (workers + 1) * 48 * pixels + 2 * n, what)
     # with the room the writer keeps free as it writes the last batch (uncompressed), so that it does not refuse later
-    check_disk(out, n * t * (pixels / shrink + 12) + HDF5_FILE_OVERHEAD
-               + write_room(rows * t * (pixels + 16), n * t * (pixels + 16)), what)
+    check_data_disk(out, *disk_need(config), what)
+
+
+def _batch_rows(config: CollectConfig) -> int:
+    """The sequences collected and written at a time: ``config.batch``, a whole number of rounds of the workers."""
+    workers = min(config.workers, config.sequences)
+    return min(max(config.batch, workers) // workers * workers, config.sequences)
+
+
+def disk_need(config: CollectConfig) -> tuple[float, float, float]:
+    """The disk the data file of ``config`` takes, for :func:`piga.data.schema.check_data_disk`: the file once
+    compressed (frames shrunk by :data:`piga.io.resources.RENDERED_FRAME_COMPRESSION`, or the shaded frames'
+    :data:`~piga.io.resources.SHADED_FRAME_COMPRESSION`; actions, states and rewards raw), a batch uncompressed, and
+    the whole file uncompressed."""
+    from piga.io.resources import HDF5_FILE_OVERHEAD, RENDERED_FRAME_COMPRESSION, SHADED_FRAME_COMPRESSION
+
+    n, t, pixels = config.sequences, config.steps, config.env.image_size**2
+    shrink = SHADED_FRAME_COMPRESSION if isinstance(config.env, DMCPendulumConfig) else RENDERED_FRAME_COMPRESSION
+    return (n * t * (pixels / shrink + 12) + HDF5_FILE_OVERHEAD, _batch_rows(config) * t * (pixels + 16),
+            n * t * (pixels + 16))
 
 
 def collect(

@@ -28,7 +28,7 @@ from piga.io.progress import progress_bar
 from envs.scenes import SceneConfig, SceneError, check_forces_visible, generate_sequence, scene_config, state_names
 from piga.io.atomic import check_writable_target
 from piga.data.collect import check_collect_sizes, sequence_rng, split_counts
-from piga.data.schema import SPLITS, DatasetWriter, write_room
+from piga.data.schema import SPLITS, DatasetWriter, check_data_disk
 from piga.io.pool import JobFailed, run_pool
 from piga.io.choices import check_types
 
@@ -95,7 +95,7 @@ def scene_attrs(config: SceneCollectConfig, command: str | None = None) -> dict[
 def collect_scene(config: SceneCollectConfig, out: str | Path, overwrite: bool = False, command: str | None = None,
                   progress: bool = True) -> Path:
     """Simulates and renders ``config.sequences`` sequences and writes them to ``out`` atomically."""
-    from piga.io.resources import HDF5_FILE_OVERHEAD, SCENE_FRAME_COMPRESSION, check_disk, check_memory
+    from piga.io.resources import HDF5_FILE_OVERHEAD, SCENE_FRAME_COMPRESSION, check_memory
 
     check_writable_target(out, overwrite)
     scene, n, t = config.scene, config.sequences, config.steps
@@ -103,8 +103,8 @@ def collect_scene(config: SceneCollectConfig, out: str | Path, overwrite: bool =
     what = f"{n} sequences x {t} frames of {size}x{size} RGB"  # before any simulation: a size that could never finish
     check_memory(min(config.batch, n) * t * (3 * size * size + 16 * scene.n_objects), what)
     step_bytes = 3 * size * size + 16 * scene.n_objects  # raw; the writer keeps room for a batch's, uncompressed
-    check_disk(out, n * t * (3 * size * size / SCENE_FRAME_COMPRESSION + 16 * scene.n_objects) + HDF5_FILE_OVERHEAD
-               + write_room(min(config.batch, n) * t * step_bytes, n * t * step_bytes), what)
+    check_data_disk(out, n * t * (3 * size * size / SCENE_FRAME_COMPRESSION + 16 * scene.n_objects) + HDF5_FILE_OVERHEAD,
+                    min(config.batch, n) * t * step_bytes, n * t * step_bytes, what)
     counts = split_counts(n, config.split)
     one = functools.partial(_one, scene=scene, seed=config.seed, steps=t, first_test=counts[0] + counts[1])
     # the bar outside the writer: one that refuses the file as it closes (blank frames) clears it

@@ -6,7 +6,7 @@ writes. It has no ``/states``, because a real recording has no ground truth.
 | input | what is accepted |
 |---|---|
 | recording | a video file that imageio reads (``.mp4``, ``.gif``, ...), an image stack (a multi-page TIFF: gray ``(T, H, W)`` or colour ``(T, H, W, 3 or 4)``), or a folder of ``.png`` / ``.jpg`` / ``.jpeg`` frames in natural name order (``f2`` before ``f10``) |
-| actions | a CSV with one row per frame: the action u_t applied after frame t. Either one column, with or without a header row, or a header row with a column named ``u`` or ``action`` |
+| actions | a CSV with one row per frame: the action u_t applied after frame t. Either one column, with or without a header row naming it ``u`` or ``action``, or a header row with a column named ``u`` or ``action`` |
 | dt | the frame interval in seconds |
 
 Each frame is converted as the env converts its render (:func:`piga.data.scene.scene_to_gray`): a
@@ -41,7 +41,7 @@ from envs.pendulum import MAX_IMAGE_SIZE
 from piga.io.atomic import check_not_an_input, check_writable_target
 from piga.data.collect import split_counts
 from piga.data.schema import (MAX_ABS_ACTION, MAX_DT, MIN_DT, MIN_IMAGE_SIZE, SPLITS, DatasetWriter, blank_error,
-                              frames_have_signal, frames_move, still_error, write_room)
+                              check_data_disk, frames_have_signal, frames_move, still_error)
 from piga.data.scene import read_image, scene_to_gray
 
 #: float32's smallest normal number: a nonzero action below it would be stored as 0 or rounded.
@@ -289,8 +289,8 @@ def _is_header(row: list[str]) -> bool:
 def read_actions(path: str | Path) -> np.ndarray:
     """The actions of a CSV, one row per frame: float32 (F,).
 
-    The CSV has one column, with an optional header row, or a header row that names the action
-    column ``u`` or ``action``. Commas, semicolons or tabs separate the columns, lines that start with ``#`` and blank
+    The CSV has one column, with an optional header row that names it ``u`` or ``action``, or several columns under
+    a header row that names the action column ``u`` or ``action``. Commas, semicolons or tabs separate the columns, lines that start with ``#`` and blank
     lines before the header or after the last value are skipped, and a separator that ends every row (``0.26,``) is not
     a column. Values are written in ASCII decimal (:data:`_CSV_NUMBER`).
 
@@ -335,6 +335,9 @@ def read_actions(path: str | Path) -> np.ndarray:
                          "add a header that names the action column 'u' or 'action'")
     if header:
         names = [cell.lower() for cell in first]
+        if len(first) == 1 and names[0] not in ACTION_COLUMNS:  # a word in place of the first value, or another name
+            raise ValueError(f"{p}: line {first_number}: expected a finite number or a header naming the column 'u' or "
+                             f"'action', got {first[0]!r}")
         if len(first) > 1:
             matches = [names.index(name) for name in ACTION_COLUMNS if name in names]
             if not matches:
@@ -389,15 +392,15 @@ def _check_resources(n_frames: int, size: int, target: Path) -> None:
     (~48 bytes per output pixel). Disk: the frames gzip-compressed
     (:data:`piga.io.resources.RECORDED_FRAME_COMPRESSION`).
     """
-    from piga.io.resources import RECORDED_FRAME_COMPRESSION, check_disk, check_memory
+    from piga.io.resources import RECORDED_FRAME_COMPRESSION, check_memory
 
     pixels = size * size
     what = f"{n_frames} frames of {size}x{size}"
     check_memory(2 * n_frames * pixels + 48 * pixels, what)
     # with the room the writer keeps free as it writes them (uncompressed, at once), so that it does not refuse later
     raw = n_frames * (pixels + 4)
-    check_disk(target, n_frames * (pixels / RECORDED_FRAME_COMPRESSION + 4) + write_room(raw, raw), what,
-               advice="free some space, write --out elsewhere, or give a smaller --image-size")  # (no count to lower)
+    check_data_disk(target, n_frames * (pixels / RECORDED_FRAME_COMPRESSION + 4), raw, raw, what,
+                    advice="free some space, write --out elsewhere, or give a smaller --image-size")  # (no count to lower)
 
 
 def import_recording(

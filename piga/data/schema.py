@@ -106,6 +106,25 @@ def write_room(slice_bytes: float, file_bytes: float) -> float:
     return slice_bytes + write_margin(file_bytes)
 
 
+def check_data_disk(out: str | Path, file_bytes: float, slice_bytes: float, raw_bytes: float, what: str,
+                    advice: str = "ask for less") -> None:
+    """Refuses, before a command makes its data, a file ``out`` whose disk cannot take it as a
+    :class:`DatasetWriter` writes it: the file (about ``file_bytes`` once compressed) and the room it keeps free to
+    write each slice (:func:`write_room` of ``slice_bytes`` in a file of ``raw_bytes``, both uncompressed), so that
+    the writer does not refuse after the work. The message gives the two parts: the need is an upper bound.
+
+    Raises:
+        piga.io.resources.ResourceError: as :func:`piga.io.resources.check_disk`.
+    """
+    from piga.io.resources import check_disk, format_bytes
+
+    room = write_room(slice_bytes, raw_bytes)
+    check_disk(out, file_bytes + room, what, advice, bound="up to",
+               detail=f" as it writes (a file of about {format_bytes(file_bytes)} once compressed, and "
+                      f"{format_bytes(room)} kept free to write {format_bytes(slice_bytes)} of frames at a time, "
+                      "uncompressed, through HDF5's caches)")
+
+
 #: Files whose frames need less memory than this are loaded whole by default when training.
 IN_MEMORY_LIMIT_BYTES = 2 * 1024**3
 

@@ -387,7 +387,7 @@ def check_report_target(out: str | os.PathLike[str], overwrite: bool) -> Path:
     The folder need not exist (it is created at the end, with any missing parents); if it exists,
     none of :data:`REPORT_FILES` may be in it without ``overwrite``.
     """
-    from piga.io.resources import FIGURE_DISK_BYTES, check_disk
+    from piga.io.resources import check_figure_disk
 
     folder = Path(out)
     check_folder_target(folder, logs=False)  # a report, no TensorBoard logs: any name the filesystem takes
@@ -400,8 +400,7 @@ def check_report_target(out: str | os.PathLike[str], overwrite: bool) -> Path:
             parent = parent.parent
         if not parent.is_dir() or not os.access(parent, os.W_OK | os.X_OK):
             raise PermissionError(f"cannot create --out {folder}: {parent} is not a writable folder")
-    check_disk(folder / REPORT_FILES[0], FIGURE_DISK_BYTES, "the diagnosis's report and figures",
-               advice="free some space, or give another --out")
+    check_figure_disk(folder / REPORT_FILES[0], "the diagnosis's report and figures")
     return folder
 
 

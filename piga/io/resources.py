@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import os
 import shutil
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -166,12 +166,15 @@ def check_training_memory(parameters: int, what: str) -> None:
     check_memory(float(TRAINING_BYTES_PER_PARAMETER * parameters), what)
 
 
-def check_disk(target: str | os.PathLike[str], needed: float, what: str, advice: str = "ask for less") -> None:
+def check_disk(target: str | os.PathLike[str], needed: float, what: str, advice: str = "ask for less", *,
+               bound: str = "about", detail: str = "", headroom: str = "") -> None:
     """Raises :class:`ResourceError` if ``needed`` bytes exceed the free space where ``target`` goes.
 
     ``target``'s folder need not exist yet (a run folder made at its first checkpoint): the space
-    is measured at its nearest existing ancestor, the filesystem it will be made on. ``advice``
-    ends the message: what the user can do.
+    is measured at its nearest existing ancestor, the filesystem it will be made on. The message says "``what`` needs
+    ``bound`` (about, up to) N of disk``detail``"; or, given ``headroom`` (what is written, in words), that ``needed``
+    is a fixed room kept free: "``what`` keeps at least N of disk free (``headroom``)". ``advice`` ends the message:
+    what the user can do.
     """
     folder = Path(target).parent if str(Path(target).parent) else Path(".")
     while not folder.is_dir() and folder != folder.parent:
@@ -181,15 +184,39 @@ def check_disk(target: str | os.PathLike[str], needed: float, what: str, advice:
     if usage.total == 0:  # /proc, /sys: "0 B free; ask for less" asked for what no size can meet
         raise ResourceError(stores_no_files(what, folder))
     if needed > free:
-        raise ResourceError(f"{what} needs about {format_bytes(needed)} of disk, but {folder} has "
-                            f"{format_bytes(free)} free; {advice}")
+        need = (f"keeps at least {format_bytes(needed)} of disk free ({headroom})" if headroom
+                else f"needs {bound} {format_bytes(needed)} of disk{detail}")
+        raise ResourceError(f"{what} {need}, but {folder} has {format_bytes(free)} free; {advice}")
 
 
 #: Room left on top of a training run's checkpoints, for its metrics, plots and TensorBoard.
 RUN_DISK_MARGIN = 64 * 1024**2
-#: Room a command that writes figures and a report only (``piga-show``, ``piga-diagnose``) asks for before its work:
-#: a diagnosis folder (report, JSON and four figures) or a strip of 30 sequences x 40 frames is under 2 MiB.
+#: Room a command that writes figures and a report only (``piga-show``, ``piga-diagnose``, ``piga-control --out``)
+#: keeps free before its work: a diagnosis folder (report, JSON and four figures) or a strip of 30 sequences x 40
+#: frames is under 2 MiB, a control summary or a goal image some KiB.
 FIGURE_DISK_BYTES = 4 * 1024**2
+#: What :func:`check_figure_disk`'s message says its outputs take.
+FIGURE_DISK_WORDS = "what it writes takes under 2 MiB"
+
+
+def check_figure_disk(target: str | os.PathLike[str], what: str, advice: str = "free some space, or give another --out") -> None:
+    """Refuses figures, pictures or a report (``what``) where ``target`` goes with less than :data:`FIGURE_DISK_BYTES`
+    free: a fixed room, and the message says so (the files themselves take far less).
+
+    Raises:
+        ResourceError: as :func:`check_disk`.
+    """
+    check_disk(target, FIGURE_DISK_BYTES, what, advice, headroom=FIGURE_DISK_WORDS)
+
+
+def held_bytes(folder: str | os.PathLike[str], names: Sequence[str]) -> int:
+    """The bytes that the files (or folders, all their files) ``names`` in ``folder`` take; 0 for those absent."""
+    total = 0
+    for name in names:
+        path = Path(folder) / name
+        files = [path] if path.is_file() else path.rglob("*") if path.is_dir() else []
+        total += sum(f.stat().st_size for f in files if f.is_file())
+    return total
 
 
 def adam_checkpoint_bytes(module: Any) -> int:
@@ -197,20 +224,31 @@ def adam_checkpoint_bytes(module: Any) -> int:
     return 3 * 4 * sum(p.numel() for p in module.parameters())
 
 
+def run_disk_need(run_dir: str | os.PathLike[str], checkpoint_bytes: float, extra: float = 0.0,
+                  resume: bool = False, rewritten: Sequence[str] = (CHECKPOINT,)) -> tuple[float, int]:
+    """The free disk a training run needs, and the bytes of ``run_dir`` counted as reused: each checkpoint is written
+    beside the previous one (atomically), so twice ``checkpoint_bytes``, plus ``extra`` and :data:`RUN_DISK_MARGIN`;
+    a resumed run (``resume``) less what the files it replaces (``rewritten``, in ``run_dir``) already take there."""
+    held = held_bytes(run_dir, rewritten) if resume else 0
+    return max(0.0, 2 * checkpoint_bytes + extra - held) + RUN_DISK_MARGIN, held
+
+
 def check_run_disk(run_dir: str | os.PathLike[str], checkpoint_bytes: float, what: str, extra: float = 0.0,
-                   checkpoint: str = CHECKPOINT) -> None:
-    """Refuses, before a training run starts, a run folder whose disk cannot hold its checkpoints:
-    each is written beside the previous one (atomically), so twice ``checkpoint_bytes``, plus
-    ``extra`` and :data:`RUN_DISK_MARGIN`. ``run_dir`` need not exist yet.
+                   checkpoint: str = CHECKPOINT, resume: bool = False, rewritten: Sequence[str] = ()) -> None:
+    """Refuses, before a training run starts, a run folder whose disk cannot hold its checkpoints
+    (:func:`run_disk_need`; ``rewritten``: files a resumed run replaces besides ``checkpoint``). ``run_dir`` need not
+    exist yet. A resumed run is told to free space only: another --out would not continue it.
 
     Raises:
         ResourceError: as :func:`check_disk`.
     """
-    check_disk(Path(run_dir) / checkpoint, 2 * checkpoint_bytes + extra + RUN_DISK_MARGIN, what,
-               advice="free some space, or give another --out")
+    needed, held = run_disk_need(run_dir, checkpoint_bytes, extra, resume, (checkpoint, *rewritten))
+    check_disk(Path(run_dir) / checkpoint, needed, what,
+               advice="free some space" if resume else "free some space, or give another --out",
+               detail=f" beyond the {format_bytes(held)} of {run_dir} that it replaces" if held else "")
 
 
-__all__ = ["FIGURE_DISK_BYTES", "HDF5_FILE_OVERHEAD", "RECORDED_FRAME_COMPRESSION", "RENDERED_FRAME_COMPRESSION",
+__all__ = ["FIGURE_DISK_BYTES", "FIGURE_DISK_WORDS", "HDF5_FILE_OVERHEAD", "RECORDED_FRAME_COMPRESSION", "RENDERED_FRAME_COMPRESSION",
            "RUN_DISK_MARGIN", "SCENE_FRAME_COMPRESSION", "SHADED_FRAME_COMPRESSION", "ResourceError",
-           "adam_checkpoint_bytes", "available_memory", "check_disk", "check_memory", "check_training_memory",
-           "check_run_disk", "format_bytes"]
+           "adam_checkpoint_bytes", "available_memory", "check_disk", "check_figure_disk", "check_memory", "check_training_memory",
+           "check_run_disk", "format_bytes", "held_bytes", "run_disk_need"]
