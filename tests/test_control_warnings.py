@@ -36,3 +36,24 @@ def test_a_model_of_other_physics_than_the_env_is_run_with_a_warning(trained, mu
     _warn_if_other_pixel_physics({"data": {"env_config": trained}}, PixelPendulumConfig(gravity_mult=mult), told)
     err = capsys.readouterr().err
     assert err == ("" if said is None else f"piga-control: warning: {said}\n")
+
+
+@pytest.mark.parametrize("trained, sweep, told, said", [
+    ({"gravity": 14.0, "gravity_mult": 1.0, "actuation_gain": 1.0, "effects": []}, (1.0, 1.4), False,
+     "at x1 of the sweep the env runs other physics than the model's training file (g = 14 m/s²): its planner plans "
+     "with the physics it identified there, so the success there measures that mismatch too (x1.4 --not-told runs the "
+     "env at the trained gravity)"),
+    ({"gravity": 14.0, "gravity_mult": 1.0, "actuation_gain": 1.0, "effects": []}, (1.4,), False, None),
+    ({"gravity": 10.0, "gravity_mult": 1.0, "actuation_gain": 1.0, "effects": []}, (0.8, 1.2), True, None),  # zero-shot
+    ({"gravity": 10.0, "gravity_mult": 1.0, "actuation_gain": 0.6, "effects": []}, (0.9, 1.0), True,
+     "at x0.9, x1 of the sweep the env runs other physics than the model's training file (actuation gain 0.6): its "
+     "planner plans with the physics it identified there, so the success there measures that mismatch too"),
+])
+def test_a_sweep_names_the_multipliers_that_run_other_physics(trained, sweep, told, said, capsys):
+    """A sweep's warning suggested ``--gravity-mult 1.4 --not-told``, which a sweep refuses, and ran x1.4 itself: it
+    names the multipliers at which the env differs from the training file instead."""
+    from piga.cli.control import _warn_if_other_pixel_physics
+
+    _warn_if_other_pixel_physics({"data": {"env_config": trained}}, PixelPendulumConfig(), sweep=sweep, told=told)
+    err = capsys.readouterr().err
+    assert err == ("" if said is None else f"piga-control: warning: {said}\n")

@@ -301,7 +301,8 @@ def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: 
     if kind is RunKind.PIGA:
         warn_if_unconverged(PROG, args.model)
         _warn_if_other_frames(args.model, checkpoint)
-        _warn_if_other_pixel_physics(checkpoint, PixelPendulumConfig())
+        _warn_if_other_pixel_physics(checkpoint, PixelPendulumConfig(), sweep=tuple(multipliers),
+                                     told=not args.not_told)
     else:
         _warn_if_did_not_learn(args.model, kind)
         from piga.control.jobs import agent_name
@@ -695,22 +696,40 @@ def _trained_gravity(trained: dict[str, Any], env: PixelPendulumConfig) -> float
         return None
 
 
-def _warn_if_other_pixel_physics(checkpoint: dict, env: PixelPendulumConfig, believed: float = 1.0) -> None:
+def _warn_if_other_pixel_physics(checkpoint: dict, env: PixelPendulumConfig, believed: float = 1.0,
+                                 sweep: tuple[float, ...] = (), told: bool = True) -> None:
     """One warning line where the model's training file was collected with other physics than the pixel pendulum
     that the episodes run (:func:`pixel_physics_difference`; ``believed``: the gravity multiplier the agent is told):
     its planner plans with the physics it identified, and a success of 0% would read as a failed identification (a
     model of g = 5, a = 2, read to within 1%, swung up 0 of 2 episodes at g = 10 and gain 1 without a word, and 2 of 2
-    at g = 5)."""
+    at g = 5). With ``sweep`` (its multipliers; ``believed`` 1 where the agent is not told, else each multiplier),
+    the line names the multipliers at which they differ."""
     from piga.io.runs import training_env_config
 
     trained = training_env_config(checkpoint)
-    if trained and (differs := pixel_physics_difference(trained, env, believed)) is not None:
-        mult = (_trained_gravity(trained, env) or env.gravity) / env.gravity
-        hint = (f" (--gravity-mult {number_text(mult)} --not-told runs the env at the trained gravity)"
-                if "g = " in differs[0] and MIN_GRAVITY <= mult * env.gravity <= MAX_GRAVITY else "")
-        print(f"{PROG}: warning: the env runs {differs[0]}, the model's training file was collected at {differs[1]}: "
-              f"its planner plans with the physics it identified there, so the success below measures that mismatch "
-              f"too{hint}", file=sys.stderr)
+    if not trained:
+        return
+    believes = (lambda m: m if told else 1.0) if sweep else (lambda m: believed)
+    found = [(m, d) for m in (sweep or (env.gravity_mult,))
+             if (d := pixel_physics_difference(trained, replace(env, gravity_mult=m), believes(m))) is not None]
+    if not found:
+        return
+    differs = found[0][1]
+    mult = (_trained_gravity(trained, env) or env.gravity) / env.gravity
+    runs_trained = MIN_GRAVITY <= mult * env.gravity <= MAX_GRAVITY
+    if sweep:
+        at = ", ".join(f"x{number_text(m)}" for m, _ in found)
+        hint = (f" (x{number_text(mult)} --not-told runs the env at the trained gravity)"
+                if "g = " in differs[0] and runs_trained else "")
+        print(f"{PROG}: warning: at {at} of the sweep the env runs other physics than the model's training file "
+              f"({differs[1]}): its planner plans with the physics it identified there, so the success there measures "
+              f"that mismatch too{hint}", file=sys.stderr)
+        return
+    hint = (f" (--gravity-mult {number_text(mult)} --not-told runs the env at the trained gravity)"
+            if "g = " in differs[0] and runs_trained else "")
+    print(f"{PROG}: warning: the env runs {differs[0]}, the model's training file was collected at {differs[1]}: "
+          f"its planner plans with the physics it identified there, so the success below measures that mismatch "
+          f"too{hint}", file=sys.stderr)
 
 
 def check_planet_frames(run_dir: str) -> None:
