@@ -1064,10 +1064,42 @@ def damping_convention(final: fit.Model, nom: Nominal) -> dict[str, Any] | None:
             "other": "explicit" if implicit else "implicit", "factor": factor, "values": values}
 
 
-def convention_note(convention: dict[str, Any]) -> str:
-    """The report's sentence on :func:`damping_convention`'s result."""
+def in_convention(model: fit.Model, nom: Nominal, taken: str | None) -> fit.Model:
+    """``model`` with its g, a and b as a system that takes the damping ``taken`` ("implicit" or "explicit", see
+    :func:`damping_convention`) makes the same frames; unchanged where ``taken`` is None (not known), where the model
+    takes it so already, or where it has no damping.
+
+    Two files whose dampings differ, read in the fit's convention where their system's is the other, differ in g and a
+    by the ratio of their factors, which is no gravity or gain error (measured: dm_control's pendulum, hinge damping
+    0.4 against the training file's 0.1, one Euler step per frame, read b = 0.505 against 0.13 and "gravity 0.967, 95%
+    interval 0.965..0.968", with g unchanged; read implicitly, as MuJoCo takes it, b = 0.537 (truth 0.531) and g
+    x1.01)."""
+    convention = None if taken is None else damping_convention(model, nom)
+    if convention is None or convention["taken"] == taken:
+        return model
+    return model.with_values({**model.values, **convention["values"]})
+
+
+def damping_in_convention(b: float, model: fit.Model, nom: Nominal, taken: str | None) -> float:
+    """A damping ``b`` of ``model``'s form (another reading of its b: a bound of its interval, the training file's) as
+    :func:`in_convention` gives it."""
+    model = model.with_values({**model.values, DAMPING.parameter: b})
+    return in_convention(model, nom, taken).values[DAMPING.parameter]
+
+
+def convention_note(convention: dict[str, Any], given_as: str | None = None) -> str:
+    """The report's sentence on :func:`damping_convention`'s result; ``given_as``: the system's convention, in which the
+    damping is given and g and a are compared where it is not the fit's (:func:`in_convention`)."""
     v, h, f = convention["values"], convention["step_s"], convention["factor"]
     other = f"g = {v['g']:.3f}, a = {v['a']:.3f}" + (f", b = {v['b']:.4g}" if "b" in v else "")
+    if given_as == convention["other"]:
+        how = ("implicitly, as MuJoCo's Euler does (the file says it comes from dm_control)" if given_as == "implicit"
+               else "explicitly, as a torque added before the step (the file says it comes from Gymnasium's pendulum)")
+        fitted = (f"the Euler step (h = {h:.4g} s), which takes it explicitly" if given_as == "implicit" else
+                  f"the substeps (h = {h:.4g} s), which take it implicitly")
+        return (f"the recorded system takes the damping {how}: the damping is given as it takes it, and g and a are "
+                f"compared with the training file's read the same way ({other}, x{f:.3f} the values of {fitted}; "
+                "frames cannot tell the two apart)")
     if convention["taken"] == "implicit":
         return (f"the substeps (h = {h:.4g} s) take the damping implicitly, as MuJoCo's Euler does; a simulator that "
                 f"adds it as an explicit torque before each step makes the same frames with {other} (x{f:.3f} these, "
@@ -1367,7 +1399,8 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
                  own: Observations | Callable[[], Observations | None] | None = None,
                  varied_actions: bool = True, rival: fit.Model | None = None,
                  own_readings: dict[tuple, fit.Model] | None = None,
-                 damped: Callable[[], fit.Model | None] | None = None, own_missing: str | None = None) -> Naming:
+                 damped: Callable[[], fit.Model | None] | None = None, own_missing: str | None = None,
+                 damping_taken: str | None = None) -> Naming:
     """Step 4: the effects that the chosen physics and the camera stage name, with intervals, and the verdict.
 
     Gymnasium's own speed clip is no gap (for a recording that the file says came from Gymnasium's
@@ -1405,6 +1438,10 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
     With ``damped`` (where "none" was chosen: a function that gives the damping single read on the same windows as
     ``final``, or None, see :func:`damping_check`), a gravity error that "none" reads is named only where that form,
     read against its own reference, reads g beyond ``gain_tolerance`` too.
+
+    ``damping_taken``: how the recorded system takes a damping (:attr:`Observations.damping_taken`; where the recording
+    does not say, the training file's). Where it is known, a damping is given in that convention, and the g and a of
+    the two files are compared in it (:func:`in_convention`).
     """
     notes: list[str] = []
     named = [e for e in final.effects if ambiguity is None or e not in ambiguity.between[0].split("+")]
@@ -1420,6 +1457,11 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
         own_obs = own() if callable(own) else own
     use_own = own_obs is not None
     own_readings = {} if own_readings is None else own_readings
+    taken = damping_taken if damping_taken is not None or own_obs is None else own_obs.damping_taken
+
+    def same(physics: fit.Model) -> fit.Model:
+        """``physics`` in the recorded system's convention (:func:`in_convention`)."""
+        return in_convention(physics, nom, taken)
     if not use_own and own_missing is not None:
         # (a model identified on Gymnasium's own one-step frames reads them as the fits do: measured, gain 1.2 read
         # 1.19 and gravity x1.2 read 1.2 without the file)
@@ -1461,9 +1503,15 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
             ref_g, ref_a = nom.g, abs(nom.a)
         else:
             both_damped = damped_reference(reference, read_own, nom, w, config, own_readings)
+            b_interval = None
             if both_damped is not None:  # the training file's damping, which the recording lacks, read in both
                 reference, read, b_interval = both_damped
-                ref_g, ref_a = read.values["g"], abs(read.values["a"])
+                if b_interval is not None:
+                    b_interval = [damping_in_convention(x, reference, nom, taken) for x in b_interval]
+            # both files in the recorded system's convention: where their dampings differ, the fit's bends g and a
+            reference, read = same(reference), same(read)
+            ref_g, ref_a = read.values["g"], abs(read.values["a"])
+            if both_damped is not None:
                 files_differ = Effect(DAMPING.name, reference.values[DAMPING.parameter], DAMPING.unit, b_interval,
                                       training=read.values[DAMPING.parameter])
                 notes.append(f"the model's own training file shows a damping (b = {read.values['b']:.3g}) that the "
@@ -1486,10 +1534,10 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
         if use_own:
             read = read_own(rival)
             if not implausible_own_reading(read, nom):
-                rival_ref_g, rival_ref_a = read.values["g"], abs(read.values["a"])
                 if (rival_damped := damped_reference(rival, read_own, nom, w, config, own_readings)) is not None:
                     read_rival, read, _ = rival_damped  # as above
-                    rival_ref_g, rival_ref_a = read.values["g"], abs(read.values["a"])
+                read_rival, read = same(read_rival), same(read)
+                rival_ref_g, rival_ref_a = read.values["g"], abs(read.values["a"])
         rival_gain, rival_g = abs(read_rival.values["a"]) / rival_ref_a, read_rival.values["g"] / rival_ref_g
     if gain_error and rival_gain is not None:
         if abs(rival_gain - 1) <= config.gain_tolerance:
@@ -1563,7 +1611,7 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
                          "a simulator with several physics steps per frame): with one Euler step per frame the "
                          "identified a and g come out low; train with `--preset continuous` to model it")
             if (convention := damping_convention(final, nom)) is not None:
-                notes.append(convention_note(convention))
+                notes.append(convention_note(convention, taken))
             if one_step_reference:
                 notes.append(f"read with the motion within the frame, a = {final.values['a']:.3f} and g = "
                              f"{final.values['g']:.3f}; read one step per frame, as the nominal model does, a = "
@@ -1582,7 +1630,7 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
             effects.append(Effect(e, value, term.unit, bracket))
     if DAMPING.name in named and not final.has(WITHIN_FRAME):
         if (convention := damping_convention(final, nom)) is not None:
-            notes.append(convention_note(convention))
+            notes.append(convention_note(convention, taken))
     if DAMPING.name in named and own_reference:
         # the damping that the training file shows in the same form: the recording's is named against it where they
         # differ, and is the nominal model's own miss where they do not
@@ -1594,8 +1642,17 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
                 effects[i] = dataclass_replace(effects[i], training=training)
             else:
                 notes.append(f"the model's own training file, read in the same form, shows the same damping (b = "
-                             f"{training:.3g}; the recording {b:.3g}): no difference between the two files, but one "
-                             "that the nominal model, identified without it, misses on its own training file too")
+                             f"{damping_in_convention(training, final, nom, taken):.3g}; the recording "
+                             f"{damping_in_convention(b, final, nom, taken):.3g}): no difference between the two "
+                             "files, but one that the nominal model, identified without it, misses on its own "
+                             "training file too")
+    if DAMPING.name in named and taken is not None:  # the damping as the recorded system takes it
+        i = next(i for i, x in enumerate(effects) if x.effect == DAMPING.name)
+        x = effects[i]
+        effects[i] = dataclass_replace(
+            x, value=same(final).values[DAMPING.parameter],
+            interval=None if x.interval is None else [damping_in_convention(b, final, nom, taken) for b in x.interval],
+            training=None if x.training is None else damping_in_convention(x.training, final, nom, taken))
     if files_differ is not None:
         effects.append(files_differ)
     a_int = interval("a")
@@ -1656,8 +1713,8 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
         # a change of mass or inertia scales a and the hinge damping's effect together; "none" holds the damping at the
         # nominal's, and g takes up the difference (see damping_check)
         alt_read = read_own(alt) if use_own else None
-        alt_ref = nom.g if alt_read is None or implausible_own_reading(alt_read, nom) else alt_read.values["g"]
-        alt_g = alt.values["g"] / alt_ref
+        alt_ref = nom.g if alt_read is None or implausible_own_reading(alt_read, nom) else same(alt_read).values["g"]
+        alt_g = (alt.values["g"] if alt_read is None else same(alt).values["g"]) / alt_ref
         if abs(alt_g - 1) <= config.gain_tolerance:
             g_error = False
             notes.append(f"g refits to {reference.values['g']:.3f} (x{g_ratio:.3f} the reference {ref_g:.3f}) with no "
@@ -2048,8 +2105,8 @@ def analyse(obs: Observations, nom: Nominal, config: DiagnoseConfig = DiagnoseCo
     draws = fit.bootstrap(final, nom, reading.fit, config.bootstrap, config.seed) if config.bootstrap else {}
     if callable(own):
         own = functools.cache(own)  # read once, however often the naming asks
-    kwargs = dict(from_gymnasium=obs.from_gymnasium, flip_bic_drop=flip_bic_drop, draws=draws,
-                  refit=nominal_form(candidates, final, obs.from_gymnasium, config), own=own,
+    kwargs = dict(from_gymnasium=obs.from_gymnasium, damping_taken=obs.damping_taken, flip_bic_drop=flip_bic_drop,
+                  draws=draws, refit=nominal_form(candidates, final, obs.from_gymnasium, config), own=own,
                   varied_actions=actions_vary(obs.actions), own_readings={}, own_missing=own_missing)
     damped = None if final.effects else damping_check(candidates, reading, nom, config)
     ambiguity = None

@@ -447,15 +447,30 @@ def fit(model: Model, nominal: Nominal, w: Windows, weights: Tensor | None = Non
     opt = torch.optim.LBFGS(free, lr=1.0, max_iter=max_iter, line_search_fn="strong_wolfe", tolerance_grad=1e-12,
                             tolerance_change=1e-14)
 
+    best: list = [math.inf, None]  # the lowest finite loss met, and its parameters
+
     def closure() -> Tensor:
         opt.zero_grad()
         value = loss(start, nominal, w, weights, params)
         value.backward()
+        if float(value.detach()) < best[0]:  # (False for a NaN)
+            best[:] = [float(value.detach()), {k: p.detach().clone() for k, p in params.items()}]
         return value
 
     opt.step(closure)
-    sign = float(params["a_sign"]) if "a_sign" in params else 1.0
-    values = {"g": float(params["log_g"].detach().exp()), "a": sign * float(params["log_a"].detach().exp())}
+
+    def ga(params: dict[str, Tensor]) -> dict[str, float]:
+        sign = float(params["a_sign"]) if "a_sign" in params else 1.0
+        return {"g": float(params["log_g"].detach().exp()), "a": sign * float(params["log_a"].detach().exp())}
+
+    values = ga(params)
+    if best[1] is not None and not (all(math.isfinite(float(p.detach())) for p in params.values())
+                                    and 0 < values["g"] < math.inf and 0 < abs(values["a"]) < math.inf):
+        # a line search that stepped where the simulation overflows leaves the parameters NaN or g and a out of
+        # float range (measured: saturation with the motion within the frame on 21 sequences of 14 frames with an
+        # actuator delay of 2): the fit is the best finite point it met
+        params = best[1]
+        values = ga(params)
     bounds = {t.parameter: t.lower_bound for t in model.terms if t.lower_bound is not None}
     values.update({k: max(float(v.detach()), bounds.get(k, -math.inf)) for k, v in params.items()
                    if not k.startswith("log_") and k != "a_sign"})
@@ -468,11 +483,20 @@ def fit_best_delay(effects: tuple[str, ...], base: dict[str, float], nominal: No
     best = None
     for k in DELAY.grid:
         m = fit(Model(effects, k, dict(base), substeps), nominal, w)
-        with torch.no_grad():
-            score = float(loss(m, nominal, w))
+        score = fitted_loss(m, nominal, w)
         if best is None or score < best[0]:
             best = (score, m)
     return best[1]
+
+
+def fitted_loss(model: Model, nominal: Nominal, w: Windows) -> float:
+    """:func:`loss` of a fitted ``model``, the score by which a search over k or M picks one; inf for a fit that
+    ran off (:func:`collapsed`), which scores last rather than stopping the search."""
+    if collapsed(model, nominal):
+        return math.inf
+    with torch.no_grad():
+        score = float(loss(model, nominal, w))
+    return score if math.isfinite(score) else math.inf
 
 
 def fit_candidate(effects: tuple[str, ...], base: dict[str, float], nominal: Nominal, w: Windows,
@@ -486,8 +510,7 @@ def fit_candidate(effects: tuple[str, ...], base: dict[str, float], nominal: Nom
         best = None
         for m_sub in WITHIN_FRAME.grid:
             m = fit_candidate(effects, base, nominal, w, delay, m_sub)
-            with torch.no_grad():
-                score = float(loss(m, nominal, w))
+            score = fitted_loss(m, nominal, w)
             if best is None or score < best[0]:
                 best = (score, m)
         return best[1]

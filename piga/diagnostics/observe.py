@@ -120,6 +120,9 @@ class Observations:
     :class:`envs.pendulum.PixelPendulumConfig`): only then is a clip at 8 rad/s Gymnasium's own."""
     impossible: dict[str, str] = field(default_factory=dict)
     """Effects that the system which made the file cannot have, by its attrs (:func:`impossible_effects`), and why."""
+    damping_taken: str | None = None
+    """How the system that made the file takes a damping, by its attrs (:func:`damping_taken`): "implicit"
+    (MuJoCo's Euler, dm_control), "explicit" (a torque added before the step, Gymnasium's), None: not known."""
 
 
 def check_compatible(model: PhysicsModel, path: str | os.PathLike[str], min_sequences: int = 20,
@@ -203,7 +206,7 @@ def observe(model: PhysicsModel, path: str | os.PathLike[str], batch: int = 16, 
         attrs = dict(f.attrs)
     check_actions(actions, path)
     return Observations(theta, actions, rec, split == SPLITS["train"], float(info.dt), frames, np.sort(keep), stale,
-                        float(blank.mean()), from_gymnasium(attrs), impossible_effects(attrs))
+                        float(blank.mean()), from_gymnasium(attrs), impossible_effects(attrs), damping_taken(attrs))
 
 
 def from_gymnasium(attrs: dict) -> bool:
@@ -228,6 +231,40 @@ IMPOSSIBLE: dict[str, dict[str, str]] = {
 }
 
 
+#: How a simulator takes a damping, by the env id that piga-collect writes into a file's attrs.
+DAMPING_TAKEN: dict[str, str] = {
+    "piga/DMCPendulum-v0": "implicit",  # (MuJoCo's Euler: q̇ <- (q̇ + h·f) / (1 + h·r))
+    "piga/PixelPendulum-v0": "explicit",  # (Gymnasium's step, with piga's effect wrappers' torques added before it)
+}
+
+
+def env_id_of(attrs: dict) -> str | None:
+    """The env id that made a file: its ``env_id``, or, in files from before it, dm_control's where an
+    ``env_config`` has its ``action_repeat`` and Gymnasium's where it has the pixel pendulum's torque arrow."""
+    import json
+
+    env_id = attrs.get("env_id")
+    if env_id is not None:
+        return str(env_id)
+    try:
+        config = attrs.get("env_config", "{}")
+        config = json.loads(config) if isinstance(config, (str, bytes)) else config
+    except (TypeError, ValueError):
+        return None
+    if isinstance(config, dict) and "action_repeat" in config:
+        return "piga/DMCPendulum-v0"
+    if isinstance(config, dict) and "draw_torque_arrow" in config:
+        return "piga/PixelPendulum-v0"
+    return None
+
+
+def damping_taken(attrs: dict) -> str | None:
+    """How the system that made a file takes a damping (:data:`DAMPING_TAKEN`), by its attrs; None: not known
+    (an imported video, a file whose hints were deleted)."""
+    env_id = env_id_of(attrs)
+    return None if env_id is None else DAMPING_TAKEN.get(env_id)
+
+
 def impossible_effects(attrs: dict) -> dict[str, str]:
     """Effects that the system which made a file cannot have, by its attrs (``env_id``, or an
     ``env_config`` with dm_control's ``action_repeat``), and why: a dm_control file has no speed clip.
@@ -236,14 +273,4 @@ def impossible_effects(attrs: dict) -> dict[str, str]:
     effect, so nothing else is. Empty for a file whose attrs say nothing (an imported video, a
     blind benchmark's file with its hints deleted).
     """
-    import json
-
-    env_id = attrs.get("env_id")
-    if env_id is None:
-        try:
-            config = json.loads(attrs.get("env_config", "{}"))
-        except (TypeError, ValueError):
-            config = None
-        if isinstance(config, dict) and "action_repeat" in config:
-            env_id = "piga/DMCPendulum-v0"
-    return dict(IMPOSSIBLE.get(str(env_id), {}))
+    return dict(IMPOSSIBLE.get(str(env_id_of(attrs)), {}))
