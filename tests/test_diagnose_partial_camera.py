@@ -123,3 +123,63 @@ def test_an_effect_says_where_it_shows() -> None:
     assert e.describe().endswith("in 25 of 50 sequences (the even ones)")
     assert e.to_dict()["where"] == "in 25 of 50 sequences (the even ones)"
     assert "where" not in Effect("blur", 1.5, "px").to_dict()
+
+
+def test_two_cameras_in_two_halves_are_each_read_where_they_show() -> None:
+    # a shift of 3 px in the odd sequences, a blur of 1.5 px in the even ones: a fit on all the frames reads both at
+    # once ("blur 1.11, shift 2.26 right, 2.16 down"), which improves every sequence; its shift alone splits them, and
+    # the blur is read on the others
+    clean, seqs, times = _recording(seqs=16, t=8)
+    odd = torch.from_numpy(seqs % 2 == 1)[:, None, None, None]
+    frames = torch.where(odd, Camera(dx=3.0, dy=3.0).apply(clean), Camera(blur=1.5).apply(clean))
+    both = Camera(blur=1.1, dx=2.2, dy=2.2)
+    assert _stage(_uint8(frames), seqs, times, [both])[0] is None
+    partial, share = _stage(_uint8(frames), seqs, times, [both, Camera(blur=1.1), Camera(dx=2.2, dy=2.2)])
+    assert partial is not None and partial.by == "sequences" and share >= 0.4
+    assert partial.groups == tuple(range(1, 16, 2))
+    assert abs(partial.camera.dx - 3) < 0.2 and abs(partial.camera.dy - 3) < 0.2 and partial.camera.blur < 0.3
+    assert abs(partial.other.blur - 1.5) < 0.15 and max(abs(partial.other.dx), abs(partial.other.dy)) < 0.3
+    named = PartialCamera(partial.camera, "sequences", partial.groups, 16, share, partial.other)
+    assert named.where() == "in 8 of 16 sequences (the odd ones; in the others, another camera)"
+    assert named.elsewhere() == "in 8 of 16 sequences (the even ones; in the others, another camera)"
+    assert named.note().startswith("the sequences disagree on the camera")
+
+
+def test_clean_frames_beside_a_partial_camera_read_no_other_camera() -> None:
+    clean, seqs, times = _recording(seqs=16, t=8)
+    late = torch.where(torch.from_numpy(times >= 4)[:, None, None, None], Camera(blur=1.5).apply(clean), clean)
+    partial, _ = _stage(_uint8(late), seqs, times, [Camera(blur=0.8)])
+    assert partial is not None and partial.groups == (4, 5, 6, 7) and partial.other == Camera()
+    assert PartialCamera(partial.camera, "frames", partial.groups, 8, 0.5, partial.other).where() == \
+        "from frame 4 on (in the frames before it, none)"
+
+
+def test_frames_are_in_view_through_the_partial_camera_they_show() -> None:
+    from piga.diagnostics.partial import partial_empty
+    from piga.diagnostics.vision import empty_frames
+
+    clean, seqs, times = _recording(seqs=8, t=8)
+    late = times >= 4
+    frames = torch.where(torch.from_numpy(late)[:, None, None, None], Camera(blur=3.0).apply(clean), clean)
+    x = torch.from_numpy(_uint8(frames).astype(np.float32) / 255).flatten(1)
+    renders = decoder_renders(MODEL, 180)
+    # with no camera the blurred frames lie nearer the empty scene than any sharp rod
+    assert empty_frames(MODEL, Camera(), x, renders) > 0.3
+    seen = PartialCamera(Camera(blur=3.0), "frames", tuple(range(4, 8)), 8, 0.5)
+    assert partial_empty(MODEL, seen, x, seqs, times, renders, 0.1) == 0.0
+    # a camera that leaves too little of the rod's contrast shows no frame with it in view (blank frames read through
+    # one are no camera's)
+    assert empty_frames(MODEL, Camera(blur=3.0), x, renders, 0.99) == 1.0
+    assert empty_frames(MODEL, [Camera(), Camera(blur=3.0)], x, renders) == 0.0  # in view through one of them
+
+
+def test_frames_in_view_through_another_camera_are_not_refused_as_empty() -> None:
+    from piga.diagnostics.diagnose import NotTheSceneError, check_in_view
+
+    config = CameraConfig()
+    check_in_view(SimpleNamespace(missing=0.01, unseen=0.01), config)
+    with pytest.raises(NotTheSceneError, match="camera seems to differ between parts") as differs:
+        check_in_view(SimpleNamespace(missing=0.64, unseen=0.0), config)
+    assert "cut frames" not in str(differs.value)
+    with pytest.raises(NotTheSceneError, match="cut frames without it out"):
+        check_in_view(SimpleNamespace(missing=0.5, unseen=0.5), config)

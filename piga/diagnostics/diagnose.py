@@ -314,17 +314,39 @@ def diagnose(model: PhysicsModel, data: str | os.PathLike[str], config: Diagnose
     # a camera at its candidates' bound first: the frames it matches worse than the empty scene are then its (a blur of
     # 7.5 px, read through the largest blur of 4 px, was refused as "not in view in 100%")
     check_camera_in_range(camera.camera, camera.matched_error, rec_training)
-    if camera.missing > config.camera.max_missing:
-        raise NotTheSceneError(f"the pendulum is not in view, or not recognisable, in {100 * camera.missing:.0f}% of the "
-                               "held-out frames (they are closer to the empty scene than to any angle of the pendulum "
-                               f"through the best camera fit, of blur up to {MAX_BLUR:g} px and shifts up to "
-                               f"{MAX_SHIFT:g} px): cut frames without it out of the recording, record with the pendulum "
-                               "in view, or, for a camera beyond those bounds, identify a model on its frames")
+    check_in_view(camera, config.camera)
     return analyse(obs, nominal_of(model), config, model=model, rec_training=rec_training,
                    progress=progress, camera=camera, arrow=training_arrow(checkpoint),
                    own=lambda: observe_own(model, checkpoint, progress, rematch=camera.rematched or config.matched_angles),
                    own_missing=recorded_data_path((checkpoint or {}).get("data")) if own is None else None,
                    matched=lambda: match_file(model, str(data), Camera()))  # both read only when needed
+
+
+def check_in_view(camera: CameraFindings, config: CameraConfig) -> None:
+    """Refuses a recording in which the pendulum is not in view in more than ``config.max_missing`` of the held-out
+    frames (:attr:`~piga.diagnostics.vision.CameraFindings.missing`); where they show it through another camera
+    (:attr:`~piga.diagnostics.vision.CameraFindings.unseen`), the refusal says the camera differs between parts of the
+    recording, not that frames without it are to be cut.
+
+    Raises:
+        NotTheSceneError: the pendulum is not in view in too many frames.
+    """
+    if camera.missing <= config.max_missing:
+        return
+    if camera.unseen <= config.max_missing:
+        # the pendulum shows in them through another camera: no frames to cut (a blur of 2.5 px from frame 8 on, before
+        # its camera in part of the recording was read, was refused "not in view in 64%: cut frames without it out")
+        raise NotTheSceneError(f"the camera seems to differ between parts of the recording: in "
+                               f"{100 * camera.missing:.0f}% of the held-out frames the pendulum is not recognisable "
+                               "through the best camera fit for the whole recording, yet shows through another (a blur "
+                               f"of up to {max(config.blurs_seen):g} px), and no camera for a part of it was found: "
+                               "diagnose the parts apart (split the recording where its camera changes), or identify a "
+                               "model on its frames")
+    raise NotTheSceneError(f"the pendulum is not in view, or not recognisable, in {100 * camera.missing:.0f}% of the "
+                           "held-out frames (they are closer to the empty scene than to any angle of the pendulum "
+                           f"through the best camera fit, of blur up to {MAX_BLUR:g} px and shifts up to "
+                           f"{MAX_SHIFT:g} px): cut frames without it out of the recording, record with the pendulum "
+                           "in view, or, for a camera beyond those bounds, identify a model on its frames")
 
 
 def check_scene_through_camera(unlike: NotTheSceneError | None, camera: Camera, matched_error: float,
@@ -2203,7 +2225,8 @@ def _pixel_errors(model: PhysicsModel, obs: Observations, nom: Nominal, nominal_
     corrected physics from ``theta``, rendered through ``camera``, repeating the prediction at a
     repeated frame. The floor is the matched residual of the same frames under ``camera``: the
     pixel error of the best angle, which no prediction can beat. A camera in part of the recording only (``partial``)
-    renders the corrected run and matches the floor's frames where it shows.
+    renders the corrected run and matches the floor's frames through its camera where it shows, and through its
+    other camera (none, where none is read) elsewhere.
     """
     from piga.world.model import frames_to_float
 
@@ -2215,7 +2238,7 @@ def _pixel_errors(model: PhysicsModel, obs: Observations, nom: Nominal, nominal_
     per_horizon: dict[str, list[float]] = {}
     typical: dict[str, float] = {}
     for key, m, th, cam, repeat in (("nominal", nominal_model, obs.theta, Camera(), False),
-                                    ("corrected", final, theta, camera, True)):
+                                    ("corrected", final, theta, camera if partial is None else partial.other, True)):
         w = fit.make_windows(th, obs.actions, obs.frames_index, None, t, obs.dt, stale, repeat=True)  # one per sequence
         if len(w.theta0) == 0:
             return PixelErrors()
@@ -2230,7 +2253,7 @@ def _pixel_errors(model: PhysicsModel, obs: Observations, nom: Nominal, nominal_
         se = ((frames - x) ** 2).mean(dim=(2, 3, 4))  # (B, H)
         per_horizon[key] = se.mean(0).tolist()
         typical[key] = float(se.mean(1).median())
-    _, floor = match(angle_table(model, camera), x.flatten(2).flatten(0, 1))
+    _, floor = match(angle_table(model, camera if partial is None else partial.other), x.flatten(2).flatten(0, 1))
     if partial is not None:
         floor = torch.where(shows.flatten(), match(angle_table(model, partial.camera), x.flatten(2).flatten(0, 1))[1], floor)
     return PixelErrors(per_horizon["nominal"], per_horizon["corrected"], float(floor.mean()), typical["nominal"],

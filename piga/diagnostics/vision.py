@@ -428,6 +428,17 @@ class CameraConfig:
     """Largest fraction of held-out frames without the pendulum in view (:func:`empty_frames`) that is diagnosed:
     beyond it the recording is refused (a file whose every second half of a sequence was blank read "blur 1.68 px";
     clean files give 0)."""
+    blurs_seen: tuple[float, ...] = (1.0, 2.0, 3.0, MAX_BLUR)
+    """Blurs (px) through which frames the accepted camera shows no pendulum in (:attr:`CameraFindings.missing`) are
+    looked at again: a pendulum seen through one of them is in view, through a camera that differs between parts of
+    the recording (measured: a blur of 2.5 px from frame 8 on, read with no camera, showed no pendulum in 64% of the
+    held-out frames and 0% through these; a blank second half of every sequence stays blank through any blur)."""
+    min_contrast: float = 0.1
+    """Smallest share of the pendulum's contrast with the empty scene (the mean squared difference of the decoder's
+    renders from it, :func:`pendulum_contrast`) that a camera must leave for frames to show the pendulum through it:
+    under it the camera hides the pendulum, and the frames it matches are empty (measured on the pixel pendulum: blur
+    2.5 and 4 px leave 32% and 18%, exposure 0.8 and 1.25 64% and 67%, a shift all of it; a blank second half of every
+    sequence was read "exposure 2.29 from frame 12 on", which leaves 4%)."""
     max_noise_correlation: float = 0.5
     """Largest correlation of the still pixels between successive frames (:func:`noise_correlation`) with which
     their spread is named sensor noise: above it, more than half of their changes persist from frame to frame, a
@@ -469,7 +480,7 @@ class CameraConfig:
                             "min_zoom": (0, 1), "zoom_scale": (0, 10),
                             "min_exposure": (0, 255), "min_core_share": (0, 1), "max_missing": (0, 1),
                             "max_scale_change": (0, 10), "min_split_share": (0, 1), "max_scale_noise": (0, 255),
-                            "max_noise_correlation": (-1, 1)})
+                            "max_noise_correlation": (-1, 1), "min_contrast": (0, 1)})
 
 
 @dataclass
@@ -513,6 +524,12 @@ class CameraFindings:
     matched_for_sign: bool = False
     """``theta`` holds the angles matched with no camera because the encoder's angles missed the actuation's sign
     (:func:`~piga.diagnostics.diagnose.read_with_sign`), not because a camera or noise was accepted."""
+
+    unseen: float = 0.0
+    """Fraction of the held-out frames in which the pendulum is not in view through any camera tried
+    (:attr:`CameraConfig.blurs_seen`, the candidates, the accepted one); measured only where ``missing`` exceeds
+    ``CameraConfig.max_missing`` (else equal to it). Well under ``missing``: the frames show the pendulum through
+    another camera than the one read, which differs between parts of the recording."""
 
     def below_naming(self, config: CameraConfig) -> dict | None:
         """The candidate row that lowers the held-out matched residual most, by more than ``min_drop``, where no camera
@@ -703,11 +720,16 @@ def camera_stage(model: PhysicsModel, path: str, theta: np.ndarray, fit: np.ndar
             scale = drawn_scale(frames_2d, renders, camera) if sized else None
     bar.update()
     # a camera effect in only part of the recording: named where it shows, with no camera of the whole recording
-    from piga.diagnostics.partial import match_partial, partial_camera, partial_effects, partial_error
+    from piga.diagnostics.partial import match_partial, partial_camera, partial_effects, partial_empty, partial_error
 
     # (the candidates refused for the size too: a blur in part of the frames shrinks the size read with no camera, a
     # 2 px blur from frame 12 on read x0.90 and "no significant gap")
     tried = [camera] if camera != Camera() else [Camera(**r["camera"]) for r in table[1:]]
+    if {"blur", "shift"} <= camera.material(config):
+        # each of its blur and its shift alone too: two cameras in two parts are read as one of both, which improves
+        # every part (a shift of 2 px in the odd sequences and a blur of 1.5 px in the even ones read "blur 0.869 px;
+        # shift 1.49 px right, 1.45 px down" at a split of 0; its shift alone split the sequences 0.49)
+        tried += [replace(camera, dx=0.0, dy=0.0), replace(camera, blur=0.0)]
     partial, split = partial_camera(model, tried, frames_2d, x_fit, fit_seqs, fit_times, still, renders, config)
     theta_partial = None
     if partial is not None:
@@ -768,11 +790,18 @@ def camera_stage(model: PhysicsModel, path: str, theta: np.ndarray, fit: np.ndar
         repeats = replace(repeats, moving=max(repeats.moving, visible_step(model, camera, repeats.visible)))
     leading, drops, drop_rate, repeat_effects = repeated_frames(stale, theta if theta_c is None else theta_c, repeats)
     effects += repeat_effects
-    missing = empty_frames(model, camera, x_held, renders)
+    if partial is None:
+        missing = empty_frames(model, camera, x_held, renders, config.min_contrast)
+    else:  # each frame through the camera it shows (a blur of 2.5 px from frame 8 on read "not in view in 64%" with none)
+        missing = partial_empty(model, partial, x_held, held_seqs, held_times, renders, config.min_contrast)
+    unseen = missing
+    if missing > config.max_missing:  # are they empty through every camera, or only through this one?
+        unseen = empty_frames(model, [camera, *tried, *(Camera(blur=b) for b in config.blurs_seen)], x_held, renders,
+                              config.min_contrast)
     bar.update()
     bar.close()
     return CameraFindings(camera, noise, drop_rate, drops, leading, table, e0, e_cam, effects, theta_c, correlation,
-                          missing, scale, partial, split)
+                          missing, scale, partial, split, unseen=unseen)
 
 
 def pendulum_reach(frames: np.ndarray, background: np.ndarray, hinge: np.ndarray, sign: float) -> float | None:
@@ -863,10 +892,39 @@ def empty_scene(renders: tuple[Tensor, Tensor]) -> Tensor:
 
 
 @torch.no_grad()
-def empty_frames(model: PhysicsModel, camera: Camera, x: Tensor, renders: tuple[Tensor, Tensor]) -> float:
+def empty_frames(model: PhysicsModel, camera: Camera | list[Camera], x: Tensor, renders: tuple[Tensor, Tensor],
+                 min_contrast: float = 0.0) -> float:
     """The fraction of frames ``x`` (M, P) closer to the empty scene than to any render of the pendulum, through
-    ``camera``: frames in which the pendulum is not in view (the empty scene: :func:`empty_scene`). A frame with the pendulum is far closer to
-    its render (measured on a default model: matched MSE about 3e-4 against 2e-2 to the empty scene)."""
+    ``camera``: frames in which the pendulum is not in view (the empty scene: :func:`empty_scene`). A frame with the
+    pendulum is far closer to its render (measured on a default model: matched MSE about 3e-4 against 2e-2 to the
+    empty scene). Given several cameras, the frames so through every one of them. A camera that leaves under
+    ``min_contrast`` of the pendulum's contrast (:func:`pendulum_contrast`) shows every frame empty."""
+    if not len(x):
+        return 0.0
+    cameras = camera if isinstance(camera, list) else [camera]
+    empty = torch.stack([empty_mask(model, c, x, renders, min_contrast) for c in cameras]).all(0)  # (M,)
+    return float(empty.double().mean())
+
+
+@torch.no_grad()
+def empty_mask(model: PhysicsModel, camera: Camera, x: Tensor, renders: tuple[Tensor, Tensor],
+               min_contrast: float = 0.0) -> Tensor:
+    """(M,) bool: which frames ``x`` (M, P) are closer to the empty scene than to any render of the pendulum, through
+    ``camera``, or all of them where ``camera`` leaves under ``min_contrast`` of the pendulum's contrast
+    (:func:`empty_frames`)."""
+    if pendulum_contrast(camera, renders) < min_contrast:
+        return torch.ones(len(x), dtype=torch.bool)
     empty = camera.apply(empty_scene(renders)[None]).flatten(1)  # (1, P)
     _, matched = match(angle_table(model, camera, renders=renders), x)  # (M,)
-    return float((((x - empty) ** 2).mean(1) <= matched).double().mean()) if len(x) else 0.0
+    return ((x - empty) ** 2).mean(1) <= matched
+
+
+@torch.no_grad()
+def pendulum_contrast(camera: Camera, renders: tuple[Tensor, Tensor]) -> float:
+    """The mean squared difference of the decoder's renders (:func:`decoder_renders`) from the empty scene through
+    ``camera``, over that with no camera: how much of the pendulum a camera leaves to see (1: all; a blur or an
+    exposure that washes it out, near 0)."""
+    empty = empty_scene(renders)[None]  # (1, C, H, W)
+    plain = float(((renders[1] - empty) ** 2).mean())
+    seen = float(((camera.apply(renders[1]) - camera.apply(empty)) ** 2).mean())
+    return seen / plain if plain > 0 else 0.0
