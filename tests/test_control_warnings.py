@@ -41,8 +41,12 @@ def test_a_model_of_other_physics_than_the_env_is_run_with_a_warning(trained, mu
 @pytest.mark.parametrize("trained, sweep, told, said", [
     ({"gravity": 14.0, "gravity_mult": 1.0, "actuation_gain": 1.0, "effects": []}, (1.0, 1.4), False,
      "at x1 of the sweep the env runs other physics than the model's training file (g = 14 m/s²): its planner plans "
-     "with the physics it identified there, so the success there measures that mismatch too (x1.4 --not-told runs the "
-     "env at the trained gravity)"),
+     "with the physics it identified there, so the success there measures that mismatch too (x1.4 runs the env at "
+     "the trained gravity that the agent plans with)"),
+    ({"gravity": 14.0, "gravity_mult": 1.0, "actuation_gain": 1.0, "effects": []}, (1.0, 1.4), True,  # told: 19.6
+     "at x1, x1.4 of the sweep the env runs other physics than the model's training file (g = 14 m/s²): its planner "
+     "plans with the physics it identified there, so the success there measures that mismatch too (with --not-told, "
+     "x1.4 runs the env at the trained gravity that the agent plans with)"),
     ({"gravity": 14.0, "gravity_mult": 1.0, "actuation_gain": 1.0, "effects": []}, (1.4,), False, None),
     ({"gravity": 10.0, "gravity_mult": 1.0, "actuation_gain": 1.0, "effects": []}, (0.8, 1.2), True, None),  # zero-shot
     ({"gravity": 10.0, "gravity_mult": 1.0, "actuation_gain": 0.6, "effects": []}, (0.9, 1.0), True,

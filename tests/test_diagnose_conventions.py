@@ -5,12 +5,13 @@ is given, in the convention that the file says its system takes."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from piga.diagnostics import fit
-from piga.diagnostics.diagnose import cut_windows, in_convention, name_effects
+from piga.diagnostics.diagnose import convention_note, cut_windows, damping_convention, in_convention, name_effects
 from piga.diagnostics.observe import Observations, damping_taken
 from tests.test_diagnose_weak_evidence import FAST, NOTHING_LEFT
 from tests.test_diagnostics import NOMINAL
@@ -47,6 +48,26 @@ def test_an_explicit_reading_is_turned_implicit_by_its_factor() -> None:
     assert implicit == pytest.approx({"g": 10.0 * factor, "a": factor, "b": 0.5 * factor})
     assert in_convention(m, NOMINAL, "explicit") is m and in_convention(m, NOMINAL, None) is m
     assert in_convention(fit.Model((), 0, {"g": 10.0, "a": 1.0}), NOMINAL, "implicit").values == {"g": 10.0, "a": 1.0}
+
+
+def test_an_explicit_reading_is_turned_implicit_over_the_systems_physics_steps() -> None:
+    """dm_control takes its hinge damping at each 0.02 s physics step, two per 0.04 s frame: converted over one step of
+    the frame, a damping of 1.594 read 1.67 with a "gain 1.06" and a "gravity 1.05"."""
+    nom = replace(NOMINAL, dt=0.04)
+    b_true, h = 1.594, 0.02
+    d = 1 / (1 + h * 3 * b_true)  # each implicit step's factor on the speed
+    b_explicit = (1 - d**2) / (0.04 * 3)  # the one explicit step per frame with the same decay over the frame
+    m = fit.Model(("damping",), 0, {"g": 10.0, "a": 1.0, "b": b_explicit})
+    two = in_convention(m, nom, "implicit", system_step=h).values
+    assert two["b"] == pytest.approx(b_true, rel=1e-9)
+    assert two["g"] == pytest.approx(10.0 * 2 / (d + d**2)) and two["a"] == pytest.approx(2 / (d + d**2))
+    one = in_convention(m, nom, "implicit").values  # one step of the frame: b 5% high, g and a 5% high
+    assert one["b"] / b_true > 1.04 and one["g"] / two["g"] > 1.04
+    assert in_convention(m, nom, "implicit", system_step=0.04).values == pytest.approx(one)
+    convention = damping_convention(m, nom, h)
+    said = convention_note(convention, "implicit", said_by="training")
+    assert "physics steps of 0.02 s" in said and "the model's training file says it comes from dm_control" in said
+    assert f"the recording's: g = {two['g']:.3f}" in said
 
 
 def test_a_damping_that_differs_between_implicitly_damped_files_names_no_gravity_error() -> None:

@@ -779,6 +779,16 @@ def test_planet_resume_names_a_piga_run_by_its_checkpoint(tiny_run: Path, tiny_d
             f"--resume: {run} is a piga-train-model run (its checkpoint.pt), not a planet run (piga-baseline planet)")
 
 
+def test_planet_resume_names_a_record_edited_to_another_kind(baseline_runs: dict[str, Path], tiny_data: Path,
+                                                             tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A planet run whose config.json was edited to name ddpg was called "a ddpg run" (and ddpg --resume then advised
+    --overwrite, which would lose it): its checkpoint says it is a planet run."""
+    run = _run_copy(baseline_runs["planet"], tmp_path / "run", _edit_record(lambda r: r.update(kind="ddpg")))
+    refused("piga-baseline", ["planet", str(tiny_data), "--out", str(run), "--resume", "--steps", "4", "--quiet"], capsys,
+            f"--resume: {run / 'config.json'} names a ddpg run, but checkpoint.pt is a planet run's; restore its "
+            "config.json, or delete it to resume from the checkpoint")
+
+
 @pytest.mark.parametrize("kind", ["planet", "ddpg"])
 def test_resume_takes_the_runs_own_values_written_out(kind: str, baseline_runs: dict[str, Path], tiny_data: Path,
                                                        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

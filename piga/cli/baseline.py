@@ -215,6 +215,9 @@ def _check_run_dir(run_dir: Path, resume: bool, overwrite: bool, kind: RunKind) 
                 return  # loader says what is wrong with it (:func:`_resumed_record`)
             raise PigaError(f"--resume: {run_dir} is a {found.writer} run (its {CHECKPOINT}), not a {kind.value} run "
                             f"({kind.writer})")
+        if checkpoint_kind(run_dir) is kind:  # the record was edited or swapped: the checkpoint is this kind's
+            raise PigaError(f"--resume: {run_dir / 'config.json'} names a {recorded} run, but {CHECKPOINT} is a "
+                            f"{kind.value} run's; restore its config.json, or delete it to resume from the checkpoint")
         raise PigaError(f"--resume: {run_dir} is a {recorded} run, not a {kind.value} run ({kind.writer})")
     if existing and not overwrite:
         if CHECKPOINT not in existing and _left_before_a_checkpoint(run_dir, existing, kind):

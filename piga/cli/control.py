@@ -719,8 +719,8 @@ def _warn_if_other_pixel_physics(checkpoint: dict, env: PixelPendulumConfig, bel
     runs_trained = MIN_GRAVITY <= mult * env.gravity <= MAX_GRAVITY
     if sweep:
         at = ", ".join(f"x{number_text(m)}" for m, _ in found)
-        hint = (f" (x{number_text(mult)} --not-told runs the env at the trained gravity)"
-                if "g = " in differs[0] and runs_trained else "")
+        hint = (f" ({'with --not-told, ' if told else ''}x{number_text(mult)} runs the env at the trained gravity "
+                "that the agent plans with)" if "g = " in differs[0] and runs_trained else "")
         print(f"{PROG}: warning: at {at} of the sweep the env runs other physics than the model's training file "
               f"({differs[1]}): its planner plans with the physics it identified there, so the success there measures "
               f"that mismatch too{hint}", file=sys.stderr)

@@ -1057,7 +1057,7 @@ def generic_basis(final: fit.Model, nom: Nominal, obs: Observations, theta: np.n
                         reading_rms=reading_rms, reading_significant=bool(reading), reading_decides=reading_decides)
 
 
-def damping_convention(final: fit.Model, nom: Nominal) -> dict[str, Any] | None:
+def damping_convention(final: fit.Model, nom: Nominal, system_step: float | None = None) -> dict[str, Any] | None:
     """How the corrected values take the damping, and the same frames' values under the other convention.
 
     Frames cannot tell damping taken implicitly, q̇ <- (q̇ + h·f) / (1 + h·r), from damping taken explicitly,
@@ -1068,8 +1068,16 @@ def damping_convention(final: fit.Model, nom: Nominal) -> dict[str, Any] | None:
     and b all low by the factor 1 / (1 + h·r) (−2.90% at h·r = 2.99%, case 19 of the blind benchmark).
     None: no damping, or an RK4 model (which has no such step).
 
+    ``system_step``: the physics step (s) of an implicit system with several steps per frame (dm_control's 0.02 s at
+    two steps per 0.04 s frame): an explicit step of the frame's dt, q̇ <- q̇·(1 - dt·r') + dt·f', is matched by n
+    implicit steps of h = dt / n, d = 1 / (1 + h·r) each, where d^n = 1 - dt·r' and f = f'·n / (d + ... + d^n) (the
+    position's move within the frame left out). Taken over one step of the frame instead, dm_control's hinge damping
+    of 1.2 (b = 1.594) read b = 1.67 with a "gain 1.06" and a "gravity 1.05"; over its two steps, "1.6 (95% interval
+    1.59..1.6)", and no gain or gravity.
+
     Returns ``{"taken": "explicit" | "implicit", "step_s": h, "other": the other one, "factor": F,
-    "values": {"g", "a", "b"} x F}``: F = 1 / (1 - h·r') from explicit to implicit, 1 / (1 + h·r) back.
+    "values": {"g", "a", "b"}}``: F, the factor on g and a, is 1 / (1 - h·r') from explicit to implicit in one step,
+    1 / (1 + h·r) back; b's own factor differs from F over several steps.
     """
     implicit = final.has(WITHIN_FRAME)
     if not implicit and fit.nominal_integrator(nom) != "euler":
@@ -1077,58 +1085,74 @@ def damping_convention(final: fit.Model, nom: Nominal) -> dict[str, Any] | None:
     b = final.values.get(DAMPING.parameter, 0.0) + fit.nominal_damping(nom)
     if b <= 0:
         return None
-    steps = final.substeps if implicit else nom.substeps
-    h = nom.dt / steps
-    hr = h * pendulum_gains()[1] * b
-    factor = 1 / (1 + hr) if implicit else 1 / (1 - hr)
-    values = {k: v * factor for k, v in final.values.items() if k in ("g", "a", DAMPING.parameter)}
-    return {"taken": "implicit" if implicit else "explicit", "step_s": h,
+    gain = pendulum_gains()[1]
+    if implicit:
+        h = nom.dt / final.substeps
+        factor = b_factor = 1 / (1 + h * gain * b)
+    else:
+        n = max(1, round(nom.dt / system_step)) if system_step else nom.substeps
+        decay = 1 - nom.dt * gain * b  # the explicit step's factor on q̇ over the frame
+        if decay <= 0:  # (a damping that reverses q̇ within a step: no implicit system makes those frames)
+            return None
+        h, d = nom.dt / n, decay ** (1 / n)
+        factor = n / sum(d**j for j in range(1, n + 1))
+        b_factor = (1 / d - 1) / (h * gain * b)
+    values = {k: v * (b_factor if k == DAMPING.parameter else factor) for k, v in final.values.items()
+              if k in ("g", "a", DAMPING.parameter)}
+    return {"taken": "implicit" if implicit else "explicit", "step_s": h, "frame_s": nom.dt,
             "other": "explicit" if implicit else "implicit", "factor": factor, "values": values}
 
 
-def in_convention(model: fit.Model, nom: Nominal, taken: str | None) -> fit.Model:
+def in_convention(model: fit.Model, nom: Nominal, taken: str | None, system_step: float | None = None) -> fit.Model:
     """``model`` with its g, a and b as a system that takes the damping ``taken`` ("implicit" or "explicit", see
-    :func:`damping_convention`) makes the same frames; unchanged where ``taken`` is None (not known), where the model
-    takes it so already, or where it has no damping.
+    :func:`damping_convention`; ``system_step``: its physics step, where several make a frame) makes the same frames;
+    unchanged where ``taken`` is None (not known), where the model takes it so already, or where it has no damping.
 
     Two files whose dampings differ, read in the fit's convention where their system's is the other, differ in g and a
     by the ratio of their factors, which is no gravity or gain error (measured: dm_control's pendulum, hinge damping
     0.4 against the training file's 0.1, one Euler step per frame, read b = 0.505 against 0.13 and "gravity 0.967, 95%
     interval 0.965..0.968", with g unchanged; read implicitly, as MuJoCo takes it, b = 0.537 (truth 0.531) and g
     x1.01)."""
-    convention = None if taken is None else damping_convention(model, nom)
+    convention = None if taken is None else damping_convention(model, nom, system_step)
     if convention is None or convention["taken"] == taken:
         return model
     return model.with_values({**model.values, **convention["values"]})
 
 
-def damping_in_convention(b: float, model: fit.Model, nom: Nominal, taken: str | None) -> float:
+def damping_in_convention(b: float, model: fit.Model, nom: Nominal, taken: str | None,
+                          system_step: float | None = None) -> float:
     """A damping ``b`` of ``model``'s form (another reading of its b: a bound of its interval, the training file's) as
     :func:`in_convention` gives it."""
     model = model.with_values({**model.values, DAMPING.parameter: b})
-    return in_convention(model, nom, taken).values[DAMPING.parameter]
+    return in_convention(model, nom, taken, system_step).values[DAMPING.parameter]
 
 
-def convention_note(convention: dict[str, Any], given_as: str | None = None) -> str:
+def convention_note(convention: dict[str, Any], given_as: str | None = None, said_by: str = "recording") -> str:
     """The report's sentence on :func:`damping_convention`'s result; ``given_as``: the system's convention, in which the
-    damping is given and g and a are compared where it is not the fit's (:func:`in_convention`)."""
+    damping is given and g and a are compared where it is not the fit's (:func:`in_convention`); ``said_by``: the file
+    that says so ("recording", or "training" where the recording does not say, as an imported one)."""
     v, h, f = convention["values"], convention["step_s"], convention["factor"]
+    frame = convention.get("frame_s", h)
     other = f"g = {v['g']:.3f}, a = {v['a']:.3f}" + (f", b = {v['b']:.4g}" if "b" in v else "")
     if given_as == convention["other"]:
-        how = ("implicitly, as MuJoCo's Euler does (the file says it comes from dm_control)" if given_as == "implicit"
-               else "explicitly, as a torque added before the step (the file says it comes from Gymnasium's pendulum)")
-        fitted = (f"the Euler step (h = {h:.4g} s), which takes it explicitly" if given_as == "implicit" else
-                  f"the substeps (h = {h:.4g} s), which take it implicitly")
-        return (f"the recorded system takes the damping {how}: the damping is given as it takes it, and g and a are "
-                f"compared with the training file's read the same way ({other}, x{f:.3f} the values of {fitted}; "
+        source = ("the file says it comes from " if said_by == "recording" else
+                  "the recording does not say; the model's training file says it comes from ")
+        how = (f"implicitly, as MuJoCo's Euler does, at physics steps of {h:.4g} s ({source}dm_control)"
+               if given_as == "implicit" else
+               f"explicitly, as a torque added before the step ({source}Gymnasium's pendulum)")
+        fitted = (f"the fit's one Euler step per frame (h = {frame:.4g} s), which takes it explicitly"
+                  if given_as == "implicit" else f"the fit's substeps (h = {h:.4g} s), which take it implicitly")
+        return (f"the recorded system takes the damping {how}: the damping is given as it takes it, and the g and a of "
+                f"both files are compared read so (the recording's: {other}; g and a x{f:.3f} those of {fitted}; "
                 "frames cannot tell the two apart)")
     if convention["taken"] == "implicit":
         return (f"the substeps (h = {h:.4g} s) take the damping implicitly, as MuJoCo's Euler does; a simulator that "
                 f"adds it as an explicit torque before each step makes the same frames with {other} (x{f:.3f} these, "
                 "1 / (1 + h·3b)): frames cannot tell the two apart")
-    return (f"the Euler step (h = {h:.4g} s) takes the damping explicitly, as a torque added before the step (as "
+    return (f"the Euler step (h = {frame:.4g} s) takes the damping explicitly, as a torque added before the step (as "
             f"Gymnasium's pendulum with a damping wrapper does); a simulator that takes it implicitly, as MuJoCo's Euler "
-            f"does, makes the same frames with {other} (x{f:.3f} these, 1 / (1 − h·3b)): frames cannot tell the two apart")
+            f"does, at steps of {h:.4g} s makes the same frames with {other} (g and a x{f:.3f} these): frames cannot "
+            "tell the two apart")
 
 
 STATIC_TORQUES = (BIAS.name, FRICTION.name)
@@ -1422,7 +1446,7 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
                  varied_actions: bool = True, rival: fit.Model | None = None,
                  own_readings: dict[tuple, fit.Model] | None = None,
                  damped: Callable[[], fit.Model | None] | None = None, own_missing: str | None = None,
-                 damping_taken: str | None = None) -> Naming:
+                 damping_taken: str | None = None, damping_step: float | None = None) -> Naming:
     """Step 4: the effects that the chosen physics and the camera stage name, with intervals, and the verdict.
 
     Gymnasium's own speed clip is no gap (for a recording that the file says came from Gymnasium's
@@ -1463,7 +1487,8 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
 
     ``damping_taken``: how the recorded system takes a damping (:attr:`Observations.damping_taken`; where the recording
     does not say, the training file's). Where it is known, a damping is given in that convention, and the g and a of
-    the two files are compared in it (:func:`in_convention`).
+    the two files are compared in it (:func:`in_convention`); ``damping_step``: the physics step at which it takes it,
+    where several make a frame (:attr:`Observations.damping_step`, taken from the same file).
     """
     notes: list[str] = []
     named = [e for e in final.effects if ambiguity is None or e not in ambiguity.between[0].split("+")]
@@ -1480,10 +1505,12 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
     use_own = own_obs is not None
     own_readings = {} if own_readings is None else own_readings
     taken = damping_taken if damping_taken is not None or own_obs is None else own_obs.damping_taken
+    step = damping_step if damping_taken is not None or own_obs is None else own_obs.damping_step
+    said_by = "recording" if damping_taken is not None or own_obs is None else "training"
 
     def same(physics: fit.Model) -> fit.Model:
         """``physics`` in the recorded system's convention (:func:`in_convention`)."""
-        return in_convention(physics, nom, taken)
+        return in_convention(physics, nom, taken, step)
     if not use_own and own_missing is not None:
         # (a model identified on Gymnasium's own one-step frames reads them as the fits do: measured, gain 1.2 read
         # 1.19 and gravity x1.2 read 1.2 without the file)
@@ -1529,7 +1556,7 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
             if both_damped is not None:  # the training file's damping, which the recording lacks, read in both
                 reference, read, b_interval = both_damped
                 if b_interval is not None:
-                    b_interval = [damping_in_convention(x, reference, nom, taken) for x in b_interval]
+                    b_interval = [damping_in_convention(x, reference, nom, taken, step) for x in b_interval]
             # both files in the recorded system's convention: where their dampings differ, the fit's bends g and a
             reference, read = same(reference), same(read)
             ref_g, ref_a = read.values["g"], abs(read.values["a"])
@@ -1632,8 +1659,8 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
             notes.append("the system keeps moving under the held action between two frames (a continuous system, or "
                          "a simulator with several physics steps per frame): with one Euler step per frame the "
                          "identified a and g come out low; train with `--preset continuous` to model it")
-            if (convention := damping_convention(final, nom)) is not None:
-                notes.append(convention_note(convention, taken))
+            if (convention := damping_convention(final, nom, step)) is not None:
+                notes.append(convention_note(convention, taken, said_by))
             if one_step_reference:
                 notes.append(f"read with the motion within the frame, a = {final.values['a']:.3f} and g = "
                              f"{final.values['g']:.3f}; read one step per frame, as the nominal model does, a = "
@@ -1651,8 +1678,8 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
                 bracket = None
             effects.append(Effect(e, value, term.unit, bracket))
     if DAMPING.name in named and not final.has(WITHIN_FRAME):
-        if (convention := damping_convention(final, nom)) is not None:
-            notes.append(convention_note(convention, taken))
+        if (convention := damping_convention(final, nom, step)) is not None:
+            notes.append(convention_note(convention, taken, said_by))
     if DAMPING.name in named and own_reference:
         # the damping that the training file shows in the same form: the recording's is named against it where they
         # differ, and is the nominal model's own miss where they do not
@@ -1664,8 +1691,8 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
                 effects[i] = dataclass_replace(effects[i], training=training)
             else:
                 notes.append(f"the model's own training file, read in the same form, shows the same damping (b = "
-                             f"{damping_in_convention(training, final, nom, taken):.3g}; the recording "
-                             f"{damping_in_convention(b, final, nom, taken):.3g}): no difference between the two "
+                             f"{damping_in_convention(training, final, nom, taken, step):.3g}; the recording "
+                             f"{damping_in_convention(b, final, nom, taken, step):.3g}): no difference between the two "
                              "files, but one that the nominal model, identified without it, misses on its own "
                              "training file too")
     if DAMPING.name in named and taken is not None:  # the damping as the recorded system takes it
@@ -1673,8 +1700,8 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
         x = effects[i]
         effects[i] = dataclass_replace(
             x, value=same(final).values[DAMPING.parameter],
-            interval=None if x.interval is None else [damping_in_convention(b, final, nom, taken) for b in x.interval],
-            training=None if x.training is None else damping_in_convention(x.training, final, nom, taken))
+            interval=None if x.interval is None else [damping_in_convention(b, final, nom, taken, step) for b in x.interval],
+            training=None if x.training is None else damping_in_convention(x.training, final, nom, taken, step))
     if files_differ is not None:
         effects.append(files_differ)
     a_int = interval("a")
@@ -2127,7 +2154,8 @@ def analyse(obs: Observations, nom: Nominal, config: DiagnoseConfig = DiagnoseCo
     draws = fit.bootstrap(final, nom, reading.fit, config.bootstrap, config.seed) if config.bootstrap else {}
     if callable(own):
         own = functools.cache(own)  # read once, however often the naming asks
-    kwargs = dict(from_gymnasium=obs.from_gymnasium, damping_taken=obs.damping_taken, flip_bic_drop=flip_bic_drop,
+    kwargs = dict(from_gymnasium=obs.from_gymnasium, damping_taken=obs.damping_taken,
+                  damping_step=obs.damping_step, flip_bic_drop=flip_bic_drop,
                   draws=draws, refit=nominal_form(candidates, final, obs.from_gymnasium, config), own=own,
                   varied_actions=actions_vary(obs.actions), own_readings={}, own_missing=own_missing)
     damped = None if final.effects else damping_check(candidates, reading, nom, config)
@@ -2185,7 +2213,7 @@ def analyse(obs: Observations, nom: Nominal, config: DiagnoseConfig = DiagnoseCo
         pictures=_pictures(model, obs, theta, camera.camera if camera is not None and camera.rematched else None)
         if model is not None and len(obs.frames_index) else None,
         ambiguity=ambiguity, excluded=excluded, exclusions=exclusions,
-        damping_convention=damping_convention(final, nom),
+        damping_convention=damping_convention(final, nom, obs.damping_step),
     )
 
 

@@ -123,6 +123,8 @@ class Observations:
     damping_taken: str | None = None
     """How the system that made the file takes a damping, by its attrs (:func:`damping_taken`): "implicit"
     (MuJoCo's Euler, dm_control), "explicit" (a torque added before the step, Gymnasium's), None: not known."""
+    damping_step: float | None = None
+    """The physics step (s) at which that system takes it, where several make a frame (:func:`damping_step`)."""
 
 
 def check_compatible(model: PhysicsModel, path: str | os.PathLike[str], min_sequences: int = 20,
@@ -206,7 +208,8 @@ def observe(model: PhysicsModel, path: str | os.PathLike[str], batch: int = 16, 
         attrs = dict(f.attrs)
     check_actions(actions, path)
     return Observations(theta, actions, rec, split == SPLITS["train"], float(info.dt), frames, np.sort(keep), stale,
-                        float(blank.mean()), from_gymnasium(attrs), impossible_effects(attrs), damping_taken(attrs))
+                        float(blank.mean()), from_gymnasium(attrs), impossible_effects(attrs), damping_taken(attrs),
+                        damping_step(attrs))
 
 
 def from_gymnasium(attrs: dict) -> bool:
@@ -256,6 +259,15 @@ def env_id_of(attrs: dict) -> str | None:
     if isinstance(config, dict) and "draw_torque_arrow" in config:
         return "piga/PixelPendulum-v0"
     return None
+
+
+def damping_step(attrs: dict) -> float | None:
+    """The physics step (s) of the system that made a file, where it takes a damping implicitly at each of several
+    steps per frame (dm_control: :data:`~envs.dmc.DMC_PHYSICS_DT`, ``action_repeat`` steps per frame); None: one step
+    per frame, or not known."""
+    from envs.dmc import DMC_PHYSICS_DT
+
+    return DMC_PHYSICS_DT if env_id_of(attrs) == "piga/DMCPendulum-v0" else None
 
 
 def damping_taken(attrs: dict) -> str | None:
