@@ -779,6 +779,16 @@ def test_planet_resume_names_a_piga_run_by_its_checkpoint(tiny_run: Path, tiny_d
             f"--resume: {run} is a piga-train-model run (its checkpoint.pt), not a planet run (piga-baseline planet)")
 
 
+def test_planet_resume_of_a_record_without_its_settings_points_to_the_checkpoint(
+        baseline_runs: dict[str, Path], tiny_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A record whose 'train' settings were removed advised only --overwrite, which loses the run; a record that is
+    gone resumes from the checkpoint's settings."""
+    run = _run_copy(baseline_runs["planet"], tmp_path / "run", _edit_record(lambda r: r.pop("train")))
+    line = refused("piga-baseline", ["planet", str(tiny_data), "--out", str(run), "--resume", "--steps", "4", "--quiet"],
+                   capsys, "has no 'train' settings")
+    assert "delete it to resume from the settings that checkpoint.pt holds" in line
+
+
 def test_planet_resume_names_a_record_edited_to_another_kind(baseline_runs: dict[str, Path], tiny_data: Path,
                                                              tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """A planet run whose config.json was edited to name ddpg was called "a ddpg run" (and ddpg --resume then advised

@@ -284,13 +284,15 @@ def _saved_config(run_dir: Path, record: dict[str, Any], key: str, cls: Any, opt
     saved = record.get(key)
     if not isinstance(saved, dict):
         raise PigaError(f"--resume: {where} has no '{key}' settings (not written by piga-baseline, or edited); "
-                        "start the run again with --overwrite")
+                        f"delete it to resume from the settings that {CHECKPOINT} holds, or start the run again with "
+                        "--overwrite")
     names = {f.name for f in dataclasses.fields(cls)}
     missing, unknown = sorted(names - set(saved) - set(optional)), sorted(set(saved) - names)
     if missing or unknown:
         raise PigaError(f"--resume: {where}'s '{key}' settings " + (f"lack {', '.join(missing)}" if missing else "")
                         + (" and " if missing and unknown else "") + (f"have unknown {', '.join(unknown)}" if unknown else "")
-                        + " (edited, or from another version); start the run again with --overwrite")
+                        + f" (edited, or from another version); delete it to resume from the settings that {CHECKPOINT} "
+                        "holds, or start the run again with --overwrite")
     for name, kind in typing.get_type_hints(cls).items():  # a number edited into text: the config's checks would compare it
         value = saved.get(name)
         if name in saved and kind in (int, float) and (isinstance(value, bool) or not isinstance(value, (int, kind))):
