@@ -4,7 +4,6 @@ is given, in the convention that the file says its system takes."""
 
 from __future__ import annotations
 
-import math
 from dataclasses import replace
 
 import numpy as np
@@ -13,24 +12,15 @@ import pytest
 from piga.diagnostics import fit
 from piga.diagnostics.diagnose import convention_note, cut_windows, damping_convention, in_convention, name_effects
 from piga.diagnostics.observe import Observations, damping_taken
-from tests.test_diagnose_weak_evidence import FAST, NOTHING_LEFT
+from tests.test_diagnose_weak_evidence import FAST, NOTHING_LEFT, simulated
 from tests.test_diagnostics import NOMINAL
 
 
 def implicitly_damped(b: float, n: int = 60, t: int = 20, seed: int = 0) -> Observations:
     """Encoded-angle-like observations of a pendulum whose damping b is taken implicitly, as MuJoCo's Euler takes it
-    (q̇ <- (q̇ + h·f) / (1 + h·3b)), written independently of piga's code."""
-    rng = np.random.default_rng(seed)
-    u = rng.uniform(-2, 2, (n, t))
-    th = np.zeros((n, t))
-    x, v = rng.uniform(-math.pi, math.pi, n), rng.uniform(-1, 1, n)
-    th[:, 0] = x
-    for i in range(t - 1):
-        v = (v + 0.05 * (15 * np.sin(x) + 3 * u[:, i])) / (1 + 0.05 * 3 * b)
-        x = x + 0.05 * v
-        th[:, i + 1] = x
-    return Observations(th + rng.normal(0, 0.002, th.shape), u, np.zeros((n, t)), np.arange(n) < int(0.75 * n), 0.05,
-                        np.zeros((0, t, 8, 8), np.uint8), np.zeros(0, int), from_gymnasium=False)
+    (q̇ <- (q̇ + h·f) / (1 + h·3b); :func:`simulated`)."""
+    return simulated(lambda v, x, u: (v + 0.05 * (15 * np.sin(x) + 3 * u)) / (1 + 0.05 * 3 * b), n, t, seed,
+                     from_gymnasium=False)
 
 
 def test_the_convention_is_read_from_the_files_provenance() -> None:

@@ -204,7 +204,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.model:  # after every refusal, so that a refused command prints one line
         warn_if_unconverged(PROG, args.model)
         _warn_if_other_frames(args.model, ckpt)
-        _warn_if_other_pixel_physics(ckpt, PixelPendulumConfig(gravity_mult=args.gravity_mult), told)
+        _warn_if_other_pixel_physics(ckpt, (args.gravity_mult,), told=not args.not_told)
     config = EpisodeConfig(episodes=args.episodes, steps=args.steps, seed=args.seed, gravity_mult=args.gravity_mult,
                            goal_angle=mpc.goal_angle, torque_arrow=args.torque_arrow)
     agent: OracleAgent | PigaMPCAgent
@@ -301,8 +301,7 @@ def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: 
     if kind is RunKind.PIGA:
         warn_if_unconverged(PROG, args.model)
         _warn_if_other_frames(args.model, checkpoint)
-        _warn_if_other_pixel_physics(checkpoint, PixelPendulumConfig(), sweep=tuple(multipliers),
-                                     told=not args.not_told)
+        _warn_if_other_pixel_physics(checkpoint, multipliers, told=not args.not_told, sweep=True)
     else:
         _warn_if_did_not_learn(args.model, kind)
         from piga.control.jobs import agent_name
@@ -696,40 +695,37 @@ def _trained_gravity(trained: dict[str, Any], env: PixelPendulumConfig) -> float
         return None
 
 
-def _warn_if_other_pixel_physics(checkpoint: dict, env: PixelPendulumConfig, believed: float = 1.0,
-                                 sweep: tuple[float, ...] = (), told: bool = True) -> None:
+def _warn_if_other_pixel_physics(checkpoint: dict, multipliers: Sequence[float] = (1.0,), told: bool = True,
+                                 sweep: bool = False) -> None:
     """One warning line where the model's training file was collected with other physics than the pixel pendulum
-    that the episodes run (:func:`pixel_physics_difference`; ``believed``: the gravity multiplier the agent is told):
-    its planner plans with the physics it identified, and a success of 0% would read as a failed identification (a
-    model of g = 5, a = 2, read to within 1%, swung up 0 of 2 episodes at g = 10 and gain 1 without a word, and 2 of 2
-    at g = 5). With ``sweep`` (its multipliers; ``believed`` 1 where the agent is not told, else each multiplier),
-    the line names the multipliers at which they differ."""
+    that the episodes run at the gravity ``multipliers`` (:func:`pixel_physics_difference`; each ``told`` to the agent
+    or not): its planner plans with the physics it identified, and a success of 0% would read as a failed
+    identification (a model of g = 5, a = 2, read to within 1%, swung up 0 of 2 episodes at g = 10 and gain 1 without
+    a word, and 2 of 2 at g = 5). A ``sweep``'s line names the multipliers at which they differ."""
     from piga.io.runs import training_env_config
 
     trained = training_env_config(checkpoint)
     if not trained:
         return
-    believes = (lambda m: m if told else 1.0) if sweep else (lambda m: believed)
-    found = [(m, d) for m in (sweep or (env.gravity_mult,))
-             if (d := pixel_physics_difference(trained, replace(env, gravity_mult=m), believes(m))) is not None]
+    env = PixelPendulumConfig()
+    found = [(m, d) for m in multipliers
+             if (d := pixel_physics_difference(trained, replace(env, gravity_mult=m), m if told else 1.0)) is not None]
     if not found:
         return
     differs = found[0][1]
     mult = (_trained_gravity(trained, env) or env.gravity) / env.gravity
-    runs_trained = MIN_GRAVITY <= mult * env.gravity <= MAX_GRAVITY
+    hinted = "g = " in differs[0] and MIN_GRAVITY <= mult * env.gravity <= MAX_GRAVITY
     if sweep:
-        at = ", ".join(f"x{number_text(m)}" for m, _ in found)
-        hint = (f" ({'with --not-told, ' if told else ''}x{number_text(mult)} runs the env at the trained gravity "
-                "that the agent plans with)" if "g = " in differs[0] and runs_trained else "")
-        print(f"{PROG}: warning: at {at} of the sweep the env runs other physics than the model's training file "
-              f"({differs[1]}): its planner plans with the physics it identified there, so the success there measures "
-              f"that mismatch too{hint}", file=sys.stderr)
-        return
-    hint = (f" (--gravity-mult {number_text(mult)} --not-told runs the env at the trained gravity)"
-            if "g = " in differs[0] and runs_trained else "")
-    print(f"{PROG}: warning: the env runs {differs[0]}, the model's training file was collected at {differs[1]}: "
-          f"its planner plans with the physics it identified there, so the success below measures that mismatch "
-          f"too{hint}", file=sys.stderr)
+        line = (f"at {', '.join(f'x{number_text(m)}' for m, _ in found)} of the sweep the env runs other physics than "
+                f"the model's training file ({differs[1]}): its planner plans with the physics it identified there, so "
+                "the success there measures that mismatch too")
+        hint = (f" ({'with --not-told, ' if told else ''}x{number_text(mult)} runs the env at the trained gravity that "
+                "the agent plans with)")
+    else:
+        line = (f"the env runs {differs[0]}, the model's training file was collected at {differs[1]}: its planner plans "
+                "with the physics it identified there, so the success below measures that mismatch too")
+        hint = f" (--gravity-mult {number_text(mult)} --not-told runs the env at the trained gravity)"
+    print(f"{PROG}: warning: {line}{hint if hinted else ''}", file=sys.stderr)
 
 
 def check_planet_frames(run_dir: str) -> None:

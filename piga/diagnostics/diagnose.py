@@ -1504,9 +1504,9 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
         own_obs = own() if callable(own) else own
     use_own = own_obs is not None
     own_readings = {} if own_readings is None else own_readings
-    taken = damping_taken if damping_taken is not None or own_obs is None else own_obs.damping_taken
-    step = damping_step if damping_taken is not None or own_obs is None else own_obs.damping_step
-    said_by = "recording" if damping_taken is not None or own_obs is None else "training"
+    # the recording's word on how its system takes a damping, else the training file's (an imported recording)
+    taken, step, said_by = ((damping_taken, damping_step, "recording") if damping_taken is not None or own_obs is None
+                            else (own_obs.damping_taken, own_obs.damping_step, "training"))
 
     def same(physics: fit.Model) -> fit.Model:
         """``physics`` in the recorded system's convention (:func:`in_convention`)."""
@@ -1680,28 +1680,29 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
     if DAMPING.name in named and not final.has(WITHIN_FRAME):
         if (convention := damping_convention(final, nom, step)) is not None:
             notes.append(convention_note(convention, taken, said_by))
-    if DAMPING.name in named and own_reference:
-        # the damping that the training file shows in the same form: the recording's is named against it where they
-        # differ, and is the nominal model's own miss where they do not
-        shows = read_own(final, (DAMPING.name,))
-        if shows.has(DAMPING) and not implausible_own_reading(shows, nom):
-            training, b = shows.values[DAMPING.parameter], final.values[DAMPING.parameter]
-            i = next(i for i, x in enumerate(effects) if x.effect == DAMPING.name)
+    if DAMPING.name in named:
+        i = next(i for i, x in enumerate(effects) if x.effect == DAMPING.name)
+
+        def given(b: float) -> float:
+            """A damping of ``final``'s form as the recorded system takes it (:func:`damping_in_convention`)."""
+            return damping_in_convention(b, final, nom, taken, step)
+        shows = read_own(final, (DAMPING.name,)) if own_reference else None
+        if shows is not None and shows.has(DAMPING) and not implausible_own_reading(shows, nom):
+            # the damping that the training file shows in the same form: the recording's is named against it where
+            # they differ, and is the nominal model's own miss where they do not
+            training = shows.values[DAMPING.parameter]
             if damping_differs(final, training, nom, w, config, effects[i].interval):
                 effects[i] = dataclass_replace(effects[i], training=training)
             else:
                 notes.append(f"the model's own training file, read in the same form, shows the same damping (b = "
-                             f"{damping_in_convention(training, final, nom, taken, step):.3g}; the recording "
-                             f"{damping_in_convention(b, final, nom, taken, step):.3g}): no difference between the two "
-                             "files, but one that the nominal model, identified without it, misses on its own "
-                             "training file too")
-    if DAMPING.name in named and taken is not None:  # the damping as the recorded system takes it
-        i = next(i for i, x in enumerate(effects) if x.effect == DAMPING.name)
-        x = effects[i]
-        effects[i] = dataclass_replace(
-            x, value=same(final).values[DAMPING.parameter],
-            interval=None if x.interval is None else [damping_in_convention(b, final, nom, taken, step) for b in x.interval],
-            training=None if x.training is None else damping_in_convention(x.training, final, nom, taken, step))
+                             f"{given(training):.3g}; the recording {given(final.values[DAMPING.parameter]):.3g}): no "
+                             "difference between the two files, but one that the nominal model, identified without "
+                             "it, misses on its own training file too")
+        if taken is not None:  # the damping as the recorded system takes it
+            x = effects[i]
+            effects[i] = dataclass_replace(x, value=given(x.value),
+                                           interval=None if x.interval is None else [given(b) for b in x.interval],
+                                           training=None if x.training is None else given(x.training))
     if files_differ is not None:
         effects.append(files_differ)
     a_int = interval("a")
@@ -2265,8 +2266,9 @@ def _pixel_errors(model: PhysicsModel, obs: Observations, nom: Nominal, nominal_
     x_all = frames_to_float(torch.from_numpy(obs.frames), model.config.channels)  # (n, T, C, H, W)
     per_horizon: dict[str, list[float]] = {}
     typical: dict[str, float] = {}
+    elsewhere = camera if partial is None else partial.other  # the camera of the frames a partial one does not show
     for key, m, th, cam, repeat in (("nominal", nominal_model, obs.theta, Camera(), False),
-                                    ("corrected", final, theta, camera if partial is None else partial.other, True)):
+                                    ("corrected", final, theta, elsewhere, True)):
         w = fit.make_windows(th, obs.actions, obs.frames_index, None, t, obs.dt, stale, repeat=True)  # one per sequence
         if len(w.theta0) == 0:
             return PixelErrors()
@@ -2281,7 +2283,7 @@ def _pixel_errors(model: PhysicsModel, obs: Observations, nom: Nominal, nominal_
         se = ((frames - x) ** 2).mean(dim=(2, 3, 4))  # (B, H)
         per_horizon[key] = se.mean(0).tolist()
         typical[key] = float(se.mean(1).median())
-    _, floor = match(angle_table(model, camera if partial is None else partial.other), x.flatten(2).flatten(0, 1))
+    _, floor = match(angle_table(model, elsewhere), x.flatten(2).flatten(0, 1))
     if partial is not None:
         floor = torch.where(shows.flatten(), match(angle_table(model, partial.camera), x.flatten(2).flatten(0, 1))[1], floor)
     return PixelErrors(per_horizon["nominal"], per_horizon["corrected"], float(floor.mean()), typical["nominal"],

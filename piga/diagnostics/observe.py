@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from envs import DMC_PENDULUM, PIXEL_PENDULUM
 from piga.data.schema import SPLITS, DatasetInfo, check_actions, inspect_dataset, read_rows, split_indices
 from piga.diagnostics.repeats import stale_frames
 from piga.world.model import PhysicsModel, frames_to_float
@@ -230,14 +231,14 @@ def from_gymnasium(attrs: dict) -> bool:
 
 #: Effects that a simulator cannot produce, by the env id that piga-collect writes into a file's attrs.
 IMPOSSIBLE: dict[str, dict[str, str]] = {
-    "piga/DMCPendulum-v0": {"speed_clip": "dm_control has no speed clip"},
+    DMC_PENDULUM: {"speed_clip": "dm_control has no speed clip"},
 }
 
 
 #: How a simulator takes a damping, by the env id that piga-collect writes into a file's attrs.
 DAMPING_TAKEN: dict[str, str] = {
-    "piga/DMCPendulum-v0": "implicit",  # (MuJoCo's Euler: q̇ <- (q̇ + h·f) / (1 + h·r))
-    "piga/PixelPendulum-v0": "explicit",  # (Gymnasium's step, with piga's effect wrappers' torques added before it)
+    DMC_PENDULUM: "implicit",  # (MuJoCo's Euler: q̇ <- (q̇ + h·f) / (1 + h·r))
+    PIXEL_PENDULUM: "explicit",  # (Gymnasium's step, with piga's effect wrappers' torques added before it)
 }
 
 
@@ -255,9 +256,9 @@ def env_id_of(attrs: dict) -> str | None:
     except (TypeError, ValueError):
         return None
     if isinstance(config, dict) and "action_repeat" in config:
-        return "piga/DMCPendulum-v0"
+        return DMC_PENDULUM
     if isinstance(config, dict) and "draw_torque_arrow" in config:
-        return "piga/PixelPendulum-v0"
+        return PIXEL_PENDULUM
     return None
 
 
@@ -267,7 +268,7 @@ def damping_step(attrs: dict) -> float | None:
     per frame, or not known."""
     from envs.dmc import DMC_PHYSICS_DT
 
-    return DMC_PHYSICS_DT if env_id_of(attrs) == "piga/DMCPendulum-v0" else None
+    return DMC_PHYSICS_DT if env_id_of(attrs) == DMC_PENDULUM else None
 
 
 def damping_taken(attrs: dict) -> str | None:
