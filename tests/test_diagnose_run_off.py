@@ -4,6 +4,7 @@ over the delay or the substeps passes a fit that ran off instead of stopping the
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
@@ -49,3 +50,36 @@ def test_a_search_over_the_substeps_passes_a_fit_that_ran_off(monkeypatch) -> No
     assert m.substeps != first and not fit.collapsed(m, NOMINAL), m
     assert fit.fitted_loss(m.with_values({"g": math.nan, "a": 1.0}), NOMINAL, w) == math.inf
     assert np.isfinite(fit.fitted_loss(m, NOMINAL, w))
+
+
+def test_the_substeps_a_file_states_are_fitted_not_searched(monkeypatch) -> None:
+    """A dm_control file (2 physics steps of 0.02 s per 0.04 s frame) with a hinge damping of 1.0 was named
+    "within_frame, 3 substeps" beside its damping: where the file states M, the fit takes it, and searches the grid only
+    where it does not."""
+    from piga.diagnostics.observe import system_substeps
+
+    assert system_substeps(0.04, 0.02) == 2 and system_substeps(0.08, 0.02) == 4
+    assert system_substeps(0.04, None) == 0 and system_substeps(0.05, 0.02) == 0  # not known; not a whole number
+    assert system_substeps(0.02, 0.02) == 0  # one step per frame: nothing moves within the frame
+    real, tried = fit.fit, []
+
+    def recorded(model, nominal, w, *args, **kwargs):
+        tried.append(model.substeps)
+        return real(model, nominal, w, *args, **kwargs)
+
+    monkeypatch.setattr(fit, "fit", recorded)
+    w = windows()
+    start = {"g": NOMINAL.g, "a": NOMINAL.a}
+    assert fit.fit_candidate(("within_frame",), start, NOMINAL, replace(w, substeps=3)).substeps == 3
+    assert tried == [3]
+    tried.clear()
+    fit.fit_candidate(("within_frame",), start, NOMINAL, w)
+    assert tried == list(WITHIN_FRAME.grid)
+    tried.clear()
+    assert fit.fit_candidate(("damping",), start, NOMINAL, replace(w, substeps=3)).substeps == 0  # no within_frame
+    from piga.diagnostics.results import Effect
+
+    stated = Effect("within_frame", 2, "substeps per frame", stated=True)
+    assert "2 physics steps per frame, as its file states" in stated.describe() and stated.to_dict()["stated"]
+    fitted = Effect("within_frame", 3, "substeps per frame")
+    assert "fits best as 3 substeps per frame" in fitted.describe() and "stated" not in fitted.to_dict()

@@ -98,10 +98,21 @@ def test_not_explained_through_a_large_vision_gap_says_so_first() -> None:
     said = "not explained by the candidates: the actions barely move the system"
     naming = Naming([], [], said, "unexplained")
     d = _seen_through_vision_gap(naming, 35.8)
-    assert d.verdict.startswith("not explained, seen through a vision gap of 35.8x") and d.verdict.endswith(said)
+    assert d.verdict.startswith("not explained, seen through a vision gap of 35.8x")
+    assert d.verdict.endswith("What the fits read through it: not explained by the candidates: the angles read "
+                              "through it barely follow the actions"), d.verdict
     assert d.verdict_class == "unexplained"
     assert _seen_through_vision_gap(naming, 35.8, encoder=False).verdict == said
     assert _seen_through_vision_gap(naming, 5.0).verdict == said
+    # the actuator's causes of an undetermined gain are not listed through such a gap (dm_control, shadows, damping
+    # 0.35: "a refits to 1.68e-08 ... a motor wired in reverse ...", its gain unchanged)
+    from piga.diagnostics.diagnose import ACTIONS_BARELY_MOVE, ACTUATOR_CAUSES
+    undetermined = Naming([], [], f"not explained by the candidates: {ACTIONS_BARELY_MOVE}: a refits to 1.68e-08; "
+                          + ACTUATOR_CAUSES, "unexplained")
+    seen = _seen_through_vision_gap(undetermined, 34.6).verdict
+    assert "a refits to 1.68e-08" in seen and "says nothing of the actuator" in seen, seen
+    assert "wired in reverse" not in seen and ACTIONS_BARELY_MOVE not in seen, seen
+    assert _seen_through_vision_gap(undetermined, 5.0) is undetermined
 
 
 def test_an_actuation_reversed_in_the_matched_angles_alone_is_named_a_flip() -> None:

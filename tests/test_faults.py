@@ -779,14 +779,24 @@ def test_planet_resume_names_a_piga_run_by_its_checkpoint(tiny_run: Path, tiny_d
             f"--resume: {run} is a piga-train-model run (its checkpoint.pt), not a planet run (piga-baseline planet)")
 
 
-def test_planet_resume_of_a_record_without_its_settings_points_to_the_checkpoint(
-        baseline_runs: dict[str, Path], tiny_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    """A record whose 'train' settings were removed advised only --overwrite, which loses the run; a record that is
-    gone resumes from the checkpoint's settings."""
-    run = _run_copy(baseline_runs["planet"], tmp_path / "run", _edit_record(lambda r: r.pop("train")))
-    line = refused("piga-baseline", ["planet", str(tiny_data), "--out", str(run), "--resume", "--steps", "4", "--quiet"],
-                   capsys, "has no 'train' settings")
-    assert "delete it to resume from the settings that checkpoint.pt holds" in line
+@pytest.mark.parametrize("drop", [("train",), ("data", "data_fingerprint")])
+def test_planet_resume_of_a_record_without_its_settings_takes_them_from_the_checkpoint(
+        drop: tuple[str, ...], baseline_runs: dict[str, Path], tiny_data: Path, files: dict[str, Path], tmp_path: Path,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """A record whose 'train' settings were removed advised only --overwrite, which loses the run, and one without its
+    data file resumed on any file, unchecked: both take what they lack from the checkpoint, saying so, and are then
+    checked as a whole record is."""
+    run = _run_copy(baseline_runs["planet"], tmp_path / "run", _edit_record(lambda r: [r.pop(key) for key in drop]))
+    argv = ["--out", str(run), "--resume", "--steps", "4", "--quiet"]
+    if drop == ("train",):
+        refused("piga-baseline", ["planet", str(tiny_data), *argv, "--batch-size", "4"], capsys, "drop --batch-size")
+    else:
+        refused("piga-baseline", ["planet", str(files["two_actions"]), *argv], capsys, "was trained on", "give that file")
+    code, out, err = run_in_process("piga-baseline", baseline.main, "planet", str(tiny_data), "--out", str(run),
+                                    "--resume", "--steps", "3", "--quiet", capsys=capsys)
+    assert_planet_run_finished(code, err)
+    assert f"lacks its {', '.join(repr(key) for key in drop if key != 'data_fingerprint')} settings" in out, out
+    assert "taken from the checkpoint" in out, out
 
 
 def test_planet_resume_names_a_record_edited_to_another_kind(baseline_runs: dict[str, Path], tiny_data: Path,
@@ -958,7 +968,7 @@ def _truncate(run: Path) -> None:
     (("--batch-size", "64"), None, ["--resume keeps the run's recipe; drop --batch-size"]),
     (("--learning-rate", "0.1", "--torque-arrow"), None, ["drop --learning-rate, --torque-arrow"]),
     ((), _edit_record(lambda r: r["ddpg"].pop("net_arch")), ["'ddpg' settings lack net_arch"]),
-    ((), _edit_record(lambda r: r.pop("ddpg")), ["has no 'ddpg' settings"]),
+    (("--batch-size", "64"), _edit_record(lambda r: r.pop("ddpg")), ["drop --batch-size"]),  # taken from the checkpoint
     ((), _truncate, ["checkpoint.pt: not a readable DDPG checkpoint", "truncated"]),
     ((), _edit_record(lambda r: r["ddpg"].__setitem__("learning_rate", "fast")),
      ["'ddpg' settings give learning_rate as 'fast', not a number"]),  # "'>' not supported between instances of 'str' and 'int'"

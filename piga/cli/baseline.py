@@ -235,16 +235,26 @@ def _check_run_dir(run_dir: Path, resume: bool, overwrite: bool, kind: RunKind) 
     remove_outputs(run_dir, RUN_OUTPUTS if overwrite else existing)  # --overwrite: a run of another kind's too
 
 
+#: The record's keys of a PlaNet-style run's data file: its path as the command gave it, and the folder it was given in.
+RUN_DATA, RUN_DATA_FOLDER = "data", "data_folder"
+
+
 def _resumed_record(run_dir: Path, kind: RunKind, args: Any) -> dict[str, Any]:
     """The record (``config.json``) of the run that ``--resume`` continues; where it is missing or unreadable, one
     rebuilt from the checkpoint, as piga-train-model rebuilds its own: the checkpoint holds the run's settings (a
     planet run's training and model sizes and its data file's path; a DDPG or DrQ-v2 run's whole recipe), and the
-    rebuilt record says that the command that started the run is unknown. An ``--iterative`` planet run's settings
-    of its rounds are only in the record: refused, saying so."""
+    rebuilt record says that the command that started the run is unknown. A record that lacks some of the sections
+    the checkpoint holds (a planet run's data file, training settings or model sizes; a DDPG run's recipe) takes those
+    from it, with a note. An ``--iterative`` planet run's settings of its rounds are only in the record: where the
+    record is missing or unreadable, refused, saying so."""
     record, why = read_run_record(run_dir)
     if why is None and not record.get("kind"):  # a JSON object without the record's fields (:func:`_check_run_dir`
         why = "names no run kind (it lacks a run record's fields)"  # found this kind's checkpoint, or none that reads)
-    if why is None:
+    # the sections the checkpoint holds too: a record that lacks some (edited) takes them from it, as a missing one is
+    # rebuilt whole (a planet record without its data file's path resumed on any file, unchecked)
+    lacking = [name for name in ((RUN_DATA, "train", "rssm") if kind is RunKind.PLANET else ("ddpg",))
+               if not isinstance(record.get(name), str if name == RUN_DATA else dict)] if why is None else []
+    if why is None and not lacking:
         return record
     from piga.io.checkpoint import read_checkpoint
 
@@ -256,18 +266,24 @@ def _resumed_record(run_dir: Path, kind: RunKind, args: Any) -> dict[str, Any]:
     if kind is RunKind.PLANET:
         from agents.planet.iterative import COLLECTED
 
-        if (run_dir / COLLECTED).exists() or args.iterative or args.rounds:
+        if why is not None and ((run_dir / COLLECTED).exists() or args.iterative or args.rounds):
             raise PigaError(f"--resume: {where} {why}, and the checkpoint does not hold the --iterative settings it "
                             "records (the episodes, rounds and steps of each round); restore config.json, or start the "
                             "run again with --overwrite")
         data = ckpt.get("data") if isinstance(ckpt.get("data"), dict) else {}
-        rebuilt = {"data": data.get("path"), "data_folder": data.get("folder"), "train": ckpt.get("train_config"),
+        rebuilt = {RUN_DATA: data.get("path"), RUN_DATA_FOLDER: data.get("folder"), "train": ckpt.get("train_config"),
                    "rssm": ckpt.get("rssm_config")}
     else:
         rebuilt = {"ddpg": ckpt.get("config")}  # (the data file of --obs latent is the autoencoder's, already trained)
-    if not all(isinstance(section, dict) for name, section in rebuilt.items() if name not in ("data", "data_folder")):
+    if why is None:  # only the sections the record lacks
+        rebuilt = {name: rebuilt[name] for name in lacking + ([RUN_DATA_FOLDER] if RUN_DATA in lacking else [])}
+        why = f"lacks its {', '.join(repr(name) for name in lacking)} settings (edited, or from an older version)"
+    if not all(isinstance(section, dict) for name, section in rebuilt.items() if name not in (RUN_DATA, RUN_DATA_FOLDER)):
         raise PigaError(f"--resume: {where} {why}, and the checkpoint does not hold the run's settings (an older "
                         "version's); restore config.json, or start the run again with --overwrite")
+    if lacking:
+        print(f"{PROG}: note: {where} {why}; they are taken from the checkpoint")
+        return {**record, **rebuilt}
     print(f"{PROG}: note: {where} {why}; it is rewritten from the checkpoint, without the command that started the "
           "run")  # on stdout: stderr is kept for the one line of an error that may follow
     return {"command": None, "kind": kind.value, **rebuilt}

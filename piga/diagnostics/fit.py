@@ -139,6 +139,12 @@ class Windows:
     """Fit the two read angles that start each window (θ_s and θ_{s-1}, so its velocity) with the
     physics, as data like the targets, instead of taking them as read (:func:`loss`); only for
     windows of 2 or more steps."""
+    substeps: int = 0
+    """The recorded system's physics steps per frame, where its file says (dm_control: its ``action_repeat``, see
+    :func:`piga.diagnostics.observe.system_substeps`): ``within_frame`` is fitted at that M, not searched over its
+    grid; 0: not known. (Searched, M is a fit of its own that moves with the other effects: dm_control at 2 physics
+    steps per frame with a hinge damping of 1.0 was named "within_frame, 3 substeps" beside the right damping, and
+    with dampings of 0.07 to 1.5 sometimes 2 substeps, mostly none.)"""
 
 
 def min_frames(horizon: int) -> int:
@@ -504,8 +510,10 @@ def fit_candidate(effects: tuple[str, ...], base: dict[str, float], nominal: Nom
     """Fits a candidate with ``effects``, starting from the values in ``base`` (g, a, ...).
 
     With a "delay" among the effects, ``delay`` holds k fixed; None searches k = 1..MAX_DELAY.
-    With "within_frame", ``substeps`` holds M fixed; None searches :data:`WITHIN_FRAME_SUBSTEPS`.
+    With "within_frame", ``substeps`` holds M fixed; None takes the recorded system's (:attr:`Windows.substeps`), or
+    where that is not known searches the effect's grid.
     """
+    substeps = substeps if substeps is not None else (w.substeps or None)
     if WITHIN_FRAME.name in effects and substeps is None:
         best = None
         for m_sub in WITHIN_FRAME.grid:

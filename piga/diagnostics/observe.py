@@ -271,6 +271,18 @@ def damping_step(attrs: dict) -> float | None:
     return DMC_PHYSICS_DT if env_id_of(attrs) == DMC_PENDULUM else None
 
 
+def system_substeps(dt: float, step: float | None) -> int:
+    """The physics steps per frame of a system that takes ``step`` (s) per physics step (:func:`damping_step`) at
+    frames of ``dt`` (s): the M that the ``within_frame`` effect is fitted at (:attr:`piga.diagnostics.fit.Windows.substeps`);
+    0 where not known, or not a whole number of steps the effect can take."""
+    from piga.world.effects import WITHIN_FRAME
+
+    if not step:
+        return 0
+    m = round(dt / step)
+    return m if 1 < m <= max(WITHIN_FRAME.grid) and abs(m * step - dt) <= 1e-6 * dt else 0
+
+
 def damping_taken(attrs: dict) -> str | None:
     """How the system that made a file takes a damping (:data:`DAMPING_TAKEN`), by its attrs; None: not known
     (an imported video, a file whose hints were deleted)."""

@@ -94,6 +94,9 @@ class Effect(_ByKey):
     """A damping only: the same parameter as the model's own training file reads it, where the two files differ in it
     (``value`` is then the recording's reading, both on top of the nominal model's own damping; see
     :func:`piga.diagnostics.diagnose.damping_differs`); None: no such comparison."""
+    stated: bool = False
+    """``within_frame`` only: its substeps are the recorded system's physics steps per frame as its file states them
+    (:attr:`piga.diagnostics.fit.Windows.substeps`), not a fit."""
 
     def describe(self) -> str:
         """One phrase for the verdict line."""
@@ -106,8 +109,9 @@ class Effect(_ByKey):
             return ("flipped actuation (the frames show the torque reversed: a camera on the other side of the hinge, "
                     "or a motor wired the other way)")
         if self.effect == "within_frame":
-            return (f"the system integrates within the frame (moves under the held action between frames; "
-                    f"fits best as {self.value:g} substeps per frame)")
+            return ("the system integrates within the frame (moves under the held action between frames; "
+                    + (f"{self.value:g} physics steps per frame, as its file states)" if self.stated else
+                       f"fits best as {self.value:g} substeps per frame)"))
         where = f" {self.where}" if self.where else ""
         if self.effect == "zoom":
             return (f"zoom {_with_interval(self.value, self.interval, 'x the drawn size')}{where}: a camera nearer or "
@@ -127,7 +131,8 @@ class Effect(_ByKey):
     def to_dict(self) -> dict[str, Any]:
         shift_only = ("dx", "dy", "dx_interval", "dy_interval")
         return {k: v for k, v in asdict(self).items()
-                if (k not in shift_only or self.effect == "shift") and (k not in ("where", "training") or v is not None)}
+                if (k not in shift_only or self.effect == "shift") and (k not in ("where", "training") or v is not None)
+                and (k != "stated" or v)}
 
 
 @dataclass(frozen=True)
