@@ -15,6 +15,10 @@ import pytest
      "physics it identified there, so the success below measures that mismatch too (--gravity-mult 1.2 --not-told "
      "runs the env at the trained gravity)"),
     ({"gravity": 14.0, "gravity_mult": 1.0, "actuation_gain": 1.0, "effects": []}, 1.4, 1.0, None),  # as it hints
+    ({"gravity": 14.0, "gravity_mult": 1.0, "actuation_gain": 1.0, "effects": []}, 1.4, 1.4,  # read "14 ... at g = 14"
+     "the env runs g = 14 m/s², the model's training file was collected at g = 14 m/s² (told x1.4, the agent plans "
+     "with g = 19.6 m/s²): its planner plans with the physics it identified there, so the success below measures that "
+     "mismatch too (--gravity-mult 1.4 --not-told runs the env at the trained gravity)"),
     ({"gravity": 10.0, "gravity_mult": 1.0, "actuation_gain": 1.0, "effects": []}, 1.4, 1.4, None),  # zero-shot, told
     ({"gravity": 10.0, "gravity_mult": 1.0, "actuation_gain": 1.0, "effects": []}, 1.4, 1.0, None),  # not told
     ({"gravity": 10.0, "gravity_mult": 1.0, "actuation_gain": 0.6, "effects": [["damping", 0.3]]}, 1.0, 1.0,

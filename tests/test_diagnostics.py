@@ -519,6 +519,15 @@ def test_the_smallest_default_file_is_accepted(tmp_path: Path) -> None:
     assert check_compatible(model, data).channels == 1
     with pytest.raises(DiagnosisInputError, match=r"frames are \(64, 64, 1\), the model takes 64x64 with 3 channel"):
         check_compatible(PhysicsModel(ModelConfig(channels=3)), data)
+    # another frame interval says what to record (it named none); a dm_control file, the action repeat that makes it
+    with pytest.raises(DiagnosisInputError, match=r"frame interval 0.05 s, the model was trained at 0.1 s; record again "
+                       r"with frames 0.1 s apart, or identify a model on frames of this interval$"):
+        check_compatible(PhysicsModel(ModelConfig(dt=0.1)), data)
+    with h5py.File(data, "a") as f:
+        f.attrs["env_id"], f.attrs["dt"] = "piga/DMCPendulum-v0", 0.06
+    with pytest.raises(DiagnosisInputError, match=r"frame interval 0.06 s, the model was trained at 0.04 s; record again "
+                       r"with --env-option action_repeat=2, or"):
+        check_compatible(PhysicsModel(ModelConfig(dt=0.04)), data)
 
 
 def test_the_autocorrelation_of_short_sequences_stops_at_their_length() -> None:

@@ -83,7 +83,7 @@ def test_piga_control_dmc_oracle_scores_and_refuses_gymnasium_options(tmp_path, 
         assert_one_line_error(completed_in_process("piga-control", main, *argv, capsys=capsys), needle)
 
 
-def test_a_piga_model_is_run_only_through_the_view_it_was_identified_on(tmp_path):
+def test_a_piga_model_is_run_only_through_the_view_it_was_identified_on(tmp_path, capsys):
     """A piga model given RGB frames failed inside its velocity estimator, and one given dm_control's camera 0 after
     identification face-on scored through a camera it never saw: both refused before an episode."""
     import h5py
@@ -113,6 +113,15 @@ def test_a_piga_model_is_run_only_through_the_view_it_was_identified_on(tmp_path
         _check_piga_view("run", face, DMCPendulumConfig(camera_distance=2.0))
     with pytest.raises(PigaError, match="camera_distance=1.5, not 1; give --env-option camera_distance=1.5"):
         _check_piga_view("run", {"data": {"path": str(far)}}, DMCPendulumConfig())
+    # shadows, which the training file did not have, run with one line (the model scored 0 with them, 922 without,
+    # without a word)
+    capsys.readouterr()
+    _check_piga_view("run", face, DMCPendulumConfig(shadows=True))
+    assert capsys.readouterr().err == ("piga-control: warning: the env renders with shadows, the model's training file "
+                                       "had none: its encoder reads frames lit otherwise than those it was trained on, "
+                                       "so the score below measures that too\n")
+    _check_piga_view("run", face, DMCPendulumConfig())
+    assert capsys.readouterr().err == ""
 
 
 @pytest.mark.parametrize("env", [(), ("--env", "piga/DMCPendulum-v0")])

@@ -143,7 +143,11 @@ def check_compatible(model: PhysicsModel, path: str | os.PathLike[str], min_sequ
     if info.action_dim != 1:
         raise DiagnosisInputError(f"{path}: needs one action per step (the pendulum's torque), found {info.action_dim}")
     if abs(info.dt - cfg.dt) > 1e-9 * max(1.0, cfg.dt):
-        raise DiagnosisInputError(f"{path}: frame interval {info.dt} s, the model was trained at {cfg.dt} s")
+        step = damping_step(info.attrs)  # a simulator's frames are whole physics steps: the repeat that makes cfg.dt
+        again = (f"--env-option action_repeat={round(cfg.dt / step)}" if step and round(cfg.dt / step) >= 1
+                 and math.isclose(round(cfg.dt / step) * step, cfg.dt) else f"frames {cfg.dt:g} s apart")
+        raise DiagnosisInputError(f"{path}: frame interval {info.dt:g} s, the model was trained at {cfg.dt:g} s; record "
+                                  f"again with {again}, or identify a model on frames of this interval")
     if info.steps < min_steps:
         raise DiagnosisInputError(f"{path}: sequences of {info.steps} frames; the diagnosis needs at least {min_steps}")
     if info.n_sequences < min_sequences:
