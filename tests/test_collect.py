@@ -95,6 +95,28 @@ def test_collect_warns_of_an_empty_split(tmp_path: Path, capsys: pytest.CaptureF
     assert code == 0 and err.count("\n") == 1 and "warning: the split 0.8,0.1,0.1 of 4 sequences" in err
 
 
+def test_collect_warns_of_noise_that_buries_the_pendulum(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """--effect noise=1000 clipped 90% of the pixels to 0 or 255 without a word, where a blanking exposure or too much
+    blur is refused: noise at least the rod's contrast with the background is warned of; noise below it is not."""
+    from piga.cli import collect as cli
+    from piga.data.collect import rod_contrast
+    from envs.pendulum import PixelPendulumConfig, make_pixel_pendulum
+
+    frame = make_pixel_pendulum(PixelPendulumConfig(draw_torque_arrow=False)).reset(seed=0)[0][-1]
+    values, counts = np.unique(frame[frame < 255], return_counts=True)
+    assert 255 - values[np.argmax(counts)] == rod_contrast() == 152  # the rod's own gray, measured on a frame
+    for noise, warned in (("1000", True), ("152", True), ("151", False)):
+        code, _, err = run_in_process("piga-collect", cli.main, "--out", str(tmp_path / "n.h5"), "--sequences", "4",
+                                      "--steps", "4", "--split", "2,1,1", "--workers", "1", "--effect", f"noise={noise}",
+                                      "--overwrite", "--quiet", capsys=capsys)
+        assert code == 0 and err.count("\n") == int(warned), err
+        assert (f"piga-collect: warning: --effect noise={noise} is at least the pendulum's contrast with the background "
+                "(152 gray levels)" in err) is warned, err
+    with h5py.File(tmp_path / "n.h5", "r") as f:  # the frames of noise 151: about half the pixels clipped
+        frames = f["frames"][()]
+    assert 0.4 < np.isin(frames, (0, 255)).mean() < 0.65
+
+
 def test_preset_applies_and_explicit_options_win(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     from piga.cli import collect as cli
 

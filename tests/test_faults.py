@@ -847,6 +847,53 @@ def test_ddpg_resume_names_an_edited_record_and_another_runs_buffer(baseline_run
             "(observations (4,), this run's (3,))")
 
 
+@pytest.mark.parametrize("key, value, held", [("obs", "pixels", "'state'"), ("env", "piga/DMCPendulum-v0", None)])
+def test_ddpg_resume_names_a_record_whose_obs_or_env_was_edited(key: str, value: str, held: str | None,
+                                                                 baseline_runs: dict[str, Path], tmp_path: Path,
+                                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    """An edited obs read "dd was trained with --obs pixels, not state" (the command line blamed: --obs pixels then
+    met the record's mismatch), and an edited env "not usable ...; start the run again with --overwrite": the record is
+    compared with the checkpoint first."""
+    run = _run_copy(baseline_runs["ddpg"], tmp_path / "run", _edit_record(lambda r: r["ddpg"].__setitem__(key, value)))
+    line = refused("piga-baseline", ["ddpg", "--obs", "state", "--out", str(run), "--resume", "--steps", "400", "--quiet"],
+                   capsys, "config.json does not describe the run its checkpoint holds (", f"{key} {value!r} there, ",
+                   "restore the record's values")
+    assert held is None or f"there, {held} in the checkpoint" in line, line
+    assert "--overwrite" not in line and "trained with --obs" not in line, line
+
+
+def test_planet_resume_takes_a_fingerprint_that_is_not_text_as_none(baseline_runs: dict[str, Path], tiny_data: Path,
+                                                                     tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A data_fingerprint edited to null read "tiny.h5 has changed since the run trained on it" of an untouched file:
+    the file is then known by its path, as a run's from before fingerprints."""
+    run = _run_copy(baseline_runs["planet"], tmp_path / "run", _edit_record(lambda r: r.update(data_fingerprint=None)))
+    code, _, err = run_in_process("piga-baseline", baseline.main, "planet", str(tiny_data), "--out", str(run), "--resume",
+                                  "--steps", "3", "--quiet", capsys=capsys)
+    assert_planet_run_finished(code, err)
+    assert "has changed" not in err, err
+
+
+def test_resume_on_the_same_contents_rewrites_the_records_data_name(baseline_runs: dict[str, Path], tiny_data: Path,
+                                                                     tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A record whose "data" was edited to another file (or whose file was moved) resumed on the file given, matched by
+    its contents, and went on naming the other one; a DDPG run from the state kept a data file it never read."""
+    run = _run_copy(baseline_runs["planet"], tmp_path / "run", _edit_record(lambda r: r.update(data="other.h5")))
+    moved = tmp_path / "moved.h5"
+    shutil.copy(tiny_data, moved)
+    code, out, err = run_in_process("piga-baseline", baseline.main, "planet", str(moved), "--out", str(run), "--resume",
+                                    "--steps", "3", "--quiet", capsys=capsys)
+    assert_planet_run_finished(code, err)
+    assert f"named other.h5; {moved} holds the same data, and the record now names it" in out, out
+    record = json.loads((run / "config.json").read_text())
+    assert (record["data"], record["data_folder"]) == (str(moved), os.getcwd())
+    run = _run_copy(baseline_runs["ddpg"], tmp_path / "ddpg", _edit_record(lambda r: r.update(data="other.h5")))
+    code, out, err = run_in_process("piga-baseline", baseline.main, "ddpg", "--obs", "state", "--out", str(run),
+                                    "--resume", "--steps", "400", "--threads", "1", "--quiet", capsys=capsys)
+    assert_sb3_run_finished(code, err)
+    assert "named other.h5 as its data file; --obs state reads none" in out, out
+    assert json.loads((run / "config.json").read_text())["data"] is None
+
+
 def test_planet_resume_takes_the_model_sizes_from_its_checkpoint(baseline_runs: dict[str, Path], tiny_data: Path,
                                                                  tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """A config.json whose 'rssm' was edited into a list was an internal error (AttributeError); the checkpoint holds
@@ -971,7 +1018,10 @@ def _truncate(run: Path) -> None:
     (("--batch-size", "64"), _edit_record(lambda r: r.pop("ddpg")), ["drop --batch-size"]),  # taken from the checkpoint
     ((), _truncate, ["checkpoint.pt: not a readable DDPG checkpoint", "truncated"]),
     ((), _edit_record(lambda r: r["ddpg"].__setitem__("learning_rate", "fast")),
-     ["'ddpg' settings give learning_rate as 'fast', not a number"]),  # "'>' not supported between instances of 'str' and 'int'"
+     # "'>' not supported between instances of 'str' and 'int'"; then "give learning_rate as 'fast', not a number
+     # (edited); start the run again with --overwrite", where the checkpoint holds the value to restore
+     ["config.json does not describe the run its checkpoint holds (learning_rate 'fast' there, 0.001 in the checkpoint): "
+      "restore the record's values"]),
 ])
 def test_ddpg_resume_refuses(argv: tuple[str, ...], edit: Callable[[Path], None] | None, needles: list[str],
                              baseline_runs: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -1240,9 +1290,9 @@ def test_a_gif_is_refused_before_the_episodes_where_an_mp4_fits(tmp_path: Path, 
     ("nan_state", ["/states holds NaN"]),
 ])
 def test_diagnose_refuses_data_before_the_diagnosis(data: str, needles: list[str], files: dict[str, Path],
-                                                    fake_planet_run: Path, tmp_path: Path,
+                                                    tiny_piga_run: Path, tmp_path: Path,
                                                     capsys: pytest.CaptureFixture[str]) -> None:
-    refused("piga-diagnose", ["--model", str(fake_planet_run), "--data", str(files[data]), "--out", str(tmp_path / "report"),
+    refused("piga-diagnose", ["--model", str(tiny_piga_run), "--data", str(files[data]), "--out", str(tmp_path / "report"),
                               "--quiet"], capsys, *needles)
     assert _listing(tmp_path) == []
 
@@ -2908,18 +2958,29 @@ def test_control_sweep_refuses_an_unreachable_ray_before_warning(tiny_piga_run: 
     assert "converge" not in line
 
 
-def test_diagnose_refuses_sequences_too_short_for_its_fit_first(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    """It encoded every frame (half a minute) before its fit found no window in sequences of 12 frames."""
+def test_diagnose_refuses_sequences_too_short_for_its_fit_first(tiny_piga_run: Path, tmp_path: Path,
+                                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    """It encoded every frame (half a minute) before its fit found no window in sequences of 12 frames. A missing
+    model, a file or a baseline's run given as --model was reported as that data problem; it is named first."""
     from piga.data.collect import CollectConfig
     from piga.data.collect import collect as collect_data
 
     data = tmp_path / "short.h5"
     collect_data(CollectConfig(sequences=20, steps=12, seed=1, workers=1), data, progress=False, command="test")
-    code, _, err = run_in_process("piga-diagnose", diagnose.main, "--data", str(data), "--model", str(tmp_path / "nowhere"),
+    code, _, err = run_in_process("piga-diagnose", diagnose.main, "--data", str(data), "--model", str(tiny_piga_run),
                                   "--out", str(tmp_path / "report"), capsys=capsys)
     assert_one_line(code, err, f"{data}: sequences of 12 frames are too short to diagnose: the fit needs 13",
                     "piga-collect --steps 13")
     assert _listing(tmp_path) == ["short.h5"]
+    planet = tmp_path / "planet"
+    planet.mkdir()
+    (planet / "config.json").write_text(json.dumps({"kind": "planet"}))
+    (planet / "checkpoint.pt").write_bytes(b"not read")
+    for model, needle in ((tmp_path / "nowhere", "nowhere"), (data, f"{data} is a file; give the run's folder"),
+                          (planet, "is a piga-baseline planet run")):
+        line = refused("piga-diagnose", ["--data", str(data), "--model", str(model), "--out", str(tmp_path / "report")],
+                       capsys, needle)
+        assert "too short" not in line, line
 
 
 def test_a_virtual_dataset_whose_source_is_missing_is_named(tiny_data: Path, tmp_path: Path,
@@ -3144,15 +3205,37 @@ def test_import_reads_no_malformed_number_as_a_header_and_names_a_latin1_file(
                             str(tmp_path / "x.h5")], capsys, needle)
 
 
-def test_import_skips_comment_lines_of_the_actions() -> None:
+def test_import_skips_comment_lines_only_where_no_action_follows(tmp_path: Path) -> None:
+    """Every # line was dropped: a commented-out action between values shifted every later one by a frame."""
     from piga.data.importer import read_actions
 
-    path = Path(os.environ.get("TMPDIR", "/tmp")) / f"piga-comments-{os.getpid()}.csv"
-    try:
-        path.write_text("u\n# recorded at 20 Hz\n0.5\n  # a gap\n-1\n")
-        assert read_actions(path).tolist() == [0.5, -1.0]
-    finally:
-        path.unlink(missing_ok=True)
+    path = tmp_path / "u.csv"
+    path.write_text("# recorded at 20 Hz\nu\n0.5\n-1\n  # the end\n")
+    assert read_actions(path).tolist() == [0.5, -1.0]
+    path.write_text("u\n0.5\n  # a gap\n-1\n")
+    with pytest.raises(ValueError, match="line 3 is a comment"):
+        read_actions(path)
+
+
+@pytest.mark.parametrize("order", ["swapped", "csv twice"])
+def test_import_names_swapped_arguments(order: str, frame_folders: dict[str, Path], tmp_path: Path,
+                                        capsys: pytest.CaptureFixture[str]) -> None:
+    """A GIF given as the actions was "line 1: byte 0x85 is not UTF-8 text; save the file as UTF-8"; a CSV given as
+    the recording, "no reader knows its format"."""
+    import imageio.v3 as iio
+
+    gif, csv = tmp_path / "v.gif", tmp_path / "a.csv"
+    iio.imwrite(gif, np.stack([np.full((16, 16), 40 * i, np.uint8) for i in range(4)]), extension=".gif")
+    csv.write_text("0.5\n" * 4)
+    argv = [str(csv), str(gif)] if order == "swapped" else [str(csv), str(csv)]
+    line = refused("piga-import", [*argv, "--dt", "0.05", "--steps", "2", "--out", str(tmp_path / "o.h5")], capsys,
+                   "the recording comes first, then the actions: piga-import RECORDING ACTIONS.csv")
+    assert (f"{gif} is a GIF, not an actions CSV file" if order == "swapped" else "it is a CSV file, such as the actions") \
+        in line and "UTF-8" not in line, line
+    acts = tmp_path / "frames"
+    shutil.copytree(frame_folders["moving"], acts)
+    refused("piga-import", [str(csv), str(acts), "--dt", "0.05", "--out", str(tmp_path / "o.h5")], capsys,
+            f"{acts} is a folder, not an actions CSV file (a folder of frames: the recording comes first")
 
 
 @pytest.mark.parametrize("prog, argv, needle", [
@@ -3978,12 +4061,13 @@ def test_a_scene_model_on_the_dmc_env_is_refused_for_its_system(tmp_path: Path, 
             capsys, "a spring model cannot control the pendulum")
 
 
-def test_diagnose_names_a_scene_file_before_its_length(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_diagnose_names_a_scene_file_before_its_length(tiny_piga_run: Path, tmp_path: Path,
+                                                       capsys: pytest.CaptureFixture[str]) -> None:
     """A 12-frame spring file was first "too short to diagnose ... piga-collect --steps 13"; recollected, it was then
     refused as spring data."""
     data = tmp_path / "spring.h5"
     assert collect.main(["--system", "spring", "--sequences", "4", "--steps", "12", "--split", "2,1,1", "--out", str(data), "--quiet"]) == 0
-    refused("piga-diagnose", ["--model", str(tmp_path / "run"), "--data", str(data), "--out", str(tmp_path / "rep")],
+    refused("piga-diagnose", ["--model", str(tiny_piga_run), "--data", str(data), "--out", str(tmp_path / "rep")],
             capsys, "piga-diagnose is for pendulum data; this file holds spring data")
 
 

@@ -100,6 +100,25 @@ def test_a_video_whose_rate_disagrees_with_dt_is_said(tmp_path: Path, recording:
     assert code == 0 and err == ""
 
 
+def test_import_warns_of_an_empty_split_as_collect_does(tmp_path: Path, recording: tuple[Path, Path, np.ndarray, np.ndarray],
+                                                        capsys: pytest.CaptureFixture[str]) -> None:
+    """piga-import and piga-collect give the same line where a split's share rounds to no sequence, and both take a
+    split given as 0 (--split 0.5,0.5,0) as asked, without a word."""
+    from piga.cli import collect as collect_cli
+
+    folder, csv, _, _ = recording
+    for split, warned in (("0.8,0.1,0.1", True), ("0.5,0.5,0", False)):
+        code, _, err = _cli(str(folder), str(csv), "--dt", "0.05", "--out", str(tmp_path / "i.h5"), "--steps", "5",
+                            "--split", split, "--overwrite", capsys=capsys)
+        assert code == 0, err
+        code, _, collected = run_in_process("piga-collect", collect_cli.main, "--out", str(tmp_path / "c.h5"), "--sequences",
+                                            "3", "--steps", "4", "--workers", "1", "--split", split, "--overwrite",
+                                            "--quiet", capsys=capsys)
+        assert code == 0, collected
+        assert err.replace("piga-import", "piga-collect") == collected, (err, collected)
+        assert ("leaves valid and test empty" in err) is warned, err
+
+
 def test_an_image_stack_is_a_recording(tmp_path: Path, recording: tuple[Path, Path, np.ndarray, np.ndarray],
                                        capsys: pytest.CaptureFixture[str]) -> None:
     """A multi-page TIFF, which imageio reads as one array (T, H, W), gray or colour, is T frames; an array that is
@@ -138,7 +157,7 @@ def test_frames_are_converted_as_the_env_converts_its_render(tmp_path: Path) -> 
         ("0.5\n-1\n2\n", [0.5, -1, 2]),
         ("Action\n0.5\n-1\n2\n", [0.5, -1, 2]),  # one column under its header
         ("t,action,other\n0,0.5,9\n1,-1,9\n2,2,9\n\n \n", [0.5, -1, 2]),  # blank lines at the end: the file's end
-        ("\n\nu\n# recorded at 20 Hz\n0.5\n-1\n", [0.5, -1]),  # blank lines before the header
+        ("\n\n# recorded at 20 Hz\nu\n0.5\n-1\n# the end\n", [0.5, -1]),  # blank and # lines before the header, at the end
         ("\ufeffu;t\n0.5;0\n-1;1\n2;2\n", [0.5, -1, 2]),  # a BOM, semicolons
         ("U\t t\n0.5\t0\n-1\t1\n2\t2\n", [0.5, -1, 2]),
         ("0.5,\n-1,\n2,\n", [0.5, -1, 2]),  # every row ends in a separator: data, not a header ['0.5', '']
@@ -182,6 +201,10 @@ def test_read_actions(tmp_path: Path, text: str, want: list[float]) -> None:
         ("0.5\n\n-1\n", "line 2 is empty, and actions follow it (line 3): a missing value would shift every later "
                          "action by one frame"),
         ("u\n0.5\n \n# a gap\n-1\n\n", "line 3 is empty, and actions follow it (line 5)"),
+        # a # line before a value: an action commented out there shifted every later one by a frame, without a word
+        ("# my actions\n0.5\n-1\n", "line 1 is a comment ('# my actions'), and actions follow it (line 2): a "
+                                      "commented-out action would shift every later action by one frame; delete the line"),
+        ("u\n0.5\n#0.53\n-1\n", "line 3 is a comment ('#0.53'), and actions follow it (line 4)"),
         ("u\n\n0.5\n", "line 2 is empty, and actions follow it (line 3)"),
         ("\n0.5\n-1\n", "line 1 is empty, and actions follow it (line 2)"),
     ],

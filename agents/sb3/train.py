@@ -205,11 +205,11 @@ def _save(run_dir: Path, model: Any, config: SB3Config, episodes: int, history: 
         tmp.write_bytes(policy.getvalue())
 
 
-def _check_record_matches(run_dir: Path, config: SB3Config, ckpt: dict[str, Any]) -> None:
-    """Raises a ValueError naming ``config.json`` where its recipe (``config``) differs from the one the checkpoint
-    holds (an edited record): the checkpoint is then not at fault."""
+def check_record_matches(run_dir: Path, ours: dict[str, Any], ckpt: dict[str, Any]) -> None:
+    """Raises a ValueError naming ``config.json`` where its recipe (``ours``, as the record holds it: piga-baseline
+    compares it before judging the command line against it, so an edited ``obs`` or ``env`` is not blamed on the
+    command line) differs from the one the checkpoint holds (an edited record): the checkpoint is then not at fault."""
     held = ckpt.get("config") if isinstance(ckpt.get("config"), dict) else {}
-    ours = config.to_dict()
 
     def plain(value: Any) -> Any:  # net_arch: a tuple in one, perhaps a list in the other
         return list(value) if isinstance(value, tuple) else value
@@ -321,7 +321,7 @@ def train_sb3(config: SB3Config, run_dir: str | Path, autoencoder: str | Path | 
     elapsed = 0.0
     if resume:
         ckpt = read_checkpoint(run_dir, RunKind.DDPG)
-        _check_record_matches(run_dir, config, ckpt)
+        check_record_matches(run_dir, config.to_dict(), ckpt)
         try:
             # the zip holds the TensorBoard folder of the run's first invocation: log where the run is now
             model = algorithm.load(io.BytesIO(ckpt["model_zip"]), env=venv, device=device,

@@ -289,6 +289,25 @@ def _resumed_record(run_dir: Path, kind: RunKind, args: Any) -> dict[str, Any]:
     return {"command": None, "kind": kind.value, **rebuilt}
 
 
+def _refuse_record_edits(run_dir: Path, record: dict[str, Any]) -> None:
+    """A DDPG run's record whose recipe differs from its checkpoint's (an edited ``obs`` or ``env``) is named as
+    such at once: judged first against the command line, it read "trained with --obs pixels, not state" (the
+    command line blamed), or "not usable ...; start the run again with --overwrite" (the run thrown away)."""
+    if not isinstance(record.get("ddpg"), dict):  # none: :func:`_saved_config` says so
+        return
+    from agents.sb3.train import check_record_matches
+    from piga.io.checkpoint import read_checkpoint
+
+    try:
+        ckpt = read_checkpoint(run_dir, RunKind.DDPG)
+    except (FileNotFoundError, ValueError) as exc:
+        raise PigaError(with_flags(str(exc))) from None
+    try:
+        check_record_matches(run_dir, record["ddpg"], ckpt)
+    except ValueError as exc:  # (the record's own names: "learning_starts 100 there")
+        raise PigaError(str(exc)) from None
+
+
 def _saved_config(run_dir: Path, record: dict[str, Any], key: str, cls: Any, optional: tuple[str, ...] = ()) -> Any:
     """The dataclass ``cls`` that a run's ``config.json`` records under ``key``, for ``--resume``.
 
@@ -337,7 +356,8 @@ def _given_options(kind: str, argv: Sequence[str] | None) -> set[str]:
 def _refuse_recipe_changes(args: Any, record: dict[str, Any], run_dir: Path, argv: Sequence[str] | None) -> None:
     """``--resume`` continues a run as it was started, as piga-train-model's does: refuses options
     that would change its recipe (other than :data:`RESUME_OPTIONS`), given with any value but the one the run was
-    started with (so the starting command plus ``--resume`` continues it), and another data file."""
+    started with (so the starting command plus ``--resume`` continues it), and another data file. A data file of the
+    same contents under another path is the run's: ``record`` is rewritten to name it."""
     kind = args.baseline
     named = [kind, args.data, "--out", args.out] if kind == "planet" else [kind, "--obs", args.obs, "--out", args.out]
     defaults = vars(build_parser().parse_args(named))
@@ -360,17 +380,25 @@ def _refuse_recipe_changes(args: Any, record: dict[str, Any], run_dir: Path, arg
         recorded = recorded_path(recorded, record.get("data_folder"))
     if not args.data or "data" not in record:  # a DDPG record rebuilt from its checkpoint, which names no data file
         return
-    if "data_fingerprint" in record:  # by contents: a moved or copied file is the same, one written over in place is not
-        from piga.data.schema import fingerprint
+    # a fingerprint that is not a string (edited to null) is none: the file is then known by its path, as a run's from
+    # before fingerprints (compared, it read "p.h5 has changed since the run trained on it" of an untouched file)
+    if isinstance(record.get("data_fingerprint"), str):  # by contents: a moved or copied file is the same, one written
+        from piga.data.schema import fingerprint  # over in place is not
 
         same = record["data_fingerprint"] == fingerprint(args.data)
-        if same and "rewards_fingerprint" in record:  # a PlaNet-style run's reward head learns from /rewards too
-            from piga.data.schema import rewards_fingerprint
+        if same and isinstance(record.get("rewards_fingerprint"), str):  # a PlaNet-style run's reward head learns
+            from piga.data.schema import rewards_fingerprint  # from /rewards too
 
             same = record["rewards_fingerprint"] == rewards_fingerprint(args.data)
         if not same and recorded is not None and os.path.abspath(recorded) == os.path.abspath(args.data):
             raise PigaError(f"--resume: {args.data} has changed since {run_dir} trained on it (its contents are not "
                             "the same); put the trained file back, or start a new run on this one")
+        if same and (recorded is None or os.path.abspath(recorded) != os.path.abspath(args.data)):
+            # the same contents under another name (a moved or renamed file, or a record's "data" edited): the record
+            # names the file the run goes on with, so that it stays true (it kept naming a file the run never saw)
+            print(f"{PROG}: note: {run_dir / 'config.json'} named {recorded or 'no data file'}; {args.data} holds the "
+                  "same data, and the record now names it")
+            record.update({RUN_DATA: args.data, RUN_DATA_FOLDER: os.getcwd()})
     else:  # a run from before fingerprints: the same file by its path
         same = recorded is not None and (os.path.abspath(recorded) == os.path.abspath(args.data) or (
             Path(recorded).exists() and Path(args.data).exists() and os.path.samefile(recorded, args.data)))
@@ -611,6 +639,7 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
     if args.resume:
         _check_run_dir(run_dir, True, args.overwrite, RunKind.DDPG)
         record = _resumed_record(run_dir, RunKind.DDPG, args)
+        _refuse_record_edits(run_dir, record)
         # runs from before --algo are DDPG; runs from before --device have none
         saved = _saved_config(run_dir, record, "ddpg", SB3Config, optional=("algo", "device", "env", "encoder_precision", "view"))
         if "encoder_precision" not in record["ddpg"]:  # runs from before the option computed in float32
@@ -620,6 +649,10 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
         if saved.algo != args.algo:
             raise PigaError(f"--resume: {run_dir} was trained with --algo {saved.algo}, not {args.algo}")
         _refuse_recipe_changes(args, record, run_dir, argv)
+        if saved.obs != "latent" and record.get(RUN_DATA) is not None:  # edited: such a run reads no data file
+            print(f"{PROG}: note: {run_dir / 'config.json'} named {record[RUN_DATA]} as its data file; --obs "
+                  f"{saved.obs} reads none, and the record now names none")
+            record[RUN_DATA] = None
         if saved.obs == "latent":  # missing or unreadable: one line before anything is written
             from agents.sb3.autoencoder import load_autoencoder
 

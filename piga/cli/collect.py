@@ -19,7 +19,8 @@ from envs.scenes import HALF_SPEED, SCENES, SceneConfig, scene_config
 from piga.cli.common import (H5_SUFFIXES, ArgumentParser, PigaError, add_preset_option, any_float, command_line,
                              format_default, given_options, h5_path, positive_float, positive_int, run_cli, seed_int,
                              split_type)
-from piga.data.collect import PAPER_MAX_SPEED, PRESETS, CollectConfig, collect, empty_split_warning
+from piga.data.collect import (PAPER_MAX_SPEED, PRESETS, CollectConfig, buried_noise_warning, collect,
+                               empty_split_warning)
 from piga.data.collect_scenes import SCENE_PRESETS, SCENE_STEPS, collect_scene
 from piga.data.schema import inspect_dataset
 from piga.io.lock import lock_run_folder
@@ -248,6 +249,8 @@ def main(argv: Sequence[str] | None = None) -> int:
           + (f", damping={info.params['damping']:g}" if "damping" in info.params else "")
           + (f", effects {format_effects(effects)}" if effects else ""))
     _warn_empty_split(config.split, info.split_counts)
+    if (warning := buried_noise_warning(env)) is not None:
+        print(f"{PROG}: warning: {warning}", file=sys.stderr)
     return 0
 
 

@@ -81,7 +81,17 @@ def main(argv: Sequence[str] | None = None) -> int:
         raise PigaError(f"--out {args.out} is the model's run folder; give another folder for the report")
     out = check_report_target(args.out, args.overwrite)
     lock_run_folder(out)  # a second diagnosis into the same folder is refused at once, not after its work
-    info = inspect_dataset(args.data)  # schema errors first, with the file's name
+    # the model before the data: a missing model, a file or another kind of run was otherwise hidden behind the data's
+    # refusal ("sequences of 12 frames are too short"), and found only after collecting again
+    require_piga_run(args.model, "piga-diagnose compares the physics a piga model identified with the data")
+    model, ckpt = load_model(args.model)
+    if model.config.system != "pendulum":
+        raise PigaError(f"{args.model}: piga-diagnose is for pendulum models; this one is a {model.config.system} model")
+    try:
+        ckpt = with_training_file(ckpt, args.model, args.training_data)
+    except ValueError as error:
+        raise PigaError(f"--training-data {error}") from None
+    info = inspect_dataset(args.data)  # the data's schema errors, with the file's name
     if info.system != "pendulum":  # before its length, whose advice would not help
         raise PigaError(f"{args.data}: piga-diagnose is for pendulum data; this file holds {info.system} data")
     from piga.diagnostics.fit import min_frames
@@ -91,14 +101,6 @@ def main(argv: Sequence[str] | None = None) -> int:
                         f"{need} (windows of {config.fit_horizon} steps after {need - config.fit_horizon - 1} frames); "
                         f"collect sequences of {need} frames or more (piga-collect --steps {need})")
     check_frames_have_signal(args.data)  # blank video: the diagnosis would divide by its zero variance
-    require_piga_run(args.model, "piga-diagnose compares the physics a piga model identified with the data")
-    model, ckpt = load_model(args.model)
-    if model.config.system != "pendulum":
-        raise PigaError(f"{args.model}: piga-diagnose is for pendulum models; this one is a {model.config.system} model")
-    try:
-        ckpt = with_training_file(ckpt, args.model, args.training_data)
-    except ValueError as error:
-        raise PigaError(f"--training-data {error}") from None
     if effects is not None:  # MPC on Gymnasium's pendulum with the model's physics
         from envs.constants import PENDULUM_DT
         from piga.cli.control import check_pendulum_model

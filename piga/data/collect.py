@@ -146,6 +146,32 @@ def empty_split_warning(split: Sequence[float], counts: dict[str, int]) -> str |
             f"{whose} will come from the train split, which is not held out ({advice})")
 
 
+#: Gymnasium's Pendulum-v1 draws its rod in this colour on a white background.
+ROD_RGB = (204, 77, 77)
+
+
+def rod_contrast() -> int:
+    """The gray levels between the pixel pendulum's rod and its white background, in piga's gray frames (the rod's
+    colour through :data:`piga.data.scene.GRAY_WEIGHTS`, truncated as the frames are: 255 - 103 = 152)."""
+    from piga.data.scene import GRAY_WEIGHTS
+
+    return 255 - int(np.dot(ROD_RGB, GRAY_WEIGHTS))
+
+
+def buried_noise_warning(env: PixelPendulumConfig | DMCPendulumConfig) -> str | None:
+    """A warning where ``--effect noise`` buries the pendulum, else None. Its standard deviation at or above the
+    rod's contrast with the background (:func:`rod_contrast`) makes a rod pixel differ from a background pixel by
+    less than the noise of either, and clips about half of all pixels to 0 or 255 (the background is 255 itself;
+    noise=1000 clipped 90%): the frames are mostly noise, with the pendulum barely in them. A warning, not a refusal:
+    the range up to 1000 is the effect's documented one."""
+    noise = dict(getattr(env, "effects", ())).get("noise")
+    if not noise or noise < (contrast := rod_contrast()):
+        return None
+    return (f"--effect noise={number_text(noise)} is at least the pendulum's contrast with the background ({contrast} gray "
+            "levels): about half the pixels are clipped to 0 or 255 and the pendulum is buried in the noise, so a model "
+            f"learns little from these frames; give a noise below {contrast}")
+
+
 #: ``piga-collect``'s presets: 'default' is :class:`CollectConfig`'s defaults; 'paper' the paper's pendulum
 #: data set, 5000 / 500 / 500 sequences of 14 frames with θ̇ drawn from U(-6, 6) at reset. The command's
 #: seed, workers and env settings other than the reset speed are its own options.

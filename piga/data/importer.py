@@ -230,7 +230,9 @@ def _read_images(path: Path) -> Iterator[np.ndarray]:
             yield np.asarray(image)
     except Exception as exc:  # imageio and its plugins raise many types for foreign or corrupt files
         first = (str(exc).strip().splitlines() or [""])[0][:120]
-        why = ("no reader knows its format" if "Could not find a backend" in first else  # imageio's words for it
+        why = (f"it is a {path.suffix[1:].upper()} file, such as the actions; {ORDER}"
+               if path.suffix.lower() in (".csv", ".tsv", ".txt") else  # the arguments swapped
+               "no reader knows its format" if "Could not find a backend" in first else  # imageio's words for it
                "it is empty" if path.stat().st_size == 0 else
                "it is an HDF5 file, such as piga's data files, which need no import" if _is_hdf5(path) else
                f"damaged, or of a format its reader does not take{': ' + first if first else ''}")
@@ -286,6 +288,30 @@ def _is_header(row: list[str]) -> bool:
     return False
 
 
+#: The arguments' order, for a recording given as the actions or a CSV given as the recording.
+ORDER = "the recording comes first, then the actions: piga-import RECORDING ACTIONS.csv"
+
+#: The first bytes of the image and video formats a recording comes in, and what they are called.
+_MEDIA_MAGIC = ((b"GIF8", "a GIF"), (b"\x89PNG", "a PNG image"), (b"\xff\xd8\xff", "a JPEG image"),
+                (b"II*\x00", "a TIFF image"), (b"MM\x00*", "a TIFF image"), (b"\x1aE\xdf\xa3", "a Matroska or WebM video"),
+                (b"BM", "a BMP image"))
+
+
+def _media_kind(path: Path) -> str | None:
+    """What image or video format ``path`` is, by its first bytes (the container's signature, which no text file
+    written as actions starts with), or None."""
+    try:
+        with open(path, "rb") as file:
+            head = file.read(12)
+    except OSError:
+        return None
+    if head[4:8] == b"ftyp":  # the ISO base media files: MP4, MOV, M4V
+        return "an MP4 or MOV video"
+    if head[:4] == b"RIFF" and head[8:12] in (b"AVI ", b"WEBP"):
+        return "an AVI video" if head[8:12] == b"AVI " else "a WebP image"
+    return next((kind for magic, kind in _MEDIA_MAGIC if head.startswith(magic)), None)
+
+
 def read_actions(path: str | Path) -> np.ndarray:
     """The actions of a CSV, one row per frame: float32 (F,).
 
@@ -296,14 +322,15 @@ def read_actions(path: str | Path) -> np.ndarray:
 
     Raises:
         FileNotFoundError: no such file.
-        ValueError: a folder, the file is empty, a blank line comes before a value (a value missing there would shift
-            every later action by a frame), a value is not a finite number or beyond
+        ValueError: a folder, an image or a video (the arguments swapped), the file is empty, a blank or ``#`` line
+            comes before a value (a value missing or commented out there would shift every later action by a frame), a value is not a finite number or beyond
             ±:data:`piga.data.schema.MAX_ABS_ACTION` (the message gives the line), the action column cannot be told,
             or a row has another number of columns than the first.
     """
     p = Path(path)
     if p.is_dir():
-        raise ValueError(f"{p} is a folder, not an actions CSV file")
+        frames = any(f.suffix.lower() in FRAME_EXTENSIONS for f in p.iterdir())
+        raise ValueError(f"{p} is a folder, not an actions CSV file" + (f" (a folder of frames: {ORDER})" if frames else ""))
     if not p.is_file():
         if p.exists():
             raise ValueError(f"{p}: is not a regular file (a pipe, a socket or a device), not an actions CSV file")
@@ -311,10 +338,13 @@ def read_actions(path: str | Path) -> np.ndarray:
     try:
         text = p.read_text(encoding="utf-8-sig")
     except UnicodeDecodeError as exc:
+        if (kind := _media_kind(p)) is not None:  # the arguments swapped: "re-save it as UTF-8" would be no help
+            raise ValueError(f"{p} is {kind}, not an actions CSV file; {ORDER}") from None
         line = p.read_bytes()[:exc.start].count(b"\n") + 1
         raise ValueError(f"{p}: line {line}: byte 0x{exc.object[exc.start]:02x} is not UTF-8 text; save the file as "
                          "UTF-8 (or plain ASCII)") from None
-    # blank lines and comment lines (``#``, as numpy's loadtxt skips them) are not rows
+    # blank lines and comment lines (``#``, as numpy's loadtxt skips them) are not rows; where actions follow them,
+    # both are refused below
     lines = [(number, line) for number, line in enumerate(text.splitlines(), start=1)
              if line.strip() and not line.lstrip().startswith("#")]
     if not lines:
@@ -356,12 +386,18 @@ def read_actions(path: str | Path) -> np.ndarray:
         raise ValueError(f"{p}: {len(first)} columns and no header row; add a header that names the action column "
                          f"'u' or 'action'")
     # a blank line before a value: a missing value there would shift every action after it by a frame, unseen
-    # wherever the count still matches the frames (trailing blank lines are the file's end)
+    # wherever the count still matches the frames (trailing blank lines are the file's end); so would a comment line
+    # there, which may be a commented-out action (``#0.53``): both are skipped only before the header and at the end
     start = first_number if header else 0
-    if blank := next((number for number, line in enumerate(text.splitlines(), start=1)
-                      if start < number < rows[-1][0] and not line.strip()), None):
-        after = next(number for number, _ in rows if number > blank)
-        raise ValueError(f"{p}: line {blank} is empty, and actions follow it (line {after}): a missing value would "
+    if skipped := next(((number, line.strip()) for number, line in enumerate(text.splitlines(), start=1)
+                        if start < number < rows[-1][0] and (not line.strip() or line.lstrip().startswith("#"))), None):
+        number, line = skipped
+        after = next(n for n, _ in rows if n > number)
+        if line:
+            raise ValueError(f"{p}: line {number} is a comment ({line[:40]!r}), and actions follow it (line {after}): a "
+                             "commented-out action would shift every later action by one frame; delete the line, or "
+                             "write the action there")
+        raise ValueError(f"{p}: line {number} is empty, and actions follow it (line {after}): a missing value would "
                          "shift every later action by one frame; write the missing action there, or delete the line")
     for number, row in rows:  # a ragged row: a stray separator, or a column shifted; which value is meant is unknown
         if len(row) != len(first):
