@@ -379,3 +379,23 @@ def test_an_exposure_is_named_relative_to_the_models_own_frames(model, tmp_path:
     assert lo <= named["exposure"]["value"] <= hi
     gone = V.camera_stage(model, str(same), np.zeros((N, T)), fit, None, reference=str(tmp_path / "gone.h5"))
     assert "exposure" in {e["effect"] for e in gone.effects}  # no own file: the decoder is the reference
+
+
+def test_a_vision_gap_only_in_the_frames_of_large_actions_is_put_on_what_is_drawn_with_them() -> None:
+    """A recording at an actuation gain of 1.5 (Gymnasium's torque arrow drawn larger than any in the training frames)
+    read "vision gap ... (blur, noise, a shifted camera or a different scene?)": where the frames after the smallest
+    actions re-render no worse than the training frames, the note says the gap lies in what is drawn with the action;
+    a gap in every frame keeps the general note."""
+    from piga.diagnostics.diagnose import calm_frames_error
+
+    rng = np.random.default_rng(0)
+    actions = rng.uniform(-2, 2, (30, 12))
+    arrow = np.concatenate([np.zeros((30, 1)), 1e-4 + 1e-3 * np.abs(actions[:, :-1]) ** 2], 1)  # frame t + 1 after u_t
+    config = DiagnoseConfig()
+    _, notes = summarise_vision(SimpleNamespace(rec_mse=arrow, actions=actions), 2e-4, None, None, [], config)
+    assert len(notes) == 1 and "the gap lies in what is drawn with the action" in notes[0], notes
+    assert calm_frames_error(arrow, actions) < 2e-4
+    everywhere = np.full((30, 12), 1e-3)
+    _, notes = summarise_vision(SimpleNamespace(rec_mse=everywhere, actions=actions), 2e-4, None, None, [], config)
+    assert len(notes) == 1 and "(blur, noise, a shifted camera or a different scene?)" in notes[0], notes
+    assert calm_frames_error(everywhere, np.ones((30, 12))) is None  # actions that never vary tell nothing
