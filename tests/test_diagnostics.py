@@ -81,9 +81,9 @@ def test_no_gap_through_a_large_vision_gap_says_the_vision_may_hide_one() -> Non
     """dm_control with shadows on re-rendered 39.5x worse than the training frames and read "no significant gap" where
     the same physics without shadows reads a damping: a verdict of no gap says that its vision may hide one."""
     obs = planted({}, n=60, t=20)
-    clean = analyse(replace(obs, rec_mse=np.full(len(obs.theta), 1.05e-3)), NOMINAL, FAST, rec_training=1e-3)
+    clean = analyse(replace(obs, rec_mse=np.full(obs.theta.shape, 1.05e-3)), NOMINAL, FAST, rec_training=1e-3)
     assert clean.verdict == "no significant gap"
-    d = analyse(replace(obs, rec_mse=np.full(len(obs.theta), 0.04)), NOMINAL, FAST, rec_training=1e-3)
+    d = analyse(replace(obs, rec_mse=np.full(obs.theta.shape, 0.04)), NOMINAL, FAST, rec_training=1e-3)
     assert d.verdict_class == "none", d.verdict
     assert d.verdict.startswith("no significant gap seen through a vision gap of 40.0x")
     assert "may hide a gap in the physics" in d.verdict
