@@ -417,6 +417,21 @@ def test_a_damping_that_the_recording_lacks_is_named_against_the_training_files(
     assert any("shows the same damping" in n for n in same.notes), same.notes
 
 
+def test_dampings_apart_by_their_interval_alone_are_not_called_the_same(monkeypatch: pytest.MonkeyPatch) -> None:
+    """dm_control at mass 0.5 on 28 sequences of 14 frames read "damping 0.251 (0.238..0.259)" and a note that the
+    training file "shows the same damping (b = 0.132)": where the one-step BIC does not tell them apart but the
+    interval excludes the file's, the note says the frames do not tell them apart."""
+    import importlib
+
+    diagnose = importlib.import_module("piga.diagnostics.diagnose")  # (the package exports a function of that name)
+    low = Nominal(g=10.0, a=0.9, offset=0.0, dt=0.05)
+    own = planted({"damping": 0.2}, n=80, seed=3)
+    monkeypatch.setattr(diagnose, "damping_differs", lambda *args, **kwargs: False)  # the BIC of the short file
+    d = analyse(planted({"damping": 0.4}, n=40, t=16), low, replace(FAST, bootstrap=20), own=own)  # (its interval)
+    assert not any("shows the same damping" in n for n in d.notes), d.notes
+    assert any("do not tell the two apart, so no difference between the files is named" in n for n in d.notes), d.notes
+
+
 def test_a_damping_compared_between_the_files_is_described_with_both() -> None:
     from piga.diagnostics.results import Effect
 
@@ -556,6 +571,16 @@ def test_effects_that_predict_worse_than_the_nominal_are_not_a_correction(damped
     drifted = _worse_than_nominal(noted, strays, final, NOMINAL)
     assert drifted.verdict_class == "unexplained" and "strays further than the nominal model's" in drifted.verdict
     assert drifted.effects == [] and "damping" in drifted.verdict  # the fit is in the verdict, no effect established
+    # left far above the floor, a fit that cut the error 7x does not "correct nothing" (gravity x1.2 on 22 sequences of
+    # 14 frames, read 1.2, floor on 4 held-out sequences); one that cut it less still does
+    assert d.gap.closure_basis == "state"
+    left = replace(d.gap, typical_free_run_mse_floor=1e-5, typical_free_run_mse_nominal=42e-5,
+                   typical_free_run_mse_corrected=6e-5)
+    cut = _worse_than_nominal(naming, left, final, NOMINAL)
+    assert cut.verdict_class == "unexplained" and "cuts the typical held-out free-run error 7.0x" in cut.verdict
+    assert "corrects nothing" not in cut.verdict and cut.effects == []
+    barely = replace(left, typical_free_run_mse_nominal=9e-5)
+    assert "corrects nothing" in _worse_than_nominal(naming, barely, final, NOMINAL).verdict
     # angles matched through a camera (the corrected model's) and the encoder's (the nominal's) do not compare: an
     # exposure in sequences 0-24 only, with g and a read right, strayed "further" at 2x on the clean held-out ones
     assert _worse_than_nominal(noted, strays, final, NOMINAL, rematched=True) is noted

@@ -332,6 +332,9 @@ def test_the_own_files_reading_starts_from_the_nominal_g_where_the_recordings_co
     assert abs(read.values["g"] / NOMINAL.g - 1) < 0.05 and not implausible_own_reading(read, NOMINAL), read.values
     assert implausible_own_reading(fit.Model((), 0, {"g": 6.3e-7, "a": 0.785}), NOMINAL)
     assert implausible_own_reading(fit.Model((), 0, {"g": NOMINAL.g, "a": SHRUNK_A / 2}), NOMINAL)
+    # 9x the nominal g is no reading of the model's own file either (an actuation gain of 2 read "g = 89.5, |a| = 7.7")
+    assert implausible_own_reading(fit.Model((), 0, {"g": 8.95 * NOMINAL.g, "a": 7.7 * NOMINAL.a}), NOMINAL)
+    assert not implausible_own_reading(fit.Model((), 0, {"g": 1.08 * NOMINAL.g, "a": 0.92 * NOMINAL.a}), NOMINAL)
 
 
 def test_gravity_that_the_nominal_form_misses_while_it_bends_a_is_named() -> None:

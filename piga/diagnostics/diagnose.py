@@ -426,10 +426,17 @@ def own_start_g(physics: fit.Model, nom: Nominal) -> float:
     return g if within_factor(g, nom.g) else nom.g
 
 
+#: The own file's reading of g or |a| beyond this factor of the nominal model's, either way, is a fit that ran off: the
+#: model was identified on that very file (measured: readings with the effects within 8% of it; a recording at an
+#: actuation gain of 2 read the training file "g = 89.5, |a| = 7.7" with damping and friction, against g = 10).
+OWN_READING_FACTOR = 2.0
+
+
 def implausible_own_reading(read: fit.Model, nom: Nominal) -> bool:
-    """Whether the own file's reading of g or |a| lies more than 1 / :data:`SHRUNK_A` times from the nominal model's:
-    the model was identified on that very file, so such a reading is a fit that ran off, not a reference."""
-    return not (within_factor(read.values["g"], nom.g) and within_factor(abs(read.values["a"]), abs(nom.a)))
+    """Whether the own file's reading of g or |a| lies more than :data:`OWN_READING_FACTOR` times from the nominal
+    model's: the model was identified on that very file, so such a reading is a fit that ran off, not a reference."""
+    near = lambda value, reference: reference / OWN_READING_FACTOR <= value <= reference * OWN_READING_FACTOR  # noqa: E731
+    return not (near(read.values["g"], nom.g) and near(abs(read.values["a"]), abs(nom.a)))
 
 
 def damped_reference(physics: fit.Model, read_own: Callable[..., fit.Model], nom: Nominal, w: WindowSet,
@@ -1277,6 +1284,9 @@ GAIN_FLOOR = 0.05
 #: effect; torques applied but logged as 0 left 7.0-8.6x with no candidate to name, and read "no significant gap".
 #: The factor keeps a wide margin above the clean recordings, whose spread over models is not yet measured.
 NO_GAP_FACTOR = 5.0
+#: A fit left far above the twin's floor that cuts the nominal model's typical held-out free-run error to this fraction
+#: or less is said to cut it, not to correct nothing (its effects are still not established).
+CUT_BY = 0.5
 #: A nominal model whose typical held-out free-run error is this factor times the twin's floor or more leaves a clear
 #: gap: a correction of it that strays further at all corrects nothing (below it, the two differ by noise).
 CLEAR_GAP = 2.0
@@ -1358,7 +1368,16 @@ def _worse_than_nominal(naming: Naming, gap: Gap, final: fit.Model, nom: Nominal
            f"{corrected:.3g} against the floor {floor:.3g} rad²; the effects it names would leave under "
            f"{NO_GAP_FACTOR:g}x)" if far else
            f"its g or a ran off (g = {final.values.get('g', nom.g):.3g}, a = {final.values.get('a', nom.a):.3g})")
-    verdict = (f"not explained by the candidates: the best fit ({'; '.join(e.describe() for e in naming.effects)}) "
+    best = '; '.join(e.describe() for e in naming.effects)
+    if far and not (worse or drifts or drifts_pixels or fit.collapsed(final, nom, factor=100.0)) \
+            and corrected <= CUT_BY * nominal:
+        # it cuts the error, but leaves too much of it: not "corrects nothing" (gravity x1.2 on 22 sequences of 14
+        # frames, read 1.2, cut the typical error 7x and was left at 6x a floor measured on 4 held-out sequences)
+        verdict = (f"not explained by the candidates: the best fit ({best}) cuts the typical held-out free-run error "
+                   f"{nominal / corrected:.1f}x, but {why}; a further effect that is no candidate, or a floor measured on "
+                   "too few held-out sequences (collect more to tell)")
+        return Naming([], [_unclaimed(note) for note in naming.notes], verdict, "unexplained")
+    verdict = (f"not explained by the candidates: the best fit ({best}) "
                f"corrects nothing, {why}; is the recording the scene the model knows (a camera moved far, or the "
                "frames cut off), are its actions logged against these frames, or does the system have an effect that "
                "is no candidate?")
@@ -1717,6 +1736,15 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
             training = shows.values[DAMPING.parameter]
             if damping_differs(final, training, nom, w, config, effects[i].interval):
                 effects[i] = dataclass_replace(effects[i], training=training)
+            elif effects[i].interval and not effects[i].interval[0] <= training <= effects[i].interval[1]:
+                # apart by the interval, not by the one-step BIC: not "the same" (dm_control at mass 0.5, 28 sequences
+                # of 14 frames: 0.251, 0.238..0.259, against the file's 0.132, was called the same; the truth 0.266)
+                low, high = (given(b) for b in effects[i].interval)
+                notes.append(f"the model's own training file, read in the same form, shows a damping of b = "
+                             f"{given(training):.3g} (the recording {given(final.values[DAMPING.parameter]):.3g}, 95% "
+                             f"interval {low:.3g}..{high:.3g}), but holding the recording's b at the file's raises its "
+                             f"one-step BIC by less than {config.bic_margin:g}: these frames do not tell the two apart, so "
+                             "no difference between the files is named (collect more or longer sequences to tell)")
             else:
                 notes.append(f"the model's own training file, read in the same form, shows the same damping (b = "
                              f"{given(training):.3g}; the recording {given(final.values[DAMPING.parameter]):.3g}): no "
@@ -1771,7 +1799,9 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
     plain_bent = plain is not None and abs(plain - 1) > config.gain_tolerance >= abs(gain - 1)
     g_error = abs(g_ratio - 1) > config.gain_tolerance and (
         refit is None or abs(g_plain - 1) > config.gain_tolerance or plain_bent)
-    if abs(g_ratio - 1) > config.gain_tolerance and not g_error and final.effects:
+    # (said also where "none" was chosen and the damping of the training file read in both: a length of 0.55 with the
+    # hinge damping removed, g x0.912 so read, was withheld without a word)
+    if abs(g_ratio - 1) > config.gain_tolerance and not g_error and (final.effects or reference is not final):
         notes.append(f"g refits to {reference.values['g']:.3f} (x{g_ratio:.3f} the reference {ref_g:.3f}) with the "
                      f"effects, but to {refit.values['g']:.3f} (x{g_plain:.3f}) in the nominal model's own form "
                      f"({own_form}): the difference compensates the effects, not a gravity error")
