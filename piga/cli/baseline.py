@@ -278,7 +278,8 @@ def _resumed_record(run_dir: Path, kind: RunKind, args: Any) -> dict[str, Any]:
     if why is None:  # only the sections the record lacks
         rebuilt = {name: rebuilt[name] for name in lacking + ([RUN_DATA_FOLDER] if RUN_DATA in lacking else [])}
         why = f"lacks its {', '.join(repr(name) for name in lacking)} settings (edited, or from an older version)"
-    if not all(isinstance(section, dict) for name, section in rebuilt.items() if name not in (RUN_DATA, RUN_DATA_FOLDER)):
+    if not all(isinstance(section, dict) for name, section in rebuilt.items()
+               if name not in (RUN_DATA, RUN_DATA_FOLDER)):
         raise PigaError(f"--resume: {where} {why}, and the checkpoint does not hold the run's settings (an older "
                         "version's); restore config.json, or start the run again with --overwrite")
     if lacking:
