@@ -435,8 +435,8 @@ OWN_READING_FACTOR = 2.0
 def implausible_own_reading(read: fit.Model, nom: Nominal) -> bool:
     """Whether the own file's reading of g or |a| lies more than :data:`OWN_READING_FACTOR` times from the nominal
     model's: the model was identified on that very file, so such a reading is a fit that ran off, not a reference."""
-    near = lambda value, reference: reference / OWN_READING_FACTOR <= value <= reference * OWN_READING_FACTOR  # noqa: E731
-    return not (near(read.values["g"], nom.g) and near(abs(read.values["a"]), abs(nom.a)))
+    return not (within_factor(read.values["g"], nom.g, OWN_READING_FACTOR)
+                and within_factor(abs(read.values["a"]), abs(nom.a), OWN_READING_FACTOR))
 
 
 def damped_reference(physics: fit.Model, read_own: Callable[..., fit.Model], nom: Nominal, w: WindowSet,
@@ -511,9 +511,10 @@ def damping_differs(recording: fit.Model, training: float, nom: Nominal, w: Wind
     return held_out_by_bic(recording, training, nom, w, config)
 
 
-def within_factor(value: float, reference: float) -> bool:
-    """Whether ``value`` lies within 1 / :data:`SHRUNK_A` times of ``reference`` (> 0), either way."""
-    return SHRUNK_A * reference <= value <= reference / SHRUNK_A
+def within_factor(value: float, reference: float, factor: float | None = None) -> bool:
+    """Whether ``value`` lies within ``factor`` times of ``reference`` (> 0), either way (None: 1 / :data:`SHRUNK_A`)."""
+    factor = 1 / SHRUNK_A if factor is None else factor
+    return reference / factor <= value <= reference * factor
 
 
 def own_reading(physics: fit.Model, nom: Nominal, own: Observations, config: DiagnoseConfig,
@@ -1817,21 +1818,18 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
         alt_read = read_own(alt) if use_own else None
         alt_ref = nom.g if alt_read is None or implausible_own_reading(alt_read, nom) else same(alt_read).values["g"]
         alt_g = (alt.values["g"] if alt_read is None else same(alt).values["g"]) / alt_ref
+        both = (f"g refits to {reference.values['g']:.3f} (x{g_ratio:.3f} the reference {ref_g:.3f}) with no effect, "
+                f"but to x{alt_g:.3f} its reference with the damping refitted (b = {alt.values[DAMPING.parameter]:.3g}), "
+                f"whose one-step BIC is within {config.ambiguous_bic:g} of no effect's: ")
         if abs(alt_g - 1) <= config.gain_tolerance:
             g_error = False
-            notes.append(f"g refits to {reference.values['g']:.3f} (x{g_ratio:.3f} the reference {ref_g:.3f}) with no "
-                         f"effect, but to x{alt_g:.3f} its reference with the damping refitted (b = "
-                         f"{alt.values[DAMPING.parameter]:.3g}), whose one-step BIC is within {config.ambiguous_bic:g} of no "
-                         "effect's: a damping left out bends g, so no gravity error is named")
+            notes.append(both + "a damping left out bends g, so no gravity error is named")
         elif not readings_agree(g_ratio, alt_g, None):
             # readings on either side of the damping's doubt, too far apart to name either (a length of 0.55, a true
             # x0.91, reads x0.915 and x0.893 the two ways: they agree)
             g_error = False
-            notes.append(f"g refits to {reference.values['g']:.3f} (x{g_ratio:.3f} the reference {ref_g:.3f}) with no "
-                         f"effect, but to x{alt_g:.3f} its reference with the damping refitted (b = "
-                         f"{alt.values[DAMPING.parameter]:.3g}), whose one-step BIC is within {config.ambiguous_bic:g} of no "
-                         "effect's: the two readings disagree, so these frames cannot tell gravity from the damping and "
-                         "no gravity error is named; record more or longer sequences to tell them apart")
+            notes.append(both + "the two readings disagree, so these frames cannot tell gravity from the damping and no "
+                         "gravity error is named; record more or longer sequences to tell them apart")
     if g_error:
         g_int = interval("g")
         if g_int and reference is not final:  # the reference's g: final's interval, shifted with it
