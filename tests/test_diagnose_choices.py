@@ -411,6 +411,8 @@ def test_a_damping_that_the_recording_lacks_is_named_against_the_training_files(
     assert abs(e.training - 0.2) < 0.02 and abs(e.value) < 0.02, e
     assert d.verdict.startswith("damping 0.2") and "in the model's own training file, " in d.verdict, d.verdict
     assert not d.gap.no_gap and d.gap.free_run_gap_closure > 0.3, d.gap.free_run_gap_closure  # (raw: 0.49)
+    # the corrected model, whose closure is measured, is the physics named: the recording read with a damping
+    assert d.corrected_effects == ["damping"] and d.corrected["b"] == pytest.approx(e.value, abs=1e-9), d.corrected
     same = analyse(planted({"damping": 0.2}, n=80, t=24), low, FAST, own=own)
     assert all(e.training is None for e in same.effects), same.verdict
     assert not any("that the recording has not" in n for n in same.notes)

@@ -1576,6 +1576,7 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
     ref_g, ref_a = nom.g, abs(nom.a)  # what the recording's g and a are compared with
     own_reference = False  # whether they are the own file's reading in the same form
     files_differ = None  # a damping that the training file shows and the recording has not (damped_reference)
+    differ_physics = None  # the recording's physics with that damping
     if use_own:
         # both files read the same way, within the frame too: the recording's own reading is compared
         read = read_own(final)
@@ -1592,6 +1593,7 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
             b_interval = None
             if both_damped is not None:  # the training file's damping, which the recording lacks, read in both
                 reference, read, b_interval = both_damped
+                differ_physics = reference  # (in the fits' own convention: the corrected model)
                 if b_interval is not None:
                     b_interval = [damping_in_convention(x, reference, nom, taken, step) for x in b_interval]
             # both files in the recorded system's convention: where their dampings differ, the fit's bends g and a
@@ -1889,7 +1891,8 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
     else:
         verdict_class = "none"
         verdict = "no significant gap"
-    return Naming(effects, notes, verdict, verdict_class)
+    return Naming(effects, notes, verdict, verdict_class,
+                  physics=differ_physics if files_differ is not None and files_differ in effects else None)
 
 
 def nominal_form(candidates: Candidates, final: fit.Model, from_gymnasium: bool, config: DiagnoseConfig) -> fit.Model:
@@ -2273,6 +2276,13 @@ def analyse(obs: Observations, nom: Nominal, config: DiagnoseConfig = DiagnoseCo
         ambiguity = None if selection.rival is None else ambiguity_of(selection.chosen, selection.rival, nom, reading,
                                                                       config, draws)
         naming = name_effects(final, nom, reading, camera, generic, config, ambiguity=ambiguity, damped=damped, **kwargs)
+    if naming.physics is not None:
+        # the named physics is the recording's reading with the damping that the two files show differently, not the
+        # chosen candidate: the corrected model is that reading, and the closure is measured for it (measured:
+        # dm_control at mass 2 named "damping 0.0698; gain 0.518" and printed "none" refitted, a = 0.41, whose raw
+        # closure was -47%)
+        final = naming.physics
+        chosen = score(final, nom, windows.fit1, windows.free)
     vision, vision_notes = summarise_vision(obs, rec_training, camera, stale, naming.effects, config)
     gap = measure_gap(candidates, chosen, nom, obs, theta, stale, windows, config, model, camera, arrow,
                       vision.ratio, corrects=bool(naming.effects) or ambiguity is not None)

@@ -269,6 +269,10 @@ class Naming(_ByKey):
     """One line."""
     verdict_class: str
     """"none", "unexplained", "ambiguous", or the effects' names joined by "+" in alphabetical order."""
+    physics: fit.Model | None = None
+    """The recording's physics that the named effects describe, where it is not the chosen candidate's: a damping
+    that the two files show differently, read on the recording with g and a (:func:`~piga.diagnostics.diagnose.
+    damped_reference`). The corrected model, and its closure, are this physics then."""
 
 
 @dataclass(frozen=True)
