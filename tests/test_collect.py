@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import h5py
@@ -85,6 +86,25 @@ def test_empty_split_warned() -> None:
                                                                                   {"train": 1, "valid": 1, "test": 0})
     assert empty_split_warning((1, 0, 0), {"train": 4, "valid": 0, "test": 0}) is None  # as asked
     assert empty_split_warning((0.8, 0.1, 0.1), {"train": 8, "valid": 1, "test": 1}) is None
+
+
+def test_empty_split_advice_fills_the_split() -> None:
+    # the advised count, rounded as the collection rounds it, fills valid and test, and one fewer does not; so do the
+    # advised counts
+    for split in [(0.8, 0.1, 0.1), (0.9, 0.1, 0.0), (0.98, 0.01, 0.01)]:
+        for n in (1, 2, 3, 5):
+            warning = empty_split_warning(split, {"train": n, "valid": 0, "test": 0}) or ""
+            fewest = int(re.search(r"give (\d+) sequences or more", warning).group(1))
+            wanted = [share > 0 for share in split[1:]]
+            assert [count > 0 for count in split_counts(fewest, split)[1:]] == wanted, (split, n, warning)
+            assert [count > 0 for count in split_counts(fewest - 1, split)[1:]] != wanted, (split, n, warning)
+            if (counts := re.search(r"--split (\d+),(\d+),(\d+)", warning)) is not None:
+                asked = tuple(int(x) for x in counts.groups())
+                assert [count > 0 for count in split_counts(n, asked)[1:]] == wanted, (split, n, warning)
+            else:
+                assert n <= sum(wanted), (split, n, warning)
+    assert "give 6 sequences or more, or counts such as --split 1,1,1)" in (
+        empty_split_warning((0.8, 0.1, 0.1), {"train": 3, "valid": 0, "test": 0}) or "")
 
 
 def test_collect_warns_of_an_empty_split(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

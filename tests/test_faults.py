@@ -1923,6 +1923,30 @@ def test_ddpg_refuses_work_it_would_never_finish(argv: list[str], needle: str, t
     assert _listing(tmp_path) == []
 
 
+def test_ddpg_latent_bounds_the_autoencoder_and_says_its_plan(tiny_data: Path, tmp_path: Path,
+                                                               capsys: pytest.CaptureFixture[str],
+                                                               monkeypatch: pytest.MonkeyPatch) -> None:
+    """--autoencoder-steps 1e9 was taken and trained for ever, without a word under --quiet."""
+    import agents.sb3.autoencoder as autoencoder
+    from agents.sb3.autoencoder import MAX_STEPS, AutoencoderConfig
+    from piga.training.train import MAX_TRAIN_STEPS
+
+    assert MAX_STEPS == MAX_TRAIN_STEPS  # piga-train-model's bound
+    base = ["ddpg", "--obs", "latent", "--data", str(tiny_data), "--out", str(tmp_path / "run"), *TINY_DDPG]
+    refused("piga-baseline", [*base, "--autoencoder-steps", "1000000000"], capsys,
+            "--autoencoder-steps: expected an integer in [1, 10000000]", code=2)
+    with pytest.raises(ValueError, match="AutoencoderConfig.steps must be at most 10,000,000"):
+        AutoencoderConfig(steps=10**9)
+
+    def interrupted_autoencoder(*args: Any, **kwargs: Any) -> None:
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(autoencoder, "train_autoencoder", interrupted_autoencoder)
+    code, stdout, _ = run_in_process("piga-baseline", baseline.main, *base, "--autoencoder-steps", "3000", capsys=capsys)
+    assert code == 130 and f"training the autoencoder on {tiny_data}'s train frames for 3000 steps (batches of 64)" in stdout
+    assert _listing(tmp_path) == []
+
+
 def test_ddpg_resume_refuses_fewer_steps(baseline_runs: dict[str, Path], tmp_path: Path,
                                          capsys: pytest.CaptureFixture[str]) -> None:
     run = _run_copy(baseline_runs["ddpg"], tmp_path / "run")

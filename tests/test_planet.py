@@ -234,6 +234,31 @@ def test_iterative_resume_is_exact(tiny_data: Path, tmp_path: Path, monkeypatch:
         assert np.array_equal(x, y)
 
 
+def test_collected_rounds_must_account_for_its_sequences(tiny_data: Path, tmp_path: Path) -> None:
+    """An edited ``rounds`` was trusted on --resume (round 2 was never collected); an unreadable file's reason was cut
+    at 120 characters, mid-parenthesis."""
+    import h5py
+
+    from agents.planet.iterative import COLLECTED, _append, rounds_collected
+    from piga.data.schema import DataFormatError, inspect_dataset, load_rewards, read_sequences
+
+    info, path = inspect_dataset(tiny_data), tmp_path / COLLECTED
+    frames, actions = read_sequences(tiny_data, "train")
+    new = {"frames": frames[:2], "actions": actions[:2], "rewards": load_rewards(tiny_data, "train")[:2], "returns": [0.0]}
+    _append(path, info, new, 1, "test")
+    assert rounds_collected(tmp_path, per_round=2) == 1
+    with h5py.File(path, "a") as f:
+        f.attrs["rounds"] = 5
+    with pytest.raises(DataFormatError, match="says it holds 5 rounds of 2 sequences, but it holds 2 sequences; the run "
+                                              "cannot continue exactly: restore it, or train the run again with --overwrite"):
+        rounds_collected(tmp_path, per_round=2)
+    path.write_text("garbage\n")
+    with pytest.raises(DataFormatError) as caught:
+        rounds_collected(tmp_path, per_round=2)
+    said = str(caught.value)
+    assert "is needed)): restore it" in said and said.count("(") == said.count(")"), said
+
+
 def test_transition_alignment_pairs_each_reward_with_the_state_its_actions_lead_to() -> None:
     config = RSSMConfig(depth=4, deter_size=16, stoch_size=4, hidden_size=16, reward_alignment="transition")
     model = WorldModel(config)

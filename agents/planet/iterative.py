@@ -38,6 +38,7 @@ from agents.planet.rssm import WorldModel
 from agents.planet.run import load_planet
 from agents.planet.train import PlanetState, check_planet_data, train_planet
 from envs import PIXEL_PENDULUM
+from envs.fields import counted
 from envs.pendulum import PixelPendulumConfig, make_pixel_pendulum
 from piga.data.schema import (DataFormatError, DatasetInfo, DatasetWriter, check_pixel_pendulum_file, inspect_dataset,
                               load_rewards, read_sequences)
@@ -77,16 +78,26 @@ def check_iterative_data(info: DatasetInfo, config: IterativeConfig) -> PixelPen
     return replace(env, frame_stack=1, episode_length=config.episode_steps)
 
 
-def rounds_collected(run_dir: str | Path) -> int:
-    """Rounds whose episodes ``run_dir/collected.h5`` holds (0 without one)."""
+def rounds_collected(run_dir: str | Path, per_round: int | None = None) -> int:
+    """Rounds whose episodes ``run_dir/collected.h5`` holds (0 without one).
+
+    ``per_round``: the sequences that each round appends; where given, the file's ``rounds`` must account for its
+    sequences (a DataFormatError otherwise: an edited attribute would skip rounds or collect them twice).
+    """
     path = Path(run_dir) / COLLECTED
     if not path.exists():
         return 0
     try:
-        return int(inspect_dataset(path).attrs["rounds"])
+        info = inspect_dataset(path)
+        rounds = int(info.attrs["rounds"])
     except (DataFormatError, KeyError, TypeError, ValueError) as exc:  # truncated or edited
-        raise DataFormatError(f"{path}, the run's collected episodes, cannot be read ({' '.join(str(exc).split())[:120]}): "
+        raise DataFormatError(f"{path}, the run's collected episodes, cannot be read ({' '.join(str(exc).split())}): "
                               "restore it, or train the run again with --overwrite") from None
+    if per_round is not None and (rounds < 0 or info.n_sequences != rounds * per_round):
+        raise DataFormatError(f"{path}, the run's collected episodes, says it holds {counted(rounds, 'round')} of "
+                              f"{counted(per_round, 'sequence')}, but it holds {counted(info.n_sequences, 'sequence')}; "
+                              "the run cannot continue exactly: restore it, or train the run again with --overwrite")
+    return rounds
 
 
 def collect_round(model: WorldModel, env_config: PixelPendulumConfig, config: IterativeConfig, planner: LatentPlannerConfig,
@@ -184,7 +195,7 @@ def train_planet_iterative(
     if not resume or _step_of(run_dir) < config.steps:  # the first training, on the file alone
         model, state = train_planet(data, run_dir, config, rssm, resume=resume and has_checkpoint, progress=progress,
                                     on_checkpoint=on_checkpoint)
-    done = rounds_collected(run_dir)
+    done = rounds_collected(run_dir, iterative.episodes * (iterative.episode_steps // info.steps))
     for r in range(1, iterative.rounds + 1):
         target = config.steps + r * iterative.steps_per_round
         if done < r:

@@ -44,6 +44,12 @@ from piga.io.choices import check_types
 __all__ = ["AutoencoderConfig", "FrameAutoencoder", "autoencoder_seconds", "check_autoencoder_data", "load_autoencoder", "train_autoencoder"]
 
 
+#: Most Adam steps the autoencoder may take: piga-train-model's most optimiser steps
+#: (:data:`piga.training.train.MAX_TRAIN_STEPS`, which agents do not import), weeks on a CPU; 1e9 was taken and trained for
+#: ever, without a word under --quiet.
+MAX_STEPS = 10_000_000
+
+
 @dataclass(frozen=True)
 class AutoencoderConfig:
     """The autoencoder and how it is trained."""
@@ -53,7 +59,7 @@ class AutoencoderConfig:
     depth: int = 16
     """Channels of the first conv layer, doubled at each of the four."""
     steps: int = 2000
-    """Adam steps."""
+    """Adam steps, at most :data:`MAX_STEPS`."""
     batch_size: int = 64
     """Frames per step."""
     lr: float = 1e-3
@@ -67,6 +73,8 @@ class AutoencoderConfig:
             raise ValueError(f"AutoencoderConfig needs sizes and steps >= 1, a finite lr > 0 and seed >= 0, got latent_size="
                              f"{self.latent_size}, depth={self.depth}, steps={self.steps}, batch_size={self.batch_size}, "
                              f"lr={self.lr}, seed={self.seed}")
+        if self.steps > MAX_STEPS:
+            raise ValueError(f"AutoencoderConfig.steps must be at most {MAX_STEPS:,} (weeks on a CPU), got {self.steps:,}")
 
 
 class FrameAutoencoder(nn.Module):

@@ -24,7 +24,7 @@ from typing import Any, get_args
 from envs.fields import counted
 from piga.cli.common import (NOT_CONVERGED, ArgumentParser, Interrupted, PigaError, add_device_option, add_preset_option,
                              check_not_demo_folder, command_line, format_default, given_options, held_run_error,
-                             made_folder, nonnegative_float, nonnegative_int, number_type, positive_float, positive_int,
+                             int_up_to, made_folder, nonnegative_float, nonnegative_int, number_type, positive_float, positive_int,
                              record_resume, recorded_options, remove_outputs, run_cli, seed_int, started_record,
                              thread_count, with_flags)
 from piga.io.atomic import check_folder_target
@@ -38,6 +38,7 @@ OUTPUTS = (CHECKPOINT, "config.json", "metrics.json", "model.zip", "autoencoder.
 
 def build_parser() -> ArgumentParser:
     from agents.planet.config import MAX_EXPLORATION_NOISE, IterativeConfig, PlanetTrainConfig, RewardAlignment, RSSMConfig
+    from agents.sb3.autoencoder import MAX_STEPS as MAX_AUTOENCODER_STEPS
     from agents.sb3.autoencoder import AutoencoderConfig
     from agents.sb3.config import (ALGORITHM_PRESETS, ALGORITHMS, DRQV2_SEED_FRAMES, ENV_ACTION_REPEAT, LEARNED_RETURN,
                                    MAX_LEARNING_RATE, OBSERVATIONS, PRECISIONS, PRESETS, VIEWS, SB3Config)
@@ -153,7 +154,8 @@ def build_parser() -> ArgumentParser:
                       shown=f"{ddpg.buffer_size}; sac: {sac['buffer_size']}; pixels: {format_default(PRESETS['pixels']['buffer_size'])}; "
                             f"drqv2: {drqv2['buffer_size']}",
                       help="replay buffer capacity")
-    d.add_argument("--autoencoder-steps", type=positive_int, default=AutoencoderConfig.steps,
+    d.add_argument("--autoencoder-steps", type=int_up_to(MAX_AUTOENCODER_STEPS, "more trains for weeks on a CPU"),
+                   default=AutoencoderConfig.steps,
                    help="with --obs latent: the autoencoder's training steps (default %(default)s)")
     d.add_argument("--torque-arrow", action="store_true", help="show Gymnasium's torque arrow in the frames (off by default, as in piga-control)")
     d.add_argument("--encoder-precision", choices=PRECISIONS, default=ddpg.encoder_precision,
@@ -719,6 +721,8 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
             if autoencoder is not None and not args.resume:
                 from agents.sb3.autoencoder import train_autoencoder
 
+                print(f"training the autoencoder on {args.data}'s train frames for {counted(ae_config.steps, 'step')} "
+                      f"(batches of {ae_config.batch_size}) -> {autoencoder}", flush=True)
                 _, mse = train_autoencoder(args.data, ae_config, autoencoder, progress=not args.quiet,
                                            device=config.device)
                 record["autoencoder"] = {**ae_config.__dict__, "train_mse": mse}

@@ -137,13 +137,33 @@ def empty_split_warning(split: Sequence[float], counts: dict[str, int]) -> str |
     if not empty:
         return None
     n = sum(counts.values())
-    advice = f"give more sequences, or counts such as --split {n - 2},1,1" if n >= 3 else "give 3 sequences or more"
+    wanted = [share > 0 for share in split[1:]]  # (valid, test)
+    fewest = _fewest_filling(split)
+    advice = f"give {fewest} sequences or more" if fewest is not None else "give more sequences"
+    if n > sum(wanted):  # counts that keep a training sequence and give each asked-for split one
+        advice += f", or counts such as --split {n - sum(wanted)},{int(wanted[0])},{int(wanted[1])}"
     # what each empty split costs: piga-train-model measures on the test split, the PlaNet-style baseline validates on
     # the valid split; each falls back to the train split, which is not held out
     cost = {"test": "piga-train-model's metrics", "valid": "the PlaNet-style baseline's validation"}
     whose = " and ".join(cost[name] for name in empty)
     return (f"the split {','.join(f'{x:g}' for x in split)} of {counted(n, 'sequence')} leaves {' and '.join(empty)} empty, so "
             f"{whose} will come from the train split, which is not held out ({advice})")
+
+
+def _fewest_filling(split: Sequence[float]) -> int | None:
+    """The fewest sequences whose split by these fractions, rounded as :func:`split_counts` rounds them, gives each
+    of valid and test with a share at least one sequence (None if a short search past the first candidate finds none,
+    as for a training share too small to keep a sequence)."""
+    def fills(n: int) -> bool:
+        try:
+            counts = split_counts(n, split)
+        except ValueError:  # (too few to keep a training sequence)
+            return False
+        return all(count > 0 for share, count in zip(split[1:], counts[1:]) if share > 0)
+
+    # round(share * n) is 0 up to n = 0.5 / share, so no smaller count can fill a split: start just below that
+    start = max(1, *(math.floor(0.5 / share) for share in split[1:] if share > 0))
+    return next((n for n in range(start, start + 1000) if fills(n)), None)
 
 
 #: Gymnasium's Pendulum-v1 draws its rod in this colour on a white background.
