@@ -484,6 +484,29 @@ def test_show_draws_a_blank_file_with_a_warning(tiny_data: Path, tmp_path: Path,
     assert _listing(tmp_path) == ["d.h5", "s.png"]
 
 
+def test_show_draws_a_small_object_of_a_large_frame_and_says_it_is_faint(tmp_path: Path,
+                                                                        capsys: pytest.CaptureFixture[str]) -> None:
+    """Frames of 1024 px were handed whole to matplotlib, whose resampling left 6 px balls a few gray levels above
+    black, without a word. Each frame is drawn area-averaged to its cell (the blob's light kept, spread over a pixel or
+    two of the strip), and a note says that objects under a pixel of the strip show faint."""
+    from piga.cli.show import main
+    from piga.evaluation.plots import frame_strip
+
+    frames = np.zeros((2, 2, 1024, 1024), np.uint8)  # [N, T, H, W]: a 6 px square moving right
+    frames[:, 0, 500:506, 300:306] = frames[:, 1, 500:506, 310:316] = 255
+    data = tmp_path / "big.h5"
+    with h5py.File(data, "w") as f:
+        f["frames"], f["actions"], f["split"] = frames, np.zeros((2, 2, 1), np.float32), np.zeros(2, np.int8)
+        f.attrs.update({"system": "pendulum", "dt": 0.05})
+    drawn = frame_strip(frames).axes[0].images[0].get_array()
+    assert drawn.shape == (68, 68) and drawn.max() > 0  # the frame at the cell's size, the blob in it
+    assert float(drawn.sum()) == pytest.approx(36 * 255 * (68 / 1024) ** 2, rel=0.1)  # its light, averaged
+    code, out, err = run_in_process("piga-show", main, str(data), "--out", str(tmp_path / "s.png"), capsys=capsys)
+    assert code == 0 and err == "" and out.count("\n") == 2, (out, err)
+    assert "note: the frames are 1024x1024 px (width x height), drawn 68 px a side: each pixel of the strip averages " \
+           "15.1x15.1 of theirs, and objects smaller than that show faint or not at all" in out
+
+
 def _dangling_frames(f: h5py.File) -> None:
     del f["frames"]
     f["frames"] = h5py.ExternalLink("gone.h5", "/frames")
