@@ -1919,6 +1919,10 @@ def test_train_resume_refuses_a_baseline_run(baseline_runs: dict[str, Path], tin
 
 @pytest.mark.parametrize("extra, needle", [
     (["--autoencoder-steps", "5"], "--autoencoder-steps is for --obs latent"),
+    # at their defaults too: the docs say "with --obs latent", "with --algo drqv2", "with --env piga/DMCPendulum-v0"
+    (["--autoencoder-steps", "2000"], "--autoencoder-steps is for --obs latent"),
+    (["--encoder-precision", "float32"], "--encoder-precision is for --algo drqv2; SB3's ddpg trains its own networks"),
+    (["--view", "face"], "--view chooses a view of piga/DMCPendulum-v0; piga/PixelPendulum-v0 is seen as it renders"),
     (["--torque-arrow"], "--obs state sees no frames"),  # the arrow was recorded for a policy that never saw it
     (["--steps", "200", "--eval-every", "400"], "never be evaluated"),
     (["--steps", "450", "--eval-every", "1000"], "--eval-every (1000) is more than --steps (450)"),  # "than steps (450)"
@@ -3267,6 +3271,13 @@ def test_import_names_swapped_arguments(order: str, frame_folders: dict[str, Pat
     ("piga-collect", ["--system", "bouncing", "--half"], "--half (the top-half data) is for the spring scene"),
     ("piga-train-model", ["DATA", "--video-lstm-scale", "2"], "--video-lstm-scale sizes the video-lstm baseline"),
     ("piga-train-model", ["DATA", "--broadcast-width", "8"], "--broadcast-width sizes the spatial-broadcast decoder"),
+    # at their defaults too: the docs say "only with --model video-lstm", "not with --model video-lstm", "only with
+    # --decoder broadcast" (each ran)
+    ("piga-train-model", ["DATA", "--video-lstm-scale", "1"], "--video-lstm-scale sizes the video-lstm baseline; "
+                                                                "architecture 'piga' has its own sizes: drop"),
+    ("piga-train-model", ["DATA", "--model", "video-lstm", "--decoder", "st"], "--decoder does not apply to --model "
+                                                                                "video-lstm"),
+    ("piga-train-model", ["DATA", "--decoder", "mlp", "--broadcast-width", "16"], "decoder 'mlp' has its own sizes"),
 ])
 def test_a_configs_refusal_names_the_flag_not_the_field(prog: str, argv: list[str], needle: str, tiny_data: Path,
                                                         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
