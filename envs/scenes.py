@@ -38,7 +38,8 @@ import numpy as np
 from envs.fields import number_text
 
 __all__ = ["SCENES", "SceneConfig", "scene_config", "accelerations", "simulate", "draw_start", "render",
-           "generate_sequence", "state_names", "SceneError", "MIN_FORCE_SHIFT", "force_shift", "check_forces_visible"]
+           "generate_sequence", "state_names", "SceneError", "MIN_FORCE_SHIFT", "force_shift", "check_forces_visible",
+           "fastest_frequency", "aliasing_warning"]
 
 
 #: Smallest ball radius (or half digit side) accepted, in pixels: smaller objects leave no trace in the frames.
@@ -397,6 +398,45 @@ def check_forces_visible(config: SceneConfig, states: np.ndarray) -> None:
                          f"line in {states.shape[1]} frames (at most {shift:.3g} px), so the frames cannot show them and "
                          f"their parameters cannot be learned; use stronger forces (the scene's own: {own}) or longer "
                          "sequences")
+
+
+def fastest_frequency(config: SceneConfig, states: np.ndarray) -> float:
+    """The fastest angular frequency of a scene's motion, rad/s (``states`` as :func:`force_shift`): the spring's
+    fastest mode, √(n·k) for n balls joined pairwise (:func:`max_stable_k`); gravity's fastest orbit, √(2·g·m/d³) for
+    two balls at the closest distance d of any two in ``states``; 0 for the bouncing balls, which do not oscillate."""
+    if config.n_objects < 2:
+        return 0.0
+    if config.physics == "spring":
+        return math.sqrt(config.n_objects * config.params["k"])
+    if config.physics != "gravity" or not states.size:
+        return 0.0
+    n = config.n_objects
+    p = states[..., : 2 * n].astype(np.float64).reshape(*states.shape[:-1], n, 2)  # (B, T, N, 2)
+    d = np.sqrt(((p[..., :, None, :] - p[..., None, :, :]) ** 2).sum(-1))  # (B, T, N, N)
+    closest = float(np.where(np.eye(n, dtype=bool), np.inf, d).min())
+    if closest == 0:  # two balls in one place: no start the scene draws
+        return math.inf
+    return math.sqrt(2 * config.params["g"] * config.params.get("m", 1.0) / closest**3)
+
+
+def aliasing_warning(config: SceneConfig, states: np.ndarray) -> str | None:
+    """A warning where a scene moves faster than its frames sample it: more than π rad of its fastest oscillation or
+    orbit (:func:`fastest_frequency`; ``states`` as :func:`force_shift`) per frame, beyond which the frames show a fast
+    motion as a slower one (they alias it) and its parameters cannot be learned from them; else None. A warning, not a
+    refusal: the simulation is right (up to :func:`max_stable_k`), the frames are too far apart. The spring at dt =
+    0.3 s passes π rad a frame from k = 54.8 (the scene's own k = 4: 0.85 rad)."""
+    omega = fastest_frequency(config, states)
+    per_frame = omega * config.dt
+    if per_frame <= math.pi:
+        return None
+    name = "k" if config.physics == "spring" else "g"
+    motion = "oscillate at" if config.physics == "spring" else "orbit each other at up to"
+    below = config.params[name] * (math.pi / per_frame) ** 2  # ω grows as the square root of k (of g)
+    objects = "digits" if config.scene == "digits-spring" else "balls"
+    return (f"{config.scene}: with {_params_text(config.params)} the {objects} {motion} {omega:.3g} rad/s, "
+            f"{per_frame:.3g} rad per frame of {config.dt:g} s, beyond the π rad per frame that the frames can sample: "
+            f"they alias the motion, and {name} cannot be learned from them; give {name} below {below:.4g} (the scene's "
+            f"own: {_params_text(SCENES[config.scene]['params'])})")
 
 
 def _force_advice(config: SceneConfig) -> str:

@@ -126,6 +126,7 @@ def _env_renders_32(f: h5py.File) -> None:
 
 def _cropped_63(f: h5py.File) -> None:
     _replace(f, "frames", f["frames"][()][:, :, :63, :63])
+    del f.attrs["env_config"]  # (its 64 px frames contradict these, which is refused on open)
 
 
 VARIANTS: dict[str, Callable[[h5py.File], None]] = {
@@ -484,6 +485,29 @@ def test_show_draws_a_blank_file_with_a_warning(tiny_data: Path, tmp_path: Path,
     assert _listing(tmp_path) == ["d.h5", "s.png"]
 
 
+def test_show_draws_a_small_object_of_a_large_frame_and_says_it_is_faint(tmp_path: Path,
+                                                                        capsys: pytest.CaptureFixture[str]) -> None:
+    """Frames of 1024 px were handed whole to matplotlib, whose resampling left 6 px balls a few gray levels above
+    black, without a word. Each frame is drawn area-averaged to its cell (the blob's light kept, spread over a pixel or
+    two of the strip), and a note says that objects under a pixel of the strip show faint."""
+    from piga.cli.show import main
+    from piga.evaluation.plots import frame_strip
+
+    frames = np.zeros((2, 2, 1024, 1024), np.uint8)  # [N, T, H, W]: a 6 px square moving right
+    frames[:, 0, 500:506, 300:306] = frames[:, 1, 500:506, 310:316] = 255
+    data = tmp_path / "big.h5"
+    with h5py.File(data, "w") as f:
+        f["frames"], f["actions"], f["split"] = frames, np.zeros((2, 2, 1), np.float32), np.zeros(2, np.int8)
+        f.attrs.update({"system": "pendulum", "dt": 0.05})
+    drawn = frame_strip(frames).axes[0].images[0].get_array()
+    assert drawn.shape == (68, 68) and drawn.max() > 0  # the frame at the cell's size, the blob in it
+    assert float(drawn.sum()) == pytest.approx(36 * 255 * (68 / 1024) ** 2, rel=0.1)  # its light, averaged
+    code, out, err = run_in_process("piga-show", main, str(data), "--out", str(tmp_path / "s.png"), capsys=capsys)
+    assert code == 0 and err == "" and out.count("\n") == 2, (out, err)
+    assert "note: the frames are 1024x1024 px (width x height), drawn 68 px a side: each pixel of the strip averages " \
+           "15.1x15.1 of theirs, and objects smaller than that show faint or not at all" in out
+
+
 def _dangling_frames(f: h5py.File) -> None:
     del f["frames"]
     f["frames"] = h5py.ExternalLink("gone.h5", "/frames")
@@ -491,6 +515,14 @@ def _dangling_frames(f: h5py.File) -> None:
 
 def _attr_edit(key: str, value: Any) -> Callable[[h5py.File], None]:
     return lambda f: f.attrs.__setitem__(key, value)
+
+
+def _dmc_labelled(action_repeat: int, dt: float) -> Callable[[h5py.File], None]:
+    """The file said to be dm_control's, at ``action_repeat`` and ``dt``."""
+    def edit(f: h5py.File) -> None:
+        f.attrs.update({"env_id": "piga/DMCPendulum-v0", "env_config": json.dumps({"action_repeat": action_repeat}),
+                        "dt": dt})
+    return edit
 
 
 @pytest.mark.parametrize("edit, needles", [
@@ -514,6 +546,15 @@ def _attr_edit(key: str, value: Any) -> Callable[[h5py.File], None]:
     (_attr_edit("params", '{"damping": 2e12}'), ["'params' gives damping=2e+12, beyond"]),
     (_attr_edit("params", '{"g": -9.8}'), ["'params' gives g=-9.8; g is >= 0 in piga's conventions"]),
     (_attr_edit("params", '{"m": -1}'), ["'params' gives m=-1; m is >= 0"]),
+    # attributes that contradict the env that made the file: g was trained for the wrong interval, without a word
+    (_attr_edit("dt", 0.1), ["'dt' says the frames are 0.1 s apart, but piga/PixelPendulum-v0 (its 'env_id') steps "
+                             "0.05 s; set 'dt' to 0.05, or collect the file again"]),
+    (_env_renders_32, ["attribute 'env_config' says the env renders 32x32 gray frames (image_size 32), but the file's "
+                       "frames are 64x64 gray; set env_config's image_size to 64"]),
+    (_dmc_labelled(2, 0.05), ["'dt' says the frames are 0.05 s apart, but piga/DMCPendulum-v0 (its 'env_id') steps 0.04 "
+                              "s at env_config's action_repeat 2 (2 x 0.02 s); set 'dt' to 0.04, or collect"]),
+    (_dmc_labelled(2, 0.06), ["steps 0.04 s at env_config's action_repeat 2", "set 'dt' to 0.04 or env_config's "
+                              "action_repeat to 3, or collect"]),
 ])
 def test_a_file_that_breaks_the_schema_is_named_on_open(edit: Callable[[h5py.File], None], needles: list[str],
                                                         tiny_data: Path, tmp_path: Path,
@@ -524,6 +565,18 @@ def test_a_file_that_breaks_the_schema_is_named_on_open(edit: Callable[[h5py.Fil
     data = _variant(tiny_data, tmp_path / "d.h5", edit)
     refused("piga-show", [str(data), "--out", str(tmp_path / "s.png")], capsys, *needles)
     assert _listing(tmp_path) == ["d.h5"]
+
+
+@pytest.mark.parametrize("edit", [_dmc_labelled(3, 0.06), _attr_edit("env_id", "elsewhere/Pendulum-v9"),
+                                  lambda f: f.attrs.__delitem__("env_id")])
+def test_a_file_whose_dt_fits_its_env_is_read(edit: Callable[[h5py.File], None], tiny_data: Path,
+                                              tmp_path: Path) -> None:
+    """dm_control's frames at another action repeat, an env piga does not know, a file from before env ids: their 'dt'
+    is not refused (nor is an imported recording's, which names no env)."""
+    from piga.data.schema import inspect_dataset
+
+    data = _variant(tiny_data, tmp_path / "d.h5", lambda f: (edit(f), f.attrs.__setitem__("dt", 0.06)))
+    assert inspect_dataset(data).dt == 0.06
 
 
 def test_half_precision_actions_and_huge_rewards_are_read_without_warnings(tiny_data: Path, tmp_path: Path) -> None:
@@ -1388,8 +1441,11 @@ def test_train_model_refuses_frames_too_small_before_training(tiny_data: Path, t
     """4x4 frames trained a whole run, then failed in the SSIM with scikit-image's message, leaving a run
     folder that made the rerun refuse."""
     rng = np.random.default_rng(0)
-    data = _variant(tiny_data, tmp_path / "d.h5",
-                    lambda f: _replace(f, "frames", rng.integers(0, 255, (*f["frames"].shape[:2], 4, 4)).astype(np.uint8)))
+    def tiny_frames(f: h5py.File) -> None:
+        _replace(f, "frames", rng.integers(0, 255, (*f["frames"].shape[:2], 4, 4)).astype(np.uint8))
+        del f.attrs["env_config"]  # (its 64 px frames contradict these, which is refused on open)
+
+    data = _variant(tiny_data, tmp_path / "d.h5", tiny_frames)
     refused("piga-train-model", [str(data), "--out", str(tmp_path / "run"), "--batch-size", "4", "--threads", "1", "--quiet"],
             capsys, "frames of 4x4 px are too small to learn from; at least 8x8")
     assert _listing(tmp_path) == ["d.h5"]
@@ -1834,6 +1890,7 @@ def test_train_resume_refuses_a_file_whose_dt_changed(tiny_piga_run: Path, tiny_
     shutil.copy(tiny_data, data)
     with h5py.File(data, "a") as f:
         f.attrs["dt"] = 0.1
+        del f.attrs["env_id"]  # a file of no env (one of the pixel pendulum's is refused on open: it steps 0.05 s)
     refused("piga-train-model", [str(data), "--out", str(run), "--resume", "--epochs", "2", "--quiet"], capsys,
             "now says its frames are 0.1 s apart; the run trained on them as 0.05 s apart", "restore the file's 'dt'")
 
@@ -1896,6 +1953,10 @@ def test_train_resume_refuses_a_baseline_run(baseline_runs: dict[str, Path], tin
 
 @pytest.mark.parametrize("extra, needle", [
     (["--autoencoder-steps", "5"], "--autoencoder-steps is for --obs latent"),
+    # at their defaults too: the docs say "with --obs latent", "with --algo drqv2", "with --env piga/DMCPendulum-v0"
+    (["--autoencoder-steps", "2000"], "--autoencoder-steps is for --obs latent"),
+    (["--encoder-precision", "float32"], "--encoder-precision is for --algo drqv2; SB3's ddpg trains its own networks"),
+    (["--view", "face"], "--view chooses a view of piga/DMCPendulum-v0; piga/PixelPendulum-v0 is seen as it renders"),
     (["--torque-arrow"], "--obs state sees no frames"),  # the arrow was recorded for a policy that never saw it
     (["--steps", "200", "--eval-every", "400"], "never be evaluated"),
     (["--steps", "450", "--eval-every", "1000"], "--eval-every (1000) is more than --steps (450)"),  # "than steps (450)"
@@ -3268,6 +3329,13 @@ def test_import_names_swapped_arguments(order: str, frame_folders: dict[str, Pat
     ("piga-collect", ["--system", "bouncing", "--half"], "--half (the top-half data) is for the spring scene"),
     ("piga-train-model", ["DATA", "--video-lstm-scale", "2"], "--video-lstm-scale sizes the video-lstm baseline"),
     ("piga-train-model", ["DATA", "--broadcast-width", "8"], "--broadcast-width sizes the spatial-broadcast decoder"),
+    # at their defaults too: the docs say "only with --model video-lstm", "not with --model video-lstm", "only with
+    # --decoder broadcast" (each ran)
+    ("piga-train-model", ["DATA", "--video-lstm-scale", "1"], "--video-lstm-scale sizes the video-lstm baseline; "
+                                                                "architecture 'piga' has its own sizes: drop"),
+    ("piga-train-model", ["DATA", "--model", "video-lstm", "--decoder", "st"], "--decoder does not apply to --model "
+                                                                                "video-lstm"),
+    ("piga-train-model", ["DATA", "--decoder", "mlp", "--broadcast-width", "16"], "decoder 'mlp' has its own sizes"),
 ])
 def test_a_configs_refusal_names_the_flag_not_the_field(prog: str, argv: list[str], needle: str, tiny_data: Path,
                                                         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -173,3 +173,27 @@ def test_force_shift_measures_the_forces_against_straight_lines() -> None:
     straight = np.concatenate([p, np.tile(v, (t, 1))], axis=1)[None].astype(np.float32)
     assert force_shift(config, straight) < 1e-5
     assert force_shift(scene_config("bouncing"), straight[..., : 8]) == 0.0
+
+
+def test_a_scene_too_fast_for_its_frames_is_warned_of(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """--k 2222 (under the substeps' limit) turned the spring 20 rad a frame: frames that alias the motion, written
+    without a word. Beyond π rad a frame one warning line says the k that keeps under it."""
+    from envs.scenes import aliasing_warning
+
+    argv = ["--system", "spring", "--sequences", "3", "--steps", "6", "--split", "1,1,1", "--workers", "1", "--quiet"]
+    code, out, err = run_in_process("piga-collect", collect_main, "--out", str(tmp_path / "k.h5"), "--k", "100", *argv,
+                                    capsys=capsys)
+    assert code == 0 and out.startswith("wrote ") and err.count("\n") == 1, err
+    assert err.startswith("piga-collect: warning: spring: with k = 100, l = 6 the balls oscillate at 14.1 rad/s, 4.24 "
+                          "rad per frame of 0.3 s, beyond the π rad per frame"), err
+    assert "give k below 54.83 (the scene's own: k = 4, l = 6)" in err
+    code, _, err = run_in_process("piga-collect", collect_main, "--out", str(tmp_path / "own.h5"), "--k", "54", *argv,
+                                  capsys=capsys)
+    assert code == 0 and err == ""  # 3.12 rad a frame
+    gravity = scene_config("gravity")
+    _, states = generate_sequence(gravity, np.random.default_rng(0), 8)  # (T, 4N)
+    assert aliasing_warning(gravity, states[None]) is None  # the scene's own g: well under a rad a frame
+    close = states[None].copy()
+    close[..., 2:4] = close[..., 0:2] + 0.5  # two balls 0.71 px apart: √(2·60/0.71³) = 18.4 rad/s
+    assert "the balls orbit each other at up to 18.4 rad/s, 9.21 rad per frame of 0.5 s" in aliasing_warning(gravity, close)
+    assert "give g below 6.979 (the scene's own: g = 60, m = 1)" in aliasing_warning(gravity, close)

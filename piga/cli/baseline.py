@@ -636,9 +636,16 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
     if args.obs != "latent" and args.data:
         raise PigaError(f"--data is for --obs latent (the autoencoder's frames); --obs {args.obs} does not use it")
     from agents.sb3.autoencoder import AutoencoderConfig
+    from envs import DMC_PENDULUM
 
-    if args.obs != "latent" and args.autoencoder_steps != AutoencoderConfig.steps:
+    written = _given_options("ddpg", argv)  # an option that does not apply is refused at its default value too
+    if args.obs != "latent" and "autoencoder_steps" in written:
         raise PigaError(f"--autoencoder-steps is for --obs latent; --obs {args.obs} trains no autoencoder")
+    if args.algo != "drqv2" and "encoder_precision" in written:
+        raise PigaError(f"--encoder-precision is for --algo drqv2; SB3's {args.algo} trains its own networks in float32: "
+                        "drop --encoder-precision")
+    if args.env != DMC_PENDULUM and "view" in written:
+        raise PigaError(f"--view chooses a view of {DMC_PENDULUM}; {args.env} is seen as it renders: drop --view")
     if args.resume:
         _check_run_dir(run_dir, True, args.overwrite, RunKind.DDPG)
         record = _resumed_record(run_dir, RunKind.DDPG, args)

@@ -15,14 +15,14 @@ from envs.dmc import MAX_SPEED_TEXT, DMCPendulumConfig
 from envs.effects import EFFECTS, format_effects, parse_effect
 from envs.fields import counted
 from envs.pendulum import MAX_ACTUATION_GAIN, MAX_GRAVITY, MIN_ACTUATION_GAIN, MIN_GRAVITY, PixelPendulumConfig
-from envs.scenes import HALF_SPEED, SCENES, SceneConfig, scene_config
+from envs.scenes import HALF_SPEED, SCENES, SceneConfig, aliasing_warning, scene_config
 from piga.cli.common import (H5_SUFFIXES, ArgumentParser, PigaError, add_preset_option, any_float, command_line,
                              format_default, given_options, h5_path, positive_float, positive_int, run_cli, seed_int,
                              split_type)
 from piga.data.collect import (PAPER_MAX_SPEED, PRESETS, CollectConfig, buried_noise_warning, collect,
                                empty_split_warning)
 from piga.data.collect_scenes import SCENE_PRESETS, SCENE_STEPS, collect_scene
-from piga.data.schema import inspect_dataset
+from piga.data.schema import inspect_dataset, load_states
 from piga.io.lock import lock_run_folder
 
 PROG = "piga-collect"
@@ -339,6 +339,8 @@ def _collect_scene(args: argparse.Namespace, argv: Sequence[str] | None, written
     print(f"wrote {path}: {args.system}, {counted(info.n_sequences, 'sequence')} x {info.steps} frames of {info.image_shape}, "
           f"split {info.split_counts}" + (f", {shown}" if shown else ""))
     _warn_empty_split(config.split, info.split_counts)
+    if (warning := aliasing_warning(scene, load_states(path, "train"))) is not None:  # motion too fast for the frames
+        print(f"{PROG}: warning: {warning}", file=sys.stderr)
     return 0
 
 

@@ -38,7 +38,8 @@ MAX_TITLE = 200
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    from piga.evaluation.plots import check_figure_target, frame_strip, save_figure  # matplotlib after run_cli's set-up
+    from piga.evaluation.plots import (check_figure_target, frame_strip, save_figure,  # matplotlib after run_cli's set-up
+                                       strip_cell_side)
 
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -83,9 +84,36 @@ def main(argv: Sequence[str] | None = None) -> int:
         for c in range(t):
             if actions.shape[-1]:
                 fig.axes[r * t + c].set_xlabel(f"u={actions[r, c, 0]:+.2f}", fontsize=6)
+    note = _faded_note(frames, strip_cell_side(fig))
     path = save_figure(fig, args.out, overwrite=args.overwrite)
     print(f"wrote {path}")
+    if note is not None:
+        print(f"note: {note}")
     return 0
+
+
+#: The share of a frame's contrast (its brightest value less its darkest) that its thumbnail in the strip must keep:
+#: below it, objects smaller than a pixel of the strip are averaged away.
+KEPT_CONTRAST = 0.5
+
+
+def _faded_note(frames: np.ndarray, side: int) -> str | None:
+    """A note where frames larger than the strip's cells (``side`` px) lose objects to the area average that draws them
+    (:func:`piga.evaluation.plots.thumbnail`): the least share of a frame's contrast that a thumbnail keeps, below
+    :data:`KEPT_CONTRAST`; None where every thumbnail keeps more, or the frames fit (``frames`` [R, C, H, W(, C)])."""
+    from piga.evaluation.plots import thumbnail
+
+    height, width = frames.shape[2:4]
+    if max(height, width) <= side:
+        return None
+    kept = [float(np.ptp(thumbnail(frame, side))) / contrast
+            for frame in frames.reshape(-1, *frames.shape[2:]) if (contrast := float(np.ptp(frame))) > 0]
+    if not kept or min(kept) >= KEPT_CONTRAST:
+        return None
+    step = max(height, width) / side
+    return (f"the frames are {width}x{height} px (width x height), drawn {side} px a side: each pixel of the strip "
+            f"averages {step:.3g}x{step:.3g} of theirs, and objects smaller than that show faint or not at all (a "
+            f"thumbnail keeps {min(kept):.0%} of its frame's contrast)")
 
 
 def _refused_elsewhere(info: DatasetInfo) -> str | None:

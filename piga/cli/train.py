@@ -11,7 +11,7 @@ from collections.abc import Iterator, Sequence
 from dataclasses import asdict, fields, replace
 from pathlib import Path
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from envs.fields import counted
 from piga.cli.common import (NOT_CONVERGED, ArgumentParser, Interrupted, PigaError, add_device_option,
@@ -23,6 +23,9 @@ from piga.io.atomic import OutputFolder, check_folder_target
 from piga.io.checkpoint import (CHECKPOINT, RUN_OUTPUTS, RunKind, check_run_files, read_run_record, recorded_data_path,
                                 require_piga_run)
 from piga.io.lock import lock_run_folder
+
+if TYPE_CHECKING:
+    from piga.world.model import ModelConfig
 
 #: The recipe options a user may give; each is a TrainConfig field of the same name.
 RECIPE_OPTIONS = ("epochs", "budget_steps", "max_minutes", "batch_size", "lr", "lr_physics", "warmup_fraction",
@@ -102,8 +105,8 @@ def build_parser() -> ArgumentParser:
     add_preset_option(p, "--loss", choices=choices["loss"], default=ModelConfig().loss,
                       help="training scheme (the paper's Table 2 ablation): 'joint', L_pred + alpha L_rec into every part; "
                       "'pred-only', L_pred alone (no autoencoder loss, no autoencoder warm-up); 'separate', the encoder "
-                      "and decoder learn from L_rec only, the velocity estimator and the physics from L_pred only. Not "
-                      "with --model video-lstm, except 'pred-only'")
+                      "and decoder learn from L_rec only, the velocity estimator and the physics from L_pred only. "
+                      "--model video-lstm takes 'joint' or 'pred-only'")
     add_preset_option(p, "--decoder", choices=choices["decoder"], default=ModelConfig().decoder,
                       help="'st': the coordinate-consistent spatial-transformer decoder; 'mlp': the paper's black-box "
                       "decoder ablation, an MLP from the objects' coordinates to the frame; 'deconv': an MLP to a small "
@@ -269,6 +272,7 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
         if args.objects is not None and info.system == "pendulum":
             raise PigaError(f"--objects: {args.data} holds pendulum data, whose model has one object (its angle); "
                             "drop --objects")
+        _refuse_options_that_do_not_apply(chosen, model_config)
         # a choice another one excludes (video-lstm with --loss separate) is ModelConfig's ValueError: run_cli's one line
         model_config = replace(model_config, **chosen)
         if args.objects is not None and not report.checks_objects(model_config):  # (it was recorded, then enforced)
@@ -511,6 +515,23 @@ def one_step_note(model: Any, attrs: dict[str, Any]) -> str | None:
     return ("note: this file is not from Gymnasium's pendulum, and the model steps once per frame (Euler): a system "
             "that keeps moving between frames reads g and a a few percent low this way (dm_control's: about 6%); "
             "--preset continuous models that motion, and piga-diagnose reads it off this model")
+
+
+def _refuse_options_that_do_not_apply(chosen: dict[str, Any], model_config: ModelConfig) -> None:
+    """Refuses a model option written for a model it does not apply to, at its default value too (``chosen``: the
+    :data:`MODEL_OPTIONS` fields given; ``model_config``: the preset's, which they change). ModelConfig can only tell a
+    value other than its default, so ``--decoder st --model video-lstm`` and ``--video-lstm-scale 1`` ran."""
+    architecture = chosen.get("architecture", model_config.architecture)
+    decoder = chosen.get("decoder", model_config.decoder)
+    if "decoder" in chosen and architecture == "video-lstm":
+        raise PigaError("--decoder does not apply to --model video-lstm, which draws its frames with its own network, "
+                        "not an object decoder: drop --decoder")
+    if "video_lstm_scale" in chosen and architecture != "video-lstm":
+        raise PigaError(f"--video-lstm-scale sizes the video-lstm baseline; architecture {architecture!r} has its own "
+                        "sizes: drop --video-lstm-scale, or give --model video-lstm")
+    if "broadcast_width" in chosen and decoder != "broadcast":
+        raise PigaError(f"--broadcast-width sizes the spatial-broadcast decoder; decoder {decoder!r} has its own sizes: "
+                        "drop --broadcast-width, or give --decoder broadcast")
 
 
 @contextlib.contextmanager

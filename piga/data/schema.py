@@ -446,6 +446,50 @@ def _check_scene_attr(info: DatasetInfo) -> None:
                               f"{info.system!r}; fix one of them")
 
 
+def _frames_text(shape: tuple[int, ...]) -> str:
+    """``64x64 gray`` or ``64x64 with 3 channels``: frames of ``shape`` (H, W) or (H, W, C) in an error."""
+    gray = len(shape) == 2 or shape[2] == 1
+    return f"{shape[0]}x{shape[1]}" + (" gray" if gray else f" with {shape[2]} channels")
+
+
+def _check_env_attrs(info: DatasetInfo) -> None:
+    """Refuses a pendulum file whose ``env_config`` or ``dt`` contradicts the env that made it: frames of another size
+    than env_config's ``image_size``; a ``dt`` other than the step of the env its ``env_id`` names (Gymnasium's pixel
+    pendulum steps 0.05 s; dm_control's env_config's ``action_repeat`` x 0.02 s). An edited 'dt' trained g for the
+    wrong interval, and only piga-control refused the model. A file without ``env_config`` (an imported recording) has
+    nothing to contradict; one from before env ids (no ``env_id``) has its frames checked, not its ``dt``."""
+    path, attrs, config = info.path, info.attrs, info.attrs.get("env_config")
+    if info.system != "pendulum" or not isinstance(config, dict):
+        return
+    size, shape = config.get("image_size"), info.image_shape
+    if isinstance(size, int) and not isinstance(size, bool) and shape[:2] != (size, size):
+        fix = (f"set env_config's image_size to {shape[0]}, or collect the file again" if shape[0] == shape[1]
+               else "collect the file again")
+        look = "RGB" if config.get("color") == "rgb" else "gray"  # (dm_control's pendulum renders either)
+        raise DataFormatError(f"{path}: attribute 'env_config' says the env renders {size}x{size} {look} frames "
+                              f"(image_size {size}), but the file's frames are {_frames_text(shape)}; {fix}")
+    env_id = attrs.get("env_id")
+    if env_id is None:
+        return
+    from envs import DMC_PENDULUM, PENDULUM_DT, PIXEL_PENDULUM  # (only for a file of an env: an import pays nothing)
+    from envs.dmc import DMC_PHYSICS_DT, MAX_ACTION_REPEAT
+
+    repeat = config.get("action_repeat")
+    if env_id == PIXEL_PENDULUM:
+        step, how = PENDULUM_DT, ""
+    elif env_id == DMC_PENDULUM and isinstance(repeat, int) and not isinstance(repeat, bool) and repeat >= 1:
+        step, how = repeat * DMC_PHYSICS_DT, f" at env_config's action_repeat {repeat} ({repeat} x {DMC_PHYSICS_DT:g} s)"
+    else:  # another env's id, or a config without the action repeat (not dm_control's): nothing to compare
+        return
+    if math.isclose(info.dt, step, rel_tol=1e-9):
+        return
+    fits = round(info.dt / DMC_PHYSICS_DT)  # dm_control: the action repeat that steps the file's dt
+    other = (f" or env_config's action_repeat to {fits}" if how and 1 <= fits <= MAX_ACTION_REPEAT
+             and math.isclose(fits * DMC_PHYSICS_DT, info.dt, rel_tol=1e-9) else "")
+    raise DataFormatError(f"{path}: attribute 'dt' says the frames are {info.dt:g} s apart, but {env_id} (its 'env_id') "
+                          f"steps {step:g} s{how}; set 'dt' to {step:g}{other}, or collect the file again")
+
+
 def _check_attrs_agree(info: DatasetInfo, f: h5py.File) -> None:
     """Refuses attributes that contradict the arrays (``n_objects``, ``state_names``, ``split_counts``) or are not the
     JSON objects they should be (``env_config``, ``scene_config``), and non-finite ``/states``."""
@@ -454,6 +498,7 @@ def _check_attrs_agree(info: DatasetInfo, f: h5py.File) -> None:
         if key in attrs and not isinstance(attrs[key], dict):
             raise DataFormatError(f"{path}: attribute '{key}' must be a JSON object, got {str(attrs[key])[:80]!r}")
     _check_scene_attr(info)
+    _check_env_attrs(info)
     states_dim = f["states"].shape[2] if info.has_states else None
     if "n_objects" in attrs:
         n = attrs["n_objects"]
@@ -588,7 +633,7 @@ def check_pixel_pendulum_file(info: DatasetInfo, use: str) -> None:
     shape = info.image_shape
     if isinstance(size, int) and not isinstance(size, bool) and shape not in ((size, size), (size, size, 1)):
         gray = len(shape) == 2 or shape[2] == 1
-        frames = f"{shape[0]}x{shape[1]}" + (" gray" if gray else f" with {shape[2]} channels")
+        frames = _frames_text(shape)
         fix = (f"set env_config's image_size to {shape[0]}, or collect the file again" if gray and shape[0] == shape[1]
                else "collect the file again with piga-collect")
         raise DataFormatError(f"{info.path}: attribute 'env_config' says the env renders {size}x{size} gray frames "

@@ -73,16 +73,43 @@ def _in_range(img: np.ndarray) -> np.ndarray:
     return img if img.dtype == np.uint8 else np.clip(img, 0, 1)
 
 
+def thumbnail(img: np.ndarray, side: int) -> np.ndarray:
+    """``img`` (H, W) or (H, W, C), area-averaged (cv2's ``INTER_AREA``) to at most ``side`` pixels on its longer side;
+    as it is where it fits. What is drawn is then each frame's light averaged over a pixel of the strip, whatever
+    matplotlib's own resampling of a larger image does, and ``piga-show`` can measure what the average keeps (a 1024 px
+    scene's 6 px balls: a few gray levels, which looked like black frames)."""
+    import cv2
+
+    h, w = img.shape[:2]
+    scale = side / max(h, w)
+    if scale >= 1:
+        return img
+    size = (max(1, round(w * scale)), max(1, round(h * scale)))  # cv2's (width, height)
+    small = cv2.resize(np.ascontiguousarray(img), size, interpolation=cv2.INTER_AREA)
+    return small.reshape(*small.shape[:2], *img.shape[2:])  # cv2 drops a single channel's axis
+
+
+def strip_cell_side(fig: Figure) -> int:
+    """The pixels a frame of :func:`frame_strip`'s ``fig`` is drawn in, a side (its first cell at the figure's dpi,
+    :func:`save_figure`'s 100)."""
+    box = fig.axes[0].get_position()
+    width, height = fig.get_size_inches() * fig.dpi
+    return max(1, int(min(box.width * width, box.height * height)))
+
+
 def frame_strip(
     frames: np.ndarray, row_labels: list[str] | None = None, col_labels: list[str] | None = None, title: str | None = None
 ) -> Figure:
-    """A grid of frames: ``frames`` uint8 or float [R, C, H, W] (gray) or [R, C, H, W, 3]."""
+    """A grid of frames: ``frames`` uint8 or float [R, C, H, W] (gray) or [R, C, H, W, 3]; frames larger than a cell
+    are area-averaged to it (:func:`thumbnail`)."""
     rows, cols = frames.shape[:2]
     fig, axes = plt.subplots(rows, cols, figsize=(cols * 0.9, rows * 0.95 + (0.3 if title else 0)), squeeze=False)
+    fig.subplots_adjust(wspace=0.05, hspace=0.1)  # first: the cells' size is what the frames are averaged to
+    side = strip_cell_side(fig)
     for r in range(rows):
         for c in range(cols):
             ax = axes[r, c]
-            img = frames[r, c]
+            img = thumbnail(frames[r, c], side)
             ax.imshow(_in_range(img), cmap="gray" if img.ndim == 2 else None, vmin=0, vmax=255 if img.dtype == np.uint8 else 1)
             ax.set_xticks([])
             ax.set_yticks([])
@@ -92,7 +119,6 @@ def frame_strip(
                 ax.set_ylabel(row_labels[r], fontsize=7, parse_math=False)
     if title:
         fig.suptitle(title, fontsize=9, parse_math=False)  # a file's name or attribute may hold '$': text, not TeX
-    fig.subplots_adjust(wspace=0.05, hspace=0.1)
     return fig
 
 
