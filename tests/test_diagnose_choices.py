@@ -653,6 +653,23 @@ def test_the_closure_line_gives_each_numbers_basis(damped) -> None:
     assert "not comparable" not in state and "not comparable" not in markdown(damped, "m", "d", "c")
 
 
+def test_the_corrected_values_say_how_the_damping_is_taken(damped) -> None:
+    """dm_control at mass 2 named "damping ... 0.0698 1/s" (MuJoCo's implicit convention) and printed "corrected g =
+    13.1, a = 0.6624, b = 0.06933" (piga's explicit step) with no word on the difference."""
+    import copy
+
+    from piga.diagnostics.report import closure_line, markdown
+
+    d = copy.deepcopy(damped)
+    d.damping_convention = {"taken": "explicit", "step_s": 0.02, "frame_s": 0.04, "other": "implicit", "factor": 1.006,
+                            "values": {"g": 13.18, "a": 0.6666, "b": 0.06977}}
+    said = "(the damping taken explicitly; taken implicitly, the same frames read g = 13.18, a = 0.6666, b = 0.06977)"
+    assert closure_line(d).endswith(said), closure_line(d)
+    assert said in markdown(d, "m", "d", "c")
+    d.damping_convention = None
+    assert "the damping taken" not in closure_line(d) and "the damping taken" not in markdown(d, "m", "d", "c")
+
+
 def test_no_gap_above_the_floor_leads_with_no_closure_percentage(damped) -> None:
     """Noise of 50 gray levels read "free-run closure in pixels 95.8% (no gap above the floor: a ratio of noise)": a
     headline percentage beside the statement that it means nothing. The line and the report's headline now lead with

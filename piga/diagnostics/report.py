@@ -189,6 +189,19 @@ def values_text(values: dict[str, float]) -> str:
     return ", ".join(f"{k} = {number(v, '.4g')}" for k, v in values.items())
 
 
+def convention_text(d: Diagnosis) -> str:
+    """" (the damping taken explicitly; taken implicitly, the same frames read g = 13.18, a = 0.6666, b = 0.06977)"
+    after the corrected values where they have a damping (:func:`~piga.diagnostics.diagnose.damping_convention`): the
+    frames cannot tell the two conventions apart, and the verdict gives the damping as the recorded system takes it,
+    so its b may be the other convention's (dm_control at mass 2 named b = 0.0698, and printed "corrected ... b =
+    0.06933" beside it)."""
+    c = d.damping_convention
+    if not c or not c.get("values"):
+        return ""
+    return (f" (the damping taken {c['taken']}ly; taken {c['other']}ly, the same frames read "
+            f"{values_text(c['values'])})")
+
+
 def closure_line(d: Diagnosis) -> str:
     """The command's one line on the closure, each number with its basis: the headline in pixels or angles, and the
     mean over all windows, which is always in angles (a blur's "free-run closure 97.6% (pixel MSE ...; mean over all
@@ -209,7 +222,7 @@ def closure_line(d: Diagnosis) -> str:
                   f"{number(g.typical_free_run_mse_corrected)} rad²"
                   + (f", of the gap above the twin's floor {number(floor)}" if floor is not None and g.floor_subtracted
                      else ""))
-    corrected = "corrected " + values_text(d.corrected)
+    corrected = "corrected " + values_text(d.corrected) + convention_text(d)
     basis = "in pixels" if pixels else "in angles"
     if g.no_gap and d.verdict_class == "unexplained":  # a gap, but nothing named that would close it
         return (f"free-run closure: none measured (the gap is not explained, so nothing was corrected; {detail}); "
@@ -322,7 +335,7 @@ def markdown(d: Diagnosis, model: str, data: str, command: str) -> str:
         f"{math.degrees(g.one_step_rms_nominal_rad):.3f}° nominal, {math.degrees(g.one_step_rms_corrected_rad):.3f}° corrected.", "",
         f"Nominal g = {number(d.nominal['g'], '.4f')}, a = {number(d.nominal['a'], '.4f')}; "
         + (f"{REFITTED}: " if g.no_gap else "corrected: ")
-        + ", ".join(f"{k} = {_fmt(v)}" for k, v in d.corrected.items()), "",
+        + ", ".join(f"{k} = {_fmt(v)}" for k, v in d.corrected.items()) + convention_text(d), "",
         "![gap](gap.png)", "",
         "| horizon | angle RMSE nominal (deg) | corrected (deg) | closure | pixel MSE nominal | corrected |", "|---|---|---|---|---|---|",
     ]
