@@ -412,6 +412,11 @@ class Gap(_ByKey):
     (``free_run_gap_closure`` None; the raw numbers stay for reference)."""
     pixel_closure_raw: bool = False
     """``pixel_free_run_gap_closure`` is raw, with no floor subtracted (it held the raw value unsaid)."""
+    typical_free_run_mse_floor_interval: list[float] | None = None
+    """95% bootstrap interval of ``typical_free_run_mse_floor``, a median over the held-out windows (None: no floor);
+    wide on a recording of few held-out sequences."""
+    held_out_windows: int | None = None
+    """The held-out windows that the floor is a median over."""
 
 
 @dataclass
