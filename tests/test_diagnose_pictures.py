@@ -204,6 +204,33 @@ def test_a_camera_candidate_that_takes_up_what_is_drawn_with_the_action_is_not_c
     assert any(n.startswith("a camera a little different") for n in notes), notes
 
 
+def test_a_vision_gap_in_what_is_drawn_with_the_action_puts_every_step_on_the_matched_angles() -> None:
+    """Gymnasium at an actuation gain of 1.6 (its torque arrow drawn larger than any in the training frames) read "not
+    explained ... a camera moved far?" with a = 2e-09 on the encoder's angles, which read through the arrow; the
+    angles matched to the decoder's renders read the gain."""
+    from piga.diagnostics import analyse
+    from piga.diagnostics.diagnose import drawn_with_the_action
+    from tests.test_diagnostics import NOMINAL, planted
+
+    obs = planted({"gain": 1.6}, n=80, t=24)
+    rng = np.random.default_rng(1)
+    u = np.abs(obs.actions[:, :-1])  # (N, T - 1)
+    arrow = np.concatenate([np.full((len(u), 1), 1e-4), 1e-4 + 5e-4 * u ** 2], 1)  # (N, T) after u_t, frame t + 1
+    read_through = obs.theta + 0.3 * np.concatenate([np.zeros((len(u), 1)), obs.actions[:, :-1]], 1) \
+        + rng.normal(0, 0.05, obs.theta.shape)  # the encoder pulled toward the arrow
+    seen = replace(obs, theta=read_through, rec_mse=arrow)
+    config = replace(DiagnoseConfig(), bootstrap=10)
+    assert drawn_with_the_action(seen, 2e-4, config)
+    assert not drawn_with_the_action(replace(seen, rec_mse=np.full_like(arrow, 1e-3)), 2e-4, config)  # every frame
+    assert not drawn_with_the_action(seen, 2e-3, config)  # within the vision ratio: no gap
+    camera = V.CameraFindings(V.Camera(), 0.0, 0.0, 0, 0, [], 1e-3, 1e-3, [])
+    d = analyse(seen, NOMINAL, config, rec_training=2e-4, camera=camera, matched=lambda: obs.theta)
+    assert d.verdict_class == "gain" and abs(d.effects[0].value - 1.6) < 0.05, d.verdict
+    assert any(n.startswith("the encoder reads its angles through what is drawn with the action") for n in d.notes)
+    on_encoder = analyse(seen, NOMINAL, replace(config, matched_angles=False), rec_training=2e-4, camera=camera)
+    assert not any("the encoder reads its angles through" in n for n in on_encoder.notes)
+
+
 def test_repeated_frames_do_not_hide_sensor_noise(model, tmp_path: Path) -> None:
     """A repeated frame (a dropped frame) repeats its noise: the repeats are left out of the correlation."""
     path = _recording(tmp_path / "rec.h5", model, "noise")

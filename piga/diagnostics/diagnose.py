@@ -2006,7 +2006,11 @@ def summarise_vision(obs: Observations, rec_training: float, camera: CameraFindi
                 notes.append(f"a camera a little different from the model's: the {small['candidate']} candidate "
                              f"({change}) lowers the held-out matched residual by {100 * small['drop']:.0f}%, but "
                              + under)
-        if camera.matched_for_sign:
+        if camera.matched_for_arrow:
+            notes.append("the encoder reads its angles through what is drawn with the action (below): the selection, "
+                         "the values and the gap are all on angles found by matching every frame to the decoder's "
+                         "renders (analysis by synthesis), not on the encoder's")
+        elif camera.matched_for_sign:
             notes.append("the encoder's angles did not show the actuation's sign, the angles found by matching every "
                          "frame to the decoder's renders do: the selection, the values and the gap are all on those "
                          "angles (analysis by synthesis), not on the encoder's")
@@ -2060,6 +2064,16 @@ def action_linked(rec_mse: np.ndarray, actions: np.ndarray, own_rec_mse: np.ndar
         ratios.append(float(after[u >= np.quantile(u, 0.8)].mean() / calm))
     rec, own = ratios
     return (rec, own) if own > 0 and not within_factor(rec, own, ACTION_LINKED_FACTOR) else None
+
+
+def drawn_with_the_action(obs: Observations, rec_training: float, config: DiagnoseConfig) -> bool:
+    """Whether the recording re-renders more than ``config.vision_ratio`` times worse than the training frames while
+    the frames after its smallest actions re-render no worse (:func:`calm_frames_error`): a vision gap in what is
+    drawn with the action, such as Gymnasium's torque arrow at an actuation gain above the training file's."""
+    if rec_training <= 0 or float(np.mean(obs.rec_mse)) <= config.vision_ratio * rec_training:
+        return False
+    calm = calm_frames_error(obs.rec_mse, obs.actions)
+    return calm is not None and calm <= rec_training
 
 
 def calm_frames_error(rec_mse: np.ndarray, actions: np.ndarray) -> float | None:
@@ -2271,6 +2285,15 @@ def analyse(obs: Observations, nom: Nominal, config: DiagnoseConfig = DiagnoseCo
     static torque below the angle reading's error, :func:`below_reading`), name the effects,
     summarise the vision, measure the gap, assemble.
     """
+    if (camera is not None and not camera.rematched and config.matched_angles and matched is not None
+            and drawn_with_the_action(obs, rec_training, config)):
+        # the encoder reads its angles through what is drawn with the action, larger than in any training frame (an
+        # actuation gain of 1.6 read a = 2e-09 and "not explained ... a camera moved far?" on the encoder's angles;
+        # gains of 2.0, or 1.6 beside a blur, which the angles matched to the decoder's renders read, read right):
+        # everything is done on the matched angles
+        return analyse(obs, nom, config, model, rec_training, progress,
+                       dataclass_replace(camera, theta=matched() if callable(matched) else matched,
+                                         matched_for_arrow=True), arrow, own, None, own_missing)
     stale = obs.stale if obs.stale is not None and obs.stale.any() else None
     theta = camera.theta if camera is not None and camera.rematched else obs.theta  # the corrected model's angles
     windows = cut_windows(obs, theta, stale, config)

@@ -524,6 +524,9 @@ class CameraFindings:
     matched_for_sign: bool = False
     """``theta`` holds the angles matched with no camera because the encoder's angles missed the actuation's sign
     (:func:`~piga.diagnostics.diagnose.read_with_sign`), not because a camera or noise was accepted."""
+    matched_for_arrow: bool = False
+    """``theta`` holds the angles matched with no camera because the vision gap lies in what is drawn with the action
+    (:func:`~piga.diagnostics.diagnose.drawn_with_the_action`), through which the encoder reads its angles."""
 
     unseen: float = 0.0
     """Fraction of the held-out frames in which the pendulum is not in view through any camera tried
