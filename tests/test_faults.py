@@ -1688,7 +1688,7 @@ def test_control_refuses_options_it_would_ignore(argv: list[str], needle: str, t
 @pytest.mark.parametrize("argv, needles", [
     (["--horizon", "7"], ["--horizon", "ddpg"]),
     (["--horizon", "20"], ["--horizon", "ddpg"]),  # the piga planner's own default: still not a DDPG option
-    (["--no-warm-start"], ["--warm-start", "a policy, no planner"]),
+    (["--no-warm-start"], ["--no-warm-start: a ddpg run plans", "a policy, no planner"]),  # the flag as written
     (["--not-told"], ["--not-told is for the piga agent", "ddpg run is never told"]),
 ])
 def test_control_refuses_planner_options_for_a_baseline_run(argv: list[str], needles: list[str],

@@ -534,7 +534,7 @@ def _baseline(args: argparse.Namespace, kind: RunKind, mpc: MPCConfig, outputs: 
         from piga.evaluation.video import check_video_room
 
         check_video_room(args.video, args.steps)  # before the episodes: real frames | reconstruction
-    planner = [f"--{name.replace('_', '-')}" for name in ("horizon", "candidates", "elites", "iterations", "warm_start")
+    planner = [_flag(args, name) for name in ("horizon", "candidates", "elites", "iterations", "warm_start")
                if name in given]
     if planner:
         raise PigaError(f"{', '.join(planner)}: a {name} run plans with its own settings "
@@ -836,7 +836,13 @@ GOAL_IMAGE_OPTIONS = ("write_goal_image", "angle", "env", "overwrite", "quiet")
 def _ignored_options(args: argparse.Namespace, given: set[str], taken: Sequence[str]) -> list[str]:
     """The ``given`` options (:func:`~piga.cli.common.given_options`) outside ``taken`` (destinations), as flags
     (``--episodes``) in the parser's order: options that a mode of the command would ignore."""
-    return [f"--{k.replace('_', '-')}" for k in vars(args) if k in given and k not in taken]
+    return [_flag(args, k) for k in vars(args) if k in given and k not in taken]
+
+
+def _flag(args: argparse.Namespace, dest: str) -> str:
+    """The flag of option ``dest`` as the user wrote it: ``--no-warm-start`` where --warm-start was turned off."""
+    flag = dest.replace("_", "-")
+    return f"--no-{flag}" if dest == "warm_start" and not args.warm_start else f"--{flag}"
 
 
 def _dmc_sb3_agent(run_dir: str, env: DMCPendulumConfig) -> SB3Agent:
