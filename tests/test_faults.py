@@ -2192,9 +2192,11 @@ def test_control_refuses_work_it_would_never_finish(argv: list[str], needle: str
     assert _listing(tmp_path) == []
 
 
-def test_control_sweep_refuses_a_gravity_multiplier(tiny_piga_run: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    """--gravity-mult beside --sweep used to be ignored."""
-    refused("piga-control", ["--model", str(tiny_piga_run), "--sweep", "0.5:1:0.5", "--gravity-mult", "2"], capsys,
+@pytest.mark.parametrize("mult", ["2", "1", "1.0"])
+def test_control_sweep_refuses_a_gravity_multiplier(mult: str, tiny_piga_run: Path,
+                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    """--gravity-mult beside --sweep used to be ignored, and still was at its default value, 1."""
+    refused("piga-control", ["--model", str(tiny_piga_run), "--sweep", "0.5:1:0.5", "--gravity-mult", mult], capsys,
             "drop --gravity-mult")
 
 
