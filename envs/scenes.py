@@ -343,10 +343,13 @@ def draw_start(config: SceneConfig, rng: np.random.Generator, steps: int,
         v0 = np.stack([v for _, v in starts])
         # forces such as --g 1e308 overflow to inf and NaN: those candidates fail the check, without a warning
         with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-            fine_p, _ = simulate(fine, p0, v0, (steps - 1) * config.substeps + 1)  # (T·M, B, N, 2)
+            fine_p, fine_v = simulate(fine, p0, v0, (steps - 1) * config.substeps + 1)  # (T·M, B, N, 2)
             good = np.flatnonzero(_acceptable(config, fine_p, test))
         if len(good):
             return simulate(config, p0[good[0]], v0[good[0]], steps)
+    # forces too weak to show are refused first: no wall, sequence length or image size would make them learnable
+    frames = [a[:: config.substeps].transpose(1, 0, 2, 3).reshape(batch, steps, -1) for a in (fine_p, fine_v)]
+    check_forces_visible(config, np.concatenate(frames, -1), walls=True)  # (B, T, 4N), as generate_sequence writes
     if config.half and test:  # a test sequence must leave the top half: short ones cannot
         raise SceneError(f"{config.scene}: no start in {config.max_tries} draws stays clear of the walls and in the top "
                          f"half for its first {config.half_frames} frames, then reaches the bottom half within {steps} "
@@ -382,9 +385,10 @@ def force_shift(config: SceneConfig, states: np.ndarray) -> float:
     return float(np.abs(p - free).max()) if states.size else 0.0
 
 
-def check_forces_visible(config: SceneConfig, states: np.ndarray) -> None:
+def check_forces_visible(config: SceneConfig, states: np.ndarray, walls: bool = False) -> None:
     """Refuses forces too weak to show in the frames (:data:`MIN_FORCE_SHIFT`; ``states`` as :func:`force_shift`):
     ``--g 1e-300`` leaves the gravity scene's balls on straight lines, and g could not be learned from them.
+    ``walls``: the starts all hit a wall, so longer sequences are not offered.
 
     Raises:
         SceneError: naming the parameters, the displacement and the scene's own values.
@@ -396,8 +400,8 @@ def check_forces_visible(config: SceneConfig, states: np.ndarray) -> None:
         values, own = _params_text(config.params), _params_text(SCENES[config.scene]["params"])
         raise SceneError(f"{config.scene}: with {values} the forces move no ball by {MIN_FORCE_SHIFT:g} px from a straight "
                          f"line in {states.shape[1]} frames (at most {shift:.3g} px), so the frames cannot show them and "
-                         f"their parameters cannot be learned; use stronger forces (the scene's own: {own}) or longer "
-                         "sequences")
+                         f"their parameters cannot be learned; use stronger forces (the scene's own: {own})"
+                         + ("" if walls else " or longer sequences"))
 
 
 def fastest_frequency(config: SceneConfig, states: np.ndarray) -> float:

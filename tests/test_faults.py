@@ -353,7 +353,7 @@ def test_a_failed_allocation_is_out_of_memory(capsys: pytest.CaptureFixture[str]
     (["--env", "piga/DMCPendulum-v0", "--max-speed", "1e308"], ["--max-speed=1e+308 is out of range", "--max-speed in [0, π/0.02 ≈ 157.0796]"], 1),
     (["--env", "piga/DMCPendulum-v0", "--env-option", "damping=1e300"], ["damping=1e+300 is out of range", "damping in [0, 100]"], 1),
     (["--system", "gravity", "--g", "1e308"], ["weaker forces than g = 1e+308, m = 1 (the scene's own: g = 60, m = 1)"], 1),
-    (["--system", "spring", "--k", "1e-300", "--steps", "12", "--image-size", "20"], ["stronger forces than k = 1e-300"], 1),
+    (["--system", "spring", "--k", "0.01", "--steps", "12", "--image-size", "20"], ["stronger forces than k = 0.01"], 1),
     (["--gravity", "-nan"], ["argument --gravity: expected a finite number > 0, got -nan"], 2),  # "expected one argument"
     (["--system", "gravity", "--g", "1e-300"], ["the forces move no ball by 0.01 px from a straight line in 6 frames",
                                                 "the scene's own: g = 60, m = 1"], 1),  # straight lines, "wrote"
@@ -2555,6 +2555,17 @@ def test_a_scene_with_forces_too_strong_names_them(tmp_path: Path, capsys: pytes
     refused("piga-collect", ["--out", str(tmp_path / "d.h5"), "--system", "gravity", "--g", "1e6", "--sequences", "2",
                              "--steps", "30", "--workers", "1", "--split", "1,1,0", "--quiet"], capsys,
             "stays clear of the walls", "weaker forces than g = 1e+06")
+    assert _listing(tmp_path) == []
+
+
+def test_a_scene_with_forces_too_weak_to_show_says_so_before_the_walls(tmp_path: Path,
+                                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    """--k 1e-9 lets the balls fly into the walls: the refusal offered shorter sequences and a larger image, and a
+    larger image was then refused for forces too weak to show, which no sequence length or image size helps."""
+    line = refused("piga-collect", ["--out", str(tmp_path / "d.h5"), "--system", "spring", "--k", "1e-9", "--sequences",
+                                    "6", "--steps", "12", "--workers", "1", "--quiet"], capsys,
+                   "with k = 1e-09, l = 6 the forces move no ball by 0.01 px", "use stronger forces (the scene's own")
+    assert "walls" not in line and "--image-size" not in line and "longer sequences" not in line
     assert _listing(tmp_path) == []
 
 
