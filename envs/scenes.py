@@ -138,6 +138,13 @@ class SceneConfig:
                 raise SceneError(f"{self.scene}: k = {number_text(self.params['k'])} is too stiff for {self.substeps} substeps of "
                                  f"{self.dt:g} s: the simulation would blow up; k must be below {stiffest:.8g} "
                                  "((2·substeps/dt)²/objects)")
+        if self.scene == "spring" and 2 * self.params.get("l", math.inf) < 2 * self.radius + BALL_GAP:
+            # (digits-spring's "radius" is half a digit's box, which its glyph does not fill: its digits may overlap)
+            raise SceneError(f"{self.scene}: at l = {number_text(self.params['l'])} the balls rest with their centres 2l = "
+                             f"{number_text(2 * self.params['l'])} px apart, under their diameter 2r = "
+                             f"{number_text(2 * self.radius)} px plus {BALL_GAP:g} px: they would touch or overlap (one "
+                             f"hiding the other) in most frames; give l of at least "
+                             f"{number_text(self.radius + BALL_GAP / 2)} (r + {BALL_GAP / 2:g}), or a smaller radius")
         if self.half and self.scene != "spring":
             raise SceneError(f"{type(self).__name__}.half (the top-half data) is for the spring scene, not {self.scene}")
         if self.half_frames < 1:
@@ -157,6 +164,11 @@ class SceneConfig:
     def to_dict(self) -> dict[str, Any]:
         """JSON-able fields."""
         return asdict(self)
+
+
+#: Pixels that the spring scene's rest length 2l must leave between its balls (the gravity scene redraws starts that
+#: bring two balls' centres within r + 1): at a shorter l the balls overlap at rest, one hiding the other.
+BALL_GAP = 1.0
 
 
 def max_stable_k(dt: float, substeps: int, n_objects: int) -> float:

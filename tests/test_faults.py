@@ -354,6 +354,9 @@ def test_a_failed_allocation_is_out_of_memory(capsys: pytest.CaptureFixture[str]
     (["--env", "piga/DMCPendulum-v0", "--env-option", "damping=1e300"], ["damping=1e+300 is out of range", "damping in [0, 100]"], 1),
     (["--system", "gravity", "--g", "1e308"], ["weaker forces than g = 1e+308, m = 1 (the scene's own: g = 60, m = 1)"], 1),
     (["--system", "spring", "--k", "0.01", "--steps", "12", "--image-size", "20"], ["stronger forces than k = 0.01"], 1),
+    # balls that overlap at rest: one hid the other at t = 0, "wrote"
+    (["--system", "spring", "--l", "0.01"], ["spring: at l = 0.01 the balls rest with their centres 2l = 0.02 px apart",
+                                             "diameter 2r = 6 px plus 1 px", "give l of at least 3.5 (r + 0.5)"], 1),
     (["--gravity", "-nan"], ["argument --gravity: expected a finite number > 0, got -nan"], 2),  # "expected one argument"
     (["--system", "gravity", "--g", "1e-300"], ["the forces move no ball by 0.01 px from a straight line in 6 frames",
                                                 "the scene's own: g = 60, m = 1"], 1),  # straight lines, "wrote"
@@ -2556,6 +2559,18 @@ def test_a_scene_with_forces_too_strong_names_them(tmp_path: Path, capsys: pytes
                              "--steps", "30", "--workers", "1", "--split", "1,1,0", "--quiet"], capsys,
             "stays clear of the walls", "weaker forces than g = 1e+06")
     assert _listing(tmp_path) == []
+
+
+def test_a_spring_rest_length_is_refused_only_where_the_balls_overlap() -> None:
+    """The rest length 2l must leave a pixel between the balls (their radius r); digits, whose glyphs do not fill
+    their box, may overlap."""
+    from envs.scenes import SceneError, scene_config
+
+    for params, radius in (({"l": 3.4}, 3.0), ({}, 6.0)):
+        with pytest.raises(SceneError, match=f"give l of at least {radius + 0.5:g} "):
+            scene_config("spring", params=params, radius=radius, image_size=64)
+    scene_config("spring", params={"l": 3.5})
+    scene_config("digits-spring", radius=14.0)
 
 
 def test_a_scene_with_forces_too_weak_to_show_says_so_before_the_walls(tmp_path: Path,
