@@ -138,6 +138,13 @@ class SceneConfig:
                 raise SceneError(f"{self.scene}: k = {number_text(self.params['k'])} is too stiff for {self.substeps} substeps of "
                                  f"{self.dt:g} s: the simulation would blow up; k must be below {stiffest:.8g} "
                                  "((2·substeps/dt)²/objects)")
+        if self.scene == "spring" and 2 * self.params.get("l", math.inf) < 2 * self.radius + BALL_GAP:
+            # (digits-spring's "radius" is half a digit's box, which its glyph does not fill: its digits may overlap)
+            raise SceneError(f"{self.scene}: at l = {number_text(self.params['l'])} the balls rest with their centres 2l = "
+                             f"{number_text(2 * self.params['l'])} px apart, under their diameter 2r = "
+                             f"{number_text(2 * self.radius)} px plus {BALL_GAP:g} px: they would touch or overlap (one "
+                             f"hiding the other) in most frames; give l of at least "
+                             f"{number_text(self.radius + BALL_GAP / 2)} (r + {BALL_GAP / 2:g}), or a smaller radius")
         if self.half and self.scene != "spring":
             raise SceneError(f"{type(self).__name__}.half (the top-half data) is for the spring scene, not {self.scene}")
         if self.half_frames < 1:
@@ -157,6 +164,11 @@ class SceneConfig:
     def to_dict(self) -> dict[str, Any]:
         """JSON-able fields."""
         return asdict(self)
+
+
+#: Pixels that the spring scene's rest length 2l must leave between its balls (the gravity scene redraws starts that
+#: bring two balls' centres within r + 1): at a shorter l the balls overlap at rest, one hiding the other.
+BALL_GAP = 1.0
 
 
 def max_stable_k(dt: float, substeps: int, n_objects: int) -> float:
@@ -343,10 +355,13 @@ def draw_start(config: SceneConfig, rng: np.random.Generator, steps: int,
         v0 = np.stack([v for _, v in starts])
         # forces such as --g 1e308 overflow to inf and NaN: those candidates fail the check, without a warning
         with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-            fine_p, _ = simulate(fine, p0, v0, (steps - 1) * config.substeps + 1)  # (T·M, B, N, 2)
+            fine_p, fine_v = simulate(fine, p0, v0, (steps - 1) * config.substeps + 1)  # (T·M, B, N, 2)
             good = np.flatnonzero(_acceptable(config, fine_p, test))
         if len(good):
             return simulate(config, p0[good[0]], v0[good[0]], steps)
+    # forces too weak to show are refused first: no wall, sequence length or image size would make them learnable
+    frames = [a[:: config.substeps].transpose(1, 0, 2, 3).reshape(batch, steps, -1) for a in (fine_p, fine_v)]
+    check_forces_visible(config, np.concatenate(frames, -1), walls=True)  # (B, T, 4N), as generate_sequence writes
     if config.half and test:  # a test sequence must leave the top half: short ones cannot
         raise SceneError(f"{config.scene}: no start in {config.max_tries} draws stays clear of the walls and in the top "
                          f"half for its first {config.half_frames} frames, then reaches the bottom half within {steps} "
@@ -382,9 +397,10 @@ def force_shift(config: SceneConfig, states: np.ndarray) -> float:
     return float(np.abs(p - free).max()) if states.size else 0.0
 
 
-def check_forces_visible(config: SceneConfig, states: np.ndarray) -> None:
+def check_forces_visible(config: SceneConfig, states: np.ndarray, walls: bool = False) -> None:
     """Refuses forces too weak to show in the frames (:data:`MIN_FORCE_SHIFT`; ``states`` as :func:`force_shift`):
     ``--g 1e-300`` leaves the gravity scene's balls on straight lines, and g could not be learned from them.
+    ``walls``: the starts all hit a wall, so longer sequences are not offered.
 
     Raises:
         SceneError: naming the parameters, the displacement and the scene's own values.
@@ -396,8 +412,8 @@ def check_forces_visible(config: SceneConfig, states: np.ndarray) -> None:
         values, own = _params_text(config.params), _params_text(SCENES[config.scene]["params"])
         raise SceneError(f"{config.scene}: with {values} the forces move no ball by {MIN_FORCE_SHIFT:g} px from a straight "
                          f"line in {states.shape[1]} frames (at most {shift:.3g} px), so the frames cannot show them and "
-                         f"their parameters cannot be learned; use stronger forces (the scene's own: {own}) or longer "
-                         "sequences")
+                         f"their parameters cannot be learned; use stronger forces (the scene's own: {own})"
+                         + ("" if walls else " or longer sequences"))
 
 
 def fastest_frequency(config: SceneConfig, states: np.ndarray) -> float:

@@ -525,6 +525,7 @@ def test_the_smallest_default_file_is_accepted(tmp_path: Path) -> None:
         check_compatible(PhysicsModel(ModelConfig(dt=0.1)), data)
     with h5py.File(data, "a") as f:
         f.attrs["env_id"], f.attrs["dt"] = "piga/DMCPendulum-v0", 0.06
+        f.attrs["env_config"], f.attrs["params"] = "{}", "{}"  # (the pixel pendulum's are refused beside dm_control's id)
     with pytest.raises(DiagnosisInputError, match=r"frame interval 0.06 s, the model was trained at 0.04 s; record again "
                        r"with --env-option action_repeat=2, or"):
         check_compatible(PhysicsModel(ModelConfig(dt=0.04)), data)

@@ -115,7 +115,12 @@ def _text_env_field(f: h5py.File) -> None:
 
 
 def _labelled_dmc(f: h5py.File) -> None:
-    f.attrs["env_id"] = "piga/DMCPendulum-v0"
+    """Said to be dm_control's, with its settings, step and true parameters (a bare 'env_id' is refused on open)."""
+    from envs.dmc import DMCPendulumConfig
+
+    config = DMCPendulumConfig()
+    f.attrs.update({"env_id": "piga/DMCPendulum-v0", "env_config": json.dumps(config.to_dict()), "dt": config.dt,
+                    "params": json.dumps(config.piga_params())})
 
 
 def _env_renders_32(f: h5py.File) -> None:
@@ -348,7 +353,10 @@ def test_a_failed_allocation_is_out_of_memory(capsys: pytest.CaptureFixture[str]
     (["--env", "piga/DMCPendulum-v0", "--max-speed", "1e308"], ["--max-speed=1e+308 is out of range", "--max-speed in [0, π/0.02 ≈ 157.0796]"], 1),
     (["--env", "piga/DMCPendulum-v0", "--env-option", "damping=1e300"], ["damping=1e+300 is out of range", "damping in [0, 100]"], 1),
     (["--system", "gravity", "--g", "1e308"], ["weaker forces than g = 1e+308, m = 1 (the scene's own: g = 60, m = 1)"], 1),
-    (["--system", "spring", "--k", "1e-300", "--steps", "12", "--image-size", "20"], ["stronger forces than k = 1e-300"], 1),
+    (["--system", "spring", "--k", "0.01", "--steps", "12", "--image-size", "20"], ["stronger forces than k = 0.01"], 1),
+    # balls that overlap at rest: one hid the other at t = 0, "wrote"
+    (["--system", "spring", "--l", "0.01"], ["spring: at l = 0.01 the balls rest with their centres 2l = 0.02 px apart",
+                                             "diameter 2r = 6 px plus 1 px", "give l of at least 3.5 (r + 0.5)"], 1),
     (["--gravity", "-nan"], ["argument --gravity: expected a finite number > 0, got -nan"], 2),  # "expected one argument"
     (["--system", "gravity", "--g", "1e-300"], ["the forces move no ball by 0.01 px from a straight line in 6 frames",
                                                 "the scene's own: g = 60, m = 1"], 1),  # straight lines, "wrote"
@@ -517,12 +525,21 @@ def _attr_edit(key: str, value: Any) -> Callable[[h5py.File], None]:
     return lambda f: f.attrs.__setitem__(key, value)
 
 
-def _dmc_labelled(action_repeat: int, dt: float) -> Callable[[h5py.File], None]:
-    """The file said to be dm_control's, at ``action_repeat`` and ``dt``."""
+def _dmc_labelled(action_repeat: int | None, dt: float) -> Callable[[h5py.File], None]:
+    """The file said to be dm_control's, at ``action_repeat`` (None: its env_config names none) and ``dt``, with its
+    true parameters at the default physics."""
+    from envs.dmc import DMCPendulumConfig
+
     def edit(f: h5py.File) -> None:
-        f.attrs.update({"env_id": "piga/DMCPendulum-v0", "env_config": json.dumps({"action_repeat": action_repeat}),
-                        "dt": dt})
+        config = {} if action_repeat is None else {"action_repeat": action_repeat}
+        f.attrs.update({"env_id": "piga/DMCPendulum-v0", "env_config": json.dumps(config), "dt": dt,
+                        "params": json.dumps(DMCPendulumConfig().piga_params())})
     return edit
+
+
+def _env_config_edit(**fields: Any) -> Callable[[h5py.File], None]:
+    """``env_config`` with ``fields`` changed."""
+    return lambda f: f.attrs.__setitem__("env_config", json.dumps({**json.loads(f.attrs["env_config"]), **fields}))
 
 
 @pytest.mark.parametrize("edit, needles", [
@@ -555,6 +572,21 @@ def _dmc_labelled(action_repeat: int, dt: float) -> Callable[[h5py.File], None]:
                               "s at env_config's action_repeat 2 (2 x 0.02 s); set 'dt' to 0.04, or collect"]),
     (_dmc_labelled(2, 0.06), ["steps 0.04 s at env_config's action_repeat 2", "set 'dt' to 0.04 or env_config's "
                               "action_repeat to 3, or collect"]),
+    # an env_id that contradicts the file's settings and step: trained, then refused by piga-control
+    (_attr_edit("env_id", "piga/DMCPendulum-v0"), ["attribute 'env_id' says piga/DMCPendulum-v0, but 'env_config' holds "
+                                                   "piga/PixelPendulum-v0's settings (gravity, gravity_mult",
+                                                   "set 'env_id' to piga/PixelPendulum-v0"]),
+    (_attr_edit("env_id", "Foo-v9"), ["attribute 'env_id' says Foo-v9, which is none of piga's envs",
+                                      "set 'env_id' to piga/PixelPendulum-v0, or drop 'env_config'"]),
+    (_dmc_labelled(None, 0.05), ["'dt' says the frames are 0.05 s apart, but piga/DMCPendulum-v0 (its 'env_id') steps a "
+                                 "whole multiple of 0.02 s", "set 'dt' to 0.04 or 'env_id' to piga/PixelPendulum-v0"]),
+    # env_config's physics against params: training scored g against one, piga-control read the other
+    (_env_config_edit(gravity=5.0), ["attribute 'params' says g = 10, but 'env_config' (gravity 5, gravity_mult 1) "
+                                     "makes g = 5", "fix the attribute that is wrong"]),
+    (_env_config_edit(gravity_mult=2), ["'params' says g = 10, but 'env_config' (gravity 10, gravity_mult 2) makes g = 20"]),
+    (_env_config_edit(actuation_gain=0.5), ["'params' says actuation_gain = 1, but 'env_config' (actuation_gain 0.5)"]),
+    (lambda f: (_dmc_labelled(3, 0.06)(f), _env_config_edit(action_repeat=3, mass=2.0)(f)),
+     ["'params' says actuation_gain = 1.32802, but 'env_config' (mass 2, length 0.5) makes actuation_gain = 0.664011"]),
 ])
 def test_a_file_that_breaks_the_schema_is_named_on_open(edit: Callable[[h5py.File], None], needles: list[str],
                                                         tiny_data: Path, tmp_path: Path,
@@ -567,12 +599,15 @@ def test_a_file_that_breaks_the_schema_is_named_on_open(edit: Callable[[h5py.Fil
     assert _listing(tmp_path) == ["d.h5"]
 
 
-@pytest.mark.parametrize("edit", [_dmc_labelled(3, 0.06), _attr_edit("env_id", "elsewhere/Pendulum-v9"),
+@pytest.mark.parametrize("edit", [_dmc_labelled(3, 0.06), _dmc_labelled(None, 0.06),
+                                  lambda f: (f.attrs.__setitem__("env_id", "elsewhere/Pendulum-v9"),
+                                             f.attrs.__delitem__("env_config")),
                                   lambda f: f.attrs.__delitem__("env_id")])
 def test_a_file_whose_dt_fits_its_env_is_read(edit: Callable[[h5py.File], None], tiny_data: Path,
                                               tmp_path: Path) -> None:
-    """dm_control's frames at another action repeat, an env piga does not know, a file from before env ids: their 'dt'
-    is not refused (nor is an imported recording's, which names no env)."""
+    """dm_control's frames at another action repeat (named or not), a recording of an env piga does not know (no
+    'env_config' of piga's envs), a file from before env ids: their 'dt' is not refused (nor is an imported
+    recording's, which names no env)."""
     from piga.data.schema import inspect_dataset
 
     data = _variant(tiny_data, tmp_path / "d.h5", lambda f: (edit(f), f.attrs.__setitem__("dt", 0.06)))
@@ -618,7 +653,9 @@ def test_true_parameters_in_range_are_read_and_drawn_without_warnings(params: di
     from piga.data.schema import inspect_dataset
     from piga.evaluation.plots import curves_figure
 
-    data = _variant(tiny_data, tmp_path / "d.h5", _attr_edit("params", json.dumps(params)))
+    # without 'env_config', whose physics such params would contradict (refused on open): a file of another source
+    data = _variant(tiny_data, tmp_path / "d.h5",
+                    lambda f: (_attr_edit("params", json.dumps(params))(f), f.attrs.__delitem__("env_config")))
     assert inspect_dataset(data).params == params
     history = [{"epoch": e, "loss": 1.0 / e, "loss_pred": 0.5 / e, "loss_rec": 0.5 / e, "g": 9.0 + e, "a": 0.5 + e}
                for e in (1, 2)]
@@ -1688,7 +1725,7 @@ def test_control_refuses_options_it_would_ignore(argv: list[str], needle: str, t
 @pytest.mark.parametrize("argv, needles", [
     (["--horizon", "7"], ["--horizon", "ddpg"]),
     (["--horizon", "20"], ["--horizon", "ddpg"]),  # the piga planner's own default: still not a DDPG option
-    (["--no-warm-start"], ["--warm-start", "a policy, no planner"]),
+    (["--no-warm-start"], ["--no-warm-start: a ddpg run plans", "a policy, no planner"]),  # the flag as written
     (["--not-told"], ["--not-told is for the piga agent", "ddpg run is never told"]),
 ])
 def test_control_refuses_planner_options_for_a_baseline_run(argv: list[str], needles: list[str],
@@ -2192,9 +2229,11 @@ def test_control_refuses_work_it_would_never_finish(argv: list[str], needle: str
     assert _listing(tmp_path) == []
 
 
-def test_control_sweep_refuses_a_gravity_multiplier(tiny_piga_run: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    """--gravity-mult beside --sweep used to be ignored."""
-    refused("piga-control", ["--model", str(tiny_piga_run), "--sweep", "0.5:1:0.5", "--gravity-mult", "2"], capsys,
+@pytest.mark.parametrize("mult", ["2", "1", "1.0"])
+def test_control_sweep_refuses_a_gravity_multiplier(mult: str, tiny_piga_run: Path,
+                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    """--gravity-mult beside --sweep used to be ignored, and still was at its default value, 1."""
+    refused("piga-control", ["--model", str(tiny_piga_run), "--sweep", "0.5:1:0.5", "--gravity-mult", mult], capsys,
             "drop --gravity-mult")
 
 
@@ -2519,6 +2558,29 @@ def test_a_scene_with_forces_too_strong_names_them(tmp_path: Path, capsys: pytes
     refused("piga-collect", ["--out", str(tmp_path / "d.h5"), "--system", "gravity", "--g", "1e6", "--sequences", "2",
                              "--steps", "30", "--workers", "1", "--split", "1,1,0", "--quiet"], capsys,
             "stays clear of the walls", "weaker forces than g = 1e+06")
+    assert _listing(tmp_path) == []
+
+
+def test_a_spring_rest_length_is_refused_only_where_the_balls_overlap() -> None:
+    """The rest length 2l must leave a pixel between the balls (their radius r); digits, whose glyphs do not fill
+    their box, may overlap."""
+    from envs.scenes import SceneError, scene_config
+
+    for params, radius in (({"l": 3.4}, 3.0), ({}, 6.0)):
+        with pytest.raises(SceneError, match=f"give l of at least {radius + 0.5:g} "):
+            scene_config("spring", params=params, radius=radius, image_size=64)
+    scene_config("spring", params={"l": 3.5})
+    scene_config("digits-spring", radius=14.0)
+
+
+def test_a_scene_with_forces_too_weak_to_show_says_so_before_the_walls(tmp_path: Path,
+                                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    """--k 1e-9 lets the balls fly into the walls: the refusal offered shorter sequences and a larger image, and a
+    larger image was then refused for forces too weak to show, which no sequence length or image size helps."""
+    line = refused("piga-collect", ["--out", str(tmp_path / "d.h5"), "--system", "spring", "--k", "1e-9", "--sequences",
+                                    "6", "--steps", "12", "--workers", "1", "--quiet"], capsys,
+                   "with k = 1e-09, l = 6 the forces move no ball by 0.01 px", "use stronger forces (the scene's own")
+    assert "walls" not in line and "--image-size" not in line and "longer sequences" not in line
     assert _listing(tmp_path) == []
 
 

@@ -102,8 +102,8 @@ def test_a_video_whose_rate_disagrees_with_dt_is_said(tmp_path: Path, recording:
 
 def test_import_warns_of_an_empty_split_as_collect_does(tmp_path: Path, recording: tuple[Path, Path, np.ndarray, np.ndarray],
                                                         capsys: pytest.CaptureFixture[str]) -> None:
-    """piga-import and piga-collect give the same line where a split's share rounds to no sequence, and both take a
-    split given as 0 (--split 0.5,0.5,0) as asked, without a word."""
+    """piga-import and piga-collect give the same line where a split's share rounds to no sequence (but for its advice,
+    in each command's own options), and both take a split given as 0 (--split 0.5,0.5,0) as asked, without a word."""
     from piga.cli import collect as collect_cli
 
     folder, csv, _, _ = recording
@@ -115,7 +115,9 @@ def test_import_warns_of_an_empty_split_as_collect_does(tmp_path: Path, recordin
                                             "3", "--steps", "4", "--workers", "1", "--split", split, "--overwrite",
                                             "--quiet", capsys=capsys)
         assert code == 0, collected
-        assert err.replace("piga-import", "piga-collect") == collected, (err, collected)
+        said = [line.rsplit(" (", 1)[0] for line in (err.replace("piga-import", "piga-collect"), collected)]
+        assert said[0] == said[1], (err, collected)
+        assert ("--steps 2 or fewer" in err) == warned and ("give 6 sequences" in collected) == warned, (err, collected)
         assert ("leaves valid and test empty" in err) is warned, err
 
 
@@ -401,3 +403,20 @@ def test_a_pipe_named_as_a_frame_is_refused(tmp_path: Path, recording: tuple[Pat
                         capsys=capsys)
     assert_one_line(code, err, "f3b.png: is not a regular file (a pipe, a socket or a device), though named as a frame")
     assert not (tmp_path / "d.h5").exists()
+
+
+@pytest.mark.parametrize("steps, advice", [
+    ("17", "(cut the recording into 6 sequences or more with --steps 2 or fewer, or import a longer one)"),
+    ("5", "(cut the recording into 6 sequences or more with --steps 2 or fewer, or import a longer one, or counts "
+          "such as --split 1,1,1)"),
+])
+def test_an_empty_split_is_advised_in_the_imports_terms(steps: str, advice: str, tmp_path: Path,
+                                                         recording: tuple[Path, Path, np.ndarray, np.ndarray],
+                                                         capsys: pytest.CaptureFixture[str]) -> None:
+    """A recording cut into too few sequences for the split was told to "give 6 sequences or more": piga-import has
+    no count of sequences, and a shorter --steps is what gives more."""
+    folder, csv, _, _ = recording
+    code, _, err = _cli(str(folder), str(csv), "--dt", "0.05", "--out", str(tmp_path / "a.h5"), "--steps", steps,
+                        capsys=capsys)
+    assert code == 0 and err.count("\n") == 1 and err.startswith("piga-import: warning: ") and err.endswith(advice + "\n"), err
+    assert "give 6 sequences" not in err

@@ -150,7 +150,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if kind.is_baseline:
         return _baseline(args, kind, mpc, outputs, argv, given)
     if args.sweep:
-        return _sweep(args, mpc, outputs, argv)
+        return _sweep(args, mpc, outputs, argv, given)
     if args.not_told and args.gravity_mult == 1.0:  # (a baseline run is refused --not-told above, in its own words)
         at, change = ((f"--gravity-mult {number_text(args.gravity_mult)}", "give another --gravity-mult")
                       if "gravity_mult" in given else ("--gravity-mult 1 (the default)", "give --gravity-mult"))
@@ -263,16 +263,17 @@ def _refuse_sweep_goal_image_and_video(args: argparse.Namespace) -> None:
 
 
 def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: Sequence[str] | None,
-           kind: RunKind = RunKind.PIGA) -> int:
+           given: set[str], kind: RunKind = RunKind.PIGA) -> int:
     """--sweep: the run's agent (``kind``) and the oracle at each multiplier; piga and the oracle are
-    told the multiplier, a baseline runs as trained."""
+    told the multiplier, a baseline runs as trained. ``given``: the options written
+    (:func:`~piga.cli.common.given_options`)."""
     from piga.control.jobs import ControlJob, run_jobs
     from piga.io.runs import load_model
 
     if args.oracle or not args.model:
         raise PigaError("--sweep compares the piga agent with the oracle: give --model RUN_DIR (without --oracle)")
     _refuse_sweep_goal_image_and_video(args)
-    if args.gravity_mult != EpisodeConfig.gravity_mult:
+    if "gravity_mult" in given:  # --gravity-mult 1, the default, too
         raise PigaError("--sweep sets the gravity multiplier of each job; drop --gravity-mult")
     try:
         multipliers = parse_range(args.sweep)
@@ -534,7 +535,7 @@ def _baseline(args: argparse.Namespace, kind: RunKind, mpc: MPCConfig, outputs: 
         from piga.evaluation.video import check_video_room
 
         check_video_room(args.video, args.steps)  # before the episodes: real frames | reconstruction
-    planner = [f"--{name.replace('_', '-')}" for name in ("horizon", "candidates", "elites", "iterations", "warm_start")
+    planner = [_flag(args, name) for name in ("horizon", "candidates", "elites", "iterations", "warm_start")
                if name in given]
     if planner:
         raise PigaError(f"{', '.join(planner)}: a {name} run plans with its own settings "
@@ -543,7 +544,7 @@ def _baseline(args: argparse.Namespace, kind: RunKind, mpc: MPCConfig, outputs: 
     if kind is RunKind.PLANET:  # after the refusals of the command line: this reads the checkpoint
         check_planet_frames(args.model)
     if args.sweep:
-        return _sweep(args, mpc, outputs, argv, kind=kind)
+        return _sweep(args, mpc, outputs, argv, given, kind=kind)
     import torch
 
     from piga.control.registry import baseline_agent
@@ -836,7 +837,13 @@ GOAL_IMAGE_OPTIONS = ("write_goal_image", "angle", "env", "overwrite", "quiet")
 def _ignored_options(args: argparse.Namespace, given: set[str], taken: Sequence[str]) -> list[str]:
     """The ``given`` options (:func:`~piga.cli.common.given_options`) outside ``taken`` (destinations), as flags
     (``--episodes``) in the parser's order: options that a mode of the command would ignore."""
-    return [f"--{k.replace('_', '-')}" for k in vars(args) if k in given and k not in taken]
+    return [_flag(args, k) for k in vars(args) if k in given and k not in taken]
+
+
+def _flag(args: argparse.Namespace, dest: str) -> str:
+    """The flag of option ``dest`` as the user wrote it: ``--no-warm-start`` where --warm-start was turned off."""
+    flag = dest.replace("_", "-")
+    return f"--no-{flag}" if dest == "warm_start" and not args.warm_start else f"--{flag}"
 
 
 def _dmc_sb3_agent(run_dir: str, env: DMCPendulumConfig) -> SB3Agent:

@@ -64,7 +64,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if result.dropped_frames:
         print(f"note: the last {result.dropped_frames} of {result.source_frames} frames (less than one sequence "
               f"of {config.steps}) were dropped")
-    if (warning := empty_split_warning(config.split, result.split_counts)) is not None:
+    if (warning := empty_split_warning(config.split, result.split_counts, result.source_frames)) is not None:
         print(f"{PROG}: warning: {warning}", file=sys.stderr)
     said = recording_frame_seconds(args.recording)
     if said is not None and abs(said - config.dt) > 0.02 * config.dt:  # (a video slowed down says its own rate)

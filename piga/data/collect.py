@@ -131,15 +131,22 @@ def split_counts(n: int, split: Sequence[float]) -> tuple[int, int, int]:
     return train, valid, test
 
 
-def empty_split_warning(split: Sequence[float], counts: dict[str, int]) -> str | None:
-    """A warning when the split asked for valid or test sequences and their share rounded to none, else None."""
+def empty_split_warning(split: Sequence[float], counts: dict[str, int], frames: int | None = None) -> str | None:
+    """A warning when the split asked for valid or test sequences and their share rounded to none, else None.
+    ``frames``: an imported recording's frames, which piga-import cuts into sequences of --steps frames: the advice is
+    then a shorter --steps (or a longer recording), as it has no count of sequences to raise."""
     empty = [name for name, share in zip(("valid", "test"), split[1:]) if share > 0 and not counts.get(name)]
     if not empty:
         return None
     n = sum(counts.values())
     wanted = [share > 0 for share in split[1:]]  # (valid, test)
     fewest = _fewest_filling(split)
-    advice = f"give {fewest} sequences or more" if fewest is not None else "give more sequences"
+    if frames is not None:  # the sequences are the recording cut into --steps frames each
+        steps = frames // fewest if fewest is not None else 0
+        advice = (f"cut the recording into {fewest} sequences or more with --steps {steps} or fewer, or import a longer one"
+                  if steps >= 2 else "import a longer recording")
+    else:
+        advice = f"give {fewest} sequences or more" if fewest is not None else "give more sequences"
     if n > sum(wanted):  # counts that keep a training sequence and give each asked-for split one
         advice += f", or counts such as --split {n - sum(wanted)},{int(wanted[0])},{int(wanted[1])}"
     # what each empty split costs: piga-train-model measures on the test split, the PlaNet-style baseline validates on

@@ -453,11 +453,14 @@ def _frames_text(shape: tuple[int, ...]) -> str:
 
 
 def _check_env_attrs(info: DatasetInfo) -> None:
-    """Refuses a pendulum file whose ``env_config`` or ``dt`` contradicts the env that made it: frames of another size
-    than env_config's ``image_size``; a ``dt`` other than the step of the env its ``env_id`` names (Gymnasium's pixel
-    pendulum steps 0.05 s; dm_control's env_config's ``action_repeat`` x 0.02 s). An edited 'dt' trained g for the
-    wrong interval, and only piga-control refused the model. A file without ``env_config`` (an imported recording) has
-    nothing to contradict; one from before env ids (no ``env_id``) has its frames checked, not its ``dt``."""
+    """Refuses a pendulum file whose ``env_config``, ``env_id``, ``dt`` or ``params`` contradict each other: frames of
+    another size than env_config's ``image_size``; an ``env_id`` that names no env of piga's, or another env than the one
+    whose settings ``env_config`` holds; a ``dt`` that the env its ``env_id`` names cannot step (Gymnasium's pixel
+    pendulum steps 0.05 s; dm_control's env_config's ``action_repeat`` x 0.02 s, or any whole multiple of 0.02 s
+    where it names none); ``params`` (the true values that training scores against) other than those env_config's
+    physics makes (what piga-control reads). An edited 'dt' trained g for the wrong interval, and only piga-control
+    refused the model. A file without ``env_config`` (an imported recording, or one of another env) has nothing to
+    contradict; one from before env ids (no ``env_id``) has its frames and ``params`` checked, not its ``dt``."""
     path, attrs, config = info.path, info.attrs, info.attrs.get("env_config")
     if info.system != "pendulum" or not isinstance(config, dict):
         return
@@ -468,26 +471,93 @@ def _check_env_attrs(info: DatasetInfo) -> None:
         look = "RGB" if config.get("color") == "rgb" else "gray"  # (dm_control's pendulum renders either)
         raise DataFormatError(f"{path}: attribute 'env_config' says the env renders {size}x{size} {look} frames "
                               f"(image_size {size}), but the file's frames are {_frames_text(shape)}; {fix}")
-    env_id = attrs.get("env_id")
-    if env_id is None:
-        return
-    from envs import DMC_PENDULUM, PENDULUM_DT, PIXEL_PENDULUM  # (only for a file of an env: an import pays nothing)
+    from envs import DMC_PENDULUM, ENV_IDS, PENDULUM_DT, PIXEL_PENDULUM  # (only for a file of an env: an import pays nothing)
     from envs.dmc import DMC_PHYSICS_DT, MAX_ACTION_REPEAT
 
+    env_id = attrs.get("env_id")
+    settings_of, fields_named = _settings_env(config)
+    if env_id is not None and (env_id not in ENV_IDS or settings_of not in (None, env_id)):
+        held = (f"holds {settings_of}'s settings ({', '.join(fields_named)})" if settings_of
+                else "holds the settings of one of piga's envs")
+        if env_id in ENV_IDS:
+            raise DataFormatError(f"{path}: attribute 'env_id' says {env_id}, but 'env_config' {held}; set 'env_id' to "
+                                  f"{settings_of}, or collect the file again")
+        fix = f"set 'env_id' to {settings_of}" if settings_of else f"set 'env_id' to the one that made it ({', '.join(ENV_IDS)})"
+        raise DataFormatError(f"{path}: attribute 'env_id' says {env_id}, which is none of piga's envs, but 'env_config' "
+                              f"{held}; {fix}, or drop 'env_config' if the file is a recording of another env")
     repeat = config.get("action_repeat")
+    step, how = None, ""
     if env_id == PIXEL_PENDULUM:
-        step, how = PENDULUM_DT, ""
+        step = PENDULUM_DT
     elif env_id == DMC_PENDULUM and isinstance(repeat, int) and not isinstance(repeat, bool) and repeat >= 1:
         step, how = repeat * DMC_PHYSICS_DT, f" at env_config's action_repeat {repeat} ({repeat} x {DMC_PHYSICS_DT:g} s)"
-    else:  # another env's id, or a config without the action repeat (not dm_control's): nothing to compare
-        return
-    if math.isclose(info.dt, step, rel_tol=1e-9):
-        return
     fits = round(info.dt / DMC_PHYSICS_DT)  # dm_control: the action repeat that steps the file's dt
-    other = (f" or env_config's action_repeat to {fits}" if how and 1 <= fits <= MAX_ACTION_REPEAT
-             and math.isclose(fits * DMC_PHYSICS_DT, info.dt, rel_tol=1e-9) else "")
-    raise DataFormatError(f"{path}: attribute 'dt' says the frames are {info.dt:g} s apart, but {env_id} (its 'env_id') "
-                          f"steps {step:g} s{how}; set 'dt' to {step:g}{other}, or collect the file again")
+    repeats = 1 <= fits <= MAX_ACTION_REPEAT and math.isclose(fits * DMC_PHYSICS_DT, info.dt, rel_tol=1e-9)
+    if env_id == DMC_PENDULUM and step is None and not repeats:  # no action repeat named: no repeat makes this dt
+        near = min(max(fits, 1), MAX_ACTION_REPEAT) * DMC_PHYSICS_DT
+        other = f" or 'env_id' to {PIXEL_PENDULUM}" if math.isclose(info.dt, PENDULUM_DT, rel_tol=1e-9) else ""
+        raise DataFormatError(f"{path}: attribute 'dt' says the frames are {info.dt:g} s apart, but {env_id} (its "
+                              f"'env_id') steps a whole multiple of {DMC_PHYSICS_DT:g} s (action_repeat 1 to "
+                              f"{MAX_ACTION_REPEAT}); set 'dt' to {near:g}{other}, or collect the file again")
+    if step is not None and not math.isclose(info.dt, step, rel_tol=1e-9):
+        other = f" or env_config's action_repeat to {fits}" if how and repeats else ""
+        raise DataFormatError(f"{path}: attribute 'dt' says the frames are {info.dt:g} s apart, but {env_id} (its "
+                              f"'env_id') steps {step:g} s{how}; set 'dt' to {step:g}{other}, or collect the file again")
+    _check_params_agree(info, config, env_id if env_id is not None else settings_of)
+
+
+def _settings_env(config: dict[str, Any]) -> tuple[str | None, list[str]]:
+    """The env whose settings ``env_config`` holds, told by the fields only its config has (the pixel pendulum's
+    ``gravity``, dm_control's ``action_repeat``), and those fields; (None, []) where none, or both envs', are there."""
+    from dataclasses import fields
+
+    from envs import DMC_PENDULUM, PIXEL_PENDULUM, DMCPendulumConfig, PixelPendulumConfig
+
+    pixel, dmc = ({f.name for f in fields(kind)} for kind in (PixelPendulumConfig, DMCPendulumConfig))
+    own = {PIXEL_PENDULUM: [k for k in config if k in pixel - dmc], DMC_PENDULUM: [k for k in config if k in dmc - pixel]}
+    found = [env for env, named in own.items() if named]
+    return (found[0], own[found[0]]) if len(found) == 1 else (None, [])
+
+
+#: The fields of each env's ``env_config`` that make each true parameter of its ``params``.
+_PARAM_SOURCES = {
+    "piga/PixelPendulum-v0": {"g": ("gravity", "gravity_mult"), "gravity": ("gravity",),
+                              "gravity_mult": ("gravity_mult",), "actuation_gain": ("actuation_gain",)},
+    "piga/DMCPendulum-v0": {"g": ("mass", "length"), "actuation_gain": ("mass", "length"),
+                            "damping": ("damping", "mass", "length"), "actuation_sign": ("flip",)},
+}
+
+
+def _check_params_agree(info: DatasetInfo, config: dict[str, Any], env: str | None) -> None:
+    """Refuses ``params`` other than those that the physics of ``env_config`` makes in ``env`` (a field it lacks at its
+    default, as piga-control reads it): training scored g against 'params' (true 10) while piga-control warned that
+    the file was collected at g = 5, read from 'env_config'. Fields that are no numbers are refused where they are
+    read."""
+    from envs import DMC_PENDULUM, PIXEL_PENDULUM, DMCPendulumConfig, PixelPendulumConfig
+
+    kind = {PIXEL_PENDULUM: PixelPendulumConfig, DMC_PENDULUM: DMCPendulumConfig}.get(str(env))
+    if kind is None:
+        return
+    sources = _PARAM_SOURCES[str(env)]
+    fields = {k: config.get(k, getattr(kind, k)) for names in sources.values() for k in names}
+    try:
+        if kind is PixelPendulumConfig:
+            gravity, mult, gain = (float(fields[k]) for k in ("gravity", "gravity_mult", "actuation_gain"))
+            made = {"g": gravity * mult, "gravity": gravity, "gravity_mult": mult, "actuation_gain": gain}
+        else:
+            made = DMCPendulumConfig(**fields).piga_params()
+    except (TypeError, ValueError):
+        return
+    for name, value in made.items():
+        given = info.params.get(name)
+        if given is None or math.isclose(float(given), value, rel_tol=1e-6, abs_tol=1e-12):
+            continue
+        read = ", ".join(f"{k} {v if isinstance(v, str) else f'{float(v):.6g}'}"
+                         for k, v in fields.items() if k in sources[name])
+        raise DataFormatError(f"{info.path}: attribute 'params' says {name} = {float(given):.6g}, but "
+                              f"'env_config' ({read}) makes {name} = {value:.6g}; fix the attribute that is "
+                              "wrong (training scores against 'params', piga-control reads 'env_config'), or collect the "
+                              "file again")
 
 
 def _check_attrs_agree(info: DatasetInfo, f: h5py.File) -> None:
