@@ -138,13 +138,14 @@ class SceneConfig:
                 raise SceneError(f"{self.scene}: k = {number_text(self.params['k'])} is too stiff for {self.substeps} substeps of "
                                  f"{self.dt:g} s: the simulation would blow up; k must be below {stiffest:.8g} "
                                  "((2·substeps/dt)²/objects)")
+        overlap = None  # the spring's balls at rest closer than their diameter (checked after the image's size)
         if self.scene == "spring" and 2 * self.params.get("l", math.inf) < 2 * self.radius + BALL_GAP:
             # (digits-spring's "radius" is half a digit's box, which its glyph does not fill: its digits may overlap)
-            raise SceneError(f"{self.scene}: at l = {number_text(self.params['l'])} the balls rest with their centres 2l = "
-                             f"{number_text(2 * self.params['l'])} px apart, under their diameter 2r = "
-                             f"{number_text(2 * self.radius)} px plus {BALL_GAP:g} px: they would touch or overlap (one "
-                             f"hiding the other) in most frames; give l of at least "
-                             f"{number_text(self.radius + BALL_GAP / 2)} (r + {BALL_GAP / 2:g}), or a smaller radius")
+            overlap = (f"at l = {number_text(self.params['l'])} the balls rest with their centres 2l = "
+                       f"{number_text(2 * self.params['l'])} px apart, under their diameter 2r = "
+                       f"{number_text(2 * self.radius)} px plus {BALL_GAP:g} px: they would touch or overlap (one "
+                       f"hiding the other) in most frames; give l of at least "
+                       f"{number_text(self.radius + BALL_GAP / 2)} (r + {BALL_GAP / 2:g}), or a smaller radius")
         if self.half and self.scene != "spring":
             raise SceneError(f"{type(self).__name__}.half (the top-half data) is for the spring scene, not {self.scene}")
         if self.half_frames < 1:
@@ -154,7 +155,10 @@ class SceneConfig:
             raise SceneError(f"{self.scene}: {self.image_size}x{self.image_size} images are too small for "
                              f"{self.n_objects} objects of radius {self.radius:g}"
                              + (f" and rest length 2l = {2 * self.params['l']:g}" if "l" in self.params else "")
-                             + f"; need at least {needed:.6g} px (a lower bound: moving objects may need more room)")
+                             + f"; need at least {needed:.6g} px (a lower bound: moving objects may need more room)"
+                             + (f"; and {overlap}" if overlap else ""))
+        if overlap:
+            raise SceneError(f"{self.scene}: {overlap}")
 
     @property
     def margin(self) -> float:

@@ -2571,6 +2571,9 @@ def test_a_spring_rest_length_is_refused_only_where_the_balls_overlap() -> None:
             scene_config("spring", params=params, radius=radius, image_size=64)
     scene_config("spring", params={"l": 3.5})
     scene_config("digits-spring", radius=14.0)
+    # images too small for the balls come first, and say the overlap too (a larger image alone would not do)
+    with pytest.raises(SceneError, match=r"images are too small .*; and at l = 6 the balls rest .* at least 20\.5"):
+        scene_config("spring", radius=20.0, image_size=32)
 
 
 def test_a_scene_with_forces_too_weak_to_show_says_so_before_the_walls(tmp_path: Path,
