@@ -3122,6 +3122,15 @@ def test_diagnose_refuses_sequences_too_short_for_its_fit_first(tiny_piga_run: P
     assert_one_line(code, err, f"{data}: sequences of 12 frames are too short to diagnose: the fit needs 13",
                     "piga-collect --steps 13")
     assert _listing(tmp_path) == ["short.h5"]
+    imported = tmp_path / "imported.h5"  # a recording brought in has no env to collect again: import it longer
+    shutil.copy(data, imported)
+    with h5py.File(imported, "a") as f:
+        for key in ("env_id", "env_config"):
+            f.attrs.pop(key, None)
+    code, _, err = run_in_process("piga-diagnose", diagnose.main, "--data", str(imported), "--model",
+                                  str(tiny_piga_run), "--out", str(tmp_path / "report"), capsys=capsys)
+    assert_one_line(code, err, "too short to diagnose", "piga-import --steps 13")
+    imported.unlink()
     planet = tmp_path / "planet"
     planet.mkdir()
     (planet / "config.json").write_text(json.dumps({"kind": "planet"}))

@@ -101,7 +101,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     if info.steps < (need := min_frames(config.fit_horizon)):  # found after the encoding otherwise (half a minute)
         raise PigaError(f"{args.data}: sequences of {info.steps} frames are too short to diagnose: the fit needs "
                         f"{need} (windows of {config.fit_horizon} steps after {need - config.fit_horizon - 1} frames); "
-                        f"collect sequences of {need} frames or more (piga-collect --steps {need})")
+                        + (f"collect sequences of {need} frames or more (piga-collect --steps {need})"
+                           if info.attrs.get("env_id") is not None else  # (a recording imported: no env to collect)
+                           f"import the recording in sequences of {need} frames or more (piga-import --steps {need})"))
     check_frames_have_signal(args.data)  # blank video: the diagnosis would divide by its zero variance
     if effects is not None:  # MPC on Gymnasium's pendulum with the model's physics
         from envs.constants import PENDULUM_DT
