@@ -2288,8 +2288,8 @@ def analyse(obs: Observations, nom: Nominal, config: DiagnoseConfig = DiagnoseCo
     if (camera is not None and not camera.rematched and config.matched_angles and matched is not None
             and drawn_with_the_action(obs, rec_training, config)):
         # the encoder reads its angles through what is drawn with the action, larger than in any training frame (an
-        # actuation gain of 1.6 read a = 2e-09 and "not explained ... a camera moved far?" on the encoder's angles;
-        # gains of 2.0, or 1.6 beside a blur, which the angles matched to the decoder's renders read, read right):
+        # actuation gain of 1.6 read a = 2e-09 and "not explained ... a camera moved far?" on the encoder's angles,
+        # where gains of 2.0, and 1.6 beside a blur, read on the angles matched to the decoder's renders, read right):
         # everything is done on the matched angles
         return analyse(obs, nom, config, model, rec_training, progress,
                        dataclass_replace(camera, theta=matched() if callable(matched) else matched,
