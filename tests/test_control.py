@@ -266,6 +266,9 @@ def test_sweep_writes_a_table_per_multiplier(control_model: Path, tmp_path: Path
     assert result.returncode == 0, result.stderr
     record = json.loads(Path(f"{out}.json").read_text())
     assert record["multipliers"] == [1.0, 1.5]
+    # the planner's settings are in the record, not only in the page's command line
+    assert record["planner"]["warm_start"] is True and record["planner"]["cem"]["horizon"] == 20, record["planner"]
+    assert record["command"].startswith("piga-control --model ")
     rows = [(r["summary"]["agent"], r["summary"]["gravity_mult"]) for r in record["results"]]
     assert rows == [("piga", 1.0), ("oracle", 1.0), ("piga", 1.5), ("oracle", 1.5)]
     assert all(len(r["episodes"]) == 1 for r in record["results"])

@@ -7,7 +7,7 @@ import os
 import math
 import sys
 from collections.abc import Callable, Sequence
-from dataclasses import replace
+from dataclasses import asdict, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -320,7 +320,10 @@ def _sweep(args: argparse.Namespace, mpc: MPCConfig, outputs: list[Path], argv: 
     if outputs:
         from piga.evaluation.plots import sweep_figure
 
-        _write_outputs(outputs, {"model": typed_text(args.model), "multipliers": multipliers, "results": [r.to_dict() for r in results]},
+        # (the planner's settings too: --no-warm-start was said only in the page's command line)
+        _write_outputs(outputs, {"model": typed_text(args.model), "command": command_line(PROG, argv),
+                                 "planner": asdict(mpc), "multipliers": multipliers,
+                                 "results": [r.to_dict() for r in results]},
                        f"# {PROG} --sweep\n\nCommand: `{command_line(PROG, argv)}`\n\n![sweep]({outputs[2].name})\n\n{table}",
                        args.overwrite, figure=lambda: sweep_figure([s.to_dict() for s in summaries]), model=args.model,
                        kind=kind)
