@@ -90,7 +90,8 @@ from piga.diagnostics.results import (Ambiguity, CameraSummary, CandidateRow, Di
                                       Naming, PixelErrors, Score, SelectionStep, VisionSummary)
 from piga.diagnostics.twin import MEASURABLE_GAP, calibrate_floor, gap_closure, mean_gap_closure, twin_floor
 from piga.diagnostics.vision import (MAX_BLUR, MAX_EXPOSURE, MAX_SHIFT, MAX_ZOOM, MIN_EXPOSURE, MIN_ZOOM, Camera,
-                                     CameraConfig, CameraFindings, angle_table, camera_stage, match, match_file)
+                                     CameraConfig, CameraFindings, action_fifths, angle_table, camera_stage, match,
+                                     match_file)
 from piga.io.choices import check_ranges, check_types
 from piga.world.model import PhysicsModel
 from piga.diagnostics.fit import Nominal
@@ -306,7 +307,7 @@ def diagnose(model: PhysicsModel, data: str | os.PathLike[str], config: Diagnose
                                   "there is no motion to diagnose")
     own = training_data_path(checkpoint)
     camera = camera_stage(model, str(data), obs.theta, obs.fit, obs.stale, config.camera, seed=config.seed,
-                          progress=progress, reference=None if own is None else str(own))
+                          progress=progress, reference=None if own is None else str(own), actions=obs.actions)
     noise = next((e["value"] for e in camera.effects if e["effect"] == "noise"), 0.0)  # the named noise, σ
     check_scene_through_camera(unlike, camera.camera if camera.partial is None else camera.partial.camera,
                                camera.matched_error, rec_training, config.max_scene_ratio,
@@ -2054,14 +2055,13 @@ def action_linked(rec_mse: np.ndarray, actions: np.ndarray, own_rec_mse: np.ndar
     the picture (a camera's exposure) moves both."""
     ratios = []
     for r, u in ((rec_mse, actions), (own_rec_mse, own_actions)):
-        u = np.abs(u[:, :-1])  # (N, T - 1): the action before each frame from the second on
-        if u.size == 0 or np.ptp(u) == 0:
+        if (fifths := action_fifths(u)) is None:
             return None
-        after = r[:, 1:]  # (N, T - 1)
-        calm = after[u <= np.quantile(u, 0.2)].mean()
+        after = r[:, 1:]  # (N, T - 1) the frames from the second on
+        calm, large = (float(after[mask].mean()) for mask in fifths)
         if calm <= 0:
             return None
-        ratios.append(float(after[u >= np.quantile(u, 0.8)].mean() / calm))
+        ratios.append(large / calm)
     rec, own = ratios
     return (rec, own) if own > 0 and not within_factor(rec, own, ACTION_LINKED_FACTOR) else None
 
@@ -2083,11 +2083,8 @@ def calm_frames_error(rec_mse: np.ndarray, actions: np.ndarray) -> float | None:
     action: a recording at an actuation gain of 1.5 re-rendered 4.7x worse than the training frames, the frames after
     its smallest actions x0.31 (the training file's own: x0.30), where a picture changed all over (a blur) is worse in
     every frame."""
-    u = np.abs(actions[:, :-1])
-    if u.size == 0 or np.ptp(u) == 0:
-        return None
-    calm = u <= np.quantile(u, 0.2)
-    return float(rec_mse[:, 1:][calm].mean())
+    fifths = action_fifths(actions)
+    return None if fifths is None else float(rec_mse[:, 1:][fifths[0]].mean())
 
 
 def twin_renderer(from_gymnasium: bool, has_model: bool, rematched: bool, vision_ratio: float | None,

@@ -334,23 +334,28 @@ def static_pixels(model: PhysicsModel, margin: int = 4, tolerance: float = 8 / 2
     return still.astype(bool)
 
 
-def calm_noise(path: str, frames: np.ndarray, seqs: np.ndarray, times: np.ndarray, still: np.ndarray) -> float | None:
-    """:func:`noise_level` of the uint8 ``frames`` (M, H, W) of sequences ``seqs`` (M,) at frame indices ``times`` (M,)
-    that follow the smallest fifth of their actions (frame t + 1 after u_t, which Gymnasium draws as its torque arrow),
-    on the pixels ``still`` (H, W); None where the file has no actions, fewer than 20 frames follow one, or they do not
-    vary. Sensor noise is in every frame; a change drawn with the action is not in these."""
-    import h5py
-
-    after = times >= 1
-    with h5py.File(path, "r") as f:
-        if "actions" not in f:  # (frames alone, as some tests write them)
-            return None
-        actions = f["actions"][...]  # (N, T, A)
-    u = np.abs(actions[seqs[after], times[after] - 1, 0])  # (M',)
-    if u.size < 20 or np.ptp(u) == 0:
+def action_fifths(actions: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """(N, T - 1) masks of the frames from the second on that follow the smallest and the largest fifth of the (N, T)
+    actions (frame t + 1 after u_t, which Gymnasium draws as its torque arrow); None where the actions do not vary."""
+    u = np.abs(actions[:, :-1])
+    if u.size == 0 or np.ptp(u) == 0:
         return None
-    calm = u <= np.quantile(u, 0.2)
-    return float(noise_level(frames[after][calm], still))
+    return u <= np.quantile(u, 0.2), u >= np.quantile(u, 0.8)
+
+
+def calm_noise(frames: np.ndarray, seqs: np.ndarray, times: np.ndarray, actions: np.ndarray,
+               still: np.ndarray) -> float | None:
+    """:func:`noise_level` of the uint8 ``frames`` (M, H, W) of sequences ``seqs`` (M,) at frame indices ``times`` (M,)
+    that follow the smallest fifth of the recording's (N, T) ``actions`` (:func:`action_fifths`), on the pixels
+    ``still`` (H, W); None where fewer than 20 of them do, or the actions do not vary. Sensor noise is in every frame; a
+    change drawn with the action is not in these."""
+    fifths = action_fifths(actions)
+    if fifths is None:
+        return None
+    after = times >= 1
+    calm = np.zeros(len(times), bool)
+    calm[after] = fifths[0][seqs[after], times[after] - 1]
+    return float(noise_level(frames[calm], still)) if calm.sum() >= 20 else None
 
 
 def noise_level(frames: np.ndarray, still: np.ndarray, interval: bool = False) -> float | tuple[float, list[float] | None]:
@@ -642,7 +647,7 @@ def match_file(model: PhysicsModel, path: str, camera: Camera, batch: int = 64) 
 
 def camera_stage(model: PhysicsModel, path: str, theta: np.ndarray, fit: np.ndarray, stale: np.ndarray | None,
                  config: CameraConfig = CameraConfig(), seed: int = 0, progress: bool = False,
-                 reference: str | None = None) -> CameraFindings:
+                 reference: str | None = None, actions: np.ndarray | None = None) -> CameraFindings:
     """Fits and tests the camera candidates on the recording ``path``.
 
     Args:
@@ -652,6 +657,8 @@ def camera_stage(model: PhysicsModel, path: str, theta: np.ndarray, fit: np.ndar
         progress: show a progress bar over the fits.
         reference: the model's own training file, where it is there: an exposure is named relative to that file's
             (:func:`reference_exposure`), since a decoder may draw the whole scene a little darker than its frames.
+        actions: (N, T) the recording's actions, where known: noise is named only where the frames after the smallest
+            of them show it too (:func:`calm_noise`).
     """
     from tqdm.auto import tqdm
 
@@ -795,8 +802,8 @@ def camera_stage(model: PhysicsModel, path: str, theta: np.ndarray, fit: np.ndar
         fresh = np.ones(len(fit_seqs), bool) if stale is None else ~stale[fit_seqs, fit_times]
         correlation = noise_correlation(frames_2d[fresh], still, fit_seqs[fresh])
     noisy = noise > config.min_noise and not correlation > config.max_noise_correlation
-    if noisy and (calm := calm_noise(path, frames_2d, fit_seqs, fit_times, still)) is not None \
-            and calm <= config.min_noise:
+    calm = calm_noise(frames_2d, fit_seqs, fit_times, actions, still) if noisy and actions is not None else None
+    if calm is not None and calm <= config.min_noise:
         # what changes the still pixels only after large actions is drawn with them, not sensor noise (Gymnasium at an
         # actuation gain of 3 draws its torque arrow onto pixels that the training frames' never reach: "noise 41.8
         # gray levels" on a file with none, whose frames after the smallest fifth of the actions read none)
