@@ -587,6 +587,11 @@ def _env_config_edit(**fields: Any) -> Callable[[h5py.File], None]:
     (_env_config_edit(actuation_gain=0.5), ["'params' says actuation_gain = 1, but 'env_config' (actuation_gain 0.5)"]),
     (lambda f: (_dmc_labelled(3, 0.06)(f), _env_config_edit(action_repeat=3, mass=2.0)(f)),
      ["'params' says actuation_gain = 1.32802, but 'env_config' (mass 2, length 0.5) makes actuation_gain = 0.664011"]),
+    # the effects attribute against env_config's: training scored a against one, piga-control made the other
+    (_attr_edit("effects", '{"gain": 0.5}'), ["attribute 'effects' says gain=0.5, but 'env_config' holds effects none",
+                                              "fix the attribute that is wrong"]),
+    (lambda f: (_env_config_edit(effects=[["damping", 0.3]])(f), f.attrs.__setitem__("effects", '{"damping": 0.2}')),
+     ["attribute 'effects' says damping=0.2, but 'env_config' holds effects damping=0.3"]),
 ])
 def test_a_file_that_breaks_the_schema_is_named_on_open(edit: Callable[[h5py.File], None], needles: list[str],
                                                         tiny_data: Path, tmp_path: Path,
@@ -612,6 +617,16 @@ def test_a_file_whose_dt_fits_its_env_is_read(edit: Callable[[h5py.File], None],
 
     data = _variant(tiny_data, tmp_path / "d.h5", lambda f: (edit(f), f.attrs.__setitem__("dt", 0.06)))
     assert inspect_dataset(data).dt == 0.06
+
+
+def test_effects_that_env_config_also_holds_are_read(tiny_data: Path, tmp_path: Path) -> None:
+    """The same effects in both attributes, in either order and as integers or floats, are not a contradiction."""
+    from piga.data.schema import inspect_dataset
+
+    data = _variant(tiny_data, tmp_path / "d.h5", lambda f: (
+        _env_config_edit(effects=[["damping", 0.3], ["delay", 1]])(f),
+        f.attrs.__setitem__("effects", '{"delay": 1.0, "damping": 0.3}')))
+    assert inspect_dataset(data).attrs["effects"] == {"delay": 1.0, "damping": 0.3}
 
 
 def test_half_precision_actions_and_huge_rewards_are_read_without_warnings(tiny_data: Path, tmp_path: Path) -> None:

@@ -208,6 +208,8 @@ def test_iterative_rounds_append_collected_episodes_and_leave_the_data_file_alon
     # 36 steps per episode cut into sequences of the file's 16 frames: 2 per episode, 4 left over
     assert (after_one.n_sequences, collected.n_sequences, collected.steps) == (2, 4, 16)
     assert collected.attrs["rounds"] == 2 and len(collected.attrs["episode_returns"]) == 2 and not collected.has_states
+    # its env_config is the env that collected it: episodes of the round's length, not the source file's
+    assert collected.attrs["env_config"]["episode_length"] == TINY_ITERATIVE.episode_steps
     frames, actions = read_sequences(tmp_path / "run" / "collected.h5", "train")
     assert frames.shape == (4, 16, 64, 64) and frames.dtype == np.uint8 and np.abs(actions).max() <= 2.0
     assert np.all(load_rewards(tmp_path / "run" / "collected.h5", "train") <= 0)
@@ -239,13 +241,14 @@ def test_collected_rounds_must_account_for_its_sequences(tiny_data: Path, tmp_pa
     at 120 characters, mid-parenthesis."""
     import h5py
 
-    from agents.planet.iterative import COLLECTED, _append, rounds_collected
+    from agents.planet.iterative import COLLECTED, _append, check_iterative_data, rounds_collected
     from piga.data.schema import DataFormatError, inspect_dataset, load_rewards, read_sequences
 
     info, path = inspect_dataset(tiny_data), tmp_path / COLLECTED
+    env = check_iterative_data(info, TINY_ITERATIVE)
     frames, actions = read_sequences(tiny_data, "train")
     new = {"frames": frames[:2], "actions": actions[:2], "rewards": load_rewards(tiny_data, "train")[:2], "returns": [0.0]}
-    _append(path, info, new, 1, "test")
+    _append(path, info, env, new, 1, "test")
     assert rounds_collected(tmp_path, per_round=2) == 1
     with h5py.File(path, "a") as f:
         f.attrs["rounds"] = 5

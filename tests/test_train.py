@@ -534,7 +534,7 @@ def test_a_parameter_still_moving_as_fast_as_its_decayed_learning_rate_allows_is
                                history=[{"k": trace[-1][1], "l": trace[-1][2]}])
 
     profile = {"k": ParameterProfile(1.168, 2.202, 2.616, 1.65), "l": ParameterProfile(3.4, 2.068, 2.66, 1.65)}
-    numbers = dict(blank=(0.00473, 0.01629), hold=0.0205, profile=profile, held_out=False)
+    numbers = dict(blank=(0.00473, 0.01629), hold=0.0205, profile=profile, held_out=True)
     verdict = check_convergence(run(l_on_its_way), physics_lr=lr, **numbers)
     assert verdict.outcome == "unsettled", verdict.reason
     assert verdict.reason.startswith("a parameter was still on its way when the learning rate decayed: l moved +0.4")
@@ -547,6 +547,10 @@ def test_a_parameter_still_moving_as_fast_as_its_decayed_learning_rate_allows_is
     # the same l at half that pace (identified short pendulum runs: 0.05x; a run with a 8% short: 0.63x)
     slower = 3.4 * np.exp(0.5 * (climb - climb[-1]))
     assert check_convergence(run(slower), physics_lr=lr, **numbers).outcome == "converged"
+    # measured on its training frames alone (a file with no test split), the same settled run is not called converged
+    unchecked = check_convergence(run(slower), physics_lr=lr, **{**numbers, "held_out": False})
+    assert unchecked.outcome == "unsettled" and "the file has no test sequences, so no frame it did not train on checks" \
+        in unchecked.reason, unchecked.reason
 
 
 def test_a_slot_that_draws_nothing_makes_a_converged_scene_run_untrained() -> None:

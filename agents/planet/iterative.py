@@ -140,8 +140,10 @@ def collect_round(model: WorldModel, env_config: PixelPendulumConfig, config: It
     return {"frames": np.concatenate(frames), "actions": np.concatenate(actions), "rewards": np.concatenate(rewards), "returns": returns}
 
 
-def _append(path: Path, info: DatasetInfo, new: dict[str, Any], round_index: int, command: str) -> None:
-    """Rewrites ``path`` atomically with its sequences and ``new``'s (all in the train split)."""
+def _append(path: Path, info: DatasetInfo, env: PixelPendulumConfig, new: dict[str, Any], round_index: int,
+            command: str) -> None:
+    """Rewrites ``path`` atomically with its sequences and ``new``'s (all in the train split); its ``env_config`` is
+    ``env``, the env that collected them (the source file's episode length is not theirs)."""
     old: dict[str, Any] = {"returns": []}
     if path.exists():
         frames, actions = read_sequences(path, "train")
@@ -149,8 +151,8 @@ def _append(path: Path, info: DatasetInfo, new: dict[str, Any], round_index: int
                "returns": list(inspect_dataset(path).attrs["episode_returns"])}
     joined = {key: np.concatenate([old[key], new[key]]) if key in old else new[key] for key in ("frames", "actions", "rewards")}
     n, t = joined["rewards"].shape
-    attrs = {key: info.attrs[key] for key in ("system", "dt", "params", "env_config", "env_id") if key in info.attrs}
-    attrs.update({"rounds": round_index, "episode_returns": old["returns"] + new["returns"], "command": command,
+    attrs = {key: info.attrs[key] for key in ("system", "dt", "params", "env_id") if key in info.attrs}
+    attrs.update({"env_config": env.to_dict(), "rounds": round_index, "episode_returns": old["returns"] + new["returns"], "command": command,
                   "source": str(info.path), "split_counts": {"train": n, "valid": 0, "test": 0}})
     with DatasetWriter(path, n, t, joined["frames"].shape[2:], joined["actions"].shape[2], None, attrs,
                        overwrite=True, rewards=True) as writer:
@@ -205,7 +207,7 @@ def train_planet_iterative(
                                  "run again with --overwrite")
             new = collect_round(load_planet(run_dir)[0], env_config, iterative, planner or LatentPlannerConfig(), config.seed, r,
                                 info.steps, progress)
-            _append(collected, info, new, r, command)
+            _append(collected, info, env_config, new, r, command)
             done = r
         if _step_of(run_dir) < target:
             model, state = train_planet(data, run_dir, replace(config, steps=target), resume=True, progress=progress,

@@ -349,10 +349,10 @@ RESUME_OPTIONS = {"planet": ("steps", "max_minutes", "rounds", "threads", "devic
                   "ddpg": ("steps", "threads", "device", "quiet")}
 
 
-def _given_options(kind: str, argv: Sequence[str] | None) -> set[str]:
-    """The destinations of the options written on the command line ``argv`` of subcommand ``kind``, even
-    where the value written is the default."""
-    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction)).choices[kind]
+def _given_options(parser: ArgumentParser, kind: str, argv: Sequence[str] | None) -> set[str]:
+    """The destinations of the options written on the command line ``argv`` of ``parser``'s subcommand ``kind``,
+    even where the value written is the default."""
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)).choices[kind]
     return given_options(sub, argv)
 
 
@@ -363,10 +363,11 @@ def _refuse_recipe_changes(args: Any, record: dict[str, Any], run_dir: Path, arg
     same contents under another path is the run's: ``record`` is rewritten to name it."""
     kind = args.baseline
     named = [kind, args.data, "--out", args.out] if kind == "planet" else [kind, "--obs", args.obs, "--out", args.out]
-    defaults = vars(build_parser().parse_args(named))
+    parser = build_parser()
+    defaults = vars(parser.parse_args(named))
     skip = {"baseline", "data", "out", "obs", "algo", "resume", "overwrite", "iterative", "quiet", *RESUME_OPTIONS[kind]}
-    given = _given_options(kind, argv)
-    started = recorded_options(build_parser(), record.get("command")) or {}  # the starting command's values may be repeated
+    given = _given_options(parser, kind, argv)
+    started = recorded_options(parser, record.get("command")) or {}  # the starting command's values may be repeated
     # and so may the run's own settings, as its record holds them (--seed 0 on a run of seed 0)
     sections = ("rssm", "train", "iterative") if kind == "planet" else ("ddpg",)
     own = {k: v for section in sections if isinstance(record.get(section), dict) for k, v in record[section].items()}
@@ -518,7 +519,7 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
             raise PigaError(f"--max-sequences {config.max_sequences}: {args.data} has {n_train} train sequences; give at "
                             f"most {n_train} (0: all)")
         if not args.iterative:  # each refused whenever written, at its default's value too
-            given = _given_options("planet", argv)
+            given = _given_options(build_parser(), "planet", argv)
             ignored = [f"--{name.replace('_', '-')}" for name in ("rounds", "round_steps", "episode_steps", "exploration_noise")
                        if name in given]
             if ignored:
@@ -638,7 +639,7 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
     from agents.sb3.autoencoder import AutoencoderConfig
     from envs import DMC_PENDULUM
 
-    written = _given_options("ddpg", argv)  # an option that does not apply is refused at its default value too
+    written = _given_options(build_parser(), "ddpg", argv)  # an option that does not apply is refused at its default value too
     if args.obs != "latent" and "autoencoder_steps" in written:
         raise PigaError(f"--autoencoder-steps is for --obs latent; --obs {args.obs} trains no autoencoder")
     if args.algo != "drqv2" and "encoder_precision" in written:

@@ -504,6 +504,31 @@ def _check_env_attrs(info: DatasetInfo) -> None:
         raise DataFormatError(f"{path}: attribute 'dt' says the frames are {info.dt:g} s apart, but {env_id} (its "
                               f"'env_id') steps {step:g} s{how}; set 'dt' to {step:g}{other}, or collect the file again")
     _check_params_agree(info, config, env_id if env_id is not None else settings_of)
+    _check_effects_agree(info, config)
+
+
+def _check_effects_agree(info: DatasetInfo, config: dict[str, Any]) -> None:
+    """Refuses an ``effects`` attribute other than the effects ``env_config`` holds: training scores the learned gain
+    against 'effects' (a ``gain`` effect scales the true a) while piga-control and piga-diagnose's ``--env`` make the
+    system from 'env_config'. Either missing, or one that is no list of name-value pairs, has nothing to contradict
+    (a malformed ``env_config`` is refused where it is read)."""
+    recorded, held = info.attrs.get("effects"), config.get("effects")
+    if not isinstance(recorded, dict) or not isinstance(held, list):
+        return
+    try:
+        said = {str(k): float(v) for k, v in recorded.items()}
+        made = {str(k): float(v) for k, v in held}
+    except (TypeError, ValueError):
+        return
+    if said.keys() == made.keys() and all(math.isclose(said[k], made[k], rel_tol=1e-6, abs_tol=1e-12) for k in said):
+        return
+
+    def text(effects: dict[str, float]) -> str:
+        return ", ".join(f"{k}={v:g}" for k, v in effects.items()) or "none"
+
+    raise DataFormatError(f"{info.path}: attribute 'effects' says {text(said)}, but 'env_config' holds effects "
+                          f"{text(made)}; fix the attribute that is wrong (training scores against 'effects', "
+                          "piga-control reads 'env_config'), or collect the file again")
 
 
 def _settings_env(config: dict[str, Any]) -> tuple[str | None, list[str]]:
