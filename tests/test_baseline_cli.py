@@ -242,6 +242,26 @@ def test_a_file_without_rewards_gets_one_line(tiny_data: Path, tmp_path: Path, c
     assert not (tmp_path / "r").exists()
 
 
+def test_planet_on_a_file_without_a_valid_split_says_what_it_checks_on(tiny_data: Path, tmp_path: Path,
+                                                                       capsys: pytest.CaptureFixture[str]) -> None:
+    """Its open-loop check read the train split without a word (piga-train-model warns of a missing test split)."""
+    import shutil
+
+    import h5py
+
+    path = Path(shutil.copy(tiny_data, tmp_path / "train_only.h5"))
+    with h5py.File(path, "a") as f:
+        f["split"][...] = 0
+        if "split_counts" in f.attrs:
+            del f.attrs["split_counts"]
+    code, _, err = run_in_process("piga-baseline", baseline.main, "planet", str(path), "--out", str(tmp_path / "r"),
+                                  *TINY_PLANET, capsys=capsys)
+    assert code in (0, 1)  # 1: a 2-step run did not learn
+    assert (f"warning: {path} has no valid sequences; no valid loss is measured, and the open-loop check (metrics.json, "
+            "openloop.png) reads the train split, which is not held out") in err
+    assert json.loads((tmp_path / "r" / "metrics.json").read_text())["open_loop"]["split"] == "train"
+
+
 def test_an_action_repeat_longer_than_the_sequences_gets_one_line(tiny_data: Path, tmp_path: Path,
                                                                   capsys: pytest.CaptureFixture[str]) -> None:
     code, _, err = run_in_process("piga-baseline", baseline.main, "planet", str(tiny_data), "--out", str(tmp_path / "r"),

@@ -295,6 +295,21 @@ def test_a_full_standard_output_is_reported_after_the_files_are_complete(tmp_pat
 
 
 @pytest.mark.skipif(not os.path.exists("/dev/full"), reason="needs /dev/full")
+def test_a_full_standard_error_loses_the_progress_bar_not_the_work(tmp_path: Path) -> None:
+    """`2> log` on a full disk: the progress bar's write failed, and collect (and training) stopped with exit 1,
+    its file removed, nothing said anywhere. The work now goes on; what stderr would have shown is dropped."""
+    import h5py
+
+    out = tmp_path / "d.h5"
+    with open("/dev/full", "w") as full:
+        done = subprocess.run(["piga-collect", "--sequences", "2", "--steps", "8", "--workers", "1", "--out", str(out)],
+                              stdout=subprocess.PIPE, stderr=full, text=True, env=ENV)
+    assert done.returncode == 0 and done.stdout.startswith(f"wrote {out}")
+    with h5py.File(out) as f:
+        assert f["frames"].shape[:2] == (2, 8)
+
+
+@pytest.mark.skipif(not os.path.exists("/dev/full"), reason="needs /dev/full")
 def test_help_onto_a_full_standard_output_is_not_a_silent_success() -> None:
     """argparse's exit after --help passed by the check: `--help > /dev/full` exited 0 with nothing shown."""
     with open("/dev/full", "w") as full:
@@ -330,7 +345,7 @@ def test_a_lost_standard_output_keeps_the_commands_own_failure(monkeypatch: pyte
 
 
 def test_output_after_a_failed_write_is_dropped_and_the_failure_kept() -> None:
-    from piga.cli.common import _GuardedStdout
+    from piga.cli.common import _GuardedStream
 
     class Failing:
         def __init__(self) -> None:
@@ -346,7 +361,7 @@ def test_output_after_a_failed_write_is_dropped_and_the_failure_kept() -> None:
             pass
 
     stream = Failing()
-    guard = _GuardedStdout(stream)
+    guard = _GuardedStream(stream)
     assert guard.write("a") == 1 and guard.failed is None
     assert guard.write("b") == 1 and guard.failed is not None and guard.failed.errno == 28
     guard.write("c")

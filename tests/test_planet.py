@@ -210,6 +210,7 @@ def test_iterative_rounds_append_collected_episodes_and_leave_the_data_file_alon
     assert collected.attrs["rounds"] == 2 and len(collected.attrs["episode_returns"]) == 2 and not collected.has_states
     # its env_config is the env that collected it: episodes of the round's length, not the source file's
     assert collected.attrs["env_config"]["episode_length"] == TINY_ITERATIVE.episode_steps
+    assert collected.attrs["seed"] == TINY_TRAIN.seed  # the seed its rounds' episodes draw theirs from
     frames, actions = read_sequences(tmp_path / "run" / "collected.h5", "train")
     assert frames.shape == (4, 16, 64, 64) and frames.dtype == np.uint8 and np.abs(actions).max() <= 2.0
     assert np.all(load_rewards(tmp_path / "run" / "collected.h5", "train") <= 0)
@@ -248,7 +249,8 @@ def test_collected_rounds_must_account_for_its_sequences(tiny_data: Path, tmp_pa
     env = check_iterative_data(info, TINY_ITERATIVE)
     frames, actions = read_sequences(tiny_data, "train")
     new = {"frames": frames[:2], "actions": actions[:2], "rewards": load_rewards(tiny_data, "train")[:2], "returns": [0.0]}
-    _append(path, info, env, new, 1, "test")
+    _append(path, info, env, new, 1, "test", seed=3)
+    assert inspect_dataset(path).attrs["seed"] == 3
     assert rounds_collected(tmp_path, per_round=2) == 1
     with h5py.File(path, "a") as f:
         f.attrs["rounds"] = 5

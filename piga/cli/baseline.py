@@ -547,6 +547,9 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
     check_run_disk(run_dir, _planet_checkpoint_bytes(run_dir, record["rssm"], args.resume), "the PlaNet-style run",
                    extra=0 if iterative is None else 2 * _collected_bytes(info, iterative), resume=args.resume)
     used = min(info.split_counts["train"], config.max_sequences or info.split_counts["train"])
+    if not info.split_counts["valid"]:  # (as piga-train-model warns of a file without a test split)
+        print(f"{PROG}: warning: {args.data} has no valid sequences; no valid loss is measured, and the open-loop "
+              "check (metrics.json, openloop.png) reads the train split, which is not held out", file=sys.stderr)
     print(f"training the PlaNet-style model on {args.data} ({counted(used, 'train sequence')} x {info.steps} frames) -> {run_dir}"
           + (f", then {counted(iterative.rounds, 'round')} of {counted(iterative.episodes, 'planner episode')} + "
              f"{counted(iterative.steps_per_round, 'step')}" if iterative else ""))

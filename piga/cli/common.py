@@ -388,7 +388,9 @@ def run_cli(prog: str, main: Callable[[Sequence[str] | None], int | None], argv:
     import tqdm  # its monitor thread, started with the first bar, warned in 3 lines where no thread could start
 
     tqdm.tqdm.monitor_interval = 0
-    stdout, sys.stdout = sys.stdout, _GuardedStdout(sys.stdout)
+    stdout, sys.stdout = sys.stdout, _GuardedStream(sys.stdout)
+    # (stderr too: progress bars onto a full disk, `2> log`, stopped collect and training, their files removed, exit 1)
+    stderr, sys.stderr = sys.stderr, _GuardedStream(sys.stderr)
     _FLAGS.clear()  # this command's parsers fill it
     excepthook, threading.excepthook = threading.excepthook, _thread_errors_to_log(prog, argv)
     code: int | str | None
@@ -414,15 +416,16 @@ def run_cli(prog: str, main: Callable[[Sequence[str] | None], int | None], argv:
         _RUNNING.clear()
         if argv is None:  # the command's own process, its work over and its exit code decided
             _exit_quietly_on_late_signals(_FINISHED_LINE.format(prog=prog) if returned else None)
-        guard, sys.stdout = sys.stdout, stdout
+        guard, sys.stdout, sys.stderr = sys.stdout, stdout, stderr
         threading.excepthook, sys.unraisablehook = excepthook, unraisablehook
         release_run_folders()  # a command run in-process (a test, a notebook) releases its run folder as it returns
-    if isinstance(guard, _GuardedStdout) and guard.failed is not None:
+    if isinstance(guard, _GuardedStream) and guard.failed is not None:
         # The work is done and its files are complete; only the report was lost. Exit 1 all the same
         # (as coreutils do), so that a script notices, but say that a rerun is not needed. A command that
         # failed on its own (a usage error, a run that did not converge) keeps its own code.
         reason = guard.failed.strerror or guard.failed.__class__.__name__
-        print(f"{prog}: error: could not write to standard output ({reason}){finished}", file=sys.stderr)
+        with contextlib.suppress(OSError):  # stderr failed too: the exit code alone says it
+            print(f"{prog}: error: could not write to standard output ({reason}){finished}", file=sys.stderr)
         sys.exit(code if isinstance(code, int) and code != 0 else 1)
     sys.exit(code or 0)
 
@@ -525,13 +528,14 @@ def _null_onto(fd: int) -> None:
         os.close(null)
 
 
-class _GuardedStdout:
-    """``sys.stdout`` during a command: a failed write (``> /dev/full``, a closed pipe) must not stop
-    a command whose files are being written, nor leave it half done. The first failure is kept in
-    :attr:`failed`, later output is dropped, and ``run_cli`` reports it after the command finished.
+class _GuardedStream:
+    """``sys.stdout`` or ``sys.stderr`` during a command: a failed write (``> /dev/full``, ``2> log`` on a full
+    disk, a closed pipe) must not stop a command whose files are being written, nor leave it half done. The first
+    failure is kept in :attr:`failed`, later output is dropped, and ``run_cli`` reports a failed stdout after the
+    command finished (on stderr; a failed stderr has nowhere to be said, and the exit code is the command's own).
 
-    Python's own stdout object has no such mode; its buffer would raise again at exit, so file
-    descriptor 1 is pointed at the null device once a write failed.
+    Python's own stream objects have no such mode; their buffers would raise again at exit, so the stream's file
+    descriptor is pointed at the null device once a write failed.
     """
 
     def __init__(self, stream: Any) -> None:
