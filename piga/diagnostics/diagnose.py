@@ -1486,9 +1486,14 @@ def _zoom_first(naming: Naming, camera: CameraFindings | None, config: CameraCon
     from 0.9 times as far read "the actions barely move the system: a refits to 5.32e-09", its actuation unchanged)."""
     if camera is None or not camera.rescaled(config) or not naming.verdict.startswith("not explained"):
         return naming
+    # an undetermined gain is then the angles' too (dm_control of length 0.4 filmed from 0.9 times as far, its a x1.56,
+    # listed "a motor wired in reverse ... another signal, other units" as causes)
+    read = naming.verdict.replace(ACTIONS_BARELY_MOVE, THROUGH_VISION[0]).replace(
+        ACTUATOR_CAUSES, "through a picture of another size, which says nothing of the actuator: angles that the "
+                         "vision misreads do not follow the actions either")
     verdict = (f"not explained: the pendulum is drawn x{camera.scale:.2f} the size of the model's renders (a camera "
                "nearer or farther, or a pendulum of another length), which the zoom candidate does not describe; "
-               "identify a model on this camera's frames. What the fits read through it: " + naming.verdict)
+               "identify a model on this camera's frames. What the fits read through it: " + read)
     return Naming(naming.effects, naming.notes, verdict, naming.verdict_class)
 
 
@@ -2035,6 +2040,12 @@ def summarise_vision(obs: Observations, rec_training: float, camera: CameraFindi
     return VisionSummary(rec_real, rec_training, ratio, summary), notes
 
 
+#: The factor by which the nominal physics' one-step angle error (RMS) on the corrected model's matched angles must
+#: exceed the corrected physics' for a pixel closure to be headlined where the nominal's pixel error is within
+#: :data:`MEASURABLE_GAP` of the matched floor: what no render draws then fills the floor, not the physics' error.
+ONE_STEP_GAP = 3.0
+
+
 #: The factor, either way, between the recording's and the training file's ratios of the re-rendering error after the
 #: largest fifth of the actions to that after the smallest fifth, beyond which the difference follows the action
 #: (:func:`action_linked`). Measured on the default Gymnasium model (24-26 sequences of 16 frames): the training file
@@ -2197,7 +2208,12 @@ def measure_gap(candidates: Candidates, chosen: Score, nom: Nominal, obs: Observ
     headline = pixel_closure if basis == "pixels" else typical_gap
     floor_subtracted = (not pixel_raw) if basis == "pixels" else floored
     if basis == "pixels":
-        measurable = pixels.typical_pixel_mse_nominal > MEASURABLE_GAP * pixels.pixel_mse_floor
+        # what no render draws raises the matched floor to the nominal's pixel error (Gymnasium's torque arrow at an
+        # actuation gain of 5, named "gain 5.01", headlined "no gap above the floor to close"): the one-step errors of
+        # both physics on the same matched angles still show such a gap (there 117.7° against 0.53°)
+        physics_gap = (float(fit.horizon_errors(nominal_model, nom, w.held1)[0])
+                       > ONE_STEP_GAP * ONE_STEP_GAP * float(one_step))
+        measurable = pixels.typical_pixel_mse_nominal > MEASURABLE_GAP * pixels.pixel_mse_floor or physics_gap
     else:
         measurable = (typ_floor is None or typ_nom > MEASURABLE_GAP * typ_floor
                       or typ_nom > typ_floor >= typ_fin)  # (a nominal error below the floor: no gap to measure)
