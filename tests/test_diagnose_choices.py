@@ -703,6 +703,19 @@ def test_no_gap_above_the_floor_leads_with_no_closure_percentage(damped) -> None
                            "MSE ") and "rad² beside the twin's floor" in line, line
 
 
+def test_a_physics_gap_that_the_matched_floor_hides_is_still_a_gap() -> None:
+    """Gymnasium's torque arrow at an actuation gain of 5, which no render draws, filled the matched floor: "gain 5.01"
+    was headlined "no gap above the floor to close". The one-step angle errors of both physics on the same matched
+    angles (117.7° against 0.53°) show the gap; sensor noise of 50 gray levels, with no physics named, does not."""
+    from piga.diagnostics.diagnose import pixel_gap_measurable
+
+    deg2 = (math.pi / 180) ** 2
+    assert pixel_gap_measurable(0.0272, 0.0227, 117.7**2 * deg2, 0.53**2 * deg2)
+    assert not pixel_gap_measurable(0.0244, 0.0193, 0.6**2 * deg2, 0.55**2 * deg2)  # the same physics both ways
+    assert pixel_gap_measurable(0.0244, 0.0100, 0.6**2 * deg2, 0.55**2 * deg2)  # a gap in the pixels alone
+    assert not pixel_gap_measurable(0.0244, 0.0193, 2.9**2 * deg2, 1.0**2 * deg2)  # under 3x in RMS
+
+
 def test_the_report_gives_a_shift_by_component(damped) -> None:
     """The effect table read "| shift | 1.002 | 1.001 .. 1.002 | px (mean of right and down) |" for a shift of 2 px
     right: its length and each component now have a row, each with its own interval."""

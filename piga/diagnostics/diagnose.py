@@ -2046,6 +2046,16 @@ def summarise_vision(obs: Observations, rec_training: float, camera: CameraFindi
 ONE_STEP_GAP = 3.0
 
 
+def pixel_gap_measurable(nominal: float, floor: float, one_step_nominal: float, one_step_corrected: float) -> bool:
+    """Whether a pixel closure measures a gap: the nominal's typical pixel MSE is more than :data:`MEASURABLE_GAP`
+    times the matched ``floor``, or the nominal physics' one-step angle MSE on the matched angles more than
+    :data:`ONE_STEP_GAP` squared times the corrected physics' on the same angles. What no render draws raises the
+    matched floor to the nominal's pixel error: Gymnasium's torque arrow at an actuation gain of 5, named "gain 5.01",
+    was headlined "no gap above the floor to close" (pixel MSE 0.0272 beside a floor of 0.0227), its one-step errors
+    117.7° against 0.53°."""
+    return nominal > MEASURABLE_GAP * floor or one_step_nominal > ONE_STEP_GAP**2 * one_step_corrected
+
+
 #: The factor, either way, between the recording's and the training file's ratios of the re-rendering error after the
 #: largest fifth of the actions to that after the smallest fifth, beyond which the difference follows the action
 #: (:func:`action_linked`). Measured on the default Gymnasium model (24-26 sequences of 16 frames): the training file
@@ -2208,12 +2218,8 @@ def measure_gap(candidates: Candidates, chosen: Score, nom: Nominal, obs: Observ
     headline = pixel_closure if basis == "pixels" else typical_gap
     floor_subtracted = (not pixel_raw) if basis == "pixels" else floored
     if basis == "pixels":
-        # what no render draws raises the matched floor to the nominal's pixel error (Gymnasium's torque arrow at an
-        # actuation gain of 5, named "gain 5.01", headlined "no gap above the floor to close"): the one-step errors of
-        # both physics on the same matched angles still show such a gap (there 117.7° against 0.53°)
-        physics_gap = (float(fit.horizon_errors(nominal_model, nom, w.held1)[0])
-                       > ONE_STEP_GAP * ONE_STEP_GAP * float(one_step))
-        measurable = pixels.typical_pixel_mse_nominal > MEASURABLE_GAP * pixels.pixel_mse_floor or physics_gap
+        measurable = pixel_gap_measurable(pixels.typical_pixel_mse_nominal, pixels.pixel_mse_floor,
+                                          float(fit.horizon_errors(nominal_model, nom, w.held1)[0]), float(one_step))
     else:
         measurable = (typ_floor is None or typ_nom > MEASURABLE_GAP * typ_floor
                       or typ_nom > typ_floor >= typ_fin)  # (a nominal error below the floor: no gap to measure)
