@@ -289,6 +289,10 @@ def test_cli_bad_env(tiny_model: Path, tiny_data: Path, tmp_path: Path, capsys: 
                                               str(tmp_path / "r"), "--env", "dampng=0.2"), "--env", "unknown effect")
     assert_one_line_error(diagnose_in_process(capsys, "--model", str(tiny_model), "--data", str(tiny_data), "--out",
                                               str(tmp_path / "r"), "--env", "damping=0.2,,delay=2"), "--env", "empty item")
+    # an env the MPC comparison could not step: refused before the diagnosis (it was after it, naming a job)
+    assert_one_line_error(diagnose_in_process(capsys, "--model", str(tiny_model), "--data", str(tiny_data), "--out",
+                                              str(tmp_path / "r"), "--env", "damping=50"), "--env: effect damping=50",
+                          "use damping below 13.2")
     assert not (tmp_path / "r").exists()
 
 
@@ -510,6 +514,12 @@ def test_the_smallest_default_file_is_accepted(tmp_path: Path) -> None:
     with pytest.raises(DiagnosisInputError, match="17 train and 3 held-out sequences; need at least 10 and 4; collect or import it "
                        "again with a split that holds out at least 4, such as --split 16,2,2$"):
         check_compatible(model, fewer)
+    few_train = tmp_path / "nine-trained.h5"  # (it was told to hold out 4, with 11 held out)
+    collect(CollectConfig(sequences=20, steps=12, seed=3, workers=1, split=(9, 5, 6)), few_train, progress=False,
+            command="t")
+    with pytest.raises(DiagnosisInputError, match="9 train and 11 held-out sequences; need at least 10 and 4; collect or "
+                       "import it again with a split that trains on at least 10, such as --split 16,2,2$"):
+        check_compatible(model, few_train)
     # gray frames with a channel axis, (H, W, 1), are gray frames: training takes them, and so does the diagnosis
     # (it refused them: "frames are (64, 64, 1), the model takes 64x64 with 1 channel(s)")
     with h5py.File(data, "a") as f:

@@ -592,6 +592,16 @@ def _env_config_edit(**fields: Any) -> Callable[[h5py.File], None]:
                                               "fix the attribute that is wrong"]),
     (lambda f: (_env_config_edit(effects=[["damping", 0.3]])(f), f.attrs.__setitem__("effects", '{"damping": 0.2}')),
      ["attribute 'effects' says damping=0.2, but 'env_config' holds effects damping=0.3"]),
+    # effects that env_config does not hold at all, and effects that piga-collect cannot make (accepted everywhere)
+    (lambda f: (f.attrs.__setitem__("env_config", json.dumps({k: v for k, v in json.loads(f.attrs["env_config"]).items()
+                                                              if k != "effects"})),
+                f.attrs.__setitem__("effects", '{"damping": 0.5}')),
+     ["attribute 'effects' says damping=0.5, but 'env_config' holds effects none"]),
+    (lambda f: (_env_config_edit(effects=[["warp", 1]])(f), f.attrs.__setitem__("effects", '{"warp": 1}')),
+     ["attribute 'effects' is not effects piga-collect makes (unknown effect 'warp'"]),
+    (lambda f: (_env_config_edit(effects=[["damping", 50]])(f), f.attrs.__setitem__("effects", '{"damping": 50}')),
+     ["the effects in 'env_config' are not effects piga-collect makes (effect damping=50", "use damping below 13.2"]),
+    (_attr_edit("effects", "garbage"), ["attribute 'effects' is not effects piga-collect makes (expected a JSON object"]),
 ])
 def test_a_file_that_breaks_the_schema_is_named_on_open(edit: Callable[[h5py.File], None], needles: list[str],
                                                         tiny_data: Path, tmp_path: Path,
@@ -627,6 +637,9 @@ def test_effects_that_env_config_also_holds_are_read(tiny_data: Path, tmp_path: 
         _env_config_edit(effects=[["damping", 0.3], ["delay", 1]])(f),
         f.attrs.__setitem__("effects", '{"delay": 1.0, "damping": 0.3}')))
     assert inspect_dataset(data).attrs["effects"] == {"delay": 1.0, "damping": 0.3}
+    data = _variant(tiny_data, tmp_path / "e.h5", lambda f: (  # env_config's effects as an object, as a user writes them
+        _env_config_edit(effects={"delay": 1})(f), f.attrs.__setitem__("effects", '{"delay": 1}')))
+    assert inspect_dataset(data).attrs["effects"] == {"delay": 1}
 
 
 def test_half_precision_actions_and_huge_rewards_are_read_without_warnings(tiny_data: Path, tmp_path: Path) -> None:

@@ -96,9 +96,9 @@ def build_parser() -> ArgumentParser:
                    "thread per worker")
     p.add_argument("--overwrite", action="store_true", help="replace files of an earlier demo in --out")
     p.add_argument("--resume", action="store_true",
-                   help="continue an earlier demo in --out (one that was interrupted): keep its data when collected with "
-                   "the same --sequences and --seed, continue its training (piga-train-model --resume), and redo the "
-                   "frames and the control")
+                   help="continue an earlier demo in --out (one that was interrupted): keep its data (give the same "
+                   "--sequences and --seed; other values are refused), continue its training (piga-train-model "
+                   "--resume), and redo the frames and the control")
     p.add_argument("--quiet", action="store_true", help="no progress bars (the stages and the summary are still printed)")
     return p
 

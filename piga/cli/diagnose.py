@@ -155,10 +155,14 @@ def _parse_env(text: str) -> tuple[tuple[str, float], ...]:
     if not all(parts):
         raise PigaError(f"--env: an empty item in {text!r}; give NAME=VALUE items separated by single commas, "
                         "e.g. 'damping=0.2,delay=2'")
-    try:
-        return normalize_effects(parts)
+    from piga.control.episodes import EpisodeConfig
+
+    try:  # the env that the MPC comparison runs, checked here: damping=50 was refused after the whole diagnosis
+        effects = normalize_effects(parts)
+        EpisodeConfig(episodes=1, effects=effects).env_config()
     except (ValueError, TypeError) as exc:
         raise PigaError(f"--env: {exc}") from None
+    return effects
 
 
 def _check_env_agrees(effects: tuple[tuple[str, float], ...], recorded: object, data: str) -> None:

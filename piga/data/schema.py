@@ -508,18 +508,33 @@ def _check_env_attrs(info: DatasetInfo) -> None:
 
 
 def _check_effects_agree(info: DatasetInfo, config: dict[str, Any]) -> None:
-    """Refuses an ``effects`` attribute other than the effects ``env_config`` holds: training scores the learned gain
-    against 'effects' (a ``gain`` effect scales the true a) while piga-control and piga-diagnose's ``--env`` make the
-    system from 'env_config'. Either missing, or one that is no list of name-value pairs, has nothing to contradict
-    (a malformed ``env_config`` is refused where it is read)."""
-    recorded, held = info.attrs.get("effects"), config.get("effects")
-    if not isinstance(recorded, dict) or not isinstance(held, list):
+    """Refuses an ``effects`` attribute, or ``env_config``'s effects, that piga-collect could not have made (an unknown
+    effect, a value out of its range, a passive torque Pendulum-v1's step cannot integrate), and an ``effects``
+    attribute other than the effects ``env_config`` holds (none where it holds no ``effects``): training scores the
+    learned gain against 'effects' (a ``gain`` effect scales the true a) while piga-control and piga-diagnose's
+    ``--env`` make the system from 'env_config'. A file without the attribute has nothing to contradict."""
+    from envs.effects import explicit_step_problem, normalize_effects
+    from envs.constants import PENDULUM_DT
+
+    recorded, held = info.attrs.get("effects"), config.get("effects", [])
+    if recorded is None:
         return
-    try:
-        said = {str(k): float(v) for k, v in recorded.items()}
-        made = {str(k): float(v) for k, v in held}
-    except (TypeError, ValueError):
-        return
+    checked = []
+    for name, effects in (("attribute 'effects' is", recorded), ("the effects in 'env_config' are", held)):
+        try:
+            if not isinstance(effects, (dict, list)):
+                raise TypeError(f"expected a JSON object of name: value, got {str(effects)[:40]!r}")
+            checked.append(dict(normalize_effects(effects)))
+        except (TypeError, ValueError) as exc:
+            raise DataFormatError(f"{info.path}: {name} not effects piga-collect makes ({exc}); fix it, or collect "
+                                  "the file again") from None
+    said, made = checked
+    gravity = config.get("gravity", 10.0) * config.get("gravity_mult", 1.0) if all(
+        isinstance(config.get(k, 1.0), (int, float)) and not isinstance(config.get(k, 1.0), bool)
+        for k in ("gravity", "gravity_mult")) else 10.0
+    if (unstable := explicit_step_problem(made, gravity, PENDULUM_DT)) is not None:
+        raise DataFormatError(f"{info.path}: the effects in 'env_config' are not effects piga-collect makes ({unstable}); "
+                              "fix them, or collect the file again")
     if said.keys() == made.keys() and all(math.isclose(said[k], made[k], rel_tol=1e-6, abs_tol=1e-12) for k in said):
         return
 

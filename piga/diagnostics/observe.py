@@ -17,6 +17,7 @@ import numpy as np
 import torch
 
 from envs import DMC_PENDULUM, PIXEL_PENDULUM
+from envs.fields import counted
 from piga.data.schema import SPLITS, DatasetInfo, check_actions, inspect_dataset, read_rows, split_indices
 from piga.diagnostics.repeats import stale_frames
 from piga.world.model import PhysicsModel, frames_to_float
@@ -151,7 +152,8 @@ def check_compatible(model: PhysicsModel, path: str | os.PathLike[str], min_sequ
     if info.steps < min_steps:
         raise DiagnosisInputError(f"{path}: sequences of {info.steps} frames; the diagnosis needs at least {min_steps}")
     if info.n_sequences < min_sequences:
-        raise DiagnosisInputError(f"{path}: {info.n_sequences} sequences; the diagnosis needs at least {min_sequences}")
+        raise DiagnosisInputError(f"{path}: {counted(info.n_sequences, 'sequence')}; the diagnosis needs at least "
+                                  f"{min_sequences}")
     n_fit = len(split_indices(path, "train"))
     # Half of the minimum to fit, a fifth held out: the minimum of 20 sequences at piga-collect's default
     # split (0.8, 0.1, 0.1) gives 16 and 4, so the smallest file that collect makes by default is accepted.
@@ -159,8 +161,9 @@ def check_compatible(model: PhysicsModel, path: str | os.PathLike[str], min_sequ
     if n_fit < min_fit or info.n_sequences - n_fit < min_held_out:
         n = info.n_sequences
         fix = ""  # the file's own split decides: piga-collect or piga-import writes another
-        if n >= min_fit + min_held_out:
-            fix = (f"; collect or import it again with a split that holds out at least {min_held_out}, such as --split "
+        if n >= min_fit + min_held_out:  # (the shortfall named: 9 train and 11 held out were told to hold out 4)
+            short = (f"trains on at least {min_fit}" if n_fit < min_fit else f"holds out at least {min_held_out}")
+            fix = (f"; collect or import it again with a split that {short}, such as --split "
                    f"{n - min_held_out},{min_held_out // 2},{min_held_out - min_held_out // 2}")
         raise DiagnosisInputError(f"{path}: {n_fit} train and {n - n_fit} held-out sequences; "
                                   f"need at least {min_fit} and {min_held_out}{fix}")
