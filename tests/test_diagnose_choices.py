@@ -16,7 +16,7 @@ from piga.diagnostics import DiagnoseConfig, Observations, analyse, fit
 from piga.diagnostics.diagnose import UNITS, clip_binding, clip_supported, deadzone_refuted, own_reading, select
 from piga.diagnostics.report import closure_line, markdown
 from piga.io.runs import Nominal, nominal_of
-from tests.test_diagnose_continuous import DT, planted_within_frame
+from tests.test_diagnose_continuous import within_frame_diagnosis
 from tests.test_diagnostics import NOMINAL, planted
 
 FAST = DiagnoseConfig(bootstrap=0)
@@ -164,15 +164,12 @@ def test_an_excluded_effect_is_not_fitted_and_the_report_says_why() -> None:
 # --- 4. the four defects ----------------------------------------------------------------------
 
 
-def test_a_gain_on_top_of_within_frame_is_not_counted_twice() -> None:
+def test_a_gain_on_top_of_within_frame_is_not_counted_twice(tmp_path_factory: pytest.TempPathFactory) -> None:
     """(a) The fast model reads a low on a system that moves within the frame; refitted with within_frame,
     a comes out at the truth, which is no gain error of the real system."""
-    obs = planted_within_frame(n=60)  # (60 sequences: a's correction still 1.23x, well past the 0.1 below)
-    rows = np.flatnonzero(obs.fit)
-    euler = fit.fit_candidate((), {}, Nominal(g=12.0, a=1.0, offset=0.0, dt=DT),
-                              fit.make_windows(obs.theta, obs.actions, rows, 8, 2, DT))
-    nominal = Nominal(g=euler.values["g"], a=euler.values["a"], offset=0.0, dt=DT)  # what a fast model identifies
-    d = analyse(obs, nominal, FAST)
+    # the diagnosis of tests/test_diagnose_continuous.py, against the nominal that one Euler step per frame fits there
+    # (60 sequences: a's correction 1.23x, well past the 0.1 below)
+    nominal, d = within_frame_diagnosis(tmp_path_factory)
     names = [e.effect for e in d.effects]
     assert "within_frame" in names and "gain" not in names, d.verdict
     assert abs(d.corrected["a"] / nominal.a - 1) > 0.1  # the correction still moves a: it is the reading, not a gain
