@@ -17,7 +17,7 @@ from piga.diagnostics import DiagnoseConfig, Observations, analyse
 from piga.diagnostics import fit
 from piga.io.runs import Nominal
 from piga.world.effects import CANDIDATES, EFFECTS, SPEED_CLIP
-from tests.helpers import assert_one_line_error, completed_in_process, run, train_tiny
+from tests.helpers import assert_one_line_error, completed_in_process, once_per_run, run, train_tiny
 
 NOMINAL = Nominal(g=10.0, a=1.0, offset=0.0, dt=0.05)
 FAST = DiagnoseConfig(bootstrap=0)
@@ -210,13 +210,15 @@ def test_a_gain_whose_interval_holds_the_nominal_is_not_named() -> None:
 def tiny_model(tiny_data: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A tiny model whose autoencoder has learnt the scene (training MSE ~25% of drawing no pendulum;
     24 steps, ~15 s), but whose physics has barely moved from g = 1, a = 0.3: its verdicts mean nothing."""
-    return train_tiny(tiny_data, tmp_path_factory.mktemp("diag") / "model", epochs=6, warmup_fraction=16 / 24, lr=3e-3)
+    return once_per_run(tmp_path_factory, "diagnostics_tiny_model", lambda: train_tiny(
+        tiny_data, tmp_path_factory.mktemp("diag") / "model", epochs=6, warmup_fraction=16 / 24, lr=3e-3))
 
 
 @pytest.fixture(scope="module")
 def untrained_model(tiny_data: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A model after 2 steps: its autoencoder draws no pendulum yet (training MSE ~60x that of drawing none)."""
-    return train_tiny(tiny_data, tmp_path_factory.mktemp("diag") / "untrained", warmup_fraction=0.5)
+    return once_per_run(tmp_path_factory, "diagnostics_untrained_model", lambda: train_tiny(
+        tiny_data, tmp_path_factory.mktemp("diag") / "untrained", warmup_fraction=0.5))
 
 
 @pytest.fixture(scope="module")
@@ -224,10 +226,13 @@ def damped_data(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """24 sequences x 16 frames of a pendulum with damping 0.3 (split 16/4/4)."""
     from piga.data.collect import CollectConfig, collect
 
-    path = tmp_path_factory.mktemp("real") / "real.h5"
-    collect(CollectConfig(sequences=24, steps=16, seed=5, workers=1, split=(16, 4, 4),
-                          env=PixelPendulumConfig(effects=(("damping", 0.3),))), path, progress=False, command="t")
-    return path
+    def make() -> Path:
+        path = tmp_path_factory.mktemp("real") / "real.h5"
+        collect(CollectConfig(sequences=24, steps=16, seed=5, workers=1, split=(16, 4, 4),
+                              env=PixelPendulumConfig(effects=(("damping", 0.3),))), path, progress=False, command="t")
+        return path
+
+    return once_per_run(tmp_path_factory, "diagnostics_damped_data", make)
 
 
 def diagnose_in_process(capsys: pytest.CaptureFixture[str], *argv: str) -> subprocess.CompletedProcess[str]:
