@@ -17,7 +17,7 @@ from piga.diagnostics.diagnose import UNITS, clip_binding, clip_supported, deadz
 from piga.diagnostics.report import closure_line, markdown
 from piga.io.runs import Nominal, nominal_of
 from tests.test_diagnose_continuous import within_frame_diagnosis
-from tests.test_diagnostics import NOMINAL, planted
+from tests.test_diagnostics import NOMINAL, planted, planted_diagnosis
 
 FAST = DiagnoseConfig(bootstrap=0)
 
@@ -176,8 +176,8 @@ def test_a_gain_on_top_of_within_frame_is_not_counted_twice(tmp_path_factory: py
     assert any("compensates the effects, not a gain error" in n for n in d.notes)
 
 
-def test_a_real_gain_error_is_still_named() -> None:
-    d = analyse(planted({"gain": 0.8}), NOMINAL, FAST)
+def test_a_real_gain_error_is_still_named(tmp_path_factory: pytest.TempPathFactory) -> None:
+    d = planted_diagnosis(tmp_path_factory, {"gain": 0.8})
     assert d.verdict_class == "gain" and abs(d.effects[0].value - 0.8) < 0.01, d.verdict
     # a deadzone reads a low in the nominal form (no effect), the gain above 1 with it: still a gain
     d = analyse(planted({"gain": 1.2, "deadzone": 0.5}, n=160), NOMINAL, FAST)
@@ -254,8 +254,8 @@ def test_a_nominal_model_with_damping_is_diagnosed_relative_to_it() -> None:
 # --- 5. the headline ----------------------------------------------------------------------------
 
 
-def test_clean_data_have_no_gap_to_close() -> None:
-    d = analyse(planted({}), NOMINAL, FAST)
+def test_clean_data_have_no_gap_to_close(tmp_path_factory: pytest.TempPathFactory) -> None:
+    d = planted_diagnosis(tmp_path_factory, {})
     assert d.verdict_class == "none" and d.gap.no_gap and d.gap.free_run_gap_closure is None
     text = markdown(d, "m", "d", "c")
     headline = next(line for line in text.splitlines() if line.startswith("**No gap to close"))
@@ -268,9 +268,9 @@ def test_clean_data_have_no_gap_to_close() -> None:
     assert "; corrected:" not in text
 
 
-def test_an_unexplained_gap_is_not_called_no_gap_to_close() -> None:
+def test_an_unexplained_gap_is_not_called_no_gap_to_close(tmp_path_factory: pytest.TempPathFactory) -> None:
     """Actions logged as 0 read "not explained ... 221x" and then "no gap to close": the gap is there, unclosed."""
-    d = analyse(planted({"cogging": 0.6}, n=160), NOMINAL, FAST)
+    d = planted_diagnosis(tmp_path_factory, {"cogging": 0.6}, n=160)
     assert d.verdict_class == "unexplained" and d.gap.no_gap, d.verdict
     text = markdown(d, "m", "d", "c")
     assert "**No closure measured**: the gap is not explained" in text and "No gap to close" not in text

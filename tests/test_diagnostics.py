@@ -13,7 +13,7 @@ import pytest
 import torch
 
 from envs.pendulum import PixelPendulumConfig, make_pixel_pendulum
-from piga.diagnostics import DiagnoseConfig, Observations, analyse
+from piga.diagnostics import DiagnoseConfig, Diagnosis, Observations, analyse
 from piga.diagnostics import fit
 from piga.io.runs import Nominal
 from piga.world.effects import CANDIDATES, EFFECTS, SPEED_CLIP
@@ -71,8 +71,15 @@ def planted(effects: dict, n: int = 120, t: int = 30, noise: float = 0.002, seed
                         np.zeros((0, t, 8, 8), np.uint8), np.zeros(0, int))
 
 
-def test_no_effect_is_no_gap() -> None:
-    d = analyse(planted({}), NOMINAL, FAST)
+def planted_diagnosis(tmp_path_factory: pytest.TempPathFactory, effects: dict, n: int = 120) -> Diagnosis:
+    """``analyse(planted(effects, n=n), NOMINAL, FAST)``, computed once in a test run: tests in several modules read the
+    same diagnosis (:func:`tests.helpers.once_per_run`)."""
+    name = "planted_" + "_".join(f"{k}{v}" for k, v in sorted(effects.items())) + f"_n{n}"
+    return once_per_run(tmp_path_factory, name, lambda: analyse(planted(effects, n=n), NOMINAL, FAST))
+
+
+def test_no_effect_is_no_gap(tmp_path_factory: pytest.TempPathFactory) -> None:
+    d = planted_diagnosis(tmp_path_factory, {})
     assert d.verdict_class == "none", d.verdict
     assert d.verdict == "no significant gap"
 
@@ -151,13 +158,13 @@ def test_two_effects_are_both_named() -> None:
     assert d.verdict_class == "bias+deadzone", d.verdict
 
 
-def test_an_effect_outside_the_candidates_is_reported_unexplained() -> None:
-    d = analyse(planted({"cogging": 0.6}, n=160), NOMINAL, FAST)
+def test_an_effect_outside_the_candidates_is_reported_unexplained(tmp_path_factory: pytest.TempPathFactory) -> None:
+    d = planted_diagnosis(tmp_path_factory, {"cogging": 0.6}, n=160)
     assert d.verdict_class == "unexplained", d.verdict
 
 
-def test_a_gain_error_is_the_refitted_a() -> None:
-    d = analyse(planted({"gain": 0.8}), NOMINAL, FAST)
+def test_a_gain_error_is_the_refitted_a(tmp_path_factory: pytest.TempPathFactory) -> None:
+    d = planted_diagnosis(tmp_path_factory, {"gain": 0.8})
     assert d.verdict_class == "gain", d.verdict
     assert abs(d.effects[0]["value"] - 0.8) < 0.01
 
