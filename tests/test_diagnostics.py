@@ -153,6 +153,8 @@ def test_planted_delay_is_exact_and_shows_in_the_cross_correlation() -> None:
     assert d.residuals["action_correlation"]["peak_lag"] == 2
 
 
+@pytest.mark.slow  # two effects named together are checked by default in tests/test_diagnose_choices.py:
+# test_a_real_gain_error_is_still_named (deadzone+gain) and test_a_gain_is_judged_against_the_models_own_file (bias+damping)
 def test_two_effects_are_both_named() -> None:
     d = analyse(planted({"bias": 0.3, "deadzone": 0.5}, n=160), NOMINAL, FAST)
     assert d.verdict_class == "bias+deadzone", d.verdict
