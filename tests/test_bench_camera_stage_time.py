@@ -9,11 +9,11 @@ from types import SimpleNamespace
 import h5py
 import pytest
 
-from tests.helpers import benchmark_module, train_tiny
+from tests.helpers import benchmark_module
 
 
 def test_it_gives_the_stage_the_fit_split_and_prints_its_time_and_camera(
-        tiny_data: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+        tiny_data: Path, tiny_run: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
     import piga.diagnostics.vision as vision
 
     calls = []
@@ -23,7 +23,7 @@ def test_it_gives_the_stage_the_fit_split_and_prints_its_time_and_camera(
         return SimpleNamespace(camera=vision.Camera(blur=0.5))
 
     monkeypatch.setattr(vision, "camera_stage", stage)
-    run = train_tiny(tiny_data, tmp_path / "run")
+    run = tiny_run  # read, not written
     capsys.readouterr()
     with benchmark_module("camera_stage_time") as bench:
         assert bench.main([str(run), str(tiny_data)]) == 0

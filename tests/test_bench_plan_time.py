@@ -16,8 +16,8 @@ from .helpers import benchmark_module, run, train_tiny
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def test_plan_time_times_the_planet_agent_in_the_same_run(tiny_data: Path, tmp_path: Path) -> None:
-    piga_run = train_tiny(tiny_data, tmp_path / "piga")
+def test_plan_time_times_the_planet_agent_in_the_same_run(tiny_data: Path, tiny_run: Path, tmp_path: Path) -> None:
+    piga_run = tiny_run  # read, not written
     planet_run = tmp_path / "planet"
     train_planet(tiny_data, planet_run, PlanetTrainConfig(steps=2, batch_size=4, chunk_length=8, checkpoint_every=2, threads=1),
                  RSSMConfig(depth=4, deter_size=16, stoch_size=4, hidden_size=16, action_repeat=2), progress=False)

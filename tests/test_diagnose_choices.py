@@ -16,8 +16,8 @@ from piga.diagnostics import DiagnoseConfig, Observations, analyse, fit
 from piga.diagnostics.diagnose import UNITS, clip_binding, clip_supported, deadzone_refuted, own_reading, select
 from piga.diagnostics.report import closure_line, markdown
 from piga.io.runs import Nominal, nominal_of
-from tests.test_diagnose_continuous import DT, planted_within_frame
-from tests.test_diagnostics import NOMINAL, planted
+from tests.test_diagnose_continuous import within_frame_diagnosis
+from tests.test_diagnostics import NOMINAL, planted, planted_diagnosis
 
 FAST = DiagnoseConfig(bootstrap=0)
 
@@ -164,23 +164,20 @@ def test_an_excluded_effect_is_not_fitted_and_the_report_says_why() -> None:
 # --- 4. the four defects ----------------------------------------------------------------------
 
 
-def test_a_gain_on_top_of_within_frame_is_not_counted_twice() -> None:
+def test_a_gain_on_top_of_within_frame_is_not_counted_twice(tmp_path_factory: pytest.TempPathFactory) -> None:
     """(a) The fast model reads a low on a system that moves within the frame; refitted with within_frame,
     a comes out at the truth, which is no gain error of the real system."""
-    obs = planted_within_frame(n=60)  # (60 sequences: a's correction still 1.23x, well past the 0.1 below)
-    rows = np.flatnonzero(obs.fit)
-    euler = fit.fit_candidate((), {}, Nominal(g=12.0, a=1.0, offset=0.0, dt=DT),
-                              fit.make_windows(obs.theta, obs.actions, rows, 8, 2, DT))
-    nominal = Nominal(g=euler.values["g"], a=euler.values["a"], offset=0.0, dt=DT)  # what a fast model identifies
-    d = analyse(obs, nominal, FAST)
+    # the diagnosis of tests/test_diagnose_continuous.py, against the nominal that one Euler step per frame fits there
+    # (60 sequences: a's correction 1.23x, well past the 0.1 below)
+    nominal, d = within_frame_diagnosis(tmp_path_factory)
     names = [e.effect for e in d.effects]
     assert "within_frame" in names and "gain" not in names, d.verdict
     assert abs(d.corrected["a"] / nominal.a - 1) > 0.1  # the correction still moves a: it is the reading, not a gain
     assert any("compensates the effects, not a gain error" in n for n in d.notes)
 
 
-def test_a_real_gain_error_is_still_named() -> None:
-    d = analyse(planted({"gain": 0.8}), NOMINAL, FAST)
+def test_a_real_gain_error_is_still_named(tmp_path_factory: pytest.TempPathFactory) -> None:
+    d = planted_diagnosis(tmp_path_factory, {"gain": 0.8})
     assert d.verdict_class == "gain" and abs(d.effects[0].value - 0.8) < 0.01, d.verdict
     # a deadzone reads a low in the nominal form (no effect), the gain above 1 with it: still a gain
     d = analyse(planted({"gain": 1.2, "deadzone": 0.5}, n=160), NOMINAL, FAST)
@@ -257,8 +254,8 @@ def test_a_nominal_model_with_damping_is_diagnosed_relative_to_it() -> None:
 # --- 5. the headline ----------------------------------------------------------------------------
 
 
-def test_clean_data_have_no_gap_to_close() -> None:
-    d = analyse(planted({}), NOMINAL, FAST)
+def test_clean_data_have_no_gap_to_close(tmp_path_factory: pytest.TempPathFactory) -> None:
+    d = planted_diagnosis(tmp_path_factory, {})
     assert d.verdict_class == "none" and d.gap.no_gap and d.gap.free_run_gap_closure is None
     text = markdown(d, "m", "d", "c")
     headline = next(line for line in text.splitlines() if line.startswith("**No gap to close"))
@@ -271,9 +268,9 @@ def test_clean_data_have_no_gap_to_close() -> None:
     assert "; corrected:" not in text
 
 
-def test_an_unexplained_gap_is_not_called_no_gap_to_close() -> None:
+def test_an_unexplained_gap_is_not_called_no_gap_to_close(tmp_path_factory: pytest.TempPathFactory) -> None:
     """Actions logged as 0 read "not explained ... 221x" and then "no gap to close": the gap is there, unclosed."""
-    d = analyse(planted({"cogging": 0.6}, n=160), NOMINAL, FAST)
+    d = planted_diagnosis(tmp_path_factory, {"cogging": 0.6}, n=160)
     assert d.verdict_class == "unexplained" and d.gap.no_gap, d.verdict
     text = markdown(d, "m", "d", "c")
     assert "**No closure measured**: the gap is not explained" in text and "No gap to close" not in text

@@ -4,13 +4,14 @@ with implicit damping), its speeds pass any clip level, and its file does not sa
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import re
 
 import numpy as np
 import pytest
 
-from piga.diagnostics import DiagnoseConfig, Observations, analyse
+from piga.diagnostics import DiagnoseConfig, Diagnosis, Observations, analyse, fit
 from piga.diagnostics.diagnose import clip_supported
 from piga.diagnostics.observe import from_gymnasium
 from piga.diagnostics.report import markdown
@@ -40,12 +41,27 @@ def planted_within_frame(n: int = 100, t: int = 30, noise: float = 0.002, seed: 
                         np.zeros((0, t, 8, 8), np.uint8), np.zeros(0, int), from_gymnasium=False)
 
 
+@functools.cache
+def euler_nominal_and_diagnosis() -> tuple[Nominal, Diagnosis]:
+    """The nominal model that one Euler step per frame identifies on the planted system (a reads low), and the
+    diagnosis against it; 0.5 mrad of angle noise, 60 sequences (100 read the same effects, and g, a and b within 0.6%
+    of the truth as 60 do, in 1.4-1.6x the time). Computed once in a test run (:func:`within_frame_diagnosis`): this
+    module and tests/test_diagnose_choices.py read it."""
+    obs = planted_within_frame(n=60, noise=0.0005)
+    euler = fit.fit_candidate((), {}, Nominal(g=12.0, a=1.0, offset=0.0, dt=DT),
+                              fit.make_windows(obs.theta, obs.actions, np.flatnonzero(obs.fit), 8, 2, DT))
+    nominal = Nominal(g=euler.values["g"], a=euler.values["a"], offset=0.0, dt=DT)  # what a fast model identifies
+    return nominal, analyse(obs, nominal, DiagnoseConfig(bootstrap=0))
+
+
+def within_frame_diagnosis(tmp_path_factory: pytest.TempPathFactory) -> tuple[Nominal, Diagnosis]:
+    """:func:`euler_nominal_and_diagnosis`, shared by the xdist workers (:func:`tests.helpers.once_per_run`)."""
+    return once_per_run(tmp_path_factory, "within_frame_diagnosis", euler_nominal_and_diagnosis)
+
+
 @pytest.fixture(scope="module")
-def diagnosis(tmp_path_factory: pytest.TempPathFactory):
-    # the nominal model as one Euler step per frame identifies it: a and g low; 0.5 mrad of angle noise; 60 sequences
-    # (100 read the same effects, and g, a and b within 0.6% of the truth as 60 do, in 1.4-1.6x the time)
-    return once_per_run(tmp_path_factory, "within_frame_diagnosis", lambda: analyse(
-        planted_within_frame(n=60, noise=0.0005), Nominal(g=12.4, a=1.2, offset=0.0, dt=DT), DiagnoseConfig(bootstrap=0)))
+def diagnosis(tmp_path_factory: pytest.TempPathFactory) -> Diagnosis:
+    return within_frame_diagnosis(tmp_path_factory)[1]
 
 
 def test_names_damping_and_the_integration_within_the_frame_not_a_clip(diagnosis):

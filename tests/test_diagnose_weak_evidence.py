@@ -28,7 +28,7 @@ from piga.diagnostics.diagnose import (GYM_SPEED_CLIP, Candidates, DiagnosisInpu
 from piga.diagnostics.observe import NotTheSceneError, Observations
 from piga.diagnostics.vision import MAX_BLUR, MAX_SHIFT, Camera
 from piga.diagnostics.results import GenericBasis, Score
-from tests.test_diagnostics import NOMINAL, planted
+from tests.test_diagnostics import NOMINAL, planted, planted_diagnosis
 
 FAST = DiagnoseConfig(bootstrap=0)
 NOTHING_LEFT = GenericBasis(bic_drop=0.0, held_out_drop=0.0, significant=False)
@@ -296,9 +296,9 @@ def test_effects_that_leave_the_gap_are_not_established(gain_read: tuple, nomina
         assert ("still strays 38.0x as far as on its twin" in judged.verdict) is (corrected == 38.0)
 
 
-def test_a_report_with_no_gap_gives_no_closure_at_all() -> None:
+def test_a_report_with_no_gap_gives_no_closure_at_all(tmp_path_factory: pytest.TempPathFactory) -> None:
     """A no-gap report read "typical_free_run_gap_closure": 0.414 beside its null headline."""
-    d = analyse(planted({}), NOMINAL, FAST)
+    d = planted_diagnosis(tmp_path_factory, {})
     assert d.verdict_class == "none" and d.gap.no_gap
     assert d.gap.free_run_gap_closure is None and d.gap.typical_free_run_gap_closure is None
     assert d.gap.mean_free_run_gap_closure is None and d.gap.pixel_free_run_gap_closure is None

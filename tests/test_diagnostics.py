@@ -13,11 +13,11 @@ import pytest
 import torch
 
 from envs.pendulum import PixelPendulumConfig, make_pixel_pendulum
-from piga.diagnostics import DiagnoseConfig, Observations, analyse
+from piga.diagnostics import DiagnoseConfig, Diagnosis, Observations, analyse
 from piga.diagnostics import fit
 from piga.io.runs import Nominal
 from piga.world.effects import CANDIDATES, EFFECTS, SPEED_CLIP
-from tests.helpers import assert_one_line_error, completed_in_process, run, train_tiny
+from tests.helpers import assert_one_line_error, completed_in_process, once_per_run, run, train_tiny
 
 NOMINAL = Nominal(g=10.0, a=1.0, offset=0.0, dt=0.05)
 FAST = DiagnoseConfig(bootstrap=0)
@@ -71,8 +71,15 @@ def planted(effects: dict, n: int = 120, t: int = 30, noise: float = 0.002, seed
                         np.zeros((0, t, 8, 8), np.uint8), np.zeros(0, int))
 
 
-def test_no_effect_is_no_gap() -> None:
-    d = analyse(planted({}), NOMINAL, FAST)
+def planted_diagnosis(tmp_path_factory: pytest.TempPathFactory, effects: dict, n: int = 120) -> Diagnosis:
+    """``analyse(planted(effects, n=n), NOMINAL, FAST)``, computed once in a test run: tests in several modules read the
+    same diagnosis (:func:`tests.helpers.once_per_run`)."""
+    name = "planted_" + "_".join(f"{k}{v}" for k, v in sorted(effects.items())) + f"_n{n}"
+    return once_per_run(tmp_path_factory, name, lambda: analyse(planted(effects, n=n), NOMINAL, FAST))
+
+
+def test_no_effect_is_no_gap(tmp_path_factory: pytest.TempPathFactory) -> None:
+    d = planted_diagnosis(tmp_path_factory, {})
     assert d.verdict_class == "none", d.verdict
     assert d.verdict == "no significant gap"
 
@@ -146,18 +153,20 @@ def test_planted_delay_is_exact_and_shows_in_the_cross_correlation() -> None:
     assert d.residuals["action_correlation"]["peak_lag"] == 2
 
 
+@pytest.mark.slow  # two effects named together are checked by default in tests/test_diagnose_choices.py:
+# test_a_real_gain_error_is_still_named (deadzone+gain) and test_a_gain_is_judged_against_the_models_own_file (bias+damping)
 def test_two_effects_are_both_named() -> None:
     d = analyse(planted({"bias": 0.3, "deadzone": 0.5}, n=160), NOMINAL, FAST)
     assert d.verdict_class == "bias+deadzone", d.verdict
 
 
-def test_an_effect_outside_the_candidates_is_reported_unexplained() -> None:
-    d = analyse(planted({"cogging": 0.6}, n=160), NOMINAL, FAST)
+def test_an_effect_outside_the_candidates_is_reported_unexplained(tmp_path_factory: pytest.TempPathFactory) -> None:
+    d = planted_diagnosis(tmp_path_factory, {"cogging": 0.6}, n=160)
     assert d.verdict_class == "unexplained", d.verdict
 
 
-def test_a_gain_error_is_the_refitted_a() -> None:
-    d = analyse(planted({"gain": 0.8}), NOMINAL, FAST)
+def test_a_gain_error_is_the_refitted_a(tmp_path_factory: pytest.TempPathFactory) -> None:
+    d = planted_diagnosis(tmp_path_factory, {"gain": 0.8})
     assert d.verdict_class == "gain", d.verdict
     assert abs(d.effects[0]["value"] - 0.8) < 0.01
 
@@ -210,13 +219,15 @@ def test_a_gain_whose_interval_holds_the_nominal_is_not_named() -> None:
 def tiny_model(tiny_data: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A tiny model whose autoencoder has learnt the scene (training MSE ~25% of drawing no pendulum;
     24 steps, ~15 s), but whose physics has barely moved from g = 1, a = 0.3: its verdicts mean nothing."""
-    return train_tiny(tiny_data, tmp_path_factory.mktemp("diag") / "model", epochs=6, warmup_fraction=16 / 24, lr=3e-3)
+    return once_per_run(tmp_path_factory, "diagnostics_tiny_model", lambda: train_tiny(
+        tiny_data, tmp_path_factory.mktemp("diag") / "model", epochs=6, warmup_fraction=16 / 24, lr=3e-3))
 
 
 @pytest.fixture(scope="module")
 def untrained_model(tiny_data: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A model after 2 steps: its autoencoder draws no pendulum yet (training MSE ~60x that of drawing none)."""
-    return train_tiny(tiny_data, tmp_path_factory.mktemp("diag") / "untrained", warmup_fraction=0.5)
+    return once_per_run(tmp_path_factory, "diagnostics_untrained_model", lambda: train_tiny(
+        tiny_data, tmp_path_factory.mktemp("diag") / "untrained", warmup_fraction=0.5))
 
 
 @pytest.fixture(scope="module")
@@ -224,10 +235,13 @@ def damped_data(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """24 sequences x 16 frames of a pendulum with damping 0.3 (split 16/4/4)."""
     from piga.data.collect import CollectConfig, collect
 
-    path = tmp_path_factory.mktemp("real") / "real.h5"
-    collect(CollectConfig(sequences=24, steps=16, seed=5, workers=1, split=(16, 4, 4),
-                          env=PixelPendulumConfig(effects=(("damping", 0.3),))), path, progress=False, command="t")
-    return path
+    def make() -> Path:
+        path = tmp_path_factory.mktemp("real") / "real.h5"
+        collect(CollectConfig(sequences=24, steps=16, seed=5, workers=1, split=(16, 4, 4),
+                              env=PixelPendulumConfig(effects=(("damping", 0.3),))), path, progress=False, command="t")
+        return path
+
+    return once_per_run(tmp_path_factory, "diagnostics_damped_data", make)
 
 
 def diagnose_in_process(capsys: pytest.CaptureFixture[str], *argv: str) -> subprocess.CompletedProcess[str]:

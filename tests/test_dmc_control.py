@@ -67,14 +67,15 @@ def test_energy_cost_pumps_from_hanging_down(sign):
 @needs_dmc
 def test_piga_control_dmc_oracle_scores_and_refuses_gymnasium_options(tmp_path, capsys):
     out = tmp_path / "oracle"
-    result = run("piga-control", "--env", "piga/DMCPendulum-v0", "--oracle", "--episodes", "1", "--seed", "1", "--quiet",
+    result = run("piga-control", "--env", "piga/DMCPendulum-v0", "--oracle", "--episodes", "1", "--seed", "2", "--quiet",
                  "--out", str(out))
     assert result.returncode == 0, result.stderr
     import json
 
     payload = json.loads((tmp_path / "oracle.json").read_text())
     (oracle,) = payload["results"]
-    assert oracle["agent"] == "oracle" and len(oracle["scores"]) == 1 and oracle["scores"][0] > 500
+    # the episode from reset seed 2 that tests/test_episodes.py records (842 of 1000, in DMC's units)
+    assert oracle == {"agent": "oracle", "scores": [842.0], "mean": 842.0, "std": 0.0}, oracle
     assert "| oracle |" in (tmp_path / "oracle.md").read_text()
     from piga.cli.control import main
 

@@ -143,6 +143,8 @@ def test_a_summary_survives_its_json_record() -> None:
     assert list(summary.labelled(agent="piga").to_dict().items())[:2] == [("agent", "piga"), ("task", "x")]
 
 
+@pytest.mark.slow  # one DMC episode; its score, 842, is checked by default through piga-control in
+# tests/test_dmc_control.py::test_piga_control_dmc_oracle_scores_and_refuses_gymnasium_options
 @needs_dmc
 def test_dmc_scores_are_the_episodes_returns() -> None:
     """The oracle's DMC episode from reset seed 2 scored 842 (of 1000) in DMC's units before the runners were one."""

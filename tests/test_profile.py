@@ -11,14 +11,12 @@ import torch
 from piga.data.schema import read_sequences
 from piga.evaluation.profile import PROFILE_FACTOR, parameter_profile
 from piga.io.runs import load_model
-from tests.helpers import train_tiny
 
 
-def test_the_profile_scales_each_learned_parameter_and_puts_it_back(tiny_data: Path, tmp_path: Path) -> None:
+def test_the_profile_scales_each_learned_parameter_and_puts_it_back(tiny_data: Path, tiny_run: Path) -> None:
     """Moved down by the factor, a parameter's profile sees its learned value as the "upper" point: the two ratios
     are each other's inverse. The model's parameters are as they were after each call."""
-    run = train_tiny(tiny_data, tmp_path / "run")
-    model, _ = load_model(run)
+    model, _ = load_model(tiny_run)  # read, not written
     frames, actions = read_sequences(tiny_data, "train")
     before = {k: v.detach().clone() for k, v in model.state_dict().items()}
     profile = parameter_profile(model, frames, actions)

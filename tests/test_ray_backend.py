@@ -45,6 +45,9 @@ def test_a_farm_gives_the_local_results_in_order_one_thread_each() -> None:
     assert sorted(ended) == list(range(6))
 
 
+@pytest.mark.slow  # Ray's workers import piga's control stack: 2 s alone, 17-25 s beside a second xdist worker;
+# by default test_a_farm_gives_the_local_results_in_order_one_thread_each checks Ray's results against the local
+# backend's, and tests/test_episodes.py::test_a_batch_split_over_workers_is_the_recorded_one the split episodes
 def test_control_episodes_split_over_ray_tasks_are_the_recorded_ones() -> None:
     assert _without_timing(run_split(ControlJob("oracle", EPISODES, MPC), workers=2, progress=False, backend=RAY)) == \
         RECORDED["oracle"]

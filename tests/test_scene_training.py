@@ -23,8 +23,9 @@ from tests.helpers import assert_one_line, run_in_process
 
 
 #: One training window per sequence of ``spring_data`` (2 steps an epoch at batch 16, not 22): for the tests of the
-#: retries, whose object check is a stand-in, and of a check that must change nothing, where what the steps learn
-#: decides nothing (measured on one core: those five tests in 17.5 s, not 35 s).
+#: retries, whose object check is a stand-in or must find no ball after two steps, and of a check that must change
+#: nothing, where what the steps learn decides nothing (measured on one core: the first five of those tests in 17.5 s,
+#: not 35 s; the lost object after the warm-up and the two-step run in 9 s, not 20 s).
 ONE_WINDOW = ("--window-stride", "30")
 
 
@@ -83,7 +84,7 @@ def test_a_run_whose_autoencoder_found_no_ball_trains_again_then_exits_1_naming_
     out = tmp_path / "run"
     code, stdout, err = run_in_process("piga-train-model", train_main, str(spring_data), "--out", str(out), "--epochs",
                                        "1", "--batch-size", "16", "--warmup-fraction", "0.5", "--threads", "1",
-                                       "--quiet", "--seed", "5", "--seed-retries", "1", capsys=capsys)
+                                       "--quiet", "--seed", "5", "--seed-retries", "1", *ONE_WINDOW, capsys=capsys)
     assert_one_line(code, err, "an object was not found", "seeds 5 and 6 tried", "--seed", "--overwrite")
     assert code == 1
     # one epoch, where the recipe plans many: the length is named before another seed
@@ -107,18 +108,19 @@ def test_an_object_lost_after_the_warm_up_restarts_the_run_there(spring_data: Pa
     from piga.evaluation.objects import ObjectCheck
 
     monkeypatch.setattr(report, "check_objects", lambda model, frames: ObjectCheck(0.3, 0.5, 0.6, True))
-    monkeypatch.setattr(report, "WARMUP_CHECK_MIN_STEPS", 20)  # a warm-up of 20 steps is checked (the floor: 250)
+    monkeypatch.setattr(report, "WARMUP_CHECK_MIN_STEPS", 2)  # a warm-up of 2 steps is checked (the floor: 250)
     out = tmp_path / "run"
     code, stdout, err = run_in_process("piga-train-model", train_main, str(spring_data), "--out", str(out), "--epochs",
                                        "3", "--batch-size", "16", "--warmup-fraction", "0.3", "--threads", "1",
-                                       "--seed", "5", "--seed-retries", "1", "--quiet", capsys=capsys)  # 3 x 22 steps, warm-up 20
+                                       "--seed", "5", "--seed-retries", "1", "--quiet", *ONE_WINDOW,
+                                       capsys=capsys)  # 3 x 2 steps, warm-up 2
     assert_one_line(code, err, "an object was not found", "seeds 5 and 6 tried")
-    assert "object check after the autoencoder's warm-up (step 22 of 66): an object was not found with seed 5 (a blob " \
+    assert "object check after the autoencoder's warm-up (step 2 of 6): an object was not found with seed 5 (a blob " \
            "0.60x as strong as the objects); training again from the start with seed 6 (retry 1 of --seed-retries 1)" in stdout
     assert "epoch 2:" not in stdout.split("training again")[0] and "epoch 3:" in stdout  # the retry trained to its end
     record = json.loads((out / "config.json").read_text())
     assert record["train"]["seed"] == 6 and record["retried_seeds"] == [5]
-    assert json.loads((out / "metrics.json").read_text())["training"]["steps"] == 66
+    assert json.loads((out / "metrics.json").read_text())["training"]["steps"] == 6
 
 
 def test_the_object_check_in_the_middle_of_a_run_changes_nothing_of_its_training(spring_data: Path,
