@@ -710,7 +710,8 @@ def test_a_physics_gap_that_the_matched_floor_hides_is_still_a_gap() -> None:
     assert pixel_gap_measurable(0.0272, 0.0227, 117.7**2 * deg2, 0.53**2 * deg2)
     assert not pixel_gap_measurable(0.0244, 0.0193, 0.6**2 * deg2, 0.55**2 * deg2)  # the same physics both ways
     assert pixel_gap_measurable(0.0244, 0.0100, 0.6**2 * deg2, 0.55**2 * deg2)  # a gap in the pixels alone
-    assert not pixel_gap_measurable(0.0244, 0.0193, 2.9**2 * deg2, 1.0**2 * deg2)  # under 3x in RMS
+    assert pixel_gap_measurable(0.0121, 0.00827, 2.0**2 * deg2, 1.0**2 * deg2)  # a gain of 3: 2x in RMS
+    assert not pixel_gap_measurable(0.0244, 0.0193, 1.4**2 * deg2, 1.0**2 * deg2)  # under 1.5x in RMS
 
 
 def test_the_report_gives_a_shift_by_component(damped) -> None:

@@ -140,6 +140,7 @@ def _camera_lines(v: VisionSummary) -> list[str]:
              if math.isfinite(c.noise) else "sensor noise not measured (the pendulum reaches every pixel)")
     if math.isfinite(c.noise_correlation):
         noise += f" (their correlation between successive frames is {c.noise_correlation:.2f}; sensor noise's is 0)"
+    calm = any("calm_drop" in row for row in c.camera_candidates)
     lines = [
         f"- **Camera**: {noise}; "
         f"{c.repeated_frames} frames repeat the previous one (within 2 gray levels) ({c.dropped_frames} while the pendulum moves: "
@@ -151,16 +152,20 @@ def _camera_lines(v: VisionSummary) -> list[str]:
            if c.angles == "matched"
            else "the encoder's angles."), "",
         "  Camera candidates, fitted by matching frames to the decoder's renders over the whole circle "
-        "(fit split), scored on held-out frames:", "",
-        "  | candidate | blur σ (px) | dx (px) | dy (px) | exposure | zoom | held-out matched MSE | drop | accepted |",
-        "  |---|---|---|---|---|---|---|---|---|",
+        "(fit split), scored on held-out frames" + (": every one, and those after the smallest fifth of the actions "
+                                                    "(calm; a candidate needs a drop over 10% in either; one that only "
+                                                    "the calm frames show is fitted on those):" if calm else ":"), "",
+        "  | candidate | blur σ (px) | dx (px) | dy (px) | exposure | zoom | held-out matched MSE | drop |"
+        + (" calm drop |" if calm else "") + " accepted |",
+        "  |---|---|---|---|---|---|---|---|" + ("---|" if calm else "") + "---|",
     ]
     for row in c.camera_candidates:
         cam = row["camera"]
         lines.append(f"  | {row['candidate']} | {cam['blur']:.3f} | {cam['dx']:.3f} | {cam['dy']:.3f} | "
                      f"{cam.get('exposure', 1.0):.3f} | {cam.get('zoom', 1.0):.3f} | "
                      f"{row['held_out_matched_mse']:.3e} | {100 * row['drop']:.1f}% | "
-                     f"{'yes' if row['accepted'] else 'no (in part of the recording only)' if row.get('partial') else 'no'} |")
+                     + (f"{100 * row['calm_drop']:.1f}% | " if calm and "calm_drop" in row else "– | " if calm else "")
+                     + f"{'yes' if row['accepted'] else 'no (in part of the recording only)' if row.get('partial') else 'no'} |")
     lines.append("")
     return lines
 
@@ -265,8 +270,10 @@ def headline_text(d: Diagnosis) -> str:
                     "by matching the frames to the decoder's renders, not with the encoder, and angle errors of the two "
                     "would not be comparable. On the typical held-out window (the median over windows of each window's "
                     f"mean pixel MSE of the rendered free run), the nominal model is at {number(g.typical_pixel_mse_nominal, '.3g')}, "
-                    f"the corrected one at {number(g.typical_pixel_mse_corrected, '.3g')}, and no prediction can beat "
-                    f"{number(g.pixel_mse_floor, '.3g')}, the error of the best-matching render of each frame"
+                    f"the corrected one at {number(g.typical_pixel_mse_corrected, '.3g')}, and "
+                    + (f"no prediction can beat {number(g.pixel_mse_floor, '.3g')}, the error of the best-matching "
+                       "render of each frame" if g.floor_subtracted else
+                       f"the best-matching render of each frame errs {number(g.pixel_mse_floor, '.3g')}")
                     + ("; the closure is the share of the gap above that floor that the correction removes."
                        if g.floor_subtracted else "; the closure is 1 − corrected / nominal." + note))
     elif g.floor_subtracted:
