@@ -524,3 +524,17 @@ def test_an_out_set_records_what_the_model_run_says_against_it(control_model: Pa
         else:
             assert warning == f"the run {run} did not converge: still drifting at the end"
             assert f"**Warning:** {warning}" in page and page.startswith("# piga-control\n\n**Warning:**")
+
+
+def test_the_effects_of_the_training_file_are_compared_as_the_env_holds_them() -> None:
+    """A training file's effects as JSON pairs ([["delay", 1]]) were always unlike the env's tuples, and, written as an
+    object by hand ({"delay": 1}, which the schema takes), were named raw: "the effects {'delay': 1}"."""
+    from envs.pendulum import PixelPendulumConfig
+    from piga.cli.control import pixel_physics_difference
+
+    plain = PixelPendulumConfig()
+    assert pixel_physics_difference({"effects": [["delay", 1]]}, plain) == ("no effect", "the effects delay=1")
+    assert pixel_physics_difference({"effects": {"delay": 1}}, plain) == ("no effect", "the effects delay=1")
+    delayed = PixelPendulumConfig(effects=(("delay", 1),))
+    assert pixel_physics_difference({"effects": [["delay", 1]]}, delayed) is None
+    assert pixel_physics_difference({"effects": [["delay", 2]]}, delayed) == ("other effects", "the effects delay=2")

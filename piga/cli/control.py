@@ -683,7 +683,9 @@ def pixel_physics_difference(trained: dict[str, Any], env: PixelPendulumConfig,
     if not math.isclose(gain, env.actuation_gain, rel_tol=1e-6):
         pairs.append((f"actuation gain {number_text(env.actuation_gain)}", f"actuation gain {number_text(gain)}"))
     effects = trained.get("effects") or []
-    if effects and effects != list(env.effects):
+    if isinstance(effects, dict):  # (an env_config written by hand may hold them as an object, which the schema takes)
+        effects = [list(item) for item in effects.items()]
+    if effects and [list(e) for e in effects] != [list(e) for e in env.effects]:
         try:
             named = ", ".join(f"{name}={number_text(float(value))}" for name, value in effects)
         except (TypeError, ValueError):
