@@ -348,18 +348,10 @@ def core_exposure(model: PhysicsModel, x: Tensor, clusters: np.ndarray, renders:
     k = 1.037 (the rod's soft edge, where the decoder's render is not the frame's, outweighs its core), and their core
     read 1.079 against the training file's 1.0094, 1.069; brightened by 1.05 and 1.1, 1.051 and 1.096."""
     ratios = frame_core_ratios(model, x, renders, camera=replace(camera, exposure=1.0))
+    frames = reference_frames(reference, count, seed)
     own = 1.0
-    if reference is not None:
-        try:
-            import h5py
-
-            with h5py.File(reference, "r") as f:
-                rows = np.arange(f["frames"].shape[0])
-            frames = _sample(reference, rows, count, np.random.default_rng(seed))[0]
-            if frames.shape[1:3] == (model.config.image_size,) * 2:
-                own = float(np.median(frame_core_ratios(model, _flat(frames, model.config.channels), renders)))
-        except (OSError, KeyError, ValueError):
-            pass
+    if frames is not None and frames.shape[1:3] == (model.config.image_size,) * 2:
+        own = float(np.median(frame_core_ratios(model, _flat(frames, model.config.channels), renders)))
     own = own if own > 0 else 1.0
     groups = [ratios[clusters == c] for c in np.unique(clusters)]
     rng = np.random.default_rng(seed)
@@ -1011,21 +1003,29 @@ def visible_step(model: PhysicsModel, camera: Camera, levels: float, size: int =
     return math.pi
 
 
+def reference_frames(reference: str | None, count: int, seed: int) -> np.ndarray | None:
+    """``count`` random uint8 frames (count, H, W[, C]) of the model's own training file ``reference``, drawn with
+    ``seed``; None where there is none, or it is gone or unreadable."""
+    if reference is None:
+        return None
+    try:
+        import h5py
+
+        with h5py.File(reference, "r") as f:
+            rows = np.arange(f["frames"].shape[0])
+        return _sample(reference, rows, count, np.random.default_rng(seed))[0]
+    except (OSError, KeyError, ValueError):
+        return None
+
+
 def reference_exposure(model: PhysicsModel, reference: str | None, still: np.ndarray, renders: tuple[Tensor, Tensor],
                        count: int, seed: int) -> float:
     """:func:`background_exposure` of ``count`` frames of the model's own training file ``reference``: how much
     brighter than its decoder's background its own frames are (1 where the file is gone, unreadable, of other
     frames, or its background cannot show it). A model trained on g = 3 frames drew them 1.6% darker, and its own
     training file read "exposure 1.02"."""
-    if reference is None:
-        return 1.0
-    try:
-        import h5py
-
-        with h5py.File(reference, "r") as f:
-            rows = np.arange(f["frames"].shape[0])
-        frames = _sample(reference, rows, count, np.random.default_rng(seed))[0]
-    except (OSError, KeyError, ValueError):
+    frames = reference_frames(reference, count, seed)
+    if frames is None:
         return 1.0
     frames = frames if frames.ndim == 3 else frames[..., 0]
     if frames.shape[1:] != still.shape:
