@@ -1660,8 +1660,9 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
         # a model trained on flipped frames without --signed-actuation shrank its a toward 0: its size
         # is no reference (measured: "gain 4.22" on dm_control filmed from the other side)
         gain_error = False
-        notes.append(f"|a| refits to x{gain:.3f} the nominal a; with the sign flipped, the nominal a is no reference "
-                     "for its size (a model trained on such frames shrinks a toward 0), so no gain error is named")
+        notes.append(f"|a| refits to x{gain:.3f} the reference a ({ref_a:.3f}); with the sign flipped, no gain error is "
+                     "named: a model trained on flipped frames without --signed-actuation shrinks its a toward 0, so "
+                     "against a flipped actuation the size of a is not read")
     if gain_error and not varied_actions:
         gain_error = False
         notes.append(f"a refits to {reference.values['a']:.3g} (x{gain:.3g} the nominal), but the actions never change: "
