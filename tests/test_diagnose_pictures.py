@@ -254,6 +254,13 @@ def test_noise_only_after_large_actions_is_not_sensor_noise() -> None:
     noisy = np.clip(128 + rng.normal(0, 10, (len(seqs), 8, 8)), 0, 255).astype(np.uint8)  # sensor noise: every frame
     value, interval = V.calm_noise(noisy, seqs, times, actions, still)
     assert interval is not None and interval[0] < 10 < interval[1] and abs(value - 10) < 1
+    stale = np.zeros((n, t), bool)  # dropped frames among the calm ones repeat the frame before, arrow and all
+    calm = np.flatnonzero(V._calm(actions, seqs, times))
+    stale[seqs[calm[::2]], times[calm[::2]]] = True
+    repeated = arrow.copy()
+    repeated[stale[seqs, times]] = rng.integers(100, 255, (int(stale.sum()), 8, 8), dtype=np.uint8)
+    assert V.calm_noise(repeated, seqs, times, actions, still)[0] > 3
+    assert V.calm_noise(repeated, seqs, times, actions, still, stale) == (0.0, None)
     both = noisy.copy()  # the noise, and the arrow on top of it after the large actions
     both[big] = arrow[big]
     assert V.noise_level(both, still) > 20

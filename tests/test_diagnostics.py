@@ -310,6 +310,34 @@ def test_cli_bad_env(tiny_model: Path, tiny_data: Path, tmp_path: Path, capsys: 
     assert not (tmp_path / "r").exists()
 
 
+def test_env_refuses_a_file_of_other_gravity_or_gain() -> None:
+    """--env simulates Gymnasium's pendulum at g = 10: a file at gravity x1.5 was compared there, and its corrected
+    physics (g = 14.9) looked worse than the nominal."""
+    from piga.cli.common import PigaError
+    from piga.cli.diagnose import _check_env_physics
+
+    _check_env_physics({"gravity": 10.0, "gravity_mult": 1.0, "actuation_gain": 1.0}, "d.h5")
+    _check_env_physics(None, "d.h5")  # a recording without env_config: taken at its word
+    with pytest.raises(PigaError, match="but d.h5 was collected at g = 15 m/s² and gain 1 .* leave --env out"):
+        _check_env_physics({"gravity": 10.0, "gravity_mult": 1.5}, "d.h5")
+    with pytest.raises(PigaError, match="collected at g = 10 m/s² and gain 2 "):
+        _check_env_physics({"actuation_gain": 2}, "d.h5")
+
+
+def test_calm_frames_leave_out_the_dropped_ones() -> None:
+    """A dropped frame after a small action repeats the frame before, drawn after a large one: Gymnasium at an
+    actuation gain of 3.5 with 10% of the frames dropped read the calm frames' error as a vision gap, and "not explained"."""
+    from piga.diagnostics.diagnose import calm_frames_error
+
+    actions = np.tile(np.array([0.1, 2.0, 0.1, 2.0, 0.1, 2.0]), (4, 1))  # (N, T): frames 1, 3, 5 follow u = 0.1
+    rec = np.tile(np.array([0.0, 1.0, 9.0, 1.0, 9.0, 1.0]), (4, 1))  # (N, T) re-rendering errors: 9 after u = 2
+    stale = np.zeros((4, 6), bool)
+    stale[:, 3] = True  # a dropped frame after a small action, showing the large arrow of the frame before
+    rec[:, 3] = 50.0
+    assert calm_frames_error(rec, actions) > 10
+    assert calm_frames_error(rec, actions, stale) == 1.0
+
+
 def test_cli_with_env_writes_a_complete_report_and_the_control_comparison(tiny_model: Path, damped_data: Path,
                                                                          tmp_path: Path,
                                                                          capsys: pytest.CaptureFixture[str]) -> None:
@@ -487,6 +515,21 @@ def test_a_late_camera_is_a_frame_delay() -> None:
     d = analyse(cam_late, NOMINAL, FAST, camera=_findings([], 2))
     assert d.verdict_class == "frame_delay", d.verdict
     assert d.effects[0]["value"] == 2
+
+
+def test_a_camera_too_late_for_the_sequences_is_refused_not_an_internal_error() -> None:
+    """A camera 3 frames late in sequences of 14 frames left no window to fit: the bootstrap took the max of no
+    sequences (exit 70), and without it nothing was fitted. It is refused, saying why."""
+    from piga.diagnostics.observe import DiagnosisInputError
+
+    stale = np.zeros((40, 14), bool)
+    stale[:, 1:4] = True
+    stale[:, 9] = True  # (and one dropped frame later on, as the recording had)
+    cam = planted({}, n=40, t=14)
+    cam_late = replace(cam, theta=np.concatenate([cam.theta[:, :1].repeat(3, 1), cam.theta[:, :-3]], 1), stale=stale)
+    with pytest.raises(DiagnosisInputError, match="^no window of 8 steps to fit the dynamics on: the sequences hold 14 "
+                                                  "frames, 4 of them repeating the frame before .* record longer"):
+        analyse(cam_late, NOMINAL, FAST, camera=_findings([], 3))
 
 
 def _findings(effects: list, leading: int):  # noqa: ANN202

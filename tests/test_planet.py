@@ -211,6 +211,7 @@ def test_iterative_rounds_append_collected_episodes_and_leave_the_data_file_alon
     # its env_config is the env that collected it: episodes of the round's length, not the source file's
     assert collected.attrs["env_config"]["episode_length"] == TINY_ITERATIVE.episode_steps
     assert collected.attrs["seed"] == TINY_TRAIN.seed  # the seed its rounds' episodes draw theirs from
+    assert collected.attrs["effects"] == {}  # (missing, a file of gain=1.5 was scored against a true a of 1)
     frames, actions = read_sequences(tmp_path / "run" / "collected.h5", "train")
     assert frames.shape == (4, 16, 64, 64) and frames.dtype == np.uint8 and np.abs(actions).max() <= 2.0
     assert np.all(load_rewards(tmp_path / "run" / "collected.h5", "train") <= 0)

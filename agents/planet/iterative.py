@@ -143,8 +143,8 @@ def collect_round(model: WorldModel, env_config: PixelPendulumConfig, config: It
 def _append(path: Path, info: DatasetInfo, env: PixelPendulumConfig, new: dict[str, Any], round_index: int,
             command: str, seed: int) -> None:
     """Rewrites ``path`` atomically with its sequences and ``new``'s (all in the train split); its ``env_config`` is
-    ``env``, the env that collected them (the source file's episode length is not theirs), and its ``seed`` the run's,
-    from which each round's episodes draw theirs."""
+    ``env``, the env that collected them (the source file's episode length is not theirs), with its ``effects`` (which
+    training scores the gain against), and its ``seed`` the run's, from which each round's episodes draw theirs."""
     old: dict[str, Any] = {"returns": []}
     if path.exists():
         frames, actions = read_sequences(path, "train")
@@ -153,7 +153,7 @@ def _append(path: Path, info: DatasetInfo, env: PixelPendulumConfig, new: dict[s
     joined = {key: np.concatenate([old[key], new[key]]) if key in old else new[key] for key in ("frames", "actions", "rewards")}
     n, t = joined["rewards"].shape
     attrs = {key: info.attrs[key] for key in ("system", "dt", "params", "env_id") if key in info.attrs}
-    attrs.update({"env_config": env.to_dict(), "seed": seed, "rounds": round_index,
+    attrs.update({"env_config": env.to_dict(), "effects": dict(env.effects), "seed": seed, "rounds": round_index,
                   "episode_returns": old["returns"] + new["returns"], "command": command, "source": str(info.path),
                   "split_counts": {"train": n, "valid": 0, "test": 0}})
     with DatasetWriter(path, n, t, joined["frames"].shape[2:], joined["actions"].shape[2], None, attrs,

@@ -116,6 +116,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         check_pendulum_model(model, args.model)
         # after the model's own checks: its advice ("give --env 'none'") is then one that runs
         _check_env_agrees(effects, info.attrs.get("effects"), args.data)
+        _check_env_physics(info.attrs.get("env_config"), args.data)
     import torch
 
     torch.set_num_threads(args.threads or max(1, min(2, torch.get_num_threads())))
@@ -163,6 +164,23 @@ def _parse_env(text: str) -> tuple[tuple[str, float], ...]:
     except (ValueError, TypeError) as exc:
         raise PigaError(f"--env: {exc}") from None
     return effects
+
+
+def _check_env_physics(config: object, data: str) -> None:
+    """Refuses --env for a file whose ``env_config`` says it was collected at another gravity or actuation gain than
+    Gymnasium's pendulum's, which the MPC comparison simulates (a file at gravity x1.5 was compared on g = 10: its
+    corrected physics, g = 14.9, looked worse than the nominal). A file without the attribute is taken at its word."""
+    if not isinstance(config, dict):
+        return
+    try:
+        g = float(config.get("gravity", 10.0)) * float(config.get("gravity_mult", 1.0))
+        gain = float(config.get("actuation_gain", 1.0))
+    except (TypeError, ValueError):
+        return
+    if not (math.isclose(g, 10.0, rel_tol=1e-6) and math.isclose(gain, 1.0, rel_tol=1e-6)):
+        raise PigaError(f"--env simulates Gymnasium's pendulum at g = 10 m/s² and actuation gain 1, but {data} was "
+                        f"collected at g = {g:.4g} m/s² and gain {gain:.4g} (its env_config): the MPC comparison would "
+                        "run on another system than the data's; leave --env out")
 
 
 def _check_env_agrees(effects: tuple[tuple[str, float], ...], recorded: object, data: str) -> None:

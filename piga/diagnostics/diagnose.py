@@ -584,6 +584,19 @@ class WindowSet:
     """``fit1`` on the encoder's angles."""
 
 
+def check_fit_windows(w: fit.Windows, obs: Observations, stale: np.ndarray | None, config: DiagnoseConfig) -> None:
+    """Refuses a recording that leaves no window of ``config.fit_horizon`` steps to fit the dynamics on: its sequences
+    are too short once the repeated frames (a camera that starts late) are left out (a camera delay of 3 frames in
+    sequences of 14 was an internal error in the bootstrap, and fitted nothing without it)."""
+    if len(w.sequence):
+        return
+    t = obs.theta.shape[1]
+    repeats = int(stale[:, 1:].sum(1).max()) if stale is not None else 0
+    because = f", {repeats} of them repeating the frame before (a camera that starts late?)" if repeats else ""
+    raise DiagnosisInputError(f"no window of {config.fit_horizon} steps to fit the dynamics on: the sequences hold "
+                              f"{t} frames{because}; record longer sequences")
+
+
 def cut_windows(obs: Observations, theta: np.ndarray, stale: np.ndarray | None, config: DiagnoseConfig) -> WindowSet:
     """Cuts the (N, T) angles ``theta`` (the corrected model's) and ``obs.theta`` (the encoder's) into windows."""
     fit_rows, held_rows = np.flatnonzero(obs.fit), np.flatnonzero(~obs.fit)
@@ -2028,7 +2041,7 @@ def summarise_vision(obs: Observations, rec_training: float, camera: CameraFindi
                          "through the fitted camera (analysis by synthesis), not on the encoder's angles")
     named_vision = {"blur", "shift", "exposure", "noise", "zoom"} & {e.effect for e in effects}
     if ratio is not None and ratio > config.vision_ratio and not named_vision:
-        small = calm_frames_error(obs.rec_mse, obs.actions)
+        small = calm_frames_error(obs.rec_mse, obs.actions, obs.stale)
         if small is not None and small <= rec_training:
             notes.append(f"vision gap: the autoencoder re-renders the real frames {ratio:.1f}x worse than its training "
                          f"frames, but those after the smallest fifth of the actions no worse (x{small / rec_training:.2f}):"
@@ -2096,19 +2109,23 @@ def drawn_with_the_action(obs: Observations, rec_training: float, config: Diagno
     drawn with the action, such as Gymnasium's torque arrow at an actuation gain above the training file's."""
     if rec_training <= 0 or float(np.mean(obs.rec_mse)) <= config.vision_ratio * rec_training:
         return False
-    calm = calm_frames_error(obs.rec_mse, obs.actions)
+    calm = calm_frames_error(obs.rec_mse, obs.actions, obs.stale)
     return calm is not None and calm <= rec_training
 
 
-def calm_frames_error(rec_mse: np.ndarray, actions: np.ndarray) -> float | None:
+def calm_frames_error(rec_mse: np.ndarray, actions: np.ndarray, stale: np.ndarray | None = None) -> float | None:
     """The mean re-rendering error of the (N, T) frames that follow the smallest fifth of the (N, T) actions (frame t + 1
     after u_t, which Gymnasium draws as its torque arrow), or None where the actions do not vary. Where it is no worse
     than the training frames' error while the recording's is a vision gap, the gap lies in what is drawn with the
     action: a recording at an actuation gain of 1.5 re-rendered 4.7x worse than the training frames, the frames after
     its smallest actions x0.31 (the training file's own: x0.30), where a picture changed all over (a blur) is worse in
-    every frame."""
+    every frame. Repeated frames (``stale`` (N, T)) are left out: a dropped frame shows the frame before it, drawn
+    after its own action (Gymnasium at an actuation gain of 3.5 with 10% of the frames dropped)."""
     fifths = action_fifths(actions)
-    return None if fifths is None else float(rec_mse[:, 1:][fifths[0]].mean())
+    if fifths is None:
+        return None
+    calm = fifths[0] if stale is None else fifths[0] & ~stale[:, 1:]
+    return float(rec_mse[:, 1:][calm].mean()) if calm.any() else None
 
 
 def twin_renderer(from_gymnasium: bool, has_model: bool, rematched: bool, vision_ratio: float | None,
@@ -2321,6 +2338,7 @@ def analyse(obs: Observations, nom: Nominal, config: DiagnoseConfig = DiagnoseCo
     stale = obs.stale if obs.stale is not None and obs.stale.any() else None
     theta = camera.theta if camera is not None and camera.rematched else obs.theta  # the corrected model's angles
     windows = cut_windows(obs, theta, stale, config)
+    check_fit_windows(windows.fit, obs, stale, config)
     check_actions_lead(obs.theta, obs.actions, stale, nom)
     excluded = excluded_candidates(obs, nom, config)
     candidates = score_candidates(nom, windows, progress, excluded, config.bic_margin, config.min_gain)

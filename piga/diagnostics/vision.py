@@ -395,12 +395,12 @@ def action_fifths(actions: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
 
 
 def calm_noise(frames: np.ndarray, seqs: np.ndarray, times: np.ndarray, actions: np.ndarray,
-               still: np.ndarray) -> tuple[float, list[float] | None] | None:
+               still: np.ndarray, stale: np.ndarray | None = None) -> tuple[float, list[float] | None] | None:
     """:func:`noise_level` (with its interval) of the uint8 ``frames`` (M, H, W) of sequences ``seqs`` (M,) at frame
     indices ``times`` (M,) that follow the smallest fifth of the recording's (N, T) ``actions``
     (:func:`action_fifths`), on the pixels ``still`` (H, W); None where fewer than 20 of them do, or the actions do not
     vary. Sensor noise is in every frame; a change drawn with the action is not in these."""
-    calm = _calm(actions, seqs, times)
+    calm = _calm(actions, seqs, times, stale)
     if calm is None:
         return None
     noise, interval = noise_level(frames[calm], still, interval=True)
@@ -636,16 +636,21 @@ class CameraFindings:
 ARROW_NOISE_FACTOR = 1.1
 
 
-def _calm(actions: np.ndarray | None, seqs: np.ndarray, times: np.ndarray, least: int = 20) -> np.ndarray | None:
+def _calm(actions: np.ndarray | None, seqs: np.ndarray, times: np.ndarray, stale: np.ndarray | None = None,
+          least: int = 20) -> np.ndarray | None:
     """(M,) bool: which of the frames of sequences ``seqs`` (M,) at indices ``times`` (M,) follow the smallest fifth of
-    the (N, T) ``actions`` (:func:`action_fifths`); None where the actions are unknown or do not vary, or fewer than
-    ``least`` frames do."""
+    the (N, T) ``actions`` (:func:`action_fifths`) and are no repeat of the frame before (``stale`` (N, T): a dropped
+    frame shows the frame before it, drawn after its own action: Gymnasium at an actuation gain of 3.5 with 10% of the
+    frames dropped read "noise 84.2" from the torque arrows they repeated); None where the actions are unknown or do
+    not vary, or fewer than ``least`` frames are left."""
     fifths = action_fifths(actions) if actions is not None else None
     if fifths is None:
         return None
     after = times >= 1
     calm = np.zeros(len(times), bool)
     calm[after] = fifths[0][seqs[after], times[after] - 1]
+    if stale is not None:
+        calm &= ~stale[seqs, times]
     return calm if calm.sum() >= least else None
 
 
@@ -748,7 +753,7 @@ def camera_stage(model: PhysicsModel, path: str, theta: np.ndarray, fit: np.ndar
     # the held-out frames after the smallest fifth of the actions, where known: a camera changes every frame, and these
     # carry nothing drawn with the action, which no camera explains (Gymnasium at an actuation gain of 5 draws its
     # torque arrow so large that a blur of 1.5 px, fitted as 1.499, lowered the residual of every frame by 7.5% alone)
-    calm_held = _calm(actions, held_seqs, held_times)
+    calm_held = _calm(actions, held_seqs, held_times, stale)
     x_calm = x_held[torch.from_numpy(calm_held)] if calm_held is not None else None
     e0 = matched_error(model, Camera(), x_held, renders=renders)
     table: list[dict] = [{"candidate": "none", "camera": Camera().__dict__, "held_out_matched_mse": e0, "drop": 0.0,
@@ -785,7 +790,7 @@ def camera_stage(model: PhysicsModel, path: str, theta: np.ndarray, fit: np.ndar
     e_base = base_row["held_out_matched_mse"]
     bar.update()
     label = "exposure+" if first else ""
-    calm_fit = _calm(actions, fit_seqs, fit_times)
+    calm_fit = _calm(actions, fit_seqs, fit_times, stale)
     x_fit_calm = x_fit[torch.from_numpy(calm_fit)] if calm_fit is not None and x_calm is not None else None
 
     def candidate(name: str, base_row: dict, needs: set[str], **fit: Any) -> dict:
@@ -905,7 +910,8 @@ def camera_stage(model: PhysicsModel, path: str, theta: np.ndarray, fit: np.ndar
     # frame, 2.98 over these, and at a gain of 3 a noise of 2 2.43 and 2.0. Elsewhere every frame is read (a noise of
     # 20.53 read 20.39 over them, 20.2 over the calm ones)
     noise, noise_ci = noise_level(frames_2d, still, interval=True)
-    calm = calm_noise(frames_2d, fit_seqs, fit_times, actions, still) if actions is not None and noise > 0 else None
+    calm = (calm_noise(frames_2d, fit_seqs, fit_times, actions, still, stale) if actions is not None and noise > 0
+            else None)
     if calm is not None and noise > ARROW_NOISE_FACTOR * calm[0]:
         noise, noise_ci = calm
     correlation = float("nan")
