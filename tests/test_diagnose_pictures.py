@@ -553,10 +553,12 @@ def test_a_vision_gap_only_in_the_frames_of_large_actions_is_put_on_what_is_draw
     actions = rng.uniform(-2, 2, (30, 12))
     arrow = np.concatenate([np.zeros((30, 1)), 1e-4 + 1e-3 * np.abs(actions[:, :-1]) ** 2], 1)  # frame t + 1 after u_t
     config = DiagnoseConfig()
-    _, notes = summarise_vision(SimpleNamespace(rec_mse=arrow, actions=actions), 2e-4, None, None, [], config)
+    _, notes = summarise_vision(SimpleNamespace(rec_mse=arrow, actions=actions, stale=None), 2e-4, None, None, [],
+                                config)
     assert len(notes) == 1 and "the gap lies in what is drawn with the action" in notes[0], notes
     assert calm_frames_error(arrow, actions) < 2e-4
     everywhere = np.full((30, 12), 1e-3)
-    _, notes = summarise_vision(SimpleNamespace(rec_mse=everywhere, actions=actions), 2e-4, None, None, [], config)
+    _, notes = summarise_vision(SimpleNamespace(rec_mse=everywhere, actions=actions, stale=None), 2e-4, None, None, [],
+                                config)
     assert len(notes) == 1 and "(blur, noise, a shifted camera or a different scene?)" in notes[0], notes
     assert calm_frames_error(everywhere, np.ones((30, 12))) is None  # actions that never vary tell nothing
