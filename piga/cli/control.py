@@ -15,6 +15,7 @@ import numpy as np
 
 from agents.config import MPCConfig
 from envs import DMC_PENDULUM, ENV_IDS, PIXEL_PENDULUM
+from envs.effects import normalize_effects
 from envs.fields import number_text
 from envs.pendulum import MAX_GRAVITY, MIN_GRAVITY, PixelPendulumConfig
 from piga.io.atomic import (atomic_output, check_file_name, check_not_an_input, check_writable_target, write_json,
@@ -683,9 +684,11 @@ def pixel_physics_difference(trained: dict[str, Any], env: PixelPendulumConfig,
     if not math.isclose(gain, env.actuation_gain, rel_tol=1e-6):
         pairs.append((f"actuation gain {number_text(env.actuation_gain)}", f"actuation gain {number_text(gain)}"))
     effects = trained.get("effects") or []
-    if isinstance(effects, dict):  # (an env_config written by hand may hold them as an object, which the schema takes)
-        effects = [list(item) for item in effects.items()]
-    if effects and [list(e) for e in effects] != [list(e) for e in env.effects]:
+    try:  # as the env holds them (pairs from JSON, or an object written by hand, which the schema takes)
+        effects = normalize_effects(effects)
+    except (TypeError, ValueError):  # (not effects piga makes: named as they are)
+        pass
+    if effects and tuple(effects) != tuple(env.effects):
         try:
             named = ", ".join(f"{name}={number_text(float(value))}" for name, value in effects)
         except (TypeError, ValueError):

@@ -170,17 +170,21 @@ def _check_env_physics(config: object, data: str) -> None:
     """Refuses --env for a file whose ``env_config`` says it was collected at another gravity or actuation gain than
     Gymnasium's pendulum's, which the MPC comparison simulates (a file at gravity x1.5 was compared on g = 10: its
     corrected physics, g = 14.9, looked worse than the nominal). A file without the attribute is taken at its word."""
+    from piga.control.episodes import EpisodeConfig
+
     if not isinstance(config, dict):
         return
+    env = EpisodeConfig(episodes=1).env_config()  # the system that the comparison simulates
     try:
-        g = float(config.get("gravity", 10.0)) * float(config.get("gravity_mult", 1.0))
-        gain = float(config.get("actuation_gain", 1.0))
+        g = float(config.get("gravity", env.gravity)) * float(config.get("gravity_mult", 1.0))
+        gain = float(config.get("actuation_gain", env.actuation_gain))
     except (TypeError, ValueError):
         return
-    if not (math.isclose(g, 10.0, rel_tol=1e-6) and math.isclose(gain, 1.0, rel_tol=1e-6)):
-        raise PigaError(f"--env simulates Gymnasium's pendulum at g = 10 m/s² and actuation gain 1, but {data} was "
-                        f"collected at g = {g:.4g} m/s² and gain {gain:.4g} (its env_config): the MPC comparison would "
-                        "run on another system than the data's; leave --env out")
+    simulated = env.gravity * env.gravity_mult
+    if not (math.isclose(g, simulated, rel_tol=1e-6) and math.isclose(gain, env.actuation_gain, rel_tol=1e-6)):
+        raise PigaError(f"--env simulates Gymnasium's pendulum at g = {simulated:g} m/s² and actuation gain "
+                        f"{env.actuation_gain:g}, but {data} was collected at g = {g:.4g} m/s² and gain {gain:.4g} (its "
+                        "env_config): the MPC comparison would run on another system than the data's; leave --env out")
 
 
 def _check_env_agrees(effects: tuple[tuple[str, float], ...], recorded: object, data: str) -> None:

@@ -513,8 +513,9 @@ def _check_effects_agree(info: DatasetInfo, config: dict[str, Any]) -> None:
     attribute other than the effects ``env_config`` holds (none where it holds no ``effects``): training scores the
     learned gain against 'effects' (a ``gain`` effect scales the true a) while piga-control and piga-diagnose's
     ``--env`` make the system from 'env_config'. A file without the attribute has nothing to contradict."""
-    from envs.effects import explicit_step_problem, normalize_effects
+    from envs import PixelPendulumConfig
     from envs.constants import PENDULUM_DT
+    from envs.effects import explicit_step_problem, normalize_effects
 
     recorded, held = info.attrs.get("effects"), config.get("effects", [])
     if recorded is None:
@@ -529,9 +530,10 @@ def _check_effects_agree(info: DatasetInfo, config: dict[str, Any]) -> None:
             raise DataFormatError(f"{info.path}: {name} not effects piga-collect makes ({exc}); fix it, or collect "
                                   "the file again") from None
     said, made = checked
-    gravity = config.get("gravity", 10.0) * config.get("gravity_mult", 1.0) if all(
-        isinstance(config.get(k, 1.0), (int, float)) and not isinstance(config.get(k, 1.0), bool)
-        for k in ("gravity", "gravity_mult")) else 10.0
+    try:  # (fields that are no numbers are refused where they are read)
+        gravity = float(config.get("gravity", PixelPendulumConfig.gravity)) * float(config.get("gravity_mult", 1.0))
+    except (TypeError, ValueError):
+        gravity = PixelPendulumConfig.gravity
     if (unstable := explicit_step_problem(made, gravity, PENDULUM_DT)) is not None:
         raise DataFormatError(f"{info.path}: the effects in 'env_config' are not effects piga-collect makes ({unstable}); "
                               "fix them, or collect the file again")

@@ -90,8 +90,8 @@ from piga.diagnostics.results import (Ambiguity, CameraSummary, CandidateRow, Di
                                       Naming, PixelErrors, Score, SelectionStep, VisionSummary)
 from piga.diagnostics.twin import MEASURABLE_GAP, calibrate_floor, gap_closure, mean_gap_closure, twin_floor
 from piga.diagnostics.vision import (MAX_BLUR, MAX_EXPOSURE, MAX_SHIFT, MAX_ZOOM, MIN_EXPOSURE, MIN_ZOOM, Camera,
-                                     CameraConfig, CameraFindings, action_fifths, angle_table, camera_stage, match,
-                                     match_file)
+                                     CameraConfig, CameraFindings, action_fifths, angle_table, calm_frames,
+                                     camera_stage, match, match_file)
 from piga.io.choices import check_ranges, check_types
 from piga.world.model import PhysicsModel
 from piga.diagnostics.fit import Nominal
@@ -1467,6 +1467,12 @@ THROUGH_VISION = ("the angles read through it barely follow the actions",
                   "tripled read a = 1.7e-08, where the same physics without shadows reads its a)")
 
 
+def _the_angles_not_the_actuator(verdict: str, through: str = THROUGH_VISION[1]) -> str:
+    """``verdict`` with an undetermined gain said to be the angles' (:data:`THROUGH_VISION`), read ``through`` what
+    the vision misreads, instead of the actuator's causes (:data:`ACTUATOR_CAUSES`)."""
+    return verdict.replace(ACTIONS_BARELY_MOVE, THROUGH_VISION[0]).replace(ACTUATOR_CAUSES, through)
+
+
 def _seen_through_vision_gap(naming: Naming, vision_ratio: float | None, encoder: bool = True) -> Naming:
     """"no significant gap", where the vision gap is :data:`HIDING_VISION_RATIO` or more, says that it may hide one;
     "not explained" says first that the angles it was read on come through that gap (dm_control with shadows on, 35.8x,
@@ -1480,9 +1486,7 @@ def _seen_through_vision_gap(naming: Naming, vision_ratio: float | None, encoder
         verdict = (f"not explained, seen through a vision gap of {vision_ratio:.1f}x (the autoencoder re-renders the "
                    "real frames that much worse than its training frames): the angles read from them may be what "
                    "the fits cannot explain; identify a model on this camera's frames, or record frames like its "
-                   "training frames. What the fits read through it: "
-                   + naming.verdict.replace(ACTIONS_BARELY_MOVE, THROUGH_VISION[0]).replace(ACTUATOR_CAUSES,
-                                                                                            THROUGH_VISION[1]))
+                   "training frames. What the fits read through it: " + _the_angles_not_the_actuator(naming.verdict))
         return Naming(naming.effects, naming.notes, verdict, naming.verdict_class)
     if naming.verdict_class != "none":
         return naming
@@ -1501,9 +1505,9 @@ def _zoom_first(naming: Naming, camera: CameraFindings | None, config: CameraCon
         return naming
     # an undetermined gain is then the angles' too (dm_control of length 0.4 filmed from 0.9 times as far, its a x1.56,
     # listed "a motor wired in reverse ... another signal, other units" as causes)
-    read = naming.verdict.replace(ACTIONS_BARELY_MOVE, THROUGH_VISION[0]).replace(
-        ACTUATOR_CAUSES, "through a picture of another size, which says nothing of the actuator: angles that the "
-                         "vision misreads do not follow the actions either")
+    read = _the_angles_not_the_actuator(naming.verdict, "through a picture of another size, which says nothing of the "
+                                                        "actuator: angles that the vision misreads do not follow the "
+                                                        "actions either")
     verdict = (f"not explained: the pendulum is drawn x{camera.scale:.2f} the size of the model's renders (a camera "
                "nearer or farther, or a pendulum of another length), which the zoom candidate does not describe; "
                "identify a model on this camera's frames. What the fits read through it: " + read)
@@ -2121,11 +2125,8 @@ def calm_frames_error(rec_mse: np.ndarray, actions: np.ndarray, stale: np.ndarra
     its smallest actions x0.31 (the training file's own: x0.30), where a picture changed all over (a blur) is worse in
     every frame. Repeated frames (``stale`` (N, T)) are left out: a dropped frame shows the frame before it, drawn
     after its own action (Gymnasium at an actuation gain of 3.5 with 10% of the frames dropped)."""
-    fifths = action_fifths(actions)
-    if fifths is None:
-        return None
-    calm = fifths[0] if stale is None else fifths[0] & ~stale[:, 1:]
-    return float(rec_mse[:, 1:][calm].mean()) if calm.any() else None
+    calm = calm_frames(actions, stale)
+    return None if calm is None or not calm.any() else float(rec_mse[:, 1:][calm].mean())
 
 
 def twin_renderer(from_gymnasium: bool, has_model: bool, rematched: bool, vision_ratio: float | None,

@@ -41,6 +41,7 @@ with the identified decoder D:
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
@@ -301,16 +302,22 @@ def core_brightening(model: PhysicsModel, x: Tensor, renders: tuple[Tensor, Tens
     camera), of the frames ``x`` (M, P) over that render: how much brighter the pendulum is than the decoder draws
     it. An exposure k brightens it by k; a change elsewhere in the picture (a missing torque arrow, which leaves
     faint pixels of the decoder's white) does not."""
-    table = angle_table(model, Camera(), renders=renders)
-    r2 = (table.renders**2).sum(1)  # (K,)
     ratios = []
-    for start in range(0, len(x), 2048):
-        xb = x[start : start + 2048]  # (m, P)
-        r = table.renders[_distances(table, xb, r2).argmin(1)]  # (m, P) each frame's nearest render
+    for _, xb, r in _nearest_renders(model, x, renders):
         core = r < dark
         ratios.append(xb[core] / r[core].clamp_min(1e-6))
     values = torch.cat(ratios)
     return float(values.median()) if len(values) else 1.0
+
+
+def _nearest_renders(model: PhysicsModel, x: Tensor, renders: tuple[Tensor, Tensor], camera: Camera = Camera(),
+                     batch: int = 2048) -> Iterator[tuple[int, Tensor, Tensor]]:
+    """``(start, frames (m, P), their nearest renders (m, P) through camera)`` for the frames ``x`` (M, P), in batches."""
+    table = angle_table(model, camera, renders=renders)
+    r2 = (table.renders**2).sum(1)  # (K,)
+    for start in range(0, len(x), batch):
+        xb = x[start : start + batch]  # (m, P)
+        yield start, xb, table.renders[_distances(table, xb, r2).argmin(1)]
 
 
 @torch.no_grad()
@@ -322,12 +329,8 @@ def frame_core_ratios(model: PhysicsModel, x: Tensor, renders: tuple[Tensor, Ten
     51 and brightened 1.1 read 56/51 = 1.098 in every frame, its interval of zero width)."""
     from scipy.stats import trim_mean
 
-    table = angle_table(model, camera, renders=renders)
-    r2 = (table.renders**2).sum(1)  # (K,)
     out = np.ones(len(x))
-    for start in range(0, len(x), 2048):
-        xb = x[start : start + 2048]  # (m, P)
-        r = table.renders[_distances(table, xb, r2).argmin(1)]  # (m, P) each frame's nearest render
+    for start, xb, r in _nearest_renders(model, x, renders, camera):
         core = (r < dark).numpy()
         ratio = (xb / r.clamp_min(1e-6)).double().numpy()
         for i in np.flatnonzero(core.any(1)):
@@ -392,6 +395,17 @@ def action_fifths(actions: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
     if u.size == 0 or np.ptp(u) == 0:
         return None
     return u <= np.quantile(u, 0.2), u >= np.quantile(u, 0.8)
+
+
+def calm_frames(actions: np.ndarray, stale: np.ndarray | None = None) -> np.ndarray | None:
+    """(N, T - 1) mask of the frames from the second on that follow the smallest fifth of the (N, T) ``actions``
+    (:func:`action_fifths`) and are no repeat of the frame before (``stale`` (N, T): a dropped frame shows the frame
+    before it, drawn after its own action: Gymnasium at an actuation gain of 3.5 with 10% of the frames dropped read
+    "noise 84.2" from the torque arrows they repeated); None where the actions do not vary."""
+    fifths = action_fifths(actions)
+    if fifths is None:
+        return None
+    return fifths[0] if stale is None else fifths[0] & ~stale[:, 1:]
 
 
 def calm_noise(frames: np.ndarray, seqs: np.ndarray, times: np.ndarray, actions: np.ndarray,
@@ -638,19 +652,15 @@ ARROW_NOISE_FACTOR = 1.1
 
 def _calm(actions: np.ndarray | None, seqs: np.ndarray, times: np.ndarray, stale: np.ndarray | None = None,
           least: int = 20) -> np.ndarray | None:
-    """(M,) bool: which of the frames of sequences ``seqs`` (M,) at indices ``times`` (M,) follow the smallest fifth of
-    the (N, T) ``actions`` (:func:`action_fifths`) and are no repeat of the frame before (``stale`` (N, T): a dropped
-    frame shows the frame before it, drawn after its own action: Gymnasium at an actuation gain of 3.5 with 10% of the
-    frames dropped read "noise 84.2" from the torque arrows they repeated); None where the actions are unknown or do
-    not vary, or fewer than ``least`` frames are left."""
-    fifths = action_fifths(actions) if actions is not None else None
-    if fifths is None:
+    """(M,) bool: which of the frames of sequences ``seqs`` (M,) at indices ``times`` (M,) are :func:`calm_frames` of
+    the (N, T) ``actions`` and ``stale``; None where the actions are unknown or do not vary, or fewer than ``least``
+    frames are left."""
+    frames = calm_frames(actions, stale) if actions is not None else None
+    if frames is None:
         return None
     after = times >= 1
     calm = np.zeros(len(times), bool)
-    calm[after] = fifths[0][seqs[after], times[after] - 1]
-    if stale is not None:
-        calm &= ~stale[seqs, times]
+    calm[after] = frames[seqs[after], times[after] - 1]
     return calm if calm.sum() >= least else None
 
 
@@ -885,7 +895,7 @@ def camera_stage(model: PhysicsModel, path: str, theta: np.ndarray, fit: np.ndar
     if camera.zoom != 1:
         effects.append({"effect": "zoom", "value": camera.zoom, "unit": ZOOM_UNIT,
                         "interval": camera_interval(model, camera, "zoom", x_fit, fit_seqs, step=0.01)})
-    if camera.exposure != 1 and not shown and camera.exposure > 1:  # a brighter picture on white: read on the rod
+    if not shown and camera.exposure > 1:  # a brighter picture on white: read on the rod
         value, interval = core_exposure(model, x_fit, fit_seqs, renders, reference, config.fit_frames, seed, camera)
         if 255 * abs(value - 1) > config.min_exposure:
             effects.append({"effect": "exposure", "value": value, "unit": "factor on every gray level",

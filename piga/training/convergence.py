@@ -300,10 +300,9 @@ def check_convergence(state: Any, config: ConvergenceConfig = ConvergenceConfig(
             f"better with {name} = {p.better:.4g}" for name, p in short_of) + "; " + _fix(planned, steps))
     if not held_out:  # a file of 1 spring sequence x 12 frames settled here with k 53% and l 56% off, its own frames
         # predicted at 0.03x the background's MSE: frames it trained on cannot tell such a fit from a right one
-        return Convergence("unsettled", "its parameters settled, but the file has no test sequences, so no frame it did "
-                                        "not train on checks them (a file this small can be fitted with wrong values); "
-                                        "collect one with a test split to check them", physics_steps, planned, steps,
-                           checks, flat)
+        return verdict("unsettled", "its parameters settled, but the file has no test sequences, so no frame it did "
+                                    "not train on checks them (a file this small can be fitted with wrong values); "
+                                    "collect one with a test split to check them")
     return verdict("converged", f"every learned parameter left its start and settled over the last "
                                 f"{100 * config.tail:.0f}% of {planned} steps")
 
