@@ -25,6 +25,12 @@ import pytest
      "the env runs actuation gain 1, no effect, the model's training file was collected at actuation gain 0.6, the "
      "effects damping=0.3: its planner plans with the physics it identified there, so the success below measures that "
      "mismatch too"),
+    ({"gravity": 10.0, "gravity_mult": 1.0, "actuation_gain": 1.0, "effects": [["blur", 1.5]]}, 1.0, 1.0,
+     "the env runs no effect, the model's training file was collected at the effects blur=1.5: its encoder learned to "
+     "read frames made with them, so the success below measures that mismatch too"),  # a blur is no "physics"
+    ({"gravity": 10.0, "gravity_mult": 1.0, "actuation_gain": 1.0, "effects": [["blur", 1.5], ["damping", 0.2]]},
+     1.0, 1.0, "the env runs no effect, the model's training file was collected at the effects damping=0.2, blur=1.5: "
+     "its planner plans with the physics it identified there, so the success below measures that mismatch too"),
     ({"gravity": 10.0, "gravity_mult": 1.0, "actuation_gain": 1.0, "effects": []}, 1.0, 1.0, None),
     ({}, 1.0, 1.0, None),
 ])
@@ -54,6 +60,9 @@ def test_a_model_of_other_physics_than_the_env_is_run_with_a_warning(trained, mu
     ({"gravity": 10.0, "gravity_mult": 1.0, "actuation_gain": 0.6, "effects": []}, (0.9, 1.0), True,
      "at x0.9, x1 of the sweep the env runs other physics than the model's training file (actuation gain 0.6): its "
      "planner plans with the physics it identified there, so the success there measures that mismatch too"),
+    ({"gravity": 10.0, "gravity_mult": 1.0, "actuation_gain": 1.0, "effects": [["noise", 5]]}, (1.0, 1.4), True,
+     "at x1, x1.4 of the sweep the env runs another camera than the model's training file (the effects noise=5): its "
+     "encoder learned to read frames made with them, so the success there measures that mismatch too"),
 ])
 def test_a_sweep_names_the_multipliers_that_run_other_physics(trained, sweep, told, said, capsys):
     """A sweep's warning suggested ``--gravity-mult 1.4 --not-told``, which a sweep refuses, and ran x1.4 itself: it

@@ -773,3 +773,20 @@ def test_an_ambiguity_says_which_side_the_free_runs_favour() -> None:
     favoured = described([2.09e-3, 2.79e-4])
     assert "which favour damping" in favoured and "the one-step fit cannot tell them apart" in favoured
     assert "the data cannot tell them apart" in described([2.09e-3, 2.0e-3])
+
+
+def test_separating_data_that_the_recording_already_holds_asks_for_more_of_it() -> None:
+    """A saturation at 0.65 was "separated by large actions, |u| above 0.65" in a recording of uniform actions in ±2,
+    which holds 67% of them there: the advice names the share it has and asks for more sequences instead."""
+    from piga.diagnostics.diagnose import separating_data
+
+    uniform = np.linspace(-2, 2, 401)
+    assert separating_data(("saturation",), {"s": 0.65}, uniform) == [
+        "more sequences (the recording already holds 67% of its actions at |u| above 0.65)"]
+    assert separating_data(("saturation",), {"s": 1.9}, uniform) == ["large actions, |u| above 1.90"]  # 2% of them
+    assert separating_data(("deadzone",), {"d": 0.05}, uniform) == ["small actions, |u| below 0.05"]
+    assert separating_data(("deadzone",), {"d": 0.5}, uniform) == [
+        "more sequences (the recording already holds 25% of its actions at |u| below 0.50)"]
+    assert separating_data(("saturation", "damping"), {"s": 0.65, "b": 0.1}) == [
+        "large actions, |u| above 0.65", "free swings with no action at several speeds (a viscous torque grows with "
+        "the speed)"]  # no actions given: the term's own evidence

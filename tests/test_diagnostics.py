@@ -338,6 +338,26 @@ def test_calm_frames_leave_out_the_dropped_ones() -> None:
     assert calm_frames_error(rec, actions, stale) == 1.0
 
 
+def test_calm_frames_follow_a_camera_delay() -> None:
+    """A camera delay of k frames shows u_t's arrow in frame t + 1 + k, and its first k frames repeat the first one:
+    Gymnasium at an actuation gain of 3 with a camera delay of 2 read "noise 61.2" from the frames taken for calm, and
+    a gain of 1.5 with a delay of 1 read "not explained", the arrow's gap taken for one all over the picture."""
+    from piga.diagnostics.diagnose import calm_frames_error
+    from piga.diagnostics.vision import action_fifths
+
+    rng = np.random.default_rng(0)
+    actions = rng.uniform(-2, 2, (8, 12))  # (N, T)
+    rec = np.zeros((8, 12))  # (N, T) re-rendering errors: the frame that shows a large arrow re-renders badly
+    rec[:, 3:] = np.abs(actions[:, :-3])  # a delay of 2: frame t + 3 shows u_t
+    stale = np.zeros((8, 12), bool)
+    stale[:, 1:3] = True  # frames 1 and 2 repeat frame 0
+    small, large = action_fifths(actions, stale)
+    assert not small[:, :2].any() and not large[:, :2].any()  # the repeats show no action
+    np.testing.assert_array_equal(small[:, 2:], action_fifths(actions)[0][:, :-2])
+    assert calm_frames_error(rec, actions) > 0.5  # taken in step with the actions, the calm frames are not calm
+    assert calm_frames_error(rec, actions, stale) <= np.quantile(np.abs(actions[:, :-1]), 0.2)
+
+
 def test_cli_with_env_writes_a_complete_report_and_the_control_comparison(tiny_model: Path, damped_data: Path,
                                                                          tmp_path: Path,
                                                                          capsys: pytest.CaptureFixture[str]) -> None:

@@ -15,7 +15,7 @@ import numpy as np
 
 from agents.config import MPCConfig
 from envs import DMC_PENDULUM, ENV_IDS, PIXEL_PENDULUM
-from envs.effects import normalize_effects
+from envs.effects import EFFECTS, normalize_effects
 from envs.fields import number_text
 from envs.pendulum import MAX_GRAVITY, MIN_GRAVITY, PixelPendulumConfig
 from piga.io.atomic import (atomic_output, check_file_name, check_not_an_input, check_writable_target, write_json,
@@ -699,6 +699,16 @@ def pixel_physics_difference(trained: dict[str, Any], env: PixelPendulumConfig,
     return ", ".join(now for now, _ in pairs), ", ".join(then for _, then in pairs)
 
 
+def _camera_effects_only(trained: dict[str, Any], env: PixelPendulumConfig) -> bool:
+    """True where every effect that the training file and ``env`` do not share acts on the frames alone ("vision")."""
+    try:
+        ours, theirs = dict(normalize_effects(trained.get("effects") or [])), dict(env.effects)
+    except (TypeError, ValueError):  # (not effects piga makes)
+        return False
+    names = {n for n in ours.keys() | theirs.keys() if ours.get(n) != theirs.get(n)}
+    return bool(names) and all(EFFECTS[n].kind == "vision" for n in names)
+
+
 def _trained_gravity(trained: dict[str, Any], env: PixelPendulumConfig) -> float | None:
     """The gravity of the training file's ``env_config`` (its gravity times its multiplier; the env's where it does
     not say); None where a hand-written attribute is no number."""
@@ -728,15 +738,20 @@ def _warn_if_other_pixel_physics(checkpoint: dict, multipliers: Sequence[float] 
     differs = found[0][1]
     mult = (_trained_gravity(trained, env) or env.gravity) / env.gravity
     hinted = "g = " in differs[0] and MIN_GRAVITY <= mult * env.gravity <= MAX_GRAVITY
+    # a file that differs by camera effects alone (a blur, a shift) was recorded with the env's physics: its frames,
+    # not its physics, are what the env does not make (the warning had called a blur "other physics")
+    camera_only = "g = " not in differs[0] and "actuation gain" not in differs[0] and _camera_effects_only(trained, env)
+    learned = ("its encoder learned to read frames made with them" if camera_only
+               else "its planner plans with the physics it identified there")
     if sweep:
-        line = (f"at {', '.join(f'x{number_text(m)}' for m, _ in found)} of the sweep the env runs other physics than "
-                f"the model's training file ({differs[1]}): its planner plans with the physics it identified there, so "
-                "the success there measures that mismatch too")
+        line = (f"at {', '.join(f'x{number_text(m)}' for m, _ in found)} of the sweep the env runs "
+                f"{'another camera' if camera_only else 'other physics'} than the model's training file "
+                f"({differs[1]}): {learned}, so the success there measures that mismatch too")
         hint = (f" ({'with --not-told, ' if told else ''}x{number_text(mult)} runs the env at the trained gravity that "
                 "the agent plans with)")
     else:
-        line = (f"the env runs {differs[0]}, the model's training file was collected at {differs[1]}: its planner plans "
-                "with the physics it identified there, so the success below measures that mismatch too")
+        line = (f"the env runs {differs[0]}, the model's training file was collected at {differs[1]}: {learned}, so "
+                "the success below measures that mismatch too")
         hint = f" (--gravity-mult {number_text(mult)} --not-told runs the env at the trained gravity)"
     print(f"{PROG}: warning: {line}{hint if hinted else ''}", file=sys.stderr)
 

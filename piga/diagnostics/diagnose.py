@@ -1221,9 +1221,28 @@ def small_note(effect: str, shift: float, reading_rms: float) -> str:
             f"told from a camera offset of that size, so it is not named and the physics is fitted without it")
 
 
-def separating_data(effects: tuple[str, ...], values: dict[str, float]) -> list[str]:
-    """What data would show ``effects`` apart from a rival (each term's ``evidence``), with their fitted values."""
-    return [EFFECTS[e].evidence.format(**values) for e in effects if EFFECTS[e].evidence]
+#: The share of the recording's actions in the range that shows an actuator effect (a deadzone's |u| below d, a
+#: saturation's |u| above s) from which asking for such actions is advice the data already meets: a saturation at 0.65
+#: beside its rival was "separated by |u| above 0.65" in a recording of uniform actions in ±2.
+MET_SHARE = 0.1
+
+
+def separating_data(effects: tuple[str, ...], values: dict[str, float], actions: np.ndarray | None = None) -> list[str]:
+    """What data would show ``effects`` apart from a rival (each term's ``evidence``), with their fitted values; where
+    the recording's ``actions`` (any shape) already hold :data:`MET_SHARE` of theirs in a deadzone's or a saturation's
+    range, more of the same data, and what share it has."""
+    u = np.zeros(0) if actions is None else np.abs(np.asarray(actions, float)).ravel()
+    hints = []
+    for e in (e for e in effects if EFFECTS[e].evidence):
+        hint = EFFECTS[e].evidence.format(**values)
+        if u.size and e in (DEADZONE.name, SATURATION.name):
+            edge = values[EFFECTS[e].parameter]
+            share = float(np.mean(u < edge if e == DEADZONE.name else u > edge))
+            if share >= MET_SHARE:
+                hint = (f"more sequences (the recording already holds {100 * share:.0f}% of its actions at |u| "
+                        f"{'below' if e == DEADZONE.name else 'above'} {edge:.2f})")
+        hints.append(hint)
+    return hints
 
 
 def _intervals(draws: dict[str, list[float]]) -> dict[str, tuple[float, float]]:
@@ -1247,7 +1266,8 @@ def ambiguity_of(chosen: Score, rival: Score, nom: Nominal, w: WindowSet | None,
             return None
     only_a = tuple(e for e in chosen.model.effects if e not in rival.model.effects)
     only_b = tuple(e for e in rival.model.effects if e not in chosen.model.effects)
-    hints = separating_data(only_a, chosen.model.values) + separating_data(only_b, rival.model.values)
+    u = None if w is None else w.fit1.actions[:, -1].numpy()  # (B,) u_s of the fit split's one-step windows
+    hints = separating_data(only_a, chosen.model.values, u) + separating_data(only_b, rival.model.values, u)
     return Ambiguity(between=["+".join(only_a) or "none", "+".join(only_b) or "none"],
                      candidates=[chosen.name, rival.name], bic=[chosen.bic, rival.bic],
                      typical_free_run_mse=[chosen.typical, rival.typical], intervals_overlap=overlap,
@@ -2018,7 +2038,7 @@ def summarise_vision(obs: Observations, rec_training: float, camera: CameraFindi
                          "would show only there, so no camera is named")
             own_obs = own() if callable(own) else own
             linked = None if own_obs is None else action_linked(obs.rec_mse, obs.actions, own_obs.rec_mse,
-                                                                own_obs.actions)
+                                                                own_obs.actions, obs.stale, own_obs.stale)
             if linked is not None:
                 notes.append(f"the re-rendering error follows the action as it does not on the model's own training "
                              f"file: the frames after the largest fifth of the actions re-render x{linked[0]:.2g} as "
@@ -2085,18 +2105,19 @@ def pixel_gap_measurable(nominal: float, floor: float, one_step_nominal: float, 
 ACTION_LINKED_FACTOR = 2.0
 
 
-def action_linked(rec_mse: np.ndarray, actions: np.ndarray, own_rec_mse: np.ndarray,
-                  own_actions: np.ndarray) -> tuple[float, float] | None:
+def action_linked(rec_mse: np.ndarray, actions: np.ndarray, own_rec_mse: np.ndarray, own_actions: np.ndarray,
+                  stale: np.ndarray | None = None, own_stale: np.ndarray | None = None) -> tuple[float, float] | None:
     """The recording's and the training file's ratios of the mean re-rendering error of the (N, T) frames after the
-    largest fifth of the (N, T) actions to that after the smallest fifth (frame t + 1 after u_t), where they differ by
-    more than :data:`ACTION_LINKED_FACTOR` either way; else None (also where the actions of either do not vary).
+    largest fifth of the (N, T) actions to that after the smallest fifth (frame t + 1 after u_t, later by a camera
+    delay that ``stale`` (N, T) shows: :func:`action_fifths`), where they differ by more than
+    :data:`ACTION_LINKED_FACTOR` either way; else None (also where the actions of either do not vary).
 
     Gymnasium draws the torque as an arrow: where the recording's arrow is drawn at another size than the training
     frames' (an actuation gain), the error after large actions moves and that after small ones does not; a change of
     the picture (a camera's exposure) moves both."""
     ratios = []
-    for r, u in ((rec_mse, actions), (own_rec_mse, own_actions)):
-        if (fifths := action_fifths(u)) is None:
+    for r, u, repeats in ((rec_mse, actions, stale), (own_rec_mse, own_actions, own_stale)):
+        if (fifths := action_fifths(u, repeats)) is None:
             return None
         after = r[:, 1:]  # (N, T - 1) the frames from the second on
         calm, large = (float(after[mask].mean()) for mask in fifths)

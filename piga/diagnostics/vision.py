@@ -49,7 +49,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from piga.diagnostics.repeats import RepeatConfig, repeated_frames
+from piga.diagnostics.repeats import RepeatConfig, leading_repeats, repeated_frames
 from piga.io.choices import check_ranges, check_types
 from piga.world.model import PhysicsModel, frames_to_float
 
@@ -388,13 +388,20 @@ def static_pixels(model: PhysicsModel, margin: int = 4, tolerance: float = 8 / 2
     return still.astype(bool)
 
 
-def action_fifths(actions: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-    """(N, T - 1) masks of the frames from the second on that follow the smallest and the largest fifth of the (N, T)
-    actions (frame t + 1 after u_t, which Gymnasium draws as its torque arrow); None where the actions do not vary."""
+def action_fifths(actions: np.ndarray, stale: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray] | None:
+    """(N, T - 1) masks of the frames from the second on that show the smallest and the largest fifth of the (N, T)
+    actions (frame t + 1 after u_t, which Gymnasium draws as its torque arrow); None where the actions do not vary.
+
+    A camera whose first k frames repeat the first one (``stale`` (N, T), :func:`leading_repeats`: a camera delay of
+    k frames) shows u_t's arrow in frame t + 1 + k: Gymnasium at an actuation gain of 3 with a camera delay of 2 read
+    "noise 61.2" from the arrows of the frames it took for calm."""
     u = np.abs(actions[:, :-1])
     if u.size == 0 or np.ptp(u) == 0:
         return None
-    return u <= np.quantile(u, 0.2), u >= np.quantile(u, 0.8)
+    lead = 0 if stale is None else min(leading_repeats(stale), u.shape[1])
+    shown = np.concatenate([np.zeros((len(u), lead)), u[:, :u.shape[1] - lead]], axis=1)  # (N, T - 1) the shown u
+    early = np.arange(u.shape[1]) < lead  # the repeats of the first frame show no action
+    return (shown <= np.quantile(u, 0.2)) & ~early, (shown >= np.quantile(u, 0.8)) & ~early
 
 
 def calm_frames(actions: np.ndarray, stale: np.ndarray | None = None) -> np.ndarray | None:
@@ -402,7 +409,7 @@ def calm_frames(actions: np.ndarray, stale: np.ndarray | None = None) -> np.ndar
     (:func:`action_fifths`) and are no repeat of the frame before (``stale`` (N, T): a dropped frame shows the frame
     before it, drawn after its own action: Gymnasium at an actuation gain of 3.5 with 10% of the frames dropped read
     "noise 84.2" from the torque arrows they repeated); None where the actions do not vary."""
-    fifths = action_fifths(actions)
+    fifths = action_fifths(actions, stale)
     if fifths is None:
         return None
     return fifths[0] if stale is None else fifths[0] & ~stale[:, 1:]
