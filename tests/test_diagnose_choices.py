@@ -790,3 +790,19 @@ def test_separating_data_that_the_recording_already_holds_asks_for_more_of_it() 
     assert separating_data(("saturation", "damping"), {"s": 0.65, "b": 0.1}) == [
         "large actions, |u| above 0.65", "free swings with no action at several speeds (a viscous torque grows with "
         "the speed)"]  # no actions given: the term's own evidence
+
+
+def test_the_pixel_floor_is_the_typical_windows_where_the_mean_over_frames_lies_above_the_corrected_one() -> None:
+    """A gain of 1.5 with a camera delay of 1 headlined "52.7% raw": the floor over all frames, a mean that the largest
+    torque arrows pull up, lay above the corrected model's typical window, a median. Its typical window's own floor is
+    subtracted instead; elsewhere the floor over all frames stands."""
+    from piga.diagnostics.diagnose import subtracted_pixel_floor
+    from piga.diagnostics.results import PixelErrors
+
+    def floor(corrected: float, mean: float, typical: float) -> float | None:
+        return subtracted_pixel_floor(PixelErrors([0.003], [corrected], mean, 0.00272, corrected, typical)).pixel_mse_floor
+
+    assert floor(0.00129, 0.0014, 0.00128) == 0.00128
+    assert floor(0.00150, 0.0014, 0.00128) == 0.0014  # the corrected above the mean floor: it stands
+    assert floor(0.00120, 0.0014, 0.00128) == 0.0014  # below both: no floor either way (the headline goes raw)
+    assert subtracted_pixel_floor(PixelErrors()).pixel_mse_floor is None

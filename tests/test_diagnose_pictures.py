@@ -194,14 +194,14 @@ def test_a_camera_candidate_that_takes_up_what_is_drawn_with_the_action_is_not_c
     lit = {"candidate": "exposure", "camera": {**V.Camera().__dict__, "exposure": 1.04}, "drop": 0.41,
            "accepted": False, "core_brightening": 1.0}
     found = V.CameraFindings(V.Camera(), 0.0, 0.0, 0, 0, [none, lit], 1e-3, 1e-3, [])
-    own = SimpleNamespace(rec_mse=error(own_actions, 2e-4), actions=own_actions)  # after large actions ~8x the calm
-    small_arrow = SimpleNamespace(rec_mse=error(actions, 5e-6), actions=actions)
+    own = SimpleNamespace(rec_mse=error(own_actions, 2e-4), actions=own_actions, stale=None)  # after large actions ~8x the calm
+    small_arrow = SimpleNamespace(rec_mse=error(actions, 5e-6), actions=actions, stale=None)
     _, notes = summarise_vision(small_arrow, 1.0, found, None, [], config, lambda: own)
     assert action_linked(small_arrow.rec_mse, actions, own.rec_mse, own_actions) is not None
     said = [n for n in notes if "exposure 1.04" in n]
     assert len(said) == 1 and said[0].startswith("the re-rendering error follows the action"), notes
     assert "the pendulum itself does not brighten" in said[0] and "under the size" not in said[0], said
-    alike = SimpleNamespace(rec_mse=error(actions, 1.6e-4), actions=actions)  # the same share: a camera's change
+    alike = SimpleNamespace(rec_mse=error(actions, 1.6e-4), actions=actions, stale=None)  # the same share: a camera's change
     assert action_linked(alike.rec_mse, actions, own.rec_mse, own_actions) is None
     _, notes = summarise_vision(alike, 1.0, found, None, [], config, lambda: own)
     assert any(n.startswith("a camera a little different") for n in notes), notes

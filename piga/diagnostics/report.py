@@ -275,7 +275,7 @@ def headline_text(d: Diagnosis) -> str:
                        "render of each frame" if g.floor_subtracted else
                        f"the best-matching render of each frame errs {number(g.pixel_mse_floor, '.3g')}")
                     + ("; the closure is the share of the gap above that floor that the correction removes."
-                       if g.floor_subtracted else "; the closure is 1 − corrected / nominal." + note))
+                       if g.floor_subtracted else "; the closure is 1 − corrected / nominal.") + note)
     elif g.floor_subtracted:
         headline = (f"{bold}Free-run closure {_pct(g.free_run_gap_closure)}{bold} of the gap above the floor, on the typical "
                     "held-out window (the median over windows of each window's mean squared free-run angle error): "

@@ -340,6 +340,8 @@ class PixelErrors(_ByKey):
     """The typical sequence's mean pixel MSE, nominal."""
     typical_pixel_mse_corrected: float | None = None
     """... corrected."""
+    typical_pixel_mse_floor: float | None = None
+    """... the matched residual (the same sequences' median of their mean)."""
 
 
 @dataclass(frozen=True)
