@@ -262,7 +262,7 @@ def test_a_recording_whose_motion_answers_actions_before_they_are_logged_is_refu
 def test_a_camera_fit_that_stops_at_a_bound_is_refused() -> None:
     """dm_control's camera 0 read by a model of the face-on camera: "blur 4 px; shift -5, -5 px; damping 48.7"."""
     check_camera_in_range(Camera(blur=1.2, dx=-3.0, dy=2.0), 2e-4, 1.7e-4)  # within the candidates' range
-    with pytest.raises(NotTheSceneError, match=r"bound \(blur 4 px, shift right -5 px, shift down -5 px; .*match the "
+    with pytest.raises(NotTheSceneError, match=r"bound \(blur 4 px, shift 5 px left, shift 5 px up; .*match the "
                                                r"model's renders at 50x the model's training error"):
         check_camera_in_range(Camera(blur=MAX_BLUR, dx=-MAX_SHIFT, dy=-MAX_SHIFT), 8.5e-3, 1.7e-4)
     # a ratio near 1 is given to two digits, not rounded to "1x worse"

@@ -669,6 +669,9 @@ def test_a_printed_value_lies_within_its_printed_interval() -> None:
     assert [side for _, side, _, _ in found] == ["right", "down"], text
     for value, _, low, high in found:
         assert float(low) <= float(value) <= float(high), text
+    left = Effect("shift", 1.8, "px", [1.79, 1.81], dx=-1.5, dy=-1.0, dx_interval=[-1.51, -1.49],
+                  dy_interval=[-1.02, 0.01]).describe()  # "shift -1.5 px right" read the other way round
+    assert left == "shift 1.5 px left (95% interval 1.49..1.51), 1 px up (95% interval -0.01..1.02)", left
     assert Effect("gain", 1.0015, "factor on the nominal a", [1.0011, 1.0019]).describe().startswith("gain 1.002 ")
     assert Effect("gain", 1.0015, "factor", None).describe() == "gain 1 factor"  # no interval: 3 digits
     assert Effect("gain", float("nan"), "factor", None).describe() == "gain – factor"

@@ -373,7 +373,8 @@ def check_camera_in_range(camera: Camera, matched_error: float, rec_training: fl
     at 45°, read by a model of the face-on camera: "blur 4 px; shift -5, -5 px; damping 48.7", with the actuation
     "flipped")."""
     at = [f"blur {camera.blur:g} px"] if camera.blur >= (1 - 1e-3) * MAX_BLUR else []
-    at += [f"{name} {value:g} px" for name, value in (("shift right", camera.dx), ("shift down", camera.dy))
+    at += [f"shift {abs(value):g} px {sides[value < 0]}" for value, sides in ((camera.dx, ("right", "left")),
+                                                                             (camera.dy, ("down", "up")))
            if abs(value) >= (1 - 1e-3) * MAX_SHIFT]
     at += [f"exposure {camera.exposure:g}" for bound in (MIN_EXPOSURE, MAX_EXPOSURE)
            if abs(camera.exposure - bound) <= 1e-3 * bound]

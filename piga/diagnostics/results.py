@@ -65,6 +65,14 @@ def _with_interval(value: float | None, interval: list[float] | None, unit: str)
     return f"{value_text(value, interval if known else None)} {unit}{ci}"
 
 
+def _toward(value: float | None, interval: list[float] | None, positive: str, negative: str) -> str:
+    """:func:`_with_interval` of a shift's component in px toward ``positive`` ("right"), or, where it is negative, of
+    its size toward ``negative`` ("left") with the interval turned with it."""
+    if value is None or value >= 0:
+        return _with_interval(value, interval, f"px {positive}")
+    return _with_interval(-value, None if interval is None else [-interval[1], -interval[0]], f"px {negative}")
+
+
 @dataclass(frozen=True)
 class Effect(_ByKey):
     """A named effect with its coefficient."""
@@ -116,9 +124,9 @@ class Effect(_ByKey):
         if self.effect == "zoom":
             return (f"zoom {_with_interval(self.value, self.interval, 'x the drawn size')}{where}: a camera nearer or "
                     "farther, or a pendulum of another length, draws it so")
-        if self.effect == "shift":  # each component with its own interval
-            return (f"shift {_with_interval(self.dx, self.dx_interval, 'px right')}, "
-                    f"{_with_interval(self.dy, self.dy_interval, 'px down')}{where}")
+        if self.effect == "shift":  # each component with its own interval, toward the side it moves ("-1.5 px right")
+            return (f"shift {_toward(self.dx, self.dx_interval, 'right', 'left')}, "
+                    f"{_toward(self.dy, self.dy_interval, 'down', 'up')}{where}")
         if self.training is not None:
             known = self.interval is not None and all(math.isfinite(x) for x in self.interval)
             none = self.value <= 0 or (known and self.interval[0] <= 0)
