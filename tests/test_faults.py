@@ -602,6 +602,11 @@ def _env_config_edit(**fields: Any) -> Callable[[h5py.File], None]:
     (lambda f: (_env_config_edit(effects=[["damping", 50]])(f), f.attrs.__setitem__("effects", '{"damping": 50}')),
      ["the effects in 'env_config' are not effects piga-collect makes (effect damping=50", "use damping below 13.2"]),
     (_attr_edit("effects", "garbage"), ["attribute 'effects' is not effects piga-collect makes (expected a JSON object"]),
+    # env_config's values that its env's config refuses (read by show, training, control and --env before)
+    (_env_config_edit(gravity="ten"), ["attribute 'env_config' is not a valid PixelPendulumConfig", "gravity"]),
+    (_env_config_edit(gravity=None), ["attribute 'env_config' is not a valid PixelPendulumConfig", "gravity"]),
+    (_env_config_edit(max_speed="fast"), ["attribute 'env_config' is not a valid PixelPendulumConfig", "max_speed"]),
+    (_env_config_edit(max_angle=7.0), ["attribute 'env_config' is not a valid PixelPendulumConfig", "max_angle"]),
 ])
 def test_a_file_that_breaks_the_schema_is_named_on_open(edit: Callable[[h5py.File], None], needles: list[str],
                                                         tiny_data: Path, tmp_path: Path,

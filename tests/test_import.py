@@ -331,8 +331,25 @@ def test_frames_enlarged_beyond_the_recording_are_noted(tmp_path: Path, recordin
     code, out, err = _cli(str(folder), str(csv), "--dt", "0.05", "--out", str(tmp_path / "d.h5"), "--steps", "5",
                           "--image-size", str(size), "--split", "1,1,1", capsys=capsys)
     assert code == 0 and err == ""
-    assert ("note: the recording's frames are 64 px on their short side, so they were enlarged to 96 px" in out) \
-        == enlarged
+    assert ("note: the recording's frames are 64 px on their short side, so they were enlarged to 96 px, which adds no "
+            "detail (--image-size 64 keeps them as recorded)" in out) == enlarged
+
+
+def test_frames_smaller_than_the_smallest_size_are_not_advised_a_smaller_one(
+        tmp_path: Path, recording: tuple[Path, Path, np.ndarray, np.ndarray], capsys: pytest.CaptureFixture[str]) -> None:
+    """2 px frames at --image-size 8 were advised "a smaller --image-size keeps them as recorded", below the smallest."""
+    from piga.data.schema import MIN_IMAGE_SIZE
+
+    _, csv, frames, _ = recording
+    folder = tmp_path / "tiny"
+    folder.mkdir()
+    for i, frame in enumerate(frames):
+        iio.imwrite(folder / f"f{i}.png", frame[::32, ::32])  # (2, 2)
+    code, out, err = _cli(str(folder), str(csv), "--dt", "0.05", "--out", str(tmp_path / "d.h5"), "--steps", "5",
+                          "--image-size", str(MIN_IMAGE_SIZE), "--split", "1,1,1", capsys=capsys)
+    assert code == 0 and err == "", err
+    assert (f"so they were enlarged to {MIN_IMAGE_SIZE} px, which adds no detail ({MIN_IMAGE_SIZE} px, the smallest "
+            "--image-size, is as close as piga reads them)") in out, out
 
 
 def test_a_crop_to_a_square_is_noted(tmp_path: Path, recording: tuple[Path, Path, np.ndarray, np.ndarray],

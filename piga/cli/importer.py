@@ -55,7 +55,9 @@ def main(argv: Sequence[str] | None = None) -> int:
           f"({config.image_size}, {config.image_size}), split {result.split_counts}, dt={config.dt:g}")
     if result.source_side < config.image_size:
         print(f"note: the recording's frames are {result.source_side} px on their short side, so they were enlarged to "
-              f"{config.image_size} px, which adds no detail (a smaller --image-size keeps them as recorded)")
+              f"{config.image_size} px, which adds no detail"
+              + (f" (--image-size {result.source_side} keeps them as recorded)" if result.source_side >= MIN_IMAGE_SIZE
+                 else f" ({MIN_IMAGE_SIZE} px, the smallest --image-size, is as close as piga reads them)"))
     height, width = result.source_shape
     if height != width:  # the pixel pendulum's frames are square: the long side loses its ends, which the user may miss
         cut, side = abs(height - width), ("left and right" if width > height else "top and bottom")

@@ -505,6 +505,30 @@ def _check_env_attrs(info: DatasetInfo) -> None:
                               f"'env_id') steps {step:g} s{how}; set 'dt' to {step:g}{other}, or collect the file again")
     _check_params_agree(info, config, env_id if env_id is not None else settings_of)
     _check_effects_agree(info, config)
+    _check_env_config_values(info, config, env_id if env_id is not None else settings_of)
+
+
+def _check_env_config_values(info: DatasetInfo, config: dict[str, Any], env_id: str | None) -> None:
+    """Refuses an ``env_config`` whose fields the config of the env it holds (``env_id``'s) refuses: a value of the wrong
+    kind or out of range (``"gravity": "ten"``, ``null``, ``"max_speed": "fast"`` were read by piga-show, training,
+    piga-control and piga-diagnose's ``--env``, and only PlaNet-style's iterative mode refused them). Fields that config
+    does not know are left alone (another version's)."""
+    from dataclasses import fields
+
+    from envs import DMC_PENDULUM, PIXEL_PENDULUM, DMCPendulumConfig, PixelPendulumConfig
+
+    kind = {PIXEL_PENDULUM: PixelPendulumConfig, DMC_PENDULUM: DMCPendulumConfig}.get(env_id or "")
+    if kind is None:
+        return
+    known = {f.name for f in fields(kind)}
+    values = {k: v for k, v in config.items() if k in known}
+    if isinstance(values.get("effects"), list):  # JSON's pairs, as the env holds them
+        values["effects"] = tuple(tuple(e) if isinstance(e, list) else e for e in values["effects"])
+    try:
+        kind(**values)
+    except (TypeError, ValueError) as exc:
+        raise DataFormatError(f"{info.path}: attribute 'env_config' is not a valid {kind.__name__} ({exc}); fix it, or "
+                              "collect the file again") from None
 
 
 def _check_effects_agree(info: DatasetInfo, config: dict[str, Any]) -> None:
