@@ -97,6 +97,9 @@ def test_a_checkpoint_with_its_replay_buffer_inside_resumes_exactly(tmp_path: Pa
     (tmp_path / "b" / "replay_buffers" / "400.pkl").unlink()
     with pytest.raises(ValueError, match=r"400.pkl, the replay buffer that .*checkpoint.pt names, is missing"):
         train_sb3(replace(TINY, steps=600), tmp_path / "b", resume=True, progress=False)
+    (tmp_path / "b" / "replay_buffers" / "400.pkl").mkdir()  # a folder in its place was called missing
+    with pytest.raises(ValueError, match=r"400.pkl, the replay buffer that .*checkpoint.pt names, is not a file"):
+        train_sb3(replace(TINY, steps=600), tmp_path / "b", resume=True, progress=False)
 
 
 def test_a_pixel_policy_runs_in_piga_episodes_with_sb3s_stacking(tmp_path: Path) -> None:

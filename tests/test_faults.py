@@ -2391,6 +2391,19 @@ def test_planet_names_its_chunk_length_flag_when_the_sequences_are_shorter(tiny_
     assert _listing(tmp_path) == []
 
 
+def test_planet_refuses_one_frame_sequences_as_no_video(tiny_data: Path, tmp_path: Path,
+                                                       capsys: pytest.CaptureFixture[str]) -> None:
+    """Sequences of one frame read "sequences of 1 frames are shorter than --chunk-length", which no length fixes."""
+    def one_frame(f: h5py.File) -> None:
+        for name in [k for k in ("frames", "actions", "states", "rewards") if k in f]:
+            _replace(f, name, f[name][:, :1])
+
+    data = _variant(tiny_data, tmp_path / "one.h5", one_frame)
+    refused("piga-baseline", ["planet", str(data), "--out", str(tmp_path / "run"), *_once(TINY_PLANET, [])], capsys,
+            "has 1 frame per sequence, and a video needs two")
+    assert _listing(tmp_path) == ["one.h5"]
+
+
 def test_planet_refuses_a_batch_that_cannot_fit(tiny_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """--batch-size 1e6 used to swap for ever."""
     refused("piga-baseline", ["planet", str(tiny_data), "--out", str(tmp_path / "run"), *_once(TINY_PLANET, ["--batch-size", "1000000"])],

@@ -31,6 +31,7 @@ from tqdm.auto import tqdm
 from agents.planet.config import PlanetTrainConfig, RSSMConfig
 from agents.planet.rssm import WorldModel, model_steps
 from agents.planet.run import load_planet
+from envs.fields import counted
 from piga.data.schema import (DataFormatError, DatasetInfo, check_actions_file, check_frames_have_signal,
                               check_pixel_pendulum_file, inspect_dataset, load_actions, load_rewards, read_sequences,
                               split_indices)
@@ -145,9 +146,12 @@ def check_planet_data(info: DatasetInfo, config: PlanetTrainConfig, repeat: int 
                               "pixel pendulum from gray frames (collect the data with piga-collect)")
     if env_id == PIXEL_PENDULUM and "env_config" in info.attrs:  # frames its env would not render
         check_pixel_pendulum_file(info, f"the PlaNet-style agent learns the pictures that {PIXEL_PENDULUM} renders")
+    if info.steps < 2:  # no chunk of any length learns motion from it
+        raise DataFormatError(f"{info.path}: has {counted(info.steps, 'frame')} per sequence, and a video needs two; "
+                              "collect longer sequences")
     check_frames_have_signal(info.path)
     if info.steps < config.chunk_length * repeat:
-        raise ValueError(f"{info.path}: sequences of {info.steps} frames are shorter than chunk_length "  # (a setting's)
+        raise ValueError(f"{info.path}: sequences of {counted(info.steps, 'frame')} are shorter than chunk_length "
                          f"{config.chunk_length}" + (f" x action repeat {repeat}" if repeat > 1 else "") + "; lower it")
     if info.split_counts["train"] < 1:
         raise ValueError(f"{info.path}: the train split is empty")

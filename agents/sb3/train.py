@@ -236,7 +236,8 @@ def _load_replay_buffer(model: Any, run_dir: Path, ckpt: dict[str, Any]) -> None
                                                                          "the run folder"))
     path = run_dir / name
     if not path.is_file():
-        raise ValueError(f"{path}, the replay buffer that {run_dir / CHECKPOINT} names, is missing: put it back, or "
+        state = "is not a file" if path.exists() else "is missing"  # (a folder in its place was called missing)
+        raise ValueError(f"{path}, the replay buffer that {run_dir / CHECKPOINT} names, {state}: put it back, or "
                          "train the run again with --overwrite")
     try:
         model.load_replay_buffer(path)
