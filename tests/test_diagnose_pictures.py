@@ -199,7 +199,12 @@ def test_a_camera_candidate_that_takes_up_what_is_drawn_with_the_action_is_not_c
     _, notes = summarise_vision(small_arrow, 1.0, found, None, [], config, lambda: own)
     assert action_linked(small_arrow.rec_mse, actions, own.rec_mse, own_actions) is not None
     said = [n for n in notes if "exposure 1.04" in n]
-    assert len(said) == 1 and said[0].startswith("the re-rendering error follows the action"), notes
+    assert len(said) == 1 and said[0].startswith("the re-rendering error follows the action less than"), notes
+    assert "drawn smaller or not at all" in said[0], said  # it read "follows the action as it does not" beside x1, x8.1
+    large_arrow = SimpleNamespace(rec_mse=error(actions, 5e-3), actions=actions, stale=None)
+    _, notes = summarise_vision(large_arrow, 1.0, found, None, [], config, lambda: own)
+    assert any(n.startswith("the re-rendering error follows the action more than") and "drawn larger" in n
+               for n in notes), notes
     assert "the pendulum itself does not brighten" in said[0] and "under the size" not in said[0], said
     alike = SimpleNamespace(rec_mse=error(actions, 1.6e-4), actions=actions, stale=None)  # the same share: a camera's change
     assert action_linked(alike.rec_mse, actions, own.rec_mse, own_actions) is None
