@@ -155,7 +155,7 @@ def test_planet_resume_without_its_record_rebuilds_it_from_the_checkpoint_exactl
         code, out, err = run_in_process("piga-baseline", baseline.main, "planet", str(tiny_data), "--out", str(run),
                                         "--resume", "--steps", "3", "--quiet", capsys=capsys)
         assert_planet_run_finished(code, err)
-        assert ("config.json is missing; it is rewritten from the checkpoint" in out) == (name == "lost"), out
+        assert ("config.json is missing; the resumed run rewrites it from the checkpoint" in out) == (name == "lost"), out
     kept, lost = (load_planet(runs[name])[0].state_dict() for name in ("kept", "lost"))
     assert all(torch.equal(kept[key], lost[key]) for key in kept)
     record = json.loads((runs["lost"] / "config.json").read_text())
@@ -174,7 +174,7 @@ def test_ddpg_resume_without_its_record_rebuilds_it_from_the_checkpoint(ddpg_run
     code, out, err = run_in_process("piga-baseline", baseline.main, "ddpg", "--obs", "state", "--out", str(run),
                                     "--resume", "--steps", "400", "--quiet", capsys=capsys)
     assert_sb3_run_finished(code, err)
-    assert "config.json is missing; it is rewritten from the checkpoint" in out, out
+    assert "config.json is missing; the resumed run rewrites it from the checkpoint" in out, out
     record = json.loads((run / "config.json").read_text())
     assert record["command"] is None and record["kind"] == "ddpg"
     assert record["ddpg"] == {**recorded, "steps": 400, "device": record["ddpg"]["device"]}

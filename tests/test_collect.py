@@ -112,7 +112,16 @@ def test_collect_warns_of_an_empty_split(tmp_path: Path, capsys: pytest.CaptureF
 
     code, _, err = run_in_process("piga-collect", cli.main, "--out", str(tmp_path / "a.h5"), "--sequences", "4",
                                   "--steps", "4", "--workers", "1", "--quiet", capsys=capsys)
-    assert code == 0 and err.count("\n") == 1 and "warning: the split 0.8,0.1,0.1 of 4 sequences" in err
+    assert code == 0 and err.count("\n") == 1 and "warning: the default preset's split 0.8,0.1,0.1 of 4 sequences" in err
+    code, _, err = run_in_process("piga-collect", cli.main, "--out", str(tmp_path / "b.h5"), "--sequences", "4",
+                                  "--steps", "4", "--split", "0.5,0.1,0.4", "--workers", "1", "--quiet", capsys=capsys)
+    assert code == 0 and "warning: the split 0.5,0.1,0.4 of 4 sequences leaves valid empty" in err, err
+    # a scene's paper preset, in counts, read "the split 0.833333,0.0833333,0.0833333", which no option had given
+    code, _, err = run_in_process("piga-collect", cli.main, "--system", "spring", "--preset", "paper", "--out",
+                                  str(tmp_path / "s.h5"), "--sequences", "6", "--steps", "4", "--workers", "1", "--quiet",
+                                  capsys=capsys)
+    assert code == 0 and ("warning: the paper preset's split 5000,500,500 (as proportions, 0.833,0.0833,0.0833) of 6 "
+                          "sequences leaves valid and test empty") in err, err
 
 
 def test_collect_warns_of_noise_that_buries_the_pendulum(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

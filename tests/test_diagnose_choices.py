@@ -746,6 +746,38 @@ def test_no_gap_is_not_claimed_where_the_nominal_model_strays_far_above_its_floo
     assert _gap_left_unnamed(none, replace(far, typical_free_run_mse_floor=None)) is none  # no twin: nothing to judge
 
 
+def test_a_rival_of_none_left_unsaid_is_said_beside_a_gap(damped) -> None:
+    """A bias of 0.05 read "not explained ... and no candidate closes it" while the bias single cut the typical error
+    4.3x at a BIC drop of 9.3; a bias of -0.03 read "no significant gap" at 2.1x the floor without a word, where the
+    bias single cut the error by 57%; a bias of 0.04 beside a gain of 1.3 read "gain 1.32" alone."""
+    from piga.diagnostics.diagnose import _gap_left_unnamed, _unsaid_rival_note
+    from piga.diagnostics.results import Ambiguity, Effect, Naming
+
+    none = Naming([], [], "no significant gap", "none")
+    bias = Ambiguity(between=["none", "bias"], candidates=["none", "bias"], bic=[0.0, -9.3],
+                     typical_free_run_mse=[4.17e-4, 9.72e-5], intervals_overlap=None,
+                     separate_by="the pendulum left at rest with no action (a bias moves its resting angle)")
+    far = replace(damped.gap, typical_free_run_mse_nominal=4.18e-4, typical_free_run_mse_floor=4.56e-5,
+                  closure_basis="state")
+    said = _gap_left_unnamed(none, far, bias)
+    assert said.verdict_class == "ambiguous" and said.verdict.startswith("ambiguous between none and bias"), said.verdict
+    assert "which favour bias" in said.verdict and "strays 9.2x as far as on its twin" in said.verdict
+    assert _unsaid_rival_note(said, far, bias) is said  # said in the verdict: no note
+    near = replace(far, typical_free_run_mse_nominal=1.29e-4, typical_free_run_mse_floor=6.23e-5)
+    small = replace(bias, bic=[0.0, 0.6], typical_free_run_mse=[1.29e-4, 5.51e-5])
+    assert _gap_left_unnamed(none, near, small) is none  # under 5x: no gap
+    noted = _unsaid_rival_note(none, near, small)
+    assert noted.verdict == "no significant gap" and len(noted.notes) == 1, noted
+    assert noted.notes[0].startswith("bias, which the held-out free run favours, cuts the typical held-out free-run "
+                                     "error from 0.000129 to 5.51e-05 rad², at a one-step BIC +0.6 from no effect's"), noted
+    gain = Naming([Effect("gain", 1.32, "factor on the nominal a", None)], [], "gain 1.32 factor", "gain")
+    assert "free-run error of the physics named from" in _unsaid_rival_note(gain, replace(near, closure_basis="pixels"), small).notes[0]
+    assert _unsaid_rival_note(none, near, replace(small, typical_free_run_mse=[1.29e-4, 0.7e-4])) is none  # cut 46%
+    clean = replace(near, typical_free_run_mse_floor=1.29e-4 / 1.39)  # the most measured without an effect
+    assert _unsaid_rival_note(none, clean, small) is none
+    assert _unsaid_rival_note(none, near, None) is none
+
+
 def test_constant_actions_are_said() -> None:
     from piga.diagnostics.diagnose import constant_actions_notes
 

@@ -186,6 +186,11 @@ def test_constant_actions_name_no_gain_nor_actuator_effect() -> None:
     assert "gain" not in d.verdict_class.split("+") and "gain" not in d.verdict, d.verdict
     assert {"delay", "deadzone", "saturation"} <= set(d.excluded)
     assert any("the actions never change" in n or "actions are all 1" in n for n in d.notes), d.notes
+    from piga.diagnostics.report import closure_line
+
+    assert d.unread == [] and "held, not read" not in closure_line(d)  # a constant 1: a reads it as a torque
+    idle = analyse(planted({}, n=60, constant=0.0), NOMINAL, FAST)  # all 0: "a = 1.003", which no frame measured
+    assert idle.unread == ["a"] and "a = 1 (held, not read)" in closure_line(idle), closure_line(idle)
 
 
 def test_a_gain_the_actions_barely_show_is_not_given_a_value() -> None:

@@ -2198,7 +2198,7 @@ def test_train_resume_without_its_record_says_it_rebuilds_it(tiny_piga_run: Path
     code, out, err = run_in_process("piga-train-model", cli.main, str(tiny_data), "--out", str(run), "--resume",
                                     "--epochs", "2", "--quiet", capsys=capsys)
     assert code in (0, NOT_CONVERGED), err
-    assert "config.json is missing; it is rewritten from the checkpoint" in out
+    assert "config.json is missing; the resumed run rewrites it from the checkpoint" in out
     record = json.loads((run / "config.json").read_text())
     assert record["command"] is None and len(record["resumed"]) == 1 and record["train"]["epochs"] == 2
 
@@ -2810,7 +2810,7 @@ def test_a_baseline_run_killed_before_its_record_says_overwrite_both_ways(baseli
             "continue it with --resume", "pass --overwrite")
     code, out, err = run_in_process("piga-baseline", baseline.main, *argv[:5], "--resume", "--quiet", capsys=capsys)
     assert_sb3_run_finished(code, err)
-    assert "config.json is missing; it is rewritten from the checkpoint" in out and (run / "config.json").exists()
+    assert "config.json is missing; the resumed run rewrites it from the checkpoint" in out and (run / "config.json").exists()
 
 
 @pytest.mark.parametrize("kind", ["ddpg", "planet"])

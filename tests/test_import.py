@@ -352,6 +352,27 @@ def test_frames_smaller_than_the_smallest_size_are_not_advised_a_smaller_one(
             "--image-size, is as close as piga reads them)") in out, out
 
 
+@pytest.mark.parametrize("random", [False, True])
+def test_a_stack_with_a_page_of_another_size_is_refused(random: bool, tmp_path: Path,
+                                                       recording: tuple[Path, Path, np.ndarray, np.ndarray],
+                                                       capsys: pytest.CaptureFixture[str]) -> None:
+    """A multi-page TIFF with one page of another size: the pendulum's frames read "damaged ... incompatible
+    keyframe" (tifffile's words), random ones were read with the page enlarged to the rest without a word; a folder of
+    such frames is refused as one that shares no size."""
+    from PIL import Image
+
+    _, csv, frames, _ = recording
+    pixels = np.random.default_rng(0).integers(0, 255, frames.shape, dtype=np.uint8) if random else frames
+    pages = [Image.fromarray(x) for x in pixels]
+    pages[5] = pages[5].resize((32, 32))
+    pages[0].save(tmp_path / "mixed.tif", save_all=True, append_images=pages[1:])
+    code, _, err = _cli(str(tmp_path / "mixed.tif"), str(csv), "--dt", "0.05", "--out", str(tmp_path / "d.h5"),
+                        "--steps", "5", capsys=capsys)
+    assert code == 1 and err.count("\n") == 1, err
+    assert "5 is 32x32" in err and "0 is 64x64" in err and "the frames of one recording share one size" in err, err
+    assert not (tmp_path / "d.h5").exists()
+
+
 def test_a_crop_to_a_square_is_noted(tmp_path: Path, recording: tuple[Path, Path, np.ndarray, np.ndarray],
                                      capsys: pytest.CaptureFixture[str]) -> None:
     """A tall recording lost its top and bottom to the centre crop without a word (the help says "centre crop")."""

@@ -287,8 +287,8 @@ def _resumed_record(run_dir: Path, kind: RunKind, args: Any) -> dict[str, Any]:
     if lacking:
         print(f"{PROG}: note: {where} {why}; they are taken from the checkpoint")
         return {**record, **rebuilt}
-    print(f"{PROG}: note: {where} {why}; it is rewritten from the checkpoint, without the command that started the "
-          "run")  # on stdout: stderr is kept for the one line of an error that may follow
+    print(f"{PROG}: note: {where} {why}; the resumed run rewrites it from the checkpoint, without the command that "
+          "started the run")  # on stdout: stderr is kept for the one line of an error that may follow
     return {"command": None, "kind": kind.value, **rebuilt}
 
 

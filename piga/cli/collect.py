@@ -248,14 +248,20 @@ def main(argv: Sequence[str] | None = None) -> int:
           f"split {info.split_counts}, g={info.params['g']:g}, actuation_gain={info.params['actuation_gain']:g}"
           + (f", damping={info.params['damping']:g}" if "damping" in info.params else "")
           + (f", effects {format_effects(effects)}" if effects else ""))
-    _warn_empty_split(config.split, info.split_counts)
+    _warn_empty_split(config.split, info.split_counts, args, preset.split)
     if (warning := buried_noise_warning(env)) is not None:
         print(f"{PROG}: warning: {warning}", file=sys.stderr)
     return 0
 
 
-def _warn_empty_split(split: Sequence[float], counts: dict[str, int]) -> None:
-    if (warning := empty_split_warning(split, counts)) is not None:
+def _warn_empty_split(split: Sequence[float], counts: dict[str, int], args: argparse.Namespace,
+                      preset_split: Sequence[float]) -> None:
+    """:func:`empty_split_warning`, naming a split the user did not give as the preset's (the paper preset's
+    5000,500,500 of 6 sequences read "the split 0.833333,0.0833333,0.0833333", which no option had said)."""
+    named = None if args.split is not None else (
+        f"the {args.preset} preset's split {','.join(f'{x:g}' for x in preset_split)}"
+        + ("" if tuple(split) == tuple(preset_split) else f" (as proportions, {','.join(f'{x:.3g}' for x in split)})"))
+    if (warning := empty_split_warning(split, counts, named=named)) is not None:
         print(f"{PROG}: warning: {warning}", file=sys.stderr)
 
 
@@ -338,7 +344,7 @@ def _collect_scene(args: argparse.Namespace, argv: Sequence[str] | None, written
     shown = ", ".join(f"{k}={v:g}" for k, v in info.params.items())
     print(f"wrote {path}: {args.system}, {counted(info.n_sequences, 'sequence')} x {info.steps} frames of {info.image_shape}, "
           f"split {info.split_counts}" + (f", {shown}" if shown else ""))
-    _warn_empty_split(config.split, info.split_counts)
+    _warn_empty_split(config.split, info.split_counts, args, SCENE_PRESETS[args.preset].split)
     if (warning := aliasing_warning(scene, load_states(path, "train"))) is not None:  # motion too fast for the frames
         print(f"{PROG}: warning: {warning}", file=sys.stderr)
     return 0

@@ -561,8 +561,8 @@ def _record_or_rebuilt(run_dir: Path, record: dict[str, Any], why: str | None) -
     model: config.json only records them) whose first command is unknown, with a note saying so."""
     if why is None:
         return record
-    print(f"{PROG}: note: {run_dir / 'config.json'} {why}; it is rewritten from the checkpoint, without the command "
-          "that started the run")  # on stdout: stderr is kept for the one line of an error that may follow
+    print(f"{PROG}: note: {run_dir / 'config.json'} {why}; the resumed run rewrites it from the checkpoint, "
+          "without the command that started the run")  # on stdout: stderr is kept for the one line of an error that may follow
     return {"command": None}
 
 

@@ -131,10 +131,12 @@ def split_counts(n: int, split: Sequence[float]) -> tuple[int, int, int]:
     return train, valid, test
 
 
-def empty_split_warning(split: Sequence[float], counts: dict[str, int], frames: int | None = None) -> str | None:
+def empty_split_warning(split: Sequence[float], counts: dict[str, int], frames: int | None = None,
+                        named: str | None = None) -> str | None:
     """A warning when the split asked for valid or test sequences and their share rounded to none, else None.
     ``frames``: an imported recording's frames, which piga-import cuts into sequences of --steps frames: the advice is
-    then a shorter --steps (or a longer recording), as it has no count of sequences to raise."""
+    then a shorter --steps (or a longer recording), as it has no count of sequences to raise. ``named``: what the
+    split is called (a preset's), where not "the split" with its values."""
     empty = [name for name, share in zip(("valid", "test"), split[1:]) if share > 0 and not counts.get(name)]
     if not empty:
         return None
@@ -153,7 +155,8 @@ def empty_split_warning(split: Sequence[float], counts: dict[str, int], frames: 
     # the valid split; each falls back to the train split, which is not held out
     cost = {"test": "piga-train-model's metrics", "valid": "the PlaNet-style baseline's validation"}
     whose = " and ".join(cost[name] for name in empty)
-    return (f"the split {','.join(f'{x:g}' for x in split)} of {counted(n, 'sequence')} leaves {' and '.join(empty)} empty, so "
+    named = named or f"the split {','.join(f'{x:g}' for x in split)}"
+    return (f"{named} of {counted(n, 'sequence')} leaves {' and '.join(empty)} empty, so "
             f"{whose} will come from the train split, which is not held out ({advice})")
 
 

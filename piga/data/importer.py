@@ -207,7 +207,12 @@ def _read_recording(path: str | Path, size: int) -> tuple[np.ndarray, tuple[int,
     shape = (size, size)
     for image in _read_images(p):
         for frame in _frames_of(image, p):
-            shape = (int(frame.shape[0]), int(frame.shape[1])) if not frames else shape
+            here = (int(frame.shape[0]), int(frame.shape[1]))
+            shape = here if not frames else shape
+            if here != shape:  # a stack's page of another size was enlarged to the rest without a word
+                raise ValueError(f"{p}: frame {len(frames)} (counted from 0) is {here[1]}x{here[0]} px (width x "
+                                 f"height), but frame 0 is {shape[1]}x{shape[0]}: the frames of one recording share "
+                                 "one size")
             try:
                 frames.append(scene_to_gray(frame, size))
             except ValueError as exc:
@@ -215,6 +220,21 @@ def _read_recording(path: str | Path, size: int) -> tuple[np.ndarray, tuple[int,
     if not frames:
         raise ValueError(f"{p}: the video has no frames")
     return np.stack(frames), shape  # (F, size, size)
+
+
+def _mixed_pages(path: Path) -> str:
+    """Why a multi-page TIFF whose pages differ in size cannot be read (tifffile: "incompatible keyframe"), naming the
+    first page of another size than page 0 (it was called "damaged")."""
+    import tifffile  # (imageio's TIFF reader)
+
+    with tifffile.TiffFile(path) as tif:
+        sizes = [tuple(int(x) for x in page.shape[:2]) for page in tif.pages]
+    other = next((i for i, size in enumerate(sizes) if size != sizes[0]), None)
+    if other is None:
+        return "damaged, or of a format its reader does not take: incompatible keyframe"
+    (h0, w0), (h, w) = sizes[0], sizes[other]
+    return (f"its page 0 is {w0}x{h0} px (width x height), but page {other} is {w}x{h}: the frames of one recording "
+            "share one size")
 
 
 #: What a recording may be, as the errors say it.
@@ -235,6 +255,7 @@ def _read_images(path: Path) -> Iterator[np.ndarray]:
                "no reader knows its format" if "Could not find a backend" in first else  # imageio's words for it
                "it is empty" if path.stat().st_size == 0 else
                "it is an HDF5 file, such as piga's data files, which need no import" if _is_hdf5(path) else
+               _mixed_pages(path) if "incompatible keyframe" in first else  # tifffile's words for pages of two sizes
                f"damaged, or of a format its reader does not take{': ' + first if first else ''}")
         raise ValueError(f"{path}: not a readable video or image stack ({why}); piga-import takes {RECORDINGS}") from None
 

@@ -6,6 +6,7 @@ import errno
 import math
 import os
 import shutil
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -189,9 +190,10 @@ def ambiguity_lines(d: Diagnosis) -> list[str]:
 REFITTED = "refitted for reference, not a correction"
 
 
-def values_text(values: dict[str, float]) -> str:
-    """"g = 12.52, a = 1.002" of a physics' values."""
-    return ", ".join(f"{k} = {number(v, '.4g')}" for k, v in values.items())
+def values_text(values: dict[str, float], unread: Sequence[str] = ()) -> str:
+    """"g = 12.52, a = 1.002" of a physics' values; those ``unread`` marked as held at their start, not read."""
+    return ", ".join(f"{k} = {number(v, '.4g')}" + (" (held, not read)" if k in unread else "")
+                     for k, v in values.items())
 
 
 def convention_text(d: Diagnosis) -> str:
@@ -227,14 +229,15 @@ def closure_line(d: Diagnosis) -> str:
                   f"{number(g.typical_free_run_mse_corrected)} rad²"
                   + (f", of the gap above the twin's floor {number(floor)}" if floor is not None and g.floor_subtracted
                      else ""))
-    corrected = "corrected " + values_text(d.corrected) + convention_text(d)
+    corrected = "corrected " + values_text(d.corrected, d.unread) + convention_text(d)
     basis = "in pixels" if pixels else "in angles"
-    if g.no_gap and d.verdict_class == "unexplained":  # a gap, but nothing named that would close it
-        return (f"free-run closure: none measured (the gap is not explained, so nothing was corrected; {detail}); "
-                f"{REFITTED}: {values_text(d.corrected)}")
+    if g.no_gap and d.verdict_class in ("unexplained", "ambiguous"):  # a gap, but nothing named that would close it
+        why = "the gap is not explained" if d.verdict_class == "unexplained" else "neither of the two is named"
+        return (f"free-run closure: none measured ({why}, so nothing was corrected; {detail}); "
+                f"{REFITTED}: {values_text(d.corrected, d.unread)}")
     if g.no_gap:
         return (f"free-run closure: no gap to close (nothing named to correct; {detail}); {REFITTED}: "
-                f"{values_text(d.corrected)}")
+                f"{values_text(d.corrected, d.unread)}")
     mean = (f"mean over all windows in angles: MSE {number(g.free_run_mse_nominal)} -> {number(g.free_run_mse_corrected)} "
             f"rad², raw closure {number(100 * g.free_run_closure, '.1f')}%")
     if pixels:
@@ -256,12 +259,14 @@ def headline_text(d: Diagnosis) -> str:
     if g.no_gap:
         lead = ("**No closure measured**: the gap is not explained by the candidates, so nothing was corrected."
                 if d.verdict_class == "unexplained" else
+                "**No closure measured**: neither of the two that explain the data about as well is named, so nothing "
+                "was corrected." if d.verdict_class == "ambiguous" else
                 "**No gap to close**: nothing was named to correct, so a closure would be a ratio of noise.")
         return (lead + " For "
                 "reference, the typical held-out window's free-run angle MSE (the median over windows of each window's "
                 f"mean squared error) is {number(g.typical_free_run_mse_nominal, '.3g')} rad² for the nominal model and "
                 f"{number(g.typical_free_run_mse_corrected, '.3g')} rad² with the physics {REFITTED} "
-                f"({values_text(d.corrected)}).")
+                f"({values_text(d.corrected, d.unread)}).")
     note = f" {g.floor_note[0].upper()}{g.floor_note[1:]}." if g.floor_note else ""
     bold = "**" if g.gap_above_floor else ""  # (a ratio of noise leads with no bold percentage)
     if g.closure_basis == "pixels":

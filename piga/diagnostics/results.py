@@ -473,6 +473,10 @@ class Diagnosis(_ByKey):
     """The report's sentences on ``excluded``: "excluded by the file's provenance: speed_clip (dm_control
     has no speed clip)", or "not tried: ..." (kept apart from ``notes``, which speak of the data)."""
 
+    unread: list[str] = field(default_factory=list)
+    """Parameters of ``corrected`` that the recording cannot show, left at their start: ``a`` where its actions are all
+    0 (read "refitted for reference: g = 10.28, a = 1.003", an a no frame of it measured)."""
+
     damping_convention: dict[str, Any] | None = None
     """How ``corrected`` takes the damping ("explicit": a torque added before each Euler step, Gymnasium's
     way; "implicit": MuJoCo's), and the same frames' g, a and b under the other convention ("values",
