@@ -237,11 +237,13 @@ def check_convergence(state: Any, config: ConvergenceConfig = ConvergenceConfig(
         never = (f"{', '.join(stuck)} never left {'its' if len(stuck) == 1 else 'their'} initial value in "
                  f"{physics_steps} physics steps")
         if blank is not None and not blank[0] < config.blank_ratio * blank[1] and blank[1] >= FAINT_BACKGROUND_MSE:
-            # frames that were not learned leave the physics nothing to fit: --lr 10 blamed the physics' rate
+            # a physics rate too small leaves the predictions poor too, so the two causes are named: --lr 10, whose
+            # network never learned the frames (encoder angles 143° off), was told to raise --lr-physics alone
             return verdict("untrained", f"{never}, and its held-out predictions (MSE {blank[0]:.4g}) are not clearly "
-                                        f"better than drawing the background alone (MSE {blank[1]:.4g}): the frames "
-                                        "were not learned (a network learning rate, --lr, too large for them?), so the "
-                                        "physics had nothing to fit; " + _fix(planned, steps))
+                                        f"better than drawing the background alone (MSE {blank[1]:.4g}): raise "
+                                        "--lr-physics, or, where --lr was raised, lower it (a network rate too large "
+                                        "learns no frames, and leaves the physics nothing to fit); or "
+                                        + _fix(planned, steps))
         return verdict("untrained", f"{never}; raise --lr-physics or " + _fix(planned, steps))
     if objects is not None and (objects.lost or (objects.empty_slots and checks)) and steps < planned:
         # cut short (--max-minutes): untrained objects are those of a run that barely trained, which --resume
