@@ -521,11 +521,8 @@ def _check_env_config_values(info: DatasetInfo, config: dict[str, Any], env_id: 
     if kind is None:
         return
     known = {f.name for f in fields(kind)}
-    values = {k: v for k, v in config.items() if k in known}
-    if isinstance(values.get("effects"), list):  # JSON's pairs, as the env holds them
-        values["effects"] = tuple(tuple(e) if isinstance(e, list) else e for e in values["effects"])
     try:
-        kind(**values)
+        kind(**{k: v for k, v in config.items() if k in known})  # (JSON's lists of pairs are effects it takes)
     except (TypeError, ValueError) as exc:
         raise DataFormatError(f"{info.path}: attribute 'env_config' is not a valid {kind.__name__} ({exc}); fix it, or "
                               "collect the file again") from None
