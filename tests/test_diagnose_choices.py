@@ -712,6 +712,9 @@ def test_a_physics_gap_that_the_matched_floor_hides_is_still_a_gap() -> None:
     assert pixel_gap_measurable(0.0244, 0.0100, 0.6**2 * deg2, 0.55**2 * deg2)  # a gap in the pixels alone
     assert pixel_gap_measurable(0.0121, 0.00827, 2.0**2 * deg2, 1.0**2 * deg2)  # a gain of 3: 2x in RMS
     assert not pixel_gap_measurable(0.0244, 0.0193, 1.4**2 * deg2, 1.0**2 * deg2)  # under 1.5x in RMS
+    # a gain of 1.3 with a deadzone of 0.2: pixels 1.35x the floor, one step within 1.5x, free runs far apart
+    assert pixel_gap_measurable(0.000959, 0.000711, 1.4**2 * deg2, 1.0**2 * deg2, 0.05, 0.0015)
+    assert not pixel_gap_measurable(0.000959, 0.000711, 1.4**2 * deg2, 1.0**2 * deg2, 0.0018, 0.0015)  # 1.2x
 
 
 def test_the_report_gives_a_shift_by_component(damped) -> None:

@@ -2116,14 +2116,19 @@ def summarise_vision(obs: Observations, rec_training: float, camera: CameraFindi
 ONE_STEP_GAP = 1.5
 
 
-def pixel_gap_measurable(nominal: float, floor: float, one_step_nominal: float, one_step_corrected: float) -> bool:
+def pixel_gap_measurable(nominal: float, floor: float, one_step_nominal: float, one_step_corrected: float,
+                         free_nominal: float = 0.0, free_corrected: float = math.inf) -> bool:
     """Whether a pixel closure measures a gap: the nominal's typical pixel MSE is more than :data:`MEASURABLE_GAP`
-    times the matched ``floor``, or the nominal physics' one-step angle MSE on the matched angles more than
-    :data:`ONE_STEP_GAP` squared times the corrected physics' on the same angles. What no render draws raises the
-    matched floor to the nominal's pixel error: Gymnasium's torque arrow at an actuation gain of 5, named "gain 5.01",
-    was headlined "no gap above the floor to close" (pixel MSE 0.0272 beside a floor of 0.0227), its one-step errors
-    117.7° against 0.53°."""
-    return nominal > MEASURABLE_GAP * floor or one_step_nominal > ONE_STEP_GAP**2 * one_step_corrected
+    times the matched ``floor``; or, on the matched angles, the nominal physics' one-step angle MSE more than
+    :data:`ONE_STEP_GAP` squared times the corrected physics', or its typical free-run angle MSE (``free_nominal``)
+    more than :data:`MEASURABLE_GAP` times the corrected physics' (``free_corrected``), which is no less than the
+    angles' own floor. What no render draws raises the matched floor to the nominal's pixel error: Gymnasium's torque
+    arrow at an actuation gain of 5, named "gain 5.01", was headlined "no gap above the floor to close" (pixel MSE
+    0.0272 beside a floor of 0.0227), its one-step errors 117.7° against 0.53°; a gain of 1.3 with a deadzone of 0.2,
+    named so, the same, its pixel MSE 1.35x the floor and its one-step errors within 1.5x, while its free runs drift
+    apart."""
+    return (nominal > MEASURABLE_GAP * floor or one_step_nominal > ONE_STEP_GAP**2 * one_step_corrected
+            or free_nominal > MEASURABLE_GAP * free_corrected)
 
 
 #: The factor, either way, between the recording's and the training file's ratios of the re-rendering error after the
@@ -2298,7 +2303,9 @@ def measure_gap(candidates: Candidates, chosen: Score, nom: Nominal, obs: Observ
         # (a matched floor above the corrected model's pixel error is no floor: the corrected error stands in for it)
         measurable = pixel_gap_measurable(pixels.typical_pixel_mse_nominal,
                                           min(pixels.pixel_mse_floor, pixels.typical_pixel_mse_corrected),
-                                          float(fit.horizon_errors(nominal_model, nom, w.held1)[0]), float(one_step))
+                                          float(fit.horizon_errors(nominal_model, nom, w.held1)[0]), float(one_step),
+                                          float(np.median(fit.window_errors(nominal_model, nom, w.free))),
+                                          float(np.median(fit.window_errors(final, nom, w.free))))
     else:
         measurable = (typ_floor is None or typ_nom > MEASURABLE_GAP * typ_floor
                       or typ_nom > typ_floor >= typ_fin)  # (a nominal error below the floor: no gap to measure)
