@@ -551,7 +551,7 @@ def _check_effects_agree(info: DatasetInfo, config: dict[str, Any]) -> None:
             raise DataFormatError(f"{info.path}: {name} not effects piga-collect makes ({exc}); fix it, or collect "
                                   "the file again") from None
     said, made = checked
-    try:  # (fields that are no numbers are refused where they are read)
+    try:  # (fields that are no numbers are refused next, by _check_env_config_values, which names them)
         gravity = float(config.get("gravity", PixelPendulumConfig.gravity)) * float(config.get("gravity_mult", 1.0))
     except (TypeError, ValueError):
         gravity = PixelPendulumConfig.gravity

@@ -2304,8 +2304,7 @@ def measure_gap(candidates: Candidates, chosen: Score, nom: Nominal, obs: Observ
         measurable = pixel_gap_measurable(pixels.typical_pixel_mse_nominal,
                                           min(pixels.pixel_mse_floor, pixels.typical_pixel_mse_corrected),
                                           float(fit.horizon_errors(nominal_model, nom, w.held1)[0]), float(one_step),
-                                          float(np.median(fit.window_errors(nominal_model, nom, w.free))),
-                                          float(np.median(fit.window_errors(final, nom, w.free))))
+                                          float(np.median(fit.window_errors(nominal_model, nom, w.free))), typ_fin)
     else:
         measurable = (typ_floor is None or typ_nom > MEASURABLE_GAP * typ_floor
                       or typ_nom > typ_floor >= typ_fin)  # (a nominal error below the floor: no gap to measure)
