@@ -732,6 +732,31 @@ def test_the_report_gives_a_shift_by_component(damped) -> None:
     assert "| shift down (dy) | 0.00325 | -0.0041 .. 0.0106 | px |" in text and "mean of right" not in text
 
 
+def test_a_camera_read_right_does_not_hide_physics_that_strays_far_above_its_matched_twin(damped) -> None:
+    """A cogging torque of 0.3 under a blur of 1 px read "blur 0.978" alone: on the angles matched through the fitted
+    camera, the corrected physics strayed 26x as far as on its twin filmed through the same camera (a blur alone:
+    0.97x). It now reads "not explained", with the camera said as read."""
+    from piga.diagnostics.diagnose import _worse_than_nominal
+    from piga.diagnostics.results import Effect, Naming
+
+    blur = Effect("blur", 0.978, "px (Gaussian σ)", [0.976, 0.98])
+    naming = Naming([blur], [], blur.describe(), "blur")
+    final = fit.Model((), 0, {"g": 10.02, "a": 0.97})
+    matched = replace(damped.gap, closure_basis="pixels", typical_free_run_mse_floor=None, floor_source=None,
+                      typical_free_run_mse_floor_interval=None, typical_free_run_mse_nominal=1.43e-3,
+                      typical_free_run_mse_corrected=1.65e-3, matched_floor=6.3e-5, matched_floor_interval=[5.1e-5, 1e-4])
+    left = _worse_than_nominal(naming, matched, final, NOMINAL, rematched=True)
+    assert left.verdict_class == "unexplained" and left.effects == [], left.verdict
+    assert left.verdict.startswith("not explained by the candidates: the camera is read as blur 0.978"), left.verdict
+    assert "strays 26.2x as far as on its twin, filmed through the same camera" in left.verdict, left.verdict
+    # the camera alone, at its twin's floor, or within 5x the upper end of the floor's interval: named as read
+    assert _worse_than_nominal(naming, replace(matched, typical_free_run_mse_corrected=9.6e-5), final, NOMINAL,
+                               rematched=True) is naming
+    assert _worse_than_nominal(naming, replace(matched, typical_free_run_mse_corrected=4.9e-4), final, NOMINAL,
+                               rematched=True) is naming
+    assert _worse_than_nominal(naming, replace(matched, matched_floor=None), final, NOMINAL, rematched=True) is naming
+
+
 def test_no_gap_is_not_claimed_where_the_nominal_model_strays_far_above_its_floor(damped) -> None:
     """Torques applied but logged as 0: the nominal error was 8.5x the twin's floor, no candidate named it, and the
     verdict read "no significant gap"."""

@@ -233,6 +233,11 @@ def test_a_vision_gap_in_what_is_drawn_with_the_action_puts_every_step_on_the_ma
     assert drawn_with_the_action(seen, 2e-4, config)
     assert not drawn_with_the_action(replace(seen, rec_mse=np.full_like(arrow, 1e-3)), 2e-4, config)  # every frame
     assert not drawn_with_the_action(seen, 2e-3, config)  # within the vision ratio: no gap
+    # an arrow a little larger than the training file's (an actuation gain of 1.2 beside friction, 1.6-1.7x): the
+    # encoder's one-step errors were 3-4x the matched angles', which read the friction that the encoder's missed
+    mean = float(arrow.mean())
+    assert drawn_with_the_action(seen, mean / 1.5, config)
+    assert not drawn_with_the_action(seen, mean / 1.1, config)  # clean recordings: 0.98x
     camera = V.CameraFindings(V.Camera(), 0.0, 0.0, 0, 0, [], 1e-3, 1e-3, [])
     d = analyse(seen, NOMINAL, config, rec_training=2e-4, camera=camera, matched=lambda: obs.theta)
     assert d.verdict_class == "gain" and abs(d.effects[0].value - 1.6) < 0.05, d.verdict

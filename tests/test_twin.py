@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import torch
 
 from envs.pendulum import PixelPendulumConfig, make_pixel_pendulum
 from piga.diagnostics import fit
 from piga.diagnostics.residuals import ridge
-from piga.diagnostics.twin import gap_closure, mean_gap_closure, render_angles, repeat_stale, twin_angles
+from piga.diagnostics.twin import gap_closure, matched_angles, mean_gap_closure, render_angles, repeat_stale, twin_angles
+from piga.diagnostics.vision import Camera
 from piga.world.effects import CANDIDATES
 from tests.test_diagnostics import NOMINAL, planted
 
@@ -37,6 +39,25 @@ def test_the_twin_is_rendered_as_the_env_renders() -> None:
     no_arrow = render_angles(angles, actions, 0.1, 64, arrow=False)
     np.testing.assert_array_equal(no_arrow[0, 0], first[0])
     assert (no_arrow[0, 1] != second[0]).any()
+
+
+def test_a_twin_filmed_through_a_camera_is_matched_back_through_it() -> None:
+    """The twin of angles matched through a fitted camera is filmed through that camera and matched as the recording
+    was: its angles come back; the sensor noise is drawn from the seed (the same seed, the same angles) and blurs them."""
+    from tests.test_vision import rod_model
+
+    network = rod_model(32)
+    angles = np.linspace(-2.5, 2.5, 12).reshape(2, 6)  # (n, T)
+    with torch.no_grad():
+        drawn = network.decoder(torch.as_tensor(angles, dtype=torch.float32)[..., None, None])[:, :, 0]  # (n, T, H, W)
+    frames = (drawn.clamp(0, 1) * 255).round().to(torch.uint8).numpy()
+    camera = Camera(blur=1.2, dx=0.7)
+    clean = matched_angles(network, frames, camera, 0.0, seed=0)
+    np.testing.assert_allclose(clean, angles, atol=0.06)  # (a 32 px rod: its matching is coarse)
+    noisy = matched_angles(network, frames, camera, 20.0, seed=0)
+    np.testing.assert_array_equal(noisy, matched_angles(network, frames, camera, 20.0, seed=0))
+    assert np.abs(noisy - clean).mean() > 1e-3  # the noise moves the matched angles
+    assert np.abs(matched_angles(network, frames, camera, 20.0, seed=1) - noisy).mean() > 1e-3
 
 
 def test_stale_frames_repeat_in_the_twin() -> None:

@@ -427,6 +427,14 @@ class Gap(_ByKey):
     wide on a recording of few held-out sequences."""
     held_out_windows: int | None = None
     """The held-out windows that the floor is a median over."""
+    matched_floor: float | None = None
+    """Where the dynamics are on angles matched through a fitted camera in a recording from Gymnasium (the closure is
+    then in pixels, with no twin in angles): the typical held-out window's free-run angle MSE of the corrected physics
+    on its twin, filmed through the same camera, with its named sensor noise, and matched as the recording's frames
+    were (:func:`piga.diagnostics.twin.twin_floor` with ``camera``): the floor of ``typical_free_run_mse_corrected``
+    in those angles. None otherwise."""
+    matched_floor_interval: list[float] | None = None
+    """95% bootstrap interval of ``matched_floor`` (a median over the held-out windows)."""
 
 
 @dataclass

@@ -40,7 +40,8 @@ import torch
 from envs.constants import MAX_ACTION
 from piga.diagnostics import fit
 from piga.diagnostics.observe import read_frames
-from piga.world.model import PhysicsModel
+from piga.diagnostics.vision import Camera, angle_table, match
+from piga.world.model import PhysicsModel, frames_to_float
 from piga.io.runs import Nominal
 
 
@@ -130,7 +131,8 @@ def repeat_stale(frames: np.ndarray, stale: np.ndarray) -> np.ndarray:
 
 def twin_floor(network: PhysicsModel, model: fit.Model, nominal: Nominal, theta: np.ndarray, actions: np.ndarray,
                stale: np.ndarray | None, stride: int, arrow: bool = True, batch: int = 16,
-               renderer: str = "simulator") -> TwinFloor:
+               renderer: str = "simulator", camera: Camera | None = None, noise: float = 0.0,
+               seed: int = 0) -> TwinFloor:
     """The errors of ``model`` on the twin of (n, T) encoded held-out sequences ``theta`` and ``actions``.
 
     Args:
@@ -140,6 +142,10 @@ def twin_floor(network: PhysicsModel, model: fit.Model, nominal: Nominal, theta:
         stride: frames between window starts, as for the real free-run windows.
         arrow: render Gymnasium's torque arrow (as in the data the model was identified on).
         renderer: "simulator" (Gymnasium's picture) or "decoder" (the model's own, :func:`decoder_render`).
+        camera: where ``theta`` are angles matched to the decoder's renders through a fitted camera (analysis by
+            synthesis, :func:`piga.diagnostics.vision.match`), the twin's frames are filmed through that camera, with
+            sensor ``noise`` (gray levels, drawn from ``seed``), and matched through it as the recording's were,
+            instead of being read by the encoder.
     """
     if renderer not in ("simulator", "decoder"):
         raise ValueError(f"renderer must be 'simulator' or 'decoder', got {renderer!r}")
@@ -150,12 +156,31 @@ def twin_floor(network: PhysicsModel, model: fit.Model, nominal: Nominal, theta:
         frames = render_angles(angles, actions, nominal.offset, network.config.image_size, arrow)
     if stale is not None:
         repeat_stale(frames, stale)
-    encoded = np.empty(angles.shape)
-    for start in range(0, len(frames), batch):
-        encoded[start : start + batch] = read_frames(network, frames[start : start + batch])[2]
+    if camera is not None:
+        encoded = matched_angles(network, frames, camera, noise, seed)
+    else:
+        encoded = np.empty(angles.shape)
+        for start in range(0, len(frames), batch):
+            encoded[start : start + batch] = read_frames(network, frames[start : start + batch])[2]
     rows = np.arange(len(encoded))
     w = fit.make_windows(encoded, actions, rows, None, stride, nominal.dt, stale, repeat=True)
     return TwinFloor(fit.horizon_errors(model, nominal, w), fit.window_errors(model, nominal, w))
+
+
+@torch.no_grad()
+def matched_angles(network: PhysicsModel, frames: np.ndarray, camera: Camera, noise: float, seed: int) -> np.ndarray:
+    """(n, T) angles of (n, T, H, W[, C]) uint8 ``frames`` filmed through ``camera`` with Gaussian sensor ``noise``
+    (gray levels; drawn from ``seed``) and quantised to 8 bits, then matched to the decoder's renders through the same
+    camera, unwrapped along time (as :func:`piga.diagnostics.vision.match_file` matches a recording)."""
+    n, t = frames.shape[:2]
+    x = frames_to_float(torch.from_numpy(np.ascontiguousarray(frames)), network.config.channels)  # (n, T, C, H, W)
+    x = camera.apply(x.flatten(0, 1))  # (n·T, C, H, W)
+    if noise > 0:
+        generator = torch.Generator().manual_seed(seed)
+        x = x + torch.randn(x.shape, generator=generator) * (noise / 255)
+    x = (x.clamp(0, 1) * 255).round() / 255  # an 8-bit camera's
+    theta, _ = match(angle_table(network, camera), x.flatten(1))
+    return np.unwrap(theta.double().numpy().reshape(n, t), axis=1)
 
 
 def calibrate_floor(floor: TwinFloor, one_step_mse: float) -> TwinFloor:
