@@ -69,6 +69,17 @@ def test_two_candidates_the_data_cannot_separate_give_an_ambiguous_verdict(spin)
     assert out["verdict_class"] == "ambiguous" and sorted(out["ambiguity"]["between"]) == ["bias", "friction"]
     text = markdown(d, "m", "d", "c")
     assert "**Ambiguous between" in text and "would separate them" in text
+    assert d.ambiguity.bic[0] <= d.ambiguity.bic[1] and f"measured with {d.ambiguity.candidates[0]} (the lower BIC)" \
+        in text
+    # a rival of "none" whose BIC is lower by less than the margin: "none" is no longer called the lower BIC
+    import copy
+
+    rivalled = copy.deepcopy(d)
+    rivalled.ambiguity = replace(d.ambiguity, candidates=["none (g, a refitted)", "friction"],
+                                 bic=[-12716.7, -12721.0])
+    text = markdown(rivalled, "m", "d", "c")
+    assert "(the lower BIC)" not in text
+    assert "measured with none (g, a refitted) (the choice: friction's BIC is lower, by less than" in text
 
 
 def test_a_clear_choice_is_not_ambiguous(damped) -> None:
@@ -351,6 +362,51 @@ def test_a_pair_whose_effects_fail_alone_beats_a_single_that_passes(monkeypatch)
     assert chosen.rival is None
     accepted = {s.tried for s in chosen.steps if s.accepted}
     assert accepted == {"friction", "damping+bias", "friction+bias"}  # damping and bias alone fail the free run
+
+
+@pytest.mark.parametrize("saturation_bic, pair_fitted", [(-10.2, True), (-1.1, False)])
+def test_a_pair_that_the_free_run_favours_is_a_rival_of_none(monkeypatch, saturation_bic: float,
+                                                             pair_fitted: bool) -> None:
+    """A deadzone of 0.25 with a saturation of 1.2 read "gain 0.72" alone: no single was accepted, and the pair, which
+    cut the typical free-run error by 50% at a BIC drop of 7.1, was no rival (only singles were). Where the
+    saturation lowered the BIC by 1.1 only, the pair was not even fitted: pairs extended the singles that lower the BIC
+    by the margin alone."""
+    import importlib
+    from types import SimpleNamespace
+
+    from piga.diagnostics.diagnose import Candidates
+    from piga.diagnostics.results import Score
+
+    table = {frozenset(): (0.0, 1.0), frozenset({"saturation"}): (saturation_bic, 0.9 if pair_fitted else 0.58),
+             frozenset({"deadzone"}): (13.6, 1.0), frozenset({"bias"}): (7.2, 0.97),
+             frozenset({"deadzone", "saturation"}): (-7.1, 0.5), frozenset({"bias", "saturation"}): (-3.0, 0.83),
+             frozenset({"bias", "deadzone"}): (20.0, 1.0)}
+
+    def fake_score(m: fit.Model, *_: object) -> Score:
+        bic, typical = table[frozenset(m.effects)]
+        return Score(m, bic, typical, np.zeros(1), typical)
+
+    fitted = []
+
+    def fake_fit(effects: tuple[str, ...], *_: object, **__: object) -> fit.Model:
+        fitted.append(frozenset(effects))
+        return fit.Model(effects, 0, {"g": 10.0, "a": 1.0, "d": 0.25, "s": 1.2, "tau0": 0.0})
+
+    diagnose = importlib.import_module("piga.diagnostics.diagnose")
+    monkeypatch.setattr(diagnose, "score", fake_score)
+    monkeypatch.setattr(diagnose.fit, "fit_candidate", fake_fit)
+    monkeypatch.setattr(diagnose, "deadzone_refuted", lambda *_: False)
+    singles = sorted((fake_score(fit.Model((e,)), None) for e in ("saturation", "deadzone", "bias")),
+                     key=lambda s: s.bic)
+    refit = fake_score(fit.Model(()), None)
+    chosen = select(Candidates(refit, refit, singles), NOMINAL, SimpleNamespace(fit=None, fit1=None, free=None), FAST)
+    assert frozenset({"deadzone", "saturation"}) in fitted, fitted
+    assert chosen.chosen is refit and chosen.rival is not None, chosen.steps
+    assert chosen.rival.model.effects == ("deadzone", "saturation"), chosen.rival.name
+    # a pair one of whose effects adds nothing on the free run is no rival: bias beside the saturation
+    table[frozenset({"deadzone", "saturation"})] = (-7.1, 0.85)
+    chosen = select(Candidates(refit, refit, singles), NOMINAL, SimpleNamespace(fit=None, fit1=None, free=None), FAST)
+    assert chosen.rival is None or chosen.rival.model.effects == ("saturation",), chosen.rival.name
 
 
 def test_an_encoder_reading_error_is_not_a_gap_in_the_physics() -> None:
@@ -752,8 +808,12 @@ def test_a_camera_read_right_does_not_hide_physics_that_strays_far_above_its_mat
     # the camera alone, at its twin's floor, or within 5x the upper end of the floor's interval: named as read
     assert _worse_than_nominal(naming, replace(matched, typical_free_run_mse_corrected=9.6e-5), final, NOMINAL,
                                rematched=True) is naming
-    assert _worse_than_nominal(naming, replace(matched, typical_free_run_mse_corrected=4.9e-4), final, NOMINAL,
+    assert _worse_than_nominal(naming, replace(matched, typical_free_run_mse_corrected=1.9e-4), final, NOMINAL,
                                rematched=True) is naming
+    # a cogging torque of 0.2 under sensor noise of 10 gray levels, 2.5x the upper end, read "noise 9.96" alone
+    noisy = replace(matched, typical_free_run_mse_corrected=7.34e-4, matched_floor=1.95e-4,
+                    matched_floor_interval=[1.47e-4, 2.9e-4])
+    assert _worse_than_nominal(naming, noisy, final, NOMINAL, rematched=True).verdict_class == "unexplained"
     assert _worse_than_nominal(naming, replace(matched, matched_floor=None), final, NOMINAL, rematched=True) is naming
 
 
@@ -850,6 +910,11 @@ def test_separating_data_that_the_recording_already_holds_asks_for_more_of_it() 
     assert separating_data(("saturation", "damping"), {"s": 0.65, "b": 0.1}) == [
         "large actions, |u| above 0.65", "free swings with no action at several speeds (a viscous torque grows with "
         "the speed)"]  # no actions given: the term's own evidence
+    # a deadzone and a saturation the recording holds enough of: asked for once ("more sequences (...) or more
+    # sequences (...)" before)
+    assert separating_data(("deadzone", "saturation"), {"d": 0.26, "s": 1.57}, uniform) == [
+        "more sequences (the recording already holds 13% of its actions at |u| below 0.26 and 22% of its actions at "
+        "|u| above 1.57)"]
 
 
 def test_the_pixel_floor_is_the_typical_windows_where_the_mean_over_frames_lies_above_the_corrected_one() -> None:

@@ -214,6 +214,32 @@ def test_a_camera_candidate_that_takes_up_what_is_drawn_with_the_action_is_not_c
     assert any(n.startswith("a camera a little different") for n in notes), notes
 
 
+def test_a_camera_accepted_under_the_named_size_is_said_where_the_angles_are_matched_through_it() -> None:
+    """An actuation gain of 0.8 drew the torque arrow smaller, and an exposure of 1.015 was accepted for the matching
+    but read on the pendulum under the size that is named: "the dynamics are fitted ... through the fitted camera"
+    named no camera."""
+    from piga.diagnostics.results import Effect
+
+    actions = np.random.default_rng(0).uniform(-2, 2, (4, 6))
+    obs = SimpleNamespace(rec_mse=np.full((4, 6), 1e-4), actions=actions, stale=None)
+    found = V.CameraFindings(V.Camera(exposure=1.015), 0.0, 0.0, 0, 0, [], 1e-4, 1e-4, [], theta=np.zeros((4, 6)))
+    _, notes = summarise_vision(obs, 1e-4, found, None, [], DiagnoseConfig())
+    said = [n for n in notes if "through the fitted camera" in n]
+    assert len(said) == 1 and "(exposure 1.015, under the sizes that are named, so no camera is named)" in said[0], notes
+    blurred = V.CameraFindings(V.Camera(blur=1.2), 0.0, 0.0, 0, 0, [], 1e-4, 1e-4, [], theta=np.zeros((4, 6)))
+    _, notes = summarise_vision(obs, 1e-4, blurred, None, [Effect("blur", 1.2, "px (Gaussian σ)")], DiagnoseConfig())
+    assert any("through the fitted camera (analysis by synthesis)" in n for n in notes), notes  # named: not said again
+    # a camera the stage read, under a verdict of "not explained" that lists no effect: no "a shifted camera?" asked
+    # (a cogging torque under a shift of 1 px, 3.3x)
+    shifted = V.CameraFindings(V.Camera(dx=1.0, dy=1.0), 0.0, 0.0, 0, 0, [], 1e-4, 1e-4,
+                               [{"effect": "shift", "value": 1.41, "unit": "px"}], theta=np.zeros((4, 6)))
+    seen = SimpleNamespace(rec_mse=np.full((4, 6), 3.3e-4), actions=actions, stale=None)
+    _, notes = summarise_vision(seen, 1e-4, shifted, None, [], DiagnoseConfig())
+    assert not any(n.startswith("vision gap") for n in notes), notes
+    _, notes = summarise_vision(seen, 1e-4, replace(shifted, effects=[]), None, [], DiagnoseConfig())
+    assert any("a shifted camera or a different scene?" in n for n in notes), notes
+
+
 def test_a_vision_gap_in_what_is_drawn_with_the_action_puts_every_step_on_the_matched_angles() -> None:
     """Gymnasium at an actuation gain of 1.6 (its torque arrow drawn larger than any in the training frames) read "not
     explained ... a camera moved far?" with a = 2e-09 on the encoder's angles, which read through the arrow; the

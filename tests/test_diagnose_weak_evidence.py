@@ -220,6 +220,27 @@ def test_two_readings_agree_on_the_same_side_within_the_interval() -> None:
     assert readings_agree(0.65, 0.6, None) and not readings_agree(0.65, 0.45, None)
     assert not readings_agree(1.43, 0.98, None)  # the other side of 1
     assert not readings_agree(1.43, 1.04, [1.19, 1.82]) and readings_agree(1.43, 1.2, [1.19, 1.82])
+    # outside a narrow interval, which knows only ours's form, but close: gravity x0.85 beside a friction of 0.08 read
+    # x0.839 (0.836..0.842) with no effect and x0.852 with the friction rival, and no gravity error was named
+    assert readings_agree(0.839, 0.852, [0.836, 0.842])
+    from piga.diagnostics.diagnose import reaching
+
+    assert reaching([0.836, 0.842], 0.852) == [0.836, 0.852] and reaching([0.836, 0.842], 0.84) == [0.836, 0.842]
+    assert reaching(None, 0.852) is None and reaching([0.836, 0.842], None) == [0.836, 0.842]
+
+
+def test_gravity_read_a_little_apart_by_none_and_its_rival_is_named() -> None:
+    """Gravity x0.85 with a friction of 0.08 on 40 sequences of 18 frames: "none" read x0.839, the friction rival
+    x0.852; "the two readings disagree, so no gravity error is named" left a 15% gravity error out of the verdict."""
+    final = fit.Model((), 0, {"g": 0.839 * NOMINAL.g, "a": NOMINAL.a})
+    rival = fit.Model(("friction",), 0, {"g": 0.852 * NOMINAL.g, "a": NOMINAL.a, "c": 0.085})
+    draws = {"g": list(np.linspace(0.836, 0.842, 20) * NOMINAL.g)}  # the bootstrap of "none": x0.836..0.842
+    named = name_effects(final, NOMINAL, w=None, camera=None, generic=NOTHING_LEFT, config=FAST, rival=rival,
+                         draws=draws)
+    assert [e.effect for e in named.effects] == ["gravity"], named.verdict
+    gravity = named.effects[0]
+    assert abs(gravity.value - 0.839) < 1e-3 and gravity.interval[1] == pytest.approx(0.852), named.verdict
+    assert not any("disagree" in n for n in named.notes), named.notes
 
 
 def test_a_rival_that_changes_no_claim_is_not_said(monkeypatch) -> None:

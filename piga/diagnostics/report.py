@@ -176,13 +176,16 @@ def ambiguity_lines(d: Diagnosis) -> list[str]:
     a = d.ambiguity
     if a is None:
         return []
+    # (a rival of "none" may have the lower BIC, by less than an effect needs: the free run made it a rival)
+    why = "the lower BIC" if a.bic[0] <= a.bic[1] else \
+        f"the choice: {a.candidates[1]}'s BIC is lower, by less than an effect needs to be named"
     overlap = ("were not compared (no bootstrap)" if a.intervals_overlap is None else
                "overlap" if a.intervals_overlap else "do not overlap")
     return [f"**Ambiguous between {a.between[0]} and {a.between[1]}**: the candidates {a.candidates[0]} and "
             f"{a.candidates[1]} have one-step BICs {a.bic[0]:.1f} and {a.bic[1]:.1f} and typical held-out free-run "
             f"errors {a.typical_free_run_mse[0]:.3g} and {a.typical_free_run_mse[1]:.3g} rad²; the 95% intervals of the "
             f"values they both fit {overlap}. Neither is named. {a.separate_by[0].upper()}{a.separate_by[1:]} would "
-            f"separate them. The gap below is measured with {a.candidates[0]} (the lower BIC).", ""]
+            f"separate them. The gap below is measured with {a.candidates[0]} ({why}).", ""]
 
 
 #: How the physics refitted to the recording is labelled where nothing was named to correct (no closure): its values

@@ -72,13 +72,17 @@ def twin_angles(model: fit.Model, nominal: Nominal, theta: np.ndarray, actions: 
     return np.concatenate([theta[:, :2], sim], 1)
 
 
-def render_angles(angles: np.ndarray, actions: np.ndarray, offset: float, image_size: int, arrow: bool) -> np.ndarray:
+def render_angles(angles: np.ndarray, actions: np.ndarray, offset: float, image_size: int, arrow: bool,
+                  arrow_gain: float = 1.0) -> np.ndarray:
     """(n, T, H, W) uint8 frames of the pendulum at (n, T) ``angles`` (model convention).
 
     Rendered as the pixel pendulum renders (Gymnasium's picture, then Gymnasium's
     ``ResizeObservation`` and ``GrayscaleObservation``); with ``arrow``, frame t shows the commanded
-    torque u_{t-1} (none at frame 0), as :class:`envs.effects.ShowCommandedTorque` does.
+    torque ``arrow_gain``·u_{t-1} (none at frame 0), as :class:`envs.effects.ShowCommandedTorque` does with its
+    actuation gain, at most :data:`envs.pendulum.ARROW_MAX_TORQUE`.
     """
+    from envs.pendulum import ARROW_MAX_TORQUE
+
     import gymnasium as gym
     from gymnasium.wrappers import GrayscaleObservation, ResizeObservation
 
@@ -99,7 +103,8 @@ def render_angles(angles: np.ndarray, actions: np.ndarray, offset: float, image_
         for i in range(angles.shape[0]):
             for j in range(angles.shape[1]):
                 base.state = np.array([angles[i, j] + offset, 0.0])
-                base.last_u = float(np.clip(actions[i, j - 1], -MAX_ACTION, MAX_ACTION)) if arrow and j > 0 else None
+                base.last_u = float(np.clip(arrow_gain * np.clip(actions[i, j - 1], -MAX_ACTION, MAX_ACTION),
+                                            -ARROW_MAX_TORQUE, ARROW_MAX_TORQUE)) if arrow and j > 0 else None
                 img = base.render()
                 for stage in stages:
                     img = stage.observation(img)
@@ -132,7 +137,7 @@ def repeat_stale(frames: np.ndarray, stale: np.ndarray) -> np.ndarray:
 def twin_floor(network: PhysicsModel, model: fit.Model, nominal: Nominal, theta: np.ndarray, actions: np.ndarray,
                stale: np.ndarray | None, stride: int, arrow: bool = True, batch: int = 16,
                renderer: str = "simulator", camera: Camera | None = None, noise: float = 0.0,
-               seed: int = 0) -> TwinFloor:
+               seed: int = 0, arrow_gain: float = 1.0) -> TwinFloor:
     """The errors of ``model`` on the twin of (n, T) encoded held-out sequences ``theta`` and ``actions``.
 
     Args:
@@ -146,6 +151,7 @@ def twin_floor(network: PhysicsModel, model: fit.Model, nominal: Nominal, theta:
             synthesis, :func:`piga.diagnostics.vision.match`), the twin's frames are filmed through that camera, with
             sensor ``noise`` (gray levels, drawn from ``seed``), and matched through it as the recording's were,
             instead of being read by the encoder.
+        arrow_gain: the actuation gain the simulator's torque arrow is drawn with (:func:`render_angles`).
     """
     if renderer not in ("simulator", "decoder"):
         raise ValueError(f"renderer must be 'simulator' or 'decoder', got {renderer!r}")
@@ -153,7 +159,7 @@ def twin_floor(network: PhysicsModel, model: fit.Model, nominal: Nominal, theta:
     if renderer == "decoder":
         frames = decoder_render(network, angles, batch)
     else:
-        frames = render_angles(angles, actions, nominal.offset, network.config.image_size, arrow)
+        frames = render_angles(angles, actions, nominal.offset, network.config.image_size, arrow, arrow_gain)
     if stale is not None:
         repeat_stale(frames, stale)
     if camera is not None:
