@@ -1026,10 +1026,10 @@ def select(candidates: Candidates, nom: Nominal, w: WindowSet, config: DiagnoseC
         # dm_control pendulum of twice the mass, 20 sequences of 16 frames, where damping cut the typical free-run
         # error by 32% at a BIC 5 above "none", and "none" read a false gravity error of 7%): such a single is a
         # rival of "none", said aloud, not a choice
-        # rival of "none" too (a deadzone of 0.25 with a saturation of 1.2 read "gain 0.72" alone: the pair, fitted, cut
-        # the typical free-run error by 50% at a BIC drop of 7.1, each of its effects by 44-50% against the other alone)
-        # is a set whose every effect earns its place on the free run against the set without it, but not Gymnasium's own
-        # clip beside others (no hypothesis about the gap, see earns)
+        # rival of "none" too, and so is a pair each of whose effects earns its place on the free run against the set
+        # without it (a deadzone of 0.25 with a saturation of 1.2 read "gain 0.72" alone: the pair cut the typical
+        # free-run error by 50% at a BIC drop of 7.1, each effect by 44-50% against the other alone); not a pair with
+        # Gymnasium's own clip (no hypothesis about the gap, see earns)
         def seen_free(members: frozenset[str]) -> bool:
             return all(passes(scored[members], scored[members - {e}])[2] > config.min_gain
                        for e in members if members - {e} in scored)

@@ -216,8 +216,8 @@ class Ambiguity(_ByKey):
     """The effects that differ, one entry per candidate ("within_frame", "speed_clip", ...)."""
     candidates: list[str]
     """The two whole candidates (e.g. "damping+within_frame", "damping+speed_clip"); the first is the
-    physics the gap is measured with (the lower BIC, or "none" where a single that the free run favours lowers the
-    BIC by less than an effect needs)."""
+    physics the gap is measured with (the lower BIC, or "none" where a single or a pair that the free run favours
+    lowers the BIC by less than an effect needs)."""
     bic: list[float]
     """Their one-step BICs on the fit split."""
     typical_free_run_mse: list[float]

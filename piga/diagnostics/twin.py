@@ -81,12 +81,10 @@ def render_angles(angles: np.ndarray, actions: np.ndarray, offset: float, image_
     torque ``arrow_gain``·u_{t-1} (none at frame 0), as :class:`envs.effects.ShowCommandedTorque` does with its
     actuation gain, at most :data:`envs.pendulum.ARROW_MAX_TORQUE`.
     """
-    from envs.pendulum import ARROW_MAX_TORQUE
-
     import gymnasium as gym
     from gymnasium.wrappers import GrayscaleObservation, ResizeObservation
 
-    from envs.pendulum import PixelPendulumConfig, make_pixel_pendulum
+    from envs.pendulum import ARROW_MAX_TORQUE, PixelPendulumConfig, make_pixel_pendulum
 
     env = make_pixel_pendulum(PixelPendulumConfig(image_size=image_size, draw_torque_arrow=True))
     try:
