@@ -229,6 +229,9 @@ def test_a_camera_accepted_under_the_named_size_is_said_where_the_angles_are_mat
     blurred = V.CameraFindings(V.Camera(blur=1.2), 0.0, 0.0, 0, 0, [], 1e-4, 1e-4, [], theta=np.zeros((4, 6)))
     _, notes = summarise_vision(obs, 1e-4, blurred, None, [Effect("blur", 1.2, "px (Gaussian σ)")], DiagnoseConfig())
     assert any("through the fitted camera (analysis by synthesis)" in n for n in notes), notes  # named: not said again
+    read = replace(blurred, effects=[{"effect": "blur", "value": 1.2, "unit": "px (Gaussian σ)"}])
+    _, notes = summarise_vision(obs, 1e-4, read, None, [], DiagnoseConfig())  # read, under a verdict listing none
+    assert any("through the fitted camera (analysis by synthesis)" in n for n in notes), notes
     # a camera the stage read, under a verdict of "not explained" that lists no effect: no "a shifted camera?" asked
     # (a cogging torque under a shift of 1 px, 3.3x)
     shifted = V.CameraFindings(V.Camera(dx=1.0, dy=1.0), 0.0, 0.0, 0, 0, [], 1e-4, 1e-4,

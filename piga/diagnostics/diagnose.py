@@ -2169,8 +2169,9 @@ def summarise_vision(obs: Observations, rec_training: float, camera: CameraFindi
                                      (f"shift {cam.dx:.2g}, {cam.dy:.2g} px", abs(cam.dx) + abs(cam.dy) > 1e-6),
                                      (f"exposure {cam.exposure:.4g}", abs(cam.exposure - 1) > 1e-6),
                                      (f"zoom {cam.zoom:.4g}", abs(cam.zoom - 1) > 1e-6)) if on]
+            named = {e.effect for e in effects} | {e["effect"] for e in camera.effects}  # (under "not explained" too)
             unnamed = (f" ({', '.join(parts)}, under the sizes that are named, so no camera is named)"
-                       if parts and not CAMERA_EFFECTS & {e.effect for e in effects} else "")
+                       if parts and not CAMERA_EFFECTS & named else "")
             notes.append("the dynamics are fitted on angles found by matching every frame to the decoder's renders "
                          f"through the fitted camera{unnamed} (analysis by synthesis), not on the encoder's angles")
     # (the camera stage's effects too: a verdict of "not explained" lists none, and a cogging torque under a shift of
