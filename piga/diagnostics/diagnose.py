@@ -317,7 +317,7 @@ def diagnose(model: PhysicsModel, data: str | os.PathLike[str], config: Diagnose
     own = training_data_path(checkpoint)
     camera = camera_stage(model, str(data), obs.theta, obs.fit, obs.stale, config.camera, seed=config.seed,
                           progress=progress, reference=None if own is None else str(own), actions=obs.actions)
-    noise = next((e["value"] for e in camera.effects if e["effect"] == "noise"), 0.0)  # the named noise, σ
+    noise = camera.named_noise
     check_scene_through_camera(unlike, camera.camera if camera.partial is None else camera.partial.camera,
                                camera.matched_error, rec_training, config.max_scene_ratio,
                                rec_real=float(np.mean(obs.rec_mse)), noise=noise)
@@ -977,6 +977,14 @@ def select(candidates: Candidates, nom: Nominal, w: WindowSet, config: DiagnoseC
                 fit_set(members - {e})
         return all(earns(members, e) for e in members if members - {e} in scored)
 
+    def favoured(members: frozenset[str]) -> bool:
+        """A set that the held-out free run favours at a one-step BIC close to "none"'s: within ``ambiguous_bic`` of it,
+        each of its effects lowering the typical free-run error by more than ``min_gain`` against the set without it
+        (for a single: against "none")."""
+        return (scored[members].bic - candidates.refit.bic <= config.ambiguous_bic
+                and all(passes(scored[members], scored[members - {e}])[2] > config.min_gain
+                        for e in members if members - {e} in scored))
+
     tried: set[frozenset[str]] = set(scored)
 
     def fit_set(members: frozenset[str]) -> None:
@@ -1005,9 +1013,8 @@ def select(candidates: Candidates, nom: Nominal, w: WindowSet, config: DiagnoseC
             # no single accepted: pairs extend too the singles that the free run favours at a BIC close to "none"'s (a
             # deadzone of 0.25 with a saturation of 1.2, 40 sequences of 24 frames: the saturation cut the typical
             # free-run error by 42% at a BIC drop of 1.1, the pair was never fitted, and "none" read "gain 0.693")
-            below += sorted((m for m in singles if m not in below and scored[m].bic - candidates.refit.bic
-                             <= config.ambiguous_bic and passes(scored[m], candidates.refit)[2] > config.min_gain),
-                            key=lambda m: scored[m].bic)[: config.beam]
+            below += sorted((m for m in singles if m not in below and favoured(m)), key=lambda m: scored[m].bic)[
+                : config.beam]
         sets = list(dict.fromkeys(m | {e} for m in below for e in names if e not in m))
         for members in tqdm(sets, desc=f"fitting sets of {size} effects", disable=not progress):
             fit_set(members)
@@ -1030,12 +1037,8 @@ def select(candidates: Candidates, nom: Nominal, w: WindowSet, config: DiagnoseC
         # without it (a deadzone of 0.25 with a saturation of 1.2 read "gain 0.72" alone: the pair cut the typical
         # free-run error by 50% at a BIC drop of 7.1, each effect by 44-50% against the other alone); not a pair with
         # Gymnasium's own clip (no hypothesis about the gap, see earns)
-        def seen_free(members: frozenset[str]) -> bool:
-            return all(passes(scored[members], scored[members - {e}])[2] > config.min_gain
-                       for e in members if members - {e} in scored)
-
-        seen = [c for members, c in scored.items() if members and c.bic - candidates.refit.bic <= config.ambiguous_bic
-                and seen_free(members) and not deadzone_refuted(c.model, w.fit1, config)
+        seen = [c for members, c in scored.items() if members and favoured(members)
+                and not deadzone_refuted(c.model, w.fit1, config)
                 and not (len(members) > 1 and known_clip is not None and SPEED_CLIP.name in members)]
         if seen:
             rival = max(seen, key=lambda c: passes(c, candidates.refit)[2])
@@ -1427,14 +1430,13 @@ def _worse_than_nominal(naming: Naming, gap: Gap, final: fit.Model, nom: Nominal
     # (gravity x1.2 on 22 sequences of 14 frames, read 1.2, left 6.0x a floor of 1.84e-05 rad², 95% interval
     # 3.69e-06..4.46e-05 over 20 windows: 2.5x its upper end; on 21 sequences of another seed and on 40 of 16 frames,
     # 1.0x and 1.3x the floor); between the two, the effects are named and a note says what is left
-    upper = max(floor, gap.typical_free_run_mse_floor_interval[1]) \
-        if floor is not None and gap.typical_free_run_mse_floor_interval else floor
+    upper = _upper_end(floor, gap.typical_free_run_mse_floor_interval)
     far = floor is not None and corrected >= NO_GAP_FACTOR * upper
-    # the same on angles matched through a fitted camera, against their own twin (:func:`matched_twin_floor`): the
-    # camera read right leaves the physics unexplained (a cogging torque under a blur of 1 px read "blur 0.978" alone)
-    matched_floor = gap.matched_floor if gap.matched_floor and not far else None
-    matched_upper = max(matched_floor, gap.matched_floor_interval[1]) \
-        if matched_floor is not None and gap.matched_floor_interval else matched_floor
+    # the same on angles matched through a fitted camera, against their own twin (:func:`matched_twin_floor`; there is
+    # then no twin in angles): the camera read right leaves the physics unexplained (a cogging torque under a blur of
+    # 1 px read "blur 0.978" alone)
+    matched_floor = gap.matched_floor or None
+    matched_upper = _upper_end(matched_floor, gap.matched_floor_interval)
     far_matched = matched_floor is not None and corrected >= MATCHED_FAR * matched_upper
     uncertain = None  # the note of a corrected model far above the floor, but not above its interval's upper end
     if floor is not None and not far and corrected >= NO_GAP_FACTOR * floor:
@@ -1491,6 +1493,12 @@ def _worse_than_nominal(naming: Naming, gap: Gap, final: fit.Model, nom: Nominal
                "is no candidate?")
     # a fit that predicts worse establishes none of its effects: they stay in the verdict, not in the list of effects
     return Naming([], [_unclaimed(note) for note in naming.notes], verdict, "unexplained")
+
+
+def _upper_end(floor: float | None, interval: list[float] | None) -> float | None:
+    """The upper end of a twin's floor (a median over the held-out windows): of its 95% ``interval``, where there is
+    one, and never below the floor itself."""
+    return max(floor, interval[1]) if floor is not None and interval else floor
 
 
 #: What the named effects may leave above the upper end of the 95% interval of their twin's floor on angles matched
@@ -2101,6 +2109,10 @@ def summarise_vision(obs: Observations, rec_training: float, camera: CameraFindi
     notes: list[str] = []
     rec_real = float(np.mean(obs.rec_mse))
     ratio = rec_real / rec_training if rec_training else None
+    # the camera effects named, the camera stage's too: a verdict of "not explained" lists none (a cogging torque under
+    # a shift of 1 px, read, asked "a shifted camera or a different scene?")
+    named_vision = CAMERA_EFFECTS & ({e.effect for e in effects}
+                                     | {e["effect"] for e in (camera.effects if camera is not None else [])})
     summary = None
     if camera is not None:
         summary = CameraSummary(camera.camera, camera.table, camera.noise, int(stale.sum()) if stale is not None else 0,
@@ -2126,7 +2138,7 @@ def summarise_vision(obs: Observations, rec_training: float, camera: CameraFindi
                          "pendulum of another length, draws it so. The angles are read through it; a pendulum of "
                          "another length shows in the physics too (g/l)")
         if (small := camera.below_naming(config.camera)) is not None:
-            change = ", ".join(f"{k} {v:.3g}" for k, v in small["camera"].items() if v != getattr(Camera(), k))
+            change = Camera(**small["camera"]).describe()
             under = ("its change is under the size that is named (blur or shift "
                      f"{config.camera.min_blur:g}/{config.camera.min_shift:g} px, exposure {config.camera.min_exposure:g} "
                      f"gray levels, zoom {config.camera.min_zoom:g}), so no camera is named")
@@ -2162,22 +2174,12 @@ def summarise_vision(obs: Observations, rec_training: float, camera: CameraFindi
         elif camera.partial is not None:
             notes.append(camera.partial.note())
         elif camera.rematched:
-            cam = camera.camera
             # a camera accepted under the sizes that are named (an actuation gain of 0.8 drew the torque arrow smaller,
             # and an exposure of 1.015 took it up): said, as the angles are matched through it
-            parts = [p for p, on in ((f"blur {cam.blur:.2g} px", cam.blur > 1e-3),
-                                     (f"shift {cam.dx:.2g}, {cam.dy:.2g} px", abs(cam.dx) + abs(cam.dy) > 1e-6),
-                                     (f"exposure {cam.exposure:.4g}", abs(cam.exposure - 1) > 1e-6),
-                                     (f"zoom {cam.zoom:.4g}", abs(cam.zoom - 1) > 1e-6)) if on]
-            named = {e.effect for e in effects} | {e["effect"] for e in camera.effects}  # (under "not explained" too)
-            unnamed = (f" ({', '.join(parts)}, under the sizes that are named, so no camera is named)"
-                       if parts and not CAMERA_EFFECTS & named else "")
+            unnamed = (f" ({camera.camera.describe(digits=4)}, under the sizes that are named, so no camera is named)"
+                       if camera.camera != Camera() and not named_vision else "")
             notes.append("the dynamics are fitted on angles found by matching every frame to the decoder's renders "
                          f"through the fitted camera{unnamed} (analysis by synthesis), not on the encoder's angles")
-    # (the camera stage's effects too: a verdict of "not explained" lists none, and a cogging torque under a shift of
-    # 1 px, read, asked "a shifted camera or a different scene?")
-    named_vision = CAMERA_EFFECTS & ({e.effect for e in effects}
-                                     | {e["effect"] for e in (camera.effects if camera is not None else [])})
     if ratio is not None and ratio > config.vision_ratio and not named_vision:
         small = calm_frames_error(obs.rec_mse, obs.actions, obs.stale)
         if small is not None and small <= rec_training:
@@ -2430,9 +2432,9 @@ def matched_twin_floor(model: PhysicsModel | None, final: fit.Model, nom: Nomina
     """The corrected physics' errors on the twin of the held-out sequences, filmed through the fitted camera with the
     named sensor noise and matched through it, where the dynamics are on angles matched so (``theta``) in a recording
     from Gymnasium; None elsewhere. Not for a camera of part of the recording (one camera would not film the twin as
-    the recording was), nor for angles matched with no camera for the actuation's sign or the torque arrow (the twin's
-    arrow is the training file's), nor without Gymnasium's picture (the decoder's twin, matched to the decoder's own
-    renders, would match them exactly: no floor).
+    the recording was), nor for angles matched with no camera for the actuation's sign or the torque arrow (no camera
+    films the recording otherwise than the model's: not measured there), nor without Gymnasium's picture (the
+    decoder's twin, matched to the decoder's own renders, would match them exactly: no floor).
 
     Measured with the fast preset's model on 60 x 40 frames: a blur of 1 px alone left the corrected physics 0.97x
     this floor; a cogging torque of 0.3 under that blur, which no candidate is, 26x (named "blur 0.978" alone before,
@@ -2441,14 +2443,13 @@ def matched_twin_floor(model: PhysicsModel | None, final: fit.Model, nom: Nomina
             or camera.matched_for_arrow or not obs.from_gymnasium):
         return None
     held_rows = np.flatnonzero(~obs.fit)
-    noise = next((e["value"] for e in camera.effects if e["effect"] == "noise"), 0.0)  # the named noise, σ
     # the arrow drawn as Gymnasium draws the recording's, at its actuation gain (read as the corrected a over the
     # nominal's): drawn at the training file's, a gain of 2.5 beside a shift of 1 px, all candidates, left 2.0x the
     # upper end of the floor's interval
     gain = abs(final.values.get("a", nom.a) / nom.a) if nom.a else 1.0
     return twin_floor(model, final, nom, theta[held_rows], obs.actions[held_rows],
                       None if stale is None else stale[held_rows], config.stride, arrow=arrow, camera=camera.camera,
-                      noise=noise, seed=config.seed, arrow_gain=gain)
+                      noise=camera.named_noise, seed=config.seed, arrow_gain=gain)
 
 
 def closure_of(naming: Naming, gap: Gap) -> Gap:

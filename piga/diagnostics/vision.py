@@ -93,6 +93,10 @@ class Camera:
             ({"exposure"} if 255 * abs(self.exposure - 1) > config.min_exposure else set()) | \
             ({"zoom"} if abs(self.zoom - 1) > config.min_zoom else set())
 
+    def describe(self, digits: int = 3) -> str:
+        """Its parts that differ from no camera, "exposure 1.04" or "dx 1, dy 1", to ``digits`` significant digits."""
+        return ", ".join(f"{k} {v:.{digits}g}" for k, v in self.__dict__.items() if v != getattr(Camera(), k))
+
     def apply(self, frames: Tensor) -> Tensor:
         """(K, C, H, W) frames in [0, 1] -> the same frames as this camera sees them."""
         x = frames
@@ -650,6 +654,11 @@ class CameraFindings:
     @property
     def rematched(self) -> bool:
         return self.theta is not None
+
+    @property
+    def named_noise(self) -> float:
+        """The sensor noise named among ``effects`` (gray levels σ; 0: none named)."""
+        return next((e["value"] for e in self.effects if e["effect"] == "noise"), 0.0)
 
 
 #: The factor by which the noise read over every frame must exceed that over the frames after the smallest fifth of
