@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 import subprocess
 from dataclasses import replace
 from pathlib import Path
@@ -201,7 +202,7 @@ def test_a_gain_the_actions_barely_show_is_not_given_a_value() -> None:
     assert gain_undetermined([3.39e-07, 3.39e-07]) and gain_undetermined([7.36e-07, 0.231])
     assert gain_undetermined([0.0013, 0.00566])  # below GAIN_FLOOR: the interval excluded the truth, 0.001
     assert not gain_undetermined([1.95, 2.01]) and not gain_undetermined([0.45, 0.52])
-    d = analyse(planted({"gain": 0.001}, n=60), NOMINAL, replace(FAST, bootstrap=10))  # a refits to 0.0049
+    d = analyse(planted({"gain": 0.001}, n=30), NOMINAL, replace(FAST, bootstrap=10))  # a refits to 5.4e-09
     assert d.verdict_class == "unexplained" and "the actions barely move the system" in d.verdict, d.verdict
     assert f"act more than {fit.MAX_DELAY} frames late (the longest delay fitted)" in d.verdict  # a longer latency
     assert not any(e.effect == "gain" for e in d.effects)
@@ -394,7 +395,7 @@ def test_cli_with_env_writes_a_complete_report_and_the_control_comparison(tiny_m
     md = (out / "report.md").read_text()
     assert ("No gap above the floor" in md) == (not g["gap_above_floor"])
     assert "MPC on the simulated real system (damping=0.3)" in md
-    assert "nan" not in md.lower().replace("nanmax", "")
+    assert not re.search(r"\bnan\b", md.lower()), md  # (not "provenance")
     for name in ("report.md", "gap.png", "residual_heatmap.png", "correlations.png"):
         assert (out / name).stat().st_size > 0
     assert not [p for p in out.parent.iterdir() if p.name.startswith(".")]  # no partial folder left
@@ -457,7 +458,7 @@ def test_the_report_never_prints_nan() -> None:
     camera = CameraFindings(Camera(blur=1.2), float("nan"), 0.0, 0, 0, [], 0.01, 0.005, effects)
     d = analyse(planted({}), NOMINAL, FAST, camera=camera)
     assert "blur" in d.verdict and "nan" not in d.verdict
-    assert "nan" not in markdown(d, "m", "d", "c").lower()
+    assert not re.search(r"\bnan\b", markdown(d, "m", "d", "c").lower())
 
 
 def test_a_limit_is_reported_where_the_physics_holds_it() -> None:
