@@ -136,6 +136,8 @@ def _page(bench, cfg, records, tmp_path: Path) -> tuple[dict, str]:
     return record, bench.markdown(record)
 
 
+@pytest.mark.slow  # a tiny run of the benchmark's training or timing (5-15 s): opt-in, as the
+# benchmark itself is
 def test_a_page_written_part_way_names_the_runs_still_to_run(bench, tmp_path: Path) -> None:
     """The page is written from the records there are (a PlaNet-style run takes hours), and says what it lacks."""
     cfg = bench.PRESETS["budget"]
@@ -246,6 +248,8 @@ def test_the_estimate_of_some_jobs_is_theirs(bench) -> None:
     assert part["train (core-s)"] == sum(bench.job_train_cost(cfg, job) for job in two)
 
 
+@pytest.mark.slow  # a tiny run of the benchmark's training or timing (5-15 s): opt-in, as the
+# benchmark itself is
 def test_drqv2_is_a_third_model_free_row_scored_as_ddpgs_runs(bench, tmp_path: Path) -> None:
     """DrQ-v2 from pixels: its own jobs, spec, cost, rows and pending cells, beside DDPG's and SAC's runs."""
     cfg = bench.PRESETS["budget"]

@@ -57,6 +57,8 @@ def test_the_published_curve_is_read_per_seed_and_runs_are_set_beside_it(tmp_pat
     assert out.with_suffix(".png").stat().st_size > 0
 
 
+@pytest.mark.slow  # a tiny run of the benchmark's training or timing (5-15 s): opt-in, as the
+# benchmark itself is
 def test_the_precision_benchmark_times_both_and_compares_one_update(tmp_path: Path) -> None:
     import drqv2_precision
 
@@ -178,6 +180,8 @@ def test_a_point_below_every_published_seed_is_named_with_how_low_the_seeds_go_n
     assert "a replay buffer of 10,000 transitions (its 1e6); 5" in page
 
 
+@pytest.mark.slow  # a tiny run of the benchmark's training or timing (5-15 s): opt-in, as the
+# benchmark itself is
 def test_the_step_time_benchmark_times_each_part_and_the_whole_loop(tmp_path: Path) -> None:
     import drqv2_step_time
 

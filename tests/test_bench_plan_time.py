@@ -16,6 +16,8 @@ from .helpers import benchmark_module, run, train_tiny
 ROOT = Path(__file__).resolve().parents[1]
 
 
+@pytest.mark.slow  # a tiny run of the benchmark's training or timing (5-15 s): opt-in, as the
+# benchmark itself is
 def test_plan_time_times_the_planet_agent_in_the_same_run(tiny_data: Path, tiny_run: Path, tmp_path: Path) -> None:
     piga_run = tiny_run  # read, not written
     planet_run = tmp_path / "planet"
@@ -82,6 +84,8 @@ def test_plan_time_at_two_revisions_alternates_and_gives_ratios(tiny_data: Path,
     assert bad.returncode != 0 and "not a revision" in bad.stderr
 
 
+@pytest.mark.slow  # a tiny run of the benchmark's training or timing (5-15 s): opt-in, as the
+# benchmark itself is
 def test_the_planet_plan_time_benchmark_times_both_engines_and_checks_their_actions(tmp_path: Path) -> None:
     out = tmp_path / "planet_plan_time"
     result = run("python", str(ROOT / "benchmarks" / "planet_plan_time.py"), "--steps", "2", "--out", str(out))

@@ -96,6 +96,8 @@ def test_a_budget_the_table_does_not_have_is_refused(protocol: Any, tmp_path: Pa
     assert "--sequences 300: the budget preset's PlaNet-style sizes are 100, 250, 500, 1000, 2000" in capsys.readouterr().err
 
 
+@pytest.mark.slow  # a tiny run of the benchmark's training or timing (5-15 s): opt-in, as the
+# benchmark itself is
 def test_a_tiny_protocol_run_collects_its_rounds_and_continues(protocol: Any, tmp_path: Path) -> None:
     """The real loop on the tiny preset: the table's first sequences seed it, each round adds a planner episode, and
     a rerun of a finished run trains nothing more."""

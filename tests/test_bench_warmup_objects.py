@@ -13,6 +13,8 @@ import pytest
 from tests.helpers import benchmark_module
 
 
+@pytest.mark.slow  # a tiny run of the benchmark's training or timing (5-15 s): opt-in, as the
+# benchmark itself is
 def test_runs_stop_after_the_warm_up_and_the_page_has_each_seed_on_both_data_sets(tmp_path: Path,
                                                                                     monkeypatch: pytest.MonkeyPatch) -> None:
     import piga.training.train as training

@@ -71,6 +71,8 @@ def test_the_critic_trains_the_encoder_and_the_actor_does_not() -> None:
     venv.close()
 
 
+@pytest.mark.slow  # three pixel runs (about 20 s alone); by default tests/test_ddpg.py::test_training_resumes_exactly
+# checks the SB3 runs' checkpoint and resume, and the tests above DrQ-v2's own update
 def test_a_run_resumes_exactly_and_acts_in_piga_episodes(tmp_path: Path) -> None:
     from agents.sb3.run import SB3Agent, load_sb3
     from agents.sb3.train import train_sb3

@@ -221,6 +221,8 @@ def test_iterative_rounds_append_collected_episodes_and_leave_the_data_file_alon
     assert metrics["train_sequences"] == 8 + 4
 
 
+@pytest.mark.slow  # two iterative runs with a planner round each; by default
+# test_training_writes_a_run_and_resumes_exactly checks that a PlaNet-style run resumes exactly
 def test_iterative_resume_is_exact(tiny_data: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     from agents.planet import iterative as planet_iterative
     from piga.data.schema import read_sequences

@@ -62,6 +62,8 @@ def _fails(x: float) -> float:
     return x
 
 
+@pytest.mark.slow  # Ray restarts a worker that died (10-30 s beside a second xdist worker); by default
+# tests/test_pool.py::test_a_failing_job_is_named_and_the_ended_ones_kept checks the pool's handling of a failing job
 def test_a_failing_job_is_named_the_ended_ones_kept_and_the_others_stopped() -> None:
     ended: list[int] = []
     started = time.monotonic()

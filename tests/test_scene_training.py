@@ -231,6 +231,8 @@ def inspect_dataset_like():
                        has_states=False, system="spring", dt=0.3, params={}, split_counts={}, attrs={"n_objects": 2})
 
 
+@pytest.mark.slow  # three short runs; by default test_a_finished_run_resumed_for_longer_is_not_retried
+# checks the retry's record across a resume
 def test_a_run_interrupted_in_a_retry_goes_on_retrying_after_resume(spring_data: Path, tmp_path: Path,
                                                                     monkeypatch: pytest.MonkeyPatch,
                                                                     capsys: pytest.CaptureFixture[str]) -> None:
