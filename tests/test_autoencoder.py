@@ -17,6 +17,8 @@ from agents.sb3.autoencoder import (
 from piga.data.schema import read_sequences
 
 
+@pytest.mark.slow  # 400 steps of training (15 s alone); by default the collapsing layout is refused
+# (test_an_autoencoder_of_the_collapsing_layout_is_refused) and a latent run trains on the codes (tests/test_ddpg.py)
 def test_codes_carry_the_pendulum_instead_of_collapsing_to_the_mean_frame(tiny_data: Path, tmp_path: Path) -> None:
     """The textbook layout (tanh bottleneck, sigmoid decoder) stalls at drawing the mean frame (MSE
     equal to the pixel variance) with every code saturated at +-1: DDPG would see a constant."""

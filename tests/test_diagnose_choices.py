@@ -87,6 +87,8 @@ def test_a_clear_choice_is_not_ambiguous(damped) -> None:
     assert d.ambiguity is None and d.verdict_class == "damping", d.verdict
 
 
+@pytest.mark.slow  # a bootstrap of 10; by default test_two_candidates_the_data_cannot_separate_give_an_ambiguous_verdict
+# gives the same ambiguity without intervals
 def test_ambiguity_needs_overlapping_intervals_with_the_bootstrap() -> None:
     """With the bootstrap, the intervals of the values both fit (g, a) are compared: here they overlap."""
     d = analyse(planted_spin(n=60), NOMINAL, DiagnoseConfig(bootstrap=10))
@@ -206,6 +208,8 @@ def test_an_excluded_effect_is_not_fitted_and_the_report_says_why() -> None:
 # --- 4. the four defects ----------------------------------------------------------------------
 
 
+@pytest.mark.slow  # the within-frame diagnosis (25 s alone: sets fitted with up to 16 substeps a frame);
+# dm_control's blind benchmark reads the same systems (benchmarks/diagnose_blind_dmc.py)
 def test_a_gain_on_top_of_within_frame_is_not_counted_twice(tmp_path_factory: pytest.TempPathFactory) -> None:
     """(a) The fast model reads a low on a system that moves within the frame; refitted with within_frame,
     a comes out at the truth, which is no gain error of the real system."""

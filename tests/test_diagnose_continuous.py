@@ -64,6 +64,8 @@ def diagnosis(tmp_path_factory: pytest.TempPathFactory) -> Diagnosis:
     return within_frame_diagnosis(tmp_path_factory)[1]
 
 
+@pytest.mark.slow  # the within-frame diagnosis (25 s alone: sets fitted with up to 16 substeps a frame);
+# dm_control's blind benchmark reads the same systems (benchmarks/diagnose_blind_dmc.py)
 def test_names_damping_and_the_integration_within_the_frame_not_a_clip(diagnosis):
     named = {e["effect"]: e for e in diagnosis.effects}
     assert {"damping", "within_frame"} <= set(named), diagnosis.verdict
@@ -76,6 +78,8 @@ def test_names_damping_and_the_integration_within_the_frame_not_a_clip(diagnosis
     assert not any("Gymnasium" in note for note in diagnosis.notes)
 
 
+@pytest.mark.slow  # the within-frame diagnosis (25 s alone: sets fitted with up to 16 substeps a frame);
+# dm_control's blind benchmark reads the same systems (benchmarks/diagnose_blind_dmc.py)
 def test_closure_has_no_invalid_floor_and_never_exceeds_100_percent(diagnosis):
     gap = diagnosis.gap
     assert gap.floor_note and "no valid floor" in gap.floor_note

@@ -146,6 +146,8 @@ def test_planted_damping_is_found_with_its_coefficient_and_closes_the_gap() -> N
     assert abs(d.corrected["g"] - 10) < 0.1 and abs(d.corrected["a"] - 1) < 0.02
 
 
+@pytest.mark.slow  # a diagnosis of 15 s alone; by default test_a_late_camera_is_a_frame_delay tells
+# a late camera from an actuator's delay
 def test_planted_delay_is_exact_and_shows_in_the_cross_correlation() -> None:
     # a camera stage that found no repeated start: the delay is the actuator's (a late camera: the test below)
     d = analyse(planted({"delay": 2}, n=60), NOMINAL, FAST, camera=_findings([], 0))  # (at 60 sequences as at 120)

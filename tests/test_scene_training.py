@@ -140,7 +140,9 @@ def test_the_object_check_in_the_middle_of_a_run_changes_nothing_of_its_training
         assert torch.equal(p, q), name
 
 
-@pytest.mark.parametrize("slots", [None, "3"])
+# the retries with the file's slots: three short runs (8 s alone); by default
+# test_a_run_whose_autoencoder_found_no_ball_trains_again_then_exits_1_naming_the_seed retries and names the seeds
+@pytest.mark.parametrize("slots", [pytest.param(None, marks=pytest.mark.slow), "3"])
 def test_a_slot_that_draws_nothing_retries_only_where_the_scene_has_an_object_for_it(
         slots: str | None, spring_data: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
         capsys: pytest.CaptureFixture[str]) -> None:

@@ -362,6 +362,8 @@ def test_train_config_names_a_bad_field(field: str, value: object) -> None:
         TrainConfig(**{field: value})
 
 
+@pytest.mark.slow  # a 60-step run (8 s alone); by default
+# test_the_plan_is_sized_from_the_file checks the warm-up planned from the data
 def test_a_file_that_ended_inside_the_old_warm_up_now_trains_its_physics(small_data: Path, tmp_path: Path,
                                                                           capsys: pytest.CaptureFixture[str]) -> None:
     """16 windows of batch 8: 2 steps an epoch. Under the old absolute 200-step warm-up, 16 epochs (32 steps)
