@@ -474,6 +474,32 @@ def test_a_brighter_picture_on_white_is_read_on_the_rod_against_the_training_fil
         assert not next(r for r in found.table if r["candidate"] == "exposure").get("core_brightening", 2) < 1.03
 
 
+def test_a_brighter_picture_on_white_beside_a_blur_is_read_with_it(tmp_path: Path) -> None:
+    """Gymnasium blurred 0.9 px and brightened by 1.1 read "blur 0.86" alone: the blur lowered the residual more than
+    the exposure did, and the exposure was never fitted with it (the dynamics, matched through that camera, read "not
+    explained ... is the recording the scene the model knows?"). Here a mid-gray rod, as Gymnasium's is, on white."""
+    import cv2
+
+    from tests.test_vision import rod_model as plain
+
+    model = plain(SIZE)
+    ys, xs = torch.meshgrid(torch.arange(SIZE) + 0.5, torch.arange(SIZE) + 0.5, indexing="ij")
+    rod = ((xs - SIZE / 2).abs() < 1.6) & (ys > 4) & (ys < SIZE / 2 + 1)
+    with torch.no_grad():
+        model.decoder.load_templates(torch.full((1, 1, SIZE, SIZE), 0.45), torch.where(rod, 8.0, -8.0)[None, None],
+                                     background=torch.ones(1, SIZE, SIZE), background_mask_logit=torch.zeros(1, SIZE, SIZE))
+    path = _recording(tmp_path / "rec.h5", model.eval(), "none")
+    with h5py.File(path, "a") as f:  # blurred, then brightened (as the camera candidates model it), with sensor noise
+        frames = f["frames"][...].reshape(-1, SIZE, SIZE).astype(np.float64)
+        seen = np.minimum(np.stack([cv2.GaussianBlur(x, (0, 0), 0.9) for x in frames]) * 1.1, 255)
+        seen = seen.reshape(N, T, SIZE, SIZE) + 3 * np.random.default_rng(4).normal(size=(N, T, SIZE, SIZE))
+        f["frames"][...] = np.clip(np.rint(seen), 0, 255).astype(np.uint8)
+    found = V.camera_stage(model, str(path), np.zeros((N, T)), np.arange(N) < 16, None)
+    named = {e["effect"]: e["value"] for e in found.effects}
+    assert {"blur", "exposure"} <= set(named), found.table
+    assert abs(named["blur"] - 0.9) < 0.03 and abs(named["exposure"] - 1.1) < 0.01, named
+
+
 def test_a_camera_is_scored_on_the_frames_that_carry_nothing_drawn_with_the_action(model, tmp_path: Path) -> None:
     """Gymnasium at an actuation gain of 5 draws its torque arrow so large that a blur of 1.5 px lowered the residual
     of every frame by 7.5% alone, under the 10% named: the gain was read 4.28 (4.03..4.77) for 5, and no blur. The

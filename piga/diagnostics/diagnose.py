@@ -935,8 +935,8 @@ def select(candidates: Candidates, nom: Nominal, w: WindowSet, config: DiagnoseC
     g, a and b within 1.6%). A candidate with a speed clip that the data refute
     (:func:`clip_refuted`, with ``speeds`` the observed speeds, :func:`observed_speeds`, and ``known_clip`` the level of
     a clip that the file's system has) or a deadzone that
-    holds almost no action (:func:`deadzone_refuted`) is passed over: the clip's sets are not fitted; the
-    deadzone's are, and may steer which pairs the beam extends (a deadzone fitted at a negative width,
+    holds almost no action (:func:`deadzone_refuted`) is passed over: the clip alone is not scored, but extends sets,
+    each of whose clips is refuted or not at its own level; the deadzone's are scored, and may steer which pairs the beam extends (a deadzone fitted at a negative width,
     common as a stand-in for a larger gain at small actions), but are never accepted. When another
     accepted set explains the data about as well as the chosen one (:func:`close_rival`), the
     selection returns both: it cannot tell them apart."""
@@ -953,7 +953,11 @@ def select(candidates: Candidates, nom: Nominal, w: WindowSet, config: DiagnoseC
     pool = [c for c in candidates.singles if not clip_refuted(c.model, nom, w.fit1, speeds, config, known_clip)]
     scored: dict[frozenset[str], Score] = {frozenset(): candidates.refit}
     scored.update({frozenset(c.model.effects): c for c in pool})
-    names = [c.model.effects[0] for c in pool]
+    # every single extends the sets, a clip refuted alone too: without the effect beside it, its level moves (a damping
+    # of 0.3 with a clip at 6 rad/s: the clip alone fitted 5.42, which the speeds pass, so damping + clip was never
+    # fitted, and the damping alone read "not explained ... a further effect that is no candidate"); each set's clip is
+    # refuted or not at its own level (fit_set)
+    names = [c.model.effects[0] for c in candidates.singles]
 
     def earns(members: frozenset[str], e: str) -> bool:
         """Effect ``e`` earns its place in ``members`` against the set without it (fitted). The file's own clip
@@ -1424,7 +1428,8 @@ def gain_undetermined(interval: list[float]) -> bool:
     return not high > 0 or high - low <= 1e-6 * high or low < GAIN_SPAN * high or high < GAIN_FLOOR
 
 
-def _worse_than_nominal(naming: Naming, gap: Gap, final: fit.Model, nom: Nominal, rematched: bool = False) -> Naming:
+def _worse_than_nominal(naming: Naming, gap: Gap, final: fit.Model, nom: Nominal, rematched: bool = False,
+                        unsaid: Ambiguity | None = None) -> Naming:
     """The verdict "not explained" where the named effects make the physics worse than the nominal one (one step
     ahead, on the held-out windows), leave the typical free run far above the twin's floor, or run off (g or a
     collapsed); on the pixel basis of a camera effect, where its typical rendered free run strays further than the
@@ -1433,7 +1438,9 @@ def _worse_than_nominal(naming: Naming, gap: Gap, final: fit.Model, nom: Nominal
     ``rematched``: the corrected model's angles were matched through a camera, the nominal's are the encoder's: their
     free runs' angle errors do not compare (an exposure of 0.8 in the sequences 0-24, all in the fit split, with g and a
     read within 0.3%, strayed "further" at 6.0e-05 against 3.1e-05 rad² on the clean held-out sequences, whose matched
-    angles are a little noisier than the encoder's)."""
+    angles are a little noisier than the encoder's). ``unsaid``: a rival of "none" left unsaid (:func:`select`); where it
+    would leave the physics on angles matched through a camera within reach of their twin, the verdict is that
+    ambiguity, not "not explained"."""
     if not naming.effects:
         return naming
     worse = gap.one_step_rms_corrected_rad > WORSE_THAN_NOMINAL * gap.one_step_rms_nominal_rad
@@ -1476,6 +1483,16 @@ def _worse_than_nominal(naming: Naming, gap: Gap, final: fit.Model, nom: Nominal
     drifts_pixels = (gap.closure_basis == "pixels" and pn is not None and pc is not None
                      and (pc > DRIFTS_FURTHER * pn or (pf is not None and pf > 0 and pn >= CLEAR_GAP * pf and pc > pn)))
     if not (worse or drifts or far or drifts_pixels or fit.collapsed(final, nom, factor=100.0)):
+        if far_matched and unsaid is not None and unsaid.typical_free_run_mse[1] < MATCHED_FAR * matched_upper:
+            # a rival of "none" that the free run favours, and that would leave the matched angles near their twin, is
+            # the ambiguity (an exposure of 1.1, a blur of 0.9 px and a bias of -0.06: the bias cut the typical error
+            # from 4.29e-04 to 1.30e-04 rad², at a one-step BIC 7.4 below none's, and "none" strayed 5.0x the floor)
+            strays = (f"without {unsaid.between[1]}, the physics on the angles matched "
+                      f"{'through the camera' if rematched else 'to the frames'} strays {corrected / matched_floor:.1f}x as "
+                      f"far as on its twin (angle MSE {corrected:.3g} against the floor {matched_floor:.3g} rad², 95% "
+                      f"interval up to {matched_upper:.3g})")
+            verdict = "; ".join([e.describe() for e in naming.effects] + [unsaid.describe(), strays])
+            return Naming(naming.effects, naming.notes, verdict, "ambiguous", naming.physics)
         if far_matched:
             camera = '; '.join(e.describe() for e in naming.effects if e.effect in CAMERA_EFFECTS)
             physics = '; '.join(e.describe() for e in naming.effects if e.effect not in CAMERA_EFFECTS)
@@ -2626,7 +2643,8 @@ def analyse(obs: Observations, nom: Nominal, config: DiagnoseConfig = DiagnoseCo
     vision, vision_notes = summarise_vision(obs, rec_training, camera, stale, naming.effects, config, own)
     gap = measure_gap(candidates, chosen, nom, obs, theta, stale, windows, config, model, camera, arrow,
                       vision.ratio, corrects=bool(naming.effects) or ambiguity is not None)
-    naming = _worse_than_nominal(naming, gap, final, nom, rematched=camera is not None and camera.rematched)
+    naming = _worse_than_nominal(naming, gap, final, nom, rematched=camera is not None and camera.rematched,
+                                 unsaid=unsaid)
     naming = _gap_left_unnamed(naming, gap, unsaid)
     if unsaid is not None and naming.verdict_class == "ambiguous":  # the rival left unsaid, said beside the gap
         ambiguity = unsaid
