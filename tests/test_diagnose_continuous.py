@@ -170,6 +170,8 @@ def test_the_substeps_take_the_damping_implicitly_as_mujoco_does():
     np.testing.assert_allclose(ours, np.stack(expected, 1), atol=1e-9, rtol=0)
 
 
+@pytest.mark.slow  # the within-frame diagnosis (25 s alone: sets fitted with up to 16 substeps a frame);
+# dm_control's blind benchmark reads the same systems (benchmarks/diagnose_blind_dmc.py)
 def test_within_frame_reads_g_of_a_mujoco_like_system_without_the_explicit_bias(diagnosis):
     """With the damping implicit, as the planted system has it, g is read to 0.3% where explicit substeps read
     it 0.8% low (h·3b = 0.8% here); a and b within 1.5% at this angle noise (0.5 mrad)."""

@@ -29,12 +29,12 @@ def _start(batch: int = 6) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
 def test_rk4_follows_a_fine_step_reference():
     system = _pendulum()
     p0, v0, actions = _start()
-    reference, reference_v = rollout(system, Euler(substeps=4000), p0, v0, actions)  # the continuous system
+    reference, reference_v = rollout(system, Euler(substeps=2000), p0, v0, actions)  # the continuous system
     rk4, rk4_v = rollout(system, RK4(substeps=2), p0, v0, actions)
     euler, _ = rollout(system, Euler(substeps=1), p0, v0, actions)
     rk4_error = (rk4 - reference).abs().max().item()
     euler_error = (euler - reference).abs().max().item()
-    assert rk4_error < 1e-3, rk4_error  # the reference itself is off by O(h) = ~1e-4
+    assert rk4_error < 1e-3, rk4_error  # the reference itself is off by O(h) = ~4e-4
     assert (rk4_v - reference_v).abs().max().item() < 3e-3
     assert euler_error > 30 * rk4_error, (euler_error, rk4_error)
 
