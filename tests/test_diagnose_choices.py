@@ -148,31 +148,13 @@ def test_a_deadzone_that_holds_no_action_is_not_chosen() -> None:
     assert not deadzone_refuted(held, w.fit1, FAST)
 
 
-def planted_clipped(n: int = 60, t: int = 40, seed: int = 0, clip: float = 8.0, friction: float = 0.1,
-                    bias: float = 0.1, delay: int = 1, damping: float = 0.0, speed: float = 6.0) -> Observations:
-    """Gymnasium's pendulum, its speed clipped at ±``clip`` rad/s after each step (8: Gymnasium's own), by default
-    with a Coulomb friction of 0.1, a bias of 0.1 and an action 1 step late, from reset speeds up to ``speed`` rad/s
-    (2% of the speeds near the clip). Written independently of piga's code."""
-    rng = np.random.default_rng(seed)
-    u = rng.uniform(-2, 2, (n, t))
-    th = np.zeros((n, t))
-    x, v = rng.uniform(-math.pi, math.pi, n), rng.uniform(-speed, speed, n)
-    th[:, 0] = x
-    for i in range(t - 1):
-        tau = (u[:, i - delay] if i >= delay else 0.0) + bias - friction * np.tanh(v / 0.1) - damping * v
-        v = np.clip(v + 0.05 * (15 * np.sin(x) + 3 * tau), -clip, clip)
-        x = x + 0.05 * v
-        th[:, i + 1] = x
-    return Observations(th + rng.normal(0, 0.002, th.shape), u, np.zeros((n, t)), np.arange(n) < int(0.75 * n), 0.05,
-                        np.zeros((0, t, 8, 8), np.uint8), np.zeros(0, int))
-
-
 @pytest.mark.slow  # a diagnosis that fits sets of four (40 s alone)
 def test_gymnasiums_own_clip_takes_none_of_the_places_of_the_effects() -> None:
     """Three effects beside Gymnasium's own clip: the sets of three with the clip crowded out the true set (a Gymnasium
     recording of friction 0.1, a bias of 0.1 and a delay of 1 read "not explained", another of a deadzone, a bias and
     a delay "gain 0.77"; here the state-level twin read "bias 0.093; delay 1", the friction dropped)."""
-    d = analyse(planted_clipped(), NOMINAL, FAST)
+    obs = planted({"friction": 0.1, "bias": 0.1, "delay": 1, "speed_clip": 8.0}, n=60, t=40, speed=6.0)
+    d = analyse(obs, NOMINAL, FAST)
     assert d.verdict_class == "bias+delay+friction", d.verdict
     values = {e.effect: e.value for e in d.effects}
     assert abs(values["friction"] - 0.1) < 0.005 and abs(values["bias"] - 0.1) < 0.005, d.verdict
@@ -184,7 +166,7 @@ def test_a_clip_refuted_alone_is_fitted_beside_the_effect_that_moved_it() -> Non
     """A damping of 0.3 with a clip at 6 rad/s (Gymnasium at reset speeds up to 8): the clip alone fitted 5.42, which
     the speeds pass, so it was left out of every set, and the damping read "not explained ... a further effect that is
     no candidate"."""
-    obs = planted_clipped(clip=6.0, friction=0.0, bias=0.0, delay=0, damping=0.3, speed=8.0)
+    obs = planted({"damping": 0.3, "speed_clip": 6.0}, n=60, t=40, speed=8.0)
     d = analyse(obs, NOMINAL, FAST)
     assert d.verdict_class == "damping+speed_clip", d.verdict
     values = {e.effect: e.value for e in d.effects}

@@ -480,15 +480,8 @@ def test_a_brighter_picture_on_white_beside_a_blur_is_read_with_it(tmp_path: Pat
     explained ... is the recording the scene the model knows?"). Here a mid-gray rod, as Gymnasium's is, on white."""
     import cv2
 
-    from tests.test_vision import rod_model as plain
-
-    model = plain(SIZE)
-    ys, xs = torch.meshgrid(torch.arange(SIZE) + 0.5, torch.arange(SIZE) + 0.5, indexing="ij")
-    rod = ((xs - SIZE / 2).abs() < 1.6) & (ys > 4) & (ys < SIZE / 2 + 1)
-    with torch.no_grad():
-        model.decoder.load_templates(torch.full((1, 1, SIZE, SIZE), 0.45), torch.where(rod, 8.0, -8.0)[None, None],
-                                     background=torch.ones(1, SIZE, SIZE), background_mask_logit=torch.zeros(1, SIZE, SIZE))
-    path = _recording(tmp_path / "rec.h5", model.eval(), "none")
+    model = rod_model(SIZE, gray=0.45)
+    path = _recording(tmp_path / "rec.h5", model, "none")
     with h5py.File(path, "a") as f:  # blurred, then brightened (as the camera candidates model it), with sensor noise
         frames = f["frames"][...].reshape(-1, SIZE, SIZE).astype(np.float64)
         seen = np.minimum(np.stack([cv2.GaussianBlur(x, (0, 0), 0.9) for x in frames]) * 1.1, 255)

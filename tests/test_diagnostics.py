@@ -49,22 +49,25 @@ def test_candidate_physics_matches_the_effect_wrappers(effects: dict) -> None:
 
 
 def planted(effects: dict, n: int = 120, t: int = 30, noise: float = 0.002, seed: int = 0,
-            constant: float | None = None) -> Observations:
-    """Encoded-angle-like observations of a pendulum with ``effects``, written independently of piga's code; with
-    ``constant``, every action is that value."""
+            constant: float | None = None, speed: float = 1.0) -> Observations:
+    """Encoded-angle-like observations of a pendulum with ``effects``, written independently of piga's code, from reset
+    speeds up to ``speed`` rad/s; with ``constant``, every action is that value. A "speed_clip" clips the speed after
+    each step, as Gymnasium's pendulum does at 8 rad/s."""
     rng = np.random.default_rng(seed)
     u = rng.uniform(-2, 2, (n, t)) if constant is None else np.full((n, t), constant)
     th = np.zeros((n, t))
-    x, v = rng.uniform(-math.pi, math.pi, n), rng.uniform(-1, 1, n)
+    x, v = rng.uniform(-math.pi, math.pi, n), rng.uniform(-speed, speed, n)
     th[:, 0] = x
+    clip = effects.get("speed_clip", math.inf)
     for i in range(t - 1):
         k = effects.get("delay", 0)
         a = u[:, i - k] if i >= k else np.zeros(n)
         if "deadzone" in effects:
             a = np.sign(a) * np.maximum(np.abs(a) - effects["deadzone"], 0)
         a = a * effects.get("gain", 1.0)
-        tau = a - effects.get("damping", 0) * v + effects.get("bias", 0) - effects.get("cogging", 0) * np.sin(4 * x)
-        v = v + 0.05 * (15 * effects.get("gravity", 1.0) * np.sin(x) + 3 * tau)
+        tau = a - effects.get("damping", 0) * v + effects.get("bias", 0) - effects.get("cogging", 0) * np.sin(4 * x) \
+            - effects.get("friction", 0) * np.tanh(v / 0.1)
+        v = np.clip(v + 0.05 * (15 * effects.get("gravity", 1.0) * np.sin(x) + 3 * tau), -clip, clip)
         x = x + 0.05 * v
         th[:, i + 1] = x
     fit_split = np.arange(n) < int(0.75 * n)

@@ -18,14 +18,15 @@ from piga.world.model import ModelConfig, PhysicsModel
 SIZE = 32
 
 
-def rod_model(size: int) -> PhysicsModel:
-    """A pendulum model whose decoder draws a dark rod up from the pivot on a white background."""
+def rod_model(size: int, gray: float = 0.2) -> PhysicsModel:
+    """A pendulum model whose decoder draws a rod of ``gray`` (dark by default) up from the pivot on a white
+    background."""
     torch.manual_seed(0)
     m = PhysicsModel(ModelConfig(image_size=size, template_hidden=8))
     ys, xs = torch.meshgrid(torch.arange(size) + 0.5, torch.arange(size) + 0.5, indexing="ij")
     rod = ((xs - size / 2).abs() < 1.6) & (ys > 4) & (ys < size / 2 + 1)  # upright at θ = 0
     mask = torch.where(rod, 8.0, -8.0)[None, None]  # (N, 1, h, h) logits
-    m.decoder.load_templates(torch.full((1, 1, size, size), 0.2), mask, background=torch.ones(1, size, size),
+    m.decoder.load_templates(torch.full((1, 1, size, size), gray), mask, background=torch.ones(1, size, size),
                              background_mask_logit=torch.zeros(1, size, size))
     return m.eval()
 

@@ -990,6 +990,10 @@ def select(candidates: Candidates, nom: Nominal, w: WindowSet, config: DiagnoseC
                 and all(passes(scored[members], scored[members - {e}])[2] > config.min_gain
                         for e in members if members - {e} in scored))
 
+    def extended(below: list[frozenset[str]]) -> list[frozenset[str]]:
+        """The sets that add one more candidate to one of ``below``, each once, in order."""
+        return list(dict.fromkeys(m | {e} for m in below for e in names if e not in m))
+
     tried: set[frozenset[str]] = set(scored)
 
     def fit_set(members: frozenset[str]) -> None:
@@ -1019,7 +1023,7 @@ def select(candidates: Candidates, nom: Nominal, w: WindowSet, config: DiagnoseC
             # delay of 1 beside a gain of 0.8: friction + delay and bias + delay, the two pairs of lowest BIC, each
             # raised the typical free-run error of the delay alone, so the truth was never fitted: "not explained")
             below += sorted((m for m in list(scored) if len(m) == size - 1 and m not in below and all(
-                scored[m - {e}].bic - scored[m].bic > config.bic_margin for e in m if m - {e} in scored)),
+                passes(scored[m], scored[m - {e}])[1] > config.bic_margin for e in m if m - {e} in scored)),
                 key=lambda m: scored[m].bic)[: config.beam]
         singles = [m for m in (frozenset([n]) for n in names) if m in scored]
         if size == 2 and not any(admissible(m) for m in singles):
@@ -1028,8 +1032,7 @@ def select(candidates: Candidates, nom: Nominal, w: WindowSet, config: DiagnoseC
             # free-run error by 42% at a BIC drop of 1.1, the pair was never fitted, and "none" read "gain 0.693")
             below += sorted((m for m in singles if m not in below and favoured(m)), key=lambda m: scored[m].bic)[
                 : config.beam]
-        sets = list(dict.fromkeys(m | {e} for m in below for e in names if e not in m))
-        for members in tqdm(sets, desc=f"fitting sets of {size} effects", disable=not progress):
+        for members in tqdm(extended(below), desc=f"fitting sets of {size} effects", disable=not progress):
             fit_set(members)
     if known_clip is not None and config.max_effects > 0 and SPEED_CLIP.name in names:
         # the file's own clip is no hypothesis about the gap (see earns), so it takes none of the max_effects places: the
@@ -1038,7 +1041,7 @@ def select(candidates: Candidates, nom: Nominal, w: WindowSet, config: DiagnoseC
         # never met the clip, and the chosen set failed its twin: "not explained")
         below = sorted((m for m in list(scored) if len(m) == config.max_effects and admissible(m)),
                        key=lambda m: scored[m].bic)[: config.beam]
-        sets = list(dict.fromkeys(m | {e} for m in below for e in names if e not in m and SPEED_CLIP.name in m | {e}))
+        sets = [m for m in extended(below) if SPEED_CLIP.name in m]
         for members in tqdm(sets, desc="fitting sets with the file's own clip", disable=not progress):
             fit_set(members)
             if members in scored and abs(scored[members].model.values["v"] - known_clip) > config.gym_clip_tolerance:
