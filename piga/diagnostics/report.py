@@ -347,7 +347,9 @@ def markdown(d: Diagnosis, model: str, data: str, command: str) -> str:
            "nominal one with the encoder: not comparable, unlike the headline in pixels" if g.closure_basis == "pixels" else "") + ". That mean "
         "is dominated by the few windows that pass near upright, where any error grows fast, even in an exactly right "
         "model." + floor + " One step: RMSE "
-        f"{math.degrees(g.one_step_rms_nominal_rad):.3f}° nominal, {math.degrees(g.one_step_rms_corrected_rad):.3f}° corrected.", "",
+        f"{math.degrees(g.one_step_rms_nominal_rad):.3f}° nominal, {math.degrees(g.one_step_rms_corrected_rad):.3f}° corrected"
+        + (f" ({math.degrees(g.one_step_rms_nominal_matched_rad):.3f}° nominal on the corrected model's matched angles)"
+           if g.one_step_rms_nominal_matched_rad is not None else "") + ".", "",
         f"Nominal g = {number(d.nominal['g'], '.4f')}, a = {number(d.nominal['a'], '.4f')}; "
         + (f"{REFITTED}: " if g.no_gap else "corrected: ")
         + ", ".join(f"{k} = {_fmt(v)}" for k, v in d.corrected.items()) + convention_text(d), "",

@@ -436,6 +436,9 @@ class Gap(_ByKey):
     in those angles. None otherwise."""
     matched_floor_interval: list[float] | None = None
     """95% bootstrap interval of ``matched_floor`` (a median over the held-out windows)."""
+    one_step_rms_nominal_matched_rad: float | None = None
+    """Where the corrected model's angles were matched through a fitted camera: the nominal model's held-out one-step
+    angle RMSE on those same angles, the one that compares with ``one_step_rms_corrected_rad`` (None otherwise)."""
 
 
 @dataclass
