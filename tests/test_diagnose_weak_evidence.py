@@ -124,6 +124,20 @@ def test_gravity_read_by_none_alone_is_not_named_when_the_rival_reads_none() -> 
     assert any("the two readings disagree, so no gain error is named" in n for n in far.notes)
 
 
+def test_a_gain_that_a_supported_command_effect_reads_away_is_not_named() -> None:
+    """A saturation of 1.5 beside a bias, which the selection rejected on the free run (at the twin's floor already):
+    its clip of the commands read "gain 0.912" beside the bias, and the set with the saturation reads no gain."""
+    final = fit.Model(("bias",), 0, {"g": NOMINAL.g, "a": 0.912 * NOMINAL.a, "tau0": -0.2})
+    kwargs = dict(w=None, camera=None, generic=NOTHING_LEFT, config=FAST)
+    assert "gain" in {e.effect for e in name_effects(final, NOMINAL, **kwargs).effects}
+    shadow = fit.Model(("bias", "saturation"), 0, {"g": NOMINAL.g, "a": 0.999 * NOMINAL.a, "tau0": -0.2, "s": 1.5})
+    why = "which lowers the one-step BIC by 50 more"
+    named = name_effects(final, NOMINAL, rival=shadow, rival_why=why, **kwargs)
+    assert {e.effect for e in named.effects} == {"bias"}, named.verdict
+    assert any(n.startswith("a refits to") and "with bias, but to x0.999 its reference with bias+saturation, " + why
+               in n for n in named.notes), named.notes
+
+
 def test_without_the_own_training_file_a_within_frame_reading_names_only_large_gain_or_gravity_errors() -> None:
     """Where the model's own training file is not found, a system that moves within the frame is judged against the
     nominal model's a and g, which read it a few percent off (dm_control against its own fast model: "gain 1.05",

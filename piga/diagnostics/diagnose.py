@@ -846,6 +846,15 @@ class Selection:
     typical free-run error within ``ambiguous_free_run``) in the round that added the last effect;
     the selection stops there. Where no set is accepted, a single that the held-out free run favours
     (by more than ``min_gain``) at a BIC within ``ambiguous_bic`` of "none". None: the choice is clear."""
+    shadow: Score | None = None
+    """The chosen effects and a deadzone or a saturation, not accepted, while its data support it: it lowers the
+    one-step BIC by more than ``bic_margin`` and leaves the typical held-out free-run error within
+    ``ambiguous_free_run`` of the chosen set's or lower, or it cuts that error by more than ``min_gain`` at a one-step BIC
+    within ``ambiguous_bic`` of theirs. An effect on the commands trades with a, so a gain read without it is bent
+    (:func:`name_effects`): a saturation of 1.5 beside a bias and gravity x1.3, at the twin's floor already, lowered
+    the BIC by 50 and was rejected on the free run, and its clip was read "gain 0.912". None: there is none."""
+    shadow_why: str = ""
+    """How the data support ``shadow``, in words."""
 
 
 def observed_speeds(theta: np.ndarray, dt: float, stale: np.ndarray | None) -> np.ndarray:
@@ -1091,6 +1100,22 @@ def select(candidates: Candidates, nom: Nominal, w: WindowSet, config: DiagnoseC
         rival = rivals[0]
         steps = [dataclass_replace(s, ambiguous=True) if s.tried == rival.name else s for s in steps]
         return Selection(chosen, steps, rival)
+    shadows = []  # (BIC drop, free-run drop, the set): a deadzone or a saturation beside the chosen effects
+    for e in (DEADZONE.name, SATURATION.name):
+        members = frozenset(chosen.model.effects) | {e}
+        if e in chosen.model.effects or members not in scored or deadzone_refuted(scored[members].model, w.fit1, config):
+            continue
+        _, bic_drop, free_drop = passes(scored[members], chosen)
+        if ((bic_drop > config.bic_margin and free_drop >= -config.ambiguous_free_run)
+                or (bic_drop >= -config.ambiguous_bic and free_drop > config.min_gain)):
+            shadows.append((bic_drop, free_drop, scored[members]))
+    if shadows:
+        bic_drop, free_drop, shadow = max(shadows, key=lambda x: x[0])
+        why = (f"which lowers the one-step BIC by {bic_drop:.3g} more, at a typical held-out free-run error "
+               f"{abs(100 * free_drop):.2g}% {'lower' if free_drop >= 0 else 'higher'}" if bic_drop > config.bic_margin
+               else f"which cuts the typical held-out free-run error by {100 * free_drop:.2g}% more, at a one-step BIC "
+               f"{'lower' if bic_drop >= 0 else 'higher'} by {abs(bic_drop):.2g}")
+        return Selection(chosen, steps, shadow=shadow, shadow_why=why)
     return Selection(chosen, steps)
 
 
@@ -1703,7 +1728,8 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
                  varied_actions: bool = True, rival: fit.Model | None = None,
                  own_readings: dict[tuple, fit.Model] | None = None,
                  damped: Callable[[], fit.Model | None] | None = None, own_missing: str | None = None,
-                 damping_taken: str | None = None, damping_step: float | None = None) -> Naming:
+                 damping_taken: str | None = None, damping_step: float | None = None,
+                 rival_why: str = "which the held-out free runs favour") -> Naming:
     """Step 4: the effects that the chosen physics and the camera stage name, with intervals, and the verdict.
 
     Gymnasium's own speed clip is no gap (for a recording that the file says came from Gymnasium's
@@ -1736,7 +1762,9 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
     does not see, fitted as ``final`` is, see :func:`select`), a gain or gravity error is named only when the rival,
     read against its own reference, shows it too: an effect left out bends g and a. ``own_readings`` keeps the own
     file's readings of one analysis, which may name its effects more than once (the same physics, the same reading),
-    and the recording's damped readings (:func:`damped_reference`).
+    and the recording's damped readings (:func:`damped_reference`). The same with ``rival`` the chosen effects and a
+    deadzone or a saturation that the selection left out while its data support it (:attr:`Selection.shadow`), said
+    ``rival_why``: an effect on the commands trades with a.
 
     With ``damped`` (where "none" was chosen: a function that gives the damping single read on the same windows as
     ``final``, or None, see :func:`damping_check`), a gravity error that "none" reads is named only where that form,
@@ -1836,6 +1864,7 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
     gain = abs(reference.values["a"]) / ref_a
     gain_error = abs(gain - 1) > config.gain_tolerance
     rival_gain = rival_g = None  # the gain and g ratio that the rival reads against its own reference
+    without = "+".join(final.effects) or "no effect"  # (the form the gain and g are read in, beside the rival's)
     if rival is not None:
         rival_ref_g, rival_ref_a = nom.g, abs(nom.a)
         read_rival = rival  # (its values; its name stays the rival's)
@@ -1850,9 +1879,8 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
     if gain_error and rival_gain is not None:
         if abs(rival_gain - 1) <= config.gain_tolerance:
             gain_error = False
-            notes.append(f"a refits to {reference.values['a']:.3f} (x{gain:.3f} the reference {ref_a:.3f}) with no effect, "
-                         f"but to x{rival_gain:.3f} its reference with {rival.name}, which the held-out free runs favour: "
-                         "not named a gain error")
+            notes.append(f"a refits to {reference.values['a']:.3f} (x{gain:.3f} the reference {ref_a:.3f}) with {without}, "
+                         f"but to x{rival_gain:.3f} its reference with {rival.name}, {rival_why}: not named a gain error")
     plain = None if refit is None else abs(refit.values["a"] / nom.a)  # the nominal form's reading
     if flipped and gain_error:
         # a model trained on flipped frames without --signed-actuation shrank its a toward 0: its size
@@ -2003,8 +2031,8 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
                      "the reference: not named a gain error")
     if gain_error and rival_gain is not None:
         gain_error = readings_agree(gain, rival_gain, [x / ref_a for x in a_int] if a_int else None)
-        notes.append(f"with {rival.name}, which the held-out free runs favour, a reads x{rival_gain:.3f} its reference "
-                     f"(x{gain:.3f} with no effect)" + ("" if gain_error else ": the two readings disagree, so no gain "
+        notes.append(f"with {rival.name}, {rival_why}, a reads x{rival_gain:.3f} its reference "
+                     f"(x{gain:.3f} with {without})" + ("" if gain_error else ": the two readings disagree, so no gain "
                                                         "error is named"))
     if gain_error:
         # (the interval reaches the rival's reading, which agrees: the bootstrap knows only the chosen form)
@@ -2033,9 +2061,8 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
                      f"({own_form}): the difference compensates the effects, not a gravity error")
     if g_error and rival_g is not None and abs(rival_g - 1) <= config.gain_tolerance:
         g_error = False
-        notes.append(f"g refits to {reference.values['g']:.3f} (x{g_ratio:.3f} the reference {ref_g:.3f}) with no effect, "
-                     f"but to x{rival_g:.3f} its reference with {rival.name}, which the held-out free runs favour: not "
-                     "named a gravity error")
+        notes.append(f"g refits to {reference.values['g']:.3f} (x{g_ratio:.3f} the reference {ref_g:.3f}) with {without}, "
+                     f"but to x{rival_g:.3f} its reference with {rival.name}, {rival_why}: not named a gravity error")
     alt_g = None  # g as the damping single reads it, against its own reference, where "none" was chosen
     if g_error and not final.effects and damped is not None and (alt := damped()) is not None:
         # a change of mass or inertia scales a and the hinge damping's effect together; "none" holds the damping at the
@@ -2066,9 +2093,8 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
                          "the reference: not named a gravity error")
         elif rival_g is not None and not readings_agree(g_ratio, rival_g, sorted(x / ref_g for x in g_int) if g_int
                                                         else None):
-            notes.append(f"g refits to x{g_ratio:.3f} the reference with no effect and to x{rival_g:.3f} its reference "
-                         f"with {rival.name}, which the held-out free runs favour: the two readings disagree, so no "
-                         "gravity error is named")
+            notes.append(f"g refits to x{g_ratio:.3f} the reference with {without} and to x{rival_g:.3f} its reference "
+                         f"with {rival.name}, {rival_why}: the two readings disagree, so no gravity error is named")
         else:
             g_ratios = reaching(sorted(x / ref_g for x in g_int) if g_int else None, rival_g)
             if g_ratios and alt_g is not None and not g_ratios[0] <= alt_g <= g_ratios[1]:
@@ -2654,6 +2680,12 @@ def analyse(obs: Observations, nom: Nominal, config: DiagnoseConfig = DiagnoseCo
     else:
         ambiguity = None if selection.rival is None else ambiguity_of(selection.chosen, selection.rival, nom, reading,
                                                                       config, draws)
+        shadow = selection.shadow
+        if shadow is not None and set(final.effects) == set(selection.chosen.model.effects):
+            # a deadzone or a saturation that the data support beside the chosen effects: a gain or gravity error is
+            # named only where it reads one too (name_effects)
+            shadow_model = fit.fit(shadow.model, nom, reading.fit) if reading is not windows else shadow.model
+            kwargs.update(rival=shadow_model, rival_why=selection.shadow_why)
         naming = name_effects(final, nom, reading, camera, generic, config, ambiguity=ambiguity, damped=damped, **kwargs)
     if naming.physics is not None:
         # the named physics is the recording's reading with the damping that the two files show differently, not the
