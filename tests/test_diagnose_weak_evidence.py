@@ -296,6 +296,24 @@ def test_a_rival_that_changes_no_claim_is_not_said(monkeypatch) -> None:
     assert not any(s["ambiguous"] for s in d.selection)
 
 
+def test_a_rival_that_reads_the_same_claims_is_said_beside_them(monkeypatch) -> None:
+    """A bias of 0.08 beside a gain of 1.3 on 30 sequences of 20 frames: "none" read "gain 1.39 (1.36..1.42)", the bias
+    rival that the free run favoured read x1.314, and neither the interval nor a note said so."""
+    module = importlib.import_module("piga.diagnostics.diagnose")
+    real = module.select
+
+    def with_a_rival(candidates, *args, **kwargs):
+        s = real(candidates, *args, **kwargs)
+        bias = next(c for c in candidates.singles if c.model.effects == ("bias",))
+        return module.Selection(candidates.refit, [replace(x, ambiguous=x.tried == "bias") for x in s.steps], bias)
+
+    monkeypatch.setattr(module, "select", with_a_rival)
+    d = analyse(planted({"gain": 1.3, "bias": 0.05}, n=60, t=20), NOMINAL, replace(FAST, max_effects=1))
+    assert d.verdict_class == "gain", d.verdict
+    assert any(re.match(r"with bias, which the held-out free runs favour, a reads x1\.\d+ its reference \(x1\.\d+ with "
+                        r"no effect\)$", n) for n in d.notes), d.notes
+
+
 def test_a_recording_whose_motion_answers_actions_before_they_are_logged_is_refused() -> None:
     """Frames one step early against their actions had read "within_frame + gain 0.889": no candidate is a lead."""
     obs = planted({})
