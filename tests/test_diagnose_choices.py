@@ -398,7 +398,9 @@ def test_a_pair_whose_effects_fail_alone_beats_a_single_that_passes(monkeypatch)
     ((-50.0, 0.0099), "bias+saturation"),    # the BIC sees it, the free run is at its floor already
     ((-6.7, 0.0043), "bias+saturation"),     # the free run sees it, the BIC barely
     ((-50.0, 0.0120), None),                 # the free run refutes it
-    ((-4.0, 0.0095), None),                  # neither sees it
+    ((-2.1, 0.0091), "bias+saturation"),     # both lean its way, each short of its margin
+    ((-4.0, 0.0098), None),                  # neither sees it
+    ((+2.0, 0.0091), None),                  # the BIC leans against it
     ((+15.0, 0.0040), None),                 # the BIC refutes it
 ])
 def test_a_command_effect_the_data_support_beside_the_chosen_ones_is_kept_as_their_shadow(
@@ -431,6 +433,45 @@ def test_a_command_effect_the_data_support_beside_the_chosen_ones_is_kept_as_the
     assert chosen.chosen.model.effects == ("bias",), chosen.steps
     assert (chosen.shadow.name if chosen.shadow else None) == shadow
     assert ("one-step BIC by 50 more" in chosen.shadow_why) == (pair[0] == -50.0 and shadow is not None)
+
+
+@pytest.mark.parametrize("single_a, refitted", [(0.933, True), (0.99, False)])
+def test_a_command_effect_is_fitted_from_the_nominal_a_too_where_the_set_without_it_bent_a(
+        monkeypatch, single_a: float, refitted: bool) -> None:
+    """A deadzone of 0.25 and a saturation of 1.5: the deadzone alone read a = 0.933, and the pair fitted from there held
+    the saturation at 1.8, binding on few actions; from the nominal a it reads the truth, at a lower loss."""
+    import importlib
+    from types import SimpleNamespace
+
+    from piga.diagnostics.diagnose import Candidates
+    from piga.diagnostics.results import Score
+
+    starts = []
+
+    def fake_fit(effects: tuple[str, ...], start: dict, *_: object, **__: object) -> fit.Model:
+        starts.append((effects, start["a"]))
+        truth = abs(start["a"] - NOMINAL.a) < 1e-9
+        return fit.Model(effects, 0, {**start, "d": 0.25 if truth else 0.21, "s": 1.5 if truth else 1.8})
+
+    def fake_score(m: fit.Model, *_: object) -> Score:
+        singles = {(): (0.0, 1.0), ("deadzone",): (-60.0, 0.65), ("saturation",): (5.0, 0.9)}
+        bic, typical = singles[m.effects] if m.effects in singles else (-75.0, 0.4) if m.values["s"] == 1.5 else \
+            (-61.0, 0.64)
+        return Score(m, bic, typical, np.zeros(1), typical)
+
+    diagnose = importlib.import_module("piga.diagnostics.diagnose")
+    monkeypatch.setattr(diagnose, "score", fake_score)
+    monkeypatch.setattr(diagnose.fit, "fit_candidate", fake_fit)
+    monkeypatch.setattr(diagnose.fit, "fitted_loss", lambda m, *_: 0.5 if m.values["s"] == 1.5 else 1.0)
+    monkeypatch.setattr(diagnose, "deadzone_refuted", lambda *_: False)
+    singles = [fake_score(fit.Model(("deadzone",), 0, {"g": 10.0, "a": single_a, "d": 0.21}), None),
+               fake_score(fit.Model(("saturation",), 0, {"g": 10.0, "a": 0.99, "s": 1.9}), None)]
+    refit = fake_score(fit.Model((), 0, {"g": 10.0, "a": 0.8}), None)
+    s = select(Candidates(refit, refit, singles), NOMINAL, SimpleNamespace(fit=None, fit1=None, free=None),
+               replace(FAST, max_effects=2))
+    pair = ("deadzone", "saturation")
+    assert [a for effects, a in starts if effects == pair] == ([single_a, NOMINAL.a] if refitted else [single_a])
+    assert s.chosen.model.effects == (pair if refitted else ("deadzone",)), s.steps
 
 
 @pytest.mark.parametrize("saturation_bic, pair_fitted", [(-10.2, True), (-1.1, False)])
