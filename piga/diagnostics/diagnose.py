@@ -850,8 +850,8 @@ class Selection:
     """The chosen effects and a deadzone or a saturation, not accepted, while its data support it: it lowers the
     one-step BIC by more than ``bic_margin`` and leaves the typical held-out free-run error within
     ``ambiguous_free_run`` of the chosen set's or lower, or it cuts that error by more than ``min_gain`` at a one-step BIC
-    within ``ambiguous_bic`` of theirs, or by more than ``ambiguous_free_run`` at a BIC no higher. An effect on the commands trades with a, so a gain read without it is bent
-    (:func:`name_effects`): a saturation of 1.5 beside a bias and gravity x1.3, at the twin's floor already, lowered
+    within ``ambiguous_bic`` of theirs, or by more than ``ambiguous_free_run`` at a BIC no higher. An effect on the
+    commands trades with a, so a gain read without it is bent (:func:`name_effects`): a saturation of 1.5 beside a bias and gravity x1.3, at the twin's floor already, lowered
     the BIC by 50 and was rejected on the free run, and its clip was read "gain 0.912". None: there is none."""
     shadow_why: str = ""
     """How the data support ``shadow``, in words."""
@@ -1028,7 +1028,7 @@ def select(candidates: Candidates, nom: Nominal, w: WindowSet, config: DiagnoseC
         if added & {DEADZONE.name, SATURATION.name} and abs(abs(a / nom.a) - 1) > config.gain_tolerance:
             # a command effect trades with a: from a start whose a the set without it bent, its level stays where it
             # changes next to nothing (a deadzone of 0.25 and a saturation of 1.5: the deadzone alone read a = 0.937, the
-            # pair fitted from there held the saturation at 1.95, where it binds on few actions, and the truth was never
+            # pair fitted from there held the saturation at 1.8, where it binds on few actions, and the truth was never
             # met: "deadzone 0.21; gain 0.937"); so it is fitted from the nominal a too, and the lower loss kept
             again = fit.fit_candidate(effects, {**start.values, "a": math.copysign(abs(nom.a), a)}, nom, w.fit)
             if fit.fitted_loss(again, nom, w.fit) < fit.fitted_loss(m, nom, w.fit):
@@ -2701,13 +2701,14 @@ def analyse(obs: Observations, nom: Nominal, config: DiagnoseConfig = DiagnoseCo
     else:
         ambiguity = None if selection.rival is None else ambiguity_of(selection.chosen, selection.rival, nom, reading,
                                                                       config, draws)
-        shadow = selection.shadow
+        shadow, beside = selection.shadow, {}
         if shadow is not None and set(final.effects) == set(selection.chosen.model.effects):
             # a deadzone or a saturation that the data support beside the chosen effects: a gain or gravity error is
             # named only where it reads one too (name_effects)
-            shadow_model = fit.fit(shadow.model, nom, reading.fit) if reading is not windows else shadow.model
-            kwargs.update(rival=shadow_model, rival_why=selection.shadow_why)
-        naming = name_effects(final, nom, reading, camera, generic, config, ambiguity=ambiguity, damped=damped, **kwargs)
+            beside = dict(rival=fit.fit(shadow.model, nom, reading.fit) if reading is not windows else shadow.model,
+                          rival_why=selection.shadow_why)
+        naming = name_effects(final, nom, reading, camera, generic, config, ambiguity=ambiguity, damped=damped,
+                              **beside, **kwargs)
     if naming.physics is not None:
         # the named physics is the recording's reading with the damping that the two files show differently, not the
         # chosen candidate: the corrected model is that reading, and the closure is measured for it (measured:
