@@ -314,6 +314,25 @@ def test_a_rival_that_reads_the_same_claims_is_said_beside_them(monkeypatch) -> 
                         r"no effect\)$", n) for n in d.notes), d.notes
 
 
+def test_a_command_effect_the_data_lean_to_is_said_where_no_gain_brings_it_up(monkeypatch) -> None:
+    """A deadzone of 0.25 and a saturation of 1.5: the set with the saturation, left out, was said only where it read
+    away a gain; without a gain claim the saturation went unsaid, with no note."""
+    module = importlib.import_module("piga.diagnostics.diagnose")
+    real = module.select
+
+    def with_a_shadow(*args, **kwargs):
+        s = real(*args, **kwargs)
+        m = s.chosen.model
+        shadow = replace(s.chosen, model=fit.Model(m.effects + ("saturation",), m.delay, {**m.values, "s": 1.5}))
+        return replace(s, shadow=shadow, shadow_why="which cuts the typical held-out free-run error by 8.7% more")
+
+    monkeypatch.setattr(module, "select", with_a_shadow)
+    d = analyse(planted({"bias": 0.3}, n=60, t=20), NOMINAL, replace(FAST, max_effects=1))
+    assert d.verdict_class == "bias", d.verdict
+    assert "saturation is not named, but the data lean its way: bias+saturation, which cuts the typical held-out " \
+           "free-run error by 8.7% more, was not accepted" in " ".join(d.notes), d.notes
+
+
 def test_a_recording_whose_motion_answers_actions_before_they_are_logged_is_refused() -> None:
     """Frames one step early against their actions had read "within_frame + gain 0.889": no candidate is a lead."""
     obs = planted({})

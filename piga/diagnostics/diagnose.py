@@ -2709,6 +2709,14 @@ def analyse(obs: Observations, nom: Nominal, config: DiagnoseConfig = DiagnoseCo
                           rival_why=selection.shadow_why)
         naming = name_effects(final, nom, reading, camera, generic, config, ambiguity=ambiguity, damped=damped,
                               **beside, **kwargs)
+        if beside and not any(shadow.name in n for n in naming.notes):
+            # said where no gain or gravity claim brought it up (a deadzone of 0.25 and a saturation of 1.5 beside a
+            # bias, on 100 sequences of 20 frames, read "bias; deadzone 0.23" with the saturation unsaid)
+            added = "+".join(e for e in shadow.model.effects if e not in final.effects)
+            naming = dataclass_replace(naming, notes=[*naming.notes, (
+                f"{added} is not named, but the data lean its way: {shadow.name}, {selection.shadow_why}, was not "
+                f"accepted, as an effect needs both a one-step BIC drop of {config.bic_margin:g} and a typical held-out "
+                f"free-run cut of {100 * config.min_gain:g}% against the set without it")])
     if naming.physics is not None:
         # the named physics is the recording's reading with the damping that the two files show differently, not the
         # chosen candidate: the corrected model is that reading, and the closure is measured for it (measured:
