@@ -2710,8 +2710,8 @@ def analyse(obs: Observations, nom: Nominal, config: DiagnoseConfig = DiagnoseCo
         naming = name_effects(final, nom, reading, camera, generic, config, ambiguity=ambiguity, damped=damped,
                               **beside, **kwargs)
         if beside and not any(shadow.name in n for n in naming.notes):
-            # said where no gain or gravity claim brought it up (a deadzone of 0.25 and a saturation of 1.5 beside a
-            # bias, on 100 sequences of 20 frames, read "bias; deadzone 0.23" with the saturation unsaid)
+            # said where no gain or gravity claim brought it up: where the chosen effects read a within the tolerance,
+            # no gain is checked against the set, and the command effect that the data lean to went unsaid
             added = "+".join(e for e in shadow.model.effects if e not in final.effects)
             naming = dataclass_replace(naming, notes=[*naming.notes, (
                 f"{added} is not named, but the data lean its way: {shadow.name}, {selection.shadow_why}, was not "
