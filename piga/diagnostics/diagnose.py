@@ -851,8 +851,9 @@ class Selection:
     one-step BIC by more than ``bic_margin`` and leaves the typical held-out free-run error within
     ``ambiguous_free_run`` of the chosen set's or lower, or it cuts that error by more than ``min_gain`` at a one-step BIC
     within ``ambiguous_bic`` of theirs, or by more than ``ambiguous_free_run`` at a BIC no higher. An effect on the
-    commands trades with a, so a gain read without it is bent (:func:`name_effects`): a saturation of 1.5 beside a bias and gravity x1.3, at the twin's floor already, lowered
-    the BIC by 50 and was rejected on the free run, and its clip was read "gain 0.912". None: there is none."""
+    commands trades with a, so a gain read without it is bent (:func:`name_effects`): a saturation of 1.5 beside a
+    bias and gravity x1.3, at the twin's floor already, lowered the BIC by 50 and was rejected on the free run, and
+    its clip was read "gain 0.912". None: there is none."""
     shadow_why: str = ""
     """How the data support ``shadow``, in words."""
 
@@ -952,9 +953,9 @@ def select(candidates: Candidates, nom: Nominal, w: WindowSet, config: DiagnoseC
     (:func:`clip_refuted`, with ``speeds`` the observed speeds, :func:`observed_speeds`, and ``known_clip`` the level of
     a clip that the file's system has) or a deadzone that
     holds almost no action (:func:`deadzone_refuted`) is passed over: the clip alone is not scored, but extends sets,
-    each of whose clips is refuted or not at its own level; the deadzone's are scored, and may steer which pairs the beam extends (a deadzone fitted at a negative width,
-    common as a stand-in for a larger gain at small actions), but are never accepted. When another
-    accepted set explains the data about as well as the chosen one (:func:`close_rival`), the
+    each of whose clips is refuted or not at its own level; the deadzone's are scored, and may steer which pairs the
+    beam extends (a deadzone fitted at a negative width, common as a stand-in for a larger gain at small actions), but
+    are never accepted. When another accepted set explains the data about as well as the chosen one (:func:`close_rival`), the
     selection returns both: it cannot tell them apart."""
     from tqdm.auto import tqdm
 
