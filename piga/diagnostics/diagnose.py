@@ -844,8 +844,9 @@ class Selection:
     rival: Score | None = None
     """A candidate that explains the data about as well as ``chosen`` (BIC within ``ambiguous_bic``,
     typical free-run error within ``ambiguous_free_run``) in the round that added the last effect;
-    the selection stops there. Where no set is accepted, a single that the held-out free run favours
-    (by more than ``min_gain``) at a BIC within ``ambiguous_bic`` of "none". None: the choice is clear."""
+    the selection stops there. Where no set is accepted, a set that the held-out free run favours
+    (by more than ``min_gain``) at a BIC within ``ambiguous_bic`` of "none", or else a deadzone or a saturation (or
+    both) that lowers the BIC at a free run within ``ambiguous_free_run``. None: the choice is clear."""
     shadow: Score | None = None
     """The chosen effects and a deadzone or a saturation, not accepted, while its data support it: it lowers the
     one-step BIC by more than ``bic_margin`` and leaves the typical held-out free-run error within
@@ -853,7 +854,8 @@ class Selection:
     within ``ambiguous_bic`` of theirs, or by more than ``ambiguous_free_run`` at a BIC no higher. An effect on the
     commands trades with a, so a gain read without it is bent (:func:`name_effects`): a saturation of 1.5 beside a
     bias and gravity x1.3, at the twin's floor already, lowered the BIC by 50 and was rejected on the free run, and
-    its clip was read "gain 0.912". None: there is none."""
+    its clip was read "gain 0.912". Or the chosen effects and any other effect (not Gymnasium's own clip) that lowers
+    the BIC at all and cuts that error by more than ``min_gain``. None: there is none."""
     shadow_why: str = ""
     """How the data support ``shadow``, in words."""
     rival_why: str = "which the held-out free runs favour"
