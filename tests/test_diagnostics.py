@@ -656,12 +656,17 @@ def test_actions_beyond_the_range_are_noted() -> None:
 
 
 def test_an_interval_is_printed_with_the_digits_that_keep_its_bounds_apart() -> None:
-    """Gravity x2 read "gravity 2 factor on the nominal g (95% interval 2..2)" while its record held 1.9973..2.0010."""
+    """Gravity x2 read "gravity 2 factor on the nominal g (95% interval 2..2)" while its record held 1.9973..2.0010; a
+    gain of 1.2 read "gain 1.21 (95% interval 1.2..1.22)" while its record held 1.2047..1.2151."""
     from piga.diagnostics.results import Effect, interval_text
 
     assert interval_text(1.9973, 2.0010) == "1.997..2.001" and interval_text(0.864, 0.949) == "0.864..0.949"
     assert interval_text(1.9973, 2.0010, digits=4) == "1.997..2.001" and interval_text(5.04, 5.04) == "5.04..5.04"
     assert "(95% interval 1.997..2.001)" in Effect("gravity", 2.0, "factor on the nominal g", [1.9973, 2.0010]).describe()
+    # nor rounded across a value it does not hold: a gain of 1.2's interval 1.2047..1.2151 read "1.2..1.22"
+    assert interval_text(1.2047, 1.2151) == "1.205..1.215" and interval_text(0.0965, 0.101) == "0.0965..0.101"
+    assert "gain 1.21 factor on the nominal a (95% interval 1.205..1.215)" in Effect(
+        "gain", 1.2099, "factor on the nominal a", [1.2047, 1.2151]).describe()
 
 
 def test_a_printed_value_lies_within_its_printed_interval() -> None:

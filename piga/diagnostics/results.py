@@ -32,10 +32,19 @@ class _ByKey:
         return getattr(self, key) if key in self else default
 
 
+#: The most that rounding may move a bound of a printed interval, as a fraction of the interval's width: a gain's
+#: interval of 1.2047..1.2151 printed "1.2..1.22", which reads as holding 1.2; it prints "1.205..1.215".
+ROUNDING_OF_WIDTH = 0.25
+
+
 def _interval_digits(low: float, high: float, digits: int) -> int:
-    """``digits``, or as many more (up to 8) as keep two different bounds apart."""
+    """``digits``, or as many more (up to 8) as keep two different bounds apart and move neither by more than
+    :data:`ROUNDING_OF_WIDTH` of the width."""
     for digits in range(digits, max(digits, 8) + 1):
-        if f"{low:.{digits}g}" != f"{high:.{digits}g}" or low == high:
+        if low == high:
+            break
+        lo, hi = f"{low:.{digits}g}", f"{high:.{digits}g}"
+        if lo != hi and max(abs(float(lo) - low), abs(float(hi) - high)) <= ROUNDING_OF_WIDTH * abs(high - low):
             break
     return digits
 
