@@ -401,6 +401,7 @@ def test_a_pair_whose_effects_fail_alone_beats_a_single_that_passes(monkeypatch)
     ((-2.1, 0.0091), "bias+saturation"),     # both lean its way, each short of its margin
     ((-4.0, 0.0098), None),                  # neither sees it
     ((+2.0, 0.0091), None),                  # the BIC leans against it
+    ((+6.4, 0.0087), None),                  # the free run sees it, the BIC rises (a saturation of 1.89, absent)
     ((+15.0, 0.0040), None),                 # the BIC refutes it
 ])
 def test_a_command_effect_the_data_support_beside_the_chosen_ones_is_kept_as_their_shadow(
