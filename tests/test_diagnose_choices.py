@@ -1168,3 +1168,21 @@ def test_a_command_effect_both_tests_see_as_well_as_none_is_its_rival(
         if rival:  # (said as what it is: the free run does not favour it)
             assert chosen.rival_why == ("which lowers the one-step BIC by 3.7 at a typical held-out free-run error 3.8% "
                                         "higher than no effect's"), chosen.rival_why
+
+
+def test_the_nominal_row_read_on_other_angles_says_it_is_not_comparable() -> None:
+    """A gain of 0.85, read on angles matched to the decoder's renders, showed the nominal model (on the encoder's
+    angles) 398 lower in BIC than "none" refitted, with nothing to say that the two rows were read on other angles. And
+    Gymnasium's own clip alone is no chosen effect whose values are read (a note said they were)."""
+    from piga.diagnostics.diagnose import Candidates, candidate_table, has_gymnasiums_clip
+    from piga.diagnostics.results import Score
+
+    nominal = Score(fit.Model((), 0, {"g": 9.99, "a": 1.0}), -13416.0, 1.0, np.zeros(1), 7.8e-5)
+    refit = Score(fit.Model((), 0, {"g": 9.99, "a": 0.854}), -13018.0, 1.0, np.zeros(1), 5.8e-5)
+    assert candidate_table(Candidates(nominal, refit, []))[0].candidate == "nominal (no refit)"
+    rows = candidate_table(Candidates(nominal, refit, []), encoder=True)
+    assert rows[0].candidate == "nominal (no refit; the encoder's angles, not comparable)" and rows[1].delta_bic == 0
+    clip = fit.Model(("speed_clip",), 0, {"g": 9.99, "a": 1.0, "v": 8.007})
+    assert has_gymnasiums_clip(clip, True, FAST) and not has_gymnasiums_clip(clip, False, FAST)
+    assert not has_gymnasiums_clip(clip.with_values({**clip.values, "v": 6.0}), True, FAST)
+    assert not has_gymnasiums_clip(refit.model, True, FAST)

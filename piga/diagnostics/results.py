@@ -177,7 +177,8 @@ class CandidateRow(_ByKey):
     """A row of the candidate table."""
 
     candidate: str
-    """"nominal (no refit)", "none (g, a refitted)" or the effect's name."""
+    """"nominal (no refit)" (with "; the encoder's angles, not comparable" where the others are read on other angles),
+    "none (g, a refitted)" or the effect's name."""
     bic: float
     """One-step BIC on the fit split."""
     held_out_free_run_mse: float
