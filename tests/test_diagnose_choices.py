@@ -794,6 +794,23 @@ def test_effects_that_predict_worse_than_the_nominal_are_not_a_correction(damped
                              "recording: no gravity error is claimed"]
     slightly = replace(d.gap, typical_free_run_mse_corrected=1.09 * d.gap.typical_free_run_mse_nominal)
     assert _worse_than_nominal(naming, slightly, final, NOMINAL) is naming  # noise, as a small gain measured
+    # straying further only without a rival of "none" that cuts the nominal's error is that ambiguity (a bias of -0.05
+    # beside a gain of 0.9: "gain 0.889" strayed to 6.9e-05 against 6.52e-05 rad², the bias rival to 3.25e-05)
+    from piga.diagnostics.results import Ambiguity
+
+    bias = Ambiguity(between=["none", "bias"], candidates=["none", "bias"], bic=[0.0, -3.9],
+                     typical_free_run_mse=[6.9e-5, 3.25e-5], intervals_overlap=None,
+                     separate_by="the pendulum left at rest with no action (a bias moves its resting angle)")
+    gain = replace(d.gap, typical_free_run_mse_nominal=6.52e-5, typical_free_run_mse_corrected=6.9e-5,
+                   typical_free_run_mse_floor=2.76e-5, typical_free_run_mse_floor_interval=[2.04e-5, 3.38e-5])
+    said = _worse_than_nominal(naming, gain, final, NOMINAL, unsaid=bias)
+    assert said.verdict_class == "ambiguous" and said.effects == naming.effects, said.verdict
+    assert said.verdict.startswith(naming.effects[0].describe() + "; ambiguous between none and bias")
+    assert said.verdict.endswith("without bias, the physics named strays further than the nominal model's on its "
+                                 "typical held-out free run (angle MSE 6.9e-05 against 6.52e-05 rad²)")
+    assert _worse_than_nominal(naming, gain, final, NOMINAL).verdict_class == "unexplained"  # no rival: as before
+    no_cut = replace(bias, typical_free_run_mse=[6.9e-5, 6.6e-5])  # a rival that does not beat the nominal
+    assert _worse_than_nominal(naming, gain, final, NOMINAL, unsaid=no_cut).verdict_class == "unexplained"
 
 
 def test_a_camera_effect_that_predicts_worse_in_pixels_is_not_a_correction(damped) -> None:
@@ -1041,6 +1058,13 @@ def test_an_ambiguity_says_which_side_the_free_runs_favour() -> None:
     favoured = described([2.09e-3, 2.79e-4])
     assert "which favour damping" in favoured and "the one-step fit cannot tell them apart" in favoured
     assert "the data cannot tell them apart" in described([2.09e-3, 2.0e-3])
+    # a pair that the one-step fit favours as a whole, not each of its effects (bias+saturation, ΔBIC 22.7, the bias
+    # 5.2 beside the saturation alone), is not one that it "cannot tell apart"
+    pair = Ambiguity(between=["none", "bias+saturation"], candidates=["none", "bias+saturation"], bic=[0.0, -22.7],
+                     typical_free_run_mse=[2.65e-4, 6.09e-5], intervals_overlap=None, separate_by="more data").describe()
+    assert ("(ΔBIC 22.7, typical held-out free-run errors 0.000265 and 6.09e-05 rad²): the one-step fit favours "
+            "bias+saturation as a whole, but not each of its effects beside the others, and the free runs of a few "
+            "held-out sequences, which favour bias+saturation, are too few to decide") in pair, pair
 
 
 def test_separating_data_that_the_recording_already_holds_asks_for_more_of_it() -> None:

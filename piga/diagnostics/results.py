@@ -246,8 +246,14 @@ class Ambiguity(_ByKey):
         # a rival of "none" is one that the held-out free runs favour where the one-step fit cannot choose: say so
         lower = 1 - DiagnoseConfig.min_gain  # the free-run drop that makes a rival
         favoured = b if second < lower * first else a if first < lower * second else None
-        why = ("the one-step fit cannot tell them apart, and the free runs of a few held-out sequences, which favour "
-               f"{favoured}, are too few to decide" if favoured else "the data cannot tell them apart")
+        # (a set the one-step fit favours as a whole but not each of its effects beside the others: bias+saturation
+        # lowered the BIC by 22.7, the bias by 5.2 beside the saturation alone, and "cannot tell them apart" was said)
+        whole = (abs(self.bic[1] - self.bic[0]) > DiagnoseConfig.ambiguous_bic
+                 and "+" in (b if self.bic[1] < self.bic[0] else a))
+        one_step = (f"the one-step fit favours {b if self.bic[1] < self.bic[0] else a} as a whole, but not each of its "
+                    "effects beside the others" if whole else "the one-step fit cannot tell them apart")
+        why = (f"{one_step}, and the free runs of a few held-out sequences, which favour {favoured}, are too few to "
+               "decide" if favoured else "the data cannot tell them apart")
         return (f"ambiguous between {a} and {b} (ΔBIC {abs(self.bic[1] - self.bic[0]):.1f}, typical held-out free-run "
                 f"errors {first:.3g} and {second:.3g} rad²): {why}; {self.separate_by} would separate them")
 
