@@ -1107,14 +1107,17 @@ def test_the_pixel_floor_is_the_typical_windows_where_the_mean_over_frames_lies_
 
 @pytest.mark.parametrize("pair, shadow", [
     ((-4.1, 0.31), "damping+friction"),      # both lean its way: the free run by 69%, the BIC by 4.1
-    ((+1.0, 0.31), None),                    # the BIC leans against it
+    ((+1.0, 0.6), None),                     # the BIC leans against it, the free run cut by 40%
+    ((+1.6, 0.5), "damping+friction"),       # the BIC leans against it, the free run halved
+    ((+11.0, 0.3), None),                    # the BIC refutes it
     ((-4.1, 0.95), None),                    # the free run barely sees it
 ])
 def test_any_effect_both_tests_lean_to_beside_the_chosen_ones_is_their_shadow(
         monkeypatch, pair: tuple[float, float], shadow: str | None) -> None:
     """A damping of 0.1 with friction of 0.08 and gravity x0.9 read "damping 0.12; gravity 0.901", the friction unsaid:
-    beside the damping it cut the typical free-run error by 69% at a BIC drop of 4.1. Gymnasium's own clip beside the
-    chosen effects is no hypothesis, and no shadow, however the tests lean."""
+    beside the damping it cut the typical free-run error by 69% at a BIC drop of 4.1; a damping of 0.25 with friction
+    of 0.06 and a gain of 0.8 the same, where the friction halved it at a BIC 1.6 higher. Gymnasium's own clip beside
+    the chosen effects is no hypothesis, and no shadow, however the tests lean."""
     import importlib
     from types import SimpleNamespace
 
@@ -1141,7 +1144,7 @@ def test_any_effect_both_tests_lean_to_beside_the_chosen_ones_is_their_shadow(
                     replace(FAST, max_effects=2), known_clip=8.0)
     assert chosen.chosen.model.effects == ("damping",), chosen.steps
     assert (chosen.shadow.name if chosen.shadow else None) == shadow
-    if shadow:
+    if shadow and pair[0] < 0:
         assert chosen.shadow_why.startswith("which cuts the typical held-out free-run error by 69% more, at a one-step "
                                             "BIC lower by 4.1"), chosen.shadow_why
 
