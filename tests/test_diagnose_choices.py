@@ -1062,7 +1062,8 @@ def test_an_ambiguity_says_which_side_the_free_runs_favour() -> None:
     # 5.2 beside the saturation alone), is not one that it "cannot tell apart"
     pair = Ambiguity(between=["none", "bias+saturation"], candidates=["none", "bias+saturation"], bic=[0.0, -22.7],
                      typical_free_run_mse=[2.65e-4, 6.09e-5], intervals_overlap=None, separate_by="more data").describe()
-    assert ("(ΔBIC 22.7, typical held-out free-run errors 0.000265 and 6.09e-05 rad²): the one-step fit favours "
+    assert ("(ΔBIC 22.7, lower for bias+saturation; typical held-out free-run errors 0.000265 and 6.09e-05 rad²): "
+            "the one-step fit favours "
             "bias+saturation as a whole, but not each of its effects beside the others, and the free runs of a few "
             "held-out sequences, which favour bias+saturation, are too few to decide") in pair, pair
 

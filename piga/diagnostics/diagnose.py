@@ -1799,6 +1799,12 @@ def _zoom_first(naming: Naming, camera: CameraFindings | None, config: CameraCon
     return Naming(naming.effects, naming.notes, verdict, naming.verdict_class)
 
 
+#: The unit of a gain or gravity error read against the model's own training file, read in the same form (a gain of
+#: 1.2 beside a damping read "gain 1.21 factor on the nominal a", where a was 1.195 times the nominal's: the factor was
+#: on the training file's reading, 0.989).
+REFERENCE_UNIT = {k: f"factor on the {k} read from the model's training file" for k in ("a", "g")}
+
+
 def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: CameraFindings | None,
                  generic: GenericBasis, config: DiagnoseConfig, from_gymnasium: bool = True,
                  ambiguity: Ambiguity | None = None, flip_bic_drop: float | None = None,
@@ -2115,7 +2121,7 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
                                                         "error is named"))
     if gain_error:
         # (the interval reaches the rival's reading, which agrees: the bootstrap knows only the chosen form)
-        effects.append(Effect("gain", gain, "factor on the nominal a",
+        effects.append(Effect("gain", gain, REFERENCE_UNIT["a"] if own_reference else "factor on the nominal a",
                               reaching([x / ref_a for x in a_int] if a_int else None, rival_gain)))
         if not a_int:
             notes.append(f"a refits to {reference.values['a']:.3f} (x{gain:.3f} the reference {ref_a:.3f}); without "
@@ -2186,7 +2192,8 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
                              "effect's) reads g: these frames do not pin the damping down, and a damping left out bends "
                              "g beyond what the bootstrap of no effect sees")
             # named as the gain is: gravity x0.5 read "no significant gap" with the gap 1,500 times the corrected error
-            effects.append(Effect("gravity", g_ratio, "factor on the nominal g", g_ratios))
+            effects.append(Effect("gravity", g_ratio, REFERENCE_UNIT["g"] if own_reference else "factor on the nominal g",
+                                  g_ratios))
             notes.append(f"g refits to {reference.values['g']:.3f} (x{g_ratio:.3f} the reference {ref_g:.3f}): gravity, or "
                          "the pendulum's length, differs from the identified model")
     if any(isinstance(EFFECTS.get(e.effect), TorqueTerm) for e in effects):

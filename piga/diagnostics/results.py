@@ -254,8 +254,11 @@ class Ambiguity(_ByKey):
                     "effects beside the others" if whole else "the one-step fit cannot tell them apart")
         why = (f"{one_step}, and the free runs of a few held-out sequences, which favour {favoured}, are too few to "
                "decide" if favoured else "the data cannot tell them apart")
-        return (f"ambiguous between {a} and {b} (ΔBIC {abs(self.bic[1] - self.bic[0]):.1f}, typical held-out free-run "
-                f"errors {first:.3g} and {second:.3g} rad²): {why}; {self.separate_by} would separate them")
+        # (which side the BIC is on: "ΔBIC 22.7" and "ΔBIC 3.7" were read as the same side, one lower, one higher)
+        lowest = b if self.bic[1] < self.bic[0] else a
+        return (f"ambiguous between {a} and {b} (ΔBIC {abs(self.bic[1] - self.bic[0]):.1f}, lower for {lowest}; typical "
+                f"held-out free-run errors {first:.3g} and {second:.3g} rad²): {why}; {self.separate_by} would separate "
+                "them")
 
 
 @dataclass(frozen=True)
