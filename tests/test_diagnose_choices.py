@@ -20,6 +20,9 @@ from tests.test_diagnose_continuous import within_frame_diagnosis
 from tests.test_diagnostics import NOMINAL, planted, planted_diagnosis
 
 FAST = DiagnoseConfig(bootstrap=0)
+#: For recordings whose dynamics hold one effect at most: the singles only (pairs and triples took 60-75% of such a
+#: diagnosis; the sets of more effects are the business of the tests that plant them).
+SINGLES = replace(FAST, max_effects=1)
 
 
 def planted_spin(bias: float = -0.3, n: int = 100, t: int = 30, noise: float = 0.002, seed: int = 0) -> Observations:
@@ -53,7 +56,7 @@ def spin():
 @pytest.fixture(scope="module")
 def damped():
     """The diagnosis of planted damping, read (not changed) by several tests: one fit for all of them."""
-    return analyse(planted({"damping": 0.2}), NOMINAL, FAST)
+    return analyse(planted({"damping": 0.2}), NOMINAL, SINGLES)
 
 
 def test_two_candidates_the_data_cannot_separate_give_an_ambiguous_verdict(spin) -> None:
@@ -189,13 +192,13 @@ def test_provenance_excludes_only_what_the_system_cannot_have() -> None:
 
 def test_an_excluded_effect_is_not_fitted_and_the_report_says_why() -> None:
     obs = replace(planted({"damping": 0.2}, n=60), impossible={"speed_clip": "dm_control has no speed clip"})
-    d = analyse(obs, NOMINAL, FAST)
+    d = analyse(obs, NOMINAL, SINGLES)
     assert d.excluded == {"speed_clip": "dm_control has no speed clip"}
     assert not any(r.candidate == "speed_clip" for r in d.candidates)
     assert "excluded by the file's provenance: speed_clip (dm_control has no speed clip)" in markdown(d, "m", "d", "c")
     assert d.to_dict()["exclusions"] == ["excluded by the file's provenance: speed_clip (dm_control has no speed clip)"]
     assert not any("clip" in n for n in d.notes)  # benchmarks/dmc.py checks that no note speaks of a clip
-    off = analyse(obs, NOMINAL, replace(FAST, use_provenance=False, max_effects=1))  # (the singles are what differ)
+    off = analyse(obs, NOMINAL, replace(SINGLES, use_provenance=False))  # (the singles are what differ)
     assert off.excluded == {} and any(r.candidate == "speed_clip" for r in off.candidates)
     assert off.verdict_class == d.verdict_class == "damping"
 
@@ -218,10 +221,10 @@ def test_a_gain_on_top_of_within_frame_is_not_counted_twice(tmp_path_factory: py
 
 
 def test_a_real_gain_error_is_still_named(tmp_path_factory: pytest.TempPathFactory) -> None:
-    d = planted_diagnosis(tmp_path_factory, {"gain": 0.8})
+    d = planted_diagnosis(tmp_path_factory, {"gain": 0.8}, config=SINGLES)
     assert d.verdict_class == "gain" and abs(d.effects[0].value - 0.8) < 0.01, d.verdict
     # a deadzone reads a low in the nominal form (no effect), the gain above 1 with it: still a gain
-    d = analyse(planted({"gain": 1.2, "deadzone": 0.5}, n=160), NOMINAL, FAST)
+    d = analyse(planted({"gain": 1.2, "deadzone": 0.5}, n=160), NOMINAL, SINGLES)
     assert d.verdict_class == "deadzone+gain", d.verdict
 
 
@@ -286,8 +289,8 @@ def test_the_nominal_model_carries_its_damping_and_integrator() -> None:
 def test_a_nominal_model_with_damping_is_diagnosed_relative_to_it() -> None:
     """A nominal b of 0.1 on data damped by 0.1: no gap; by 0.3: damping of +0.2 on top."""
     damped = fit.Nominal(g=10.0, a=1.0, offset=0.0, dt=0.05, b=0.1)
-    assert analyse(planted({"damping": 0.1}), damped, FAST).verdict_class == "none"
-    d = analyse(planted({"damping": 0.3}), damped, FAST)
+    assert analyse(planted({"damping": 0.1}), damped, SINGLES).verdict_class == "none"
+    d = analyse(planted({"damping": 0.3}), damped, SINGLES)
     assert d.verdict_class == "damping" and abs(d.effects[0].value - 0.2) < 0.01, d.verdict
     assert d.nominal["b"] == 0.1
 
@@ -348,7 +351,7 @@ def test_a_floor_just_above_the_corrected_error_is_reached_and_one_far_above_is_
     windows = corrected * above * np.exp(np.random.default_rng(0).normal(0, 1, 200))
     monkeypatch.setattr(D, "twin_renderer", lambda *args, **kwargs: ("simulator", None))
     monkeypatch.setattr(D, "twin_floor", lambda *args, **kwargs: TwinFloor(np.full(35, corrected * above), windows))
-    g = analyse(obs, NOMINAL, FAST).gap
+    g = analyse(obs, NOMINAL, SINGLES).gap
     if at_floor:
         assert g.floor_subtracted and g.free_run_gap_closure == 1.0 and "at the twin's floor" in g.floor_note
     else:
@@ -525,7 +528,7 @@ def test_an_encoder_reading_error_is_not_a_gap_in_the_physics() -> None:
     named, and what it leaves is not called "not explained by the candidates"."""
     obs = planted({"damping": 0.2}, n=160)
     misread = obs.theta + 0.012 * np.sin(3 * obs.theta) + 0.008 * np.cos(5 * obs.theta)
-    d = analyse(replace(obs, theta=misread), NOMINAL, FAST)
+    d = analyse(replace(obs, theta=misread), NOMINAL, SINGLES)
     assert d.verdict_class == "damping", d.verdict
     assert d.generic_basis.reading_decides and not d.generic_basis.significant  # the basis alone would have said it
     assert 0.007 < d.generic_basis.reading_rms < 0.014  # planted: 10.2 mrad rms

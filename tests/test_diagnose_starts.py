@@ -63,7 +63,7 @@ def test_a_window_whose_system_is_singular_though_finite_keeps_its_starts() -> N
 
 def test_the_option_refits_the_chosen_values(noisy) -> None:
     """``DiagnoseConfig.fit_starts``: the same choice (damping), its value refitted (read starts: b 7% high)."""
-    fitted = analyse(noisy, NOMINAL, DiagnoseConfig(bootstrap=0))  # on by default
+    fitted = analyse(noisy, NOMINAL, DiagnoseConfig(bootstrap=0, max_effects=1))  # on by default (the damping alone)
     assert DiagnoseConfig().fit_starts and DiagnoseConfig().matched_angles
     assert fitted.verdict_class == "damping", fitted.verdict
     assert abs(fitted.corrected["b"] / 0.2 - 1) < 0.01
@@ -74,13 +74,12 @@ def test_matched_angles_read_the_chosen_values_on_the_matched_angles(noisy) -> N
     chosen effects' values on the matched ones (here 2 mrad); without the option ``matched`` is not used.
     ``fit_starts`` is off here, so that only the angles differ."""
     matched = planted({"damping": 0.2}, n=150, t=30, noise=0.002).theta  # the same motion, read better
-    config = DiagnoseConfig(bootstrap=0, fit_starts=False, matched_angles=True)
+    config = DiagnoseConfig(bootstrap=0, fit_starts=False, matched_angles=True, max_effects=1)  # (the damping alone)
     on_matched = analyse(noisy, NOMINAL, config, matched=lambda: matched)
     assert on_matched.verdict_class == "damping", on_matched.verdict
     assert abs(on_matched.corrected["b"] / 0.2 - 1) < 0.01  # read on the encoder's angles: 0.207
     assert any("matching every frame to the decoder's renders" in n for n in on_matched.notes)
-    # (the damping alone: the sets of more effects are another test's)
-    plain = analyse(noisy, NOMINAL, replace(config, matched_angles=False, max_effects=1), matched=lambda: matched)
+    plain = analyse(noisy, NOMINAL, replace(config, matched_angles=False), matched=lambda: matched)
     assert plain.corrected["b"] > 0.203 and not any("decoder's renders" in n for n in plain.notes)
 
 
@@ -94,8 +93,8 @@ def test_a_sign_seen_only_on_the_matched_angles_moves_the_whole_diagnosis_onto_t
     truth = planted({"gain": -1.0, "damping": 0.3}, n=40, t=20)
     misread = planted({"gain": 0.05}, n=40, t=20, noise=0.02)  # the same actions (seed), hardly any response
     camera = CameraFindings(Camera(), 0.0, 0.0, 0, 0, [], 1e-4, 1e-4, [])
-    d = analyse(misread, NOMINAL, DiagnoseConfig(bootstrap=0, fit_starts=False, matched_angles=True), camera=camera,
-                matched=lambda: truth.theta)
+    d = analyse(misread, NOMINAL, DiagnoseConfig(bootstrap=0, fit_starts=False, matched_angles=True, max_effects=1),
+                camera=camera, matched=lambda: truth.theta)  # (the damping is the one effect of the dynamics)
     named = {e.effect: e.value for e in d.effects}
     assert "flip" in named and abs(named.get("damping", 0) / 0.3 - 1) < 0.05, d.verdict
     assert any("the selection, the values and the gap are all on those angles" in n for n in d.notes)
