@@ -562,7 +562,7 @@ def test_a_damping_that_only_the_training_file_has_is_read_in_both_files(effect:
     low = Nominal(g=10.0, a=0.9, offset=0.0, dt=0.05)
     real = planted({effect: value}, n=n, t=t)
     own = planted({"damping": 0.2}, n=80, seed=3)
-    d = analyse(real, low, FAST, own=own)
+    d = analyse(real, low, SINGLES, own=own)
     read = {e.effect: e.value for e in d.effects}.get(effect)
     assert read is not None and abs(read / value - 1) < 0.02, d.verdict
     assert any("shows a damping" in n for n in d.notes)
