@@ -235,7 +235,7 @@ def test_a_flipped_actuation_is_detected(nominal_a: float) -> None:
     --signed-actuation (its log-space a shrank toward 0)."""
     obs = planted({})
     flipped = replace(obs, actions=-obs.actions)
-    d = analyse(flipped, replace(NOMINAL, a=nominal_a), FAST)
+    d = analyse(flipped, replace(NOMINAL, a=nominal_a), SINGLES)
     assert d.effects[0].effect == "flip", d.verdict
     assert "flip" in d.verdict_class.split("+")
     assert "flipped actuation" in d.verdict

@@ -290,7 +290,7 @@ def test_a_rival_that_changes_no_claim_is_not_said(monkeypatch) -> None:
         return module.Selection(s.chosen, steps, bias)
 
     monkeypatch.setattr(module, "select", with_a_rival)
-    d = analyse(planted({}), NOMINAL, FAST)
+    d = analyse(planted({}), NOMINAL, replace(FAST, max_effects=1))  # (the rival is planted: the singles suffice)
     assert d.verdict_class == "none", d.verdict
     assert d.ambiguity is None
     assert not any(s["ambiguous"] for s in d.selection)
@@ -363,7 +363,7 @@ def test_a_camera_fit_that_stops_at_a_bound_is_refused() -> None:
 
 @pytest.fixture(scope="module")
 def gain_read() -> tuple:
-    d = analyse(planted({"gain": 0.7}), NOMINAL, FAST)
+    d = analyse(planted({"gain": 0.7}), NOMINAL, replace(FAST, max_effects=1))  # (no dynamics effect: the singles)
     assert d.verdict_class == "gain" and d.gap.closure_basis == "state"
     return Naming(list(d.effects), list(d.notes), d.verdict, d.verdict_class), d.gap, d.corrected_model()
 

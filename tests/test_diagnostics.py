@@ -97,9 +97,9 @@ def test_no_gap_through_a_large_vision_gap_says_the_vision_may_hide_one() -> Non
     """dm_control with shadows on re-rendered 39.5x worse than the training frames and read "no significant gap" where
     the same physics without shadows reads a damping: a verdict of no gap says that its vision may hide one."""
     obs = planted({}, n=60, t=20)
-    clean = analyse(replace(obs, rec_mse=np.full(obs.theta.shape, 1.05e-3)), NOMINAL, FAST, rec_training=1e-3)
+    clean = analyse(replace(obs, rec_mse=np.full(obs.theta.shape, 1.05e-3)), NOMINAL, SINGLES, rec_training=1e-3)
     assert clean.verdict == "no significant gap"
-    d = analyse(replace(obs, rec_mse=np.full(obs.theta.shape, 0.04)), NOMINAL, FAST, rec_training=1e-3)
+    d = analyse(replace(obs, rec_mse=np.full(obs.theta.shape, 0.04)), NOMINAL, SINGLES, rec_training=1e-3)
     assert d.verdict_class == "none", d.verdict
     assert d.verdict.startswith("no significant gap seen through a vision gap of 40.0x")
     assert "may hide a gap in the physics" in d.verdict
@@ -184,7 +184,7 @@ def test_a_gain_error_is_the_refitted_a(tmp_path_factory: pytest.TempPathFactory
 
 def test_a_gravity_error_is_named_not_called_no_gap() -> None:
     """Gravity x0.5 read "no significant gap" (a note only), with the gap 1,500 times the corrected error."""
-    d = analyse(planted({"gravity": 0.5}), NOMINAL, FAST)
+    d = analyse(planted({"gravity": 0.5}), NOMINAL, SINGLES)
     assert d.verdict_class == "gravity", d.verdict
     (e,) = d.effects
     assert e.value == pytest.approx(0.5, abs=0.01) and not d.gap.no_gap
@@ -212,7 +212,7 @@ def test_a_gain_the_actions_barely_show_is_not_given_a_value() -> None:
     assert gain_undetermined([3.39e-07, 3.39e-07]) and gain_undetermined([7.36e-07, 0.231])
     assert gain_undetermined([0.0013, 0.00566])  # below GAIN_FLOOR: the interval excluded the truth, 0.001
     assert not gain_undetermined([1.95, 2.01]) and not gain_undetermined([0.45, 0.52])
-    d = analyse(planted({"gain": 0.001}, n=30), NOMINAL, replace(FAST, bootstrap=10))  # a refits to 5.4e-09
+    d = analyse(planted({"gain": 0.001}, n=30), NOMINAL, replace(SINGLES, bootstrap=10))  # a refits to 5.4e-09
     assert d.verdict_class == "unexplained" and "the actions barely move the system" in d.verdict, d.verdict
     assert f"act more than {fit.MAX_DELAY} frames late (the longest delay fitted)" in d.verdict  # a longer latency
     assert not any(e.effect == "gain" for e in d.effects)
@@ -466,7 +466,7 @@ def test_the_report_never_prints_nan() -> None:
 
     effects = [{"effect": "blur", "value": 1.2, "unit": "px (Gaussian σ)", "interval": [float("nan"), float("nan")]}]
     camera = CameraFindings(Camera(blur=1.2), float("nan"), 0.0, 0, 0, [], 0.01, 0.005, effects)
-    d = analyse(planted({}), NOMINAL, FAST, camera=camera)
+    d = analyse(planted({}), NOMINAL, SINGLES, camera=camera)
     assert "blur" in d.verdict and "nan" not in d.verdict
     assert not re.search(r"\bnan\b", markdown(d, "m", "d", "c").lower())
 
