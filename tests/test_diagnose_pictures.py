@@ -637,3 +637,16 @@ def test_a_vision_gap_only_in_the_frames_of_large_actions_is_put_on_what_is_draw
                                 config)
     assert len(notes) == 1 and "(blur, noise, a shifted camera or a different scene?)" in notes[0], notes
     assert calm_frames_error(everywhere, np.ones((30, 12))) is None  # actions that never vary tell nothing
+
+
+def test_a_brighter_picture_is_named_only_where_the_rod_shows_its_share() -> None:
+    """A recording without the torque arrow, blurred 0.8 px, fitted an exposure of 1.032 with the blur (on the arrow's
+    faint pixels) and named "exposure 1.012", read on its rod: under half of the fit's brightening, which a real
+    exposure shows in full (1.3 read 1.31)."""
+    from piga.diagnostics.vision import CameraConfig, rod_shows_exposure
+
+    config = CameraConfig()
+    assert not rod_shows_exposure(1.012, 1.032, config)
+    assert rod_shows_exposure(1.31, 1.3, config) and rod_shows_exposure(1.05, 1.08, config)
+    assert not rod_shows_exposure(1.011, 1.011, config)  # under min_exposure gray levels, as before
+    assert not rod_shows_exposure(1.05, 1.12, replace(config, min_core_share=0.5))
