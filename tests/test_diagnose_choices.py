@@ -48,6 +48,23 @@ def planted_spin(bias: float = -0.3, n: int = 100, t: int = 30, noise: float = 0
 # --- 1. ambiguity -----------------------------------------------------------------------------
 
 
+def scored_from(monkeypatch: pytest.MonkeyPatch, table: dict, values: dict[str, float]):  # noqa: ANN201
+    """The selection's rules on chosen numbers: each set scored from ``table`` ({effects: (BIC, typical free-run
+    error)}) and fitted at ``values``. Returns the scorer, to make the singles with."""
+    import importlib
+
+    from piga.diagnostics.results import Score
+
+    def fake_score(m: fit.Model, *_: object) -> Score:
+        bic, typical = table[frozenset(m.effects)]
+        return Score(m, bic, typical, np.zeros(1), typical)
+
+    diagnose = importlib.import_module("piga.diagnostics.diagnose")  # the module, not the function of that name
+    monkeypatch.setattr(diagnose, "score", fake_score)
+    monkeypatch.setattr(diagnose.fit, "fit_candidate", lambda effects, *_, **__: fit.Model(effects, 0, dict(values)))
+    return fake_score
+
+
 @pytest.fixture(scope="module")
 def spin():
     return analyse(planted_spin(), NOMINAL, SINGLES)  # (a bias or friction alone: the singles decide)
@@ -413,23 +430,13 @@ def test_a_command_effect_the_data_support_beside_the_chosen_ones_is_kept_as_the
     the free run; a deadzone of 0.3 beside friction cut the free run by 57% at a BIC drop of 6.6 and was rejected on
     the BIC. Each time the gain that stood in for it was named ("gain 0.912", "gain 0.618"): the set with it is now
     returned beside the choice, to read the gain against."""
-    import importlib
     from types import SimpleNamespace
 
     from piga.diagnostics.diagnose import Candidates
-    from piga.diagnostics.results import Score
 
     table = {frozenset(): (0.0, 1.0), frozenset({"bias"}): (-100.0, 0.01), frozenset({"saturation"}): (-5.0, 0.9),
              frozenset({"bias", "saturation"}): (-100.0 + pair[0], pair[1])}
-
-    def fake_score(m: fit.Model, *_: object) -> Score:
-        bic, typical = table[frozenset(m.effects)]
-        return Score(m, bic, typical, np.zeros(1), typical)
-
-    diagnose = importlib.import_module("piga.diagnostics.diagnose")
-    monkeypatch.setattr(diagnose, "score", fake_score)
-    monkeypatch.setattr(diagnose.fit, "fit_candidate",
-                        lambda effects, *_, **__: fit.Model(effects, 0, {"g": 10.0, "a": 1.0, "s": 1.5, "tau0": 0.1}))
+    fake_score = scored_from(monkeypatch, table, {"g": 10.0, "a": 1.0, "s": 1.5, "tau0": 0.1})
     singles = sorted((fake_score(fit.Model((e,)), None) for e in ("bias", "saturation")), key=lambda s: s.bic)
     refit = fake_score(fit.Model(()), None)
     chosen = select(Candidates(refit, refit, singles), NOMINAL, SimpleNamespace(fit=None, fit1=None, free=None),
@@ -1126,21 +1133,12 @@ def test_any_effect_both_tests_lean_to_beside_the_chosen_ones_is_their_shadow(
     from types import SimpleNamespace
 
     from piga.diagnostics.diagnose import Candidates
-    from piga.diagnostics.results import Score
 
     table = {frozenset(): (0.0, 1.0), frozenset({"damping"}): (-870.0, 0.013), frozenset({"friction"}): (-614.0, 0.083),
              frozenset({"speed_clip"}): (-1.0, 1.0), frozenset({"damping", "friction"}): (-870.0 + pair[0], pair[1] * 0.013),
              frozenset({"damping", "speed_clip"}): (-880.0, 0.0125), frozenset({"friction", "speed_clip"}): (-600.0, 0.09)}
-
-    def fake_score(m: fit.Model, *_: object) -> Score:
-        bic, typical = table[frozenset(m.effects)]
-        return Score(m, bic, typical, np.zeros(1), typical)
-
-    diagnose = importlib.import_module("piga.diagnostics.diagnose")
-    monkeypatch.setattr(diagnose, "score", fake_score)
-    monkeypatch.setattr(diagnose.fit, "fit_candidate",
-                        lambda effects, *_, **__: fit.Model(effects, 0, {"g": 9.0, "a": 1.0, "b": 0.1, "c": 0.08, "v": 8.0}))
-    monkeypatch.setattr(diagnose, "clip_refuted", lambda *_, **__: False)
+    fake_score = scored_from(monkeypatch, table, {"g": 9.0, "a": 1.0, "b": 0.1, "c": 0.08, "v": 8.0})
+    monkeypatch.setattr(importlib.import_module("piga.diagnostics.diagnose"), "clip_refuted", lambda *_, **__: False)
     singles = sorted((fake_score(fit.Model((e,)), None) for e in ("damping", "friction", "speed_clip")),
                      key=lambda s: s.bic)
     refit = fake_score(fit.Model(()), None)
