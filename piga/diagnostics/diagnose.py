@@ -1090,7 +1090,8 @@ def select(candidates: Candidates, nom: Nominal, w: WindowSet, config: DiagnoseC
     if not accepted:
         commands = [frozenset([e]) for e in (DEADZONE.name, SATURATION.name)]
         a = candidates.refit.model.values.get("a", nom.a)
-        if all(m in scored for m in commands) and abs(abs(a / nom.a) - 1) > config.gain_tolerance:
+        if (config.max_effects > 1 and all(m in scored for m in commands)
+                and abs(abs(a / nom.a) - 1) > config.gain_tolerance):
             # "none" reads a gain error: the two command effects together may be what bent it, where neither alone
             # lowers the BIC (a deadzone of 0.2 with a saturation of 1.5 and a gain of 0.7, 100 sequences of 20
             # frames: no single lowered the BIC, the pair was never fitted, and "none" read "gain 0.574 (0.566..0.581)")
