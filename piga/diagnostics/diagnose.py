@@ -851,11 +851,11 @@ class Selection:
     """The chosen effects and a deadzone or a saturation, not accepted, while its data support it: it lowers the
     one-step BIC by more than ``bic_margin`` and leaves the typical held-out free-run error within
     ``ambiguous_free_run`` of the chosen set's or lower, or it cuts that error by more than ``ambiguous_free_run`` at a
-    BIC no higher. An effect on the
-    commands trades with a, so a gain read without it is bent (:func:`name_effects`): a saturation of 1.5 beside a
-    bias and gravity x1.3, at the twin's floor already, lowered the BIC by 50 and was rejected on the free run, and
-    its clip was read "gain 0.912". Or the chosen effects and any other effect (not Gymnasium's own clip) that lowers
-    the BIC at all and cuts that error by more than ``min_gain``. None: there is none."""
+    BIC no higher. An effect on the commands trades with a, so a gain read without it is bent (:func:`name_effects`):
+    a saturation of 1.5 beside a bias and gravity x1.3, at the twin's floor already, lowered the BIC by 50 and was
+    rejected on the free run, and its clip was read "gain 0.912". Or the chosen effects and any other effect (not
+    Gymnasium's own clip) that lowers the BIC at all and cuts that error by more than ``min_gain``. Or either kind
+    that cuts it by :data:`CUT_BY` or more at a BIC within ``ambiguous_bic`` of theirs. None: there is none."""
     shadow_why: str = ""
     """How the data support ``shadow``, in words."""
     rival_why: str = "which the held-out free runs favour"
