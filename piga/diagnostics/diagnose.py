@@ -941,6 +941,17 @@ def close_rival(best: Score, cand: Score, config: DiagnoseConfig) -> bool:
     return abs(cand.bic - best.bic) <= config.ambiguous_bic and free_gap <= config.ambiguous_free_run
 
 
+def leans_beside(command: bool, bic_drop: float, free_drop: float, config: DiagnoseConfig) -> bool:
+    """Whether the data lean to an effect added to the chosen ones (:attr:`Selection.shadow`), by its one-step BIC drop
+    and its typical held-out free-run drop against them; ``command``: a deadzone or a saturation."""
+    if bic_drop >= -config.ambiguous_bic and free_drop >= 1 - CUT_BY:
+        return True
+    if command:
+        return ((bic_drop > config.bic_margin and free_drop >= -config.ambiguous_free_run)
+                or (bic_drop >= 0 and free_drop > config.ambiguous_free_run))
+    return bic_drop >= 0 and free_drop > config.min_gain
+
+
 def select(candidates: Candidates, nom: Nominal, w: WindowSet, config: DiagnoseConfig, progress: bool = False,
            speeds: np.ndarray | None = None, known_clip: float | None = None) -> Selection:
     """Sets of up to ``max_effects`` effects, each size extending the ``beam`` best sets of the size
@@ -1088,18 +1099,17 @@ def select(candidates: Candidates, nom: Nominal, w: WindowSet, config: DiagnoseC
         if ok:
             accepted.append(cand)
     if not accepted:
-        commands = [frozenset([e]) for e in (DEADZONE.name, SATURATION.name)]
+        pair = frozenset({DEADZONE.name, SATURATION.name})  # the effects on the commands
         a = candidates.refit.model.values.get("a", nom.a)
-        if (config.max_effects > 1 and all(m in scored for m in commands)
+        if (config.max_effects > 1 and pair not in scored and all(frozenset([e]) in scored for e in pair)
                 and abs(abs(a / nom.a) - 1) > config.gain_tolerance):
             # "none" reads a gain error: the two command effects together may be what bent it, where neither alone
             # lowers the BIC (a deadzone of 0.2 with a saturation of 1.5 and a gain of 0.7, 100 sequences of 20
             # frames: no single lowered the BIC, the pair was never fitted, and "none" read "gain 0.574 (0.566..0.581)")
-            fitted = commands[0] | commands[1] in scored
-            fit_set(commands[0] | commands[1])
-            if not fitted and commands[0] | commands[1] in scored:  # (a step of its own, once)
-                _, bic_drop, free_drop = passes(scored[commands[0] | commands[1]], candidates.refit)
-                steps.append(SelectionStep(scored[commands[0] | commands[1]].name, bic_drop, free_drop, False))
+            fit_set(pair)
+            if pair in scored:  # (a step of its own, in BIC order)
+                _, bic_drop, free_drop = passes(scored[pair], candidates.refit)
+                steps.append(SelectionStep(scored[pair].name, bic_drop, free_drop, False))
                 steps.sort(key=lambda x: -x.bic_drop)
         # the one-step BIC may not see an effect that the held-out free run shows (few or short sequences: measured, a
         # dm_control pendulum of twice the mass, 20 sequences of 16 frames, where damping cut the typical free-run
@@ -1112,29 +1122,26 @@ def select(candidates: Candidates, nom: Nominal, w: WindowSet, config: DiagnoseC
         seen = [c for members, c in scored.items() if members and favoured(members)
                 and not deadzone_refuted(c.model, w.fit1, config)
                 and not (len(members) > 1 and known_clip is not None and SPEED_CLIP.name in members)]
+        why = Selection.rival_why
         if not seen:
             # nor one that both tests see about as well as "none", where it is a deadzone or a saturation (or both, each
             # so against the other alone) that lowers the BIC at all: an effect on the commands trades with a, so
             # "none"'s gain may be its stand-in (a deadzone of 0.1 on 100 sequences of 20 frames lowered the BIC by 3.7
             # at a typical free-run error 3.8% higher, read a at x0.983, and "none" read a false "gain 0.934")
-            seen = [c for members, c in scored.items() if members and members <= commands[0] | commands[1]
+            seen = [c for members, c in scored.items() if members and members <= pair
                     and all(passes(c, scored[members - {e}])[1] > 0
                             and passes(c, scored[members - {e}])[2] >= -config.ambiguous_free_run for e in members)
                     and not deadzone_refuted(c.model, w.fit1, config)]
-            if seen:
-                rival = max(seen, key=lambda c: passes(c, candidates.refit)[2])
-                _, bic_drop, free_drop = passes(rival, candidates.refit)
-                steps = [dataclass_replace(s, ambiguous=True) if s.tried == rival.name else s for s in steps]
-                return Selection(candidates.refit, steps, rival, rival_why=(
-                    f"which lowers the one-step BIC by {bic_drop:.2g} at a typical held-out free-run error "
-                    f"{abs(100 * free_drop):.2g}% {'lower' if free_drop >= 0 else 'higher'} than no effect's"))
+            why = "which lowers the one-step BIC by {:.2g} at a typical held-out free-run error {:.2g}% {} than no effect's"
         if seen:
             # one that the one-step BIC favours too first (a bias of -0.1 under a blur of 1.2 px: bias + saturation cut
             # the free run by 36% at a BIC 4.9 above "none"'s, the bias alone by 28% at a BIC 4.3 below it), then by the
             # free run's cut
             rival = max(seen, key=lambda c: (passes(c, candidates.refit)[1] > 0, passes(c, candidates.refit)[2]))
+            _, bic_drop, free_drop = passes(rival, candidates.refit)
             steps = [dataclass_replace(s, ambiguous=True) if s.tried == rival.name else s for s in steps]
-            return Selection(candidates.refit, steps, rival)
+            return Selection(candidates.refit, steps, rival, rival_why=why.format(
+                bic_drop, abs(100 * free_drop), "lower" if free_drop >= 0 else "higher"))
         return Selection(candidates.refit, steps)
     chosen = accepted[0]  # the lowest BIC, unless a set close to it in BIC is far better on the held-out free run
     ties = [c for c in accepted[1:] if c.bic - chosen.bic <= config.ambiguous_bic
@@ -1167,10 +1174,7 @@ def select(candidates: Candidates, nom: Nominal, w: WindowSet, config: DiagnoseC
         # absent, cut it by 13% at a BIC 6.4 higher; a damping of 0.25 with friction of 0.06 and a gain of 0.8: damping
         # + friction halved it at a BIC 1.6 higher, and the friction went unsaid; such cuts of earlier recordings were
         # all by effects that were there)
-        if (((bic_drop > config.bic_margin and free_drop >= -config.ambiguous_free_run)
-                or (bic_drop >= 0 and free_drop > config.ambiguous_free_run)) if command
-                else bic_drop >= 0 and free_drop > config.min_gain) or (
-                    bic_drop >= -config.ambiguous_bic and free_drop >= 1 - CUT_BY):
+        if leans_beside(command, bic_drop, free_drop, config):
             shadows.append((command, bic_drop, free_drop, scored[members]))
     if shadows:
         # a command effect first (a gain read without it is bent), by its BIC drop; else by the free run's cut
@@ -1593,7 +1597,8 @@ def _worse_than_nominal(naming: Naming, gap: Gap, final: fit.Model, nom: Nominal
     pn, pc, pf = gap.typical_pixel_mse_nominal, gap.typical_pixel_mse_corrected, gap.pixel_mse_floor
     drifts_pixels = (gap.closure_basis == "pixels" and pn is not None and pc is not None
                      and (pc > DRIFTS_FURTHER * pn or (pf is not None and pf > 0 and pn >= CLEAR_GAP * pf and pc > pn)))
-    if not (worse or drifts or far or drifts_pixels or fit.collapsed(final, nom, factor=100.0)):
+    ran_off = fit.collapsed(final, nom, factor=100.0)
+    if not (worse or drifts or far or drifts_pixels or ran_off):
         if far_matched and unsaid is not None and unsaid.typical_free_run_mse[1] < MATCHED_FAR * matched_upper:
             # a rival of "none" that the free run favours, and that would leave the matched angles near their twin, is
             # the ambiguity (an exposure of 1.1, a blur of 0.9 px and a bias of -0.06: the bias cut the typical error
@@ -1627,7 +1632,7 @@ def _worse_than_nominal(naming: Naming, gap: Gap, final: fit.Model, nom: Nominal
            f"{corrected:.3g} against the floor {floor:.3g} rad²; the effects it names would leave under "
            f"{NO_GAP_FACTOR:g}x)" if far else
            f"its g or a ran off (g = {final.values.get('g', nom.g):.3g}, a = {final.values.get('a', nom.a):.3g})")
-    if (drifts and not (worse or far or drifts_pixels or fit.collapsed(final, nom, factor=100.0))
+    if (drifts and not (worse or far or drifts_pixels or ran_off)
             and unsaid is not None and unsaid.typical_free_run_mse[1] < nominal):
         # it strays further only without a rival of "none" that cuts the nominal's error: that ambiguity, not "corrects
         # nothing" (a bias of -0.05 beside a gain of 0.9, 100 sequences of 20 frames: "gain 0.889" strayed to 6.9e-05
@@ -1638,7 +1643,7 @@ def _worse_than_nominal(naming: Naming, gap: Gap, final: fit.Model, nom: Nominal
         verdict = "; ".join([e.describe() for e in naming.effects] + [unsaid.describe(), strays])
         return Naming(naming.effects, naming.notes, verdict, "ambiguous", naming.physics)
     best = '; '.join(e.describe() for e in naming.effects)
-    if far and not (worse or drifts or drifts_pixels or fit.collapsed(final, nom, factor=100.0)) \
+    if far and not (worse or drifts or drifts_pixels or ran_off) \
             and corrected <= CUT_BY * nominal:
         # it cuts the error, but leaves too much of it: not "corrects nothing" (gravity x1.2 on 22 sequences of 14
         # frames, read 1.2, cut the typical error 7x and was left at 6x a floor measured on 4 held-out sequences)
@@ -2249,7 +2254,7 @@ def nominal_form(candidates: Candidates, final: fit.Model, from_gymnasium: bool,
     a x1.001, the clip single x1.144)."""
     if has_gymnasiums_clip(final, from_gymnasium, config):
         clipped = next((c.model for c in candidates.singles if c.model.effects == (SPEED_CLIP.name,)), None)
-        if clipped is not None and abs(clipped.values["v"] - GYM_SPEED_CLIP) <= config.gym_clip_tolerance:
+        if clipped is not None and has_gymnasiums_clip(clipped, from_gymnasium, config):
             return clipped
     return candidates.refit.model
 

@@ -248,14 +248,12 @@ class Ambiguity(_ByKey):
         favoured = b if second < lower * first else a if first < lower * second else None
         # (a set the one-step fit favours as a whole but not each of its effects beside the others: bias+saturation
         # lowered the BIC by 22.7, the bias by 5.2 beside the saturation alone, and "cannot tell them apart" was said)
-        whole = (abs(self.bic[1] - self.bic[0]) > DiagnoseConfig.ambiguous_bic
-                 and "+" in (b if self.bic[1] < self.bic[0] else a))
-        one_step = (f"the one-step fit favours {b if self.bic[1] < self.bic[0] else a} as a whole, but not each of its "
-                    "effects beside the others" if whole else "the one-step fit cannot tell them apart")
+        lowest = b if self.bic[1] < self.bic[0] else a  # (said: "ΔBIC 22.7" and "ΔBIC 3.7" were read as one side)
+        whole = abs(self.bic[1] - self.bic[0]) > DiagnoseConfig.ambiguous_bic and "+" in lowest
+        one_step = (f"the one-step fit favours {lowest} as a whole, but not each of its effects beside the others" if whole
+                    else "the one-step fit cannot tell them apart")
         why = (f"{one_step}, and the free runs of a few held-out sequences, which favour {favoured}, are too few to "
                "decide" if favoured else "the data cannot tell them apart")
-        # (which side the BIC is on: "ΔBIC 22.7" and "ΔBIC 3.7" were read as the same side, one lower, one higher)
-        lowest = b if self.bic[1] < self.bic[0] else a
         return (f"ambiguous between {a} and {b} (ΔBIC {abs(self.bic[1] - self.bic[0]):.1f}, lower for {lowest}; typical "
                 f"held-out free-run errors {first:.3g} and {second:.3g} rad²): {why}; {self.separate_by} would separate "
                 "them")

@@ -323,7 +323,13 @@ def rod_shows_exposure(read: float, fitted: float, config: CameraConfig) -> bool
     (``min_core_share``) of the fit's. A recording without the torque arrow, blurred 0.8 px, fitted 1.032 with the blur
     on the arrow's faint pixels and read "exposure 1.012" on its rod (without the blur, the same share refused it
     before the blur was fitted: :func:`core_brightening`); a real exposure of 1.3 reads 1.31."""
-    return 255 * abs(read - 1) > config.min_exposure and read - 1 >= config.min_core_share * (fitted - 1)
+    return 255 * abs(read - 1) > config.min_exposure and core_shows_share(read, fitted, config)
+
+
+def core_shows_share(read: float, fitted: float, config: CameraConfig) -> bool:
+    """The pendulum's dark pixels, brightened by ``read``, show ``min_core_share`` of a brighter picture fitted at
+    ``fitted``."""
+    return read - 1 >= config.min_core_share * (fitted - 1)
 
 
 def _nearest_renders(model: PhysicsModel, x: Tensor, renders: tuple[Tensor, Tensor], camera: Camera = Camera(),
@@ -821,7 +827,7 @@ def camera_stage(model: PhysicsModel, path: str, theta: np.ndarray, fit: np.ndar
     if lit["accepted"] and not shown:  # a brighter picture on white: the pendulum itself must show it
         core = core_brightening(model, x_fit, renders)
         lit["core_brightening"] = core
-        lit["accepted"] = core - 1 >= config.min_core_share * (exposed.exposure - 1)
+        lit["accepted"] = core_shows_share(core, exposed.exposure, config)
     table.append(lit)
     first = shown and lit["accepted"]
     base, base_row = (exposed, lit) if first else (Camera(), table[0])
