@@ -5,6 +5,7 @@ damping and integrator)."""
 
 from __future__ import annotations
 
+import importlib
 import math
 from dataclasses import replace
 
@@ -1149,6 +1150,68 @@ def test_any_effect_both_tests_lean_to_beside_the_chosen_ones_is_their_shadow(
     if shadow and pair[0] < 0:
         assert chosen.shadow_why.startswith("which cuts the typical held-out free-run error by 69% more, at a one-step "
                                             "BIC lower by 4.1"), chosen.shadow_why
+
+
+@pytest.mark.parametrize("triple, a, shadow", [
+    ((-656.3, 0.0322), 0.84, "friction+delay+deadzone"),  # the free run leans its way by 10.6%, the BIC 2.8 against
+    ((-656.3, 0.0340), 0.84, "friction+delay"),           # the free run by 5.6% only
+    ((-640.0, 0.0322), 0.84, "friction+delay"),           # the BIC refutes it
+    ((-656.3, 0.0322), 1.00, "friction+delay"),           # the chosen set reads no gain: not fitted
+])
+def test_a_command_effect_beside_the_shadow_is_read_where_the_chosen_set_reads_a_gain(
+        monkeypatch, triple: tuple[float, float], a: float, shadow: str) -> None:
+    """Friction of 0.08, a deadzone of 0.2, a delay of 1 and gravity x0.9 on 30 sequences of 20 frames: the delay alone
+    was chosen, read "gain 0.843", and its shadow, friction + delay, read a at x0.858, a gain too, so the gain was named;
+    friction + delay + deadzone, never fitted, read a, the friction and the deadzone right."""
+    from types import SimpleNamespace
+
+    from piga.diagnostics.diagnose import Candidates
+
+    table = {frozenset(): (0.0, 1.0), frozenset({"delay"}): (-657.6, 0.158), frozenset({"friction"}): (11.6, 0.622),
+             frozenset({"deadzone"}): (10.7, 1.014), frozenset({"friction", "delay"}): (-659.1, 0.036),
+             frozenset({"delay", "deadzone"}): (-654.7, 0.172), frozenset({"friction", "delay", "deadzone"}): triple}
+    fake_score = scored_from(monkeypatch, table, {"g": 9.0, "a": a * NOMINAL.a, "c": 0.08, "d": 0.2})
+    monkeypatch.setattr(importlib.import_module("piga.diagnostics.diagnose"), "deadzone_refuted", lambda *_: False)
+    monkeypatch.setattr(fit, "fitted_loss", lambda *_: 1.0)  # (the deadzone's fit from the nominal a: a tie)
+    singles = sorted((fake_score(fit.Model((e,), 0, {"g": 9.0, "a": a * NOMINAL.a}), None)
+                      for e in ("delay", "friction", "deadzone")), key=lambda s: s.bic)
+    refit = fake_score(fit.Model(()), None)
+    chosen = select(Candidates(refit, refit, singles), NOMINAL, SimpleNamespace(fit=None, fit1=None, free=None), FAST)
+    assert chosen.chosen.model.effects == ("delay",), chosen.steps
+    assert "+".join(e for e in ("friction", "delay", "deadzone") if e in chosen.shadow.model.effects) == shadow
+    if shadow == "friction+delay+deadzone":  # (said against the chosen set)
+        assert chosen.shadow_why.startswith("which cuts the typical held-out free-run error by 80% more, at a one-step "
+                                            "BIC higher by 1.3"), chosen.shadow_why
+
+
+@pytest.mark.parametrize("swapped, rival", [
+    ((-139.0, 0.050), "friction+deadzone"),  # lower in BIC, freer in the free run: only its deadzone failed that test
+    ((-139.0, 0.060), None),                 # its free run 7% worse than the chosen set's
+    ((-125.0, 0.050), None),                 # higher in BIC than the chosen set
+])
+def test_a_set_that_swaps_a_chosen_effect_and_fails_only_the_free_run_is_a_rival(
+        monkeypatch, swapped: tuple[float, float], rival: str | None) -> None:
+    """Friction of 0.08, a deadzone of 0.2, a delay of 1 and gravity x0.9, 100 sequences of 20 frames: friction + delay
+    + deadzone, 8.8 lower in BIC and 11% lower in typical free-run error than damping + delay + deadzone, was rejected
+    because its deadzone raised the error of friction + delay by 11%; damping + delay + deadzone was chosen, and read a
+    false "damping 0.0173" with no word of the friction."""
+    from types import SimpleNamespace
+
+    from piga.diagnostics.diagnose import Candidates
+
+    table = {frozenset(): (0.0, 1.0), frozenset({"damping"}): (-100.0, 0.1), frozenset({"friction"}): (-118.0, 0.045),
+             frozenset({"deadzone"}): (-5.0, 1.0), frozenset({"damping", "deadzone"}): (-130.0, 0.056),
+             frozenset({"friction", "deadzone"}): swapped, frozenset({"damping", "friction"}): (-117.0, 0.045)}
+    fake_score = scored_from(monkeypatch, table, {"g": 9.0, "a": 1.0, "b": 0.02, "c": 0.08, "d": 0.2})
+    monkeypatch.setattr(importlib.import_module("piga.diagnostics.diagnose"), "deadzone_refuted", lambda *_: False)
+    singles = sorted((fake_score(fit.Model((e,)), None) for e in ("damping", "friction", "deadzone")),
+                     key=lambda s: s.bic)
+    refit = fake_score(fit.Model(()), None)
+    s = select(Candidates(refit, refit, singles), NOMINAL, SimpleNamespace(fit=None, fit1=None, free=None),
+               replace(FAST, max_effects=2))
+    assert s.chosen.model.effects == ("damping", "deadzone"), s.steps
+    assert (s.rival.name if s.rival else None) == rival
+    assert [x.tried for x in s.steps if x.ambiguous] == ([rival] if rival else [])
 
 
 @pytest.mark.parametrize("deadzone, rival", [
