@@ -846,9 +846,9 @@ class Selection:
     typical free-run error within ``ambiguous_free_run``) in the round that added the last effect;
     the selection stops there. Or a set of as many effects and lower BIC, each of whose effects lowers the BIC by more
     than ``bic_margin`` against the set without it, that only the free run's test rejected, at a typical free-run error
-    within ``ambiguous_free_run`` of the chosen set's or lower. Where no set is accepted, a set that the held-out free run favours
-    (by more than ``min_gain``) at a BIC within ``ambiguous_bic`` of "none", or else a deadzone or a saturation (or
-    both) that lowers the BIC at a free run within ``ambiguous_free_run``. None: the choice is clear."""
+    within ``ambiguous_free_run`` of the chosen set's or lower. Where no set is accepted, a set that the held-out free
+    run favours (by more than ``min_gain``) at a BIC within ``ambiguous_bic`` of "none", or else a deadzone or a
+    saturation (or both) that lowers the BIC at a free run within ``ambiguous_free_run``. None: the choice is clear."""
     shadow: Score | None = None
     """The chosen effects and a deadzone or a saturation, not accepted, while its data support it: it lowers the
     one-step BIC by more than ``bic_margin`` and leaves the typical held-out free-run error within
@@ -1199,8 +1199,8 @@ def select(candidates: Candidates, nom: Nominal, w: WindowSet, config: DiagnoseC
     if shadows:
         # a command effect first (a gain read without it is bent), by its BIC drop; else by the free run's cut
         command, bic_drop, free_drop, shadow = max(shadows, key=lambda x: (x[0], x[1] if x[0] else x[2]))
-        a = chosen.model.values.get("a", nom.a)
-        if not command and abs(abs(a / nom.a) - 1) > config.gain_tolerance and len(shadow.model.effects) < config.max_effects:
+        bent = abs(abs(chosen.model.values.get("a", nom.a) / nom.a) - 1) > config.gain_tolerance
+        if not command and bent and len(shadow.model.effects) < config.max_effects:
             # where the chosen set reads a gain, a deadzone or a saturation beside the shadow's effect too, that the
             # free run favours by more than min_gain at a BIC within ambiguous_bic of the shadow's, or that leans its
             # way as above: its gain is read with both (friction 0.08, a deadzone of 0.2, a delay of 1 and gravity x0.9,
