@@ -50,10 +50,11 @@ def completed_in_process(prog: str, main: Callable[[Sequence[str] | None], int |
     return subprocess.CompletedProcess([prog, *argv], code, out, err)
 
 
-def assert_one_line(code: int, err: str, *needles: str) -> str:
-    """A failed command: non-zero exit, exactly one line on stderr containing each needle, no traceback."""
+def assert_one_line(code: int, err: str, *needles: str, status: int = 1) -> str:
+    """A refused or failed command: exit ``status`` (1: refused input, usage errors too), exactly one line on stderr
+    containing each needle, no traceback."""
     lines = err.strip().splitlines()
-    assert code != 0, "expected a failure"
+    assert code == status, f"expected exit status {status}, got {code}: {err}"
     assert len(lines) == 1 and "Traceback" not in err, err
     for needle in needles:
         assert needle in lines[0], lines[0]

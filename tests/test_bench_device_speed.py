@@ -57,7 +57,7 @@ def test_the_speed_up_is_the_ratio_of_the_medians() -> None:
 def test_full_gpu_needs_the_gpu_timed(pendulum: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     with pytest.raises(SystemExit) as stop:
         device_speed.main(["--data", str(pendulum), "--out", str(tmp_path / "speed"), "--full", "gpu"])
-    assert stop.value.code == 2 and "--full gpu needs --device cuda" in capsys.readouterr().err
+    assert stop.value.code == 1 and "--full gpu needs --device cuda" in capsys.readouterr().err
     assert not list(tmp_path.iterdir())
 
 

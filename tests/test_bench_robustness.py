@@ -199,14 +199,14 @@ def _command(path: Path, body: str) -> None:
 def test_a_refused_row_is_recorded_and_not_rerun(bench, spring_file: Path, tmp_path: Path,
                                                  monkeypatch: pytest.MonkeyPatch) -> None:
     """The whole flow, as a user would see it, with stand-ins for the commands: piga-collect copies a tiny file,
-    piga-train-model refuses it (exit 2)."""
+    piga-train-model refuses it (exit 1)."""
     folder = tmp_path / "bin"
     folder.mkdir()
     calls = tmp_path / "calls"
     _command(folder / "piga-collect", f"import shutil\nshutil.copy({str(spring_file)!r}, sys.argv[sys.argv.index('--out') + 1])\n")
     _command(folder / "piga-train-model", f"open({str(calls)!r}, 'a').write(' '.join(sys.argv[1:]) + '\\n')\n"
              "print('piga-train-model: error: sequences have 10 frames; training needs 10', file=sys.stderr)\n"
-             "sys.exit(2)\n")
+             "sys.exit(1)\n")
     env = {**ENV, "PATH": f"{folder}{os.pathsep}{ENV['PATH']}"}
     out, work = tmp_path / "results" / "robustness", tmp_path / "work"
     args = ("python", str(ROOT / "benchmarks" / "robustness.py"), "--rows", "spring/steps10", "--out", str(out),
@@ -214,7 +214,7 @@ def test_a_refused_row_is_recorded_and_not_rerun(bench, spring_file: Path, tmp_p
     result = run(*args, env=env)
     assert result.returncode == 0, result.stderr
     record = json.loads(out.with_suffix(".json").read_text())["rows"][0]
-    assert record["row"] == "spring/steps10" and record["verdict"] == "flagged" and record["exit_code"] == 2
+    assert record["row"] == "spring/steps10" and record["verdict"] == "flagged" and record["exit_code"] == 1
     assert record["stderr_last"].endswith("training needs 10")
     assert record["train_command"].startswith("piga-train-model ") and "--threads 1 --quiet" in record["train_command"]
     page = out.with_suffix(".md").read_text()
@@ -243,7 +243,7 @@ def test_a_refused_row_is_recorded_and_not_rerun(bench, spring_file: Path, tmp_p
 
 def _stand_ins(tmp_path: Path, spring_file: Path, monkeypatch: pytest.MonkeyPatch) -> tuple[Path, Path]:
     """Stand-ins for the commands on PATH (as in the test above): piga-collect copies a tiny file and logs each call,
-    piga-train-model refuses the file (exit 2) and logs each call. Returns the two logs."""
+    piga-train-model refuses the file (exit 1) and logs each call. Returns the two logs."""
     folder = tmp_path / "bin"
     folder.mkdir()
     collected, trained = tmp_path / "collected", tmp_path / "trained"
@@ -251,7 +251,7 @@ def _stand_ins(tmp_path: Path, spring_file: Path, monkeypatch: pytest.MonkeyPatc
              f"shutil.copy({str(spring_file)!r}, sys.argv[sys.argv.index('--out') + 1])\n")
     _command(folder / "piga-train-model", f"open({str(trained)!r}, 'a').write(' '.join(sys.argv[1:]) + '\\n')\n"
              "print('piga-train-model: error: sequences have 10 frames; training needs 10', file=sys.stderr)\n"
-             "sys.exit(2)\n")
+             "sys.exit(1)\n")
     monkeypatch.setenv("PATH", f"{folder}{os.pathsep}{os.environ['PATH']}")
     return collected, trained
 

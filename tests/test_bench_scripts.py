@@ -24,30 +24,30 @@ def test_every_script_runs_under_run_cli(script: Path) -> None:
 BAD_INPUT = [
     (["control.py", "--model", "nowhere", "--out", "OUT"], 1,
      "control.py: error: nowhere/checkpoint.pt: no checkpoint (is nowhere a piga-train-model run folder?)"),
-    (["control.py", "--model", "nowhere", "--out", "/dev/null/x"], 2,  # refused before any job, not after an hour
+    (["control.py", "--model", "nowhere", "--out", "/dev/null/x"], 1,  # refused before any job, not after an hour
      "control.py: error: argument --out: /dev/null is a file, not a folder, so /dev/null/x cannot be written there "
      "(see --help)"),
     # each trained or collected first, then failed "removed or moved while it ran?" (/proc) or "[Errno 17]" (a file)
-    (["identify_time.py", "--out", "/proc/x/y"], 2, "identify_time.py: error: argument --out: /proc is on a file "
+    (["identify_time.py", "--out", "/proc/x/y"], 1, "identify_time.py: error: argument --out: /proc is on a file "
      "system that stores no files (as /proc and /sys are); write elsewhere (see --help)"),
-    (["train_accuracy.py", "--work", "/dev/null"], 2, "train_accuracy.py: error: argument --work: /dev/null is a file, "
+    (["train_accuracy.py", "--work", "/dev/null"], 1, "train_accuracy.py: error: argument --work: /dev/null is a file, "
      "not a folder: give a folder for the data and runs (see --help)"),
     (["identify_time.py", "--out", "OUT", "--recipes", "budget-abc"], 1,
      "identify_time.py: error: --recipes budget-abc: budget-N takes a whole number of steps N >= 1"),
-    (["identify_time.py", "--out", "OUT", "--threads", "-1"], 2, "identify_time.py: error: argument --threads: "
+    (["identify_time.py", "--out", "OUT", "--threads", "-1"], 1, "identify_time.py: error: argument --threads: "
      "expected an integer in [0, MAX] (0: torch's choice; at most this machine's MAX CPUs), got -1 (see --help)"),
-    (["storage.py", "--out", "OUT", "--work", "W", "--cap-mb", "0"], 2,
+    (["storage.py", "--out", "OUT", "--work", "W", "--cap-mb", "0"], 1,
      "storage.py: error: argument --cap-mb: expected a positive integer, got 0 (see --help)"),
-    (["dmc.py", "--out", "OUT", "--work", "W", "--control-seed", "-1"], 2,
+    (["dmc.py", "--out", "OUT", "--work", "W", "--control-seed", "-1"], 1,
      "dmc.py: error: argument --control-seed: expected an integer in [0, 2^63 - 1], got -1 (see --help)"),
     (["backends.py", "--model", "m", "--out", "OUT", "--work", "W", "--ray", "garbage"], 1,  # after the local sweep
      "backends.py: error: --ray garbage: no Ray cluster at garbage:6379: unknown host (Name or service not known)"),
     (["camera_stage_time.py", "run", "nowhere.h5"], 1, "camera_stage_time.py: error: nowhere.h5: no such file"),
-    (["control.py", "--model", "nowhere", "--workers", "0"], 2,
+    (["control.py", "--model", "nowhere", "--workers", "0"], 1,
      "control.py: error: argument --workers: expected a positive integer, got 0 (see --help)"),
-    (["backends.py", "--bogus", "1"], 2,  # every bad argument was "--cluster-note: expected a value, got ''", its default
+    (["backends.py", "--bogus", "1"], 1,  # every bad argument was "--cluster-note: expected a value, got ''", its default
      "backends.py: error: the following arguments are required: --model, --work, --out (see --help)"),
-    (["ablations.py", "--seeds", "-1", "--out", "OUT"], 2,
+    (["ablations.py", "--seeds", "-1", "--out", "OUT"], 1,
      "ablations.py: error: argument --seeds: expected an integer in [0, 2^63 - 1], got -1 (see --help)"),
     # a missing model was an internal error (TypeError) after the first case's data was collected
     (["diagnose_blind.py", "--model", "nowhere", "--cases", "1", "--out", "OUT", "--work", "W"], 1,
@@ -57,7 +57,7 @@ BAD_INPUT = [
     (["dmc.py", "--work", "W", "--out", "OUT", "--variant", "bogus=1"], 1,  # was found after the first seed's hour
      "dmc.py: error: --variant bogus=1: --env-option bogus: unknown for piga/DMCPendulum-v0; known: action_repeat, "
      "camera, camera_distance, color, damping, flip, length, mass, shadows"),
-    (["planet_plan_time.py", "--out", "OUT", "--threads", "0"], 2,  # was torch's RuntimeError, exit 70
+    (["planet_plan_time.py", "--out", "OUT", "--threads", "0"], 1,  # was torch's RuntimeError, exit 70
      "planet_plan_time.py: error: argument --threads: expected a positive integer, got 0 (see --help)"),
 ]
 #: The cases run as scripts (an interpreter each); the others run the script's main in this process, through the
@@ -94,7 +94,7 @@ def test_a_folder_where_a_page_goes_is_refused_before_the_work(tmp_path: Path) -
     (tmp_path / "dd.json").mkdir()
     done = subprocess.run([sys.executable, str(BENCHMARKS / "speed_clip_bias.py"), "--out", "dd"], capture_output=True,
                           text=True, env=ENV, cwd=tmp_path, timeout=120)
-    assert done.returncode == 2 and done.stderr.strip().splitlines() == [
+    assert done.returncode == 1 and done.stderr.strip().splitlines() == [
         "speed_clip_bias.py: error: argument --out: dd.json is a folder, so the page dd.json cannot be written there "
         "(see --help)"]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["dd.json"]

@@ -199,7 +199,7 @@ def test_split_with_a_negative_number_is_named(capsys: pytest.CaptureFixture[str
     from piga.cli import collect as cli
 
     code, _, err = run_in_process("piga-collect", cli.main, "--out", str(tmp_path / "d.h5"), "--split", "-1,1,1", capsys=capsys)
-    assert code == 2 and "expected one argument" not in err
+    assert code == 1 and "expected one argument" not in err
     assert_one_line(code, err, "--split", ">= 0", "'-1,1,1'")
 
 
@@ -215,8 +215,8 @@ def test_internal_error_is_one_line_naming_a_log(tmp_path: Path, monkeypatch: py
         return {}["missing"]  # a bug, not a user error
 
     code, _, err = run_in_process("piga-x", buggy, "--flag", capsys=capsys)
-    line = assert_one_line(code, err, "piga-x: internal error (KeyError: 'missing')", "please report it")
-    assert code == INTERNAL_ERROR
+    line = assert_one_line(code, err, "piga-x: internal error (KeyError: 'missing')", "please report it",
+                           status=INTERNAL_ERROR)
     logs = list((tmp_path / "piga-logs").iterdir())
     assert len(logs) == 1 and str(logs[0]) in line
     text = logs[0].read_text()

@@ -214,7 +214,7 @@ def test_sweep_cli_bad_input(tmp_path: Path, capsys: pytest.CaptureFixture[str])
 
 def test_the_ray_option_is_checked_before_any_work(capsys: pytest.CaptureFixture[str]) -> None:
     for bad in ("host:port", "ray://head:10001", "head:70000"):
-        assert ctl(capsys, "--oracle", "--ray", bad).returncode == 2
+        assert ctl(capsys, "--oracle", "--ray", bad).returncode == 1
         assert_one_line_error(ctl(capsys, "--oracle", "--ray", bad), "--ray", "HOST:PORT")
     assert_one_line_error(ctl(capsys, "--oracle", "--ray", "auto"), "--ray runs the jobs of --sweep")
     assert_one_line_error(ctl(capsys, "--env", "piga/DMCPendulum-v0", "--ray", "auto"), "--ray is not an option")

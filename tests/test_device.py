@@ -77,7 +77,7 @@ def test_device_errors_get_one_line(prog: str, main: Any, argv: tuple[str, ...],
     assert code == 1
     assert_one_line(code, err, f"{prog}: error: --device cuda: {NO_GPU}")
     code, _, err = run_in_process(prog, main, *args, "--device", "tpu", capsys=capsys)
-    assert code == 2
+    assert code == 1
     assert_one_line(code, err, "--device: invalid choice: 'tpu'")
     assert not out.exists()
 

@@ -402,11 +402,11 @@ def test_collect_cli_effect_writes_attrs(tmp_path: Path, capsys: pytest.CaptureF
 @pytest.mark.parametrize(
     "value, needle, code",
     [
-        ("wind=1", "valid effects", 2),
-        ("damping", "NAME=VALUE", 2),
-        ("damping=x", "expected a number", 2),
-        ("delay=0", "integer >= 1", 2),
-        ("frame_drop=1.5", "in [1e-06, 1)", 2),
+        ("wind=1", "valid effects", 1),
+        ("damping", "NAME=VALUE", 1),
+        ("damping=x", "expected a number", 1),
+        ("delay=0", "integer >= 1", 1),
+        ("frame_drop=1.5", "in [1e-06, 1)", 1),
     ],
 )
 def test_collect_cli_bad_effect(tmp_path: Path, capsys: pytest.CaptureFixture[str], value: str, needle: str, code: int) -> None:

@@ -260,7 +260,7 @@ def test_cli_bad_input(tmp_path: Path, recording: tuple[Path, Path, np.ndarray, 
                      "17 frames", "one sequence of 18 frames")
     code, err = run(str(folder), str(csv), "--dt", "0", "--out", out)
     assert_one_line(code, err, "--dt")
-    assert code == 2
+    assert code == 1
     assert_one_line(*run(str(folder), str(csv), "--dt", "-0.05", "--out", out), "--dt")
     assert_one_line(*run(str(folder), str(csv), "--out", out), "--dt")
     assert_one_line(*run(str(folder), str(csv), "--dt", "0.05", "--out", out, "--steps", "5", "--split", "0,0,1"),

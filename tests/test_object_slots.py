@@ -81,7 +81,7 @@ def test_gravity_trains_and_is_scored_with_another_slot_count(slots: int, gravit
 def test_a_bad_count_is_one_line(value: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     code, _, err = run_in_process("piga-train-model", train_main, "x.h5", "--out", str(tmp_path / "run"), "--objects",
                                   value, capsys=capsys)
-    assert code == 2
+    assert code == 1
     assert_one_line(code, err, "--objects", "expected an integer in [1, 64]")
 
 

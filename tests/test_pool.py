@@ -184,7 +184,7 @@ def test_a_command_names_the_failed_job_in_its_one_line(function: object, code: 
         return 0
 
     exit_code, _, err = run_in_process("prog", main, capsys=capsys)
-    assert exit_code == code and assert_one_line(exit_code, err).startswith(needle), err
+    assert assert_one_line(exit_code, err, status=code).startswith(needle), err
 
 
 def test_a_job_that_ends_after_a_commit_records_both_commits(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

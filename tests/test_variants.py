@@ -74,7 +74,7 @@ def test_options_of_the_physics_are_refused_for_a_baseline(small_data: Path, tmp
     assert_one_line(code, err, "--signed-actuation", "video-lstm")
     code, _, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(tmp_path / "run"), "--model", "lstm",
                                   capsys=capsys)
-    assert code == 2 and "invalid choice" in err
+    assert code == 1 and "invalid choice" in err
     assert not (tmp_path / "run").exists()
 
 
@@ -170,7 +170,7 @@ def test_the_broadcast_width_sizes_that_decoder_and_only_it(small_data: Path, tm
     assert not out.exists()
     code, _, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), "--decoder", "broadcast",
                                   "--broadcast-width", str(cli.MAX_BROADCAST_WIDTH + 1), *SMALL, capsys=capsys)
-    assert code == 2 and "gigabytes per batch" in err and not out.exists()
+    assert code == 1 and "gigabytes per batch" in err and not out.exists()
 
 
 def test_a_model_larger_than_the_memory_is_refused_before_it_is_built(small_data: Path, tmp_path: Path,

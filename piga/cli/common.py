@@ -54,7 +54,9 @@ def with_flags(message: str) -> str:
 
 
 class ArgumentParser(argparse.ArgumentParser):
-    """argparse that reports a usage error as a single line on stderr (exit 2).
+    """argparse that reports a usage error as a single line on stderr, with exit status 1 as any other refused input
+    (argparse's own 2 made ``--image-size 0``, refused by its type, exit 2 and ``--image-size 1``, refused after
+    parsing, exit 1).
 
     Abbreviations are off (``allow_abbrev=False``): ``--gravity 14`` must not silently mean
     ``--gravity-mult 14``; an option is taken only as spelt in full. Subparsers inherit this class.
@@ -77,7 +79,7 @@ class ArgumentParser(argparse.ArgumentParser):
         return super().add_argument(*args, **kwargs)
 
     def error(self, message: str) -> NoReturn:
-        self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
+        self.exit(1, f"{self.prog}: error: {message} (see --help)\n")
 
     def parse_known_args(self, args: Sequence[str] | None = None,  # type: ignore[override]
                          namespace: argparse.Namespace | None = None) -> tuple[argparse.Namespace, list[str]]:
@@ -659,7 +661,7 @@ def remove_outputs(run_dir: Path, names: Sequence[str], ignore_errors: bool = Fa
             path.unlink()
 
 
-#: Exit status of an unexpected internal error (BSD's EX_SOFTWARE); user errors exit 1, usage errors 2.
+#: Exit status of an unexpected internal error (BSD's EX_SOFTWARE); refused input, usage errors too, exits 1.
 INTERNAL_ERROR = 70
 #: Exit status of a training run that finished and saved its model but did not converge (its parameters still
 #: moved at the end, or it stopped before its plan ended): the warning line says why, ``--resume`` continues it.

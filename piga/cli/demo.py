@@ -177,9 +177,10 @@ def main(argv: Sequence[str] | None = None) -> int:
                     if before[path] is False and path.exists():
                         path.unlink()
                 raise
-    except KeyboardInterrupt:  # say what this demo kept (a step's own message would name its own command)
+    except KeyboardInterrupt:  # say what this demo kept (a step's own message would name its own command): all of it
+        # where it was resumed (its data file, kept from the run it continues, was left out), else what this run made
         kept = [str(path.relative_to(out)) for path in outputs
-                if path.exists() and path.stat().st_mtime_ns != before[path]]
+                if path.exists() and (args.resume or path.stat().st_mtime_ns != before[path])]
         if kept:
             raise Interrupted(f"{out} keeps {', '.join(kept)} from this demo; run the same command with "
                               f"{resume_option(args.overwrite)} to continue it, or with --overwrite to start over") from None

@@ -265,7 +265,9 @@ def _validate(f: h5py.File, path: Path) -> DatasetInfo:
         try:
             found = f[name]
         except KeyError:
-            raise DataFormatError(f"{path}: /{name} is a link that does not resolve (to {f.get(name, getlink=True)!r})") from None
+            link = f.get(name, getlink=True)  # (h5py's repr of an external link leaves its "<" unclosed)
+            to = f"{link.path} in {link.filename}" if isinstance(link, h5py.ExternalLink) else getattr(link, "path", link)
+            raise DataFormatError(f"{path}: /{name} is a link that does not resolve (to {to})") from None
         if not isinstance(found, h5py.Dataset):
             raise DataFormatError(f"{path}: missing dataset /{name} (it is a {type(found).__name__.lower()})")
         return found
@@ -452,6 +454,17 @@ def _frames_text(shape: tuple[int, ...]) -> str:
     return f"{shape[0]}x{shape[1]}" + (" gray" if gray else f" with {shape[2]} channels")
 
 
+def _image_size_fix(side: int) -> str:
+    """What to change where env_config's image_size contradicts square frames of ``side`` pixels: that image_size,
+    where an env can render it (frames of 2048 px were sent to an image_size that every command then refused)."""
+    from envs.pendulum import MAX_IMAGE_SIZE  # (on this error only: the schema is read without gymnasium's import)
+
+    if MIN_IMAGE_SIZE <= side <= MAX_IMAGE_SIZE:
+        return f"set env_config's image_size to {side}, or collect the file again"
+    return (f"frames {side} px a side are outside the envs' {MIN_IMAGE_SIZE} to {MAX_IMAGE_SIZE} px: resize them (as "
+            "piga-import --image-size does), or collect the file again")
+
+
 def _check_env_attrs(info: DatasetInfo) -> None:
     """Refuses a pendulum file whose ``env_config``, ``env_id``, ``dt`` or ``params`` contradict each other: frames of
     another size than env_config's ``image_size``; an ``env_id`` that names no env of piga's, or another env than the one
@@ -466,8 +479,7 @@ def _check_env_attrs(info: DatasetInfo) -> None:
         return
     size, shape = config.get("image_size"), info.image_shape
     if isinstance(size, int) and not isinstance(size, bool) and shape[:2] != (size, size):
-        fix = (f"set env_config's image_size to {shape[0]}, or collect the file again" if shape[0] == shape[1]
-               else "collect the file again")
+        fix = _image_size_fix(shape[0]) if shape[0] == shape[1] else "collect the file again"
         look = "RGB" if config.get("color") == "rgb" else "gray"  # (dm_control's pendulum renders either)
         raise DataFormatError(f"{path}: attribute 'env_config' says the env renders {size}x{size} {look} frames "
                               f"(image_size {size}), but the file's frames are {_frames_text(shape)}; {fix}")
@@ -767,7 +779,7 @@ def check_pixel_pendulum_file(info: DatasetInfo, use: str) -> None:
     if isinstance(size, int) and not isinstance(size, bool) and shape not in ((size, size), (size, size, 1)):
         gray = len(shape) == 2 or shape[2] == 1
         frames = _frames_text(shape)
-        fix = (f"set env_config's image_size to {shape[0]}, or collect the file again" if gray and shape[0] == shape[1]
+        fix = (_image_size_fix(shape[0]) if gray and shape[0] == shape[1]
                else "collect the file again with piga-collect")
         raise DataFormatError(f"{info.path}: attribute 'env_config' says the env renders {size}x{size} gray frames "
                               f"(image_size {size}), but the file's frames are {frames}; {use}: {fix}")
