@@ -2138,7 +2138,9 @@ def name_effects(final: fit.Model, nom: Nominal, w: WindowSet | None, camera: Ca
                              f"{given(training):.3g} (the recording {given(final.values[DAMPING.parameter]):.3g}, 95% "
                              f"interval {low:.3g}..{high:.3g}), but holding the recording's b at the file's raises its "
                              f"one-step BIC by less than {config.bic_margin:g}: these frames do not tell the two apart, so "
-                             "no difference between the files is named (collect more or longer sequences to tell)")
+                             "no difference between the files is named, and the damping named is one that the nominal "
+                             "model, identified without it, misses on its own training file too (collect more or longer "
+                             "sequences to tell)")
             else:
                 notes.append(f"the model's own training file, read in the same form, shows the same damping (b = "
                              f"{given(training):.3g}; the recording {given(final.values[DAMPING.parameter]):.3g}): no "
