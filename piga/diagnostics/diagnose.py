@@ -1162,9 +1162,9 @@ def select(candidates: Candidates, nom: Nominal, w: WindowSet, config: DiagnoseC
         # sequences of 20 frames: friction + delay + deadzone, 8.8 lower in BIC, its typical free-run error 11% lower,
         # was rejected as its deadzone raised that error by 11% against friction + delay; damping + delay + deadzone
         # was chosen, and read a false "damping 0.0173", the friction unsaid)
-        size = len(chosen.model.effects)
+        size, taken = len(chosen.model.effects), {frozenset(c.model.effects) for c in accepted}
         rivals = [c for members, c in sorted(scored.items(), key=lambda kv: kv[1].bic)
-                  if len(members) == size and c.bic < chosen.bic and c not in accepted
+                  if len(members) == size and c.bic < chosen.bic and members not in taken
                   and c.typical <= (1 + config.ambiguous_free_run) * chosen.typical
                   and not deadzone_refuted(c.model, w.fit1, config)
                   and not (known_clip is not None and SPEED_CLIP.name in members)
