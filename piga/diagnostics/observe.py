@@ -127,6 +127,9 @@ class Observations:
     (MuJoCo's Euler, dm_control), "explicit" (a torque added before the step, Gymnasium's), None: not known."""
     damping_step: float | None = None
     """The physics step (s) at which that system takes it, where several make a frame (:func:`damping_step`)."""
+    lossy_source: str | None = None
+    """The video that piga-import read the frames from, where its format compresses with loss (:func:`lossy_source`);
+    None: another source, or none said."""
 
 
 def check_compatible(model: PhysicsModel, path: str | os.PathLike[str], min_sequences: int = 20,
@@ -217,7 +220,19 @@ def observe(model: PhysicsModel, path: str | os.PathLike[str], batch: int = 16, 
     check_actions(actions, path)
     return Observations(theta, actions, rec, split == SPLITS["train"], float(info.dt), frames, np.sort(keep), stale,
                         float(blank.mean()), from_gymnasium(attrs), impossible_effects(attrs), damping_taken(attrs),
-                        damping_step(attrs))
+                        damping_step(attrs), lossy_source(attrs))
+
+
+#: Video containers whose usual codecs (H.264, VP9, MPEG-4 ...) compress with loss: frames read from them carry the
+#: codec's errors, which a twin drawn without them lacks.
+LOSSY_VIDEO = (".mp4", ".m4v", ".mov", ".avi", ".mkv", ".webm", ".wmv", ".flv", ".mpg", ".mpeg", ".ogv", ".3gp")
+
+
+def lossy_source(attrs: dict) -> str | None:
+    """The file's ``source`` (piga-import's: the recording it read), where its name says a lossy video format."""
+    source = attrs.get("source")
+    source = source.decode() if isinstance(source, bytes) else source
+    return source if isinstance(source, str) and source.lower().endswith(LOSSY_VIDEO) else None
 
 
 def from_gymnasium(attrs: dict) -> bool:
