@@ -1309,3 +1309,8 @@ def test_not_explained_on_frames_from_a_lossy_video_says_the_codec_may_be_the_ga
     assert _through_a_codec(unexplained, None) is unexplained
     none = Naming([], [], "no significant gap", "none")
     assert _through_a_codec(none, "runs/v_t07.mp4") is none
+    beside = Naming([], [], "ambiguous between none and within_frame (ΔBIC 8.1 ...); the nominal model's typical "
+                            "held-out free run strays 8.6x as far as on its twin", "ambiguous")
+    assert "a lossy video" in _through_a_codec(beside, "c.mp4").verdict
+    alone = Naming([], [], "ambiguous between damping and friction (ΔBIC 2.0 ...)", "ambiguous")
+    assert _through_a_codec(alone, "c.mp4") is alone  # (no gap against the floor claimed)

@@ -1840,11 +1840,14 @@ def _seen_through_vision_gap(naming: Naming, vision_ratio: float | None, encoder
 
 
 def _through_a_codec(naming: Naming, source: str | None) -> Naming:
-    """A verdict of "not explained" on frames that piga-import read from a lossy video (``source``) says that the
-    codec's errors may be the gap: the twin's floor is drawn without them (clean recordings written to H.264 at crf 24
-    and 28 and imported read "not explained", 6.3x and 7.4x the floor; at crf 18 and 20, "no significant gap" at
-    3.1-3.2x)."""
-    if source is None or naming.verdict_class != "unexplained" or not naming.verdict.startswith("not explained"):
+    """A verdict that claims a gap against the twin's floor ("not explained", or an ambiguity beside a gap left
+    unnamed) on frames that piga-import read from a lossy video (``source``) says that the codec's errors may be that
+    gap: the floor is drawn without them (clean recordings written to H.264 at crf 24 and 28 and imported read "not
+    explained", 6.3x and 7.4x the floor, and at crf 26 "ambiguous between none and within_frame ... 8.6x"; at crf 18
+    and 20, "no significant gap" at 3.1-3.2x)."""
+    unexplained = naming.verdict_class == "unexplained" and naming.verdict.startswith("not explained")
+    if source is None or not (unexplained or (naming.verdict_class == "ambiguous" and "as far as on its twin" in
+                                              naming.verdict)):
         return naming
     verdict = (f"{naming.verdict}; the frames come from {os.path.basename(source)}, a lossy video: its codec's errors in the "
                "angles are not in the twin's floor, which is drawn without them, and may be all of this gap (import a "
