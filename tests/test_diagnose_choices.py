@@ -1314,3 +1314,23 @@ def test_not_explained_on_frames_from_a_lossy_video_says_the_codec_may_be_the_ga
     assert "a lossy video" in _through_a_codec(beside, "c.mp4").verdict
     alone = Naming([], [], "ambiguous between damping and friction (ΔBIC 2.0 ...)", "ambiguous")
     assert _through_a_codec(alone, "c.mp4") is alone  # (no gap against the floor claimed)
+
+
+def test_a_command_rival_of_none_that_reads_a_gain_is_said() -> None:
+    """A deadzone of 0.2 with a gain of 1.2 under camera noise read "noise 9.93" alone: "none" read a at x1.005, and its
+    rival, the deadzone (13.2 lower in BIC, its free run 4.5% worse), read a = 1.279 and d = 0.241, unsaid."""
+    from piga.diagnostics.diagnose import _offset_gain_note
+    from piga.diagnostics.results import Effect, Naming, Score
+
+    none = fit.Model((), 0, {"g": 10.0, "a": 1.005})
+    deadzone = Score(fit.Model(("deadzone",), 0, {"g": 10.0, "a": 1.279, "d": 0.241}), -13.2, 1.0, np.zeros(1), 1.0)
+    why = "which lowers the one-step BIC by 13 at a typical held-out free-run error 4.5% higher than no effect's"
+    noise = Naming([Effect("noise", 9.93, "gray levels (σ)", None)], [], "noise 9.93 gray levels (σ)", "noise")
+    noted = _offset_gain_note(noise, none, deadzone, why, FAST)
+    assert noted.verdict == noise.verdict and noted.notes == [
+        f"with deadzone, {why}, a reads x1.273 what no effect reads (read as deadzone 0.241): a gain that a deadzone or a "
+        "saturation offsets reads as none at all, so neither is ruled out"], noted.notes
+    same = replace(deadzone, model=fit.Model(("deadzone",), 0, {"g": 10.0, "a": 1.02, "d": 0.05}))
+    assert _offset_gain_note(noise, none, same, why, FAST) is noise  # a read alike: nothing offset
+    bias = replace(deadzone, model=fit.Model(("bias",), 0, {"g": 10.0, "a": 1.279, "tau0": 0.1}))
+    assert _offset_gain_note(noise, none, bias, why, FAST) is noise  # no command effect
