@@ -266,7 +266,8 @@ def _validate(f: h5py.File, path: Path) -> DatasetInfo:
             found = f[name]
         except KeyError:
             link = f.get(name, getlink=True)  # (h5py's repr of an external link leaves its "<" unclosed)
-            to = f"{link.path} in {link.filename}" if isinstance(link, h5py.ExternalLink) else getattr(link, "path", link)
+            external = isinstance(link, h5py.ExternalLink)
+            to = f"{link.path} in {link.filename}" if external else getattr(link, "path", link)
             raise DataFormatError(f"{path}: /{name} is a link that does not resolve (to {to})") from None
         if not isinstance(found, h5py.Dataset):
             raise DataFormatError(f"{path}: missing dataset /{name} (it is a {type(found).__name__.lower()})")

@@ -1156,8 +1156,8 @@ def select(candidates: Candidates, nom: Nominal, w: WindowSet, config: DiagnoseC
         accepted = [chosen] + [c for c in accepted if c is not chosen]
     rivals = [c for c in accepted[1:] if close_rival(chosen, c, config)]
     if not rivals:
-        # nor a set that swaps effects of the chosen one, of lower BIC, each of whose effects lowers the BIC by more than
-        # bic_margin against the set without it, rejected only by the free run's test, where it runs freely about as
+        # nor a set that swaps effects of the chosen one, of lower BIC, each of whose effects lowers the BIC by more
+        # than bic_margin against the set without it, rejected only by the free run's test, where it runs freely about as
         # well as the chosen one or better (friction 0.08, a deadzone of 0.2, a delay of 1 and gravity x0.9, 100
         # sequences of 20 frames: friction + delay + deadzone, 8.8 lower in BIC, its typical free-run error 11% lower,
         # was rejected as its deadzone raised that error by 11% against friction + delay; damping + delay + deadzone
@@ -1537,8 +1537,8 @@ CUT_BY = 0.5
 #: gap: a correction of it that strays further at all corrects nothing (below it, the two differ by noise).
 CLEAR_GAP = 2.0
 #: A typical held-out free-run error this factor times the twin's floor or more, left by the physics named, is a gap
-#: plainly left (clean recordings 0.54-1.39x; among 649 probe and benchmark reports, those of effects absent from the
-#: truth under 2x): a rival of "none" that the free run favours is noted there however the one-step BIC leans.
+#: plainly left (measured: clean recordings 0.54-1.39x; recordings whose rival of "none" was an effect absent from the
+#: truth, under 2x): a rival of "none" that the free run favours is noted there however the one-step BIC leans.
 PLAIN_GAP = 3.0
 
 
@@ -1839,7 +1839,8 @@ def _seen_through_vision_gap(naming: Naming, vision_ratio: float | None, encoder
     return Naming(naming.effects, naming.notes, verdict, naming.verdict_class)
 
 
-def _offset_gain_note(naming: Naming, final: fit.Model, rival: Score, rival_why: str, config: DiagnoseConfig) -> Naming:
+def _offset_gain_note(naming: Naming, final: fit.Model, rival: Score, rival_why: str,
+                      config: DiagnoseConfig) -> Naming:
     """``naming`` of "none" with a note of its rival, a deadzone or a saturation (or both), that reads a beyond
     ``gain_tolerance`` of "none"'s where "none" names no gain: a gain that a command effect offsets reads as none at
     all (a deadzone of 0.2 with a gain of 1.2 under camera noise of 10 gray levels, 40 sequences of 20 frames, read
@@ -1867,9 +1868,9 @@ def _through_a_codec(naming: Naming, source: str | None) -> Naming:
     if source is None or not (unexplained or (naming.verdict_class == "ambiguous" and "as far as on its twin" in
                                               naming.verdict)):
         return naming
-    verdict = (f"{naming.verdict}; the frames come from {os.path.basename(source)}, a lossy video: its codec's errors in the "
-               "angles are not in the twin's floor, which is drawn without them, and may be all of this gap (import a "
-               "lossless copy, such as PNG frames, or one of higher quality, to tell)")
+    verdict = (f"{naming.verdict}; the frames come from {os.path.basename(source)}, a lossy video: its codec's errors "
+               "in the angles are not in the twin's floor, which is drawn without them, and may be all of this gap "
+               "(import a lossless copy, such as PNG frames, or one of higher quality, to tell)")
     return Naming(naming.effects, naming.notes, verdict, naming.verdict_class, naming.physics)
 
 
