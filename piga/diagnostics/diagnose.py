@@ -104,6 +104,8 @@ from piga.io.runs import (nominal_of, training_arrow, training_blank_mse, traini
 
 #: Gymnasium Pendulum-v1's own speed clip (rad/s).
 GYM_SPEED_CLIP = PENDULUM_MAX_SPEED
+#: The effects on the commands: each trades with a, so a gain read without one may be its stand-in.
+COMMAND_EFFECTS = (DEADZONE.name, SATURATION.name)
 
 
 #: Bounds of DiagnoseConfig's numbers (the bootstrap's other limits are ``__post_init__``'s): the fractions within [0, 1], BIC
@@ -946,6 +948,17 @@ def close_rival(best: Score, cand: Score, config: DiagnoseConfig) -> bool:
     return abs(cand.bic - best.bic) <= config.ambiguous_bic and free_gap <= config.ambiguous_free_run
 
 
+def reads_a_gain(model: fit.Model, nom: Nominal, config: DiagnoseConfig) -> bool:
+    """Whether ``model`` reads |a| beyond ``gain_tolerance`` of the nominal's."""
+    return abs(abs(model.values.get("a", nom.a) / nom.a) - 1) > config.gain_tolerance
+
+
+def effect_values(model: fit.Model) -> str:
+    """``model``'s effects with their fitted values, for a note ("friction 0.0865, deadzone 0.198")."""
+    return ", ".join(f"{e} {model.values[EFFECTS[e].parameter]:.3g}" for e in model.effects
+                     if EFFECTS[e].parameter in model.values)
+
+
 def leans_beside(command: bool, bic_drop: float, free_drop: float, config: DiagnoseConfig) -> bool:
     """Whether the data lean to an effect added to the chosen ones (:attr:`Selection.shadow`), by its one-step BIC drop
     and its typical held-out free-run drop against them; ``command``: a deadzone or a saturation."""
@@ -1046,7 +1059,7 @@ def select(candidates: Candidates, nom: Nominal, w: WindowSet, config: DiagnoseC
         m = fit.fit_candidate(effects, start.values, nom, w.fit)
         added = members - set(start.effects)
         a = start.values.get("a", nom.a)
-        if added & {DEADZONE.name, SATURATION.name} and abs(abs(a / nom.a) - 1) > config.gain_tolerance:
+        if added & set(COMMAND_EFFECTS) and reads_a_gain(start, nom, config):
             # a command effect trades with a: from a start whose a the set without it bent, its level stays where it
             # changes next to nothing (a deadzone of 0.25 and a saturation of 1.5: the deadzone alone read a = 0.937, the
             # pair fitted from there held the saturation at 1.8, where it binds on few actions, and the truth was never
@@ -1104,10 +1117,9 @@ def select(candidates: Candidates, nom: Nominal, w: WindowSet, config: DiagnoseC
         if ok:
             accepted.append(cand)
     if not accepted:
-        pair = frozenset({DEADZONE.name, SATURATION.name})  # the effects on the commands
-        a = candidates.refit.model.values.get("a", nom.a)
+        pair = frozenset(COMMAND_EFFECTS)
         if (config.max_effects > 1 and pair not in scored and all(frozenset([e]) in scored for e in pair)
-                and abs(abs(a / nom.a) - 1) > config.gain_tolerance):
+                and reads_a_gain(candidates.refit.model, nom, config)):
             # "none" reads a gain error: the two command effects together may be what bent it, where neither alone
             # lowers the BIC (a deadzone of 0.2 with a saturation of 1.5 and a gain of 0.7, 100 sequences of 20
             # frames: no single lowered the BIC, the pair was never fitted, and "none" read "gain 0.574 (0.566..0.581)")
@@ -1181,7 +1193,7 @@ def select(candidates: Candidates, nom: Nominal, w: WindowSet, config: DiagnoseC
                 or (e == SPEED_CLIP.name and known_clip is not None)):  # (the file's own clip: no hypothesis, see earns)
             continue
         _, bic_drop, free_drop = passes(scored[members], chosen)
-        command = e in (DEADZONE.name, SATURATION.name)
+        command = e in COMMAND_EFFECTS
         # a command effect (it trades with a) is supported where the BIC passed and the free run did not fail, or both
         # lean its way, the free run by more than ambiguous_free_run (a deadzone of 0.25 and a saturation of 1.5 read
         # "deadzone 0.21; gain 0.937", where the saturation, read at 1.42 with the deadzone at 0.262 and a at 1.03, cut
@@ -1199,7 +1211,7 @@ def select(candidates: Candidates, nom: Nominal, w: WindowSet, config: DiagnoseC
     if shadows:
         # a command effect first (a gain read without it is bent), by its BIC drop; else by the free run's cut
         command, bic_drop, free_drop, shadow = max(shadows, key=lambda x: (x[0], x[1] if x[0] else x[2]))
-        bent = abs(abs(chosen.model.values.get("a", nom.a) / nom.a) - 1) > config.gain_tolerance
+        bent = reads_a_gain(chosen.model, nom, config)
         if not command and bent and len(shadow.model.effects) < config.max_effects:
             # where the chosen set reads a gain, a deadzone or a saturation beside the shadow's effect too, that the
             # free run favours by more than min_gain at a BIC within ambiguous_bic of the shadow's, or that leans its
@@ -1208,7 +1220,7 @@ def select(candidates: Candidates, nom: Nominal, w: WindowSet, config: DiagnoseC
             # friction + delay + deadzone, never fitted, cut the free run of friction + delay by 10.5% at a BIC 2.8
             # higher and read a, the friction and the deadzone right; with 31% at 4.1 on a second seed)
             extended_by = []
-            for d in (DEADZONE.name, SATURATION.name):
+            for d in COMMAND_EFFECTS:
                 members = frozenset(shadow.model.effects) | {d}
                 if d in shadow.model.effects or d not in names:
                     continue
@@ -1222,8 +1234,7 @@ def select(candidates: Candidates, nom: Nominal, w: WindowSet, config: DiagnoseC
             if extended_by:
                 shadow = max(extended_by, key=lambda x: x[0])[1]
                 _, bic_drop, free_drop = passes(shadow, chosen)
-        values = ", ".join(f"{e} {shadow.model.values[EFFECTS[e].parameter]:.3g}" for e in shadow.model.effects
-                           if EFFECTS[e].parameter in shadow.model.values)
+        values = effect_values(shadow.model)
         why = (f"which lowers the one-step BIC by {bic_drop:.3g} more, at a typical held-out free-run error "
                f"{abs(100 * free_drop):.2g}% {'lower' if free_drop >= 0 else 'higher'}" if bic_drop > config.bic_margin
                else f"which cuts the typical held-out free-run error by {100 * free_drop:.2g}% more, at a one-step BIC "
@@ -1443,7 +1454,7 @@ def separating_data(effects: tuple[str, ...], values: dict[str, float], actions:
     u = np.zeros(0) if actions is None else np.abs(np.asarray(actions, float)).ravel()
     hints, met = [], []  # (met: the ranges the recording already holds enough of, said once)
     for e in (e for e in effects if EFFECTS[e].evidence):
-        if u.size and e in (DEADZONE.name, SATURATION.name):
+        if u.size and e in COMMAND_EFFECTS:
             edge = values[EFFECTS[e].parameter]
             share = float(np.mean(u < edge if e == DEADZONE.name else u > edge))
             if share >= MET_SHARE:
@@ -1845,17 +1856,16 @@ def _offset_gain_note(naming: Naming, final: fit.Model, rival: Score, rival_why:
     ``gain_tolerance`` of "none"'s where "none" names no gain: a gain that a command effect offsets reads as none at
     all (a deadzone of 0.2 with a gain of 1.2 under camera noise of 10 gray levels, 40 sequences of 20 frames, read
     "noise 9.93" alone: "none" read a at x1.005, the deadzone rival, 13.2 lower in BIC, a = 1.279 and d = 0.241)."""
-    command = {DEADZONE.name, SATURATION.name}
-    if (not rival.model.effects or not set(rival.model.effects) <= command
+    if (not rival.model.effects or not set(rival.model.effects) <= set(COMMAND_EFFECTS)
             or "gain" in {e.effect for e in naming.effects} or rival.name in " ".join(naming.notes)):
         return naming
     ratio = abs(rival.model.values.get("a", 0.0) / final.values["a"]) if final.values.get("a") else 1.0
     if abs(ratio - 1) <= config.gain_tolerance:
         return naming
-    values = ", ".join(f"{e} {rival.model.values[EFFECTS[e].parameter]:.3g}" for e in rival.model.effects)
     return dataclass_replace(naming, notes=[*naming.notes, (
-        f"with {rival.name}, {rival_why}, a reads x{ratio:.3f} what no effect reads (read as {values}): a gain that a "
-        "deadzone or a saturation offsets reads as none at all, so neither is ruled out")])
+        f"with {rival.name}, {rival_why}, a reads x{ratio:.3f} what no effect reads (read as "
+        f"{effect_values(rival.model)}): a gain that a deadzone or a saturation offsets reads as none at all, so neither "
+        "is ruled out")])
 
 
 def _through_a_codec(naming: Naming, source: str | None) -> Naming:
