@@ -39,6 +39,7 @@ def test_codes_carry_the_pendulum_instead_of_collapsing_to_the_mean_frame(tiny_d
     assert 0 < autoencoder_seconds(path) < 600  # recorded for the DDPG run's compute
 
 
+@pytest.mark.slow
 def test_an_autoencoder_of_the_collapsing_layout_is_refused(tiny_data: Path, tmp_path: Path) -> None:
     path = tmp_path / "ae.pt"
     train_autoencoder(tiny_data, AutoencoderConfig(steps=1, depth=4, batch_size=2), path, progress=False)

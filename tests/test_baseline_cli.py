@@ -163,6 +163,7 @@ def test_planet_resume_without_its_record_rebuilds_it_from_the_checkpoint_exactl
     assert record["rssm"]["deter_size"] == 8 and len(record["resumed"]) == 1
 
 
+@pytest.mark.slow
 def test_ddpg_resume_without_its_record_rebuilds_it_from_the_checkpoint(ddpg_run: Path, tmp_path: Path,
                                                                          capsys: pytest.CaptureFixture[str]) -> None:
     import shutil
@@ -309,6 +310,7 @@ def test_piga_control_refuses_goals_for_baselines(planet_run: Path, option: tupl
 
 
 @pytest.mark.parametrize("kind, workers, panels", [("planet", "2", 2), ("ddpg", "1", 1)])
+@pytest.mark.slow
 def test_piga_control_writes_a_baseline_video(planet_run: Path, ddpg_run: Path, tmp_path: Path, kind: str, workers: str,
                                               panels: int, capsys: pytest.CaptureFixture[str]) -> None:
     """Episode 0 as real frames (| the PlaNet-style model's reconstruction), also when workers ran the episodes."""
@@ -358,6 +360,7 @@ def test_episodes_split_over_workers_are_the_episodes_of_one_process(planet_run:
     assert len({e.return_ for e in one.episodes}) == 3  # three different episodes, not one thrice
 
 
+@pytest.mark.slow
 def test_planet_iterative_from_the_command_line(tiny_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "run"
     code, stdout, err = run_in_process("piga-baseline", baseline.main, "planet", str(tiny_data), "--out", str(out), *TINY_PLANET,

@@ -88,6 +88,7 @@ def _stand_ins(ablations: Any, monkeypatch: pytest.MonkeyPatch, fail: str | None
     return calls
 
 
+@pytest.mark.slow
 def test_the_page_figure_and_json_are_written_and_a_rerun_reuses_the_records(ablations, tmp_path: Path,
                                                                             monkeypatch: pytest.MonkeyPatch) -> None:
     calls = _stand_ins(ablations, monkeypatch)

@@ -25,6 +25,7 @@ def pendulum(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return path
 
 
+@pytest.mark.slow
 def test_it_times_both_trainings_on_the_cpu(pendulum: Path, tmp_path: Path) -> None:
     out = tmp_path / "speed"
     assert device_speed.main(["--data", str(pendulum), "--out", str(out), "--steps", "1", "--warmup", "1",

@@ -75,6 +75,7 @@ def _stand_ins(regions: Any, monkeypatch: pytest.MonkeyPatch, half_file: Path,
     return calls
 
 
+@pytest.mark.slow
 def test_the_page_strip_and_json_are_written_and_a_rerun_reuses_the_records(regions, tmp_path: Path, half_file: Path,
                                                                            monkeypatch: pytest.MonkeyPatch) -> None:
     calls = _stand_ins(regions, monkeypatch, half_file)

@@ -105,6 +105,7 @@ def test_h264_changes_only_the_frames(bench, spring_file: Path, tmp_path: Path, 
     assert np.abs(changed).mean() < 20  # lossy, yet still the picture
 
 
+@pytest.mark.slow
 def test_h264_of_gray_frames_and_odd_sizes(bench, tiny_data: Path, tmp_path: Path) -> None:
     target = tmp_path / "h264.h5"
     bench.postprocess(tiny_data, target, "h264:crf=23", chunk=5)
@@ -196,6 +197,7 @@ def _command(path: Path, body: str) -> None:
     path.chmod(path.stat().st_mode | stat.S_IXUSR)
 
 
+@pytest.mark.slow
 def test_a_refused_row_is_recorded_and_not_rerun(bench, spring_file: Path, tmp_path: Path,
                                                  monkeypatch: pytest.MonkeyPatch) -> None:
     """The whole flow, as a user would see it, with stand-ins for the commands: piga-collect copies a tiny file,

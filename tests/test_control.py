@@ -236,6 +236,7 @@ def test_a_sweep_on_ray_without_ray_or_its_cluster_is_refused_in_one_line(contro
     assert line == "piga-control: error: --ray auto: Ray is not installed: pip install -e '.[ray]'"
 
 
+@pytest.mark.slow
 def test_agents_import_nothing_from_diagnostics() -> None:
     """The planner knows no diagnosis: importing every agents module in a fresh interpreter loads no piga.diagnostics."""
     import subprocess
@@ -257,6 +258,7 @@ def control_model(tiny_run: Path) -> Path:
     return tiny_run
 
 
+@pytest.mark.slow
 def test_sweep_writes_a_table_per_multiplier(control_model: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     import json
 
@@ -299,6 +301,7 @@ def test_video_is_written_and_decodes(control_model: Path, tmp_path: Path, suffi
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+@pytest.mark.slow
 def test_interrupted_sweep_ends_with_its_workers(control_model: Path, sig: signal.Signals) -> None:
     """Ctrl-C or SIGTERM to piga-control during a sweep: one line, a non-zero exit, and no worker left."""
     if not Path("/proc/self/stat").exists():

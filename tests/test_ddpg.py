@@ -79,6 +79,7 @@ def test_training_resumes_exactly(tmp_path: Path) -> None:
     assert [p.name for p in (tmp_path / "a" / "replay_buffers").iterdir()] == ["400.pkl"]
 
 
+@pytest.mark.slow
 def test_a_checkpoint_with_its_replay_buffer_inside_resumes_exactly(tmp_path: Path) -> None:
     """Runs checkpointed before the buffer had a file of its own held its bytes in checkpoint.pt: they continue; a
     checkpoint whose buffer file is gone is named, not an internal error."""
@@ -102,6 +103,7 @@ def test_a_checkpoint_with_its_replay_buffer_inside_resumes_exactly(tmp_path: Pa
         train_sb3(replace(TINY, steps=600), tmp_path / "b", resume=True, progress=False)
 
 
+@pytest.mark.slow
 def test_a_pixel_policy_runs_in_piga_episodes_with_sb3s_stacking(tmp_path: Path) -> None:
     from stable_baselines3.common.vec_env import DummyVecEnv, VecFrameStack
 
@@ -128,6 +130,7 @@ def test_a_pixel_policy_runs_in_piga_episodes_with_sb3s_stacking(tmp_path: Path)
     venv.close()
 
 
+@pytest.mark.slow
 def test_a_latent_run_trains_on_its_autoencoders_codes_and_records_its_cost(tiny_data: Path, tmp_path: Path) -> None:
     from agents.sb3.autoencoder import AutoencoderConfig, train_autoencoder
     from agents.sb3.run import SB3Agent

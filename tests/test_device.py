@@ -96,6 +96,7 @@ def as_if_saved_on_a_gpu(run_dir: Path, **changes: dict[str, Any]) -> None:
             torch.load(path, weights_only=False)
 
 
+@pytest.mark.slow
 def test_a_model_trained_on_a_gpu_loads_and_resumes_on_the_cpu(tiny_data: Path, tmp_path: Path,
                                                               capsys: pytest.CaptureFixture[str]) -> None:
     from piga.io.runs import load_model
@@ -133,6 +134,7 @@ def test_a_planet_run_trained_on_a_gpu_resumes_on_the_cpu(tiny_data: Path, tmp_p
     assert json.loads((run_dir / "metrics.json").read_text())["steps"] == 3
 
 
+@pytest.mark.slow
 def test_a_baseline_run_from_before_the_device_option_resumes(tiny_data: Path, tmp_path: Path,
                                                                capsys: pytest.CaptureFixture[str]) -> None:
     run_dir = tmp_path / "ddpg"

@@ -77,6 +77,7 @@ def damped():
     return analyse(planted({"damping": 0.2}), NOMINAL, SINGLES)
 
 
+@pytest.mark.slow
 def test_two_candidates_the_data_cannot_separate_give_an_ambiguous_verdict(spin) -> None:
     d = spin
     assert d.verdict_class == "ambiguous", d.verdict
@@ -208,6 +209,7 @@ def test_provenance_excludes_only_what_the_system_cannot_have() -> None:
     assert impossible_effects({}) == {}  # a blind benchmark's file, its hints deleted
 
 
+@pytest.mark.slow
 def test_an_excluded_effect_is_not_fitted_and_the_report_says_why() -> None:
     obs = replace(planted({"damping": 0.2}, n=60), impossible={"speed_clip": "dm_control has no speed clip"})
     d = analyse(obs, NOMINAL, SINGLES)
@@ -238,6 +240,7 @@ def test_a_gain_on_top_of_within_frame_is_not_counted_twice(tmp_path_factory: py
     assert any("compensates the effects, not a gain error" in n for n in d.notes)
 
 
+@pytest.mark.slow
 def test_a_real_gain_error_is_still_named(tmp_path_factory: pytest.TempPathFactory) -> None:
     d = planted_diagnosis(tmp_path_factory, {"gain": 0.8}, config=SINGLES)
     assert d.verdict_class == "gain" and abs(d.effects[0].value - 0.8) < 0.01, d.verdict
@@ -304,6 +307,7 @@ def test_the_nominal_model_carries_its_damping_and_integrator() -> None:
     torch.testing.assert_close(ours[..., 1], v[..., 0, 0], atol=1e-10, rtol=0)
 
 
+@pytest.mark.slow
 def test_a_nominal_model_with_damping_is_diagnosed_relative_to_it() -> None:
     """A nominal b of 0.1 on data damped by 0.1: no gap; by 0.3: damping of +0.2 on top."""
     damped = fit.Nominal(g=10.0, a=1.0, offset=0.0, dt=0.05, b=0.1)
@@ -560,6 +564,7 @@ def test_a_gain_is_judged_against_the_models_own_file() -> None:
 
 
 @pytest.mark.parametrize("effect, value, n, t", [("gain", 0.7, 120, 30), ("gravity", 0.83, 80, 24)])
+@pytest.mark.slow
 def test_a_damping_that_only_the_training_file_has_is_read_in_both_files(effect: str, value: float, n: int,
                                                                          t: int) -> None:
     """The training system had a damping, the recording's has none: read in the recording's form (no damping), the

@@ -474,6 +474,7 @@ def test_a_picture_without_the_arrow_is_not_a_brighter_exposure(tmp_path: Path) 
                               V.decoder_renders(model, V.TABLE_SIZE // 2)) == pytest.approx(1.3, abs=0.03)
 
 
+@pytest.mark.slow
 def test_a_brighter_picture_on_white_is_read_on_the_rod_against_the_training_file(tmp_path: Path) -> None:
     """On Gymnasium's frames the matched residual read a picture brightened by 1.07 as 1.037 (interval 1.03..1.04),
     and its rod's dark pixels read it right: the value is now read there, against the training file's."""
@@ -557,6 +558,7 @@ def test_the_report_shows_the_calm_frames_drop_that_accepted_a_candidate() -> No
     assert "calm" not in "\n".join(_camera_lines(VisionSummary(1e-3, 1e-3, 1.0, summary)))
 
 
+@pytest.mark.slow
 def test_a_large_shift_moves_the_pendulum_onto_pixels_not_read_as_noise(model, tmp_path: Path) -> None:
     """A shift of 4.9 px, beyond the still pixels' margin of 4, read "noise 8.34": the still pixels are now those the
     pendulum never reaches through the accepted camera."""
@@ -597,6 +599,7 @@ def test_a_blurred_pendulum_moving_slowly_does_not_drop_frames(model, tmp_path: 
     assert found.camera.blur == pytest.approx(3.9, abs=0.2) and "frame_drop" not in {e["effect"] for e in found.effects}
 
 
+@pytest.mark.slow
 def test_an_exposure_is_named_relative_to_the_models_own_frames(model, tmp_path: Path) -> None:
     """A model trained on g = 3 frames drew the whole scene 1.6% darker than they were, and its own training file read
     "exposure 1.02": the exposure is the recording's over the own file's, where that file is there."""

@@ -61,6 +61,7 @@ def test_a_window_whose_system_is_singular_though_finite_keeps_its_starts() -> N
     assert torch.allclose(step[1], torch.tensor([2.0 / 3.0, 4.0 / 3.0], dtype=torch.float64))  # solved
 
 
+@pytest.mark.slow
 def test_the_option_refits_the_chosen_values(noisy) -> None:
     """``DiagnoseConfig.fit_starts``: the same choice (damping), its value refitted (read starts: b 7% high)."""
     fitted = analyse(noisy, NOMINAL, DiagnoseConfig(bootstrap=0, max_effects=1))  # on by default (the damping alone)
@@ -69,6 +70,7 @@ def test_the_option_refits_the_chosen_values(noisy) -> None:
     assert abs(fitted.corrected["b"] / 0.2 - 1) < 0.01
 
 
+@pytest.mark.slow
 def test_matched_angles_read_the_chosen_values_on_the_matched_angles(noisy) -> None:
     """``DiagnoseConfig.matched_angles``: the selection on the encoder's angles (here 10 mrad of error), the
     chosen effects' values on the matched ones (here 2 mrad); without the option ``matched`` is not used.
@@ -83,6 +85,7 @@ def test_matched_angles_read_the_chosen_values_on_the_matched_angles(noisy) -> N
     assert plain.corrected["b"] > 0.203 and not any("decoder's renders" in n for n in plain.notes)
 
 
+@pytest.mark.slow
 def test_a_sign_seen_only_on_the_matched_angles_moves_the_whole_diagnosis_onto_them() -> None:
     """An encoder that misreads the recording (here: angles that barely respond to the actions) misses the actuation's
     sign, and with it the selection misses what else there is; the matched angles show the reversed actuation: then the

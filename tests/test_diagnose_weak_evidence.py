@@ -227,6 +227,7 @@ def gymnasium_clipped(gain: float, n: int = 120, t: int = 30, seed: int = 2) -> 
     return simulated(lambda v, x, u: np.clip(v + 0.05 * (15 * np.sin(x) + 3 * gain * u), -8, 8), n, t, seed)
 
 
+@pytest.mark.slow
 def test_gymnasiums_own_clip_is_fitted_where_it_binds_too_rarely_to_pile_up() -> None:
     """The pixel pendulum with a gain of 1.15: speeds reach the clip in under 1% of the steps, fewer at 8 than just
     below, and none beyond; without the clip "none" read the gain 1.139 (95% interval 1.12..1.14)."""

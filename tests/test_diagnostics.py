@@ -93,6 +93,7 @@ def test_no_effect_is_no_gap(tmp_path_factory: pytest.TempPathFactory) -> None:
     assert d.verdict == "no significant gap"
 
 
+@pytest.mark.slow
 def test_no_gap_through_a_large_vision_gap_says_the_vision_may_hide_one() -> None:
     """dm_control with shadows on re-rendered 39.5x worse than the training frames and read "no significant gap" where
     the same physics without shadows reads a damping: a verdict of no gap says that its vision may hide one."""
@@ -131,6 +132,7 @@ def test_not_explained_through_a_large_vision_gap_says_so_first() -> None:
     assert _seen_through_vision_gap(undetermined, 5.0) is undetermined
 
 
+@pytest.mark.slow
 def test_an_actuation_reversed_in_the_matched_angles_alone_is_named_a_flip() -> None:
     """An encoder that misreads a camera on the other side of the hinge showed no response to the actions, and the
     matched angles' reading of the nominal sign shrank a to 3e-08 ("the actions barely move the system"): the reading
@@ -190,6 +192,7 @@ def test_a_gravity_error_is_named_not_called_no_gap() -> None:
     assert e.value == pytest.approx(0.5, abs=0.01) and not d.gap.no_gap
 
 
+@pytest.mark.slow
 def test_constant_actions_name_no_gain_nor_actuator_effect() -> None:
     """All-1 actions read "gain 0.0271 factor on the nominal a" beside a note that the gain cannot be judged: a
     constant command times a gain is a constant torque."""
@@ -218,6 +221,7 @@ def test_a_gain_the_actions_barely_show_is_not_given_a_value() -> None:
     assert not any(e.effect == "gain" for e in d.effects)
 
 
+@pytest.mark.slow
 def test_a_gain_whose_interval_holds_the_nominal_is_not_named() -> None:
     obs = planted({"gain": 0.97}, n=40, t=20, noise=0.003, seed=2)  # little data: a refits to 0.966; interval holds 1
     untested = analyse(obs, NOMINAL, SINGLES)
@@ -424,6 +428,7 @@ def test_a_model_whose_training_failed_is_refused(untrained_model: Path, damped_
     assert not out.exists()
 
 
+@pytest.mark.slow
 def test_video_that_is_not_the_pendulum_is_refused_not_diagnosed(tiny_model: Path, damped_data: Path, tmp_path: Path,
                                                                   capsys: pytest.CaptureFixture[str]) -> None:
     """Random-noise frames: one line, "not the scene the model knows", no list of effects, no folder."""
@@ -512,6 +517,7 @@ def _drop_frames(obs: Observations, p: float, seed: int = 0) -> Observations:
     return replace(obs, theta=theta, stale=stale)
 
 
+@pytest.mark.slow
 def test_dropped_frames_are_named_and_their_repeats_predicted() -> None:
     from piga.diagnostics.repeats import repeated_frames
 
@@ -539,6 +545,7 @@ def test_a_still_pendulum_repeating_frames_is_no_drop() -> None:
     assert repeated_frames(stale, theta)[3] == []
 
 
+@pytest.mark.slow
 def test_a_late_camera_is_a_frame_delay() -> None:
     from piga.diagnostics.repeats import leading_repeats
 
@@ -592,6 +599,7 @@ def test_a_video_of_constant_frames_is_refused_with_a_reason(tiny_model: Path, d
     assert "ZeroDivisionError" not in result.stderr and not out.exists()
 
 
+@pytest.mark.slow
 def test_the_smallest_default_file_is_accepted(tmp_path: Path) -> None:
     """20 sequences at piga-collect's default split (16, 2, 2) are what the docs name as the minimum."""
     from piga.data.collect import CollectConfig, collect

@@ -108,6 +108,7 @@ def test_a_batch_split_over_workers_is_the_recorded_one() -> None:
 
 
 @pytest.mark.parametrize("name, kind, steps", [("planet", "planet", 8), ("ddpg", "ddpg", 25), ("sac", "ddpg", 25)])
+@pytest.mark.slow
 def test_the_baselines_episodes_are_the_recorded_ones(name: str, kind: str, steps: int, runs: dict[str, Path]) -> None:
     torch.set_num_threads(1)
     job = ControlJob(kind, replace(EPISODES, steps=steps), MPC, model_dir=str(runs[name]))

@@ -170,6 +170,7 @@ def _small_disk(monkeypatch: pytest.MonkeyPatch, size: int) -> None:
     monkeypatch.setattr(shutil, "disk_usage", usage)
 
 
+@pytest.mark.slow
 def test_a_small_file_is_written_on_a_small_empty_disk(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                                                        capsys: pytest.CaptureFixture[str]) -> None:
     """A 100 KB file on an empty 6 MiB disk: after collecting, "the disk is full", as the writer kept 8 MiB free for

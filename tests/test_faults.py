@@ -815,6 +815,7 @@ def test_a_resumed_run_counts_the_checkpoint_it_replaces(tmp_path: Path, monkeyp
 
 
 @pytest.mark.parametrize("prog, head", [("piga-train-model", []), ("piga-baseline", ["planet"])])
+@pytest.mark.slow
 def test_resume_on_a_small_disk_counts_the_runs_checkpoint(prog: str, head: list[str], tiny_run: Path,
                                                            baseline_runs: dict[str, Path], tiny_data: Path,
                                                            tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
@@ -998,6 +999,7 @@ def test_planet_resume_takes_a_fingerprint_that_is_not_text_as_none(baseline_run
     assert "has changed" not in err, err
 
 
+@pytest.mark.slow
 def test_resume_on_the_same_contents_rewrites_the_records_data_name(baseline_runs: dict[str, Path], tiny_data: Path,
                                                                      tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """A record whose "data" was edited to another file (or whose file was moved) resumed on the file given, matched by
@@ -2103,6 +2105,7 @@ def test_train_refuses_a_folder_with_another_runs_curves(tiny_data: Path, tmp_pa
     assert (out / "tensorboard" / "events.old").exists()
 
 
+@pytest.mark.slow
 def test_train_resume_tells_a_moved_file_from_another_of_the_same_shape(tiny_piga_run: Path, tiny_data: Path,
                                                                         tmp_path: Path,
                                                                         capsys: pytest.CaptureFixture[str]) -> None:
@@ -2127,6 +2130,7 @@ def test_train_resume_tells_a_moved_file_from_another_of_the_same_shape(tiny_pig
     assert code in (0, NOT_CONVERGED), err  # resumed and trained: a tiny run is too short to be judged converged
 
 
+@pytest.mark.slow
 def test_train_resume_names_the_trained_file_from_the_current_folder(tiny_piga_run: Path, tiny_data: Path,
                                                                     tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                                                                     capsys: pytest.CaptureFixture[str]) -> None:
@@ -2189,6 +2193,7 @@ def test_train_resume_says_the_file_has_changed(tiny_piga_run: Path, tiny_data: 
             f"--resume: {data} has changed since the run trained on it")
 
 
+@pytest.mark.slow
 def test_train_resume_without_its_record_says_it_rebuilds_it(tiny_piga_run: Path, tiny_data: Path, tmp_path: Path,
                                                               capsys: pytest.CaptureFixture[str]) -> None:
     """The checkpoint holds the recipe and the model, so a lost config.json does not stop a resume; the rebuilt
@@ -2606,6 +2611,7 @@ def test_an_invalid_dmc_physics_state_is_the_configs_error(capsys: pytest.Captur
     assert "QACC" not in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_a_scene_with_forces_too_strong_names_them(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """--g 1e6 flings every start into a wall; the message named only the sequences, the speed and the image."""
     refused("piga-collect", ["--out", str(tmp_path / "d.h5"), "--system", "gravity", "--g", "1e6", "--sequences", "2",
@@ -2629,6 +2635,7 @@ def test_a_spring_rest_length_is_refused_only_where_the_balls_overlap() -> None:
         scene_config("spring", radius=20.0, image_size=32)
 
 
+@pytest.mark.slow
 def test_a_scene_with_forces_too_weak_to_show_says_so_before_the_walls(tmp_path: Path,
                                                                       capsys: pytest.CaptureFixture[str]) -> None:
     """--k 1e-9 lets the balls fly into the walls: the refusal offered shorter sequences and a larger image, and a
@@ -3500,6 +3507,7 @@ def test_an_error_line_comes_after_the_progress_bar_it_ended(tmp_path: Path) -> 
     assert result.returncode == 1 and result.stderr.rstrip().endswith("prog: error: bad input"), result.stderr
 
 
+@pytest.mark.slow
 def test_diagnose_refuses_an_env_that_contradicts_the_files_effects(tmp_path: Path, tiny_piga_run: Path,
                                                                      capsys: pytest.CaptureFixture[str]) -> None:
     """The MPC comparison of --env would have run on another system than the one the data came from. (Judged after
@@ -3781,6 +3789,7 @@ def test_an_edited_planet_metrics_record_tells_nothing_and_says_nothing(edit: Ca
     assert not [w for w in recwarn if issubclass(w.category, RuntimeWarning)]
 
 
+@pytest.mark.slow
 def test_resume_takes_a_default_the_run_was_started_at(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """--resume --encoder-precision auto on a run started without it was "drop --encoder-precision" (the record holds
     the precision resolved); the run was started at auto all the same."""
@@ -3820,6 +3829,7 @@ def test_a_goal_image_of_another_shape_is_warned_of(tiny_piga_run: Path, tmp_pat
         goal_from_image(model, checkpoint, tiny)
 
 
+@pytest.mark.slow
 def test_train_model_resume_takes_auto_loading_the_run_was_started_at(tiny_data: Path, tmp_path: Path,
                                                                      capsys: pytest.CaptureFixture[str]) -> None:
     """--resume --data-loading auto on a run started without it was "drop --data-loading" (the checkpoint holds the
@@ -3836,6 +3846,7 @@ def test_train_model_resume_takes_auto_loading_the_run_was_started_at(tiny_data:
             "--resume keeps the run's recipe; drop --data-loading")
 
 
+@pytest.mark.slow
 def test_control_writes_its_outputs_for_a_non_ascii_model_under_a_c_locale(tiny_piga_run: Path, tmp_path: Path) -> None:
     """Under LC_ALL=C with PYTHONUTF8=0 the model's name held lone surrogates, and OUT.md failed to encode after the
     episodes ("surrogates not allowed")."""
@@ -3879,6 +3890,7 @@ def test_a_model_of_a_rate_dmc_steps_is_pointed_at_dmc(dt: float, told: bool, ti
 
 @needs_dmc
 @pytest.mark.parametrize("renderer", ["glfw", "osmesa"])
+@pytest.mark.slow
 def test_a_renderer_that_cannot_start_here_is_one_line(renderer: str, tmp_path: Path) -> None:
     """MUJOCO_GL=glfw without a display was exit 70 after glfw's warnings and a half-made context's complaint
     (16 lines); osmesa without its library was exit 70 (PyOpenGL's AttributeError)."""
@@ -3891,6 +3903,7 @@ def test_a_renderer_that_cannot_start_here_is_one_line(renderer: str, tmp_path: 
 
 
 @pytest.mark.parametrize("variables", [{"OMP_NUM_THREADS": "0", "MPLBACKEND": "bogus"}, {"OMP_NUM_THREADS": "abc"}])
+@pytest.mark.slow
 def test_a_variable_a_library_cannot_use_changes_nothing(variables: dict[str, str], tiny_data: Path,
                                                          tmp_path: Path) -> None:
     """OMP_NUM_THREADS=0 printed libgomp's "Invalid value" on stderr; MPLBACKEND=bogus failed at the first figure,
@@ -3905,6 +3918,7 @@ def test_a_variable_a_library_cannot_use_changes_nothing(variables: dict[str, st
 
 
 @pytest.mark.parametrize("seed", [str(2**32), str(2**63 - 1)])
+@pytest.mark.slow
 def test_every_seed_the_parser_takes_runs(seed: str, tiny_data: Path, tmp_path: Path,
                                           capsys: pytest.CaptureFixture[str]) -> None:
     """Seeds from 2^32 to 2^63 - 1 passed the parser, then failed in numpy's global seeding ("Seed must be between 0

@@ -16,6 +16,7 @@ def _ball_rows(frames: np.ndarray) -> np.ndarray:
     return frames.max(axis=(-1, -2)) > 0  # frames (…, H, W, 3)
 
 
+@pytest.mark.slow
 def test_half_file_shows_the_bottom_half_only_in_the_test_extrapolation(tmp_path):
     path = tmp_path / "half.h5"
     args = ["--system", "spring", "--half", "--sequences", "8", "--split", "4,2,2", "--seed", "3", "--workers", "1",

@@ -26,6 +26,7 @@ def _start(batch: int = 6) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     return p0, v0, actions
 
 
+@pytest.mark.slow
 def test_rk4_follows_a_fine_step_reference():
     system = _pendulum()
     p0, v0, actions = _start()
@@ -136,6 +137,7 @@ def _fit_a(signed: bool, steps: int = 150) -> float:
     return model.parameters_dict()["a"]
 
 
+@pytest.mark.slow
 def test_signed_actuation_learns_a_flipped_motor():
     assert _fit_a(signed=True) == pytest.approx(-1.3, rel=0.05)
     assert _fit_a(signed=False, steps=50) > 0  # in log space it cannot cross 0

@@ -418,6 +418,7 @@ def test_ddpg_threads_0_is_torchs_choice_and_a_bad_count_names_its_field() -> No
         SB3Config(batch_size=0)
 
 
+@pytest.mark.slow
 def test_help_under_an_ascii_locale_is_printed_with_escapes() -> None:
     """Under LC_ALL=C with PYTHONUTF8=0 stdout is ASCII: '--help' (θ, ·) failed with an encoding error (exit 1)."""
     env = {**ENV, "LC_ALL": "C", "LANG": "C", "PYTHONUTF8": "0", "PYTHONCOERCECLOCALE": "0"}

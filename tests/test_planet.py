@@ -193,6 +193,7 @@ def _iterative(data: Path, run: Path, rounds: int, resume: bool = False) -> tupl
                                   progress=False, planner=TINY_CEM)
 
 
+@pytest.mark.slow
 def test_iterative_rounds_append_collected_episodes_and_leave_the_data_file_alone(tiny_data: Path, tmp_path: Path) -> None:
     import hashlib
     import json
@@ -310,6 +311,7 @@ def test_the_reward_head_has_the_layers_and_width_asked_for() -> None:
         replace(small, reward_layers=0)
 
 
+@pytest.mark.slow
 def test_the_checkpoint_keeps_the_weights_of_the_lowest_valid_loss(tiny_data: Path, tmp_path: Path) -> None:
     """Each checkpoint measures the valid split's loss; the lowest one's weights are kept (resumed exactly) and
     write_selected makes them a run of their own: the weights a run stopped at that step has."""

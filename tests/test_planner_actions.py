@@ -117,6 +117,7 @@ EXACT = ["oracle", "oracle_tilted_goal", "oracle_goal_near_down", "oracle_best_m
 
 
 @pytest.mark.parametrize("name", EXACT)
+@pytest.mark.slow
 def test_the_planners_choose_the_recorded_actions(chosen: dict[str, np.ndarray], name: str) -> None:
     recorded = np.load(DATA)
     assert set(recorded.files) == set(EXACT) == set(chosen)

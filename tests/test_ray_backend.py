@@ -38,6 +38,7 @@ def _square(x: int) -> tuple[int, int]:
     return x * x, torch.get_num_threads()
 
 
+@pytest.mark.slow
 def test_a_farm_gives_the_local_results_in_order_one_thread_each() -> None:
     ended: list[int] = []
     on_ray = run_pool(_square, list(range(6)), progress=False, backend=RAY, on_result=lambda i, r: ended.append(i))

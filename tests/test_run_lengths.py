@@ -24,6 +24,7 @@ def small_spring(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return collect_scene(config, path, progress=False, command="test")
 
 
+@pytest.mark.slow
 def test_a_scene_run_shorter_than_its_recipe_retries_no_seed(small_spring: Path, tmp_path: Path,
                                                              monkeypatch: pytest.MonkeyPatch,
                                                              capsys: pytest.CaptureFixture[str]) -> None:
@@ -45,6 +46,7 @@ def test_a_scene_run_shorter_than_its_recipe_retries_no_seed(small_spring: Path,
     assert record["train"]["seed"] == 0 and record["train"]["seed_retries"] == 0 and "retried_seeds" not in record
 
 
+@pytest.mark.slow
 def test_a_resumed_scene_run_still_shorter_than_its_recipe_is_told_to_train_that_long(
         small_spring: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
     """After --resume --epochs 3 of a 2-epoch run (6 steps of 1,650 planned), the advice turned to "train again with

@@ -76,6 +76,7 @@ def test_unknown_system_in_a_file_is_one_line(spring_data: Path, tmp_path: Path,
     assert not (tmp_path / "run").exists()
 
 
+@pytest.mark.slow
 def test_a_run_whose_autoencoder_found_no_ball_trains_again_then_exits_1_naming_the_seed(
         spring_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """Two optimiser steps: the decoder renders no ball yet, so the balls stay in the residual. The run
@@ -98,6 +99,7 @@ def test_a_run_whose_autoencoder_found_no_ball_trains_again_then_exits_1_naming_
     assert len(list((out / "tensorboard").iterdir())) == 1  # the first attempt's curves are gone
 
 
+@pytest.mark.slow
 def test_an_object_lost_after_the_warm_up_restarts_the_run_there(spring_data: Path, tmp_path: Path,
                                                                   monkeypatch: pytest.MonkeyPatch,
                                                                   capsys: pytest.CaptureFixture[str]) -> None:
@@ -273,6 +275,7 @@ def test_a_run_interrupted_in_a_retry_goes_on_retrying_after_resume(spring_data:
     assert json.loads((out / "config.json").read_text())["retried_seeds"] == [5, 6]
 
 
+@pytest.mark.slow
 def test_a_finished_run_resumed_for_longer_is_not_retried(spring_data: Path, tmp_path: Path,
                                                            monkeypatch: pytest.MonkeyPatch,
                                                            capsys: pytest.CaptureFixture[str]) -> None:

@@ -39,6 +39,7 @@ SITE_TOOLS = ("mkdocs", "material", "mkdocstrings", "mkdocstrings_handlers")
 @pytest.mark.skipif(any(importlib.util.find_spec(m) is None for m in SITE_TOOLS),
                     reason="the docs extra (mkdocs, mkdocs-material, mkdocstrings[python]) is not installed: "
                     "pip install torch==2.13.0 -e '.[docs]'")
+@pytest.mark.slow
 def test_the_site_builds_strictly(tmp_path: Path) -> None:
     """A broken link, a missing page in the nav or an API name that no longer exists fails the build."""
     out = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "--site-dir", str(tmp_path / "site")],

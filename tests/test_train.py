@@ -207,6 +207,7 @@ def test_cli_refuses_unusable_actions_up_front(small_data: Path, tmp_path: Path,
     assert not out.exists()
 
 
+@pytest.mark.slow
 def test_cli_curriculum_fraction_plans_the_horizon_and_a_sum_of_one_is_refused(
         small_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "r"  # 16 windows of batch 8: 2 steps an epoch, 10 epochs
@@ -275,6 +276,7 @@ def test_cli_paper_preset_runs(small_data: Path, tmp_path: Path, capsys: pytest.
     assert load_model(out)[0].system.offset.requires_grad  # the paper preset learns the angle offset
 
 
+@pytest.mark.slow
 def test_cli_interrupted_first_epoch_writes_nothing_and_rerun_works(
         small_data: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "r"
@@ -310,6 +312,7 @@ def test_cli_interrupted_first_epoch_writes_nothing_and_rerun_works(
     assert len(json.loads((out / "config.json").read_text())["resumed"]) == 2
 
 
+@pytest.mark.slow
 def test_resume_with_more_epochs_replans_the_cosine(small_data: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """As documented: from the resumed step on, the learning rates are those of a straight run of the new length."""
     import piga.training.train as training
@@ -589,6 +592,7 @@ def test_a_slot_that_draws_nothing_makes_a_converged_scene_run_untrained() -> No
     assert verdict.outcome == "unsettled" and "before its objects were learned" in verdict.reason
 
 
+@pytest.mark.slow
 def test_cli_interrupted_right_after_its_first_checkpoint_keeps_it_with_its_record(
         small_data: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
     """Ctrl-C between the first checkpoint's write and the record that goes with it: the run is kept, said so, and

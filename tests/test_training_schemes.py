@@ -128,6 +128,7 @@ def test_old_configs_are_joint_with_the_st_decoder_and_video_lstm_refuses_what_i
 
 @pytest.mark.parametrize(("flag", "value", "other"), [("--loss", "pred-only", "joint"), ("--loss", "separate", "pred-only"),
                                                       ("--decoder", "mlp", "st")])
+@pytest.mark.slow
 def test_each_option_trains_is_recorded_and_kept_by_resume(flag: str, value: str, other: str, small_data: Path,
                                                            tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "run"
@@ -158,6 +159,7 @@ def test_each_option_trains_is_recorded_and_kept_by_resume(flag: str, value: str
     assert "epoch 2:" in stdout and json.loads((out / "metrics.json").read_text())["training"]["steps"] == 4
 
 
+@pytest.mark.slow
 def test_resume_refuses_another_preset_and_takes_the_runs_own(small_data: Path, tmp_path: Path,
                                                                 capsys: pytest.CaptureFixture[str]) -> None:
     """A run of --preset continuous resumed with --preset fast: the preset was taken and ignored."""

@@ -28,6 +28,7 @@ def small_data(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 @pytest.mark.parametrize("architecture", ["video-lstm", "in-ig"])
+@pytest.mark.slow
 def test_a_baseline_trains_is_evaluated_as_piga_and_says_it_has_no_physics(
         architecture: str, small_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "run"
@@ -197,6 +198,7 @@ def _field_docs() -> dict[str, str]:
             if isinstance(a, ast.AnnAssign) and isinstance(b, ast.Expr) and isinstance(b.value, ast.Constant)}
 
 
+@pytest.mark.slow
 def test_the_video_lstm_scale_sizes_it_and_only_it(small_data: Path, tmp_path: Path,
                                                    capsys: pytest.CaptureFixture[str]) -> None:
     def count(**config: object) -> int:

@@ -175,6 +175,7 @@ def test_still_pixels_survive_a_decoder_that_leaks_a_few_gray_levels(model: Phys
     assert V.noise_level(noisy, still) == pytest.approx(12, rel=0.05)
 
 
+@pytest.mark.slow
 def test_stale_frames_come_from_the_drop_and_delay_wrappers() -> None:
     def frames(effects: dict) -> np.ndarray:
         env = make_pixel_pendulum(PixelPendulumConfig(image_size=32, effects=tuple(effects.items())))
