@@ -1294,9 +1294,10 @@ def test_the_nominal_row_read_on_other_angles_says_it_is_not_comparable() -> Non
     assert not has_gymnasiums_clip(refit.model, True, FAST)
 
 
-def test_not_explained_on_frames_from_a_lossy_video_says_the_codec_may_be_the_gap() -> None:
+def test_a_verdict_on_frames_from_a_lossy_video_says_its_twin_was_filmed_through_a_codec() -> None:
     """Clean recordings written to H.264 at crf 24 and 28 and imported read "not explained ... strays 6.3x (7.4x) as far
-    as on its twin ... no candidate closes it", with no word that the twin's floor is drawn without the codec's errors."""
+    as on its twin ... no candidate closes it", with the twin drawn without the codec's errors. Filmed through H.264
+    now, a verdict on the floor says what the twin's codec cannot rule out."""
     from piga.diagnostics.diagnose import _through_a_codec
     from piga.diagnostics.observe import lossy_source
     from piga.diagnostics.results import Naming
@@ -1307,18 +1308,49 @@ def test_not_explained_on_frames_from_a_lossy_video_says_the_codec_may_be_the_ga
     assert lossy_source({}) is None
     unexplained = Naming([], [], "not explained by the candidates: the nominal model's typical held-out free run strays "
                                  "7.4x as far as on its twin", "unexplained")
-    said = _through_a_codec(unexplained, "runs/v_t07.mp4")
-    assert said.verdict.startswith(unexplained.verdict + "; the frames come from v_t07.mp4, a lossy video: its codec's "
-                                   "errors in the angles are not in the twin's floor"), said.verdict
-    assert said.verdict_class == "unexplained"
-    assert _through_a_codec(unexplained, None) is unexplained
+    said = _through_a_codec(unexplained, "runs/v_t07.mp4", 27.4)
+    assert said.verdict.startswith(unexplained.verdict + "; the frames come from v_t07.mp4, a lossy video, and the twin "
+                                   "was filmed through H.264 at crf 27, where the encoder's one-step errors are the "
+                                   "recording's, but a codec that errs otherwise"), said.verdict
+    assert said.verdict_class == "unexplained" and said.notes == []
+    assert _through_a_codec(unexplained, None, None) is unexplained
+    assert _through_a_codec(unexplained, "runs/v_t07.mp4", None) is unexplained  # (the twin errs as much without one)
     none = Naming([], [], "no significant gap", "none")
-    assert _through_a_codec(none, "runs/v_t07.mp4") is none
+    noted = _through_a_codec(none, "runs/v_t07.mp4", 18.0)
+    assert noted.verdict == none.verdict and len(noted.notes) == 1
+    assert "crf 18" in noted.notes[0] and "that floor errs high" in noted.notes[0]
     beside = Naming([], [], "ambiguous between none and within_frame (ΔBIC 8.1 ...); the nominal model's typical "
                             "held-out free run strays 8.6x as far as on its twin", "ambiguous")
-    assert "a lossy video" in _through_a_codec(beside, "c.mp4").verdict
+    assert "a lossy video" in _through_a_codec(beside, "c.mp4", 30.0).verdict
     alone = Naming([], [], "ambiguous between damping and friction (ΔBIC 2.0 ...)", "ambiguous")
-    assert _through_a_codec(alone, "c.mp4") is alone  # (no gap against the floor claimed)
+    assert _through_a_codec(alone, "c.mp4", 30.0) is alone  # (no gap against the floor claimed)
+
+
+def test_a_twin_through_h264_matches_the_recordings_median_residual() -> None:
+    """The floor of frames from a lossy video: the rungs are tried until the twin's median one-step residual reaches
+    the recording's, and the floor is interpolated between that rung and the one before (a rung no noisier than the one
+    before is passed over); a recording that reads no noisier than the clean twin keeps it."""
+    from piga.diagnostics.twin import CODEC_LADDER, TwinFloor, codec_floor, through_h264
+
+    at = lambda v: TwinFloor(np.array([v, 4 * v]), np.array([10 * v, 20 * v]), v)  # noqa: E731
+    rungs = dict(zip(CODEC_LADDER, (1.0, 2.0, 1.5, 4.0, 8.0, 16.0, 32.0)))
+    tried: list[float] = []
+    floor_at = lambda crf: (tried.append(crf), at(rungs[crf]))[1]  # noqa: E731
+    floor, crf = codec_floor(floor_at, at(0.5), 3.0)  # between the rungs of 2 and 4 (1.5 passed over): halfway
+    assert tried == list(CODEC_LADDER[:4]) and crf == pytest.approx((CODEC_LADDER[1] + CODEC_LADDER[3]) / 2)
+    np.testing.assert_allclose(floor.windows, [30.0, 60.0])
+    assert floor.residual == 3.0
+    tried.clear()
+    floor, crf = codec_floor(floor_at, at(0.5), 0.4)  # the clean twin reads as noisily already
+    assert crf is None and floor.horizon[0] == 0.5 and tried == []
+    floor, crf = codec_floor(floor_at, at(0.5), 1e3)  # past the last rung: the last
+    assert crf == CODEC_LADDER[-1] and floor.horizon[0] == 32.0
+    # the round trip: the frames' shape and type, what a codec's errors do to them
+    rng = np.random.default_rng(0)
+    frames = np.clip(np.linspace(0, 255, 31)[None, None, None] + rng.normal(0, 3, (2, 5, 31, 31)), 0, 255).astype(np.uint8)
+    errors = [np.abs(through_h264(frames, crf).astype(int) - frames).mean() for crf in (14, 38)]
+    back = through_h264(frames, 14)
+    assert back.shape == frames.shape and back.dtype == np.uint8 and 0 < errors[0] < errors[1]
 
 
 def test_a_command_rival_of_none_that_reads_a_gain_is_said() -> None:

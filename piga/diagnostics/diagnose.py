@@ -88,8 +88,8 @@ from piga.diagnostics.residuals import (action_correlation, autocorrelation, bin
                                         GENERIC_COLUMNS, one_step_residuals, reading_features, ridge)
 from piga.diagnostics.results import (Ambiguity, CameraSummary, CandidateRow, Diagnosis, Effect, Gap, GenericBasis,
                                       Naming, PixelErrors, Score, SelectionStep, VisionSummary)
-from piga.diagnostics.twin import (MEASURABLE_GAP, TwinFloor, calibrate_floor, gap_closure, mean_gap_closure,
-                                   twin_floor)
+from piga.diagnostics.twin import (MEASURABLE_GAP, TwinFloor, calibrate_floor, codec_floor, gap_closure,
+                                   mean_gap_closure, median_residual, twin_floor)
 from piga.diagnostics.vision import (MAX_BLUR, MAX_EXPOSURE, MAX_SHIFT, MAX_ZOOM, MIN_EXPOSURE, MIN_ZOOM, Camera,
                                      CameraConfig, CameraFindings, action_fifths, angle_table, calm_frames,
                                      camera_stage, match, match_file)
@@ -1868,19 +1868,30 @@ def _offset_gain_note(naming: Naming, final: fit.Model, rival: Score, rival_why:
         "is ruled out")])
 
 
-def _through_a_codec(naming: Naming, source: str | None) -> Naming:
-    """A verdict that claims a gap against the twin's floor ("not explained", or an ambiguity beside a gap left
-    unnamed) on frames that piga-import read from a lossy video (``source``) says that the codec's errors may be that
-    gap: the floor is drawn without them (clean recordings written to H.264 at crf 24 and 28 and imported read "not
-    explained", 6.3x and 7.4x the floor, and at crf 26 "ambiguous between none and within_frame ... 8.6x"; at crf 18
-    and 20, "no significant gap" at 3.1-3.2x)."""
-    unexplained = naming.verdict_class == "unexplained" and naming.verdict.startswith("not explained")
-    if source is None or not (unexplained or (naming.verdict_class == "ambiguous" and "as far as on its twin" in
-                                              naming.verdict)):
+def _through_a_codec(naming: Naming, source: str | None, crf: float | None) -> Naming:
+    """On frames that piga-import read from a lossy video (``source``), whose twin was filmed through H.264 at ``crf``
+    (:func:`piga.diagnostics.twin.codec_floor`; None: the twin reads the angles as noisily without one), says so beside
+    what the floor decides: a verdict that claims a gap above it ("not explained", or an ambiguity beside a gap left
+    unnamed) says that a codec unlike the twin's may still be part of it; "no significant gap", that the floor errs
+    high and an effect that adds less than a few times the codec's errors is not seen (a cogging torque of 0.25 at crf
+    18 and a friction of 0.15 at crf 26 read so). With the twin drawn without a codec, clean recordings written to
+    H.264 at crf 24 and 28 and imported read "not explained", 6.3x and 7.4x the floor, and a delay of 2 at crf 28,
+    its one candidate, "not explained ... corrects nothing"."""
+    if source is None or crf is None:
         return naming
-    verdict = (f"{naming.verdict}; the frames come from {os.path.basename(source)}, a lossy video: its codec's errors "
-               "in the angles are not in the twin's floor, which is drawn without them, and may be all of this gap "
-               "(import a lossless copy, such as PNG frames, or one of higher quality, to tell)")
+    video = f"the frames come from {os.path.basename(source)}, a lossy video, and the twin was filmed through H.264 " \
+            f"at crf {crf:.0f}, where the encoder's one-step errors are the recording's"
+    if naming.verdict_class == "none":
+        return dataclass_replace(naming, notes=[*naming.notes, (
+            f"{video}: that floor errs high, and an effect that adds less than a few times the codec's errors to the "
+            "free runs is not seen (import a lossless copy, such as PNG frames, or one of higher quality, to look "
+            "closer)")])
+    unexplained = naming.verdict_class == "unexplained" and naming.verdict.startswith("not explained")
+    if not (unexplained or (naming.verdict_class == "ambiguous" and "as far as on its twin" in naming.verdict)):
+        return naming
+    verdict = (f"{naming.verdict}; {video}, but a codec that errs otherwise (another kind, or a video drawn larger "
+               "before the import's resize) may still be part of this gap (import a lossless copy, such as PNG "
+               "frames, to tell)")
     return Naming(naming.effects, naming.notes, verdict, naming.verdict_class, naming.physics)
 
 
@@ -2604,11 +2615,21 @@ def measure_gap(candidates: Candidates, chosen: Score, nom: Nominal, obs: Observ
     # file says the recording came from there too; otherwise by the model's own decoder, whose picture
     # is the recording's camera only if the autoencoder re-renders the recording about as well as its
     # training frames. Else there is no valid floor, and the closure is raw.
-    floor = None
+    # Frames read from a lossy video: the twin is filmed through H.264 at the quality that reads its angles as noisily
+    # as the recording's (piga.diagnostics.twin.codec_floor), a twin of every sequence: the codec's misread frames make
+    # the floor of the held-out ones alone vary 2x between neighbouring qualities.
+    floor, floor_crf = None, None
     floor_source, floor_note = twin_renderer(obs.from_gymnasium, model is not None, rematched, vision_ratio, config)
     if floor_source is not None:
-        floor = twin_floor(model, final, nom, theta[held_rows], obs.actions[held_rows],
-                           None if stale is None else stale[held_rows], config.stride, arrow=arrow, renderer=floor_source)
+        floor_of = functools.partial(twin_floor, model, final, nom, stride=config.stride, arrow=arrow,
+                                     renderer=floor_source)
+        floor = floor_of(theta[held_rows], obs.actions[held_rows], None if stale is None else stale[held_rows])
+        if obs.lossy_source is not None:
+            every = np.arange(len(theta))
+            floor_at = functools.partial(floor_of, theta, obs.actions, stale)
+            coded, floor_crf = codec_floor(lambda crf: floor_at(crf=crf), floor_at(),
+                                           median_residual(final, nom, theta, obs.actions, every, stale))
+            floor = floor if floor_crf is None else coded
         if floor_source == "decoder":
             floor = calibrate_floor(floor, float(h_fin[0]))
     # Closure on the typical window: the median over held-out windows of each window's mean squared
@@ -2688,7 +2709,7 @@ def measure_gap(candidates: Candidates, chosen: Score, nom: Nominal, obs: Observ
         free_run_mse_floor=float(floor.horizon.mean()) if floor is not None else None,
         free_run_gap_closure=headline if corrects else None,
         typical_free_run_mse_nominal=typ_nom, typical_free_run_mse_corrected=typ_fin,
-        typical_free_run_mse_floor=typ_floor, typical_free_run_closure=raw_typical, floor_source=floor_source,
+        typical_free_run_mse_floor=typ_floor, typical_free_run_closure=raw_typical, floor_source=floor_source, floor_crf=floor_crf,
         # (no correction, no closure: a no-gap report read "typical_free_run_gap_closure": 0.414 beside a null headline)
         typical_free_run_gap_closure=typical_gap if corrects else None,
         mean_free_run_gap_closure=mean_gap if corrects else None,
@@ -2926,7 +2947,7 @@ def analyse(obs: Observations, nom: Nominal, config: DiagnoseConfig = DiagnoseCo
     naming = _seen_through_vision_gap(naming, vision.ratio, encoder=camera is None or not (
         camera.rematched or camera.rescaled(config.camera)))
     naming = _zoom_first(naming, camera, config.camera)
-    naming = _through_a_codec(naming, obs.lossy_source)
+    naming = _through_a_codec(naming, obs.lossy_source, gap.floor_crf)
     gap = closure_of(naming, gap)
     # (whether the own file was read is known only now: the naming reads it where it judges a gain or gravity error)
     alike = " and in the model's own training file alike" if kwargs["own_readings"] else ""

@@ -290,10 +290,14 @@ def headline_text(d: Diagnosis) -> str:
                     f"{number(g.typical_free_run_mse_nominal, '.3g')} rad² nominal, {number(g.typical_free_run_mse_corrected, '.3g')} rad² "
                     f"corrected, and a floor of {number(g.typical_free_run_mse_floor, '.3g')} rad², the corrected model's own error "
                     "on a simulated twin of the held-out data that it describes exactly (re-simulated with the corrected "
-                    + ("physics, rendered by the simulator, read by the encoder)" if g.floor_source != "decoder" else
+                    + ("physics, rendered by the simulator, " if g.floor_source != "decoder" else
                        "physics, drawn by the model's own decoder, whose picture is this recording's camera as it re-renders "
-                       "the recording about as well as its training frames, read by the encoder, and scaled down to this "
-                       "recording's own vision noise by the ratio of the one-step errors, recording over twin)")
+                       "the recording about as well as its training frames, ")
+                    + (f"filmed through H.264 at crf {g.floor_crf:.0f}, the quality at which its one-step error is this "
+                       "recording's (whose frames come from a lossy video), " if g.floor_crf is not None else "")
+                    + ("read by the encoder)" if g.floor_source != "decoder" else
+                       "read by the encoder, and scaled down to this recording's own vision noise by the ratio of the "
+                       "one-step errors, recording over twin)")
                     + ". Raw, with no floor subtracted (1 − corrected / nominal of the same two numbers): "
                     f"{_pct(g.typical_free_run_closure)}." + note)
     else:
