@@ -2303,20 +2303,26 @@ def test_a_baseline_sweep_refuses_a_video_for_what_it_is(baseline_runs: dict[str
             "--sweep plays its jobs in worker processes and films none of them")
 
 
+@pytest.mark.parametrize("log_g, needle", [
+    (float("nan"), "checkpoint.pt: holds NaN or infinite weights (system.log_g)"),
+    (800.0, "checkpoint.pt: its physical parameters are not finite numbers (g = inf)"),
+])
 @pytest.mark.parametrize("prog", ["piga-control", "piga-train-model"])
-def test_a_checkpoint_with_nan_weights_is_named(prog: str, tiny_piga_run: Path, tiny_data: Path, tmp_path: Path,
+def test_a_checkpoint_with_nan_weights_is_named(prog: str, log_g: float, needle: str, tiny_piga_run: Path,
+                                                tiny_data: Path, tmp_path: Path,
                                                 capsys: pytest.CaptureFixture[str]) -> None:
     """A checkpoint whose log g is NaN: control failed in the physics' own check without naming the file, and a
-    resume trained to a NaN loss and called the damaged file the "last good checkpoint"."""
+    resume trained to a NaN loss and called the damaged file the "last good checkpoint". A finite log g of 800 is
+    g = inf: control planned with it and exited 0."""
     import torch
 
     run = _run_copy(tiny_piga_run, tmp_path / "run")
     ckpt = torch.load(run / "checkpoint.pt", weights_only=False)
-    ckpt["model"]["system.log_g"].fill_(float("nan"))
+    ckpt["model"]["system.log_g"].fill_(log_g)
     torch.save(ckpt, run / "checkpoint.pt")
-    argv = (["--model", str(run), "--oracle"][:2] + ["--episodes", "1", "--quiet"] if prog == "piga-control"
+    argv = (["--model", str(run), "--episodes", "1", "--quiet"] if prog == "piga-control"
             else [str(tiny_data), "--out", str(run), "--resume", "--epochs", "3", "--quiet"])
-    refused(prog, argv, capsys, "checkpoint.pt: holds NaN or infinite weights (system.log_g)", "train the run again")
+    refused(prog, argv, capsys, needle, "train the run again")
 
 
 def test_control_refuses_two_goals_and_reads_a_goal_image_quietly(tiny_piga_run: Path, tmp_path: Path,

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import functools
 import json
+import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -86,6 +87,12 @@ def load_model(run_dir: str | os.PathLike[str], any_model: bool = False) -> tupl
     if bad:
         raise ValueError(f"{Path(run_dir) / CHECKPOINT}: holds NaN or infinite weights ({', '.join(bad[:3])}"
                          f"{', ...' if len(bad) > 3 else ''}); the file is damaged: train the run again")
+    # finite weights can still give physics that is not (a log g of 800 is g = inf, which planned, exit 0)
+    infinite = {name: value for name, value in model.physical_parameters().items() if not math.isfinite(value)}
+    if infinite:
+        raise ValueError(f"{Path(run_dir) / CHECKPOINT}: its physical parameters are not finite numbers ("
+                         f"{', '.join(f'{name} = {value}' for name, value in infinite.items())}); the file is damaged: "
+                         "train the run again")
     if not (any_model or model.has_physics):
         raise ValueError(f"{run_dir} holds a piga-train-model --model {model.config.architecture} run: "
                          f"{NO_PHYSICS[model.config.architecture].split(': ')[0]}, without the physical parameters "
