@@ -89,6 +89,22 @@ def test_a_single_the_free_run_favours_is_a_rival_of_none(bic: float, typical: f
     assert [x.ambiguous for x in s.steps] == [rival is not None]
 
 
+@pytest.mark.parametrize("none_a, bic, a, rival", [
+    (0.86, -1003.5, 1.04, "saturation"),  # lower in BIC, a 4% off where "none" reads it 14% off: a rival
+    (0.86, -1003.5, 0.90, None),          # a still 10% off: no rival
+    (0.86, -998.0, 1.04, None),           # higher in BIC: no rival
+    (1.01, -1003.5, 1.00, None),          # "none" reads no gain: nothing to stand in for
+])
+def test_a_command_single_that_reads_none_s_gain_mostly_away_is_a_rival(none_a: float, bic: float, a: float,
+                                                                         rival: str | None) -> None:
+    """A deadzone of 0.15 beside gravity x1.1, 30 sequences of 20 frames, read "gain 0.883 (0.825..0.914)" alone: the
+    deadzone single, 3.5 lower in BIC, read a at x1.04, its free run 19% worse on the few held-out sequences."""
+    none = scored((), -1000.0, 1e-3, a=none_a)
+    single = scored(("saturation",), bic, 1.19e-3, a=a, s=1.2)
+    s = select(Candidates(none, none, [single]), NOMINAL, SimpleNamespace(fit1=None), DiagnoseConfig())
+    assert s.chosen is none and (s.rival.name if s.rival else None) == rival
+
+
 @pytest.mark.parametrize("friction_typical, chosen", [
     (0.25e-3, "friction"),  # 1.5 worse in BIC, 2.4x better on the held-out free run: the free run tells them apart
     (0.35e-3, "damping"),   # 1.7x better: not enough to overrule the BIC
