@@ -235,7 +235,8 @@ def through_h264(frames: np.ndarray, crf: float) -> np.ndarray:
     with tempfile.TemporaryDirectory() as folder:
         path = Path(folder) / "twin.mp4"
         iio.imwrite(path, rgb, fps=20, codec="libx264", macro_block_size=1, pixelformat="yuv420p",
-                    output_params=["-crf", f"{crf:g}", "-preset", "medium"], ffmpeg_log_level="quiet")
+                    # one encoder thread: x264's output depends on its thread count, so on the machine's cores
+                    output_params=["-crf", f"{crf:g}", "-preset", "medium", "-threads", "1"], ffmpeg_log_level="quiet")
         back = np.stack(list(iio.imiter(path)))[:, :h, :w]  # (n·T, H, W, 3)
     if len(back) != n * t:
         raise RuntimeError(f"H.264 gave back {len(back)} of the twin's {n * t} frames")
