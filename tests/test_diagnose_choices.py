@@ -1304,7 +1304,7 @@ def test_a_verdict_on_frames_from_a_lossy_video_says_its_twin_was_filmed_through
     now, a verdict on the floor says what the twin's codec cannot rule out."""
     from piga.diagnostics.diagnose import _through_a_codec
     from piga.diagnostics.observe import lossy_source
-    from piga.diagnostics.results import Naming
+    from piga.diagnostics.results import Effect, Naming
 
     assert lossy_source({"source": "runs/v_t07.MP4"}) == "runs/v_t07.MP4"
     assert lossy_source({"source": b"clip.webm"}) == "clip.webm"
@@ -1328,6 +1328,11 @@ def test_a_verdict_on_frames_from_a_lossy_video_says_its_twin_was_filmed_through
     assert "a lossy video" in _through_a_codec(beside, "c.mp4", 30.0).verdict
     alone = Naming([], [], "ambiguous between damping and friction (ΔBIC 2.0 ...)", "ambiguous")
     assert _through_a_codec(alone, "c.mp4", 30.0) is alone  # (no gap against the floor claimed)
+    # effects named on angles that noisy: friction read as a damping at crf 26
+    damping = Naming([Effect("damping", 0.066, "1/s", [0.062, 0.070])], [], "damping 0.0662 1/s", "damping")
+    said = _through_a_codec(damping, "c.mp4", 26.3)
+    assert said.verdict == damping.verdict and "read a friction as a damping" in said.notes[-1]
+    assert _through_a_codec(damping, "c.mp4", 20.0) is damping  # (read right at crf 18 to 22)
 
 
 def test_a_twin_through_h264_matches_the_recordings_median_residual() -> None:
