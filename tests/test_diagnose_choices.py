@@ -1332,7 +1332,7 @@ def test_a_verdict_on_frames_from_a_lossy_video_says_its_twin_was_filmed_through
     damping = Naming([Effect("damping", 0.066, "1/s", [0.062, 0.070])], [], "damping 0.0662 1/s", "damping")
     said = _through_a_codec(damping, "c.mp4", 26.3)
     assert said.verdict == damping.verdict and "read a friction as a damping" in said.notes[-1]
-    assert _through_a_codec(damping, "c.mp4", 20.0) is damping  # (read right at crf 18 to 22)
+    assert _through_a_codec(damping, "c.mp4", None) is damping  # (the twin reads as noisily without a codec)
 
 
 def test_a_twin_through_h264_matches_the_recordings_median_residual() -> None:

@@ -1884,14 +1884,6 @@ def _offset_gain_note(naming: Naming, final: fit.Model, rival: Score, rival_why:
         "is ruled out")])
 
 
-#: The H.264 quality (the twin's matched crf) from which on a verdict that names effects on frames from a lossy video
-#: says that they may stand in for others: a friction of 0.3 read "damping 0.0662" and "damping 0.0681" at crf 26, a
-#: friction of 0.2 beside a delay "damping 0.0462" through MPEG-4, and a deadzone of 0.3 "gain 0.792" and "gain 0.774"
-#: at crf 28 (matched 26.3 and 30.2), where the same frames uncompressed read them right; at crf 18 to 22 the effects
-#: planted were read right.
-LOSSY_SELECTION_CRF = 24.0
-
-
 def _through_a_codec(naming: Naming, source: str | None, crf: float | None) -> Naming:
     """On frames that piga-import read from a lossy video (``source``), whose twin was filmed through H.264 at ``crf``
     (:func:`piga.diagnostics.twin.codec_floor`; None: the twin reads the angles as noisily without one), says so beside
@@ -1912,11 +1904,14 @@ def _through_a_codec(naming: Naming, source: str | None, crf: float | None) -> N
             "closer)")])
     unexplained = naming.verdict_class == "unexplained" and naming.verdict.startswith("not explained")
     if not (unexplained or (naming.verdict_class == "ambiguous" and "as far as on its twin" in naming.verdict)):
-        if naming.effects and crf >= LOSSY_SELECTION_CRF:
+        if naming.effects:
+            # (a friction of 0.3 read "damping 0.0662" and "damping 0.0681" at crf 26, and "damping 0.0694" at crf 18;
+            # a friction of 0.2 beside a delay "damping 0.0462" through MPEG-4; a deadzone of 0.3 "gain 0.792" and
+            # "gain 0.774" at crf 28: the same frames uncompressed read them right)
             return dataclass_replace(naming, notes=[*naming.notes, (
-                f"{video}: on angles this noisy the one-step fit has read a friction as a damping and a deadzone as a "
-                "gain (H.264 at crf 26 to 30, two seeds each), so an effect named may stand in for another that "
-                "bends the motion alike (import a lossless copy, such as PNG frames, to tell)")])
+                f"{video}: on angles read through a codec the one-step fit has read a friction as a damping and a "
+                "deadzone as a gain (H.264 at crf 18 to 28), so an effect named may stand in for another that bends "
+                "the motion alike (import a lossless copy, such as PNG frames, to tell)")])
         return naming
     verdict = (f"{naming.verdict}; {video}, but a codec that errs otherwise (another kind, or a video drawn larger "
                "before the import's resize) may still be part of this gap (import a lossless copy, such as PNG "
