@@ -69,6 +69,8 @@ def test_the_rows_cover_the_issue(bench) -> None:
     row = next(r for r in rows if r.name == "spring/noise-10")
     assert row.train_command(Path("f.h5"), Path("run")) == ["piga-train-model", "f.h5", "--out", "run", "--seed-retries", "1", "--threads", "1", "--quiet"]
     assert next(r for r in rows if r.name == "seeds/spring-seed3").train_command(Path("f"), Path("r"))[-2:] == ["--seed", "3"]
+    # a pendulum's model has no object slots to check: piga-train-model refuses --seed-retries there
+    assert "--seed-retries" not in next(r for r in rows if r.name == "pendulum/sequences50").train_command(Path("f"), Path("r"))
     assert bench.select(rows, ["pendulum/size*"]) == [r for r in rows if r.name in ("pendulum/size32", "pendulum/size96")]
     short = next(r for r in rows if r.name == "pendulum/steps10")  # 10 frames < L + T_pred: training shortens T_pred
     assert bench.recipe_windows(short)[0] == 10 and bench.estimate_minutes(short)["train"] > 1
