@@ -1893,8 +1893,10 @@ def _through_a_codec(naming: Naming, source: str | None, crf: float | None) -> N
     18 and a friction of 0.15 at crf 26 read so). With the twin drawn without a codec, clean recordings written to
     H.264 at crf 24 and 28 and imported read "not explained", 6.3x and 7.4x the floor, and a delay of 2 at crf 28,
     its one candidate, "not explained ... corrects nothing"."""
-    if source is None or crf is None:
+    if source is None:
         return naming
+    if crf is None:  # (no twin filmed through a codec: a camera's re-matched angles, or a twin as noisy without one)
+        return _stand_ins(naming, f"the frames come from {os.path.basename(source)}, a lossy video")
     video = f"the frames come from {os.path.basename(source)}, a lossy video, and the twin was filmed through H.264 " \
             f"at crf {crf:.0f}, where the encoder's one-step errors are the recording's"
     if naming.verdict_class == "none":
@@ -1904,19 +1906,25 @@ def _through_a_codec(naming: Naming, source: str | None, crf: float | None) -> N
             "closer)")])
     unexplained = naming.verdict_class == "unexplained" and naming.verdict.startswith("not explained")
     if not (unexplained or (naming.verdict_class == "ambiguous" and "as far as on its twin" in naming.verdict)):
-        if naming.effects:
-            # (a friction of 0.3 read "damping 0.0662" and "damping 0.0681" at crf 26, and "damping 0.0694" at crf 18;
-            # a friction of 0.2 beside a delay "damping 0.0462" through MPEG-4; a deadzone of 0.3 "gain 0.792" and
-            # "gain 0.774" at crf 28: the same frames uncompressed read them right)
-            return dataclass_replace(naming, notes=[*naming.notes, (
-                f"{video}: on angles read through a codec the one-step fit has read a friction as a damping and a "
-                "deadzone as a gain (H.264 at crf 18 to 28), so an effect named may stand in for another that bends "
-                "the motion alike (import a lossless copy, such as PNG frames, to tell)")])
-        return naming
+        return _stand_ins(naming, video)
     verdict = (f"{naming.verdict}; {video}, but a codec that errs otherwise (another kind, or a video drawn larger "
                "before the import's resize) may still be part of this gap (import a lossless copy, such as PNG "
                "frames, to tell)")
     return Naming(naming.effects, naming.notes, verdict, naming.verdict_class, naming.physics)
+
+
+def _stand_ins(naming: Naming, video: str) -> Naming:
+    """``naming`` that names effects on frames from a lossy video (``video``: which, in words) with a note that they may
+    stand in for others: a friction of 0.3 read "damping 0.0662" and "damping 0.0681" at crf 26, and "damping 0.0694"
+    at crf 18; a friction of 0.2 beside a delay "damping 0.0462" through MPEG-4; a deadzone of 0.3 "gain 0.792" and
+    "gain 0.774" at crf 28, a saturation of 0.8 "gain 0.571" and "gain 0.555": the same frames uncompressed read them
+    right."""
+    if not naming.effects:
+        return naming
+    return dataclass_replace(naming, notes=[*naming.notes, (
+        f"{video}: on angles read through a codec the one-step fit has read a friction as a damping, and a deadzone or "
+        "a saturation as a gain (H.264 at crf 18 to 28), so an effect named may stand in for another that bends the "
+        "motion alike (import a lossless copy, such as PNG frames, to tell)")])
 
 
 def _zoom_first(naming: Naming, camera: CameraFindings | None, config: CameraConfig) -> Naming:
