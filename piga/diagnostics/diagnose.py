@@ -2746,7 +2746,8 @@ def measure_gap(candidates: Candidates, chosen: Score, nom: Nominal, obs: Observ
         free_run_mse_floor=float(floor.horizon.mean()) if floor is not None else None,
         free_run_gap_closure=headline if corrects else None,
         typical_free_run_mse_nominal=typ_nom, typical_free_run_mse_corrected=typ_fin,
-        typical_free_run_mse_floor=typ_floor, typical_free_run_closure=raw_typical, floor_source=floor_source, floor_crf=floor_crf,
+        typical_free_run_mse_floor=typ_floor, typical_free_run_closure=raw_typical, floor_source=floor_source,
+        floor_crf=floor_crf,
         # (no correction, no closure: a no-gap report read "typical_free_run_gap_closure": 0.414 beside a null headline)
         typical_free_run_gap_closure=typical_gap if corrects else None,
         mean_free_run_gap_closure=mean_gap if corrects else None,

@@ -293,8 +293,9 @@ def headline_text(d: Diagnosis) -> str:
                     + ("physics, rendered by the simulator, " if g.floor_source != "decoder" else
                        "physics, drawn by the model's own decoder, whose picture is this recording's camera as it re-renders "
                        "the recording about as well as its training frames, ")
-                    + (f"filmed through H.264 at crf {g.floor_crf:.0f}, the quality at which its one-step error is this "
-                       "recording's (whose frames come from a lossy video), " if g.floor_crf is not None else "")
+                    + (f"filmed through H.264 at crf {g.floor_crf:.0f}, the quality at which its median one-step "
+                       "residual is this recording's (whose frames come from a lossy video), " if g.floor_crf is not None
+                       else "")
                     + ("read by the encoder)" if g.floor_source != "decoder" else
                        "read by the encoder, and scaled down to this recording's own vision noise by the ratio of the "
                        "one-step errors, recording over twin)")

@@ -406,8 +406,8 @@ class Gap(_ByKey):
     """What drew the twin that measured the floor: "simulator" (Gymnasium's picture, for a recording
     from Gymnasium), "decoder" (the model's own picture of the recording's camera) or None (no twin)."""
     floor_crf: float | None
-    """The H.264 quality (constant rate factor) the twin was filmed through, matched to the recording's one-step error,
-    for frames read from a lossy video (:func:`piga.diagnostics.twin.codec_floor`); None: no codec."""
+    """The H.264 quality (constant rate factor) the twin was filmed through, matched to the recording's median one-step
+    residual, for frames read from a lossy video (:func:`piga.diagnostics.twin.codec_floor`); None: no codec."""
     typical_free_run_gap_closure: float | None
     """Closure above the floor on the typical window (raw when no floor)."""
     mean_free_run_gap_closure: float | None

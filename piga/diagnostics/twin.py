@@ -49,6 +49,7 @@ import torch
 from envs.constants import MAX_ACTION
 from piga.diagnostics import fit
 from piga.diagnostics.observe import read_frames
+from piga.diagnostics.residuals import one_step_residuals
 from piga.diagnostics.vision import Camera, angle_table, match
 from piga.world.model import PhysicsModel, frames_to_float
 from piga.io.runs import Nominal
@@ -191,8 +192,6 @@ def median_residual(model: fit.Model, nominal: Nominal, theta: np.ndarray, actio
                     stale: np.ndarray | None) -> float:
     """The median absolute one-step acceleration residual (rad/s²) of ``model`` on sequences ``rows`` of (N, T) encoded
     ``theta``, leaving out those that touch a repeated frame."""
-    from piga.diagnostics.residuals import one_step_residuals
-
     res = one_step_residuals(model, nominal, theta, actions, rows, stale)
     return float(np.median(np.abs(res.rho[res.valid]))) if res.valid.any() else math.nan
 
@@ -213,8 +212,9 @@ def matched_angles(network: PhysicsModel, frames: np.ndarray, camera: Camera, no
     return np.unwrap(theta.double().numpy().reshape(n, t), axis=1)
 
 
-#: The H.264 qualities (x264's constant rate factor: 0 lossless, 51 worst) a lossy recording's twin is filmed through,
-#: in steps of about 1.5x in the encoder's one-step angle error (measured with the fast preset's model on 32x32 frames).
+#: The H.264 qualities (x264's constant rate factor: 0 lossless, 51 worst) a lossy recording's twin is filmed through
+#: (with the fast preset's model on 64x64 frames, the median one-step residual rose from 2.2 to 3.5, 4.3, 5.0, 7.7 and
+#: 9.3 rad/s² over crf 14 to 34; 1.0 without a codec).
 CODEC_LADDER = (14, 18, 22, 26, 30, 34, 38)
 
 
