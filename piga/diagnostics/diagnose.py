@@ -948,18 +948,21 @@ def close_rival(best: Score, cand: Score, config: DiagnoseConfig) -> bool:
     return abs(cand.bic - best.bic) <= config.ambiguous_bic and free_gap <= config.ambiguous_free_run
 
 
+def gain_error(model: fit.Model, nom: Nominal) -> float:
+    """How far ``model``'s |a| is from the nominal's, relative: |(|a| / a_nominal) - 1|."""
+    return abs(abs(model.values.get("a", nom.a) / nom.a) - 1)
+
+
 def reads_a_gain(model: fit.Model, nom: Nominal, config: DiagnoseConfig) -> bool:
     """Whether ``model`` reads |a| beyond ``gain_tolerance`` of the nominal's."""
-    return abs(abs(model.values.get("a", nom.a) / nom.a) - 1) > config.gain_tolerance
+    return gain_error(model, nom) > config.gain_tolerance
 
 
 def offsets_the_gain(chosen: fit.Model, beside: fit.Model, nom: Nominal, config: DiagnoseConfig) -> bool:
     """Whether ``chosen`` is "none" reading a gain (:func:`reads_a_gain`) and ``beside``, a command effect added to it,
     reads a less than half as far from the nominal's."""
-    if chosen.effects or not reads_a_gain(chosen, nom, config):
-        return False
-    off = lambda m: abs(abs(m.values.get("a", nom.a) / nom.a) - 1)  # noqa: E731
-    return off(beside) < off(chosen) / 2
+    return (not chosen.effects and reads_a_gain(chosen, nom, config)
+            and gain_error(beside, nom) < gain_error(chosen, nom) / 2)
 
 
 def effect_values(model: fit.Model) -> str:
@@ -1912,10 +1915,9 @@ def _through_a_codec(naming: Naming, source: str | None, crf: float | None) -> N
     unexplained = naming.verdict_class == "unexplained" and naming.verdict.startswith("not explained")
     if not (unexplained or (naming.verdict_class == "ambiguous" and "as far as on its twin" in naming.verdict)):
         return _stand_ins(naming, video)
-    verdict = (f"{naming.verdict}; {video}, but a codec that errs otherwise (another kind, or a video drawn larger "
-               "before the import's resize) may still be part of this gap (import a lossless copy, such as PNG "
-               "frames, to tell)")
-    return Naming(naming.effects, naming.notes, verdict, naming.verdict_class, naming.physics)
+    return dataclass_replace(naming, verdict=(
+        f"{naming.verdict}; {video}, but a codec that errs otherwise (another kind, or a video drawn larger before the "
+        "import's resize) may still be part of this gap (import a lossless copy, such as PNG frames, to tell)"))
 
 
 def _stand_ins(naming: Naming, video: str) -> Naming:
@@ -2660,13 +2662,13 @@ def measure_gap(candidates: Candidates, chosen: Score, nom: Nominal, obs: Observ
     if floor_source is not None:
         floor_of = functools.partial(twin_floor, model, final, nom, stride=config.stride, arrow=arrow,
                                      renderer=floor_source)
-        floor = floor_of(theta[held_rows], obs.actions[held_rows], None if stale is None else stale[held_rows])
         if obs.lossy_source is not None:
-            every = np.arange(len(theta))
             floor_at = functools.partial(floor_of, theta, obs.actions, stale)
             coded, floor_crf = codec_floor(lambda crf: floor_at(crf=crf), floor_at(),
-                                           median_residual(final, nom, theta, obs.actions, every, stale))
-            floor = floor if floor_crf is None else coded
+                                           median_residual(final, nom, theta, obs.actions, np.arange(len(theta)), stale))
+            floor = coded if floor_crf is not None else None
+        if floor is None:  # (the held-out sequences' own twin, where no codec is in the floor)
+            floor = floor_of(theta[held_rows], obs.actions[held_rows], None if stale is None else stale[held_rows])
         if floor_source == "decoder":
             floor = calibrate_floor(floor, float(h_fin[0]))
     # Closure on the typical window: the median over held-out windows of each window's mean squared
