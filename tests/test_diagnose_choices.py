@@ -332,6 +332,12 @@ def test_clean_data_have_no_gap_to_close(tmp_path_factory: pytest.TempPathFactor
     assert "refitted for reference, not a correction: g = " in line and "corrected g" not in line, line
     assert "refitted for reference, not a correction (g = " in headline, headline
     assert "; corrected:" not in text
+    assert "not comparable" not in headline
+    # where the refit reads matched angles (the gap in pixels), its angle MSE beside the nominal's is said not to compare
+    matched = replace(d, gap=replace(d.gap, closure_basis="pixels"))
+    headline = next(line for line in markdown(matched, "m", "d", "c").splitlines() if line.startswith("**No gap"))
+    assert headline.endswith("the nominal model on the encoder's angles, the refit on those found by matching the "
+                             "frames to the decoder's renders: not comparable."), headline
 
 
 def test_an_unexplained_gap_is_not_called_no_gap_to_close(tmp_path_factory: pytest.TempPathFactory) -> None:

@@ -119,7 +119,8 @@ DIAGNOSE_RANGES = {
     "clip_min_binding": (0, 1), "deadzone_min_binding": (0, 1), "ambiguous_free_run": (0, 1),
     "free_run_tie_break": (0, 1),
     "gym_clip_tolerance": (0, GYM_SPEED_CLIP), "clip_band": (0, GYM_SPEED_CLIP), "clip_min_at": (1, 1_000_000),
-    "vision_ratio": (0, math.inf), "max_scene_ratio": (0, math.inf), "max_training_fraction": (0, math.inf)}
+    "vision_ratio": (0, math.inf), "codec_reading_ratio": (0, math.inf), "max_scene_ratio": (0, math.inf),
+    "max_training_fraction": (0, math.inf)}
 
 
 @dataclass(frozen=True)
@@ -227,7 +228,8 @@ class DiagnoseConfig:
     them a gain error is named on its point estimate: its interval is what tells a gain from the
     trade-off of a deadzone or a saturation with a, so the verdict then says it was not tested."""
     seed: int = 0
-    """Seed of the bootstrap."""
+    """Seed of the bootstrap, of the frames the camera stage samples to fit its candidates on, and of the sensor noise
+    that films the twin (so it matters with ``bootstrap`` 0 too)."""
     vision_ratio: float = 2.0
     """Re-rendering error above this multiple of the model's training error counts as a vision gap."""
     arrow_vision_ratio: float = 1.25
@@ -238,6 +240,17 @@ class DiagnoseConfig:
     frames: clean 0.98x, actuation gains of 1.1, 1.15 and 1.3 1.27x, 1.44x and 2.36x; a gain of 1.2 with friction
     0.1 at 1.63x and 1.73x read "not explained" on the encoder's angles (held-out one-step errors 0.016 and 0.024 rad
     rms), "friction 0.101; gain 1.201" and "friction 0.0999; gain 1.2" on the matched ones (0.005 and 0.006 rad)."""
+    codec_reading_ratio: float = 1.5
+    """In a recording read from a lossy video (:func:`piga.diagnostics.observe.lossy_source`), where the nominal
+    physics' typical one-step angle error on the encoder's angles is above this multiple of that on angles matched to
+    the decoder's renders (:func:`codec_reading_ratio`), the encoder reads its angles through the codec's errors, and
+    every step is done on the matched angles. Measured on 16 recordings of 50 x 40 frames written to H.264 and imported
+    (``benchmarks/codec_imports.py``): against the states, the encoder's angles erred 0.74-2.31 deg (RMS) at crf 18-28,
+    the matched ones 0.13-0.27 deg; the ratio was 1.20 at crf 10, 1.65 at crf 14, 1.87-2.67 at crf 18-28, and
+    0.75-0.96 on the same frames uncompressed. On the encoder's angles a friction of 0.3 read "damping 0.0654" and
+    "damping 0.0705" at crf 26, a deadzone of 0.3 "gain 0.793" at crf 28; on the matched ones "friction 0.3" and
+    "friction 0.299", and "ambiguous between none and deadzone" (12 of 16 right, 3 ambiguous with "none", against 6
+    and 3 on the encoder's angles)."""
     max_scene_ratio: float = 100.0
     """Re-rendering error above this multiple of the model's training error: not the scene the model
     knows, and the diagnosis refuses. Measured with a model of the default recipe (piga-collect
@@ -267,7 +280,8 @@ class DiagnoseConfig:
         check_types(self)  # a value of the wrong kind named here, not met deep inside
         if not isinstance(self.camera, CameraConfig):
             raise TypeError(f"DiagnoseConfig.camera must be a CameraConfig; got {self.camera!r} ({type(self.camera).__name__})")
-        check_ranges(self, DIAGNOSE_RANGES, above=("vision_ratio", "max_scene_ratio", "max_training_fraction"))
+        check_ranges(self, DIAGNOSE_RANGES, above=("vision_ratio", "codec_reading_ratio", "max_scene_ratio",
+                                                   "max_training_fraction"))
         if 0 < self.bootstrap < self.MIN_BOOTSTRAP:
             raise ValueError(f"bootstrap must be 0 (no intervals) or at least {self.MIN_BOOTSTRAP} replicates (a 95% "
                              f"interval of fewer is their extremes), got {self.bootstrap}")
@@ -2497,7 +2511,13 @@ def summarise_vision(obs: Observations, rec_training: float, camera: CameraFindi
                 notes.append(f"a camera a little different from the model's: the {small['candidate']} candidate "
                              f"({change}) lowers the held-out matched residual by {100 * small['drop']:.0f}%, but "
                              + under)
-        if camera.matched_for_arrow:
+        if camera.matched_for_codec is not None:
+            notes.append(f"the frames come from {os.path.basename(obs.lossy_source or '')}, a lossy video, whose codec's "
+                         "errors the encoder reads: the nominal physics' typical one-step angle error is "
+                         f"{camera.matched_for_codec:.1f}x as large on its angles as on angles found by matching every "
+                         "frame to the decoder's renders (analysis by synthesis), so the selection, the values and the "
+                         "gap are all on those")
+        elif camera.matched_for_arrow:
             notes.append("the encoder reads its angles through what is drawn with the action (below): the selection, "
                          "the values and the gap are all on angles found by matching every frame to the decoder's "
                          "renders (analysis by synthesis), not on the encoder's")
@@ -2603,6 +2623,23 @@ def calm_frames_error(rec_mse: np.ndarray, actions: np.ndarray, stale: np.ndarra
     after its own action (Gymnasium at an actuation gain of 3.5 with 10% of the frames dropped)."""
     calm = calm_frames(actions, stale)
     return None if calm is None or not calm.any() else float(rec_mse[:, 1:][calm].mean())
+
+
+def codec_reading_ratio(obs: Observations, matched: np.ndarray, nom: Nominal) -> float:
+    """The nominal physics' typical (median) absolute one-step angle error on the encoder's angles over that on the
+    (N, T) ``matched`` angles, over every sequence (repeated frames left out): how much more noisily the encoder reads
+    the recording. A codec's blocks and ringing are what the encoder never saw in training, where matching the whole
+    picture to the decoder's renders averages over them (:attr:`DiagnoseConfig.codec_reading_ratio`)."""
+    rows = np.arange(len(obs.theta))
+    stale = obs.stale if obs.stale is not None and obs.stale.any() else None
+
+    def typical(theta: np.ndarray) -> float:
+        w = fit.make_windows(theta, obs.actions, rows, 1, 1, obs.dt, stale)
+        with torch.no_grad():
+            return float(torch.median(fit.squared_errors(fit.Model(), nom, w)[:, 0].sqrt()))
+
+    on_matched = typical(matched)
+    return typical(obs.theta) / on_matched if on_matched > 0 else math.inf
 
 
 def twin_renderer(from_gymnasium: bool, has_model: bool, rematched: bool, vision_ratio: float | None,
@@ -2787,7 +2824,7 @@ def matched_twin_floor(model: PhysicsModel | None, final: fit.Model, nom: Nomina
     this floor; a cogging torque of 0.3 under that blur, which no candidate is, 26x (named "blur 0.978" alone before,
     with the corrected physics' mean free-run angle error 73% above the nominal's)."""
     if (model is None or camera is None or not camera.rematched or camera.partial is not None or camera.matched_for_sign
-            or camera.matched_for_arrow or not obs.from_gymnasium):
+            or camera.matched_for_arrow or camera.matched_for_codec is not None or not obs.from_gymnasium):
         return None
     held_rows = np.flatnonzero(~obs.fit)
     # the arrow drawn as Gymnasium draws the recording's, at its actuation gain (read as the corrected a over the
@@ -2856,15 +2893,22 @@ def analyse(obs: Observations, nom: Nominal, config: DiagnoseConfig = DiagnoseCo
     static torque below the angle reading's error, :func:`below_reading`), name the effects,
     summarise the vision, measure the gap, assemble.
     """
-    if (camera is not None and not camera.rematched and config.matched_angles and matched is not None
-            and drawn_with_the_action(obs, rec_training, config)):
-        # the encoder reads its angles through what is drawn with the action, larger than in any training frame (an
-        # actuation gain of 1.6 read a = 2e-09 and "not explained ... a camera moved far?" on the encoder's angles,
-        # where gains of 2.0, and 1.6 beside a blur, read on the angles matched to the decoder's renders, read right):
-        # everything is done on the matched angles
-        return analyse(obs, nom, config, model, rec_training, progress,
-                       dataclass_replace(camera, theta=matched() if callable(matched) else matched,
-                                         matched_for_arrow=True), arrow, own, None, own_missing)
+    if camera is not None and not camera.rematched and config.matched_angles and matched is not None:
+        if drawn_with_the_action(obs, rec_training, config):
+            # the encoder reads its angles through what is drawn with the action, larger than in any training frame (an
+            # actuation gain of 1.6 read a = 2e-09 and "not explained ... a camera moved far?" on the encoder's angles,
+            # where gains of 2.0, and 1.6 beside a blur, read on the angles matched to the decoder's renders, read
+            # right): everything is done on the matched angles
+            return analyse(obs, nom, config, model, rec_training, progress,
+                           dataclass_replace(camera, theta=matched() if callable(matched) else matched,
+                                             matched_for_arrow=True), arrow, own, None, own_missing)
+        if obs.lossy_source is not None:
+            matched = matched() if callable(matched) else matched
+            ratio = codec_reading_ratio(obs, matched, nom)
+            if ratio > config.codec_reading_ratio:  # so with the codec's errors (see the config's field)
+                return analyse(obs, nom, config, model, rec_training, progress,
+                               dataclass_replace(camera, theta=matched, matched_for_codec=ratio), arrow, own, None,
+                               own_missing)
     stale = obs.stale if obs.stale is not None and obs.stale.any() else None
     theta = camera.theta if camera is not None and camera.rematched else obs.theta  # the corrected model's angles
     windows = cut_windows(obs, theta, stale, config)
@@ -2987,7 +3031,9 @@ def analyse(obs: Observations, nom: Nominal, config: DiagnoseConfig = DiagnoseCo
     naming = _seen_through_vision_gap(naming, vision.ratio, encoder=camera is None or not (
         camera.rematched or camera.rescaled(config.camera)))
     naming = _zoom_first(naming, camera, config.camera)
-    naming = _through_a_codec(naming, obs.lossy_source, gap.floor_crf)
+    # (on angles matched to the decoder's renders the codec's errors are averaged over, and no twin is filmed)
+    naming = _through_a_codec(naming, None if camera is not None and camera.rematched else obs.lossy_source,
+                              gap.floor_crf)
     gap = closure_of(naming, gap)
     # (whether the own file was read is known only now: the naming reads it where it judges a gain or gravity error)
     alike = " and in the model's own training file alike" if kwargs["own_readings"] else ""

@@ -269,7 +269,9 @@ def headline_text(d: Diagnosis) -> str:
                 "reference, the typical held-out window's free-run angle MSE (the median over windows of each window's "
                 f"mean squared error) is {number(g.typical_free_run_mse_nominal, '.3g')} rad² for the nominal model and "
                 f"{number(g.typical_free_run_mse_corrected, '.3g')} rad² with the physics {REFITTED} "
-                f"({values_text(d.corrected, d.unread)}).")
+                f"({values_text(d.corrected, d.unread)})"
+                + (", the nominal model on the encoder's angles, the refit on those found by matching the frames to "
+                   "the decoder's renders: not comparable." if g.closure_basis == "pixels" else "."))
     note = f" {g.floor_note[0].upper()}{g.floor_note[1:]}." if g.floor_note else ""
     bold = "**" if g.gap_above_floor else ""  # (a ratio of noise leads with no bold percentage)
     if g.closure_basis == "pixels":

@@ -643,6 +643,11 @@ class CameraFindings:
     matched_for_arrow: bool = False
     """``theta`` holds the angles matched with no camera because the vision gap lies in what is drawn with the action
     (:func:`~piga.diagnostics.diagnose.drawn_with_the_action`), through which the encoder reads its angles."""
+    matched_for_codec: float | None = None
+    """Where ``theta`` holds the angles matched with no camera because the recording comes from a lossy video whose
+    codec's errors the encoder reads: how many times as large the nominal physics' typical one-step angle error is on
+    the encoder's angles as on the matched ones (:func:`~piga.diagnostics.diagnose.codec_reading_ratio`); None
+    otherwise."""
 
     unseen: float = 0.0
     """Fraction of the held-out frames in which the pendulum is not in view through any camera tried
