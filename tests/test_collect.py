@@ -162,3 +162,17 @@ def test_preset_applies_and_explicit_options_win(tmp_path: Path, capsys: pytest.
                                   "--steps", "3", "--workers", "1", "--quiet", capsys=capsys)
     assert code == 0, err
     assert inspect_dataset(out).split_counts == {"train": 10, "valid": 1, "test": 1}
+
+
+def test_max_angle_takes_pi_as_written() -> None:
+    """The help gave the default as 3.142, which was then refused as out of range (above pi): pi rounded up to a few
+    digits, and the word, are pi; a value beyond that rounding is left for the env to refuse."""
+    import argparse
+    import math
+
+    from piga.cli.collect import angle_up_to_pi
+
+    assert angle_up_to_pi("3.142") == angle_up_to_pi("3.1416") == angle_up_to_pi("pi") == math.pi
+    assert angle_up_to_pi("3.15") == 3.15 and angle_up_to_pi("1.5") == 1.5
+    with pytest.raises(argparse.ArgumentTypeError):
+        angle_up_to_pi("a lot")

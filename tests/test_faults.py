@@ -559,6 +559,9 @@ def _env_config_edit(**fields: Any) -> Callable[[h5py.File], None]:
     (_attr_edit("params", '{"g": 1e308, "actuation_gain": 1}'), ["'params' gives g=1e+308, beyond any physical value"]),
     (_attr_edit("params", '{"g": 10, "actuation_gain": -1e13}'), ["'params' gives actuation_gain=-1e+13", "at most 1e+12"]),
     (_attr_edit("params", '{"damping": 2e12}'), ["'params' gives damping=2e+12, beyond"]),
+    (_attr_edit("params", '{"g": 1e-30, "actuation_gain": 1}'), ["'params' gives g=1e-30, below any physical value",
+                                                                 "at least 1e-06 in magnitude, or 0"]),
+    (_attr_edit("params", '{"g": 10, "actuation_gain": -1e-9}'), ["'params' gives actuation_gain=-1e-09, below"]),
     (_attr_edit("params", '{"g": -9.8}'), ["'params' gives g=-9.8; g is >= 0 in piga's conventions"]),
     (_attr_edit("params", '{"m": -1}'), ["'params' gives m=-1; m is >= 0"]),
     # attributes that contradict the env that made the file: g was trained for the wrong interval, without a word
@@ -675,7 +678,7 @@ def test_a_true_parameter_of_zero_is_scored_infinitely_off() -> None:
     assert math.isinf(errors["g"]["relative_error"]) and math.isfinite(errors["a"]["relative_error"])
 
 
-@pytest.mark.parametrize("params", [{"g": 0, "actuation_gain": -1.0, "damping": 0.0}, {"g": 1e12, "actuation_gain": 1e-300},
+@pytest.mark.parametrize("params", [{"g": 0, "actuation_gain": -1.0, "damping": 0.0}, {"g": 1e12, "actuation_gain": 1e-6},
                                     {"g": 1e-6, "actuation_gain": -1e12, "gravity": 1e15}])
 def test_true_parameters_in_range_are_read_and_drawn_without_warnings(params: dict[str, float], tiny_data: Path,
                                                                       tmp_path: Path) -> None:
@@ -804,14 +807,47 @@ def test_a_resumed_run_counts_the_checkpoint_it_replaces(tmp_path: Path, monkeyp
         f.truncate(checkpoint)
     _disk_with_free(monkeypatch, checkpoint + RUN_DISK_MARGIN + 2**20)  # the first run's need less its checkpoint
     check_run_disk(run, checkpoint, "the training run", resume=True)
+    # --overwrite replaces it too: the run that fit there was refused its own --overwrite ("needs about 84.0 MiB")
+    check_run_disk(run, checkpoint, "the training run", overwrite=True)
     with pytest.raises(ResourceError, match=r"needs about 84\.0 MiB of disk, .*; free some space, or give another --out$"):
         check_run_disk(run, checkpoint, "the training run")
     _disk_with_free(monkeypatch, 60 * 2**20)
+    # an old checkpoint larger than the new one's: the new one is still written beside it first
+    with pytest.raises(ResourceError, match=r"needs about 65\.0 MiB of disk beyond the 10\.0 MiB"):
+        check_run_disk(run, 2**20, "the training run", overwrite=True)
     with pytest.raises(ResourceError) as info:
         check_run_disk(run, checkpoint, "the training run", resume=True)
     assert str(info.value).startswith(f"the training run needs about 74.0 MiB of disk beyond the 10.0 MiB of {run} that "
                                       "it replaces, but "), str(info.value)
     assert str(info.value).endswith("has 60.0 MiB free; free some space"), str(info.value)
+
+
+def test_a_demo_overwritten_counts_the_checkpoint_it_replaces(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """piga-demo --overwrite was refused on the disk where the same demo had fit: its checkpoint counted as taken."""
+    import re
+
+    import torch
+
+    from piga.cli.demo import DEMO_RUN, check_demo_disk
+    from piga.data.collect import CollectConfig
+    from piga.io.resources import ResourceError, adam_checkpoint_bytes
+    from piga.training.train import PRESETS
+    from piga.world.variants import build_model
+
+    out = tmp_path / "demo"
+    (out / DEMO_RUN).mkdir(parents=True)
+    with torch.device("meta"):
+        checkpoint = adam_checkpoint_bytes(build_model(PRESETS["fast"].model))
+    with open(out / DEMO_RUN / "checkpoint.pt", "wb") as f:
+        f.truncate(checkpoint)
+    _disk_with_free(monkeypatch, 0)
+    with pytest.raises(ResourceError) as plain:
+        check_demo_disk(out, CollectConfig(), resume=False)
+    need = float(re.search(r"needs about ([\d.]+) MiB", str(plain.value)).group(1)) * 2**20
+    _disk_with_free(monkeypatch, int(need - checkpoint / 2))
+    check_demo_disk(out, CollectConfig(), resume=False, overwrite=True)
+    with pytest.raises(ResourceError):  # (without --overwrite the checkpoint is not replaced)
+        check_demo_disk(out, CollectConfig(), resume=False)
 
 
 @pytest.mark.parametrize("prog, head", [("piga-train-model", []), ("piga-baseline", ["planet"])])
@@ -4393,6 +4429,34 @@ def test_a_ddpg_budget_below_one_evaluation_names_what_to_give(argv: list[str], 
                                                                capsys: pytest.CaptureFixture[str]) -> None:
     refused("piga-baseline", ["ddpg", "--obs", "state", "--out", str(tmp_path / "run"), *argv], capsys, needle)
     assert _listing(tmp_path) == []
+
+
+def test_a_disk_that_fills_after_the_first_checkpoint_names_the_resume(tiny_data: Path, tmp_path: Path,
+                                                                       capsys: pytest.CaptureFixture[str],
+                                                                       monkeypatch: pytest.MonkeyPatch) -> None:
+    """The disk filling in the middle of training said "free some space ... and run the command again", and the same
+    command was then refused: "already holds a run". The line names the checkpoint kept and --resume, which works."""
+    import errno
+
+    import piga.training.train
+
+    real = piga.training.train.train
+
+    def full_after_its_first_checkpoint(*args: Any, on_epoch: Any = None, **kwargs: Any) -> Any:
+        def hook(state: Any, model: Any) -> None:
+            on_epoch(state, model)
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(tmp_path / "run" / "events"))
+
+        return real(*args, on_epoch=hook, **kwargs)
+
+    argv = [str(tiny_data), "--out", str(tmp_path / "run"), "--epochs", "2", "--batch-size", "16", "--quiet"]
+    with monkeypatch.context() as patch:
+        patch.setattr(piga.training.train, "train", full_after_its_first_checkpoint)
+        code, _, err = run_in_process("piga-train-model", train.main, *argv, capsys=capsys)
+    assert_one_line(code, err, "the disk is full (no space left on device)", "checkpoint.pt holds epoch 1: free some "
+                    "space and continue with --resume")
+    code, _, err = run_in_process("piga-train-model", train.main, *argv, "--resume", capsys=capsys)
+    assert code in (0, 3), err
 
 
 @pytest.mark.parametrize("how, epoch", [(["--resume", "--epochs", "3"], 2), (["--overwrite", "--epochs", "2", "--batch-size", "16"], 1)])

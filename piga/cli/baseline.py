@@ -545,7 +545,8 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
             raise PigaError("--max-minutes stops one training; with --iterative, bound the run with --rounds instead")
         check_iterative_data(info, iterative)
     check_run_disk(run_dir, _planet_checkpoint_bytes(run_dir, record["rssm"], args.resume), "the PlaNet-style run",
-                   extra=0 if iterative is None else 2 * _collected_bytes(info, iterative), resume=args.resume)
+                   extra=0 if iterative is None else 2 * _collected_bytes(info, iterative), resume=args.resume,
+                   overwrite=args.overwrite)
     used = min(info.split_counts["train"], config.max_sequences or info.split_counts["train"])
     if not info.split_counts["valid"]:  # (as piga-train-model warns of a file without a test split)
         print(f"{PROG}: warning: {args.data} has no valid sequences; no valid loss is measured, and the open-loop "
@@ -713,7 +714,7 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
             record["data_fingerprint"] = fingerprint(args.data)
         checkpoint_bytes = buffer_bytes = _ddpg_checkpoint_bytes(config, ae_config.latent_size)
     check_run_disk(run_dir, checkpoint_bytes, f"{config.algo.upper()}'s run (a replay buffer of {config.buffer_size})",
-                   resume=args.resume, rewritten=(REPLAY_BUFFERS,))
+                   resume=args.resume, rewritten=(REPLAY_BUFFERS,), overwrite=args.overwrite)
     # SB3 allocates the buffer untouched and fills it as the run goes: a buffer beyond the memory would be killed hours in
     source = f"as {run_dir / 'config.json'} gives it" if args.resume else "--buffer-size"  # a resume takes the record's
     check_memory(buffer_bytes, f"{config.algo.upper()}'s replay buffer of {config.buffer_size} ({source})")

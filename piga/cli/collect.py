@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import re
 import sys
 from collections.abc import Mapping, Sequence
@@ -122,6 +123,19 @@ def dmc_config(options: Sequence[tuple[str, str]], own: Mapping[str, str] | None
         raise ValueError(message.replace("DMCPendulumConfig.", "--env-option ")) from None
 
 
+#: How far above pi a --max-angle is still pi rounded up (3.142, 3.1416), and taken as pi.
+PI_ROUNDED = 5e-4
+
+
+def angle_up_to_pi(text: str) -> float:
+    """argparse type of --max-angle: a number, or 'pi'; pi rounded up to a few digits (3.142, 3.1416, as it is often
+    written) is taken as pi, where the env refuses anything above it (3.142 was refused, as out of range)."""
+    if text.strip().lower() in ("pi", "π"):
+        return math.pi
+    value = any_float(text)
+    return math.pi if math.pi < value <= math.pi + PI_ROUNDED else value
+
+
 def build_parser() -> ArgumentParser:
     defaults = CollectConfig()
     env = defaults.env
@@ -180,8 +194,9 @@ def build_parser() -> ArgumentParser:
                       f"{DMC_PENDULUM}, at rest as DMC's; the paper preset uses {PAPER_MAX_SPEED:g} on either",
                       help=f"reset draws theta_dot ~ U(-s, s), s in [0, {PENDULUM_MAX_SPEED:g}] on {PIXEL_PENDULUM} "
                       f"(Gymnasium's speed clip), [0, {MAX_SPEED_TEXT}] on {DMC_PENDULUM} (half a turn per physics step)")
-    p.add_argument("--max-angle", type=any_float, default=env.max_angle,
-                   help="reset draws theta ~ U(-a, a), a in [0, pi] (default %(default).4g, i.e. pi)")
+    p.add_argument("--max-angle", type=angle_up_to_pi, default=env.max_angle,
+                   help="reset draws theta ~ U(-a, a), a in [0, pi] (default pi; 'pi', or pi rounded up such as "
+                   "3.142 or 3.1416, is taken as pi)")
     add_preset_option(p, "--image-size", type=positive_int, default=env.image_size,
                       shown=f"{env.image_size}; a scene's own: {', '.join(f'{k} {v}' for k, v in _scene_sizes().items())}",
                       help="frame side in pixels")

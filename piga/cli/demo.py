@@ -125,10 +125,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         raise PigaError(f"--out {out} holds a run of its own ({CHECKPOINT}); a demo writes its data, pictures and run "
                         "(in --out/model) into a folder of its own: give another --out")
     collect_config = replace(CollectConfig(), sequences=args.sequences, seed=args.seed)
-    check_demo_disk(out, collect_config, args.resume)  # /proc, /sys: "removed or moved while it ran?"
-    lock_run_folder(out)  # a second command on this folder is refused until this one ends
     data, strip, run_dir = out / "pendulum.h5", out / "frames.png", out / DEMO_RUN
     goal_png, control_md = out / "goal.png", out / "control.md"
+    if not args.overwrite and not args.resume:  # before the disk: an earlier demo's files would count as taken there
+        _check_not_the_users(data)
+        for path in (data, strip, run_dir / CHECKPOINT, goal_png, control_md):
+            if path.exists():
+                raise PigaError(f"{path} exists from an earlier demo; pass --resume to continue that demo or "
+                                "--overwrite to replace it")
+    check_demo_disk(out, collect_config, args.resume, args.overwrite)  # /proc, /sys: "removed or moved while it ran?"
+    lock_run_folder(out)  # a second command on this folder is refused until this one ends
     if args.resume and args.overwrite:
         raise PigaError("--resume continues the demo in --out and --overwrite replaces it; give one of them")
     if args.resume and not any(path.exists() for path in (data, strip, run_dir / CHECKPOINT, goal_png, control_md)):
@@ -144,15 +150,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         if kind is not RunKind.PIGA:
             raise PigaError(f"--resume: {run_dir} holds a {kind.writer} run, not the piga-train-model run of a demo; "
                             "pass --overwrite (not --resume) to start the demo over")
+    _check_not_the_users(data)
     # (a demo that kept only its pictures continues from the start: they are made again)
-    if data.exists() and not _written_by_demo(data):  # a file of the user's: --overwrite would destroy it
-        raise PigaError(f"{data} exists and is not a piga-demo's data file; give another --out (a demo writes "
-                        "pendulum.h5, frames.png, model/, goal.png and control.md into it)")
-    if not args.overwrite and not args.resume:
-        for path in (data, strip, run_dir / CHECKPOINT, goal_png, control_md):
-            if path.exists():
-                raise PigaError(f"{path} exists from an earlier demo; pass --resume to continue that demo or "
-                                "--overwrite to replace it")
     from piga.cli.control import check_angle
 
     check_angle("--goal-angle", args.goal_angle)
@@ -187,11 +186,19 @@ def main(argv: Sequence[str] | None = None) -> int:
         raise KeyboardInterrupt from None
 
 
-def check_demo_disk(out: Path, config: CollectConfig, resume: bool) -> None:
+def _check_not_the_users(data: Path) -> None:
+    """Refuses a --out whose pendulum.h5 is a file of the user's, which --overwrite would destroy."""
+    if data.exists() and not _written_by_demo(data):
+        raise PigaError(f"{data} exists and is not a piga-demo's data file; give another --out (a demo writes "
+                        "pendulum.h5, frames.png, model/, goal.png and control.md into it)")
+
+
+def check_demo_disk(out: Path, config: CollectConfig, resume: bool, overwrite: bool = False) -> None:
     """Refuses, before anything is made, a --out whose disk cannot hold the whole demo: its data file (about
     :func:`piga.data.collect.disk_need`'s size, and the room the writer keeps free as it writes it), the fast preset's
     training run (:func:`piga.io.resources.run_disk_need`) and the pictures and table
-    (:data:`piga.io.resources.FIGURE_DISK_BYTES`); a resumed demo less what its data file and checkpoint already take.
+    (:data:`piga.io.resources.FIGURE_DISK_BYTES`); a resumed demo less what its data file and checkpoint already take,
+    one that replaces an earlier demo (``overwrite``) less its checkpoint (its data file is written beside the old one).
 
     Raises:
         piga.io.resources.ResourceError: the whole need, its parts, and the free space.
@@ -210,13 +217,13 @@ def check_demo_disk(out: Path, config: CollectConfig, resume: bool) -> None:
     collecting = 0.0 if kept else file_bytes + write_room(slice_bytes, raw_bytes)
     with torch.device("meta"):  # its size only: no memory taken
         checkpoint_bytes = adam_checkpoint_bytes(build_model(PRESETS["fast"].model))
-    run_bytes, _ = run_disk_need(run_dir, checkpoint_bytes, resume=resume)
+    run_bytes, _ = run_disk_need(run_dir, checkpoint_bytes, resume=resume, overwrite=overwrite)
     data_part = f"the data file, about {format_bytes(file_bytes)}; " if not kept else ""
     check_disk(data, max(collecting, (0.0 if kept else file_bytes) + run_bytes + FIGURE_DISK_BYTES), f"--out {out}",
                advice="free some space" if resume else "free some space, or give another --out",
                detail=f" for the whole demo ({data_part}the training run, {format_bytes(run_bytes)} for its "
                       f"checkpoints of {format_bytes(checkpoint_bytes)}, metrics and figures"
-                      f"{', less the checkpoint it replaces' if resume and (run_dir / CHECKPOINT).is_file() else ''}; "
+                      f"{', less the checkpoint it replaces' if (resume or overwrite) and (run_dir / CHECKPOINT).is_file() else ''}; "
                       f"and {format_bytes(FIGURE_DISK_BYTES)} kept free for its pictures and table)")
 
 

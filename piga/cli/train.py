@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import errno
 import math
 import os
 import shutil
@@ -335,7 +336,7 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
                           f"the {model_config.architecture} model of these sizes (its weights, gradients and Adam's moments)")
     fresh = build_model(model_config)  # its size and start values, before training builds its own
     check_run_disk(run_dir, (run_dir / CHECKPOINT).stat().st_size if args.resume else adam_checkpoint_bytes(fresh),
-                   "the training run", resume=args.resume)
+                   "the training run", resume=args.resume, overwrite=args.overwrite)
     record.update({"data": str(args.data), "data_folder": os.getcwd(), "train": asdict(train_config), "plan": asdict(plan),
                    "model": model_config.to_dict()})
     if not info.split_counts["test"]:
@@ -437,6 +438,16 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
             if tried:  # a retry stopped before its first checkpoint: the folders held only the lost try
                 remove_empty_folders(missing)
             raise
+        except OSError as exc:
+            checkpoint = run_dir / CHECKPOINT
+            if exc.errno != errno.ENOSPC or not checkpoint.exists() or not (
+                    written or resuming or _identity(checkpoint) != before):
+                raise
+            # a full disk after this command's first checkpoint: the folder now holds a run, which the same command
+            # refused ("already holds a run") where the generic line said to run it again
+            raise PigaError(f"the disk is full (no space left on device); {checkpoint} holds epoch "
+                            f"{_saved_epoch(run_dir)}: free some space and continue with "
+                            f"{resume_option(args.overwrite)}") from None
         try:
             now = fingerprint(args.data)
         except (DataFormatError, FileNotFoundError) as exc:  # removed or truncated while the run trained on it
@@ -536,8 +547,9 @@ def _refuse_options_that_do_not_apply(chosen: dict[str, Any], model_config: Mode
 
 @contextlib.contextmanager
 def _report_interrupted(run_dir: Path, epoch: int, written: bool = False, resume: str = "--resume") -> Iterator[None]:
-    """Ctrl-C or SIGTERM after the last checkpoint: the trained model is kept, and the line says so (not "nothing was
-    written", which a rerun then contradicted: "already holds a run"). ``written``: the report is complete too."""
+    """Ctrl-C or SIGTERM (or a full disk) after the last checkpoint: the trained model is kept, and the line says so (not
+    "nothing was written", which a rerun then contradicted: "already holds a run"). ``written``: the report is complete
+    too."""
     try:
         yield
     except KeyboardInterrupt:
@@ -545,6 +557,12 @@ def _report_interrupted(run_dir: Path, epoch: int, written: bool = False, resume
             raise Interrupted(f"{run_dir} holds the finished run (epoch {epoch}) and its report") from None
         raise Interrupted(f"{run_dir / CHECKPOINT} holds the trained model (epoch {epoch}), but its report was not "
                           f"finished; run the same command with {resume} to write it") from None
+    except OSError as exc:
+        if exc.errno != errno.ENOSPC or written:
+            raise
+        raise PigaError(f"the disk is full (no space left on device); {run_dir / CHECKPOINT} holds the trained model "
+                        f"(epoch {epoch}), but its report was not finished: free some space and run the same command "
+                        f"with {resume} to write it") from None
 
 
 def _start_values(model: Any) -> str:

@@ -825,12 +825,18 @@ NONNEGATIVE_PARAMETERS = ("g", "damping", "k", "l", "m")
 #: below float's range that the relative error, the scores and the learning-curve figure stay finite (1e308 overflowed
 #: them). Small magnitudes are kept: a weak effect is a valid truth to score against.
 MAX_TRUE_PARAMETER = 1e12
+#: The smallest magnitude a true gravity or actuation gain may have, but 0: piga-collect's own least (``--gravity-mult``
+#: and ``--actuation-gain`` reach 1e-6). Below it, a training's relative error is no number a person reads (g = 1e-30
+#: printed "error 105122959613800041538990471380992.00%").
+MIN_TRUE_PARAMETER = 1e-6
+#: The true parameters that :data:`MIN_TRUE_PARAMETER` bounds (a damping, a weak effect, may be as small as it is).
+BOUNDED_BELOW = ("g", "actuation_gain")
 
 
 def _check_true_parameter(path: str, name: str, value: float) -> None:
     """Refuses a finite true parameter of a file's ``params`` that no model could be scored against: a sign piga's
-    conventions do not give it, or a magnitude above :data:`MAX_TRUE_PARAMETER` (0 is accepted: it has no relative
-    error, and the scores say so)."""
+    conventions do not give it, a magnitude above :data:`MAX_TRUE_PARAMETER`, or a gravity or gain of a magnitude
+    below :data:`MIN_TRUE_PARAMETER` (0 is accepted: it has no relative error, and the scores say so)."""
     if name not in SIGNED_PARAMETERS and name not in NONNEGATIVE_PARAMETERS:
         return
     if name in NONNEGATIVE_PARAMETERS and value < 0:
@@ -841,6 +847,9 @@ def _check_true_parameter(path: str, name: str, value: float) -> None:
 
         raise DataFormatError(f"{path}: attribute 'params' gives {name}={number_text(value)}, beyond any physical value "
                               f"(at most {MAX_TRUE_PARAMETER:g} in magnitude)")
+    if name in BOUNDED_BELOW and 0 < abs(value) < MIN_TRUE_PARAMETER:
+        raise DataFormatError(f"{path}: attribute 'params' gives {name}={value:g}, below any physical value (at least "
+                              f"{MIN_TRUE_PARAMETER:g} in magnitude, or 0)")
 
 
 def _finite_float(value: int | float) -> bool:

@@ -225,24 +225,28 @@ def adam_checkpoint_bytes(module: Any) -> int:
 
 
 def run_disk_need(run_dir: str | os.PathLike[str], checkpoint_bytes: float, extra: float = 0.0,
-                  resume: bool = False, rewritten: Sequence[str] = (CHECKPOINT,)) -> tuple[float, int]:
+                  resume: bool = False, rewritten: Sequence[str] = (CHECKPOINT,), overwrite: bool = False
+                  ) -> tuple[float, int]:
     """The free disk a training run needs, and the bytes of ``run_dir`` counted as reused: each checkpoint is written
     beside the previous one (atomically), so twice ``checkpoint_bytes``, plus ``extra`` and :data:`RUN_DISK_MARGIN`;
-    a resumed run (``resume``) less what the files it replaces (``rewritten``, in ``run_dir``) already take there."""
-    held = held_bytes(run_dir, rewritten) if resume else 0
-    return max(0.0, 2 * checkpoint_bytes + extra - held) + RUN_DISK_MARGIN, held
+    a resumed run (``resume``) or one that replaces the run there (``overwrite``) less what the files it replaces
+    (``rewritten``, in ``run_dir``) already take there, but at least one checkpoint: the first is written beside them.
+    (Counted as taken, the files that ``--overwrite`` replaces refused it on the disk where the same run had fit.)"""
+    held = held_bytes(run_dir, rewritten) if resume or overwrite else 0
+    return max(checkpoint_bytes if held else 0.0, 2 * checkpoint_bytes + extra - held) + RUN_DISK_MARGIN, held
 
 
 def check_run_disk(run_dir: str | os.PathLike[str], checkpoint_bytes: float, what: str, extra: float = 0.0,
-                   checkpoint: str = CHECKPOINT, resume: bool = False, rewritten: Sequence[str] = ()) -> None:
+                   checkpoint: str = CHECKPOINT, resume: bool = False, rewritten: Sequence[str] = (),
+                   overwrite: bool = False) -> None:
     """Refuses, before a training run starts, a run folder whose disk cannot hold its checkpoints
-    (:func:`run_disk_need`; ``rewritten``: files a resumed run replaces besides ``checkpoint``). ``run_dir`` need not
+    (:func:`run_disk_need`; ``rewritten``: files a resumed or overwriting run replaces besides ``checkpoint``). ``run_dir`` need not
     exist yet. A resumed run is told to free space only: another --out would not continue it.
 
     Raises:
         ResourceError: as :func:`check_disk`.
     """
-    needed, held = run_disk_need(run_dir, checkpoint_bytes, extra, resume, (checkpoint, *rewritten))
+    needed, held = run_disk_need(run_dir, checkpoint_bytes, extra, resume, (checkpoint, *rewritten), overwrite)
     check_disk(Path(run_dir) / checkpoint, needed, what,
                advice="free some space" if resume else "free some space, or give another --out",
                detail=f" beyond the {format_bytes(held)} of {run_dir} that it replaces" if held else "")
