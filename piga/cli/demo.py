@@ -150,7 +150,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         if kind is not RunKind.PIGA:
             raise PigaError(f"--resume: {run_dir} holds a {kind.writer} run, not the piga-train-model run of a demo; "
                             "pass --overwrite (not --resume) to start the demo over")
-    _check_not_the_users(data)
+    if args.overwrite or args.resume:  # (without either, checked above)
+        _check_not_the_users(data)
     # (a demo that kept only its pictures continues from the start: they are made again)
     from piga.cli.control import check_angle
 
@@ -218,12 +219,13 @@ def check_demo_disk(out: Path, config: CollectConfig, resume: bool, overwrite: b
     with torch.device("meta"):  # its size only: no memory taken
         checkpoint_bytes = adam_checkpoint_bytes(build_model(PRESETS["fast"].model))
     run_bytes, _ = run_disk_need(run_dir, checkpoint_bytes, resume=resume, overwrite=overwrite)
+    replaced = (resume or overwrite) and (run_dir / CHECKPOINT).is_file()
     data_part = f"the data file, about {format_bytes(file_bytes)}; " if not kept else ""
     check_disk(data, max(collecting, (0.0 if kept else file_bytes) + run_bytes + FIGURE_DISK_BYTES), f"--out {out}",
                advice="free some space" if resume else "free some space, or give another --out",
                detail=f" for the whole demo ({data_part}the training run, {format_bytes(run_bytes)} for its "
                       f"checkpoints of {format_bytes(checkpoint_bytes)}, metrics and figures"
-                      f"{', less the checkpoint it replaces' if (resume or overwrite) and (run_dir / CHECKPOINT).is_file() else ''}; "
+                      f"{', less the checkpoint it replaces' if replaced else ''}; "
                       f"and {format_bytes(FIGURE_DISK_BYTES)} kept free for its pictures and table)")
 
 

@@ -46,7 +46,8 @@ def build_parser() -> ArgumentParser:
                                                     f"{d.MAX_BOOTSTRAP}]"), default=d.bootstrap,
                    help=f"bootstrap replicates for intervals: 0 (none: a gain error is then named on its estimate alone, "
                    f"untested) or {d.MIN_BOOTSTRAP} to {d.MAX_BOOTSTRAP} (default %(default)s)")
-    p.add_argument("--seed", type=seed_int, default=d.seed, help="seed of the bootstrap, of the frames the camera stage fits on and of the twin's sensor noise "
+    p.add_argument("--seed", type=seed_int, default=d.seed,
+                   help="seed of the bootstrap, of the frames the camera stage fits on and of the twin's sensor noise "
                    "(default %(default)s)")
     p.add_argument("--fit-starts", action=argparse.BooleanOptionalAction, default=d.fit_starts,
                    help="refit the chosen effects' values with each fitting window's two start angles fitted too "

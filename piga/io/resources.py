@@ -240,8 +240,8 @@ def check_run_disk(run_dir: str | os.PathLike[str], checkpoint_bytes: float, wha
                    checkpoint: str = CHECKPOINT, resume: bool = False, rewritten: Sequence[str] = (),
                    overwrite: bool = False) -> None:
     """Refuses, before a training run starts, a run folder whose disk cannot hold its checkpoints
-    (:func:`run_disk_need`; ``rewritten``: files a resumed or overwriting run replaces besides ``checkpoint``). ``run_dir`` need not
-    exist yet. A resumed run is told to free space only: another --out would not continue it.
+    (:func:`run_disk_need`; ``rewritten``: files a resumed or overwriting run replaces besides ``checkpoint``).
+    ``run_dir`` need not exist yet. A resumed run is told to free space only: another --out would not continue it.
 
     Raises:
         ResourceError: as :func:`check_disk`.
