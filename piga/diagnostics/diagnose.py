@@ -2894,21 +2894,22 @@ def analyse(obs: Observations, nom: Nominal, config: DiagnoseConfig = DiagnoseCo
     summarise the vision, measure the gap, assemble.
     """
     if camera is not None and not camera.rematched and config.matched_angles and matched is not None:
+        why: dict[str, Any] = {}  # the CameraFindings field that says why everything goes on the matched angles
         if drawn_with_the_action(obs, rec_training, config):
             # the encoder reads its angles through what is drawn with the action, larger than in any training frame (an
             # actuation gain of 1.6 read a = 2e-09 and "not explained ... a camera moved far?" on the encoder's angles,
             # where gains of 2.0, and 1.6 beside a blur, read on the angles matched to the decoder's renders, read
-            # right): everything is done on the matched angles
-            return analyse(obs, nom, config, model, rec_training, progress,
-                           dataclass_replace(camera, theta=matched() if callable(matched) else matched,
-                                             matched_for_arrow=True), arrow, own, None, own_missing)
-        if obs.lossy_source is not None:
+            # right)
+            why = {"matched_for_arrow": True}
+        elif obs.lossy_source is not None:
             matched = matched() if callable(matched) else matched
             ratio = codec_reading_ratio(obs, matched, nom)
             if ratio > config.codec_reading_ratio:  # so with the codec's errors (see the config's field)
-                return analyse(obs, nom, config, model, rec_training, progress,
-                               dataclass_replace(camera, theta=matched, matched_for_codec=ratio), arrow, own, None,
-                               own_missing)
+                why = {"matched_for_codec": ratio}
+        if why:  # everything is done on the matched angles
+            return analyse(obs, nom, config, model, rec_training, progress,
+                           dataclass_replace(camera, theta=matched() if callable(matched) else matched, **why), arrow,
+                           own, None, own_missing)
     stale = obs.stale if obs.stale is not None and obs.stale.any() else None
     theta = camera.theta if camera is not None and camera.rematched else obs.theta  # the corrected model's angles
     windows = cut_windows(obs, theta, stale, config)
