@@ -25,11 +25,12 @@ from envs.fields import counted
 from piga.cli.common import (NOT_CONVERGED, ArgumentParser, Interrupted, PigaError, add_device_option, add_preset_option,
                              check_not_demo_folder, command_line, format_default, given_options, held_run_error,
                              int_up_to, made_folder, nonnegative_float, nonnegative_int, number_type, positive_float, positive_int,
-                             record_resume, recorded_options, remove_outputs, run_cli, seed_int, started_record,
+                             record_resume, recorded_options, remove_outputs, resume_option, run_cli, seed_int, started_record,
                              thread_count, with_flags)
 from piga.io.atomic import check_folder_target
 from piga.io.checkpoint import CHECKPOINT, RUN_OUTPUTS, RunKind, check_run_files, checkpoint_kind, read_run_record, recorded_path
 from piga.io.lock import lock_run_folder
+from piga.io.replaced import ReplacedRun, replacing, settle_replaced
 
 PROG = "piga-baseline"
 OUTPUTS = (CHECKPOINT, "config.json", "metrics.json", "model.zip", "autoencoder.pt", "tensorboard", "collected.h5",
@@ -193,11 +194,14 @@ def _left_before_a_checkpoint(run_dir: Path, existing: list[str], kind: RunKind)
     return True
 
 
-def _check_run_dir(run_dir: Path, resume: bool, overwrite: bool, kind: RunKind) -> None:
-    """Refuses to clobber a run, or to resume what is not one of this kind; clears it with ``overwrite``."""
+def _check_run_dir(run_dir: Path, resume: bool, overwrite: bool, kind: RunKind, replaced: ReplacedRun) -> None:
+    """Refuses to clobber a run, or to resume what is not one of this kind; with ``overwrite``, sets it aside
+    (``replaced``: deleted at the new run's first checkpoint, put back if the command ends before it)."""
     check_folder_target(run_dir)
     check_not_demo_folder(run_dir)
     lock_run_folder(run_dir)  # a second command on this folder is refused until this one ends
+    if (settled := settle_replaced(run_dir)) is not None:
+        print(settled)
     if resume and overwrite:
         raise PigaError("--resume continues the run in --out and --overwrite replaces it; give one of them")
     check_run_files(run_dir)  # a pipe as its checkpoint: refused, neither read nor removed
@@ -234,7 +238,8 @@ def _check_run_dir(run_dir: Path, resume: bool, overwrite: bool, kind: RunKind) 
                             "was stopped as it wrote its first checkpoint); continue it with --resume (its settings "
                             "are rebuilt from the checkpoint), or pass --overwrite to start it again")
         raise held_run_error(run_dir, kind)
-    remove_outputs(run_dir, RUN_OUTPUTS if overwrite else existing)  # --overwrite: a run of another kind's too
+    if overwrite:  # a run of another kind's outputs too
+        replaced.set_aside(run_dir, RUN_OUTPUTS)
 
 
 #: The record's keys of a PlaNet-style run's data file: its path as the command gave it, and the folder it was given in.
@@ -435,11 +440,13 @@ def _nothing_left_unless_checkpointed(run_dir: Path, written: list[int], fresh: 
             raise
 
 
-def _interrupted(run_dir: Path, written: list[int], resume: bool) -> None:
+def _interrupted(run_dir: Path, written: list[int], resume: bool, overwrite: bool) -> None:
     """Raises the line of a run interrupted after a checkpoint, or of a resumed one before its next checkpoint: its
-    checkpoint is kept either way ("nothing was written" would read as the run lost)."""
+    checkpoint is kept either way ("nothing was written" would read as the run lost). A run given --overwrite is
+    continued with --resume in its place (beside it, --resume is refused)."""
     if written:
-        raise Interrupted(f"{run_dir / CHECKPOINT} holds step {written[-1]}; continue with --resume") from None
+        raise Interrupted(f"{run_dir / CHECKPOINT} holds step {written[-1]}; continue with "
+                          f"{resume_option(overwrite)}") from None
     if resume:
         raise Interrupted(f"{run_dir / CHECKPOINT} is as it was (stopped before the next checkpoint); continue with "
                           "--resume") from None
@@ -462,7 +469,7 @@ def check_planet_memory(rssm: Any, config: Any = None) -> None:
                      f"a batch of {config.batch_size} x {config.chunk_length} frames (--batch-size x --chunk-length)")
 
 
-def _planet(args: Any, argv: Sequence[str] | None) -> int:
+def _planet(args: Any, argv: Sequence[str] | None, replaced: ReplacedRun) -> int:
     from agents.planet.config import IterativeConfig, PlanetTrainConfig
     from piga.io.resources import check_run_disk
     from piga.io.atomic import write_json
@@ -475,7 +482,7 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
     command = command_line(PROG, argv)
     iterative: IterativeConfig | None = None
     if args.resume:
-        _check_run_dir(run_dir, True, args.overwrite, RunKind.PLANET)
+        _check_run_dir(run_dir, True, args.overwrite, RunKind.PLANET, replaced)
         record = _resumed_record(run_dir, RunKind.PLANET, args)
         _refuse_recipe_changes(args, record, run_dir, argv)
         saved = _saved_config(run_dir, record, "train", PlanetTrainConfig, optional=("device",))  # older runs have none
@@ -532,7 +539,7 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
             from agents.planet.iterative import check_iterative_data
 
             check_iterative_data(info, iterative)
-        _check_run_dir(run_dir, False, args.overwrite, RunKind.PLANET)
+        _check_run_dir(run_dir, False, args.overwrite, RunKind.PLANET, replaced)
         record = started_record(command, kind=RunKind.PLANET.value, data=str(args.data), data_folder=os.getcwd(),
                                 data_fingerprint=fingerprint(args.data), rewards_fingerprint=rewards_fingerprint(args.data),
                                 train=config.to_dict(), rssm=rssm.to_dict(),
@@ -559,6 +566,7 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
     def on_checkpoint(state: Any) -> None:
         if not written:
             write_json(run_dir / "config.json", record)
+            replaced.drop()
         written.append(state.step)
 
     try:
@@ -574,7 +582,7 @@ def _planet(args: Any, argv: Sequence[str] | None) -> int:
     except TrainingDiverged as exc:
         raise PigaError(f"training diverged: {exc}") from None
     except KeyboardInterrupt:
-        _interrupted(run_dir, written, args.resume)
+        _interrupted(run_dir, written, args.resume, args.overwrite)
         raise
     if not written:  # a resume with nothing left to do still records its command
         write_json(run_dir / "config.json", record)
@@ -626,7 +634,7 @@ def _ddpg_checkpoint_bytes(config: Any, latent_size: int) -> float:
     return config.buffer_size * (2 * per_obs + 16)
 
 
-def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
+def _ddpg(args: Any, argv: Sequence[str] | None, replaced: ReplacedRun) -> int:
     from piga.io.atomic import write_json
     from agents.sb3.config import SB3Config, resolve_precision  # it checks --eval-every against the env's episode length
     from agents.sb3.run import AUTOENCODER, REPLAY_BUFFERS
@@ -652,7 +660,7 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
     if args.env != DMC_PENDULUM and "view" in written:
         raise PigaError(f"--view chooses a view of {DMC_PENDULUM}; {args.env} is seen as it renders: drop --view")
     if args.resume:
-        _check_run_dir(run_dir, True, args.overwrite, RunKind.DDPG)
+        _check_run_dir(run_dir, True, args.overwrite, RunKind.DDPG, replaced)
         record = _resumed_record(run_dir, RunKind.DDPG, args)
         _refuse_record_edits(run_dir, record)
         # runs from before --algo are DDPG; runs from before --device have none
@@ -707,7 +715,7 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
             check_autoencoder_data(info)  # blank or ill-sized frames: one line, before --out is touched
             check_pixel_pendulum_file(info, "--obs latent learns its codes from the file's frames and then acts on "
                                       f"{PIXEL_PENDULUM}, whose frames they must be")
-        _check_run_dir(run_dir, False, args.overwrite, RunKind.DDPG)
+        _check_run_dir(run_dir, False, args.overwrite, RunKind.DDPG, replaced)
         record = started_record(command, kind=RunKind.DDPG.value, data=args.data, data_folder=os.getcwd(),
                                 ddpg=config.to_dict())
         if args.data:
@@ -724,6 +732,7 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
     def on_checkpoint(step: int) -> None:
         if not written:
             write_json(run_dir / "config.json", record)
+            replaced.drop()
         written.append(step)
 
     try:
@@ -745,7 +754,7 @@ def _ddpg(args: Any, argv: Sequence[str] | None) -> int:
     except TrainingDiverged as exc:
         raise PigaError(f"training diverged: {exc}") from None
     except KeyboardInterrupt:
-        _interrupted(run_dir, written, args.resume)
+        _interrupted(run_dir, written, args.resume, args.overwrite)
         raise
     if not written:  # a resume with nothing left to do still records its command (and a rebuilt record)
         write_json(run_dir / "config.json", record)
@@ -769,7 +778,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     from piga.io.device import resolve_device
 
     resolve_device(args.device)  # --device cuda without a GPU: one line, before anything is read or written
-    return _planet(args, argv) if args.baseline == "planet" else _ddpg(args, argv)
+    with replacing() as replaced:  # the run that --overwrite replaces: back in place if this one ends before a checkpoint
+        return (_planet if args.baseline == "planet" else _ddpg)(args, argv, replaced)
 
 
 def entry() -> None:

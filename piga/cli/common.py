@@ -291,6 +291,14 @@ def held_run_error(run_dir: Path, kind: Any) -> PigaError:
     if other is not None and other is not kind:
         return PigaError(f"{run_dir} already holds a {other.writer} run ({files}); give another --out, or --overwrite "
                          "to replace it")
+    import zipfile
+
+    from piga.io.checkpoint import CHECKPOINT
+
+    if not zipfile.is_zipfile(run_dir / CHECKPOINT):  # torch writes a zip; cut short, its end is missing: no --resume
+        return PigaError(f"{run_dir} already holds a run ({files}) whose {CHECKPOINT} cannot be read (not a whole "
+                         "checkpoint: cut short or damaged), so --resume cannot continue it; pass --overwrite to start "
+                         "it again, or give another --out")
     return PigaError(f"{run_dir} already holds a run ({files}); pass --resume to continue it or --overwrite to replace "
                      "it")
 

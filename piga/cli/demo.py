@@ -125,6 +125,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         raise PigaError(f"--out {out} holds a run of its own ({CHECKPOINT}); a demo writes its data, pictures and run "
                         "(in --out/model) into a folder of its own: give another --out")
     collect_config = replace(CollectConfig(), sequences=args.sequences, seed=args.seed)
+    from piga.cli.control import check_angle
+
+    # the values first: a wrong one is the line, whatever the folder holds (not "exists from an earlier demo")
+    check_angle("--goal-angle", args.goal_angle)
+    _check_enough_sequences(collect_config)
     data, strip, run_dir = out / "pendulum.h5", out / "frames.png", out / DEMO_RUN
     goal_png, control_md = out / "goal.png", out / "control.md"
     if not args.overwrite and not args.resume:  # before the disk: an earlier demo's files would count as taken there
@@ -153,10 +158,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.overwrite or args.resume:  # (without either, checked above)
         _check_not_the_users(data)
     # (a demo that kept only its pictures continues from the start: they are made again)
-    from piga.cli.control import check_angle
-
-    check_angle("--goal-angle", args.goal_angle)
-    _check_enough_sequences(collect_config)  # checked before any folder
     outputs = (data, strip, run_dir / CHECKPOINT, goal_png, control_md)
     before = {path: path.exists() and path.stat().st_mtime_ns for path in outputs}
     try:

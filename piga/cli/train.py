@@ -6,7 +6,6 @@ import contextlib
 import errno
 import math
 import os
-import shutil
 import sys
 from collections.abc import Iterator, Sequence
 from dataclasses import asdict, fields, replace
@@ -21,9 +20,10 @@ from piga.cli.common import (NOT_CONVERGED, ArgumentParser, Interrupted, PigaErr
                              record_resume, recorded_options, remove_empty_folders, remove_outputs, resume_option, run_cli,
                              seed_int, started_record, thread_count, unit_fraction)
 from piga.io.atomic import OutputFolder, check_folder_target
-from piga.io.checkpoint import (CHECKPOINT, RUN_OUTPUTS, RunKind, check_run_files, read_run_record, recorded_data_path,
+from piga.io.checkpoint import (CHECKPOINT, RunKind, check_run_files, read_run_record, recorded_data_path,
                                 require_piga_run)
 from piga.io.lock import lock_run_folder
+from piga.io.replaced import ReplacedRun, replacing, settle_replaced
 
 if TYPE_CHECKING:
     from piga.world.model import ModelConfig
@@ -162,6 +162,11 @@ def build_parser() -> ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
+    with replacing() as replaced:  # the run that --overwrite replaces: back in place if this one ends before a checkpoint
+        return _main(argv, prog, replaced)
+
+
+def _main(argv: Sequence[str] | None, prog: str, replaced: ReplacedRun) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     options_given = given_options(parser, argv)  # the options written, at the default's value too
@@ -172,6 +177,8 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
     check_folder_target(run_dir)
     check_not_demo_folder(run_dir)
     lock_run_folder(run_dir)  # a second command on this folder is refused until this one ends
+    if (settled := settle_replaced(run_dir)) is not None:
+        print(settled)
     if args.data_loading == "memory" and args.stream_cache_mb is not None:
         raise PigaError("--stream-cache-mb sizes the cache of --data-loading stream; --data-loading memory reads the "
                         "frames whole, so drop one of them")
@@ -357,10 +364,8 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
         print(f"note: sequences of {info.steps} frames: the physics predicts {model_config.pred_frames} frames "
               f"per window, not the recipe's {recipe.model.pred_frames}")  # stdout: stderr is for what went wrong
     written: list[int] = []
-    if args.overwrite and not args.resume and (run_dir / "tensorboard").is_dir():
-        shutil.rmtree(run_dir / "tensorboard")  # the replaced run's curves, which the new run's would join
-    if args.overwrite and not args.resume and not fresh.has_templates:
-        (run_dir / "templates.png").unlink(missing_ok=True)  # the replaced run's; a model without templates draws none
+    if args.overwrite and not args.resume:  # deleted at the first checkpoint; until then, put back if this run ends
+        replaced.set_aside(run_dir)
 
     # seeds whose run lost an object and was trained again (a resumed run's too: the retries of a run interrupted
     # before its end go on after the resume; a finished run resumed for longer is the user's, and no retry drops it)
@@ -376,12 +381,11 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
         if not written:
             with folder.kept():
                 write_json(run_dir / "config.json", record)
-            # the report of the state resumed from, or of the run --overwrite replaces, no longer describes the
-            # checkpoint: an interrupted resume or overwrite left it beside a newer model, which piga-diagnose then
-            # judged by the old report's numbers (and piga-control by its convergence); so do the outputs of a run of
-            # another kind that --overwrite replaces (a baseline's model.zip, openloop.png)
-            remove_outputs(run_dir, REPORT_OUTPUTS + (tuple(n for n in RUN_OUTPUTS if n not in OUTPUTS)
-                                                      if args.overwrite else ()))
+            # the report of the state resumed from no longer describes the checkpoint: an interrupted resume left it
+            # beside a newer model, which piga-diagnose then judged by the old report's numbers (and piga-control by
+            # its convergence); the run that --overwrite replaces goes whole
+            remove_outputs(run_dir, REPORT_OUTPUTS)
+            replaced.drop()
         written.append(state.epoch)
         # with a retry left, a scene's objects are checked once the autoencoder's warm-up is over: an object not
         # found then is not found at the end either (benchmarks/warmup_objects.py), and the retry starts at once
@@ -431,6 +435,7 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
                 # interrupted between this command's first checkpoint and its on_epoch: the record goes with it
                 write_json(run_dir / "config.json", record)
                 written.append(_saved_epoch(run_dir))
+                replaced.drop()
             if written or resuming:
                 epoch = written[-1] if written else _saved_epoch(run_dir)
                 raise Interrupted(f"{run_dir / CHECKPOINT} holds epoch {epoch}; continue with "
@@ -445,6 +450,7 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
                 raise
             # a full disk after this command's first checkpoint: the folder now holds a run, which the same command
             # refused ("already holds a run") where the generic line said to run it again
+            replaced.drop()  # (the checkpoint is this run's)
             raise PigaError(f"the disk is full (no space left on device); {checkpoint} holds epoch "
                             f"{_saved_epoch(run_dir)}: free some space and continue with "
                             f"{resume_option(args.overwrite)}") from None

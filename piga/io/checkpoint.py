@@ -311,6 +311,10 @@ def read_checkpoint(run_dir: str | os.PathLike[str], kind: RunKind) -> dict[str,
             raise FileNotFoundError(f"{path}: no checkpoint: {run_dir} looks like a piga-demo folder, whose run "
                                     f"{demo_run} has no checkpoint yet; continue the demo with piga-demo --out "
                                     f"{run_dir} --resume")
+        if (Path(run_dir) / ".replaced" / CHECKPOINT).is_file():  # (piga.io.replaced.ASIDE, which imports this module)
+            raise FileNotFoundError(f"{path}: no checkpoint: a command given --overwrite was killed before its new run's "
+                                    f"first checkpoint, and the run it replaced is in {Path(run_dir) / '.replaced'}; "
+                                    f"move those files back into {run_dir} (or rerun that command, which does it)")
         raise FileNotFoundError(f"{path}: no checkpoint (is {run_dir} a {kind.writer} run folder?)")
     check_run_file(path)
     try:
