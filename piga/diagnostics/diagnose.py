@@ -2629,17 +2629,16 @@ def codec_reading_ratio(obs: Observations, matched: np.ndarray, nom: Nominal) ->
     """The nominal physics' typical (median) absolute one-step angle error on the encoder's angles over that on the
     (N, T) ``matched`` angles, over every sequence (repeated frames left out): how much more noisily the encoder reads
     the recording. A codec's blocks and ringing are what the encoder never saw in training, where matching the whole
-    picture to the decoder's renders averages over them (:attr:`DiagnoseConfig.codec_reading_ratio`)."""
+    picture to the decoder's renders averages over them (:attr:`DiagnoseConfig.codec_reading_ratio`). NaN where no
+    step runs between two fresh frames."""
     rows = np.arange(len(obs.theta))
     stale = obs.stale if obs.stale is not None and obs.stale.any() else None
-
-    def typical(theta: np.ndarray) -> float:
-        w = fit.make_windows(theta, obs.actions, rows, 1, 1, obs.dt, stale)
-        with torch.no_grad():
-            return float(torch.median(fit.squared_errors(fit.Model(), nom, w)[:, 0].sqrt()))
-
-    on_matched = typical(matched)
-    return typical(obs.theta) / on_matched if on_matched > 0 else math.inf
+    # (a one-step angle error is the acceleration residual times dt², so the ratio of the two medians is the same)
+    on_matched = median_residual(fit.Model(), nom, matched, obs.actions, rows, stale)
+    on_encoder = median_residual(fit.Model(), nom, obs.theta, obs.actions, rows, stale)
+    if math.isnan(on_matched) or math.isnan(on_encoder):  # no step between two fresh frames: nothing to compare
+        return math.nan
+    return on_encoder / on_matched if on_matched > 0 else math.inf
 
 
 def twin_renderer(from_gymnasium: bool, has_model: bool, rematched: bool, vision_ratio: float | None,
