@@ -4729,3 +4729,34 @@ def test_a_planet_run_cut_short_by_its_budget_says_so(tiny_data: Path, tmp_path:
             *TINY_PLANET[2:]]  # (TINY_PLANET without its --steps 2)
     code, _, err = run_in_process("piga-baseline", baseline.main, *argv, capsys=capsys)
     assert code in (1, 3) and "--max-minutes stopped" in err and "of 500" in err, err
+
+
+def test_demo_resume_trains_anew_a_run_of_an_earlier_demos_data(tmp_path: Path, tiny_run: Path,
+                                                                 capsys: pytest.CaptureFixture[str],
+                                                                 monkeypatch: pytest.MonkeyPatch) -> None:
+    """An --overwrite with another --seed stopped after its collection left the earlier demo's run (put back as it was)
+    beside the new data; --resume sent it to piga-train-model --resume, which refused the other file."""
+    from piga.cli.common import Interrupted
+    from piga.data.collect import collect
+
+    out = tmp_path / "demo"
+    calls: list[list[str]] = []
+
+    def small_collect(config: Any, path: Path, **kwargs: Any) -> None:
+        collect(replace(config, steps=8, workers=1), path, **kwargs)
+
+    def interrupted_training(argv: Sequence[str], prog: str) -> int:
+        calls.append(list(argv))
+        raise Interrupted("stopped")
+
+    monkeypatch.setattr(demo, "collect", small_collect)
+    monkeypatch.setattr(demo, "_check_enough_sequences", lambda config: None)
+    monkeypatch.setattr(demo.show, "main", lambda argv: 0)
+    monkeypatch.setattr(demo.train, "main", interrupted_training)
+    argv = ["--out", str(out), "--sequences", "4", "--quiet"]
+    run_in_process("piga-demo", demo.main, *argv, capsys=capsys)  # keeps its pendulum.h5, no run yet
+    shutil.copytree(tiny_run, out / "model")  # a run of other data (the earlier demo's, put back)
+    calls.clear()
+    code, text, err = run_in_process("piga-demo", demo.main, *argv, "--resume", capsys=capsys)
+    assert code == 130, err
+    assert "anew" in text and "--overwrite" in calls[0] and "--resume" not in calls[0], (text, calls)

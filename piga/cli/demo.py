@@ -188,6 +188,19 @@ def main(argv: Sequence[str] | None = None) -> int:
         raise KeyboardInterrupt from None
 
 
+def _trained_on(run_dir: Path, data: Path) -> bool:
+    """Whether the run in ``run_dir`` trained on the contents of ``data`` (its checkpoint's fingerprint of its file;
+    True for a checkpoint without one, or one that does not read: piga-train-model --resume then says what is wrong)."""
+    from piga.data.schema import fingerprint
+    from piga.io.checkpoint import RunKind, read_checkpoint
+
+    try:
+        trained = read_checkpoint(run_dir, RunKind.PIGA).get("data", {}).get("fingerprint")
+    except (OSError, ValueError):
+        return True
+    return trained is None or trained == fingerprint(data)
+
+
 def _check_not_the_users(data: Path) -> None:
     """Refuses a --out whose pendulum.h5 is a file of the user's, which --overwrite would destroy."""
     if data.exists() and not _written_by_demo(data):
@@ -274,7 +287,13 @@ def _run(args: argparse.Namespace, argv: Sequence[str] | None, out: Path, config
         collect(config, data, overwrite=args.overwrite, command=command_line(PROG, argv), progress=not args.quiet)
     print(f"[2/4] saving a strip of frames to {strip}", flush=True)
     show.main([str(data), "--out", str(strip), *redo])
-    if args.resume and (run_dir / CHECKPOINT).exists():
+    if args.resume and (run_dir / CHECKPOINT).exists() and not _trained_on(run_dir, data):
+        # an --overwrite with another --seed, stopped after its collection and before its first checkpoint, left the
+        # earlier demo's run beside the new data: piga-train-model --resume refuses it, so it is trained anew
+        print(f"[3/4] training the world model into {run_dir} anew (fast preset): the run there trained on an earlier "
+              f"demo's data, not on {data}", flush=True)
+        how = ["--overwrite"]
+    elif args.resume and (run_dir / CHECKPOINT).exists():
         print(f"[3/4] continuing the training in {run_dir} (piga-train-model --resume)", flush=True)
         how = ["--resume"]
     else:  # (an earlier demo interrupted before its first checkpoint left no run to continue)
