@@ -665,6 +665,15 @@ def test_half_precision_actions_and_huge_rewards_are_read_without_warnings(tiny_
         check_actions(np.ones((2, 3, 1), np.float16), "a.h5")
         with pytest.raises(DataFormatError, match="/rewards holds NaN or infinite values"):
             load_rewards(data, "train")
+    # finite, but beyond what a reward loss can square: "training diverged: loss became inf at step 0", no fix named
+    for scale, fine in ((1e30, False), (1e17, False), (1e6, True)):
+        data = _variant(tiny_data, tmp_path / f"r{scale:g}.h5", lambda f: _replace(
+            f, "rewards", np.where(np.arange(f["rewards"].shape[1]) == 3, -scale, f["rewards"][()])))
+        if fine:
+            assert load_rewards(data, "train").min() == -scale
+        else:
+            with pytest.raises(DataFormatError, match=r"/rewards holds values beyond ±1e\+15 .*rescale the rewards"):
+                load_rewards(data, "train")
 
 
 def test_a_true_parameter_of_zero_is_scored_infinitely_off() -> None:
@@ -1136,6 +1145,42 @@ def test_ddpg_that_diverges_stops_with_exit_1(tmp_path: Path, capsys: pytest.Cap
     assert _listing(tmp_path) == []
 
 
+def test_an_actor_critic_whose_policy_turns_nan_after_a_checkpoint_is_said_to_have_diverged(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    """SAC at --learning-rate 0.2: torch.distributions refused the NaN policy as it sampled ("Expected parameter loc
+    ... found invalid values", not "training diverged", no checkpoint named); piga-control then called the run
+    interrupted and sent it to --resume, which diverges again (an exact resume)."""
+    from stable_baselines3 import DDPG
+
+    from piga.cli.control import baseline_unfinished
+
+    learn, calls = DDPG.learn, []
+
+    def nan_on_the_second_chunk(self: Any, *args: Any, **kwargs: Any) -> Any:
+        calls.append(1)
+        if len(calls) == 2:
+            raise ValueError("Expected parameter loc (Tensor of shape (1, 1)) of distribution Normal(loc: "
+                             "tensor([[nan]])) to satisfy the constraint Real(), but found invalid values")
+        return learn(self, *args, **kwargs)
+
+    monkeypatch.setattr(DDPG, "learn", nan_on_the_second_chunk)
+    run = tmp_path / "run"
+    argv = ["ddpg", "--obs", "state", "--out", str(run), "--steps", "400", *TINY_DDPG[2:]]  # (TINY_DDPG's --steps 200)
+    line = refused("piga-baseline", argv, capsys, "training diverged: the policy's action distribution became NaN by "
+                   "step 200", f"last good checkpoint: {run / 'checkpoint.pt'}")
+    assert json.loads((run / "config.json").read_text())["diverged"] == line.split("error: ", 1)[1]
+    warning = baseline_unfinished(run)
+    assert warning is not None and "diverged" in warning and "--overwrite and a lower learning rate" in warning
+    calls.clear()
+    calls.append(1)  # the resume's first chunk is the run's second: it diverges again, and the record says so still
+    refused("piga-baseline", [*argv, "--resume"], capsys, "training diverged")
+    assert "diverged" in json.loads((run / "config.json").read_text())
+    monkeypatch.setattr(DDPG, "learn", learn)  # a resume that gets past the step: the record no longer says it
+    code, _, err = run_in_process("piga-baseline", baseline.main, *argv, "--resume", capsys=capsys)
+    assert_sb3_run_finished(code, err)
+    assert "diverged" not in json.loads((run / "config.json").read_text())
+
+
 @pytest.mark.parametrize("data, needles", [
     ("blank", ["every frame is blank"]),
     ("colour", ["the autoencoder takes gray 64x64 frames"]),
@@ -1447,6 +1492,42 @@ def test_a_gif_is_refused_before_the_episodes_where_an_mp4_fits(tmp_path: Path, 
 # ---------------------------------------------------------------------------------------------
 
 
+def test_an_actor_critic_whose_policy_turns_nan_after_a_checkpoint_is_said_to_have_diverged(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    """SAC at --learning-rate 0.2: torch.distributions refused the NaN policy as it sampled ("Expected parameter loc
+    ... found invalid values", not "training diverged", no checkpoint named); piga-control then called the run
+    interrupted and sent it to --resume, which diverges again (an exact resume)."""
+    from stable_baselines3 import DDPG
+
+    from piga.cli.control import baseline_unfinished
+
+    learn, calls = DDPG.learn, []
+
+    def nan_on_the_second_chunk(self: Any, *args: Any, **kwargs: Any) -> Any:
+        calls.append(1)
+        if len(calls) == 2:
+            raise ValueError("Expected parameter loc (Tensor of shape (1, 1)) of distribution Normal(loc: "
+                             "tensor([[nan]])) to satisfy the constraint Real(), but found invalid values")
+        return learn(self, *args, **kwargs)
+
+    monkeypatch.setattr(DDPG, "learn", nan_on_the_second_chunk)
+    run = tmp_path / "run"
+    argv = ["ddpg", "--obs", "state", "--out", str(run), "--steps", "400", *TINY_DDPG[2:]]  # (TINY_DDPG's --steps 200)
+    line = refused("piga-baseline", argv, capsys, "training diverged: the policy's action distribution became NaN by "
+                   "step 200", f"last good checkpoint: {run / 'checkpoint.pt'}")
+    assert json.loads((run / "config.json").read_text())["diverged"] == line.split("error: ", 1)[1]
+    warning = baseline_unfinished(run)
+    assert warning is not None and "diverged" in warning and "--overwrite and a lower learning rate" in warning
+    calls.clear()
+    calls.append(1)  # the resume's first chunk is the run's second: it diverges again, and the record says so still
+    refused("piga-baseline", [*argv, "--resume"], capsys, "training diverged")
+    assert "diverged" in json.loads((run / "config.json").read_text())
+    monkeypatch.setattr(DDPG, "learn", learn)  # a resume that gets past the step: the record no longer says it
+    code, _, err = run_in_process("piga-baseline", baseline.main, *argv, "--resume", capsys=capsys)
+    assert_sb3_run_finished(code, err)
+    assert "diverged" not in json.loads((run / "config.json").read_text())
+
+
 @pytest.mark.parametrize("data, needles", [
     ("blank", ["every frame is blank"]),
     ("still", ["nothing moves"]),
@@ -1493,6 +1574,42 @@ def test_diagnose_on_a_baseline_run_says_what_it_is(files: dict[str, Path], fake
                                      str(tmp_path / "report")], capsys, "is a piga-baseline planet run", "piga-train-model")
     assert "model_config" not in line
     assert _listing(tmp_path) == []
+
+
+def test_an_actor_critic_whose_policy_turns_nan_after_a_checkpoint_is_said_to_have_diverged(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    """SAC at --learning-rate 0.2: torch.distributions refused the NaN policy as it sampled ("Expected parameter loc
+    ... found invalid values", not "training diverged", no checkpoint named); piga-control then called the run
+    interrupted and sent it to --resume, which diverges again (an exact resume)."""
+    from stable_baselines3 import DDPG
+
+    from piga.cli.control import baseline_unfinished
+
+    learn, calls = DDPG.learn, []
+
+    def nan_on_the_second_chunk(self: Any, *args: Any, **kwargs: Any) -> Any:
+        calls.append(1)
+        if len(calls) == 2:
+            raise ValueError("Expected parameter loc (Tensor of shape (1, 1)) of distribution Normal(loc: "
+                             "tensor([[nan]])) to satisfy the constraint Real(), but found invalid values")
+        return learn(self, *args, **kwargs)
+
+    monkeypatch.setattr(DDPG, "learn", nan_on_the_second_chunk)
+    run = tmp_path / "run"
+    argv = ["ddpg", "--obs", "state", "--out", str(run), "--steps", "400", *TINY_DDPG[2:]]  # (TINY_DDPG's --steps 200)
+    line = refused("piga-baseline", argv, capsys, "training diverged: the policy's action distribution became NaN by "
+                   "step 200", f"last good checkpoint: {run / 'checkpoint.pt'}")
+    assert json.loads((run / "config.json").read_text())["diverged"] == line.split("error: ", 1)[1]
+    warning = baseline_unfinished(run)
+    assert warning is not None and "diverged" in warning and "--overwrite and a lower learning rate" in warning
+    calls.clear()
+    calls.append(1)  # the resume's first chunk is the run's second: it diverges again, and the record says so still
+    refused("piga-baseline", [*argv, "--resume"], capsys, "training diverged")
+    assert "diverged" in json.loads((run / "config.json").read_text())
+    monkeypatch.setattr(DDPG, "learn", learn)  # a resume that gets past the step: the record no longer says it
+    code, _, err = run_in_process("piga-baseline", baseline.main, *argv, "--resume", capsys=capsys)
+    assert_sb3_run_finished(code, err)
+    assert "diverged" not in json.loads((run / "config.json").read_text())
 
 
 @pytest.mark.parametrize("data, needles", [
@@ -4760,3 +4877,19 @@ def test_demo_resume_trains_anew_a_run_of_an_earlier_demos_data(tmp_path: Path, 
     code, text, err = run_in_process("piga-demo", demo.main, *argv, "--resume", capsys=capsys)
     assert code == 130, err
     assert "anew" in text and "--overwrite" in calls[0] and "--resume" not in calls[0], (text, calls)
+
+
+def test_a_piga_run_that_diverged_after_a_checkpoint_is_warned_of_as_diverged(tiny_run: Path, tmp_path: Path) -> None:
+    """Its readers called it interrupted ("continue it with --resume"), which repeats the divergence exactly."""
+    from piga.io.checkpoint import record_divergence
+    from piga.io.runs import convergence_warning
+
+    run = tmp_path / "run"
+    shutil.copytree(tiny_run, run)
+    (run / "metrics.json").unlink(missing_ok=True)
+    (run / "config.json").write_text(json.dumps({"command": f"piga-train-model tiny.h5 --out {run}"}))
+    assert "interrupted" in (convergence_warning(run) or "")
+    record_divergence(run, "training diverged: loss became nan at step 9 (epoch 2); last good checkpoint: run/x")
+    warning = convergence_warning(run) or ""
+    assert warning.startswith(f"warning: the run {run} diverged (training diverged: loss became nan at step 9") and \
+        "--overwrite and a lower learning rate" in warning, warning

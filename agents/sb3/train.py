@@ -256,12 +256,21 @@ def _check_finite(model: Any, callback: Any, evaluated: bool, checkpoint: Path) 
     Raises:
         piga.training.train.TrainingDiverged: naming the step, the cause and the last good checkpoint.
     """
-    bad = [name for name, p in model.policy.named_parameters() if not torch.isfinite(p).all()]
+    bad = _non_finite(model)
     ret = float(callback.last_mean_reward) if evaluated else 0.0
-    if not bad and np.isfinite(ret):
+    if bad is None and np.isfinite(ret):
         return
-    _diverged(f"the weights of {bad[0]} became non-finite" if bad else f"the evaluation's mean return became {ret}",
+    _diverged(f"the weights of {bad} became non-finite" if bad else f"the evaluation's mean return became {ret}",
               model.num_timesteps, checkpoint)
+
+
+def _non_finite(model: Any) -> str | None:
+    """The name of the first of ``model``'s learned tensors (its policy's weights, SAC's entropy coefficient) that holds
+    a NaN or an infinity, or None."""
+    tensors = [*model.policy.named_parameters()]
+    if isinstance(getattr(model, "log_ent_coef", None), torch.Tensor):  # SAC's learned temperature, outside the policy
+        tensors.append(("log_ent_coef", model.log_ent_coef))
+    return next((name for name, p in tensors if not torch.isfinite(p).all()), None)
 
 
 def _diverged(cause: str, step: int, checkpoint: Path) -> NoReturn:
@@ -359,6 +368,11 @@ def train_sb3(config: SB3Config, run_dir: str | Path, autoencoder: str | Path | 
                             tb_log_name=config.algo)
             except NonFiniteAction as exc:
                 _diverged(str(exc), model.num_timesteps, run_dir / CHECKPOINT)
+            except ValueError as exc:  # torch.distributions refuses a NaN mean or scale (SAC's policy) as it samples
+                if (bad := _non_finite(model)) is None and "found invalid values" not in str(exc):
+                    raise
+                _diverged(f"the weights of {bad} became non-finite" if bad else "the policy's action distribution "
+                          "became NaN", model.num_timesteps, run_dir / CHECKPOINT)
             bar.update(model.num_timesteps - bar.n)  # none, unless a step went uncounted
             _check_finite(model, callback, chunk == config.eval_every, run_dir / CHECKPOINT)
             elapsed = time.monotonic() - started

@@ -481,12 +481,15 @@ def baseline_did_not_learn(run_dir: str | Path, kind: RunKind) -> str | None:
 
 def baseline_unfinished(run_dir: str | Path) -> str | None:
     """The warning (without its "warning: ") for a baseline run with a checkpoint but no metrics.json: piga-baseline
-    writes the record at its end, so the run was interrupted or killed, and never checked for learning; else None."""
-    from piga.io.checkpoint import CHECKPOINT, check_run_file
+    writes the record at its end, so the run was interrupted or killed (or it diverged, which its record says), and
+    never checked for learning; else None."""
+    from piga.io.checkpoint import CHECKPOINT, check_run_file, divergence_warning
 
     check_run_file(Path(run_dir) / "metrics.json")  # a pipe: refused, not tested
     if (Path(run_dir) / "metrics.json").exists() or not (Path(run_dir) / CHECKPOINT).exists():
         return None
+    if (diverged := divergence_warning(run_dir)) is not None:  # (--resume would diverge again)
+        return diverged
     return (f"the run {run_dir} has no metrics.json: it stopped before its end (interrupted, or killed) and was never "
             "checked for learning; this used its last checkpoint (continue it with piga-baseline --resume)")
 

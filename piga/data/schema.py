@@ -914,6 +914,11 @@ def load_states(path: str | os.PathLike[str], split: str, limit: int | None = No
         return _take(f["states"], idx[:_count(limit)]).astype(np.float32)
 
 
+#: The largest reward magnitude a file may hold: a batch's summed squared reward errors stay far inside float32 (a
+#: reward of 1e30 made the PlaNet-style loss infinite at its first step; 1e6 trained, if to nothing useful).
+MAX_REWARD = 1e15
+
+
 def load_rewards(path: str | os.PathLike[str], split: str, limit: int | None = None) -> np.ndarray:
     """Rewards (float32 [n, T]) of one split (its first ``limit`` sequences with ``limit``): ``rewards[n, t]``
     is the env's reward for the action after ``frames[n, t]``. For reward-based baselines only; piga's own
@@ -921,7 +926,8 @@ def load_rewards(path: str | os.PathLike[str], split: str, limit: int | None = N
 
     Raises:
         DataFormatError: the file has no ``/rewards`` (optional in the schema; ``piga-collect`` writes it),
-            or they hold NaN or infinite values (naming the first: sequence, step).
+            or they hold NaN or infinite values, or values beyond :data:`MAX_REWARD` (naming the first: sequence,
+            step).
     """
     idx = split_indices(path, split)[:_count(limit)]
     with _open(path) as f:
@@ -934,6 +940,12 @@ def load_rewards(path: str | os.PathLike[str], split: str, limit: int | None = N
         i, t = (int(k) for k in np.argwhere(bad)[0])
         raise DataFormatError(f"{path}: /rewards holds NaN or infinite values ({int(bad.sum())} entries; the first: "
                               f"sequence {int(idx[i])}, step {t}: {rewards[i, t]}); fix or recompute the rewards")
+    huge = np.abs(rewards) > MAX_REWARD
+    if huge.any():  # finite, but a reward head's squared error of them is not (the loss became inf at step 0)
+        i, t = (int(k) for k in np.argwhere(huge)[0])
+        raise DataFormatError(f"{path}: /rewards holds values beyond ±{MAX_REWARD:.0e} ({int(huge.sum())} entries; the "
+                              f"first: sequence {int(idx[i])}, step {t}: {rewards[i, t]:.3g}), whose squared errors "
+                              "overflow a reward model's float32 loss; rescale the rewards")
     return rewards.astype(np.float32)
 
 

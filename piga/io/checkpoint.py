@@ -35,9 +35,10 @@ RUN_OUTPUTS = (CHECKPOINT, "config.json", "metrics.json", "tensorboard", "rollou
 #: The files of a run folder that commands read: its checkpoint and its two records.
 RUN_FILES = (CHECKPOINT, "config.json", "metrics.json")
 
-__all__ = ["CHECKPOINT", "DEMO_RUN", "RUN_FILES", "RunKind", "check_run_file", "check_run_files", "checked_run_kind",
-           "checkpoint_kind", "is_demo_folder", "kind_mismatch", "read_checkpoint", "recorded_data_path", "recorded_path",
-           "require_piga_run", "run_kind", "write_checkpoint", "unreadable"]
+__all__ = ["CHECKPOINT", "DEMO_RUN", "DIVERGED", "RUN_FILES", "RunKind", "check_run_file", "check_run_files",
+           "checked_run_kind", "checkpoint_kind", "divergence_warning", "is_demo_folder", "kind_mismatch",
+           "read_checkpoint", "record_divergence", "recorded_data_path", "recorded_path", "require_piga_run", "run_kind",
+           "write_checkpoint", "unreadable"]
 
 
 class RunKind(enum.Enum):
@@ -383,3 +384,39 @@ def check_counts(path: Path, kind: RunKind, **counts: object) -> None:
         if isinstance(value, bool) or not isinstance(value, int) or value < 0:
             raise ValueError(f"{path}: not a {kind.label} checkpoint that can continue: its {name} is {value!r}, not a "
                              "count; restore the run's own file, or train the run again with --overwrite")
+
+
+#: The key of a run's record (config.json) that says the run diverged after a checkpoint, and why.
+DIVERGED = "diverged"
+
+
+def record_divergence(run_dir: str | os.PathLike[str], cause: str) -> None:
+    """Writes ``cause`` (the divergence's line) into the record of the run in ``run_dir``, whose checkpoint this
+    command wrote or resumed from: the commands that read the run say that it diverged (its checkpoint is the last
+    good one, never checked for learning, and an exact --resume diverges again), not that it was interrupted. A record
+    that cannot be read is left as it is."""
+    from piga.io.atomic import write_json
+
+    run_dir = Path(run_dir)
+    if not (run_dir / CHECKPOINT).is_file():
+        return
+    record, why = read_run_record(run_dir)
+    if why is not None:
+        return
+    with contextlib.suppress(OSError):  # (a full disk: the line of the divergence is still said)
+        write_json(run_dir / "config.json", {**record, DIVERGED: cause})
+
+
+def divergence_warning(run_dir: str | os.PathLike[str]) -> str | None:
+    """The warning (without its "warning: ") for a run whose record says it diverged (:func:`record_divergence`),
+    else None."""
+    try:
+        record, _ = read_run_record(run_dir)
+    except ValueError:  # config.json is a pipe or a folder: the command that reads the run says so itself
+        return None
+    cause = record.get(DIVERGED)
+    if not isinstance(cause, str):
+        return None
+    return (f"the run {run_dir} diverged ({cause}); this used its last good checkpoint, which was never checked for "
+            "learning (--resume repeats the same steps exactly and diverges again: train the run anew with --overwrite "
+            "and a lower learning rate)")

@@ -115,7 +115,7 @@ def convergence_warning(run_dir: str | os.PathLike[str]) -> str | None:
     """
     import json
 
-    from piga.io.checkpoint import CHECKPOINT, check_run_file, unreadable_record
+    from piga.io.checkpoint import CHECKPOINT, check_run_file, divergence_warning, unreadable_record
 
     path = Path(run_dir) / "metrics.json"
     check_run_file(path)
@@ -127,6 +127,8 @@ def convergence_warning(run_dir: str | os.PathLike[str]) -> str | None:
         if not (Path(run_dir) / "config.json").exists():  # piga.train writes neither record (piga-train-model both)
             return (f"warning: the run {run_dir} has no metrics.json, so it was never checked for convergence (a run "
                     "trained through the library's piga.train is checked by piga.write_run_report, which writes it)")
+        if (diverged := divergence_warning(run_dir)) is not None:
+            return f"warning: {diverged}"
         return (f"warning: the run {run_dir} has no metrics.json: it stopped before its end (interrupted, or its report "
                 "not written) and was never checked for convergence; this used its last checkpoint (continue it with "
                 "--resume)")
