@@ -1492,42 +1492,6 @@ def test_a_gif_is_refused_before_the_episodes_where_an_mp4_fits(tmp_path: Path, 
 # ---------------------------------------------------------------------------------------------
 
 
-def test_an_actor_critic_whose_policy_turns_nan_after_a_checkpoint_is_said_to_have_diverged(
-        tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
-    """SAC at --learning-rate 0.2: torch.distributions refused the NaN policy as it sampled ("Expected parameter loc
-    ... found invalid values", not "training diverged", no checkpoint named); piga-control then called the run
-    interrupted and sent it to --resume, which diverges again (an exact resume)."""
-    from stable_baselines3 import DDPG
-
-    from piga.cli.control import baseline_unfinished
-
-    learn, calls = DDPG.learn, []
-
-    def nan_on_the_second_chunk(self: Any, *args: Any, **kwargs: Any) -> Any:
-        calls.append(1)
-        if len(calls) == 2:
-            raise ValueError("Expected parameter loc (Tensor of shape (1, 1)) of distribution Normal(loc: "
-                             "tensor([[nan]])) to satisfy the constraint Real(), but found invalid values")
-        return learn(self, *args, **kwargs)
-
-    monkeypatch.setattr(DDPG, "learn", nan_on_the_second_chunk)
-    run = tmp_path / "run"
-    argv = ["ddpg", "--obs", "state", "--out", str(run), "--steps", "400", *TINY_DDPG[2:]]  # (TINY_DDPG's --steps 200)
-    line = refused("piga-baseline", argv, capsys, "training diverged: the policy's action distribution became NaN by "
-                   "step 200", f"last good checkpoint: {run / 'checkpoint.pt'}")
-    assert json.loads((run / "config.json").read_text())["diverged"] == line.split("error: ", 1)[1]
-    warning = baseline_unfinished(run)
-    assert warning is not None and "diverged" in warning and "--overwrite and a lower learning rate" in warning
-    calls.clear()
-    calls.append(1)  # the resume's first chunk is the run's second: it diverges again, and the record says so still
-    refused("piga-baseline", [*argv, "--resume"], capsys, "training diverged")
-    assert "diverged" in json.loads((run / "config.json").read_text())
-    monkeypatch.setattr(DDPG, "learn", learn)  # a resume that gets past the step: the record no longer says it
-    code, _, err = run_in_process("piga-baseline", baseline.main, *argv, "--resume", capsys=capsys)
-    assert_sb3_run_finished(code, err)
-    assert "diverged" not in json.loads((run / "config.json").read_text())
-
-
 @pytest.mark.parametrize("data, needles", [
     ("blank", ["every frame is blank"]),
     ("still", ["nothing moves"]),
@@ -1574,42 +1538,6 @@ def test_diagnose_on_a_baseline_run_says_what_it_is(files: dict[str, Path], fake
                                      str(tmp_path / "report")], capsys, "is a piga-baseline planet run", "piga-train-model")
     assert "model_config" not in line
     assert _listing(tmp_path) == []
-
-
-def test_an_actor_critic_whose_policy_turns_nan_after_a_checkpoint_is_said_to_have_diverged(
-        tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
-    """SAC at --learning-rate 0.2: torch.distributions refused the NaN policy as it sampled ("Expected parameter loc
-    ... found invalid values", not "training diverged", no checkpoint named); piga-control then called the run
-    interrupted and sent it to --resume, which diverges again (an exact resume)."""
-    from stable_baselines3 import DDPG
-
-    from piga.cli.control import baseline_unfinished
-
-    learn, calls = DDPG.learn, []
-
-    def nan_on_the_second_chunk(self: Any, *args: Any, **kwargs: Any) -> Any:
-        calls.append(1)
-        if len(calls) == 2:
-            raise ValueError("Expected parameter loc (Tensor of shape (1, 1)) of distribution Normal(loc: "
-                             "tensor([[nan]])) to satisfy the constraint Real(), but found invalid values")
-        return learn(self, *args, **kwargs)
-
-    monkeypatch.setattr(DDPG, "learn", nan_on_the_second_chunk)
-    run = tmp_path / "run"
-    argv = ["ddpg", "--obs", "state", "--out", str(run), "--steps", "400", *TINY_DDPG[2:]]  # (TINY_DDPG's --steps 200)
-    line = refused("piga-baseline", argv, capsys, "training diverged: the policy's action distribution became NaN by "
-                   "step 200", f"last good checkpoint: {run / 'checkpoint.pt'}")
-    assert json.loads((run / "config.json").read_text())["diverged"] == line.split("error: ", 1)[1]
-    warning = baseline_unfinished(run)
-    assert warning is not None and "diverged" in warning and "--overwrite and a lower learning rate" in warning
-    calls.clear()
-    calls.append(1)  # the resume's first chunk is the run's second: it diverges again, and the record says so still
-    refused("piga-baseline", [*argv, "--resume"], capsys, "training diverged")
-    assert "diverged" in json.loads((run / "config.json").read_text())
-    monkeypatch.setattr(DDPG, "learn", learn)  # a resume that gets past the step: the record no longer says it
-    code, _, err = run_in_process("piga-baseline", baseline.main, *argv, "--resume", capsys=capsys)
-    assert_sb3_run_finished(code, err)
-    assert "diverged" not in json.loads((run / "config.json").read_text())
 
 
 @pytest.mark.parametrize("data, needles", [
