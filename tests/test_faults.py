@@ -4821,3 +4821,12 @@ def test_a_piga_run_that_diverged_after_a_checkpoint_is_warned_of_as_diverged(ti
     warning = convergence_warning(run) or ""
     assert warning.startswith(f"warning: the run {run} diverged (training diverged: loss became nan at step 9") and \
         "--overwrite and a lower learning rate" in warning, warning
+
+
+def test_a_float32_dt_is_read_as_the_decimal_written(tiny_data: Path, tmp_path: Path) -> None:
+    """float32's 0.05 (0.0500000007) was refused: "says the frames are 0.05 s apart, but piga/PixelPendulum-v0 steps
+    0.05 s; set 'dt' to 0.05"."""
+    from piga.data.schema import inspect_dataset
+
+    data = _variant(tiny_data, tmp_path / "d.h5", lambda f: f.attrs.__setitem__("dt", np.float32(0.05)))
+    assert inspect_dataset(data).dt == 0.05

@@ -216,6 +216,8 @@ class DatasetInfo:
 def _attr(value: Any) -> Any:
     if isinstance(value, bytes):
         value = value.decode()
+    if isinstance(value, (np.float16, np.float32)):  # the decimal written: float32's 0.05 is 0.0500000007, a 'dt' that
+        return float(str(value))  # was refused as not Gymnasium's 0.05 s ("set 'dt' to 0.05")
     if isinstance(value, np.generic):
         value = value.item()
     if isinstance(value, str) and value[:1] in "{[":
