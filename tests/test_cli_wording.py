@@ -101,6 +101,9 @@ def test_show_names_an_empty_split_and_draws_blank_frames(blank_test_only: Path,
                                   "test", capsys=capsys)
     assert code == 0 and (tmp_path / "m.png").exists()
     assert err.count("\n") == 1 and "warning: " in err and "every frame is blank" in err and "drawn all the same" in err
+    # a count beyond the file is refused in one line, without the warning of a strip it does not draw
+    refused("piga-show", [str(blank_test_only), "--out", str(tmp_path / "n.png"), "--split", "test", "--sequences",
+                          "50"], capsys, "--sequences 50", "give at most 4")
 
 
 # ---------------------------------------------------------------------------------------------

@@ -1145,6 +1145,29 @@ def test_ddpg_that_diverges_stops_with_exit_1(tmp_path: Path, capsys: pytest.Cap
     assert _listing(tmp_path) == []
 
 
+def test_a_checkpoint_that_fails_to_write_leaves_no_replay_buffer_astray(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                                        monkeypatch: pytest.MonkeyPatch) -> None:
+    """A full disk at the second checkpoint left its buffer (400.pkl, 33 MB of a pixel run) beside the one the
+    checkpoint names, which a --resume then counted against the disk."""
+    import errno
+
+    import agents.sb3.train as sb3_train
+
+    write, calls = sb3_train.write_checkpoint, []
+
+    def full_the_second_time(*args: Any, **kwargs: Any) -> None:
+        calls.append(1)
+        if len(calls) == 2:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        write(*args, **kwargs)
+
+    monkeypatch.setattr(sb3_train, "write_checkpoint", full_the_second_time)
+    run = tmp_path / "run"
+    refused("piga-baseline", ["ddpg", "--obs", "state", "--out", str(run), "--steps", "400", *TINY_DDPG[2:]], capsys,
+            "the disk is full")
+    assert sorted(p.name for p in (run / "replay_buffers").iterdir()) == ["200.pkl"]
+
+
 def test_an_actor_critic_whose_policy_turns_nan_after_a_checkpoint_is_said_to_have_diverged(
         tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
     """SAC at --learning-rate 0.2: torch.distributions refused the NaN policy as it sampled ("Expected parameter loc

@@ -197,7 +197,11 @@ def _save(run_dir: Path, model: Any, config: SB3Config, episodes: int, history: 
         "history": history,
         "elapsed": elapsed,
     }
-    write_checkpoint(run_dir, payload)
+    try:
+        write_checkpoint(run_dir, payload)
+    except BaseException:  # (a full disk) the checkpoint still names the earlier buffer: this one would be left astray
+        (run_dir / buffer).unlink(missing_ok=True)
+        raise
     for earlier in (run_dir / REPLAY_BUFFERS).glob("*.pkl"):
         if earlier.name != buffer.name:
             earlier.unlink(missing_ok=True)

@@ -53,12 +53,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         held = [name for name, n in info.split_counts.items() if n]
         raise ValueError(f"split '{args.split}' of {args.data} is empty; give --split "
                          + " or ".join(f"{name} ({counted(info.split_counts[name], 'sequence')})" for name in held))
+    warnings = []  # said once the strip is sure to be drawn: a refusal after them made two lines
     try:  # a blank or still file is drawn, with a warning for the blank one: a viewer is how one finds out
         check_frames_have_signal(args.data, motion=False)
     except BlankFramesError as blank:
-        print(f"{PROG}: warning: {blank}; drawn all the same", file=sys.stderr)
+        warnings.append(f"{PROG}: warning: {blank}; drawn all the same")
     if (odd := _refused_elsewhere(info)) is not None:
-        print(f"{PROG}: warning: {odd}; drawn all the same", file=sys.stderr)
+        warnings.append(f"{PROG}: warning: {odd}; drawn all the same")
     check_actions_file(args.data)  # a non-finite action is named rather than drawn
     # a count written beyond the file is refused (the defaults shrink to a small file: the strip shows what it holds)
     for dest, have, noun, where in (("sequences", len(available), "sequence", f"in its {args.split} split"),
@@ -74,6 +75,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             frames = np.stack([f["frames"][int(i), :t] for i in idx])
         with read_rows(f["actions"], "the strip's sequences"):
             actions = np.stack([f["actions"][int(i), :t] for i in idx])
+    for line in warnings:
+        print(line, file=sys.stderr)
     labels = [f"seq {i}" for i in idx]
     cols = [f"t={k}" for k in range(t)]
     title = f"{typed_text(info.path.name)}: {info.system}, dt={info.dt:g}, params {info.params}"
