@@ -804,6 +804,22 @@ def _disk_with_free(monkeypatch: pytest.MonkeyPatch, free: int) -> None:
     monkeypatch.setattr(shutil, "disk_usage", lambda path: real(path)._replace(free=free))
 
 
+def test_an_overwrite_counts_the_checkpoint_it_has_set_aside(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A baseline's --overwrite checks its disk after moving the replaced run into RUN/.replaced: counted there too, or
+    the run that fit was refused its own --overwrite again."""
+    from piga.io.replaced import ReplacedRun
+    from piga.io.resources import RUN_DISK_MARGIN, check_run_disk
+
+    run = tmp_path / "run"
+    run.mkdir()
+    checkpoint = 10 * 2**20
+    with open(run / "checkpoint.pt", "wb") as f:
+        f.truncate(checkpoint)
+    ReplacedRun().set_aside(run)
+    _disk_with_free(monkeypatch, checkpoint + RUN_DISK_MARGIN + 2**20)
+    check_run_disk(run, checkpoint, "the PlaNet-style run", overwrite=True)
+
+
 def test_a_resumed_run_counts_the_checkpoint_it_replaces(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """A run that started on a disk was refused its own --resume there: the check asked again for two checkpoints,
     counting the one the resume replaces as used, and offered "give another --out", which continues nothing."""
