@@ -1161,6 +1161,17 @@ def test_ddpg_that_diverges_stops_with_exit_1(tmp_path: Path, capsys: pytest.Cap
     assert _listing(tmp_path) == []
 
 
+def test_an_actor_critics_disk_check_counts_its_networks(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The check counted two replay buffers and a margin: a pixel run of --buffer-size 1000 passed it on a 150 MiB disk
+    (126.5 MiB asked) and filled it at its second checkpoint, two buffers and three policy zips (about 37 MiB each)."""
+    _disk_with_free(monkeypatch, 66 * 2**20)  # the buffers (1000 x 40 bytes) and the margin fit; the networks do not
+    line = refused("piga-baseline", ["ddpg", "--obs", "state", "--out", str(tmp_path / "run"), *TINY_DDPG,
+                                     "--buffer-size", "1000"], capsys, "DDPG's run (a replay buffer of 1000) needs about")
+    assert float(re.search(r"needs about ([\d.]+) MiB", line).group(1)) > 66, line
+    assert _listing(tmp_path) == []
+
+
 def test_a_checkpoint_that_fails_to_write_leaves_no_replay_buffer_astray(tmp_path: Path, capsys: pytest.CaptureFixture[str],
                                                                         monkeypatch: pytest.MonkeyPatch) -> None:
     """A full disk at the second checkpoint left its buffer (400.pkl, 33 MB of a pixel run) beside the one the

@@ -298,7 +298,8 @@ def _reaching_key(threshold: float) -> str:
 
 
 def train_sb3(config: SB3Config, run_dir: str | Path, autoencoder: str | Path | None = None, resume: bool = False,
-               progress: bool = True, on_checkpoint: Callable[[int], None] | None = None) -> dict[str, Any]:
+               progress: bool = True, on_checkpoint: Callable[[int], None] | None = None,
+               check_disk: Callable[[int], None] | None = None) -> dict[str, Any]:
     """Trains ``config.algo`` for ``config.steps`` env steps; writes ``checkpoint.pt``, ``model.zip``, TensorBoard
     (``tensorboard/``) and ``metrics.json`` (the EvalCallback learning curve) to ``run_dir``.
 
@@ -309,6 +310,8 @@ def train_sb3(config: SB3Config, run_dir: str | Path, autoencoder: str | Path | 
         autoencoder: for ``obs="latent"``, the trained autoencoder (:mod:`agents.sb3.autoencoder`).
         resume: continue the run in ``run_dir`` exactly.
         on_checkpoint: called with the step count after each checkpoint.
+        check_disk: called, before the first step, with the bytes of the model's saved networks (its policy zip, held
+            by the checkpoint and by model.zip), which only the built model tells: the caller checks its disk again.
 
     Returns:
         The metrics written to ``metrics.json``.
@@ -361,6 +364,10 @@ def train_sb3(config: SB3Config, run_dir: str | Path, autoencoder: str | Path | 
         venv.seed(_episode_seeds(venv).seed_of(k))
     else:
         model = new_model(config, venv, device, tensorboard_log=str(run_dir / "tensorboard"))
+    if check_disk is not None:
+        policy = io.BytesIO()
+        model.save(policy)
+        check_disk(len(policy.getvalue()))
     callback = _eval_callback(config, eval_env)
     started = time.monotonic() - elapsed
     bar = tqdm(total=config.steps, initial=model.num_timesteps, desc=f"{config.algo} ({config.obs})", unit="step", disable=not progress)

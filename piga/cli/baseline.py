@@ -641,7 +641,7 @@ def _ddpg_checkpoint_bytes(config: Any, latent_size: int) -> float:
 def _ddpg(args: Any, argv: Sequence[str] | None, replaced: ReplacedRun) -> int:
     from piga.io.atomic import write_json
     from agents.sb3.config import SB3Config, resolve_precision  # it checks --eval-every against the env's episode length
-    from agents.sb3.run import AUTOENCODER, REPLAY_BUFFERS
+    from agents.sb3.run import AUTOENCODER, MODEL, REPLAY_BUFFERS
     from agents.sb3.train import first_step_reaching, train_sb3
     from piga.io.resources import check_memory, check_run_disk
     from piga.training.train import TrainingDiverged
@@ -726,8 +726,17 @@ def _ddpg(args: Any, argv: Sequence[str] | None, replaced: ReplacedRun) -> int:
         if args.data:
             record["data_fingerprint"] = fingerprint(args.data)
         checkpoint_bytes = buffer_bytes = _ddpg_checkpoint_bytes(config, ae_config.latent_size)
-    check_run_disk(run_dir, checkpoint_bytes, f"{config.algo.upper()}'s run (a replay buffer of {config.buffer_size})",
-                   resume=args.resume, rewritten=(REPLAY_BUFFERS,), overwrite=args.overwrite)
+    what = f"{config.algo.upper()}'s run (a replay buffer of {config.buffer_size})"
+    check_run_disk(run_dir, checkpoint_bytes, what, resume=args.resume, rewritten=(REPLAY_BUFFERS,),
+                   overwrite=args.overwrite)
+
+    def check_disk_with(policy: int) -> None:
+        """Again, with the networks that the built model saves (a pixel CNN's with Adam's moments: about 37 MiB): the
+        checkpoint holds them beside the buffer and is written beside the previous one, and model.zip holds them once
+        more; so the peak is two buffers and three policies. The first check, without them, let a run start that
+        filled its disk at the second checkpoint."""
+        check_run_disk(run_dir, buffer_bytes + policy, what, extra=policy, resume=args.resume,
+                       rewritten=(REPLAY_BUFFERS, MODEL), overwrite=args.overwrite)
     # SB3 allocates the buffer untouched and fills it as the run goes: a buffer beyond the memory would be killed hours in
     source = f"as {run_dir / 'config.json'} gives it" if args.resume else "--buffer-size"  # a resume takes the record's
     check_memory(buffer_bytes, f"{config.algo.upper()}'s replay buffer of {config.buffer_size} ({source})")
@@ -755,7 +764,7 @@ def _ddpg(args: Any, argv: Sequence[str] | None, replaced: ReplacedRun) -> int:
                 print(f"autoencoder trained on {args.data}: per-pixel MSE {mse:.5f}")
             print(f"training {config.algo.upper()} from {config.obs} for {config.steps} env steps -> {run_dir}")
             metrics = train_sb3(config, run_dir, autoencoder, resume=args.resume, progress=not args.quiet,
-                                 on_checkpoint=on_checkpoint)
+                                 on_checkpoint=on_checkpoint, check_disk=check_disk_with)
     except TrainingDiverged as exc:
         if written or args.resume:  # its checkpoint is this run's: the commands that read it say it diverged
             record_divergence(run_dir, f"training diverged: {exc}")
