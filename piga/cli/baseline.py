@@ -28,7 +28,7 @@ from piga.cli.common import (NOT_CONVERGED, ArgumentParser, Interrupted, PigaErr
                              record_resume, recorded_options, remove_outputs, resume_option, run_cli, seed_int, started_record,
                              thread_count, with_flags)
 from piga.io.atomic import check_folder_target
-from piga.io.checkpoint import (CHECKPOINT, DIVERGED, RUN_OUTPUTS, RunKind, check_run_files, checkpoint_kind, read_run_record,
+from piga.io.checkpoint import (CHECKPOINT, RUN_OUTPUTS, RunKind, check_run_files, checkpoint_kind, read_run_record,
                                 record_divergence, recorded_path)
 from piga.io.lock import lock_run_folder
 from piga.io.replaced import ReplacedRun, replacing, settle_replaced
@@ -485,7 +485,6 @@ def _planet(args: Any, argv: Sequence[str] | None, replaced: ReplacedRun) -> int
     if args.resume:
         _check_run_dir(run_dir, True, args.overwrite, RunKind.PLANET, replaced)
         record = _resumed_record(run_dir, RunKind.PLANET, args)
-        record.pop(DIVERGED, None)  # (this resume's first checkpoint writes the record without it)
         _refuse_recipe_changes(args, record, run_dir, argv)
         saved = _saved_config(run_dir, record, "train", PlanetTrainConfig, optional=("device",))  # older runs have none
         _refuse_fewer_steps(args.steps, saved.steps)
@@ -666,7 +665,6 @@ def _ddpg(args: Any, argv: Sequence[str] | None, replaced: ReplacedRun) -> int:
     if args.resume:
         _check_run_dir(run_dir, True, args.overwrite, RunKind.DDPG, replaced)
         record = _resumed_record(run_dir, RunKind.DDPG, args)
-        record.pop(DIVERGED, None)  # (this resume's first checkpoint writes the record without it)
         _refuse_record_edits(run_dir, record)
         # runs from before --algo are DDPG; runs from before --device have none
         saved = _saved_config(run_dir, record, "ddpg", SB3Config, optional=("algo", "device", "env", "encoder_precision", "view"))

@@ -284,17 +284,15 @@ def held_run_error(run_dir: Path, kind: Any) -> PigaError:
     :class:`~piga.io.checkpoint.RunKind`) without --resume or --overwrite: --resume where the run is of that kind;
     where it is another's (its record says), another --out, since --resume would refuse it. It lists every output of
     any kind of run that the folder holds (:data:`~piga.io.checkpoint.RUN_OUTPUTS`), not only this command's."""
-    from piga.io.checkpoint import RUN_OUTPUTS, held_kind
+    import zipfile
+
+    from piga.io.checkpoint import CHECKPOINT, RUN_OUTPUTS, held_kind
 
     files = ", ".join(name for name in RUN_OUTPUTS if (run_dir / name).exists())
     other = held_kind(run_dir)
     if other is not None and other is not kind:
         return PigaError(f"{run_dir} already holds a {other.writer} run ({files}); give another --out, or --overwrite "
                          "to replace it")
-    import zipfile
-
-    from piga.io.checkpoint import CHECKPOINT
-
     if not zipfile.is_zipfile(run_dir / CHECKPOINT):  # torch writes a zip; cut short, its end is missing: no --resume
         return PigaError(f"{run_dir} already holds a run ({files}) whose {CHECKPOINT} cannot be read (not a whole "
                          "checkpoint: cut short or damaged), so --resume cannot continue it; pass --overwrite to start "
@@ -813,9 +811,12 @@ def connect_backend(ray: str | None) -> Backend:
 
 def record_resume(record: dict[str, Any], command: str) -> None:
     """Adds a ``--resume`` invocation to a run's record (its ``config.json``): the command, and the commit of the code
-    that continues it (``resumed_commits``, in step; None outside a git checkout), beside the ``commit`` it started at."""
+    that continues it (``resumed_commits``, in step; None outside a git checkout), beside the ``commit`` it started at.
+    A divergence that the record names goes (this resume's first checkpoint writes the record without it)."""
+    from piga.io.checkpoint import DIVERGED
     from piga.io.pool import git_commit
 
+    record.pop(DIVERGED, None)
     record.setdefault("resumed", []).append(command)
     record.setdefault("resumed_commits", []).append(git_commit())
 

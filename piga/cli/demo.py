@@ -132,9 +132,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     _check_enough_sequences(collect_config)
     data, strip, run_dir = out / "pendulum.h5", out / "frames.png", out / DEMO_RUN
     goal_png, control_md = out / "goal.png", out / "control.md"
+    outputs = (data, strip, run_dir / CHECKPOINT, goal_png, control_md)
     if not args.overwrite and not args.resume:  # before the disk: an earlier demo's files would count as taken there
         _check_not_the_users(data)
-        for path in (data, strip, run_dir / CHECKPOINT, goal_png, control_md):
+        for path in outputs:
             if path.exists():
                 raise PigaError(f"{path} exists from an earlier demo; pass --resume to continue that demo or "
                                 "--overwrite to replace it")
@@ -142,7 +143,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     lock_run_folder(out)  # a second command on this folder is refused until this one ends
     if args.resume and args.overwrite:
         raise PigaError("--resume continues the demo in --out and --overwrite replaces it; give one of them")
-    if args.resume and not any(path.exists() for path in (data, strip, run_dir / CHECKPOINT, goal_png, control_md)):
+    if args.resume and not any(path.exists() for path in outputs):
         raise PigaError(f"--resume: {out} holds no earlier demo to continue; run without --resume")
     if args.resume and (run_dir / CHECKPOINT).exists():  # before anything is made again: not this demo's kind of run
         from piga.io.checkpoint import RunKind, checked_run_kind
@@ -155,10 +156,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         if kind is not RunKind.PIGA:
             raise PigaError(f"--resume: {run_dir} holds a {kind.writer} run, not the piga-train-model run of a demo; "
                             "pass --overwrite (not --resume) to start the demo over")
-    if args.overwrite or args.resume:  # (without either, checked above)
+    if args.overwrite or args.resume:  # (without either, checked above; with one, after what their checks say)
         _check_not_the_users(data)
     # (a demo that kept only its pictures continues from the start: they are made again)
-    outputs = (data, strip, run_dir / CHECKPOINT, goal_png, control_md)
     before = {path: path.exists() and path.stat().st_mtime_ns for path in outputs}
     try:
         with made_folder(out):

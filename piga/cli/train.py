@@ -20,7 +20,7 @@ from piga.cli.common import (NOT_CONVERGED, ArgumentParser, Interrupted, PigaErr
                              record_resume, recorded_options, remove_empty_folders, remove_outputs, resume_option, run_cli,
                              seed_int, started_record, thread_count, unit_fraction)
 from piga.io.atomic import OutputFolder, check_folder_target
-from piga.io.checkpoint import (CHECKPOINT, DIVERGED, RunKind, check_run_files, read_run_record, record_divergence,
+from piga.io.checkpoint import (CHECKPOINT, RunKind, check_run_files, read_run_record, record_divergence,
                                 recorded_data_path, require_piga_run)
 from piga.io.lock import lock_run_folder
 from piga.io.replaced import ReplacedRun, replacing, settle_replaced
@@ -261,7 +261,6 @@ def _main(argv: Sequence[str] | None, prog: str, replaced: ReplacedRun) -> int:
                                **({"threads": args.threads} if "threads" in options_given else {}))
         model_config = saved_model.config
         record = _record_or_rebuilt(run_dir, stored, why)
-        record.pop(DIVERGED, None)  # (this resume's first checkpoint writes the record without it)
         record_resume(record, command)
         preset = started_preset
         recipe = preset_for(preset, info)  # the length it plans, which a run started shorter is still judged by

@@ -32,10 +32,14 @@ CHECKPOINT = "checkpoint.pt"
 RUN_OUTPUTS = (CHECKPOINT, "config.json", "metrics.json", "tensorboard", "rollout.png", "templates.png", "curves.png",
                "openloop.png", "model.zip", "autoencoder.pt", "collected.h5", "replay_buffers")
 
+#: The folder, inside a run folder, that holds the outputs of the run that --overwrite replaces until the new run's
+#: first checkpoint (:mod:`piga.io.replaced`).
+REPLACED_ASIDE = ".replaced"
+
 #: The files of a run folder that commands read: its checkpoint and its two records.
 RUN_FILES = (CHECKPOINT, "config.json", "metrics.json")
 
-__all__ = ["CHECKPOINT", "DEMO_RUN", "DIVERGED", "RUN_FILES", "RunKind", "check_run_file", "check_run_files",
+__all__ = ["CHECKPOINT", "DEMO_RUN", "DIVERGED", "REPLACED_ASIDE", "RUN_FILES", "RunKind", "check_run_file", "check_run_files",
            "checked_run_kind", "checkpoint_kind", "divergence_warning", "is_demo_folder", "kind_mismatch",
            "read_checkpoint", "record_divergence", "recorded_data_path", "recorded_path", "require_piga_run", "run_kind",
            "write_checkpoint", "unreadable"]
@@ -312,9 +316,9 @@ def read_checkpoint(run_dir: str | os.PathLike[str], kind: RunKind) -> dict[str,
             raise FileNotFoundError(f"{path}: no checkpoint: {run_dir} looks like a piga-demo folder, whose run "
                                     f"{demo_run} has no checkpoint yet; continue the demo with piga-demo --out "
                                     f"{run_dir} --resume")
-        if (Path(run_dir) / ".replaced" / CHECKPOINT).is_file():  # (piga.io.replaced.ASIDE, which imports this module)
+        if (Path(run_dir) / REPLACED_ASIDE / CHECKPOINT).is_file():
             raise FileNotFoundError(f"{path}: no checkpoint: a command given --overwrite was killed before its new run's "
-                                    f"first checkpoint, and the run it replaced is in {Path(run_dir) / '.replaced'}; "
+                                    f"first checkpoint, and the run it replaced is in {Path(run_dir) / REPLACED_ASIDE}; "
                                     f"move those files back into {run_dir} (or rerun that command, which does it)")
         raise FileNotFoundError(f"{path}: no checkpoint (is {run_dir} a {kind.writer} run folder?)")
     check_run_file(path)

@@ -18,10 +18,7 @@ import shutil
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 
-from piga.io.checkpoint import CHECKPOINT, RUN_OUTPUTS
-
-#: The folder, inside the run folder, that holds the replaced run's outputs while the new run has no checkpoint.
-ASIDE = ".replaced"
+from piga.io.checkpoint import CHECKPOINT, REPLACED_ASIDE as ASIDE, RUN_OUTPUTS
 
 
 def _present(path: Path) -> bool:

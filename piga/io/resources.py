@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from piga.io.atomic import stores_no_files
-from piga.io.checkpoint import CHECKPOINT
+from piga.io.checkpoint import CHECKPOINT, REPLACED_ASIDE
 
 #: gzip (level 4) shrinks piga-collect's pendulum frames about 25x (measured on its default data);
 #: the disk check of generated data assumes 20x.
@@ -232,8 +232,9 @@ def run_disk_need(run_dir: str | os.PathLike[str], checkpoint_bytes: float, extr
     a resumed run (``resume``) or one that replaces the run there (``overwrite``) less what the files it replaces
     (``rewritten``, in ``run_dir``) already take there, but at least one checkpoint: the first is written beside them.
     (Counted as taken, the files that ``--overwrite`` replaces refused it on the disk where the same run had fit.)"""
-    # (a baseline's --overwrite has set the replaced run aside in RUN/.replaced by now: piga.io.replaced.ASIDE)
-    held = held_bytes(run_dir, rewritten) + held_bytes(Path(run_dir) / ".replaced", rewritten) if resume or overwrite else 0
+    # (a baseline's --overwrite has set the replaced run aside by now)
+    held = (held_bytes(run_dir, rewritten) + held_bytes(Path(run_dir) / REPLACED_ASIDE, rewritten)
+            if resume or overwrite else 0)
     return max(checkpoint_bytes if held else 0.0, 2 * checkpoint_bytes + extra - held) + RUN_DISK_MARGIN, held
 
 
