@@ -76,6 +76,7 @@ def test_piga_control_dmc_oracle_scores_and_refuses_gymnasium_options(tmp_path, 
     (oracle,) = payload["results"]
     # the episode from reset seed 2 that tests/test_episodes.py records (842 of 1000, in DMC's units)
     assert oracle == {"agent": "oracle", "scores": [842.0], "mean": 842.0, "std": 0.0}, oracle
+    assert payload["config"]["planner"]["seed"] == 2  # --seed seeds the planner too, as on the pixel env
     assert "| oracle |" in (tmp_path / "oracle.md").read_text()
     from piga.cli.control import main
 

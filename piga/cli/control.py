@@ -1071,7 +1071,7 @@ def _dmc(args: argparse.Namespace, argv: Sequence[str] | None, given: set[str]) 
     from envs.dmc import DMCPendulumEnv
 
     DMCPendulumEnv(config.env).close()  # a renderer that cannot start here: its one line before a model's warnings
-    results = []
+    results, kind = [], None
     if args.model:
         from piga.io.checkpoint import checked_run_kind
         from piga.io.runs import load_model
@@ -1103,9 +1103,11 @@ def _dmc(args: argparse.Namespace, argv: Sequence[str] | None, given: set[str]) 
     text = dmc_markdown(results, config, command)
     print(text)
     if outputs:
-        _write_outputs(outputs, {"command": command, "config": {"episodes": config.episodes, "seed": config.seed,
-                                                                "env": config.env.to_dict()},
-                                 "results": [dmc_record(r) for r in results]}, text, args.overwrite)
+        record = {"episodes": config.episodes, "seed": config.seed, "env": config.env.to_dict()}
+        if args.oracle or kind is not RunKind.DDPG:  # as in the table: an SB3 policy plans nothing
+            record["planner"] = asdict(config.planner)
+        _write_outputs(outputs, {"command": command, "config": record, "results": [dmc_record(r) for r in results]},
+                       text, args.overwrite)
     return 0
 
 

@@ -42,7 +42,11 @@ class DMCControlConfig:
     env: DMCPendulumConfig = field(default_factory=DMCPendulumConfig)
     """The environment (variants: mass, length, damping, flip)."""
     planner: SwingUpConfig = field(default_factory=SwingUpConfig)
-    """The planner, the same for both agents."""
+    """The planner, the same for both agents; its RNG is seeded with ``seed`` (``piga-control --seed`` seeds the start
+    states and the planner, on either env)."""
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "planner", replace(self.planner, seed=self.seed))  # frozen: one seed, set once
 
 
 class OracleSwingUp:
