@@ -271,9 +271,26 @@ def test_too_few_windows_names_a_stride_that_was_raised() -> None:
     # sequences one window long give one window at any stride: a bouncing file of 10 x 10 frames at the scene
     # preset's stride of 2 was told to lower it
     with pytest.raises(ValueError, match=r"give more data$"):
-        plan_training(TrainConfig(window_stride=2), 8, at_stride_one=8)
-    with pytest.raises(ValueError, match=r"or lower --window-stride \(now 2\)"):
-        plan_training(TrainConfig(window_stride=2), 16, at_stride_one=32)
+        plan_training(TrainConfig(window_stride=2), 8, layout=(8, 1))
+    with pytest.raises(ValueError, match=r"or lower --window-stride to 1 or less \(now 2\)"):
+        plan_training(TrainConfig(window_stride=2), 16, layout=(16, 2))
+
+
+@pytest.mark.parametrize("sequences, starts, stride", [(20, 27, 20), (20, 27, 12), (3, 100, 50), (32, 5, 5), (1, 80, 9)])
+def test_the_stride_named_for_too_few_windows_fills_a_batch(sequences: int, starts: int, stride: int) -> None:
+    """A batch of 64 on 20 sequences of 27 start frames at a stride of 20: told only to lower the stride, a user who
+    tried 12 was refused again (every stride from 14 to 26 gives 40 windows, 12 and 13 give 60)."""
+    import re
+
+    from piga.training.train import TrainConfig, plan_training
+
+    config = TrainConfig(window_stride=stride, batch_size=64)
+    windows = sequences * len(range(0, starts, stride))
+    with pytest.raises(ValueError, match=r"lower --window-stride to (\d+) or less") as info:
+        plan_training(config, windows, layout=(sequences, starts))
+    most = int(re.search(r"to (\d+) or less", str(info.value)).group(1))
+    assert sequences * len(range(0, starts, most)) >= 64  # it fills a batch
+    assert sequences * len(range(0, starts, most + 1)) < 64  # and is the largest that does
 
 
 @pytest.mark.skipif(not os.path.exists("/dev/full"), reason="needs /dev/full")

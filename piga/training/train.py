@@ -240,21 +240,35 @@ class TrainPlan:
                 + (f"; a checkpoint every {self.checkpoint_every} epochs" if self.checkpoint_every > 1 else ""))
 
 
-def plan_training(config: TrainConfig, windows: int, at_stride_one: int | None = None) -> TrainPlan:
+def largest_stride(batch: int, sequences: int, starts: int) -> int | None:
+    """The largest window stride at which ``sequences`` sequences of ``starts`` start frames each (at a stride of 1)
+    give at least ``batch`` windows (a sequence gives ceil(starts / stride)), or None where not even a stride of 1 does.
+    """
+    per_sequence = -(-batch // sequences)  # windows each sequence must give
+    if per_sequence > starts:
+        return None
+    # ceil(starts / s) >= k  <=>  s < starts / (k - 1); any stride where one window each is enough
+    return max(starts, 1) if per_sequence <= 1 else -(-starts // (per_sequence - 1)) - 1
+
+
+def plan_training(config: TrainConfig, windows: int, layout: tuple[int, int] | None = None) -> TrainPlan:
     """Sizes a recipe to a file of ``windows`` training windows.
 
     With ``config.epochs`` 0 the run is the fewest whole epochs that reach ``budget_steps``; the
     warm-up, the curriculum and the final average are fractions of the planned steps (at least one
     step each when their fraction is not 0), so that the physics trains for most of the run whatever
-    the file's size. ``at_stride_one``: the windows that a stride of 1 would give (None: not known), for the advice
-    when there are fewer than a batch.
+    the file's size. ``layout``: the file's train sequences and the start frames one of them has at a stride of 1
+    (None: not known), for the advice when there are fewer windows than a batch.
     """
     per_epoch = windows // config.batch_size
     if per_epoch < 1:
         from envs.fields import counted  # here: training runs without gymnasium's import
-        # (a stride of 1 where it would fill a batch: sequences one window long give one window at any stride)
-        helps = config.window_stride > 1 and (at_stride_one is None or at_stride_one >= config.batch_size)
-        stride = f", or lower --window-stride (now {config.window_stride})" if helps else ""
+        stride = ""
+        if config.window_stride > 1 and layout is None:
+            stride = f", or lower --window-stride (now {config.window_stride})"
+        elif config.window_stride > 1 and (most := largest_stride(config.batch_size, *layout)):
+            # (sequences one window long give one window at any stride: no stride helps there)
+            stride = f", or lower --window-stride to {most} or less (now {config.window_stride})"
         raise ValueError(f"{counted(windows, 'training window')} {'is' if windows == 1 else 'are'} fewer than one "
                          f"batch of {config.batch_size}, so no step would run; lower the batch size (--batch-size) or "
                          f"give more data{stride}")
@@ -658,7 +672,7 @@ def check_trainable(info: DatasetInfo, model_config: ModelConfig, train_config: 
                                   "(piga-collect's random actions, or a recording with the motor driven)")
     windows = n_train * len(range(0, info.steps - needed + 1, train_config.window_stride))
     try:
-        return plan_training(train_config, windows, n_train * (info.steps - needed + 1))
+        return plan_training(train_config, windows, (n_train, info.steps - needed + 1))
     except ValueError as exc:
         from envs.fields import counted  # here: training runs without gymnasium's import
 
