@@ -665,7 +665,7 @@ def test_half_precision_actions_and_huge_rewards_are_read_without_warnings(tiny_
         check_actions(np.ones((2, 3, 1), np.float16), "a.h5")
         with pytest.raises(DataFormatError, match="/rewards holds NaN or infinite values"):
             load_rewards(data, "train")
-    # finite, but beyond what a reward loss can square: "training diverged: loss became inf at step 0", no fix named
+    # finite, but beyond what a reward loss can square: "training diverged: loss became inf at step 1", no fix named
     for scale, fine in ((1e30, False), (1e17, False), (1e6, True)):
         data = _variant(tiny_data, tmp_path / f"r{scale:g}.h5", lambda f: _replace(
             f, "rewards", np.where(np.arange(f["rewards"].shape[1]) == 3, -scale, f["rewards"][()])))

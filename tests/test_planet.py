@@ -98,7 +98,7 @@ def test_nan_stops_and_names_the_last_good_checkpoint(tiny_data: Path, tmp_path:
         return parts._replace(loss=parts.loss * float("nan")) if len(calls) == 3 else parts
 
     monkeypatch.setattr(WorldModel, "loss", loss_that_blows_up)
-    with pytest.raises(TrainingDiverged, match=f"step 2; last good checkpoint: {tmp_path / 'run' / 'checkpoint.pt'}"):
+    with pytest.raises(TrainingDiverged, match=f"at step 3; last good checkpoint: {tmp_path / 'run' / 'checkpoint.pt'}"):
         train_planet(tiny_data, tmp_path / "run", TINY_TRAIN, TINY, progress=False)
 
 

@@ -334,7 +334,7 @@ def train_planet(
             parts = model.loss(frames, actions, rewards, config, generator)
             if not torch.isfinite(parts.loss):
                 good = ckpt_path if ckpt_path.exists() else None
-                raise TrainingDiverged(f"loss became {parts.loss.item()} at step {state.step}; "
+                raise TrainingDiverged(f"loss became {parts.loss.item()} at step {state.step + 1}; "
                                        + (f"last good checkpoint: {good}" if good else "no checkpoint was written yet"))
             optimizer_step(model, optimizer, parts.loss, config.grad_clip)
             state.step += 1

@@ -791,7 +791,7 @@ def train(
                 # warm-up steps predict one frame (the horizon's floor) instead
                 loss = out.loss if horizon > 0 or cfg.loss == "pred-only" else cfg.alpha * out.loss_rec
                 if not torch.isfinite(loss):
-                    raise TrainingDiverged(f"loss became {loss.item()} at step {state.step} (epoch {state.epoch + 1}); "
+                    raise TrainingDiverged(f"loss became {loss.item()} at step {state.step + 1} (epoch {state.epoch + 1}); "
                                            + _last_good(ckpt_path))
                 optimizer.zero_grad(set_to_none=True)
                 loss.backward()
