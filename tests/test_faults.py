@@ -3332,7 +3332,8 @@ def test_diagnose_refuses_sequences_too_short_for_its_fit_first(tiny_piga_run: P
     planet.mkdir()
     (planet / "config.json").write_text(json.dumps({"kind": "planet"}))
     (planet / "checkpoint.pt").write_bytes(b"not read")
-    for model, needle in ((tmp_path / "nowhere", "nowhere"), (data, f"{data} is a file; give the run's folder"),
+    for model, needle in ((tmp_path / "nowhere", f"--model {tmp_path / 'nowhere'} does not exist"),
+                          (data, f"--model {data} is a file, not a run folder"),
                           (planet, "is a piga-baseline planet run")):
         line = refused("piga-diagnose", ["--data", str(data), "--model", str(model), "--out", str(tmp_path / "report")],
                        capsys, needle)

@@ -640,6 +640,21 @@ def _failed_allocation(exc: RuntimeError) -> str | None:
     return None if found is None else format_bytes(float(found.group(1)))
 
 
+def check_model_folder(model: str, writers: str = "piga-train-model or piga-baseline") -> None:
+    """Refuses a ``--model`` that is no folder (missing, a file, a link that loops) in one line; a run just started
+    has no folder yet, and is said by the checkpoint's loader. ``writers``: the commands whose runs the caller takes."""
+    from piga.io.atomic import link_loop, loop_message
+    from piga.io.checkpoint import CHECKPOINT
+    from piga.io.lock import held_by
+
+    if Path(model).is_dir() or held_by(model) is not None:
+        return
+    if (loop := link_loop(model)) is not None:
+        raise PigaError(loop_message(model, loop, "--model"))
+    what = "is a file, not a run folder" if Path(model).exists() else "does not exist"
+    raise PigaError(f"--model {model} {what} (give the folder that {writers} wrote its {CHECKPOINT} in)")
+
+
 @contextlib.contextmanager
 def made_folder(folder: str | os.PathLike[str]) -> Iterator[Path]:
     """Makes ``folder`` (and missing parents) for a command's outputs, and removes the folders it
@@ -921,5 +936,5 @@ def split_type(text: str) -> tuple[float, float, float]:
 
 __all__ = ["ArgumentParser", "PigaError", "RAY_HELP", "add_ray_option", "connect_backend", "ray_address", "run_cli", "run_script", "positive_int", "nonnegative_int", "seed_int", "thread_count", "positive_float", "nonnegative_float",
            "split_type", "add_preset_option", "documented_default", "format_default", "Interrupted", "made_folder",
-           "missing_folders", "remove_empty_folders", "remove_outputs", "add_device_option", "file_path", "stem_path", "h5_path",
+           "missing_folders", "remove_empty_folders", "check_model_folder", "remove_outputs", "add_device_option", "file_path", "stem_path", "h5_path",
            "H5_SUFFIXES"]

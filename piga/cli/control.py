@@ -20,13 +20,13 @@ from envs.fields import number_text
 from envs.pendulum import MAX_GRAVITY, MIN_GRAVITY, PixelPendulumConfig
 from piga.io.atomic import (atomic_output, check_file_name, check_not_an_input, check_writable_target, write_json,
                              written_together)
-from piga.cli.common import (ArgumentParser, PigaError, add_ray_option, command_line, connect_backend,
+from piga.cli.common import (ArgumentParser, PigaError, add_ray_option, check_model_folder, command_line, connect_backend,
                              given_options, int_up_to, positive_float, positive_int, run_cli, seed_int,
                              stem_path, typed_text, warn_if_still_training, warn_if_unconverged, work_finished)
 from piga.control.episodes import EpisodeConfig, parse_range, run_episodes
 from piga.evaluation.episodes import summary_markdown
 from piga.io.checkpoint import RunKind, recorded_data_path
-from piga.io.lock import held_by, lock_run_folder
+from piga.io.lock import lock_run_folder
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -158,7 +158,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         raise PigaError(f"--not-told keeps the piga agent's gravity at x1 while the env's changes; at {at} nothing "
                         f"changes: {change}, or drop --not-told")
     if args.model:  # (before --workers is judged by the run's kind)
-        _check_model_folder(args.model)
+        check_model_folder(args.model)
     if args.ray or "workers" in given:  # --workers 2, the default, too
         raise PigaError(f"{'--ray' if args.ray else '--workers'} runs the jobs of --sweep and a baseline run's episodes; a "
                         "piga or oracle run without --sweep plays its episodes in this process")
@@ -1022,21 +1022,6 @@ def _training_env_id(checkpoint: dict) -> str | None:
     return env_id if isinstance(env_id, str) and env_id else None
 
 
-def _check_model_folder(model: str) -> None:
-    """Refuses a ``--model`` that is no folder (missing, a file, a link that loops) in one line, on either env; a run
-    just started has no folder yet, and is said by the checkpoint's loader."""
-    if Path(model).is_dir() or held_by(model) is not None:
-        return
-    from piga.io.atomic import link_loop, loop_message
-    from piga.io.checkpoint import CHECKPOINT
-
-    if (loop := link_loop(model)) is not None:
-        raise PigaError(loop_message(model, loop, "--model"))
-    what = "is a file, not a run folder" if Path(model).exists() else "does not exist"
-    raise PigaError(f"--model {model} {what} (give the folder that piga-train-model or piga-baseline wrote its "
-                    f"{CHECKPOINT} in)")
-
-
 def _dmc(args: argparse.Namespace, argv: Sequence[str] | None, given: set[str]) -> int:
     """``--env piga/DMCPendulum-v0``: the piga agent and/or the oracle, scored in DMC's units."""
     from piga.cli.collect import dmc_config, parse_env_option
@@ -1047,7 +1032,7 @@ def _dmc(args: argparse.Namespace, argv: Sequence[str] | None, given: set[str]) 
     if not args.model and not args.oracle:  # as on the pixel env: nothing is run that was not asked for
         raise PigaError("give --model RUN_DIR (or --oracle, or both)")
     if args.model:  # as on the pixel env, before the env is made
-        _check_model_folder(args.model)
+        check_model_folder(args.model)
     import argparse as _argparse
 
     try:

@@ -7,8 +7,8 @@ import math
 from collections.abc import Sequence
 from pathlib import Path
 
-from piga.cli.common import (ArgumentParser, Interrupted, PigaError, command_line, int_up_to, number_type, run_cli,
-                             seed_int, thread_count, warn_if_unconverged)
+from piga.cli.common import (ArgumentParser, Interrupted, PigaError, check_model_folder, command_line, int_up_to,
+                             number_type, run_cli, seed_int, thread_count, warn_if_unconverged)
 from piga.io.lock import lock_run_folder
 
 PROG = "piga-diagnose"
@@ -87,6 +87,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     lock_run_folder(out)  # a second diagnosis into the same folder is refused at once, not after its work
     # the model before the data: a missing model, a file or another kind of run was otherwise hidden behind the data's
     # refusal ("sequences of 12 frames are too short"), and found only after collecting again
+    check_model_folder(args.model, "piga-train-model")
     require_piga_run(args.model, "piga-diagnose compares the physics a piga model identified with the data")
     model, ckpt = load_model(args.model)
     if model.config.system != "pendulum":
