@@ -556,10 +556,12 @@ def _planet(args: Any, argv: Sequence[str] | None, replaced: ReplacedRun) -> int
                    extra=0 if iterative is None else 2 * _collected_bytes(info, iterative), resume=args.resume,
                    overwrite=args.overwrite)
     used = min(info.split_counts["train"], config.max_sequences or info.split_counts["train"])
-    if not info.split_counts["valid"]:  # (as piga-train-model warns of a file without a test split)
-        print(f"{PROG}: warning: {args.data} has no valid sequences; no valid loss is measured, and the open-loop "
-              "check (metrics.json, openloop.png) reads the train split, which is not held out", file=sys.stderr)
-    print(f"training the PlaNet-style model on {args.data} ({counted(used, 'train sequence')} x {info.steps} frames) -> {run_dir}"
+    # (as piga-train-model says of a file without a test split: on stdout, so that a run that then did not learn says
+    # so in one line on stderr)
+    unchecked = ("" if info.split_counts["valid"] else "; no valid sequences, so no valid loss is measured, and the "
+                 "open-loop check (metrics.json, openloop.png) reads the train split, which is not held out")
+    print(f"training the PlaNet-style model on {args.data} ({counted(used, 'train sequence')} x {info.steps} frames"
+          f"{unchecked}) -> {run_dir}"
           + (f", then {counted(iterative.rounds, 'round')} of {counted(iterative.episodes, 'planner episode')} + "
              f"{counted(iterative.steps_per_round, 'step')}" if iterative else ""))
     written: list[int] = []

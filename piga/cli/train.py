@@ -346,16 +346,16 @@ def _main(argv: Sequence[str] | None, prog: str, replaced: ReplacedRun) -> int:
                    "the training run", resume=args.resume, overwrite=args.overwrite)
     record.update({"data": str(args.data), "data_folder": os.getcwd(), "train": asdict(train_config), "plan": asdict(plan),
                    "model": model_config.to_dict()})
-    if not info.split_counts["test"]:
-        print(f"{prog}: warning: {args.data} has no test sequences; metrics.json and the figures will be measured on "
-              "the train split, which is not held out", file=sys.stderr)
     start = (f"{info.system} parameters start at {_start_values(fresh)}" if fresh.has_physics
              else f"a {model_config.architecture} model (no physical parameters)")
     if args.resume:  # (its first lines looked like a fresh run's)
         start = (f"continuing from epoch {int(stood.get('epoch', 0))} (step {int(stood.get('step', 0)):,}, "
                  f"{trained / 60:.1f} min trained)")
-    print(f"training on {args.data} ({counted(info.split_counts['train'], 'train sequence')} x {info.steps} frames); "
-          f"{start} -> {run_dir} (device {device})")
+    # said here, not as a warning line on stderr: a run that then fails its checks says so in one line there
+    untested = ("" if info.split_counts["test"] else "; no test sequences, so metrics.json and the figures measure the "
+                "train split, which is not held out")
+    print(f"training on {args.data} ({counted(info.split_counts['train'], 'train sequence')} x {info.steps} frames"
+          f"{untested}); {start} -> {run_dir} (device {device})")
     print(f"plan: {plan.describe(model_config.pred_frames, fresh.has_physics, model_config.loss != 'pred-only')}")
     if train_config.data_loading == "stream":
         print(f"reading: the frames are streamed from {args.data} through a {train_config.stream_cache_mb} MiB cache, in "
