@@ -276,7 +276,7 @@ def test_cli_bad_inputs(tiny_model: Path, tiny_data: Path, tmp_path: Path, capsy
 
     out = str(tmp_path / "report")
     assert_one_line_error(run("piga-diagnose", "--model", str(tmp_path / "nope"), "--data", str(tiny_data), "--out", out),
-                          "no checkpoint")  # once as a script
+                          "nope does not exist")  # once as a script
     assert_one_line_error(diagnose_in_process(capsys, "--model", str(tiny_model), "--data", str(tmp_path / "x.h5"),
                                               "--out", out))
     assert_one_line_error(diagnose_in_process(capsys, "--model", str(tiny_model), "--data", str(tiny_data),
