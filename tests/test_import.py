@@ -299,7 +299,44 @@ def test_cli_refuses_a_frame_size_that_cannot_fit(tmp_path: Path, recording: tup
     assert_one_line(code, err, "argument --image-size: expected an integer in [8, 1024]")
     assert list(tmp_path.iterdir()) == []
     with pytest.raises(ValueError, match="17 frames of 2000000x2000000 needs about .* of memory"):
-        _check_resources(17, 2_000_000, out)
+        _check_resources(17, 2_000_000, 40, out)
+
+
+def test_the_disk_check_counts_one_slice_of_the_recording_uncompressed(tmp_path: Path,
+                                                                       monkeypatch: pytest.MonkeyPatch) -> None:
+    """A 20,000-frame recording at 64x64 was refused on a 64 MiB disk as needing up to 125.3 MiB: the file (39.1 MiB
+    at the assumed 2x) and the whole recording uncompressed, kept free to be written at once. It is written a slice
+    at a time, and the room kept free is one slice."""
+    import shutil
+
+    from piga.data import importer
+    from piga.io.resources import ResourceError
+
+    real = shutil.disk_usage
+    monkeypatch.setattr(shutil, "disk_usage", lambda path: real(path)._replace(free=64 * 2**20))
+    importer._check_resources(20_000, 64, 40, tmp_path / "o.h5")  # 39.1 MiB + one slice of 16 MiB + 8 MiB margin
+    monkeypatch.setattr(shutil, "disk_usage", lambda path: real(path)._replace(free=50 * 2**20))
+    with pytest.raises(ResourceError, match=r"a file of about 39.1 MiB once compressed, and .*16.0 MiB of frames at a time"):
+        importer._check_resources(20_000, 64, 40, tmp_path / "o.h5")
+    assert importer._slice_sequences(40, 64) * 40 * (64 * 64 + 4) <= importer.WRITE_SLICE_BYTES
+    assert importer._slice_sequences(40, 1024) == 1  # one sequence larger than a slice is written alone
+
+
+def test_an_import_written_in_slices_is_the_recording(tmp_path: Path, recording: tuple[Path, Path, np.ndarray, np.ndarray],
+                                                       monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every sequence lands where the recording has it when each slice holds one sequence."""
+    from piga.data import importer
+
+    folder, csv, _, _ = recording
+    whole, sliced = tmp_path / "whole.h5", tmp_path / "sliced.h5"
+    config = importer.ImportConfig(dt=0.05, steps=4)
+    importer.import_recording(folder, csv, whole, config, command="t")
+    monkeypatch.setattr(importer, "WRITE_SLICE_BYTES", 1)
+    importer.import_recording(folder, csv, sliced, config, command="t")
+    with h5py.File(whole) as a, h5py.File(sliced) as b:
+        assert a["frames"].shape[0] >= 2
+        for key in ("frames", "actions", "split"):
+            np.testing.assert_array_equal(a[key][()], b[key][()])
 
 
 def test_cli_refuses_to_overwrite(tmp_path: Path, recording: tuple[Path, Path, np.ndarray, np.ndarray],

@@ -442,21 +442,34 @@ def read_actions(path: str | Path) -> np.ndarray:
     return values.astype(np.float32)
 
 
-def _check_resources(n_frames: int, size: int, target: Path) -> None:
+#: The frames and actions written to the file at a time (whole sequences, at least one): the room the writer keeps
+#: free on the disk as it writes is one slice, not the whole recording uncompressed.
+WRITE_SLICE_BYTES = 16 * 1024**2
+
+
+def _slice_sequences(steps: int, size: int) -> int:
+    """Sequences of ``steps`` frames of ``size`` x ``size`` (and their actions) per write: at most
+    :data:`WRITE_SLICE_BYTES`, at least one."""
+    return max(1, WRITE_SLICE_BYTES // (steps * (size * size + 4)))
+
+
+def _check_resources(n_frames: int, size: int, steps: int, target: Path) -> None:
     """Refuses, before decoding, a frame count and size (one frame per action) that cannot fit.
 
     Memory: the converted frames twice (the list and the stacked array) and one frame's conversion
     (~48 bytes per output pixel). Disk: the frames gzip-compressed
-    (:data:`piga.io.resources.RECORDED_FRAME_COMPRESSION`).
+    (:data:`piga.io.resources.RECORDED_FRAME_COMPRESSION`), and the room to write one slice of sequences of
+    ``steps`` frames (:func:`_slice_sequences`).
     """
     from piga.io.resources import RECORDED_FRAME_COMPRESSION, check_memory
 
     pixels = size * size
     what = f"{n_frames} frames of {size}x{size}"
     check_memory(2 * n_frames * pixels + 48 * pixels, what)
-    # with the room the writer keeps free as it writes them (uncompressed, at once), so that it does not refuse later
+    # with the room the writer keeps free as it writes a slice (uncompressed), so that it does not refuse later
     raw = n_frames * (pixels + 4)
-    check_data_disk(target, n_frames * (pixels / RECORDED_FRAME_COMPRESSION + 4), raw, raw, what,
+    written = min(raw, _slice_sequences(steps, size) * steps * (pixels + 4))
+    check_data_disk(target, n_frames * (pixels / RECORDED_FRAME_COMPRESSION + 4), written, raw, what,
                     advice="free some space, write --out elsewhere, or give a smaller --image-size")  # (no count to lower)
 
 
@@ -489,7 +502,7 @@ def import_recording(
     if not recording.exists():
         raise FileNotFoundError(f"{recording}: no such video file or frame folder")
     u = read_actions(actions)  # (F,)
-    _check_resources(len(u), config.image_size, target)
+    _check_resources(len(u), config.image_size, config.steps, target)
     frames, shape = _read_recording(recording, config.image_size)  # (F, S, S)
     if len(u) != len(frames):
         raise ValueError(f"{actions} has {counted(len(u), 'action')} but {recording} has "
@@ -520,7 +533,10 @@ def import_recording(
         "split_counts": dict(zip(SPLITS, counts)),
     }
     with DatasetWriter(target, n, t, (size, size), 1, None, attrs, overwrite=overwrite) as writer:
-        writer.write(0, frames[: n * t].reshape(n, t, size, size), u[: n * t].reshape(n, t, 1))
+        sequences, sequence_actions = frames[: n * t].reshape(n, t, size, size), u[: n * t].reshape(n, t, 1)
+        step = _slice_sequences(t, size)
+        for start in range(0, n, step):
+            writer.write(start, sequences[start : start + step], sequence_actions[start : start + step])
         writer.set_split(np.repeat(np.arange(3, dtype=np.int8), counts))
     return ImportResult(target, n, len(frames), dropped, dict(zip(SPLITS, counts)), shape)
 
