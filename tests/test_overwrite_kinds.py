@@ -187,3 +187,106 @@ def test_a_reader_names_a_run_set_aside_by_a_killed_overwrite(tmp_path: Path) ->
     ReplacedRun().set_aside(run)
     with pytest.raises(FileNotFoundError, match=r"killed before its new run's first checkpoint.*\.replaced"):
         read_checkpoint(run, RunKind.PIGA)
+
+
+def _earlier_demo(out: Path) -> dict[str, bytes]:
+    """A folder as an earlier piga-demo left it (its data file a real one of the demo's; the rest placeholders)."""
+    from piga.data.collect import CollectConfig, collect
+
+    out.mkdir()
+    collect(CollectConfig(sequences=3, steps=4, seed=1, workers=1), out / "pendulum.h5", progress=False,
+            command=f"piga-demo --out {out}")
+    for name in ("frames.png", "goal.png", "control.md", "model/checkpoint.pt", "model/metrics.json"):
+        (out / name).parent.mkdir(exist_ok=True)
+        (out / name).write_bytes(b"earlier " + name.encode())
+    return _contents(out)
+
+
+def _new_collect(config: object, path: Path, **kwargs: object) -> None:
+    Path(path).write_bytes(b"new data")
+
+
+@pytest.mark.parametrize("stop", ["collected", "refused in training", "interrupted in training"])
+def test_a_demo_overwrite_stopped_before_its_first_checkpoint_leaves_the_earlier_demo(
+        stop: str, tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    """A Ctrl-C after the collection of a piga-demo --overwrite had already replaced the earlier demo's data file,
+    while its model, goal.png and control.md stayed: a folder of two demos, the earlier data lost."""
+    from piga.cli import demo
+    from piga.cli.common import PigaError
+
+    out = tmp_path / "demo"
+    earlier = _earlier_demo(out)
+
+    def collect_then_stop(config: object, path: Path, **kwargs: object) -> None:
+        _new_collect(config, path)
+        raise KeyboardInterrupt
+
+    def training(argv: list[str], prog: str) -> int:
+        assert (out / "pendulum.h5").read_bytes() == b"new data"
+        raise PigaError("refused") if stop == "refused in training" else KeyboardInterrupt
+
+    monkeypatch.setattr(demo, "collect", collect_then_stop if stop == "collected" else _new_collect)
+    monkeypatch.setattr(demo, "_check_enough_sequences", lambda config: None)
+    monkeypatch.setattr(demo.show, "main", lambda argv: Path(argv[argv.index("--out") + 1]).write_bytes(b"new") and 0)
+    monkeypatch.setattr(demo.train, "main", training)
+    code, _, err = run_in_process("piga-demo", demo.main, "--out", str(out), "--overwrite", "--quiet", capsys=capsys)
+    if stop == "refused in training":
+        assert_one_line(code, err, "refused")
+    else:
+        assert_one_line(code, err, f"interrupted; nothing was written; {out} holds the earlier demo as it was",
+                        status=130)
+    assert _contents(out) == earlier
+
+
+def test_a_demo_overwrite_that_got_a_checkpoint_replaces_the_earlier_demo_whole(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    from piga.cli import demo
+    from piga.cli.common import Interrupted
+
+    out = tmp_path / "demo"
+    _earlier_demo(out)
+
+    def trained_then_stopped(argv: list[str], prog: str) -> int:
+        (out / "model" / "checkpoint.pt").write_bytes(b"new checkpoint")
+        raise Interrupted("model/checkpoint.pt holds epoch 1; continue with --resume")
+
+    monkeypatch.setattr(demo, "collect", _new_collect)
+    monkeypatch.setattr(demo, "_check_enough_sequences", lambda config: None)
+    monkeypatch.setattr(demo.show, "main", lambda argv: 0)
+    monkeypatch.setattr(demo.train, "main", trained_then_stopped)
+    code, _, err = run_in_process("piga-demo", demo.main, "--out", str(out), "--overwrite", "--quiet", capsys=capsys)
+    assert_one_line(code, err, "keeps pendulum.h5, model/checkpoint.pt from this demo", "--resume in place of --overwrite",
+                    status=130)
+    # the earlier demo's goal image and table went with it: no folder of two demos
+    assert _contents(out) == {"pendulum.h5": b"new data", "model/checkpoint.pt": b"new checkpoint",
+                              "model/metrics.json": b"earlier model/metrics.json"}  # (the model's own: train-model's)
+
+
+@pytest.mark.parametrize("new_checkpoint", [False, True])
+def test_a_killed_demo_overwrite_is_settled_by_the_next_demo(new_checkpoint: bool, tmp_path: Path,
+                                                             capsys: pytest.CaptureFixture[str],
+                                                             monkeypatch: pytest.MonkeyPatch) -> None:
+    """SIGKILL: the earlier demo's files wait in --out/.replaced. The next demo puts them back where the run in
+    model/ did not train on the new data file, and deletes them where it did."""
+    from piga.cli import demo
+
+    out = tmp_path / "demo"
+    earlier = _earlier_demo(out)
+    (out / ASIDE).mkdir()
+    for name in ("pendulum.h5", "frames.png", "goal.png", "control.md"):
+        (out / name).rename(out / ASIDE / name)
+    from piga.data.collect import CollectConfig, collect
+
+    collect(CollectConfig(sequences=3, steps=4, seed=2, workers=1), out / "pendulum.h5", progress=False,
+            command=f"piga-demo --out {out} --seed 2")
+    new_data = (out / "pendulum.h5").read_bytes()
+    monkeypatch.setattr(demo, "_trained_on", lambda run, data, strict=False: new_checkpoint and data == out / "pendulum.h5")
+    code, out_text, err = run_in_process("piga-demo", demo.main, "--out", str(out), "--quiet", capsys=capsys)
+    assert_one_line(code, err, "exists from an earlier demo", "--resume")  # the plain rerun, settled first
+    if new_checkpoint:
+        assert out_text.startswith(f"removed {out / ASIDE}: the earlier demo that an --overwrite replaced")
+        assert _contents(out) == {"pendulum.h5": new_data, "model/checkpoint.pt": b"earlier model/checkpoint.pt",
+                                  "model/metrics.json": b"earlier model/metrics.json"}
+    else:
+        assert out_text.startswith(f"restored the earlier demo in {out} from {out / ASIDE}")
+        assert _contents(out) == earlier

@@ -28,6 +28,7 @@ from piga.data.schema import inspect_dataset
 from piga.io.atomic import check_folder_target
 from piga.io.checkpoint import CHECKPOINT, DEMO_RUN
 from piga.io.lock import lock_run_folder
+from piga.io.replaced import replacing
 
 PROG = "piga-demo"
 
@@ -133,6 +134,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     data, strip, run_dir = out / "pendulum.h5", out / "frames.png", out / DEMO_RUN
     goal_png, control_md = out / "goal.png", out / "control.md"
     outputs = (data, strip, run_dir / CHECKPOINT, goal_png, control_md)
+    lock_run_folder(out)  # a second command on this folder is refused until this one ends
+    if (settled := _settle_demo(out, data, run_dir)) is not None:  # an --overwrite killed outright: before its checks
+        print(settled)
     if not args.overwrite and not args.resume:  # before the disk: an earlier demo's files would count as taken there
         _check_not_the_users(data)
         for path in outputs:
@@ -140,7 +144,6 @@ def main(argv: Sequence[str] | None = None) -> int:
                 raise PigaError(f"{path} exists from an earlier demo; pass --resume to continue that demo or "
                                 "--overwrite to replace it")
     check_demo_disk(out, collect_config, args.resume, args.overwrite)  # /proc, /sys: "removed or moved while it ran?"
-    lock_run_folder(out)  # a second command on this folder is refused until this one ends
     if args.resume and args.overwrite:
         raise PigaError("--resume continues the demo in --out and --overwrite replaces it; give one of them")
     if args.resume and not any(path.exists() for path in outputs):
@@ -160,23 +163,26 @@ def main(argv: Sequence[str] | None = None) -> int:
         _check_not_the_users(data)
     # (a demo that kept only its pictures continues from the start: they are made again)
     before = {path: path.exists() and path.stat().st_mtime_ns for path in outputs}
+    checkpoint = run_dir / CHECKPOINT
+
+    def trained() -> bool:  # this demo's model has a checkpoint of its own
+        return checkpoint.exists() and checkpoint.stat().st_mtime_ns != before[checkpoint]
+
     try:
-        with made_folder(out):
+        with made_folder(out), replacing() as replaced:
+            if args.overwrite:  # the earlier demo's files wait in --out/.replaced until this demo's first checkpoint
+                replaced.set_aside(out, DEMO_FILES)  # (its run in model/: piga-train-model --overwrite does the same)
             try:
                 return _run(args, argv, out, collect_config, data, strip, run_dir, goal_png, control_md)
-            except Exception as exc:
-                checkpoint = run_dir / CHECKPOINT
-                if checkpoint.exists() and checkpoint.stat().st_mtime_ns != before[checkpoint]:
-                    # training got as far as a checkpoint: the data stays with it, for --resume
-                    if isinstance(exc, PigaError):
-                        raise PigaError(f"{' '.join(str(exc).split())}; {out} keeps this demo's data and model: run it "
-                                        "with --resume to continue it (and a larger --epochs where the training used "
-                                        "all its planned steps), or with --overwrite to start over") from None
-                    raise
-                # refused before a model: the files this demo made would make the rerun refuse for them
-                for path in (data, strip, goal_png, control_md):
-                    if before[path] is False and path.exists():
-                        path.unlink()
+            except BaseException as exc:
+                if trained():  # the data stays with the model, for --resume; an earlier demo is given up
+                    replaced.drop()
+                elif not isinstance(exc, KeyboardInterrupt) or replaced.moved:
+                    # refused before a model, the files this demo made would make the rerun refuse for them; an
+                    # earlier demo that it replaces comes back (replacing) as it was, without them
+                    for path in (data, strip, goal_png, control_md):
+                        if before[path] is False and path.exists():
+                            path.unlink()
                 raise
     except KeyboardInterrupt:  # say what this demo kept (a step's own message would name its own command): all of it
         # where it was resumed (its data file, kept from the run it continues, was left out), else what this run made
@@ -185,20 +191,52 @@ def main(argv: Sequence[str] | None = None) -> int:
         if kept:
             raise Interrupted(f"{out} keeps {', '.join(kept)} from this demo; run the same command with "
                               f"{resume_option(args.overwrite)} to continue it, or with --overwrite to start over") from None
+        if args.overwrite and any(before[path] is not False for path in outputs):
+            raise Interrupted(f"nothing was written; {out} holds the earlier demo as it was") from None
         raise KeyboardInterrupt from None
+    except PigaError as exc:
+        if trained():
+            raise PigaError(f"{' '.join(str(exc).split())}; {out} keeps this demo's data and model: run it with "
+                            "--resume to continue it (and a larger --epochs where the training used all its planned "
+                            "steps), or with --overwrite to start over") from None
+        raise
 
 
-def _trained_on(run_dir: Path, data: Path) -> bool:
-    """Whether the run in ``run_dir`` trained on the contents of ``data`` (its checkpoint's fingerprint of its file;
-    True for a checkpoint without one, or one that does not read: piga-train-model --resume then says what is wrong)."""
+#: The demo's own files in --out, beside its run (model/): what an --overwrite sets aside until its first checkpoint.
+DEMO_FILES = ("pendulum.h5", "frames.png", "goal.png", "control.md")
+
+
+def _settle_demo(out: Path, data: Path, run_dir: Path) -> str | None:
+    """Settles the earlier demo that an ``--overwrite`` killed outright (SIGKILL) left in ``out/.replaced``: its run's
+    own first (:func:`piga.io.replaced.settle_replaced`); then the earlier demo's files are deleted where the run in
+    ``run_dir`` has a checkpoint trained on the new data file and not on theirs (the new demo got that far), and put
+    back otherwise. Returns a line that says which, or None where there was nothing to settle."""
+    from piga.io.checkpoint import REPLACED_ASIDE
+    from piga.io.replaced import settle_replaced, settle_set_aside
+
+    aside = out / REPLACED_ASIDE
+    if not aside.is_dir() or aside.is_symlink():
+        return None
+    settle_replaced(run_dir)
+    new = ((run_dir / CHECKPOINT).is_file() and data.is_file() and _trained_on(run_dir, data, strict=True)
+           and not ((aside / data.name).is_file() and _trained_on(run_dir, aside / data.name, strict=True)))
+    return settle_set_aside(out, DEMO_FILES, keep_new=new, what="the earlier demo")
+
+
+def _trained_on(run_dir: Path, data: Path, strict: bool = False) -> bool:
+    """Whether the run in ``run_dir`` trained on the contents of ``data`` (its checkpoint's fingerprint of its file).
+    A checkpoint without one, or one that does not read, counts as True (piga-train-model --resume then says what is
+    wrong), or as False where ``strict``; so does a data file that does not read."""
     from piga.data.schema import fingerprint
     from piga.io.checkpoint import RunKind, read_checkpoint
 
     try:
         trained = read_checkpoint(run_dir, RunKind.PIGA).get("data", {}).get("fingerprint")
+        if trained is None:
+            return not strict
+        return trained == fingerprint(data)
     except (OSError, ValueError):
-        return True
-    return trained is None or trained == fingerprint(data)
+        return not strict
 
 
 def _check_not_the_users(data: Path) -> None:

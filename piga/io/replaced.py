@@ -109,3 +109,21 @@ def settle_replaced(run_dir: str | os.PathLike[str]) -> str | None:
     _restore(run_dir, moved, moved)  # (what the new run wrote beside them, a record or curves without a checkpoint, stays)
     return (f"restored the run in {run_dir} from {aside}, where an --overwrite stopped before the new run's first "
             "checkpoint had set it aside")
+
+
+def settle_set_aside(folder: str | os.PathLike[str], names: Sequence[str], keep_new: bool, what: str) -> str | None:
+    """Settles ``folder/.replaced`` where a command killed outright set aside the outputs ``names`` of ``what`` (an
+    earlier run that is not a training run: piga-demo's files): deleted where ``keep_new`` (the new run got as far
+    as its first checkpoint), else put back in place of the new versions. Returns a line that says which, or None."""
+    folder = Path(folder)
+    aside = folder / ASIDE
+    if not aside.is_dir() or aside.is_symlink():
+        return None
+    if keep_new:
+        _remove(aside)
+        return (f"removed {aside}: {what} that an --overwrite replaced, left there by a command stopped after the new "
+                "one's first checkpoint")
+    moved = [name for name in names if _present(aside / name)]
+    _restore(folder, moved, moved)
+    return (f"restored {what} in {folder} from {aside}, where an --overwrite stopped before the new one's first "
+            "checkpoint had set it aside")
