@@ -314,10 +314,11 @@ def _start(config: SceneConfig, rng: np.random.Generator) -> tuple[np.ndarray, n
     return p, v
 
 
-def _acceptable(config: SceneConfig, ps: np.ndarray, test: bool = False) -> np.ndarray:
+def _acceptable(config: SceneConfig, ps: np.ndarray, test: bool = False, reach: bool = True) -> np.ndarray:
     """Which candidates (ps: (T, B, N, 2), ``config.substeps`` rows per frame) keep every centre off the walls
     (force-only scenes), for gravity no two balls within r + 1 of each other, and with ``half`` the balls in the top
-    half as :attr:`SceneConfig.half` says (``test``: a test sequence); (B,) bool."""
+    half as :attr:`SceneConfig.half` says (``test``: a test sequence, which must then reach the bottom half, unless
+    ``reach`` is False); (B,) bool."""
     if config.physics == "bouncing":
         return np.ones(ps.shape[1], bool)
     low, high = config.margin, config.image_size - config.margin
@@ -326,7 +327,7 @@ def _acceptable(config: SceneConfig, ps: np.ndarray, test: bool = False) -> np.n
         middle, y = config.image_size / 2, ps[..., 1]  # (T, B, N)
         kept = (config.half_frames - 1) * config.substeps + 1 if test else len(ps)  # rows that stay on top
         ok &= (y[:kept] + config.radius <= middle).all(axis=(0, 2))  # no pixel of a ball in the bottom half
-        if test:  # a ball wholly in the bottom half in some later frame
+        if test and reach:  # a ball wholly in the bottom half in some later frame
             ok &= (y[kept - 1 :: config.substeps] - config.radius >= middle).any(axis=(0, 2))
     if config.physics == "gravity":
         d = np.sqrt(((ps[..., :, None, :] - ps[..., None, :, :]) ** 2).sum(-1))  # (T, B, N, N)
@@ -353,6 +354,7 @@ def draw_start(config: SceneConfig, rng: np.random.Generator, steps: int,
     """
     fine = replace(config, dt=config.dt / config.substeps, substeps=1)
     batch = 1 if config.physics == "bouncing" else _CANDIDATES  # every bouncing start is acceptable
+    stayed = False  # (a --half test sequence) some start kept to the top half, and failed only to reach the bottom
     for _ in range(0, config.max_tries, batch):
         starts = [_start(config, rng) for _ in range(batch)]
         p0 = np.stack([p for p, _ in starts])  # (B, N, 2)
@@ -361,16 +363,21 @@ def draw_start(config: SceneConfig, rng: np.random.Generator, steps: int,
         with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
             fine_p, fine_v = simulate(fine, p0, v0, (steps - 1) * config.substeps + 1)  # (T·M, B, N, 2)
             good = np.flatnonzero(_acceptable(config, fine_p, test))
+            if config.half and test and not len(good) and not stayed:
+                stayed = bool(_acceptable(config, fine_p, test, reach=False).any())
         if len(good):
             return simulate(config, p0[good[0]], v0[good[0]], steps)
     # forces too weak to show are refused first: no wall, sequence length or image size would make them learnable
     frames = [a[:: config.substeps].transpose(1, 0, 2, 3).reshape(batch, steps, -1) for a in (fine_p, fine_v)]
     check_forces_visible(config, np.concatenate(frames, -1), walls=True)  # (B, T, 4N), as generate_sequence writes
     if config.half and test:  # a test sequence must leave the top half: short ones cannot
+        # a larger image keeps a start in the top half longer, and puts the bottom half further away: it helps only
+        # where no start stayed on top, and longer sequences only where some did
+        fix = (f"use longer sequences (--steps, now {steps}){_force_advice(config)}" if stayed
+               else f"use a larger image (--image-size, now {config.image_size}){_force_advice(config)}")
         raise SceneError(f"{config.scene}: no start in {config.max_tries} draws stays clear of the walls and in the top "
                          f"half for its first {config.half_frames} frames, then reaches the bottom half within {steps} "
-                         f"frames (a --half test sequence); use longer sequences (--steps){_force_advice(config)} or a "
-                         "larger image (--image-size)")
+                         f"frames (a --half test sequence); {fix}")
     raise SceneError(f"{config.scene}: no start in {config.max_tries} draws stays clear of the walls"
                      f"{' and in the top half' if config.half else ''} for {steps} frames; use shorter sequences "
                      f"(--steps){_force_advice(config)} or a larger image (--image-size)")
