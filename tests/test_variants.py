@@ -183,7 +183,8 @@ def test_a_model_larger_than_the_memory_is_refused_before_it_is_built(small_data
     out = tmp_path / "run"
     code, _, err = run_in_process(PROG, cli.main, str(small_data), "--out", str(out), "--model", "video-lstm", *SMALL,
                                   capsys=capsys)
-    assert_one_line(code, err, "the video-lstm model of these sizes", "needs about", "976.6 KiB is available")
+    assert_one_line(code, err, "training on frames of 64x64 needs about", "976.6 KiB is available",
+                    "smaller --image-size")
     assert not out.exists()
 
 

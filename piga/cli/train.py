@@ -335,12 +335,17 @@ def _main(argv: Sequence[str] | None, prog: str, replaced: ReplacedRun) -> int:
         raise PigaError(f"--resume: the run has trained {trained / 60:.3g} min, past its --max-minutes "
                         f"{train_config.max_minutes:g} (a budget over the run's whole life, resumes included); give a "
                         "larger --max-minutes to continue it")
-    from piga.io.resources import adam_checkpoint_bytes, check_run_disk, check_training_memory
-    from piga.world.variants import build_model, parameter_count
+    from piga.io.resources import adam_checkpoint_bytes, check_run_disk
+    from piga.training.memory import check_training_fits
+    from piga.world.model import ModelConfig
+    from piga.world.variants import activation_bytes, build_model, parameter_count
 
-    # sized before it is built: a model too large for the memory is refused here, not killed by the kernel later
-    check_training_memory(parameter_count(model_config),
-                          f"the {model_config.architecture} model of these sizes (its weights, gradients and Adam's moments)")
+    # sized before it is built: a model and batch too large for the memory are refused here, not killed by the kernel
+    # later (frames of 1024x1024 and a batch of 4 took 24 GB)
+    raised = tuple(f"--{dest.replace('_', '-')}" for dest in ("video_lstm_scale", "broadcast_width")
+                   if getattr(model_config, dest) > getattr(ModelConfig, dest))
+    check_training_fits(parameter_count(model_config), activation_bytes(model_config), train_config.batch_size,
+                        train_config.average_fraction > 0, f"{model_config.image_size}x{model_config.image_size}", raised)
     fresh = build_model(model_config)  # its size and start values, before training builds its own
     check_run_disk(run_dir, (run_dir / CHECKPOINT).stat().st_size if args.resume else adam_checkpoint_bytes(fresh),
                    "the training run", resume=args.resume, overwrite=args.overwrite)

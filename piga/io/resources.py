@@ -115,13 +115,28 @@ def _cgroup_available() -> int | None:
     return left
 
 
+def _address_space_available() -> int | None:
+    """What the process's address-space limit (``ulimit -v``, RLIMIT_AS) leaves beyond its present size, or None
+    where there is no such limit."""
+    try:
+        import resource
+
+        limit = resource.getrlimit(resource.RLIMIT_AS)[0]
+        if limit == resource.RLIM_INFINITY:
+            return None
+        with open("/proc/self/status", encoding="ascii") as f:
+            size = next(int(line.split()[1]) * 1024 for line in f if line.startswith("VmSize:"))
+    except (ImportError, OSError, StopIteration, ValueError):
+        return None
+    return max(0, limit - size)
+
+
 def available_memory() -> int | None:
     """Bytes of memory available to a new allocation, or None if unknown: the machine's (Linux:
-    MemAvailable), or less where a memory cgroup (a container's or a job's limit) leaves less."""
-    machine, cgroup = _machine_available(), _cgroup_available()
-    if machine is None or cgroup is None:
-        return cgroup if machine is None else machine
-    return min(machine, cgroup)
+    MemAvailable), or less where a memory cgroup (a container's or a job's limit) or the process's address-space
+    limit (``ulimit -v``) leaves less."""
+    known = [n for n in (_machine_available(), _cgroup_available(), _address_space_available()) if n is not None]
+    return min(known) if known else None
 
 
 def check_memory(needed: float, what: str, advice: str = "ask for less") -> None:

@@ -36,3 +36,28 @@ def build_model(config: ModelConfig) -> FrameModel:
 def parameter_count(config: ModelConfig) -> int:
     """The trainable parameters of ``build_model(config)``, counted on torch's meta device (no memory taken)."""
     return meta_parameter_count(lambda: build_model(config), trainable_only=True)
+
+
+def activation_bytes(config: ModelConfig) -> int | None:
+    """The activations that one training window of ``build_model(config)`` keeps for its backward pass, in bytes:
+    the tensors autograd saves (each once; views of the parameters left out), measured by running the forward pass on
+    torch's meta device (no memory taken, well under a second). None where an operation has no meta kernel.
+
+    What a training run needs beyond its parameters: :mod:`piga.training.memory`.
+    """
+    import torch
+
+    saved: dict[int, torch.Tensor] = {}
+    try:
+        with torch.device("meta"):
+            model = build_model(config)
+            own = {id(p) for p in model.parameters()}
+            shape = (1, config.window, config.image_size, config.image_size) + ((config.channels,) if config.channels > 1 else ())
+            frames = torch.zeros(shape, dtype=torch.uint8)  # (1, L+T, H, W[, C])
+            actions = torch.zeros(1, config.window, config.action_dim)  # (1, L+T, A)
+            with torch.autograd.graph.saved_tensors_hooks(lambda x: saved.setdefault(id(x), x), lambda x: x):
+                model(frames, actions)
+    except (RuntimeError, NotImplementedError, TypeError):
+        return None
+    return sum(x.numel() * x.element_size() for key, x in saved.items()
+               if key not in own and not (x._base is not None and id(x._base) in own))

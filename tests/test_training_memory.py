@@ -1,0 +1,72 @@
+"""A training run's memory is checked before the model is built (:mod:`piga.training.memory`): frames of 1024x1024
+and a batch of 4 took 24 GB, and the kernel killed the process without a word; under a memory limit the line said
+"choose smaller sizes", which named no option."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+
+from piga.cli import train as cli
+from piga.io import resources
+from piga.io.resources import ResourceError
+from piga.training.memory import check_training_fits, training_need
+from piga.training.train import PRESETS
+from piga.world.variants import activation_bytes, parameter_count
+from tests.helpers import assert_one_line, run_in_process
+
+GiB = 2**30
+
+
+def test_the_activations_grow_with_the_frames_pixels() -> None:
+    small, large = (replace(PRESETS["fast"].model, image_size=size) for size in (64, 1024))
+    a_small, a_large = activation_bytes(small), activation_bytes(large)
+    assert a_small is not None and a_large is not None
+    assert 200 < a_large / a_small < 300  # 256x the pixels; the physics' own tensors do not grow
+    assert 700 * 2**20 < a_large < 1000 * 2**20  # measured: 832 MiB per window
+
+
+@pytest.mark.parametrize("available, needle", [
+    (22.4 * GiB, "lower --batch-size to 2 or less, or collect or import the frames at a smaller --image-size"),
+    (8 * GiB, "; collect or import the frames at a smaller --image-size (piga-collect, piga-import)"),
+])
+def test_a_1024_px_run_is_refused_with_what_to_lower(available: float, needle: str,
+                                                      monkeypatch: pytest.MonkeyPatch) -> None:
+    config = replace(PRESETS["fast"].model, image_size=1024)
+    parameters, activations = parameter_count(config), activation_bytes(config)
+    monkeypatch.setattr(resources, "available_memory", lambda: int(available))
+    with pytest.raises(ResourceError, match="training on frames of 1024x1024 needs about 25.3 GiB") as info:
+        check_training_fits(parameters, activations, 4, True, "1024x1024")
+    assert needle in str(info.value)
+    if "--batch-size to 2" in needle:  # the batch it names fits, and one more does not
+        fixed, batched = training_need(parameters, activations, 2, True)
+        assert fixed + batched <= available < sum(training_need(parameters, activations, 3, True))
+        check_training_fits(parameters, activations, 2, True, "1024x1024")
+
+
+def test_a_raised_model_size_is_named(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(resources, "available_memory", lambda: 10**6)
+    with pytest.raises(ResourceError, match=r"; lower --video-lstm-scale, or collect or import the frames"):
+        check_training_fits(10**6, 10**6, 1, False, "64x64", ("--video-lstm-scale",))
+
+
+def test_the_default_run_fits_without_a_word(monkeypatch: pytest.MonkeyPatch) -> None:
+    config = PRESETS["fast"].model
+    fixed, batched = training_need(parameter_count(config), activation_bytes(config) or 0, 32, True)
+    assert fixed + batched < 0.5 * GiB  # 64x64, a batch of 32: well within any machine
+    monkeypatch.setattr(resources, "available_memory", lambda: None)  # unknown: not refused
+    check_training_fits(10**12, 10**12, 32, True, "64x64")
+
+
+def test_the_cli_refuses_a_batch_too_large_for_the_memory_before_anything_is_written(
+        tiny_data: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    config = replace(PRESETS["fast"].model, image_size=64)
+    fixed, batched = training_need(parameter_count(config), activation_bytes(config) or 0, 1, True)
+    monkeypatch.setattr(resources, "available_memory", lambda: int(fixed + 1.5 * batched))  # a batch of 1 fits
+    out = tmp_path / "run"
+    code, _, err = run_in_process("piga-train-model", cli.main, str(tiny_data), "--out", str(out), "--preset", "fast",
+                                  "--batch-size", "4", "--quiet", capsys=capsys)
+    assert_one_line(code, err, "training on frames of 64x64 needs about", "lower --batch-size to 1 or less")
+    assert not out.exists()
