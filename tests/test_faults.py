@@ -569,6 +569,10 @@ def _env_config_edit(**fields: Any) -> Callable[[h5py.File], None]:
                              "0.05 s; set 'dt' to 0.05, or collect the file again"]),
     (_env_renders_32, ["attribute 'env_config' says the env renders 32x32 gray frames (image_size 32), but the file's "
                        "frames are 64x64 gray; set env_config's image_size to 64"]),
+    # colour frames where the env renders gray ones: trained on, and refused only by piga-diagnose
+    (lambda f: _replace(f, "frames", np.repeat(f["frames"][()][..., None], 3, -1)),
+     ["attribute 'env_config' says the env renders gray frames, but the file's frames are 64x64 with 3 channels; "
+      "collect the file again"]),
     # frames of a size no env renders: "set env_config's image_size to 2048", which every command then refused
     (lambda f: _replace(f, "frames", f["frames"][()][:, :, :4, :4]),
      ["the file's frames are 4x4 gray; frames 4 px a side are outside the envs' 8 to 1024 px: resize them (as "

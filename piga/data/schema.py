@@ -486,6 +486,11 @@ def _check_env_attrs(info: DatasetInfo) -> None:
         look = "RGB" if config.get("color") == "rgb" else "gray"  # (dm_control's pendulum renders either)
         raise DataFormatError(f"{path}: attribute 'env_config' says the env renders {size}x{size} {look} frames "
                               f"(image_size {size}), but the file's frames are {_frames_text(shape)}; {fix}")
+    rgb, gray = config.get("color") == "rgb", len(shape) == 2 or shape[2] == 1
+    if gray == rgb:  # (dm_control's pendulum renders either; Gymnasium's, gray) a model would read other frames
+        raise DataFormatError(f"{path}: attribute 'env_config' says the env renders {'RGB' if rgb else 'gray'} frames"
+                              f"{' (color rgb)' if rgb else ''}, but the file's frames are {_frames_text(shape)}; "
+                              "collect the file again")
     from envs import DMC_PENDULUM, ENV_IDS, PENDULUM_DT, PIXEL_PENDULUM  # (only for a file of an env: an import pays nothing)
     from envs.dmc import DMC_PHYSICS_DT, MAX_ACTION_REPEAT
 
