@@ -78,6 +78,12 @@ def _colour(f: h5py.File) -> None:
     _replace(f, "frames", np.repeat(f["frames"][()][..., None], 3, axis=-1))
 
 
+def _colour_recording(f: h5py.File) -> None:
+    """Colour frames in a file of no env (a recording): refused where the env is known, on open."""
+    _colour(f)
+    del f.attrs["env_config"]
+
+
 def _channel_axis(f: h5py.File) -> None:
     _replace(f, "frames", f["frames"][()][..., None])
 
@@ -138,7 +144,7 @@ VARIANTS: dict[str, Callable[[h5py.File], None]] = {
     "blank": _blank, "nan_state": _nan_state, "nan_reward": _nan_reward, "colour": _colour, "channel_axis": _channel_axis,
     "two_actions": _two_actions, "no_actions": _no_actions, "unknown_env_field": _unknown_env_field,
     "labelled_spring": _labelled_spring, "still": _still, "text_env_field": _text_env_field, "labelled_dmc": _labelled_dmc,
-    "env_renders_32": _env_renders_32, "cropped_63": _cropped_63,
+    "env_renders_32": _env_renders_32, "cropped_63": _cropped_63, "colour_recording": _colour_recording,
 }
 
 
@@ -733,7 +739,7 @@ def test_a_true_parameter_of_zero_is_printed_without_an_error() -> None:
 
 
 @pytest.mark.parametrize("data, argv, needles", [
-    ("colour", (), ["colour frames", "gray"]),
+    ("colour", (), ["'env_config' says the env renders gray frames", "64x64 with 3 channels"]),
     ("two_actions", (), ["has 2 action dimensions", "takes one"]),
     ("no_actions", (), ["has 0 action dimensions", "takes one"]),  # it said "RSSMConfig.action_dim must be >= 1"
     ("blank", (), ["every frame is blank"]),
@@ -1237,7 +1243,7 @@ def test_an_actor_critic_whose_policy_turns_nan_after_a_checkpoint_is_said_to_ha
 
 @pytest.mark.parametrize("data, needles", [
     ("blank", ["every frame is blank"]),
-    ("colour", ["the autoencoder takes gray 64x64 frames"]),
+    ("colour", ["'env_config' says the env renders gray frames", "64x64 with 3 channels"]),
     # the autoencoder learnt MuJoCo's frames, then DDPG ran on the pixel pendulum's (exit 0)
     ("labelled_dmc", ["--obs latent learns its codes from the file's frames", "acts on piga/PixelPendulum-v0",
                       "this file is pendulum from piga/DMCPendulum-v0"]),
@@ -3194,11 +3200,13 @@ def test_a_file_an_imageio_plugin_misreads_is_no_image_and_one_line(tmp_path: Pa
 
 @pytest.fixture(scope="module")
 def foreign_frame_runs(files: dict[str, Path], tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    """One-epoch piga runs on frames the pixel pendulum does not render: 63x63 gray ("cropped_63"), 64x64 colour ("colour")."""
+    """One-epoch piga runs on frames the pixel pendulum does not render: 63x63 gray ("cropped_63"), 64x64 colour ("colour"),
+    each in a file of no env (a file of the pixel pendulum's with them is refused on open)."""
     from tests.helpers import train_tiny
 
     root = tmp_path_factory.mktemp("foreign")
-    return {name: train_tiny(files[name], root / name) for name in ("cropped_63", "colour")}
+    return {name: train_tiny(files[file], root / name) for name, file in (("cropped_63", "cropped_63"),
+                                                                          ("colour", "colour_recording"))}
 
 
 @pytest.mark.parametrize("run, needle", [("cropped_63", "takes 63x63 gray frames"), ("colour", "takes 64x64 3-channel frames")])
