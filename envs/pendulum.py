@@ -57,7 +57,7 @@ from gymnasium.wrappers import (
     ResizeObservation,
 )
 
-from envs.constants import MAX_ACTION, PENDULUM_DT, PENDULUM_MAX_SPEED
+from envs.constants import MAX_ACTION, MAX_IMAGE_SIZE, PENDULUM_DT, PENDULUM_MAX_SPEED
 from envs.effects import EFFECTS, ShowCommandedTorque, explicit_step_problem, normalize_effects, wrap_effects
 from envs.fields import check_field_kinds, number_text
 from piga.world.effects import scaled_gravity
@@ -86,9 +86,6 @@ MIN_ACTUATION_GAIN = MIN_GRAVITY = 1e-6
 _TOO_WEAK = "weaker, it moves the pendulum's tip by under a hundredth of a pixel in a 200-step episode"
 
 
-#: Largest frame side (pixels), of either pendulum: MuJoCo renders it off-screen, Gymnasium's render (500 px) is
-#: resized to it, and far larger frames would not fit a replay buffer (5000 px frames were collected, upscaled).
-MAX_IMAGE_SIZE = 1024
 #: The largest ``blur`` sigma is the frame side over this: at σ = side/8 (8 px in 64 px frames) a frame still spans
 #: 18 gray levels and its motion moves pixels by 7; at side/4 they were 5 and 2 levels (the frames were nearly blank).
 MAX_BLUR_FRACTION = 8

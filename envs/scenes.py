@@ -35,6 +35,7 @@ from typing import Any, Literal, get_args
 
 import numpy as np
 
+from envs.constants import MAX_IMAGE_SIZE
 from envs.fields import number_text
 
 __all__ = ["SCENES", "SceneConfig", "scene_config", "accelerations", "simulate", "draw_start", "render",
@@ -150,6 +151,9 @@ class SceneConfig:
             raise SceneError(f"{type(self).__name__}.half (the top-half data) is for the spring scene, not {self.scene}")
         if self.half_frames < 1:
             raise SceneError(f"{type(self).__name__}.half_frames must be >= 1, got {self.half_frames}")
+        if self.image_size > MAX_IMAGE_SIZE:  # as the pendulum's: 2000 px spring frames were collected, then untrainable
+            raise SceneError(f"{type(self).__name__}.image_size must be at most {MAX_IMAGE_SIZE} px (the largest frames "
+                             f"piga-collect draws), got {self.image_size}")
         needed = _minimum_size(self)
         if self.image_size < needed:
             raise SceneError(f"{self.scene}: {self.image_size}x{self.image_size} images are too small for "

@@ -338,6 +338,9 @@ def test_a_failed_allocation_is_out_of_memory(capsys: pytest.CaptureFixture[str]
     (["--system", "bouncing", "--colors", "black", "black"], ["is the background's", "invisible"], 1),
     (["--system", "bouncing", "--colors", "red", "white", "--background", "white"], ["object 1's colour"], 1),
     (["--system", "spring", "--k", "1e6"], ["k = 1e+06 is too stiff", "below 2222.2222 "], 1),
+    # the pendulum's largest frames bound the scenes too: 2000 px spring frames were written, then needed 147 GiB to train
+    (["--system", "spring", "--image-size", "1025"], ["--image-size must be at most 1024 px", "got 1025"], 1),
+    (["--system", "gravity", "--image-size", "5000"], ["--image-size must be at most 1024 px", "got 5000"], 1),
     (["--seed", "9" * 25], ["--seed: expected an integer in [0, 2^63 - 1]"], 1),
     (["--actuation-gain", "1e39"], ["--actuation-gain=1e+39 is out of range", "at most 1e+06"], 1),
     (["--gravity", "1e39"], ["--gravity x --gravity-mult = 1e+39 is out of range", "at most 1066"], 1),
