@@ -290,3 +290,23 @@ def test_a_killed_demo_overwrite_is_settled_by_the_next_demo(new_checkpoint: boo
     else:
         assert out_text.startswith(f"restored the earlier demo in {out} from {out / ASIDE}")
         assert _contents(out) == earlier
+
+
+def test_a_killed_demos_half_written_files_go_with_the_next_demo(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                                 monkeypatch: pytest.MonkeyPatch) -> None:
+    """A demo killed while it collected left .pendulum.h5.partial-PID, which a refused rerun and a whole --resume (that
+    keeps its data file, never writing it again) left behind."""
+    import subprocess
+    import sys
+
+    from piga.cli import demo
+    from piga.io.atomic import partial_path
+
+    out = tmp_path / "demo"
+    earlier = _earlier_demo(out)
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    stale = partial_path(out / "pendulum.h5").with_name(f".pendulum.h5.partial-{int(dead.stdout)}")
+    stale.write_bytes(b"half a file")
+    code, _, err = run_in_process("piga-demo", demo.main, "--out", str(out), "--quiet", capsys=capsys)
+    assert_one_line(code, err, "exists from an earlier demo")  # refused, and the leftover gone all the same
+    assert not stale.exists() and _contents(out) == earlier

@@ -25,7 +25,7 @@ from piga.cli.common import (ArgumentParser, Interrupted, PigaError, command_lin
                              resume_option, run_cli, seed_int, thread_count)
 from piga.data.collect import CollectConfig, collect
 from piga.data.schema import inspect_dataset
-from piga.io.atomic import check_folder_target
+from piga.io.atomic import check_folder_target, remove_stale_partials
 from piga.io.checkpoint import CHECKPOINT, DEMO_RUN
 from piga.io.lock import lock_run_folder
 from piga.io.replaced import replacing
@@ -137,6 +137,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     lock_run_folder(out)  # a second command on this folder is refused until this one ends
     if (settled := _settle_demo(out, data, run_dir)) is not None:  # an --overwrite killed outright: before its checks
         print(settled)
+    for name in DEMO_FILES:  # a killed demo's half-written files: a demo that keeps its data never writes them again
+        remove_stale_partials(out / name)
     if not args.overwrite and not args.resume:  # before the disk: an earlier demo's files would count as taken there
         _check_not_the_users(data)
         for path in outputs:
