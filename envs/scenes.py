@@ -102,7 +102,7 @@ class SceneConfig:
 
     def __post_init__(self) -> None:
         if self.scene not in SCENES:
-            raise SceneError(f"unknown scene {self.scene!r}; known: {sorted(SCENES)}")
+            raise SceneError(f"unknown scene {self.scene!r}; known: {', '.join(sorted(SCENES))}")
         if self.physics not in get_args(Physics):
             raise SceneError(f"SceneConfig.physics must be one of {', '.join(map(repr, get_args(Physics)))}; got {self.physics!r}")
         if self.n_objects < 1:
@@ -223,7 +223,7 @@ def scene_config(scene: str, **overrides: Any) -> SceneConfig:
     """The scene's defaults with ``overrides``; ``params`` entries are merged, not replaced. With ``half=True`` the
     speed is :data:`HALF_SPEED` and ``max_tries`` 100,000 unless given."""
     if scene not in SCENES:
-        raise SceneError(f"unknown scene {scene!r}; known: {sorted(SCENES)}")
+        raise SceneError(f"unknown scene {scene!r}; known: {', '.join(sorted(SCENES))}")
     values = dict(SCENES[scene])
     params = dict(values["params"])
     unknown = set(overrides.get("params", {})) - set(params)

@@ -290,5 +290,5 @@ def test_make_system_registry() -> None:
     for name, cls in SYSTEMS.items():
         assert type(make_system(name)) is cls
     assert make_system("gravity", n_objects=2).n_objects == 2
-    with pytest.raises(ValueError, match="unknown system 'pong'; known: \\['bouncing', 'gravity', 'pendulum', 'spring'\\]"):
+    with pytest.raises(ValueError, match="unknown system 'pong'; known: bouncing, gravity, pendulum, spring"):
         make_system("pong")

@@ -437,7 +437,7 @@ def check_report_target(out: str | os.PathLike[str], overwrite: bool) -> Path:
             parent = parent.parent
         if not parent.is_dir() or not os.access(parent, os.W_OK | os.X_OK):
             raise PermissionError(f"cannot create --out {folder}: {parent} is not a writable folder")
-    check_figure_disk(folder / REPORT_FILES[0], "the diagnosis's report and figures")
+    check_figure_disk(folder / REPORT_FILES[0], "the diagnosis (its report and figures)")
     return folder
 
 

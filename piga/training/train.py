@@ -383,13 +383,13 @@ def preset_for(name: str, info: DatasetInfo) -> Recipe:
 
 def _preset(name: str, info: DatasetInfo) -> Recipe:
     if name not in PRESETS:
-        raise ValueError(f"unknown preset {name!r}; known: {sorted(PRESETS)}")
+        raise ValueError(f"unknown preset {name!r}; known: {', '.join(sorted(PRESETS))}")
     if info.system == "pendulum":
         return PRESETS[name]
     scene = str(info.attrs.get("scene", info.system))
     recipes = SCENE_PRESETS.get(scene) or SCENE_PRESETS.get(info.system)
     if recipes is None:
-        raise ValueError(f"{info.path}: system {info.system!r} has no physics model; known: {sorted(SYSTEM_SHAPES)}")
+        raise ValueError(f"{info.path}: system {info.system!r} has no physics model; known: {', '.join(sorted(SYSTEM_SHAPES))}")
     if name not in recipes:
         raise ValueError(f"preset {name!r} is the pendulum's; a {scene} file has {', '.join(sorted(recipes))}")
     recipe = recipes[name]
@@ -442,7 +442,7 @@ def model_config_for(info: DatasetInfo, model: ModelConfig | None = None, n_obje
     objects from its attributes (``n_objects``: the model's object slots instead, ``piga-train-model --objects``). Sequences shorter than the recipe's window L + T_pred shorten T_pred
     to what they hold, down to :data:`MIN_PRED_FRAMES` (:func:`check_trainable` refuses shorter ones)."""
     if info.system not in SYSTEM_SHAPES:
-        raise ValueError(f"{info.path}: system {info.system!r} has no physics model; known: {sorted(SYSTEM_SHAPES)}")
+        raise ValueError(f"{info.path}: system {info.system!r} has no physics model; known: {', '.join(sorted(SYSTEM_SHAPES))}")
     actions = SYSTEM_SHAPES[info.system][2]
     if info.action_dim != actions:  # a pendulum file labelled 'spring' trained as a scene, and blamed a lost object
         raise ValueError(f"{info.path}: its attribute 'system' says {info.system!r}, whose model takes {actions} action "

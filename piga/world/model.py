@@ -171,7 +171,7 @@ class ModelConfig:
     def __post_init__(self) -> None:
         check_types(self)  # a number given as text fails here, naming the field, not at a comparison below
         if not isinstance(self.system, str) or self.system not in SYSTEM_SHAPES:
-            raise ValueError(f"unknown system {self.system!r}; known: {sorted(SYSTEM_SHAPES)}")
+            raise ValueError(f"unknown system {self.system!r}; known: {', '.join(sorted(SYSTEM_SHAPES))}")
         check_choices(self)  # architecture, loss, decoder, rec_frames, integrator, readout
         if self.image_size < 8 or self.channels not in (1, 3) or self.substeps < 1:
             raise ValueError(f"ModelConfig needs image_size >= 8, channels 1 or 3 and substeps >= 1, got image_size="
@@ -235,7 +235,7 @@ class ModelConfig:
         values = dict(values)
         system = values.get("system", cls.system)
         if system not in SYSTEMS:
-            raise ValueError(f"unknown system {system!r}; known: {sorted(SYSTEMS)}")
+            raise ValueError(f"unknown system {system!r}; known: {', '.join(sorted(SYSTEMS))}")
         options = SYSTEMS[system].Options
         nested = values.pop("system_options", None)
         shared = {f.name for f in fields(cls)}

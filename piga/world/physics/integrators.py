@@ -130,7 +130,7 @@ def make_integrator(name: str, substeps: int) -> Euler | RK4:
     try:
         cls = INTEGRATORS[name]
     except KeyError:
-        raise ValueError(f"unknown integrator {name!r}; known: {sorted(INTEGRATORS)}") from None
+        raise ValueError(f"unknown integrator {name!r}; known: {', '.join(sorted(INTEGRATORS))}") from None
     return cls(substeps)  # type: ignore[return-value]
 
 

@@ -586,5 +586,5 @@ def make_system(name: str, **kwargs: object) -> System:
     try:
         cls = SYSTEMS[name]
     except KeyError:
-        raise ValueError(f"unknown system {name!r}; known: {sorted(SYSTEMS)}") from None
+        raise ValueError(f"unknown system {name!r}; known: {', '.join(sorted(SYSTEMS))}") from None
     return cls(**kwargs)  # type: ignore[arg-type]
