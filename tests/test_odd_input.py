@@ -508,6 +508,8 @@ def test_a_folder_that_cannot_be_made_on_a_read_only_disk_is_named(tmp_path: Pat
     ("frames", "has 1 frame per sequence (a video needs two): piga-train-model"),
     ("both", "has 2 action columns (a pendulum takes 1) and 1 frame per sequence (a video needs two): piga-train-model"),
     ("wide", "has frames of 64x24 px (a model takes square ones): piga-train-model"),
+    ("system", "has the system 'banana', which no model knows (known: bouncing, gravity, pendulum, spring): "
+               "piga-train-model"),
 ])
 def test_show_warns_once_of_what_the_other_commands_refuse(odd: str, needle: str, tiny_data: Path, tmp_path: Path,
                                                            capsys: pytest.CaptureFixture[str]) -> None:
@@ -518,7 +520,7 @@ def test_show_warns_once_of_what_the_other_commands_refuse(odd: str, needle: str
     data = tmp_path / "odd.h5"
     shutil.copyfile(tiny_data, data)
     with h5py.File(data, "a") as f:
-        for name in ("frames", "actions", "states", "rewards"):
+        for name in ("frames", "actions", "states", "rewards") if odd != "system" else ():
             array = f[name][()]
             if odd == "wide":
                 array = array[..., 20:44] if name == "frames" else array
@@ -531,6 +533,8 @@ def test_show_warns_once_of_what_the_other_commands_refuse(odd: str, needle: str
             f[name] = array
         if odd == "wide":  # frames no env rendered (the env_config's 64x64 ones are refused on open)
             del f.attrs["env_config"]
+        if odd == "system":  # drawn without a word: it names no model
+            f.attrs["system"] = "banana"
     code, out, err = run_in_process("piga-show", main, str(data), "--out", str(tmp_path / "s.png"), capsys=capsys)
     assert code == 0 and (tmp_path / "s.png").exists() and "wrote" in out, err
     assert err.count("\n") == 1 and err.startswith("piga-show: warning: ") and needle in err, err

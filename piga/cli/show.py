@@ -120,9 +120,15 @@ def _faded_note(frames: np.ndarray, side: int) -> str | None:
 
 
 def _refused_elsewhere(info: DatasetInfo) -> str | None:
-    """What the other commands refuse in a file that the strip draws all the same, in one line: a pendulum's action
-    columns other than its one torque, sequences of one frame, and frames that are not square (None: none)."""
+    """What the other commands refuse in a file that the strip draws all the same, in one line: a system that no model
+    knows, a pendulum's action columns other than its one torque, sequences of one frame, and frames that are not
+    square (None: none)."""
     odd = []
+    if info.system != "pendulum":  # (the models' list imports torch: not for the pendulum's files, the common case)
+        from piga.world.model import SYSTEM_SHAPES
+
+        if info.system not in SYSTEM_SHAPES:
+            odd.append(f"the system {info.system!r}, which no model knows (known: {', '.join(sorted(SYSTEM_SHAPES))})")
     if info.image_shape[0] != info.image_shape[1]:
         odd.append(f"frames of {info.image_shape[0]}x{info.image_shape[1]} px (a model takes square ones)")
     if info.system == "pendulum" and info.action_dim != 1:
