@@ -70,3 +70,18 @@ def test_the_cli_refuses_a_batch_too_large_for_the_memory_before_anything_is_wri
                                   "--batch-size", "4", "--quiet", capsys=capsys)
     assert_one_line(code, err, "training on frames of 64x64 needs about", "lower --batch-size to 1 or less")
     assert not out.exists()
+
+
+def test_the_benchmark_compares_the_count_with_a_measured_step(tmp_path: Path) -> None:
+    """benchmarks/training_memory.py: one small case in a fresh process; the count covers what the step took."""
+    import json
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    import training_memory
+
+    out = tmp_path / "memory"
+    assert training_memory.main(["--out", str(out), "--sizes", "32"]) == 0
+    (row,) = json.loads(out.with_suffix(".json").read_text())["cases"]
+    assert row["size"] == 32 and row["batch"] == 2 and row["measured_gib"] >= 0 and row["counted_gib"] > 0
+    assert "| 32x32 | 2 |" in out.with_suffix(".md").read_text()

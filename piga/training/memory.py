@@ -10,15 +10,9 @@ before the kernel killed the process without a word. The need, refused before an
 - per window of the batch: twice the bytes autograd saves (:func:`piga.world.variants.activation_bytes`), the
   gradients of those activations being made as the backward pass frees them.
 
-Measured (fast preset, one thread): the resident memory that one forward and backward pass added to a process that
-held the model, against what this counts for the same step (gradients, temporaries and activations):
-
-| frames | batch | measured | counted |
-|---|---|---|---|
-| 1024x1024 | 1 | 6.67 GiB | 7.91 GiB |
-| 512x512 | 2 | 2.05 GiB | 2.38 GiB |
-| 256x256 | 2 | 0.53 GiB | 0.60 GiB |
-| 64x64 | 32 | 0.17 GiB | 0.23 GiB |
+Checked against one real forward and backward pass (fast preset, one thread) by ``benchmarks/training_memory.py``
+(results/training_memory.md): the count for the same pass is 1.08 to 1.62 times the rise of the process's resident
+memory, from 64x64 frames with a batch of 32 to 1024x1024 with a batch of 1.
 """
 
 from __future__ import annotations
