@@ -266,6 +266,12 @@ def _full_disk(monkeypatch: pytest.MonkeyPatch) -> None:
     ("piga-baseline", ["planet", "x.h5", "--out", "r", "--free", "3"], "unrecognized arguments: --free 3"),
     ("piga-baseline", ["ddpg", "--obs", "state", "--out", "r", "--learning", "1"], "unrecognized arguments: --learning 1"),
     ("piga-demo", ["--seq", "3"], "unrecognized arguments: --seq 3"),
+    # a required option abbreviated was refused as missing ("required: --out"), with no word of the abbreviation
+    ("piga-collect", ["--ou", "x.h5"], "unrecognized argument --ou: options are taken only as spelt in full; give --out"),
+    ("piga-import", ["v", "a.csv", "--d", "0.05", "--out", "x.h5"], "unrecognized argument --d: options are taken "
+                                                                   "only as spelt in full; give --dt"),
+    ("piga-baseline", ["planet", "x.h5", "--ou=r"], "unrecognized argument --ou: options are taken only as spelt in "
+                                                    "full; give --out"),
 ])
 def test_abbreviations_are_refused(prog: str, argv: list[str], needle: str, tmp_path: Path,
                                    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
@@ -3050,6 +3056,15 @@ def test_import_names_a_folder_given_as_the_actions(frame_folders: dict[str, Pat
     refused("piga-import", [str(frame_folders["moving"]), str(acts), "--dt", "0.05", "--out", str(tmp_path / "o.h5")],
             capsys, f"{acts} is a folder, not an actions CSV file")
     assert _listing(tmp_path) == ["acts"]
+
+
+def test_import_names_a_data_file_given_as_the_actions(frame_folders: dict[str, Path], tiny_data: Path, tmp_path: Path,
+                                                       capsys: pytest.CaptureFixture[str]) -> None:
+    """It said "byte 0x89 is not UTF-8 text; save the file as UTF-8", which no re-save of an HDF5 file answers."""
+    line = refused("piga-import", [str(frame_folders["moving"]), str(tiny_data), "--dt", "0.05", "--out",
+                                   str(tmp_path / "o.h5")], capsys, f"{tiny_data} is an HDF5 file",
+                   "not an actions CSV file; give the CSV of the recording's actions")
+    assert "UTF-8" not in line and _listing(tmp_path) == []
 
 
 def test_planet_iterative_refuses_another_envs_file(files: dict[str, Path], tmp_path: Path,

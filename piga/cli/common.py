@@ -79,6 +79,17 @@ class ArgumentParser(argparse.ArgumentParser):
         return super().add_argument(*args, **kwargs)
 
     def error(self, message: str) -> NoReturn:
+        if message.startswith("the following arguments are required:"):
+            # argparse says a required option is missing before it names an unknown one: "--ou x.h5" was refused as
+            # "required: --out", with no word that --ou is no option (abbreviations are off)
+            required = _required_flags(self)
+            for token in self._given_args:
+                flag = token.split("=", 1)[0]
+                full = sorted({name for name in required if flag.startswith("--") and name.startswith(flag) and name != flag})
+                if full:
+                    message = (f"unrecognized argument {flag}: options are taken only as spelt in full; give "
+                               f"{' or '.join(full)}")
+                    break
         self.exit(1, f"{self.prog}: error: {message} (see --help)\n")
 
     def parse_known_args(self, args: Sequence[str] | None = None,  # type: ignore[override]
@@ -87,6 +98,7 @@ class ArgumentParser(argparse.ArgumentParser):
         rather than the last one silently winning (``--dt 0.05 --dt 0.1``). Options meant to repeat (``append``,
         ``extend``, ``count``) may. Each parser (a subcommand's too) checks its own options."""
         self._given_once: dict[argparse.Action, list[str]] = {}
+        self._given_args = list(sys.argv[1:] if args is None else args)  # for error(): the options as written
         for action in self._actions:  # config fields named in a config's ValueError are shown as these flags
             longs = [s for s in action.option_strings if s.startswith("--")]
             if longs and action.dest not in ("help", argparse.SUPPRESS):
@@ -638,6 +650,17 @@ def _failed_allocation(exc: RuntimeError) -> str | None:
 
     found = re.search(r"can't allocate memory: you tried to allocate (\d+) bytes", str(exc))
     return None if found is None else format_bytes(float(found.group(1)))
+
+
+def _required_flags(parser: argparse.ArgumentParser) -> list[str]:
+    """The long names of the required options of ``parser`` and of its subcommands (their error reaches the parent's)."""
+    flags = []
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            flags += [flag for sub in action.choices.values() for flag in _required_flags(sub)]
+        elif action.required:
+            flags += [flag for flag in action.option_strings if flag.startswith("--")]
+    return flags
 
 
 def check_model_folder(model: str, writers: str = "piga-train-model or piga-baseline") -> None:
