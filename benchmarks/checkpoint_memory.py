@@ -22,7 +22,6 @@ Writes ``OUT.json`` and ``OUT.md``.
 from __future__ import annotations
 
 import io
-import multiprocessing
 import shlex
 import sys
 import tempfile
@@ -30,7 +29,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from common import machine, machine_words, out_prefix, write_page
+from common import machine, machine_words, measured_in_fresh_process, out_prefix, peak_memory_readable, write_page
 from piga.cli.common import ArgumentParser, positive_int
 
 #: The ways compared: the buffer as bytes inside checkpoint.pt (as before), or streamed into its own file (piga's).
@@ -97,10 +96,6 @@ def measure(way: str, buffer_size: int) -> dict[str, float]:
     return out
 
 
-def _child(way: str, buffer_size: int, queue: Any) -> None:
-    queue.put(measure(way, buffer_size))
-
-
 def markdown(record: dict[str, Any]) -> str:
     rows = record["ways"]
     lines = [
@@ -135,22 +130,13 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--buffer-size", type=positive_int, default=30_000,
                    help="transitions in the replay buffer (DrQ-v2's runs: 100000, 2.5 GB) (default %(default)s)")
     args = p.parse_args(argv)
-    if not Path("/proc/self/clear_refs").exists():
-        print("checkpoint_memory.py: error: needs Linux's /proc/self/status and clear_refs to read peak memory",
-              file=sys.stderr)
+    if not peak_memory_readable("checkpoint_memory.py"):
         return 1
-    context = multiprocessing.get_context("spawn")
     ways = {}
     for way in WAYS:
-        queue = context.Queue()
-        child = context.Process(target=_child, args=(way, args.buffer_size, queue))
-        child.start()
-        child.join()  # (the result is a few numbers: the queue never blocks the child's exit)
-        if child.exitcode != 0:
-            print(f"checkpoint_memory.py: error: measuring '{way}' failed (exit {child.exitcode}; killed for memory?)",
-                  file=sys.stderr)
+        if (row := measured_in_fresh_process(measure, (way, args.buffer_size), "checkpoint_memory.py", f"'{way}'")) is None:
             return 1
-        ways[way] = queue.get(timeout=60)
+        ways[way] = row
         print(f"{way}: {ways[way]}")
     command = shlex.join(["python", "benchmarks/checkpoint_memory.py", *(sys.argv[1:] if argv is None else argv)])
     record = {"command": command, "machine": machine(), "buffer_size": args.buffer_size, "ways": ways}

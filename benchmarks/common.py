@@ -79,6 +79,36 @@ def change_cells(before: dict[str, Any] | None, after: dict[str, Any]) -> str:
             f"{cell('success_rate', before.get('x1.4'), x14, '.0f')}% ({x14['episodes']})")
 
 
+
+def peak_memory_readable(script: str) -> bool:
+    """Whether this machine lets a memory benchmark read its peak (Linux's /proc/self/status and clear_refs); prints
+    ``script``'s one-line error where it does not."""
+    if Path("/proc/self/clear_refs").exists():
+        return True
+    print(f"{script}: error: needs Linux's /proc/self/status and clear_refs to read peak memory", file=sys.stderr)
+    return False
+
+
+def _put_result(measure: Callable[..., Any], args: tuple, queue: Any) -> None:
+    queue.put(measure(*args))
+
+
+def measured_in_fresh_process(measure: Callable[..., Any], args: tuple, script: str, what: str) -> Any:
+    """``measure(*args)`` in a fresh (spawned) process, so that its peak memory is its own; its result, or None after
+    ``script``'s one-line error naming ``what`` where the process failed (killed for memory, say)."""
+    import multiprocessing
+
+    context = multiprocessing.get_context("spawn")
+    queue = context.Queue()
+    child = context.Process(target=_put_result, args=(measure, args, queue))
+    child.start()
+    child.join()  # (the result is a few numbers: the queue never blocks the child's exit)
+    if child.exitcode != 0:
+        print(f"{script}: error: measuring {what} failed (exit {child.exitcode}; killed for memory?)", file=sys.stderr)
+        return None
+    return queue.get(timeout=60)
+
+
 def write_page(out: Path, record: dict[str, Any], page: str) -> None:
     """Writes ``OUT.json`` (the record) and ``OUT.md`` (the page), both or neither, and says so."""
     from piga.io.atomic import atomic_output, write_json, written_together

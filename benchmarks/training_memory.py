@@ -18,13 +18,12 @@ Writes ``OUT.json`` and ``OUT.md``.
 
 from __future__ import annotations
 
-import multiprocessing
 import shlex
 import sys
 from pathlib import Path
 from typing import Any
 
-from common import machine, machine_words, out_prefix, write_page
+from common import machine, machine_words, measured_in_fresh_process, out_prefix, peak_memory_readable, write_page
 from piga.cli.common import ArgumentParser
 
 #: (frame side, batch) measured by default: the default 64 px run, and larger frames where the check matters.
@@ -62,10 +61,6 @@ def measure(size: int, batch: int) -> dict[str, float]:
             "measured_gib": measured, "counted_gib": counted}
 
 
-def _child(size: int, batch: int, queue: Any) -> None:
-    queue.put(measure(size, batch))
-
-
 def markdown(record: dict[str, Any]) -> str:
     lines = ["# piga-train-model's memory check against one training step", "",
              f"From `{record['command']}` on {machine_words(record['machine'])}.", "",
@@ -90,25 +85,16 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--sizes", type=int, nargs="+", default=None,
                    help="frame sides, each with the batch of CASES, or 2 (default: CASES)")
     args = p.parse_args(argv)
-    if not Path("/proc/self/clear_refs").exists():
-        print("training_memory.py: error: needs Linux's /proc/self/status and clear_refs to read peak memory",
-              file=sys.stderr)
+    if not peak_memory_readable("training_memory.py"):
         return 1
     batches = dict(CASES)
     cases = CASES if args.sizes is None else tuple((s, batches.get(s, 2)) for s in args.sizes)
-    context = multiprocessing.get_context("spawn")
     rows = []
     for size, batch in cases:
-        queue = context.Queue()
-        child = context.Process(target=_child, args=(size, batch, queue))
-        child.start()
-        child.join()  # (the result is a few numbers: the queue never blocks the child's exit)
-        if child.exitcode != 0:
-            print(f"training_memory.py: error: measuring {size} px failed (exit {child.exitcode}; killed for memory?)",
-                  file=sys.stderr)
+        if (row := measured_in_fresh_process(measure, (size, batch), "training_memory.py", f"{size} px")) is None:
             return 1
-        rows.append(queue.get(timeout=60))
-        print(f"{size} px, batch {batch}: {rows[-1]}")
+        rows.append(row)
+        print(f"{size} px, batch {batch}: {row}")
     command = shlex.join(["python", "benchmarks/training_memory.py", *(sys.argv[1:] if argv is None else argv)])
     record = {"command": command, "machine": machine(), "cases": rows}
     write_page(args.out, record, markdown(record))
