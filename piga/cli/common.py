@@ -83,10 +83,9 @@ class ArgumentParser(argparse.ArgumentParser):
             # argparse says a required option is missing before it names an unknown one: "--ou x.h5" was refused as
             # "required: --out", with no word that --ou is no option (abbreviations are off)
             required = _required_flags(self)
-            for token in self._given_args:
-                flag = token.split("=", 1)[0]
-                full = sorted({name for name in required if flag.startswith("--") and name.startswith(flag) and name != flag})
-                if full:
+            for flag in (token.split("=", 1)[0] for token in getattr(self, "_given_args", ())):
+                full = sorted({name for name in required if name.startswith(flag) and name != flag})
+                if flag.startswith("--") and full:
                     message = (f"unrecognized argument {flag}: options are taken only as spelt in full; give "
                                f"{' or '.join(full)}")
                     break

@@ -182,7 +182,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 elif not isinstance(exc, KeyboardInterrupt) or replaced.moved:
                     # refused before a model, the files this demo made would make the rerun refuse for them; an
                     # earlier demo that it replaces comes back (replacing) as it was, without them
-                    for path in (data, strip, goal_png, control_md):
+                    for path in (out / name for name in DEMO_FILES):
                         if before[path] is False and path.exists():
                             path.unlink()
                 raise
@@ -222,7 +222,7 @@ def _settle_demo(out: Path, data: Path, run_dir: Path) -> str | None:
     settle_replaced(run_dir)
     new = ((run_dir / CHECKPOINT).is_file() and data.is_file() and _trained_on(run_dir, data, strict=True)
            and not ((aside / data.name).is_file() and _trained_on(run_dir, aside / data.name, strict=True)))
-    return settle_set_aside(out, DEMO_FILES, keep_new=new, what="the earlier demo")
+    return settle_set_aside(out, DEMO_FILES, new, "the earlier demo", "demo")
 
 
 def _trained_on(run_dir: Path, data: Path, strict: bool = False) -> bool:

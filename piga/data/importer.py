@@ -361,7 +361,7 @@ def read_actions(path: str | Path) -> np.ndarray:
     except UnicodeDecodeError as exc:
         if (kind := _media_kind(p)) is not None:  # the arguments swapped: "re-save it as UTF-8" would be no help
             raise ValueError(f"{p} is {kind}, not an actions CSV file; {ORDER}") from None
-        if p.read_bytes()[:8] == b"\x89HDF\r\n\x1a\n":  # HDF5's signature: a data file, which no re-save makes a CSV
+        if _is_hdf5(p):  # a data file, which no re-save makes a CSV
             raise ValueError(f"{p} is an HDF5 file (a data file of piga's?), not an actions CSV file; give the CSV of "
                              f"the recording's actions ({ORDER})") from None
         line = p.read_bytes()[:exc.start].count(b"\n") + 1

@@ -97,24 +97,15 @@ def replacing() -> Iterator[ReplacedRun]:
 def settle_replaced(run_dir: str | os.PathLike[str]) -> str | None:
     """Settles the ``.replaced`` folder that a command killed outright left in ``run_dir``: deleted where the folder
     holds a checkpoint (the new run's), put back where it does not. Returns a line that says which, or None."""
-    run_dir = Path(run_dir)
-    aside = run_dir / ASIDE
-    if not aside.is_dir() or aside.is_symlink():
-        return None
-    if _present(run_dir / CHECKPOINT):
-        _remove(aside)
-        return (f"removed {aside}: the run that an --overwrite replaced, left there by a command stopped after the "
-                "new run's first checkpoint")
-    moved = [name for name in RUN_OUTPUTS if _present(aside / name)]
-    _restore(run_dir, moved, moved)  # (what the new run wrote beside them, a record or curves without a checkpoint, stays)
-    return (f"restored the run in {run_dir} from {aside}, where an --overwrite stopped before the new run's first "
-            "checkpoint had set it aside")
+    # (what the new run wrote beside them, a record or curves without a checkpoint, stays)
+    return settle_set_aside(run_dir, RUN_OUTPUTS, _present(Path(run_dir) / CHECKPOINT), "the run", "run")
 
 
-def settle_set_aside(folder: str | os.PathLike[str], names: Sequence[str], keep_new: bool, what: str) -> str | None:
-    """Settles ``folder/.replaced`` where a command killed outright set aside the outputs ``names`` of ``what`` (an
-    earlier run that is not a training run: piga-demo's files): deleted where ``keep_new`` (the new run got as far
-    as its first checkpoint), else put back in place of the new versions. Returns a line that says which, or None."""
+def settle_set_aside(folder: str | os.PathLike[str], names: Sequence[str], keep_new: bool, what: str,
+                     kind: str) -> str | None:
+    """Settles ``folder/.replaced`` where a command killed outright set aside the outputs ``names`` of ``what`` (the
+    earlier run, or piga-demo's earlier files) before the new ``kind``'s first checkpoint: deleted where ``keep_new``
+    (the new one got that far), else put back in place of the new versions. Returns a line that says which, or None."""
     folder = Path(folder)
     aside = folder / ASIDE
     if not aside.is_dir() or aside.is_symlink():
@@ -122,8 +113,8 @@ def settle_set_aside(folder: str | os.PathLike[str], names: Sequence[str], keep_
     if keep_new:
         _remove(aside)
         return (f"removed {aside}: {what} that an --overwrite replaced, left there by a command stopped after the new "
-                "one's first checkpoint")
+                f"{kind}'s first checkpoint")
     moved = [name for name in names if _present(aside / name)]
     _restore(folder, moved, moved)
-    return (f"restored {what} in {folder} from {aside}, where an --overwrite stopped before the new one's first "
+    return (f"restored {what} in {folder} from {aside}, where an --overwrite stopped before the new {kind}'s first "
             "checkpoint had set it aside")
