@@ -630,6 +630,9 @@ def test_the_smallest_default_file_is_accepted(tmp_path: Path) -> None:
     assert check_compatible(model, data).channels == 1
     with pytest.raises(DiagnosisInputError, match=r"frames are \(64, 64, 1\), the model takes 64x64 with 3 channel"):
         check_compatible(PhysicsModel(ModelConfig(channels=3)), data)
+    with pytest.raises(DiagnosisInputError, match=r"frames are \(64, 64, 1\), the model takes 32x32 with 1 channel\(s\); "
+                       r"import or collect them at --image-size 32 \(piga-import, piga-collect\)$"):
+        check_compatible(PhysicsModel(ModelConfig(image_size=32)), data)
     # another frame interval says what to record (it named none); a dm_control file, the action repeat that makes it
     with pytest.raises(DiagnosisInputError, match=r"frame interval 0.05 s, the model was trained at 0.1 s; record again "
                        r"with frames 0.1 s apart, or identify a model on frames of this interval$"):

@@ -393,6 +393,8 @@ def test_a_failed_allocation_is_out_of_memory(capsys: pytest.CaptureFixture[str]
     (["--system", "spring", "--env", "piga/PixelPendulum-v0"], ["--env: pendulum option(s), not for --system spring"], 1),
     (["--system", "spring", "--effect", "damping=0.1"], ["--effect: pendulum option(s), not for --system spring"], 1),  # ignored
     (["--system", "spring", "--g", "3"], ["--g: not a parameter of --system spring; it takes --k, --l"], 1),  # "['g']"
+    (["--system", "gravity", "--gravity", "5"], ["--gravity: pendulum option(s), not for --system gravity; its "
+                                                 "gravitational constant is --g (default 60)"], 1),
     (["--env", "piga/DMCPendulum-v0", "--env-option", "flip=sideways"], ["--env-option flip='sideways' is out of range"], 1),
 ])
 def test_collect_refuses(argv: list[str], needles: list[str], code: int, tmp_path: Path,
@@ -1761,7 +1763,7 @@ def test_demo_refused_in_training_leaves_nothing(tmp_path: Path, capsys: pytest.
         Path(argv[argv.index("--out") + 1]).write_bytes(b"png")
         return 0
 
-    def refused_training(argv: Sequence[str]) -> int:
+    def refused_training(argv: Sequence[str], **_: Any) -> int:
         raise PigaError("27 training windows are fewer than one batch of 32")
 
     monkeypatch.setattr(demo, "collect", fake_collect)
@@ -1780,7 +1782,7 @@ def test_demo_failed_after_a_checkpoint_keeps_its_data_for_resume(tmp_path: Path
     def fake_collect(config: Any, out: Path, **kwargs: Any) -> None:
         Path(out).write_bytes(b"data")
 
-    def diverged(argv: Sequence[str], prog: str) -> int:
+    def diverged(argv: Sequence[str], prog: str, **_: Any) -> int:
         run = Path(argv[argv.index("--out") + 1])
         run.mkdir(parents=True, exist_ok=True)
         (run / "checkpoint.pt").write_bytes(b"ckpt")
@@ -1794,6 +1796,29 @@ def test_demo_failed_after_a_checkpoint_keeps_its_data_for_resume(tmp_path: Path
     assert {"demo/pendulum.h5", "demo/model/checkpoint.pt"} <= set(_listing(tmp_path))
 
 
+def test_demo_whose_model_did_not_learn_says_the_demos_way_to_train_longer(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    """The training's own fix (--max-minutes, --budget-steps: not the demo's options) gave way to the demo's, said once."""
+    from piga.cli.common import PigaError
+
+    def fake_collect(config: Any, out: Path, **kwargs: Any) -> None:
+        Path(out).write_bytes(b"data")
+
+    def not_learned(argv: Sequence[str], prog: str, longer: Any) -> int:
+        run = Path(argv[argv.index("--out") + 1])
+        run.mkdir(parents=True, exist_ok=True)
+        (run / "checkpoint.pt").write_bytes(b"ckpt")
+        raise PigaError(f"the run did not identify its parameters: it settled on nothing; {longer(260, 260)}")
+
+    monkeypatch.setattr(demo, "collect", fake_collect)
+    monkeypatch.setattr(demo.show, "main", lambda argv: 0)
+    monkeypatch.setattr(demo.train, "main", not_learned)
+    line = refused("piga-demo", ["--out", str(tmp_path / "demo")], capsys, "did not identify",
+                   f"{tmp_path / 'demo'} keeps this demo's data and model: run the demo again with --resume and a "
+                   "larger --epochs (its training took 260 of 260 planned steps), or with --overwrite and more --sequences")
+    assert line.count("keeps this demo's") == 1 and "--max-minutes" not in line and "--budget-steps" not in line
+
+
 def test_demo_interrupted_in_training_says_what_it_kept(tmp_path: Path, capsys: pytest.CaptureFixture[str],
                                                         monkeypatch: pytest.MonkeyPatch) -> None:
     from piga.cli.common import Interrupted
@@ -1802,7 +1827,7 @@ def test_demo_interrupted_in_training_says_what_it_kept(tmp_path: Path, capsys: 
     def small_collect(config: Any, path: Path, **kwargs: Any) -> None:  # (a real file: --resume reads it)
         collect(replace(config, steps=4, workers=1), path, **kwargs)
 
-    def interrupted_training(argv: Sequence[str], prog: str) -> int:  # as piga-train-model after its first checkpoint
+    def interrupted_training(argv: Sequence[str], prog: str, **_: Any) -> int:  # as piga-train-model after its first checkpoint
         raise Interrupted("model/checkpoint.pt holds epoch 1; continue with --resume")
 
     monkeypatch.setattr(demo, "collect", small_collect)
@@ -1834,7 +1859,7 @@ def test_demo_resume_continues_from_what_it_kept(tmp_path: Path, capsys: pytest.
         calls.append(("collect", []))
         collect(replace(config, steps=8, workers=1), path, **kwargs)
 
-    def interrupted_training(argv: Sequence[str], prog: str) -> int:
+    def interrupted_training(argv: Sequence[str], prog: str, **_: Any) -> int:
         calls.append(("train", list(argv)))
         (out / "model").mkdir()
         (out / "model" / "checkpoint.pt").write_bytes(b"ckpt")
@@ -1857,7 +1882,7 @@ def test_demo_resume_continues_from_what_it_kept(tmp_path: Path, capsys: pytest.
     (out / "pendulum.h5").write_bytes(kept)
     calls.clear()
 
-    def resumed_training(argv: Sequence[str], prog: str) -> int:
+    def resumed_training(argv: Sequence[str], prog: str, **_: Any) -> int:
         calls.append(("train", list(argv)))
         raise Interrupted("again")
 
@@ -4872,7 +4897,7 @@ def test_demo_resume_trains_anew_a_run_of_an_earlier_demos_data(tmp_path: Path, 
     def small_collect(config: Any, path: Path, **kwargs: Any) -> None:
         collect(replace(config, steps=8, workers=1), path, **kwargs)
 
-    def interrupted_training(argv: Sequence[str], prog: str) -> int:
+    def interrupted_training(argv: Sequence[str], prog: str, **_: Any) -> int:
         calls.append(list(argv))
         raise Interrupted("stopped")
 

@@ -492,6 +492,34 @@ def test_a_quoted_tilde_is_named_not_made(tmp_path: Path, monkeypatch: pytest.Mo
         check_writable_target("a b/x.h5", overwrite=False)
 
 
+def test_a_quoted_tilde_folder_is_named_not_made(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A folder output makes its parents: --out '~/r' (quoted) made a folder named "~" in the working folder, which a
+    later `rm -rf ~` to remove it would take for the home folder. A "~" folder that exists is the user's."""
+    monkeypatch.chdir(tmp_path)
+    for out in ("~/r", "~", "~user/r"):
+        with pytest.raises(FileNotFoundError, match=f"--out {out}: '~' is a folder's name here, as the shell did not"):
+            check_folder_target(out)
+    assert list(tmp_path.iterdir()) == []
+    (tmp_path / "~").mkdir()
+    assert check_folder_target("~/r") == Path("~/r")
+
+
+@pytest.mark.parametrize("command", ["piga-train-model", "piga-diagnose", "piga-baseline", "piga-demo"])
+def test_a_quoted_tilde_folder_is_refused_by_the_commands_that_make_one(
+        command: str, tiny_data: Path, tiny_run: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    from piga.cli import baseline, demo, diagnose, train
+
+    main, argv = {"piga-train-model": (train.main, [str(tiny_data)]),
+                  "piga-diagnose": (diagnose.main, ["--model", str(tiny_run), "--data", str(tiny_data)]),
+                  "piga-baseline": (baseline.main, ["planet", str(tiny_data), "--chunk-length", "6"]),
+                  "piga-demo": (demo.main, [])}[command]
+    monkeypatch.chdir(tmp_path)
+    code, _, err = run_in_process(command, main, *argv, "--out", "~/r", capsys=capsys)
+    assert code == 1 and err.count("\n") == 1 and "the shell did not expand it" in err, err
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_a_folder_that_cannot_be_made_on_a_read_only_disk_is_named(tmp_path: Path,
                                                                    monkeypatch: pytest.MonkeyPatch) -> None:
     """On a read-only file system, --out ro/sub/x.h5 was told "make it first (mkdir -p ro/sub)", which fails there."""

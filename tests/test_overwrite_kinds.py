@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -221,7 +222,7 @@ def test_a_demo_overwrite_stopped_before_its_first_checkpoint_leaves_the_earlier
         _new_collect(config, path)
         raise KeyboardInterrupt
 
-    def training(argv: list[str], prog: str) -> int:
+    def training(argv: list[str], prog: str, **_: Any) -> int:
         assert (out / "pendulum.h5").read_bytes() == b"new data"
         raise PigaError("refused") if stop == "refused in training" else KeyboardInterrupt
 
@@ -246,7 +247,7 @@ def test_a_demo_overwrite_that_got_a_checkpoint_replaces_the_earlier_demo_whole(
     out = tmp_path / "demo"
     _earlier_demo(out)
 
-    def trained_then_stopped(argv: list[str], prog: str) -> int:
+    def trained_then_stopped(argv: list[str], prog: str, **_: Any) -> int:
         (out / "model" / "checkpoint.pt").write_bytes(b"new checkpoint")
         raise Interrupted("model/checkpoint.pt holds epoch 1; continue with --resume")
 

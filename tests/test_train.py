@@ -414,6 +414,38 @@ def test_a_run_stopped_after_its_physics_trained_exits_3_with_a_warning(small_da
     assert (out / "checkpoint.pt").exists()
 
 
+def test_a_command_training_through_this_one_says_its_own_way_to_train_longer(small_data: Path, tmp_path: Path,
+                                                                          capsys: pytest.CaptureFixture[str]) -> None:
+    """piga-demo's training that did not converge told its user to raise --max-minutes or --budget-steps, which
+    piga-demo does not take: the command that trains through piga-train-model says its own way instead."""
+    out = tmp_path / "r"
+
+    def longer(planned: int, steps: int) -> str:
+        return f"run the demo with --epochs (it took {steps} of {planned})"
+
+    code, _, err = run_in_process("piga-demo", lambda argv: cli.main(argv, prog="piga-demo", longer=longer),
+                                  str(small_data), "--out", str(out), "--batch-size", "4", "--epochs", "10",
+                                  "--warmup-fraction", "0.05", "--max-minutes", "1e-9", "--quiet", "--threads", "1",
+                                  capsys=capsys)
+    assert code == NOT_CONVERGED, err
+    assert err.count("\n") == 1 and err.startswith("piga-demo: warning: not converged: "), err
+    assert "run the demo with --epochs (it took 4 of 40)" in err and "--max-minutes" not in err, err
+    assert "(options of piga-train-model" not in err, err  # every option it names is the demo's
+
+
+def test_another_commands_reason_names_whose_options_it_leaves() -> None:
+    from piga.training.convergence import length_fix
+
+    verdict = {"planned_steps": 40, "steps": 40,
+               "reason": "g never left its initial value in 30 physics steps; raise --lr-physics or " + length_fix(40, 40)}
+    owner = " (options of piga-train-model d.h5 --out r)"
+    assert cli._reason_for(verdict, cli.PROG, None, owner) == (verdict["reason"], "")
+    reason, whose = cli._reason_for(verdict, "piga-demo", lambda planned, steps: f"--epochs past {steps}", owner)
+    assert reason.endswith("raise --lr-physics or --epochs past 40") and whose == owner  # --lr-physics is not its own
+    verdict["reason"] = "too short to judge; " + length_fix(40, 40)
+    assert cli._reason_for(verdict, "piga-demo", lambda planned, steps: "--epochs", owner) == ("too short to judge; --epochs", "")
+
+
 def test_converged_is_false_when_the_parameters_never_moved(small_data: Path, tmp_path: Path,
                                                            capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "r"

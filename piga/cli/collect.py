@@ -324,7 +324,10 @@ def _collect_scene(args: argparse.Namespace, argv: Sequence[str] | None, written
                                   "max_speed", "env", "env_option")
                      if name in written]
     if pendulum_only:
-        raise PigaError(f"{', '.join(pendulum_only)}: pendulum option(s), not for --system {args.system}")
+        own_g = "--gravity" in pendulum_only and "g" in SCENES[args.system]["params"]  # the scene's own g is --g
+        raise PigaError(f"{', '.join(pendulum_only)}: pendulum option(s), not for --system {args.system}"
+                        + (f"; its gravitational constant is --g (default {format_default(SCENES[args.system]['params']['g'])})"
+                           if own_g else ""))
     params = {flag.lstrip("-"): getattr(args, flag.lstrip("-")) for flag in SCENE_PARAMETERS
               if getattr(args, flag.lstrip("-")) is not None}
     own = SCENES[args.system]["params"]

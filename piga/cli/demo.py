@@ -197,11 +197,22 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise Interrupted(f"nothing was written; {out} holds the earlier demo as it was") from None
         raise KeyboardInterrupt from None
     except PigaError as exc:
-        if trained():
+        if trained() and _kept(out) not in str(exc):  # (a training that did not learn said it, with its fix)
             raise PigaError(f"{' '.join(str(exc).split())}; {out} keeps this demo's data and model: run it with "
                             "--resume to continue it (and a larger --epochs where the training used all its planned "
                             "steps), or with --overwrite to start over") from None
         raise
+
+
+def _kept(out: Path) -> str:
+    return f"{out} keeps this demo's data and model"
+
+
+def _longer(out: Path, planned: int, steps: int) -> str:
+    """The demo's way to train its model longer, said where the training did not converge in place of
+    piga-train-model's (--max-minutes and --budget-steps are not the demo's options)."""
+    return (f"{_kept(out)}: run the demo again with --resume and a larger --epochs (its training took {steps} of "
+            f"{planned} planned steps), or with --overwrite and more --sequences")
 
 
 #: The demo's own files in --out, beside its run (model/): what an --overwrite sets aside until its first checkpoint.
@@ -342,7 +353,8 @@ def _run(args: argparse.Namespace, argv: Sequence[str] | None, out: Path, config
     trained = train.main([str(data), "--out", str(run_dir), "--seed", str(args.seed), *how,
                           *(["--epochs", str(args.epochs)] if args.epochs else []),
                           *(["--threads", str(args.threads)] if args.threads else []),
-                          *(["--quiet"] if args.quiet else [])], prog=PROG)
+                          *(["--quiet"] if args.quiet else [])], prog=PROG,
+                         longer=lambda planned, steps: _longer(out, planned, steps))
     import json
 
     from piga.evaluation.evaluate import true_and_error

@@ -6,8 +6,9 @@ import contextlib
 import errno
 import math
 import os
+import re
 import sys
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import asdict, fields, replace
 from pathlib import Path
 
@@ -24,6 +25,7 @@ from piga.io.checkpoint import (CHECKPOINT, RunKind, check_run_files, read_run_r
                                 recorded_data_path, require_piga_run)
 from piga.io.lock import lock_run_folder
 from piga.io.replaced import ReplacedRun, replacing, settle_replaced
+from piga.training.convergence import length_fix
 
 if TYPE_CHECKING:
     from piga.world.model import ModelConfig
@@ -161,12 +163,16 @@ def build_parser() -> ArgumentParser:
     return p
 
 
-def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
+def main(argv: Sequence[str] | None = None, prog: str = PROG, longer: Callable[[int, int], str] | None = None) -> int:
+    """``prog``: the command that trains through this one (piga-demo), which names itself in warnings and errors;
+    ``longer(planned, steps)``: that command's own way to train longer, said in place of this command's
+    (:func:`~piga.training.convergence.length_fix`) where a run did not converge."""
     with replacing() as replaced:  # the run that --overwrite replaces: back in place if this one ends before a checkpoint
-        return _main(argv, prog, replaced)
+        return _main(argv, prog, replaced, longer)
 
 
-def _main(argv: Sequence[str] | None, prog: str, replaced: ReplacedRun) -> int:
+def _main(argv: Sequence[str] | None, prog: str, replaced: ReplacedRun,
+          longer: Callable[[int, int], str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     options_given = given_options(parser, argv)  # the options written, at the default's value too
@@ -506,24 +512,40 @@ def _main(argv: Sequence[str] | None, prog: str, replaced: ReplacedRun) -> int:
               + (f"; encoder angle error {metrics['angle']['mean_abs_error_deg']:.2f} deg" if "angle" in metrics else ""))
         print(f"trained {counted(state.epoch, 'epoch')} ({counted(state.step, 'step')}) in {state.elapsed / 60:.1f} min; "
               f"wrote {run_dir}/metrics.json and figures")
-        # another command training through this one (piga-demo) does not take these options: say whose they are
-        whose = "" if prog == PROG else f" (options of {PROG} {args.data} --out {run_dir})"
+        owner = f" (options of {PROG} {args.data} --out {run_dir})"
+        reason, whose = _reason_for(convergence, prog, longer, owner)
         if convergence["outcome"] == "untrained":
             seeds = f" (seeds {', '.join(map(str, tried))} and {train_config.seed} tried)" if tried else ""
             # (bouncing balls have physics but no parameter: it was refused as not identifying them)
             what = "identify its parameters" if model.learned_parameter_names() else "learn to predict"
-            reason = convergence["reason"]
             if recipe_steps is not None and (lost or empty):  # the cause, with the length's fix for the seed's
                 steps = f"{state.step:,} step" + ("" if state.step == 1 else "s")
                 reason = (f"{reason.split('; ')[0]}, in {'runs' if tried else 'a run'} of {steps} "
                           f"where the {preset} preset plans {recipe_steps:,} for this file: train it that long "
                           "(leave out --epochs and --budget-steps, with --overwrite or another --out) before another "
                           "--seed")
+                whose = "" if prog == PROG else owner
             raise PigaError(f"the run did not {what}{seeds}: {reason}{whose}")
         if convergence["outcome"] == "unsettled":
-            print(f"{prog}: warning: not converged: {convergence['reason']}{whose}", file=sys.stderr)
+            print(f"{prog}: warning: not converged: {reason}{whose}", file=sys.stderr)
             return NOT_CONVERGED
     return 0
+
+
+def _reason_for(convergence: dict[str, Any], prog: str, longer: Callable[[int, int], str] | None,
+                whose: str) -> tuple[str, str]:
+    """The verdict's reason as ``prog`` says it, and ``whose``, the note that names this command as the owner of the
+    options it names, or "" where they are all ``prog``'s: another command training through this one (piga-demo)
+    says its own way to train longer, ``longer``, and takes none of this command's options but the ones it names."""
+    reason = convergence["reason"]
+    if prog == PROG:
+        return reason, ""
+    own = ""
+    if longer is not None:
+        own = longer(convergence["planned_steps"], convergence["steps"])
+        reason = reason.replace(length_fix(convergence["planned_steps"], convergence["steps"]), own)
+    options = set(re.findall(r"--[a-z][a-z-]*", reason)) - set(re.findall(r"--[a-z][a-z-]*", own))
+    return reason, whose if options else ""
 
 
 def one_step_note(model: Any, attrs: dict[str, Any]) -> str | None:

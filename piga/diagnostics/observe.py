@@ -142,8 +142,10 @@ def check_compatible(model: PhysicsModel, path: str | os.PathLike[str], min_sequ
     if info.system != cfg.system:
         raise DiagnosisInputError(f"{path}: data of system {info.system!r}, but the model is a {cfg.system} model")
     if info.image_shape[:2] != (cfg.image_size, cfg.image_size) or info.channels != cfg.channels:
+        fix = (f"; import or collect them at --image-size {cfg.image_size} (piga-import, piga-collect)"
+               if info.channels == cfg.channels else "")
         raise DiagnosisInputError(f"{path}: frames are {info.image_shape}, the model takes {cfg.image_size}x{cfg.image_size} "
-                                  f"with {cfg.channels} channel(s)")
+                                  f"with {cfg.channels} channel(s){fix}")
     if info.action_dim != 1:
         raise DiagnosisInputError(f"{path}: needs one action per step (the pendulum's torque), found {info.action_dim}")
     if abs(info.dt - cfg.dt) > 1e-9 * max(1.0, cfg.dt):

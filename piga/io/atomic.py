@@ -79,9 +79,8 @@ def check_writable_target(path: str | os.PathLike[str], overwrite: bool) -> Path
         if blocking is not None and _read_only(blocking):  # mkdir -p would fail there too
             raise PermissionError(f"folder {folder} does not exist, and cannot be made: {blocking} is on a read-only "
                                   "file system; write somewhere else")
-        if folder.parts and folder.parts[0].startswith("~"):  # quoted, so the shell did not expand it
-            raise FileNotFoundError(f"folder {folder} does not exist: '~' is a folder's name here, as the shell did not "
-                                    "expand it (it was quoted); give the path unquoted, or as $HOME/...")
+        if _unexpanded_home(folder):
+            raise FileNotFoundError(f"folder {folder} does not exist: {UNEXPANDED_HOME}")
         raise FileNotFoundError(f"folder {folder} does not exist; make it first (mkdir -p {shlex.quote(str(folder))})")
     if not os.access(folder, os.W_OK | os.X_OK):
         raise PermissionError(f"folder {folder} is not writable")
@@ -92,6 +91,17 @@ def check_writable_target(path: str | os.PathLike[str], overwrite: bool) -> Path
     if total == 0:  # /proc, /sys: writable to root, yet no file can be made there (a command said so only at the end)
         raise PermissionError(stores_no_files(str(target), folder))
     return target
+
+
+#: Said of a path whose first part, "~", the shell did not expand.
+UNEXPANDED_HOME = ("'~' is a folder's name here, as the shell did not expand it (it was quoted); give the path unquoted, "
+                   "or as $HOME/...")
+
+
+def _unexpanded_home(path: Path) -> bool:
+    """Whether ``path`` starts with a ``~`` (or ``~user``) that the shell did not expand (it was quoted), and no such
+    folder exists here: a command would take it for a folder of that name in the working folder."""
+    return bool(path.parts) and path.parts[0].startswith("~") and not Path(path.parts[0]).exists()
 
 
 def stores_no_files(what: str, folder: Path) -> str:
@@ -223,6 +233,8 @@ def check_folder_target(folder: str | os.PathLike[str], flag: str = "--out", log
                                  "link or make its target first")
     if path.exists() and not path.is_dir():
         raise NotADirectoryError(f"{flag} {path} is a file, not a folder")
+    if _unexpanded_home(path):  # a folder output makes its parents: it would make a folder named "~" here
+        raise FileNotFoundError(f"{flag} {path}: {UNEXPANDED_HOME}")
     blocking = next((p for p in path.parents if p.exists()), None)
     if blocking is not None and not blocking.is_dir():
         raise NotADirectoryError(f"{flag} {path}: {blocking} is a file, not a folder, so {path} cannot be made there")

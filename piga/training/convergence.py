@@ -130,7 +130,9 @@ class Convergence:
         return asdict(self)
 
 
-def _fix(planned: int, steps: int) -> str:
+def length_fix(planned: int, steps: int) -> str:
+    """The fix for a run too short to judge or to learn: train longer, with this command's options (a command that
+    trains through piga-train-model, piga-demo, puts its own in place of this text)."""
     if steps < planned:  # stopped by --max-minutes (a budget over the run's whole life): a larger one continues it
         return ("train longer: continue this run with --resume and a larger --max-minutes (it took "
                 f"{steps} of {planned} planned steps), or give it more data")
@@ -148,7 +150,7 @@ def _blank_fix(background: float, planned: int, steps: int) -> str:
     if background < FAINT_BACKGROUND_MSE:
         return ("the held-out frames differ from the background by under one gray level (the system hardly shows in "
                 "them, or hardly moves): check the data, not the training")
-    return _fix(planned, steps)
+    return length_fix(planned, steps)
 
 
 def check_convergence(state: Any, config: ConvergenceConfig = ConvergenceConfig(),
@@ -213,7 +215,7 @@ def check_convergence(state: Any, config: ConvergenceConfig = ConvergenceConfig(
 
     if physics_steps == 0:
         return verdict("untrained", f"the physics never trained: all {steps} steps were the autoencoder warm-up "
-                                    f"({plan['warmup_steps']} steps); " + _fix(planned, steps))
+                                    f"({plan['warmup_steps']} steps); " + length_fix(planned, steps))
     # A parameter that starts at 0 (the pendulum's angle offset) has no scale of its own: it is judged
     # in absolute terms, and only for drift, since its truth may well be 0.
     scaled = {name: c for name, c in checks.items() if c.start != 0}
@@ -243,13 +245,13 @@ def check_convergence(state: Any, config: ConvergenceConfig = ConvergenceConfig(
                                         f"better than drawing the background alone (MSE {blank[1]:.4g}): raise "
                                         "--lr-physics, or, where --lr was raised, lower it (a network rate too large "
                                         "learns no frames, and leaves the physics nothing to fit); or "
-                                        + _fix(planned, steps))
-        return verdict("untrained", f"{never}; raise --lr-physics or " + _fix(planned, steps))
+                                        + length_fix(planned, steps))
+        return verdict("untrained", f"{never}; raise --lr-physics or " + length_fix(planned, steps))
     if objects is not None and (objects.lost or (objects.empty_slots and checks)) and steps < planned:
         # cut short (--max-minutes): untrained objects are those of a run that barely trained, which --resume
         # continues; another seed was asked for, and the run thrown away
         return verdict("unsettled", f"the run stopped at step {steps} of {planned} planned, before its objects were "
-                                    "learned; " + _fix(planned, steps))
+                                    "learned; " + length_fix(planned, steps))
     if objects is not None and objects.lost:
         return verdict("untrained", objects.reason())
     if objects is not None and objects.empty_slots and checks:  # (a baseline has no parameters to bend)
@@ -261,20 +263,20 @@ def check_convergence(state: Any, config: ConvergenceConfig = ConvergenceConfig(
                                     + _blank_fix(blank[1], planned, steps))
     if steps < planned:
         return verdict("unsettled", f"the run stopped at step {steps} of {planned} planned, before its learning rate "
-                                    "decayed; " + _fix(planned, steps))
+                                    "decayed; " + length_fix(planned, steps))
     short = [name for name, c in checks.items() if c.tail_change is None]
     if short:
         from envs.fields import counted  # here: training runs without gymnasium's import
 
         return verdict("unsettled", f"the run is too short to judge whether {', '.join(short)} settled "
                                     f"({counted(steps, 'step')}, fewer than 5 recorded over its last tenth); "
-                                    + _fix(planned, steps))
+                                    + length_fix(planned, steps))
     drifting = []
     for name, c in checks.items():
         if c.tail_change is not None and abs(c.tail_change) > max(config.drift_tolerance, 2 * (c.tail_spread or 0.0)):
             drifting.append(f"{name} moved {100 * c.tail_change:+.2f}% over the last {100 * config.tail:.0f}% of steps")
     if drifting:
-        return verdict("unsettled", "still drifting at the end: " + "; ".join(drifting) + "; " + _fix(planned, steps))
+        return verdict("unsettled", "still drifting at the end: " + "; ".join(drifting) + "; " + length_fix(planned, steps))
     if not checks:
         return verdict("converged", f"the {'physics' if blank is None else 'prediction'} trained for {physics_steps} "
                                     f"steps (no parameter to learn)" + ("" if blank is None else
@@ -293,20 +295,20 @@ def check_convergence(state: Any, config: ConvergenceConfig = ConvergenceConfig(
         return verdict("untrained", f"its parameters settled, but its held-out predictions (MSE {blank[0]:.4g}) are not "
                                     f"{1 / config.hold_ratio:.3g}x better than holding the last input frame still (MSE "
                                     f"{hold:.4g}): it did not learn the motion, so its parameters mean nothing; give it "
-                                    "more or longer sequences, or " + _fix(planned, steps))
+                                    "more or longer sequences, or " + length_fix(planned, steps))
     moving = [f"{name} moved {100 * c.tail_change:+.2f}% over the last {100 * config.tail:.0f}% of steps, "
               f"{abs(c.tail_speed):.2f}x the sum of its learning rate there (the bar is {config.speed_tolerance:g}x)"
               for name, c in checks.items() if c.tail_speed is not None and c.tail_change is not None
               and abs(c.tail_speed) >= config.speed_tolerance]
     if moving:
         return verdict("unsettled", "a parameter was still on its way when the learning rate decayed: " + "; ".join(moving)
-                       + "; " + _fix(planned, steps))
+                       + "; " + length_fix(planned, steps))
     short_of = [(name, p) for name, p in (profile or {}).items()
                 if name in checks and min(p.lower, p.upper) < 1 - config.profile_tolerance]
     if short_of:
         return verdict("unsettled", "a parameter stopped short of its value: " + "; ".join(
             f"{name} = {p.value:.4g} settled, but the training frames are predicted {100 * (1 - min(p.lower, p.upper)):.0f}% "
-            f"better with {name} = {p.better:.4g}" for name, p in short_of) + "; " + _fix(planned, steps))
+            f"better with {name} = {p.better:.4g}" for name, p in short_of) + "; " + length_fix(planned, steps))
     if not held_out:  # a file of 1 spring sequence x 12 frames settled here with k 53% and l 56% off, its own frames
         # predicted at 0.03x the background's MSE: frames it trained on cannot tell such a fit from a right one
         return verdict("unsettled", "its parameters settled, but the file has no test sequences, so no frame it did "
