@@ -91,6 +91,9 @@ def test_two_candidates_the_data_cannot_separate_give_an_ambiguous_verdict(spin)
     assert out["verdict_class"] == "ambiguous" and sorted(out["ambiguity"]["between"]) == ["bias", "friction"]
     text = markdown(d, "m", "d", "c")
     assert "**Ambiguous between" in text and "would separate them" in text
+    assert "**Warning" not in text  # a model whose records say nothing against it
+    assert "**Warning: the run m did not converge: x.** The effects below" in markdown(
+        d, "m", "d", "c", model_warning="the run m did not converge: x")
     assert d.ambiguity.bic[0] <= d.ambiguity.bic[1] and f"measured with {d.ambiguity.candidates[0]} (the lower BIC)" \
         in text
     # a rival of "none" whose BIC is lower by less than the margin: "none" is no longer called the lower BIC

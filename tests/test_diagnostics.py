@@ -408,6 +408,12 @@ def test_cli_with_env_writes_a_complete_report_and_the_control_comparison(tiny_m
         assert g["typical_free_run_mse_floor"] >= 0
     md = (out / "report.md").read_text()
     assert ("No gap above the floor" in md) == (not g["gap_above_floor"])
+    from piga.io.runs import convergence_warning
+
+    warning = convergence_warning(tiny_model)  # the model's own "did not converge", in the report as on stderr
+    assert warning is not None and report["model_warning"] == warning.removeprefix("warning: ").rstrip(".")
+    assert f"**Warning: {report['model_warning']}.** The effects below are the recording measured against this " \
+        "model" in md and md.index("**Warning:") < md.index("## Verdict")
     assert "MPC on the simulated real system (damping=0.3)" in md
     assert not re.search(r"\bnan\b", md.lower()), md  # (not "provenance")
     for name in ("report.md", "gap.png", "residual_heatmap.png", "correlations.png"):

@@ -130,7 +130,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         diagnosis.control = compare_control(args.model, diagnosis, effects, episodes=args.episodes or args.default_episodes,
                                             seed=args.seed,
                                             progress=not args.quiet)
-    report = write_report(diagnosis, out, args.model, args.data, command_line(PROG, argv), overwrite=args.overwrite)
+    from piga.io.runs import convergence_warning
+
+    warning = convergence_warning(args.model)  # (its line on stderr comes below)
+    report = write_report(diagnosis, out, args.model, args.data, command_line(PROG, argv), overwrite=args.overwrite,
+                          model_warning=warning.removeprefix("warning: ").rstrip(".") if warning else None)
     try:  # the report is complete from here: an interrupt says so (a rerun needs --overwrite)
         warn_if_unconverged(PROG, args.model)  # after the work: a refusal of the model stays the one line on stderr
         print(f"verdict: {diagnosis.verdict}")

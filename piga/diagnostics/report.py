@@ -315,12 +315,15 @@ def headline_text(d: Diagnosis) -> str:
     return headline
 
 
-def markdown(d: Diagnosis, model: str, data: str, command: str) -> str:
-    """The report as Markdown."""
+def markdown(d: Diagnosis, model: str, data: str, command: str, model_warning: str | None = None) -> str:
+    """The report as Markdown; ``model_warning``: what the model's own records say against it (a run that did not
+    converge), said above the verdict, which measures the recording against that model."""
     g = d.gap
     lines = [
         "# piga-diagnose report", "",
         f"Command: `{command}`", "", f"Model: `{model}`. Data: `{data}` (frames and actions only).", "",
+        *([f"**Warning: {model_warning}.** The effects below are the recording measured against this model, so they "
+           "may be the model's own error.", ""] if model_warning else []),
         f"## Verdict: {d.verdict}", "",
     ]
     if d.effects:
@@ -441,20 +444,23 @@ def check_report_target(out: str | os.PathLike[str], overwrite: bool) -> Path:
     return folder
 
 
-def _write_files(d: Diagnosis, folder: Path, model: str, data: str, command: str, overwrite: bool) -> None:
+def _write_files(d: Diagnosis, folder: Path, model: str, data: str, command: str, overwrite: bool,
+                 model_warning: str | None = None) -> None:
     save_figure(gap_figure(d), folder / "gap.png", overwrite=overwrite)
     save_figure(heatmap_figure(d), folder / "residual_heatmap.png", overwrite=overwrite)
     save_figure(correlation_figure(d), folder / "correlations.png", overwrite=overwrite)
     if d.pictures is not None:
         save_figure(frames_figure(d), folder / "frames.png", overwrite=overwrite)
-    write_json(folder / "report.json", {"command": command, "model": model, "data": data, **d.to_dict()}, overwrite=overwrite)
+    write_json(folder / "report.json", {"command": command, "model": model, "data": data, "model_warning": model_warning,
+                                        **d.to_dict()}, overwrite=overwrite)
     with atomic_output(folder / "report.md", overwrite=overwrite) as tmp:
-        tmp.write_text(markdown(d, model, data, command), encoding="utf-8")
+        tmp.write_text(markdown(d, model, data, command, model_warning), encoding="utf-8")
 
 
 def write_report(d: Diagnosis, out: str | os.PathLike[str], model: str, data: str, command: str,
-                 overwrite: bool = False) -> Path:
-    """Writes :data:`REPORT_FILES` into the folder ``out``; returns the path of ``report.md``.
+                 overwrite: bool = False, model_warning: str | None = None) -> Path:
+    """Writes :data:`REPORT_FILES` into the folder ``out``; returns the path of ``report.md``. ``model_warning``: what
+    the model's records say against it (:func:`piga.io.runs.convergence_warning`), said in the report too.
 
     A new folder appears whole: the files are written into a hidden sibling, which is then renamed
     to ``out``. Into an existing folder, each file is written atomically.
@@ -462,14 +468,14 @@ def write_report(d: Diagnosis, out: str | os.PathLike[str], model: str, data: st
     folder = check_report_target(out, overwrite)
     if folder.is_dir():  # all or none of them, so that a failure part-way leaves nothing to refuse the rerun
         with written_together(folder / name for name in REPORT_FILES):
-            _write_files(d, folder, model, data, command, overwrite)
+            _write_files(d, folder, model, data, command, overwrite, model_warning)
         return folder / "report.md"
     made = missing_folders(folder.parent)
     folder.parent.mkdir(parents=True, exist_ok=True)
     tmp = partial_path(folder)
     try:
         tmp.mkdir()
-        _write_files(d, tmp, model, data, command, overwrite=True)
+        _write_files(d, tmp, model, data, command, overwrite=True, model_warning=model_warning)
         try:
             os.rename(tmp, folder)
         except OSError as exc:  # another command made it meanwhile (a rename never replaces a folder with files)
