@@ -34,6 +34,20 @@ def test_a_link_to_nothing_is_not_replaced_without_overwrite(tmp_path: Path) -> 
         check_folder_target(folder)
 
 
+def test_overwrite_replaces_a_link_and_leaves_the_file_it_points_to(tmp_path: Path) -> None:
+    """As docs/commands/index.md says: --overwrite of an output that is a symbolic link writes a file in its place."""
+    from piga.io.atomic import atomic_output
+
+    target, link = tmp_path / "target.json", tmp_path / "out.json"
+    target.write_text("earlier")
+    link.symlink_to(target)
+    with pytest.raises(OutputExistsError):
+        check_writable_target(link, overwrite=False)
+    with atomic_output(link, overwrite=True) as tmp:
+        tmp.write_text("new")
+    assert not link.is_symlink() and link.read_text() == "new" and target.read_text() == "earlier"
+
+
 def test_a_file_system_that_stores_no_files_is_refused_where_the_target_is_checked() -> None:
     """/proc and /sys are writable to root, yet hold no files: only the commands that also checked the disk said so
     before their work."""
