@@ -1,15 +1,17 @@
-"""Benchmark: the memory one training step of piga-train-model takes, against what its memory check counts.
+"""Benchmark: the memory that piga-train-model takes, against what its memory check counts.
 
 ``piga-train-model`` refuses, before it builds the model, a run whose parameters and batch do not fit in memory
-(:mod:`piga.training.memory`): per parameter the weights, gradients, Adam's moments, an averaged copy and the backward
-pass's temporaries; per window twice the activations that autograd saves (measured on torch's meta device,
-:func:`piga.world.variants.activation_bytes`). This checks that count against the process's own memory.
+(:mod:`piga.training.memory`): per parameter the weights, gradients, Adam's moments and step, an averaged copy and the
+backward pass's temporaries; per window twice the activations that autograd saves (measured on torch's meta device,
+:func:`piga.world.variants.activation_bytes`); and the process's own memory. This checks that count against the
+processes' own memory, two ways, each in a fresh process with one torch thread:
 
-For each (frame side, batch), in a fresh process with one torch thread: builds the fast preset's model for frames of
-that side, then runs one forward and backward pass on random frames and reads how much the process's high-water mark
-of resident memory rose over it (Linux's VmHWM, reset just before). The count for the same step is the gradients and
-temporaries (8 bytes per parameter) and the batch's activations; the optimizer's moments and the averaged copy, which
-the check also counts, are not allocated by one pass.
+- whole runs: ``piga-train-model`` (fast preset, ``--budget-steps 4``) on a small collected file of frames of that
+  side, its peak resident memory (``getrusage``'s ``ru_maxrss`` of the finished command) against the check's whole
+  count; a size whose count exceeds the memory available is refused by the command, and said so;
+- one pass: builds the model, runs one forward and backward pass on random frames and reads how much the process's
+  high-water mark of resident memory rose over it (Linux's VmHWM, reset just before), against the count for the same
+  pass (the gradients and temporaries, 8 bytes per parameter, and the batch's activations).
 
     python benchmarks/training_memory.py --out results/training_memory
 
@@ -18,6 +20,7 @@ Writes ``OUT.json`` and ``OUT.md``.
 
 from __future__ import annotations
 
+import os
 import shlex
 import sys
 from pathlib import Path
@@ -26,7 +29,8 @@ from typing import Any
 from common import machine, machine_words, measured_in_fresh_process, out_prefix, peak_memory_readable, write_page
 from piga.cli.common import ArgumentParser
 
-#: (frame side, batch) measured by default: the default 64 px run, and larger frames where the check matters.
+#: (frame side, batch) measured by default: the default 64 px run, and larger frames where the check matters (at
+#: 1024x1024 a whole run needs more than this machine's memory: the command's refusal is recorded).
 CASES = ((64, 32), (256, 2), (512, 2), (1024, 1))
 
 
@@ -41,7 +45,7 @@ def measure(size: int, batch: int) -> dict[str, float]:
 
     import torch
 
-    from piga.training.memory import BACKWARD_BYTES_PER_PARAMETER, training_need
+    from piga.training.memory import ALLOCATOR_SLACK, BACKWARD_BYTES_PER_PARAMETER, training_need
     from piga.training.train import PRESETS
     from piga.world.variants import activation_bytes, build_model, parameter_count
 
@@ -56,21 +60,79 @@ def measure(size: int, batch: int) -> dict[str, float]:
     model(frames, actions).loss.backward()
     measured = _peak_gib() - before
     _, batched = training_need(parameters, activations, batch, averaged=False)
-    counted = (parameters * (4 + BACKWARD_BYTES_PER_PARAMETER) + batched) / 2**30  # gradients, temporaries, activations
+    # gradients, temporaries and activations, with the allocator's slack
+    counted = (ALLOCATOR_SLACK * parameters * (4 + BACKWARD_BYTES_PER_PARAMETER) + batched) / 2**30
     return {"size": size, "batch": batch, "parameters": parameters, "activations_mib": activations / 2**20,
             "measured_gib": measured, "counted_gib": counted}
 
 
+def measure_run(size: int, batch: int) -> dict[str, Any]:
+    """A whole piga-train-model run at frames of ``size`` px and a batch of ``batch`` (four steps), started from this
+    process: its peak resident memory against the check's count, or the command's refusal where the count does not
+    fit the memory available."""
+    import resource
+    import subprocess
+    import tempfile
+    from dataclasses import replace
+
+    from envs.pendulum import PixelPendulumConfig
+    from piga.data.collect import CollectConfig, collect
+    from piga.io import resources
+    from piga.training.memory import training_need
+    from piga.training.train import PRESETS
+    from piga.world.variants import activation_bytes, parameter_count
+
+    config = replace(PRESETS["fast"].model, image_size=size)
+    fixed, batched = training_need(parameter_count(config), activation_bytes(config) or 0, batch, averaged=True)
+    available = resources.available_memory()
+    with tempfile.TemporaryDirectory() as folder:
+        data = Path(folder) / "frames.h5"  # enough training windows for the batch: 20 frames give 7 windows each
+        sequences = max(4, -(-batch // 7) + 2)
+        collect(CollectConfig(sequences=sequences, steps=20, seed=0, workers=1, split=(sequences - 2, 1, 1),
+                              env=PixelPendulumConfig(image_size=size)), data, progress=False, command="benchmarks/training_memory.py")
+        run = subprocess.run([sys.executable, "-c", RUN_TRAIN_MODEL, str(data), "--out", str(Path(folder) / "run"),
+                              "--preset", "fast", "--budget-steps", "4", "--batch-size", str(batch), "--threads", "1",
+                              "--quiet"], capture_output=True, text=True, env={**os.environ, "OMP_NUM_THREADS": "1"})
+    peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss * 1024 / 2**30  # (kB on Linux) its one child's
+    refused = run.returncode == 1 and "needs about" in run.stderr
+    if run.returncode not in (0, 3) and not refused:  # 3: finished, too short to converge (four steps)
+        raise RuntimeError(f"piga-train-model at {size} px exited {run.returncode}: {run.stderr.strip()}")
+    return {"size": size, "batch": batch, "counted_gib": (fixed + batched) / 2**30,
+            "available_gib": None if available is None else available / 2**30,
+            "measured_gib": None if refused else peak, "refused": run.stderr.strip() if refused else None}
+
+
+#: piga-train-model as its script runs it, for a child whose peak memory is its own.
+RUN_TRAIN_MODEL = "import sys; from piga.cli.common import run_cli; from piga.cli.train import PROG, main; " \
+                  "run_cli(PROG, main, sys.argv[1:])"
+
+
 def markdown(record: dict[str, Any]) -> str:
-    lines = ["# piga-train-model's memory check against one training step", "",
+    lines = ["# piga-train-model's memory check against its runs", "",
              f"From `{record['command']}` on {machine_words(record['machine'])}.", "",
-             "The fast preset's model, one forward and backward pass in a fresh process with one torch thread. Measured: "
-             "the rise of the process's high-water mark of resident memory over the pass (Linux's VmHWM). Counted: "
-             "what `piga.training.memory` counts for the same pass (gradients and the backward pass's temporaries, 8 "
-             "bytes per parameter, and twice the activations autograd saves per window, measured on torch's meta "
-             "device); its check adds Adam's moments and the averaged copy, which one pass does not allocate.", "",
-             "| frames | batch | parameters | saved activations per window | measured | counted | counted / measured |",
-             "|---|---|---|---|---|---|---|"]
+             "## Whole runs", "",
+             "`piga-train-model` with the fast preset, `--budget-steps 4`, one torch thread, on a small collected file "
+             "of frames of each side, in a fresh process. Measured: the command's peak resident memory (`getrusage`). "
+             "Counted: what `piga.training.memory` counts before it builds the model (per parameter: weights, "
+             "gradients, Adam's moments and step, the averaged copy and the backward pass's temporaries, 32 bytes; "
+             "per window of the batch: twice the activations autograd saves, measured on torch's meta device; and "
+             "0.5 GiB for the process itself; all of it times 1.1, the allocator's slack). A size whose count is over the memory available is refused by the "
+             "command before it builds anything.", "",
+             "| frames | batch | counted | measured | counted / measured |", "|---|---|---|---|---|"]
+    for r in record["runs"]:
+        if r["measured_gib"] is None:
+            lines.append(f"| {r['size']}x{r['size']} | {r['batch']} | {r['counted_gib']:.2f} GiB | refused: "
+                         f"{r['available_gib']:.1f} GiB available | - |")
+        else:
+            lines.append(f"| {r['size']}x{r['size']} | {r['batch']} | {r['counted_gib']:.2f} GiB | "
+                         f"{r['measured_gib']:.2f} GiB | {r['counted_gib'] / r['measured_gib']:.2f} |")
+    lines += ["", "## One forward and backward pass", "",
+              "The fast preset's model, one pass in a fresh process with one torch thread. Measured: the rise of the "
+              "process's high-water mark of resident memory over the pass (Linux's VmHWM). Counted: the part of the "
+              "check's count that one pass allocates (gradients and the backward pass's temporaries, 8 bytes per "
+              "parameter, and twice the activations autograd saves per window; times 1.1).", "",
+              "| frames | batch | parameters | saved activations per window | measured | counted | counted / measured |",
+              "|---|---|---|---|---|---|---|"]
     for r in record["cases"]:
         lines.append(f"| {r['size']}x{r['size']} | {r['batch']} | {r['parameters'] / 1e6:.1f}M | "
                      f"{r['activations_mib']:.1f} MiB | {r['measured_gib']:.2f} GiB | {r['counted_gib']:.2f} GiB | "
@@ -89,14 +151,16 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     batches = dict(CASES)
     cases = CASES if args.sizes is None else tuple((s, batches.get(s, 2)) for s in args.sizes)
-    rows = []
+    record: dict[str, Any] = {"runs": [], "cases": []}
     for size, batch in cases:
-        if (row := measured_in_fresh_process(measure, (size, batch), "training_memory.py", f"{size} px")) is None:
-            return 1
-        rows.append(row)
-        print(f"{size} px, batch {batch}: {row}")
+        for key, measure_one, what in (("runs", measure_run, "a whole run"), ("cases", measure, "one pass")):
+            row = measured_in_fresh_process(measure_one, (size, batch), "training_memory.py", f"{what} at {size} px")
+            if row is None:
+                return 1
+            record[key].append(row)
+            print(f"{size} px, batch {batch}, {what}: {row}", flush=True)
     command = shlex.join(["python", "benchmarks/training_memory.py", *(sys.argv[1:] if argv is None else argv)])
-    record = {"command": command, "machine": machine(), "cases": rows}
+    record = {"command": command, "machine": machine(), **record}
     write_page(args.out, record, markdown(record))
     return 0
 

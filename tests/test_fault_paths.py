@@ -306,6 +306,18 @@ def test_ctrl_c_while_a_module_loads_names_the_command_without_a_lookup() -> Non
     assert result.returncode == 130 and result.stderr == "piga-import: interrupted; nothing was written\n", result.stderr
 
 
+@pytest.mark.parametrize("system", ["pendulum", "spring"])
+def test_a_collection_without_room_is_told_what_collect_can_change(system: str, tmp_path: Path,
+                                                                   monkeypatch: pytest.MonkeyPatch,
+                                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    """piga-collect's disk refusal ended "ask for less", which names no option."""
+    _small_disk(monkeypatch, 1000)
+    line = refused("piga-collect", ["--system", system, "--out", str(tmp_path / "d.h5"), "--sequences", "4"], capsys,
+                   "needs up to", "free some space, write --out elsewhere, or give fewer --sequences or --steps or a "
+                   "smaller --image-size")
+    assert "ask for less" not in line and not (tmp_path / "d.h5").exists()
+
+
 def test_an_import_without_room_is_told_what_import_can_change(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                                                                capsys: pytest.CaptureFixture[str]) -> None:
     """piga-import's disk refusal ended "ask for less", though import has no count to lower."""

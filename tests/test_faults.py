@@ -272,6 +272,11 @@ def _full_disk(monkeypatch: pytest.MonkeyPatch) -> None:
                                                                    "only as spelt in full; give --dt"),
     ("piga-baseline", ["planet", "x.h5", "--ou=r"], "unrecognized argument --ou: options are taken only as spelt in "
                                                     "full; give --out"),
+    # "--" ends the options: it was taken for an abbreviation of --out, which was given (after it)
+    ("piga-show", ["--", "x.h5", "--out", "s.png"], "--out comes after '--', which ends the options (what follows it is "
+                                                   "taken as file names); give the options before '--'"),
+    ("piga-import", ["--", "v", "a.csv", "--dt", "0.05", "--out", "x.h5"], "--dt and --out come after '--'"),
+    ("piga-baseline", ["planet", "--", "x.h5", "--out", "r"], "--out comes after '--'"),
 ])
 def test_abbreviations_are_refused(prog: str, argv: list[str], needle: str, tmp_path: Path,
                                    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:

@@ -1,6 +1,7 @@
 """A training run's memory is checked before the model is built (:mod:`piga.training.memory`): frames of 1024x1024
 and a batch of 4 took 24 GB, and the kernel killed the process without a word; under a memory limit the line said
-"choose smaller sizes", which named no option."""
+"choose smaller sizes", which named no option. With a batch of 2 the count of one pass let through a run that the
+kernel killed at 23.9 GB: Adam's step and the process itself are counted too."""
 
 from __future__ import annotations
 
@@ -29,7 +30,8 @@ def test_the_activations_grow_with_the_frames_pixels() -> None:
 
 
 @pytest.mark.parametrize("available, needle", [
-    (22.4 * GiB, "lower --batch-size to 2 or less, or collect or import the frames at a smaller --image-size"),
+    (32 * GiB, "lower --batch-size to 2 or less, or collect or import the frames at a smaller --image-size"),
+    (22.4 * GiB, "; collect or import the frames at a smaller --image-size (piga-collect, piga-import)"),
     (8 * GiB, "; collect or import the frames at a smaller --image-size (piga-collect, piga-import)"),
 ])
 def test_a_1024_px_run_is_refused_with_what_to_lower(available: float, needle: str,
@@ -37,7 +39,7 @@ def test_a_1024_px_run_is_refused_with_what_to_lower(available: float, needle: s
     config = replace(PRESETS["fast"].model, image_size=1024)
     parameters, activations = parameter_count(config), activation_bytes(config)
     monkeypatch.setattr(resources, "available_memory", lambda: int(available))
-    with pytest.raises(ResourceError, match="training on frames of 1024x1024 needs about 25.3 GiB") as info:
+    with pytest.raises(ResourceError, match="training on frames of 1024x1024 needs about 35.3 GiB") as info:
         check_training_fits(parameters, activations, 4, True, "1024x1024")
     assert needle in str(info.value)
     if "--batch-size to 2" in needle:  # the batch it names fits, and one more does not
@@ -55,7 +57,7 @@ def test_a_raised_model_size_is_named(monkeypatch: pytest.MonkeyPatch) -> None:
 def test_the_default_run_fits_without_a_word(monkeypatch: pytest.MonkeyPatch) -> None:
     config = PRESETS["fast"].model
     fixed, batched = training_need(parameter_count(config), activation_bytes(config) or 0, 32, True)
-    assert fixed + batched < 0.5 * GiB  # 64x64, a batch of 32: well within any machine
+    assert fixed + batched < 1 * GiB  # 64x64, a batch of 32: well within any machine
     monkeypatch.setattr(resources, "available_memory", lambda: None)  # unknown: not refused
     check_training_fits(10**12, 10**12, 32, True, "64x64")
 
@@ -73,7 +75,7 @@ def test_the_cli_refuses_a_batch_too_large_for_the_memory_before_anything_is_wri
 
 
 def test_the_benchmark_compares_the_count_with_a_measured_step(tmp_path: Path) -> None:
-    """benchmarks/training_memory.py: one small case in a fresh process; the count covers what the step took."""
+    """benchmarks/training_memory.py: one small case in a fresh process; the count covers what the whole run took."""
     import json
     import sys
 
@@ -82,6 +84,8 @@ def test_the_benchmark_compares_the_count_with_a_measured_step(tmp_path: Path) -
 
     out = tmp_path / "memory"
     assert training_memory.main(["--out", str(out), "--sizes", "32"]) == 0
-    (row,) = json.loads(out.with_suffix(".json").read_text())["cases"]
+    record = json.loads(out.with_suffix(".json").read_text())
+    (row,), (run,) = record["cases"], record["runs"]
     assert row["size"] == 32 and row["batch"] == 2 and row["measured_gib"] >= 0 and row["counted_gib"] > 0
-    assert "| 32x32 | 2 |" in out.with_suffix(".md").read_text()
+    assert run["size"] == 32 and run["refused"] is None and 0 < run["measured_gib"] <= run["counted_gib"]
+    assert out.with_suffix(".md").read_text().count("| 32x32 | 2 |") == 2

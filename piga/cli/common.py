@@ -83,12 +83,19 @@ class ArgumentParser(argparse.ArgumentParser):
             # argparse says a required option is missing before it names an unknown one: "--ou x.h5" was refused as
             # "required: --out", with no word that --ou is no option (abbreviations are off)
             required = _required_flags(self)
-            for flag in (token.split("=", 1)[0] for token in getattr(self, "_given_args", ())):
+            given = list(getattr(self, "_given_args", ()))
+            ended = given.index("--") if "--" in given else len(given)  # "--" ends the options: names follow it
+            for flag in (token.split("=", 1)[0] for token in given[:ended]):
                 full = sorted({name for name in required if name.startswith(flag) and name != flag})
                 if flag.startswith("--") and full:
                     message = (f"unrecognized argument {flag}: options are taken only as spelt in full; give "
                                f"{' or '.join(full)}")
                     break
+            else:
+                after = [token.split("=", 1)[0] for token in given[ended + 1:]]
+                if moved := sorted(set(after) & set(required)):
+                    message = (f"{' and '.join(moved)} {'comes' if len(moved) == 1 else 'come'} after '--', which ends "
+                               "the options (what follows it is taken as file names); give the options before '--'")
         self.exit(1, f"{self.prog}: error: {message} (see --help)\n")
 
     def parse_known_args(self, args: Sequence[str] | None = None,  # type: ignore[override]

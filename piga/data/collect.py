@@ -263,13 +263,17 @@ def check_resources(config: CollectConfig, out: str | Path) -> None:
     what = f"{n} sequences x {t} frames of {config.env.image_size}x{config.env.image_size}"
     check_memory(_batch_rows(config) * t * (pixels + 12) + (workers + 1) * 48 * pixels + 2 * n, what)
     # with the room the writer keeps free as it writes the last batch (uncompressed), so that it does not refuse later
-    check_data_disk(out, *disk_need(config), what)
+    check_data_disk(out, *disk_need(config), what, advice=COLLECT_DISK_ADVICE)
 
 
 def _batch_rows(config: CollectConfig) -> int:
     """The sequences collected and written at a time: ``config.batch``, a whole number of rounds of the workers."""
     workers = min(config.workers, config.sequences)
     return min(max(config.batch, workers) // workers * workers, config.sequences)
+
+
+#: What to change where a collection's file does not fit on its disk (piga-collect's options).
+COLLECT_DISK_ADVICE = "free some space, write --out elsewhere, or give fewer --sequences or --steps or a smaller --image-size"
 
 
 def disk_need(config: CollectConfig) -> tuple[float, float, float]:

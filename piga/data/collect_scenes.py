@@ -27,7 +27,7 @@ from piga.io.progress import progress_bar
 
 from envs.scenes import SceneConfig, SceneError, check_forces_visible, generate_sequence, scene_config, state_names
 from piga.io.atomic import check_writable_target
-from piga.data.collect import check_collect_sizes, sequence_rng, split_counts
+from piga.data.collect import COLLECT_DISK_ADVICE, check_collect_sizes, sequence_rng, split_counts
 from piga.data.schema import SPLITS, DatasetWriter, check_data_disk
 from piga.io.pool import JobFailed, run_pool
 from piga.io.choices import check_types
@@ -104,7 +104,7 @@ def collect_scene(config: SceneCollectConfig, out: str | Path, overwrite: bool =
     check_memory(min(config.batch, n) * t * (3 * size * size + 16 * scene.n_objects), what)
     step_bytes = 3 * size * size + 16 * scene.n_objects  # raw; the writer keeps room for a batch's, uncompressed
     check_data_disk(out, n * t * (3 * size * size / SCENE_FRAME_COMPRESSION + 16 * scene.n_objects) + HDF5_FILE_OVERHEAD,
-                    min(config.batch, n) * t * step_bytes, n * t * step_bytes, what)
+                    min(config.batch, n) * t * step_bytes, n * t * step_bytes, what, advice=COLLECT_DISK_ADVICE)
     counts = split_counts(n, config.split)
     one = functools.partial(_one, scene=scene, seed=config.seed, steps=t, first_test=counts[0] + counts[1])
     # the bar outside the writer: one that refuses the file as it closes (blank frames) clears it

@@ -5,14 +5,19 @@ activations that a training window keeps for its backward pass: frames of 1024x1
 before the kernel killed the process without a word. The need, refused before anything is allocated:
 
 - per parameter: :data:`piga.io.resources.TRAINING_BYTES_PER_PARAMETER` (weights, gradients, Adam's two moments),
-  4 bytes more for the averaged copy of the final steps (``TrainConfig.average_fraction``), and 4 for the backward
-  pass's temporaries (a weight's gradient is made beside the one it adds to);
+  4 bytes more for the averaged copy of the final steps (``TrainConfig.average_fraction``), 4 for the backward
+  pass's temporaries (a weight's gradient is made beside the one it adds to), and 8 for Adam's step (torch's CPU
+  Adam makes the square root of a weight's second moment and its quotient, each the size of the weight; the
+  encoder's first layer holds most of the parameters at large frames);
 - per window of the batch: twice the bytes autograd saves (:func:`piga.world.variants.activation_bytes`), the
-  gradients of those activations being made as the backward pass frees them.
+  gradients of those activations being made as the backward pass frees them;
+- the process itself: torch, the libraries and the command before its model (:data:`PROCESS_BYTES`);
+- all of it times :data:`ALLOCATOR_SLACK`.
 
-Checked against one real forward and backward pass (fast preset, one thread) by ``benchmarks/training_memory.py``
-(results/training_memory.md): the count for the same pass is 1.08 to 1.62 times the rise of the process's resident
-memory, from 64x64 frames with a batch of 32 to 1024x1024 with a batch of 1.
+Checked by ``benchmarks/training_memory.py`` (results/training_memory.md) against the peak resident memory of whole
+``piga-train-model`` runs (fast preset, one thread, four steps: the count is 1.12 to 1.22 times their peak, from
+512x512 to 64x64) and of single forward and backward passes (1.23 to 1.32 times). The count for one pass alone (8 bytes per parameter and the activations) missed
+Adam's step: frames of 1024x1024 and a batch of 2, counted at 20.9 GiB, were killed by the kernel at 23.9 GB.
 """
 
 from __future__ import annotations
@@ -24,16 +29,26 @@ from piga.io.resources import TRAINING_BYTES_PER_PARAMETER, ResourceError, forma
 BACKWARD_BYTES_PER_PARAMETER = 4
 #: Bytes per parameter of the averaged copy, where the run averages its last steps.
 AVERAGE_BYTES_PER_PARAMETER = 4
+#: Bytes per parameter of Adam's step: the square root of the second moment, and its quotient by the bias correction.
+OPTIMISER_STEP_BYTES_PER_PARAMETER = 8
+#: The command's own resident memory before its model: torch and the libraries (0.26 GiB after their import) with the
+#: data and the plan (0.51 GiB at 256x256, measured before the first step; results/training_memory.md).
+PROCESS_BYTES = 2**29
+#: The count times this: the memory allocator's slack (freed blocks it keeps, pages in use in part). Without it whole
+#: runs peaked at 0.91 to 0.98 times the count, the most at 512x512, where the parameters weigh most.
+ALLOCATOR_SLACK = 1.1
 #: The activations' bytes in the backward pass, per byte that autograd saves.
 ACTIVATION_FACTOR = 2
 
 
 def training_need(parameters: int, activations: int, batch: int, averaged: bool) -> tuple[float, float]:
-    """(the parameters' part, the batch's part) of a training run's memory, in bytes, for ``parameters`` trainable
-    parameters and ``activations`` saved bytes per window (``averaged``: the run keeps an averaged copy)."""
-    per_parameter = (TRAINING_BYTES_PER_PARAMETER + BACKWARD_BYTES_PER_PARAMETER
+    """(the parameters' and the process's part, the batch's part) of a training run's memory, in bytes, for
+    ``parameters`` trainable parameters and ``activations`` saved bytes per window (``averaged``: the run keeps an
+    averaged copy)."""
+    per_parameter = (TRAINING_BYTES_PER_PARAMETER + BACKWARD_BYTES_PER_PARAMETER + OPTIMISER_STEP_BYTES_PER_PARAMETER
                      + (AVERAGE_BYTES_PER_PARAMETER if averaged else 0))
-    return float(parameters * per_parameter), float(ACTIVATION_FACTOR * activations * batch)
+    return (ALLOCATOR_SLACK * (parameters * per_parameter + PROCESS_BYTES),
+            ALLOCATOR_SLACK * ACTIVATION_FACTOR * activations * batch)
 
 
 def check_training_fits(parameters: int, activations: int | None, batch: int, averaged: bool, frames: str,
@@ -58,9 +73,9 @@ def check_training_fits(parameters: int, activations: int | None, batch: int, av
     advice = f"lower {' or '.join(lower)}, or {frames_advice}" if lower else frames_advice
     raise ResourceError(f"training on frames of {frames} needs about {format_bytes(fixed + batched)} of memory (the "
                         f"model's {parameters / 1e6:.3g}M parameters, which grow with the frames' pixels, with their "
-                        f"gradients and Adam's moments: {format_bytes(fixed)}; the activations of a batch of {batch}: "
-                        f"{format_bytes(batched)}), but {format_bytes(available)} is available; {advice}")
+                        f"gradients, Adam's moments and its step, and the process itself: {format_bytes(fixed)}; the "
+                        f"activations of a batch of {batch}: {format_bytes(batched)}), but {format_bytes(available)} is available; {advice}")
 
 
-__all__ = ["ACTIVATION_FACTOR", "AVERAGE_BYTES_PER_PARAMETER", "BACKWARD_BYTES_PER_PARAMETER", "check_training_fits",
-           "training_need"]
+__all__ = ["ACTIVATION_FACTOR", "ALLOCATOR_SLACK", "AVERAGE_BYTES_PER_PARAMETER", "BACKWARD_BYTES_PER_PARAMETER",
+           "OPTIMISER_STEP_BYTES_PER_PARAMETER", "PROCESS_BYTES", "check_training_fits", "training_need"]
