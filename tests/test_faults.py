@@ -277,6 +277,8 @@ def _full_disk(monkeypatch: pytest.MonkeyPatch) -> None:
                                                    "taken as file names); give the options before '--'"),
     ("piga-import", ["--", "v", "a.csv", "--dt", "0.05", "--out", "x.h5"], "--dt and --out come after '--'"),
     ("piga-baseline", ["planet", "--", "x.h5", "--out", "r"], "--out comes after '--'"),
+    ("piga-demo", ["--", "--out", "d"], "--out comes after '--'"),  # (no required option: "unrecognized arguments")
+    ("piga-control", ["--", "--oracle"], "--oracle comes after '--'"),
 ])
 def test_abbreviations_are_refused(prog: str, argv: list[str], needle: str, tmp_path: Path,
                                    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
@@ -1535,18 +1537,89 @@ def test_out_that_fills_the_disk_part_way_leaves_nothing_for_the_rerun(argv: lis
     assert len(_listing(tmp_path)) == (3 if last == "png" else 2)
 
 
-def test_written_together_removes_what_it_wrote_and_keeps_what_was_there(tmp_path: Path) -> None:
+def test_a_sweep_overwrite_interrupted_as_it_writes_keeps_the_earlier_set(tiny_piga_run: Path, tmp_path: Path,
+                                                                           capsys: pytest.CaptureFixture[str],
+                                                                           monkeypatch: pytest.MonkeyPatch) -> None:
+    """Ctrl-C as --sweep --overwrite wrote its figure, the last of the set, deleted the earlier sw.json and sw.md and
+    said "nothing was written"."""
+    import hashlib
+
+    from matplotlib.figure import Figure
+
+    argv = ["--model", str(tiny_piga_run), "--sweep", "1:1.2:0.2", "--workers", "1", "--out", "sw", "--episodes", "1",
+            "--steps", "20", "--candidates", "8", "--iterations", "1", "--horizon", "2", "--quiet"]
+    monkeypatch.chdir(tmp_path)
+    code, _, err = run_in_process("piga-control", control.main, *argv, capsys=capsys)
+    assert code == 0, err
+
+    def digests() -> dict[str, str]:
+        return {p.name: hashlib.md5(p.read_bytes()).hexdigest() for p in tmp_path.iterdir()}
+
+    before = digests()
+    assert sorted(before) == ["sw.json", "sw.md", "sw.png"]
+
+    def interrupted(self: object, path: object, *args: Any, **kwargs: Any) -> None:
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(Figure, "savefig", interrupted)
+    code, _, err = run_in_process("piga-control", control.main, *argv, "--seed", "1", "--overwrite", capsys=capsys)
+    assert code == 130 and err.endswith("piga-control: interrupted; nothing was written\n"), err
+    assert digests() == before
+
+
+@pytest.mark.parametrize("stop", [OSError, KeyboardInterrupt])
+def test_written_together_removes_what_it_wrote_and_puts_back_what_was_there(stop: type[BaseException],
+                                                                             tmp_path: Path) -> None:
+    """An --overwrite of a set stopped part-way (piga-control --sweep --overwrite, interrupted as it wrote) lost the
+    earlier OUT.json, which it had replaced, and said "nothing was written"."""
     from piga.io.atomic import atomic_output, written_together
 
     kept, replaced, new = tmp_path / "kept.md", tmp_path / "replaced.json", tmp_path / "new.png"
-    kept.write_text("old")
-    replaced.write_text("old")
-    with pytest.raises(OSError), written_together([kept, replaced, new]):
+    kept.write_text("old md")
+    replaced.write_text("old json")
+    with pytest.raises(stop), written_together([kept, replaced, new]):
         for path in (replaced, new):
             with atomic_output(path, overwrite=True) as tmp:
                 tmp.write_text("new")
-        raise OSError("the disk filled on the last one")
-    assert _listing(tmp_path) == ["kept.md"]
+        raise stop("the disk filled on the last one")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["kept.md", "replaced.json"]  # no hidden copy left
+    assert kept.read_text() == "old md" and replaced.read_text() == "old json"
+    with written_together([kept, replaced, new]):  # a set written whole replaces the earlier one
+        for path in (kept, replaced, new):
+            with atomic_output(path, overwrite=True) as tmp:
+                tmp.write_text("new")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["kept.md", "new.png", "replaced.json"]
+    assert {p.read_text() for p in tmp_path.iterdir()} == {"new"}
+
+
+def test_a_set_inside_a_set_puts_back_what_was_there(tmp_path: Path) -> None:
+    """piga-control writes --out's set inside the set with its --video: the inner set found the outer's kept copy."""
+    from piga.io.atomic import atomic_output, written_together
+
+    video, out = tmp_path / "v.mp4", tmp_path / "o.json"
+    video.write_text("old video")
+    out.write_text("old json")
+    with pytest.raises(KeyboardInterrupt), written_together([video, out]):
+        with atomic_output(video, overwrite=True) as tmp:
+            tmp.write_text("new")
+        with written_together([out]):
+            with atomic_output(out, overwrite=True) as tmp:
+                tmp.write_text("new")
+            raise KeyboardInterrupt
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["o.json", "v.mp4"]
+    assert video.read_text() == "old video" and out.read_text() == "old json"
+
+
+def test_a_copy_kept_by_a_killed_set_is_removed_by_the_next_write(tmp_path: Path) -> None:
+    from piga.io.atomic import atomic_output
+
+    out = tmp_path / "out.json"
+    out.write_text("earlier")
+    stale = tmp_path / ".out.json.kept-999999999"  # (no such process)
+    stale.write_text("kept by a killed command")
+    with atomic_output(out, overwrite=True) as tmp:
+        tmp.write_text("new")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.json"]
 
 
 def test_a_gif_is_refused_before_the_episodes_where_an_mp4_fits(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

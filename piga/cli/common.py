@@ -92,11 +92,22 @@ class ArgumentParser(argparse.ArgumentParser):
                                f"{' or '.join(full)}")
                     break
             else:
-                after = [token.split("=", 1)[0] for token in given[ended + 1:]]
-                if moved := sorted(set(after) & set(required)):
-                    message = (f"{' and '.join(moved)} {'comes' if len(moved) == 1 else 'come'} after '--', which ends "
-                               "the options (what follows it is taken as file names); give the options before '--'")
+                message = self._after_the_end(given, ended, required) or message
+        elif message.startswith("unrecognized arguments:"):  # options after "--": taken as names, then left over
+            given = list(getattr(self, "_given_args", ()))
+            if "--" in given:
+                message = self._after_the_end(given, given.index("--"), list(self._option_string_actions)) or message
         self.exit(1, f"{self.prog}: error: {message} (see --help)\n")
+
+    @staticmethod
+    def _after_the_end(given: list[str], ended: int, options: list[str]) -> str | None:
+        """The line for ``options`` written after the ``--`` at ``given[ended]``, which ends the options; None where
+        none is."""
+        after = [token.split("=", 1)[0] for token in given[ended + 1:]]
+        if not (moved := sorted(set(after) & set(options))):
+            return None
+        return (f"{' and '.join(moved)} {'comes' if len(moved) == 1 else 'come'} after '--', which ends the options "
+                "(what follows it is taken as file names); give the options before '--'")
 
     def parse_known_args(self, args: Sequence[str] | None = None,  # type: ignore[override]
                          namespace: argparse.Namespace | None = None) -> tuple[argparse.Namespace, list[str]]:

@@ -304,12 +304,13 @@ def _name_max(folder: Path) -> int:
         return 255
 
 
-def _partial_prefix(target: Path) -> str:
+def _partial_prefix(target: Path, kind: str = "partial") -> str:
     """``.NAME.partial-``, or for a name too long to take the prefix and a PID, ``.DIGEST.partial-`` (a digest of the
-    name), so that a legal name near the filesystem's limit can still be written through its temporary sibling."""
-    prefix = f".{target.name}.partial-"
+    name), so that a legal name near the filesystem's limit can still be written through its temporary sibling;
+    ``kind`` "kept": the sibling that keeps the file a set replaces until the set is whole (:func:`written_together`)."""
+    prefix = f".{target.name}.{kind}-"
     if len(os.fsencode(prefix)) + 10 > _name_max(target.parent):  # 10: room for any PID
-        prefix = f".{hashlib.sha1(os.fsencode(target.name)).hexdigest()[:20]}.partial-"
+        prefix = f".{hashlib.sha1(os.fsencode(target.name)).hexdigest()[:20]}.{kind}-"
     return prefix
 
 
@@ -338,15 +339,17 @@ def _alive(pid: int) -> bool:
 
 
 def remove_stale_partials(target: Path) -> list[Path]:
-    """Removes ``.NAME.partial-PID`` siblings of ``target`` left by a process that no longer runs.
+    """Removes ``.NAME.partial-PID`` siblings of ``target`` left by a process that no longer runs, and the
+    ``.NAME.kept-PID`` copies of an earlier ``target`` that such a process kept while it replaced a set of files
+    (:func:`written_together`).
 
     A SIGKILL (or a power cut) leaves them; the next write of the same target cleans them up. Files
     of a live PID are left alone (another run may be writing). Returns the files removed.
     """
     removed = []
-    prefix = _partial_prefix(target)
+    prefixes = (_partial_prefix(target), _partial_prefix(target, "kept"))
     for path in target.parent.iterdir() if target.parent.is_dir() else ():
-        if not path.name.startswith(prefix):
+        if not (prefix := next((p for p in prefixes if path.name.startswith(p)), None)):
             continue
         pid = path.name[len(prefix):]
         if pid.isdigit() and int(pid) != os.getpid() and not _alive(int(pid)):
@@ -410,18 +413,47 @@ def _identity(path: Path) -> tuple[int, int, int] | None:
 def written_together(paths: Iterable[str | os.PathLike[str]]) -> Iterator[None]:
     """The outputs ``paths`` of one command (``OUT.json``, ``OUT.md``, ``OUT.png``), written in the body, each
     atomically: if the body fails or is interrupted, those of them that it wrote are removed again, so that no part
-    of the set is left to block the command's rerun (``exists; pass --overwrite``) or to link to a missing file.
-    Files that were there before and that the body did not replace are kept."""
+    of the set is left to block the command's rerun (``exists; pass --overwrite``) or to link to a missing file, and
+    the files that were there before (an ``--overwrite``) are put back as they were: each is kept under a hidden
+    sibling, ``.NAME.kept-PID`` (a hard link; a copy where the file system has none), until the set is whole. An
+    interrupted ``--overwrite`` lost the earlier OUT.json, replaced before OUT.md was written."""
     targets = [Path(p) for p in paths]
-    before = [_identity(p) for p in targets]
+    kept: dict[Path, Path] = {}
+    try:
+        for path in targets:
+            if path.is_file() and not path.is_symlink():  # (a link is replaced, not its target: nothing to keep)
+                remove_stale_partials(path)
+                keep = path.with_name(f"{_partial_prefix(path, 'kept')}{os.getpid()}")
+                if os.path.lexists(keep):  # kept by an enclosing set of this process, which puts it back
+                    continue
+                try:
+                    os.link(path, keep)
+                except OSError:  # no hard links on this file system
+                    shutil.copy2(path, keep)
+                kept[path] = keep
+    except BaseException:  # nothing replaced yet
+        _remove(kept.values())
+        raise
+    before = [_identity(p) for p in targets]  # (after the links, which change a file's ctime)
     try:
         yield
     except BaseException:
         for path, was in zip(targets, before):
-            if (now := _identity(path)) is not None and now != was:
+            if (now := _identity(path)) is not None and now != was:  # written by the body
                 with contextlib.suppress(OSError):
                     path.unlink()
+            if path in kept and _identity(path) is None:  # replaced (or removed) by the body: put back
+                with contextlib.suppress(OSError):
+                    os.replace(kept.pop(path), path)
         raise
+    finally:
+        _remove(kept.values())
+
+
+def _remove(paths: Iterable[Path]) -> None:
+    for path in paths:
+        with contextlib.suppress(OSError):
+            path.unlink()
 
 
 def write_json(path: str | os.PathLike[str], payload: dict[str, Any], overwrite: bool = True) -> None:
