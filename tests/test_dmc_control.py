@@ -126,7 +126,7 @@ def test_a_piga_model_is_run_only_through_the_view_it_was_identified_on(tmp_path
     assert capsys.readouterr().err == ""
 
 
-@pytest.mark.parametrize("env", [(), ("--env", "piga/DMCPendulum-v0")])
+@pytest.mark.parametrize("env", [(), ("--env", "piga/DMCPendulum-v0"), ("--sweep", "0.9:1.1:0.1")])
 def test_a_missing_model_folder_is_said_alike_on_both_envs(tmp_path, capsys, env):
     """With the DMC env, a missing --model read "nosuchdir/checkpoint.pt: no checkpoint (is nosuchdir a
     piga-train-model run folder?)", where the pixel env says that the folder does not exist."""

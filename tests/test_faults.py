@@ -1874,6 +1874,44 @@ def test_demo_failed_after_a_checkpoint_keeps_its_data_for_resume(tmp_path: Path
     assert {"demo/pendulum.h5", "demo/model/checkpoint.pt"} <= set(_listing(tmp_path))
 
 
+def test_a_resumed_demo_that_fails_in_training_removes_the_earlier_models_control_table(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    """A resume that failed after its training's checkpoint left goal.png and control.md of the model it replaced."""
+    from piga.cli.common import PigaError
+
+    out = tmp_path / "demo"
+    (out / "model").mkdir(parents=True)
+    for name in ("pendulum.h5", "frames.png", "goal.png", "control.md", "model/checkpoint.pt"):
+        (out / name).write_bytes(b"earlier")
+
+    def failed(argv: Sequence[str], prog: str, **_: Any) -> int:
+        (Path(argv[argv.index("--out") + 1]) / "checkpoint.pt").write_bytes(b"continued")
+        raise PigaError("the loss became NaN at epoch 4; model/checkpoint.pt holds epoch 3")
+
+    monkeypatch.setattr(demo, "_check_kept_data", lambda data, config: None)
+    monkeypatch.setattr(demo, "_check_not_the_users", lambda data: None)
+    monkeypatch.setattr(demo, "_trained_on", lambda *args, **kwargs: True)
+    monkeypatch.setattr(demo.show, "main", lambda argv: 0)
+    monkeypatch.setattr(demo.train, "main", failed)
+    refused("piga-demo", ["--out", str(out), "--resume"], capsys, "the loss became NaN", "--resume")
+    assert sorted(p.name for p in out.iterdir()) == ["frames.png", "model", "pendulum.h5"]
+
+
+def test_a_demo_resumed_with_fewer_epochs_is_told_the_demos_option(tiny_data: Path, tmp_path: Path,
+                                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    """piga-demo --resume --epochs 3, after 5, was told "--resume may raise --epochs or --budget-steps", and piga-demo
+    has no --budget-steps."""
+    from tests.helpers import train_tiny
+
+    run = train_tiny(tiny_data, tmp_path / "run", epochs=2)
+    code, _, err = run_in_process("piga-demo", lambda argv: train.main(argv, prog="piga-demo"), str(tiny_data),
+                                  "--out", str(run), "--resume", "--epochs", "1", "--quiet", capsys=capsys)
+    assert code == 1 and "--resume may raise --epochs, never lower them" in err and "--budget-steps" not in err, err
+    code, _, err = run_in_process("piga-train-model", train.main, str(tiny_data), "--out", str(run), "--resume",
+                                  "--epochs", "1", "--quiet", capsys=capsys)
+    assert code == 1 and "--resume may raise --epochs or --budget-steps, never lower them" in err, err
+
+
 def test_demo_whose_model_did_not_learn_says_the_demos_way_to_train_longer(
         tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
     """The training's own fix (--max-minutes, --budget-steps: not the demo's options) gave way to the demo's, said once."""
@@ -3459,7 +3497,10 @@ def test_diagnose_refuses_sequences_too_short_for_its_fit_first(tiny_piga_run: P
             f.attrs.pop(key, None)
     code, _, err = run_in_process("piga-diagnose", diagnose.main, "--data", str(imported), "--model",
                                   str(tiny_piga_run), "--out", str(tmp_path / "report"), capsys=capsys)
-    assert_one_line(code, err, "too short to diagnose", "piga-import --steps 13")
+    line = assert_one_line(code, err, "too short to diagnose", "piga-import --steps 13")
+    # 240 frames make 18 sequences of 13: imported again that way, it was refused for their number
+    assert line.endswith("; but its 240 frames make 18 such sequences, and the diagnosis needs 20 (260 frames): "
+                         "record a longer video"), line
     imported.unlink()
     planet = tmp_path / "planet"
     planet.mkdir()

@@ -151,6 +151,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if kind.is_baseline:
         return _baseline(args, kind, mpc, outputs, argv, given)
     if args.sweep:
+        if args.model:  # as a single run says it (the checkpoint's loader named a piga-train-model folder alone)
+            check_model_folder(args.model)
         return _sweep(args, mpc, outputs, argv, given)
     if args.not_told and args.gravity_mult == 1.0:  # (a baseline run is refused --not-told above, in its own words)
         at, change = ((f"--gravity-mult {number_text(args.gravity_mult)}", "give another --gravity-mult")

@@ -179,6 +179,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             except BaseException as exc:
                 if trained():  # the data stays with the model, for --resume; an earlier demo is given up
                     replaced.drop()
+                    for path in (goal_png, control_md):  # an earlier model's control table: not this model's
+                        if before[path] is not False and path.exists() and path.stat().st_mtime_ns == before[path]:
+                            path.unlink()
                 elif not isinstance(exc, KeyboardInterrupt) or replaced.moved:
                     # refused before a model, the files this demo made would make the rerun refuse for them; an
                     # earlier demo that it replaces comes back (replacing) as it was, without them

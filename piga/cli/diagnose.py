@@ -66,6 +66,17 @@ def build_parser() -> ArgumentParser:
     return p
 
 
+def _too_short_recording(frames: int, steps: int) -> str:
+    """What to add where a recording of ``frames`` frames cannot make the diagnosis's sequences of ``steps`` frames
+    however it is imported (its import in sequences of 13 was then refused for their number)."""
+    from piga.diagnostics.observe import MIN_SEQUENCES as sequences
+
+    if frames >= sequences * steps:
+        return ""
+    return (f"; but its {frames} frames make {frames // steps} such sequences, and the diagnosis needs {sequences} "
+            f"({sequences * steps} frames): record a longer video")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     from piga.io.checkpoint import require_piga_run
@@ -106,7 +117,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                         f"{need} (windows of {config.fit_horizon} steps after {need - config.fit_horizon - 1} frames); "
                         + (f"collect sequences of {need} frames or more (piga-collect --steps {need})"
                            if info.attrs.get("env_id") is not None else  # (a recording imported: no env to collect)
-                           f"import the recording in sequences of {need} frames or more (piga-import --steps {need})"))
+                           f"import the recording in sequences of {need} frames or more (piga-import --steps {need})"
+                           + _too_short_recording(info.n_sequences * info.steps, need)))
     check_frames_have_signal(args.data)  # blank video: the diagnosis would divide by its zero variance
     if effects is not None:  # MPC on Gymnasium's pendulum with the model's physics
         from envs.constants import PENDULUM_DT

@@ -333,7 +333,8 @@ def _main(argv: Sequence[str] | None, prog: str, replaced: ReplacedRun,
                          if name in overrides)
         raise PigaError(f"--resume {given}: the run already planned {planned['epochs']} epochs "
                         f"({planned['epochs'] * planned.get('steps_per_epoch', 0)} steps); --resume may raise "
-                        "--epochs or --budget-steps, never lower them")
+                        + ("--epochs or --budget-steps" if prog == PROG else "--epochs")  # (piga-demo takes --epochs)
+                        + ", never lower them")
     stood = (ckpt.get("state") or {}) if args.resume else {}  # where the resumed run stands
     trained = float(stood.get("elapsed", 0.0))
     if train_config.max_minutes and trained > train_config.max_minutes * 60 \

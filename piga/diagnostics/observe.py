@@ -132,7 +132,11 @@ class Observations:
     None: another source, or none said."""
 
 
-def check_compatible(model: PhysicsModel, path: str | os.PathLike[str], min_sequences: int = 20,
+#: The fewest sequences a recording gives the diagnosis.
+MIN_SEQUENCES = 20
+
+
+def check_compatible(model: PhysicsModel, path: str | os.PathLike[str], min_sequences: int = MIN_SEQUENCES,
                      min_steps: int = 12) -> DatasetInfo:
     """The file's info; raises :class:`DiagnosisInputError` with one clear line when ``model`` cannot diagnose ``path``."""
     info = inspect_dataset(path)
