@@ -29,7 +29,8 @@ import time
 from pathlib import Path
 from typing import Any
 
-from common import machine, machine_words, measured_in_fresh_process, out_prefix, peak_memory_readable, write_page
+from common import (machine, machine_words, measured_in_fresh_process, out_prefix, peak_memory_readable,
+                    process_memory_kib, write_page)
 from piga.cli.common import ArgumentParser, positive_int
 
 #: The ways compared: the buffer as bytes inside checkpoint.pt (as before), or streamed into its own file (piga's).
@@ -38,8 +39,7 @@ WAYS = ("bytes", "file")
 
 def _rss_gb() -> tuple[float, float]:
     """This process's resident memory now and its high-water mark, in GB (Linux's /proc/self/status)."""
-    fields = dict(line.split(":", 1) for line in Path("/proc/self/status").read_text().splitlines() if ":" in line)
-    return int(fields["VmRSS"].split()[0]) / 1e6, int(fields["VmHWM"].split()[0]) / 1e6
+    return process_memory_kib("VmRSS") / 1e6, process_memory_kib("VmHWM") / 1e6
 
 
 def _reset_peak() -> None:

@@ -80,6 +80,12 @@ def change_cells(before: dict[str, Any] | None, after: dict[str, Any]) -> str:
 
 
 
+def process_memory_kib(field: str) -> int:
+    """A memory field of this process (``VmRSS``, ``VmHWM``) in KiB, from Linux's /proc/self/status."""
+    fields = dict(line.split(":", 1) for line in Path("/proc/self/status").read_text().splitlines() if ":" in line)
+    return int(fields[field].split()[0])
+
+
 def peak_memory_readable(script: str) -> bool:
     """Whether this machine lets a memory benchmark read its peak (Linux's /proc/self/status and clear_refs); prints
     ``script``'s one-line error where it does not."""

@@ -26,7 +26,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from common import machine, machine_words, measured_in_fresh_process, out_prefix, peak_memory_readable, write_page
+from common import (machine, machine_words, measured_in_fresh_process, out_prefix, peak_memory_readable,
+                    process_memory_kib, write_page)
 from piga.cli.common import ArgumentParser
 
 #: (frame side, batch) measured by default: the default 64 px run, and larger frames where the check matters (at
@@ -35,8 +36,7 @@ CASES = ((64, 32), (256, 2), (512, 2), (1024, 1))
 
 
 def _peak_gib() -> float:
-    fields = dict(line.split(":", 1) for line in Path("/proc/self/status").read_text().splitlines() if ":" in line)
-    return int(fields["VmHWM"].split()[0]) * 1024 / 2**30
+    return process_memory_kib("VmHWM") * 1024 / 2**30
 
 
 def measure(size: int, batch: int) -> dict[str, float]:
@@ -86,8 +86,8 @@ def measure_run(size: int, batch: int) -> dict[str, Any]:
     fixed, batched = training_need(parameter_count(config), activation_bytes(config) or 0, batch, averaged=True)
     available = resources.available_memory()
     with tempfile.TemporaryDirectory() as folder:
-        data = Path(folder) / "frames.h5"  # enough training windows for the batch: 20 frames give 7 windows each
-        sequences = max(4, -(-batch // 7) + 2)
+        data = Path(folder) / "frames.h5"  # enough training windows for the batch, in sequences of 20 frames
+        sequences = max(4, -(-batch // (20 - config.window + 1)) + 2)
         collect(CollectConfig(sequences=sequences, steps=20, seed=0, workers=1, split=(sequences - 2, 1, 1),
                               env=PixelPendulumConfig(image_size=size)), data, progress=False, command="benchmarks/training_memory.py")
         run = subprocess.run([sys.executable, "-c", RUN_TRAIN_MODEL, str(data), "--out", str(Path(folder) / "run"),

@@ -150,17 +150,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     kind = _run_kind(args)
     if kind.is_baseline:
         return _baseline(args, kind, mpc, outputs, argv, given)
+    if args.model:  # (before --workers is judged by the run's kind; the sweep's loader named a piga-train-model folder)
+        check_model_folder(args.model)
     if args.sweep:
-        if args.model:  # as a single run says it (the checkpoint's loader named a piga-train-model folder alone)
-            check_model_folder(args.model)
         return _sweep(args, mpc, outputs, argv, given)
     if args.not_told and args.gravity_mult == 1.0:  # (a baseline run is refused --not-told above, in its own words)
         at, change = ((f"--gravity-mult {number_text(args.gravity_mult)}", "give another --gravity-mult")
                       if "gravity_mult" in given else ("--gravity-mult 1 (the default)", "give --gravity-mult"))
         raise PigaError(f"--not-told keeps the piga agent's gravity at x1 while the env's changes; at {at} nothing "
                         f"changes: {change}, or drop --not-told")
-    if args.model:  # (before --workers is judged by the run's kind)
-        check_model_folder(args.model)
     if args.ray or "workers" in given:  # --workers 2, the default, too
         raise PigaError(f"{'--ray' if args.ray else '--workers'} runs the jobs of --sweep and a baseline run's episodes; a "
                         "piga or oracle run without --sweep plays its episodes in this process")

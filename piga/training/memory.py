@@ -16,8 +16,9 @@ before the kernel killed the process without a word. The need, refused before an
 
 Checked by ``benchmarks/training_memory.py`` (results/training_memory.md) against the peak resident memory of whole
 ``piga-train-model`` runs (fast preset, one thread, four steps: the count is 1.12 to 1.22 times their peak, from
-512x512 to 64x64) and of single forward and backward passes (1.23 to 1.32 times). The count for one pass alone (8 bytes per parameter and the activations) missed
-Adam's step: frames of 1024x1024 and a batch of 2, counted at 20.9 GiB, were killed by the kernel at 23.9 GB.
+512x512 to 64x64) and of single forward and backward passes (1.23 to 1.32 times). The count for one pass alone
+(8 bytes per parameter and the activations) missed Adam's step: frames of 1024x1024 and a batch of 2, counted at
+20.9 GiB, were killed by the kernel at 23.9 GB.
 """
 
 from __future__ import annotations
@@ -31,11 +32,12 @@ BACKWARD_BYTES_PER_PARAMETER = 4
 AVERAGE_BYTES_PER_PARAMETER = 4
 #: Bytes per parameter of Adam's step: the square root of the second moment, and its quotient by the bias correction.
 OPTIMISER_STEP_BYTES_PER_PARAMETER = 8
-#: The command's own resident memory before its model: torch and the libraries (0.26 GiB after their import) with the
-#: data and the plan (0.51 GiB at 256x256, measured before the first step; results/training_memory.md).
+#: The command's own resident memory beside its model: torch, the libraries, the data and the plan (the 64x64 whole run
+#: of results/training_memory.md peaks at 0.72 GiB, of which its parameters and activations are under 0.3 GiB).
 PROCESS_BYTES = 2**29
-#: The count times this: the memory allocator's slack (freed blocks it keeps, pages in use in part). Without it whole
-#: runs peaked at 0.91 to 0.98 times the count, the most at 512x512, where the parameters weigh most.
+#: The count times this: the memory allocator's slack (freed blocks it keeps, pages in use in part). Without it the
+#: count is 1.02 to 1.11 times the whole runs' peaks (results/training_memory.md's ratios over 1.1), a margin of 2% at
+#: 512x512, where the parameters weigh most.
 ALLOCATOR_SLACK = 1.1
 #: The activations' bytes in the backward pass, per byte that autograd saves.
 ACTIVATION_FACTOR = 2
@@ -74,7 +76,8 @@ def check_training_fits(parameters: int, activations: int | None, batch: int, av
     raise ResourceError(f"training on frames of {frames} needs about {format_bytes(fixed + batched)} of memory (the "
                         f"model's {parameters / 1e6:.3g}M parameters, which grow with the frames' pixels, with their "
                         f"gradients, Adam's moments and its step, and the process itself: {format_bytes(fixed)}; the "
-                        f"activations of a batch of {batch}: {format_bytes(batched)}), but {format_bytes(available)} is available; {advice}")
+                        f"activations of a batch of {batch}: {format_bytes(batched)}), but {format_bytes(available)} is "
+                        f"available; {advice}")
 
 
 __all__ = ["ACTIVATION_FACTOR", "ALLOCATOR_SLACK", "AVERAGE_BYTES_PER_PARAMETER", "BACKWARD_BYTES_PER_PARAMETER",
