@@ -20,21 +20,37 @@ EXCEPTION_NAME = re.compile(r"\b[A-Z]\w*(Error|Exception)\b|EOFError")
 
 @pytest.mark.parametrize("content, needle", [
     (b"", "checkpoint.pt: not a readable piga checkpoint (it is empty)"),  # "EOFError: Ran out of input"
-    (bytes(range(0xC1, 0x100)) * 20, "(its bytes are not a torch file)"),  # "UnicodeDecodeError: 'utf-8' codec ..."
-    (None, "(PytorchStreamReader failed reading zip archive"),  # "RuntimeError: PytorchStreamReader ..."
-], ids=["empty", "random", "cut"])
-def test_an_unreadable_checkpoint_is_said_in_words(content: bytes | None, needle: str, tmp_path: Path) -> None:
+    (bytes(range(0xC1, 0x100)) * 20, "(its bytes are not a file of this kind)"),  # "UnicodeDecodeError: 'utf-8' ..."
+    (b"garbage\n", "(its bytes are not a file of this kind)"),  # "invalid literal for int() with base 10: 'arbage\n'"
+    (1000, "(it is cut short or damaged)"),  # "PytorchStreamReader failed reading zip archive: ..."
+    (5000, "(it is cut short or damaged)"),  # "[Errno 22] Invalid argument"
+    (b"\x80\x04\x95", "(it is cut short or damaged)"),  # a pickle cut short: "pickle data was truncated"
+], ids=["empty", "random", "text", "cut-1000", "cut-5000", "pickle-cut"])
+def test_an_unreadable_checkpoint_is_said_in_words(content: bytes | int, needle: str, tmp_path: Path) -> None:
     from piga.io.checkpoint import CHECKPOINT, RunKind, read_checkpoint
 
     path = tmp_path / CHECKPOINT
-    if content is None:  # a checkpoint cut short
-        torch.save({"model": {"w": torch.zeros(1000)}}, path)
-        content = path.read_bytes()[:1000]
+    if isinstance(content, int):  # a checkpoint cut short after that many bytes
+        torch.save({"model": {"w": torch.zeros(10000)}}, path)
+        content = path.read_bytes()[:content]
     path.write_bytes(content)
     with pytest.raises(ValueError) as error:
         read_checkpoint(tmp_path, RunKind.PIGA)
     assert needle in str(error.value) and "truncated" in str(error.value), error.value
     assert not EXCEPTION_NAME.search(str(error.value)), error.value
+    assert "Errno" not in str(error.value) and "int()" not in str(error.value), error.value
+
+
+def test_a_whole_archive_of_other_entries_is_not_called_cut_short(tmp_path: Path) -> None:
+    """A complete zip archive that torch cannot read as a checkpoint is named by its entries, not as cut short."""
+    import zipfile
+
+    from piga.io.checkpoint import CHECKPOINT, RunKind, read_checkpoint
+
+    with zipfile.ZipFile(tmp_path / CHECKPOINT, "w") as archive:
+        archive.writestr("notes.txt", "not a checkpoint")
+    with pytest.raises(ValueError, match=r"\(its entries are not those that piga-train-model writes\)"):
+        read_checkpoint(tmp_path, RunKind.PIGA)
 
 
 def test_a_broken_metrics_record_is_said_in_words(tmp_path: Path) -> None:

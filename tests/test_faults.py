@@ -1024,6 +1024,27 @@ def test_planet_resume_names_a_record_edited_to_another_kind(baseline_runs: dict
             "config.json, or delete it to resume from the checkpoint")
 
 
+@pytest.mark.parametrize("change, needle", [
+    (lambda r: r["train"].__setitem__("free_nats", 0.5), "(free_nats 0.5 there, "),
+    (lambda r: r["train"].__setitem__("chunk_length", 6), "(chunk_length 6 there, 8 in the checkpoint)"),
+    (lambda r: r["rssm"].__setitem__("deter_size", 16), "(deter_size 16 there, 8 in the checkpoint)"),
+], ids=["free_nats", "chunk_length", "deter_size"])
+def test_planet_resume_names_a_record_that_does_not_describe_its_checkpoint(change: Callable[[dict[str, Any]], None],
+                                                                            needle: str, baseline_runs: dict[str, Path],
+                                                                            tiny_data: Path, tmp_path: Path,
+                                                                            capsys: pytest.CaptureFixture[str]) -> None:
+    """A planet run resumed with an edited free_nats or chunk_length trained on the edited value without a word, and
+    its checkpoint then held it: a run never started with it. The record is named, with both values, before the command
+    line is judged against it (the starting command's --chunk-length 8 is not blamed), and nothing is written."""
+    run = _run_copy(baseline_runs["planet"], tmp_path / "run", _edit_record(change))
+    before = {path: path.read_bytes() for path in run.rglob("*") if path.is_file()}
+    refused("piga-baseline", ["planet", str(tiny_data), "--out", str(run), "--resume", "--steps", "4", "--chunk-length",
+                              "8", "--quiet"], capsys,
+            f"{run / 'config.json'} does not describe the run its checkpoint holds " + needle,
+            "restore the record's values, or delete it to resume from the checkpoint's")
+    assert {path: path.read_bytes() for path in run.rglob("*") if path.is_file()} == before
+
+
 @pytest.mark.parametrize("kind", ["planet", "ddpg"])
 def test_resume_takes_the_runs_own_values_written_out(kind: str, baseline_runs: dict[str, Path], tiny_data: Path,
                                                        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -2279,6 +2300,36 @@ def test_train_resume_refuses_the_default_seed_written_for_a_run_of_another(tiny
             capsys, "drop --seed")
 
 
+@pytest.mark.parametrize("edit, needle", [
+    (_edit_record(lambda r: r["train"].__setitem__("lr", 0.005)), "(lr 0.005 there, 0.001 in the checkpoint)"),
+    (_edit_record(lambda r: r["model"].__setitem__("image_size", 16)), "(image_size 16 there, 64 in the checkpoint)"),
+    (_edit_record(lambda r: r["train"].__setitem__("seed", 7)), "(seed 7 there, 0 in the checkpoint)"),
+], ids=["lr", "image_size", "another-runs-checkpoint"])
+def test_train_resume_names_a_record_that_does_not_describe_its_checkpoint(edit: Callable[[Path], None], needle: str,
+                                                                           tiny_piga_run: Path, tiny_data: Path,
+                                                                           tmp_path: Path,
+                                                                           capsys: pytest.CaptureFixture[str]) -> None:
+    """An edited record (or another run's checkpoint put beside it) was rewritten from the checkpoint without a word:
+    the user's edit was lost. It is named, with both values, and nothing is written; without the record, the run
+    resumes from the checkpoint's settings, as the line says."""
+    from piga.cli import train as cli
+    from piga.cli.common import NOT_CONVERGED
+
+    run = _run_copy(tiny_piga_run, tmp_path / "run")
+    argv = [str(tiny_data), "--out", str(run), "--resume", "--epochs", "2", "--threads", "1", "--quiet"]
+    code, _, err = run_in_process("piga-train-model", cli.main, *argv, capsys=capsys)  # writes the run's record
+    assert code in (0, NOT_CONVERGED) and (run / "config.json").is_file(), err
+    edit(run)
+    before = {path: path.read_bytes() for path in run.rglob("*") if path.is_file()}
+    argv[argv.index("2")] = "3"
+    refused("piga-train-model", argv, capsys, f"{run / 'config.json'} does not describe the run its checkpoint holds "
+            + needle, "restore the record's values, or delete it to resume from the checkpoint's")
+    assert {path: path.read_bytes() for path in run.rglob("*") if path.is_file()} == before
+    (run / "config.json").unlink()
+    code, _, err = run_in_process("piga-train-model", cli.main, *argv, capsys=capsys)
+    assert code in (0, NOT_CONVERGED) and "Traceback" not in err, err
+
+
 def test_train_resume_without_its_record_takes_the_checkpoints_own_recipe(tiny_piga_run: Path, tiny_data: Path,
                                                                            tmp_path: Path,
                                                                            capsys: pytest.CaptureFixture[str]) -> None:
@@ -3410,7 +3461,7 @@ def _truncated_torch_file(path: Path) -> None:
 
 
 @pytest.mark.parametrize("ae, needles", [
-    (_truncated_torch_file, ["autoencoder.pt: not a readable autoencoder of a latent DDPG run", "PytorchStreamReader",
+    (_truncated_torch_file, ["autoencoder.pt: not a readable autoencoder of a latent DDPG run", "cut short or damaged",
                              "may be truncated", "--overwrite"]),
     (lambda path: None, ["autoencoder.pt is missing", "restore it, or train the run again with --overwrite"]),
 ])
@@ -4615,6 +4666,16 @@ def test_diagnose_names_a_scene_file_before_its_length(tiny_piga_run: Path, tmp_
     assert collect.main(["--system", "spring", "--sequences", "4", "--steps", "12", "--split", "2,1,1", "--out", str(data), "--quiet"]) == 0
     refused("piga-diagnose", ["--model", str(tiny_piga_run), "--data", str(data), "--out", str(tmp_path / "rep")],
             capsys, "piga-diagnose is for pendulum data; this file holds spring data")
+
+
+def test_a_digits_spring_file_is_named_by_its_scene(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A digits-spring file (system "spring", scene "digits-spring") was called "spring" by the commands that refuse
+    it."""
+    data = tmp_path / "digits.h5"
+    assert collect.main(["--system", "digits-spring", "--sequences", "4", "--steps", "12", "--split", "2,1,1", "--out",
+                         str(data), "--seed", "1", "--quiet"]) == 0
+    refused("piga-baseline", ["planet", str(data), "--out", str(tmp_path / "bp"), "--quiet"], capsys,
+            "this file is digits-spring")
 
 
 def test_diagnose_env_on_a_model_of_another_rate_says_drop_env(tiny_piga_run: Path, tiny_data: Path, tmp_path: Path,

@@ -131,7 +131,7 @@ def check_planet_data(info: DatasetInfo, config: PlanetTrainConfig, repeat: int 
     env_id = info.attrs.get("env_id")  # files from before env ids, and imported ones, hold none
     if info.system != "pendulum" or env_id not in (None, PIXEL_PENDULUM):  # before training: no command could use it
         raise DataFormatError(f"{info.path}: the PlaNet-style agent is trained on and controls {PIXEL_PENDULUM}'s "
-                              f"pendulum; this file is {info.system}" + (f" from {env_id}" if env_id else "")
+                              f"pendulum; this file is {info.named}" + (f" from {env_id}" if env_id else "")
                               + f" (collect one with piga-collect --env {PIXEL_PENDULUM})")
     if not info.has_rewards:
         raise DataFormatError(f"{info.path}: has no /rewards; the PlaNet-style model learns a reward head "

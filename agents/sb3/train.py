@@ -40,8 +40,8 @@ from envs.observations import EpisodeSeeds, FiniteActions, LatentObservation, No
 from envs.pendulum import PixelPendulumConfig
 from piga.data.schema import legacy_seed
 from piga.io.atomic import OutputFolder, atomic_output, write_json
-from piga.io.checkpoint import (CHECKPOINT, RunKind, check_counts, read_checkpoint, resuming_from, unreadable,
-                                write_checkpoint)
+from piga.io.checkpoint import (CHECKPOINT, RunKind, check_counts, check_record_matches, read_checkpoint,
+                                resuming_from, unreadable, write_checkpoint)
 from piga.io.device import resolve_device, set_threads
 from piga.io.progress import close_bar
 
@@ -209,23 +209,6 @@ def _save(run_dir: Path, model: Any, config: SB3Config, episodes: int, history: 
         tmp.write_bytes(policy.getvalue())
 
 
-def check_record_matches(run_dir: Path, ours: dict[str, Any], ckpt: dict[str, Any]) -> None:
-    """Raises a ValueError naming ``config.json`` where its recipe (``ours``, as the record holds it: piga-baseline
-    compares it before judging the command line against it, so an edited ``obs`` or ``env`` is not blamed on the
-    command line) differs from the one the checkpoint holds (an edited record): the checkpoint is then not at fault."""
-    held = ckpt.get("config") if isinstance(ckpt.get("config"), dict) else {}
-
-    def plain(value: Any) -> Any:  # net_arch: a tuple in one, perhaps a list in the other
-        return list(value) if isinstance(value, tuple) else value
-
-    differ = [name for name in ours if name in held and name not in ("steps", "threads", "device")
-              and plain(held[name]) != plain(ours[name])]
-    if differ:
-        raise ValueError(f"{run_dir / 'config.json'} does not describe the run its checkpoint holds ("
-                         + ", ".join(f"{n} {ours[n]!r} there, {held[n]!r} in the checkpoint" for n in differ)
-                         + "): restore the record's values")
-
-
 def _load_replay_buffer(model: Any, run_dir: Path, ckpt: dict[str, Any]) -> None:
     """Fills ``model``'s replay buffer from the file the checkpoint names (or, in a checkpoint written before buffers
     had files of their own, from its bytes)."""
@@ -236,8 +219,8 @@ def _load_replay_buffer(model: Any, run_dir: Path, ckpt: dict[str, Any]) -> None
         raise unreadable(run_dir / CHECKPOINT, RunKind.DDPG, KeyError("replay_buffer_file"))
     name = ckpt["replay_buffer_file"]
     if not isinstance(name, str) or Path(name).is_absolute() or ".." in Path(name).parts:
-        raise unreadable(run_dir / CHECKPOINT, RunKind.DDPG, ValueError(f"its replay buffer is {name!r}, not a file in "
-                                                                         "the run folder"))
+        raise unreadable(run_dir / CHECKPOINT, RunKind.DDPG, f"its replay buffer is {name!r}, not a file in the run "
+                                                             "folder")
     path = run_dir / name
     if not path.is_file():
         state = "is not a file" if path.exists() else "is missing"  # (a folder in its place was called missing)
@@ -338,7 +321,7 @@ def train_sb3(config: SB3Config, run_dir: str | Path, autoencoder: str | Path | 
     elapsed = 0.0
     if resume:
         ckpt = read_checkpoint(run_dir, RunKind.DDPG)
-        check_record_matches(run_dir, config.to_dict(), ckpt)
+        check_record_matches(run_dir, [(config.to_dict(), ckpt.get("config"))])
         try:
             # the zip holds the TensorBoard folder of the run's first invocation: log where the run is now
             model = algorithm.load(io.BytesIO(ckpt["model_zip"]), env=venv, device=device,

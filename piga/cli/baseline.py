@@ -298,21 +298,23 @@ def _resumed_record(run_dir: Path, kind: RunKind, args: Any) -> dict[str, Any]:
     return {"command": None, "kind": kind.value, **rebuilt}
 
 
-def _refuse_record_edits(run_dir: Path, record: dict[str, Any]) -> None:
-    """A DDPG run's record whose recipe differs from its checkpoint's (an edited ``obs`` or ``env``) is named as
-    such at once: judged first against the command line, it read "trained with --obs pixels, not state" (the
-    command line blamed), or "not usable ...; start the run again with --overwrite" (the run thrown away)."""
-    if not isinstance(record.get("ddpg"), dict):  # none: :func:`_saved_config` says so
-        return
-    from agents.sb3.train import check_record_matches
-    from piga.io.checkpoint import read_checkpoint
+def _refuse_record_edits(run_dir: Path, record: dict[str, Any], kind: RunKind) -> None:
+    """A record whose recipe differs from its checkpoint's (an edited ``obs`` or ``env`` of a DDPG run, an edited
+    ``free_nats`` of a planet run, or another run's checkpoint in the folder) is named as such at once: judged first
+    against the command line, it read "trained with --obs pixels, not state" (the command line blamed), or "not usable
+    ...; start the run again with --overwrite" (the run thrown away); and a planet run trained on the edited value."""
+    from piga.io.checkpoint import check_record_matches, read_checkpoint
 
     try:
-        ckpt = read_checkpoint(run_dir, RunKind.DDPG)
+        ckpt = read_checkpoint(run_dir, kind)
     except (FileNotFoundError, ValueError) as exc:
         raise PigaError(with_flags(str(exc))) from None
+    sections = ([(record.get("train"), ckpt.get("train_config")), (record.get("rssm"), ckpt.get("rssm_config"))]
+                if kind is RunKind.PLANET else [(record.get("ddpg"), ckpt.get("config"))])
+    # an --iterative run's settings of its rounds are only in its record: deleting it is no way out
+    fix = "restore the record's values" if kind is RunKind.PLANET and record.get("iterative") else None
     try:
-        check_record_matches(run_dir, record["ddpg"], ckpt)
+        check_record_matches(run_dir, sections, **({"fix": fix} if fix else {}))
     except ValueError as exc:  # (the record's own names: "learning_starts 100 there")
         raise PigaError(str(exc)) from None
 
@@ -485,6 +487,7 @@ def _planet(args: Any, argv: Sequence[str] | None, replaced: ReplacedRun) -> int
     if args.resume:
         _check_run_dir(run_dir, True, args.overwrite, RunKind.PLANET, replaced)
         record = _resumed_record(run_dir, RunKind.PLANET, args)
+        _refuse_record_edits(run_dir, record, RunKind.PLANET)
         _refuse_recipe_changes(args, record, run_dir, argv)
         saved = _saved_config(run_dir, record, "train", PlanetTrainConfig, optional=("device",))  # older runs have none
         _refuse_fewer_steps(args.steps, saved.steps)
@@ -667,7 +670,7 @@ def _ddpg(args: Any, argv: Sequence[str] | None, replaced: ReplacedRun) -> int:
     if args.resume:
         _check_run_dir(run_dir, True, args.overwrite, RunKind.DDPG, replaced)
         record = _resumed_record(run_dir, RunKind.DDPG, args)
-        _refuse_record_edits(run_dir, record)
+        _refuse_record_edits(run_dir, record, RunKind.DDPG)
         # runs from before --algo are DDPG; runs from before --device have none
         saved = _saved_config(run_dir, record, "ddpg", SB3Config, optional=("algo", "device", "env", "encoder_precision", "view"))
         if "encoder_precision" not in record["ddpg"]:  # runs from before the option computed in float32

@@ -109,7 +109,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         raise PigaError(f"--training-data {error}") from None
     info = inspect_dataset(args.data)  # the data's schema errors, with the file's name
     if info.system != "pendulum":  # before its length, whose advice would not help
-        raise PigaError(f"{args.data}: piga-diagnose is for pendulum data; this file holds {info.system} data")
+        raise PigaError(f"{args.data}: piga-diagnose is for pendulum data; this file holds {info.named} data")
     from piga.diagnostics.fit import min_frames
 
     if info.steps < (need := min_frames(config.fit_horizon)):  # found after the encoding otherwise (half a minute)

@@ -79,7 +79,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(line, file=sys.stderr)
     labels = [f"seq {i}" for i in idx]
     cols = [f"t={k}" for k in range(t)]
-    title = f"{typed_text(info.path.name)}: {info.system}, dt={info.dt:g}, params {info.params}"
+    title = f"{typed_text(info.path.name)}: {info.named}, dt={info.dt:g}, params {info.params}"
     if len(title) > MAX_TITLE:  # a file's attributes can be any text; matplotlib lays out every character
         title = title[: MAX_TITLE - 3] + "..."
     fig = frame_strip(frames, labels, cols, title)

@@ -21,8 +21,8 @@ from piga.cli.common import (NOT_CONVERGED, ArgumentParser, Interrupted, PigaErr
                              record_resume, recorded_options, remove_empty_folders, remove_outputs, resume_option, run_cli,
                              seed_int, started_record, thread_count, unit_fraction)
 from piga.io.atomic import OutputFolder, check_folder_target
-from piga.io.checkpoint import (CHECKPOINT, RunKind, check_run_files, read_run_record, record_divergence,
-                                recorded_data_path, require_piga_run)
+from piga.io.checkpoint import (CHECKPOINT, RunKind, check_record_matches, check_run_files, read_run_record,
+                                record_divergence, recorded_data_path, require_piga_run)
 from piga.io.lock import lock_run_folder
 from piga.io.replaced import ReplacedRun, replacing, settle_replaced
 from piga.training.convergence import length_fix
@@ -243,6 +243,12 @@ def _main(argv: Sequence[str] | None, prog: str, replaced: ReplacedRun,
                             "train a new run (without --resume)")
         saved = TrainConfig.from_dict(ckpt["train_config"])
         stored, why = read_run_record(run_dir)
+        try:  # an edited record (training follows the checkpoint: the edit was lost without a word), or another run's
+            # checkpoint put in the folder
+            check_record_matches(run_dir, [(stored.get("train"), ckpt["train_config"]),
+                                           (stored.get("model"), ckpt.get("model_config"))])
+        except ValueError as exc:
+            raise PigaError(str(exc)) from None
         started = recorded_options(build_parser(), stored.get("command")) or {}
         started_preset = started.get("preset", build_parser().get_default("preset"))  # the run's, as its command gave it
         changed = (sorted(set(overrides) - {"epochs", "budget_steps", "max_minutes"}) + (["signed_actuation"] if args.signed_actuation else [])

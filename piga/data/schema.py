@@ -208,6 +208,13 @@ class DatasetInfo:
         return self.image_shape[2] if len(self.image_shape) == 3 else 1
 
     @property
+    def named(self) -> str:
+        """The file's system as a user named it: its scene where that is not the system's own name ("digits-spring",
+        whose system is "spring"), else its system."""
+        scene = self.attrs.get("scene")
+        return scene if isinstance(scene, str) and scene else self.system
+
+    @property
     def sequence_bytes(self) -> int:
         """Bytes of one sequence's frames, uncompressed (T·H·W[·C])."""
         return self.steps * int(np.prod(self.image_shape))
@@ -777,9 +784,9 @@ def check_pixel_pendulum_file(info: DatasetInfo, use: str) -> None:
 
     env_id = info.attrs.get("env_id", PIXEL_PENDULUM)  # files from before env ids hold none
     if info.system != "pendulum" or env_id != PIXEL_PENDULUM:
-        raise DataFormatError(f"{info.path}: {use}; this file is {info.system} from {env_id}")
+        raise DataFormatError(f"{info.path}: {use}; this file is {info.named} from {env_id}")
     if "env_config" not in info.attrs:
-        raise DataFormatError(f"{info.path}: {use}; this file is {info.system} without the 'env_config' that "
+        raise DataFormatError(f"{info.path}: {use}; this file is {info.named} without the 'env_config' that "
                               "piga-collect records (an imported recording?)")
     config = info.attrs["env_config"]  # a JSON object (inspect_dataset checked it)
     size = config.get("image_size") if isinstance(config, dict) else None

@@ -20,7 +20,7 @@ import enum
 import json
 import os
 import pickle
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -207,6 +207,33 @@ def read_run_record(run_dir: str | os.PathLike[str]) -> tuple[dict[str, Any], st
     return (payload, None) if isinstance(payload, dict) else ({}, "is not a run record (not a JSON object)")
 
 
+#: The settings that a ``--resume`` may change (the run's length and budget, and how its process runs): a run's
+#: record and its checkpoint may hold different values of them (a resume stopped before its first checkpoint).
+RESUMABLE_SETTINGS = frozenset({"steps", "epochs", "budget_steps", "max_minutes", "threads", "device"})
+
+
+def check_record_matches(run_dir: str | os.PathLike[str], sections: Iterable[tuple[object, object]],
+                         fix: str = "restore the record's values, or delete it to resume from the checkpoint's") -> None:
+    """Refuses a run whose record (``config.json``) no longer describes the run its checkpoint holds: an edited
+    record, or another run's checkpoint put in the folder. ``sections``: pairs of a section of the record and the same
+    settings as the checkpoint holds them; the settings that both hold are compared, but for
+    :data:`RESUMABLE_SETTINGS`. A resume trains on the checkpoint's settings, so an edit was lost without a word (a
+    learning rate edited there, or a PlaNet run's free nats, which did train with the edited value).
+
+    Raises:
+        ValueError: naming config.json, each setting that differs with both values, and ``fix``.
+    """
+    def plain(value: Any) -> Any:  # as JSON holds it: the checkpoint's tuples (nested ones too) are lists there
+        return json.loads(json.dumps(value, default=str))
+
+    differ = [(name, ours[name], held[name]) for ours, held in sections if isinstance(ours, dict) and isinstance(held, dict)
+              for name in ours if name in held and name not in RESUMABLE_SETTINGS and plain(held[name]) != plain(ours[name])]
+    if differ:
+        raise ValueError(f"{Path(run_dir) / 'config.json'} does not describe the run its checkpoint holds ("
+                         + ", ".join(f"{name} {ours!r} there, {held!r} in the checkpoint" for name, ours, held in differ)
+                         + f"): {fix}")
+
+
 def recorded_path(path: str, folder: object) -> str:
     """A path that a run recorded as its command was given it, relative to ``folder`` (the folder that command ran in;
     None in the records of older runs, whose relative paths are left as they are), as a path from the current folder:
@@ -337,32 +364,60 @@ def read_checkpoint(run_dir: str | os.PathLike[str], kind: RunKind) -> dict[str,
     return payload
 
 
-def unreadable(path: Path, kind: RunKind, exc: Exception, what: str | None = None) -> ValueError:
-    """The one-line error for a ``kind`` checkpoint that cannot be read: the file, and the first sentence of the cause
-    (for an entry it lacks, the entry: the file was written by something else, not cut short). ``what``: the file's
-    name in the message, for another file of the run (default: "<kind> checkpoint"; e.g. "autoencoder of a latent
-    DDPG run")."""
+def unreadable(path: Path, kind: RunKind, exc: Exception | str, what: str | None = None) -> ValueError:
+    """The one-line error for a ``kind`` checkpoint that cannot be read: the file, and the cause in words (for an
+    entry it lacks, the entry: the file was written by something else, not cut short; ``exc`` a string: the cause as
+    the caller words it). ``what``: the file's name in the message, for another file of the run (default: "<kind>
+    checkpoint"; e.g. "autoencoder of a latent DDPG run")."""
     what = what or f"{kind.label} checkpoint"
     # (torch's zip reader raises KeyError("filename 'storages' not found") for a damaged file: that is no entry's name)
     if isinstance(exc, KeyError) and exc.args and isinstance(exc.args[0], str) and exc.args[0].isidentifier():
         article = "an" if what[:1].lower() in "aeiou" else "a"
         return ValueError(f"{path}: not {article} {what}: it lacks the entry {exc.args[0]!r} that {kind.writer} "
                           "writes; restore the run's own file, or train the run again with --overwrite")
-    return ValueError(f"{path}: not a readable {what} ({_unreadable_cause(path, exc)}); "
+    cause = exc if isinstance(exc, str) else _unreadable_cause(path, kind, exc)
+    return ValueError(f"{path}: not a readable {what} ({cause}); "
                       "it may be truncated (a full disk, an interrupted copy) or edited: restore it, or train the run "
                       "again with --overwrite")
 
 
-def _unreadable_cause(path: Path, exc: Exception) -> str:
-    """Why torch could not read ``path``, in words rather than an exception's name: an empty file ("Ran out of input"),
-    bytes that are no torch file at all (pickle's decode errors), or torch's own first sentence (a zip archive cut
-    short: "PytorchStreamReader failed reading zip archive: failed finding central directory")."""
-    with contextlib.suppress(OSError):
-        if path.stat().st_size == 0:
-            return "it is empty"
-    if isinstance(exc, (EOFError, UnicodeDecodeError, pickle.UnpicklingError)):
-        return "its bytes are not a torch file"
-    return _first_sentence(exc)
+def _unreadable_cause(path: Path, kind: RunKind, exc: Exception) -> str:
+    """Why ``path`` could not be read, in words rather than the reader's own text (which quoted "[Errno 22] Invalid
+    argument" for a checkpoint cut short, and a slice of the file's bytes for a text file): an empty file; a torch or
+    pickle file cut short or damaged (its first bytes are a zip archive's, as torch.save and SB3 write, or a pickle's,
+    as SB3's replay buffers are); a whole one whose entries are not ``kind``'s; another kind of file; or the system's
+    reason (no permission)."""
+    import zipfile
+
+    try:
+        with open(path, "rb") as f:
+            head = f.read(4)
+    except OSError as err:
+        return err.strerror.lower() if err.strerror else "it cannot be opened"
+    if not head:
+        return "it is empty"
+    whole = {b"PK\x03\x04": lambda: zipfile.is_zipfile(path),  # the archive's directory, at its end, is there
+             b"\x80": lambda: not isinstance(exc, (EOFError, pickle.UnpicklingError))}  # pickle protocol 2 or later
+    for signature, complete in whole.items():
+        if head.startswith(signature):
+            return _payload_cause(kind, exc) if complete() else "it is cut short or damaged"
+    return "its bytes are not a file of this kind"
+
+
+def _payload_cause(kind: RunKind, exc: Exception) -> str:
+    """What is wrong with the entries of a whole ``kind`` checkpoint, from the error that reading them raised: a
+    setting too many or too few (a dataclass's TypeError), weights of another model (torch's state-dict check), or
+    entries of another kind."""
+    import re
+
+    text = str(exc)
+    if extra := re.search(r"unexpected keyword argument '(\w+)'", text):
+        return f"it holds a setting {extra[1]!r} that {kind.writer} does not write"
+    if missing := re.search(r"missing (\d+) required (?:\w+ )*arguments?: (.+)$", text):
+        return f"it lacks the setting{'' if missing[1] == '1' else 's'} {missing[2]} that {kind.writer} writes"
+    if "state_dict" in text:
+        return "its weights are not those of the model its settings describe"
+    return f"its entries are not those that {kind.writer} writes"
 
 
 @contextlib.contextmanager
