@@ -155,6 +155,11 @@ class SceneConfig:
             raise SceneError(f"{type(self).__name__}.image_size must be at most {MAX_IMAGE_SIZE} px (the largest frames "
                              f"piga-collect draws), got {self.image_size}")
         needed = _minimum_size(self)
+        if needed > MAX_IMAGE_SIZE:  # (l = 1e308: "2l = inf; need at least inf px")
+            raise SceneError(f"{self.scene}: {self.n_objects} objects of radius {number_text(self.radius)}"
+                             + (f" and rest length 2l at l = {number_text(self.params['l'])}" if "l" in self.params else "")
+                             + f" need images larger than {MAX_IMAGE_SIZE} px, the largest piga-collect draws; give a "
+                             + ("smaller l or radius" if "l" in self.params else "smaller radius"))
         if self.image_size < needed:
             raise SceneError(f"{self.scene}: {self.image_size}x{self.image_size} images are too small for "
                              f"{self.n_objects} objects of radius {self.radius:g}"

@@ -116,8 +116,13 @@ def test_sac_takes_its_own_presets_and_resumes_only_as_sac(tmp_path: Path, capsy
     assert (config.algo, config.gamma, config.buffer_size, config.net_arch) == ("sac", sac["gamma"], sac["buffer_size"], sac["net_arch"])
     assert (config.learning_starts, model.learning_starts) == (150, 150)  # a given option overrides the preset
     code, _, err = run_in_process("piga-baseline", baseline.main, "ddpg", "--obs", "state", "--out", str(out), "--resume",
-                                  "--steps", "400", capsys=capsys)
+                                  "--steps", "400", "--algo", "ddpg", capsys=capsys)
     assert_one_line(code, err, "was trained with --algo sac, not ddpg")
+    # without --algo, the run's own (its default, ddpg, was refused as "trained with --algo sac, not ddpg")
+    code, stdout, err = run_in_process("piga-baseline", baseline.main, "ddpg", "--obs", "state", "--out", str(out),
+                                       "--resume", "--steps", "400", "--quiet", capsys=capsys)
+    assert_sb3_run_finished(code, err)
+    assert load_sb3(out)[1].algo == "sac"
 
 
 def test_planet_resume_reads_the_model_config_from_the_checkpoint(planet_run: Path, tiny_data: Path, tmp_path: Path,

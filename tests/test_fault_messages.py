@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import json
 import re
 import shutil
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 
@@ -53,6 +55,24 @@ def test_a_whole_archive_of_other_entries_is_not_called_cut_short(tmp_path: Path
         read_checkpoint(tmp_path, RunKind.PIGA)
 
 
+def test_a_data_file_whose_metadata_is_damaged_is_said_in_words(tiny_data: Path, tmp_path: Path,
+                                                                capsys: pytest.CaptureFixture[str]) -> None:
+    """Bytes flipped in a data file's attributes left HDF5's own error: exit 70, "internal error (RuntimeError: Error
+    iterating over attributes (ran off end of input buffer while decoding))"."""
+    from piga.data.schema import DataFormatError, inspect_dataset
+
+    damaged = bytearray(tiny_data.read_bytes())
+    for i in range(3000, 40000, 97):
+        damaged[i] ^= 0xFF
+    path = tmp_path / "damaged.h5"
+    path.write_bytes(bytes(damaged))
+    with pytest.raises(DataFormatError) as error:
+        inspect_dataset(path)
+    assert f"{path}: not a readable HDF5 file (damaged: it opens, but its attributes" in str(error.value), error.value
+    assert not EXCEPTION_NAME.search(str(error.value)), error.value
+    refused("piga-show", [str(path), "--out", str(tmp_path / "s.png")], capsys, "not a readable HDF5 file (damaged")
+
+
 def test_a_broken_metrics_record_is_said_in_words(tmp_path: Path) -> None:
     """It read "metrics.json cannot be read (JSONDecodeError)"."""
     from piga.io.checkpoint import read_run_record
@@ -61,15 +81,40 @@ def test_a_broken_metrics_record_is_said_in_words(tmp_path: Path) -> None:
     (tmp_path / "metrics.json").write_text("{bad")
     (tmp_path / "config.json").write_bytes(b"\xff\xfe{")
     warning = convergence_warning(tmp_path)
-    assert warning == (f"warning: {tmp_path / 'metrics.json'} cannot be read (not valid JSON: expecting property name "
-                       "enclosed in double quotes at line 1, column 2); whether the run converged is unknown"), warning
+    assert warning == (f"warning: {tmp_path / 'metrics.json'} cannot be read (not valid JSON: it breaks off or goes "
+                       "wrong at line 1, column 2); whether the run converged is unknown"), warning
     assert read_run_record(tmp_path) == ({}, "cannot be read (not text: its bytes are not UTF-8)")
+
+
+@pytest.mark.parametrize("edit, needle", [
+    (lambda run: (run / "metrics.json").write_text("{}"), "metrics.json does not say whether the run converged"),
+    (lambda run: shutil.copyfile(run / "other.pt", run / "checkpoint.pt"), "judged a model of 4 steps, but checkpoint.pt "
+                                                                          "holds one of 7 (another run's, or replaced"),
+], ids=["empty-metrics", "another-runs-checkpoint"])
+def test_a_verdict_that_does_not_judge_the_model_is_not_taken_for_converged(edit: Callable[[Path], None], needle: str,
+                                                                           tiny_run: Path, tmp_path: Path) -> None:
+    """A metrics.json edited to {} read as converged, and another run's checkpoint put beside a converged run's records
+    planned under that run's verdict: both without a word."""
+    from piga.io.runs import convergence_warning
+
+    run = tmp_path / "run"
+    shutil.copytree(tiny_run, run)
+    payload = torch.load(run / "checkpoint.pt", weights_only=False)
+    payload["state"]["step"] = 7  # another run's: the tiny run's report judged its 4 steps
+    torch.save(payload, run / "other.pt")
+    assert json.loads((run / "metrics.json").read_text())["training"]["steps"] == 4
+    before = convergence_warning(run)
+    assert before is None or "judged" not in before, before
+    edit(run)
+    warning = convergence_warning(run)
+    assert warning is not None and needle in warning and "whether" in warning, warning
 
 
 @pytest.mark.parametrize("name, needle", [
     ("d.h5", "(it is an HDF5 file, such as piga's data files, which need no import)"),  # "OSError: cannot find loader"
     ("empty.mp4", "(it is empty)"),
-    ("broken.mp4", "(damaged, or of a format its reader does not take"),  # "OSError: Could not load meta information"
+    ("broken.mp4", "(damaged, or of a format its reader does not take)"),  # "OSError: Could not load meta information"
+    ("text.mp4", "(damaged, or of a format its reader does not take)"),  # it quoted "Could not load meta information"
 ])
 def test_import_says_why_a_recording_cannot_be_read(name: str, needle: str, tmp_path: Path,
                                                     capsys: pytest.CaptureFixture[str]) -> None:
@@ -78,11 +123,12 @@ def test_import_says_why_a_recording_cannot_be_read(name: str, needle: str, tmp_
         with h5py.File(recording, "w") as f:
             f["frames"] = np.zeros((1, 4, 8, 8), np.uint8)
     else:
-        recording.write_bytes(b"" if name == "empty.mp4" else b"\0\0\0\x18ftypmp42" + bytes(range(256)) * 8)
+        recording.write_bytes(b"" if name == "empty.mp4" else b"not a video\n" if name == "text.mp4" else
+                              b"\0\0\0\x18ftypmp42" + bytes(range(256)) * 8)
     (tmp_path / "u.csv").write_text("u\n" + "0.1\n" * 12)
     line = refused("piga-import", [str(recording), str(tmp_path / "u.csv"), "--dt", "0.05", "--steps", "4", "--out",
                                    str(tmp_path / "o.h5")], capsys, f"{name}: not a readable video or image stack", needle)
-    assert not EXCEPTION_NAME.search(line), line
+    assert not EXCEPTION_NAME.search(line) and "meta information" not in line, line
     assert not (tmp_path / "o.h5").exists()
 
 

@@ -346,8 +346,9 @@ def test_a_failed_allocation_is_out_of_memory(capsys: pytest.CaptureFixture[str]
     (["--max-speed", "-1"], ["--max-speed=-1 is out of range (--max-speed in [0, 8])"], 1),  # it listed every field's range
     (["--env", "piga/DMCPendulum-v0", "--image-size", "7"], ["--image-size=7 is out of range (--image-size in [8, 1024]"], 1),
     (["--system", "digits-spring", "--background", "black"], ["--background: digits-spring draws its digits over a texture"], 1),
-    (["--system", "bouncing", "--radius", "1e308"], ["images are too small", "need at least inf px"], 1),  # an OverflowError
-    (["--system", "gravity", "--radius", "1e200"], ["images are too small", "need at least 8e+200 px"], 1),
+    # an OverflowError, then "need at least inf px"
+    (["--system", "bouncing", "--radius", "1e308"], ["radius 1e+308 need images larger than 1024 px", "smaller radius"], 1),
+    (["--system", "gravity", "--radius", "1e200"], ["radius 1e+200 need images larger than 1024 px", "smaller radius"], 1),
     (["--system", "bouncing", "--colors", "black", "black"], ["is the background's", "invisible"], 1),
     (["--system", "bouncing", "--colors", "red", "white", "--background", "white"], ["object 1's colour"], 1),
     (["--system", "spring", "--k", "1e6"], ["k = 1e+06 is too stiff", "below 2222.2222 "], 1),
@@ -2981,6 +2982,14 @@ def test_a_spring_rest_length_is_refused_only_where_the_balls_overlap() -> None:
     # images too small for the balls come first, and say the overlap too (a larger image alone would not do)
     with pytest.raises(SceneError, match=r"images are too small .*; and at l = 6 the balls rest .* at least 20\.5"):
         scene_config("spring", radius=20.0, image_size=32)
+    # beyond the largest image: said so, not "2l = inf; need at least inf px" (l = 1e308)
+    for params, radius, fix in (({"l": 1e308}, 3.0, "smaller l or radius"), ({}, 1e308, "smaller l or radius")):
+        with pytest.raises(SceneError, match=f"need images larger than 1024 px, the largest piga-collect draws; give a "
+                                             f"{fix}$") as error:
+            scene_config("spring", params=params, radius=radius, image_size=32)
+        assert "inf" not in str(error.value), error.value
+    with pytest.raises(SceneError, match="bouncing: 2 objects of radius 1e\\+308 need images larger .* smaller radius$"):
+        scene_config("bouncing", radius=1e308, image_size=32)
 
 
 @pytest.mark.slow

@@ -134,7 +134,7 @@ def build_parser() -> ArgumentParser:
     d.add_argument("--algo", choices=ALGORITHMS, default=ddpg.algo,
                    help="the algorithm: ddpg (the paper's), or sac, its stronger sibling with the zoo's Pendulum-v1 "
                    "settings, or drqv2 (DrQ-v2: an encoder trained by the critic, augmentation, 3-step returns; "
-                   "--obs pixels; its paper's settings) (default %(default)s)")
+                   "--obs pixels; its paper's settings) (default %(default)s; with --resume, the run's own unless given)")
     d.add_argument("--eval-every", type=positive_int, default=ddpg.eval_every,
                    help="env steps between evaluations and checkpoints, a multiple of the episode length (200; DMC's 500), "
                    "of which --steps is a multiple "
@@ -677,6 +677,8 @@ def _ddpg(args: Any, argv: Sequence[str] | None, replaced: ReplacedRun) -> int:
             saved = replace(saved, encoder_precision="float32")
         if saved.obs != args.obs:
             raise PigaError(f"--resume: {run_dir} was trained with --obs {saved.obs}, not {args.obs}")
+        if "algo" not in written:  # the run's own (its default named the run "trained with --algo sac, not ddpg")
+            args.algo = saved.algo
         if saved.algo != args.algo:
             raise PigaError(f"--resume: {run_dir} was trained with --algo {saved.algo}, not {args.algo}")
         _refuse_recipe_changes(args, record, run_dir, argv)

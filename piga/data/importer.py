@@ -231,7 +231,7 @@ def _mixed_pages(path: Path) -> str:
         sizes = [tuple(int(x) for x in page.shape[:2]) for page in tif.pages]
     other = next((i for i, size in enumerate(sizes) if size != sizes[0]), None)
     if other is None:
-        return "damaged, or of a format its reader does not take: incompatible keyframe"
+        return "damaged, or of a format its reader does not take"
     (h0, w0), (h, w) = sizes[0], sizes[other]
     return (f"its page 0 is {w0}x{h0} px (width x height), but page {other} is {w}x{h}: the frames of one recording "
             "share one size")
@@ -256,7 +256,8 @@ def _read_images(path: Path) -> Iterator[np.ndarray]:
                "it is empty" if path.stat().st_size == 0 else
                "it is an HDF5 file, such as piga's data files, which need no import" if _is_hdf5(path) else
                _mixed_pages(path) if "incompatible keyframe" in first else  # tifffile's words for pages of two sizes
-               f"damaged, or of a format its reader does not take{': ' + first if first else ''}")
+               "damaged, or of a format its reader does not take")  # (not the reader's own words: "Could not load meta
+        # information")
         raise ValueError(f"{path}: not a readable video or image stack ({why}); piga-import takes {RECORDINGS}") from None
 
 

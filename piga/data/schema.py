@@ -388,10 +388,17 @@ def inspect_dataset(path: str | os.PathLike[str]) -> DatasetInfo:
     which the commands that learn from or diagnose the frames run.
     """
     with _open(path) as f:
-        info = _validate(f, Path(path))
-        _check_attrs_agree(info, f)
-        _check_virtual_sources(f, Path(path))
-        _check_frames_written(f, Path(path))
+        try:
+            info = _validate(f, Path(path))
+            _check_attrs_agree(info, f)
+            _check_virtual_sources(f, Path(path))
+            _check_frames_written(f, Path(path))
+        except FileNotFoundError:
+            raise
+        except (RuntimeError, OSError):  # HDF5's own reading of damaged metadata: "Error iterating over attributes
+            # (ran off end of input buffer while decoding)", "Unable to synchronously check link existence (...)"
+            raise DataFormatError(f"{path}: not a readable HDF5 file (damaged: it opens, but its attributes or its "
+                                  "index of datasets cannot be read); collect, import or copy it again") from None
         return info
 
 
@@ -986,8 +993,8 @@ def read_rows(ds: h5py.Dataset, which: str) -> Iterator[None]:
     try:
         yield
     except OSError as exc:
-        raise DataFormatError(f"{ds.file.filename}: {ds.name} of {which} cannot be read ({' '.join(str(exc).split())}): "
-                              "the file is damaged; collect, import or copy it again") from None
+        raise DataFormatError(f"{ds.file.filename}: {ds.name} of {which} cannot be read (HDF5 cannot decode it): the "
+                              "file is damaged; collect, import or copy it again") from None
 
 
 class DatasetWriter:

@@ -261,7 +261,8 @@ def unreadable_record(exc: Exception) -> str:
     """Why a JSON record of a run cannot be read, in words: its JSON broken (where), its bytes not text, or the
     system's reason (no permission)."""
     if isinstance(exc, json.JSONDecodeError):
-        return f"not valid JSON: {exc.msg.lower()} at line {exc.lineno}, column {exc.colno}"
+        return f"not valid JSON: it breaks off or goes wrong at line {exc.lineno}, column {exc.colno}"  # (not the
+        # parser's own "expecting property name enclosed in double quotes")
     if isinstance(exc, UnicodeDecodeError):
         return "not text: its bytes are not UTF-8"
     return exc.strerror.lower() if isinstance(exc, OSError) and exc.strerror else _first_sentence(exc)

@@ -101,6 +101,17 @@ def load_model(run_dir: str | os.PathLike[str], any_model: bool = False) -> tupl
     return model, ckpt
 
 
+def _checkpoint_step(path: Path) -> int | None:
+    """The optimiser step that a piga checkpoint holds, or None where it cannot say (no file, unreadable: the
+    commands that load the model say why). Memory-mapped: only the entries read are."""
+    try:
+        state = torch.load(path, map_location="cpu", weights_only=False, mmap=True).get("state")
+    except Exception:  # any unreadable file: the loader of the model names the cause
+        return None
+    step = state.get("step") if isinstance(state, dict) else None
+    return step if isinstance(step, int) and not isinstance(step, bool) else None
+
+
 def convergence_warning(run_dir: str | os.PathLike[str]) -> str | None:
     """One line when the run's metrics.json says it did not converge (``converged: false``), else None.
 
@@ -136,9 +147,18 @@ def convergence_warning(run_dir: str | os.PathLike[str]) -> str | None:
         return f"warning: {path} cannot be read ({unreadable_record(exc)}); whether the run converged is unknown"
     if not isinstance(metrics, dict):
         return f"warning: {path} is not a metrics record; whether the run converged is unknown"
-    converged = metrics.get("converged", True)
+    if "converged" not in metrics:  # an edited record ({}): it was taken as converged
+        return f"warning: {path} does not say whether the run converged (it has no 'converged'); whether it did is unknown"
+    converged = metrics["converged"]
     if not isinstance(converged, bool):  # an edited record: "no" would read as converged
         return f"warning: {path} gives 'converged' as {converged!r}, not true or false; whether the run converged is unknown"
+    training = metrics.get("training")
+    steps = training.get("steps") if isinstance(training, dict) else None
+    held = _checkpoint_step(Path(run_dir) / CHECKPOINT)
+    if isinstance(steps, int) and not isinstance(steps, bool) and held is not None and steps != held:
+        # another run's checkpoint put beside this record: its verdict was taken for a model it never judged
+        return (f"warning: {path} judged a model of {steps:,} steps, but {CHECKPOINT} holds one of {held:,} (another "
+                "run's, or replaced since); whether this model converged is unknown")
     if converged:
         return None
     convergence = metrics.get("convergence")
