@@ -992,7 +992,7 @@ def read_rows(ds: h5py.Dataset, which: str) -> Iterator[None]:
         DataFormatError: in place of that OSError."""
     try:
         yield
-    except OSError as exc:
+    except OSError:
         raise DataFormatError(f"{ds.file.filename}: {ds.name} of {which} cannot be read (HDF5 cannot decode it): the "
                               "file is damaged; collect, import or copy it again") from None
 
