@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 import torch
 
+from tests.helpers import ENV
 from tests.test_faults import refused
 
 #: A Python exception's name, as it must not appear in a user's line.
@@ -73,6 +74,27 @@ def test_a_data_file_whose_metadata_is_damaged_is_said_in_words(tiny_data: Path,
     refused("piga-show", [str(path), "--out", str(tmp_path / "s.png")], capsys, "not a readable HDF5 file (damaged")
 
 
+@pytest.mark.parametrize("offset, needle", [
+    (800, "its index names /frames, but it cannot be found"),  # "... (to <h5py._hl.group.HardLink object at 0x7f...>)"
+    (1505, "it opens, but its attributes or its index of datasets cannot be read"),  # "ValueError: Insufficient precision"
+])
+def test_a_data_file_with_one_byte_flipped_is_said_in_words(offset: int, needle: str, tmp_path: Path) -> None:
+    """Bytes of a collected file's header flipped one at a time (offsets found by flipping each of its first 4000)."""
+    from piga.data.collect import CollectConfig, collect
+    from piga.data.schema import DataFormatError, inspect_dataset
+
+    path = tmp_path / "d.h5"
+    collect(CollectConfig(sequences=12, steps=16, seed=3, workers=1, split=(8, 2, 2)), path, progress=False,
+            command="test")
+    damaged = bytearray(path.read_bytes())
+    damaged[offset] ^= 0xFF
+    path.write_bytes(bytes(damaged))
+    with pytest.raises(DataFormatError) as error:
+        inspect_dataset(path)
+    assert f"{path}: not a readable HDF5 file (damaged: {needle}" in str(error.value), error.value
+    assert "0x" not in str(error.value) and not EXCEPTION_NAME.search(str(error.value)), error.value
+
+
 def test_a_broken_metrics_record_is_said_in_words(tmp_path: Path) -> None:
     """It read "metrics.json cannot be read (JSONDecodeError)"."""
     from piga.io.checkpoint import read_run_record
@@ -115,6 +137,8 @@ def test_a_verdict_that_does_not_judge_the_model_is_not_taken_for_converged(edit
     ("empty.mp4", "(it is empty)"),
     ("broken.mp4", "(damaged, or of a format its reader does not take)"),  # "OSError: Could not load meta information"
     ("text.mp4", "(damaged, or of a format its reader does not take)"),  # it quoted "Could not load meta information"
+    # tifffile logged "<tifffile.TiffPages @8> invalid page offset ..." on stderr above the line
+    ("cut.tif", "(damaged, or of a format its reader does not take)"),
 ])
 def test_import_says_why_a_recording_cannot_be_read(name: str, needle: str, tmp_path: Path,
                                                     capsys: pytest.CaptureFixture[str]) -> None:
@@ -122,6 +146,11 @@ def test_import_says_why_a_recording_cannot_be_read(name: str, needle: str, tmp_
     if name.endswith(".h5"):
         with h5py.File(recording, "w") as f:
             f["frames"] = np.zeros((1, 4, 8, 8), np.uint8)
+    elif name.endswith(".tif"):  # a 20-page stack cut short
+        import imageio.v3 as iio
+
+        iio.imwrite(recording, np.random.default_rng(0).integers(0, 255, (20, 32, 32), dtype=np.uint8))
+        recording.write_bytes(recording.read_bytes()[:15000])
     else:
         recording.write_bytes(b"" if name == "empty.mp4" else b"not a video\n" if name == "text.mp4" else
                               b"\0\0\0\x18ftypmp42" + bytes(range(256)) * 8)
@@ -130,6 +159,47 @@ def test_import_says_why_a_recording_cannot_be_read(name: str, needle: str, tmp_
                                    str(tmp_path / "o.h5")], capsys, f"{name}: not a readable video or image stack", needle)
     assert not EXCEPTION_NAME.search(line) and "meta information" not in line, line
     assert not (tmp_path / "o.h5").exists()
+
+
+def test_a_tiff_cut_short_is_one_line_from_a_fresh_process(tmp_path: Path) -> None:
+    """tifffile logged "<tifffile.TiffPages @8> invalid page offset ..." through Python's last-resort handler, a line
+    on stderr above the command's own (in a fresh process: pytest's own log handlers hide it in this one)."""
+    import subprocess
+    import sys
+
+    import imageio.v3 as iio
+
+    recording = tmp_path / "cut.tif"
+    iio.imwrite(recording, np.random.default_rng(0).integers(0, 255, (20, 32, 32), dtype=np.uint8))
+    recording.write_bytes(recording.read_bytes()[:15000])
+    (tmp_path / "u.csv").write_text("u\n" + "0.1\n" * 20)
+    done = subprocess.run([sys.executable, "-c", "from piga.cli.importer import entry; entry()",
+                           str(recording), str(tmp_path / "u.csv"), "--dt", "0.05", "--steps", "4", "--out",
+                           str(tmp_path / "o.h5")], capture_output=True, text=True, env={**ENV, "OMP_NUM_THREADS": "1"})
+    assert done.returncode == 1 and len(done.stderr.strip().splitlines()) == 1, done.stderr
+    assert "tifffile" not in done.stderr and "damaged" in done.stderr, done.stderr
+
+
+def test_a_tiff_cut_short_that_still_reads_is_refused_as_damaged(tmp_path: Path,
+                                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    """A TIFF stack cut short read as the pages before the cut: imported as half a recording with exit 0 (or the
+    actions blamed for the count), and taken whole as a goal image (its first page)."""
+    import imageio.v3 as iio
+
+    from piga.data.scene import read_image
+
+    whole = tmp_path / "whole.tif"
+    iio.imwrite(whole, np.random.default_rng(0).integers(0, 255, (20, 32, 32), dtype=np.uint8))
+    for name, cut in (("end.tif", 0.95), ("middle.tif", 0.6)):
+        (tmp_path / name).write_bytes(whole.read_bytes()[: int(whole.stat().st_size * cut)])
+    assert iio.imread(tmp_path / "end.tif").shape == (20, 32, 32)  # (the reader takes it, warning on its logger)
+    (tmp_path / "u.csv").write_text("u\n" + "0.1\n" * 20)
+    line = refused("piga-import", [str(tmp_path / "end.tif"), str(tmp_path / "u.csv"), "--dt", "0.05", "--steps", "4",
+                                   "--out", str(tmp_path / "o.h5")], capsys,
+                   "end.tif: not a readable video or image stack (damaged: its reader could not find all of it")
+    assert "u.csv" not in line and not (tmp_path / "o.h5").exists(), line
+    with pytest.raises(ValueError, match=r"middle.tif: not a readable image \(damaged: its reader could not find all"):
+        read_image(tmp_path / "middle.tif")
 
 
 @pytest.fixture(scope="module")

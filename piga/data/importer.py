@@ -42,7 +42,7 @@ from piga.io.atomic import check_not_an_input, check_writable_target
 from piga.data.collect import split_counts
 from piga.data.schema import (MAX_ABS_ACTION, MAX_DT, MIN_DT, MIN_IMAGE_SIZE, SPLITS, DatasetWriter, blank_error,
                               check_data_disk, frames_have_signal, frames_move, still_error)
-from piga.data.scene import read_image, scene_to_gray
+from piga.data.scene import DAMAGED_READ, read_image, reader_log, scene_to_gray
 
 #: float32's smallest normal number: a nonzero action below it would be stored as 0 or rounded.
 FLOAT32_TINY = np.finfo(np.float32).tiny
@@ -182,7 +182,19 @@ def read_recording(path: str | Path, size: int) -> np.ndarray:
 
 def _read_recording(path: str | Path, size: int) -> tuple[np.ndarray, tuple[int, int]]:
     """:func:`read_recording`'s frames (F, size, size), and the first frame's (height, width), before the centre crop
-    to a square and the resize (a short side below ``size`` means the frames were enlarged)."""
+    to a square and the resize (a short side below ``size`` means the frames were enlarged). A recording whose reader
+    warned of damage it read past is refused: a TIFF stack cut short gave the pages before the cut, and the actions
+    were blamed for the count ("a.csv has 48 actions but cut.tif has 24 frames"), or half the recording was written."""
+    with reader_log() as caught:
+        frames, shape = _decode_recording(path, size)
+    if caught:
+        raise ValueError(f"{path}: not a readable video or image stack ({DAMAGED_READ}); piga-import takes "
+                         f"{RECORDINGS}")
+    return frames, shape
+
+
+def _decode_recording(path: str | Path, size: int) -> tuple[np.ndarray, tuple[int, int]]:
+    """:func:`_read_recording`'s frames and first frame's (height, width)."""
     p = Path(path)
     if p.is_dir():
         frames = []

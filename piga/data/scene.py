@@ -8,8 +8,11 @@ Goal images (:mod:`piga.control.goal`) and imported recordings (:mod:`piga.data.
 
 from __future__ import annotations
 
+import logging
 import os
 import warnings
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -63,6 +66,32 @@ def scene_to_gray(img: np.ndarray, size: int) -> np.ndarray:
     return img
 
 
+#: Why a file whose reader warned of damage that it read past is refused (:func:`reader_log`).
+DAMAGED_READ = "damaged: its reader could not find all of it, as in a file cut short"
+
+
+@contextmanager
+def reader_log() -> Iterator[list[logging.LogRecord]]:
+    """Inside: the warnings that the TIFF reader logs (tifffile: "<tifffile.TiffPages @8> invalid page offset 21128")
+    are kept in the list yielded, not written to stderr, where Python's last-resort handler put them above the
+    command's own one line."""
+    caught: list[logging.LogRecord] = []
+
+    class _Keep(logging.Handler):
+        def emit(self, record: logging.LogRecord) -> None:
+            caught.append(record)
+
+    logger = logging.getLogger("tifffile")
+    handler, propagate = _Keep(logging.WARNING), logger.propagate
+    logger.addHandler(handler)
+    logger.propagate = False
+    try:
+        yield caught
+    finally:
+        logger.removeHandler(handler)
+        logger.propagate = propagate
+
+
 def read_image(path: str | os.PathLike[str]) -> np.ndarray:
     """Reads a PNG, JPEG or other still image as an array, unconverted (an animation of one frame: that frame).
 
@@ -71,8 +100,6 @@ def read_image(path: str | os.PathLike[str]) -> np.ndarray:
         IsADirectoryError: ``path`` is a folder.
         ValueError: the file is not a readable image, or is an animation of several frames.
     """
-    import imageio.v3 as iio
-
     p = Path(path)
     if p.is_dir():
         raise IsADirectoryError(f"{p}: is a folder, not an image file")
@@ -85,6 +112,27 @@ def read_image(path: str | os.PathLike[str]) -> np.ndarray:
     # colour or palette entry (a PNG's tRNS, a GIF's), which it reads as opaque RGB or gray otherwise: its alpha is
     # then checked as any other's
     mode = "RGB" if meta.get("mode") == "CMYK" else "RGBA" if "transparency" in meta else None
+    with reader_log() as caught:
+        image = _read_image(p, mode, meta)
+    if caught:  # a TIFF cut short: its first page was taken for the image
+        raise ValueError(f"{p}: not a readable image ({DAMAGED_READ}); give a PNG or a JPEG")
+    if image.size == 0:  # what a plugin made of a file that is not its own
+        raise ValueError(f"{p}: not a readable image (it has no pixels)")
+    if image.ndim == 4:  # (frames, H, W, C): an animation (a GIF, an APNG) is read whole
+        if len(image) > 1:
+            raise ValueError(f"{p}: an animation of {len(image)} frames; give one image")
+        image = image[0]
+    return image
+
+
+def _read_image(p: Path, mode: str | None, meta: dict[str, Any]) -> np.ndarray:
+    """:func:`read_image`'s array, as the file's reader gives it.
+
+    Raises:
+        ValueError: the file is not a readable image (the message names it and why).
+    """
+    import imageio.v3 as iio
+
     try:
         # imageio tries its plugins in turn, and some warn of a file that is not theirs (spe.py read a torch
         # checkpoint as 0 frames, warning "The file header ... claims there are 7 frames"): the one line of the
@@ -114,12 +162,6 @@ def read_image(path: str | os.PathLike[str]) -> np.ndarray:
                "no reader knows its format" if "Could not find a backend" in str(exc) else
                "damaged, or not a picture in the format its suffix names; give a PNG or a JPEG")
         raise ValueError(f"{p}: not a readable image ({why})") from None
-    if image.size == 0:  # what a plugin made of a file that is not its own
-        raise ValueError(f"{p}: not a readable image (it has no pixels)")
-    if image.ndim == 4:  # (frames, H, W, C): an animation (a GIF, an APNG) is read whole
-        if len(image) > 1:
-            raise ValueError(f"{p}: an animation of {len(image)} frames; give one image")
-        image = image[0]
     return image
 
 

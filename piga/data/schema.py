@@ -275,6 +275,10 @@ def _validate(f: h5py.File, path: Path) -> DatasetInfo:
             found = f[name]
         except KeyError:
             link = f.get(name, getlink=True)  # (h5py's repr of an external link leaves its "<" unclosed)
+            if isinstance(link, h5py.HardLink):  # the file's own dataset, not found: its index is damaged (it was
+                # "a link that does not resolve (to <h5py._hl.group.HardLink object at 0x7f...>)")
+                raise DataFormatError(f"{path}: not a readable HDF5 file (damaged: its index names /{name}, but it "
+                                      "cannot be found); collect, import or copy it again") from None
             external = isinstance(link, h5py.ExternalLink)
             to = f"{link.path} in {link.filename}" if external else getattr(link, "path", link)
             raise DataFormatError(f"{path}: /{name} is a link that does not resolve (to {to})") from None
@@ -393,10 +397,11 @@ def inspect_dataset(path: str | os.PathLike[str]) -> DatasetInfo:
             _check_attrs_agree(info, f)
             _check_virtual_sources(f, Path(path))
             _check_frames_written(f, Path(path))
-        except FileNotFoundError:
+        except (FileNotFoundError, DataFormatError):
             raise
-        except (RuntimeError, OSError):  # HDF5's own reading of damaged metadata: "Error iterating over attributes
-            # (ran off end of input buffer while decoding)", "Unable to synchronously check link existence (...)"
+        except (RuntimeError, OSError, ValueError, TypeError):  # HDF5's own reading of damaged metadata: "Error
+            # iterating over attributes (ran off end of input buffer while decoding)", "Unable to synchronously check
+            # link existence (...)", a damaged datatype ("Insufficient precision in available types to represent")
             raise DataFormatError(f"{path}: not a readable HDF5 file (damaged: it opens, but its attributes or its "
                                   "index of datasets cannot be read); collect, import or copy it again") from None
         return info
