@@ -154,7 +154,8 @@ def markdown(record: dict[str, Any]) -> str:
              "planner with exploration noise 0.3 (of the action bound) per round, until its data total the table's "
              "env steps at that size; its optimiser steps total the table's 12000. Both are scored on the same 20 "
              "episodes at x1.0 and 5 at x1.4 (not told). Training minutes count the optimiser's steps, not the protocol's "
-             "planner episodes.", "",
+             "planner episodes; they are wall-clock minutes of one-thread runs that shared the machine with other jobs "
+             "(the protocol's at 500 ran at low priority beside them), so they compare costs only roughly.", "",
              "| env steps (table's sequences) | data | seed | rounds x steps per round | success x1.0 (episodes) | "
              "mean return x1.0 | success x1.4 | training min |",
              "|---|---|---|---|---|---|---|---|"]
