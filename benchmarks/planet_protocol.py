@@ -145,10 +145,22 @@ def _cells(run: dict[str, Any]) -> str:
     return f"{score_cells(run, x14_episodes=False)} | {run['train_seconds'] / 60:.0f}"
 
 
+def _machines(record: dict[str, Any]) -> str:
+    """The machine line: each protocol run's own, named with its runs where they differ (a run continued on another
+    machine is named by the one that finished it, which wrote its record)."""
+    by_machine: dict[str, list[str]] = {}
+    for name, run in record["runs"].items():
+        by_machine.setdefault(machine_words(run.get("machine", record["machine"])), []).append(name)
+    if len(by_machine) <= 1:
+        return f"Machine: {next(iter(by_machine), machine_words(record['machine']))}."
+    return "Machines of the protocol's runs: " + "; ".join(f"{', '.join(names)}: {words}"
+                                                           for words, names in by_machine.items()) + "."
+
+
 def markdown(record: dict[str, Any]) -> str:
     lines = ["# The PlaNet-style model on PlaNet's data protocol", "",
              f"Command: `{record['command']}`", "",
-             f"Machine: {machine_words(record['machine'])}.", "",
+             _machines(record), "",
              "Each protocol row collects its data as PlaNet does: the table's first "
              f"{record['seed_sequences']} random sequences as seed episodes, then one 200-step episode of the latent "
              "planner with exploration noise 0.3 (of the action bound) per round, until its data total the table's "
