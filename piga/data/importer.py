@@ -268,8 +268,8 @@ def _read_images(path: Path) -> Iterator[np.ndarray]:
                "it is empty" if path.stat().st_size == 0 else
                "it is an HDF5 file, such as piga's data files, which need no import" if _is_hdf5(path) else
                _mixed_pages(path) if "incompatible keyframe" in first else  # tifffile's words for pages of two sizes
-               "damaged, or of a format its reader does not take")  # (not the reader's own words: "Could not load meta
-        # information")
+               # not the reader's own words after it ("Could not load meta information")
+               "damaged, or of a format its reader does not take")
         raise ValueError(f"{path}: not a readable video or image stack ({why}); piga-import takes {RECORDINGS}") from None
 
 

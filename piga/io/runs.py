@@ -104,6 +104,8 @@ def load_model(run_dir: str | os.PathLike[str], any_model: bool = False) -> tupl
 def _checkpoint_step(path: Path) -> int | None:
     """The optimiser step that a piga checkpoint holds, or None where it cannot say (no file, unreadable: the
     commands that load the model say why). Memory-mapped: only the entries read are."""
+    if not path.is_file():  # (a pipe in its place would be waited on for ever: the loader refuses it)
+        return None
     try:
         state = torch.load(path, map_location="cpu", weights_only=False, mmap=True).get("state")
     except Exception:  # any unreadable file: the loader of the model names the cause
