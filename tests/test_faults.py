@@ -4680,6 +4680,7 @@ def test_diagnose_names_a_scene_file_before_its_length(tiny_piga_run: Path, tmp_
 def test_a_digits_spring_file_is_named_by_its_scene(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """A digits-spring file (system "spring", scene "digits-spring") was called "spring" by the commands that refuse
     it."""
+    pytest.importorskip("sklearn", reason="the digits need the 'scenes' extra (scikit-learn)")
     data = tmp_path / "digits.h5"
     assert collect.main(["--system", "digits-spring", "--sequences", "4", "--steps", "12", "--split", "2,1,1", "--out",
                          str(data), "--seed", "1", "--quiet"]) == 0
