@@ -108,16 +108,23 @@ RUN_TRAIN_MODEL = "import sys; from piga.cli.common import run_cli; from piga.cl
 
 
 def markdown(record: dict[str, Any]) -> str:
+    from piga.io.resources import TRAINING_BYTES_PER_PARAMETER
+    from piga.training import memory
+
+    per_parameter = (TRAINING_BYTES_PER_PARAMETER + memory.BACKWARD_BYTES_PER_PARAMETER
+                     + memory.OPTIMISER_STEP_BYTES_PER_PARAMETER + memory.AVERAGE_BYTES_PER_PARAMETER)
+    slack = f"{memory.ALLOCATOR_SLACK:g}"
     lines = ["# piga-train-model's memory check against its runs", "",
              f"From `{record['command']}` on {machine_words(record['machine'])}.", "",
              "## Whole runs", "",
              "`piga-train-model` with the fast preset, `--budget-steps 4`, one torch thread, on a small collected file "
              "of frames of each side, in a fresh process. Measured: the command's peak resident memory (`getrusage`). "
              "Counted: what `piga.training.memory` counts before it builds the model (per parameter: weights, "
-             "gradients, Adam's moments and step, the averaged copy and the backward pass's temporaries, 32 bytes; "
-             "per window of the batch: twice the activations autograd saves, measured on torch's meta device; and "
-             "0.5 GiB for the process itself; all of it times 1.1, the allocator's slack). A size whose count is over the memory available is refused by the "
-             "command before it builds anything.", "",
+             f"gradients, Adam's moments and step, the averaged copy and the backward pass's temporaries, "
+             f"{per_parameter} bytes; per window of the batch: {memory.ACTIVATION_FACTOR} times the activations "
+             f"autograd saves, measured on torch's meta device; and {memory.PROCESS_BYTES / 2**30:g} GiB for the "
+             f"process itself; all of it times {slack}, the allocator's slack). A size whose count is over the memory "
+             "available is refused by the command before it builds anything.", "",
              "| frames | batch | counted | measured | counted / measured |", "|---|---|---|---|---|"]
     for r in record["runs"]:
         if r["measured_gib"] is None:
@@ -129,8 +136,9 @@ def markdown(record: dict[str, Any]) -> str:
     lines += ["", "## One forward and backward pass", "",
               "The fast preset's model, one pass in a fresh process with one torch thread. Measured: the rise of the "
               "process's high-water mark of resident memory over the pass (Linux's VmHWM). Counted: the part of the "
-              "check's count that one pass allocates (gradients and the backward pass's temporaries, 8 bytes per "
-              "parameter, and twice the activations autograd saves per window; times 1.1).", "",
+              "check's count that one pass allocates (gradients and the backward pass's temporaries, "
+              f"{4 + memory.BACKWARD_BYTES_PER_PARAMETER} bytes per parameter, and {memory.ACTIVATION_FACTOR} times "
+              f"the activations autograd saves per window; times {slack}).", "",
               "| frames | batch | parameters | saved activations per window | measured | counted | counted / measured |",
               "|---|---|---|---|---|---|---|"]
     for r in record["cases"]:

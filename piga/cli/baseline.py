@@ -298,23 +298,26 @@ def _resumed_record(run_dir: Path, kind: RunKind, args: Any) -> dict[str, Any]:
     return {"command": None, "kind": kind.value, **rebuilt}
 
 
-def _refuse_record_edits(run_dir: Path, record: dict[str, Any], kind: RunKind) -> None:
-    """A record whose recipe differs from its checkpoint's (an edited ``obs`` or ``env`` of a DDPG run, an edited
-    ``free_nats`` of a planet run, or another run's checkpoint in the folder) is named as such at once: judged first
-    against the command line, it read "trained with --obs pixels, not state" (the command line blamed), or "not usable
-    ...; start the run again with --overwrite" (the run thrown away); and a planet run trained on the edited value."""
-    from piga.io.checkpoint import check_record_matches, read_checkpoint
+def _refuse_record_edits(run_dir: Path, record: dict[str, Any], kind: RunKind,
+                         ckpt: dict[str, Any] | None = None) -> None:
+    """A record whose recipe differs from its checkpoint's (``ckpt``, read here where None: an edited ``obs`` or
+    ``env`` of a DDPG run, an edited ``free_nats`` of a planet run, or another run's checkpoint in the folder) is named
+    as such at once: judged first against the command line, it read "trained with --obs pixels, not state" (the
+    command line blamed), or "not usable ...; start the run again with --overwrite" (the run thrown away); and a planet
+    run trained on the edited value."""
+    from piga.io.checkpoint import RESTORE_OR_DELETE, check_record_matches, read_checkpoint
 
-    try:
-        ckpt = read_checkpoint(run_dir, kind)
-    except (FileNotFoundError, ValueError) as exc:
-        raise PigaError(with_flags(str(exc))) from None
+    if ckpt is None:
+        try:
+            ckpt = read_checkpoint(run_dir, kind)
+        except (FileNotFoundError, ValueError) as exc:
+            raise PigaError(with_flags(str(exc))) from None
     sections = ([(record.get("train"), ckpt.get("train_config")), (record.get("rssm"), ckpt.get("rssm_config"))]
                 if kind is RunKind.PLANET else [(record.get("ddpg"), ckpt.get("config"))])
     # an --iterative run's settings of its rounds are only in its record: deleting it is no way out
-    fix = "restore the record's values" if kind is RunKind.PLANET and record.get("iterative") else None
+    iterative = kind is RunKind.PLANET and record.get("iterative")
     try:
-        check_record_matches(run_dir, sections, **({"fix": fix} if fix else {}))
+        check_record_matches(run_dir, sections, "restore the record's values" if iterative else RESTORE_OR_DELETE)
     except ValueError as exc:  # (the record's own names: "learning_starts 100 there")
         raise PigaError(str(exc)) from None
 
@@ -487,7 +490,14 @@ def _planet(args: Any, argv: Sequence[str] | None, replaced: ReplacedRun) -> int
     if args.resume:
         _check_run_dir(run_dir, True, args.overwrite, RunKind.PLANET, replaced)
         record = _resumed_record(run_dir, RunKind.PLANET, args)
-        _refuse_record_edits(run_dir, record, RunKind.PLANET)
+        from agents.planet.run import load_planet
+
+        try:  # the model's sizes are the checkpoint's: a record may lack them (benchmarks/baselines.py wrote none
+            # before) or have been edited
+            held, ckpt = load_planet(run_dir)
+        except (FileNotFoundError, ValueError) as exc:
+            raise PigaError(with_flags(str(exc))) from None
+        _refuse_record_edits(run_dir, record, RunKind.PLANET, ckpt)
         _refuse_recipe_changes(args, record, run_dir, argv)
         saved = _saved_config(run_dir, record, "train", PlanetTrainConfig, optional=("device",))  # older runs have none
         _refuse_fewer_steps(args.steps, saved.steps)
@@ -507,13 +517,7 @@ def _planet(args: Any, argv: Sequence[str] | None, replaced: ReplacedRun) -> int
             _refuse_fewer_steps(args.rounds, saved_iterative.rounds, "--rounds")
             iterative = replace(saved_iterative, rounds=args.rounds or saved_iterative.rounds)
             record["iterative"] = iterative.to_dict()
-        from agents.planet.run import load_planet
-
-        try:  # the model's sizes are the checkpoint's: a record may lack them (benchmarks/baselines.py wrote none
-            # before) or have been edited
-            record["rssm"] = load_planet(run_dir)[0].config.to_dict()
-        except (FileNotFoundError, ValueError) as exc:
-            raise PigaError(with_flags(str(exc))) from None
+        record["rssm"] = held.config.to_dict()
         record_resume(record, command)
     else:
         config = PlanetTrainConfig(steps=args.steps or PlanetTrainConfig.steps, batch_size=args.batch_size, chunk_length=args.chunk_length,

@@ -79,12 +79,12 @@ class ArgumentParser(argparse.ArgumentParser):
         return super().add_argument(*args, **kwargs)
 
     def error(self, message: str) -> NoReturn:
+        given = list(getattr(self, "_given_args", ()))
+        ended = given.index("--") if "--" in given else len(given)  # "--" ends the options: names follow it
         if message.startswith("the following arguments are required:"):
             # argparse says a required option is missing before it names an unknown one: "--ou x.h5" was refused as
             # "required: --out", with no word that --ou is no option (abbreviations are off)
             required = _required_flags(self)
-            given = list(getattr(self, "_given_args", ()))
-            ended = given.index("--") if "--" in given else len(given)  # "--" ends the options: names follow it
             for flag in (token.split("=", 1)[0] for token in given[:ended]):
                 full = sorted({name for name in required if name.startswith(flag) and name != flag})
                 if flag.startswith("--") and full:
@@ -94,9 +94,7 @@ class ArgumentParser(argparse.ArgumentParser):
             else:
                 message = self._after_the_end(given, ended, required) or message
         elif message.startswith("unrecognized arguments:"):  # options after "--": taken as names, then left over
-            given = list(getattr(self, "_given_args", ()))
-            if "--" in given:
-                message = self._after_the_end(given, given.index("--"), list(self._option_string_actions)) or message
+            message = self._after_the_end(given, ended, list(self._option_string_actions)) or message
         self.exit(1, f"{self.prog}: error: {message} (see --help)\n")
 
     @staticmethod

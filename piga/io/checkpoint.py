@@ -212,8 +212,12 @@ def read_run_record(run_dir: str | os.PathLike[str]) -> tuple[dict[str, Any], st
 RESUMABLE_SETTINGS = frozenset({"steps", "epochs", "budget_steps", "max_minutes", "threads", "device"})
 
 
+#: :func:`check_record_matches`'s fix where a resume without the record rebuilds it from the checkpoint.
+RESTORE_OR_DELETE = "restore the record's values, or delete it to resume from the checkpoint's"
+
+
 def check_record_matches(run_dir: str | os.PathLike[str], sections: Iterable[tuple[object, object]],
-                         fix: str = "restore the record's values, or delete it to resume from the checkpoint's") -> None:
+                         fix: str = RESTORE_OR_DELETE) -> None:
     """Refuses a run whose record (``config.json``) no longer describes the run its checkpoint holds: an edited
     record, or another run's checkpoint put in the folder. ``sections``: pairs of a section of the record and the same
     settings as the checkpoint holds them; the settings that both hold are compared, but for
