@@ -176,3 +176,30 @@ def test_max_angle_takes_pi_as_written() -> None:
     assert angle_up_to_pi("3.15") == 3.15 and angle_up_to_pi("1.5") == 1.5
     with pytest.raises(argparse.ArgumentTypeError):
         angle_up_to_pi("a lot")
+
+
+@pytest.mark.parametrize("sequences, steps, size", [(4, 8, 32), (12, 16, 64)])
+def test_the_disk_check_names_about_the_size_the_file_takes(sequences: int, steps: int, size: int,
+                                                           tmp_path: Path) -> None:
+    """A refusal on a small disk called a 13.2 KiB file "about 130.0 KiB once compressed": HDF5's own bytes were a
+    fixed 128 KiB, ten times what a small file holds."""
+    from envs.pendulum import PixelPendulumConfig
+    from piga.data.collect import disk_need
+
+    config = CollectConfig(sequences=sequences, steps=steps, seed=5, workers=1, split=(sequences - 2, 1, 1),
+                           env=PixelPendulumConfig(image_size=size))
+    written = collect(config, tmp_path / "d.h5", progress=False, command="test").stat().st_size
+    assert 0.9 < disk_need(config)[0] / written < 1.5, (disk_need(config)[0], written)
+
+
+@pytest.mark.parametrize("scene", ["spring", "digits-spring"])
+def test_the_disk_check_of_a_scene_names_about_the_size_the_file_takes(scene: str, tmp_path: Path) -> None:
+    """Ball scenes were sized as if their frames shrank 4x, as digits' do; they shrink 24-28x."""
+    if scene == "digits-spring":
+        pytest.importorskip("sklearn", reason="the digits are scikit-learn's")
+    from envs.scenes import scene_config
+    from piga.data.collect_scenes import SceneCollectConfig, collect_scene, scene_disk_need
+
+    config = SceneCollectConfig(scene=scene_config(scene), sequences=6, steps=8, seed=5, split=(4, 1, 1))
+    written = collect_scene(config, tmp_path / "d.h5", progress=False, command="test").stat().st_size
+    assert 0.9 < scene_disk_need(config)[0] / written < 2.5, (scene_disk_need(config)[0], written)

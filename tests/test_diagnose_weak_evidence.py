@@ -411,6 +411,17 @@ def test_a_report_with_no_gap_gives_no_closure_at_all(tmp_path_factory: pytest.T
     assert d.verdict_class == "none" and d.gap.no_gap
     assert d.gap.free_run_gap_closure is None and d.gap.typical_free_run_gap_closure is None
     assert d.gap.mean_free_run_gap_closure is None and d.gap.pixel_free_run_gap_closure is None
+    # its per-horizon table read "closure 71.1%" under "No gap to close": the refit's ratio, which corrects nothing
+    import matplotlib.pyplot as plt
+
+    from piga.diagnostics.report import gap_figure, markdown
+
+    table = [line for line in markdown(d, "m", "d", "c").splitlines() if line.startswith("| ")]
+    head = next(line for line in table if line.startswith("| horizon |"))
+    rows = [line.split(" | ") for line in table[table.index(head) + 2:] if line.split(" | ")[0][2:].isdigit()]
+    assert "| refitted (deg) | closure |" in head and "corrected" not in head, head
+    assert rows and all(row[3] == "–" for row in rows), rows
+    plt.close(gap_figure(d))
 
 
 def test_the_own_files_reading_starts_from_the_nominal_a_where_the_recordings_shrank() -> None:

@@ -552,17 +552,18 @@ def test_a_folder_that_cannot_be_made_on_a_read_only_disk_is_named(tmp_path: Pat
     ("wide", "has frames of 64x24 px (a model takes square ones): piga-train-model"),
     ("system", "has the system 'banana', which no model knows (known: bouncing, gravity, pendulum, spring): "
                "piga-train-model"),
+    ("spring", "has 1 action column (a spring takes 0): piga-train-model"),
 ])
 def test_show_warns_once_of_what_the_other_commands_refuse(odd: str, needle: str, tiny_data: Path, tmp_path: Path,
                                                            capsys: pytest.CaptureFixture[str]) -> None:
-    """It drew a file of two action columns, or of one frame a sequence, without a word, which every other command
-    refuses."""
+    """It drew a file of two action columns, or of one frame a sequence, or a pendulum's file labelled 'spring', without
+    a word, which every other command refuses."""
     from piga.cli.show import main
 
     data = tmp_path / "odd.h5"
     shutil.copyfile(tiny_data, data)
     with h5py.File(data, "a") as f:
-        for name in ("frames", "actions", "states", "rewards") if odd != "system" else ():
+        for name in ("frames", "actions", "states", "rewards") if odd not in ("system", "spring") else ():
             array = f[name][()]
             if odd == "wide":
                 array = array[..., 20:44] if name == "frames" else array
@@ -575,8 +576,8 @@ def test_show_warns_once_of_what_the_other_commands_refuse(odd: str, needle: str
             f[name] = array
         if odd == "wide":  # frames no env rendered (the env_config's 64x64 ones are refused on open)
             del f.attrs["env_config"]
-        if odd == "system":  # drawn without a word: it names no model
-            f.attrs["system"] = "banana"
+        if odd in ("system", "spring"):  # drawn without a word: it names no model, or one without actions
+            f.attrs["system"] = "banana" if odd == "system" else "spring"
     code, out, err = run_in_process("piga-show", main, str(data), "--out", str(tmp_path / "s.png"), capsys=capsys)
     assert code == 0 and (tmp_path / "s.png").exists() and "wrote" in out, err
     assert err.count("\n") == 1 and err.startswith("piga-show: warning: ") and needle in err, err

@@ -1008,14 +1008,13 @@ def _check_dmc_rate(run_dir: str, checkpoint: dict, dt: float, env: DMCPendulumC
 
 def _training_env_id(checkpoint: dict) -> str | None:
     """The env id of the file the model was trained on, where the file is still there and names one."""
-    import h5py
-
+    from piga.data.schema import open_data_file
     from piga.io.runs import training_data_path
 
     if (path := training_data_path(checkpoint)) is None:
         return None
     try:
-        with h5py.File(path, "r") as f:
+        with open_data_file(path) as f:
             env_id = f.attrs.get("env_id")
     except (OSError, ValueError):
         return None

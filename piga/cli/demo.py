@@ -24,7 +24,7 @@ from piga.cli import show, train
 from piga.cli.common import (ArgumentParser, Interrupted, PigaError, command_line, int_up_to, made_folder, positive_int,
                              resume_option, run_cli, seed_int, thread_count)
 from piga.data.collect import CollectConfig, collect
-from piga.data.schema import inspect_dataset
+from piga.data.schema import inspect_dataset, open_data_file
 from piga.io.atomic import check_folder_target, remove_stale_partials
 from piga.io.checkpoint import CHECKPOINT, DEMO_RUN
 from piga.io.lock import lock_run_folder
@@ -107,10 +107,8 @@ def build_parser() -> ArgumentParser:
 def _written_by_demo(path: Path) -> bool:
     """Whether ``path`` may be the data file piga-demo collected: an HDF5 file whose ``command`` attribute names
     piga-demo, or one too damaged to read it (a demo's, cut short: --resume and --overwrite say what to do)."""
-    import h5py
-
     try:
-        with h5py.File(path, "r") as f:
+        with open_data_file(path) as f:
             command = f.attrs.get("command")
     except (OSError, ValueError):
         with open(path, "rb") as f:

@@ -6,13 +6,12 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-import h5py
 import numpy as np
 
 from envs.fields import counted
 from piga.cli.common import ArgumentParser, file_path, given_options, positive_int, run_cli, typed_text
 from piga.data.schema import (SPLITS, BlankFramesError, DatasetInfo, check_actions_file, check_frames_have_signal,
-                              inspect_dataset, read_rows, split_indices)
+                              inspect_dataset, open_data_file, read_rows, split_indices)
 from piga.io.resources import check_figure_disk
 from piga.io.atomic import check_not_an_input
 
@@ -70,7 +69,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     idx = available[: args.sequences]
     t = min(args.frames, info.steps)
     _check_strip_fits(args.out, t, len(idx))
-    with h5py.File(args.data, "r") as f:
+    with open_data_file(args.data) as f:
         with read_rows(f["frames"], "the strip's sequences"):
             frames = np.stack([f["frames"][int(i), :t] for i in idx])
         with read_rows(f["actions"], "the strip's sequences"):
@@ -121,18 +120,20 @@ def _faded_note(frames: np.ndarray, side: int) -> str | None:
 
 def _refused_elsewhere(info: DatasetInfo) -> str | None:
     """What the other commands refuse in a file that the strip draws all the same, in one line: a system that no model
-    knows, a pendulum's action columns other than its one torque, sequences of one frame, and frames that are not
+    knows, action columns other than the system's (a pendulum's one torque, none for a scene), sequences of one frame, and frames that are not
     square (None: none)."""
     odd = []
+    actions: int | None = 1  # the pendulum's one torque; None: a system that no model knows
     if info.system != "pendulum":  # (the models' list imports torch: not for the pendulum's files, the common case)
         from piga.world.model import SYSTEM_SHAPES
 
-        if info.system not in SYSTEM_SHAPES:
+        actions = SYSTEM_SHAPES[info.system][2] if info.system in SYSTEM_SHAPES else None
+        if actions is None:
             odd.append(f"the system {info.system!r}, which no model knows (known: {', '.join(sorted(SYSTEM_SHAPES))})")
     if info.image_shape[0] != info.image_shape[1]:
         odd.append(f"frames of {info.image_shape[0]}x{info.image_shape[1]} px (a model takes square ones)")
-    if info.system == "pendulum" and info.action_dim != 1:
-        odd.append(f"{counted(info.action_dim, 'action column')} (a pendulum takes 1)")
+    if actions is not None and info.action_dim != actions:  # a pendulum file labelled 'spring', say
+        odd.append(f"{counted(info.action_dim, 'action column')} (a {info.system} takes {actions})")
     if info.steps < 2:
         odd.append(f"{counted(info.steps, 'frame')} per sequence (a video needs two)")
     if not odd:

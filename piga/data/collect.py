@@ -279,13 +279,14 @@ COLLECT_DISK_ADVICE = "free some space, write --out elsewhere, or give fewer --s
 def disk_need(config: CollectConfig) -> tuple[float, float, float]:
     """The disk the data file of ``config`` takes, for :func:`piga.data.schema.check_data_disk`: the file once
     compressed (frames shrunk by :data:`piga.io.resources.RENDERED_FRAME_COMPRESSION`, or the shaded frames'
-    :data:`~piga.io.resources.SHADED_FRAME_COMPRESSION`; actions, states and rewards raw), a batch uncompressed, and
+    :data:`~piga.io.resources.SHADED_FRAME_COMPRESSION`; actions, states and rewards raw; HDF5's own bytes,
+    :func:`~piga.io.resources.hdf5_file_overhead`), a batch uncompressed, and
     the whole file uncompressed."""
-    from piga.io.resources import HDF5_FILE_OVERHEAD, RENDERED_FRAME_COMPRESSION, SHADED_FRAME_COMPRESSION
+    from piga.io.resources import RENDERED_FRAME_COMPRESSION, SHADED_FRAME_COMPRESSION, hdf5_file_overhead
 
     n, t, pixels = config.sequences, config.steps, config.env.image_size**2
     shrink = SHADED_FRAME_COMPRESSION if isinstance(config.env, DMCPendulumConfig) else RENDERED_FRAME_COMPRESSION
-    return (n * t * (pixels / shrink + 12) + HDF5_FILE_OVERHEAD, _batch_rows(config) * t * (pixels + 16),
+    return (n * t * (pixels / shrink + 12) + hdf5_file_overhead(n), _batch_rows(config) * t * (pixels + 16),
             n * t * (pixels + 16))
 
 

@@ -92,19 +92,31 @@ def scene_attrs(config: SceneCollectConfig, command: str | None = None) -> dict[
     }
 
 
+def scene_disk_need(config: SceneCollectConfig) -> tuple[float, float, float]:
+    """The disk the data file of ``config`` takes, for :func:`piga.data.schema.check_data_disk`: the file once
+    compressed (frames shrunk by :data:`piga.io.resources.SCENE_FRAME_COMPRESSION`, states raw, and HDF5's own
+    bytes), a batch uncompressed (the room the writer keeps free), and the whole file uncompressed."""
+    from piga.io.resources import SCENE_FRAME_COMPRESSION, hdf5_file_overhead
+
+    scene, n, t = config.scene, config.sequences, config.steps
+    pixels, state_bytes = 3 * scene.image_size**2, 16 * scene.n_objects
+    shrink = SCENE_FRAME_COMPRESSION["digits" if scene.scene == "digits-spring" else "balls"]
+    step_bytes = pixels + state_bytes  # raw
+    return (n * t * (pixels / shrink + state_bytes) + hdf5_file_overhead(n), min(config.batch, n) * t * step_bytes,
+            n * t * step_bytes)
+
+
 def collect_scene(config: SceneCollectConfig, out: str | Path, overwrite: bool = False, command: str | None = None,
                   progress: bool = True) -> Path:
     """Simulates and renders ``config.sequences`` sequences and writes them to ``out`` atomically."""
-    from piga.io.resources import HDF5_FILE_OVERHEAD, SCENE_FRAME_COMPRESSION, check_memory
+    from piga.io.resources import check_memory
 
     check_writable_target(out, overwrite)
     scene, n, t = config.scene, config.sequences, config.steps
     size = scene.image_size
     what = f"{n} sequences x {t} frames of {size}x{size} RGB"  # before any simulation: a size that could never finish
     check_memory(min(config.batch, n) * t * (3 * size * size + 16 * scene.n_objects), what)
-    step_bytes = 3 * size * size + 16 * scene.n_objects  # raw; the writer keeps room for a batch's, uncompressed
-    check_data_disk(out, n * t * (3 * size * size / SCENE_FRAME_COMPRESSION + 16 * scene.n_objects) + HDF5_FILE_OVERHEAD,
-                    min(config.batch, n) * t * step_bytes, n * t * step_bytes, what, advice=COLLECT_DISK_ADVICE)
+    check_data_disk(out, *scene_disk_need(config), what, advice=COLLECT_DISK_ADVICE)
     counts = split_counts(n, config.split)
     one = functools.partial(_one, scene=scene, seed=config.seed, steps=t, first_test=counts[0] + counts[1])
     # the bar outside the writer: one that refuses the file as it closes (blank frames) clears it

@@ -474,10 +474,10 @@ def _check_resources(n_frames: int, size: int, steps: int, target: Path) -> None
 
     Memory: the converted frames twice (the list and the stacked array) and one frame's conversion
     (~48 bytes per output pixel). Disk: the frames gzip-compressed
-    (:data:`piga.io.resources.RECORDED_FRAME_COMPRESSION`), and the room to write one slice of sequences of
+    (:data:`piga.io.resources.RECORDED_FRAME_COMPRESSION`) with HDF5's own bytes, and the room to write one slice of sequences of
     ``steps`` frames (:func:`_slice_sequences`).
     """
-    from piga.io.resources import RECORDED_FRAME_COMPRESSION, check_memory
+    from piga.io.resources import RECORDED_FRAME_COMPRESSION, check_memory, hdf5_file_overhead
 
     pixels = size * size
     what = f"{n_frames} frames of {size}x{size}"
@@ -485,7 +485,8 @@ def _check_resources(n_frames: int, size: int, steps: int, target: Path) -> None
     # with the room the writer keeps free as it writes a slice (uncompressed), so that it does not refuse later
     raw = n_frames * (pixels + 4)
     written = min(raw, _slice_sequences(steps, size) * steps * (pixels + 4))
-    check_data_disk(target, n_frames * (pixels / RECORDED_FRAME_COMPRESSION + 4), written, raw, what,
+    compressed = n_frames * (pixels / RECORDED_FRAME_COMPRESSION + 4) + hdf5_file_overhead(-(-n_frames // steps))
+    check_data_disk(target, compressed, written, raw, what,
                     advice="free some space, write --out elsewhere, or give a smaller --image-size")  # (no count to lower)
 
 

@@ -39,6 +39,7 @@ from typing import Any, Literal
 import h5py
 import numpy as np
 from piga import __version__
+from piga.data.header_check import remember_written, unreadable_header
 from piga.io.atomic import atomic_output, link_loop, loop_message
 
 SPLITS: dict[str, int] = {"train": 0, "valid": 1, "test": 2}
@@ -57,6 +58,8 @@ def legacy_seed(seed: int) -> int:
 
 
 REQUIRED_ATTRS = ("system", "dt")
+DATASETS = ("frames", "actions", "split", "states", "rewards")
+"""The datasets of the schema, in the order they are checked."""
 
 #: The smallest frame side, in pixels, that piga's models and data take (the encoder's and the SSIM's windows).
 MIN_IMAGE_SIZE = 8
@@ -92,11 +95,11 @@ WRITE_MARGIN_BYTES = 8 * 2**20
 def write_margin(file_bytes: float) -> float:
     """The free space a :class:`DatasetWriter` keeps beyond a slice's raw bytes, for a file whose arrays take
     ``file_bytes`` uncompressed: :data:`WRITE_MARGIN_BYTES`, or for a smaller file those bytes and
-    :data:`~piga.io.resources.HDF5_FILE_OVERHEAD`, as HDF5's caches hold no more than the file's data (a full
+    :data:`~piga.io.resources.HDF5_WRITE_HEADROOM`, as HDF5's caches hold no more than the file's data (a full
     8 MiB refused a 100 KB file on a 6 MiB disk)."""
-    from piga.io.resources import HDF5_FILE_OVERHEAD
+    from piga.io.resources import HDF5_WRITE_HEADROOM
 
-    return min(WRITE_MARGIN_BYTES, file_bytes + HDF5_FILE_OVERHEAD)
+    return min(WRITE_MARGIN_BYTES, file_bytes + HDF5_WRITE_HEADROOM)
 
 
 def write_room(slice_bytes: float, file_bytes: float) -> float:
@@ -166,7 +169,7 @@ def check_actions(actions: np.ndarray, path: str | os.PathLike[str]) -> None:
 def check_actions_file(path: str | os.PathLike[str]) -> np.ndarray:
     """:func:`check_actions` on a whole file's ``/actions`` (float32 [N, T, A], small next to the frames); returns
     them."""
-    with _open(path) as f:
+    with open_data_file(path) as f:
         with read_rows(f["actions"], "every sequence"):
             actions = np.asarray(f["actions"][()])
     check_actions(actions, path)
@@ -361,7 +364,10 @@ def _validate(f: h5py.File, path: Path) -> DatasetInfo:
     )
 
 
-def _open(path: str | os.PathLike[str]) -> h5py.File:
+def open_data_file(path: str | os.PathLike[str]) -> h5py.File:
+    """``path`` opened for reading, or :class:`DataFormatError` (:class:`FileNotFoundError` where it is missing) saying
+    in words why it cannot be: every command's way into a data file, so that one whose header crashes or hangs HDF5
+    is refused before this process reads it (:func:`piga.data.header_check.unreadable_header`)."""
     p = Path(path)
     if not p.exists():
         loop = link_loop(p)  # exists() is False for a link that loops
@@ -370,6 +376,8 @@ def _open(path: str | os.PathLike[str]) -> h5py.File:
         raise DataFormatError(f"{p}: is a folder, not an HDF5 file")
     if not p.is_file():  # a FIFO's open waits for a writer for ever; a device is no file to read
         raise DataFormatError(f"{p}: is not a regular file (a pipe, a socket or a device), not an HDF5 file")
+    if (damage := unreadable_header(p, DATASETS)) is not None:  # before this process meets a crash or a hang there
+        raise DataFormatError(f"{p}: not a readable HDF5 file ({damage}); collect, import or copy it again")
     try:
         return h5py.File(p, "r")
     except BlockingIOError:  # HDF5's lock: the file is open for writing elsewhere (errno EAGAIN, "unable to lock file")
@@ -391,7 +399,7 @@ def inspect_dataset(path: str | os.PathLike[str]) -> DatasetInfo:
     small). Whether the frames carry a signal is a separate check, :func:`check_frames_have_signal`,
     which the commands that learn from or diagnose the frames run.
     """
-    with _open(path) as f:
+    with open_data_file(path) as f:
         try:
             info = _validate(f, Path(path))
             _check_attrs_agree(info, f)
@@ -430,7 +438,7 @@ def _check_virtual_sources(f: h5py.File, path: Path) -> None:
     """A virtual dataset (HDF5's VDS) whose source file is missing reads as its fill value: the frames of a moved
     file looked blank ("every frame is blank"), the actions zero. Each source is named instead; so is the file of a
     dataset in HDF5's external raw storage that is not found from the current folder (it was "the file is damaged")."""
-    for name in ("frames", "actions", "split", "states", "rewards"):
+    for name in DATASETS:
         ds = f.get(name)
         if isinstance(ds, h5py.Dataset) and ds.external:  # HDF5's external raw storage, found from the current folder
             for source, _, _ in ds.external:
@@ -778,7 +786,7 @@ def check_frames_have_signal(path: str | os.PathLike[str], motion: bool = True) 
     Raises:
         DataFormatError: naming the file and the level, or saying that nothing moves.
     """
-    with _open(path) as f:
+    with open_data_file(path) as f:
         _check_frames_signal(f["frames"], path, motion)
 
 
@@ -816,7 +824,7 @@ def fingerprint(path: str | os.PathLike[str]) -> str:
     """A short hash of what a file holds, not of where it lies: its /actions, /split and first sequence of
     frames (sha256, hex). A moved or copied file keeps it; another file of the same shape (another seed, another
     recording) does not. It reads a few hundred kB of a default file."""
-    with _open(path) as f:
+    with open_data_file(path) as f:
         with read_rows(f["frames"], "sequence 0"):
             first = f["frames"][0]
         return _digest(f["actions"][()], f["split"][()], first)
@@ -825,7 +833,7 @@ def fingerprint(path: str | os.PathLike[str]) -> str:
 def rewards_fingerprint(path: str | os.PathLike[str]) -> str | None:
     """A short hash of the file's /rewards (as :func:`fingerprint`'s; None without them): what the PlaNet-style
     baseline's reward head learns from, beside the frames and actions that :func:`fingerprint` covers."""
-    with _open(path) as f:
+    with open_data_file(path) as f:
         return _digest(f["rewards"][()]) if "rewards" in f else None
 
 
@@ -889,7 +897,7 @@ def _finite_float(value: int | float) -> bool:
 def split_indices(path: str | os.PathLike[str], split: str) -> np.ndarray:
     """Sequence indices (sorted, int64) that belong to ``split`` ("train", "valid" or "test")."""
     code = _split_code(split)
-    with _open(path) as f:
+    with open_data_file(path) as f:
         _validate(f, Path(path))
         return np.flatnonzero(f["split"][()] == code)
 
@@ -912,7 +920,7 @@ def read_sequences(path: str | os.PathLike[str], split: str, limit: int | None =
     ``limit``, only the split's first ``limit`` sequences are read (a file larger than memory is not loaded
     to evaluate a few of them)."""
     idx = split_indices(path, split)[:_count(limit)]
-    with _open(path) as f:
+    with open_data_file(path) as f:
         return _take(f["frames"], idx), _take(f["actions"], idx).astype(np.float32)
 
 
@@ -920,7 +928,7 @@ def load_actions(path: str | os.PathLike[str], split: str, limit: int | None = N
     """Actions (float32 [n, T, A]) of one split (its first ``limit`` sequences with ``limit``), without its
     frames: for a reader that streams the frames."""
     idx = split_indices(path, split)[:_count(limit)]
-    with _open(path) as f:
+    with open_data_file(path) as f:
         return _take(f["actions"], idx).astype(np.float32)
 
 
@@ -934,7 +942,7 @@ def load_states(path: str | os.PathLike[str], split: str, limit: int | None = No
         DataFormatError: the file has no ``/states``.
     """
     idx = split_indices(path, split)
-    with _open(path) as f:
+    with open_data_file(path) as f:
         if "states" not in f:
             raise DataFormatError(f"{path}: has no /states (ground truth is optional in the schema)")
         return _take(f["states"], idx[:_count(limit)]).astype(np.float32)
@@ -956,7 +964,7 @@ def load_rewards(path: str | os.PathLike[str], split: str, limit: int | None = N
             step).
     """
     idx = split_indices(path, split)[:_count(limit)]
-    with _open(path) as f:
+    with open_data_file(path) as f:
         if "rewards" not in f:
             raise DataFormatError(f"{path}: has no /rewards (reward-based baselines need them; files from "
                                   "piga-collect have them)")
@@ -1155,4 +1163,5 @@ class DatasetWriter:
             self._ctx.__exit__(DataFormatError, blank, None)
             raise blank
         self._ctx.__exit__(None, None, None)
+        remember_written(self.path)
 

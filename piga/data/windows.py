@@ -16,8 +16,7 @@ import torch
 from torch.utils.data import Dataset, Sampler
 
 from piga.data.schema import (IN_MEMORY_LIMIT_BYTES, DataFormatError, check_frames_have_signal, inspect_dataset, load_actions,
-                              read_rows, read_sequences,
-                       split_indices)
+                              open_data_file, read_rows, read_sequences, split_indices)
 
 #: The streaming reader's cache of whole sequences of frames, in bytes.
 STREAM_CACHE_BYTES = 256 * 1024**2
@@ -56,7 +55,7 @@ class SequenceReader:
 
     def __init__(self, path: str | os.PathLike[str], sequences: np.ndarray, cache_bytes: int = STREAM_CACHE_BYTES):
         self.path, self.sequences = Path(path), np.asarray(sequences)
-        with h5py.File(self.path, "r") as f:
+        with open_data_file(self.path) as f:
             self.sequence_bytes = int(np.prod(f["frames"].shape[1:]))
         self.capacity = max(1, cache_bytes // max(1, self.sequence_bytes))
         """Sequences the cache holds."""
@@ -70,7 +69,7 @@ class SequenceReader:
         return self._cached(int(position))
 
     def _read(self, position: int) -> np.ndarray:
-        if self._file is None:
+        if self._file is None:  # opened directly: __init__ read the file's header through open_data_file's check
             self._file = h5py.File(self.path, "r")
         index = int(self.sequences[position])
         with read_rows(self._file["frames"], f"sequence {index}"):

@@ -18,7 +18,7 @@ import torch
 
 from envs import DMC_PENDULUM, PIXEL_PENDULUM
 from envs.fields import counted
-from piga.data.schema import SPLITS, DatasetInfo, check_actions, inspect_dataset, read_rows, split_indices
+from piga.data.schema import SPLITS, DatasetInfo, check_actions, inspect_dataset, open_data_file, read_rows, split_indices
 from piga.diagnostics.repeats import stale_frames
 from piga.world.model import PhysicsModel, frames_to_float
 from piga.io.runs import training_steps
@@ -199,11 +199,10 @@ def observe(model: PhysicsModel, path: str | os.PathLike[str], batch: int = 16, 
         batch: sequences per forward pass.
         keep_frames: held-out sequences whose frames are kept for pixel errors.
     """
-    import h5py
     from tqdm.auto import tqdm
 
     info = check_compatible(model, path)
-    with h5py.File(path, "r") as f:
+    with open_data_file(path) as f:
         split = f["split"][:] if "split" in f else np.zeros(info.n_sequences, np.int8)
         n = info.n_sequences
         theta = np.empty((n, info.steps))

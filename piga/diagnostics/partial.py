@@ -208,10 +208,10 @@ def match_partial(model: PhysicsModel, path: str, partial: PartialCamera,
     elsewhere, unwrapped along time; and ``partial`` with its groups over the whole file: for "sequences", those
     whose frames match closer through its camera than through :attr:`PartialCamera.other` (none, where none is read; the
     fit split's are only a sample)."""
-    import h5py
+    from piga.data.schema import open_data_file
 
     plain, seen = angle_table(model, partial.other), angle_table(model, partial.camera)
-    with h5py.File(path, "r") as f:
+    with open_data_file(path) as f:
         ds = f["frames"]
         n, t = ds.shape[:2]
         out = np.empty((n, t))

@@ -25,12 +25,14 @@ REPORT_FILES = ("report.md", "report.json", "gap.png", "residual_heatmap.png", "
 
 
 def gap_figure(d: Diagnosis):  # noqa: ANN201
-    """Held-out error against horizon, angles and pixels, nominal vs corrected, and the closure."""
+    """Held-out error against horizon, angles and pixels, nominal vs corrected, and the closure (none where nothing was
+    named to correct: the refit is drawn for reference, and no closure)."""
     g = d.gap
     fig, axes = plt.subplots(1, 3, figsize=(11, 3))
     h = g.horizon
+    other = "refitted" if g.no_gap else "corrected"
     axes[0].semilogy(h, np.degrees(np.sqrt(g.state_mse_nominal)), label="nominal")
-    axes[0].semilogy(h, np.degrees(np.sqrt(g.state_mse_corrected)), label="corrected")
+    axes[0].semilogy(h, np.degrees(np.sqrt(g.state_mse_corrected)), label=other)
     if g.state_mse_floor is not None:
         axes[0].semilogy(h, np.degrees(np.sqrt(g.state_mse_floor)), ls=":", color="gray", label="floor (twin)")
     axes[0].set_title("angle RMSE (deg)" + (": nominal on the encoder's, corrected on matched angles"
@@ -41,15 +43,19 @@ def gap_figure(d: Diagnosis):  # noqa: ANN201
         pn, pc = np.array(g.pixel_mse_nominal), np.array(g.pixel_mse_corrected)
         hp = range(1, len(pn) + 1)
         axes[1].plot(hp, pn, label="nominal")
-        axes[1].plot(hp, pc, label="corrected")
+        axes[1].plot(hp, pc, label=other)
         if g.pixel_mse_floor is not None:
             axes[1].axhline(g.pixel_mse_floor, ls=":", color="gray", label="matched floor")
         if g.closure_basis == "pixels":
             closure = 100 * (pn - pc) / np.maximum(pn - g.pixel_mse_floor, 1e-12)
             title = "closure of the pixel gap above the floor (%)"
     axes[1].set_title("pixel MSE of the rendered prediction", fontsize=9)
-    axes[2].plot(range(1, len(closure) + 1), closure)
-    axes[2].set_ylim(min(0, float(np.min(closure)) if len(closure) else 0) - 5, 105)
+    if g.no_gap:  # a ratio against a refit that corrects nothing: a curve of it read as a closure
+        axes[2].text(0.5, 0.5, "no closure:\nnothing named to correct", ha="center", va="center",
+                     transform=axes[2].transAxes)
+    else:
+        axes[2].plot(range(1, len(closure) + 1), closure)
+        axes[2].set_ylim(min(0, float(np.min(closure)) if len(closure) else 0) - 5, 105)
     axes[2].set_title(title, fontsize=9)
     for ax in axes:
         ax.set_xlabel("horizon (steps)")
@@ -342,6 +348,11 @@ def markdown(d: Diagnosis, model: str, data: str, command: str, model_warning: s
     lines += [f"- {n}" for n in d.exclusions + d.notes] + ([""] if d.notes or d.exclusions else [])
     lines += ambiguity_lines(d)
     headline = headline_text(d)
+    other = "refitted" if g.no_gap else "corrected"  # a refit that corrects nothing has no closure (a ratio of noise)
+
+    def closure(i: int) -> str:
+        return "–" if g.no_gap else f"{100 * g.closure[i]:.1f}%"
+
     floor = "" if g.free_run_mse_floor is None else (
         f" On the twin, an exactly right model has {number(g.free_run_mse_floor, '.3g')} rad²" + (
             f": {_pct(g.mean_free_run_gap_closure)} of the gap above that floor is closed."
@@ -351,26 +362,27 @@ def markdown(d: Diagnosis, model: str, data: str, command: str, model_warning: s
     lines += [
         "## Size of the gap, and how far it shrinks", "", headline, "",
         f"Mean over all held-out windows and horizons 1..{g.horizon[-1]}: angle MSE {number(g.free_run_mse_nominal, '.3g')} rad² "
-        f"nominal, {number(g.free_run_mse_corrected, '.3g')} rad² corrected"
+        f"nominal, {number(g.free_run_mse_corrected, '.3g')} rad² {other}"
         + (" (nothing to close)" if g.no_gap else f": raw closure {100 * g.free_run_closure:.1f}%")
         + (", in angles, which the corrected model reads by matching the frames to the decoder's renders and the "
            "nominal one with the encoder: not comparable, unlike the headline in pixels" if g.closure_basis == "pixels" else "") + ". That mean "
         "is dominated by the few windows that pass near upright, where any error grows fast, even in an exactly right "
         "model." + floor + " One step: RMSE "
-        f"{math.degrees(g.one_step_rms_nominal_rad):.3f}° nominal, {math.degrees(g.one_step_rms_corrected_rad):.3f}° corrected"
+        f"{math.degrees(g.one_step_rms_nominal_rad):.3f}° nominal, {math.degrees(g.one_step_rms_corrected_rad):.3f}° {other}"
         + (f" ({math.degrees(g.one_step_rms_nominal_matched_rad):.3f}° nominal on the corrected model's matched angles)"
            if g.one_step_rms_nominal_matched_rad is not None else "") + ".", "",
         f"Nominal g = {number(d.nominal['g'], '.4f')}, a = {number(d.nominal['a'], '.4f')}; "
         + (f"{REFITTED}: " if g.no_gap else "corrected: ")
         + ", ".join(f"{k} = {_fmt(v)}" for k, v in d.corrected.items()) + convention_text(d), "",
         "![gap](gap.png)", "",
-        "| horizon | angle RMSE nominal (deg) | corrected (deg) | closure | pixel MSE nominal | corrected |", "|---|---|---|---|---|---|",
+        f"| horizon | angle RMSE nominal (deg) | {other} (deg) | closure | pixel MSE nominal | {other} |",
+        "|---|---|---|---|---|---|",
     ]
     pn, pc = g.pixel_mse_nominal, g.pixel_mse_corrected
     for i in sorted({0, 1, 4, 9, 19, len(g.horizon) - 1} & set(range(len(g.horizon)))):
         pix = (f"{pn[i]:.2e} | {pc[i]:.2e}" if i < len(pn) else "– | –")
         lines.append(f"| {g.horizon[i]} | {math.degrees(math.sqrt(g.state_mse_nominal[i])):.3f} | "
-                     f"{math.degrees(math.sqrt(g.state_mse_corrected[i])):.3f} | {100 * g.closure[i]:.1f}% | {pix} |")
+                     f"{math.degrees(math.sqrt(g.state_mse_corrected[i])):.3f} | {closure(i)} | {pix} |")
     if d.control:
         env = ", ".join(f"{k}={v}" for k, v in d.control["effects"].items()) or "none"
         reader = ("reads angles through the fitted camera (matching) instead of the encoder"

@@ -713,9 +713,9 @@ def _sample(path: str, rows: np.ndarray, count: int,
             rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(count, H, W[, C]) uint8 random frames of sequences ``rows`` of the file, and (count,) their sequences and
     (count,) their frame indices, in the file's order."""
-    import h5py
+    from piga.data.schema import open_data_file
 
-    with h5py.File(path, "r") as f:
+    with open_data_file(path) as f:
         ds = f["frames"]
         t = ds.shape[1]
         seqs = np.sort(rng.choice(rows, min(len(rows), max(1, count // t + 1) * 2), replace=False))
@@ -758,10 +758,10 @@ def _flat(frames: np.ndarray, channels: int = 1) -> Tensor:
 @torch.no_grad()
 def match_file(model: PhysicsModel, path: str, camera: Camera, batch: int = 64) -> np.ndarray:
     """(N, T) angles of every frame of ``path`` matched under ``camera``, unwrapped along time."""
-    import h5py
+    from piga.data.schema import open_data_file
 
     table = angle_table(model, camera)
-    with h5py.File(path, "r") as f:
+    with open_data_file(path) as f:
         ds = f["frames"]
         n, t = ds.shape[:2]
         out = np.empty((n, t))
@@ -1081,9 +1081,9 @@ def reference_frames(reference: str | None, count: int, seed: int) -> np.ndarray
     if reference is None:
         return None
     try:
-        import h5py
+        from piga.data.schema import open_data_file
 
-        with h5py.File(reference, "r") as f:
+        with open_data_file(reference) as f:
             rows = np.arange(f["frames"].shape[0])
         return _sample(reference, rows, count, np.random.default_rng(seed))[0]
     except (OSError, KeyError, ValueError):

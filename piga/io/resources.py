@@ -23,11 +23,23 @@ RENDERED_FRAME_COMPRESSION = 20.0
 RECORDED_FRAME_COMPRESSION = 2.0
 #: dm_control's shaded frames shrink about 16x (40 sequences x 40 frames); the disk check assumes 10x.
 SHADED_FRAME_COMPRESSION = 10.0
-#: A scene's RGB frames shrink 18-20x for balls and 4.8x for digits (20 sequences of each); the check assumes 4x.
-SCENE_FRAME_COMPRESSION = 4.0
-#: An HDF5 file's own bytes beyond its data (its metadata and chunk index): a 12 x 12 dm_control file of 29 KiB of
-#: compressed frames takes 64 KiB.
-HDF5_FILE_OVERHEAD = 128 * 1024
+#: A scene's RGB frames shrink 24-28x for balls (20 sequences of each ball scene, and of bouncing balls of radius 12
+#: at 64x64) and 4.5-4.8x for digits; the check assumes 12x and 4x.
+SCENE_FRAME_COMPRESSION: dict[str, float] = {"balls": 12.0, "digits": 4.0}
+#: An HDF5 file's own bytes beyond its data, as piga writes it: its metadata, and the chunk index of /frames (one
+#: sequence a chunk), whose first node holds 64 entries. Measured on pendulum files (gzip-4): 11.1 KiB up to 64
+#: sequences of any size, 25.7 KiB for 200 and 51.3 KiB for 600 (``os.path.getsize`` less each dataset's
+#: ``get_storage_size``); :func:`hdf5_file_overhead` stays a little above them.
+HDF5_FILE_BYTES = 12 * 1024
+HDF5_BYTES_PER_SEQUENCE = 80
+#: The room beyond a small file's data that a :class:`~piga.data.schema.DatasetWriter` keeps free as it writes, for
+#: HDF5's metadata and caches: well above :func:`hdf5_file_overhead`, as running out mid-write is what must not happen.
+HDF5_WRITE_HEADROOM = 128 * 1024
+
+
+def hdf5_file_overhead(sequences: int) -> float:
+    """An HDF5 file's own bytes beyond its data, for a file of ``sequences`` sequences (see :data:`HDF5_FILE_BYTES`)."""
+    return HDF5_FILE_BYTES + HDF5_BYTES_PER_SEQUENCE * sequences
 
 
 class ResourceError(ValueError):
@@ -269,7 +281,7 @@ def check_run_disk(run_dir: str | os.PathLike[str], checkpoint_bytes: float, wha
                detail=f" beyond the {format_bytes(held)} of {run_dir} that it replaces" if held else "")
 
 
-__all__ = ["FIGURE_DISK_BYTES", "FIGURE_DISK_WORDS", "HDF5_FILE_OVERHEAD", "RECORDED_FRAME_COMPRESSION", "RENDERED_FRAME_COMPRESSION",
+__all__ = ["FIGURE_DISK_BYTES", "FIGURE_DISK_WORDS", "HDF5_BYTES_PER_SEQUENCE", "HDF5_FILE_BYTES", "HDF5_WRITE_HEADROOM", "RECORDED_FRAME_COMPRESSION", "RENDERED_FRAME_COMPRESSION",
            "RUN_DISK_MARGIN", "SCENE_FRAME_COMPRESSION", "SHADED_FRAME_COMPRESSION", "ResourceError",
            "adam_checkpoint_bytes", "available_memory", "check_disk", "check_figure_disk", "check_memory", "check_training_memory",
            "check_run_disk", "format_bytes", "held_bytes", "run_disk_need"]

@@ -266,10 +266,9 @@ def training_blank_mse(model: PhysicsModel, checkpoint: dict[str, Any] | None, m
     the model's own background (the per-pixel median it subtracts, :mod:`piga.world.encoder`), i.e. the
     error of a render that draws no object at all. Read from the first ``max_sequences`` train
     sequences of the training file named in the checkpoint; None if that file is gone or unreadable."""
-    import h5py
     import numpy as np
 
-    from piga.data.schema import split_indices
+    from piga.data.schema import open_data_file, split_indices
     from piga.world.model import frames_to_float
 
     path = training_data_path(checkpoint)
@@ -277,7 +276,7 @@ def training_blank_mse(model: PhysicsModel, checkpoint: dict[str, Any] | None, m
         return None
     try:
         rows = split_indices(path, "train")[:max_sequences]
-        with h5py.File(path, "r") as f:
+        with open_data_file(path) as f:
             raw = f["frames"][np.sort(rows)]
     except (OSError, KeyError, ValueError):
         return None
@@ -292,7 +291,7 @@ def training_blank_mse(model: PhysicsModel, checkpoint: dict[str, Any] | None, m
 def training_env_config(checkpoint: dict[str, Any] | None) -> dict[str, Any]:
     """The ``env_config`` of the run's training file: as the checkpoint keeps it, else (an older checkpoint) read from
     the file it names, if that file is still there and has one, else {} (a file of another source, or gone)."""
-    import h5py
+    from piga.data.schema import open_data_file
 
     kept = ((checkpoint or {}).get("data") or {}).get("env_config")
     if isinstance(kept, dict):
@@ -301,7 +300,7 @@ def training_env_config(checkpoint: dict[str, Any] | None) -> dict[str, Any]:
     if path is None:
         return {}
     try:
-        with h5py.File(path, "r") as f:
+        with open_data_file(path) as f:
             config = json.loads(f.attrs["env_config"])
     except (OSError, KeyError, ValueError):
         return {}

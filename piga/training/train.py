@@ -31,7 +31,6 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable, Literal
 
-import h5py
 import numpy as np
 import torch
 from torch.utils.data import DataLoader, RandomSampler
@@ -41,7 +40,7 @@ from piga.io.atomic import FolderMovedError, OutputFolder
 from piga.io.choices import check_choices, check_types
 from piga.io.device import Device, resolve_device, set_threads
 from piga.data.schema import (MAX_SEED, MIN_IMAGE_SIZE, DataFormatError, DatasetInfo, check_actions_file, fingerprint, legacy_seed, read_rows,
-                              inspect_dataset, split_indices)
+                              inspect_dataset, open_data_file, split_indices)
 from piga.world.encoder import estimate_background
 from piga.world.model import SYSTEM_SHAPES, FrameModel, ModelConfig, frames_to_float
 from piga.world.physics import BouncingOptions, PendulumOptions
@@ -521,7 +520,7 @@ def _background(data: str | Path, channels: int, seed: int, max_frames: int = 20
     steps = inspect_dataset(data).steps
     pick = np.sort(np.random.default_rng(seed).choice(len(sequences) * steps, size=min(max_frames, len(sequences) * steps),
                                                       replace=False))  # flat indices into the split's (n·T) frames
-    with h5py.File(data, "r") as f, read_rows(f["frames"], "the training sequences sampled for the background"):
+    with open_data_file(data) as f, read_rows(f["frames"], "the training sequences sampled for the background"):
         chosen = [f["frames"][int(sequences[row])][pick[pick // steps == row] % steps] for row in np.unique(pick // steps)]
     sample = frames_to_float(torch.from_numpy(np.concatenate(chosen))[:, None], channels)[:, 0]  # (F, C, H, W)
     return estimate_background(sample)
