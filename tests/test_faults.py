@@ -610,6 +610,10 @@ def _env_config_edit(**fields: Any) -> Callable[[h5py.File], None]:
     (_attr_edit("env_id", "piga/DMCPendulum-v0"), ["attribute 'env_id' says piga/DMCPendulum-v0, but 'env_config' holds "
                                                    "piga/PixelPendulum-v0's settings (gravity, gravity_mult",
                                                    "set 'env_id' to piga/PixelPendulum-v0"]),
+    # split_counts whose JSON a flipped byte broke: its text was quoted with the byte in it
+    (_attr_edit("split_counts", '{"train": 8, "valid": 2, "test":\x012}'),
+     ["attribute 'split_counts' must be a JSON object of sequences per split, got '{\"train\": 8, \"valid\": 2, "
+      "\"test\":\\x012}'; fix the attribute or drop it"]),
     (_attr_edit("env_id", "Foo-v9"), ["attribute 'env_id' says Foo-v9, which is none of piga's envs",
                                       "set 'env_id' to piga/PixelPendulum-v0, or drop 'env_config'"]),
     (_dmc_labelled(None, 0.05), ["'dt' says the frames are 0.05 s apart, but piga/DMCPendulum-v0 (its 'env_id') steps a "

@@ -329,9 +329,8 @@ def _validate(f: h5py.File, path: Path) -> DatasetInfo:
         if key not in attrs:
             raise DataFormatError(f"{path}: missing file attribute '{key}'")
     if not isinstance(attrs["system"], str) or not attrs["system"]:  # (an array of one name was shown, and then refused)
-        shown = repr(attrs["system"]) if len(repr(attrs["system"])) <= 40 else f"{repr(attrs['system'])[:37]}..."
         raise DataFormatError(f"{path}: attribute 'system' must be one string naming the system (e.g. 'pendulum'), got "
-                              f"{shown}")
+                              f"{_shown(attrs['system'])}")
     try:
         dt = float("nan") if isinstance(attrs["dt"], bool) else float(attrs["dt"])
     except (TypeError, ValueError):
@@ -344,9 +343,8 @@ def _validate(f: h5py.File, path: Path) -> DatasetInfo:
         raise DataFormatError(f"{path}: attribute 'params' must be a JSON object, got {params!r}")
     for name, value in params.items():
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not _finite_float(value):
-            shown = f"{value!r}" if len(repr(value)) <= 40 else f"{repr(value)[:37]}..."  # JSON integers are unbounded
             raise DataFormatError(f"{path}: attribute 'params' must give each parameter as a finite number, got "
-                                  f"{name}={shown}")
+                                  f"{name}={_shown(value)}")  # (JSON integers are unbounded)
         _check_true_parameter(path, name, float(value))
     return DatasetInfo(
         path=path,
@@ -362,6 +360,11 @@ def _validate(f: h5py.File, path: Path) -> DatasetInfo:
         attrs=attrs,
         has_rewards=has_rewards,
     )
+
+
+def _shown(value: Any) -> str:
+    """An attribute's value in a message: its repr (escapes for a damaged byte), cut to 40 characters."""
+    return repr(value) if len(repr(value)) <= 40 else f"{repr(value)[:37]}..."
 
 
 def open_data_file(path: str | os.PathLike[str]) -> h5py.File:
@@ -695,6 +698,9 @@ def _check_attrs_agree(info: DatasetInfo, f: h5py.File) -> None:
                                   f"({STATE_DIM_PER_OBJECT} per object: {states_dim / STATE_DIM_PER_OBJECT:g} objects); "
                                   "fix the attribute")
     recorded_split = attrs.get("split_counts")
+    if recorded_split is not None and not isinstance(recorded_split, dict):  # (a damaged byte: its text, not JSON)
+        raise DataFormatError(f"{path}: attribute 'split_counts' must be a JSON object of sequences per split, got "
+                              f"{_shown(recorded_split)}; fix the attribute or drop it (/split is what is read)")
     if recorded_split is not None and recorded_split != info.split_counts:
         raise DataFormatError(f"{path}: attribute 'split_counts' says {recorded_split}, but /split holds "
                               f"{info.split_counts}; fix the attribute or drop it (/split is what is read)")
