@@ -80,7 +80,7 @@ def unreadable_header(path: Path, datasets: Sequence[str]) -> str | None:
                                stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                                timeout=TIMEOUT_S, check=False)
     except subprocess.TimeoutExpired:  # run() has killed the child
-        return f"damaged: reading its header did not end within {TIMEOUT_S:g} s"
+        return f"reading its header did not end within {TIMEOUT_S:g} s: damaged, or on a disk that does not answer"
     except OSError:  # no child could start (a limit on processes, no interpreter at sys.executable): read it here
         return None
     if -child.returncode in CRASHES:
