@@ -722,3 +722,17 @@ def test_a_brighter_picture_is_named_only_where_the_rod_shows_its_share() -> Non
     assert rod_shows_exposure(1.31, 1.3, config) and rod_shows_exposure(1.05, 1.08, config)
     assert not rod_shows_exposure(1.011, 1.011, config)  # under min_exposure gray levels, as before
     assert not rod_shows_exposure(1.05, 1.12, replace(config, min_core_share=0.5))
+
+
+@pytest.mark.parametrize("matched_angles", [True, False])
+def test_no_matched_angles_set_aside_by_an_accepted_camera_is_said(matched_angles: bool) -> None:
+    """--no-matched-angles on a recording whose camera stage accepted an exposure of 1.013, under the size that is
+    named: the dynamics were fitted on the matched angles, and nothing said that the flag was set aside."""
+    found = V.CameraFindings(V.Camera(exposure=1.013), 0.0, 0.0, 0, 0, [], 1e-3, 1e-3, [], theta=np.zeros((2, 3)))
+    config = DiagnoseConfig(matched_angles=matched_angles)
+    _, notes = summarise_vision(SimpleNamespace(rec_mse=np.ones(3)), 1.0, found, None, [], config)
+    said = [n for n in notes if n.startswith("--no-matched-angles is set aside")]
+    assert len(said) == (not matched_angles), notes
+    if said:
+        assert said[0] == ("--no-matched-angles is set aside: the camera stage accepted a camera under the sizes that "
+                           "are named, so every step reads the angles matched to the decoder's renders")

@@ -195,24 +195,32 @@ def test_a_file_the_writer_has_no_room_for_is_refused_before_the_work(tmp_path: 
 
     monkeypatch.setattr(collecting, "_vector_env", never)
     _small_disk(monkeypatch, 6 * 2**20)
-    line = refused("piga-collect", ["--sequences", "300", "--steps", "50", "--workers", "1", "--quiet", "--out",
+    line = refused("piga-collect", ["--sequences", "1000", "--steps", "50", "--workers", "1", "--quiet", "--out",
                                     str(tmp_path / "c.h5")], capsys, "needs up to", "has 6.0 MiB free")
     assert "full" not in line
     assert _listing(tmp_path) == []
 
 
-def test_the_writer_names_its_need_not_a_full_disk(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    """Refused by the writer (the disk filled after the command's check), the line gives the free space and the need."""
+@pytest.mark.parametrize("frames, in_file", [("blank", "164 B in the file"), ("noise", "96.1 KiB in the file")])
+def test_the_writer_names_its_need_not_a_full_disk(frames: str, in_file: str, tmp_path: Path,
+                                                   monkeypatch: pytest.MonkeyPatch) -> None:
+    """Refused by the writer (the disk filled after the command's check), the line gives the free space and the need:
+    the slice's bytes as they take the file (zlib at the codec's level: blank frames shrink to a few bytes, noise not
+    at all) and the room kept for HDF5's metadata."""
     import numpy as np
 
     from piga.data.schema import DatasetWriter
     from piga.io.resources import ResourceError
 
+    pixels = np.zeros((2, 3, 128, 128), np.uint8) if frames == "blank" else \
+        np.random.default_rng(0).integers(0, 256, (2, 3, 128, 128), dtype=np.uint8)
     with pytest.raises(ResourceError) as refusal:
-        with DatasetWriter(tmp_path / "d.h5", 2, 3, (8, 8), 1, None, {"system": "pendulum", "dt": 0.05}) as writer:
+        with DatasetWriter(tmp_path / "d.h5", 2, 3, (128, 128), 1, None, {"system": "pendulum", "dt": 0.05}) as writer:
             _small_disk(monkeypatch, 2000)
-            writer.write(0, np.zeros((2, 3, 8, 8), np.uint8), np.zeros((2, 3, 1), np.float32))
-    assert "its disk has 2.0 KiB free, less than the 128.8 KiB" in str(refusal.value) and "full" not in str(refusal.value)
+            writer.write(0, pixels, np.zeros((2, 3, 1), np.float32))
+    line = str(refusal.value)
+    assert "its disk has 2.0 KiB free, less than the " in line and "full" not in line
+    assert f"({in_file}, and 140.2 KiB kept free for HDF5's metadata" in line, line
     assert _listing(tmp_path) == []
 
 

@@ -302,11 +302,10 @@ def test_cli_refuses_a_frame_size_that_cannot_fit(tmp_path: Path, recording: tup
         _check_resources(17, 2_000_000, 40, out)
 
 
-def test_the_disk_check_counts_one_slice_of_the_recording_uncompressed(tmp_path: Path,
-                                                                       monkeypatch: pytest.MonkeyPatch) -> None:
-    """A 20,000-frame recording at 64x64 was refused on a 64 MiB disk as needing up to 125.3 MiB: the file (39.1 MiB
-    at the assumed 2x; 39.2 MiB with HDF5's own bytes) and the whole recording uncompressed, kept free to be written at once. It is written a slice
-    at a time, and the room kept free is one slice."""
+def test_the_disk_check_counts_one_slice_of_the_recording(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A 20,000-frame recording at 64x64 was refused on a 64 MiB disk as needing up to 125.3 MiB: the file (39.2 MiB at
+    the assumed 2x, with HDF5's own bytes) and the whole recording uncompressed, kept free to be written at once. It is
+    written a slice at a time, and the room kept free is one slice as it takes the disk, and HDF5's metadata."""
     import shutil
 
     from piga.data import importer
@@ -314,9 +313,10 @@ def test_the_disk_check_counts_one_slice_of_the_recording_uncompressed(tmp_path:
 
     real = shutil.disk_usage
     monkeypatch.setattr(shutil, "disk_usage", lambda path: real(path)._replace(free=64 * 2**20))
-    importer._check_resources(20_000, 64, 40, tmp_path / "o.h5")  # 39.2 MiB + one slice of 16 MiB + 8 MiB margin
-    monkeypatch.setattr(shutil, "disk_usage", lambda path: real(path)._replace(free=50 * 2**20))
-    with pytest.raises(ResourceError, match=r"a file of about 39.2 MiB once compressed, and .*16.0 MiB of frames at a time"):
+    importer._check_resources(20_000, 64, 40, tmp_path / "o.h5")  # 39.2 MiB + one slice of 8.0 MiB + the metadata's
+    monkeypatch.setattr(shutil, "disk_usage", lambda path: real(path)._replace(free=47 * 2**20))
+    with pytest.raises(ResourceError, match=r"needs up to 47.3 MiB .*a file of about 39.2 MiB once compressed, and 8.2 "
+                                            r"MiB kept free as it writes: about 8.0 MiB for the next sequences"):
         importer._check_resources(20_000, 64, 40, tmp_path / "o.h5")
     assert importer._slice_sequences(40, 64) * 40 * (64 * 64 + 4) <= importer.WRITE_SLICE_BYTES
     assert importer._slice_sequences(40, 1024) == 1  # one sequence larger than a slice is written alone

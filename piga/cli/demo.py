@@ -279,9 +279,9 @@ def check_demo_disk(out: Path, config: CollectConfig, resume: bool, overwrite: b
     from piga.world.variants import build_model
 
     data, run_dir = out / "pendulum.h5", out / DEMO_RUN
-    file_bytes, slice_bytes, raw_bytes = disk_need(config)
+    file_bytes, slice_bytes, sequences = disk_need(config)
     kept = resume and data.is_file()  # the earlier demo's data: kept, not written again
-    collecting = 0.0 if kept else file_bytes + write_room(slice_bytes, raw_bytes)
+    collecting = 0.0 if kept else file_bytes + write_room(slice_bytes, sequences)
     with torch.device("meta"):  # its size only: no memory taken
         checkpoint_bytes = adam_checkpoint_bytes(build_model(PRESETS["fast"].model))
     run_bytes, _ = run_disk_need(run_dir, checkpoint_bytes, resume=resume, overwrite=overwrite)

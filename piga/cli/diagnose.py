@@ -56,9 +56,10 @@ def build_parser() -> ArgumentParser:
     p.add_argument("--matched-angles", action=argparse.BooleanOptionalAction, default=d.matched_angles,
                    help="read the chosen effects' values, and the model's own training file that a gain is judged "
                         "against, on angles matched to the decoder's renders instead of the encoder's; the selection "
-                        "is unchanged (default %(default)s). A named camera effect, a vision gap in what is drawn "
-                        "with the action, or an actuation sign that only the matched angles show puts every step on "
-                        "matched angles, with this option or without")
+                        "is unchanged (default %(default)s). A camera that the camera stage accepts (named, or under the "
+                        "sizes that are named), a vision gap in what is drawn with the action, or an actuation sign "
+                        "that only the matched angles show puts every step on matched angles, with this option or "
+                        "without, and a note says which")
     p.add_argument("--threads", type=thread_count, default=0,
                    help="torch CPU threads (default %(default)s: torch's choice, at most 2; small fits gain little from more)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing report in --out")

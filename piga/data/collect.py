@@ -262,7 +262,7 @@ def check_resources(config: CollectConfig, out: str | Path) -> None:
     workers = min(config.workers, n)
     what = f"{n} sequences x {t} frames of {config.env.image_size}x{config.env.image_size}"
     check_memory(_batch_rows(config) * t * (pixels + 12) + (workers + 1) * 48 * pixels + 2 * n, what)
-    # with the room the writer keeps free as it writes the last batch (uncompressed), so that it does not refuse later
+    # with the room the writer keeps free as it writes the last batch, so that it does not refuse later
     check_data_disk(out, *disk_need(config), what, advice=COLLECT_DISK_ADVICE)
 
 
@@ -276,18 +276,17 @@ def _batch_rows(config: CollectConfig) -> int:
 COLLECT_DISK_ADVICE = "free some space, write --out elsewhere, or give fewer --sequences or --steps or a smaller --image-size"
 
 
-def disk_need(config: CollectConfig) -> tuple[float, float, float]:
+def disk_need(config: CollectConfig) -> tuple[float, float, int]:
     """The disk the data file of ``config`` takes, for :func:`piga.data.schema.check_data_disk`: the file once
     compressed (frames shrunk by :data:`piga.io.resources.RENDERED_FRAME_COMPRESSION`, or the shaded frames'
     :data:`~piga.io.resources.SHADED_FRAME_COMPRESSION`; actions, states and rewards raw; HDF5's own bytes,
-    :func:`~piga.io.resources.hdf5_file_overhead`), a batch uncompressed, and
-    the whole file uncompressed."""
+    :func:`~piga.io.resources.hdf5_file_overhead`), a batch as it takes the disk, and the sequences."""
     from piga.io.resources import RENDERED_FRAME_COMPRESSION, SHADED_FRAME_COMPRESSION, hdf5_file_overhead
 
     n, t, pixels = config.sequences, config.steps, config.env.image_size**2
     shrink = SHADED_FRAME_COMPRESSION if isinstance(config.env, DMCPendulumConfig) else RENDERED_FRAME_COMPRESSION
-    return (n * t * (pixels / shrink + 12) + hdf5_file_overhead(n), _batch_rows(config) * t * (pixels + 16),
-            n * t * (pixels + 16))
+    step_bytes = pixels / shrink + 16  # a frame compressed, and its action, state (2 values) and reward raw
+    return n * t * step_bytes + hdf5_file_overhead(n), _batch_rows(config) * t * step_bytes, n
 
 
 def collect(

@@ -95,15 +95,13 @@ def scene_attrs(config: SceneCollectConfig, command: str | None = None) -> dict[
 def scene_disk_need(config: SceneCollectConfig) -> tuple[float, float, float]:
     """The disk the data file of ``config`` takes, for :func:`piga.data.schema.check_data_disk`: the file once
     compressed (frames shrunk by :data:`piga.io.resources.SCENE_FRAME_COMPRESSION`, states raw, and HDF5's own
-    bytes), a batch uncompressed (the room the writer keeps free), and the whole file uncompressed."""
+    bytes), a batch as it takes the disk (the room the writer keeps free), and the sequences."""
     from piga.io.resources import SCENE_FRAME_COMPRESSION, hdf5_file_overhead
 
     scene, n, t = config.scene, config.sequences, config.steps
-    pixels, state_bytes = 3 * scene.image_size**2, 16 * scene.n_objects
     shrink = SCENE_FRAME_COMPRESSION["digits" if scene.scene == "digits-spring" else "balls"]
-    step_bytes = pixels + state_bytes  # raw
-    return (n * t * (pixels / shrink + state_bytes) + hdf5_file_overhead(n), min(config.batch, n) * t * step_bytes,
-            n * t * step_bytes)
+    step_bytes = 3 * scene.image_size**2 / shrink + 16 * scene.n_objects  # a frame compressed, its states raw
+    return n * t * step_bytes + hdf5_file_overhead(n), min(config.batch, n) * t * step_bytes, n
 
 
 def collect_scene(config: SceneCollectConfig, out: str | Path, overwrite: bool = False, command: str | None = None,

@@ -482,11 +482,11 @@ def _check_resources(n_frames: int, size: int, steps: int, target: Path) -> None
     pixels = size * size
     what = f"{n_frames} frames of {size}x{size}"
     check_memory(2 * n_frames * pixels + 48 * pixels, what)
-    # with the room the writer keeps free as it writes a slice (uncompressed), so that it does not refuse later
-    raw = n_frames * (pixels + 4)
-    written = min(raw, _slice_sequences(steps, size) * steps * (pixels + 4))
-    compressed = n_frames * (pixels / RECORDED_FRAME_COMPRESSION + 4) + hdf5_file_overhead(-(-n_frames // steps))
-    check_data_disk(target, compressed, written, raw, what,
+    # with the room the writer keeps free as it writes a slice, so that it does not refuse later
+    step_bytes = pixels / RECORDED_FRAME_COMPRESSION + 4  # a frame compressed, its action raw
+    sequences = -(-n_frames // steps)
+    written = min(n_frames, _slice_sequences(steps, size) * steps) * step_bytes
+    check_data_disk(target, n_frames * step_bytes + hdf5_file_overhead(sequences), written, sequences, what,
                     advice="free some space, write --out elsewhere, or give a smaller --image-size")  # (no count to lower)
 
 

@@ -29,6 +29,7 @@ import math
 import os
 import shutil
 import typing
+import zlib
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -86,46 +87,42 @@ def codec_options(codec: FrameCodec) -> dict[str, Any]:
     return {"compression": "gzip", "compression_opts": int(codec.split("-")[1])}
 
 
-#: Free space a :class:`DatasetWriter` keeps beyond a slice's raw bytes before writing it: HDF5's chunk caches (1 MiB
-#: a dataset, flushed at close) and its metadata. HDF5 that runs out of disk mid-write leaves objects whose
-#: deallocation fails (h5py printed dozens of tracebacks, then the process segfaulted), so the writer stops first.
-WRITE_MARGIN_BYTES = 8 * 2**20
+def write_margin(sequences: int) -> float:
+    """The free space a :class:`DatasetWriter` keeps beyond the bytes of the slice it writes next, in a file of
+    ``sequences`` sequences: room for HDF5's metadata as it grows and is flushed at close
+    (:data:`~piga.io.resources.HDF5_WRITE_HEADROOM` and :func:`~piga.io.resources.hdf5_file_overhead`). HDF5 that runs
+    out of disk mid-write leaves objects whose deallocation fails (h5py printed dozens of tracebacks, then the process
+    segfaulted), so the writer stops first. The frames hold no room of their own: the writer keeps no chunk cache, so
+    each slice is on disk, compressed, once written."""
+    from piga.io.resources import HDF5_WRITE_HEADROOM, hdf5_file_overhead
+
+    return HDF5_WRITE_HEADROOM + hdf5_file_overhead(sequences)
 
 
-def write_margin(file_bytes: float) -> float:
-    """The free space a :class:`DatasetWriter` keeps beyond a slice's raw bytes, for a file whose arrays take
-    ``file_bytes`` uncompressed: :data:`WRITE_MARGIN_BYTES`, or for a smaller file those bytes and
-    :data:`~piga.io.resources.HDF5_WRITE_HEADROOM`, as HDF5's caches hold no more than the file's data (a full
-    8 MiB refused a 100 KB file on a 6 MiB disk)."""
-    from piga.io.resources import HDF5_WRITE_HEADROOM
-
-    return min(WRITE_MARGIN_BYTES, file_bytes + HDF5_WRITE_HEADROOM)
+def write_room(slice_bytes: float, sequences: int) -> float:
+    """The free space a :class:`DatasetWriter` asks for before it writes a slice that takes ``slice_bytes`` on disk
+    into a file of ``sequences`` sequences: the slice and :func:`write_margin`. A command's disk check before its work
+    adds it to the file's size, so that the writer's own check does not refuse after the work."""
+    return slice_bytes + write_margin(sequences)
 
 
-def write_room(slice_bytes: float, file_bytes: float) -> float:
-    """The free space a :class:`DatasetWriter` asks for before it writes a slice of ``slice_bytes`` (raw) into a file
-    of ``file_bytes`` (raw): the slice and :func:`write_margin`. A command's disk check before its work adds it to
-    the file's size, so that the writer's own check does not refuse after the work."""
-    return slice_bytes + write_margin(file_bytes)
-
-
-def check_data_disk(out: str | Path, file_bytes: float, slice_bytes: float, raw_bytes: float, what: str,
+def check_data_disk(out: str | Path, file_bytes: float, slice_bytes: float, sequences: int, what: str,
                     advice: str = "ask for less") -> None:
     """Refuses, before a command makes its data, a file ``out`` whose disk cannot take it as a
     :class:`DatasetWriter` writes it: the file (about ``file_bytes`` once compressed) and the room it keeps free to
-    write each slice (:func:`write_room` of ``slice_bytes`` in a file of ``raw_bytes``, both uncompressed), so that
-    the writer does not refuse after the work. The message gives the two parts: the need is an upper bound.
+    write each slice (:func:`write_room` of a slice of about ``slice_bytes`` on disk in a file of ``sequences``), so
+    that the writer does not refuse after the work. The message gives the two parts: the need is an upper bound.
 
     Raises:
         piga.io.resources.ResourceError: as :func:`piga.io.resources.check_disk`.
     """
     from piga.io.resources import check_disk, format_bytes
 
-    room = write_room(slice_bytes, raw_bytes)
+    room = write_room(slice_bytes, sequences)
     check_disk(out, file_bytes + room, what, advice, bound="up to",
                detail=f" as it writes (a file of about {format_bytes(file_bytes)} once compressed, and "
-                      f"{format_bytes(room)} kept free to write {format_bytes(slice_bytes)} of frames at a time, "
-                      "uncompressed, through HDF5's caches)")
+                      f"{format_bytes(room)} kept free as it writes: about {format_bytes(slice_bytes)} for the next "
+                      "sequences, and room for HDF5's metadata)")
 
 
 #: Files whose frames need less memory than this are loaded whole by default when training.
@@ -1073,7 +1070,10 @@ class DatasetWriter:
         self._ctx = atomic_output(self.path, overwrite=self.overwrite)
         tmp = self._ctx.__enter__()
         n, t = self.shape
-        f = h5py.File(tmp, "w")
+        # no chunk cache: each slice's chunks (one sequence each, written whole) go to disk compressed as written, so
+        # the disk check before a slice counts every byte the file has taken (a cache of 1 MiB a dataset held
+        # chunks back until close, and the check had to keep that room free on top)
+        f = h5py.File(tmp, "w", rdcc_nbytes=0)
         self._file = f
         opts = codec_options(self.compression)
         f.create_dataset("frames", (n, t, *self.image_shape), dtype=np.uint8, chunks=(1, t, *self.image_shape), **opts)
@@ -1094,7 +1094,8 @@ class DatasetWriter:
         stop = start + len(frames)
         if frames.shape[1:] != (self.shape[1], *self.image_shape):
             raise ValueError(f"frames slice has shape {frames.shape}, expected (n, {self.shape[1]}, {self.image_shape})")
-        self._check_room(sum(a.nbytes for a in (frames, actions, states, rewards) if a is not None), len(frames))
+        self._check_room(self._disk_bytes(frames) + sum(a.nbytes for a in (actions, states, rewards) if a is not None),
+                         len(frames))
         self._file["frames"][start:stop] = frames
         self._file["actions"][start:stop] = actions
         if self.state_dim is not None:
@@ -1111,16 +1112,18 @@ class DatasetWriter:
             self._levels = (min(self._levels[0], int(frames.min())), max(self._levels[1], int(frames.max())))
         self._moves = self._moves or (len(frames) > 0 and frames_move(frames))
 
-    def file_bytes(self) -> int:
-        """The file's arrays, uncompressed."""
-        n, t = self.shape
-        per_step = math.prod(self.image_shape) + 4 * (self.action_dim + (self.state_dim or 0) + int(self.rewards))
-        return n * t * per_step + n  # + /split
+    def _disk_bytes(self, frames: np.ndarray) -> int:
+        """The bytes that ``frames`` (n, T, ...) take in the file: with gzip, each sequence (one chunk) compressed by
+        zlib at the codec's level, which is what HDF5's deflate filter runs; otherwise their raw size (LZF: at most
+        about that)."""
+        if not self.compression.startswith("gzip"):
+            return frames.nbytes
+        level = int(self.compression.split("-")[1])
+        return sum(len(zlib.compress(np.ascontiguousarray(sequence).data, level)) for sequence in frames)
 
-    def _check_room(self, raw_bytes: int, sequences: int) -> None:
+    def _check_room(self, disk_bytes: int, sequences: int) -> None:
         """Refuses a slice of ``sequences`` where the file's disk has less free space than :func:`write_room` (the
-        slice's ``raw_bytes``, uncompressed: at most what it takes compressed, and :func:`write_margin`), before HDF5
-        runs out.
+        ``disk_bytes`` the slice takes in the file, and :func:`write_margin`), before HDF5 runs out.
 
         Raises:
             piga.io.resources.ResourceError: the free space and the need, in numbers (the disk need not be full).
@@ -1129,13 +1132,13 @@ class DatasetWriter:
 
         assert self._file is not None
         free = shutil.disk_usage(Path(self._file.filename).parent).free
-        margin = write_margin(self.file_bytes())
-        if free < raw_bytes + margin:
-            shown = format_bytes if format_bytes(free) != format_bytes(raw_bytes + margin) else "{:,.0f} B".format
+        margin = write_margin(self.shape[0])
+        if free < disk_bytes + margin:
+            shown = format_bytes if format_bytes(free) != format_bytes(disk_bytes + margin) else "{:,.0f} B".format
             raise ResourceError(f"{self.path}: its disk has {shown(free)} free, less than the "
-                                f"{shown(raw_bytes + margin)} that writing the next {sequences} sequences "
-                                f"takes ({format_bytes(raw_bytes)} uncompressed, and {format_bytes(margin)} kept free "
-                                "for HDF5's caches, which must not run out mid-write); free some space, or write "
+                                f"{shown(disk_bytes + margin)} that writing the next {sequences} sequences "
+                                f"takes ({format_bytes(disk_bytes)} in the file, and {format_bytes(margin)} kept free "
+                                "for HDF5's metadata, which must not run out mid-write); free some space, or write "
                                 "elsewhere")
 
     def set_split(self, split: np.ndarray) -> None:

@@ -2534,6 +2534,15 @@ def summarise_vision(obs: Observations, rec_training: float, camera: CameraFindi
                        if camera.camera != Camera() and not named_vision else "")
             notes.append("the dynamics are fitted on angles found by matching every frame to the decoder's renders "
                          f"through the fitted camera{unnamed} (analysis by synthesis), not on the encoder's angles")
+        if camera.rematched and not config.matched_angles:  # the flag asked for the encoder's: said where it is not
+            why = ("the recording comes from a lossy video" if camera.matched_for_codec is not None else
+                   "the vision gap lies in what is drawn with the action" if camera.matched_for_arrow else
+                   "only the matched angles show the actuation's sign" if camera.matched_for_sign else
+                   "a camera is named in part of the recording" if camera.partial is not None else
+                   "a camera is named" if named_vision else
+                   "the camera stage accepted a camera under the sizes that are named")
+            notes.append(f"--no-matched-angles is set aside: {why}, so every step reads the angles matched to the "
+                         "decoder's renders")
     if ratio is not None and ratio > config.vision_ratio and not named_vision:
         small = calm_frames_error(obs.rec_mse, obs.actions, obs.stale)
         if small is not None and small <= rec_training:
