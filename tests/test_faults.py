@@ -1951,15 +1951,32 @@ def test_demo_whose_model_did_not_learn_says_the_demos_way_to_train_longer(
         run = Path(argv[argv.index("--out") + 1])
         run.mkdir(parents=True, exist_ok=True)
         (run / "checkpoint.pt").write_bytes(b"ckpt")
-        raise PigaError(f"the run did not identify its parameters: it settled on nothing; {longer(260, 260)}")
+        raise PigaError(f"the run did not identify its parameters: it settled on nothing; {longer(260, 260, False)}")
 
     monkeypatch.setattr(demo, "collect", fake_collect)
     monkeypatch.setattr(demo.show, "main", lambda argv: 0)
     monkeypatch.setattr(demo.train, "main", not_learned)
     line = refused("piga-demo", ["--out", str(tmp_path / "demo")], capsys, "did not identify",
-                   f"{tmp_path / 'demo'} keeps this demo's data and model: run the demo again with --resume and a "
-                   "larger --epochs (its training took 260 of 260 planned steps), or with --overwrite and more --sequences")
+                   "run the demo again with --resume and a larger --epochs (its training took 260 of 260 planned "
+                   f"steps), or with --overwrite and more --sequences; {tmp_path / 'demo'} keeps this demo's data and "
+                   "model")
     assert line.count("keeps this demo's") == 1 and "--max-minutes" not in line and "--budget-steps" not in line
+
+
+def test_the_demos_fix_for_a_run_that_did_not_learn_the_motion_reads_as_one_sentence() -> None:
+    """It read "give it more or longer sequences, or dmx keeps this demo's data and model: run the demo again with
+    --resume ...": the demo's words pasted into piga-train-model's, and the longer training first, where more data is
+    what a run that did not learn the motion needs first."""
+    from piga.cli.demo import _longer
+    from piga.cli.train import _reason_for
+    from piga.training.convergence import data_fix
+
+    reason = "it did not learn the motion, so its parameters mean nothing; " + data_fix(240, 240)
+    said, _ = _reason_for({"reason": reason, "planned_steps": 240, "steps": 240}, "piga-demo",
+                          lambda planned, steps, data_first: _longer(Path("dmx"), planned, steps, data_first), "")
+    assert said == ("it did not learn the motion, so its parameters mean nothing; run the demo again with --overwrite and "
+                    "more --sequences, or with --resume and a larger --epochs (its training took 240 of 240 planned "
+                    "steps); dmx keeps this demo's data and model")
 
 
 def test_demo_interrupted_in_training_says_what_it_kept(tmp_path: Path, capsys: pytest.CaptureFixture[str],

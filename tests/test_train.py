@@ -420,7 +420,7 @@ def test_a_command_training_through_this_one_says_its_own_way_to_train_longer(sm
     piga-demo does not take: the command that trains through piga-train-model says its own way instead."""
     out = tmp_path / "r"
 
-    def longer(planned: int, steps: int) -> str:
+    def longer(planned: int, steps: int, data_first: bool) -> str:
         return f"run the demo with --epochs (it took {steps} of {planned})"
 
     code, _, err = run_in_process("piga-demo", lambda argv: cli.main(argv, prog="piga-demo", longer=longer),
@@ -440,10 +440,12 @@ def test_another_commands_reason_names_whose_options_it_leaves() -> None:
                "reason": "g never left its initial value in 30 physics steps; raise --lr-physics or " + length_fix(40, 40)}
     owner = " (options of piga-train-model d.h5 --out r)"
     assert cli._reason_for(verdict, cli.PROG, None, owner) == (verdict["reason"], "")
-    reason, whose = cli._reason_for(verdict, "piga-demo", lambda planned, steps: f"--epochs past {steps}", owner)
+    reason, whose = cli._reason_for(verdict, "piga-demo", lambda planned, steps, data_first: f"--epochs past {steps}",
+                                    owner)
     assert reason.endswith("raise --lr-physics or --epochs past 40") and whose == owner  # --lr-physics is not its own
     verdict["reason"] = "too short to judge; " + length_fix(40, 40)
-    assert cli._reason_for(verdict, "piga-demo", lambda planned, steps: "--epochs", owner) == ("too short to judge; --epochs", "")
+    assert cli._reason_for(verdict, "piga-demo", lambda planned, steps, data_first: "--epochs", owner) == (
+        "too short to judge; --epochs", "")
 
 
 def test_converged_is_false_when_the_parameters_never_moved(small_data: Path, tmp_path: Path,

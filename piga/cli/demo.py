@@ -209,11 +209,14 @@ def _kept(out: Path) -> str:
     return f"{out} keeps this demo's data and model"
 
 
-def _longer(out: Path, planned: int, steps: int) -> str:
+def _longer(out: Path, planned: int, steps: int, data_first: bool = False) -> str:
     """The demo's way to train its model longer, said where the training did not converge in place of
-    piga-train-model's (--max-minutes and --budget-steps are not the demo's options)."""
-    return (f"{_kept(out)}: run the demo again with --resume and a larger --epochs (its training took {steps} of "
-            f"{planned} planned steps), or with --overwrite and more --sequences")
+    piga-train-model's (--max-minutes and --budget-steps are not the demo's options); with ``data_first``, where it
+    did not learn the motion at all, more --sequences comes first."""
+    more = "--overwrite and more --sequences"
+    longer = f"--resume and a larger --epochs (its training took {steps} of {planned} planned steps)"
+    first, then = (more, longer) if data_first else (longer, more)
+    return f"run the demo again with {first}, or with {then}; {_kept(out)}"
 
 
 #: The demo's own files in --out, beside its run (model/): what an --overwrite sets aside until its first checkpoint.
@@ -355,7 +358,7 @@ def _run(args: argparse.Namespace, argv: Sequence[str] | None, out: Path, config
                           *(["--epochs", str(args.epochs)] if args.epochs else []),
                           *(["--threads", str(args.threads)] if args.threads else []),
                           *(["--quiet"] if args.quiet else [])], prog=PROG,
-                         longer=lambda planned, steps: _longer(out, planned, steps))
+                         longer=lambda planned, steps, data_first: _longer(out, planned, steps, data_first))
     import json
 
     from piga.evaluation.evaluate import true_and_error

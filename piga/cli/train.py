@@ -25,7 +25,7 @@ from piga.io.checkpoint import (CHECKPOINT, RunKind, check_record_matches, check
                                 record_divergence, recorded_data_path, require_piga_run)
 from piga.io.lock import lock_run_folder
 from piga.io.replaced import ReplacedRun, replacing, settle_replaced
-from piga.training.convergence import length_fix
+from piga.training.convergence import data_fix, length_fix
 
 if TYPE_CHECKING:
     from piga.world.model import ModelConfig
@@ -163,16 +163,18 @@ def build_parser() -> ArgumentParser:
     return p
 
 
-def main(argv: Sequence[str] | None = None, prog: str = PROG, longer: Callable[[int, int], str] | None = None) -> int:
+def main(argv: Sequence[str] | None = None, prog: str = PROG,
+         longer: Callable[[int, int, bool], str] | None = None) -> int:
     """``prog``: the command that trains through this one (piga-demo), which names itself in warnings and errors;
-    ``longer(planned, steps)``: that command's own way to train longer, said in place of this command's
-    (:func:`~piga.training.convergence.length_fix`) where a run did not converge."""
+    ``longer(planned, steps, data_first)``: that command's own way to train longer, said in place of this command's
+    (:func:`~piga.training.convergence.length_fix`) where a run did not converge, or, with ``data_first``, its way to
+    more data and then longer training (in place of :func:`~piga.training.convergence.data_fix`)."""
     with replacing() as replaced:  # the run that --overwrite replaces: back in place if this one ends before a checkpoint
         return _main(argv, prog, replaced, longer)
 
 
 def _main(argv: Sequence[str] | None, prog: str, replaced: ReplacedRun,
-          longer: Callable[[int, int], str] | None = None) -> int:
+          longer: Callable[[int, int, bool], str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     options_given = given_options(parser, argv)  # the options written, at the default's value too
@@ -539,7 +541,7 @@ def _main(argv: Sequence[str] | None, prog: str, replaced: ReplacedRun,
     return 0
 
 
-def _reason_for(convergence: dict[str, Any], prog: str, longer: Callable[[int, int], str] | None,
+def _reason_for(convergence: dict[str, Any], prog: str, longer: Callable[[int, int, bool], str] | None,
                 whose: str) -> tuple[str, str]:
     """The verdict's reason as ``prog`` says it, and ``whose``, the note that names this command as the owner of the
     options it names, or "" where they are all ``prog``'s: another command training through this one (piga-demo)
@@ -549,8 +551,10 @@ def _reason_for(convergence: dict[str, Any], prog: str, longer: Callable[[int, i
         return reason, ""
     own = ""
     if longer is not None:
-        own = longer(convergence["planned_steps"], convergence["steps"])
-        reason = reason.replace(length_fix(convergence["planned_steps"], convergence["steps"]), own)
+        planned, steps = convergence["planned_steps"], convergence["steps"]
+        data_first = data_fix(planned, steps) in reason  # (its own words: "give it more ... sequences, or" + theirs)
+        own = longer(planned, steps, data_first)
+        reason = reason.replace(data_fix(planned, steps) if data_first else length_fix(planned, steps), own)
     options = set(re.findall(r"--[a-z][a-z-]*", reason)) - set(re.findall(r"--[a-z][a-z-]*", own))
     return reason, whose if options else ""
 

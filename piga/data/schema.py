@@ -1128,15 +1128,15 @@ class DatasetWriter:
         Raises:
             piga.io.resources.ResourceError: the free space and the need, in numbers (the disk need not be full).
         """
-        from piga.io.resources import ResourceError, format_bytes
+        from piga.io.resources import ResourceError, format_apart, format_bytes
 
         assert self._file is not None
         free = shutil.disk_usage(Path(self._file.filename).parent).free
         margin = write_margin(self.shape[0])
         if free < disk_bytes + margin:
-            shown = format_bytes if format_bytes(free) != format_bytes(disk_bytes + margin) else "{:,.0f} B".format
-            raise ResourceError(f"{self.path}: its disk has {shown(free)} free, less than the "
-                                f"{shown(disk_bytes + margin)} that writing the next {sequences} sequences "
+            shown_need, shown_free = format_apart(disk_bytes + margin, free)
+            raise ResourceError(f"{self.path}: its disk has {shown_free} free, less than the "
+                                f"{shown_need} that writing the next {sequences} sequences "
                                 f"takes ({format_bytes(disk_bytes)} in the file, and {format_bytes(margin)} kept free "
                                 "for HDF5's metadata, which must not run out mid-write); free some space, or write "
                                 "elsewhere")

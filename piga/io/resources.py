@@ -55,6 +55,14 @@ def format_bytes(n: float) -> str:
     raise AssertionError("unreachable")
 
 
+def format_apart(need: float, have: float) -> tuple[str, str]:
+    """:func:`format_bytes` of a need and what is there, in whole bytes where the two would read the same ("needs up to
+    1.3 MiB ..., but it has 1.3 MiB free" read as if it fitted)."""
+    if format_bytes(need) != format_bytes(have):
+        return format_bytes(need), format_bytes(have)
+    return f"{need:,.0f} B", f"{have:,.0f} B"
+
+
 def _machine_available() -> int | None:
     """The machine's available memory (Linux: MemAvailable), or None if unknown."""
     try:
@@ -155,8 +163,8 @@ def check_memory(needed: float, what: str, advice: str = "ask for less") -> None
     """Raises :class:`ResourceError` if ``needed`` bytes exceed the available memory; ``advice`` ends the message."""
     available = available_memory()
     if available is not None and needed > available:
-        raise ResourceError(f"{what} needs about {format_bytes(needed)} of memory, but {format_bytes(available)} is "
-                            f"available; {advice}")
+        shown_need, shown_available = format_apart(needed, available)
+        raise ResourceError(f"{what} needs about {shown_need} of memory, but {shown_available} is available; {advice}")
 
 
 #: Bytes per parameter of float32 training with Adam: the weights, their gradients and Adam's two moments.
@@ -211,9 +219,10 @@ def check_disk(target: str | os.PathLike[str], needed: float, what: str, advice:
     if usage.total == 0:  # /proc, /sys: "0 B free; ask for less" asked for what no size can meet
         raise ResourceError(stores_no_files(what, folder))
     if needed > free:
-        need = (f"keeps at least {format_bytes(needed)} of disk free ({headroom})" if headroom
-                else f"needs {bound} {format_bytes(needed)} of disk{detail}")
-        raise ResourceError(f"{what} {need}, but {folder} has {format_bytes(free)} free; {advice}")
+        shown_need, shown_free = format_apart(needed, free)
+        need = (f"keeps at least {shown_need} of disk free ({headroom})" if headroom
+                else f"needs {bound} {shown_need} of disk{detail}")
+        raise ResourceError(f"{what} {need}, but {folder} has {shown_free} free; {advice}")
 
 
 #: Room left on top of a training run's checkpoints, for its metrics, plots and TensorBoard.
@@ -284,4 +293,4 @@ def check_run_disk(run_dir: str | os.PathLike[str], checkpoint_bytes: float, wha
 __all__ = ["FIGURE_DISK_BYTES", "FIGURE_DISK_WORDS", "HDF5_BYTES_PER_SEQUENCE", "HDF5_FILE_BYTES", "HDF5_WRITE_HEADROOM", "RECORDED_FRAME_COMPRESSION", "RENDERED_FRAME_COMPRESSION",
            "RUN_DISK_MARGIN", "SCENE_FRAME_COMPRESSION", "SHADED_FRAME_COMPRESSION", "ResourceError",
            "adam_checkpoint_bytes", "available_memory", "check_disk", "check_figure_disk", "check_memory", "check_training_memory",
-           "check_run_disk", "format_bytes", "held_bytes", "run_disk_need"]
+           "check_run_disk", "format_apart", "format_bytes", "hdf5_file_overhead", "held_bytes", "run_disk_need"]

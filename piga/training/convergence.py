@@ -141,6 +141,11 @@ def length_fix(planned: int, steps: int) -> str:
             "planned steps)")
 
 
+def data_fix(planned: int, steps: int) -> str:
+    """The fix for a run that did not learn the motion: more data first, then :func:`length_fix`."""
+    return "give it more or longer sequences, or " + length_fix(planned, steps)
+
+
 #: A background MSE below one gray level squared: the held-out frames hardly differ from the background.
 FAINT_BACKGROUND_MSE = (1 / 255) ** 2
 
@@ -294,8 +299,8 @@ def check_convergence(state: Any, config: ConvergenceConfig = ConvergenceConfig(
     if blank is not None and hold is not None and not blank[0] < config.hold_ratio * hold:
         return verdict("untrained", f"its parameters settled, but its held-out predictions (MSE {blank[0]:.4g}) are not "
                                     f"{1 / config.hold_ratio:.3g}x better than holding the last input frame still (MSE "
-                                    f"{hold:.4g}): it did not learn the motion, so its parameters mean nothing; give it "
-                                    "more or longer sequences, or " + length_fix(planned, steps))
+                                    f"{hold:.4g}): it did not learn the motion, so its parameters mean nothing; "
+                                    + data_fix(planned, steps))
     moving = [f"{name} moved {100 * c.tail_change:+.2f}% over the last {100 * config.tail:.0f}% of steps, "
               f"{abs(c.tail_speed):.2f}x the sum of its learning rate there (the bar is {config.speed_tolerance:g}x)"
               for name, c in checks.items() if c.tail_speed is not None and c.tail_change is not None

@@ -24,7 +24,7 @@ Checked by ``benchmarks/training_memory.py`` (results/training_memory.md) agains
 from __future__ import annotations
 
 from piga.io import resources
-from piga.io.resources import TRAINING_BYTES_PER_PARAMETER, ResourceError, format_bytes
+from piga.io.resources import TRAINING_BYTES_PER_PARAMETER, ResourceError, format_apart, format_bytes
 
 #: Bytes per parameter beyond :data:`TRAINING_BYTES_PER_PARAMETER`: the backward pass's temporaries.
 BACKWARD_BYTES_PER_PARAMETER = 4
@@ -73,10 +73,11 @@ def check_training_fits(parameters: int, activations: int | None, batch: int, av
     lower = ([f"--batch-size to {fits} or less"] if fits else []) + list(sizes)
     frames_advice = "collect or import the frames at a smaller --image-size (piga-collect, piga-import)"
     advice = f"lower {' or '.join(lower)}, or {frames_advice}" if lower else frames_advice
-    raise ResourceError(f"training on frames of {frames} needs about {format_bytes(fixed + batched)} of memory (the "
+    shown_need, shown_available = format_apart(fixed + batched, available)
+    raise ResourceError(f"training on frames of {frames} needs about {shown_need} of memory (the "
                         f"model's {parameters / 1e6:.3g}M parameters, which grow with the frames' pixels, with their "
                         f"gradients, Adam's moments and its step, and the process itself: {format_bytes(fixed)}; the "
-                        f"activations of a batch of {batch}: {format_bytes(batched)}), but {format_bytes(available)} is "
+                        f"activations of a batch of {batch}: {format_bytes(batched)}), but {shown_available} is "
                         f"available; {advice}")
 
 
