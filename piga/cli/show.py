@@ -120,8 +120,8 @@ def _faded_note(frames: np.ndarray, side: int) -> str | None:
 
 def _refused_elsewhere(info: DatasetInfo) -> str | None:
     """What the other commands refuse in a file that the strip draws all the same, in one line: a system that no model
-    knows, action columns other than the system's (a pendulum's one torque, none for a scene), sequences of one frame, and frames that are not
-    square (None: none)."""
+    knows, action columns other than the system's (a pendulum's one torque, none for a scene), sequences of one frame,
+    and frames that are not square (None: none)."""
     odd = []
     actions: int | None = 1  # the pendulum's one torque; None: a system that no model knows
     if info.system != "pendulum":  # (the models' list imports torch: not for the pendulum's files, the common case)

@@ -92,7 +92,7 @@ def scene_attrs(config: SceneCollectConfig, command: str | None = None) -> dict[
     }
 
 
-def scene_disk_need(config: SceneCollectConfig) -> tuple[float, float, float]:
+def scene_disk_need(config: SceneCollectConfig) -> tuple[float, float, int]:
     """The disk the data file of ``config`` takes, for :func:`piga.data.schema.check_data_disk`: the file once
     compressed (frames shrunk by :data:`piga.io.resources.SCENE_FRAME_COMPRESSION`, states raw, and HDF5's own
     bytes), a batch as it takes the disk (the room the writer keeps free), and the sequences."""

@@ -474,8 +474,8 @@ def _check_resources(n_frames: int, size: int, steps: int, target: Path) -> None
 
     Memory: the converted frames twice (the list and the stacked array) and one frame's conversion
     (~48 bytes per output pixel). Disk: the frames gzip-compressed
-    (:data:`piga.io.resources.RECORDED_FRAME_COMPRESSION`) with HDF5's own bytes, and the room to write one slice of sequences of
-    ``steps`` frames (:func:`_slice_sequences`).
+    (:data:`piga.io.resources.RECORDED_FRAME_COMPRESSION`) with HDF5's own bytes, and the room to write one slice of
+    sequences of ``steps`` frames (:func:`_slice_sequences`).
     """
     from piga.io.resources import RECORDED_FRAME_COMPRESSION, check_memory, hdf5_file_overhead
 

@@ -290,7 +290,8 @@ def check_run_disk(run_dir: str | os.PathLike[str], checkpoint_bytes: float, wha
                detail=f" beyond the {format_bytes(held)} of {run_dir} that it replaces" if held else "")
 
 
-__all__ = ["FIGURE_DISK_BYTES", "FIGURE_DISK_WORDS", "HDF5_BYTES_PER_SEQUENCE", "HDF5_FILE_BYTES", "HDF5_WRITE_HEADROOM", "RECORDED_FRAME_COMPRESSION", "RENDERED_FRAME_COMPRESSION",
+__all__ = ["FIGURE_DISK_BYTES", "FIGURE_DISK_WORDS", "HDF5_BYTES_PER_SEQUENCE", "HDF5_FILE_BYTES", "HDF5_WRITE_HEADROOM",
+           "RECORDED_FRAME_COMPRESSION", "RENDERED_FRAME_COMPRESSION",
            "RUN_DISK_MARGIN", "SCENE_FRAME_COMPRESSION", "SHADED_FRAME_COMPRESSION", "ResourceError",
            "adam_checkpoint_bytes", "available_memory", "check_disk", "check_figure_disk", "check_memory", "check_training_memory",
            "check_run_disk", "format_apart", "format_bytes", "hdf5_file_overhead", "held_bytes", "run_disk_need"]
