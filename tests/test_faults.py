@@ -610,6 +610,10 @@ def _env_config_edit(**fields: Any) -> Callable[[h5py.File], None]:
     (_attr_edit("env_id", "piga/DMCPendulum-v0"), ["attribute 'env_id' says piga/DMCPendulum-v0, but 'env_config' holds "
                                                    "piga/PixelPendulum-v0's settings (gravity, gravity_mult",
                                                    "set 'env_id' to piga/PixelPendulum-v0"]),
+    # actions of fewer steps than the frames: "must be float ..., got float32 (12, 10, 1)" blamed their type
+    (lambda f: _replace(f, "actions", f["actions"][()][:, :10]),
+     ["/actions has shape (12, 10, 1), but /frames holds 12 sequences of 16 frames; /actions must be [N=12, T=16, A]: "
+      "one action row per frame"]),
     # split_counts whose JSON a flipped byte broke: its text was quoted with the byte in it
     (_attr_edit("split_counts", '{"train": 8, "valid": 2, "test":\x012}'),
      ["attribute 'split_counts' must be a JSON object of sequences per split, got '{\"train\": 8, \"valid\": 2, "

@@ -298,8 +298,11 @@ def _validate(f: h5py.File, path: Path) -> DatasetInfo:
         raise DataFormatError(f"{path}: /frames is empty, shape {frames.shape}")
     _check_frames_not_odd_one_out(f, path, n, t)
     actions = need("actions")
-    if actions.ndim != 3 or actions.shape[:2] != (n, t) or not np.issubdtype(actions.dtype, np.floating):
+    if not np.issubdtype(actions.dtype, np.floating):
         raise DataFormatError(f"{path}: /actions must be float [N={n}, T={t}, A], got {actions.dtype} {actions.shape}")
+    if actions.ndim != 3 or actions.shape[:2] != (n, t):  # (it read "must be float ..., got float32 (24, 10, 1)")
+        raise DataFormatError(f"{path}: /actions has shape {actions.shape}, but /frames holds {n} sequences of {t} "
+                              f"frames; /actions must be [N={n}, T={t}, A]: one action row per frame")
     states = optional("states")
     has_states = states is not None
     if states is not None and (states.ndim != 3 or not (np.issubdtype(states.dtype, np.floating)
