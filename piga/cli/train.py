@@ -552,9 +552,10 @@ def _reason_for(convergence: dict[str, Any], prog: str, longer: Callable[[int, i
     own = ""
     if longer is not None:
         planned, steps = convergence["planned_steps"], convergence["steps"]
-        data_first = data_fix(planned, steps) in reason  # (its own words: "give it more ... sequences, or" + theirs)
+        more = data_fix(planned, steps)  # its own words: "give it more ... sequences, or " and the length's fix
+        data_first = more in reason
         own = longer(planned, steps, data_first)
-        reason = reason.replace(data_fix(planned, steps) if data_first else length_fix(planned, steps), own)
+        reason = reason.replace(more if data_first else length_fix(planned, steps), own)
     options = set(re.findall(r"--[a-z][a-z-]*", reason)) - set(re.findall(r"--[a-z][a-z-]*", own))
     return reason, whose if options else ""
 

@@ -2511,21 +2511,26 @@ def summarise_vision(obs: Observations, rec_training: float, camera: CameraFindi
                 notes.append(f"a camera a little different from the model's: the {small['candidate']} candidate "
                              f"({change}) lowers the held-out matched residual by {100 * small['drop']:.0f}%, but "
                              + under)
+        why = None  # why the steps are on matched angles: said where --no-matched-angles asked for the encoder's
         if camera.matched_for_codec is not None:
+            why = "the recording comes from a lossy video"
             notes.append(f"the frames come from {os.path.basename(obs.lossy_source or '')}, a lossy video, whose codec's "
                          "errors the encoder reads: the nominal physics' typical one-step angle error is "
                          f"{camera.matched_for_codec:.1f}x as large on its angles as on angles found by matching every "
                          "frame to the decoder's renders (analysis by synthesis), so the selection, the values and the "
                          "gap are all on those")
         elif camera.matched_for_arrow:
+            why = "the vision gap lies in what is drawn with the action"
             notes.append("the encoder reads its angles through what is drawn with the action (below): the selection, "
                          "the values and the gap are all on angles found by matching every frame to the decoder's "
                          "renders (analysis by synthesis), not on the encoder's")
         elif camera.matched_for_sign:
+            why = "only the matched angles show the actuation's sign"
             notes.append("the encoder's angles did not show the actuation's sign, the angles found by matching every "
                          "frame to the decoder's renders do: the selection, the values and the gap are all on those "
                          "angles (analysis by synthesis), not on the encoder's")
         elif camera.partial is not None:
+            why = "a camera is named in part of the recording"
             notes.append(camera.partial.note())
         elif camera.rematched:
             # a camera accepted under the sizes that are named (an actuation gain of 0.8 drew the torque arrow smaller,
@@ -2534,13 +2539,8 @@ def summarise_vision(obs: Observations, rec_training: float, camera: CameraFindi
                        if camera.camera != Camera() and not named_vision else "")
             notes.append("the dynamics are fitted on angles found by matching every frame to the decoder's renders "
                          f"through the fitted camera{unnamed} (analysis by synthesis), not on the encoder's angles")
-        if camera.rematched and not config.matched_angles:  # the flag asked for the encoder's: said where it is not
-            why = ("the recording comes from a lossy video" if camera.matched_for_codec is not None else
-                   "the vision gap lies in what is drawn with the action" if camera.matched_for_arrow else
-                   "only the matched angles show the actuation's sign" if camera.matched_for_sign else
-                   "a camera is named in part of the recording" if camera.partial is not None else
-                   "a camera is named" if named_vision else
-                   "the camera stage accepted a camera under the sizes that are named")
+            why = "a camera is named" if named_vision else "the camera stage accepted a camera under the sizes that are named"
+        if why is not None and camera.rematched and not config.matched_angles:
             notes.append(f"--no-matched-angles is set aside: {why}, so every step reads the angles matched to the "
                          "decoder's renders")
     if ratio is not None and ratio > config.vision_ratio and not named_vision:
