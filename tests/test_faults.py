@@ -1905,9 +1905,11 @@ def test_demo_failed_after_a_checkpoint_keeps_its_data_for_resume(tmp_path: Path
     assert {"demo/pendulum.h5", "demo/model/checkpoint.pt"} <= set(_listing(tmp_path))
 
 
+@pytest.mark.parametrize("learned", [True, False])
 def test_a_resumed_demo_that_fails_in_training_removes_the_earlier_models_control_table(
-        tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
-    """A resume that failed after its training's checkpoint left goal.png and control.md of the model it replaced."""
+        learned: bool, tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    """A resume that failed after its training's checkpoint left goal.png and control.md of the model it replaced;
+    they are removed, and the refusal says so (it did not, where the run did not identify its parameters)."""
     from piga.cli.common import PigaError
 
     out = tmp_path / "demo"
@@ -1917,14 +1919,19 @@ def test_a_resumed_demo_that_fails_in_training_removes_the_earlier_models_contro
 
     def failed(argv: Sequence[str], prog: str, **_: Any) -> int:
         (Path(argv[argv.index("--out") + 1]) / "checkpoint.pt").write_bytes(b"continued")
-        raise PigaError("the loss became NaN at epoch 4; model/checkpoint.pt holds epoch 3")
+        if learned:
+            raise PigaError("the loss became NaN at epoch 4; model/checkpoint.pt holds epoch 3")
+        raise PigaError(f"the run did not identify its parameters; {_['longer'](260, 260, False)}")
 
     monkeypatch.setattr(demo, "_check_kept_data", lambda data, config: None)
     monkeypatch.setattr(demo, "_check_not_the_users", lambda data: None)
     monkeypatch.setattr(demo, "_trained_on", lambda *args, **kwargs: True)
     monkeypatch.setattr(demo.show, "main", lambda argv: 0)
     monkeypatch.setattr(demo.train, "main", failed)
-    refused("piga-demo", ["--out", str(out), "--resume"], capsys, "the loss became NaN", "--resume")
+    line = refused("piga-demo", ["--out", str(out), "--resume"], capsys,
+                   "the loss became NaN" if learned else "did not identify", "--resume",
+                   "(goal.png and control.md of the earlier demo, made with its model, were removed)")
+    assert line.count("were removed") == 1 and line.count("keeps this demo's") == 1, line
     assert sorted(p.name for p in out.iterdir()) == ["frames.png", "model", "pendulum.h5"]
 
 

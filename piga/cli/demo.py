@@ -168,6 +168,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     def trained() -> bool:  # this demo's model has a checkpoint of its own
         return checkpoint.exists() and checkpoint.stat().st_mtime_ns != before[checkpoint]
 
+    removed: list[str] = []  # the earlier demo's control pages, removed once this demo has a model of its own
     try:
         with made_folder(out), replacing() as replaced:
             if args.overwrite:  # the earlier demo's files wait in --out/.replaced until this demo's first checkpoint
@@ -180,6 +181,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                     for path in (goal_png, control_md):  # an earlier model's control table: not this model's
                         if before[path] is not False and path.exists() and path.stat().st_mtime_ns == before[path]:
                             path.unlink()
+                            removed.append(path.name)
                 elif not isinstance(exc, KeyboardInterrupt) or replaced.moved:
                     # refused before a model, the files this demo made would make the rerun refuse for them; an
                     # earlier demo that it replaces comes back (replacing) as it was, without them
@@ -192,17 +194,28 @@ def main(argv: Sequence[str] | None = None) -> int:
         kept = [str(path.relative_to(out)) for path in outputs
                 if path.exists() and (args.resume or path.stat().st_mtime_ns != before[path])]
         if kept:
-            raise Interrupted(f"{out} keeps {', '.join(kept)} from this demo; run the same command with "
-                              f"{resume_option(args.overwrite)} to continue it, or with --overwrite to start over") from None
+            raise Interrupted(f"{out} keeps {', '.join(kept)} from this demo{_removed(removed)}; run the same command "
+                              f"with {resume_option(args.overwrite)} to continue it, or with --overwrite to start "
+                              "over") from None
         if args.overwrite and any(before[path] is not False for path in outputs):
             raise Interrupted(f"nothing was written; {out} holds the earlier demo as it was") from None
         raise KeyboardInterrupt from None
     except PigaError as exc:
         if trained() and _kept(out) not in str(exc):  # (a training that did not learn said it, with its fix)
-            raise PigaError(f"{' '.join(str(exc).split())}; {out} keeps this demo's data and model: run it with "
-                            "--resume to continue it (and a larger --epochs where the training used all its planned "
-                            "steps), or with --overwrite to start over") from None
+            raise PigaError(f"{' '.join(str(exc).split())}; {out} keeps this demo's data and model"
+                            f"{_removed(removed)}: run it with --resume to continue it (and a larger --epochs where "
+                            "the training used all its planned steps), or with --overwrite to start over") from None
+        if removed:
+            raise PigaError(f"{' '.join(str(exc).split())}{_removed(removed)}") from None
         raise
+
+
+def _removed(names: list[str]) -> str:
+    """Says which of the earlier demo's control pages (goal.png, control.md) a resumed demo removed: they described
+    the model it replaced, and its own control stage did not run."""
+    if not names:
+        return ""
+    return f" ({' and '.join(names)} of the earlier demo, made with its model, {'was' if len(names) == 1 else 'were'} removed)"
 
 
 def _kept(out: Path) -> str:
