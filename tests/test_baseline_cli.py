@@ -240,12 +240,26 @@ def test_bad_input_gets_one_line(args: tuple[str, ...], needle: str, capsys: pyt
     assert not (tmp_path / "r").exists()
 
 
-def test_a_file_without_rewards_gets_one_line(tiny_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+@pytest.mark.parametrize("imported", [False, True])
+def test_a_file_without_rewards_gets_one_line(imported: bool, tiny_data: Path, tmp_path: Path,
+                                             capsys: pytest.CaptureFixture[str]) -> None:
+    """An imported recording was told that "files from piga-collect have them": no advice for a recording."""
+    import h5py
+
     path = copy_without(tiny_data, tmp_path / "old.h5", "rewards")
+    if imported:
+        with h5py.File(path, "r+") as f:
+            f.attrs["source_frames"] = 100
     code, _, err = run_in_process("piga-baseline", baseline.main, "planet", str(path), "--out", str(tmp_path / "r"),
                                   *TINY_PLANET, capsys=capsys)
-    assert_one_line(code, err, "has no /rewards")
+    assert_one_line(code, err, "has no /rewards, as no imported recording has; the PlaNet-style model learns a reward "
+                    "head from the env's rewards" if imported else "has no /rewards; the PlaNet-style model learns a "
+                    "reward head (collect the data with piga-collect, which writes them)")
     assert not (tmp_path / "r").exists()
+    from piga.data.schema import DataFormatError, load_rewards
+
+    with pytest.raises(DataFormatError, match="as no imported recording has" if imported else "files from piga-collect"):
+        load_rewards(path, "train")  # (piga's learned-reward ablation reads them here)
 
 
 def test_planet_on_a_file_without_a_valid_split_says_what_it_checks_on(tiny_data: Path, tmp_path: Path,

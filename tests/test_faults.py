@@ -689,6 +689,19 @@ def test_effects_that_env_config_also_holds_are_read(tiny_data: Path, tmp_path: 
     assert inspect_dataset(data).attrs["effects"] == {"delay": 1}
 
 
+def test_one_bad_action_is_counted_in_the_singular() -> None:
+    """It read "(1 entries; the first: sequence 0, step 2: nan)"."""
+    from piga.data.schema import DataFormatError, check_actions
+
+    actions = np.zeros((2, 4, 1), np.float32)
+    actions[0, 2, 0] = np.nan
+    with pytest.raises(DataFormatError, match=r"\(1 entry; the first: sequence 0, step 2: nan\)"):
+        check_actions(actions, "a.h5")
+    actions[1, 3, 0] = np.inf
+    with pytest.raises(DataFormatError, match=r"\(2 entries; the first"):
+        check_actions(actions, "a.h5")
+
+
 def test_half_precision_actions_and_huge_rewards_are_read_without_warnings(tiny_data: Path, tmp_path: Path) -> None:
     """float16 actions were compared with ±1e6 in float16 (an overflow warning on stderr); float64 rewards
     beyond float32's range overflowed in the cast before the check named them."""

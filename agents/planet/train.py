@@ -134,6 +134,10 @@ def check_planet_data(info: DatasetInfo, config: PlanetTrainConfig, repeat: int 
                               f"pendulum; this file is {info.named}" + (f" from {env_id}" if env_id else "")
                               + f" (collect one with piga-collect --env {PIXEL_PENDULUM})")
     if not info.has_rewards:
+        if "source_frames" in info.attrs:  # piga-import's: no recording holds rewards, and none can be collected for it
+            raise DataFormatError(f"{info.path}: has no /rewards, as no imported recording has; the PlaNet-style model "
+                                  "learns a reward head from the env's rewards, so it trains on files that piga-collect "
+                                  f"writes (piga-collect --env {PIXEL_PENDULUM})")
         raise DataFormatError(f"{info.path}: has no /rewards; the PlaNet-style model learns a reward head "
                               "(collect the data with piga-collect, which writes them)")
     if info.image_shape[:2] != (64, 64):

@@ -100,7 +100,8 @@ def build_parser() -> ArgumentParser:
                    help="continue an earlier demo in --out (one that was interrupted): keep its data (give the same "
                    "--sequences and --seed; other values are refused), continue its training (piga-train-model "
                    "--resume), and redo the frames and the control")
-    p.add_argument("--quiet", action="store_true", help="no progress bars (the stages and the summary are still printed)")
+    p.add_argument("--quiet", action="store_true",
+                   help="no progress bars (the stages, a line per training checkpoint and the summary are still printed)")
     return p
 
 
@@ -215,7 +216,8 @@ def _removed(names: list[str]) -> str:
     the model it replaced, and its own control stage did not run."""
     if not names:
         return ""
-    return f" ({' and '.join(names)} of the earlier demo, made with its model, {'was' if len(names) == 1 else 'were'} removed)"
+    were = "was" if len(names) == 1 else "were"
+    return f" ({' and '.join(names)} of the earlier demo, made with its model, {were} removed)"
 
 
 def _kept(out: Path) -> str:

@@ -44,8 +44,9 @@ def build_parser() -> ArgumentParser:
     p.add_argument("--bootstrap", type=number_type(int, lambda v: v == 0 or d.MIN_BOOTSTRAP <= v <= d.MAX_BOOTSTRAP,
                                                     f"0 (no intervals) or an integer in [{d.MIN_BOOTSTRAP}, "
                                                     f"{d.MAX_BOOTSTRAP}]"), default=d.bootstrap,
-                   help=f"bootstrap replicates for intervals: 0 (none: a gain error is then named on its estimate alone, "
-                   f"untested) or {d.MIN_BOOTSTRAP} to {d.MAX_BOOTSTRAP} (default %(default)s)")
+                   help=f"bootstrap replicates for the physics effects' intervals: 0 (none: a gain error is then named on "
+                   f"its estimate alone, untested) or {d.MIN_BOOTSTRAP} to {d.MAX_BOOTSTRAP} (default %(default)s); "
+                   "the camera effects' intervals come from their own fit, with or without it")
     p.add_argument("--seed", type=seed_int, default=d.seed,
                    help="seed of the bootstrap, of the frames the camera stage fits on and of the twin's sensor noise "
                    "(default %(default)s)")

@@ -159,7 +159,7 @@ def build_parser() -> ArgumentParser:
     p.add_argument("--resume", action="store_true", help="continue the run in --out; it may raise --epochs, --budget-steps or --max-minutes "
                    "(docs: piga-train-model; resuming replans the cosine schedule)")
     p.add_argument("--overwrite", action="store_true", help="replace the outputs of an earlier run in --out")
-    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.add_argument("--quiet", action="store_true", help="no progress bars (a line per checkpoint is still printed)")
     return p
 
 

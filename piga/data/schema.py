@@ -51,6 +51,11 @@ SPLITS: dict[str, int] = {"train": 0, "valid": 1, "test": 2}
 MAX_SEED = 2**63 - 1
 
 
+def _entries(count: int) -> str:
+    """``count`` entries of an array, in the singular for one."""
+    return f"{count} entr{'y' if count == 1 else 'ies'}"
+
+
 def legacy_seed(seed: int) -> int:
     """``seed`` for the generators that take 32 bits only (numpy's global ``np.random.seed``, which SB3's
     ``set_random_seed`` calls): a seed below 2^32 as it is, a larger one hashed into 32 bits by numpy's
@@ -159,7 +164,7 @@ def check_actions(actions: np.ndarray, path: str | os.PathLike[str]) -> None:
         n, t = (int(i) for i in np.argwhere(bad)[0][:2])
         value = actions[(n, t, *np.argwhere(bad)[0][2:])]
         what = "NaN or infinite values" if not np.isfinite(value) else f"values beyond ±{MAX_ABS_ACTION:g}"
-        raise DataFormatError(f"{path}: /actions holds {what} ({int(bad.sum())} entries; the first: sequence {n}, "
+        raise DataFormatError(f"{path}: /actions holds {what} ({_entries(int(bad.sum()))}; the first: sequence {n}, "
                               f"step {t}: {value}); fix the recording's actions")
 
 
@@ -720,7 +725,7 @@ def _check_attrs_agree(info: DatasetInfo, f: h5py.File) -> None:
         bad = ~np.isfinite(states) | (np.abs(np.nan_to_num(states)) > np.finfo(np.float32).max)
         if bad.any():
             n, t, k = (int(i) for i in np.argwhere(bad)[0])
-            raise DataFormatError(f"{path}: /states holds NaN or infinite values ({int(bad.sum())} entries; the first: "
+            raise DataFormatError(f"{path}: /states holds NaN or infinite values ({_entries(int(bad.sum()))}; the first: "
                                   f"sequence {n}, step {t}, value {k}: {states[n, t, k]}); fix or drop /states "
                                   "(ground truth is optional)")
 
@@ -972,18 +977,21 @@ def load_rewards(path: str | os.PathLike[str], split: str, limit: int | None = N
     idx = split_indices(path, split)[:_count(limit)]
     with open_data_file(path) as f:
         if "rewards" not in f:
+            if "source_frames" in f.attrs:  # piga-import's: a recording holds no rewards, and none can be collected for it
+                raise DataFormatError(f"{path}: has no /rewards, as no imported recording has: reward-based baselines "
+                                      "learn from the env's rewards, so they train on files of piga-collect's envs only")
             raise DataFormatError(f"{path}: has no /rewards (reward-based baselines need them; files from "
                                   "piga-collect have them)")
         rewards = _take(f["rewards"], idx).astype(np.float64)  # (n, T); checked before the cast (1e300 overflows float32)
     bad = ~np.isfinite(rewards) | (np.abs(np.nan_to_num(rewards)) > np.finfo(np.float32).max)
     if bad.any():
         i, t = (int(k) for k in np.argwhere(bad)[0])
-        raise DataFormatError(f"{path}: /rewards holds NaN or infinite values ({int(bad.sum())} entries; the first: "
+        raise DataFormatError(f"{path}: /rewards holds NaN or infinite values ({_entries(int(bad.sum()))}; the first: "
                               f"sequence {int(idx[i])}, step {t}: {rewards[i, t]}); fix or recompute the rewards")
     huge = np.abs(rewards) > MAX_REWARD
     if huge.any():  # finite, but a reward head's squared error of them is not (the loss became inf at step 0)
         i, t = (int(k) for k in np.argwhere(huge)[0])
-        raise DataFormatError(f"{path}: /rewards holds values beyond ±{MAX_REWARD:.0e} ({int(huge.sum())} entries; the "
+        raise DataFormatError(f"{path}: /rewards holds values beyond ±{MAX_REWARD:.0e} ({_entries(int(huge.sum()))}; the "
                               f"first: sequence {int(idx[i])}, step {t}: {rewards[i, t]:.3g}), whose squared errors "
                               "overflow a reward model's float32 loss; rescale the rewards")
     return rewards.astype(np.float32)
