@@ -1105,9 +1105,15 @@ class DatasetWriter:
         stop = start + len(frames)
         if frames.shape[1:] != (self.shape[1], *self.image_shape):
             raise ValueError(f"frames slice has shape {frames.shape}, expected (n, {self.shape[1]}, {self.image_shape})")
-        self._check_room(self._disk_bytes(frames) + sum(a.nbytes for a in (actions, states, rewards) if a is not None),
-                         len(frames))
-        self._file["frames"][start:stop] = frames
+        chunks = self._chunks(frames)
+        frame_bytes = frames.nbytes if chunks is None else sum(len(chunk) for chunk in chunks)
+        self._check_room(frame_bytes + sum(a.nbytes for a in (actions, states, rewards) if a is not None), len(frames))
+        if chunks is None:
+            self._file["frames"][start:stop] = frames
+        else:  # each sequence's chunk as compressed for the check, not compressed by HDF5 a second time
+            corner = (0,) * (frames.ndim - 1)
+            for i, chunk in enumerate(chunks):
+                self._file["frames"].id.write_direct_chunk((start + i, *corner), chunk)
         self._file["actions"][start:stop] = actions
         if self.state_dim is not None:
             if states is None:
@@ -1123,14 +1129,15 @@ class DatasetWriter:
             self._levels = (min(self._levels[0], int(frames.min())), max(self._levels[1], int(frames.max())))
         self._moves = self._moves or (len(frames) > 0 and frames_move(frames))
 
-    def _disk_bytes(self, frames: np.ndarray) -> int:
-        """The bytes that ``frames`` (n, T, ...) take in the file: with gzip, each sequence (one chunk) compressed by
-        zlib at the codec's level, which is what HDF5's deflate filter runs; otherwise their raw size (LZF: at most
-        about that)."""
+    def _chunks(self, frames: np.ndarray) -> list[bytes] | None:
+        """With gzip, each sequence of ``frames`` (n, T, ...) as its chunk in the file: compressed by zlib at the
+        codec's level, the stream HDF5's deflate filter writes (its only filter here), so that the disk check counts
+        the bytes written and HDF5 takes them as they are (``write_direct_chunk``). None otherwise: HDF5 stores the
+        frames raw, or with LZF at most about their raw size."""
         if not self.compression.startswith("gzip"):
-            return frames.nbytes
+            return None
         level = int(self.compression.split("-")[1])
-        return sum(len(zlib.compress(np.ascontiguousarray(sequence).data, level)) for sequence in frames)
+        return [zlib.compress(np.ascontiguousarray(sequence, dtype=np.uint8).data, level) for sequence in frames]
 
     def _check_room(self, disk_bytes: int, sequences: int) -> None:
         """Refuses a slice of ``sequences`` where the file's disk has less free space than :func:`write_room` (the
