@@ -253,3 +253,14 @@ def test_env_option_help_lists_every_key_and_refusals_name_the_flag(capsys: pyte
     assert ", ".join(env_option_keys()) in text
     with pytest.raises(ValueError, match=r"^--env-option flip='sideways' is out of range"):
         dmc_config([("flip", "sideways")])
+
+
+@pytest.mark.parametrize("episodes, said", [(1, "1 episode of 1000 physics steps of 0.02 s (score: sum of DMC's reward, "
+                                                "max 1000), seed 4."),
+                                            (3, "3 episodes of 1000 physics steps of 0.02 s (score: sum of DMC's "
+                                                "reward, max 1000), seeds 4..6.")])
+def test_the_dmc_table_counts_one_episode_and_its_seed_in_the_singular(episodes: int, said: str) -> None:
+    """It read "1 episodes ..., seeds 0..0"."""
+    from piga.control.dmc import DMCControlConfig, dmc_markdown
+
+    assert said in dmc_markdown([], DMCControlConfig(episodes=episodes, seed=4), "c")

@@ -1934,7 +1934,7 @@ def test_a_resumed_demo_that_fails_in_training_removes_the_earlier_models_contro
         (Path(argv[argv.index("--out") + 1]) / "checkpoint.pt").write_bytes(b"continued")
         if learned:
             raise PigaError("the loss became NaN at epoch 4; model/checkpoint.pt holds epoch 3")
-        raise PigaError(f"the run did not identify its parameters; {_['longer'](260, 260, False)}")
+        raise PigaError(f"the run did not identify its parameters; {_['longer'](260, 260, 'data', 26)}")
 
     monkeypatch.setattr(demo, "_check_kept_data", lambda data, config: None)
     monkeypatch.setattr(demo, "_check_not_the_users", lambda data: None)
@@ -1975,13 +1975,13 @@ def test_demo_whose_model_did_not_learn_says_the_demos_way_to_train_longer(
         run = Path(argv[argv.index("--out") + 1])
         run.mkdir(parents=True, exist_ok=True)
         (run / "checkpoint.pt").write_bytes(b"ckpt")
-        raise PigaError(f"the run did not identify its parameters: it settled on nothing; {longer(260, 260, False)}")
+        raise PigaError(f"the run did not identify its parameters: it settled on nothing; {longer(260, 260, 'length', 26)}")
 
     monkeypatch.setattr(demo, "collect", fake_collect)
     monkeypatch.setattr(demo.show, "main", lambda argv: 0)
     monkeypatch.setattr(demo.train, "main", not_learned)
     line = refused("piga-demo", ["--out", str(tmp_path / "demo")], capsys, "did not identify",
-                   "run the demo again with --resume and a larger --epochs (its training took 260 of 260 planned "
+                   "run the demo again with --resume and a larger --epochs, up to 200 (its training took 260 of 260 planned "
                    f"steps), or with --overwrite and more --sequences; {tmp_path / 'demo'} keeps this demo's data and "
                    "model")
     assert line.count("keeps this demo's") == 1 and "--max-minutes" not in line and "--budget-steps" not in line
@@ -1997,10 +1997,37 @@ def test_the_demos_fix_for_a_run_that_did_not_learn_the_motion_reads_as_one_sent
 
     reason = "it did not learn the motion, so its parameters mean nothing; " + data_fix(240, 240)
     said, _ = _reason_for({"reason": reason, "planned_steps": 240, "steps": 240}, "piga-demo",
-                          lambda planned, steps, data_first: _longer(Path("dmx"), planned, steps, data_first), "")
+                          lambda planned, steps, need, epochs: _longer(Path("dmx"), planned, steps, need, epochs), "",
+                          24)
     assert said == ("it did not learn the motion, so its parameters mean nothing; run the demo again with --overwrite and "
-                    "more --sequences, or with --resume and a larger --epochs (its training took 240 of 240 planned "
-                    "steps); dmx keeps this demo's data and model")
+                    "more --sequences, or with --resume and a larger --epochs, up to 200 (its training took 240 of 240 "
+                    "planned steps); dmx keeps this demo's data and model")
+
+
+def test_the_demos_fix_for_a_file_without_a_test_split_is_more_sequences() -> None:
+    """A 2-sequence demo ended "collect one with a test split to check them": the demo collects, with --sequences."""
+    from piga.cli.demo import _longer
+    from piga.cli.train import _reason_for
+    from piga.training.convergence import SPLIT_FIX
+
+    reason = "its parameters settled, but the file has no test sequences, so no frame it did not train on checks them; "
+    said, whose = _reason_for({"reason": reason + SPLIT_FIX, "planned_steps": 2000, "steps": 2000}, "piga-demo",
+                              lambda planned, steps, need, epochs: _longer(Path("dmx"), planned, steps, need, epochs),
+                              " (options of piga-train-model)", 2000)
+    assert (said, whose) == (reason + "run the demo again with --overwrite and --sequences 6 or more, which leave it a "
+                             "test split", "")
+
+
+def test_the_demos_fix_past_its_largest_epochs_is_piga_train_models() -> None:
+    """A tiny demo's fast preset planned 300 epochs of a step each, and the demo said "--resume and a larger
+    --epochs", which it refuses past 200."""
+    from piga.cli.demo import _longer
+
+    said = _longer(Path("dmx"), 300, 300, "data", 300)
+    assert said == ("run the demo again with --overwrite and more --sequences (its training took 300 of 300 planned "
+                    "steps in 300 epochs, and the demo's --epochs is at most 200), or train it longer with "
+                    "piga-train-model dmx/pendulum.h5 --out dmx/model --resume --epochs 600 and then run the demo "
+                    "again with --resume; dmx keeps this demo's data and model")
 
 
 def test_demo_interrupted_in_training_says_what_it_kept(tmp_path: Path, capsys: pytest.CaptureFixture[str],

@@ -180,7 +180,11 @@ def test_read_actions(tmp_path: Path, text: str, want: list[float]) -> None:
         ("", "empty"),
         ("u\n", "header and no values"),
         ("0.5\nfast\n", "line 2: expected a finite number, got 'fast'"),
-        ("u\n0.5\nnan\n", "line 3"),
+        ("u\n0.5\nnan\n", "line 3: expected a finite number, got 'nan'; write the action there"),
+        ("u\n0.5\n-Infinity\n", "line 3: expected a finite number, got '-Infinity'; write the action there"),
+        # beyond float64: read as inf, and told to write it in decimal digits, which it was
+        ("u\n0.5\n1e400\n", "line 3: the action 1e400 is beyond ±1e+06 (the pendulum's torque is at most ±2)"),
+        ("u\n-1E+999\n", "line 2: the action -1E+999 is beyond ±1e+06"),
         ("1,2\n3,4\n", "one number with a decimal comma or two columns of integers"),
         ("1,2,3\n3,4,5\n", "3 columns and no header row"),
         # a European locale's decimal comma: it was "2 columns ... add a header", and the header then "2 column(s),

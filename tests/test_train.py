@@ -243,6 +243,8 @@ def test_cli_warns_when_there_is_no_test_split(tmp_path: Path, capsys: pytest.Ca
     assert "no test sequences, so metrics.json and the figures measure the train split" in out
     assert len(err.splitlines()) <= 1, err  # at most the verdict's warning (exit 3)
     assert "SSIM (train split)" in out
+    # one epoch: the readout, which has no parameters, reads the angle all the same, and the line says so
+    assert "encoder angle error" in out and "(the centroid readout's, as small before any training" in out, out
     assert json.loads((tmp_path / "r" / "metrics.json").read_text())["split"] == "train"
 
 
@@ -420,8 +422,8 @@ def test_a_command_training_through_this_one_says_its_own_way_to_train_longer(sm
     piga-demo does not take: the command that trains through piga-train-model says its own way instead."""
     out = tmp_path / "r"
 
-    def longer(planned: int, steps: int, data_first: bool) -> str:
-        return f"run the demo with --epochs (it took {steps} of {planned})"
+    def longer(planned: int, steps: int, need: str, epochs: int) -> str:
+        return f"run the demo with --epochs (it took {steps} of {planned} in {epochs} epochs)"
 
     code, _, err = run_in_process("piga-demo", lambda argv: cli.main(argv, prog="piga-demo", longer=longer),
                                   str(small_data), "--out", str(out), "--batch-size", "4", "--epochs", "10",
@@ -429,7 +431,7 @@ def test_a_command_training_through_this_one_says_its_own_way_to_train_longer(sm
                                   capsys=capsys)
     assert code == NOT_CONVERGED, err
     assert err.count("\n") == 1 and err.startswith("piga-demo: warning: not converged: "), err
-    assert "run the demo with --epochs (it took 4 of 40)" in err and "--max-minutes" not in err, err
+    assert "run the demo with --epochs (it took 4 of 40 in 10 epochs)" in err and "--max-minutes" not in err, err
     assert "(options of piga-train-model" not in err, err  # every option it names is the demo's
 
 
@@ -439,12 +441,12 @@ def test_another_commands_reason_names_whose_options_it_leaves() -> None:
     verdict = {"planned_steps": 40, "steps": 40,
                "reason": "g never left its initial value in 30 physics steps; raise --lr-physics or " + length_fix(40, 40)}
     owner = " (options of piga-train-model d.h5 --out r)"
-    assert cli._reason_for(verdict, cli.PROG, None, owner) == (verdict["reason"], "")
-    reason, whose = cli._reason_for(verdict, "piga-demo", lambda planned, steps, data_first: f"--epochs past {steps}",
-                                    owner)
+    assert cli._reason_for(verdict, cli.PROG, None, owner, 8) == (verdict["reason"], "")
+    reason, whose = cli._reason_for(verdict, "piga-demo", lambda planned, steps, need, epochs: f"--epochs past {steps}",
+                                    owner, 8)
     assert reason.endswith("raise --lr-physics or --epochs past 40") and whose == owner  # --lr-physics is not its own
     verdict["reason"] = "too short to judge; " + length_fix(40, 40)
-    assert cli._reason_for(verdict, "piga-demo", lambda planned, steps, data_first: "--epochs", owner) == (
+    assert cli._reason_for(verdict, "piga-demo", lambda planned, steps, need, epochs: "--epochs", owner, 8) == (
         "too short to judge; --epochs", "")
 
 

@@ -23,12 +23,13 @@ from envs.fields import counted
 from piga.cli import show, train
 from piga.cli.common import (ArgumentParser, Interrupted, PigaError, command_line, int_up_to, made_folder, positive_int,
                              resume_option, run_cli, seed_int, thread_count)
-from piga.data.collect import CollectConfig, collect
+from piga.data.collect import CollectConfig, collect, fewest_filling
 from piga.data.schema import inspect_dataset, open_data_file
 from piga.io.atomic import check_folder_target, remove_stale_partials
 from piga.io.checkpoint import CHECKPOINT, DEMO_RUN
 from piga.io.lock import lock_run_folder
 from piga.io.replaced import replacing
+from piga.training.convergence import Need
 
 PROG = "piga-demo"
 
@@ -224,13 +225,24 @@ def _kept(out: Path) -> str:
     return f"{out} keeps this demo's data and model"
 
 
-def _longer(out: Path, planned: int, steps: int, data_first: bool = False) -> str:
-    """The demo's way to train its model longer, said where the training did not converge in place of
-    piga-train-model's (--max-minutes and --budget-steps are not the demo's options); with ``data_first``, where it
-    did not learn the motion at all, more --sequences comes first."""
+def _longer(out: Path, planned: int, steps: int, need: Need = "length", epochs: int = 0) -> str:
+    """The demo's way to train its model longer than the ``planned`` steps in ``epochs`` epochs, said where the
+    training did not converge in place of piga-train-model's (--max-minutes and --budget-steps are not the demo's
+    options). As ``need`` says: where it did not learn the motion at all, more --sequences comes first; where its file
+    had no test split, more --sequences alone. Where the run planned the demo's most epochs or more, a larger --epochs
+    is piga-train-model's, on the demo's run."""
     more = "--overwrite and more --sequences"
-    longer = f"--resume and a larger --epochs (its training took {steps} of {planned} planned steps)"
-    first, then = (more, longer) if data_first else (longer, more)
+    if need == "split":  # (the default split's fractions: what the demo collects)
+        fewest = fewest_filling(CollectConfig().split)
+        return f"run the demo again with --overwrite and --sequences {fewest} or more, which leave it a test split"
+    cap = DEMO_LIMITS["epochs"]
+    if epochs >= cap:  # (the fast preset plans a tiny file past it: 2 sequences, 2000 epochs of a step each)
+        return (f"run the demo again with {more} (its training took {steps} of {planned} planned steps in "
+                f"{counted(epochs, 'epoch')}, and the demo's --epochs is at most {cap}), or train it longer with "
+                f"piga-train-model {out / 'pendulum.h5'} --out {out / DEMO_RUN} --resume --epochs {2 * epochs} and "
+                f"then run the demo again with --resume; {_kept(out)}")
+    longer = f"--resume and a larger --epochs, up to {cap} (its training took {steps} of {planned} planned steps)"
+    first, then = (more, longer) if need == "data" else (longer, more)
     return f"run the demo again with {first}, or with {then}; {_kept(out)}"
 
 
@@ -373,7 +385,7 @@ def _run(args: argparse.Namespace, argv: Sequence[str] | None, out: Path, config
                           *(["--epochs", str(args.epochs)] if args.epochs else []),
                           *(["--threads", str(args.threads)] if args.threads else []),
                           *(["--quiet"] if args.quiet else [])], prog=PROG,
-                         longer=lambda planned, steps, data_first: _longer(out, planned, steps, data_first))
+                         longer=lambda planned, steps, need, epochs: _longer(out, planned, steps, need, epochs))
     import json
 
     from piga.evaluation.evaluate import true_and_error

@@ -25,7 +25,7 @@ from piga.io.checkpoint import (CHECKPOINT, RunKind, check_record_matches, check
                                 record_divergence, recorded_data_path, require_piga_run)
 from piga.io.lock import lock_run_folder
 from piga.io.replaced import ReplacedRun, replacing, settle_replaced
-from piga.training.convergence import data_fix, length_fix
+from piga.training.convergence import SPLIT_FIX, Need, data_fix, length_fix
 
 if TYPE_CHECKING:
     from piga.world.model import ModelConfig
@@ -164,17 +164,19 @@ def build_parser() -> ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None, prog: str = PROG,
-         longer: Callable[[int, int, bool], str] | None = None) -> int:
+         longer: Callable[[int, int, Need, int], str] | None = None) -> int:
     """``prog``: the command that trains through this one (piga-demo), which names itself in warnings and errors;
-    ``longer(planned, steps, data_first)``: that command's own way to train longer, said in place of this command's
-    (:func:`~piga.training.convergence.length_fix`) where a run did not converge, or, with ``data_first``, its way to
-    more data and then longer training (in place of :func:`~piga.training.convergence.data_fix`)."""
+    ``longer(planned, steps, need, epochs)``: that command's own way to train longer than the ``planned`` steps in
+    ``epochs`` epochs, said in place of this command's (:func:`~piga.training.convergence.length_fix`) where a run did
+    not converge; or, as ``need`` says, its way to more data and then longer training (in place of
+    :func:`~piga.training.convergence.data_fix`), or to a file with a test split (in place of
+    :data:`~piga.training.convergence.SPLIT_FIX`)."""
     with replacing() as replaced:  # the run that --overwrite replaces: back in place if this one ends before a checkpoint
         return _main(argv, prog, replaced, longer)
 
 
 def _main(argv: Sequence[str] | None, prog: str, replaced: ReplacedRun,
-          longer: Callable[[int, int, bool], str] | None = None) -> int:
+          longer: Callable[[int, int, Need, int], str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     options_given = given_options(parser, argv)  # the options written, at the default's value too
@@ -518,11 +520,14 @@ def _main(argv: Sequence[str] | None, prog: str, replaced: ReplacedRun,
         ssim = metrics["frame_ssim_mean"]
         print(f"SSIM ({metrics['split']} split): prediction {ssim['prediction']:.3f}"
               + (f", extrapolation {ssim['extrapolation']:.3f}" if ssim["extrapolation"] is not None else "")
-              + (f"; encoder angle error {metrics['angle']['mean_abs_error_deg']:.2f} deg" if "angle" in metrics else ""))
+              + (f"; encoder angle error {metrics['angle']['mean_abs_error_deg']:.2f} deg" if "angle" in metrics else "")
+              # the centroid readout has no parameters: an untrained model reads 0.07 deg (the trained one 0.10)
+              + (" (the centroid readout's, as small before any training: the prediction SSIM and the parameters "
+                 "measure the training)" if "angle" in metrics and model_config.readout == "centroid" else ""))
         print(f"trained {counted(state.epoch, 'epoch')} ({counted(state.step, 'step')}) in {state.elapsed / 60:.1f} min; "
               f"wrote {run_dir}/metrics.json and figures")
         owner = f" (options of {PROG} {args.data} --out {run_dir})"
-        reason, whose = _reason_for(convergence, prog, longer, owner)
+        reason, whose = _reason_for(convergence, prog, longer, owner, state.plan.get("epochs", state.epoch))
         if convergence["outcome"] == "untrained":
             seeds = f" (seeds {', '.join(map(str, tried))} and {train_config.seed} tried)" if tried else ""
             # (bouncing balls have physics but no parameter: it was refused as not identifying them)
@@ -541,21 +546,23 @@ def _main(argv: Sequence[str] | None, prog: str, replaced: ReplacedRun,
     return 0
 
 
-def _reason_for(convergence: dict[str, Any], prog: str, longer: Callable[[int, int, bool], str] | None,
-                whose: str) -> tuple[str, str]:
+def _reason_for(convergence: dict[str, Any], prog: str, longer: Callable[[int, int, Need, int], str] | None,
+                whose: str, epochs: int) -> tuple[str, str]:
     """The verdict's reason as ``prog`` says it, and ``whose``, the note that names this command as the owner of the
     options it names, or "" where they are all ``prog``'s: another command training through this one (piga-demo)
-    says its own way to train longer, ``longer``, and takes none of this command's options but the ones it names."""
+    says its own way to train longer, ``longer``, and takes none of this command's options but the ones it names
+    (``epochs``: the epochs the run planned)."""
     reason = convergence["reason"]
     if prog == PROG:
         return reason, ""
     own = ""
     if longer is not None:
         planned, steps = convergence["planned_steps"], convergence["steps"]
-        more = data_fix(planned, steps)  # its own words: "give it more ... sequences, or " and the length's fix
-        data_first = more in reason
-        own = longer(planned, steps, data_first)
-        reason = reason.replace(more if data_first else length_fix(planned, steps), own)
+        fixes: dict[Need, str] = {"data": data_fix(planned, steps), "split": SPLIT_FIX,  # this command's own words
+                                  "length": length_fix(planned, steps)}  # (the data's fix holds the length's: first)
+        need = next((name for name, fix in fixes.items() if fix in reason), "length")
+        own = longer(planned, steps, need, epochs)
+        reason = reason.replace(fixes[need], own)
     options = set(re.findall(r"--[a-z][a-z-]*", reason)) - set(re.findall(r"--[a-z][a-z-]*", own))
     return reason, whose if options else ""
 

@@ -25,6 +25,7 @@ import numpy as np
 from agents.protocol import Agent
 from agents.swingup import DampedPendulumDynamics, SwingUpConfig, SwingUpPlanner
 from envs.dmc import DMCPendulumConfig, make_dmc_pendulum
+from envs.fields import counted
 from piga.control.episodes import EpisodeStart, Scoring, run_agent
 from piga.evaluation.episodes import EpisodeBatch
 
@@ -110,13 +111,18 @@ def dmc_record(batch: EpisodeBatch) -> dict[str, Any]:
     return {"agent": batch.summary.labels["agent"], "scores": scores, "mean": float(np.mean(scores)), "std": float(np.std(scores))}
 
 
+def _seeds(first: int, episodes: int) -> str:
+    """The episodes' seeds: "seed 3" for one, "seeds 3..7" for five."""
+    return f"seed {first}" if episodes == 1 else f"seeds {first}..{first + episodes - 1}"
+
+
 def dmc_markdown(results: list[EpisodeBatch], config: DMCControlConfig, command: str) -> str:
     """A Markdown table of the batches' DMC scores, with the command and the env."""
     lines = [f"Command: `{command}`", "",
              f"DMC pendulum-swingup through {'the face-on camera' if config.env.camera == 'face' else 'dm_control camera 0'}: "
              f"{json.dumps(config.env.to_dict())}; "
-             f"{config.episodes} episodes of 1000 physics steps of 0.02 s (score: sum of DMC's reward, max 1000), "
-             f"seeds {config.seed}..{config.seed + config.episodes - 1}.", "",
+             f"{counted(config.episodes, 'episode')} of 1000 physics steps of 0.02 s (score: sum of DMC's reward, max "
+             f"1000), {_seeds(config.seed, config.episodes)}.", "",
              "| agent | mean score | std | min | max |", "|---|---|---|---|---|"]
     for r in map(dmc_record, results):
         lines.append(f"| {r['agent']} | {r['mean']:.1f} | {r['std']:.1f} | {min(r['scores']):.0f} | {max(r['scores']):.0f} |")

@@ -142,7 +142,7 @@ def empty_split_warning(split: Sequence[float], counts: dict[str, int], frames: 
         return None
     n = sum(counts.values())
     wanted = [share > 0 for share in split[1:]]  # (valid, test)
-    fewest = _fewest_filling(split)
+    fewest = fewest_filling(split)
     if frames is not None:  # the sequences are the recording cut into --steps frames each
         steps = frames // fewest if fewest is not None else 0
         advice = (f"cut the recording into {fewest} sequences or more with --steps {steps} or fewer, or import a longer one"
@@ -160,7 +160,7 @@ def empty_split_warning(split: Sequence[float], counts: dict[str, int], frames: 
             f"{whose} will come from the train split, which is not held out ({advice})")
 
 
-def _fewest_filling(split: Sequence[float]) -> int | None:
+def fewest_filling(split: Sequence[float]) -> int | None:
     """The fewest sequences whose split by these fractions, rounded as :func:`split_counts` rounds them, gives each
     of valid and test with a share at least one sequence (None if a short search past the first candidate finds none,
     as for a training share too small to keep a sequence)."""

@@ -444,10 +444,12 @@ def read_actions(path: str | Path) -> np.ndarray:
     for i, (number, row) in enumerate(rows):
         cell = row[column] if column < len(row) else ""
         value = _number(cell)
-        if value is None or not math.isfinite(value):
+        if value is None:
             raise ValueError(f"{p}: line {number}: expected a finite number, got {cell!r} (write it in ASCII decimal "
                              "digits, such as -0.5 or 1e-3)")
-        if abs(value) > MAX_ABS_ACTION:  # beyond float32 it would be stored as inf
+        if math.isnan(value) or (math.isinf(value) and cell.strip("+-").isalpha()):  # written as nan, inf or infinity
+            raise ValueError(f"{p}: line {number}: expected a finite number, got {cell!r}; write the action there")
+        if abs(value) > MAX_ABS_ACTION:  # beyond float32 it would be stored as inf (1e400: beyond float64 too)
             raise ValueError(f"{p}: line {number}: the action {cell} is beyond ±{MAX_ABS_ACTION:g} (the pendulum's torque "
                              "is at most ±2); check the column's unit")
         if value != 0 and abs(value) < FLOAT32_TINY:  # float32 would store it as 0 or a rounded subnormal

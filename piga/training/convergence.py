@@ -146,6 +146,15 @@ def data_fix(planned: int, steps: int) -> str:
     return "give it more or longer sequences, or " + length_fix(planned, steps)
 
 
+#: What a run that did not converge needs first, as :func:`piga.cli.train.main`'s ``longer`` is told: to train longer
+#: (:func:`length_fix`), more data and then longer training (:func:`data_fix`), or a test split (:data:`SPLIT_FIX`).
+Need = Literal["length", "data", "split"]
+
+#: The fix for a run checked on its training frames alone (a file without test sequences): this command's words (a
+#: command that trains through piga-train-model, piga-demo, puts its own in their place).
+SPLIT_FIX = "collect one with a test split to check them"
+
+
 #: A background MSE below one gray level squared: the held-out frames hardly differ from the background.
 FAINT_BACKGROUND_MSE = (1 / 255) ** 2
 
@@ -318,7 +327,7 @@ def check_convergence(state: Any, config: ConvergenceConfig = ConvergenceConfig(
         # predicted at 0.03x the background's MSE: frames it trained on cannot tell such a fit from a right one
         return verdict("unsettled", "its parameters settled, but the file has no test sequences, so no frame it did "
                                     "not train on checks them (a file this small can be fitted with wrong values); "
-                                    "collect one with a test split to check them")
+                                    + SPLIT_FIX)
     return verdict("converged", f"every learned parameter left its start and settled over the last "
                                 f"{100 * config.tail:.0f}% of {planned} steps")
 
