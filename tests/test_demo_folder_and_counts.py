@@ -8,6 +8,7 @@ from dataclasses import asdict
 from pathlib import Path
 from types import SimpleNamespace
 
+import h5py
 import numpy as np
 import pytest
 
@@ -172,3 +173,24 @@ def test_a_data_file_the_demo_did_not_write_is_not_offered_to_overwrite(mine: by
                                          "file; give another --out (a demo writes pendulum.h5, frames.png, model/, "
                                          "goal.png and control.md into it)"), err
     assert _snapshot(out) == before
+
+
+def test_a_resumed_demo_with_fewer_epochs_is_refused_before_it_draws_again(tiny_data: Path, tmp_path: Path,
+                                                                          capsys: pytest.CaptureFixture[str]) -> None:
+    """It was refused at its training stage, after the strip (frames.png) was drawn again."""
+    from piga.cli import demo
+    from tests.helpers import train_tiny
+
+    folder = tmp_path / "demo"
+    folder.mkdir()
+    shutil.copy(tiny_data, folder / "pendulum.h5")
+    with h5py.File(folder / "pendulum.h5", "a") as f:  # as the demo collected it
+        f.attrs["command"] = "piga-demo --out demo --sequences 12 --seed 3"
+    (folder / "frames.png").write_bytes(b"strip")
+    train_tiny(folder / "pendulum.h5", folder / DEMO_RUN, epochs=2)
+    before = _snapshot(folder)
+    code, _, err = run_in_process("piga-demo", demo.main, "--out", str(folder), "--resume", "--epochs", "1",
+                                  "--sequences", "12", "--seed", "3", "--quiet", capsys=capsys)
+    assert code == 1 and err.count("\n") == 1, err
+    assert "--resume --epochs 1: the run already planned 2 epochs" in err and "never lower them" in err, err
+    assert _snapshot(folder) == before

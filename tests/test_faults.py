@@ -1189,16 +1189,21 @@ def test_planet_resume_names_its_file_from_the_current_folder(baseline_runs: dic
             f"was trained on {Path('a') / 'moved.h5'}, not ", "give that file")
 
 
-def test_planet_resume_refuses_its_file_written_over_in_place(baseline_runs: dict[str, Path], tiny_data: Path,
+@pytest.mark.parametrize("edit", ["actions", "later frames"])
+def test_planet_resume_refuses_its_file_written_over_in_place(edit: str, baseline_runs: dict[str, Path], tiny_data: Path,
                                                               tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """The file's contents were compared only when its path differed: a file collected again under the same name
-    resumed the run on other data, exit 0 (piga-train-model refused it)."""
+    resumed the run on other data, exit 0 (piga-train-model refused it). So did a file whose sequences after the
+    first were reversed in time (the fingerprint read the first sequence's frames only)."""
     data = tmp_path / "d.h5"
     shutil.copyfile(tiny_data, data)
     run = _run_copy(baseline_runs["planet"], tmp_path / "run",
                     _edit_record(lambda r: r.__setitem__("data", str(data))))
-    with h5py.File(data, "a") as f:  # another first sequence (the fingerprint reads the actions and the first sequence)
-        f["actions"][0] = -f["actions"][0]
+    with h5py.File(data, "a") as f:
+        if edit == "actions":
+            f["actions"][0] = -f["actions"][0]
+        else:
+            f["frames"][5:] = f["frames"][5:][:, ::-1]
     refused("piga-baseline", ["planet", str(data), "--out", str(run), "--resume", "--steps", "4", "--quiet"], capsys,
             f"{data} has changed since", "put the trained file back")
 
@@ -4116,6 +4121,42 @@ def test_the_own_training_file_must_still_be_the_runs(tiny_data: Path, tmp_path:
     assert training_data_path(own) == str(tiny_data)
     assert training_data_path({"data": {**own["data"], "path": str(other)}}) is None
     assert training_data_path({"data": {"path": str(other)}}) == str(other)  # an old checkpoint keeps no fingerprint
+
+
+def test_the_fingerprint_covers_every_frame_and_reads_a_kept_one_as_it_was_taken(tiny_data: Path,
+                                                                                  tmp_path: Path) -> None:
+    """Sequences after the first reversed in time kept the fingerprint (it hashed the actions, the split and the first
+    sequence's frames), and a resumed training, a PlaNet-style resume and piga-diagnose --training-data took the
+    edited file as the run's. A run of an earlier version kept such a fingerprint: it is compared by it still."""
+    import shutil
+
+    from piga.data.schema import FINGERPRINT_MARK, fingerprint, has_fingerprint
+    from piga.io.runs import with_training_file
+
+    edited = _variant(tiny_data, tmp_path / "edited.h5", lambda f: f["frames"].__setitem__(
+        slice(5, None), f["frames"][5:][:, ::-1]))
+    copy = shutil.copy(tiny_data, tmp_path / "copy.h5")
+    kept = fingerprint(tiny_data)
+    assert kept.startswith(FINGERPRINT_MARK) and fingerprint(copy) == kept and fingerprint(edited) != kept
+    assert has_fingerprint(copy, kept) and not has_fingerprint(edited, kept) and not has_fingerprint(copy, None)
+    earlier = fingerprint(tiny_data, like="0123456789abcdef")  # as an earlier version kept it: 16 hex digits
+    assert len(earlier) == 16 and not earlier.startswith(FINGERPRINT_MARK)
+    assert has_fingerprint(copy, earlier) and has_fingerprint(edited, earlier)  # (what it could not tell apart)
+    run = tmp_path / "run"
+    run.mkdir()
+    with pytest.raises(ValueError, match="is not the file .* was trained on"):
+        with_training_file({"data": {"path": str(tiny_data), "fingerprint": kept}}, run, given=edited)
+    assert with_training_file({"data": {"path": "gone.h5", "fingerprint": earlier}}, run, given=edited)["data"]["path"] \
+        == str(edited)  # an earlier run's file, compared as it was
+
+
+def test_train_resume_refuses_its_file_with_later_frames_edited(tiny_piga_run: Path, tiny_data: Path, tmp_path: Path,
+                                                                capsys: pytest.CaptureFixture[str]) -> None:
+    """The resume trained on, exit 3 (the fingerprint hashed the first sequence's frames only)."""
+    edited = _variant(tiny_data, tmp_path / "edited.h5", lambda f: f["frames"].__setitem__(
+        slice(5, None), f["frames"][5:][:, ::-1]))
+    refused("piga-train-model", [str(edited), "--out", str(_run_copy(tiny_piga_run, tmp_path / "a")), "--resume",
+                                 "--epochs", "2", "--quiet"], capsys, "continues on the file the run trained on")
 
 
 def test_the_own_training_file_is_found_beside_a_moved_run_and_given_by_hand(tiny_data: Path, tmp_path: Path) -> None:

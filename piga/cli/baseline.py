@@ -398,9 +398,9 @@ def _refuse_recipe_changes(args: Any, record: dict[str, Any], run_dir: Path, arg
     # a fingerprint that is not a string (edited to null) is none: the file is then known by its path, as a run's from
     # before fingerprints (compared, it read "p.h5 has changed since the run trained on it" of an untouched file)
     if isinstance(record.get("data_fingerprint"), str):  # by contents: a moved or copied file is the same, one written
-        from piga.data.schema import fingerprint  # over in place is not
+        from piga.data.schema import has_fingerprint  # over in place, or edited in place, is not
 
-        same = record["data_fingerprint"] == fingerprint(args.data)
+        same = has_fingerprint(args.data, record["data_fingerprint"])
         if same and isinstance(record.get("rewards_fingerprint"), str):  # a PlaNet-style run's reward head learns
             from piga.data.schema import rewards_fingerprint  # from /rewards too
 

@@ -267,18 +267,36 @@ def _settle_demo(out: Path, data: Path, run_dir: Path) -> str | None:
     return settle_set_aside(out, DEMO_FILES, new, "the earlier demo", "demo")
 
 
+def _check_resumed_epochs(run_dir: Path, data: Path, epochs: int) -> None:
+    """Refuses a resumed demo's --epochs below the epochs its run planned, as piga-train-model --resume does, before
+    the demo's earlier stages run again; a run trained on other data (trained anew) or that does not read is left to
+    the training."""
+    from piga.io.checkpoint import RunKind, read_checkpoint
+
+    if not ((run_dir / CHECKPOINT).is_file() and _trained_on(run_dir, data, strict=True)):
+        return
+    try:
+        planned = read_checkpoint(run_dir, RunKind.PIGA).get("plan") or {}
+    except (OSError, ValueError):
+        return
+    if isinstance(planned.get("epochs"), int) and epochs < planned["epochs"]:
+        raise PigaError(f"--resume --epochs {epochs}: the run already planned {planned['epochs']} epochs "
+                        f"({planned['epochs'] * planned.get('steps_per_epoch', 0)} steps); --resume may raise --epochs, "
+                        "never lower them")
+
+
 def _trained_on(run_dir: Path, data: Path, strict: bool = False) -> bool:
     """Whether the run in ``run_dir`` trained on the contents of ``data`` (its checkpoint's fingerprint of its file).
     A checkpoint without one, or one that does not read, counts as True (piga-train-model --resume then says what is
     wrong), or as False where ``strict``; so does a data file that does not read."""
-    from piga.data.schema import fingerprint
+    from piga.data.schema import has_fingerprint
     from piga.io.checkpoint import RunKind, read_checkpoint
 
     try:
         trained = read_checkpoint(run_dir, RunKind.PIGA).get("data", {}).get("fingerprint")
         if trained is None:
             return not strict
-        return trained == fingerprint(data)
+        return has_fingerprint(data, trained)
     except (OSError, ValueError):
         return not strict
 
@@ -363,6 +381,8 @@ def _run(args: argparse.Namespace, argv: Sequence[str] | None, out: Path, config
     redo = ["--overwrite"] if args.overwrite or args.resume else []  # the strip: made again from the data
     if args.resume and data.exists():
         _check_kept_data(data, config)
+        if args.epochs is not None:  # before the strip is drawn again: piga-train-model --resume refuses fewer
+            _check_resumed_epochs(run_dir, data, args.epochs)
         print(f"[1/4] keeping the {args.sequences} sequences in {data} (collected by the earlier demo)", flush=True)
     else:
         print(f"[1/4] collecting {args.sequences} sequences into {data}", flush=True)

@@ -205,7 +205,7 @@ def _main(argv: Sequence[str] | None, prog: str, replaced: ReplacedRun,
         raise PigaError(f"{run_dir} holds outputs of an earlier run but no checkpoint ({', '.join(existing)}); "
                         "pass --overwrite to replace them")
     from piga.io.atomic import write_json
-    from piga.data.schema import DataFormatError, fingerprint, inspect_dataset
+    from piga.data.schema import DataFormatError, fingerprint, has_fingerprint, inspect_dataset
     from piga.training import report
     from piga.training.report import scene_objects, write_run_report
     from piga.io.runs import load_model
@@ -231,12 +231,13 @@ def _main(argv: Sequence[str] | None, prog: str, replaced: ReplacedRun,
             raise PigaError(f"--resume: {args.data} ({info.system}, {info.image_shape}) does not match the run's data "
                             f"({data['system']}, {tuple(data['image_shape'])})")
         if "fingerprint" in data:  # a moved or copied file keeps its contents; another file is another run
-            same_data = data["fingerprint"] == data_at_start
+            # (a run of an earlier version kept a fingerprint of the first frames only: the file is hashed as it was)
+            same_data = data["fingerprint"] == data_at_start or has_fingerprint(args.data, data["fingerprint"])
         else:  # a checkpoint from before fingerprints: the same path, or a file of the same shape
             same_data = Path(trained_on).resolve() == Path(args.data).resolve() or (
                 data.get("sequences") == info.n_sequences and data.get("steps") == info.steps and data["dt"] == info.dt)
         if not same_data and Path(trained_on).resolve() == Path(args.data).resolve():
-            raise PigaError(f"--resume: {args.data} has changed since the run trained on it (its actions, split or first "
+            raise PigaError(f"--resume: {args.data} has changed since the run trained on it (its actions, split or "
                             "frames differ); train a new run (without --resume) to learn from the changed file")
         if not same_data:
             raise PigaError(f"--resume continues on the file the run trained on ({trained_on}), not {args.data}; "

@@ -204,13 +204,16 @@ def _is_training_file(path: str | os.PathLike[str], data: dict[str, Any]) -> boo
     """Whether ``path`` is a file with the fingerprint that the checkpoint's ``data`` record keeps (where it keeps one)."""
     if not (str(path) and os.path.isfile(path)):
         return False
-    return "fingerprint" not in data or _file_fingerprint(path) == data["fingerprint"]
+    return "fingerprint" not in data or _file_fingerprint(path, data["fingerprint"]) == data["fingerprint"]
 
 
-def _file_fingerprint(path: str | os.PathLike[str]) -> str | None:
-    """:func:`_fingerprint` of the file ``path`` as it is now."""
+def _file_fingerprint(path: str | os.PathLike[str], like: object = None) -> str | None:
+    """:func:`_fingerprint` of the file ``path`` as it is now, hashed as the kept fingerprint ``like`` was."""
+    from piga.data.schema import FINGERPRINT_MARK
+
     stat = os.stat(path)
-    return _fingerprint(str(path), stat.st_ino, stat.st_size, stat.st_mtime_ns)
+    legacy = isinstance(like, str) and not like.startswith(FINGERPRINT_MARK)
+    return _fingerprint(str(path), stat.st_ino, stat.st_size, stat.st_mtime_ns, legacy)
 
 
 def with_training_file(checkpoint: dict[str, Any], run_dir: str | os.PathLike[str],
@@ -232,7 +235,7 @@ def with_training_file(checkpoint: dict[str, Any], run_dir: str | os.PathLike[st
             raise ValueError(f"{given} is a folder: give the data file the model was trained on")
         if not os.path.isfile(given):
             raise ValueError(f"{given}: no such file (give the data file the model was trained on)")
-        if "fingerprint" in data and _file_fingerprint(given) is None:
+        if "fingerprint" in data and _file_fingerprint(given, data["fingerprint"]) is None:
             raise ValueError(f"{given} is not a piga data file (HDF5 with /frames and /actions): give the file the "
                              "model was trained on")
         if not _is_training_file(given, data):
@@ -250,13 +253,14 @@ def with_training_file(checkpoint: dict[str, Any], run_dir: str | os.PathLike[st
 
 
 @functools.lru_cache(maxsize=8)
-def _fingerprint(path: str, inode: int, size: int, mtime_ns: int) -> str | None:
+def _fingerprint(path: str, inode: int, size: int, mtime_ns: int, legacy: bool = False) -> str | None:
     """:func:`piga.data.schema.fingerprint` of ``path`` as it is now (its inode, size and time key the cache: a
-    command asks for its run's training file several times), or None where it is not a data file any more."""
+    command asks for its run's training file several times), or None where it is not a data file any more. With
+    ``legacy``, hashed as a run of an earlier version hashed its file (the first sequence's frames only)."""
     from piga.data.schema import fingerprint
 
     try:
-        return fingerprint(path)
+        return fingerprint(path, like="" if legacy else None)
     except (OSError, ValueError, KeyError):
         return None
 
