@@ -3440,15 +3440,17 @@ def test_a_damaged_chunk_is_named_with_its_file_and_sequence(prog: str, tiny_dat
 
 def test_a_damaged_chunk_past_the_first_sequence_is_named_before_training(tiny_data: Path, tmp_path: Path,
                                                                           capsys: pytest.CaptureFixture[str]) -> None:
-    """The background's sample of the training frames read the damaged chunk without naming it: a bare OSError."""
+    """The background's sample of the training frames read the damaged chunk without naming it: a bare OSError. (The
+    fingerprint of the file, which hashes every frame, reads it first, and names its sequence.)"""
     from piga.data.schema import split_indices
 
     data = tmp_path / "bad.h5"
     shutil.copy(tiny_data, data)
-    _damage_chunk(data, int(split_indices(data, "train")[-1]))
+    damaged = int(split_indices(data, "train")[-1])
+    _damage_chunk(data, damaged)
     refused("piga-train-model", [str(data), "--out", str(tmp_path / "run"), "--epochs", "1", "--batch-size", "4",
-                                 "--quiet"], capsys, f"{data}: /frames of the training sequences sampled for the background "
-            "cannot be read", "the file is damaged")
+                                 "--quiet"], capsys, f"{data}: /frames of sequence {damaged} cannot be read",
+            "the file is damaged")
     assert _listing(tmp_path) == ["bad.h5"]
 
 

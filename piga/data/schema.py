@@ -865,8 +865,14 @@ def fingerprint(path: str | os.PathLike[str], like: object = None) -> str:
         block = max(1, _FINGERPRINT_BLOCK_BYTES // per_sequence)
         for start in range(0, n, block):
             stop = min(start + block, n)
-            with read_rows(frames, f"sequences {start}..{stop - 1}"):
-                digest.update(np.ascontiguousarray(frames[start:stop]).tobytes())
+            try:
+                with read_rows(frames, f"sequences {start}..{stop - 1}"):
+                    digest.update(np.ascontiguousarray(frames[start:stop]).tobytes())
+            except DataFormatError:  # a damaged chunk: named by its sequence
+                for i in range(start, stop):
+                    with read_rows(frames, f"sequence {i}"):
+                        frames[i]  # (read only to find the first that does not decode)
+                raise
         return FINGERPRINT_MARK + digest.hexdigest()[:16]
 
 
