@@ -347,6 +347,9 @@ def _acceptable(config: SceneConfig, ps: np.ndarray, test: bool = False, reach: 
 
 #: Candidate starts simulated together while looking for an acceptable one.
 _CANDIDATES = 64
+#: The starts of --half test sequences that kept to the top half but did not reach the bottom, kept to find the
+#: length that one of them needs (:func:`_half_test_steps`): the more, the shorter the least of those lengths.
+_STAYED = 1024
 
 
 def draw_start(config: SceneConfig, rng: np.random.Generator, steps: int,
@@ -363,7 +366,8 @@ def draw_start(config: SceneConfig, rng: np.random.Generator, steps: int,
     """
     fine = replace(config, dt=config.dt / config.substeps, substeps=1)
     batch = 1 if config.physics == "bouncing" else _CANDIDATES  # every bouncing start is acceptable
-    stayed = False  # (a --half test sequence) some start kept to the top half, and failed only to reach the bottom
+    stayed: list[tuple[np.ndarray, np.ndarray]] = []  # (a --half test sequence) starts (p0, v0) that kept to the top
+    # half and failed only to reach the bottom: a few, to find the length they need
     for _ in range(0, config.max_tries, batch):
         starts = [_start(config, rng) for _ in range(batch)]
         p0 = np.stack([p for p, _ in starts])  # (B, N, 2)
@@ -372,8 +376,8 @@ def draw_start(config: SceneConfig, rng: np.random.Generator, steps: int,
         with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
             fine_p, fine_v = simulate(fine, p0, v0, (steps - 1) * config.substeps + 1)  # (T·M, B, N, 2)
             good = np.flatnonzero(_acceptable(config, fine_p, test))
-            if config.half and test and not len(good) and not stayed:
-                stayed = bool(_acceptable(config, fine_p, test, reach=False).any())
+            if config.half and test and not len(good) and len(stayed) < _STAYED:
+                stayed += [(p0[i], v0[i]) for i in np.flatnonzero(_acceptable(config, fine_p, test, reach=False))]
         if len(good):
             return simulate(config, p0[good[0]], v0[good[0]], steps)
     # forces too weak to show are refused first: no wall, sequence length or image size would make them learnable
@@ -382,14 +386,34 @@ def draw_start(config: SceneConfig, rng: np.random.Generator, steps: int,
     if config.half and test:  # a test sequence must leave the top half: short ones cannot
         # a larger image keeps a start in the top half longer, and puts the bottom half further away: it helps only
         # where no start stayed on top, and longer sequences only where some did
-        fix = (f"use longer sequences (--steps, now {steps}){_force_advice(config)}" if stayed
-               else f"use a larger image (--image-size, now {config.image_size}){_force_advice(config)}")
+        if stayed:
+            needed = _half_test_steps(config, stayed, steps)
+            fix = ("use longer sequences (--steps, now " + str(steps)
+                   + (f"; a start drawn here reaches the bottom half with --steps {needed}" if needed else "")
+                   + f"){_force_advice(config)}")
+        else:
+            fix = f"use a larger image (--image-size, now {config.image_size}){_force_advice(config)}"
         raise SceneError(f"{config.scene}: no start in {config.max_tries} draws stays clear of the walls and in the top "
                          f"half for its first {config.half_frames} frames, then reaches the bottom half within {steps} "
                          f"frames (a --half test sequence); {fix}")
     raise SceneError(f"{config.scene}: no start in {config.max_tries} draws stays clear of the walls"
                      f"{' and in the top half' if config.half else ''} for {steps} frames; use shorter sequences "
                      f"(--steps){_force_advice(config)} or a larger image (--image-size)")
+
+
+def _half_test_steps(config: SceneConfig, starts: list[tuple[np.ndarray, np.ndarray]], steps: int) -> int | None:
+    """The fewest frames, past ``steps`` and up to 10 times as many, with which one of ``starts`` (p0, v0) makes an
+    acceptable --half test sequence (:func:`_acceptable`: clear of the walls throughout, on top for its first frames,
+    then wholly in the bottom half); None where none does."""
+    fine = replace(config, dt=config.dt / config.substeps, substeps=1)
+    longest = 10 * steps
+    p0, v0 = np.stack([p for p, _ in starts]), np.stack([v for _, v in starts])  # (B, N, 2)
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        fine_p, _ = simulate(fine, p0, v0, (longest - 1) * config.substeps + 1)  # (T·M, B, N, 2)
+        for length in range(steps + 1, longest + 1):
+            if _acceptable(config, fine_p[: (length - 1) * config.substeps + 1], test=True).any():
+                return length
+    return None
 
 
 #: Least displacement, in pixels, by which a scene's forces must move some ball away from its force-free path (a straight

@@ -4209,14 +4209,36 @@ def test_a_folder_matplotlib_cannot_write_gets_a_temporary_one_quietly(where: st
 def test_a_half_spring_too_short_for_its_test_sequences_says_longer(tmp_path: Path, capsys: pytest.CaptureFixture[str],
                                                                     monkeypatch: pytest.MonkeyPatch) -> None:
     """The advice was "use shorter sequences, a lower speed", which --half refuses and no flag sets, after "job sequence
-    18 failed"."""
+    18 failed"; then "use longer sequences (--steps, now 20)", with no length that works (20 failed, 30 worked)."""
+    import re
+
     real = collect.scene_config  # a --half scene draws up to 100,000 starts (7 s) before it gives up: 2,000 here
     monkeypatch.setattr(collect, "scene_config", lambda scene, **given: real(scene, **{"max_tries": 2000, **given}))
     line = refused("piga-collect", ["--system", "spring", "--half", "--sequences", "20", "--steps", "11", "--out",
                                     str(tmp_path / "h.h5"), "--quiet"], capsys,
-                   "then reaches the bottom half within 11 frames", "use longer sequences (--steps, now 11)")
+                   "then reaches the bottom half within 11 frames", "use longer sequences (--steps, now 11; a start "
+                   "drawn here reaches the bottom half with --steps ")
     # a larger image puts the bottom half further away: it was named too, and did not help
     assert "job" not in line and "--image-size" not in line and not (tmp_path / "h.h5").exists()
+    steps = re.search(r"with --steps (\d+)\)", line)
+    assert steps is not None and int(steps.group(1)) > 11, line
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed, steps", [(0, 11), (32045, 14)])
+def test_the_length_a_half_spring_is_told_works(seed: int, steps: int, tmp_path: Path,
+                                                capsys: pytest.CaptureFixture[str]) -> None:
+    """With all its draws (100,000, about 9 s), the length that the refusal names collects the file (20 frames failed
+    for seed 32045, and the refusal named no length)."""
+    import re
+
+    out = str(tmp_path / "h.h5")
+    line = refused("piga-collect", ["--system", "spring", "--half", "--sequences", "20", "--steps", str(steps), "--out",
+                                    out, "--seed", str(seed), "--quiet"], capsys, "a start drawn here reaches")
+    named = re.search(r"with --steps (\d+)\)", line)
+    assert named is not None, line
+    assert collect.main(["--system", "spring", "--half", "--sequences", "20", "--steps", named.group(1), "--out", out,
+                         "--seed", str(seed), "--quiet"]) == 0
 
 
 @pytest.mark.parametrize("text, needle", [("1:1e308:1e-308", "gives more than 1000 values"),
