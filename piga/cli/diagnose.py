@@ -18,7 +18,9 @@ def build_parser() -> ArgumentParser:
     p = ArgumentParser(prog=PROG, description="Diagnose the gap between an identified piga model and video + actions of "
                        "a 'real' system: its size per horizon, where it lies (vision or dynamics; residuals over the state "
                        "and the actions), which unmodelled effect causes it, and how far it shrinks once that effect is "
-                       "added. Reads only /frames and /actions.")
+                       "added. Reads /frames, /actions and dt, and of the other attributes only what says which simulator or "
+                       "recording made it (env_id, env_config, source); never /states, nor the params or effects that "
+                       "made the file (--env only checks its effects against them).")
     p.add_argument("--model", required=True, help="run folder of piga-train-model (the identified model)")
     p.add_argument("--data", required=True, help="HDF5 file of the real system (piga-collect --effect, or piga-import)")
     p.add_argument("--out", required=True, help="report folder: report.md, report.json and plots")
