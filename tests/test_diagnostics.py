@@ -459,8 +459,13 @@ def test_the_training_check_of_a_run() -> None:
     run = {"state": {"step": 500}, "plan": {"warmup_steps": 200}}
     check_training(run, 0.001, 0.004, max_fraction=1.0)  # a trained model: 25% of drawing no pendulum
     check_training(run, 0.001, None, max_fraction=1.0)  # no scale known: the recorded error alone is checked
-    with pytest.raises(UntrainedModelError, match="training failed"):
+    with pytest.raises(UntrainedModelError, match="training failed") as refused:
         check_training(run, 0.2, 0.004, max_fraction=1.0)
+    assert "(0.004); train it longer" in str(refused.value)
+    # the training file not found, the scale is the recording's: said so (it read as the training frames')
+    with pytest.raises(UntrainedModelError, match=r"no pendulum at all \(0.004 in the recording's frames, as its "
+                                                  r"training file is not found from here \(--training-data gives it\)\)"):
+        check_training(run, 0.2, 0.004, max_fraction=1.0, blank_of_recording=True)
     with pytest.raises(UntrainedModelError, match="never trained"):
         check_training({"state": {"step": 0}}, 0.001, 0.004, max_fraction=1.0)
     with pytest.raises(UntrainedModelError, match="warm-up"):

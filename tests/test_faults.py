@@ -279,6 +279,13 @@ def _full_disk(monkeypatch: pytest.MonkeyPatch) -> None:
     ("piga-baseline", ["planet", "--", "x.h5", "--out", "r"], "--out comes after '--'"),
     ("piga-demo", ["--", "--out", "d"], "--out comes after '--'"),  # (no required option: "unrecognized arguments")
     ("piga-control", ["--", "--oracle"], "--oracle comes after '--'"),
+    # a positional argument written as an option: "unrecognized arguments: --data", with no word of its place
+    ("piga-baseline", ["planet", "--data", "x.h5", "--out", "r"], "unrecognized argument --data: data is given without "
+                                                                  "a flag, by its place (piga-baseline planet data ...)"),
+    ("piga-train-model", ["--data", "x.h5", "--out", "r"], "unrecognized argument --data: data is given without a flag, "
+                                                          "by its place (piga-train-model data ...)"),
+    ("piga-import", ["v", "a.csv", "--dt", "0.05", "--out", "x.h5", "--actions=b.csv"],
+     "unrecognized argument --actions: actions is given without a flag, by its place (piga-import recording actions"),
 ])
 def test_abbreviations_are_refused(prog: str, argv: list[str], needle: str, tmp_path: Path,
                                    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:

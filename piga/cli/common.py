@@ -94,8 +94,31 @@ class ArgumentParser(argparse.ArgumentParser):
             else:
                 message = self._after_the_end(given, ended, required) or message
         elif message.startswith("unrecognized arguments:"):  # options after "--": taken as names, then left over
-            message = self._after_the_end(given, ended, list(self._option_string_actions)) or message
+            message = (self._after_the_end(given, ended, list(self._option_string_actions))
+                       or self._positional_as_option(given[:ended]) or message)
         self.exit(1, f"{self.prog}: error: {message} (see --help)\n")
+
+    def _positional_as_option(self, given: list[str]) -> str | None:
+        """The line for a positional argument written as an option (``piga-baseline planet --data d.h5``: "unrecognized
+        arguments: --data", with no word that the file goes by its place); None where none is."""
+        parsers, positionals = [self], {}
+        while parsers:  # this parser's positional arguments, and those of the subcommand given
+            parser = parsers.pop()
+            names = [action for action in parser._actions  # noqa: SLF001  (argparse lists a parser's arguments only
+                     if not action.option_strings and action.dest != argparse.SUPPRESS]  # there)
+            usage = " ".join([parser.prog, *(str(action.metavar or action.dest) for action in names
+                                             if not isinstance(action, argparse._SubParsersAction))])  # noqa: SLF001
+            for action in names:
+                if isinstance(action, argparse._SubParsersAction):  # noqa: SLF001
+                    parsers += [sub for name, sub in action.choices.items() if name in given]
+                else:
+                    positionals[action.dest] = (str(action.metavar or action.dest), usage)
+        for flag in (token.split("=", 1)[0] for token in given if token.startswith("--")):
+            found = positionals.get(flag[2:].replace("-", "_"))
+            if found is not None:
+                shown, usage = found
+                return f"unrecognized argument {flag}: {shown} is given without a flag, by its place ({usage} ...)"
+        return None
 
     @staticmethod
     def _after_the_end(given: list[str], ended: int, options: list[str]) -> str | None:

@@ -327,7 +327,7 @@ def diagnose(model: PhysicsModel, data: str | os.PathLike[str], config: Diagnose
         check_training(checkpoint, rec_training, blank, config.max_training_fraction)
     obs = observe(model, data, progress=progress)
     if blank is None:  # the training file is gone: the recording's frames give the scale
-        check_training(checkpoint, rec_training, obs.blank_mse, config.max_training_fraction)
+        check_training(checkpoint, rec_training, obs.blank_mse, config.max_training_fraction, blank_of_recording=True)
     try:
         check_scene(obs, rec_training, config.max_scene_ratio)
         unlike = None

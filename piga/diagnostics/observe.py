@@ -37,7 +37,7 @@ class NotTheSceneError(DiagnosisInputError):
 
 
 def check_training(checkpoint: dict[str, Any] | None, rec_training: float, blank: float | None,
-                   max_fraction: float) -> None:
+                   max_fraction: float, blank_of_recording: bool = False) -> None:
     """Refuses a run whose training clearly failed (:class:`UntrainedModelError`).
 
     Args:
@@ -47,6 +47,7 @@ def check_training(checkpoint: dict[str, Any] | None, rec_training: float, blank
         blank: the error scale: the MSE of the frames against the model's background, a render
             that draws no pendulum (:func:`piga.io.runs.training_blank_mse`); None: unknown.
         max_fraction: refuse when ``rec_training`` exceeds this fraction of ``blank``.
+        blank_of_recording: ``blank`` is the recording's (the run's training file is not found): the line says so.
     """
     steps = training_steps(checkpoint)
     if steps == 0:
@@ -59,9 +60,12 @@ def check_training(checkpoint: dict[str, Any] | None, rec_training: float, blank
         raise UntrainedModelError("the checkpoint records no finite reconstruction error, so the model's training "
                                   "cannot be checked; use a run of piga-train-model")
     if blank is not None and rec_training > max_fraction * blank:
+        where = (" in the recording's frames, as its training file is not found from here (--training-data gives it)"
+                 if blank_of_recording else "")
         raise UntrainedModelError(
             f"the model's training failed: it re-renders its training frames with MSE {rec_training:.3g}, "
-            f"{rec_training / blank:.2g}x the error of drawing no pendulum at all ({blank:.3g}); train it longer")
+            f"{rec_training / blank:.2g}x the error of drawing no pendulum at all ({blank:.3g}{where}); train it "
+            "longer")
 
 
 def check_scene(obs: Observations, rec_training: float, max_ratio: float) -> None:
