@@ -25,6 +25,19 @@ if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
     signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
+@pytest.fixture(autouse=True)
+def _internal_error_logs_stay_in_the_tests_folders(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch,
+                                                   tmp_path_factory: pytest.TempPathFactory) -> None:
+    """The tests that provoke an internal error (exit 70) left its log in the machine's own piga-logs folder on every
+    run: a test's logs go to its tmp_path (the folder the real one names, where a test points the temporary folder
+    there), or else to the session's temporary folder."""
+    from piga.cli import common
+
+    folder = (request.getfixturevalue("tmp_path") if "tmp_path" in request.fixturenames
+              else tmp_path_factory.getbasetemp()) / "piga-logs"
+    monkeypatch.setattr(common, "log_folder", lambda: folder)
+
+
 @pytest.fixture(scope="session")
 def tiny_data(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """12 pendulum sequences x 16 frames, seed 3 (split 8/2/2)."""
