@@ -4232,7 +4232,7 @@ def test_a_half_spring_too_short_for_its_test_sequences_says_longer(tmp_path: Pa
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("seed, steps", [(0, 11), (32045, 14)])
+@pytest.mark.parametrize("seed, steps", [(0, 11), (32045, 14), (32045, 20)])
 def test_the_length_a_half_spring_is_told_works(seed: int, steps: int, tmp_path: Path,
                                                 capsys: pytest.CaptureFixture[str]) -> None:
     """With all its draws (100,000, about 9 s), the length that the refusal names collects the file (20 frames failed
