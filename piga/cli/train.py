@@ -445,7 +445,8 @@ def _main(argv: Sequence[str] | None, prog: str, replaced: ReplacedRun,
         early.clear()
         try:
             model, state = train(args.data, run_dir, train_config, model_config, resume=resuming,
-                                 progress=not args.quiet, on_epoch=on_epoch, n_objects=args.objects)
+                                 progress=not args.quiet, on_epoch=on_epoch, n_objects=args.objects,
+                                 data_fingerprint=data_at_start)
         except _LostInWarmup as lost_early:
             next_seed(f"object check after the autoencoder's warm-up (step {lost_early.step:,} of {lost_early.total:,})",
                       lost_with(lost_early.ratio))

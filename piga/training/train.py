@@ -687,6 +687,7 @@ def train(
     progress: bool = True,
     on_epoch: Callable[[TrainState, FrameModel], None] | None = None,
     n_objects: int | None = None,
+    data_fingerprint: str | None = None,
 ) -> tuple[FrameModel, TrainState]:
     """Trains on the train split of ``data``; writes checkpoints and TensorBoard scalars to ``run_dir``.
 
@@ -698,7 +699,8 @@ def train(
     ``train_config`` should be the run's saved one (``TrainConfig.from_dict(ckpt["train_config"])``),
     possibly with more ``epochs``; ``model_config`` is ignored. Otherwise the model is ``model_config``
     (None: the fast recipe's) fitted to the file (:func:`model_config_for`), with ``n_objects`` object slots
-    (None: the file's count). Resuming with the same
+    (None: the file's count); ``data_fingerprint``: :func:`~piga.data.schema.fingerprint` of ``data`` where the caller
+    took it already (it decodes every frame), else taken here. Resuming with the same
     ``epochs`` continues exactly. With more ``epochs``, the cosine schedule is replanned over the
     new total: from the resumed step on, the learning rates are those a straight run of the new
     length has at that step (they rise again if the old run had finished its cosine), while the
@@ -724,7 +726,7 @@ def train(
     run_dir = Path(run_dir)
     folder = OutputFolder(run_dir)  # moved or removed while the run trains: said, not made again
     info = inspect_dataset(data)
-    data_fingerprint = fingerprint(data)
+    data_fingerprint = data_fingerprint or fingerprint(data)
     ckpt_path = run_dir / CHECKPOINT
     set_threads(train_config.threads, "TrainConfig")
     state = TrainState()
