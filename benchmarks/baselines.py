@@ -52,11 +52,11 @@ from the state 5 min (30k), from the latent 12 min (30k, autoencoder included), 
 
 | preset | what | collect | training (core-h) | PlaNet-style episodes (core-h) | other episodes (core-h) | wall on 2 idle cores |
 |---|---|---|---|---|---|---|
-| ``budget`` | piga at 2/5/10/25/50/100/250 sequences x 3 seeds (at least 3000 steps each); PlaNet-style at 100/250/500/1000/2000 x 1 seed, and a second seed at 500 and 2000 (12000 steps each); DDPG state 30k x 3 seeds, latent 30k x 1, pixels 20k x 1; SAC pixels 20k x 1; DrQ-v2 pixels 12k x 1; 20 episodes per evaluation; sweep x0.6, 1.0, 1.4, 1.8 with 5 episodes each | 0.2 h | 21.1 | 2.4 | 0.6 | 12.2 h |
+| ``budget`` | piga at 2/5/10/25/50/100/250 sequences x 3 seeds (at least 3000 steps each); PlaNet-style at 100/250/500/1000/2000 x 1 seed, and a second seed at 500, 1000 and 2000 (12000 steps each); DDPG state 30k x 3 seeds, latent 30k x 1, pixels 20k x 1; SAC pixels 20k x 1; DrQ-v2 pixels 12k x 2 seeds; 20 episodes per evaluation; sweep x0.6, 1.0, 1.4, 1.8 with 5 episodes each | 0.2 h | 24.0 | 2.7 | 0.6 | 13.9 h |
 | ``full`` | the full design: piga at 2/5/10/25/50/100/250/500/1000/2000 sequences and PlaNet-style at 100/250/500/1000/2000, 3 seeds each, DDPG 30k/80k/80k x 3 seeds, SAC and DrQ-v2 pixels 80k x 3 seeds each, 20 episodes, 14 multipliers x 10 episodes | 0.2 h | 128.0 | 21.4 | 3.2 | 76.5 h |
 
 The budget preset answers every question of the comparison with what it can afford, and says what
-it cut: PlaNet-style has one seed per point and a second at 500 and 2000 sequences (its 12000 steps
+it cut: PlaNet-style has one seed per point and a second at 500, 1000 and 2000 sequences (its 12000 steps
 are almost two hours each), its points are where it might reach 80% rather than where piga does, DDPG
 from pixels gets 20k steps (10k of them the zoo's random warm-up, so 10k of learning; the paper's DDPG
 from pixels failed), SAC from pixels 20k (learning from step 100), DrQ-v2 from pixels 12k (4k of them
@@ -198,7 +198,7 @@ PRESETS: dict[str, BenchConfig] = {
     "full": BenchConfig(planet_sizes=(100, 250, 500, 1000, 2000)),
     "budget": BenchConfig(sizes=(2, 5, 10, 25, 50, 100, 250), seeds=(0, 1, 2), planet_sizes=(100, 250, 500, 1000, 2000),
                           planet_seeds=(0,),
-                          planet_more_seeds=((500, (1,)), (2000, (1,))),
+                          planet_more_seeds=((500, (1,)), (1000, (1,)), (2000, (1,))),
                           piga_min_steps=3000,
                           ddpg_runs=(("state", 30000, (0, 1, 2)), ("latent", 30000, (0,)), ("pixels", 20000, (0,))),
                           sac_runs=(("pixels", 20000, (0,)),), drqv2_runs=(("pixels", 12000, (0, 1)),),

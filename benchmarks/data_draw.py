@@ -10,7 +10,8 @@ beside the table's record of the same job.
     python benchmarks/data_draw.py --out results/data_draw --jobs piga-n2-s0 planet-n250-s0
 
 The default jobs are piga at its smallest size (2 sequences, 3 training seeds: the cell most exposed to the draw)
-and the PlaNet-style model where its curve crosses 80% (250 and 500 sequences, seed 0; about 2 h each on one core).
+and the PlaNet-style model where its curve crosses 80% and 95% (250, 500 and 1000 sequences, seed 0; about 2 h each
+on one core).
 Runs, data files and records go in ``OUT_runs/`` (the table's layout); a job whose record has the same settings is
 not run again, so the same command continues. Writes OUT.json and OUT.md.
 """
@@ -28,7 +29,7 @@ from piga.cli.common import ArgumentParser
 
 DATA_SEED = 200
 """The second collection's seed (the table's is ``BenchConfig.data_seed``, 100)."""
-JOBS = ("piga-n2-s0", "piga-n2-s1", "piga-n2-s2", "planet-n250-s0", "planet-n500-s0")
+JOBS = ("piga-n2-s0", "piga-n2-s1", "piga-n2-s2", "planet-n250-s0", "planet-n500-s0", "planet-n1000-s0")
 """The table's jobs run again by default."""
 
 
