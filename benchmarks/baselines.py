@@ -1030,7 +1030,8 @@ def data_ratios(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     return [data_ratio(points["planet"], points["piga"], threshold) for threshold in RATIO_THRESHOLDS]
 
 
-def _need_cell(need: dict[str, Any]) -> str:
+def need_cell(need: dict[str, Any]) -> str:
+    """A need of :func:`efficiency.data_ratio` in words: its sequences and interval, or the bound it is."""
     interval, share = f"95%: {need['low']:,.0f}–{need['high']:,.0f}", need["bounded_draws"]
     if need["bound"] != "exact":
         what = "at most" if need["bound"] == "at_most" else "more than"
@@ -1039,7 +1040,8 @@ def _need_cell(need: dict[str, Any]) -> str:
     return f"{need['value']:,.0f} ({interval}" + (f"; {100 * share:.0f}% of draws a bound)" if share else ")")
 
 
-def _ratio_cell(ratio: dict[str, Any], what: str = "") -> str:
+def ratio_cell(ratio: dict[str, Any], what: str = "") -> str:
+    """A ratio of :func:`efficiency.data_ratio` in words (``what`` after the "x"): its value, bound and interval."""
     prefix = {"exact": "", "at_least": "at least ", "at_most": "at most ", "undefined": "undefined: "}[ratio["bound"]]
     return f"{prefix}{ratio['value']:,.0f}x{what} (95%: {ratio['low']:,.0f}–{ratio['high']:,.0f}x)"
 
@@ -1050,9 +1052,9 @@ def data_ratio_claim(ratios: list[dict[str, Any]]) -> str:
         return ""
     first, *rest = ratios
     text = (f"At {100 * first['threshold']:.0f}% success, the PlaNet-style model needs "
-            f"{_need_cell(first['numerator'])} sequences and piga {_need_cell(first['denominator'])}: "
-            f"{_ratio_cell(first['ratio'], ' the data')}")
-    more = "; ".join(f"At {100 * r['threshold']:.0f}%, {_ratio_cell(r['ratio'])}" for r in rest)
+            f"{need_cell(first['numerator'])} sequences and piga {need_cell(first['denominator'])}: "
+            f"{ratio_cell(first['ratio'], ' the data')}")
+    more = "; ".join(f"At {100 * r['threshold']:.0f}%, {ratio_cell(r['ratio'])}" for r in rest)
     return text + "." + (f" {more}." if more else "")
 
 
@@ -1076,8 +1078,8 @@ def data_ratio_lines(record: dict[str, Any]) -> list[str]:
              "intervals understate the spread between seeds.\n",
              "| success | piga needs (sequences) | PlaNet-style needs (sequences) | PlaNet-style / piga |", "|---|---|---|---|"]
     for row in record["data_ratio"]:
-        lines.append(f"| {100 * row['threshold']:.0f}% | {_need_cell(row['denominator'])} | {_need_cell(row['numerator'])} | "
-                     f"{_ratio_cell(row['ratio'])} |")
+        lines.append(f"| {100 * row['threshold']:.0f}% | {need_cell(row['denominator'])} | {need_cell(row['numerator'])} | "
+                     f"{ratio_cell(row['ratio'])} |")
     return lines + ["", f"The README's sentence: {record['data_ratio_claim']}\n"]
 
 

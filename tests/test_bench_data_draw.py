@@ -71,3 +71,29 @@ def test_the_tables_draw_and_unknown_jobs_are_refused(draw: Any, tmp_path: Path,
         draw.main([*argv, "--out", str(tmp_path / "x")])
     assert message in capsys.readouterr().err
     assert not (tmp_path / "x_runs").exists()
+
+
+def _row(agent: str, sequences: int, table: float | None, second: float) -> dict[str, Any]:
+    return {"agent": agent, "sequences": sequences, "table": None if table is None else {"x1": _summary(table)},
+            "x1": _summary(second)}
+
+
+def test_each_draw_and_both_are_read_as_the_table_reads_its_curve(draw: Any) -> None:
+    rows = {"piga-n2-s0": _row("piga", 2, 1.0, 1.0), "piga-n2-s1": _row("piga", 2, 1.0, 1.0),
+            "planet-n250-s0": _row("planet", 250, 0.75, 0.0), "planet-n500-s0": _row("planet", 500, 0.5, 0.1),
+            "planet-n1000-s0": _row("planet", 1000, 1.0, 0.9), "planet-n2000-s0": _row("planet", 2000, None, 1.0)}
+    needs = {(row["threshold"], row["draw"]): row for row in draw.draw_needs(rows)}
+    assert sorted(needs) == [(t, d) for t in (0.8, 0.95) for d in sorted(("table", "second", "both"))]
+    # 80% between 500 and 1000, in log(sequences): the table's 50% -> 100%, the second's 10% -> 90%; both: 30% -> 95%
+    for name, rate0, rate1 in (("table", 0.5, 1.0), ("second", 0.1, 0.9), ("both", 0.3, 0.95)):
+        need = needs[(0.8, name)]["numerator"]
+        assert need["bound"] == "exact" and need["value"] == pytest.approx(500 * 2 ** ((0.8 - rate0) / (rate1 - rate0)))
+        assert needs[(0.8, name)]["denominator"]["bound"] == "at_most" and needs[(0.8, name)]["ratio"]["bound"] != "exact"
+    # 2000 sequences have a run on the second draw only: on its curve, not on the pooled one
+    assert needs[(0.95, "second")]["numerator"]["value"] == pytest.approx(1000 * 2 ** ((0.95 - 0.9) / 0.1))
+    assert needs[(0.95, "both")]["numerator"]["value"] == pytest.approx(1000)
+    record = {"jobs": rows, "needs": draw.draw_needs(rows), "data_seed": 200, "table_data_seed": 100}
+    page = "\n".join(draw.needs_lines(record))
+    assert "the PlaNet-style model at 250, 500, 1000 and 2000 sequences, piga at 2)" in page
+    assert "| 80% | 100 (the table) | at most 2 (its smallest size; in every draw) | 758 (" in page
+    assert draw.needs_lines({**record, "needs": []}) == []
