@@ -814,11 +814,12 @@ def check_pixel_pendulum_file(info: DatasetInfo, use: str) -> None:
     from envs import PIXEL_PENDULUM  # here: the schema is read without gymnasium's import
 
     env_id = info.attrs.get("env_id", PIXEL_PENDULUM)  # files from before env ids hold none
+    give = f"give a file that piga-collect wrote of {PIXEL_PENDULUM} (piga-collect --out DATA.h5)"
     if info.system != "pendulum" or env_id != PIXEL_PENDULUM:
-        raise DataFormatError(f"{info.path}: {use}; this file is {info.named} from {env_id}")
+        raise DataFormatError(f"{info.path}: {use}; this file is {info.named} from {env_id}: {give}")
     if "env_config" not in info.attrs:
         raise DataFormatError(f"{info.path}: {use}; this file is {info.named} without the 'env_config' that "
-                              "piga-collect records (an imported recording?)")
+                              f"piga-collect records (an imported recording?): {give}")
     config = info.attrs["env_config"]  # a JSON object (inspect_dataset checked it)
     size = config.get("image_size") if isinstance(config, dict) else None
     shape = info.image_shape
