@@ -690,7 +690,7 @@ def figures(record: dict[str, Any], out: Path) -> dict[str, str]:
     axes[0].set_ylim(-5, 105)
     for ax, ylabel in ((axes[0], "success (%)"), (axes[1], "mean return")):
         ax.set_xscale("log")
-        ax.set_xticks(sizes, [str(n) for n in sizes])
+        ax.set_xticks(sizes, [f"{n // 1000}k" if n >= 1000 and n % 1000 == 0 else str(n) for n in sizes])  # (the labels "1000" and "2000" ran together)
         ax.minorticks_off()
         ax.set_xlabel("training sequences")
         ax.set_ylabel(ylabel)
@@ -894,6 +894,17 @@ def _pending_note(record: dict[str, Any]) -> list[str]:
               "could change says so. The same command continues the rest.\n"]
 
 
+def _invocation_line(record: dict[str, Any]) -> str:
+    """What the invocation that wrote the page ran, and its wall time (a record without ``jobs_run`` predates it)."""
+    ran = record.get("jobs_run")
+    if ran == []:
+        return ("\nThe invocation that wrote this page ran no job: it read the records that earlier invocations kept "
+                "(each run's training time is its own record's).\n")
+    what = f", running {', '.join(ran)}" if ran else ""
+    return (f"\nWall time of the invocation that wrote this page: {record['wall_seconds'] / 60:.1f} min{what} (records "
+            "kept from earlier invocations are not run again).\n")
+
+
 def markdown(record: dict[str, Any]) -> str:
     """The results page."""
     lines = [f"# Baselines: piga, PlaNet-style and DDPG\n\nCommand: `{record['command']}` (preset `{record['preset']}`)\n",
@@ -961,8 +972,7 @@ def markdown(record: dict[str, Any]) -> str:
                "the machine's other core (jobs of one invocation, or invocations with `--workers 1` side by side). "
                "Each run's record names the machine it ran on:\n"),
               *[f"- {m}: {', '.join(names)}" for m, names in record["job_machines"].items()],
-              (f"\nWall time of the invocation that wrote this page: {record['wall_seconds'] / 60:.1f} min (records kept "
-               "from earlier invocations are not run again).\n")]
+              _invocation_line(record)]
     return "\n".join(lines) + "\n"
 
 
@@ -1037,7 +1047,8 @@ def need_cell(need: dict[str, Any]) -> str:
         what = "at most" if need["bound"] == "at_most" else "more than"
         where = "smallest" if need["bound"] == "at_most" else "largest"
         return f"{what} {need['value']:,.0f} (its {where} size; " + ("in every draw)" if share == 1 else f"{interval})")
-    return f"{need['value']:,.0f} ({interval}" + (f"; {100 * share:.0f}% of draws a bound)" if share else ")")
+    part = "under 1%" if share < 0.005 else f"{100 * share:.0f}%"
+    return f"{need['value']:,.0f} ({interval}" + (f"; {part} of draws a bound)" if share else ")")
 
 
 def ratio_cell(ratio: dict[str, Any], what: str = "") -> str:
@@ -1118,7 +1129,9 @@ def main() -> int:
     command = ["python", "benchmarks/baselines.py", "--out", str(args.out), "--preset", args.preset]
     record: dict[str, Any] = {"command": shlex.join(command), "invocation": shlex.join(["python", *sys.argv]),
                               "preset": args.preset, "config": asdict(cfg), "machine": machine(), "estimate_seconds": cost}
+    kept = {job.name for job in jobs_for(cfg) if kept_record(folder, job, cfg) is not None}
     records = run_all(cfg, folder, only, backend)
+    record["jobs_run"] = [name for name, kept_or_run in records.items() if kept_or_run is not None and name not in kept]
     record.update(aggregate(records, cfg))
     if record["pending"]:
         print(f"{len(records) - len(record['pending'])} of {len(records)} jobs have a record; still to run: "

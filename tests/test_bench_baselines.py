@@ -281,3 +281,10 @@ def test_drqv2_is_a_third_model_free_row_scored_as_ddpgs_runs(bench, tmp_path: P
     assert "| DrQ-v2 from pixels | 12k env steps (2 seeds) |  | pending, pending | pending | pending, pending (not told) |" \
         in record["summary_table"]
     assert [f["pending"] for f in record["floors"]] == [[]] * 5  # no floor waits for it
+
+
+def test_the_page_says_what_the_invocation_that_wrote_it_ran(bench) -> None:
+    assert "ran no job: it read the records" in bench._invocation_line({"jobs_run": [], "wall_seconds": 1.0})
+    line = bench._invocation_line({"jobs_run": ["planet-n1000-s1"], "wall_seconds": 5400.0})
+    assert "90.0 min, running planet-n1000-s1 (records kept" in line
+    assert "102.2 min (records kept" in bench._invocation_line({"wall_seconds": 6132.0})  # a record from before the field

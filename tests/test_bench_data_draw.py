@@ -97,3 +97,11 @@ def test_each_draw_and_both_are_read_as_the_table_reads_its_curve(draw: Any) -> 
     assert "the PlaNet-style model at 250, 500, 1000 and 2000 sequences, piga at 2)" in page
     assert "| 80% | 100 (the table) | at most 2 (its smallest size; in every draw) | 758 (" in page
     assert draw.needs_lines({**record, "needs": []}) == []
+
+
+def test_a_need_bounded_in_a_few_draws_says_so(draw: Any) -> None:
+    table = sys.modules[draw.run_all.__module__]
+    need = {"value": 952.0, "bound": "exact", "low": 917.0, "high": 964.0}
+    assert table.need_cell({**need, "bounded_draws": 0.001}) == "952 (95%: 917–964; under 1% of draws a bound)"
+    assert table.need_cell({**need, "bounded_draws": 0.08}) == "952 (95%: 917–964; 8% of draws a bound)"
+    assert table.need_cell({**need, "bounded_draws": 0.0}) == "952 (95%: 917–964)"
