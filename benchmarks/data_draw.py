@@ -99,11 +99,21 @@ def needs_lines(record: dict[str, Any]) -> list[str]:
     return lines + [""]
 
 
+def _machine_lines(record: dict[str, Any]) -> list[str]:
+    """The machine the jobs ran on, or each machine and its jobs where they ran on several."""
+    jobs: dict[str, list[str]] = {}
+    for name, machine in record.get("machines", {"": record["machine"]}).items():
+        jobs.setdefault(machine_words(machine), []).append(name)
+    if len(jobs) == 1:
+        return [f"Machine: {next(iter(jobs))}."]
+    return ["Machines:", "", *(f"- {words}: {', '.join(names)}" for words, names in jobs.items())]
+
+
 def markdown(record: dict[str, Any]) -> str:
     """The page: a row per job and draw, the table's first."""
     lines = ["# The baselines table's runs on a second data draw", "",
              f"Command: `{record['command']}`", "",
-             f"Machine: {machine_words(record['machine'])}.", "",
+             *_machine_lines(record), "",
              f"Each job runs exactly as in the baselines table (results/baselines.md), on the nested subsets of a "
              f"second random-action collection (data seed {record['data_seed']}) instead of the table's (seed "
              f"{record['table_data_seed']}). The episodes are the table's; piga is told x{TABLE_GRAVITY:g}, the "
@@ -143,7 +153,8 @@ def main(argv: list[str] | None = None) -> int:
                    "x1.4": records[name]["sweep"][f"{TABLE_GRAVITY:g}"], "train_seconds": records[name]["train_seconds"]}
             for name in names}
     record = {"command": " ".join(["python", "benchmarks/data_draw.py", *(sys.argv[1:] if argv is None else argv)]),
-              "machine": records[names[0]]["machine"], "data_seed": args.data_seed,
+              "machine": records[names[0]]["machine"], "machines": {name: records[name]["machine"] for name in names},
+              "data_seed": args.data_seed,
               "table_data_seed": table_cfg.data_seed, "jobs": rows, "needs": draw_needs(rows)}
     write_page(args.out, record, markdown(record))
     return 0

@@ -105,3 +105,13 @@ def test_a_need_bounded_in_a_few_draws_says_so(draw: Any) -> None:
     assert table.need_cell({**need, "bounded_draws": 0.001}) == "952 (95%: 917–964; under 1% of draws a bound)"
     assert table.need_cell({**need, "bounded_draws": 0.08}) == "952 (95%: 917–964; 8% of draws a bound)"
     assert table.need_cell({**need, "bounded_draws": 0.0}) == "952 (95%: 917–964)"
+
+
+def test_jobs_of_several_machines_are_named_by_machine(draw: Any) -> None:
+    one = {"cpu": "AMD EPYC", "cpu_family_model": "26/2", "cores": 2, "torch": "2.13.0+cpu", "torch_threads": 1,
+           "python": "3.11.7"}
+    other = {**one, "cpu_family_model": "25/17"}
+    lines = draw._machine_lines({"machine": one, "machines": {"piga-n2-s0": one, "planet-n1000-s0": other}})
+    assert lines[0] == "Machines:" and lines[2].endswith(": piga-n2-s0") and lines[3].endswith(": planet-n1000-s0")
+    assert "25/17" in lines[3]
+    assert draw._machine_lines({"machine": one})[0].startswith("Machine: AMD EPYC (family/model 26/2)")
