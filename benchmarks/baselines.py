@@ -690,7 +690,8 @@ def figures(record: dict[str, Any], out: Path) -> dict[str, str]:
     axes[0].set_ylim(-5, 105)
     for ax, ylabel in ((axes[0], "success (%)"), (axes[1], "mean return")):
         ax.set_xscale("log")
-        ax.set_xticks(sizes, [f"{n // 1000}k" if n >= 1000 and n % 1000 == 0 else str(n) for n in sizes])  # (the labels "1000" and "2000" ran together)
+        # (thousands as "1k": the labels "1000" and "2000" ran together)
+        ax.set_xticks(sizes, [f"{n // 1000}k" if n >= 1000 and n % 1000 == 0 else str(n) for n in sizes])
         ax.minorticks_off()
         ax.set_xlabel("training sequences")
         ax.set_ylabel(ylabel)

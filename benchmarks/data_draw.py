@@ -72,6 +72,7 @@ def draw_needs(rows: dict[str, dict[str, Any]]) -> list[dict[str, Any]]:
 
 
 def _listed(sizes: list[int]) -> str:
+    """Sizes in words: "250, 500 and 1000"."""
     return ", ".join(map(str, sizes[:-1])) + (" and " if len(sizes) > 1 else "") + str(sizes[-1])
 
 
@@ -87,10 +88,11 @@ def needs_lines(record: dict[str, Any]) -> list[str]:
              "curve of success at x1.0 first reaches a rate, interpolated in log(sequences) between its sizes, and the "
              f"PlaNet-style model's need over piga's; 95% intervals over {record['needs'][0]['draws']:,} bootstrap "
              "draws that resample each size's runs, then their episodes. The curves hold this page's jobs only "
-             f"(the PlaNet-style model at {_listed(sizes['planet'])} sequences, piga at {_listed(sizes['piga'])}), so a need past the largest size reads \"more than\" it and one "
-             "reached at the smallest \"at most\" it. A ratio with such a need is a bound, and \"undefined\" where its "
-             "draws bound it both ways (its interval is then of ratios of bounds). \"both\" pools the two draws' runs at each size that both have, as runs of one "
-             "sample.", "",
+             f"(the PlaNet-style model at {_listed(sizes['planet'])} sequences, piga at {_listed(sizes['piga'])}), "
+             "so a need past the largest size reads \"more than\" it and one reached at the smallest \"at most\" it. "
+             "A ratio with such a need is a bound, and \"undefined\" where its draws bound it both ways (its interval "
+             "is then of ratios of bounds). \"both\" pools the two draws' runs at each size that both have, as runs of "
+             "one sample.", "",
              "| success | data seed | piga needs (sequences) | PlaNet-style needs (sequences) | PlaNet-style / piga |",
              "|---|---|---|---|---|"]
     for row in record["needs"]:

@@ -1320,7 +1320,8 @@ def test_an_actor_critic_whose_policy_turns_nan_after_a_checkpoint_is_said_to_ha
     ("colour", ["'env_config' says the env renders gray frames", "64x64 with 3 channels"]),
     # the autoencoder learnt MuJoCo's frames, then DDPG ran on the pixel pendulum's (exit 0)
     ("labelled_dmc", ["--obs latent learns its codes from the file's frames", "acts on piga/PixelPendulum-v0",
-                      "this file is pendulum from piga/DMCPendulum-v0"]),
+                      "this file is pendulum from piga/DMCPendulum-v0",
+                      "give a file that piga-collect wrote of piga/PixelPendulum-v0 (piga-collect --out DATA.h5)"]),
     ("env_renders_32", ["attribute 'env_config' says the env renders 32x32 gray frames", "the file's frames are 64x64 gray"]),
 ])
 def test_ddpg_latent_refuses_unusable_frames(data: str, needles: list[str], files: dict[str, Path], tmp_path: Path,
