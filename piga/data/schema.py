@@ -840,18 +840,18 @@ FINGERPRINT_MARK = "2:"
 _FINGERPRINT_BLOCK_BYTES = 64 * 2**20
 
 
-def fingerprint(path: str | os.PathLike[str], like: object = None) -> str:
+def fingerprint(path: str | os.PathLike[str], legacy: bool = False) -> str:
     """A short hash of what a file holds, not of where it lies: its /actions, /split and every frame (sha256, hex,
     after :data:`FINGERPRINT_MARK`). A moved or copied file keeps it; another file of the same shape (another seed,
     another recording), or this one with any frame edited in place, does not. It decodes the whole of /frames, a
     block of sequences at a time (0.04 s for 50 default sequences of 40 frames).
 
-    ``like``: a fingerprint kept by a run, to hash this file as that one was hashed: one without the mark hashes the
-    first sequence's frames only (a sequence after it edited in place kept the fingerprint, and a resumed run trained
-    on the edited frames). Compare with :func:`has_fingerprint`."""
+    ``legacy``: hashed as earlier versions did (:func:`is_legacy_fingerprint`), the first sequence's frames only (a
+    sequence after it edited in place kept the fingerprint, and a resumed run trained on the edited frames). Compare a
+    kept fingerprint with :func:`has_fingerprint`."""
     with open_data_file(path) as f:
         frames = f["frames"]
-        if isinstance(like, str) and not like.startswith(FINGERPRINT_MARK):
+        if legacy:
             with read_rows(frames, "sequence 0"):
                 first = frames[0]
             return _digest(f["actions"][()], f["split"][()], first)
@@ -877,10 +877,16 @@ def fingerprint(path: str | os.PathLike[str], like: object = None) -> str:
         return FINGERPRINT_MARK + digest.hexdigest()[:16]
 
 
+def is_legacy_fingerprint(kept: object) -> bool:
+    """Whether a run's ``kept`` fingerprint was taken by an earlier version (no :data:`FINGERPRINT_MARK`): of the
+    first sequence's frames only, so that a file is compared with it hashed that way."""
+    return isinstance(kept, str) and not kept.startswith(FINGERPRINT_MARK)
+
+
 def has_fingerprint(path: str | os.PathLike[str], kept: object) -> bool:
     """Whether the file ``path`` holds what a run's ``kept`` fingerprint (:func:`fingerprint`) was taken of, hashed as
     that one was."""
-    return isinstance(kept, str) and fingerprint(path, like=kept) == kept
+    return isinstance(kept, str) and fingerprint(path, legacy=is_legacy_fingerprint(kept)) == kept
 
 
 def rewards_fingerprint(path: str | os.PathLike[str]) -> str | None:

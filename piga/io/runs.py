@@ -209,11 +209,10 @@ def _is_training_file(path: str | os.PathLike[str], data: dict[str, Any]) -> boo
 
 def _file_fingerprint(path: str | os.PathLike[str], like: object = None) -> str | None:
     """:func:`_fingerprint` of the file ``path`` as it is now, hashed as the kept fingerprint ``like`` was."""
-    from piga.data.schema import FINGERPRINT_MARK
+    from piga.data.schema import is_legacy_fingerprint
 
     stat = os.stat(path)
-    legacy = isinstance(like, str) and not like.startswith(FINGERPRINT_MARK)
-    return _fingerprint(str(path), stat.st_ino, stat.st_size, stat.st_mtime_ns, legacy)
+    return _fingerprint(str(path), stat.st_ino, stat.st_size, stat.st_mtime_ns, is_legacy_fingerprint(like))
 
 
 def with_training_file(checkpoint: dict[str, Any], run_dir: str | os.PathLike[str],
@@ -260,7 +259,7 @@ def _fingerprint(path: str, inode: int, size: int, mtime_ns: int, legacy: bool =
     from piga.data.schema import fingerprint
 
     try:
-        return fingerprint(path, like="" if legacy else None)
+        return fingerprint(path, legacy=legacy)
     except (OSError, ValueError, KeyError):
         return None
 
